@@ -1,0 +1,76 @@
+//! Errors of reading and writing `.mdlod` files. Every message names the file and, where
+//! there is one, the place in it (section, record index or byte offset).
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum FormatError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    #[error("{path}: not an .mdlod file (the first 8 bytes are not the mdlod signature)")]
+    BadMagic { path: PathBuf },
+
+    #[error(
+        "{path}: format version {major}.{minor} is not readable by this mdlod, which reads \
+         major versions {readable_min} to {readable_max}; {hint}"
+    )]
+    UnsupportedVersion {
+        path: PathBuf,
+        major: u16,
+        minor: u16,
+        readable_min: u16,
+        readable_max: u16,
+        hint: &'static str,
+    },
+
+    #[error("{path}: {place}: checksum mismatch (stored {stored:016x}, computed {computed:016x}); the file is corrupt")]
+    Checksum {
+        path: PathBuf,
+        place: String,
+        stored: u64,
+        computed: u64,
+    },
+
+    #[error("{path}: {place}: {problem}")]
+    Corrupt {
+        path: PathBuf,
+        place: String,
+        problem: String,
+    },
+
+    #[error("{path}: METADATA section: invalid JSON: {source}")]
+    Metadata {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+
+    #[error("{path}: cannot write: {problem}")]
+    Write { path: PathBuf, problem: String },
+}
+
+impl FormatError {
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        FormatError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    pub(crate) fn corrupt(
+        path: impl Into<PathBuf>,
+        place: impl Into<String>,
+        problem: impl Into<String>,
+    ) -> Self {
+        FormatError::Corrupt {
+            path: path.into(),
+            place: place.into(),
+            problem: problem.into(),
+        }
+    }
+}

@@ -1,0 +1,140 @@
+//! The JSON metadata section: what the file holds and where it came from.
+//!
+//! Everything here is descriptive (the renderer needs none of it to draw), so it is
+//! stored as UTF-8 JSON that other tools can read without this crate. Unknown fields are
+//! ignored on read so later minor versions may add fields.
+
+use serde::{Deserialize, Serialize};
+
+/// A simulation cell: `origin + u·a + v·b + w·c` for u, v, w in [0, 1).
+///
+/// Orthogonal boxes have `a = (lx,0,0)`, `b = (0,ly,0)`, `c = (0,0,lz)`; LAMMPS triclinic
+/// boxes have `a = (lx,0,0)`, `b = (xy,ly,0)`, `c = (xz,yz,lz)`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimulationBox {
+    pub origin: [f64; 3],
+    pub a: [f64; 3],
+    pub b: [f64; 3],
+    pub c: [f64; 3],
+    /// Periodicity along a, b, c, when the input says (LAMMPS `pp`, XYZ `pbc=`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub periodic: Option<[bool; 3]>,
+}
+
+impl SimulationBox {
+    /// An axis-aligned box from its lower and upper corners.
+    pub fn orthogonal(lo: [f64; 3], hi: [f64; 3]) -> Self {
+        Self::lammps(lo, hi, [0.0; 3])
+    }
+
+    /// A LAMMPS box from `xlo..xhi` etc. (the *true* box bounds, not the `_bound` values
+    /// a triclinic dump prints) and the tilt factors `xy xz yz`.
+    pub fn lammps(lo: [f64; 3], hi: [f64; 3], tilt: [f64; 3]) -> Self {
+        let [xy, xz, yz] = tilt;
+        SimulationBox {
+            origin: lo,
+            a: [hi[0] - lo[0], 0.0, 0.0],
+            b: [xy, hi[1] - lo[1], 0.0],
+            c: [xz, yz, hi[2] - lo[2]],
+            periodic: None,
+        }
+    }
+
+    /// True when the cell vectors are axis-aligned.
+    pub fn is_orthogonal(&self) -> bool {
+        self.a[1] == 0.0
+            && self.a[2] == 0.0
+            && self.b[0] == 0.0
+            && self.b[2] == 0.0
+            && self.c[0] == 0.0
+            && self.c[1] == 0.0
+    }
+
+    /// Cartesian position of fractional coordinates `(u, v, w)`.
+    pub fn from_fractional(&self, f: [f64; 3]) -> [f64; 3] {
+        let mut p = self.origin;
+        for (k, pk) in p.iter_mut().enumerate() {
+            *pk += f[0] * self.a[k] + f[1] * self.b[k] + f[2] * self.c[k];
+        }
+        p
+    }
+}
+
+/// One species: how a particle of this kind looks.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Species {
+    pub name: String,
+    /// Sphere radius in the simulation's length unit.
+    pub radius: f32,
+    /// Linear-light RGB albedo in [0, 1].
+    pub colour: [f32; 3],
+}
+
+/// The optional per-particle scalar and its quantization range.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AttributeInfo {
+    pub name: String,
+    /// Value of quantized 0.
+    pub min: f32,
+    /// Value of quantized 65535.
+    pub max: f32,
+}
+
+impl AttributeInfo {
+    /// Decodes a quantized attribute value.
+    pub fn decode(&self, q: u16) -> f32 {
+        self.min + (self.max - self.min) * (f32::from(q) / 65535.0)
+    }
+}
+
+/// Where the particles came from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SourceInfo {
+    pub path: String,
+    pub size: u64,
+    /// Modification time, seconds since the Unix epoch, when the file system gives one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub modified_unix: Option<i64>,
+    /// Index of the frame within the source (0-based).
+    #[serde(default)]
+    pub frame: u64,
+}
+
+/// The parameters the hierarchy was built with.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BuildInfo {
+    /// A cluster is split while it holds more than this many points.
+    pub max_cluster_size: u32,
+    /// The coarsest real level holds at most this many points (under the single top node).
+    pub max_root_points: u32,
+    /// Levels between a node and the points it quantizes (δn in the format spec).
+    pub delta_n: u32,
+    /// Bits per quantized coordinate: 8 or 16.
+    pub position_bits: u32,
+}
+
+/// The metadata section.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Metadata {
+    /// Number of particles (the finest level).
+    pub particles: u64,
+    #[serde(rename = "box", default, skip_serializing_if = "Option::is_none")]
+    pub simulation_box: Option<SimulationBox>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timestep: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub units: Option<String>,
+    pub species: Vec<Species>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attribute: Option<AttributeInfo>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<SourceInfo>,
+    pub build: BuildInfo,
+    /// Largest Euclidean distance between a particle's decoded position and its input
+    /// position (as single precision), over all particles.
+    pub max_position_error: f64,
+    /// The program that wrote the file, e.g. `mdlod 0.1.0`.
+    pub writer: String,
+}

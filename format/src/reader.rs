@@ -1,0 +1,802 @@
+//! Validating, zero-copy reader.
+//!
+//! [`MdlodFile::open`] maps the file and checks, before anything is indexed: the header
+//! (signature, version range, checksum, stated size), the section table (checksum, every
+//! bound with checked arithmetic, alignment, no overlaps, required sections present once),
+//! the metadata, the level table and every node (checksum, level, child and point ranges,
+//! parent and quantization links, finite values). That is linear in the node count and
+//! reads no particle data, so opening a 10^9-particle file is quick. After it, the typed
+//! accessors cannot go out of bounds. [`MdlodFile::verify`] reads everything else: every
+//! section checksum, every species index and every decoded point.
+
+use std::fs::File;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use xxhash_rust::xxh3::xxh3_64;
+
+use crate::error::FormatError;
+use crate::layout::{
+    Header, LevelRecord, NodeRecord, SectionEntry, SectionKind, HEADER_SIZE, MAGIC, READABLE_MAJOR,
+    SECTION_ALIGN,
+};
+use crate::meta::Metadata;
+use crate::quantize;
+
+/// Largest metadata section accepted (JSON of a few species needs a few KiB).
+const MAX_METADATA_BYTES: u64 = 16 << 20;
+/// Largest section table accepted.
+const MAX_SECTIONS: u32 = 1 << 16;
+/// Deepest hierarchy accepted (levels are stored as u8).
+const MAX_LEVELS: usize = 255;
+
+/// Quantized positions of one level.
+#[derive(Clone, Copy, Debug)]
+pub enum Positions<'a> {
+    U8(&'a [[u8; 3]]),
+    U16(&'a [[u16; 3]]),
+}
+
+impl Positions<'_> {
+    pub fn len(&self) -> usize {
+        match self {
+            Positions::U8(p) => p.len(),
+            Positions::U16(p) => p.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The quantized value of point `i`, widened to u16.
+    pub fn get(&self, i: usize) -> [u16; 3] {
+        match self {
+            Positions::U8(p) => p[i].map(u16::from),
+            Positions::U16(p) => p[i],
+        }
+    }
+
+    /// The raw bytes (3 or 6 per point), e.g. for upload to a GPU.
+    pub fn bytes(&self) -> &[u8] {
+        match self {
+            Positions::U8(p) => bytemuck::cast_slice(p),
+            Positions::U16(p) => bytemuck::cast_slice(p),
+        }
+    }
+}
+
+/// An open, validated `.mdlod` file.
+pub struct MdlodFile {
+    path: PathBuf,
+    map: memmap2::Mmap,
+    header: Header,
+    sections: Vec<SectionEntry>,
+    metadata: Metadata,
+    levels_range: Range<usize>,
+    nodes_range: Range<usize>,
+    /// Byte range of POSITIONS per level (empty for level 0).
+    positions: Vec<Range<usize>>,
+    species_range: Range<usize>,
+    attribute_range: Option<Range<usize>>,
+}
+
+/// What [`MdlodFile::verify`] checked.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VerifyReport {
+    pub sections: usize,
+    pub bytes_hashed: u64,
+    pub points_decoded: u64,
+    /// Largest distance by which a decoded particle centre lies outside the bounding box
+    /// of its parent node (0 for a consistent file, up to float rounding).
+    pub max_outside_parent_bounds: f64,
+}
+
+impl MdlodFile {
+    /// Opens and validates `path`.
+    pub fn open(path: impl AsRef<Path>) -> Result<MdlodFile, FormatError> {
+        let path = path.as_ref().to_path_buf();
+        let file = File::open(&path).map_err(|e| FormatError::io(&path, e))?;
+        let map = crate::mmap::map_file(&file).map_err(|e| FormatError::io(&path, e))?;
+        Self::from_map(path, map)
+    }
+
+    fn from_map(path: PathBuf, map: memmap2::Mmap) -> Result<MdlodFile, FormatError> {
+        let len = map.len() as u64;
+        let corrupt = |place: &str, problem: String| FormatError::corrupt(&path, place, problem);
+
+        // Header.
+        if map.len() < HEADER_SIZE {
+            if map.len() >= 8 && map[..8] != MAGIC {
+                return Err(FormatError::BadMagic { path });
+            }
+            return Err(corrupt(
+                "header",
+                format!("file is {len} bytes, shorter than the {HEADER_SIZE}-byte header"),
+            ));
+        }
+        let header: Header = bytemuck::pod_read_unaligned(&map[..HEADER_SIZE]);
+        if header.magic != MAGIC {
+            return Err(FormatError::BadMagic { path });
+        }
+        if !READABLE_MAJOR.contains(&header.version_major) {
+            let newer = header.version_major > *READABLE_MAJOR.end();
+            return Err(FormatError::UnsupportedVersion {
+                path,
+                major: header.version_major,
+                minor: header.version_minor,
+                readable_min: *READABLE_MAJOR.start(),
+                readable_max: *READABLE_MAJOR.end(),
+                hint: if newer {
+                    "it was written by a newer mdlod: upgrade mdlod to read it"
+                } else {
+                    "convert the source data again with this mdlod"
+                },
+            });
+        }
+        let computed = xxh3_64(&map[..56]);
+        if computed != header.header_checksum {
+            return Err(FormatError::Checksum {
+                path,
+                place: "header (bytes 0..56)".into(),
+                stored: header.header_checksum,
+                computed,
+            });
+        }
+        if header.file_size != len {
+            return Err(corrupt(
+                "header",
+                format!(
+                    "states a file size of {} bytes but the file has {len} (truncated or appended to)",
+                    header.file_size
+                ),
+            ));
+        }
+        if header.position_bits != 8 && header.position_bits != 16 {
+            return Err(corrupt(
+                "header (offset 20)",
+                format!("position bits {} (must be 8 or 16)", header.position_bits),
+            ));
+        }
+
+        // Section table.
+        if header.section_count > MAX_SECTIONS {
+            return Err(corrupt(
+                "header (offset 16)",
+                format!("{} sections (at most {MAX_SECTIONS})", header.section_count),
+            ));
+        }
+        let table_len = u64::from(header.section_count) * 32;
+        let table_end = header
+            .section_table_offset
+            .checked_add(table_len)
+            .filter(|&end| end <= len && header.section_table_offset >= HEADER_SIZE as u64);
+        let Some(table_end) = table_end else {
+            return Err(corrupt(
+                "header (offset 24)",
+                format!(
+                    "section table at {} with {} entries does not lie inside the {len}-byte file",
+                    header.section_table_offset, header.section_count
+                ),
+            ));
+        };
+        let table_bytes = &map[header.section_table_offset as usize..table_end as usize];
+        let computed = xxh3_64(table_bytes);
+        if computed != header.section_table_checksum {
+            return Err(FormatError::Checksum {
+                path,
+                place: format!("section table at offset {}", header.section_table_offset),
+                stored: header.section_table_checksum,
+                computed,
+            });
+        }
+        let sections: Vec<SectionEntry> = table_bytes
+            .chunks_exact(32)
+            .map(bytemuck::pod_read_unaligned)
+            .collect();
+
+        let place_of = |i: usize, s: &SectionEntry| {
+            let name = SectionKind::from_code(s.kind).map_or("unknown", SectionKind::name);
+            format!(
+                "section {i} ({name}, level {}) at offset {}",
+                s.level, s.offset
+            )
+        };
+        let mut spans: Vec<(u64, u64, usize)> = Vec::with_capacity(sections.len());
+        for (i, s) in sections.iter().enumerate() {
+            let end = s
+                .offset
+                .checked_add(s.length)
+                .filter(|&e| e <= header.section_table_offset);
+            if s.offset % SECTION_ALIGN != 0 || s.offset < HEADER_SIZE as u64 || end.is_none() {
+                return Err(corrupt(
+                    &place_of(i, s),
+                    format!(
+                        "length {} does not fit between the header and the section table at {}, or the offset is not a multiple of {SECTION_ALIGN}",
+                        s.length, header.section_table_offset
+                    ),
+                ));
+            }
+            spans.push((s.offset, s.offset + s.length, i));
+        }
+        spans.sort_unstable();
+        for w in spans.windows(2) {
+            if w[1].0 < w[0].1 {
+                return Err(corrupt(
+                    &place_of(w[1].2, &sections[w[1].2]),
+                    format!("overlaps section {}", w[0].2),
+                ));
+            }
+        }
+
+        let find = |kind: SectionKind, level: Option<u32>| -> Result<Option<usize>, FormatError> {
+            let mut found = None;
+            for (i, s) in sections.iter().enumerate() {
+                if s.kind == kind as u32 && level.is_none_or(|l| s.level == l) {
+                    if found.is_some() {
+                        return Err(FormatError::corrupt(
+                            &path,
+                            place_of(i, s),
+                            format!("second {} section", kind.name()),
+                        ));
+                    }
+                    found = Some(i);
+                }
+            }
+            Ok(found)
+        };
+        let require = |kind: SectionKind, level: Option<u32>| -> Result<usize, FormatError> {
+            find(kind, level)?.ok_or_else(|| {
+                FormatError::corrupt(
+                    &path,
+                    "section table",
+                    match level {
+                        Some(l) => format!("no {} section for level {l}", kind.name()),
+                        None => format!("no {} section", kind.name()),
+                    },
+                )
+            })
+        };
+        let range = |i: usize| {
+            let s = &sections[i];
+            s.offset as usize..(s.offset + s.length) as usize
+        };
+        let check_sum = |i: usize| -> Result<(), FormatError> {
+            let computed = xxh3_64(&map[range(i)]);
+            if computed != sections[i].checksum {
+                return Err(FormatError::Checksum {
+                    path: path.clone(),
+                    place: place_of(i, &sections[i]),
+                    stored: sections[i].checksum,
+                    computed,
+                });
+            }
+            Ok(())
+        };
+
+        // Metadata.
+        let mi = require(SectionKind::Metadata, None)?;
+        if sections[mi].length > MAX_METADATA_BYTES {
+            return Err(corrupt(
+                &place_of(mi, &sections[mi]),
+                format!(
+                    "{} bytes of metadata (at most {MAX_METADATA_BYTES})",
+                    sections[mi].length
+                ),
+            ));
+        }
+        check_sum(mi)?;
+        let metadata: Metadata =
+            serde_json::from_slice(&map[range(mi)]).map_err(|source| FormatError::Metadata {
+                path: path.clone(),
+                source,
+            })?;
+
+        // Levels.
+        let li = require(SectionKind::Levels, None)?;
+        check_sum(li)?;
+        let level_bytes = &map[range(li)];
+        if level_bytes.len() % 32 != 0 {
+            return Err(corrupt(
+                &place_of(li, &sections[li]),
+                "length is not a multiple of 32".into(),
+            ));
+        }
+        let levels: &[LevelRecord] = bytemuck::try_cast_slice(level_bytes)
+            .map_err(|e| corrupt(&place_of(li, &sections[li]), format!("misaligned: {e}")))?;
+        let level_count = levels.len();
+        if !(2..=MAX_LEVELS).contains(&level_count) {
+            return Err(corrupt(
+                &place_of(li, &sections[li]),
+                format!("{level_count} levels (must be 2 to {MAX_LEVELS})"),
+            ));
+        }
+        let last = level_count - 1;
+        if levels[0].point_count != 1 {
+            return Err(corrupt(
+                "level 0",
+                format!(
+                    "{} points (must be the single top node)",
+                    levels[0].point_count
+                ),
+            ));
+        }
+        let mut node_total: u64 = 0;
+        for (l, lv) in levels.iter().enumerate() {
+            if lv.point_count == 0 || lv.point_count > u64::from(u32::MAX) {
+                return Err(corrupt(
+                    &format!("level {l}"),
+                    format!("{} points (must be 1 to 2^32-1)", lv.point_count),
+                ));
+            }
+            if lv.node_first != node_total {
+                return Err(corrupt(
+                    &format!("level {l}"),
+                    format!("first node {} (expected {node_total})", lv.node_first),
+                ));
+            }
+            if l < last {
+                node_total += lv.point_count;
+            }
+        }
+        if metadata.particles != levels[last].point_count {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "says {} particles but the finest level holds {}",
+                    metadata.particles, levels[last].point_count
+                ),
+            ));
+        }
+        let delta_n = metadata.build.delta_n as usize;
+        if delta_n == 0 || delta_n > last {
+            return Err(corrupt(
+                "METADATA",
+                format!("build.delta_n {delta_n} (must be 1 to {last})"),
+            ));
+        }
+        if metadata.build.position_bits != header.position_bits {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "build.position_bits {} disagrees with the header's {}",
+                    metadata.build.position_bits, header.position_bits
+                ),
+            ));
+        }
+        if metadata.species.is_empty() || metadata.species.len() > usize::from(u16::MAX) {
+            return Err(corrupt(
+                "METADATA",
+                format!("{} species (must be 1 to 65535)", metadata.species.len()),
+            ));
+        }
+
+        // Nodes.
+        let ni = require(SectionKind::Nodes, None)?;
+        if sections[ni].length != node_total * 96 {
+            return Err(corrupt(
+                &place_of(ni, &sections[ni]),
+                format!(
+                    "{} bytes, expected {node_total} nodes of 96 bytes",
+                    sections[ni].length
+                ),
+            ));
+        }
+        check_sum(ni)?;
+        let nodes: &[NodeRecord] = bytemuck::try_cast_slice(&map[range(ni)])
+            .map_err(|e| corrupt(&place_of(ni, &sections[ni]), format!("misaligned: {e}")))?;
+        validate_nodes(&path, nodes, levels, delta_n, metadata.species.len())?;
+
+        // Per-point sections.
+        let bytes_per_point = 3 * (header.position_bits as u64 / 8);
+        let mut positions = vec![0..0];
+        for (l, lv) in levels.iter().enumerate().skip(1) {
+            let i = require(SectionKind::Positions, Some(l as u32))?;
+            if sections[i].length != lv.point_count * bytes_per_point {
+                return Err(corrupt(
+                    &place_of(i, &sections[i]),
+                    format!(
+                        "{} bytes, expected {} points of {bytes_per_point} bytes",
+                        sections[i].length, lv.point_count
+                    ),
+                ));
+            }
+            positions.push(range(i));
+        }
+        let n = levels[last].point_count;
+        let si = require(SectionKind::Species, Some(last as u32))?;
+        if sections[si].length != n * 2 {
+            return Err(corrupt(
+                &place_of(si, &sections[si]),
+                format!(
+                    "{} bytes, expected {n} u16 species indices",
+                    sections[si].length
+                ),
+            ));
+        }
+        let attribute_range = match (
+            find(SectionKind::Attribute, Some(last as u32))?,
+            &metadata.attribute,
+        ) {
+            (Some(i), Some(_)) => {
+                if sections[i].length != n * 2 {
+                    return Err(corrupt(
+                        &place_of(i, &sections[i]),
+                        format!("{} bytes, expected {n} u16 values", sections[i].length),
+                    ));
+                }
+                Some(range(i))
+            }
+            (None, None) => None,
+            (Some(_), None) => {
+                return Err(corrupt(
+                    "METADATA",
+                    "an ATTRIBUTE section is present but the metadata names no attribute"
+                        .to_string(),
+                ))
+            }
+            (None, Some(a)) => {
+                return Err(corrupt(
+                    "section table",
+                    format!(
+                        "metadata names attribute {:?} but there is no ATTRIBUTE section",
+                        a.name
+                    ),
+                ))
+            }
+        };
+
+        let levels_range = range(li);
+        let nodes_range = range(ni);
+        let species_range = range(si);
+        Ok(MdlodFile {
+            path,
+            map,
+            header,
+            sections,
+            metadata,
+            levels_range,
+            nodes_range,
+            positions,
+            species_range,
+            attribute_range,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    pub fn sections(&self) -> &[SectionEntry] {
+        &self.sections
+    }
+
+    pub fn metadata(&self) -> &Metadata {
+        &self.metadata
+    }
+
+    pub fn position_bits(&self) -> u32 {
+        self.header.position_bits
+    }
+
+    pub fn delta_n(&self) -> usize {
+        self.metadata.build.delta_n as usize
+    }
+
+    pub fn levels(&self) -> &[LevelRecord] {
+        bytemuck::cast_slice(&self.map[self.levels_range.clone()])
+    }
+
+    pub fn level_count(&self) -> usize {
+        self.levels().len()
+    }
+
+    pub fn particle_count(&self) -> u64 {
+        self.metadata.particles
+    }
+
+    /// All nodes, level by level; node `levels()[l].node_first + i` is point `i` of level `l`.
+    pub fn nodes(&self) -> &[NodeRecord] {
+        bytemuck::cast_slice(&self.map[self.nodes_range.clone()])
+    }
+
+    /// The nodes of level `l` (empty for the finest level).
+    pub fn level_nodes(&self, l: usize) -> &[NodeRecord] {
+        let lv = self.levels()[l];
+        if l + 1 == self.level_count() {
+            return &[];
+        }
+        &self.nodes()[lv.node_first as usize..(lv.node_first + lv.point_count) as usize]
+    }
+
+    /// Quantized positions of level `l` (empty for level 0, whose single point is node 0).
+    pub fn positions(&self, l: usize) -> Positions<'_> {
+        let bytes = &self.map[self.positions[l].clone()];
+        match self.header.position_bits {
+            8 => Positions::U8(bytemuck::cast_slice(bytes)),
+            _ => Positions::U16(bytemuck::cast_slice(bytes)),
+        }
+    }
+
+    /// Species index of every particle. Values are checked only by [`verify`](Self::verify):
+    /// look them up in the species table with `get`.
+    pub fn species(&self) -> &[u16] {
+        bytemuck::cast_slice(&self.map[self.species_range.clone()])
+    }
+
+    /// Quantized attribute of every particle, when the file has one.
+    pub fn attribute(&self) -> Option<&[u16]> {
+        self.attribute_range
+            .clone()
+            .map(|r| bytemuck::cast_slice(&self.map[r]))
+    }
+
+    /// For level `m ≥ 1`: the nodes that encode its points and, for each, the range of
+    /// points it encodes, in order (the ranges tile the level).
+    pub fn encoding_ranges(&self, m: usize) -> Vec<(usize, Range<usize>)> {
+        let ql = m.saturating_sub(self.delta_n());
+        let levels = self.levels();
+        let nodes = self.nodes();
+        let first = levels[ql].node_first as usize;
+        let count = levels[ql].point_count as usize;
+        // Descendant ranges of the level-ql nodes, pushed down one level at a time.
+        let mut ranges: Vec<Range<usize>> = (0..count).map(|i| i..i + 1).collect();
+        for l in ql..m {
+            let lnodes = self.level_nodes(l);
+            for r in &mut ranges {
+                let a = &lnodes[r.start];
+                let b = &lnodes[r.end - 1];
+                *r = a.child_first as usize..(b.child_first + b.child_count) as usize;
+            }
+        }
+        let _ = nodes;
+        ranges
+            .into_iter()
+            .enumerate()
+            .map(|(i, r)| (first + i, r))
+            .collect()
+    }
+
+    /// Decodes every point of level `m ≥ 1`, in order.
+    pub fn decode_level(&self, m: usize) -> Vec<[f32; 3]> {
+        let pos = self.positions(m);
+        let nodes = self.nodes();
+        let bits = self.position_bits();
+        let mut out = Vec::with_capacity(pos.len());
+        for (node, r) in self.encoding_ranges(m) {
+            let n = &nodes[node];
+            for i in r {
+                out.push(quantize::decode3(
+                    pos.get(i),
+                    n.centroid,
+                    n.quant_scale,
+                    bits,
+                ));
+            }
+        }
+        out
+    }
+
+    /// Checks every section checksum, every species index and every decoded particle
+    /// (finite, inside its parent's bounds up to the quantization step).
+    pub fn verify(&self) -> Result<VerifyReport, FormatError> {
+        let mut report = VerifyReport::default();
+        for (i, s) in self.sections.iter().enumerate() {
+            let bytes = &self.map[s.offset as usize..(s.offset + s.length) as usize];
+            let computed = xxh3_64(bytes);
+            if computed != s.checksum {
+                let name = SectionKind::from_code(s.kind).map_or("unknown", SectionKind::name);
+                return Err(FormatError::Checksum {
+                    path: self.path.clone(),
+                    place: format!(
+                        "section {i} ({name}, level {}) at offset {}",
+                        s.level, s.offset
+                    ),
+                    stored: s.checksum,
+                    computed,
+                });
+            }
+            report.sections += 1;
+            report.bytes_hashed += s.length;
+        }
+        let species_count = self.metadata.species.len();
+        if let Some(i) = self
+            .species()
+            .iter()
+            .position(|&s| usize::from(s) >= species_count)
+        {
+            return Err(FormatError::corrupt(
+                &self.path,
+                format!("SPECIES, particle {i}"),
+                format!(
+                    "species index {} but only {species_count} species",
+                    self.species()[i]
+                ),
+            ));
+        }
+        let last = self.level_count() - 1;
+        let nodes = self.nodes();
+        for m in 1..=last {
+            let pos = self.decode_level(m);
+            let parents = self.level_nodes(m - 1);
+            for (pi, parent) in parents.iter().enumerate() {
+                let r =
+                    parent.child_first as usize..(parent.child_first + parent.child_count) as usize;
+                // The step of the encoding node bounds how far rounding may move a point.
+                let enc = &nodes[self.encoding_node_of_children(m, pi)];
+                let slack = enc
+                    .quant_scale
+                    .iter()
+                    .map(|s| f64::from(*s))
+                    .fold(0.0, f64::max);
+                for i in r {
+                    let p = pos[i];
+                    if p.iter().any(|v| !v.is_finite()) {
+                        return Err(FormatError::corrupt(
+                            &self.path,
+                            format!("level {m}, point {i}"),
+                            "decodes to a non-finite position",
+                        ));
+                    }
+                    let mut outside = 0.0f64;
+                    for k in 0..3 {
+                        let lo = f64::from(parent.bounds_min[k]) - f64::from(p[k]);
+                        let hi = f64::from(p[k]) - f64::from(parent.bounds_max[k]);
+                        outside = outside.max(lo).max(hi);
+                    }
+                    let excess = outside - slack;
+                    report.max_outside_parent_bounds =
+                        report.max_outside_parent_bounds.max(outside.max(0.0));
+                    if excess > 1e-3 * (1.0 + f64::from(parent.radius)) {
+                        return Err(FormatError::corrupt(
+                            &self.path,
+                            format!("level {m}, point {i}"),
+                            format!("decodes {outside} outside the bounds of its parent node"),
+                        ));
+                    }
+                }
+                report.points_decoded += u64::from(parent.child_count);
+            }
+        }
+        Ok(report)
+    }
+
+    /// The node encoding the children of point `pi` of level `m - 1`.
+    fn encoding_node_of_children(&self, m: usize, pi: usize) -> usize {
+        // Walk up from the parent (level m-1) to level max(0, m - delta_n).
+        let ql = m.saturating_sub(self.delta_n());
+        let levels = self.levels();
+        let mut node = levels[m - 1].node_first as usize + pi;
+        let nodes = self.nodes();
+        for _ in ql..m - 1 {
+            node = nodes[node].parent as usize;
+        }
+        node
+    }
+}
+
+/// Checks every node record against the level table; linear in the node count.
+fn validate_nodes(
+    path: &Path,
+    nodes: &[NodeRecord],
+    levels: &[LevelRecord],
+    delta_n: usize,
+    species_count: usize,
+) -> Result<(), FormatError> {
+    let last = levels.len() - 1;
+    let bad =
+        |id: usize, problem: String| FormatError::corrupt(path, format!("node {id}"), problem);
+    for l in 0..last {
+        let first = levels[l].node_first as usize;
+        let count = levels[l].point_count as usize;
+        let next_count = levels[l + 1].point_count;
+        let next_first = levels[l + 1].node_first as usize;
+        let mut expected_child: u64 = 0;
+        for i in 0..count {
+            let id = first + i;
+            let n = &nodes[id];
+            if usize::from(n.level) != l {
+                return Err(bad(id, format!("level {} (it lies on level {l})", n.level)));
+            }
+            if u64::from(n.child_first) != expected_child || n.child_count == 0 {
+                return Err(bad(id, format!(
+                    "children {}+{} do not continue the previous node's (expected first {expected_child}, count ≥ 1)",
+                    n.child_first, n.child_count
+                )));
+            }
+            expected_child += u64::from(n.child_count);
+            if expected_child > next_count {
+                return Err(bad(id, format!("children end at {expected_child}, beyond the {next_count} points of level {}", l + 1)));
+            }
+            let point_level = (l + delta_n).min(last);
+            if usize::from(n.point_level) != point_level {
+                return Err(bad(
+                    id,
+                    format!("point level {} (expected {point_level})", n.point_level),
+                ));
+            }
+            let pl_count = levels[point_level].point_count;
+            if u64::from(n.point_first) + u64::from(n.point_count) > pl_count || n.point_count == 0
+            {
+                return Err(bad(
+                    id,
+                    format!(
+                        "points {}+{} outside the {pl_count} points of level {point_level}",
+                        n.point_first, n.point_count
+                    ),
+                ));
+            }
+            if l == 0 {
+                if n.parent != u32::MAX {
+                    return Err(bad(id, "top node has a parent".into()));
+                }
+            } else {
+                let p = n.parent as usize;
+                let pfirst = levels[l - 1].node_first as usize;
+                let ok = p >= pfirst
+                    && p < first
+                    && (nodes[p].child_first as usize
+                        ..(nodes[p].child_first + nodes[p].child_count) as usize)
+                        .contains(&i);
+                if !ok {
+                    return Err(bad(id, format!("parent {p} does not list it as a child")));
+                }
+            }
+            // Encoding node: the ancestor on level max(0, point_level - delta_n).
+            let ql = point_level.saturating_sub(delta_n);
+            let mut anc = id;
+            for _ in ql..l {
+                anc = nodes[anc].parent as usize;
+            }
+            if n.quant_node as usize != anc {
+                return Err(bad(
+                    id,
+                    format!(
+                        "encoding node {} (expected its ancestor {anc} on level {ql})",
+                        n.quant_node
+                    ),
+                ));
+            }
+            let floats = n
+                .centroid
+                .iter()
+                .chain(&n.quant_scale)
+                .chain(&n.bounds_min)
+                .chain(&n.bounds_max)
+                .chain([&n.radius, &n.area_sum, &n.attribute, &n.rms_radius]);
+            let mut finite = true;
+            for v in floats {
+                finite &= v.is_finite();
+            }
+            if !finite
+                || n.radius < 0.0
+                || n.quant_scale.iter().any(|s| *s < 0.0)
+                || n.area_sum < 0.0
+            {
+                return Err(bad(id, "non-finite or negative geometry".into()));
+            }
+            if (0..3).any(|k| n.bounds_min[k] > n.bounds_max[k]) {
+                return Err(bad(id, "bounds_min exceeds bounds_max".into()));
+            }
+            if usize::from(n.species) >= species_count {
+                return Err(bad(id, format!("species {} of {species_count}", n.species)));
+            }
+        }
+        if expected_child != next_count {
+            return Err(FormatError::corrupt(
+                path,
+                format!("level {l}"),
+                format!(
+                    "nodes have {expected_child} children but level {} holds {next_count} points",
+                    l + 1
+                ),
+            ));
+        }
+        let _ = next_first;
+    }
+    Ok(())
+}

@@ -1,0 +1,201 @@
+//! Streaming writer: sections are appended one after another to a temporary file beside
+//! the target, each hashed while it is written; [`Writer::finish`] appends the section
+//! table, writes the header, syncs and renames the file into place. Dropping a writer
+//! without finishing removes the temporary file.
+
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use xxhash_rust::xxh3::{xxh3_64, Xxh3};
+
+use crate::error::FormatError;
+use crate::layout::{
+    align_up, Header, SectionEntry, SectionKind, FORMAT_VERSION, HEADER_SIZE, MAGIC,
+};
+
+/// Writes one `.mdlod` file.
+pub struct Writer {
+    path: PathBuf,
+    tmp: Option<tempfile::NamedTempFile>,
+    out: BufWriter<File>,
+    offset: u64,
+    position_bits: u32,
+    sections: Vec<SectionEntry>,
+}
+
+impl Writer {
+    /// Starts writing `path` (created or replaced only by [`Writer::finish`]).
+    pub fn create(path: &Path, position_bits: u32) -> Result<Writer, FormatError> {
+        if position_bits != 8 && position_bits != 16 {
+            return Err(FormatError::Write {
+                path: path.into(),
+                problem: format!("position bits must be 8 or 16, not {position_bits}"),
+            });
+        }
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
+        let tmp = tempfile::Builder::new()
+            .prefix(&format!(".{name}."))
+            .suffix(".tmp")
+            .tempfile_in(dir)
+            .map_err(|e| FormatError::io(dir, e))?;
+        let file = tmp.reopen().map_err(|e| FormatError::io(tmp.path(), e))?;
+        let mut out = BufWriter::with_capacity(1 << 20, file);
+        out.write_all(&[0u8; HEADER_SIZE])
+            .map_err(|e| FormatError::io(tmp.path(), e))?;
+        Ok(Writer {
+            path: path.into(),
+            tmp: Some(tmp),
+            out,
+            offset: HEADER_SIZE as u64,
+            position_bits,
+            sections: Vec::new(),
+        })
+    }
+
+    fn tmp_path(&self) -> PathBuf {
+        self.tmp
+            .as_ref()
+            .map(|t| t.path().to_path_buf())
+            .unwrap_or_else(|| self.path.clone())
+    }
+
+    fn pad_to_alignment(&mut self) -> Result<(), FormatError> {
+        let aligned = align_up(self.offset).ok_or_else(|| FormatError::Write {
+            path: self.path.clone(),
+            problem: "file offset overflow".into(),
+        })?;
+        let pad = (aligned - self.offset) as usize;
+        self.out
+            .write_all(&[0u8; 64][..pad])
+            .map_err(|e| FormatError::io(self.tmp_path(), e))?;
+        self.offset = aligned;
+        Ok(())
+    }
+
+    /// Begins a section; write its bytes through the returned writer, then call
+    /// [`SectionWriter::end`].
+    pub fn section(
+        &mut self,
+        kind: SectionKind,
+        level: u32,
+    ) -> Result<SectionWriter<'_>, FormatError> {
+        self.pad_to_alignment()?;
+        Ok(SectionWriter {
+            start: self.offset,
+            kind,
+            level,
+            hasher: Xxh3::new(),
+            writer: self,
+        })
+    }
+
+    /// Writes a whole section from one buffer.
+    pub fn write_section(
+        &mut self,
+        kind: SectionKind,
+        level: u32,
+        bytes: &[u8],
+    ) -> Result<(), FormatError> {
+        let mut s = self.section(kind, level)?;
+        s.write_bytes(bytes)?;
+        s.end()
+    }
+
+    /// Writes a whole section of plain-old-data records.
+    pub fn write_pod_section<T: bytemuck::NoUninit>(
+        &mut self,
+        kind: SectionKind,
+        level: u32,
+        items: &[T],
+    ) -> Result<(), FormatError> {
+        self.write_section(kind, level, bytemuck::cast_slice(items))
+    }
+
+    /// Appends the section table and header, syncs, and renames the file into place.
+    pub fn finish(mut self) -> Result<(), FormatError> {
+        self.pad_to_alignment()?;
+        let table_offset = self.offset;
+        let table: &[u8] = bytemuck::cast_slice(&self.sections);
+        let table_checksum = xxh3_64(table);
+        let tmp_path = self.tmp_path();
+        self.out
+            .write_all(table)
+            .map_err(|e| FormatError::io(&tmp_path, e))?;
+        let file_size = table_offset + table.len() as u64;
+        let mut header = Header {
+            magic: MAGIC,
+            version_major: FORMAT_VERSION.0,
+            version_minor: FORMAT_VERSION.1,
+            flags: 0,
+            section_count: self.sections.len() as u32,
+            position_bits: self.position_bits,
+            section_table_offset: table_offset,
+            file_size,
+            section_table_checksum: table_checksum,
+            reserved: 0,
+            header_checksum: 0,
+        };
+        header.header_checksum = xxh3_64(&bytemuck::bytes_of(&header)[..56]);
+        let io = |e| FormatError::io(&tmp_path, e);
+        self.out.seek(SeekFrom::Start(0)).map_err(io)?;
+        self.out
+            .write_all(bytemuck::bytes_of(&header))
+            .map_err(io)?;
+        self.out.flush().map_err(io)?;
+        self.out.get_ref().sync_all().map_err(io)?;
+        let tmp = self
+            .tmp
+            .take()
+            .expect("temporary file present until finish");
+        tmp.persist(&self.path)
+            .map_err(|e| FormatError::io(&self.path, e.error))?;
+        Ok(())
+    }
+}
+
+/// Writes the bytes of one section; hashes them on the way.
+pub struct SectionWriter<'w> {
+    writer: &'w mut Writer,
+    start: u64,
+    kind: SectionKind,
+    level: u32,
+    hasher: Xxh3,
+}
+
+impl SectionWriter<'_> {
+    pub fn write_bytes(&mut self, bytes: &[u8]) -> Result<(), FormatError> {
+        self.hasher.update(bytes);
+        let path = self.writer.tmp_path();
+        self.writer
+            .out
+            .write_all(bytes)
+            .map_err(|e| FormatError::io(path, e))?;
+        self.writer.offset += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Writes a slice of plain-old-data records.
+    pub fn write_pod<T: bytemuck::NoUninit>(&mut self, items: &[T]) -> Result<(), FormatError> {
+        self.write_bytes(bytemuck::cast_slice(items))
+    }
+
+    pub fn end(self) -> Result<(), FormatError> {
+        let entry = SectionEntry {
+            kind: self.kind as u32,
+            level: self.level,
+            offset: self.start,
+            length: self.writer.offset - self.start,
+            checksum: self.hasher.digest(),
+        };
+        self.writer.sections.push(entry);
+        Ok(())
+    }
+}

@@ -1,0 +1,123 @@
+//! Conversion of one frame to a `.mdlod` file: species looks, hierarchy, metadata, write.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use mdlod_format::meta::{AttributeInfo, BuildInfo, Metadata, SourceInfo};
+use mdlod_format::FormatError;
+
+use crate::frame::Frame;
+use crate::hierarchy::{self, BuildError, BuildParams, Particles};
+use crate::progress::Progress;
+use crate::species::species_table;
+
+/// How to convert.
+#[derive(Clone, Debug, Default)]
+pub struct ConvertOptions {
+    pub build: BuildParams,
+    /// Radius overrides by species name.
+    pub radii: Vec<(String, f32)>,
+}
+
+/// What a conversion built.
+#[derive(Clone, Debug)]
+pub struct ConvertReport {
+    pub particles: u64,
+    pub levels: usize,
+    pub nodes: usize,
+    pub max_position_error: f64,
+    pub build_time: Duration,
+    pub write_time: Duration,
+    pub file_size: u64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConvertError {
+    #[error("{path}: {source}")]
+    Build {
+        path: String,
+        #[source]
+        source: BuildError,
+    },
+    #[error(transparent)]
+    Write(#[from] FormatError),
+}
+
+/// Builds the hierarchy of `frame` and writes it to `output`. `source` describes where
+/// the frame came from (recorded in the metadata).
+pub fn convert_frame(
+    frame: &Frame,
+    source: Option<SourceInfo>,
+    output: &Path,
+    options: &ConvertOptions,
+    progress: &dyn Progress,
+) -> Result<ConvertReport, ConvertError> {
+    let species = species_table(&frame.species, &options.radii);
+    let particles = Particles {
+        positions: &frame.positions,
+        species_index: &frame.species_index,
+        species: &species,
+        attribute: frame.attribute.as_ref().map(|a| a.values.as_slice()),
+    };
+    let t0 = Instant::now();
+    let source_name = source
+        .as_ref()
+        .map_or_else(|| "input".to_string(), |s| s.path.clone());
+    let h =
+        hierarchy::build(particles, &options.build, progress).map_err(|e| ConvertError::Build {
+            path: source_name,
+            source: e,
+        })?;
+    let build_time = t0.elapsed();
+    let metadata = Metadata {
+        particles: frame.len() as u64,
+        simulation_box: frame.simulation_box.clone(),
+        timestep: frame.timestep,
+        time: frame.time,
+        units: frame.units.clone(),
+        species,
+        attribute: frame.attribute.as_ref().map(|a| AttributeInfo {
+            name: a.name.clone(),
+            min: 0.0,
+            max: 0.0,
+        }),
+        source,
+        build: BuildInfo {
+            max_cluster_size: options.build.max_cluster_size,
+            max_root_points: options.build.max_root_points,
+            delta_n: options.build.delta_n,
+            position_bits: options.build.position_bits,
+        },
+        max_position_error: h.max_position_error,
+        writer: format!("mdlod {}", env!("CARGO_PKG_VERSION")),
+    };
+    let t1 = Instant::now();
+    progress.stage("writing", None, "bytes");
+    h.write(output, metadata)?;
+    progress.finish_stage();
+    let write_time = t1.elapsed();
+    let file_size = std::fs::metadata(output).map(|m| m.len()).unwrap_or(0);
+    Ok(ConvertReport {
+        particles: h.particle_count() as u64,
+        levels: h.level_count(),
+        nodes: h.nodes.len(),
+        max_position_error: h.max_position_error,
+        build_time,
+        write_time,
+        file_size,
+    })
+}
+
+/// Describes a source file for the metadata.
+pub fn source_info(path: &Path, frame: u64) -> SourceInfo {
+    let meta = std::fs::metadata(path).ok();
+    SourceInfo {
+        path: path.display().to_string(),
+        size: meta.as_ref().map_or(0, |m| m.len()),
+        modified_unix: meta
+            .and_then(|m| m.modified().ok())
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map(|d| d.as_secs() as i64),
+        frame,
+    }
+}

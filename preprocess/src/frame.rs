@@ -1,0 +1,56 @@
+//! The in-memory particle frame every reader produces and the hierarchy builder consumes.
+//!
+//! A [`Frame`] is one timestep of one simulation: positions in the simulation's own
+//! length unit, a species index per particle into [`Frame::species`], an optional scalar
+//! attribute, and what the dump said about the box, the timestep and the units.
+
+pub use mdlod_format::meta::SimulationBox;
+
+/// One species (atom type or element) as named in the input.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpeciesName {
+    /// Element symbol (`Cu`), LAMMPS numeric type as text (`1`), or the XYZ species label.
+    pub name: String,
+    /// True when `name` came from a numeric LAMMPS `type` column with no element given.
+    pub numeric_type: bool,
+}
+
+/// One timestep of particles, as read from a dump.
+#[derive(Clone, Debug, Default)]
+pub struct Frame {
+    /// Particle centres, in the simulation's length unit, unwrapped/scaled columns already
+    /// converted to Cartesian coordinates.
+    pub positions: Vec<[f32; 3]>,
+    /// Index into `species` for every particle (same length as `positions`).
+    pub species_index: Vec<u16>,
+    /// The distinct species in order of first appearance (numeric LAMMPS types sorted
+    /// numerically instead).
+    pub species: Vec<SpeciesName>,
+    /// Optional per-particle scalar (a named dump column), same length as `positions`.
+    pub attribute: Option<Attribute>,
+    /// The simulation cell, when the dump has one.
+    pub simulation_box: Option<SimulationBox>,
+    /// The MD timestep number, when known.
+    pub timestep: Option<u64>,
+    /// Simulation time, when the dump records it (LAMMPS `ITEM: TIME`, XYZ `Time=`).
+    pub time: Option<f64>,
+    /// Unit style, when the dump records it (LAMMPS `ITEM: UNITS`).
+    pub units: Option<String>,
+}
+
+/// A named per-particle scalar column.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Attribute {
+    pub name: String,
+    pub values: Vec<f32>,
+}
+
+impl Frame {
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+}

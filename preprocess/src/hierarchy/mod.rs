@@ -1,0 +1,526 @@
+//! The level-of-detail hierarchy (Hopf et al. 2003, sections 3-5).
+//!
+//! How it works:
+//! 1. The particles are the finest level. [`pca_split::cluster`] splits them into
+//!    clusters of at most `max_cluster_size` points by PCA splits.
+//! 2. Each cluster gets a representative point ([`representative`]): the radius-weighted
+//!    centroid, a radius from Eq. 2, and the same radiant flux as its members (Eq. 1:
+//!    the area Σ r² and the area-weighted colour are kept). The representatives form the
+//!    next coarser level, which is split again, until a level has at most
+//!    `max_root_points`; a single top node above it closes the hierarchy.
+//! 3. The levels are put in their final order top-down: the children of every node are
+//!    contiguous and in the order of their parents, so every node's descendants on any
+//!    deeper level form one range (one draw call).
+//! 4. Every point of level `m ≥ 1` is quantized relative to its ancestor on level
+//!    `max(0, m − δn)` ([`mdlod_format::quantize`]); the largest decoding error over all
+//!    particles is measured and recorded.
+//!
+//! Every step is deterministic and independent of the thread count: parallel work only
+//! ever splits independent clusters or maps over independent items, and each sum is
+//! accumulated in a fixed order.
+
+pub mod pca_split;
+pub mod representative;
+
+use std::ops::Range;
+use std::path::Path;
+
+use mdlod_format::layout::{pack_colour, LevelRecord, NodeRecord, SectionKind};
+use mdlod_format::meta::{AttributeInfo, Metadata, Species};
+use mdlod_format::{quantize, FormatError, Writer};
+use rayon::prelude::*;
+
+use crate::progress::Progress;
+use pca_split::{cluster, Clusters, Item};
+use representative::{LevelPoints, Source};
+
+/// How to build the hierarchy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BuildParams {
+    /// A cluster is split while it holds more than this many points (≥ 2).
+    pub max_cluster_size: u32,
+    /// The coarsest real level holds at most this many points.
+    pub max_root_points: u32,
+    /// A node encodes (and is drawn with) its descendants `delta_n` levels down.
+    pub delta_n: u32,
+    /// Bits per quantized coordinate: 8 or 16.
+    pub position_bits: u32,
+}
+
+impl Default for BuildParams {
+    fn default() -> Self {
+        BuildParams {
+            max_cluster_size: 8,
+            max_root_points: 4096,
+            delta_n: 1,
+            position_bits: 16,
+        }
+    }
+}
+
+/// Errors of building a hierarchy.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    #[error("invalid build parameters: {0}")]
+    Params(String),
+    #[error("no particles to build a hierarchy from")]
+    Empty,
+    #[error("{0} particles: a level holds at most 4294967295 points in format version 1")]
+    TooMany(usize),
+    #[error("particle {index} has a non-finite position {position:?}")]
+    NonFinite { index: usize, position: [f32; 3] },
+    #[error("particle {index} has species index {species} but only {count} species are defined")]
+    BadSpecies {
+        index: usize,
+        species: u16,
+        count: usize,
+    },
+}
+
+/// The particles to build from, borrowed from a [`crate::Frame`] or any other source.
+#[derive(Clone, Copy, Debug)]
+pub struct Particles<'a> {
+    pub positions: &'a [[f32; 3]],
+    pub species_index: &'a [u16],
+    pub species: &'a [Species],
+    pub attribute: Option<&'a [f32]>,
+}
+
+/// A built hierarchy, in final order, ready to be written.
+#[derive(Clone, Debug)]
+pub struct Hierarchy {
+    pub params: BuildParams,
+    pub levels: Vec<LevelRecord>,
+    pub nodes: Vec<NodeRecord>,
+    /// Quantized positions of levels 1.. (index 0 is empty).
+    pub quantized: Vec<Vec<[u16; 3]>>,
+    /// Input index of every particle in final order.
+    pub particle_order: Vec<u32>,
+    /// Species index per particle, final order.
+    pub species_index: Vec<u16>,
+    /// Quantized attribute per particle, final order, with its range.
+    pub attribute: Option<(Vec<u16>, f32, f32)>,
+    /// Largest distance between a decoded particle and its input position.
+    pub max_position_error: f64,
+}
+
+impl Hierarchy {
+    pub fn level_count(&self) -> usize {
+        self.levels.len()
+    }
+
+    pub fn particle_count(&self) -> usize {
+        self.particle_order.len()
+    }
+
+    /// Writes the hierarchy with `metadata` (whose `particles`, `build`,
+    /// `max_position_error` and `attribute` range are filled in here).
+    pub fn write(&self, path: &Path, mut metadata: Metadata) -> Result<(), FormatError> {
+        let last = self.level_count() - 1;
+        metadata.particles = self.particle_count() as u64;
+        metadata.max_position_error = self.max_position_error;
+        metadata.build = mdlod_format::meta::BuildInfo {
+            max_cluster_size: self.params.max_cluster_size,
+            max_root_points: self.params.max_root_points,
+            delta_n: self.params.delta_n,
+            position_bits: self.params.position_bits,
+        };
+        match (&self.attribute, &mut metadata.attribute) {
+            (Some((_, min, max)), Some(info)) => {
+                info.min = *min;
+                info.max = *max;
+            }
+            (Some((_, min, max)), None) => {
+                metadata.attribute = Some(AttributeInfo {
+                    name: "attribute".into(),
+                    min: *min,
+                    max: *max,
+                })
+            }
+            (None, _) => metadata.attribute = None,
+        }
+        let json = serde_json::to_vec_pretty(&metadata).expect("metadata serializes");
+        let mut w = Writer::create(path, self.params.position_bits)?;
+        w.write_section(SectionKind::Metadata, 0, &json)?;
+        w.write_pod_section(SectionKind::Levels, 0, &self.levels)?;
+        w.write_pod_section(SectionKind::Nodes, 0, &self.nodes)?;
+        for (m, q) in self.quantized.iter().enumerate().skip(1) {
+            let mut s = w.section(SectionKind::Positions, m as u32)?;
+            if self.params.position_bits == 16 {
+                s.write_pod(q)?;
+            } else {
+                for chunk in q.chunks(1 << 16) {
+                    let bytes: Vec<[u8; 3]> = chunk.iter().map(|p| p.map(|v| v as u8)).collect();
+                    s.write_pod(&bytes)?;
+                }
+            }
+            s.end()?;
+        }
+        w.write_pod_section(SectionKind::Species, last as u32, &self.species_index)?;
+        if let Some((a, _, _)) = &self.attribute {
+            w.write_pod_section(SectionKind::Attribute, last as u32, a)?;
+        }
+        w.finish()
+    }
+}
+
+/// Builds the hierarchy of `particles`.
+pub fn build(
+    particles: Particles<'_>,
+    params: &BuildParams,
+    progress: &dyn Progress,
+) -> Result<Hierarchy, BuildError> {
+    validate(&particles, params)?;
+    let n = particles.positions.len();
+    progress.stage("building hierarchy", Some(n as u64), "particles");
+
+    // 1-2. Cluster level by level, finest first, until the top node.
+    let mut clusterings: Vec<Clusters> = Vec::new(); // finest first
+    let mut coarser: Vec<LevelPoints> = Vec::new(); // representatives, finest-but-one first
+    loop {
+        let src = match coarser.last() {
+            None => Source::Particles(&particles),
+            Some(l) => Source::Reps(l),
+        };
+        let count = src.len();
+        let clusters = if count <= params.max_root_points as usize {
+            Clusters {
+                order: (0..count as u32).collect(),
+                offsets: vec![0, count as u32],
+            }
+        } else {
+            let items: Vec<Item> = (0..count)
+                .into_par_iter()
+                .map(|i| Item {
+                    position: src.position(i),
+                    weight: src.radius(i),
+                    id: i as u32,
+                })
+                .collect();
+            cluster(items, params.max_cluster_size as usize)
+        };
+        let reps = representative::representatives(&src, &clusters);
+        if coarser.is_empty() {
+            progress.advance(n as u64 / 2);
+        }
+        let done = clusters.len() == 1;
+        clusterings.push(clusters);
+        coarser.push(reps);
+        if done {
+            break;
+        }
+    }
+    let level_count = clusterings.len() + 1;
+    let last = level_count - 1;
+    // Level l (0 = top) in build order: coarser[last - 1 - l] for l < last.
+    let level_src = |l: usize| -> Source<'_> {
+        if l == last {
+            Source::Particles(&particles)
+        } else {
+            Source::Reps(&coarser[last - 1 - l])
+        }
+    };
+    // Clusters whose representatives form level l-1 split the points of level l.
+    let clusters_of = |l: usize| &clusterings[last - l];
+
+    // 3. Final order, top-down.
+    let mut order: Vec<Vec<u32>> = vec![vec![0]];
+    let mut child_ranges: Vec<Vec<Range<u32>>> = Vec::new(); // per level < last
+    for l in 1..level_count {
+        let parents = &order[l - 1];
+        let cl = clusters_of(l);
+        let mut ranges = Vec::with_capacity(parents.len());
+        let mut next = Vec::with_capacity(cl.order.len());
+        for &b in parents {
+            let start = next.len() as u32;
+            next.extend_from_slice(cl.members(b as usize));
+            ranges.push(start..next.len() as u32);
+        }
+        child_ranges.push(ranges);
+        order.push(next);
+    }
+
+    // Level table.
+    let mut levels = Vec::with_capacity(level_count);
+    let mut node_first = 0u64;
+    for ord in &order {
+        levels.push(LevelRecord {
+            point_count: ord.len() as u64,
+            node_first,
+            reserved: [0; 2],
+        });
+        node_first += ord.len() as u64;
+    }
+    levels[last].node_first = levels[last - 1].node_first + levels[last - 1].point_count;
+
+    // 4. Nodes.
+    let delta_n = params.delta_n as usize;
+    let mut nodes: Vec<NodeRecord> = Vec::with_capacity(node_first as usize);
+    for l in 0..last {
+        let src = level_src(l);
+        let first = levels[l].node_first as u32;
+        let parent_first = if l == 0 {
+            0
+        } else {
+            levels[l - 1].node_first as u32
+        };
+        let parent_of: Vec<u32> = if l == 0 {
+            vec![u32::MAX]
+        } else {
+            let mut p = vec![0u32; order[l].len()];
+            for (pi, r) in child_ranges[l - 1].iter().enumerate() {
+                for c in r.clone() {
+                    p[c as usize] = parent_first + pi as u32;
+                }
+            }
+            p
+        };
+        let point_level = (l + delta_n).min(last);
+        let point_ranges = descendant_ranges(&child_ranges, l, point_level);
+        let level_nodes: Vec<NodeRecord> = order[l]
+            .par_iter()
+            .enumerate()
+            .map(|(i, &b)| {
+                let rep = src
+                    .reps()
+                    .expect("levels above the finest are representatives");
+                let b = b as usize;
+                let cr = &child_ranges[l][i];
+                let pr = &point_ranges[i];
+                NodeRecord {
+                    centroid: rep.position[b],
+                    radius: rep.radius[b],
+                    quant_scale: [0.0; 3],
+                    area_sum: rep.area[b],
+                    bounds_min: rep.bounds[b].0,
+                    attribute: rep.attribute[b],
+                    bounds_max: rep.bounds[b].1,
+                    colour: pack_colour(rep.colour[b]),
+                    child_first: cr.start,
+                    child_count: cr.end - cr.start,
+                    point_first: pr.start,
+                    point_count: pr.end - pr.start,
+                    parent: parent_of[i],
+                    quant_node: first + i as u32,
+                    rms_radius: rep.rms_radius[b],
+                    level: l as u8,
+                    point_level: point_level as u8,
+                    species: rep.species[b],
+                }
+            })
+            .collect();
+        nodes.extend(level_nodes);
+    }
+    // Encoding node = ancestor on level max(0, point_level - delta_n).
+    for id in 0..nodes.len() {
+        let n = nodes[id];
+        let ql = (n.point_level as usize).saturating_sub(delta_n);
+        let mut anc = id;
+        for _ in ql..n.level as usize {
+            anc = nodes[anc].parent as usize;
+        }
+        nodes[id].quant_node = anc as u32;
+    }
+
+    // 5. Quantization: scales from the largest offsets of every encoded level.
+    let bits = params.position_bits;
+    let positions: Vec<Vec<[f32; 3]>> = (0..level_count)
+        .map(|l| {
+            let src = level_src(l);
+            order[l]
+                .par_iter()
+                .map(|&b| src.position(b as usize))
+                .collect()
+        })
+        .collect();
+    let mut max_offset = vec![[0.0f64; 3]; nodes.len()];
+    for m in 1..level_count {
+        let ql = m.saturating_sub(delta_n);
+        let ranges = descendant_ranges(&child_ranges, ql, m);
+        let first = levels[ql].node_first as usize;
+        let offs: Vec<[f64; 3]> = ranges
+            .par_iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let c = nodes[first + i].centroid;
+                let mut mo = [0.0f64; 3];
+                for p in &positions[m][r.start as usize..r.end as usize] {
+                    for k in 0..3 {
+                        mo[k] = mo[k].max((f64::from(p[k]) - f64::from(c[k])).abs());
+                    }
+                }
+                mo
+            })
+            .collect();
+        for (i, o) in offs.into_iter().enumerate() {
+            let mo = &mut max_offset[first + i];
+            for k in 0..3 {
+                mo[k] = mo[k].max(o[k]);
+            }
+        }
+    }
+    for (node, mo) in nodes.iter_mut().zip(&max_offset) {
+        node.quant_scale = quantize::scale_for(*mo, bits);
+    }
+    let mut quantized = vec![Vec::new()];
+    let mut max_err = 0.0f64;
+    for m in 1..level_count {
+        let ql = m.saturating_sub(delta_n);
+        let ranges = descendant_ranges(&child_ranges, ql, m);
+        let first = levels[ql].node_first as usize;
+        let per_node: Vec<(Vec<[u16; 3]>, f64)> = ranges
+            .par_iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let node = &nodes[first + i];
+                let mut out = Vec::with_capacity((r.end - r.start) as usize);
+                let mut err = 0.0f64;
+                for p in &positions[m][r.start as usize..r.end as usize] {
+                    let q = [0, 1, 2].map(|k| {
+                        quantize::encode(
+                            f64::from(p[k]),
+                            node.centroid[k],
+                            node.quant_scale[k],
+                            bits,
+                        )
+                    });
+                    let d = quantize::decode3(q, node.centroid, node.quant_scale, bits);
+                    let e2: f64 = (0..3)
+                        .map(|k| (f64::from(d[k]) - f64::from(p[k])).powi(2))
+                        .sum();
+                    err = err.max(e2.sqrt());
+                    out.push(q);
+                }
+                (out, err)
+            })
+            .collect();
+        let mut level_q = Vec::with_capacity(positions[m].len());
+        for (q, e) in per_node {
+            level_q.extend(q);
+            if m == last {
+                max_err = max_err.max(e);
+            }
+        }
+        quantized.push(level_q);
+    }
+
+    let particle_order = order.pop().expect("finest level");
+    let species_index = particle_order
+        .par_iter()
+        .map(|&i| particles.species_index[i as usize])
+        .collect();
+    let attribute = particles.attribute.map(|a| {
+        let (min, max) = a
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        let span = max - min;
+        let q = particle_order
+            .par_iter()
+            .map(|&i| {
+                if span > 0.0 {
+                    ((a[i as usize] - min) / span * 65535.0)
+                        .round()
+                        .clamp(0.0, 65535.0) as u16
+                } else {
+                    0
+                }
+            })
+            .collect();
+        (q, min, max)
+    });
+    progress.advance(n as u64 - n as u64 / 2);
+    progress.finish_stage();
+    Ok(Hierarchy {
+        params: params.clone(),
+        levels,
+        nodes,
+        quantized,
+        particle_order,
+        species_index,
+        attribute,
+        max_position_error: max_err,
+    })
+}
+
+/// For every point of level `from`, the range of its descendants on level `to ≥ from`.
+fn descendant_ranges(child_ranges: &[Vec<Range<u32>>], from: usize, to: usize) -> Vec<Range<u32>> {
+    let count = if from == 0 {
+        1
+    } else {
+        child_ranges[from - 1]
+            .iter()
+            .map(|r| r.end - r.start)
+            .sum::<u32>() as usize
+    };
+    let mut ranges: Vec<Range<u32>> = (0..count as u32).map(|i| i..i + 1).collect();
+    for l in from..to {
+        let cr = &child_ranges[l];
+        for r in &mut ranges {
+            *r = cr[r.start as usize].start..cr[r.end as usize - 1].end;
+        }
+    }
+    ranges
+}
+
+fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
+    if params.max_cluster_size < 2 {
+        return Err(BuildError::Params(format!(
+            "max cluster size {} (must be at least 2)",
+            params.max_cluster_size
+        )));
+    }
+    if params.max_root_points < params.max_cluster_size {
+        return Err(BuildError::Params(format!(
+            "max root points {} is below the max cluster size {}",
+            params.max_root_points, params.max_cluster_size
+        )));
+    }
+    if params.position_bits != 8 && params.position_bits != 16 {
+        return Err(BuildError::Params(format!(
+            "position bits {} (must be 8 or 16)",
+            params.position_bits
+        )));
+    }
+    if params.delta_n == 0 || params.delta_n > 8 {
+        return Err(BuildError::Params(format!(
+            "delta_n {} (must be 1 to 8)",
+            params.delta_n
+        )));
+    }
+    let n = p.positions.len();
+    if n == 0 {
+        return Err(BuildError::Empty);
+    }
+    if n > u32::MAX as usize {
+        return Err(BuildError::TooMany(n));
+    }
+    if p.species_index.len() != n || p.attribute.is_some_and(|a| a.len() != n) {
+        return Err(BuildError::Params(
+            "per-particle arrays differ in length".into(),
+        ));
+    }
+    if let Some(index) = p
+        .positions
+        .iter()
+        .position(|x| x.iter().any(|v| !v.is_finite()))
+    {
+        return Err(BuildError::NonFinite {
+            index,
+            position: p.positions[index],
+        });
+    }
+    if let Some(index) = p
+        .species_index
+        .iter()
+        .position(|&s| usize::from(s) >= p.species.len())
+    {
+        return Err(BuildError::BadSpecies {
+            index,
+            species: p.species_index[index],
+            count: p.species.len(),
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,257 @@
+//! Cluster representatives (Hopf et al. 2003, Eq. 1 and Eq. 2).
+//!
+//! For cluster `j` with members `i` (radius `r_i`, diameter `s_i = 2 r_i`, position `x_i`):
+//! - position: the radius-weighted centroid `X_j = Σ s_i x_i / Σ s_i`;
+//! - size (Eq. 2): `s_j = 0.5 / (|I_j| − 1) · sqrt(Σ_{i ≠ m} s_i ‖x_i − X_j‖) + s_m` where
+//!   `m` is the largest member (`s_j = s_m` for a single member), so a representative is
+//!   never smaller than its largest child;
+//! - flux (Eq. 1): `π/4 s_j² c_j = π/4 Σ s_i² c_i`. The flux is kept as the pair (area
+//!   `A_j = Σ A_i` with `A_i = r_i²` for particles, area-weighted colour
+//!   `Σ A_i c_i / A_j`): flux `= π A_j · colour_j`, and a splat of size `s_j` has intensity
+//!   `c_j = colour_j · A_j / r_j²`. Sums compose exactly from level to level.
+//! - attribute: area-weighted mean; species: that of the member with the largest area;
+//!   bounds: union of the members' bounds (particle spheres at the finest level).
+
+use mdlod_format::meta::Species;
+
+use super::pca_split::Clusters;
+use super::Particles;
+
+/// The representatives of one level, indexed by cluster.
+#[derive(Clone, Debug, Default)]
+pub struct LevelPoints {
+    pub position: Vec<[f32; 3]>,
+    pub radius: Vec<f32>,
+    pub area: Vec<f32>,
+    pub colour: Vec<[f32; 3]>,
+    pub attribute: Vec<f32>,
+    pub species: Vec<u16>,
+    pub bounds: Vec<([f32; 3], [f32; 3])>,
+    pub rms_radius: Vec<f32>,
+}
+
+/// The points of one level: the particles, or representatives of a finer level.
+#[derive(Clone, Copy, Debug)]
+pub enum Source<'a> {
+    Particles(&'a Particles<'a>),
+    Reps(&'a LevelPoints),
+}
+
+impl<'a> Source<'a> {
+    pub fn len(&self) -> usize {
+        match self {
+            Source::Particles(p) => p.positions.len(),
+            Source::Reps(r) => r.position.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn reps(&self) -> Option<&'a LevelPoints> {
+        match self {
+            Source::Reps(r) => Some(r),
+            Source::Particles(_) => None,
+        }
+    }
+
+    fn species_of(p: &'a Particles<'a>, i: usize) -> &'a Species {
+        &p.species[usize::from(p.species_index[i])]
+    }
+
+    #[inline]
+    pub fn position(&self, i: usize) -> [f32; 3] {
+        match self {
+            Source::Particles(p) => p.positions[i],
+            Source::Reps(r) => r.position[i],
+        }
+    }
+
+    #[inline]
+    pub fn radius(&self, i: usize) -> f32 {
+        match self {
+            Source::Particles(p) => Self::species_of(p, i).radius,
+            Source::Reps(r) => r.radius[i],
+        }
+    }
+
+    #[inline]
+    fn area(&self, i: usize) -> f32 {
+        match self {
+            Source::Particles(p) => {
+                let r = Self::species_of(p, i).radius;
+                r * r
+            }
+            Source::Reps(r) => r.area[i],
+        }
+    }
+
+    #[inline]
+    fn colour(&self, i: usize) -> [f32; 3] {
+        match self {
+            Source::Particles(p) => Self::species_of(p, i).colour,
+            Source::Reps(r) => r.colour[i],
+        }
+    }
+
+    #[inline]
+    fn attribute(&self, i: usize) -> f32 {
+        match self {
+            Source::Particles(p) => p.attribute.map_or(0.0, |a| a[i]),
+            Source::Reps(r) => r.attribute[i],
+        }
+    }
+
+    #[inline]
+    fn species(&self, i: usize) -> u16 {
+        match self {
+            Source::Particles(p) => p.species_index[i],
+            Source::Reps(r) => r.species[i],
+        }
+    }
+
+    #[inline]
+    fn bounds(&self, i: usize) -> ([f32; 3], [f32; 3]) {
+        match self {
+            Source::Particles(p) => {
+                let x = p.positions[i];
+                let r = Self::species_of(p, i).radius;
+                (x.map(|v| v - r), x.map(|v| v + r))
+            }
+            Source::Reps(r) => r.bounds[i],
+        }
+    }
+}
+
+/// One representative, computed in double precision from its members.
+#[derive(Clone, Copy, Debug)]
+struct Rep {
+    position: [f32; 3],
+    radius: f32,
+    area: f32,
+    colour: [f32; 3],
+    attribute: f32,
+    species: u16,
+    bounds: ([f32; 3], [f32; 3]),
+    rms_radius: f32,
+}
+
+fn representative(src: &Source<'_>, members: &[u32]) -> Rep {
+    let n = members.len();
+    let mut w_sum = 0.0f64;
+    let mut wx = [0.0f64; 3];
+    let mut x_sum = [0.0f64; 3];
+    let mut area = 0.0f64;
+    let mut colour = [0.0f64; 3];
+    let mut attr = 0.0f64;
+    let mut largest = (0usize, f32::NEG_INFINITY);
+    let mut top_area = (0u16, f32::NEG_INFINITY);
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for (k, &i) in members.iter().enumerate() {
+        let i = i as usize;
+        let x = src.position(i);
+        let r = src.radius(i);
+        let a = src.area(i);
+        let w = f64::from(r);
+        w_sum += w;
+        for d in 0..3 {
+            wx[d] += w * f64::from(x[d]);
+            x_sum[d] += f64::from(x[d]);
+        }
+        area += f64::from(a);
+        let c = src.colour(i);
+        for d in 0..3 {
+            colour[d] += f64::from(a) * f64::from(c[d]);
+        }
+        attr += f64::from(a) * f64::from(src.attribute(i));
+        if r > largest.1 {
+            largest = (k, r);
+        }
+        if a > top_area.1 {
+            top_area = (src.species(i), a);
+        }
+        let (blo, bhi) = src.bounds(i);
+        for d in 0..3 {
+            lo[d] = lo[d].min(blo[d]);
+            hi[d] = hi[d].max(bhi[d]);
+        }
+    }
+    let centre: [f64; 3] = if w_sum > 0.0 {
+        wx.map(|v| v / w_sum)
+    } else {
+        x_sum.map(|v| v / n as f64)
+    };
+    // Eq. 2 in diameters.
+    let s_m = 2.0 * f64::from(largest.1);
+    let mut weighted_dist = 0.0f64;
+    let mut sq_dist = 0.0f64;
+    for (k, &i) in members.iter().enumerate() {
+        let x = src.position(i as usize);
+        let d2: f64 = (0..3).map(|d| (f64::from(x[d]) - centre[d]).powi(2)).sum();
+        sq_dist += d2;
+        if k != largest.0 {
+            weighted_dist += 2.0 * f64::from(src.radius(i as usize)) * d2.sqrt();
+        }
+    }
+    let s_j = if n > 1 {
+        0.5 / (n as f64 - 1.0) * weighted_dist.sqrt() + s_m
+    } else {
+        s_m
+    };
+    let (colour, attribute) = if area > 0.0 {
+        (colour.map(|c| (c / area) as f32), (attr / area) as f32)
+    } else {
+        let mut c = [0.0f64; 3];
+        let mut a = 0.0;
+        for &i in members {
+            let ci = src.colour(i as usize);
+            for d in 0..3 {
+                c[d] += f64::from(ci[d]) / n as f64;
+            }
+            a += f64::from(src.attribute(i as usize)) / n as f64;
+        }
+        (c.map(|v| v as f32), a as f32)
+    };
+    Rep {
+        position: centre.map(|v| v as f32),
+        radius: (s_j / 2.0) as f32,
+        area: area as f32,
+        colour,
+        attribute,
+        species: top_area.0,
+        bounds: (lo, hi),
+        rms_radius: (sq_dist / n as f64).sqrt() as f32,
+    }
+}
+
+/// The representatives of `clusters` of the points in `src`.
+pub fn representatives(src: &Source<'_>, clusters: &Clusters) -> LevelPoints {
+    use rayon::prelude::*;
+    let reps: Vec<Rep> = (0..clusters.len())
+        .into_par_iter()
+        .map(|c| representative(src, clusters.members(c)))
+        .collect();
+    let mut out = LevelPoints {
+        position: Vec::with_capacity(reps.len()),
+        radius: Vec::with_capacity(reps.len()),
+        area: Vec::with_capacity(reps.len()),
+        colour: Vec::with_capacity(reps.len()),
+        attribute: Vec::with_capacity(reps.len()),
+        species: Vec::with_capacity(reps.len()),
+        bounds: Vec::with_capacity(reps.len()),
+        rms_radius: Vec::with_capacity(reps.len()),
+    };
+    for r in reps {
+        out.position.push(r.position);
+        out.radius.push(r.radius);
+        out.area.push(r.area);
+        out.colour.push(r.colour);
+        out.attribute.push(r.attribute);
+        out.species.push(r.species);
+        out.bounds.push(r.bounds);
+        out.rms_radius.push(r.rms_radius);
+    }
+    out
+}

@@ -1,0 +1,159 @@
+//! Default looks of species: radii by element from a table of standard atomic radii, a
+//! palette for numeric LAMMPS types, and user overrides (`--radius Cu=1.28`).
+
+use mdlod_format::meta::Species;
+
+use crate::frame::SpeciesName;
+
+/// (symbol, atomic radius in Å, sRGB colour as commonly used by molecular viewers).
+const ELEMENTS: &[(&str, f32, [u8; 3])] = &[
+    ("H", 0.46, [255, 255, 255]),
+    ("He", 1.22, [217, 255, 255]),
+    ("Li", 1.57, [204, 128, 255]),
+    ("Be", 1.12, [194, 255, 0]),
+    ("B", 0.88, [255, 181, 181]),
+    ("C", 0.77, [144, 144, 144]),
+    ("N", 0.74, [48, 80, 248]),
+    ("O", 0.74, [255, 13, 13]),
+    ("F", 0.72, [144, 224, 80]),
+    ("Ne", 1.60, [179, 227, 245]),
+    ("Na", 1.91, [171, 92, 242]),
+    ("Mg", 1.60, [138, 255, 0]),
+    ("Al", 1.43, [191, 166, 166]),
+    ("Si", 1.18, [240, 200, 160]),
+    ("P", 1.10, [255, 128, 0]),
+    ("S", 1.04, [255, 255, 48]),
+    ("Cl", 0.99, [31, 240, 31]),
+    ("Ar", 1.92, [128, 209, 227]),
+    ("K", 2.35, [143, 64, 212]),
+    ("Ca", 1.97, [61, 255, 0]),
+    ("Ti", 1.47, [191, 194, 199]),
+    ("V", 1.34, [166, 166, 171]),
+    ("Cr", 1.28, [138, 153, 199]),
+    ("Mn", 1.27, [156, 122, 199]),
+    ("Fe", 1.26, [224, 102, 51]),
+    ("Co", 1.25, [240, 144, 160]),
+    ("Ni", 1.24, [80, 208, 80]),
+    ("Cu", 1.28, [200, 128, 51]),
+    ("Zn", 1.34, [125, 128, 176]),
+    ("Ga", 1.35, [194, 143, 143]),
+    ("Ge", 1.22, [102, 143, 143]),
+    ("Kr", 1.98, [92, 184, 209]),
+    ("Zr", 1.60, [148, 224, 224]),
+    ("Nb", 1.46, [115, 194, 201]),
+    ("Mo", 1.39, [84, 181, 181]),
+    ("Pd", 1.37, [0, 105, 133]),
+    ("Ag", 1.44, [192, 192, 192]),
+    ("Sn", 1.58, [102, 128, 128]),
+    ("Xe", 2.18, [66, 158, 176]),
+    ("Ta", 1.46, [77, 166, 255]),
+    ("W", 1.39, [33, 148, 214]),
+    ("Pt", 1.39, [208, 208, 224]),
+    ("Au", 1.44, [255, 209, 35]),
+    ("Pb", 1.75, [87, 89, 97]),
+    ("U", 1.56, [0, 143, 255]),
+];
+
+/// Palette for numeric types (sRGB), cycled.
+const PALETTE: &[[u8; 3]] = &[
+    [230, 102, 51],
+    [102, 102, 255],
+    [255, 255, 0],
+    [255, 102, 255],
+    [51, 230, 51],
+    [0, 230, 230],
+    [255, 153, 0],
+    [153, 51, 204],
+    [128, 128, 128],
+    [51, 153, 102],
+];
+
+/// Radius of a numeric type or unknown name, in the simulation's length unit.
+pub const DEFAULT_RADIUS: f32 = 0.5;
+
+fn srgb_to_linear(c: [u8; 3]) -> [f32; 3] {
+    c.map(|v| {
+        let v = f32::from(v) / 255.0;
+        if v <= 0.04045 {
+            v / 12.92
+        } else {
+            ((v + 0.055) / 1.055).powf(2.4)
+        }
+    })
+}
+
+/// The standard radius and colour of an element symbol (case-insensitive), if known.
+pub fn element(symbol: &str) -> Option<(f32, [f32; 3])> {
+    ELEMENTS
+        .iter()
+        .find(|(s, _, _)| s.eq_ignore_ascii_case(symbol))
+        .map(|(_, r, c)| (*r, srgb_to_linear(*c)))
+}
+
+/// The looks of every species, with `overrides` (name, radius) applied.
+pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<Species> {
+    names
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let (mut radius, colour) = match (s.numeric_type, element(&s.name)) {
+                (false, Some(rc)) => rc,
+                _ => (DEFAULT_RADIUS, srgb_to_linear(PALETTE[i % PALETTE.len()])),
+            };
+            if let Some((_, r)) = overrides.iter().rev().find(|(n, _)| *n == s.name) {
+                radius = *r;
+            }
+            Species {
+                name: s.name.clone(),
+                radius,
+                colour,
+            }
+        })
+        .collect()
+}
+
+/// Parses `NAME=RADIUS`.
+pub fn parse_radius_override(s: &str) -> Result<(String, f32), String> {
+    let (name, r) = s
+        .split_once('=')
+        .ok_or_else(|| format!("expected NAME=RADIUS, got {s:?}"))?;
+    let r: f32 = r
+        .trim()
+        .parse()
+        .map_err(|_| format!("radius {r:?} in {s:?} is not a number"))?;
+    if !(r.is_finite() && r > 0.0) {
+        return Err(format!("radius in {s:?} must be positive"));
+    }
+    Ok((name.trim().to_string(), r))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn elements_numeric_types_and_overrides() {
+        let names = vec![
+            SpeciesName {
+                name: "Cu".into(),
+                numeric_type: false,
+            },
+            SpeciesName {
+                name: "2".into(),
+                numeric_type: true,
+            },
+            SpeciesName {
+                name: "Xx".into(),
+                numeric_type: false,
+            },
+        ];
+        let t = species_table(&names, &[("2".into(), 0.9)]);
+        assert_eq!(t[0].radius, 1.28);
+        assert_eq!(t[1].radius, 0.9);
+        assert_eq!(t[2].radius, DEFAULT_RADIUS);
+        assert_ne!(t[1].colour, t[2].colour);
+        assert!(parse_radius_override("Cu=1.3").is_ok());
+        assert!(parse_radius_override("Cu").is_err());
+        assert!(parse_radius_override("Cu=-1").is_err());
+    }
+}

@@ -1,0 +1,324 @@
+//! Hierarchy round trips: build, write, reopen, verify, and check the invariants the
+//! renderer relies on.
+
+use mdlod_format::quantize;
+use mdlod_format::MdlodFile;
+use mdlod_preprocess::convert::{convert_frame, ConvertOptions};
+use mdlod_preprocess::hierarchy::BuildParams;
+use mdlod_preprocess::{Attribute, Frame, NoProgress, SpeciesName};
+
+/// A small deterministic frame: an FCC slab, a duplicated point pair, a sparse cloud.
+fn test_frame(n_cells: usize) -> Frame {
+    let a = 3.615f32;
+    let basis = [
+        [0.0, 0.0, 0.0],
+        [0.5, 0.5, 0.0],
+        [0.5, 0.0, 0.5],
+        [0.0, 0.5, 0.5],
+    ];
+    let mut positions = vec![];
+    let mut species_index = vec![];
+    for i in 0..n_cells {
+        for j in 0..n_cells {
+            for k in 0..n_cells / 2 {
+                for b in basis {
+                    positions.push([
+                        (i as f32 + b[0]) * a,
+                        (j as f32 + b[1]) * a,
+                        (k as f32 + b[2]) * a,
+                    ]);
+                    species_index.push(((i + j + k) % 7 == 0) as u16);
+                }
+            }
+        }
+    }
+    // Exact duplicates.
+    for _ in 0..50 {
+        positions.push([1.0, 1.0, 100.0]);
+        species_index.push(0);
+    }
+    // A sparse cloud above (xorshift).
+    let mut s = 0x9E3779B97F4A7C15u64;
+    for _ in 0..500 {
+        let mut r = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        positions.push([r() * 100.0, r() * 100.0, 50.0 + r() * 80.0]);
+        species_index.push(1);
+    }
+    let values = positions.iter().map(|p| p[2] * 0.5 - 3.0).collect();
+    Frame {
+        species_index,
+        species: vec![
+            SpeciesName {
+                name: "Cu".into(),
+                numeric_type: false,
+            },
+            SpeciesName {
+                name: "Ag".into(),
+                numeric_type: false,
+            },
+        ],
+        attribute: Some(Attribute {
+            name: "c_pe".into(),
+            values,
+        }),
+        timestep: Some(1000),
+        positions,
+        ..Default::default()
+    }
+}
+
+fn convert(frame: &Frame, params: BuildParams) -> (tempfile::TempDir, MdlodFile) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.mdlod");
+    let opts = ConvertOptions {
+        build: params,
+        radii: vec![],
+    };
+    convert_frame(frame, None, &path, &opts, &NoProgress).unwrap();
+    let f = MdlodFile::open(&path).unwrap();
+    (dir, f)
+}
+
+fn check_round_trip(frame: &Frame, params: BuildParams) {
+    let (_dir, f) = convert(frame, params.clone());
+    let report = f.verify().unwrap();
+    let last = f.level_count() - 1;
+    assert_eq!(f.particle_count() as usize, frame.len());
+    assert_eq!(
+        report.points_decoded as usize,
+        f.levels()[1..]
+            .iter()
+            .map(|l| l.point_count as usize)
+            .sum::<usize>()
+    );
+
+    // Every particle decodes within the recorded bound, and the bound is honest:
+    // within the theoretical half step of its encoding node.
+    let decoded = f.decode_level(last);
+    let bound = f.metadata().max_position_error;
+    // Match decoded particles to inputs: same multiset of (species, position within bound).
+    // The file keeps no particle ids, so compare sorted by a spatial key of the input
+    // positions via the species counts and a nearest check on a grid.
+    let mut species_counts = [0usize; 2];
+    for &s in f.species() {
+        species_counts[s as usize] += 1;
+    }
+    let mut input_counts = [0usize; 2];
+    for &s in &frame.species_index {
+        input_counts[s as usize] += 1;
+    }
+    assert_eq!(species_counts, input_counts);
+    let mut grid = std::collections::HashMap::<[i64; 3], Vec<[f32; 3]>>::new();
+    let cell = 2.0f32;
+    let key = |p: [f32; 3]| p.map(|v| (v / cell).floor() as i64);
+    for p in &frame.positions {
+        grid.entry(key(*p)).or_default().push(*p);
+    }
+    let mut worst = 0.0f64;
+    for d in &decoded {
+        let k = key(*d);
+        let mut best = f64::INFINITY;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(v) = grid.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                        for p in v {
+                            let e: f64 = (0..3)
+                                .map(|i| (f64::from(p[i]) - f64::from(d[i])).powi(2))
+                                .sum();
+                            best = best.min(e.sqrt());
+                        }
+                    }
+                }
+            }
+        }
+        worst = worst.max(best);
+    }
+    assert!(
+        worst <= bound + 1e-12,
+        "a particle decodes {worst} away, recorded bound {bound}"
+    );
+    let h = quantize::half_range(params.position_bits) as f64;
+    let extent = 130.0 * 3f64.sqrt();
+    assert!(
+        bound <= extent / h,
+        "bound {bound} exceeds a half step of the whole extent"
+    );
+
+    // Hierarchy invariants and Eq. 1 per cluster.
+    let nodes = f.nodes();
+    let levels = f.levels();
+    assert_eq!(levels[0].point_count, 1);
+    for l in 0..last {
+        for (i, n) in f.level_nodes(l).iter().enumerate() {
+            let id = levels[l].node_first as usize + i;
+            // Area (flux) is conserved: Σ children's area = parent's area.
+            let child_area: f64 = if l + 1 < last {
+                f.level_nodes(l + 1)
+                    [n.child_first as usize..(n.child_first + n.child_count) as usize]
+                    .iter()
+                    .map(|c| f64::from(c.area_sum))
+                    .sum()
+            } else {
+                let sp = f.species();
+                let order_species =
+                    &sp[n.child_first as usize..(n.child_first + n.child_count) as usize];
+                order_species
+                    .iter()
+                    .map(|&s| f64::from(f.metadata().species[s as usize].radius).powi(2))
+                    .sum()
+            };
+            let rel = (child_area - f64::from(n.area_sum)).abs() / child_area;
+            assert!(
+                rel < 1e-5,
+                "node {id}: area {} vs children {child_area}",
+                n.area_sum
+            );
+            // Eq. 2: never smaller than the largest child.
+            let largest_child = if l + 1 < last {
+                f.level_nodes(l + 1)
+                    [n.child_first as usize..(n.child_first + n.child_count) as usize]
+                    .iter()
+                    .map(|c| c.radius)
+                    .fold(0.0, f32::max)
+            } else {
+                1.28f32.min(1.44)
+            };
+            assert!(
+                n.radius >= largest_child * 0.999,
+                "node {id}: radius {} < child {largest_child}",
+                n.radius
+            );
+            // Bounds contain the children's bounds.
+            if l + 1 < last {
+                for c in &f.level_nodes(l + 1)
+                    [n.child_first as usize..(n.child_first + n.child_count) as usize]
+                {
+                    for k in 0..3 {
+                        assert!(
+                            c.bounds_min[k] >= n.bounds_min[k]
+                                && c.bounds_max[k] <= n.bounds_max[k]
+                        );
+                    }
+                }
+            }
+            assert!(n.child_count as usize <= params.max_cluster_size as usize || l == 0);
+            assert_eq!(nodes[id].level as usize, l);
+        }
+    }
+    // Area of the top equals all particles' area.
+    let total: f64 = frame
+        .species_index
+        .iter()
+        .map(|&s| if s == 0 { 1.28f64 * 1.28 } else { 1.44 * 1.44 })
+        .sum();
+    assert!((f64::from(nodes[0].area_sum) - total).abs() / total < 1e-5);
+    assert!(levels[1].point_count <= u64::from(params.max_root_points));
+
+    // Attribute survives within its quantization step.
+    let info = f.metadata().attribute.clone().unwrap();
+    assert_eq!(info.name, "c_pe");
+    let a = f.attribute().unwrap();
+    let step = (info.max - info.min) / 65535.0;
+    let mut dec: Vec<f32> = a.iter().map(|&q| info.decode(q)).collect();
+    let mut inp: Vec<f32> = frame.attribute.as_ref().unwrap().values.clone();
+    dec.sort_by(f32::total_cmp);
+    inp.sort_by(f32::total_cmp);
+    for (d, i) in dec.iter().zip(&inp) {
+        assert!((d - i).abs() <= step, "attribute {d} vs {i}");
+    }
+}
+
+#[test]
+fn round_trip_u16_delta1() {
+    check_round_trip(
+        &test_frame(16),
+        BuildParams {
+            max_root_points: 64,
+            ..Default::default()
+        },
+    );
+}
+
+#[test]
+fn round_trip_u8_delta2() {
+    check_round_trip(
+        &test_frame(12),
+        BuildParams {
+            max_root_points: 32,
+            delta_n: 2,
+            position_bits: 8,
+            max_cluster_size: 6,
+        },
+    );
+}
+
+#[test]
+fn single_particle_and_tiny_inputs() {
+    for n in [1usize, 2, 3, 9] {
+        let frame = Frame {
+            positions: (0..n).map(|i| [i as f32, 0.0, 0.0]).collect(),
+            species_index: vec![0; n],
+            species: vec![SpeciesName {
+                name: "Cu".into(),
+                numeric_type: false,
+            }],
+            ..Default::default()
+        };
+        let (_d, f) = convert(&frame, BuildParams::default());
+        f.verify().unwrap();
+        assert_eq!(f.level_count(), 2);
+        assert_eq!(f.decode_level(1).len(), n);
+    }
+}
+
+#[test]
+fn output_is_byte_identical_whatever_the_thread_count() {
+    let frame = test_frame(24);
+    let bytes = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mdlod");
+        let opts = ConvertOptions {
+            build: BuildParams {
+                max_root_points: 100,
+                ..Default::default()
+            },
+            radii: vec![],
+        };
+        pool.install(|| convert_frame(&frame, None, &path, &opts, &NoProgress).unwrap());
+        std::fs::read(&path).unwrap()
+    };
+    let one = bytes(1);
+    assert_eq!(one, bytes(2));
+    assert_eq!(one, bytes(5));
+}
+
+#[test]
+fn non_finite_positions_are_refused() {
+    let mut frame = test_frame(4);
+    frame.positions[7] = [f32::NAN, 0.0, 0.0];
+    let dir = tempfile::tempdir().unwrap();
+    let err = convert_frame(
+        &frame,
+        None,
+        &dir.path().join("x.mdlod"),
+        &ConvertOptions::default(),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("particle 7") && err.contains("non-finite"),
+        "{err}"
+    );
+    assert!(!dir.path().join("x.mdlod").exists());
+}
