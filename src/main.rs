@@ -1,1 +1,48 @@
-fn main() {}
+//! `mdlod`: the command-line program. Argument parsing and progress output only; the work
+//! lives in the library crates.
+
+mod commands;
+mod progress;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "mdlod",
+    version,
+    about = "Level-of-detail conversion and rendering for huge particle simulations",
+    long_about = "mdlod converts molecular-dynamics, SPH and n-body dumps once into a \
+                  level-of-detail .mdlod file (a PCA-split cluster hierarchy with quantized \
+                  relative coordinates, laid out for memory mapping)."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    Convert(commands::convert::Args),
+    Info(commands::info::Args),
+    Verify(commands::verify::Args),
+    Generate(commands::generate::Args),
+    Demo(commands::demo::Args),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Convert(a) => commands::convert::run(a),
+        Command::Info(a) => commands::info::run(a),
+        Command::Verify(a) => commands::verify::run(a),
+        Command::Generate(a) => commands::generate::run(a),
+        Command::Demo(a) => commands::demo::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

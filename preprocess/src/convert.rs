@@ -26,6 +26,8 @@ pub struct ConvertReport {
     pub levels: usize,
     pub nodes: usize,
     pub max_position_error: f64,
+    /// Time spent reading and parsing the input (zero for [`convert_frame`]).
+    pub read_time: Duration,
     pub build_time: Duration,
     pub write_time: Duration,
     pub file_size: u64,
@@ -33,6 +35,8 @@ pub struct ConvertReport {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ConvertError {
+    #[error(transparent)]
+    Read(#[from] crate::readers::ReadError),
     #[error("{path}: {source}")]
     Build {
         path: String,
@@ -102,10 +106,49 @@ pub fn convert_frame(
         levels: h.level_count(),
         nodes: h.nodes.len(),
         max_position_error: h.max_position_error,
+        read_time: Duration::ZERO,
         build_time,
         write_time,
         file_size,
     })
+}
+
+/// Which frame of a multi-frame input to convert.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum FrameSelect {
+    /// Frame `k` (0-based).
+    Index(usize),
+    /// The last frame.
+    #[default]
+    Last,
+}
+
+/// Reads one frame of `input` (any format [`crate::readers`] knows) and converts it.
+pub fn convert_file(
+    input: &Path,
+    output: &Path,
+    frame: FrameSelect,
+    read: &crate::readers::ReadOptions,
+    options: &ConvertOptions,
+    progress: &dyn Progress,
+) -> Result<ConvertReport, ConvertError> {
+    let dump = crate::readers::DumpFile::open(input)?;
+    let k = match frame {
+        FrameSelect::Index(k) => k,
+        FrameSelect::Last => dump.frame_count().saturating_sub(1),
+    };
+    let t0 = Instant::now();
+    let frame = dump.read_frame(k, read, progress)?;
+    let read_time = t0.elapsed();
+    let mut report = convert_frame(
+        &frame,
+        Some(source_info(input, k as u64)),
+        output,
+        options,
+        progress,
+    )?;
+    report.read_time = read_time;
+    Ok(report)
 }
 
 /// Describes a source file for the metadata.

@@ -366,44 +366,32 @@ pub fn build(
     let mut max_err = 0.0f64;
     for m in 1..level_count {
         let ql = m.saturating_sub(delta_n);
-        let ranges = descendant_ranges(&child_ranges, ql, m);
-        let first = levels[ql].node_first as usize;
-        let per_node: Vec<(Vec<[u16; 3]>, f64)> = ranges
+        let first = levels[ql].node_first as u32;
+        // The encoding node of every point of level m.
+        let mut encoder = vec![0u32; positions[m].len()];
+        for (i, r) in descendant_ranges(&child_ranges, ql, m).iter().enumerate() {
+            encoder[r.start as usize..r.end as usize].fill(first + i as u32);
+        }
+        let encoded: Vec<([u16; 3], f64)> = positions[m]
             .par_iter()
-            .enumerate()
-            .map(|(i, r)| {
-                let node = &nodes[first + i];
-                let mut out = Vec::with_capacity((r.end - r.start) as usize);
-                let mut err = 0.0f64;
-                for p in &positions[m][r.start as usize..r.end as usize] {
-                    let q = [0, 1, 2].map(|k| {
-                        quantize::encode(
-                            f64::from(p[k]),
-                            node.centroid[k],
-                            node.quant_scale[k],
-                            bits,
-                        )
-                    });
-                    let d = quantize::decode3(q, node.centroid, node.quant_scale, bits);
-                    let e2: f64 = (0..3)
-                        .map(|k| (f64::from(d[k]) - f64::from(p[k])).powi(2))
-                        .sum();
-                    err = err.max(e2.sqrt());
-                    out.push(q);
-                }
-                (out, err)
+            .zip(&encoder)
+            .map(|(p, &e)| {
+                let node = &nodes[e as usize];
+                let q = [0, 1, 2].map(|k| {
+                    quantize::encode(f64::from(p[k]), node.centroid[k], node.quant_scale[k], bits)
+                });
+                let d = quantize::decode3(q, node.centroid, node.quant_scale, bits);
+                let e2: f64 = (0..3)
+                    .map(|k| (f64::from(d[k]) - f64::from(p[k])).powi(2))
+                    .sum();
+                (q, e2.sqrt())
             })
             .collect();
-        let mut level_q = Vec::with_capacity(positions[m].len());
-        for (q, e) in per_node {
-            level_q.extend(q);
-            if m == last {
-                max_err = max_err.max(e);
-            }
+        if m == last {
+            max_err = encoded.iter().map(|e| e.1).fold(0.0, f64::max);
         }
-        quantized.push(level_q);
+        quantized.push(encoded.into_iter().map(|e| e.0).collect());
     }
-
     let particle_order = order.pop().expect("finest level");
     let species_index = particle_order
         .par_iter()

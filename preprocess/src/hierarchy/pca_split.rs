@@ -13,8 +13,6 @@
 //! through floating-point rounding — are split at the middle of their (deterministic)
 //! order instead, so crystal lattices and duplicated points never stall the build.
 
-use rayon::prelude::*;
-
 /// One point being clustered.
 #[derive(Clone, Copy, Debug)]
 pub struct Item {
@@ -53,7 +51,16 @@ const PARALLEL_MIN: usize = 1 << 15;
 /// Splits `items` into clusters of at most `max_cluster_size` points.
 pub fn cluster(mut items: Vec<Item>, max_cluster_size: usize) -> Clusters {
     let max = max_cluster_size.max(1);
-    let sizes = split(&mut items, max);
+    let n = items.len();
+    let mut scratch = items.clone();
+    let mut order = vec![0u32; n];
+    let stats = Stats::of(
+        &items,
+        items
+            .first()
+            .map_or([0.0; 3], |i| i.position.map(f64::from)),
+    );
+    let sizes = split(&mut items, &mut scratch, &mut order, &stats, max);
     let mut offsets = Vec::with_capacity(sizes.len() + 1);
     let mut acc = 0u32;
     offsets.push(0);
@@ -61,116 +68,229 @@ pub fn cluster(mut items: Vec<Item>, max_cluster_size: usize) -> Clusters {
         acc += s;
         offsets.push(acc);
     }
-    let order = items.par_iter().map(|it| it.id).collect();
     Clusters { order, offsets }
 }
 
-fn split(items: &mut [Item], max: usize) -> Vec<u32> {
-    if items.len() <= max {
-        return vec![items.len() as u32];
+/// Sums over a cluster's points about a shift `s` (a point near the cluster, so that the
+/// sums do not cancel): enough for the weighted centroid and the covariance.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Stats {
+    shift: [f64; 3],
+    n: f64,
+    w: f64,
+    wd: [f64; 3],
+    d: [f64; 3],
+    /// xx, xy, xz, yy, yz, zz of d dᵀ.
+    dd: [f64; 6],
+}
+
+impl Stats {
+    /// The sums of `items` about `shift`, in one pass.
+    pub fn of(items: &[Item], shift: [f64; 3]) -> Stats {
+        let mut s = Stats {
+            shift,
+            ..Stats::default()
+        };
+        for it in items {
+            s.add(it, 1.0);
+        }
+        s
     }
+
+    /// Adds `mask` (0 or 1) times the point's terms: branch-free accumulation.
+    #[inline(always)]
+    fn add(&mut self, it: &Item, mask: f64) {
+        let d = [0, 1, 2].map(|k| (f64::from(it.position[k]) - self.shift[k]) * mask);
+        let w = f64::from(it.weight) * mask;
+        self.n += mask;
+        self.w += w;
+        for k in 0..3 {
+            self.wd[k] += w * d[k];
+            self.d[k] += d[k];
+        }
+        self.dd[0] += d[0] * d[0];
+        self.dd[1] += d[0] * d[1];
+        self.dd[2] += d[0] * d[2];
+        self.dd[3] += d[1] * d[1];
+        self.dd[4] += d[1] * d[2];
+        self.dd[5] += d[2] * d[2];
+    }
+
+    /// The weighted centroid (the plain mean when all weights are zero) and the unit
+    /// principal axis of the covariance about it.
+    pub fn plane(&self) -> ([f64; 3], [f64; 3]) {
+        let shift = if self.w > 0.0 {
+            self.wd.map(|v| v / self.w)
+        } else {
+            self.d.map(|v| v / self.n.max(1.0))
+        };
+        // A = Σ (d − D)(d − D)ᵀ = Σ ddᵀ − D Σdᵀ − Σd Dᵀ + n D Dᵀ
+        let idx = [
+            (0, 0, 0),
+            (1, 0, 1),
+            (2, 0, 2),
+            (3, 1, 1),
+            (4, 1, 2),
+            (5, 2, 2),
+        ];
+        let mut a = [0.0f64; 6];
+        for (s, i, j) in idx {
+            a[s] = self.dd[s] - shift[i] * self.d[j] - self.d[i] * shift[j]
+                + self.n * shift[i] * shift[j];
+        }
+        let centroid = [0, 1, 2].map(|k| self.shift[k] + shift[k]);
+        (centroid, largest_eigenvector(a))
+    }
+}
+
+/// Splits `items` (whose sums are `stats`) recursively; partitions go to `scratch`, which
+/// then serves as the source of the next level down (the two buffers alternate). Leaves
+/// write their ids to `order` at the same positions.
+fn split(
+    items: &mut [Item],
+    scratch: &mut [Item],
+    order: &mut [u32],
+    stats: &Stats,
+    max: usize,
+) -> Vec<u32> {
     if items.len() < PARALLEL_MIN {
         let mut sizes = Vec::with_capacity(items.len() / max * 2 + 1);
-        split_into(items, max, &mut sizes);
+        split_into(items, scratch, order, stats, max, &mut sizes);
         return sizes;
     }
-    let mid = partition(items);
-    let (left, right) = items.split_at_mut(mid);
-    let (mut a, b) = rayon::join(|| split(left, max), || split(right, max));
+    let (mid, sa, sb) = partition(items, scratch, stats);
+    let (sl, sr) = scratch.split_at_mut(mid);
+    let (il, ir) = items.split_at_mut(mid);
+    let (ol, or) = order.split_at_mut(mid);
+    let (mut a, b) = rayon::join(
+        || split(sl, il, ol, &sa, max),
+        || split(sr, ir, or, &sb, max),
+    );
     a.extend(b);
     a
 }
 
-fn split_into(items: &mut [Item], max: usize, sizes: &mut Vec<u32>) {
+fn split_into(
+    items: &mut [Item],
+    scratch: &mut [Item],
+    order: &mut [u32],
+    stats: &Stats,
+    max: usize,
+    sizes: &mut Vec<u32>,
+) {
     if items.len() <= max {
+        for (o, it) in order.iter_mut().zip(items.iter()) {
+            *o = it.id;
+        }
         sizes.push(items.len() as u32);
         return;
     }
-    let mid = partition(items);
-    let (left, right) = items.split_at_mut(mid);
-    split_into(left, max, sizes);
-    split_into(right, max, sizes);
+    let (mid, sa, sb) = partition(items, scratch, stats);
+    let (sl, sr) = scratch.split_at_mut(mid);
+    let (il, ir) = items.split_at_mut(mid);
+    let (ol, or) = order.split_at_mut(mid);
+    split_into(sl, il, ol, &sa, max, sizes);
+    split_into(sr, ir, or, &sb, max, sizes);
 }
 
-/// Reorders `items` so that the points on the non-negative side of the PCA plane come
-/// first, and returns their count (always between 1 and `len - 1`).
-fn partition(items: &mut [Item]) -> usize {
+/// Writes `items` to `out` with the points on the non-negative side of the PCA plane
+/// first (in their order) and the rest after them (in reverse order), and returns the
+/// size of the first part (always between 1 and `len - 1`) with the sums of both parts,
+/// gathered in the same pass. Branch-free: every item is written to both ends and only
+/// one cursor advances.
+fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, Stats) {
     let n = items.len();
-    let (centroid, axis) = principal_plane(items);
-    let side = |it: &Item| {
-        let d = [0, 1, 2].map(|k| f64::from(it.position[k]) - centroid[k]);
-        d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2] >= 0.0
+    let (centroid, axis) = stats.plane();
+    // Single precision is plenty to pick a side; the plane offset is folded into one
+    // constant so the test is one dot product.
+    let e = axis.map(|v| v as f32);
+    let offset = (centroid[0] * axis[0] + centroid[1] * axis[1] + centroid[2] * axis[2]) as f32;
+    let mut a = Stats {
+        shift: centroid,
+        ..Stats::default()
     };
-    let mut i = 0;
-    let mut j = n;
-    while i < j {
-        if side(&items[i]) {
-            i += 1;
-        } else {
-            j -= 1;
-            items.swap(i, j);
-        }
+    let mut b = a;
+    let mut lo = 0usize;
+    let mut hi = n;
+    for it in items {
+        let p = it.position;
+        let left = p[0] * e[0] + p[1] * e[1] + p[2] * e[2] >= offset;
+        // lo < hi holds before every write: lo + (n - hi) items were placed so far.
+        out[lo] = *it;
+        out[hi - 1] = *it;
+        let m = f64::from(u8::from(left));
+        a.add(it, m);
+        b.add(it, 1.0 - m);
+        lo += usize::from(left);
+        hi -= usize::from(!left);
     }
-    if i == 0 || i == n {
-        n / 2
-    } else {
-        i
+    if lo == 0 || lo == n {
+        // Degenerate (duplicates, or rounding put everything on one side): halve the
+        // cluster in its current order.
+        out.copy_from_slice(items);
+        let h = n / 2;
+        return (
+            h,
+            Stats::of(&out[..h], centroid),
+            Stats::of(&out[h..], centroid),
+        );
     }
+    // The right part was written back to front; its sums do not depend on order.
+    (lo, a, b)
 }
 
 /// The weighted centroid and the unit principal axis of the points (any unit vector when
 /// the covariance vanishes).
 pub fn principal_plane(items: &[Item]) -> ([f64; 3], [f64; 3]) {
-    // One pass of sums about the first point (shifted to avoid cancellation).
-    let x0 = items[0].position.map(f64::from);
-    let mut w_sum = 0.0;
-    let mut wd = [0.0f64; 3];
-    let mut d_sum = [0.0f64; 3];
-    let mut dd = [0.0f64; 6];
-    for it in items {
-        let d = [0, 1, 2].map(|k| f64::from(it.position[k]) - x0[k]);
-        let w = f64::from(it.weight);
-        w_sum += w;
-        for k in 0..3 {
-            wd[k] += w * d[k];
-            d_sum[k] += d[k];
-        }
-        dd[0] += d[0] * d[0];
-        dd[1] += d[0] * d[1];
-        dd[2] += d[0] * d[2];
-        dd[3] += d[1] * d[1];
-        dd[4] += d[1] * d[2];
-        dd[5] += d[2] * d[2];
-    }
-    let n = items.len() as f64;
-    let shift = if w_sum > 0.0 {
-        wd.map(|v| v / w_sum)
-    } else {
-        d_sum.map(|v| v / n)
-    };
-    // A = Σ (d − D)(d − D)ᵀ = Σ ddᵀ − D Σdᵀ − Σd Dᵀ + n D Dᵀ
-    let idx = [
-        (0, 0, 0),
-        (1, 0, 1),
-        (2, 0, 2),
-        (3, 1, 1),
-        (4, 1, 2),
-        (5, 2, 2),
-    ];
-    let mut a = [0.0f64; 6];
-    for (s, i, j) in idx {
-        a[s] = dd[s] - shift[i] * d_sum[j] - d_sum[i] * shift[j] + n * shift[i] * shift[j];
-    }
-    let centroid = [0, 1, 2].map(|k| x0[k] + shift[k]);
-    (centroid, largest_eigenvector(a))
+    Stats::of(items, items[0].position.map(f64::from)).plane()
 }
 
 /// Unit eigenvector of the largest eigenvalue of the symmetric matrix
-/// `[[a0 a1 a2] [a1 a3 a4] [a2 a4 a5]]`, by power iteration from the axis of largest
-/// variance.
+/// `[[a0 a1 a2] [a1 a3 a4] [a2 a4 a5]]`: the eigenvalue in closed form (Smith 1961), the
+/// vector as the longest cross product of two rows of `A − λI`; power iteration where
+/// the largest eigenvalue is (nearly) repeated.
 pub fn largest_eigenvector(a: [f64; 6]) -> [f64; 3] {
     let m = [[a[0], a[1], a[2]], [a[1], a[3], a[4]], [a[2], a[4], a[5]]];
-    let diag = [a[0], a[3], a[5]];
+    let p1 = a[1] * a[1] + a[2] * a[2] + a[4] * a[4];
+    let q = (a[0] + a[3] + a[5]) / 3.0;
+    let p2 = (a[0] - q).powi(2) + (a[3] - q).powi(2) + (a[5] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    if p.is_nan() || p <= 0.0 || !p.is_finite() {
+        return power_iteration(&m);
+    }
+    let b = |i: usize, j: usize| (m[i][j] - if i == j { q } else { 0.0 }) / p;
+    let det = b(0, 0) * (b(1, 1) * b(2, 2) - b(1, 2) * b(2, 1))
+        - b(0, 1) * (b(1, 0) * b(2, 2) - b(1, 2) * b(2, 0))
+        + b(0, 2) * (b(1, 0) * b(2, 1) - b(1, 1) * b(2, 0));
+    let phi = (det / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+    let lambda = q + 2.0 * p * phi.cos();
+    let r = [0, 1, 2].map(|i| [0, 1, 2].map(|j| m[i][j] - if i == j { lambda } else { 0.0 }));
+    let cross = |u: [f64; 3], v: [f64; 3]| {
+        [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ]
+    };
+    let norm2 = |v: [f64; 3]| v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    let candidates = [cross(r[0], r[1]), cross(r[0], r[2]), cross(r[1], r[2])];
+    let mut best = candidates[0];
+    for c in &candidates[1..] {
+        if norm2(*c) > norm2(best) {
+            best = *c;
+        }
+    }
+    // A (nearly) repeated largest eigenvalue leaves the rows nearly parallel.
+    let scale = p * p;
+    if norm2(best).is_nan() || norm2(best) <= 1e-12 * scale * scale {
+        return power_iteration(&m);
+    }
+    let n = norm2(best).sqrt();
+    best.map(|x| x / n)
+}
+
+fn power_iteration(m: &[[f64; 3]; 3]) -> [f64; 3] {
+    let diag = [m[0][0], m[1][1], m[2][2]];
     let start = if diag[0] >= diag[1] && diag[0] >= diag[2] {
         0
     } else if diag[1] >= diag[2] {
@@ -184,7 +304,7 @@ pub fn largest_eigenvector(a: [f64; 6]) -> [f64; 3] {
     for _ in 0..32 {
         let w = [0, 1, 2].map(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2]);
         let norm = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
-        if !(norm > 0.0) || !norm.is_finite() {
+        if norm.is_nan() || norm <= 0.0 || !norm.is_finite() {
             break;
         }
         let next = w.map(|x| x / norm);
@@ -224,6 +344,44 @@ mod tests {
             .collect();
         let (_, axis) = principal_plane(&items(&pts));
         assert!(axis[0].abs() > 0.999, "axis {axis:?}");
+    }
+
+    #[test]
+    fn closed_form_matches_power_iteration() {
+        let mut seed = 12345u64;
+        let mut r = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..1000 {
+            // A = Σ v vᵀ over a few random vectors: symmetric positive semi-definite.
+            let mut a = [0.0; 6];
+            for _ in 0..4 {
+                let v = [r(), r() * 3.0, r() * 0.5];
+                a[0] += v[0] * v[0];
+                a[1] += v[0] * v[1];
+                a[2] += v[0] * v[2];
+                a[3] += v[1] * v[1];
+                a[4] += v[1] * v[2];
+                a[5] += v[2] * v[2];
+            }
+            let e = largest_eigenvector(a);
+            let m = [[a[0], a[1], a[2]], [a[1], a[3], a[4]], [a[2], a[4], a[5]]];
+            // A e = λ e with λ the Rayleigh quotient, and λ is the largest: no unit
+            // vector of the power iteration's result has a larger quotient.
+            let ae = [0, 1, 2].map(|i| m[i][0] * e[0] + m[i][1] * e[1] + m[i][2] * e[2]);
+            let lambda = ae[0] * e[0] + ae[1] * e[1] + ae[2] * e[2];
+            let resid = (0..3)
+                .map(|i| (ae[i] - lambda * e[i]).abs())
+                .fold(0.0, f64::max);
+            assert!(resid < 1e-6 * (1.0 + lambda), "residual {resid} for {a:?}");
+            let p = power_iteration(&m);
+            let ap = [0, 1, 2].map(|i| m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2]);
+            let lp = ap[0] * p[0] + ap[1] * p[1] + ap[2] * p[2];
+            assert!(lambda >= lp - 1e-6 * (1.0 + lp), "{lambda} < {lp}");
+        }
     }
 
     #[test]

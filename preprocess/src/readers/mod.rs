@@ -1,1 +1,588 @@
-//! Readers for particle dumps.
+//! Readers for particle dumps: LAMMPS text dumps and (extended) XYZ, plain or gzip-compressed.
+//!
+//! How it works:
+//! - [`DumpFile::open`] memory-maps the file (gzip files, recognised by their magic bytes,
+//!   are decompressed into memory instead), picks the [`InputFormat`] from the file name or,
+//!   failing that, from the first line, and builds a *frame index* in one scan: LAMMPS
+//!   frames are found with `memchr::memmem` as lines starting `ITEM: TIMESTEP`; XYZ frames
+//!   by reading each frame's atom count and skipping that many lines with a vectorised
+//!   newline count. The index holds each frame's byte range and timestep, so
+//!   [`DumpFile::frame_count`] and [`DumpFile::frame_timestep`] need no further parsing and
+//!   frame `k` is read without touching the frames before it.
+//! - [`DumpFile::read_frame`] parses that frame's header (box, counts, column names), maps
+//!   the columns onto positions, species and the optional attribute, and hands the atom
+//!   lines to the shared parallel parser (`atoms.rs`), which splits them into chunks at line
+//!   boundaries and parses the chunks with rayon into preallocated output arrays.
+//! - Every error is a [`ReadError`] whose message starts `path:line:` (1-based line of the
+//!   decompressed text). Line numbers are computed only when an error is built, by counting
+//!   newlines up to the error's byte offset, so the fast path never tracks them.
+//!
+//! What is read:
+//! - **LAMMPS text dumps**: `ITEM: UNITS`, `TIME`, `TIMESTEP`, `NUMBER OF ATOMS`,
+//!   `BOX BOUNDS` (orthogonal, restricted triclinic `xy xz yz` with the `_bound` values
+//!   converted to the true box, general triclinic `abc origin`) and `ATOMS <columns>` in
+//!   any column order. Coordinates come from the first complete triple of `x y z`, `xu yu
+//!   zu`, `xs ys zs`, `xsu ysu zsu` (in that order of preference: wrapped Cartesian, then
+//!   unwrapped, then scaled; scaled ones are converted through the possibly triclinic
+//!   box). Species come from `element` if present, else `type` (numeric types sorted
+//!   numerically), else all atoms are one species named `atom`.
+//! - **XYZ / extended XYZ**: `Lattice`, `Origin`, `pbc`, `Time`, `Timestep`/`step` and
+//!   `Properties` (column order and counts honoured; a property of count `n > 1` is `n`
+//!   columns `name[0]`...); plain XYZ columns are `species x y z col5 col6 ...`.
+//! - Any numeric column can be the per-particle attribute ([`ReadOptions::attribute`]).
+//!   NaN and infinite numbers in used columns are errors. Atom order is kept.
+//! - Files are memory-mapped; gzip files (single or multi-member) are decompressed into
+//!   memory. zstd and bzip2 files are recognised and refused with a clear error.
+
+mod atoms;
+mod float;
+mod lammps_text;
+mod xyz;
+
+use std::fmt;
+use std::fs::File;
+use std::io::Read;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+pub use float::parse_f64;
+
+use crate::frame::{Attribute, Frame, SimulationBox};
+use crate::progress::{NoProgress, Progress};
+
+/// A position in an input file: the path and a 1-based line number. Displays as `path:line`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Location {
+    pub path: PathBuf,
+    pub line: u64,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}", self.path.display(), self.line)
+    }
+}
+
+/// Everything that can go wrong reading a dump. Every message starts with the file path and,
+/// where there is one, the line (`dump.lammpstrj:1042: expected 5 columns, found 4`).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReadError {
+    /// Opening, mapping or decompressing the file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{at}: file is empty")]
+    Empty { at: Location },
+    /// Not a format this module reads (or a compression it does not decompress).
+    #[error("{at}: {message}")]
+    Unsupported { at: Location, message: String },
+    #[error("{}: frame {frame} does not exist; the file has {count} frame(s)", path.display())]
+    NoSuchFrame {
+        path: PathBuf,
+        frame: usize,
+        count: usize,
+    },
+    /// A header line (LAMMPS `ITEM:` block, XYZ count or comment line) is not as expected.
+    #[error("{at}: {message}")]
+    Malformed { at: Location, message: String },
+    #[error("{at}: expected {expected} columns, found {found}")]
+    ColumnCount {
+        at: Location,
+        expected: usize,
+        found: usize,
+    },
+    #[error("{at}: column `{column}`: `{text}` is not a number")]
+    NotANumber {
+        at: Location,
+        column: String,
+        text: String,
+    },
+    #[error("{at}: column `{column}`: `{text}` is not a finite number")]
+    NonFinite {
+        at: Location,
+        column: String,
+        text: String,
+    },
+    /// Fewer atom lines than the header announced.
+    #[error("{at}: truncated frame: the header announces {expected} atoms but only {found} atom lines follow")]
+    Truncated {
+        at: Location,
+        expected: usize,
+        found: usize,
+    },
+    /// More atom lines than the header announced (`at` is the first extra line).
+    #[error("{at}: more atom lines than the {expected} the header announces")]
+    ExtraLines { at: Location, expected: usize },
+    #[error("{at}: no coordinate columns (need x y z, xu yu zu, xs ys zs or xsu ysu zsu); columns are: {columns}")]
+    NoCoordinates { at: Location, columns: String },
+    #[error("{at}: no column `{name}` for the attribute; available columns: {available}")]
+    UnknownAttribute {
+        at: Location,
+        name: String,
+        available: String,
+    },
+    #[error("{at}: more than 65536 distinct species")]
+    TooManySpecies { at: Location },
+}
+
+/// The dump formats this module reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputFormat {
+    /// LAMMPS text dump (`dump atom`, `dump custom`).
+    LammpsText,
+    /// XYZ or extended XYZ.
+    Xyz,
+}
+
+impl InputFormat {
+    /// The format implied by a file name, ignoring a `.gz`, `.bz2` or `.zst` suffix:
+    /// `.lammpstrj`, `.dump`, `.lammps` and `dump.*` are LAMMPS; `.xyz` and `.extxyz` are XYZ.
+    pub fn from_path(path: &Path) -> Option<InputFormat> {
+        let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+        let name = [".gz", ".bz2", ".zst"]
+            .iter()
+            .find_map(|s| name.strip_suffix(s))
+            .unwrap_or(&name);
+        if name.ends_with(".xyz") || name.ends_with(".extxyz") {
+            Some(InputFormat::Xyz)
+        } else if name.ends_with(".lammpstrj")
+            || name.ends_with(".dump")
+            || name.ends_with(".lammps")
+            || name.starts_with("dump.")
+        {
+            Some(InputFormat::LammpsText)
+        } else {
+            None
+        }
+    }
+
+    /// The format implied by the first non-blank line: `ITEM:` is LAMMPS, an integer is XYZ.
+    pub fn sniff(data: &[u8]) -> Option<InputFormat> {
+        let mut cursor = Cursor::new(data, 0);
+        while let Some((_, line)) = cursor.next_line() {
+            let line = trim(line);
+            if line.is_empty() {
+                continue;
+            }
+            if line.starts_with(b"ITEM:") {
+                return Some(InputFormat::LammpsText);
+            }
+            return parse_int::<u64>(line).map(|_| InputFormat::Xyz);
+        }
+        None
+    }
+}
+
+impl fmt::Display for InputFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            InputFormat::LammpsText => "LAMMPS text dump",
+            InputFormat::Xyz => "XYZ",
+        })
+    }
+}
+
+/// Choices for [`DumpFile::read_frame`].
+#[derive(Clone, Debug, Default)]
+pub struct ReadOptions {
+    /// Name of a column to read as [`Frame::attribute`] (LAMMPS column name such as `c_pe`,
+    /// or extended-XYZ property name, `name[i]` for component `i` of a vector property).
+    pub attribute: Option<String>,
+}
+
+/// What a frame's header says, without its atoms.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameInfo {
+    /// Number of atoms the header announces.
+    pub particles: usize,
+    pub timestep: Option<u64>,
+    pub time: Option<f64>,
+    pub units: Option<String>,
+    pub simulation_box: Option<SimulationBox>,
+    /// Column names of the atom lines (LAMMPS `ITEM: ATOMS` names; XYZ property names).
+    pub columns: Vec<String>,
+}
+
+/// A frame's parsed header: the public part plus where its atoms are and how to read them.
+pub(crate) struct Header {
+    pub info: FrameInfo,
+    pub layout: atoms::AtomLayout,
+    /// Offset of the line naming the columns, for column errors.
+    pub columns_at: usize,
+    /// Byte range of the atom lines.
+    pub atoms: Range<usize>,
+}
+
+/// The bytes of an opened dump: a memory map or a decompressed buffer.
+type Bytes = Box<dyn AsRef<[u8]> + Send + Sync>;
+
+enum Index {
+    Lammps(lammps_text::Index),
+    Xyz(xyz::Index),
+}
+
+/// An opened dump file and its frame index.
+pub struct DumpFile {
+    path: PathBuf,
+    bytes: Bytes,
+    format: InputFormat,
+    index: Index,
+}
+
+impl fmt::Debug for DumpFile {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("DumpFile")
+            .field("path", &self.path)
+            .field("format", &self.format)
+            .field("frames", &self.frame_count())
+            .finish()
+    }
+}
+
+impl DumpFile {
+    /// Opens a dump, detecting its format from the name or first line, and indexes its frames.
+    pub fn open(path: &Path) -> Result<DumpFile, ReadError> {
+        DumpFile::open_with(path, None, &NoProgress)
+    }
+
+    /// Like [`DumpFile::open`], with the format given (or `None` to detect it) and progress
+    /// reported for decompression and indexing.
+    pub fn open_with(
+        path: &Path,
+        format: Option<InputFormat>,
+        progress: &dyn Progress,
+    ) -> Result<DumpFile, ReadError> {
+        let io = |source| ReadError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let first_line = || Location {
+            path: path.to_path_buf(),
+            line: 1,
+        };
+        let file = File::open(path).map_err(io)?;
+        let size = file.metadata().map_err(io)?.len();
+        if size == 0 {
+            return Err(ReadError::Empty { at: first_line() });
+        }
+        let map = mdlod_format::mmap::map_file(&file).map_err(io)?;
+        let bytes: Bytes = if map.starts_with(&[0x1f, 0x8b]) {
+            Box::new(gunzip(path, &map, progress)?)
+        } else if map.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) || is_bzip2(&map) {
+            return Err(ReadError::Unsupported {
+                at: first_line(),
+                message: "zstd and bzip2 compressed dumps are not supported; decompress the file or recompress it with gzip".into(),
+            });
+        } else {
+            Box::new(map)
+        };
+        let data = bytes.as_ref().as_ref();
+        if data.iter().all(|b| b.is_ascii_whitespace()) {
+            return Err(ReadError::Empty { at: first_line() });
+        }
+        let format = format
+            .or_else(|| InputFormat::from_path(path))
+            .or_else(|| InputFormat::sniff(data))
+            .ok_or_else(|| {
+                let mut cursor = Cursor::new(data, 0);
+                let line = std::iter::from_fn(|| cursor.next_line())
+                    .map(|(_, l)| trim(l))
+                    .find(|l| !l.is_empty())
+                    .unwrap_or_default();
+                ReadError::Unsupported {
+                    at: first_line(),
+                    message: format!(
+                        "cannot tell the format from the name or the first line `{}`; expected a LAMMPS text dump (`ITEM: ...`) or an XYZ file (atom count)",
+                        shorten(line)
+                    ),
+                }
+            })?;
+        let ctx = Ctx { path, data };
+        progress.stage("indexing frames", Some(data.len() as u64), "bytes");
+        let index = match format {
+            InputFormat::LammpsText => Index::Lammps(lammps_text::Index::build(&ctx)?),
+            InputFormat::Xyz => Index::Xyz(xyz::Index::build(&ctx)?),
+        };
+        progress.advance(data.len() as u64);
+        progress.finish_stage();
+        Ok(DumpFile {
+            path: path.to_path_buf(),
+            bytes,
+            format,
+            index,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn format(&self) -> InputFormat {
+        self.format
+    }
+
+    /// The dump's bytes (decompressed when the file is gzip-compressed).
+    fn bytes(&self) -> &[u8] {
+        self.bytes.as_ref().as_ref()
+    }
+
+    /// Number of frames in the file.
+    pub fn frame_count(&self) -> usize {
+        match &self.index {
+            Index::Lammps(i) => i.len(),
+            Index::Xyz(i) => i.len(),
+        }
+    }
+
+    /// Timestep of frame `k` from the index (no parsing). `None` when `k` is out of range or
+    /// the frame does not record one (XYZ files without `Timestep=`/`step=`).
+    pub fn frame_timestep(&self, k: usize) -> Option<u64> {
+        match &self.index {
+            Index::Lammps(i) => i.timestep(k),
+            Index::Xyz(i) => i.timestep(k),
+        }
+    }
+
+    /// Parses frame `k`'s header only: counts, box, time and column names.
+    pub fn frame_info(&self, k: usize) -> Result<FrameInfo, ReadError> {
+        Ok(self.header(k)?.info)
+    }
+
+    /// Reads frame `k`.
+    pub fn read_frame(
+        &self,
+        k: usize,
+        opts: &ReadOptions,
+        progress: &dyn Progress,
+    ) -> Result<Frame, ReadError> {
+        let ctx = self.ctx();
+        let header = self.header(k)?;
+        let columns = &header.info.columns;
+        let (coords, scaled) = header
+            .layout
+            .coords
+            .ok_or_else(|| ReadError::NoCoordinates {
+                at: ctx.at(header.columns_at),
+                columns: columns.join(" "),
+            })?;
+        let fractional = match (scaled, &header.info.simulation_box) {
+            (false, _) => None,
+            (true, Some(b)) => Some(b),
+            (true, None) => {
+                return Err(ReadError::Malformed {
+                    at: ctx.at(header.columns_at),
+                    message: "scaled coordinates but no ITEM: BOX BOUNDS to unscale them".into(),
+                })
+            }
+        };
+        let attribute = match &opts.attribute {
+            None => None,
+            Some(name) => Some(columns.iter().position(|c| c == name).ok_or_else(|| {
+                ReadError::UnknownAttribute {
+                    at: ctx.at(header.columns_at),
+                    name: name.clone(),
+                    available: columns.join(" "),
+                }
+            })?),
+        };
+        let atoms = atoms::parse(
+            &ctx,
+            header.atoms.clone(),
+            header.info.particles,
+            &header.layout,
+            coords,
+            fractional,
+            attribute,
+            &format!("reading frame {k}"),
+            progress,
+        )?;
+        let attribute = atoms.attribute.map(|values| Attribute {
+            name: columns[attribute.unwrap_or_default()].clone(),
+            values,
+        });
+        let info = header.info;
+        Ok(Frame {
+            positions: atoms.positions,
+            species_index: atoms.species_index,
+            species: atoms.species,
+            attribute,
+            simulation_box: info.simulation_box,
+            timestep: info.timestep,
+            time: info.time,
+            units: info.units,
+        })
+    }
+
+    fn ctx(&self) -> Ctx<'_> {
+        Ctx {
+            path: &self.path,
+            data: self.bytes(),
+        }
+    }
+
+    fn header(&self, k: usize) -> Result<Header, ReadError> {
+        if k >= self.frame_count() {
+            return Err(ReadError::NoSuchFrame {
+                path: self.path.clone(),
+                frame: k,
+                count: self.frame_count(),
+            });
+        }
+        let ctx = self.ctx();
+        match &self.index {
+            Index::Lammps(i) => i.header(&ctx, k),
+            Index::Xyz(i) => i.header(&ctx, k),
+        }
+    }
+}
+
+/// The file being read, for building errors with line numbers.
+pub(crate) struct Ctx<'a> {
+    pub path: &'a Path,
+    pub data: &'a [u8],
+}
+
+impl Ctx<'_> {
+    /// The location of byte `offset`: its 1-based line number, by counting newlines. The end
+    /// of a file that ends with a newline counts as its last line.
+    pub fn at(&self, offset: usize) -> Location {
+        let mut offset = offset.min(self.data.len());
+        if offset == self.data.len() && self.data.ends_with(b"\n") {
+            offset -= 1;
+        }
+        let line = memchr::memchr_iter(b'\n', &self.data[..offset]).count() as u64 + 1;
+        Location {
+            path: self.path.to_path_buf(),
+            line,
+        }
+    }
+
+    pub fn malformed(&self, offset: usize, message: impl Into<String>) -> ReadError {
+        ReadError::Malformed {
+            at: self.at(offset),
+            message: message.into(),
+        }
+    }
+}
+
+/// Reads lines (without `\n`, with any `\r` left for [`trim`]) from a byte offset.
+pub(crate) struct Cursor<'a> {
+    data: &'a [u8],
+    pub pos: usize,
+}
+
+impl<'a> Cursor<'a> {
+    pub fn new(data: &'a [u8], pos: usize) -> Self {
+        Cursor { data, pos }
+    }
+
+    /// The next line and its start offset, or `None` at the end.
+    pub fn next_line(&mut self) -> Option<(usize, &'a [u8])> {
+        if self.pos >= self.data.len() {
+            return None;
+        }
+        let start = self.pos;
+        match memchr::memchr(b'\n', &self.data[start..]) {
+            Some(p) => {
+                self.pos = start + p + 1;
+                Some((start, &self.data[start..start + p]))
+            }
+            None => {
+                self.pos = self.data.len();
+                Some((start, &self.data[start..]))
+            }
+        }
+    }
+}
+
+/// `s` without leading and trailing ASCII whitespace (including `\r`).
+pub(crate) fn trim(s: &[u8]) -> &[u8] {
+    s.trim_ascii()
+}
+
+/// Whitespace-separated fields of a line.
+pub(crate) fn fields(line: &[u8]) -> impl Iterator<Item = &[u8]> {
+    line.split(|b| b.is_ascii_whitespace())
+        .filter(|t| !t.is_empty())
+}
+
+pub(crate) fn parse_int<T: std::str::FromStr>(s: &[u8]) -> Option<T> {
+    std::str::from_utf8(trim(s)).ok()?.parse().ok()
+}
+
+/// A line for an error message: lossy UTF-8, trimmed, at most 60 characters.
+pub(crate) fn shorten(line: &[u8]) -> String {
+    let s = String::from_utf8_lossy(trim(line));
+    if s.chars().count() > 60 {
+        format!("{}...", s.chars().take(60).collect::<String>())
+    } else {
+        s.into_owned()
+    }
+}
+
+/// The offset just after the `n`-th newline from `pos`, or `data.len()` when there are fewer.
+/// Counts newlines a block at a time (vectorised), so skipping is several GB/s.
+pub(crate) fn skip_lines(data: &[u8], mut pos: usize, mut n: usize) -> usize {
+    const BLOCK: usize = 1 << 16;
+    while n > 0 && pos < data.len() {
+        let end = (pos + BLOCK).min(data.len());
+        let block = &data[pos..end];
+        let count = memchr::memchr_iter(b'\n', block).count();
+        if count < n {
+            n -= count;
+            pos = end;
+            continue;
+        }
+        for p in memchr::memchr_iter(b'\n', block) {
+            n -= 1;
+            if n == 0 {
+                return pos + p + 1;
+            }
+        }
+    }
+    if n == 0 {
+        pos
+    } else {
+        data.len()
+    }
+}
+
+fn is_bzip2(data: &[u8]) -> bool {
+    data.len() >= 10
+        && data.starts_with(b"BZh")
+        && (b'1'..=b'9').contains(&data[3])
+        && data[4..10] == [0x31, 0x41, 0x59, 0x26, 0x53, 0x59]
+}
+
+/// Decompresses a (possibly multi-member) gzip file into memory.
+fn gunzip(path: &Path, compressed: &[u8], progress: &dyn Progress) -> Result<Vec<u8>, ReadError> {
+    struct Counting<'a, 'p> {
+        inner: &'a [u8],
+        progress: &'p dyn Progress,
+    }
+    impl Read for Counting<'_, '_> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let n = self.inner.read(buf)?;
+            self.progress.advance(n as u64);
+            Ok(n)
+        }
+    }
+    progress.stage("decompressing", Some(compressed.len() as u64), "bytes");
+    let reader = Counting {
+        inner: compressed,
+        progress,
+    };
+    let mut out = Vec::with_capacity(compressed.len().saturating_mul(4));
+    flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(1 << 20, reader))
+        .read_to_end(&mut out)
+        .map_err(|e| ReadError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(e.kind(), format!("gzip decompression failed: {e}")),
+        })?;
+    progress.finish_stage();
+    Ok(out)
+}

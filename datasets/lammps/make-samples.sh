@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# Regenerates the small real LAMMPS dumps in this folder (seconds in all).
+# Needs Debian's `lammps` package (apt-get install -y lammps), which provides `lmp` and
+# the EAM potentials in /usr/share/lammps/potentials.
+set -euo pipefail
+cd "$(dirname "$0")"
+export LAMMPS_POTENTIALS="${LAMMPS_POTENTIALS:-/usr/share/lammps/potentials}"
+export OMP_NUM_THREADS=1
+LMP="${LMP:-$(command -v lmp || command -v lmp_serial)}"
+for input in in.cu_melt in.cuag_alloy in.lj_triclinic in.cu_slab; do
+    echo "== $LMP -in $input"
+    "$LMP" -in "$input" -log none -screen none
+done
+ls -l ./*.dump ./*.dump.gz ./*.xyz

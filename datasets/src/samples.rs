@@ -1,0 +1,150 @@
+//! The small real LAMMPS dumps committed in `datasets/lammps/` (see its README), with what
+//! a reader should find in each, for other crates' tests.
+
+use std::path::PathBuf;
+
+/// One committed LAMMPS output file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LammpsSample {
+    /// File name inside `datasets/lammps/`.
+    pub file: &'static str,
+    /// The input script (in the same folder) that wrote it.
+    pub input: &'static str,
+    /// Atoms per frame (constant).
+    pub atoms: u64,
+    /// Timesteps of the frames, in file order.
+    pub timesteps: &'static [u64],
+    /// Column names of `ITEM: ATOMS` (empty for XYZ).
+    pub columns: &'static [&'static str],
+    /// Text after `ITEM: BOX BOUNDS` (`xy xz yz pp pp pp` for a triclinic box; empty for XYZ).
+    pub box_bounds: &'static str,
+    /// Gzip-compressed.
+    pub gzip: bool,
+    /// `ITEM: UNITS` value (written once, before the first frame).
+    pub units: Option<&'static str>,
+    /// Has `ITEM: TIME` in every frame (timestep × 0.002 ps).
+    pub time: bool,
+    /// Atom lines sorted by id in every frame.
+    pub sorted: bool,
+}
+
+const STEPS_6: &[u64] = &[0, 100, 200, 300, 400, 500];
+const STEPS_5: &[u64] = &[0, 100, 200, 300, 400];
+const STEPS_4: &[u64] = &[0, 100, 200, 300];
+const ORTHO: &str = "pp pp pp";
+const TRICLINIC: &str = "xy xz yz pp pp pp";
+
+/// Every committed sample.
+pub const LAMMPS_SAMPLES: &[LammpsSample] = &[
+    LammpsSample {
+        file: "cu_melt.custom.dump",
+        input: "in.cu_melt",
+        atoms: 500,
+        timesteps: STEPS_6,
+        columns: &["id", "type", "x", "y", "z", "c_pe"],
+        box_bounds: ORTHO,
+        gzip: false,
+        units: Some("metal"),
+        time: true,
+        sorted: true,
+    },
+    LammpsSample {
+        file: "cu_melt.atom.dump",
+        input: "in.cu_melt",
+        atoms: 500,
+        timesteps: STEPS_6,
+        columns: &["id", "type", "xs", "ys", "zs"],
+        box_bounds: ORTHO,
+        gzip: false,
+        units: None,
+        time: false,
+        sorted: false,
+    },
+    LammpsSample {
+        file: "cu_melt.custom.dump.gz",
+        input: "in.cu_melt",
+        atoms: 500,
+        timesteps: STEPS_6,
+        columns: &["id", "type", "x", "y", "z", "vx", "vy", "vz", "c_ke"],
+        box_bounds: ORTHO,
+        gzip: true,
+        units: None,
+        time: false,
+        sorted: true,
+    },
+    LammpsSample {
+        file: "cu_melt.xyz",
+        input: "in.cu_melt",
+        atoms: 500,
+        timesteps: STEPS_6,
+        columns: &[],
+        box_bounds: "",
+        gzip: false,
+        units: None,
+        time: false,
+        sorted: false,
+    },
+    LammpsSample {
+        file: "cuag_alloy.unwrapped.dump",
+        input: "in.cuag_alloy",
+        atoms: 864,
+        timesteps: STEPS_5,
+        columns: &["id", "type", "element", "xu", "yu", "zu", "c_pe"],
+        box_bounds: ORTHO,
+        gzip: false,
+        units: None,
+        time: false,
+        sorted: true,
+    },
+    LammpsSample {
+        file: "lj_triclinic.scaled.dump",
+        input: "in.lj_triclinic",
+        atoms: 256,
+        timesteps: STEPS_4,
+        columns: &["id", "type", "xs", "ys", "zs"],
+        box_bounds: TRICLINIC,
+        gzip: false,
+        units: None,
+        time: false,
+        sorted: false,
+    },
+    LammpsSample {
+        file: "lj_triclinic.cartesian.dump",
+        input: "in.lj_triclinic",
+        atoms: 256,
+        timesteps: STEPS_4,
+        columns: &["id", "type", "x", "y", "z", "v_speed"],
+        box_bounds: TRICLINIC,
+        gzip: false,
+        units: None,
+        time: false,
+        sorted: true,
+    },
+    LammpsSample {
+        file: "cu_slab.shrinkwrap.dump",
+        input: "in.cu_slab",
+        atoms: 648,
+        timesteps: STEPS_4,
+        columns: &["id", "type", "x", "y", "z", "ix", "iy", "iz", "c_ke"],
+        box_bounds: "pp pp ss",
+        gzip: false,
+        units: Some("metal"),
+        time: false,
+        sorted: true,
+    },
+];
+
+/// The folder holding the committed samples (`datasets/lammps/` of this source tree).
+pub fn lammps_samples_dir() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/lammps"))
+}
+
+/// Path of the committed sample `file` (e.g. `"cu_melt.custom.dump"`).
+pub fn lammps_sample_path(file: &str) -> PathBuf {
+    lammps_samples_dir().join(file)
+}
+
+/// The sample entry for `file`, if there is one.
+pub fn lammps_sample(file: &str) -> Option<&'static LammpsSample> {
+    LAMMPS_SAMPLES.iter().find(|s| s.file == file)
+}

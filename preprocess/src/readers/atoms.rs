@@ -1,0 +1,527 @@
+//! Parallel parsing of a block of whitespace-separated atom lines, shared by the LAMMPS and
+//! XYZ readers.
+//!
+//! How it works:
+//! 1. The block (the bytes of one frame's atom lines, trailing whitespace trimmed) is cut
+//!    into chunks of about [`CHUNK_BYTES`], each cut moved forward to just after a `\n`, so
+//!    every chunk holds whole lines.
+//! 2. The lines of every chunk are counted in parallel (`memchr`, several GB/s). Their sum
+//!    is checked against the count the header announced *before* any number is parsed, so a
+//!    truncated frame is reported at once. The counts also tell each chunk where its atoms
+//!    go in the output arrays, which are allocated once and split into disjoint slices.
+//! 3. Chunks are parsed in parallel with rayon. Each walks its bytes once: per line, per
+//!    field, it finds the field's end and acts on the field by its [`Role`] (coordinate,
+//!    species, attribute, or skip). Numbers go through [`parse_f64`]; species tokens are
+//!    looked up in a small per-chunk table and stored as chunk-local ids.
+//! 4. The per-chunk species tables are merged in chunk order (so "first appearance" order
+//!    is kept), optionally sorted numerically (LAMMPS `type`), and every chunk's local ids
+//!    are rewritten to global ids in parallel.
+//!
+//! Errors carry the byte offset of the offending field or line; the line number is only
+//! computed (by counting newlines from the start of the file) when an error is reported.
+
+use std::collections::HashMap;
+use std::ops::Range;
+
+use rayon::prelude::*;
+
+use super::float::{parse_prefix, parse_slow};
+use super::{Ctx, ReadError};
+use crate::frame::{SimulationBox, SpeciesName};
+use crate::progress::Progress;
+
+/// Target chunk size for parallel parsing.
+const CHUNK_BYTES: usize = 1 << 19;
+
+/// Species name used when a dump has no species column.
+pub(crate) const DEFAULT_SPECIES: &str = "atom";
+
+/// How the columns of a frame's atom lines map onto a [`crate::Frame`].
+#[derive(Clone, Debug)]
+pub(crate) struct AtomLayout {
+    /// One name per whitespace-separated field.
+    pub columns: Vec<String>,
+    /// Coordinate column indices and whether they are fractional (scaled), if any.
+    pub coords: Option<([usize; 3], bool)>,
+    /// Column holding the species (element or type), if any.
+    pub species: Option<usize>,
+    /// Species names that all parse as integers are sorted numerically and flagged
+    /// `numeric_type` (LAMMPS `type` column without `element`).
+    pub numeric_species: bool,
+}
+
+/// What a chunk parser does with one field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Role {
+    Skip,
+    Coord(usize),
+    Species,
+    Attr,
+    CoordAttr(usize),
+    SpeciesAttr,
+}
+
+/// Everything a chunk parser needs besides its bytes.
+struct Plan<'p> {
+    roles: Vec<Role>,
+    columns: &'p [String],
+    fractional: Option<&'p SimulationBox>,
+}
+
+/// The parsed atoms of one frame.
+pub(crate) struct Atoms {
+    pub positions: Vec<[f32; 3]>,
+    pub species_index: Vec<u16>,
+    pub species: Vec<SpeciesName>,
+    pub attribute: Option<Vec<f32>>,
+}
+
+/// Parses `expected` atom lines from `block` (byte range into `ctx.data`, starting at a line
+/// start). `count_line` is the offset of the header line that announced `expected`, for
+/// error messages.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn parse(
+    ctx: &Ctx<'_>,
+    block: Range<usize>,
+    expected: usize,
+    layout: &AtomLayout,
+    coords: [usize; 3],
+    fractional: Option<&SimulationBox>,
+    attribute: Option<usize>,
+    label: &str,
+    progress: &dyn Progress,
+) -> Result<Atoms, ReadError> {
+    let data = ctx.data;
+    let mut end = block.end;
+    while end > block.start && data[end - 1].is_ascii_whitespace() {
+        end -= 1;
+    }
+    let start = block.start;
+    progress.stage(label, Some((end - start) as u64), "bytes");
+
+    // 1. chunks at line boundaries
+    let mut chunks: Vec<Range<usize>> = Vec::new();
+    let mut at = start;
+    while at < end {
+        let mut cut = (at + CHUNK_BYTES).min(end);
+        if cut < end {
+            cut = match memchr::memchr(b'\n', &data[cut..end]) {
+                Some(p) => cut + p + 1,
+                None => end,
+            };
+        }
+        chunks.push(at..cut);
+        at = cut;
+    }
+
+    // 2. line counts, checked against the announced count
+    let counts: Vec<usize> = chunks
+        .par_iter()
+        .map(|c| {
+            let n = memchr::memchr_iter(b'\n', &data[c.clone()]).count();
+            if c.end == end {
+                n + 1
+            } else {
+                n
+            }
+        })
+        .collect();
+    let found: usize = counts.iter().sum();
+    if found < expected {
+        return Err(ReadError::Truncated {
+            at: ctx.at(end),
+            expected,
+            found,
+        });
+    }
+    if found > expected {
+        let extra = super::skip_lines(data, start, expected);
+        return Err(ReadError::ExtraLines {
+            at: ctx.at(extra),
+            expected,
+        });
+    }
+
+    // 3. parse into disjoint output slices
+    let mut roles = vec![Role::Skip; layout.columns.len()];
+    if let Some(s) = layout.species {
+        roles[s] = Role::Species;
+    }
+    for (k, &c) in coords.iter().enumerate() {
+        roles[c] = Role::Coord(k);
+    }
+    if let Some(a) = attribute {
+        roles[a] = match roles[a] {
+            Role::Coord(k) => Role::CoordAttr(k),
+            Role::Species => Role::SpeciesAttr,
+            _ => Role::Attr,
+        };
+    }
+    let plan = Plan {
+        roles,
+        columns: &layout.columns,
+        fractional,
+    };
+    let mut positions = vec![[0f32; 3]; expected];
+    let mut species_index = vec![0u16; expected];
+    let mut attr_values = attribute.map(|_| vec![0f32; expected]);
+    let mut work = Vec::with_capacity(chunks.len());
+    {
+        let mut pos_rest = positions.as_mut_slice();
+        let mut sp_rest = species_index.as_mut_slice();
+        let mut attr_rest = attr_values.as_deref_mut();
+        for (chunk, &n) in chunks.iter().zip(&counts) {
+            let (p, pr) = pos_rest.split_at_mut(n);
+            let (s, sr) = sp_rest.split_at_mut(n);
+            pos_rest = pr;
+            sp_rest = sr;
+            let a = match attr_rest.take() {
+                Some(rest) => {
+                    let (a, ar) = rest.split_at_mut(n);
+                    attr_rest = Some(ar);
+                    Some(a)
+                }
+                None => None,
+            };
+            work.push((chunk.clone(), p, s, a));
+        }
+    }
+    let tables: Vec<Result<SpeciesTable<'_>, ReadError>> = work
+        .into_par_iter()
+        .map(|(chunk, p, s, a)| {
+            let len = chunk.len() as u64;
+            let r = parse_chunk(ctx, chunk, &plan, p, s, a);
+            progress.advance(len);
+            r
+        })
+        .collect();
+    let mut local = Vec::with_capacity(tables.len());
+    for t in tables {
+        local.push(t?);
+    }
+
+    // 4. merge species
+    let species = if layout.species.is_some() {
+        merge_species(
+            ctx,
+            start,
+            &local,
+            &counts,
+            layout.numeric_species,
+            &mut species_index,
+        )?
+    } else if expected > 0 {
+        vec![SpeciesName {
+            name: DEFAULT_SPECIES.to_string(),
+            numeric_type: false,
+        }]
+    } else {
+        Vec::new()
+    };
+    progress.finish_stage();
+    Ok(Atoms {
+        positions,
+        species_index,
+        species,
+        attribute: attr_values,
+    })
+}
+
+/// Merges per-chunk species tables and rewrites `species_index` to global ids.
+fn merge_species(
+    ctx: &Ctx<'_>,
+    block_start: usize,
+    local: &[SpeciesTable<'_>],
+    counts: &[usize],
+    numeric: bool,
+    species_index: &mut [u16],
+) -> Result<Vec<SpeciesName>, ReadError> {
+    let mut names: Vec<&[u8]> = Vec::new();
+    let mut ids: HashMap<&[u8], u16> = HashMap::new();
+    let mut luts: Vec<Vec<u16>> = Vec::with_capacity(local.len());
+    for table in local {
+        let mut lut = Vec::with_capacity(table.names.len());
+        for &name in &table.names {
+            let id = match ids.get(name) {
+                Some(&id) => id,
+                None => {
+                    let id = u16::try_from(names.len()).map_err(|_| ReadError::TooManySpecies {
+                        at: ctx.at(block_start),
+                    })?;
+                    names.push(name);
+                    ids.insert(name, id);
+                    id
+                }
+            };
+            lut.push(id);
+        }
+        luts.push(lut);
+    }
+    let values: Option<Vec<i64>> = if numeric {
+        names
+            .iter()
+            .map(|n| std::str::from_utf8(n).ok()?.parse::<i64>().ok())
+            .collect()
+    } else {
+        None
+    };
+    let numeric_type = values.is_some();
+    if let Some(values) = values {
+        let mut order: Vec<usize> = (0..names.len()).collect();
+        order.sort_by_key(|&i| values[i]);
+        let mut rank = vec![0u16; names.len()];
+        for (new, &old) in order.iter().enumerate() {
+            rank[old] = new as u16;
+        }
+        names = order.iter().map(|&i| names[i]).collect();
+        for lut in &mut luts {
+            for id in lut.iter_mut() {
+                *id = rank[*id as usize];
+            }
+        }
+    }
+    let mut slices = Vec::with_capacity(counts.len());
+    let mut rest = species_index;
+    for (&n, lut) in counts.iter().zip(&luts) {
+        let (s, r) = rest.split_at_mut(n);
+        rest = r;
+        slices.push((s, lut));
+    }
+    slices.into_par_iter().for_each(|(s, lut)| {
+        if lut.iter().enumerate().any(|(i, &g)| g as usize != i) {
+            for v in s.iter_mut() {
+                *v = lut[*v as usize];
+            }
+        }
+    });
+    Ok(names
+        .into_iter()
+        .map(|n| SpeciesName {
+            name: String::from_utf8_lossy(n).into_owned(),
+            numeric_type,
+        })
+        .collect())
+}
+
+/// Distinct species tokens of one chunk, in order of first appearance.
+struct SpeciesTable<'a> {
+    names: Vec<&'a [u8]>,
+    last: usize,
+    map: HashMap<&'a [u8], u16>,
+}
+
+impl<'a> SpeciesTable<'a> {
+    /// Linear search up to this many names, a hash map beyond.
+    const LINEAR: usize = 16;
+
+    fn new() -> Self {
+        SpeciesTable {
+            names: Vec::new(),
+            last: 0,
+            map: HashMap::new(),
+        }
+    }
+
+    /// The chunk-local id of `token`, or `None` when there are too many species.
+    #[inline]
+    fn id(&mut self, token: &'a [u8]) -> Option<u16> {
+        if self.names.get(self.last) == Some(&token) {
+            return Some(self.last as u16);
+        }
+        let found = if self.names.len() <= Self::LINEAR {
+            self.names.iter().position(|&n| n == token)
+        } else {
+            self.map.get(token).map(|&i| i as usize)
+        };
+        let i = match found {
+            Some(i) => i,
+            None => {
+                let i = self.names.len();
+                let id = u16::try_from(i).ok()?;
+                self.names.push(token);
+                if self.names.len() > Self::LINEAR {
+                    if self.map.is_empty() {
+                        for (j, &n) in self.names.iter().enumerate() {
+                            self.map.insert(n, j as u16);
+                        }
+                    } else {
+                        self.map.insert(token, id);
+                    }
+                }
+                i
+            }
+        };
+        self.last = i;
+        Some(i as u16)
+    }
+}
+
+/// Parses the lines of one chunk into the given output slices (one line per element).
+fn parse_chunk<'a>(
+    ctx: &Ctx<'a>,
+    chunk: Range<usize>,
+    plan: &Plan<'_>,
+    positions: &mut [[f32; 3]],
+    species: &mut [u16],
+    mut attribute: Option<&mut [f32]>,
+) -> Result<SpeciesTable<'a>, ReadError> {
+    let bytes: &'a [u8] = &ctx.data[..chunk.end];
+    let roles = plan.roles.as_slice();
+    let mut table = SpeciesTable::new();
+    let mut i = chunk.start;
+    for (a, (pos_out, sp_out)) in positions.iter_mut().zip(species.iter_mut()).enumerate() {
+        let line_start = i;
+        let mut col = 0usize;
+        let mut p = [0f64; 3];
+        let mut attr = 0f64;
+        let mut sp = 0u16;
+        loop {
+            while i < bytes.len() && bytes[i] <= b' ' && bytes[i] != b'\n' {
+                i += 1;
+            }
+            if i >= bytes.len() || bytes[i] == b'\n' {
+                break;
+            }
+            let t0 = i;
+            let Some(&role) = roles.get(col) else {
+                return Err(column_count(ctx, line_start, roles.len()));
+            };
+            match role {
+                Role::Skip => {
+                    while i < bytes.len() && bytes[i] > b' ' {
+                        i += 1;
+                    }
+                }
+                Role::Coord(k) => p[k] = number(ctx, plan, bytes, &mut i, col)?,
+                Role::Attr => attr = number(ctx, plan, bytes, &mut i, col)?,
+                Role::CoordAttr(k) => {
+                    p[k] = number(ctx, plan, bytes, &mut i, col)?;
+                    attr = p[k];
+                }
+                Role::Species | Role::SpeciesAttr => {
+                    while i < bytes.len() && bytes[i] > b' ' {
+                        i += 1;
+                    }
+                    let token = &bytes[t0..i];
+                    sp = table
+                        .id(token)
+                        .ok_or_else(|| ReadError::TooManySpecies { at: ctx.at(t0) })?;
+                    if role == Role::SpeciesAttr {
+                        let mut j = t0;
+                        attr = number(ctx, plan, bytes, &mut j, col)?;
+                    }
+                }
+            }
+            col += 1;
+        }
+        if col != roles.len() {
+            return Err(column_count(ctx, line_start, roles.len()));
+        }
+        i += 1;
+        let q = match plan.fractional {
+            Some(b) => b.from_fractional(p),
+            None => p,
+        };
+        let q = [q[0] as f32, q[1] as f32, q[2] as f32];
+        if !q.iter().all(|v| v.is_finite()) {
+            return Err(ReadError::Malformed {
+                at: ctx.at(line_start),
+                message: format!(
+                    "position ({:?}, {:?}, {:?}) is outside the single-precision range",
+                    p[0], p[1], p[2]
+                ),
+            });
+        }
+        *pos_out = q;
+        *sp_out = sp;
+        if let Some(out) = attribute.as_deref_mut() {
+            let v = attr as f32;
+            if !v.is_finite() {
+                return Err(ReadError::Malformed {
+                    at: ctx.at(line_start),
+                    message: format!(
+                        "attribute value {attr:?} is outside the single-precision range"
+                    ),
+                });
+            }
+            out[a] = v;
+        }
+    }
+    Ok(table)
+}
+
+/// Parses the numeric field starting at `*i` and moves `*i` past it; NaN and infinities
+/// are errors. The fast path parses while scanning, without finding the field's end first.
+#[inline(always)]
+fn number(
+    ctx: &Ctx<'_>,
+    plan: &Plan<'_>,
+    bytes: &[u8],
+    i: &mut usize,
+    col: usize,
+) -> Result<f64, ReadError> {
+    let rest = &bytes[*i..];
+    if let Some((v, n)) = parse_prefix(rest) {
+        if rest.get(n).is_none_or(|&b| b <= b' ') && v.is_finite() {
+            *i += n;
+            return Ok(v);
+        }
+    }
+    number_slow(ctx, plan, bytes, i, col)
+}
+
+/// [`number`] for fields the fast path does not take: the standard library's parse, and
+/// the errors.
+#[cold]
+#[inline(never)]
+fn number_slow(
+    ctx: &Ctx<'_>,
+    plan: &Plan<'_>,
+    bytes: &[u8],
+    i: &mut usize,
+    col: usize,
+) -> Result<f64, ReadError> {
+    let start = *i;
+    while *i < bytes.len() && bytes[*i] > b' ' {
+        *i += 1;
+    }
+    let token = &bytes[start..*i];
+    let text = || String::from_utf8_lossy(token).into_owned();
+    match parse_slow(token) {
+        Some(v) if v.is_finite() => Ok(v),
+        Some(_) => Err(ReadError::NonFinite {
+            at: ctx.at(start),
+            column: plan.columns[col].clone(),
+            text: text(),
+        }),
+        None => Err(ReadError::NotANumber {
+            at: ctx.at(start),
+            column: plan.columns[col].clone(),
+            text: text(),
+        }),
+    }
+}
+
+/// The error for a line whose field count differs from the header's (slow path).
+#[cold]
+fn column_count(ctx: &Ctx<'_>, line_start: usize, expected: usize) -> ReadError {
+    let data = ctx.data;
+    let line_end =
+        memchr::memchr(b'\n', &data[line_start..]).map_or(data.len(), |p| line_start + p);
+    let line = &data[line_start..line_end];
+    let found = line.split(|&b| b <= b' ').filter(|t| !t.is_empty()).count();
+    if line.starts_with(b"ITEM:") {
+        return ReadError::Malformed {
+            at: ctx.at(line_start),
+            message: format!(
+                "found `{}` where an atom line was expected (truncated frame?)",
+                String::from_utf8_lossy(line).trim_end()
+            ),
+        };
+    }
+    ReadError::ColumnCount {
+        at: ctx.at(line_start),
+        expected,
+        found,
+    }
+}

@@ -1,0 +1,353 @@
+//! LAMMPS text dumps (`dump atom`, `dump custom`), as LAMMPS writes them.
+//!
+//! How it works:
+//! - **Index.** One `memchr::memmem` scan finds every line that is exactly
+//!   `ITEM: TIMESTEP`; the next line gives the frame's timestep. LAMMPS writes
+//!   `ITEM: UNITS` (first frame only) and `ITEM: TIME` *before* `ITEM: TIMESTEP`, so each
+//!   frame start is moved back over up to two such two-line blocks; the first `UNITS`
+//!   value found is kept for all frames. Frame `k` spans from its start to the next
+//!   frame's start.
+//! - **Header.** `ITEM:` blocks are read in any order until `ITEM: ATOMS <columns>`:
+//!   `UNITS`, `TIME`, `TIMESTEP`, `NUMBER OF ATOMS` and `BOX BOUNDS`; unknown items are
+//!   skipped up to the next `ITEM:` line. `BOX BOUNDS` comes in three shapes:
+//!   orthogonal (`lo hi` per line), restricted triclinic (`xy xz yz` keywords, lines
+//!   `lo_bound hi_bound tilt`, converted to the true bounds as the LAMMPS `dump` docs
+//!   describe: `xlo = xlo_bound - min(0, xy, xz, xy+xz)`, `xhi = xhi_bound - max(0, xy, xz,
+//!   xy+xz)`, `ylo = ylo_bound - min(0, yz)`, `yhi = yhi_bound - max(0, yz)`) and general
+//!   triclinic (`abc origin` keywords, lines `ax ay az originx` etc.). Boundary flags
+//!   (`pp ff sm`) set [`SimulationBox::periodic`] (periodic where the flag is `pp`).
+//! - **Columns.** Coordinates come from the first complete triple in the order
+//!   `x y z` > `xu yu zu` > `xs ys zs` > `xsu ysu zsu`: wrapped Cartesian first, then
+//!   unwrapped, then scaled (fractional, converted with [`SimulationBox::from_fractional`],
+//!   which handles triclinic boxes). Species come from `element` if present, else from
+//!   `type` (numeric types are sorted numerically and flagged `numeric_type`; type labels
+//!   keep first-appearance order), else every atom is one species. Any column can be the
+//!   attribute. An `ITEM: ATOMS` line without names (very old LAMMPS) means `id type xs ys zs`.
+//! - **Atoms.** The lines after `ITEM: ATOMS` up to the frame end go to the shared parallel
+//!   parser, which checks their count against `NUMBER OF ATOMS` and keeps their order.
+
+use memchr::memmem;
+
+use super::atoms::AtomLayout;
+use super::{
+    fields, parse_f64, parse_int, shorten, trim, Ctx, Cursor, FrameInfo, Header, ReadError,
+};
+use crate::frame::SimulationBox;
+
+/// Byte range and timestep of one frame.
+struct Span {
+    start: usize,
+    end: usize,
+    timestep: Option<u64>,
+}
+
+/// The frames of a LAMMPS text dump.
+pub(crate) struct Index {
+    frames: Vec<Span>,
+    /// `ITEM: UNITS`, which LAMMPS writes in the first frame only.
+    units: Option<String>,
+}
+
+/// Coordinate column triples in order of preference, and whether they are scaled.
+const COORDINATE_STYLES: [([&str; 3], bool); 4] = [
+    (["x", "y", "z"], false),
+    (["xu", "yu", "zu"], false),
+    (["xs", "ys", "zs"], true),
+    (["xsu", "ysu", "zsu"], true),
+];
+
+/// The line ending at `line_start - 1` (its start and bytes), if any.
+fn prev_line(data: &[u8], line_start: usize) -> Option<(usize, &[u8])> {
+    if line_start == 0 {
+        return None;
+    }
+    let end = line_start - 1;
+    let start = memchr::memrchr(b'\n', &data[..end]).map_or(0, |p| p + 1);
+    Some((start, &data[start..end]))
+}
+
+impl Index {
+    pub fn build(ctx: &Ctx<'_>) -> Result<Index, ReadError> {
+        let data = ctx.data;
+        let mut frames: Vec<Span> = Vec::new();
+        let mut units = None;
+        for p in memmem::find_iter(data, b"ITEM: TIMESTEP") {
+            if p > 0 && data[p - 1] != b'\n' {
+                continue;
+            }
+            let mut cursor = Cursor::new(data, p);
+            match cursor.next_line() {
+                Some((_, line)) if trim(line) == b"ITEM: TIMESTEP" => {}
+                _ => continue,
+            }
+            let timestep = cursor.next_line().and_then(|(_, l)| parse_int::<u64>(l));
+            let floor = frames.last().map_or(0, |f| f.start);
+            let mut start = p;
+            for _ in 0..2 {
+                let Some((value_start, value)) = prev_line(data, start) else {
+                    break;
+                };
+                let Some((item_start, item)) = prev_line(data, value_start) else {
+                    break;
+                };
+                let item = trim(item);
+                if item_start <= floor && !frames.is_empty() {
+                    break;
+                }
+                if item == b"ITEM: UNITS" {
+                    if units.is_none() {
+                        units = Some(String::from_utf8_lossy(trim(value)).into_owned());
+                    }
+                } else if item != b"ITEM: TIME" {
+                    break;
+                }
+                start = item_start;
+            }
+            if let Some(last) = frames.last_mut() {
+                last.end = start;
+            }
+            frames.push(Span {
+                start,
+                end: data.len(),
+                timestep,
+            });
+        }
+        let Some(first) = frames.first() else {
+            return Err(ctx.malformed(0, "no `ITEM: TIMESTEP` line found: not a LAMMPS text dump"));
+        };
+        if let Some(p) = data[..first.start]
+            .iter()
+            .position(|b| !b.is_ascii_whitespace())
+        {
+            let line = Cursor::new(data, p).next_line().map_or(&[][..], |l| l.1);
+            return Err(ctx.malformed(
+                p,
+                format!(
+                    "expected `ITEM: TIMESTEP` to start the dump, found `{}`",
+                    shorten(line)
+                ),
+            ));
+        }
+        Ok(Index { frames, units })
+    }
+
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    pub fn timestep(&self, k: usize) -> Option<u64> {
+        self.frames.get(k)?.timestep
+    }
+
+    /// Parses the header of frame `k` (which must exist).
+    pub fn header(&self, ctx: &Ctx<'_>, k: usize) -> Result<Header, ReadError> {
+        let span = &self.frames[k];
+        let data = &ctx.data[..span.end];
+        let mut cursor = Cursor::new(data, span.start);
+        let mut info = FrameInfo {
+            particles: 0,
+            timestep: None,
+            time: None,
+            units: None,
+            simulation_box: None,
+            columns: Vec::new(),
+        };
+        let mut particles = None;
+        let (columns_at, columns) = loop {
+            let Some((at, line)) = cursor.next_line() else {
+                return Err(ctx.malformed(
+                    span.end,
+                    format!("frame {k} ends before its `ITEM: ATOMS` line"),
+                ));
+            };
+            let line = trim(line);
+            if line.is_empty() {
+                continue;
+            }
+            let Some(item) = line.strip_prefix(b"ITEM:") else {
+                return Err(ctx.malformed(
+                    at,
+                    format!("expected an `ITEM:` line, found `{}`", shorten(line)),
+                ));
+            };
+            let item = trim(item);
+            match item {
+                b"TIMESTEP" => {
+                    info.timestep = Some(value(ctx, &mut cursor, at, "TIMESTEP", |v| {
+                        parse_int::<u64>(v)
+                    })?);
+                }
+                b"TIME" => {
+                    info.time = Some(value(ctx, &mut cursor, at, "TIME", |v| {
+                        parse_f64(v).filter(|t| t.is_finite())
+                    })?);
+                }
+                b"UNITS" => {
+                    info.units = Some(value(ctx, &mut cursor, at, "UNITS", |v| {
+                        Some(String::from_utf8_lossy(v).into_owned())
+                    })?);
+                }
+                b"NUMBER OF ATOMS" => {
+                    particles = Some(value(ctx, &mut cursor, at, "NUMBER OF ATOMS", |v| {
+                        parse_int::<usize>(v)
+                    })?);
+                }
+                _ if item.starts_with(b"BOX BOUNDS") => {
+                    info.simulation_box = Some(parse_box(ctx, &mut cursor, at, &item[10..])?);
+                }
+                _ if item.starts_with(b"ATOMS") => {
+                    let mut names: Vec<String> = fields(&item[5..])
+                        .map(|f| String::from_utf8_lossy(f).into_owned())
+                        .collect();
+                    if names.is_empty() {
+                        names = ["id", "type", "xs", "ys", "zs"].map(String::from).to_vec();
+                    }
+                    break (at, names);
+                }
+                _ => loop {
+                    // An item this reader does not know: skip to the next `ITEM:` line.
+                    let save = cursor.pos;
+                    match cursor.next_line() {
+                        None => break,
+                        Some((_, l)) if trim(l).starts_with(b"ITEM:") => {
+                            cursor.pos = save;
+                            break;
+                        }
+                        Some(_) => {}
+                    }
+                },
+            }
+        };
+        info.particles = particles.ok_or_else(|| {
+            ctx.malformed(
+                columns_at,
+                "no `ITEM: NUMBER OF ATOMS` before `ITEM: ATOMS`",
+            )
+        })?;
+        if info.units.is_none() {
+            info.units = self.units.clone();
+        }
+        let find = |name: &str| columns.iter().position(|c| c == name);
+        let coords = COORDINATE_STYLES.iter().find_map(|(names, scaled)| {
+            Some(([find(names[0])?, find(names[1])?, find(names[2])?], *scaled))
+        });
+        let element = find("element");
+        let layout = AtomLayout {
+            columns: columns.clone(),
+            coords,
+            species: element.or_else(|| find("type")),
+            numeric_species: element.is_none(),
+        };
+        info.columns = columns;
+        Ok(Header {
+            info,
+            layout,
+            columns_at,
+            atoms: cursor.pos..span.end,
+        })
+    }
+}
+
+/// Reads the single value line after `ITEM: <item>` at `item_at`.
+fn value<T>(
+    ctx: &Ctx<'_>,
+    cursor: &mut Cursor<'_>,
+    item_at: usize,
+    item: &str,
+    parse: impl FnOnce(&[u8]) -> Option<T>,
+) -> Result<T, ReadError> {
+    let Some((at, line)) = cursor.next_line() else {
+        return Err(ctx.malformed(item_at, format!("`ITEM: {item}` has no value line")));
+    };
+    parse(trim(line)).ok_or_else(|| {
+        ctx.malformed(
+            at,
+            format!("malformed `ITEM: {item}` value `{}`", shorten(line)),
+        )
+    })
+}
+
+/// Parses the three lines after `ITEM: BOX BOUNDS<rest>`.
+fn parse_box(
+    ctx: &Ctx<'_>,
+    cursor: &mut Cursor<'_>,
+    item_at: usize,
+    rest: &[u8],
+) -> Result<SimulationBox, ReadError> {
+    let words: Vec<&[u8]> = fields(rest).collect();
+    let general = words.contains(&&b"abc"[..]);
+    let triclinic = words.contains(&&b"xy"[..]);
+    let flags: Vec<&[u8]> = words
+        .iter()
+        .copied()
+        .filter(|w| w.len() == 2 && w.iter().all(|b| b"pfsm".contains(b)))
+        .collect();
+    let (per_line, shape) = if general {
+        (4, "ax ay az origin")
+    } else if triclinic {
+        (3, "lo_bound hi_bound tilt")
+    } else {
+        (2, "lo hi")
+    };
+    let mut rows = [[0f64; 4]; 3];
+    for (r, row) in rows.iter_mut().enumerate() {
+        let Some((at, line)) = cursor.next_line() else {
+            return Err(ctx.malformed(
+                item_at,
+                format!("malformed BOX BOUNDS: expected 3 lines, found {r}"),
+            ));
+        };
+        let values: Vec<&[u8]> = fields(line).collect();
+        if values.len() != per_line {
+            return Err(ctx.malformed(
+                at,
+                format!(
+                    "malformed BOX BOUNDS: expected {per_line} numbers ({shape}), found `{}`",
+                    shorten(line)
+                ),
+            ));
+        }
+        for (slot, v) in row.iter_mut().zip(&values) {
+            *slot = parse_f64(v).filter(|x| x.is_finite()).ok_or_else(|| {
+                ctx.malformed(
+                    at,
+                    format!(
+                        "malformed BOX BOUNDS: `{}` is not a finite number",
+                        shorten(v)
+                    ),
+                )
+            })?;
+        }
+    }
+    let mut b = if general {
+        SimulationBox {
+            origin: [rows[0][3], rows[1][3], rows[2][3]],
+            a: [rows[0][0], rows[0][1], rows[0][2]],
+            b: [rows[1][0], rows[1][1], rows[1][2]],
+            c: [rows[2][0], rows[2][1], rows[2][2]],
+            periodic: None,
+        }
+    } else if triclinic {
+        let (xy, xz, yz) = (rows[0][2], rows[1][2], rows[2][2]);
+        let lo = [
+            rows[0][0] - 0f64.min(xy).min(xz).min(xy + xz),
+            rows[1][0] - 0f64.min(yz),
+            rows[2][0],
+        ];
+        let hi = [
+            rows[0][1] - 0f64.max(xy).max(xz).max(xy + xz),
+            rows[1][1] - 0f64.max(yz),
+            rows[2][1],
+        ];
+        SimulationBox::lammps(lo, hi, [xy, xz, yz])
+    } else {
+        SimulationBox::orthogonal(
+            [rows[0][0], rows[1][0], rows[2][0]],
+            [rows[0][1], rows[1][1], rows[2][1]],
+        )
+    };
+    if flags.len() == 3 {
+        b.periodic = Some([flags[0] == b"pp", flags[1] == b"pp", flags[2] == b"pp"]);
+    }
+    Ok(b)
+}

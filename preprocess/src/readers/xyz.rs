@@ -1,0 +1,354 @@
+//! XYZ and extended XYZ files.
+//!
+//! How it works:
+//! - **Index.** A frame is an atom-count line, a comment line and that many atom lines. The
+//!   index walks the file once: it parses each count, reads the comment line (for the
+//!   timestep), and skips the atom lines with a vectorised newline count
+//!   ([`super::skip_lines`]), never looking inside them. Blank lines between frames and at
+//!   the end are allowed.
+//! - **Comment line.** Parsed as extended-XYZ `key=value` pairs (values may be quoted with
+//!   `"..."` or `{...}`; keys are matched case-insensitively):
+//!   `Lattice="ax ay az bx by bz cx cy cz"` gives the cell vectors, `Origin="x y z"`
+//!   (OVITO) its origin, `pbc="T T F"` its periodicity (default `T T T` when a lattice is
+//!   given, as the extended-XYZ convention says), `Time=` the time, and `Timestep=` or
+//!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes) the timestep.
+//!   `Properties=name:type:count:...` names the columns in order; types `S`, `R`, `I`, `L`.
+//!   Without `Properties` the columns are `species:S:1:pos:R:3` followed by whatever extra
+//!   columns the first atom line has, named `col5`, `col6`, ... (1-based position).
+//! - **Columns.** Positions come from the `pos` property (Cartesian), species from
+//!   `species` (or atomic numbers `Z`) in order of first appearance. A property with count
+//!   1 is one column named after it; a property with count `n > 1` is `n` columns named
+//!   `name[0]` ... `name[n-1]`. Any numeric column can be the attribute.
+//! - **Atoms.** The atom lines go to the shared parallel parser.
+
+use super::atoms::AtomLayout;
+use super::{
+    fields, parse_int, shorten, skip_lines, trim, Ctx, Cursor, FrameInfo, Header, ReadError,
+};
+use crate::frame::SimulationBox;
+
+/// Byte range and timestep of one frame.
+struct Span {
+    start: usize,
+    end: usize,
+    timestep: Option<u64>,
+}
+
+/// The frames of an XYZ file.
+pub(crate) struct Index {
+    frames: Vec<Span>,
+}
+
+impl Index {
+    pub fn build(ctx: &Ctx<'_>) -> Result<Index, ReadError> {
+        let data = ctx.data;
+        let mut frames = Vec::new();
+        let mut cursor = Cursor::new(data, 0);
+        while let Some((at, line)) =
+            std::iter::from_fn(|| cursor.next_line()).find(|(_, l)| !trim(l).is_empty())
+        {
+            let n: usize = parse_int(line).ok_or_else(|| {
+                ctx.malformed(
+                    at,
+                    format!(
+                        "expected the atom count of frame {} (an integer), found `{}`",
+                        frames.len(),
+                        shorten(line)
+                    ),
+                )
+            })?;
+            let timestep = cursor.next_line().and_then(|(_, c)| comment_timestep(c));
+            let end = skip_lines(data, cursor.pos, n);
+            cursor.pos = end;
+            frames.push(Span {
+                start: at,
+                end,
+                timestep,
+            });
+        }
+        if frames.is_empty() {
+            return Err(ctx.malformed(0, "no XYZ frame found"));
+        }
+        Ok(Index { frames })
+    }
+
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    pub fn timestep(&self, k: usize) -> Option<u64> {
+        self.frames.get(k)?.timestep
+    }
+
+    /// Parses the count and comment lines of frame `k` (which must exist).
+    pub fn header(&self, ctx: &Ctx<'_>, k: usize) -> Result<Header, ReadError> {
+        let span = &self.frames[k];
+        let data = &ctx.data[..span.end];
+        let mut cursor = Cursor::new(data, span.start);
+        let (count_at, count) = cursor.next_line().unwrap_or((span.start, &[]));
+        let particles: usize =
+            parse_int(count).ok_or_else(|| ctx.malformed(count_at, "malformed atom count line"))?;
+        let (comment_at, comment) = match cursor.next_line() {
+            Some(c) => c,
+            None if particles == 0 => (span.end, &[][..]),
+            None => {
+                return Err(ReadError::Truncated {
+                    at: ctx.at(span.end),
+                    expected: particles,
+                    found: 0,
+                })
+            }
+        };
+        let atoms_at = cursor.pos;
+        let comment_text = String::from_utf8_lossy(comment);
+        let pairs = key_values(&comment_text);
+        let get = |key: &str| {
+            pairs
+                .iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(key))
+                .map(|(_, v)| v.as_str())
+        };
+        let bad = |message: String| ctx.malformed(comment_at, message);
+
+        let numbers = |key: &str, n: usize| -> Result<Option<Vec<f64>>, ReadError> {
+            let Some(v) = get(key) else { return Ok(None) };
+            let values: Option<Vec<f64>> = v
+                .split_whitespace()
+                .map(|t| t.parse::<f64>().ok().filter(|x| x.is_finite()))
+                .collect();
+            match values {
+                Some(values) if values.len() == n => Ok(Some(values)),
+                _ => Err(bad(format!("`{key}` must be {n} numbers, found `{v}`"))),
+            }
+        };
+        let simulation_box = match numbers("Lattice", 9)? {
+            None => None,
+            Some(l) => {
+                let origin = numbers("Origin", 3)?.unwrap_or(vec![0.0; 3]);
+                let periodic = match get("pbc") {
+                    None => [true; 3],
+                    Some(v) => {
+                        let flags: Option<Vec<bool>> = v.split_whitespace().map(logical).collect();
+                        match flags {
+                            Some(f) if f.len() == 3 => [f[0], f[1], f[2]],
+                            _ => return Err(bad(format!("`pbc` must be 3 logicals, found `{v}`"))),
+                        }
+                    }
+                };
+                Some(SimulationBox {
+                    origin: [origin[0], origin[1], origin[2]],
+                    a: [l[0], l[1], l[2]],
+                    b: [l[3], l[4], l[5]],
+                    c: [l[6], l[7], l[8]],
+                    periodic: Some(periodic),
+                })
+            }
+        };
+        let time = match get("Time") {
+            None => None,
+            Some(v) => Some(
+                v.trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|t| t.is_finite())
+                    .ok_or_else(|| bad(format!("`Time` is not a number: `{v}`")))?,
+            ),
+        };
+
+        let layout = match get("Properties") {
+            Some(p) => properties_layout(p).map_err(bad)?,
+            None => {
+                // Plain XYZ: species x y z, plus any extra columns of the first atom line.
+                let mut columns: Vec<String> =
+                    ["species", "x", "y", "z"].map(String::from).to_vec();
+                if particles > 0 {
+                    let first = Cursor::new(data, atoms_at)
+                        .next_line()
+                        .map_or(&[][..], |l| l.1);
+                    let n = fields(first).count();
+                    if n < 4 {
+                        return Err(ReadError::ColumnCount {
+                            at: ctx.at(atoms_at),
+                            expected: 4,
+                            found: n,
+                        });
+                    }
+                    columns.extend((5..=n).map(|i| format!("col{i}")));
+                }
+                AtomLayout {
+                    columns,
+                    coords: Some(([1, 2, 3], false)),
+                    species: Some(0),
+                    numeric_species: false,
+                }
+            }
+        };
+        Ok(Header {
+            info: FrameInfo {
+                particles,
+                timestep: span.timestep,
+                time,
+                units: None,
+                simulation_box,
+                columns: layout.columns.clone(),
+            },
+            layout,
+            columns_at: comment_at,
+            atoms: atoms_at..span.end,
+        })
+    }
+}
+
+/// An extended-XYZ logical: `T`, `True`, `1` or `F`, `False`, `0` (any case).
+fn logical(s: &str) -> Option<bool> {
+    match s.to_ascii_lowercase().as_str() {
+        "t" | "true" | "1" => Some(true),
+        "f" | "false" | "0" => Some(false),
+        _ => None,
+    }
+}
+
+/// The column layout described by a `Properties=` value.
+fn properties_layout(value: &str) -> Result<AtomLayout, String> {
+    let parts: Vec<&str> = value.split(':').collect();
+    if parts.is_empty() || !parts.chunks_exact(3).remainder().is_empty() {
+        return Err(format!(
+            "malformed `Properties` `{value}`: expected name:type:count triples"
+        ));
+    }
+    let mut columns = Vec::new();
+    let mut coords = None;
+    let mut species = None;
+    let mut atomic_number = None;
+    for triple in parts.chunks(3) {
+        let (name, kind, count) = (triple[0], triple[1], triple[2]);
+        let count: usize = count.parse().ok().filter(|&c| c > 0).ok_or_else(|| {
+            format!("malformed `Properties`: `{count}` is not a count for `{name}`")
+        })?;
+        if !matches!(kind, "S" | "R" | "I" | "L") {
+            return Err(format!(
+                "malformed `Properties`: unknown type `{kind}` for `{name}` (expected S, R, I or L)"
+            ));
+        }
+        let first = columns.len();
+        if count == 1 {
+            columns.push(name.to_string());
+        } else {
+            columns.extend((0..count).map(|i| format!("{name}[{i}]")));
+        }
+        let numeric = matches!(kind, "R" | "I");
+        if (name.eq_ignore_ascii_case("pos") || name.eq_ignore_ascii_case("positions"))
+            && count == 3
+            && numeric
+            && coords.is_none()
+        {
+            coords = Some(([first, first + 1, first + 2], false));
+        } else if name.eq_ignore_ascii_case("species") && count == 1 && species.is_none() {
+            species = Some(first);
+        } else if name == "Z" && count == 1 && kind == "I" {
+            atomic_number = Some(first);
+        }
+    }
+    Ok(AtomLayout {
+        columns,
+        coords,
+        species: species.or(atomic_number),
+        numeric_species: false,
+    })
+}
+
+/// The timestep recorded in a comment line: `Timestep=N` or `step=N` (any case), or the
+/// `Timestep: N` LAMMPS `dump xyz` writes.
+fn comment_timestep(comment: &[u8]) -> Option<u64> {
+    let text = String::from_utf8_lossy(comment);
+    if text.contains('=') {
+        for (k, v) in key_values(&text) {
+            if k.eq_ignore_ascii_case("timestep") || k.eq_ignore_ascii_case("step") {
+                if let Ok(t) = v.trim().parse() {
+                    return Some(t);
+                }
+            }
+        }
+    }
+    let mut words = text.split_whitespace();
+    while let Some(w) = words.next() {
+        if w.eq_ignore_ascii_case("timestep:") {
+            return words.next()?.parse().ok();
+        }
+    }
+    None
+}
+
+/// Splits an extended-XYZ comment line into `key=value` pairs. A bare `key` gets value
+/// `T`. Values (and keys) may be quoted with `"..."` (backslash escapes the next character)
+/// or `{...}`; an unterminated quote runs to the end of the line.
+pub(crate) fn key_values(line: &str) -> Vec<(String, String)> {
+    let chars: Vec<char> = line.chars().collect();
+    let mut i = 0;
+    let mut out = Vec::new();
+    let token = |i: &mut usize, stop_at_eq: bool| -> String {
+        let mut s = String::new();
+        match chars.get(*i) {
+            Some('"') => {
+                *i += 1;
+                while let Some(&c) = chars.get(*i) {
+                    *i += 1;
+                    match c {
+                        '"' => break,
+                        '\\' => {
+                            if let Some(&n) = chars.get(*i) {
+                                s.push(n);
+                                *i += 1;
+                            }
+                        }
+                        _ => s.push(c),
+                    }
+                }
+            }
+            Some('{') => {
+                *i += 1;
+                while let Some(&c) = chars.get(*i) {
+                    *i += 1;
+                    if c == '}' {
+                        break;
+                    }
+                    s.push(c);
+                }
+            }
+            _ => {
+                while let Some(&c) = chars.get(*i) {
+                    if c.is_whitespace() || (stop_at_eq && c == '=') {
+                        break;
+                    }
+                    s.push(c);
+                    *i += 1;
+                }
+            }
+        }
+        s
+    };
+    loop {
+        while chars.get(i).is_some_and(|c| c.is_whitespace()) {
+            i += 1;
+        }
+        if i >= chars.len() {
+            break;
+        }
+        let key = token(&mut i, true);
+        let mut j = i;
+        while chars.get(j).is_some_and(|c| c.is_whitespace()) {
+            j += 1;
+        }
+        let value = if chars.get(j) == Some(&'=') {
+            i = j + 1;
+            while chars.get(i).is_some_and(|c| c.is_whitespace()) {
+                i += 1;
+            }
+            token(&mut i, false)
+        } else {
+            "T".to_string()
+        };
+        out.push((key, value));
+    }
+    out
+}

@@ -1,0 +1,163 @@
+//! Cross-checks on real LAMMPS outputs in `datasets/lammps/` (see `make-samples.sh` there):
+//! the same run dumped in different styles must give the same positions. Each test is
+//! skipped (with a note) when its files are absent.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use mdlod_preprocess::readers::{DumpFile, ReadOptions};
+use mdlod_preprocess::{Frame, NoProgress};
+
+fn sample(name: &str) -> Option<PathBuf> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../datasets/lammps")
+        .join(name);
+    if path.exists() {
+        Some(path)
+    } else {
+        eprintln!("skipped: {} not present", path.display());
+        None
+    }
+}
+
+fn read(dump: &DumpFile, k: usize, attribute: Option<&str>) -> Frame {
+    let opts = ReadOptions {
+        attribute: attribute.map(String::from),
+    };
+    dump.read_frame(k, &opts, &NoProgress).unwrap()
+}
+
+/// Positions by atom id (the `id` column read as the attribute).
+fn by_id(frame: &Frame) -> HashMap<u32, [f32; 3]> {
+    let ids = &frame.attribute.as_ref().unwrap().values;
+    ids.iter()
+        .zip(&frame.positions)
+        .map(|(&id, &p)| (id as u32, p))
+        .collect()
+}
+
+/// Wrapped positions of the same atoms agree up to the dumps' 6 significant digits, or
+/// differ by a lattice vector (an atom just across a periodic face).
+fn assert_same_positions(a: &Frame, b: &Frame, tolerance: f32) {
+    let (a_ids, b_ids) = (by_id(a), by_id(b));
+    assert_eq!(a_ids.len(), b_ids.len());
+    let cell = a.simulation_box.as_ref().unwrap();
+    for (id, pa) in &a_ids {
+        let pb = b_ids[id];
+        let mut best = f32::INFINITY;
+        for i in -1..=1 {
+            for j in -1..=1 {
+                for k in -1..=1 {
+                    let shift: [f64; 3] = std::array::from_fn(|d| {
+                        f64::from(i) * cell.a[d]
+                            + f64::from(j) * cell.b[d]
+                            + f64::from(k) * cell.c[d]
+                    });
+                    let dist = (0..3)
+                        .map(|d| (pa[d] - pb[d] - shift[d] as f32).abs())
+                        .fold(0f32, f32::max);
+                    best = best.min(dist);
+                }
+            }
+        }
+        assert!(best < tolerance, "atom {id}: {pa:?} vs {pb:?}");
+    }
+}
+
+#[test]
+fn lj_triclinic_scaled_matches_cartesian() {
+    let (Some(scaled), Some(cartesian)) = (
+        sample("lj_triclinic.scaled.dump"),
+        sample("lj_triclinic.cartesian.dump"),
+    ) else {
+        return;
+    };
+    let scaled = DumpFile::open(&scaled).unwrap();
+    let cartesian = DumpFile::open(&cartesian).unwrap();
+    assert_eq!(scaled.frame_count(), cartesian.frame_count());
+    for k in 0..scaled.frame_count() {
+        assert_eq!(scaled.frame_timestep(k), cartesian.frame_timestep(k));
+        let s = read(&scaled, k, Some("id"));
+        let c = read(&cartesian, k, Some("id"));
+        assert_eq!(s.simulation_box, c.simulation_box);
+        assert!(!c.simulation_box.as_ref().unwrap().is_orthogonal());
+        assert_same_positions(&s, &c, 2e-4);
+    }
+    let c = read(&cartesian, 1, Some("v_speed"));
+    assert_eq!(c.attribute.unwrap().values.len(), c.positions.len());
+}
+
+#[test]
+fn cu_melt_all_styles_agree() {
+    let (Some(atom), Some(custom), Some(gz), Some(xyz)) = (
+        sample("cu_melt.atom.dump"),
+        sample("cu_melt.custom.dump"),
+        sample("cu_melt.custom.dump.gz"),
+        sample("cu_melt.xyz"),
+    ) else {
+        return;
+    };
+    let atom = DumpFile::open(&atom).unwrap();
+    let custom = DumpFile::open(&custom).unwrap();
+    let gz = DumpFile::open(&gz).unwrap();
+    let xyz = DumpFile::open(&xyz).unwrap();
+    let n = custom.frame_count();
+    assert!(n > 1);
+    for d in [&atom, &gz, &xyz] {
+        assert_eq!(d.frame_count(), n);
+    }
+    for k in 0..n {
+        let step = custom.frame_timestep(k);
+        assert!(step.is_some());
+        for d in [&atom, &gz, &xyz] {
+            assert_eq!(d.frame_timestep(k), step);
+        }
+        let a = read(&atom, k, Some("id"));
+        let c = read(&custom, k, Some("id"));
+        let g = read(&gz, k, Some("id"));
+        let x = read(&xyz, k, None);
+        assert_eq!(c.units.as_deref(), Some("metal"));
+        assert!(c.time.is_some());
+        assert_same_positions(&a, &c, 2e-4);
+        assert_same_positions(&g, &c, 2e-4);
+        // The xyz and custom dumps are both sorted by id.
+        assert_eq!(x.len(), c.len());
+        assert_eq!(x.species.len(), 1);
+        assert_eq!(x.species[0].name, "Cu");
+        assert_eq!(c.species[0].name, "1");
+        assert!(c.species[0].numeric_type);
+        for (p, q) in x.positions.iter().zip(&c.positions) {
+            assert!((0..3).all(|d| (p[d] - q[d]).abs() < 2e-4), "{p:?} {q:?}");
+        }
+    }
+    assert!(read(&custom, n - 1, Some("c_pe")).attribute.is_some());
+    assert!(read(&gz, n - 1, Some("c_ke")).attribute.is_some());
+}
+
+#[test]
+fn cuag_alloy_elements_and_unwrapped() {
+    let Some(path) = sample("cuag_alloy.unwrapped.dump") else {
+        return;
+    };
+    let dump = DumpFile::open(&path).unwrap();
+    for k in 0..dump.frame_count() {
+        let f = read(&dump, k, Some("c_pe"));
+        let mut names: Vec<&str> = f.species.iter().map(|s| s.name.as_str()).collect();
+        names.sort();
+        assert_eq!(names, vec!["Ag", "Cu"]);
+        assert!(f.species.iter().all(|s| !s.numeric_type));
+        assert_eq!(f.attribute.as_ref().unwrap().values.len(), f.len());
+    }
+}
+
+#[test]
+fn cu_slab_shrink_wrapped_boundary() {
+    let Some(path) = sample("cu_slab.shrinkwrap.dump") else {
+        return;
+    };
+    let dump = DumpFile::open(&path).unwrap();
+    let f = read(&dump, dump.frame_count() - 1, Some("c_ke"));
+    let b = f.simulation_box.unwrap();
+    assert_eq!(b.periodic, Some([true, true, false]));
+    assert_eq!(f.units.as_deref(), Some("metal"));
+}

@@ -1,0 +1,395 @@
+//! Bad input gives a clear error naming the file and line, never a panic.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use mdlod_preprocess::readers::{DumpFile, ReadError, ReadOptions};
+use mdlod_preprocess::NoProgress;
+
+fn write(dir: &Path, name: &str, text: &[u8]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Opens `text` as `name` and reads frame `k` with `attribute`; returns the error message.
+fn error_k(name: &str, text: &str, k: usize, attribute: Option<&str>) -> (PathBuf, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), name, text.as_bytes());
+    let opts = ReadOptions {
+        attribute: attribute.map(String::from),
+    };
+    let result = DumpFile::open(&path).and_then(|d| d.read_frame(k, &opts, &NoProgress));
+    match result {
+        Ok(f) => panic!("{name}: expected an error, read {} atoms", f.len()),
+        Err(e) => (path, e.to_string()),
+    }
+}
+
+/// Asserts that reading frame 0 of `text` fails with exactly `path:<message>`.
+fn assert_error(name: &str, text: &str, attribute: Option<&str>, message: &str) {
+    let (path, got) = error_k(name, text, 0, attribute);
+    assert_eq!(got, format!("{}:{message}", path.display()));
+}
+
+const HEAD: &str = "\
+ITEM: TIMESTEP
+0
+ITEM: NUMBER OF ATOMS
+3
+ITEM: BOX BOUNDS pp pp pp
+0.0 10.0
+0.0 10.0
+0.0 10.0
+ITEM: ATOMS id type x y z
+";
+// Atom lines are lines 10, 11, 12.
+
+fn dump(atoms: &str) -> String {
+    format!("{HEAD}{atoms}")
+}
+
+#[test]
+fn empty_file() {
+    assert_error("e.lammpstrj", "", None, "1: file is empty");
+    assert_error("e.xyz", "  \n\n", None, "1: file is empty");
+}
+
+#[test]
+fn truncated_frame() {
+    assert_error(
+        "t.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n"),
+        None,
+        "11: truncated frame: the header announces 3 atoms but only 2 atom lines follow",
+    );
+}
+
+#[test]
+fn atom_count_larger_than_lines_present_before_next_frame() {
+    let text = format!(
+        "{}{}",
+        dump("1 1 0 0 0\n"),
+        dump("1 1 1 1 1\n2 1 2 2 2\n3 1 3 3 3\n")
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "mid.lammpstrj", text.as_bytes());
+    let d = DumpFile::open(&path).unwrap();
+    let got = d
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        got,
+        format!(
+            "{}:10: truncated frame: the header announces 3 atoms but only 1 atom lines follow",
+            path.display()
+        )
+    );
+    // The next frame is unaffected.
+    assert_eq!(d.frame_count(), 2);
+    let f = d
+        .read_frame(1, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert_eq!(f.positions[2], [3.0; 3]);
+}
+
+#[test]
+fn more_atom_lines_than_announced() {
+    assert_error(
+        "x.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 0 0 0\n4 1 0 0 0\n"),
+        None,
+        "13: more atom lines than the 3 the header announces",
+    );
+}
+
+#[test]
+fn file_cut_in_the_middle_of_a_line() {
+    assert_error(
+        "cut.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 0.5 0."),
+        None,
+        "12: expected 5 columns, found 4",
+    );
+}
+
+#[test]
+fn wrong_column_count() {
+    assert_error(
+        "c.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0\n3 1 0 0 0\n"),
+        None,
+        "11: expected 5 columns, found 4",
+    );
+    assert_error(
+        "c6.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 0 0 0 9\n"),
+        None,
+        "12: expected 5 columns, found 6",
+    );
+}
+
+#[test]
+fn non_numeric_field() {
+    assert_error(
+        "n.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 0 abc 0\n"),
+        None,
+        "12: column `y`: `abc` is not a number",
+    );
+}
+
+#[test]
+fn nan_or_inf_coordinate() {
+    assert_error(
+        "nan.lammpstrj",
+        &dump("1 1 nan 0 0\n2 1 0 0 0\n3 1 0 0 0\n"),
+        None,
+        "10: column `x`: `nan` is not a finite number",
+    );
+    assert_error(
+        "inf.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 -inf\n3 1 0 0 0\n"),
+        None,
+        "11: column `z`: `-inf` is not a finite number",
+    );
+    assert_error(
+        "big.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 1e300 0 0\n"),
+        None,
+        "12: position (1e300, 0.0, 0.0) is outside the single-precision range",
+    );
+}
+
+#[test]
+fn no_coordinate_columns() {
+    let text = HEAD.replace("id type x y z", "id type vx vy x y")
+        + "1 1 0 0 0 0\n2 1 0 0 0 0\n3 1 0 0 0 0\n";
+    assert_error(
+        "nc.lammpstrj",
+        &text,
+        None,
+        "9: no coordinate columns (need x y z, xu yu zu, xs ys zs or xsu ysu zsu); columns are: id type vx vy x y",
+    );
+}
+
+#[test]
+fn scaled_coordinates_without_box() {
+    let text =
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1\nITEM: ATOMS id type xs ys zs\n1 1 0 0 0\n";
+    assert_error(
+        "nb.lammpstrj",
+        text,
+        None,
+        "5: scaled coordinates but no ITEM: BOX BOUNDS to unscale them",
+    );
+}
+
+#[test]
+fn malformed_box_bounds() {
+    assert_error(
+        "b1.lammpstrj",
+        &dump("").replace("0.0 10.0\nITEM: ATOMS", "0.0\nITEM: ATOMS"),
+        None,
+        "8: malformed BOX BOUNDS: expected 2 numbers (lo hi), found `0.0`",
+    );
+    assert_error(
+        "b2.lammpstrj",
+        &dump("").replacen("0.0 10.0", "0.0 ten", 1),
+        None,
+        "6: malformed BOX BOUNDS: `ten` is not a finite number",
+    );
+    assert_error(
+        "b3.lammpstrj",
+        &dump("").replace("BOX BOUNDS pp pp pp", "BOX BOUNDS xy xz yz pp pp pp"),
+        None,
+        "6: malformed BOX BOUNDS: expected 3 numbers (lo_bound hi_bound tilt), found `0.0 10.0`",
+    );
+}
+
+#[test]
+fn malformed_header_values() {
+    assert_error(
+        "h1.lammpstrj",
+        &dump("").replacen("3\n", "three\n", 1),
+        None,
+        "4: malformed `ITEM: NUMBER OF ATOMS` value `three`",
+    );
+    assert_error(
+        "h2.lammpstrj",
+        &dump("").replacen("TIMESTEP\n0", "TIMESTEP\n-1", 1),
+        None,
+        "2: malformed `ITEM: TIMESTEP` value `-1`",
+    );
+    assert_error(
+        "h3.lammpstrj",
+        &dump("").replace("ITEM: NUMBER OF ATOMS\n3\n", ""),
+        None,
+        "7: no `ITEM: NUMBER OF ATOMS` before `ITEM: ATOMS`",
+    );
+    assert_error(
+        "h4.lammpstrj",
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n3\n",
+        None,
+        "4: frame 0 ends before its `ITEM: ATOMS` line",
+    );
+    assert_error(
+        "h5.lammpstrj",
+        "garbage\nITEM: TIMESTEP\n0\n",
+        None,
+        "1: expected `ITEM: TIMESTEP` to start the dump, found `garbage`",
+    );
+    assert_error(
+        "h6.lammpstrj",
+        "ITEM: NUMBER OF ATOMS\n0\n",
+        None,
+        "1: no `ITEM: TIMESTEP` line found: not a LAMMPS text dump",
+    );
+}
+
+#[test]
+fn unknown_attribute_column() {
+    assert_error(
+        "a.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 0 0 0\n"),
+        Some("c_pe"),
+        "9: no column `c_pe` for the attribute; available columns: id type x y z",
+    );
+}
+
+#[test]
+fn non_numeric_attribute() {
+    let text =
+        HEAD.replace("id type x y z", "id element x y z") + "1 Cu 0 0 0\n2 Cu 0 0 0\n3 Cu 0 0 0\n";
+    assert_error(
+        "na.lammpstrj",
+        &text,
+        Some("element"),
+        "10: column `element`: `Cu` is not a number",
+    );
+}
+
+#[test]
+fn unknown_format_and_unsupported_compression() {
+    assert_error(
+        "mystery.txt",
+        "hello world\n",
+        None,
+        "1: cannot tell the format from the name or the first line `hello world`; expected a LAMMPS text dump (`ITEM: ...`) or an XYZ file (atom count)",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        dir.path(),
+        "z.lammpstrj.zst",
+        &[0x28, 0xb5, 0x2f, 0xfd, 0, 0, 0, 0],
+    );
+    let got = DumpFile::open(&path).unwrap_err().to_string();
+    assert!(
+        got.starts_with(&format!("{}:1: zstd and bzip2", path.display())),
+        "{got}"
+    );
+}
+
+#[test]
+fn corrupt_gzip() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    enc.write_all(dump("1 1 0 0 0\n").repeat(50).as_bytes())
+        .unwrap();
+    let mut bytes = enc.finish().unwrap();
+    bytes.truncate(bytes.len() / 2);
+    let path = write(dir.path(), "bad.lammpstrj.gz", &bytes);
+    let err = DumpFile::open(&path).unwrap_err();
+    assert!(matches!(err, ReadError::Io { .. }));
+    let got = err.to_string();
+    assert!(
+        got.starts_with(&format!("{}: gzip decompression failed", path.display())),
+        "{got}"
+    );
+}
+
+#[test]
+fn missing_file_and_missing_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("nothing.lammpstrj");
+    let got = DumpFile::open(&path).unwrap_err().to_string();
+    assert!(got.starts_with(&format!("{}: ", path.display())), "{got}");
+    let (path, got) = error_k(
+        "one.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 0 0 0\n"),
+        1,
+        None,
+    );
+    assert_eq!(
+        got,
+        format!(
+            "{}: frame 1 does not exist; the file has 1 frame(s)",
+            path.display()
+        )
+    );
+}
+
+#[test]
+fn xyz_errors() {
+    assert_error(
+        "t.xyz",
+        "3\ncomment\nC 0 0 0\nC 1 1 1\n",
+        None,
+        "4: truncated frame: the header announces 3 atoms but only 2 atom lines follow",
+    );
+    assert_error(
+        "c.xyz",
+        "2\ncomment\nC 0 0 0\nC 1 1\n",
+        None,
+        "4: expected 4 columns, found 3",
+    );
+    assert_error(
+        "c3.xyz",
+        "1\n\nC 0 0\n",
+        None,
+        "3: expected 4 columns, found 3",
+    );
+    assert_error(
+        "n.xyz",
+        "1\n\nC 0 x 0\n",
+        None,
+        "3: column `y`: `x` is not a number",
+    );
+    assert_error(
+        "nan.xyz",
+        "1\n\nC 0 NaN 0\n",
+        None,
+        "3: column `y`: `NaN` is not a finite number",
+    );
+    assert_error(
+        "count.xyz",
+        "1\n\nC 0 0 0\nabc\n\nC 0 0 0\n",
+        None,
+        "4: expected the atom count of frame 1 (an integer), found `abc`",
+    );
+    assert_error(
+        "lat.xyz",
+        "1\nLattice=\"1 2 3\"\nC 0 0 0\n",
+        None,
+        "2: `Lattice` must be 9 numbers, found `1 2 3`",
+    );
+    assert_error(
+        "prop.xyz",
+        "1\nProperties=species:S:1:pos:R\nC 0 0 0\n",
+        None,
+        "2: malformed `Properties` `species:S:1:pos:R`: expected name:type:count triples",
+    );
+    assert_error(
+        "nopos.xyz",
+        "1\nProperties=species:S:1:velo:R:3\nC 0 0 0\n",
+        None,
+        "2: no coordinate columns (need x y z, xu yu zu, xs ys zs or xsu ysu zsu); columns are: species velo[0] velo[1] velo[2]",
+    );
+    assert_error(
+        "attr.xyz",
+        "1\nProperties=species:S:1:pos:R:3\nC 0 0 0\n",
+        Some("charge"),
+        "2: no column `charge` for the attribute; available columns: species pos[0] pos[1] pos[2]",
+    );
+}

@@ -1,0 +1,422 @@
+//! LAMMPS text dump reading: coordinate styles, boxes, species, multi-frame access,
+//! line endings and compression.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use mdlod_preprocess::readers::{DumpFile, InputFormat, ReadOptions};
+use mdlod_preprocess::{Frame, NoProgress};
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn read(path: &Path, attribute: Option<&str>) -> Frame {
+    let dump = DumpFile::open(path).unwrap();
+    let opts = ReadOptions {
+        attribute: attribute.map(String::from),
+    };
+    dump.read_frame(0, &opts, &NoProgress).unwrap()
+}
+
+fn close(a: [f32; 3], b: [f64; 3]) -> bool {
+    a.iter()
+        .zip(b)
+        .all(|(&x, y)| (f64::from(x) - y).abs() < 1e-5 * (1.0 + y.abs()))
+}
+
+fn names(frame: &Frame) -> Vec<&str> {
+    frame.species.iter().map(|s| s.name.as_str()).collect()
+}
+
+const ORTHO: &str = "\
+ITEM: TIMESTEP
+100
+ITEM: NUMBER OF ATOMS
+3
+ITEM: BOX BOUNDS pp pp ff
+0.0 10.0
+-5.0 5.0
+0.0 20.0
+";
+
+#[test]
+fn orthogonal_cartesian() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!(
+        "{ORTHO}ITEM: ATOMS id type x y z\n1 1 1.5 -2.5 3.0\n2 2 4.0 0.0 19.5\n3 1 9.9 4.9 0.1\n"
+    );
+    let path = write(dir.path(), "a.lammpstrj", &text);
+    let f = read(&path, None);
+    assert_eq!(f.len(), 3);
+    assert_eq!(f.positions[0], [1.5, -2.5, 3.0]);
+    assert_eq!(f.positions[1], [4.0, 0.0, 19.5]);
+    assert_eq!(f.positions[2], [9.9, 4.9, 0.1]);
+    assert_eq!(f.species_index, vec![0, 1, 0]);
+    assert_eq!(names(&f), vec!["1", "2"]);
+    assert!(f.species.iter().all(|s| s.numeric_type));
+    assert_eq!(f.timestep, Some(100));
+    let b = f.simulation_box.unwrap();
+    assert_eq!(b.origin, [0.0, -5.0, 0.0]);
+    assert_eq!(b.a, [10.0, 0.0, 0.0]);
+    assert_eq!(b.b, [0.0, 10.0, 0.0]);
+    assert_eq!(b.c, [0.0, 0.0, 20.0]);
+    assert_eq!(b.periodic, Some([true, true, false]));
+    assert!(f.attribute.is_none());
+}
+
+#[test]
+fn every_coordinate_style_and_preference() {
+    let dir = tempfile::tempdir().unwrap();
+    // Box: origin (0,-5,0), lengths (10,10,20).
+    let cases = [
+        ("x y z", "1.0 2.0 3.0", [1.0, 2.0, 3.0]),
+        ("xu yu zu", "11.0 -7.0 23.0", [11.0, -7.0, 23.0]),
+        ("xs ys zs", "0.5 0.25 0.75", [5.0, -2.5, 15.0]),
+        ("xsu ysu zsu", "1.5 -0.5 0.5", [15.0, -10.0, 10.0]),
+        // several styles: x beats xu beats xs beats xsu
+        (
+            "xsu ysu zsu xs ys zs xu yu zu x y z",
+            "0 0 0 0 0 0 1 1 1 2 3 4",
+            [2.0, 3.0, 4.0],
+        ),
+        ("xs ys zs xu yu zu", "0.5 0.5 0.5 7 8 9", [7.0, 8.0, 9.0]),
+        (
+            "xsu ysu zsu xs ys zs",
+            "0 0 0 0.5 0.5 0.5",
+            [5.0, 0.0, 10.0],
+        ),
+    ];
+    for (i, (cols, line, want)) in cases.iter().enumerate() {
+        let text =
+            format!("{ORTHO}ITEM: ATOMS id type {cols}\n1 1 {line}\n2 1 {line}\n3 1 {line}\n");
+        let path = write(dir.path(), &format!("c{i}.dump"), &text);
+        let f = read(&path, None);
+        for p in &f.positions {
+            assert!(close(*p, *want), "{cols}: got {p:?}, want {want:?}");
+        }
+    }
+}
+
+/// A restricted triclinic box: the `_bound` values are converted to true bounds, and
+/// scaled coordinates go through the tilted cell vectors.
+#[test]
+fn triclinic_bounds_and_scaled_coordinates() {
+    let dir = tempfile::tempdir().unwrap();
+    let (xlo, xhi, ylo, yhi, zlo, zhi) = (0.0, 10.0, 1.0, 9.0, -2.0, 4.0);
+    let (xy, xz, yz) = (2.0, -3.0, 1.5);
+    let xlo_b = xlo + f64::min(0.0, xy).min(xz).min(xy + xz);
+    let xhi_b = xhi + f64::max(0.0, xy).max(xz).max(xy + xz);
+    let ylo_b = ylo + f64::min(0.0, yz);
+    let yhi_b = yhi + f64::max(0.0, yz);
+    let text = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS xy xz yz pp pp pp\n\
+         {xlo_b} {xhi_b} {xy}\n{ylo_b} {yhi_b} {xz}\n{zlo} {zhi} {yz}\n\
+         ITEM: ATOMS id type xs ys zs\n1 1 0.5 0.5 0.5\n2 1 0 0 1\n"
+    );
+    let path = write(dir.path(), "tri.lammpstrj", &text);
+    let f = read(&path, None);
+    let b = f.simulation_box.clone().unwrap();
+    assert_eq!(b.origin, [xlo, ylo, zlo]);
+    assert_eq!(b.a, [xhi - xlo, 0.0, 0.0]);
+    assert_eq!(b.b, [xy, yhi - ylo, 0.0]);
+    assert_eq!(b.c, [xz, yz, zhi - zlo]);
+    assert_eq!(b.periodic, Some([true; 3]));
+    let (lx, ly, lz) = (xhi - xlo, yhi - ylo, zhi - zlo);
+    let want0 = [
+        xlo + 0.5 * lx + 0.5 * xy + 0.5 * xz,
+        ylo + 0.5 * ly + 0.5 * yz,
+        zlo + 0.5 * lz,
+    ];
+    assert!(
+        close(f.positions[0], want0),
+        "{:?} {want0:?}",
+        f.positions[0]
+    );
+    assert!(close(f.positions[1], [xlo + xz, ylo + yz, zhi]));
+
+    // Same box, unwrapped scaled coordinates.
+    let text = text.replace("xs ys zs", "xsu ysu zsu");
+    let path = write(dir.path(), "tri_su.lammpstrj", &text);
+    let f = read(&path, None);
+    assert!(close(f.positions[0], want0));
+}
+
+#[test]
+fn general_triclinic_box() {
+    let dir = tempfile::tempdir().unwrap();
+    let text =
+        "ITEM: TIMESTEP\n5\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS abc origin pp pp fm\n\
+                10 0 0 -1\n1 8 0 -2\n0.5 0.5 6 -3\nITEM: ATOMS id type xs ys zs\n1 1 0.5 0.5 0.5\n";
+    let path = write(dir.path(), "gen.lammpstrj", text);
+    let f = read(&path, None);
+    let b = f.simulation_box.clone().unwrap();
+    assert_eq!(b.origin, [-1.0, -2.0, -3.0]);
+    assert_eq!(b.a, [10.0, 0.0, 0.0]);
+    assert_eq!(b.b, [1.0, 8.0, 0.0]);
+    assert_eq!(b.c, [0.5, 0.5, 6.0]);
+    assert_eq!(b.periodic, Some([true, true, false]));
+    assert!(close(f.positions[0], [4.75, 2.25, 0.0]));
+}
+
+#[test]
+fn element_wins_over_type_and_unsorted_order_is_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!(
+        "{ORTHO}ITEM: ATOMS x y z element type id\n\
+         3 3 3 Ni 2 3\n1 1 1 Cu 1 1\n2 2 2 Ni 2 2\n"
+    );
+    let path = write(dir.path(), "el.lammpstrj", &text);
+    let f = read(&path, None);
+    assert_eq!(names(&f), vec!["Ni", "Cu"]);
+    assert!(f.species.iter().all(|s| !s.numeric_type));
+    assert_eq!(f.species_index, vec![0, 1, 0]);
+    assert_eq!(f.positions, vec![[3.0; 3], [1.0; 3], [2.0; 3]]);
+}
+
+#[test]
+fn numeric_types_are_sorted_numerically() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!("{ORTHO}ITEM: ATOMS id type x y z\n1 10 0 0 0\n2 2 0 0 0\n3 1 0 0 0\n");
+    let path = write(dir.path(), "types.lammpstrj", &text);
+    let f = read(&path, None);
+    assert_eq!(names(&f), vec!["1", "2", "10"]);
+    assert_eq!(f.species_index, vec![2, 1, 0]);
+}
+
+#[test]
+fn type_labels_keep_first_appearance() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!("{ORTHO}ITEM: ATOMS id type x y z\n1 O 0 0 0\n2 H 0 0 0\n3 H 0 0 0\n");
+    let path = write(dir.path(), "labels.lammpstrj", &text);
+    let f = read(&path, None);
+    assert_eq!(names(&f), vec!["O", "H"]);
+    assert!(f.species.iter().all(|s| !s.numeric_type));
+}
+
+#[test]
+fn no_species_column_gives_one_species() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!("{ORTHO}ITEM: ATOMS x y z\n1 2 3\n4 5 6\n7 8 9\n");
+    let path = write(dir.path(), "nospecies.lammpstrj", &text);
+    let f = read(&path, None);
+    assert_eq!(f.species.len(), 1);
+    assert_eq!(f.species_index, vec![0, 0, 0]);
+}
+
+#[test]
+fn attribute_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!(
+        "{ORTHO}ITEM: ATOMS id type x y z c_pe vx\n1 1 0 0 0 -3.5 1\n2 1 0 0 0 -4.25 2\n3 2 1 1 1 1e-3 3\n"
+    );
+    let path = write(dir.path(), "attr.lammpstrj", &text);
+    let f = read(&path, Some("c_pe"));
+    let a = f.attribute.unwrap();
+    assert_eq!(a.name, "c_pe");
+    assert_eq!(a.values, vec![-3.5, -4.25, 1e-3]);
+    // A coordinate or the type column can be the attribute too.
+    let f = read(&path, Some("x"));
+    assert_eq!(f.attribute.unwrap().values, vec![0.0, 0.0, 1.0]);
+    let f = read(&path, Some("type"));
+    assert_eq!(f.attribute.as_ref().unwrap().values, vec![1.0, 1.0, 2.0]);
+    assert_eq!(names(&f), vec!["1", "2"]);
+}
+
+#[test]
+fn windows_line_endings() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!(
+        "ITEM: UNITS\nmetal\nITEM: TIME\n0.25\n{ORTHO}ITEM: ATOMS id type x y z c_q\n1 1 1.5 2.5 3.5 0.5\n2 2 4 5 6 -1\n3 1 7 8 9 2\n"
+    )
+    .replace('\n', "\r\n");
+    let path = write(dir.path(), "crlf.lammpstrj", &text);
+    let f = read(&path, Some("c_q"));
+    assert_eq!(
+        f.positions,
+        vec![[1.5, 2.5, 3.5], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]
+    );
+    assert_eq!(names(&f), vec!["1", "2"]);
+    assert_eq!(f.attribute.unwrap().values, vec![0.5, -1.0, 2.0]);
+    assert_eq!(f.units.as_deref(), Some("metal"));
+    assert_eq!(f.time, Some(0.25));
+    assert_eq!(f.timestep, Some(100));
+}
+
+fn frame_text(step: u64, time: Option<f64>, n: usize, offset: f64) -> String {
+    let mut s = String::new();
+    if let Some(t) = time {
+        s += &format!("ITEM: TIME\n{t}\n");
+    }
+    s += &format!(
+        "ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 100\n0 100\n0 100\nITEM: ATOMS id type x y z\n"
+    );
+    for i in 0..n {
+        s += &format!(
+            "{} {} {} {} {}\n",
+            i + 1,
+            i % 3 + 1,
+            offset + i as f64,
+            1.0,
+            2.0
+        );
+    }
+    s
+}
+
+fn three_frames() -> String {
+    let mut text = String::from("ITEM: UNITS\nreal\n");
+    text += &frame_text(0, Some(0.0), 4, 0.0);
+    text += &frame_text(1000, Some(2.5), 5, 10.0);
+    text += &frame_text(2000, Some(5.0), 2, 20.0);
+    text
+}
+
+fn check_three_frames(dump: &DumpFile) {
+    assert_eq!(dump.frame_count(), 3);
+    assert_eq!(dump.frame_timestep(0), Some(0));
+    assert_eq!(dump.frame_timestep(1), Some(1000));
+    assert_eq!(dump.frame_timestep(2), Some(2000));
+    assert_eq!(dump.frame_timestep(3), None);
+    // Frame 2 first: random access without reading frames 0 and 1.
+    let f2 = dump
+        .read_frame(2, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert_eq!(f2.len(), 2);
+    assert_eq!(f2.positions, vec![[20.0, 1.0, 2.0], [21.0, 1.0, 2.0]]);
+    assert_eq!(f2.timestep, Some(2000));
+    assert_eq!(f2.time, Some(5.0));
+    assert_eq!(
+        f2.units.as_deref(),
+        Some("real"),
+        "UNITS of frame 0 apply to all"
+    );
+    let f1 = dump
+        .read_frame(1, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert_eq!(f1.len(), 5);
+    assert_eq!(f1.positions[4], [14.0, 1.0, 2.0]);
+    assert_eq!(f1.time, Some(2.5));
+    let f0 = dump
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert_eq!(f0.len(), 4);
+    assert_eq!(f0.time, Some(0.0));
+    let info = dump.frame_info(1).unwrap();
+    assert_eq!(info.particles, 5);
+    assert_eq!(info.columns, vec!["id", "type", "x", "y", "z"]);
+}
+
+#[test]
+fn multi_frame_random_access() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "multi.lammpstrj", &three_frames());
+    let dump = DumpFile::open(&path).unwrap();
+    assert_eq!(dump.format(), InputFormat::LammpsText);
+    check_three_frames(&dump);
+}
+
+#[test]
+fn gzip_transparent() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("multi.lammpstrj.gz");
+    // Two gzip members, as `cat a.gz b.gz` would make.
+    let text = three_frames();
+    let (first, second) = text.split_at(text.len() / 2);
+    let mut bytes = Vec::new();
+    for part in [first, second] {
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        enc.write_all(part.as_bytes()).unwrap();
+        bytes.extend(enc.finish().unwrap());
+    }
+    std::fs::write(&path, bytes).unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    check_three_frames(&dump);
+}
+
+#[test]
+fn large_frame_parsed_in_parallel_chunks() {
+    // Big enough for many parser chunks; checks order and species across chunk seams.
+    let n = 60_000;
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n7\nITEM: NUMBER OF ATOMS\n60000\nITEM: BOX BOUNDS pp pp pp\n0 1\n0 1\n0 1\nITEM: ATOMS id type x y z c_v\n",
+    );
+    for i in 0..n {
+        let t = if i < 40_000 { 5 } else { 1 + i % 4 };
+        text += &format!(
+            "{} {t} {}.25 {} -{}.5 {}\n",
+            n - i,
+            i,
+            i % 97,
+            i % 13,
+            i * 2
+        );
+    }
+    let path = write(dir.path(), "big.lammpstrj", &text);
+    let f = read(&path, Some("c_v"));
+    assert_eq!(f.len(), n);
+    assert_eq!(names(&f), vec!["1", "2", "3", "4", "5"]);
+    for i in 0..n {
+        let t = if i < 40_000 { 5 } else { 1 + i % 4 };
+        assert_eq!(
+            f.positions[i],
+            [i as f32 + 0.25, (i % 97) as f32, -((i % 13) as f32) - 0.5]
+        );
+        assert_eq!(f.species[f.species_index[i] as usize].name, t.to_string());
+        assert_eq!(f.attribute.as_ref().unwrap().values[i], (i * 2) as f32);
+    }
+}
+
+#[test]
+fn format_detection() {
+    use InputFormat::*;
+    for (name, want) in [
+        ("a.lammpstrj", Some(LammpsText)),
+        ("a.dump", Some(LammpsText)),
+        ("a.lammps", Some(LammpsText)),
+        ("dump.melt", Some(LammpsText)),
+        ("dump.melt.gz", Some(LammpsText)),
+        ("A.LAMMPSTRJ.GZ", Some(LammpsText)),
+        ("a.xyz", Some(Xyz)),
+        ("dump.xyz", Some(Xyz)),
+        ("a.extxyz.gz", Some(Xyz)),
+        ("a.txt", None),
+    ] {
+        assert_eq!(InputFormat::from_path(Path::new(name)), want, "{name}");
+    }
+    assert_eq!(
+        InputFormat::sniff(b"\nITEM: TIMESTEP\n0\n"),
+        Some(LammpsText)
+    );
+    assert_eq!(InputFormat::sniff(b"  12 \ncomment\n"), Some(Xyz));
+    assert_eq!(InputFormat::sniff(b"hello\n"), None);
+
+    // Unknown extension: sniffed.
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!("{ORTHO}ITEM: ATOMS id type x y z\n1 1 0 0 0\n2 1 0 0 0\n3 1 0 0 0\n");
+    let path = write(dir.path(), "noext", &text);
+    assert_eq!(DumpFile::open(&path).unwrap().format(), LammpsText);
+}
+
+#[test]
+fn unknown_items_are_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "ITEM: TIMESTEP\n1\nITEM: SOMETHING NEW\na b\nc d\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS\n0 1\n0 1\n0 1\nITEM: ATOMS x y z\n0.5 0.5 0.5\n";
+    let path = write(dir.path(), "new.lammpstrj", text);
+    let f = read(&path, None);
+    assert_eq!(f.positions, vec![[0.5; 3]]);
+    assert_eq!(f.simulation_box.unwrap().periodic, None);
+}
+
+#[test]
+fn empty_frame_is_fine() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "ITEM: TIMESTEP\n1\nITEM: NUMBER OF ATOMS\n0\nITEM: BOX BOUNDS pp pp pp\n0 1\n0 1\n0 1\nITEM: ATOMS id type x y z\n";
+    let path = write(dir.path(), "zero.lammpstrj", text);
+    let f = read(&path, None);
+    assert!(f.is_empty());
+    assert!(f.species.is_empty());
+}

@@ -1,0 +1,178 @@
+//! XYZ and extended XYZ reading.
+
+use std::path::{Path, PathBuf};
+
+use mdlod_preprocess::readers::{DumpFile, InputFormat, ReadOptions};
+use mdlod_preprocess::{Frame, NoProgress};
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn read_k(path: &Path, k: usize, attribute: Option<&str>) -> Frame {
+    let dump = DumpFile::open(path).unwrap();
+    let opts = ReadOptions {
+        attribute: attribute.map(String::from),
+    };
+    dump.read_frame(k, &opts, &NoProgress).unwrap()
+}
+
+fn names(frame: &Frame) -> Vec<&str> {
+    frame.species.iter().map(|s| s.name.as_str()).collect()
+}
+
+#[test]
+fn plain_xyz() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "3\nwater molecule\nO 0.0 0.0 0.1173\nH 0.0 0.7572 -0.4692\nH 0.0 -0.7572 -0.4692\n";
+    let path = write(dir.path(), "water.xyz", text);
+    let dump = DumpFile::open(&path).unwrap();
+    assert_eq!(dump.format(), InputFormat::Xyz);
+    assert_eq!(dump.frame_count(), 1);
+    assert_eq!(dump.frame_timestep(0), None);
+    let f = read_k(&path, 0, None);
+    assert_eq!(names(&f), vec!["O", "H"]);
+    assert!(f.species.iter().all(|s| !s.numeric_type));
+    assert_eq!(f.species_index, vec![0, 1, 1]);
+    assert_eq!(f.positions[1], [0.0, 0.7572, -0.4692]);
+    assert!(f.simulation_box.is_none());
+    assert_eq!(
+        dump.frame_info(0).unwrap().columns,
+        vec!["species", "x", "y", "z"]
+    );
+}
+
+#[test]
+fn plain_xyz_extra_columns_as_attribute() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "2\n\nC 1 2 3 0.5 7\nC 4 5 6 -0.5 8\n";
+    let path = write(dir.path(), "extra.xyz", text);
+    let f = read_k(&path, 0, Some("col5"));
+    assert_eq!(f.attribute.unwrap().values, vec![0.5, -0.5]);
+    let f = read_k(&path, 0, Some("col6"));
+    assert_eq!(f.attribute.unwrap().values, vec![7.0, 8.0]);
+}
+
+#[test]
+fn extended_xyz_lattice_properties_pbc_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "2\n\
+        Lattice=\"10.0 0.0 0.0 1.0 9.0 0.0 0.5 0.5 8.0\" Properties=id:I:1:pos:R:3:forces:R:3:species:S:1:energy:R:1 pbc=\"T F T\" Time=1.5 Timestep=42 label=\"a b\"\n\
+        1 1.0 2.0 3.0 0.1 0.2 0.3 Si -4.5\n\
+        2 4.0 5.0 6.0 0.4 0.5 0.6 O -3.25\n";
+    let path = write(dir.path(), "ext.extxyz", text);
+    let dump = DumpFile::open(&path).unwrap();
+    assert_eq!(dump.frame_timestep(0), Some(42));
+    let info = dump.frame_info(0).unwrap();
+    assert_eq!(
+        info.columns,
+        vec![
+            "id",
+            "pos[0]",
+            "pos[1]",
+            "pos[2]",
+            "forces[0]",
+            "forces[1]",
+            "forces[2]",
+            "species",
+            "energy"
+        ]
+    );
+    let f = read_k(&path, 0, Some("energy"));
+    assert_eq!(f.positions, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+    assert_eq!(names(&f), vec!["Si", "O"]);
+    assert_eq!(f.attribute.as_ref().unwrap().values, vec![-4.5, -3.25]);
+    assert_eq!(f.attribute.as_ref().unwrap().name, "energy");
+    assert_eq!(f.time, Some(1.5));
+    assert_eq!(f.timestep, Some(42));
+    let b = f.simulation_box.clone().unwrap();
+    assert_eq!(b.origin, [0.0; 3]);
+    assert_eq!(b.a, [10.0, 0.0, 0.0]);
+    assert_eq!(b.b, [1.0, 9.0, 0.0]);
+    assert_eq!(b.c, [0.5, 0.5, 8.0]);
+    assert_eq!(b.periodic, Some([true, false, true]));
+    let f = read_k(&path, 0, Some("forces[1]"));
+    assert_eq!(f.attribute.unwrap().values, vec![0.2, 0.5]);
+    let f = read_k(&path, 0, Some("id"));
+    assert_eq!(f.attribute.unwrap().values, vec![1.0, 2.0]);
+}
+
+#[test]
+fn extended_xyz_defaults_and_origin() {
+    let dir = tempfile::tempdir().unwrap();
+    // Lattice without pbc means periodic; no Properties means species:S:1:pos:R:3;
+    // lower-case keys and OVITO's Origin are understood.
+    let text = "1\nlattice=\"2 0 0 0 2 0 0 0 2\" origin=\"-1 -1 -1\"\nAr 0.5 0.5 0.5\n";
+    let path = write(dir.path(), "d.xyz", text);
+    let f = read_k(&path, 0, None);
+    let b = f.simulation_box.clone().unwrap();
+    assert_eq!(b.origin, [-1.0; 3]);
+    assert_eq!(b.periodic, Some([true; 3]));
+    assert_eq!(f.positions, vec![[0.5; 3]]);
+    assert_eq!(names(&f), vec!["Ar"]);
+}
+
+#[test]
+fn extended_xyz_property_order_is_honoured() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "2\nProperties=pos:R:3:Z:I:1 Lattice=\"5 0 0 0 5 0 0 0 5\"\n1 2 3 6\n4 5 6 8\n";
+    let path = write(dir.path(), "z.xyz", text);
+    let f = read_k(&path, 0, None);
+    assert_eq!(f.positions, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+    assert_eq!(names(&f), vec!["6", "8"]);
+}
+
+#[test]
+fn multi_frame_xyz_random_access() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::new();
+    for (k, n) in [3usize, 1, 2].iter().enumerate() {
+        text += &format!("{n}\nProperties=species:S:1:pos:R:3 step={}\n", k * 10);
+        for i in 0..*n {
+            text += &format!("X{i} {} {} {}\n", k, i, 0.5);
+        }
+    }
+    text += "\n\n";
+    let path = write(dir.path(), "traj.xyz", &text);
+    let dump = DumpFile::open(&path).unwrap();
+    assert_eq!(dump.frame_count(), 3);
+    assert_eq!(
+        (0..4).map(|k| dump.frame_timestep(k)).collect::<Vec<_>>(),
+        vec![Some(0), Some(10), Some(20), None]
+    );
+    let f = read_k(&path, 2, None);
+    assert_eq!(f.positions, vec![[2.0, 0.0, 0.5], [2.0, 1.0, 0.5]]);
+    assert_eq!(names(&f), vec!["X0", "X1"]);
+    let f = read_k(&path, 1, None);
+    assert_eq!(f.positions, vec![[1.0, 0.0, 0.5]]);
+    let f = read_k(&path, 0, None);
+    assert_eq!(f.len(), 3);
+}
+
+#[test]
+fn lammps_xyz_dump_timestep_and_crlf() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "2\r\n Atoms. Timestep: 500\r\n1 0 0 0\r\n2 1 1 1\r\n2\r\n Atoms. Timestep: 600\r\n1 2 2 2\r\n2 3 3 3\r\n";
+    let path = write(dir.path(), "dump.xyz", text);
+    let dump = DumpFile::open(&path).unwrap();
+    assert_eq!(dump.frame_timestep(0), Some(500));
+    assert_eq!(dump.frame_timestep(1), Some(600));
+    let f = read_k(&path, 1, None);
+    assert_eq!(f.positions, vec![[2.0; 3], [3.0; 3]]);
+    assert_eq!(f.timestep, Some(600));
+    assert_eq!(names(&f), vec!["1", "2"]);
+}
+
+#[test]
+fn gzip_xyz() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("g.xyz.gz");
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    enc.write_all(b"1\n\nFe 1 2 3\n").unwrap();
+    std::fs::write(&path, enc.finish().unwrap()).unwrap();
+    let f = read_k(&path, 0, None);
+    assert_eq!(f.positions, vec![[1.0, 2.0, 3.0]]);
+}

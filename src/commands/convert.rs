@@ -1,0 +1,136 @@
+//! `mdlod convert`: one frame of a dump to a `.mdlod` file.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use mdlod_preprocess::convert::{convert_file, ConvertOptions, ConvertReport, FrameSelect};
+use mdlod_preprocess::hierarchy::BuildParams;
+use mdlod_preprocess::readers::ReadOptions;
+use mdlod_preprocess::species::parse_radius_override;
+
+use crate::progress::Bar;
+
+/// Convert one frame of a particle dump (LAMMPS text, XYZ, extended XYZ; .gz too) into a
+/// level-of-detail .mdlod file.
+#[derive(clap::Args)]
+#[command(
+    after_help = "Example:\n  mdlod convert dump.lammpstrj.gz -o frame.mdlod --last --radius Cu=1.28 --attribute c_pe"
+)]
+pub struct Args {
+    /// The dump to read.
+    pub input: PathBuf,
+    /// The .mdlod file to write (replaced atomically).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Frame to convert (0-based).
+    #[arg(long, conflicts_with = "last")]
+    pub frame: Option<usize>,
+    /// Convert the last frame (the default).
+    #[arg(long)]
+    pub last: bool,
+    /// Radius of a species, NAME=RADIUS (element or numeric LAMMPS type); repeatable.
+    #[arg(long = "radius", value_name = "NAME=R", value_parser = parse_radius_override)]
+    pub radii: Vec<(String, f32)>,
+    /// Dump column to keep as the per-particle scalar attribute.
+    #[arg(long)]
+    pub attribute: Option<String>,
+    /// Bits per quantized coordinate.
+    #[arg(long, value_enum, default_value = "u16")]
+    pub precision: Precision,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// A cluster is split while it holds more than this many points.
+    #[arg(long, default_value_t = 8)]
+    pub cluster_size: u32,
+    /// The coarsest level holds at most this many points.
+    #[arg(long, default_value_t = 4096)]
+    pub root_points: u32,
+    /// Levels between a node and the points it is drawn with (δn).
+    #[arg(long, default_value_t = 1)]
+    pub delta_n: u32,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Precision {
+    U8,
+    U16,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let report = with_threads(args.threads, || convert(&args))??;
+    print_report(&args.output, &report);
+    Ok(())
+}
+
+pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
+    match threads {
+        Some(n) => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .context("cannot start the worker threads")?;
+            Ok(pool.install(f))
+        }
+        None => Ok(f()),
+    }
+}
+
+fn convert(args: &Args) -> Result<ConvertReport> {
+    let options = ConvertOptions {
+        build: BuildParams {
+            max_cluster_size: args.cluster_size,
+            max_root_points: args.root_points,
+            delta_n: args.delta_n,
+            position_bits: match args.precision {
+                Precision::U8 => 8,
+                Precision::U16 => 16,
+            },
+        },
+        radii: args.radii.clone(),
+    };
+    let frame = match args.frame {
+        Some(k) => FrameSelect::Index(k),
+        None => FrameSelect::Last,
+    };
+    let read = ReadOptions {
+        attribute: args.attribute.clone(),
+    };
+    Ok(convert_file(
+        &args.input,
+        &args.output,
+        frame,
+        &read,
+        &options,
+        &Bar::new(),
+    )?)
+}
+
+pub fn print_report(output: &std::path::Path, r: &ConvertReport) {
+    let total = r.read_time + r.build_time + r.write_time;
+    println!(
+        "wrote {}: {} particles, {} levels, {} nodes, {:.1} MiB, max position error {:.3e}",
+        output.display(),
+        r.particles,
+        r.levels,
+        r.nodes,
+        r.file_size as f64 / (1 << 20) as f64,
+        r.max_position_error
+    );
+    let peak = peak_memory_mib().map_or(String::new(), |m| format!(", peak memory {m:.0} MiB"));
+    println!(
+        "  read {:.2} s, hierarchy {:.2} s, write {:.2} s ({:.2} M particles/s overall{peak})",
+        r.read_time.as_secs_f64(),
+        r.build_time.as_secs_f64(),
+        r.write_time.as_secs_f64(),
+        r.particles as f64 / total.as_secs_f64().max(1e-9) / 1e6
+    );
+}
+
+/// Peak resident memory of this process so far (Linux), in MiB.
+fn peak_memory_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}

@@ -1,0 +1,102 @@
+//! `mdlod info`: what a `.mdlod` file holds.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use mdlod_format::MdlodFile;
+use serde_json::json;
+
+/// Show what a .mdlod file holds: particles, levels, species, box, build parameters.
+#[derive(clap::Args)]
+#[command(after_help = "Example:\n  mdlod info frame.mdlod --json | jq .particles")]
+pub struct Args {
+    pub file: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let f = MdlodFile::open(&args.file)?;
+    let m = f.metadata();
+    let levels: Vec<u64> = f.levels().iter().map(|l| l.point_count).collect();
+    let file_size = std::fs::metadata(&args.file).map(|m| m.len()).unwrap_or(0);
+    if args.json {
+        let v = json!({
+            "file": args.file.display().to_string(),
+            "file_size": file_size,
+            "format_version": format!("{}.{}", f.header().version_major, f.header().version_minor),
+            "particles": m.particles,
+            "levels": f.level_count(),
+            "level_points": levels,
+            "nodes": f.nodes().len(),
+            "species": m.species,
+            "attribute": m.attribute,
+            "box": m.simulation_box,
+            "timestep": m.timestep,
+            "time": m.time,
+            "units": m.units,
+            "source": m.source,
+            "build": m.build,
+            "max_position_error": m.max_position_error,
+            "writer": m.writer,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("{}", args.file.display());
+    println!(
+        "  format {}.{}, {:.1} MiB, written by {}",
+        f.header().version_major,
+        f.header().version_minor,
+        file_size as f64 / (1 << 20) as f64,
+        m.writer
+    );
+    println!("  particles    {}", m.particles);
+    println!(
+        "  levels       {} (points per level, top first: {})",
+        f.level_count(),
+        levels
+            .iter()
+            .map(u64::to_string)
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    println!("  nodes        {}", f.nodes().len());
+    for s in &m.species {
+        println!(
+            "  species      {:<6} radius {:.3}  colour [{:.2} {:.2} {:.2}]",
+            s.name, s.radius, s.colour[0], s.colour[1], s.colour[2]
+        );
+    }
+    if let Some(a) = &m.attribute {
+        println!("  attribute    {} in [{}, {}]", a.name, a.min, a.max);
+    }
+    if let Some(b) = &m.simulation_box {
+        println!(
+            "  box          origin {:?} a {:?} b {:?} c {:?}",
+            b.origin, b.a, b.b, b.c
+        );
+    }
+    if let Some(t) = m.timestep {
+        println!("  timestep     {t}");
+    }
+    if let Some(t) = m.time {
+        println!("  time         {t}");
+    }
+    if let Some(u) = &m.units {
+        println!("  units        {u}");
+    }
+    if let Some(s) = &m.source {
+        println!(
+            "  source       {} (frame {}, {} bytes)",
+            s.path, s.frame, s.size
+        );
+    }
+    println!(
+        "  build        cluster size {}, root points {}, delta_n {}, {}-bit positions",
+        m.build.max_cluster_size, m.build.max_root_points, m.build.delta_n, m.build.position_bits
+    );
+    println!("  max position error {:.4e}", m.max_position_error);
+    Ok(())
+}
