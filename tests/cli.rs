@@ -1,0 +1,279 @@
+//! End-to-end tests of the `mdlod` program on real LAMMPS output and generated data.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use mdlod_datasets::{lammps_sample_path, LAMMPS_SAMPLES};
+use mdlod_format::MdlodFile;
+use mdlod_preprocess::readers::{DumpFile, ReadOptions};
+use mdlod_preprocess::NoProgress;
+
+fn mdlod(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args(args)
+        .output()
+        .expect("the mdlod binary runs")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = mdlod(args);
+    assert!(
+        out.status.success(),
+        "mdlod {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+fn fails(args: &[&str]) -> String {
+    let out = mdlod(args);
+    assert!(!out.status.success(), "mdlod {args:?} should fail");
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(!err.contains("panicked"), "mdlod {args:?} panicked: {err}");
+    err
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The nearest input particle of every decoded particle, through a hash grid.
+fn max_nearest_distance(inputs: &[[f32; 3]], decoded: &[[f32; 3]], cell: f32) -> f64 {
+    let key = |p: &[f32; 3]| p.map(|v| (v / cell).floor() as i64);
+    let mut grid = std::collections::HashMap::<[i64; 3], Vec<[f32; 3]>>::new();
+    for p in inputs {
+        grid.entry(key(p)).or_default().push(*p);
+    }
+    let mut worst = 0.0f64;
+    for d in decoded {
+        let k = key(d);
+        let mut best = f64::INFINITY;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    for p in grid
+                        .get(&[k[0] + dx, k[1] + dy, k[2] + dz])
+                        .into_iter()
+                        .flatten()
+                    {
+                        let e: f64 = (0..3)
+                            .map(|i| (f64::from(p[i]) - f64::from(d[i])).powi(2))
+                            .sum();
+                        best = best.min(e.sqrt());
+                    }
+                }
+            }
+        }
+        worst = worst.max(best);
+    }
+    worst
+}
+
+#[test]
+fn every_real_lammps_sample_round_trips_within_the_recorded_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    for sample in LAMMPS_SAMPLES {
+        let input = lammps_sample_path(sample.file);
+        let out = dir.path().join(format!("{}.mdlod", sample.file));
+        for precision in ["u16", "u8"] {
+            ok(&[
+                "convert",
+                s(&input),
+                "-o",
+                s(&out),
+                "--precision",
+                precision,
+            ]);
+            let f = MdlodFile::open(&out).unwrap();
+            f.verify().unwrap();
+            // The last frame, as the reader sees it.
+            let dump = DumpFile::open(&input).unwrap();
+            let frame = dump
+                .read_frame(dump.frame_count() - 1, &ReadOptions::default(), &NoProgress)
+                .unwrap();
+            assert_eq!(f.particle_count(), sample.atoms, "{}", sample.file);
+            assert_eq!(f.metadata().timestep, sample.timesteps.last().copied());
+            let names: Vec<&str> = f
+                .metadata()
+                .species
+                .iter()
+                .map(|s| s.name.as_str())
+                .collect();
+            let input_names: Vec<&str> = frame.species.iter().map(|s| s.name.as_str()).collect();
+            assert_eq!(names, input_names);
+            let mut counts = vec![0usize; names.len()];
+            for &sp in f.species() {
+                counts[sp as usize] += 1;
+            }
+            let mut input_counts = vec![0usize; names.len()];
+            for &sp in &frame.species_index {
+                input_counts[sp as usize] += 1;
+            }
+            assert_eq!(counts, input_counts, "{}", sample.file);
+            let decoded = f.decode_level(f.level_count() - 1);
+            let bound = f.metadata().max_position_error;
+            let worst = max_nearest_distance(&frame.positions, &decoded, 1.0);
+            assert!(
+                worst <= bound + 1e-9,
+                "{} ({precision}): a particle decodes {worst} from the nearest input, bound {bound}",
+                sample.file
+            );
+            // The bound is that of the quantization: under a step of the box.
+            let limit = if precision == "u16" { 1e-3 } else { 0.5 };
+            assert!(
+                bound < limit,
+                "{} ({precision}): bound {bound}",
+                sample.file
+            );
+        }
+    }
+}
+
+#[test]
+fn info_json_has_the_promised_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cuag_alloy.unwrapped.dump");
+    let out = dir.path().join("a.mdlod");
+    let text = ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&out),
+        "--frame",
+        "2",
+        "--attribute",
+        "c_pe",
+        "--radius",
+        "Cu=1.3",
+    ]);
+    assert!(text.contains("max position error"), "{text}");
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&out), "--json"])).unwrap();
+    for key in [
+        "particles",
+        "levels",
+        "nodes",
+        "species",
+        "box",
+        "timestep",
+        "max_position_error",
+    ] {
+        assert!(!json[key].is_null(), "info --json lacks {key}: {json}");
+    }
+    assert_eq!(json["particles"], 864);
+    assert_eq!(json["source"]["frame"], 2);
+    assert_eq!(json["attribute"]["name"], "c_pe");
+    let species = json["species"].as_array().unwrap();
+    let cu = species.iter().find(|s| s["name"] == "Cu").unwrap();
+    assert!((cu["radius"].as_f64().unwrap() - 1.3).abs() < 1e-6);
+    let ag = species.iter().find(|s| s["name"] == "Ag").unwrap();
+    assert!(
+        (ag["radius"].as_f64().unwrap() - 1.44).abs() < 1e-6,
+        "standard radius of Ag"
+    );
+    let text = ok(&["info", s(&out)]);
+    assert!(text.contains("particles    864"), "{text}");
+    let text = ok(&["verify", s(&out)]);
+    assert!(text.contains(": ok:"), "{text}");
+}
+
+#[test]
+fn generated_data_converts_identically_with_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("alloy.lammpstrj");
+    ok(&[
+        "generate",
+        "alloy",
+        "--particles",
+        "30000",
+        "-o",
+        s(&dump),
+        "--frames",
+        "2",
+    ]);
+    let a = dir.path().join("a.mdlod");
+    let b = dir.path().join("b.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&a), "--threads", "1"]);
+    ok(&["convert", s(&dump), "-o", s(&b), "--threads", "2"]);
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    let f = MdlodFile::open(&a).unwrap();
+    assert_eq!(f.particle_count(), 30000);
+    assert_eq!(f.metadata().timestep, Some(100));
+    assert_eq!(f.metadata().species.len(), 2);
+}
+
+#[test]
+fn bad_inputs_give_clear_errors_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.mdlod");
+    let empty = dir.path().join("empty.lammpstrj");
+    std::fs::write(&empty, "").unwrap();
+    let err = fails(&["convert", s(&empty), "-o", s(&out)]);
+    assert!(
+        err.contains("empty.lammpstrj") && err.contains("empty"),
+        "{err}"
+    );
+
+    let truncated = dir.path().join("cut.lammpstrj");
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    std::fs::write(&truncated, &text[..text.len() - 200]).unwrap();
+    let err = fails(&["convert", s(&truncated), "-o", s(&out)]);
+    assert!(
+        err.contains("cut.lammpstrj:") && err.contains("truncated"),
+        "{err}"
+    );
+
+    let nan = dir.path().join("nan.lammpstrj");
+    std::fs::write(
+        &nan,
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS pp pp pp\n0 1\n0 1\n0 1\nITEM: ATOMS id type x y z\n1 1 0 0 0\n2 1 nan 0 0\n",
+    )
+    .unwrap();
+    let err = fails(&["convert", s(&nan), "-o", s(&out)]);
+    assert!(err.contains("nan.lammpstrj:11"), "{err}");
+
+    let err = fails(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&out),
+        "--frame",
+        "99",
+    ]);
+    assert!(err.contains("frame 99"), "{err}");
+    let err = fails(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&out),
+        "--attribute",
+        "nope",
+    ]);
+    assert!(err.contains("nope") && err.contains("c_pe"), "{err}");
+    let err = fails(&["convert", s(&empty), "-o", s(&out), "--radius", "Cu"]);
+    assert!(err.contains("NAME=RADIUS"), "{err}");
+    assert!(!out.exists(), "no output after failures");
+
+    let not_mdlod = dir.path().join("x.mdlod");
+    std::fs::write(
+        &not_mdlod,
+        b"hello, this is not an mdlod file at all, just some text.......",
+    )
+    .unwrap();
+    let err = fails(&["info", s(&not_mdlod)]);
+    assert!(
+        err.contains("x.mdlod") && err.contains("not an .mdlod file"),
+        "{err}"
+    );
+    let err = fails(&["verify", s(&dir.path().join("missing.mdlod"))]);
+    assert!(err.contains("missing.mdlod"), "{err}");
+}
+
+#[test]
+fn demo_generates_converts_and_verifies() {
+    let dir = tempfile::tempdir().unwrap();
+    let d: PathBuf = dir.path().join("demo");
+    let text = ok(&["demo", "--particles", "20000", "--dir", s(&d)]);
+    assert!(text.contains("verified"), "{text}");
+    assert!(text.contains("particles    20000"), "{text}");
+    assert!(d.join("crater.mdlod").exists());
+}
