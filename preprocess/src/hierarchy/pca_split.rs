@@ -116,6 +116,45 @@ impl Stats {
         self.dd[5] += d[2] * d[2];
     }
 
+    /// The same sums about another shift.
+    fn shifted(&self, shift: [f64; 3]) -> Stats {
+        let t = [0, 1, 2].map(|k| shift[k] - self.shift[k]);
+        // Σ(d − t) = Σd − n t;  Σ w(d − t) = Σ wd − w t;
+        // Σ(d − t)(d − t)ᵀ = Σddᵀ − t Σdᵀ − Σd tᵀ + n t tᵀ
+        let idx = [
+            (0, 0, 0),
+            (1, 0, 1),
+            (2, 0, 2),
+            (3, 1, 1),
+            (4, 1, 2),
+            (5, 2, 2),
+        ];
+        let mut dd = self.dd;
+        for (s, i, j) in idx {
+            dd[s] += -t[i] * self.d[j] - self.d[i] * t[j] + self.n * t[i] * t[j];
+        }
+        Stats {
+            shift,
+            n: self.n,
+            w: self.w,
+            wd: [0, 1, 2].map(|k| self.wd[k] - self.w * t[k]),
+            d: [0, 1, 2].map(|k| self.d[k] - self.n * t[k]),
+            dd,
+        }
+    }
+
+    /// `self − other` (both about the same shift).
+    fn minus(&self, o: &Stats) -> Stats {
+        Stats {
+            shift: self.shift,
+            n: self.n - o.n,
+            w: self.w - o.w,
+            wd: [0, 1, 2].map(|k| self.wd[k] - o.wd[k]),
+            d: [0, 1, 2].map(|k| self.d[k] - o.d[k]),
+            dd: [0, 1, 2, 3, 4, 5].map(|k| self.dd[k] - o.dd[k]),
+        }
+    }
+
     /// The weighted centroid (the plain mean when all weights are zero) and the unit
     /// principal axis of the covariance about it.
     pub fn plane(&self) -> ([f64; 3], [f64; 3]) {
@@ -209,7 +248,6 @@ fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, 
         shift: centroid,
         ..Stats::default()
     };
-    let mut b = a;
     let mut lo = 0usize;
     let mut hi = n;
     for it in items {
@@ -218,9 +256,7 @@ fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, 
         // lo < hi holds before every write: lo + (n - hi) items were placed so far.
         out[lo] = *it;
         out[hi - 1] = *it;
-        let m = f64::from(u8::from(left));
-        a.add(it, m);
-        b.add(it, 1.0 - m);
+        a.add(it, f64::from(u8::from(left)));
         lo += usize::from(left);
         hi -= usize::from(!left);
     }
@@ -236,6 +272,7 @@ fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, 
         );
     }
     // The right part was written back to front; its sums do not depend on order.
+    let b = stats.shifted(centroid).minus(&a);
     (lo, a, b)
 }
 
