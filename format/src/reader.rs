@@ -7,7 +7,8 @@
 //! parent and quantization links, finite values). That is linear in the node count and
 //! reads no particle data, so opening a 10^9-particle file is quick. After it, the typed
 //! accessors cannot go out of bounds. [`MdlodFile::verify`] reads everything else: every
-//! section checksum, every species index and every decoded point.
+//! section checksum, the (zero) padding between sections, every node's point range, every
+//! species index and every decoded point.
 
 use std::fs::File;
 use std::ops::Range;
@@ -17,8 +18,8 @@ use xxhash_rust::xxh3::xxh3_64;
 
 use crate::error::FormatError;
 use crate::layout::{
-    Header, LevelRecord, NodeRecord, SectionEntry, SectionKind, HEADER_SIZE, MAGIC, READABLE_MAJOR,
-    SECTION_ALIGN,
+    align_up, Header, LevelRecord, NodeRecord, SectionEntry, SectionKind, HEADER_SIZE, MAGIC,
+    READABLE_MAJOR, SECTION_ALIGN,
 };
 use crate::meta::Metadata;
 use crate::quantize;
@@ -170,12 +171,16 @@ impl MdlodFile {
         let table_end = header
             .section_table_offset
             .checked_add(table_len)
-            .filter(|&end| end <= len && header.section_table_offset >= HEADER_SIZE as u64);
+            .filter(|&end| {
+                end <= len
+                    && header.section_table_offset >= HEADER_SIZE as u64
+                    && align_up(header.section_table_offset) == Some(header.section_table_offset)
+            });
         let Some(table_end) = table_end else {
             return Err(corrupt(
                 "header (offset 24)",
                 format!(
-                    "section table at {} with {} entries does not lie inside the {len}-byte file",
+                    "section table at {} with {} entries does not lie inside the {len}-byte file, or its offset is not a multiple of {SECTION_ALIGN}",
                     header.section_table_offset, header.section_count
                 ),
             ));
@@ -296,7 +301,8 @@ impl MdlodFile {
         let li = require(SectionKind::Levels, None)?;
         check_sum(li)?;
         let level_bytes = &map[range(li)];
-        if level_bytes.len() % 32 != 0 {
+        // (Not `is_multiple_of`: the workspace's minimum Rust is 1.85.)
+        if !level_bytes.chunks_exact(32).remainder().is_empty() {
             return Err(corrupt(
                 &place_of(li, &sections[li]),
                 "length is not a multiple of 32".into(),
@@ -389,7 +395,8 @@ impl MdlodFile {
 
         // Per-point sections.
         let bytes_per_point = 3 * (header.position_bits as u64 / 8);
-        let mut positions = vec![0..0];
+        let mut positions = Vec::with_capacity(level_count);
+        positions.push(0..0);
         for (l, lv) in levels.iter().enumerate().skip(1) {
             let i = require(SectionKind::Positions, Some(l as u32))?;
             if sections[i].length != lv.point_count * bytes_per_point {
@@ -581,7 +588,8 @@ impl MdlodFile {
         out
     }
 
-    /// Checks every section checksum, every species index and every decoded particle
+    /// Checks every section checksum, that the padding between sections is zero, every
+    /// node's point range, every species index and every decoded particle
     /// (finite, inside its parent's bounds up to the quantization step).
     pub fn verify(&self) -> Result<VerifyReport, FormatError> {
         let mut report = VerifyReport::default();
@@ -603,6 +611,33 @@ impl MdlodFile {
             report.sections += 1;
             report.bytes_hashed += s.length;
         }
+        // The bytes outside the header, the sections and the table (alignment padding, and
+        // anything after the table) are covered by no checksum; the spec makes them zero,
+        // so a flipped one is found here.
+        let mut spans: Vec<(usize, usize)> = self
+            .sections
+            .iter()
+            .map(|s| (s.offset as usize, (s.offset + s.length) as usize))
+            .collect();
+        spans.push((0, HEADER_SIZE));
+        let table_at = self.header.section_table_offset as usize;
+        spans.push((table_at, table_at + 32 * self.sections.len()));
+        spans.push((self.map.len(), self.map.len()));
+        spans.sort_unstable();
+        let mut covered = 0;
+        for (start, end) in spans {
+            if let Some(k) = self.map[covered.min(start)..start]
+                .iter()
+                .position(|&b| b != 0)
+            {
+                return Err(FormatError::corrupt(
+                    &self.path,
+                    format!("byte {}", covered + k),
+                    "lies in no section (padding) but is not zero",
+                ));
+            }
+            covered = covered.max(end);
+        }
         let species_count = self.metadata.species.len();
         if let Some(i) = self
             .species()
@@ -620,6 +655,37 @@ impl MdlodFile {
         }
         let last = self.level_count() - 1;
         let nodes = self.nodes();
+        // Every node's point range is its descendants on its point level.
+        for l in 0..last {
+            let point_level = (l + self.delta_n()).min(last);
+            let mut ranges: Vec<Range<usize>> = (0..self.levels()[l].point_count as usize)
+                .map(|i| i..i + 1)
+                .collect();
+            for d in l..point_level {
+                let dnodes = self.level_nodes(d);
+                for r in &mut ranges {
+                    let (a, b) = (&dnodes[r.start], &dnodes[r.end - 1]);
+                    *r = a.child_first as usize..(b.child_first + b.child_count) as usize;
+                }
+            }
+            let first = self.levels()[l].node_first as usize;
+            for (i, r) in ranges.into_iter().enumerate() {
+                let n = &nodes[first + i];
+                if n.point_first as usize != r.start || n.point_count as usize != r.len() {
+                    return Err(FormatError::corrupt(
+                        &self.path,
+                        format!("node {}", first + i),
+                        format!(
+                            "points {}+{} on level {point_level}, but its descendants there are {}+{}",
+                            n.point_first,
+                            n.point_count,
+                            r.start,
+                            r.len()
+                        ),
+                    ));
+                }
+            }
+        }
         for m in 1..=last {
             let pos = self.decode_level(m);
             let parents = self.level_nodes(m - 1);
@@ -643,10 +709,10 @@ impl MdlodFile {
                         ));
                     }
                     let mut outside = 0.0f64;
-                    for k in 0..3 {
-                        let lo = f64::from(parent.bounds_min[k]) - f64::from(p[k]);
-                        let hi = f64::from(p[k]) - f64::from(parent.bounds_max[k]);
-                        outside = outside.max(lo).max(hi);
+                    for ((&v, &lo), &hi) in p.iter().zip(&parent.bounds_min).zip(&parent.bounds_max)
+                    {
+                        let (v, lo, hi) = (f64::from(v), f64::from(lo), f64::from(hi));
+                        outside = outside.max(lo - v).max(v - hi);
                     }
                     let excess = outside - slack;
                     report.max_outside_parent_bounds =

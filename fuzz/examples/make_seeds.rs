@@ -1,0 +1,125 @@
+//! Writes seed inputs for the fuzz targets into `corpus/<target>/` (relative to the
+//! current directory, normally `fuzz/`): small valid `.mdlod` files made by
+//! `convert_frame`, and small LAMMPS and XYZ dumps. Each seed is one mode byte (see the
+//! targets) followed by the file. Runs on stable: `cargo run --example make_seeds`.
+
+use std::path::Path;
+
+use mdlod_preprocess::convert::{convert_frame, ConvertOptions};
+use mdlod_preprocess::hierarchy::BuildParams;
+use mdlod_preprocess::{Attribute, Frame, NoProgress, SpeciesName};
+
+fn frame(n: usize, attribute: bool) -> Frame {
+    let mut s = 0x9E3779B97F4A7C15u64;
+    let mut r = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32 * 20.0
+    };
+    let positions: Vec<[f32; 3]> = (0..n).map(|_| [r(), r(), r()]).collect();
+    Frame {
+        species_index: (0..n).map(|i| (i % 3 == 0) as u16).collect(),
+        species: ["Cu", "Ag"]
+            .map(|name| SpeciesName {
+                name: name.into(),
+                numeric_type: false,
+            })
+            .to_vec(),
+        attribute: attribute.then(|| Attribute {
+            name: "c_pe".into(),
+            values: positions.iter().map(|p| p[0] - p[1]).collect(),
+        }),
+        positions,
+        ..Default::default()
+    }
+}
+
+fn put(dir: &Path, name: &str, mode: u8, bytes: &[u8]) {
+    let mut seed = vec![mode];
+    seed.extend_from_slice(bytes);
+    std::fs::write(dir.join(name), seed).unwrap();
+}
+
+fn main() {
+    let mdlod = Path::new("corpus/mdlod_reader");
+    let dumps = Path::new("corpus/lammps_dump");
+    std::fs::create_dir_all(mdlod).unwrap();
+    std::fs::create_dir_all(dumps).unwrap();
+
+    let tmp = tempfile::tempdir().unwrap();
+    let cases = [
+        (1, false, BuildParams::default()),
+        (9, false, BuildParams::default()),
+        (
+            300,
+            true,
+            BuildParams {
+                max_root_points: 8,
+                ..Default::default()
+            },
+        ),
+        (
+            300,
+            false,
+            BuildParams {
+                max_cluster_size: 4,
+                max_root_points: 6,
+                delta_n: 2,
+                position_bits: 8,
+            },
+        ),
+    ];
+    for (i, (n, attribute, build)) in cases.into_iter().enumerate() {
+        let path = tmp.path().join("seed.mdlod");
+        let opts = ConvertOptions {
+            build,
+            radii: vec![],
+        };
+        convert_frame(&frame(n, attribute), None, &path, &opts, &NoProgress).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        // Mode 1 (checksums recomputed) lets mutations reach the structural checks; mode 0
+        // keeps the file as it is.
+        put(mdlod, &format!("valid-{i}-resealed"), 1, &bytes);
+        put(mdlod, &format!("valid-{i}"), 0, &bytes);
+    }
+
+    let lammps_custom = "ITEM: UNITS\nmetal\nITEM: TIME\n0.5\nITEM: TIMESTEP\n100\n\
+        ITEM: NUMBER OF ATOMS\n3\nITEM: BOX BOUNDS pp pp ff\n0 10\n0 10\n0 10\n\
+        ITEM: ATOMS id type x y z c_pe q\n1 1 0.5 0.5 0.5 -3.2 0.1\n2 2 1.5 1.5 1.5 -3.1 -0.1\n\
+        3 1 2.5 2.5 2.5 -3.0 0\nITEM: TIMESTEP\n200\nITEM: NUMBER OF ATOMS\n1\n\
+        ITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n0 10\nITEM: ATOMS id element xu yu zu\n1 Cu 1 2 3\n";
+    let lammps_triclinic = "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n2\n\
+        ITEM: BOX BOUNDS xy xz yz pp pp pp\n-1 11 1\n0 10 0\n0 10 0\n\
+        ITEM: ATOMS id type xs ys zs\n1 1 0.1 0.2 0.3\n2 1 0.9 0.8 0.7\n";
+    let lammps_general = "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1\n\
+        ITEM: BOX BOUNDS abc origin pp pp pp\n10 0 0 0\n1 10 0 0\n0 0 10 0\n\
+        ITEM: ATOMS id type xsu ysu zsu\n1 1 0.5 0.5 0.5\n";
+    let lammps_old =
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS\n0 1\n0 1\n0 1\n\
+        ITEM: ATOMS\n1 1 0.1 0.1 0.1\n2 2 0.2 0.2 0.2\n";
+    let xyz = "3\nLattice=\"10 0 0 0 10 0 0 0 10\" Properties=species:S:1:pos:R:3:q:R:1 \
+        Time=1.5 pbc=\"T T F\"\nCu 0 0 0 0.1\nAg 1 1 1 -0.1\nCu 2 2 2 0\n\
+        1\nplain comment\nH 0.5 0.5 0.5\n";
+    // Mode bits 0-1 pick the file name, bits 2-3 the attribute (see lammps_dump.rs).
+    put(dumps, "lammps-custom", 1 << 2, lammps_custom.as_bytes());
+    put(
+        dumps,
+        "lammps-custom-q",
+        3 | 2 << 2,
+        lammps_custom.as_bytes(),
+    );
+    put(dumps, "lammps-triclinic", 0, lammps_triclinic.as_bytes());
+    put(dumps, "lammps-general", 0, lammps_general.as_bytes());
+    put(dumps, "lammps-old", 3, lammps_old.as_bytes());
+    put(dumps, "xyz", 1 | 2 << 2, xyz.as_bytes());
+    put(dumps, "xyz-sniffed", 3, xyz.as_bytes());
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    std::io::Write::write_all(&mut gz, xyz.as_bytes()).unwrap();
+    put(dumps, "xyz-gz", 2, &gz.finish().unwrap());
+    println!(
+        "seeds written to {} and {}",
+        mdlod.display(),
+        dumps.display()
+    );
+}
