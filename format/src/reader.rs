@@ -547,7 +547,6 @@ impl MdlodFile {
     pub fn encoding_ranges(&self, m: usize) -> Vec<(usize, Range<usize>)> {
         let ql = m.saturating_sub(self.delta_n());
         let levels = self.levels();
-        let nodes = self.nodes();
         let first = levels[ql].node_first as usize;
         let count = levels[ql].point_count as usize;
         // Descendant ranges of the level-ql nodes, pushed down one level at a time.
@@ -560,7 +559,6 @@ impl MdlodFile {
                 *r = a.child_first as usize..(b.child_first + b.child_count) as usize;
             }
         }
-        let _ = nodes;
         ranges
             .into_iter()
             .enumerate()
@@ -760,7 +758,6 @@ fn validate_nodes(
         let first = levels[l].node_first as usize;
         let count = levels[l].point_count as usize;
         let next_count = levels[l + 1].point_count;
-        let next_first = levels[l + 1].node_first as usize;
         let mut expected_child: u64 = 0;
         for i in 0..count {
             let id = first + i;
@@ -862,7 +859,6 @@ fn validate_nodes(
                 ),
             ));
         }
-        let _ = next_first;
     }
     Ok(())
 }
