@@ -24,15 +24,18 @@ pub fn scale_for(max_abs_offset: [f64; 3], bits: u32) -> [f32; 3] {
     })
 }
 
-/// Encodes one coordinate.
+/// Encodes one coordinate: `clamp(round((x − base) / scale + H), 0, 2^bits − 1)`, with
+/// halves rounded up.
+#[inline]
 pub fn encode(x: f64, base: f32, scale: f32, bits: u32) -> u16 {
     let max = ((1u32 << bits) - 1) as f64;
-    let h = f64::from(half_range(bits));
+    let h = max / 2.0;
     if scale == 0.0 {
-        return h.round() as u16;
+        return (h + 0.5) as u16;
     }
-    let q = ((x - f64::from(base)) / f64::from(scale) + h).round();
-    q.clamp(0.0, max) as u16
+    let v = ((x - f64::from(base)) / f64::from(scale) + h).clamp(0.0, max);
+    // v ≥ 0, so truncation after adding one half rounds to nearest (no libm call).
+    (v + 0.5) as u16
 }
 
 /// Decodes one coordinate, exactly as every reader (and the GPU) does.

@@ -85,35 +85,39 @@ pub struct Stats {
 }
 
 impl Stats {
-    /// The sums of `items` about `shift`, in one pass.
+    /// The sums of `items` about `shift`, in one pass. Local accumulators keep the
+    /// loop in registers.
     pub fn of(items: &[Item], shift: [f64; 3]) -> Stats {
-        let mut s = Stats {
-            shift,
-            ..Stats::default()
-        };
+        let (mut w_sum, mut wx, mut wy, mut wz) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        let (mut dx, mut dy, mut dz) = (0.0f64, 0.0f64, 0.0f64);
+        let (mut xx, mut xy, mut xz, mut yy, mut yz, mut zz) = (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
         for it in items {
-            s.add(it, 1.0);
+            let x = f64::from(it.position[0]) - shift[0];
+            let y = f64::from(it.position[1]) - shift[1];
+            let z = f64::from(it.position[2]) - shift[2];
+            let w = f64::from(it.weight);
+            w_sum += w;
+            wx += w * x;
+            wy += w * y;
+            wz += w * z;
+            dx += x;
+            dy += y;
+            dz += z;
+            xx += x * x;
+            xy += x * y;
+            xz += x * z;
+            yy += y * y;
+            yz += y * z;
+            zz += z * z;
         }
-        s
-    }
-
-    /// Adds `mask` (0 or 1) times the point's terms: branch-free accumulation.
-    #[inline(always)]
-    fn add(&mut self, it: &Item, mask: f64) {
-        let d = [0, 1, 2].map(|k| (f64::from(it.position[k]) - self.shift[k]) * mask);
-        let w = f64::from(it.weight) * mask;
-        self.n += mask;
-        self.w += w;
-        for k in 0..3 {
-            self.wd[k] += w * d[k];
-            self.d[k] += d[k];
+        Stats {
+            shift,
+            n: items.len() as f64,
+            w: w_sum,
+            wd: [wx, wy, wz],
+            d: [dx, dy, dz],
+            dd: [xx, xy, xz, yy, yz, zz],
         }
-        self.dd[0] += d[0] * d[0];
-        self.dd[1] += d[0] * d[1];
-        self.dd[2] += d[0] * d[2];
-        self.dd[3] += d[1] * d[1];
-        self.dd[4] += d[1] * d[2];
-        self.dd[5] += d[2] * d[2];
     }
 
     /// The same sums about another shift.
@@ -235,7 +239,7 @@ fn split_into(
 /// Writes `items` to `out` with the points on the non-negative side of the PCA plane
 /// first (in their order) and the rest after them (in reverse order), and returns the
 /// size of the first part (always between 1 and `len - 1`) with the sums of both parts,
-/// gathered in the same pass. Branch-free: every item is written to both ends and only
+/// gathered from the smaller part. Branch-free: every item is written to both ends and only
 /// one cursor advances.
 fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, Stats) {
     let n = items.len();
@@ -244,10 +248,6 @@ fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, 
     // constant so the test is one dot product.
     let e = axis.map(|v| v as f32);
     let offset = (centroid[0] * axis[0] + centroid[1] * axis[1] + centroid[2] * axis[2]) as f32;
-    let mut a = Stats {
-        shift: centroid,
-        ..Stats::default()
-    };
     let mut lo = 0usize;
     let mut hi = n;
     for it in items {
@@ -256,7 +256,6 @@ fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, 
         // lo < hi holds before every write: lo + (n - hi) items were placed so far.
         out[lo] = *it;
         out[hi - 1] = *it;
-        a.add(it, f64::from(u8::from(left)));
         lo += usize::from(left);
         hi -= usize::from(!left);
     }
@@ -271,9 +270,19 @@ fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, 
             Stats::of(&out[h..], centroid),
         );
     }
-    // The right part was written back to front; its sums do not depend on order.
-    let b = stats.shifted(centroid).minus(&a);
-    (lo, a, b)
+    // The sums of the smaller part come from a pass over it (in cache for all but the
+    // largest clusters); the other part's are the rest. The right part was written back
+    // to front; sums do not depend on order.
+    let total = stats.shifted(centroid);
+    if lo <= n - lo {
+        let a = Stats::of(&out[..lo], centroid);
+        let b = total.minus(&a);
+        (lo, a, b)
+    } else {
+        let b = Stats::of(&out[lo..], centroid);
+        let a = total.minus(&b);
+        (lo, a, b)
+    }
 }
 
 /// The weighted centroid and the unit principal axis of the points (any unit vector when

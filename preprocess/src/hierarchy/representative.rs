@@ -77,17 +77,6 @@ impl<'a> Source<'a> {
     }
 
     #[inline]
-    fn area(&self, i: usize) -> f32 {
-        match self {
-            Source::Particles(p) => {
-                let r = Self::species_of(p, i).radius;
-                r * r
-            }
-            Source::Reps(r) => r.area[i],
-        }
-    }
-
-    #[inline]
     fn colour(&self, i: usize) -> [f32; 3] {
         match self {
             Source::Particles(p) => Self::species_of(p, i).colour,
@@ -102,24 +91,49 @@ impl<'a> Source<'a> {
             Source::Reps(r) => r.attribute[i],
         }
     }
+}
 
-    #[inline]
-    fn species(&self, i: usize) -> u16 {
-        match self {
-            Source::Particles(p) => p.species_index[i],
-            Source::Reps(r) => r.species[i],
-        }
-    }
+/// Everything a representative needs of one member.
+#[derive(Clone, Copy, Debug)]
+struct Member {
+    position: [f32; 3],
+    radius: f32,
+    area: f32,
+    colour: [f32; 3],
+    attribute: f32,
+    species: u16,
+    bounds: ([f32; 3], [f32; 3]),
+}
 
+impl Source<'_> {
+    /// All of point `i` in one dispatch.
     #[inline]
-    fn bounds(&self, i: usize) -> ([f32; 3], [f32; 3]) {
+    fn member(&self, i: usize) -> Member {
         match self {
             Source::Particles(p) => {
+                let species = p.species_index[i];
+                let sp = &p.species[usize::from(species)];
                 let x = p.positions[i];
-                let r = Self::species_of(p, i).radius;
-                (x.map(|v| v - r), x.map(|v| v + r))
+                let r = sp.radius;
+                Member {
+                    position: x,
+                    radius: r,
+                    area: r * r,
+                    colour: sp.colour,
+                    attribute: p.attribute.map_or(0.0, |a| a[i]),
+                    species,
+                    bounds: (x.map(|v| v - r), x.map(|v| v + r)),
+                }
             }
-            Source::Reps(r) => r.bounds[i],
+            Source::Reps(r) => Member {
+                position: r.position[i],
+                radius: r.radius[i],
+                area: r.area[i],
+                colour: r.colour[i],
+                attribute: r.attribute[i],
+                species: r.species[i],
+                bounds: r.bounds[i],
+            },
         }
     }
 }
@@ -150,10 +164,10 @@ fn representative(src: &Source<'_>, members: &[u32]) -> Rep {
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
     for (k, &i) in members.iter().enumerate() {
-        let i = i as usize;
-        let x = src.position(i);
-        let r = src.radius(i);
-        let a = src.area(i);
+        let m = src.member(i as usize);
+        let x = m.position;
+        let r = m.radius;
+        let a = m.area;
         let w = f64::from(r);
         w_sum += w;
         for d in 0..3 {
@@ -161,18 +175,17 @@ fn representative(src: &Source<'_>, members: &[u32]) -> Rep {
             x_sum[d] += f64::from(x[d]);
         }
         area += f64::from(a);
-        let c = src.colour(i);
         for d in 0..3 {
-            colour[d] += f64::from(a) * f64::from(c[d]);
+            colour[d] += f64::from(a) * f64::from(m.colour[d]);
         }
-        attr += f64::from(a) * f64::from(src.attribute(i));
+        attr += f64::from(a) * f64::from(m.attribute);
         if r > largest.1 {
             largest = (k, r);
         }
         if a > top_area.1 {
-            top_area = (src.species(i), a);
+            top_area = (m.species, a);
         }
-        let (blo, bhi) = src.bounds(i);
+        let (blo, bhi) = m.bounds;
         for d in 0..3 {
             lo[d] = lo[d].min(blo[d]);
             hi[d] = hi[d].max(bhi[d]);
