@@ -25,6 +25,7 @@ enum Command {
     Convert(commands::convert::Args),
     Info(commands::info::Args),
     Verify(commands::verify::Args),
+    Render(commands::render::Args),
     Generate(commands::generate::Args),
     Demo(commands::demo::Args),
 }
@@ -35,6 +36,7 @@ fn main() -> std::process::ExitCode {
         Command::Convert(a) => commands::convert::run(a),
         Command::Info(a) => commands::info::run(a),
         Command::Verify(a) => commands::verify::run(a),
+        Command::Render(a) => commands::render::run(a),
         Command::Generate(a) => commands::generate::run(a),
         Command::Demo(a) => commands::demo::run(a),
     };

@@ -277,3 +277,122 @@ fn demo_generates_converts_and_verifies() {
     assert!(text.contains("particles    20000"), "{text}");
     assert!(d.join("crater.mdlod").exists());
 }
+
+/// Decodes an RGBA8 PNG.
+fn read_png(path: &Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(info.buffer_size());
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    (info.width, info.height, buf)
+}
+
+#[test]
+fn render_writes_a_picture_and_views_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cuag_alloy.unwrapped.dump");
+    let file = dir.path().join("a.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file)]);
+    let a = dir.path().join("a.png");
+    let view = dir.path().join("view.json");
+    let text = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&a),
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--azimuth",
+        "-40",
+        "--elevation",
+        "30",
+        "--spp",
+        "2",
+        "--background",
+        "#000000",
+        "--save-view",
+        s(&view),
+    ]);
+    assert!(text.contains("864 particles"), "{text}");
+    let (w, h, pixels) = read_png(&a);
+    assert_eq!((w, h), (160, 120));
+    let covered = pixels
+        .chunks(4)
+        .filter(|p| p[0] > 0 || p[1] > 0 || p[2] > 0)
+        .count();
+    let share = covered as f64 / f64::from(w * h);
+    assert!(
+        (0.05..0.95).contains(&share),
+        "spheres cover {share} of the image"
+    );
+
+    // The saved view reproduces the image exactly; a streaming pool ample for the file
+    // converges to the same pixels.
+    let b = dir.path().join("b.png");
+    ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&b),
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--view",
+        s(&view),
+        "--spp",
+        "2",
+        "--background",
+        "#000000",
+    ]);
+    assert_eq!(read_png(&a).2, read_png(&b).2);
+    let c = dir.path().join("c.png");
+    let text = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&c),
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--view",
+        s(&view),
+        "--spp",
+        "2",
+        "--background",
+        "#000000",
+        "--gpu-memory",
+        "16M",
+    ]);
+    assert!(text.contains("first image after"), "{text}");
+    assert_eq!(read_png(&a).2, read_png(&c).2);
+}
+
+#[test]
+fn render_without_an_adapter_says_how_to_get_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a.mdlod");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.xyz")),
+        "-o",
+        s(&file),
+    ]);
+    let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args(["render", s(&file), "-o", s(&dir.path().join("x.png"))])
+        .env("WGPU_BACKEND", "dx12")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("mesa-vulkan-drivers") && !err.contains("panicked"),
+        "{err}"
+    );
+    assert!(!dir.path().join("x.png").exists());
+}

@@ -6,7 +6,8 @@ use anyhow::Result;
 use mdlod_datasets::{GenerateOptions, Kind};
 use mdlod_format::MdlodFile;
 
-/// Generate a crater data set, convert it to .mdlod, verify it and print what was built.
+/// Generate a crater data set, convert it to .mdlod, verify it, print what was built and
+/// render a picture of it.
 #[derive(clap::Args)]
 #[command(after_help = "Example:\n  cargo run --release -- demo --particles 1000000")]
 pub struct Args {
@@ -36,7 +37,8 @@ pub fn run(args: Args) -> Result<()> {
         output: out.clone(),
         frame: None,
         last: true,
-        radii: vec![],
+        // The generator writes copper as LAMMPS type 1.
+        radii: vec![("1".into(), 1.28)],
         attribute: Some(Kind::Crater.extra_column().to_string()),
         precision: super::convert::Precision::U16,
         threads: None,
@@ -51,8 +53,27 @@ pub fn run(args: Args) -> Result<()> {
         r.points_decoded
     );
     super::info::run(super::info::Args {
-        file: out,
+        file: out.clone(),
         json: false,
+    })?;
+    let png = args.dir.join("crater.png");
+    println!("4. rendering {}", png.display());
+    super::render::run(super::render::Args {
+        file: out,
+        output: png,
+        width: 1280,
+        height: 720,
+        view: None,
+        azimuth: 30.0,
+        elevation: 25.0,
+        zoom: 1.0,
+        ortho: false,
+        spp: 4,
+        screen_error: 1.0,
+        budget: 4_000_000,
+        gpu_memory: None,
+        background: "#ffffff".into(),
+        save_view: None,
     })?;
     Ok(())
 }

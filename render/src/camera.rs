@@ -1,0 +1,424 @@
+//! The orbit camera: a target point, a direction given by azimuth and elevation, a
+//! distance, and a perspective or orthographic projection.
+//!
+//! How it works: the world is Z-up (as most MD boxes are drawn). The camera sits at
+//! `target + distance · (cos e cos a, cos e sin a, sin e)` for azimuth `a` and elevation
+//! `e`, and looks at the target. Its right vector is `(−sin a, cos a, 0)` and its up
+//! vector completes a right-handed frame, so looking straight down (e = ±90°) is as
+//! well defined as any other view. View space is right-handed with the camera looking
+//! down −Z; clip space is WebGPU's (depth in [0, 1]), built with
+//! `glam::camera::rh::proj::directx` (glam 0.34 dropped `Mat4::perspective_rh`).
+//!
+//! Orthographic views show a height of `2 · distance · tan(fov_y / 2)` world units, the
+//! height a perspective view shows at the target, so zooming (changing the distance)
+//! works the same in both and switching projections keeps the target's framing.
+//! `near`/`far` are explicit; [`Camera::fit_depth_range`] sets them around a box.
+
+use glam::{Mat4, Vec2, Vec3, Vec4};
+use serde::{Deserialize, Serialize};
+
+/// The kind of projection.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Projection {
+    #[default]
+    Perspective,
+    Orthographic,
+}
+
+/// An axis-aligned box in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Bounds {
+    pub fn new(min: impl Into<Vec3>, max: impl Into<Vec3>) -> Self {
+        Bounds {
+            min: min.into(),
+            max: max.into(),
+        }
+    }
+
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// Radius of the sphere through the corners, around [`Self::center`].
+    pub fn radius(&self) -> f32 {
+        (self.max - self.min).length() * 0.5
+    }
+}
+
+/// An orbit camera. Angles are in degrees, lengths in world units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    /// The point looked at and orbited around.
+    pub target: Vec3,
+    /// Angle around +Z, from +X towards +Y.
+    pub azimuth_deg: f32,
+    /// Angle above the XY plane, −90 to 90.
+    pub elevation_deg: f32,
+    /// Distance from the eye to the target (> 0).
+    pub distance: f32,
+    /// Vertical field of view of the perspective projection; for orthographic views it
+    /// sets the visible height at a given distance (see the module docs).
+    pub fov_y_deg: f32,
+    pub projection: Projection,
+    /// Near and far clip distances along the view direction (view-space −Z). For
+    /// orthographic views `near` may be negative.
+    pub near: f32,
+    pub far: f32,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Camera {
+            target: Vec3::ZERO,
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            distance: 10.0,
+            fov_y_deg: 30.0,
+            projection: Projection::Perspective,
+            near: 0.01,
+            far: 100.0,
+        }
+    }
+}
+
+impl Camera {
+    /// Checks that the camera can be used: finite numbers, a positive distance, a field
+    /// of view between 0 and 180 degrees.
+    pub fn check(&self) -> Result<(), String> {
+        let finite = self.target.is_finite()
+            && [
+                self.azimuth_deg,
+                self.elevation_deg,
+                self.distance,
+                self.fov_y_deg,
+            ]
+            .iter()
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(format!("camera has a non-finite value: {self:?}"));
+        }
+        if self.distance <= 0.0 {
+            return Err(format!(
+                "camera distance {} (must be positive)",
+                self.distance
+            ));
+        }
+        if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
+            return Err(format!(
+                "camera fov_y_deg {} (must be between 0 and 180)",
+                self.fov_y_deg
+            ));
+        }
+        Ok(())
+    }
+
+    /// Unit vector from the target towards the eye (view-space +Z).
+    pub fn back(&self) -> Vec3 {
+        let (sa, ca) = self.azimuth_deg.to_radians().sin_cos();
+        let (se, ce) = self.elevation_deg.to_radians().sin_cos();
+        Vec3::new(ce * ca, ce * sa, se)
+    }
+
+    /// The camera's right vector (view-space +X).
+    pub fn right(&self) -> Vec3 {
+        let (sa, ca) = self.azimuth_deg.to_radians().sin_cos();
+        Vec3::new(-sa, ca, 0.0)
+    }
+
+    /// The camera's up vector (view-space +Y).
+    pub fn up(&self) -> Vec3 {
+        self.back().cross(self.right())
+    }
+
+    /// The eye position.
+    pub fn eye(&self) -> Vec3 {
+        self.target + self.back() * self.distance
+    }
+
+    /// World to view space (right-handed, looking down −Z).
+    pub fn view_from_world(&self) -> Mat4 {
+        let (r, u, b, e) = (self.right(), self.up(), self.back(), self.eye());
+        Mat4::from_cols(
+            Vec4::new(r.x, u.x, b.x, 0.0),
+            Vec4::new(r.y, u.y, b.y, 0.0),
+            Vec4::new(r.z, u.z, b.z, 0.0),
+            Vec4::new(-r.dot(e), -u.dot(e), -b.dot(e), 1.0),
+        )
+    }
+
+    /// World-space height visible at the target (the orthographic view height).
+    pub fn view_height_at_target(&self) -> f32 {
+        2.0 * self.distance * (self.fov_y_deg.to_radians() * 0.5).tan()
+    }
+
+    /// View to clip space for an image of the given aspect ratio (width / height).
+    pub fn clip_from_view(&self, aspect: f32) -> Mat4 {
+        match self.projection {
+            Projection::Perspective => glam::camera::rh::proj::directx::perspective(
+                self.fov_y_deg.to_radians(),
+                aspect,
+                self.near,
+                self.far,
+            ),
+            Projection::Orthographic => {
+                let hh = self.view_height_at_target() * 0.5;
+                let hw = hh * aspect;
+                glam::camera::rh::proj::directx::orthographic(-hw, hw, -hh, hh, self.near, self.far)
+            }
+        }
+    }
+
+    /// World to clip space for a `size_px` image, shifted by `jitter_px` pixels
+    /// (x right, y down) for supersampling.
+    pub fn clip_from_world(&self, size_px: [u32; 2], jitter_px: Vec2) -> Mat4 {
+        self.jittered_clip_from_view(size_px, jitter_px) * self.view_from_world()
+    }
+
+    /// View to clip space for a `size_px` image, shifted by `jitter_px` pixels.
+    pub fn jittered_clip_from_view(&self, size_px: [u32; 2], jitter_px: Vec2) -> Mat4 {
+        let [w, h] = size_px.map(|v| v.max(1) as f32);
+        let shift = Mat4::from_translation(Vec3::new(
+            2.0 * jitter_px.x / w,
+            -2.0 * jitter_px.y / h,
+            0.0,
+        ));
+        shift * self.clip_from_view(w / h)
+    }
+
+    /// Pixels per world unit at view depth `depth` (distance along the view direction)
+    /// in an image `height_px` pixels high.
+    pub fn pixels_per_world(&self, depth: f32, height_px: u32) -> f32 {
+        let h = height_px as f32;
+        match self.projection {
+            Projection::Perspective => {
+                h / (2.0 * depth.max(f32::MIN_POSITIVE) * (self.fov_y_deg.to_radians() * 0.5).tan())
+            }
+            Projection::Orthographic => h / self.view_height_at_target(),
+        }
+    }
+
+    /// Rotates the view around the target.
+    pub fn orbit(&mut self, d_azimuth_deg: f32, d_elevation_deg: f32) {
+        self.azimuth_deg = (self.azimuth_deg + d_azimuth_deg).rem_euclid(360.0);
+        self.elevation_deg = (self.elevation_deg + d_elevation_deg).clamp(-90.0, 90.0);
+    }
+
+    /// Moves the target (and the eye with it) by `dx` right and `dy` up, in world units.
+    pub fn pan(&mut self, dx: f32, dy: f32) {
+        self.target += self.right() * dx + self.up() * dy;
+    }
+
+    /// Moves the target so that the scene follows a drag of `dx_px`, `dy_px` pixels
+    /// (x right, y down) at the target's depth.
+    pub fn pan_px(&mut self, dx_px: f32, dy_px: f32, height_px: u32) {
+        let world_per_px = 1.0 / self.pixels_per_world(self.distance, height_px);
+        self.pan(-dx_px * world_per_px, dy_px * world_per_px);
+    }
+
+    /// Moves closer by `factor` (2 halves the distance).
+    pub fn zoom(&mut self, factor: f32) {
+        if factor.is_finite() && factor > 0.0 {
+            self.distance /= factor;
+        }
+    }
+
+    /// Aims at the centre of `bounds` from the current direction, at the distance where
+    /// the bounding sphere just fits an image of `aspect` (width / height), and sets the
+    /// depth range around it.
+    pub fn fit(&mut self, bounds: &Bounds, aspect: f32) {
+        let r = bounds.radius().max(1e-6);
+        let tan_half_y = (self.fov_y_deg.to_radians() * 0.5).tan();
+        let tan_half = tan_half_y * aspect.min(1.0);
+        self.target = bounds.center();
+        self.distance = match self.projection {
+            Projection::Perspective => r / tan_half.atan().sin(),
+            Projection::Orthographic => r / tan_half,
+        };
+        self.fit_depth_range(bounds);
+    }
+
+    /// Sets `near` and `far` to enclose the bounding sphere of `bounds` (with a small
+    /// margin); in perspective `near` stays positive, at least `far / 10^5`.
+    pub fn fit_depth_range(&mut self, bounds: &Bounds) {
+        let r = bounds.radius().max(1e-6) * 1.01;
+        let depth = (self.eye() - bounds.center()).dot(self.back());
+        let far = depth + r;
+        let near = depth - r;
+        match self.projection {
+            Projection::Perspective => {
+                let far = far.max(1e-5);
+                self.far = far;
+                self.near = near.max(far * 1e-5);
+            }
+            Projection::Orthographic => {
+                self.near = near;
+                self.far = if far > near { far } else { near + 1.0 };
+            }
+        }
+    }
+
+    /// The six frustum planes of `clip_from_world` as `(normal, d)` with
+    /// `normal · p + d ≥ 0` inside: left, right, bottom, top, near, far.
+    pub fn frustum_planes(clip_from_world: &Mat4) -> [Vec4; 6] {
+        let m = clip_from_world;
+        let (r0, r1, r2, r3) = (m.row(0), m.row(1), m.row(2), m.row(3));
+        [r3 + r0, r3 - r0, r3 + r1, r3 - r1, r2, r3 - r2].map(|p| {
+            let n = p.truncate().length();
+            if n > 0.0 {
+                p / n
+            } else {
+                p
+            }
+        })
+    }
+
+    /// True when the box may intersect the frustum (a conservative test).
+    pub fn box_in_frustum(planes: &[Vec4; 6], min: Vec3, max: Vec3) -> bool {
+        planes.iter().all(|p| {
+            let v = Vec3::new(
+                if p.x >= 0.0 { max.x } else { min.x },
+                if p.y >= 0.0 { max.y } else { min.y },
+                if p.z >= 0.0 { max.z } else { min.z },
+            );
+            p.truncate().dot(v) + p.w >= 0.0
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        (a - b).length() < 1e-4
+    }
+
+    #[test]
+    fn frame_is_orthonormal_and_right_handed_even_looking_down() {
+        for (az, el) in [
+            (0.0, 0.0),
+            (30.0, 20.0),
+            (200.0, -60.0),
+            (45.0, 90.0),
+            (0.0, -90.0),
+        ] {
+            let c = Camera {
+                azimuth_deg: az,
+                elevation_deg: el,
+                ..Default::default()
+            };
+            let (r, u, b) = (c.right(), c.up(), c.back());
+            assert!((r.length() - 1.0).abs() < 1e-5 && (u.length() - 1.0).abs() < 1e-5);
+            assert!(r.dot(u).abs() < 1e-5 && r.dot(b).abs() < 1e-5 && u.dot(b).abs() < 1e-5);
+            assert!(close(r.cross(u), b), "az {az} el {el}");
+        }
+    }
+
+    #[test]
+    fn target_projects_to_the_centre_and_the_eye_is_at_distance() {
+        let mut c = Camera {
+            target: Vec3::new(1.0, 2.0, 3.0),
+            distance: 7.0,
+            ..Default::default()
+        };
+        c.fit_depth_range(&Bounds::new([0.0; 3], [2.0, 4.0, 6.0]));
+        assert!(((c.eye() - c.target).length() - 7.0).abs() < 1e-5);
+        let v = c.view_from_world().transform_point3(c.target);
+        assert!(close(v, Vec3::new(0.0, 0.0, -7.0)), "{v}");
+        for p in [Projection::Perspective, Projection::Orthographic] {
+            c.projection = p;
+            let clip = c.clip_from_world([100, 50], Vec2::ZERO) * c.target.extend(1.0);
+            let ndc = clip.truncate() / clip.w;
+            assert!(ndc.x.abs() < 1e-5 && ndc.y.abs() < 1e-5);
+            assert!(ndc.z > 0.0 && ndc.z < 1.0, "{p:?}: depth {}", ndc.z);
+        }
+    }
+
+    #[test]
+    fn fitted_bounds_are_inside_the_frustum() {
+        let b = Bounds::new([-3.0, 0.0, 10.0], [5.0, 2.0, 12.0]);
+        for p in [Projection::Perspective, Projection::Orthographic] {
+            for aspect in [0.5, 1.0, 2.0] {
+                let mut c = Camera {
+                    projection: p,
+                    azimuth_deg: 70.0,
+                    elevation_deg: -35.0,
+                    ..Default::default()
+                };
+                c.fit(&b, aspect);
+                let m = c.clip_from_view(aspect) * c.view_from_world();
+                for i in 0..8 {
+                    let corner = Vec3::new(
+                        if i & 1 == 0 { b.min.x } else { b.max.x },
+                        if i & 2 == 0 { b.min.y } else { b.max.y },
+                        if i & 4 == 0 { b.min.z } else { b.max.z },
+                    );
+                    let clip = m * corner.extend(1.0);
+                    let ndc = clip.truncate() / clip.w;
+                    assert!(
+                        ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 && (0.0..=1.0).contains(&ndc.z),
+                        "{p:?} aspect {aspect}: corner {corner} at {ndc}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn orthographic_scale_and_pan_zoom_orbit() {
+        let mut c = Camera {
+            projection: Projection::Orthographic,
+            distance: 10.0,
+            fov_y_deg: 90.0,
+            ..Default::default()
+        };
+        // tan(45°) = 1: 20 world units high.
+        assert!((c.view_height_at_target() - 20.0).abs() < 1e-4);
+        assert!((c.pixels_per_world(123.0, 200) - 10.0).abs() < 1e-3);
+        let before = c.target;
+        c.pan_px(10.0, 0.0, 200);
+        // Dragging right by 10 px = 1 world unit moves the target left.
+        assert!(close(c.target, before - c.right()));
+        c.zoom(2.0);
+        assert!((c.distance - 5.0).abs() < 1e-6);
+        c.orbit(350.0, 100.0);
+        assert!((c.azimuth_deg - 20.0).abs() < 1e-4 && c.elevation_deg == 90.0);
+    }
+
+    #[test]
+    fn jitter_shifts_by_pixels() {
+        let mut c = Camera::default();
+        c.fit_depth_range(&Bounds::new([-1.0; 3], [1.0; 3]));
+        let a = c.clip_from_world([64, 32], Vec2::ZERO) * Vec4::new(0.0, 0.0, 0.0, 1.0);
+        let b = c.clip_from_world([64, 32], Vec2::new(0.5, 0.25)) * Vec4::new(0.0, 0.0, 0.0, 1.0);
+        let (a, b) = (a.truncate() / a.w, b.truncate() / b.w);
+        assert!(((b.x - a.x) * 32.0 - 0.5).abs() < 1e-4);
+        assert!(((a.y - b.y) * 16.0 - 0.25).abs() < 1e-4);
+    }
+
+    #[test]
+    fn frustum_test_is_conservative_and_rejects_far_boxes() {
+        let mut c = Camera::default();
+        let b = Bounds::new([-1.0; 3], [1.0; 3]);
+        c.fit(&b, 1.0);
+        let planes = Camera::frustum_planes(&(c.clip_from_view(1.0) * c.view_from_world()));
+        assert!(Camera::box_in_frustum(&planes, b.min, b.max));
+        assert!(Camera::box_in_frustum(
+            &planes,
+            Vec3::splat(-0.1),
+            Vec3::splat(0.1)
+        ));
+        // Behind the camera.
+        let behind = c.eye() + c.back() * 5.0;
+        assert!(!Camera::box_in_frustum(&planes, behind - 0.1, behind + 0.1));
+        // Far off to the side.
+        let side = c.target + c.right() * 100.0;
+        assert!(!Camera::box_in_frustum(&planes, side - 0.1, side + 0.1));
+    }
+}

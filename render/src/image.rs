@@ -1,0 +1,152 @@
+//! RGBA8 images: PNG output (written atomically), PNG input (for golden tests).
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::error::RenderError;
+
+/// An 8-bit RGBA image, rows top to bottom, sRGB-encoded colour.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RgbaImage {
+    pub width: u32,
+    pub height: u32,
+    /// `width * height * 4` bytes.
+    pub data: Vec<u8>,
+}
+
+impl RgbaImage {
+    pub fn new(width: u32, height: u32) -> Self {
+        RgbaImage {
+            width,
+            height,
+            data: vec![0; width as usize * height as usize * 4],
+        }
+    }
+
+    /// The pixel at column `x`, row `y` (from the top).
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
+        let i = (y as usize * self.width as usize + x as usize) * 4;
+        [
+            self.data[i],
+            self.data[i + 1],
+            self.data[i + 2],
+            self.data[i + 3],
+        ]
+    }
+
+    pub fn set_pixel(&mut self, x: u32, y: u32, p: [u8; 4]) {
+        let i = (y as usize * self.width as usize + x as usize) * 4;
+        self.data[i..i + 4].copy_from_slice(&p);
+    }
+
+    /// Encodes the image as a PNG (sRGB chunk set).
+    pub fn to_png(&self) -> Result<Vec<u8>, String> {
+        let mut out = Vec::new();
+        {
+            let mut enc = png::Encoder::new(&mut out, self.width, self.height);
+            enc.set_color(png::ColorType::Rgba);
+            enc.set_depth(png::BitDepth::Eight);
+            enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+            let mut w = enc.write_header().map_err(|e| e.to_string())?;
+            w.write_image_data(&self.data).map_err(|e| e.to_string())?;
+            w.finish().map_err(|e| e.to_string())?;
+        }
+        Ok(out)
+    }
+
+    /// Writes the image as a PNG file, atomically.
+    pub fn save_png(&self, path: &Path) -> Result<(), RenderError> {
+        let bytes = self.to_png().map_err(|message| RenderError::Png {
+            path: path.to_path_buf(),
+            message,
+        })?;
+        write_atomic(path, &bytes)
+    }
+
+    /// Reads an 8-bit RGB or RGBA PNG.
+    pub fn load_png(path: &Path) -> Result<RgbaImage, RenderError> {
+        let bytes = std::fs::read(path).map_err(|e| RenderError::io(path, e))?;
+        let png_err = |message: String| RenderError::Png {
+            path: path.to_path_buf(),
+            message,
+        };
+        let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
+        dec.set_transformations(png::Transformations::EXPAND);
+        let mut reader = dec.read_info().map_err(|e| png_err(e.to_string()))?;
+        let size = reader
+            .output_buffer_size()
+            .ok_or_else(|| png_err("image too large".into()))?;
+        let mut buf = vec![0; size];
+        let info = reader
+            .next_frame(&mut buf)
+            .map_err(|e| png_err(e.to_string()))?;
+        if info.bit_depth != png::BitDepth::Eight {
+            return Err(png_err(format!("bit depth {:?} (need 8)", info.bit_depth)));
+        }
+        let (w, h) = (info.width, info.height);
+        let data = match info.color_type {
+            png::ColorType::Rgba => buf[..w as usize * h as usize * 4].to_vec(),
+            png::ColorType::Rgb => buf[..w as usize * h as usize * 3]
+                .chunks_exact(3)
+                .flat_map(|p| [p[0], p[1], p[2], 255])
+                .collect(),
+            other => return Err(png_err(format!("colour type {other:?} (need RGB or RGBA)"))),
+        };
+        Ok(RgbaImage {
+            width: w,
+            height: h,
+            data,
+        })
+    }
+}
+
+/// Writes `bytes` to a temporary file beside `path`, then renames it into place, so a
+/// failed write never leaves a partial file at `path`.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".mdlod-tmp");
+    // Temporary files are private (0600); the result should be an ordinary file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    let mut tmp = builder
+        .tempfile_in(dir)
+        .map_err(|e| RenderError::io(path, e))?;
+    tmp.write_all(bytes)
+        .and_then(|_| tmp.as_file().sync_all())
+        .map_err(|e| RenderError::io(path, e))?;
+    tmp.persist(path)
+        .map_err(|e| RenderError::io(path, e.error))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn png_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        let mut img = RgbaImage::new(3, 2);
+        img.set_pixel(2, 1, [10, 20, 30, 255]);
+        img.set_pixel(0, 0, [1, 2, 3, 4]);
+        img.save_png(&path).unwrap();
+        assert_eq!(RgbaImage::load_png(&path).unwrap(), img);
+    }
+
+    #[test]
+    fn unwritable_target_is_an_error_naming_it() {
+        let img = RgbaImage::new(1, 1);
+        let e = img
+            .save_png(Path::new("/nonexistent-dir/x.png"))
+            .unwrap_err();
+        assert!(e.to_string().contains("/nonexistent-dir/x.png"), "{e}");
+    }
+}

@@ -1,0 +1,384 @@
+//! mdlod's renderer: reads a `.mdlod` file through `mdlod-format` and draws it.
+//!
+//! How it works, one frame:
+//! 1. [`context`] opens a GPU device (honouring `WGPU_BACKEND`; a clear
+//!    [`RenderError::NoAdapter`] when there is none).
+//! 2. [`camera`] / [`view`] give the orbit camera (optionally from a JSON view file).
+//! 3. [`traversal::traverse`] picks the cut through the hierarchy on the CPU: nodes no
+//!    larger than `error_px` pixels on screen are drawn as their representative, larger
+//!    ones are opened, largest first, up to a point budget; subtrees outside the view
+//!    frustum are culled. The result is a list of contiguous point ranges.
+//! 4. [`passes::sphere_raycast`] uploads those ranges' raw quantized positions and draws
+//!    one ray-cast, depth-correct sphere per point, decoding positions on the GPU;
+//!    [`renderer`] runs it once per sample (jittered supersampling), averages and reads
+//!    back an RGBA8 [`image::RgbaImage`].
+//!
+//! [`streaming::StreamingRenderer`] draws the same cut out of core: the points live in a
+//! fixed GPU page pool with least-recently-used eviction, filled by a loader thread
+//! largest-on-screen first, and a subtree whose pages are missing is drawn by its
+//! nearest resident ancestor until they arrive.
+//!
+//! [`render_to_png`] does all of it for the command line; [`render_image`] is the same
+//! with an open file and renderer, for callers that draw several frames. Nothing here
+//! prints: progress and results go back to the caller in a [`RenderReport`].
+
+pub mod camera;
+pub mod context;
+pub mod error;
+pub mod image;
+pub mod passes;
+pub mod renderer;
+pub mod streaming;
+pub mod traversal;
+pub mod view;
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use mdlod_format::MdlodFile;
+
+pub use camera::{Bounds, Camera, Projection};
+pub use context::{BackendChoice, GpuContext};
+pub use error::RenderError;
+pub use glam;
+pub use image::RgbaImage;
+pub use passes::sphere_raycast::Lighting;
+pub use renderer::{FrameSettings, RenderedFrame, Renderer};
+pub use streaming::{StreamStats, StreamingRenderer};
+pub use traversal::{traverse, traverse_with, DrawList, DrawRange, Residency, TraversalSettings};
+pub use view::ViewFile;
+
+/// Where the camera comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ViewSpec {
+    /// Orbit around the data's centre, at the distance where the data fits, divided by
+    /// `zoom` (2 = twice as close).
+    Orbit {
+        azimuth_deg: f32,
+        elevation_deg: f32,
+        zoom: f32,
+        projection: Projection,
+    },
+    /// A JSON view file (see [`view`]).
+    File(PathBuf),
+    /// An explicit camera (its near/far planes are refitted to the data).
+    Camera(Camera),
+}
+
+impl Default for ViewSpec {
+    fn default() -> Self {
+        ViewSpec::Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            zoom: 1.0,
+            projection: Projection::Perspective,
+        }
+    }
+}
+
+/// What to render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderOptions {
+    pub width: u32,
+    pub height: u32,
+    pub view: ViewSpec,
+    /// Samples per pixel (1 to [`renderer::MAX_SPP`]).
+    pub spp: u32,
+    /// Largest projected size, in pixels, of a cluster drawn as one sphere.
+    pub error_px: f32,
+    /// Most spheres to draw (clamped to what the GPU's buffers hold).
+    pub budget: u64,
+    /// Background colour, sRGB-encoded, each channel in [0, 1].
+    pub background: [f32; 3],
+    pub lighting: Lighting,
+    /// Which backends to search for an adapter.
+    pub backends: BackendChoice,
+    /// Stream node data through a GPU pool of at most this many bytes (least recently
+    /// used pages evicted) instead of uploading the whole cut; frames are drawn until
+    /// everything the view needs has arrived.
+    pub gpu_memory: Option<u64>,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            width: 1280,
+            height: 720,
+            view: ViewSpec::default(),
+            spp: 1,
+            error_px: 1.0,
+            budget: 4_000_000,
+            background: [1.0, 1.0, 1.0],
+            lighting: Lighting::default(),
+            backends: BackendChoice::FromEnv,
+            gpu_memory: None,
+        }
+    }
+}
+
+/// What a render did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderReport {
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    /// Particles (finest-level points) drawn.
+    pub particles_drawn: u64,
+    /// Cluster representatives drawn.
+    pub nodes_drawn: u64,
+    /// Contiguous ranges drawn.
+    pub ranges: usize,
+    /// Nodes opened by the traversal.
+    pub nodes_opened: u64,
+    /// Largest projected size (px) of a representative drawn (0: only particles).
+    pub error_px: f32,
+    /// True when the point budget stopped refinement.
+    pub budget_limited: bool,
+    /// The budget applied (the requested one, clamped to the GPU's limits).
+    pub budget: u64,
+    pub adapter: String,
+    pub backend: String,
+    /// The camera used (e.g. to save as a view file).
+    pub camera: Camera,
+    pub traversal_time: Duration,
+    /// GPU time, when the adapter measures it.
+    pub gpu_time: Option<Duration>,
+    /// Wall time of the whole render (traversal, upload, drawing, readback).
+    pub total_time: Duration,
+    /// Frames drawn: 1, or with streaming, until the view was complete.
+    pub frames: u32,
+    /// With streaming: wall time until the first (coarse) frame was read back.
+    pub first_frame_time: Option<Duration>,
+}
+
+/// Parses a colour as `#rrggbb`, `rrggbb` or three numbers in [0, 1] separated by commas.
+pub fn parse_colour(s: &str) -> Result<[f32; 3], RenderError> {
+    let bad = || {
+        RenderError::InvalidOptions(format!(
+            "colour {s:?} (use #rrggbb or r,g,b with each in 0..1)"
+        ))
+    };
+    let t = s.trim();
+    let hex = t.strip_prefix('#').unwrap_or(t);
+    if hex.len() == 6 && hex.chars().all(|c| c.is_ascii_hexdigit()) {
+        let v = u32::from_str_radix(hex, 16).map_err(|_| bad())?;
+        return Ok([16, 8, 0].map(|sh| ((v >> sh) & 0xff) as f32 / 255.0));
+    }
+    let parts: Vec<f32> = t
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad())?;
+    match parts[..] {
+        [r, g, b] if [r, g, b].iter().all(|c| (0.0..=1.0).contains(c)) => Ok([r, g, b]),
+        _ => Err(bad()),
+    }
+}
+
+/// The bounds of everything in the file (the top node's box).
+pub fn data_bounds(file: &MdlodFile) -> Bounds {
+    let top = &file.nodes()[0];
+    Bounds::new(top.bounds_min, top.bounds_max)
+}
+
+/// The camera `view` gives for `file` and an image of `width` × `height`.
+pub fn camera_for(
+    file: &MdlodFile,
+    view: &ViewSpec,
+    width: u32,
+    height: u32,
+) -> Result<Camera, RenderError> {
+    let bounds = data_bounds(file);
+    let aspect = width.max(1) as f32 / height.max(1) as f32;
+    Ok(match view {
+        ViewSpec::Orbit {
+            azimuth_deg,
+            elevation_deg,
+            zoom,
+            projection,
+        } => {
+            if !(zoom.is_finite() && *zoom > 0.0) {
+                return Err(RenderError::InvalidOptions(format!(
+                    "zoom {zoom} (must be positive)"
+                )));
+            }
+            let v = ViewFile {
+                projection: *projection,
+                azimuth_deg: *azimuth_deg,
+                elevation_deg: elevation_deg.clamp(-90.0, 90.0),
+                zoom: *zoom,
+                ..Default::default()
+            };
+            v.to_camera(&bounds, aspect)
+        }
+        ViewSpec::File(path) => ViewFile::load(path)?.to_camera(&bounds, aspect),
+        ViewSpec::Camera(c) => {
+            c.check().map_err(RenderError::InvalidOptions)?;
+            let mut c = c.clone();
+            c.fit_depth_range(&bounds);
+            c
+        }
+    })
+}
+
+/// Renders an open file with an existing renderer.
+pub fn render_image(
+    renderer: &Renderer,
+    file: &MdlodFile,
+    opts: &RenderOptions,
+) -> Result<(RgbaImage, RenderReport), RenderError> {
+    let t0 = Instant::now();
+    if !(opts.error_px.is_finite() && opts.error_px >= 0.0) {
+        return Err(RenderError::InvalidOptions(format!(
+            "error {} px (must be 0 or more)",
+            opts.error_px
+        )));
+    }
+    let camera = camera_for(file, &opts.view, opts.width, opts.height)?;
+    let budget = opts.budget.min(renderer.max_points()).max(1);
+    let settings = TraversalSettings {
+        viewport: [opts.width, opts.height],
+        error_px: opts.error_px,
+        budget_points: budget,
+    };
+    let draw = traverse(&camera, file, &settings);
+    let traversal_time = t0.elapsed();
+    let frame = renderer.render(
+        file,
+        &camera,
+        &draw,
+        &FrameSettings {
+            width: opts.width,
+            height: opts.height,
+            spp: opts.spp,
+            background_srgb: opts.background,
+            lighting: opts.lighting,
+            read_depth: false,
+        },
+    )?;
+    let report = RenderReport {
+        width: opts.width,
+        height: opts.height,
+        spp: opts.spp,
+        particles_drawn: draw.particles,
+        nodes_drawn: draw.representatives,
+        ranges: draw.ranges.len(),
+        nodes_opened: draw.opened_nodes,
+        error_px: draw.error_px,
+        budget_limited: draw.budget_limited,
+        budget,
+        adapter: renderer.ctx.adapter_name().to_string(),
+        backend: format!("{:?}", renderer.ctx.backend()),
+        camera,
+        traversal_time,
+        gpu_time: frame.gpu_time,
+        total_time: t0.elapsed(),
+        frames: 1,
+        first_frame_time: None,
+    };
+    Ok((frame.image, report))
+}
+
+/// Renders an open file through a streaming pool of `pool_bytes` of GPU memory: draws
+/// what is resident (coarse levels first), waits for the pages the view asked for, and
+/// repeats until the view is complete. The image is the last frame's.
+pub fn render_streaming(
+    renderer: &Renderer,
+    file: std::sync::Arc<MdlodFile>,
+    opts: &RenderOptions,
+    pool_bytes: u64,
+) -> Result<(RgbaImage, RenderReport), RenderError> {
+    let t0 = Instant::now();
+    if !(opts.error_px.is_finite() && opts.error_px >= 0.0) {
+        return Err(RenderError::InvalidOptions(format!(
+            "error {} px (must be 0 or more)",
+            opts.error_px
+        )));
+    }
+    let camera = camera_for(&file, &opts.view, opts.width, opts.height)?;
+    let budget = opts.budget.min(renderer.max_points()).max(1);
+    let traversal = TraversalSettings {
+        viewport: [opts.width, opts.height],
+        error_px: opts.error_px,
+        budget_points: budget,
+    };
+    let settings = FrameSettings {
+        width: opts.width,
+        height: opts.height,
+        spp: opts.spp,
+        background_srgb: opts.background,
+        lighting: opts.lighting,
+        read_depth: false,
+    };
+    let mut stream = StreamingRenderer::new(renderer, file, pool_bytes)?;
+    let mut frames = 0u32;
+    let mut first_frame_time = None;
+    // Each frame installs what arrived and asks for what is missing; a still view
+    // completes in a number of frames bounded by the cut's depth and the pool size.
+    const MAX_FRAMES: u32 = 10_000;
+    loop {
+        let (frame, draw, stats) = stream.render(&camera, &traversal, &settings)?;
+        frames += 1;
+        first_frame_time.get_or_insert_with(|| t0.elapsed());
+        // Done when the view is complete, or when the pool is full and nothing more
+        // arrives or is asked for (the best this pool can hold).
+        let settled = stats.installed == 0 && stats.requested == 0 && stats.pending == 0;
+        if stats.complete || settled || frames >= MAX_FRAMES {
+            let report = RenderReport {
+                width: opts.width,
+                height: opts.height,
+                spp: opts.spp,
+                particles_drawn: draw.particles,
+                nodes_drawn: draw.representatives,
+                ranges: draw.ranges.len(),
+                nodes_opened: draw.opened_nodes,
+                error_px: draw.error_px,
+                budget_limited: draw.budget_limited || stats.pool_limited,
+                budget,
+                adapter: renderer.ctx.adapter_name().to_string(),
+                backend: format!("{:?}", renderer.ctx.backend()),
+                camera,
+                traversal_time: Duration::ZERO,
+                gpu_time: frame.gpu_time,
+                total_time: t0.elapsed(),
+                frames,
+                first_frame_time,
+            };
+            return Ok((frame.image, report));
+        }
+        stream.wait_for_loads(Duration::from_secs(5));
+    }
+}
+
+/// Renders `file` and writes the image to `out` as a PNG (atomically).
+pub fn render_to_png(
+    file: &Path,
+    out: &Path,
+    opts: &RenderOptions,
+) -> Result<RenderReport, RenderError> {
+    let t0 = Instant::now();
+    let file = MdlodFile::open(file)?;
+    let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
+    let (image, mut report) = match opts.gpu_memory {
+        None => render_image(&renderer, &file, opts)?,
+        Some(pool) => render_streaming(&renderer, std::sync::Arc::new(file), opts, pool)?,
+    };
+    image.save_png(out)?;
+    report.total_time = t0.elapsed();
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colours_parse() {
+        assert_eq!(parse_colour("#ff0080").unwrap(), [1.0, 0.0, 128.0 / 255.0]);
+        assert_eq!(parse_colour("000000").unwrap(), [0.0; 3]);
+        assert_eq!(parse_colour("0.5, 1, 0").unwrap(), [0.5, 1.0, 0.0]);
+        for bad in ["#ff00", "1,2,3", "red", "0.1,0.2"] {
+            assert!(parse_colour(bad).is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,141 @@
+//! Supersample accumulation and resolve (`accumulate.wgsl`): full-screen passes that add
+//! a jittered sample image into a float target with weight 1/N, and copy the sum into
+//! the sRGB output.
+
+/// WGSL source of the pass.
+pub const SHADER: &str = include_str!("accumulate.wgsl");
+
+/// Format of the accumulation target.
+pub const ACCUM_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// Format of the final image (sRGB encoding on store).
+pub const OUTPUT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
+/// `Params` in the WGSL.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct WeightUniforms {
+    pub weight: [f32; 4],
+}
+
+/// Two pipelines over one layout: additive accumulation and the plain resolve copy.
+pub struct AccumulatePass {
+    pub accumulate: wgpu::RenderPipeline,
+    pub resolve: wgpu::RenderPipeline,
+    pub layout: wgpu::BindGroupLayout,
+}
+
+impl AccumulatePass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("accumulate.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("accumulate"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("accumulate"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let make = |label: &str, format: wgpu::TextureFormat, blend: Option<wgpu::BlendState>| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_fullscreen"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: Default::default(),
+                depth_stencil: None,
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_weighted"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format,
+                        blend,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let add = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::One,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let accumulate = make(
+            "accumulate",
+            ACCUM_FORMAT,
+            Some(wgpu::BlendState {
+                color: add,
+                alpha: add,
+            }),
+        );
+        let resolve = make("resolve", OUTPUT_FORMAT, None);
+        AccumulatePass {
+            accumulate,
+            resolve,
+            layout,
+        }
+    }
+
+    /// A bind group reading `src` with `weight`.
+    pub fn bind(
+        &self,
+        device: &wgpu::Device,
+        src: &wgpu::TextureView,
+        weight: f32,
+    ) -> wgpu::BindGroup {
+        use wgpu::util::DeviceExt;
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("accumulate weight"),
+            contents: bytemuck::bytes_of(&WeightUniforms {
+                weight: [weight, 0.0, 0.0, 0.0],
+            }),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("accumulate"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(src),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: params.as_entire_binding(),
+                },
+            ],
+        })
+    }
+}

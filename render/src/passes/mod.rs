@@ -1,0 +1,28 @@
+//! GPU passes, each a Rust file beside its WGSL file. The `#[repr(C)]` structs that the
+//! shaders read are defined next to the pipeline that binds them.
+
+pub mod accumulate;
+pub mod sphere_raycast;
+
+/// Every WGSL source of the crate, by file name (validated with naga in the tests).
+pub const SHADERS: &[(&str, &str)] = &[
+    ("sphere_raycast.wgsl", sphere_raycast::SHADER),
+    ("accumulate.wgsl", accumulate::SHADER),
+];
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn every_shader_validates_with_naga() {
+        for (name, src) in super::SHADERS {
+            let module = naga::front::wgsl::parse_str(src)
+                .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::empty(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
+        }
+    }
+}

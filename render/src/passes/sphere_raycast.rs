@@ -1,0 +1,472 @@
+//! The sphere ray-casting pass (`sphere_raycast.wgsl`): one depth-correct impostor per
+//! drawn point, positions decoded on the GPU from the file's quantized words.
+//!
+//! How it works: [`pack`] turns a [`DrawList`] into four flat arrays, copying (not
+//! decoding) file data: the raw position words of every range (each range padded to
+//! a whole u32), per point either its species index (particles, two per u32) or its
+//! node's radius and colour (representatives), one [`RangeGpu`] per range (base, scale,
+//! offsets into the other arrays) and one range index per point. The pass draws
+//! `points` instances of a 4-vertex strip in a single call; see the WGSL for the
+//! shading. The `#[repr(C)]` structs here mirror the WGSL structs field for field.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat4, Vec3};
+use mdlod_format::{FormatError, MdlodFile};
+
+use crate::error::RenderError;
+use crate::traversal::DrawList;
+
+/// WGSL source of the pass.
+pub const SHADER: &str = include_str!("sphere_raycast.wgsl");
+
+/// Format of the colour target the pass draws into (linear, for accumulation).
+pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// Format of the depth target.
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// `Frame` in the WGSL: per-sample uniforms.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct FrameUniforms {
+    pub clip_from_view: [[f32; 4]; 4],
+    pub view_from_world: [[f32; 4]; 4],
+    /// xyz: unit vector towards the light, in view space.
+    pub light_dir_view: [f32; 4],
+    /// ambient, diffuse, specular, shininess.
+    pub material: [f32; 4],
+    /// x: 1 for orthographic; y: H = (2^bits − 1) / 2.
+    pub params: [f32; 4],
+    /// x: position bits; y: species count.
+    pub counts: [u32; 4],
+}
+
+/// `Range` in the WGSL: one run of points decoded with one base and scale.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct RangeGpu {
+    pub base: [f32; 3],
+    /// First u32 of the range's quantized positions in the positions buffer.
+    pub word_offset: u32,
+    pub scale: [f32; 3],
+    /// Particles: first u32 of the species indices (two u16 per word);
+    /// representatives: first u32 of the (radius, colour) pairs.
+    pub attr_offset: u32,
+    /// Instance index of the range's first point.
+    pub first_point: u32,
+    /// [`KIND_PARTICLE`] or [`KIND_NODE`].
+    pub kind: u32,
+    /// Index of the range's first point within its block of words: point `j` of the
+    /// range is point `j + point_offset` of the block starting at `word_offset` /
+    /// `attr_offset` (0 when a range has its own words; a page offset when streaming).
+    pub point_offset: u32,
+    pub pad: u32,
+}
+
+pub const KIND_PARTICLE: u32 = 0;
+pub const KIND_NODE: u32 = 1;
+
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 192);
+const _: () = assert!(std::mem::size_of::<RangeGpu>() == 48);
+
+/// The lighting: one directional light fixed in view space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lighting {
+    /// Direction towards the light in view space (x right, y up, z towards the viewer).
+    pub direction_view: Vec3,
+    pub ambient: f32,
+    pub diffuse: f32,
+    pub specular: f32,
+    pub shininess: f32,
+}
+
+impl Default for Lighting {
+    fn default() -> Self {
+        Lighting {
+            direction_view: Vec3::new(-0.35, 0.45, 1.0).normalize(),
+            ambient: 0.15,
+            diffuse: 0.85,
+            specular: 0.25,
+            shininess: 32.0,
+        }
+    }
+}
+
+impl FrameUniforms {
+    pub fn new(
+        clip_from_view: Mat4,
+        view_from_world: Mat4,
+        orthographic: bool,
+        lighting: &Lighting,
+        position_bits: u32,
+        species_count: u32,
+    ) -> Self {
+        let l = lighting.direction_view.normalize_or(Vec3::Z);
+        FrameUniforms {
+            clip_from_view: clip_from_view.to_cols_array_2d(),
+            view_from_world: view_from_world.to_cols_array_2d(),
+            light_dir_view: [l.x, l.y, l.z, 0.0],
+            material: [
+                lighting.ambient,
+                lighting.diffuse,
+                lighting.specular,
+                lighting.shininess,
+            ],
+            params: [
+                if orthographic { 1.0 } else { 0.0 },
+                mdlod_format::quantize::half_range(position_bits),
+                0.0,
+                0.0,
+            ],
+            counts: [position_bits, species_count, 0, 0],
+        }
+    }
+}
+
+/// A draw list flattened for the GPU (see the module docs).
+#[derive(Clone, Debug, Default)]
+pub struct PackedDraw {
+    pub positions: Vec<u32>,
+    pub attrs: Vec<u32>,
+    pub ranges: Vec<RangeGpu>,
+    pub point_range: Vec<u32>,
+    /// Species table: linear albedo and radius.
+    pub species: Vec<[f32; 4]>,
+    pub position_bits: u32,
+}
+
+impl PackedDraw {
+    pub fn points(&self) -> u32 {
+        self.point_range.len() as u32
+    }
+
+    /// Bytes of the largest of the storage buffers.
+    pub fn largest_buffer_bytes(&self) -> u64 {
+        [
+            self.positions.len() * 4,
+            self.attrs.len() * 4,
+            self.ranges.len() * 48,
+            self.point_range.len() * 4,
+            self.species.len() * 16,
+        ]
+        .into_iter()
+        .max()
+        .unwrap_or(0) as u64
+    }
+
+    /// What the vertex shader computes for point `i`: world position, radius, albedo.
+    /// (A CPU twin of the shader's decoding, for tests.)
+    pub fn decode_point(&self, i: u32) -> ([f32; 3], f32, [f32; 3]) {
+        let r = &self.ranges[self.point_range[i as usize] as usize];
+        let j = i - r.first_point + r.point_offset;
+        let word = |w: u32| self.positions[w as usize];
+        let q: [u16; 3] = std::array::from_fn(|k| {
+            let k = 3 * j + k as u32;
+            if self.position_bits == 16 {
+                (word(r.word_offset + (k >> 1)) >> ((k & 1) * 16)) as u16
+            } else {
+                ((word(r.word_offset + (k >> 2)) >> ((k & 3) * 8)) & 0xff) as u16
+            }
+        });
+        let h = mdlod_format::quantize::half_range(self.position_bits);
+        let pos = std::array::from_fn(|k| r.base[k] + r.scale[k] * (f32::from(q[k]) - h));
+        if r.kind == KIND_PARTICLE {
+            let hw = r.attr_offset * 2 + j;
+            let s = ((self.attrs[(hw >> 1) as usize] >> ((hw & 1) * 16)) & 0xffff) as usize;
+            let sp = self.species[s.min(self.species.len() - 1)];
+            (pos, sp[3], [sp[0], sp[1], sp[2]])
+        } else {
+            let a = (r.attr_offset + 2 * j) as usize;
+            let c = self.attrs[a + 1].to_le_bytes();
+            (
+                pos,
+                f32::from_bits(self.attrs[a]),
+                [c[0], c[1], c[2]].map(|v| f32::from(v) / 255.0),
+            )
+        }
+    }
+}
+
+/// Appends `bytes` as little-endian u32 words, the last one zero-padded.
+pub fn push_bytes_as_words(out: &mut Vec<u32>, bytes: &[u8]) {
+    let mut chunks = bytes.chunks_exact(4);
+    for c in &mut chunks {
+        out.push(u32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+    }
+    let rest = chunks.remainder();
+    if !rest.is_empty() {
+        let mut w = [0u8; 4];
+        w[..rest.len()].copy_from_slice(rest);
+        out.push(u32::from_le_bytes(w));
+    }
+}
+
+/// Flattens `draw` for the GPU. Species indices are checked here (opening a file does not
+/// read them), so a corrupt index is an error naming the particle, not a wrong colour.
+pub fn pack(file: &MdlodFile, draw: &DrawList) -> Result<PackedDraw, RenderError> {
+    let bits = file.position_bits();
+    let bytes_per_point = 3 * (bits as usize / 8);
+    let last = file.level_count() - 1;
+    let nodes = file.nodes();
+    let levels = file.levels();
+    let meta = file.metadata();
+    let species_count = meta.species.len();
+    let mut out = PackedDraw {
+        position_bits: bits,
+        species: meta
+            .species
+            .iter()
+            .map(|s| [s.colour[0], s.colour[1], s.colour[2], s.radius])
+            .collect(),
+        ..Default::default()
+    };
+    out.point_range.reserve(draw.points as usize);
+    for (ri, r) in draw.ranges.iter().enumerate() {
+        let level = usize::from(r.level);
+        let (first, count) = (r.first as usize, r.count as usize);
+        let enc = &nodes[r.quant_node as usize];
+        let word_offset = out.positions.len() as u32;
+        let attr_offset = out.attrs.len() as u32;
+        let (base, scale) = if level == 0 {
+            // The top node itself: no stored position; scale 0 decodes to the centroid.
+            push_bytes_as_words(&mut out.positions, &vec![0u8; bytes_per_point]);
+            (nodes[0].centroid, [0.0; 3])
+        } else {
+            let pos = file.positions(level);
+            let bytes = &pos.bytes()[first * bytes_per_point..(first + count) * bytes_per_point];
+            push_bytes_as_words(&mut out.positions, bytes);
+            (enc.centroid, enc.quant_scale)
+        };
+        let kind = if level == last {
+            let sp = &file.species()[first..first + count];
+            if let Some(k) = sp.iter().position(|&s| usize::from(s) >= species_count) {
+                return Err(RenderError::Format(FormatError::Corrupt {
+                    path: file.path().to_path_buf(),
+                    place: format!("SPECIES, particle {}", first + k),
+                    problem: format!("species index {} but only {species_count} species", sp[k]),
+                }));
+            }
+            push_bytes_as_words(&mut out.attrs, bytemuck::cast_slice(sp));
+            KIND_PARTICLE
+        } else {
+            let node_first = levels[level].node_first as usize + first;
+            for n in &nodes[node_first..node_first + count] {
+                out.attrs.push(n.radius.to_bits());
+                out.attrs.push(n.colour);
+            }
+            KIND_NODE
+        };
+        out.ranges.push(RangeGpu {
+            base,
+            word_offset,
+            scale,
+            attr_offset,
+            first_point: out.point_range.len() as u32,
+            kind,
+            point_offset: 0,
+            pad: 0,
+        });
+        out.point_range
+            .extend(std::iter::repeat_n(ri as u32, count));
+    }
+    Ok(out)
+}
+
+/// The pipeline and its bind group layout.
+pub struct SphereRaycastPass {
+    pub pipeline: wgpu::RenderPipeline,
+    pub layout: wgpu::BindGroupLayout,
+}
+
+/// The storage buffers the pass reads (see the WGSL bindings 1 to 5).
+#[derive(Clone, Copy)]
+pub struct SphereInputs<'a> {
+    pub positions: &'a wgpu::Buffer,
+    pub attrs: &'a wgpu::Buffer,
+    pub ranges: &'a wgpu::Buffer,
+    pub point_range: &'a wgpu::Buffer,
+    pub species: &'a wgpu::Buffer,
+}
+
+/// The GPU buffers of one packed draw list.
+pub struct SphereBuffers {
+    pub uniforms: wgpu::Buffer,
+    pub bind_group: wgpu::BindGroup,
+    pub points: u32,
+}
+
+impl SphereRaycastPass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("sphere_raycast.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let storage = |binding: u32| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::VERTEX,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("sphere_raycast"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                storage(1),
+                storage(2),
+                storage(3),
+                storage(4),
+                storage(5),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("sphere_raycast"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("sphere_raycast"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: COLOUR_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        SphereRaycastPass { pipeline, layout }
+    }
+
+    /// Uploads `packed` and makes the bind group.
+    pub fn upload(&self, device: &wgpu::Device, packed: &PackedDraw) -> SphereBuffers {
+        use wgpu::util::DeviceExt;
+        let storage = |label: &str, bytes: &[u8]| {
+            // Bindings must not be empty: give empty arrays one zero word.
+            let zero = [0u8; 16];
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: if bytes.is_empty() { &zero } else { bytes },
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let positions = storage("positions", bytemuck::cast_slice(&packed.positions));
+        let attrs = storage("attrs", bytemuck::cast_slice(&packed.attrs));
+        let ranges = storage("ranges", bytemuck::cast_slice(&packed.ranges));
+        let point_range = storage("point_range", bytemuck::cast_slice(&packed.point_range));
+        let species = storage("species", bytemuck::cast_slice(&packed.species));
+        self.bind(
+            device,
+            &SphereInputs {
+                positions: &positions,
+                attrs: &attrs,
+                ranges: &ranges,
+                point_range: &point_range,
+                species: &species,
+            },
+            packed.points(),
+        )
+    }
+
+    /// Makes the bind group over existing buffers (e.g. a streaming pool) for `points`
+    /// instances.
+    pub fn bind(
+        &self,
+        device: &wgpu::Device,
+        inputs: &SphereInputs<'_>,
+        points: u32,
+    ) -> SphereBuffers {
+        let SphereInputs {
+            positions,
+            attrs,
+            ranges,
+            point_range,
+            species,
+        } = *inputs;
+        let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame uniforms"),
+            size: std::mem::size_of::<FrameUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sphere_raycast"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniforms.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: positions.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: attrs.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: ranges.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: point_range.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: species.as_entire_binding(),
+                },
+            ],
+        });
+        SphereBuffers {
+            uniforms,
+            bind_group,
+            points,
+        }
+    }
+
+    /// Records the draw into `pass`.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, buffers: &SphereBuffers) {
+        if buffers.points == 0 {
+            return;
+        }
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &buffers.bind_group, &[]);
+        pass.draw(0..4, 0..buffers.points);
+    }
+}

@@ -1,0 +1,174 @@
+// Sphere ray casting: one depth-correct impostor per point.
+//
+// Each point is an instance of a 4-vertex triangle strip. The vertex shader pulls the
+// point's quantized position from `positions` (raw 8- or 16-bit words of the file,
+// packed into u32), decodes it with its range's base and scale
+// (world = base + scale * (q - H)), looks up radius and albedo (from the species table
+// for particles, from the node record copy in `attrs` for representatives), and places a
+// view-facing quad that covers the sphere's projection. The fragment shader intersects
+// the pixel's ray with the sphere, discards misses, writes the hit's depth and shades
+// it (Lambert + Blinn-Phong, one directional light fixed in view space).
+//
+// The Rust twins of the structs below are in sphere_raycast.rs.
+
+struct Frame {
+    clip_from_view: mat4x4<f32>,
+    view_from_world: mat4x4<f32>,
+    // xyz: unit vector towards the light, in view space.
+    light_dir_view: vec4<f32>,
+    // x: ambient, y: diffuse, z: specular, w: shininess.
+    material: vec4<f32>,
+    // x: 1 for orthographic, 0 for perspective; y: H = (2^bits - 1) / 2.
+    params: vec4<f32>,
+    // x: position bits (8 or 16), y: species count.
+    counts: vec4<u32>,
+};
+
+struct Range {
+    base: vec3<f32>,
+    word_offset: u32,
+    scale: vec3<f32>,
+    attr_offset: u32,
+    first_point: u32,
+    kind: u32,
+    // Index of the range's first point within the block at word_offset / attr_offset.
+    point_offset: u32,
+    pad: u32,
+};
+
+const KIND_PARTICLE: u32 = 0u;
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<storage, read> positions: array<u32>;
+@group(0) @binding(2) var<storage, read> attrs: array<u32>;
+@group(0) @binding(3) var<storage, read> ranges: array<Range>;
+@group(0) @binding(4) var<storage, read> point_range: array<u32>;
+// rgb: linear albedo, w: radius.
+@group(0) @binding(5) var<storage, read> species: array<vec4<f32>>;
+
+fn u16_at(base_word: u32, h: u32) -> u32 {
+    let w = positions[base_word + (h >> 1u)];
+    return (w >> ((h & 1u) * 16u)) & 0xffffu;
+}
+
+fn u8_at(base_word: u32, b: u32) -> u32 {
+    let w = positions[base_word + (b >> 2u)];
+    return (w >> ((b & 3u) * 8u)) & 0xffu;
+}
+
+fn quantized(r: Range, j: u32) -> vec3<f32> {
+    let k = 3u * j;
+    if frame.counts.x == 16u {
+        return vec3<f32>(
+            f32(u16_at(r.word_offset, k)),
+            f32(u16_at(r.word_offset, k + 1u)),
+            f32(u16_at(r.word_offset, k + 2u)),
+        );
+    }
+    return vec3<f32>(
+        f32(u8_at(r.word_offset, k)),
+        f32(u8_at(r.word_offset, k + 1u)),
+        f32(u8_at(r.word_offset, k + 2u)),
+    );
+}
+
+struct VsOut {
+    @builtin(position) clip: vec4<f32>,
+    // The quad point in view space; the pixel's ray passes through it.
+    @location(0) view_pos: vec3<f32>,
+    @location(1) @interpolate(flat) center: vec3<f32>,
+    @location(2) @interpolate(flat) radius: f32,
+    @location(3) @interpolate(flat) albedo: vec3<f32>,
+};
+
+@vertex
+fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VsOut {
+    let r = ranges[point_range[ii]];
+    let j = ii - r.first_point + r.point_offset;
+    let q = quantized(r, j);
+    let world = r.base + r.scale * (q - vec3<f32>(frame.params.y));
+
+    var radius: f32;
+    var albedo: vec3<f32>;
+    if r.kind == KIND_PARTICLE {
+        let h = r.attr_offset * 2u + j;
+        let s = min((attrs[h >> 1u] >> ((h & 1u) * 16u)) & 0xffffu, frame.counts.y - 1u);
+        let sp = species[s];
+        radius = sp.w;
+        albedo = sp.xyz;
+    } else {
+        radius = bitcast<f32>(attrs[r.attr_offset + 2u * j]);
+        albedo = unpack4x8unorm(attrs[r.attr_offset + 2u * j + 1u]).xyz;
+    }
+
+    let center = (frame.view_from_world * vec4<f32>(world, 1.0)).xyz;
+    let corner = vec2<f32>(f32(vi & 1u), f32((vi >> 1u) & 1u)) * 2.0 - 1.0;
+    var out: VsOut;
+    out.center = center;
+    out.radius = radius;
+    out.albedo = albedo;
+    var p: vec3<f32>;
+    if frame.params.x > 0.5 {
+        // Orthographic: the projection is a disk of the sphere's radius.
+        p = center + vec3<f32>(corner * radius, 0.0);
+    } else {
+        let d = length(center);
+        if d <= radius * 1.0001 {
+            // The eye is inside the sphere: draw nothing (a degenerate quad).
+            out.clip = vec4<f32>(0.0, 0.0, -1.0, 1.0);
+            out.view_pos = center;
+            return out;
+        }
+        // A quad through the centre, facing the eye, holding the tangent cone's circle.
+        let dir = center / d;
+        let helper = select(vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 0.0, 0.0), abs(dir.y) > 0.9);
+        let u = normalize(cross(helper, dir));
+        let v = cross(dir, u);
+        let half_size = radius * d / sqrt(d * d - radius * radius);
+        p = center + (u * corner.x + v * corner.y) * half_size;
+    }
+    out.view_pos = p;
+    out.clip = frame.clip_from_view * vec4<f32>(p, 1.0);
+    return out;
+}
+
+struct FsOut {
+    @location(0) colour: vec4<f32>,
+    @builtin(frag_depth) depth: f32,
+};
+
+@fragment
+fn fs_main(in: VsOut) -> FsOut {
+    var dir: vec3<f32>;
+    if frame.params.x > 0.5 {
+        dir = vec3<f32>(0.0, 0.0, -1.0);
+    } else {
+        dir = normalize(in.view_pos);
+    }
+    // Ray from the quad point (close to the sphere, so the quadratic stays well
+    // conditioned far from the eye); t may be negative (in front of the quad).
+    let oc = in.view_pos - in.center;
+    let b = dot(oc, dir);
+    let c = dot(oc, oc) - in.radius * in.radius;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        discard;
+    }
+    let t = -b - sqrt(disc);
+    let hit = in.view_pos + t * dir;
+    let n = (hit - in.center) / in.radius;
+    let clip = frame.clip_from_view * vec4<f32>(hit, 1.0);
+
+    let l = frame.light_dir_view.xyz;
+    let v = -dir;
+    let ndl = max(dot(n, l), 0.0);
+    let h = normalize(l + v);
+    let spec = select(0.0, pow(max(dot(n, h), 0.0), frame.material.w), ndl > 0.0);
+    let colour = in.albedo * (frame.material.x + frame.material.y * ndl)
+        + vec3<f32>(frame.material.z * spec);
+
+    var out: FsOut;
+    out.colour = vec4<f32>(colour, 1.0);
+    out.depth = clamp(clip.z / clip.w, 0.0, 1.0);
+    return out;
+}

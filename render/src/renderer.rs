@@ -1,0 +1,531 @@
+//! Headless frames: traversal output in, an RGBA8 image (and optionally depth) out.
+//!
+//! How it works: the draw list is packed and uploaded once. Each of the `spp` samples
+//! draws the spheres with the projection shifted by a sub-pixel offset (Halton 2,3;
+//! none for one sample) into a float colour target cleared to the background, then adds
+//! that image with weight 1/spp into a float accumulation target. The sum is copied
+//! into an sRGB target (the format encodes) and read back. GPU time, when the device
+//! has timestamp queries, runs from the start of the first sample's sphere pass to the
+//! end of the resolve pass.
+
+use std::time::Duration;
+
+use glam::Vec2;
+use mdlod_format::MdlodFile;
+
+use crate::camera::{Camera, Projection};
+use crate::context::GpuContext;
+use crate::error::RenderError;
+use crate::image::RgbaImage;
+use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
+use crate::passes::sphere_raycast::{
+    pack, FrameUniforms, Lighting, PackedDraw, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT,
+    DEPTH_FORMAT,
+};
+use crate::traversal::DrawList;
+
+/// Most samples per pixel accepted.
+pub const MAX_SPP: u32 = 256;
+
+/// How to draw a frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameSettings {
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel: 1 (pixel centres) or more (jittered, averaged).
+    pub spp: u32,
+    /// Background colour, sRGB-encoded in [0, 1].
+    pub background_srgb: [f32; 3],
+    pub lighting: Lighting,
+    /// Also read back the depth buffer of the last sample.
+    pub read_depth: bool,
+}
+
+impl Default for FrameSettings {
+    fn default() -> Self {
+        FrameSettings {
+            width: 1280,
+            height: 720,
+            spp: 1,
+            background_srgb: [1.0, 1.0, 1.0],
+            lighting: Lighting::default(),
+            read_depth: false,
+        }
+    }
+}
+
+/// A rendered frame.
+#[derive(Clone, Debug)]
+pub struct RenderedFrame {
+    pub image: RgbaImage,
+    /// Depth in [0, 1] (WebGPU NDC z) per pixel, rows top to bottom, of the last sample;
+    /// 1 where nothing was hit. Only with [`FrameSettings::read_depth`].
+    pub depth: Option<Vec<f32>>,
+    /// GPU time of the frame, when the device measures it.
+    pub gpu_time: Option<Duration>,
+    /// Points drawn.
+    pub points: u32,
+}
+
+/// Converts one sRGB-encoded channel to linear.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn halton(mut i: u32, base: u32) -> f32 {
+    let mut f = 1.0f32;
+    let mut r = 0.0f32;
+    while i > 0 {
+        f /= base as f32;
+        r += f * (i % base) as f32;
+        i /= base;
+    }
+    r
+}
+
+/// Sub-pixel offset of sample `s` of `spp` (pixels, in [−0.5, 0.5)).
+pub fn jitter(s: u32, spp: u32) -> Vec2 {
+    if spp <= 1 {
+        Vec2::ZERO
+    } else {
+        Vec2::new(halton(s + 1, 2) - 0.5, halton(s + 1, 3) - 0.5)
+    }
+}
+
+/// A device with the pipelines built.
+pub struct Renderer {
+    pub ctx: GpuContext,
+    sphere: SphereRaycastPass,
+    accumulate: AccumulatePass,
+}
+
+impl std::fmt::Debug for Renderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Renderer")
+            .field("ctx", &self.ctx)
+            .finish_non_exhaustive()
+    }
+}
+
+fn padded_row(bytes_per_row: u32) -> u32 {
+    bytes_per_row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
+}
+
+impl Renderer {
+    pub fn new(ctx: GpuContext) -> Self {
+        let sphere = SphereRaycastPass::new(&ctx.device);
+        let accumulate = AccumulatePass::new(&ctx.device);
+        Renderer {
+            ctx,
+            sphere,
+            accumulate,
+        }
+    }
+
+    /// The most points one frame can draw on this device (storage buffer limits: a
+    /// representative needs 8 bytes of attributes, the largest per-point array).
+    pub fn max_points(&self) -> u64 {
+        let l = self.ctx.device.limits();
+        l.max_storage_buffer_binding_size.min(l.max_buffer_size) / 8
+    }
+
+    fn check(&self, s: &FrameSettings) -> Result<(), RenderError> {
+        let max = self.ctx.device.limits().max_texture_dimension_2d;
+        if s.width == 0 || s.height == 0 || s.width > max || s.height > max {
+            return Err(RenderError::InvalidOptions(format!(
+                "image size {}x{} (each side must be 1 to {max} on this adapter)",
+                s.width, s.height
+            )));
+        }
+        if s.spp == 0 || s.spp > MAX_SPP {
+            return Err(RenderError::InvalidOptions(format!(
+                "{} samples per pixel (must be 1 to {MAX_SPP})",
+                s.spp
+            )));
+        }
+        if s.background_srgb.iter().any(|c| !c.is_finite()) {
+            return Err(RenderError::InvalidOptions(
+                "background colour is not finite".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Draws `draw` (a cut of `file`) as seen by `camera`.
+    pub fn render(
+        &self,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        settings: &FrameSettings,
+    ) -> Result<RenderedFrame, RenderError> {
+        self.check(settings)?;
+        let packed = pack(file, draw)?;
+        let limits = self.ctx.device.limits();
+        let largest = packed.largest_buffer_bytes();
+        if largest > limits.max_storage_buffer_binding_size || largest > limits.max_buffer_size {
+            return Err(RenderError::InvalidOptions(format!(
+                "the cut of {} points needs a {largest}-byte buffer, more than this adapter \
+                 allows ({} bytes): lower the point budget",
+                packed.points(),
+                limits.max_storage_buffer_binding_size
+            )));
+        }
+        self.ctx
+            .scoped(|| self.render_packed(&packed, camera, settings))
+    }
+
+    /// Draws an already packed draw list.
+    pub fn render_packed(
+        &self,
+        packed: &PackedDraw,
+        camera: &Camera,
+        settings: &FrameSettings,
+    ) -> Result<RenderedFrame, RenderError> {
+        self.check(settings)?;
+        let buffers = self.sphere.upload(&self.ctx.device, packed);
+        self.render_bound(
+            &buffers,
+            packed.position_bits,
+            packed.species.len() as u32,
+            camera,
+            settings,
+        )
+    }
+
+    /// The sphere pass, for callers that bind their own buffers (see
+    /// [`SphereRaycastPass::bind`]).
+    pub fn sphere_pass(&self) -> &SphereRaycastPass {
+        &self.sphere
+    }
+
+    /// Draws the points of bound sphere buffers. Call inside [`GpuContext::scoped`] to
+    /// turn GPU errors into [`RenderError::Gpu`].
+    pub fn render_bound(
+        &self,
+        buffers: &SphereBuffers,
+        position_bits: u32,
+        species_count: u32,
+        camera: &Camera,
+        settings: &FrameSettings,
+    ) -> Result<RenderedFrame, RenderError> {
+        self.check(settings)?;
+        let device = &self.ctx.device;
+        let queue = &self.ctx.queue;
+        let (w, h) = (settings.width, settings.height);
+        let size = wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        };
+        let texture = |label: &str, format: wgpu::TextureFormat, usage: wgpu::TextureUsages| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        use wgpu::TextureUsages as U;
+        let sample = texture(
+            "sample",
+            COLOUR_FORMAT,
+            U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
+        );
+        let depth = texture("depth", DEPTH_FORMAT, U::RENDER_ATTACHMENT | U::COPY_SRC);
+        let accum = texture(
+            "accum",
+            ACCUM_FORMAT,
+            U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
+        );
+        let output = texture("output", OUTPUT_FORMAT, U::RENDER_ATTACHMENT | U::COPY_SRC);
+        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let (sample_v, depth_v, accum_v, output_v) =
+            (view(&sample), view(&depth), view(&accum), view(&output));
+
+        let add_bg = self
+            .accumulate
+            .bind(device, &sample_v, 1.0 / settings.spp as f32);
+        let resolve_bg = self.accumulate.bind(device, &accum_v, 1.0);
+
+        let colour_row = padded_row(w * 4);
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("colour readback"),
+            size: u64::from(colour_row) * u64::from(h),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let depth_readback = settings.read_depth.then(|| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("depth readback"),
+                size: u64::from(colour_row) * u64::from(h),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        let timing = self.ctx.timestamps().then(|| {
+            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("frame time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            });
+            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps"),
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let read = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps readback"),
+                size: 16,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            (set, resolve, read)
+        });
+
+        let bg = settings
+            .background_srgb
+            .map(|c| f64::from(srgb_to_linear(c)));
+        let view_from_world = camera.view_from_world();
+        let ortho = camera.projection == Projection::Orthographic;
+        for s in 0..settings.spp {
+            let uniforms = FrameUniforms::new(
+                camera.jittered_clip_from_view([w, h], jitter(s, settings.spp)),
+                view_from_world,
+                ortho,
+                &settings.lighting,
+                position_bits,
+                species_count,
+            );
+            queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            let mut enc = device.create_command_encoder(&Default::default());
+            let first = s == 0;
+            let last = s + 1 == settings.spp;
+            {
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("spheres"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &sample_v,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color {
+                                r: bg[0],
+                                g: bg[1],
+                                b: bg[2],
+                                a: 1.0,
+                            }),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth_v,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Store,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: timing.as_ref().filter(|_| first).map(|(set, _, _)| {
+                        wgpu::RenderPassTimestampWrites {
+                            query_set: set,
+                            beginning_of_pass_write_index: Some(0),
+                            end_of_pass_write_index: None,
+                        }
+                    }),
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                self.sphere.draw(&mut pass, buffers);
+            }
+            {
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("accumulate"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &accum_v,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: if first {
+                                wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
+                            } else {
+                                wgpu::LoadOp::Load
+                            },
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_pipeline(&self.accumulate.accumulate);
+                pass.set_bind_group(0, &add_bg, &[]);
+                pass.draw(0..3, 0..1);
+            }
+            if last {
+                {
+                    let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                        label: Some("resolve"),
+                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                            view: &output_v,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: wgpu::Operations {
+                                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                                store: wgpu::StoreOp::Store,
+                            },
+                        })],
+                        depth_stencil_attachment: None,
+                        timestamp_writes: timing.as_ref().map(|(set, _, _)| {
+                            wgpu::RenderPassTimestampWrites {
+                                query_set: set,
+                                beginning_of_pass_write_index: None,
+                                end_of_pass_write_index: Some(1),
+                            }
+                        }),
+                        occlusion_query_set: None,
+                        multiview_mask: None,
+                    });
+                    pass.set_pipeline(&self.accumulate.resolve);
+                    pass.set_bind_group(0, &resolve_bg, &[]);
+                    pass.draw(0..3, 0..1);
+                }
+                enc.copy_texture_to_buffer(
+                    wgpu::TexelCopyTextureInfo {
+                        texture: &output,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d::ZERO,
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: &readback,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(colour_row),
+                            rows_per_image: Some(h),
+                        },
+                    },
+                    size,
+                );
+                if let Some(buf) = &depth_readback {
+                    enc.copy_texture_to_buffer(
+                        wgpu::TexelCopyTextureInfo {
+                            texture: &depth,
+                            mip_level: 0,
+                            origin: wgpu::Origin3d::ZERO,
+                            aspect: wgpu::TextureAspect::DepthOnly,
+                        },
+                        wgpu::TexelCopyBufferInfo {
+                            buffer: buf,
+                            layout: wgpu::TexelCopyBufferLayout {
+                                offset: 0,
+                                bytes_per_row: Some(colour_row),
+                                rows_per_image: Some(h),
+                            },
+                        },
+                        size,
+                    );
+                }
+                if let Some((set, resolve, read)) = &timing {
+                    enc.resolve_query_set(set, 0..2, resolve, 0);
+                    enc.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
+                }
+            }
+            queue.submit([enc.finish()]);
+        }
+
+        let bytes = self.read_buffer(&readback)?;
+        let mut image = RgbaImage::new(w, h);
+        let row = (w * 4) as usize;
+        for y in 0..h as usize {
+            let src = &bytes[y * colour_row as usize..][..row];
+            image.data[y * row..(y + 1) * row].copy_from_slice(src);
+        }
+        let depth = match &depth_readback {
+            Some(buf) => {
+                let bytes = self.read_buffer(buf)?;
+                let mut d = Vec::with_capacity(w as usize * h as usize);
+                for y in 0..h as usize {
+                    let src = &bytes[y * colour_row as usize..][..row];
+                    d.extend(
+                        src.chunks_exact(4)
+                            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+                    );
+                }
+                Some(d)
+            }
+            None => None,
+        };
+        let gpu_time = match &timing {
+            Some((_, _, read)) => {
+                let bytes = self.read_buffer(read)?;
+                let t0 = u64::from_le_bytes(bytes[0..8].try_into().unwrap_or_default());
+                let t1 = u64::from_le_bytes(bytes[8..16].try_into().unwrap_or_default());
+                let ns = t1.saturating_sub(t0) as f64 * f64::from(queue.get_timestamp_period());
+                Some(Duration::from_nanos(ns as u64))
+            }
+            None => None,
+        };
+        Ok(RenderedFrame {
+            image,
+            depth,
+            gpu_time,
+            points: buffers.points,
+        })
+    }
+
+    fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        self.ctx
+            .device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| RenderError::Gpu(format!("waiting for the GPU: {e}")))?;
+        rx.recv()
+            .map_err(|_| RenderError::Gpu("readback was cancelled".into()))?
+            .map_err(|e| RenderError::Gpu(format!("mapping a readback buffer: {e}")))?;
+        let data = buffer
+            .get_mapped_range(..)
+            .map_err(|e| RenderError::Gpu(format!("reading a mapped buffer: {e:?}")))?
+            .to_vec();
+        buffer.unmap();
+        Ok(data)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn jitter_offsets_are_sub_pixel_and_centred() {
+        assert_eq!(jitter(0, 1), Vec2::ZERO);
+        let n = 64;
+        let mut mean = Vec2::ZERO;
+        for s in 0..n {
+            let j = jitter(s, n);
+            assert!(j.x.abs() <= 0.5 && j.y.abs() <= 0.5);
+            mean += j / n as f32;
+        }
+        assert!(mean.length() < 0.03, "{mean}");
+    }
+
+    #[test]
+    fn srgb_conversion_end_points() {
+        assert_eq!(srgb_to_linear(0.0), 0.0);
+        assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
+        assert!((srgb_to_linear(0.5) - 0.214).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,569 @@
+//! Out-of-core rendering: a fixed GPU memory pool of pages with least-recently-used
+//! eviction, filled by a background loader thread in order of screen size.
+//!
+//! How it works.
+//! - A *page* is a fixed number ([`PAGE_POINTS`] by default) of consecutive points of one level (the last page of a
+//!   level may be shorter). Its GPU form is a *slot*: the raw quantized position words
+//!   of its points, and per point either the species index (particles) or the node's
+//!   radius and colour (representatives). Every slot has the same size, so the pool is
+//!   two fixed buffers (positions, attributes) of `capacity` slots plus one reserved
+//!   slot holding the top node; there is no fragmentation.
+//! - Each frame first installs the pages the loader has finished: into a free slot, or
+//!   else into the least recently used slot not used by the previous frame (an
+//!   eviction). Then it runs the traversal ([`crate::traversal::traverse_with`]) with a
+//!   [`Residency`] that lets a node open only when every page holding its children is
+//!   resident. A node whose pages are missing stays drawn as its representative, so a
+//!   missing subtree is drawn by its nearest resident ancestor, and its pages are
+//!   requested with the node's projected size as priority. A node whose pages would not
+//!   fit in the pool together with the pages already used this frame is neither opened
+//!   nor requested (the pool, like the point budget, caps the cut), so the working set
+//!   of a still view always fits and loading converges.
+//! - Requests go to the loader thread largest first; it copies the pages out of the
+//!   memory-mapped file (taking the page faults off the render thread) and sends them
+//!   back. Each drawn range is split at page boundaries and points into its slots.
+//! - Once a frame requests nothing and has nothing in flight, it is *complete*: with a
+//!   pool large enough for the cut it draws exactly what [`crate::render_image`] draws.
+
+use std::collections::{HashMap, HashSet};
+use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use mdlod_format::{FormatError, MdlodFile};
+
+use crate::camera::Camera;
+use crate::error::RenderError;
+use crate::passes::sphere_raycast::{
+    push_bytes_as_words, RangeGpu, SphereInputs, KIND_NODE, KIND_PARTICLE,
+};
+use crate::renderer::{FrameSettings, RenderedFrame, Renderer};
+use crate::traversal::{traverse_with, DrawList, Residency, TraversalSettings};
+
+/// Default points per page.
+pub const PAGE_POINTS: u32 = 256;
+
+/// A page: points `page * page_points ..` of `level` (≥ 1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PageId {
+    pub level: u8,
+    pub page: u32,
+}
+
+/// What a streaming frame did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StreamStats {
+    /// Frame number (1 for the first).
+    pub frame: u64,
+    /// Pages that fit in the pool.
+    pub capacity_pages: usize,
+    pub resident_pages: usize,
+    /// Pages the cut of this frame used.
+    pub used_pages: usize,
+    /// Pages installed at the start of this frame.
+    pub installed: usize,
+    /// Pages evicted to make room this frame.
+    pub evicted: usize,
+    /// Pages evicted since the renderer was made.
+    pub evicted_total: u64,
+    /// Pages requested this frame.
+    pub requested: usize,
+    /// Requests in flight after this frame.
+    pub pending: usize,
+    /// True when the pool capacity kept a node from opening.
+    pub pool_limited: bool,
+    /// Nothing was missing and nothing is in flight: more frames of this view draw the
+    /// same cut.
+    pub complete: bool,
+}
+
+struct LoadedPage {
+    id: PageId,
+    positions: Vec<u32>,
+    attrs: Vec<u32>,
+    error: Option<String>,
+}
+
+#[derive(Clone, Copy)]
+struct Slot {
+    page: PageId,
+    last_used: u64,
+}
+
+/// Renders a file through a fixed-size GPU page pool (see the module docs).
+pub struct StreamingRenderer<'r> {
+    renderer: &'r Renderer,
+    file: Arc<MdlodFile>,
+    capacity: usize,
+    page_points: u32,
+    slot_pos_words: u32,
+    slot_attr_words: u32,
+    positions: wgpu::Buffer,
+    attrs: wgpu::Buffer,
+    species: wgpu::Buffer,
+    slots: Vec<Option<Slot>>,
+    resident: HashMap<PageId, u32>,
+    pending: HashSet<PageId>,
+    frame: u64,
+    evicted_total: u64,
+    requests: Option<Sender<Vec<PageId>>>,
+    loaded: Receiver<LoadedPage>,
+    /// Pages received by [`StreamingRenderer::wait_for_loads`], installed next frame.
+    backlog: Vec<LoadedPage>,
+    loader: Option<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for StreamingRenderer<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("StreamingRenderer")
+            .field("capacity", &self.capacity)
+            .field("resident", &self.resident.len())
+            .field("frame", &self.frame)
+            .finish_non_exhaustive()
+    }
+}
+
+fn page_range(file: &MdlodFile, id: PageId, page_points: u32) -> std::ops::Range<usize> {
+    let count = file.levels()[usize::from(id.level)].point_count as usize;
+    let a = id.page as usize * page_points as usize;
+    a..(a + page_points as usize).min(count)
+}
+
+fn load_page(file: &MdlodFile, id: PageId, page_points: u32) -> LoadedPage {
+    let level = usize::from(id.level);
+    let last = file.level_count() - 1;
+    let r = page_range(file, id, page_points);
+    let bpp = 3 * (file.position_bits() as usize / 8);
+    let mut positions = Vec::new();
+    push_bytes_as_words(
+        &mut positions,
+        &file.positions(level).bytes()[r.start * bpp..r.end * bpp],
+    );
+    let mut attrs = Vec::new();
+    let mut error = None;
+    if level == last {
+        let sp = &file.species()[r.clone()];
+        let count = file.metadata().species.len();
+        if let Some(k) = sp.iter().position(|&s| usize::from(s) >= count) {
+            error = Some(
+                FormatError::Corrupt {
+                    path: file.path().to_path_buf(),
+                    place: format!("SPECIES, particle {}", r.start + k),
+                    problem: format!("species index {} but only {count} species", sp[k]),
+                }
+                .to_string(),
+            );
+        }
+        push_bytes_as_words(&mut attrs, bytemuck::cast_slice(sp));
+    } else {
+        let first = file.levels()[level].node_first as usize;
+        for n in &file.nodes()[first + r.start..first + r.end] {
+            attrs.push(n.radius.to_bits());
+            attrs.push(n.colour);
+        }
+    }
+    LoadedPage {
+        id,
+        positions,
+        attrs,
+        error,
+    }
+}
+
+impl<'r> StreamingRenderer<'r> {
+    /// A pool of at most `pool_bytes` of GPU memory (at least one page, at most what one
+    /// storage binding holds) for `file`, with pages of [`PAGE_POINTS`] points.
+    pub fn new(
+        renderer: &'r Renderer,
+        file: Arc<MdlodFile>,
+        pool_bytes: u64,
+    ) -> Result<Self, RenderError> {
+        Self::with_page_points(renderer, file, pool_bytes, PAGE_POINTS)
+    }
+
+    /// Bytes of GPU memory one page takes for a file of `position_bits`.
+    pub fn slot_bytes(position_bits: u32, page_points: u32) -> u64 {
+        u64::from(page_points) * u64::from(3 * position_bits / 8 + 2 * 4)
+    }
+
+    /// [`Self::new`] with pages of `page_points` points (a multiple of 4, at least 4).
+    pub fn with_page_points(
+        renderer: &'r Renderer,
+        file: Arc<MdlodFile>,
+        pool_bytes: u64,
+        page_points: u32,
+    ) -> Result<Self, RenderError> {
+        if page_points < 4 || page_points % 4 != 0 || page_points > 1 << 20 {
+            return Err(RenderError::InvalidOptions(format!(
+                "{page_points} points per page (must be a multiple of 4 from 4 to 2^20)"
+            )));
+        }
+        let bits = file.position_bits();
+        let slot_pos_words = page_points * 3 * bits / 32;
+        let slot_attr_words = page_points * 2;
+        let slot_bytes = Self::slot_bytes(bits, page_points);
+        let limits = renderer.ctx.device.limits();
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let max_slots = max_binding / (u64::from(slot_attr_words) * 4) - 1;
+        let capacity = (pool_bytes / slot_bytes).clamp(1, max_slots) as usize;
+        let device = &renderer.ctx.device;
+        let buffer = |label: &str, words: u32| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: (capacity as u64 + 1) * u64::from(words) * 4,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let positions = buffer("page pool positions", slot_pos_words);
+        let attrs = buffer("page pool attributes", slot_attr_words);
+        // The reserved last slot: the top node at its centroid (zero words, scale 0).
+        let top = &file.nodes()[0];
+        let queue = &renderer.ctx.queue;
+        queue.write_buffer(
+            &attrs,
+            capacity as u64 * u64::from(slot_attr_words) * 4,
+            bytemuck::cast_slice(&[top.radius.to_bits(), top.colour]),
+        );
+        let species_table: Vec<[f32; 4]> = file
+            .metadata()
+            .species
+            .iter()
+            .map(|s| [s.colour[0], s.colour[1], s.colour[2], s.radius])
+            .collect();
+        use wgpu::util::DeviceExt;
+        let species = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("species"),
+            contents: bytemuck::cast_slice(&species_table),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+
+        let (req_tx, req_rx) = channel::<Vec<PageId>>();
+        let (res_tx, res_rx) = channel::<LoadedPage>();
+        let loader_file = file.clone();
+        let loader_page_points = page_points;
+        let loader = std::thread::Builder::new()
+            .name("mdlod-page-loader".into())
+            .spawn(move || {
+                while let Ok(batch) = req_rx.recv() {
+                    for id in batch {
+                        if res_tx
+                            .send(load_page(&loader_file, id, loader_page_points))
+                            .is_err()
+                        {
+                            return;
+                        }
+                    }
+                }
+            })
+            .map_err(|e| RenderError::Gpu(format!("cannot start the page loader: {e}")))?;
+        Ok(StreamingRenderer {
+            renderer,
+            file,
+            capacity,
+            page_points,
+            slot_pos_words,
+            slot_attr_words,
+            positions,
+            attrs,
+            species,
+            slots: vec![None; capacity],
+            resident: HashMap::new(),
+            pending: HashSet::new(),
+            frame: 0,
+            evicted_total: 0,
+            requests: Some(req_tx),
+            loaded: res_rx,
+            backlog: Vec::new(),
+            loader: Some(loader),
+        })
+    }
+
+    /// Pages the pool holds.
+    pub fn capacity_pages(&self) -> usize {
+        self.capacity
+    }
+
+    /// Total pages of the file (levels 1 and below).
+    pub fn file_pages(&self) -> u64 {
+        self.file.levels()[1..]
+            .iter()
+            .map(|l| l.point_count.div_ceil(u64::from(self.page_points)))
+            .sum()
+    }
+
+    /// Waits until every requested page has arrived (or `timeout` passes); they are
+    /// installed by the next frame.
+    pub fn wait_for_loads(&mut self, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        let mut arrived = Vec::new();
+        let outstanding = self.pending.len().saturating_sub(self.backlog.len());
+        while arrived.len() < outstanding {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.loaded.recv_timeout(left) {
+                Ok(p) => arrived.push(p),
+                Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => break,
+            }
+        }
+        self.backlog.extend(arrived);
+    }
+
+    fn install(&mut self, page: LoadedPage, stats: &mut StreamStats) -> Result<(), RenderError> {
+        self.pending.remove(&page.id);
+        if let Some(e) = page.error {
+            return Err(RenderError::Gpu(e));
+        }
+        if self.resident.contains_key(&page.id) {
+            return Ok(());
+        }
+        let slot = match self.slots.iter().position(Option::is_none) {
+            Some(s) => s,
+            None => {
+                // Least recently used among the slots the previous frame did not use.
+                let Some((s, old)) = self
+                    .slots
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, s)| s.map(|s| (i, s)))
+                    .filter(|(_, s)| s.last_used + 1 < self.frame)
+                    .min_by_key(|(i, s)| (s.last_used, *i))
+                else {
+                    return Ok(()); // No room now; asked for again if still wanted.
+                };
+                self.resident.remove(&old.page);
+                stats.evicted += 1;
+                self.evicted_total += 1;
+                s
+            }
+        };
+        let queue = &self.renderer.ctx.queue;
+        queue.write_buffer(
+            &self.positions,
+            slot as u64 * u64::from(self.slot_pos_words) * 4,
+            bytemuck::cast_slice(&page.positions),
+        );
+        queue.write_buffer(
+            &self.attrs,
+            slot as u64 * u64::from(self.slot_attr_words) * 4,
+            bytemuck::cast_slice(&page.attrs),
+        );
+        // Requested by the previous frame: as recently used as its pages.
+        self.slots[slot] = Some(Slot {
+            page: page.id,
+            last_used: self.frame,
+        });
+        self.resident.insert(page.id, slot as u32);
+        stats.installed += 1;
+        Ok(())
+    }
+
+    /// Draws one frame of `camera`'s view with what is resident, installs what arrived
+    /// and requests what is missing. Repeat with a still view until
+    /// [`StreamStats::complete`].
+    pub fn render(
+        &mut self,
+        camera: &Camera,
+        traversal: &TraversalSettings,
+        settings: &FrameSettings,
+    ) -> Result<(RenderedFrame, DrawList, StreamStats), RenderError> {
+        self.frame += 1;
+        let mut stats = StreamStats {
+            frame: self.frame,
+            capacity_pages: self.capacity,
+            ..Default::default()
+        };
+        let mut arrived: Vec<LoadedPage> = std::mem::take(&mut self.backlog);
+        arrived.extend(self.loaded.try_iter());
+        for page in arrived {
+            self.install(page, &mut stats)?;
+        }
+
+        let file = self.file.clone();
+        let mut residency = PoolResidency {
+            page_points: self.page_points,
+            resident: &self.resident,
+            slots: &mut self.slots,
+            frame: self.frame,
+            capacity: self.capacity,
+            used: HashSet::new(),
+            wanted: Vec::new(),
+            pool_limited: false,
+        };
+        let draw = traverse_with(camera, &file, traversal, &mut residency);
+        let (used, mut wanted, pool_limited) = (
+            residency.used.len(),
+            residency.wanted,
+            residency.pool_limited,
+        );
+        stats.used_pages = used;
+        stats.pool_limited = pool_limited;
+
+        // Requests, largest first.
+        wanted.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        let mut batch = Vec::new();
+        for (_, id) in wanted {
+            if self.pending.insert(id) {
+                batch.push(id);
+            }
+        }
+        stats.requested = batch.len();
+        if !batch.is_empty() {
+            if let Some(tx) = &self.requests {
+                tx.send(batch)
+                    .map_err(|_| RenderError::Gpu("the page loader stopped".into()))?;
+            }
+        }
+        stats.pending = self.pending.len();
+        stats.evicted_total = self.evicted_total;
+        stats.resident_pages = self.resident.len();
+        stats.complete = stats.requested == 0 && stats.pending == 0 && draw.deferred_nodes == 0;
+
+        let (ranges, point_range) = self.ranges_of(&draw)?;
+        let device = &self.renderer.ctx.device;
+        use wgpu::util::DeviceExt;
+        let storage = |label: &str, bytes: &[u8]| {
+            let zero = [0u8; 16];
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: if bytes.is_empty() { &zero } else { bytes },
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let ranges_buf = storage("ranges", bytemuck::cast_slice(&ranges));
+        let point_range_buf = storage("point_range", bytemuck::cast_slice(&point_range));
+        let species_count = self.file.metadata().species.len() as u32;
+        let bits = self.file.position_bits();
+        let ctx = &self.renderer.ctx;
+        let frame = ctx.scoped(|| {
+            let buffers = self.renderer.sphere_pass().bind(
+                device,
+                &SphereInputs {
+                    positions: &self.positions,
+                    attrs: &self.attrs,
+                    ranges: &ranges_buf,
+                    point_range: &point_range_buf,
+                    species: &self.species,
+                },
+                point_range.len() as u32,
+            );
+            self.renderer
+                .render_bound(&buffers, bits, species_count, camera, settings)
+        })?;
+        Ok((frame, draw, stats))
+    }
+
+    /// The GPU ranges of a cut: each range split at page boundaries, pointing into
+    /// the slots.
+    fn ranges_of(&self, draw: &DrawList) -> Result<(Vec<RangeGpu>, Vec<u32>), RenderError> {
+        let nodes = self.file.nodes();
+        let last = self.file.level_count() - 1;
+        let mut ranges = Vec::new();
+        let mut point_range = Vec::new();
+        let mut push = |r: RangeGpu, count: u32, ranges: &mut Vec<RangeGpu>| {
+            let mut r = r;
+            r.first_point = point_range.len() as u32;
+            point_range.extend(std::iter::repeat_n(ranges.len() as u32, count as usize));
+            ranges.push(r);
+        };
+        for d in &draw.ranges {
+            if d.level == 0 {
+                let r = RangeGpu {
+                    base: nodes[0].centroid,
+                    word_offset: self.capacity as u32 * self.slot_pos_words,
+                    scale: [0.0; 3],
+                    attr_offset: self.capacity as u32 * self.slot_attr_words,
+                    kind: KIND_NODE,
+                    ..Default::default()
+                };
+                push(r, 1, &mut ranges);
+                continue;
+            }
+            let enc = &nodes[d.quant_node as usize];
+            let kind = if usize::from(d.level) == last {
+                KIND_PARTICLE
+            } else {
+                KIND_NODE
+            };
+            let mut a = d.first;
+            let end = d.first + d.count;
+            while a < end {
+                let page = a / self.page_points;
+                let b = end.min((page + 1) * self.page_points);
+                let id = PageId {
+                    level: d.level,
+                    page,
+                };
+                let slot = *self.resident.get(&id).ok_or_else(|| {
+                    RenderError::Gpu(format!("page {id:?} drawn but not resident"))
+                })?;
+                let r = RangeGpu {
+                    base: enc.centroid,
+                    word_offset: slot * self.slot_pos_words,
+                    scale: enc.quant_scale,
+                    attr_offset: slot * self.slot_attr_words,
+                    kind,
+                    point_offset: a - page * self.page_points,
+                    ..Default::default()
+                };
+                push(r, b - a, &mut ranges);
+                a = b;
+            }
+        }
+        Ok((ranges, point_range))
+    }
+}
+
+impl Drop for StreamingRenderer<'_> {
+    fn drop(&mut self) {
+        self.requests.take();
+        // Unblock a loader waiting to send.
+        while self.loaded.try_recv().is_ok() {}
+        if let Some(h) = self.loader.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+struct PoolResidency<'a> {
+    page_points: u32,
+    resident: &'a HashMap<PageId, u32>,
+    slots: &'a mut Vec<Option<Slot>>,
+    frame: u64,
+    capacity: usize,
+    used: HashSet<PageId>,
+    wanted: Vec<(f32, PageId)>,
+    pool_limited: bool,
+}
+
+impl Residency for PoolResidency<'_> {
+    fn can_open(&mut self, file: &MdlodFile, id: u32, size_px: f32) -> bool {
+        let n = &file.nodes()[id as usize];
+        let level = n.level + 1;
+        let first_page = n.child_first / self.page_points;
+        let last_page = (n.child_first + n.child_count - 1) / self.page_points;
+        let pages = (first_page..=last_page).map(|page| PageId { level, page });
+        let new = pages.clone().filter(|p| !self.used.contains(p)).count();
+        if self.used.len() + new > self.capacity {
+            self.pool_limited = true;
+            return false;
+        }
+        let mut all = true;
+        for p in pages {
+            self.used.insert(p);
+            match self.resident.get(&p) {
+                Some(&slot) => {
+                    if let Some(s) = &mut self.slots[slot as usize] {
+                        s.last_used = self.frame;
+                    }
+                }
+                None => {
+                    all = false;
+                    self.wanted.push((size_px, p));
+                }
+            }
+        }
+        all
+    }
+}

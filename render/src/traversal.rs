@@ -1,0 +1,336 @@
+//! Choosing what to draw: a cut through the hierarchy by projected size.
+//!
+//! How it works. Every point of the file is either a node (a cluster, drawn as one
+//! sphere: its *representative*, with the node's radius and colour) or a particle (a
+//! point of the finest level). The cut is a set of points on mixed levels such that every
+//! particle inside the view is covered by exactly one drawn ancestor-or-self.
+//!
+//! 1. Start with the top node drawn as its own representative.
+//! 2. Keep the drawn nodes in a priority queue by *projected size*: the diameter in
+//!    pixels of the sphere around the node's bounding box, at the sphere's nearest depth
+//!    (perspective) or at the fixed scale (orthographic); a sphere reaching the near
+//!    plane counts as infinitely large. The box bounds every particle sphere below the
+//!    node, so drawing the node's representative instead of its particles moves nothing
+//!    by more than that size.
+//! 3. Pop the largest. If it is at most `error_px`, stop: every node still drawn is
+//!    small enough. Otherwise *open* it: its representative is replaced by its children
+//!    (nodes of the next level, each drawn as its own representative and queued in
+//!    turn, or particles, which are final). Children whose bounding box lies outside the
+//!    view frustum are culled with their whole subtree; particle children are kept
+//!    whenever their parent is visible (they are culled with their parent's box).
+//! 4. Opening a node changes the number of drawn points by `visible children − 1`. If
+//!    that would exceed `budget_points`, refinement stops there: largest first means
+//!    that what is left is uniformly as fine as the budget allows, and the size of that
+//!    node is reported as the error actually achieved.
+//!
+//! The result is emitted per opened node: the children it draws (those not opened and
+//! not culled) as maximal runs of consecutive points. Children of one node are
+//! contiguous on their level and share one encoding node (the ancestor on level
+//! `max(0, level − δn)`), so each run is one [`DrawRange`] decoded with one base and
+//! scale; when no child of a node is opened or culled, the run is the node's whole
+//! child range, i.e. with δn = 1 exactly its stored `point_first`/`point_count` range.
+//! With δn > 1 the cut still refines one level at a time (through `child_first` /
+//! `child_count`), so the choice of points is as fine-grained as with δn = 1; δn only
+//! changes which ancestor's base and scale decode a run (`quant_node`), and a node's
+//! stored δn-deep `point_first`/`point_count` range is not needed here.
+//! A top node that is never opened is drawn as a range of level 0 (its centroid).
+//! Ranges come out ordered by opened node index, so by level and position in the file.
+//!
+//! Streaming plugs in through [`Residency`]: a node whose children's data are not on the
+//! GPU is not opened but stays drawn (so a missing subtree is drawn by its nearest
+//! resident ancestor) and refinement continues with the other nodes; the residency
+//! records what it was asked for, largest first.
+//!
+//! This is a pure function of the camera, the file and the settings: no GPU involved.
+
+use std::cmp::{Ordering, Reverse};
+use std::collections::{BinaryHeap, HashSet};
+
+use glam::{Mat4, Vec2, Vec3};
+use mdlod_format::{MdlodFile, NodeRecord};
+
+use crate::camera::{Camera, Projection};
+
+/// What the cut must honour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TraversalSettings {
+    /// Image size in pixels (width, height); sizes are measured in its pixels.
+    pub viewport: [u32; 2],
+    /// Largest projected size (pixels) of a node drawn as its representative.
+    pub error_px: f32,
+    /// Most points (spheres) to draw; at least 1 is always drawn when anything is visible.
+    pub budget_points: u64,
+}
+
+impl Default for TraversalSettings {
+    fn default() -> Self {
+        TraversalSettings {
+            viewport: [1280, 720],
+            error_px: 1.0,
+            budget_points: 4_000_000,
+        }
+    }
+}
+
+/// A run of consecutive points of one level, drawn with one base and scale.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DrawRange {
+    /// The level of the points. Level 0 is the top node itself, drawn at its centroid.
+    pub level: u8,
+    /// First point index on `level`.
+    pub first: u32,
+    /// Number of points.
+    pub count: u32,
+    /// Node whose `centroid` and `quant_scale` decode the points' positions
+    /// (for level 0: node 0, whose centroid is the position).
+    pub quant_node: u32,
+}
+
+/// The cut: what to draw, and how it was chosen.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DrawList {
+    pub ranges: Vec<DrawRange>,
+    /// Points drawn (spheres): `particles + representatives`.
+    pub points: u64,
+    /// Particles (finest-level points) drawn.
+    pub particles: u64,
+    /// Node representatives drawn.
+    pub representatives: u64,
+    /// Nodes opened (replaced by their children).
+    pub opened_nodes: u64,
+    /// Nodes whose subtree was culled by the view frustum.
+    pub culled_nodes: u64,
+    /// Largest projected size (px) of a drawn representative: the error achieved
+    /// (0 when only particles are drawn).
+    pub error_px: f32,
+    /// True when the budget stopped refinement before `error_px` was reached.
+    pub budget_limited: bool,
+    /// Nodes that should have been opened but whose children were not resident
+    /// (streaming); they are drawn as their representatives.
+    pub deferred_nodes: u64,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+struct Size(f32);
+impl Eq for Size {}
+impl PartialOrd for Size {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Size {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.0.total_cmp(&other.0)
+    }
+}
+
+/// Projects node bounds for the size test and the frustum test.
+pub struct Projector {
+    view_from_world: Mat4,
+    planes: [glam::Vec4; 6],
+    projection: Projection,
+    near: f32,
+    /// Pixels per world unit at depth 1 (perspective) or everywhere (orthographic).
+    scale: f32,
+}
+
+impl Projector {
+    pub fn new(camera: &Camera, viewport: [u32; 2]) -> Self {
+        let clip = camera.clip_from_world(viewport, Vec2::ZERO);
+        Projector {
+            view_from_world: camera.view_from_world(),
+            planes: Camera::frustum_planes(&clip),
+            projection: camera.projection,
+            near: camera.near,
+            scale: camera.pixels_per_world(1.0, viewport[1]),
+        }
+    }
+
+    /// Diameter in pixels of the sphere around the node's bounding box.
+    pub fn size_px(&self, n: &NodeRecord) -> f32 {
+        let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
+        let r = (max - min).length() * 0.5;
+        match self.projection {
+            Projection::Orthographic => 2.0 * r * self.scale,
+            Projection::Perspective => {
+                let depth = -self.view_from_world.transform_point3((min + max) * 0.5).z;
+                let nearest = depth - r;
+                if nearest <= self.near.max(0.0) {
+                    f32::INFINITY
+                } else {
+                    2.0 * r * self.scale / nearest
+                }
+            }
+        }
+    }
+
+    /// True when the node's bounding box may intersect the view frustum.
+    pub fn visible(&self, n: &NodeRecord) -> bool {
+        Camera::box_in_frustum(&self.planes, n.bounds_min.into(), n.bounds_max.into())
+    }
+}
+
+/// The node that encodes the positions of the children of node `parent`.
+fn children_encoder(file: &MdlodFile, parent: usize) -> usize {
+    let nodes = file.nodes();
+    let child_level = usize::from(nodes[parent].level) + 1;
+    let ql = child_level.saturating_sub(file.delta_n());
+    let mut n = parent;
+    while usize::from(nodes[n].level) > ql {
+        n = nodes[n].parent as usize;
+    }
+    n
+}
+
+/// Whether a node's children can be drawn now (streaming: are their data on the GPU?).
+pub trait Residency {
+    /// Called for node `id` (of projected size `size_px`) just before it would be
+    /// opened, after the budget check. `false` keeps the node drawn as its
+    /// representative (a non-resident subtree is drawn by its nearest resident
+    /// ancestor); an implementation may then request the data, most wanted (largest)
+    /// first. `true` means the children may be drawn in this frame.
+    fn can_open(&mut self, file: &MdlodFile, id: u32, size_px: f32) -> bool;
+}
+
+/// Everything is resident (the whole file is at hand).
+pub struct AllResident;
+
+impl Residency for AllResident {
+    fn can_open(&mut self, _file: &MdlodFile, _id: u32, _size_px: f32) -> bool {
+        true
+    }
+}
+
+/// Chooses the cut for `camera` (see the module docs).
+pub fn traverse(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings) -> DrawList {
+    traverse_with(camera, file, settings, &mut AllResident)
+}
+
+/// [`traverse`] where opening a node also needs `residency`'s consent; a refused node
+/// stays drawn and refinement goes on with the others.
+pub fn traverse_with(
+    camera: &Camera,
+    file: &MdlodFile,
+    settings: &TraversalSettings,
+    residency: &mut dyn Residency,
+) -> DrawList {
+    let nodes = file.nodes();
+    let levels = file.levels();
+    let last = file.level_count() - 1;
+    let proj = Projector::new(camera, settings.viewport);
+    let budget = settings.budget_points.max(1);
+    let mut list = DrawList::default();
+    if !proj.visible(&nodes[0]) {
+        list.culled_nodes = 1;
+        return list;
+    }
+
+    let mut opened: HashSet<u32> = HashSet::new();
+    let mut heap: BinaryHeap<(Size, Reverse<u32>)> = BinaryHeap::new();
+    heap.push((Size(proj.size_px(&nodes[0])), Reverse(0)));
+    let mut drawn: u64 = 1;
+    let mut achieved = 0.0f32;
+    while let Some((Size(size), Reverse(id))) = heap.pop() {
+        if size <= settings.error_px {
+            achieved = achieved.max(size);
+            break;
+        }
+        let n = &nodes[id as usize];
+        let child_level = usize::from(n.level) + 1;
+        let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
+        let visible_children = if child_level == last {
+            children.len() as u64
+        } else {
+            let first = levels[child_level].node_first as usize;
+            children
+                .clone()
+                .filter(|&c| proj.visible(&nodes[first + c]))
+                .count() as u64
+        };
+        if drawn - 1 + visible_children > budget {
+            achieved = achieved.max(size);
+            list.budget_limited = true;
+            break;
+        }
+        if !residency.can_open(file, id, size) {
+            achieved = achieved.max(size);
+            list.deferred_nodes += 1;
+            continue;
+        }
+        drawn = drawn - 1 + visible_children;
+        opened.insert(id);
+        if child_level < last {
+            let first = levels[child_level].node_first as usize;
+            for c in children {
+                let cn = &nodes[first + c];
+                if proj.visible(cn) {
+                    heap.push((Size(proj.size_px(cn)), Reverse((first + c) as u32)));
+                }
+            }
+        }
+    }
+
+    // Emission.
+    if !opened.contains(&0) {
+        list.ranges.push(DrawRange {
+            level: 0,
+            first: 0,
+            count: 1,
+            quant_node: 0,
+        });
+        list.representatives = 1;
+        list.points = 1;
+        list.error_px = achieved;
+        return list;
+    }
+    let mut open: Vec<u32> = opened.iter().copied().collect();
+    open.sort_unstable();
+    for &id in &open {
+        let n = &nodes[id as usize];
+        let child_level = usize::from(n.level) + 1;
+        let enc = children_encoder(file, id as usize) as u32;
+        let children = n.child_first..n.child_first + n.child_count;
+        let mut run: Option<(u32, u32)> = None;
+        let flush = |run: &mut Option<(u32, u32)>, list: &mut DrawList| {
+            if let Some((first, count)) = run.take() {
+                list.ranges.push(DrawRange {
+                    level: child_level as u8,
+                    first,
+                    count,
+                    quant_node: enc,
+                });
+                if child_level == last {
+                    list.particles += u64::from(count);
+                } else {
+                    list.representatives += u64::from(count);
+                }
+            }
+        };
+        for c in children {
+            let draw = if child_level == last {
+                true
+            } else {
+                let cid = levels[child_level].node_first as u32 + c;
+                let cn = &nodes[cid as usize];
+                if opened.contains(&cid) {
+                    false
+                } else if proj.visible(cn) {
+                    true
+                } else {
+                    list.culled_nodes += 1;
+                    false
+                }
+            };
+            match (&mut run, draw) {
+                (Some((_, count)), true) => *count += 1,
+                (None, true) => run = Some((c, 1)),
+                (_, false) => flush(&mut run, &mut list),
+            }
+        }
+        flush(&mut run, &mut list);
+    }
+    list.opened_nodes = open.len() as u64;
+    list.points = list.particles + list.representatives;
+    list.error_px = achieved;
+    list
+}

@@ -1,0 +1,242 @@
+//! The view file (`--view view.json`): a camera saved as JSON.
+//!
+//! ```json
+//! { "version": 1, "projection": "perspective", "azimuth_deg": 30, "elevation_deg": 20,
+//!   "target": [10, 10, 5], "distance": 80, "fov_y_deg": 30 }
+//! ```
+//!
+//! Only `version` is required. A file without `target` or `distance` is fitted to the
+//! data's bounds (`zoom` then moves closer: 2 is twice as close as the fit). Unknown
+//! fields are ignored, so later minor versions may add some; a file of another major
+//! version is refused with a message naming both. Near and far planes are not stored:
+//! they are recomputed from the data's bounds.
+
+use std::path::Path;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::{Bounds, Camera, Projection};
+use crate::error::RenderError;
+
+/// The view file version this crate writes and reads.
+pub const VIEW_VERSION: u32 = 1;
+
+fn default_azimuth() -> f32 {
+    Camera::default().azimuth_deg
+}
+fn default_elevation() -> f32 {
+    Camera::default().elevation_deg
+}
+fn default_fov() -> f32 {
+    Camera::default().fov_y_deg
+}
+fn default_zoom() -> f32 {
+    1.0
+}
+
+/// A camera as stored in a view file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ViewFile {
+    pub version: u32,
+    #[serde(default)]
+    pub projection: Projection,
+    #[serde(default = "default_azimuth")]
+    pub azimuth_deg: f32,
+    #[serde(default = "default_elevation")]
+    pub elevation_deg: f32,
+    /// Point looked at; the centre of the data when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<[f32; 3]>,
+    /// Eye-to-target distance; fitted to the data when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distance: Option<f32>,
+    /// Zoom relative to the fitted distance (used only when `distance` is absent).
+    #[serde(default = "default_zoom")]
+    pub zoom: f32,
+    #[serde(default = "default_fov")]
+    pub fov_y_deg: f32,
+}
+
+impl Default for ViewFile {
+    fn default() -> Self {
+        ViewFile {
+            version: VIEW_VERSION,
+            projection: Projection::Perspective,
+            azimuth_deg: default_azimuth(),
+            elevation_deg: default_elevation(),
+            target: None,
+            distance: None,
+            zoom: 1.0,
+            fov_y_deg: default_fov(),
+        }
+    }
+}
+
+impl ViewFile {
+    /// Reads and checks a view file.
+    pub fn load(path: &Path) -> Result<ViewFile, RenderError> {
+        let text = std::fs::read_to_string(path).map_err(|e| RenderError::io(path, e))?;
+        Self::parse(&text).map_err(|message| RenderError::View {
+            path: path.to_path_buf(),
+            message,
+        })
+    }
+
+    /// Parses and checks view-file JSON; the error says what is wrong.
+    pub fn parse(text: &str) -> Result<ViewFile, String> {
+        let v: ViewFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
+        v.check()?;
+        Ok(v)
+    }
+
+    fn check(&self) -> Result<(), String> {
+        if self.version != VIEW_VERSION {
+            return Err(format!(
+                "version {} (this mdlod reads view files of version {VIEW_VERSION})",
+                self.version
+            ));
+        }
+        let finite = [
+            self.azimuth_deg,
+            self.elevation_deg,
+            self.zoom,
+            self.fov_y_deg,
+        ]
+        .iter()
+        .chain(self.target.iter().flatten())
+        .chain(self.distance.iter())
+        .all(|v| v.is_finite());
+        if !finite {
+            return Err("a number is not finite".into());
+        }
+        if !(-90.0..=90.0).contains(&self.elevation_deg) {
+            return Err(format!(
+                "elevation_deg {} (must be -90 to 90)",
+                self.elevation_deg
+            ));
+        }
+        if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
+            return Err(format!(
+                "fov_y_deg {} (must be between 0 and 180)",
+                self.fov_y_deg
+            ));
+        }
+        if self.distance.is_some_and(|d| d <= 0.0) || self.zoom <= 0.0 {
+            return Err("distance and zoom must be positive".into());
+        }
+        Ok(())
+    }
+
+    /// Writes the view file (to a temporary file first, then renamed into place).
+    pub fn save(&self, path: &Path) -> Result<(), RenderError> {
+        let text = serde_json::to_string_pretty(self).map_err(|e| RenderError::View {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        crate::image::write_atomic(path, text.as_bytes())
+    }
+
+    /// The view of a camera (the target and distance are stored).
+    pub fn from_camera(c: &Camera) -> ViewFile {
+        ViewFile {
+            version: VIEW_VERSION,
+            projection: c.projection,
+            azimuth_deg: c.azimuth_deg,
+            elevation_deg: c.elevation_deg,
+            target: Some(c.target.to_array()),
+            distance: Some(c.distance),
+            zoom: 1.0,
+            fov_y_deg: c.fov_y_deg,
+        }
+    }
+
+    /// The camera for data within `bounds` and an image of `aspect` (width / height),
+    /// with near and far planes around the bounds.
+    pub fn to_camera(&self, bounds: &Bounds, aspect: f32) -> Camera {
+        let mut c = Camera {
+            projection: self.projection,
+            azimuth_deg: self.azimuth_deg,
+            elevation_deg: self.elevation_deg,
+            fov_y_deg: self.fov_y_deg,
+            ..Default::default()
+        };
+        c.fit(bounds, aspect);
+        match self.distance {
+            Some(d) => c.distance = d,
+            None => c.zoom(self.zoom),
+        }
+        if let Some(t) = self.target {
+            c.target = Vec3::from(t);
+        }
+        c.fit_depth_range(bounds);
+        c
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_through_a_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("view.json");
+        let cam = Camera {
+            target: Vec3::new(1.0, -2.0, 3.5),
+            azimuth_deg: 12.0,
+            elevation_deg: -40.0,
+            distance: 9.0,
+            fov_y_deg: 45.0,
+            projection: Projection::Orthographic,
+            ..Default::default()
+        };
+        ViewFile::from_camera(&cam).save(&path).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.contains("\"version\": 1") && text.contains("orthographic"));
+        let back = ViewFile::load(&path).unwrap();
+        let b = Bounds::new([0.0; 3], [1.0; 3]);
+        let c2 = back.to_camera(&b, 1.0);
+        assert_eq!(c2.target, cam.target);
+        assert_eq!(c2.distance, cam.distance);
+        assert_eq!(
+            (
+                c2.azimuth_deg,
+                c2.elevation_deg,
+                c2.fov_y_deg,
+                c2.projection
+            ),
+            (12.0, -40.0, 45.0, Projection::Orthographic)
+        );
+    }
+
+    #[test]
+    fn minimal_file_fits_and_zooms() {
+        let v = ViewFile::parse(r#"{"version": 1, "zoom": 2, "future_field": true}"#).unwrap();
+        let b = Bounds::new([0.0; 3], [10.0; 3]);
+        let fitted = ViewFile::parse(r#"{"version": 1}"#)
+            .unwrap()
+            .to_camera(&b, 1.0);
+        let c = v.to_camera(&b, 1.0);
+        assert_eq!(c.target, b.center());
+        assert!((c.distance * 2.0 - fitted.distance).abs() < 1e-4);
+    }
+
+    #[test]
+    fn bad_files_are_refused_with_a_reason() {
+        for (text, needle) in [
+            (r#"{"version": 2}"#, "version 2"),
+            (r#"{"azimuth_deg": 3}"#, "version"),
+            (r#"{"version": 1, "elevation_deg": 120}"#, "elevation"),
+            (r#"{"version": 1, "fov_y_deg": 0}"#, "fov_y_deg"),
+            (r#"{"version": 1, "distance": -1}"#, "positive"),
+            (r#"{"version": 1, "projection": "fisheye"}"#, "fisheye"),
+            ("not json", "expected"),
+        ] {
+            let e = ViewFile::parse(text).unwrap_err();
+            assert!(e.contains(needle), "{text}: {e}");
+        }
+        let e = ViewFile::load(Path::new("/nonexistent/view.json")).unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/view.json"));
+    }
+}

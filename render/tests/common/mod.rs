@@ -1,0 +1,159 @@
+//! Shared helpers of the renderer's integration tests: small `.mdlod` files made with
+//! the real converter, and cut bookkeeping.
+#![allow(dead_code)]
+
+pub mod golden;
+
+use std::path::PathBuf;
+
+use mdlod_format::MdlodFile;
+use mdlod_preprocess::convert::{convert_frame, ConvertOptions};
+use mdlod_preprocess::hierarchy::BuildParams;
+use mdlod_preprocess::{Frame, NoProgress, SpeciesName};
+use mdlod_render::DrawList;
+
+/// A deterministic xorshift generator giving floats in [0, 1).
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed.wrapping_mul(0x9E3779B97F4A7C15) | 1)
+    }
+
+    pub fn next_f32(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+fn species(names: &[&str]) -> Vec<SpeciesName> {
+    names
+        .iter()
+        .map(|n| SpeciesName {
+            name: n.to_string(),
+            numeric_type: false,
+        })
+        .collect()
+}
+
+/// `n` particles: a few dense blobs in a sparse cloud, in a 60 Å box, three species.
+pub fn cloud_frame(n: usize, seed: u64) -> Frame {
+    let mut rng = Rng::new(seed);
+    let blobs: Vec<[f32; 3]> = (0..5)
+        .map(|_| [0; 3].map(|_| 10.0 + 40.0 * rng.next_f32()))
+        .collect();
+    let mut positions = Vec::with_capacity(n);
+    let mut species_index = Vec::with_capacity(n);
+    for i in 0..n {
+        let p = if i % 3 == 0 {
+            [0; 3].map(|_| 60.0 * rng.next_f32())
+        } else {
+            let b = blobs[i % blobs.len()];
+            [0, 1, 2].map(|k| b[k] + 8.0 * (rng.next_f32() - 0.5))
+        };
+        positions.push(p);
+        species_index.push((i % 3) as u16);
+    }
+    Frame {
+        positions,
+        species_index,
+        species: species(&["Cu", "Ag", "O"]),
+        ..Default::default()
+    }
+}
+
+/// An FCC copper block of `n³` cells (4 atoms each), every 7th atom silver.
+pub fn fcc_frame(n: usize) -> Frame {
+    let a = 3.615f32;
+    let basis = [
+        [0.0, 0.0, 0.0],
+        [0.5, 0.5, 0.0],
+        [0.5, 0.0, 0.5],
+        [0.0, 0.5, 0.5],
+    ];
+    let mut positions = vec![];
+    let mut species_index = vec![];
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                for b in basis {
+                    positions.push([
+                        (i as f32 + b[0]) * a,
+                        (j as f32 + b[1]) * a,
+                        (k as f32 + b[2]) * a,
+                    ]);
+                    species_index.push(u16::from(positions.len() % 7 == 0));
+                }
+            }
+        }
+    }
+    Frame {
+        positions,
+        species_index,
+        species: species(&["Cu", "Ag"]),
+        ..Default::default()
+    }
+}
+
+/// Particles at the given positions, all of one species with the given radius.
+pub fn spheres_frame(positions: &[[f32; 3]]) -> Frame {
+    Frame {
+        positions: positions.to_vec(),
+        species_index: vec![0; positions.len()],
+        species: species(&["X"]),
+        ..Default::default()
+    }
+}
+
+/// Converts `frame` with the real converter into a temporary file and opens it.
+pub fn make_file(
+    frame: &Frame,
+    build: BuildParams,
+    radii: &[(&str, f32)],
+) -> (tempfile::TempDir, PathBuf, MdlodFile) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.mdlod");
+    let opts = ConvertOptions {
+        build,
+        radii: radii.iter().map(|(n, r)| (n.to_string(), *r)).collect(),
+    };
+    convert_frame(frame, None, &path, &opts, &NoProgress).unwrap();
+    let f = MdlodFile::open(&path).unwrap();
+    (dir, path, f)
+}
+
+/// Small hierarchy parameters so that small files still have several levels.
+pub fn small_build() -> BuildParams {
+    BuildParams {
+        max_cluster_size: 6,
+        max_root_points: 16,
+        ..Default::default()
+    }
+}
+
+/// The particles (indices on the finest level) below point `i` of level `level`.
+pub fn particles_below(f: &MdlodFile, level: usize, first: usize, count: usize) -> (usize, usize) {
+    let last = f.level_count() - 1;
+    let (mut a, mut b) = (first, first + count);
+    for l in level..last {
+        let nodes = f.level_nodes(l);
+        let (na, nb) = (&nodes[a], &nodes[b - 1]);
+        a = na.child_first as usize;
+        b = (nb.child_first + nb.child_count) as usize;
+    }
+    (a, b)
+}
+
+/// How many drawn points cover each particle.
+pub fn coverage(f: &MdlodFile, draw: &DrawList) -> Vec<u32> {
+    let mut cover = vec![0u32; f.particle_count() as usize];
+    for r in &draw.ranges {
+        let (a, b) = particles_below(f, r.level as usize, r.first as usize, r.count as usize);
+        for c in &mut cover[a..b] {
+            *c += 1;
+        }
+    }
+    cover
+}

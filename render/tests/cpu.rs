@@ -1,0 +1,337 @@
+//! Renderer tests that need no GPU: the traversal's cut invariants and the packing of a
+//! cut for the GPU, on small files made with the real converter.
+
+mod common;
+
+use common::*;
+use glam::{Vec2, Vec3};
+use mdlod_format::MdlodFile;
+use mdlod_preprocess::hierarchy::BuildParams;
+use mdlod_render::passes::sphere_raycast::pack;
+use mdlod_render::traversal::Projector;
+use mdlod_render::{camera_for, traverse, Camera, DrawList, TraversalSettings, ViewSpec};
+
+const VIEWPORT: [u32; 2] = [256, 192];
+
+fn fitted_camera(f: &MdlodFile) -> Camera {
+    camera_for(f, &ViewSpec::default(), VIEWPORT[0], VIEWPORT[1]).unwrap()
+}
+
+fn cut(f: &MdlodFile, cam: &Camera, error_px: f32, budget: u64) -> DrawList {
+    traverse(
+        cam,
+        f,
+        &TraversalSettings {
+            viewport: VIEWPORT,
+            error_px,
+            budget_points: budget,
+        },
+    )
+}
+
+fn node_of(f: &MdlodFile, level: usize, i: usize) -> usize {
+    f.levels()[level].node_first as usize + i
+}
+
+/// Every drawn point is counted once in the list's statistics.
+fn check_counts(f: &MdlodFile, d: &DrawList) {
+    let last = f.level_count() - 1;
+    let particles: u64 = d
+        .ranges
+        .iter()
+        .filter(|r| r.level as usize == last)
+        .map(|r| u64::from(r.count))
+        .sum();
+    let all: u64 = d.ranges.iter().map(|r| u64::from(r.count)).sum();
+    assert_eq!(d.particles, particles);
+    assert_eq!(d.points, all);
+    assert_eq!(d.representatives, all - particles);
+}
+
+#[test]
+fn error_zero_draws_every_particle_exactly_once() {
+    let (_d, _p, f) = make_file(&cloud_frame(3000, 1), small_build(), &[]);
+    assert!(f.level_count() >= 4, "want a deep hierarchy");
+    let d = cut(&f, &fitted_camera(&f), 0.0, u64::MAX);
+    check_counts(&f, &d);
+    let last = f.level_count() - 1;
+    assert!(d.ranges.iter().all(|r| r.level as usize == last));
+    assert_eq!(d.particles, 3000);
+    assert!(coverage(&f, &d).iter().all(|&c| c == 1));
+    assert_eq!(d.error_px, 0.0);
+    assert!(!d.budget_limited);
+    // With δn = 1 and nothing culled, every range is a node's whole stored point range.
+    for r in &d.ranges {
+        let n = &f.nodes()[r.quant_node as usize];
+        assert_eq!((n.point_first, n.point_count), (r.first, r.count));
+        assert_eq!(n.point_level, r.level);
+    }
+}
+
+#[test]
+fn huge_error_draws_just_the_top_node() {
+    let (_d, _p, f) = make_file(&cloud_frame(2000, 2), small_build(), &[]);
+    let d = cut(&f, &fitted_camera(&f), 1e9, u64::MAX);
+    check_counts(&f, &d);
+    assert_eq!(d.ranges.len(), 1);
+    let r = d.ranges[0];
+    assert_eq!((r.level, r.first, r.count, r.quant_node), (0, 0, 1, 0));
+    assert_eq!(d.points, 1);
+    assert!(coverage(&f, &d).iter().all(|&c| c == 1));
+}
+
+#[test]
+fn intermediate_error_gives_a_mixed_cut_that_covers_once_and_honours_the_error() {
+    let (_d, _p, f) = make_file(&cloud_frame(4000, 3), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let proj = Projector::new(&cam, VIEWPORT);
+    let last = f.level_count() - 1;
+    for error in [8.0f32, 20.0, 50.0] {
+        let d = cut(&f, &cam, error, u64::MAX);
+        check_counts(&f, &d);
+        assert!(coverage(&f, &d).iter().all(|&c| c == 1), "error {error}");
+        let levels: std::collections::BTreeSet<u8> = d.ranges.iter().map(|r| r.level).collect();
+        assert!(levels.len() >= 2, "error {error}: levels {levels:?}");
+        let mut largest = 0.0f32;
+        for r in &d.ranges {
+            if (r.level as usize) < last {
+                for i in r.first..r.first + r.count {
+                    let n = &f.nodes()[node_of(&f, r.level as usize, i as usize)];
+                    let s = proj.size_px(n);
+                    assert!(s <= error, "a drawn node is {s} px > {error}");
+                    largest = largest.max(s);
+                }
+            }
+        }
+        assert_eq!(d.error_px, largest);
+        // Ranges of one level never overlap and come in file order per level.
+        let mut by_level: Vec<Vec<(u32, u32)>> = vec![vec![]; f.level_count()];
+        for r in &d.ranges {
+            by_level[r.level as usize].push((r.first, r.count));
+        }
+        for v in &by_level {
+            for w in v.windows(2) {
+                assert!(w[0].0 + w[0].1 <= w[1].0);
+            }
+        }
+    }
+    // Coarser error, fewer points.
+    let fine = cut(&f, &cam, 8.0, u64::MAX).points;
+    let coarse = cut(&f, &cam, 50.0, u64::MAX).points;
+    assert!(coarse < fine, "{coarse} vs {fine}");
+}
+
+#[test]
+fn budget_is_respected_and_refines_largest_first() {
+    let (_d, _p, f) = make_file(&cloud_frame(4000, 4), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let proj = Projector::new(&cam, VIEWPORT);
+    let last = f.level_count() - 1;
+    for budget in [1u64, 20, 100, 1000, 3999] {
+        let d = cut(&f, &cam, 0.0, budget);
+        check_counts(&f, &d);
+        assert!(
+            d.points <= budget,
+            "{} points over budget {budget}",
+            d.points
+        );
+        assert!(d.budget_limited);
+        assert!(coverage(&f, &d).iter().all(|&c| c == 1), "budget {budget}");
+        // Largest first: no drawn node is larger than the reported error.
+        for r in d.ranges.iter().filter(|r| (r.level as usize) < last) {
+            for i in r.first..r.first + r.count {
+                let n = &f.nodes()[node_of(&f, r.level as usize, i as usize)];
+                assert!(proj.size_px(n) <= d.error_px);
+            }
+        }
+    }
+    assert_eq!(cut(&f, &cam, 0.0, 4000).points, 4000);
+    assert!(!cut(&f, &cam, 0.0, 4000).budget_limited);
+}
+
+#[test]
+fn nothing_outside_the_frustum_and_everything_inside_is_drawn() {
+    let (_d, _p, f) = make_file(&cloud_frame(4000, 5), small_build(), &[]);
+    let mut cam = fitted_camera(&f);
+    cam.zoom(3.0);
+    cam.pan(8.0, -5.0);
+    cam.orbit(40.0, 10.0);
+    let bounds = mdlod_render::data_bounds(&f);
+    cam.fit_depth_range(&bounds);
+    let d = cut(&f, &cam, 0.0, u64::MAX);
+    check_counts(&f, &d);
+    assert!(d.culled_nodes > 0, "the view should cut something off");
+    let cover = coverage(&f, &d);
+    assert!(cover.iter().all(|&c| c <= 1));
+    assert!(cover.contains(&0) && cover.contains(&1));
+
+    let clip = cam.clip_from_world(VIEWPORT, Vec2::ZERO);
+    let planes = Camera::frustum_planes(&clip);
+    let last = f.level_count() - 1;
+    // Every drawn particle's parent box meets the frustum.
+    for r in d.ranges.iter().filter(|r| r.level as usize == last) {
+        let parent_level = last - 1;
+        for i in r.first..r.first + r.count {
+            let parent = f
+                .level_nodes(parent_level)
+                .iter()
+                .find(|n| (n.child_first..n.child_first + n.child_count).contains(&i))
+                .unwrap();
+            assert!(Camera::box_in_frustum(
+                &planes,
+                parent.bounds_min.into(),
+                parent.bounds_max.into()
+            ));
+        }
+    }
+    // Every particle whose centre is well inside the frustum is drawn.
+    let decoded = f.decode_level(last);
+    let mut inside = 0;
+    for (i, p) in decoded.iter().enumerate() {
+        let c = clip * Vec3::from(*p).extend(1.0);
+        let ndc = c.truncate() / c.w;
+        if ndc.x.abs() < 0.95 && ndc.y.abs() < 0.95 && ndc.z > 0.0 && ndc.z < 1.0 {
+            inside += 1;
+            assert_eq!(
+                cover[i], 1,
+                "particle {i} at {p:?} is in view but not drawn"
+            );
+        }
+    }
+    assert!(inside > 100);
+}
+
+#[test]
+fn camera_looking_away_draws_nothing() {
+    let (_d, _p, f) = make_file(&cloud_frame(500, 6), small_build(), &[]);
+    let mut cam = fitted_camera(&f);
+    cam.target += cam.back() * 3.0 * cam.distance;
+    let d = cut(&f, &cam, 0.0, u64::MAX);
+    assert!(d.ranges.is_empty() && d.points == 0);
+}
+
+#[test]
+fn delta_n_2_and_8_bit_positions_cover_once_and_pack_to_the_files_positions() {
+    let build = BuildParams {
+        max_cluster_size: 5,
+        max_root_points: 12,
+        delta_n: 2,
+        position_bits: 8,
+    };
+    for (frame, build) in [(cloud_frame(3000, 7), build), (fcc_frame(6), small_build())] {
+        let (_d, _p, f) = make_file(&frame, build, &[]);
+        let cam = fitted_camera(&f);
+        let last = f.level_count() - 1;
+        let decoded: Vec<Vec<[f32; 3]>> = (0..f.level_count())
+            .map(|l| {
+                if l == 0 {
+                    vec![f.nodes()[0].centroid]
+                } else {
+                    f.decode_level(l)
+                }
+            })
+            .collect();
+        for error in [0.0, 3.0, 12.0, 1e9] {
+            let d = cut(&f, &cam, error, u64::MAX);
+            check_counts(&f, &d);
+            assert!(coverage(&f, &d).iter().all(|&c| c == 1));
+            let packed = pack(&f, &d).unwrap();
+            assert_eq!(u64::from(packed.points()), d.points);
+            let mut i = 0u32;
+            for r in &d.ranges {
+                let level = r.level as usize;
+                for k in r.first..r.first + r.count {
+                    let (pos, radius, albedo) = packed.decode_point(i);
+                    assert_eq!(pos, decoded[level][k as usize], "level {level} point {k}");
+                    if level == last {
+                        let s = &f.metadata().species[f.species()[k as usize] as usize];
+                        assert_eq!((radius, albedo), (s.radius, s.colour));
+                    } else {
+                        let n = &f.nodes()[node_of(&f, level, k as usize)];
+                        assert_eq!(radius, n.radius);
+                        let c = n.colour_rgb();
+                        assert_eq!(albedo, c);
+                    }
+                    i += 1;
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn traversal_is_deterministic() {
+    let (_d, _p, f) = make_file(&cloud_frame(2000, 8), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    assert_eq!(cut(&f, &cam, 3.0, 700), cut(&f, &cam, 3.0, 700));
+}
+
+/// Refuses to open the nodes of one level whose index is even, and remembers what it
+/// was asked.
+struct Patchy {
+    level: u8,
+    refused: std::collections::HashSet<u32>,
+}
+
+impl mdlod_render::Residency for Patchy {
+    fn can_open(&mut self, file: &MdlodFile, id: u32, _size_px: f32) -> bool {
+        let n = &file.nodes()[id as usize];
+        if n.level == self.level && id % 2 == 0 {
+            self.refused.insert(id);
+            false
+        } else {
+            true
+        }
+    }
+}
+
+#[test]
+fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
+    let (_d, _p, f) = make_file(&cloud_frame(3000, 9), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let settings = TraversalSettings {
+        viewport: VIEWPORT,
+        error_px: 0.0,
+        budget_points: u64::MAX,
+    };
+    let mut patchy = Patchy {
+        level: 2,
+        refused: Default::default(),
+    };
+    let d = mdlod_render::traverse_with(&cam, &f, &settings, &mut patchy);
+    check_counts(&f, &d);
+    assert!(!patchy.refused.is_empty());
+    assert_eq!(d.deferred_nodes as usize, patchy.refused.len());
+    // Still every particle exactly once: refused subtrees are drawn by the refused node.
+    assert!(coverage(&f, &d).iter().all(|&c| c == 1));
+    for &id in &patchy.refused {
+        let n = &f.nodes()[id as usize];
+        let i = id - f.levels()[2].node_first as u32;
+        assert!(
+            d.ranges
+                .iter()
+                .any(|r| r.level == 2 && (r.first..r.first + r.count).contains(&i)),
+            "refused node {id} is not drawn"
+        );
+        // Nothing below it is drawn.
+        let (a, b) = particles_below(&f, 2, i as usize, 1);
+        let below = d.ranges.iter().filter(|r| r.level > 2).any(|r| {
+            let (ra, rb) =
+                particles_below(&f, r.level as usize, r.first as usize, r.count as usize);
+            ra < b && a < rb
+        });
+        assert!(
+            !below,
+            "node {id} ({n:?}) is refused but its descendants are drawn"
+        );
+    }
+    // Everything else is refined to particles.
+    let last = f.level_count() - 1;
+    let other: u64 = d
+        .ranges
+        .iter()
+        .filter(|r| r.level as usize != last)
+        .map(|r| u64::from(r.count))
+        .sum();
+    assert_eq!(other, patchy.refused.len() as u64);
+}

@@ -1,0 +1,650 @@
+//! Rendering tests on a real device: Vulkan (lavapipe on machines without a GPU) unless
+//! `WGPU_BACKEND` names another backend. Images are small (≤ 256×256) and scenes have
+//! ≤ 10^4 particles so that the whole file runs in seconds on a CPU rasterizer.
+
+mod common;
+
+use std::sync::OnceLock;
+
+use common::golden::{self, Tolerance};
+use common::*;
+use glam::{Mat4, Vec3, Vec4};
+use mdlod_format::MdlodFile;
+use mdlod_render::{
+    camera_for, render_image, render_to_png, traverse, BackendChoice, Camera, FrameSettings,
+    GpuContext, Projection, RenderError, RenderOptions, RenderedFrame, Renderer, RgbaImage,
+    TraversalSettings, ViewFile, ViewSpec,
+};
+
+/// The backends the tests use: `WGPU_BACKEND` when set, else Vulkan only (so that a
+/// missing Vulkan driver fails loudly instead of silently falling back to GL).
+fn backends() -> BackendChoice {
+    if std::env::var_os("WGPU_BACKEND").is_some() {
+        BackendChoice::FromEnv
+    } else {
+        BackendChoice::Only(wgpu::Backends::VULKAN)
+    }
+}
+
+fn renderer() -> &'static Renderer {
+    static R: OnceLock<Renderer> = OnceLock::new();
+    R.get_or_init(|| match GpuContext::with_backends(backends()) {
+        Ok(ctx) => Renderer::new(ctx),
+        Err(e) => panic!("{e}"),
+    })
+}
+
+fn opts(width: u32, height: u32) -> RenderOptions {
+    RenderOptions {
+        width,
+        height,
+        error_px: 0.0,
+        budget: u64::MAX,
+        background: [0.0, 0.0, 0.0],
+        backends: backends(),
+        ..Default::default()
+    }
+}
+
+/// Renders every particle of `f` with `camera` (near/far refitted), with depth.
+fn render_all(f: &MdlodFile, camera: &Camera, w: u32, h: u32, spp: u32) -> RenderedFrame {
+    let mut camera = camera.clone();
+    camera.fit_depth_range(&mdlod_render::data_bounds(f));
+    let draw = traverse(
+        &camera,
+        f,
+        &TraversalSettings {
+            viewport: [w, h],
+            error_px: 0.0,
+            budget_points: u64::MAX,
+        },
+    );
+    renderer()
+        .render(
+            f,
+            &camera,
+            &draw,
+            &FrameSettings {
+                width: w,
+                height: h,
+                spp,
+                background_srgb: [0.0; 3],
+                read_depth: true,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+}
+
+fn ortho_camera(target: Vec3, distance: f32) -> Camera {
+    Camera {
+        target,
+        azimuth_deg: 0.0,
+        elevation_deg: 0.0,
+        distance,
+        fov_y_deg: 90.0,
+        projection: Projection::Orthographic,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn single_sphere_covers_its_projected_disk_area() {
+    // Orthographic, fov 90°: the view is 2·distance world units high.
+    let (_d, _p, f) = make_file(
+        &spheres_frame(&[[1.0, 2.0, 3.0]]),
+        small_build(),
+        &[("X", 2.0)],
+    );
+    let size = 128u32;
+    for distance in [3.0f32, 5.0, 12.0] {
+        let cam = ortho_camera(
+            Vec3::new(1.0, 2.0, 3.0) + Vec3::new(0.0, 0.13, -0.07),
+            distance,
+        );
+        let frame = render_all(&f, &cam, size, size, 1);
+        let depth = frame.depth.unwrap();
+        let covered = depth.iter().filter(|&&d| d < 1.0).count() as f64;
+        let r_px = 2.0 * f64::from(size) / (2.0 * f64::from(distance));
+        let area = std::f64::consts::PI * r_px * r_px;
+        // Pixel-centre sampling of a disk: the count deviates from πr² by far less than
+        // 1% for radii of tens of pixels (Gauss circle problem: O(r^(2/3))).
+        let tol = 0.01 * area + 2.0;
+        assert!(
+            (covered - area).abs() <= tol,
+            "distance {distance}: {covered} pixels covered, disk area {area:.1} (±{tol:.1})"
+        );
+        // The colour image agrees with the depth image.
+        let lit = frame
+            .image
+            .data
+            .chunks_exact(4)
+            .filter(|p| p[0] > 0 || p[1] > 0 || p[2] > 0)
+            .count() as f64;
+        assert_eq!(lit, covered);
+    }
+}
+
+/// Nearest hit of the ray `o + t d` with the spheres: `(t, graze)` with `graze` the
+/// discriminant over r² of the sphere hit (0 at the silhouette), and the smallest
+/// |discriminant| / r² over all spheres (small: some sphere is grazed or nearly hit, and
+/// rasterization rounding may go either way).
+fn cpu_hit(o: Vec3, d: Vec3, spheres: &[(Vec3, f32)]) -> (Option<(f32, f32)>, f32) {
+    let mut best: Option<(f32, f32)> = None;
+    let mut closest_call = f32::INFINITY;
+    for &(c, r) in spheres {
+        let oc = o - c;
+        let b = oc.dot(d);
+        let cc = oc.dot(oc) - r * r;
+        let disc = b * b - cc;
+        closest_call = closest_call.min((disc / (r * r)).abs());
+        if disc < 0.0 {
+            continue;
+        }
+        let t = -b - disc.sqrt();
+        if best.is_none_or(|(bt, _)| t < bt) {
+            best = Some((t, disc / (r * r)));
+        }
+    }
+    (best, closest_call)
+}
+
+#[test]
+fn hit_depth_matches_a_cpu_ray_sphere_intersection() {
+    let mut rng = Rng::new(11);
+    let centres: Vec<[f32; 3]> = (0..40)
+        .map(|_| [0; 3].map(|_| 20.0 * rng.next_f32()))
+        .collect();
+    let (_d, _p, f) = make_file(&spheres_frame(&centres), small_build(), &[("X", 1.7)]);
+    let last = f.level_count() - 1;
+    let spheres: Vec<(Vec3, f32)> = f
+        .decode_level(last)
+        .into_iter()
+        .map(|p| (Vec3::from(p), 1.7))
+        .collect();
+    let (w, h) = (160u32, 120u32);
+    for projection in [Projection::Perspective, Projection::Orthographic] {
+        let mut cam = camera_for(
+            &f,
+            &ViewSpec::Orbit {
+                azimuth_deg: 35.0,
+                elevation_deg: 25.0,
+                zoom: 1.3,
+                projection,
+            },
+            w,
+            h,
+        )
+        .unwrap();
+        cam.fit_depth_range(&mdlod_render::data_bounds(&f));
+        let frame = render_all(&f, &cam, w, h, 1);
+        let depth = frame.depth.unwrap();
+        let clip_from_view = cam.clip_from_view(w as f32 / h as f32);
+        let view_from_clip = clip_from_view.inverse();
+        let view_from_world = cam.view_from_world();
+        let view_spheres: Vec<(Vec3, f32)> = spheres
+            .iter()
+            .map(|&(c, r)| (view_from_world.transform_point3(c), r))
+            .collect();
+        let unproject = |m: &Mat4, x: f32, y: f32, z: f32| {
+            let v = *m * Vec4::new(x, y, z, 1.0);
+            v.truncate() / v.w
+        };
+        let (mut compared, mut hits) = (0, 0);
+        for py in 0..h {
+            for px in 0..w {
+                let nx = 2.0 * (px as f32 + 0.5) / w as f32 - 1.0;
+                let ny = 1.0 - 2.0 * (py as f32 + 0.5) / h as f32;
+                let a = unproject(&view_from_clip, nx, ny, 0.0);
+                let b = unproject(&view_from_clip, nx, ny, 1.0);
+                let dir = (b - a).normalize();
+                let gpu = depth[(py * w + px) as usize];
+                let (hit, closest_call) = cpu_hit(a, dir, &view_spheres);
+                if closest_call < 2e-2 {
+                    // A grazing ray may go either way under rasterization rounding.
+                    continue;
+                }
+                match hit {
+                    Some((t, graze)) => {
+                        let hit = a + dir * t;
+                        let clip = clip_from_view * hit.extend(1.0);
+                        let expected = clip.z / clip.w;
+                        // Compare as view-space depth (linear, world units). The GPU's ray
+                        // comes from an interpolated quad point (relative error ~1e-6..1e-5
+                        // on real GPUs); near a silhouette depth amplifies a ray error by
+                        // 1/sqrt(graze).
+                        let gpu_view = unproject(&view_from_clip, nx, ny, gpu).z;
+                        let tol = 1e-3 + 2e-5 * hit.z.abs() / graze.sqrt();
+                        assert!(
+                            (gpu_view - hit.z).abs() < tol,
+                            "{projection:?} pixel ({px},{py}): GPU depth {gpu} (z {gpu_view}), \
+                             CPU {expected} (z {}), tolerance {tol}, graze {graze}",
+                            hit.z
+                        );
+                        compared += 1;
+                        hits += 1;
+                    }
+                    None => {
+                        assert_eq!(gpu, 1.0, "{projection:?} pixel ({px},{py}) should be empty");
+                        compared += 1;
+                    }
+                }
+            }
+        }
+        assert!(
+            hits > 1000 && compared > (w * h) as usize * 9 / 10,
+            "{hits} {compared}"
+        );
+    }
+}
+
+#[test]
+fn golden_fcc_block_perspective_supersampled() {
+    let (_d, _p, f) = make_file(&fcc_frame(5), small_build(), &[]);
+    let mut o = opts(128, 128);
+    o.spp = 4;
+    o.background = [0.1, 0.12, 0.15];
+    o.view = ViewSpec::Orbit {
+        azimuth_deg: 35.0,
+        elevation_deg: 25.0,
+        zoom: 1.1,
+        projection: Projection::Perspective,
+    };
+    let (img, report) = render_image(renderer(), &f, &o).unwrap();
+    assert_eq!(report.particles_drawn, 500);
+    golden::check(
+        "fcc_block_perspective_4spp",
+        &img,
+        Tolerance {
+            per_channel: 8,
+            max_failing_share: 0.005,
+        },
+    );
+}
+
+#[test]
+fn golden_cloud_lod_orthographic() {
+    let (_d, _p, f) = make_file(&cloud_frame(6000, 21), small_build(), &[]);
+    let mut o = opts(160, 120);
+    o.error_px = 6.0;
+    o.background = [1.0, 1.0, 1.0];
+    o.view = ViewSpec::Orbit {
+        azimuth_deg: -60.0,
+        elevation_deg: 40.0,
+        zoom: 1.0,
+        projection: Projection::Orthographic,
+    };
+    let (img, report) = render_image(renderer(), &f, &o).unwrap();
+    assert!(
+        report.nodes_drawn > 0 && report.particles_drawn > 0,
+        "{report:?}"
+    );
+    golden::check(
+        "cloud_lod_orthographic",
+        &img,
+        Tolerance {
+            per_channel: 8,
+            max_failing_share: 0.005,
+        },
+    );
+}
+
+fn mean_abs_diff(a: &RgbaImage, b: &RgbaImage) -> f64 {
+    let s: u64 = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| u64::from(x.abs_diff(*y)))
+        .sum();
+    s as f64 / a.data.len() as f64
+}
+
+#[test]
+fn supersampling_converges_to_the_reference() {
+    let (_d, _p, f) = make_file(&fcc_frame(4), small_build(), &[]);
+    let cam = camera_for(&f, &ViewSpec::default(), 96, 96).unwrap();
+    let reference = render_all(&f, &cam, 96, 96, 64).image;
+    let one = render_all(&f, &cam, 96, 96, 1).image;
+    let sixteen = render_all(&f, &cam, 96, 96, 16).image;
+    let (e1, e16) = (
+        mean_abs_diff(&one, &reference),
+        mean_abs_diff(&sixteen, &reference),
+    );
+    assert!(e16 < e1 * 0.5, "1 spp: {e1}, 16 spp: {e16}");
+    assert!(e16 < 1.0, "16 spp differs from 64 spp by {e16} on average");
+}
+
+#[test]
+fn view_file_and_orbit_options_give_the_same_image() {
+    let (dir, _p, f) = make_file(&cloud_frame(800, 31), small_build(), &[]);
+    let view = dir.path().join("view.json");
+    std::fs::write(
+        &view,
+        r#"{"version": 1, "azimuth_deg": 10, "elevation_deg": -20, "zoom": 1.5}"#,
+    )
+    .unwrap();
+    let mut a = opts(64, 64);
+    a.view = ViewSpec::File(view.clone());
+    let mut b = opts(64, 64);
+    b.view = ViewSpec::Orbit {
+        azimuth_deg: 10.0,
+        elevation_deg: -20.0,
+        zoom: 1.5,
+        projection: Projection::Perspective,
+    };
+    let (ia, ra) = render_image(renderer(), &f, &a).unwrap();
+    let (ib, _) = render_image(renderer(), &f, &b).unwrap();
+    assert_eq!(ia, ib);
+    // The report's camera saved as a view file reproduces the image too.
+    ViewFile::from_camera(&ra.camera).save(&view).unwrap();
+    let (ic, _) = render_image(renderer(), &f, &a).unwrap();
+    assert_eq!(ia, ic);
+}
+
+#[test]
+fn render_to_png_writes_the_image_and_reports() {
+    let (dir, path, _f) = make_file(&cloud_frame(2000, 41), small_build(), &[]);
+    let out = dir.path().join("out.png");
+    let mut o = opts(64, 48);
+    o.error_px = 3.0;
+    o.spp = 2;
+    let report = render_to_png(&path, &out, &o).unwrap();
+    let img = RgbaImage::load_png(&out).unwrap();
+    assert_eq!((img.width, img.height), (64, 48));
+    assert!(report.particles_drawn + report.nodes_drawn > 0);
+    assert!(!report.adapter.is_empty());
+    assert_eq!((report.width, report.height, report.spp), (64, 48, 2));
+    if renderer().ctx.timestamps() {
+        assert!(
+            report.gpu_time.is_some_and(|t| t.as_nanos() > 0),
+            "{report:?}"
+        );
+    }
+    // Something other than the background was drawn.
+    assert!(img.data.chunks_exact(4).any(|p| p[..3] != [0, 0, 0]));
+}
+
+#[test]
+fn invalid_options_are_errors_not_panics() {
+    let (_d, _p, f) = make_file(&cloud_frame(100, 51), small_build(), &[]);
+    for (w, h, spp, err) in [
+        (0, 10, 1, 1.0),
+        (10, 10, 0, 1.0),
+        (10, 10, 1000, 1.0),
+        (10, 10, 1, f32::NAN),
+        (100_000, 10, 1, 1.0),
+    ] {
+        let mut o = opts(w, h);
+        o.spp = spp;
+        o.error_px = err;
+        match render_image(renderer(), &f, &o) {
+            Err(RenderError::InvalidOptions(_)) => {}
+            other => panic!("{w}x{h} spp {spp} error {err}: {other:?}"),
+        }
+    }
+    for bad in [
+        Camera {
+            distance: f32::NAN,
+            ..Default::default()
+        },
+        Camera {
+            distance: 0.0,
+            ..Default::default()
+        },
+        Camera {
+            fov_y_deg: 180.0,
+            ..Default::default()
+        },
+    ] {
+        let mut o = opts(16, 16);
+        o.view = ViewSpec::Camera(bad);
+        assert!(matches!(
+            render_image(renderer(), &f, &o),
+            Err(RenderError::InvalidOptions(_))
+        ));
+    }
+}
+
+#[test]
+fn missing_adapter_is_a_clear_error() {
+    let e = GpuContext::with_backends(BackendChoice::Only(wgpu::Backends::empty())).unwrap_err();
+    assert!(matches!(e, RenderError::NoAdapter { .. }), "{e:?}");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("mesa-vulkan-drivers") && msg.contains("GPU driver"),
+        "{msg}"
+    );
+    // Through the library entry point: the error, and no output file.
+    let (dir, path, _f) = make_file(&cloud_frame(100, 61), small_build(), &[]);
+    let out = dir.path().join("none.png");
+    let mut o = opts(32, 32);
+    o.backends = BackendChoice::Only(wgpu::Backends::empty());
+    let e = render_to_png(&path, &out, &o).unwrap_err();
+    assert!(matches!(e, RenderError::NoAdapter { .. }), "{e:?}");
+    assert!(!out.exists());
+}
+
+/// Run by [`wgpu_backend_naming_an_absent_backend_is_a_clear_error`] in a child process
+/// with `WGPU_BACKEND=dx12` (there is no DX12 on Linux).
+#[test]
+#[ignore = "run as a child process by wgpu_backend_naming_an_absent_backend_is_a_clear_error"]
+fn child_render_with_absent_backend() {
+    let (dir, path, _f) = make_file(&cloud_frame(100, 71), small_build(), &[]);
+    let out = dir.path().join("none.png");
+    let mut o = opts(32, 32);
+    o.backends = BackendChoice::FromEnv;
+    let e = render_to_png(&path, &out, &o).unwrap_err();
+    let msg = e.to_string();
+    assert!(matches!(e, RenderError::NoAdapter { .. }), "{e:?}");
+    assert!(
+        msg.contains("WGPU_BACKEND=dx12") && msg.contains("mesa-vulkan-drivers"),
+        "{msg}"
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+#[cfg(not(windows))]
+fn wgpu_backend_naming_an_absent_backend_is_a_clear_error() {
+    let exe = std::env::current_exe().unwrap();
+    let out = std::process::Command::new(exe)
+        .args([
+            "--exact",
+            "child_render_with_absent_backend",
+            "--ignored",
+            "--nocapture",
+            "--test-threads=1",
+        ])
+        .env("WGPU_BACKEND", "dx12")
+        .output()
+        .unwrap();
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "child failed:\n{text}");
+    assert!(text.contains("1 passed"), "{text}");
+}
+
+/// Timings on a larger scene (not part of the normal run):
+/// `cargo test -p mdlod-render --release --test gpu timing -- --ignored --nocapture`.
+#[test]
+#[ignore = "timing report, run by hand"]
+fn timing_fcc_block() {
+    let n: usize = std::env::var("MDLOD_TIMING_CELLS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(30);
+    let t = std::time::Instant::now();
+    let (dir, path, f) = make_file(&fcc_frame(n), Default::default(), &[]);
+    eprintln!(
+        "{} particles converted in {:.2?}",
+        f.particle_count(),
+        t.elapsed()
+    );
+    for (error_px, spp, zoom) in [
+        (0.0, 1, 1.0),
+        (1.0, 1, 1.0),
+        (0.0, 4, 1.0),
+        (0.0, 1, 0.1),
+        (1.0, 1, 0.1),
+        (4.0, 1, 0.1),
+    ] {
+        let mut o = opts(1280, 720);
+        o.error_px = error_px;
+        o.spp = spp;
+        o.view = ViewSpec::Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            zoom,
+            projection: Projection::Perspective,
+        };
+        o.background = [1.0; 3];
+        let out = dir
+            .path()
+            .join(format!("timing-{error_px}-{spp}-{zoom}.png"));
+        let r = render_to_png(&path, &out, &o).unwrap();
+        eprintln!(
+            "zoom {zoom}, error {error_px} px, {spp} spp: {} particles + {} nodes in {} ranges; traversal \
+             {:.2?}, GPU {:?}, total {:.2?} ({})",
+            r.particles_drawn,
+            r.nodes_drawn,
+            r.ranges,
+            r.traversal_time,
+            r.gpu_time,
+            r.total_time,
+            r.adapter
+        );
+        if let Ok(keep) = std::env::var("MDLOD_TIMING_KEEP") {
+            std::fs::copy(
+                &out,
+                std::path::Path::new(&keep).join(out.file_name().unwrap()),
+            )
+            .unwrap();
+        }
+    }
+}
+
+/// Renders frames of one view through `s` until the stream is complete.
+fn converge(
+    s: &mut mdlod_render::StreamingRenderer<'_>,
+    camera: &Camera,
+    traversal: &TraversalSettings,
+    settings: &FrameSettings,
+) -> (
+    RenderedFrame,
+    mdlod_render::DrawList,
+    mdlod_render::StreamStats,
+    usize,
+) {
+    for i in 1..=60 {
+        let (frame, draw, stats) = s.render(camera, traversal, settings).unwrap();
+        if stats.complete {
+            return (frame, draw, stats, i);
+        }
+        s.wait_for_loads(std::time::Duration::from_secs(10));
+    }
+    panic!("the stream did not converge in 60 frames");
+}
+
+#[test]
+fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
+    use mdlod_render::StreamingRenderer;
+    // Small pages, so that a small file has many.
+    const PAGE: u32 = 16;
+    let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
+    let f = std::sync::Arc::new(f);
+    let (w, h) = (160u32, 120u32);
+    // A distant view of everything, and a close-up of one corner of the box.
+    let far = camera_for(
+        &f,
+        &ViewSpec::Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            zoom: 0.25,
+            projection: Projection::Perspective,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    let mut corner = camera_for(
+        &f,
+        &ViewSpec::Orbit {
+            azimuth_deg: 0.0,
+            elevation_deg: 90.0,
+            zoom: 5.0,
+            projection: Projection::Orthographic,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    corner.target = Vec3::new(5.0, 5.0, 20.0);
+    let views = [ViewSpec::Camera(far), ViewSpec::Camera(corner)];
+    let mut o = opts(w, h);
+    o.error_px = 5.0;
+    o.background = [0.2, 0.2, 0.2];
+    let settings = FrameSettings {
+        width: w,
+        height: h,
+        spp: 1,
+        background_srgb: o.background,
+        ..Default::default()
+    };
+    let mut references = vec![];
+    let mut used = vec![];
+    {
+        let mut unlimited =
+            StreamingRenderer::with_page_points(renderer(), f.clone(), 1 << 30, PAGE).unwrap();
+        for v in &views {
+            o.view = v.clone();
+            let (reference, report) = render_image(renderer(), &f, &o).unwrap();
+            let camera = camera_for(&f, v, w, h).unwrap();
+            let traversal = TraversalSettings {
+                viewport: [w, h],
+                error_px: o.error_px,
+                budget_points: report.budget,
+            };
+            let (frame, draw, stats, _) = converge(&mut unlimited, &camera, &traversal, &settings);
+            assert_eq!(draw.particles, report.particles_drawn);
+            assert_eq!(draw.representatives, report.nodes_drawn);
+            assert_eq!(
+                frame.image, reference,
+                "unlimited pool differs from the direct render"
+            );
+            used.push(stats.used_pages);
+            references.push((camera, traversal, reference));
+        }
+    }
+    // A pool just large enough for the larger of the two cuts.
+    let capacity = *used.iter().max().unwrap();
+    let pool = capacity as u64 * StreamingRenderer::slot_bytes(f.position_bits(), PAGE);
+    let mut tiny = StreamingRenderer::with_page_points(renderer(), f.clone(), pool, PAGE).unwrap();
+    assert_eq!(tiny.capacity_pages(), capacity);
+    assert!(
+        (capacity as u64) * 3 < tiny.file_pages() * 2,
+        "pool of {capacity} pages is not small against the file's {}",
+        tiny.file_pages()
+    );
+    // The first frame has nothing resident: the top node stands for everything.
+    let (camera, traversal, _) = &references[0];
+    let (_, first, stats) = tiny.render(camera, traversal, &settings).unwrap();
+    assert_eq!((first.points, first.deferred_nodes), (1, 1));
+    assert!(stats.requested > 0 && !stats.complete);
+    for round in 0..2 {
+        for (i, (camera, traversal, reference)) in references.iter().enumerate() {
+            let (frame, _, stats, frames) = converge(&mut tiny, camera, traversal, &settings);
+            assert!(stats.resident_pages <= capacity);
+            assert_eq!(
+                &frame.image, reference,
+                "round {round}, view {i}: tiny pool after {frames} frames"
+            );
+        }
+    }
+    let (_, _, stats) = tiny
+        .render(&references[0].0, &references[0].1, &settings)
+        .unwrap();
+    assert!(
+        stats.evicted_total > 0,
+        "switching views should evict: {stats:?}"
+    );
+}

@@ -1,0 +1,141 @@
+//! `mdlod render`: a `.mdlod` file to a PNG, headless.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use mdlod_render::{parse_colour, render_to_png, Projection, RenderOptions, ViewFile, ViewSpec};
+
+/// Render a .mdlod file to a PNG with no window: sphere ray casting of a level-of-detail
+/// cut chosen by screen-space error.
+#[derive(clap::Args)]
+#[command(
+    after_help = "Examples:\n  mdlod render frame.mdlod -o frame.png --azimuth 30 --elevation 20 --spp 4\n  mdlod render frame.mdlod -o close.png --view close.json --screen-error 0.5\n  mdlod render frame.mdlod -o big.png --gpu-memory 512M --save-view view.json"
+)]
+pub struct Args {
+    pub file: PathBuf,
+    /// The PNG to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[arg(long, default_value_t = 1280)]
+    pub width: u32,
+    #[arg(long, default_value_t = 720)]
+    pub height: u32,
+    /// A JSON view file (as written by --save-view).
+    #[arg(long, conflicts_with_all = ["azimuth", "elevation", "zoom", "ortho"])]
+    pub view: Option<PathBuf>,
+    /// Orbit angle around the vertical axis, degrees.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    pub azimuth: f32,
+    /// Angle above the horizontal, degrees.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    pub elevation: f32,
+    /// 1 fits the data; 2 is twice as close.
+    #[arg(long, default_value_t = 1.0)]
+    pub zoom: f32,
+    /// Orthographic instead of perspective projection.
+    #[arg(long)]
+    pub ortho: bool,
+    /// Samples per pixel (jittered supersampling).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Largest on-screen size, in pixels, of a cluster drawn as one sphere.
+    #[arg(long, default_value_t = 1.0)]
+    pub screen_error: f32,
+    /// Most spheres to draw; refinement stops there, largest on screen first.
+    #[arg(long, default_value_t = 4_000_000)]
+    pub budget: u64,
+    /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G).
+    #[arg(long, value_parser = parse_bytes)]
+    pub gpu_memory: Option<u64>,
+    /// Background colour: #rrggbb or r,g,b in [0, 1].
+    #[arg(long, default_value = "#ffffff")]
+    pub background: String,
+    /// Write the camera used as a view file.
+    #[arg(long)]
+    pub save_view: Option<PathBuf>,
+}
+
+/// Parses `512M`, `2G`, `1048576`, `64KiB`.
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let v: f64 = num
+        .parse()
+        .map_err(|_| format!("{s:?} is not a size such as 512M"))?;
+    let mult = match unit.trim().to_ascii_uppercase().as_str() {
+        "" | "B" => 1u64,
+        "K" | "KB" | "KIB" => 1 << 10,
+        "M" | "MB" | "MIB" => 1 << 20,
+        "G" | "GB" | "GIB" => 1 << 30,
+        "T" | "TB" | "TIB" => 1 << 40,
+        _ => return Err(format!("unknown unit in {s:?} (use K, M, G or T)")),
+    };
+    Ok((v * mult as f64) as u64)
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let view = match &args.view {
+        Some(p) => ViewSpec::File(p.clone()),
+        None => ViewSpec::Orbit {
+            azimuth_deg: args.azimuth,
+            elevation_deg: args.elevation,
+            zoom: args.zoom,
+            projection: if args.ortho {
+                Projection::Orthographic
+            } else {
+                Projection::Perspective
+            },
+        },
+    };
+    let opts = RenderOptions {
+        width: args.width,
+        height: args.height,
+        view,
+        spp: args.spp,
+        error_px: args.screen_error,
+        budget: args.budget,
+        background: parse_colour(&args.background)?,
+        gpu_memory: args.gpu_memory,
+        ..Default::default()
+    };
+    let r = render_to_png(&args.file, &args.output, &opts)?;
+    println!(
+        "wrote {} ({}x{}, {} spp) on {} ({}): {} particles and {} cluster spheres in {} ranges, error {:.2} px{}",
+        args.output.display(),
+        r.width,
+        r.height,
+        r.spp,
+        r.adapter,
+        r.backend,
+        r.particles_drawn,
+        r.nodes_drawn,
+        r.ranges,
+        r.error_px,
+        if r.budget_limited { " (budget reached)" } else { "" }
+    );
+    let gpu = r.gpu_time.map_or(String::new(), |t| {
+        format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)
+    });
+    let stream = match r.first_frame_time {
+        Some(t) => format!(
+            ", first image after {:.0} ms, complete after {} frames",
+            t.as_secs_f64() * 1e3,
+            r.frames
+        ),
+        None => String::new(),
+    };
+    println!(
+        "  total {:.0} ms{gpu}{stream}",
+        r.total_time.as_secs_f64() * 1e3
+    );
+    if let Some(p) = &args.save_view {
+        ViewFile::from_camera(&r.camera)
+            .save(p)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        println!("  view saved to {}", p.display());
+    }
+    Ok(())
+}
