@@ -239,8 +239,7 @@ fn split_into(
 /// Writes `items` to `out` with the points on the non-negative side of the PCA plane
 /// first (in their order) and the rest after them (in reverse order), and returns the
 /// size of the first part (always between 1 and `len - 1`) with the sums of both parts,
-/// gathered from the smaller part. Branch-free: every item is written to both ends and only
-/// one cursor advances.
+/// gathered from the smaller part. Branch-free: the store goes to a selected slot.
 fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, Stats) {
     let n = items.len();
     let (centroid, axis) = stats.plane();
@@ -254,8 +253,9 @@ fn partition(items: &[Item], out: &mut [Item], stats: &Stats) -> (usize, Stats, 
         let p = it.position;
         let left = p[0] * e[0] + p[1] * e[1] + p[2] * e[2] >= offset;
         // lo < hi holds before every write: lo + (n - hi) items were placed so far.
-        out[lo] = *it;
-        out[hi - 1] = *it;
+        // One store to a selected (not branched-to) slot.
+        let dst = if left { lo } else { hi - 1 };
+        out[dst] = *it;
         lo += usize::from(left);
         hi -= usize::from(!left);
     }

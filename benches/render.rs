@@ -1,0 +1,175 @@
+//! Benchmarks of the renderer core: frame time and spheres drawn versus data size, with
+//! and without level of detail; the first-image latency of a freshly opened file through
+//! the streaming pool; resident host memory. `cargo bench --bench render` prints the
+//! table and rewrites the renderer section of BENCHMARKS.md (or of the file named by
+//! `MDLOD_BENCH_OUT`).
+//!
+//! `MDLOD_RENDER_SIZES` (default `1000000,10000000`): crater data sets generated and
+//! converted into `data/bench/` when missing. `MDLOD_RENDER_FULL_MAX` (default 2000000):
+//! the largest size also drawn without level of detail (every particle).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use mdlod_datasets::{write_lammps_dump_to_path, GenerateOptions, Kind};
+use mdlod_format::MdlodFile;
+use mdlod_preprocess::convert::{convert_file, ConvertOptions, FrameSelect};
+use mdlod_preprocess::readers::ReadOptions;
+use mdlod_preprocess::NoProgress;
+use mdlod_render::{
+    render_image, render_streaming, GpuContext, Projection, RenderOptions, Renderer, ViewSpec,
+};
+
+const W: u32 = 1280;
+const H: u32 = 720;
+
+fn env_list(name: &str, default: &str) -> Vec<u64> {
+    std::env::var(name)
+        .unwrap_or_else(|_| default.into())
+        .split(',')
+        .filter_map(|s| s.trim().parse::<f64>().ok().map(|v| v as u64))
+        .collect()
+}
+
+fn dataset(n: u64) -> PathBuf {
+    let mdlod = PathBuf::from(format!("data/bench/crater-{n}.mdlod"));
+    if mdlod.exists() {
+        return mdlod;
+    }
+    std::fs::create_dir_all("data/bench").unwrap();
+    let dump = PathBuf::from(format!("data/bench/crater-{n}.lammpstrj"));
+    if !dump.exists() {
+        eprintln!("generating {}", dump.display());
+        write_lammps_dump_to_path(&GenerateOptions::new(Kind::Crater, n), &dump, |_| {}).unwrap();
+    }
+    eprintln!("converting {}", dump.display());
+    let opts = ConvertOptions {
+        radii: vec![("1".into(), 1.28)],
+        ..Default::default()
+    };
+    convert_file(&dump, &mdlod, FrameSelect::Last, &ReadOptions::default(), &opts, &NoProgress)
+        .unwrap();
+    mdlod
+}
+
+fn rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+fn median(mut v: Vec<Duration>) -> Duration {
+    v.sort();
+    v[v.len() / 2]
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+fn main() {
+    let sizes = env_list("MDLOD_RENDER_SIZES", "1000000,10000000");
+    let full_max = env_list("MDLOD_RENDER_FULL_MAX", "2000000")[0];
+    let renderer = Renderer::new(GpuContext::new().expect("a GPU adapter"));
+    let adapter = renderer.ctx.adapter_name().to_string();
+    let view = ViewSpec::Orbit {
+        azimuth_deg: 30.0,
+        elevation_deg: 25.0,
+        zoom: 1.0,
+        projection: Projection::Perspective,
+    };
+    let base = RenderOptions {
+        width: W,
+        height: H,
+        view,
+        spp: 1,
+        error_px: 1.0,
+        ..Default::default()
+    };
+    let pool: u64 = 512 << 20;
+    let mut rows = vec![];
+    for &n in &sizes {
+        let path = dataset(n);
+        let size_mb = std::fs::metadata(&path).unwrap().len() as f64 / 1e6;
+        // First image: open the file and draw what the streaming pool holds after one
+        // frame (the coarse levels), then until the view is complete.
+        let t = Instant::now();
+        let file = Arc::new(MdlodFile::open(&path).unwrap());
+        let open = t.elapsed();
+        let (_img, stream) = render_streaming(&renderer, file.clone(), &base, pool).unwrap();
+        let first = open + stream.first_frame_time.unwrap_or_default();
+        let complete = open + stream.total_time;
+        let rss_after_stream = rss_mib();
+        let reps = if n >= 50_000_000 { 3 } else { 5 };
+        let mut lod = vec![];
+        let mut report = None;
+        for _ in 0..reps {
+            let (_img, r) = render_image(&renderer, &file, &base).unwrap();
+            lod.push(r.gpu_time.unwrap_or(r.total_time));
+            report = Some(r);
+        }
+        let r = report.unwrap();
+        let full = (n <= full_max).then(|| {
+            let opts = RenderOptions {
+                error_px: 0.0,
+                budget: u64::MAX,
+                ..base.clone()
+            };
+            let mut times = vec![];
+            let mut drawn = 0;
+            for _ in 0..reps.min(3) {
+                let (_img, r) = render_image(&renderer, &file, &opts).unwrap();
+                times.push(r.gpu_time.unwrap_or(r.total_time));
+                drawn = r.particles_drawn + r.nodes_drawn;
+            }
+            (median(times), drawn)
+        });
+        let row = format!(
+            "| {n} | {size_mb:.0} | {} | {:.2} | {:.1} | {:.1} | {:.0} | {:.0} | {} | {} | {:.0} |",
+            r.particles_drawn + r.nodes_drawn,
+            r.error_px,
+            ms(median(lod)),
+            ms(r.traversal_time),
+            ms(first),
+            ms(complete),
+            full.map_or("—".into(), |f| format!("{:.1}", ms(f.0))),
+            full.map_or("—".into(), |f| f.1.to_string()),
+            rss_after_stream,
+        );
+        eprintln!("{row}");
+        rows.push(row);
+    }
+    // The section's marker: `render` here; another name for results from another adapter.
+    let section = std::env::var("MDLOD_BENCH_SECTION").unwrap_or_else(|_| "render".into());
+    let begin = format!("<!-- {section}:begin");
+    let end = format!("<!-- {section}:end -->\n");
+    let mut t = String::new();
+    t.push_str(&format!("{begin} (generated by `cargo bench --bench render`; do not edit) -->\n"));
+    t.push_str(&format!(
+        "Adapter: **{adapter}**. Image {W}×{H}, 1 sample per pixel, perspective view fitting the whole crater data set, screen error 1 px. Frame times are GPU time (timestamp queries) when the adapter has them, else wall time; medians. Streaming pool {} MiB.\n\n",
+        pool >> 20
+    ));
+    t.push_str("| particles | .mdlod MB | spheres drawn (LOD) | achieved error px | frame ms (LOD) | traversal ms | first image ms (open + coarse frame) | view complete ms (streaming) | frame ms (every particle) | spheres (every particle) | host RSS MiB |\n");
+    t.push_str("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for r in &rows {
+        t.push_str(r);
+        t.push('\n');
+    }
+    t.push_str(&end);
+    println!("{t}");
+    let out = std::env::var("MDLOD_BENCH_OUT").unwrap_or_else(|_| "BENCHMARKS.md".into());
+    let path = Path::new(&out);
+    let old = std::fs::read_to_string(path).unwrap_or_else(|_| "# Benchmarks\n\n".into());
+    let new = match (old.find(&begin), old.find(&end)) {
+        (Some(a), Some(b)) => format!("{}{}{}", &old[..a], t, &old[b + end.len()..]),
+        _ => format!("{old}\n### Renderer core on {adapter}\n\n{t}"),
+    };
+    std::fs::write(path, new).unwrap();
+    eprintln!("updated {}", path.display());
+}
