@@ -284,28 +284,28 @@ pub fn build(
                 let rep = src
                     .reps()
                     .expect("levels above the finest are representatives");
-                let b = b as usize;
+                let rep = &rep.0[b as usize];
                 let cr = &child_ranges[l][i];
                 let pr = &point_ranges[i];
                 NodeRecord {
-                    centroid: rep.position[b],
-                    radius: rep.radius[b],
+                    centroid: rep.position,
+                    radius: rep.radius,
                     quant_scale: [0.0; 3],
-                    area_sum: rep.area[b],
-                    bounds_min: rep.bounds[b].0,
-                    attribute: rep.attribute[b],
-                    bounds_max: rep.bounds[b].1,
-                    colour: pack_colour(rep.colour[b]),
+                    area_sum: rep.area,
+                    bounds_min: rep.bounds.0,
+                    attribute: rep.attribute,
+                    bounds_max: rep.bounds.1,
+                    colour: pack_colour(rep.colour),
                     child_first: cr.start,
                     child_count: cr.end - cr.start,
                     point_first: pr.start,
                     point_count: pr.end - pr.start,
                     parent: parent_of[i],
                     quant_node: first + i as u32,
-                    rms_radius: rep.rms_radius[b],
+                    rms_radius: rep.rms_radius,
                     level: l as u8,
                     point_level: point_level as u8,
-                    species: rep.species[b],
+                    species: rep.species,
                 }
             })
             .collect();
@@ -372,25 +372,34 @@ pub fn build(
         for (i, r) in descendant_ranges(&child_ranges, ql, m).iter().enumerate() {
             encoder[r.start as usize..r.end as usize].fill(first + i as u32);
         }
-        let encoded: Vec<([u16; 3], f64)> = positions[m]
+        let encoded: Vec<[u16; 3]> = positions[m]
             .par_iter()
             .zip(&encoder)
             .map(|(p, &e)| {
                 let node = &nodes[e as usize];
-                let q = [0, 1, 2].map(|k| {
+                [0, 1, 2].map(|k| {
                     quantize::encode(f64::from(p[k]), node.centroid[k], node.quant_scale[k], bits)
-                });
-                let d = quantize::decode3(q, node.centroid, node.quant_scale, bits);
-                let e2: f64 = (0..3)
-                    .map(|k| (f64::from(d[k]) - f64::from(p[k])).powi(2))
-                    .sum();
-                (q, e2.sqrt())
+                })
             })
             .collect();
         if m == last {
-            max_err = encoded.iter().map(|e| e.1).fold(0.0, f64::max);
+            // The error actually made, decoded exactly as readers decode (the maximum
+            // does not depend on the order of reduction).
+            max_err = positions[m]
+                .par_iter()
+                .zip(&encoded)
+                .zip(&encoder)
+                .map(|((p, q), &e)| {
+                    let node = &nodes[e as usize];
+                    let d = quantize::decode3(*q, node.centroid, node.quant_scale, bits);
+                    (0..3)
+                        .map(|k| (f64::from(d[k]) - f64::from(p[k])).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .reduce(|| 0.0, f64::max);
         }
-        quantized.push(encoded.into_iter().map(|e| e.0).collect());
+        quantized.push(encoded);
     }
     let particle_order = order.pop().expect("finest level");
     let species_index = particle_order

@@ -17,18 +17,10 @@ use mdlod_format::meta::Species;
 use super::pca_split::Clusters;
 use super::Particles;
 
-/// The representatives of one level, indexed by cluster.
+/// The representatives of one level, indexed by cluster: one record per point, so that
+/// gathering them in another order touches one cache line per point.
 #[derive(Clone, Debug, Default)]
-pub struct LevelPoints {
-    pub position: Vec<[f32; 3]>,
-    pub radius: Vec<f32>,
-    pub area: Vec<f32>,
-    pub colour: Vec<[f32; 3]>,
-    pub attribute: Vec<f32>,
-    pub species: Vec<u16>,
-    pub bounds: Vec<([f32; 3], [f32; 3])>,
-    pub rms_radius: Vec<f32>,
-}
+pub struct LevelPoints(pub Vec<Rep>);
 
 /// The points of one level: the particles, or representatives of a finer level.
 #[derive(Clone, Copy, Debug)]
@@ -41,7 +33,7 @@ impl<'a> Source<'a> {
     pub fn len(&self) -> usize {
         match self {
             Source::Particles(p) => p.positions.len(),
-            Source::Reps(r) => r.position.len(),
+            Source::Reps(r) => r.0.len(),
         }
     }
 
@@ -64,7 +56,7 @@ impl<'a> Source<'a> {
     pub fn position(&self, i: usize) -> [f32; 3] {
         match self {
             Source::Particles(p) => p.positions[i],
-            Source::Reps(r) => r.position[i],
+            Source::Reps(r) => r.0[i].position,
         }
     }
 
@@ -72,7 +64,7 @@ impl<'a> Source<'a> {
     pub fn radius(&self, i: usize) -> f32 {
         match self {
             Source::Particles(p) => Self::species_of(p, i).radius,
-            Source::Reps(r) => r.radius[i],
+            Source::Reps(r) => r.0[i].radius,
         }
     }
 
@@ -80,7 +72,7 @@ impl<'a> Source<'a> {
     fn colour(&self, i: usize) -> [f32; 3] {
         match self {
             Source::Particles(p) => Self::species_of(p, i).colour,
-            Source::Reps(r) => r.colour[i],
+            Source::Reps(r) => r.0[i].colour,
         }
     }
 
@@ -88,7 +80,7 @@ impl<'a> Source<'a> {
     fn attribute(&self, i: usize) -> f32 {
         match self {
             Source::Particles(p) => p.attribute.map_or(0.0, |a| a[i]),
-            Source::Reps(r) => r.attribute[i],
+            Source::Reps(r) => r.0[i].attribute,
         }
     }
 }
@@ -125,30 +117,33 @@ impl Source<'_> {
                     bounds: (x.map(|v| v - r), x.map(|v| v + r)),
                 }
             }
-            Source::Reps(r) => Member {
-                position: r.position[i],
-                radius: r.radius[i],
-                area: r.area[i],
-                colour: r.colour[i],
-                attribute: r.attribute[i],
-                species: r.species[i],
-                bounds: r.bounds[i],
-            },
+            Source::Reps(r) => {
+                let r = &r.0[i];
+                Member {
+                    position: r.position,
+                    radius: r.radius,
+                    area: r.area,
+                    colour: r.colour,
+                    attribute: r.attribute,
+                    species: r.species,
+                    bounds: r.bounds,
+                }
+            }
         }
     }
 }
 
 /// One representative, computed in double precision from its members.
 #[derive(Clone, Copy, Debug)]
-struct Rep {
-    position: [f32; 3],
-    radius: f32,
-    area: f32,
-    colour: [f32; 3],
-    attribute: f32,
-    species: u16,
-    bounds: ([f32; 3], [f32; 3]),
-    rms_radius: f32,
+pub struct Rep {
+    pub position: [f32; 3],
+    pub radius: f32,
+    pub area: f32,
+    pub colour: [f32; 3],
+    pub attribute: f32,
+    pub species: u16,
+    pub bounds: ([f32; 3], [f32; 3]),
+    pub rms_radius: f32,
 }
 
 fn representative(src: &Source<'_>, members: &[u32]) -> Rep {
@@ -242,29 +237,9 @@ fn representative(src: &Source<'_>, members: &[u32]) -> Rep {
 /// The representatives of `clusters` of the points in `src`.
 pub fn representatives(src: &Source<'_>, clusters: &Clusters) -> LevelPoints {
     use rayon::prelude::*;
-    let reps: Vec<Rep> = (0..clusters.len())
+    let reps = (0..clusters.len())
         .into_par_iter()
         .map(|c| representative(src, clusters.members(c)))
         .collect();
-    let mut out = LevelPoints {
-        position: Vec::with_capacity(reps.len()),
-        radius: Vec::with_capacity(reps.len()),
-        area: Vec::with_capacity(reps.len()),
-        colour: Vec::with_capacity(reps.len()),
-        attribute: Vec::with_capacity(reps.len()),
-        species: Vec::with_capacity(reps.len()),
-        bounds: Vec::with_capacity(reps.len()),
-        rms_radius: Vec::with_capacity(reps.len()),
-    };
-    for r in reps {
-        out.position.push(r.position);
-        out.radius.push(r.radius);
-        out.area.push(r.area);
-        out.colour.push(r.colour);
-        out.attribute.push(r.attribute);
-        out.species.push(r.species);
-        out.bounds.push(r.bounds);
-        out.rms_radius.push(r.rms_radius);
-    }
-    out
+    LevelPoints(reps)
 }
