@@ -38,7 +38,7 @@ impl Progress for Bar {
         bar.set_draw_target(ProgressDrawTarget::stderr());
         let template = match (total, unit) {
             (Some(_), "bytes") => "{msg:>20} [{bar:30}] {binary_bytes}/{binary_total_bytes} {binary_bytes_per_sec} ETA {eta}",
-            (Some(_), _) => "{msg:>20} [{bar:30}] {human_pos}/{human_len} {per_sec} ETA {eta}",
+            (Some(_), _) => "{msg:>20} [{bar:30}] {human_pos}/{human_len} {per_sec:0} ETA {eta}",
             (None, _) => "{msg:>20} {spinner} {elapsed}",
         };
         bar.set_style(

@@ -58,7 +58,7 @@ pub fn generate(
         let b = indicatif::ProgressBar::new(total);
         b.set_style(
             indicatif::ProgressStyle::with_template(
-                "{msg:>20} [{bar:30}] {human_pos}/{human_len} {per_sec} ETA {eta}",
+                "{msg:>20} [{bar:30}] {human_pos}/{human_len} {per_sec:0} ETA {eta}",
             )
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
             .progress_chars("=> "),

@@ -30,7 +30,7 @@ use mdlod_format::meta::{AttributeInfo, Metadata, Species};
 use mdlod_format::{quantize, FormatError, Writer};
 use rayon::prelude::*;
 
-use crate::progress::Progress;
+use crate::progress::{NoProgress, Progress};
 use pca_split::{cluster, Clusters, Item};
 use representative::{LevelPoints, Source};
 
@@ -172,7 +172,9 @@ pub fn build(
 ) -> Result<Hierarchy, BuildError> {
     validate(&particles, params)?;
     let n = particles.positions.len();
-    progress.stage("building hierarchy", Some(n as u64), "particles");
+    // Progress in particles: the finest clustering counts for one pass over them, the
+    // rest of the build for another.
+    progress.stage("building hierarchy", Some(2 * n as u64), "particles");
 
     // 1-2. Cluster level by level, finest first, until the top node.
     let mut clusterings: Vec<Clusters> = Vec::new(); // finest first
@@ -197,11 +199,19 @@ pub fn build(
                     id: i as u32,
                 })
                 .collect();
-            cluster(items, params.max_cluster_size as usize)
+            let p: &dyn Progress = if coarser.is_empty() {
+                progress
+            } else {
+                &NoProgress
+            };
+            cluster(items, params.max_cluster_size as usize, p)
         };
         let reps = representative::representatives(&src, &clusters);
         if coarser.is_empty() {
-            progress.advance(n as u64 / 2);
+            if clusters.len() == 1 {
+                progress.advance(n as u64);
+            }
+            progress.advance(n as u64 / 4);
         }
         let done = clusters.len() == 1;
         clusterings.push(clusters);
@@ -253,6 +263,7 @@ pub fn build(
     }
     levels[last].node_first = levels[last - 1].node_first + levels[last - 1].point_count;
 
+    progress.advance(n as u64 / 4);
     // 4. Nodes.
     let delta_n = params.delta_n as usize;
     let mut nodes: Vec<NodeRecord> = Vec::with_capacity(node_first as usize);
@@ -322,6 +333,7 @@ pub fn build(
         nodes[id].quant_node = anc as u32;
     }
 
+    progress.advance(n as u64 / 4);
     // 5. Quantization: scales from the largest offsets of every encoded level.
     let bits = params.position_bits;
     let positions: Vec<Vec<[f32; 3]>> = (0..level_count)
@@ -427,7 +439,7 @@ pub fn build(
             .collect();
         (q, min, max)
     });
-    progress.advance(n as u64 - n as u64 / 2);
+    progress.advance(n as u64 - 3 * (n as u64 / 4));
     progress.finish_stage();
     Ok(Hierarchy {
         params: params.clone(),

@@ -14,6 +14,8 @@
 //! order instead, so crystal lattices and duplicated points never stall the build.
 
 /// One point being clustered.
+use crate::progress::Progress;
+
 #[derive(Clone, Copy, Debug)]
 pub struct Item {
     pub position: [f32; 3],
@@ -49,7 +51,8 @@ impl Clusters {
 const PARALLEL_MIN: usize = 1 << 15;
 
 /// Splits `items` into clusters of at most `max_cluster_size` points.
-pub fn cluster(mut items: Vec<Item>, max_cluster_size: usize) -> Clusters {
+/// `progress` advances by the points of each finished subtree.
+pub fn cluster(mut items: Vec<Item>, max_cluster_size: usize, progress: &dyn Progress) -> Clusters {
     let max = max_cluster_size.max(1);
     let n = items.len();
     let mut scratch = items.clone();
@@ -60,7 +63,7 @@ pub fn cluster(mut items: Vec<Item>, max_cluster_size: usize) -> Clusters {
             .first()
             .map_or([0.0; 3], |i| i.position.map(f64::from)),
     );
-    let sizes = split(&mut items, &mut scratch, &mut order, &stats, max);
+    let sizes = split(&mut items, &mut scratch, &mut order, &stats, max, progress);
     let mut offsets = Vec::with_capacity(sizes.len() + 1);
     let mut acc = 0u32;
     offsets.push(0);
@@ -195,10 +198,12 @@ fn split(
     order: &mut [u32],
     stats: &Stats,
     max: usize,
+    progress: &dyn Progress,
 ) -> Vec<u32> {
     if items.len() < PARALLEL_MIN {
         let mut sizes = Vec::with_capacity(items.len() / max * 2 + 1);
         split_into(items, scratch, order, stats, max, &mut sizes);
+        progress.advance(items.len() as u64);
         return sizes;
     }
     let (mid, sa, sb) = partition(items, scratch, stats);
@@ -206,8 +211,8 @@ fn split(
     let (il, ir) = items.split_at_mut(mid);
     let (ol, or) = order.split_at_mut(mid);
     let (mut a, b) = rayon::join(
-        || split(sl, il, ol, &sa, max),
-        || split(sr, ir, or, &sb, max),
+        || split(sl, il, ol, &sa, max, progress),
+        || split(sr, ir, or, &sb, max, progress),
     );
     a.extend(b);
     a
@@ -442,7 +447,7 @@ mod tests {
         let pts: Vec<[f32; 3]> = (0..1000)
             .map(|i| [(i % 10) as f32, ((i / 10) % 10) as f32, (i / 100) as f32])
             .collect();
-        let c = cluster(items(&pts), 8);
+        let c = cluster(items(&pts), 8, &crate::NoProgress);
         let mut seen = c.order.clone();
         seen.sort_unstable();
         assert_eq!(seen, (0..1000).collect::<Vec<u32>>());
@@ -455,12 +460,12 @@ mod tests {
     #[test]
     fn duplicates_and_planes_terminate() {
         let pts = vec![[1.0f32, 2.0, 3.0]; 500];
-        let c = cluster(items(&pts), 4);
+        let c = cluster(items(&pts), 4, &crate::NoProgress);
         assert!(c.len() >= 125);
         let plane: Vec<[f32; 3]> = (0..400)
             .map(|i| [(i % 20) as f32, (i / 20) as f32, 0.0])
             .collect();
-        let c = cluster(items(&plane), 8);
+        let c = cluster(items(&plane), 8, &crate::NoProgress);
         assert!((0..c.len()).all(|k| c.members(k).len() <= 8));
     }
 
@@ -472,7 +477,7 @@ mod tests {
             pts.push([i as f32 * 0.1, 0.0, 0.0]);
             pts.push([100.0 + i as f32 * 0.1, 0.0, 0.0]);
         }
-        let c = cluster(items(&pts), 4);
+        let c = cluster(items(&pts), 4, &crate::NoProgress);
         for k in 0..c.len() {
             let xs: Vec<f32> = c.members(k).iter().map(|&i| pts[i as usize][0]).collect();
             assert!(xs.iter().all(|&x| x < 50.0) || xs.iter().all(|&x| x > 50.0));
