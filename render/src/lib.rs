@@ -221,13 +221,12 @@ pub fn camera_for(
     })
 }
 
-/// Renders an open file with an existing renderer.
-pub fn render_image(
+/// The camera, traversal and frame settings `opts` asks for, checked.
+fn frame_setup(
     renderer: &Renderer,
     file: &MdlodFile,
     opts: &RenderOptions,
-) -> Result<(RgbaImage, RenderReport), RenderError> {
-    let t0 = Instant::now();
+) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     if !(opts.error_px.is_finite() && opts.error_px >= 0.0) {
         return Err(RenderError::InvalidOptions(format!(
             "error {} px (must be 0 or more)",
@@ -235,47 +234,69 @@ pub fn render_image(
         )));
     }
     let camera = camera_for(file, &opts.view, opts.width, opts.height)?;
-    let budget = opts.budget.min(renderer.max_points()).max(1);
-    let settings = TraversalSettings {
+    let traversal = TraversalSettings {
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,
-        budget_points: budget,
+        budget_points: opts.budget.min(renderer.max_points()).max(1),
     };
-    let draw = traverse(&camera, file, &settings);
-    let traversal_time = t0.elapsed();
-    let frame = renderer.render(
-        file,
-        &camera,
-        &draw,
-        &FrameSettings {
-            width: opts.width,
-            height: opts.height,
-            spp: opts.spp,
-            background_srgb: opts.background,
-            lighting: opts.lighting,
-            read_depth: false,
-        },
-    )?;
-    let report = RenderReport {
+    let settings = FrameSettings {
         width: opts.width,
         height: opts.height,
         spp: opts.spp,
-        particles_drawn: draw.particles,
-        nodes_drawn: draw.representatives,
-        ranges: draw.ranges.len(),
-        nodes_opened: draw.opened_nodes,
-        error_px: draw.error_px,
-        budget_limited: draw.budget_limited,
-        budget,
-        adapter: renderer.ctx.adapter_name().to_string(),
-        backend: format!("{:?}", renderer.ctx.backend()),
-        camera,
-        traversal_time,
-        gpu_time: frame.gpu_time,
-        total_time: t0.elapsed(),
-        frames: 1,
-        first_frame_time: None,
+        background_srgb: opts.background,
+        lighting: opts.lighting,
+        read_depth: false,
     };
+    Ok((camera, traversal, settings))
+}
+
+impl RenderReport {
+    /// The report of one drawn frame (times other than the GPU's left at zero).
+    fn new(
+        renderer: &Renderer,
+        opts: &RenderOptions,
+        camera: Camera,
+        traversal: &TraversalSettings,
+        draw: &DrawList,
+        frame: &RenderedFrame,
+    ) -> RenderReport {
+        RenderReport {
+            width: opts.width,
+            height: opts.height,
+            spp: opts.spp,
+            particles_drawn: draw.particles,
+            nodes_drawn: draw.representatives,
+            ranges: draw.ranges.len(),
+            nodes_opened: draw.opened_nodes,
+            error_px: draw.error_px,
+            budget_limited: draw.budget_limited,
+            budget: traversal.budget_points,
+            adapter: renderer.ctx.adapter_name().to_string(),
+            backend: format!("{:?}", renderer.ctx.backend()),
+            camera,
+            traversal_time: Duration::ZERO,
+            gpu_time: frame.gpu_time,
+            total_time: Duration::ZERO,
+            frames: 1,
+            first_frame_time: None,
+        }
+    }
+}
+
+/// Renders an open file with an existing renderer.
+pub fn render_image(
+    renderer: &Renderer,
+    file: &MdlodFile,
+    opts: &RenderOptions,
+) -> Result<(RgbaImage, RenderReport), RenderError> {
+    let t0 = Instant::now();
+    let (camera, traversal, settings) = frame_setup(renderer, file, opts)?;
+    let draw = traverse(&camera, file, &traversal);
+    let traversal_time = t0.elapsed();
+    let frame = renderer.render(file, &camera, &draw, &settings)?;
+    let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
+    report.traversal_time = traversal_time;
+    report.total_time = t0.elapsed();
     Ok((frame.image, report))
 }
 
@@ -289,27 +310,7 @@ pub fn render_streaming(
     pool_bytes: u64,
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
     let t0 = Instant::now();
-    if !(opts.error_px.is_finite() && opts.error_px >= 0.0) {
-        return Err(RenderError::InvalidOptions(format!(
-            "error {} px (must be 0 or more)",
-            opts.error_px
-        )));
-    }
-    let camera = camera_for(&file, &opts.view, opts.width, opts.height)?;
-    let budget = opts.budget.min(renderer.max_points()).max(1);
-    let traversal = TraversalSettings {
-        viewport: [opts.width, opts.height],
-        error_px: opts.error_px,
-        budget_points: budget,
-    };
-    let settings = FrameSettings {
-        width: opts.width,
-        height: opts.height,
-        spp: opts.spp,
-        background_srgb: opts.background,
-        lighting: opts.lighting,
-        read_depth: false,
-    };
+    let (camera, traversal, settings) = frame_setup(renderer, &file, opts)?;
     let mut stream = StreamingRenderer::new(renderer, file, pool_bytes)?;
     let mut frames = 0u32;
     let mut first_frame_time = None;
@@ -324,26 +325,11 @@ pub fn render_streaming(
         // arrives or is asked for (the best this pool can hold).
         let settled = stats.installed == 0 && stats.requested == 0 && stats.pending == 0;
         if stats.complete || settled || frames >= MAX_FRAMES {
-            let report = RenderReport {
-                width: opts.width,
-                height: opts.height,
-                spp: opts.spp,
-                particles_drawn: draw.particles,
-                nodes_drawn: draw.representatives,
-                ranges: draw.ranges.len(),
-                nodes_opened: draw.opened_nodes,
-                error_px: draw.error_px,
-                budget_limited: draw.budget_limited || stats.pool_limited,
-                budget,
-                adapter: renderer.ctx.adapter_name().to_string(),
-                backend: format!("{:?}", renderer.ctx.backend()),
-                camera,
-                traversal_time: Duration::ZERO,
-                gpu_time: frame.gpu_time,
-                total_time: t0.elapsed(),
-                frames,
-                first_frame_time,
-            };
+            let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
+            report.budget_limited |= stats.pool_limited;
+            report.total_time = t0.elapsed();
+            report.frames = frames;
+            report.first_frame_time = first_frame_time;
             return Ok((frame.image, report));
         }
         stream.wait_for_loads(Duration::from_secs(5));
