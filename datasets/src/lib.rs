@@ -319,3 +319,30 @@ pub fn write_lammps_dump_to_path(
     let mut file = std::fs::File::create(path)?;
     write_lammps_dump(opts, &mut file, progress)
 }
+
+/// The sites of an FCC block of `cells[0] × cells[1] × cells[2]` unit cells with lattice
+/// constant `a`, starting at the origin, in cell order (x outermost, then y, z, then the
+/// four basis sites): a small exact lattice for tests.
+pub fn fcc_block(cells: [usize; 3], a: f32) -> Vec<[f32; 3]> {
+    const BASIS: [[f32; 3]; 4] = [
+        [0.0, 0.0, 0.0],
+        [0.5, 0.5, 0.0],
+        [0.5, 0.0, 0.5],
+        [0.0, 0.5, 0.5],
+    ];
+    let mut sites = Vec::with_capacity(4 * cells[0] * cells[1] * cells[2]);
+    for i in 0..cells[0] {
+        for j in 0..cells[1] {
+            for k in 0..cells[2] {
+                for b in BASIS {
+                    sites.push([
+                        (i as f32 + b[0]) * a,
+                        (j as f32 + b[1]) * a,
+                        (k as f32 + b[2]) * a,
+                    ]);
+                }
+            }
+        }
+    }
+    sites
+}

@@ -25,29 +25,16 @@ use xxhash_rust::xxh3::xxh3_64;
 /// An FCC slab of `n × n × n/2` cells (two species) with a sparse cloud above it and a
 /// scalar attribute: `2 n³ + 200` particles.
 fn test_frame(n: usize) -> Frame {
-    let a = 3.615f32;
-    let basis = [
-        [0.0, 0.0, 0.0],
-        [0.5, 0.5, 0.0],
-        [0.5, 0.0, 0.5],
-        [0.0, 0.5, 0.5],
-    ];
-    let mut positions = vec![];
-    let mut species_index = vec![];
-    for i in 0..n {
-        for j in 0..n {
-            for k in 0..n / 2 {
-                for b in basis {
-                    positions.push([
-                        (i as f32 + b[0]) * a,
-                        (j as f32 + b[1]) * a,
-                        (k as f32 + b[2]) * a,
-                    ]);
-                    species_index.push(u16::from((i + 2 * j + k) % 5 == 0));
-                }
-            }
-        }
-    }
+    let (nz, ny) = (n / 2, n);
+    let mut positions = mdlod_datasets::fcc_block([n, n, nz], 3.615);
+    // Species by unit cell (i, j, k): site s lies in cell s / 4, k innermost.
+    let mut species_index: Vec<u16> = (0..positions.len())
+        .map(|s| {
+            let c = s / 4;
+            let (i, j, k) = (c / (nz * ny), (c / nz) % ny, c % nz);
+            u16::from((i + 2 * j + k) % 5 == 0)
+        })
+        .collect();
     let mut s = 0x2545F4914F6CDD1Du64;
     let mut r = || {
         s ^= s << 13;

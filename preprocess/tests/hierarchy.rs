@@ -9,29 +9,16 @@ use mdlod_preprocess::{Attribute, Frame, NoProgress, SpeciesName};
 
 /// A small deterministic frame: an FCC slab, a duplicated point pair, a sparse cloud.
 fn test_frame(n_cells: usize) -> Frame {
-    let a = 3.615f32;
-    let basis = [
-        [0.0, 0.0, 0.0],
-        [0.5, 0.5, 0.0],
-        [0.5, 0.0, 0.5],
-        [0.0, 0.5, 0.5],
-    ];
-    let mut positions = vec![];
-    let mut species_index = vec![];
-    for i in 0..n_cells {
-        for j in 0..n_cells {
-            for k in 0..n_cells / 2 {
-                for b in basis {
-                    positions.push([
-                        (i as f32 + b[0]) * a,
-                        (j as f32 + b[1]) * a,
-                        (k as f32 + b[2]) * a,
-                    ]);
-                    species_index.push(((i + j + k) % 7 == 0) as u16);
-                }
-            }
-        }
-    }
+    let (nz, ny) = (n_cells / 2, n_cells);
+    let mut positions = mdlod_datasets::fcc_block([n_cells, n_cells, nz], 3.615);
+    // Species by unit cell (i, j, k): site s lies in cell s / 4, k innermost.
+    let mut species_index: Vec<u16> = (0..positions.len())
+        .map(|s| {
+            let c = s / 4;
+            let (i, j, k) = (c / (nz * ny), (c / nz) % ny, c % nz);
+            u16::from((i + j + k) % 7 == 0)
+        })
+        .collect();
     // Exact duplicates.
     for _ in 0..50 {
         positions.push([1.0, 1.0, 100.0]);

@@ -66,29 +66,11 @@ pub fn cloud_frame(n: usize, seed: u64) -> Frame {
 
 /// An FCC copper block of `n³` cells (4 atoms each), every 7th atom silver.
 pub fn fcc_frame(n: usize) -> Frame {
-    let a = 3.615f32;
-    let basis = [
-        [0.0, 0.0, 0.0],
-        [0.5, 0.5, 0.0],
-        [0.5, 0.0, 0.5],
-        [0.0, 0.5, 0.5],
-    ];
-    let mut positions = vec![];
-    let mut species_index = vec![];
-    for i in 0..n {
-        for j in 0..n {
-            for k in 0..n {
-                for b in basis {
-                    positions.push([
-                        (i as f32 + b[0]) * a,
-                        (j as f32 + b[1]) * a,
-                        (k as f32 + b[2]) * a,
-                    ]);
-                    species_index.push(u16::from(positions.len() % 7 == 0));
-                }
-            }
-        }
-    }
+    let positions = mdlod_datasets::fcc_block([n, n, n], 3.615);
+    // Every 7th atom silver (counting from 1).
+    let species_index = (1..=positions.len())
+        .map(|count| u16::from(count % 7 == 0))
+        .collect();
     Frame {
         positions,
         species_index,
