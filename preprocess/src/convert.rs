@@ -139,6 +139,9 @@ pub fn convert_file(
     };
     let t0 = Instant::now();
     let frame = dump.read_frame(k, read, progress)?;
+    // The frame owns its data: release the mapped (or decompressed) dump before the
+    // hierarchy's working memory is allocated.
+    drop(dump);
     let read_time = t0.elapsed();
     let mut report = convert_frame(
         &frame,
