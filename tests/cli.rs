@@ -332,43 +332,18 @@ fn render_writes_a_picture_and_views_round_trip() {
 
     // The saved view reproduces the image exactly; a streaming pool ample for the file
     // converges to the same pixels.
+    let from_view = |png: &Path, extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(png), "--view", s(&view)];
+        args.extend(["--width", "160", "--height", "120", "--spp", "2"]);
+        args.extend(["--background", "#000000"]);
+        args.extend(extra);
+        ok(&args)
+    };
     let b = dir.path().join("b.png");
-    ok(&[
-        "render",
-        s(&file),
-        "-o",
-        s(&b),
-        "--width",
-        "160",
-        "--height",
-        "120",
-        "--view",
-        s(&view),
-        "--spp",
-        "2",
-        "--background",
-        "#000000",
-    ]);
+    from_view(&b, &[]);
     assert_eq!(read_png(&a).2, read_png(&b).2);
     let c = dir.path().join("c.png");
-    let text = ok(&[
-        "render",
-        s(&file),
-        "-o",
-        s(&c),
-        "--width",
-        "160",
-        "--height",
-        "120",
-        "--view",
-        s(&view),
-        "--spp",
-        "2",
-        "--background",
-        "#000000",
-        "--gpu-memory",
-        "16M",
-    ]);
+    let text = from_view(&c, &["--gpu-memory", "16M"]);
     assert!(text.contains("first image after"), "{text}");
     assert_eq!(read_png(&a).2, read_png(&c).2);
 }
