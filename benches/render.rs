@@ -9,6 +9,8 @@
 //! the largest size also drawn without level of detail (every particle).
 //! `MDLOD_RENDER_ERROR` (default 1) and `MDLOD_RENDER_BUDGET` (default 4000000): the
 //! screen error in pixels and the sphere budget of the level-of-detail frames.
+//! `MDLOD_RENDER_COMPARE_MAX` (default 20000000): the largest size also drawn without
+//! occlusion culling, for comparison.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -90,6 +92,7 @@ fn main() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(1.0);
     let budget = env_list("MDLOD_RENDER_BUDGET", "4000000")[0];
+    let compare_max = env_list("MDLOD_RENDER_COMPARE_MAX", "20000000")[0];
     let renderer = Renderer::new(GpuContext::new().expect("a GPU adapter"));
     let adapter = renderer.ctx.adapter_name().to_string();
     let view = ViewSpec::Orbit {
@@ -109,6 +112,7 @@ fn main() {
     };
     let pool: u64 = 512 << 20;
     let mut rows = vec![];
+    let mut costs = vec![];
     for &n in &sizes {
         let path = dataset(n);
         let size_mb = std::fs::metadata(&path).unwrap().len() as f64 / 1e6;
@@ -122,18 +126,33 @@ fn main() {
         let complete = open + stream.total_time;
         let rss_after_stream = rss_mib();
         let reps = if n >= 50_000_000 { 3 } else { 5 };
-        let mut lod = vec![];
-        let mut report = None;
-        for _ in 0..reps {
-            let (_img, r) = render_image(&renderer, &file, &base).unwrap();
-            lod.push(r.gpu_time.unwrap_or(r.total_time));
-            report = Some(r);
-        }
-        let r = report.unwrap();
+        // Level of detail with occlusion culling (the default), then without it.
+        let lod = |opts: &RenderOptions, reps: usize| {
+            let mut gpu = vec![];
+            let mut cost = vec![];
+            let mut report = None;
+            for _ in 0..reps {
+                let (_img, r) = render_image(&renderer, &file, opts).unwrap();
+                let g = r.gpu_time.unwrap_or(r.total_time);
+                gpu.push(g);
+                cost.push(g + r.traversal_time);
+                report = Some(r);
+            }
+            (median(gpu), median(cost), report.unwrap())
+        };
+        let (gpu, cost, r) = lod(&base, reps);
+        let plain = (n <= compare_max).then(|| {
+            let opts = RenderOptions {
+                occlusion: false,
+                ..base.clone()
+            };
+            lod(&opts, reps.min(3))
+        });
         let full = (n <= full_max).then(|| {
             let opts = RenderOptions {
                 error_px: 0.0,
                 budget: u64::MAX,
+                occlusion: false,
                 ..base.clone()
             };
             let mut times = vec![];
@@ -145,20 +164,28 @@ fn main() {
             }
             (median(times), drawn)
         });
+        let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
         let row = format!(
-            "| {n} | {size_mb:.0} | {} | {:.2} | {:.1} | {:.1} | {:.0} | {:.0} | {} | {} | {:.0} |",
+            "| {n} | {size_mb:.0} | {} | {} | {:.2} | {:.1} | {:.1} | {:.1} | {} | {} | {:.0} | {:.0} | {} | {} | {:.0} | {:.0} / {:.0} |",
             r.particles_drawn + r.nodes_drawn,
+            r.nodes_occluded,
             r.error_px,
-            ms(median(lod)),
+            ms(gpu),
             ms(r.traversal_time),
+            ms(cost),
+            plain.as_ref().map_or("—".into(), |p| (p.2.particles_drawn + p.2.nodes_drawn).to_string()),
+            plain.as_ref().map_or("—".into(), |p| format!("{:.1} / {:.1}", ms(p.0), ms(p.1))),
             ms(first),
             ms(complete),
             full.map_or("—".into(), |f| format!("{:.1}", ms(f.0))),
             full.map_or("—".into(), |f| f.1.to_string()),
             rss_after_stream,
+            mib(r.gpu_data_bytes),
+            mib(stream.gpu_data_bytes + stream.gpu_target_bytes),
         );
         eprintln!("{row}");
         rows.push(row);
+        costs.push((n, gpu, cost, r.error_px));
     }
     // The section's marker: `render` here; another name for results from another adapter.
     let section = std::env::var("MDLOD_BENCH_SECTION").unwrap_or_else(|_| "render".into());
@@ -173,11 +200,26 @@ fn main() {
         "Adapter: **{adapter}**. Image {W}×{H}, 1 sample per pixel, perspective view fitting the whole crater data set, screen error {error_px} px, budget {budget} spheres. Frame times are GPU time (timestamp queries) when the adapter has them, else wall time; medians. Streaming pool {} MiB.\n\n",
         pool >> 20,
     ));
-    t.push_str("| particles | .mdlod MB | spheres drawn (LOD) | achieved error px | frame ms (LOD) | traversal ms | first image ms (open + coarse frame) | view complete ms (streaming) | frame ms (every particle) | spheres (every particle) | host RSS MiB |\n");
-    t.push_str("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    t.push_str("| particles | .mdlod MB | spheres drawn | hidden clusters left out | achieved error px | GPU frame ms | traversal ms | frame cost ms (traversal + GPU) | spheres without occlusion culling | without: GPU ms / cost ms | first image ms (open + coarse frame) | view complete ms (streaming) | frame ms (every particle) | spheres (every particle) | host RSS MiB | GPU MiB: cut / streaming pool + targets |\n");
+    t.push_str(
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
     for r in &rows {
         t.push_str(r);
         t.push('\n');
+    }
+    if let (Some(small), Some(large)) = (costs.first(), costs.last()) {
+        if large.0 > small.0 {
+            t.push_str(&format!(
+                "\nScaling from {} to {} particles at the same image size and error: GPU frame time {:.2}×, frame cost (traversal + GPU) {:.2}× (target ≤ 1.5×); achieved error {:.2} and {:.2} px.\n",
+                small.0,
+                large.0,
+                large.1.as_secs_f64() / small.1.as_secs_f64(),
+                large.2.as_secs_f64() / small.2.as_secs_f64(),
+                small.3,
+                large.3,
+            ));
+        }
     }
     if let Some(o) = ovito {
         t.push_str(&o);

@@ -6,8 +6,10 @@
 //! 2. [`camera`] / [`view`] give the orbit camera (optionally from a JSON view file).
 //! 3. [`traversal::traverse`] picks the cut through the hierarchy on the CPU: nodes no
 //!    larger than `error_px` pixels on screen are drawn as their representative, larger
-//!    ones are opened, largest first, up to a point budget; subtrees outside the view
-//!    frustum are culled. The result is a list of contiguous point ranges.
+//!    ones are opened, up to a point budget; subtrees outside the view frustum are culled,
+//!    and so are those hidden behind spheres already chosen ([`occlusion`]: the cut is
+//!    walked nearest first against a conservative CPU depth pyramid, so no visible pixel
+//!    changes). The result is a list of contiguous point ranges.
 //! 4. [`passes::sphere_raycast`] uploads those ranges' raw quantized positions and draws
 //!    one ray-cast, depth-correct sphere per point, decoding positions on the GPU;
 //!    [`renderer`] runs it once per sample (jittered supersampling), averages and reads
@@ -26,6 +28,7 @@ pub mod camera;
 pub mod context;
 pub mod error;
 pub mod image;
+pub mod occlusion;
 pub mod passes;
 pub mod renderer;
 pub mod streaming;
@@ -42,6 +45,7 @@ pub use context::{BackendChoice, GpuContext};
 pub use error::RenderError;
 pub use glam;
 pub use image::RgbaImage;
+pub use occlusion::OcclusionMode;
 pub use passes::sphere_raycast::Lighting;
 pub use renderer::{FrameSettings, RenderedFrame, Renderer};
 pub use streaming::{StreamStats, StreamingRenderer};
@@ -97,6 +101,9 @@ pub struct RenderOptions {
     /// used pages evicted) instead of uploading the whole cut; frames are drawn until
     /// everything the view needs has arrived.
     pub gpu_memory: Option<u64>,
+    /// Leave out clusters hidden behind spheres already drawn (exact: no visible pixel
+    /// changes; see [`occlusion`]).
+    pub occlusion: bool,
 }
 
 impl Default for RenderOptions {
@@ -112,6 +119,7 @@ impl Default for RenderOptions {
             lighting: Lighting::default(),
             backends: BackendChoice::FromEnv,
             gpu_memory: None,
+            occlusion: true,
         }
     }
 }
@@ -130,6 +138,8 @@ pub struct RenderReport {
     pub ranges: usize,
     /// Nodes opened by the traversal.
     pub nodes_opened: u64,
+    /// Nodes left out as hidden behind drawn spheres (occlusion culling).
+    pub nodes_occluded: u64,
     /// Largest projected size (px) of a representative drawn (0: only particles).
     pub error_px: f32,
     /// True when the point budget stopped refinement.
@@ -149,6 +159,10 @@ pub struct RenderReport {
     pub frames: u32,
     /// With streaming: wall time until the first (coarse) frame was read back.
     pub first_frame_time: Option<Duration>,
+    /// GPU memory of the last frame: point data (the uploaded cut, or the streaming
+    /// pool) and render targets, in bytes.
+    pub gpu_data_bytes: u64,
+    pub gpu_target_bytes: u64,
 }
 
 /// Parses a colour as `#rrggbb`, `rrggbb` or three numbers in [0, 1] separated by commas.
@@ -238,6 +252,13 @@ fn frame_setup(
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,
         budget_points: opts.budget.min(renderer.max_points()).max(1),
+        occlusion: if !opts.occlusion {
+            OcclusionMode::Off
+        } else if opts.spp <= 1 {
+            OcclusionMode::PixelCentres
+        } else {
+            OcclusionMode::WholePixels
+        },
     };
     let settings = FrameSettings {
         width: opts.width,
@@ -268,6 +289,7 @@ impl RenderReport {
             nodes_drawn: draw.representatives,
             ranges: draw.ranges.len(),
             nodes_opened: draw.opened_nodes,
+            nodes_occluded: draw.occluded_nodes,
             error_px: draw.error_px,
             budget_limited: draw.budget_limited,
             budget: traversal.budget_points,
@@ -279,6 +301,8 @@ impl RenderReport {
             total_time: Duration::ZERO,
             frames: 1,
             first_frame_time: None,
+            gpu_data_bytes: frame.gpu_data_bytes,
+            gpu_target_bytes: frame.gpu_target_bytes,
         }
     }
 }

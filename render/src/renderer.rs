@@ -65,6 +65,11 @@ pub struct RenderedFrame {
     pub gpu_time: Option<Duration>,
     /// Points drawn.
     pub points: u32,
+    /// Bytes of point data the frame read on the GPU: the uploaded cut, or the
+    /// streaming pool's position and attribute buffers plus its range tables.
+    pub gpu_data_bytes: u64,
+    /// Bytes of the frame's render targets and readback buffer.
+    pub gpu_target_bytes: u64,
 }
 
 /// Converts one sRGB-encoded channel to linear.
@@ -188,13 +193,15 @@ impl Renderer {
     ) -> Result<RenderedFrame, RenderError> {
         self.check(settings)?;
         let buffers = self.sphere.upload(&self.ctx.device, packed);
-        self.render_bound(
+        let mut frame = self.render_bound(
             &buffers,
             packed.position_bits,
             packed.species.len() as u32,
             camera,
             settings,
-        )
+        )?;
+        frame.gpu_data_bytes = packed.data_bytes();
+        Ok(frame)
     }
 
     /// The sphere pass, for callers that bind their own buffers (see
@@ -476,11 +483,16 @@ impl Renderer {
             }
             None => None,
         };
+        // sample (RGBA8) + depth (f32) + accumulation (RGBA16F) + output (RGBA8) + readback.
+        let gpu_target_bytes =
+            u64::from(w) * u64::from(h) * (4 + 4 + 8 + 4) + u64::from(colour_row) * u64::from(h);
         Ok(RenderedFrame {
             image,
             depth,
             gpu_time,
             points: buffers.points,
+            gpu_data_bytes: 0,
+            gpu_target_bytes,
         })
     }
 

@@ -451,6 +451,12 @@ impl<'r> StreamingRenderer<'r> {
             self.renderer
                 .render_bound(&buffers, bits, species_count, camera, settings)
         })?;
+        let mut frame = frame;
+        frame.gpu_data_bytes = self.positions.size()
+            + self.attrs.size()
+            + ranges_buf.size()
+            + point_range_buf.size()
+            + self.species.size();
         Ok((frame, draw, stats))
     }
 
@@ -565,5 +571,11 @@ impl Residency for PoolResidency<'_> {
             }
         }
         all
+    }
+
+    fn restart(&mut self) {
+        self.used.clear();
+        self.wanted.clear();
+        self.pool_limited = false;
     }
 }

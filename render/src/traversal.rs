@@ -36,6 +36,17 @@
 //! A top node that is never opened is drawn as a range of level 0 (its centroid).
 //! Ranges come out ordered by opened node index, so by level and position in the file.
 //!
+//! With occlusion culling ([`TraversalSettings::occlusion`], on by default) the same
+//! cut is walked *nearest first* instead: a node whose box is hidden behind the spheres
+//! already committed (see [`crate::occlusion`]) is dropped with its whole subtree; a node
+//! small enough is committed as its representative; any other is opened, and particle
+//! children are committed at once. Every commitment is recorded in the occlusion buffer,
+//! so what is behind it is culled as the walk goes deeper. Without a budget the result
+//! is exactly the cut above minus hidden subtrees, and no pixel changes. The budget
+//! counts committed points; when they exceed it the walk starts over with the error
+//! 1.5× coarser (reported in [`DrawList::restarts`] and as `budget_limited`), so a
+//! budget-limited cut is uniformly coarser rather than fine in front and coarse behind.
+//!
 //! Streaming plugs in through [`Residency`]: a node whose children's data are not on the
 //! GPU is not opened but stays drawn (so a missing subtree is drawn by its nearest
 //! resident ancestor) and refinement continues with the other nodes; the residency
@@ -47,9 +58,10 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, HashSet};
 
 use glam::{Mat4, Vec2, Vec3};
-use mdlod_format::{MdlodFile, NodeRecord};
+use mdlod_format::{quantize, MdlodFile, NodeRecord};
 
 use crate::camera::{Camera, Projection};
+use crate::occlusion::{OcclusionBuffer, OcclusionMode};
 
 /// What the cut must honour.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -60,6 +72,8 @@ pub struct TraversalSettings {
     pub error_px: f32,
     /// Most points (spheres) to draw; at least 1 is always drawn when anything is visible.
     pub budget_points: u64,
+    /// Occlusion culling (see [`crate::occlusion`]); match it to the samples per pixel.
+    pub occlusion: OcclusionMode,
 }
 
 impl Default for TraversalSettings {
@@ -68,6 +82,7 @@ impl Default for TraversalSettings {
             viewport: [1280, 720],
             error_px: 1.0,
             budget_points: 4_000_000,
+            occlusion: OcclusionMode::PixelCentres,
         }
     }
 }
@@ -108,6 +123,11 @@ pub struct DrawList {
     /// Nodes that should have been opened but whose children were not resident
     /// (streaming); they are drawn as their representatives.
     pub deferred_nodes: u64,
+    /// Nodes left out because spheres already drawn hide them (occlusion culling).
+    pub occluded_nodes: u64,
+    /// Times the occlusion traversal started over with a coarser error to meet the
+    /// budget.
+    pub restarts: u32,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -164,6 +184,14 @@ impl Projector {
         }
     }
 
+    /// Distance along the view direction to the near side of the sphere around the
+    /// node's bounding box: the order in which the occlusion traversal visits nodes.
+    pub fn near_depth(&self, n: &NodeRecord) -> f32 {
+        let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
+        let r = (max - min).length() * 0.5;
+        -self.view_from_world.transform_point3((min + max) * 0.5).z - r
+    }
+
     /// True when the node's bounding box may intersect the view frustum.
     pub fn visible(&self, n: &NodeRecord) -> bool {
         Camera::box_in_frustum(&self.planes, n.bounds_min.into(), n.bounds_max.into())
@@ -190,6 +218,9 @@ pub trait Residency {
     /// ancestor); an implementation may then request the data, most wanted (largest)
     /// first. `true` means the children may be drawn in this frame.
     fn can_open(&mut self, file: &MdlodFile, id: u32, size_px: f32) -> bool;
+
+    /// The traversal starts over (with a coarser error): forget this pass's requests.
+    fn restart(&mut self) {}
 }
 
 /// Everything is resident (the whole file is at hand).
@@ -209,6 +240,39 @@ pub fn traverse(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings)
 /// [`traverse`] where opening a node also needs `residency`'s consent; a refused node
 /// stays drawn and refinement goes on with the others.
 pub fn traverse_with(
+    camera: &Camera,
+    file: &MdlodFile,
+    settings: &TraversalSettings,
+    residency: &mut dyn Residency,
+) -> DrawList {
+    if settings.occlusion != OcclusionMode::Off {
+        let mut error_px = settings.error_px;
+        for attempt in 0..MAX_RESTARTS {
+            let Some(mut buffer) =
+                OcclusionBuffer::new(camera, settings.viewport, settings.occlusion)
+            else {
+                break;
+            };
+            if let Some(mut list) =
+                front_to_back(camera, file, settings, error_px, residency, &mut buffer)
+            {
+                list.restarts = attempt;
+                list.budget_limited = attempt > 0;
+                return list;
+            }
+            residency.restart();
+            error_px = (error_px * 1.5).max(0.5);
+        }
+    }
+    largest_first(camera, file, settings, residency)
+}
+
+/// Coarsening steps (×1.5 each) the occlusion traversal tries before it falls back to
+/// the largest-first cut, which always meets the budget.
+const MAX_RESTARTS: u32 = 24;
+
+/// The cut without occlusion: largest projected size first, up to the budget.
+fn largest_first(
     camera: &Camera,
     file: &MdlodFile,
     settings: &TraversalSettings,
@@ -269,9 +333,156 @@ pub fn traverse_with(
             }
         }
     }
+    emit(file, &proj, &opened, &HashSet::new(), achieved, list)
+}
 
-    // Emission.
+/// The cut with occlusion culling: nodes are visited nearest first; a node hidden by the
+/// spheres committed so far is dropped with its subtree, one small enough (or not
+/// resident) is committed as its representative, and the others are opened, committing
+/// their particle children at once. `None` when the committed points exceed the budget
+/// (the caller starts over with a coarser error).
+fn front_to_back(
+    camera: &Camera,
+    file: &MdlodFile,
+    settings: &TraversalSettings,
+    error_px: f32,
+    residency: &mut dyn Residency,
+    buffer: &mut OcclusionBuffer,
+) -> Option<DrawList> {
+    let nodes = file.nodes();
+    let levels = file.levels();
+    let last = file.level_count() - 1;
+    let proj = Projector::new(camera, settings.viewport);
+    let budget = settings.budget_points.max(1);
+    let bits = file.position_bits();
+    let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
+    let species = file.species();
+    // How far a drawn sphere of a subtree can reach past the node's box: representatives
+    // are centred on a convex combination of their particles' centres, each at least the
+    // smallest particle radius inside the box, with a radius no larger than the node's
+    // (Eq. 2 makes radii grow up the hierarchy); every decoded centre moves by at most
+    // the recorded quantization error.
+    let r_min = radii.iter().copied().fold(f32::INFINITY, f32::min).max(0.0);
+    let r_min = if r_min.is_finite() { r_min } else { 0.0 };
+    let quant = file.metadata().max_position_error as f32;
+    let quant = if quant.is_finite() {
+        quant.max(0.0)
+    } else {
+        f32::INFINITY
+    };
+    let mut list = DrawList::default();
+    if !proj.visible(&nodes[0]) {
+        list.culled_nodes = 1;
+        return Some(list);
+    }
+
+    // The sphere a node is drawn as when it is not opened, exactly as the GPU decodes it.
+    let representative = |id: u32| -> (Vec3, f32) {
+        let n = &nodes[id as usize];
+        if n.level == 0 {
+            return (Vec3::from(n.centroid), n.radius);
+        }
+        let level = usize::from(n.level);
+        let enc = &nodes[children_encoder(file, n.parent as usize)];
+        let q = file
+            .positions(level)
+            .get(id as usize - levels[level].node_first as usize);
+        let p = quantize::decode3(q, enc.centroid, enc.quant_scale, bits);
+        (Vec3::from(p), n.radius)
+    };
+
+    let mut opened: HashSet<u32> = HashSet::new();
+    let mut hidden: HashSet<u32> = HashSet::new();
+    let mut heap: BinaryHeap<(Reverse<Size>, Reverse<u32>)> = BinaryHeap::new();
+    heap.push((Reverse(Size(proj.near_depth(&nodes[0]))), Reverse(0)));
+    let mut committed: u64 = 0;
+    let mut achieved = 0.0f32;
+    while let Some((_, Reverse(id))) = heap.pop() {
+        let n = &nodes[id as usize];
+        let margin = (n.radius - r_min).max(0.0) + quant;
+        if buffer.box_hidden(n.bounds_min.into(), n.bounds_max.into(), margin) {
+            hidden.insert(id);
+            list.occluded_nodes += 1;
+            continue;
+        }
+        let size = proj.size_px(n);
+        let child_level = usize::from(n.level) + 1;
+        let children = n.child_first..n.child_first + n.child_count;
+        let commit = size <= error_px || {
+            let particles = if child_level == last {
+                u64::from(n.child_count)
+            } else {
+                0
+            };
+            if committed + particles > budget {
+                return None;
+            }
+            let refused = !residency.can_open(file, id, size);
+            list.deferred_nodes += u64::from(refused);
+            refused
+        };
+        if commit {
+            achieved = achieved.max(size);
+            committed += 1;
+            if committed > budget {
+                return None;
+            }
+            let (c, r) = representative(id);
+            buffer.add_sphere(c, r);
+            continue;
+        }
+        opened.insert(id);
+        if child_level < last {
+            let first = levels[child_level].node_first as usize;
+            for c in children {
+                let cn = &nodes[first + c as usize];
+                if proj.visible(cn) {
+                    heap.push((
+                        Reverse(Size(proj.near_depth(cn))),
+                        Reverse((first + c as usize) as u32),
+                    ));
+                }
+            }
+        } else {
+            let enc = &nodes[children_encoder(file, id as usize)];
+            let positions = file.positions(last);
+            for c in children {
+                let p = quantize::decode3(
+                    positions.get(c as usize),
+                    enc.centroid,
+                    enc.quant_scale,
+                    bits,
+                );
+                let s = species
+                    .get(c as usize)
+                    .map_or(0, |&s| usize::from(s).min(radii.len().saturating_sub(1)));
+                if let Some(&r) = radii.get(s) {
+                    buffer.add_sphere(Vec3::from(p), r);
+                }
+            }
+            committed += u64::from(n.child_count);
+        }
+    }
+    Some(emit(file, &proj, &opened, &hidden, achieved, list))
+}
+
+/// Turns the opened nodes into draw ranges: each opened node draws its children that
+/// are neither opened, hidden nor outside the frustum.
+fn emit(
+    file: &MdlodFile,
+    proj: &Projector,
+    opened: &HashSet<u32>,
+    hidden: &HashSet<u32>,
+    achieved: f32,
+    mut list: DrawList,
+) -> DrawList {
+    let nodes = file.nodes();
+    let levels = file.levels();
+    let last = file.level_count() - 1;
     if !opened.contains(&0) {
+        if hidden.contains(&0) {
+            return list;
+        }
         list.ranges.push(DrawRange {
             level: 0,
             first: 0,
@@ -312,7 +523,7 @@ pub fn traverse_with(
             } else {
                 let cid = levels[child_level].node_first as u32 + c;
                 let cn = &nodes[cid as usize];
-                if opened.contains(&cid) {
+                if opened.contains(&cid) || hidden.contains(&cid) {
                     false
                 } else if proj.visible(cn) {
                     true

@@ -9,7 +9,9 @@ use mdlod_format::MdlodFile;
 use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_render::passes::sphere_raycast::pack;
 use mdlod_render::traversal::Projector;
-use mdlod_render::{camera_for, traverse, Camera, DrawList, TraversalSettings, ViewSpec};
+use mdlod_render::{
+    camera_for, traverse, Camera, DrawList, OcclusionMode, Projection, TraversalSettings, ViewSpec,
+};
 
 const VIEWPORT: [u32; 2] = [256, 192];
 
@@ -25,6 +27,7 @@ fn cut(f: &MdlodFile, cam: &Camera, error_px: f32, budget: u64) -> DrawList {
             viewport: VIEWPORT,
             error_px,
             budget_points: budget,
+            occlusion: OcclusionMode::Off,
         },
     )
 }
@@ -293,6 +296,7 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
         viewport: VIEWPORT,
         error_px: 0.0,
         budget_points: u64::MAX,
+        occlusion: OcclusionMode::Off,
     };
     let mut patchy = Patchy {
         level: 2,
@@ -334,4 +338,178 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
         .map(|r| u64::from(r.count))
         .sum();
     assert_eq!(other, patchy.refused.len() as u64);
+}
+
+/// The spheres a cut draws: (key, centre, radius), decoded as the GPU does.
+fn drawn_spheres(f: &MdlodFile, d: &DrawList) -> Vec<((u8, u32), Vec3, f32)> {
+    let last = f.level_count() - 1;
+    let nodes = f.nodes();
+    let bits = f.position_bits();
+    let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
+    let mut out = vec![];
+    for r in &d.ranges {
+        for i in r.first..r.first + r.count {
+            let level = r.level as usize;
+            let centre = if level == 0 {
+                Vec3::from(nodes[0].centroid)
+            } else {
+                let enc = &nodes[r.quant_node as usize];
+                let q = f.positions(level).get(i as usize);
+                Vec3::from(mdlod_format::quantize::decode3(
+                    q,
+                    enc.centroid,
+                    enc.quant_scale,
+                    bits,
+                ))
+            };
+            let radius = if level == last {
+                radii[usize::from(f.species()[i as usize]).min(radii.len() - 1)]
+            } else {
+                nodes[node_of(f, level, i as usize)].radius
+            };
+            out.push(((r.level, i), centre, radius));
+        }
+    }
+    out
+}
+
+/// Per pixel centre, the nearest sphere hit (key and ray parameter), by CPU ray casting.
+fn nearest_hits(cam: &Camera, spheres: &[((u8, u32), Vec3, f32)]) -> Vec<Option<((u8, u32), f32)>> {
+    let [w, h] = VIEWPORT;
+    let clip = cam.clip_from_world(VIEWPORT, Vec2::ZERO);
+    let inv = clip.inverse();
+    let view = cam.view_from_world();
+    let mut best: Vec<Option<((u8, u32), f32)>> = vec![None; (w * h) as usize];
+    for &(key, c, r) in spheres {
+        let d = -view.transform_point3(c).z;
+        // A generous pixel rectangle around the sphere's projection.
+        let (cx, cy, rho) = {
+            let p = clip.project_point3(c);
+            let cx = (p.x + 1.0) * 0.5 * w as f32;
+            let cy = (1.0 - p.y) * 0.5 * h as f32;
+            let near = match cam.projection {
+                Projection::Perspective => (d - r).max(1e-3),
+                Projection::Orthographic => d,
+            };
+            (cx, cy, 1.5 * r * cam.pixels_per_world(near, h) + 2.0)
+        };
+        let x0 = (cx - rho).floor().max(0.0) as u32;
+        let y0 = (cy - rho).floor().max(0.0) as u32;
+        let x1 = ((cx + rho).ceil().max(0.0) as u32).min(w - 1);
+        let y1 = ((cy + rho).ceil().max(0.0) as u32).min(h - 1);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let ndc_x = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
+                let ndc_y = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
+                let a = inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.0));
+                let b = inv.project_point3(Vec3::new(ndc_x, ndc_y, 1.0));
+                let dir = (b - a).normalize();
+                let oc = a - c;
+                let bb = oc.dot(dir);
+                let disc = bb * bb - (oc.dot(oc) - r * r);
+                if disc < 0.0 {
+                    continue;
+                }
+                let t = -bb - disc.sqrt();
+                let slot = &mut best[(y * w + x) as usize];
+                if slot.is_none_or(|(k, bt)| (t, key) < (bt, k)) {
+                    *slot = Some((key, t));
+                }
+            }
+        }
+    }
+    best
+}
+
+#[test]
+fn occlusion_culling_drops_hidden_clusters_and_keeps_every_visible_sphere() {
+    let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
+    let views = [
+        ViewSpec::default(),
+        ViewSpec::Orbit {
+            azimuth_deg: 10.0,
+            elevation_deg: 5.0,
+            zoom: 2.5,
+            projection: Projection::Perspective,
+        },
+        ViewSpec::Orbit {
+            azimuth_deg: 60.0,
+            elevation_deg: 40.0,
+            zoom: 1.0,
+            projection: Projection::Orthographic,
+        },
+    ];
+    for view in &views {
+        let cam = camera_for(&f, view, VIEWPORT[0], VIEWPORT[1]).unwrap();
+        for error_px in [0.0, 4.0] {
+            let settings = |occlusion| TraversalSettings {
+                viewport: VIEWPORT,
+                error_px,
+                budget_points: u64::MAX,
+                occlusion,
+            };
+            let all = traverse(&cam, &f, &settings(OcclusionMode::Off));
+            let seen = traverse(&cam, &f, &settings(OcclusionMode::PixelCentres));
+            check_counts(&f, &seen);
+            assert!(
+                seen.occluded_nodes > 0,
+                "{view:?} {error_px}: nothing hidden"
+            );
+            assert!(
+                seen.points * 3 < all.points * 2,
+                "{view:?} {error_px}: {} of {} points kept",
+                seen.points,
+                all.points
+            );
+            // The same cut, less hidden subtrees: never a point drawn twice or coarser.
+            assert!(coverage(&f, &seen).iter().all(|&c| c <= 1));
+            assert!(seen.error_px <= all.error_px);
+            // And every pixel sees the same sphere at the same depth.
+            let a = nearest_hits(&cam, &drawn_spheres(&f, &all));
+            let b = nearest_hits(&cam, &drawn_spheres(&f, &seen));
+            let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+            assert_eq!(
+                differing, 0,
+                "{view:?} {error_px}: {differing} pixels change"
+            );
+            assert!(a.iter().filter(|h| h.is_some()).count() > 1000);
+        }
+    }
+}
+
+#[test]
+fn occlusion_traversal_meets_the_budget_by_coarsening() {
+    let (_d, _p, f) = make_file(&fcc_frame(9), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let settings = TraversalSettings {
+        viewport: VIEWPORT,
+        error_px: 0.0,
+        budget_points: 150,
+        occlusion: OcclusionMode::PixelCentres,
+    };
+    let d = traverse(&cam, &f, &settings);
+    check_counts(&f, &d);
+    assert!(d.points <= 150 && d.points > 0, "{} points", d.points);
+    assert!(d.budget_limited && d.restarts > 0);
+    assert!(d.error_px > 0.0);
+    // Supersampling uses the stricter whole-pixel test: it hides less.
+    let centres = traverse(
+        &cam,
+        &f,
+        &TraversalSettings {
+            budget_points: u64::MAX,
+            ..settings
+        },
+    );
+    let whole = traverse(
+        &cam,
+        &f,
+        &TraversalSettings {
+            budget_points: u64::MAX,
+            occlusion: OcclusionMode::WholePixels,
+            ..settings
+        },
+    );
+    assert!(whole.points >= centres.points);
+    assert!(whole.occluded_nodes > 0);
 }

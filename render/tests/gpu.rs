@@ -12,8 +12,8 @@ use glam::{Mat4, Vec3, Vec4};
 use mdlod_format::MdlodFile;
 use mdlod_render::{
     camera_for, render_image, render_to_png, traverse, BackendChoice, Camera, FrameSettings,
-    GpuContext, Projection, RenderError, RenderOptions, RenderedFrame, Renderer, RgbaImage,
-    TraversalSettings, ViewFile, ViewSpec,
+    GpuContext, OcclusionMode, Projection, RenderError, RenderOptions, RenderedFrame, Renderer,
+    RgbaImage, TraversalSettings, ViewFile, ViewSpec,
 };
 
 /// The backends the tests use: `WGPU_BACKEND` when set, else Vulkan only (so that a
@@ -57,6 +57,7 @@ fn render_all(f: &MdlodFile, camera: &Camera, w: u32, h: u32, spp: u32) -> Rende
             viewport: [w, h],
             error_px: 0.0,
             budget_points: u64::MAX,
+            occlusion: OcclusionMode::Off,
         },
     );
     renderer()
@@ -250,16 +251,22 @@ fn golden_fcc_block_perspective_supersampled() {
         zoom: 1.1,
         projection: Projection::Perspective,
     };
+    // With occlusion culling (the default) and without it, the same golden image.
     let (img, report) = render_image(renderer(), &f, &o).unwrap();
-    assert_eq!(report.particles_drawn, 500);
-    golden::check(
-        "fcc_block_perspective_4spp",
-        &img,
-        Tolerance {
-            per_channel: 8,
-            max_failing_share: 0.005,
-        },
-    );
+    assert!(report.nodes_occluded > 0 && report.particles_drawn < 500);
+    o.occlusion = false;
+    let (all, all_report) = render_image(renderer(), &f, &o).unwrap();
+    assert_eq!(all_report.particles_drawn, 500);
+    for image in [&img, &all] {
+        golden::check(
+            "fcc_block_perspective_4spp",
+            image,
+            Tolerance {
+                per_channel: 8,
+                max_failing_share: 0.005,
+            },
+        );
+    }
 }
 
 #[test]
@@ -603,6 +610,7 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
                 viewport: [w, h],
                 error_px: o.error_px,
                 budget_points: report.budget,
+                occlusion: OcclusionMode::PixelCentres,
             };
             let (frame, draw, stats, _) = converge(&mut unlimited, &camera, &traversal, &settings);
             assert_eq!(draw.particles, report.particles_drawn);
@@ -647,4 +655,34 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
         stats.evicted_total > 0,
         "switching views should evict: {stats:?}"
     );
+}
+
+#[test]
+fn occlusion_culling_changes_no_pixel() {
+    let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
+    for (error_px, projection) in [
+        (0.0, Projection::Perspective),
+        (3.0, Projection::Orthographic),
+    ] {
+        let mut o = opts(160, 120);
+        o.error_px = error_px;
+        o.view = ViewSpec::Orbit {
+            azimuth_deg: 25.0,
+            elevation_deg: 15.0,
+            zoom: 1.3,
+            projection,
+        };
+        let (culled, r) = render_image(renderer(), &f, &o).unwrap();
+        o.occlusion = false;
+        let (all, r_all) = render_image(renderer(), &f, &o).unwrap();
+        let drawn = |r: &mdlod_render::RenderReport| r.particles_drawn + r.nodes_drawn;
+        assert!(
+            drawn(&r) * 3 < drawn(&r_all) * 2,
+            "{} of {} spheres drawn",
+            drawn(&r),
+            drawn(&r_all)
+        );
+        let (failing, _) = golden::compare(&all, &culled, 0);
+        assert_eq!(failing, 0, "{projection:?}: {failing} pixels differ");
+    }
 }

@@ -71,6 +71,7 @@ pub fn run(args: Args) -> Result<()> {
         spp: 4,
         screen_error: 1.0,
         budget: 4_000_000,
+        no_occlusion: false,
         gpu_memory: None,
         background: "#ffffff".into(),
         save_view: None,

@@ -44,6 +44,10 @@ pub struct Args {
     /// Most spheres to draw; refinement stops there, largest on screen first.
     #[arg(long, default_value_t = 4_000_000)]
     pub budget: u64,
+    /// Draw clusters hidden behind nearer spheres too (occlusion culling is exact, so
+    /// this only costs time; for comparisons).
+    #[arg(long)]
+    pub no_occlusion: bool,
     /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G).
     #[arg(long, value_parser = parse_bytes)]
     pub gpu_memory: Option<u64>,
@@ -99,11 +103,12 @@ pub fn run(args: Args) -> Result<()> {
         budget: args.budget,
         background: parse_colour(&args.background)?,
         gpu_memory: args.gpu_memory,
+        occlusion: !args.no_occlusion,
         ..Default::default()
     };
     let r = render_to_png(&args.file, &args.output, &opts)?;
     println!(
-        "wrote {} ({}x{}, {} spp) on {} ({}): {} particles and {} cluster spheres in {} ranges, error {:.2} px{}",
+        "wrote {} ({}x{}, {} spp) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} hidden clusters left out), error {:.2} px{}",
         args.output.display(),
         r.width,
         r.height,
@@ -113,6 +118,7 @@ pub fn run(args: Args) -> Result<()> {
         r.particles_drawn,
         r.nodes_drawn,
         r.ranges,
+        r.nodes_occluded,
         r.error_px,
         if r.budget_limited { " (budget reached)" } else { "" }
     );

@@ -140,6 +140,15 @@ impl PackedDraw {
     }
 
     /// Bytes of the largest of the storage buffers.
+    /// Bytes of all the buffers the cut uploads.
+    pub fn data_bytes(&self) -> u64 {
+        (self.positions.len() * 4
+            + self.attrs.len() * 4
+            + self.ranges.len() * 48
+            + self.point_range.len() * 4
+            + self.species.len() * 16) as u64
+    }
+
     pub fn largest_buffer_bytes(&self) -> u64 {
         [
             self.positions.len() * 4,

@@ -1,0 +1,471 @@
+//! Occlusion culling on the CPU: a conservative depth pyramid built from the spheres the
+//! cut has already committed to drawing.
+//!
+//! How it works. In a dense block of atoms almost every cluster the cut would draw lies
+//! behind others; drawing them costs GPU time and streaming them costs memory, although
+//! they change no pixel. The traversal therefore visits nodes front to back (nearest
+//! first) and keeps, per pixel, an *upper bound* of the depth of what is already drawn
+//! there:
+//!
+//! - When a sphere is committed (a particle, or a representative that will not be
+//!   opened), every pixel sample it certainly covers gets a bound of its hit depth
+//!   (view-space distance along the view direction). "Certainly covers" uses the sphere's
+//!   cross-section through its centre, a disk of radius `r` at depth `d`, which projects
+//!   to a circle of radius `r · pixels_per_world(d)` around the projected centre: every
+//!   ray through that circle enters the sphere before reaching depth `d`. A ray crossing
+//!   the disk at distance `a` from the centre, at angle θ to the view axis, enters at most
+//!   at depth `d − cos θ · max(0, √(r² − a²) − a · sin θ)`; with θ bounded by the image
+//!   corner's angle (0 in orthographic views) that is the bound stored, so the GPU's
+//!   ray-cast impostor writes a depth no larger there. The circle is shrunk by a small
+//!   margin and the depth enlarged by one, so float rounding cannot break the bound.
+//! - Which samples: with one sample per pixel the GPU samples pixel centres, so a pixel
+//!   counts when its centre is inside the circle ([`OcclusionMode::PixelCentres`]); with
+//!   jittered supersampling a pixel counts only when the whole pixel square is inside
+//!   ([`OcclusionMode::WholePixels`]).
+//! - A node is hidden when the nearest depth of its bounding box, grown by the node's
+//!   representative radius (radii only grow up the hierarchy, Eq. 2, so this bounds every
+//!   sphere drawn for any part of the subtree), is larger than the stored bound at every
+//!   sample its projected box can reach. The maximum over a rectangle comes from a max
+//!   pyramid (each texel the maximum of its 2×2 children, updated as pixels are written),
+//!   read at the level where the rectangle spans at most 2×2 texels, which covers a
+//!   superset of the rectangle and so stays conservative.
+//!
+//! Nothing the GPU would show is removed: a culled node's every fragment would fail the
+//! depth test against spheres that are drawn. Depths are compared in view space, which
+//! is monotone along every ray, as the GPU's depth buffer is.
+
+use glam::{Mat4, Vec3, Vec4Swizzles};
+
+use crate::camera::{Camera, Projection};
+
+/// Which occlusion test the traversal applies.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum OcclusionMode {
+    /// No occlusion culling: every node in the frustum is considered.
+    Off,
+    /// One sample per pixel, at the pixel centre (the renderer's 1-spp mode).
+    #[default]
+    PixelCentres,
+    /// Samples anywhere in the pixel (jittered supersampling): a pixel is occluded only
+    /// when the whole pixel square is covered.
+    WholePixels,
+}
+
+/// Relative shrink of an occluder's circle and absolute shrink in pixels.
+const RADIUS_SHRINK_REL: f32 = 1e-3;
+const RADIUS_SHRINK_PX: f32 = 0.02;
+/// Relative growth of an occluder's depth, and of an occludee's rectangle in pixels.
+const DEPTH_GROW_REL: f32 = 1e-5;
+const RECT_GROW_PX: f32 = 0.5;
+
+/// A query reads the pyramid level where the rectangle spans fewer than this many
+/// texels per axis: finer levels bound the rectangle more tightly (less uncovered border
+/// swept in) at the price of more reads.
+const QUERY_SPAN: u32 = 8;
+
+/// The per-pixel depth bound and its max pyramid.
+pub struct OcclusionBuffer {
+    mode: OcclusionMode,
+    width: u32,
+    height: u32,
+    /// `levels[k]` is `dims[k].0 × dims[k].1`, row-major; level 0 is the image.
+    levels: Vec<Vec<f32>>,
+    dims: Vec<(u32, u32)>,
+    clip_from_world: Mat4,
+    view_from_world: Mat4,
+    camera: Camera,
+    /// Sine and cosine bounds of the angle between any view ray and the view axis.
+    sin_max: f32,
+    cos_min: f32,
+    /// Pixels written so far (statistics).
+    pub pixels_written: u64,
+}
+
+impl OcclusionBuffer {
+    /// An empty buffer (nothing occludes) for `camera` at `viewport`; `None` for
+    /// [`OcclusionMode::Off`] or an empty viewport.
+    pub fn new(camera: &Camera, viewport: [u32; 2], mode: OcclusionMode) -> Option<Self> {
+        let [width, height] = viewport;
+        if mode == OcclusionMode::Off || width == 0 || height == 0 {
+            return None;
+        }
+        let mut dims = vec![(width, height)];
+        while let Some(&(w, h)) = dims.last() {
+            if w == 1 && h == 1 {
+                break;
+            }
+            dims.push((w.div_ceil(2), h.div_ceil(2)));
+        }
+        // The widest ray angle: the image corner (perspective); rays are parallel in
+        // orthographic views.
+        let (sin_max, cos_min) = match camera.projection {
+            Projection::Perspective => {
+                let t = (camera.fov_y_deg.to_radians() * 0.5).tan()
+                    * (1.0 + (width as f32 / height as f32).powi(2)).sqrt();
+                let n = (1.0 + t * t).sqrt();
+                // Rounded outwards.
+                ((t / n + 1e-4).min(1.0), (1.0 / n - 1e-4).max(0.0))
+            }
+            Projection::Orthographic => (0.0, 1.0),
+        };
+        let levels = dims
+            .iter()
+            .map(|&(w, h)| vec![f32::INFINITY; w as usize * h as usize])
+            .collect();
+        Some(OcclusionBuffer {
+            mode,
+            width,
+            height,
+            levels,
+            dims,
+            clip_from_world: camera.clip_from_world(viewport, glam::Vec2::ZERO),
+            view_from_world: camera.view_from_world(),
+            camera: camera.clone(),
+            sin_max,
+            cos_min,
+            pixels_written: 0,
+        })
+    }
+
+    /// The stored depth bound of pixel `(x, y)` (rows top to bottom).
+    pub fn depth_at(&self, x: u32, y: u32) -> f32 {
+        self.levels[0][(y * self.width + x) as usize]
+    }
+
+    /// Pixel coordinates (x right, y down; pixel `i` spans `[i, i + 1)`) of a point.
+    fn to_px(&self, world: Vec3) -> Option<(f32, f32)> {
+        let c = self.clip_from_world * world.extend(1.0);
+        if c.w.is_nan() || c.w <= 0.0 {
+            return None;
+        }
+        let ndc = c.xy() / c.w;
+        Some((
+            (ndc.x + 1.0) * 0.5 * self.width as f32,
+            (1.0 - ndc.y) * 0.5 * self.height as f32,
+        ))
+    }
+
+    /// View depth (distance along the view direction) of a point.
+    fn depth(&self, world: Vec3) -> f32 {
+        -self.view_from_world.transform_point3(world).z
+    }
+
+    /// Records a sphere that will be drawn.
+    pub fn add_sphere(&mut self, center: Vec3, radius: f32) {
+        let d = self.depth(center);
+        if !(d.is_finite() && radius.is_finite() && radius > 0.0) {
+            return;
+        }
+        if self.camera.projection == Projection::Perspective && d - radius <= self.camera.near {
+            return;
+        }
+        let Some((cx, cy)) = self.to_px(center) else {
+            return;
+        };
+        let rho = radius * rho_px_per_world(&self.camera, d, self.height);
+        let rho = rho * (1.0 - RADIUS_SHRINK_REL) - RADIUS_SHRINK_PX;
+        if rho.is_nan() || rho <= 0.0 || !cx.is_finite() || !cy.is_finite() {
+            return;
+        }
+        let ppw = rho_px_per_world(&self.camera, d, self.height);
+        let r2 = radius * radius;
+        let (sin_max, cos_min) = (self.sin_max, self.cos_min);
+        // Depth bound at a sample `dist_px` from the projected centre (see `new`).
+        let bound = |dist_px: f32| -> f32 {
+            let a = dist_px / ppw;
+            let inside = (r2 - a * a).max(0.0).sqrt() - a * sin_max;
+            (d - cos_min * inside.max(0.0)) * (1.0 + DEPTH_GROW_REL)
+        };
+        let rho2 = rho * rho;
+        let (w, h) = (self.width as f32, self.height as f32);
+        match self.mode {
+            OcclusionMode::Off => {}
+            OcclusionMode::PixelCentres => {
+                let j0 = (cy - rho - 0.5).ceil().max(0.0);
+                let j1 = (cy + rho - 0.5).floor().min(h - 1.0);
+                let mut j = j0;
+                while j <= j1 {
+                    let dy = j + 0.5 - cy;
+                    let hw2 = rho2 - dy * dy;
+                    if hw2 >= 0.0 {
+                        let hw = hw2.sqrt();
+                        let i0 = (cx - hw - 0.5).ceil().max(0.0);
+                        let i1 = (cx + hw - 0.5).floor().min(w - 1.0);
+                        let mut i = i0;
+                        while i <= i1 {
+                            let dx = i + 0.5 - cx;
+                            self.write(i as u32, j as u32, bound((dx * dx + dy * dy).sqrt()));
+                            i += 1.0;
+                        }
+                    }
+                    j += 1.0;
+                }
+            }
+            OcclusionMode::WholePixels => {
+                let j0 = (cy - rho).ceil().max(0.0);
+                let j1 = ((cy + rho).floor() - 1.0).min(h - 1.0);
+                let mut j = j0;
+                while j <= j1 {
+                    let dy = (j - cy).abs().max((j + 1.0 - cy).abs());
+                    let hw2 = rho2 - dy * dy;
+                    if hw2 >= 0.0 {
+                        let hw = hw2.sqrt();
+                        let i0 = (cx - hw).ceil().max(0.0);
+                        let i1 = ((cx + hw).floor() - 1.0).min(w - 1.0);
+                        let mut i = i0;
+                        while i <= i1 {
+                            let dx = (i - cx).abs().max((i + 1.0 - cx).abs());
+                            self.write(i as u32, j as u32, bound((dx * dx + dy * dy).sqrt()));
+                            i += 1.0;
+                        }
+                    }
+                    j += 1.0;
+                }
+            }
+        }
+    }
+
+    fn write(&mut self, x: u32, y: u32, depth: f32) {
+        let i = (y * self.width + x) as usize;
+        if depth >= self.levels[0][i] {
+            return;
+        }
+        self.levels[0][i] = depth;
+        self.pixels_written += 1;
+        let (mut x, mut y) = (x, y);
+        for k in 1..self.levels.len() {
+            let (cw, ch) = self.dims[k - 1];
+            let (px, py) = (x / 2, y / 2);
+            let child = &self.levels[k - 1];
+            let mut m = f32::NEG_INFINITY;
+            for cy in 2 * py..(2 * py + 2).min(ch) {
+                for cx in 2 * px..(2 * px + 2).min(cw) {
+                    m = m.max(child[(cy * cw + cx) as usize]);
+                }
+            }
+            let pw = self.dims[k].0;
+            let slot = &mut self.levels[k][(py * pw + px) as usize];
+            if m >= *slot {
+                break;
+            }
+            *slot = m;
+            (x, y) = (px, py);
+        }
+    }
+
+    /// Largest stored depth over pixels `x0..=x1 × y0..=y1` (clipped to the image), or
+    /// an upper bound of it.
+    pub fn max_depth(&self, x0: u32, y0: u32, x1: u32, y1: u32) -> f32 {
+        let (x1, y1) = (x1.min(self.width - 1), y1.min(self.height - 1));
+        if x0 > x1 || y0 > y1 {
+            return f32::NEG_INFINITY;
+        }
+        let mut k = 0;
+        while k + 1 < self.levels.len()
+            && ((x1 >> k) - (x0 >> k) >= QUERY_SPAN || (y1 >> k) - (y0 >> k) >= QUERY_SPAN)
+        {
+            k += 1;
+        }
+        let w = self.dims[k].0;
+        let level = &self.levels[k];
+        let mut m = f32::NEG_INFINITY;
+        for y in (y0 >> k)..=(y1 >> k) {
+            let row = &level[(y * w) as usize..][(x0 >> k) as usize..=(x1 >> k) as usize];
+            for &v in row {
+                m = m.max(v);
+            }
+            if m == f32::INFINITY {
+                break;
+            }
+        }
+        m
+    }
+
+    /// True when nothing inside the box `min..max` grown by `margin` can be seen past
+    /// what is recorded.
+    pub fn box_hidden(&self, min: Vec3, max: Vec3, margin: f32) -> bool {
+        let (min, max) = (min - Vec3::splat(margin), max + Vec3::splat(margin));
+        let mut nearest = f32::INFINITY;
+        let (mut x0, mut y0) = (f32::INFINITY, f32::INFINITY);
+        let (mut x1, mut y1) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for k in 0..8 {
+            let p = Vec3::new(
+                if k & 1 == 0 { min.x } else { max.x },
+                if k & 2 == 0 { min.y } else { max.y },
+                if k & 4 == 0 { min.z } else { max.z },
+            );
+            let d = self.depth(p);
+            nearest = nearest.min(d);
+            if self.camera.projection == Projection::Perspective && d <= self.camera.near {
+                return false;
+            }
+            let Some((x, y)) = self.to_px(p) else {
+                return false;
+            };
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x);
+            y1 = y1.max(y);
+        }
+        if !(nearest.is_finite() && x0.is_finite() && y0.is_finite()) {
+            return false;
+        }
+        let (x0, y0, x1, y1) = (
+            x0 - RECT_GROW_PX,
+            y0 - RECT_GROW_PX,
+            x1 + RECT_GROW_PX,
+            y1 + RECT_GROW_PX,
+        );
+        // Pixels whose samples can fall inside the rectangle.
+        let (px0, py0, px1, py1) = match self.mode {
+            OcclusionMode::PixelCentres => (
+                (x0 - 0.5).ceil(),
+                (y0 - 0.5).ceil(),
+                (x1 - 0.5).floor(),
+                (y1 - 0.5).floor(),
+            ),
+            _ => (x0.floor(), y0.floor(), x1.floor(), y1.floor()),
+        };
+        let (w, h) = (self.width as f32, self.height as f32);
+        let (px0, py0) = (px0.max(0.0), py0.max(0.0));
+        let (px1, py1) = (px1.min(w - 1.0), py1.min(h - 1.0));
+        if px0 > px1 || py0 > py1 {
+            // No sample of the image can see it.
+            return true;
+        }
+        let far = self.max_depth(px0 as u32, py0 as u32, px1 as u32, py1 as u32);
+        nearest > far
+    }
+}
+
+/// Pixels per world unit at view depth `d`.
+fn rho_px_per_world(camera: &Camera, d: f32, height: u32) -> f32 {
+    camera.pixels_per_world(d, height)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Bounds;
+
+    fn camera(projection: Projection) -> Camera {
+        let mut c = Camera {
+            projection,
+            ..Default::default()
+        };
+        let b = Bounds::new([-10.0; 3], [10.0; 3]);
+        c.fit(&b, 1.5);
+        c.fit_depth_range(&b);
+        c
+    }
+
+    #[test]
+    fn pyramid_max_matches_brute_force() {
+        let cam = camera(Projection::Perspective);
+        let mut buf = OcclusionBuffer::new(&cam, [37, 23], OcclusionMode::PixelCentres).unwrap();
+        let mut state = 12345u64;
+        let mut rnd = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as u32
+        };
+        for _ in 0..400 {
+            let (x, y) = (rnd() % 37, rnd() % 23);
+            buf.write(x, y, (rnd() % 1000) as f32);
+        }
+        for _ in 0..2000 {
+            let (xa, xb) = (rnd() % 37, rnd() % 37);
+            let (ya, yb) = (rnd() % 23, rnd() % 23);
+            let (x0, x1, y0, y1) = (xa.min(xb), xa.max(xb), ya.min(yb), ya.max(yb));
+            let mut brute = f32::NEG_INFINITY;
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    brute = brute.max(buf.depth_at(x, y));
+                }
+            }
+            let got = buf.max_depth(x0, y0, x1, y1);
+            assert!(got >= brute, "pyramid {got} below the true maximum {brute}");
+            if x0 == x1 && y0 == y1 {
+                assert_eq!(got, brute);
+            }
+        }
+        // Fill everything: the root is then the global maximum.
+        for y in 0..23 {
+            for x in 0..37 {
+                buf.write(x, y, 5.0);
+            }
+        }
+        assert_eq!(buf.max_depth(0, 0, 36, 22), 5.0);
+    }
+
+    #[test]
+    fn a_box_behind_a_large_sphere_is_hidden_and_one_in_front_is_not() {
+        for projection in [Projection::Perspective, Projection::Orthographic] {
+            for mode in [OcclusionMode::PixelCentres, OcclusionMode::WholePixels] {
+                let cam = camera(projection);
+                let mut buf = OcclusionBuffer::new(&cam, [96, 64], mode).unwrap();
+                let toward_eye = cam.back();
+                // A big sphere at the target, a small box well behind it and one in front.
+                buf.add_sphere(Vec3::ZERO, 6.0);
+                let behind = -toward_eye * 8.0;
+                let front = toward_eye * 8.0;
+                let half = Vec3::splat(0.5);
+                assert!(
+                    buf.box_hidden(behind - half, behind + half, 0.0),
+                    "{projection:?} {mode:?}"
+                );
+                assert!(!buf.box_hidden(front - half, front + half, 0.0));
+                // Grown past the sphere's silhouette, the box behind shows.
+                assert!(!buf.box_hidden(behind - half, behind + half, 7.0));
+                // Nothing recorded where the sphere is absent.
+                let side = cam.right() * 9.0 - toward_eye * 8.0;
+                assert!(!buf.box_hidden(side - half, side + half, 0.0));
+            }
+        }
+    }
+
+    #[test]
+    fn recorded_pixels_are_inside_the_sphere_silhouette() {
+        // Every pixel marked by a sphere has its sample ray hit the sphere at a depth no
+        // larger than the recorded one (checked with a CPU ray-sphere intersection).
+        let cam = camera(Projection::Perspective);
+        let (w, h) = (64u32, 48u32);
+        for mode in [OcclusionMode::PixelCentres, OcclusionMode::WholePixels] {
+            let mut buf = OcclusionBuffer::new(&cam, [w, h], mode).unwrap();
+            let c = cam.right() * 3.0 + cam.up() * 1.5;
+            let r = 4.0;
+            buf.add_sphere(c, r);
+            let clip_inv = buf.clip_from_world.inverse();
+            let eye = cam.eye();
+            let mut marked = 0;
+            for y in 0..h {
+                for x in 0..w {
+                    let d = buf.depth_at(x, y);
+                    if !d.is_finite() {
+                        continue;
+                    }
+                    marked += 1;
+                    let samples: &[(f32, f32)] = match mode {
+                        OcclusionMode::PixelCentres => &[(0.5, 0.5)],
+                        _ => &[(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)],
+                    };
+                    for &(sx, sy) in samples {
+                        let ndc_x = (x as f32 + sx) / w as f32 * 2.0 - 1.0;
+                        let ndc_y = 1.0 - (y as f32 + sy) / h as f32 * 2.0;
+                        let p = clip_inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.5));
+                        let dir = (p - eye).normalize();
+                        let oc = eye - c;
+                        let b = oc.dot(dir);
+                        let disc = b * b - (oc.dot(oc) - r * r);
+                        assert!(disc >= 0.0, "pixel ({x}, {y}) marked but its ray misses");
+                        let t = -b - disc.sqrt();
+                        let hit_depth = buf.depth(eye + dir * t);
+                        assert!(hit_depth <= d, "hit at {hit_depth} behind the bound {d}");
+                    }
+                }
+            }
+            assert!(marked > 40, "{mode:?}: only {marked} pixels marked");
+        }
+    }
+}
