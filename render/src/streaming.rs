@@ -38,7 +38,9 @@ use crate::passes::sphere_raycast::{
     push_bytes_as_words, RangeGpu, SphereInputs, KIND_NODE, KIND_PARTICLE,
 };
 use crate::renderer::{FrameSettings, RenderedFrame, Renderer};
-use crate::traversal::{traverse_with, DrawList, Residency, TraversalSettings};
+use crate::traversal::{
+    representative_radius, traverse_with, DrawList, Residency, TraversalSettings,
+};
 
 /// Default points per page.
 pub const PAGE_POINTS: u32 = 256;
@@ -158,7 +160,7 @@ fn load_page(file: &MdlodFile, id: PageId, page_points: u32) -> LoadedPage {
     } else {
         let first = file.levels()[level].node_first as usize;
         for n in &file.nodes()[first + r.start..first + r.end] {
-            attrs.push(n.radius.to_bits());
+            attrs.push(representative_radius(n).to_bits());
             attrs.push(n.colour);
         }
     }
@@ -225,7 +227,7 @@ impl<'r> StreamingRenderer<'r> {
         queue.write_buffer(
             &attrs,
             capacity as u64 * u64::from(slot_attr_words) * 4,
-            bytemuck::cast_slice(&[top.radius.to_bits(), top.colour]),
+            bytemuck::cast_slice(&[representative_radius(top).to_bits(), top.colour]),
         );
         let species_table: Vec<[f32; 4]> = file
             .metadata()

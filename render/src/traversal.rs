@@ -198,6 +198,30 @@ impl Projector {
     }
 }
 
+/// The radius a node's representative sphere is drawn with: the *coverage radius*
+/// `√area_sum`, whose disk has the projected area of all the particle disks below
+/// (Eq. 1's flux carried by the size, the colour kept), capped by the size of the
+/// node's box (`½ ∛(extent_x · extent_y · extent_z)`, so that a compact cluster is not
+/// drawn larger than itself) and never below the Eq. 2 radius stored in the file.
+///
+/// Why not Eq. 2 alone: that radius barely exceeds the largest child's, so a coarse cut
+/// of a solid is a sparse cloud of small spheres through which deeper ones show, which
+/// both changes the picture (the solid looks porous) and defeats occlusion culling.
+/// Spheres of equal flux keep, on average, the same covered area per unit depth as the
+/// particles they stand for. All three terms only grow up the hierarchy, so a node's
+/// radius bounds every representative radius in its subtree.
+pub fn representative_radius(n: &NodeRecord) -> f32 {
+    let e = Vec3::from(n.bounds_max) - Vec3::from(n.bounds_min);
+    let cap = 0.5 * (e.x.max(0.0) * e.y.max(0.0) * e.z.max(0.0)).cbrt();
+    let coverage = n.area_sum.max(0.0).sqrt();
+    let r = coverage.min(cap).max(n.radius);
+    if r.is_finite() {
+        r
+    } else {
+        n.radius
+    }
+}
+
 /// The node that encodes the positions of the children of node `parent`.
 fn children_encoder(file: &MdlodFile, parent: usize) -> usize {
     let nodes = file.nodes();
@@ -380,7 +404,7 @@ fn front_to_back(
     let representative = |id: u32| -> (Vec3, f32) {
         let n = &nodes[id as usize];
         if n.level == 0 {
-            return (Vec3::from(n.centroid), n.radius);
+            return (Vec3::from(n.centroid), representative_radius(n));
         }
         let level = usize::from(n.level);
         let enc = &nodes[children_encoder(file, n.parent as usize)];
@@ -388,7 +412,7 @@ fn front_to_back(
             .positions(level)
             .get(id as usize - levels[level].node_first as usize);
         let p = quantize::decode3(q, enc.centroid, enc.quant_scale, bits);
-        (Vec3::from(p), n.radius)
+        (Vec3::from(p), representative_radius(n))
     };
 
     let mut opened: HashSet<u32> = HashSet::new();
@@ -399,7 +423,7 @@ fn front_to_back(
     let mut achieved = 0.0f32;
     while let Some((_, Reverse(id))) = heap.pop() {
         let n = &nodes[id as usize];
-        let margin = (n.radius - r_min).max(0.0) + quant;
+        let margin = (representative_radius(n) - r_min).max(0.0) + quant;
         if buffer.box_hidden(n.bounds_min.into(), n.bounds_max.into(), margin) {
             hidden.insert(id);
             list.occluded_nodes += 1;

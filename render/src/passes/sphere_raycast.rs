@@ -6,15 +6,18 @@
 //! a whole u32), per point either its species index (particles, two per u32) or its
 //! node's radius and colour (representatives), one [`RangeGpu`] per range (base, scale,
 //! offsets into the other arrays) and one range index per point. The pass draws
-//! `points` instances of a 4-vertex strip in a single call; see the WGSL for the
-//! shading. The `#[repr(C)]` structs here mirror the WGSL structs field for field.
+//! `6 × points` vertices (two triangles per point, not instanced) in a single call; see
+//! the WGSL for the shading. The `#[repr(C)]` structs here mirror the WGSL structs field for field.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
 use mdlod_format::{FormatError, MdlodFile};
 
 use crate::error::RenderError;
-use crate::traversal::DrawList;
+use crate::traversal::{representative_radius, DrawList};
+
+/// Vertices drawn per point: two triangles covering the sphere's quad.
+pub const VERTICES_PER_POINT: u32 = 6;
 
 /// WGSL source of the pass.
 pub const SHADER: &str = include_str!("sphere_raycast.wgsl");
@@ -259,7 +262,7 @@ pub fn pack(file: &MdlodFile, draw: &DrawList) -> Result<PackedDraw, RenderError
         } else {
             let node_first = levels[level].node_first as usize + first;
             for n in &nodes[node_first..node_first + count] {
-                out.attrs.push(n.radius.to_bits());
+                out.attrs.push(representative_radius(n).to_bits());
                 out.attrs.push(n.colour);
             }
             KIND_NODE
@@ -354,7 +357,7 @@ impl SphereRaycastPass {
                 buffers: &[],
             },
             primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                topology: wgpu::PrimitiveTopology::TriangleList,
                 ..Default::default()
             },
             depth_stencil: Some(wgpu::DepthStencilState {
@@ -469,13 +472,15 @@ impl SphereRaycastPass {
         }
     }
 
-    /// Records the draw into `pass`.
+    /// Records the draw into `pass` (call [`Self::max_points`]-checked buffers only).
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, buffers: &SphereBuffers) {
         if buffers.points == 0 {
             return;
         }
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &buffers.bind_group, &[]);
-        pass.draw(0..4, 0..buffers.points);
+        // Six vertices (two triangles) per point, not instanced: small instances leave
+        // most of a GPU's vertex lanes idle.
+        pass.draw(0..buffers.points.saturating_mul(VERTICES_PER_POINT), 0..1);
     }
 }

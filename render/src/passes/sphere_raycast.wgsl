@@ -1,6 +1,7 @@
 // Sphere ray casting: one depth-correct impostor per point.
 //
-// Each point is an instance of a 4-vertex triangle strip. The vertex shader pulls the
+// Each point is 6 vertices (two triangles of its quad; point = vertex / 6, not instanced,
+// so that GPUs fill their vertex lanes). The vertex shader pulls the
 // point's quantized position from `positions` (raw 8- or 16-bit words of the file,
 // packed into u32), decodes it with its range's base and scale
 // (world = base + scale * (q - H)), looks up radius and albedo (from the species table
@@ -82,7 +83,10 @@ struct VsOut {
 };
 
 @vertex
-fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VsOut {
+fn vs_main(@builtin(vertex_index) vertex: u32) -> VsOut {
+    let ii = vertex / 6u;
+    // Quad corners 0..3 (bit 0: x, bit 1: y) as the triangles (0, 1, 2) and (2, 1, 3).
+    let vi = (0x312210u >> ((vertex - ii * 6u) * 4u)) & 3u;
     let r = ranges[point_range[ii]];
     let j = ii - r.first_point + r.point_offset;
     let q = quantized(r, j);
