@@ -118,12 +118,10 @@ impl GpuContext {
             return Err(no_adapter());
         };
         let info = adapter.get_info();
-        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let required_features = if timestamps {
-            wgpu::Features::TIMESTAMP_QUERY
-        } else {
-            wgpu::Features::empty()
-        };
+        // Optional features, taken when the adapter has them: GPU timing, and early
+        // depth tests for the sphere pass's conservative depth.
+        let required_features = adapter.features()
+            & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SHADER_EARLY_DEPTH_TEST);
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("mdlod-render"),
@@ -149,7 +147,7 @@ impl GpuContext {
             device,
             queue,
             info,
-            timestamps,
+            timestamps: required_features.contains(wgpu::Features::TIMESTAMP_QUERY),
             uncaptured,
         })
     }

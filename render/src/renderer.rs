@@ -18,7 +18,6 @@ use crate::context::GpuContext;
 use crate::error::RenderError;
 use crate::image::RgbaImage;
 use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
-use crate::passes::sphere_raycast::VERTICES_PER_POINT;
 use crate::passes::sphere_raycast::{
     pack, FrameUniforms, Lighting, PackedDraw, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT,
     DEPTH_FORMAT,
@@ -134,11 +133,10 @@ impl Renderer {
 
     /// The most points one frame can draw on this device (storage buffer limits: a
     /// representative needs 8 bytes of attributes, the largest per-point array), and
-    /// at most what one draw's vertex indices can count.
+    /// at most what one draw's instance indices can count.
     pub fn max_points(&self) -> u64 {
         let l = self.ctx.device.limits();
-        (l.max_storage_buffer_binding_size.min(l.max_buffer_size) / 8)
-            .min(u64::from(u32::MAX / VERTICES_PER_POINT))
+        (l.max_storage_buffer_binding_size.min(l.max_buffer_size) / 8).min(u64::from(u32::MAX))
     }
 
     fn check(&self, s: &FrameSettings) -> Result<(), RenderError> {

@@ -55,7 +55,7 @@
 //! This is a pure function of the camera, the file and the settings: no GPU involved.
 
 use std::cmp::{Ordering, Reverse};
-use std::collections::{BinaryHeap, HashSet};
+use std::collections::BinaryHeap;
 
 use glam::{Mat4, Vec2, Vec3};
 use mdlod_format::{quantize, MdlodFile, NodeRecord};
@@ -222,6 +222,38 @@ pub fn representative_radius(n: &NodeRecord) -> f32 {
     }
 }
 
+/// Per-node marks of one traversal: a byte per node, zero-initialised lazily by the OS
+/// (only the pages of visited nodes are touched), plus the list of opened nodes.
+struct Marks {
+    state: Vec<u8>,
+    open: Vec<u32>,
+}
+
+const OPENED: u8 = 1;
+const HIDDEN: u8 = 2;
+
+impl Marks {
+    fn new(nodes: usize) -> Self {
+        Marks {
+            state: vec![0; nodes],
+            open: Vec::new(),
+        }
+    }
+
+    fn open(&mut self, id: u32) {
+        self.state[id as usize] = OPENED;
+        self.open.push(id);
+    }
+
+    fn hide(&mut self, id: u32) {
+        self.state[id as usize] = HIDDEN;
+    }
+
+    fn get(&self, id: u32) -> u8 {
+        self.state[id as usize]
+    }
+}
+
 /// The node that encodes the positions of the children of node `parent`.
 fn children_encoder(file: &MdlodFile, parent: usize) -> usize {
     let nodes = file.nodes();
@@ -313,7 +345,7 @@ fn largest_first(
         return list;
     }
 
-    let mut opened: HashSet<u32> = HashSet::new();
+    let mut marks = Marks::new(nodes.len());
     let mut heap: BinaryHeap<(Size, Reverse<u32>)> = BinaryHeap::new();
     heap.push((Size(proj.size_px(&nodes[0])), Reverse(0)));
     let mut drawn: u64 = 1;
@@ -346,7 +378,7 @@ fn largest_first(
             continue;
         }
         drawn = drawn - 1 + visible_children;
-        opened.insert(id);
+        marks.open(id);
         if child_level < last {
             let first = levels[child_level].node_first as usize;
             for c in children {
@@ -357,7 +389,7 @@ fn largest_first(
             }
         }
     }
-    emit(file, &proj, &opened, &HashSet::new(), achieved, list)
+    emit(file, &proj, marks, achieved, list)
 }
 
 /// The cut with occlusion culling: nodes are visited nearest first; a node hidden by the
@@ -415,23 +447,37 @@ fn front_to_back(
         (Vec3::from(p), representative_radius(n))
     };
 
-    let mut opened: HashSet<u32> = HashSet::new();
-    let mut hidden: HashSet<u32> = HashSet::new();
+    let mut marks = Marks::new(nodes.len());
     let mut heap: BinaryHeap<(Reverse<Size>, Reverse<u32>)> = BinaryHeap::new();
     heap.push((Reverse(Size(proj.near_depth(&nodes[0]))), Reverse(0)));
     let mut committed: u64 = 0;
     let mut achieved = 0.0f32;
     while let Some((_, Reverse(id))) = heap.pop() {
         let n = &nodes[id as usize];
-        let margin = (representative_radius(n) - r_min).max(0.0) + quant;
-        if buffer.box_hidden(n.bounds_min.into(), n.bounds_max.into(), margin) {
-            hidden.insert(id);
-            list.occluded_nodes += 1;
-            continue;
-        }
         let size = proj.size_px(n);
         let child_level = usize::from(n.level) + 1;
         let children = n.child_first..n.child_first + n.child_count;
+        // The largest representative that can be drawn for this subtree: its own when
+        // it is small enough to be drawn, else its children's (none below a node whose
+        // children are particles). A node that is then refused by the residency is
+        // drawn as its representative: a streaming frame, never the converged image,
+        // may miss where that larger sphere pokes out of a hidden box.
+        let reach = if size <= error_px {
+            representative_radius(n)
+        } else if child_level == last {
+            0.0
+        } else {
+            let first = levels[child_level].node_first as usize;
+            children.clone().fold(0.0f32, |m, c| {
+                m.max(representative_radius(&nodes[first + c as usize]))
+            })
+        };
+        let margin = (reach - r_min).max(0.0) + quant;
+        if buffer.box_hidden(n.bounds_min.into(), n.bounds_max.into(), margin) {
+            marks.hide(id);
+            list.occluded_nodes += 1;
+            continue;
+        }
         let commit = size <= error_px || {
             let particles = if child_level == last {
                 u64::from(n.child_count)
@@ -455,7 +501,7 @@ fn front_to_back(
             buffer.add_sphere(c, r);
             continue;
         }
-        opened.insert(id);
+        marks.open(id);
         if child_level < last {
             let first = levels[child_level].node_first as usize;
             for c in children {
@@ -487,7 +533,7 @@ fn front_to_back(
             committed += u64::from(n.child_count);
         }
     }
-    Some(emit(file, &proj, &opened, &hidden, achieved, list))
+    Some(emit(file, &proj, marks, achieved, list))
 }
 
 /// Turns the opened nodes into draw ranges: each opened node draws its children that
@@ -495,16 +541,15 @@ fn front_to_back(
 fn emit(
     file: &MdlodFile,
     proj: &Projector,
-    opened: &HashSet<u32>,
-    hidden: &HashSet<u32>,
+    marks: Marks,
     achieved: f32,
     mut list: DrawList,
 ) -> DrawList {
     let nodes = file.nodes();
     let levels = file.levels();
     let last = file.level_count() - 1;
-    if !opened.contains(&0) {
-        if hidden.contains(&0) {
+    if marks.get(0) != OPENED {
+        if marks.get(0) == HIDDEN {
             return list;
         }
         list.ranges.push(DrawRange {
@@ -518,7 +563,7 @@ fn emit(
         list.error_px = achieved;
         return list;
     }
-    let mut open: Vec<u32> = opened.iter().copied().collect();
+    let mut open = marks.open.clone();
     open.sort_unstable();
     for &id in &open {
         let n = &nodes[id as usize];
@@ -547,7 +592,7 @@ fn emit(
             } else {
                 let cid = levels[child_level].node_first as u32 + c;
                 let cn = &nodes[cid as usize];
-                if opened.contains(&cid) || hidden.contains(&cid) {
+                if marks.get(cid) != 0 {
                     false
                 } else if proj.visible(cn) {
                     true

@@ -134,8 +134,9 @@ pub fn run(args: Args) -> Result<()> {
         None => String::new(),
     };
     println!(
-        "  total {:.0} ms{gpu}{stream}",
-        r.total_time.as_secs_f64() * 1e3
+        "  total {:.0} ms (traversal {:.0} ms{gpu}){stream}",
+        r.total_time.as_secs_f64() * 1e3,
+        r.traversal_time.as_secs_f64() * 1e3
     );
     if let Some(p) = &args.save_view {
         ViewFile::from_camera(&r.camera)

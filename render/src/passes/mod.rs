@@ -24,5 +24,16 @@ mod tests {
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
         }
+        // The conservative-depth variant of the sphere pass.
+        let src = super::sphere_raycast::shader_source(true);
+        assert!(src.contains("@early_depth_test(greater_equal)"));
+        let module = naga::front::wgsl::parse_str(&src)
+            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::EARLY_DEPTH_TEST,
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
     }
 }

@@ -6,8 +6,8 @@
 //! a whole u32), per point either its species index (particles, two per u32) or its
 //! node's radius and colour (representatives), one [`RangeGpu`] per range (base, scale,
 //! offsets into the other arrays) and one range index per point. The pass draws
-//! `6 × points` vertices (two triangles per point, not instanced) in a single call; see
-//! the WGSL for the shading. The `#[repr(C)]` structs here mirror the WGSL structs field for field.
+//! `points` instances of a 4-vertex strip in a single call (measured faster on an H200
+//! than 6 non-instanced vertices per point); see the WGSL for the shading. The `#[repr(C)]` structs here mirror the WGSL structs field for field.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
@@ -16,11 +16,21 @@ use mdlod_format::{FormatError, MdlodFile};
 use crate::error::RenderError;
 use crate::traversal::{representative_radius, DrawList};
 
-/// Vertices drawn per point: two triangles covering the sphere's quad.
-pub const VERTICES_PER_POINT: u32 = 6;
-
 /// WGSL source of the pass.
 pub const SHADER: &str = include_str!("sphere_raycast.wgsl");
+
+/// The source with the fragment stage declared conservative (its depth is never nearer
+/// than the rasterized quad's), for devices with `SHADER_EARLY_DEPTH_TEST`.
+pub fn shader_source(early_depth: bool) -> String {
+    if early_depth {
+        SHADER.replace(
+            "@fragment\nfn fs_main",
+            "@fragment @early_depth_test(greater_equal)\nfn fs_main",
+        )
+    } else {
+        SHADER.to_string()
+    }
+}
 
 /// Format of the colour target the pass draws into (linear, for accumulation).
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
@@ -310,7 +320,14 @@ impl SphereRaycastPass {
     pub fn new(device: &wgpu::Device) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("sphere_raycast.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+            source: wgpu::ShaderSource::Wgsl(
+                shader_source(
+                    device
+                        .features()
+                        .contains(wgpu::Features::SHADER_EARLY_DEPTH_TEST),
+                )
+                .into(),
+            ),
         });
         let storage = |binding: u32| wgpu::BindGroupLayoutEntry {
             binding,
@@ -357,7 +374,7 @@ impl SphereRaycastPass {
                 buffers: &[],
             },
             primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
                 ..Default::default()
             },
             depth_stencil: Some(wgpu::DepthStencilState {
@@ -472,15 +489,13 @@ impl SphereRaycastPass {
         }
     }
 
-    /// Records the draw into `pass` (call [`Self::max_points`]-checked buffers only).
+    /// Records the draw into `pass`.
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, buffers: &SphereBuffers) {
         if buffers.points == 0 {
             return;
         }
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &buffers.bind_group, &[]);
-        // Six vertices (two triangles) per point, not instanced: small instances leave
-        // most of a GPU's vertex lanes idle.
-        pass.draw(0..buffers.points.saturating_mul(VERTICES_PER_POINT), 0..1);
+        pass.draw(0..4, 0..buffers.points);
     }
 }

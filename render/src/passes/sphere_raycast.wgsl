@@ -1,14 +1,17 @@
 // Sphere ray casting: one depth-correct impostor per point.
 //
-// Each point is 6 vertices (two triangles of its quad; point = vertex / 6, not instanced,
-// so that GPUs fill their vertex lanes). The vertex shader pulls the
+// Each point is an instance of a 4-vertex triangle strip. The vertex shader pulls the
 // point's quantized position from `positions` (raw 8- or 16-bit words of the file,
 // packed into u32), decodes it with its range's base and scale
 // (world = base + scale * (q - H)), looks up radius and albedo (from the species table
 // for particles, from the node record copy in `attrs` for representatives), and places a
-// view-facing quad that covers the sphere's projection. The fragment shader intersects
-// the pixel's ray with the sphere, discards misses, writes the hit's depth and shades
-// it (Lambert + Blinn-Phong, one directional light fixed in view space).
+// view-facing quad that covers the sphere's projection, in the plane touching the
+// sphere's front. The fragment shader intersects the pixel's ray with the sphere, discards
+// misses, writes the hit's depth and shades it (Lambert + Blinn-Phong, one directional
+// light fixed in view space). Since the hit is never nearer than the quad, the pipeline
+// declares the written depth "greater or equal" where the device allows it
+// (`@early_depth_test(greater_equal)`, added by sphere_raycast.rs), so fragments
+// behind what is already drawn are rejected before they are shaded.
 //
 // The Rust twins of the structs below are in sphere_raycast.rs.
 
@@ -83,10 +86,7 @@ struct VsOut {
 };
 
 @vertex
-fn vs_main(@builtin(vertex_index) vertex: u32) -> VsOut {
-    let ii = vertex / 6u;
-    // Quad corners 0..3 (bit 0: x, bit 1: y) as the triangles (0, 1, 2) and (2, 1, 3).
-    let vi = (0x312210u >> ((vertex - ii * 6u) * 4u)) & 3u;
+fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VsOut {
     let r = ranges[point_range[ii]];
     let j = ii - r.first_point + r.point_offset;
     let q = quantized(r, j);
@@ -113,8 +113,9 @@ fn vs_main(@builtin(vertex_index) vertex: u32) -> VsOut {
     out.albedo = albedo;
     var p: vec3<f32>;
     if frame.params.x > 0.5 {
-        // Orthographic: the projection is a disk of the sphere's radius.
-        p = center + vec3<f32>(corner * radius, 0.0);
+        // Orthographic: the projection is a disk of the sphere's radius; the quad lies
+        // in the plane touching the sphere's front.
+        p = center + vec3<f32>(corner * radius, radius);
     } else {
         let d = length(center);
         if d <= radius * 1.0001 {
@@ -123,13 +124,16 @@ fn vs_main(@builtin(vertex_index) vertex: u32) -> VsOut {
             out.view_pos = center;
             return out;
         }
-        // A quad through the centre, facing the eye, holding the tangent cone's circle.
+        // A quad facing the eye in the plane touching the sphere's front, holding the
+        // tangent cone's circle there. The whole sphere lies behind that plane, so every
+        // hit is at least as deep as the quad point on its ray (conservative depth).
         let dir = center / d;
         let helper = select(vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 0.0, 0.0), abs(dir.y) > 0.9);
         let u = normalize(cross(helper, dir));
         let v = cross(dir, u);
-        let half_size = radius * d / sqrt(d * d - radius * radius);
-        p = center + (u * corner.x + v * corner.y) * half_size;
+        let front = d - radius;
+        let half_size = radius * front / sqrt(d * d - radius * radius);
+        p = dir * front + (u * corner.x + v * corner.y) * half_size;
     }
     out.view_pos = p;
     out.clip = frame.clip_from_view * vec4<f32>(p, 1.0);
@@ -173,6 +177,8 @@ fn fs_main(in: VsOut) -> FsOut {
 
     var out: FsOut;
     out.colour = vec4<f32>(colour, 1.0);
-    out.depth = clamp(clip.z / clip.w, 0.0, 1.0);
+    // Never nearer than the quad itself (it only differs by rounding): the promise that
+    // lets the GPU reject hidden fragments before shading them (see EARLY_DEPTH).
+    out.depth = max(clamp(clip.z / clip.w, 0.0, 1.0), in.clip.z);
     return out;
 }
