@@ -371,3 +371,50 @@ fn render_without_an_adapter_says_how_to_get_one() {
     );
     assert!(!dir.path().join("x.png").exists());
 }
+
+#[test]
+fn binary_lammps_dumps_convert_like_their_text_twins() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bin, text) = (dir.path().join("bin.mdlod"), dir.path().join("text.mdlod"));
+    let out = ok(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.custom.bin")),
+        "-o",
+        s(&bin),
+        "--attribute",
+        "c_pe",
+    ]);
+    assert!(out.contains("500 particles"), "{out}");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&text),
+        "--attribute",
+        "c_pe",
+    ]);
+    let (b, t) = (
+        MdlodFile::open(&bin).unwrap(),
+        MdlodFile::open(&text).unwrap(),
+    );
+    b.verify().unwrap();
+    // The last frame of both is step 500 of the same run.
+    assert_eq!(b.metadata().timestep, Some(500));
+    assert_eq!(b.metadata().timestep, t.metadata().timestep);
+    assert_eq!(b.metadata().time, t.metadata().time);
+    assert_eq!(b.metadata().units.as_deref(), Some("metal"));
+    assert_eq!(b.particle_count(), t.particle_count());
+    // An old-style column list that does not fit is refused, naming the file.
+    let err = fails(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.atom.bin")),
+        "-o",
+        s(&bin),
+        "--columns",
+        "id type x y",
+    ]);
+    assert!(
+        err.contains("cu_melt.atom.bin") && err.contains("4 column names"),
+        "{err}"
+    );
+}

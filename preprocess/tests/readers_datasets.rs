@@ -23,6 +23,7 @@ fn sample(name: &str) -> Option<PathBuf> {
 fn read(dump: &DumpFile, k: usize, attribute: Option<&str>) -> Frame {
     let opts = ReadOptions {
         attribute: attribute.map(String::from),
+        ..Default::default()
     };
     dump.read_frame(k, &opts, &NoProgress).unwrap()
 }

@@ -18,6 +18,7 @@ fn error_k(name: &str, text: &str, k: usize, attribute: Option<&str>) -> (PathBu
     let path = write(dir.path(), name, text.as_bytes());
     let opts = ReadOptions {
         attribute: attribute.map(String::from),
+        ..Default::default()
     };
     let result = DumpFile::open(&path).and_then(|d| d.read_frame(k, &opts, &NoProgress));
     match result {

@@ -17,6 +17,7 @@ fn read(path: &Path, attribute: Option<&str>) -> Frame {
     let dump = DumpFile::open(path).unwrap();
     let opts = ReadOptions {
         attribute: attribute.map(String::from),
+        ..Default::default()
     };
     dump.read_frame(0, &opts, &NoProgress).unwrap()
 }

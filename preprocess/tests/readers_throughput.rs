@@ -37,6 +37,7 @@ fn measure(name: &str, text: &str, attribute: Option<&str>) {
     let mb = text.len() as f64 / 1e6;
     let opts = ReadOptions {
         attribute: attribute.map(String::from),
+        ..Default::default()
     };
     for threads in [1, rayon::current_num_threads()] {
         let pool = rayon::ThreadPoolBuilder::new()

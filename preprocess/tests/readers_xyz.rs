@@ -15,6 +15,7 @@ fn read_k(path: &Path, k: usize, attribute: Option<&str>) -> Frame {
     let dump = DumpFile::open(path).unwrap();
     let opts = ReadOptions {
         attribute: attribute.map(String::from),
+        ..Default::default()
     };
     dump.read_frame(k, &opts, &NoProgress).unwrap()
 }

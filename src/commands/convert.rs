@@ -34,6 +34,10 @@ pub struct Args {
     /// Dump column to keep as the per-particle scalar attribute.
     #[arg(long)]
     pub attribute: Option<String>,
+    /// Column names, space separated, for dumps that do not name them (old-revision
+    /// LAMMPS binary dumps other than `dump atom`), e.g. "id type x y z c_pe".
+    #[arg(long, value_name = "NAMES")]
+    pub columns: Option<String>,
     /// Bits per quantized coordinate.
     #[arg(long, value_enum, default_value = "u16")]
     pub precision: Precision,
@@ -95,6 +99,10 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     };
     let read = ReadOptions {
         attribute: args.attribute.clone(),
+        columns: args
+            .columns
+            .as_ref()
+            .map(|c| c.split_whitespace().map(str::to_string).collect()),
     };
     Ok(convert_file(
         &args.input,

@@ -40,6 +40,7 @@ pub fn run(args: Args) -> Result<()> {
         // The generator writes copper as LAMMPS type 1.
         radii: vec![("1".into(), 1.28)],
         attribute: Some(Kind::Crater.extra_column().to_string()),
+        columns: None,
         precision: super::convert::Precision::U16,
         threads: None,
         cluster_size: 8,

@@ -31,11 +31,14 @@
 //!   columns `name[0]`...); plain XYZ columns are `species x y z col5 col6 ...`.
 //! - Any numeric column can be the per-particle attribute ([`ReadOptions::attribute`]).
 //!   NaN and infinite numbers in used columns are errors. Atom order is kept.
+//! - **LAMMPS binary dumps** (`.bin`, both header revisions): see `lammps_binary.rs`.
+//!   Errors name the byte offset instead of a line.
 //! - Files are memory-mapped; gzip files (single or multi-member) are decompressed into
 //!   memory. zstd and bzip2 files are recognised and refused with a clear error.
 
 mod atoms;
 mod float;
+mod lammps_binary;
 mod lammps_text;
 mod xyz;
 
@@ -127,6 +130,13 @@ pub enum ReadError {
     },
     #[error("{at}: more than 65536 distinct species")]
     TooManySpecies { at: Location },
+    /// A binary input is malformed; `offset` is the byte where the problem is.
+    #[error("{}: byte {offset}: {message}", path.display())]
+    Binary {
+        path: PathBuf,
+        offset: u64,
+        message: String,
+    },
 }
 
 /// The dump formats this module reads.
@@ -136,11 +146,14 @@ pub enum InputFormat {
     LammpsText,
     /// XYZ or extended XYZ.
     Xyz,
+    /// LAMMPS binary dump (`dump custom` / `dump atom` to a `.bin` file).
+    LammpsBinary,
 }
 
 impl InputFormat {
     /// The format implied by a file name, ignoring a `.gz`, `.bz2` or `.zst` suffix:
-    /// `.lammpstrj`, `.dump`, `.lammps` and `dump.*` are LAMMPS; `.xyz` and `.extxyz` are XYZ.
+    /// `.lammpstrj`, `.dump`, `.lammps` and `dump.*` are LAMMPS text; `.bin` is LAMMPS
+    /// binary (as LAMMPS itself decides); `.xyz` and `.extxyz` are XYZ.
     pub fn from_path(path: &Path) -> Option<InputFormat> {
         let name = path.file_name()?.to_str()?.to_ascii_lowercase();
         let name = [".gz", ".bz2", ".zst"]
@@ -149,6 +162,8 @@ impl InputFormat {
             .unwrap_or(&name);
         if name.ends_with(".xyz") || name.ends_with(".extxyz") {
             Some(InputFormat::Xyz)
+        } else if name.ends_with(".bin") {
+            Some(InputFormat::LammpsBinary)
         } else if name.ends_with(".lammpstrj")
             || name.ends_with(".dump")
             || name.ends_with(".lammps")
@@ -182,6 +197,7 @@ impl fmt::Display for InputFormat {
         f.write_str(match self {
             InputFormat::LammpsText => "LAMMPS text dump",
             InputFormat::Xyz => "XYZ",
+            InputFormat::LammpsBinary => "LAMMPS binary dump",
         })
     }
 }
@@ -192,6 +208,9 @@ pub struct ReadOptions {
     /// Name of a column to read as [`Frame::attribute`] (LAMMPS column name such as `c_pe`,
     /// or extended-XYZ property name, `name[i]` for component `i` of a vector property).
     pub attribute: Option<String>,
+    /// Column names for inputs that do not name their columns (old-revision LAMMPS
+    /// binary dumps); when given, they replace the file's own names.
+    pub columns: Option<Vec<String>>,
 }
 
 /// What a frame's header says, without its atoms.
@@ -223,6 +242,7 @@ type Bytes = Box<dyn AsRef<[u8]> + Send + Sync>;
 enum Index {
     Lammps(lammps_text::Index),
     Xyz(xyz::Index),
+    LammpsBinary(lammps_binary::Index),
 }
 
 /// An opened dump file and its frame index.
@@ -286,6 +306,7 @@ impl DumpFile {
         }
         let format = format
             .or_else(|| InputFormat::from_path(path))
+            .or_else(|| lammps_binary::sniff(data).then_some(InputFormat::LammpsBinary))
             .or_else(|| InputFormat::sniff(data))
             .ok_or_else(|| {
                 let mut cursor = Cursor::new(data, 0);
@@ -306,6 +327,9 @@ impl DumpFile {
         let index = match format {
             InputFormat::LammpsText => Index::Lammps(lammps_text::Index::build(&ctx)?),
             InputFormat::Xyz => Index::Xyz(xyz::Index::build(&ctx)?),
+            InputFormat::LammpsBinary => {
+                Index::LammpsBinary(lammps_binary::Index::build(path, data)?)
+            }
         };
         progress.advance(data.len() as u64);
         progress.finish_stage();
@@ -335,6 +359,7 @@ impl DumpFile {
         match &self.index {
             Index::Lammps(i) => i.len(),
             Index::Xyz(i) => i.len(),
+            Index::LammpsBinary(i) => i.len(),
         }
     }
 
@@ -344,12 +369,32 @@ impl DumpFile {
         match &self.index {
             Index::Lammps(i) => i.timestep(k),
             Index::Xyz(i) => i.timestep(k),
+            Index::LammpsBinary(i) => i.timestep(k),
         }
     }
 
     /// Parses frame `k`'s header only: counts, box, time and column names.
     pub fn frame_info(&self, k: usize) -> Result<FrameInfo, ReadError> {
+        if let Index::LammpsBinary(i) = &self.index {
+            self.check_frame(k)?;
+            return Ok(lammps_binary::frame_info(
+                &self.path,
+                i.header(k),
+                &ReadOptions::default(),
+            ));
+        }
         Ok(self.header(k)?.info)
+    }
+
+    fn check_frame(&self, k: usize) -> Result<(), ReadError> {
+        if k >= self.frame_count() {
+            return Err(ReadError::NoSuchFrame {
+                path: self.path.clone(),
+                frame: k,
+                count: self.frame_count(),
+            });
+        }
+        Ok(())
     }
 
     /// Reads frame `k`.
@@ -359,6 +404,16 @@ impl DumpFile {
         opts: &ReadOptions,
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
+        if let Index::LammpsBinary(i) = &self.index {
+            self.check_frame(k)?;
+            return lammps_binary::read_frame(
+                &self.path,
+                self.bytes(),
+                i.header(k),
+                opts,
+                progress,
+            );
+        }
         let ctx = self.ctx();
         let header = self.header(k)?;
         let columns = &header.info.columns;
@@ -425,17 +480,16 @@ impl DumpFile {
     }
 
     fn header(&self, k: usize) -> Result<Header, ReadError> {
-        if k >= self.frame_count() {
-            return Err(ReadError::NoSuchFrame {
-                path: self.path.clone(),
-                frame: k,
-                count: self.frame_count(),
-            });
-        }
+        self.check_frame(k)?;
         let ctx = self.ctx();
         match &self.index {
             Index::Lammps(i) => i.header(&ctx, k),
             Index::Xyz(i) => i.header(&ctx, k),
+            Index::LammpsBinary(_) => Err(ReadError::Binary {
+                path: self.path.clone(),
+                offset: 0,
+                message: "internal error: text header of a binary dump".into(),
+            }),
         }
     }
 }

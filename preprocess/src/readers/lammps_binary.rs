@@ -1,0 +1,562 @@
+//! LAMMPS binary dumps: what `dump custom` and `dump atom` write when the file name ends
+//! in `.bin`.
+//!
+//! How it works. A binary dump is a sequence of frames, each a header and the atoms as
+//! chunks of native doubles (one chunk per writing process), all little-endian here:
+//!
+//! | field | type | revision 1-2 ("new", LAMMPS since late 2020) | old (no magic) |
+//! | --- | --- | --- | --- |
+//! | magic | i64 `−len`, then `len` bytes | `DUMPCUSTOM` / `DUMPATOM` | absent |
+//! | endian, revision | i32, i32 | `1`, `1` or `2` | absent |
+//! | timestep, atoms | i64, i64 | yes | yes |
+//! | triclinic | i32 | 0 or 1 | 0 or 1 |
+//! | boundary | 6 × i32 | yes | yes |
+//! | box | 6 × f64 (`lo hi` per axis, the `_bound` values when triclinic) | yes | yes |
+//! | tilts | 3 × f64 `xy xz yz`, only when triclinic | yes | yes |
+//! | values per atom | i32 | yes | yes |
+//! | unit style | i32 length + bytes (length 0 after the first frame) | yes | absent |
+//! | time | u8 flag, then f64 when 1 | yes | absent |
+//! | column names | i32 length + bytes, space separated | yes | absent |
+//! | chunks | i32 count, then per chunk i32 `n` and `n` f64 | yes | yes |
+//!
+//! The old revision names no columns: `dump atom`'s five (`id type xs ys zs`, eight with
+//! image flags) are assumed, anything else needs [`crate::readers::ReadOptions::columns`].
+//! Opening scans the headers and skips the chunks by their lengths, checking every count
+//! against the file size with checked arithmetic, so a truncated or corrupt file is
+//! reported with the byte offset where it goes wrong, and frame `k` is then read without
+//! touching the others. Atoms are decoded in parallel, straight from the mapped bytes.
+
+use rayon::prelude::*;
+
+use super::{FrameInfo, ReadError, ReadOptions};
+use crate::frame::{Attribute, Frame, SimulationBox, SpeciesName};
+use crate::progress::Progress;
+use std::path::Path;
+
+/// Coordinate column triples, in order of preference (as for text dumps).
+const COORDINATE_STYLES: [([&str; 3], bool); 4] = [
+    (["x", "y", "z"], false),
+    (["xu", "yu", "zu"], false),
+    (["xs", "ys", "zs"], true),
+    (["xsu", "ysu", "zsu"], true),
+];
+
+/// Most values per atom accepted (LAMMPS writes one per column).
+const MAX_VALUES_PER_ATOM: usize = 4096;
+/// Longest magic, unit or column string accepted.
+const MAX_STRING: usize = 1 << 16;
+
+/// One frame's header, as read.
+#[derive(Clone, Debug)]
+pub(crate) struct BinHeader {
+    pub timestep: u64,
+    pub atoms: usize,
+    pub simulation_box: SimulationBox,
+    pub values_per_atom: usize,
+    pub units: Option<String>,
+    pub time: Option<f64>,
+    pub columns: Option<Vec<String>>,
+    /// Byte ranges of the chunks' doubles.
+    pub chunks: Vec<std::ops::Range<usize>>,
+}
+
+/// The frames of a binary dump.
+pub(crate) struct Index {
+    frames: Vec<BinHeader>,
+}
+
+struct Reader<'a> {
+    path: &'a Path,
+    data: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn err(&self, at: usize, message: impl Into<String>) -> ReadError {
+        ReadError::Binary {
+            path: self.path.to_path_buf(),
+            offset: at as u64,
+            message: message.into(),
+        }
+    }
+
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], ReadError> {
+        let end = self.pos.checked_add(n).filter(|&e| e <= self.data.len());
+        let Some(end) = end else {
+            return Err(self.err(
+                self.pos,
+                format!(
+                    "truncated: {what} needs {n} bytes, {} left",
+                    self.data.len() - self.pos
+                ),
+            ));
+        };
+        let s = &self.data[self.pos..end];
+        self.pos = end;
+        Ok(s)
+    }
+
+    fn i32(&mut self, what: &str) -> Result<i32, ReadError> {
+        Ok(i32::from_le_bytes(
+            self.take(4, what)?.try_into().unwrap_or([0; 4]),
+        ))
+    }
+
+    fn i64(&mut self, what: &str) -> Result<i64, ReadError> {
+        Ok(i64::from_le_bytes(
+            self.take(8, what)?.try_into().unwrap_or([0; 8]),
+        ))
+    }
+
+    fn f64(&mut self, what: &str) -> Result<f64, ReadError> {
+        let at = self.pos;
+        let v = f64::from_le_bytes(self.take(8, what)?.try_into().unwrap_or([0; 8]));
+        if !v.is_finite() {
+            return Err(self.err(at, format!("{what} is not a finite number ({v})")));
+        }
+        Ok(v)
+    }
+
+    /// A count in `0..=max`.
+    fn count(&mut self, what: &str, max: usize) -> Result<usize, ReadError> {
+        let at = self.pos;
+        let v = self.i32(what)?;
+        usize::try_from(v)
+            .ok()
+            .filter(|&v| v <= max)
+            .ok_or_else(|| self.err(at, format!("{what} is {v}, expected 0 to {max}")))
+    }
+
+    fn string(&mut self, what: &str) -> Result<String, ReadError> {
+        let n = self.count(what, MAX_STRING)?;
+        let at = self.pos;
+        let bytes = self.take(n, what)?;
+        std::str::from_utf8(bytes)
+            .map(str::to_string)
+            .map_err(|_| self.err(at, format!("{what} is not text")))
+    }
+}
+
+/// True when `data` starts like a binary dump of the current revision.
+pub(crate) fn sniff(data: &[u8]) -> bool {
+    data.len() >= 12
+        && i64::from_le_bytes(data[..8].try_into().unwrap_or([0; 8])) < 0
+        && data[8..12] == *b"DUMP"
+}
+
+impl Index {
+    pub fn build(path: &Path, data: &[u8]) -> Result<Index, ReadError> {
+        let mut r = Reader { path, data, pos: 0 };
+        let mut frames = Vec::new();
+        let mut units: Option<String> = None;
+        while r.pos < data.len() {
+            let mut h = header(&mut r)?;
+            // The unit style is written once, in the first frame.
+            if h.units.is_some() {
+                units.clone_from(&h.units);
+            } else {
+                h.units.clone_from(&units);
+            }
+            frames.push(h);
+        }
+        if frames.is_empty() {
+            return Err(r.err(0, "no frames"));
+        }
+        Ok(Index { frames })
+    }
+
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    pub fn timestep(&self, k: usize) -> Option<u64> {
+        self.frames.get(k).map(|h| h.timestep)
+    }
+
+    pub fn header(&self, k: usize) -> &BinHeader {
+        &self.frames[k]
+    }
+}
+
+/// Reads one frame header at the reader's position and skips its chunks.
+fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
+    let start = r.pos;
+    let first = r.i64("timestep")?;
+    let mut revised = false;
+    let timestep = if first < 0 {
+        let len = usize::try_from(first.unsigned_abs())
+            .ok()
+            .filter(|&l| l <= 64)
+            .ok_or_else(|| r.err(start, format!("bad magic string length {}", -first)))?;
+        let at = r.pos;
+        let magic = r.take(len, "magic string")?;
+        if !magic.starts_with(b"DUMP") {
+            return Err(r.err(
+                at,
+                format!(
+                    "not a LAMMPS binary dump (magic `{}`)",
+                    String::from_utf8_lossy(magic)
+                ),
+            ));
+        }
+        let at = r.pos;
+        let endian = r.i32("endian flag")?;
+        if endian != 1 {
+            return Err(r.err(
+                at,
+                format!("written on a machine of the other byte order (endian flag {endian:#x}); convert it there with LAMMPS' binary2txt"),
+            ));
+        }
+        let at = r.pos;
+        let rev = r.i32("format revision")?;
+        if !(1..=2).contains(&rev) {
+            return Err(r.err(
+                at,
+                format!("format revision {rev} is not supported (this reader knows 1 and 2)"),
+            ));
+        }
+        revised = true;
+        r.i64("timestep")?
+    } else {
+        first
+    };
+    let timestep = u64::try_from(timestep)
+        .map_err(|_| r.err(start, format!("negative timestep {timestep}")))?;
+    let at = r.pos;
+    let atoms = r.i64("atom count")?;
+    let atoms =
+        usize::try_from(atoms).map_err(|_| r.err(at, format!("negative atom count {atoms}")))?;
+    let at = r.pos;
+    let triclinic = r.i32("triclinic flag")?;
+    if !(0..=1).contains(&triclinic) {
+        return Err(r.err(
+            at,
+            format!("triclinic flag {triclinic} is not supported (0 or 1)"),
+        ));
+    }
+    let mut boundary = [0i32; 6];
+    for b in &mut boundary {
+        *b = r.i32("boundary flags")?;
+    }
+    let mut bounds = [0f64; 6];
+    for v in &mut bounds {
+        *v = r.f64("box bound")?;
+    }
+    let mut simulation_box = if triclinic == 1 {
+        let (xy, xz, yz) = (r.f64("tilt xy")?, r.f64("tilt xz")?, r.f64("tilt yz")?);
+        // The `_bound` values, as in text dumps, converted to the true box.
+        let lo = [
+            bounds[0] - 0f64.min(xy).min(xz).min(xy + xz),
+            bounds[2] - 0f64.min(yz),
+            bounds[4],
+        ];
+        let hi = [
+            bounds[1] - 0f64.max(xy).max(xz).max(xy + xz),
+            bounds[3] - 0f64.max(yz),
+            bounds[5],
+        ];
+        SimulationBox::lammps(lo, hi, [xy, xz, yz])
+    } else {
+        SimulationBox::orthogonal(
+            [bounds[0], bounds[2], bounds[4]],
+            [bounds[1], bounds[3], bounds[5]],
+        )
+    };
+    // LAMMPS boundary codes per side: 0 periodic, 1 fixed, 2 shrink-wrapped, 3 minimum.
+    simulation_box.periodic = Some([0, 1, 2].map(|k| boundary[2 * k] == 0));
+    let at = r.pos;
+    let values_per_atom = r.count("values per atom", MAX_VALUES_PER_ATOM)?;
+    if values_per_atom == 0 {
+        return Err(r.err(at, "zero values per atom"));
+    }
+    let (mut units, mut time, mut columns) = (None, None, None);
+    if revised {
+        let u = r.string("unit style")?;
+        units = (!u.is_empty()).then_some(u);
+        let at = r.pos;
+        match r.take(1, "time flag")?[0] {
+            0 => {}
+            1 => time = Some(r.f64("time")?),
+            f => return Err(r.err(at, format!("time flag {f}, expected 0 or 1"))),
+        }
+        let at = r.pos;
+        let names: Vec<String> = r
+            .string("column names")?
+            .split_ascii_whitespace()
+            .map(str::to_string)
+            .collect();
+        if names.len() != values_per_atom {
+            return Err(r.err(
+                at,
+                format!(
+                    "{} column names for {values_per_atom} values per atom",
+                    names.len()
+                ),
+            ));
+        }
+        columns = Some(names);
+    }
+    let nchunk = r.count("chunk count", i32::MAX as usize)?;
+    let expected = atoms
+        .checked_mul(values_per_atom)
+        .ok_or_else(|| r.err(start, "atom count overflows"))?;
+    let mut chunks = Vec::with_capacity(nchunk.min(1 << 16));
+    let mut total = 0usize;
+    for c in 0..nchunk {
+        let at = r.pos;
+        let n = r.count("chunk length", i32::MAX as usize)?;
+        if n % values_per_atom != 0 {
+            return Err(r.err(
+                at,
+                format!("chunk {c} holds {n} values, not a multiple of {values_per_atom} per atom"),
+            ));
+        }
+        let bytes = n
+            .checked_mul(8)
+            .ok_or_else(|| r.err(at, "chunk length overflows"))?;
+        let begin = r.pos;
+        r.take(bytes, &format!("chunk {c} of timestep {timestep}"))?;
+        chunks.push(begin..r.pos);
+        total = total
+            .checked_add(n)
+            .ok_or_else(|| r.err(at, "chunk lengths overflow"))?;
+    }
+    if total != expected {
+        return Err(r.err(
+            start,
+            format!(
+                "timestep {timestep}: the header announces {atoms} atoms but its chunks hold {} ",
+                total / values_per_atom
+            ),
+        ));
+    }
+    Ok(BinHeader {
+        timestep,
+        atoms,
+        simulation_box,
+        values_per_atom,
+        units,
+        time,
+        columns,
+        chunks,
+    })
+}
+
+/// The column names of a frame: its own, the caller's, or `dump atom`'s defaults.
+fn columns(path: &Path, h: &BinHeader, opts: &ReadOptions) -> Result<Vec<String>, ReadError> {
+    let err = |message: String| ReadError::Binary {
+        path: path.to_path_buf(),
+        offset: 0,
+        message,
+    };
+    if let Some(given) = &opts.columns {
+        if given.len() != h.values_per_atom {
+            return Err(err(format!(
+                "{} column names given for {} values per atom",
+                given.len(),
+                h.values_per_atom
+            )));
+        }
+        return Ok(given.clone());
+    }
+    if let Some(c) = &h.columns {
+        return Ok(c.clone());
+    }
+    let defaults: &[&str] = match h.values_per_atom {
+        5 => &["id", "type", "xs", "ys", "zs"],
+        8 => &["id", "type", "xs", "ys", "zs", "ix", "iy", "iz"],
+        n => {
+            return Err(err(format!(
+                "an old-revision binary dump names no columns and its {n} values per atom are not `dump atom`'s; give the column names (e.g. --columns \"id type x y z\")"
+            )))
+        }
+    };
+    Ok(defaults.iter().map(|s| s.to_string()).collect())
+}
+
+pub(crate) fn frame_info(path: &Path, h: &BinHeader, opts: &ReadOptions) -> FrameInfo {
+    FrameInfo {
+        particles: h.atoms,
+        timestep: Some(h.timestep),
+        time: h.time,
+        units: h.units.clone(),
+        simulation_box: Some(h.simulation_box.clone()),
+        columns: columns(path, h, opts).unwrap_or_default(),
+    }
+}
+
+/// Decodes frame `h` of `data`.
+pub(crate) fn read_frame(
+    path: &Path,
+    data: &[u8],
+    h: &BinHeader,
+    opts: &ReadOptions,
+    progress: &dyn Progress,
+) -> Result<Frame, ReadError> {
+    let first_chunk = h.chunks.first().map_or(0, |c| c.start) as u64;
+    let err = |offset: u64, message: String| ReadError::Binary {
+        path: path.to_path_buf(),
+        offset,
+        message,
+    };
+    let names = columns(path, h, opts)?;
+    let find = |name: &str| names.iter().position(|c| c == name);
+    let Some((coords, scaled)) = COORDINATE_STYLES
+        .iter()
+        .find_map(|(n, scaled)| Some(([find(n[0])?, find(n[1])?, find(n[2])?], *scaled)))
+    else {
+        return Err(ReadError::NoCoordinates {
+            at: super::Location {
+                path: path.to_path_buf(),
+                line: 0,
+            },
+            columns: names.join(" "),
+        });
+    };
+    let species_col = find("type");
+    let attribute_col = match &opts.attribute {
+        None => None,
+        Some(name) => Some(find(name).ok_or_else(|| {
+            err(
+                first_chunk,
+                format!(
+                    "no column `{name}` for the attribute; available columns: {}",
+                    names.join(" ")
+                ),
+            )
+        })?),
+    };
+    let stride = h.values_per_atom * 8;
+    let n = h.atoms;
+    progress.stage(
+        &format!("reading timestep {}", h.timestep),
+        Some(n as u64),
+        "particles",
+    );
+    let mut positions = vec![[0f32; 3]; n];
+    let mut types = vec![0i64; n];
+    let mut attribute = attribute_col.map(|_| vec![0f32; n]);
+    let value = |atom: &[u8], c: usize| {
+        f64::from_le_bytes(atom[8 * c..8 * c + 8].try_into().unwrap_or([0; 8]))
+    };
+    let bx = &h.simulation_box;
+    // Atoms in file order: chunk after chunk.
+    let mut first = 0usize;
+    for chunk in &h.chunks {
+        let bytes = &data[chunk.clone()];
+        let count = bytes.len() / stride;
+        let range = first..first + count;
+        // Returns the index (within the chunk) and column of the first bad value.
+        let bad = positions[range.clone()]
+            .par_iter_mut()
+            .zip(types[range.clone()].par_iter_mut())
+            .zip(bytes.par_chunks_exact(stride))
+            .enumerate()
+            .map(|(i, ((p, t), atom))| {
+                let mut x = [0f64; 3];
+                for k in 0..3 {
+                    x[k] = value(atom, coords[k]);
+                    if !x[k].is_finite() {
+                        return Some((i, coords[k]));
+                    }
+                }
+                let x = if scaled { bx.from_fractional(x) } else { x };
+                *p = x.map(|v| v as f32);
+                if let Some(c) = species_col {
+                    let v = value(atom, c);
+                    if !(v.is_finite() && v.fract() == 0.0 && v.abs() < 1e15) {
+                        return Some((i, c));
+                    }
+                    *t = v as i64;
+                }
+                None
+            })
+            .find_first(Option::is_some)
+            .flatten();
+        if let Some((i, c)) = bad {
+            let offset = (chunk.start + i * stride + 8 * c) as u64;
+            return Err(err(
+                offset,
+                format!(
+                    "atom {} of timestep {}: column `{}` is not a finite number{}",
+                    first + i + 1,
+                    h.timestep,
+                    names[c],
+                    if Some(c) == species_col {
+                        " or not an integer type"
+                    } else {
+                        ""
+                    }
+                ),
+            ));
+        }
+        if let (Some(values), Some(c)) = (attribute.as_mut(), attribute_col) {
+            let bad = values[range.clone()]
+                .par_iter_mut()
+                .zip(bytes.par_chunks_exact(stride))
+                .position_first(|(out, atom)| {
+                    let v = value(atom, c);
+                    *out = v as f32;
+                    !v.is_finite()
+                });
+            if let Some(i) = bad {
+                return Err(err(
+                    (chunk.start + i * stride + 8 * c) as u64,
+                    format!(
+                        "atom {} of timestep {}: column `{}` is not a finite number",
+                        first + i + 1,
+                        h.timestep,
+                        names[c]
+                    ),
+                ));
+            }
+        }
+        progress.advance(count as u64);
+        first += count;
+    }
+    progress.finish_stage();
+
+    // Species: LAMMPS numeric types, sorted numerically.
+    let (species, species_index) = match species_col {
+        None => (
+            vec![SpeciesName {
+                name: super::atoms::DEFAULT_SPECIES.into(),
+                numeric_type: false,
+            }],
+            vec![0u16; n],
+        ),
+        Some(_) => {
+            let mut distinct: Vec<i64> = types.clone();
+            distinct.par_sort_unstable();
+            distinct.dedup();
+            if distinct.len() > 1 << 16 {
+                return Err(err(first_chunk, "more than 65536 distinct types".into()));
+            }
+            let index: Vec<u16> = types
+                .par_iter()
+                .map(|t| distinct.binary_search(t).unwrap_or(0) as u16)
+                .collect();
+            let names = distinct
+                .iter()
+                .map(|t| SpeciesName {
+                    name: t.to_string(),
+                    numeric_type: true,
+                })
+                .collect();
+            (names, index)
+        }
+    };
+    Ok(Frame {
+        positions,
+        species_index,
+        species,
+        attribute: attribute.zip(attribute_col).map(|(values, c)| Attribute {
+            name: names[c].clone(),
+            values,
+        }),
+        simulation_box: Some(h.simulation_box.clone()),
+        timestep: Some(h.timestep),
+        time: h.time,
+        units: h.units.clone(),
+    })
+}

@@ -1,0 +1,321 @@
+//! LAMMPS binary dumps: real files written by LAMMPS (datasets/lammps/in.*_binary) read
+//! against the text dumps of the same runs, the old header revision, and bad files.
+
+use std::path::{Path, PathBuf};
+
+use mdlod_datasets::lammps_sample_path;
+use mdlod_preprocess::readers::{DumpFile, InputFormat, ReadError, ReadOptions};
+use mdlod_preprocess::{Frame, NoProgress};
+
+fn read(path: &Path, k: usize, opts: &ReadOptions) -> Frame {
+    DumpFile::open(path)
+        .unwrap()
+        .read_frame(k, opts, &NoProgress)
+        .unwrap()
+}
+
+fn with_attribute(name: &str) -> ReadOptions {
+    ReadOptions {
+        attribute: Some(name.into()),
+        ..Default::default()
+    }
+}
+
+/// Positions reordered by atom id (read as the attribute).
+fn by_id(frame: &Frame) -> Vec<[f32; 3]> {
+    let ids = &frame.attribute.as_ref().unwrap().values;
+    let mut order: Vec<usize> = (0..frame.len()).collect();
+    order.sort_by(|&a, &b| ids[a].total_cmp(&ids[b]));
+    order.iter().map(|&i| frame.positions[i]).collect()
+}
+
+fn assert_close(a: &[[f32; 3]], b: &[[f32; 3]], tol: f32, what: &str) {
+    assert_eq!(a.len(), b.len(), "{what}");
+    for (i, (p, q)) in a.iter().zip(b).enumerate() {
+        for k in 0..3 {
+            assert!(
+                (p[k] - q[k]).abs() <= tol * (1.0 + q[k].abs()),
+                "{what}: atom {i} axis {k}: {} vs {}",
+                p[k],
+                q[k]
+            );
+        }
+    }
+}
+
+#[test]
+fn custom_binary_matches_the_text_dump_of_the_same_run() {
+    let bin = DumpFile::open(&lammps_sample_path("cu_melt.custom.bin")).unwrap();
+    assert_eq!(bin.format(), InputFormat::LammpsBinary);
+    assert_eq!(bin.frame_count(), 3);
+    assert_eq!(
+        (0..3).map(|k| bin.frame_timestep(k)).collect::<Vec<_>>(),
+        [Some(0), Some(250), Some(500)]
+    );
+    let info = bin.frame_info(1).unwrap();
+    assert_eq!(info.particles, 500);
+    assert_eq!(info.columns, ["id", "type", "x", "y", "z", "c_pe"]);
+    let text = DumpFile::open(&lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    // Steps 0 and 500 are in both (text: every 100 steps, 6 significant digits).
+    for (kb, kt) in [(0, 0), (2, 5)] {
+        let b = bin
+            .read_frame(kb, &with_attribute("c_pe"), &NoProgress)
+            .unwrap();
+        let t = text
+            .read_frame(kt, &with_attribute("c_pe"), &NoProgress)
+            .unwrap();
+        assert_eq!(b.timestep, t.timestep);
+        assert_eq!(b.time, t.time);
+        assert_eq!(b.units.as_deref(), Some("metal"));
+        assert_eq!(b.units, t.units);
+        assert_eq!(b.species, t.species);
+        assert_eq!(b.species_index, t.species_index);
+        assert_close(&b.positions, &t.positions, 1e-5, "positions");
+        let (ba, ta) = (b.attribute.unwrap(), t.attribute.unwrap());
+        assert_eq!(ba.name, "c_pe");
+        for (x, y) in ba.values.iter().zip(&ta.values) {
+            assert!((x - y).abs() <= 1e-5 * (1.0 + y.abs()), "c_pe {x} vs {y}");
+        }
+        let (bb, tb) = (b.simulation_box.unwrap(), t.simulation_box.unwrap());
+        assert_eq!(bb.periodic, Some([true; 3]));
+        for k in 0..3 {
+            assert!((bb.origin[k] - tb.origin[k]).abs() < 1e-9);
+            assert!((bb.a[k] - tb.a[k]).abs() < 1e-9);
+        }
+    }
+}
+
+#[test]
+fn atom_binary_is_scaled_and_unsorted_and_agrees_with_custom() {
+    let atom = lammps_sample_path("cu_melt.atom.bin");
+    let info = DumpFile::open(&atom).unwrap().frame_info(0).unwrap();
+    assert_eq!(info.columns, ["id", "type", "xs", "ys", "zs"]);
+    for k in 0..3 {
+        let a = read(&atom, k, &with_attribute("id"));
+        let c = read(
+            &lammps_sample_path("cu_melt.custom.bin"),
+            k,
+            &with_attribute("id"),
+        );
+        assert_close(&by_id(&a), &by_id(&c), 1e-5, "scaled vs Cartesian");
+    }
+}
+
+#[test]
+fn a_file_set_per_timestep_reads_frame_by_frame() {
+    let custom = lammps_sample_path("cu_melt.custom.bin");
+    let l = 5.0 * 3.615;
+    for (k, step) in [0u64, 250, 500].into_iter().enumerate() {
+        let path = lammps_sample_path(&format!("cu_melt.step.{step}.bin"));
+        let f = DumpFile::open(&path).unwrap();
+        assert_eq!(f.frame_count(), 1);
+        assert_eq!(f.frame_timestep(0), Some(step));
+        let unwrapped = read(&path, 0, &with_attribute("id"));
+        let wrapped = read(&custom, k, &with_attribute("id"));
+        // Unwrapped and wrapped coordinates differ by whole box lengths.
+        for (u, w) in by_id(&unwrapped).iter().zip(by_id(&wrapped)) {
+            for ax in 0..3 {
+                let periods = (u[ax] - w[ax]) / l;
+                assert!((periods - periods.round()).abs() < 1e-4, "{u:?} vs {w:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn triclinic_binary_matches_the_text_dump() {
+    let bin = lammps_sample_path("lj_triclinic.custom.bin");
+    let text = lammps_sample_path("lj_triclinic.cartesian.dump");
+    assert_eq!(DumpFile::open(&bin).unwrap().frame_count(), 4);
+    for k in 0..4 {
+        let b = read(&bin, k, &with_attribute("v_speed"));
+        let t = read(&text, k, &with_attribute("v_speed"));
+        assert_eq!(b.timestep, t.timestep);
+        assert_close(&b.positions, &t.positions, 2e-5, "positions");
+        let (bb, tb) = (b.simulation_box.unwrap(), t.simulation_box.unwrap());
+        for (x, y) in [bb.origin, bb.a, bb.b, bb.c]
+            .iter()
+            .flatten()
+            .zip([tb.origin, tb.a, tb.b, tb.c].iter().flatten())
+        {
+            assert!((x - y).abs() < 1e-5 * (1.0 + y.abs()), "box {x} vs {y}");
+        }
+        assert!(!bb.is_orthogonal());
+    }
+}
+
+/// Rewrites a current-revision binary dump in the old layout (no magic, endian, revision,
+/// units, time or column names): how LAMMPS wrote binary dumps before late 2020.
+fn to_old_revision(new: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut p = 0usize;
+    let i32_at = |p: usize| i32::from_le_bytes(new[p..p + 4].try_into().unwrap());
+    let i64_at = |p: usize| i64::from_le_bytes(new[p..p + 8].try_into().unwrap());
+    while p < new.len() {
+        let len = (-i64_at(p)) as usize;
+        p += 8 + len + 8; // marker, magic, endian + revision
+        let triclinic = i32_at(p + 16);
+        let fixed = 8 + 8 + 4 + 24 + 48 + if triclinic == 1 { 24 } else { 0 } + 4;
+        out.extend_from_slice(&new[p..p + fixed]);
+        p += fixed;
+        let units = i32_at(p) as usize;
+        p += 4 + units;
+        p += if new[p] == 1 { 9 } else { 1 };
+        let columns = i32_at(p) as usize;
+        p += 4 + columns;
+        let start = p;
+        let nchunk = i32_at(p) as usize;
+        p += 4;
+        for _ in 0..nchunk {
+            p += 4 + 8 * i32_at(p) as usize;
+        }
+        out.extend_from_slice(&new[start..p]);
+    }
+    out
+}
+
+fn temp_copy(name: &str, bytes: &[u8]) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    std::fs::write(&path, bytes).unwrap();
+    (dir, path)
+}
+
+#[test]
+fn the_old_header_revision_reads_the_same_atoms() {
+    for (file, attribute) in [("cu_melt.atom.bin", "id"), ("cu_melt.custom.bin", "c_pe")] {
+        let new_path = lammps_sample_path(file);
+        let old = to_old_revision(&std::fs::read(&new_path).unwrap());
+        let (_d, old_path) = temp_copy("old.bin", &old);
+        let old_dump = DumpFile::open(&old_path).unwrap();
+        assert_eq!(old_dump.frame_count(), 3);
+        let names: Vec<String> = DumpFile::open(&new_path)
+            .unwrap()
+            .frame_info(0)
+            .unwrap()
+            .columns;
+        let opts = ReadOptions {
+            attribute: Some(attribute.into()),
+            columns: (file == "cu_melt.custom.bin").then(|| names.clone()),
+        };
+        for k in 0..3 {
+            let a = old_dump.read_frame(k, &opts, &NoProgress).unwrap();
+            let b = read(&new_path, k, &with_attribute(attribute));
+            assert_eq!(a.positions, b.positions);
+            assert_eq!(a.species_index, b.species_index);
+            assert_eq!(a.attribute, b.attribute);
+            assert_eq!(a.timestep, b.timestep);
+            assert_eq!(a.time, None);
+        }
+        if file == "cu_melt.custom.bin" {
+            // Six unnamed values per atom are not `dump atom`'s: the columns are needed.
+            let e = old_dump
+                .read_frame(0, &ReadOptions::default(), &NoProgress)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("names no columns") && e.contains("--columns"),
+                "{e}"
+            );
+            assert!(e.starts_with(&old_path.display().to_string()), "{e}");
+        }
+    }
+}
+
+fn open_err(bytes: &[u8]) -> String {
+    let (_d, path) = temp_copy("bad.bin", bytes);
+    match DumpFile::open(&path) {
+        Err(e) => {
+            let s = e.to_string();
+            assert!(s.starts_with(&path.display().to_string()), "{s}");
+            s
+        }
+        Ok(d) => {
+            // Some damage only shows when the atoms are decoded.
+            (0..d.frame_count())
+                .find_map(|k| {
+                    d.read_frame(k, &with_attribute("c_pe"), &NoProgress)
+                        .err()
+                        .map(|e| e.to_string())
+                })
+                .unwrap_or_default()
+        }
+    }
+}
+
+#[test]
+fn truncated_and_corrupt_binary_dumps_are_errors_naming_the_byte() {
+    let good = std::fs::read(lammps_sample_path("cu_melt.custom.bin")).unwrap();
+    // Every truncation (in steps, through headers and atoms) is an error, never a panic.
+    let mut cut = 1;
+    while cut < good.len() {
+        let e = open_err(&good[..cut]);
+        assert!(e.contains("byte "), "cut at {cut}: {e}");
+        cut += if cut < 400 { 1 } else { 997 };
+    }
+    assert!(open_err(&good[..100]).contains("truncated"));
+
+    // A chunk length that is not a whole number of atoms.
+    let mut bad = good.clone();
+    let chunk_len_at = 0xa6; // after the chunk count of frame 0
+    bad[chunk_len_at..chunk_len_at + 4].copy_from_slice(&2999i32.to_le_bytes());
+    let e = open_err(&bad);
+    assert!(e.contains("not a multiple of 6"), "{e}");
+
+    // A NaN coordinate: the atom, the column and the byte are named.
+    let mut bad = good.clone();
+    let first_atom = chunk_len_at + 4;
+    let x_of_atom_3 = first_atom + 2 * 6 * 8 + 2 * 8;
+    bad[x_of_atom_3..x_of_atom_3 + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+    let e = open_err(&bad);
+    assert!(
+        e.contains("atom 3 of timestep 0")
+            && e.contains("`x`")
+            && e.contains(&format!("byte {x_of_atom_3}")),
+        "{e}"
+    );
+
+    // Another byte order, another revision, a wrong magic.
+    let mut bad = good.clone();
+    bad[18..22].copy_from_slice(&0x0100_0000i32.to_le_bytes());
+    assert!(open_err(&bad).contains("other byte order"));
+    let mut bad = good.clone();
+    bad[22..26].copy_from_slice(&3i32.to_le_bytes());
+    assert!(open_err(&bad).contains("revision 3"));
+    let mut bad = good.clone();
+    bad[8..12].copy_from_slice(b"JUNK");
+    let e = open_err(&bad);
+    assert!(e.contains("not a LAMMPS binary dump"), "{e}");
+    // An atom count the chunks do not hold.
+    let mut bad = good.clone();
+    bad[0x22..0x2a].copy_from_slice(&501i64.to_le_bytes());
+    let e = open_err(&bad);
+    assert!(e.contains("announces 501 atoms"), "{e}");
+    // Not a number of values per atom.
+    let mut bad = good;
+    bad[0x76..0x7a].copy_from_slice(&(-6i32).to_le_bytes());
+    assert!(open_err(&bad).contains("values per atom is -6"));
+}
+
+#[test]
+fn wrong_attribute_and_no_coordinates_are_clear_errors() {
+    let path = lammps_sample_path("cu_melt.atom.bin");
+    let e = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &with_attribute("c_pe"), &NoProgress)
+        .unwrap_err();
+    assert!(matches!(e, ReadError::Binary { .. }));
+    assert!(e
+        .to_string()
+        .contains("available columns: id type xs ys zs"));
+    let opts = ReadOptions {
+        columns: Some(["id", "type", "a", "b", "c"].map(String::from).to_vec()),
+        ..Default::default()
+    };
+    let e = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &opts, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no coordinate columns"), "{e}");
+}
