@@ -144,6 +144,12 @@ pub fn lammps_sample_path(file: &str) -> PathBuf {
     lammps_samples_dir().join(file)
 }
 
+/// Path of a committed GSD sample in `datasets/gsd/` (written by the `gsd` Python
+/// package; see `datasets/gsd/make-samples.py`).
+pub fn gsd_sample_path(file: &str) -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/gsd")).join(file)
+}
+
 /// The sample entry for `file`, if there is one.
 pub fn lammps_sample(file: &str) -> Option<&'static LammpsSample> {
     LAMMPS_SAMPLES.iter().find(|s| s.file == file)

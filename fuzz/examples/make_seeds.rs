@@ -24,6 +24,7 @@ fn frame(n: usize, attribute: bool) -> Frame {
             .map(|name| SpeciesName {
                 name: name.into(),
                 numeric_type: false,
+                radius: None,
             })
             .to_vec(),
         attribute: attribute.then(|| Attribute {

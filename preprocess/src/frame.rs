@@ -13,6 +13,9 @@ pub struct SpeciesName {
     pub name: String,
     /// True when `name` came from a numeric LAMMPS `type` column with no element given.
     pub numeric_type: bool,
+    /// The radius the input gives this species (GSD `particles/diameter` / 2), used
+    /// unless the user overrides it.
+    pub radius: Option<f32>,
 }
 
 /// One timestep of particles, as read from a dump.

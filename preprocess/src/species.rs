@@ -90,7 +90,8 @@ pub fn element(symbol: &str) -> Option<(f32, [f32; 3])> {
         .map(|(_, r, c)| (*r, srgb_to_linear(*c)))
 }
 
-/// The looks of every species, with `overrides` (name, radius) applied.
+/// The looks of every species: the radius the input gives, else the element's or the
+/// default, with `overrides` (name, radius) applied last.
 pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<Species> {
     names
         .iter()
@@ -100,6 +101,9 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
                 (false, Some(rc)) => rc,
                 _ => (DEFAULT_RADIUS, srgb_to_linear(PALETTE[i % PALETTE.len()])),
             };
+            if let Some(r) = s.radius.filter(|r| r.is_finite() && *r > 0.0) {
+                radius = r;
+            }
             if let Some((_, r)) = overrides.iter().rev().find(|(n, _)| *n == s.name) {
                 radius = *r;
             }
@@ -137,14 +141,17 @@ mod tests {
             SpeciesName {
                 name: "Cu".into(),
                 numeric_type: false,
+                radius: None,
             },
             SpeciesName {
                 name: "2".into(),
                 numeric_type: true,
+                radius: None,
             },
             SpeciesName {
                 name: "Xx".into(),
                 numeric_type: false,
+                radius: None,
             },
         ];
         let t = species_table(&names, &[("2".into(), 0.9)]);

@@ -53,6 +53,7 @@ fn test_frame(n: usize) -> Frame {
             .map(|name| SpeciesName {
                 name: name.into(),
                 numeric_type: false,
+                radius: None,
             })
             .to_vec(),
         attribute: Some(Attribute {

@@ -43,10 +43,12 @@ fn test_frame(n_cells: usize) -> Frame {
             SpeciesName {
                 name: "Cu".into(),
                 numeric_type: false,
+                radius: None,
             },
             SpeciesName {
                 name: "Ag".into(),
                 numeric_type: false,
+                radius: None,
             },
         ],
         attribute: Some(Attribute {
@@ -254,6 +256,7 @@ fn single_particle_and_tiny_inputs() {
             species: vec![SpeciesName {
                 name: "Cu".into(),
                 numeric_type: false,
+                radius: None,
             }],
             ..Default::default()
         };

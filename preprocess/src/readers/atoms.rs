@@ -214,6 +214,7 @@ pub(crate) fn parse(
         vec![SpeciesName {
             name: DEFAULT_SPECIES.to_string(),
             numeric_type: false,
+            radius: None,
         }]
     } else {
         Vec::new()
@@ -299,6 +300,7 @@ fn merge_species(
         .map(|n| SpeciesName {
             name: String::from_utf8_lossy(n).into_owned(),
             numeric_type,
+            radius: None,
         })
         .collect())
 }

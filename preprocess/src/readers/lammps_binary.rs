@@ -522,6 +522,7 @@ pub(crate) fn read_frame(
             vec![SpeciesName {
                 name: super::atoms::DEFAULT_SPECIES.into(),
                 numeric_type: false,
+                radius: None,
             }],
             vec![0u16; n],
         ),
@@ -541,6 +542,7 @@ pub(crate) fn read_frame(
                 .map(|t| SpeciesName {
                     name: t.to_string(),
                     numeric_type: true,
+                    radius: None,
                 })
                 .collect();
             (names, index)

@@ -33,11 +33,13 @@
 //!   NaN and infinite numbers in used columns are errors. Atom order is kept.
 //! - **LAMMPS binary dumps** (`.bin`, both header revisions): see `lammps_binary.rs`.
 //!   Errors name the byte offset instead of a line.
+//! - **GSD** (HOOMD-blue, `hoomd` schema, file layers 1.x and 2.x): see `gsd.rs`.
 //! - Files are memory-mapped; gzip files (single or multi-member) are decompressed into
 //!   memory. zstd and bzip2 files are recognised and refused with a clear error.
 
 mod atoms;
 mod float;
+mod gsd;
 mod lammps_binary;
 mod lammps_text;
 mod xyz;
@@ -148,12 +150,14 @@ pub enum InputFormat {
     Xyz,
     /// LAMMPS binary dump (`dump custom` / `dump atom` to a `.bin` file).
     LammpsBinary,
+    /// GSD (HOOMD-blue), `hoomd` schema.
+    Gsd,
 }
 
 impl InputFormat {
     /// The format implied by a file name, ignoring a `.gz`, `.bz2` or `.zst` suffix:
     /// `.lammpstrj`, `.dump`, `.lammps` and `dump.*` are LAMMPS text; `.bin` is LAMMPS
-    /// binary (as LAMMPS itself decides); `.xyz` and `.extxyz` are XYZ.
+    /// binary (as LAMMPS itself decides); `.gsd` is GSD; `.xyz` and `.extxyz` are XYZ.
     pub fn from_path(path: &Path) -> Option<InputFormat> {
         let name = path.file_name()?.to_str()?.to_ascii_lowercase();
         let name = [".gz", ".bz2", ".zst"]
@@ -164,6 +168,8 @@ impl InputFormat {
             Some(InputFormat::Xyz)
         } else if name.ends_with(".bin") {
             Some(InputFormat::LammpsBinary)
+        } else if name.ends_with(".gsd") {
+            Some(InputFormat::Gsd)
         } else if name.ends_with(".lammpstrj")
             || name.ends_with(".dump")
             || name.ends_with(".lammps")
@@ -198,6 +204,7 @@ impl fmt::Display for InputFormat {
             InputFormat::LammpsText => "LAMMPS text dump",
             InputFormat::Xyz => "XYZ",
             InputFormat::LammpsBinary => "LAMMPS binary dump",
+            InputFormat::Gsd => "GSD",
         })
     }
 }
@@ -243,6 +250,7 @@ enum Index {
     Lammps(lammps_text::Index),
     Xyz(xyz::Index),
     LammpsBinary(lammps_binary::Index),
+    Gsd(gsd::Index),
 }
 
 /// An opened dump file and its frame index.
@@ -307,6 +315,7 @@ impl DumpFile {
         let format = format
             .or_else(|| InputFormat::from_path(path))
             .or_else(|| lammps_binary::sniff(data).then_some(InputFormat::LammpsBinary))
+            .or_else(|| gsd::sniff(data).then_some(InputFormat::Gsd))
             .or_else(|| InputFormat::sniff(data))
             .ok_or_else(|| {
                 let mut cursor = Cursor::new(data, 0);
@@ -330,6 +339,7 @@ impl DumpFile {
             InputFormat::LammpsBinary => {
                 Index::LammpsBinary(lammps_binary::Index::build(path, data)?)
             }
+            InputFormat::Gsd => Index::Gsd(gsd::Index::build(path, data)?),
         };
         progress.advance(data.len() as u64);
         progress.finish_stage();
@@ -360,6 +370,7 @@ impl DumpFile {
             Index::Lammps(i) => i.len(),
             Index::Xyz(i) => i.len(),
             Index::LammpsBinary(i) => i.len(),
+            Index::Gsd(i) => i.len(),
         }
     }
 
@@ -370,11 +381,16 @@ impl DumpFile {
             Index::Lammps(i) => i.timestep(k),
             Index::Xyz(i) => i.timestep(k),
             Index::LammpsBinary(i) => i.timestep(k),
+            Index::Gsd(i) => i.timestep(self.bytes(), k),
         }
     }
 
     /// Parses frame `k`'s header only: counts, box, time and column names.
     pub fn frame_info(&self, k: usize) -> Result<FrameInfo, ReadError> {
+        if let Index::Gsd(i) = &self.index {
+            self.check_frame(k)?;
+            return gsd::frame_info(&self.path, self.bytes(), i, k);
+        }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
             return Ok(lammps_binary::frame_info(
@@ -404,6 +420,10 @@ impl DumpFile {
         opts: &ReadOptions,
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
+        if let Index::Gsd(i) = &self.index {
+            self.check_frame(k)?;
+            return gsd::read_frame(&self.path, self.bytes(), i, k, opts, progress);
+        }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
             return lammps_binary::read_frame(
@@ -485,7 +505,7 @@ impl DumpFile {
         match &self.index {
             Index::Lammps(i) => i.header(&ctx, k),
             Index::Xyz(i) => i.header(&ctx, k),
-            Index::LammpsBinary(_) => Err(ReadError::Binary {
+            Index::LammpsBinary(_) | Index::Gsd(_) => Err(ReadError::Binary {
                 path: self.path.clone(),
                 offset: 0,
                 message: "internal error: text header of a binary dump".into(),

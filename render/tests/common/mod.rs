@@ -34,6 +34,7 @@ fn species(names: &[&str]) -> Vec<SpeciesName> {
         .map(|n| SpeciesName {
             name: n.to_string(),
             numeric_type: false,
+            radius: None,
         })
         .collect()
 }

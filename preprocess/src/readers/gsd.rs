@@ -1,0 +1,558 @@
+//! GSD files (HOOMD-blue's General Simulation Data), `hoomd` schema.
+//!
+//! How it works. A GSD file is a 256-byte header, an index of 32-byte entries (frame,
+//! N, M, location, name id, type) pointing at raw little-endian data chunks, and a list
+//! of chunk names (64-byte slots in file layer 1.0, 0-separated in 2.x). Opening reads
+//! the header, the names and the index, checking every entry's data range against the
+//! file size with checked arithmetic; reading frame `k` looks up its chunks:
+//!
+//! - `particles/N` (u32), `particles/position` (f32 or f64, N×3), `particles/typeid`
+//!   (u32, default 0), `particles/types` (N×M characters, default `A`),
+//!   `particles/diameter` (f32, default 1: the species radius is half its mean per
+//!   type), `configuration/step` (u64, default 0), `configuration/box` (f32 ×6:
+//!   `Lx Ly Lz xy xz yz`, centred on the origin).
+//! - As the schema says, a chunk missing from frame `k` is taken from frame 0, and one
+//!   missing from both has its default: writers store only what changed.
+//! - The attribute may be any per-particle chunk of N numbers (`charge`, `mass`,
+//!   `particles/charge`, ...).
+//!
+//! Errors name the byte offset of the damaged entry or value.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use super::{FrameInfo, ReadError, ReadOptions};
+use crate::frame::{Attribute, Frame, SimulationBox, SpeciesName};
+use crate::progress::Progress;
+
+const MAGIC: u64 = 0x65DF_65DF_65DF_65DF;
+const HEADER: usize = 256;
+const ENTRY: usize = 32;
+/// Name slot size of file layer 1.0 (and the unit of the name list size in 2.x).
+const NAME_SLOT: usize = 64;
+
+/// GSD chunk element types.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Ty {
+    U8,
+    U16,
+    U32,
+    U64,
+    I8,
+    I16,
+    I32,
+    I64,
+    F32,
+    F64,
+    Char,
+}
+
+impl Ty {
+    fn from_code(c: u8) -> Option<Ty> {
+        Some(match c {
+            1 => Ty::U8,
+            2 => Ty::U16,
+            3 => Ty::U32,
+            4 => Ty::U64,
+            5 => Ty::I8,
+            6 => Ty::I16,
+            7 => Ty::I32,
+            8 => Ty::I64,
+            9 => Ty::F32,
+            10 => Ty::F64,
+            11 => Ty::Char,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Ty::U8 | Ty::I8 | Ty::Char => 1,
+            Ty::U16 | Ty::I16 => 2,
+            Ty::U32 | Ty::I32 | Ty::F32 => 4,
+            Ty::U64 | Ty::I64 | Ty::F64 => 8,
+        }
+    }
+
+    /// Element `i` of `bytes` as f64.
+    fn get(self, bytes: &[u8], i: usize) -> f64 {
+        let b = &bytes[i * self.size()..(i + 1) * self.size()];
+        let a = |n: usize| -> [u8; 8] {
+            let mut out = [0u8; 8];
+            out[..n].copy_from_slice(&b[..n]);
+            out
+        };
+        match self {
+            Ty::U8 | Ty::Char => f64::from(b[0]),
+            Ty::I8 => f64::from(b[0] as i8),
+            Ty::U16 => f64::from(u16::from_le_bytes([b[0], b[1]])),
+            Ty::I16 => f64::from(i16::from_le_bytes([b[0], b[1]])),
+            Ty::U32 => f64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            Ty::I32 => f64::from(i32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            Ty::F32 => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            Ty::U64 => u64::from_le_bytes(a(8)) as f64,
+            Ty::I64 => i64::from_le_bytes(a(8)) as f64,
+            Ty::F64 => f64::from_le_bytes(a(8)),
+        }
+    }
+}
+
+/// One index entry: an N×M chunk of `ty` at `location` (checked to lie in the file).
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    frame: u64,
+    n: usize,
+    m: usize,
+    location: usize,
+    name: u16,
+    ty: Ty,
+    /// Byte offset of the entry in the index, for errors.
+    at: usize,
+}
+
+/// The chunks of a GSD file.
+pub(crate) struct Index {
+    names: Vec<String>,
+    /// Sorted by (frame, name).
+    entries: Vec<Entry>,
+    frames: usize,
+}
+
+/// True when `data` starts with the GSD magic number.
+pub(crate) fn sniff(data: &[u8]) -> bool {
+    data.len() >= 8 && u64::from_le_bytes(data[..8].try_into().unwrap_or([0; 8])) == MAGIC
+}
+
+fn err(path: &Path, offset: usize, message: impl Into<String>) -> ReadError {
+    ReadError::Binary {
+        path: path.to_path_buf(),
+        offset: offset as u64,
+        message: message.into(),
+    }
+}
+
+fn u64_at(data: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(data[at..at + 8].try_into().unwrap_or([0; 8]))
+}
+
+impl Index {
+    pub fn build(path: &Path, data: &[u8]) -> Result<Index, ReadError> {
+        if data.len() < HEADER {
+            return Err(err(
+                path,
+                data.len(),
+                format!("truncated: the GSD header needs {HEADER} bytes"),
+            ));
+        }
+        if u64_at(data, 0) != MAGIC {
+            return Err(err(path, 0, "not a GSD file (bad magic number)"));
+        }
+        let version = u32::from_le_bytes(data[44..48].try_into().unwrap_or([0; 4]));
+        let major = version >> 16;
+        if !(1..=2).contains(&major) {
+            return Err(err(
+                path,
+                44,
+                format!(
+                    "GSD file layer {}.{} is not supported (1.x and 2.x are)",
+                    major,
+                    version & 0xffff
+                ),
+            ));
+        }
+        let schema = String::from_utf8_lossy(&data[112..176]);
+        let schema = schema.trim_end_matches('\0');
+        if schema != "hoomd" {
+            return Err(err(
+                path,
+                112,
+                format!("schema `{schema}`: only the `hoomd` schema holds particles"),
+            ));
+        }
+        let block = |loc_at: usize, count_at: usize, unit: usize, what: &str| {
+            let loc = u64_at(data, loc_at);
+            let count = u64_at(data, count_at);
+            let range = usize::try_from(loc).ok().and_then(|l| {
+                let len = usize::try_from(count).ok()?.checked_mul(unit)?;
+                let end = l.checked_add(len)?;
+                (end <= data.len()).then_some(l..end)
+            });
+            range.ok_or_else(|| {
+                err(
+                    path,
+                    loc_at,
+                    format!("the {what} ({count} × {unit} bytes at {loc}) lies outside the file"),
+                )
+            })
+        };
+        let names_range =
+            block(24, 32, NAME_SLOT, "name list").or_else(|_| block(24, 32, 1, "name list"))?;
+        let names_bytes = &data[names_range.clone()];
+        let names: Vec<String> = if major == 1 {
+            names_bytes
+                .chunks(NAME_SLOT)
+                .take_while(|s| s.first().is_some_and(|&b| b != 0))
+                .map(|s| {
+                    let end = s.iter().position(|&b| b == 0).unwrap_or(s.len());
+                    String::from_utf8_lossy(&s[..end]).into_owned()
+                })
+                .collect()
+        } else {
+            names_bytes
+                .split(|&b| b == 0)
+                .take_while(|s| !s.is_empty())
+                .map(|s| String::from_utf8_lossy(s).into_owned())
+                .collect()
+        };
+        let index_range = block(8, 16, ENTRY, "index")?;
+        let mut entries = Vec::new();
+        for (k, e) in data[index_range.clone()].chunks_exact(ENTRY).enumerate() {
+            let at = index_range.start + k * ENTRY;
+            let location = u64_at(e, 16);
+            if location == 0 {
+                break; // The end of the used entries.
+            }
+            let frame = u64_at(e, 0);
+            let n = u64_at(e, 8);
+            let m = u32::from_le_bytes(e[24..28].try_into().unwrap_or([0; 4]));
+            let name = u16::from_le_bytes([e[28], e[29]]);
+            let ty = Ty::from_code(e[30])
+                .ok_or_else(|| err(path, at + 30, format!("unknown chunk type {}", e[30])))?;
+            if usize::from(name) >= names.len() {
+                return Err(err(
+                    path,
+                    at + 28,
+                    format!(
+                        "chunk name id {name}, but the name list has {}",
+                        names.len()
+                    ),
+                ));
+            }
+            let fits = usize::try_from(n).ok().and_then(|n| {
+                let bytes = n.checked_mul(m as usize)?.checked_mul(ty.size())?;
+                let l = usize::try_from(location).ok()?;
+                (l.checked_add(bytes)? <= data.len()).then_some((n, l))
+            });
+            let Some((n, location)) = fits else {
+                return Err(err(
+                    path,
+                    at,
+                    format!(
+                        "chunk `{}` of frame {frame} ({n} × {m} values at byte {location}) lies outside the file (truncated?)",
+                        names[usize::from(name)]
+                    ),
+                ));
+            };
+            entries.push(Entry {
+                frame,
+                n,
+                m: m as usize,
+                location,
+                name,
+                ty,
+                at,
+            });
+        }
+        entries.sort_by_key(|e| (e.frame, e.name));
+        let frames = entries.last().map_or(0, |e| e.frame as usize + 1);
+        if frames == 0 {
+            return Err(err(path, index_range.start, "no frames"));
+        }
+        Ok(Index {
+            names,
+            entries,
+            frames,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.frames
+    }
+
+    /// The chunk `name` of frame `k`, else of frame 0 (the schema's rule).
+    fn chunk(&self, k: usize, name: &str) -> Option<&Entry> {
+        let id = self.names.iter().position(|n| n == name)? as u16;
+        let find = |f: u64| {
+            self.entries
+                .binary_search_by_key(&(f, id), |e| (e.frame, e.name))
+                .ok()
+                .map(|i| &self.entries[i])
+        };
+        find(k as u64).or_else(|| find(0))
+    }
+
+    pub fn timestep(&self, data: &[u8], k: usize) -> Option<u64> {
+        if k >= self.frames {
+            return None;
+        }
+        match self.chunk(k, "configuration/step") {
+            Some(e) if e.ty == Ty::U64 && e.n * e.m >= 1 => Some(u64_at(data, e.location)),
+            Some(_) => None,
+            None => Some(0),
+        }
+    }
+
+    /// Particle count of frame `k`.
+    fn particles(&self, path: &Path, data: &[u8], k: usize) -> Result<usize, ReadError> {
+        match self.chunk(k, "particles/N") {
+            Some(e) if e.n * e.m == 1 => Ok(e.ty.get(&data[e.location..], 0) as usize),
+            Some(e) => Err(err(path, e.at, "`particles/N` is not a single number")),
+            None => Ok(0),
+        }
+    }
+
+    fn simulation_box(
+        &self,
+        path: &Path,
+        data: &[u8],
+        k: usize,
+    ) -> Result<SimulationBox, ReadError> {
+        let v: Vec<f64> = match self.chunk(k, "configuration/box") {
+            Some(e) if e.n * e.m == 6 => (0..6).map(|i| e.ty.get(&data[e.location..], i)).collect(),
+            Some(e) => {
+                return Err(err(
+                    path,
+                    e.at,
+                    "`configuration/box` does not hold 6 numbers",
+                ))
+            }
+            None => vec![1.0, 1.0, 1.0, 0.0, 0.0, 0.0],
+        };
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(err(
+                path,
+                0,
+                format!("frame {k}: the box {v:?} is not finite"),
+            ));
+        }
+        let (lx, ly, lz, xy, xz, yz) = (v[0], v[1], v[2], v[3], v[4], v[5]);
+        let a = [lx, 0.0, 0.0];
+        let b = [xy * ly, ly, 0.0];
+        let c = [xz * lz, yz * lz, lz];
+        Ok(SimulationBox {
+            origin: [0, 1, 2].map(|i| -0.5 * (a[i] + b[i] + c[i])),
+            a,
+            b,
+            c,
+            periodic: Some([true; 3]),
+        })
+    }
+}
+
+pub(crate) fn frame_info(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+) -> Result<FrameInfo, ReadError> {
+    let particles = index.particles(path, data, k)?;
+    let mut columns: Vec<String> = index
+        .names
+        .iter()
+        .filter(|n| {
+            n.starts_with("particles/")
+                && index
+                    .chunk(k, n)
+                    .is_some_and(|e| e.n == particles && e.ty != Ty::Char)
+        })
+        .cloned()
+        .collect();
+    columns.sort();
+    Ok(FrameInfo {
+        particles,
+        timestep: index.timestep(data, k),
+        time: None,
+        units: None,
+        simulation_box: Some(index.simulation_box(path, data, k)?),
+        columns,
+    })
+}
+
+/// Reads frame `k`.
+pub(crate) fn read_frame(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+    opts: &ReadOptions,
+    progress: &dyn Progress,
+) -> Result<Frame, ReadError> {
+    let n = index.particles(path, data, k)?;
+    let chunk_of = |name: &str, m: usize, required: bool| -> Result<Option<&Entry>, ReadError> {
+        match index.chunk(k, name) {
+            None if required && n > 0 => Err(err(
+                path,
+                0,
+                format!("frame {k} has no `{name}` (and frame 0 has none either)"),
+            )),
+            None => Ok(None),
+            Some(e) if e.n != n || e.m != m => Err(err(
+                path,
+                e.at,
+                format!(
+                    "frame {k}: `{name}` is {} × {}, expected {n} × {m} for {n} particles",
+                    e.n, e.m
+                ),
+            )),
+            Some(e) => Ok(Some(e)),
+        }
+    };
+    progress.stage(&format!("reading frame {k}"), Some(n as u64), "particles");
+    let mut positions = vec![[0f32; 3]; n];
+    if let Some(e) = chunk_of("particles/position", 3, true)? {
+        if !matches!(e.ty, Ty::F32 | Ty::F64) {
+            return Err(err(
+                path,
+                e.at,
+                "`particles/position` is not floating point",
+            ));
+        }
+        let bytes = &data[e.location..e.location + n * 3 * e.ty.size()];
+        let bad = positions
+            .par_iter_mut()
+            .enumerate()
+            .find_map_first(|(i, p)| {
+                for c in 0..3 {
+                    let v = e.ty.get(bytes, 3 * i + c);
+                    if !v.is_finite() {
+                        return Some(i);
+                    }
+                    p[c] = v as f32;
+                }
+                None
+            });
+        if let Some(i) = bad {
+            return Err(err(
+                path,
+                e.location + 3 * i * e.ty.size(),
+                format!("frame {k}: particle {i} has a position that is not finite"),
+            ));
+        }
+    }
+    progress.advance(n as u64);
+
+    // Types: names from `particles/types` (N names of M characters), ids per particle.
+    let type_names: Vec<String> = match index.chunk(k, "particles/types") {
+        Some(e) if matches!(e.ty, Ty::I8 | Ty::U8 | Ty::Char) => data
+            [e.location..e.location + e.n * e.m]
+            .chunks(e.m.max(1))
+            .map(|s| {
+                let end = s.iter().position(|&b| b == 0).unwrap_or(s.len());
+                String::from_utf8_lossy(&s[..end]).into_owned()
+            })
+            .collect(),
+        Some(e) => return Err(err(path, e.at, "`particles/types` is not text")),
+        None => vec!["A".to_string()],
+    };
+    if type_names.is_empty() || type_names.len() > 1 << 16 {
+        return Err(err(
+            path,
+            0,
+            format!(
+                "frame {k}: {} particle types (1 to 65536 allowed)",
+                type_names.len()
+            ),
+        ));
+    }
+    let mut species_index = vec![0u16; n];
+    if let Some(e) = chunk_of("particles/typeid", 1, false)? {
+        let bytes = &data[e.location..e.location + n * e.ty.size()];
+        let count = type_names.len();
+        let bad = species_index
+            .par_iter_mut()
+            .enumerate()
+            .find_map_first(|(i, s)| {
+                let t = e.ty.get(bytes, i);
+                if t >= 0.0 && (t as usize) < count && t.fract() == 0.0 {
+                    *s = t as u16;
+                    None
+                } else {
+                    Some((i, t))
+                }
+            });
+        if let Some((i, t)) = bad {
+            return Err(err(
+                path,
+                e.location + i * e.ty.size(),
+                format!("frame {k}: particle {i} has type id {t}, but there are {count} types"),
+            ));
+        }
+    }
+    // Radii: half the mean diameter of each type's particles (default diameter 1).
+    let mut sum = vec![0f64; type_names.len()];
+    let mut count = vec![0u64; type_names.len()];
+    if let Some(e) = chunk_of("particles/diameter", 1, false)? {
+        let bytes = &data[e.location..e.location + n * e.ty.size()];
+        for (i, &s) in species_index.iter().enumerate() {
+            let d = e.ty.get(bytes, i);
+            if !(d.is_finite() && d > 0.0) {
+                return Err(err(
+                    path,
+                    e.location + i * e.ty.size(),
+                    format!("frame {k}: particle {i} has diameter {d}"),
+                ));
+            }
+            sum[usize::from(s)] += d;
+            count[usize::from(s)] += 1;
+        }
+    }
+    let species = type_names
+        .iter()
+        .enumerate()
+        .map(|(t, name)| SpeciesName {
+            name: name.clone(),
+            numeric_type: false,
+            radius: Some(if count[t] > 0 {
+                (0.5 * sum[t] / count[t] as f64) as f32
+            } else {
+                0.5
+            }),
+        })
+        .collect();
+
+    let attribute = match &opts.attribute {
+        None => None,
+        Some(name) => {
+            let full = if name.contains('/') {
+                name.clone()
+            } else {
+                format!("particles/{name}")
+            };
+            let Some(e) = chunk_of(&full, 1, false)? else {
+                let available = frame_info(path, data, index, k)?.columns.join(" ");
+                return Err(err(
+                    path,
+                    0,
+                    format!(
+                        "no per-particle chunk `{full}` for the attribute; available: {available}"
+                    ),
+                ));
+            };
+            if e.ty == Ty::Char {
+                return Err(err(path, e.at, format!("`{full}` is text, not numbers")));
+            }
+            let bytes = &data[e.location..e.location + n * e.ty.size()];
+            let values: Vec<f32> = (0..n).map(|i| e.ty.get(bytes, i) as f32).collect();
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(err(
+                    path,
+                    e.location + i * e.ty.size(),
+                    format!("frame {k}: `{full}` of particle {i} is not finite"),
+                ));
+            }
+            Some(Attribute { name: full, values })
+        }
+    };
+    progress.finish_stage();
+    Ok(Frame {
+        positions,
+        species_index,
+        species,
+        attribute,
+        simulation_box: Some(index.simulation_box(path, data, k)?),
+        timestep: index.timestep(data, k),
+        time: None,
+        units: None,
+    })
+}
