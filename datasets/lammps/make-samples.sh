@@ -11,4 +11,9 @@ for input in in.cu_melt in.cuag_alloy in.lj_triclinic in.cu_slab in.cu_melt_bina
     echo "== $LMP -in $input"
     "$LMP" -in "$input" -log none -screen none
 done
+# Per-processor pieces need 2 MPI processes (Debian's lmp is built with MPI).
+if command -v mpirun >/dev/null; then
+    echo "== mpirun -np 2 $LMP -in in.cu_melt_mpi"
+    mpirun --allow-run-as-root -np 2 "$LMP" -in in.cu_melt_mpi -log none -screen none
+fi
 ls -l ./*.dump ./*.dump.gz ./*.xyz ./*.bin

@@ -49,6 +49,17 @@ pub struct Attribute {
 }
 
 impl Frame {
+    /// A frame with this one's box, timestep, time and units and no particles.
+    pub fn clone_header(&self) -> Frame {
+        Frame {
+            simulation_box: self.simulation_box.clone(),
+            timestep: self.timestep,
+            time: self.time,
+            units: self.units.clone(),
+            ..Default::default()
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.positions.len()
     }

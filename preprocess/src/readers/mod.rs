@@ -34,6 +34,8 @@
 //! - **LAMMPS binary dumps** (`.bin`, both header revisions): see `lammps_binary.rs`.
 //!   Errors name the byte offset instead of a line.
 //! - **GSD** (HOOMD-blue, `hoomd` schema, file layers 1.x and 2.x): see `gsd.rs`.
+//! - **Per-processor pieces**: a LAMMPS file name with `%` opens all its pieces as one
+//!   dump (see `pieces.rs`).
 //! - Files are memory-mapped; gzip files (single or multi-member) are decompressed into
 //!   memory. zstd and bzip2 files are recognised and refused with a clear error.
 
@@ -42,6 +44,7 @@ mod float;
 mod gsd;
 mod lammps_binary;
 mod lammps_text;
+mod pieces;
 mod xyz;
 
 use std::fmt;
@@ -251,6 +254,8 @@ enum Index {
     Xyz(xyz::Index),
     LammpsBinary(lammps_binary::Index),
     Gsd(gsd::Index),
+    /// Per-processor pieces of one dump (a file name with `%`).
+    Pieces(Vec<DumpFile>),
 }
 
 /// An opened dump file and its frame index.
@@ -284,6 +289,20 @@ impl DumpFile {
         format: Option<InputFormat>,
         progress: &dyn Progress,
     ) -> Result<DumpFile, ReadError> {
+        if path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.contains('%'))
+            && !path.exists()
+        {
+            let pieces = pieces::open(path, format, progress)?;
+            return Ok(DumpFile {
+                path: path.to_path_buf(),
+                bytes: Box::new(Vec::new()),
+                format: pieces[0].format,
+                index: Index::Pieces(pieces),
+            });
+        }
         let io = |source| ReadError::Io {
             path: path.to_path_buf(),
             source,
@@ -371,6 +390,7 @@ impl DumpFile {
             Index::Xyz(i) => i.len(),
             Index::LammpsBinary(i) => i.len(),
             Index::Gsd(i) => i.len(),
+            Index::Pieces(p) => p[0].frame_count(),
         }
     }
 
@@ -382,6 +402,7 @@ impl DumpFile {
             Index::Xyz(i) => i.timestep(k),
             Index::LammpsBinary(i) => i.timestep(k),
             Index::Gsd(i) => i.timestep(self.bytes(), k),
+            Index::Pieces(p) => p[0].frame_timestep(k),
         }
     }
 
@@ -390,6 +411,10 @@ impl DumpFile {
         if let Index::Gsd(i) = &self.index {
             self.check_frame(k)?;
             return gsd::frame_info(&self.path, self.bytes(), i, k);
+        }
+        if let Index::Pieces(p) = &self.index {
+            self.check_frame(k)?;
+            return pieces::frame_info(p, k);
         }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
@@ -423,6 +448,10 @@ impl DumpFile {
         if let Index::Gsd(i) = &self.index {
             self.check_frame(k)?;
             return gsd::read_frame(&self.path, self.bytes(), i, k, opts, progress);
+        }
+        if let Index::Pieces(p) = &self.index {
+            self.check_frame(k)?;
+            return pieces::read_frame(p, k, opts, progress);
         }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
@@ -505,7 +534,7 @@ impl DumpFile {
         match &self.index {
             Index::Lammps(i) => i.header(&ctx, k),
             Index::Xyz(i) => i.header(&ctx, k),
-            Index::LammpsBinary(_) | Index::Gsd(_) => Err(ReadError::Binary {
+            Index::LammpsBinary(_) | Index::Gsd(_) | Index::Pieces(_) => Err(ReadError::Binary {
                 path: self.path.clone(),
                 offset: 0,
                 message: "internal error: text header of a binary dump".into(),

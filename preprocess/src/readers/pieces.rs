@@ -1,0 +1,175 @@
+//! Per-processor pieces of one dump: LAMMPS writes one file per process when the dump's
+//! file name holds a `%` (`dump.%.lammpstrj` → `dump.0.lammpstrj`, `dump.1.lammpstrj`,
+//! ...). Opening the name with the `%` opens every piece (text or binary), checks that
+//! they hold the same frames, and reading a frame concatenates the pieces' atoms in
+//! processor order, merging their species by name.
+
+use std::path::{Path, PathBuf};
+
+use super::{DumpFile, FrameInfo, InputFormat, ReadError, ReadOptions};
+use crate::frame::{Attribute, Frame, SpeciesName};
+use crate::progress::Progress;
+
+/// The piece files of `pattern` (a path whose file name holds one `%`), in processor
+/// order.
+pub(crate) fn piece_paths(pattern: &Path) -> Result<Vec<PathBuf>, ReadError> {
+    let io = |message: String| ReadError::Io {
+        path: pattern.to_path_buf(),
+        source: std::io::Error::new(std::io::ErrorKind::NotFound, message),
+    };
+    let name = pattern
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| io("not a file name".into()))?;
+    let (prefix, suffix) = name
+        .split_once('%')
+        .ok_or_else(|| io("no `%` in the file name".into()))?;
+    let dir = match pattern.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut found: Vec<(u64, PathBuf)> = std::fs::read_dir(&dir)
+        .map_err(|e| ReadError::Io {
+            path: dir.clone(),
+            source: e,
+        })?
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let n = e.file_name().into_string().ok()?;
+            let digits = n.strip_prefix(prefix)?.strip_suffix(suffix)?;
+            if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+                return None;
+            }
+            Some((digits.parse().ok()?, e.path()))
+        })
+        .collect();
+    found.sort();
+    if found.is_empty() {
+        return Err(io(format!(
+            "no files match `{name}` (`%` stands for the processor number)"
+        )));
+    }
+    for (i, (n, _)) in found.iter().enumerate() {
+        if *n != i as u64 {
+            return Err(io(format!(
+                "piece {i} is missing (found {}); the pieces must be numbered from 0",
+                found
+                    .iter()
+                    .map(|(n, _)| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
+    Ok(found.into_iter().map(|(_, p)| p).collect())
+}
+
+/// Opens every piece and checks that they agree on the frames.
+pub(crate) fn open(
+    pattern: &Path,
+    format: Option<InputFormat>,
+    progress: &dyn Progress,
+) -> Result<Vec<DumpFile>, ReadError> {
+    let pieces = piece_paths(pattern)?
+        .iter()
+        .map(|p| DumpFile::open_with(p, format, progress))
+        .collect::<Result<Vec<_>, _>>()?;
+    let first = &pieces[0];
+    for p in &pieces[1..] {
+        let mismatch = |message: String| ReadError::Malformed {
+            at: super::Location {
+                path: p.path().to_path_buf(),
+                line: 1,
+            },
+            message,
+        };
+        if p.frame_count() != first.frame_count() {
+            return Err(mismatch(format!(
+                "{} frames, but {} has {}",
+                p.frame_count(),
+                first.path().display(),
+                first.frame_count()
+            )));
+        }
+        if let Some(k) =
+            (0..first.frame_count()).find(|&k| p.frame_timestep(k) != first.frame_timestep(k))
+        {
+            return Err(mismatch(format!(
+                "frame {k} is timestep {:?}, but in {} it is {:?}",
+                p.frame_timestep(k),
+                first.path().display(),
+                first.frame_timestep(k)
+            )));
+        }
+    }
+    Ok(pieces)
+}
+
+pub(crate) fn frame_info(pieces: &[DumpFile], k: usize) -> Result<FrameInfo, ReadError> {
+    let mut info = pieces[0].frame_info(k)?;
+    for p in &pieces[1..] {
+        info.particles += p.frame_info(k)?.particles;
+    }
+    Ok(info)
+}
+
+/// Reads frame `k` of every piece and concatenates them.
+pub(crate) fn read_frame(
+    pieces: &[DumpFile],
+    k: usize,
+    opts: &ReadOptions,
+    progress: &dyn Progress,
+) -> Result<Frame, ReadError> {
+    let frames = pieces
+        .iter()
+        .map(|p| p.read_frame(k, opts, progress))
+        .collect::<Result<Vec<_>, _>>()?;
+    // Species: the union by name; numeric LAMMPS types sorted numerically, others in
+    // order of first appearance.
+    let mut species: Vec<SpeciesName> = Vec::new();
+    for f in &frames {
+        for s in &f.species {
+            if !species.iter().any(|g| g.name == s.name) {
+                species.push(s.clone());
+            }
+        }
+    }
+    if species.iter().all(|s| s.numeric_type) {
+        species.sort_by_key(|s| s.name.parse::<i64>().unwrap_or(i64::MAX));
+    }
+    if species.len() > 1 << 16 {
+        return Err(ReadError::TooManySpecies {
+            at: super::Location {
+                path: pieces[0].path().to_path_buf(),
+                line: 1,
+            },
+        });
+    }
+    let total: usize = frames.iter().map(Frame::len).sum();
+    let mut out = Frame {
+        positions: Vec::with_capacity(total),
+        species_index: Vec::with_capacity(total),
+        species: species.clone(),
+        attribute: None,
+        ..frames[0].clone_header()
+    };
+    let mut attribute: Option<Attribute> = frames[0].attribute.as_ref().map(|a| Attribute {
+        name: a.name.clone(),
+        values: Vec::with_capacity(total),
+    });
+    for f in &frames {
+        let remap: Vec<u16> = f
+            .species
+            .iter()
+            .map(|s| species.iter().position(|g| g.name == s.name).unwrap_or(0) as u16)
+            .collect();
+        out.positions.extend_from_slice(&f.positions);
+        out.species_index
+            .extend(f.species_index.iter().map(|&i| remap[usize::from(i)]));
+        if let (Some(a), Some(fa)) = (attribute.as_mut(), f.attribute.as_ref()) {
+            a.values.extend_from_slice(&fa.values);
+        }
+    }
+    out.attribute = attribute;
+    Ok(out)
+}

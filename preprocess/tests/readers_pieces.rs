@@ -1,0 +1,95 @@
+//! Per-processor dump pieces (`%` in a LAMMPS dump name): real pieces written by LAMMPS
+//! on 2 MPI processes, merged and compared with the single-file dump of the same run.
+
+use std::path::Path;
+
+use mdlod_datasets::lammps_sample_path;
+use mdlod_preprocess::readers::{DumpFile, ReadOptions};
+use mdlod_preprocess::{Frame, NoProgress};
+
+fn read(path: &Path, k: usize) -> Frame {
+    DumpFile::open(path)
+        .unwrap()
+        .read_frame(
+            k,
+            &ReadOptions {
+                attribute: Some("id".into()),
+                ..Default::default()
+            },
+            &NoProgress,
+        )
+        .unwrap()
+}
+
+/// (id, position, species name) sorted by id.
+fn atoms(f: &Frame) -> Vec<(u32, [f32; 3], String)> {
+    let ids = &f.attribute.as_ref().unwrap().values;
+    let mut v: Vec<_> = (0..f.len())
+        .map(|i| {
+            (
+                ids[i] as u32,
+                f.positions[i],
+                f.species[usize::from(f.species_index[i])].name.clone(),
+            )
+        })
+        .collect();
+    v.sort_by_key(|a| a.0);
+    v
+}
+
+#[test]
+fn text_and_binary_pieces_merge_into_the_whole_frame() {
+    let all = lammps_sample_path("cu_melt_mpi.all.dump");
+    for pattern in ["cu_melt_mpi.%.dump", "cu_melt_mpi.%.bin"] {
+        let path = lammps_sample_path(pattern);
+        let d = DumpFile::open(&path).unwrap();
+        assert_eq!(d.frame_count(), 3, "{pattern}");
+        assert_eq!(d.frame_info(1).unwrap().particles, 500);
+        for k in 0..3 {
+            assert_eq!(d.frame_timestep(k), Some(250 * k as u64));
+            let (merged, whole) = (read(&path, k), read(&all, k));
+            assert_eq!(merged.len(), 500);
+            // Both pieces hold atoms: the merge really joins two files.
+            let first = DumpFile::open(&lammps_sample_path(&pattern.replace('%', "0")))
+                .unwrap()
+                .frame_info(k)
+                .unwrap()
+                .particles;
+            assert!(first > 0 && first < 500);
+            assert_eq!(merged.timestep, whole.timestep);
+            for (a, b) in atoms(&merged).iter().zip(atoms(&whole)) {
+                assert_eq!(a.0, b.0);
+                assert_eq!(a.2, b.2);
+                for ax in 0..3 {
+                    // Text pieces equal the text whole; binary ones round to it.
+                    assert!((a.1[ax] - b.1[ax]).abs() <= 1e-5 * (1.0 + b.1[ax].abs()));
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn missing_or_disagreeing_pieces_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let copy = |from: &str, to: &str| {
+        std::fs::copy(lammps_sample_path(from), dir.path().join(to)).unwrap();
+    };
+    // Only piece 1.
+    copy("cu_melt_mpi.1.dump", "run.1.dump");
+    let e = DumpFile::open(&dir.path().join("run.%.dump"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("piece 0 is missing (found 1)"), "{e}");
+    // Piece 0 from another run with other frames.
+    copy("cu_melt.custom.dump", "run.0.dump");
+    let e = DumpFile::open(&dir.path().join("run.%.dump"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("run.1.dump") && e.contains("frames"), "{e}");
+    // Nothing at all.
+    let e = DumpFile::open(&dir.path().join("none.%.dump"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no files match `none.%.dump`"), "{e}");
+}
