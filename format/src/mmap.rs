@@ -2,6 +2,9 @@
 
 use std::fs::File;
 
+/// A read-only file mapping (what [`map_file`] returns).
+pub use memmap2::Mmap;
+
 /// Maps `file` read-only.
 ///
 /// Every reader in mdlod (the `.mdlod` reader and the dump readers) goes through here, so

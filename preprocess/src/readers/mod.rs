@@ -34,6 +34,7 @@
 //! - **LAMMPS binary dumps** (`.bin`, both header revisions): see `lammps_binary.rs`.
 //!   Errors name the byte offset instead of a line.
 //! - **GSD** (HOOMD-blue, `hoomd` schema, file layers 1.x and 2.x): see `gsd.rs`.
+//! - **Raw arrays** described by a JSON sidecar (`*.raw.json`): see `raw.rs`.
 //! - **Per-processor pieces**: a LAMMPS file name with `%` opens all its pieces as one
 //!   dump (see `pieces.rs`).
 //! - Files are memory-mapped; gzip files (single or multi-member) are decompressed into
@@ -45,6 +46,7 @@ mod gsd;
 mod lammps_binary;
 mod lammps_text;
 mod pieces;
+mod raw;
 mod xyz;
 
 use std::fmt;
@@ -155,6 +157,8 @@ pub enum InputFormat {
     LammpsBinary,
     /// GSD (HOOMD-blue), `hoomd` schema.
     Gsd,
+    /// Raw binary arrays described by a JSON sidecar (`*.raw.json`).
+    Raw,
 }
 
 impl InputFormat {
@@ -173,6 +177,8 @@ impl InputFormat {
             Some(InputFormat::LammpsBinary)
         } else if name.ends_with(".gsd") {
             Some(InputFormat::Gsd)
+        } else if name.ends_with(".raw.json") {
+            Some(InputFormat::Raw)
         } else if name.ends_with(".lammpstrj")
             || name.ends_with(".dump")
             || name.ends_with(".lammps")
@@ -208,6 +214,7 @@ impl fmt::Display for InputFormat {
             InputFormat::Xyz => "XYZ",
             InputFormat::LammpsBinary => "LAMMPS binary dump",
             InputFormat::Gsd => "GSD",
+            InputFormat::Raw => "raw arrays with a JSON sidecar",
         })
     }
 }
@@ -256,6 +263,7 @@ enum Index {
     Gsd(gsd::Index),
     /// Per-processor pieces of one dump (a file name with `%`).
     Pieces(Vec<DumpFile>),
+    Raw(Box<raw::Index>),
 }
 
 /// An opened dump file and its frame index.
@@ -359,6 +367,7 @@ impl DumpFile {
                 Index::LammpsBinary(lammps_binary::Index::build(path, data)?)
             }
             InputFormat::Gsd => Index::Gsd(gsd::Index::build(path, data)?),
+            InputFormat::Raw => Index::Raw(Box::new(raw::Index::build(path, data)?)),
         };
         progress.advance(data.len() as u64);
         progress.finish_stage();
@@ -391,6 +400,7 @@ impl DumpFile {
             Index::LammpsBinary(i) => i.len(),
             Index::Gsd(i) => i.len(),
             Index::Pieces(p) => p[0].frame_count(),
+            Index::Raw(_) => 1,
         }
     }
 
@@ -403,6 +413,7 @@ impl DumpFile {
             Index::LammpsBinary(i) => i.timestep(k),
             Index::Gsd(i) => i.timestep(self.bytes(), k),
             Index::Pieces(p) => p[0].frame_timestep(k),
+            Index::Raw(r) => (k == 0).then(|| r.timestep()).flatten(),
         }
     }
 
@@ -415,6 +426,10 @@ impl DumpFile {
         if let Index::Pieces(p) = &self.index {
             self.check_frame(k)?;
             return pieces::frame_info(p, k);
+        }
+        if let Index::Raw(r) = &self.index {
+            self.check_frame(k)?;
+            return Ok(r.frame_info());
         }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
@@ -452,6 +467,10 @@ impl DumpFile {
         if let Index::Pieces(p) = &self.index {
             self.check_frame(k)?;
             return pieces::read_frame(p, k, opts, progress);
+        }
+        if let Index::Raw(r) = &self.index {
+            self.check_frame(k)?;
+            return r.read_frame(opts, progress);
         }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
@@ -534,11 +553,13 @@ impl DumpFile {
         match &self.index {
             Index::Lammps(i) => i.header(&ctx, k),
             Index::Xyz(i) => i.header(&ctx, k),
-            Index::LammpsBinary(_) | Index::Gsd(_) | Index::Pieces(_) => Err(ReadError::Binary {
-                path: self.path.clone(),
-                offset: 0,
-                message: "internal error: text header of a binary dump".into(),
-            }),
+            Index::LammpsBinary(_) | Index::Gsd(_) | Index::Pieces(_) | Index::Raw(_) => {
+                Err(ReadError::Binary {
+                    path: self.path.clone(),
+                    offset: 0,
+                    message: "internal error: text header of a binary dump".into(),
+                })
+            }
         }
     }
 }

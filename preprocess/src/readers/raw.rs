@@ -1,0 +1,527 @@
+//! Raw binary arrays described by a small JSON sidecar (`*.raw.json`): for codes that
+//! can dump their arrays but have no standard format (or for a quick `numpy.tofile`).
+//!
+//! The sidecar names the files (relative to itself) and how to read them:
+//!
+//! ```json
+//! {
+//!   "mdlod_raw": 1,
+//!   "particles": 1000000,
+//!   "positions": { "file": "pos.f32", "type": "f32", "layout": "interleaved" },
+//!   "species":   { "file": "type.u8", "type": "u8", "names": ["Cu", "Ag"] },
+//!   "radii":     [1.28, 1.44],
+//!   "attribute": { "file": "pe.f32", "type": "f32", "name": "c_pe" },
+//!   "box":       { "origin": [0, 0, 0], "a": [10, 0, 0], "b": [0, 10, 0], "c": [0, 0, 10] },
+//!   "timestep": 1000, "time": 2.0, "units": "metal"
+//! }
+//! ```
+//!
+//! - `positions` is required: `type` `f32` or `f64`; `layout` `interleaved` (x y z per
+//!   particle, the default) or `planar` (all x, then all y, then all z). `particles` may
+//!   be left out when the positions file holds exactly the particles.
+//! - `species` (optional): one integer per particle (`u8`, `u16`, `u32` or `i32`), an
+//!   index into `names` (default names are the numbers); `radii` optionally gives each
+//!   species' radius.
+//! - `attribute` (optional): one `f32` or `f64` per particle.
+//! - Every array may have `offset` (bytes to skip, default 0) and `byte_order`
+//!   (`little`, the default, or `big`).
+//! - Unknown keys are errors (a misspelt key must not be ignored silently); every size is
+//!   checked against the file with checked arithmetic; non-finite values and species
+//!   indices past `names` are errors naming the file and the byte.
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::Deserialize;
+
+use super::{FrameInfo, ReadError, ReadOptions};
+use crate::frame::{Attribute, Frame, SimulationBox, SpeciesName};
+use crate::progress::Progress;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Sidecar {
+    mdlod_raw: u32,
+    #[serde(default)]
+    particles: Option<u64>,
+    positions: Array,
+    #[serde(default)]
+    species: Option<Array>,
+    #[serde(default)]
+    radii: Option<Vec<f32>>,
+    #[serde(default)]
+    attribute: Option<Array>,
+    #[serde(default, rename = "box")]
+    simulation_box: Option<BoxSpec>,
+    #[serde(default)]
+    timestep: Option<u64>,
+    #[serde(default)]
+    time: Option<f64>,
+    #[serde(default)]
+    units: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Array {
+    file: PathBuf,
+    #[serde(rename = "type")]
+    ty: String,
+    #[serde(default)]
+    offset: u64,
+    #[serde(default)]
+    layout: Option<String>,
+    #[serde(default)]
+    byte_order: Option<String>,
+    #[serde(default)]
+    names: Option<Vec<String>>,
+    #[serde(default)]
+    name: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BoxSpec {
+    origin: [f64; 3],
+    a: [f64; 3],
+    b: [f64; 3],
+    c: [f64; 3],
+    #[serde(default)]
+    periodic: Option<[bool; 3]>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Ty {
+    F32,
+    F64,
+    U8,
+    U16,
+    U32,
+    I32,
+}
+
+impl Ty {
+    fn size(self) -> usize {
+        match self {
+            Ty::U8 => 1,
+            Ty::U16 => 2,
+            Ty::F32 | Ty::U32 | Ty::I32 => 4,
+            Ty::F64 => 8,
+        }
+    }
+
+    fn get(self, b: &[u8], i: usize, big: bool) -> f64 {
+        let s = self.size();
+        let mut w = [0u8; 8];
+        w[..s].copy_from_slice(&b[i * s..(i + 1) * s]);
+        if big {
+            w[..s].reverse();
+        }
+        match self {
+            Ty::U8 => f64::from(w[0]),
+            Ty::U16 => f64::from(u16::from_le_bytes([w[0], w[1]])),
+            Ty::U32 => f64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])),
+            Ty::I32 => f64::from(i32::from_le_bytes([w[0], w[1], w[2], w[3]])),
+            Ty::F32 => f64::from(f32::from_le_bytes([w[0], w[1], w[2], w[3]])),
+            Ty::F64 => f64::from_le_bytes(w),
+        }
+    }
+}
+
+/// One array, mapped and checked.
+struct Mapped {
+    path: PathBuf,
+    map: mdlod_format::mmap::Mmap,
+    ty: Ty,
+    offset: usize,
+    big: bool,
+}
+
+impl Mapped {
+    fn bytes(&self) -> &[u8] {
+        &self.map[self.offset..]
+    }
+}
+
+/// An opened sidecar and its arrays.
+pub(crate) struct Index {
+    particles: usize,
+    positions: Mapped,
+    planar: bool,
+    species: Option<(Mapped, Vec<String>)>,
+    radii: Option<Vec<f32>>,
+    attribute: Option<(Mapped, String)>,
+    simulation_box: Option<SimulationBox>,
+    timestep: Option<u64>,
+    time: Option<f64>,
+    units: Option<String>,
+}
+
+fn err(path: &Path, offset: u64, message: impl Into<String>) -> ReadError {
+    ReadError::Binary {
+        path: path.to_path_buf(),
+        offset,
+        message: message.into(),
+    }
+}
+
+fn malformed(path: &Path, message: impl Into<String>) -> ReadError {
+    ReadError::Malformed {
+        at: super::Location {
+            path: path.to_path_buf(),
+            line: 1,
+        },
+        message: message.into(),
+    }
+}
+
+impl Index {
+    pub fn build(path: &Path, text: &[u8]) -> Result<Index, ReadError> {
+        let sidecar: Sidecar = serde_json::from_slice(text).map_err(|e| ReadError::Malformed {
+            at: super::Location {
+                path: path.to_path_buf(),
+                line: e.line() as u64,
+            },
+            message: format!("raw sidecar: {e}"),
+        })?;
+        if sidecar.mdlod_raw != 1 {
+            return Err(malformed(
+                path,
+                format!(
+                    "raw sidecar version {} (this reader knows 1)",
+                    sidecar.mdlod_raw
+                ),
+            ));
+        }
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let map = |a: &Array, what: &str, allowed: &[&str]| -> Result<Mapped, ReadError> {
+            let ty = match a.ty.as_str() {
+                "f32" => Ty::F32,
+                "f64" => Ty::F64,
+                "u8" => Ty::U8,
+                "u16" => Ty::U16,
+                "u32" => Ty::U32,
+                "i32" => Ty::I32,
+                t => {
+                    return Err(malformed(
+                        path,
+                        format!("{what}: type `{t}` (use one of {})", allowed.join(", ")),
+                    ))
+                }
+            };
+            if !allowed.contains(&a.ty.as_str()) {
+                return Err(malformed(
+                    path,
+                    format!(
+                        "{what}: type `{}` (use one of {})",
+                        a.ty,
+                        allowed.join(", ")
+                    ),
+                ));
+            }
+            let big = match a.byte_order.as_deref() {
+                None | Some("little") => false,
+                Some("big") => true,
+                Some(o) => {
+                    return Err(malformed(
+                        path,
+                        format!("{what}: byte_order `{o}` (use little or big)"),
+                    ))
+                }
+            };
+            let file_path = dir.join(&a.file);
+            let file = std::fs::File::open(&file_path).map_err(|e| ReadError::Io {
+                path: file_path.clone(),
+                source: e,
+            })?;
+            let map = mdlod_format::mmap::map_file(&file).map_err(|e| ReadError::Io {
+                path: file_path.clone(),
+                source: e,
+            })?;
+            let offset = usize::try_from(a.offset)
+                .ok()
+                .filter(|&o| o <= map.len())
+                .ok_or_else(|| {
+                    err(
+                        &file_path,
+                        a.offset,
+                        format!(
+                            "{what}: offset {} is past the end ({} bytes)",
+                            a.offset,
+                            map.len()
+                        ),
+                    )
+                })?;
+            Ok(Mapped {
+                path: file_path,
+                map,
+                ty,
+                offset,
+                big,
+            })
+        };
+        let positions = map(&sidecar.positions, "positions", &["f32", "f64"])?;
+        let planar = match sidecar.positions.layout.as_deref() {
+            None | Some("interleaved") => false,
+            Some("planar") => true,
+            Some(l) => {
+                return Err(malformed(
+                    path,
+                    format!("positions: layout `{l}` (use interleaved or planar)"),
+                ))
+            }
+        };
+        let available = positions.bytes().len() / (3 * positions.ty.size());
+        let particles = match sidecar.particles {
+            Some(n) => usize::try_from(n).map_err(|_| malformed(path, "particles: too many"))?,
+            None => {
+                if positions.bytes().len() % (3 * positions.ty.size()) != 0 {
+                    return Err(err(
+                        &positions.path,
+                        positions.offset as u64,
+                        format!(
+                            "{} bytes are not a whole number of {} positions; give `particles`",
+                            positions.bytes().len(),
+                            sidecar.positions.ty
+                        ),
+                    ));
+                }
+                available
+            }
+        };
+        let need = |m: &Mapped, per: usize, what: &str| -> Result<(), ReadError> {
+            let bytes = particles
+                .checked_mul(per)
+                .and_then(|v| v.checked_mul(m.ty.size()))
+                .ok_or_else(|| malformed(path, format!("{what}: size overflows")))?;
+            if bytes > m.bytes().len() {
+                return Err(err(
+                    &m.path,
+                    m.map.len() as u64,
+                    format!(
+                        "{what}: {particles} particles need {bytes} bytes from byte {}, the file has {} (truncated?)",
+                        m.offset,
+                        m.bytes().len()
+                    ),
+                ));
+            }
+            Ok(())
+        };
+        need(&positions, 3, "positions")?;
+        let species = match &sidecar.species {
+            None => None,
+            Some(a) => {
+                let m = map(a, "species", &["u8", "u16", "u32", "i32"])?;
+                need(&m, 1, "species")?;
+                let names = a.names.clone().unwrap_or_default();
+                if names.len() > 1 << 16 {
+                    return Err(malformed(path, "species: more than 65536 names"));
+                }
+                Some((m, names))
+            }
+        };
+        let attribute = match &sidecar.attribute {
+            None => None,
+            Some(a) => {
+                let m = map(a, "attribute", &["f32", "f64"])?;
+                need(&m, 1, "attribute")?;
+                Some((m, a.name.clone().unwrap_or_else(|| "attribute".into())))
+            }
+        };
+        if let Some(r) = &sidecar.radii {
+            if r.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(malformed(
+                    path,
+                    "radii: every radius must be a positive number",
+                ));
+            }
+        }
+        let simulation_box = match sidecar.simulation_box {
+            None => None,
+            Some(b) => {
+                if [b.origin, b.a, b.b, b.c]
+                    .iter()
+                    .flatten()
+                    .any(|v| !v.is_finite())
+                {
+                    return Err(malformed(path, "box: not finite"));
+                }
+                Some(SimulationBox {
+                    origin: b.origin,
+                    a: b.a,
+                    b: b.b,
+                    c: b.c,
+                    periodic: b.periodic,
+                })
+            }
+        };
+        Ok(Index {
+            particles,
+            positions,
+            planar,
+            species,
+            radii: sidecar.radii,
+            attribute,
+            simulation_box,
+            timestep: sidecar.timestep,
+            time: sidecar.time.filter(|t| t.is_finite()),
+            units: sidecar.units,
+        })
+    }
+
+    pub fn timestep(&self) -> Option<u64> {
+        self.timestep
+    }
+
+    pub fn frame_info(&self) -> FrameInfo {
+        let mut columns = vec!["x".to_string(), "y".into(), "z".into()];
+        if self.species.is_some() {
+            columns.push("species".into());
+        }
+        if let Some((_, name)) = &self.attribute {
+            columns.push(name.clone());
+        }
+        FrameInfo {
+            particles: self.particles,
+            timestep: self.timestep,
+            time: self.time,
+            units: self.units.clone(),
+            simulation_box: self.simulation_box.clone(),
+            columns,
+        }
+    }
+
+    pub fn read_frame(
+        &self,
+        opts: &ReadOptions,
+        progress: &dyn Progress,
+    ) -> Result<Frame, ReadError> {
+        let n = self.particles;
+        progress.stage("reading raw arrays", Some(n as u64), "particles");
+        let p = &self.positions;
+        let bytes = p.bytes();
+        let size = p.ty.size();
+        let mut positions = vec![[0f32; 3]; n];
+        let planar = self.planar;
+        let bad = positions
+            .par_iter_mut()
+            .enumerate()
+            .find_map_first(|(i, out)| {
+                for k in 0..3 {
+                    let j = if planar { k * n + i } else { 3 * i + k };
+                    let v = p.ty.get(bytes, j, p.big);
+                    if !v.is_finite() {
+                        return Some(j);
+                    }
+                    out[k] = v as f32;
+                }
+                None
+            });
+        if let Some(j) = bad {
+            return Err(err(
+                &p.path,
+                (p.offset + j * size) as u64,
+                format!(
+                    "particle {}: a coordinate is not finite",
+                    if planar { j % n } else { j / 3 }
+                ),
+            ));
+        }
+        progress.advance(n as u64);
+        let (species, species_index) = match &self.species {
+            None => (
+                vec![SpeciesName {
+                    name: super::atoms::DEFAULT_SPECIES.into(),
+                    numeric_type: false,
+                    radius: self.radii.as_ref().and_then(|r| r.first().copied()),
+                }],
+                vec![0u16; n],
+            ),
+            Some((m, names)) => {
+                let b = m.bytes();
+                let raw: Vec<f64> = (0..n)
+                    .into_par_iter()
+                    .map(|i| m.ty.get(b, i, m.big))
+                    .collect();
+                let count = if names.is_empty() {
+                    raw.iter().fold(0.0f64, |a, &v| a.max(v + 1.0)).min(65536.0) as usize
+                } else {
+                    names.len()
+                };
+                if let Some(i) = raw.iter().position(|&v| v < 0.0 || v as usize >= count) {
+                    return Err(err(
+                        &m.path,
+                        (m.offset + i * m.ty.size()) as u64,
+                        format!(
+                            "particle {i}: species {} but there are {count} species{}",
+                            raw[i],
+                            if names.is_empty() {
+                                " (at most 65536)"
+                            } else {
+                                " names"
+                            }
+                        ),
+                    ));
+                }
+                let names: Vec<String> = if names.is_empty() {
+                    (0..count).map(|i| i.to_string()).collect()
+                } else {
+                    names.clone()
+                };
+                let species = names
+                    .iter()
+                    .enumerate()
+                    .map(|(i, name)| SpeciesName {
+                        name: name.clone(),
+                        numeric_type: false,
+                        radius: self.radii.as_ref().and_then(|r| r.get(i).copied()),
+                    })
+                    .collect();
+                (species, raw.iter().map(|&v| v as u16).collect())
+            }
+        };
+        let attribute = match (&self.attribute, &opts.attribute) {
+            (Some((m, name)), wanted) if wanted.as_deref().is_none_or(|w| w == name) => {
+                let b = m.bytes();
+                let values: Vec<f32> = (0..n)
+                    .into_par_iter()
+                    .map(|i| m.ty.get(b, i, m.big) as f32)
+                    .collect();
+                if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                    return Err(err(
+                        &m.path,
+                        (m.offset + i * m.ty.size()) as u64,
+                        format!("particle {i}: `{name}` is not finite"),
+                    ));
+                }
+                Some(Attribute {
+                    name: name.clone(),
+                    values,
+                })
+            }
+            (_, Some(wanted)) => {
+                return Err(malformed(
+                    &self.positions.path,
+                    format!(
+                        "no attribute `{wanted}` in the sidecar{}",
+                        self.attribute
+                            .as_ref()
+                            .map_or(String::new(), |(_, n)| format!(" (it has `{n}`)"))
+                    ),
+                ))
+            }
+            (_, None) => None,
+        };
+        progress.finish_stage();
+        Ok(Frame {
+            positions,
+            species_index,
+            species,
+            attribute,
+            simulation_box: self.simulation_box.clone(),
+            timestep: self.timestep,
+            time: self.time,
+            units: self.units.clone(),
+        })
+    }
+}

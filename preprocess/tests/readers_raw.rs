@@ -1,0 +1,174 @@
+//! Raw binary arrays with a JSON sidecar: layouts, types, byte orders, and bad sidecars
+//! or arrays.
+
+use std::path::{Path, PathBuf};
+
+use mdlod_preprocess::readers::{DumpFile, InputFormat, ReadOptions};
+use mdlod_preprocess::NoProgress;
+
+struct Case {
+    dir: tempfile::TempDir,
+}
+
+impl Case {
+    fn new() -> Case {
+        Case {
+            dir: tempfile::tempdir().unwrap(),
+        }
+    }
+
+    fn file(&self, name: &str, bytes: &[u8]) -> PathBuf {
+        let p = self.dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    }
+
+    fn sidecar(&self, json: &str) -> PathBuf {
+        self.file("frame.raw.json", json.as_bytes())
+    }
+}
+
+fn positions(n: usize) -> Vec<[f64; 3]> {
+    (0..n)
+        .map(|i| {
+            let t = i as f64;
+            [t * 0.5, (t * 0.37).sin() * 10.0, -t / 3.0]
+        })
+        .collect()
+}
+
+fn read(path: &Path) -> Result<mdlod_preprocess::Frame, String> {
+    DumpFile::open(path)
+        .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
+        .map_err(|e| e.to_string())
+}
+
+#[test]
+fn interleaved_f32_with_species_radii_attribute_and_box() {
+    let c = Case::new();
+    let p = positions(1000);
+    let pos: Vec<u8> = p
+        .iter()
+        .flatten()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    c.file("pos.f32", &pos);
+    let types: Vec<u8> = (0..1000).map(|i| (i % 3) as u8).collect();
+    c.file("type.u8", &types);
+    let pe: Vec<u8> = (0..1000)
+        .flat_map(|i| (-(i as f64)).to_le_bytes())
+        .collect();
+    c.file("pe.f64", &pe);
+    let path = c.sidecar(
+        r#"{ "mdlod_raw": 1, "particles": 1000,
+             "positions": { "file": "pos.f32", "type": "f32" },
+             "species": { "file": "type.u8", "type": "u8", "names": ["Cu", "Ag", "X"] },
+             "radii": [1.28, 1.44, 0.3],
+             "attribute": { "file": "pe.f64", "type": "f64", "name": "c_pe" },
+             "box": { "origin": [0, 0, 0], "a": [500, 0, 0], "b": [0, 20, 0], "c": [0, 0, 400] },
+             "timestep": 1000, "time": 2.5, "units": "metal" }"#,
+    );
+    let d = DumpFile::open(&path).unwrap();
+    assert_eq!(d.format(), InputFormat::Raw);
+    assert_eq!((d.frame_count(), d.frame_timestep(0)), (1, Some(1000)));
+    let f = read(&path).unwrap();
+    for (a, b) in f.positions.iter().zip(&p) {
+        assert_eq!(*a, b.map(|v| v as f32));
+    }
+    assert_eq!(
+        f.species_index,
+        types.iter().map(|&t| u16::from(t)).collect::<Vec<_>>()
+    );
+    let radii: Vec<_> = f
+        .species
+        .iter()
+        .map(|s| (s.name.as_str(), s.radius))
+        .collect();
+    assert_eq!(
+        radii,
+        [("Cu", Some(1.28)), ("Ag", Some(1.44)), ("X", Some(0.3))]
+    );
+    let a = f.attribute.unwrap();
+    assert_eq!(a.name, "c_pe");
+    assert_eq!(a.values[999], -999.0);
+    assert_eq!((f.time, f.units.as_deref()), (Some(2.5), Some("metal")));
+    assert_eq!(f.simulation_box.unwrap().c, [0.0, 0.0, 400.0]);
+}
+
+#[test]
+fn planar_big_endian_f64_with_an_offset_and_a_derived_count() {
+    let c = Case::new();
+    let p = positions(257);
+    let mut bytes = vec![0xAB; 16]; // a header to skip
+    for k in 0..3 {
+        for q in &p {
+            bytes.extend_from_slice(&q[k].to_be_bytes());
+        }
+    }
+    c.file("pos.f64be", &bytes);
+    let path = c.sidecar(
+        r#"{ "mdlod_raw": 1,
+             "positions": { "file": "pos.f64be", "type": "f64", "layout": "planar",
+                            "byte_order": "big", "offset": 16 } }"#,
+    );
+    let f = read(&path).unwrap();
+    assert_eq!(f.len(), 257);
+    for (a, b) in f.positions.iter().zip(&p) {
+        assert_eq!(*a, b.map(|v| v as f32));
+    }
+    assert_eq!(f.species.len(), 1);
+}
+
+#[test]
+fn bad_sidecars_and_arrays_are_errors_naming_the_file() {
+    let c = Case::new();
+    let good: Vec<u8> = positions(10)
+        .iter()
+        .flatten()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    c.file("pos.f32", &good);
+    let mut nan = good.clone();
+    nan[4 * 7..4 * 8].copy_from_slice(&f32::NAN.to_le_bytes());
+    c.file("nan.f32", &nan);
+    c.file("type.u8", &[0, 1, 2, 0, 1, 2, 0, 1, 2, 9]);
+    let pos = |file: &str, extra: &str| {
+        format!(
+            r#"{{ "mdlod_raw": 1, "positions": {{ "file": "{file}", "type": "f32" }}{extra} }}"#
+        )
+    };
+    let cases: Vec<(String, &str, &str)> = vec![
+        (pos("pos.f32", r#", "particles": 11"#), "pos.f32", "truncated?"),
+        (pos("pos.f32", r#", "particels": 10"#), "frame.raw.json", "unknown field `particels`"),
+        (pos("missing.f32", ""), "missing.f32", "No such file"),
+        (pos("nan.f32", ""), "nan.f32", "byte 28: particle 2: a coordinate is not finite"),
+        (
+            pos("pos.f32", r#", "species": { "file": "type.u8", "type": "u8", "names": ["a", "b", "c"] }"#),
+            "type.u8",
+            "byte 9: particle 9: species 9 but there are 3 species",
+        ),
+        (
+            r#"{ "mdlod_raw": 1, "positions": { "file": "pos.f32", "type": "u8" } }"#.into(),
+            "frame.raw.json",
+            "type `u8` (use one of f32, f64)",
+        ),
+        (
+            r#"{ "mdlod_raw": 1, "positions": { "file": "pos.f32", "type": "f32", "offset": 4 } }"#.into(),
+            "pos.f32",
+            "not a whole number of f32 positions",
+        ),
+        (
+            r#"{ "mdlod_raw": 1, "positions": { "file": "pos.f32", "type": "f32", "offset": 999 } }"#.into(),
+            "pos.f32",
+            "offset 999 is past the end",
+        ),
+        (pos("pos.f32", r#", "particles": 18446744073709551615"#), "frame.raw.json", ""),
+        (r#"{ "mdlod_raw": 2 }"#.into(), "frame.raw.json", ""),
+        ("{ not json".into(), "frame.raw.json", "raw sidecar"),
+    ];
+    for (json, file, needle) in cases {
+        let path = c.sidecar(&json);
+        let e = read(&path).unwrap_err();
+        assert!(e.contains(file) && e.contains(needle), "{json}\n  -> {e}");
+    }
+}
