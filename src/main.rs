@@ -23,6 +23,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     Convert(commands::convert::Args),
+    Batch(commands::batch::Args),
     Info(commands::info::Args),
     Verify(commands::verify::Args),
     Render(commands::render::Args),
@@ -34,6 +35,7 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Convert(a) => commands::convert::run(a),
+        Command::Batch(a) => commands::batch::run(a),
         Command::Info(a) => commands::info::run(a),
         Command::Verify(a) => commands::verify::run(a),
         Command::Render(a) => commands::render::run(a),

@@ -418,3 +418,128 @@ fn binary_lammps_dumps_convert_like_their_text_twins() {
         "{err}"
     );
 }
+
+/// The invariants a batch directory keeps whenever a batch is killed: every visible
+/// `.mdlod` is complete and equals the uninterrupted run's, and the manifest lists only
+/// such files.
+fn check_batch_dir(dir: &Path, reference: &mdlod_preprocess::batch::Manifest) {
+    let expected = |ts: u64| {
+        reference
+            .frames
+            .iter()
+            .find(|f| f.timestep == ts)
+            .map(|f| f.checksum.clone())
+    };
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') || name == "dataset.json" {
+            continue;
+        }
+        let ts: u64 = name
+            .strip_prefix("frame-")
+            .and_then(|n| n.strip_suffix(".mdlod"))
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("unexpected file {name}"));
+        let f = MdlodFile::open(e.path()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        f.verify().unwrap();
+        assert_eq!(
+            Some(format!("{:016x}", f.header().section_table_checksum)),
+            expected(ts),
+            "{name}"
+        );
+    }
+    if dir.join("dataset.json").exists() {
+        let m = mdlod_preprocess::batch::read_manifest(dir).unwrap();
+        for f in &m.frames {
+            assert!(
+                dir.join(&f.file).is_file(),
+                "manifest lists missing {}",
+                f.file
+            );
+            assert_eq!(Some(f.checksum.clone()), expected(f.timestep));
+        }
+    }
+}
+
+#[test]
+fn killing_a_batch_at_any_moment_leaves_only_complete_frames_and_a_true_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("alloy.lammpstrj");
+    ok(&[
+        "generate",
+        "alloy",
+        "-n",
+        "60000",
+        "--frames",
+        "6",
+        "-o",
+        s(&input),
+    ]);
+    let reference = dir.path().join("reference");
+    ok(&["batch", s(&input), "-o", s(&reference), "--threads", "2"]);
+    let reference = mdlod_preprocess::batch::read_manifest(&reference).unwrap();
+    assert_eq!(reference.frames.len(), 6);
+
+    let work = dir.path().join("work");
+    // The uninterrupted run takes about 2 s here: the kills land while frames are being
+    // read, built, written and renamed, and while the manifest is rewritten.
+    let mut frames_seen = vec![];
+    for (signal, delay_ms) in [
+        ("KILL", 50),
+        ("INT", 250),
+        ("KILL", 400),
+        ("INT", 500),
+        ("KILL", 600),
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+            .args(["batch", s(&input), "-o", s(&work), "--threads", "2"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let status = Command::new("kill")
+            .args([&format!("-{signal}"), &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success() || child.try_wait().unwrap().is_some());
+        child.wait().unwrap();
+        check_batch_dir(&work, &reference);
+        frames_seen
+            .push(mdlod_preprocess::batch::read_manifest(&work).map_or(0, |m| m.frames.len()));
+    }
+    // Some kills interrupted the work (not everything was done before the last one).
+    assert!(frames_seen.iter().any(|&n| n < 6), "{frames_seen:?}");
+    // A rerun finishes the job and agrees with the uninterrupted run.
+    ok(&["batch", s(&input), "-o", s(&work), "--threads", "2"]);
+    check_batch_dir(&work, &reference);
+    let done = mdlod_preprocess::batch::read_manifest(&work).unwrap();
+    assert_eq!(done.frames, reference.frames);
+}
+
+#[test]
+fn batch_takes_its_shard_from_a_slurm_job_array() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d");
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    for id in 1..=3 {
+        let run = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+            .args(["batch", s(&input), "-o", s(&out)])
+            .env("SLURM_ARRAY_TASK_ID", id.to_string())
+            .env("SLURM_ARRAY_TASK_MIN", "1")
+            .env("SLURM_ARRAY_TASK_COUNT", "3")
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&run.stdout);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        assert!(text.contains(&format!("(shard {} of 3)", id - 1)), "{text}");
+    }
+    let merged = ok(&["batch", "--merge", s(&out)]);
+    assert!(merged.contains("merged 6 frames"), "{merged}");
+    let err = fails(&["batch", s(&input), "-o", s(&out), "--shard", "3/3"]);
+    assert!(err.contains("index must be below the count"), "{err}");
+}

@@ -155,6 +155,7 @@ impl Writer {
             .tmp
             .take()
             .expect("temporary file present until finish");
+        make_readable(tmp.as_file()).map_err(io)?;
         tmp.persist(&self.path)
             .map_err(|e| FormatError::io(&self.path, e.error))?;
         Ok(())
@@ -198,4 +199,17 @@ impl SectionWriter<'_> {
         self.writer.sections.push(entry);
         Ok(())
     }
+}
+
+/// Temporary files are created private (0600); a finished file gets the usual 0644, so
+/// that colleagues (and cluster jobs of other users in the group) can read it.
+pub fn make_readable(file: &std::fs::File) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        file.set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
+    #[cfg(not(unix))]
+    let _ = file;
+    Ok(())
 }

@@ -1,6 +1,7 @@
 //! mdlod's offline stage: read particle dumps, build the PCA-split level-of-detail
 //! hierarchy, quantize it and write it as a `.mdlod` file through `mdlod-format`.
 
+pub mod batch;
 pub mod convert;
 pub mod frame;
 pub mod hierarchy;

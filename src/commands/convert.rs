@@ -10,8 +10,9 @@ use mdlod_preprocess::species::parse_radius_override;
 
 use crate::progress::Bar;
 
-/// Convert one frame of a particle dump (LAMMPS text, XYZ, extended XYZ; .gz too) into a
-/// level-of-detail .mdlod file.
+/// Convert one frame of a particle dump (LAMMPS text or binary, `%` piece sets, GSD, XYZ,
+/// extended XYZ, raw arrays with a .raw.json sidecar; .gz too) into a level-of-detail
+/// .mdlod file.
 #[derive(clap::Args)]
 #[command(
     after_help = "Example:\n  mdlod convert dump.lammpstrj.gz -o frame.mdlod --last --radius Cu=1.28 --attribute c_pe"
@@ -28,6 +29,16 @@ pub struct Args {
     /// Convert the last frame (the default).
     #[arg(long)]
     pub last: bool,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub build: BuildArgs,
+}
+
+/// How frames are read and built, shared by `convert` and `batch`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct BuildArgs {
     /// Radius of a species, NAME=RADIUS (element or numeric LAMMPS type); repeatable.
     #[arg(long = "radius", value_name = "NAME=R", value_parser = parse_radius_override)]
     pub radii: Vec<(String, f32)>,
@@ -41,9 +52,6 @@ pub struct Args {
     /// Bits per quantized coordinate.
     #[arg(long, value_enum, default_value = "u16")]
     pub precision: Precision,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
     /// A cluster is split while it holds more than this many points.
     #[arg(long, default_value_t = 8)]
     pub cluster_size: u32,
@@ -53,6 +61,32 @@ pub struct Args {
     /// Levels between a node and the points it is drawn with (δn).
     #[arg(long, default_value_t = 1)]
     pub delta_n: u32,
+}
+
+impl BuildArgs {
+    /// The library options these arguments ask for.
+    pub fn options(&self) -> (ConvertOptions, ReadOptions) {
+        let convert = ConvertOptions {
+            build: BuildParams {
+                max_cluster_size: self.cluster_size,
+                max_root_points: self.root_points,
+                delta_n: self.delta_n,
+                position_bits: match self.precision {
+                    Precision::U8 => 8,
+                    Precision::U16 => 16,
+                },
+            },
+            radii: self.radii.clone(),
+        };
+        let read = ReadOptions {
+            attribute: self.attribute.clone(),
+            columns: self
+                .columns
+                .as_ref()
+                .map(|c| c.split_whitespace().map(str::to_string).collect()),
+        };
+        (convert, read)
+    }
 }
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
@@ -81,28 +115,10 @@ pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Sen
 }
 
 fn convert(args: &Args) -> Result<ConvertReport> {
-    let options = ConvertOptions {
-        build: BuildParams {
-            max_cluster_size: args.cluster_size,
-            max_root_points: args.root_points,
-            delta_n: args.delta_n,
-            position_bits: match args.precision {
-                Precision::U8 => 8,
-                Precision::U16 => 16,
-            },
-        },
-        radii: args.radii.clone(),
-    };
+    let (options, read) = args.build.options();
     let frame = match args.frame {
         Some(k) => FrameSelect::Index(k),
         None => FrameSelect::Last,
-    };
-    let read = ReadOptions {
-        attribute: args.attribute.clone(),
-        columns: args
-            .columns
-            .as_ref()
-            .map(|c| c.split_whitespace().map(str::to_string).collect()),
     };
     Ok(convert_file(
         &args.input,

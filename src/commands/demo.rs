@@ -37,15 +37,17 @@ pub fn run(args: Args) -> Result<()> {
         output: out.clone(),
         frame: None,
         last: true,
-        // The generator writes copper as LAMMPS type 1.
-        radii: vec![("1".into(), 1.28)],
-        attribute: Some(Kind::Crater.extra_column().to_string()),
-        columns: None,
-        precision: super::convert::Precision::U16,
         threads: None,
-        cluster_size: 8,
-        root_points: 4096,
-        delta_n: 1,
+        build: super::convert::BuildArgs {
+            // The generator writes copper as LAMMPS type 1.
+            radii: vec![("1".into(), 1.28)],
+            attribute: Some(Kind::Crater.extra_column().to_string()),
+            columns: None,
+            precision: super::convert::Precision::U16,
+            cluster_size: 8,
+            root_points: 4096,
+            delta_n: 1,
+        },
     })?;
     let f = MdlodFile::open(&out)?;
     let r = f.verify()?;

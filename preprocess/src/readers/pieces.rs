@@ -10,9 +10,9 @@ use super::{DumpFile, FrameInfo, InputFormat, ReadError, ReadOptions};
 use crate::frame::{Attribute, Frame, SpeciesName};
 use crate::progress::Progress;
 
-/// The piece files of `pattern` (a path whose file name holds one `%`), in processor
-/// order.
-pub(crate) fn piece_paths(pattern: &Path) -> Result<Vec<PathBuf>, ReadError> {
+/// The piece files of `pattern` (a path whose file name holds one `%`, standing for
+/// the processor number), in processor order.
+pub fn piece_paths(pattern: &Path) -> Result<Vec<PathBuf>, ReadError> {
     let io = |message: String| ReadError::Io {
         path: pattern.to_path_buf(),
         source: std::io::Error::new(std::io::ErrorKind::NotFound, message),

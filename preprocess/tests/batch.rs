@@ -1,0 +1,130 @@
+//! Batch conversion of whole trajectories: manifest, resuming, shards and merging.
+
+use std::path::{Path, PathBuf};
+
+use mdlod_datasets::lammps_sample_path;
+use mdlod_format::MdlodFile;
+use mdlod_preprocess::batch::{batch, merge, read_manifest, BatchError, BatchOptions, Manifest};
+use mdlod_preprocess::NoProgress;
+
+fn opts() -> BatchOptions {
+    BatchOptions {
+        memory_limit: 1 << 30,
+        ..Default::default()
+    }
+}
+
+/// A copy of the 6-frame real dump (so its modification time can change).
+fn input(dir: &Path) -> PathBuf {
+    let p = dir.join("melt.dump");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.dump"), &p).unwrap();
+    p
+}
+
+fn check_manifest(dir: &Path, m: &Manifest) {
+    for f in &m.frames {
+        let file = MdlodFile::open(dir.join(&f.file)).unwrap();
+        file.verify().unwrap();
+        assert_eq!(file.metadata().timestep, Some(f.timestep));
+        assert_eq!(
+            format!("{:016x}", file.header().section_table_checksum),
+            f.checksum
+        );
+        assert_eq!(file.particle_count(), f.particles);
+    }
+}
+
+#[test]
+fn every_frame_converts_once_and_reruns_redo_only_what_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.frames_total, r.converted, r.skipped), (6, 6, 0));
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(
+        m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>(),
+        [0, 100, 200, 300, 400, 500]
+    );
+    assert_eq!(m.frames[3].file, "frame-300.mdlod");
+    assert_eq!(m.frames[3].time, Some(0.6));
+    assert_eq!(m.frames[3].source.frame, 3);
+    assert!(m.frames[0].simulation_box.is_some());
+    check_manifest(&out, &m);
+
+    // Nothing changed: nothing to do.
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 6));
+
+    // A lost output and a leftover temporary file of a killed run.
+    std::fs::remove_file(out.join("frame-300.mdlod")).unwrap();
+    std::fs::write(out.join(".frame-100.mdlod.abc123.tmp"), b"partial").unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (1, 5));
+    assert!(!out.join(".frame-100.mdlod.abc123.tmp").exists());
+    let again = read_manifest(&out).unwrap();
+    assert_eq!(again, m, "the redone frame is byte-identical");
+
+    // A changed source: everything is redone.
+    let f = std::fs::File::options().write(true).open(&src).unwrap();
+    f.set_modified(std::time::SystemTime::UNIX_EPOCH + std::time::Duration::from_secs(1_000_000))
+        .unwrap();
+    drop(f);
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (6, 0));
+}
+
+#[test]
+fn shards_merge_into_the_manifest_of_an_unsharded_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let whole = dir.path().join("whole");
+    batch(std::slice::from_ref(&src), &whole, &opts(), &NoProgress).unwrap();
+    let sharded = dir.path().join("sharded");
+    let mut counts = vec![];
+    for i in 0..4 {
+        let o = BatchOptions {
+            shard: Some((i, 4)),
+            ..opts()
+        };
+        let r = batch(std::slice::from_ref(&src), &sharded, &o, &NoProgress).unwrap();
+        counts.push(r.frames_in_shard);
+        if i == 2 {
+            // Not all shards yet.
+            let e = merge(&sharded).unwrap_err().to_string();
+            assert!(e.contains("shard 3 of 4 has no manifest"), "{e}");
+        }
+    }
+    assert_eq!(counts, [2, 2, 1, 1]);
+    let merged = merge(&sharded).unwrap();
+    let reference = read_manifest(&whole).unwrap();
+    assert_eq!(merged.frames, reference.frames);
+    assert_eq!(read_manifest(&sharded).unwrap(), merged);
+    check_manifest(&sharded, &merged);
+}
+
+#[test]
+fn conflicting_inputs_and_bad_shards_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = input(dir.path());
+    let b = lammps_sample_path("cu_melt.step.0.bin");
+    let e = batch(&[a.clone(), b], &dir.path().join("o"), &opts(), &NoProgress).unwrap_err();
+    assert!(
+        matches!(e, BatchError::DuplicateTimestep { timestep: 0, .. }),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("melt.dump frame 0")
+            && e.to_string().contains("cu_melt.step.0.bin frame 0")
+    );
+    let o = BatchOptions {
+        shard: Some((4, 4)),
+        ..opts()
+    };
+    assert!(matches!(
+        batch(&[a], &dir.path().join("o"), &o, &NoProgress),
+        Err(BatchError::BadShard(4, 4))
+    ));
+    let e = merge(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("no shard manifests"), "{e}");
+}
