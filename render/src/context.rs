@@ -118,10 +118,12 @@ impl GpuContext {
             return Err(no_adapter());
         };
         let info = adapter.get_info();
-        // Optional features, taken when the adapter has them: GPU timing, and early
-        // depth tests for the sphere pass's conservative depth.
+        // Optional features, taken when the adapter has them: GPU timing, early depth
+        // tests for the sphere pass's conservative depth, float blending for splats.
         let required_features = adapter.features()
-            & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SHADER_EARLY_DEPTH_TEST);
+            & (wgpu::Features::TIMESTAMP_QUERY
+                | wgpu::Features::SHADER_EARLY_DEPTH_TEST
+                | wgpu::Features::FLOAT32_BLENDABLE);
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("mdlod-render"),

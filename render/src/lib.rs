@@ -47,7 +47,7 @@ pub use glam;
 pub use image::RgbaImage;
 pub use occlusion::OcclusionMode;
 pub use passes::sphere_raycast::Lighting;
-pub use renderer::{FrameSettings, RenderedFrame, Renderer};
+pub use renderer::{FrameSettings, RenderedFrame, Renderer, SplatFrame};
 pub use streaming::{StreamStats, StreamingRenderer};
 pub use traversal::{traverse, traverse_with, DrawList, DrawRange, Residency, TraversalSettings};
 pub use view::ViewFile;
@@ -102,8 +102,24 @@ pub struct RenderOptions {
     /// everything the view needs has arrived.
     pub gpu_memory: Option<u64>,
     /// Leave out clusters hidden behind spheres already drawn (exact: no visible pixel
-    /// changes; see [`occlusion`]).
+    /// changes; see [`occlusion`]). Sphere mode only.
     pub occlusion: bool,
+    /// How points are drawn.
+    pub mode: RenderMode,
+    /// Splat mode: tone-mapping exposure (light added per unit of flux); `None` picks one
+    /// from the image.
+    pub exposure: Option<f32>,
+}
+
+/// How points are drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RenderMode {
+    /// Opaque, depth-correct ray-cast spheres, shaded.
+    #[default]
+    Spheres,
+    /// Additive, flux-preserving splats accumulated in floating point and tone mapped
+    /// (SPH, astrophysics; see [`passes::splat`]).
+    Splat,
 }
 
 impl Default for RenderOptions {
@@ -120,6 +136,8 @@ impl Default for RenderOptions {
             backends: BackendChoice::FromEnv,
             gpu_memory: None,
             occlusion: true,
+            mode: RenderMode::Spheres,
+            exposure: None,
         }
     }
 }
@@ -163,6 +181,9 @@ pub struct RenderReport {
     /// pool) and render targets, in bytes.
     pub gpu_data_bytes: u64,
     pub gpu_target_bytes: u64,
+    /// Splat mode: the tone-mapping exposure used and the image's total flux.
+    pub exposure: Option<f32>,
+    pub total_flux: Option<f64>,
 }
 
 /// Parses a colour as `#rrggbb`, `rrggbb` or three numbers in [0, 1] separated by commas.
@@ -252,7 +273,8 @@ fn frame_setup(
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,
         budget_points: opts.budget.min(renderer.max_points()).max(1),
-        occlusion: if !opts.occlusion {
+        occlusion: if !opts.occlusion || opts.mode == RenderMode::Splat {
+            // Additive splats hide nothing.
             OcclusionMode::Off
         } else if opts.spp <= 1 {
             OcclusionMode::PixelCentres
@@ -303,6 +325,8 @@ impl RenderReport {
             first_frame_time: None,
             gpu_data_bytes: frame.gpu_data_bytes,
             gpu_target_bytes: frame.gpu_target_bytes,
+            exposure: None,
+            total_flux: None,
         }
     }
 }
@@ -317,6 +341,24 @@ pub fn render_image(
     let (camera, traversal, settings) = frame_setup(renderer, file, opts)?;
     let draw = traverse(&camera, file, &traversal);
     let traversal_time = t0.elapsed();
+    if opts.mode == RenderMode::Splat {
+        let splats = renderer.render_splats(file, &camera, &draw, opts.width, opts.height, 1.0)?;
+        let (image, exposure) = splats.tone_map(opts.exposure, opts.background);
+        let frame = RenderedFrame {
+            image,
+            depth: None,
+            gpu_time: splats.gpu_time,
+            points: splats.points,
+            gpu_data_bytes: splats.gpu_data_bytes,
+            gpu_target_bytes: u64::from(opts.width) * u64::from(opts.height) * 32,
+        };
+        let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
+        report.traversal_time = traversal_time;
+        report.exposure = Some(exposure);
+        report.total_flux = Some(splats.total_flux()[3]);
+        report.total_time = t0.elapsed();
+        return Ok((frame.image, report));
+    }
     let frame = renderer.render(file, &camera, &draw, &settings)?;
     let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
     report.traversal_time = traversal_time;
@@ -333,6 +375,11 @@ pub fn render_streaming(
     opts: &RenderOptions,
     pool_bytes: u64,
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
+    if opts.mode == RenderMode::Splat {
+        return Err(RenderError::InvalidOptions(
+            "splat mode draws from the whole file for now: leave out the GPU memory pool".into(),
+        ));
+    }
     let t0 = Instant::now();
     let (camera, traversal, settings) = frame_setup(renderer, &file, opts)?;
     let mut stream = StreamingRenderer::new(renderer, file, pool_bytes)?;

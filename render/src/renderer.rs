@@ -22,6 +22,7 @@ use crate::passes::sphere_raycast::{
     pack, FrameUniforms, Lighting, PackedDraw, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT,
     DEPTH_FORMAT,
 };
+use crate::passes::splat::{SplatPass, HDR_FORMAT};
 use crate::traversal::DrawList;
 
 /// Most samples per pixel accepted.
@@ -72,6 +73,70 @@ pub struct RenderedFrame {
     pub gpu_target_bytes: u64,
 }
 
+/// A splat accumulation: per pixel (rows top to bottom) the flux in r, g, b and in total
+/// (a), before tone mapping.
+#[derive(Clone, Debug)]
+pub struct SplatFrame {
+    pub width: u32,
+    pub height: u32,
+    pub hdr: Vec<[f32; 4]>,
+    pub gpu_time: Option<Duration>,
+    pub points: u32,
+    pub gpu_data_bytes: u64,
+}
+
+impl SplatFrame {
+    /// The image's total flux per channel (r, g, b, total).
+    pub fn total_flux(&self) -> [f64; 4] {
+        let mut t = [0f64; 4];
+        for p in &self.hdr {
+            for k in 0..4 {
+                t[k] += f64::from(p[k]);
+            }
+        }
+        t
+    }
+
+    /// Tone maps to an sRGB image over `background_srgb`: each channel's flux `f` adds
+    /// `1 − exp(−exposure · f)` of light. Without an exposure, the one that maps the
+    /// 99.5th percentile of the lit pixels' total flux to 0.86 (1 − e⁻²). Returns the
+    /// image and the exposure used.
+    pub fn tone_map(&self, exposure: Option<f32>, background_srgb: [f32; 3]) -> (RgbaImage, f32) {
+        let exposure = exposure.unwrap_or_else(|| {
+            let mut lit: Vec<f32> = self.hdr.iter().map(|p| p[3]).filter(|v| *v > 0.0).collect();
+            if lit.is_empty() {
+                return 1.0;
+            }
+            let k = ((lit.len() as f64 * 0.995) as usize).min(lit.len() - 1);
+            let (_, v, _) = lit.select_nth_unstable_by(k, f32::total_cmp);
+            2.0 / v.max(f32::MIN_POSITIVE)
+        });
+        let bg = background_srgb.map(srgb_to_linear);
+        let mut image = RgbaImage::new(self.width, self.height);
+        for (i, p) in self.hdr.iter().enumerate() {
+            let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
+                if k == 3 {
+                    return 255;
+                }
+                let light = 1.0 - (-exposure * p[k].max(0.0)).exp();
+                let v = bg[k] + (1.0 - bg[k]) * light;
+                (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
+            });
+            image.data[4 * i..4 * i + 4].copy_from_slice(&px);
+        }
+        (image, exposure)
+    }
+}
+
+/// Converts one linear channel to sRGB encoding.
+pub fn linear_to_srgb(c: f32) -> f32 {
+    if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
 /// Converts one sRGB-encoded channel to linear.
 pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 {
@@ -106,6 +171,7 @@ pub struct Renderer {
     pub ctx: GpuContext,
     sphere: SphereRaycastPass,
     accumulate: AccumulatePass,
+    splat: Option<SplatPass>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -124,10 +190,12 @@ impl Renderer {
     pub fn new(ctx: GpuContext) -> Self {
         let sphere = SphereRaycastPass::new(&ctx.device);
         let accumulate = AccumulatePass::new(&ctx.device);
+        let splat = SplatPass::new(&ctx.device, &sphere.layout);
         Renderer {
             ctx,
             sphere,
             accumulate,
+            splat,
         }
     }
 
@@ -494,6 +562,177 @@ impl Renderer {
             points: buffers.points,
             gpu_data_bytes: 0,
             gpu_target_bytes,
+        })
+    }
+
+    /// Accumulates flux-preserving splats of `draw` (see [`crate::passes::splat`]) into a
+    /// float image: per pixel, the flux of every colour channel and in total.
+    pub fn render_splats(
+        &self,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        width: u32,
+        height: u32,
+        intensity: f32,
+    ) -> Result<SplatFrame, RenderError> {
+        let Some(splat) = &self.splat else {
+            return Err(RenderError::InvalidOptions(format!(
+                "splatting needs additive blending of 32-bit floats, which {} does not offer",
+                self.ctx.adapter_name()
+            )));
+        };
+        self.check(&FrameSettings {
+            width,
+            height,
+            ..Default::default()
+        })?;
+        let packed =
+            crate::passes::sphere_raycast::pack_with(file, draw, |n| n.area_sum.max(0.0).sqrt())?;
+        let limits = self.ctx.device.limits();
+        if packed.largest_buffer_bytes() > limits.max_storage_buffer_binding_size {
+            return Err(RenderError::InvalidOptions(format!(
+                "the cut of {} points is too large for this adapter: lower the point budget",
+                packed.points()
+            )));
+        }
+        self.ctx.scoped(|| {
+            let device = &self.ctx.device;
+            let queue = &self.ctx.queue;
+            let buffers = self.sphere.upload(device, &packed);
+            let mut uniforms = FrameUniforms::new(
+                camera.clip_from_view(width as f32 / height as f32),
+                camera.view_from_world(),
+                camera.projection == Projection::Orthographic,
+                &Default::default(),
+                packed.position_bits,
+                packed.species.len() as u32,
+            );
+            uniforms.material = [width as f32, height as f32, intensity, 0.0];
+            queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            let size = wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            };
+            let target = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("splat accumulation"),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: HDR_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            });
+            let view = target.create_view(&Default::default());
+            let row = padded_row(width * 16);
+            let readback = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("splat readback"),
+                size: u64::from(row) * u64::from(height),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let timing = self.ctx.timestamps().then(|| {
+                let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("splat time"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: 2,
+                });
+                let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("splat timestamps"),
+                    size: 16,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                });
+                let read = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("splat timestamps readback"),
+                    size: 16,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                (set, resolve, read)
+            });
+            let mut enc = device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("splat"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: timing.as_ref().map(|(set, _, _)| {
+                        wgpu::RenderPassTimestampWrites {
+                            query_set: set,
+                            beginning_of_pass_write_index: Some(0),
+                            end_of_pass_write_index: Some(1),
+                        }
+                    }),
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                if buffers.points > 0 {
+                    pass.set_pipeline(&splat.pipeline);
+                    pass.set_bind_group(0, &buffers.bind_group, &[]);
+                    pass.draw(0..4, 0..buffers.points);
+                }
+            }
+            enc.copy_texture_to_buffer(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &target,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &readback,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(row),
+                        rows_per_image: Some(height),
+                    },
+                },
+                size,
+            );
+            if let Some((set, resolve, read)) = &timing {
+                enc.resolve_query_set(set, 0..2, resolve, 0);
+                enc.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
+            }
+            queue.submit([enc.finish()]);
+            let bytes = self.read_buffer(&readback)?;
+            let mut hdr = Vec::with_capacity(width as usize * height as usize);
+            for y in 0..height as usize {
+                let src = &bytes[y * row as usize..][..width as usize * 16];
+                hdr.extend(src.chunks_exact(16).map(|c| {
+                    [0, 1, 2, 3].map(|k| {
+                        f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]])
+                    })
+                }));
+            }
+            let gpu_time = match &timing {
+                Some((_, _, read)) => {
+                    let b = self.read_buffer(read)?;
+                    let t0 = u64::from_le_bytes(b[0..8].try_into().unwrap_or_default());
+                    let t1 = u64::from_le_bytes(b[8..16].try_into().unwrap_or_default());
+                    let ns = t1.saturating_sub(t0) as f64 * f64::from(queue.get_timestamp_period());
+                    Some(Duration::from_nanos(ns as u64))
+                }
+                None => None,
+            };
+            Ok(SplatFrame {
+                width,
+                height,
+                hdr,
+                gpu_time,
+                points: buffers.points,
+                gpu_data_bytes: packed.data_bytes(),
+            })
         })
     }
 

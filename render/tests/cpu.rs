@@ -340,47 +340,6 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
     assert_eq!(other, patchy.refused.len() as u64);
 }
 
-/// The spheres a cut draws: (key, centre, radius), decoded as the GPU does.
-fn drawn_spheres(f: &MdlodFile, d: &DrawList) -> Vec<((u8, u32), Vec3, f32)> {
-    drawn_spheres_with(f, d, mdlod_render::traversal::representative_radius)
-}
-
-fn drawn_spheres_with(
-    f: &MdlodFile,
-    d: &DrawList,
-    radius_of: fn(&mdlod_format::NodeRecord) -> f32,
-) -> Vec<((u8, u32), Vec3, f32)> {
-    let last = f.level_count() - 1;
-    let nodes = f.nodes();
-    let bits = f.position_bits();
-    let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
-    let mut out = vec![];
-    for r in &d.ranges {
-        for i in r.first..r.first + r.count {
-            let level = r.level as usize;
-            let centre = if level == 0 {
-                Vec3::from(nodes[0].centroid)
-            } else {
-                let enc = &nodes[r.quant_node as usize];
-                let q = f.positions(level).get(i as usize);
-                Vec3::from(mdlod_format::quantize::decode3(
-                    q,
-                    enc.centroid,
-                    enc.quant_scale,
-                    bits,
-                ))
-            };
-            let radius = if level == last {
-                radii[usize::from(f.species()[i as usize]).min(radii.len() - 1)]
-            } else {
-                radius_of(&nodes[node_of(f, level, i as usize)])
-            };
-            out.push(((r.level, i), centre, radius));
-        }
-    }
-    out
-}
-
 /// Per pixel centre, the nearest sphere hit (key and ray parameter), by CPU ray casting.
 fn nearest_hits(cam: &Camera, spheres: &[((u8, u32), Vec3, f32)]) -> Vec<Option<((u8, u32), f32)>> {
     let [w, h] = VIEWPORT;

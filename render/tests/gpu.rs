@@ -686,3 +686,165 @@ fn occlusion_culling_changes_no_pixel() {
         assert_eq!(failing, 0, "{projection:?}: {failing} pixels differ");
     }
 }
+
+/// CPU reference of the splat pass: every point of the cut deposits
+/// `π r_px² · colour` with the pass's normalised Gaussian.
+fn splat_reference(
+    f: &MdlodFile,
+    camera: &Camera,
+    draw: &mdlod_render::DrawList,
+    w: u32,
+    h: u32,
+) -> Vec<[f64; 4]> {
+    use mdlod_render::passes::splat::{splat_sigma, splat_weight, TRUNCATION};
+    let clip_from_view = camera.clip_from_view(w as f32 / h as f32);
+    let clip_from_world = clip_from_view * camera.view_from_world();
+    let meta = f.metadata();
+    let last = f.level_count() - 1;
+    let mut img = vec![[0f64; 4]; (w * h) as usize];
+    let spheres = drawn_spheres_with(f, draw, |n| n.area_sum.max(0.0).sqrt());
+    for ((level, i), c, r) in spheres {
+        let colour = if usize::from(level) == last {
+            meta.species[usize::from(f.species()[i as usize])].colour
+        } else {
+            f.nodes()[f.levels()[usize::from(level)].node_first as usize + i as usize].colour_rgb()
+        };
+        let clip = clip_from_world * c.extend(1.0);
+        let ppw = clip_from_view.y_axis.y * 0.5 * h as f32 / clip.w;
+        let r_px = r * ppw;
+        let sigma = splat_sigma(r_px);
+        let flux = std::f32::consts::PI * r_px * r_px;
+        let (cx, cy) = (
+            (clip.x / clip.w + 1.0) * 0.5 * w as f32,
+            (1.0 - clip.y / clip.w) * 0.5 * h as f32,
+        );
+        let reach = TRUNCATION * sigma;
+        let (x0, x1) = (
+            (cx - reach).floor().max(0.0) as u32,
+            ((cx + reach).ceil() as u32).min(w - 1),
+        );
+        let (y0, y1) = (
+            (cy - reach).floor().max(0.0) as u32,
+            ((cy + reach).ceil() as u32).min(h - 1),
+        );
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let wgt = splat_weight(x as f32 + 0.5 - cx, y as f32 + 0.5 - cy, sigma);
+                let px = &mut img[(y * w + x) as usize];
+                for k in 0..3 {
+                    px[k] += f64::from(wgt * flux * colour[k]);
+                }
+                px[3] += f64::from(wgt * flux);
+            }
+        }
+    }
+    img
+}
+
+#[test]
+fn splats_match_the_cpu_reference_and_keep_the_flux_at_every_level() {
+    let (_d, _p, f) = make_file(&cloud_frame(4000, 5), small_build(), &[]);
+    let (w, h) = (96u32, 72u32);
+    for projection in [Projection::Orthographic, Projection::Perspective] {
+        let camera = camera_for(
+            &f,
+            &ViewSpec::Orbit {
+                azimuth_deg: 40.0,
+                elevation_deg: 30.0,
+                zoom: 0.8,
+                projection,
+            },
+            w,
+            h,
+        )
+        .unwrap();
+        let mut fluxes = vec![];
+        // (Coarser still, a handful of splats wider than the image would lose flux off
+        // its edges.)
+        for error_px in [0.0, 6.0, 24.0] {
+            let draw = traverse(
+                &camera,
+                &f,
+                &TraversalSettings {
+                    viewport: [w, h],
+                    error_px,
+                    budget_points: u64::MAX,
+                    occlusion: OcclusionMode::Off,
+                },
+            );
+            let gpu = renderer()
+                .render_splats(&f, &camera, &draw, w, h, 1.0)
+                .unwrap();
+            let cpu = splat_reference(&f, &camera, &draw, w, h);
+            let peak = cpu.iter().map(|p| p[3]).fold(0.0, f64::max);
+            for (i, (g, c)) in gpu.hdr.iter().zip(&cpu).enumerate() {
+                for k in 0..4 {
+                    assert!(
+                        (f64::from(g[k]) - c[k]).abs() <= 1e-4 * peak + 1e-5,
+                        "{projection:?} {error_px} px: pixel {i} channel {k}: {} vs {}",
+                        g[k],
+                        c[k]
+                    );
+                }
+            }
+            let total = gpu.total_flux();
+            let expected: f64 = cpu.iter().map(|p| p[3]).sum();
+            assert!((total[3] - expected).abs() <= 1e-4 * expected);
+            fluxes.push((error_px, draw.points, total));
+        }
+        // The whole data set is in view: the image's flux is the cut's flux, the same at
+        // every level (exactly in orthographic views; in perspective a representative
+        // sits at its particles' mean depth, so the pixels-per-unit factor differs a
+        // little).
+        // Per colour channel, representatives' mean colours are stored with 8 bits
+        // (rounding by up to 0.5/255 of a channel), so colour fluxes get a looser bound
+        // than the total.
+        let tol = |k: usize| match (projection, k) {
+            (Projection::Orthographic, 3) => 1e-3,
+            (Projection::Orthographic, _) => 1e-2,
+            (Projection::Perspective, _) => 2e-2,
+        };
+        let reference = fluxes[0].2;
+        assert!(
+            fluxes.last().unwrap().1 * 20 <= fluxes[0].1,
+            "the coarsest cut is far coarser: {fluxes:?}"
+        );
+        for (error_px, points, total) in &fluxes {
+            for k in 0..4 {
+                let tol = tol(k);
+                let rel = (total[k] - reference[k]).abs() / reference[k];
+                assert!(
+                    rel <= tol,
+                    "{projection:?}: {error_px} px ({points} points): channel {k} flux off by {rel:.2e}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn splat_mode_renders_tone_mapped_and_refuses_streaming() {
+    let (_d, _p, f) = make_file(&cloud_frame(2000, 3), small_build(), &[]);
+    let mut o = opts(64, 48);
+    o.mode = mdlod_render::RenderMode::Splat;
+    o.error_px = 4.0;
+    let (img, report) = render_image(renderer(), &f, &o).unwrap();
+    let exposure = report.exposure.unwrap();
+    assert!(exposure > 0.0 && report.total_flux.unwrap() > 0.0);
+    // Black background, some lit pixels, none pure white at the automatic exposure.
+    let lit = img.data.chunks_exact(4).filter(|p| p[0] > 10).count();
+    assert!(lit > 100, "{lit} lit pixels");
+    assert!(img
+        .data
+        .chunks_exact(4)
+        .all(|p| p[0] < 255 || p[1] < 255 || p[2] < 255));
+    // Twice the exposure: brighter everywhere it is lit.
+    o.exposure = Some(2.0 * exposure);
+    let (brighter, _) = render_image(renderer(), &f, &o).unwrap();
+    let sum = |i: &RgbaImage| i.data.iter().map(|&v| u64::from(v)).sum::<u64>();
+    assert!(sum(&brighter) > sum(&img));
+    let e = mdlod_render::render_streaming(renderer(), std::sync::Arc::new(f), &o, 1 << 20)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("splat mode"), "{e}");
+}

@@ -76,7 +76,9 @@ pub fn run(args: Args) -> Result<()> {
         budget: 4_000_000,
         no_occlusion: false,
         gpu_memory: None,
-        background: "#ffffff".into(),
+        background: None,
+        mode: super::render::Mode::Spheres,
+        exposure: None,
         save_view: None,
     })?;
     Ok(())

@@ -3,7 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use mdlod_render::{parse_colour, render_to_png, Projection, RenderOptions, ViewFile, ViewSpec};
+use mdlod_render::{
+    parse_colour, render_to_png, Projection, RenderMode, RenderOptions, ViewFile, ViewSpec,
+};
 
 /// Render a .mdlod file to a PNG with no window: sphere ray casting of a level-of-detail
 /// cut chosen by screen-space error.
@@ -51,12 +53,26 @@ pub struct Args {
     /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G).
     #[arg(long, value_parser = parse_bytes)]
     pub gpu_memory: Option<u64>,
-    /// Background colour: #rrggbb or r,g,b in [0, 1].
-    #[arg(long, default_value = "#ffffff")]
-    pub background: String,
+    /// How to draw the points: opaque ray-cast spheres, or additive flux-preserving
+    /// splats (SPH, astrophysics), tone mapped.
+    #[arg(long, value_enum, default_value = "spheres")]
+    pub mode: Mode,
+    /// Splat mode: light added per unit of flux (default: chosen from the image).
+    #[arg(long)]
+    pub exposure: Option<f32>,
+    /// Background colour: #rrggbb or r,g,b in [0, 1] (default white for spheres, black
+    /// for splats).
+    #[arg(long)]
+    pub background: Option<String>,
     /// Write the camera used as a view file.
     #[arg(long)]
     pub save_view: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Mode {
+    Spheres,
+    Splat,
 }
 
 /// Parses `512M`, `2G`, `1048576`, `64KiB`.
@@ -101,7 +117,15 @@ pub fn run(args: Args) -> Result<()> {
         spp: args.spp,
         error_px: args.screen_error,
         budget: args.budget,
-        background: parse_colour(&args.background)?,
+        background: parse_colour(args.background.as_deref().unwrap_or(match args.mode {
+            Mode::Spheres => "#ffffff",
+            Mode::Splat => "#000000",
+        }))?,
+        mode: match args.mode {
+            Mode::Spheres => RenderMode::Spheres,
+            Mode::Splat => RenderMode::Splat,
+        },
+        exposure: args.exposure,
         gpu_memory: args.gpu_memory,
         occlusion: !args.no_occlusion,
         ..Default::default()
@@ -125,6 +149,9 @@ pub fn run(args: Args) -> Result<()> {
     let gpu = r.gpu_time.map_or(String::new(), |t| {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)
     });
+    if let (Some(e), Some(f)) = (r.exposure, r.total_flux) {
+        println!("  splats: total flux {f:.4e}, exposure {e:.4e}");
+    }
     let stream = match r.first_frame_time {
         Some(t) => format!(
             ", first image after {:.0} ms, complete after {} frames",

@@ -3,11 +3,13 @@
 
 pub mod accumulate;
 pub mod sphere_raycast;
+pub mod splat;
 
 /// Every WGSL source of the crate, by file name (validated with naga in the tests).
 pub const SHADERS: &[(&str, &str)] = &[
     ("sphere_raycast.wgsl", sphere_raycast::SHADER),
     ("accumulate.wgsl", accumulate::SHADER),
+    ("splat.wgsl", splat::SHADER),
 ];
 
 #[cfg(test)]

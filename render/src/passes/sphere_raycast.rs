@@ -16,8 +16,16 @@ use mdlod_format::{FormatError, MdlodFile};
 use crate::error::RenderError;
 use crate::traversal::{representative_radius, DrawList};
 
-/// WGSL source of the pass.
-pub const SHADER: &str = include_str!("sphere_raycast.wgsl");
+/// The shared point decoding (uniforms, bindings, `load_point`) every point pass starts
+/// with.
+pub const POINTS_WGSL: &str = include_str!("points.wgsl");
+
+/// WGSL source of the pass: `points.wgsl` followed by `sphere_raycast.wgsl`.
+pub const SHADER: &str = concat!(
+    include_str!("points.wgsl"),
+    "\n",
+    include_str!("sphere_raycast.wgsl")
+);
 
 /// The source with the fragment stage declared conservative (its depth is never nearer
 /// than the rasterized quad's), for devices with `SHADER_EARLY_DEPTH_TEST`.
@@ -225,6 +233,16 @@ pub fn push_bytes_as_words(out: &mut Vec<u32>, bytes: &[u8]) {
 /// Flattens `draw` for the GPU. Species indices are checked here (opening a file does not
 /// read them), so a corrupt index is an error naming the particle, not a wrong colour.
 pub fn pack(file: &MdlodFile, draw: &DrawList) -> Result<PackedDraw, RenderError> {
+    pack_with(file, draw, representative_radius)
+}
+
+/// [`pack`] with representatives drawn at `radius(node)` (e.g. `sqrt(area_sum)` for
+/// flux-preserving splats).
+pub fn pack_with(
+    file: &MdlodFile,
+    draw: &DrawList,
+    radius: fn(&mdlod_format::NodeRecord) -> f32,
+) -> Result<PackedDraw, RenderError> {
     let bits = file.position_bits();
     let bytes_per_point = 3 * (bits as usize / 8);
     let last = file.level_count() - 1;
@@ -272,7 +290,7 @@ pub fn pack(file: &MdlodFile, draw: &DrawList) -> Result<PackedDraw, RenderError
         } else {
             let node_first = levels[level].node_first as usize + first;
             for n in &nodes[node_first..node_first + count] {
-                out.attrs.push(representative_radius(n).to_bits());
+                out.attrs.push(radius(n).to_bits());
                 out.attrs.push(n.colour);
             }
             KIND_NODE

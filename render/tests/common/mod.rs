@@ -6,6 +6,7 @@ pub mod golden;
 
 use std::path::PathBuf;
 
+use glam::Vec3;
 use mdlod_format::MdlodFile;
 use mdlod_preprocess::convert::{convert_frame, ConvertOptions};
 use mdlod_preprocess::hierarchy::BuildParams;
@@ -139,4 +140,45 @@ pub fn coverage(f: &MdlodFile, draw: &DrawList) -> Vec<u32> {
         }
     }
     cover
+}
+
+/// The spheres a cut draws: (key, centre, radius), decoded as the GPU does.
+pub fn drawn_spheres(f: &MdlodFile, d: &DrawList) -> Vec<((u8, u32), Vec3, f32)> {
+    drawn_spheres_with(f, d, mdlod_render::traversal::representative_radius)
+}
+
+pub fn drawn_spheres_with(
+    f: &MdlodFile,
+    d: &DrawList,
+    radius_of: fn(&mdlod_format::NodeRecord) -> f32,
+) -> Vec<((u8, u32), Vec3, f32)> {
+    let last = f.level_count() - 1;
+    let nodes = f.nodes();
+    let bits = f.position_bits();
+    let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
+    let mut out = vec![];
+    for r in &d.ranges {
+        for i in r.first..r.first + r.count {
+            let level = r.level as usize;
+            let centre = if level == 0 {
+                Vec3::from(nodes[0].centroid)
+            } else {
+                let enc = &nodes[r.quant_node as usize];
+                let q = f.positions(level).get(i as usize);
+                Vec3::from(mdlod_format::quantize::decode3(
+                    q,
+                    enc.centroid,
+                    enc.quant_scale,
+                    bits,
+                ))
+            };
+            let radius = if level == last {
+                radii[usize::from(f.species()[i as usize]).min(radii.len() - 1)]
+            } else {
+                radius_of(&nodes[f.levels()[level].node_first as usize + i as usize])
+            };
+            out.push(((r.level, i), centre, radius));
+        }
+    }
+    out
 }

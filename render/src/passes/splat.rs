@@ -1,0 +1,128 @@
+//! The splat pass (`splat.wgsl`): additive, flux-preserving Gaussian splats of the points
+//! of a cut into a 32-bit float target, for data where particles add light (SPH,
+//! astrophysics) rather than hide each other. See the WGSL for the kernel; the CPU twin
+//! [`splat_weight`] is what the tests compare against.
+//!
+//! The pass shares the sphere pass's bind group layout, so a packed cut is bound the same
+//! way; representatives are packed with `sqrt(area_sum)` as their radius so that each
+//! carries exactly the flux of its particles (Eq. 1).
+
+/// WGSL source of the pass: `points.wgsl` followed by `splat.wgsl`.
+pub const SHADER: &str = concat!(
+    include_str!("points.wgsl"),
+    "\n",
+    include_str!("splat.wgsl")
+);
+
+/// The accumulation target: additive blending of f32 needs `FLOAT32_BLENDABLE`.
+pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// Kernel constants, as in the WGSL.
+pub const TRUNCATION: f32 = 3.5;
+pub const MIN_SIGMA_PX: f32 = 0.7;
+const SQUARE_MASS: f32 = 0.999_069_85;
+
+/// The Gaussian's sigma (pixels) for a point of projected radius `r_px`.
+pub fn splat_sigma(r_px: f32) -> f32 {
+    (0.5 * r_px).max(MIN_SIGMA_PX)
+}
+
+/// The weight a splat of sigma `sigma` gives a pixel centre at offset `(dx, dy)` pixels
+/// from its centre (0 outside the truncation square); weights sum to 1 over a pixel grid.
+pub fn splat_weight(dx: f32, dy: f32, sigma: f32) -> f32 {
+    let limit = TRUNCATION * sigma;
+    if dx.abs() > limit || dy.abs() > limit {
+        return 0.0;
+    }
+    let s2 = sigma * sigma;
+    (-(dx * dx + dy * dy) / (2.0 * s2)).exp() / (std::f32::consts::TAU * s2 * SQUARE_MASS)
+}
+
+/// The splat pipeline.
+pub struct SplatPass {
+    pub pipeline: wgpu::RenderPipeline,
+}
+
+impl SplatPass {
+    /// The pass over `layout` (the sphere pass's bind group layout); `None` when the
+    /// device cannot blend 32-bit floats.
+    pub fn new(device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> Option<SplatPass> {
+        if !device
+            .features()
+            .contains(wgpu::Features::FLOAT32_BLENDABLE)
+        {
+            return None;
+        }
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("splat.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("splat"),
+            bind_group_layouts: &[Some(layout)],
+            immediate_size: 0,
+        });
+        let add = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::One,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("splat"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: HDR_FORMAT,
+                    blend: Some(wgpu::BlendState {
+                        color: add,
+                        alpha: add,
+                    }),
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                ..Default::default()
+            },
+            depth_stencil: None,
+            multisample: Default::default(),
+            multiview_mask: None,
+            cache: None,
+        });
+        Some(SplatPass { pipeline })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weights_sum_to_one_on_a_pixel_grid() {
+        for sigma in [MIN_SIGMA_PX, 1.0, 2.5, 7.0] {
+            for (cx, cy) in [(0.5f32, 0.5f32), (0.0, 0.0), (0.3, 0.77)] {
+                let reach = (TRUNCATION * sigma).ceil() as i32 + 2;
+                let mut sum = 0.0f64;
+                for y in -reach..=reach {
+                    for x in -reach..=reach {
+                        let (dx, dy) = (x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
+                        sum += f64::from(splat_weight(dx, dy, sigma));
+                    }
+                }
+                assert!(
+                    (sum - 1.0).abs() < 3e-4,
+                    "sigma {sigma}, centre ({cx}, {cy}): {sum}"
+                );
+            }
+        }
+    }
+}
