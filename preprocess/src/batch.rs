@@ -350,18 +350,13 @@ pub fn batch(
                     let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                     Ok(entry_of(&out, &f))
                 })();
-                match result {
-                    Ok(entry) => {
-                        let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
-                        m.frames.push(entry);
-                        if let Err(e) = save(&mut m) {
-                            failed.store(true, Ordering::Relaxed);
-                            first_error
-                                .lock()
-                                .unwrap_or_else(|e| e.into_inner())
-                                .get_or_insert(e);
-                            return;
-                        }
+                let recorded = result.and_then(|entry| {
+                    let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
+                    m.frames.push(entry);
+                    save(&mut m)
+                });
+                match recorded {
+                    Ok(()) => {
                         converted.fetch_add(1, Ordering::Relaxed);
                         progress.advance(job.particles);
                     }

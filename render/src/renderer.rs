@@ -182,6 +182,29 @@ impl std::fmt::Debug for Renderer {
     }
 }
 
+/// Two timestamps around a frame's passes.
+struct FrameTimer {
+    set: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    read: wgpu::Buffer,
+}
+
+impl FrameTimer {
+    /// Writes for a pass that begins (`begin`) and/or ends (`end`) the timed span.
+    fn writes(&self, begin: bool, end: bool) -> wgpu::RenderPassTimestampWrites<'_> {
+        wgpu::RenderPassTimestampWrites {
+            query_set: &self.set,
+            beginning_of_pass_write_index: begin.then_some(0),
+            end_of_pass_write_index: end.then_some(1),
+        }
+    }
+
+    fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
+        enc.resolve_query_set(&self.set, 0..2, &self.resolve, 0);
+        enc.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 16);
+    }
+}
+
 fn padded_row(bytes_per_row: u32) -> u32 {
     bytes_per_row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
 }
@@ -347,26 +370,7 @@ impl Renderer {
                 mapped_at_creation: false,
             })
         });
-        let timing = self.ctx.timestamps().then(|| {
-            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("frame time"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 2,
-            });
-            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("timestamps"),
-                size: 16,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            let read = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("timestamps readback"),
-                size: 16,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            (set, resolve, read)
-        });
+        let timing = self.frame_timer();
 
         let bg = settings
             .background_srgb
@@ -411,13 +415,10 @@ impl Renderer {
                         }),
                         stencil_ops: None,
                     }),
-                    timestamp_writes: timing.as_ref().filter(|_| first).map(|(set, _, _)| {
-                        wgpu::RenderPassTimestampWrites {
-                            query_set: set,
-                            beginning_of_pass_write_index: Some(0),
-                            end_of_pass_write_index: None,
-                        }
-                    }),
+                    timestamp_writes: timing
+                        .as_ref()
+                        .filter(|_| first)
+                        .map(|t| t.writes(true, false)),
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
@@ -462,13 +463,7 @@ impl Renderer {
                             },
                         })],
                         depth_stencil_attachment: None,
-                        timestamp_writes: timing.as_ref().map(|(set, _, _)| {
-                            wgpu::RenderPassTimestampWrites {
-                                query_set: set,
-                                beginning_of_pass_write_index: None,
-                                end_of_pass_write_index: Some(1),
-                            }
-                        }),
+                        timestamp_writes: timing.as_ref().map(|t| t.writes(false, true)),
                         occlusion_query_set: None,
                         multiview_mask: None,
                     });
@@ -512,9 +507,8 @@ impl Renderer {
                         size,
                     );
                 }
-                if let Some((set, resolve, read)) = &timing {
-                    enc.resolve_query_set(set, 0..2, resolve, 0);
-                    enc.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
+                if let Some(t) = &timing {
+                    t.resolve(&mut enc);
                 }
             }
             queue.submit([enc.finish()]);
@@ -542,16 +536,7 @@ impl Renderer {
             }
             None => None,
         };
-        let gpu_time = match &timing {
-            Some((_, _, read)) => {
-                let bytes = self.read_buffer(read)?;
-                let t0 = u64::from_le_bytes(bytes[0..8].try_into().unwrap_or_default());
-                let t1 = u64::from_le_bytes(bytes[8..16].try_into().unwrap_or_default());
-                let ns = t1.saturating_sub(t0) as f64 * f64::from(queue.get_timestamp_period());
-                Some(Duration::from_nanos(ns as u64))
-            }
-            None => None,
-        };
+        let gpu_time = self.gpu_time(timing.as_ref())?;
         // sample (RGBA8) + depth (f32) + accumulation (RGBA16F) + output (RGBA8) + readback.
         let gpu_target_bytes =
             u64::from(w) * u64::from(h) * (4 + 4 + 8 + 4) + u64::from(colour_row) * u64::from(h);
@@ -633,26 +618,7 @@ impl Renderer {
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            let timing = self.ctx.timestamps().then(|| {
-                let set = device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("splat time"),
-                    ty: wgpu::QueryType::Timestamp,
-                    count: 2,
-                });
-                let resolve = device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("splat timestamps"),
-                    size: 16,
-                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                });
-                let read = device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("splat timestamps readback"),
-                    size: 16,
-                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                });
-                (set, resolve, read)
-            });
+            let timing = self.frame_timer();
             let mut enc = device.create_command_encoder(&Default::default());
             {
                 let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -667,13 +633,7 @@ impl Renderer {
                         },
                     })],
                     depth_stencil_attachment: None,
-                    timestamp_writes: timing.as_ref().map(|(set, _, _)| {
-                        wgpu::RenderPassTimestampWrites {
-                            query_set: set,
-                            beginning_of_pass_write_index: Some(0),
-                            end_of_pass_write_index: Some(1),
-                        }
-                    }),
+                    timestamp_writes: timing.as_ref().map(|t| t.writes(true, true)),
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
@@ -700,9 +660,8 @@ impl Renderer {
                 },
                 size,
             );
-            if let Some((set, resolve, read)) = &timing {
-                enc.resolve_query_set(set, 0..2, resolve, 0);
-                enc.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
+            if let Some(t) = &timing {
+                t.resolve(&mut enc);
             }
             queue.submit([enc.finish()]);
             let bytes = self.read_buffer(&readback)?;
@@ -715,16 +674,7 @@ impl Renderer {
                     })
                 }));
             }
-            let gpu_time = match &timing {
-                Some((_, _, read)) => {
-                    let b = self.read_buffer(read)?;
-                    let t0 = u64::from_le_bytes(b[0..8].try_into().unwrap_or_default());
-                    let t1 = u64::from_le_bytes(b[8..16].try_into().unwrap_or_default());
-                    let ns = t1.saturating_sub(t0) as f64 * f64::from(queue.get_timestamp_period());
-                    Some(Duration::from_nanos(ns as u64))
-                }
-                None => None,
-            };
+            let gpu_time = self.gpu_time(timing.as_ref())?;
             Ok(SplatFrame {
                 width,
                 height,
@@ -734,6 +684,42 @@ impl Renderer {
                 gpu_data_bytes: packed.data_bytes(),
             })
         })
+    }
+
+    /// Timestamp queries for a frame's passes, when the device has them.
+    fn frame_timer(&self) -> Option<FrameTimer> {
+        let device = &self.ctx.device;
+        self.ctx.timestamps().then(|| FrameTimer {
+            set: device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("frame time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            }),
+            resolve: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps"),
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
+            read: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps readback"),
+                size: 16,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        })
+    }
+
+    /// The time between the timer's two stamps (after the frame was submitted).
+    fn gpu_time(&self, timer: Option<&FrameTimer>) -> Result<Option<Duration>, RenderError> {
+        let Some(t) = timer else {
+            return Ok(None);
+        };
+        let bytes = self.read_buffer(&t.read)?;
+        let t0 = u64::from_le_bytes(bytes[0..8].try_into().unwrap_or_default());
+        let t1 = u64::from_le_bytes(bytes[8..16].try_into().unwrap_or_default());
+        let ns = t1.saturating_sub(t0) as f64 * f64::from(self.ctx.queue.get_timestamp_period());
+        Ok(Some(Duration::from_nanos(ns as u64)))
     }
 
     fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {

@@ -409,26 +409,17 @@ pub(crate) fn read_frame(
             ));
         }
         let bytes = &data[e.location..e.location + n * 3 * e.ty.size()];
-        let bad = positions
-            .par_iter_mut()
-            .enumerate()
-            .find_map_first(|(i, p)| {
-                for c in 0..3 {
-                    let v = e.ty.get(bytes, 3 * i + c);
-                    if !v.is_finite() {
-                        return Some(i);
-                    }
-                    p[c] = v as f32;
-                }
-                None
-            });
-        if let Some(i) = bad {
-            return Err(err(
-                path,
-                e.location + 3 * i * e.ty.size(),
-                format!("frame {k}: particle {i} has a position that is not finite"),
-            ));
-        }
+        positions =
+            super::decode_positions(n, |i, k| 3 * i + k, |j| e.ty.get(bytes, j)).map_err(|j| {
+                err(
+                    path,
+                    e.location + j * e.ty.size(),
+                    format!(
+                        "frame {k}: particle {} has a position that is not finite",
+                        j / 3
+                    ),
+                )
+            })?;
     }
     progress.advance(n as u64);
 

@@ -565,6 +565,35 @@ impl DumpFile {
     }
 }
 
+/// Decodes `n` positions in parallel: coordinate `k` of particle `i` is `value(at(i, k))`.
+/// On a non-finite value, the `at` index of the first one (in particle order).
+pub(crate) fn decode_positions(
+    n: usize,
+    at: impl Fn(usize, usize) -> usize + Sync,
+    value: impl Fn(usize) -> f64 + Sync,
+) -> Result<Vec<[f32; 3]>, usize> {
+    use rayon::prelude::*;
+    let mut positions = vec![[0f32; 3]; n];
+    let bad = positions
+        .par_iter_mut()
+        .enumerate()
+        .find_map_first(|(i, p)| {
+            for k in 0..3 {
+                let j = at(i, k);
+                let v = value(j);
+                if !v.is_finite() {
+                    return Some(j);
+                }
+                p[k] = v as f32;
+            }
+            None
+        });
+    match bad {
+        Some(j) => Err(j),
+        None => Ok(positions),
+    }
+}
+
 /// The file being read, for building errors with line numbers.
 pub(crate) struct Ctx<'a> {
     pub path: &'a Path,

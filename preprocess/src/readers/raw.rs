@@ -401,32 +401,22 @@ impl Index {
         let p = &self.positions;
         let bytes = p.bytes();
         let size = p.ty.size();
-        let mut positions = vec![[0f32; 3]; n];
         let planar = self.planar;
-        let bad = positions
-            .par_iter_mut()
-            .enumerate()
-            .find_map_first(|(i, out)| {
-                for k in 0..3 {
-                    let j = if planar { k * n + i } else { 3 * i + k };
-                    let v = p.ty.get(bytes, j, p.big);
-                    if !v.is_finite() {
-                        return Some(j);
-                    }
-                    out[k] = v as f32;
-                }
-                None
-            });
-        if let Some(j) = bad {
-            return Err(err(
+        let positions = super::decode_positions(
+            n,
+            |i, k| if planar { k * n + i } else { 3 * i + k },
+            |j| p.ty.get(bytes, j, p.big),
+        )
+        .map_err(|j| {
+            err(
                 &p.path,
                 (p.offset + j * size) as u64,
                 format!(
                     "particle {}: a coordinate is not finite",
                     if planar { j % n } else { j / 3 }
                 ),
-            ));
-        }
+            )
+        })?;
         progress.advance(n as u64);
         let (species, species_index) = match &self.species {
             None => (

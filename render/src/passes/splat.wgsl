@@ -16,8 +16,30 @@
 
 const TRUNCATION: f32 = 3.5;
 const MIN_SIGMA_PX: f32 = 0.7;
-// (erf(3.5 / sqrt(2)))^2: the Gaussian's mass inside the truncation square.
-const SQUARE_MASS: f32 = 0.99906985;
+// sqrt(2 pi) * erf(3.5 / sqrt(2)): a unit Gaussian's mass inside the truncation.
+const AXIS_MASS: f32 = 2.50546287;
+const EXACT_BELOW: f32 = 32.0;
+
+// Sum over pixel centres (i + 0.5) within the truncation of exp(-(x - c)^2 / 2 sigma^2).
+fn axis_sum(c: f32, sigma: f32) -> f32 {
+    if sigma >= EXACT_BELOW {
+        return AXIS_MASS * sigma;
+    }
+    let limit = TRUNCATION * sigma;
+    let inv = 1.0 / (2.0 * sigma * sigma);
+    var sum = 0.0;
+    var x = ceil(c - 0.5 - limit);
+    let last = floor(c - 0.5 + limit);
+    loop {
+        if x > last {
+            break;
+        }
+        let d = x + 0.5 - c;
+        sum += exp(-d * d * inv);
+        x += 1.0;
+    }
+    return sum;
+}
 
 struct VsOut {
     @builtin(position) clip: vec4<f32>,
@@ -48,11 +70,11 @@ fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> 
     let r_px = pt.radius * ppw;
     let sigma = max(0.5 * r_px, MIN_SIGMA_PX);
     let flux = 3.14159265 * r_px * r_px * frame.material.z;
-    let norm = 1.0 / (6.28318531 * sigma * sigma * SQUARE_MASS);
-    out.energy = vec4<f32>(pt.albedo * flux, flux) * norm;
-    out.sigma = sigma;
     let ndc = clip.xy / clip.w;
     out.center_px = vec2<f32>((ndc.x + 1.0) * 0.5 * size.x, (1.0 - ndc.y) * 0.5 * size.y);
+    let norm = 1.0 / (axis_sum(out.center_px.x, sigma) * axis_sum(out.center_px.y, sigma));
+    out.energy = vec4<f32>(pt.albedo * flux, flux) * norm;
+    out.sigma = sigma;
     let corner = vec2<f32>(f32(vi & 1u), f32((vi >> 1u) & 1u)) * 2.0 - 1.0;
     // One pixel wider than the truncation square, which the fragment stage enforces
     // exactly: rasterization rounding must not drop its edge pixels.
