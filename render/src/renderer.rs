@@ -205,6 +205,34 @@ impl FrameTimer {
     }
 }
 
+/// Copies a whole texture (one aspect) into a readback buffer with rows of `row` bytes.
+fn copy_to_buffer(
+    enc: &mut wgpu::CommandEncoder,
+    texture: &wgpu::Texture,
+    aspect: wgpu::TextureAspect,
+    buffer: &wgpu::Buffer,
+    row: u32,
+    size: wgpu::Extent3d,
+) {
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(size.height),
+            },
+        },
+        size,
+    );
+}
+
 fn padded_row(bytes_per_row: u32) -> u32 {
     bytes_per_row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
 }
@@ -471,39 +499,21 @@ impl Renderer {
                     pass.set_bind_group(0, &resolve_bg, &[]);
                     pass.draw(0..3, 0..1);
                 }
-                enc.copy_texture_to_buffer(
-                    wgpu::TexelCopyTextureInfo {
-                        texture: &output,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d::ZERO,
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    wgpu::TexelCopyBufferInfo {
-                        buffer: &readback,
-                        layout: wgpu::TexelCopyBufferLayout {
-                            offset: 0,
-                            bytes_per_row: Some(colour_row),
-                            rows_per_image: Some(h),
-                        },
-                    },
+                copy_to_buffer(
+                    &mut enc,
+                    &output,
+                    wgpu::TextureAspect::All,
+                    &readback,
+                    colour_row,
                     size,
                 );
                 if let Some(buf) = &depth_readback {
-                    enc.copy_texture_to_buffer(
-                        wgpu::TexelCopyTextureInfo {
-                            texture: &depth,
-                            mip_level: 0,
-                            origin: wgpu::Origin3d::ZERO,
-                            aspect: wgpu::TextureAspect::DepthOnly,
-                        },
-                        wgpu::TexelCopyBufferInfo {
-                            buffer: buf,
-                            layout: wgpu::TexelCopyBufferLayout {
-                                offset: 0,
-                                bytes_per_row: Some(colour_row),
-                                rows_per_image: Some(h),
-                            },
-                        },
+                    copy_to_buffer(
+                        &mut enc,
+                        &depth,
+                        wgpu::TextureAspect::DepthOnly,
+                        buf,
+                        colour_row,
                         size,
                     );
                 }
@@ -643,21 +653,12 @@ impl Renderer {
                     pass.draw(0..4, 0..buffers.points);
                 }
             }
-            enc.copy_texture_to_buffer(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &target,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &readback,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(row),
-                        rows_per_image: Some(height),
-                    },
-                },
+            copy_to_buffer(
+                &mut enc,
+                &target,
+                wgpu::TextureAspect::All,
+                &readback,
+                row,
                 size,
             );
             if let Some(t) = &timing {
