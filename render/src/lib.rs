@@ -47,7 +47,7 @@ pub use glam;
 pub use image::RgbaImage;
 pub use occlusion::OcclusionMode;
 pub use passes::sphere_raycast::Lighting;
-pub use renderer::{FrameSettings, RenderedFrame, Renderer, SplatFrame};
+pub use renderer::{FrameSettings, RenderedFrame, Renderer, SplatBlend, SplatFrame};
 pub use streaming::{StreamStats, StreamingRenderer};
 pub use traversal::{traverse, traverse_with, DrawList, DrawRange, Residency, TraversalSettings};
 pub use view::ViewFile;
@@ -112,7 +112,7 @@ pub struct RenderOptions {
 }
 
 /// How points are drawn.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub enum RenderMode {
     /// Opaque, depth-correct ray-cast spheres, shaded.
     #[default]
@@ -120,6 +120,9 @@ pub enum RenderMode {
     /// Additive, flux-preserving splats accumulated in floating point and tone mapped
     /// (SPH, astrophysics; see [`passes::splat`]).
     Splat,
+    /// Translucent splats sorted back to front and composited with the over operator,
+    /// for data that needs depth order; `opacity` is the splats' peak alpha.
+    SplatOver { opacity: f32 },
 }
 
 impl Default for RenderOptions {
@@ -273,7 +276,7 @@ fn frame_setup(
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,
         budget_points: opts.budget.min(renderer.max_points()).max(1),
-        occlusion: if !opts.occlusion || opts.mode == RenderMode::Splat {
+        occlusion: if !opts.occlusion || opts.mode != RenderMode::Spheres {
             // Additive splats hide nothing.
             OcclusionMode::Off
         } else if opts.spp <= 1 {
@@ -341,9 +344,39 @@ pub fn render_image(
     let (camera, traversal, settings) = frame_setup(renderer, file, opts)?;
     let draw = traverse(&camera, file, &traversal);
     let traversal_time = t0.elapsed();
-    if opts.mode == RenderMode::Splat {
-        let splats = renderer.render_splats(file, &camera, &draw, opts.width, opts.height, 1.0)?;
-        let (image, exposure) = splats.tone_map(opts.exposure, opts.background);
+    if opts.mode != RenderMode::Spheres {
+        let (splats, image, exposure) = match opts.mode {
+            RenderMode::SplatOver { opacity } => {
+                if !(opacity.is_finite() && opacity > 0.0 && opacity <= 1.0) {
+                    return Err(RenderError::InvalidOptions(format!(
+                        "opacity {opacity} (must be in (0, 1])"
+                    )));
+                }
+                let sorted = traversal::sort_back_to_front(file, &draw, &camera);
+                let splats = renderer.render_splats(
+                    file,
+                    &camera,
+                    &sorted,
+                    opts.width,
+                    opts.height,
+                    SplatBlend::Over { opacity },
+                )?;
+                let image = splats.composite_over(opts.background);
+                (splats, image, None)
+            }
+            _ => {
+                let splats = renderer.render_splats(
+                    file,
+                    &camera,
+                    &draw,
+                    opts.width,
+                    opts.height,
+                    SplatBlend::Additive { intensity: 1.0 },
+                )?;
+                let (image, exposure) = splats.tone_map(opts.exposure, opts.background);
+                (splats, image, Some(exposure))
+            }
+        };
         let frame = RenderedFrame {
             image,
             depth: None,
@@ -354,8 +387,8 @@ pub fn render_image(
         };
         let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
         report.traversal_time = traversal_time;
-        report.exposure = Some(exposure);
-        report.total_flux = Some(splats.total_flux()[3]);
+        report.exposure = exposure;
+        report.total_flux = exposure.map(|_| splats.total_flux()[3]);
         report.total_time = t0.elapsed();
         return Ok((frame.image, report));
     }
@@ -375,7 +408,7 @@ pub fn render_streaming(
     opts: &RenderOptions,
     pool_bytes: u64,
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
-    if opts.mode == RenderMode::Splat {
+    if opts.mode != RenderMode::Spheres {
         return Err(RenderError::InvalidOptions(
             "splat mode draws from the whole file for now: leave out the GPU memory pool".into(),
         ));

@@ -73,6 +73,16 @@ pub struct RenderedFrame {
     pub gpu_target_bytes: u64,
 }
 
+/// How splats combine.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SplatBlend {
+    /// Added up: flux-preserving (`intensity` scales every point's flux).
+    Additive { intensity: f32 },
+    /// Translucent discs of peak alpha `opacity`, composited with the over operator in
+    /// the order of the draw list (sort it back to front first).
+    Over { opacity: f32 },
+}
+
 /// A splat accumulation: per pixel (rows top to bottom) the flux in r, g, b and in total
 /// (a), before tone mapping.
 #[derive(Clone, Debug)]
@@ -125,6 +135,26 @@ impl SplatFrame {
             image.data[4 * i..4 * i + 4].copy_from_slice(&px);
         }
         (image, exposure)
+    }
+}
+
+impl SplatFrame {
+    /// An over-blended frame (premultiplied colour and coverage) over `background_srgb`.
+    pub fn composite_over(&self, background_srgb: [f32; 3]) -> RgbaImage {
+        let bg = background_srgb.map(srgb_to_linear);
+        let mut image = RgbaImage::new(self.width, self.height);
+        for (i, p) in self.hdr.iter().enumerate() {
+            let a = p[3].clamp(0.0, 1.0);
+            let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
+                if k == 3 {
+                    return 255;
+                }
+                let v = p[k] + (1.0 - a) * bg[k];
+                (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
+            });
+            image.data[4 * i..4 * i + 4].copy_from_slice(&px);
+        }
+        image
     }
 }
 
@@ -569,7 +599,7 @@ impl Renderer {
         draw: &DrawList,
         width: u32,
         height: u32,
-        intensity: f32,
+        blend: SplatBlend,
     ) -> Result<SplatFrame, RenderError> {
         let Some(splat) = &self.splat else {
             return Err(RenderError::InvalidOptions(format!(
@@ -603,7 +633,11 @@ impl Renderer {
                 packed.position_bits,
                 packed.species.len() as u32,
             );
-            uniforms.material = [width as f32, height as f32, intensity, 0.0];
+            let (pipeline, intensity, opacity) = match blend {
+                SplatBlend::Additive { intensity } => (&splat.pipeline, intensity, 0.0),
+                SplatBlend::Over { opacity } => (&splat.over, 1.0, opacity),
+            };
+            uniforms.material = [width as f32, height as f32, intensity, opacity];
             queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
             let size = wgpu::Extent3d {
                 width,
@@ -648,7 +682,7 @@ impl Renderer {
                     multiview_mask: None,
                 });
                 if buffers.points > 0 {
-                    pass.set_pipeline(&splat.pipeline);
+                    pass.set_pipeline(pipeline);
                     pass.set_bind_group(0, &buffers.bind_group, &[]);
                     pass.draw(0..4, 0..buffers.points);
                 }

@@ -614,3 +614,61 @@ fn emit(
     list.error_px = achieved;
     list
 }
+
+/// World positions of every point of `draw`, in draw order, decoded as the GPU does.
+pub fn point_positions(file: &MdlodFile, draw: &DrawList) -> Vec<Vec3> {
+    let nodes = file.nodes();
+    let bits = file.position_bits();
+    let mut out = Vec::with_capacity(draw.points as usize);
+    for r in &draw.ranges {
+        let level = usize::from(r.level);
+        if level == 0 {
+            out.push(Vec3::from(nodes[0].centroid));
+            continue;
+        }
+        let enc = &nodes[r.quant_node as usize];
+        let pos = file.positions(level);
+        for i in r.first..r.first + r.count {
+            let q = pos.get(i as usize);
+            out.push(Vec3::from(quantize::decode3(
+                q,
+                enc.centroid,
+                enc.quant_scale,
+                bits,
+            )));
+        }
+    }
+    out
+}
+
+/// `draw` as one range per point, ordered back to front (farthest view depth first; ties
+/// by level and index), for blending that needs depth order.
+pub fn sort_back_to_front(file: &MdlodFile, draw: &DrawList, camera: &Camera) -> DrawList {
+    let view = camera.view_from_world();
+    let positions = point_positions(file, draw);
+    let mut points: Vec<(f32, DrawRange)> = Vec::with_capacity(positions.len());
+    let mut p = positions.iter();
+    for r in &draw.ranges {
+        for i in r.first..r.first + r.count {
+            let depth = p.next().map_or(0.0, |w| -view.transform_point3(*w).z);
+            points.push((
+                depth,
+                DrawRange {
+                    level: r.level,
+                    first: i,
+                    count: 1,
+                    quant_node: r.quant_node,
+                },
+            ));
+        }
+    }
+    points.sort_by(|a, b| {
+        b.0.total_cmp(&a.0)
+            .then(a.1.level.cmp(&b.1.level))
+            .then(a.1.first.cmp(&b.1.first))
+    });
+    DrawList {
+        ranges: points.into_iter().map(|(_, r)| r).collect(),
+        ..draw.clone()
+    }
+}

@@ -773,7 +773,14 @@ fn splats_match_the_cpu_reference_and_keep_the_flux_at_every_level() {
                 },
             );
             let gpu = renderer()
-                .render_splats(&f, &camera, &draw, w, h, 1.0)
+                .render_splats(
+                    &f,
+                    &camera,
+                    &draw,
+                    w,
+                    h,
+                    mdlod_render::SplatBlend::Additive { intensity: 1.0 },
+                )
                 .unwrap();
             let cpu = splat_reference(&f, &camera, &draw, w, h);
             let peak = cpu.iter().map(|p| p[3]).fold(0.0, f64::max);
@@ -847,4 +854,102 @@ fn splat_mode_renders_tone_mapped_and_refuses_streaming() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("splat mode"), "{e}");
+}
+
+#[test]
+fn sorted_over_blending_matches_a_cpu_compositor() {
+    use mdlod_render::passes::splat::{over_alpha, TRUNCATION};
+    use mdlod_render::traversal::{point_positions, sort_back_to_front};
+    let (_d, _p, f) = make_file(&cloud_frame(1500, 7), small_build(), &[]);
+    let (w, h) = (80u32, 60u32);
+    let camera = camera_for(&f, &ViewSpec::default(), w, h).unwrap();
+    let clip_from_view = camera.clip_from_view(w as f32 / h as f32);
+    let clip_from_world = clip_from_view * camera.view_from_world();
+    let opacity = 0.7;
+    for error_px in [0.0, 8.0] {
+        let draw = traverse(
+            &camera,
+            &f,
+            &TraversalSettings {
+                viewport: [w, h],
+                error_px,
+                budget_points: u64::MAX,
+                occlusion: OcclusionMode::Off,
+            },
+        );
+        let sorted = sort_back_to_front(&f, &draw, &camera);
+        assert_eq!(sorted.points, draw.points);
+        // Back to front.
+        let view = camera.view_from_world();
+        let depths: Vec<f32> = point_positions(&f, &sorted)
+            .iter()
+            .map(|p| -view.transform_point3(*p).z)
+            .collect();
+        assert!(depths.windows(2).all(|d| d[0] >= d[1]));
+
+        let blend = mdlod_render::SplatBlend::Over { opacity };
+        let gpu = renderer()
+            .render_splats(&f, &camera, &sorted, w, h, blend)
+            .unwrap();
+        // The CPU compositor, in the same order.
+        let meta = f.metadata();
+        let last = f.level_count() - 1;
+        let mut img = vec![[0f32; 4]; (w * h) as usize];
+        for ((level, i), c, r) in drawn_spheres_with(&f, &sorted, |n| n.area_sum.max(0.0).sqrt()) {
+            let colour = if usize::from(level) == last {
+                meta.species[usize::from(f.species()[i as usize])].colour
+            } else {
+                f.nodes()[f.levels()[usize::from(level)].node_first as usize + i as usize]
+                    .colour_rgb()
+            };
+            let clip = clip_from_world * c.extend(1.0);
+            let r_px = r * clip_from_view.y_axis.y * 0.5 * h as f32 / clip.w;
+            let (cx, cy) = (
+                (clip.x / clip.w + 1.0) * 0.5 * w as f32,
+                (1.0 - clip.y / clip.w) * 0.5 * h as f32,
+            );
+            let reach = TRUNCATION * mdlod_render::passes::splat::splat_sigma(r_px);
+            for y in
+                ((cy - reach).floor().max(0.0) as u32)..=(((cy + reach).ceil() as u32).min(h - 1))
+            {
+                for x in ((cx - reach).floor().max(0.0) as u32)
+                    ..=(((cx + reach).ceil() as u32).min(w - 1))
+                {
+                    let a = over_alpha(x as f32 + 0.5 - cx, y as f32 + 0.5 - cy, r_px, opacity);
+                    let px = &mut img[(y * w + x) as usize];
+                    for k in 0..3 {
+                        px[k] = colour[k] * a + (1.0 - a) * px[k];
+                    }
+                    px[3] = a + (1.0 - a) * px[3];
+                }
+            }
+        }
+        for (i, (g, c)) in gpu.hdr.iter().zip(&img).enumerate() {
+            for k in 0..4 {
+                assert!(
+                    (g[k] - c[k]).abs() <= 2e-4,
+                    "{error_px} px: pixel {i} channel {k}: {} vs {}",
+                    g[k],
+                    c[k]
+                );
+            }
+        }
+        assert!(img.iter().filter(|p| p[3] > 0.5).count() > 200);
+        // The order matters: front to back gives another picture.
+        let mut reversed = sorted.clone();
+        reversed.ranges.reverse();
+        let wrong = renderer()
+            .render_splats(&f, &camera, &reversed, w, h, blend)
+            .unwrap();
+        let differ = wrong
+            .hdr
+            .iter()
+            .zip(&gpu.hdr)
+            .filter(|(a, b)| (0..3).any(|k| (a[k] - b[k]).abs() > 0.02))
+            .count();
+        assert!(
+            differ > 50,
+            "{error_px} px: only {differ} pixels depend on the order"
+        );
+    }
 }

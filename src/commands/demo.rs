@@ -78,6 +78,7 @@ pub fn run(args: Args) -> Result<()> {
         gpu_memory: None,
         background: None,
         mode: super::render::Mode::Spheres,
+        opacity: 0.8,
         exposure: None,
         save_view: None,
     })?;

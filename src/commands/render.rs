@@ -53,10 +53,14 @@ pub struct Args {
     /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G).
     #[arg(long, value_parser = parse_bytes)]
     pub gpu_memory: Option<u64>,
-    /// How to draw the points: opaque ray-cast spheres, or additive flux-preserving
-    /// splats (SPH, astrophysics), tone mapped.
+    /// How to draw the points: opaque ray-cast spheres; additive flux-preserving splats
+    /// (SPH, astrophysics), tone mapped; or translucent splats sorted back to front and
+    /// over-blended, for data that needs depth order.
     #[arg(long, value_enum, default_value = "spheres")]
     pub mode: Mode,
+    /// splat-over mode: the splats' peak opacity, in (0, 1].
+    #[arg(long, default_value_t = 0.8)]
+    pub opacity: f32,
     /// Splat mode: light added per unit of flux (default: chosen from the image).
     #[arg(long)]
     pub exposure: Option<f32>,
@@ -73,6 +77,7 @@ pub struct Args {
 pub enum Mode {
     Spheres,
     Splat,
+    SplatOver,
 }
 
 /// Parses `512M`, `2G`, `1048576`, `64KiB`.
@@ -119,11 +124,14 @@ pub fn run(args: Args) -> Result<()> {
         budget: args.budget,
         background: parse_colour(args.background.as_deref().unwrap_or(match args.mode {
             Mode::Spheres => "#ffffff",
-            Mode::Splat => "#000000",
+            Mode::Splat | Mode::SplatOver => "#000000",
         }))?,
         mode: match args.mode {
             Mode::Spheres => RenderMode::Spheres,
             Mode::Splat => RenderMode::Splat,
+            Mode::SplatOver => RenderMode::SplatOver {
+                opacity: args.opacity,
+            },
         },
         exposure: args.exposure,
         gpu_memory: args.gpu_memory,

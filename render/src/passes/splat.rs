@@ -59,9 +59,23 @@ pub fn splat_weight(dx: f32, dy: f32, cx: f32, cy: f32, sigma: f32) -> f32 {
         / (axis_sum(cx, sigma) * axis_sum(cy, sigma))
 }
 
-/// The splat pipeline.
+/// The alpha a translucent splat (over-blending) gives a pixel centre at offset
+/// `(dx, dy)`: `opacity · exp(−d²/2σ²)`, attenuated by the squared diameter below one
+/// pixel (Eq. 3); 0 outside the truncation square.
+pub fn over_alpha(dx: f32, dy: f32, r_px: f32, opacity: f32) -> f32 {
+    let sigma = splat_sigma(r_px);
+    let limit = TRUNCATION * sigma;
+    if dx.abs() > limit || dy.abs() > limit {
+        return 0.0;
+    }
+    let diameter = 2.0 * r_px;
+    opacity * (diameter * diameter).min(1.0) * (-(dx * dx + dy * dy) / (2.0 * sigma * sigma)).exp()
+}
+
+/// The splat pipelines: additive (flux) and over (sorted, translucent).
 pub struct SplatPass {
     pub pipeline: wgpu::RenderPipeline,
+    pub over: wgpu::RenderPipeline,
 }
 
 impl SplatPass {
@@ -88,38 +102,47 @@ impl SplatPass {
             dst_factor: wgpu::BlendFactor::One,
             operation: wgpu::BlendOperation::Add,
         };
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("splat"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: HDR_FORMAT,
-                    blend: Some(wgpu::BlendState {
-                        color: add,
-                        alpha: add,
-                    }),
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleStrip,
-                ..Default::default()
-            },
-            depth_stencil: None,
-            multisample: Default::default(),
-            multiview_mask: None,
-            cache: None,
-        });
-        Some(SplatPass { pipeline })
+        let over = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let make = |entry: &str, blend: wgpu::BlendComponent| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: HDR_FORMAT,
+                        blend: Some(wgpu::BlendState {
+                            color: blend,
+                            alpha: blend,
+                        }),
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleStrip,
+                    ..Default::default()
+                },
+                depth_stencil: None,
+                multisample: Default::default(),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let pipeline = make("fs_main", add);
+        let over = make("fs_over", over);
+        Some(SplatPass { pipeline, over })
     }
 }
 

@@ -11,8 +11,13 @@
 // the sum of the points' fluxes. Blending is additive into a 32-bit float target; tone
 // mapping happens on the host.
 //
+// Sorted over-blending (`fs_over`, Hopf et al. section 6) draws the same footprints as
+// translucent discs composited back to front with the over operator (the host orders the
+// points): alpha = opacity * exp(-d^2 / 2 sigma^2), attenuated by the square of the
+// diameter in pixels below one pixel (Eq. 3), colour premultiplied.
+//
 // Follows points.wgsl. Frame.material here: x, y = image width and height in pixels,
-// z = intensity scale.
+// z = intensity scale, w = opacity (over-blending).
 
 const TRUNCATION: f32 = 3.5;
 const MIN_SIGMA_PX: f32 = 0.7;
@@ -48,6 +53,8 @@ struct VsOut {
     // Flux per channel (rgb) and in total (a), already divided by the kernel's
     // normalisation.
     @location(2) @interpolate(flat) energy: vec4<f32>,
+    // Over-blending: albedo and peak alpha.
+    @location(3) @interpolate(flat) albedo_alpha: vec4<f32>,
 };
 
 @vertex
@@ -58,6 +65,7 @@ fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> 
     out.center_px = vec2<f32>(0.0);
     out.sigma = 1.0;
     out.energy = vec4<f32>(0.0);
+    out.albedo_alpha = vec4<f32>(0.0);
     // Behind the eye or in front of the near plane: not drawn.
     if clip.w <= 0.0 || clip.z < 0.0 {
         out.clip = vec4<f32>(0.0, 0.0, -1.0, 1.0);
@@ -74,6 +82,8 @@ fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> 
     out.center_px = vec2<f32>((ndc.x + 1.0) * 0.5 * size.x, (1.0 - ndc.y) * 0.5 * size.y);
     let norm = 1.0 / (axis_sum(out.center_px.x, sigma) * axis_sum(out.center_px.y, sigma));
     out.energy = vec4<f32>(pt.albedo * flux, flux) * norm;
+    let diameter = 2.0 * r_px;
+    out.albedo_alpha = vec4<f32>(pt.albedo, frame.material.w * min(diameter * diameter, 1.0));
     out.sigma = sigma;
     let corner = vec2<f32>(f32(vi & 1u), f32((vi >> 1u) & 1u)) * 2.0 - 1.0;
     // One pixel wider than the truncation square, which the fragment stage enforces
@@ -92,4 +102,15 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
         discard;
     }
     return in.energy * exp(-dot(d, d) / (2.0 * s2));
+}
+
+@fragment
+fn fs_over(in: VsOut) -> @location(0) vec4<f32> {
+    let d = in.clip.xy - in.center_px;
+    let limit = TRUNCATION * in.sigma;
+    if abs(d.x) > limit || abs(d.y) > limit {
+        discard;
+    }
+    let a = in.albedo_alpha.w * exp(-dot(d, d) / (2.0 * in.sigma * in.sigma));
+    return vec4<f32>(in.albedo_alpha.xyz * a, a);
 }
