@@ -109,6 +109,9 @@ pub struct RenderOptions {
     /// Splat mode: tone-mapping exposure (light added per unit of flux); `None` picks one
     /// from the image.
     pub exposure: Option<f32>,
+    /// Splat mode: each point's intensity is its scalar attribute (mapped from the
+    /// attribute's range to [0, 1], grey) instead of its species colour.
+    pub splat_by_attribute: bool,
 }
 
 /// How points are drawn.
@@ -141,6 +144,7 @@ impl Default for RenderOptions {
             occlusion: true,
             mode: RenderMode::Spheres,
             exposure: None,
+            splat_by_attribute: false,
         }
     }
 }
@@ -371,7 +375,10 @@ pub fn render_image(
                     &draw,
                     opts.width,
                     opts.height,
-                    SplatBlend::Additive { intensity: 1.0 },
+                    SplatBlend::Additive {
+                        intensity: 1.0,
+                        by_attribute: opts.splat_by_attribute,
+                    },
                 )?;
                 let (image, exposure) = splats.tone_map(opts.exposure, opts.background);
                 (splats, image, Some(exposure))

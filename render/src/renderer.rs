@@ -18,6 +18,7 @@ use crate::context::GpuContext;
 use crate::error::RenderError;
 use crate::image::RgbaImage;
 use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
+use crate::passes::sphere_raycast::PackStyle;
 use crate::passes::sphere_raycast::{
     pack, FrameUniforms, Lighting, PackedDraw, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT,
     DEPTH_FORMAT,
@@ -76,8 +77,9 @@ pub struct RenderedFrame {
 /// How splats combine.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SplatBlend {
-    /// Added up: flux-preserving (`intensity` scales every point's flux).
-    Additive { intensity: f32 },
+    /// Added up: flux-preserving (`intensity` scales every point's flux); coloured by
+    /// species, or grey by the scalar attribute (mapped from its range to [0, 1]).
+    Additive { intensity: f32, by_attribute: bool },
     /// Translucent discs of peak alpha `opacity`, composited with the over operator in
     /// the order of the draw list (sort it back to front first).
     Over { opacity: f32 },
@@ -612,8 +614,13 @@ impl Renderer {
             height,
             ..Default::default()
         })?;
-        let packed =
-            crate::passes::sphere_raycast::pack_with(file, draw, |n| n.area_sum.max(0.0).sqrt())?;
+        let style = match blend {
+            SplatBlend::Additive {
+                by_attribute: true, ..
+            } => PackStyle::FluxAttribute,
+            _ => PackStyle::FluxColour,
+        };
+        let packed = crate::passes::sphere_raycast::pack_with(file, draw, style)?;
         let limits = self.ctx.device.limits();
         if packed.largest_buffer_bytes() > limits.max_storage_buffer_binding_size {
             return Err(RenderError::InvalidOptions(format!(
@@ -634,7 +641,7 @@ impl Renderer {
                 packed.species.len() as u32,
             );
             let (pipeline, intensity, opacity) = match blend {
-                SplatBlend::Additive { intensity } => (&splat.pipeline, intensity, 0.0),
+                SplatBlend::Additive { intensity, .. } => (&splat.pipeline, intensity, 0.0),
                 SplatBlend::Over { opacity } => (&splat.over, 1.0, opacity),
             };
             uniforms.material = [width as f32, height as f32, intensity, opacity];

@@ -779,7 +779,10 @@ fn splats_match_the_cpu_reference_and_keep_the_flux_at_every_level() {
                     &draw,
                     w,
                     h,
-                    mdlod_render::SplatBlend::Additive { intensity: 1.0 },
+                    mdlod_render::SplatBlend::Additive {
+                        intensity: 1.0,
+                        by_attribute: false,
+                    },
                 )
                 .unwrap();
             let cpu = splat_reference(&f, &camera, &draw, w, h);
@@ -952,4 +955,77 @@ fn sorted_over_blending_matches_a_cpu_compositor() {
             "{error_px} px: only {differ} pixels depend on the order"
         );
     }
+}
+
+#[test]
+fn splats_by_attribute_keep_the_attribute_flux_at_every_level() {
+    let mut frame = cloud_frame(3000, 11);
+    let values: Vec<f32> = frame.positions.iter().map(|p| 0.1 * p[0] - 2.0).collect();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "e".into(),
+        values,
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let (w, h) = (96u32, 72u32);
+    let camera = camera_for(
+        &f,
+        &ViewSpec::Orbit {
+            azimuth_deg: 20.0,
+            elevation_deg: 10.0,
+            zoom: 0.8,
+            projection: Projection::Orthographic,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    // Expected: every particle's disk area on screen times its attribute mapped to [0, 1].
+    let ppw = camera.clip_from_view(w as f32 / h as f32).y_axis.y * 0.5 * h as f32;
+    let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
+    let expected: f64 = f
+        .attribute()
+        .unwrap()
+        .iter()
+        .zip(f.species())
+        .map(|(&q, &s)| {
+            let r = f64::from(radii[usize::from(s)] * ppw);
+            std::f64::consts::PI * r * r * f64::from(q) / 65535.0
+        })
+        .sum();
+    let blend = mdlod_render::SplatBlend::Additive {
+        intensity: 1.0,
+        by_attribute: true,
+    };
+    for error_px in [0.0, 6.0, 24.0] {
+        let draw = traverse(
+            &camera,
+            &f,
+            &TraversalSettings {
+                viewport: [w, h],
+                error_px,
+                budget_points: u64::MAX,
+                occlusion: OcclusionMode::Off,
+            },
+        );
+        let s = renderer()
+            .render_splats(&f, &camera, &draw, w, h, blend)
+            .unwrap();
+        let total = s.total_flux();
+        // Grey: the three channels carry the same light.
+        assert!((total[0] - total[2]).abs() <= 1e-6 * total[0]);
+        let rel = (total[0] - expected).abs() / expected;
+        assert!(
+            rel < 1e-3,
+            "{error_px} px ({} points): attribute flux off by {rel:.2e}",
+            draw.points
+        );
+    }
+    // Without an attribute there is nothing to take intensities from.
+    let (_d2, _p2, plain) = make_file(&cloud_frame(300, 1), small_build(), &[]);
+    let draw = traverse(&camera, &plain, &TraversalSettings::default());
+    let e = renderer()
+        .render_splats(&plain, &camera, &draw, w, h, blend)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no per-particle attribute"), "{e}");
 }

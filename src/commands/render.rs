@@ -61,6 +61,10 @@ pub struct Args {
     /// splat-over mode: the splats' peak opacity, in (0, 1].
     #[arg(long, default_value_t = 0.8)]
     pub opacity: f32,
+    /// Splat mode: each point's light is its species colour, or its scalar attribute
+    /// (the file's per-particle column, mapped from its range to [0, 1]).
+    #[arg(long, value_enum, default_value = "species")]
+    pub intensity: Intensity,
     /// Splat mode: light added per unit of flux (default: chosen from the image).
     #[arg(long)]
     pub exposure: Option<f32>,
@@ -78,6 +82,12 @@ pub enum Mode {
     Spheres,
     Splat,
     SplatOver,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Intensity {
+    Species,
+    Attribute,
 }
 
 /// Parses `512M`, `2G`, `1048576`, `64KiB`.
@@ -134,6 +144,7 @@ pub fn run(args: Args) -> Result<()> {
             },
         },
         exposure: args.exposure,
+        splat_by_attribute: matches!(args.intensity, Intensity::Attribute),
         gpu_memory: args.gpu_memory,
         occlusion: !args.no_occlusion,
         ..Default::default()

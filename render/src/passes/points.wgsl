@@ -30,6 +30,7 @@ struct Range {
 };
 
 const KIND_PARTICLE: u32 = 0u;
+const KIND_INTENSITY: u32 = 2u;
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> positions: array<u32>;
@@ -86,6 +87,9 @@ fn load_point(ii: u32) -> Point {
         let sp = species[s];
         p.radius = sp.w;
         p.albedo = sp.xyz;
+    } else if r.kind == KIND_INTENSITY {
+        p.radius = bitcast<f32>(attrs[r.attr_offset + 2u * j]);
+        p.albedo = vec3<f32>(bitcast<f32>(attrs[r.attr_offset + 2u * j + 1u]));
     } else {
         p.radius = bitcast<f32>(attrs[r.attr_offset + 2u * j]);
         p.albedo = unpack4x8unorm(attrs[r.attr_offset + 2u * j + 1u]).xyz;

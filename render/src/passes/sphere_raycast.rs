@@ -85,6 +85,8 @@ pub struct RangeGpu {
 
 pub const KIND_PARTICLE: u32 = 0;
 pub const KIND_NODE: u32 = 1;
+/// Per point a radius and a grey intensity, both f32 (splats by attribute).
+pub const KIND_INTENSITY: u32 = 2;
 
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 192);
 const _: () = assert!(std::mem::size_of::<RangeGpu>() == 48);
@@ -233,16 +235,45 @@ pub fn push_bytes_as_words(out: &mut Vec<u32>, bytes: &[u8]) {
 /// Flattens `draw` for the GPU. Species indices are checked here (opening a file does not
 /// read them), so a corrupt index is an error naming the particle, not a wrong colour.
 pub fn pack(file: &MdlodFile, draw: &DrawList) -> Result<PackedDraw, RenderError> {
-    pack_with(file, draw, representative_radius)
+    pack_with(file, draw, PackStyle::Spheres)
 }
 
-/// [`pack`] with representatives drawn at `radius(node)` (e.g. `sqrt(area_sum)` for
-/// flux-preserving splats).
+/// What the per-point attributes of a packed cut carry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PackStyle {
+    /// Spheres: representatives at their coverage radius with their colour.
+    Spheres,
+    /// Flux-preserving splats coloured by species: representatives at `sqrt(area_sum)`.
+    FluxColour,
+    /// Flux-preserving splats whose intensity is the scalar attribute, mapped linearly
+    /// from its range to [0, 1] (an affine map keeps the area-weighted means of the
+    /// representatives exact): every point is a [`KIND_INTENSITY`] record.
+    FluxAttribute,
+}
+
+/// [`pack`] in a given style.
 pub fn pack_with(
     file: &MdlodFile,
     draw: &DrawList,
-    radius: fn(&mdlod_format::NodeRecord) -> f32,
+    style: PackStyle,
 ) -> Result<PackedDraw, RenderError> {
+    let radius: fn(&mdlod_format::NodeRecord) -> f32 = match style {
+        PackStyle::Spheres => representative_radius,
+        _ => |n| n.area_sum.max(0.0).sqrt(),
+    };
+    let attribute = match style {
+        PackStyle::FluxAttribute => {
+            let info = file.metadata().attribute.clone().ok_or_else(|| {
+                RenderError::InvalidOptions(format!(
+                    "{} has no per-particle attribute to take intensities from",
+                    file.path().display()
+                ))
+            })?;
+            let values = file.attribute().unwrap_or_default();
+            Some((info, values))
+        }
+        _ => None,
+    };
     let bits = file.position_bits();
     let bytes_per_point = 3 * (bits as usize / 8);
     let last = file.level_count() - 1;
@@ -276,7 +307,41 @@ pub fn pack_with(
             push_bytes_as_words(&mut out.positions, bytes);
             (enc.centroid, enc.quant_scale)
         };
-        let kind = if level == last {
+        let kind = if let Some((info, values)) = &attribute {
+            let span = info.max - info.min;
+            let sp = &file.species()[first.min(file.species().len())..];
+            for k in 0..count {
+                let (r, intensity) = if level == last {
+                    let s = sp.get(k).copied().unwrap_or(0);
+                    let r = meta
+                        .species
+                        .get(usize::from(s))
+                        .map(|s| s.radius)
+                        .ok_or_else(|| {
+                            RenderError::Format(FormatError::Corrupt {
+                                path: file.path().to_path_buf(),
+                                place: format!("SPECIES, particle {}", first + k),
+                                problem: format!(
+                                    "species index {s} but only {species_count} species"
+                                ),
+                            })
+                        })?;
+                    let q = values.get(first + k).copied().unwrap_or(0);
+                    (r, f32::from(q) / 65535.0)
+                } else {
+                    let n = &nodes[levels[level].node_first as usize + first + k];
+                    let i = if span > 0.0 {
+                        ((n.attribute - info.min) / span).clamp(0.0, 1.0)
+                    } else {
+                        1.0
+                    };
+                    (radius(n), i)
+                };
+                out.attrs.push(r.to_bits());
+                out.attrs.push(intensity.to_bits());
+            }
+            KIND_INTENSITY
+        } else if level == last {
             let sp = &file.species()[first..first + count];
             if let Some(k) = sp.iter().position(|&s| usize::from(s) >= species_count) {
                 return Err(RenderError::Format(FormatError::Corrupt {
