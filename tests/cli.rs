@@ -543,3 +543,66 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
     let err = fails(&["batch", s(&input), "-o", s(&out), "--shard", "3/3"]);
     assert!(err.contains("index must be below the count"), "{err}");
 }
+
+/// Runs mdlod under a file-size limit (`ulimit -f`, with SIGXFSZ ignored, so writes past
+/// it fail with EFBIG exactly as they would on a full disk with ENOSPC).
+#[cfg(unix)]
+fn mdlod_limited(blocks: u32, args: &[&str]) -> Output {
+    let quoted: Vec<String> = args.iter().map(|a| format!("'{a}'")).collect();
+    Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -f {blocks}; trap '' XFSZ; exec '{}' {}",
+            env!("CARGO_BIN_EXE_mdlod"),
+            quoted.join(" ")
+        ))
+        .output()
+        .unwrap()
+}
+
+#[cfg(unix)]
+#[test]
+fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.lammpstrj");
+    ok(&[
+        "generate",
+        "alloy",
+        "-n",
+        "40000",
+        "--frames",
+        "2",
+        "-o",
+        s(&input),
+    ]);
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let out = out_dir.join("frame.mdlod");
+    let run = mdlod_limited(100, &["convert", s(&input), "-o", s(&out)]);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        err.contains(&format!("{}: File too large", out.display())),
+        "{err}"
+    );
+    let batch_dir = dir.path().join("batch");
+    let run = mdlod_limited(100, &["batch", s(&input), "-o", s(&batch_dir)]);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        err.contains(".mdlod: File too large") && err.contains("frame-"),
+        "{err}"
+    );
+    // Nothing partial, visible or hidden; the manifest lists no frame.
+    for d in [&out_dir, &batch_dir] {
+        let names: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n != "dataset.json")
+            .collect();
+        assert!(names.is_empty(), "left behind: {names:?}");
+    }
+    let m = mdlod_preprocess::batch::read_manifest(&batch_dir).unwrap();
+    assert!(m.frames.is_empty());
+}

@@ -46,10 +46,10 @@ impl Writer {
             .suffix(".tmp")
             .tempfile_in(dir)
             .map_err(|e| FormatError::io(dir, e))?;
-        let file = tmp.reopen().map_err(|e| FormatError::io(tmp.path(), e))?;
+        let file = tmp.reopen().map_err(|e| FormatError::io(path, e))?;
         let mut out = BufWriter::with_capacity(1 << 20, file);
         out.write_all(&[0u8; HEADER_SIZE])
-            .map_err(|e| FormatError::io(tmp.path(), e))?;
+            .map_err(|e| FormatError::io(path, e))?;
         Ok(Writer {
             path: path.into(),
             tmp: Some(tmp),
@@ -60,11 +60,10 @@ impl Writer {
         })
     }
 
+    /// The path errors name: the file being written (not its temporary stand-in, which
+    /// is removed when writing fails), so a full disk reads `out.mdlod: No space left`.
     fn tmp_path(&self) -> PathBuf {
-        self.tmp
-            .as_ref()
-            .map(|t| t.path().to_path_buf())
-            .unwrap_or_else(|| self.path.clone())
+        self.path.clone()
     }
 
     fn pad_to_alignment(&mut self) -> Result<(), FormatError> {
