@@ -31,6 +31,7 @@ pub mod image;
 pub mod occlusion;
 pub mod passes;
 pub mod renderer;
+pub mod sndf;
 pub mod streaming;
 pub mod traversal;
 pub mod view;
@@ -126,6 +127,9 @@ pub enum RenderMode {
     /// Translucent splats sorted back to front and composited with the over operator,
     /// for data that needs depth order; `opacity` is the splats' peak alpha.
     SplatOver { opacity: f32 },
+    /// S-NDFs sampled with `iterations` jittered rays per pixel into `bins × bins`
+    /// projected-normal bins, then shaded from the S-NDFs alone (see [`sndf`]).
+    Sndf { iterations: u32, bins: u32 },
 }
 
 impl Default for RenderOptions {
@@ -280,9 +284,14 @@ fn frame_setup(
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,
         budget_points: opts.budget.min(renderer.max_points()).max(1),
-        occlusion: if !opts.occlusion || opts.mode != RenderMode::Spheres {
-            // Additive splats hide nothing.
+        occlusion: if !opts.occlusion
+            || matches!(opts.mode, RenderMode::Splat | RenderMode::SplatOver { .. })
+        {
+            // Splats hide nothing.
             OcclusionMode::Off
+        } else if matches!(opts.mode, RenderMode::Sndf { .. }) {
+            // Jittered sampling: only whole covered pixels occlude.
+            OcclusionMode::WholePixels
         } else if opts.spp <= 1 {
             OcclusionMode::PixelCentres
         } else {
@@ -348,6 +357,34 @@ pub fn render_image(
     let (camera, traversal, settings) = frame_setup(renderer, file, opts)?;
     let draw = traverse(&camera, file, &traversal);
     let traversal_time = t0.elapsed();
+    if let RenderMode::Sndf { iterations, bins } = opts.mode {
+        let sndf = renderer.sample_sndf(
+            file,
+            &camera,
+            &draw,
+            &sndf::SndfSettings {
+                width: opts.width,
+                height: opts.height,
+                iterations,
+                bins,
+            },
+        )?;
+        let sampled = t0.elapsed();
+        let image = sndf.shade(&opts.lighting, opts.background);
+        let frame = RenderedFrame {
+            image,
+            depth: None,
+            gpu_time: None,
+            points: draw.points as u32,
+            gpu_data_bytes: sndf.hist.len() as u64 * 16,
+            gpu_target_bytes: u64::from(opts.width) * u64::from(opts.height) * 20,
+        };
+        let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
+        report.traversal_time = traversal_time;
+        report.spp = iterations;
+        report.total_time = sampled;
+        return Ok((frame.image, report));
+    }
     if opts.mode != RenderMode::Spheres {
         let (splats, image, exposure) = match opts.mode {
             RenderMode::SplatOver { opacity } => {

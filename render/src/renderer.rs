@@ -18,12 +18,13 @@ use crate::context::GpuContext;
 use crate::error::RenderError;
 use crate::image::RgbaImage;
 use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
-use crate::passes::sphere_raycast::PackStyle;
 use crate::passes::sphere_raycast::{
     pack, FrameUniforms, Lighting, PackedDraw, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT,
     DEPTH_FORMAT,
 };
+use crate::passes::sphere_raycast::{PackStyle, GBUFFER_FORMAT};
 use crate::passes::splat::{SplatPass, HDR_FORMAT};
+use crate::sndf::{AccumulateParams, Sndf, SndfPass, SndfSettings};
 use crate::traversal::DrawList;
 
 /// Most samples per pixel accepted.
@@ -204,6 +205,10 @@ pub struct Renderer {
     sphere: SphereRaycastPass,
     accumulate: AccumulatePass,
     splat: Option<SplatPass>,
+    sndf: SndfPass,
+    /// Particle samples drawn so far (points × samples), so that tests can check that
+    /// re-lighting S-NDFs draws none.
+    points_sampled: std::sync::atomic::AtomicU64,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -274,11 +279,14 @@ impl Renderer {
         let sphere = SphereRaycastPass::new(&ctx.device);
         let accumulate = AccumulatePass::new(&ctx.device);
         let splat = SplatPass::new(&ctx.device, &sphere.layout);
+        let sndf = SndfPass::new(&ctx.device);
         Renderer {
             ctx,
             sphere,
             accumulate,
             splat,
+            sndf,
+            points_sampled: Default::default(),
         }
     }
 
@@ -582,6 +590,7 @@ impl Renderer {
         // sample (RGBA8) + depth (f32) + accumulation (RGBA16F) + output (RGBA8) + readback.
         let gpu_target_bytes =
             u64::from(w) * u64::from(h) * (4 + 4 + 8 + 4) + u64::from(colour_row) * u64::from(h);
+        self.count_samples(buffers.points, settings.spp);
         Ok(RenderedFrame {
             image,
             depth,
@@ -589,6 +598,204 @@ impl Renderer {
             points: buffers.points,
             gpu_data_bytes: 0,
             gpu_target_bytes,
+        })
+    }
+
+    /// Particle samples drawn so far by this renderer (points × samples per pixel).
+    pub fn points_sampled(&self) -> u64 {
+        self.points_sampled
+            .load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    fn count_samples(&self, points: u32, samples: u32) {
+        self.points_sampled.fetch_add(
+            u64::from(points) * u64::from(samples),
+            std::sync::atomic::Ordering::Relaxed,
+        );
+    }
+
+    /// Samples the S-NDFs of `draw` seen by `camera`: `iterations` jittered rays per
+    /// texel, `bins × bins` projected-normal bins (see [`crate::sndf`]).
+    pub fn sample_sndf(
+        &self,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        settings: &SndfSettings,
+    ) -> Result<Sndf, RenderError> {
+        let SndfSettings {
+            width,
+            height,
+            iterations,
+            bins,
+        } = *settings;
+        self.check(&FrameSettings {
+            width,
+            height,
+            spp: iterations.clamp(1, MAX_SPP),
+            ..Default::default()
+        })?;
+        if iterations == 0 || !(1..=32).contains(&bins) {
+            return Err(RenderError::InvalidOptions(format!(
+                "{iterations} iterations and {bins} bins (need at least 1 iteration and 1 to 32 bins)"
+            )));
+        }
+        let hist_bytes = u64::from(width) * u64::from(height) * u64::from(bins * bins) * 16;
+        let limits = self.ctx.device.limits();
+        if hist_bytes
+            > limits
+                .max_storage_buffer_binding_size
+                .min(limits.max_buffer_size)
+        {
+            return Err(RenderError::InvalidOptions(format!(
+                "S-NDFs of {width}x{height} texels with {bins}x{bins} bins need {hist_bytes} bytes, \
+                 more than one buffer of this adapter holds ({} bytes): use a smaller image or fewer bins",
+                limits.max_storage_buffer_binding_size
+            )));
+        }
+        let packed = pack(file, draw)?;
+        self.ctx.scoped(|| {
+            let device = &self.ctx.device;
+            let queue = &self.ctx.queue;
+            let buffers = self.sphere.upload(device, &packed);
+            let size = wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            };
+            let texture = |label: &str, format| {
+                device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                        | wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                })
+            };
+            let normals = texture("sndf normals", GBUFFER_FORMAT);
+            let albedos = texture("sndf albedos", GBUFFER_FORMAT);
+            let depth = texture("sndf depth", DEPTH_FORMAT);
+            let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+            let (normals_v, albedos_v, depth_v) = (view(&normals), view(&albedos), view(&depth));
+            let hist = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("sndf histograms"),
+                size: hist_bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            use wgpu::util::DeviceExt;
+            let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("sndf params"),
+                contents: bytemuck::bytes_of(&AccumulateParams {
+                    width,
+                    height,
+                    bins,
+                    pad: 0,
+                }),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("sndf accumulate"),
+                layout: &self.sndf.layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: params.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&normals_v),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::TextureView(&albedos_v),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: hist.as_entire_binding(),
+                    },
+                ],
+            });
+            let clear = |v| wgpu::RenderPassColorAttachment {
+                view: v,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            };
+            for s in 0..iterations {
+                let uniforms = FrameUniforms::new(
+                    camera.jittered_clip_from_view([width, height], jitter(s, iterations)),
+                    camera.view_from_world(),
+                    camera.projection == Projection::Orthographic,
+                    &Lighting::default(),
+                    packed.position_bits,
+                    packed.species.len() as u32,
+                );
+                queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+                let mut enc = device.create_command_encoder(&Default::default());
+                {
+                    let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                        label: Some("sndf sample"),
+                        color_attachments: &[Some(clear(&normals_v)), Some(clear(&albedos_v))],
+                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                            view: &depth_v,
+                            depth_ops: Some(wgpu::Operations {
+                                load: wgpu::LoadOp::Clear(1.0),
+                                store: wgpu::StoreOp::Store,
+                            }),
+                            stencil_ops: None,
+                        }),
+                        timestamp_writes: None,
+                        occlusion_query_set: None,
+                        multiview_mask: None,
+                    });
+                    if buffers.points > 0 {
+                        pass.set_pipeline(&self.sphere.gbuffer);
+                        pass.set_bind_group(0, &buffers.bind_group, &[]);
+                        pass.draw(0..4, 0..buffers.points);
+                    }
+                }
+                {
+                    let mut pass = enc.begin_compute_pass(&Default::default());
+                    pass.set_pipeline(&self.sndf.pipeline);
+                    pass.set_bind_group(0, &bind, &[]);
+                    pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+                }
+                queue.submit([enc.finish()]);
+            }
+            self.count_samples(buffers.points, iterations);
+            let read = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("sndf readback"),
+                size: hist_bytes,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut enc = device.create_command_encoder(&Default::default());
+            enc.copy_buffer_to_buffer(&hist, 0, &read, 0, hist_bytes);
+            queue.submit([enc.finish()]);
+            let bytes = self.read_buffer(&read)?;
+            let hist: Vec<[f32; 4]> = bytes
+                .chunks_exact(16)
+                .map(|c| {
+                    [0, 1, 2, 3].map(|k| {
+                        f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]])
+                    })
+                })
+                .collect();
+            Ok(Sndf {
+                width,
+                height,
+                bins,
+                rays: iterations,
+                hist,
+            })
         })
     }
 
@@ -717,6 +924,7 @@ impl Renderer {
                 }));
             }
             let gpu_time = self.gpu_time(timing.as_ref())?;
+            self.count_samples(buffers.points, 1);
             Ok(SplatFrame {
                 width,
                 height,

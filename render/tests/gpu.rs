@@ -1029,3 +1029,145 @@ fn splats_by_attribute_keep_the_attribute_flux_at_every_level() {
         .to_string();
     assert!(e.contains("no per-particle attribute"), "{e}");
 }
+
+/// Area of the part of the cell `[x0, x0 + c] × [y0, y0 + c]` inside the unit disk.
+fn cell_in_disk(x0: f64, y0: f64, c: f64) -> f64 {
+    const N: usize = 200;
+    let mut inside = 0;
+    for j in 0..N {
+        for i in 0..N {
+            let x = x0 + c * (i as f64 + 0.5) / N as f64;
+            let y = y0 + c * (j as f64 + 0.5) / N as f64;
+            inside += usize::from(x * x + y * y <= 1.0);
+        }
+    }
+    c * c * inside as f64 / (N * N) as f64
+}
+
+#[test]
+fn a_sphere_seen_orthographically_has_a_uniform_sndf_over_the_normal_disk() {
+    // One sphere of radius 2 filling most of a 64×64 orthographic view: screen position
+    // maps linearly to the projected normal, so the samples of all texels together are
+    // uniform over the disk; each bin gets its share of the disk's area.
+    let (_d, _p, f) = make_file(
+        &spheres_frame(&[[0.0, 0.0, 0.0]]),
+        small_build(),
+        &[("X", 2.0)],
+    );
+    let cam = ortho_camera(Vec3::new(0.0, 0.0, 0.0), 2.5);
+    let draw = traverse(
+        &cam,
+        &f,
+        &TraversalSettings {
+            viewport: [64, 64],
+            error_px: 0.0,
+            budget_points: u64::MAX,
+            occlusion: OcclusionMode::Off,
+        },
+    );
+    let bins = 8u32;
+    let sndf = renderer()
+        .sample_sndf(
+            &f,
+            &cam,
+            &draw,
+            &mdlod_render::sndf::SndfSettings {
+                width: 64,
+                height: 64,
+                iterations: 16,
+                bins,
+            },
+        )
+        .unwrap();
+    let mut counts = vec![0f64; (bins * bins) as usize];
+    for p in sndf.hist.chunks_exact((bins * bins) as usize) {
+        for (c, b) in counts.iter_mut().zip(p) {
+            *c += f64::from(b[3]);
+        }
+    }
+    let total: f64 = counts.iter().sum();
+    // The sphere's disk is π·(2·64/5)² px, sampled 16 times per texel.
+    let expected_total = std::f64::consts::PI * (2.0 * 64.0 / 5.0f64).powi(2) * 16.0;
+    assert!(
+        (total - expected_total).abs() < 0.01 * expected_total,
+        "{total} vs {expected_total}"
+    );
+    let cell = 2.0 / f64::from(bins);
+    for by in 0..bins {
+        for bx in 0..bins {
+            let share = cell_in_disk(
+                -1.0 + cell * f64::from(bx),
+                -1.0 + cell * f64::from(by),
+                cell,
+            ) / std::f64::consts::PI;
+            let got = counts[(by * bins + bx) as usize] / total;
+            // Monte Carlo error of ~10^4 stratified samples, and the disk's rim cells.
+            assert!(
+                (got - share).abs() <= 0.06 * share + 5e-4,
+                "bin ({bx}, {by}): {got:.5} of the samples, {share:.5} of the disk"
+            );
+        }
+    }
+}
+
+#[test]
+fn relighting_sndfs_matches_supersampling_under_the_new_light_and_draws_no_particle() {
+    let (_d, _p, f) = make_file(&fcc_frame(6), small_build(), &[]);
+    let own = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    let (w, h) = (64u32, 48u32);
+    let mut o = opts(w, h);
+    o.spp = 16;
+    o.background = [0.1, 0.1, 0.1];
+    o.view = ViewSpec::Orbit {
+        azimuth_deg: 30.0,
+        elevation_deg: 25.0,
+        zoom: 1.0,
+        projection: Projection::Orthographic,
+    };
+    let camera = camera_for(&f, &o.view, w, h).unwrap();
+    let draw = traverse(
+        &camera,
+        &f,
+        &TraversalSettings {
+            viewport: [w, h],
+            error_px: 0.0,
+            budget_points: u64::MAX,
+            occlusion: OcclusionMode::WholePixels,
+        },
+    );
+    let sndf = own
+        .sample_sndf(
+            &f,
+            &camera,
+            &draw,
+            &mdlod_render::sndf::SndfSettings {
+                width: w,
+                height: h,
+                iterations: 16,
+                bins: 8,
+            },
+        )
+        .unwrap();
+    let sampled = own.points_sampled();
+    assert_eq!(sampled, draw.points * 16);
+    let mut previous: Option<RgbaImage> = None;
+    for direction in [
+        Vec3::new(-0.35, 0.45, 1.0),
+        Vec3::new(0.8, -0.2, 0.4),
+        Vec3::new(0.0, 1.0, 0.2),
+    ] {
+        let light = mdlod_render::Lighting {
+            direction_view: direction.normalize(),
+            ..Default::default()
+        };
+        let relit = sndf.shade(&light, o.background);
+        assert_eq!(own.points_sampled(), sampled, "re-lighting drew particles");
+        o.lighting = light;
+        let (reference, _) = render_image(renderer(), &f, &o).unwrap();
+        let diff = mean_abs_diff(&relit, &reference);
+        assert!(
+            diff < 2.0,
+            "light {direction}: mean difference {diff:.2} of 255"
+        );
+    }
+}

@@ -79,6 +79,8 @@ pub fn run(args: Args) -> Result<()> {
         background: None,
         mode: super::render::Mode::Spheres,
         opacity: 0.8,
+        iterations: 16,
+        bins: 8,
         intensity: super::render::Intensity::Species,
         exposure: None,
         save_view: None,

@@ -54,10 +54,17 @@ pub struct Args {
     #[arg(long, value_parser = parse_bytes)]
     pub gpu_memory: Option<u64>,
     /// How to draw the points: opaque ray-cast spheres; additive flux-preserving splats
-    /// (SPH, astrophysics), tone mapped; or translucent splats sorted back to front and
-    /// over-blended, for data that needs depth order.
+    /// (SPH, astrophysics), tone mapped; translucent splats sorted back to front and
+    /// over-blended, for data that needs depth order; or spheres sampled into S-NDFs and
+    /// shaded from them.
     #[arg(long, value_enum, default_value = "spheres")]
     pub mode: Mode,
+    /// sndf mode: jittered rays per pixel accumulated into the S-NDFs.
+    #[arg(long, default_value_t = 16)]
+    pub iterations: u32,
+    /// sndf mode: bins per axis of the projected normal disk.
+    #[arg(long, default_value_t = 8)]
+    pub bins: u32,
     /// splat-over mode: the splats' peak opacity, in (0, 1].
     #[arg(long, default_value_t = 0.8)]
     pub opacity: f32,
@@ -82,6 +89,7 @@ pub enum Mode {
     Spheres,
     Splat,
     SplatOver,
+    Sndf,
 }
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
@@ -133,7 +141,7 @@ pub fn run(args: Args) -> Result<()> {
         error_px: args.screen_error,
         budget: args.budget,
         background: parse_colour(args.background.as_deref().unwrap_or(match args.mode {
-            Mode::Spheres => "#ffffff",
+            Mode::Spheres | Mode::Sndf => "#ffffff",
             Mode::Splat | Mode::SplatOver => "#000000",
         }))?,
         mode: match args.mode {
@@ -141,6 +149,10 @@ pub fn run(args: Args) -> Result<()> {
             Mode::Splat => RenderMode::Splat,
             Mode::SplatOver => RenderMode::SplatOver {
                 opacity: args.opacity,
+            },
+            Mode::Sndf => RenderMode::Sndf {
+                iterations: args.iterations,
+                bins: args.bins,
             },
         },
         exposure: args.exposure,

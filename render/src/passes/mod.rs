@@ -10,6 +10,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("sphere_raycast.wgsl", sphere_raycast::SHADER),
     ("accumulate.wgsl", accumulate::SHADER),
     ("splat.wgsl", splat::SHADER),
+    ("sndf_accumulate.wgsl", crate::sndf::ACCUMULATE_SHADER),
 ];
 
 #[cfg(test)]

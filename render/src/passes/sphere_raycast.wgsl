@@ -71,8 +71,15 @@ struct FsOut {
     @builtin(frag_depth) depth: f32,
 };
 
-@fragment
-fn fs_main(in: VsOut) -> FsOut {
+// The pixel's ray against the fragment's sphere: the view-space hit, its unit normal and
+// the ray direction, or a discard on a miss.
+struct Hit {
+    point: vec3<f32>,
+    normal: vec3<f32>,
+    dir: vec3<f32>,
+};
+
+fn ray_hit(in: VsOut) -> Hit {
     var dir: vec3<f32>;
     if frame.params.x > 0.5 {
         dir = vec3<f32>(0.0, 0.0, -1.0);
@@ -89,12 +96,26 @@ fn fs_main(in: VsOut) -> FsOut {
         discard;
     }
     let t = -b - sqrt(disc);
-    let hit = in.view_pos + t * dir;
-    let n = (hit - in.center) / in.radius;
-    let clip = frame.clip_from_view * vec4<f32>(hit, 1.0);
+    var h: Hit;
+    h.point = in.view_pos + t * dir;
+    h.normal = (h.point - in.center) / in.radius;
+    h.dir = dir;
+    return h;
+}
 
+// The hit's depth, never nearer than the quad itself (it only differs by rounding): the
+// promise that lets the GPU reject hidden fragments before shading them (EARLY_DEPTH).
+fn hit_depth(in: VsOut, hit: Hit) -> f32 {
+    let clip = frame.clip_from_view * vec4<f32>(hit.point, 1.0);
+    return max(clamp(clip.z / clip.w, 0.0, 1.0), in.clip.z);
+}
+
+@fragment
+fn fs_main(in: VsOut) -> FsOut {
+    let hit = ray_hit(in);
+    let n = hit.normal;
     let l = frame.light_dir_view.xyz;
-    let v = -dir;
+    let v = -hit.dir;
     let ndl = max(dot(n, l), 0.0);
     let h = normalize(l + v);
     let spec = select(0.0, pow(max(dot(n, h), 0.0), frame.material.w), ndl > 0.0);
@@ -103,8 +124,23 @@ fn fs_main(in: VsOut) -> FsOut {
 
     var out: FsOut;
     out.colour = vec4<f32>(colour, 1.0);
-    // Never nearer than the quad itself (it only differs by rounding): the promise that
-    // lets the GPU reject hidden fragments before shading them (see EARLY_DEPTH).
-    out.depth = max(clamp(clip.z / clip.w, 0.0, 1.0), in.clip.z);
+    out.depth = hit_depth(in, hit);
+    return out;
+}
+
+// S-NDF sampling: the nearest hit's view-space normal and the point's albedo, unshaded.
+struct GBufferOut {
+    @location(0) normal: vec4<f32>,
+    @location(1) albedo: vec4<f32>,
+    @builtin(frag_depth) depth: f32,
+};
+
+@fragment
+fn fs_gbuffer(in: VsOut) -> GBufferOut {
+    let hit = ray_hit(in);
+    var out: GBufferOut;
+    out.normal = vec4<f32>(hit.normal, 1.0);
+    out.albedo = vec4<f32>(in.albedo, 1.0);
+    out.depth = hit_depth(in, hit);
     return out;
 }
