@@ -27,6 +27,8 @@ enum Command {
     Info(commands::info::Args),
     Verify(commands::verify::Args),
     Render(commands::render::Args),
+    Sample(commands::sample::Args),
+    Shade(commands::shade::Args),
     Generate(commands::generate::Args),
     Demo(commands::demo::Args),
 }
@@ -39,6 +41,8 @@ fn main() -> std::process::ExitCode {
         Command::Info(a) => commands::info::run(a),
         Command::Verify(a) => commands::verify::run(a),
         Command::Render(a) => commands::render::run(a),
+        Command::Sample(a) => commands::sample::run(a),
+        Command::Shade(a) => commands::shade::run(a),
         Command::Generate(a) => commands::generate::run(a),
         Command::Demo(a) => commands::demo::run(a),
     };

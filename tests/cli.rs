@@ -606,3 +606,76 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
     let m = mdlod_preprocess::batch::read_manifest(&batch_dir).unwrap();
     assert!(m.frames.is_empty());
 }
+
+#[test]
+fn sndfs_sampled_once_shade_without_the_particles() {
+    let dir = tempfile::tempdir().unwrap();
+    let mdlod = dir.path().join("melt.mdlod");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&mdlod),
+    ]);
+    let sndf = dir.path().join("view.sndf");
+    let size = ["--width", "96", "--height", "64"];
+    let sampled = ok(&[
+        &["sample", s(&mdlod), "-o", s(&sndf), "--iterations", "8"][..],
+        &size,
+    ]
+    .concat());
+    assert!(sampled.contains("8 rays each"), "{sampled}");
+    let direct = dir.path().join("direct.png");
+    ok(&[
+        &[
+            "render",
+            s(&mdlod),
+            "-o",
+            s(&direct),
+            "--mode",
+            "sndf",
+            "--iterations",
+            "8",
+        ][..],
+        &size,
+    ]
+    .concat());
+    // Without the particle data: the same picture from the S-NDFs, then re-lit.
+    std::fs::remove_file(&mdlod).unwrap();
+    let shaded = dir.path().join("shaded.png");
+    let out = ok(&["shade", s(&sndf), "-o", s(&shaded)]);
+    assert!(out.contains("no particle data read"), "{out}");
+    assert_eq!(
+        std::fs::read(&shaded).unwrap(),
+        std::fs::read(&direct).unwrap()
+    );
+    let relit = dir.path().join("relit.png");
+    ok(&[
+        "shade",
+        s(&sndf),
+        "-o",
+        s(&relit),
+        "--light",
+        "-1,0.2,0.5:#ff8040",
+        "--light",
+        "1,1,1",
+        "--brdf",
+        "lambert",
+        "--level",
+        "1",
+    ]);
+    let (w, h, px) = read_png(&relit);
+    assert_eq!((w, h), (48, 32));
+    let (_, _, before) = read_png(&shaded);
+    assert_ne!(px.len(), before.len());
+    // A damaged file is refused, naming it.
+    let mut bytes = std::fs::read(&sndf).unwrap();
+    let last = bytes.len() - 3;
+    bytes[last] ^= 0x55;
+    std::fs::write(&sndf, bytes).unwrap();
+    let err = fails(&["shade", s(&sndf), "-o", s(&relit)]);
+    assert!(
+        err.contains("view.sndf") && err.contains("checksum"),
+        "{err}"
+    );
+}

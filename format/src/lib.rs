@@ -22,6 +22,7 @@ pub mod meta;
 pub mod mmap;
 pub mod quantize;
 pub mod reader;
+pub mod sndf;
 pub mod writer;
 
 pub use error::FormatError;

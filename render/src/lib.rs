@@ -502,6 +502,73 @@ pub fn render_to_png(
     Ok(report)
 }
 
+/// Samples the S-NDFs of `file` as `opts` asks (its mode must be [`RenderMode::Sndf`])
+/// and writes them, with the camera, to `out` (a `.sndf` file).
+pub fn sample_to_file(
+    file: &Path,
+    out: &Path,
+    opts: &RenderOptions,
+) -> Result<RenderReport, RenderError> {
+    let RenderMode::Sndf { iterations, bins } = opts.mode else {
+        return Err(RenderError::InvalidOptions(
+            "sampling needs the sndf mode".into(),
+        ));
+    };
+    let t0 = Instant::now();
+    let mdlod = MdlodFile::open(file)?;
+    let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
+    let (camera, traversal, _) = frame_setup(&renderer, &mdlod, opts)?;
+    let draw = traverse(&camera, &mdlod, &traversal);
+    let traversal_time = t0.elapsed();
+    let sndf = renderer.sample_sndf(
+        &mdlod,
+        &camera,
+        &draw,
+        &sndf::SndfSettings {
+            width: opts.width,
+            height: opts.height,
+            iterations,
+            bins,
+        },
+    )?;
+    let view = serde_json::to_value(ViewFile::from_camera(&camera))
+        .map_err(|e| RenderError::InvalidOptions(e.to_string()))?;
+    sndf.to_data(view, Some(file.display().to_string()))
+        .save(out)?;
+    let frame = RenderedFrame {
+        image: RgbaImage::new(1, 1),
+        depth: None,
+        gpu_time: None,
+        points: draw.points as u32,
+        gpu_data_bytes: sndf.hist.len() as u64 * 16,
+        gpu_target_bytes: 0,
+    };
+    let mut report = RenderReport::new(&renderer, opts, camera, &traversal, &draw, &frame);
+    report.spp = iterations;
+    report.traversal_time = traversal_time;
+    report.total_time = t0.elapsed();
+    Ok(report)
+}
+
+/// Shades a `.sndf` file under `lights` to a PNG, `level` S-MIP levels coarser than it
+/// was sampled (each halves the image); reads no particle data. Returns the image size.
+pub fn shade_file(
+    input: &Path,
+    out: &Path,
+    lights: &sndf::ShadeLights,
+    background_srgb: [f32; 3],
+    level: u32,
+) -> Result<(u32, u32), RenderError> {
+    let data = mdlod_format::sndf::SndfData::load(input)?;
+    let mut s = sndf::Sndf::from_data(&data);
+    for _ in 0..level {
+        s = s.downsample();
+    }
+    let image = s.shade_with(lights, background_srgb);
+    image.save_png(out)?;
+    Ok((s.width, s.height))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -22,6 +22,8 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
+use mdlod_format::sndf::{SndfData, SndfHeader};
+
 use crate::image::RgbaImage;
 use crate::passes::sphere_raycast::Lighting;
 use crate::renderer::{linear_to_srgb, srgb_to_linear};
@@ -137,14 +139,47 @@ pub fn bin_of(x: f32, y: f32, bins: u32) -> (u32, u32) {
     (idx(x), idx(y))
 }
 
+/// The lights and material S-NDFs are shaded with: any number of coloured directional
+/// lights (directions towards the light, in view space), ambient light, Lambert and an
+/// optional Blinn-Phong highlight.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShadeLights {
+    pub ambient: f32,
+    /// (direction towards the light, linear RGB colour).
+    pub lights: Vec<(Vec3, [f32; 3])>,
+    pub diffuse: f32,
+    /// 0 for Lambert only.
+    pub specular: f32,
+    pub shininess: f32,
+}
+
+impl From<&Lighting> for ShadeLights {
+    /// The sphere renderer's single white light.
+    fn from(l: &Lighting) -> Self {
+        ShadeLights {
+            ambient: l.ambient,
+            lights: vec![(l.direction_view, [1.0; 3])],
+            diffuse: l.diffuse,
+            specular: l.specular,
+            shininess: l.shininess,
+        }
+    }
+}
+
 /// Per bin (row-major, `by * bins + bx`), the lighting averaged over the bin's part of
-/// the normal disk, as (albedo factor: ambient + diffuse · max(n·l, 0); highlight:
-/// specular · Blinn-Phong), for the view direction +z. Bins outside the disk get the
-/// values at the nearest disk edge.
-pub fn bin_lighting(bins: u32, lighting: &Lighting) -> Vec<(f32, f32)> {
+/// the normal disk, per colour channel, as (albedo factor: ambient + Σ diffuse ·
+/// max(n·l, 0) · colour; highlight: Σ specular · Blinn-Phong · colour), for the view
+/// direction +z. Bins outside the disk get the values at the nearest disk edge.
+pub fn bin_lighting(bins: u32, lights: &ShadeLights) -> Vec<([f32; 3], [f32; 3])> {
     const SUB: u32 = 16;
-    let l = lighting.direction_view.normalize_or(Vec3::Z);
-    let h = (l + Vec3::Z).normalize_or(Vec3::Z);
+    let dirs: Vec<(Vec3, Vec3, [f32; 3])> = lights
+        .lights
+        .iter()
+        .map(|&(d, c)| {
+            let l = d.normalize_or(Vec3::Z);
+            (l, (l + Vec3::Z).normalize_or(Vec3::Z), c)
+        })
+        .collect();
     let shade = |x: f32, y: f32| {
         let r2 = x * x + y * y;
         let (x, y, r2) = if r2 > 1.0 {
@@ -154,31 +189,38 @@ pub fn bin_lighting(bins: u32, lighting: &Lighting) -> Vec<(f32, f32)> {
             (x, y, r2)
         };
         let n = Vec3::new(x, y, (1.0 - r2).max(0.0).sqrt());
-        let ndl = n.dot(l).max(0.0);
-        let spec = if ndl > 0.0 {
-            n.dot(h).max(0.0).powf(lighting.shininess)
-        } else {
-            0.0
-        };
-        (
-            lighting.ambient + lighting.diffuse * ndl,
-            lighting.specular * spec,
-        )
+        let mut a = [lights.ambient; 3];
+        let mut s = [0.0f32; 3];
+        for (l, h, c) in &dirs {
+            let ndl = n.dot(*l).max(0.0);
+            let spec = if ndl > 0.0 && lights.specular > 0.0 {
+                lights.specular * n.dot(*h).max(0.0).powf(lights.shininess)
+            } else {
+                0.0
+            };
+            for k in 0..3 {
+                a[k] += lights.diffuse * ndl * c[k];
+                s[k] += spec * c[k];
+            }
+        }
+        (a, s)
     };
     let cell = 2.0 / bins as f32;
     let mut out = Vec::with_capacity((bins * bins) as usize);
     for by in 0..bins {
         for bx in 0..bins {
-            let (mut a, mut s, mut n) = (0.0, 0.0, 0u32);
-            let mut fallback = (0.0, 0.0);
+            let (mut a, mut s, mut n) = ([0f32; 3], [0f32; 3], 0u32);
+            let mut fallback = ([0f32; 3], [0f32; 3]);
             for j in 0..SUB {
                 for i in 0..SUB {
                     let x = -1.0 + cell * (bx as f32 + (i as f32 + 0.5) / SUB as f32);
                     let y = -1.0 + cell * (by as f32 + (j as f32 + 0.5) / SUB as f32);
                     let v = shade(x, y);
                     if x * x + y * y <= 1.0 {
-                        a += v.0;
-                        s += v.1;
+                        for k in 0..3 {
+                            a[k] += v.0[k];
+                            s[k] += v.1[k];
+                        }
                         n += 1;
                     } else {
                         fallback = v;
@@ -186,7 +228,7 @@ pub fn bin_lighting(bins: u32, lighting: &Lighting) -> Vec<(f32, f32)> {
                 }
             }
             out.push(if n > 0 {
-                (a / n as f32, s / n as f32)
+                (a.map(|v| v / n as f32), s.map(|v| v / n as f32))
             } else {
                 fallback
             });
@@ -203,33 +245,186 @@ impl Sndf {
         &self.hist[i..i + b2]
     }
 
-    /// Shades every texel under `lighting` over `background_srgb`, from the S-NDFs alone.
-    pub fn shade(&self, lighting: &Lighting, background_srgb: [f32; 3]) -> RgbaImage {
-        let table = bin_lighting(self.bins, lighting);
+    /// Shades every texel over `background_srgb`, from the S-NDFs alone: linear RGB per
+    /// texel, rows top to bottom.
+    pub fn shade_linear(&self, lights: &ShadeLights, background_srgb: [f32; 3]) -> Vec<[f32; 3]> {
+        let table = bin_lighting(self.bins, lights);
         let bg = background_srgb.map(srgb_to_linear);
         let rays = self.rays.max(1) as f32;
-        let mut image = RgbaImage::new(self.width, self.height);
-        for y in 0..self.height {
-            for x in 0..self.width {
+        let b2 = (self.bins * self.bins) as usize;
+        self.hist
+            .chunks_exact(b2)
+            .map(|texel| {
                 let mut c = [0f32; 3];
                 let mut hits = 0.0;
-                for (bin, &(a, s)) in self.texel(x, y).iter().zip(&table) {
+                for (bin, (a, s)) in texel.iter().zip(&table) {
                     for k in 0..3 {
-                        c[k] += bin[k] * a + bin[3] * s;
+                        c[k] += bin[k] * a[k] + bin[3] * s[k];
                     }
                     hits += bin[3];
                 }
                 let miss = (1.0 - hits / rays).max(0.0);
-                let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
-                    if k == 3 {
-                        return 255;
-                    }
-                    let v = c[k] / rays + miss * bg[k];
-                    (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
-                });
-                image.set_pixel(x, y, px);
-            }
+                [0, 1, 2].map(|k| c[k] / rays + miss * bg[k])
+            })
+            .collect()
+    }
+
+    /// [`Self::shade_linear`] as an sRGB image.
+    pub fn shade_with(&self, lights: &ShadeLights, background_srgb: [f32; 3]) -> RgbaImage {
+        let mut image = RgbaImage::new(self.width, self.height);
+        for (i, c) in self
+            .shade_linear(lights, background_srgb)
+            .iter()
+            .enumerate()
+        {
+            let px = [c[0], c[1], c[2], 1.0]
+                .map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);
+            image.data[4 * i..4 * i + 4].copy_from_slice(&px);
         }
         image
+    }
+
+    /// Shades under the sphere renderer's lighting.
+    pub fn shade(&self, lighting: &Lighting, background_srgb: [f32; 3]) -> RgbaImage {
+        self.shade_with(&ShadeLights::from(lighting), background_srgb)
+    }
+
+    /// The next coarser S-MIP level: each texel holds the sum of its 2×2 children's bins
+    /// and four times the rays, i.e. their average S-NDF (a missing child at an odd edge
+    /// counts as four rays that hit nothing).
+    pub fn downsample(&self) -> Sndf {
+        let (w, h) = (self.width.div_ceil(2), self.height.div_ceil(2));
+        let b2 = (self.bins * self.bins) as usize;
+        let mut hist = vec![[0f32; 4]; w as usize * h as usize * b2];
+        for y in 0..self.height {
+            for x in 0..self.width {
+                let dst = ((y / 2) * w + x / 2) as usize * b2;
+                for (d, s) in hist[dst..dst + b2].iter_mut().zip(self.texel(x, y)) {
+                    for k in 0..4 {
+                        d[k] += s[k];
+                    }
+                }
+            }
+        }
+        Sndf {
+            width: w,
+            height: h,
+            bins: self.bins,
+            rays: self.rays * 4,
+            hist,
+        }
+    }
+
+    /// The file form, with the camera (a view file's JSON) and the source's name.
+    pub fn to_data(&self, view: serde_json::Value, source: Option<String>) -> SndfData {
+        SndfData {
+            header: SndfHeader {
+                width: self.width,
+                height: self.height,
+                bins: self.bins,
+                binning: "projected-normals".into(),
+                rays: self.rays,
+                view,
+                source,
+            },
+            hist: self.hist.clone(),
+        }
+    }
+
+    /// From the file form.
+    pub fn from_data(d: &SndfData) -> Sndf {
+        Sndf {
+            width: d.header.width,
+            height: d.header.height,
+            bins: d.header.bins,
+            rays: d.header.rays,
+            hist: d.hist.clone(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn random_sndf(w: u32, h: u32, bins: u32, rays: u32) -> Sndf {
+        let mut state = 7u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let hist = (0..w * h * bins * bins)
+            .map(|_| {
+                let n = (next() * 3.0).floor();
+                [n * next(), n * next(), n * next(), n]
+            })
+            .collect();
+        Sndf {
+            width: w,
+            height: h,
+            bins,
+            rays,
+            hist,
+        }
+    }
+
+    #[test]
+    fn downsampling_sums_the_two_by_two_children_exactly() {
+        let s = random_sndf(6, 4, 4, 64);
+        let d = s.downsample();
+        assert_eq!((d.width, d.height, d.rays), (3, 2, 256));
+        for y in 0..2 {
+            for x in 0..3 {
+                for b in 0..16 {
+                    for k in 0..4 {
+                        let sum = s.texel(2 * x, 2 * y)[b][k]
+                            + s.texel(2 * x + 1, 2 * y)[b][k]
+                            + s.texel(2 * x, 2 * y + 1)[b][k]
+                            + s.texel(2 * x + 1, 2 * y + 1)[b][k];
+                        assert_eq!(d.texel(x, y)[b][k], sum);
+                    }
+                }
+            }
+        }
+        // So a coarse texel's linear colour is the average of its children's.
+        let lights = ShadeLights::from(&Lighting::default());
+        let (fine, coarse) = (
+            s.shade_linear(&lights, [0.3; 3]),
+            d.shade_linear(&lights, [0.3; 3]),
+        );
+        for y in 0..2usize {
+            for x in 0..3usize {
+                for k in 0..3 {
+                    let avg = (fine[2 * y * 6 + 2 * x][k]
+                        + fine[2 * y * 6 + 2 * x + 1][k]
+                        + fine[(2 * y + 1) * 6 + 2 * x][k]
+                        + fine[(2 * y + 1) * 6 + 2 * x + 1][k])
+                        / 4.0;
+                    assert!((coarse[y * 3 + x][k] - avg).abs() < 1e-5);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn file_form_round_trips() {
+        let s = random_sndf(5, 3, 8, 4);
+        let s = Sndf {
+            hist: s
+                .hist
+                .iter()
+                .map(|b| [b[0].min(b[3]), b[1].min(b[3]), b[2].min(b[3]), b[3]])
+                .collect(),
+            ..s
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.sndf");
+        s.to_data(serde_json::json!({"zoom": 1.0}), None)
+            .save(&p)
+            .unwrap();
+        let back = Sndf::from_data(&mdlod_format::sndf::SndfData::load(&p).unwrap());
+        assert_eq!(back, s);
     }
 }

@@ -6,4 +6,6 @@ pub mod demo;
 pub mod generate;
 pub mod info;
 pub mod render;
+pub mod sample;
+pub mod shade;
 pub mod verify;

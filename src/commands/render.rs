@@ -18,25 +18,8 @@ pub struct Args {
     /// The PNG to write.
     #[arg(short, long)]
     pub output: PathBuf,
-    #[arg(long, default_value_t = 1280)]
-    pub width: u32,
-    #[arg(long, default_value_t = 720)]
-    pub height: u32,
-    /// A JSON view file (as written by --save-view).
-    #[arg(long, conflicts_with_all = ["azimuth", "elevation", "zoom", "ortho"])]
-    pub view: Option<PathBuf>,
-    /// Orbit angle around the vertical axis, degrees.
-    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
-    pub azimuth: f32,
-    /// Angle above the horizontal, degrees.
-    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
-    pub elevation: f32,
-    /// 1 fits the data; 2 is twice as close.
-    #[arg(long, default_value_t = 1.0)]
-    pub zoom: f32,
-    /// Orthographic instead of perspective projection.
-    #[arg(long)]
-    pub ortho: bool,
+    #[command(flatten)]
+    pub camera: ViewArgs,
     /// Samples per pixel (jittered supersampling).
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
@@ -84,6 +67,48 @@ pub struct Args {
     pub save_view: Option<PathBuf>,
 }
 
+/// The image size and the camera, shared by `render` and `sample`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ViewArgs {
+    #[arg(long, default_value_t = 1280)]
+    pub width: u32,
+    #[arg(long, default_value_t = 720)]
+    pub height: u32,
+    /// A JSON view file (as written by --save-view).
+    #[arg(long, conflicts_with_all = ["azimuth", "elevation", "zoom", "ortho"])]
+    pub view: Option<PathBuf>,
+    /// Orbit angle around the vertical axis, degrees.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    pub azimuth: f32,
+    /// Angle above the horizontal, degrees.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    pub elevation: f32,
+    /// 1 fits the data; 2 is twice as close.
+    #[arg(long, default_value_t = 1.0)]
+    pub zoom: f32,
+    /// Orthographic instead of perspective projection.
+    #[arg(long)]
+    pub ortho: bool,
+}
+
+impl ViewArgs {
+    pub fn spec(&self) -> ViewSpec {
+        match &self.view {
+            Some(p) => ViewSpec::File(p.clone()),
+            None => ViewSpec::Orbit {
+                azimuth_deg: self.azimuth,
+                elevation_deg: self.elevation,
+                zoom: self.zoom,
+                projection: if self.ortho {
+                    Projection::Orthographic
+                } else {
+                    Projection::Perspective
+                },
+            },
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum Mode {
     Spheres,
@@ -120,22 +145,10 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let view = match &args.view {
-        Some(p) => ViewSpec::File(p.clone()),
-        None => ViewSpec::Orbit {
-            azimuth_deg: args.azimuth,
-            elevation_deg: args.elevation,
-            zoom: args.zoom,
-            projection: if args.ortho {
-                Projection::Orthographic
-            } else {
-                Projection::Perspective
-            },
-        },
-    };
+    let view = args.camera.spec();
     let opts = RenderOptions {
-        width: args.width,
-        height: args.height,
+        width: args.camera.width,
+        height: args.camera.height,
         view,
         spp: args.spp,
         error_px: args.screen_error,

@@ -1,0 +1,293 @@
+//! `.sndf` files: sampled screen-space normal distribution functions of one view, so a
+//! picture can be shaded and re-lit later with no particle data at all. FORMAT.md
+//! ("S-NDF files") is the spec; this is its reference implementation.
+//!
+//! Layout (little-endian): the 8-byte magic `\x89MDSNDF\n`, u16 major and minor version,
+//! u32 JSON header length `J`, u64 XXH3-64 of the data, `J` bytes of JSON header
+//! ([`SndfHeader`]), zero padding to a multiple of 16, then `width · height · bins²`
+//! records of four f32 (albedo sum r, g, b and sample count), texel-major, rows top to
+//! bottom, bins row-major (`by · bins + bx`).
+//!
+//! A reader checks, before it trusts anything: the magic and version, the JSON header
+//! against size caps, every size with checked arithmetic against the file length, the
+//! checksum, and every value (finite, non-negative, a bin's count at most the rays and
+//! its colour sum at most its count per channel).
+
+use std::io::Write;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use xxhash_rust::xxh3::xxh3_64;
+
+use crate::error::FormatError;
+
+/// The first 8 bytes of every `.sndf` file.
+pub const SNDF_MAGIC: [u8; 8] = *b"\x89MDSNDF\n";
+/// The version written; readers accept major version 1.
+pub const SNDF_VERSION: (u16, u16) = (1, 0);
+const FIXED: usize = 8 + 2 + 2 + 4 + 8;
+/// Largest JSON header accepted.
+const MAX_HEADER: usize = 1 << 20;
+/// Largest image side and bin count accepted.
+const MAX_SIDE: u32 = 1 << 16;
+const MAX_BINS: u32 = 32;
+
+/// What a `.sndf` file says about its S-NDFs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SndfHeader {
+    pub width: u32,
+    pub height: u32,
+    /// Bins per axis.
+    pub bins: u32,
+    /// `"projected-normals"`: bin `(bx, by)` holds view-space normals with
+    /// `(n.x, n.y)` in `[−1 + bx·c, −1 + (bx+1)·c) × [−1 + by·c, …)`, `c = 2 / bins`.
+    pub binning: String,
+    /// Jittered rays per texel.
+    pub rays: u32,
+    /// The camera, as a view file (JSON) of the renderer.
+    pub view: serde_json::Value,
+    /// Where the particles came from (the `.mdlod` path), for the record.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+}
+
+/// Sampled S-NDFs: the header and, per texel, `bins²` records `[r, g, b, count]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SndfData {
+    pub header: SndfHeader,
+    pub hist: Vec<[f32; 4]>,
+}
+
+fn corrupt(path: &Path, place: &str, problem: impl Into<String>) -> FormatError {
+    FormatError::Corrupt {
+        path: path.to_path_buf(),
+        place: place.into(),
+        problem: problem.into(),
+    }
+}
+
+fn records(h: &SndfHeader) -> Option<usize> {
+    (h.width as usize)
+        .checked_mul(h.height as usize)?
+        .checked_mul((h.bins as usize).checked_mul(h.bins as usize)?)
+}
+
+fn check_header(path: &Path, h: &SndfHeader) -> Result<usize, FormatError> {
+    if h.width == 0 || h.height == 0 || h.width > MAX_SIDE || h.height > MAX_SIDE {
+        return Err(corrupt(
+            path,
+            "header",
+            format!("image {}x{} (each side 1 to {MAX_SIDE})", h.width, h.height),
+        ));
+    }
+    if h.bins == 0 || h.bins > MAX_BINS {
+        return Err(corrupt(
+            path,
+            "header",
+            format!("{} bins (1 to {MAX_BINS})", h.bins),
+        ));
+    }
+    if h.binning != "projected-normals" {
+        return Err(corrupt(
+            path,
+            "header",
+            format!(
+                "binning `{}` (this reader knows `projected-normals`)",
+                h.binning
+            ),
+        ));
+    }
+    if h.rays == 0 {
+        return Err(corrupt(path, "header", "zero rays per texel"));
+    }
+    records(h).ok_or_else(|| corrupt(path, "header", "size overflows"))
+}
+
+impl SndfData {
+    /// Writes `self` to `path` atomically (temporary file, then rename).
+    pub fn save(&self, path: &Path) -> Result<(), FormatError> {
+        let n = check_header(path, &self.header)?;
+        if self.hist.len() != n {
+            return Err(FormatError::Write {
+                path: path.to_path_buf(),
+                problem: format!("{} records for a header that needs {n}", self.hist.len()),
+            });
+        }
+        let json = serde_json::to_vec(&self.header).map_err(|e| FormatError::Write {
+            path: path.to_path_buf(),
+            problem: e.to_string(),
+        })?;
+        let data: &[u8] = bytemuck::cast_slice(&self.hist);
+        let mut out = Vec::with_capacity(FIXED + json.len() + 16 + data.len());
+        out.extend_from_slice(&SNDF_MAGIC);
+        out.extend_from_slice(&SNDF_VERSION.0.to_le_bytes());
+        out.extend_from_slice(&SNDF_VERSION.1.to_le_bytes());
+        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        out.extend_from_slice(&xxh3_64(data).to_le_bytes());
+        out.extend_from_slice(&json);
+        out.resize(out.len().div_ceil(16) * 16, 0);
+        out.extend_from_slice(data);
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let io = |e| FormatError::io(path, e);
+        let mut tmp = tempfile::Builder::new()
+            .prefix(".sndf.")
+            .suffix(".tmp")
+            .tempfile_in(dir)
+            .map_err(io)?;
+        tmp.write_all(&out).map_err(io)?;
+        tmp.as_file().sync_all().map_err(io)?;
+        crate::writer::make_readable(tmp.as_file()).map_err(io)?;
+        tmp.persist(path)
+            .map_err(|e| FormatError::io(path, e.error))?;
+        Ok(())
+    }
+
+    /// Reads and validates `path`.
+    pub fn load(path: &Path) -> Result<SndfData, FormatError> {
+        let bytes = std::fs::read(path).map_err(|e| FormatError::io(path, e))?;
+        Self::parse(path, &bytes)
+    }
+
+    /// Validates and decodes the bytes of a `.sndf` file (`path` names it in errors).
+    pub fn parse(path: &Path, bytes: &[u8]) -> Result<SndfData, FormatError> {
+        if bytes.len() < FIXED || bytes[..8] != SNDF_MAGIC {
+            return Err(corrupt(
+                path,
+                "start",
+                "not an .sndf file (no S-NDF signature)",
+            ));
+        }
+        let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]);
+        let (major, minor) = (u16_at(8), u16_at(10));
+        if major != SNDF_VERSION.0 {
+            return Err(FormatError::UnsupportedVersion {
+                path: path.to_path_buf(),
+                major,
+                minor,
+                readable_min: 1,
+                readable_max: 1,
+                hint: "write it again with this mdlod (mdlod sample)",
+            });
+        }
+        let json_len = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+        let checksum = u64::from_le_bytes(bytes[16..24].try_into().unwrap_or([0; 8]));
+        if json_len > MAX_HEADER || FIXED + json_len > bytes.len() {
+            return Err(corrupt(
+                path,
+                "header",
+                format!(
+                    "header length {json_len} does not fit the file ({} bytes)",
+                    bytes.len()
+                ),
+            ));
+        }
+        let header: SndfHeader = serde_json::from_slice(&bytes[FIXED..FIXED + json_len])
+            .map_err(|e| corrupt(path, "header", format!("invalid JSON: {e}")))?;
+        let n = check_header(path, &header)?;
+        let start = (FIXED + json_len).div_ceil(16) * 16;
+        let expected = n.checked_mul(16).and_then(|d| d.checked_add(start));
+        if expected != Some(bytes.len()) {
+            return Err(corrupt(
+                path,
+                "data",
+                format!(
+                    "{}x{} texels of {}² bins need {} bytes in all, the file has {}",
+                    header.width,
+                    header.height,
+                    header.bins,
+                    expected.map_or("too many".into(), |e| e.to_string()),
+                    bytes.len()
+                ),
+            ));
+        }
+        let data = &bytes[start..];
+        let computed = xxh3_64(data);
+        if computed != checksum {
+            return Err(FormatError::Checksum {
+                path: path.to_path_buf(),
+                place: "data".into(),
+                stored: checksum,
+                computed,
+            });
+        }
+        let rays = header.rays as f32;
+        let mut hist = Vec::with_capacity(n);
+        for (i, c) in data.chunks_exact(16).enumerate() {
+            let r: [f32; 4] = [0, 1, 2, 3]
+                .map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap_or([0; 4])));
+            let ok = r.iter().all(|v| v.is_finite() && *v >= 0.0)
+                && r[3] <= rays * (1.0 + 1e-6)
+                && r[..3].iter().all(|&v| v <= r[3] * (1.0 + 1e-5) + 1e-6);
+            if !ok {
+                return Err(corrupt(
+                    path,
+                    &format!("record {i}"),
+                    format!("{r:?} is not a bin (finite, count at most {rays}, colour sums at most the count)"),
+                ));
+            }
+            hist.push(r);
+        }
+        Ok(SndfData { header, hist })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> SndfData {
+        let header = SndfHeader {
+            width: 3,
+            height: 2,
+            bins: 2,
+            binning: "projected-normals".into(),
+            rays: 4,
+            view: serde_json::json!({"azimuth_deg": 30.0}),
+            source: Some("x.mdlod".into()),
+        };
+        let hist = (0..24)
+            .map(|i| {
+                let c = (i % 5) as f32;
+                [0.5 * c, 0.25 * c, 0.0, c.min(4.0)]
+            })
+            .collect();
+        SndfData { header, hist }
+    }
+
+    #[test]
+    fn round_trips_and_refuses_damage() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("v.sndf");
+        let s = sample();
+        s.save(&p).unwrap();
+        assert_eq!(SndfData::load(&p).unwrap(), s);
+        let good = std::fs::read(&p).unwrap();
+        // Every truncation and every flipped byte: an error naming the file, no panic.
+        for cut in 0..good.len() {
+            let e = SndfData::parse(&p, &good[..cut]).unwrap_err().to_string();
+            assert!(e.starts_with(&p.display().to_string()), "{e}");
+        }
+        for i in 0..good.len() {
+            let mut bad = good.clone();
+            bad[i] ^= 0x40;
+            if let Ok(d) = SndfData::parse(&p, &bad) {
+                // Only JSON whitespace or an equivalent spelling can survive.
+                assert_eq!(d.hist, s.hist, "byte {i}");
+            }
+        }
+        // A value that no sampling can give, with a matching checksum.
+        let mut wrong = s.clone();
+        wrong.hist[5][3] = 9.0;
+        let q = dir.path().join("w.sndf");
+        wrong.save(&q).unwrap();
+        let e = SndfData::load(&q).unwrap_err().to_string();
+        assert!(
+            e.contains("record 5") && e.contains("count at most 4"),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,67 @@
+//! `mdlod sample`: S-NDFs of one view to a `.sndf` file, to shade later without the
+//! particles.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use mdlod_render::{sample_to_file, RenderMode, RenderOptions};
+
+use super::render::ViewArgs;
+
+/// Sample the screen-space normal distributions of one view of a .mdlod file and store
+/// them (with the camera) in a .sndf file; `mdlod shade` then lights it any number of
+/// times with no particle data.
+#[derive(clap::Args)]
+#[command(after_help = "Example:\n  \
+    mdlod sample frame.mdlod -o view.sndf --iterations 64 --width 640 --height 360\n  \
+    mdlod shade view.sndf -o lit.png --light -1,1,1 --light 1,0,0.5:#4060ff")]
+pub struct Args {
+    pub file: PathBuf,
+    /// The .sndf file to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub camera: ViewArgs,
+    /// Jittered rays per pixel.
+    #[arg(long, default_value_t = 64)]
+    pub iterations: u32,
+    /// Bins per axis of the projected normal disk.
+    #[arg(long, default_value_t = 8)]
+    pub bins: u32,
+    /// Largest on-screen size, in pixels, of a cluster drawn as one sphere.
+    #[arg(long, default_value_t = 1.0)]
+    pub screen_error: f32,
+    /// Most spheres to draw.
+    #[arg(long, default_value_t = 4_000_000)]
+    pub budget: u64,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let opts = RenderOptions {
+        width: args.camera.width,
+        height: args.camera.height,
+        view: args.camera.spec(),
+        error_px: args.screen_error,
+        budget: args.budget,
+        mode: RenderMode::Sndf {
+            iterations: args.iterations,
+            bins: args.bins,
+        },
+        ..Default::default()
+    };
+    let r = sample_to_file(&args.file, &args.output, &opts)?;
+    println!(
+        "wrote {} ({}x{} texels, {}x{} bins, {} rays each) on {}: {} particles and {} cluster spheres, {:.0} ms",
+        args.output.display(),
+        r.width,
+        r.height,
+        args.bins,
+        args.bins,
+        r.spp,
+        r.adapter,
+        r.particles_drawn,
+        r.nodes_drawn,
+        r.total_time.as_secs_f64() * 1e3
+    );
+    Ok(())
+}

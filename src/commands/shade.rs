@@ -1,0 +1,116 @@
+//! `mdlod shade`: light stored S-NDFs (a `.sndf` file) and write a PNG; no particle data,
+//! no GPU.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use mdlod_render::glam::Vec3;
+use mdlod_render::parse_colour;
+use mdlod_render::sndf::ShadeLights;
+
+/// Shade a .sndf file (written by `mdlod sample`) under new lights, at its own resolution
+/// or a coarser S-MIP level, without the particles.
+#[derive(clap::Args)]
+#[command(after_help = "Example:\n  \
+    mdlod shade view.sndf -o lit.png --light -1,1,1 --light 1,0,0.5:#4060ff --brdf lambert")]
+pub struct Args {
+    pub input: PathBuf,
+    /// The PNG to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// A directional light: direction towards it in view space (x right, y up, z to the
+    /// viewer), optionally with a colour, e.g. `-1,1,1` or `1,0,0.5:#4060ff`; repeatable.
+    /// Default: one white light from the upper left.
+    #[arg(
+        long = "light",
+        value_name = "X,Y,Z[:COLOUR]",
+        allow_hyphen_values = true
+    )]
+    pub lights: Vec<String>,
+    /// Ambient light.
+    #[arg(long, default_value_t = 0.15)]
+    pub ambient: f32,
+    /// Lambert weight.
+    #[arg(long, default_value_t = 0.85)]
+    pub diffuse: f32,
+    /// Reflectance: Lambert only, or Lambert plus a Blinn-Phong highlight.
+    #[arg(long, value_enum, default_value = "blinn-phong")]
+    pub brdf: Brdf,
+    /// Blinn-Phong highlight weight and exponent.
+    #[arg(long, default_value_t = 0.25)]
+    pub specular: f32,
+    #[arg(long, default_value_t = 32.0)]
+    pub exponent: f32,
+    /// S-MIP levels coarser than sampled: each halves the image (2×2 averages of S-NDFs).
+    #[arg(long, default_value_t = 0)]
+    pub level: u32,
+    /// Background colour for rays that hit nothing.
+    #[arg(long, default_value = "#ffffff")]
+    pub background: String,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Brdf {
+    Lambert,
+    BlinnPhong,
+}
+
+/// Parses `x,y,z` or `x,y,z:colour`.
+fn parse_light(s: &str) -> Result<(Vec3, [f32; 3])> {
+    let (dir, colour) = match s.split_once(':') {
+        Some((d, c)) => (d, Some(c)),
+        None => (s, None),
+    };
+    let v: Vec<f32> = dir
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("light {s:?}: the direction is not three numbers"))?;
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) || v.iter().all(|x| *x == 0.0) {
+        bail!("light {s:?}: the direction must be three finite numbers, not all zero");
+    }
+    let colour = match colour {
+        Some(c) => parse_colour(c)?.map(mdlod_render::renderer::srgb_to_linear),
+        None => [1.0; 3],
+    };
+    Ok((Vec3::new(v[0], v[1], v[2]).normalize(), colour))
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let mut lights = args
+        .lights
+        .iter()
+        .map(|l| parse_light(l))
+        .collect::<Result<Vec<_>>>()?;
+    if lights.is_empty() {
+        lights.push((mdlod_render::Lighting::default().direction_view, [1.0; 3]));
+    }
+    if args.level > 16 {
+        bail!("level {} (at most 16)", args.level);
+    }
+    let shade = ShadeLights {
+        ambient: args.ambient,
+        lights,
+        diffuse: args.diffuse,
+        specular: match args.brdf {
+            Brdf::Lambert => 0.0,
+            Brdf::BlinnPhong => args.specular,
+        },
+        shininess: args.exponent,
+    };
+    let (w, h) = mdlod_render::shade_file(
+        &args.input,
+        &args.output,
+        &shade,
+        parse_colour(&args.background)?,
+        args.level,
+    )?;
+    println!(
+        "wrote {} ({w}x{h}, level {}) from {}, {} light(s), no particle data read",
+        args.output.display(),
+        args.level,
+        args.input.display(),
+        shade.lights.len()
+    );
+    Ok(())
+}
