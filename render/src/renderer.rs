@@ -24,7 +24,10 @@ use crate::passes::sphere_raycast::{
 };
 use crate::passes::sphere_raycast::{PackStyle, GBUFFER_FORMAT};
 use crate::passes::splat::{SplatPass, HDR_FORMAT};
-use crate::sndf::{AccumulateParams, Sndf, SndfPass, SndfSettings};
+use crate::sndf::{
+    shade_table, AccumulateParams, ShadeLights, ShadeParams, Sndf, SndfPass, SndfSettings,
+    SndfShadePass,
+};
 use crate::traversal::DrawList;
 
 /// Most samples per pixel accepted.
@@ -206,6 +209,7 @@ pub struct Renderer {
     accumulate: AccumulatePass,
     splat: Option<SplatPass>,
     sndf: SndfPass,
+    sndf_shade: SndfShadePass,
     /// Particle samples drawn so far (points × samples), so that tests can check that
     /// re-lighting S-NDFs draws none.
     points_sampled: std::sync::atomic::AtomicU64,
@@ -280,12 +284,14 @@ impl Renderer {
         let accumulate = AccumulatePass::new(&ctx.device);
         let splat = SplatPass::new(&ctx.device, &sphere.layout);
         let sndf = SndfPass::new(&ctx.device);
+        let sndf_shade = SndfShadePass::new(&ctx.device);
         Renderer {
             ctx,
             sphere,
             accumulate,
             splat,
             sndf,
+            sndf_shade,
             points_sampled: Default::default(),
         }
     }
@@ -729,6 +735,7 @@ impl Renderer {
                     store: wgpu::StoreOp::Store,
                 },
             };
+            let timing = self.frame_timer();
             for s in 0..iterations {
                 let uniforms = FrameUniforms::new(
                     camera.jittered_clip_from_view([width, height], jitter(s, iterations)),
@@ -752,7 +759,10 @@ impl Renderer {
                             }),
                             stencil_ops: None,
                         }),
-                        timestamp_writes: None,
+                        timestamp_writes: timing
+                            .as_ref()
+                            .filter(|_| s == 0)
+                            .map(|t| t.writes(true, false)),
                         occlusion_query_set: None,
                         multiview_mask: None,
                     });
@@ -763,13 +773,29 @@ impl Renderer {
                     }
                 }
                 {
-                    let mut pass = enc.begin_compute_pass(&Default::default());
+                    let last = s + 1 == iterations;
+                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some("sndf accumulate"),
+                        timestamp_writes: timing.as_ref().filter(|_| last).map(|t| {
+                            wgpu::ComputePassTimestampWrites {
+                                query_set: &t.set,
+                                beginning_of_pass_write_index: None,
+                                end_of_pass_write_index: Some(1),
+                            }
+                        }),
+                    });
                     pass.set_pipeline(&self.sndf.pipeline);
                     pass.set_bind_group(0, &bind, &[]);
                     pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
                 }
+                if s + 1 == iterations {
+                    if let Some(t) = &timing {
+                        t.resolve(&mut enc);
+                    }
+                }
                 queue.submit([enc.finish()]);
             }
+            let gpu_time = self.gpu_time(timing.as_ref())?;
             self.count_samples(buffers.points, iterations);
             let read = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("sndf readback"),
@@ -795,7 +821,125 @@ impl Renderer {
                 bins,
                 rays: iterations,
                 hist,
+                gpu_time,
             })
+        })
+    }
+
+    /// Shades S-NDFs on the GPU (the same result as [`Sndf::shade_with`], to rounding):
+    /// uploads them, then one compute pass. Returns the image and the GPU time of the
+    /// shading pass alone (what re-lighting costs once the S-NDFs are on the GPU).
+    pub fn shade_sndf(
+        &self,
+        sndf: &Sndf,
+        lights: &ShadeLights,
+        background_srgb: [f32; 3],
+    ) -> Result<(RgbaImage, Option<Duration>), RenderError> {
+        let limits = self.ctx.device.limits();
+        let bytes = sndf.hist.len() as u64 * 16;
+        if bytes
+            > limits
+                .max_storage_buffer_binding_size
+                .min(limits.max_buffer_size)
+        {
+            return Err(RenderError::InvalidOptions(format!(
+                "{bytes} bytes of S-NDFs do not fit one buffer of this adapter"
+            )));
+        }
+        self.ctx.scoped(|| {
+            use wgpu::util::DeviceExt;
+            let device = &self.ctx.device;
+            let queue = &self.ctx.queue;
+            let texels = sndf.width * sndf.height;
+            let bg = background_srgb.map(srgb_to_linear);
+            let init = |label: &str, contents: &[u8], usage| {
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage,
+                })
+            };
+            let params = init(
+                "shade params",
+                bytemuck::bytes_of(&ShadeParams {
+                    width: sndf.width,
+                    height: sndf.height,
+                    bins: sndf.bins,
+                    rays: sndf.rays.max(1) as f32,
+                    background: [bg[0], bg[1], bg[2], 0.0],
+                }),
+                wgpu::BufferUsages::UNIFORM,
+            );
+            let table = init(
+                "shade table",
+                bytemuck::cast_slice(&shade_table(sndf.bins, lights)),
+                wgpu::BufferUsages::STORAGE,
+            );
+            let hist = init(
+                "sndf histograms",
+                bytemuck::cast_slice(&sndf.hist),
+                wgpu::BufferUsages::STORAGE,
+            );
+            let out_bytes = u64::from(texels) * 4;
+            let pixels = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("shaded pixels"),
+                size: out_bytes.max(4),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let read = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("shaded pixels readback"),
+                size: out_bytes.max(4),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("sndf shade"),
+                layout: &self.sndf_shade.layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: params.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: table.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: hist.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: pixels.as_entire_binding(),
+                    },
+                ],
+            });
+            let timing = self.frame_timer();
+            let mut enc = device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("sndf shade"),
+                    timestamp_writes: timing.as_ref().map(|t| wgpu::ComputePassTimestampWrites {
+                        query_set: &t.set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    }),
+                });
+                pass.set_pipeline(&self.sndf_shade.pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(texels.div_ceil(64), 1, 1);
+            }
+            enc.copy_buffer_to_buffer(&pixels, 0, &read, 0, out_bytes.max(4));
+            if let Some(t) = &timing {
+                t.resolve(&mut enc);
+            }
+            queue.submit([enc.finish()]);
+            let bytes = self.read_buffer(&read)?;
+            let mut image = RgbaImage::new(sndf.width, sndf.height);
+            let n = image.data.len();
+            image.data.copy_from_slice(&bytes[..n]);
+            Ok((image, self.gpu_time(timing.as_ref())?))
         })
     }
 

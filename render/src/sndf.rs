@@ -30,6 +30,76 @@ use crate::renderer::{linear_to_srgb, srgb_to_linear};
 
 /// WGSL source of the accumulation pass.
 pub const ACCUMULATE_SHADER: &str = include_str!("passes/sndf_accumulate.wgsl");
+/// WGSL source of the GPU shading pass.
+pub const SHADE_SHADER: &str = include_str!("passes/sndf_shade.wgsl");
+
+/// `ShadeParams` in the WGSL.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct ShadeParams {
+    pub width: u32,
+    pub height: u32,
+    pub bins: u32,
+    pub rays: f32,
+    pub background: [f32; 4],
+}
+
+/// The GPU shading pipeline.
+pub struct SndfShadePass {
+    pub pipeline: wgpu::ComputePipeline,
+    pub layout: wgpu::BindGroupLayout,
+}
+
+impl SndfShadePass {
+    pub fn new(device: &wgpu::Device) -> SndfShadePass {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("sndf_shade.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADE_SHADER.into()),
+        });
+        let buffer = |binding, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let read = wgpu::BufferBindingType::Storage { read_only: true };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("sndf_shade"),
+            entries: &[
+                buffer(0, wgpu::BufferBindingType::Uniform),
+                buffer(1, read),
+                buffer(2, read),
+                buffer(3, wgpu::BufferBindingType::Storage { read_only: false }),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("sndf_shade"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("sndf_shade"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("shade"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        SndfShadePass { pipeline, layout }
+    }
+}
+
+/// The per-bin table the shading pass reads: two rgba entries per bin.
+pub fn shade_table(bins: u32, lights: &ShadeLights) -> Vec<[f32; 4]> {
+    bin_lighting(bins, lights)
+        .iter()
+        .flat_map(|(a, s)| [[a[0], a[1], a[2], 0.0], [s[0], s[1], s[2], 0.0]])
+        .collect()
+}
 
 /// `Params` in the WGSL.
 #[repr(C)]
@@ -130,6 +200,8 @@ pub struct Sndf {
     /// Rays per texel (iterations).
     pub rays: u32,
     pub hist: Vec<[f32; 4]>,
+    /// GPU time of the sampling (all iterations), when measured.
+    pub gpu_time: Option<std::time::Duration>,
 }
 
 /// The bin of a projected normal `(x, y)`, as the WGSL computes it.
@@ -252,8 +324,9 @@ impl Sndf {
         let bg = background_srgb.map(srgb_to_linear);
         let rays = self.rays.max(1) as f32;
         let b2 = (self.bins * self.bins) as usize;
+        use rayon::prelude::*;
         self.hist
-            .chunks_exact(b2)
+            .par_chunks_exact(b2)
             .map(|texel| {
                 let mut c = [0f32; 3];
                 let mut hits = 0.0;
@@ -312,6 +385,7 @@ impl Sndf {
             bins: self.bins,
             rays: self.rays * 4,
             hist,
+            gpu_time: None,
         }
     }
 
@@ -339,6 +413,7 @@ impl Sndf {
             bins: d.header.bins,
             rays: d.header.rays,
             hist: d.hist.clone(),
+            gpu_time: None,
         }
     }
 }
@@ -367,6 +442,7 @@ mod tests {
             bins,
             rays,
             hist,
+            gpu_time: None,
         }
     }
 

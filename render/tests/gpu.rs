@@ -1161,6 +1161,22 @@ fn relighting_sndfs_matches_supersampling_under_the_new_light_and_draws_no_parti
             ..Default::default()
         };
         let relit = sndf.shade(&light, o.background);
+        // The GPU shading pass gives the same picture (to rounding).
+        let (on_gpu, _) = own
+            .shade_sndf(
+                &sndf,
+                &mdlod_render::sndf::ShadeLights::from(&light),
+                o.background,
+            )
+            .unwrap();
+        assert!(
+            relit
+                .data
+                .iter()
+                .zip(&on_gpu.data)
+                .all(|(a, b)| a.abs_diff(*b) <= 1),
+            "host and GPU shading differ"
+        );
         assert_eq!(own.points_sampled(), sampled, "re-lighting drew particles");
         o.lighting = light;
         let (reference, _) = render_image(renderer(), &f, &o).unwrap();

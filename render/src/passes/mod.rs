@@ -11,6 +11,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("accumulate.wgsl", accumulate::SHADER),
     ("splat.wgsl", splat::SHADER),
     ("sndf_accumulate.wgsl", crate::sndf::ACCUMULATE_SHADER),
+    ("sndf_shade.wgsl", crate::sndf::SHADE_SHADER),
 ];
 
 #[cfg(test)]
@@ -29,7 +30,11 @@ mod tests {
         }
         // The conservative-depth variant of the sphere pass.
         let src = super::sphere_raycast::shader_source(true);
-        assert!(src.contains("@early_depth_test(greater_equal)"));
+        assert_eq!(
+            src.matches("@fragment @early_depth_test(greater_equal)")
+                .count(),
+            2
+        );
         let module = naga::front::wgsl::parse_str(&src)
             .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
         naga::valid::Validator::new(

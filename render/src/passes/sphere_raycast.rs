@@ -31,10 +31,16 @@ pub const SHADER: &str = concat!(
 /// than the rasterized quad's), for devices with `SHADER_EARLY_DEPTH_TEST`.
 pub fn shader_source(early_depth: bool) -> String {
     if early_depth {
-        SHADER.replace(
-            "@fragment\nfn fs_main",
-            "@fragment @early_depth_test(greater_equal)\nfn fs_main",
-        )
+        // Both fragment stages write a depth never nearer than the rasterized quad's.
+        SHADER
+            .replace(
+                "@fragment\nfn fs_main",
+                "@fragment @early_depth_test(greater_equal)\nfn fs_main",
+            )
+            .replace(
+                "@fragment\nfn fs_gbuffer",
+                "@fragment @early_depth_test(greater_equal)\nfn fs_gbuffer",
+            )
     } else {
         SHADER.to_string()
     }

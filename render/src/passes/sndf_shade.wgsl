@@ -1,0 +1,47 @@
+// Deferred shading of S-NDFs on the GPU (the same sums as Sndf::shade_linear on the
+// host): per texel, the bins' albedo sums times the per-bin albedo factors plus their
+// counts times the per-bin highlights, over the rays, plus the background's share of the
+// rays that hit nothing; then sRGB-encoded into RGBA8.
+//
+// The Rust twin of ShadeParams is in sndf.rs.
+
+struct ShadeParams {
+    width: u32,
+    height: u32,
+    bins: u32,
+    rays: f32,
+    // rgb: linear background.
+    background: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> params: ShadeParams;
+// Two per bin: the albedo factor (rgb) and the highlight (rgb).
+@group(0) @binding(1) var<storage, read> table: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> hist: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read_write> pixels: array<u32>;
+
+fn to_srgb(c: f32) -> f32 {
+    if c <= 0.0031308 {
+        return c * 12.92;
+    }
+    return 1.055 * pow(c, 1.0 / 2.4) - 0.055;
+}
+
+@compute @workgroup_size(64)
+fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
+    let t = id.x;
+    if t >= params.width * params.height {
+        return;
+    }
+    let b2 = params.bins * params.bins;
+    var c = vec3<f32>(0.0);
+    var hits = 0.0;
+    for (var i = 0u; i < b2; i++) {
+        let h = hist[t * b2 + i];
+        c += h.xyz * table[2u * i].xyz + h.w * table[2u * i + 1u].xyz;
+        hits += h.w;
+    }
+    let miss = max(1.0 - hits / params.rays, 0.0);
+    let lin = clamp(c / params.rays + miss * params.background.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
+    pixels[t] = pack4x8unorm(vec4<f32>(to_srgb(lin.x), to_srgb(lin.y), to_srgb(lin.z), 1.0));
+}
