@@ -358,6 +358,7 @@ fn sndf_table(renderer: &Renderer, adapter: &str, n: u64) {
         height: h,
         iterations: k,
         bins,
+        binning: Default::default(),
     };
     let mut sample_times = vec![];
     let mut sndf = None;

@@ -31,6 +31,8 @@ const MAX_HEADER: usize = 1 << 20;
 /// Largest image side and bin count accepted.
 const MAX_SIDE: u32 = 1 << 16;
 const MAX_BINS: u32 = 32;
+/// The binnings of the normals a file may use (see FORMAT.md).
+pub const BINNINGS: [&str; 3] = ["projected-normals", "spherical", "lambert-equal-area"];
 
 /// What a `.sndf` file says about its S-NDFs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -40,8 +42,7 @@ pub struct SndfHeader {
     pub height: u32,
     /// Bins per axis.
     pub bins: u32,
-    /// `"projected-normals"`: bin `(bx, by)` holds view-space normals with
-    /// `(n.x, n.y)` in `[−1 + bx·c, −1 + (bx+1)·c) × [−1 + by·c, …)`, `c = 2 / bins`.
+    /// One of [`BINNINGS`] (FORMAT.md, section 10).
     pub binning: String,
     /// Jittered rays per texel.
     pub rays: u32,

@@ -128,8 +128,12 @@ pub enum RenderMode {
     /// for data that needs depth order; `opacity` is the splats' peak alpha.
     SplatOver { opacity: f32 },
     /// S-NDFs sampled with `iterations` jittered rays per pixel into `bins × bins`
-    /// projected-normal bins, then shaded from the S-NDFs alone (see [`sndf`]).
-    Sndf { iterations: u32, bins: u32 },
+    /// bins of `binning`, then shaded from the S-NDFs alone (see [`sndf`]).
+    Sndf {
+        iterations: u32,
+        bins: u32,
+        binning: sndf::Binning,
+    },
 }
 
 impl Default for RenderOptions {
@@ -357,7 +361,12 @@ pub fn render_image(
     let (camera, traversal, settings) = frame_setup(renderer, file, opts)?;
     let draw = traverse(&camera, file, &traversal);
     let traversal_time = t0.elapsed();
-    if let RenderMode::Sndf { iterations, bins } = opts.mode {
+    if let RenderMode::Sndf {
+        iterations,
+        bins,
+        binning,
+    } = opts.mode
+    {
         let sndf = renderer.sample_sndf(
             file,
             &camera,
@@ -367,6 +376,7 @@ pub fn render_image(
                 height: opts.height,
                 iterations,
                 bins,
+                binning,
             },
         )?;
         let sampled = t0.elapsed();
@@ -509,7 +519,12 @@ pub fn sample_to_file(
     out: &Path,
     opts: &RenderOptions,
 ) -> Result<RenderReport, RenderError> {
-    let RenderMode::Sndf { iterations, bins } = opts.mode else {
+    let RenderMode::Sndf {
+        iterations,
+        bins,
+        binning,
+    } = opts.mode
+    else {
         return Err(RenderError::InvalidOptions(
             "sampling needs the sndf mode".into(),
         ));
@@ -529,6 +544,7 @@ pub fn sample_to_file(
             height: opts.height,
             iterations,
             bins,
+            binning,
         },
     )?;
     let view = serde_json::to_value(ViewFile::from_camera(&camera))

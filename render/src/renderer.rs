@@ -634,6 +634,7 @@ impl Renderer {
             height,
             iterations,
             bins,
+            binning,
         } = *settings;
         self.check(&FrameSettings {
             width,
@@ -700,7 +701,7 @@ impl Renderer {
                     width,
                     height,
                     bins,
-                    pad: 0,
+                    binning: binning.code(),
                 }),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
@@ -819,6 +820,7 @@ impl Renderer {
                 width,
                 height,
                 bins,
+                binning,
                 rays: iterations,
                 hist,
                 gpu_time,
@@ -872,7 +874,7 @@ impl Renderer {
             );
             let table = init(
                 "shade table",
-                bytemuck::cast_slice(&shade_table(sndf.bins, lights)),
+                bytemuck::cast_slice(&shade_table(sndf.bins, sndf.binning, lights)),
                 wgpu::BufferUsages::STORAGE,
             );
             let hist = init(

@@ -5,9 +5,9 @@
 //! 1. Sampling: each iteration draws the cut's spheres into a G-buffer (the nearest
 //!    hit's view-space normal and the particle's albedo) with one jittered ray per texel
 //!    (the same Halton sub-pixel pattern as supersampling), then a compute pass
-//!    (`sndf_accumulate.wgsl`) adds the sample to the texel's histogram over the
-//!    projected normal disk: `bins × bins` cells of `(n.x, n.y)` in `[−1, 1]²`
-//!    ("projected normals"). A bin keeps the sum of the albedos that fell into it and
+//!    (`sndf_accumulate.wgsl`) adds the sample to the texel's histogram over the normals:
+//!    `bins × bins` cells of a [`Binning`] (projected normals `(n.x, n.y)` in `[−1, 1]²`
+//!    by default; spherical coordinates; Lambert azimuthal equal-area). A bin keeps the sum of the albedos that fell into it and
 //!    their count, so per-particle colours shade exactly; rays that hit nothing add
 //!    nothing, and `1 − Σ counts / rays` is the texel's background share.
 //! 2. Shading ([`Sndf::shade`]) needs no particle: per bin, the lighting averaged over
@@ -16,8 +16,10 @@
 //!    (Blinn-Phong highlight); a texel's colour is the bins' colour sums and counts
 //!    weighted by those, over the rays, plus the background's share.
 //!
-//! What is not here yet: the virtual S-MIP (tiles, levels, a tile pool), the binnings
-//! other than projected normals, environment maps and the `.sndf` file.
+//! 3. Coarser S-MIP levels ([`Sndf::downsample`]) add 2×2 blocks of texels' bins.
+//!
+//! What is not here yet: the virtual S-MIP's tiles and tile pool (the whole image's
+//! S-NDFs are in memory), environment maps and the normal-disk explorer.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -94,8 +96,8 @@ impl SndfShadePass {
 }
 
 /// The per-bin table the shading pass reads: two rgba entries per bin.
-pub fn shade_table(bins: u32, lights: &ShadeLights) -> Vec<[f32; 4]> {
-    bin_lighting(bins, lights)
+pub fn shade_table(bins: u32, binning: Binning, lights: &ShadeLights) -> Vec<[f32; 4]> {
+    bin_lighting(bins, binning, lights)
         .iter()
         .flat_map(|(a, s)| [[a[0], a[1], a[2], 0.0], [s[0], s[1], s[2], 0.0]])
         .collect()
@@ -108,7 +110,97 @@ pub struct AccumulateParams {
     pub width: u32,
     pub height: u32,
     pub bins: u32,
-    pub pad: u32,
+    /// [`Binning::code`].
+    pub binning: u32,
+}
+
+/// How the normals are binned (the cell coordinates `(u, v)` in `[0, 1]²`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Binning {
+    /// `(n.x, n.y)` in `[−1, 1]²`: the projected normal disk.
+    #[default]
+    ProjectedNormals,
+    /// Azimuth `atan2(n.y, n.x)` over `[−π, π)` and polar angle `acos(n.z)` over
+    /// `[0, π/2]` (the hemisphere facing the viewer).
+    Spherical,
+    /// Lambert azimuthal equal-area projection about the view axis, the hemisphere onto
+    /// the unit disk: `(n.x, n.y) · sqrt(2 / (1 + n.z)) / √2`.
+    LambertEqualArea,
+}
+
+impl Binning {
+    pub fn code(self) -> u32 {
+        match self {
+            Binning::ProjectedNormals => 0,
+            Binning::Spherical => 1,
+            Binning::LambertEqualArea => 2,
+        }
+    }
+
+    /// The name stored in `.sndf` headers.
+    pub fn name(self) -> &'static str {
+        match self {
+            Binning::ProjectedNormals => "projected-normals",
+            Binning::Spherical => "spherical",
+            Binning::LambertEqualArea => "lambert-equal-area",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Binning> {
+        [
+            Binning::ProjectedNormals,
+            Binning::Spherical,
+            Binning::LambertEqualArea,
+        ]
+        .into_iter()
+        .find(|b| b.name() == name)
+    }
+
+    /// The cell coordinates of a unit normal (the WGSL's `bin_coords`).
+    pub fn coords(self, n: Vec3) -> (f32, f32) {
+        match self {
+            Binning::ProjectedNormals => ((n.x + 1.0) * 0.5, (n.y + 1.0) * 0.5),
+            Binning::Spherical => (
+                n.y.atan2(n.x) / std::f32::consts::TAU + 0.5,
+                n.z.clamp(-1.0, 1.0).acos() / std::f32::consts::FRAC_PI_2,
+            ),
+            Binning::LambertEqualArea => {
+                let k = (2.0 / (1.0 + n.z).max(1e-6)).sqrt() / std::f32::consts::SQRT_2;
+                ((n.x * k + 1.0) * 0.5, (n.y * k + 1.0) * 0.5)
+            }
+        }
+    }
+
+    /// The unit normal at cell coordinates `(u, v)`, if any normal maps there.
+    pub fn normal(self, u: f32, v: f32) -> Option<Vec3> {
+        match self {
+            Binning::ProjectedNormals => {
+                let (x, y) = (2.0 * u - 1.0, 2.0 * v - 1.0);
+                let r2 = x * x + y * y;
+                (r2 <= 1.0).then(|| Vec3::new(x, y, (1.0 - r2).sqrt()))
+            }
+            Binning::Spherical => {
+                let phi = (u - 0.5) * std::f32::consts::TAU;
+                let theta = v * std::f32::consts::FRAC_PI_2;
+                Some(Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                ))
+            }
+            Binning::LambertEqualArea => {
+                let (x, y) = (
+                    (2.0 * u - 1.0) * std::f32::consts::SQRT_2,
+                    (2.0 * v - 1.0) * std::f32::consts::SQRT_2,
+                );
+                let r2 = x * x + y * y;
+                (r2 <= 2.0).then(|| {
+                    let s = (1.0 - r2 / 4.0).max(0.0).sqrt();
+                    Vec3::new(x * s, y * s, 1.0 - r2 / 2.0)
+                })
+            }
+        }
+    }
 }
 
 /// The accumulation pipeline.
@@ -185,8 +277,9 @@ pub struct SndfSettings {
     pub height: u32,
     /// Jittered rays per texel.
     pub iterations: u32,
-    /// Bins per axis of the projected normal disk (8 by default).
+    /// Bins per axis (8 by default).
     pub bins: u32,
+    pub binning: Binning,
 }
 
 /// The sampled S-NDFs of one view: per texel (rows top to bottom), `bins × bins` bins
@@ -197,6 +290,7 @@ pub struct Sndf {
     pub width: u32,
     pub height: u32,
     pub bins: u32,
+    pub binning: Binning,
     /// Rays per texel (iterations).
     pub rays: u32,
     pub hist: Vec<[f32; 4]>,
@@ -204,11 +298,12 @@ pub struct Sndf {
     pub gpu_time: Option<std::time::Duration>,
 }
 
-/// The bin of a projected normal `(x, y)`, as the WGSL computes it.
-pub fn bin_of(x: f32, y: f32, bins: u32) -> (u32, u32) {
+/// The bin of a unit normal, as the WGSL computes it.
+pub fn bin_of(n: Vec3, bins: u32, binning: Binning) -> (u32, u32) {
     let b = bins as f32;
-    let idx = |v: f32| (((v + 1.0) * 0.5).clamp(0.0, 1.0) * b).min(b - 1.0) as u32;
-    (idx(x), idx(y))
+    let (u, v) = binning.coords(n);
+    let idx = |c: f32| (c.clamp(0.0, 1.0) * b).min(b - 1.0) as u32;
+    (idx(u), idx(v))
 }
 
 /// The lights and material S-NDFs are shaded with: any number of coloured directional
@@ -242,7 +337,11 @@ impl From<&Lighting> for ShadeLights {
 /// the normal disk, per colour channel, as (albedo factor: ambient + Σ diffuse ·
 /// max(n·l, 0) · colour; highlight: Σ specular · Blinn-Phong · colour), for the view
 /// direction +z. Bins outside the disk get the values at the nearest disk edge.
-pub fn bin_lighting(bins: u32, lights: &ShadeLights) -> Vec<([f32; 3], [f32; 3])> {
+pub fn bin_lighting(
+    bins: u32,
+    binning: Binning,
+    lights: &ShadeLights,
+) -> Vec<([f32; 3], [f32; 3])> {
     const SUB: u32 = 16;
     let dirs: Vec<(Vec3, Vec3, [f32; 3])> = lights
         .lights
@@ -252,15 +351,7 @@ pub fn bin_lighting(bins: u32, lights: &ShadeLights) -> Vec<([f32; 3], [f32; 3])
             (l, (l + Vec3::Z).normalize_or(Vec3::Z), c)
         })
         .collect();
-    let shade = |x: f32, y: f32| {
-        let r2 = x * x + y * y;
-        let (x, y, r2) = if r2 > 1.0 {
-            let r = r2.sqrt() * 1.0001;
-            (x / r, y / r, r2 / (r * r))
-        } else {
-            (x, y, r2)
-        };
-        let n = Vec3::new(x, y, (1.0 - r2).max(0.0).sqrt());
+    let shade = |n: Vec3| {
         let mut a = [lights.ambient; 3];
         let mut s = [0.0f32; 3];
         for (l, h, c) in &dirs {
@@ -277,25 +368,34 @@ pub fn bin_lighting(bins: u32, lights: &ShadeLights) -> Vec<([f32; 3], [f32; 3])
         }
         (a, s)
     };
-    let cell = 2.0 / bins as f32;
+    let cell = 1.0 / bins as f32;
     let mut out = Vec::with_capacity((bins * bins) as usize);
     for by in 0..bins {
         for bx in 0..bins {
             let (mut a, mut s, mut n) = ([0f32; 3], [0f32; 3], 0u32);
-            let mut fallback = ([0f32; 3], [0f32; 3]);
+            // A cell no normal maps to (a corner of a disk binning) takes the lighting
+            // of the disk's edge towards its centre.
+            let centre = (cell * (bx as f32 + 0.5), cell * (by as f32 + 0.5));
+            let fallback = {
+                let (du, dv) = (centre.0 - 0.5, centre.1 - 0.5);
+                let len = (du * du + dv * dv).sqrt().max(1e-6);
+                let edge = binning
+                    .normal(0.5 + du / len * 0.4999, 0.5 + dv / len * 0.4999)
+                    .or_else(|| binning.normal(0.5, 0.5))
+                    .unwrap_or(Vec3::Z);
+                shade(edge)
+            };
             for j in 0..SUB {
                 for i in 0..SUB {
-                    let x = -1.0 + cell * (bx as f32 + (i as f32 + 0.5) / SUB as f32);
-                    let y = -1.0 + cell * (by as f32 + (j as f32 + 0.5) / SUB as f32);
-                    let v = shade(x, y);
-                    if x * x + y * y <= 1.0 {
+                    let u = cell * (bx as f32 + (i as f32 + 0.5) / SUB as f32);
+                    let v = cell * (by as f32 + (j as f32 + 0.5) / SUB as f32);
+                    if let Some(normal) = binning.normal(u, v) {
+                        let val = shade(normal);
                         for k in 0..3 {
-                            a[k] += v.0[k];
-                            s[k] += v.1[k];
+                            a[k] += val.0[k];
+                            s[k] += val.1[k];
                         }
                         n += 1;
-                    } else {
-                        fallback = v;
                     }
                 }
             }
@@ -320,7 +420,7 @@ impl Sndf {
     /// Shades every texel over `background_srgb`, from the S-NDFs alone: linear RGB per
     /// texel, rows top to bottom.
     pub fn shade_linear(&self, lights: &ShadeLights, background_srgb: [f32; 3]) -> Vec<[f32; 3]> {
-        let table = bin_lighting(self.bins, lights);
+        let table = bin_lighting(self.bins, self.binning, lights);
         let bg = background_srgb.map(srgb_to_linear);
         let rays = self.rays.max(1) as f32;
         let b2 = (self.bins * self.bins) as usize;
@@ -383,6 +483,7 @@ impl Sndf {
             width: w,
             height: h,
             bins: self.bins,
+            binning: self.binning,
             rays: self.rays * 4,
             hist,
             gpu_time: None,
@@ -396,7 +497,7 @@ impl Sndf {
                 width: self.width,
                 height: self.height,
                 bins: self.bins,
-                binning: "projected-normals".into(),
+                binning: self.binning.name().into(),
                 rays: self.rays,
                 view,
                 source,
@@ -405,12 +506,13 @@ impl Sndf {
         }
     }
 
-    /// From the file form.
+    /// From the file form (the reader has checked the binning's name).
     pub fn from_data(d: &SndfData) -> Sndf {
         Sndf {
             width: d.header.width,
             height: d.header.height,
             bins: d.header.bins,
+            binning: Binning::from_name(&d.header.binning).unwrap_or_default(),
             rays: d.header.rays,
             hist: d.hist.clone(),
             gpu_time: None,
@@ -440,6 +542,7 @@ mod tests {
             width: w,
             height: h,
             bins,
+            binning: Binning::default(),
             rays,
             hist,
             gpu_time: None,
@@ -482,6 +585,56 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn binnings_invert_and_bin_the_hemisphere() {
+        for binning in [
+            Binning::ProjectedNormals,
+            Binning::Spherical,
+            Binning::LambertEqualArea,
+        ] {
+            for j in 0..20 {
+                for i in 0..20 {
+                    let (u, v) = ((i as f32 + 0.5) / 20.0, (j as f32 + 0.5) / 20.0);
+                    let Some(n) = binning.normal(u, v) else {
+                        continue;
+                    };
+                    assert!((n.length() - 1.0).abs() < 1e-4, "{binning:?}");
+                    assert!(n.z >= -1e-6, "{binning:?}: faces away");
+                    let (a, b) = binning.coords(n);
+                    // Spherical coordinates are singular at the pole.
+                    if binning != Binning::Spherical || v > 0.05 {
+                        assert!((a - u).abs() < 1e-3 && (b - v).abs() < 1e-3, "{binning:?}");
+                    }
+                    assert_eq!(Binning::from_name(binning.name()), Some(binning));
+                }
+            }
+        }
+        // Equal area: the Lambert cells inside the disk hold equal solid angles, so a
+        // uniform hemisphere fills them evenly (checked on the central cells).
+        let b = Binning::LambertEqualArea;
+        let mut counts = [0u32; 4];
+        let n = 400;
+        for j in 0..n {
+            for i in 0..n {
+                // Uniform on the hemisphere: z uniform in [0, 1], azimuth uniform.
+                let z = (j as f32 + 0.5) / n as f32;
+                let phi = (i as f32 + 0.5) / n as f32 * std::f32::consts::TAU;
+                let r = (1.0 - z * z).sqrt();
+                let (bx, by) = bin_of(Vec3::new(r * phi.cos(), r * phi.sin(), z), 4, b);
+                if (1..3).contains(&bx) && (1..3).contains(&by) {
+                    counts[((by - 1) * 2 + bx - 1) as usize] += 1;
+                }
+            }
+        }
+        let mean = counts.iter().sum::<u32>() as f32 / 4.0;
+        assert!(
+            counts
+                .iter()
+                .all(|&c| (c as f32 - mean).abs() < 0.01 * mean),
+            "{counts:?}"
+        );
     }
 
     #[test]

@@ -1076,6 +1076,7 @@ fn a_sphere_seen_orthographically_has_a_uniform_sndf_over_the_normal_disk() {
                 height: 64,
                 iterations: 16,
                 bins,
+                binning: Default::default(),
             },
         )
         .unwrap();
@@ -1135,63 +1136,72 @@ fn relighting_sndfs_matches_supersampling_under_the_new_light_and_draws_no_parti
             occlusion: OcclusionMode::WholePixels,
         },
     );
-    let sndf = own
-        .sample_sndf(
-            &f,
-            &camera,
-            &draw,
-            &mdlod_render::sndf::SndfSettings {
-                width: w,
-                height: h,
-                iterations: 16,
-                bins: 8,
-            },
-        )
-        .unwrap();
-    let sampled = own.points_sampled();
-    assert_eq!(sampled, draw.points * 16);
-    let mut previous: Option<RgbaImage> = None;
-    for direction in [
-        Vec3::new(-0.35, 0.45, 1.0),
-        Vec3::new(0.8, -0.2, 0.4),
-        Vec3::new(0.0, 1.0, 0.2),
+    use mdlod_render::sndf::Binning;
+    for binning in [
+        Binning::ProjectedNormals,
+        Binning::Spherical,
+        Binning::LambertEqualArea,
     ] {
-        let light = mdlod_render::Lighting {
-            direction_view: direction.normalize(),
-            ..Default::default()
-        };
-        let relit = sndf.shade(&light, o.background);
-        // The GPU shading pass gives the same picture (to rounding).
-        let (on_gpu, _) = own
-            .shade_sndf(
-                &sndf,
-                &mdlod_render::sndf::ShadeLights::from(&light),
-                o.background,
+        let before = own.points_sampled();
+        let sndf = own
+            .sample_sndf(
+                &f,
+                &camera,
+                &draw,
+                &mdlod_render::sndf::SndfSettings {
+                    width: w,
+                    height: h,
+                    iterations: 16,
+                    bins: 8,
+                    binning,
+                },
             )
             .unwrap();
-        assert!(
-            relit
-                .data
-                .iter()
-                .zip(&on_gpu.data)
-                .all(|(a, b)| a.abs_diff(*b) <= 1),
-            "host and GPU shading differ"
-        );
-        assert_eq!(own.points_sampled(), sampled, "re-lighting drew particles");
-        o.lighting = light;
-        let (reference, _) = render_image(renderer(), &f, &o).unwrap();
-        let diff = mean_abs_diff(&relit, &reference);
-        assert!(
-            diff < 2.0,
-            "light {direction}: mean difference {diff:.2} of 255"
-        );
-        // The light matters: the previous light's image is far from this reference.
-        if let Some(p) = previous.replace(relit) {
-            let other = mean_abs_diff(&p, &reference);
+        let sampled = own.points_sampled();
+        assert_eq!(sampled - before, draw.points * 16);
+        let mut previous: Option<RgbaImage> = None;
+        for direction in [
+            Vec3::new(-0.35, 0.45, 1.0),
+            Vec3::new(0.8, -0.2, 0.4),
+            Vec3::new(0.0, 1.0, 0.2),
+        ] {
+            let light = mdlod_render::Lighting {
+                direction_view: direction.normalize(),
+                ..Default::default()
+            };
+            let relit = sndf.shade(&light, o.background);
+            // The GPU shading pass gives the same picture (to rounding).
+            let (on_gpu, _) = own
+                .shade_sndf(
+                    &sndf,
+                    &mdlod_render::sndf::ShadeLights::from(&light),
+                    o.background,
+                )
+                .unwrap();
             assert!(
-                other > 5.0 * diff.max(0.5),
-                "light {direction}: {other:.2} vs {diff:.2}"
+                relit
+                    .data
+                    .iter()
+                    .zip(&on_gpu.data)
+                    .all(|(a, b)| a.abs_diff(*b) <= 1),
+                "host and GPU shading differ"
             );
+            assert_eq!(own.points_sampled(), sampled, "re-lighting drew particles");
+            o.lighting = light;
+            let (reference, _) = render_image(renderer(), &f, &o).unwrap();
+            let diff = mean_abs_diff(&relit, &reference);
+            assert!(
+                diff < 2.0,
+                "{binning:?}, light {direction}: mean difference {diff:.2} of 255"
+            );
+            // The light matters: the previous light's image is far from this reference.
+            if let Some(p) = previous.replace(relit) {
+                let other = mean_abs_diff(&p, &reference);
+                assert!(
+                    other > 5.0 * diff.max(0.5),
+                    "light {direction}: {other:.2} vs {diff:.2}"
+                );
+            }
         }
     }
 }
@@ -1245,6 +1255,7 @@ fn zoomed_out_sndfs_beat_supersampling_with_as_many_iterations() {
                 height: base,
                 iterations: k,
                 bins: 8,
+                binning: Default::default(),
             },
         )
         .unwrap();

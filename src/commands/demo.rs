@@ -83,6 +83,7 @@ pub fn run(args: Args) -> Result<()> {
         opacity: 0.8,
         iterations: 16,
         bins: 8,
+        binning: super::render::BinningArg::Projected,
         intensity: super::render::Intensity::Species,
         exposure: None,
         save_view: None,

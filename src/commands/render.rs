@@ -45,9 +45,12 @@ pub struct Args {
     /// sndf mode: jittered rays per pixel accumulated into the S-NDFs.
     #[arg(long, default_value_t = 16)]
     pub iterations: u32,
-    /// sndf mode: bins per axis of the projected normal disk.
+    /// sndf mode: bins per axis of the normal parametrisation.
     #[arg(long, default_value_t = 8)]
     pub bins: u32,
+    /// sndf mode: how normals are binned.
+    #[arg(long, value_enum, default_value = "projected")]
+    pub binning: BinningArg,
     /// splat-over mode: the splats' peak opacity, in (0, 1].
     #[arg(long, default_value_t = 0.8)]
     pub opacity: f32,
@@ -117,6 +120,28 @@ pub enum Mode {
     Sndf,
 }
 
+/// The S-NDF binnings.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum BinningArg {
+    /// Projected normals (n.x, n.y) on the unit disk.
+    Projected,
+    /// Spherical coordinates: azimuth and polar angle.
+    Spherical,
+    /// Lambert azimuthal equal-area.
+    Lambert,
+}
+
+impl BinningArg {
+    pub fn binning(self) -> mdlod_render::sndf::Binning {
+        use mdlod_render::sndf::Binning;
+        match self {
+            BinningArg::Projected => Binning::ProjectedNormals,
+            BinningArg::Spherical => Binning::Spherical,
+            BinningArg::Lambert => Binning::LambertEqualArea,
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum Intensity {
     Species,
@@ -166,6 +191,7 @@ pub fn run(args: Args) -> Result<()> {
             Mode::Sndf => RenderMode::Sndf {
                 iterations: args.iterations,
                 bins: args.bins,
+                binning: args.binning.binning(),
             },
         },
         exposure: args.exposure,

@@ -25,9 +25,12 @@ pub struct Args {
     /// Jittered rays per pixel.
     #[arg(long, default_value_t = 64)]
     pub iterations: u32,
-    /// Bins per axis of the projected normal disk.
+    /// Bins per axis of the normal parametrisation.
     #[arg(long, default_value_t = 8)]
     pub bins: u32,
+    /// How normals are binned.
+    #[arg(long, value_enum, default_value = "projected")]
+    pub binning: super::render::BinningArg,
     /// Largest on-screen size, in pixels, of a cluster drawn as one sphere.
     #[arg(long, default_value_t = 1.0)]
     pub screen_error: f32,
@@ -46,6 +49,7 @@ pub fn run(args: Args) -> Result<()> {
         mode: RenderMode::Sndf {
             iterations: args.iterations,
             bins: args.bins,
+            binning: args.binning.binning(),
         },
         ..Default::default()
     };

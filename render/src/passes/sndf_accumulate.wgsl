@@ -1,7 +1,10 @@
 // S-NDF accumulation (Ibrahim et al. 2017, section 4): after each sampling iteration has
 // drawn the nearest hit's view-space normal and albedo into a G-buffer (one jittered ray
-// per texel), every texel adds that sample to its histogram over the projected normal
-// disk: bins x bins "projected normals" cells of (n.x, n.y) in [-1, 1]^2. Each bin keeps
+// per texel), every texel adds that sample to its histogram over the normals: bins x bins
+// cells of one of three parametrisations (binning 0: projected normals (n.x, n.y) in
+// [-1, 1]^2; 1: spherical coordinates, azimuth and polar angle over the hemisphere facing
+// the viewer; 2: Lambert azimuthal equal-area about the view axis, the hemisphere onto
+// the unit disk). Each bin keeps
 // the sum of the albedos that landed in it (rgb) and their count (a): colour-weighted
 // sums stay linear under averaging, so per-particle colours shade exactly. A texel whose
 // ray hit nothing adds nothing; its coverage is the total count over the iterations.
@@ -12,13 +15,27 @@ struct Params {
     width: u32,
     height: u32,
     bins: u32,
-    pad: u32,
+    binning: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var normals: texture_2d<f32>;
 @group(0) @binding(2) var albedos: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> hist: array<vec4<f32>>;
+
+// The normal's cell coordinates in [0, 1]^2 (clamped by the caller).
+fn bin_coords(n: vec3<f32>) -> vec2<f32> {
+    if params.binning == 1u {
+        let phi = atan2(n.y, n.x);
+        let theta = acos(clamp(n.z, -1.0, 1.0));
+        return vec2<f32>(phi / 6.28318531 + 0.5, theta / 1.57079633);
+    }
+    if params.binning == 2u {
+        let k = sqrt(2.0 / max(1.0 + n.z, 1e-6)) / 1.41421356;
+        return (n.xy * k + 1.0) * 0.5;
+    }
+    return (n.xy + 1.0) * 0.5;
+}
 
 @compute @workgroup_size(8, 8)
 fn accumulate(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -32,8 +49,9 @@ fn accumulate(@builtin(global_invocation_id) id: vec3<u32>) {
     let a = textureLoad(albedos, vec2<i32>(id.xy), 0);
     let b = params.bins;
     let fb = f32(b);
-    let bx = min(u32(clamp((n.x + 1.0) * 0.5, 0.0, 1.0) * fb), b - 1u);
-    let by = min(u32(clamp((n.y + 1.0) * 0.5, 0.0, 1.0) * fb), b - 1u);
+    let c = clamp(bin_coords(n.xyz), vec2<f32>(0.0), vec2<f32>(1.0));
+    let bx = min(u32(c.x * fb), b - 1u);
+    let by = min(u32(c.y * fb), b - 1u);
     let i = (id.y * params.width + id.x) * b * b + by * b + bx;
     hist[i] = hist[i] + vec4<f32>(a.xyz, 1.0);
 }
