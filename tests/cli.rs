@@ -668,6 +668,30 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     assert_eq!((w, h), (48, 32));
     let (_, _, before) = read_png(&shaded);
     assert_ne!(px.len(), before.len());
+    // The explorer pattern and an environment map, also without the particles.
+    let explored = dir.path().join("explored.png");
+    ok(&["shade", s(&sndf), "-o", s(&explored), "--explorer", "6"]);
+    assert_ne!(read_png(&explored).2, read_png(&shaded).2);
+    let env = dir.path().join("env.png");
+    let mut sky = mdlod_render::RgbaImage::new(8, 4);
+    for y in 0..4 {
+        for x in 0..8 {
+            sky.set_pixel(
+                x,
+                y,
+                if y < 2 {
+                    [255, 220, 160, 255]
+                } else {
+                    [30, 60, 140, 255]
+                },
+            );
+        }
+    }
+    sky.save_png(&env).unwrap();
+    let lit = dir.path().join("env-lit.png");
+    let out = ok(&["shade", s(&sndf), "-o", s(&lit), "--envmap", s(&env)]);
+    assert!(out.contains("0 light(s)"), "{out}");
+    assert_ne!(read_png(&lit).2, read_png(&shaded).2);
     // A damaged file is refused, naming it.
     let mut bytes = std::fs::read(&sndf).unwrap();
     let last = bytes.len() - 3;

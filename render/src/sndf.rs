@@ -308,7 +308,8 @@ pub fn bin_of(n: Vec3, bins: u32, binning: Binning) -> (u32, u32) {
 
 /// The lights and material S-NDFs are shaded with: any number of coloured directional
 /// lights (directions towards the light, in view space), ambient light, Lambert and an
-/// optional Blinn-Phong highlight.
+/// optional Blinn-Phong highlight, an optional environment map, or instead of all
+/// lighting the normal-disk explorer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShadeLights {
     pub ambient: f32,
@@ -318,6 +319,120 @@ pub struct ShadeLights {
     /// 0 for Lambert only.
     pub specular: f32,
     pub shininess: f32,
+    /// Diffuse light from an environment (Lambert irradiance).
+    pub environment: Option<EnvironmentMap>,
+    /// Colour the normals by direction instead of lighting them.
+    pub explorer: Option<Explorer>,
+}
+
+/// An equirectangular environment in view space (a light probe that turns with the view,
+/// like a material capture): column `i` is the azimuth `atan2(d.x, d.z)` from −π to π,
+/// row `j` the elevation `asin(d.y)` from π/2 (top) to −π/2; linear RGB radiance.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvironmentMap {
+    pub width: u32,
+    pub height: u32,
+    pub radiance: Vec<[f32; 3]>,
+}
+
+impl EnvironmentMap {
+    /// From an sRGB image (e.g. a PNG).
+    pub fn from_image(image: &RgbaImage) -> EnvironmentMap {
+        EnvironmentMap {
+            width: image.width,
+            height: image.height,
+            radiance: image
+                .data
+                .chunks_exact(4)
+                .map(|p| [0, 1, 2].map(|k| srgb_to_linear(f32::from(p[k]) / 255.0)))
+                .collect(),
+        }
+    }
+
+    /// Directions and solid angles of the texels of a copy at most 32×16.
+    fn samples(&self) -> Vec<(Vec3, f32, [f32; 3])> {
+        let (w, h) = (self.width.clamp(1, 32), self.height.clamp(1, 16));
+        let mut out = Vec::with_capacity((w * h) as usize);
+        for j in 0..h {
+            let elevation =
+                std::f32::consts::FRAC_PI_2 - (j as f32 + 0.5) / h as f32 * std::f32::consts::PI;
+            let d_omega = (std::f32::consts::TAU / w as f32)
+                * (std::f32::consts::PI / h as f32)
+                * elevation.cos();
+            for i in 0..w {
+                let azimuth =
+                    (i as f32 + 0.5) / w as f32 * std::f32::consts::TAU - std::f32::consts::PI;
+                let d = Vec3::new(
+                    elevation.cos() * azimuth.sin(),
+                    elevation.sin(),
+                    elevation.cos() * azimuth.cos(),
+                );
+                // The mean radiance of the source texels this one covers.
+                let (x0, x1) = (
+                    i * self.width / w,
+                    ((i + 1) * self.width / w).max(i * self.width / w + 1),
+                );
+                let (y0, y1) = (
+                    j * self.height / h,
+                    ((j + 1) * self.height / h).max(j * self.height / h + 1),
+                );
+                let mut sum = [0f32; 3];
+                let mut n = 0.0;
+                for y in y0..y1.min(self.height) {
+                    for x in x0..x1.min(self.width) {
+                        let r = self.radiance[(y * self.width + x) as usize];
+                        for k in 0..3 {
+                            sum[k] += r[k];
+                        }
+                        n += 1.0;
+                    }
+                }
+                out.push((d, d_omega, sum.map(|v| v / f32::max(n, 1.0))));
+            }
+        }
+        out
+    }
+}
+
+/// The S-NDF explorer (it replaces the lighting and the albedos): a normal within
+/// `disk_deg` of the view axis gets `disk_colour`;
+/// the others get the colour of their azimuthal slice (`slices` equal slices, the first
+/// centred on +x), blended to black over `tolerance_deg` at the slice borders so the
+/// borders stand out.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Explorer {
+    pub disk_deg: f32,
+    pub slices: u32,
+    pub tolerance_deg: f32,
+    pub disk_colour: [f32; 3],
+    pub slice_colours: Vec<[f32; 3]>,
+}
+
+impl Explorer {
+    /// The pattern's colour for a view-space normal.
+    pub fn colour(&self, n: Vec3) -> [f32; 3] {
+        let from_axis = n.z.clamp(-1.0, 1.0).acos().to_degrees();
+        if from_axis <= self.disk_deg {
+            return self.disk_colour;
+        }
+        let slices = self.slices.max(1);
+        let width = 360.0 / slices as f32;
+        let azimuth = n.y.atan2(n.x).to_degrees().rem_euclid(360.0);
+        let shifted = (azimuth + width / 2.0).rem_euclid(360.0);
+        let k = ((shifted / width) as u32).min(slices - 1);
+        let to_border = (shifted - k as f32 * width).min((k + 1) as f32 * width - shifted);
+        let fade = if self.tolerance_deg > 0.0 {
+            (to_border / self.tolerance_deg).min(1.0)
+        } else {
+            1.0
+        };
+        let c = self
+            .slice_colours
+            .get(k as usize % self.slice_colours.len().max(1))
+            .copied()
+            .unwrap_or([1.0; 3]);
+        c.map(|v| v * fade)
+    }
 }
 
 impl From<&Lighting> for ShadeLights {
@@ -329,6 +444,8 @@ impl From<&Lighting> for ShadeLights {
             diffuse: l.diffuse,
             specular: l.specular,
             shininess: l.shininess,
+            environment: None,
+            explorer: None,
         }
     }
 }
@@ -351,9 +468,23 @@ pub fn bin_lighting(
             (l, (l + Vec3::Z).normalize_or(Vec3::Z), c)
         })
         .collect();
+    let environment = lights.environment.as_ref().map(EnvironmentMap::samples);
     let shade = |n: Vec3| {
+        if let Some(explorer) = &lights.explorer {
+            // The pattern's colour per sample, whatever the particle's albedo.
+            return ([0.0; 3], explorer.colour(n));
+        }
         let mut a = [lights.ambient; 3];
         let mut s = [0.0f32; 3];
+        if let Some(env) = &environment {
+            // Lambert irradiance over π: the mean radiance the hemisphere around n sends.
+            for (d, omega, r) in env {
+                let c = n.dot(*d).max(0.0) * omega / std::f32::consts::PI;
+                for k in 0..3 {
+                    a[k] += lights.diffuse * c * r[k];
+                }
+            }
+        }
         for (l, h, c) in &dirs {
             let ndl = n.dot(*l).max(0.0);
             let spec = if ndl > 0.0 && lights.specular > 0.0 {
@@ -635,6 +766,70 @@ mod tests {
                 .all(|&c| (c as f32 - mean).abs() < 0.01 * mean),
             "{counts:?}"
         );
+    }
+
+    #[test]
+    fn a_uniform_environment_lights_every_normal_alike_and_the_explorer_colours_by_direction() {
+        // Lambert irradiance of a constant environment L is L for every normal.
+        let env = EnvironmentMap {
+            width: 64,
+            height: 32,
+            radiance: vec![[0.5, 0.25, 1.0]; 64 * 32],
+        };
+        let lights = ShadeLights {
+            ambient: 0.0,
+            lights: vec![],
+            diffuse: 0.8,
+            specular: 0.0,
+            shininess: 1.0,
+            environment: Some(env),
+            explorer: None,
+        };
+        for binning in [Binning::ProjectedNormals, Binning::LambertEqualArea] {
+            for (a, s) in bin_lighting(8, binning, &lights) {
+                for (k, want) in [0.4f32, 0.2, 0.8].iter().enumerate() {
+                    assert!((a[k] - want).abs() < 0.02 * want, "{binning:?}: {a:?}");
+                }
+                assert_eq!(s, [0.0; 3]);
+            }
+        }
+        // The explorer: the central disk, the slices, dark borders.
+        let explorer = Explorer {
+            disk_deg: 20.0,
+            slices: 4,
+            tolerance_deg: 5.0,
+            disk_colour: [1.0, 1.0, 1.0],
+            slice_colours: vec![
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+                [1.0, 1.0, 0.0],
+            ],
+        };
+        let at = |from_axis: f32, azimuth: f32| {
+            let (t, p) = (from_axis.to_radians(), azimuth.to_radians());
+            explorer.colour(Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos()))
+        };
+        assert_eq!(at(10.0, 123.0), [1.0, 1.0, 1.0]);
+        assert_eq!(at(60.0, 0.0), [1.0, 0.0, 0.0]);
+        assert_eq!(at(60.0, 90.0), [0.0, 1.0, 0.0]);
+        assert_eq!(at(60.0, 270.0), [1.0, 1.0, 0.0]);
+        assert!(at(60.0, 45.0).iter().all(|&v| v < 0.05), "a border is dark");
+        // In the shading table the pattern replaces both the lighting and the albedos:
+        // the central bins (normals near the view axis) carry the disk's colour per sample.
+        let lights = ShadeLights {
+            environment: None,
+            explorer: Some(explorer),
+            ..lights
+        };
+        let table = bin_lighting(8, Binning::ProjectedNormals, &lights);
+        for (b, (a, s)) in table.iter().enumerate() {
+            assert_eq!(*a, [0.0; 3]);
+            if [27, 28, 35, 36].contains(&b) {
+                // (Their corners reach 20.7° from the axis, just past the disk.)
+                assert!(s.iter().all(|&v| v > 0.99), "bin {b}: {s:?}");
+            }
+        }
     }
 
     #[test]

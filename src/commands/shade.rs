@@ -41,6 +41,21 @@ pub struct Args {
     pub specular: f32,
     #[arg(long, default_value_t = 32.0)]
     pub exponent: f32,
+    /// An environment map (equirectangular PNG in view space, like a material capture):
+    /// adds its Lambert irradiance. Without --light, it is the only light besides the
+    /// ambient.
+    #[arg(long, value_name = "PNG")]
+    pub envmap: Option<PathBuf>,
+    /// Colour the normals instead of lighting them: the explorer pattern with this many
+    /// azimuthal slices around a central disk.
+    #[arg(long, value_name = "SLICES")]
+    pub explorer: Option<u32>,
+    /// Explorer: the central disk's angular radius, degrees.
+    #[arg(long, default_value_t = 20.0)]
+    pub explorer_disk: f32,
+    /// Explorer: the dark border width between slices, degrees.
+    #[arg(long, default_value_t = 3.0)]
+    pub explorer_tolerance: f32,
     /// S-MIP levels coarser than sampled: each halves the image (2×2 averages of S-NDFs).
     #[arg(long, default_value_t = 0)]
     pub level: u32,
@@ -82,9 +97,33 @@ pub fn run(args: Args) -> Result<()> {
         .iter()
         .map(|l| parse_light(l))
         .collect::<Result<Vec<_>>>()?;
-    if lights.is_empty() {
+    let environment = match &args.envmap {
+        Some(p) => Some(mdlod_render::sndf::EnvironmentMap::from_image(
+            &mdlod_render::RgbaImage::load_png(p)?,
+        )),
+        None => None,
+    };
+    if lights.is_empty() && environment.is_none() {
         lights.push((mdlod_render::Lighting::default().direction_view, [1.0; 3]));
     }
+    let explorer = match args.explorer {
+        Some(0) => bail!("--explorer needs at least one slice"),
+        Some(n) => Some(mdlod_render::sndf::Explorer {
+            disk_deg: args.explorer_disk,
+            slices: n,
+            tolerance_deg: args.explorer_tolerance,
+            disk_colour: [0.9, 0.9, 0.9],
+            slice_colours: vec![
+                [0.85, 0.1, 0.1],
+                [0.1, 0.6, 0.15],
+                [0.1, 0.25, 0.85],
+                [0.9, 0.7, 0.05],
+                [0.6, 0.1, 0.7],
+                [0.05, 0.65, 0.7],
+            ],
+        }),
+        None => None,
+    };
     if args.level > 16 {
         bail!("level {} (at most 16)", args.level);
     }
@@ -97,6 +136,8 @@ pub fn run(args: Args) -> Result<()> {
             Brdf::BlinnPhong => args.specular,
         },
         shininess: args.exponent,
+        environment,
+        explorer,
     };
     let (w, h) = mdlod_render::shade_file(
         &args.input,
