@@ -566,23 +566,46 @@ pub fn sample_to_file(
     Ok(report)
 }
 
-/// Shades a `.sndf` file under `lights` to a PNG, `level` S-MIP levels coarser than it
-/// was sampled (each halves the image); reads no particle data. Returns the image size.
+/// Which S-MIP level [`shade_file`] shades.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ShadeLevel {
+    /// This many levels coarser than sampled (each halves the image).
+    Level(u32),
+    /// Zoomed out by any factor ≥ 1, trilinear between levels.
+    ZoomOut(f32),
+}
+
+impl std::fmt::Display for ShadeLevel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ShadeLevel::Level(l) => write!(f, "level {l}"),
+            ShadeLevel::ZoomOut(z) => write!(f, "zoomed out {z}x"),
+        }
+    }
+}
+
+/// Shades a `.sndf` file under `lights` to a PNG at `level`; reads no particle data.
+/// Returns the image size.
 pub fn shade_file(
     input: &Path,
     out: &Path,
     lights: &sndf::ShadeLights,
     background_srgb: [f32; 3],
-    level: u32,
+    level: ShadeLevel,
 ) -> Result<(u32, u32), RenderError> {
     let data = mdlod_format::sndf::SndfData::load(input)?;
     let mut s = sndf::Sndf::from_data(&data);
-    for _ in 0..level {
-        s = s.downsample();
-    }
-    let image = s.shade_with(lights, background_srgb);
+    let image = match level {
+        ShadeLevel::Level(l) => {
+            for _ in 0..l {
+                s = s.downsample();
+            }
+            s.shade_with(lights, background_srgb)
+        }
+        ShadeLevel::ZoomOut(z) => s.shade_zoomed(lights, background_srgb, z),
+    };
     image.save_png(out)?;
-    Ok((s.width, s.height))
+    Ok((image.width, image.height))
 }
 
 #[cfg(test)]

@@ -593,6 +593,78 @@ impl Sndf {
         self.shade_with(&ShadeLights::from(lighting), background_srgb)
     }
 
+    /// Shades the view zoomed out by `zoom_out` (≥ 1) into an image `zoom_out` times
+    /// smaller, trilinearly: bilinear within the two S-MIP levels around `log2 zoom_out`,
+    /// linear between them, on linear colours (shading is linear in the S-NDFs).
+    pub fn shade_zoomed(
+        &self,
+        lights: &ShadeLights,
+        background_srgb: [f32; 3],
+        zoom_out: f32,
+    ) -> RgbaImage {
+        let zoom_out = if zoom_out.is_finite() {
+            zoom_out.max(1.0)
+        } else {
+            1.0
+        };
+        let f = zoom_out.log2();
+        let l0 = f.floor() as u32;
+        let t = f - l0 as f32;
+        let mut level = self.clone();
+        for _ in 0..l0 {
+            level = level.downsample();
+        }
+        let next = level.downsample();
+        let images = [
+            (
+                level.width,
+                level.height,
+                level.shade_linear(lights, background_srgb),
+            ),
+            (
+                next.width,
+                next.height,
+                next.shade_linear(lights, background_srgb),
+            ),
+        ];
+        let (w, h) = (
+            ((self.width as f32 / zoom_out).round() as u32).max(1),
+            ((self.height as f32 / zoom_out).round() as u32).max(1),
+        );
+        let bilinear = |(lw, lh, img): &(u32, u32, Vec<[f32; 3]>), x: f32, y: f32| {
+            let (x, y) = (
+                (x - 0.5).clamp(0.0, *lw as f32 - 1.0),
+                (y - 0.5).clamp(0.0, *lh as f32 - 1.0),
+            );
+            let (x0, y0) = (x.floor() as u32, y.floor() as u32);
+            let (x1, y1) = ((x0 + 1).min(lw - 1), (y0 + 1).min(lh - 1));
+            let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+            let at = |x: u32, y: u32| img[(y * lw + x) as usize];
+            let mut c = [0f32; 3];
+            for k in 0..3 {
+                let top = at(x0, y0)[k] * (1.0 - fx) + at(x1, y0)[k] * fx;
+                let bottom = at(x0, y1)[k] * (1.0 - fx) + at(x1, y1)[k] * fx;
+                c[k] = top * (1.0 - fy) + bottom * fy;
+            }
+            c
+        };
+        let mut image = RgbaImage::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                // The output pixel's centre in level-0 texels, then in each level's.
+                let (px, py) = ((x as f32 + 0.5) * zoom_out, (y as f32 + 0.5) * zoom_out);
+                let s0 = (1u32 << l0) as f32;
+                let a = bilinear(&images[0], px / s0, py / s0);
+                let b = bilinear(&images[1], px / (2.0 * s0), py / (2.0 * s0));
+                let c = [0, 1, 2].map(|k| a[k] * (1.0 - t) + b[k] * t);
+                let px = [c[0], c[1], c[2], 1.0]
+                    .map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);
+                image.set_pixel(x, y, px);
+            }
+        }
+        image
+    }
+
     /// The next coarser S-MIP level: each texel holds the sum of its 2×2 children's bins
     /// and four times the rays, i.e. their average S-NDF (a missing child at an odd edge
     /// counts as four rays that hit nothing).
@@ -830,6 +902,40 @@ mod tests {
                 assert!(s.iter().all(|&v| v > 0.99), "bin {b}: {s:?}");
             }
         }
+    }
+
+    #[test]
+    fn zooming_out_is_trilinear_between_levels() {
+        let s = random_sndf(16, 16, 4, 64);
+        let lights = ShadeLights::from(&Lighting::default());
+        let bg = [0.2; 3];
+        // At a power of two it is that level exactly.
+        for level in 0..3u32 {
+            let mut l = s.clone();
+            for _ in 0..level {
+                l = l.downsample();
+            }
+            assert_eq!(
+                s.shade_zoomed(&lights, bg, (1u32 << level) as f32),
+                l.shade_with(&lights, bg),
+                "level {level}"
+            );
+        }
+        // Between levels the colour lies between the two levels' (per pixel, in the
+        // blend of their bilinear samples): at 2^1.5 it is the 50/50 mix.
+        let mid = s.shade_zoomed(&lights, bg, 2f32.powf(1.5));
+        let (lo, hi) = (
+            s.shade_zoomed(&lights, bg, 2.0),
+            s.shade_zoomed(&lights, bg, 4.0),
+        );
+        assert_eq!((mid.width, mid.height), (6, 6));
+        let mean =
+            |i: &RgbaImage| i.data.iter().map(|&v| f64::from(v)).sum::<f64>() / i.data.len() as f64;
+        let (m, a, b) = (mean(&mid), mean(&lo), mean(&hi));
+        assert!(
+            m >= a.min(b) - 1.0 && m <= a.max(b) + 1.0,
+            "{m} not between {a} and {b}"
+        );
     }
 
     #[test]

@@ -57,8 +57,12 @@ pub struct Args {
     #[arg(long, default_value_t = 3.0)]
     pub explorer_tolerance: f32,
     /// S-MIP levels coarser than sampled: each halves the image (2×2 averages of S-NDFs).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, conflicts_with = "zoom_out")]
     pub level: u32,
+    /// Zoom out by this factor (≥ 1, any value): trilinear between the two S-MIP levels
+    /// around it; the image is that many times smaller.
+    #[arg(long, value_name = "FACTOR")]
+    pub zoom_out: Option<f32>,
     /// Background colour for rays that hit nothing.
     #[arg(long, default_value = "#ffffff")]
     pub background: String,
@@ -139,17 +143,21 @@ pub fn run(args: Args) -> Result<()> {
         environment,
         explorer,
     };
+    let level = match args.zoom_out {
+        Some(z) if !(z.is_finite() && z >= 1.0) => bail!("--zoom-out {z} (must be 1 or more)"),
+        Some(z) => mdlod_render::ShadeLevel::ZoomOut(z),
+        None => mdlod_render::ShadeLevel::Level(args.level),
+    };
     let (w, h) = mdlod_render::shade_file(
         &args.input,
         &args.output,
         &shade,
         parse_colour(&args.background)?,
-        args.level,
+        level,
     )?;
     println!(
-        "wrote {} ({w}x{h}, level {}) from {}, {} light(s), no particle data read",
+        "wrote {} ({w}x{h}, {level}) from {}, {} light(s), no particle data read",
         args.output.display(),
-        args.level,
         args.input.display(),
         shade.lights.len()
     );
