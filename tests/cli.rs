@@ -692,6 +692,40 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     let out = ok(&["shade", s(&sndf), "-o", s(&lit), "--envmap", s(&env)]);
     assert!(out.contains("0 light(s)"), "{out}");
     assert_ne!(read_png(&lit).2, read_png(&shaded).2);
+    // Sampled finer so that every atom gets enough samples; shown at the asked size.
+    let fine = dir.path().join("fine.sndf");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&mdlod),
+        "--radius",
+        "1=1.28",
+    ]);
+    let out = ok(&[
+        "sample",
+        s(&mdlod),
+        "-o",
+        s(&fine),
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--iterations",
+        "2",
+        "--min-samples",
+        "32",
+    ]);
+    assert!(
+        out.contains("sampled at") && out.contains("shown at level"),
+        "{out}"
+    );
+    let shown = dir.path().join("shown.png");
+    ok(&["shade", s(&fine), "-o", s(&shown)]);
+    assert_eq!(read_png(&shown).0, 40);
+    let finest = dir.path().join("finest.png");
+    ok(&["shade", s(&fine), "-o", s(&finest), "--level", "0"]);
+    assert!(read_png(&finest).0 > 40);
     // A damaged file is refused, naming it.
     let mut bytes = std::fs::read(&sndf).unwrap();
     let last = bytes.len() - 3;

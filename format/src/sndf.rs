@@ -51,6 +51,10 @@ pub struct SndfHeader {
     /// Where the particles came from (the `.mdlod` path), for the record.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub source: Option<String>,
+    /// The S-MIP level that shows the intended image size, when the S-NDFs were sampled
+    /// finer so that every sphere gets enough samples (absent: 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub display_level: Option<u32>,
 }
 
 /// Sampled S-NDFs: the header and, per texel, `bins²` records `[r, g, b, count]`.
@@ -101,6 +105,9 @@ fn check_header(path: &Path, h: &SndfHeader) -> Result<usize, FormatError> {
     }
     if h.rays == 0 {
         return Err(corrupt(path, "header", "zero rays per texel"));
+    }
+    if h.display_level.is_some_and(|l| l > 16) {
+        return Err(corrupt(path, "header", "display level above 16"));
     }
     records(h).ok_or_else(|| corrupt(path, "header", "size overflows"))
 }
@@ -249,6 +256,7 @@ mod tests {
             rays: 4,
             view: serde_json::json!({"azimuth_deg": 30.0}),
             source: Some("x.mdlod".into()),
+            display_level: Some(1),
         };
         let hist = (0..24)
             .map(|i| {

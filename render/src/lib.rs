@@ -519,6 +519,17 @@ pub fn sample_to_file(
     out: &Path,
     opts: &RenderOptions,
 ) -> Result<RenderReport, RenderError> {
+    sample_to_file_at(file, out, opts, None)
+}
+
+/// [`sample_to_file`] recording `display_level`: the S-MIP level that shows the intended
+/// image size when the S-NDFs were sampled finer (see [`level0_scale`]).
+pub fn sample_to_file_at(
+    file: &Path,
+    out: &Path,
+    opts: &RenderOptions,
+    display_level: Option<u32>,
+) -> Result<RenderReport, RenderError> {
     let RenderMode::Sndf {
         iterations,
         bins,
@@ -549,8 +560,9 @@ pub fn sample_to_file(
     )?;
     let view = serde_json::to_value(ViewFile::from_camera(&camera))
         .map_err(|e| RenderError::InvalidOptions(e.to_string()))?;
-    sndf.to_data(view, Some(file.display().to_string()))
-        .save(out)?;
+    let mut data = sndf.to_data(view, Some(file.display().to_string()));
+    data.header.display_level = display_level;
+    data.save(out)?;
     let frame = RenderedFrame {
         image: RgbaImage::new(1, 1),
         depth: None,
@@ -566,9 +578,43 @@ pub fn sample_to_file(
     Ok(report)
 }
 
+/// The S-MIP level-0 scale for sampling `file` as `opts` asks: the smallest power of two
+/// `s ≤ 16` such that sampling at `s` times the image size with `iterations` rays per
+/// texel gives every particle sphere at least `min_samples` samples (taking the smallest
+/// species radius at the data's far side). 1 when `min_samples` is 0.
+pub fn level0_scale(
+    file: &MdlodFile,
+    opts: &RenderOptions,
+    iterations: u32,
+    min_samples: u32,
+) -> Result<u32, RenderError> {
+    if min_samples == 0 {
+        return Ok(1);
+    }
+    let camera = camera_for(file, &opts.view, opts.width, opts.height)?;
+    let bounds = data_bounds(file);
+    let far = (camera.eye() - bounds.center()).dot(camera.back()) + bounds.radius();
+    let r_min = file
+        .metadata()
+        .species
+        .iter()
+        .map(|s| s.radius)
+        .fold(f32::INFINITY, f32::min);
+    let r_px = r_min * camera.pixels_per_world(far.max(camera.near), opts.height);
+    let per_sphere = std::f32::consts::PI * r_px * r_px * iterations.max(1) as f32;
+    let mut scale = 1u32;
+    while scale < 16 && per_sphere * ((scale * scale) as f32) < min_samples as f32 {
+        scale *= 2;
+    }
+    Ok(scale)
+}
+
 /// Which S-MIP level [`shade_file`] shades.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ShadeLevel {
+    /// The level the file says shows the intended image size (0 unless it was sampled
+    /// finer to give every sphere enough samples).
+    Display,
     /// This many levels coarser than sampled (each halves the image).
     Level(u32),
     /// Zoomed out by any factor ≥ 1, trilinear between levels.
@@ -578,6 +624,7 @@ pub enum ShadeLevel {
 impl std::fmt::Display for ShadeLevel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
+            ShadeLevel::Display => write!(f, "display level"),
             ShadeLevel::Level(l) => write!(f, "level {l}"),
             ShadeLevel::ZoomOut(z) => write!(f, "zoomed out {z}x"),
         }
@@ -596,13 +643,17 @@ pub fn shade_file(
     let data = mdlod_format::sndf::SndfData::load(input)?;
     let mut s = sndf::Sndf::from_data(&data);
     let image = match level {
-        ShadeLevel::Level(l) => {
-            for _ in 0..l {
+        ShadeLevel::ZoomOut(z) => s.shade_zoomed(lights, background_srgb, z),
+        ShadeLevel::Display | ShadeLevel::Level(_) => {
+            let levels = match level {
+                ShadeLevel::Level(l) => l,
+                _ => data.header.display_level.unwrap_or(0),
+            };
+            for _ in 0..levels {
                 s = s.downsample();
             }
             s.shade_with(lights, background_srgb)
         }
-        ShadeLevel::ZoomOut(z) => s.shade_zoomed(lights, background_srgb, z),
     };
     image.save_png(out)?;
     Ok((image.width, image.height))

@@ -704,6 +704,7 @@ impl Sndf {
                 rays: self.rays,
                 view,
                 source,
+                display_level: None,
             },
             hist: self.hist.clone(),
         }

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use mdlod_render::{sample_to_file, RenderMode, RenderOptions};
+use mdlod_render::{sample_to_file_at, RenderMode, RenderOptions};
 
 use super::render::ViewArgs;
 
@@ -31,6 +31,10 @@ pub struct Args {
     /// How normals are binned.
     #[arg(long, value_enum, default_value = "projected")]
     pub binning: super::render::BinningArg,
+    /// Sample finer than the image (up to 16× per axis) until every particle sphere gets
+    /// at least this many samples; `shade` then shows the image size by default.
+    #[arg(long, default_value_t = 0)]
+    pub min_samples: u32,
     /// Largest on-screen size, in pixels, of a cluster drawn as one sphere.
     #[arg(long, default_value_t = 1.0)]
     pub screen_error: f32,
@@ -53,7 +57,30 @@ pub fn run(args: Args) -> Result<()> {
         },
         ..Default::default()
     };
-    let r = sample_to_file(&args.file, &args.output, &opts)?;
+    let scale = mdlod_render::level0_scale(
+        &mdlod_format::MdlodFile::open(&args.file)?,
+        &opts,
+        args.iterations,
+        args.min_samples,
+    )?;
+    let opts = RenderOptions {
+        width: opts.width * scale,
+        height: opts.height * scale,
+        ..opts
+    };
+    let r = sample_to_file_at(
+        &args.file,
+        &args.output,
+        &opts,
+        (scale > 1).then(|| scale.trailing_zeros()),
+    )?;
+    if scale > 1 {
+        println!(
+            "  sampled at {scale}x the image size so that every sphere gets at least {} samples; shown at level {}",
+            args.min_samples,
+            scale.trailing_zeros()
+        );
+    }
     println!(
         "wrote {} ({}x{} texels, {}x{} bins, {} rays each) on {}: {} particles and {} cluster spheres, {:.0} ms",
         args.output.display(),

@@ -57,8 +57,10 @@ pub struct Args {
     #[arg(long, default_value_t = 3.0)]
     pub explorer_tolerance: f32,
     /// S-MIP levels coarser than sampled: each halves the image (2×2 averages of S-NDFs).
-    #[arg(long, default_value_t = 0, conflicts_with = "zoom_out")]
-    pub level: u32,
+    /// Default: the level the file was sampled for (0 unless `sample --min-samples`
+    /// sampled finer).
+    #[arg(long, conflicts_with = "zoom_out")]
+    pub level: Option<u32>,
     /// Zoom out by this factor (≥ 1, any value): trilinear between the two S-MIP levels
     /// around it; the image is that many times smaller.
     #[arg(long, value_name = "FACTOR")]
@@ -128,8 +130,8 @@ pub fn run(args: Args) -> Result<()> {
         }),
         None => None,
     };
-    if args.level > 16 {
-        bail!("level {} (at most 16)", args.level);
+    if args.level.is_some_and(|l| l > 16) {
+        bail!("level {:?} (at most 16)", args.level);
     }
     let shade = ShadeLights {
         ambient: args.ambient,
@@ -146,7 +148,10 @@ pub fn run(args: Args) -> Result<()> {
     let level = match args.zoom_out {
         Some(z) if !(z.is_finite() && z >= 1.0) => bail!("--zoom-out {z} (must be 1 or more)"),
         Some(z) => mdlod_render::ShadeLevel::ZoomOut(z),
-        None => mdlod_render::ShadeLevel::Level(args.level),
+        None => match args.level {
+            Some(l) => mdlod_render::ShadeLevel::Level(l),
+            None => mdlod_render::ShadeLevel::Display,
+        },
     };
     let (w, h) = mdlod_render::shade_file(
         &args.input,
