@@ -305,7 +305,8 @@ fn splat_table(renderer: &Renderer, adapter: &str, n: u64) {
     std::fs::write(&out, new).unwrap();
 }
 
-/// S-NDFs: one sampling iteration against one plain ray-casting sample, re-lighting
+/// S-NDFs (`MDLOD_SNDF_BINS` bins per axis, default 8): one sampling iteration against
+/// one plain ray-casting sample, re-lighting
 /// against re-sampling at 256 spp, and the S-NDF memory, at 1280×720 (halved until the
 /// histograms fit one buffer of the adapter). Writes the `<section>-sndf` section.
 fn sndf_table(renderer: &Renderer, adapter: &str, n: u64) {
@@ -315,7 +316,8 @@ fn sndf_table(renderer: &Renderer, adapter: &str, n: u64) {
     let max = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size);
-    let (mut w, mut h, bins, k) = (W, H, 8u32, 16u32);
+    let bins = env_list("MDLOD_SNDF_BINS", "8")[0] as u32;
+    let (mut w, mut h, k) = (W, H, 16u32);
     while u64::from(w) * u64::from(h) * u64::from(bins * bins) * 16 > max {
         w /= 2;
         h /= 2;

@@ -647,7 +647,11 @@ impl Renderer {
                 "{iterations} iterations and {bins} bins (need at least 1 iteration and 1 to 32 bins)"
             )));
         }
-        let hist_bytes = u64::from(width) * u64::from(height) * u64::from(bins * bins) * 16;
+        // In 8×8-texel blocks (see sndf_accumulate.wgsl), padded to whole blocks.
+        let hist_bytes = u64::from(width.div_ceil(8) * 8)
+            * u64::from(height.div_ceil(8) * 8)
+            * u64::from(bins * bins)
+            * 16;
         let limits = self.ctx.device.limits();
         if hist_bytes
             > limits
@@ -808,7 +812,7 @@ impl Renderer {
             enc.copy_buffer_to_buffer(&hist, 0, &read, 0, hist_bytes);
             queue.submit([enc.finish()]);
             let bytes = self.read_buffer(&read)?;
-            let hist: Vec<[f32; 4]> = bytes
+            let blocked: Vec<[f32; 4]> = bytes
                 .chunks_exact(16)
                 .map(|c| {
                     [0, 1, 2, 3].map(|k| {
@@ -816,6 +820,17 @@ impl Renderer {
                     })
                 })
                 .collect();
+            // From 8×8-texel blocks to rows.
+            let b2 = (bins * bins) as usize;
+            let blocks_x = width.div_ceil(8) as usize;
+            let mut hist = Vec::with_capacity(width as usize * height as usize * b2);
+            for y in 0..height as usize {
+                for x in 0..width as usize {
+                    let block = (y / 8) * blocks_x + x / 8;
+                    let at = (block * 64 + (y % 8) * 8 + x % 8) * b2;
+                    hist.extend_from_slice(&blocked[at..at + b2]);
+                }
+            }
             Ok(Sndf {
                 width,
                 height,

@@ -52,6 +52,12 @@ fn accumulate(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = clamp(bin_coords(n.xyz), vec2<f32>(0.0), vec2<f32>(1.0));
     let bx = min(u32(c.x * fb), b - 1u);
     let by = min(u32(c.y * fb), b - 1u);
-    let i = (id.y * params.width + id.x) * b * b + by * b + bx;
+    // Blocked layout: the 8×8 texels of a workgroup keep their bins in one contiguous
+    // stretch (64 KiB at 8×8 bins), so a pass over a large image does not scatter over
+    // the whole buffer; the host reorders to rows on readback.
+    let blocks_x = (params.width + 7u) / 8u;
+    let block = (id.y / 8u) * blocks_x + id.x / 8u;
+    let local = (id.y % 8u) * 8u + id.x % 8u;
+    let i = (block * 64u + local) * b * b + by * b + bx;
     hist[i] = hist[i] + vec4<f32>(a.xyz, 1.0);
 }
