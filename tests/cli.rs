@@ -620,7 +620,16 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     let sndf = dir.path().join("view.sndf");
     let size = ["--width", "96", "--height", "64"];
     let sampled = ok(&[
-        &["sample", s(&mdlod), "-o", s(&sndf), "--iterations", "8"][..],
+        &[
+            "sample",
+            s(&mdlod),
+            "-o",
+            s(&sndf),
+            "--iterations",
+            "8",
+            "--binning",
+            "lambert",
+        ][..],
         &size,
     ]
     .concat());
@@ -636,6 +645,8 @@ fn sndfs_sampled_once_shade_without_the_particles() {
             "sndf",
             "--iterations",
             "8",
+            "--binning",
+            "lambert",
         ][..],
         &size,
     ]
@@ -692,6 +703,11 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     let out = ok(&["shade", s(&sndf), "-o", s(&lit), "--envmap", s(&env)]);
     assert!(out.contains("0 light(s)"), "{out}");
     assert_ne!(read_png(&lit).2, read_png(&shaded).2);
+    let info = ok(&["info", s(&sndf)]);
+    assert!(
+        info.contains("96x64 texels, 8x8 lambert-equal-area bins, 8 rays each"),
+        "{info}"
+    );
     // Sampled finer so that every atom gets enough samples; shown at the asked size.
     let fine = dir.path().join("fine.sndf");
     ok(&[

@@ -93,13 +93,14 @@ fn check_header(path: &Path, h: &SndfHeader) -> Result<usize, FormatError> {
             format!("{} bins (1 to {MAX_BINS})", h.bins),
         ));
     }
-    if h.binning != "projected-normals" {
+    if !BINNINGS.contains(&h.binning.as_str()) {
         return Err(corrupt(
             path,
             "header",
             format!(
-                "binning `{}` (this reader knows `projected-normals`)",
-                h.binning
+                "binning `{}` (this reader knows {})",
+                h.binning,
+                BINNINGS.join(", ")
             ),
         ));
     }

@@ -7,19 +7,22 @@
 //!    (the same Halton sub-pixel pattern as supersampling), then a compute pass
 //!    (`sndf_accumulate.wgsl`) adds the sample to the texel's histogram over the normals:
 //!    `bins × bins` cells of a [`Binning`] (projected normals `(n.x, n.y)` in `[−1, 1]²`
-//!    by default; spherical coordinates; Lambert azimuthal equal-area). A bin keeps the sum of the albedos that fell into it and
-//!    their count, so per-particle colours shade exactly; rays that hit nothing add
-//!    nothing, and `1 − Σ counts / rays` is the texel's background share.
+//!    by default; spherical coordinates; Lambert azimuthal equal-area). A bin keeps the
+//!    sum of the albedos that fell into it and their count, so per-particle colours
+//!    shade exactly; rays that hit nothing add nothing, and `1 − Σ counts / rays` is the
+//!    texel's background share. The GPU buffer holds the histograms in 8×8-texel blocks
+//!    (a workgroup's writes stay together); they come back in rows.
 //! 2. Shading ([`Sndf::shade`]) needs no particle: per bin, the lighting averaged over
 //!    the bin's part of the normal disk (the discrete form of Eq. 12-14), split into the
 //!    part that multiplies the albedo (ambient + Lambert) and the part that does not
 //!    (Blinn-Phong highlight); a texel's colour is the bins' colour sums and counts
 //!    weighted by those, over the rays, plus the background's share.
-//!
 //! 3. Coarser S-MIP levels ([`Sndf::downsample`]) add 2×2 blocks of texels' bins.
 //!
-//! What is not here yet: the virtual S-MIP's tiles and tile pool (the whole image's
-//! S-NDFs are in memory), environment maps and the normal-disk explorer.
+//! Shading also takes an environment map and the normal-disk explorer
+//! ([`ShadeLights`]), and any zoom-out factor, trilinear between levels
+//! ([`Sndf::shade_zoomed`]). What is not here yet: the virtual S-MIP's tiles and tile
+//! pool (the whole image's S-NDFs are in memory) and a painted transfer function.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;

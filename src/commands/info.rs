@@ -6,7 +6,8 @@ use anyhow::Result;
 use mdlod_format::MdlodFile;
 use serde_json::json;
 
-/// Show what a .mdlod file holds: particles, levels, species, box, build parameters.
+/// Show what a .mdlod file holds (particles, levels, species, box, build parameters), or
+/// a .sndf file (texels, bins, rays, the camera).
 #[derive(clap::Args)]
 #[command(after_help = "Example:\n  mdlod info frame.mdlod --json | jq .particles")]
 pub struct Args {
@@ -16,7 +17,57 @@ pub struct Args {
     pub json: bool,
 }
 
+/// A `.sndf` file's header.
+fn sndf_info(args: &Args) -> Result<()> {
+    let d = mdlod_format::sndf::SndfData::load(&args.file)?;
+    let h = &d.header;
+    let bytes = d.hist.len() * 16;
+    if args.json {
+        let v = json!({
+            "file": args.file.display().to_string(),
+            "kind": "sndf",
+            "width": h.width,
+            "height": h.height,
+            "bins": h.bins,
+            "binning": h.binning,
+            "rays": h.rays,
+            "display_level": h.display_level.unwrap_or(0),
+            "source": h.source,
+            "view": h.view,
+            "data_bytes": bytes,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("{}", args.file.display());
+    println!(
+        "  S-NDFs       {}x{} texels, {}x{} {} bins, {} rays each, {:.1} MiB",
+        h.width,
+        h.height,
+        h.bins,
+        h.bins,
+        h.binning,
+        h.rays,
+        bytes as f64 / (1 << 20) as f64
+    );
+    println!("  shown at     level {}", h.display_level.unwrap_or(0));
+    if let Some(s) = &h.source {
+        println!("  sampled from {s}");
+    }
+    println!("  view         {}", h.view);
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<()> {
+    // The first 8 bytes tell an S-NDF file from a .mdlod one.
+    let is_sndf = std::fs::File::open(&args.file).ok().is_some_and(|mut f| {
+        let mut magic = [0u8; 8];
+        std::io::Read::read_exact(&mut f, &mut magic).is_ok()
+            && magic == mdlod_format::sndf::SNDF_MAGIC
+    });
+    if is_sndf {
+        return sndf_info(&args);
+    }
     let f = MdlodFile::open(&args.file)?;
     let m = f.metadata();
     let levels: Vec<u64> = f.levels().iter().map(|l| l.point_count).collect();
