@@ -264,7 +264,9 @@ fn splat_table(renderer: &Renderer, adapter: &str, n: u64) {
             },
             error_px,
             budget: u64::MAX,
-            mode: mdlod_render::RenderMode::Splat,
+            mode: mdlod_render::RenderMode::Splat {
+                by_attribute: false,
+            },
             ..Default::default()
         };
         let mut times = vec![];

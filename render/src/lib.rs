@@ -110,9 +110,6 @@ pub struct RenderOptions {
     /// Splat mode: tone-mapping exposure (light added per unit of flux); `None` picks one
     /// from the image.
     pub exposure: Option<f32>,
-    /// Splat mode: each point's intensity is its scalar attribute (mapped from the
-    /// attribute's range to [0, 1], grey) instead of its species colour.
-    pub splat_by_attribute: bool,
 }
 
 /// How points are drawn.
@@ -122,8 +119,10 @@ pub enum RenderMode {
     #[default]
     Spheres,
     /// Additive, flux-preserving splats accumulated in floating point and tone mapped
-    /// (SPH, astrophysics; see [`passes::splat`]).
-    Splat,
+    /// (SPH, astrophysics; see [`passes::splat`]); `by_attribute`: each point's light is
+    /// its scalar attribute (mapped from the attribute's range to [0, 1], grey) instead of
+    /// its species colour.
+    Splat { by_attribute: bool },
     /// Translucent splats sorted back to front and composited with the over operator,
     /// for data that needs depth order; `opacity` is the splats' peak alpha.
     SplatOver { opacity: f32 },
@@ -152,7 +151,6 @@ impl Default for RenderOptions {
             occlusion: true,
             mode: RenderMode::Spheres,
             exposure: None,
-            splat_by_attribute: false,
         }
     }
 }
@@ -289,8 +287,10 @@ fn frame_setup(
         error_px: opts.error_px,
         budget_points: opts.budget.min(renderer.max_points()).max(1),
         occlusion: if !opts.occlusion
-            || matches!(opts.mode, RenderMode::Splat | RenderMode::SplatOver { .. })
-        {
+            || matches!(
+                opts.mode,
+                RenderMode::Splat { .. } | RenderMode::SplatOver { .. }
+            ) {
             // Splats hide nothing.
             OcclusionMode::Off
         } else if matches!(opts.mode, RenderMode::Sndf { .. }) {
@@ -424,7 +424,7 @@ pub fn render_image(
                     opts.height,
                     SplatBlend::Additive {
                         intensity: 1.0,
-                        by_attribute: opts.splat_by_attribute,
+                        by_attribute: matches!(opts.mode, RenderMode::Splat { by_attribute: true }),
                     },
                 )?;
                 let (image, exposure) = splats.tone_map(opts.exposure, opts.background);

@@ -240,6 +240,15 @@ impl FrameTimer {
         }
     }
 
+    /// The same for a compute pass.
+    fn compute_writes(&self, begin: bool, end: bool) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.set,
+            beginning_of_pass_write_index: begin.then_some(0),
+            end_of_pass_write_index: end.then_some(1),
+        }
+    }
+
     fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
         enc.resolve_query_set(&self.set, 0..2, &self.resolve, 0);
         enc.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 16);
@@ -272,6 +281,25 @@ fn copy_to_buffer(
         },
         size,
     );
+}
+
+/// A buffer to read GPU results back into.
+fn readback_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// The first `row_bytes` of each of `rows` rows of `padded` bytes each.
+fn unpad_rows(bytes: &[u8], padded: u32, row_bytes: usize, rows: u32) -> Vec<u8> {
+    let mut out = Vec::with_capacity(row_bytes * rows as usize);
+    for y in 0..rows as usize {
+        out.extend_from_slice(&bytes[y * padded as usize..][..row_bytes]);
+    }
+    out
 }
 
 fn padded_row(bytes_per_row: u32) -> u32 {
@@ -430,19 +458,17 @@ impl Renderer {
         let resolve_bg = self.accumulate.bind(device, &accum_v, 1.0);
 
         let colour_row = padded_row(w * 4);
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("colour readback"),
-            size: u64::from(colour_row) * u64::from(h),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let readback = readback_buffer(
+            device,
+            "colour readback",
+            u64::from(colour_row) * u64::from(h),
+        );
         let depth_readback = settings.read_depth.then(|| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("depth readback"),
-                size: u64::from(colour_row) * u64::from(h),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
+            readback_buffer(
+                device,
+                "depth readback",
+                u64::from(colour_row) * u64::from(h),
+            )
         });
         let timing = self.frame_timer();
 
@@ -571,24 +597,15 @@ impl Renderer {
         }
 
         let bytes = self.read_buffer(&readback)?;
-        let mut image = RgbaImage::new(w, h);
         let row = (w * 4) as usize;
-        for y in 0..h as usize {
-            let src = &bytes[y * colour_row as usize..][..row];
-            image.data[y * row..(y + 1) * row].copy_from_slice(src);
-        }
+        let mut image = RgbaImage::new(w, h);
+        image.data = unpad_rows(&bytes, colour_row, row, h);
         let depth = match &depth_readback {
             Some(buf) => {
                 let bytes = self.read_buffer(buf)?;
-                let mut d = Vec::with_capacity(w as usize * h as usize);
-                for y in 0..h as usize {
-                    let src = &bytes[y * colour_row as usize..][..row];
-                    d.extend(
-                        src.chunks_exact(4)
-                            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])),
-                    );
-                }
-                Some(d)
+                Some(bytemuck::pod_collect_to_vec(&unpad_rows(
+                    &bytes, colour_row, row, h,
+                )))
             }
             None => None,
         };
@@ -781,13 +798,10 @@ impl Renderer {
                     let last = s + 1 == iterations;
                     let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                         label: Some("sndf accumulate"),
-                        timestamp_writes: timing.as_ref().filter(|_| last).map(|t| {
-                            wgpu::ComputePassTimestampWrites {
-                                query_set: &t.set,
-                                beginning_of_pass_write_index: None,
-                                end_of_pass_write_index: Some(1),
-                            }
-                        }),
+                        timestamp_writes: timing
+                            .as_ref()
+                            .filter(|_| last)
+                            .map(|t| t.compute_writes(false, true)),
                     });
                     pass.set_pipeline(&self.sndf.pipeline);
                     pass.set_bind_group(0, &bind, &[]);
@@ -802,24 +816,12 @@ impl Renderer {
             }
             let gpu_time = self.gpu_time(timing.as_ref())?;
             self.count_samples(buffers.points, iterations);
-            let read = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("sndf readback"),
-                size: hist_bytes,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let read = readback_buffer(device, "sndf readback", hist_bytes);
             let mut enc = device.create_command_encoder(&Default::default());
             enc.copy_buffer_to_buffer(&hist, 0, &read, 0, hist_bytes);
             queue.submit([enc.finish()]);
             let bytes = self.read_buffer(&read)?;
-            let blocked: Vec<[f32; 4]> = bytes
-                .chunks_exact(16)
-                .map(|c| {
-                    [0, 1, 2, 3].map(|k| {
-                        f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]])
-                    })
-                })
-                .collect();
+            let blocked: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
             // From 8×8-texel blocks to rows.
             let b2 = (bins * bins) as usize;
             let blocks_x = width.div_ceil(8) as usize;
@@ -904,12 +906,7 @@ impl Renderer {
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             });
-            let read = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("shaded pixels readback"),
-                size: out_bytes.max(4),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let read = readback_buffer(device, "shaded pixels readback", out_bytes.max(4));
             let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("sndf shade"),
                 layout: &self.sndf_shade.layout,
@@ -937,11 +934,7 @@ impl Renderer {
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("sndf shade"),
-                    timestamp_writes: timing.as_ref().map(|t| wgpu::ComputePassTimestampWrites {
-                        query_set: &t.set,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: Some(1),
-                    }),
+                    timestamp_writes: timing.as_ref().map(|t| t.compute_writes(true, true)),
                 });
                 pass.set_pipeline(&self.sndf_shade.pipeline);
                 pass.set_bind_group(0, &bind, &[]);
@@ -1031,12 +1024,8 @@ impl Renderer {
             });
             let view = target.create_view(&Default::default());
             let row = padded_row(width * 16);
-            let readback = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("splat readback"),
-                size: u64::from(row) * u64::from(height),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let readback =
+                readback_buffer(device, "splat readback", u64::from(row) * u64::from(height));
             let timing = self.frame_timer();
             let mut enc = device.create_command_encoder(&Default::default());
             {
@@ -1075,15 +1064,10 @@ impl Renderer {
             }
             queue.submit([enc.finish()]);
             let bytes = self.read_buffer(&readback)?;
-            let mut hdr = Vec::with_capacity(width as usize * height as usize);
-            for y in 0..height as usize {
-                let src = &bytes[y * row as usize..][..width as usize * 16];
-                hdr.extend(src.chunks_exact(16).map(|c| {
-                    [0, 1, 2, 3].map(|k| {
-                        f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]])
-                    })
-                }));
-            }
+            let hdr: Vec<[f32; 4]> = unpad_rows(&bytes, row, width as usize * 16, height)
+                .chunks_exact(16)
+                .map(bytemuck::pod_read_unaligned)
+                .collect();
             let gpu_time = self.gpu_time(timing.as_ref())?;
             self.count_samples(buffers.points, 1);
             Ok(SplatFrame {
@@ -1112,12 +1096,7 @@ impl Renderer {
                 usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             }),
-            read: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("timestamps readback"),
-                size: 16,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
+            read: readback_buffer(device, "timestamps readback", 16),
         })
     }
 

@@ -35,7 +35,7 @@ use mdlod_format::{FormatError, MdlodFile};
 use crate::camera::Camera;
 use crate::error::RenderError;
 use crate::passes::sphere_raycast::{
-    push_bytes_as_words, RangeGpu, SphereInputs, KIND_NODE, KIND_PARTICLE,
+    push_bytes_as_words, storage_buffer, RangeGpu, SphereInputs, KIND_NODE, KIND_PARTICLE,
 };
 use crate::renderer::{FrameSettings, RenderedFrame, Renderer};
 use crate::traversal::{
@@ -424,15 +424,7 @@ impl<'r> StreamingRenderer<'r> {
 
         let (ranges, point_range) = self.ranges_of(&draw)?;
         let device = &self.renderer.ctx.device;
-        use wgpu::util::DeviceExt;
-        let storage = |label: &str, bytes: &[u8]| {
-            let zero = [0u8; 16];
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents: if bytes.is_empty() { &zero } else { bytes },
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
+        let storage = |label: &str, bytes: &[u8]| storage_buffer(device, label, bytes);
         let ranges_buf = storage("ranges", bytemuck::cast_slice(&ranges));
         let point_range_buf = storage("point_range", bytemuck::cast_slice(&point_range));
         let species_count = self.file.metadata().species.len() as u32;

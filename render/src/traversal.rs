@@ -541,7 +541,7 @@ fn front_to_back(
 fn emit(
     file: &MdlodFile,
     proj: &Projector,
-    marks: Marks,
+    mut marks: Marks,
     achieved: f32,
     mut list: DrawList,
 ) -> DrawList {
@@ -563,7 +563,7 @@ fn emit(
         list.error_px = achieved;
         return list;
     }
-    let mut open = marks.open.clone();
+    let mut open = std::mem::take(&mut marks.open);
     open.sort_unstable();
     for &id in &open {
         let n = &nodes[id as usize];

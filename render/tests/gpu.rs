@@ -46,6 +46,26 @@ fn opts(width: u32, height: u32) -> RenderOptions {
     }
 }
 
+/// The cut of `f` for `camera` at `viewport` and `error_px`, with no budget.
+fn cut(
+    f: &MdlodFile,
+    camera: &Camera,
+    viewport: [u32; 2],
+    error_px: f32,
+    occlusion: OcclusionMode,
+) -> mdlod_render::DrawList {
+    traverse(
+        camera,
+        f,
+        &TraversalSettings {
+            viewport,
+            error_px,
+            budget_points: u64::MAX,
+            occlusion,
+        },
+    )
+}
+
 /// Renders every particle of `f` with `camera` (near/far refitted), with depth.
 fn render_all(f: &MdlodFile, camera: &Camera, w: u32, h: u32, spp: u32) -> RenderedFrame {
     let mut camera = camera.clone();
@@ -762,16 +782,7 @@ fn splats_match_the_cpu_reference_and_keep_the_flux_at_every_level() {
         // (Coarser still, a handful of splats wider than the image would lose flux off
         // its edges.)
         for error_px in [0.0, 6.0, 24.0] {
-            let draw = traverse(
-                &camera,
-                &f,
-                &TraversalSettings {
-                    viewport: [w, h],
-                    error_px,
-                    budget_points: u64::MAX,
-                    occlusion: OcclusionMode::Off,
-                },
-            );
+            let draw = cut(&f, &camera, [w, h], error_px, OcclusionMode::Off);
             let gpu = renderer()
                 .render_splats(
                     &f,
@@ -836,7 +847,9 @@ fn splats_match_the_cpu_reference_and_keep_the_flux_at_every_level() {
 fn splat_mode_renders_tone_mapped_and_refuses_streaming() {
     let (_d, _p, f) = make_file(&cloud_frame(2000, 3), small_build(), &[]);
     let mut o = opts(64, 48);
-    o.mode = mdlod_render::RenderMode::Splat;
+    o.mode = mdlod_render::RenderMode::Splat {
+        by_attribute: false,
+    };
     o.error_px = 4.0;
     let (img, report) = render_image(renderer(), &f, &o).unwrap();
     let exposure = report.exposure.unwrap();
@@ -870,16 +883,7 @@ fn sorted_over_blending_matches_a_cpu_compositor() {
     let clip_from_world = clip_from_view * camera.view_from_world();
     let opacity = 0.7;
     for error_px in [0.0, 8.0] {
-        let draw = traverse(
-            &camera,
-            &f,
-            &TraversalSettings {
-                viewport: [w, h],
-                error_px,
-                budget_points: u64::MAX,
-                occlusion: OcclusionMode::Off,
-            },
-        );
+        let draw = cut(&f, &camera, [w, h], error_px, OcclusionMode::Off);
         let sorted = sort_back_to_front(&f, &draw, &camera);
         assert_eq!(sorted.points, draw.points);
         // Back to front.
@@ -997,16 +1001,7 @@ fn splats_by_attribute_keep_the_attribute_flux_at_every_level() {
         by_attribute: true,
     };
     for error_px in [0.0, 6.0, 24.0] {
-        let draw = traverse(
-            &camera,
-            &f,
-            &TraversalSettings {
-                viewport: [w, h],
-                error_px,
-                budget_points: u64::MAX,
-                occlusion: OcclusionMode::Off,
-            },
-        );
+        let draw = cut(&f, &camera, [w, h], error_px, OcclusionMode::Off);
         let s = renderer()
             .render_splats(&f, &camera, &draw, w, h, blend)
             .unwrap();
@@ -1055,16 +1050,7 @@ fn a_sphere_seen_orthographically_has_a_uniform_sndf_over_the_normal_disk() {
         &[("X", 2.0)],
     );
     let cam = ortho_camera(Vec3::new(0.0, 0.0, 0.0), 2.5);
-    let draw = traverse(
-        &cam,
-        &f,
-        &TraversalSettings {
-            viewport: [64, 64],
-            error_px: 0.0,
-            budget_points: u64::MAX,
-            occlusion: OcclusionMode::Off,
-        },
-    );
+    let draw = cut(&f, &cam, [64, 64], 0.0, OcclusionMode::Off);
     let bins = 8u32;
     let sndf = renderer()
         .sample_sndf(
@@ -1126,16 +1112,7 @@ fn relighting_sndfs_matches_supersampling_under_the_new_light_and_draws_no_parti
         projection: Projection::Orthographic,
     };
     let camera = camera_for(&f, &o.view, w, h).unwrap();
-    let draw = traverse(
-        &camera,
-        &f,
-        &TraversalSettings {
-            viewport: [w, h],
-            error_px: 0.0,
-            budget_points: u64::MAX,
-            occlusion: OcclusionMode::WholePixels,
-        },
-    );
+    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
     use mdlod_render::sndf::Binning;
     for binning in [
         Binning::ProjectedNormals,
@@ -1235,16 +1212,7 @@ fn zoomed_out_sndfs_beat_supersampling_with_as_many_iterations() {
         projection: Projection::Orthographic,
     };
     let camera = camera_for(&f, &view, base, base).unwrap();
-    let draw = traverse(
-        &camera,
-        &f,
-        &TraversalSettings {
-            viewport: [base, base],
-            error_px: 0.0,
-            budget_points: u64::MAX,
-            occlusion: OcclusionMode::Off,
-        },
-    );
+    let draw = cut(&f, &camera, [base, base], 0.0, OcclusionMode::Off);
     let mut sndf = renderer()
         .sample_sndf(
             &f,

@@ -184,7 +184,9 @@ pub fn run(args: Args) -> Result<()> {
         }))?,
         mode: match args.mode {
             Mode::Spheres => RenderMode::Spheres,
-            Mode::Splat => RenderMode::Splat,
+            Mode::Splat => RenderMode::Splat {
+                by_attribute: matches!(args.intensity, Intensity::Attribute),
+            },
             Mode::SplatOver => RenderMode::SplatOver {
                 opacity: args.opacity,
             },
@@ -195,7 +197,6 @@ pub fn run(args: Args) -> Result<()> {
             },
         },
         exposure: args.exposure,
-        splat_by_attribute: matches!(args.intensity, Intensity::Attribute),
         gpu_memory: args.gpu_memory,
         occlusion: !args.no_occlusion,
         ..Default::default()

@@ -384,6 +384,18 @@ pub fn pack_with(
     Ok(out)
 }
 
+/// A read-only storage buffer holding `bytes`; bindings must not be empty, so an empty
+/// array gets one zero word.
+pub fn storage_buffer(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    let zero = [0u8; 16];
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: if bytes.is_empty() { &zero } else { bytes },
+        usage: wgpu::BufferUsages::STORAGE,
+    })
+}
+
 /// The pipelines (shaded, and the S-NDF G-buffer of normals and albedos) and their bind
 /// group layout.
 pub struct SphereRaycastPass {
@@ -510,16 +522,7 @@ impl SphereRaycastPass {
 
     /// Uploads `packed` and makes the bind group.
     pub fn upload(&self, device: &wgpu::Device, packed: &PackedDraw) -> SphereBuffers {
-        use wgpu::util::DeviceExt;
-        let storage = |label: &str, bytes: &[u8]| {
-            // Bindings must not be empty: give empty arrays one zero word.
-            let zero = [0u8; 16];
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents: if bytes.is_empty() { &zero } else { bytes },
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
+        let storage = |label: &str, bytes: &[u8]| storage_buffer(device, label, bytes);
         let positions = storage("positions", bytemuck::cast_slice(&packed.positions));
         let attrs = storage("attrs", bytemuck::cast_slice(&packed.attrs));
         let ranges = storage("ranges", bytemuck::cast_slice(&packed.ranges));
