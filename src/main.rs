@@ -2,6 +2,7 @@
 //! lives in the library crates.
 
 mod commands;
+mod interrupt;
 mod progress;
 
 use clap::{Parser, Subcommand};

@@ -111,6 +111,10 @@ pub struct BuildInfo {
     pub delta_n: u32,
     /// Bits per quantized coordinate: 8 or 16.
     pub position_bits: u32,
+    /// Present when the hierarchy was built in spatial chunks of at most this many
+    /// particles (FORMAT.md, "Chunked builds").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chunk_points: Option<u64>,
 }
 
 /// The metadata section.

@@ -76,6 +76,7 @@ fn main() {
         let opts = ConvertOptions {
             build,
             radii: vec![],
+            ..Default::default()
         };
         convert_frame(&frame(n, attribute), None, &path, &opts, &NoProgress).unwrap();
         let bytes = std::fs::read(&path).unwrap();

@@ -314,7 +314,13 @@ pub fn batch(
 
     // As many conversions at once as memory and threads allow.
     let threads = rayon::current_num_threads().max(1);
-    let largest = todo.iter().map(|j| j.particles).max().unwrap_or(1).max(1);
+    // A frame above the chunk size is built a chunk at a time.
+    let largest = todo
+        .iter()
+        .map(|j| j.particles.min(opts.convert.chunks.chunk_points as u64))
+        .max()
+        .unwrap_or(1)
+        .max(1);
     let by_memory = (opts.memory_limit / (largest * BYTES_PER_PARTICLE)).max(1) as usize;
     let jobs = by_memory
         .min(threads)
@@ -322,6 +328,9 @@ pub fn batch(
         .min(todo.len())
         .max(1);
     let total_particles: u64 = todo.iter().map(|j| j.particles).sum();
+    let mut convert = opts.convert.clone();
+    convert.chunks.memory_limit = opts.memory_limit / jobs as u64;
+    let convert = &convert;
     progress.stage(
         &format!("converting {} frames, {jobs} at a time", todo.len()),
         Some(total_particles),
@@ -342,11 +351,38 @@ pub fn batch(
                     return;
                 };
                 let result = (|| -> Result<FrameEntry, BatchError> {
-                    let frame = job.dump.read_frame(job.frame, &opts.read, &quiet)?;
                     let out = out_dir.join(frame_file_name(job.timestep));
                     let source = fingerprint(job.input, job.frame as u64);
-                    convert_frame(&frame, Some(source), &out, &opts.convert, &quiet)?;
-                    drop(frame);
+                    if job.particles as usize > convert.chunks.chunk_points
+                        && job.dump.reads_parts()
+                    {
+                        // Out of core: the frame is read a window at a time.
+                        let info = job.dump.frame_info(job.frame)?;
+                        let header = crate::Frame {
+                            simulation_box: info.simulation_box.clone(),
+                            timestep: info.timestep,
+                            time: info.time,
+                            units: info.units.clone(),
+                            ..Default::default()
+                        };
+                        let src = crate::chunked::DumpSource {
+                            path: job.input.to_path_buf(),
+                            frame: job.frame,
+                            options: opts.read.clone(),
+                            particles: info.particles,
+                            simulation_box: info.simulation_box,
+                        };
+                        crate::chunked::convert_chunked(
+                            &src,
+                            crate::convert::base_metadata(&header, Some(source), &convert),
+                            &out,
+                            &convert,
+                            &quiet,
+                        )?;
+                    } else {
+                        let frame = job.dump.read_frame(job.frame, &opts.read, &quiet)?;
+                        convert_frame(&frame, Some(source), &out, &convert, &quiet)?;
+                    }
                     let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                     Ok(entry_of(&out, &f))
                 })();

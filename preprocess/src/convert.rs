@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use mdlod_format::meta::{AttributeInfo, BuildInfo, Metadata, SourceInfo};
 use mdlod_format::FormatError;
 
+use crate::chunked::{convert_chunked, ChunkOptions, DumpSource, FrameSource};
 use crate::frame::Frame;
 use crate::hierarchy::{self, BuildError, BuildParams, Particles};
 use crate::progress::Progress;
@@ -17,6 +18,8 @@ pub struct ConvertOptions {
     pub build: BuildParams,
     /// Radius overrides by species name.
     pub radii: Vec<(String, f32)>,
+    /// When and how frames are built in chunks (out of core).
+    pub chunks: ChunkOptions,
 }
 
 /// What a conversion built.
@@ -45,6 +48,14 @@ pub enum ConvertError {
     },
     #[error(transparent)]
     Write(#[from] FormatError),
+    #[error("working file {path}: {source}")]
+    Temp {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("chunked conversion: {0}")]
+    Chunked(String),
 }
 
 /// Builds the hierarchy of `frame` and writes it to `output`. `source` describes where
@@ -56,6 +67,10 @@ pub fn convert_frame(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
+    if frame.len() > options.chunks.chunk_points {
+        let metadata = base_metadata(frame, source, options);
+        return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
+    }
     let species = species_table(&frame.species, &options.radii);
     let particles = Particles {
         positions: &frame.positions,
@@ -73,28 +88,9 @@ pub fn convert_frame(
             source: e,
         })?;
     let build_time = t0.elapsed();
-    let metadata = Metadata {
-        particles: frame.len() as u64,
-        simulation_box: frame.simulation_box.clone(),
-        timestep: frame.timestep,
-        time: frame.time,
-        units: frame.units.clone(),
-        species,
-        attribute: frame.attribute.as_ref().map(|a| AttributeInfo {
-            name: a.name.clone(),
-            min: 0.0,
-            max: 0.0,
-        }),
-        source,
-        build: BuildInfo {
-            max_cluster_size: options.build.max_cluster_size,
-            max_root_points: options.build.max_root_points,
-            delta_n: options.build.delta_n,
-            position_bits: options.build.position_bits,
-        },
-        max_position_error: h.max_position_error,
-        writer: format!("mdlod {}", env!("CARGO_PKG_VERSION")),
-    };
+    let mut metadata = base_metadata(frame, source, options);
+    metadata.species = species;
+    metadata.max_position_error = h.max_position_error;
     let t1 = Instant::now();
     progress.stage("writing", None, "bytes");
     h.write(output, metadata)?;
@@ -111,6 +107,34 @@ pub fn convert_frame(
         write_time,
         file_size,
     })
+}
+
+/// The metadata of `frame` before its hierarchy is built (species, attribute range and
+/// error bound are filled in by the build).
+pub fn base_metadata(frame: &Frame, source: Option<SourceInfo>, options: &ConvertOptions) -> Metadata {
+    Metadata {
+        particles: frame.len() as u64,
+        simulation_box: frame.simulation_box.clone(),
+        timestep: frame.timestep,
+        time: frame.time,
+        units: frame.units.clone(),
+        species: species_table(&frame.species, &options.radii),
+        attribute: frame.attribute.as_ref().map(|a| AttributeInfo {
+            name: a.name.clone(),
+            min: 0.0,
+            max: 0.0,
+        }),
+        source,
+        build: BuildInfo {
+            max_cluster_size: options.build.max_cluster_size,
+            max_root_points: options.build.max_root_points,
+            delta_n: options.build.delta_n,
+            position_bits: options.build.position_bits,
+            chunk_points: None,
+        },
+        max_position_error: 0.0,
+        writer: format!("mdlod {}", env!("CARGO_PKG_VERSION")),
+    }
 }
 
 /// Which frame of a multi-frame input to convert.
@@ -137,6 +161,26 @@ pub fn convert_file(
         FrameSelect::Index(k) => k,
         FrameSelect::Last => dump.frame_count().saturating_sub(1),
     };
+    let info = dump.frame_info(k)?;
+    if info.particles > options.chunks.chunk_points && dump.reads_parts() {
+        drop(dump);
+        let header = Frame {
+            simulation_box: info.simulation_box.clone(),
+            timestep: info.timestep,
+            time: info.time,
+            units: info.units.clone(),
+            ..Frame::default()
+        };
+        let metadata = base_metadata(&header, Some(source_info(input, k as u64)), options);
+        let source = DumpSource {
+            path: input.to_path_buf(),
+            frame: k,
+            options: read.clone(),
+            particles: info.particles,
+            simulation_box: info.simulation_box,
+        };
+        return convert_chunked(&source, metadata, output, options, progress);
+    }
     let t0 = Instant::now();
     let frame = dump.read_frame(k, read, progress)?;
     // The frame owns its data: release the mapped (or decompressed) dump before the

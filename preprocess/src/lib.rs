@@ -2,6 +2,7 @@
 //! hierarchy, quantize it and write it as a `.mdlod` file through `mdlod-format`.
 
 pub mod batch;
+pub mod chunked;
 pub mod convert;
 pub mod frame;
 pub mod hierarchy;

@@ -78,6 +78,7 @@ fn valid_bytes_of(n: usize, params: BuildParams) -> Vec<u8> {
     let opts = ConvertOptions {
         build: params,
         radii: vec![],
+        ..Default::default()
     };
     convert_frame(&test_frame(n), None, &path, &opts, &NoProgress).unwrap();
     std::fs::read(&path).unwrap()

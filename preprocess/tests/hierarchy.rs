@@ -3,6 +3,7 @@
 
 use mdlod_format::quantize;
 use mdlod_format::MdlodFile;
+use mdlod_preprocess::chunked::ChunkOptions;
 use mdlod_preprocess::convert::{convert_frame, ConvertOptions};
 use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_preprocess::{Attribute, Frame, NoProgress, SpeciesName};
@@ -62,19 +63,61 @@ fn test_frame(n_cells: usize) -> Frame {
 }
 
 fn convert(frame: &Frame, params: BuildParams) -> (tempfile::TempDir, MdlodFile) {
+    convert_with(
+        frame,
+        &ConvertOptions {
+            build: params,
+            ..Default::default()
+        },
+    )
+}
+
+fn convert_with(frame: &Frame, opts: &ConvertOptions) -> (tempfile::TempDir, MdlodFile) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("t.mdlod");
-    let opts = ConvertOptions {
-        build: params,
-        radii: vec![],
-    };
-    convert_frame(frame, None, &path, &opts, &NoProgress).unwrap();
+    convert_frame(frame, None, &path, opts, &NoProgress).unwrap();
     let f = MdlodFile::open(&path).unwrap();
     (dir, f)
 }
 
+/// Options that build `frame` in chunks of at most `chunk_points`.
+fn chunked(params: BuildParams, chunk_points: usize, memory_limit: u64) -> ConvertOptions {
+    ConvertOptions {
+        build: params,
+        chunks: ChunkOptions {
+            chunk_points,
+            memory_limit,
+            temp_dir: None,
+            window_points: 128,
+        },
+        ..Default::default()
+    }
+}
+
 fn check_round_trip(frame: &Frame, params: BuildParams) {
-    let (_dir, f) = convert(frame, params.clone());
+    check_round_trip_with(
+        frame,
+        &ConvertOptions {
+            build: params,
+            ..Default::default()
+        },
+    );
+}
+
+fn check_round_trip_with(frame: &Frame, opts: &ConvertOptions) {
+    let params = opts.build.clone();
+    let (dir, f) = convert_with(frame, opts);
+    let chunked = frame.len() > opts.chunks.chunk_points;
+    assert_eq!(
+        f.metadata().build.chunk_points,
+        chunked.then_some(opts.chunks.chunk_points as u64)
+    );
+    // Working files are gone.
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, vec![std::ffi::OsString::from("t.mdlod")]);
     let report = f.verify().unwrap();
     let last = f.level_count() - 1;
     assert_eq!(f.particle_count() as usize, frame.len());
@@ -196,7 +239,13 @@ fn check_round_trip(frame: &Frame, params: BuildParams) {
                     }
                 }
             }
-            assert!(n.child_count as usize <= params.max_cluster_size as usize || l == 0);
+            // A chunk's root holds up to the root points; every other node a cluster.
+            let max_children = if l == 0 || chunked {
+                params.max_root_points
+            } else {
+                params.max_cluster_size
+            };
+            assert!(n.child_count <= max_children);
             assert_eq!(nodes[id].level as usize, l);
         }
     }
@@ -248,6 +297,109 @@ fn round_trip_u8_delta2() {
 }
 
 #[test]
+fn chunked_round_trip_u16_delta1() {
+    // About 8700 particles in chunks of at most 1000: the lattice, the duplicates and
+    // the sparse cloud land in chunks of different depths.
+    check_round_trip_with(
+        &test_frame(16),
+        &chunked(
+            BuildParams {
+                max_root_points: 64,
+                ..Default::default()
+            },
+            1000,
+            1 << 30,
+        ),
+    );
+}
+
+#[test]
+fn chunked_round_trip_u8_delta3() {
+    check_round_trip_with(
+        &test_frame(12),
+        &chunked(
+            BuildParams {
+                max_root_points: 32,
+                delta_n: 3,
+                position_bits: 8,
+                max_cluster_size: 6,
+            },
+            400,
+            1 << 30,
+        ),
+    );
+}
+
+#[test]
+fn chunked_round_trip_of_coincident_points() {
+    // 3000 copies of one point exceed a chunk: they are split by order.
+    let mut frame = test_frame(6);
+    for _ in 0..3000 {
+        frame.positions.push([5.0, 5.0, 5.0]);
+        frame.species_index.push(1);
+        frame.attribute.as_mut().unwrap().values.push(1.0);
+    }
+    check_round_trip_with(
+        &frame,
+        &chunked(
+            BuildParams {
+                max_root_points: 64,
+                delta_n: 2,
+                ..Default::default()
+            },
+            500,
+            1 << 30,
+        ),
+    );
+}
+
+#[test]
+fn chunked_output_is_identical_whatever_the_memory_limit_and_threads() {
+    let frame = test_frame(16);
+    let params = BuildParams {
+        max_root_points: 64,
+        ..Default::default()
+    };
+    let bytes = |threads: usize, limit: u64| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mdlod");
+        let opts = chunked(params.clone(), 1000, limit);
+        pool.install(|| convert_frame(&frame, None, &path, &opts, &NoProgress).unwrap());
+        std::fs::read(&path).unwrap()
+    };
+    // One chunk at a time, then several.
+    let one_at_a_time = mdlod_preprocess::chunked::chunk_memory(1000);
+    let a = bytes(1, one_at_a_time);
+    assert_eq!(a, bytes(3, 1 << 32));
+    assert_eq!(a, bytes(2, one_at_a_time));
+}
+
+#[test]
+fn chunked_conversion_refuses_a_limit_below_one_chunk() {
+    let frame = test_frame(8);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.mdlod");
+    let opts = chunked(
+        BuildParams {
+            max_root_points: 64,
+            ..Default::default()
+        },
+        500,
+        1 << 20,
+    );
+    let err = convert_frame(&frame, None, &path, &opts, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("memory limit of 1 MiB"), "{err}");
+    assert!(!path.exists());
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "working files left");
+}
+
+#[test]
 fn single_particle_and_tiny_inputs() {
     for n in [1usize, 2, 3, 9] {
         let frame = Frame {
@@ -283,6 +435,7 @@ fn output_is_byte_identical_whatever_the_thread_count() {
                 ..Default::default()
             },
             radii: vec![],
+            ..Default::default()
         };
         pool.install(|| convert_frame(&frame, None, &path, &opts, &NoProgress).unwrap());
         std::fs::read(&path).unwrap()

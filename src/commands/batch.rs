@@ -106,7 +106,17 @@ pub fn run(args: Args) -> Result<()> {
     let Some(out) = &args.output else {
         bail!("give the batch directory with -o DIR");
     };
-    let (convert, read) = args.build.options();
+    let (mut convert, read) = args.build.options();
+    // Working files of out-of-core frames: a directory of this run's own, removed on
+    // Ctrl-C and SIGTERM (partial frames are redone by the next run).
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let temp_parent = convert.chunks.temp_dir_for(&out.join("frame"));
+    let work = tempfile::Builder::new()
+        .prefix(".mdlod-convert-")
+        .tempdir_in(&temp_parent)
+        .with_context(|| format!("cannot create a working directory in {}", temp_parent.display()))?;
+    crate::interrupt::remove_on_interrupt(work.path(), None);
+    convert.chunks.temp_dir = Some(work.path().to_path_buf());
     let opts = BatchOptions {
         convert,
         read,

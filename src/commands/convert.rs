@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use mdlod_preprocess::chunked::ChunkOptions;
 use mdlod_preprocess::convert::{convert_file, ConvertOptions, ConvertReport, FrameSelect};
 use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_preprocess::readers::ReadOptions;
@@ -32,6 +33,11 @@ pub struct Args {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Memory the conversion may use (e.g. 4G; default: half of the machine's memory).
+    /// Frames above the chunk size are built out of core, as many chunks at a time as
+    /// fit; the file does not depend on it.
+    #[arg(long, value_parser = crate::commands::render::parse_bytes)]
+    pub memory_limit: Option<u64>,
     #[command(flatten)]
     pub build: BuildArgs,
 }
@@ -61,6 +67,14 @@ pub struct BuildArgs {
     /// Levels between a node and the points it is drawn with (δn).
     #[arg(long, default_value_t = 1)]
     pub delta_n: u32,
+    /// Frames above this many particles are built out of core, in spatial chunks of at
+    /// most this many (the choice is recorded in the file).
+    #[arg(long, default_value_t = mdlod_preprocess::chunked::DEFAULT_CHUNK_POINTS)]
+    pub chunk_points: usize,
+    /// Directory for the working files of out-of-core builds (default: the output's
+    /// directory); they are removed on success, on failure and on Ctrl-C.
+    #[arg(long, value_name = "DIR")]
+    pub temp_dir: Option<PathBuf>,
 }
 
 impl BuildArgs {
@@ -77,6 +91,11 @@ impl BuildArgs {
                 },
             },
             radii: self.radii.clone(),
+            chunks: ChunkOptions {
+                chunk_points: self.chunk_points,
+                temp_dir: self.temp_dir.clone(),
+                ..ChunkOptions::default()
+            },
         };
         let read = ReadOptions {
             attribute: self.attribute.clone(),
@@ -115,7 +134,19 @@ pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Sen
 }
 
 fn convert(args: &Args) -> Result<ConvertReport> {
-    let (options, read) = args.build.options();
+    let (mut options, read) = args.build.options();
+    if let Some(limit) = args.memory_limit {
+        options.chunks.memory_limit = limit;
+    }
+    // Working files of an out-of-core build live in a directory of this run's own, which
+    // a Ctrl-C (or SIGTERM from a scheduler) removes together with the partial output.
+    let temp_parent = options.chunks.temp_dir_for(&args.output);
+    let work = tempfile::Builder::new()
+        .prefix(".mdlod-convert-")
+        .tempdir_in(&temp_parent)
+        .with_context(|| format!("cannot create a working directory in {}", temp_parent.display()))?;
+    crate::interrupt::remove_on_interrupt(work.path(), Some(&args.output));
+    options.chunks.temp_dir = Some(work.path().to_path_buf());
     let frame = match args.frame {
         Some(k) => FrameSelect::Index(k),
         None => FrameSelect::Last,

@@ -38,6 +38,7 @@ pub fn run(args: Args) -> Result<()> {
         frame: None,
         last: true,
         threads: None,
+        memory_limit: None,
         build: super::convert::BuildArgs {
             // The generator writes copper as LAMMPS type 1.
             radii: vec![("1".into(), 1.28)],
@@ -47,6 +48,8 @@ pub fn run(args: Args) -> Result<()> {
             cluster_size: 8,
             root_points: 4096,
             delta_n: 1,
+            chunk_points: mdlod_preprocess::chunked::DEFAULT_CHUNK_POINTS,
+            temp_dir: None,
         },
     })?;
     let f = MdlodFile::open(&out)?;

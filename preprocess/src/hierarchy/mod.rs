@@ -102,6 +102,20 @@ pub struct Hierarchy {
     pub attribute: Option<(Vec<u16>, f32, f32)>,
     /// Largest distance between a decoded particle and its input position.
     pub max_position_error: f64,
+    /// The top node's representative, at full precision.
+    pub root: representative::Rep,
+    /// Unquantized positions of levels `0..keep_levels` in final order (see
+    /// [`BuildExtras::keep_levels`]); empty by default.
+    pub top_positions: Vec<Vec<[f32; 3]>>,
+}
+
+/// Options of [`build_with`] that a chunked build needs and a plain build does not.
+#[derive(Clone, Debug, Default)]
+pub struct BuildExtras {
+    /// Quantize the attribute over this range instead of the particles' own.
+    pub attribute_range: Option<(f32, f32)>,
+    /// Keep the unquantized positions of this many levels from the top.
+    pub keep_levels: usize,
 }
 
 impl Hierarchy {
@@ -124,6 +138,7 @@ impl Hierarchy {
             max_root_points: self.params.max_root_points,
             delta_n: self.params.delta_n,
             position_bits: self.params.position_bits,
+            chunk_points: metadata.build.chunk_points,
         };
         match (&self.attribute, &mut metadata.attribute) {
             (Some((_, min, max)), Some(info)) => {
@@ -168,6 +183,16 @@ impl Hierarchy {
 pub fn build(
     particles: Particles<'_>,
     params: &BuildParams,
+    progress: &dyn Progress,
+) -> Result<Hierarchy, BuildError> {
+    build_with(particles, params, &BuildExtras::default(), progress)
+}
+
+/// [`build`] with the options of a chunked build.
+pub fn build_with(
+    particles: Particles<'_>,
+    params: &BuildParams,
+    extras: &BuildExtras,
     progress: &dyn Progress,
 ) -> Result<Hierarchy, BuildError> {
     validate(&particles, params)?;
@@ -413,17 +438,23 @@ pub fn build(
         }
         quantized.push(encoded);
     }
+    let top_positions = positions
+        .into_iter()
+        .take(extras.keep_levels)
+        .collect();
+    let root = coarser.last().expect("the top level").0[0];
     let particle_order = order.pop().expect("finest level");
     let species_index = particle_order
         .par_iter()
         .map(|&i| particles.species_index[i as usize])
         .collect();
     let attribute = particles.attribute.map(|a| {
-        let (min, max) = a
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
-                (lo.min(v), hi.max(v))
-            });
+        let (min, max) = extras.attribute_range.unwrap_or_else(|| {
+            a.iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                    (lo.min(v), hi.max(v))
+                })
+        });
         let span = max - min;
         let q = particle_order
             .par_iter()
@@ -450,6 +481,8 @@ pub fn build(
         species_index,
         attribute,
         max_position_error: max_err,
+        root,
+        top_positions,
     })
 }
 

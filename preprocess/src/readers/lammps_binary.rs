@@ -393,6 +393,19 @@ pub(crate) fn read_frame(
     opts: &ReadOptions,
     progress: &dyn Progress,
 ) -> Result<Frame, ReadError> {
+    read_range(path, data, h, opts, 0..h.atoms, progress)
+}
+
+/// Decodes atoms `range` (in file order) of frame `h` as a frame of their own; species
+/// are the distinct types in the range.
+pub(crate) fn read_range(
+    path: &Path,
+    data: &[u8],
+    h: &BinHeader,
+    opts: &ReadOptions,
+    range: std::ops::Range<usize>,
+    progress: &dyn Progress,
+) -> Result<Frame, ReadError> {
     let first_chunk = h.chunks.first().map_or(0, |c| c.start) as u64;
     let err = |offset: u64, message: String| ReadError::Binary {
         path: path.to_path_buf(),
@@ -427,7 +440,7 @@ pub(crate) fn read_frame(
         })?),
     };
     let stride = h.values_per_atom * 8;
-    let n = h.atoms;
+    let n = range.len();
     progress.stage(
         &format!("reading timestep {}", h.timestep),
         Some(n as u64),
@@ -440,12 +453,24 @@ pub(crate) fn read_frame(
         f64::from_le_bytes(atom[8 * c..8 * c + 8].try_into().unwrap_or([0; 8]))
     };
     let bx = &h.simulation_box;
-    // Atoms in file order: chunk after chunk.
+    // Atoms in file order: chunk after chunk; `first` counts the atoms before this chunk.
     let mut first = 0usize;
     for chunk in &h.chunks {
+        let in_chunk = chunk.len() / stride;
+        let (lo, hi) = (
+            range.start.clamp(first, first + in_chunk),
+            range.end.clamp(first, first + in_chunk),
+        );
+        if lo == hi {
+            first += in_chunk;
+            continue;
+        }
+        let chunk = chunk.start + (lo - first) * stride..chunk.start + (hi - first) * stride;
         let bytes = &data[chunk.clone()];
-        let count = bytes.len() / stride;
-        let range = first..first + count;
+        let count = hi - lo;
+        let skipped = lo - first;
+        let out = lo - range.start;
+        let range = out..out + count;
         // Returns the index (within the chunk) and column of the first bad value.
         let bad = positions[range.clone()]
             .par_iter_mut()
@@ -479,7 +504,7 @@ pub(crate) fn read_frame(
                 offset,
                 format!(
                     "atom {} of timestep {}: column `{}` is not a finite number{}",
-                    first + i + 1,
+                    first + skipped + i + 1,
                     h.timestep,
                     names[c],
                     if Some(c) == species_col {
@@ -504,7 +529,7 @@ pub(crate) fn read_frame(
                     (chunk.start + i * stride + 8 * c) as u64,
                     format!(
                         "atom {} of timestep {}: column `{}` is not a finite number",
-                        first + i + 1,
+                        first + skipped + i + 1,
                         h.timestep,
                         names[c]
                     ),
@@ -512,7 +537,7 @@ pub(crate) fn read_frame(
             }
         }
         progress.advance(count as u64);
-        first += count;
+        first += in_chunk;
     }
     progress.finish_stage();
 

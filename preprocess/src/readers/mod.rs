@@ -454,6 +454,52 @@ impl DumpFile {
         Ok(())
     }
 
+    /// True when [`DumpFile::read_part`] can read this dump's frames a range of particles
+    /// at a time (binary formats with fixed-size records).
+    pub fn reads_parts(&self) -> bool {
+        matches!(self.index, Index::Raw(_) | Index::LammpsBinary(_))
+    }
+
+    /// Reads particles `range` (in file order) of frame `k` as a frame of their own, for
+    /// dumps where [`DumpFile::reads_parts`] holds. Species are those the range uses, in
+    /// the order the whole frame would list them.
+    pub fn read_part(
+        &self,
+        k: usize,
+        opts: &ReadOptions,
+        range: Range<usize>,
+        progress: &dyn Progress,
+    ) -> Result<Frame, ReadError> {
+        self.check_frame(k)?;
+        let total = self.frame_info(k)?.particles;
+        if range.start > range.end || range.end > total {
+            return Err(ReadError::Binary {
+                path: self.path.clone(),
+                offset: 0,
+                message: format!(
+                    "particles {}..{} requested of a frame of {total}",
+                    range.start, range.end
+                ),
+            });
+        }
+        match &self.index {
+            Index::Raw(r) => r.read_range(opts, range, progress),
+            Index::LammpsBinary(i) => lammps_binary::read_range(
+                &self.path,
+                self.bytes(),
+                i.header(k),
+                opts,
+                range,
+                progress,
+            ),
+            _ => Err(ReadError::Binary {
+                path: self.path.clone(),
+                offset: 0,
+                message: "this format is read a whole frame at a time".into(),
+            }),
+        }
+    }
+
     /// Reads frame `k`.
     pub fn read_frame(
         &self,

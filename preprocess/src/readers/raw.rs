@@ -396,7 +396,20 @@ impl Index {
         opts: &ReadOptions,
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
-        let n = self.particles;
+        self.read_range(opts, 0..self.particles, progress)
+    }
+
+    /// Particles `range` (within `0..particles`) as a frame of their own. Without species
+    /// names, the species are named by index up to the largest in the range.
+    pub fn read_range(
+        &self,
+        opts: &ReadOptions,
+        range: std::ops::Range<usize>,
+        progress: &dyn Progress,
+    ) -> Result<Frame, ReadError> {
+        let total = self.particles;
+        let first = range.start;
+        let n = range.len();
         progress.stage("reading raw arrays", Some(n as u64), "particles");
         let p = &self.positions;
         let bytes = p.bytes();
@@ -404,7 +417,13 @@ impl Index {
         let planar = self.planar;
         let positions = super::decode_positions(
             n,
-            |i, k| if planar { k * n + i } else { 3 * i + k },
+            |i, k| {
+                if planar {
+                    k * total + first + i
+                } else {
+                    3 * (first + i) + k
+                }
+            },
             |j| p.ty.get(bytes, j, p.big),
         )
         .map_err(|j| {
@@ -413,7 +432,7 @@ impl Index {
                 (p.offset + j * size) as u64,
                 format!(
                     "particle {}: a coordinate is not finite",
-                    if planar { j % n } else { j / 3 }
+                    if planar { j % total } else { j / 3 }
                 ),
             )
         })?;
@@ -429,7 +448,7 @@ impl Index {
             ),
             Some((m, names)) => {
                 let b = m.bytes();
-                let raw: Vec<f64> = (0..n)
+                let raw: Vec<f64> = (first..first + n)
                     .into_par_iter()
                     .map(|i| m.ty.get(b, i, m.big))
                     .collect();
@@ -441,9 +460,10 @@ impl Index {
                 if let Some(i) = raw.iter().position(|&v| v < 0.0 || v as usize >= count) {
                     return Err(err(
                         &m.path,
-                        (m.offset + i * m.ty.size()) as u64,
+                        (m.offset + (first + i) * m.ty.size()) as u64,
                         format!(
-                            "particle {i}: species {} but there are {count} species{}",
+                            "particle {}: species {} but there are {count} species{}",
+                            first + i,
                             raw[i],
                             if names.is_empty() {
                                 " (at most 65536)"
@@ -473,11 +493,12 @@ impl Index {
         let attribute = match (&self.attribute, &opts.attribute) {
             (Some((m, name)), wanted) if wanted.as_deref().is_none_or(|w| w == name) => {
                 let b = m.bytes();
-                let values: Vec<f32> = (0..n)
+                let values: Vec<f32> = (first..first + n)
                     .into_par_iter()
                     .map(|i| m.ty.get(b, i, m.big) as f32)
                     .collect();
                 if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                    let i = first + i;
                     return Err(err(
                         &m.path,
                         (m.offset + i * m.ty.size()) as u64,

@@ -102,6 +102,7 @@ pub fn make_file(
     let opts = ConvertOptions {
         build,
         radii: radii.iter().map(|(n, r)| (n.to_string(), *r)).collect(),
+        ..Default::default()
     };
     convert_frame(frame, None, &path, &opts, &NoProgress).unwrap();
     let f = MdlodFile::open(&path).unwrap();

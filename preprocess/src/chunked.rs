@@ -1,0 +1,1119 @@
+//! Out-of-core conversion: a frame of more than `chunk_points` particles is built in
+//! spatial chunks, so that memory stays within a limit whatever the frame's size.
+//!
+//! How it works:
+//! 1. **Partition**, one pass over the input a window of particles at a time. Every
+//!    particle goes to one of the 512 cells of an 8×8×8 grid over the box (the dump's
+//!    box, or the particles' bounds when it has none; particles outside it go to the
+//!    nearest cell) and is appended to that cell's working file: position, species and
+//!    attribute. A cell that ends with more than `chunk_points` particles is split the
+//!    same way over its own bounds (and by file order when all its particles coincide).
+//!    The leaf cells, in Morton order, are grouped greedily into chunks of at most
+//!    `chunk_points` particles.
+//! 2. **Chunks.** Each chunk is loaded and built into a complete hierarchy by the
+//!    in-memory builder ([`crate::hierarchy::build_with`]), as many chunks at a time as
+//!    the memory limit allows. Its node table, quantized positions and per-particle data
+//!    go to working files; its cell files are removed.
+//! 3. **Assembly.** The chunk roots become the children of one top node, in chunk order.
+//!    Chunks whose hierarchy is shallower than the deepest are padded under the top with
+//!    single-child copies of their root, so that every particle lies on the last level.
+//!    The file is then written level by level: node records are copied with their
+//!    indices rebased, quantized positions are copied unchanged except on the levels the
+//!    top node encodes (re-encoded from the kept unquantized positions), and each working
+//!    file is removed as soon as its last part is copied.
+//!
+//! The file depends only on the input and `chunk_points` (recorded in the metadata):
+//! never on the memory limit or the thread count, which only decide how many chunks are
+//! built at once. Working files live in a fresh directory inside
+//! [`ChunkOptions::temp_dir`], removed on success and on failure.
+
+use std::collections::HashMap;
+use std::fs::{self, File};
+use std::io::{BufWriter, Read, Write};
+use std::ops::Range;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use mdlod_format::layout::{pack_colour, LevelRecord, NodeRecord, SectionKind};
+use mdlod_format::meta::{Metadata, SimulationBox};
+use mdlod_format::{quantize, Writer};
+use rayon::prelude::*;
+
+use crate::convert::{ConvertError, ConvertOptions, ConvertReport};
+use crate::frame::{Frame, SpeciesName};
+use crate::hierarchy::pca_split::Clusters;
+use crate::hierarchy::representative::{representatives, LevelPoints, Rep, Source};
+use crate::hierarchy::{build_with, BuildError, BuildExtras, Particles};
+use crate::progress::{NoProgress, Progress};
+use crate::species::species_table;
+
+/// Frames above this many particles are built in chunks of at most this many.
+pub const DEFAULT_CHUNK_POINTS: usize = 1 << 24;
+/// Working memory of the in-memory builder per particle (measured peak, with margin).
+pub const BUILD_BYTES_PER_PARTICLE: u64 = 110;
+/// Particles read from the input per window.
+const WINDOW: usize = 1 << 22;
+/// Cells per axis of one partition step, as a power of two.
+const GRID_BITS: u32 = 3;
+const CELLS: usize = 1 << (3 * GRID_BITS);
+/// Deeper splits than this go by order (no spatial progress is left in `f32`).
+const MAX_SPLIT_DEPTH: u32 = 10;
+
+/// How a chunked conversion runs.
+#[derive(Clone, Debug)]
+pub struct ChunkOptions {
+    /// Frames above this many particles are built in chunks of at most this many.
+    pub chunk_points: usize,
+    /// Working memory the conversion may use, in bytes.
+    pub memory_limit: u64,
+    /// Directory for working files (a fresh subdirectory is made and removed); `None`:
+    /// the output's directory.
+    pub temp_dir: Option<PathBuf>,
+    /// Particles read from the input at a time (the file does not depend on it).
+    pub window_points: usize,
+}
+
+impl Default for ChunkOptions {
+    /// Chunks of [`DEFAULT_CHUNK_POINTS`], half of the machine's memory, working files
+    /// next to the output.
+    fn default() -> Self {
+        ChunkOptions {
+            chunk_points: DEFAULT_CHUNK_POINTS,
+            memory_limit: default_memory_limit(),
+            temp_dir: None,
+            window_points: WINDOW,
+        }
+    }
+}
+
+impl ChunkOptions {
+    /// The directory working files go to when writing `output`.
+    pub fn temp_dir_for(&self, output: &Path) -> PathBuf {
+        match (&self.temp_dir, output.parent()) {
+            (Some(d), _) => d.clone(),
+            (None, Some(d)) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
+    }
+}
+
+/// Half of the machine's physical memory (Linux), or 4 GiB when it cannot be read.
+pub fn default_memory_limit() -> u64 {
+    let total = fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
+        s.lines()
+            .find(|l| l.starts_with("MemTotal:"))
+            .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+    });
+    total.map_or(4 << 30, |kib| kib * 1024 / 2)
+}
+
+/// The working memory one chunk of `points` particles needs, in bytes.
+pub fn chunk_memory(points: usize) -> u64 {
+    points as u64 * BUILD_BYTES_PER_PARTICLE + (64 << 20)
+}
+
+/// Where a chunked conversion reads particles from, a range at a time.
+pub trait ParticleSource: Sync {
+    /// Number of particles in the frame.
+    fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// The frame's box, when known.
+    fn simulation_box(&self) -> Option<&SimulationBox>;
+    /// Particles `range` as a frame of their own (its own species list).
+    fn read(&self, range: Range<usize>) -> Result<Frame, ConvertError>;
+}
+
+/// A frame already in memory.
+pub struct FrameSource<'a>(pub &'a Frame);
+
+impl ParticleSource for FrameSource<'_> {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    fn simulation_box(&self) -> Option<&SimulationBox> {
+        self.0.simulation_box.as_ref()
+    }
+
+    fn read(&self, range: Range<usize>) -> Result<Frame, ConvertError> {
+        let f = self.0;
+        Ok(Frame {
+            positions: f.positions[range.clone()].to_vec(),
+            species_index: f.species_index[range.clone()].to_vec(),
+            species: f.species.clone(),
+            attribute: f.attribute.as_ref().map(|a| crate::frame::Attribute {
+                name: a.name.clone(),
+                values: a.values[range].to_vec(),
+            }),
+            ..f.clone_header()
+        })
+    }
+}
+
+/// One frame of a dump whose format reads parts ([`crate::readers::DumpFile::reads_parts`]).
+/// The dump is opened afresh for every window, so the pages of the input it maps are
+/// released after each window and resident memory stays bounded.
+pub struct DumpSource {
+    pub path: PathBuf,
+    pub frame: usize,
+    pub options: crate::readers::ReadOptions,
+    pub particles: usize,
+    pub simulation_box: Option<SimulationBox>,
+}
+
+impl ParticleSource for DumpSource {
+    fn len(&self) -> usize {
+        self.particles
+    }
+
+    fn simulation_box(&self) -> Option<&SimulationBox> {
+        self.simulation_box.as_ref()
+    }
+
+    fn read(&self, range: Range<usize>) -> Result<Frame, ConvertError> {
+        let dump = crate::readers::DumpFile::open(&self.path)?;
+        Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
+    }
+}
+
+/// A working-file error.
+fn temp_err(path: &Path, e: std::io::Error) -> ConvertError {
+    ConvertError::Temp {
+        path: path.to_path_buf(),
+        source: e,
+    }
+}
+
+/// The species of all windows, merged by name.
+#[derive(Default)]
+struct SpeciesMerge {
+    list: Vec<SpeciesName>,
+    by_name: HashMap<String, u16>,
+}
+
+impl SpeciesMerge {
+    /// Maps a window's species indices to merged (provisional) ones.
+    fn add(&mut self, part: &[SpeciesName]) -> Result<Vec<u16>, ConvertError> {
+        part.iter()
+            .map(|s| {
+                if let Some(&i) = self.by_name.get(&s.name) {
+                    let known = &mut self.list[usize::from(i)];
+                    known.numeric_type &= s.numeric_type;
+                    known.radius = known.radius.or(s.radius);
+                    return Ok(i);
+                }
+                let i = u16::try_from(self.list.len()).map_err(|_| {
+                    ConvertError::Chunked("more than 65536 species in one frame".into())
+                })?;
+                self.by_name.insert(s.name.clone(), i);
+                self.list.push(s.clone());
+                Ok(i)
+            })
+            .collect()
+    }
+
+    /// The final species list (numeric LAMMPS types sorted numerically, others in order
+    /// of first appearance, as the whole-frame readers list them) and the map from
+    /// provisional to final indices.
+    fn finish(self) -> (Vec<SpeciesName>, Vec<u16>) {
+        let mut order: Vec<usize> = (0..self.list.len()).collect();
+        if self.list.iter().all(|s| s.numeric_type) {
+            order.sort_by_key(|&i| self.list[i].name.parse::<i64>().unwrap_or(i64::MAX));
+        }
+        let mut map = vec![0u16; self.list.len()];
+        for (new, &old) in order.iter().enumerate() {
+            map[old] = new as u16;
+        }
+        let list = order.iter().map(|&i| self.list[i].clone()).collect();
+        (list, map)
+    }
+}
+
+/// Working records: position (3 × f32), species (u16), attribute (f32, when present).
+#[derive(Clone, Copy)]
+struct RecordLayout {
+    attribute: bool,
+}
+
+impl RecordLayout {
+    fn size(self) -> usize {
+        if self.attribute {
+            18
+        } else {
+            14
+        }
+    }
+
+    fn position(self, r: &[u8]) -> [f32; 3] {
+        [0, 1, 2].map(|k| f32::from_le_bytes([r[4 * k], r[4 * k + 1], r[4 * k + 2], r[4 * k + 3]]))
+    }
+}
+
+/// One cell of the partition: a working file of records.
+#[derive(Debug)]
+struct Cell {
+    path: PathBuf,
+    count: usize,
+    lo: [f32; 3],
+    hi: [f32; 3],
+}
+
+/// The cell (Morton code) of `x` in an 8×8×8 grid over `lo..hi`.
+fn cell_of(x: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> usize {
+    let cells = 1u32 << GRID_BITS;
+    let mut code = 0usize;
+    let idx: [u32; 3] = [0, 1, 2].map(|k| {
+        let ext = hi[k] - lo[k];
+        if ext > 0.0 && x[k].is_finite() {
+            (((x[k] - lo[k]) / ext * cells as f32).max(0.0) as u32).min(cells - 1)
+        } else {
+            0
+        }
+    });
+    for b in 0..GRID_BITS {
+        for (k, i) in idx.iter().enumerate() {
+            code |= (((i >> b) & 1) as usize) << (3 * b + k as u32) as usize;
+        }
+    }
+    code
+}
+
+/// Appends windows of records to the cells of a grid over `lo..hi`.
+struct Partitioner {
+    dir: PathBuf,
+    prefix: String,
+    layout: RecordLayout,
+    lo: [f32; 3],
+    hi: [f32; 3],
+    writers: Vec<Option<BufWriter<File>>>,
+    cells: Vec<Cell>,
+}
+
+impl Partitioner {
+    fn new(dir: &Path, prefix: String, layout: RecordLayout, lo: [f32; 3], hi: [f32; 3]) -> Self {
+        Partitioner {
+            dir: dir.to_path_buf(),
+            prefix,
+            layout,
+            lo,
+            hi,
+            writers: (0..CELLS).map(|_| None).collect(),
+            cells: (0..CELLS)
+                .map(|_| Cell {
+                    path: PathBuf::new(),
+                    count: 0,
+                    lo: [f32::INFINITY; 3],
+                    hi: [f32::NEG_INFINITY; 3],
+                })
+                .collect(),
+        }
+    }
+
+    /// Appends the records in `bytes`, in order.
+    fn add(&mut self, bytes: &[u8]) -> Result<(), ConvertError> {
+        let size = self.layout.size();
+        let (lo, hi, layout) = (self.lo, self.hi, self.layout);
+        let ids: Vec<u16> = bytes
+            .par_chunks_exact(size)
+            .map(|r| cell_of(layout.position(r), lo, hi) as u16)
+            .collect();
+        for (r, &id) in bytes.chunks_exact(size).zip(&ids) {
+            let id = usize::from(id);
+            let cell = &mut self.cells[id];
+            if self.writers[id].is_none() {
+                cell.path = self.dir.join(format!("{}-{id:03}.cell", self.prefix));
+                let f = File::create(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
+                self.writers[id] = Some(BufWriter::with_capacity(1 << 16, f));
+            }
+            let w = self.writers[id].as_mut().expect("opened above");
+            w.write_all(r).map_err(|e| temp_err(&cell.path, e))?;
+            cell.count += 1;
+            let x = layout.position(r);
+            for k in 0..3 {
+                cell.lo[k] = cell.lo[k].min(x[k]);
+                cell.hi[k] = cell.hi[k].max(x[k]);
+            }
+        }
+        Ok(())
+    }
+
+    /// The non-empty cells in Morton order.
+    fn finish(self) -> Result<Vec<Cell>, ConvertError> {
+        let mut out = Vec::new();
+        for (w, cell) in self.writers.into_iter().zip(self.cells) {
+            if let Some(mut w) = w {
+                w.flush().map_err(|e| temp_err(&cell.path, e))?;
+                out.push(cell);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// Reads a cell's records `range` (in records).
+fn read_records(cell: &Cell, layout: RecordLayout, range: Range<usize>) -> Result<Vec<u8>, ConvertError> {
+    let size = layout.size();
+    let mut buf = vec![0u8; range.len() * size];
+    let f = File::open(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
+    f.read_exact_at(&mut buf, (range.start * size) as u64)
+        .map_err(|e| temp_err(&cell.path, e))?;
+    Ok(buf)
+}
+
+/// Splits `cell` until every leaf holds at most `max` records; leaves in order.
+fn refine(
+    cell: Cell,
+    layout: RecordLayout,
+    max: usize,
+    depth: u32,
+    out: &mut Vec<Cell>,
+) -> Result<(), ConvertError> {
+    if cell.count <= max {
+        out.push(cell);
+        return Ok(());
+    }
+    let flat = (0..3).all(|k| cell.hi[k] <= cell.lo[k]);
+    let prefix = format!(
+        "{}s",
+        cell.path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+    );
+    let dir = cell.path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut children = Vec::new();
+    if !flat && depth < MAX_SPLIT_DEPTH {
+        let mut p = Partitioner::new(&dir, prefix.clone(), layout, cell.lo, cell.hi);
+        for start in (0..cell.count).step_by(WINDOW) {
+            let bytes = read_records(&cell, layout, start..(start + WINDOW).min(cell.count))?;
+            p.add(&bytes)?;
+        }
+        children = p.finish()?;
+    }
+    if children.len() <= 1 {
+        // No spatial progress: split by order.
+        for c in &children {
+            fs::remove_file(&c.path).map_err(|e| temp_err(&c.path, e))?;
+        }
+        children.clear();
+        for (i, start) in (0..cell.count).step_by(max).enumerate() {
+            let end = (start + max).min(cell.count);
+            let path = dir.join(format!("{prefix}-o{i:05}.cell"));
+            let mut w = BufWriter::new(File::create(&path).map_err(|e| temp_err(&path, e))?);
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for s in (start..end).step_by(WINDOW) {
+                let bytes = read_records(&cell, layout, s..(s + WINDOW).min(end))?;
+                for r in bytes.chunks_exact(layout.size()) {
+                    let x = layout.position(r);
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(x[k]);
+                        hi[k] = hi[k].max(x[k]);
+                    }
+                }
+                w.write_all(&bytes).map_err(|e| temp_err(&path, e))?;
+            }
+            w.flush().map_err(|e| temp_err(&path, e))?;
+            children.push(Cell {
+                path,
+                count: end - start,
+                lo,
+                hi,
+            });
+        }
+    }
+    fs::remove_file(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
+    for c in children {
+        refine(c, layout, max, depth + 1, out)?;
+    }
+    Ok(())
+}
+
+/// What one chunk's build left behind.
+struct ChunkResult {
+    levels: Vec<LevelRecord>,
+    root: Rep,
+    /// The root node's quant_scale (it covers every level the root encodes).
+    root_scale: [f32; 3],
+    /// Unquantized positions of the chunk's levels `0..δn`.
+    top_positions: Vec<Vec<[f32; 3]>>,
+    max_error: f64,
+    nodes_file: PathBuf,
+    positions_file: PathBuf,
+    species_file: PathBuf,
+    attribute_file: Option<PathBuf>,
+}
+
+impl ChunkResult {
+    fn depth(&self) -> usize {
+        self.levels.len()
+    }
+}
+
+struct ChunkInput<'a> {
+    layout: RecordLayout,
+    species: &'a [mdlod_format::meta::Species],
+    species_map: &'a [u16],
+    options: &'a ConvertOptions,
+    extras: &'a BuildExtras,
+    dir: &'a Path,
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ConvertError> {
+    let mut w = BufWriter::with_capacity(1 << 20, File::create(path).map_err(|e| temp_err(path, e))?);
+    w.write_all(bytes).map_err(|e| temp_err(path, e))?;
+    w.flush().map_err(|e| temp_err(path, e))
+}
+
+fn build_chunk(c: usize, cells: &[Cell], input: &ChunkInput<'_>) -> Result<ChunkResult, ConvertError> {
+    let layout = input.layout;
+    let size = layout.size();
+    let n: usize = cells.iter().map(|c| c.count).sum();
+    let mut positions = Vec::with_capacity(n);
+    let mut species_index = Vec::with_capacity(n);
+    let mut attribute = layout.attribute.then(|| Vec::with_capacity(n));
+    for cell in cells {
+        let mut bytes = vec![0u8; cell.count * size];
+        File::open(&cell.path)
+            .and_then(|mut f| f.read_exact(&mut bytes))
+            .map_err(|e| temp_err(&cell.path, e))?;
+        for r in bytes.chunks_exact(size) {
+            positions.push(layout.position(r));
+            let s = u16::from_le_bytes([r[12], r[13]]);
+            species_index.push(input.species_map[usize::from(s)]);
+            if let Some(a) = attribute.as_mut() {
+                a.push(f32::from_le_bytes([r[14], r[15], r[16], r[17]]));
+            }
+        }
+    }
+    let particles = Particles {
+        positions: &positions,
+        species_index: &species_index,
+        species: input.species,
+        attribute: attribute.as_deref(),
+    };
+    let h = build_with(particles, &input.options.build, input.extras, &NoProgress).map_err(|e| {
+        ConvertError::Build {
+            path: format!("chunk {c}"),
+            source: e,
+        }
+    })?;
+    drop((positions, attribute));
+    let stem = |ext: &str| input.dir.join(format!("chunk-{c:05}.{ext}"));
+    let nodes_file = stem("nodes");
+    write_file(&nodes_file, bytemuck::cast_slice(&h.nodes))?;
+    let positions_file = stem("positions");
+    {
+        let mut w = BufWriter::with_capacity(
+            1 << 20,
+            File::create(&positions_file).map_err(|e| temp_err(&positions_file, e))?,
+        );
+        for q in h.quantized.iter().skip(1) {
+            w.write_all(bytemuck::cast_slice(q))
+                .map_err(|e| temp_err(&positions_file, e))?;
+        }
+        w.flush().map_err(|e| temp_err(&positions_file, e))?;
+    }
+    let species_file = stem("species");
+    write_file(&species_file, bytemuck::cast_slice(&h.species_index))?;
+    let attribute_file = match &h.attribute {
+        Some((a, _, _)) => {
+            let p = stem("attribute");
+            write_file(&p, bytemuck::cast_slice(a))?;
+            Some(p)
+        }
+        None => None,
+    };
+    for cell in cells {
+        fs::remove_file(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
+    }
+    Ok(ChunkResult {
+        levels: h.levels.clone(),
+        root: h.root,
+        root_scale: h.nodes[0].quant_scale,
+        top_positions: h.top_positions,
+        max_error: h.max_position_error,
+        nodes_file,
+        positions_file,
+        species_file,
+        attribute_file,
+    })
+}
+
+/// Builds the hierarchy of `source` in chunks and writes it to `output`. `metadata`
+/// supplies what the source knows (box, timestep, source file); the species, particle
+/// count, attribute range, build parameters and error bound are filled in here.
+pub fn convert_chunked(
+    source: &dyn ParticleSource,
+    mut metadata: Metadata,
+    output: &Path,
+    options: &ConvertOptions,
+    progress: &dyn Progress,
+) -> Result<ConvertReport, ConvertError> {
+    let chunk = &options.chunks;
+    let window = chunk.window_points.max(1);
+    let n = source.len();
+    let params = &options.build;
+    if n == 0 {
+        return Err(ConvertError::Build {
+            path: output.display().to_string(),
+            source: BuildError::Empty,
+        });
+    }
+    if chunk.chunk_points < params.max_root_points as usize {
+        return Err(ConvertError::Chunked(format!(
+            "chunks of {} particles are smaller than the {} root points",
+            chunk.chunk_points, params.max_root_points
+        )));
+    }
+    let temp_dir = chunk.temp_dir_for(output);
+    let work = tempfile::Builder::new()
+        .prefix(".mdlod-convert-")
+        .tempdir_in(&temp_dir)
+        .map_err(|e| temp_err(&temp_dir, e))?;
+    let dir = work.path();
+
+    // 1. Partition.
+    let t0 = Instant::now();
+    let bounds = match source.simulation_box() {
+        Some(b) => box_bounds(b),
+        None => {
+            progress.stage("finding bounds", Some(n as u64), "particles");
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for start in (0..n).step_by(window) {
+                let f = source.read(start..(start + window).min(n))?;
+                for x in &f.positions {
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(x[k]);
+                        hi[k] = hi[k].max(x[k]);
+                    }
+                }
+                progress.advance(f.len() as u64);
+            }
+            progress.finish_stage();
+            (lo, hi)
+        }
+    };
+    progress.stage("partitioning", Some(n as u64), "particles");
+    let mut merge = SpeciesMerge::default();
+    let mut layout = None;
+    let mut partitioner = None;
+    let mut attribute_name = None;
+    let mut range = (f32::INFINITY, f32::NEG_INFINITY);
+    for start in (0..n).step_by(window) {
+        let f = source.read(start..(start + window).min(n))?;
+        let lay = *layout.get_or_insert(RecordLayout {
+            attribute: f.attribute.is_some(),
+        });
+        if lay.attribute != f.attribute.is_some() || f.positions.len() != f.species_index.len() {
+            return Err(ConvertError::Chunked(format!(
+                "particles {start}..: the window's columns differ from the first window's"
+            )));
+        }
+        let p = partitioner.get_or_insert_with(|| {
+            Partitioner::new(dir, "cell".into(), lay, bounds.0, bounds.1)
+        });
+        let map = merge.add(&f.species)?;
+        if let Some(index) = f.positions.iter().position(|x| x.iter().any(|v| !v.is_finite())) {
+            return Err(ConvertError::Build {
+                path: output.display().to_string(),
+                source: BuildError::NonFinite {
+                    index: start + index,
+                    position: f.positions[index],
+                },
+            });
+        }
+        let mut bytes = Vec::with_capacity(f.len() * lay.size());
+        for i in 0..f.len() {
+            for v in f.positions[i] {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+            let s = map.get(usize::from(f.species_index[i])).copied().ok_or_else(|| {
+                ConvertError::Build {
+                    path: output.display().to_string(),
+                    source: BuildError::BadSpecies {
+                        index: start + i,
+                        species: f.species_index[i],
+                        count: map.len(),
+                    },
+                }
+            })?;
+            bytes.extend_from_slice(&s.to_le_bytes());
+            if let Some(a) = &f.attribute {
+                let v = a.values[i];
+                range = (range.0.min(v), range.1.max(v));
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        if let Some(a) = &f.attribute {
+            attribute_name.get_or_insert_with(|| a.name.clone());
+        }
+        p.add(&bytes)?;
+        progress.advance(f.len() as u64);
+    }
+    progress.finish_stage();
+    let layout = layout.expect("at least one window");
+    let cells = partitioner.expect("at least one window").finish()?;
+    let mut leaves = Vec::new();
+    for cell in cells {
+        refine(cell, layout, chunk.chunk_points, 0, &mut leaves)?;
+    }
+    // Greedy grouping in Morton order.
+    let mut groups: Vec<Range<usize>> = Vec::new();
+    let mut count = 0usize;
+    for (i, cell) in leaves.iter().enumerate() {
+        match groups.last_mut() {
+            Some(g) if count + cell.count <= chunk.chunk_points => {
+                g.end = i + 1;
+                count += cell.count;
+            }
+            _ => {
+                groups.push(i..i + 1);
+                count = cell.count;
+            }
+        }
+    }
+    if groups.len() > params.max_root_points as usize {
+        return Err(ConvertError::Chunked(format!(
+            "{} chunks exceed the {} root points; raise the root points or the chunk size",
+            groups.len(),
+            params.max_root_points
+        )));
+    }
+    let read_time = t0.elapsed();
+
+    // 2. Chunks.
+    let t1 = Instant::now();
+    let (names, species_map) = merge.finish();
+    let species = species_table(&names, &options.radii);
+    let largest = groups
+        .iter()
+        .map(|g| leaves[g.clone()].iter().map(|c| c.count).sum::<usize>())
+        .max()
+        .unwrap_or(0);
+    let need = chunk_memory(largest);
+    if need > chunk.memory_limit {
+        return Err(ConvertError::Chunked(format!(
+            "the memory limit of {} MiB is below the {} MiB one chunk of {largest} particles needs",
+            chunk.memory_limit >> 20,
+            need >> 20
+        )));
+    }
+    let jobs = ((chunk.memory_limit / need) as usize).clamp(1, rayon::current_num_threads());
+    let extras = BuildExtras {
+        attribute_range: layout.attribute.then_some(range),
+        keep_levels: params.delta_n as usize,
+    };
+    let input = ChunkInput {
+        layout,
+        species: &species,
+        species_map: &species_map,
+        options,
+        extras: &extras,
+        dir,
+    };
+    progress.stage(
+        &format!("building {} chunks", groups.len()),
+        Some(n as u64),
+        "particles",
+    );
+    let mut chunks = Vec::with_capacity(groups.len());
+    let ids: Vec<usize> = (0..groups.len()).collect();
+    for batch in ids.chunks(jobs) {
+        let built: Vec<ChunkResult> = batch
+            .par_iter()
+            .map(|&c| {
+                let r = build_chunk(c, &leaves[groups[c].clone()], &input);
+                if r.is_ok() {
+                    progress.advance(leaves[groups[c].clone()].iter().map(|c| c.count as u64).sum());
+                }
+                r
+            })
+            .collect::<Result<_, _>>()?;
+        chunks.extend(built);
+    }
+    progress.finish_stage();
+    let build_time = t1.elapsed();
+
+    // 3. Assembly.
+    let t2 = Instant::now();
+    metadata.particles = n as u64;
+    metadata.species = species;
+    if let Some(info) = metadata.attribute.as_mut() {
+        info.min = range.0;
+        info.max = range.1;
+    } else if layout.attribute {
+        metadata.attribute = Some(mdlod_format::meta::AttributeInfo {
+            name: attribute_name.unwrap_or_else(|| "attribute".into()),
+            min: range.0,
+            max: range.1,
+        });
+    }
+    metadata.build = mdlod_format::meta::BuildInfo {
+        max_cluster_size: params.max_cluster_size,
+        max_root_points: params.max_root_points,
+        delta_n: params.delta_n,
+        position_bits: params.position_bits,
+        chunk_points: Some(chunk.chunk_points as u64),
+    };
+    let (levels, nodes) = assemble(&chunks, &metadata, output, params, progress)?;
+    let write_time = t2.elapsed();
+    drop(work);
+    let file_size = fs::metadata(output).map(|m| m.len()).unwrap_or(0);
+    Ok(ConvertReport {
+        particles: n as u64,
+        levels,
+        nodes,
+        max_position_error: metadata.max_position_error,
+        read_time,
+        build_time,
+        write_time,
+        file_size,
+    })
+}
+
+/// The axis-aligned bounds of a (possibly triclinic) box.
+fn box_bounds(b: &SimulationBox) -> ([f32; 3], [f32; 3]) {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for corner in 0..8 {
+        for k in 0..3 {
+            let mut v = b.origin[k];
+            if corner & 1 != 0 {
+                v += b.a[k];
+            }
+            if corner & 2 != 0 {
+                v += b.b[k];
+            }
+            if corner & 4 != 0 {
+                v += b.c[k];
+            }
+            lo[k] = lo[k].min(v as f32);
+            hi[k] = hi[k].max(v as f32);
+        }
+    }
+    (lo, hi)
+}
+
+/// The global layout of the chunks' levels under one top node.
+struct Layout {
+    /// Global level of every chunk's local level 0 is `1 + pad[c]`.
+    pad: Vec<usize>,
+    /// Index of the last level.
+    last: usize,
+    /// `offset[g][c]`: points of level `g` before chunk `c` (`offset[g][K]` is the count).
+    offset: Vec<Vec<u64>>,
+    levels: Vec<LevelRecord>,
+}
+
+impl Layout {
+    fn new(chunks: &[ChunkResult]) -> Result<Layout, ConvertError> {
+        let k = chunks.len();
+        let last = chunks.iter().map(ChunkResult::depth).max().unwrap_or(1);
+        let pad: Vec<usize> = chunks.iter().map(|c| last - c.depth()).collect();
+        let mut offset = vec![vec![0u64; k + 1]; last + 1];
+        offset[0][k] = 1;
+        for g in 1..=last {
+            for (c, ch) in chunks.iter().enumerate() {
+                let here = if g <= pad[c] {
+                    1
+                } else {
+                    ch.levels[g - 1 - pad[c]].point_count
+                };
+                offset[g][c + 1] = offset[g][c] + here;
+            }
+        }
+        let mut levels = Vec::with_capacity(last + 1);
+        let mut node_first = 0u64;
+        for (g, off) in offset.iter().enumerate() {
+            let count = off[k];
+            if count > u64::from(u32::MAX) {
+                return Err(ConvertError::Build {
+                    path: format!("level {g}"),
+                    source: BuildError::TooMany(count as usize),
+                });
+            }
+            levels.push(LevelRecord {
+                point_count: count,
+                node_first,
+                reserved: [0; 2],
+            });
+            if g < last {
+                node_first += count;
+            }
+        }
+        Ok(Layout {
+            pad,
+            last,
+            offset,
+            levels,
+        })
+    }
+
+    /// Global node index of point `i` of chunk `c` on global level `g`.
+    fn node(&self, g: usize, c: usize, i: u64) -> u32 {
+        (self.levels[g].node_first + self.offset[g][c] + i) as u32
+    }
+
+    fn count(&self, g: usize, c: usize) -> u64 {
+        self.offset[g][c + 1] - self.offset[g][c]
+    }
+}
+
+fn assemble(
+    chunks: &[ChunkResult],
+    metadata: &Metadata,
+    output: &Path,
+    params: &crate::hierarchy::BuildParams,
+    progress: &dyn Progress,
+) -> Result<(usize, usize), ConvertError> {
+    let lay = Layout::new(chunks)?;
+    let k = chunks.len();
+    let last = lay.last;
+    let dn = params.delta_n as usize;
+    let bits = params.position_bits;
+    // The points of global level `m` of chunk `c`, unquantized, for the levels the top
+    // node encodes (m ≤ δn): padding copies of the root, or the chunk's kept levels.
+    let top_points = |c: usize, m: usize| -> Vec<[f32; 3]> {
+        if m <= lay.pad[c] {
+            vec![chunks[c].root.position]
+        } else {
+            chunks[c].top_positions[m - 1 - lay.pad[c]].clone()
+        }
+    };
+    // The top node: one cluster of the chunk roots.
+    let roots = LevelPoints(chunks.iter().map(|c| c.root).collect());
+    let top = representatives(
+        &Source::Reps(&roots),
+        &Clusters {
+            order: (0..k as u32).collect(),
+            offsets: vec![0, k as u32],
+        },
+    )
+    .0[0];
+    let top_pl = dn.min(last);
+    let mut max_off = [0.0f64; 3];
+    for m in 1..=top_pl {
+        for c in 0..k {
+            for x in top_points(c, m) {
+                for a in 0..3 {
+                    max_off[a] = max_off[a].max((f64::from(x[a]) - f64::from(top.position[a])).abs());
+                }
+            }
+        }
+    }
+    let top_scale = quantize::scale_for(max_off, bits);
+    let mut metadata = metadata.clone();
+    metadata.max_position_error = if last <= dn {
+        // The particles themselves are encoded by the top node.
+        let mut e = 0.0f64;
+        for c in 0..k {
+            for x in top_points(c, last) {
+                let q = [0, 1, 2].map(|a| quantize::encode(f64::from(x[a]), top.position[a], top_scale[a], bits));
+                let d = quantize::decode3(q, top.position, top_scale, bits);
+                e = e.max((0..3).map(|a| (f64::from(d[a]) - f64::from(x[a])).powi(2)).sum::<f64>().sqrt());
+            }
+        }
+        e
+    } else {
+        chunks.iter().map(|c| c.max_error).fold(0.0, f64::max)
+    };
+
+    let json = serde_json::to_vec_pretty(&metadata).expect("metadata serializes");
+    let total_bytes: u64 = chunks
+        .iter()
+        .map(|c| {
+            [Some(&c.nodes_file), Some(&c.positions_file), Some(&c.species_file), c.attribute_file.as_ref()]
+                .into_iter()
+                .flatten()
+                .map(|p| fs::metadata(p).map_or(0, |m| m.len()))
+                .sum::<u64>()
+        })
+        .sum();
+    progress.stage("writing", Some(total_bytes), "bytes");
+    let mut w = Writer::create(output, bits)?;
+    w.write_section(SectionKind::Metadata, 0, &json)?;
+    w.write_pod_section(SectionKind::Levels, 0, &lay.levels)?;
+
+    // Nodes, level by level.
+    let node_count = lay.levels[last].node_first as usize;
+    {
+        let mut s = w.section(SectionKind::Nodes, 0)?;
+        let rep_node = |rep: &Rep, g: usize| NodeRecord {
+            centroid: rep.position,
+            radius: rep.radius,
+            quant_scale: [0.0; 3],
+            area_sum: rep.area,
+            bounds_min: rep.bounds.0,
+            attribute: rep.attribute,
+            bounds_max: rep.bounds.1,
+            colour: pack_colour(rep.colour),
+            child_first: 0,
+            child_count: 1,
+            point_first: 0,
+            point_count: 1,
+            parent: u32::MAX,
+            quant_node: 0,
+            rms_radius: 0.0,
+            level: g as u8,
+            point_level: 0,
+            species: rep.species,
+        };
+        let mut top_node = rep_node(&top, 0);
+        top_node.quant_scale = top_scale;
+        top_node.child_count = k as u32;
+        top_node.point_level = top_pl as u8;
+        top_node.point_count = lay.levels[top_pl].point_count as u32;
+        top_node.rms_radius = top.rms_radius;
+        s.write_pod(&[top_node])?;
+        let mut buf: Vec<NodeRecord> = Vec::new();
+        for g in 1..last {
+            let pl = (g + dn).min(last);
+            let enc_level = pl.saturating_sub(dn);
+            for (c, ch) in chunks.iter().enumerate() {
+                let pad = lay.pad[c];
+                let parent_of_root = if pad == 0 { 0 } else { lay.node(pad, c, 0) };
+                if g <= pad {
+                    // A padding copy of the chunk's root.
+                    let mut n = rep_node(&ch.root, g);
+                    n.quant_scale = ch.root_scale;
+                    n.child_first = lay.offset[g + 1][c] as u32;
+                    n.point_first = lay.offset[pl][c] as u32;
+                    n.point_count = lay.count(pl, c) as u32;
+                    n.point_level = pl as u8;
+                    n.parent = if g == 1 { 0 } else { lay.node(g - 1, c, 0) };
+                    n.quant_node = if enc_level == 0 { 0 } else { lay.node(enc_level, c, 0) };
+                    s.write_pod(&[n])?;
+                    continue;
+                }
+                let j = g - 1 - pad;
+                let local = &ch.levels;
+                let first = local[j].node_first;
+                let count = local[j].point_count;
+                let file = File::open(&ch.nodes_file).map_err(|e| temp_err(&ch.nodes_file, e))?;
+                let step = 1u64 << 16;
+                let mut at = 0u64;
+                while at < count {
+                    let len = step.min(count - at);
+                    buf.resize(len as usize, bytemuck::Zeroable::zeroed());
+                    file.read_exact_at(
+                        bytemuck::cast_slice_mut(&mut buf),
+                        (first + at) * std::mem::size_of::<NodeRecord>() as u64,
+                    )
+                    .map_err(|e| temp_err(&ch.nodes_file, e))?;
+                    for n in &mut buf {
+                        n.child_first += lay.offset[g + 1][c] as u32;
+                        n.point_first += lay.offset[pl][c] as u32;
+                        n.parent = if j == 0 {
+                            parent_of_root
+                        } else {
+                            let i = u64::from(n.parent) - local[j - 1].node_first;
+                            lay.node(g - 1, c, i)
+                        };
+                        n.quant_node = if enc_level >= 1 + pad {
+                            let lj = enc_level - 1 - pad;
+                            let i = u64::from(n.quant_node) - local[lj].node_first;
+                            lay.node(enc_level, c, i)
+                        } else if enc_level == 0 {
+                            0
+                        } else {
+                            lay.node(enc_level, c, 0)
+                        };
+                        n.level = g as u8;
+                        n.point_level = pl as u8;
+                    }
+                    s.write_pod(&buf)?;
+                    progress.advance(len * std::mem::size_of::<NodeRecord>() as u64);
+                    at += len;
+                }
+                if g == last - 1 {
+                    fs::remove_file(&ch.nodes_file).map_err(|e| temp_err(&ch.nodes_file, e))?;
+                }
+            }
+        }
+        s.end()?;
+    }
+    if last == 1 {
+        for ch in chunks {
+            fs::remove_file(&ch.nodes_file).map_err(|e| temp_err(&ch.nodes_file, e))?;
+        }
+    }
+
+    // Positions, level by level.
+    let mut qbuf: Vec<[u16; 3]> = Vec::new();
+    for m in 1..=last {
+        let mut s = w.section(SectionKind::Positions, m as u32)?;
+        let put = |s: &mut mdlod_format::writer::SectionWriter<'_>, q: &[[u16; 3]]| {
+            if bits == 16 {
+                s.write_pod(q)
+            } else {
+                let b: Vec<[u8; 3]> = q.iter().map(|p| p.map(|v| v as u8)).collect();
+                s.write_pod(&b)
+            }
+        };
+        for (c, ch) in chunks.iter().enumerate() {
+            let pad = lay.pad[c];
+            if m <= dn {
+                let q: Vec<[u16; 3]> = top_points(c, m)
+                    .iter()
+                    .map(|x| [0, 1, 2].map(|a| quantize::encode(f64::from(x[a]), top.position[a], top_scale[a], bits)))
+                    .collect();
+                put(&mut s, &q)?;
+            } else if m <= pad + 1 {
+                // A padding copy (or the root itself) encoded by a padding copy.
+                let x = ch.root.position;
+                let q = [0, 1, 2].map(|a| quantize::encode(f64::from(x[a]), x[a], ch.root_scale[a], bits));
+                put(&mut s, &[q])?;
+            } else {
+                let j = m - 1 - pad;
+                let before: u64 = ch.levels[1..j].iter().map(|l| l.point_count).sum();
+                let count = ch.levels[j].point_count;
+                let file = File::open(&ch.positions_file).map_err(|e| temp_err(&ch.positions_file, e))?;
+                let step = 1u64 << 18;
+                let mut at = 0u64;
+                while at < count {
+                    let len = step.min(count - at);
+                    qbuf.resize(len as usize, [0; 3]);
+                    file.read_exact_at(bytemuck::cast_slice_mut(&mut qbuf), (before + at) * 6)
+                        .map_err(|e| temp_err(&ch.positions_file, e))?;
+                    put(&mut s, &qbuf)?;
+                    progress.advance(len * 6);
+                    at += len;
+                }
+            }
+            if m == last {
+                fs::remove_file(&ch.positions_file).map_err(|e| temp_err(&ch.positions_file, e))?;
+            }
+        }
+        s.end()?;
+    }
+
+    // Per-particle sections.
+    let copy = |w: &mut Writer, kind: SectionKind, files: Vec<&PathBuf>| -> Result<(), ConvertError> {
+        let mut s = w.section(kind, last as u32)?;
+        let mut buf = vec![0u8; 1 << 22];
+        for path in files {
+            let mut f = File::open(path).map_err(|e| temp_err(path, e))?;
+            loop {
+                let got = f.read(&mut buf).map_err(|e| temp_err(path, e))?;
+                if got == 0 {
+                    break;
+                }
+                s.write_bytes(&buf[..got])?;
+                progress.advance(got as u64);
+            }
+            fs::remove_file(path).map_err(|e| temp_err(path, e))?;
+        }
+        s.end()?;
+        Ok(())
+    };
+    copy(&mut w, SectionKind::Species, chunks.iter().map(|c| &c.species_file).collect())?;
+    let attribute_files: Vec<&PathBuf> = chunks.iter().filter_map(|c| c.attribute_file.as_ref()).collect();
+    if !attribute_files.is_empty() {
+        copy(&mut w, SectionKind::Attribute, attribute_files)?;
+    }
+    w.finish()?;
+    progress.finish_stage();
+    Ok((last + 1, node_count))
+}

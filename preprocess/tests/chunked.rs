@@ -1,0 +1,95 @@
+//! Out-of-core conversion from dumps read a window at a time: the file equals the one
+//! built from the whole frame in memory with the same chunks, for raw arrays and real
+//! LAMMPS binary dumps (whose atoms span several per-processor blocks).
+
+use std::path::Path;
+
+use mdlod_format::MdlodFile;
+use mdlod_preprocess::chunked::ChunkOptions;
+use mdlod_preprocess::convert::{convert_file, convert_frame, source_info, ConvertOptions, FrameSelect};
+use mdlod_preprocess::hierarchy::BuildParams;
+use mdlod_preprocess::readers::{DumpFile, ReadOptions};
+use mdlod_preprocess::NoProgress;
+
+fn options(chunk_points: usize) -> ConvertOptions {
+    ConvertOptions {
+        build: BuildParams {
+            max_root_points: 64,
+            ..Default::default()
+        },
+        radii: vec![("1".into(), 1.28)],
+        chunks: ChunkOptions {
+            chunk_points,
+            memory_limit: 1 << 30,
+            temp_dir: None,
+            window_points: 128,
+        },
+    }
+}
+
+/// Converts `input` out of core (window by window) and from the whole frame in memory,
+/// both in chunks of `chunk_points`, and checks the two files are identical.
+fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usize) -> MdlodFile {
+    let dir = tempfile::tempdir().unwrap();
+    let streamed = dir.path().join("streamed.mdlod");
+    let opts = options(chunk_points);
+    let dump = DumpFile::open(input).unwrap();
+    assert!(dump.reads_parts());
+    let k = dump.frame_count() - 1;
+    let n = dump.frame_info(k).unwrap().particles;
+    assert!(n > chunk_points, "{n} particles do not need chunks of {chunk_points}");
+    convert_file(input, &streamed, FrameSelect::Last, read, &opts, &NoProgress).unwrap();
+    let frame = dump.read_frame(k, read, &NoProgress).unwrap();
+    let whole = dir.path().join("whole.mdlod");
+    convert_frame(&frame, Some(source_info(input, k as u64)), &whole, &opts, &NoProgress).unwrap();
+    let (a, b) = (std::fs::read(&streamed).unwrap(), std::fs::read(&whole).unwrap());
+    assert!(a == b, "{}: streamed and in-memory chunked files differ", input.display());
+    let f = MdlodFile::open(&streamed).unwrap();
+    f.verify().unwrap();
+    assert_eq!(f.particle_count() as usize, n);
+    assert_eq!(f.metadata().build.chunk_points, Some(chunk_points as u64));
+    // Only the two outputs remain: the working files are gone.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+    f
+}
+
+#[test]
+fn lammps_binary_dump_streams_into_the_same_file() {
+    let path = mdlod_datasets::lammps_sample_path("cu_melt.custom.bin");
+    let read = ReadOptions {
+        attribute: Some("c_pe".into()),
+        ..Default::default()
+    };
+    let f = streamed_equals_in_memory(&path, &read, 300);
+    assert!(f.metadata().attribute.is_some());
+}
+
+#[test]
+fn raw_arrays_stream_into_the_same_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 5000usize;
+    let mut pos = Vec::new();
+    let mut species = Vec::new();
+    let mut s = 0x2545F4914F6CDD1Du64;
+    for i in 0..n {
+        for _ in 0..3 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            pos.extend_from_slice(&((s >> 40) as f32 / 1e5).to_le_bytes());
+        }
+        species.push((i % 3) as u8);
+    }
+    std::fs::write(dir.path().join("pos.f32"), &pos).unwrap();
+    std::fs::write(dir.path().join("type.u8"), &species).unwrap();
+    let sidecar = dir.path().join("frame.raw.json");
+    std::fs::write(
+        &sidecar,
+        r#"{"mdlod_raw": 1, "positions": {"file": "pos.f32", "type": "f32"},
+            "species": {"file": "type.u8", "type": "u8", "names": ["Cu", "Ag", "Ni"]}}"#,
+    )
+    .unwrap();
+    let f = streamed_equals_in_memory(&sidecar, &ReadOptions::default(), 700);
+    let names: Vec<&str> = f.metadata().species.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["Cu", "Ag", "Ni"]);
+}
