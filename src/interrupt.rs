@@ -22,7 +22,13 @@ pub fn remove_on_interrupt(work_dir: &Path, output: Option<&Path>) {
         let _ = ctrlc::set_handler(|| {
             let targets = TARGETS.lock().unwrap_or_else(|e| e.into_inner());
             for (dir, output) in targets.iter() {
-                let _ = std::fs::remove_dir_all(dir);
+                // Workers may still add a file while the directory is being removed.
+                for _ in 0..10 {
+                    if std::fs::remove_dir_all(dir).is_ok() || !dir.exists() {
+                        break;
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
                 if let Some(out) = output {
                     remove_partial(out);
                 }

@@ -753,3 +753,102 @@ fn sndfs_sampled_once_shade_without_the_particles() {
         "{err}"
     );
 }
+
+/// Names in `dir` that an out-of-core conversion leaves only while it runs.
+fn working_entries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".mdlod-convert-") || n.ends_with(".tmp"))
+        .collect()
+}
+
+#[test]
+fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("alloy.raw.json");
+    let made = ok(&[
+        "generate", "alloy", "-n", "120000", "--format", "raw", "-o", s(&input),
+    ]);
+    assert!(made.contains("120000 particles"), "{made}");
+    // Chunks of 30 000: one at a time under 100 MiB, both threads with 8 GiB.
+    let convert = |out: &Path, limit: &str, threads: &str| {
+        ok(&[
+            "convert", s(&input), "-o", s(out), "--radius", "1=1.28", "--radius", "2=1.44",
+            "--root-points", "256", "--chunk-points", "30000", "--memory-limit", limit,
+            "--threads", threads,
+        ])
+    };
+    let (a, b) = (dir.path().join("a.mdlod"), dir.path().join("b.mdlod"));
+    convert(&a, "100M", "1");
+    convert(&b, "8G", "2");
+    assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap());
+    let info = ok(&["info", s(&a), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&info).unwrap();
+    assert_eq!(v["metadata"]["build"]["chunk_points"], 30000, "{info}");
+    assert_eq!(v["metadata"]["particles"], 120000, "{info}");
+    ok(&["verify", s(&a)]);
+    assert!(working_entries(dir.path()).is_empty());
+
+    // A limit below one chunk is refused before any work, naming the need.
+    let err = fails(&[
+        "convert", s(&input), "-o", s(&dir.path().join("c.mdlod")), "--chunk-points", "30000",
+        "--root-points", "256", "--memory-limit", "10M",
+    ]);
+    assert!(err.contains("memory limit of 10 MiB"), "{err}");
+    assert!(working_entries(dir.path()).is_empty());
+
+    // Ctrl-C while chunks are being built removes the working files and the partial
+    // output.
+    let out = dir.path().join("interrupted.mdlod");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args([
+            "convert", s(&input), "-o", s(&out), "--chunk-points", "5000", "--root-points", "64",
+            "--threads", "1",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let building = loop {
+        let chunk_files = working_entries(dir.path())
+            .iter()
+            .filter(|n| n.starts_with(".mdlod-convert-"))
+            .flat_map(|n| walk(&dir.path().join(n)))
+            .any(|f| f.contains("chunk-"));
+        if chunk_files || started.elapsed().as_secs() > 60 {
+            break chunk_files;
+        }
+        if child.try_wait().unwrap().is_some() {
+            break false;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    };
+    assert!(building, "the conversion ended before chunks were built");
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let done = child.wait_with_output().unwrap();
+    assert_eq!(done.status.code(), Some(130), "{}", String::from_utf8_lossy(&done.stderr));
+    assert!(!out.exists());
+    assert!(working_entries(dir.path()).is_empty(), "{:?}", working_entries(dir.path()));
+}
+
+/// Every file name below `dir` (empty when it is gone).
+fn walk(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                out.extend(walk(&p));
+            } else {
+                out.push(e.file_name().to_string_lossy().into_owned());
+            }
+        }
+    }
+    out
+}

@@ -311,6 +311,88 @@ pub fn write_lammps_dump<W: Write + ?Sized>(
     })
 }
 
+/// Writes one frame as raw arrays with a `*.raw.json` sidecar (the input for the
+/// largest conversions: no parsing, a window at a time): `STEM.pos.f32` (x y z per
+/// particle), `STEM.type.u8` (LAMMPS type − 1, named by the type number),
+/// `STEM.EXTRA.f32` (the extra column) and `STEM.raw.json`. The values are exactly those
+/// the text dump of the same options holds. Returns the sidecar's path with the summary.
+pub fn write_raw_arrays(
+    opts: &GenerateOptions,
+    dir: &Path,
+    stem: &str,
+    mut progress: impl FnMut(u64),
+) -> io::Result<(std::path::PathBuf, Summary)> {
+    opts.validate()?;
+    if opts.frames != 1 {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "raw arrays hold one frame",
+        ));
+    }
+    let base = opts.particles - opts.duplicates;
+    let plan = match opts.kind {
+        Kind::Crater => kinds::crater(base, opts.seed),
+        Kind::Alloy => kinds::alloy(base, opts.seed),
+        Kind::Droplets => kinds::droplets(base, opts.seed),
+    };
+    let column = opts.kind.extra_column();
+    let names = [
+        format!("{stem}.pos.f32"),
+        format!("{stem}.type.u8"),
+        format!("{stem}.{column}.f32"),
+    ];
+    let create = |n: &str| {
+        std::fs::File::create(dir.join(n)).map(|f| io::BufWriter::with_capacity(1 << 20, f))
+    };
+    let (mut pos, mut types, mut extra) = (
+        std::fs::File::create(dir.join(&names[0]))?,
+        create(&names[1])?,
+        create(&names[2])?,
+    );
+    let mut sink = sink::Sink::new(&mut pos, &mut progress);
+    sink.set_binary(sink::BinaryOut::new(&mut types, &mut extra));
+    let bx = plan.bounds(0).rounded();
+    sink.begin_frame(base, opts.duplicates, [bx.hi[0], bx.hi[1]]);
+    plan.emit(opts.seed, 0, &mut sink)?;
+    sink.finish()?;
+    let total = sink.total_lines;
+    drop(sink);
+    let type_names: Vec<String> = (1..=plan.species).map(|t| t.to_string()).collect();
+    let sidecar = serde_json::json!({
+        "mdlod_raw": 1,
+        "particles": total,
+        "positions": { "file": names[0], "type": "f32" },
+        "species": { "file": names[1], "type": "u8", "names": type_names },
+        "attribute": { "file": names[2], "type": "f32", "name": column },
+        "box": {
+            "origin": bx.lo,
+            "a": [bx.hi[0] - bx.lo[0], 0.0, 0.0],
+            "b": [0.0, bx.hi[1] - bx.lo[1], 0.0],
+            "c": [0.0, 0.0, bx.hi[2] - bx.lo[2]],
+        },
+        "timestep": 0,
+    });
+    let path = dir.join(format!("{stem}.raw.json"));
+    std::fs::write(&path, serde_json::to_vec_pretty(&sidecar)?)?;
+    let bytes = names
+        .iter()
+        .map(|n| std::fs::metadata(dir.join(n)).map_or(0, |m| m.len()))
+        .sum();
+    Ok((
+        path,
+        Summary {
+            particles: opts.particles,
+            frames: 1,
+            total_particles: total,
+            bytes,
+            species: plan.species,
+            extra_column: column,
+            first_box: bx,
+            bounds: bx,
+        },
+    ))
+}
+
 /// [`write_lammps_dump`] into a new file at `path` (truncated if it exists).
 pub fn write_lammps_dump_to_path(
     opts: &GenerateOptions,

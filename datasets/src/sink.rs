@@ -126,6 +126,28 @@ pub(crate) struct Sink<'a, W: Write + ?Sized> {
     next_dup_at: u64,
     /// Periodic lengths in x and y, quantized; positions are wrapped into `[0, len)`.
     wrap: [i64; 2],
+    /// Raw arrays instead of text: positions go to `out` as little-endian f32 triples.
+    binary: Option<BinaryOut<'a>>,
+}
+
+/// The other arrays of a raw-array output: types (u8, 0-based) and the extra column
+/// (f32), buffered.
+pub(crate) struct BinaryOut<'a> {
+    pub types: &'a mut dyn Write,
+    pub extra: &'a mut dyn Write,
+    tbuf: Vec<u8>,
+    ebuf: Vec<u8>,
+}
+
+impl<'a> BinaryOut<'a> {
+    pub(crate) fn new(types: &'a mut dyn Write, extra: &'a mut dyn Write) -> Self {
+        BinaryOut {
+            types,
+            extra,
+            tbuf: Vec::with_capacity(FLUSH_AT),
+            ebuf: Vec::with_capacity(FLUSH_AT),
+        }
+    }
 }
 
 impl<'a, W: Write + ?Sized> Sink<'a, W> {
@@ -147,6 +169,7 @@ impl<'a, W: Write + ?Sized> Sink<'a, W> {
             dup_written: 0,
             next_dup_at: u64::MAX,
             wrap: [i64::MAX; 2],
+            binary: None,
         }
     }
 
@@ -174,7 +197,15 @@ impl<'a, W: Write + ?Sized> Sink<'a, W> {
         num.div_ceil(self.dup_total as u128) as u64
     }
 
+    /// Writes raw arrays instead of text from now on.
+    pub(crate) fn set_binary(&mut self, out: BinaryOut<'a>) {
+        self.binary = Some(out);
+    }
+
     pub(crate) fn raw(&mut self, text: &[u8]) -> io::Result<()> {
+        if self.binary.is_some() {
+            return Ok(());
+        }
         if self.pos + text.len() > FLUSH_AT {
             self.flush_buf()?;
         }
@@ -197,6 +228,12 @@ impl<'a, W: Write + ?Sized> Sink<'a, W> {
     }
 
     fn flush_buf(&mut self) -> io::Result<()> {
+        if let Some(b) = self.binary.as_mut() {
+            b.types.write_all(&b.tbuf)?;
+            b.extra.write_all(&b.ebuf)?;
+            b.tbuf.clear();
+            b.ebuf.clear();
+        }
         self.out.write_all(&self.buf[..self.pos])?;
         self.bytes += self.pos as u64;
         self.pos = 0;
@@ -206,6 +243,10 @@ impl<'a, W: Write + ?Sized> Sink<'a, W> {
     pub(crate) fn finish(&mut self) -> io::Result<()> {
         self.flush_buf()?;
         (self.progress)(self.total_lines);
+        if let Some(b) = self.binary.as_mut() {
+            b.types.flush()?;
+            b.extra.flush()?;
+        }
         self.out.flush()
     }
 
@@ -263,6 +304,23 @@ impl<'a, W: Write + ?Sized> Sink<'a, W> {
 
     #[inline]
     fn line(&mut self, ty: u32, q: [i64; 3], e: i64) {
+        if let Some(b) = self.binary.as_mut() {
+            // The values the text would hold, as a reader parses them.
+            for v in q {
+                let x = (v as f64 / SCALE) as f32;
+                self.buf[self.pos..self.pos + 4].copy_from_slice(&x.to_le_bytes());
+                self.pos += 4;
+            }
+            b.tbuf.push(ty.saturating_sub(1).min(255) as u8);
+            b.ebuf
+                .extend_from_slice(&((e as f64 / SCALE) as f32).to_le_bytes());
+            self.total_lines += 1;
+            if self.total_lines >= self.next_progress {
+                self.next_progress += PROGRESS_EVERY;
+                (self.progress)(self.total_lines);
+            }
+            return;
+        }
         let l = &mut self.buf[self.pos..self.pos + LINE_MAX];
         // Fixed-size copy (no call); the bytes past the id are overwritten below.
         l[..24].copy_from_slice(&self.id_text);

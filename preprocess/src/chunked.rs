@@ -49,7 +49,7 @@ use crate::progress::{NoProgress, Progress};
 use crate::species::species_table;
 
 /// Frames above this many particles are built in chunks of at most this many.
-pub const DEFAULT_CHUNK_POINTS: usize = 1 << 24;
+pub const DEFAULT_CHUNK_POINTS: usize = 1 << 22;
 /// Working memory of the in-memory builder per particle (measured peak, with margin).
 pub const BUILD_BYTES_PER_PARTICLE: u64 = 110;
 /// Particles read from the input per window.
@@ -701,6 +701,13 @@ pub fn convert_chunked(
         )));
     }
     let jobs = ((chunk.memory_limit / need) as usize).clamp(1, rayon::current_num_threads());
+    // Each chunk narrows to about max_root_points / K points under its root, so that the
+    // levels under the top grow as gradually as in a single build.
+    let mut chunk_options = options.clone();
+    chunk_options.build.max_root_points = params
+        .max_cluster_size
+        .max(params.max_root_points.div_ceil(groups.len() as u32));
+    let options = &chunk_options;
     let extras = BuildExtras {
         attribute_range: layout.attribute.then_some(range),
         keep_levels: params.delta_n as usize,
@@ -718,20 +725,40 @@ pub fn convert_chunked(
         Some(n as u64),
         "particles",
     );
-    let mut chunks = Vec::with_capacity(groups.len());
-    let ids: Vec<usize> = (0..groups.len()).collect();
-    for batch in ids.chunks(jobs) {
-        let built: Vec<ChunkResult> = batch
-            .par_iter()
-            .map(|&c| {
-                let r = build_chunk(c, &leaves[groups[c].clone()], &input);
-                if r.is_ok() {
-                    progress.advance(leaves[groups[c].clone()].iter().map(|c| c.count as u64).sum());
+    // `jobs` workers take the next chunk as they finish one (each build is parallel
+    // itself); results are kept by chunk index, so the order never depends on timing.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let failed = std::sync::atomic::AtomicBool::new(false);
+    let results: Vec<std::sync::Mutex<Option<Result<ChunkResult, ConvertError>>>> =
+        (0..groups.len()).map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.min(groups.len()) {
+            scope.spawn(|| loop {
+                use std::sync::atomic::Ordering::Relaxed;
+                let c = next.fetch_add(1, Relaxed);
+                if c >= groups.len() || failed.load(Relaxed) {
+                    return;
                 }
-                r
-            })
-            .collect::<Result<_, _>>()?;
-        chunks.extend(built);
+                let cells = &leaves[groups[c].clone()];
+                let r = build_chunk(c, cells, &input);
+                match &r {
+                    Ok(_) => progress.advance(cells.iter().map(|c| c.count as u64).sum()),
+                    Err(_) => failed.store(true, Relaxed),
+                }
+                *results[c].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+            });
+        }
+    });
+    let mut chunks = Vec::with_capacity(groups.len());
+    for r in results {
+        match r.into_inner().unwrap_or_else(|e| e.into_inner()) {
+            Some(Ok(c)) => chunks.push(c),
+            Some(Err(e)) => return Err(e),
+            None => {}
+        }
+    }
+    if chunks.len() != groups.len() {
+        return Err(ConvertError::Chunked("a chunk was not built".into()));
     }
     progress.finish_stage();
     let build_time = t1.elapsed();
@@ -757,7 +784,8 @@ pub fn convert_chunked(
         position_bits: params.position_bits,
         chunk_points: Some(chunk.chunk_points as u64),
     };
-    let (levels, nodes) = assemble(&chunks, &metadata, output, params, progress)?;
+    let (levels, nodes, max_position_error) =
+        assemble(&chunks, &metadata, output, params, progress)?;
     let write_time = t2.elapsed();
     drop(work);
     let file_size = fs::metadata(output).map(|m| m.len()).unwrap_or(0);
@@ -765,7 +793,7 @@ pub fn convert_chunked(
         particles: n as u64,
         levels,
         nodes,
-        max_position_error: metadata.max_position_error,
+        max_position_error,
         read_time,
         build_time,
         write_time,
@@ -867,7 +895,7 @@ fn assemble(
     output: &Path,
     params: &crate::hierarchy::BuildParams,
     progress: &dyn Progress,
-) -> Result<(usize, usize), ConvertError> {
+) -> Result<(usize, usize, f64), ConvertError> {
     let lay = Layout::new(chunks)?;
     let k = chunks.len();
     let last = lay.last;
@@ -1115,5 +1143,5 @@ fn assemble(
     }
     w.finish()?;
     progress.finish_stage();
-    Ok((last + 1, node_count))
+    Ok((last + 1, node_count, metadata.max_position_error))
 }

@@ -27,13 +27,26 @@ pub struct Args {
     /// Number of frames (timesteps 0, 100, 200, ...).
     #[arg(long, default_value_t = 1)]
     pub frames: u32,
+    /// Output format: a LAMMPS text dump, or raw arrays with a sidecar (give the output
+    /// as NAME.raw.json; one frame; the fastest input for huge conversions).
+    #[arg(long, value_enum, default_value = "lammps")]
+    pub format: OutputFormat,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum OutputFormat {
+    Lammps,
+    Raw,
 }
 
 pub fn run(args: Args) -> Result<()> {
     let mut opts = GenerateOptions::new(args.kind, args.particles);
     opts.seed = args.seed;
     opts.frames = args.frames;
-    let summary = generate(&opts, &args.output)?;
+    let summary = match args.format {
+        OutputFormat::Lammps => generate(&opts, &args.output)?,
+        OutputFormat::Raw => generate_raw(&opts, &args.output)?,
+    };
     println!(
         "wrote {}: {} frame(s) of {} particles ({} species, extra column {}), {:.1} MiB",
         args.output.display(),
@@ -46,15 +59,40 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-pub fn generate(
+fn generate_raw(
     opts: &GenerateOptions,
     output: &std::path::Path,
 ) -> Result<mdlod_datasets::Summary> {
-    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let name = output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let Some(stem) = name.strip_suffix(".raw.json").filter(|s| !s.is_empty()) else {
+        anyhow::bail!(
+            "{}: raw arrays need an output named NAME.raw.json (the sidecar)",
+            output.display()
+        );
+    };
+    let dir = match output.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let bar = bar(opts.particles);
+    let (_, summary) = mdlod_datasets::write_raw_arrays(opts, &dir, stem, |n| {
+        if let Some(b) = &bar {
+            b.set_position(n);
+        }
+    })
+    .with_context(|| format!("cannot write the arrays of {}", output.display()))?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
     }
-    let total = opts.particles * u64::from(opts.frames);
-    let bar = std::io::stderr().is_terminal().then(|| {
+    Ok(summary)
+}
+
+fn bar(total: u64) -> Option<indicatif::ProgressBar> {
+    std::io::stderr().is_terminal().then(|| {
         let b = indicatif::ProgressBar::new(total);
         b.set_style(
             indicatif::ProgressStyle::with_template(
@@ -65,7 +103,17 @@ pub fn generate(
         );
         b.set_message("generating");
         b
-    });
+    })
+}
+
+pub fn generate(
+    opts: &GenerateOptions,
+    output: &std::path::Path,
+) -> Result<mdlod_datasets::Summary> {
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    let bar = bar(opts.particles * u64::from(opts.frames));
     let summary = write_lammps_dump_to_path(opts, output, |n| {
         if let Some(b) = &bar {
             b.set_position(n);
