@@ -785,8 +785,8 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
     assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap());
     let info = ok(&["info", s(&a), "--json"]);
     let v: serde_json::Value = serde_json::from_str(&info).unwrap();
-    assert_eq!(v["metadata"]["build"]["chunk_points"], 30000, "{info}");
-    assert_eq!(v["metadata"]["particles"], 120000, "{info}");
+    assert_eq!(v["build"]["chunk_points"], 30000, "{info}");
+    assert_eq!(v["particles"], 120000, "{info}");
     ok(&["verify", s(&a)]);
     assert!(working_entries(dir.path()).is_empty());
 
