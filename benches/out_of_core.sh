@@ -40,7 +40,7 @@ PY
     >"$DIR/convert-$n.log" 2>"$DIR/time-$n.log" &
   pid=$!
   while kill -0 "$pid" 2>/dev/null; do
-    t=$(du -sb "$DIR"/.mdlod-convert-* 2>/dev/null | awk '{s+=$1} END {print s+0}')
+    t=$({ du -sb "$DIR"/.mdlod-convert-* 2>/dev/null || true; } | awk '{s+=$1} END {printf "%d\n", s}')
     [ "$t" -gt "$peak_tmp" ] && peak_tmp=$t
     sleep 1
   done

@@ -768,15 +768,35 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("alloy.raw.json");
     let made = ok(&[
-        "generate", "alloy", "-n", "120000", "--format", "raw", "-o", s(&input),
+        "generate",
+        "alloy",
+        "-n",
+        "120000",
+        "--format",
+        "raw",
+        "-o",
+        s(&input),
     ]);
     assert!(made.contains("120000 particles"), "{made}");
     // Chunks of 30 000: one at a time under 100 MiB, both threads with 8 GiB.
     let convert = |out: &Path, limit: &str, threads: &str| {
         ok(&[
-            "convert", s(&input), "-o", s(out), "--radius", "1=1.28", "--radius", "2=1.44",
-            "--root-points", "256", "--chunk-points", "30000", "--memory-limit", limit,
-            "--threads", threads,
+            "convert",
+            s(&input),
+            "-o",
+            s(out),
+            "--radius",
+            "1=1.28",
+            "--radius",
+            "2=1.44",
+            "--root-points",
+            "256",
+            "--chunk-points",
+            "30000",
+            "--memory-limit",
+            limit,
+            "--threads",
+            threads,
         ])
     };
     let (a, b) = (dir.path().join("a.mdlod"), dir.path().join("b.mdlod"));
@@ -792,8 +812,16 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
 
     // A limit below one chunk is refused before any work, naming the need.
     let err = fails(&[
-        "convert", s(&input), "-o", s(&dir.path().join("c.mdlod")), "--chunk-points", "30000",
-        "--root-points", "256", "--memory-limit", "10M",
+        "convert",
+        s(&input),
+        "-o",
+        s(&dir.path().join("c.mdlod")),
+        "--chunk-points",
+        "30000",
+        "--root-points",
+        "256",
+        "--memory-limit",
+        "10M",
     ]);
     assert!(err.contains("memory limit of 10 MiB"), "{err}");
     assert!(working_entries(dir.path()).is_empty());
@@ -803,8 +831,16 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
     let out = dir.path().join("interrupted.mdlod");
     let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
         .args([
-            "convert", s(&input), "-o", s(&out), "--chunk-points", "5000", "--root-points", "64",
-            "--threads", "1",
+            "convert",
+            s(&input),
+            "-o",
+            s(&out),
+            "--chunk-points",
+            "5000",
+            "--root-points",
+            "64",
+            "--threads",
+            "1",
         ])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
@@ -832,9 +868,18 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
         .unwrap();
     assert!(status.success());
     let done = child.wait_with_output().unwrap();
-    assert_eq!(done.status.code(), Some(130), "{}", String::from_utf8_lossy(&done.stderr));
+    assert_eq!(
+        done.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
     assert!(!out.exists());
-    assert!(working_entries(dir.path()).is_empty(), "{:?}", working_entries(dir.path()));
+    assert!(
+        working_entries(dir.path()).is_empty(),
+        "{:?}",
+        working_entries(dir.path())
+    );
 }
 
 /// Every file name below `dir` (empty when it is gone).

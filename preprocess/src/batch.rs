@@ -353,35 +353,29 @@ pub fn batch(
                 let result = (|| -> Result<FrameEntry, BatchError> {
                     let out = out_dir.join(frame_file_name(job.timestep));
                     let source = fingerprint(job.input, job.frame as u64);
-                    if job.particles as usize > convert.chunks.chunk_points
-                        && job.dump.reads_parts()
-                    {
-                        // Out of core: the frame is read a window at a time.
+                    let streamed = if job.particles as usize > convert.chunks.chunk_points {
                         let info = job.dump.frame_info(job.frame)?;
-                        let header = crate::Frame {
-                            simulation_box: info.simulation_box.clone(),
-                            timestep: info.timestep,
-                            time: info.time,
-                            units: info.units.clone(),
-                            ..Default::default()
-                        };
-                        let src = crate::chunked::DumpSource {
-                            path: job.input.to_path_buf(),
-                            frame: job.frame,
-                            options: opts.read.clone(),
-                            particles: info.particles,
-                            simulation_box: info.simulation_box,
-                        };
+                        crate::convert::window_source(job.dump, job.frame, &opts.read, &info)
+                            .map(|s| (s, info))
+                    } else {
+                        None
+                    };
+                    if let Some((src, info)) = streamed {
+                        // Out of core: the frame is read a window at a time.
                         crate::chunked::convert_chunked(
-                            &src,
-                            crate::convert::base_metadata(&header, Some(source), &convert),
+                            src.as_ref(),
+                            crate::convert::base_metadata(
+                                &crate::convert::header_of(&info),
+                                Some(source),
+                                convert,
+                            ),
                             &out,
-                            &convert,
+                            convert,
                             &quiet,
                         )?;
                     } else {
                         let frame = job.dump.read_frame(job.frame, &opts.read, &quiet)?;
-                        convert_frame(&frame, Some(source), &out, &convert, &quiet)?;
+                        convert_frame(&frame, Some(source), &out, convert, &quiet)?;
                     }
                     let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                     Ok(entry_of(&out, &f))

@@ -122,8 +122,26 @@ pub trait ParticleSource: Sync {
     }
     /// The frame's box, when known.
     fn simulation_box(&self) -> Option<&SimulationBox>;
-    /// Particles `range` as a frame of their own (its own species list).
-    fn read(&self, range: Range<usize>) -> Result<Frame, ConvertError>;
+    /// Calls `f` for consecutive windows of at most `window` particles, in order: the
+    /// index of the window's first particle, and its particles as a frame of their own
+    /// (with its own species list).
+    fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError>;
+}
+
+/// The callback of [`ParticleSource::windows`].
+pub type WindowFn<'a> = dyn FnMut(usize, Frame) -> Result<(), ConvertError> + 'a;
+
+/// [`ParticleSource::windows`] of a source that reads any range.
+fn windows_by_range(
+    n: usize,
+    window: usize,
+    f: &mut WindowFn<'_>,
+    read: impl Fn(Range<usize>) -> Result<Frame, ConvertError>,
+) -> Result<(), ConvertError> {
+    for start in (0..n).step_by(window.max(1)) {
+        f(start, read(start..(start + window).min(n))?)?;
+    }
+    Ok(())
 }
 
 /// A frame already in memory.
@@ -138,9 +156,15 @@ impl ParticleSource for FrameSource<'_> {
         self.0.simulation_box.as_ref()
     }
 
-    fn read(&self, range: Range<usize>) -> Result<Frame, ConvertError> {
+    fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError> {
+        windows_by_range(self.len(), window, f, |r| Ok(self.read(r)))
+    }
+}
+
+impl FrameSource<'_> {
+    fn read(&self, range: Range<usize>) -> Frame {
         let f = self.0;
-        Ok(Frame {
+        Frame {
             positions: f.positions[range.clone()].to_vec(),
             species_index: f.species_index[range.clone()].to_vec(),
             species: f.species.clone(),
@@ -149,7 +173,7 @@ impl ParticleSource for FrameSource<'_> {
                 values: a.values[range].to_vec(),
             }),
             ..f.clone_header()
-        })
+        }
     }
 }
 
@@ -173,9 +197,35 @@ impl ParticleSource for DumpSource {
         self.simulation_box.as_ref()
     }
 
-    fn read(&self, range: Range<usize>) -> Result<Frame, ConvertError> {
-        let dump = crate::readers::DumpFile::open(&self.path)?;
-        Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
+    fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError> {
+        windows_by_range(self.particles, window, f, |range| {
+            let dump = crate::readers::DumpFile::open(&self.path)?;
+            Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
+        })
+    }
+}
+
+/// One frame of an uncompressed text dump (LAMMPS or XYZ), parsed a window of lines at a
+/// time ([`crate::readers::read_text_windows`]).
+pub struct TextSource {
+    pub path: PathBuf,
+    pub frame: usize,
+    pub options: crate::readers::ReadOptions,
+    pub particles: usize,
+    pub simulation_box: Option<SimulationBox>,
+}
+
+impl ParticleSource for TextSource {
+    fn len(&self) -> usize {
+        self.particles
+    }
+
+    fn simulation_box(&self) -> Option<&SimulationBox> {
+        self.simulation_box.as_ref()
+    }
+
+    fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError> {
+        crate::readers::read_text_windows(&self.path, self.frame, &self.options, window, f)
     }
 }
 
@@ -354,7 +404,11 @@ impl Partitioner {
 }
 
 /// Reads a cell's records `range` (in records).
-fn read_records(cell: &Cell, layout: RecordLayout, range: Range<usize>) -> Result<Vec<u8>, ConvertError> {
+fn read_records(
+    cell: &Cell,
+    layout: RecordLayout,
+    range: Range<usize>,
+) -> Result<Vec<u8>, ConvertError> {
     let size = layout.size();
     let mut buf = vec![0u8; range.len() * size];
     let f = File::open(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
@@ -378,7 +432,9 @@ fn refine(
     let flat = (0..3).all(|k| cell.hi[k] <= cell.lo[k]);
     let prefix = format!(
         "{}s",
-        cell.path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+        cell.path
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
     );
     let dir = cell.path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut children = Vec::new();
@@ -460,12 +516,17 @@ struct ChunkInput<'a> {
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ConvertError> {
-    let mut w = BufWriter::with_capacity(1 << 20, File::create(path).map_err(|e| temp_err(path, e))?);
+    let mut w =
+        BufWriter::with_capacity(1 << 20, File::create(path).map_err(|e| temp_err(path, e))?);
     w.write_all(bytes).map_err(|e| temp_err(path, e))?;
     w.flush().map_err(|e| temp_err(path, e))
 }
 
-fn build_chunk(c: usize, cells: &[Cell], input: &ChunkInput<'_>) -> Result<ChunkResult, ConvertError> {
+fn build_chunk(
+    c: usize,
+    cells: &[Cell],
+    input: &ChunkInput<'_>,
+) -> Result<ChunkResult, ConvertError> {
     let layout = input.layout;
     let size = layout.size();
     let n: usize = cells.iter().map(|c| c.count).sum();
@@ -492,12 +553,13 @@ fn build_chunk(c: usize, cells: &[Cell], input: &ChunkInput<'_>) -> Result<Chunk
         species: input.species,
         attribute: attribute.as_deref(),
     };
-    let h = build_with(particles, &input.options.build, input.extras, &NoProgress).map_err(|e| {
-        ConvertError::Build {
-            path: format!("chunk {c}"),
-            source: e,
-        }
-    })?;
+    let h =
+        build_with(particles, &input.options.build, input.extras, &NoProgress).map_err(|e| {
+            ConvertError::Build {
+                path: format!("chunk {c}"),
+                source: e,
+            }
+        })?;
     drop((positions, attribute));
     let stem = |ext: &str| input.dir.join(format!("chunk-{c:05}.{ext}"));
     let nodes_file = stem("nodes");
@@ -581,8 +643,7 @@ pub fn convert_chunked(
             progress.stage("finding bounds", Some(n as u64), "particles");
             let mut lo = [f32::INFINITY; 3];
             let mut hi = [f32::NEG_INFINITY; 3];
-            for start in (0..n).step_by(window) {
-                let f = source.read(start..(start + window).min(n))?;
+            source.windows(window, &mut |_, f| {
                 for x in &f.positions {
                     for k in 0..3 {
                         lo[k] = lo[k].min(x[k]);
@@ -590,7 +651,8 @@ pub fn convert_chunked(
                     }
                 }
                 progress.advance(f.len() as u64);
-            }
+                Ok(())
+            })?;
             progress.finish_stage();
             (lo, hi)
         }
@@ -601,8 +663,9 @@ pub fn convert_chunked(
     let mut partitioner = None;
     let mut attribute_name = None;
     let mut range = (f32::INFINITY, f32::NEG_INFINITY);
-    for start in (0..n).step_by(window) {
-        let f = source.read(start..(start + window).min(n))?;
+    let mut seen = 0usize;
+    source.windows(window, &mut |start, f| {
+        seen += f.len();
         let lay = *layout.get_or_insert(RecordLayout {
             attribute: f.attribute.is_some(),
         });
@@ -611,11 +674,14 @@ pub fn convert_chunked(
                 "particles {start}..: the window's columns differ from the first window's"
             )));
         }
-        let p = partitioner.get_or_insert_with(|| {
-            Partitioner::new(dir, "cell".into(), lay, bounds.0, bounds.1)
-        });
+        let p = partitioner
+            .get_or_insert_with(|| Partitioner::new(dir, "cell".into(), lay, bounds.0, bounds.1));
         let map = merge.add(&f.species)?;
-        if let Some(index) = f.positions.iter().position(|x| x.iter().any(|v| !v.is_finite())) {
+        if let Some(index) = f
+            .positions
+            .iter()
+            .position(|x| x.iter().any(|v| !v.is_finite()))
+        {
             return Err(ConvertError::Build {
                 path: output.display().to_string(),
                 source: BuildError::NonFinite {
@@ -629,16 +695,17 @@ pub fn convert_chunked(
             for v in f.positions[i] {
                 bytes.extend_from_slice(&v.to_le_bytes());
             }
-            let s = map.get(usize::from(f.species_index[i])).copied().ok_or_else(|| {
-                ConvertError::Build {
+            let s = map
+                .get(usize::from(f.species_index[i]))
+                .copied()
+                .ok_or_else(|| ConvertError::Build {
                     path: output.display().to_string(),
                     source: BuildError::BadSpecies {
                         index: start + i,
                         species: f.species_index[i],
                         count: map.len(),
                     },
-                }
-            })?;
+                })?;
             bytes.extend_from_slice(&s.to_le_bytes());
             if let Some(a) = &f.attribute {
                 let v = a.values[i];
@@ -651,8 +718,14 @@ pub fn convert_chunked(
         }
         p.add(&bytes)?;
         progress.advance(f.len() as u64);
-    }
+        Ok(())
+    })?;
     progress.finish_stage();
+    if seen != n {
+        return Err(ConvertError::Chunked(format!(
+            "the input announced {n} particles but held {seen}"
+        )));
+    }
     let layout = layout.expect("at least one window");
     let cells = partitioner.expect("at least one window").finish()?;
     let mut leaves = Vec::new();
@@ -729,8 +802,10 @@ pub fn convert_chunked(
     // itself); results are kept by chunk index, so the order never depends on timing.
     let next = std::sync::atomic::AtomicUsize::new(0);
     let failed = std::sync::atomic::AtomicBool::new(false);
-    let results: Vec<std::sync::Mutex<Option<Result<ChunkResult, ConvertError>>>> =
-        (0..groups.len()).map(|_| std::sync::Mutex::new(None)).collect();
+    let results: Vec<std::sync::Mutex<Option<Result<ChunkResult, ConvertError>>>> = (0..groups
+        .len())
+        .map(|_| std::sync::Mutex::new(None))
+        .collect();
     std::thread::scope(|scope| {
         for _ in 0..jobs.min(groups.len()) {
             scope.spawn(|| loop {
@@ -926,7 +1001,8 @@ fn assemble(
         for c in 0..k {
             for x in top_points(c, m) {
                 for a in 0..3 {
-                    max_off[a] = max_off[a].max((f64::from(x[a]) - f64::from(top.position[a])).abs());
+                    max_off[a] =
+                        max_off[a].max((f64::from(x[a]) - f64::from(top.position[a])).abs());
                 }
             }
         }
@@ -938,9 +1014,16 @@ fn assemble(
         let mut e = 0.0f64;
         for c in 0..k {
             for x in top_points(c, last) {
-                let q = [0, 1, 2].map(|a| quantize::encode(f64::from(x[a]), top.position[a], top_scale[a], bits));
+                let q = [0, 1, 2].map(|a| {
+                    quantize::encode(f64::from(x[a]), top.position[a], top_scale[a], bits)
+                });
                 let d = quantize::decode3(q, top.position, top_scale, bits);
-                e = e.max((0..3).map(|a| (f64::from(d[a]) - f64::from(x[a])).powi(2)).sum::<f64>().sqrt());
+                e = e.max(
+                    (0..3)
+                        .map(|a| (f64::from(d[a]) - f64::from(x[a])).powi(2))
+                        .sum::<f64>()
+                        .sqrt(),
+                );
             }
         }
         e
@@ -952,11 +1035,16 @@ fn assemble(
     let total_bytes: u64 = chunks
         .iter()
         .map(|c| {
-            [Some(&c.nodes_file), Some(&c.positions_file), Some(&c.species_file), c.attribute_file.as_ref()]
-                .into_iter()
-                .flatten()
-                .map(|p| fs::metadata(p).map_or(0, |m| m.len()))
-                .sum::<u64>()
+            [
+                Some(&c.nodes_file),
+                Some(&c.positions_file),
+                Some(&c.species_file),
+                c.attribute_file.as_ref(),
+            ]
+            .into_iter()
+            .flatten()
+            .map(|p| fs::metadata(p).map_or(0, |m| m.len()))
+            .sum::<u64>()
         })
         .sum();
     progress.stage("writing", Some(total_bytes), "bytes");
@@ -1011,7 +1099,11 @@ fn assemble(
                     n.point_count = lay.count(pl, c) as u32;
                     n.point_level = pl as u8;
                     n.parent = if g == 1 { 0 } else { lay.node(g - 1, c, 0) };
-                    n.quant_node = if enc_level == 0 { 0 } else { lay.node(enc_level, c, 0) };
+                    n.quant_node = if enc_level == 0 {
+                        0
+                    } else {
+                        lay.node(enc_level, c, 0)
+                    };
                     s.write_pod(&[n])?;
                     continue;
                 }
@@ -1039,7 +1131,7 @@ fn assemble(
                             let i = u64::from(n.parent) - local[j - 1].node_first;
                             lay.node(g - 1, c, i)
                         };
-                        n.quant_node = if enc_level >= 1 + pad {
+                        n.quant_node = if enc_level > pad {
                             let lj = enc_level - 1 - pad;
                             let i = u64::from(n.quant_node) - local[lj].node_first;
                             lay.node(enc_level, c, i)
@@ -1085,19 +1177,25 @@ fn assemble(
             if m <= dn {
                 let q: Vec<[u16; 3]> = top_points(c, m)
                     .iter()
-                    .map(|x| [0, 1, 2].map(|a| quantize::encode(f64::from(x[a]), top.position[a], top_scale[a], bits)))
+                    .map(|x| {
+                        [0, 1, 2].map(|a| {
+                            quantize::encode(f64::from(x[a]), top.position[a], top_scale[a], bits)
+                        })
+                    })
                     .collect();
                 put(&mut s, &q)?;
             } else if m <= pad + 1 {
                 // A padding copy (or the root itself) encoded by a padding copy.
                 let x = ch.root.position;
-                let q = [0, 1, 2].map(|a| quantize::encode(f64::from(x[a]), x[a], ch.root_scale[a], bits));
+                let q = [0, 1, 2]
+                    .map(|a| quantize::encode(f64::from(x[a]), x[a], ch.root_scale[a], bits));
                 put(&mut s, &[q])?;
             } else {
                 let j = m - 1 - pad;
                 let before: u64 = ch.levels[1..j].iter().map(|l| l.point_count).sum();
                 let count = ch.levels[j].point_count;
-                let file = File::open(&ch.positions_file).map_err(|e| temp_err(&ch.positions_file, e))?;
+                let file =
+                    File::open(&ch.positions_file).map_err(|e| temp_err(&ch.positions_file, e))?;
                 let step = 1u64 << 18;
                 let mut at = 0u64;
                 while at < count {
@@ -1118,26 +1216,34 @@ fn assemble(
     }
 
     // Per-particle sections.
-    let copy = |w: &mut Writer, kind: SectionKind, files: Vec<&PathBuf>| -> Result<(), ConvertError> {
-        let mut s = w.section(kind, last as u32)?;
-        let mut buf = vec![0u8; 1 << 22];
-        for path in files {
-            let mut f = File::open(path).map_err(|e| temp_err(path, e))?;
-            loop {
-                let got = f.read(&mut buf).map_err(|e| temp_err(path, e))?;
-                if got == 0 {
-                    break;
+    let copy =
+        |w: &mut Writer, kind: SectionKind, files: Vec<&PathBuf>| -> Result<(), ConvertError> {
+            let mut s = w.section(kind, last as u32)?;
+            let mut buf = vec![0u8; 1 << 22];
+            for path in files {
+                let mut f = File::open(path).map_err(|e| temp_err(path, e))?;
+                loop {
+                    let got = f.read(&mut buf).map_err(|e| temp_err(path, e))?;
+                    if got == 0 {
+                        break;
+                    }
+                    s.write_bytes(&buf[..got])?;
+                    progress.advance(got as u64);
                 }
-                s.write_bytes(&buf[..got])?;
-                progress.advance(got as u64);
+                fs::remove_file(path).map_err(|e| temp_err(path, e))?;
             }
-            fs::remove_file(path).map_err(|e| temp_err(path, e))?;
-        }
-        s.end()?;
-        Ok(())
-    };
-    copy(&mut w, SectionKind::Species, chunks.iter().map(|c| &c.species_file).collect())?;
-    let attribute_files: Vec<&PathBuf> = chunks.iter().filter_map(|c| c.attribute_file.as_ref()).collect();
+            s.end()?;
+            Ok(())
+        };
+    copy(
+        &mut w,
+        SectionKind::Species,
+        chunks.iter().map(|c| &c.species_file).collect(),
+    )?;
+    let attribute_files: Vec<&PathBuf> = chunks
+        .iter()
+        .filter_map(|c| c.attribute_file.as_ref())
+        .collect();
     if !attribute_files.is_empty() {
         copy(&mut w, SectionKind::Attribute, attribute_files)?;
     }

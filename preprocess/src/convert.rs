@@ -111,7 +111,11 @@ pub fn convert_frame(
 
 /// The metadata of `frame` before its hierarchy is built (species, attribute range and
 /// error bound are filled in by the build).
-pub fn base_metadata(frame: &Frame, source: Option<SourceInfo>, options: &ConvertOptions) -> Metadata {
+pub fn base_metadata(
+    frame: &Frame,
+    source: Option<SourceInfo>,
+    options: &ConvertOptions,
+) -> Metadata {
     Metadata {
         particles: frame.len() as u64,
         simulation_box: frame.simulation_box.clone(),
@@ -134,6 +138,47 @@ pub fn base_metadata(frame: &Frame, source: Option<SourceInfo>, options: &Conver
         },
         max_position_error: 0.0,
         writer: format!("mdlod {}", env!("CARGO_PKG_VERSION")),
+    }
+}
+
+/// A frame with the box, timestep, time and units of `info` and no particles.
+pub fn header_of(info: &crate::readers::FrameInfo) -> Frame {
+    Frame {
+        simulation_box: info.simulation_box.clone(),
+        timestep: info.timestep,
+        time: info.time,
+        units: info.units.clone(),
+        ..Frame::default()
+    }
+}
+
+/// A source that reads frame `k` of `dump` a window at a time, when its format allows
+/// (binary dumps and raw arrays by ranges, uncompressed text by lines); `None` for the
+/// formats that are read whole (GSD, compressed text, `%` piece sets).
+pub fn window_source(
+    dump: &crate::readers::DumpFile,
+    k: usize,
+    read: &crate::readers::ReadOptions,
+    info: &crate::readers::FrameInfo,
+) -> Option<Box<dyn crate::chunked::ParticleSource>> {
+    if dump.reads_parts() {
+        Some(Box::new(DumpSource {
+            path: dump.path().to_path_buf(),
+            frame: k,
+            options: read.clone(),
+            particles: info.particles,
+            simulation_box: info.simulation_box.clone(),
+        }))
+    } else if dump.reads_text_windows() {
+        Some(Box::new(crate::chunked::TextSource {
+            path: dump.path().to_path_buf(),
+            frame: k,
+            options: read.clone(),
+            particles: info.particles,
+            simulation_box: info.simulation_box.clone(),
+        }))
+    } else {
+        None
     }
 }
 
@@ -162,24 +207,17 @@ pub fn convert_file(
         FrameSelect::Last => dump.frame_count().saturating_sub(1),
     };
     let info = dump.frame_info(k)?;
-    if info.particles > options.chunks.chunk_points && dump.reads_parts() {
-        drop(dump);
-        let header = Frame {
-            simulation_box: info.simulation_box.clone(),
-            timestep: info.timestep,
-            time: info.time,
-            units: info.units.clone(),
-            ..Frame::default()
-        };
-        let metadata = base_metadata(&header, Some(source_info(input, k as u64)), options);
-        let source = DumpSource {
-            path: input.to_path_buf(),
-            frame: k,
-            options: read.clone(),
-            particles: info.particles,
-            simulation_box: info.simulation_box,
-        };
-        return convert_chunked(&source, metadata, output, options, progress);
+    if info.particles > options.chunks.chunk_points {
+        if let Some(source) = window_source(&dump, k, read, &info) {
+            // Out of core: the frame is read a window at a time.
+            drop(dump);
+            let metadata = base_metadata(
+                &header_of(&info),
+                Some(source_info(input, k as u64)),
+                options,
+            );
+            return convert_chunked(source.as_ref(), metadata, output, options, progress);
+        }
     }
     let t0 = Instant::now();
     let frame = dump.read_frame(k, read, progress)?;

@@ -128,3 +128,49 @@ fn conflicting_inputs_and_bad_shards_are_errors() {
     let e = merge(dir.path()).unwrap_err().to_string();
     assert!(e.contains("no shard manifests"), "{e}");
 }
+
+#[test]
+fn frames_above_the_chunk_size_are_built_out_of_core_and_match_convert() {
+    // The real binary dump (3 frames of 500 atoms), in chunks of 300 read 128 at a time.
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("melt.bin");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.bin"), &src).unwrap();
+    let mut o = opts();
+    o.convert.build.max_root_points = 64;
+    o.convert.chunks.chunk_points = 300;
+    o.convert.chunks.window_points = 128;
+    let out = dir.path().join("out");
+    let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert!(r.converted >= 2);
+    let m = read_manifest(&out).unwrap();
+    check_manifest(&out, &m);
+    // Working files are gone: only frames and the manifest remain.
+    for e in std::fs::read_dir(&out).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(
+            name.starts_with("frame-") || name == "dataset.json",
+            "left behind: {name}"
+        );
+    }
+    // Each frame's hierarchy equals `convert`'s of the same frame (the metadata's
+    // source records differ only in how they name the input).
+    for (k, f) in m.frames.iter().enumerate() {
+        let file = MdlodFile::open(out.join(&f.file)).unwrap();
+        assert_eq!(file.metadata().build.chunk_points, Some(300));
+        let single = dir.path().join(format!("single-{k}.mdlod"));
+        mdlod_preprocess::convert::convert_file(
+            &src,
+            &single,
+            mdlod_preprocess::convert::FrameSelect::Index(k),
+            &o.read,
+            &o.convert,
+            &NoProgress,
+        )
+        .unwrap();
+        let other = MdlodFile::open(&single).unwrap();
+        assert!(file.nodes() == other.nodes(), "frame {k}: nodes differ");
+        assert_eq!(file.species(), other.species());
+        let last = file.level_count() - 1;
+        assert_eq!(file.positions(last).bytes(), other.positions(last).bytes());
+    }
+}

@@ -1,12 +1,15 @@
 //! Out-of-core conversion from dumps read a window at a time: the file equals the one
-//! built from the whole frame in memory with the same chunks, for raw arrays and real
-//! LAMMPS binary dumps (whose atoms span several per-processor blocks).
+//! built from the whole frame in memory with the same chunks, for raw arrays, real LAMMPS
+//! binary and text dumps and XYZ files; a truncated text dump read in windows still names
+//! the file and line.
 
 use std::path::Path;
 
 use mdlod_format::MdlodFile;
 use mdlod_preprocess::chunked::ChunkOptions;
-use mdlod_preprocess::convert::{convert_file, convert_frame, source_info, ConvertOptions, FrameSelect};
+use mdlod_preprocess::convert::{
+    convert_file, convert_frame, source_info, ConvertOptions, FrameSelect,
+};
 use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_preprocess::readers::{DumpFile, ReadOptions};
 use mdlod_preprocess::NoProgress;
@@ -34,16 +37,41 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
     let streamed = dir.path().join("streamed.mdlod");
     let opts = options(chunk_points);
     let dump = DumpFile::open(input).unwrap();
-    assert!(dump.reads_parts());
+    assert!(dump.reads_parts() || dump.reads_text_windows());
     let k = dump.frame_count() - 1;
     let n = dump.frame_info(k).unwrap().particles;
-    assert!(n > chunk_points, "{n} particles do not need chunks of {chunk_points}");
-    convert_file(input, &streamed, FrameSelect::Last, read, &opts, &NoProgress).unwrap();
+    assert!(
+        n > chunk_points,
+        "{n} particles do not need chunks of {chunk_points}"
+    );
+    convert_file(
+        input,
+        &streamed,
+        FrameSelect::Last,
+        read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
     let frame = dump.read_frame(k, read, &NoProgress).unwrap();
     let whole = dir.path().join("whole.mdlod");
-    convert_frame(&frame, Some(source_info(input, k as u64)), &whole, &opts, &NoProgress).unwrap();
-    let (a, b) = (std::fs::read(&streamed).unwrap(), std::fs::read(&whole).unwrap());
-    assert!(a == b, "{}: streamed and in-memory chunked files differ", input.display());
+    convert_frame(
+        &frame,
+        Some(source_info(input, k as u64)),
+        &whole,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    let (a, b) = (
+        std::fs::read(&streamed).unwrap(),
+        std::fs::read(&whole).unwrap(),
+    );
+    assert!(
+        a == b,
+        "{}: streamed and in-memory chunked files differ",
+        input.display()
+    );
     let f = MdlodFile::open(&streamed).unwrap();
     f.verify().unwrap();
     assert_eq!(f.particle_count() as usize, n);
@@ -90,6 +118,63 @@ fn raw_arrays_stream_into_the_same_file() {
     )
     .unwrap();
     let f = streamed_equals_in_memory(&sidecar, &ReadOptions::default(), 700);
-    let names: Vec<&str> = f.metadata().species.iter().map(|s| s.name.as_str()).collect();
+    let names: Vec<&str> = f
+        .metadata()
+        .species
+        .iter()
+        .map(|s| s.name.as_str())
+        .collect();
     assert_eq!(names, ["Cu", "Ag", "Ni"]);
+}
+
+#[test]
+fn lammps_text_dump_streams_into_the_same_file() {
+    let path = mdlod_datasets::lammps_sample_path("cu_melt.custom.dump");
+    let read = ReadOptions {
+        attribute: Some("c_pe".into()),
+        ..Default::default()
+    };
+    streamed_equals_in_memory(&path, &read, 300);
+}
+
+#[test]
+fn xyz_file_streams_into_the_same_file() {
+    let path = mdlod_datasets::lammps_sample_path("cu_melt.xyz");
+    streamed_equals_in_memory(&path, &ReadOptions::default(), 300);
+}
+
+#[test]
+fn a_truncated_text_dump_read_in_windows_names_the_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let text =
+        std::fs::read_to_string(mdlod_datasets::lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    // The first frame, cut 100 atoms short of the 500 its header announces.
+    let lines: Vec<&str> = text.lines().collect();
+    let atoms_at = lines
+        .iter()
+        .position(|l| l.starts_with("ITEM: ATOMS"))
+        .unwrap()
+        + 1;
+    let cut = lines[..atoms_at + 400].join("\n") + "\n";
+    let path = dir.path().join("cut.lammpstrj");
+    std::fs::write(&path, cut).unwrap();
+    let out = dir.path().join("cut.mdlod");
+    let err = convert_file(
+        &path,
+        &out,
+        FrameSelect::Last,
+        &ReadOptions::default(),
+        &options(300),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("cut.lammpstrj"), "{err}");
+    assert!(err.contains("line"), "{err}");
+    assert!(!out.exists());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        1,
+        "working files left"
+    );
 }

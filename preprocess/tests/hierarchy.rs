@@ -396,7 +396,11 @@ fn chunked_conversion_refuses_a_limit_below_one_chunk() {
         .to_string();
     assert!(err.contains("memory limit of 1 MiB"), "{err}");
     assert!(!path.exists());
-    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "working files left");
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        0,
+        "working files left"
+    );
 }
 
 #[test]

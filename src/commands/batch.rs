@@ -114,7 +114,12 @@ pub fn run(args: Args) -> Result<()> {
     let work = tempfile::Builder::new()
         .prefix(".mdlod-convert-")
         .tempdir_in(&temp_parent)
-        .with_context(|| format!("cannot create a working directory in {}", temp_parent.display()))?;
+        .with_context(|| {
+            format!(
+                "cannot create a working directory in {}",
+                temp_parent.display()
+            )
+        })?;
     crate::interrupt::remove_on_interrupt(work.path(), None);
     convert.chunks.temp_dir = Some(work.path().to_path_buf());
     let opts = BatchOptions {

@@ -144,7 +144,12 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     let work = tempfile::Builder::new()
         .prefix(".mdlod-convert-")
         .tempdir_in(&temp_parent)
-        .with_context(|| format!("cannot create a working directory in {}", temp_parent.display()))?;
+        .with_context(|| {
+            format!(
+                "cannot create a working directory in {}",
+                temp_parent.display()
+            )
+        })?;
     crate::interrupt::remove_on_interrupt(work.path(), Some(&args.output));
     options.chunks.temp_dir = Some(work.path().to_path_buf());
     let frame = match args.frame {

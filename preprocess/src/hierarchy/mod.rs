@@ -438,10 +438,7 @@ pub fn build_with(
         }
         quantized.push(encoded);
     }
-    let top_positions = positions
-        .into_iter()
-        .take(extras.keep_levels)
-        .collect();
+    let top_positions = positions.into_iter().take(extras.keep_levels).collect();
     let root = coarser.last().expect("the top level").0[0];
     let particle_order = order.pop().expect("finest level");
     let species_index = particle_order

@@ -271,6 +271,8 @@ enum Index {
 pub struct DumpFile {
     path: PathBuf,
     bytes: Bytes,
+    /// True when `bytes` were decompressed (not a map of the file).
+    compressed: bool,
     format: InputFormat,
     index: Index,
 }
@@ -308,6 +310,7 @@ impl DumpFile {
             return Ok(DumpFile {
                 path: path.to_path_buf(),
                 bytes: Box::new(Vec::new()),
+                compressed: false,
                 format: pieces[0].format,
                 index: Index::Pieces(pieces),
             });
@@ -326,7 +329,8 @@ impl DumpFile {
             return Err(ReadError::Empty { at: first_line() });
         }
         let map = mdlod_format::mmap::map_file(&file).map_err(io)?;
-        let bytes: Bytes = if map.starts_with(&[0x1f, 0x8b]) {
+        let compressed = map.starts_with(&[0x1f, 0x8b]);
+        let bytes: Bytes = if compressed {
             Box::new(gunzip(path, &map, progress)?)
         } else if map.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) || is_bzip2(&map) {
             return Err(ReadError::Unsupported {
@@ -375,6 +379,7 @@ impl DumpFile {
         Ok(DumpFile {
             path: path.to_path_buf(),
             bytes,
+            compressed,
             format,
             index,
         })
@@ -500,6 +505,12 @@ impl DumpFile {
         }
     }
 
+    /// True when [`read_text_windows`] can read this dump's frames a window of lines at a
+    /// time (uncompressed LAMMPS text and XYZ files).
+    pub fn reads_text_windows(&self) -> bool {
+        matches!(self.index, Index::Lammps(_) | Index::Xyz(_)) && !self.compressed
+    }
+
     /// Reads frame `k`.
     pub fn read_frame(
         &self,
@@ -531,6 +542,46 @@ impl DumpFile {
         }
         let ctx = self.ctx();
         let header = self.header(k)?;
+        let (coords, fractional, attribute) = text_columns(&ctx, &header, opts)?;
+        let columns = &header.info.columns;
+        let atoms = atoms::parse(
+            &ctx,
+            header.atoms.clone(),
+            header.info.particles,
+            &header.layout,
+            coords,
+            fractional,
+            attribute,
+            &format!("reading frame {k}"),
+            progress,
+        )?;
+        let attribute = atoms.attribute.map(|values| Attribute {
+            name: columns[attribute.unwrap_or_default()].clone(),
+            values,
+        });
+        let info = header.info;
+        Ok(Frame {
+            positions: atoms.positions,
+            species_index: atoms.species_index,
+            species: atoms.species,
+            attribute,
+            simulation_box: info.simulation_box,
+            timestep: info.timestep,
+            time: info.time,
+            units: info.units,
+        })
+    }
+}
+
+/// The coordinate columns (and whether they are scaled), the box to unscale them with,
+/// and the attribute column of a text frame.
+#[allow(clippy::type_complexity)]
+fn text_columns<'h>(
+    ctx: &Ctx<'_>,
+    header: &'h Header,
+    opts: &ReadOptions,
+) -> Result<([usize; 3], Option<&'h SimulationBox>, Option<usize>), ReadError> {
+    {
         let columns = &header.info.columns;
         let (coords, scaled) = header
             .layout
@@ -559,34 +610,92 @@ impl DumpFile {
                 }
             })?),
         };
+        Ok((coords, fractional, attribute))
+    }
+}
+
+/// Reads frame `k` of the uncompressed text dump `path` (LAMMPS or XYZ) a window of at
+/// most `window` atom lines at a time, calling `f` with each window's first atom index and
+/// its atoms as a frame of their own (their own species list). The file is mapped afresh
+/// for every window, so the pages already parsed are released and resident memory stays
+/// bounded whatever the frame's size. Errors name the file and line as whole-frame
+/// reading does.
+pub fn read_text_windows<E: From<ReadError>>(
+    path: &Path,
+    k: usize,
+    opts: &ReadOptions,
+    window: usize,
+    mut f: impl FnMut(usize, Frame) -> Result<(), E>,
+) -> Result<(), E> {
+    let (header, compressed) = {
+        let dump = DumpFile::open(path)?;
+        (dump.header(k)?, dump.compressed)
+    };
+    if compressed {
+        return Err(ReadError::Unsupported {
+            at: Location {
+                path: path.to_path_buf(),
+                line: 1,
+            },
+            message: "compressed dumps are read whole, not in windows".into(),
+        }
+        .into());
+    }
+    let io = |source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = File::open(path).map_err(io)?;
+    let total = header.info.particles;
+    let mut pos = header.atoms.start;
+    let mut first = 0usize;
+    let window = window.max(1);
+    while first < total {
+        let map = mdlod_format::mmap::map_file(&file).map_err(io)?;
+        let data: &[u8] = &map;
+        let ctx = Ctx { path, data };
+        let (coords, fractional, attribute) = text_columns(&ctx, &header, opts)?;
+        let want = window.min(total - first);
+        let end_limit = header.atoms.end.min(data.len());
+        // The end of the `want`-th line from `pos` (or the block's end).
+        let end = memchr::memchr_iter(b'\n', &data[pos..end_limit])
+            .nth(want - 1)
+            .map_or(end_limit, |i| pos + i + 1);
         let atoms = atoms::parse(
             &ctx,
-            header.atoms.clone(),
-            header.info.particles,
+            pos..end,
+            want,
             &header.layout,
             coords,
             fractional,
             attribute,
             &format!("reading frame {k}"),
-            progress,
+            &NoProgress,
         )?;
         let attribute = atoms.attribute.map(|values| Attribute {
-            name: columns[attribute.unwrap_or_default()].clone(),
+            name: header.info.columns[attribute.unwrap_or_default()].clone(),
             values,
         });
-        let info = header.info;
-        Ok(Frame {
-            positions: atoms.positions,
-            species_index: atoms.species_index,
-            species: atoms.species,
-            attribute,
-            simulation_box: info.simulation_box,
-            timestep: info.timestep,
-            time: info.time,
-            units: info.units,
-        })
+        f(
+            first,
+            Frame {
+                positions: atoms.positions,
+                species_index: atoms.species_index,
+                species: atoms.species,
+                attribute,
+                simulation_box: header.info.simulation_box.clone(),
+                timestep: header.info.timestep,
+                time: header.info.time,
+                units: header.info.units.clone(),
+            },
+        )?;
+        pos = end;
+        first += want;
     }
+    Ok(())
+}
 
+impl DumpFile {
     fn ctx(&self) -> Ctx<'_> {
         Ctx {
             path: &self.path,
