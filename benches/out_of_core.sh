@@ -18,7 +18,6 @@ mkdir -p "$DIR"
 cargo build --release --bin mdlod >&2
 BIN=target/release/mdlod
 cores=$(nproc)
-rows=()
 for n in $SIZES; do
   input="$DIR/crater-$n.raw.json"
   if [ ! -f "$input" ]; then
@@ -40,7 +39,7 @@ PY
     >"$DIR/convert-$n.log" 2>"$DIR/time-$n.log" &
   pid=$!
   while kill -0 "$pid" 2>/dev/null; do
-    t=$({ du -sb "$DIR"/.mdlod-convert-* 2>/dev/null || true; } | awk '{s+=$1} END {printf "%d\n", s}')
+    t=$({ du -sb "$DIR"/.mdlod-convert-* 2>/dev/null || true; } | awk '{s+=$1} END {printf "%.0f\n", s}')
     [ "$t" -gt "$peak_tmp" ] && peak_tmp=$t
     sleep 1
   done
@@ -55,10 +54,11 @@ PY
   levels=$(grep "^wrote" "$DIR/convert-$n.log" | sed -E 's/.*particles, ([0-9]+) levels.*/\1/')
   out_bytes=$(stat -c %s "$out")
   "$BIN" verify "$out" >&2
-  rows+=("$(python3 -c "
+  # Each size's row is kept, so rerunning one size keeps the others' rows.
+  echo "$(python3 -c "
 n=$n; wall=$wall; c=$cores
 print(f'| {n:.1e} | {${in_bytes}/1e9:.1f} | $LIMIT | {wall:.0f} | $read_s | $build_s | $write_s | {n/wall/1e6:.2f} | {n/wall/1e6/c:.2f} | {${rss_kib}/1048576:.2f} | {${peak_tmp}/1e9:.1f} | {${out_bytes}/1e9:.1f} | $levels | $err |')
-")")
+")" > "$DIR/row-$n.md"
   rm -f "$out"
 done
 cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')
@@ -67,8 +67,8 @@ table="Machine: $cores cores ($cpu), $mem GiB RAM. Input: generated crater as ra
 
 | particles | input GB | limit | wall s | partition s | chunks s | assembly s | M particles/s | per core | peak RSS GiB | peak working files GB | .mdlod GB | levels | max position error |
 |---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-for r in "${rows[@]}"; do table="$table
-$r"; done
+for f in $(ls "$DIR"/row-*.md | sort -t- -k2 -n); do table="$table
+$(cat "$f")"; done
 echo "$table"
 python3 - "$table" <<'PY'
 import re, sys
