@@ -370,8 +370,28 @@ impl Partitioner {
             .par_chunks_exact(size)
             .map(|r| cell_of(layout.position(r), lo, hi) as u16)
             .collect();
+        // A stable counting sort of the window by cell, so that each cell's records go
+        // out in one write, in input order.
+        let mut start = vec![0usize; CELLS + 1];
+        for &id in &ids {
+            start[usize::from(id) + 1] += 1;
+        }
+        for c in 0..CELLS {
+            start[c + 1] += start[c];
+        }
+        let mut next = start.clone();
+        let mut sorted = vec![0u8; bytes.len()];
         for (r, &id) in bytes.chunks_exact(size).zip(&ids) {
-            let id = usize::from(id);
+            let at = &mut next[usize::from(id)];
+            sorted[*at * size..(*at + 1) * size].copy_from_slice(r);
+            *at += 1;
+        }
+        for id in 0..CELLS {
+            let (a, b) = (start[id], start[id + 1]);
+            if a == b {
+                continue;
+            }
+            let part = &sorted[a * size..b * size];
             let cell = &mut self.cells[id];
             if self.writers[id].is_none() {
                 cell.path = self.dir.join(format!("{}-{id:03}.cell", self.prefix));
@@ -379,12 +399,14 @@ impl Partitioner {
                 self.writers[id] = Some(BufWriter::with_capacity(1 << 16, f));
             }
             let w = self.writers[id].as_mut().expect("opened above");
-            w.write_all(r).map_err(|e| temp_err(&cell.path, e))?;
-            cell.count += 1;
-            let x = layout.position(r);
-            for k in 0..3 {
-                cell.lo[k] = cell.lo[k].min(x[k]);
-                cell.hi[k] = cell.hi[k].max(x[k]);
+            w.write_all(part).map_err(|e| temp_err(&cell.path, e))?;
+            cell.count += b - a;
+            for r in part.chunks_exact(size) {
+                let x = layout.position(r);
+                for k in 0..3 {
+                    cell.lo[k] = cell.lo[k].min(x[k]);
+                    cell.hi[k] = cell.hi[k].max(x[k]);
+                }
             }
         }
         Ok(())
@@ -690,29 +712,41 @@ pub fn convert_chunked(
                 },
             });
         }
-        let mut bytes = Vec::with_capacity(f.len() * lay.size());
-        for i in 0..f.len() {
-            for v in f.positions[i] {
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
-            let s = map
-                .get(usize::from(f.species_index[i]))
-                .copied()
-                .ok_or_else(|| ConvertError::Build {
-                    path: output.display().to_string(),
-                    source: BuildError::BadSpecies {
-                        index: start + i,
-                        species: f.species_index[i],
-                        count: map.len(),
-                    },
-                })?;
-            bytes.extend_from_slice(&s.to_le_bytes());
-            if let Some(a) = &f.attribute {
-                let v = a.values[i];
-                range = (range.0.min(v), range.1.max(v));
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
+        if let Some(i) = f
+            .species_index
+            .iter()
+            .position(|&s| usize::from(s) >= map.len())
+        {
+            return Err(ConvertError::Build {
+                path: output.display().to_string(),
+                source: BuildError::BadSpecies {
+                    index: start + i,
+                    species: f.species_index[i],
+                    count: map.len(),
+                },
+            });
         }
+        if let Some(a) = &f.attribute {
+            range = a
+                .values
+                .iter()
+                .fold(range, |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        }
+        let size = lay.size();
+        let mut bytes = vec![0u8; f.len() * size];
+        bytes
+            .par_chunks_exact_mut(size)
+            .enumerate()
+            .for_each(|(i, r)| {
+                for (k, v) in f.positions[i].iter().enumerate() {
+                    r[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+                }
+                let s = map[usize::from(f.species_index[i])];
+                r[12..14].copy_from_slice(&s.to_le_bytes());
+                if let Some(a) = &f.attribute {
+                    r[14..18].copy_from_slice(&a.values[i].to_le_bytes());
+                }
+            });
         if let Some(a) = &f.attribute {
             attribute_name.get_or_insert_with(|| a.name.clone());
         }

@@ -26,6 +26,7 @@
 
 pub mod camera;
 pub mod context;
+pub mod density;
 pub mod error;
 pub mod image;
 pub mod occlusion;
@@ -133,6 +134,9 @@ pub enum RenderMode {
         bins: u32,
         binning: sndf::Binning,
     },
+    /// The image-space density volume of the points (Falk et al. 2010): direct volume
+    /// rendering through a transfer function, or an iso-surface (see [`density`]).
+    Density(density::DensitySettings),
 }
 
 impl Default for RenderOptions {
@@ -197,6 +201,8 @@ pub struct RenderReport {
     /// Splat mode: the tone-mapping exposure used and the image's total flux.
     pub exposure: Option<f32>,
     pub total_flux: Option<f64>,
+    /// Density mode: slice stacks run before every ray was done, of those the volume spans.
+    pub density_stacks: Option<(u32, u32)>,
 }
 
 /// Parses a colour as `#rrggbb`, `rrggbb` or three numbers in [0, 1] separated by commas.
@@ -289,9 +295,9 @@ fn frame_setup(
         occlusion: if !opts.occlusion
             || matches!(
                 opts.mode,
-                RenderMode::Splat { .. } | RenderMode::SplatOver { .. }
+                RenderMode::Splat { .. } | RenderMode::SplatOver { .. } | RenderMode::Density(_)
             ) {
-            // Splats hide nothing.
+            // Splats and densities hide nothing.
             OcclusionMode::Off
         } else if matches!(opts.mode, RenderMode::Sndf { .. }) {
             // Jittered sampling: only whole covered pixels occlude.
@@ -347,6 +353,7 @@ impl RenderReport {
             gpu_target_bytes: frame.gpu_target_bytes,
             exposure: None,
             total_flux: None,
+            density_stacks: None,
         }
     }
 }
@@ -394,6 +401,24 @@ pub fn render_image(
         report.spp = iterations;
         report.total_time = sampled;
         return Ok((frame.image, report));
+    }
+    if let RenderMode::Density(settings) = opts.mode {
+        let frame =
+            renderer.render_density(file, &camera, &draw, opts.width, opts.height, &settings)?;
+        let image = frame.image(opts.background);
+        let rendered = RenderedFrame {
+            image,
+            depth: None,
+            gpu_time: None,
+            points: draw.points as u32,
+            gpu_data_bytes: frame.gpu_data_bytes,
+            gpu_target_bytes: u64::from(opts.width) * u64::from(opts.height) * (32 + 48),
+        };
+        let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &rendered);
+        report.traversal_time = traversal_time;
+        report.density_stacks = Some((frame.stacks_run, frame.stacks));
+        report.total_time = t0.elapsed();
+        return Ok((rendered.image, report));
     }
     if opts.mode != RenderMode::Spheres {
         let (splats, image, exposure) = match opts.mode {

@@ -164,6 +164,45 @@ impl SplatFrame {
     }
 }
 
+/// A rendered density frame: per-pixel premultiplied colour and opacity, and (iso mode)
+/// the distance along the ray of the surface.
+pub struct DensityFrame {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<[f32; 4]>,
+    pub hit: Vec<f32>,
+    /// The points, sorted by distance, as the density saw them.
+    pub points: Vec<crate::density::DensityPoint>,
+    pub slicing: crate::density::Slicing,
+    /// Stacks of slices the volume spans, and how many were run before every ray was
+    /// done.
+    pub stacks: u32,
+    pub stacks_run: u32,
+    /// Point splats drawn over all stacks.
+    pub splatted: u64,
+    pub gpu_data_bytes: u64,
+}
+
+impl DensityFrame {
+    /// Composites over the background and encodes sRGB.
+    pub fn image(&self, background_srgb: [f32; 3]) -> RgbaImage {
+        let bg = background_srgb.map(srgb_to_linear);
+        let mut image = RgbaImage::new(self.width, self.height);
+        for (i, p) in self.rgba.iter().enumerate() {
+            let a = p[3].clamp(0.0, 1.0);
+            let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
+                if k == 3 {
+                    return 255;
+                }
+                let v = p[k] + (1.0 - a) * bg[k];
+                (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
+            });
+            image.data[4 * i..4 * i + 4].copy_from_slice(&px);
+        }
+        image
+    }
+}
+
 /// Converts one linear channel to sRGB encoding.
 pub fn linear_to_srgb(c: f32) -> f32 {
     if c <= 0.003_130_8 {
@@ -208,6 +247,7 @@ pub struct Renderer {
     sphere: SphereRaycastPass,
     accumulate: AccumulatePass,
     splat: Option<SplatPass>,
+    density: Option<crate::passes::density::DensityPass>,
     sndf: SndfPass,
     sndf_shade: SndfShadePass,
     /// Particle samples drawn so far (points × samples), so that tests can check that
@@ -311,6 +351,7 @@ impl Renderer {
         let sphere = SphereRaycastPass::new(&ctx.device);
         let accumulate = AccumulatePass::new(&ctx.device);
         let splat = SplatPass::new(&ctx.device, &sphere.layout);
+        let density = crate::passes::density::DensityPass::new(&ctx.device, &sphere.layout);
         let sndf = SndfPass::new(&ctx.device);
         let sndf_shade = SndfShadePass::new(&ctx.device);
         Renderer {
@@ -318,6 +359,7 @@ impl Renderer {
             sphere,
             accumulate,
             splat,
+            density,
             sndf,
             sndf_shade,
             points_sampled: Default::default(),
@@ -1076,6 +1118,347 @@ impl Renderer {
                 hdr,
                 gpu_time,
                 points: buffers.points,
+                gpu_data_bytes: packed.data_bytes(),
+            })
+        })
+    }
+
+    /// Renders the density volume of `draw` (see [`crate::density`]): slices splatted a
+    /// stack at a time and ray cast after each stack, until every ray is done.
+    pub fn render_density(
+        &self,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        width: u32,
+        height: u32,
+        settings: &crate::density::DensitySettings,
+    ) -> Result<DensityFrame, RenderError> {
+        use crate::density::{DensityPoint, Slicing};
+        use crate::passes::density::{
+            DensityGpu, RayGpu, SLICES_GRADIENT, SLICES_PLAIN, SLICE_FORMAT,
+        };
+        let Some(pass) = &self.density else {
+            return Err(RenderError::InvalidOptions(format!(
+                "the density volume needs additive blending of 32-bit floats, which {} does not offer",
+                self.ctx.adapter_name()
+            )));
+        };
+        settings.validate().map_err(RenderError::InvalidOptions)?;
+        self.check(&FrameSettings {
+            width,
+            height,
+            ..Default::default()
+        })?;
+        // Points sorted by their distance along the rays, so a stack draws an interval.
+        let points = crate::density::density_points(file, draw);
+        let mut order: Vec<(f32, usize)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (crate::density::ray_distance(camera, p.position), i))
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let singles = crate::density::single_ranges(draw);
+        let sorted_draw = DrawList {
+            ranges: order.iter().map(|&(_, i)| singles[i]).collect(),
+            ..draw.clone()
+        };
+        let sorted: Vec<DensityPoint> = order.iter().map(|&(_, i)| points[i]).collect();
+        let distances: Vec<f32> = order.iter().map(|&(d, _)| d).collect();
+        let r_ref = file
+            .metadata()
+            .species
+            .iter()
+            .map(|s| s.radius)
+            .fold(0.0f32, f32::max)
+            .max(f32::MIN_POSITIVE);
+        let slicing = Slicing::new(&sorted, camera, settings, r_ref);
+        let h_max = sorted
+            .iter()
+            .map(|p| settings.kernel_scale * p.radius)
+            .fold(0.0f32, f32::max);
+        // The box of the points' supports: rays stop where they leave it.
+        let bounds = sorted.iter().fold(
+            (
+                glam::Vec3::splat(f32::INFINITY),
+                glam::Vec3::splat(f32::NEG_INFINITY),
+            ),
+            |(lo, hi), p| {
+                let h = glam::Vec3::splat(settings.kernel_scale * p.radius);
+                (lo.min(p.position - h), hi.max(p.position + h))
+            },
+        );
+        let packed =
+            crate::passes::sphere_raycast::pack_with(file, &sorted_draw, PackStyle::FluxColour)?;
+        let limits = self.ctx.device.limits();
+        if packed.largest_buffer_bytes() > limits.max_storage_buffer_binding_size {
+            return Err(RenderError::InvalidOptions(format!(
+                "the cut of {} points is too large for this adapter: lower the point budget",
+                packed.points()
+            )));
+        }
+        let per_stack = if settings.iso.is_some() {
+            SLICES_GRADIENT
+        } else {
+            SLICES_PLAIN
+        };
+        let stacks = slicing.slices.div_ceil(per_stack);
+        let albedo = file
+            .metadata()
+            .species
+            .first()
+            .map_or([0.8; 3], |s| s.colour);
+        self.ctx.scoped(|| {
+            let device = &self.ctx.device;
+            let queue = &self.ctx.queue;
+            let buffers = self.sphere.upload(device, &packed);
+            let aspect = width as f32 / height as f32;
+            let uniforms = FrameUniforms::new(
+                camera.clip_from_view(aspect),
+                camera.view_from_world(),
+                camera.projection == Projection::Orthographic,
+                &Default::default(),
+                packed.position_bits,
+                packed.species.len() as u32,
+            );
+            queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            let world_from_clip =
+                (camera.clip_from_view(aspect) * camera.view_from_world()).inverse();
+            let eye = camera
+                .view_from_world()
+                .inverse()
+                .transform_point3(glam::Vec3::ZERO);
+            let ortho = camera.projection == Projection::Orthographic;
+            let records: Vec<DensityGpu> = (0..stacks)
+                .map(|st| DensityGpu {
+                    world_from_clip: world_from_clip.to_cols_array_2d(),
+                    eye: [eye.x, eye.y, eye.z, if ortho { 1.0 } else { 0.0 }],
+                    slicing: [
+                        slicing.lambda_min + (st * per_stack) as f32 * slicing.step,
+                        slicing.step,
+                        settings.kernel_scale,
+                        1.0 / r_ref,
+                    ],
+                    mode: [
+                        per_stack.min(slicing.slices - st * per_stack) as f32,
+                        if settings.iso.is_some() { 1.0 } else { 0.0 },
+                        4.0 / 3.0 * std::f32::consts::PI * r_ref.powi(3),
+                        0.0,
+                    ],
+                    size: [
+                        width as f32,
+                        height as f32,
+                        settings.iso.unwrap_or(0.0),
+                        settings.density_max,
+                    ],
+                    clip: settings.clip.unwrap_or([0.0; 4]),
+                    flags: [u32::from(settings.clip.is_some()), st, 0, 0],
+                    albedo: [albedo[0], albedo[1], albedo[2], settings.opacity],
+                    pad: [
+                        [bounds.0.x, bounds.0.y, bounds.0.z, 0.0],
+                        [bounds.1.x, bounds.1.y, bounds.1.z, 0.0],
+                        [0.0; 4],
+                        [0.0; 4],
+                        [0.0; 4],
+                    ],
+                })
+                .collect();
+            let stride = std::mem::size_of::<DensityGpu>() as u64;
+            let slicing_buf = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("density slicing"),
+                size: stride * u64::from(stacks),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            queue.write_buffer(&slicing_buf, 0, bytemuck::cast_slice(&records));
+            let view_buf = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("density view"),
+                size: 64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            queue.write_buffer(
+                &view_buf,
+                0,
+                bytemuck::cast_slice(&camera.view_from_world().to_cols_array()),
+            );
+            let size = wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            };
+            let slice_tex = |label| {
+                device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: SLICE_FORMAT,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                        | wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                })
+            };
+            let (ta, tb) = (slice_tex("density slices a"), slice_tex("density slices b"));
+            let (va, vb) = (
+                ta.create_view(&Default::default()),
+                tb.create_view(&Default::default()),
+            );
+            let pixels = u64::from(width) * u64::from(height);
+            let ray_bytes = pixels * std::mem::size_of::<RayGpu>() as u64;
+            let rays = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("density rays"),
+                size: ray_bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let active = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("density active rays"),
+                size: 4,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let active_read = readback_buffer(device, "active rays readback", 4);
+            let record = wgpu::BufferBinding {
+                buffer: &slicing_buf,
+                offset: 0,
+                size: std::num::NonZeroU64::new(stride),
+            };
+            let slicing_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("density slicing"),
+                layout: &pass.slicing_layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(record.clone()),
+                }],
+            });
+            let composite_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("density composite"),
+                layout: &pass.composite_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::Buffer(record),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&va),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::TextureView(&vb),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: rays.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: active.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: view_buf.as_entire_binding(),
+                    },
+                ],
+            });
+            // Stacks in groups; after each group the active rays are counted.
+            const GROUP: u32 = 8;
+            let mut stacks_run = 0u32;
+            let mut splatted = 0u64;
+            let mut st = 0u32;
+            while st < stacks {
+                let mut enc = device.create_command_encoder(&Default::default());
+                enc.clear_buffer(&active, 0, None);
+                let end = (st + GROUP).min(stacks);
+                for k in st..end {
+                    let rec = &records[k as usize];
+                    let (a, b) = (
+                        rec.slicing[0],
+                        rec.slicing[0] + (rec.mode[0] - 1.0) * rec.slicing[1],
+                    );
+                    let first = distances.partition_point(|&d| d < a - h_max) as u32;
+                    let last = distances.partition_point(|&d| d <= b + h_max) as u32;
+                    let offset = (u64::from(k) * stride) as u32;
+                    {
+                        let clear = wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Store,
+                        };
+                        let attach = |view| {
+                            Some(wgpu::RenderPassColorAttachment {
+                                view,
+                                depth_slice: None,
+                                resolve_target: None,
+                                ops: clear,
+                            })
+                        };
+                        let mut rp = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                            label: Some("density slices"),
+                            color_attachments: &[attach(&va), attach(&vb)],
+                            depth_stencil_attachment: None,
+                            timestamp_writes: None,
+                            occlusion_query_set: None,
+                            multiview_mask: None,
+                        });
+                        if last > first {
+                            rp.set_pipeline(&pass.splat);
+                            rp.set_bind_group(0, &buffers.bind_group, &[]);
+                            rp.set_bind_group(1, &slicing_group, &[offset]);
+                            rp.draw(0..4, first..last);
+                            splatted += u64::from(last - first);
+                        }
+                    }
+                    let mut cp = enc.begin_compute_pass(&Default::default());
+                    cp.set_pipeline(&pass.composite);
+                    cp.set_bind_group(0, &composite_group, &[offset]);
+                    cp.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+                }
+                enc.copy_buffer_to_buffer(&active, 0, &active_read, 0, 4);
+                queue.submit([enc.finish()]);
+                stacks_run = end;
+                st = end;
+                let left = u32::from_le_bytes(
+                    self.read_buffer(&active_read)?[..4]
+                        .try_into()
+                        .unwrap_or([0; 4]),
+                );
+                if left == 0 {
+                    break;
+                }
+            }
+            let read = readback_buffer(device, "density rays readback", ray_bytes);
+            let mut enc = device.create_command_encoder(&Default::default());
+            enc.copy_buffer_to_buffer(&rays, 0, &read, 0, ray_bytes);
+            queue.submit([enc.finish()]);
+            let bytes = self.read_buffer(&read)?;
+            let rays: Vec<RayGpu> = bytes
+                .chunks_exact(48)
+                .map(bytemuck::pod_read_unaligned)
+                .collect();
+            self.count_samples(splatted.min(u64::from(u32::MAX)) as u32, 1);
+            Ok(DensityFrame {
+                width,
+                height,
+                rgba: rays.iter().map(|r| r.colour).collect(),
+                hit: rays
+                    .iter()
+                    .map(|r| {
+                        if r.state[3] > 0.5 {
+                            r.state[1]
+                        } else {
+                            f32::NAN
+                        }
+                    })
+                    .collect(),
+                points: sorted,
+                slicing,
+                stacks,
+                stacks_run,
+                splatted,
                 gpu_data_bytes: packed.data_bytes(),
             })
         })

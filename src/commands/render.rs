@@ -38,10 +38,31 @@ pub struct Args {
     pub gpu_memory: Option<u64>,
     /// How to draw the points: opaque ray-cast spheres; additive flux-preserving splats
     /// (SPH, astrophysics), tone mapped; translucent splats sorted back to front and
-    /// over-blended, for data that needs depth order; or spheres sampled into S-NDFs and
-    /// shaded from them.
+    /// over-blended, for data that needs depth order; spheres sampled into S-NDFs and
+    /// shaded from them; the image-space density volume (density) or its iso-surface
+    /// (iso).
     #[arg(long, value_enum, default_value = "spheres")]
     pub mode: Mode,
+    /// iso mode: the surface's volume fraction (φ: 0.74 in a close packing of the
+    /// largest species' spheres).
+    #[arg(long, default_value_t = 0.3)]
+    pub iso_value: f32,
+    /// density and iso modes: slices from the data's nearest to its farthest point.
+    #[arg(long, default_value_t = 256)]
+    pub slices: u32,
+    /// density and iso modes: kernel support in point radii.
+    #[arg(long, default_value_t = 2.5)]
+    pub kernel_scale: f32,
+    /// density mode: the volume fraction at the top of the transfer function.
+    #[arg(long, default_value_t = 0.8)]
+    pub density_max: f32,
+    /// density mode: absorption, opacity per reference radius of path at the top density.
+    #[arg(long, default_value_t = 0.5)]
+    pub absorption: f32,
+    /// density and iso modes: keep only samples with n·p ≤ d, given as nx,ny,nz,d (world
+    /// units); particles beyond the plane still add density inside it.
+    #[arg(long, value_name = "NX,NY,NZ,D", value_parser = parse_plane, allow_hyphen_values = true)]
+    pub clip: Option<[f32; 4]>,
     /// sndf mode: jittered rays per pixel accumulated into the S-NDFs.
     #[arg(long, default_value_t = 16)]
     pub iterations: u32,
@@ -118,6 +139,18 @@ pub enum Mode {
     Splat,
     SplatOver,
     Sndf,
+    Density,
+    Iso,
+}
+
+/// Parses `nx,ny,nz,d`.
+fn parse_plane(s: &str) -> Result<[f32; 4], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{s:?}: expected four numbers nx,ny,nz,d"))?;
+    <[f32; 4]>::try_from(v).map_err(|_| format!("{s:?}: expected four numbers nx,ny,nz,d"))
 }
 
 /// The S-NDF binnings.
@@ -179,8 +212,8 @@ pub fn run(args: Args) -> Result<()> {
         error_px: args.screen_error,
         budget: args.budget,
         background: parse_colour(args.background.as_deref().unwrap_or(match args.mode {
-            Mode::Spheres | Mode::Sndf => "#ffffff",
-            Mode::Splat | Mode::SplatOver => "#000000",
+            Mode::Spheres | Mode::Sndf | Mode::Iso => "#ffffff",
+            Mode::Splat | Mode::SplatOver | Mode::Density => "#000000",
         }))?,
         mode: match args.mode {
             Mode::Spheres => RenderMode::Spheres,
@@ -195,6 +228,16 @@ pub fn run(args: Args) -> Result<()> {
                 bins: args.bins,
                 binning: args.binning.binning(),
             },
+            Mode::Density | Mode::Iso => {
+                RenderMode::Density(mdlod_render::density::DensitySettings {
+                    iso: matches!(args.mode, Mode::Iso).then_some(args.iso_value),
+                    slices: args.slices,
+                    kernel_scale: args.kernel_scale,
+                    density_max: args.density_max,
+                    opacity: args.absorption,
+                    clip: args.clip,
+                })
+            }
         },
         exposure: args.exposure,
         gpu_memory: args.gpu_memory,
@@ -222,6 +265,9 @@ pub fn run(args: Args) -> Result<()> {
     });
     if let (Some(e), Some(f)) = (r.exposure, r.total_flux) {
         println!("  splats: total flux {f:.4e}, exposure {e:.4e}");
+    }
+    if let Some((run, all)) = r.density_stacks {
+        println!("  density: {run} of {all} slice stacks run before every ray was done");
     }
     let stream = match r.first_frame_time {
         Some(t) => format!(

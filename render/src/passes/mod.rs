@@ -2,6 +2,7 @@
 //! shaders read are defined next to the pipeline that binds them.
 
 pub mod accumulate;
+pub mod density;
 pub mod sphere_raycast;
 pub mod splat;
 
@@ -10,6 +11,8 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("sphere_raycast.wgsl", sphere_raycast::SHADER),
     ("accumulate.wgsl", accumulate::SHADER),
     ("splat.wgsl", splat::SHADER),
+    ("density.wgsl", density::SHADER),
+    ("density_composite.wgsl", density::COMPOSITE_SHADER),
     ("sndf_accumulate.wgsl", crate::sndf::ACCUMULATE_SHADER),
     ("sndf_shade.wgsl", crate::sndf::SHADE_SHADER),
 ];

@@ -1,0 +1,368 @@
+//! The image-space density volume (Falk et al. 2010, section 3): the metaball density
+//! of the points of a cut, reconstructed on demand at the sampling positions of ray
+//! casting and rendered as a volume (`--mode density`) or an iso-surface (`--mode iso`).
+//!
+//! How it works:
+//! - **Density.** `φ(p) = V · Σ_j m_j W(|p − p_j|, h_j)` with the normalised smooth-step
+//!   (poly6) kernel `W(r, h) = 315 / (64 π h³) · (1 − r²/h²)³` for `r < h`. A point's mass
+//!   is its area relative to the largest species' radius `r_ref`, `m_j = (ρ_j / r_ref)²`
+//!   with `ρ_j = sqrt(area_sum)` (a particle's own radius; a representative carries its
+//!   particles' mass, Eq. 1), its support `h_j = kernel_scale · ρ_j`, and
+//!   `V = 4/3 π r_ref³`: φ is a volume fraction (a close packing of reference spheres has
+//!   φ ≈ 0.74), the same for every zoom and level.
+//! - **Slices.** Each pixel's ray `p = o + λ v` (o: the eye in perspective, so the slices
+//!   are concentric spherical shells; the near plane in orthographic views) is sampled at
+//!   `λ_s = λ_min + s Δλ` from the data's nearest to its farthest distance. A pass splats
+//!   every point whose support reaches a stack of slices as a perspective-correct
+//!   footprint (the projected box of its support sphere) into several float targets at
+//!   once (multiple render targets: 8 density slices, or 2 slices with gradients for the
+//!   iso-surface, whose gradients are summed the same way), additively blended. Points are
+//!   sorted by distance on the host, so each stack draws only the interval of points that
+//!   can reach it.
+//! - **Ray casting.** A compute pass composites each stack front to back into a per-pixel
+//!   state: emission and absorption from a transfer function of φ, or the first crossing
+//!   of the iso-value (interpolated between slices, across stacks too) shaded with the
+//!   interpolated gradient. Rays stop when their opacity saturates or the data ends; a
+//!   counter of active rays, read back every few stacks, ends the frame once none is
+//!   left (early ray termination).
+//! - **Clipping.** A plane `n · p ≤ d` removes samples, not particles: points outside it
+//!   still add density inside, so a cut shows the true density at the cut.
+//!
+//! [`reference`] is the CPU twin of the whole pipeline (the tests' oracle).
+
+use glam::Vec3;
+
+/// How to render the density volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DensitySettings {
+    /// Iso-surface at this volume fraction instead of direct volume rendering.
+    pub iso: Option<f32>,
+    /// Number of slices from the nearest to the farthest point of the data.
+    pub slices: u32,
+    /// Kernel support in units of a point's radius.
+    pub kernel_scale: f32,
+    /// Volume fraction shown at the top of the transfer function.
+    pub density_max: f32,
+    /// Absorption: opacity per reference radius of path at `density_max`.
+    pub opacity: f32,
+    /// Keep samples with `n · p ≤ d` (`[n.x, n.y, n.z, d]`, world units).
+    pub clip: Option<[f32; 4]>,
+}
+
+impl Default for DensitySettings {
+    fn default() -> Self {
+        DensitySettings {
+            iso: None,
+            slices: 256,
+            kernel_scale: 2.5,
+            density_max: 0.8,
+            opacity: 0.5,
+            clip: None,
+        }
+    }
+}
+
+impl DensitySettings {
+    pub fn validate(&self) -> Result<(), String> {
+        if !(1..=16384).contains(&self.slices) {
+            return Err(format!("{} slices (1 to 16384)", self.slices));
+        }
+        let positive = |v: f32, what: &str| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("{what} {v} (must be positive)"))
+            }
+        };
+        positive(self.kernel_scale, "kernel scale")?;
+        positive(self.density_max, "density maximum")?;
+        positive(self.opacity, "opacity")?;
+        if let Some(v) = self.iso {
+            positive(v, "iso-value")?;
+        }
+        if let Some(c) = self.clip {
+            let n = Vec3::new(c[0], c[1], c[2]);
+            if !(c.iter().all(|v| v.is_finite()) && n.length() > 0.0) {
+                return Err(format!("clip plane {c:?} (needs a non-zero normal)"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Opacity at which a ray stops (the paper's threshold).
+pub const OPAQUE: f32 = 0.99;
+
+/// `W(r, h)`, the normalised poly6 kernel.
+pub fn kernel(r2: f32, h: f32) -> f32 {
+    let h2 = h * h;
+    if r2 >= h2 {
+        return 0.0;
+    }
+    let t = 1.0 - r2 / h2;
+    315.0 / (64.0 * std::f32::consts::PI * h2 * h) * t * t * t
+}
+
+/// `∇_p W(|p − p_j|, h)` for `d = p − p_j`.
+pub fn kernel_gradient(d: Vec3, h: f32) -> Vec3 {
+    let h2 = h * h;
+    let r2 = d.length_squared();
+    if r2 >= h2 {
+        return Vec3::ZERO;
+    }
+    let t = 1.0 - r2 / h2;
+    d * (-6.0 * 315.0 / (64.0 * std::f32::consts::PI * h2 * h * h2) * t * t)
+}
+
+/// The transfer function: colour (linear RGB) of a volume fraction `t = φ / φ_max`
+/// clamped to [0, 1], blue through red to yellow.
+pub fn transfer_colour(t: f32) -> Vec3 {
+    let t = t.clamp(0.0, 1.0);
+    let stops = [
+        Vec3::new(0.02, 0.05, 0.45),
+        Vec3::new(0.75, 0.08, 0.06),
+        Vec3::new(1.0, 0.85, 0.25),
+    ];
+    if t < 0.5 {
+        stops[0].lerp(stops[1], t * 2.0)
+    } else {
+        stops[1].lerp(stops[2], t * 2.0 - 1.0)
+    }
+}
+
+/// Opacity of one sample of volume fraction `phi` over a step `step / r_ref`.
+pub fn sample_alpha(phi: f32, s: &DensitySettings, step_over_ref: f32) -> f32 {
+    let t = (phi / s.density_max).clamp(0.0, 1.0);
+    1.0 - (-s.opacity * t * step_over_ref).exp()
+}
+
+/// One point as the density sees it: position, radius (`sqrt(area_sum)`), albedo.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DensityPoint {
+    pub position: Vec3,
+    pub radius: f32,
+}
+
+/// What the frame's rays share: their origins and directions come from the camera;
+/// `lambda_min` and `step` place the slices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Slicing {
+    pub lambda_min: f32,
+    pub step: f32,
+    pub slices: u32,
+    pub r_ref: f32,
+}
+
+impl Slicing {
+    /// Slices covering the points' supports along the rays of `camera`.
+    pub fn new(
+        points: &[DensityPoint],
+        camera: &crate::camera::Camera,
+        s: &DensitySettings,
+        r_ref: f32,
+    ) -> Slicing {
+        let mut lo = f32::INFINITY;
+        let mut hi = f32::NEG_INFINITY;
+        for p in points {
+            let l = ray_distance(camera, p.position);
+            let h = s.kernel_scale * p.radius;
+            lo = lo.min(l - h);
+            hi = hi.max(l + h);
+        }
+        if !lo.is_finite() {
+            lo = 0.0;
+            hi = 1.0;
+        }
+        let lo = lo.max(0.0);
+        let step = ((hi - lo) / s.slices as f32).max(f32::MIN_POSITIVE);
+        Slicing {
+            lambda_min: lo,
+            step,
+            slices: s.slices,
+            r_ref,
+        }
+    }
+}
+
+/// The distance along the rays at which `p` lies: from the eye in perspective (shells),
+/// from the near plane's plane through the eye in orthographic views (planes).
+pub fn ray_distance(camera: &crate::camera::Camera, p: Vec3) -> f32 {
+    let view = camera.view_from_world().transform_point3(p);
+    match camera.projection {
+        crate::camera::Projection::Perspective => view.length(),
+        crate::camera::Projection::Orthographic => -view.z,
+    }
+}
+
+/// Ray origin and unit direction through pixel centre `(x, y)` of a `width × height`
+/// image: world space, as the GPU reconstructs them.
+pub fn pixel_ray(
+    camera: &crate::camera::Camera,
+    x: f32,
+    y: f32,
+    width: u32,
+    height: u32,
+) -> (Vec3, Vec3) {
+    let aspect = width as f32 / height as f32;
+    let world_from_clip = (camera.clip_from_view(aspect) * camera.view_from_world()).inverse();
+    let ndc = glam::Vec2::new(2.0 * x / width as f32 - 1.0, 1.0 - 2.0 * y / height as f32);
+    let near = world_from_clip.project_point3(ndc.extend(0.0));
+    let far = world_from_clip.project_point3(ndc.extend(1.0));
+    let dir = (far - near).normalize();
+    let view_from_world = camera.view_from_world();
+    match camera.projection {
+        crate::camera::Projection::Perspective => {
+            (view_from_world.inverse().transform_point3(Vec3::ZERO), dir)
+        }
+        crate::camera::Projection::Orthographic => {
+            // The point on the ray in the plane through the eye (view z = 0).
+            let v = view_from_world.transform_point3(near);
+            (near + dir * v.z, dir)
+        }
+    }
+}
+
+/// The CPU reference of a density frame.
+pub struct Reference {
+    /// Linear RGB and alpha, premultiplied, per pixel.
+    pub rgba: Vec<[f32; 4]>,
+    /// Iso mode: the distance along the ray of the first crossing (NaN where none).
+    pub hit: Vec<f32>,
+}
+
+/// Volume fraction and its gradient at `p` (brute force over `points`).
+pub fn density_at(
+    points: &[DensityPoint],
+    p: Vec3,
+    s: &DensitySettings,
+    r_ref: f32,
+) -> (f32, Vec3) {
+    let v = 4.0 / 3.0 * std::f32::consts::PI * r_ref.powi(3);
+    let mut phi = 0.0;
+    let mut grad = Vec3::ZERO;
+    for q in points {
+        let h = s.kernel_scale * q.radius;
+        let m = (q.radius / r_ref).powi(2);
+        let d = p - q.position;
+        phi += m * kernel(d.length_squared(), h);
+        grad += m * kernel_gradient(d, h);
+    }
+    (phi * v, grad * v)
+}
+
+/// Whether `p` is kept by the clip plane.
+pub fn kept(clip: Option<[f32; 4]>, p: Vec3) -> bool {
+    clip.is_none_or(|c| Vec3::new(c[0], c[1], c[2]).dot(p) <= c[3])
+}
+
+/// Shades an iso-surface hit: Lambert from a headlight with a little ambient.
+pub fn iso_shade(albedo: Vec3, gradient: Vec3, dir: Vec3) -> Vec3 {
+    let n = -gradient.normalize_or_zero();
+    albedo * (0.25 + 0.75 * n.dot(-dir).max(0.0))
+}
+
+/// Renders the density frame on the CPU, exactly as the GPU pipeline does.
+pub fn reference(
+    points: &[DensityPoint],
+    camera: &crate::camera::Camera,
+    width: u32,
+    height: u32,
+    s: &DensitySettings,
+    slicing: &Slicing,
+    albedo: Vec3,
+) -> Reference {
+    let mut rgba = vec![[0.0f32; 4]; (width * height) as usize];
+    let mut hit = vec![f32::NAN; (width * height) as usize];
+    for y in 0..height {
+        for x in 0..width {
+            let i = (y * width + x) as usize;
+            let (o, v) = pixel_ray(camera, x as f32 + 0.5, y as f32 + 0.5, width, height);
+            let mut c = Vec3::ZERO;
+            let mut a = 0.0f32;
+            let mut prev: Option<(f32, Vec3)> = None;
+            for k in 0..slicing.slices {
+                let lambda = slicing.lambda_min + k as f32 * slicing.step;
+                let p = o + v * lambda;
+                let (phi, g) = if kept(s.clip, p) {
+                    density_at(points, p, s, slicing.r_ref)
+                } else {
+                    (0.0, Vec3::ZERO)
+                };
+                match s.iso {
+                    None => {
+                        let alpha = sample_alpha(phi, s, slicing.step / slicing.r_ref);
+                        c += (1.0 - a) * alpha * transfer_colour(phi / s.density_max);
+                        a += (1.0 - a) * alpha;
+                        if a >= OPAQUE {
+                            break;
+                        }
+                    }
+                    Some(iso) => {
+                        if let Some((p0, g0)) = prev {
+                            if p0 < iso && phi >= iso {
+                                let t = (iso - p0) / (phi - p0);
+                                hit[i] = lambda - slicing.step + t * slicing.step;
+                                c = iso_shade(albedo, g0.lerp(g, t), v);
+                                a = 1.0;
+                                break;
+                            }
+                        } else if phi >= iso {
+                            hit[i] = lambda;
+                            c = iso_shade(albedo, g, v);
+                            a = 1.0;
+                            break;
+                        }
+                        prev = Some((phi, g));
+                    }
+                }
+            }
+            rgba[i] = [c.x, c.y, c.z, a];
+        }
+    }
+    Reference { rgba, hit }
+}
+
+/// The points of `draw` in order, as the density pass packs them: a particle at its
+/// species' radius, a representative at `sqrt(area_sum)` (it carries its particles' mass).
+pub fn density_points(
+    file: &mdlod_format::MdlodFile,
+    draw: &crate::traversal::DrawList,
+) -> Vec<DensityPoint> {
+    let positions = crate::traversal::point_positions(file, draw);
+    let last = file.level_count() - 1;
+    let species = file.species();
+    let table = &file.metadata().species;
+    let mut out = Vec::with_capacity(positions.len());
+    let mut p = positions.iter();
+    for r in &draw.ranges {
+        let level = usize::from(r.level);
+        for i in r.first..r.first + r.count {
+            let radius = if level == last {
+                let s = species.get(i as usize).copied().unwrap_or(0);
+                table.get(usize::from(s)).map_or(0.0, |s| s.radius)
+            } else {
+                file.level_nodes(level)[i as usize].area_sum.max(0.0).sqrt()
+            };
+            if let Some(&position) = p.next() {
+                out.push(DensityPoint { position, radius });
+            }
+        }
+    }
+    out
+}
+
+/// `draw` as one range per point, in the same order.
+pub fn single_ranges(draw: &crate::traversal::DrawList) -> Vec<crate::traversal::DrawRange> {
+    let mut out = Vec::with_capacity(draw.points as usize);
+    for r in &draw.ranges {
+        for i in r.first..r.first + r.count {
+            out.push(crate::traversal::DrawRange {
+                level: r.level,
+                first: i,
+                count: 1,
+                quant_node: r.quant_node,
+            });
+        }
+    }
+    out
+}

@@ -1,0 +1,185 @@
+//! The density passes (`density.wgsl`, `density_composite.wgsl`): kernel splatting into
+//! a stack of slices, and ray casting through each stack. See [`crate::density`] for the
+//! method and its CPU twin.
+
+use bytemuck::{Pod, Zeroable};
+
+/// WGSL of the splatting pass: `points.wgsl` followed by `density.wgsl`.
+pub const SHADER: &str = concat!(
+    include_str!("points.wgsl"),
+    "\n",
+    include_str!("density.wgsl")
+);
+
+/// WGSL of the ray-casting pass.
+pub const COMPOSITE_SHADER: &str = include_str!("density_composite.wgsl");
+
+/// The slice targets: additive blending of f32 needs `FLOAT32_BLENDABLE`.
+pub const SLICE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// Slices per stack: 8 densities, or 2 densities with gradients (iso-surfaces).
+pub const SLICES_PLAIN: u32 = 8;
+pub const SLICES_GRADIENT: u32 = 2;
+
+/// `Density` in the WGSL: one stack's slicing (256 bytes, a dynamic-offset stride).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct DensityGpu {
+    pub world_from_clip: [[f32; 4]; 4],
+    pub eye: [f32; 4],
+    pub slicing: [f32; 4],
+    pub mode: [f32; 4],
+    pub size: [f32; 4],
+    pub clip: [f32; 4],
+    pub flags: [u32; 4],
+    pub albedo: [f32; 4],
+    pub pad: [[f32; 4]; 5],
+}
+
+/// `Ray` in the composite WGSL: per-pixel state between stacks.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct RayGpu {
+    pub colour: [f32; 4],
+    pub prev: [f32; 4],
+    pub state: [f32; 4],
+}
+
+/// The pipelines and the layouts of their own bindings.
+pub struct DensityPass {
+    pub splat: wgpu::RenderPipeline,
+    pub slicing_layout: wgpu::BindGroupLayout,
+    pub composite: wgpu::ComputePipeline,
+    pub composite_layout: wgpu::BindGroupLayout,
+}
+
+impl DensityPass {
+    /// The passes; `points_layout` is the sphere pass's bind group layout (the packed
+    /// cut). `None` when the device cannot blend 32-bit floats.
+    pub fn new(device: &wgpu::Device, points_layout: &wgpu::BindGroupLayout) -> Option<Self> {
+        if !device
+            .features()
+            .contains(wgpu::Features::FLOAT32_BLENDABLE)
+        {
+            return None;
+        }
+        let uniform = |binding, visibility, dynamic: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: dynamic,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let slicing_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("density slicing"),
+            entries: &[uniform(
+                0,
+                wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT,
+                true,
+            )],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("density.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("density splat"),
+            bind_group_layouts: &[Some(points_layout), Some(&slicing_layout)],
+            immediate_size: 0,
+        });
+        let add = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::One,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let target = Some(wgpu::ColorTargetState {
+            format: SLICE_FORMAT,
+            blend: Some(wgpu::BlendState {
+                color: add,
+                alpha: add,
+            }),
+            write_mask: wgpu::ColorWrites::ALL,
+        });
+        let splat = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("density splat"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_splat"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_splat"),
+                compilation_options: Default::default(),
+                targets: &[target.clone(), target],
+            }),
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                ..Default::default()
+            },
+            depth_stencil: None,
+            multisample: Default::default(),
+            multiview_mask: None,
+            cache: None,
+        });
+        let texture = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let storage = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: false },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let composite_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("density composite"),
+            entries: &[
+                uniform(0, wgpu::ShaderStages::COMPUTE, true),
+                texture(1),
+                texture(2),
+                storage(3),
+                storage(4),
+                uniform(5, wgpu::ShaderStages::COMPUTE, false),
+            ],
+        });
+        let cmodule = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("density_composite.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(COMPOSITE_SHADER.into()),
+        });
+        let clayout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("density composite"),
+            bind_group_layouts: &[Some(&composite_layout)],
+            immediate_size: 0,
+        });
+        let composite = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("density composite"),
+            layout: Some(&clayout),
+            module: &cmodule,
+            entry_point: Some("cs_composite"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Some(DensityPass {
+            splat,
+            slicing_layout,
+            composite,
+            composite_layout,
+        })
+    }
+}

@@ -1,0 +1,156 @@
+// Ray casting through one stack of density slices (Falk et al. 2010, sections 3.3-3.4):
+// front-to-back compositing with a transfer function, or the first crossing of the
+// iso-value, into a per-pixel state that carries over to the next stack. Rays that are
+// done are counted out of `active`, which the host reads to end the frame early.
+//
+// Follows density.wgsl's `Density` struct (copied below with the bindings of this pass).
+
+struct Density {
+    world_from_clip: mat4x4<f32>,
+    eye: vec4<f32>,
+    slicing: vec4<f32>,
+    mode: vec4<f32>,
+    size: vec4<f32>,
+    clip: vec4<f32>,
+    flags: vec4<u32>,
+    albedo: vec4<f32>,
+    // 0, 1: the box of the points' supports (xyz); the rest unused.
+    pad: array<vec4<f32>, 5>,
+};
+
+struct Ray {
+    // Premultiplied colour and opacity.
+    colour: vec4<f32>,
+    // The previous sample: gradient and density (iso mode).
+    prev: vec4<f32>,
+    // x: 1 when done, y: iso hit distance, z: 1 once a previous sample exists, w: 1 on
+    // an iso hit.
+    state: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> dens: Density;
+@group(0) @binding(1) var slice_a: texture_2d<f32>;
+@group(0) @binding(2) var slice_b: texture_2d<f32>;
+@group(0) @binding(3) var<storage, read_write> rays: array<Ray>;
+@group(0) @binding(4) var<storage, read_write> active_rays: atomic<u32>;
+@group(0) @binding(5) var<uniform> view_from_world: mat4x4<f32>;
+
+const OPAQUE: f32 = 0.99;
+
+fn transfer_colour(t: f32) -> vec3<f32> {
+    let u = clamp(t, 0.0, 1.0);
+    let s0 = vec3<f32>(0.02, 0.05, 0.45);
+    let s1 = vec3<f32>(0.75, 0.08, 0.06);
+    let s2 = vec3<f32>(1.0, 0.85, 0.25);
+    if u < 0.5 {
+        return mix(s0, s1, u * 2.0);
+    }
+    return mix(s1, s2, u * 2.0 - 1.0);
+}
+
+fn shade(gradient: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
+    var n = vec3<f32>(0.0);
+    if dot(gradient, gradient) > 0.0 {
+        n = -normalize(gradient);
+    }
+    return dens.albedo.xyz * (0.25 + 0.75 * max(dot(n, -dir), 0.0));
+}
+
+@compute @workgroup_size(8, 8)
+fn cs_composite(@builtin(global_invocation_id) id: vec3<u32>) {
+    let w = u32(dens.size.x);
+    let h = u32(dens.size.y);
+    if id.x >= w || id.y >= h {
+        return;
+    }
+    let i = id.y * w + id.x;
+    var ray = rays[i];
+    if ray.state.x > 0.5 {
+        return;
+    }
+    let px = vec2<f32>(f32(id.x) + 0.5, f32(id.y) + 0.5);
+    let ndc = vec2<f32>(2.0 * px.x / dens.size.x - 1.0, 1.0 - 2.0 * px.y / dens.size.y);
+    let n4 = dens.world_from_clip * vec4<f32>(ndc, 0.0, 1.0);
+    let f4 = dens.world_from_clip * vec4<f32>(ndc, 1.0, 1.0);
+    let near = n4.xyz / n4.w;
+    let dir = normalize(f4.xyz / f4.w - near);
+    var origin = dens.eye.xyz;
+    if dens.eye.w > 0.5 {
+        origin = near + dir * (view_from_world * vec4<f32>(near, 1.0)).z;
+    }
+    // A ray that has left the box of the points' supports (or never meets it) is done.
+    let inv = 1.0 / dir;
+    let t0 = (dens.pad[0].xyz - origin) * inv;
+    let t1 = (dens.pad[1].xyz - origin) * inv;
+    let t_enter = max(max(min(t0.x, t1.x), min(t0.y, t1.y)), min(t0.z, t1.z));
+    let t_exit = min(min(max(t0.x, t1.x), max(t0.y, t1.y)), max(t0.z, t1.z));
+    if t_exit < t_enter || dens.slicing.x > t_exit {
+        ray.state.x = 1.0;
+        rays[i] = ray;
+        return;
+    }
+    let a = textureLoad(slice_a, vec2<i32>(id.xy), 0);
+    let b = textureLoad(slice_b, vec2<i32>(id.xy), 0);
+    let gradients = dens.mode.y > 0.5;
+    let n = u32(dens.mode.x);
+    for (var k = 0u; k < n; k++) {
+        let lambda = dens.slicing.x + f32(k) * dens.slicing.y;
+        let p = origin + dir * lambda;
+        var s = vec4<f32>(0.0);
+        if gradients {
+            if k == 0u {
+                s = a;
+            } else {
+                s = b;
+            }
+        } else {
+            var v = a[k & 3u];
+            if k >= 4u {
+                v = b[k & 3u];
+            }
+            s = vec4<f32>(0.0, 0.0, 0.0, v);
+        }
+        if dens.flags.x == 1u && dot(dens.clip.xyz, p) > dens.clip.w {
+            s = vec4<f32>(0.0);
+        }
+        if dens.size.z <= 0.0 {
+            // Direct volume rendering.
+            let t = clamp(s.w / dens.size.w, 0.0, 1.0);
+            let alpha = 1.0 - exp(-dens.albedo.w * t * dens.slicing.y * dens.slicing.w);
+            let c = transfer_colour(s.w / dens.size.w);
+            ray.colour = vec4<f32>(
+                ray.colour.xyz + (1.0 - ray.colour.w) * alpha * c,
+                ray.colour.w + (1.0 - ray.colour.w) * alpha,
+            );
+            if ray.colour.w >= OPAQUE {
+                ray.state.x = 1.0;
+                break;
+            }
+        } else {
+            let iso = dens.size.z;
+            if ray.state.z > 0.5 {
+                let p0 = ray.prev.w;
+                if p0 < iso && s.w >= iso {
+                    let t = (iso - p0) / (s.w - p0);
+                    ray.state.y = lambda - dens.slicing.y + t * dens.slicing.y;
+                    ray.state.w = 1.0;
+                    ray.colour = vec4<f32>(shade(mix(ray.prev.xyz, s.xyz, t), dir), 1.0);
+                    ray.state.x = 1.0;
+                    break;
+                }
+            } else if s.w >= iso {
+                ray.state.y = lambda;
+                ray.state.w = 1.0;
+                ray.colour = vec4<f32>(shade(s.xyz, dir), 1.0);
+                ray.state.x = 1.0;
+                break;
+            }
+            ray.prev = s;
+            ray.state.z = 1.0;
+        }
+    }
+    rays[i] = ray;
+    if ray.state.x < 0.5 {
+        atomicAdd(&active_rays, 1u);
+    }
+}

@@ -1,0 +1,271 @@
+//! The image-space density volume against its CPU twin (`density::reference`, the same
+//! rays, slices, kernel and compositing in plain loops): density values through the
+//! transfer function, iso-surface positions (and one analytic iso-sphere), clipping that
+//! removes samples but not particles, and early ray termination.
+
+mod common;
+
+use std::sync::OnceLock;
+
+use common::*;
+use glam::Vec3;
+use mdlod_format::MdlodFile;
+use mdlod_render::density::{reference, DensityPoint, DensitySettings};
+use mdlod_render::{
+    camera_for, traverse, BackendChoice, Camera, GpuContext, OcclusionMode, Projection, Renderer,
+    TraversalSettings, ViewSpec,
+};
+
+fn renderer() -> &'static Renderer {
+    static R: OnceLock<Renderer> = OnceLock::new();
+    R.get_or_init(|| {
+        let backends = if std::env::var_os("WGPU_BACKEND").is_some() {
+            BackendChoice::FromEnv
+        } else {
+            BackendChoice::Only(wgpu::Backends::VULKAN)
+        };
+        match GpuContext::with_backends(backends) {
+            Ok(ctx) => Renderer::new(ctx),
+            Err(e) => panic!("{e}"),
+        }
+    })
+}
+
+fn camera(f: &MdlodFile, projection: Projection, w: u32, h: u32) -> Camera {
+    camera_zoom(f, projection, w, h, 1.3)
+}
+
+fn camera_zoom(f: &MdlodFile, projection: Projection, w: u32, h: u32, zoom: f32) -> Camera {
+    camera_for(
+        f,
+        &ViewSpec::Orbit {
+            azimuth_deg: 35.0,
+            elevation_deg: 25.0,
+            zoom,
+            projection,
+        },
+        w,
+        h,
+    )
+    .unwrap()
+}
+
+/// Every particle of `f` (no level of detail).
+fn all_points(f: &MdlodFile, camera: &Camera, w: u32, h: u32) -> mdlod_render::DrawList {
+    traverse(
+        camera,
+        f,
+        &TraversalSettings {
+            viewport: [w, h],
+            error_px: 0.0,
+            budget_points: u64::MAX,
+            occlusion: OcclusionMode::Off,
+        },
+    )
+}
+
+/// Renders on the GPU and on the CPU; returns both colour buffers, both hit buffers and
+/// the frame's stack counts.
+#[allow(clippy::type_complexity)]
+fn both(
+    f: &MdlodFile,
+    camera: &Camera,
+    w: u32,
+    h: u32,
+    s: &DensitySettings,
+    cpu_points: Option<&[DensityPoint]>,
+) -> (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<f32>, Vec<f32>, (u32, u32)) {
+    let draw = all_points(f, camera, w, h);
+    let frame = renderer()
+        .render_density(f, camera, &draw, w, h, s)
+        .unwrap();
+    let albedo = Vec3::from(f.metadata().species[0].colour);
+    let points = cpu_points.unwrap_or(&frame.points);
+    let r = reference(points, camera, w, h, s, &frame.slicing, albedo);
+    (
+        frame.rgba,
+        r.rgba,
+        frame.hit,
+        r.hit,
+        (frame.stacks_run, frame.stacks),
+    )
+}
+
+fn max_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn density_volume_matches_the_cpu_ray_marcher() {
+    let (_d, _p, f) = make_file(&fcc_frame(3), small_build(), &[]);
+    let (w, h) = (40u32, 30u32);
+    for projection in [Projection::Perspective, Projection::Orthographic] {
+        let cam = camera(&f, projection, w, h);
+        let s = DensitySettings {
+            slices: 64,
+            opacity: 1.5,
+            ..Default::default()
+        };
+        let (gpu, cpu, _, _, _) = both(&f, &cam, w, h, &s, None);
+        let lit = cpu.iter().filter(|p| p[3] > 0.05).count();
+        assert!(
+            lit > (w * h / 10) as usize,
+            "{projection:?}: only {lit} pixels see the block"
+        );
+        let d = max_diff(&gpu, &cpu);
+        assert!(d < 0.01, "{projection:?}: GPU and CPU differ by {d}");
+    }
+}
+
+#[test]
+fn iso_surface_matches_the_cpu_ray_marcher() {
+    let (_d, _p, f) = make_file(&cloud_frame(300, 3), small_build(), &[]);
+    let (w, h) = (40u32, 30u32);
+    for projection in [Projection::Perspective, Projection::Orthographic] {
+        let cam = camera(&f, projection, w, h);
+        let s = DensitySettings {
+            iso: Some(0.05),
+            slices: 96,
+            ..Default::default()
+        };
+        let (gpu, cpu, gh, ch, _) = both(&f, &cam, w, h, &s, None);
+        let hits = ch.iter().filter(|v| v.is_finite()).count();
+        assert!(
+            hits > 20,
+            "{projection:?}: the surface covers {hits} pixels"
+        );
+        let mut disagree = 0;
+        let mut worst = 0.0f32;
+        for (a, b) in gh.iter().zip(&ch) {
+            match (a.is_finite(), b.is_finite()) {
+                (true, true) => worst = worst.max((a - b).abs()),
+                (false, false) => {}
+                _ => disagree += 1,
+            }
+        }
+        assert!(
+            disagree * 100 <= hits,
+            "{projection:?}: {disagree} pixels hit on one side only"
+        );
+        assert!(
+            worst < 1e-2,
+            "{projection:?}: surface distances differ by {worst}"
+        );
+        let mut colour = 0.0f32;
+        for (i, (a, b)) in gh.iter().zip(&ch).enumerate() {
+            if a.is_finite() && b.is_finite() {
+                colour = colour.max(
+                    (0..3)
+                        .map(|k| (gpu[i][k] - cpu[i][k]).abs())
+                        .fold(0.0, f32::max),
+                );
+            }
+        }
+        assert!(colour < 0.02, "{projection:?}: shading differs by {colour}");
+    }
+}
+
+#[test]
+fn a_single_particle_makes_an_iso_sphere_of_the_kernel_radius() {
+    // φ(r) = V m 315/(64 π h³) (1 − r²/h²)³ with m = 1, V = 4/3 π r_ref³, r = 1, h = 2.5:
+    // the iso-value 0.2 lies at r_iso = h sqrt(1 − (0.2 / φ(0))^(1/3)).
+    let (_d, _p, f) = make_file(
+        &spheres_frame(&[[5.0, 5.0, 5.0]]),
+        small_build(),
+        &[("X", 1.0)],
+    );
+    let (w, h) = (33u32, 33u32);
+    let cam = camera(&f, Projection::Orthographic, w, h);
+    let s = DensitySettings {
+        iso: Some(0.2),
+        slices: 400,
+        ..Default::default()
+    };
+    let draw = all_points(&f, &cam, w, h);
+    let frame = renderer()
+        .render_density(&f, &cam, &draw, w, h, &s)
+        .unwrap();
+    let kh = 2.5f32;
+    let peak =
+        4.0 / 3.0 * std::f32::consts::PI * 315.0 / (64.0 * std::f32::consts::PI * kh.powi(3));
+    let r_iso = kh * (1.0 - (0.2 / peak).cbrt()).sqrt();
+    let centre = mdlod_render::density::ray_distance(&cam, Vec3::splat(5.0));
+    let hit = frame.hit[(16 * w + 16) as usize];
+    // The centre pixel's ray passes within half a pixel of the particle.
+    let px = cam.view_height_at_target() / h as f32;
+    assert!(
+        (centre - hit - r_iso).abs() < 0.01 + px * px / r_iso,
+        "surface at {} from the centre, expected {r_iso}",
+        centre - hit
+    );
+    // The silhouette's area matches the disk of radius r_iso.
+    let covered = frame.hit.iter().filter(|v| v.is_finite()).count() as f32;
+    let disk = std::f32::consts::PI * (r_iso / px).powi(2);
+    assert!(
+        (covered - disk).abs() < 0.1 * disk + 4.0,
+        "{covered} pixels, disk {disk}"
+    );
+}
+
+#[test]
+fn clipping_removes_samples_not_particles() {
+    // Two particles either side of the plane x = 5: density inside the kept half-space
+    // near the plane includes the particle beyond it.
+    let (_d, _p, f) = make_file(
+        &spheres_frame(&[[4.2, 5.0, 5.0], [5.8, 5.0, 5.0], [3.0, 5.0, 5.0]]),
+        small_build(),
+        &[("X", 1.0)],
+    );
+    let (w, h) = (32u32, 24u32);
+    let cam = camera(&f, Projection::Perspective, w, h);
+    let s = DensitySettings {
+        slices: 64,
+        opacity: 3.0,
+        clip: Some([1.0, 0.0, 0.0, 5.0]),
+        ..Default::default()
+    };
+    let (gpu, cpu, _, _, _) = both(&f, &cam, w, h, &s, None);
+    let d = max_diff(&gpu, &cpu);
+    assert!(d < 0.01, "GPU and CPU differ by {d}");
+    // Clipping the particles instead (dropping the one beyond the plane) is visibly wrong.
+    let draw = all_points(&f, &cam, w, h);
+    let frame = renderer()
+        .render_density(&f, &cam, &draw, w, h, &s)
+        .unwrap();
+    let inside: Vec<DensityPoint> = frame
+        .points
+        .iter()
+        .copied()
+        .filter(|p| p.position.x <= 5.0)
+        .collect();
+    let albedo = Vec3::ONE;
+    let wrong = reference(&inside, &cam, w, h, &s, &frame.slicing, albedo);
+    assert!(
+        max_diff(&cpu, &wrong.rgba) > 0.05,
+        "the particle beyond the plane adds nothing"
+    );
+    // And the clip removes what lies beyond the plane.
+    let unclipped = DensitySettings { clip: None, ..s };
+    let (full, _, _, _, _) = both(&f, &cam, w, h, &unclipped, None);
+    assert!(max_diff(&full, &gpu) > 0.05);
+}
+
+#[test]
+fn rays_stop_once_opaque() {
+    let (_d, _p, f) = make_file(&fcc_frame(5), small_build(), &[]);
+    let (w, h) = (24u32, 18u32);
+    // Zoomed into the block: every ray meets dense matter at once.
+    let cam = camera_zoom(&f, Projection::Orthographic, w, h, 4.0);
+    let s = DensitySettings {
+        slices: 256,
+        opacity: 50.0,
+        ..Default::default()
+    };
+    let (gpu, cpu, _, _, (run, all)) = both(&f, &cam, w, h, &s, None);
+    assert!(run <= all / 2, "{run} of {all} stacks run");
+    assert!(gpu.iter().all(|p| p[3] >= 0.99), "a ray stayed open");
+    assert!(max_diff(&gpu, &cpu) < 0.01);
+}
