@@ -350,19 +350,3 @@ pub fn density_points(
     }
     out
 }
-
-/// `draw` as one range per point, in the same order.
-pub fn single_ranges(draw: &crate::traversal::DrawList) -> Vec<crate::traversal::DrawRange> {
-    let mut out = Vec::with_capacity(draw.points as usize);
-    for r in &draw.ranges {
-        for i in r.first..r.first + r.count {
-            out.push(crate::traversal::DrawRange {
-                level: r.level,
-                first: i,
-                count: 1,
-                quant_node: r.quant_node,
-            });
-        }
-    }
-    out
-}

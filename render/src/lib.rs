@@ -15,6 +15,10 @@
 //!    [`renderer`] runs it once per sample (jittered supersampling), averages and reads
 //!    back an RGBA8 [`image::RgbaImage`].
 //!
+//! The other modes draw the same cut differently: [`passes::splat`] as additive or
+//! sorted translucent splats, [`sndf`] as screen-space normal distributions shaded
+//! after sampling, and [`density`] as an image-space density volume or iso-surface.
+//!
 //! [`streaming::StreamingRenderer`] draws the same cut out of core: the points live in a
 //! fixed GPU page pool with least-recently-used eviction, filled by a loader thread
 //! largest-on-screen first, and a subtree whose pages are missing is drawn by its

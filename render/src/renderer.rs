@@ -1150,21 +1150,42 @@ impl Renderer {
             height,
             ..Default::default()
         })?;
-        // Points sorted by their distance along the rays, so a stack draws an interval.
+        // Ranges (a node's children: compact) sorted by their distance along the rays,
+        // so that a stack draws one interval of instances: those whose range centre lies
+        // within the largest range half-extent plus the largest support of it.
         let points = crate::density::density_points(file, draw);
-        let mut order: Vec<(f32, usize)> = points
-            .iter()
-            .enumerate()
-            .map(|(i, p)| (crate::density::ray_distance(camera, p.position), i))
-            .collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let singles = crate::density::single_ranges(draw);
+        let mut spans: Vec<(f32, usize, std::ops::Range<usize>)> =
+            Vec::with_capacity(draw.ranges.len());
+        let mut half_extent = 0.0f32;
+        let mut at = 0usize;
+        for (k, r) in draw.ranges.iter().enumerate() {
+            let pts = at..(at + r.count as usize).min(points.len());
+            at = pts.end;
+            let (lo, hi) = points[pts.clone()].iter().fold(
+                (f32::INFINITY, f32::NEG_INFINITY),
+                |(lo, hi), p| {
+                    let d = crate::density::ray_distance(camera, p.position);
+                    (lo.min(d), hi.max(d))
+                },
+            );
+            half_extent = half_extent.max(0.5 * (hi - lo));
+            spans.push((0.5 * (lo + hi), k, pts));
+        }
+        spans.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let sorted_draw = DrawList {
-            ranges: order.iter().map(|&(_, i)| singles[i]).collect(),
+            ranges: spans.iter().map(|s| draw.ranges[s.1]).collect(),
             ..draw.clone()
         };
-        let sorted: Vec<DensityPoint> = order.iter().map(|&(_, i)| points[i]).collect();
-        let distances: Vec<f32> = order.iter().map(|&(d, _)| d).collect();
+        let sorted: Vec<DensityPoint> = spans
+            .iter()
+            .flat_map(|s| points[s.2.clone()].iter().copied())
+            .collect();
+        let centres: Vec<f32> = spans.iter().map(|s| s.0).collect();
+        let mut instance_first = Vec::with_capacity(spans.len() + 1);
+        instance_first.push(0u32);
+        for s in &spans {
+            instance_first.push(instance_first.last().copied().unwrap_or(0) + s.2.len() as u32);
+        }
         let r_ref = file
             .metadata()
             .species
@@ -1176,7 +1197,8 @@ impl Renderer {
         let h_max = sorted
             .iter()
             .map(|p| settings.kernel_scale * p.radius)
-            .fold(0.0f32, f32::max);
+            .fold(0.0f32, f32::max)
+            + half_extent;
         // The box of the points' supports: rays stop where they leave it.
         let bounds = sorted.iter().fold(
             (
@@ -1380,8 +1402,8 @@ impl Renderer {
                         rec.slicing[0],
                         rec.slicing[0] + (rec.mode[0] - 1.0) * rec.slicing[1],
                     );
-                    let first = distances.partition_point(|&d| d < a - h_max) as u32;
-                    let last = distances.partition_point(|&d| d <= b + h_max) as u32;
+                    let first = instance_first[centres.partition_point(|&d| d < a - h_max)];
+                    let last = instance_first[centres.partition_point(|&d| d <= b + h_max)];
                     let offset = (u64::from(k) * stride) as u32;
                     {
                         let clear = wgpu::Operations {
