@@ -1150,13 +1150,14 @@ impl Renderer {
             height,
             ..Default::default()
         })?;
-        // Ranges (a node's children: compact) sorted by their distance along the rays,
-        // so that a stack draws one interval of instances: those whose range centre lies
-        // within the largest range half-extent plus the largest support of it.
+        // Ranges (a node's children: compact) sorted by their nearest distance along the
+        // rays, so that a stack draws one interval of instances: from the first range
+        // after which every range ends before the stack (a running maximum of the ends),
+        // to the last range that starts before the stack's end (each widened by the
+        // largest support).
         let points = crate::density::density_points(file, draw);
-        let mut spans: Vec<(f32, usize, std::ops::Range<usize>)> =
+        let mut spans: Vec<(f32, usize, std::ops::Range<usize>, f32)> =
             Vec::with_capacity(draw.ranges.len());
-        let mut half_extent = 0.0f32;
         let mut at = 0usize;
         for (k, r) in draw.ranges.iter().enumerate() {
             let pts = at..(at + r.count as usize).min(points.len());
@@ -1168,8 +1169,7 @@ impl Renderer {
                     (lo.min(d), hi.max(d))
                 },
             );
-            half_extent = half_extent.max(0.5 * (hi - lo));
-            spans.push((0.5 * (lo + hi), k, pts));
+            spans.push((lo, k, pts, hi));
         }
         spans.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let sorted_draw = DrawList {
@@ -1180,7 +1180,14 @@ impl Renderer {
             .iter()
             .flat_map(|s| points[s.2.clone()].iter().copied())
             .collect();
-        let centres: Vec<f32> = spans.iter().map(|s| s.0).collect();
+        let starts: Vec<f32> = spans.iter().map(|s| s.0).collect();
+        // ends_before[j]: the largest end among ranges 0..j.
+        let mut ends_before = Vec::with_capacity(spans.len() + 1);
+        ends_before.push(f32::NEG_INFINITY);
+        for s in &spans {
+            let m = ends_before.last().copied().unwrap_or(f32::NEG_INFINITY);
+            ends_before.push(m.max(s.3));
+        }
         let mut instance_first = Vec::with_capacity(spans.len() + 1);
         instance_first.push(0u32);
         for s in &spans {
@@ -1197,8 +1204,7 @@ impl Renderer {
         let h_max = sorted
             .iter()
             .map(|p| settings.kernel_scale * p.radius)
-            .fold(0.0f32, f32::max)
-            + half_extent;
+            .fold(0.0f32, f32::max);
         // The box of the points' supports: rays stop where they leave it.
         let bounds = sorted.iter().fold(
             (
@@ -1402,8 +1408,13 @@ impl Renderer {
                         rec.slicing[0],
                         rec.slicing[0] + (rec.mode[0] - 1.0) * rec.slicing[1],
                     );
-                    let first = instance_first[centres.partition_point(|&d| d < a - h_max)];
-                    let last = instance_first[centres.partition_point(|&d| d <= b + h_max)];
+                    // The last j whose predecessors all end before the stack.
+                    let skip = ends_before
+                        .partition_point(|&e| e < a - h_max)
+                        .saturating_sub(1);
+                    let first = instance_first[skip];
+                    let last =
+                        instance_first[starts.partition_point(|&d| d <= b + h_max).max(skip)];
                     let offset = (u64::from(k) * stride) as u32;
                     {
                         let clear = wgpu::Operations {
