@@ -58,3 +58,37 @@ fn remove_partial(output: &Path) {
         }
     }
 }
+
+/// A fresh working directory in `parent` for an out-of-core build, named after this host
+/// and process (`.mdlod-convert-HOST-PID-XXXX`). Directories of earlier runs on this host
+/// whose process is gone (killed outright, where no handler could run) are removed first;
+/// other hosts' directories on a shared file system are left alone.
+pub fn work_dir(parent: &Path) -> std::io::Result<tempfile::TempDir> {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .ok()
+        .filter(|h| {
+            !h.is_empty()
+                && h.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.')
+        })
+        .unwrap_or_else(|| "host".into());
+    let ours = format!(".mdlod-convert-{host}-");
+    if let Ok(entries) = std::fs::read_dir(parent) {
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let Some(rest) = name.strip_prefix(&ours) else {
+                continue;
+            };
+            let pid = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
+            if let Some(pid) = pid {
+                if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+                    let _ = std::fs::remove_dir_all(e.path());
+                }
+            }
+        }
+    }
+    tempfile::Builder::new()
+        .prefix(&format!("{ours}{}-", std::process::id()))
+        .tempdir_in(parent)
+}

@@ -880,6 +880,59 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
         "{:?}",
         working_entries(dir.path())
     );
+
+    // SIGKILL leaves the working directory (nothing can run); the next conversion on this
+    // host removes it, since its process is gone.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args([
+            "convert",
+            s(&input),
+            "-o",
+            s(&out),
+            "--chunk-points",
+            "5000",
+            "--root-points",
+            "64",
+            "--threads",
+            "1",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    while !working_entries(dir.path())
+        .iter()
+        .filter(|n| n.starts_with(".mdlod-convert-"))
+        .flat_map(|n| walk(&dir.path().join(n)))
+        .any(|f| f.contains("chunk-"))
+    {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the conversion ended before chunks were built"
+        );
+        assert!(started.elapsed().as_secs() < 60);
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!working_entries(dir.path()).is_empty());
+    ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&out),
+        "--chunk-points",
+        "30000",
+        "--root-points",
+        "256",
+    ]);
+    assert!(
+        working_entries(dir.path()).is_empty(),
+        "{:?}",
+        working_entries(dir.path())
+    );
+    ok(&["verify", s(&out)]);
 }
 
 /// Every file name below `dir` (empty when it is gone).

@@ -111,15 +111,12 @@ pub fn run(args: Args) -> Result<()> {
     // Ctrl-C and SIGTERM (partial frames are redone by the next run).
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let temp_parent = convert.chunks.temp_dir_for(&out.join("frame"));
-    let work = tempfile::Builder::new()
-        .prefix(".mdlod-convert-")
-        .tempdir_in(&temp_parent)
-        .with_context(|| {
-            format!(
-                "cannot create a working directory in {}",
-                temp_parent.display()
-            )
-        })?;
+    let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
+        format!(
+            "cannot create a working directory in {}",
+            temp_parent.display()
+        )
+    })?;
     crate::interrupt::remove_on_interrupt(work.path(), None);
     convert.chunks.temp_dir = Some(work.path().to_path_buf());
     let opts = BatchOptions {

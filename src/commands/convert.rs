@@ -141,15 +141,12 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     // Working files of an out-of-core build live in a directory of this run's own, which
     // a Ctrl-C (or SIGTERM from a scheduler) removes together with the partial output.
     let temp_parent = options.chunks.temp_dir_for(&args.output);
-    let work = tempfile::Builder::new()
-        .prefix(".mdlod-convert-")
-        .tempdir_in(&temp_parent)
-        .with_context(|| {
-            format!(
-                "cannot create a working directory in {}",
-                temp_parent.display()
-            )
-        })?;
+    let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
+        format!(
+            "cannot create a working directory in {}",
+            temp_parent.display()
+        )
+    })?;
     crate::interrupt::remove_on_interrupt(work.path(), Some(&args.output));
     options.chunks.temp_dir = Some(work.path().to_path_buf());
     let frame = match args.frame {
