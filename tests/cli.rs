@@ -703,6 +703,28 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     let out = ok(&["shade", s(&sndf), "-o", s(&lit), "--envmap", s(&env)]);
     assert!(out.contains("0 light(s)"), "{out}");
     assert_ne!(read_png(&lit).2, read_png(&shaded).2);
+    // A painted transfer function: one green texel colours every normal green, so no
+    // pixel has more red or blue than the white background blended in.
+    let painted = dir.path().join("disk.png");
+    let mut disk = mdlod_render::RgbaImage::new(1, 1);
+    disk.set_pixel(0, 0, [0, 255, 0, 255]);
+    disk.save_png(&painted).unwrap();
+    let green = dir.path().join("green.png");
+    ok(&[
+        "shade",
+        s(&sndf),
+        "-o",
+        s(&green),
+        "--transfer",
+        s(&painted),
+    ]);
+    let (_, _, g) = read_png(&green);
+    let pixels: Vec<&[u8]> = g.chunks_exact(4).collect();
+    assert!(
+        pixels.iter().any(|p| p[..3] == [0, 255, 0]),
+        "no fully covered green pixel"
+    );
+    assert!(pixels.iter().all(|p| p[1] >= p[0] && p[1] >= p[2]));
     let info = ok(&["info", s(&sndf)]);
     assert!(
         info.contains("96x64 texels, 8x8 lambert-equal-area bins, 8 rays each"),

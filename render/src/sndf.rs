@@ -326,6 +326,49 @@ pub struct ShadeLights {
     pub environment: Option<EnvironmentMap>,
     /// Colour the normals by direction instead of lighting them.
     pub explorer: Option<Explorer>,
+    /// Colour the normals from a painted image of the normal disk instead of lighting
+    /// them (see [`TransferImage`]); it takes precedence over the explorer.
+    pub transfer: Option<TransferImage>,
+}
+
+/// A transfer function over the normal disk, painted as an image: the disk of projected
+/// normals (view space, +x right, +y up) is inscribed in the image, so a normal `n` takes
+/// the colour of the texel at `((n.x + 1) / 2 · width, (1 − n.y) / 2 · height)`. Linear
+/// RGB.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransferImage {
+    pub width: u32,
+    pub height: u32,
+    pub colour: Vec<[f32; 3]>,
+}
+
+impl TransferImage {
+    /// From an sRGB image (e.g. a PNG painted in any editor).
+    pub fn from_image(image: &RgbaImage) -> TransferImage {
+        TransferImage {
+            width: image.width,
+            height: image.height,
+            colour: image
+                .data
+                .chunks_exact(4)
+                .map(|p| [0, 1, 2].map(|k| srgb_to_linear(f32::from(p[k]) / 255.0)))
+                .collect(),
+        }
+    }
+
+    /// The colour of the texel a view-space normal falls on.
+    pub fn colour(&self, n: Vec3) -> [f32; 3] {
+        if self.width == 0 || self.height == 0 {
+            return [0.0; 3];
+        }
+        let x = ((n.x + 1.0) * 0.5 * self.width as f32).clamp(0.0, self.width as f32 - 1.0) as u32;
+        let y =
+            ((1.0 - n.y) * 0.5 * self.height as f32).clamp(0.0, self.height as f32 - 1.0) as u32;
+        self.colour
+            .get((y * self.width + x) as usize)
+            .copied()
+            .unwrap_or([0.0; 3])
+    }
 }
 
 /// An equirectangular environment in view space (a light probe that turns with the view,
@@ -449,6 +492,7 @@ impl From<&Lighting> for ShadeLights {
             shininess: l.shininess,
             environment: None,
             explorer: None,
+            transfer: None,
         }
     }
 }
@@ -473,6 +517,10 @@ pub fn bin_lighting(
         .collect();
     let environment = lights.environment.as_ref().map(EnvironmentMap::samples);
     let shade = |n: Vec3| {
+        if let Some(t) = &lights.transfer {
+            // The painted colour per sample, whatever the particle's albedo.
+            return ([0.0; 3], t.colour(n));
+        }
         if let Some(explorer) = &lights.explorer {
             // The pattern's colour per sample, whatever the particle's albedo.
             return ([0.0; 3], explorer.colour(n));
@@ -845,6 +893,54 @@ mod tests {
     }
 
     #[test]
+    fn a_painted_transfer_image_colours_each_bin_by_its_normals() {
+        // Four quadrants: the disk's upper left red, upper right green, lower left blue,
+        // lower right white.
+        let image = RgbaImage {
+            width: 2,
+            height: 2,
+            data: vec![
+                255, 0, 0, 255, 0, 255, 0, 255, //
+                0, 0, 255, 255, 255, 255, 255, 255,
+            ],
+        };
+        let t = TransferImage::from_image(&image);
+        assert_eq!(t.colour(Vec3::new(-0.5, 0.5, 0.7)), [1.0, 0.0, 0.0]);
+        assert_eq!(t.colour(Vec3::new(0.5, 0.5, 0.7)), [0.0, 1.0, 0.0]);
+        assert_eq!(t.colour(Vec3::new(-0.5, -0.5, 0.7)), [0.0, 0.0, 1.0]);
+        assert_eq!(t.colour(Vec3::new(0.9, -0.1, 0.4)), [1.0, 1.0, 1.0]);
+        let lights = ShadeLights {
+            ambient: 0.3,
+            lights: vec![(Vec3::Z, [1.0; 3])],
+            diffuse: 0.7,
+            specular: 0.5,
+            shininess: 8.0,
+            environment: None,
+            explorer: None,
+            transfer: Some(t.clone()),
+        };
+        // 8×8 bins never straddle a quadrant border: every bin on the disk carries its
+        // quadrant's colour, in place of the lighting and the albedo.
+        let bins = 8;
+        let table = bin_lighting(bins, Binning::ProjectedNormals, &lights);
+        let mut seen = std::collections::HashSet::new();
+        for by in 0..bins {
+            for bx in 0..bins {
+                let u = (bx as f32 + 0.5) / bins as f32;
+                let v = (by as f32 + 0.5) / bins as f32;
+                let Some(n) = Binning::ProjectedNormals.normal(u, v) else {
+                    continue;
+                };
+                let (a, s) = table[(by * bins + bx) as usize];
+                assert_eq!(a, [0.0; 3]);
+                assert_eq!(s, t.colour(n), "bin ({bx}, {by})");
+                seen.insert(s.map(|c| c as u8));
+            }
+        }
+        assert_eq!(seen.len(), 4);
+    }
+
+    #[test]
     fn a_uniform_environment_lights_every_normal_alike_and_the_explorer_colours_by_direction() {
         // Lambert irradiance of a constant environment L is L for every normal.
         let env = EnvironmentMap {
@@ -860,6 +956,7 @@ mod tests {
             shininess: 1.0,
             environment: Some(env),
             explorer: None,
+            transfer: None,
         };
         for binning in [Binning::ProjectedNormals, Binning::LambertEqualArea] {
             for (a, s) in bin_lighting(8, binning, &lights) {
@@ -896,6 +993,7 @@ mod tests {
         let lights = ShadeLights {
             environment: None,
             explorer: Some(explorer),
+            transfer: None,
             ..lights
         };
         let table = bin_lighting(8, Binning::ProjectedNormals, &lights);

@@ -50,6 +50,11 @@ pub struct Args {
     /// azimuthal slices around a central disk.
     #[arg(long, value_name = "SLICES")]
     pub explorer: Option<u32>,
+    /// Colour the normals instead of lighting them from a painted transfer function: a
+    /// PNG with the disk of projected normals inscribed in it (view space: +x right, +y
+    /// up).
+    #[arg(long, value_name = "PNG", conflicts_with = "explorer")]
+    pub transfer: Option<PathBuf>,
     /// Explorer: the central disk's angular radius, degrees.
     #[arg(long, default_value_t = 20.0)]
     pub explorer_disk: f32,
@@ -144,6 +149,12 @@ pub fn run(args: Args) -> Result<()> {
         shininess: args.exponent,
         environment,
         explorer,
+        transfer: match &args.transfer {
+            Some(p) => Some(mdlod_render::sndf::TransferImage::from_image(
+                &mdlod_render::RgbaImage::load_png(p)?,
+            )),
+            None => None,
+        },
     };
     let level = match args.zoom_out {
         Some(z) if !(z.is_finite() && z >= 1.0) => bail!("--zoom-out {z} (must be 1 or more)"),
