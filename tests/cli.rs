@@ -851,39 +851,7 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
     // Ctrl-C while chunks are being built removes the working files and the partial
     // output.
     let out = dir.path().join("interrupted.mdlod");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
-        .args([
-            "convert",
-            s(&input),
-            "-o",
-            s(&out),
-            "--chunk-points",
-            "5000",
-            "--root-points",
-            "64",
-            "--threads",
-            "1",
-        ])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let started = std::time::Instant::now();
-    let building = loop {
-        let chunk_files = working_entries(dir.path())
-            .iter()
-            .filter(|n| n.starts_with(".mdlod-convert-"))
-            .flat_map(|n| walk(&dir.path().join(n)))
-            .any(|f| f.contains("chunk-"));
-        if chunk_files || started.elapsed().as_secs() > 60 {
-            break chunk_files;
-        }
-        if child.try_wait().unwrap().is_some() {
-            break false;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    };
-    assert!(building, "the conversion ended before chunks were built");
+    let child = convert_until_chunks_are_built(dir.path(), &input, &out);
     let status = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
@@ -905,37 +873,7 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
 
     // SIGKILL leaves the working directory (nothing can run); the next conversion on this
     // host removes it, since its process is gone.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
-        .args([
-            "convert",
-            s(&input),
-            "-o",
-            s(&out),
-            "--chunk-points",
-            "5000",
-            "--root-points",
-            "64",
-            "--threads",
-            "1",
-        ])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let started = std::time::Instant::now();
-    while !working_entries(dir.path())
-        .iter()
-        .filter(|n| n.starts_with(".mdlod-convert-"))
-        .flat_map(|n| walk(&dir.path().join(n)))
-        .any(|f| f.contains("chunk-"))
-    {
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "the conversion ended before chunks were built"
-        );
-        assert!(started.elapsed().as_secs() < 60);
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
+    let mut child = convert_until_chunks_are_built(dir.path(), &input, &out);
     child.kill().unwrap();
     child.wait().unwrap();
     assert!(!working_entries(dir.path()).is_empty());
@@ -955,6 +893,43 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
         working_entries(dir.path())
     );
     ok(&["verify", s(&out)]);
+}
+
+/// Starts an out-of-core conversion of `input` (in `dir`) into `out` and returns once its
+/// working directory holds built chunks.
+fn convert_until_chunks_are_built(dir: &Path, input: &Path, out: &Path) -> std::process::Child {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args([
+            "convert",
+            s(input),
+            "-o",
+            s(out),
+            "--chunk-points",
+            "5000",
+            "--root-points",
+            "64",
+            "--threads",
+            "1",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    while !working_entries(dir)
+        .iter()
+        .filter(|n| n.starts_with(".mdlod-convert-"))
+        .flat_map(|n| walk(&dir.join(n)))
+        .any(|f| f.contains("chunk-"))
+    {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the conversion ended before chunks were built"
+        );
+        assert!(started.elapsed().as_secs() < 60, "no chunks after a minute");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child
 }
 
 /// Every file name below `dir` (empty when it is gone).

@@ -35,7 +35,7 @@ use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use mdlod_format::layout::{pack_colour, LevelRecord, NodeRecord, SectionKind};
+use mdlod_format::layout::{LevelRecord, NodeRecord, SectionKind};
 use mdlod_format::meta::{Metadata, SimulationBox};
 use mdlod_format::{quantize, Writer};
 use rayon::prelude::*;
@@ -177,15 +177,27 @@ impl FrameSource<'_> {
     }
 }
 
-/// One frame of a dump whose format reads parts ([`crate::readers::DumpFile::reads_parts`]).
-/// The dump is opened afresh for every window, so the pages of the input it maps are
-/// released after each window and resident memory stays bounded.
+/// One frame of a dump read a window at a time without holding it whole.
 pub struct DumpSource {
     pub path: PathBuf,
     pub frame: usize,
     pub options: crate::readers::ReadOptions,
     pub particles: usize,
     pub simulation_box: Option<SimulationBox>,
+    /// How the windows are read.
+    pub windows: Windows,
+}
+
+/// How a [`DumpSource`] reads its windows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Windows {
+    /// By particle ranges ([`crate::readers::DumpFile::read_part`]: binary dumps, raw
+    /// arrays). The dump is opened afresh for every window, so the pages of the input it
+    /// maps are released after each window and resident memory stays bounded.
+    Parts,
+    /// By lines ([`crate::readers::read_text_windows`]: uncompressed LAMMPS text, XYZ),
+    /// mapping the file afresh for every window.
+    Text,
 }
 
 impl ParticleSource for DumpSource {
@@ -198,34 +210,15 @@ impl ParticleSource for DumpSource {
     }
 
     fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError> {
-        windows_by_range(self.particles, window, f, |range| {
-            let dump = crate::readers::DumpFile::open(&self.path)?;
-            Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
-        })
-    }
-}
-
-/// One frame of an uncompressed text dump (LAMMPS or XYZ), parsed a window of lines at a
-/// time ([`crate::readers::read_text_windows`]).
-pub struct TextSource {
-    pub path: PathBuf,
-    pub frame: usize,
-    pub options: crate::readers::ReadOptions,
-    pub particles: usize,
-    pub simulation_box: Option<SimulationBox>,
-}
-
-impl ParticleSource for TextSource {
-    fn len(&self) -> usize {
-        self.particles
-    }
-
-    fn simulation_box(&self) -> Option<&SimulationBox> {
-        self.simulation_box.as_ref()
-    }
-
-    fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError> {
-        crate::readers::read_text_windows(&self.path, self.frame, &self.options, window, f)
+        match self.windows {
+            Windows::Parts => windows_by_range(self.particles, window, f, |range| {
+                let dump = crate::readers::DumpFile::open(&self.path)?;
+                Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
+            }),
+            Windows::Text => {
+                crate::readers::read_text_windows(&self.path, self.frame, &self.options, window, f)
+            }
+        }
     }
 }
 
@@ -1090,32 +1083,11 @@ fn assemble(
     let node_count = lay.levels[last].node_first as usize;
     {
         let mut s = w.section(SectionKind::Nodes, 0)?;
-        let rep_node = |rep: &Rep, g: usize| NodeRecord {
-            centroid: rep.position,
-            radius: rep.radius,
-            quant_scale: [0.0; 3],
-            area_sum: rep.area,
-            bounds_min: rep.bounds.0,
-            attribute: rep.attribute,
-            bounds_max: rep.bounds.1,
-            colour: pack_colour(rep.colour),
-            child_first: 0,
-            child_count: 1,
-            point_first: 0,
-            point_count: 1,
-            parent: u32::MAX,
-            quant_node: 0,
-            rms_radius: 0.0,
-            level: g as u8,
-            point_level: 0,
-            species: rep.species,
-        };
-        let mut top_node = rep_node(&top, 0);
+        let mut top_node = top.node(0);
         top_node.quant_scale = top_scale;
         top_node.child_count = k as u32;
         top_node.point_level = top_pl as u8;
         top_node.point_count = lay.levels[top_pl].point_count as u32;
-        top_node.rms_radius = top.rms_radius;
         s.write_pod(&[top_node])?;
         let mut buf: Vec<NodeRecord> = Vec::new();
         for g in 1..last {
@@ -1126,7 +1098,11 @@ fn assemble(
                 let parent_of_root = if pad == 0 { 0 } else { lay.node(pad, c, 0) };
                 if g <= pad {
                     // A padding copy of the chunk's root.
-                    let mut n = rep_node(&ch.root, g);
+                    // rms_radius 0: the one child sits at the centroid.
+                    let mut n = NodeRecord {
+                        rms_radius: 0.0,
+                        ..ch.root.node(g)
+                    };
                     n.quant_scale = ch.root_scale;
                     n.child_first = lay.offset[g + 1][c] as u32;
                     n.point_first = lay.offset[pl][c] as u32;

@@ -161,25 +161,21 @@ pub fn window_source(
     read: &crate::readers::ReadOptions,
     info: &crate::readers::FrameInfo,
 ) -> Option<Box<dyn crate::chunked::ParticleSource>> {
-    if dump.reads_parts() {
-        Some(Box::new(DumpSource {
-            path: dump.path().to_path_buf(),
-            frame: k,
-            options: read.clone(),
-            particles: info.particles,
-            simulation_box: info.simulation_box.clone(),
-        }))
+    let windows = if dump.reads_parts() {
+        crate::chunked::Windows::Parts
     } else if dump.reads_text_windows() {
-        Some(Box::new(crate::chunked::TextSource {
-            path: dump.path().to_path_buf(),
-            frame: k,
-            options: read.clone(),
-            particles: info.particles,
-            simulation_box: info.simulation_box.clone(),
-        }))
+        crate::chunked::Windows::Text
     } else {
-        None
-    }
+        return None;
+    };
+    Some(Box::new(DumpSource {
+        path: dump.path().to_path_buf(),
+        frame: k,
+        options: read.clone(),
+        particles: info.particles,
+        simulation_box: info.simulation_box.clone(),
+        windows,
+    }))
 }
 
 /// Which frame of a multi-frame input to convert.

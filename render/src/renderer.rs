@@ -147,21 +147,32 @@ impl SplatFrame {
 impl SplatFrame {
     /// An over-blended frame (premultiplied colour and coverage) over `background_srgb`.
     pub fn composite_over(&self, background_srgb: [f32; 3]) -> RgbaImage {
-        let bg = background_srgb.map(srgb_to_linear);
-        let mut image = RgbaImage::new(self.width, self.height);
-        for (i, p) in self.hdr.iter().enumerate() {
-            let a = p[3].clamp(0.0, 1.0);
-            let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
-                if k == 3 {
-                    return 255;
-                }
-                let v = p[k] + (1.0 - a) * bg[k];
-                (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
-            });
-            image.data[4 * i..4 * i + 4].copy_from_slice(&px);
-        }
-        image
+        composite_over(&self.hdr, self.width, self.height, background_srgb)
     }
+}
+
+/// Premultiplied linear colour and coverage per pixel, composited over
+/// `background_srgb` and encoded as sRGB.
+fn composite_over(
+    rgba: &[[f32; 4]],
+    width: u32,
+    height: u32,
+    background_srgb: [f32; 3],
+) -> RgbaImage {
+    let bg = background_srgb.map(srgb_to_linear);
+    let mut image = RgbaImage::new(width, height);
+    for (i, p) in rgba.iter().enumerate() {
+        let a = p[3].clamp(0.0, 1.0);
+        let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
+            if k == 3 {
+                return 255;
+            }
+            let v = p[k] + (1.0 - a) * bg[k];
+            (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
+        });
+        image.data[4 * i..4 * i + 4].copy_from_slice(&px);
+    }
+    image
 }
 
 /// A rendered density frame: per-pixel premultiplied colour and opacity, and (iso mode)
@@ -186,20 +197,7 @@ pub struct DensityFrame {
 impl DensityFrame {
     /// Composites over the background and encodes sRGB.
     pub fn image(&self, background_srgb: [f32; 3]) -> RgbaImage {
-        let bg = background_srgb.map(srgb_to_linear);
-        let mut image = RgbaImage::new(self.width, self.height);
-        for (i, p) in self.rgba.iter().enumerate() {
-            let a = p[3].clamp(0.0, 1.0);
-            let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
-                if k == 3 {
-                    return 255;
-                }
-                let v = p[k] + (1.0 - a) * bg[k];
-                (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
-            });
-            image.data[4 * i..4 * i + 4].copy_from_slice(&px);
-        }
-        image
+        composite_over(&self.rgba, self.width, self.height, background_srgb)
     }
 }
 

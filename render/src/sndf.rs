@@ -331,6 +331,15 @@ pub struct ShadeLights {
     pub transfer: Option<TransferImage>,
 }
 
+/// The linear RGB of every pixel of an sRGB image.
+fn linear_rgb(image: &RgbaImage) -> Vec<[f32; 3]> {
+    image
+        .data
+        .chunks_exact(4)
+        .map(|p| [0, 1, 2].map(|k| srgb_to_linear(f32::from(p[k]) / 255.0)))
+        .collect()
+}
+
 /// A transfer function over the normal disk, painted as an image: the disk of projected
 /// normals (view space, +x right, +y up) is inscribed in the image, so a normal `n` takes
 /// the colour of the texel at `((n.x + 1) / 2 · width, (1 − n.y) / 2 · height)`. Linear
@@ -348,11 +357,7 @@ impl TransferImage {
         TransferImage {
             width: image.width,
             height: image.height,
-            colour: image
-                .data
-                .chunks_exact(4)
-                .map(|p| [0, 1, 2].map(|k| srgb_to_linear(f32::from(p[k]) / 255.0)))
-                .collect(),
+            colour: linear_rgb(image),
         }
     }
 
@@ -387,11 +392,7 @@ impl EnvironmentMap {
         EnvironmentMap {
             width: image.width,
             height: image.height,
-            radiance: image
-                .data
-                .chunks_exact(4)
-                .map(|p| [0, 1, 2].map(|k| srgb_to_linear(f32::from(p[k]) / 255.0)))
-                .collect(),
+            radiance: linear_rgb(image),
         }
     }
 

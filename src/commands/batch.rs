@@ -82,17 +82,6 @@ fn shard(args: &Args) -> Result<Option<(u32, u32)>> {
     }
 }
 
-/// Half of the machine's memory (Linux), else 4 GiB.
-fn default_memory_limit() -> u64 {
-    std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|s| {
-            let line = s.lines().find(|l| l.starts_with("MemTotal:"))?;
-            line.split_whitespace().nth(1)?.parse::<u64>().ok()
-        })
-        .map_or(4 << 30, |kib| kib * 1024 / 2)
-}
-
 pub fn run(args: Args) -> Result<()> {
     if let Some(dir) = &args.merge {
         let m = merge(dir)?;
@@ -123,7 +112,9 @@ pub fn run(args: Args) -> Result<()> {
         convert,
         read,
         shard: shard(&args)?,
-        memory_limit: args.memory_limit.unwrap_or_else(default_memory_limit),
+        memory_limit: args
+            .memory_limit
+            .unwrap_or_else(mdlod_preprocess::chunked::default_memory_limit),
         max_jobs: None,
     };
     let report = with_threads(args.threads, || {

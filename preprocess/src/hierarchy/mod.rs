@@ -25,7 +25,7 @@ pub mod representative;
 use std::ops::Range;
 use std::path::Path;
 
-use mdlod_format::layout::{pack_colour, LevelRecord, NodeRecord, SectionKind};
+use mdlod_format::layout::{LevelRecord, NodeRecord, SectionKind};
 use mdlod_format::meta::{AttributeInfo, Metadata, Species};
 use mdlod_format::{quantize, FormatError, Writer};
 use rayon::prelude::*;
@@ -324,24 +324,14 @@ pub fn build_with(
                 let cr = &child_ranges[l][i];
                 let pr = &point_ranges[i];
                 NodeRecord {
-                    centroid: rep.position,
-                    radius: rep.radius,
-                    quant_scale: [0.0; 3],
-                    area_sum: rep.area,
-                    bounds_min: rep.bounds.0,
-                    attribute: rep.attribute,
-                    bounds_max: rep.bounds.1,
-                    colour: pack_colour(rep.colour),
                     child_first: cr.start,
                     child_count: cr.end - cr.start,
                     point_first: pr.start,
                     point_count: pr.end - pr.start,
                     parent: parent_of[i],
                     quant_node: first + i as u32,
-                    rms_radius: rep.rms_radius,
-                    level: l as u8,
                     point_level: point_level as u8,
-                    species: rep.species,
+                    ..rep.node(l)
                 }
             })
             .collect();

@@ -146,6 +146,34 @@ pub struct Rep {
     pub rms_radius: f32,
 }
 
+impl Rep {
+    /// The node record of this representative on `level`: its geometry, flux and
+    /// species; the links (children, points, parent, encoding node) and the quantization
+    /// scale are the caller's, zero here (one child, one point, no parent).
+    pub fn node(&self, level: usize) -> mdlod_format::layout::NodeRecord {
+        mdlod_format::layout::NodeRecord {
+            centroid: self.position,
+            radius: self.radius,
+            quant_scale: [0.0; 3],
+            area_sum: self.area,
+            bounds_min: self.bounds.0,
+            attribute: self.attribute,
+            bounds_max: self.bounds.1,
+            colour: mdlod_format::layout::pack_colour(self.colour),
+            child_first: 0,
+            child_count: 1,
+            point_first: 0,
+            point_count: 1,
+            parent: u32::MAX,
+            quant_node: 0,
+            rms_radius: self.rms_radius,
+            level: level as u8,
+            point_level: 0,
+            species: self.species,
+        }
+    }
+}
+
 fn representative(src: &Source<'_>, members: &[u32]) -> Rep {
     let n = members.len();
     let mut w_sum = 0.0f64;

@@ -4,15 +4,22 @@
 
 use bytemuck::{Pod, Zeroable};
 
-/// WGSL of the splatting pass: `points.wgsl` followed by `density.wgsl`.
+/// WGSL of the splatting pass: `points.wgsl`, `density_common.wgsl`, `density.wgsl`.
 pub const SHADER: &str = concat!(
     include_str!("points.wgsl"),
+    "\n",
+    include_str!("density_common.wgsl"),
     "\n",
     include_str!("density.wgsl")
 );
 
-/// WGSL of the ray-casting pass.
-pub const COMPOSITE_SHADER: &str = include_str!("density_composite.wgsl");
+/// WGSL of the ray-casting pass: `density_common.wgsl` followed by
+/// `density_composite.wgsl`.
+pub const COMPOSITE_SHADER: &str = concat!(
+    include_str!("density_common.wgsl"),
+    "\n",
+    include_str!("density_composite.wgsl")
+);
 
 /// The slice targets: additive blending of f32 needs `FLOAT32_BLENDABLE`.
 pub const SLICE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
@@ -21,7 +28,8 @@ pub const SLICE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 pub const SLICES_PLAIN: u32 = 8;
 pub const SLICES_GRADIENT: u32 = 2;
 
-/// `Density` in the WGSL: one stack's slicing (256 bytes, a dynamic-offset stride).
+/// `Density` in `density_common.wgsl`: one stack's slicing (256 bytes, a dynamic-offset
+/// stride).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct DensityGpu {

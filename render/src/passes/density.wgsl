@@ -3,28 +3,7 @@
 // each fragment evaluates the kernel at its own ray's sampling positions. Additive
 // blending into two float targets sums the points.
 //
-// Follows points.wgsl. Group 1 holds the stack's slicing (density.rs, `DensityGpu`).
-
-struct Density {
-    world_from_clip: mat4x4<f32>,
-    // xyz: the eye (perspective ray origin); w: 1 for orthographic.
-    eye: vec4<f32>,
-    // x: distance of the stack's first slice, y: slice step, z: kernel scale, w: 1 / r_ref.
-    slicing: vec4<f32>,
-    // x: slices in this stack, y: 1 with gradients (2 slices of rho + gradient) or 0
-    // (8 slices of rho), z: reference volume 4/3 pi r_ref^3.
-    mode: vec4<f32>,
-    // xy: image size in pixels; z: iso-value (iso mode) ; w: density shown at the top of
-    // the transfer function.
-    size: vec4<f32>,
-    // xyz: clip plane normal, w: its offset (samples with n.p > w are left out).
-    clip: vec4<f32>,
-    // x: 1 when the clip plane is on; y: the stack's index.
-    flags: vec4<u32>,
-    // xyz: iso-surface albedo; w: absorption (opacity per r_ref at the top density).
-    albedo: vec4<f32>,
-    pad: array<vec4<f32>, 5>,
-};
+// Follows points.wgsl and density_common.wgsl. Group 1 holds the stack's slicing.
 
 @group(1) @binding(0) var<uniform> dens: Density;
 
@@ -36,22 +15,6 @@ struct SplatOut {
     @location(1) @interpolate(flat) h: f32,
     @location(2) @interpolate(flat) mass: f32,
 };
-
-// The ray through pixel centre `px`: origin and unit direction, world space.
-fn pixel_ray(px: vec2<f32>) -> array<vec3<f32>, 2> {
-    let ndc = vec2<f32>(2.0 * px.x / dens.size.x - 1.0, 1.0 - 2.0 * px.y / dens.size.y);
-    let n4 = dens.world_from_clip * vec4<f32>(ndc, 0.0, 1.0);
-    let f4 = dens.world_from_clip * vec4<f32>(ndc, 1.0, 1.0);
-    let near = n4.xyz / n4.w;
-    let far = f4.xyz / f4.w;
-    let dir = normalize(far - near);
-    var origin = dens.eye.xyz;
-    if dens.eye.w > 0.5 {
-        let vz = (frame.view_from_world * vec4<f32>(near, 1.0)).z;
-        origin = near + dir * vz;
-    }
-    return array<vec3<f32>, 2>(origin, dir);
-}
 
 @vertex
 fn vs_splat(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> SplatOut {
@@ -97,7 +60,7 @@ struct SliceOut {
 
 @fragment
 fn fs_splat(in: SplatOut) -> SliceOut {
-    let ray = pixel_ray(in.clip.xy);
+    let ray = pixel_ray(in.clip.xy, frame.view_from_world);
     let h2 = in.h * in.h;
     let norm = dens.mode.z * in.mass * 315.0 / (64.0 * PI * h2 * in.h);
     var out: SliceOut;

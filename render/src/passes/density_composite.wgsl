@@ -3,20 +3,7 @@
 // iso-value, into a per-pixel state that carries over to the next stack. Rays that are
 // done are counted out of `active`, which the host reads to end the frame early.
 //
-// Follows density.wgsl's `Density` struct (copied below with the bindings of this pass).
-
-struct Density {
-    world_from_clip: mat4x4<f32>,
-    eye: vec4<f32>,
-    slicing: vec4<f32>,
-    mode: vec4<f32>,
-    size: vec4<f32>,
-    clip: vec4<f32>,
-    flags: vec4<u32>,
-    albedo: vec4<f32>,
-    // 0, 1: the box of the points' supports (xyz); the rest unused.
-    pad: array<vec4<f32>, 5>,
-};
+// Follows density_common.wgsl.
 
 struct Ray {
     // Premultiplied colour and opacity.
@@ -68,16 +55,9 @@ fn cs_composite(@builtin(global_invocation_id) id: vec3<u32>) {
     if ray.state.x > 0.5 {
         return;
     }
-    let px = vec2<f32>(f32(id.x) + 0.5, f32(id.y) + 0.5);
-    let ndc = vec2<f32>(2.0 * px.x / dens.size.x - 1.0, 1.0 - 2.0 * px.y / dens.size.y);
-    let n4 = dens.world_from_clip * vec4<f32>(ndc, 0.0, 1.0);
-    let f4 = dens.world_from_clip * vec4<f32>(ndc, 1.0, 1.0);
-    let near = n4.xyz / n4.w;
-    let dir = normalize(f4.xyz / f4.w - near);
-    var origin = dens.eye.xyz;
-    if dens.eye.w > 0.5 {
-        origin = near + dir * (view_from_world * vec4<f32>(near, 1.0)).z;
-    }
+    let ray_ = pixel_ray(vec2<f32>(f32(id.x) + 0.5, f32(id.y) + 0.5), view_from_world);
+    let origin = ray_[0];
+    let dir = ray_[1];
     // A ray that has left the box of the points' supports (or never meets it) is done.
     let inv = 1.0 / dir;
     let t0 = (dens.pad[0].xyz - origin) * inv;

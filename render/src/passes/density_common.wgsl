@@ -1,0 +1,41 @@
+// Shared by density.wgsl and density_composite.wgsl: one stack's slicing (the Rust twin
+// is `DensityGpu` in density.rs) and the ray through a pixel. Each pass binds its own
+// `dens: Density` uniform.
+
+struct Density {
+    world_from_clip: mat4x4<f32>,
+    // xyz: the eye (perspective ray origin); w: 1 for orthographic.
+    eye: vec4<f32>,
+    // x: distance of the stack's first slice, y: slice step, z: kernel scale, w: 1 / r_ref.
+    slicing: vec4<f32>,
+    // x: slices in this stack, y: 1 with gradients (2 slices of rho + gradient) or 0
+    // (8 slices of rho), z: reference volume 4/3 pi r_ref^3.
+    mode: vec4<f32>,
+    // xy: image size in pixels; z: iso-value (0: direct volume rendering); w: density
+    // shown at the top of the transfer function.
+    size: vec4<f32>,
+    // xyz: clip plane normal, w: its offset (samples with n.p > w are left out).
+    clip: vec4<f32>,
+    // x: 1 when the clip plane is on; y: the stack's index.
+    flags: vec4<u32>,
+    // xyz: iso-surface albedo; w: absorption (opacity per r_ref at the top density).
+    albedo: vec4<f32>,
+    // 0, 1: the box of the points' supports (xyz); the rest unused (a 256-byte stride).
+    pad: array<vec4<f32>, 5>,
+};
+
+// The ray through pixel centre `px`: origin and unit direction, world space. The origin
+// is the eye in perspective views, the point of the ray in the eye's plane (view z = 0)
+// in orthographic ones.
+fn pixel_ray(px: vec2<f32>, view_from_world: mat4x4<f32>) -> array<vec3<f32>, 2> {
+    let ndc = vec2<f32>(2.0 * px.x / dens.size.x - 1.0, 1.0 - 2.0 * px.y / dens.size.y);
+    let n4 = dens.world_from_clip * vec4<f32>(ndc, 0.0, 1.0);
+    let f4 = dens.world_from_clip * vec4<f32>(ndc, 1.0, 1.0);
+    let near = n4.xyz / n4.w;
+    let dir = normalize(f4.xyz / f4.w - near);
+    var origin = dens.eye.xyz;
+    if dens.eye.w > 0.5 {
+        origin = near + dir * (view_from_world * vec4<f32>(near, 1.0)).z;
+    }
+    return array<vec3<f32>, 2>(origin, dir);
+}
