@@ -360,7 +360,8 @@ fn density_table(renderer: &Renderer, adapter: &str, sizes: &[u64]) {
             rows.push_str(&row);
         }
     }
-    let section = "render-density";
+    let section =
+        std::env::var("MDLOD_BENCH_SECTION").unwrap_or_else(|_| "render".into()) + "-density";
     let (begin, end) = (
         format!("<!-- {section}:begin"),
         format!("<!-- {section}:end -->\n"),

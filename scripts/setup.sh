@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs what mdlod needs on a fresh Debian/Ubuntu machine that has Rust (cargo) already:
-# Mesa's software Vulkan driver (lavapipe), so the renderer and its tests run without a GPU.
+# Mesa's software Vulkan driver (lavapipe), so the renderer and its tests run without a GPU,
+# and Xvfb, a virtual X display for the viewer's window tests.
 set -euo pipefail
-packages=(mesa-vulkan-drivers libvulkan1)
+packages=(mesa-vulkan-drivers libvulkan1 xvfb)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

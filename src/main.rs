@@ -32,6 +32,7 @@ enum Command {
     Shade(commands::shade::Args),
     Generate(commands::generate::Args),
     Demo(commands::demo::Args),
+    View(commands::view::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -46,6 +47,7 @@ fn main() -> std::process::ExitCode {
         Command::Shade(a) => commands::shade::run(a),
         Command::Generate(a) => commands::generate::run(a),
         Command::Demo(a) => commands::demo::run(a),
+        Command::View(a) => commands::view::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

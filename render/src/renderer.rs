@@ -686,6 +686,20 @@ impl Renderer {
         draw: &DrawList,
         settings: &SndfSettings,
     ) -> Result<Sndf, RenderError> {
+        self.sample_sndf_from(file, camera, draw, settings, 0)
+    }
+
+    /// [`Self::sample_sndf`] continuing a progressive sequence: the rays are those of
+    /// iterations `first .. first + iterations` of the sub-pixel pattern, so batches
+    /// added with [`Sndf::add`] equal one sampling of all their iterations.
+    pub fn sample_sndf_from(
+        &self,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        settings: &SndfSettings,
+        first: u32,
+    ) -> Result<Sndf, RenderError> {
         let SndfSettings {
             width,
             height,
@@ -800,7 +814,11 @@ impl Renderer {
             let timing = self.frame_timer();
             for s in 0..iterations {
                 let uniforms = FrameUniforms::new(
-                    camera.jittered_clip_from_view([width, height], jitter(s, iterations)),
+                    camera.jittered_clip_from_view(
+                        [width, height],
+                        // A lone first iteration is centred, as 1-spp ray casting is.
+                        jitter(first + s, if first == 0 { iterations } else { u32::MAX }),
+                    ),
                     camera.view_from_world(),
                     camera.projection == Projection::Orthographic,
                     &Lighting::default(),

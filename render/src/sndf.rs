@@ -593,6 +593,28 @@ pub fn bin_lighting(
 }
 
 impl Sndf {
+    /// Adds another sampling of the same view (the same size and bins), as progressive
+    /// refinement does: histograms and ray counts sum, so the result is one sampling
+    /// of all the rays. Returns false, changing nothing, when the two do not match.
+    pub fn add(&mut self, other: &Sndf) -> bool {
+        if (self.width, self.height, self.bins, self.binning)
+            != (other.width, other.height, other.bins, other.binning)
+        {
+            return false;
+        }
+        for (a, b) in self.hist.iter_mut().zip(&other.hist) {
+            for k in 0..4 {
+                a[k] += b[k];
+            }
+        }
+        self.rays += other.rays;
+        self.gpu_time = match (self.gpu_time, other.gpu_time) {
+            (Some(a), Some(b)) => Some(a + b),
+            _ => None,
+        };
+        true
+    }
+
     /// The bins of texel `(x, y)`.
     pub fn texel(&self, x: u32, y: u32) -> &[[f32; 4]] {
         let b2 = (self.bins * self.bins) as usize;

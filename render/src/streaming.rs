@@ -195,7 +195,7 @@ impl<'r> StreamingRenderer<'r> {
         pool_bytes: u64,
         page_points: u32,
     ) -> Result<Self, RenderError> {
-        if page_points < 4 || page_points % 4 != 0 || page_points > 1 << 20 {
+        if page_points < 4 || !page_points.is_multiple_of(4) || page_points > 1 << 20 {
             return Err(RenderError::InvalidOptions(format!(
                 "{page_points} points per page (must be a multiple of 4 from 4 to 2^20)"
             )));

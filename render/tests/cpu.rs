@@ -279,7 +279,7 @@ struct Patchy {
 impl mdlod_render::Residency for Patchy {
     fn can_open(&mut self, file: &MdlodFile, id: u32, _size_px: f32) -> bool {
         let n = &file.nodes()[id as usize];
-        if n.level == self.level && id % 2 == 0 {
+        if n.level == self.level && id.is_multiple_of(2) {
             self.refused.insert(id);
             false
         } else {

@@ -1259,3 +1259,66 @@ fn zoomed_out_sndfs_beat_supersampling_with_as_many_iterations() {
         );
     }
 }
+
+/// Progressive refinement: S-NDFs sampled in batches (2, then 3, then 3 iterations of one
+/// sub-pixel sequence) and added equal one sampling of all 8 iterations, and a batch of a
+/// different view size is refused.
+#[test]
+fn sndf_batches_add_up_to_one_sampling() {
+    let (_d, _p, f) = make_file(&fcc_frame(5), small_build(), &[]);
+    let (w, h) = (48u32, 36u32);
+    let camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
+    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
+    let settings = |iterations| mdlod_render::sndf::SndfSettings {
+        width: w,
+        height: h,
+        iterations,
+        bins: 4,
+        binning: Default::default(),
+    };
+    let r = renderer();
+    let whole = r.sample_sndf(&f, &camera, &draw, &settings(8)).unwrap();
+    let mut sum = r
+        .sample_sndf_from(&f, &camera, &draw, &settings(2), 0)
+        .unwrap();
+    for first in [2, 5] {
+        let batch = r
+            .sample_sndf_from(&f, &camera, &draw, &settings(3), first)
+            .unwrap();
+        assert!(sum.add(&batch));
+    }
+    assert_eq!(sum.rays, 8);
+    let mut hits = 0.0;
+    for (a, b) in sum.hist.iter().zip(&whole.hist) {
+        for k in 0..4 {
+            assert!(
+                (a[k] - b[k]).abs() <= 1e-4 * b[k].abs().max(1.0),
+                "{a:?} vs {b:?}"
+            );
+        }
+        hits += b[3];
+    }
+    assert!(hits > 0.0, "the view shows the data");
+    // Not the same sequence: a batch restarting at iteration 0 differs somewhere.
+    let restart = r
+        .sample_sndf_from(&f, &camera, &draw, &settings(3), 0)
+        .unwrap();
+    let later = r
+        .sample_sndf_from(&f, &camera, &draw, &settings(3), 2)
+        .unwrap();
+    assert_ne!(restart.hist, later.hist);
+    let other = Renderer::sample_sndf(
+        r,
+        &f,
+        &camera,
+        &draw,
+        &mdlod_render::sndf::SndfSettings {
+            width: w / 2,
+            ..settings(1)
+        },
+    )
+    .unwrap();
+    let before = sum.clone();
+    assert!(!sum.add(&other));
+    assert_eq!(sum, before);
+}

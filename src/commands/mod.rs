@@ -9,3 +9,4 @@ pub mod render;
 pub mod sample;
 pub mod shade;
 pub mod verify;
+pub mod view;

@@ -1,0 +1,67 @@
+//! `mdlod view`: the interactive viewer (the work is in the `mdlod-viewer` crate).
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Result;
+use mdlod_viewer::{Mode, ViewerOptions};
+
+/// Open a .mdlod file, or a batch directory with dataset.json, in a window: orbit (left
+/// drag, arrows), pan (right drag), zoom (wheel, + and -), fit (F), orthographic (O),
+/// modes (1-6), timesteps (, and ., space plays).
+#[derive(clap::Args)]
+#[command(
+    after_help = "Examples:\n  mdlod view frame.mdlod\n  mdlod view runs/ --mode sndf\n  mdlod view frame.mdlod --script session.json   # play actions, write screenshots, close"
+)]
+pub struct Args {
+    /// A .mdlod file or a directory written by `mdlod batch`.
+    pub path: PathBuf,
+    /// Size of the image area of the window (logical pixels).
+    #[arg(long, default_value_t = 1280)]
+    pub width: u32,
+    #[arg(long, default_value_t = 720)]
+    pub height: u32,
+    /// Start from a view file (as `mdlod render --view` takes).
+    #[arg(long)]
+    pub view: Option<PathBuf>,
+    #[arg(long, value_enum, default_value = "standard")]
+    pub mode: ModeArg,
+    /// Play a script: a JSON array of actions (orbit, pan, zoom, mode, light, step,
+    /// screenshot, save_sndf, save_view, ...), then close; any error fails the command.
+    #[arg(long)]
+    pub script: Option<PathBuf>,
+    /// Longest a script may run, seconds.
+    #[arg(long, default_value_t = 600)]
+    pub script_timeout: u64,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ModeArg {
+    Standard,
+    Supersampled,
+    Sndf,
+    Splat,
+    Density,
+    Iso,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let mode = match args.mode {
+        ModeArg::Standard => Mode::Standard,
+        ModeArg::Supersampled => Mode::Supersampled,
+        ModeArg::Sndf => Mode::Sndf,
+        ModeArg::Splat => Mode::Splat,
+        ModeArg::Density => Mode::Density,
+        ModeArg::Iso => Mode::Iso,
+    };
+    mdlod_viewer::run(ViewerOptions {
+        path: args.path,
+        window: [args.width.max(16), args.height.max(16)],
+        view: args.view,
+        mode,
+        backends: mdlod_render::BackendChoice::FromEnv,
+        script: args.script,
+        script_timeout: Duration::from_secs(args.script_timeout),
+    })?;
+    Ok(())
+}

@@ -1,0 +1,738 @@
+//! The window: eframe (winit + egui-winit + egui-wgpu) around the render thread.
+//!
+//! Each repaint drains the render thread's replies, draws the panel and the latest image,
+//! turns mouse and keys into [`Action`]s, runs the next step of a script, and sends one
+//! render request when the state changed. While the user drags, requests are quick
+//! previews whose screen error adapts to hold the target frame time; 150 ms after the
+//! last input the refined request follows (supersampling, progressive S-NDFs).
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use eframe::egui;
+use mdlod_render::{RgbaImage, ViewFile};
+
+use crate::state::{adapt_error, Action, Changed, Mode, ViewerState};
+use crate::worker::{FrameStats, Reply, Request, Worker};
+
+/// Width of the control panel left of the image (logical pixels).
+pub(crate) const PANEL_WIDTH: f32 = 240.0;
+
+/// Input this recent makes a frame a quick preview.
+const MOVING: Duration = Duration::from_millis(150);
+
+/// The latest image from the render thread.
+struct Shown {
+    id: u64,
+    image: RgbaImage,
+    stats: FrameStats,
+    interactive: bool,
+    refined: bool,
+}
+
+/// A script being played: the actions left and what the current one waits for.
+pub(crate) struct Script {
+    pub actions: VecDeque<Action>,
+    waiting: Option<Wait>,
+    deadline: Instant,
+}
+
+impl Script {
+    pub fn new(actions: Vec<Action>, timeout: Duration) -> Script {
+        Script {
+            actions: actions.into(),
+            waiting: None,
+            deadline: Instant::now() + timeout,
+        }
+    }
+}
+
+enum Wait {
+    /// Until the view is refined, then run this action.
+    Refined(Action),
+    /// Until the render thread has written this many files.
+    Writes,
+}
+
+pub(crate) struct ViewerApp {
+    pub state: ViewerState,
+    worker: Worker,
+    texture: Option<egui::TextureHandle>,
+    shown: Option<Shown>,
+    next_id: u64,
+    /// The newest request sent and whether it was a preview.
+    requested: Option<(u64, bool)>,
+    dirty: Changed,
+    last_input: Option<Instant>,
+    /// Screen error of previews, adapted to the target frame time.
+    moving_error: f32,
+    script: Option<Script>,
+    /// Files the render thread has yet to write.
+    pending_writes: usize,
+    /// The first error, for the exit status when a script runs.
+    pub outcome: Arc<Mutex<Option<String>>>,
+    message: Option<String>,
+    playing: bool,
+    last_step: Instant,
+    light_index: usize,
+}
+
+impl ViewerApp {
+    pub fn new(
+        state: ViewerState,
+        worker: Worker,
+        script: Option<Script>,
+        outcome: Arc<Mutex<Option<String>>>,
+    ) -> ViewerApp {
+        let moving_error = state.settings.error_px.max(1.0);
+        ViewerApp {
+            state,
+            worker,
+            texture: None,
+            shown: None,
+            next_id: 1,
+            requested: None,
+            dirty: Changed {
+                scene: true,
+                lighting: false,
+            },
+            last_input: None,
+            moving_error,
+            script,
+            pending_writes: 0,
+            outcome,
+            message: None,
+            playing: false,
+            last_step: Instant::now(),
+            light_index: 0,
+        }
+    }
+
+    fn fail(&mut self, message: String) {
+        self.message = Some(message.clone());
+        if self.script.is_some() {
+            let mut o = self.outcome.lock().unwrap_or_else(|e| e.into_inner());
+            o.get_or_insert(message);
+        }
+    }
+
+    /// Applies an action from the mouse, keys or panel (`user`) or a script.
+    fn act(&mut self, action: Action, user: bool) {
+        match &action {
+            Action::SaveView { path } => {
+                if let Err(e) = ViewFile::from_camera(&self.state.camera).save(path) {
+                    self.fail(e.to_string());
+                }
+                return;
+            }
+            Action::LoadView { path } => {
+                match ViewFile::load(path) {
+                    Ok(v) => {
+                        let c = v.to_camera(&self.state.bounds, self.state.aspect());
+                        self.state.set_camera(c);
+                        self.dirty.scene = true;
+                    }
+                    Err(e) => self.fail(e.to_string()),
+                }
+                return;
+            }
+            _ => {}
+        }
+        let before = self.state.frame;
+        let c = self.state.apply(&action);
+        self.dirty.scene |= c.scene;
+        self.dirty.lighting |= c.lighting;
+        if user && c.scene {
+            self.last_input = Some(Instant::now());
+        }
+        if self.state.frame != before {
+            self.prefetch_next();
+        }
+    }
+
+    fn prefetch_next(&self) {
+        let n = self.state.frames.len();
+        if n > 1 {
+            let next = &self.state.frames[(self.state.frame + 1) % n].path;
+            self.worker.send(Request::Prefetch(next.clone()));
+        }
+    }
+
+    fn moving(&self) -> bool {
+        self.last_input.is_some_and(|t| t.elapsed() < MOVING)
+    }
+
+    /// The view shows the current state, as refined as the mode goes.
+    fn settled(&self) -> bool {
+        !self.dirty.scene
+            && !self.dirty.lighting
+            && self.requested.is_some_and(|(id, preview)| {
+                !preview && self.shown.as_ref().is_some_and(|s| s.id == id && s.refined)
+            })
+    }
+
+    fn send_render(&mut self) {
+        let interactive = self.moving() && self.dirty.scene;
+        let size = self.state.size;
+        let opts = if interactive {
+            self.state.interactive_options(size, self.moving_error)
+        } else {
+            self.state.render_options(size)
+        };
+        let id = self.next_id;
+        self.next_id += 1;
+        self.worker.send(Request::Render {
+            id,
+            path: self.state.frames[self.state.frame].path.clone(),
+            opts,
+            shade: self.state.settings.shade_lights(),
+            interactive,
+        });
+        self.requested = Some((id, interactive));
+        self.dirty = Changed::default();
+    }
+
+    fn receive(&mut self, ctx: &egui::Context) {
+        while let Ok(reply) = self.worker.rx.try_recv() {
+            match reply {
+                Reply::Image {
+                    id,
+                    image,
+                    stats,
+                    interactive,
+                    refined,
+                } => {
+                    // Images of requests overtaken by newer ones are still shown (they
+                    // are the nearest thing to the view), but do not settle it.
+                    if interactive {
+                        self.moving_error = adapt_error(
+                            self.moving_error,
+                            stats.frame_ms,
+                            self.state.settings.target_frame_ms,
+                            self.state.settings.error_px.max(1.0),
+                        );
+                    }
+                    let colour = egui::ColorImage::from_rgba_unmultiplied(
+                        [image.width as usize, image.height as usize],
+                        &image.data,
+                    );
+                    match &mut self.texture {
+                        Some(t) => t.set(colour, egui::TextureOptions::NEAREST),
+                        None => {
+                            self.texture = Some(ctx.load_texture(
+                                "view",
+                                colour,
+                                egui::TextureOptions::NEAREST,
+                            ))
+                        }
+                    }
+                    self.shown = Some(Shown {
+                        id,
+                        image,
+                        stats,
+                        interactive,
+                        refined,
+                    });
+                }
+                Reply::Written { out, result } => {
+                    self.pending_writes = self.pending_writes.saturating_sub(1);
+                    match result {
+                        Ok(()) => self.message = Some(format!("wrote {}", out.display())),
+                        Err(e) => self.fail(e),
+                    }
+                }
+                Reply::Error(e) => self.fail(e),
+            }
+        }
+    }
+
+    /// Runs the script's next step; returns true while it has work left.
+    fn step_script(&mut self, ctx: &egui::Context) -> bool {
+        let Some(script) = self.script.as_mut() else {
+            return false;
+        };
+        if Instant::now() > script.deadline {
+            let left = script.actions.len();
+            self.script = None;
+            self.fail(format!(
+                "the script timed out waiting for the view ({left} actions left)"
+            ));
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return false;
+        }
+        let waiting = script.waiting.take();
+        match waiting {
+            Some(Wait::Writes) => {
+                if self.pending_writes > 0 {
+                    self.wait(Wait::Writes);
+                }
+                return true;
+            }
+            Some(Wait::Refined(action)) => {
+                if self.settled() {
+                    self.run_when_refined(action);
+                } else {
+                    self.wait(Wait::Refined(action));
+                }
+                return true;
+            }
+            None => {}
+        }
+        let Some(script) = self.script.as_mut() else {
+            return false;
+        };
+        let Some(action) = script.actions.pop_front() else {
+            self.script = None;
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return false;
+        };
+        match action {
+            Action::Screenshot {
+                path,
+                width: Some(w),
+                height: Some(h),
+            } => {
+                let opts = self.state.render_options([w, h]);
+                self.worker.send(Request::Screenshot {
+                    path: self.state.frames[self.state.frame].path.clone(),
+                    opts,
+                    shade: self.state.settings.shade_lights(),
+                    out: path,
+                });
+                self.pending_writes += 1;
+                script.waiting = Some(Wait::Writes);
+            }
+            Action::Screenshot { .. } | Action::SaveSndf { .. } | Action::WaitStill => {
+                script.waiting = Some(Wait::Refined(action));
+            }
+            Action::Quit => {
+                script.actions.clear();
+            }
+            // Camera moves count as the user's: previews first, then the refined view.
+            other => self.act(other, true),
+        }
+        true
+    }
+
+    fn wait(&mut self, w: Wait) {
+        if let Some(s) = self.script.as_mut() {
+            s.waiting = Some(w);
+        }
+    }
+
+    /// A script action that needed the refined view.
+    fn run_when_refined(&mut self, action: Action) {
+        match action {
+            Action::Screenshot { path, .. } => {
+                let saved = match &self.shown {
+                    Some(s) => s.image.save_png(&path).map_err(|e| e.to_string()),
+                    None => Err("nothing shown yet".into()),
+                };
+                if let Err(e) = saved {
+                    self.fail(e);
+                }
+            }
+            Action::SaveSndf { path } => {
+                self.worker.send(Request::SaveSndf { out: path });
+                self.pending_writes += 1;
+                if let Some(s) = self.script.as_mut() {
+                    s.waiting = Some(Wait::Writes);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn keys(&mut self, ctx: &egui::Context) {
+        if ctx.egui_wants_keyboard_input() {
+            return;
+        }
+        let mut actions = vec![];
+        ctx.input(|i| {
+            use egui::Key;
+            let step = if i.modifiers.shift { 15.0 } else { 5.0 };
+            let px = step / crate::state::ORBIT_DEG_PER_PX;
+            for (key, a) in [
+                (Key::ArrowLeft, Action::Orbit { dx: -px, dy: 0.0 }),
+                (Key::ArrowRight, Action::Orbit { dx: px, dy: 0.0 }),
+                (Key::ArrowUp, Action::Orbit { dx: 0.0, dy: px }),
+                (Key::ArrowDown, Action::Orbit { dx: 0.0, dy: -px }),
+                (Key::Plus, Action::Zoom { factor: 1.25 }),
+                (Key::Equals, Action::Zoom { factor: 1.25 }),
+                (Key::Minus, Action::Zoom { factor: 0.8 }),
+                (Key::F, Action::Fit),
+                (Key::Period, Action::Step { delta: 1 }),
+                (Key::Comma, Action::Step { delta: -1 }),
+            ] {
+                if i.key_pressed(key) {
+                    actions.push(a);
+                }
+            }
+            if i.key_pressed(Key::O) {
+                actions.push(Action::Projection {
+                    orthographic: self.state.camera.projection
+                        == mdlod_render::Projection::Perspective,
+                });
+            }
+            for (key, mode) in [
+                Key::Num1,
+                Key::Num2,
+                Key::Num3,
+                Key::Num4,
+                Key::Num5,
+                Key::Num6,
+            ]
+            .into_iter()
+            .zip(Mode::ALL)
+            {
+                if i.key_pressed(key) {
+                    actions.push(Action::Mode { mode });
+                }
+            }
+            if i.key_pressed(Key::Space) {
+                self.playing = !self.playing;
+            }
+        });
+        for a in actions {
+            self.act(a, true);
+        }
+    }
+
+    fn panel(&mut self, ui: &mut egui::Ui) {
+        let mut actions = vec![];
+        let s = &self.state.settings;
+        ui.heading("mdlod");
+        ui.separator();
+        ui.label("Mode (keys 1-6)");
+        let mut mode = s.mode;
+        egui::ComboBox::from_id_salt("mode")
+            .selected_text(mode.name())
+            .show_ui(ui, |ui| {
+                for m in Mode::ALL {
+                    ui.selectable_value(&mut mode, m, m.name());
+                }
+            });
+        if mode != s.mode {
+            actions.push(Action::Mode { mode });
+        }
+        let mut error = s.error_px;
+        if ui
+            .add(egui::Slider::new(&mut error, 0.0..=16.0).text("screen error px"))
+            .changed()
+        {
+            actions.push(Action::ScreenError { px: error });
+        }
+        match s.mode {
+            Mode::Sndf => {
+                let mut n = s.sndf_iterations;
+                if ui
+                    .add(egui::Slider::new(&mut n, 1..=1024).text("S-NDF rays"))
+                    .changed()
+                {
+                    actions.push(Action::SndfIterations { n });
+                }
+            }
+            Mode::Supersampled => {
+                let mut n = s.spp;
+                if ui
+                    .add(egui::Slider::new(&mut n, 1..=mdlod_render::renderer::MAX_SPP).text("spp"))
+                    .changed()
+                {
+                    actions.push(Action::Spp { n });
+                }
+            }
+            _ => {}
+        }
+        let mut target = s.target_frame_ms;
+        if ui
+            .add(egui::Slider::new(&mut target, 5.0..=200.0).text("target ms"))
+            .changed()
+        {
+            actions.push(Action::TargetFrameMs { ms: target });
+        }
+        ui.horizontal(|ui| {
+            if ui.button("Fit (F)").clicked() {
+                actions.push(Action::Fit);
+            }
+            let ortho = self.state.camera.projection == mdlod_render::Projection::Orthographic;
+            if ui.selectable_label(ortho, "Orthographic (O)").clicked() {
+                actions.push(Action::Projection {
+                    orthographic: !ortho,
+                });
+            }
+        });
+        ui.horizontal(|ui| {
+            if ui.button("Save view").clicked() {
+                actions.push(Action::SaveView {
+                    path: PathBuf::from("view.json"),
+                });
+            }
+            if ui.button("Load view").clicked() {
+                actions.push(Action::LoadView {
+                    path: PathBuf::from("view.json"),
+                });
+            }
+        });
+        ui.separator();
+        ui.label("Lights (drag on the disk)");
+        let n = s.lights.len();
+        if n > 0 {
+            self.light_index = self.light_index.min(n - 1);
+            ui.horizontal(|ui| {
+                for i in 0..n {
+                    ui.selectable_value(&mut self.light_index, i, format!("{}", i + 1));
+                }
+            });
+            if let Some(a) = light_disk(ui, &s.lights, self.light_index) {
+                actions.push(a);
+            }
+            let mut colour = s.lights[self.light_index].colour;
+            ui.horizontal(|ui| {
+                if ui.color_edit_button_rgb(&mut colour).changed() {
+                    let mut l = s.lights[self.light_index];
+                    l.colour = colour;
+                    actions.push(Action::RemoveLight {
+                        index: self.light_index,
+                    });
+                    actions.push(Action::AddLight { light: l });
+                    self.light_index = n - 1;
+                }
+                if ui.button("remove").clicked() {
+                    actions.push(Action::RemoveLight {
+                        index: self.light_index,
+                    });
+                }
+            });
+        }
+        if ui.button("add light").clicked() {
+            actions.push(Action::AddLight {
+                light: crate::state::Light {
+                    direction: [0.5, 0.3, 0.8],
+                    colour: [0.4, 0.5, 1.0],
+                },
+            });
+        }
+        let mut blinn = s.specular > 0.0;
+        let mut shininess = s.shininess;
+        let before = (blinn, shininess);
+        ui.checkbox(&mut blinn, "Blinn-Phong highlight");
+        ui.add(egui::Slider::new(&mut shininess, 1.0..=256.0).text("exponent"));
+        if (blinn, shininess) != before {
+            actions.push(Action::Brdf {
+                specular: if blinn { 0.25 } else { 0.0 },
+                shininess,
+            });
+        }
+        let mut explorer = s.explorer.is_some();
+        let mut slices = s.explorer.unwrap_or(6);
+        let before = (explorer, slices);
+        ui.checkbox(&mut explorer, "S-NDF explorer pattern");
+        ui.add_enabled(
+            explorer,
+            egui::Slider::new(&mut slices, 1..=12).text("slices"),
+        );
+        if (explorer, slices) != before {
+            actions.push(Action::Explorer {
+                slices: explorer.then_some(slices),
+            });
+        }
+        if self.state.frames.len() > 1 {
+            ui.separator();
+            ui.label("Timestep (, and .; space plays)");
+            let mut index = self.state.frame;
+            let last = self.state.frames.len() - 1;
+            ui.add(
+                egui::Slider::new(&mut index, 0..=last).text(
+                    self.state.frames[self.state.frame]
+                        .timestep
+                        .map_or(String::new(), |t| format!("t = {t}")),
+                ),
+            );
+            if index != self.state.frame {
+                actions.push(Action::Frame { index });
+            }
+            ui.checkbox(&mut self.playing, "play");
+        }
+        ui.separator();
+        self.status(ui);
+        for a in actions {
+            self.act(a, true);
+        }
+    }
+
+    fn status(&self, ui: &mut egui::Ui) {
+        ui.label("Status");
+        match &self.shown {
+            Some(s) => {
+                let t = &s.stats;
+                ui.label(format!(
+                    "frame {:.0} ms{}{}",
+                    t.frame_ms,
+                    t.gpu_ms
+                        .map_or(String::new(), |g| format!(" (GPU {g:.1} ms)")),
+                    if s.interactive { ", moving" } else { "" }
+                ));
+                ui.label(format!(
+                    "{} spp{}",
+                    t.spp,
+                    if s.refined { "" } else { ", refining" }
+                ));
+                ui.label(format!(
+                    "{} particles + {} clusters, error {:.2} px",
+                    t.particles, t.representatives, t.error_px
+                ));
+                ui.label(format!("GPU {:.0} MiB ({})", mib(t.gpu_bytes), t.adapter));
+            }
+            None => {
+                ui.label("loading…");
+            }
+        }
+        ui.label(format!("host {:.0} MiB resident", host_rss_mib()));
+        let waiting = self
+            .requested
+            .is_some_and(|(id, _)| self.shown.as_ref().is_none_or(|s| s.id != id));
+        ui.label(format!(
+            "queue: {}{} file(s) to write",
+            if waiting { "a frame, " } else { "" },
+            self.pending_writes
+        ));
+        if let Some(m) = &self.message {
+            ui.label(m);
+        }
+    }
+}
+
+fn mib(b: u64) -> f64 {
+    b as f64 / (1024.0 * 1024.0)
+}
+
+fn host_rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// The light widget: the disk of view directions (x right, y up, the viewer at the
+/// centre). Every light is a dot; dragging places the selected one.
+fn light_disk(
+    ui: &mut egui::Ui,
+    lights: &[crate::state::Light],
+    selected: usize,
+) -> Option<Action> {
+    let size = 120.0;
+    let (rect, response) = ui.allocate_exact_size(egui::vec2(size, size), egui::Sense::drag());
+    let painter = ui.painter_at(rect);
+    let c = rect.center();
+    let r = size * 0.45;
+    painter.circle_filled(c, r, egui::Color32::from_gray(40));
+    painter.circle_stroke(c, r, egui::Stroke::new(1.0, egui::Color32::GRAY));
+    for (i, l) in lights.iter().enumerate() {
+        let p = c + egui::vec2(l.direction[0], -l.direction[1]) * r;
+        let colour = egui::Color32::from_rgb(
+            (l.colour[0].clamp(0.0, 1.0) * 255.0) as u8,
+            (l.colour[1].clamp(0.0, 1.0) * 255.0) as u8,
+            (l.colour[2].clamp(0.0, 1.0) * 255.0) as u8,
+        );
+        painter.circle_filled(p, if i == selected { 6.0 } else { 4.0 }, colour);
+        if l.direction[2] < 0.0 {
+            painter.circle_stroke(p, 7.0, egui::Stroke::new(1.0, egui::Color32::RED));
+        }
+    }
+    if response.dragged() || response.clicked() {
+        let p = response.interact_pointer_pos()?;
+        let v = (p - c) / r;
+        let (x, y) = (v.x, -v.y);
+        let len = (x * x + y * y).sqrt();
+        let (x, y) = if len > 1.0 {
+            (x / len, y / len)
+        } else {
+            (x, y)
+        };
+        let z = (1.0 - x * x - y * y).max(0.0).sqrt();
+        return Some(Action::Light {
+            index: selected,
+            direction: [x, y, z],
+        });
+    }
+    None
+}
+
+impl eframe::App for ViewerApp {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        let ctx = ui.ctx().clone();
+        self.receive(&ctx);
+        egui::Panel::left("controls")
+            .resizable(false)
+            .exact_size(PANEL_WIDTH)
+            .show(ui, |ui| self.panel(ui));
+        let mut actions = vec![];
+        egui::CentralPanel::default()
+            .frame(egui::Frame::NONE)
+            .show(ui, |ui| {
+                let rect = ui.available_rect_before_wrap();
+                let ppp = ctx.pixels_per_point();
+                let size = [
+                    (rect.width() * ppp).round().max(1.0) as u32,
+                    (rect.height() * ppp).round().max(1.0) as u32,
+                ];
+                if size != self.state.size {
+                    self.state.size = size;
+                    self.dirty.scene = true;
+                }
+                let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
+                if let Some(t) = &self.texture {
+                    ui.painter().image(
+                        t.id(),
+                        rect,
+                        egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0)),
+                        egui::Color32::WHITE,
+                    );
+                }
+                let d = response.drag_delta() * ppp;
+                if d != egui::Vec2::ZERO {
+                    if response.dragged_by(egui::PointerButton::Primary) {
+                        actions.push(Action::Orbit { dx: d.x, dy: d.y });
+                    } else {
+                        actions.push(Action::Pan { dx: d.x, dy: d.y });
+                    }
+                }
+                if response.hovered() {
+                    let scroll = ctx.input(|i| i.smooth_scroll_delta().y);
+                    if scroll != 0.0 {
+                        actions.push(Action::Zoom {
+                            factor: (scroll * 0.003).exp(),
+                        });
+                    }
+                }
+            });
+        for a in actions {
+            self.act(a, true);
+        }
+        self.keys(&ctx);
+        let scripted = self.step_script(&ctx);
+        if self.playing && self.settled() && self.last_step.elapsed() > Duration::from_millis(200) {
+            self.last_step = Instant::now();
+            self.act(Action::Step { delta: 1 }, false);
+        }
+        if self.dirty.scene || self.dirty.lighting {
+            self.send_render();
+        } else if self
+            .requested
+            .is_some_and(|(_, preview)| preview && !self.moving())
+        {
+            // The user stopped: the refined frame.
+            self.dirty.scene = true;
+            self.send_render();
+        }
+        if scripted || self.moving() || self.playing || self.requested.is_some_and(|(_, p)| p) {
+            ctx.request_repaint_after(Duration::from_millis(16));
+        }
+    }
+}

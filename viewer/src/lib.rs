@@ -1,0 +1,162 @@
+//! The interactive viewer, `mdlod view`: a window over the same renderer `mdlod render`
+//! uses headless.
+//!
+//! How it works:
+//! - [`state`]: the camera, mode, lights and timestep as plain data; every input, from
+//!   the mouse, keys, panel or a script, is an [`state::Action`] applied there. The state
+//!   turns into the [`mdlod_render::RenderOptions`] of `mdlod render`, so a screenshot is
+//!   the headless image of the same view.
+//! - [`worker`]: a render thread that owns the GPU renderer and the mapped files;
+//!   latest-wins render requests, progressive S-NDF refinement while the view is still,
+//!   re-shading without sampling when only the lights change, prefetch of the next
+//!   timestep. The window never waits for it.
+//! - `app`: the window (eframe: winit, egui-winit, egui-wgpu), which shows the render
+//!   thread's images, previews at an adapted screen error while the user drags, and
+//!   plays scripts (`--script`): JSON arrays of actions with screenshots, which is how
+//!   the viewer is tested under Xvfb.
+//!
+//! Frames travel from the render thread to the window as images on the host, one copy
+//! per frame; the render thread has its own device, so a slow frame never stalls the
+//! interface.
+
+mod app;
+pub mod state;
+pub mod worker;
+
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use mdlod_format::MdlodFile;
+use mdlod_render::{camera_for, data_bounds, BackendChoice, GpuContext, ViewSpec};
+
+pub use state::{Action, FrameInfo, Mode, ViewerState};
+
+/// What can go wrong opening the viewer.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewerError {
+    #[error("{path}: {message}")]
+    DataSet { path: PathBuf, message: String },
+    #[error(transparent)]
+    Format(#[from] mdlod_format::FormatError),
+    #[error(transparent)]
+    Render(#[from] mdlod_render::RenderError),
+    #[error("script {path}: {message}")]
+    Script { path: PathBuf, message: String },
+    #[error("the window: {0}")]
+    Window(String),
+    #[error("{0}")]
+    Failed(String),
+}
+
+/// How to open the viewer.
+#[derive(Clone, Debug)]
+pub struct ViewerOptions {
+    /// A `.mdlod` file, or a batch directory with `dataset.json`.
+    pub path: PathBuf,
+    /// Window size (logical pixels).
+    pub window: [u32; 2],
+    pub view: Option<PathBuf>,
+    pub mode: Mode,
+    pub backends: BackendChoice,
+    /// Play these actions, then close; the first error fails the run.
+    pub script: Option<PathBuf>,
+    /// Longest a script may run.
+    pub script_timeout: Duration,
+}
+
+/// The frames of a `.mdlod` file or of a batch directory (its `dataset.json`, in the
+/// manifest's order).
+pub fn frames_of(path: &Path) -> Result<Vec<FrameInfo>, ViewerError> {
+    if !path.is_dir() {
+        return Ok(vec![FrameInfo {
+            path: path.to_path_buf(),
+            timestep: None,
+        }]);
+    }
+    let manifest = path.join("dataset.json");
+    let err = |message: String| ViewerError::DataSet {
+        path: manifest.clone(),
+        message,
+    };
+    let text = std::fs::read_to_string(&manifest).map_err(|e| err(e.to_string()))?;
+    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| err(e.to_string()))?;
+    let frames = json
+        .get("frames")
+        .and_then(|f| f.as_array())
+        .ok_or_else(|| err("no \"frames\" list".into()))?;
+    let mut out = vec![];
+    for (i, f) in frames.iter().enumerate() {
+        let file = f
+            .get("file")
+            .and_then(|v| v.as_str())
+            .ok_or_else(|| err(format!("frame {i}: no \"file\"")))?;
+        out.push(FrameInfo {
+            path: path.join(file),
+            timestep: f.get("timestep").and_then(|v| v.as_u64()),
+        });
+    }
+    if out.is_empty() {
+        return Err(err("the data set has no frames".into()));
+    }
+    out.sort_by_key(|f| f.timestep);
+    Ok(out)
+}
+
+/// Opens the window and runs until it closes (or the script ends).
+pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
+    let script = match &opts.script {
+        Some(p) => {
+            let err = |message: String| ViewerError::Script {
+                path: p.clone(),
+                message,
+            };
+            let text = std::fs::read_to_string(p).map_err(|e| err(e.to_string()))?;
+            let actions: Vec<Action> =
+                serde_json::from_str(&text).map_err(|e| err(e.to_string()))?;
+            Some(app::Script::new(actions, opts.script_timeout))
+        }
+        None => None,
+    };
+    let frames = frames_of(&opts.path)?;
+    let first = MdlodFile::open(&frames[0].path)?;
+    let [w, h] = opts.window;
+    let view = match &opts.view {
+        Some(p) => ViewSpec::File(p.clone()),
+        None => ViewSpec::default(),
+    };
+    let camera = camera_for(&first, &view, w, h)?;
+    let mut state = ViewerState::new(frames, camera, data_bounds(&first), [w, h]);
+    state.settings.mode = opts.mode;
+    drop(first);
+    // The render thread's device, found before the window opens so that a machine
+    // without one gets the renderer's clear error.
+    let ctx = GpuContext::with_backends(opts.backends)?;
+    let outcome = Arc::new(Mutex::new(None));
+    let result = outcome.clone();
+    let native = eframe::NativeOptions {
+        viewport: eframe::egui::ViewportBuilder::default()
+            .with_inner_size([w as f32 + app::PANEL_WIDTH, h as f32])
+            .with_title(format!("mdlod: {}", opts.path.display())),
+        renderer: eframe::Renderer::Wgpu,
+        ..Default::default()
+    };
+    let title = format!("mdlod: {}", opts.path.display());
+    eframe::run_native(
+        &title,
+        native,
+        Box::new(move |cc| {
+            let egui_ctx = cc.egui_ctx.clone();
+            let worker = worker::Worker::start(ctx, move || egui_ctx.request_repaint())?;
+            Ok(Box::new(app::ViewerApp::new(
+                state, worker, script, outcome,
+            )))
+        }),
+    )
+    .map_err(|e| ViewerError::Window(e.to_string()))?;
+    let failure = result.lock().unwrap_or_else(|e| e.into_inner()).take();
+    match failure {
+        Some(message) => Err(ViewerError::Failed(message)),
+        None => Ok(()),
+    }
+}

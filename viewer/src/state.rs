@@ -1,0 +1,720 @@
+//! What the viewer shows, as plain data: the camera, the render mode and its settings,
+//! the lights and the timestep. Every input, from the mouse, the keyboard, the panel or a
+//! script, becomes an [`Action`] applied here, so the whole interaction logic is tested
+//! without a window. [`ViewerState::render_options`] turns the state into the same
+//! [`RenderOptions`] `mdlod render` uses, which is why a viewer screenshot and a headless
+//! render of the same view and settings are the same pixels.
+
+use std::path::PathBuf;
+
+use mdlod_render::camera::{Bounds, Camera, Projection};
+use mdlod_render::glam::Vec3;
+use mdlod_render::sndf::{Binning, Explorer, ShadeLights};
+use mdlod_render::{density::DensitySettings, Lighting, RenderMode, RenderOptions, ViewSpec};
+use serde::{Deserialize, Serialize};
+
+/// How the view is drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mode {
+    /// Ray-cast spheres, one sample per pixel.
+    #[default]
+    Standard,
+    /// Ray-cast spheres with jittered supersampling once the view is still.
+    Supersampled,
+    /// S-NDFs sampled progressively while the view is still, shaded from the S-NDFs:
+    /// changing the lights re-shades without touching the particles.
+    Sndf,
+    /// Additive, flux-preserving splats, tone mapped.
+    Splat,
+    /// The image-space density volume.
+    Density,
+    /// The density's iso-surface.
+    Iso,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 6] = [
+        Mode::Standard,
+        Mode::Supersampled,
+        Mode::Sndf,
+        Mode::Splat,
+        Mode::Density,
+        Mode::Iso,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Standard => "standard",
+            Mode::Supersampled => "supersampled",
+            Mode::Sndf => "S-NDF",
+            Mode::Splat => "splat",
+            Mode::Density => "density",
+            Mode::Iso => "iso-surface",
+        }
+    }
+}
+
+/// A directional light: the direction towards it in view space (x right, y up, z towards
+/// the viewer) and its linear RGB colour.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Light {
+    pub direction: [f32; 3],
+    #[serde(default = "white")]
+    pub colour: [f32; 3],
+}
+
+fn white() -> [f32; 3] {
+    [1.0; 3]
+}
+
+/// Everything but the camera and the timestep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    pub mode: Mode,
+    /// Supersampled mode: samples per pixel of the refined image.
+    pub spp: u32,
+    /// S-NDF mode: rays per texel to refine to.
+    pub sndf_iterations: u32,
+    pub bins: u32,
+    /// Screen error (px) of the refined image.
+    pub error_px: f32,
+    /// Most spheres in one frame.
+    pub budget: u64,
+    /// Frame time to hold while the view moves (ms): the cut coarsens until it does.
+    pub target_frame_ms: f32,
+    /// sRGB background.
+    pub background: [f32; 3],
+    pub lights: Vec<Light>,
+    pub ambient: f32,
+    pub diffuse: f32,
+    /// Blinn-Phong highlight weight; 0 is Lambert only.
+    pub specular: f32,
+    pub shininess: f32,
+    /// S-NDF mode: colour the normals by the explorer pattern (this many slices around a
+    /// central disk) instead of lighting them.
+    pub explorer: Option<u32>,
+    pub explorer_disk_deg: f32,
+    pub explorer_tolerance_deg: f32,
+    /// Density and iso modes.
+    pub iso_value: f32,
+    pub density_max: f32,
+    pub absorption: f32,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        let l = Lighting::default();
+        Settings {
+            mode: Mode::Standard,
+            spp: 8,
+            sndf_iterations: 64,
+            bins: 8,
+            error_px: 1.0,
+            budget: 4_000_000,
+            target_frame_ms: 33.0,
+            background: [1.0; 3],
+            lights: vec![Light {
+                direction: l.direction_view.to_array(),
+                colour: [1.0; 3],
+            }],
+            ambient: l.ambient,
+            diffuse: l.diffuse,
+            specular: l.specular,
+            shininess: l.shininess,
+            explorer: None,
+            explorer_disk_deg: 20.0,
+            explorer_tolerance_deg: 3.0,
+            iso_value: 0.3,
+            density_max: 0.8,
+            absorption: 0.5,
+        }
+    }
+}
+
+impl Settings {
+    /// The S-NDF shading (all lights, colours, BRDF and explorer); relighting changes only
+    /// this.
+    pub fn shade_lights(&self) -> ShadeLights {
+        ShadeLights {
+            ambient: self.ambient,
+            lights: self
+                .lights
+                .iter()
+                .map(|l| (Vec3::from(l.direction).normalize_or_zero(), l.colour))
+                .collect(),
+            diffuse: self.diffuse,
+            specular: self.specular,
+            shininess: self.shininess,
+            environment: None,
+            explorer: self.explorer.map(|slices| Explorer {
+                disk_deg: self.explorer_disk_deg,
+                slices: slices.max(1),
+                tolerance_deg: self.explorer_tolerance_deg,
+                disk_colour: [0.9, 0.9, 0.9],
+                slice_colours: vec![
+                    [0.85, 0.1, 0.1],
+                    [0.1, 0.6, 0.15],
+                    [0.1, 0.25, 0.85],
+                    [0.9, 0.7, 0.05],
+                    [0.6, 0.1, 0.7],
+                    [0.05, 0.65, 0.7],
+                ],
+            }),
+            transfer: None,
+        }
+    }
+
+    /// The sphere renderer's lighting: its one light is the first of the list.
+    pub fn sphere_lighting(&self) -> Lighting {
+        let direction = self
+            .lights
+            .first()
+            .map(|l| Vec3::from(l.direction).normalize_or_zero())
+            .filter(|d| *d != Vec3::ZERO)
+            .unwrap_or(Lighting::default().direction_view);
+        Lighting {
+            direction_view: direction,
+            ambient: self.ambient,
+            diffuse: self.diffuse,
+            specular: self.specular,
+            shininess: self.shininess,
+        }
+    }
+}
+
+/// One input, whatever its source (mouse, keys, panel, script). Scripts are JSON arrays
+/// of these, e.g. `{"action": "orbit", "dx": 120, "dy": 0}`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "action", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Action {
+    /// Orbit as a mouse drag of (dx, dy) pixels does.
+    Orbit {
+        dx: f32,
+        dy: f32,
+    },
+    /// Pan as a drag of (dx, dy) pixels with the right button does.
+    Pan {
+        dx: f32,
+        dy: f32,
+    },
+    /// Move closer by this factor (2: twice as close).
+    Zoom {
+        factor: f32,
+    },
+    /// Fit the data in view.
+    Fit,
+    /// Perspective or orthographic projection.
+    Projection {
+        orthographic: bool,
+    },
+    Mode {
+        mode: Mode,
+    },
+    /// Set light `index`'s direction (view space).
+    Light {
+        index: usize,
+        direction: [f32; 3],
+    },
+    /// Rotate light `index` as a drag of (dx, dy) pixels on the light widget does.
+    DragLight {
+        index: usize,
+        dx: f32,
+        dy: f32,
+    },
+    AddLight {
+        light: Light,
+    },
+    RemoveLight {
+        index: usize,
+    },
+    /// Lambert only (`specular` 0) or Blinn-Phong with this weight and exponent.
+    Brdf {
+        specular: f32,
+        shininess: f32,
+    },
+    /// The S-NDF explorer pattern with this many slices, or none.
+    Explorer {
+        slices: Option<u32>,
+    },
+    /// Go to timestep `index` (of the data set's frames).
+    Frame {
+        index: usize,
+    },
+    /// Step this many timesteps (wrapping).
+    Step {
+        delta: i64,
+    },
+    ScreenError {
+        px: f32,
+    },
+    /// S-NDF mode: rays per texel to refine to.
+    SndfIterations {
+        n: u32,
+    },
+    /// Supersampled mode: samples per pixel.
+    Spp {
+        n: u32,
+    },
+    TargetFrameMs {
+        ms: f32,
+    },
+    /// Write the camera as a view file.
+    SaveView {
+        path: PathBuf,
+    },
+    LoadView {
+        path: PathBuf,
+    },
+    /// Write what the window shows once the view is refined (no size), or render the
+    /// current view and settings at this size through the headless path.
+    Screenshot {
+        path: PathBuf,
+        #[serde(default)]
+        width: Option<u32>,
+        #[serde(default)]
+        height: Option<u32>,
+    },
+    /// S-NDF mode: write the S-NDFs refined so far (with the camera) as a `.sndf` file,
+    /// once refinement is done.
+    SaveSndf {
+        path: PathBuf,
+    },
+    /// Wait until the view is refined.
+    WaitStill,
+    Quit,
+}
+
+/// Which parts of the state an action changed, so that the viewer redraws only what must
+/// be: the S-NDFs survive a lighting change.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Changed {
+    /// The camera, the timestep, the mode or a setting the particles are drawn with.
+    pub scene: bool,
+    /// The lights or the BRDF only.
+    pub lighting: bool,
+}
+
+/// Degrees of orbit per pixel dragged.
+pub const ORBIT_DEG_PER_PX: f32 = 0.3;
+/// Light widget: degrees per pixel dragged.
+pub const LIGHT_DEG_PER_PX: f32 = 0.5;
+
+/// The viewer's state.
+#[derive(Clone, Debug)]
+pub struct ViewerState {
+    pub camera: Camera,
+    pub settings: Settings,
+    /// The data set's frames (one for a single file) and the one shown.
+    pub frames: Vec<FrameInfo>,
+    pub frame: usize,
+    /// The shown frame's bounds (for fitting).
+    pub bounds: Bounds,
+    /// The window's image size (pixels).
+    pub size: [u32; 2],
+}
+
+/// One timestep of a data set.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameInfo {
+    pub path: PathBuf,
+    pub timestep: Option<u64>,
+}
+
+impl ViewerState {
+    pub fn new(frames: Vec<FrameInfo>, camera: Camera, bounds: Bounds, size: [u32; 2]) -> Self {
+        ViewerState {
+            camera,
+            settings: Settings::default(),
+            frames,
+            frame: 0,
+            bounds,
+            size,
+        }
+    }
+
+    pub fn aspect(&self) -> f32 {
+        self.size[0].max(1) as f32 / self.size[1].max(1) as f32
+    }
+
+    /// Applies one action; file actions (views, screenshots) are the caller's, and change
+    /// nothing here except `LoadView`, whose camera the caller passes through
+    /// [`ViewerState::set_camera`].
+    pub fn apply(&mut self, action: &Action) -> Changed {
+        let scene = Changed {
+            scene: true,
+            lighting: false,
+        };
+        let lighting = Changed {
+            scene: false,
+            lighting: true,
+        };
+        let s = &mut self.settings;
+        match action {
+            Action::Orbit { dx, dy } => {
+                self.camera
+                    .orbit(-dx * ORBIT_DEG_PER_PX, dy * ORBIT_DEG_PER_PX);
+                scene
+            }
+            Action::Pan { dx, dy } => {
+                self.camera.pan_px(*dx, *dy, self.size[1].max(1));
+                scene
+            }
+            Action::Zoom { factor } => {
+                if factor.is_finite() && *factor > 0.0 {
+                    self.camera.zoom(*factor);
+                    scene
+                } else {
+                    Changed::default()
+                }
+            }
+            Action::Fit => {
+                let aspect = self.aspect();
+                self.camera.fit(&self.bounds, aspect);
+                scene
+            }
+            Action::Projection { orthographic } => {
+                self.camera.projection = if *orthographic {
+                    Projection::Orthographic
+                } else {
+                    Projection::Perspective
+                };
+                scene
+            }
+            Action::Mode { mode } => {
+                s.mode = *mode;
+                scene
+            }
+            Action::Light { index, direction } => {
+                let d = Vec3::from(*direction);
+                match s.lights.get_mut(*index) {
+                    Some(l) if d.is_finite() && d != Vec3::ZERO => {
+                        l.direction = d.normalize().to_array();
+                        lighting
+                    }
+                    _ => Changed::default(),
+                }
+            }
+            Action::DragLight { index, dx, dy } => match s.lights.get_mut(*index) {
+                Some(l) => {
+                    l.direction = drag_direction(l.direction, *dx, *dy);
+                    lighting
+                }
+                None => Changed::default(),
+            },
+            Action::AddLight { light } => {
+                s.lights.push(*light);
+                lighting
+            }
+            Action::RemoveLight { index } => {
+                if *index < s.lights.len() {
+                    s.lights.remove(*index);
+                    lighting
+                } else {
+                    Changed::default()
+                }
+            }
+            Action::Brdf {
+                specular,
+                shininess,
+            } => {
+                s.specular = specular.max(0.0);
+                s.shininess = shininess.max(1.0);
+                lighting
+            }
+            Action::Explorer { slices } => {
+                s.explorer = *slices;
+                lighting
+            }
+            Action::Frame { index } => {
+                if *index < self.frames.len() && *index != self.frame {
+                    self.frame = *index;
+                    scene
+                } else {
+                    Changed::default()
+                }
+            }
+            Action::Step { delta } => {
+                let n = self.frames.len() as i64;
+                if n <= 1 {
+                    return Changed::default();
+                }
+                self.frame = (self.frame as i64 + delta).rem_euclid(n) as usize;
+                scene
+            }
+            Action::ScreenError { px } => {
+                s.error_px = px.max(0.0);
+                scene
+            }
+            Action::SndfIterations { n } => {
+                s.sndf_iterations = (*n).max(1);
+                scene
+            }
+            Action::Spp { n } => {
+                s.spp = (*n).clamp(1, mdlod_render::renderer::MAX_SPP);
+                scene
+            }
+            Action::TargetFrameMs { ms } => {
+                s.target_frame_ms = ms.max(1.0);
+                Changed::default()
+            }
+            Action::SaveView { .. }
+            | Action::LoadView { .. }
+            | Action::Screenshot { .. }
+            | Action::SaveSndf { .. }
+            | Action::WaitStill
+            | Action::Quit => Changed::default(),
+        }
+    }
+
+    pub fn set_camera(&mut self, camera: Camera) {
+        self.camera = camera;
+    }
+
+    /// The options of the refined image of the current view at `size`.
+    pub fn render_options(&self, size: [u32; 2]) -> RenderOptions {
+        let s = &self.settings;
+        let mode = match s.mode {
+            Mode::Standard | Mode::Supersampled => RenderMode::Spheres,
+            Mode::Sndf => RenderMode::Sndf {
+                iterations: s.sndf_iterations,
+                bins: s.bins,
+                binning: Binning::default(),
+            },
+            Mode::Splat => RenderMode::Splat {
+                by_attribute: false,
+            },
+            Mode::Density | Mode::Iso => RenderMode::Density(DensitySettings {
+                iso: (s.mode == Mode::Iso).then_some(s.iso_value),
+                density_max: s.density_max,
+                opacity: s.absorption,
+                ..Default::default()
+            }),
+        };
+        let splat = matches!(s.mode, Mode::Splat | Mode::Density | Mode::Iso);
+        RenderOptions {
+            width: size[0].max(1),
+            height: size[1].max(1),
+            view: ViewSpec::Camera(self.camera.clone()),
+            spp: if s.mode == Mode::Supersampled {
+                s.spp.max(1)
+            } else {
+                1
+            },
+            error_px: s.error_px,
+            budget: s.budget,
+            background: if splat && s.mode == Mode::Splat {
+                [0.0; 3]
+            } else {
+                s.background
+            },
+            lighting: s.sphere_lighting(),
+            mode,
+            ..Default::default()
+        }
+    }
+
+    /// The options of a quick frame while the view moves: one sample per pixel and the
+    /// cut coarsened to `error_px`; S-NDF and supersampled modes show plain spheres.
+    pub fn interactive_options(&self, size: [u32; 2], error_px: f32) -> RenderOptions {
+        let mut o = self.render_options(size);
+        o.spp = 1;
+        o.error_px = error_px.max(self.settings.error_px);
+        if matches!(o.mode, RenderMode::Sndf { .. }) {
+            o.mode = RenderMode::Spheres;
+        }
+        o
+    }
+}
+
+/// A light direction turned by a drag on the light widget: dx about the view's vertical
+/// axis, dy about its horizontal axis; it stays a unit vector.
+pub fn drag_direction(direction: [f32; 3], dx: f32, dy: f32) -> [f32; 3] {
+    let d = Vec3::from(direction).normalize_or(Vec3::Z);
+    let yaw = mdlod_render::glam::Quat::from_rotation_y((dx * LIGHT_DEG_PER_PX).to_radians());
+    let pitch = mdlod_render::glam::Quat::from_rotation_x((-dy * LIGHT_DEG_PER_PX).to_radians());
+    (pitch * yaw * d).normalize().to_array()
+}
+
+/// Adapts the interactive screen error to hold the target frame time: coarser when the
+/// last moving frame took longer than the target, finer when it took under half of it.
+pub fn adapt_error(current_px: f32, last_frame_ms: f32, target_ms: f32, finest_px: f32) -> f32 {
+    let finest = finest_px.max(0.25);
+    if last_frame_ms > target_ms {
+        (current_px.max(finest) * (last_frame_ms / target_ms).sqrt().clamp(1.25, 4.0)).min(256.0)
+    } else if last_frame_ms < 0.5 * target_ms {
+        (current_px / 1.25).max(finest)
+    } else {
+        current_px.max(finest)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state() -> ViewerState {
+        let bounds = Bounds::new([0.0, 0.0, 0.0], [10.0, 10.0, 10.0]);
+        let mut camera = Camera::default();
+        camera.fit(&bounds, 4.0 / 3.0);
+        ViewerState::new(
+            vec![
+                FrameInfo {
+                    path: "a.mdlod".into(),
+                    timestep: Some(0),
+                },
+                FrameInfo {
+                    path: "b.mdlod".into(),
+                    timestep: Some(100),
+                },
+                FrameInfo {
+                    path: "c.mdlod".into(),
+                    timestep: Some(200),
+                },
+            ],
+            camera,
+            bounds,
+            [400, 300],
+        )
+    }
+
+    #[test]
+    fn camera_actions_move_the_camera_and_fit_restores_it() {
+        let mut s = state();
+        let fitted = s.camera.clone();
+        let c = s.apply(&Action::Orbit { dx: 50.0, dy: 0.0 });
+        assert!(c.scene && !c.lighting);
+        assert!((s.camera.azimuth_deg - (fitted.azimuth_deg - 15.0)).abs() < 1e-4);
+        s.apply(&Action::Orbit { dx: 0.0, dy: 50.0 });
+        assert!((s.camera.elevation_deg - (fitted.elevation_deg + 15.0)).abs() < 1e-4);
+        s.apply(&Action::Zoom { factor: 2.0 });
+        assert!((s.camera.distance - fitted.distance / 2.0).abs() < 1e-3);
+        let target = s.camera.target;
+        s.apply(&Action::Pan { dx: 40.0, dy: 0.0 });
+        assert!((s.camera.target - target).length() > 0.0);
+        // A bad zoom changes nothing.
+        assert_eq!(s.apply(&Action::Zoom { factor: -1.0 }), Changed::default());
+        s.apply(&Action::Fit);
+        assert!((s.camera.target - fitted.target).length() < 1e-4);
+        assert!((s.camera.distance - fitted.distance).abs() < 1e-3);
+    }
+
+    #[test]
+    fn lighting_actions_change_only_the_lighting() {
+        let mut s = state();
+        let c = s.apply(&Action::Light {
+            index: 0,
+            direction: [0.0, 0.0, 2.0],
+        });
+        assert_eq!(
+            c,
+            Changed {
+                scene: false,
+                lighting: true
+            }
+        );
+        assert_eq!(s.settings.lights[0].direction, [0.0, 0.0, 1.0]);
+        s.apply(&Action::DragLight {
+            index: 0,
+            dx: 180.0,
+            dy: 0.0,
+        });
+        let d = Vec3::from(s.settings.lights[0].direction);
+        assert!((d.length() - 1.0).abs() < 1e-5);
+        assert!((d.x - 1.0).abs() < 1e-4, "90 degrees to the right: {d}");
+        s.apply(&Action::AddLight {
+            light: Light {
+                direction: [1.0, 0.0, 0.0],
+                colour: [0.2, 0.3, 1.0],
+            },
+        });
+        assert_eq!(s.settings.shade_lights().lights.len(), 2);
+        assert_eq!(
+            s.apply(&Action::RemoveLight { index: 5 }),
+            Changed::default()
+        );
+        s.apply(&Action::RemoveLight { index: 0 });
+        assert_eq!(s.settings.lights.len(), 1);
+        s.apply(&Action::Brdf {
+            specular: 0.0,
+            shininess: 8.0,
+        });
+        assert_eq!(s.settings.sphere_lighting().specular, 0.0);
+        assert_eq!(
+            s.settings.sphere_lighting().direction_view,
+            Vec3::new(1.0, 0.0, 0.0)
+        );
+    }
+
+    #[test]
+    fn timesteps_step_and_wrap() {
+        let mut s = state();
+        assert!(s.apply(&Action::Step { delta: 1 }).scene);
+        assert_eq!(s.frame, 1);
+        s.apply(&Action::Step { delta: -2 });
+        assert_eq!(s.frame, 2);
+        assert_eq!(s.apply(&Action::Frame { index: 7 }), Changed::default());
+        assert_eq!(s.frame, 2);
+    }
+
+    #[test]
+    fn options_follow_the_mode() {
+        let mut s = state();
+        s.apply(&Action::Mode {
+            mode: Mode::Supersampled,
+        });
+        assert_eq!(s.render_options([10, 10]).spp, 8);
+        assert_eq!(s.interactive_options([10, 10], 4.0).spp, 1);
+        assert_eq!(s.interactive_options([10, 10], 4.0).error_px, 4.0);
+        s.apply(&Action::Mode { mode: Mode::Sndf });
+        assert!(matches!(
+            s.render_options([10, 10]).mode,
+            RenderMode::Sndf { iterations: 64, .. }
+        ));
+        assert_eq!(
+            s.interactive_options([10, 10], 1.0).mode,
+            RenderMode::Spheres
+        );
+        s.apply(&Action::Mode { mode: Mode::Iso });
+        match s.render_options([10, 10]).mode {
+            RenderMode::Density(d) => assert_eq!(d.iso, Some(0.3)),
+            m => panic!("{m:?}"),
+        }
+    }
+
+    #[test]
+    fn the_interactive_error_holds_the_target_frame_time() {
+        // Too slow: coarser, by more when much slower; bounded.
+        assert!(adapt_error(1.0, 66.0, 33.0, 1.0) > 1.0);
+        assert!(adapt_error(1.0, 330.0, 33.0, 1.0) > adapt_error(1.0, 66.0, 33.0, 1.0));
+        assert!(adapt_error(200.0, 1e6, 33.0, 1.0) <= 256.0);
+        // Fast: finer, never below the refined error.
+        assert!(adapt_error(8.0, 5.0, 33.0, 1.0) < 8.0);
+        assert_eq!(adapt_error(1.0, 5.0, 33.0, 1.0), 1.0);
+        // Within the band: unchanged.
+        assert_eq!(adapt_error(4.0, 20.0, 33.0, 1.0), 4.0);
+    }
+
+    #[test]
+    fn scripts_parse_and_unknown_actions_are_refused() {
+        let script = r#"[{"action": "orbit", "dx": 120, "dy": 0},
+            {"action": "mode", "mode": "sndf"},
+            {"action": "screenshot", "path": "a.png"},
+            {"action": "light", "index": 0, "direction": [1, 1, 1]},
+            {"action": "step", "delta": 1}, {"action": "wait_still"}]"#;
+        let actions: Vec<Action> = serde_json::from_str(script).unwrap();
+        assert_eq!(actions.len(), 6);
+        assert_eq!(
+            actions[2],
+            Action::Screenshot {
+                path: "a.png".into(),
+                width: None,
+                height: None
+            }
+        );
+        assert!(serde_json::from_str::<Vec<Action>>(r#"[{"action": "fly"}]"#).is_err());
+        assert!(
+            serde_json::from_str::<Vec<Action>>(r#"[{"action": "zoom", "factr": 2}]"#).is_err()
+        );
+    }
+}

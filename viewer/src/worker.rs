@@ -1,0 +1,533 @@
+//! The render thread: it owns the GPU renderer and the open files, so that loading,
+//! traversal and drawing never block the window. The window sends [`Request`]s and
+//! shows the [`Reply`] images as they come.
+//!
+//! - Render requests are latest-wins: when several wait, only the newest is drawn.
+//! - In S-NDF mode a still view refines by itself: after each batch of iterations, if
+//!   no new request waits, the thread samples the next batch (continuing the sub-pixel
+//!   sequence), adds it to the S-NDFs and sends the shaded image, until the target
+//!   count. A request for the same view with other lights only re-shades the S-NDFs:
+//!   no particle is sampled (see [`Worker::points_sampled`]).
+//! - Screenshots, saved S-NDFs and prefetches run in order between frames.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{channel, Receiver, Sender, TryRecvError};
+use std::sync::Arc;
+use std::time::Instant;
+
+use mdlod_format::MdlodFile;
+use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
+use mdlod_render::{
+    camera_for, render_image, traverse, GpuContext, OcclusionMode, RenderMode, RenderOptions,
+    Renderer, RgbaImage, TraversalSettings, ViewFile,
+};
+
+/// Iterations in each progressive S-NDF batch.
+pub const SNDF_BATCH: u32 = 4;
+
+/// What the window asks of the render thread.
+pub enum Request {
+    /// Draw `opts` of the file at `path`. `shade` is the S-NDF shading (S-NDF mode);
+    /// `interactive` frames are quick previews while the view moves.
+    Render {
+        id: u64,
+        path: PathBuf,
+        opts: RenderOptions,
+        shade: ShadeLights,
+        interactive: bool,
+    },
+    /// Open a file ahead of need (the next timestep).
+    Prefetch(PathBuf),
+    /// Render `opts` of `path` through the headless path and write a PNG.
+    Screenshot {
+        path: PathBuf,
+        opts: RenderOptions,
+        shade: ShadeLights,
+        out: PathBuf,
+    },
+    /// Write the current S-NDFs (with their camera) as a `.sndf` file.
+    SaveSndf {
+        out: PathBuf,
+    },
+    Quit,
+}
+
+/// Numbers for the status panel.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    /// Wall time of the frame on the render thread (traversal, drawing, readback).
+    pub frame_ms: f32,
+    pub gpu_ms: Option<f32>,
+    /// Samples per pixel reached (S-NDF rays so far, or the supersampling count).
+    pub spp: u32,
+    pub particles: u64,
+    pub representatives: u64,
+    pub error_px: f32,
+    pub gpu_bytes: u64,
+    pub adapter: String,
+}
+
+/// What the render thread sends back.
+pub enum Reply {
+    Image {
+        id: u64,
+        image: RgbaImage,
+        stats: FrameStats,
+        interactive: bool,
+        /// The image is as refined as this request asks (all S-NDF iterations, the
+        /// supersampling, the final cut).
+        refined: bool,
+    },
+    /// A screenshot or S-NDF file was written (or not).
+    Written {
+        out: PathBuf,
+        result: Result<(), String>,
+    },
+    Error(String),
+}
+
+/// The S-NDFs of one view, refined batch by batch.
+struct Progressive {
+    id: u64,
+    path: PathBuf,
+    file: Arc<MdlodFile>,
+    /// The request's options (lights aside, what was sampled).
+    opts: RenderOptions,
+    shade: ShadeLights,
+    camera: mdlod_render::Camera,
+    draw: mdlod_render::DrawList,
+    settings: SndfSettings,
+    sndf: Option<Sndf>,
+    target: u32,
+}
+
+impl Progressive {
+    fn rays(&self) -> u32 {
+        self.sndf.as_ref().map_or(0, |s| s.rays)
+    }
+}
+
+/// The window's handle on the render thread.
+pub struct Worker {
+    tx: Sender<Request>,
+    pub rx: Receiver<Reply>,
+    thread: Option<std::thread::JoinHandle<()>>,
+    sampled: Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl Worker {
+    /// Starts the render thread on its own GPU device. `wake` is called after each reply
+    /// (the window repaints).
+    pub fn start(
+        ctx: GpuContext,
+        wake: impl Fn() + Send + 'static,
+    ) -> Result<Worker, std::io::Error> {
+        let (tx, requests) = channel();
+        let (replies, rx) = channel();
+        let sampled = Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let counter = sampled.clone();
+        let thread = std::thread::Builder::new()
+            .name("mdlod render".into())
+            .spawn(move || {
+                let mut state = Thread {
+                    renderer: Renderer::new(ctx),
+                    files: HashMap::new(),
+                    progressive: None,
+                    replies,
+                    wake: Box::new(wake),
+                    counter,
+                };
+                state.run(requests);
+            })?;
+        Ok(Worker {
+            tx,
+            rx,
+            thread: Some(thread),
+            sampled,
+        })
+    }
+
+    pub fn send(&self, r: Request) {
+        // The thread only ends on Quit or when the window is gone.
+        let _ = self.tx.send(r);
+    }
+
+    /// Particle samples drawn so far by the render thread (points × rays).
+    pub fn points_sampled(&self) -> u64 {
+        self.sampled.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        let _ = self.tx.send(Request::Quit);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+struct Thread {
+    renderer: Renderer,
+    files: HashMap<PathBuf, Arc<MdlodFile>>,
+    progressive: Option<Progressive>,
+    replies: Sender<Reply>,
+    wake: Box<dyn Fn() + Send>,
+    counter: Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl Thread {
+    fn reply(&self, r: Reply) {
+        self.counter.store(
+            self.renderer.points_sampled(),
+            std::sync::atomic::Ordering::Relaxed,
+        );
+        let _ = self.replies.send(r);
+        (self.wake)();
+    }
+
+    fn file(&mut self, path: &Path) -> Result<Arc<MdlodFile>, String> {
+        if let Some(f) = self.files.get(path) {
+            return Ok(f.clone());
+        }
+        let f = Arc::new(MdlodFile::open(path).map_err(|e| format!("{}: {e}", path.display()))?);
+        // Keep the shown frame and a few neighbours mapped.
+        if self.files.len() >= 4 {
+            self.files.clear();
+        }
+        self.files.insert(path.to_path_buf(), f.clone());
+        Ok(f)
+    }
+
+    fn run(&mut self, requests: Receiver<Request>) {
+        let mut pending: Vec<Request> = Vec::new();
+        loop {
+            // Block only when there is nothing to refine.
+            if pending.is_empty() {
+                let refining = self
+                    .progressive
+                    .as_ref()
+                    .is_some_and(|p| p.rays() < p.target);
+                if refining {
+                    match requests.try_recv() {
+                        Ok(r) => pending.push(r),
+                        Err(TryRecvError::Empty) => {
+                            self.refine_step();
+                            continue;
+                        }
+                        Err(TryRecvError::Disconnected) => return,
+                    }
+                } else {
+                    match requests.recv() {
+                        Ok(r) => pending.push(r),
+                        Err(_) => return,
+                    }
+                }
+            }
+            pending.extend(requests.try_iter());
+            // The newest render request wins; the others run in order.
+            let newest = pending
+                .iter()
+                .rposition(|r| matches!(r, Request::Render { .. }));
+            for (i, r) in std::mem::take(&mut pending).into_iter().enumerate() {
+                match r {
+                    Request::Quit => return,
+                    Request::Render { .. } if Some(i) != newest => {}
+                    Request::Render {
+                        id,
+                        path,
+                        opts,
+                        shade,
+                        interactive,
+                    } => self.render(id, &path, opts, shade, interactive),
+                    Request::Prefetch(path) => {
+                        let _ = self.file(&path);
+                    }
+                    Request::Screenshot {
+                        path,
+                        opts,
+                        shade,
+                        out,
+                    } => {
+                        let result = self.screenshot(&path, &opts, &shade, &out);
+                        self.reply(Reply::Written { out, result });
+                    }
+                    Request::SaveSndf { out } => {
+                        let result = match &self.progressive {
+                            Some(Progressive {
+                                sndf: Some(sndf),
+                                camera,
+                                path,
+                                ..
+                            }) => save_sndf(sndf, camera, path, &out),
+                            _ => Err("no S-NDFs sampled yet: switch to the S-NDF mode".into()),
+                        };
+                        self.reply(Reply::Written { out, result });
+                    }
+                }
+            }
+        }
+    }
+
+    fn render(
+        &mut self,
+        id: u64,
+        path: &Path,
+        opts: RenderOptions,
+        shade: ShadeLights,
+        interactive: bool,
+    ) {
+        let t0 = Instant::now();
+        let file = match self.file(path) {
+            Ok(f) => f,
+            Err(e) => return self.reply(Reply::Error(e)),
+        };
+        if let RenderMode::Sndf { iterations, .. } = opts.mode {
+            if let Some(p) = self
+                .progressive
+                .as_mut()
+                .filter(|p| p.path == path && same_sampling(&p.opts, &opts))
+            {
+                // The same view under other lights: re-shade, sample nothing.
+                p.id = id;
+                p.target = iterations;
+                p.shade = shade;
+                p.opts = opts;
+                self.show_progress(t0);
+                return;
+            }
+            self.progressive = None;
+            match sndf_setup(&self.renderer, &file, &opts) {
+                Ok((camera, draw, settings)) => {
+                    self.progressive = Some(Progressive {
+                        id,
+                        path: path.to_path_buf(),
+                        file,
+                        opts,
+                        shade,
+                        camera,
+                        draw,
+                        settings,
+                        sndf: None,
+                        target: iterations,
+                    });
+                    self.refine_step();
+                }
+                Err(e) => self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+            }
+            return;
+        }
+        match render_image(&self.renderer, &file, &opts) {
+            Ok((image, report)) => {
+                let stats = FrameStats {
+                    frame_ms: t0.elapsed().as_secs_f32() * 1e3,
+                    gpu_ms: report.gpu_time.map(|d| d.as_secs_f32() * 1e3),
+                    spp: report.spp,
+                    particles: report.particles_drawn,
+                    representatives: report.nodes_drawn,
+                    error_px: report.error_px,
+                    gpu_bytes: report.gpu_data_bytes + report.gpu_target_bytes,
+                    adapter: report.adapter.clone(),
+                };
+                self.reply(Reply::Image {
+                    id,
+                    image,
+                    stats,
+                    interactive,
+                    refined: !interactive,
+                });
+            }
+            Err(e) => self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+        }
+    }
+
+    /// Samples the next batch of the progressive S-NDFs and shows them.
+    fn refine_step(&mut self) {
+        let t0 = Instant::now();
+        let Some(p) = self.progressive.as_mut() else {
+            return;
+        };
+        let done = p.rays();
+        let n = SNDF_BATCH.min(p.target.saturating_sub(done)).max(1);
+        let batch = self.renderer.sample_sndf_from(
+            &p.file,
+            &p.camera,
+            &p.draw,
+            &SndfSettings {
+                iterations: n,
+                ..p.settings
+            },
+            done,
+        );
+        match batch {
+            Ok(b) => {
+                match &mut p.sndf {
+                    Some(s) => {
+                        s.add(&b);
+                    }
+                    None => p.sndf = Some(b),
+                }
+                self.show_progress(t0);
+            }
+            Err(e) => {
+                let path = p.path.display().to_string();
+                self.progressive = None;
+                self.reply(Reply::Error(format!("{path}: {e}")));
+            }
+        }
+    }
+
+    /// Shades the progressive S-NDFs under their lights and sends the image.
+    fn show_progress(&mut self, t0: Instant) {
+        let Some(p) = self.progressive.as_ref() else {
+            return;
+        };
+        let Some(sndf) = &p.sndf else {
+            return;
+        };
+        let image = sndf.shade_with(&p.shade, p.opts.background);
+        let stats = FrameStats {
+            frame_ms: t0.elapsed().as_secs_f32() * 1e3,
+            gpu_ms: None,
+            spp: sndf.rays,
+            particles: p.draw.particles,
+            representatives: p.draw.representatives,
+            error_px: p.draw.error_px,
+            gpu_bytes: sndf.hist.len() as u64 * 16,
+            adapter: self.renderer.ctx.adapter_name().to_string(),
+        };
+        let reply = Reply::Image {
+            id: p.id,
+            image,
+            stats,
+            interactive: false,
+            refined: sndf.rays >= p.target,
+        };
+        self.reply(reply);
+    }
+
+    /// A screenshot through the headless path: the image `mdlod render` gives for the
+    /// same options (S-NDFs sampled in the viewer's batches, shaded under its lights).
+    fn screenshot(
+        &mut self,
+        path: &Path,
+        opts: &RenderOptions,
+        shade: &ShadeLights,
+        out: &Path,
+    ) -> Result<(), String> {
+        let file = self.file(path)?;
+        let image = match opts.mode {
+            RenderMode::Sndf { iterations, .. } => {
+                let (sndf, _) = sample_progressively(&self.renderer, &file, opts, iterations)?;
+                sndf.shade_with(shade, opts.background)
+            }
+            _ => {
+                render_image(&self.renderer, &file, opts)
+                    .map_err(|e| format!("{}: {e}", path.display()))?
+                    .0
+            }
+        };
+        image
+            .save_png(out)
+            .map_err(|e| format!("{}: {e}", out.display()))
+    }
+}
+
+/// Whether two S-NDF requests sample the same thing (they may differ in lights).
+fn same_sampling(a: &RenderOptions, b: &RenderOptions) -> bool {
+    let strip = |o: &RenderOptions| {
+        let mut o = o.clone();
+        o.lighting = Default::default();
+        o.background = [0.0; 3];
+        if let RenderMode::Sndf { iterations, .. } = &mut o.mode {
+            *iterations = 0;
+        }
+        o
+    };
+    strip(a) == strip(b)
+}
+
+/// Opens no window: the S-NDFs `iterations` rays deep of `opts`'s view of `file`,
+/// sampled in batches of [`SNDF_BATCH`] exactly as the viewer refines (for tests and
+/// screenshots).
+pub fn sample_progressively(
+    renderer: &Renderer,
+    file: &MdlodFile,
+    opts: &RenderOptions,
+    iterations: u32,
+) -> Result<(Sndf, mdlod_render::Camera), String> {
+    let (camera, draw, settings) = sndf_setup(renderer, file, opts)?;
+    let mut sndf: Option<Sndf> = None;
+    let mut done = 0;
+    while done < iterations {
+        let n = SNDF_BATCH.min(iterations - done);
+        let batch = renderer
+            .sample_sndf_from(
+                file,
+                &camera,
+                &draw,
+                &SndfSettings {
+                    iterations: n,
+                    ..settings
+                },
+                done,
+            )
+            .map_err(|e| e.to_string())?;
+        match &mut sndf {
+            None => sndf = Some(batch),
+            Some(s) => {
+                s.add(&batch);
+            }
+        }
+        done += n;
+    }
+    sndf.map(|s| (s, camera))
+        .ok_or_else(|| "no S-NDF iterations asked for".to_string())
+}
+
+fn sndf_setup(
+    renderer: &Renderer,
+    file: &MdlodFile,
+    opts: &RenderOptions,
+) -> Result<(mdlod_render::Camera, mdlod_render::DrawList, SndfSettings), String> {
+    let RenderMode::Sndf { bins, binning, .. } = opts.mode else {
+        return Err("not the S-NDF mode".into());
+    };
+    let camera =
+        camera_for(file, &opts.view, opts.width, opts.height).map_err(|e| e.to_string())?;
+    let draw = traverse(
+        &camera,
+        file,
+        &TraversalSettings {
+            viewport: [opts.width, opts.height],
+            error_px: opts.error_px,
+            budget_points: opts.budget.min(renderer.max_points()).max(1),
+            occlusion: OcclusionMode::WholePixels,
+        },
+    );
+    Ok((
+        camera,
+        draw,
+        SndfSettings {
+            width: opts.width,
+            height: opts.height,
+            iterations: 0,
+            bins,
+            binning,
+        },
+    ))
+}
+
+/// Saves S-NDFs with their camera.
+pub fn save_sndf(
+    sndf: &Sndf,
+    camera: &mdlod_render::Camera,
+    source: &Path,
+    out: &Path,
+) -> Result<(), String> {
+    let view = serde_json::to_value(ViewFile::from_camera(camera)).map_err(|e| e.to_string())?;
+    sndf.to_data(view, Some(source.display().to_string()))
+        .save(out)
+        .map_err(|e| e.to_string())
+}

@@ -1,0 +1,175 @@
+//! The render thread without a window: progressive S-NDF refinement, re-lighting without
+//! sampling, latest-wins requests, and screenshots that equal the headless renderer's.
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::RecvTimeoutError;
+use std::time::Duration;
+
+use mdlod_preprocess::convert::{convert_frame, ConvertOptions};
+use mdlod_preprocess::{Frame, NoProgress, SpeciesName};
+use mdlod_render::{camera_for, render_image, BackendChoice, GpuContext, Renderer, RgbaImage};
+use mdlod_viewer::state::{Action, FrameInfo, Mode, ViewerState};
+use mdlod_viewer::worker::{Reply, Request, Worker, SNDF_BATCH};
+
+fn backends() -> BackendChoice {
+    BackendChoice::FromEnv
+}
+
+/// A small FCC block with two species, converted by the real converter.
+fn make_file(dir: &Path) -> PathBuf {
+    let positions = mdlod_datasets::fcc_block([5, 5, 5], 3.615);
+    let species_index = (0..positions.len())
+        .map(|i| u16::from(i % 7 == 0))
+        .collect();
+    let species = ["Cu", "Ag"]
+        .iter()
+        .map(|n| SpeciesName {
+            name: n.to_string(),
+            numeric_type: false,
+            radius: None,
+        })
+        .collect();
+    let frame = Frame {
+        positions,
+        species_index,
+        species,
+        ..Default::default()
+    };
+    let path = dir.join("block.mdlod");
+    convert_frame(&frame, None, &path, &ConvertOptions::default(), &NoProgress).unwrap();
+    path
+}
+
+fn state(path: &Path, size: [u32; 2]) -> ViewerState {
+    let f = mdlod_format::MdlodFile::open(path).unwrap();
+    let camera = camera_for(&f, &Default::default(), size[0], size[1]).unwrap();
+    ViewerState::new(
+        vec![FrameInfo {
+            path: path.to_path_buf(),
+            timestep: None,
+        }],
+        camera,
+        mdlod_render::data_bounds(&f),
+        size,
+    )
+}
+
+/// The next image reply (errors fail the test).
+fn next_image(w: &Worker) -> (u64, RgbaImage, u32, bool) {
+    loop {
+        match w.rx.recv_timeout(Duration::from_secs(120)) {
+            Ok(Reply::Image {
+                id,
+                image,
+                stats,
+                refined,
+                ..
+            }) => return (id, image, stats.spp, refined),
+            Ok(Reply::Error(e)) => panic!("{e}"),
+            Ok(Reply::Written { result, .. }) => result.unwrap(),
+            Err(RecvTimeoutError::Timeout) => panic!("no image in 120 s"),
+            Err(e) => panic!("{e}"),
+        }
+    }
+}
+
+fn render(w: &Worker, s: &ViewerState, id: u64) {
+    w.send(Request::Render {
+        id,
+        path: s.frames[0].path.clone(),
+        opts: s.render_options(s.size),
+        shade: s.settings.shade_lights(),
+        interactive: false,
+    });
+}
+
+#[test]
+fn sndfs_refine_while_still_and_relight_without_sampling() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let mut s = state(&path, [64, 48]);
+    s.apply(&Action::Mode { mode: Mode::Sndf });
+    s.settings.sndf_iterations = 3 * SNDF_BATCH;
+    let w = Worker::start(GpuContext::with_backends(backends()).unwrap(), || {}).unwrap();
+    render(&w, &s, 1);
+    // Refinement goes on by itself, batch after batch, until the target.
+    let mut spps = vec![];
+    let refined = loop {
+        let (id, image, spp, refined) = next_image(&w);
+        assert_eq!(id, 1);
+        spps.push(spp);
+        if refined {
+            break image;
+        }
+    };
+    assert_eq!(spps, vec![SNDF_BATCH, 2 * SNDF_BATCH, 3 * SNDF_BATCH]);
+    let sampled = w.points_sampled();
+    assert!(sampled > 0);
+    // The same view under another light: a new image at once, no particle sampled.
+    s.apply(&Action::Light {
+        index: 0,
+        direction: [1.0, 0.0, 0.2],
+    });
+    render(&w, &s, 2);
+    let (id, relit, spp, done) = next_image(&w);
+    assert_eq!((id, spp, done), (2, 3 * SNDF_BATCH, true));
+    assert_eq!(w.points_sampled(), sampled, "re-lighting sampled particles");
+    assert_ne!(relit.data, refined.data);
+    // Re-lit equals sampling afresh under that light, through the headless path (the
+    // same batches: identical pixels).
+    let out = dir.path().join("shot.png");
+    w.send(Request::Screenshot {
+        path: path.clone(),
+        opts: s.render_options(s.size),
+        shade: s.settings.shade_lights(),
+        out: out.clone(),
+    });
+    match w.rx.recv_timeout(Duration::from_secs(120)).unwrap() {
+        Reply::Written { result, .. } => result.unwrap(),
+        _ => panic!("expected the screenshot"),
+    }
+    assert_eq!(RgbaImage::load_png(&out).unwrap().data, relit.data);
+    // A moved camera starts over.
+    s.apply(&Action::Orbit { dx: 40.0, dy: 0.0 });
+    render(&w, &s, 3);
+    let (id, _, spp, _) = next_image(&w);
+    assert_eq!((id, spp), (3, SNDF_BATCH));
+    assert!(w.points_sampled() > sampled);
+}
+
+#[test]
+fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let mut s = state(&path, [80, 60]);
+    let w = Worker::start(GpuContext::with_backends(backends()).unwrap(), || {}).unwrap();
+    // Three requests at once: only the last is drawn.
+    for (id, dx) in [(1, 10.0), (2, 20.0), (3, 30.0)] {
+        s.apply(&Action::Orbit { dx, dy: 0.0 });
+        render(&w, &s, id);
+    }
+    let (id, image, _, refined) = next_image(&w);
+    assert_eq!((id, refined), (3, true));
+    assert!(matches!(
+        w.rx.recv_timeout(Duration::from_millis(300)),
+        Err(RecvTimeoutError::Timeout)
+    ));
+    let renderer = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    let f = mdlod_format::MdlodFile::open(&path).unwrap();
+    let (headless, _) = render_image(&renderer, &f, &s.render_options([80, 60])).unwrap();
+    assert_eq!(image.data, headless.data);
+    // A missing file is an error naming it, and the thread goes on.
+    w.send(Request::Render {
+        id: 4,
+        path: dir.path().join("missing.mdlod"),
+        opts: s.render_options([8, 8]),
+        shade: s.settings.shade_lights(),
+        interactive: false,
+    });
+    match w.rx.recv_timeout(Duration::from_secs(60)).unwrap() {
+        Reply::Error(e) => assert!(e.contains("missing.mdlod"), "{e}"),
+        _ => panic!("expected an error"),
+    }
+    render(&w, &s, 5);
+    assert_eq!(next_image(&w).0, 5);
+}
