@@ -947,3 +947,82 @@ fn walk(dir: &Path) -> Vec<String> {
     }
     out
 }
+
+/// The look options: a colour map by the attribute and restyled species give other
+/// pictures of the same view; a species the file lacks, a colour map without an
+/// attribute and a bad value are clear errors.
+#[test]
+fn render_styles_points_by_attribute_and_species() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let dump = d.join("a.lammpstrj");
+    ok(&["generate", "alloy", "-n", "4000", "-o", s(&dump)]);
+    let with = d.join("with.mdlod");
+    let without = d.join("without.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&with), "--attribute", "c_pe"]);
+    ok(&["convert", s(&dump), "-o", s(&without)]);
+    let png = |name: &str, extra: &[&str]| {
+        let out = d.join(name);
+        let mut args = vec![
+            "render",
+            s(&with),
+            "-o",
+            s(&out),
+            "--width",
+            "96",
+            "--height",
+            "72",
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        read_png(&out).2
+    };
+    let plain = png("plain.png", &[]);
+    let mapped = png("mapped.png", &["--colour-map", "viridis"]);
+    let hidden = png(
+        "hidden.png",
+        &["--hide-species", "2", "--radius-scale", "0.8"],
+    );
+    let recoloured = png("recoloured.png", &["--species-colour", "1=#00ff00"]);
+    for other in [&mapped, &hidden, &recoloured] {
+        assert_ne!(&plain, other);
+    }
+    // Recolouring species 1 green: green now dominates.
+    let greenish = |img: &[u8]| {
+        img.chunks_exact(4)
+            .filter(|p| p[1] > p[0].saturating_add(40) && p[1] > p[2].saturating_add(40))
+            .count()
+    };
+    assert!(greenish(&recoloured) > 10 * greenish(&plain).max(1));
+    let err = fails(&[
+        "render",
+        s(&with),
+        "-o",
+        s(&d.join("x.png")),
+        "--hide-species",
+        "Xx",
+    ]);
+    assert!(err.contains("\"Xx\"") && err.contains("1, 2"), "{err}");
+    let err = fails(&[
+        "render",
+        s(&without),
+        "-o",
+        s(&d.join("x.png")),
+        "--colour-map",
+        "magma",
+    ]);
+    assert!(
+        err.contains("no per-particle attribute") && err.contains("without.mdlod"),
+        "{err}"
+    );
+    let err = fails(&[
+        "render",
+        s(&with),
+        "-o",
+        s(&d.join("x.png")),
+        "--species-radius",
+        "1=-2",
+    ]);
+    assert!(err.contains("radius"), "{err}");
+    assert!(!d.join("x.png").exists());
+}

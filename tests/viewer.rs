@@ -153,12 +153,17 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
         {"action": "save_sndf", "path": p("view.sndf")},
         {"action": "light", "index": 0, "direction": [1, 0, 0.3]},
         {"action": "screenshot", "path": p("relit.png")},
+        {"action": "paint", "x": 0.0, "y": 0.0, "radius": 0.7, "colour": [0.0, 1.0, 0.0]},
+        {"action": "screenshot", "path": p("painted.png")},
+        {"action": "clear_paint"},
         {"action": "mode", "mode": "standard"},
         // Back to `mdlod render`'s light (it has one, fixed).
         {"action": "light", "index": 0, "direction": [-0.35, 0.45, 1.0]},
         {"action": "step", "delta": 1},
         {"action": "screenshot", "path": p("stepped.png")},
-        {"action": "screenshot", "path": p("big.png"), "width": 96, "height": 64}
+        {"action": "screenshot", "path": p("big.png"), "width": 96, "height": 64},
+        {"action": "species_visible", "name": "2", "visible": false},
+        {"action": "screenshot", "path": p("hidden.png")}
     ]);
     std::fs::write(d.join("session.json"), script.to_string()).unwrap();
     let xdg = d.join("xdg");
@@ -237,6 +242,19 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
         &[],
     );
     assert!(differing(&relit, &png(&d.join("shaded.png")), 1) < 0.001);
+    // Painting the normal disk green re-colours the S-NDFs: green where it was not.
+    let painted = png(&d.join("painted.png"));
+    let green = |img: &Png| {
+        img.rgba
+            .chunks_exact(4)
+            .filter(|p| p[1] > p[0].saturating_add(60) && p[1] > p[2].saturating_add(60))
+            .count()
+    };
+    assert!(
+        green(&painted) > 20 * green(&relit).max(1),
+        "{} green pixels",
+        green(&painted)
+    );
     // The next timestep is another picture: that frame's, from the same view.
     let stepped = png(&d.join("stepped.png"));
     assert!(differing(&stepped, &orbited, 8) > 0.01);
@@ -252,6 +270,11 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
         &[],
     );
     assert!(differing(&big, &png(Path::new(&out)), 2) < 0.002);
+    // Hiding species 2 in the window is `render --hide-species 2`.
+    let hidden = png(&d.join("hidden.png"));
+    assert!(differing(&hidden, &stepped, 8) > 0.01);
+    let headless_hidden = render(&frame1, &p("hidden-headless.png"), &["--hide-species", "2"]);
+    assert!(differing(&hidden, &headless_hidden, 2) < 0.002);
 }
 
 #[test]

@@ -38,6 +38,7 @@ pub mod passes;
 pub mod renderer;
 pub mod sndf;
 pub mod streaming;
+pub mod style;
 pub mod traversal;
 pub mod view;
 
@@ -55,6 +56,7 @@ pub use occlusion::OcclusionMode;
 pub use passes::sphere_raycast::Lighting;
 pub use renderer::{FrameSettings, RenderedFrame, Renderer, SplatBlend, SplatFrame};
 pub use streaming::{StreamStats, StreamingRenderer};
+pub use style::{ColourMap, PointStyle, SpeciesStyle};
 pub use traversal::{traverse, traverse_with, DrawList, DrawRange, Residency, TraversalSettings};
 pub use view::ViewFile;
 
@@ -115,6 +117,9 @@ pub struct RenderOptions {
     /// Splat mode: tone-mapping exposure (light added per unit of flux); `None` picks one
     /// from the image.
     pub exposure: Option<f32>,
+    /// Sphere and S-NDF modes: the points' look (species colours, radii, hiding, colour
+    /// by the attribute); see [`style`].
+    pub style: PointStyle,
 }
 
 /// How points are drawn.
@@ -159,6 +164,7 @@ impl Default for RenderOptions {
             occlusion: true,
             mode: RenderMode::Spheres,
             exposure: None,
+            style: PointStyle::default(),
         }
     }
 }
@@ -207,6 +213,8 @@ pub struct RenderReport {
     pub total_flux: Option<f64>,
     /// Density mode: slice stacks run before every ray was done, of those the volume spans.
     pub density_stacks: Option<(u32, u32)>,
+    /// Density mode: host work before the GPU passes (decoding, sorting, packing).
+    pub density_host_time: Option<Duration>,
 }
 
 /// Parses a colour as `#rrggbb`, `rrggbb` or three numbers in [0, 1] separated by commas.
@@ -297,6 +305,7 @@ fn frame_setup(
         error_px: opts.error_px,
         budget_points: opts.budget.min(renderer.max_points()).max(1),
         occlusion: if !opts.occlusion
+            || opts.style.changes_geometry()
             || matches!(
                 opts.mode,
                 RenderMode::Splat { .. } | RenderMode::SplatOver { .. } | RenderMode::Density(_)
@@ -319,6 +328,7 @@ fn frame_setup(
         background_srgb: opts.background,
         lighting: opts.lighting,
         read_depth: false,
+        style: opts.style.clone(),
     };
     Ok((camera, traversal, settings))
 }
@@ -358,6 +368,7 @@ impl RenderReport {
             exposure: None,
             total_flux: None,
             density_stacks: None,
+            density_host_time: None,
         }
     }
 }
@@ -378,7 +389,7 @@ pub fn render_image(
         binning,
     } = opts.mode
     {
-        let sndf = renderer.sample_sndf(
+        let sndf = renderer.sample_sndf_styled(
             file,
             &camera,
             &draw,
@@ -389,6 +400,8 @@ pub fn render_image(
                 bins,
                 binning,
             },
+            0,
+            &opts.style,
         )?;
         let sampled = t0.elapsed();
         let image = sndf.shade(&opts.lighting, opts.background);
@@ -421,6 +434,7 @@ pub fn render_image(
         let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &rendered);
         report.traversal_time = traversal_time;
         report.density_stacks = Some((frame.stacks_run, frame.stacks));
+        report.density_host_time = Some(frame.host_time);
         report.total_time = t0.elapsed();
         return Ok((rendered.image, report));
     }
@@ -494,6 +508,13 @@ pub fn render_streaming(
     if opts.mode != RenderMode::Spheres {
         return Err(RenderError::InvalidOptions(
             "splat mode draws from the whole file for now: leave out the GPU memory pool".into(),
+        ));
+    }
+    if opts.style != PointStyle::default() {
+        return Err(RenderError::InvalidOptions(
+            "species styles and colour maps draw from the whole file for now: leave out the \
+             GPU memory pool"
+                .into(),
         ));
     }
     let t0 = Instant::now();
@@ -575,7 +596,7 @@ pub fn sample_to_file_at(
     let (camera, traversal, _) = frame_setup(&renderer, &mdlod, opts)?;
     let draw = traverse(&camera, &mdlod, &traversal);
     let traversal_time = t0.elapsed();
-    let sndf = renderer.sample_sndf(
+    let sndf = renderer.sample_sndf_styled(
         &mdlod,
         &camera,
         &draw,
@@ -586,6 +607,8 @@ pub fn sample_to_file_at(
             bins,
             binning,
         },
+        0,
+        &opts.style,
     )?;
     let view = serde_json::to_value(ViewFile::from_camera(&camera))
         .map_err(|e| RenderError::InvalidOptions(e.to_string()))?;

@@ -19,7 +19,7 @@ use crate::error::RenderError;
 use crate::image::RgbaImage;
 use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
 use crate::passes::sphere_raycast::{
-    pack, FrameUniforms, Lighting, PackedDraw, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT,
+    FrameUniforms, Lighting, PackedDraw, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT,
     DEPTH_FORMAT,
 };
 use crate::passes::sphere_raycast::{PackStyle, GBUFFER_FORMAT};
@@ -45,6 +45,8 @@ pub struct FrameSettings {
     pub lighting: Lighting,
     /// Also read back the depth buffer of the last sample.
     pub read_depth: bool,
+    /// The points' look (species colours, radii, hiding, colour map).
+    pub style: crate::style::PointStyle,
 }
 
 impl Default for FrameSettings {
@@ -56,6 +58,7 @@ impl Default for FrameSettings {
             background_srgb: [1.0, 1.0, 1.0],
             lighting: Lighting::default(),
             read_depth: false,
+            style: Default::default(),
         }
     }
 }
@@ -192,6 +195,9 @@ pub struct DensityFrame {
     /// Point splats drawn over all stacks.
     pub splatted: u64,
     pub gpu_data_bytes: u64,
+    /// Host work before the first GPU pass: decoding, depth-sorting and packing the
+    /// points.
+    pub host_time: std::time::Duration,
 }
 
 impl DensityFrame {
@@ -403,7 +409,12 @@ impl Renderer {
         settings: &FrameSettings,
     ) -> Result<RenderedFrame, RenderError> {
         self.check(settings)?;
-        let packed = pack(file, draw)?;
+        let packed = crate::passes::sphere_raycast::pack_styled(
+            file,
+            draw,
+            crate::passes::sphere_raycast::PackStyle::Spheres,
+            &settings.style,
+        )?;
         let limits = self.ctx.device.limits();
         let largest = packed.largest_buffer_bytes();
         if largest > limits.max_storage_buffer_binding_size || largest > limits.max_buffer_size {
@@ -700,6 +711,19 @@ impl Renderer {
         settings: &SndfSettings,
         first: u32,
     ) -> Result<Sndf, RenderError> {
+        self.sample_sndf_styled(file, camera, draw, settings, first, &Default::default())
+    }
+
+    /// [`Self::sample_sndf_from`] with the points' look changed by `style`.
+    pub fn sample_sndf_styled(
+        &self,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        settings: &SndfSettings,
+        first: u32,
+        style: &crate::style::PointStyle,
+    ) -> Result<Sndf, RenderError> {
         let SndfSettings {
             width,
             height,
@@ -735,7 +759,12 @@ impl Renderer {
                 limits.max_storage_buffer_binding_size
             )));
         }
-        let packed = pack(file, draw)?;
+        let packed = crate::passes::sphere_raycast::pack_styled(
+            file,
+            draw,
+            crate::passes::sphere_raycast::PackStyle::Spheres,
+            style,
+        )?;
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
@@ -1150,6 +1179,7 @@ impl Renderer {
         height: u32,
         settings: &crate::density::DensitySettings,
     ) -> Result<DensityFrame, RenderError> {
+        let t0 = std::time::Instant::now();
         use crate::density::{DensityPoint, Slicing};
         use crate::passes::density::{
             DensityGpu, RayGpu, SLICES_GRADIENT, SLICES_PLAIN, SLICE_FORMAT,
@@ -1252,6 +1282,7 @@ impl Renderer {
             .species
             .first()
             .map_or([0.8; 3], |s| s.colour);
+        let host_time = t0.elapsed();
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
@@ -1509,6 +1540,7 @@ impl Renderer {
                 stacks_run,
                 splatted,
                 gpu_data_bytes: packed.data_bytes(),
+                host_time,
             })
         })
     }

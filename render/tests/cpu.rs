@@ -524,3 +524,103 @@ fn coarse_cuts_cover_about_the_pixels_the_particles_cover() {
         );
     }
 }
+
+/// Styled packing: every particle takes its species' overridden colour and radius times
+/// the scale (0 when hidden), or with a colour map the map's colour of its own attribute
+/// value; clusters their coverage radius times the scale and the map's colour of their
+/// mean attribute. Positions never change. A colour map needs an attribute.
+#[test]
+fn styles_recolour_resize_and_hide_points_when_packed() {
+    use mdlod_render::passes::sphere_raycast::{pack_styled, PackStyle};
+    use mdlod_render::style::{pack_colour, ColourMap, PointStyle, SpeciesStyle};
+    let mut frame = cloud_frame(1500, 4);
+    let values: Vec<f32> = frame.positions.iter().map(|p| p[1] - 30.0).collect();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "vy".into(),
+        values,
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let (_d2, _p2, plain) = make_file(&cloud_frame(100, 4), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let d = cut(&f, &cam, 30.0, u64::MAX);
+    let last = f.level_count() - 1;
+    assert!(d.ranges.iter().any(|r| r.level as usize == last));
+    assert!(d.ranges.iter().any(|r| (r.level as usize) < last));
+    let base = pack(&f, &d).unwrap();
+    let info = f.metadata().attribute.clone().unwrap();
+    let unpack = |c: [f32; 3]| {
+        let p = pack_colour(c).to_le_bytes();
+        [p[0], p[1], p[2]].map(|v| f32::from(v) / 255.0)
+    };
+    for map in [None, Some(ColourMap::Viridis)] {
+        let style = PointStyle {
+            species: vec![
+                SpeciesStyle {
+                    name: "Cu".into(),
+                    colour: Some([0.9, 0.1, 0.2]),
+                    radius: Some(2.0),
+                    hidden: false,
+                },
+                SpeciesStyle {
+                    name: "Ag".into(),
+                    hidden: true,
+                    ..Default::default()
+                },
+            ],
+            radius_scale: 1.5,
+            colour_map: map,
+        };
+        let packed = pack_styled(&f, &d, PackStyle::Spheres, &style).unwrap();
+        assert_eq!(packed.points(), base.points());
+        let mut i = 0u32;
+        for r in &d.ranges {
+            let level = r.level as usize;
+            for k in r.first..r.first + r.count {
+                let (pos, radius, albedo) = packed.decode_point(i);
+                let (pos0, radius0, albedo0) = base.decode_point(i);
+                assert_eq!(pos, pos0);
+                if level == last {
+                    let s = f.species()[k as usize] as usize;
+                    let want_r = match s {
+                        0 => 2.0 * 1.5,
+                        1 => 0.0,
+                        _ => radius0 * 1.5,
+                    };
+                    assert!((radius - want_r).abs() < 1e-6, "species {s}: {radius}");
+                    let want_c = match (map, s) {
+                        (Some(m), _) => {
+                            let q = f.attribute().unwrap()[k as usize];
+                            unpack(m.colour(f32::from(q) / 65535.0))
+                        }
+                        (None, 0) => [0.9, 0.1, 0.2],
+                        (None, _) => albedo0,
+                    };
+                    assert_eq!(albedo, want_c);
+                } else {
+                    assert!((radius - radius0 * 1.5).abs() <= 1e-5 * radius0.max(1.0));
+                    let n = &f.nodes()[node_of(&f, level, k as usize)];
+                    let want_c = match map {
+                        Some(m) => {
+                            unpack(m.colour((n.attribute - info.min) / (info.max - info.min)))
+                        }
+                        None => albedo0,
+                    };
+                    assert_eq!(albedo, want_c);
+                }
+                i += 1;
+            }
+        }
+    }
+    let err = pack_styled(
+        &plain,
+        &cut(&plain, &fitted_camera(&plain), 6.0, u64::MAX),
+        PackStyle::Spheres,
+        &PointStyle {
+            colour_map: Some(ColourMap::Magma),
+            ..Default::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("no per-particle attribute"), "{err}");
+}

@@ -1322,3 +1322,53 @@ fn sndf_batches_add_up_to_one_sampling() {
     assert!(!sum.add(&other));
     assert_eq!(sum, before);
 }
+
+/// Hiding a species draws exactly the picture of the data without it (every particle
+/// drawn, the same camera), and a colour map draws a different one.
+#[test]
+fn a_hidden_species_leaves_the_picture_of_the_data_without_it() {
+    use mdlod_render::{PointStyle, SpeciesStyle};
+    let frame = fcc_frame(4);
+    let mut copper = frame.clone();
+    let keep: Vec<bool> = frame.species_index.iter().map(|&s| s == 0).collect();
+    copper.positions = frame
+        .positions
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(p, _)| *p)
+        .collect();
+    copper.species_index = vec![0; copper.positions.len()];
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let (_d2, _p2, g) = make_file(&copper, small_build(), &[]);
+    let (w, h) = (96u32, 72u32);
+    let camera = camera_for(&f, &ViewSpec::default(), w, h).unwrap();
+    let mut o = opts(w, h);
+    o.view = ViewSpec::Camera(camera);
+    o.error_px = 0.0;
+    let (all, _) = render_image(renderer(), &f, &o).unwrap();
+    let (without, _) = render_image(renderer(), &g, &o).unwrap();
+    o.style = PointStyle {
+        species: vec![SpeciesStyle {
+            name: "Ag".into(),
+            hidden: true,
+            ..Default::default()
+        }],
+        ..Default::default()
+    };
+    let (hidden, report) = render_image(renderer(), &f, &o).unwrap();
+    assert_eq!(
+        report.nodes_occluded, 0,
+        "occlusion culling is off for hiding styles"
+    );
+    let differing = |a: &RgbaImage, b: &RgbaImage| {
+        a.data
+            .chunks_exact(4)
+            .zip(b.data.chunks_exact(4))
+            .filter(|(p, q)| (0..3).any(|k| p[k].abs_diff(q[k]) > 2))
+            .count() as f64
+            / f64::from(w * h)
+    };
+    assert!(differing(&all, &without) > 0.01, "silver atoms show");
+    assert!(differing(&hidden, &without) < 0.002);
+}

@@ -95,6 +95,13 @@ pub fn run(args: Args) -> Result<()> {
         binning: super::render::BinningArg::Projected,
         intensity: super::render::Intensity::Species,
         exposure: None,
+        style: super::render::StyleArgs {
+            colour_map: None,
+            radius_scale: 1.0,
+            species_colour: vec![],
+            species_radius: vec![],
+            hide_species: vec![],
+        },
         save_view: None,
     })?;
     Ok(())

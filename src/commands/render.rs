@@ -86,9 +86,100 @@ pub struct Args {
     /// for splats).
     #[arg(long)]
     pub background: Option<String>,
+    #[command(flatten)]
+    pub style: StyleArgs,
     /// Write the camera used as a view file.
     #[arg(long)]
     pub save_view: Option<PathBuf>,
+}
+
+/// The points' look, shared by `render` and `sample` (sphere and S-NDF modes).
+#[derive(clap::Args, Clone, Debug)]
+pub struct StyleArgs {
+    /// Colour the particles by the file's scalar attribute through this colour map
+    /// (clusters by their mean) instead of by species.
+    #[arg(long, value_enum)]
+    pub colour_map: Option<ColourMapArg>,
+    /// Multiply every radius by this (occlusion culling is then off).
+    #[arg(long, default_value_t = 1.0)]
+    pub radius_scale: f32,
+    /// A species' colour, e.g. `Cu=#c87533`; repeatable. Exact for particles; clusters
+    /// keep the mixture stored in the file.
+    #[arg(long = "species-colour", value_name = "NAME=COLOUR")]
+    pub species_colour: Vec<String>,
+    /// A species' radius, e.g. `Ag=1.6`; repeatable.
+    #[arg(long = "species-radius", value_name = "NAME=R")]
+    pub species_radius: Vec<String>,
+    /// Leave out the particles of a species (clusters drawn in their place still
+    /// include them); repeatable.
+    #[arg(long = "hide-species", value_name = "NAME")]
+    pub hide_species: Vec<String>,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ColourMapArg {
+    Viridis,
+    Magma,
+    CoolWarm,
+    Grey,
+}
+
+impl StyleArgs {
+    pub fn style(&self) -> Result<mdlod_render::PointStyle> {
+        use mdlod_render::{ColourMap, SpeciesStyle};
+        let mut species: Vec<SpeciesStyle> = vec![];
+        let mut entry = |name: &str| -> usize {
+            match species.iter().position(|s| s.name == name) {
+                Some(i) => i,
+                None => {
+                    species.push(SpeciesStyle {
+                        name: name.to_string(),
+                        ..Default::default()
+                    });
+                    species.len() - 1
+                }
+            }
+        };
+        let split = |s: &str, what: &str| -> Result<(String, String)> {
+            s.split_once('=')
+                .map(|(a, b)| (a.trim().to_string(), b.trim().to_string()))
+                .with_context(|| format!("{s:?}: expected NAME={what}"))
+        };
+        let mut colours = vec![];
+        for c in &self.species_colour {
+            let (name, colour) = split(c, "COLOUR")?;
+            let rgb = parse_colour(&colour)?.map(mdlod_render::renderer::srgb_to_linear);
+            colours.push((entry(&name), rgb));
+        }
+        let mut radii = vec![];
+        for r in &self.species_radius {
+            let (name, radius) = split(r, "R")?;
+            let v: f32 = radius
+                .parse()
+                .with_context(|| format!("{r:?}: the radius is not a number"))?;
+            radii.push((entry(&name), v));
+        }
+        let hidden: Vec<usize> = self.hide_species.iter().map(|n| entry(n)).collect();
+        for (i, c) in colours {
+            species[i].colour = Some(c);
+        }
+        for (i, r) in radii {
+            species[i].radius = Some(r);
+        }
+        for i in hidden {
+            species[i].hidden = true;
+        }
+        Ok(mdlod_render::PointStyle {
+            species,
+            radius_scale: self.radius_scale,
+            colour_map: self.colour_map.map(|m| match m {
+                ColourMapArg::Viridis => ColourMap::Viridis,
+                ColourMapArg::Magma => ColourMap::Magma,
+                ColourMapArg::CoolWarm => ColourMap::CoolWarm,
+                ColourMapArg::Grey => ColourMap::Grey,
+            }),
+        })
+    }
 }
 
 /// The image size and the camera, shared by `render` and `sample`.
@@ -242,6 +333,7 @@ pub fn run(args: Args) -> Result<()> {
         exposure: args.exposure,
         gpu_memory: args.gpu_memory,
         occlusion: !args.no_occlusion,
+        style: args.style.style()?,
         ..Default::default()
     };
     let r = render_to_png(&args.file, &args.output, &opts)?;

@@ -41,6 +41,8 @@ pub struct Args {
     /// Most spheres to draw.
     #[arg(long, default_value_t = 4_000_000)]
     pub budget: u64,
+    #[command(flatten)]
+    pub style: super::render::StyleArgs,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -55,6 +57,7 @@ pub fn run(args: Args) -> Result<()> {
             bins: args.bins,
             binning: args.binning.binning(),
         },
+        style: args.style.style()?,
         ..Default::default()
     };
     let scale = mdlod_render::level0_scale(

@@ -77,6 +77,9 @@ pub(crate) struct ViewerApp {
     playing: bool,
     last_step: Instant,
     light_index: usize,
+    brush_colour: [f32; 3],
+    brush_radius: f32,
+    environment_path: String,
 }
 
 impl ViewerApp {
@@ -107,6 +110,9 @@ impl ViewerApp {
             playing: false,
             last_step: Instant::now(),
             light_index: 0,
+            brush_colour: [0.9, 0.2, 0.1],
+            brush_radius: 0.15,
+            environment_path: String::new(),
         }
     }
 
@@ -125,6 +131,21 @@ impl ViewerApp {
                 if let Err(e) = ViewFile::from_camera(&self.state.camera).save(path) {
                     self.fail(e.to_string());
                 }
+                return;
+            }
+            Action::Environment { path } => {
+                match path {
+                    None => self.state.settings.environment = None,
+                    Some(p) => match RgbaImage::load_png(p) {
+                        Ok(image) => {
+                            self.state.settings.environment = Some(Arc::new(
+                                mdlod_render::sndf::EnvironmentMap::from_image(&image),
+                            ))
+                        }
+                        Err(e) => return self.fail(e.to_string()),
+                    },
+                }
+                self.dirty.lighting = true;
                 return;
             }
             Action::LoadView { path } => {
@@ -527,16 +548,108 @@ impl ViewerApp {
         }
         let mut explorer = s.explorer.is_some();
         let mut slices = s.explorer.unwrap_or(6);
-        let before = (explorer, slices);
+        let mut disk = s.explorer_disk_deg;
+        let mut tolerance = s.explorer_tolerance_deg;
+        let before = (explorer, slices, disk, tolerance);
         ui.checkbox(&mut explorer, "S-NDF explorer pattern");
         ui.add_enabled(
             explorer,
             egui::Slider::new(&mut slices, 1..=12).text("slices"),
         );
-        if (explorer, slices) != before {
+        ui.add_enabled(
+            explorer,
+            egui::Slider::new(&mut disk, 0.0..=90.0).text("disk °"),
+        );
+        ui.add_enabled(
+            explorer,
+            egui::Slider::new(&mut tolerance, 0.0..=20.0).text("border °"),
+        );
+        if (explorer, slices, disk, tolerance) != before {
             actions.push(Action::Explorer {
                 slices: explorer.then_some(slices),
+                disk_deg: Some(disk),
+                tolerance_deg: Some(tolerance),
             });
+        }
+        ui.label("Paint on the normal disk (S-NDF mode)");
+        ui.horizontal(|ui| {
+            ui.color_edit_button_rgb(&mut self.brush_colour);
+            ui.add(egui::Slider::new(&mut self.brush_radius, 0.02..=0.5).text("brush"));
+        });
+        if let Some(a) = paint_disk(
+            ui,
+            s.transfer.as_deref(),
+            self.brush_colour,
+            self.brush_radius,
+        ) {
+            actions.push(a);
+        }
+        if s.transfer.is_some() && ui.button("clear paint").clicked() {
+            actions.push(Action::ClearPaint);
+        }
+        ui.horizontal(|ui| {
+            ui.label("environment");
+            ui.text_edit_singleline(&mut self.environment_path);
+        });
+        ui.horizontal(|ui| {
+            if ui.button("load").clicked() {
+                actions.push(Action::Environment {
+                    path: Some(PathBuf::from(self.environment_path.trim())),
+                });
+            }
+            if s.environment.is_some() && ui.button("none").clicked() {
+                actions.push(Action::Environment { path: None });
+            }
+        });
+        ui.separator();
+        ui.label("Data");
+        for (name, file_colour) in &self.state.species {
+            let st = s.style.species.iter().find(|t| &t.name == name);
+            let mut visible = !st.is_some_and(|t| t.hidden);
+            let mut colour = st.and_then(|t| t.colour).unwrap_or(*file_colour);
+            ui.horizontal(|ui| {
+                if ui.checkbox(&mut visible, name.as_str()).changed() {
+                    actions.push(Action::SpeciesVisible {
+                        name: name.clone(),
+                        visible,
+                    });
+                }
+                if ui.color_edit_button_rgb(&mut colour).changed() {
+                    actions.push(Action::SpeciesColour {
+                        name: name.clone(),
+                        colour,
+                    });
+                }
+            });
+        }
+        let mut scale = s.style.radius_scale;
+        if ui
+            .add(
+                egui::Slider::new(&mut scale, 0.1..=4.0)
+                    .logarithmic(true)
+                    .text("radius scale"),
+            )
+            .changed()
+        {
+            actions.push(Action::RadiusScale { scale });
+        }
+        if let Some(attribute) = &self.state.attribute {
+            let mut by = s.style.colour_map.is_some();
+            let mut map = s.style.colour_map.unwrap_or_default();
+            let before = (by, map);
+            ui.checkbox(&mut by, format!("colour by {attribute}"));
+            egui::ComboBox::from_id_salt("colour map")
+                .selected_text(map.name())
+                .show_ui(ui, |ui| {
+                    for m in mdlod_render::ColourMap::ALL {
+                        ui.selectable_value(&mut map, m, m.name());
+                    }
+                });
+            if (by, map) != before {
+                actions.push(Action::ColourMap {
+                    map: by.then_some(map),
+                });
+            }
         }
         if self.state.frames.len() > 1 {
             ui.separator();
@@ -664,6 +777,64 @@ fn light_disk(
     None
 }
 
+/// The painting widget: the normal disk showing the painted colours (mid grey where
+/// nothing is painted yet); dragging paints with the brush.
+fn paint_disk(
+    ui: &mut egui::Ui,
+    transfer: Option<&mdlod_render::sndf::TransferImage>,
+    colour: [f32; 3],
+    radius: f32,
+) -> Option<Action> {
+    let size = 120.0;
+    let (rect, response) = ui.allocate_exact_size(egui::vec2(size, size), egui::Sense::drag());
+    let painter = ui.painter_at(rect);
+    let c = rect.center();
+    let r = size * 0.45;
+    // A coarse mosaic of the painted image, inside the disk.
+    let n = 24;
+    let cell = 2.0 * r / n as f32;
+    for j in 0..n {
+        for i in 0..n {
+            let (x, y) = (
+                (i as f32 + 0.5) / n as f32 * 2.0 - 1.0,
+                1.0 - (j as f32 + 0.5) / n as f32 * 2.0,
+            );
+            if x * x + y * y > 1.0 {
+                continue;
+            }
+            let lin = match transfer {
+                Some(t) => {
+                    let z = (1.0 - x * x - y * y).max(0.0).sqrt();
+                    t.colour(mdlod_render::glam::Vec3::new(x, y, z))
+                }
+                None => [0.5; 3],
+            };
+            let px = lin.map(|v| (mdlod_render::renderer::linear_to_srgb(v) * 255.0) as u8);
+            let min = egui::pos2(
+                rect.left() + (size - 2.0 * r) / 2.0,
+                rect.top() + (size - 2.0 * r) / 2.0,
+            ) + egui::vec2(i as f32 * cell, j as f32 * cell);
+            painter.rect_filled(
+                egui::Rect::from_min_size(min, egui::vec2(cell + 0.5, cell + 0.5)),
+                0.0,
+                egui::Color32::from_rgb(px[0], px[1], px[2]),
+            );
+        }
+    }
+    painter.circle_stroke(c, r, egui::Stroke::new(1.0, egui::Color32::GRAY));
+    if response.dragged() || response.clicked() {
+        let p = response.interact_pointer_pos()?;
+        let v = (p - c) / r;
+        return Some(Action::Paint {
+            x: v.x.clamp(-1.0, 1.0),
+            y: (-v.y).clamp(-1.0, 1.0),
+            radius,
+            colour,
+        });
+    }
+    None
+}
+
 impl eframe::App for ViewerApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
@@ -671,7 +842,9 @@ impl eframe::App for ViewerApp {
         egui::Panel::left("controls")
             .resizable(false)
             .exact_size(PANEL_WIDTH)
-            .show(ui, |ui| self.panel(ui));
+            .show(ui, |ui| {
+                egui::ScrollArea::vertical().show(ui, |ui| self.panel(ui));
+            });
         let mut actions = vec![];
         egui::CentralPanel::default()
             .frame(egui::Frame::NONE)

@@ -128,6 +128,13 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     let camera = camera_for(&first, &view, w, h)?;
     let mut state = ViewerState::new(frames, camera, data_bounds(&first), [w, h]);
     state.settings.mode = opts.mode;
+    let meta = first.metadata();
+    state.species = meta
+        .species
+        .iter()
+        .map(|s| (s.name.clone(), s.colour))
+        .collect();
+    state.attribute = meta.attribute.as_ref().map(|a| a.name.clone());
     drop(first);
     // The render thread's device, found before the window opens so that a machine
     // without one gets the renderer's clear error.

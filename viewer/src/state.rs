@@ -6,11 +6,15 @@
 //! render of the same view and settings are the same pixels.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use mdlod_render::camera::{Bounds, Camera, Projection};
 use mdlod_render::glam::Vec3;
-use mdlod_render::sndf::{Binning, Explorer, ShadeLights};
-use mdlod_render::{density::DensitySettings, Lighting, RenderMode, RenderOptions, ViewSpec};
+use mdlod_render::sndf::{Binning, EnvironmentMap, Explorer, ShadeLights, TransferImage};
+use mdlod_render::{
+    density::DensitySettings, ColourMap, Lighting, PointStyle, RenderMode, RenderOptions,
+    SpeciesStyle, ViewSpec,
+};
 use serde::{Deserialize, Serialize};
 
 /// How the view is drawn.
@@ -100,6 +104,12 @@ pub struct Settings {
     pub iso_value: f32,
     pub density_max: f32,
     pub absorption: f32,
+    /// Sphere and S-NDF modes: species colours and visibility, radius scale, colour map.
+    pub style: PointStyle,
+    /// S-NDF mode: a painted transfer function over the normal disk (before the explorer
+    /// and the lights), and an environment map's light.
+    pub transfer: Option<Arc<TransferImage>>,
+    pub environment: Option<Arc<EnvironmentMap>>,
 }
 
 impl Default for Settings {
@@ -128,6 +138,9 @@ impl Default for Settings {
             iso_value: 0.3,
             density_max: 0.8,
             absorption: 0.5,
+            style: PointStyle::default(),
+            transfer: None,
+            environment: None,
         }
     }
 }
@@ -146,7 +159,7 @@ impl Settings {
             diffuse: self.diffuse,
             specular: self.specular,
             shininess: self.shininess,
-            environment: None,
+            environment: self.environment.as_deref().cloned(),
             explorer: self.explorer.map(|slices| Explorer {
                 disk_deg: self.explorer_disk_deg,
                 slices: slices.max(1),
@@ -161,7 +174,7 @@ impl Settings {
                     [0.05, 0.65, 0.7],
                 ],
             }),
-            transfer: None,
+            transfer: self.transfer.as_deref().cloned(),
         }
     }
 
@@ -233,9 +246,30 @@ pub enum Action {
         specular: f32,
         shininess: f32,
     },
-    /// The S-NDF explorer pattern with this many slices, or none.
+    /// The S-NDF explorer pattern with this many slices, or none; optionally the
+    /// central disk's angular radius and the border between slices (degrees).
     Explorer {
         slices: Option<u32>,
+        #[serde(default)]
+        disk_deg: Option<f32>,
+        #[serde(default)]
+        tolerance_deg: Option<f32>,
+    },
+    /// S-NDF mode: paint on the normal disk (x right, y up, in [-1, 1]) with a round
+    /// brush of this radius; the painted disk then colours the normals instead of the
+    /// lights.
+    Paint {
+        x: f32,
+        y: f32,
+        radius: f32,
+        colour: [f32; 3],
+    },
+    /// Back to the lights from a painted disk.
+    ClearPaint,
+    /// An environment map (equirectangular PNG, view space) adding its Lambert light, or
+    /// none.
+    Environment {
+        path: Option<PathBuf>,
     },
     /// Go to timestep `index` (of the data set's frames).
     Frame {
@@ -247,6 +281,24 @@ pub enum Action {
     },
     ScreenError {
         px: f32,
+    },
+    /// A species' colour (linear RGB), by name.
+    SpeciesColour {
+        name: String,
+        colour: [f32; 3],
+    },
+    /// Show or hide a species' particles, by name.
+    SpeciesVisible {
+        name: String,
+        visible: bool,
+    },
+    /// Multiply every radius.
+    RadiusScale {
+        scale: f32,
+    },
+    /// Colour by the scalar attribute through this map, or by species.
+    ColourMap {
+        map: Option<ColourMap>,
     },
     /// S-NDF mode: rays per texel to refine to.
     SndfIterations {
@@ -312,6 +364,9 @@ pub struct ViewerState {
     pub bounds: Bounds,
     /// The window's image size (pixels).
     pub size: [u32; 2],
+    /// The data's species (name, linear colour) and scalar attribute, for the panel.
+    pub species: Vec<(String, [f32; 3])>,
+    pub attribute: Option<String>,
 }
 
 /// One timestep of a data set.
@@ -330,6 +385,8 @@ impl ViewerState {
             frame: 0,
             bounds,
             size,
+            species: vec![],
+            attribute: None,
         }
     }
 
@@ -422,9 +479,42 @@ impl ViewerState {
                 s.shininess = shininess.max(1.0);
                 lighting
             }
-            Action::Explorer { slices } => {
+            Action::Explorer {
+                slices,
+                disk_deg,
+                tolerance_deg,
+            } => {
                 s.explorer = *slices;
+                if let Some(d) = disk_deg.filter(|d| d.is_finite()) {
+                    s.explorer_disk_deg = d.clamp(0.0, 90.0);
+                }
+                if let Some(t) = tolerance_deg.filter(|t| t.is_finite()) {
+                    s.explorer_tolerance_deg = t.clamp(0.0, 45.0);
+                }
                 lighting
+            }
+            Action::Paint {
+                x,
+                y,
+                radius,
+                colour,
+            } => {
+                let t = s.transfer.get_or_insert_with(|| {
+                    Arc::new(TransferImage {
+                        width: PAINT_SIZE,
+                        height: PAINT_SIZE,
+                        colour: vec![[0.5; 3]; (PAINT_SIZE * PAINT_SIZE) as usize],
+                    })
+                });
+                paint(Arc::make_mut(t), *x, *y, *radius, *colour);
+                lighting
+            }
+            Action::ClearPaint => {
+                if s.transfer.take().is_some() {
+                    lighting
+                } else {
+                    Changed::default()
+                }
             }
             Action::Frame { index } => {
                 if *index < self.frames.len() && *index != self.frame {
@@ -446,6 +536,26 @@ impl ViewerState {
                 s.error_px = px.max(0.0);
                 scene
             }
+            Action::SpeciesColour { name, colour } => {
+                style_of(&mut s.style, name).colour = Some(colour.map(|c| c.clamp(0.0, 1.0)));
+                scene
+            }
+            Action::SpeciesVisible { name, visible } => {
+                style_of(&mut s.style, name).hidden = !visible;
+                scene
+            }
+            Action::RadiusScale { scale } => {
+                if scale.is_finite() && *scale > 0.0 {
+                    s.style.radius_scale = *scale;
+                    scene
+                } else {
+                    Changed::default()
+                }
+            }
+            Action::ColourMap { map } => {
+                s.style.colour_map = *map;
+                scene
+            }
             Action::SndfIterations { n } => {
                 s.sndf_iterations = (*n).max(1);
                 scene
@@ -462,6 +572,7 @@ impl ViewerState {
             | Action::LoadView { .. }
             | Action::Screenshot { .. }
             | Action::SaveSndf { .. }
+            | Action::Environment { .. }
             | Action::WaitStill
             | Action::Quit => Changed::default(),
         }
@@ -510,6 +621,7 @@ impl ViewerState {
             },
             lighting: s.sphere_lighting(),
             mode,
+            style: s.style.clone(),
             ..Default::default()
         }
     }
@@ -525,6 +637,44 @@ impl ViewerState {
         }
         o
     }
+}
+
+/// Texels per side of the painted normal disk.
+pub const PAINT_SIZE: u32 = 64;
+
+/// Paints `colour` into `t` with a round brush of `radius` at (x, y) on the normal disk
+/// (x right, y up, in [-1, 1]); the brush's edge blends over one texel.
+pub fn paint(t: &mut TransferImage, x: f32, y: f32, radius: f32, colour: [f32; 3]) {
+    let (w, h) = (t.width as f32, t.height as f32);
+    let (cx, cy) = ((x + 1.0) * 0.5 * w, (1.0 - y) * 0.5 * h);
+    let r = (radius.max(0.0) * 0.5 * w).max(0.5);
+    for j in 0..t.height {
+        for i in 0..t.width {
+            let d = ((i as f32 + 0.5 - cx).powi(2) + (j as f32 + 0.5 - cy).powi(2)).sqrt();
+            let a = (r + 0.5 - d).clamp(0.0, 1.0);
+            if a > 0.0 {
+                let c = &mut t.colour[(j * t.width + i) as usize];
+                for k in 0..3 {
+                    c[k] += (colour[k] - c[k]) * a;
+                }
+            }
+        }
+    }
+}
+
+/// The style entry of species `name`, added when missing.
+fn style_of<'a>(style: &'a mut PointStyle, name: &str) -> &'a mut SpeciesStyle {
+    let i = match style.species.iter().position(|s| s.name == name) {
+        Some(i) => i,
+        None => {
+            style.species.push(SpeciesStyle {
+                name: name.to_string(),
+                ..Default::default()
+            });
+            style.species.len() - 1
+        }
+    };
+    &mut style.species[i]
 }
 
 /// A light direction turned by a drag on the light widget: dx about the view's vertical
@@ -644,6 +794,69 @@ mod tests {
             s.settings.sphere_lighting().direction_view,
             Vec3::new(1.0, 0.0, 0.0)
         );
+    }
+
+    #[test]
+    fn style_actions_reach_the_render_options() {
+        let mut s = state();
+        assert!(
+            s.apply(&Action::SpeciesVisible {
+                name: "Ag".into(),
+                visible: false
+            })
+            .scene
+        );
+        s.apply(&Action::SpeciesColour {
+            name: "Ag".into(),
+            colour: [2.0, 0.5, 0.0],
+        });
+        s.apply(&Action::RadiusScale { scale: 0.5 });
+        assert_eq!(
+            s.apply(&Action::RadiusScale { scale: 0.0 }),
+            Changed::default()
+        );
+        s.apply(&Action::ColourMap {
+            map: Some(ColourMap::Magma),
+        });
+        let o = s.render_options([10, 10]);
+        assert_eq!(o.style.species.len(), 1);
+        assert_eq!(o.style.species[0].colour, Some([1.0, 0.5, 0.0]));
+        assert!(o.style.species[0].hidden);
+        assert_eq!(o.style.radius_scale, 0.5);
+        assert_eq!(o.style.colour_map, Some(ColourMap::Magma));
+    }
+
+    #[test]
+    fn painting_the_normal_disk_makes_a_transfer_function() {
+        let mut s = state();
+        assert!(s.settings.shade_lights().transfer.is_none());
+        let c = s.apply(&Action::Paint {
+            x: 0.5,
+            y: 0.5,
+            radius: 0.2,
+            colour: [1.0, 0.0, 0.0],
+        });
+        assert_eq!(
+            c,
+            Changed {
+                scene: false,
+                lighting: true
+            }
+        );
+        let t = s.settings.shade_lights().transfer.unwrap();
+        // The brush's centre is red, the opposite side of the disk untouched.
+        let n = |x: f32, y: f32| mdlod_render::glam::Vec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+        assert_eq!(t.colour(n(0.5, 0.5)), [1.0, 0.0, 0.0]);
+        assert_eq!(t.colour(n(-0.5, -0.5)), [0.5; 3]);
+        assert!(s.apply(&Action::ClearPaint).lighting);
+        assert!(s.settings.shade_lights().transfer.is_none());
+        s.apply(&Action::Explorer {
+            slices: Some(4),
+            disk_deg: Some(30.0),
+            tolerance_deg: Some(500.0),
+        });
+        let e = s.settings.shade_lights().explorer.unwrap();
+        assert_eq!((e.slices, e.disk_deg, e.tolerance_deg), (4, 30.0, 45.0));
     }
 
     #[test]

@@ -350,7 +350,7 @@ impl Thread {
         };
         let done = p.rays();
         let n = SNDF_BATCH.min(p.target.saturating_sub(done)).max(1);
-        let batch = self.renderer.sample_sndf_from(
+        let batch = self.renderer.sample_sndf_styled(
             &p.file,
             &p.camera,
             &p.draw,
@@ -359,6 +359,7 @@ impl Thread {
                 ..p.settings
             },
             done,
+            &p.opts.style,
         );
         match batch {
             Ok(b) => {
@@ -463,7 +464,7 @@ pub fn sample_progressively(
     while done < iterations {
         let n = SNDF_BATCH.min(iterations - done);
         let batch = renderer
-            .sample_sndf_from(
+            .sample_sndf_styled(
                 file,
                 &camera,
                 &draw,
@@ -472,6 +473,7 @@ pub fn sample_progressively(
                     ..settings
                 },
                 done,
+                &opts.style,
             )
             .map_err(|e| e.to_string())?;
         match &mut sndf {
@@ -503,7 +505,11 @@ fn sndf_setup(
             viewport: [opts.width, opts.height],
             error_px: opts.error_px,
             budget_points: opts.budget.min(renderer.max_points()).max(1),
-            occlusion: OcclusionMode::WholePixels,
+            occlusion: if opts.style.changes_geometry() {
+                OcclusionMode::Off
+            } else {
+                OcclusionMode::WholePixels
+            },
         },
     );
     Ok((

@@ -14,6 +14,7 @@ use glam::{Mat4, Vec3};
 use mdlod_format::{FormatError, MdlodFile};
 
 use crate::error::RenderError;
+use crate::style::{pack_colour, PointStyle};
 use crate::traversal::{representative_radius, DrawList};
 
 /// The shared point decoding (uniforms, bindings, `load_point`) every point pass starts
@@ -265,9 +266,41 @@ pub fn pack_with(
     draw: &DrawList,
     style: PackStyle,
 ) -> Result<PackedDraw, RenderError> {
-    let radius: fn(&mdlod_format::NodeRecord) -> f32 = match style {
-        PackStyle::Spheres => representative_radius,
-        _ => |n| n.area_sum.max(0.0).sqrt(),
+    pack_styled(file, draw, style, &PointStyle::default())
+}
+
+/// [`pack_with`] with the points' look changed by `look` (spheres only; see
+/// [`crate::style`]).
+pub fn pack_styled(
+    file: &MdlodFile,
+    draw: &DrawList,
+    style: PackStyle,
+    look: &PointStyle,
+) -> Result<PackedDraw, RenderError> {
+    let default_look = PointStyle::default();
+    let look = if style == PackStyle::Spheres {
+        look
+    } else {
+        &default_look
+    };
+    look.validate().map_err(RenderError::InvalidOptions)?;
+    let scale = look.radius_scale;
+    let radius = |n: &mdlod_format::NodeRecord| match style {
+        PackStyle::Spheres => representative_radius(n) * scale,
+        _ => n.area_sum.max(0.0).sqrt(),
+    };
+    // Colouring by the attribute: (map, attribute range, quantized values).
+    let mapped = match look.colour_map {
+        Some(map) => {
+            let info = file.metadata().attribute.clone().ok_or_else(|| {
+                RenderError::InvalidOptions(format!(
+                    "{} has no per-particle attribute to colour by",
+                    file.path().display()
+                ))
+            })?;
+            Some((map, info, file.attribute().unwrap_or_default()))
+        }
+        None => None,
     };
     let attribute = match style {
         PackStyle::FluxAttribute => {
@@ -291,11 +324,9 @@ pub fn pack_with(
     let species_count = meta.species.len();
     let mut out = PackedDraw {
         position_bits: bits,
-        species: meta
-            .species
-            .iter()
-            .map(|s| [s.colour[0], s.colour[1], s.colour[2], s.radius])
-            .collect(),
+        species: look
+            .species_table(&meta.species)
+            .map_err(|e| RenderError::InvalidOptions(format!("{}: {e}", file.path().display())))?,
         ..Default::default()
     };
     out.point_range.reserve(draw.points as usize);
@@ -349,6 +380,43 @@ pub fn pack_with(
                 out.attrs.push(intensity.to_bits());
             }
             KIND_INTENSITY
+        } else if let Some((map, info, values)) = &mapped {
+            // Radius and mapped colour per point, as cluster records are.
+            let span = info.max - info.min;
+            if level == last {
+                let sp = &file.species()[first..first + count];
+                for (k, &s) in sp.iter().enumerate() {
+                    let r = out
+                        .species
+                        .get(usize::from(s))
+                        .map(|e| e[3])
+                        .ok_or_else(|| {
+                            RenderError::Format(FormatError::Corrupt {
+                                path: file.path().to_path_buf(),
+                                place: format!("SPECIES, particle {}", first + k),
+                                problem: format!(
+                                    "species index {s} but only {species_count} species"
+                                ),
+                            })
+                        })?;
+                    let q = values.get(first + k).copied().unwrap_or(0);
+                    out.attrs.push(r.to_bits());
+                    out.attrs
+                        .push(pack_colour(map.colour(f32::from(q) / 65535.0)));
+                }
+            } else {
+                let node_first = levels[level].node_first as usize + first;
+                for n in &nodes[node_first..node_first + count] {
+                    let t = if span > 0.0 {
+                        (n.attribute - info.min) / span
+                    } else {
+                        1.0
+                    };
+                    out.attrs.push(radius(n).to_bits());
+                    out.attrs.push(pack_colour(map.colour(t)));
+                }
+            }
+            KIND_NODE
         } else if level == last {
             let sp = &file.species()[first..first + count];
             if let Some(k) = sp.iter().position(|&s| usize::from(s) >= species_count) {

@@ -1,0 +1,285 @@
+//! How particles look beyond the file's species table: per-species colours, radii and
+//! visibility, a global radius scale, and colouring by the scalar attribute through a
+//! colour map.
+//!
+//! How it works: the style is applied when a cut is packed for the GPU (see
+//! [`crate::passes::sphere_raycast::pack_styled`]), so no shader changes and no
+//! particle data is rewritten. Particles take their species' styled colour and radius,
+//! or, with a colour map, the map's colour of their own attribute value (they are then
+//! packed like cluster records: radius and colour per point). Clusters take the map's
+//! colour of their area-weighted mean attribute, and their coverage radius times the
+//! radius scale; their colour is otherwise the mixture baked into the file, so
+//! per-species colours and hiding are exact at the particle level only, and a cluster
+//! drawn in place of a hidden species' particles still shows them. Styles that change
+//! sizes or hide particles turn occlusion culling off (it assumes the file's radii).
+
+use serde::{Deserialize, Serialize};
+
+/// One species' look, by its name in the file (each `None` keeps the file's value).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SpeciesStyle {
+    pub name: String,
+    /// Linear RGB albedo.
+    pub colour: Option<[f32; 3]>,
+    pub radius: Option<f32>,
+    pub hidden: bool,
+}
+
+/// Colour maps for the scalar attribute (perceptually ordered, from low to high).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ColourMap {
+    #[default]
+    Viridis,
+    Magma,
+    /// Blue through white to red, for signed quantities.
+    CoolWarm,
+    Grey,
+}
+
+impl ColourMap {
+    pub const ALL: [ColourMap; 4] = [
+        ColourMap::Viridis,
+        ColourMap::Magma,
+        ColourMap::CoolWarm,
+        ColourMap::Grey,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ColourMap::Viridis => "viridis",
+            ColourMap::Magma => "magma",
+            ColourMap::CoolWarm => "cool-warm",
+            ColourMap::Grey => "grey",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<ColourMap> {
+        ColourMap::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// sRGB control points, evenly spaced over [0, 1].
+    fn stops(self) -> &'static [[f32; 3]] {
+        match self {
+            ColourMap::Viridis => &[
+                [0.267, 0.005, 0.329],
+                [0.283, 0.141, 0.458],
+                [0.254, 0.265, 0.530],
+                [0.207, 0.372, 0.553],
+                [0.164, 0.471, 0.558],
+                [0.128, 0.567, 0.551],
+                [0.135, 0.659, 0.518],
+                [0.267, 0.749, 0.441],
+                [0.478, 0.821, 0.319],
+                [0.741, 0.873, 0.150],
+                [0.993, 0.906, 0.144],
+            ],
+            ColourMap::Magma => &[
+                [0.001, 0.000, 0.014],
+                [0.078, 0.054, 0.212],
+                [0.232, 0.060, 0.438],
+                [0.390, 0.100, 0.502],
+                [0.550, 0.161, 0.506],
+                [0.716, 0.215, 0.475],
+                [0.868, 0.288, 0.409],
+                [0.967, 0.439, 0.360],
+                [0.994, 0.624, 0.427],
+                [0.995, 0.812, 0.573],
+                [0.987, 0.991, 0.750],
+            ],
+            ColourMap::CoolWarm => &[
+                [0.230, 0.299, 0.754],
+                [0.552, 0.690, 0.996],
+                [0.865, 0.865, 0.865],
+                [0.958, 0.604, 0.483],
+                [0.706, 0.016, 0.150],
+            ],
+            ColourMap::Grey => &[[0.1, 0.1, 0.1], [0.95, 0.95, 0.95]],
+        }
+    }
+
+    /// The linear RGB colour at `t` in [0, 1] (clamped; NaN maps to 0).
+    pub fn colour(self, t: f32) -> [f32; 3] {
+        let stops = self.stops();
+        let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+        let x = t * (stops.len() - 1) as f32;
+        let i = (x.floor() as usize).min(stops.len() - 2);
+        let f = x - i as f32;
+        let (a, b) = (stops[i], stops[i + 1]);
+        [0, 1, 2].map(|k| crate::renderer::srgb_to_linear(a[k] + (b[k] - a[k]) * f))
+    }
+}
+
+/// The look of the points of a cut.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PointStyle {
+    /// Species named here change; the others keep the file's look.
+    pub species: Vec<SpeciesStyle>,
+    /// Multiplies every radius, particles' and clusters'.
+    pub radius_scale: f32,
+    /// Colour by the scalar attribute instead of by species.
+    pub colour_map: Option<ColourMap>,
+}
+
+impl Default for PointStyle {
+    fn default() -> Self {
+        PointStyle {
+            species: vec![],
+            radius_scale: 1.0,
+            colour_map: None,
+        }
+    }
+}
+
+impl PointStyle {
+    /// True when the style draws points at other sizes than the file's or hides some:
+    /// occlusion culling, which assumes the file's radii, must then be off.
+    pub fn changes_geometry(&self) -> bool {
+        self.radius_scale != 1.0 || self.species.iter().any(|s| s.hidden || s.radius.is_some())
+    }
+
+    /// The species table (linear colour, radius) after styling; hidden species get
+    /// radius 0, which draws nothing. A style naming a species the file lacks is an
+    /// error that lists the file's species.
+    pub fn species_table(
+        &self,
+        species: &[mdlod_format::meta::Species],
+    ) -> Result<Vec<[f32; 4]>, String> {
+        if let Some(st) = self
+            .species
+            .iter()
+            .find(|st| !species.iter().any(|s| s.name == st.name))
+        {
+            let names: Vec<&str> = species.iter().map(|s| s.name.as_str()).collect();
+            return Err(format!(
+                "no species named {:?} (the file has {})",
+                st.name,
+                names.join(", ")
+            ));
+        }
+        Ok(species
+            .iter()
+            .map(|s| {
+                let st = self
+                    .species
+                    .iter()
+                    .rfind(|st| st.name == s.name)
+                    .cloned()
+                    .unwrap_or_default();
+                let c = st.colour.unwrap_or(s.colour);
+                let r = if st.hidden {
+                    0.0
+                } else {
+                    st.radius.unwrap_or(s.radius) * self.radius_scale
+                };
+                [c[0], c[1], c[2], r]
+            })
+            .collect())
+    }
+
+    /// Checks the numbers.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.radius_scale.is_finite() && self.radius_scale > 0.0) {
+            return Err(format!(
+                "radius scale {} (must be positive)",
+                self.radius_scale
+            ));
+        }
+        for s in &self.species {
+            if s.radius.is_some_and(|r| !(r.is_finite() && r > 0.0)) {
+                return Err(format!(
+                    "species {}: radius {:?} (must be positive)",
+                    s.name, s.radius
+                ));
+            }
+            if s.colour.is_some_and(|c| {
+                c.iter()
+                    .any(|v| !(v.is_finite() && (0.0..=1.0).contains(v)))
+            }) {
+                return Err(format!(
+                    "species {}: colour {:?} (each channel in [0, 1])",
+                    s.name, s.colour
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Packs a linear RGB colour as the file's node colours are: RGBA8, R in the low byte.
+pub fn pack_colour(c: [f32; 3]) -> u32 {
+    let b = c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32);
+    b[0] | (b[1] << 8) | (b[2] << 16) | (255 << 24)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colour_maps_run_from_their_first_to_their_last_stop() {
+        for m in ColourMap::ALL {
+            let s = m.stops();
+            let lin = |c: [f32; 3]| c.map(crate::renderer::srgb_to_linear);
+            let close = |a: [f32; 3], b: [f32; 3]| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-6);
+            assert!(close(m.colour(0.0), lin(s[0])));
+            assert!(close(m.colour(1.0), lin(s[s.len() - 1])));
+            assert_eq!(m.colour(-3.0), m.colour(0.0));
+            assert_eq!(m.colour(f32::NAN), m.colour(0.0));
+            assert_eq!(ColourMap::from_name(m.name()), Some(m));
+        }
+        // Viridis grows in lightness.
+        let luma = |c: [f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        let l: Vec<f32> = (0..=10)
+            .map(|i| luma(ColourMap::Viridis.colour(i as f32 / 10.0)))
+            .collect();
+        assert!(l.windows(2).all(|w| w[1] > w[0]), "{l:?}");
+    }
+
+    #[test]
+    fn the_species_table_takes_overrides_scale_and_hiding() {
+        let sp = |name: &str, r: f32| mdlod_format::meta::Species {
+            name: name.into(),
+            radius: r,
+            colour: [0.5, 0.5, 0.5],
+        };
+        let style = PointStyle {
+            species: vec![
+                SpeciesStyle {
+                    name: "A".into(),
+                    colour: Some([1.0, 0.0, 0.0]),
+                    radius: None,
+                    hidden: false,
+                },
+                SpeciesStyle {
+                    name: "B".into(),
+                    hidden: true,
+                    ..Default::default()
+                },
+            ],
+            radius_scale: 2.0,
+            colour_map: None,
+        };
+        let file = [sp("A", 1.0), sp("B", 1.5), sp("C", 0.5)];
+        let t = style.species_table(&file).unwrap();
+        assert_eq!(
+            t,
+            vec![
+                [1.0, 0.0, 0.0, 2.0],
+                [0.5, 0.5, 0.5, 0.0],
+                [0.5, 0.5, 0.5, 1.0]
+            ]
+        );
+        let err = style.species_table(&file[1..]).unwrap_err();
+        assert!(err.contains("\"A\"") && err.contains("B, C"), "{err}");
+        assert!(style.changes_geometry());
+        assert!(!PointStyle::default().changes_geometry());
+        assert!(PointStyle {
+            radius_scale: 0.0,
+            ..Default::default()
+        }
+        .validate()
+        .is_err());
+        assert_eq!(pack_colour([1.0, 0.0, 0.5]), 0xff80_00ff);
+    }
+}
