@@ -28,7 +28,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use mdlod_format::MdlodFile;
-use mdlod_render::{camera_for, data_bounds, BackendChoice, GpuContext, ViewSpec};
+use mdlod_render::{camera_for, data_bounds, BackendChoice, ViewSpec};
 
 pub use state::{Action, FrameInfo, Mode, ViewerState};
 
@@ -136,9 +136,16 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         .collect();
     state.attribute = meta.attribute.as_ref().map(|a| a.name.clone());
     drop(first);
-    // The render thread's device, found before the window opens so that a machine
-    // without one gets the renderer's clear error.
-    let ctx = GpuContext::with_backends(opts.backends)?;
+    // The render thread and its device start before the window opens, so that a
+    // machine without a device gets the renderer's clear error. Its replies wake the
+    // window once there is one.
+    let window: Arc<Mutex<Option<eframe::egui::Context>>> = Arc::new(Mutex::new(None));
+    let wake = window.clone();
+    let worker = worker::Worker::start(opts.backends, move || {
+        if let Some(ctx) = wake.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
+            ctx.request_repaint();
+        }
+    })?;
     let outcome = Arc::new(Mutex::new(None));
     let result = outcome.clone();
     let native = eframe::NativeOptions {
@@ -153,8 +160,7 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         &title,
         native,
         Box::new(move |cc| {
-            let egui_ctx = cc.egui_ctx.clone();
-            let worker = worker::Worker::start(ctx, move || egui_ctx.request_repaint())?;
+            *window.lock().unwrap_or_else(|e| e.into_inner()) = Some(cc.egui_ctx.clone());
             Ok(Box::new(app::ViewerApp::new(
                 state, worker, script, outcome,
             )))

@@ -19,8 +19,8 @@ use std::time::Instant;
 use mdlod_format::MdlodFile;
 use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
 use mdlod_render::{
-    camera_for, render_image, traverse, GpuContext, OcclusionMode, RenderMode, RenderOptions,
-    Renderer, RgbaImage, TraversalSettings, ViewFile,
+    camera_for, render_image, traverse, BackendChoice, GpuContext, OcclusionMode, RenderError,
+    RenderMode, RenderOptions, Renderer, RgbaImage, TraversalSettings, ViewFile,
 };
 
 /// Iterations in each progressive S-NDF batch.
@@ -117,19 +117,32 @@ pub struct Worker {
 }
 
 impl Worker {
-    /// Starts the render thread on its own GPU device. `wake` is called after each reply
-    /// (the window repaints).
+    /// Starts the render thread, which opens its own GPU device (on `backends`) and
+    /// keeps it: the device is created, used and dropped on that one thread, which some
+    /// drivers need. Returns the device's error when there is none. `wake` is called
+    /// after each reply (the window repaints).
     pub fn start(
-        ctx: GpuContext,
+        backends: BackendChoice,
         wake: impl Fn() + Send + 'static,
-    ) -> Result<Worker, std::io::Error> {
+    ) -> Result<Worker, RenderError> {
         let (tx, requests) = channel();
         let (replies, rx) = channel();
+        let (ready_tx, ready) = channel();
         let sampled = Arc::new(std::sync::atomic::AtomicU64::new(0));
         let counter = sampled.clone();
         let thread = std::thread::Builder::new()
             .name("mdlod render".into())
             .spawn(move || {
+                let ctx = match GpuContext::with_backends(backends) {
+                    Ok(c) => {
+                        let _ = ready_tx.send(Ok(()));
+                        c
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return;
+                    }
+                };
                 let mut state = Thread {
                     renderer: Renderer::new(ctx),
                     files: HashMap::new(),
@@ -139,7 +152,19 @@ impl Worker {
                     counter,
                 };
                 state.run(requests);
+            })
+            .map_err(|e| {
+                RenderError::InvalidOptions(format!("cannot start the render thread: {e}"))
             })?;
+        let started = ready.recv().unwrap_or_else(|_| {
+            Err(RenderError::InvalidOptions(
+                "the render thread ended before opening a device".into(),
+            ))
+        });
+        if let Err(e) = started {
+            let _ = thread.join();
+            return Err(e);
+        }
         Ok(Worker {
             tx,
             rx,

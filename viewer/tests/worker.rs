@@ -90,7 +90,7 @@ fn sndfs_refine_while_still_and_relight_without_sampling() {
     let mut s = state(&path, [64, 48]);
     s.apply(&Action::Mode { mode: Mode::Sndf });
     s.settings.sndf_iterations = 3 * SNDF_BATCH;
-    let w = Worker::start(GpuContext::with_backends(backends()).unwrap(), || {}).unwrap();
+    let w = Worker::start(backends(), || {}).unwrap();
     render(&w, &s, 1);
     // Refinement goes on by itself, batch after batch, until the target.
     let mut spps = vec![];
@@ -142,7 +142,7 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
     let dir = tempfile::tempdir().unwrap();
     let path = make_file(dir.path());
     let mut s = state(&path, [80, 60]);
-    let w = Worker::start(GpuContext::with_backends(backends()).unwrap(), || {}).unwrap();
+    let w = Worker::start(backends(), || {}).unwrap();
     // Three requests at once: only the last is drawn.
     for (id, dx) in [(1, 10.0), (2, 20.0), (3, 30.0)] {
         s.apply(&Action::Orbit { dx, dy: 0.0 });
