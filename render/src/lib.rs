@@ -287,8 +287,9 @@ pub fn camera_for(
     })
 }
 
-/// The camera, traversal and frame settings `opts` asks for, checked.
-fn frame_setup(
+/// The camera, traversal and frame settings `opts` asks for, checked (for callers that
+/// drive a [`StreamingRenderer`] themselves, like the viewer).
+pub fn frame_setup(
     renderer: &Renderer,
     file: &MdlodFile,
     opts: &RenderOptions,

@@ -173,6 +173,16 @@ fn load_page(file: &MdlodFile, id: PageId, page_points: u32) -> LoadedPage {
 }
 
 impl<'r> StreamingRenderer<'r> {
+    /// Frames drawn so far.
+    pub fn frames_drawn(&self) -> u64 {
+        self.frame
+    }
+
+    /// The file streamed.
+    pub fn file(&self) -> &Arc<MdlodFile> {
+        &self.file
+    }
+
     /// A pool of at most `pool_bytes` of GPU memory (at least one page, at most what one
     /// storage binding holds) for `file`, with pages of [`PAGE_POINTS`] points.
     pub fn new(

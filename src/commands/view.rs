@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Result;
+use mdlod_viewer::worker::GpuMemory;
 use mdlod_viewer::{Mode, ViewerOptions};
 
 /// Open a .mdlod file, or a batch directory with dataset.json, in a window: orbit (left
@@ -30,6 +31,11 @@ pub struct Args {
     /// screenshot, save_sndf, save_view, ...), then close; any error fails the command.
     #[arg(long)]
     pub script: Option<PathBuf>,
+    /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G); `0`
+    /// uploads each frame's cut instead. Default: a 512 MiB pool for files larger than
+    /// that, direct otherwise.
+    #[arg(long, value_parser = super::render::parse_bytes)]
+    pub gpu_memory: Option<u64>,
     /// Longest a script may run, seconds.
     #[arg(long, default_value_t = 600)]
     pub script_timeout: u64,
@@ -60,6 +66,11 @@ pub fn run(args: Args) -> Result<()> {
         view: args.view,
         mode,
         backends: mdlod_render::BackendChoice::FromEnv,
+        gpu_memory: match args.gpu_memory {
+            None => GpuMemory::Auto(512 << 20),
+            Some(0) => GpuMemory::Direct,
+            Some(b) => GpuMemory::Pool(b),
+        },
         script: args.script,
         script_timeout: Duration::from_secs(args.script_timeout),
     })?;

@@ -697,6 +697,11 @@ impl ViewerApp {
                     t.particles, t.representatives, t.error_px
                 ));
                 ui.label(format!("GPU {:.0} MiB ({})", mib(t.gpu_bytes), t.adapter));
+                if let Some((resident, capacity, pending)) = t.streaming {
+                    ui.label(format!(
+                        "streaming: {resident} of {capacity} pages resident, {pending} loading"
+                    ));
+                }
             }
             None => {
                 ui.label("loading…");

@@ -59,6 +59,8 @@ pub struct ViewerOptions {
     pub view: Option<PathBuf>,
     pub mode: Mode,
     pub backends: BackendChoice,
+    /// Sphere frames through a fixed GPU page pool, or each frame's cut uploaded.
+    pub gpu_memory: worker::GpuMemory,
     /// Play these actions, then close; the first error fails the run.
     pub script: Option<PathBuf>,
     /// Longest a script may run.
@@ -141,7 +143,7 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     // window once there is one.
     let window: Arc<Mutex<Option<eframe::egui::Context>>> = Arc::new(Mutex::new(None));
     let wake = window.clone();
-    let worker = worker::Worker::start(opts.backends, move || {
+    let worker = worker::Worker::start(opts.backends, opts.gpu_memory, move || {
         if let Some(ctx) = wake.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
             ctx.request_repaint();
         }

@@ -66,6 +66,8 @@ pub struct FrameStats {
     pub error_px: f32,
     pub gpu_bytes: u64,
     pub adapter: String,
+    /// Streaming: pages resident, pages the pool holds, page loads in flight.
+    pub streaming: Option<(usize, usize, usize)>,
 }
 
 /// What the render thread sends back.
@@ -123,6 +125,7 @@ impl Worker {
     /// after each reply (the window repaints).
     pub fn start(
         backends: BackendChoice,
+        gpu_memory: GpuMemory,
         wake: impl Fn() + Send + 'static,
     ) -> Result<Worker, RenderError> {
         let (tx, requests) = channel();
@@ -143,8 +146,11 @@ impl Worker {
                         return;
                     }
                 };
+                let renderer = Renderer::new(ctx);
                 let mut state = Thread {
-                    renderer: Renderer::new(ctx),
+                    renderer: &renderer,
+                    gpu_memory,
+                    stream: None,
                     files: HashMap::new(),
                     progressive: None,
                     replies,
@@ -193,8 +199,30 @@ impl Drop for Worker {
     }
 }
 
-struct Thread {
-    renderer: Renderer,
+/// When sphere frames stream node data through a fixed GPU pool instead of uploading
+/// each frame's cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GpuMemory {
+    /// Upload each frame's cut (within the sphere budget).
+    Direct,
+    /// A pool of this many bytes, least recently used pages evicted.
+    Pool(u64),
+    /// A pool of this many bytes for files larger than the pool, else direct.
+    Auto(u64),
+}
+
+/// A streamed view still filling in.
+struct Streaming<'r> {
+    path: PathBuf,
+    renderer: mdlod_render::StreamingRenderer<'r>,
+    /// The request being refined: id, options.
+    pending: Option<(u64, RenderOptions)>,
+}
+
+struct Thread<'r> {
+    renderer: &'r Renderer,
+    gpu_memory: GpuMemory,
+    stream: Option<Streaming<'r>>,
     files: HashMap<PathBuf, Arc<MdlodFile>>,
     progressive: Option<Progressive>,
     replies: Sender<Reply>,
@@ -202,7 +230,7 @@ struct Thread {
     counter: Arc<std::sync::atomic::AtomicU64>,
 }
 
-impl Thread {
+impl<'r> Thread<'r> {
     fn reply(&self, r: Reply) {
         self.counter.store(
             self.renderer.points_sampled(),
@@ -233,12 +261,17 @@ impl Thread {
                 let refining = self
                     .progressive
                     .as_ref()
-                    .is_some_and(|p| p.rays() < p.target);
+                    .is_some_and(|p| p.rays() < p.target)
+                    || self.stream.as_ref().is_some_and(|s| s.pending.is_some());
                 if refining {
                     match requests.try_recv() {
                         Ok(r) => pending.push(r),
                         Err(TryRecvError::Empty) => {
-                            self.refine_step();
+                            if self.stream.as_ref().is_some_and(|s| s.pending.is_some()) {
+                                self.stream_step();
+                            } else {
+                                self.refine_step();
+                            }
                             continue;
                         }
                         Err(TryRecvError::Disconnected) => return,
@@ -323,7 +356,7 @@ impl Thread {
                 return;
             }
             self.progressive = None;
-            match sndf_setup(&self.renderer, &file, &opts) {
+            match sndf_setup(self.renderer, &file, &opts) {
                 Ok((camera, draw, settings)) => {
                     self.progressive = Some(Progressive {
                         id,
@@ -343,7 +376,20 @@ impl Thread {
             }
             return;
         }
-        match render_image(&self.renderer, &file, &opts) {
+        if opts.mode == RenderMode::Spheres && opts.style == Default::default() {
+            let pool = match self.gpu_memory {
+                GpuMemory::Direct => None,
+                GpuMemory::Pool(b) => Some(b),
+                GpuMemory::Auto(b) => std::fs::metadata(path)
+                    .is_ok_and(|m| m.len() > b)
+                    .then_some(b),
+            };
+            if let Some(pool) = pool {
+                return self.stream_start(id, path, file, opts, pool);
+            }
+        }
+        self.stream = None;
+        match render_image(self.renderer, &file, &opts) {
             Ok((image, report)) => {
                 let stats = FrameStats {
                     frame_ms: t0.elapsed().as_secs_f32() * 1e3,
@@ -354,6 +400,7 @@ impl Thread {
                     error_px: report.error_px,
                     gpu_bytes: report.gpu_data_bytes + report.gpu_target_bytes,
                     adapter: report.adapter.clone(),
+                    streaming: None,
                 };
                 self.reply(Reply::Image {
                     id,
@@ -364,6 +411,86 @@ impl Thread {
                 });
             }
             Err(e) => self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+        }
+    }
+
+    /// Draws a streamed view: what is resident now, asking for the rest; later steps
+    /// draw again as pages arrive, until the view is complete.
+    fn stream_start(
+        &mut self,
+        id: u64,
+        path: &Path,
+        file: Arc<MdlodFile>,
+        opts: RenderOptions,
+        pool: u64,
+    ) {
+        if self.stream.as_ref().is_none_or(|s| s.path != path) {
+            match mdlod_render::StreamingRenderer::new(self.renderer, file, pool) {
+                Ok(r) => {
+                    self.stream = Some(Streaming {
+                        path: path.to_path_buf(),
+                        renderer: r,
+                        pending: None,
+                    })
+                }
+                Err(e) => return self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+            }
+        }
+        if let Some(s) = self.stream.as_mut() {
+            s.pending = Some((id, opts));
+        }
+        self.stream_step();
+    }
+
+    /// One streamed frame of the pending view.
+    fn stream_step(&mut self) {
+        let t0 = Instant::now();
+        let Some(s) = self.stream.as_mut() else {
+            return;
+        };
+        let Some((id, opts)) = s.pending.clone() else {
+            return;
+        };
+        if s.renderer.frames_drawn() > 0 {
+            // Give the loader a moment when the last frame asked for pages.
+            s.renderer
+                .wait_for_loads(std::time::Duration::from_millis(50));
+        }
+        let file = s.renderer.file().clone();
+        let frame = mdlod_render::frame_setup(self.renderer, &file, &opts).and_then(
+            |(camera, traversal, settings)| s.renderer.render(&camera, &traversal, &settings),
+        );
+        match frame {
+            Ok((frame, draw, stats)) => {
+                let settled = stats.complete
+                    || (stats.installed == 0 && stats.requested == 0 && stats.pending == 0);
+                if settled {
+                    s.pending = None;
+                }
+                let stats = FrameStats {
+                    frame_ms: t0.elapsed().as_secs_f32() * 1e3,
+                    gpu_ms: frame.gpu_time.map(|d| d.as_secs_f32() * 1e3),
+                    spp: opts.spp,
+                    particles: draw.particles,
+                    representatives: draw.representatives,
+                    error_px: draw.error_px,
+                    gpu_bytes: frame.gpu_data_bytes + frame.gpu_target_bytes,
+                    adapter: self.renderer.ctx.adapter_name().to_string(),
+                    streaming: Some((stats.resident_pages, stats.capacity_pages, stats.pending)),
+                };
+                self.reply(Reply::Image {
+                    id,
+                    image: frame.image,
+                    stats,
+                    interactive: false,
+                    refined: settled,
+                });
+            }
+            Err(e) => {
+                let path = s.path.display().to_string();
+                self.stream = None;
+                self.reply(Reply::Error(format!("{path}: {e}")));
+            }
         }
     }
 
@@ -422,6 +549,7 @@ impl Thread {
             error_px: p.draw.error_px,
             gpu_bytes: sndf.hist.len() as u64 * 16,
             adapter: self.renderer.ctx.adapter_name().to_string(),
+            streaming: None,
         };
         let reply = Reply::Image {
             id: p.id,
@@ -445,11 +573,11 @@ impl Thread {
         let file = self.file(path)?;
         let image = match opts.mode {
             RenderMode::Sndf { iterations, .. } => {
-                let (sndf, _) = sample_progressively(&self.renderer, &file, opts, iterations)?;
+                let (sndf, _) = sample_progressively(self.renderer, &file, opts, iterations)?;
                 sndf.shade_with(shade, opts.background)
             }
             _ => {
-                render_image(&self.renderer, &file, opts)
+                render_image(self.renderer, &file, opts)
                     .map_err(|e| format!("{}: {e}", path.display()))?
                     .0
             }

@@ -9,7 +9,7 @@ use mdlod_preprocess::convert::{convert_frame, ConvertOptions};
 use mdlod_preprocess::{Frame, NoProgress, SpeciesName};
 use mdlod_render::{camera_for, render_image, BackendChoice, GpuContext, Renderer, RgbaImage};
 use mdlod_viewer::state::{Action, FrameInfo, Mode, ViewerState};
-use mdlod_viewer::worker::{Reply, Request, Worker, SNDF_BATCH};
+use mdlod_viewer::worker::{GpuMemory, Reply, Request, Worker, SNDF_BATCH};
 
 fn backends() -> BackendChoice {
     BackendChoice::FromEnv
@@ -90,7 +90,7 @@ fn sndfs_refine_while_still_and_relight_without_sampling() {
     let mut s = state(&path, [64, 48]);
     s.apply(&Action::Mode { mode: Mode::Sndf });
     s.settings.sndf_iterations = 3 * SNDF_BATCH;
-    let w = Worker::start(backends(), || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
     render(&w, &s, 1);
     // Refinement goes on by itself, batch after batch, until the target.
     let mut spps = vec![];
@@ -142,7 +142,7 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
     let dir = tempfile::tempdir().unwrap();
     let path = make_file(dir.path());
     let mut s = state(&path, [80, 60]);
-    let w = Worker::start(backends(), || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
     // Three requests at once: only the last is drawn.
     for (id, dx) in [(1, 10.0), (2, 20.0), (3, 30.0)] {
         s.apply(&Action::Orbit { dx, dy: 0.0 });
@@ -172,4 +172,43 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
     }
     render(&w, &s, 5);
     assert_eq!(next_image(&w).0, 5);
+}
+
+/// With a GPU pool, sphere frames stream: the first image comes from what is resident,
+/// later ones refine as pages arrive, and the last equals the direct render.
+#[test]
+fn streamed_frames_refine_to_the_direct_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let mut s = state(&path, [80, 60]);
+    s.apply(&Action::Orbit { dx: 25.0, dy: 10.0 });
+    let w = Worker::start(backends(), GpuMemory::Pool(64 << 20), || {}).unwrap();
+    render(&w, &s, 1);
+    let mut frames = 0;
+    let last = loop {
+        match w.rx.recv_timeout(Duration::from_secs(120)).unwrap() {
+            Reply::Image {
+                id,
+                image,
+                stats,
+                refined,
+                ..
+            } => {
+                assert_eq!(id, 1);
+                frames += 1;
+                let (resident, capacity, _) = stats.streaming.expect("a streamed frame");
+                assert!(resident <= capacity);
+                if refined {
+                    break image;
+                }
+            }
+            Reply::Error(e) => panic!("{e}"),
+            Reply::Written { .. } => panic!("nothing was asked to be written"),
+        }
+    };
+    assert!(frames >= 2, "the first frame had nothing resident yet");
+    let renderer = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    let f = mdlod_format::MdlodFile::open(&path).unwrap();
+    let (direct, _) = render_image(&renderer, &f, &s.render_options([80, 60])).unwrap();
+    assert_eq!(last.data, direct.data);
 }
