@@ -193,6 +193,40 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
         ],
         &env,
     );
+    // An error in a script ends it at once and fails the command, naming the cause.
+    let bad = d.join("bad-session.json");
+    std::fs::write(
+        &bad,
+        serde_json::json!([
+            {"action": "load_view", "path": p("missing-view.json")},
+            {"action": "wait_still"},
+            {"action": "pause", "seconds": 600}
+        ])
+        .to_string(),
+    )
+    .unwrap();
+    let t0 = Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args([
+            "view",
+            &p("runs"),
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--script",
+        ])
+        .arg(&bad)
+        .envs(env.iter().copied())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("missing-view.json"), "{err}");
+    assert!(
+        t0.elapsed() < Duration::from_secs(120),
+        "the failed script did not end"
+    );
     drop(x);
 
     let start = png(&d.join("start.png"));

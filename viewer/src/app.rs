@@ -18,7 +18,7 @@ use crate::state::{adapt_error, Action, Changed, Mode, ViewerState};
 use crate::worker::{FrameStats, Reply, Request, Worker};
 
 /// Width of the control panel left of the image (logical pixels).
-pub(crate) const PANEL_WIDTH: f32 = 240.0;
+pub(crate) const PANEL_WIDTH: f32 = 270.0;
 
 /// Input this recent makes a frame a quick preview.
 const MOVING: Duration = Duration::from_millis(150);
@@ -54,6 +54,8 @@ enum Wait {
     Refined(Action),
     /// Until the render thread has written this many files.
     Writes,
+    /// Until this moment.
+    Until(Instant),
 }
 
 pub(crate) struct ViewerApp {
@@ -271,6 +273,18 @@ impl ViewerApp {
 
     /// Runs the script's next step; returns true while it has work left.
     fn step_script(&mut self, ctx: &egui::Context) -> bool {
+        if self.script.is_some()
+            && self
+                .outcome
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .is_some()
+        {
+            // The first error ends the script (the command then fails with it).
+            self.script = None;
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return false;
+        }
         let Some(script) = self.script.as_mut() else {
             return false;
         };
@@ -288,6 +302,12 @@ impl ViewerApp {
             Some(Wait::Writes) => {
                 if self.pending_writes > 0 {
                     self.wait(Wait::Writes);
+                }
+                return true;
+            }
+            Some(Wait::Until(t)) => {
+                if Instant::now() < t {
+                    self.wait(Wait::Until(t));
                 }
                 return true;
             }
@@ -330,6 +350,10 @@ impl ViewerApp {
             }
             Action::Quit => {
                 script.actions.clear();
+            }
+            Action::Pause { seconds } => {
+                let d = Duration::from_secs_f32(seconds.clamp(0.0, 3600.0));
+                script.waiting = Some(Wait::Until(Instant::now() + d));
             }
             // Camera moves count as the user's: previews first, then the refined view.
             other => self.act(other, true),
@@ -697,6 +721,9 @@ impl ViewerApp {
                     t.particles, t.representatives, t.error_px
                 ));
                 ui.label(format!("GPU {:.0} MiB ({})", mib(t.gpu_bytes), t.adapter));
+                if let Some(b) = t.bins {
+                    ui.label(format!("S-NDF {b}×{b} bins"));
+                }
                 if let Some((resident, capacity, pending)) = t.streaming {
                     ui.label(format!(
                         "streaming: {resident} of {capacity} pages resident, {pending} loading"

@@ -334,6 +334,10 @@ pub enum Action {
     },
     /// Wait until the view is refined.
     WaitStill,
+    /// Keep the window as it is for this many seconds (demonstrations, captures).
+    Pause {
+        seconds: f32,
+    },
     Quit,
 }
 
@@ -574,6 +578,7 @@ impl ViewerState {
             | Action::SaveSndf { .. }
             | Action::Environment { .. }
             | Action::WaitStill
+            | Action::Pause { .. }
             | Action::Quit => Changed::default(),
         }
     }

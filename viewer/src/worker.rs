@@ -68,6 +68,9 @@ pub struct FrameStats {
     pub adapter: String,
     /// Streaming: pages resident, pages the pool holds, page loads in flight.
     pub streaming: Option<(usize, usize, usize)>,
+    /// S-NDF mode: bins per axis sampled (fewer than asked when the adapter's buffers
+    /// are too small for the view).
+    pub bins: Option<u32>,
 }
 
 /// What the render thread sends back.
@@ -401,6 +404,7 @@ impl<'r> Thread<'r> {
                     gpu_bytes: report.gpu_data_bytes + report.gpu_target_bytes,
                     adapter: report.adapter.clone(),
                     streaming: None,
+                    bins: None,
                 };
                 self.reply(Reply::Image {
                     id,
@@ -477,6 +481,7 @@ impl<'r> Thread<'r> {
                     gpu_bytes: frame.gpu_data_bytes + frame.gpu_target_bytes,
                     adapter: self.renderer.ctx.adapter_name().to_string(),
                     streaming: Some((stats.resident_pages, stats.capacity_pages, stats.pending)),
+                    bins: None,
                 };
                 self.reply(Reply::Image {
                     id,
@@ -550,6 +555,7 @@ impl<'r> Thread<'r> {
             gpu_bytes: sndf.hist.len() as u64 * 16,
             adapter: self.renderer.ctx.adapter_name().to_string(),
             streaming: None,
+            bins: Some(sndf.bins),
         };
         let reply = Reply::Image {
             id: p.id,
@@ -649,6 +655,7 @@ fn sndf_setup(
     let RenderMode::Sndf { bins, binning, .. } = opts.mode else {
         return Err("not the S-NDF mode".into());
     };
+    let bins = fitting_bins(renderer, opts.width, opts.height, bins);
     let camera =
         camera_for(file, &opts.view, opts.width, opts.height).map_err(|e| e.to_string())?;
     let draw = traverse(
@@ -676,6 +683,20 @@ fn sndf_setup(
             binning,
         },
     ))
+}
+
+/// The most bins per axis, at most `bins`, halving, whose histograms of a `width` ×
+/// `height` view fit one buffer of the adapter (software drivers allow 128 MiB).
+pub fn fitting_bins(renderer: &Renderer, width: u32, height: u32, bins: u32) -> u32 {
+    let limits = renderer.ctx.device.limits();
+    let max = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    let mut b = bins.max(1);
+    while b > 1 && u64::from(width) * u64::from(height) * u64::from(b * b) * 16 > max {
+        b /= 2;
+    }
+    b
 }
 
 /// Saves S-NDFs with their camera.

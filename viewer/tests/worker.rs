@@ -172,6 +172,19 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
     }
     render(&w, &s, 5);
     assert_eq!(next_image(&w).0, 5);
+    // S-NDF bins shrink to what one buffer of the adapter holds.
+    use mdlod_viewer::worker::fitting_bins;
+    assert_eq!(fitting_bins(&renderer, 16, 16, 8), 8);
+    let b = fitting_bins(&renderer, 8192, 8192, 8);
+    let limits = renderer.ctx.device.limits();
+    assert!(b < 8);
+    assert!(
+        b == 1
+            || 8192u64 * 8192 * u64::from(b * b) * 16
+                <= limits
+                    .max_storage_buffer_binding_size
+                    .min(limits.max_buffer_size)
+    );
 }
 
 /// With a GPU pool, sphere frames stream: the first image comes from what is resident,
