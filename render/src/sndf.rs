@@ -456,6 +456,25 @@ pub struct Explorer {
 }
 
 impl Explorer {
+    /// The pattern with `slices` slices in the default palette (a light grey disk; red,
+    /// green, blue, yellow, purple and teal slices, repeating).
+    pub fn new(slices: u32, disk_deg: f32, tolerance_deg: f32) -> Explorer {
+        Explorer {
+            disk_deg,
+            slices,
+            tolerance_deg,
+            disk_colour: [0.9, 0.9, 0.9],
+            slice_colours: vec![
+                [0.85, 0.1, 0.1],
+                [0.1, 0.6, 0.15],
+                [0.1, 0.25, 0.85],
+                [0.9, 0.7, 0.05],
+                [0.6, 0.1, 0.7],
+                [0.05, 0.65, 0.7],
+            ],
+        }
+    }
+
     /// The pattern's colour for a view-space normal.
     pub fn colour(&self, n: Vec3) -> [f32; 3] {
         let from_axis = n.z.clamp(-1.0, 1.0).acos().to_degrees();

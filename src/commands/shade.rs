@@ -119,20 +119,11 @@ pub fn run(args: Args) -> Result<()> {
     }
     let explorer = match args.explorer {
         Some(0) => bail!("--explorer needs at least one slice"),
-        Some(n) => Some(mdlod_render::sndf::Explorer {
-            disk_deg: args.explorer_disk,
-            slices: n,
-            tolerance_deg: args.explorer_tolerance,
-            disk_colour: [0.9, 0.9, 0.9],
-            slice_colours: vec![
-                [0.85, 0.1, 0.1],
-                [0.1, 0.6, 0.15],
-                [0.1, 0.25, 0.85],
-                [0.9, 0.7, 0.05],
-                [0.6, 0.1, 0.7],
-                [0.05, 0.65, 0.7],
-            ],
-        }),
+        Some(n) => Some(mdlod_render::sndf::Explorer::new(
+            n,
+            args.explorer_disk,
+            args.explorer_tolerance,
+        )),
         None => None,
     };
     if args.level.is_some_and(|l| l > 16) {

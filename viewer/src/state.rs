@@ -160,19 +160,12 @@ impl Settings {
             specular: self.specular,
             shininess: self.shininess,
             environment: self.environment.as_deref().cloned(),
-            explorer: self.explorer.map(|slices| Explorer {
-                disk_deg: self.explorer_disk_deg,
-                slices: slices.max(1),
-                tolerance_deg: self.explorer_tolerance_deg,
-                disk_colour: [0.9, 0.9, 0.9],
-                slice_colours: vec![
-                    [0.85, 0.1, 0.1],
-                    [0.1, 0.6, 0.15],
-                    [0.1, 0.25, 0.85],
-                    [0.9, 0.7, 0.05],
-                    [0.6, 0.1, 0.7],
-                    [0.05, 0.65, 0.7],
-                ],
+            explorer: self.explorer.map(|slices| {
+                Explorer::new(
+                    slices.max(1),
+                    self.explorer_disk_deg,
+                    self.explorer_tolerance_deg,
+                )
             }),
             transfer: self.transfer.as_deref().cloned(),
         }
