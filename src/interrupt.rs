@@ -3,7 +3,26 @@
 //! writing are removed before the program exits with status 130.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, Once};
+
+/// Set as the clean-up starts: work failing from then on (its files vanish under it) is
+/// the interruption's doing, and the program exits with 130, not with that error.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// Whether an interruption's clean-up has started.
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
+
+/// Called on an error: when it comes from an interruption, waits for the clean-up to
+/// exit with 130 instead of reporting it.
+pub fn defer_to_interrupt() {
+    if interrupted() {
+        std::thread::sleep(std::time::Duration::from_secs(30));
+        std::process::exit(130);
+    }
+}
 
 /// Working directories, and outputs whose hidden partial files go with them.
 static TARGETS: Mutex<Vec<(PathBuf, Option<PathBuf>)>> = Mutex::new(Vec::new());
@@ -20,6 +39,7 @@ pub fn remove_on_interrupt(work_dir: &Path, output: Option<&Path>) {
         // Without a handler the default action still stops the program; only the
         // clean-up is lost, so a failure to install is not an error.
         let _ = ctrlc::set_handler(|| {
+            INTERRUPTED.store(true, Ordering::SeqCst);
             let targets = TARGETS.lock().unwrap_or_else(|e| e.into_inner());
             for (dir, output) in targets.iter() {
                 // Workers may still add a file while the directory is being removed.

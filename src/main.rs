@@ -52,6 +52,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
+            interrupt::defer_to_interrupt();
             // The chain of causes, without repeating one a message already includes
             // (library errors often show their source themselves).
             let mut message = e.to_string();
