@@ -532,8 +532,7 @@ pub fn render_streaming(
         first_frame_time.get_or_insert_with(|| t0.elapsed());
         // Done when the view is complete, or when the pool is full and nothing more
         // arrives or is asked for (the best this pool can hold).
-        let settled = stats.installed == 0 && stats.requested == 0 && stats.pending == 0;
-        if stats.complete || settled || frames >= MAX_FRAMES {
+        if stats.settled() || frames >= MAX_FRAMES {
             let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
             report.budget_limited |= stats.pool_limited;
             report.total_time = t0.elapsed();

@@ -79,6 +79,14 @@ pub struct StreamStats {
     pub complete: bool,
 }
 
+impl StreamStats {
+    /// More frames of this view would draw the same image: it is complete, or the pool
+    /// is full and nothing more arrives or is asked for (the best this pool can hold).
+    pub fn settled(&self) -> bool {
+        self.complete || (self.installed == 0 && self.requested == 0 && self.pending == 0)
+    }
+}
+
 struct LoadedPage {
     id: PageId,
     positions: Vec<u32>,

@@ -764,49 +764,52 @@ fn host_rss_mib() -> f64 {
         .map_or(0.0, |kb| kb / 1024.0)
 }
 
-/// The light widget: the disk of view directions (x right, y up, the viewer at the
-/// centre). Every light is a dot; dragging places the selected one.
+/// A disk of view directions (x right, y up, the viewer at the centre) for the light
+/// and painting widgets: its painter, centre and radius, and where on the unit disk a
+/// click or drag happened, if one did.
+fn normal_disk(ui: &mut egui::Ui) -> (egui::Painter, egui::Pos2, f32, Option<(f32, f32)>) {
+    let size = 120.0;
+    let (rect, response) = ui.allocate_exact_size(egui::vec2(size, size), egui::Sense::drag());
+    let (c, r) = (rect.center(), size * 0.45);
+    let at = (response.dragged() || response.clicked())
+        .then(|| response.interact_pointer_pos())
+        .flatten()
+        .map(|p| ((p.x - c.x) / r, (c.y - p.y) / r));
+    (ui.painter_at(rect), c, r, at)
+}
+
+/// A linear RGB colour as egui's sRGB colour.
+fn srgb8(linear: [f32; 3]) -> egui::Color32 {
+    let c = linear
+        .map(|v| (mdlod_render::renderer::linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);
+    egui::Color32::from_rgb(c[0], c[1], c[2])
+}
+
+/// The light widget: every light is a dot on the disk of view directions (circled red
+/// when behind the data); dragging places the selected one on the front hemisphere.
 fn light_disk(
     ui: &mut egui::Ui,
     lights: &[crate::state::Light],
     selected: usize,
 ) -> Option<Action> {
-    let size = 120.0;
-    let (rect, response) = ui.allocate_exact_size(egui::vec2(size, size), egui::Sense::drag());
-    let painter = ui.painter_at(rect);
-    let c = rect.center();
-    let r = size * 0.45;
+    let (painter, c, r, at) = normal_disk(ui);
     painter.circle_filled(c, r, egui::Color32::from_gray(40));
     painter.circle_stroke(c, r, egui::Stroke::new(1.0, egui::Color32::GRAY));
     for (i, l) in lights.iter().enumerate() {
         let p = c + egui::vec2(l.direction[0], -l.direction[1]) * r;
-        let colour = egui::Color32::from_rgb(
-            (l.colour[0].clamp(0.0, 1.0) * 255.0) as u8,
-            (l.colour[1].clamp(0.0, 1.0) * 255.0) as u8,
-            (l.colour[2].clamp(0.0, 1.0) * 255.0) as u8,
-        );
-        painter.circle_filled(p, if i == selected { 6.0 } else { 4.0 }, colour);
+        painter.circle_filled(p, if i == selected { 6.0 } else { 4.0 }, srgb8(l.colour));
         if l.direction[2] < 0.0 {
             painter.circle_stroke(p, 7.0, egui::Stroke::new(1.0, egui::Color32::RED));
         }
     }
-    if response.dragged() || response.clicked() {
-        let p = response.interact_pointer_pos()?;
-        let v = (p - c) / r;
-        let (x, y) = (v.x, -v.y);
-        let len = (x * x + y * y).sqrt();
-        let (x, y) = if len > 1.0 {
-            (x / len, y / len)
-        } else {
-            (x, y)
-        };
-        let z = (1.0 - x * x - y * y).max(0.0).sqrt();
-        return Some(Action::Light {
-            index: selected,
-            direction: [x, y, z],
-        });
-    }
-    None
+    let (x, y) = at?;
+    let len = (x * x + y * y).sqrt().max(1.0);
+    let (x, y) = (x / len, y / len);
+    let z = (1.0 - x * x - y * y).max(0.0).sqrt();
+    Some(Action::Light {
+        index: selected,
+        direction: [x, y, z],
+    })
 }
 
 /// The painting widget: the normal disk showing the painted colours (mid grey where
@@ -817,11 +820,7 @@ fn paint_disk(
     colour: [f32; 3],
     radius: f32,
 ) -> Option<Action> {
-    let size = 120.0;
-    let (rect, response) = ui.allocate_exact_size(egui::vec2(size, size), egui::Sense::drag());
-    let painter = ui.painter_at(rect);
-    let c = rect.center();
-    let r = size * 0.45;
+    let (painter, c, r, at) = normal_disk(ui);
     // A coarse mosaic of the painted image, inside the disk.
     let n = 24;
     let cell = 2.0 * r / n as f32;
@@ -841,30 +840,22 @@ fn paint_disk(
                 }
                 None => [0.5; 3],
             };
-            let px = lin.map(|v| (mdlod_render::renderer::linear_to_srgb(v) * 255.0) as u8);
-            let min = egui::pos2(
-                rect.left() + (size - 2.0 * r) / 2.0,
-                rect.top() + (size - 2.0 * r) / 2.0,
-            ) + egui::vec2(i as f32 * cell, j as f32 * cell);
+            let min = c - egui::vec2(r, r) + egui::vec2(i as f32 * cell, j as f32 * cell);
             painter.rect_filled(
                 egui::Rect::from_min_size(min, egui::vec2(cell + 0.5, cell + 0.5)),
                 0.0,
-                egui::Color32::from_rgb(px[0], px[1], px[2]),
+                srgb8(lin),
             );
         }
     }
     painter.circle_stroke(c, r, egui::Stroke::new(1.0, egui::Color32::GRAY));
-    if response.dragged() || response.clicked() {
-        let p = response.interact_pointer_pos()?;
-        let v = (p - c) / r;
-        return Some(Action::Paint {
-            x: v.x.clamp(-1.0, 1.0),
-            y: (-v.y).clamp(-1.0, 1.0),
-            radius,
-            colour,
-        });
-    }
-    None
+    let (x, y) = at?;
+    Some(Action::Paint {
+        x: x.clamp(-1.0, 1.0),
+        y: y.clamp(-1.0, 1.0),
+        radius,
+        colour,
+    })
 }
 
 impl eframe::App for ViewerApp {

@@ -19,8 +19,8 @@ use std::time::Instant;
 use mdlod_format::MdlodFile;
 use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
 use mdlod_render::{
-    camera_for, render_image, traverse, BackendChoice, GpuContext, OcclusionMode, RenderError,
-    RenderMode, RenderOptions, Renderer, RgbaImage, TraversalSettings, ViewFile,
+    render_image, traverse, BackendChoice, GpuContext, RenderError, RenderMode, RenderOptions,
+    Renderer, RgbaImage, ViewFile,
 };
 
 /// Iterations in each progressive S-NDF batch.
@@ -466,8 +466,7 @@ impl<'r> Thread<'r> {
         );
         match frame {
             Ok((frame, draw, stats)) => {
-                let settled = stats.complete
-                    || (stats.installed == 0 && stats.requested == 0 && stats.pending == 0);
+                let settled = stats.settled();
                 if settled {
                     s.pending = None;
                 }
@@ -656,22 +655,11 @@ fn sndf_setup(
         return Err("not the S-NDF mode".into());
     };
     let bins = fitting_bins(renderer, opts.width, opts.height, bins);
-    let camera =
-        camera_for(file, &opts.view, opts.width, opts.height).map_err(|e| e.to_string())?;
-    let draw = traverse(
-        &camera,
-        file,
-        &TraversalSettings {
-            viewport: [opts.width, opts.height],
-            error_px: opts.error_px,
-            budget_points: opts.budget.min(renderer.max_points()).max(1),
-            occlusion: if opts.style.changes_geometry() {
-                OcclusionMode::Off
-            } else {
-                OcclusionMode::WholePixels
-            },
-        },
-    );
+    // The cut `render --mode sndf` draws (whole-pixel occlusion, none for styles that
+    // change sizes).
+    let (camera, traversal, _) =
+        mdlod_render::frame_setup(renderer, file, opts).map_err(|e| e.to_string())?;
+    let draw = traverse(&camera, file, &traversal);
     Ok((
         camera,
         draw,

@@ -322,6 +322,13 @@ pub fn pack_styled(
     let levels = file.levels();
     let meta = file.metadata();
     let species_count = meta.species.len();
+    let bad_species = |particle: usize, s: u16| {
+        RenderError::Format(FormatError::Corrupt {
+            path: file.path().to_path_buf(),
+            place: format!("SPECIES, particle {particle}"),
+            problem: format!("species index {s} but only {species_count} species"),
+        })
+    };
     let mut out = PackedDraw {
         position_bits: bits,
         species: look
@@ -356,15 +363,7 @@ pub fn pack_styled(
                         .species
                         .get(usize::from(s))
                         .map(|s| s.radius)
-                        .ok_or_else(|| {
-                            RenderError::Format(FormatError::Corrupt {
-                                path: file.path().to_path_buf(),
-                                place: format!("SPECIES, particle {}", first + k),
-                                problem: format!(
-                                    "species index {s} but only {species_count} species"
-                                ),
-                            })
-                        })?;
+                        .ok_or_else(|| bad_species(first + k, s))?;
                     let q = values.get(first + k).copied().unwrap_or(0);
                     (r, f32::from(q) / 65535.0)
                 } else {
@@ -390,15 +389,7 @@ pub fn pack_styled(
                         .species
                         .get(usize::from(s))
                         .map(|e| e[3])
-                        .ok_or_else(|| {
-                            RenderError::Format(FormatError::Corrupt {
-                                path: file.path().to_path_buf(),
-                                place: format!("SPECIES, particle {}", first + k),
-                                problem: format!(
-                                    "species index {s} but only {species_count} species"
-                                ),
-                            })
-                        })?;
+                        .ok_or_else(|| bad_species(first + k, s))?;
                     let q = values.get(first + k).copied().unwrap_or(0);
                     out.attrs.push(r.to_bits());
                     out.attrs
@@ -420,11 +411,7 @@ pub fn pack_styled(
         } else if level == last {
             let sp = &file.species()[first..first + count];
             if let Some(k) = sp.iter().position(|&s| usize::from(s) >= species_count) {
-                return Err(RenderError::Format(FormatError::Corrupt {
-                    path: file.path().to_path_buf(),
-                    place: format!("SPECIES, particle {}", first + k),
-                    problem: format!("species index {} but only {species_count} species", sp[k]),
-                }));
+                return Err(bad_species(first + k, sp[k]));
             }
             push_bytes_as_words(&mut out.attrs, bytemuck::cast_slice(sp));
             KIND_PARTICLE
