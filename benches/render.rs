@@ -455,7 +455,7 @@ fn sndf_table(renderer: &Renderer, adapter: &str, n: u64) {
     let bins = env_list("MDLOD_SNDF_BINS", "8")[0] as u32;
     let size = env_list("MDLOD_SNDF_SIZE", "1280,720");
     let (mut w, mut h, k) = (size[0] as u32, size[1] as u32, 16u32);
-    while u64::from(w) * u64::from(h) * u64::from(bins * bins) * 16 > max {
+    while mdlod_render::sndf::sndf_buffer_bytes(w, h, bins) > max {
         w /= 2;
         h /= 2;
     }

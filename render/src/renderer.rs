@@ -236,6 +236,18 @@ fn halton(mut i: u32, base: u32) -> f32 {
     r
 }
 
+/// One sampling pass of S-NDFs into tiles (see [`Renderer::accumulate_sndf`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SndfPassSettings {
+    pub width: u32,
+    pub height: u32,
+    pub bins: u32,
+    pub binning: crate::sndf::Binning,
+    pub iterations: u32,
+    /// The first iteration's index in the sub-pixel sequence.
+    pub first: u32,
+}
+
 /// Sub-pixel offset of sample `s` of `spp` (pixels, in [−0.5, 0.5)).
 pub fn jitter(s: u32, spp: u32) -> Vec2 {
     if spp <= 1 {
@@ -742,11 +754,8 @@ impl Renderer {
                 "{iterations} iterations and {bins} bins (need at least 1 iteration and 1 to 32 bins)"
             )));
         }
-        // In 8×8-texel blocks (see sndf_accumulate.wgsl), padded to whole blocks.
-        let hist_bytes = u64::from(width.div_ceil(8) * 8)
-            * u64::from(height.div_ceil(8) * 8)
-            * u64::from(bins * bins)
-            * 16;
+        // In 64×64-texel tiles (see sndf_accumulate.wgsl), padded to whole tiles.
+        let hist_bytes = crate::sndf::sndf_buffer_bytes(width, height, bins);
         let limits = self.ctx.device.limits();
         if hist_bytes
             > limits
@@ -759,165 +768,52 @@ impl Renderer {
                 limits.max_storage_buffer_binding_size
             )));
         }
-        let packed = crate::passes::sphere_raycast::pack_styled(
-            file,
-            draw,
-            crate::passes::sphere_raycast::PackStyle::Spheres,
-            style,
-        )?;
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
-            let buffers = self.sphere.upload(device, &packed);
-            let size = wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            };
-            let texture = |label: &str, format| {
-                device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                        | wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                })
-            };
-            let normals = texture("sndf normals", GBUFFER_FORMAT);
-            let albedos = texture("sndf albedos", GBUFFER_FORMAT);
-            let depth = texture("sndf depth", DEPTH_FORMAT);
-            let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-            let (normals_v, albedos_v, depth_v) = (view(&normals), view(&albedos), view(&depth));
             let hist = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("sndf histograms"),
                 size: hist_bytes,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             });
-            use wgpu::util::DeviceExt;
-            let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("sndf params"),
-                contents: bytemuck::bytes_of(&AccumulateParams {
+            // Every tile of the image, in order: slot i is tile i.
+            let tiles = width.div_ceil(crate::sndf::TILE) * height.div_ceil(crate::sndf::TILE);
+            let pages: Vec<u32> = (0..tiles).collect();
+            let gpu_time = self.accumulate_sndf(
+                file,
+                camera,
+                draw,
+                style,
+                &SndfPassSettings {
                     width,
                     height,
                     bins,
-                    binning: binning.code(),
-                }),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
-            let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("sndf accumulate"),
-                layout: &self.sndf.layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: params.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::TextureView(&normals_v),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::TextureView(&albedos_v),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: hist.as_entire_binding(),
-                    },
-                ],
-            });
-            let clear = |v| wgpu::RenderPassColorAttachment {
-                view: v,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
+                    binning,
+                    iterations,
+                    first,
                 },
-            };
-            let timing = self.frame_timer();
-            for s in 0..iterations {
-                let uniforms = FrameUniforms::new(
-                    camera.jittered_clip_from_view(
-                        [width, height],
-                        // A lone first iteration is centred, as 1-spp ray casting is.
-                        jitter(first + s, if first == 0 { iterations } else { u32::MAX }),
-                    ),
-                    camera.view_from_world(),
-                    camera.projection == Projection::Orthographic,
-                    &Lighting::default(),
-                    packed.position_bits,
-                    packed.species.len() as u32,
-                );
-                queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
-                let mut enc = device.create_command_encoder(&Default::default());
-                {
-                    let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("sndf sample"),
-                        color_attachments: &[Some(clear(&normals_v)), Some(clear(&albedos_v))],
-                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                            view: &depth_v,
-                            depth_ops: Some(wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(1.0),
-                                store: wgpu::StoreOp::Store,
-                            }),
-                            stencil_ops: None,
-                        }),
-                        timestamp_writes: timing
-                            .as_ref()
-                            .filter(|_| s == 0)
-                            .map(|t| t.writes(true, false)),
-                        occlusion_query_set: None,
-                        multiview_mask: None,
-                    });
-                    if buffers.points > 0 {
-                        pass.set_pipeline(&self.sphere.gbuffer);
-                        pass.set_bind_group(0, &buffers.bind_group, &[]);
-                        pass.draw(0..4, 0..buffers.points);
-                    }
-                }
-                {
-                    let last = s + 1 == iterations;
-                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some("sndf accumulate"),
-                        timestamp_writes: timing
-                            .as_ref()
-                            .filter(|_| last)
-                            .map(|t| t.compute_writes(false, true)),
-                    });
-                    pass.set_pipeline(&self.sndf.pipeline);
-                    pass.set_bind_group(0, &bind, &[]);
-                    pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
-                }
-                if s + 1 == iterations {
-                    if let Some(t) = &timing {
-                        t.resolve(&mut enc);
-                    }
-                }
-                queue.submit([enc.finish()]);
-            }
-            let gpu_time = self.gpu_time(timing.as_ref())?;
-            self.count_samples(buffers.points, iterations);
+                &hist,
+                &pages,
+            )?;
             let read = readback_buffer(device, "sndf readback", hist_bytes);
             let mut enc = device.create_command_encoder(&Default::default());
             enc.copy_buffer_to_buffer(&hist, 0, &read, 0, hist_bytes);
             queue.submit([enc.finish()]);
             let bytes = self.read_buffer(&read)?;
-            let blocked: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
-            // From 8×8-texel blocks to rows.
+            let tiled: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
+            // From tiles of 8×8-texel blocks to rows.
+            let tile = crate::sndf::TILE;
             let b2 = (bins * bins) as usize;
-            let blocks_x = width.div_ceil(8) as usize;
+            let tiles_x = width.div_ceil(tile);
             let mut hist = Vec::with_capacity(width as usize * height as usize * b2);
-            for y in 0..height as usize {
-                for x in 0..width as usize {
-                    let block = (y / 8) * blocks_x + x / 8;
-                    let at = (block * 64 + (y % 8) * 8 + x % 8) * b2;
-                    hist.extend_from_slice(&blocked[at..at + b2]);
+            for y in 0..height {
+                for x in 0..width {
+                    let slot = (y / tile) * tiles_x + x / tile;
+                    let at = (slot * tile * tile + crate::sndf::texel_in_tile(x % tile, y % tile))
+                        as usize
+                        * b2;
+                    hist.extend_from_slice(&tiled[at..at + b2]);
                 }
             }
             Ok(Sndf {
@@ -930,6 +826,212 @@ impl Renderer {
                 gpu_time,
             })
         })
+    }
+
+    /// Draws `iterations` G-buffers of `draw` seen by `camera` (a `width × height`
+    /// rectangle of texels) and adds them to the histograms in `hist`: tile `i` of the
+    /// rectangle (rows of 64×64-texel tiles) goes to slot `pages[i]` of the buffer, or
+    /// nowhere for [`crate::sndf::NO_SLOT`]. Returns the GPU time when measured.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn accumulate_sndf(
+        &self,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        style: &crate::style::PointStyle,
+        settings: &SndfPassSettings,
+        hist: &wgpu::Buffer,
+        pages: &[u32],
+    ) -> Result<Option<Duration>, RenderError> {
+        let SndfPassSettings {
+            width,
+            height,
+            bins,
+            binning,
+            iterations,
+            first,
+        } = *settings;
+        let tiles_x = width.div_ceil(crate::sndf::TILE);
+        debug_assert_eq!(
+            pages.len() as u32,
+            tiles_x * height.div_ceil(crate::sndf::TILE)
+        );
+        let packed = crate::passes::sphere_raycast::pack_styled(
+            file,
+            draw,
+            crate::passes::sphere_raycast::PackStyle::Spheres,
+            style,
+        )?;
+        let device = &self.ctx.device;
+        let queue = &self.ctx.queue;
+        let buffers = self.sphere.upload(device, &packed);
+        let layers = crate::sndf::ACCUMULATE_LAYERS.min(iterations).max(1);
+        let texture = |label: &str, format, layers| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: layers,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+        };
+        let normals = texture("sndf normals", GBUFFER_FORMAT, layers);
+        let albedos = texture("sndf albedos", GBUFFER_FORMAT, layers);
+        let depth = texture("sndf depth", DEPTH_FORMAT, 1);
+        let array_view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let layer_view = |t: &wgpu::Texture, l: u32| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2),
+                base_array_layer: l,
+                array_layer_count: Some(1),
+                ..Default::default()
+            })
+        };
+        let (normals_a, albedos_a) = (array_view(&normals), array_view(&albedos));
+        let normal_layers: Vec<_> = (0..layers).map(|l| layer_view(&normals, l)).collect();
+        let albedo_layers: Vec<_> = (0..layers).map(|l| layer_view(&albedos, l)).collect();
+        let depth_v = depth.create_view(&Default::default());
+        use wgpu::util::DeviceExt;
+        let params_of = |layers| AccumulateParams {
+            width,
+            height,
+            bins,
+            binning: binning.code(),
+            layers,
+            tiles_x,
+            pad: [0; 2],
+        };
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("sndf params"),
+            contents: bytemuck::bytes_of(&params_of(layers)),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        });
+        let page_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("sndf page table"),
+            contents: bytemuck::cast_slice(pages),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sndf accumulate"),
+            layout: &self.sndf.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&normals_a),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&albedos_a),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: hist.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: page_buffer.as_entire_binding(),
+                },
+            ],
+        });
+        let clear = |v| wgpu::RenderPassColorAttachment {
+            view: v,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                store: wgpu::StoreOp::Store,
+            },
+        };
+        let timing = self.frame_timer();
+        for s in 0..iterations {
+            let layer = s % layers;
+            let uniforms = FrameUniforms::new(
+                camera.jittered_clip_from_view(
+                    [width, height],
+                    // A lone first iteration is centred, as 1-spp ray casting is.
+                    jitter(first + s, if first == 0 { iterations } else { u32::MAX }),
+                ),
+                camera.view_from_world(),
+                camera.projection == Projection::Orthographic,
+                &Lighting::default(),
+                packed.position_bits,
+                packed.species.len() as u32,
+            );
+            queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            let last = s + 1 == iterations;
+            let full = layer + 1 == layers;
+            if last && !full {
+                // The last group fills only some layers.
+                queue.write_buffer(&params, 0, bytemuck::bytes_of(&params_of(layer + 1)));
+            }
+            let mut enc = device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("sndf sample"),
+                    color_attachments: &[
+                        Some(clear(&normal_layers[layer as usize])),
+                        Some(clear(&albedo_layers[layer as usize])),
+                    ],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth_v,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Store,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: timing
+                        .as_ref()
+                        .filter(|_| s == 0)
+                        .map(|t| t.writes(true, false)),
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                if buffers.points > 0 {
+                    pass.set_pipeline(&self.sphere.gbuffer);
+                    pass.set_bind_group(0, &buffers.bind_group, &[]);
+                    pass.draw(0..4, 0..buffers.points);
+                }
+            }
+            if full || last {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("sndf accumulate"),
+                    timestamp_writes: timing
+                        .as_ref()
+                        .filter(|_| last)
+                        .map(|t| t.compute_writes(false, true)),
+                });
+                pass.set_pipeline(&self.sndf.pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+            }
+            if last {
+                if let Some(t) = &timing {
+                    t.resolve(&mut enc);
+                }
+            }
+            queue.submit([enc.finish()]);
+        }
+        let gpu_time = self.gpu_time(timing.as_ref())?;
+        self.count_samples(buffers.points, iterations);
+        Ok(gpu_time)
     }
 
     /// Shades S-NDFs on the GPU (the same result as [`Sndf::shade_with`], to rounding):

@@ -10,8 +10,11 @@
 //!    by default; spherical coordinates; Lambert azimuthal equal-area). A bin keeps the
 //!    sum of the albedos that fell into it and their count, so per-particle colours
 //!    shade exactly; rays that hit nothing add nothing, and `1 − Σ counts / rays` is the
-//!    texel's background share. The GPU buffer holds the histograms in 8×8-texel blocks
-//!    (a workgroup's writes stay together); they come back in rows.
+//!    texel's background share. The GPU buffer holds the histograms in the S-MIP's
+//!    64×64-texel tiles (see [`crate::smip`]), each in 8×8-texel blocks (a workgroup's
+//!    writes stay together); they come back in rows. The G-buffer has several layers,
+//!    one iteration each, and one accumulation pass adds them all, so a texel's bins are
+//!    read and written once per [`ACCUMULATE_LAYERS`] iterations.
 //! 2. Shading ([`Sndf::shade`]) needs no particle: per bin, the lighting averaged over
 //!    the bin's part of the normal disk (the discrete form of Eq. 12-14), split into the
 //!    part that multiplies the albedo (ambient + Lambert) and the part that does not
@@ -110,11 +113,43 @@ pub fn shade_table(bins: u32, binning: Binning, lights: &ShadeLights) -> Vec<[f3
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct AccumulateParams {
+    /// The sampled rectangle, in texels.
     pub width: u32,
     pub height: u32,
     pub bins: u32,
     /// [`Binning::code`].
     pub binning: u32,
+    /// G-buffer layers (iterations) this pass adds.
+    pub layers: u32,
+    /// The rectangle's width in tiles (the page table's row length).
+    pub tiles_x: u32,
+    pub pad: [u32; 2],
+}
+
+/// Iterations drawn into G-buffer layers before one accumulation pass adds them.
+pub const ACCUMULATE_LAYERS: u32 = 4;
+
+/// A page-table entry of a tile that is not being sampled.
+pub const NO_SLOT: u32 = u32::MAX;
+
+/// Tile side in texels (the S-MIP's tiles, and the histogram buffer's layout).
+pub const TILE: u32 = 64;
+
+/// Index of texel `(lx, ly)` of a tile within its slot (8×8-texel blocks), as the
+/// accumulation shader stores it.
+pub fn texel_in_tile(lx: u32, ly: u32) -> u32 {
+    ((ly / 8) * 8 + lx / 8) * 64 + (ly % 8) * 8 + lx % 8
+}
+
+/// Bytes of one tile's histograms.
+pub fn tile_bytes(bins: u32) -> u64 {
+    u64::from(TILE * TILE) * u64::from(bins * bins) * 16
+}
+
+/// Bytes of the histogram buffer that S-NDFs of `width × height` texels need (whole
+/// tiles).
+pub fn sndf_buffer_bytes(width: u32, height: u32, bins: u32) -> u64 {
+    u64::from(width.div_ceil(TILE)) * u64::from(height.div_ceil(TILE)) * tile_bytes(bins)
 }
 
 /// How the normals are binned (the cell coordinates `(u, v)` in `[0, 1]²`).
@@ -223,7 +258,7 @@ impl SndfPass {
             visibility: wgpu::ShaderStages::COMPUTE,
             ty: wgpu::BindingType::Texture {
                 sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D2,
+                view_dimension: wgpu::TextureViewDimension::D2Array,
                 multisampled: false,
             },
             count: None,
@@ -248,6 +283,16 @@ impl SndfPass {
                     visibility: wgpu::ShaderStages::COMPUTE,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Storage { read_only: false },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: false,
                         min_binding_size: None,
                     },

@@ -681,7 +681,7 @@ pub fn fitting_bins(renderer: &Renderer, width: u32, height: u32, bins: u32) -> 
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size);
     let mut b = bins.max(1);
-    while b > 1 && u64::from(width) * u64::from(height) * u64::from(b * b) * 16 > max {
+    while b > 1 && mdlod_render::sndf::sndf_buffer_bytes(width, height, b) > max {
         b /= 2;
     }
     b

@@ -9,19 +9,38 @@
 // sums stay linear under averaging, so per-particle colours shade exactly. A texel whose
 // ray hit nothing adds nothing; its coverage is the total count over the iterations.
 //
+// Storage: the histograms live in 64x64-texel tiles (the S-MIP's tiles, see smip.rs).
+// The sampled rectangle is tiles_x tiles wide; `pages` maps each of its tiles to a slot
+// of the tile pool, or to NO_SLOT for a tile that is not being sampled (its texels add
+// nothing). Within a slot, texels are kept in 8x8 blocks so that one workgroup's writes
+// stay within 64 KiB at 8x8 bins: texel (lx, ly) of a tile is number
+// ((ly / 8) * 8 + lx / 8) * 64 + (ly % 8) * 8 + lx % 8.
+//
+// Several iterations per pass: the G-buffer is an array of `layers` layers, one
+// iteration each, and a texel adds all of them to its histogram at once, so a texel's
+// bins are read and written once per `layers` iterations.
+//
 // The Rust twin of Params is in sndf.rs.
+
+const TILE: u32 = 64u;
+const NO_SLOT: u32 = 0xffffffffu;
 
 struct Params {
     width: u32,
     height: u32,
     bins: u32,
     binning: u32,
+    layers: u32,
+    tiles_x: u32,
+    pad0: u32,
+    pad1: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var normals: texture_2d<f32>;
-@group(0) @binding(2) var albedos: texture_2d<f32>;
+@group(0) @binding(1) var normals: texture_2d_array<f32>;
+@group(0) @binding(2) var albedos: texture_2d_array<f32>;
 @group(0) @binding(3) var<storage, read_write> hist: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> pages: array<u32>;
 
 // The normal's cell coordinates in [0, 1]^2 (clamped by the caller).
 fn bin_coords(n: vec3<f32>) -> vec2<f32> {
@@ -42,22 +61,26 @@ fn accumulate(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= params.width || id.y >= params.height {
         return;
     }
-    let n = textureLoad(normals, vec2<i32>(id.xy), 0);
-    if n.w < 0.5 {
+    let slot = pages[(id.y / TILE) * params.tiles_x + id.x / TILE];
+    if slot == NO_SLOT {
         return;
     }
-    let a = textureLoad(albedos, vec2<i32>(id.xy), 0);
+    let lx = id.x % TILE;
+    let ly = id.y % TILE;
+    let local = ((ly / 8u) * 8u + lx / 8u) * 64u + (ly % 8u) * 8u + lx % 8u;
     let b = params.bins;
     let fb = f32(b);
-    let c = clamp(bin_coords(n.xyz), vec2<f32>(0.0), vec2<f32>(1.0));
-    let bx = min(u32(c.x * fb), b - 1u);
-    let by = min(u32(c.y * fb), b - 1u);
-    // Blocked layout: the 8×8 texels of a workgroup keep their bins in one contiguous
-    // stretch (64 KiB at 8×8 bins), so a pass over a large image does not scatter over
-    // the whole buffer; the host reorders to rows on readback.
-    let blocks_x = (params.width + 7u) / 8u;
-    let block = (id.y / 8u) * blocks_x + id.x / 8u;
-    let local = (id.y % 8u) * 8u + id.x % 8u;
-    let i = (block * 64u + local) * b * b + by * b + bx;
-    hist[i] = hist[i] + vec4<f32>(a.xyz, 1.0);
+    let base = (slot * TILE * TILE + local) * b * b;
+    for (var l = 0u; l < params.layers; l++) {
+        let n = textureLoad(normals, vec2<i32>(id.xy), i32(l), 0);
+        if n.w < 0.5 {
+            continue;
+        }
+        let a = textureLoad(albedos, vec2<i32>(id.xy), i32(l), 0);
+        let c = clamp(bin_coords(n.xyz), vec2<f32>(0.0), vec2<f32>(1.0));
+        let bx = min(u32(c.x * fb), b - 1u);
+        let by = min(u32(c.y * fb), b - 1u);
+        let i = base + by * b + bx;
+        hist[i] = hist[i] + vec4<f32>(a.xyz, 1.0);
+    }
 }
