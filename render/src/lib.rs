@@ -36,6 +36,7 @@ pub mod image;
 pub mod occlusion;
 pub mod passes;
 pub mod renderer;
+pub mod smip;
 pub mod sndf;
 pub mod streaming;
 pub mod style;

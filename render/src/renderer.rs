@@ -280,7 +280,7 @@ impl std::fmt::Debug for Renderer {
 }
 
 /// Two timestamps around a frame's passes.
-struct FrameTimer {
+pub(crate) struct FrameTimer {
     set: wgpu::QuerySet,
     resolve: wgpu::Buffer,
     read: wgpu::Buffer,
@@ -297,7 +297,11 @@ impl FrameTimer {
     }
 
     /// The same for a compute pass.
-    fn compute_writes(&self, begin: bool, end: bool) -> wgpu::ComputePassTimestampWrites<'_> {
+    pub(crate) fn compute_writes(
+        &self,
+        begin: bool,
+        end: bool,
+    ) -> wgpu::ComputePassTimestampWrites<'_> {
         wgpu::ComputePassTimestampWrites {
             query_set: &self.set,
             beginning_of_pass_write_index: begin.then_some(0),
@@ -305,7 +309,7 @@ impl FrameTimer {
         }
     }
 
-    fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
+    pub(crate) fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
         enc.resolve_query_set(&self.set, 0..2, &self.resolve, 0);
         enc.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 16);
     }
@@ -340,7 +344,7 @@ fn copy_to_buffer(
 }
 
 /// A buffer to read GPU results back into.
-fn readback_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+pub(crate) fn readback_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size,
@@ -1648,7 +1652,7 @@ impl Renderer {
     }
 
     /// Timestamp queries for a frame's passes, when the device has them.
-    fn frame_timer(&self) -> Option<FrameTimer> {
+    pub(crate) fn frame_timer(&self) -> Option<FrameTimer> {
         let device = &self.ctx.device;
         self.ctx.timestamps().then(|| FrameTimer {
             set: device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -1667,7 +1671,10 @@ impl Renderer {
     }
 
     /// The time between the timer's two stamps (after the frame was submitted).
-    fn gpu_time(&self, timer: Option<&FrameTimer>) -> Result<Option<Duration>, RenderError> {
+    pub(crate) fn gpu_time(
+        &self,
+        timer: Option<&FrameTimer>,
+    ) -> Result<Option<Duration>, RenderError> {
         let Some(t) = timer else {
             return Ok(None);
         };
@@ -1678,7 +1685,7 @@ impl Renderer {
         Ok(Some(Duration::from_nanos(ns as u64)))
     }
 
-    fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {
+    pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {
         let (tx, rx) = std::sync::mpsc::channel();
         buffer.map_async(wgpu::MapMode::Read, .., move |r| {
             let _ = tx.send(r);

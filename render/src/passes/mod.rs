@@ -15,6 +15,8 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("density_composite.wgsl", density::COMPOSITE_SHADER),
     ("sndf_accumulate.wgsl", crate::sndf::ACCUMULATE_SHADER),
     ("sndf_shade.wgsl", crate::sndf::SHADE_SHADER),
+    ("smip_downsample.wgsl", crate::smip::DOWNSAMPLE_SHADER),
+    ("smip_composite.wgsl", crate::smip::COMPOSITE_SHADER),
 ];
 
 #[cfg(test)]

@@ -1,0 +1,1218 @@
+//! The virtual screen-space mipmap of S-NDFs (S-MIP; Ibrahim et al. 2017, section 6):
+//! S-NDFs cached in tiles that outlive the view, so panning and zooming sample only what
+//! newly comes into view.
+//!
+//! How it works.
+//! 1. **Frame.** An S-MIP belongs to one view direction, one look of the points and one
+//!    file ([`SmipFrame`]): a grid parallel to the screen, in the plane coordinates
+//!    `(u, v)` = (world · right, world · up) of an orthographic camera. Level 0's texels
+//!    are `texel0` world units wide, fine enough that the smallest sphere covers at least
+//!    `N` texels (`π r² / texel0² ≥ N`), and aligned with the first view's pixels; level
+//!    `L`'s texels are `2^L` times wider. Tiles are 64×64 texels, addressed by
+//!    `(level, x, y)` with signed `x`, `y` (the grid is unbounded).
+//!    Orthographic views only: under perspective, a pan or zoom moves the eye and the
+//!    parallax changes every texel, so there is nothing to reuse.
+//! 2. **Levels of a view.** A view whose pixels are `p` world units wide shows level
+//!    `f = log2(p / texel0)`: levels `⌊f⌋` and `⌊f⌋ + 1`, blended by the fraction
+//!    (trilinear, as a texture mipmap is read), or level 0 alone when zoomed in past
+//!    it. The tiles under the view's pixels (with the bilinear footprint) are needed.
+//! 3. **Cache.** A fixed pool of tile slots on the GPU (one buffer) and a page table on
+//!    the host (tile → slot, rays per texel, last use). A needed tile that is not
+//!    resident gets a free slot, or the least recently used slot of a tile this view
+//!    does not need.
+//! 4. **Filling a tile.** A tile of level `L + 1` whose four children are resident (with
+//!    equal rays) is their 2×2 down-sampling on the GPU (`smip_downsample.wgsl`): no
+//!    particle is touched. Otherwise it is sampled: missing tiles are grouped into
+//!    rectangles (runs along tile rows, merged down columns); each rectangle is drawn by
+//!    an orthographic camera covering exactly its texels, with the hierarchy cut chosen
+//!    against that level's texel size and culled to the rectangle, and its histograms
+//!    accumulate straight into the pool through the rectangle's page table
+//!    (`sndf_accumulate.wgsl`).
+//! 5. **Progressive refinement** ([`Smip::refine`]) adds iterations to the view's sampled
+//!    tiles, continuing each tile's sub-pixel sequence; tiles with different ray counts
+//!    are refined in separate rectangles. Down-sampled tiles are derived again.
+//! 6. **Shading** ([`Smip::shade`]) needs no particle: the composite pass
+//!    (`smip_composite.wgsl`) maps each pixel to both levels, shades the four nearest
+//!    texels of each from their S-NDFs and blends them trilinearly. Re-lighting is this
+//!    pass alone.
+//!
+//! A change of view direction, projection, particle radius or style, bins or file means
+//! a new frame: every tile is dropped ([`SmipStats::invalidated`]).
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::time::Duration;
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use mdlod_format::MdlodFile;
+
+use crate::camera::{Bounds, Camera, Projection};
+use crate::error::RenderError;
+use crate::image::RgbaImage;
+use crate::occlusion::OcclusionMode;
+use crate::renderer::{srgb_to_linear, Renderer, SndfPassSettings};
+use crate::sndf::{shade_table, tile_bytes, Binning, ShadeLights, NO_SLOT, TILE};
+use crate::style::PointStyle;
+use crate::traversal::{traverse, TraversalSettings};
+
+/// WGSL source of the down-sampling pass.
+pub const DOWNSAMPLE_SHADER: &str = include_str!("passes/smip_downsample.wgsl");
+/// WGSL source of the composite (shading) pass.
+pub const COMPOSITE_SHADER: &str = include_str!("passes/smip_composite.wgsl");
+
+/// Deepest level an S-MIP addresses.
+const MAX_LEVEL: u32 = 30;
+/// A level fraction this close to a whole number shows one level alone.
+const LEVEL_SNAP: f64 = 1e-4;
+/// Texels whose bilinear weight is below this (rounding of a view on texel centres) do
+/// not make their tile needed; the composite pass clamps to the needed tiles.
+const SPAN_SLACK: f64 = 1e-3;
+
+/// `DownParams` in `smip_downsample.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct DownParams {
+    pub bins: u32,
+    pub parent: u32,
+    pub pad: [u32; 2],
+    pub children: [u32; 4],
+}
+
+/// `Level` in `smip_composite.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct LevelParams {
+    pub origin: [f32; 2],
+    pub step: f32,
+    pub weight: f32,
+    pub tiles: [u32; 2],
+    pub page_offset: u32,
+    pub pad: u32,
+}
+
+/// `Params` in `smip_composite.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct CompositeParams {
+    pub width: u32,
+    pub height: u32,
+    pub bins: u32,
+    pub levels: u32,
+    pub background: [f32; 4],
+    pub level: [LevelParams; 2],
+}
+
+/// A tile's address: level, and column and row of 64×64-texel tiles (rows go down).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TileKey {
+    pub level: u32,
+    pub x: i32,
+    pub y: i32,
+}
+
+impl TileKey {
+    /// The four tiles of the level below, in quadrant order (top left, top right,
+    /// bottom left, bottom right).
+    pub fn children(self) -> Option<[TileKey; 4]> {
+        let level = self.level.checked_sub(1)?;
+        let (x, y) = (self.x * 2, self.y * 2);
+        Some([(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| TileKey {
+            level,
+            x: x + dx,
+            y: y + dy,
+        }))
+    }
+}
+
+/// What every tile of an S-MIP depends on; a different frame drops them all.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SmipFrame {
+    pub azimuth_deg: f32,
+    pub elevation_deg: f32,
+    /// The orthographic camera's field of view (it relates distance and view height).
+    pub fov_y_deg: f32,
+    /// World units per texel of level 0.
+    pub texel0: f64,
+    /// Plane coordinates `(u, v)` of level 0's texel corner `(0, 0)` (top left).
+    pub origin: [f64; 2],
+    pub bins: u32,
+    pub binning: Binning,
+    /// The data and the points' look (the caller's description: file, style).
+    pub content: String,
+}
+
+impl SmipFrame {
+    /// The frame of an orthographic view of `width × height` pixels: level 0 aligned with
+    /// its pixels, `2^-k` of their size for the smallest `k` at which a sphere of
+    /// `min_radius` covers at least `samples_per_sphere` texels.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        min_radius: f32,
+        samples_per_sphere: f32,
+        bins: u32,
+        binning: Binning,
+        content: String,
+    ) -> Result<SmipFrame, RenderError> {
+        if camera.projection != Projection::Orthographic {
+            return Err(RenderError::InvalidOptions(
+                "an S-MIP needs an orthographic view (under perspective a pan moves the eye)"
+                    .into(),
+            ));
+        }
+        camera.check().map_err(RenderError::InvalidOptions)?;
+        if width == 0 || height == 0 || !(1..=32).contains(&bins) {
+            return Err(RenderError::InvalidOptions(format!(
+                "an S-MIP of a {width}x{height} view with {bins} bins"
+            )));
+        }
+        let p0 = f64::from(camera.view_height_at_target()) / f64::from(height);
+        let r = f64::from(min_radius);
+        let n = f64::from(samples_per_sphere.max(0.0));
+        let mut texel0 = p0;
+        let mut k = 0;
+        while r.is_finite() && r > 0.0 && std::f64::consts::PI * (r / texel0).powi(2) < n && k < 20
+        {
+            texel0 *= 0.5;
+            k += 1;
+        }
+        let (uc, vc) = plane_of(camera, camera.target);
+        Ok(SmipFrame {
+            azimuth_deg: camera.azimuth_deg,
+            elevation_deg: camera.elevation_deg,
+            fov_y_deg: camera.fov_y_deg,
+            texel0,
+            origin: [
+                uc - f64::from(width) * 0.5 * p0,
+                vc + f64::from(height) * 0.5 * p0,
+            ],
+            bins,
+            binning,
+            content,
+        })
+    }
+
+    /// Whether `camera` looks along this frame's direction, orthographically (so that its
+    /// views are pans and zooms of the frame's).
+    pub fn fits(&self, camera: &Camera) -> bool {
+        camera.projection == Projection::Orthographic
+            && camera.azimuth_deg == self.azimuth_deg
+            && camera.elevation_deg == self.elevation_deg
+            && camera.fov_y_deg == self.fov_y_deg
+    }
+
+    /// World units per texel of `level`.
+    pub fn texel(&self, level: u32) -> f64 {
+        self.texel0 * f64::from(1u32 << level.min(MAX_LEVEL))
+    }
+}
+
+/// The smallest sphere radius of `file` under `style` (species radii; clusters are
+/// larger).
+pub fn min_radius(file: &MdlodFile, style: &PointStyle) -> f32 {
+    file.metadata()
+        .species
+        .iter()
+        .map(|s| {
+            let own = style
+                .species
+                .iter()
+                .find(|x| x.name == s.name)
+                .and_then(|x| x.radius);
+            own.unwrap_or(s.radius) * style.radius_scale
+        })
+        .fold(f32::INFINITY, f32::min)
+}
+
+/// Plane coordinates `(u, v)` of a world point under the camera's orientation.
+fn plane_of(camera: &Camera, p: Vec3) -> (f64, f64) {
+    (
+        f64::from(p.dot(camera.right())),
+        f64::from(p.dot(camera.up())),
+    )
+}
+
+/// Sampling settings of an S-MIP.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SmipConfig {
+    /// Tile slots in the GPU pool (capped by the adapter's largest buffer).
+    pub pool_tiles: u32,
+    /// Largest projected size, in texels of the level sampled, of a node drawn as its
+    /// representative.
+    pub error_px: f32,
+    /// Most spheres per sampled rectangle.
+    pub budget_points: u64,
+    pub occlusion: OcclusionMode,
+}
+
+impl Default for SmipConfig {
+    fn default() -> Self {
+        SmipConfig {
+            pool_tiles: 256,
+            error_px: 1.0,
+            budget_points: 50_000_000,
+            occlusion: OcclusionMode::WholePixels,
+        }
+    }
+}
+
+/// What a call did to the cache.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SmipStats {
+    /// The finer level shown and the coarser one's share of the blend.
+    pub level: u32,
+    pub blend: f32,
+    /// Tiles the view needs (both levels).
+    pub needed: u32,
+    /// Needed tiles that were already resident.
+    pub reused: u32,
+    /// Tiles sampled from the particles, and rectangles drawn to do it.
+    pub sampled: u32,
+    pub rects: u32,
+    /// Tiles made by down-sampling resident tiles.
+    pub downsampled: u32,
+    /// Tiles evicted to make room.
+    pub evicted: u32,
+    /// Spheres drawn times iterations.
+    pub particle_samples: u64,
+    /// All tiles were dropped for a new frame.
+    pub invalidated: bool,
+    pub gpu_time: Option<Duration>,
+}
+
+/// A tile's histograms as read back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileData {
+    /// Texels in rows (64 × 64), each `bins²` bins.
+    pub hist: Vec<[f32; 4]>,
+    /// Rays per texel.
+    pub rays: u32,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Tile {
+    slot: u32,
+    rays: u32,
+    /// Made by down-sampling its children.
+    derived: bool,
+    used: u64,
+}
+
+/// The levels a view shows, and where its pixels fall in them.
+#[derive(Clone, Debug)]
+struct LevelPlan {
+    level: u32,
+    weight: f64,
+    /// Texel coordinates of pixel (0, 0)'s centre.
+    origin: [f64; 2],
+    /// Texels per pixel.
+    step: f64,
+    /// Tiles needed: x0..x1, y0..y1.
+    tiles: [i32; 4],
+}
+
+impl LevelPlan {
+    fn keys(&self) -> impl Iterator<Item = TileKey> + '_ {
+        let [x0, x1, y0, y1] = self.tiles;
+        (y0..y1).flat_map(move |y| {
+            (x0..x1).map(move |x| TileKey {
+                level: self.level,
+                x,
+                y,
+            })
+        })
+    }
+}
+
+/// The S-MIP cache: a pool of tile slots on the GPU and its page table.
+pub struct Smip {
+    config: SmipConfig,
+    frame: Option<SmipFrame>,
+    tiles: HashMap<TileKey, Tile>,
+    free: Vec<u32>,
+    capacity: u32,
+    clock: u64,
+    pool: wgpu::Buffer,
+    bins: u32,
+    down: (wgpu::ComputePipeline, wgpu::BindGroupLayout),
+    composite: (wgpu::ComputePipeline, wgpu::BindGroupLayout),
+}
+
+fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+    entry: &str,
+    buffers: &[wgpu::BufferBindingType],
+) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let entries: Vec<_> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, &ty)| wgpu::BindGroupLayoutEntry {
+            binding: i as u32,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        })
+        .collect();
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries: &entries,
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    (pipeline, layout)
+}
+
+impl Smip {
+    /// A cache of `config.pool_tiles` tiles of `bins × bins` bins (fewer when one buffer
+    /// of the adapter holds fewer).
+    pub fn new(renderer: &Renderer, bins: u32, config: SmipConfig) -> Result<Smip, RenderError> {
+        if !(1..=32).contains(&bins) {
+            return Err(RenderError::InvalidOptions(format!(
+                "{bins} bins per axis (1 to 32)"
+            )));
+        }
+        let device = &renderer.ctx.device;
+        let limits = device.limits();
+        let max = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let fit = u32::try_from(max / tile_bytes(bins)).unwrap_or(u32::MAX);
+        let capacity = config.pool_tiles.min(fit);
+        if capacity == 0 {
+            return Err(RenderError::InvalidOptions(format!(
+                "an S-MIP tile of {bins}x{bins} bins needs {} bytes, more than one buffer of this adapter holds",
+                tile_bytes(bins)
+            )));
+        }
+        let pool = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("smip tile pool"),
+            size: u64::from(capacity) * tile_bytes(bins),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        use wgpu::BufferBindingType as T;
+        let read = T::Storage { read_only: true };
+        let write = T::Storage { read_only: false };
+        let down = compute_pipeline(
+            device,
+            "smip_downsample.wgsl",
+            DOWNSAMPLE_SHADER,
+            "downsample",
+            &[T::Uniform, write],
+        );
+        let composite = compute_pipeline(
+            device,
+            "smip_composite.wgsl",
+            COMPOSITE_SHADER,
+            "composite",
+            &[T::Uniform, read, read, read, read, write],
+        );
+        Ok(Smip {
+            config,
+            frame: None,
+            tiles: HashMap::new(),
+            free: (0..capacity).rev().collect(),
+            capacity,
+            clock: 0,
+            pool,
+            bins,
+            down,
+            composite,
+        })
+    }
+
+    /// Tile slots in the pool.
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+
+    /// Bytes of the tile pool on the GPU.
+    pub fn pool_bytes(&self) -> u64 {
+        u64::from(self.capacity) * tile_bytes(self.bins)
+    }
+
+    /// The frame the cached tiles belong to.
+    pub fn frame(&self) -> Option<&SmipFrame> {
+        self.frame.as_ref()
+    }
+
+    /// Resident tiles.
+    pub fn resident(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// Rays per texel of a resident tile.
+    pub fn rays(&self, key: TileKey) -> Option<u32> {
+        self.tiles.get(&key).map(|t| t.rays)
+    }
+
+    /// Drops every tile.
+    pub fn clear(&mut self) {
+        self.tiles.clear();
+        self.free = (0..self.capacity).rev().collect();
+    }
+
+    /// Makes every tile `camera`'s view of `width × height` pixels needs resident:
+    /// reused, down-sampled or sampled with `iterations` rays per texel. `frame` must
+    /// fit the camera; a frame different from the cached one drops every tile first.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prepare(
+        &mut self,
+        renderer: &Renderer,
+        file: &MdlodFile,
+        frame: &SmipFrame,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        iterations: u32,
+        style: &PointStyle,
+    ) -> Result<SmipStats, RenderError> {
+        let mut stats = SmipStats::default();
+        if self.frame.as_ref() != Some(frame) {
+            stats.invalidated = !self.tiles.is_empty();
+            self.clear();
+            self.frame = Some(frame.clone());
+        }
+        if frame.bins != self.bins {
+            return Err(RenderError::InvalidOptions(format!(
+                "the S-MIP frame has {} bins, the pool {}",
+                frame.bins, self.bins
+            )));
+        }
+        let plans = self.plan(camera, width, height)?;
+        stats.level = plans[0].level;
+        stats.blend = plans.get(1).map_or(0.0, |p| p.weight as f32);
+        let needed: Vec<TileKey> = plans.iter().flat_map(|p| p.keys()).collect();
+        stats.needed = needed.len() as u32;
+        self.clock += 1;
+        let mut pinned: HashSet<TileKey> = needed.iter().copied().collect();
+        for key in &needed {
+            if let Some(t) = self.tiles.get_mut(key) {
+                t.used = self.clock;
+                stats.reused += 1;
+            }
+        }
+        for plan in &plans {
+            let missing: Vec<TileKey> = plan
+                .keys()
+                .filter(|k| !self.tiles.contains_key(k))
+                .collect();
+            let (derive, sample): (Vec<TileKey>, Vec<TileKey>) =
+                missing.into_iter().partition(|k| self.derivable(*k));
+            for k in &derive {
+                pinned.extend(k.children().into_iter().flatten());
+            }
+            for &key in derive.iter().chain(&sample) {
+                let slot = self.allocate(&pinned, &mut stats)?;
+                self.tiles.insert(
+                    key,
+                    Tile {
+                        slot,
+                        rays: 0,
+                        derived: false,
+                        used: self.clock,
+                    },
+                );
+            }
+            self.clear_slots(renderer, &sample);
+            self.sample(
+                renderer,
+                file,
+                frame,
+                &sample,
+                iterations.max(1),
+                style,
+                &mut stats,
+            )?;
+            for key in derive {
+                self.downsample(renderer, key)?;
+                stats.downsampled += 1;
+            }
+        }
+        Ok(stats)
+    }
+
+    /// Adds `iterations` rays per texel to the tiles of the view (which [`Self::prepare`]
+    /// made resident): sampled tiles continue their sub-pixel sequences, down-sampled
+    /// tiles are derived again from their refined children, or sampled further when
+    /// those are gone.
+    #[allow(clippy::too_many_arguments)]
+    pub fn refine(
+        &mut self,
+        renderer: &Renderer,
+        file: &MdlodFile,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        iterations: u32,
+        style: &PointStyle,
+    ) -> Result<SmipStats, RenderError> {
+        let mut stats = SmipStats::default();
+        let frame = self.frame.clone().ok_or_else(|| {
+            RenderError::InvalidOptions("refining an S-MIP that has no frame".into())
+        })?;
+        let plans = self.plan(camera, width, height)?;
+        stats.level = plans[0].level;
+        stats.blend = plans.get(1).map_or(0.0, |p| p.weight as f32);
+        for plan in &plans {
+            let keys: Vec<TileKey> = plan.keys().collect();
+            stats.needed += keys.len() as u32;
+            if let Some(k) = keys.iter().find(|k| !self.tiles.contains_key(k)) {
+                return Err(RenderError::InvalidOptions(format!(
+                    "refining S-MIP tile {k:?}, which is not resident (prepare the view first)"
+                )));
+            }
+            let (derive, sample): (Vec<TileKey>, Vec<TileKey>) = keys
+                .into_iter()
+                .partition(|k| self.tiles[k].derived && self.derivable(*k));
+            self.sample(
+                renderer, file, &frame, &sample, iterations, style, &mut stats,
+            )?;
+            for key in derive {
+                self.downsample(renderer, key)?;
+                stats.downsampled += 1;
+            }
+        }
+        Ok(stats)
+    }
+
+    /// Shades the view from the resident tiles: no particle is touched. Returns the
+    /// image and the GPU time of the composite pass.
+    pub fn shade(
+        &self,
+        renderer: &Renderer,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        lights: &ShadeLights,
+        background_srgb: [f32; 3],
+    ) -> Result<(RgbaImage, Option<Duration>), RenderError> {
+        let plans = self.plan(camera, width, height)?;
+        let mut pages = vec![];
+        let mut levels = [LevelParams::default(); 2];
+        for (i, plan) in plans.iter().enumerate() {
+            let [x0, x1, y0, y1] = plan.tiles;
+            levels[i] = LevelParams {
+                origin: [
+                    (plan.origin[0] - f64::from(x0) * f64::from(TILE)) as f32,
+                    (plan.origin[1] - f64::from(y0) * f64::from(TILE)) as f32,
+                ],
+                step: plan.step as f32,
+                weight: plan.weight as f32,
+                tiles: [(x1 - x0) as u32, (y1 - y0) as u32],
+                page_offset: pages.len() as u32,
+                pad: 0,
+            };
+            for key in plan.keys() {
+                let tile = self.tiles.get(&key).ok_or_else(|| {
+                    RenderError::InvalidOptions(format!(
+                        "shading S-MIP tile {key:?}, which is not resident (prepare the view first)"
+                    ))
+                })?;
+                pages.push(tile.slot);
+            }
+        }
+        let mut rays = vec![0f32; self.capacity as usize];
+        for t in self.tiles.values() {
+            rays[t.slot as usize] = t.rays as f32;
+        }
+        let bins = self.bins;
+        let binning = self
+            .frame
+            .as_ref()
+            .map_or(Binning::default(), |f| f.binning);
+        let bg = background_srgb.map(srgb_to_linear);
+        renderer.ctx.scoped(|| {
+            use wgpu::util::DeviceExt;
+            let device = &renderer.ctx.device;
+            let queue = &renderer.ctx.queue;
+            let init = |label: &str, contents: &[u8], usage| {
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage,
+                })
+            };
+            let params = init(
+                "smip composite params",
+                bytemuck::bytes_of(&CompositeParams {
+                    width,
+                    height,
+                    bins,
+                    levels: plans.len() as u32,
+                    background: [bg[0], bg[1], bg[2], 0.0],
+                    level: levels,
+                }),
+                wgpu::BufferUsages::UNIFORM,
+            );
+            let storage = wgpu::BufferUsages::STORAGE;
+            let table = init(
+                "smip shade table",
+                bytemuck::cast_slice(&shade_table(bins, binning, lights)),
+                storage,
+            );
+            let pages = init("smip pages", bytemuck::cast_slice(&pages), storage);
+            let rays = init("smip rays", bytemuck::cast_slice(&rays), storage);
+            let out_bytes = (u64::from(width) * u64::from(height) * 4).max(4);
+            let pixels = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("smip pixels"),
+                size: out_bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let read = crate::renderer::readback_buffer(device, "smip pixels readback", out_bytes);
+            let entries: Vec<_> = [&params, &table, &self.pool, &pages, &rays, &pixels]
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: b.as_entire_binding(),
+                })
+                .collect();
+            let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("smip composite"),
+                layout: &self.composite.1,
+                entries: &entries,
+            });
+            let timing = renderer.frame_timer();
+            let mut enc = device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("smip composite"),
+                    timestamp_writes: timing.as_ref().map(|t| t.compute_writes(true, true)),
+                });
+                pass.set_pipeline(&self.composite.0);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+            }
+            enc.copy_buffer_to_buffer(&pixels, 0, &read, 0, out_bytes);
+            if let Some(t) = &timing {
+                t.resolve(&mut enc);
+            }
+            queue.submit([enc.finish()]);
+            let bytes = renderer.read_buffer(&read)?;
+            let mut image = RgbaImage::new(width, height);
+            let n = image.data.len();
+            image.data.copy_from_slice(&bytes[..n]);
+            Ok((image, renderer.gpu_time(timing.as_ref())?))
+        })
+    }
+
+    /// A resident tile's histograms and rays.
+    pub fn read_tile(
+        &self,
+        renderer: &Renderer,
+        key: TileKey,
+    ) -> Result<Option<TileData>, RenderError> {
+        let Some(tile) = self.tiles.get(&key) else {
+            return Ok(None);
+        };
+        let bytes = tile_bytes(self.bins);
+        let data = renderer.ctx.scoped(|| {
+            let device = &renderer.ctx.device;
+            let read = crate::renderer::readback_buffer(device, "smip tile readback", bytes);
+            let mut enc = device.create_command_encoder(&Default::default());
+            enc.copy_buffer_to_buffer(&self.pool, u64::from(tile.slot) * bytes, &read, 0, bytes);
+            renderer.ctx.queue.submit([enc.finish()]);
+            renderer.read_buffer(&read)
+        })?;
+        let blocked: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data);
+        let b2 = (self.bins * self.bins) as usize;
+        let mut rows = Vec::with_capacity(blocked.len());
+        for y in 0..TILE {
+            for x in 0..TILE {
+                let at = crate::sndf::texel_in_tile(x, y) as usize * b2;
+                rows.extend_from_slice(&blocked[at..at + b2]);
+            }
+        }
+        Ok(Some(TileData {
+            hist: rows,
+            rays: tile.rays,
+        }))
+    }
+
+    /// The levels `camera`'s view shows and the tiles it needs.
+    fn plan(
+        &self,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<Vec<LevelPlan>, RenderError> {
+        let frame = self.frame.as_ref().ok_or_else(|| {
+            RenderError::InvalidOptions("an S-MIP view before any frame was set".into())
+        })?;
+        if !frame.fits(camera) {
+            return Err(RenderError::InvalidOptions(
+                "the view does not fit the S-MIP's frame (direction or projection changed)".into(),
+            ));
+        }
+        if width == 0 || height == 0 {
+            return Err(RenderError::InvalidOptions(format!(
+                "an S-MIP view of {width}x{height} pixels"
+            )));
+        }
+        let p = f64::from(camera.view_height_at_target()) / f64::from(height);
+        let f = (p / frame.texel0).log2();
+        let mut levels: Vec<(u32, f64)> = if f.is_nan() || f <= LEVEL_SNAP {
+            vec![(0, 1.0)]
+        } else {
+            let l = f.floor();
+            let t = f - l;
+            let l = l.min(f64::from(MAX_LEVEL - 1)) as u32;
+            if t < LEVEL_SNAP {
+                vec![(l, 1.0)]
+            } else if t > 1.0 - LEVEL_SNAP {
+                vec![(l + 1, 1.0)]
+            } else {
+                vec![(l, 1.0 - t), (l + 1, t)]
+            }
+        };
+        levels.truncate(2);
+        let (uc, vc) = plane_of(camera, camera.target);
+        // Pixel (0, 0)'s centre.
+        let u = uc + (0.5 - f64::from(width) * 0.5) * p;
+        let v = vc - (0.5 - f64::from(height) * 0.5) * p;
+        let mut plans = vec![];
+        for (level, weight) in levels {
+            let t = frame.texel(level);
+            let origin = [(u - frame.origin[0]) / t, (frame.origin[1] - v) / t];
+            let step = p / t;
+            // Texels under the bilinear footprints of the first and last pixel centres.
+            let span = |o: f64, n: u32| {
+                let first = (o - 0.5 + SPAN_SLACK).floor();
+                let last = (o + f64::from(n - 1) * step - 0.5 - SPAN_SLACK)
+                    .ceil()
+                    .max(first);
+                let tile = |c: f64| (c / f64::from(TILE)).floor();
+                (tile(first), tile(last) + 1.0)
+            };
+            let (x0, x1) = span(origin[0], width);
+            let (y0, y1) = span(origin[1], height);
+            let limit = f64::from(i32::MAX / 2);
+            if [x0, x1, y0, y1]
+                .iter()
+                .any(|c| !c.is_finite() || c.abs() > limit)
+            {
+                return Err(RenderError::InvalidOptions(
+                    "the view is too far from the S-MIP's origin".into(),
+                ));
+            }
+            plans.push(LevelPlan {
+                level,
+                weight,
+                origin,
+                step,
+                tiles: [x0 as i32, x1 as i32, y0 as i32, y1 as i32],
+            });
+        }
+        Ok(plans)
+    }
+
+    /// Whether a tile can be made from its four resident children, which have equal
+    /// rays.
+    fn derivable(&self, key: TileKey) -> bool {
+        let Some(children) = key.children() else {
+            return false;
+        };
+        let rays: Vec<Option<u32>> = children
+            .iter()
+            .map(|c| self.tiles.get(c).map(|t| t.rays))
+            .collect();
+        rays.iter().all(|r| r.is_some() && *r == rays[0])
+    }
+
+    /// A free slot, or the least recently used slot of an unpinned tile.
+    fn allocate(
+        &mut self,
+        pinned: &HashSet<TileKey>,
+        stats: &mut SmipStats,
+    ) -> Result<u32, RenderError> {
+        if let Some(slot) = self.free.pop() {
+            return Ok(slot);
+        }
+        let victim = self
+            .tiles
+            .iter()
+            .filter(|(k, _)| !pinned.contains(k))
+            .min_by_key(|(k, t)| (t.used, **k))
+            .map(|(k, _)| *k);
+        match victim {
+            Some(k) => {
+                stats.evicted += 1;
+                Ok(self.tiles.remove(&k).map(|t| t.slot).unwrap_or(0))
+            }
+            None => Err(RenderError::InvalidOptions(format!(
+                "the view needs more than the S-MIP pool's {} tiles: enlarge the pool or shrink the window",
+                self.capacity
+            ))),
+        }
+    }
+
+    fn clear_slots(&self, renderer: &Renderer, keys: &[TileKey]) {
+        if keys.is_empty() {
+            return;
+        }
+        let bytes = tile_bytes(self.bins);
+        let mut enc = renderer
+            .ctx
+            .device
+            .create_command_encoder(&Default::default());
+        for k in keys {
+            let slot = self.tiles[k].slot;
+            enc.clear_buffer(&self.pool, u64::from(slot) * bytes, Some(bytes));
+        }
+        renderer.ctx.queue.submit([enc.finish()]);
+    }
+
+    /// Samples `iterations` more rays into each of `keys` (resident tiles of one
+    /// level), in rectangles of tiles with equal rays.
+    #[allow(clippy::too_many_arguments)]
+    fn sample(
+        &mut self,
+        renderer: &Renderer,
+        file: &MdlodFile,
+        frame: &SmipFrame,
+        keys: &[TileKey],
+        iterations: u32,
+        style: &PointStyle,
+        stats: &mut SmipStats,
+    ) -> Result<(), RenderError> {
+        if keys.is_empty() || iterations == 0 {
+            return Ok(());
+        }
+        let mut groups: BTreeMap<(u32, u32), Vec<(i32, i32)>> = BTreeMap::new();
+        for k in keys {
+            groups
+                .entry((k.level, self.tiles[k].rays))
+                .or_default()
+                .push((k.x, k.y));
+        }
+        let bounds = crate::data_bounds(file);
+        for ((level, rays), tiles) in groups {
+            let set: HashSet<(i32, i32)> = tiles.iter().copied().collect();
+            for [x0, x1, y0, y1] in rectangles(&tiles) {
+                let (camera, size) = rect_camera(frame, level, [x0, x1, y0, y1], &bounds);
+                let draw = traverse(
+                    &camera,
+                    file,
+                    &TraversalSettings {
+                        viewport: size,
+                        error_px: self.config.error_px,
+                        budget_points: self.config.budget_points,
+                        occlusion: self.config.occlusion,
+                    },
+                );
+                let mut pages = vec![];
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        let key = TileKey { level, x, y };
+                        pages.push(if set.contains(&(x, y)) {
+                            self.tiles[&key].slot
+                        } else {
+                            NO_SLOT
+                        });
+                    }
+                }
+                let gpu = renderer.ctx.scoped(|| {
+                    renderer.accumulate_sndf(
+                        file,
+                        &camera,
+                        &draw,
+                        style,
+                        &SndfPassSettings {
+                            width: size[0],
+                            height: size[1],
+                            bins: self.bins,
+                            binning: frame.binning,
+                            iterations,
+                            first: rays,
+                        },
+                        &self.pool,
+                        &pages,
+                    )
+                })?;
+                stats.rects += 1;
+                stats.particle_samples += draw.points * u64::from(iterations);
+                stats.gpu_time = match (stats.gpu_time, gpu) {
+                    (Some(a), Some(b)) => Some(a + b),
+                    (None, b) => b,
+                    (a, None) => a,
+                };
+            }
+            for (x, y) in tiles {
+                let t = self
+                    .tiles
+                    .get_mut(&TileKey { level, x, y })
+                    .expect("sampled tiles are resident");
+                t.rays += iterations;
+                t.derived = false;
+                stats.sampled += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// Makes `key` the 2×2 down-sampling of its resident children.
+    fn downsample(&mut self, renderer: &Renderer, key: TileKey) -> Result<(), RenderError> {
+        let children = key.children().expect("derivable tiles have children");
+        let slots = children.map(|c| self.tiles[&c].slot);
+        let rays = self.tiles[&children[0]].rays * 4;
+        let parent = self.tiles[&key].slot;
+        renderer.ctx.scoped(|| {
+            use wgpu::util::DeviceExt;
+            let device = &renderer.ctx.device;
+            let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("smip downsample params"),
+                contents: bytemuck::bytes_of(&DownParams {
+                    bins: self.bins,
+                    parent,
+                    pad: [0; 2],
+                    children: slots,
+                }),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("smip downsample"),
+                layout: &self.down.1,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: params.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: self.pool.as_entire_binding(),
+                    },
+                ],
+            });
+            let mut enc = device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&self.down.0);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(TILE / 8, TILE / 8, 1);
+            }
+            renderer.ctx.queue.submit([enc.finish()]);
+            Ok(())
+        })?;
+        let t = self.tiles.get_mut(&key).expect("resident");
+        t.rays = rays;
+        t.derived = true;
+        Ok(())
+    }
+}
+
+/// Rectangles `[x0, x1, y0, y1]` (exclusive ends) covering exactly `tiles`: runs along
+/// each row, merged with the run below when it spans the same columns.
+pub fn rectangles(tiles: &[(i32, i32)]) -> Vec<[i32; 4]> {
+    let mut rows: BTreeMap<i32, Vec<i32>> = BTreeMap::new();
+    for &(x, y) in tiles {
+        rows.entry(y).or_default().push(x);
+    }
+    let mut done = vec![];
+    // Open rectangles by column span, with the row after their last.
+    let mut open: HashMap<(i32, i32), (i32, i32)> = HashMap::new();
+    for (y, mut xs) in rows {
+        xs.sort_unstable();
+        xs.dedup();
+        let mut runs = vec![];
+        let mut start = xs[0];
+        for w in xs.windows(2) {
+            if w[1] != w[0] + 1 {
+                runs.push((start, w[0] + 1));
+                start = w[1];
+            }
+        }
+        runs.push((start, xs[xs.len() - 1] + 1));
+        let mut next = HashMap::new();
+        for span in runs {
+            match open.remove(&span) {
+                Some((y0, end)) if end == y => {
+                    next.insert(span, (y0, y + 1));
+                }
+                other => {
+                    if let Some((y0, end)) = other {
+                        done.push([span.0, span.1, y0, end]);
+                    }
+                    next.insert(span, (y, y + 1));
+                }
+            }
+        }
+        for (span, (y0, end)) in open.drain() {
+            done.push([span.0, span.1, y0, end]);
+        }
+        open = next;
+    }
+    for (span, (y0, end)) in open {
+        done.push([span.0, span.1, y0, end]);
+    }
+    done.sort_unstable();
+    done
+}
+
+/// The orthographic camera whose `size` pixels are exactly the texels of tiles
+/// `[x0, x1) × [y0, y1)` of `level`.
+fn rect_camera(
+    frame: &SmipFrame,
+    level: u32,
+    rect: [i32; 4],
+    bounds: &Bounds,
+) -> (Camera, [u32; 2]) {
+    let [x0, x1, y0, y1] = rect;
+    let t = frame.texel(level) * f64::from(TILE);
+    let u0 = frame.origin[0] + f64::from(x0) * t;
+    let u1 = frame.origin[0] + f64::from(x1) * t;
+    let v0 = frame.origin[1] - f64::from(y0) * t;
+    let v1 = frame.origin[1] - f64::from(y1) * t;
+    let mut camera = Camera {
+        azimuth_deg: frame.azimuth_deg,
+        elevation_deg: frame.elevation_deg,
+        fov_y_deg: frame.fov_y_deg,
+        projection: Projection::Orthographic,
+        ..Default::default()
+    };
+    let (uc, vc) = ((u0 + u1) * 0.5, (v0 + v1) * 0.5);
+    let depth = bounds.center().dot(camera.back());
+    camera.target = camera.right() * uc as f32 + camera.up() * vc as f32 + camera.back() * depth;
+    camera.distance =
+        ((v0 - v1) / (2.0 * (f64::from(frame.fov_y_deg).to_radians() * 0.5).tan())) as f32;
+    camera.fit_depth_range(bounds);
+    let size = [(x1 - x0) as u32 * TILE, (y1 - y0) as u32 * TILE];
+    (camera, size)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rectangles_cover_exactly_the_tiles() {
+        let cases: Vec<Vec<(i32, i32)>> = vec![
+            (0..3).flat_map(|y| (0..4).map(move |x| (x, y))).collect(),
+            // An L-shaped strip, as a diagonal pan uncovers.
+            (0..4)
+                .map(|y| (3, y))
+                .chain((0..3).map(|x| (x, 3)))
+                .collect(),
+            vec![(-2, -1), (5, 7), (6, 7), (-1, -1)],
+        ];
+        for tiles in cases {
+            let rects = rectangles(&tiles);
+            let mut covered = vec![];
+            for [x0, x1, y0, y1] in &rects {
+                for y in *y0..*y1 {
+                    for x in *x0..*x1 {
+                        covered.push((x, y));
+                    }
+                }
+            }
+            covered.sort_unstable();
+            let mut want = tiles.clone();
+            want.sort_unstable();
+            assert_eq!(covered, want, "{rects:?}");
+        }
+        // A full block is one rectangle.
+        let block: Vec<_> = (0..3).flat_map(|y| (0..4).map(move |x| (x, y))).collect();
+        assert_eq!(rectangles(&block), vec![[0, 4, 0, 3]]);
+    }
+
+    #[test]
+    fn children_tile_their_parent() {
+        let k = TileKey {
+            level: 2,
+            x: -1,
+            y: 3,
+        };
+        let c = k.children().unwrap();
+        assert_eq!(
+            c[0],
+            TileKey {
+                level: 1,
+                x: -2,
+                y: 6
+            }
+        );
+        assert_eq!(
+            c[3],
+            TileKey {
+                level: 1,
+                x: -1,
+                y: 7
+            }
+        );
+        assert!(TileKey {
+            level: 0,
+            x: 0,
+            y: 0
+        }
+        .children()
+        .is_none());
+    }
+
+    #[test]
+    fn level_zero_gives_every_sphere_its_samples() {
+        let mut camera = Camera {
+            projection: Projection::Orthographic,
+            ..Default::default()
+        };
+        camera.fit(&Bounds::new([-10.0; 3], [10.0; 3]), 1.0);
+        let frame = |r: f32, n: f32| {
+            SmipFrame::new(
+                &camera,
+                100,
+                100,
+                r,
+                n,
+                8,
+                Binning::default(),
+                String::new(),
+            )
+            .unwrap()
+        };
+        let p0 = f64::from(camera.view_height_at_target()) / 100.0;
+        // A large sphere: the view's own pixels.
+        assert_eq!(frame(10.0 * p0 as f32, 4.0).texel0, p0);
+        // A small one: halved until π r² / t² ≥ N.
+        let f = frame(0.1 * p0 as f32, 4.0);
+        assert!(std::f64::consts::PI * (0.1 * p0 / f.texel0).powi(2) >= 4.0);
+        assert!(std::f64::consts::PI * (0.1 * p0 / (2.0 * f.texel0)).powi(2) < 4.0);
+        // Perspective is refused.
+        let persp = Camera::default();
+        assert!(SmipFrame::new(
+            &persp,
+            10,
+            10,
+            1.0,
+            1.0,
+            8,
+            Binning::default(),
+            String::new()
+        )
+        .is_err());
+    }
+}
