@@ -154,6 +154,14 @@ impl GpuContext {
         })
     }
 
+    /// Waits until the GPU has finished all submitted work (for wall-clock timings).
+    pub fn wait_idle(&self) -> Result<(), RenderError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| RenderError::Gpu(format!("waiting for the GPU: {e}")))
+    }
+
     /// The adapter's name, e.g. `llvmpipe (LLVM 15.0.6, 256 bits)`.
     pub fn adapter_name(&self) -> &str {
         &self.info.name

@@ -275,6 +275,8 @@ pub struct SmipStats {
     pub downsampled: u32,
     /// Tiles evicted to make room.
     pub evicted: u32,
+    /// Spheres drawn per iteration, over the sampled rectangles.
+    pub points: u64,
     /// Spheres drawn times iterations.
     pub particle_samples: u64,
     /// All tiles were dropped for a new frame.
@@ -451,6 +453,23 @@ impl Smip {
         self.capacity
     }
 
+    /// Bins per axis of the pool's tiles.
+    pub fn bins(&self) -> u32 {
+        self.bins
+    }
+
+    /// The fewest rays per texel among the tiles `camera`'s view needs (0 when one is
+    /// not resident).
+    pub fn view_rays(&self, camera: &Camera, width: u32, height: u32) -> Result<u32, RenderError> {
+        let plans = self.plan(camera, width, height)?;
+        Ok(plans
+            .iter()
+            .flat_map(|p| p.keys())
+            .map(|k| self.tiles.get(&k).map_or(0, |t| t.rays))
+            .min()
+            .unwrap_or(0))
+    }
+
     /// Bytes of the tile pool on the GPU.
     pub fn pool_bytes(&self) -> u64 {
         u64::from(self.capacity) * tile_bytes(self.bins)
@@ -557,10 +576,11 @@ impl Smip {
         Ok(stats)
     }
 
-    /// Adds `iterations` rays per texel to the tiles of the view (which [`Self::prepare`]
-    /// made resident): sampled tiles continue their sub-pixel sequences, down-sampled
-    /// tiles are derived again from their refined children, or sampled further when
-    /// those are gone.
+    /// Adds up to `iterations` rays per texel to the tiles of the view (which
+    /// [`Self::prepare`] made resident) that have fewer than `target`, without passing
+    /// it: sampled tiles continue their sub-pixel sequences, down-sampled tiles are
+    /// derived again from their refined children, or sampled further when those are
+    /// gone.
     #[allow(clippy::too_many_arguments)]
     pub fn refine(
         &mut self,
@@ -570,6 +590,7 @@ impl Smip {
         width: u32,
         height: u32,
         iterations: u32,
+        target: u32,
         style: &PointStyle,
     ) -> Result<SmipStats, RenderError> {
         let mut stats = SmipStats::default();
@@ -590,12 +611,22 @@ impl Smip {
             let (derive, sample): (Vec<TileKey>, Vec<TileKey>) = keys
                 .into_iter()
                 .partition(|k| self.tiles[k].derived && self.derivable(*k));
-            self.sample(
-                renderer, file, &frame, &sample, iterations, style, &mut stats,
-            )?;
-            for key in derive {
-                self.downsample(renderer, key)?;
-                stats.downsampled += 1;
+            let sample = sample.into_iter().filter(|k| self.tiles[k].rays < target);
+            // Tiles with equal rays get equal additions (and are sampled together).
+            let mut by_add: BTreeMap<u32, Vec<TileKey>> = BTreeMap::new();
+            for k in sample {
+                let add = iterations.min(target - self.tiles[&k].rays);
+                by_add.entry(add).or_default().push(k);
+            }
+            for (add, keys) in by_add {
+                self.sample(renderer, file, &frame, &keys, add, style, &mut stats)?;
+            }
+            // Derived tiles follow their children when those changed.
+            if stats.sampled > 0 {
+                for key in derive {
+                    self.downsample(renderer, key)?;
+                    stats.downsampled += 1;
+                }
             }
         }
         Ok(stats)
@@ -957,6 +988,7 @@ impl Smip {
                     )
                 })?;
                 stats.rects += 1;
+                stats.points += draw.points;
                 stats.particle_samples += draw.points * u64::from(iterations);
                 stats.gpu_time = match (stats.gpu_time, gpu) {
                     (Some(a), Some(b)) => Some(a + b),

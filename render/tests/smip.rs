@@ -237,7 +237,10 @@ fn panning_samples_only_the_newly_visible_tiles() {
         .prepare(r, &f, &fr, &camera, size, size, 4, &style)
         .unwrap();
     assert_eq!((back.sampled, back.particle_samples), (0, 0));
-    assert_eq!(shade(&s, &camera, size, size).data, a.data);
+    assert!(
+        shade(&s, &camera, size, size).data == a.data,
+        "the same tiles shade alike"
+    );
 }
 
 /// Zooming out by two serves the coarser level by down-sampling cached tiles, exactly
@@ -361,7 +364,13 @@ fn a_tiny_pool_evicts_and_still_gives_the_same_images() {
             .unwrap();
         assert_eq!(tiny.resident(), 4);
         let (a, b) = (shade(&tiny, &v, size, size), shade(&large, &v, size, size));
-        assert_eq!(a.data, b.data, "pan {dx}");
+        // Tiles sampled again after eviction come from other rectangles (another
+        // rasterization of the same texels): equal up to a few edge pixels.
+        let (bad, _) = compare(&a, &b, 2);
+        assert!(
+            bad <= (size * size / 200) as usize,
+            "pan {dx}: {bad} pixels differ"
+        );
     }
     assert!(evicted >= 8, "{evicted}");
     let mut wide = camera.clone();
@@ -386,8 +395,11 @@ fn refinement_adds_up_and_a_new_direction_invalidates() {
     let (mut a, mut b) = (smip(16), smip(16));
     a.prepare(r, &f, &fr, &camera, size, size, 2, &style)
         .unwrap();
-    let st = a.refine(r, &f, &camera, size, size, 3, &style).unwrap();
+    let st = a.refine(r, &f, &camera, size, size, 3, 5, &style).unwrap();
     assert_eq!(st.sampled, 4);
+    // At the target, nothing more is sampled.
+    let st = a.refine(r, &f, &camera, size, size, 3, 5, &style).unwrap();
+    assert_eq!((st.sampled, st.particle_samples), (0, 0));
     b.prepare(r, &f, &fr, &camera, size, size, 5, &style)
         .unwrap();
     let (ta, tb) = (assemble(&a, 0, [0, 2, 0, 2]), assemble(&b, 0, [0, 2, 0, 2]));

@@ -630,8 +630,14 @@ impl ViewerState {
         let mut o = self.render_options(size);
         o.spp = 1;
         o.error_px = error_px.max(self.settings.error_px);
+        // Orthographic S-NDF views pan and zoom over the S-MIP's cached tiles (the render
+        // thread falls back to spheres for an orbit); perspective ones preview spheres.
         if matches!(o.mode, RenderMode::Sndf { .. }) {
-            o.mode = RenderMode::Spheres;
+            if self.camera.projection == mdlod_render::Projection::Orthographic {
+                o.error_px = self.settings.error_px;
+            } else {
+                o.mode = RenderMode::Spheres;
+            }
         }
         o
     }

@@ -8,6 +8,11 @@
 //!   sequence), adds it to the S-NDFs and sends the shaded image, until the target
 //!   count. A request for the same view with other lights only re-shades the S-NDFs:
 //!   no particle is sampled (see [`Worker::points_sampled`]).
+//! - Orthographic S-NDF views go through a virtual S-MIP ([`mdlod_render::smip`]) that
+//!   outlives the view: a pan or zoom samples only the tiles that come into view (one
+//!   iteration while the user drags, then refined tile by tile), and zooming out
+//!   down-samples the cached tiles. An orbit starts a new S-MIP: while dragging, those
+//!   frames are sphere previews, as in perspective.
 //! - Screenshots, saved S-NDFs and prefetches run in order between frames.
 
 use std::collections::HashMap;
@@ -17,6 +22,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use mdlod_format::MdlodFile;
+use mdlod_render::smip::{Smip, SmipConfig, SmipFrame};
 use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
 use mdlod_render::{
     render_image, traverse, BackendChoice, GpuContext, RenderError, RenderMode, RenderOptions,
@@ -113,6 +119,21 @@ impl Progressive {
     }
 }
 
+/// An orthographic S-NDF view shown from the S-MIP, refined tile by tile.
+struct TiledView {
+    id: u64,
+    path: PathBuf,
+    file: Arc<MdlodFile>,
+    opts: RenderOptions,
+    shade: ShadeLights,
+    camera: mdlod_render::Camera,
+    /// Rays per texel wanted, and the fewest the view's tiles have.
+    target: u32,
+    rays: u32,
+    /// Spheres per iteration of the last sampling.
+    points: u64,
+}
+
 /// The window's handle on the render thread.
 pub struct Worker {
     tx: Sender<Request>,
@@ -156,6 +177,8 @@ impl Worker {
                     stream: None,
                     files: HashMap::new(),
                     progressive: None,
+                    smip: None,
+                    tiled: None,
                     replies,
                     wake: Box::new(wake),
                     counter,
@@ -228,6 +251,9 @@ struct Thread<'r> {
     stream: Option<Streaming<'r>>,
     files: HashMap<PathBuf, Arc<MdlodFile>>,
     progressive: Option<Progressive>,
+    /// The S-MIP cache of orthographic S-NDF views, and the view it shows.
+    smip: Option<Smip>,
+    tiled: Option<TiledView>,
     replies: Sender<Reply>,
     wake: Box<dyn Fn() + Send>,
     counter: Arc<std::sync::atomic::AtomicU64>,
@@ -265,6 +291,7 @@ impl<'r> Thread<'r> {
                     .progressive
                     .as_ref()
                     .is_some_and(|p| p.rays() < p.target)
+                    || self.tiled.as_ref().is_some_and(|t| t.rays < t.target)
                     || self.stream.as_ref().is_some_and(|s| s.pending.is_some());
                 if refining {
                     match requests.try_recv() {
@@ -272,6 +299,8 @@ impl<'r> Thread<'r> {
                         Err(TryRecvError::Empty) => {
                             if self.stream.as_ref().is_some_and(|s| s.pending.is_some()) {
                                 self.stream_step();
+                            } else if self.tiled.is_some() {
+                                self.tiled_step();
                             } else {
                                 self.refine_step();
                             }
@@ -314,6 +343,10 @@ impl<'r> Thread<'r> {
                         let result = self.screenshot(&path, &opts, &shade, &out);
                         self.reply(Reply::Written { out, result });
                     }
+                    Request::SaveSndf { out } if self.tiled.is_some() => {
+                        let result = self.save_tiled(&out);
+                        self.reply(Reply::Written { out, result });
+                    }
                     Request::SaveSndf { out } => {
                         let result = match &self.progressive {
                             Some(Progressive {
@@ -344,6 +377,30 @@ impl<'r> Thread<'r> {
             Ok(f) => f,
             Err(e) => return self.reply(Reply::Error(e)),
         };
+        let mut opts = opts;
+        if let RenderMode::Sndf { .. } = opts.mode {
+            let camera = match mdlod_render::camera_for(&file, &opts.view, opts.width, opts.height)
+            {
+                Ok(c) => c,
+                Err(e) => return self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+            };
+            if camera.projection == mdlod_render::Projection::Orthographic {
+                self.progressive = None;
+                match self.tiled_render(id, path, &file, &opts, &shade, camera, interactive) {
+                    Ok(true) => return,
+                    // A preview of a new direction: spheres, below.
+                    Ok(false) => opts.mode = RenderMode::Spheres,
+                    Err(e) => {
+                        self.tiled = None;
+                        return self.reply(Reply::Error(format!("{}: {e}", path.display())));
+                    }
+                }
+            } else {
+                self.tiled = None;
+            }
+        } else {
+            self.tiled = None;
+        }
         if let RenderMode::Sndf { iterations, .. } = opts.mode {
             if let Some(p) = self
                 .progressive
@@ -496,6 +553,191 @@ impl<'r> Thread<'r> {
                 self.reply(Reply::Error(format!("{path}: {e}")));
             }
         }
+    }
+
+    /// Shows an orthographic S-NDF view from the S-MIP: tiles already cached are reused,
+    /// new ones sampled with one iteration while the user drags (else a batch). Returns
+    /// false, doing nothing, for a drag that left the S-MIP's frame (an orbit): the
+    /// caller draws a sphere preview instead.
+    #[allow(clippy::too_many_arguments)]
+    fn tiled_render(
+        &mut self,
+        id: u64,
+        path: &Path,
+        file: &Arc<MdlodFile>,
+        opts: &RenderOptions,
+        shade: &ShadeLights,
+        camera: mdlod_render::Camera,
+        interactive: bool,
+    ) -> Result<bool, String> {
+        let t0 = Instant::now();
+        let RenderMode::Sndf {
+            iterations,
+            bins,
+            binning,
+        } = opts.mode
+        else {
+            return Ok(false);
+        };
+        let (w, h) = (opts.width, opts.height);
+        // Room for the view's tiles at two levels, and as many again to pan back to.
+        let want = 4 * (w.div_ceil(64) + 2) * (h.div_ceil(64) + 2);
+        let (bins, pool_tiles) = fitting_pool(self.renderer, want, bins);
+        if self
+            .smip
+            .as_ref()
+            .is_none_or(|s| s.bins() != bins || s.capacity() != pool_tiles)
+        {
+            self.smip = None;
+            self.smip = Some(
+                Smip::new(
+                    self.renderer,
+                    bins,
+                    SmipConfig {
+                        pool_tiles,
+                        error_px: opts.error_px,
+                        ..Default::default()
+                    },
+                )
+                .map_err(|e| e.to_string())?,
+            );
+        }
+        let smip = self.smip.as_mut().expect("just made");
+        let content = format!(
+            "{} {:?} error {} {}",
+            path.display(),
+            opts.style,
+            opts.error_px,
+            binning.name()
+        );
+        let frame = match smip.frame() {
+            Some(f) if f.fits(&camera) && f.content == content && f.bins == bins => f.clone(),
+            _ if interactive => return Ok(false),
+            _ => SmipFrame::new(
+                &camera,
+                w,
+                h,
+                mdlod_render::smip::min_radius(file, &opts.style),
+                1.0,
+                bins,
+                binning,
+                content,
+            )
+            .map_err(|e| e.to_string())?,
+        };
+        let first = if interactive { 1 } else { SNDF_BATCH };
+        let stats = smip
+            .prepare(
+                self.renderer,
+                file,
+                &frame,
+                &camera,
+                w,
+                h,
+                first.min(iterations.max(1)),
+                &opts.style,
+            )
+            .map_err(|e| e.to_string())?;
+        let rays = smip.view_rays(&camera, w, h).map_err(|e| e.to_string())?;
+        self.tiled = Some(TiledView {
+            id,
+            path: path.to_path_buf(),
+            file: file.clone(),
+            opts: opts.clone(),
+            shade: shade.clone(),
+            camera,
+            target: if interactive { 0 } else { iterations },
+            rays,
+            points: stats.points,
+        });
+        self.show_tiled(t0, interactive);
+        Ok(true)
+    }
+
+    /// Adds the next batch of rays to the S-MIP view's tiles and shows it.
+    fn tiled_step(&mut self) {
+        let t0 = Instant::now();
+        let (Some(t), Some(smip)) = (self.tiled.as_mut(), self.smip.as_mut()) else {
+            self.tiled = None;
+            return;
+        };
+        let (w, h) = (t.opts.width, t.opts.height);
+        let refined = smip
+            .refine(
+                self.renderer,
+                &t.file,
+                &t.camera,
+                w,
+                h,
+                SNDF_BATCH,
+                t.target,
+                &t.opts.style,
+            )
+            .and_then(|stats| {
+                t.points = t.points.max(stats.points);
+                smip.view_rays(&t.camera, w, h)
+            });
+        match refined {
+            Ok(rays) => {
+                // A view that cannot progress (nothing left to sample) is done.
+                t.rays = if rays > t.rays { rays } else { t.target };
+                self.show_tiled(t0, false);
+            }
+            Err(e) => {
+                let path = t.path.display().to_string();
+                self.tiled = None;
+                self.reply(Reply::Error(format!("{path}: {e}")));
+            }
+        }
+    }
+
+    /// Shades the S-MIP view under its lights and sends the image.
+    fn show_tiled(&mut self, t0: Instant, interactive: bool) {
+        let (Some(t), Some(smip)) = (self.tiled.as_ref(), self.smip.as_ref()) else {
+            return;
+        };
+        let (w, h) = (t.opts.width, t.opts.height);
+        match smip.shade(self.renderer, &t.camera, w, h, &t.shade, t.opts.background) {
+            Ok((image, gpu)) => {
+                let stats = FrameStats {
+                    frame_ms: t0.elapsed().as_secs_f32() * 1e3,
+                    gpu_ms: gpu.map(|d| d.as_secs_f32() * 1e3),
+                    spp: t.rays,
+                    particles: t.points,
+                    representatives: 0,
+                    error_px: t.opts.error_px,
+                    gpu_bytes: smip.pool_bytes(),
+                    adapter: self.renderer.ctx.adapter_name().to_string(),
+                    streaming: None,
+                    bins: Some(smip.bins()),
+                };
+                let reply = Reply::Image {
+                    id: t.id,
+                    image,
+                    stats,
+                    interactive,
+                    refined: !interactive && t.rays >= t.target,
+                };
+                self.reply(reply);
+            }
+            Err(e) => {
+                let path = t.path.display().to_string();
+                self.tiled = None;
+                self.reply(Reply::Error(format!("{path}: {e}")));
+            }
+        }
+    }
+
+    /// Saves the S-NDFs of the S-MIP view as `mdlod sample` writes them: the view
+    /// sampled whole, as deep as the view's target.
+    fn save_tiled(&mut self, out: &Path) -> Result<(), String> {
+        let Some(t) = self.tiled.as_ref() else {
+            return Err("no S-NDFs sampled yet: switch to the S-NDF mode".into());
+        };
+        let (path, opts, target) = (t.path.clone(), t.opts.clone(), t.target.max(1));
+        let file = self.file(&path)?;
+        let (sndf, camera) = sample_progressively(self.renderer, &file, &opts, target)?;
+        save_sndf(&sndf, &camera, &path, out)
     }
 
     /// Samples the next batch of the progressive S-NDFs and shows them.
@@ -685,6 +927,23 @@ pub fn fitting_bins(renderer: &Renderer, width: u32, height: u32, bins: u32) -> 
         b /= 2;
     }
     b
+}
+
+/// The most bins per axis, at most `bins`, halving, at which a pool of `tiles` S-MIP
+/// tiles fits one buffer of the adapter, and the pool's size in tiles (fewer when even
+/// one bin does not fit them all).
+pub fn fitting_pool(renderer: &Renderer, tiles: u32, bins: u32) -> (u32, u32) {
+    let limits = renderer.ctx.device.limits();
+    let max = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    let tile = mdlod_render::sndf::tile_bytes;
+    let mut b = bins.max(1);
+    while b > 1 && u64::from(tiles) * tile(b) > max {
+        b /= 2;
+    }
+    let fit = u32::try_from(max / tile(b)).unwrap_or(u32::MAX);
+    (b, tiles.min(fit).max(1))
 }
 
 /// Saves S-NDFs with their camera.

@@ -17,7 +17,12 @@ fn backends() -> BackendChoice {
 
 /// A small FCC block with two species, converted by the real converter.
 fn make_file(dir: &Path) -> PathBuf {
-    let positions = mdlod_datasets::fcc_block([5, 5, 5], 3.615);
+    make_block(dir, 5)
+}
+
+/// An FCC block of `n³` cells with two species.
+fn make_block(dir: &Path, n: usize) -> PathBuf {
+    let positions = mdlod_datasets::fcc_block([n, n, n], 3.615);
     let species_index = (0..positions.len())
         .map(|i| u16::from(i % 7 == 0))
         .collect();
@@ -224,4 +229,93 @@ fn streamed_frames_refine_to_the_direct_image() {
     let f = mdlod_format::MdlodFile::open(&path).unwrap();
     let (direct, _) = render_image(&renderer, &f, &s.render_options([80, 60])).unwrap();
     assert_eq!(last.data, direct.data);
+}
+
+/// Orthographic S-NDF views come from the S-MIP: a pan samples only the tiles that come
+/// into view, a pan while dragging shows at once (one iteration on the new tiles),
+/// re-lighting samples no particle, and an orbit while dragging is a sphere preview.
+#[test]
+fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    // Large enough that a column of tiles culls most of it.
+    let path = make_block(dir.path(), 12);
+    let mut s = state(&path, [128, 96]);
+    s.apply(&Action::Projection { orthographic: true });
+    // Close in, so that the data fills the view and what pans in.
+    s.apply(&Action::Zoom { factor: 3.0 });
+    s.apply(&Action::Mode { mode: Mode::Sndf });
+    s.settings.sndf_iterations = 2 * SNDF_BATCH;
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let until_refined = |id: u64| -> (RgbaImage, Vec<u32>) {
+        let mut spps = vec![];
+        loop {
+            let (got, image, spp, refined) = next_image(&w);
+            assert_eq!(got, id);
+            spps.push(spp);
+            if refined {
+                return (image, spps);
+            }
+        }
+    };
+    render(&w, &s, 1);
+    let (first, spps) = until_refined(1);
+    assert_eq!(spps, vec![SNDF_BATCH, 2 * SNDF_BATCH]);
+    let view_cost = w.points_sampled();
+    assert!(view_cost > 0);
+    // A drag: the image comes at once from the cached tiles plus one iteration of the
+    // column that came into view.
+    s.apply(&Action::Pan { dx: -70.0, dy: 0.0 });
+    w.send(Request::Render {
+        id: 2,
+        path: path.clone(),
+        opts: s.interactive_options(s.size, 1.0),
+        shade: s.settings.shade_lights(),
+        interactive: true,
+    });
+    let (id, moving, spp, refined) = next_image(&w);
+    assert_eq!((id, spp, refined), (2, 1, false));
+    assert_ne!(moving.data, first.data);
+    // Released: the new tiles refine to the target.
+    render(&w, &s, 3);
+    let (panned, _) = until_refined(3);
+    let pan_cost = w.points_sampled() - view_cost;
+    assert!(
+        pan_cost > 0 && pan_cost < view_cost,
+        "a pan sampled {pan_cost} particle samples, the whole view {view_cost}"
+    );
+    // The pixels still in view did not change: the image moved by 70 pixels.
+    for y in 0..96 {
+        for x in 0..58 {
+            let (a, b) = (first.pixel(x + 70, y), panned.pixel(x, y));
+            assert!(
+                a.iter().zip(b).all(|(p, q)| p.abs_diff(q) <= 1),
+                "({x}, {y}): {a:?} vs {b:?}"
+            );
+        }
+    }
+    // Another light: no particle sampled.
+    let before = w.points_sampled();
+    s.apply(&Action::Light {
+        index: 0,
+        direction: [1.0, 0.0, 0.2],
+    });
+    render(&w, &s, 4);
+    let (relit, _) = until_refined(4);
+    assert_eq!(w.points_sampled(), before);
+    assert_ne!(relit.data, panned.data);
+    // An orbit while dragging leaves the S-MIP's frame: a one-sample sphere preview.
+    s.apply(&Action::Orbit { dx: 30.0, dy: 0.0 });
+    w.send(Request::Render {
+        id: 5,
+        path: path.clone(),
+        opts: s.interactive_options(s.size, 1.0),
+        shade: s.settings.shade_lights(),
+        interactive: true,
+    });
+    let (id, _, spp, refined) = next_image(&w);
+    assert_eq!((id, spp, refined), (5, 1, false));
+    // Released: a new S-MIP for the new direction.
+    render(&w, &s, 6);
+    let (_, spps) = until_refined(6);
+    assert_eq!(spps, vec![SNDF_BATCH, 2 * SNDF_BATCH]);
 }
