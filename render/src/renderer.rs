@@ -236,6 +236,13 @@ fn halton(mut i: u32, base: u32) -> f32 {
     r
 }
 
+/// A cut packed and uploaded for S-NDF sampling, kept to sample it again.
+pub(crate) struct UploadedCut {
+    buffers: crate::passes::sphere_raycast::SphereBuffers,
+    position_bits: u32,
+    species: u32,
+}
+
 /// One sampling pass of S-NDFs into tiles (see [`Renderer::accumulate_sndf`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SndfPassSettings {
@@ -847,6 +854,39 @@ impl Renderer {
         hist: &wgpu::Buffer,
         pages: &[u32],
     ) -> Result<Option<Duration>, RenderError> {
+        let cut = self.upload_cut(file, draw, style)?;
+        self.accumulate_uploaded(&cut, camera, settings, hist, pages)
+    }
+
+    /// Packs `draw` (with `style`) and uploads it, for [`Self::accumulate_uploaded`].
+    pub(crate) fn upload_cut(
+        &self,
+        file: &MdlodFile,
+        draw: &DrawList,
+        style: &crate::style::PointStyle,
+    ) -> Result<UploadedCut, RenderError> {
+        let packed = crate::passes::sphere_raycast::pack_styled(
+            file,
+            draw,
+            crate::passes::sphere_raycast::PackStyle::Spheres,
+            style,
+        )?;
+        Ok(UploadedCut {
+            buffers: self.sphere.upload(&self.ctx.device, &packed),
+            position_bits: packed.position_bits,
+            species: packed.species.len() as u32,
+        })
+    }
+
+    /// [`Self::accumulate_sndf`] of a cut already on the GPU.
+    pub(crate) fn accumulate_uploaded(
+        &self,
+        cut: &UploadedCut,
+        camera: &Camera,
+        settings: &SndfPassSettings,
+        hist: &wgpu::Buffer,
+        pages: &[u32],
+    ) -> Result<Option<Duration>, RenderError> {
         let SndfPassSettings {
             width,
             height,
@@ -860,15 +900,9 @@ impl Renderer {
             pages.len() as u32,
             tiles_x * height.div_ceil(crate::sndf::TILE)
         );
-        let packed = crate::passes::sphere_raycast::pack_styled(
-            file,
-            draw,
-            crate::passes::sphere_raycast::PackStyle::Spheres,
-            style,
-        )?;
         let device = &self.ctx.device;
         let queue = &self.ctx.queue;
-        let buffers = self.sphere.upload(device, &packed);
+        let buffers = &cut.buffers;
         let layers = crate::sndf::ACCUMULATE_LAYERS.min(iterations).max(1);
         let texture = |label: &str, format, layers| {
             device.create_texture(&wgpu::TextureDescriptor {
@@ -975,8 +1009,8 @@ impl Renderer {
                 camera.view_from_world(),
                 camera.projection == Projection::Orthographic,
                 &Lighting::default(),
-                packed.position_bits,
-                packed.species.len() as u32,
+                cut.position_bits,
+                cut.species,
             );
             queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
             let last = s + 1 == iterations;

@@ -50,7 +50,7 @@ use crate::camera::{Bounds, Camera, Projection};
 use crate::error::RenderError;
 use crate::image::RgbaImage;
 use crate::occlusion::OcclusionMode;
-use crate::renderer::{srgb_to_linear, Renderer, SndfPassSettings};
+use crate::renderer::{srgb_to_linear, Renderer, SndfPassSettings, UploadedCut};
 use crate::sndf::{shade_table, tile_bytes, Binning, ShadeLights, NO_SLOT, TILE};
 use crate::style::PointStyle;
 use crate::traversal::{traverse, TraversalSettings};
@@ -340,7 +340,13 @@ pub struct Smip {
     bins: u32,
     down: (wgpu::ComputePipeline, wgpu::BindGroupLayout),
     composite: (wgpu::ComputePipeline, wgpu::BindGroupLayout),
+    /// The cuts of recently sampled rectangles, on the GPU, with their sphere counts:
+    /// refining the same tiles again needs no traversal or upload.
+    cuts: HashMap<(u32, [i32; 4]), (UploadedCut, u64)>,
 }
+
+/// Rectangles whose uploaded cuts are kept.
+const KEPT_CUTS: usize = 16;
 
 fn compute_pipeline(
     device: &wgpu::Device,
@@ -445,6 +451,7 @@ impl Smip {
             bins,
             down,
             composite,
+            cuts: HashMap::new(),
         })
     }
 
@@ -493,6 +500,7 @@ impl Smip {
     /// Drops every tile.
     pub fn clear(&mut self) {
         self.tiles.clear();
+        self.cuts.clear();
         self.free = (0..self.capacity).rev().collect();
     }
 
@@ -948,16 +956,27 @@ impl Smip {
             let set: HashSet<(i32, i32)> = tiles.iter().copied().collect();
             for [x0, x1, y0, y1] in rectangles(&tiles) {
                 let (camera, size) = rect_camera(frame, level, [x0, x1, y0, y1], &bounds);
-                let draw = traverse(
-                    &camera,
-                    file,
-                    &TraversalSettings {
-                        viewport: size,
-                        error_px: self.config.error_px,
-                        budget_points: self.config.budget_points,
-                        occlusion: self.config.occlusion,
-                    },
-                );
+                let key = (level, [x0, x1, y0, y1]);
+                if !self.cuts.contains_key(&key) {
+                    let draw = traverse(
+                        &camera,
+                        file,
+                        &TraversalSettings {
+                            viewport: size,
+                            error_px: self.config.error_px,
+                            budget_points: self.config.budget_points,
+                            occlusion: self.config.occlusion,
+                        },
+                    );
+                    let cut = renderer
+                        .ctx
+                        .scoped(|| renderer.upload_cut(file, &draw, style))?;
+                    if self.cuts.len() >= KEPT_CUTS {
+                        self.cuts.clear();
+                    }
+                    self.cuts.insert(key, (cut, draw.points));
+                }
+                let (cut, points) = &self.cuts[&key];
                 let mut pages = vec![];
                 for y in y0..y1 {
                     for x in x0..x1 {
@@ -970,11 +989,9 @@ impl Smip {
                     }
                 }
                 let gpu = renderer.ctx.scoped(|| {
-                    renderer.accumulate_sndf(
-                        file,
+                    renderer.accumulate_uploaded(
+                        cut,
                         &camera,
-                        &draw,
-                        style,
                         &SndfPassSettings {
                             width: size[0],
                             height: size[1],
@@ -987,9 +1004,10 @@ impl Smip {
                         &pages,
                     )
                 })?;
+                let draw_points = *points;
                 stats.rects += 1;
-                stats.points += draw.points;
-                stats.particle_samples += draw.points * u64::from(iterations);
+                stats.points += draw_points;
+                stats.particle_samples += draw_points * u64::from(iterations);
                 stats.gpu_time = match (stats.gpu_time, gpu) {
                     (Some(a), Some(b)) => Some(a + b),
                     (None, b) => b,
