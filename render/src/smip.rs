@@ -537,7 +537,7 @@ impl Smip {
         let needed: Vec<TileKey> = plans.iter().flat_map(|p| p.keys()).collect();
         stats.needed = needed.len() as u32;
         self.clock += 1;
-        let mut pinned: HashSet<TileKey> = needed.iter().copied().collect();
+        let pinned: HashSet<TileKey> = needed.iter().copied().collect();
         for key in &needed {
             if let Some(t) = self.tiles.get_mut(key) {
                 t.used = self.clock;
@@ -551,20 +551,23 @@ impl Smip {
                 .collect();
             let (derive, sample): (Vec<TileKey>, Vec<TileKey>) =
                 missing.into_iter().partition(|k| self.derivable(*k));
-            for k in &derive {
-                pinned.extend(k.children().into_iter().flatten());
+            // Down-sampled tiles first, their children pinned until then; once the
+            // down-sampling is queued, the children may make room for sampled tiles.
+            let mut with_children = pinned.clone();
+            with_children.extend(
+                derive
+                    .iter()
+                    .flat_map(|k| k.children().into_iter().flatten()),
+            );
+            for &key in &derive {
+                let slot = self.allocate(&with_children, &mut stats)?;
+                self.insert(key, slot);
+                self.downsample(renderer, key)?;
+                stats.downsampled += 1;
             }
-            for &key in derive.iter().chain(&sample) {
+            for &key in &sample {
                 let slot = self.allocate(&pinned, &mut stats)?;
-                self.tiles.insert(
-                    key,
-                    Tile {
-                        slot,
-                        rays: 0,
-                        derived: false,
-                        used: self.clock,
-                    },
-                );
+                self.insert(key, slot);
             }
             self.clear_slots(renderer, &sample);
             self.sample(
@@ -576,10 +579,6 @@ impl Smip {
                 style,
                 &mut stats,
             )?;
-            for key in derive {
-                self.downsample(renderer, key)?;
-                stats.downsampled += 1;
-            }
         }
         Ok(stats)
     }
@@ -883,6 +882,19 @@ impl Smip {
             .map(|c| self.tiles.get(c).map(|t| t.rays))
             .collect();
         rays.iter().all(|r| r.is_some() && *r == rays[0])
+    }
+
+    /// Enters a new, empty tile in the page table.
+    fn insert(&mut self, key: TileKey, slot: u32) {
+        self.tiles.insert(
+            key,
+            Tile {
+                slot,
+                rays: 0,
+                derived: false,
+                used: self.clock,
+            },
+        );
     }
 
     /// A free slot, or the least recently used slot of an unpinned tile.

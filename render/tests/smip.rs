@@ -19,19 +19,21 @@ use mdlod_render::{
 const BINS: u32 = 4;
 const BG: [f32; 3] = [0.1, 0.1, 0.1];
 
+fn new_renderer() -> Renderer {
+    let backends = if std::env::var_os("WGPU_BACKEND").is_some() {
+        BackendChoice::FromEnv
+    } else {
+        BackendChoice::Only(wgpu::Backends::VULKAN)
+    };
+    match GpuContext::with_backends(backends) {
+        Ok(ctx) => Renderer::new(ctx),
+        Err(e) => panic!("{e}"),
+    }
+}
+
 fn renderer() -> &'static Renderer {
     static R: OnceLock<Renderer> = OnceLock::new();
-    R.get_or_init(|| {
-        let backends = if std::env::var_os("WGPU_BACKEND").is_some() {
-            BackendChoice::FromEnv
-        } else {
-            BackendChoice::Only(wgpu::Backends::VULKAN)
-        };
-        match GpuContext::with_backends(backends) {
-            Ok(ctx) => Renderer::new(ctx),
-            Err(e) => panic!("{e}"),
-        }
-    })
+    R.get_or_init(new_renderer)
 }
 
 fn file() -> (tempfile::TempDir, MdlodFile) {
@@ -92,13 +94,13 @@ fn pixel(camera: &Camera, size: u32) -> f32 {
     camera.view_height_at_target() / size as f32
 }
 
-fn shade(s: &Smip, camera: &Camera, w: u32, h: u32) -> RgbaImage {
-    s.shade(renderer(), camera, w, h, &lights(), BG).unwrap().0
+fn shade(r: &Renderer, s: &Smip, camera: &Camera, w: u32, h: u32) -> RgbaImage {
+    s.shade(r, camera, w, h, &lights(), BG).unwrap().0
 }
 
 /// Level-`level` texels of tiles `[x0, x1) × [y0, y1)` as one S-NDF image (all tiles
 /// must have equal rays).
-fn assemble(s: &Smip, level: u32, rect: [i32; 4]) -> Sndf {
+fn assemble(r: &Renderer, s: &Smip, level: u32, rect: [i32; 4]) -> Sndf {
     let [x0, x1, y0, y1] = rect;
     let (w, h) = ((x1 - x0) as u32 * TILE, (y1 - y0) as u32 * TILE);
     let b2 = (BINS * BINS) as usize;
@@ -108,7 +110,7 @@ fn assemble(s: &Smip, level: u32, rect: [i32; 4]) -> Sndf {
         for tx in x0..x1 {
             let tile = s
                 .read_tile(
-                    renderer(),
+                    r,
                     TileKey {
                         level,
                         x: tx,
@@ -169,17 +171,28 @@ fn the_smip_shades_like_the_host_and_relights_without_particles() {
     let size = 128;
     let camera = view(&f, size);
     let fr = frame(&camera, size);
-    let mut s = smip(16);
-    let r = renderer();
+    // A renderer of its own: its particle counter sees no other test.
+    let own = new_renderer();
+    let r = &own;
+    let mut s = Smip::new(
+        r,
+        BINS,
+        SmipConfig {
+            pool_tiles: 16,
+            error_px: 0.0,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let stats = s
         .prepare(r, &f, &fr, &camera, size, size, 4, &PointStyle::default())
         .unwrap();
     assert_eq!((stats.level, stats.blend), (0, 0.0));
     assert_eq!((stats.needed, stats.sampled, stats.rects), (4, 4, 1));
     assert!(stats.particle_samples > 0);
-    let reference = assemble(&s, 0, [0, 2, 0, 2]);
+    let reference = assemble(r, &s, 0, [0, 2, 0, 2]);
     assert_eq!(reference.rays, 4);
-    let gpu = shade(&s, &camera, size, size);
+    let gpu = shade(r, &s, &camera, size, size);
     let host = reference.shade_with(&lights(), BG);
     assert!(max_diff(&gpu, &host) <= 1, "{}", max_diff(&gpu, &host));
     // The data is in view: not all background.
@@ -211,7 +224,7 @@ fn panning_samples_only_the_newly_visible_tiles() {
     let first = s
         .prepare(r, &f, &fr, &camera, size, size, 4, &style)
         .unwrap();
-    let a = shade(&s, &camera, size, size);
+    let a = shade(r, &s, &camera, size, size);
     // Right by 40 pixels (not a whole tile): tiles x = 0..3 needed, x = 2 is new.
     let mut panned = camera.clone();
     panned.pan(40.0 * pixel(&camera, size), 0.0);
@@ -222,14 +235,14 @@ fn panning_samples_only_the_newly_visible_tiles() {
     assert_eq!((second.reused, second.sampled), (4, 2));
     assert!(!second.invalidated);
     assert!(second.particle_samples < first.particle_samples);
-    let b = shade(&s, &panned, size, size);
+    let b = shade(r, &s, &panned, size, size);
     assert!(max_diff(&crop(&a, 40, 0, 88, size), &crop(&b, 0, 0, 88, size)) <= 1);
     // A fresh cache of the same frame sampling the panned view at once agrees.
     let mut fresh = smip(16);
     fresh
         .prepare(r, &f, &fr, &panned, size, size, 4, &style)
         .unwrap();
-    let c = shade(&fresh, &panned, size, size);
+    let c = shade(r, &fresh, &panned, size, size);
     let (bad, _) = compare(&c, &b, 2);
     assert!(bad <= (size * size / 200) as usize, "{bad} pixels differ");
     // Panning back needs nothing new.
@@ -238,7 +251,7 @@ fn panning_samples_only_the_newly_visible_tiles() {
         .unwrap();
     assert_eq!((back.sampled, back.particle_samples), (0, 0));
     assert!(
-        shade(&s, &camera, size, size).data == a.data,
+        shade(r, &s, &camera, size, size).data == a.data,
         "the same tiles shade alike"
     );
 }
@@ -276,7 +289,7 @@ fn zooming_out_downsamples_cached_tiles_exactly() {
         .unwrap();
     let (parent, rays) = (tile.hist, tile.rays);
     assert_eq!(rays, 12);
-    let host = assemble(&s, 0, [0, 2, 0, 2]).downsample();
+    let host = assemble(r, &s, 0, [0, 2, 0, 2]).downsample();
     assert_eq!(host.rays, rays);
     for (g, h) in parent.iter().zip(&host.hist) {
         for k in 0..4 {
@@ -286,7 +299,7 @@ fn zooming_out_downsamples_cached_tiles_exactly() {
             );
         }
     }
-    let _ = shade(&s, &out, size, size);
+    let _ = shade(r, &s, &out, size, size);
 }
 
 /// Between two levels the composite blends them trilinearly: with the view's corner on
@@ -327,8 +340,8 @@ fn fractional_zoom_is_trilinear_between_levels() {
     // footprints reach texel −1 of level 1: the 5 tiles left of and above the origin are
     // sampled.
     assert_eq!((stats.downsampled, stats.sampled), (4, 5), "{stats:?}");
-    let gpu = shade(&s, &z, size, size);
-    let level0 = assemble(&s, 0, [0, 4, 0, 4]);
+    let gpu = shade(r, &s, &z, size, size);
+    let level0 = assemble(r, &s, 0, [0, 4, 0, 4]);
     // The host clamps at its image's edge instead: compare from the second pixel on.
     let host = level0.shade_zoomed(&lights(), BG, 1.5);
     let (host, gpu) = (
@@ -363,7 +376,10 @@ fn a_tiny_pool_evicts_and_still_gives_the_same_images() {
             .prepare(r, &f, &fr, &v, size, size, 3, &style)
             .unwrap();
         assert_eq!(tiny.resident(), 4);
-        let (a, b) = (shade(&tiny, &v, size, size), shade(&large, &v, size, size));
+        let (a, b) = (
+            shade(r, &tiny, &v, size, size),
+            shade(r, &large, &v, size, size),
+        );
         // Tiles sampled again after eviction come from other rectangles (another
         // rasterization of the same texels): equal up to a few edge pixels.
         let (bad, _) = compare(&a, &b, 2);
@@ -373,6 +389,18 @@ fn a_tiny_pool_evicts_and_still_gives_the_same_images() {
         );
     }
     assert!(evicted >= 8, "{evicted}");
+    // A zoom-out in a pool of ten: the nine coarser tiles, one down-sampled from four
+    // cached children that are evicted once it is made.
+    let mut ten = smip(10);
+    ten.prepare(r, &f, &fr, &camera, size, size, 3, &style)
+        .unwrap();
+    let mut out = camera.clone();
+    out.zoom(0.5);
+    let st = ten
+        .prepare(r, &f, &fr, &out, size, size, 3, &style)
+        .unwrap();
+    assert_eq!((st.needed, st.downsampled, st.sampled), (9, 1, 8));
+    assert_eq!(ten.resident(), 10);
     let mut wide = camera.clone();
     wide.pan(10.0 * p, 10.0 * p);
     let e = tiny
@@ -402,7 +430,10 @@ fn refinement_adds_up_and_a_new_direction_invalidates() {
     assert_eq!((st.sampled, st.particle_samples), (0, 0));
     b.prepare(r, &f, &fr, &camera, size, size, 5, &style)
         .unwrap();
-    let (ta, tb) = (assemble(&a, 0, [0, 2, 0, 2]), assemble(&b, 0, [0, 2, 0, 2]));
+    let (ta, tb) = (
+        assemble(r, &a, 0, [0, 2, 0, 2]),
+        assemble(r, &b, 0, [0, 2, 0, 2]),
+    );
     assert_eq!((ta.rays, tb.rays), (5, 5));
     for (x, y) in ta.hist.iter().zip(&tb.hist) {
         for k in 0..4 {
