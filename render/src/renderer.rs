@@ -276,6 +276,11 @@ pub struct Renderer {
     /// Particle samples drawn so far (points × samples), so that tests can check that
     /// re-lighting S-NDFs draws none.
     points_sampled: std::sync::atomic::AtomicU64,
+    /// Large buffers kept between calls by purpose (S-NDF histograms and their
+    /// read-back): progressive refinement samples the same size again and again, and
+    /// making and first touching hundreds of MiB of fresh memory costs more than the
+    /// iterations themselves.
+    scratch: std::sync::Mutex<std::collections::HashMap<&'static str, wgpu::Buffer>>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -390,6 +395,7 @@ impl Renderer {
             sndf,
             sndf_shade,
             points_sampled: Default::default(),
+            scratch: Default::default(),
         }
     }
 
@@ -782,12 +788,16 @@ impl Renderer {
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
-            let hist = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("sndf histograms"),
-                size: hist_bytes,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
+            let hist = self.take_scratch(
+                "sndf histograms",
+                hist_bytes,
+                wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+            );
+            let mut enc = device.create_command_encoder(&Default::default());
+            enc.clear_buffer(&hist, 0, None);
+            queue.submit([enc.finish()]);
             // Every tile of the image, in order: slot i is tile i.
             let tiles = width.div_ceil(crate::sndf::TILE) * height.div_ceil(crate::sndf::TILE);
             let pages: Vec<u32> = (0..tiles).collect();
@@ -807,11 +817,17 @@ impl Renderer {
                 &hist,
                 &pages,
             )?;
-            let read = readback_buffer(device, "sndf readback", hist_bytes);
+            let read = self.take_scratch(
+                "sndf readback",
+                hist_bytes,
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            );
             let mut enc = device.create_command_encoder(&Default::default());
             enc.copy_buffer_to_buffer(&hist, 0, &read, 0, hist_bytes);
             queue.submit([enc.finish()]);
             let bytes = self.read_buffer(&read)?;
+            self.keep_scratch("sndf histograms", hist);
+            self.keep_scratch("sndf readback", read);
             let tiled: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
             // From tiles of 8×8-texel blocks to rows.
             let tile = crate::sndf::TILE;
@@ -1717,6 +1733,40 @@ impl Renderer {
         let t1 = u64::from_le_bytes(bytes[8..16].try_into().unwrap_or_default());
         let ns = t1.saturating_sub(t0) as f64 * f64::from(self.ctx.queue.get_timestamp_period());
         Ok(Some(Duration::from_nanos(ns as u64)))
+    }
+
+    /// Takes the kept buffer for `purpose` when it has this size and usage, else makes
+    /// one; give it back with [`Self::keep_scratch`]. A buffer taken is not shared: a
+    /// second caller meanwhile gets a new one. The caller clears it when it needs zeros.
+    fn take_scratch(
+        &self,
+        purpose: &'static str,
+        size: u64,
+        usage: wgpu::BufferUsages,
+    ) -> wgpu::Buffer {
+        let kept = self
+            .scratch
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(purpose);
+        match kept {
+            Some(b) if b.size() == size && b.usage() == usage => b,
+            // A kept buffer of another size is dropped before the new one is made.
+            _ => self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(purpose),
+                size,
+                usage,
+                mapped_at_creation: false,
+            }),
+        }
+    }
+
+    /// Keeps a buffer from [`Self::take_scratch`] for the next call.
+    fn keep_scratch(&self, purpose: &'static str, buffer: wgpu::Buffer) {
+        self.scratch
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(purpose, buffer);
     }
 
     pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {
