@@ -24,8 +24,8 @@
 //!
 //! Shading also takes an environment map and the normal-disk explorer
 //! ([`ShadeLights`]), and any zoom-out factor, trilinear between levels
-//! ([`Sndf::shade_zoomed`]). What is not here yet: the virtual S-MIP's tiles and tile
-//! pool (the whole image's S-NDFs are in memory) and a painted transfer function.
+//! ([`Sndf::shade_zoomed`]). [`Sndf`] holds a whole view's S-NDFs in host memory; the
+//! virtual S-MIP of tiles in a GPU pool, which outlives the view, is [`crate::smip`].
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
