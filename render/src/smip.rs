@@ -15,7 +15,8 @@
 //! 2. **Levels of a view.** A view whose pixels are `p` world units wide shows level
 //!    `f = log2(p / texel0)`: levels `⌊f⌋` and `⌊f⌋ + 1`, blended by the fraction
 //!    (trilinear, as a texture mipmap is read), or level 0 alone when zoomed in past
-//!    it. The tiles under the view's pixels (with the bilinear footprint) are needed.
+//!    it. The tiles under the view's pixel centres are needed; bilinear neighbours
+//!    beyond the view's edge are clamped, as at a texture's edge.
 //! 3. **Cache.** A fixed pool of tile slots on the GPU (one buffer) and a page table on
 //!    the host (tile → slot, rays per texel, last use). A needed tile that is not
 //!    resident gets a free slot, or the least recently used slot of a tile this view
@@ -64,8 +65,8 @@ pub const COMPOSITE_SHADER: &str = include_str!("passes/smip_composite.wgsl");
 const MAX_LEVEL: u32 = 30;
 /// A level fraction this close to a whole number shows one level alone.
 const LEVEL_SNAP: f64 = 1e-4;
-/// Texels whose bilinear weight is below this (rounding of a view on texel centres) do
-/// not make their tile needed; the composite pass clamps to the needed tiles.
+/// Pixel centres this close to a texel boundary count as inside (rounding of views on
+/// texel centres).
 const SPAN_SLACK: f64 = 1e-3;
 
 /// `DownParams` in `smip_downsample.wgsl`.
@@ -343,6 +344,9 @@ pub struct Smip {
     /// The cuts of recently sampled rectangles, on the GPU, with their sphere counts:
     /// refining the same tiles again needs no traversal or upload.
     cuts: HashMap<(u32, [i32; 4]), (UploadedCut, u64)>,
+    /// Levels coarser than a view's own that every call uses (see
+    /// [`Self::set_level_bias`]).
+    level_bias: u32,
 }
 
 /// Rectangles whose uploaded cuts are kept.
@@ -452,12 +456,20 @@ impl Smip {
             down,
             composite,
             cuts: HashMap::new(),
+            level_bias: 0,
         })
     }
 
     /// Tile slots in the pool.
     pub fn capacity(&self) -> u32 {
         self.capacity
+    }
+
+    /// Shows views `bias` levels coarser than their pixels (texels `2^bias` pixels
+    /// wide, magnified bilinearly): a quicker, blurrier picture while the user drags,
+    /// `4^bias` times fewer texels to sample. Applies to every later call until changed.
+    pub fn set_level_bias(&mut self, bias: u32) {
+        self.level_bias = bias.min(8);
     }
 
     /// Bins per axis of the pool's tiles.
@@ -815,7 +827,7 @@ impl Smip {
             )));
         }
         let p = f64::from(camera.view_height_at_target()) / f64::from(height);
-        let f = (p / frame.texel0).log2();
+        let f = (p / frame.texel0).log2() + f64::from(self.level_bias);
         let mut levels: Vec<(u32, f64)> = if f.is_nan() || f <= LEVEL_SNAP {
             vec![(0, 1.0)]
         } else {
@@ -840,11 +852,13 @@ impl Smip {
             let t = frame.texel(level);
             let origin = [(u - frame.origin[0]) / t, (frame.origin[1] - v) / t];
             let step = p / t;
-            // Texels under the bilinear footprints of the first and last pixel centres.
+            // Texels under the first and last pixel centres. Their bilinear neighbours
+            // beyond the view's edge are not needed: the composite clamps to the needed
+            // tiles, as a texture clamps at its edge, which saves a ring of tiles.
             let span = |o: f64, n: u32| {
-                let first = (o - 0.5 + SPAN_SLACK).floor();
-                let last = (o + f64::from(n - 1) * step - 0.5 - SPAN_SLACK)
-                    .ceil()
+                let first = (o + SPAN_SLACK).floor();
+                let last = (o + f64::from(n - 1) * step - SPAN_SLACK)
+                    .floor()
                     .max(first);
                 let tile = |c: f64| (c / f64::from(TILE)).floor();
                 (tile(first), tile(last) + 1.0)

@@ -256,6 +256,51 @@ fn panning_samples_only_the_newly_visible_tiles() {
     );
 }
 
+/// A level bias shows the view from a coarser level: a quarter of the tiles (with their
+/// margin), the same picture blurred, and the coarser level made from the cached finer
+/// tiles when they are there.
+#[test]
+fn a_level_bias_shows_a_coarser_level() {
+    let (_d, f) = file();
+    let size = 128;
+    let camera = view(&f, size);
+    let fr = frame(&camera, size);
+    let r = renderer();
+    let style = PointStyle::default();
+    let mut s = smip(32);
+    s.set_level_bias(1);
+    let coarse = s
+        .prepare(r, &f, &fr, &camera, size, size, 4, &style)
+        .unwrap();
+    assert_eq!((coarse.level, coarse.blend, coarse.needed), (1, 0.0, 1));
+    let blurred = shade(r, &s, &camera, size, size);
+    s.set_level_bias(0);
+    s.prepare(r, &f, &fr, &camera, size, size, 4, &style)
+        .unwrap();
+    let sharp = shade(r, &s, &camera, size, size);
+    // Close on the whole (a blurred copy), not equal.
+    let mean = |a: &RgbaImage, b: &RgbaImage| {
+        a.data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| f64::from(x.abs_diff(*y)))
+            .sum::<f64>()
+            / a.data.len() as f64
+    };
+    let d = mean(&blurred, &sharp);
+    assert!(d > 0.1 && d < 12.0, "mean difference {d}");
+    // Back to the bias: the coarse tile is derived again from the four sharp ones.
+    let mut fresh = smip(32);
+    fresh
+        .prepare(r, &f, &fr, &camera, size, size, 4, &style)
+        .unwrap();
+    fresh.set_level_bias(1);
+    let st = fresh
+        .prepare(r, &f, &fr, &camera, size, size, 4, &style)
+        .unwrap();
+    assert_eq!((st.downsampled, st.sampled), (1, 0));
+}
+
 /// Zooming out by two serves the coarser level by down-sampling cached tiles, exactly
 /// the 2×2 sums of the host's down-sampling, with four times the rays.
 #[test]
@@ -336,13 +381,12 @@ fn fractional_zoom_is_trilinear_between_levels() {
         "{}",
         stats.blend
     );
-    // Level 1 from the cached level 0 (tiles 0..2), but the first pixels' bilinear
-    // footprints reach texel −1 of level 1: the 5 tiles left of and above the origin are
-    // sampled.
-    assert_eq!((stats.downsampled, stats.sampled), (4, 5), "{stats:?}");
+    // Level 1 (tiles 0..2) from the cached level 0, nothing sampled.
+    assert_eq!((stats.downsampled, stats.sampled), (4, 0), "{stats:?}");
     let gpu = shade(r, &s, &z, size, size);
     let level0 = assemble(r, &s, 0, [0, 4, 0, 4]);
-    // The host clamps at its image's edge instead: compare from the second pixel on.
+    // Both clamp at the edge of the texels they hold; compare from the second pixel on
+    // all the same (the host clamps at its 256-texel image, the S-MIP at its tiles).
     let host = level0.shade_zoomed(&lights(), BG, 1.5);
     let (host, gpu) = (
         crop(&host, 1, 1, size - 1, size - 1),

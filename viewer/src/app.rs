@@ -212,6 +212,11 @@ impl ViewerApp {
             opts,
             shade: self.state.settings.shade_lights(),
             interactive,
+            coarsen: if interactive {
+                coarsen_levels(self.moving_error, self.state.settings.error_px)
+            } else {
+                0
+            },
         });
         self.requested = Some((id, interactive));
         self.dirty = Changed::default();
@@ -930,5 +935,34 @@ impl eframe::App for ViewerApp {
         if scripted || self.moving() || self.playing || self.requested.is_some_and(|(_, p)| p) {
             ctx.request_repaint_after(Duration::from_millis(16));
         }
+    }
+}
+
+/// S-MIP levels to coarsen an orthographic S-NDF view by while dragging: one per
+/// doubling of the preview's screen error over the settled one (the adaptation that
+/// holds the target frame time), at most 3.
+pub fn coarsen_levels(moving_error_px: f32, error_px: f32) -> u32 {
+    let ratio = moving_error_px / error_px.max(0.25);
+    if ratio.is_finite() && ratio >= 2.0 {
+        (ratio.log2().floor() as u32).min(3)
+    } else {
+        0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::coarsen_levels;
+
+    #[test]
+    fn slow_previews_coarsen_the_smip_level_per_doubling_of_the_error() {
+        assert_eq!(coarsen_levels(1.0, 1.0), 0);
+        assert_eq!(coarsen_levels(1.9, 1.0), 0);
+        assert_eq!(coarsen_levels(2.0, 1.0), 1);
+        assert_eq!(coarsen_levels(7.9, 1.0), 2);
+        assert_eq!(coarsen_levels(64.0, 1.0), 3);
+        assert_eq!(coarsen_levels(f32::NAN, 1.0), 0);
+        // A settled error of zero counts as a quarter pixel.
+        assert_eq!(coarsen_levels(1.0, 0.0), 2);
     }
 }

@@ -42,6 +42,9 @@ pub enum Request {
         opts: RenderOptions,
         shade: ShadeLights,
         interactive: bool,
+        /// While the user drags an orthographic S-NDF view: show it this many S-MIP
+        /// levels coarser than its pixels (a quarter of the texels per level).
+        coarsen: u32,
     },
     /// Open a file ahead of need (the next timestep).
     Prefetch(PathBuf),
@@ -132,6 +135,8 @@ struct TiledView {
     rays: u32,
     /// Spheres per iteration of the last sampling.
     points: u64,
+    /// S-MIP levels coarser than the view's own (while dragging).
+    coarsen: u32,
 }
 
 /// The window's handle on the render thread.
@@ -330,7 +335,8 @@ impl<'r> Thread<'r> {
                         opts,
                         shade,
                         interactive,
-                    } => self.render(id, &path, opts, shade, interactive),
+                        coarsen,
+                    } => self.render(id, &path, opts, shade, interactive, coarsen),
                     Request::Prefetch(path) => {
                         let _ = self.file(&path);
                     }
@@ -371,6 +377,7 @@ impl<'r> Thread<'r> {
         opts: RenderOptions,
         shade: ShadeLights,
         interactive: bool,
+        coarsen: u32,
     ) {
         let t0 = Instant::now();
         let file = match self.file(path) {
@@ -386,7 +393,17 @@ impl<'r> Thread<'r> {
             };
             if camera.projection == mdlod_render::Projection::Orthographic {
                 self.progressive = None;
-                match self.tiled_render(id, path, &file, &opts, &shade, camera, interactive) {
+                let coarsen = if interactive { coarsen } else { 0 };
+                match self.tiled_render(
+                    id,
+                    path,
+                    &file,
+                    &opts,
+                    &shade,
+                    camera,
+                    coarsen,
+                    interactive,
+                ) {
                     Ok(true) => return,
                     // A preview of a new direction: spheres, below.
                     Ok(false) => opts.mode = RenderMode::Spheres,
@@ -568,6 +585,7 @@ impl<'r> Thread<'r> {
         opts: &RenderOptions,
         shade: &ShadeLights,
         camera: mdlod_render::Camera,
+        coarsen: u32,
         interactive: bool,
     ) -> Result<bool, String> {
         let t0 = Instant::now();
@@ -603,6 +621,7 @@ impl<'r> Thread<'r> {
             );
         }
         let smip = self.smip.as_mut().expect("just made");
+        smip.set_level_bias(coarsen);
         let content = format!(
             "{} {:?} error {} {}",
             path.display(),
@@ -649,6 +668,7 @@ impl<'r> Thread<'r> {
             target: if interactive { 0 } else { iterations },
             rays,
             points: stats.points,
+            coarsen,
         });
         self.show_tiled(t0, interactive);
         Ok(true)
@@ -662,6 +682,7 @@ impl<'r> Thread<'r> {
             return;
         };
         let (w, h) = (t.opts.width, t.opts.height);
+        smip.set_level_bias(t.coarsen);
         let refined = smip
             .refine(
                 self.renderer,
@@ -693,9 +714,10 @@ impl<'r> Thread<'r> {
 
     /// Shades the S-MIP view under its lights and sends the image.
     fn show_tiled(&mut self, t0: Instant, interactive: bool) {
-        let (Some(t), Some(smip)) = (self.tiled.as_ref(), self.smip.as_ref()) else {
+        let (Some(t), Some(smip)) = (self.tiled.as_ref(), self.smip.as_mut()) else {
             return;
         };
+        smip.set_level_bias(t.coarsen);
         let (w, h) = (t.opts.width, t.opts.height);
         match smip.shade(self.renderer, &t.camera, w, h, &t.shade, t.opts.background) {
             Ok((image, gpu)) => {

@@ -85,6 +85,7 @@ fn render(w: &Worker, s: &ViewerState, id: u64) {
         opts: s.render_options(s.size),
         shade: s.settings.shade_lights(),
         interactive: false,
+        coarsen: 0,
     });
 }
 
@@ -170,6 +171,7 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
         opts: s.render_options([8, 8]),
         shade: s.settings.shade_lights(),
         interactive: false,
+        coarsen: 0,
     });
     match w.rx.recv_timeout(Duration::from_secs(60)).unwrap() {
         Reply::Error(e) => assert!(e.contains("missing.mdlod"), "{e}"),
@@ -271,10 +273,26 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
         opts: s.interactive_options(s.size, 1.0),
         shade: s.settings.shade_lights(),
         interactive: true,
+        coarsen: 0,
     });
     let (id, moving, spp, refined) = next_image(&w);
     assert_eq!((id, spp, refined), (2, 1, false));
     assert_ne!(moving.data, first.data);
+    // Dragging on with slow frames: a level coarser (the preview's texels are two
+    // pixels wide), still at once.
+    s.apply(&Action::Pan { dx: -6.0, dy: 0.0 });
+    w.send(Request::Render {
+        id: 20,
+        path: path.clone(),
+        opts: s.interactive_options(s.size, 1.0),
+        shade: s.settings.shade_lights(),
+        interactive: true,
+        coarsen: 1,
+    });
+    let (id, coarse, _, refined) = next_image(&w);
+    assert_eq!((id, refined), (20, false));
+    assert_eq!((coarse.width, coarse.height), (128, 96));
+    s.apply(&Action::Pan { dx: 6.0, dy: 0.0 });
     // Released: the new tiles refine to the target.
     render(&w, &s, 3);
     let (panned, _) = until_refined(3);
@@ -311,6 +329,7 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
         opts: s.interactive_options(s.size, 1.0),
         shade: s.settings.shade_lights(),
         interactive: true,
+        coarsen: 0,
     });
     let (id, _, spp, refined) = next_image(&w);
     assert_eq!((id, spp, refined), (5, 1, false));
