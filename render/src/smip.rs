@@ -243,7 +243,7 @@ pub struct SmipConfig {
     /// Largest projected size, in texels of the level sampled, of a node drawn as its
     /// representative.
     pub error_px: f32,
-    /// Most spheres per sampled rectangle.
+    /// Most spheres per sampled rectangle (clamped to what one GPU buffer holds).
     pub budget_points: u64,
     pub occlusion: OcclusionMode,
 }
@@ -253,7 +253,7 @@ impl Default for SmipConfig {
         SmipConfig {
             pool_tiles: 256,
             error_px: 1.0,
-            budget_points: 50_000_000,
+            budget_points: 4_000_000,
             occlusion: OcclusionMode::WholePixels,
         }
     }
@@ -990,7 +990,11 @@ impl Smip {
                         &TraversalSettings {
                             viewport: size,
                             error_px: self.config.error_px,
-                            budget_points: self.config.budget_points,
+                            budget_points: self
+                                .config
+                                .budget_points
+                                .min(renderer.max_points())
+                                .max(1),
                             occlusion: self.config.occlusion,
                         },
                     );
