@@ -349,8 +349,9 @@ pub struct Smip {
     level_bias: u32,
 }
 
-/// Rectangles whose uploaded cuts are kept.
-const KEPT_CUTS: usize = 16;
+/// Spheres, over all rectangles, whose uploaded cuts are kept (about 16 bytes each on
+/// the GPU).
+const KEPT_POINTS: u64 = 16 << 20;
 
 fn compute_pipeline(
     device: &wgpu::Device,
@@ -1001,7 +1002,8 @@ impl Smip {
                     let cut = renderer
                         .ctx
                         .scoped(|| renderer.upload_cut(file, &draw, style))?;
-                    if self.cuts.len() >= KEPT_CUTS {
+                    let kept: u64 = self.cuts.values().map(|c| c.1).sum();
+                    if kept + draw.points > KEPT_POINTS {
                         self.cuts.clear();
                     }
                     self.cuts.insert(key, (cut, draw.points));
@@ -1107,9 +1109,34 @@ impl Smip {
     }
 }
 
+/// Largest side, in tiles, of a sampled rectangle. Each rectangle's cut is chosen on its
+/// own, and a cut over its point budget coarsens as a whole; small rectangles keep the
+/// cut of a tile independent of how many tiles were sampled with it.
+pub const MAX_RECT_TILES: i32 = 4;
+
 /// Rectangles `[x0, x1, y0, y1]` (exclusive ends) covering exactly `tiles`: runs along
-/// each row, merged with the run below when it spans the same columns.
+/// each row, merged with the run below when it spans the same columns, then cut into
+/// pieces at most [`MAX_RECT_TILES`] on a side.
 pub fn rectangles(tiles: &[(i32, i32)]) -> Vec<[i32; 4]> {
+    let mut out = vec![];
+    for [x0, x1, y0, y1] in runs(tiles) {
+        for ya in (y0..y1).step_by(MAX_RECT_TILES as usize) {
+            for xa in (x0..x1).step_by(MAX_RECT_TILES as usize) {
+                out.push([
+                    xa,
+                    (xa + MAX_RECT_TILES).min(x1),
+                    ya,
+                    (ya + MAX_RECT_TILES).min(y1),
+                ]);
+            }
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+/// Rectangles covering exactly `tiles`, of any size (see [`rectangles`]).
+fn runs(tiles: &[(i32, i32)]) -> Vec<[i32; 4]> {
     let mut rows: BTreeMap<i32, Vec<i32>> = BTreeMap::new();
     for &(x, y) in tiles {
         rows.entry(y).or_default().push(x);
@@ -1194,6 +1221,7 @@ mod tests {
     fn rectangles_cover_exactly_the_tiles() {
         let cases: Vec<Vec<(i32, i32)>> = vec![
             (0..3).flat_map(|y| (0..4).map(move |x| (x, y))).collect(),
+            (0..9).flat_map(|y| (-3..7).map(move |x| (x, y))).collect(),
             // An L-shaped strip, as a diagonal pan uncovers.
             (0..4)
                 .map(|y| (3, y))
@@ -1216,9 +1244,15 @@ mod tests {
             want.sort_unstable();
             assert_eq!(covered, want, "{rects:?}");
         }
-        // A full block is one rectangle.
+        // A full block is one rectangle, up to the largest side.
         let block: Vec<_> = (0..3).flat_map(|y| (0..4).map(move |x| (x, y))).collect();
         assert_eq!(rectangles(&block), vec![[0, 4, 0, 3]]);
+        let big: Vec<_> = (0..5).flat_map(|y| (0..9).map(move |x| (x, y))).collect();
+        let rects = rectangles(&big);
+        assert_eq!(rects.len(), 6);
+        assert!(rects
+            .iter()
+            .all(|r| r[1] - r[0] <= MAX_RECT_TILES && r[3] - r[2] <= MAX_RECT_TILES));
     }
 
     #[test]
