@@ -8,6 +8,10 @@
 //! records of four f32 (albedo sum r, g, b and sample count), texel-major, rows top to
 //! bottom, bins row-major (`by · bins + bx`).
 //!
+//! A file may instead hold S-MIP tiles (version 1.1, [`SndfTiles`]): 64×64-texel tiles
+//! of a screen-space mipmap at any levels, each with its own rays, in the order the
+//! header lists them.
+//!
 //! A reader checks, before it trusts anything: the magic and version, the JSON header
 //! against size caps, every size with checked arithmetic against the file length, the
 //! checksum, and every value (finite, non-negative, a bin's count at most the rays and
@@ -23,8 +27,17 @@ use crate::error::FormatError;
 
 /// The first 8 bytes of every `.sndf` file.
 pub const SNDF_MAGIC: [u8; 8] = *b"\x89MDSNDF\n";
-/// The version written; readers accept major version 1.
+/// The version written for one image of S-NDFs; readers accept major version 1.
 pub const SNDF_VERSION: (u16, u16) = (1, 0);
+/// The version written for S-MIP tiles (the header's `smip`).
+pub const SNDF_TILES_VERSION: (u16, u16) = (1, 1);
+/// Texels per side of an S-MIP tile.
+pub const SNDF_TILE: u32 = 64;
+/// Most tiles a file holds.
+const MAX_TILES: usize = 1 << 16;
+/// Deepest S-MIP level, and the largest tile coordinate, a file may name.
+const MAX_LEVEL: u32 = 30;
+const MAX_TILE_COORD: i32 = 1 << 24;
 const FIXED: usize = 8 + 2 + 2 + 4 + 8;
 /// Largest JSON header accepted.
 const MAX_HEADER: usize = 1 << 20;
@@ -55,6 +68,35 @@ pub struct SndfHeader {
     /// finer so that every sphere gets enough samples (absent: 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub display_level: Option<u32>,
+    /// S-MIP tiles instead of one image (version 1.1): `width × height` is then the size
+    /// of the view they were shown in, and `rays` the fewest rays of any tile.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub smip: Option<SndfTiles>,
+}
+
+/// The S-MIP a file's tiles belong to, and the tiles (FORMAT.md, section 10).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SndfTiles {
+    /// World units per texel of level 0 (level `l`'s texels are `2^l` times wider).
+    pub texel0: f64,
+    /// Plane coordinates `(u, v)` = (world · right, world · up) of the top-left corner
+    /// of level 0's texel (0, 0).
+    pub origin: [f64; 2],
+    /// Texels per tile side: 64.
+    pub tile: u32,
+    /// The tiles, in the order of the data block.
+    pub tiles: Vec<SndfTile>,
+}
+
+/// One tile: level, column and row of tiles (rows go down), rays per texel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SndfTile {
+    pub level: u32,
+    pub x: i32,
+    pub y: i32,
+    pub rays: u32,
 }
 
 /// Sampled S-NDFs: the header and, per texel, `bins²` records `[r, g, b, count]`.
@@ -73,9 +115,72 @@ fn corrupt(path: &Path, place: &str, problem: impl Into<String>) -> FormatError 
 }
 
 fn records(h: &SndfHeader) -> Option<usize> {
-    (h.width as usize)
-        .checked_mul(h.height as usize)?
-        .checked_mul((h.bins as usize).checked_mul(h.bins as usize)?)
+    let b2 = (h.bins as usize).checked_mul(h.bins as usize)?;
+    match &h.smip {
+        Some(t) => t
+            .tiles
+            .len()
+            .checked_mul((SNDF_TILE * SNDF_TILE) as usize)?
+            .checked_mul(b2),
+        None => (h.width as usize)
+            .checked_mul(h.height as usize)?
+            .checked_mul(b2),
+    }
+}
+
+/// The rays per texel of every record, in order: one count per run of records.
+fn record_rays(h: &SndfHeader) -> Vec<(usize, u32)> {
+    let b2 = (h.bins * h.bins) as usize;
+    match &h.smip {
+        Some(t) => t
+            .tiles
+            .iter()
+            .map(|tile| ((SNDF_TILE * SNDF_TILE) as usize * b2, tile.rays))
+            .collect(),
+        None => vec![(usize::MAX, h.rays)],
+    }
+}
+
+fn check_tiles(path: &Path, h: &SndfHeader, t: &SndfTiles) -> Result<(), FormatError> {
+    let bad = |problem: String| Err(corrupt(path, "header (smip)", problem));
+    if !(t.texel0.is_finite() && t.texel0 > 0.0 && t.origin.iter().all(|v| v.is_finite())) {
+        return bad(format!(
+            "texel size {} and origin {:?} (finite, the size positive)",
+            t.texel0, t.origin
+        ));
+    }
+    if t.tile != SNDF_TILE {
+        return bad(format!(
+            "tiles of {} texels (this version has {SNDF_TILE})",
+            t.tile
+        ));
+    }
+    if t.tiles.is_empty() || t.tiles.len() > MAX_TILES {
+        return bad(format!("{} tiles (1 to {MAX_TILES})", t.tiles.len()));
+    }
+    let mut seen = std::collections::HashSet::new();
+    for (i, tile) in t.tiles.iter().enumerate() {
+        if tile.level > MAX_LEVEL
+            || tile.x.unsigned_abs() > MAX_TILE_COORD as u32
+            || tile.y.unsigned_abs() > MAX_TILE_COORD as u32
+            || tile.rays == 0
+        {
+            return bad(format!(
+                "tile {i} {tile:?} (level at most {MAX_LEVEL}, coordinates within ±{MAX_TILE_COORD}, at least one ray)"
+            ));
+        }
+        if !seen.insert((tile.level, tile.x, tile.y)) {
+            return bad(format!("tile {i} {tile:?} appears twice"));
+        }
+    }
+    let fewest = t.tiles.iter().map(|t| t.rays).min().unwrap_or(0);
+    if h.rays != fewest {
+        return bad(format!(
+            "rays {} in the header, the fewest of the tiles is {fewest}",
+            h.rays
+        ));
+    }
+    Ok(())
 }
 
 fn check_header(path: &Path, h: &SndfHeader) -> Result<usize, FormatError> {
@@ -110,6 +215,9 @@ fn check_header(path: &Path, h: &SndfHeader) -> Result<usize, FormatError> {
     if h.display_level.is_some_and(|l| l > 16) {
         return Err(corrupt(path, "header", "display level above 16"));
     }
+    if let Some(t) = &h.smip {
+        check_tiles(path, h, t)?;
+    }
     records(h).ok_or_else(|| corrupt(path, "header", "size overflows"))
 }
 
@@ -129,9 +237,15 @@ impl SndfData {
         })?;
         let data: &[u8] = bytemuck::cast_slice(&self.hist);
         let mut out = Vec::with_capacity(FIXED + json.len() + 16 + data.len());
+        // Files of one image stay 1.0, readable by every 1.x reader.
+        let version = if self.header.smip.is_some() {
+            SNDF_TILES_VERSION
+        } else {
+            SNDF_VERSION
+        };
         out.extend_from_slice(&SNDF_MAGIC);
-        out.extend_from_slice(&SNDF_VERSION.0.to_le_bytes());
-        out.extend_from_slice(&SNDF_VERSION.1.to_le_bytes());
+        out.extend_from_slice(&version.0.to_le_bytes());
+        out.extend_from_slice(&version.1.to_le_bytes());
         out.extend_from_slice(&(json.len() as u32).to_le_bytes());
         out.extend_from_slice(&xxh3_64(data).to_le_bytes());
         out.extend_from_slice(&json);
@@ -200,13 +314,15 @@ impl SndfData {
         let start = (FIXED + json_len).div_ceil(16) * 16;
         let expected = n.checked_mul(16).and_then(|d| d.checked_add(start));
         if expected != Some(bytes.len()) {
+            let what = match &header.smip {
+                Some(t) => format!("{} tiles", t.tiles.len()),
+                None => format!("{}x{} texels", header.width, header.height),
+            };
             return Err(corrupt(
                 path,
                 "data",
                 format!(
-                    "{}x{} texels of {}² bins need {} bytes in all, the file has {}",
-                    header.width,
-                    header.height,
+                    "{what} of {}² bins need {} bytes in all, the file has {}",
                     header.bins,
                     expected.map_or("too many".into(), |e| e.to_string()),
                     bytes.len()
@@ -223,9 +339,13 @@ impl SndfData {
                 computed,
             });
         }
-        let rays = header.rays as f32;
+        let runs = record_rays(&header);
+        let mut run = runs
+            .iter()
+            .flat_map(|&(len, rays)| std::iter::repeat_n(rays, len));
         let mut hist = Vec::with_capacity(n);
         for (i, c) in data.chunks_exact(16).enumerate() {
+            let rays = run.next().unwrap_or(header.rays) as f32;
             let r: [f32; 4] = [0, 1, 2, 3]
                 .map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap_or([0; 4])));
             let ok = r.iter().all(|v| v.is_finite() && *v >= 0.0)
@@ -258,6 +378,7 @@ mod tests {
             view: serde_json::json!({"azimuth_deg": 30.0}),
             source: Some("x.mdlod".into()),
             display_level: Some(1),
+            smip: None,
         };
         let hist = (0..24)
             .map(|i| {
@@ -299,5 +420,106 @@ mod tests {
             e.contains("record 5") && e.contains("count at most 4"),
             "{e}"
         );
+    }
+
+    fn tiled() -> SndfData {
+        let tiles = vec![
+            SndfTile {
+                level: 0,
+                x: -1,
+                y: 2,
+                rays: 3,
+            },
+            SndfTile {
+                level: 1,
+                x: 0,
+                y: 0,
+                rays: 12,
+            },
+        ];
+        let per = (SNDF_TILE * SNDF_TILE) as usize;
+        let hist = (0..2 * per)
+            .map(|i| {
+                let c = ((i % 4) as f32).min(if i < per { 3.0 } else { 12.0 });
+                [0.5 * c, 0.0, c, c]
+            })
+            .collect();
+        SndfData {
+            header: SndfHeader {
+                width: 100,
+                height: 60,
+                bins: 1,
+                binning: "projected-normals".into(),
+                rays: 3,
+                view: serde_json::json!({"projection": "orthographic"}),
+                source: None,
+                display_level: None,
+                smip: Some(SndfTiles {
+                    texel0: 0.25,
+                    origin: [-3.0, 7.5],
+                    tile: SNDF_TILE,
+                    tiles,
+                }),
+            },
+            hist,
+        }
+    }
+
+    #[test]
+    fn tiles_round_trip_with_their_own_rays_and_bad_tiles_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.sndf");
+        let t = tiled();
+        t.save(&p).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        assert_eq!(&bytes[8..12], &[1, 0, 1, 0], "version 1.1");
+        assert_eq!(SndfData::load(&p).unwrap(), t);
+        // One image stays version 1.0.
+        let q = dir.path().join("i.sndf");
+        sample().save(&q).unwrap();
+        assert_eq!(&std::fs::read(&q).unwrap()[8..12], &[1, 0, 0, 0]);
+        // A count above its own tile's rays (3), though below the other tile's (12).
+        let mut over = t.clone();
+        over.hist[10][3] = 5.0;
+        over.save(&p).unwrap();
+        let e = SndfData::load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("record 10") && e.contains("count at most 3"),
+            "{e}"
+        );
+        type Damage = Box<dyn Fn(&mut SndfTiles, &mut SndfHeader)>;
+        let cases: Vec<(&str, Damage)> = vec![
+            ("appears twice", Box::new(|s, _| s.tiles[1] = s.tiles[0])),
+            ("tiles of 32", Box::new(|s, _| s.tile = 32)),
+            ("texel size", Box::new(|s, _| s.texel0 = -1.0)),
+            ("level at most", Box::new(|s, _| s.tiles[0].level = 99)),
+            ("fewest of the tiles", Box::new(|_, h| h.rays = 12)),
+            ("0 tiles", Box::new(|s, _| s.tiles.clear())),
+        ];
+        for (want, damage) in cases {
+            let mut bad = t.clone();
+            let mut header = bad.header.clone();
+            let mut smip = header.smip.take().unwrap();
+            damage(&mut smip, &mut header);
+            header.smip = Some(smip);
+            bad.header = header;
+            // Written by hand: save refuses such headers too.
+            assert!(bad.save(&p).is_err(), "{want}");
+            let json = serde_json::to_vec(&bad.header).unwrap();
+            let data: &[u8] = bytemuck::cast_slice(&bad.hist);
+            let mut raw = vec![];
+            raw.extend_from_slice(&SNDF_MAGIC);
+            raw.extend_from_slice(&[1, 0, 1, 0]);
+            raw.extend_from_slice(&(json.len() as u32).to_le_bytes());
+            raw.extend_from_slice(&xxh3_64(data).to_le_bytes());
+            raw.extend_from_slice(&json);
+            raw.resize(raw.len().div_ceil(16) * 16, 0);
+            raw.extend_from_slice(data);
+            let e = SndfData::parse(&p, &raw).unwrap_err().to_string();
+            assert!(
+                e.contains(want) && e.starts_with(&p.display().to_string()),
+                "{want}: {e}"
+            );
+        }
     }
 }

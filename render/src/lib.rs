@@ -694,6 +694,11 @@ pub fn shade_file(
     level: ShadeLevel,
 ) -> Result<(u32, u32), RenderError> {
     let data = mdlod_format::sndf::SndfData::load(input)?;
+    if data.header.smip.is_some() {
+        let image = shade_tiles_file(input, &data, lights, background_srgb, level)?;
+        image.save_png(out)?;
+        return Ok((image.width, image.height));
+    }
     let mut s = sndf::Sndf::from_data(&data);
     let image = match level {
         ShadeLevel::ZoomOut(z) => s.shade_zoomed(lights, background_srgb, z),
@@ -710,6 +715,45 @@ pub fn shade_file(
     };
     image.save_png(out)?;
     Ok((image.width, image.height))
+}
+
+/// Shades a file of S-MIP tiles on the host: its view at its size, or `level` levels
+/// (or `zoom_out` times) coarser, the image that much smaller; coarser tiles missing
+/// from the file are made from the finer ones.
+fn shade_tiles_file(
+    input: &Path,
+    data: &mdlod_format::sndf::SndfData,
+    lights: &sndf::ShadeLights,
+    background_srgb: [f32; 3],
+    level: ShadeLevel,
+) -> Result<RgbaImage, RenderError> {
+    let bad = |message: String| RenderError::View {
+        path: input.to_path_buf(),
+        message,
+    };
+    let view: ViewFile = serde_json::from_value(data.header.view.clone())
+        .map_err(|e| bad(format!("the view in the header: {e}")))?;
+    let (w, h) = (data.header.width, data.header.height);
+    let target = glam::Vec3::from(view.target.unwrap_or([0.0; 3]));
+    let camera = view.to_camera(
+        &Bounds::new(target - 1.0, target + 1.0),
+        w as f32 / h as f32,
+    );
+    let mut tiles =
+        smip::SmipTiles::from_data(data, &camera).ok_or_else(|| bad("no S-MIP tiles".into()))?;
+    let factor = match level {
+        ShadeLevel::Display => 1.0,
+        ShadeLevel::Level(l) => {
+            tiles.level_bias = 0;
+            2f32.powi(l as i32)
+        }
+        ShadeLevel::ZoomOut(z) => z,
+    };
+    let (w, h) = (
+        ((w as f32 / factor).round() as u32).max(1),
+        ((h as f32 / factor).round() as u32).max(1),
+    );
+    smip::shade_tiles(&tiles, &camera, w, h, lights, background_srgb)
 }
 
 #[cfg(test)]

@@ -45,13 +45,14 @@ use std::time::Duration;
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use mdlod_format::sndf::{SndfData, SndfHeader, SndfTile, SndfTiles};
 use mdlod_format::MdlodFile;
 
 use crate::camera::{Bounds, Camera, Projection};
 use crate::error::RenderError;
 use crate::image::RgbaImage;
 use crate::occlusion::OcclusionMode;
-use crate::renderer::{srgb_to_linear, Renderer, SndfPassSettings, UploadedCut};
+use crate::renderer::{linear_to_srgb, srgb_to_linear, Renderer, SndfPassSettings, UploadedCut};
 use crate::sndf::{shade_table, tile_bytes, Binning, ShadeLights, NO_SLOT, TILE};
 use crate::style::PointStyle;
 use crate::traversal::{traverse, TraversalSettings};
@@ -817,73 +818,34 @@ impl Smip {
         let frame = self.frame.as_ref().ok_or_else(|| {
             RenderError::InvalidOptions("an S-MIP view before any frame was set".into())
         })?;
-        if !frame.fits(camera) {
-            return Err(RenderError::InvalidOptions(
-                "the view does not fit the S-MIP's frame (direction or projection changed)".into(),
-            ));
+        plan_view(frame, self.level_bias, camera, width, height)
+    }
+
+    /// The tiles `camera`'s view needs, read back from the pool with the frame: what a
+    /// `.sndf` file of S-MIP tiles holds and [`shade_tiles`] lights on the host.
+    pub fn export(
+        &self,
+        renderer: &Renderer,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<SmipTiles, RenderError> {
+        let plans = self.plan(camera, width, height)?;
+        let frame = self.frame.clone().expect("planned views have a frame");
+        let mut tiles = BTreeMap::new();
+        for key in plans.iter().flat_map(|p| p.keys()) {
+            let data = self.read_tile(renderer, key)?.ok_or_else(|| {
+                RenderError::InvalidOptions(format!(
+                    "exporting S-MIP tile {key:?}, which is not resident (prepare the view first)"
+                ))
+            })?;
+            tiles.insert(key, data);
         }
-        if width == 0 || height == 0 {
-            return Err(RenderError::InvalidOptions(format!(
-                "an S-MIP view of {width}x{height} pixels"
-            )));
-        }
-        let p = f64::from(camera.view_height_at_target()) / f64::from(height);
-        let f = (p / frame.texel0).log2() + f64::from(self.level_bias);
-        let mut levels: Vec<(u32, f64)> = if f.is_nan() || f <= LEVEL_SNAP {
-            vec![(0, 1.0)]
-        } else {
-            let l = f.floor();
-            let t = f - l;
-            let l = l.min(f64::from(MAX_LEVEL - 1)) as u32;
-            if t < LEVEL_SNAP {
-                vec![(l, 1.0)]
-            } else if t > 1.0 - LEVEL_SNAP {
-                vec![(l + 1, 1.0)]
-            } else {
-                vec![(l, 1.0 - t), (l + 1, t)]
-            }
-        };
-        levels.truncate(2);
-        let (uc, vc) = plane_of(camera, camera.target);
-        // Pixel (0, 0)'s centre.
-        let u = uc + (0.5 - f64::from(width) * 0.5) * p;
-        let v = vc - (0.5 - f64::from(height) * 0.5) * p;
-        let mut plans = vec![];
-        for (level, weight) in levels {
-            let t = frame.texel(level);
-            let origin = [(u - frame.origin[0]) / t, (frame.origin[1] - v) / t];
-            let step = p / t;
-            // Texels under the first and last pixel centres. Their bilinear neighbours
-            // beyond the view's edge are not needed: the composite clamps to the needed
-            // tiles, as a texture clamps at its edge, which saves a ring of tiles.
-            let span = |o: f64, n: u32| {
-                let first = (o + SPAN_SLACK).floor();
-                let last = (o + f64::from(n - 1) * step - SPAN_SLACK)
-                    .floor()
-                    .max(first);
-                let tile = |c: f64| (c / f64::from(TILE)).floor();
-                (tile(first), tile(last) + 1.0)
-            };
-            let (x0, x1) = span(origin[0], width);
-            let (y0, y1) = span(origin[1], height);
-            let limit = f64::from(i32::MAX / 2);
-            if [x0, x1, y0, y1]
-                .iter()
-                .any(|c| !c.is_finite() || c.abs() > limit)
-            {
-                return Err(RenderError::InvalidOptions(
-                    "the view is too far from the S-MIP's origin".into(),
-                ));
-            }
-            plans.push(LevelPlan {
-                level,
-                weight,
-                origin,
-                step,
-                tiles: [x0 as i32, x1 as i32, y0 as i32, y1 as i32],
-            });
-        }
-        Ok(plans)
+        Ok(SmipTiles {
+            frame,
+            level_bias: self.level_bias,
+            tiles,
+        })
     }
 
     /// Whether a tile can be made from its four resident children, which have equal
@@ -1107,6 +1069,308 @@ impl Smip {
         t.derived = true;
         Ok(())
     }
+}
+
+/// A view's S-MIP tiles on the host, with their frame (see [`Smip::export`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SmipTiles {
+    pub frame: SmipFrame,
+    /// The level bias they were shown with.
+    pub level_bias: u32,
+    pub tiles: BTreeMap<TileKey, TileData>,
+}
+
+impl SmipTiles {
+    /// The file form: the tiles in key order, the view's camera and size, the source.
+    pub fn to_data(
+        &self,
+        width: u32,
+        height: u32,
+        view: serde_json::Value,
+        source: Option<String>,
+    ) -> SndfData {
+        let list: Vec<SndfTile> = self
+            .tiles
+            .iter()
+            .map(|(k, t)| SndfTile {
+                level: k.level,
+                x: k.x,
+                y: k.y,
+                rays: t.rays,
+            })
+            .collect();
+        SndfData {
+            header: SndfHeader {
+                width,
+                height,
+                bins: self.frame.bins,
+                binning: self.frame.binning.name().into(),
+                rays: list.iter().map(|t| t.rays).min().unwrap_or(1),
+                view,
+                source,
+                display_level: (self.level_bias > 0).then_some(self.level_bias),
+                smip: Some(SndfTiles {
+                    texel0: self.frame.texel0,
+                    origin: self.frame.origin,
+                    tile: TILE,
+                    tiles: list,
+                }),
+            },
+            hist: self
+                .tiles
+                .values()
+                .flat_map(|t| t.hist.iter().copied())
+                .collect(),
+        }
+    }
+
+    /// From the file form (which the reader has checked) and the camera of its view;
+    /// `None` for a file of one image.
+    pub fn from_data(d: &SndfData, camera: &Camera) -> Option<SmipTiles> {
+        let t = d.header.smip.as_ref()?;
+        let per_tile = (TILE * TILE * d.header.bins * d.header.bins) as usize;
+        let tiles = t
+            .tiles
+            .iter()
+            .zip(d.hist.chunks_exact(per_tile))
+            .map(|(t, hist)| {
+                (
+                    TileKey {
+                        level: t.level,
+                        x: t.x,
+                        y: t.y,
+                    },
+                    TileData {
+                        hist: hist.to_vec(),
+                        rays: t.rays,
+                    },
+                )
+            })
+            .collect();
+        Some(SmipTiles {
+            frame: SmipFrame {
+                azimuth_deg: camera.azimuth_deg,
+                elevation_deg: camera.elevation_deg,
+                fov_y_deg: camera.fov_y_deg,
+                texel0: t.texel0,
+                origin: t.origin,
+                bins: d.header.bins,
+                binning: Binning::from_name(&d.header.binning).unwrap_or_default(),
+                content: d.header.source.clone().unwrap_or_default(),
+            },
+            level_bias: d.header.display_level.unwrap_or(0),
+            tiles,
+        })
+    }
+}
+
+/// Shades `camera`'s view of the tiles on the host, as the composite pass does on the
+/// GPU (the CPU reference of [`Smip::shade`]): each needed tile's texels shaded once
+/// from their S-NDFs, then per pixel bilinear within each level (clamped to the needed
+/// tiles) and linear between the levels. A needed tile that is missing is made from
+/// its children when any are there ([`derive_tile`]), else it shows the background.
+pub fn shade_tiles(
+    tiles: &SmipTiles,
+    camera: &Camera,
+    width: u32,
+    height: u32,
+    lights: &ShadeLights,
+    background_srgb: [f32; 3],
+) -> Result<RgbaImage, RenderError> {
+    let plans = plan_view(&tiles.frame, tiles.level_bias, camera, width, height)?;
+    let bg = background_srgb.map(srgb_to_linear);
+    let mut shaded: HashMap<TileKey, Vec<[f32; 3]>> = HashMap::new();
+    for key in plans.iter().flat_map(|p| p.keys()) {
+        let derived;
+        let tile = match tiles.tiles.get(&key) {
+            Some(t) => Some(t),
+            None => {
+                derived = derive_tile(&tiles.tiles, key, tiles.frame.bins, 4);
+                derived.as_ref()
+            }
+        };
+        if let Some(t) = tile {
+            let sndf = crate::sndf::Sndf {
+                width: TILE,
+                height: TILE,
+                bins: tiles.frame.bins,
+                binning: tiles.frame.binning,
+                rays: t.rays,
+                hist: t.hist.clone(),
+                gpu_time: None,
+            };
+            shaded.insert(key, sndf.shade_linear(lights, background_srgb));
+        }
+    }
+    let texel = |plan: &LevelPlan, x: i64, y: i64| -> [f32; 3] {
+        let [x0, x1, y0, y1] = plan.tiles.map(i64::from);
+        let t = i64::from(TILE);
+        let (x, y) = (x.clamp(x0 * t, x1 * t - 1), y.clamp(y0 * t, y1 * t - 1));
+        let key = TileKey {
+            level: plan.level,
+            x: x.div_euclid(t) as i32,
+            y: y.div_euclid(t) as i32,
+        };
+        match shaded.get(&key) {
+            Some(c) => c[(y.rem_euclid(t) * t + x.rem_euclid(t)) as usize],
+            None => bg,
+        }
+    };
+    let mut image = RgbaImage::new(width, height);
+    for py in 0..height {
+        for px in 0..width {
+            let mut c = [0f32; 3];
+            for plan in &plans {
+                let tx = plan.origin[0] + f64::from(px) * plan.step - 0.5;
+                let ty = plan.origin[1] + f64::from(py) * plan.step - 0.5;
+                let (fx, fy) = (tx.floor(), ty.floor());
+                let (wx, wy) = ((tx - fx) as f32, (ty - fy) as f32);
+                let (ix, iy) = (fx as i64, fy as i64);
+                for (dx, dy, w) in [
+                    (0, 0, (1.0 - wx) * (1.0 - wy)),
+                    (1, 0, wx * (1.0 - wy)),
+                    (0, 1, (1.0 - wx) * wy),
+                    (1, 1, wx * wy),
+                ] {
+                    if w > 0.0 {
+                        let v = texel(plan, ix + dx, iy + dy);
+                        for k in 0..3 {
+                            c[k] += plan.weight as f32 * w * v[k];
+                        }
+                    }
+                }
+            }
+            let p = [c[0], c[1], c[2], 1.0]
+                .map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);
+            image.set_pixel(px, py, p);
+        }
+    }
+    Ok(image)
+}
+
+/// A tile made on the host from tiles of finer levels (up to `depth` levels down): the
+/// 2×2 sums of its children's texels, as the GPU down-samples. A child that is missing
+/// counts as texels whose rays hit nothing; children with fewer rays than the most are
+/// scaled up to it (the same expected S-NDF). `None` when no descendant is there.
+pub fn derive_tile(
+    tiles: &BTreeMap<TileKey, TileData>,
+    key: TileKey,
+    bins: u32,
+    depth: u32,
+) -> Option<TileData> {
+    if let Some(t) = tiles.get(&key) {
+        return Some(t.clone());
+    }
+    if depth == 0 {
+        return None;
+    }
+    let children: Vec<Option<TileData>> = key
+        .children()?
+        .iter()
+        .map(|c| derive_tile(tiles, *c, bins, depth - 1))
+        .collect();
+    let rays = children.iter().flatten().map(|c| c.rays).max()?;
+    let b2 = (bins * bins) as usize;
+    let half = TILE / 2;
+    let mut hist = vec![[0f32; 4]; (TILE * TILE) as usize * b2];
+    for (q, child) in children.iter().enumerate() {
+        let Some(child) = child else { continue };
+        let scale = rays as f32 / child.rays.max(1) as f32;
+        let (ox, oy) = ((q as u32 % 2) * half, (q as u32 / 2) * half);
+        for y in 0..TILE {
+            for x in 0..TILE {
+                let dst = (((oy + y / 2) * TILE + ox + x / 2) as usize) * b2;
+                let src = ((y * TILE + x) as usize) * b2;
+                for b in 0..b2 {
+                    for k in 0..4 {
+                        hist[dst + b][k] += child.hist[src + b][k] * scale;
+                    }
+                }
+            }
+        }
+    }
+    Some(TileData {
+        hist,
+        rays: rays * 4,
+    })
+}
+
+/// The levels `camera`'s view of `frame` shows, `bias` levels coarser than its pixels,
+/// and the tiles it needs.
+fn plan_view(
+    frame: &SmipFrame,
+    bias: u32,
+    camera: &Camera,
+    width: u32,
+    height: u32,
+) -> Result<Vec<LevelPlan>, RenderError> {
+    if !frame.fits(camera) {
+        return Err(RenderError::InvalidOptions(
+            "the view does not fit the S-MIP's frame (direction or projection changed)".into(),
+        ));
+    }
+    if width == 0 || height == 0 {
+        return Err(RenderError::InvalidOptions(format!(
+            "an S-MIP view of {width}x{height} pixels"
+        )));
+    }
+    let p = f64::from(camera.view_height_at_target()) / f64::from(height);
+    let f = (p / frame.texel0).log2() + f64::from(bias);
+    let mut levels: Vec<(u32, f64)> = if f.is_nan() || f <= LEVEL_SNAP {
+        vec![(0, 1.0)]
+    } else {
+        let l = f.floor();
+        let t = f - l;
+        let l = l.min(f64::from(MAX_LEVEL - 1)) as u32;
+        if t < LEVEL_SNAP {
+            vec![(l, 1.0)]
+        } else if t > 1.0 - LEVEL_SNAP {
+            vec![(l + 1, 1.0)]
+        } else {
+            vec![(l, 1.0 - t), (l + 1, t)]
+        }
+    };
+    levels.truncate(2);
+    let (uc, vc) = plane_of(camera, camera.target);
+    // Pixel (0, 0)'s centre.
+    let u = uc + (0.5 - f64::from(width) * 0.5) * p;
+    let v = vc - (0.5 - f64::from(height) * 0.5) * p;
+    let mut plans = vec![];
+    for (level, weight) in levels {
+        let t = frame.texel(level);
+        let origin = [(u - frame.origin[0]) / t, (frame.origin[1] - v) / t];
+        let step = p / t;
+        // Texels under the first and last pixel centres. Their bilinear neighbours
+        // beyond the view's edge are not needed: the composite clamps to the needed
+        // tiles, as a texture clamps at its edge, which saves a ring of tiles.
+        let span = |o: f64, n: u32| {
+            let first = (o + SPAN_SLACK).floor();
+            let last = (o + f64::from(n - 1) * step - SPAN_SLACK)
+                .floor()
+                .max(first);
+            let tile = |c: f64| (c / f64::from(TILE)).floor();
+            (tile(first), tile(last) + 1.0)
+        };
+        let (x0, x1) = span(origin[0], width);
+        let (y0, y1) = span(origin[1], height);
+        let limit = f64::from(i32::MAX / 2);
+        if [x0, x1, y0, y1]
+            .iter()
+            .any(|c| !c.is_finite() || c.abs() > limit)
+        {
+            return Err(RenderError::InvalidOptions(
+                "the view is too far from the S-MIP's origin".into(),
+            ));
+        }
+        plans.push(LevelPlan {
+            level,
+            weight,
+            origin,
+            step,
+            tiles: [x0 as i32, x1 as i32, y0 as i32, y1 as i32],
+        });
+    }
+    Ok(plans)
 }
 
 /// Largest side, in tiles, of a sampled rectangle. Each rectangle's cut is chosen on its

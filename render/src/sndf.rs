@@ -843,6 +843,7 @@ impl Sndf {
                 view,
                 source,
                 display_level: None,
+                smip: None,
             },
             hist: self.hist.clone(),
         }
