@@ -244,7 +244,9 @@ pub struct SmipConfig {
     /// Largest projected size, in texels of the level sampled, of a node drawn as its
     /// representative.
     pub error_px: f32,
-    /// Most spheres per sampled rectangle (clamped to what one GPU buffer holds).
+    /// Most spheres per full rectangle of [`MAX_RECT_TILES`]² tiles; a smaller rectangle
+    /// gets its share by area, so that the cut's density does not depend on how tiles
+    /// were grouped (clamped to what one GPU buffer holds).
     pub budget_points: u64,
     pub occlusion: OcclusionMode,
 }
@@ -953,9 +955,9 @@ impl Smip {
                         &TraversalSettings {
                             viewport: size,
                             error_px: self.config.error_px,
-                            budget_points: self
-                                .config
-                                .budget_points
+                            budget_points: (self.config.budget_points
+                                * ((x1 - x0) * (y1 - y0)) as u64
+                                / (MAX_RECT_TILES * MAX_RECT_TILES) as u64)
                                 .min(renderer.max_points())
                                 .max(1),
                             occlusion: self.config.occlusion,
