@@ -750,16 +750,23 @@ impl<'r> Thread<'r> {
         }
     }
 
-    /// Saves the S-NDFs of the S-MIP view as `mdlod sample` writes them: the view
-    /// sampled whole, as deep as the view's target.
+    /// Saves the S-MIP tiles the view shows, with their frame and the view: the file
+    /// `mdlod shade` lights into the picture in the window.
     fn save_tiled(&mut self, out: &Path) -> Result<(), String> {
-        let Some(t) = self.tiled.as_ref() else {
+        let (Some(t), Some(smip)) = (self.tiled.as_ref(), self.smip.as_mut()) else {
             return Err("no S-NDFs sampled yet: switch to the S-NDF mode".into());
         };
-        let (path, opts, target) = (t.path.clone(), t.opts.clone(), t.target.max(1));
-        let file = self.file(&path)?;
-        let (sndf, camera) = sample_progressively(self.renderer, &file, &opts, target)?;
-        save_sndf(&sndf, &camera, &path, out)
+        let (w, h) = (t.opts.width, t.opts.height);
+        smip.set_level_bias(t.coarsen);
+        let tiles = smip
+            .export(self.renderer, &t.camera, w, h)
+            .map_err(|e| e.to_string())?;
+        let view =
+            serde_json::to_value(ViewFile::from_camera(&t.camera)).map_err(|e| e.to_string())?;
+        tiles
+            .to_data(w, h, view, Some(t.path.display().to_string()))
+            .save(out)
+            .map_err(|e| e.to_string())
     }
 
     /// Samples the next batch of the progressive S-NDFs and shows them.

@@ -311,6 +311,34 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
             );
         }
     }
+    // Saved S-NDFs are the view's S-MIP tiles; shaded without a GPU they give the
+    // picture in the window.
+    let saved = dir.path().join("tiles.sndf");
+    w.send(Request::SaveSndf { out: saved.clone() });
+    match w.rx.recv_timeout(Duration::from_secs(60)).unwrap() {
+        Reply::Written { result, .. } => result.unwrap(),
+        _ => panic!("expected the saved file"),
+    }
+    let lit = dir.path().join("tiles.png");
+    mdlod_render::shade_file(
+        &saved,
+        &lit,
+        &s.settings.shade_lights(),
+        s.render_options(s.size).background,
+        mdlod_render::ShadeLevel::Display,
+    )
+    .unwrap();
+    let lit = RgbaImage::load_png(&lit).unwrap();
+    let differ = lit
+        .data
+        .iter()
+        .zip(&panned.data)
+        .filter(|(a, b)| a.abs_diff(**b) > 1)
+        .count();
+    assert!(
+        differ <= 16,
+        "{differ} channel values differ from the window's"
+    );
     // Another light: no particle sampled.
     let before = w.points_sampled();
     s.apply(&Action::Light {
