@@ -607,6 +607,74 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
     assert!(m.frames.is_empty());
 }
 
+/// `sample --tiles` stores the S-MIP tiles of an orthographic view; `shade` lights them
+/// into the picture `render --mode sndf` gives (sampled whole, one cut: equal up to the
+/// rectangles' cut borders), and into a coarser level made from them. A perspective view
+/// is refused.
+#[test]
+fn smip_tiles_sampled_once_shade_without_the_particles() {
+    let dir = tempfile::tempdir().unwrap();
+    let mdlod = dir.path().join("melt.mdlod");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&mdlod),
+    ]);
+    let sndf = dir.path().join("tiles.sndf");
+    let view = [
+        "--width",
+        "96",
+        "--height",
+        "64",
+        "--ortho",
+        "--zoom",
+        "2",
+        "--iterations",
+        "8",
+        "--bins",
+        "4",
+    ];
+    let out = ok(&[&["sample", s(&mdlod), "-o", s(&sndf), "--tiles"][..], &view].concat());
+    assert!(out.contains("S-MIP tiles"), "{out}");
+    let direct = dir.path().join("direct.png");
+    ok(&[
+        &["render", s(&mdlod), "-o", s(&direct), "--mode", "sndf"][..],
+        &view,
+    ]
+    .concat());
+    let other = dir.path().join("other.sndf");
+    let perspective = fails(&[
+        "sample",
+        s(&mdlod),
+        "-o",
+        s(&other),
+        "--tiles",
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ]);
+    assert!(perspective.contains("orthographic"), "{perspective}");
+    assert!(!other.exists());
+    std::fs::remove_file(&mdlod).unwrap();
+    let shaded = dir.path().join("shaded.png");
+    let out = ok(&["shade", s(&sndf), "-o", s(&shaded)]);
+    assert!(out.contains("no particle data read"), "{out}");
+    let (w, h, a) = read_png(&shaded);
+    let (_, _, b) = read_png(&direct);
+    assert_eq!((w, h), (96, 64));
+    let differ = a
+        .chunks(4)
+        .zip(b.chunks(4))
+        .filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > 8))
+        .count();
+    assert!(differ * 50 <= 96 * 64, "{differ} pixels differ");
+    let coarse = dir.path().join("coarse.png");
+    ok(&["shade", s(&sndf), "-o", s(&coarse), "--level", "1"]);
+    assert_eq!(read_png(&coarse).0, 48);
+}
+
 #[test]
 fn sndfs_sampled_once_shade_without_the_particles() {
     let dir = tempfile::tempdir().unwrap();

@@ -573,6 +573,76 @@ pub fn sample_to_file(
     sample_to_file_at(file, out, opts, None)
 }
 
+/// Samples the S-MIP tiles an orthographic view of `file` shows (`opts` in the sndf
+/// mode: iterations per texel, bins, binning; the screen error and budget apply per
+/// sampled rectangle) and writes them to `out` as a `.sndf` file of tiles (version 1.1),
+/// with level 0 fine enough that a sphere covers `samples_per_sphere` texels. Returns
+/// what the sampling did and the tiles written.
+pub fn sample_tiles_to_file(
+    file: &Path,
+    out: &Path,
+    opts: &RenderOptions,
+    samples_per_sphere: f32,
+) -> Result<(smip::SmipStats, usize), RenderError> {
+    let RenderMode::Sndf {
+        iterations,
+        bins,
+        binning,
+    } = opts.mode
+    else {
+        return Err(RenderError::InvalidOptions(
+            "sampling needs the sndf mode".into(),
+        ));
+    };
+    let mdlod = MdlodFile::open(file)?;
+    let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
+    let (w, h) = (opts.width, opts.height);
+    let camera = camera_for(&mdlod, &opts.view, w, h)?;
+    if camera.projection != Projection::Orthographic {
+        return Err(RenderError::InvalidOptions(
+            "S-MIP tiles need an orthographic view (--ortho): under perspective a pan moves the eye".into(),
+        ));
+    }
+    let frame = smip::SmipFrame::new(
+        &camera,
+        w,
+        h,
+        smip::min_radius(&mdlod, &opts.style),
+        samples_per_sphere,
+        bins,
+        binning,
+        file.display().to_string(),
+    )?;
+    let tiles = (w.div_ceil(sndf::TILE) + 1) * (h.div_ceil(sndf::TILE) + 1);
+    let mut cache = smip::Smip::new(
+        &renderer,
+        bins,
+        smip::SmipConfig {
+            pool_tiles: tiles,
+            error_px: opts.error_px,
+            budget_points: opts.budget,
+            ..Default::default()
+        },
+    )?;
+    let stats = cache.prepare(
+        &renderer,
+        &mdlod,
+        &frame,
+        &camera,
+        w,
+        h,
+        iterations,
+        &opts.style,
+    )?;
+    let exported = cache.export(&renderer, &camera, w, h)?;
+    let view = serde_json::to_value(ViewFile::from_camera(&camera))
+        .map_err(|e| RenderError::InvalidOptions(e.to_string()))?;
+    exported
+        .to_data(w, h, view, Some(file.display().to_string()))
+        .save(out)?;
+    Ok((stats, exported.tiles.len()))
+}
+
 /// [`sample_to_file`] recording `display_level`: the S-MIP level that shows the intended
 /// image size when the S-NDFs were sampled finer (see [`level0_scale`]).
 pub fn sample_to_file_at(

@@ -455,7 +455,7 @@ fn a_tiny_pool_evicts_and_still_gives_the_same_images() {
 }
 
 /// Refinement continues each tile's sub-pixel sequence: 2 iterations then 3 equal 5 at
-/// once. A new view direction drops every tile.
+/// once. A new view direction or particle radius drops every tile.
 #[test]
 fn refinement_adds_up_and_a_new_direction_invalidates() {
     let (_d, f) = file();
@@ -495,6 +495,14 @@ fn refinement_adds_up_and_a_new_direction_invalidates() {
     assert_eq!((st.reused, st.sampled), (0, st.needed));
     // The old frame's view no longer fits.
     assert!(a.shade(r, &camera, size, size, &lights(), BG).is_err());
+    // Another radius (the caller's content of the frame) drops every tile too.
+    let mut scaled = turned_frame.clone();
+    scaled.content = "fcc radius x1.5".into();
+    let st = a
+        .prepare(r, &f, &scaled, &turned, size, size, 2, &style)
+        .unwrap();
+    assert!(st.invalidated);
+    assert_eq!(st.reused, 0);
 }
 
 /// The host's composite of exported tiles equals the GPU's (the CPU reference of the

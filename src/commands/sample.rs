@@ -43,6 +43,11 @@ pub struct Args {
     pub budget: u64,
     #[command(flatten)]
     pub style: super::render::StyleArgs,
+    /// Store the S-MIP tiles the view shows (orthographic views, `--ortho`), with the
+    /// S-MIP's grid, instead of one image of S-NDFs; `--min-samples` then sets how fine
+    /// level 0 is.
+    #[arg(long)]
+    pub tiles: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -60,6 +65,25 @@ pub fn run(args: Args) -> Result<()> {
         style: args.style.style()?,
         ..Default::default()
     };
+    if args.tiles {
+        let (stats, tiles) = mdlod_render::sample_tiles_to_file(
+            &args.file,
+            &args.output,
+            &opts,
+            args.min_samples as f32,
+        )?;
+        println!(
+            "wrote {} ({tiles} S-MIP tiles of 64x64 texels at level {}, {}x{} bins, {} rays each): {} rectangles, {} spheres drawn per iteration",
+            args.output.display(),
+            stats.level,
+            args.bins,
+            args.bins,
+            args.iterations,
+            stats.rects,
+            stats.points,
+        );
+        return Ok(());
+    }
     let scale = mdlod_render::level0_scale(
         &mdlod_format::MdlodFile::open(&args.file)?,
         &opts,
