@@ -236,6 +236,49 @@ fn halton(mut i: u32, base: u32) -> f32 {
     r
 }
 
+/// Histograms read back in the accumulation's layout (64×64-texel tiles of 8×8-texel
+/// blocks, tiles in rows), reordered to texels in rows.
+fn tiles_to_rows(bytes: &[u8], width: u32, height: u32, bins: u32) -> Vec<[f32; 4]> {
+    let tiled: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(bytes);
+    let tile = crate::sndf::TILE;
+    let b2 = (bins * bins) as usize;
+    let tiles_x = width.div_ceil(tile);
+    let mut hist = Vec::with_capacity(width as usize * height as usize * b2);
+    for y in 0..height {
+        for x in 0..width {
+            let slot = (y / tile) * tiles_x + x / tile;
+            let at =
+                (slot * tile * tile + crate::sndf::texel_in_tile(x % tile, y % tile)) as usize * b2;
+            hist.extend_from_slice(&tiled[at..at + b2]);
+        }
+    }
+    hist
+}
+
+/// S-NDFs of one view kept on the GPU for progressive refinement (see
+/// [`Renderer::resident_sndf`]): batches add rays to the resident histograms, shading
+/// reads them there, and nothing is read back unless asked.
+pub struct ResidentSndf {
+    hist: wgpu::Buffer,
+    cut: UploadedCut,
+    camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    pub bins: u32,
+    pub binning: crate::sndf::Binning,
+    /// Rays per texel so far.
+    pub rays: u32,
+    /// Spheres drawn per iteration.
+    pub points: u64,
+}
+
+impl ResidentSndf {
+    /// Bytes of histograms on the GPU.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.hist.size()
+    }
+}
+
 /// A cut packed and uploaded for S-NDF sampling, kept to sample it again.
 pub(crate) struct UploadedCut {
     buffers: crate::passes::sphere_raycast::SphereBuffers,
@@ -828,30 +871,147 @@ impl Renderer {
             let bytes = self.read_buffer(&read)?;
             self.keep_scratch("sndf histograms", hist);
             self.keep_scratch("sndf readback", read);
-            let tiled: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
-            // From tiles of 8×8-texel blocks to rows.
-            let tile = crate::sndf::TILE;
-            let b2 = (bins * bins) as usize;
-            let tiles_x = width.div_ceil(tile);
-            let mut hist = Vec::with_capacity(width as usize * height as usize * b2);
-            for y in 0..height {
-                for x in 0..width {
-                    let slot = (y / tile) * tiles_x + x / tile;
-                    let at = (slot * tile * tile + crate::sndf::texel_in_tile(x % tile, y % tile))
-                        as usize
-                        * b2;
-                    hist.extend_from_slice(&tiled[at..at + b2]);
-                }
-            }
             Ok(Sndf {
                 width,
                 height,
                 bins,
                 binning,
                 rays: iterations,
-                hist,
+                hist: tiles_to_rows(&bytes, width, height, bins),
                 gpu_time,
             })
+        })
+    }
+
+    /// Starts S-NDFs of `draw` seen by `camera` that stay on the GPU
+    /// (`settings.iterations` is not used: add rays with [`Self::refine_resident`]).
+    pub fn resident_sndf(
+        &self,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        settings: &SndfSettings,
+        style: &crate::style::PointStyle,
+    ) -> Result<ResidentSndf, RenderError> {
+        let SndfSettings {
+            width,
+            height,
+            bins,
+            binning,
+            ..
+        } = *settings;
+        self.check(&FrameSettings {
+            width,
+            height,
+            ..Default::default()
+        })?;
+        let bytes = crate::sndf::sndf_buffer_bytes(width, height, bins);
+        let limits = self.ctx.device.limits();
+        if !(1..=32).contains(&bins)
+            || bytes
+                > limits
+                    .max_storage_buffer_binding_size
+                    .min(limits.max_buffer_size)
+        {
+            return Err(RenderError::InvalidOptions(format!(
+                "S-NDFs of {width}x{height} texels with {bins}x{bins} bins ({bytes} bytes) do not fit one buffer of this adapter"
+            )));
+        }
+        self.ctx.scoped(|| {
+            let hist = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("resident sndf histograms"),
+                size: bytes,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut enc = self.ctx.device.create_command_encoder(&Default::default());
+            enc.clear_buffer(&hist, 0, None);
+            self.ctx.queue.submit([enc.finish()]);
+            Ok(ResidentSndf {
+                hist,
+                cut: self.upload_cut(file, draw, style)?,
+                camera: camera.clone(),
+                width,
+                height,
+                bins,
+                binning,
+                rays: 0,
+                points: draw.points,
+            })
+        })
+    }
+
+    /// Adds `iterations` rays per texel to resident S-NDFs, continuing their sub-pixel
+    /// sequence. Returns the GPU time when measured.
+    pub fn refine_resident(
+        &self,
+        r: &mut ResidentSndf,
+        iterations: u32,
+    ) -> Result<Option<Duration>, RenderError> {
+        if iterations == 0 {
+            return Ok(None);
+        }
+        let tiles = r.width.div_ceil(crate::sndf::TILE) * r.height.div_ceil(crate::sndf::TILE);
+        let pages: Vec<u32> = (0..tiles).collect();
+        let gpu = self.ctx.scoped(|| {
+            self.accumulate_uploaded(
+                &r.cut,
+                &r.camera,
+                &SndfPassSettings {
+                    width: r.width,
+                    height: r.height,
+                    bins: r.bins,
+                    binning: r.binning,
+                    iterations,
+                    first: r.rays,
+                },
+                &r.hist,
+                &pages,
+            )
+        })?;
+        r.rays += iterations;
+        Ok(gpu)
+    }
+
+    /// Shades resident S-NDFs on the GPU (as [`Sndf::shade_with`] does, to rounding):
+    /// no particle is touched and only the image is read back.
+    pub fn shade_resident(
+        &self,
+        r: &ResidentSndf,
+        lights: &ShadeLights,
+        background_srgb: [f32; 3],
+    ) -> Result<(RgbaImage, Option<Duration>), RenderError> {
+        self.ctx.scoped(|| {
+            self.shade_histograms(
+                &r.hist,
+                (r.width, r.height, Some(r.width.div_ceil(crate::sndf::TILE))),
+                (r.bins, r.binning, r.rays),
+                lights,
+                background_srgb,
+            )
+        })
+    }
+
+    /// Reads resident S-NDFs back to the host.
+    pub fn read_resident(&self, r: &ResidentSndf) -> Result<Sndf, RenderError> {
+        let bytes = r.hist.size();
+        let data = self.ctx.scoped(|| {
+            let read = readback_buffer(&self.ctx.device, "resident sndf readback", bytes);
+            let mut enc = self.ctx.device.create_command_encoder(&Default::default());
+            enc.copy_buffer_to_buffer(&r.hist, 0, &read, 0, bytes);
+            self.ctx.queue.submit([enc.finish()]);
+            self.read_buffer(&read)
+        })?;
+        Ok(Sndf {
+            width: r.width,
+            height: r.height,
+            bins: r.bins,
+            binning: r.binning,
+            rays: r.rays,
+            hist: tiles_to_rows(&data, r.width, r.height, r.bins),
+            gpu_time: None,
         })
     }
 
@@ -1110,90 +1270,118 @@ impl Renderer {
         }
         self.ctx.scoped(|| {
             use wgpu::util::DeviceExt;
-            let device = &self.ctx.device;
-            let queue = &self.ctx.queue;
-            let texels = sndf.width * sndf.height;
-            let bg = background_srgb.map(srgb_to_linear);
-            let init = |label: &str, contents: &[u8], usage| {
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(label),
-                    contents,
-                    usage,
-                })
-            };
-            let params = init(
-                "shade params",
-                bytemuck::bytes_of(&ShadeParams {
-                    width: sndf.width,
-                    height: sndf.height,
-                    bins: sndf.bins,
-                    rays: sndf.rays.max(1) as f32,
-                    background: [bg[0], bg[1], bg[2], 0.0],
-                }),
-                wgpu::BufferUsages::UNIFORM,
-            );
-            let table = init(
-                "shade table",
-                bytemuck::cast_slice(&shade_table(sndf.bins, sndf.binning, lights)),
-                wgpu::BufferUsages::STORAGE,
-            );
-            let hist = init(
-                "sndf histograms",
-                bytemuck::cast_slice(&sndf.hist),
-                wgpu::BufferUsages::STORAGE,
-            );
-            let out_bytes = u64::from(texels) * 4;
-            let pixels = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("shaded pixels"),
-                size: out_bytes.max(4),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            let read = readback_buffer(device, "shaded pixels readback", out_bytes.max(4));
-            let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("sndf shade"),
-                layout: &self.sndf_shade.layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: params.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: table.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: hist.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: pixels.as_entire_binding(),
-                    },
-                ],
-            });
-            let timing = self.frame_timer();
-            let mut enc = device.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("sndf shade"),
-                    timestamp_writes: timing.as_ref().map(|t| t.compute_writes(true, true)),
+            let hist = self
+                .ctx
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("sndf histograms"),
+                    contents: bytemuck::cast_slice(&sndf.hist),
+                    usage: wgpu::BufferUsages::STORAGE,
                 });
-                pass.set_pipeline(&self.sndf_shade.pipeline);
-                pass.set_bind_group(0, &bind, &[]);
-                pass.dispatch_workgroups(texels.div_ceil(64), 1, 1);
-            }
-            enc.copy_buffer_to_buffer(&pixels, 0, &read, 0, out_bytes.max(4));
-            if let Some(t) = &timing {
-                t.resolve(&mut enc);
-            }
-            queue.submit([enc.finish()]);
-            let bytes = self.read_buffer(&read)?;
-            let mut image = RgbaImage::new(sndf.width, sndf.height);
-            let n = image.data.len();
-            image.data.copy_from_slice(&bytes[..n]);
-            Ok((image, self.gpu_time(timing.as_ref())?))
+            self.shade_histograms(
+                &hist,
+                (sndf.width, sndf.height, None),
+                (sndf.bins, sndf.binning, sndf.rays),
+                lights,
+                background_srgb,
+            )
         })
+    }
+
+    /// The shading pass over histograms on the GPU: `size` is the image and, for the
+    /// accumulation's tiled layout, its tiles per row; `sampling` the bins, binning and
+    /// rays per texel.
+    fn shade_histograms(
+        &self,
+        hist: &wgpu::Buffer,
+        size: (u32, u32, Option<u32>),
+        sampling: (u32, crate::sndf::Binning, u32),
+        lights: &ShadeLights,
+        background_srgb: [f32; 3],
+    ) -> Result<(RgbaImage, Option<Duration>), RenderError> {
+        use wgpu::util::DeviceExt;
+        let ((width, height, tiles_x), (bins, binning, rays)) = (size, sampling);
+        let device = &self.ctx.device;
+        let queue = &self.ctx.queue;
+        let texels = width * height;
+        let bg = background_srgb.map(srgb_to_linear);
+        let init = |label: &str, contents: &[u8], usage| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage,
+            })
+        };
+        let params = init(
+            "shade params",
+            bytemuck::bytes_of(&ShadeParams {
+                width,
+                height,
+                bins,
+                rays: rays.max(1) as f32,
+                background: [bg[0], bg[1], bg[2], 0.0],
+                tiled: u32::from(tiles_x.is_some()),
+                tiles_x: tiles_x.unwrap_or(0),
+                pad: [0; 2],
+            }),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let table = init(
+            "shade table",
+            bytemuck::cast_slice(&shade_table(bins, binning, lights)),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let out_bytes = u64::from(texels) * 4;
+        let pixels = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("shaded pixels"),
+            size: out_bytes.max(4),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let read = readback_buffer(device, "shaded pixels readback", out_bytes.max(4));
+        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sndf shade"),
+            layout: &self.sndf_shade.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: table.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: hist.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: pixels.as_entire_binding(),
+                },
+            ],
+        });
+        let timing = self.frame_timer();
+        let mut enc = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("sndf shade"),
+                timestamp_writes: timing.as_ref().map(|t| t.compute_writes(true, true)),
+            });
+            pass.set_pipeline(&self.sndf_shade.pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(texels.div_ceil(64), 1, 1);
+        }
+        enc.copy_buffer_to_buffer(&pixels, 0, &read, 0, out_bytes.max(4));
+        if let Some(t) = &timing {
+            t.resolve(&mut enc);
+        }
+        queue.submit([enc.finish()]);
+        let bytes = self.read_buffer(&read)?;
+        let mut image = RgbaImage::new(width, height);
+        let n = image.data.len();
+        image.data.copy_from_slice(&bytes[..n]);
+        Ok((image, self.gpu_time(timing.as_ref())?))
     }
 
     /// Accumulates flux-preserving splats of `draw` (see [`crate::passes::splat`]) into a

@@ -50,6 +50,11 @@ pub struct ShadeParams {
     pub bins: u32,
     pub rays: f32,
     pub background: [f32; 4],
+    /// 0: histograms in rows; 1: in tiles, as the accumulation stores them.
+    pub tiled: u32,
+    /// Tiles per row when tiled.
+    pub tiles_x: u32,
+    pub pad: [u32; 2],
 }
 
 /// The GPU shading pipeline.

@@ -1260,6 +1260,56 @@ fn zoomed_out_sndfs_beat_supersampling_with_as_many_iterations() {
     }
 }
 
+/// S-NDFs kept on the GPU and refined there in batches (4, then 4) hold what one
+/// sampling of 8 iterations holds, and their GPU shading equals the host's.
+#[test]
+fn resident_sndfs_refine_on_the_gpu_like_one_sampling() {
+    let (_d, _p, f) = make_file(&fcc_frame(5), small_build(), &[]);
+    let (w, h) = (80u32, 70u32);
+    let camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
+    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
+    let settings = mdlod_render::sndf::SndfSettings {
+        width: w,
+        height: h,
+        iterations: 8,
+        bins: 4,
+        binning: Default::default(),
+    };
+    let r = renderer();
+    let whole = r.sample_sndf(&f, &camera, &draw, &settings).unwrap();
+    let mut resident = r
+        .resident_sndf(&f, &camera, &draw, &settings, &Default::default())
+        .unwrap();
+    r.refine_resident(&mut resident, 4).unwrap();
+    r.refine_resident(&mut resident, 4).unwrap();
+    assert_eq!(resident.rays, 8);
+    let back = r.read_resident(&resident).unwrap();
+    assert_eq!((back.width, back.height, back.rays), (w, h, 8));
+    for (a, b) in back.hist.iter().zip(&whole.hist) {
+        for k in 0..4 {
+            assert!(
+                (a[k] - b[k]).abs() <= 1e-4 * b[k].abs().max(1.0),
+                "{a:?} vs {b:?}"
+            );
+        }
+    }
+    let lights = mdlod_render::sndf::ShadeLights::from(&mdlod_render::Lighting::default());
+    let (gpu, _) = r.shade_resident(&resident, &lights, [0.2; 3]).unwrap();
+    let host = whole.shade_with(&lights, [0.2; 3]);
+    let worst = gpu
+        .data
+        .iter()
+        .zip(&host.data)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    assert!(worst <= 1, "GPU and host shading differ by {worst}");
+    assert!(
+        host.data.chunks(4).any(|p| p[0] > 80),
+        "the data is in view"
+    );
+}
+
 /// Progressive refinement: S-NDFs sampled in batches (2, then 3, then 3 iterations of one
 /// sub-pixel sequence) and added equal one sampling of all 8 iterations, and a batch of a
 /// different view size is refused.

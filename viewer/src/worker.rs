@@ -5,9 +5,9 @@
 //! - Render requests are latest-wins: when several wait, only the newest is drawn.
 //! - In S-NDF mode a still view refines by itself: after each batch of iterations, if
 //!   no new request waits, the thread samples the next batch (continuing the sub-pixel
-//!   sequence), adds it to the S-NDFs and sends the shaded image, until the target
-//!   count. A request for the same view with other lights only re-shades the S-NDFs:
-//!   no particle is sampled (see [`Worker::points_sampled`]).
+//!   sequence) into the S-NDFs, which stay on the GPU, shades them there and sends the
+//!   image, until the target count. A request for the same view with other lights only
+//!   re-shades the S-NDFs: no particle is sampled (see [`Worker::points_sampled`]).
 //! - Orthographic S-NDF views go through a virtual S-MIP ([`mdlod_render::smip`]) that
 //!   outlives the view: a pan or zoom samples only the tiles that come into view (one
 //!   iteration while the user drags, then refined tile by tile), and zooming out
@@ -22,6 +22,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use mdlod_format::MdlodFile;
+use mdlod_render::renderer::ResidentSndf;
 use mdlod_render::smip::{Smip, SmipConfig, SmipFrame};
 use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
 use mdlod_render::{
@@ -101,7 +102,9 @@ pub enum Reply {
     Error(String),
 }
 
-/// The S-NDFs of one view, refined batch by batch.
+/// The S-NDFs of one view, refined batch by batch on the GPU (they stay there: each
+/// batch adds its rays in place, shading reads them there, and only the image comes
+/// back).
 struct Progressive {
     id: u64,
     path: PathBuf,
@@ -112,13 +115,13 @@ struct Progressive {
     camera: mdlod_render::Camera,
     draw: mdlod_render::DrawList,
     settings: SndfSettings,
-    sndf: Option<Sndf>,
+    resident: Option<ResidentSndf>,
     target: u32,
 }
 
 impl Progressive {
     fn rays(&self) -> u32 {
-        self.sndf.as_ref().map_or(0, |s| s.rays)
+        self.resident.as_ref().map_or(0, |s| s.rays)
     }
 }
 
@@ -356,11 +359,15 @@ impl<'r> Thread<'r> {
                     Request::SaveSndf { out } => {
                         let result = match &self.progressive {
                             Some(Progressive {
-                                sndf: Some(sndf),
+                                resident: Some(resident),
                                 camera,
                                 path,
                                 ..
-                            }) => save_sndf(sndf, camera, path, &out),
+                            }) => self
+                                .renderer
+                                .read_resident(resident)
+                                .map_err(|e| e.to_string())
+                                .and_then(|sndf| save_sndf(&sndf, camera, path, &out)),
                             _ => Err("no S-NDFs sampled yet: switch to the S-NDF mode".into()),
                         };
                         self.reply(Reply::Written { out, result });
@@ -444,7 +451,7 @@ impl<'r> Thread<'r> {
                         camera,
                         draw,
                         settings,
-                        sndf: None,
+                        resident: None,
                         target: iterations,
                     });
                     self.refine_step();
@@ -775,29 +782,17 @@ impl<'r> Thread<'r> {
         let Some(p) = self.progressive.as_mut() else {
             return;
         };
-        let done = p.rays();
-        let n = SNDF_BATCH.min(p.target.saturating_sub(done)).max(1);
-        let batch = self.renderer.sample_sndf_styled(
-            &p.file,
-            &p.camera,
-            &p.draw,
-            &SndfSettings {
-                iterations: n,
-                ..p.settings
-            },
-            done,
-            &p.opts.style,
-        );
+        let n = SNDF_BATCH.min(p.target.saturating_sub(p.rays())).max(1);
+        let renderer = self.renderer;
+        let batch = match &mut p.resident {
+            Some(r) => Ok(r),
+            None => renderer
+                .resident_sndf(&p.file, &p.camera, &p.draw, &p.settings, &p.opts.style)
+                .map(|r| p.resident.insert(r)),
+        }
+        .and_then(|r| renderer.refine_resident(r, n));
         match batch {
-            Ok(b) => {
-                match &mut p.sndf {
-                    Some(s) => {
-                        s.add(&b);
-                    }
-                    None => p.sndf = Some(b),
-                }
-                self.show_progress(t0);
-            }
+            Ok(_) => self.show_progress(t0),
             Err(e) => {
                 let path = p.path.display().to_string();
                 self.progressive = None;
@@ -811,28 +806,38 @@ impl<'r> Thread<'r> {
         let Some(p) = self.progressive.as_ref() else {
             return;
         };
-        let Some(sndf) = &p.sndf else {
+        let Some(resident) = &p.resident else {
             return;
         };
-        let image = sndf.shade_with(&p.shade, p.opts.background);
+        let image = match self
+            .renderer
+            .shade_resident(resident, &p.shade, p.opts.background)
+        {
+            Ok((image, _)) => image,
+            Err(e) => {
+                let path = p.path.display().to_string();
+                self.progressive = None;
+                return self.reply(Reply::Error(format!("{path}: {e}")));
+            }
+        };
         let stats = FrameStats {
             frame_ms: t0.elapsed().as_secs_f32() * 1e3,
             gpu_ms: None,
-            spp: sndf.rays,
+            spp: resident.rays,
             particles: p.draw.particles,
             representatives: p.draw.representatives,
             error_px: p.draw.error_px,
-            gpu_bytes: sndf.hist.len() as u64 * 16,
+            gpu_bytes: resident.gpu_bytes(),
             adapter: self.renderer.ctx.adapter_name().to_string(),
             streaming: None,
-            bins: Some(sndf.bins),
+            bins: Some(resident.bins),
         };
         let reply = Reply::Image {
             id: p.id,
             image,
             stats,
             interactive: false,
-            refined: sndf.rays >= p.target,
+            refined: resident.rays >= p.target,
         };
         self.reply(reply);
     }

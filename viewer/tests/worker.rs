@@ -122,7 +122,7 @@ fn sndfs_refine_while_still_and_relight_without_sampling() {
     assert_eq!(w.points_sampled(), sampled, "re-lighting sampled particles");
     assert_ne!(relit.data, refined.data);
     // Re-lit equals sampling afresh under that light, through the headless path (the
-    // same batches: identical pixels).
+    // same batches).
     let out = dir.path().join("shot.png");
     w.send(Request::Screenshot {
         path: path.clone(),
@@ -134,7 +134,20 @@ fn sndfs_refine_while_still_and_relight_without_sampling() {
         Reply::Written { result, .. } => result.unwrap(),
         _ => panic!("expected the screenshot"),
     }
-    assert_eq!(RgbaImage::load_png(&out).unwrap().data, relit.data);
+    // The window's S-NDFs stay on the GPU and are shaded there; the screenshot's are
+    // shaded on the host: equal to rounding.
+    let shot = RgbaImage::load_png(&out).unwrap();
+    let worst = shot
+        .data
+        .iter()
+        .zip(&relit.data)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    assert!(
+        worst <= 1,
+        "the screenshot differs from the window by {worst}"
+    );
     // A moved camera starts over.
     s.apply(&Action::Orbit { dx: 40.0, dy: 0.0 });
     render(&w, &s, 3);

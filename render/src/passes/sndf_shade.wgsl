@@ -12,6 +12,12 @@ struct ShadeParams {
     rays: f32,
     // rgb: linear background.
     background: vec4<f32>,
+    // 0: texels in rows; 1: in 64x64-texel tiles of 8x8 blocks, tiles_x tiles per row
+    // (as sndf_accumulate.wgsl stores them).
+    tiled: u32,
+    tiles_x: u32,
+    pad0: u32,
+    pad1: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: ShadeParams;
@@ -34,10 +40,19 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let b2 = params.bins * params.bins;
+    var texel = t;
+    if params.tiled == 1u {
+        let x = t % params.width;
+        let y = t / params.width;
+        let lx = x % 64u;
+        let ly = y % 64u;
+        let slot = (y / 64u) * params.tiles_x + x / 64u;
+        texel = slot * 4096u + ((ly / 8u) * 8u + lx / 8u) * 64u + (ly % 8u) * 8u + lx % 8u;
+    }
     var c = vec3<f32>(0.0);
     var hits = 0.0;
     for (var i = 0u; i < b2; i++) {
-        let h = hist[t * b2 + i];
+        let h = hist[texel * b2 + i];
         c += h.xyz * table[2u * i].xyz + h.w * table[2u * i + 1u].xyz;
         hits += h.w;
     }
