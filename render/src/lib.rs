@@ -804,6 +804,12 @@ fn shade_tiles_file(
     let view: ViewFile = serde_json::from_value(data.header.view.clone())
         .map_err(|e| bad(format!("the view in the header: {e}")))?;
     let (w, h) = (data.header.width, data.header.height);
+    // The tiles do not bound the image a header asks for: cap it (512 MiB of pixels).
+    if u64::from(w) * u64::from(h) > 1 << 27 {
+        return Err(bad(format!(
+            "a view of {w}x{h} pixels (at most 2^27 pixels are shaded from tiles)"
+        )));
+    }
     let target = glam::Vec3::from(view.target.unwrap_or([0.0; 3]));
     let camera = view.to_camera(
         &Bounds::new(target - 1.0, target + 1.0),
@@ -824,6 +830,7 @@ fn shade_tiles_file(
         ((h as f32 / factor).round() as u32).max(1),
     );
     smip::shade_tiles(&tiles, &camera, w, h, lights, background_srgb)
+        .map_err(|e| bad(format!("shading its S-MIP tiles: {e}")))
 }
 
 #[cfg(test)]

@@ -547,6 +547,21 @@ fn exported_tiles_shade_on_the_host_as_on_the_gpu() {
     let direct = shade(r, &s, &camera, size, size);
     let (bad, _) = compare(&direct, &lit(mdlod_render::ShadeLevel::Display), 1);
     assert!(bad <= 4, "{bad}");
+    // Headers the tiles cannot serve: errors naming the file, no panic.
+    let good = mdlod_format::sndf::SndfData::load(&path).unwrap();
+    let bad = dir.path().join("bad.sndf");
+    let mut huge = good.clone();
+    (huge.header.width, huge.header.height) = (65536, 65536);
+    let mut persp = good.clone();
+    persp.header.view["projection"] = "perspective".into();
+    for (d, want) in [(huge, "at most"), (persp, "frame")] {
+        d.save(&bad).unwrap();
+        let e =
+            mdlod_render::shade_file(&bad, &out, &lights(), BG, mdlod_render::ShadeLevel::Display)
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains(want) && e.contains("bad.sndf"), "{e}");
+    }
     // One level coarser: 64×64, from tiles the host down-samples, as the GPU would.
     let coarse = lit(mdlod_render::ShadeLevel::Level(1));
     assert_eq!((coarse.width, coarse.height), (64, 64));
