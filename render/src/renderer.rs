@@ -286,7 +286,7 @@ pub(crate) struct UploadedCut {
     species: u32,
 }
 
-/// One sampling pass of S-NDFs into tiles (see [`Renderer::accumulate_sndf`]).
+/// One sampling pass of S-NDFs into tiles (see [`Renderer::accumulate_uploaded`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SndfPassSettings {
     pub width: u32,
@@ -319,11 +319,6 @@ pub struct Renderer {
     /// Particle samples drawn so far (points × samples), so that tests can check that
     /// re-lighting S-NDFs draws none.
     points_sampled: std::sync::atomic::AtomicU64,
-    /// Large buffers kept between calls by purpose (S-NDF histograms and their
-    /// read-back): progressive refinement samples the same size again and again, and
-    /// making and first touching hundreds of MiB of fresh memory costs more than the
-    /// iterations themselves.
-    scratch: std::sync::Mutex<std::collections::HashMap<&'static str, wgpu::Buffer>>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -335,7 +330,7 @@ impl std::fmt::Debug for Renderer {
 }
 
 /// Two timestamps around a frame's passes.
-pub(crate) struct FrameTimer {
+struct FrameTimer {
     set: wgpu::QuerySet,
     resolve: wgpu::Buffer,
     read: wgpu::Buffer,
@@ -352,11 +347,7 @@ impl FrameTimer {
     }
 
     /// The same for a compute pass.
-    pub(crate) fn compute_writes(
-        &self,
-        begin: bool,
-        end: bool,
-    ) -> wgpu::ComputePassTimestampWrites<'_> {
+    fn compute_writes(&self, begin: bool, end: bool) -> wgpu::ComputePassTimestampWrites<'_> {
         wgpu::ComputePassTimestampWrites {
             query_set: &self.set,
             beginning_of_pass_write_index: begin.then_some(0),
@@ -364,7 +355,7 @@ impl FrameTimer {
         }
     }
 
-    pub(crate) fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
+    fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
         enc.resolve_query_set(&self.set, 0..2, &self.resolve, 0);
         enc.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 16);
     }
@@ -438,7 +429,6 @@ impl Renderer {
             sndf,
             sndf_shade,
             points_sampled: Default::default(),
-            scratch: Default::default(),
         }
     }
 
@@ -801,7 +791,7 @@ impl Renderer {
             height,
             iterations,
             bins,
-            binning,
+            ..
         } = *settings;
         self.check(&FrameSettings {
             width,
@@ -814,73 +804,14 @@ impl Renderer {
                 "{iterations} iterations and {bins} bins (need at least 1 iteration and 1 to 32 bins)"
             )));
         }
-        // In 64×64-texel tiles (see sndf_accumulate.wgsl), padded to whole tiles.
-        let hist_bytes = crate::sndf::sndf_buffer_bytes(width, height, bins);
-        let limits = self.ctx.device.limits();
-        if hist_bytes
-            > limits
-                .max_storage_buffer_binding_size
-                .min(limits.max_buffer_size)
-        {
-            return Err(RenderError::InvalidOptions(format!(
-                "S-NDFs of {width}x{height} texels with {bins}x{bins} bins need {hist_bytes} bytes, \
-                 more than one buffer of this adapter holds ({} bytes): use a smaller image or fewer bins",
-                limits.max_storage_buffer_binding_size
-            )));
-        }
-        self.ctx.scoped(|| {
-            let device = &self.ctx.device;
-            let queue = &self.ctx.queue;
-            let hist = self.take_scratch(
-                "sndf histograms",
-                hist_bytes,
-                wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_SRC
-                    | wgpu::BufferUsages::COPY_DST,
-            );
-            let mut enc = device.create_command_encoder(&Default::default());
-            enc.clear_buffer(&hist, 0, None);
-            queue.submit([enc.finish()]);
-            // Every tile of the image, in order: slot i is tile i.
-            let tiles = width.div_ceil(crate::sndf::TILE) * height.div_ceil(crate::sndf::TILE);
-            let pages: Vec<u32> = (0..tiles).collect();
-            let gpu_time = self.accumulate_sndf(
-                file,
-                camera,
-                draw,
-                style,
-                &SndfPassSettings {
-                    width,
-                    height,
-                    bins,
-                    binning,
-                    iterations,
-                    first,
-                },
-                &hist,
-                &pages,
-            )?;
-            let read = self.take_scratch(
-                "sndf readback",
-                hist_bytes,
-                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            );
-            let mut enc = device.create_command_encoder(&Default::default());
-            enc.copy_buffer_to_buffer(&hist, 0, &read, 0, hist_bytes);
-            queue.submit([enc.finish()]);
-            let bytes = self.read_buffer(&read)?;
-            self.keep_scratch("sndf histograms", hist);
-            self.keep_scratch("sndf readback", read);
-            Ok(Sndf {
-                width,
-                height,
-                bins,
-                binning,
-                rays: iterations,
-                hist: tiles_to_rows(&bytes, width, height, bins),
-                gpu_time,
-            })
-        })
+        // The resident S-NDFs of one call, continuing the sequence at `first`.
+        let mut resident = self.resident_sndf(file, camera, draw, settings, style)?;
+        resident.rays = first;
+        let gpu_time = self.refine_resident(&mut resident, iterations)?;
+        let mut sndf = self.read_resident(&resident)?;
+        sndf.rays = iterations;
+        sndf.gpu_time = gpu_time;
+        Ok(sndf)
     }
 
     /// Starts S-NDFs of `draw` seen by `camera` that stay on the GPU
@@ -914,7 +845,9 @@ impl Renderer {
                     .min(limits.max_buffer_size)
         {
             return Err(RenderError::InvalidOptions(format!(
-                "S-NDFs of {width}x{height} texels with {bins}x{bins} bins ({bytes} bytes) do not fit one buffer of this adapter"
+                "S-NDFs of {width}x{height} texels with {bins}x{bins} bins need {bytes} bytes, \
+                 more than one buffer of this adapter holds ({} bytes): use a smaller image or fewer bins",
+                limits.max_storage_buffer_binding_size
             )));
         }
         self.ctx.scoped(|| {
@@ -1015,25 +948,6 @@ impl Renderer {
         })
     }
 
-    /// Draws `iterations` G-buffers of `draw` seen by `camera` (a `width × height`
-    /// rectangle of texels) and adds them to the histograms in `hist`: tile `i` of the
-    /// rectangle (rows of 64×64-texel tiles) goes to slot `pages[i]` of the buffer, or
-    /// nowhere for [`crate::sndf::NO_SLOT`]. Returns the GPU time when measured.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn accumulate_sndf(
-        &self,
-        file: &MdlodFile,
-        camera: &Camera,
-        draw: &DrawList,
-        style: &crate::style::PointStyle,
-        settings: &SndfPassSettings,
-        hist: &wgpu::Buffer,
-        pages: &[u32],
-    ) -> Result<Option<Duration>, RenderError> {
-        let cut = self.upload_cut(file, draw, style)?;
-        self.accumulate_uploaded(&cut, camera, settings, hist, pages)
-    }
-
     /// Packs `draw` (with `style`) and uploads it, for [`Self::accumulate_uploaded`].
     pub(crate) fn upload_cut(
         &self,
@@ -1054,7 +968,11 @@ impl Renderer {
         })
     }
 
-    /// [`Self::accumulate_sndf`] of a cut already on the GPU.
+    /// Draws `iterations` G-buffers of an uploaded cut seen by `camera` (a `width ×
+    /// height` rectangle of texels) and adds them to the histograms in `hist`: tile `i`
+    /// of the rectangle (rows of 64×64-texel tiles) goes to slot `pages[i]` of the
+    /// buffer, or nowhere for [`crate::sndf::NO_SLOT`]. Returns the GPU time when
+    /// measured.
     pub(crate) fn accumulate_uploaded(
         &self,
         cut: &UploadedCut,
@@ -1302,7 +1220,6 @@ impl Renderer {
         use wgpu::util::DeviceExt;
         let ((width, height, tiles_x), (bins, binning, rays)) = (size, sampling);
         let device = &self.ctx.device;
-        let queue = &self.ctx.queue;
         let texels = width * height;
         let bg = background_srgb.map(srgb_to_linear);
         let init = |label: &str, contents: &[u8], usage| {
@@ -1331,52 +1248,66 @@ impl Renderer {
             bytemuck::cast_slice(&shade_table(bins, binning, lights)),
             wgpu::BufferUsages::STORAGE,
         );
-        let out_bytes = u64::from(texels) * 4;
+        self.image_pass(
+            "sndf shade",
+            (&self.sndf_shade.pipeline, &self.sndf_shade.layout),
+            &[&params, &table, hist],
+            [texels.div_ceil(64), 1],
+            (width, height),
+        )
+    }
+
+    /// Runs a compute pass that writes an RGBA8 image: `inputs` are bound in order,
+    /// the image's pixel buffer after them; the image is read back. Returns it and the
+    /// pass's GPU time.
+    pub(crate) fn image_pass(
+        &self,
+        label: &str,
+        (pipeline, layout): (&wgpu::ComputePipeline, &wgpu::BindGroupLayout),
+        inputs: &[&wgpu::Buffer],
+        workgroups: [u32; 2],
+        (width, height): (u32, u32),
+    ) -> Result<(RgbaImage, Option<Duration>), RenderError> {
+        let device = &self.ctx.device;
+        let out_bytes = (u64::from(width) * u64::from(height) * 4).max(4);
         let pixels = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("shaded pixels"),
-            size: out_bytes.max(4),
+            label: Some(label),
+            size: out_bytes,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let read = readback_buffer(device, "shaded pixels readback", out_bytes.max(4));
+        let read = readback_buffer(device, label, out_bytes);
+        let entries: Vec<_> = inputs
+            .iter()
+            .copied()
+            .chain([&pixels])
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
         let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("sndf shade"),
-            layout: &self.sndf_shade.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: table.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: hist.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: pixels.as_entire_binding(),
-                },
-            ],
+            label: Some(label),
+            layout,
+            entries: &entries,
         });
         let timing = self.frame_timer();
         let mut enc = device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("sndf shade"),
+                label: Some(label),
                 timestamp_writes: timing.as_ref().map(|t| t.compute_writes(true, true)),
             });
-            pass.set_pipeline(&self.sndf_shade.pipeline);
+            pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(texels.div_ceil(64), 1, 1);
+            pass.dispatch_workgroups(workgroups[0], workgroups[1], 1);
         }
-        enc.copy_buffer_to_buffer(&pixels, 0, &read, 0, out_bytes.max(4));
+        enc.copy_buffer_to_buffer(&pixels, 0, &read, 0, out_bytes);
         if let Some(t) = &timing {
             t.resolve(&mut enc);
         }
-        queue.submit([enc.finish()]);
+        self.ctx.queue.submit([enc.finish()]);
         let bytes = self.read_buffer(&read)?;
         let mut image = RgbaImage::new(width, height);
         let n = image.data.len();
@@ -1890,7 +1821,7 @@ impl Renderer {
     }
 
     /// Timestamp queries for a frame's passes, when the device has them.
-    pub(crate) fn frame_timer(&self) -> Option<FrameTimer> {
+    fn frame_timer(&self) -> Option<FrameTimer> {
         let device = &self.ctx.device;
         self.ctx.timestamps().then(|| FrameTimer {
             set: device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -1909,10 +1840,7 @@ impl Renderer {
     }
 
     /// The time between the timer's two stamps (after the frame was submitted).
-    pub(crate) fn gpu_time(
-        &self,
-        timer: Option<&FrameTimer>,
-    ) -> Result<Option<Duration>, RenderError> {
+    fn gpu_time(&self, timer: Option<&FrameTimer>) -> Result<Option<Duration>, RenderError> {
         let Some(t) = timer else {
             return Ok(None);
         };
@@ -1921,40 +1849,6 @@ impl Renderer {
         let t1 = u64::from_le_bytes(bytes[8..16].try_into().unwrap_or_default());
         let ns = t1.saturating_sub(t0) as f64 * f64::from(self.ctx.queue.get_timestamp_period());
         Ok(Some(Duration::from_nanos(ns as u64)))
-    }
-
-    /// Takes the kept buffer for `purpose` when it has this size and usage, else makes
-    /// one; give it back with [`Self::keep_scratch`]. A buffer taken is not shared: a
-    /// second caller meanwhile gets a new one. The caller clears it when it needs zeros.
-    fn take_scratch(
-        &self,
-        purpose: &'static str,
-        size: u64,
-        usage: wgpu::BufferUsages,
-    ) -> wgpu::Buffer {
-        let kept = self
-            .scratch
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .remove(purpose);
-        match kept {
-            Some(b) if b.size() == size && b.usage() == usage => b,
-            // A kept buffer of another size is dropped before the new one is made.
-            _ => self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(purpose),
-                size,
-                usage,
-                mapped_at_creation: false,
-            }),
-        }
-    }
-
-    /// Keeps a buffer from [`Self::take_scratch`] for the next call.
-    fn keep_scratch(&self, purpose: &'static str, buffer: wgpu::Buffer) {
-        self.scratch
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .insert(purpose, buffer);
     }
 
     pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {

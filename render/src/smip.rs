@@ -464,6 +464,11 @@ impl Smip {
         })
     }
 
+    /// How tiles are sampled.
+    pub fn config(&self) -> &SmipConfig {
+        &self.config
+    }
+
     /// Tile slots in the pool.
     pub fn capacity(&self) -> u32 {
         self.capacity
@@ -704,7 +709,6 @@ impl Smip {
         renderer.ctx.scoped(|| {
             use wgpu::util::DeviceExt;
             let device = &renderer.ctx.device;
-            let queue = &renderer.ctx.queue;
             let init = |label: &str, contents: &[u8], usage| {
                 device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some(label),
@@ -732,48 +736,13 @@ impl Smip {
             );
             let pages = init("smip pages", bytemuck::cast_slice(&pages), storage);
             let rays = init("smip rays", bytemuck::cast_slice(&rays), storage);
-            let out_bytes = (u64::from(width) * u64::from(height) * 4).max(4);
-            let pixels = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("smip pixels"),
-                size: out_bytes,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            let read = crate::renderer::readback_buffer(device, "smip pixels readback", out_bytes);
-            let entries: Vec<_> = [&params, &table, &self.pool, &pages, &rays, &pixels]
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32,
-                    resource: b.as_entire_binding(),
-                })
-                .collect();
-            let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("smip composite"),
-                layout: &self.composite.1,
-                entries: &entries,
-            });
-            let timing = renderer.frame_timer();
-            let mut enc = device.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("smip composite"),
-                    timestamp_writes: timing.as_ref().map(|t| t.compute_writes(true, true)),
-                });
-                pass.set_pipeline(&self.composite.0);
-                pass.set_bind_group(0, &bind, &[]);
-                pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
-            }
-            enc.copy_buffer_to_buffer(&pixels, 0, &read, 0, out_bytes);
-            if let Some(t) = &timing {
-                t.resolve(&mut enc);
-            }
-            queue.submit([enc.finish()]);
-            let bytes = renderer.read_buffer(&read)?;
-            let mut image = RgbaImage::new(width, height);
-            let n = image.data.len();
-            image.data.copy_from_slice(&bytes[..n]);
-            Ok((image, renderer.gpu_time(timing.as_ref())?))
+            renderer.image_pass(
+                "smip composite",
+                (&self.composite.0, &self.composite.1),
+                &[&params, &table, &self.pool, &pages, &rays],
+                [width.div_ceil(8), height.div_ceil(8)],
+                (width, height),
+            )
         })
     }
 

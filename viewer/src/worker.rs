@@ -608,11 +608,9 @@ impl<'r> Thread<'r> {
         // Room for the view's tiles at two levels, and as many again to pan back to.
         let want = 4 * (w.div_ceil(64) + 2) * (h.div_ceil(64) + 2);
         let (bins, pool_tiles) = fitting_pool(self.renderer, want, bins);
-        if self
-            .smip
-            .as_ref()
-            .is_none_or(|s| s.bins() != bins || s.capacity() != pool_tiles)
-        {
+        if self.smip.as_ref().is_none_or(|s| {
+            s.bins() != bins || s.capacity() != pool_tiles || s.config().error_px != opts.error_px
+        }) {
             self.smip = None;
             self.smip = Some(
                 Smip::new(
@@ -629,13 +627,9 @@ impl<'r> Thread<'r> {
         }
         let smip = self.smip.as_mut().expect("just made");
         smip.set_level_bias(coarsen);
-        let content = format!(
-            "{} {:?} error {} {}",
-            path.display(),
-            opts.style,
-            opts.error_px,
-            binning.name()
-        );
+        // What the tiles depend on besides the direction (the screen error is the
+        // cache's own setting: a new one makes a new cache above).
+        let content = format!("{} {:?} {}", path.display(), opts.style, binning.name());
         let frame = match smip.frame() {
             Some(f) if f.fits(&camera) && f.content == content && f.bins == bins => f.clone(),
             _ if interactive => return Ok(false),
