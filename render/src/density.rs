@@ -28,7 +28,7 @@
 //! - **Clipping.** A plane `n · p ≤ d` removes samples, not particles: points outside it
 //!   still add density inside, so a cut shows the true density at the cut.
 //!
-//! [`reference`] is the CPU twin of the whole pipeline (the tests' oracle).
+//! [`reference()`] is the CPU twin of the whole pipeline (the tests' oracle).
 
 use glam::Vec3;
 

@@ -54,7 +54,7 @@ pub use error::RenderError;
 pub use glam;
 pub use image::RgbaImage;
 pub use occlusion::OcclusionMode;
-pub use passes::sphere_raycast::Lighting;
+pub use passes::sphere_raycast::{Lighting, PackStyle};
 pub use renderer::{FrameSettings, RenderedFrame, Renderer, SplatBlend, SplatFrame};
 pub use streaming::{StreamStats, StreamingRenderer};
 pub use style::{ColourMap, PointStyle, SpeciesStyle};
@@ -421,125 +421,229 @@ pub fn render_image(
         report.total_time = sampled;
         return Ok((frame.image, report));
     }
-    if let RenderMode::Density(settings) = opts.mode {
-        let frame =
-            renderer.render_density(file, &camera, &draw, opts.width, opts.height, &settings)?;
-        let image = frame.image(opts.background);
-        let rendered = RenderedFrame {
-            image,
-            depth: None,
-            gpu_time: None,
-            points: draw.points as u32,
-            gpu_data_bytes: frame.gpu_data_bytes,
-            gpu_target_bytes: u64::from(opts.width) * u64::from(opts.height) * (32 + 48),
-        };
-        let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &rendered);
-        report.traversal_time = traversal_time;
-        report.density_stacks = Some((frame.stacks_run, frame.stacks));
-        report.density_host_time = Some(frame.host_time);
-        report.total_time = t0.elapsed();
-        return Ok((rendered.image, report));
-    }
-    if opts.mode != RenderMode::Spheres {
-        let (splats, image, exposure) = match opts.mode {
-            RenderMode::SplatOver { opacity } => {
-                if !(opacity.is_finite() && opacity > 0.0 && opacity <= 1.0) {
-                    return Err(RenderError::InvalidOptions(format!(
-                        "opacity {opacity} (must be in (0, 1])"
-                    )));
-                }
-                let sorted = traversal::sort_back_to_front(file, &draw, &camera);
-                let splats = renderer.render_splats(
-                    file,
-                    &camera,
-                    &sorted,
-                    opts.width,
-                    opts.height,
-                    SplatBlend::Over { opacity },
-                )?;
-                let image = splats.composite_over(opts.background);
-                (splats, image, None)
-            }
-            _ => {
-                let splats = renderer.render_splats(
-                    file,
-                    &camera,
-                    &draw,
-                    opts.width,
-                    opts.height,
-                    SplatBlend::Additive {
-                        intensity: 1.0,
-                        by_attribute: matches!(opts.mode, RenderMode::Splat { by_attribute: true }),
-                    },
-                )?;
-                let (image, exposure) = splats.tone_map(opts.exposure, opts.background);
-                (splats, image, Some(exposure))
-            }
-        };
-        let frame = RenderedFrame {
-            image,
-            depth: None,
-            gpu_time: splats.gpu_time,
-            points: splats.points,
-            gpu_data_bytes: splats.gpu_data_bytes,
-            gpu_target_bytes: u64::from(opts.width) * u64::from(opts.height) * 32,
-        };
-        let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
-        report.traversal_time = traversal_time;
-        report.exposure = exposure;
-        report.total_flux = exposure.map(|_| splats.total_flux()[3]);
-        report.total_time = t0.elapsed();
-        return Ok((frame.image, report));
-    }
-    let frame = renderer.render(file, &camera, &draw, &settings)?;
-    let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
+    let (style, look) = page_style(opts);
+    let source = renderer::PackedCut {
+        renderer,
+        file,
+        style,
+        look: &look,
+    };
+    let (image, mut report) = draw_cut(
+        renderer, file, &source, &camera, &traversal, &draw, opts, &settings,
+    )?;
     report.traversal_time = traversal_time;
     report.total_time = t0.elapsed();
-    Ok((frame.image, report))
+    Ok((image, report))
 }
 
-/// Renders an open file through a streaming pool of `pool_bytes` of GPU memory: draws
-/// what is resident (coarse levels first), waits for the pages the view asked for, and
-/// repeats until the view is complete. The image is the last frame's.
+/// The packing and look of the points `opts`'s mode draws (what a streaming pool for
+/// it must hold: see [`StreamingRenderer::with_style`]).
+pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
+    match opts.mode {
+        RenderMode::Spheres | RenderMode::Sndf { .. } => (PackStyle::Spheres, opts.style.clone()),
+        RenderMode::Splat { by_attribute: true } => {
+            (PackStyle::FluxAttribute, PointStyle::default())
+        }
+        RenderMode::Splat { .. } | RenderMode::SplatOver { .. } | RenderMode::Density(_) => {
+            (PackStyle::FluxColour, PointStyle::default())
+        }
+    }
+}
+
+/// Draws the cut `draw` in `opts`'s mode (not S-NDFs) from the points `source` binds;
+/// the report's times other than the GPU's are left at zero.
+#[allow(clippy::too_many_arguments)]
+fn draw_cut(
+    renderer: &Renderer,
+    file: &MdlodFile,
+    source: &dyn renderer::CutSource,
+    camera: &Camera,
+    traversal: &TraversalSettings,
+    draw: &DrawList,
+    opts: &RenderOptions,
+    settings: &FrameSettings,
+) -> Result<(RgbaImage, RenderReport), RenderError> {
+    let (w, h) = (opts.width, opts.height);
+    let pixels = u64::from(w) * u64::from(h);
+    let report = |frame: &RenderedFrame| {
+        RenderReport::new(renderer, opts, camera.clone(), traversal, draw, frame)
+    };
+    match opts.mode {
+        RenderMode::Sndf { .. } => Err(RenderError::InvalidOptions(
+            "S-NDFs are sampled by render_image or the S-MIP, not drawn from a cut".into(),
+        )),
+        RenderMode::Density(settings) => {
+            let frame =
+                renderer.render_density_from(source, file, camera, draw, w, h, &settings)?;
+            let rendered = RenderedFrame {
+                image: frame.image(opts.background),
+                depth: None,
+                gpu_time: None,
+                points: draw.points as u32,
+                gpu_data_bytes: frame.gpu_data_bytes,
+                gpu_target_bytes: pixels * (32 + 48),
+            };
+            let mut report = report(&rendered);
+            report.density_stacks = Some((frame.stacks_run, frame.stacks));
+            report.density_host_time = Some(frame.host_time);
+            Ok((rendered.image, report))
+        }
+        RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => {
+            let (splats, image, exposure) = match opts.mode {
+                RenderMode::SplatOver { opacity } => {
+                    if !(opacity.is_finite() && opacity > 0.0 && opacity <= 1.0) {
+                        return Err(RenderError::InvalidOptions(format!(
+                            "opacity {opacity} (must be in (0, 1])"
+                        )));
+                    }
+                    let sorted = traversal::sort_back_to_front(file, draw, camera);
+                    let splats = renderer.render_splats_from(
+                        source,
+                        camera,
+                        &sorted,
+                        w,
+                        h,
+                        SplatBlend::Over { opacity },
+                    )?;
+                    let image = splats.composite_over(opts.background);
+                    (splats, image, None)
+                }
+                _ => {
+                    let splats = renderer.render_splats_from(
+                        source,
+                        camera,
+                        draw,
+                        w,
+                        h,
+                        SplatBlend::Additive {
+                            intensity: 1.0,
+                            by_attribute: matches!(
+                                opts.mode,
+                                RenderMode::Splat { by_attribute: true }
+                            ),
+                        },
+                    )?;
+                    let (image, exposure) = splats.tone_map(opts.exposure, opts.background);
+                    (splats, image, Some(exposure))
+                }
+            };
+            let frame = RenderedFrame {
+                image,
+                depth: None,
+                gpu_time: splats.gpu_time,
+                points: splats.points,
+                gpu_data_bytes: splats.gpu_data_bytes,
+                gpu_target_bytes: pixels * 32,
+            };
+            let mut report = report(&frame);
+            report.exposure = exposure;
+            report.total_flux = exposure.map(|_| splats.total_flux()[3]);
+            Ok((frame.image, report))
+        }
+        RenderMode::Spheres => {
+            let frame = renderer.ctx.scoped(|| {
+                let cut = source.bind(draw)?;
+                let mut frame = renderer.render_bound(
+                    &cut.buffers,
+                    cut.position_bits,
+                    cut.species_count,
+                    camera,
+                    settings,
+                )?;
+                frame.gpu_data_bytes = cut.data_bytes;
+                Ok(frame)
+            })?;
+            let report = report(&frame);
+            Ok((frame.image, report))
+        }
+    }
+}
+
+/// One frame of a streamed view in `opts`'s mode (not S-NDFs), for callers that show
+/// every frame, like the viewer: [`StreamingRenderer::prepare`] (install, traverse,
+/// request), then the mode's passes over the resident pages. The pool must have been
+/// made for the mode ([`page_style`]).
+pub fn render_stream_frame(
+    renderer: &Renderer,
+    stream: &mut StreamingRenderer,
+    opts: &RenderOptions,
+) -> Result<(RgbaImage, RenderReport, StreamStats), RenderError> {
+    let t0 = Instant::now();
+    let file = stream.file().clone();
+    let (camera, traversal, settings) = frame_setup(renderer, &file, opts)?;
+    let (style, look) = page_style(opts);
+    if stream.style() != (style, &look) {
+        return Err(RenderError::InvalidOptions(
+            "the streaming pool holds points packed for another mode or style".into(),
+        ));
+    }
+    let (draw, stats) = stream.prepare(&camera, &traversal)?;
+    let traversal_time = t0.elapsed();
+    let (image, mut report) = draw_cut(
+        renderer, &file, stream, &camera, &traversal, &draw, opts, &settings,
+    )?;
+    report.budget_limited |= stats.pool_limited;
+    report.traversal_time = traversal_time;
+    report.total_time = t0.elapsed();
+    Ok((image, report, stats))
+}
+
+/// Renders an open file through a streaming pool of `pool_bytes` of GPU memory: the
+/// first frame draws what is resident (the coarse levels), then frames install the
+/// pages the view asked for and ask for more until the view is complete (or the pool
+/// holds all it can), and the last frame is drawn. Every mode but S-NDFs streams (those
+/// go out of core through the S-MIP: `mdlod sample --tiles`).
 pub fn render_streaming(
     renderer: &Renderer,
     file: std::sync::Arc<MdlodFile>,
     opts: &RenderOptions,
     pool_bytes: u64,
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
-    if opts.mode != RenderMode::Spheres {
+    if matches!(opts.mode, RenderMode::Sndf { .. }) {
         return Err(RenderError::InvalidOptions(
-            "splat mode draws from the whole file for now: leave out the GPU memory pool".into(),
-        ));
-    }
-    if opts.style != PointStyle::default() {
-        return Err(RenderError::InvalidOptions(
-            "species styles and colour maps draw from the whole file for now: leave out the \
-             GPU memory pool"
+            "S-NDFs do not stream through the GPU memory pool: leave out the pool, or sample \
+             an orthographic view's S-MIP tiles (mdlod sample --tiles)"
                 .into(),
         ));
     }
     let t0 = Instant::now();
     let (camera, traversal, settings) = frame_setup(renderer, &file, opts)?;
-    let mut stream = StreamingRenderer::new(renderer, file, pool_bytes)?;
+    let (style, look) = page_style(opts);
+    let mut stream = StreamingRenderer::with_style(
+        renderer,
+        file.clone(),
+        pool_bytes,
+        streaming::PAGE_POINTS,
+        style,
+        &look,
+    )?;
     let mut frames = 0u32;
     let mut first_frame_time = None;
+    let mut traversal_time = Duration::ZERO;
     // Each frame installs what arrived and asks for what is missing; a still view
     // completes in a number of frames bounded by the cut's depth and the pool size.
     const MAX_FRAMES: u32 = 10_000;
     loop {
-        let (frame, draw, stats) = stream.render(&camera, &traversal, &settings)?;
+        let tf = Instant::now();
+        let (draw, stats) = stream.prepare(&camera, &traversal)?;
+        traversal_time += tf.elapsed();
         frames += 1;
-        first_frame_time.get_or_insert_with(|| t0.elapsed());
         // Done when the view is complete, or when the pool is full and nothing more
         // arrives or is asked for (the best this pool can hold).
-        if stats.settled() || frames >= MAX_FRAMES {
-            let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
-            report.budget_limited |= stats.pool_limited;
-            report.total_time = t0.elapsed();
-            report.frames = frames;
-            report.first_frame_time = first_frame_time;
-            return Ok((frame.image, report));
+        let last = stats.settled() || frames >= MAX_FRAMES;
+        if frames == 1 || last {
+            let (image, mut report) = draw_cut(
+                renderer, &file, &stream, &camera, &traversal, &draw, opts, &settings,
+            )?;
+            first_frame_time.get_or_insert_with(|| t0.elapsed());
+            if last {
+                report.budget_limited |= stats.pool_limited;
+                report.traversal_time = traversal_time;
+                report.total_time = t0.elapsed();
+                report.frames = frames;
+                report.first_frame_time = first_frame_time;
+                return Ok((image, report));
+            }
         }
         stream.wait_for_loads(Duration::from_secs(5));
     }

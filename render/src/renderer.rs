@@ -33,6 +33,85 @@ use crate::traversal::DrawList;
 /// Most samples per pixel accepted.
 pub const MAX_SPP: u32 = 256;
 
+/// A cut bound for the GPU: the point passes' bind group over its points, and what
+/// decoding them needs.
+pub struct BoundCut {
+    pub buffers: SphereBuffers,
+    pub position_bits: u32,
+    pub species_count: u32,
+    /// Bytes of the buffers the points live in.
+    pub data_bytes: u64,
+}
+
+/// Where a pass gets the points of a draw list, in the list's order: packed from the
+/// file and uploaded ([`PackedCut`]), or the resident pages of a streaming pool
+/// ([`crate::StreamingRenderer`]).
+pub trait CutSource {
+    /// What the bound points' attributes carry (each pass needs its own).
+    fn style(&self) -> PackStyle;
+    /// Binds the points of `draw`, a cut of the source's file.
+    fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError>;
+}
+
+/// The cut packed from the mapped file and uploaded whole.
+pub struct PackedCut<'a> {
+    pub renderer: &'a Renderer,
+    pub file: &'a MdlodFile,
+    pub style: PackStyle,
+    pub look: &'a crate::style::PointStyle,
+}
+
+impl CutSource for PackedCut<'_> {
+    fn style(&self) -> PackStyle {
+        self.style
+    }
+
+    fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError> {
+        let packed =
+            crate::passes::sphere_raycast::pack_styled(self.file, draw, self.style, self.look)?;
+        let limits = self.renderer.ctx.device.limits();
+        let largest = packed.largest_buffer_bytes();
+        if largest > limits.max_storage_buffer_binding_size || largest > limits.max_buffer_size {
+            return Err(RenderError::InvalidOptions(format!(
+                "the cut of {} points needs a {largest}-byte buffer, more than this adapter \
+                 allows ({} bytes): lower the point budget",
+                packed.points(),
+                limits.max_storage_buffer_binding_size
+            )));
+        }
+        Ok(BoundCut {
+            buffers: self
+                .renderer
+                .sphere
+                .upload(&self.renderer.ctx.device, &packed),
+            position_bits: packed.position_bits,
+            species_count: packed.species.len() as u32,
+            data_bytes: packed.data_bytes(),
+        })
+    }
+}
+
+/// The packing a splat blend draws from.
+pub fn splat_style(blend: SplatBlend) -> PackStyle {
+    match blend {
+        SplatBlend::Additive {
+            by_attribute: true, ..
+        } => PackStyle::FluxAttribute,
+        _ => PackStyle::FluxColour,
+    }
+}
+
+fn check_source(source: &dyn CutSource, want: PackStyle, what: &str) -> Result<(), RenderError> {
+    if source.style() == want {
+        Ok(())
+    } else {
+        Err(RenderError::InvalidOptions(format!(
+            "{what} draws points packed as {want:?}, but the source holds {:?}",
+            source.style()
+        )))
+    }
+}
+
 /// How to draw a frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameSettings {
@@ -1326,6 +1405,25 @@ impl Renderer {
         height: u32,
         blend: SplatBlend,
     ) -> Result<SplatFrame, RenderError> {
+        let source = PackedCut {
+            renderer: self,
+            file,
+            style: splat_style(blend),
+            look: &Default::default(),
+        };
+        self.render_splats_from(&source, camera, draw, width, height, blend)
+    }
+
+    /// [`Self::render_splats`] of the points `source` binds for `draw`.
+    pub fn render_splats_from(
+        &self,
+        source: &dyn CutSource,
+        camera: &Camera,
+        draw: &DrawList,
+        width: u32,
+        height: u32,
+        blend: SplatBlend,
+    ) -> Result<SplatFrame, RenderError> {
         let Some(splat) = &self.splat else {
             return Err(RenderError::InvalidOptions(format!(
                 "splatting needs additive blending of 32-bit floats, which {} does not offer",
@@ -1337,31 +1435,19 @@ impl Renderer {
             height,
             ..Default::default()
         })?;
-        let style = match blend {
-            SplatBlend::Additive {
-                by_attribute: true, ..
-            } => PackStyle::FluxAttribute,
-            _ => PackStyle::FluxColour,
-        };
-        let packed = crate::passes::sphere_raycast::pack_with(file, draw, style)?;
-        let limits = self.ctx.device.limits();
-        if packed.largest_buffer_bytes() > limits.max_storage_buffer_binding_size {
-            return Err(RenderError::InvalidOptions(format!(
-                "the cut of {} points is too large for this adapter: lower the point budget",
-                packed.points()
-            )));
-        }
+        check_source(source, splat_style(blend), "splatting")?;
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
-            let buffers = self.sphere.upload(device, &packed);
+            let cut = source.bind(draw)?;
+            let buffers = &cut.buffers;
             let mut uniforms = FrameUniforms::new(
                 camera.clip_from_view(width as f32 / height as f32),
                 camera.view_from_world(),
                 camera.projection == Projection::Orthographic,
                 &Default::default(),
-                packed.position_bits,
-                packed.species.len() as u32,
+                cut.position_bits,
+                cut.species_count,
             );
             let (pipeline, intensity, opacity) = match blend {
                 SplatBlend::Additive { intensity, .. } => (&splat.pipeline, intensity, 0.0),
@@ -1438,7 +1524,7 @@ impl Renderer {
                 hdr,
                 gpu_time,
                 points: buffers.points,
-                gpu_data_bytes: packed.data_bytes(),
+                gpu_data_bytes: cut.data_bytes,
             })
         })
     }
@@ -1454,6 +1540,29 @@ impl Renderer {
         height: u32,
         settings: &crate::density::DensitySettings,
     ) -> Result<DensityFrame, RenderError> {
+        let source = PackedCut {
+            renderer: self,
+            file,
+            style: PackStyle::FluxColour,
+            look: &Default::default(),
+        };
+        self.render_density_from(&source, file, camera, draw, width, height, settings)
+    }
+
+    /// [`Self::render_density`] of the points `source` binds (packed as
+    /// [`PackStyle::FluxColour`]); `file` gives the host its positions for the slicing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_density_from(
+        &self,
+        source: &dyn CutSource,
+        file: &MdlodFile,
+        camera: &Camera,
+        draw: &DrawList,
+        width: u32,
+        height: u32,
+        settings: &crate::density::DensitySettings,
+    ) -> Result<DensityFrame, RenderError> {
+        check_source(source, PackStyle::FluxColour, "the density volume")?;
         let t0 = std::time::Instant::now();
         use crate::density::{DensityPoint, Slicing};
         use crate::passes::density::{
@@ -1537,15 +1646,6 @@ impl Renderer {
                 (lo.min(p.position - h), hi.max(p.position + h))
             },
         );
-        let packed =
-            crate::passes::sphere_raycast::pack_with(file, &sorted_draw, PackStyle::FluxColour)?;
-        let limits = self.ctx.device.limits();
-        if packed.largest_buffer_bytes() > limits.max_storage_buffer_binding_size {
-            return Err(RenderError::InvalidOptions(format!(
-                "the cut of {} points is too large for this adapter: lower the point budget",
-                packed.points()
-            )));
-        }
         let per_stack = if settings.iso.is_some() {
             SLICES_GRADIENT
         } else {
@@ -1561,15 +1661,16 @@ impl Renderer {
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
-            let buffers = self.sphere.upload(device, &packed);
+            let cut = source.bind(&sorted_draw)?;
+            let buffers = &cut.buffers;
             let aspect = width as f32 / height as f32;
             let uniforms = FrameUniforms::new(
                 camera.clip_from_view(aspect),
                 camera.view_from_world(),
                 camera.projection == Projection::Orthographic,
                 &Default::default(),
-                packed.position_bits,
-                packed.species.len() as u32,
+                cut.position_bits,
+                cut.species_count,
             );
             queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
             let world_from_clip =
@@ -1814,7 +1915,7 @@ impl Renderer {
                 stacks,
                 stacks_run,
                 splatted,
-                gpu_data_bytes: packed.data_bytes(),
+                gpu_data_bytes: cut.data_bytes,
                 host_time,
             })
         })

@@ -4,8 +4,10 @@
 //! How it works.
 //! - A *page* is a fixed number ([`PAGE_POINTS`] by default) of consecutive points of one level (the last page of a
 //!   level may be shorter). Its GPU form is a *slot*: the raw quantized position words
-//!   of its points, and per point either the species index (particles) or the node's
-//!   radius and colour (representatives). Every slot has the same size, so the pool is
+//!   of its points, and at most two attribute words per point, packed as the pool's
+//!   [`PackStyle`] and look ask ([`AttrPacker`], the packer of whole cuts too): species
+//!   index or radius and colour for spheres, flux radius and colour or intensity for
+//!   splats and densities. Every slot has the same size, so the pool is
 //!   two fixed buffers (positions, attributes) of `capacity` slots plus one reserved
 //!   slot holding the top node; there is no fragmentation.
 //! - Each frame first installs the pages the loader has finished: into a free slot, or
@@ -23,6 +25,9 @@
 //!   back. Each drawn range is split at page boundaries and points into its slots.
 //! - Once a frame requests nothing and has nothing in flight, it is *complete*: with a
 //!   pool large enough for the cut it draws exactly what [`crate::render_image`] draws.
+//! - [`StreamingRenderer::render`] draws spheres; [`StreamingRenderer::prepare`] does a
+//!   frame's bookkeeping alone, and the pool then binds the cut as a [`CutSource`] for
+//!   any pass (splats, the density volume: [`crate::render_stream_frame`]).
 
 use std::collections::{HashMap, HashSet};
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
@@ -30,17 +35,16 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use mdlod_format::{FormatError, MdlodFile};
+use mdlod_format::MdlodFile;
 
 use crate::camera::Camera;
 use crate::error::RenderError;
 use crate::passes::sphere_raycast::{
-    push_bytes_as_words, storage_buffer, RangeGpu, SphereInputs, KIND_NODE, KIND_PARTICLE,
+    push_bytes_as_words, storage_buffer, AttrPacker, PackStyle, RangeGpu, SphereInputs,
 };
-use crate::renderer::{FrameSettings, RenderedFrame, Renderer};
-use crate::traversal::{
-    representative_radius, traverse_with, DrawList, Residency, TraversalSettings,
-};
+use crate::renderer::{BoundCut, CutSource, FrameSettings, RenderedFrame, Renderer};
+use crate::style::PointStyle;
+use crate::traversal::{traverse_with, DrawList, Residency, TraversalSettings};
 
 /// Default points per page.
 pub const PAGE_POINTS: u32 = 256;
@@ -111,6 +115,8 @@ pub struct StreamingRenderer<'r> {
     positions: wgpu::Buffer,
     attrs: wgpu::Buffer,
     species: wgpu::Buffer,
+    packer: AttrPacker,
+    look: PointStyle,
     slots: Vec<Option<Slot>>,
     resident: HashMap<PageId, u32>,
     pending: HashSet<PageId>,
@@ -139,9 +145,8 @@ fn page_range(file: &MdlodFile, id: PageId, page_points: u32) -> std::ops::Range
     a..(a + page_points as usize).min(count)
 }
 
-fn load_page(file: &MdlodFile, id: PageId, page_points: u32) -> LoadedPage {
+fn load_page(file: &MdlodFile, id: PageId, page_points: u32, packer: &AttrPacker) -> LoadedPage {
     let level = usize::from(id.level);
-    let last = file.level_count() - 1;
     let r = page_range(file, id, page_points);
     let bpp = 3 * (file.position_bits() as usize / 8);
     let mut positions = Vec::new();
@@ -150,28 +155,10 @@ fn load_page(file: &MdlodFile, id: PageId, page_points: u32) -> LoadedPage {
         &file.positions(level).bytes()[r.start * bpp..r.end * bpp],
     );
     let mut attrs = Vec::new();
-    let mut error = None;
-    if level == last {
-        let sp = &file.species()[r.clone()];
-        let count = file.metadata().species.len();
-        if let Some(k) = sp.iter().position(|&s| usize::from(s) >= count) {
-            error = Some(
-                FormatError::Corrupt {
-                    path: file.path().to_path_buf(),
-                    place: format!("SPECIES, particle {}", r.start + k),
-                    problem: format!("species index {} but only {count} species", sp[k]),
-                }
-                .to_string(),
-            );
-        }
-        push_bytes_as_words(&mut attrs, bytemuck::cast_slice(sp));
-    } else {
-        let first = file.levels()[level].node_first as usize;
-        for n in &file.nodes()[first + r.start..first + r.end] {
-            attrs.push(representative_radius(n).to_bits());
-            attrs.push(n.colour);
-        }
-    }
+    let error = packer
+        .push(file, level, r.start, r.len(), &mut attrs)
+        .err()
+        .map(|e| e.to_string());
     LoadedPage {
         id,
         positions,
@@ -213,6 +200,28 @@ impl<'r> StreamingRenderer<'r> {
         pool_bytes: u64,
         page_points: u32,
     ) -> Result<Self, RenderError> {
+        Self::with_style(
+            renderer,
+            file,
+            pool_bytes,
+            page_points,
+            PackStyle::Spheres,
+            &PointStyle::default(),
+        )
+    }
+
+    /// A pool whose pages carry the points as `style` packs them, with the look `look`
+    /// (spheres only): the pool then feeds the passes of that style (splats, the density
+    /// volume, styled spheres). See [`crate::passes::sphere_raycast::AttrPacker`].
+    pub fn with_style(
+        renderer: &'r Renderer,
+        file: Arc<MdlodFile>,
+        pool_bytes: u64,
+        page_points: u32,
+        style: PackStyle,
+        look: &PointStyle,
+    ) -> Result<Self, RenderError> {
+        let packer = AttrPacker::new(&file, style, look)?;
         if page_points < 4 || !page_points.is_multiple_of(4) || page_points > 1 << 20 {
             return Err(RenderError::InvalidOptions(format!(
                 "{page_points} points per page (must be a multiple of 4 from 4 to 2^20)"
@@ -240,39 +249,27 @@ impl<'r> StreamingRenderer<'r> {
         let positions = buffer("page pool positions", slot_pos_words);
         let attrs = buffer("page pool attributes", slot_attr_words);
         // The reserved last slot: the top node at its centroid (zero words, scale 0).
-        let top = &file.nodes()[0];
-        let queue = &renderer.ctx.queue;
-        queue.write_buffer(
+        let mut top = Vec::new();
+        packer.push(&file, 0, 0, 1, &mut top)?;
+        renderer.ctx.queue.write_buffer(
             &attrs,
             capacity as u64 * u64::from(slot_attr_words) * 4,
-            bytemuck::cast_slice(&[representative_radius(top).to_bits(), top.colour]),
+            bytemuck::cast_slice(&top),
         );
-        let species_table: Vec<[f32; 4]> = file
-            .metadata()
-            .species
-            .iter()
-            .map(|s| [s.colour[0], s.colour[1], s.colour[2], s.radius])
-            .collect();
-        use wgpu::util::DeviceExt;
-        let species = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("species"),
-            contents: bytemuck::cast_slice(&species_table),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
+        let species = storage_buffer(device, "species", bytemuck::cast_slice(&packer.species));
 
         let (req_tx, req_rx) = channel::<Vec<PageId>>();
         let (res_tx, res_rx) = channel::<LoadedPage>();
         let loader_file = file.clone();
         let loader_page_points = page_points;
+        let loader_packer = packer.clone();
         let loader = std::thread::Builder::new()
             .name("mdlod-page-loader".into())
             .spawn(move || {
                 while let Ok(batch) = req_rx.recv() {
                     for id in batch {
-                        if res_tx
-                            .send(load_page(&loader_file, id, loader_page_points))
-                            .is_err()
-                        {
+                        let page = load_page(&loader_file, id, loader_page_points, &loader_packer);
+                        if res_tx.send(page).is_err() {
                             return;
                         }
                     }
@@ -289,6 +286,8 @@ impl<'r> StreamingRenderer<'r> {
             positions,
             attrs,
             species,
+            packer,
+            look: look.clone(),
             slots: vec![None; capacity],
             resident: HashMap::new(),
             pending: HashSet::new(),
@@ -379,15 +378,50 @@ impl<'r> StreamingRenderer<'r> {
         Ok(())
     }
 
-    /// Draws one frame of `camera`'s view with what is resident, installs what arrived
-    /// and requests what is missing. Repeat with a still view until
-    /// [`StreamStats::complete`].
+    /// Draws one frame of `camera`'s view as spheres with what is resident, installs what
+    /// arrived and requests what is missing. Repeat with a still view until
+    /// [`StreamStats::complete`]. Other passes draw a [`Self::prepare`]d cut through
+    /// [`CutSource`].
     pub fn render(
         &mut self,
         camera: &Camera,
         traversal: &TraversalSettings,
         settings: &FrameSettings,
     ) -> Result<(RenderedFrame, DrawList, StreamStats), RenderError> {
+        if self.packer.style() != PackStyle::Spheres || self.look != settings.style {
+            return Err(RenderError::InvalidOptions(
+                "this pool's pages were packed for another style than the frame's".into(),
+            ));
+        }
+        let (draw, stats) = self.prepare(camera, traversal)?;
+        let frame = self.renderer.ctx.scoped(|| {
+            let cut = self.bind(&draw)?;
+            let mut frame = self.renderer.render_bound(
+                &cut.buffers,
+                cut.position_bits,
+                cut.species_count,
+                camera,
+                settings,
+            )?;
+            frame.gpu_data_bytes = cut.data_bytes;
+            Ok(frame)
+        })?;
+        Ok((frame, draw, stats))
+    }
+
+    /// The pages' packing and look (a pool serves the passes of one style).
+    pub fn style(&self) -> (PackStyle, &PointStyle) {
+        (self.packer.style(), &self.look)
+    }
+
+    /// One frame's bookkeeping without drawing: installs the pages that arrived, chooses
+    /// the cut of `camera`'s view from what is resident, and requests what is missing.
+    /// The cut's points are then bound with [`CutSource::bind`] until the next call.
+    pub fn prepare(
+        &mut self,
+        camera: &Camera,
+        traversal: &TraversalSettings,
+    ) -> Result<(DrawList, StreamStats), RenderError> {
         self.frame += 1;
         let mut stats = StreamStats {
             frame: self.frame,
@@ -440,36 +474,7 @@ impl<'r> StreamingRenderer<'r> {
         stats.resident_pages = self.resident.len();
         stats.complete = stats.requested == 0 && stats.pending == 0 && draw.deferred_nodes == 0;
 
-        let (ranges, point_range) = self.ranges_of(&draw)?;
-        let device = &self.renderer.ctx.device;
-        let storage = |label: &str, bytes: &[u8]| storage_buffer(device, label, bytes);
-        let ranges_buf = storage("ranges", bytemuck::cast_slice(&ranges));
-        let point_range_buf = storage("point_range", bytemuck::cast_slice(&point_range));
-        let species_count = self.file.metadata().species.len() as u32;
-        let bits = self.file.position_bits();
-        let ctx = &self.renderer.ctx;
-        let frame = ctx.scoped(|| {
-            let buffers = self.renderer.sphere_pass().bind(
-                device,
-                &SphereInputs {
-                    positions: &self.positions,
-                    attrs: &self.attrs,
-                    ranges: &ranges_buf,
-                    point_range: &point_range_buf,
-                    species: &self.species,
-                },
-                point_range.len() as u32,
-            );
-            self.renderer
-                .render_bound(&buffers, bits, species_count, camera, settings)
-        })?;
-        let mut frame = frame;
-        frame.gpu_data_bytes = self.positions.size()
-            + self.attrs.size()
-            + ranges_buf.size()
-            + point_range_buf.size()
-            + self.species.size();
-        Ok((frame, draw, stats))
+        Ok((draw, stats))
     }
 
     /// The GPU ranges of a cut: each range split at page boundaries, pointing into
@@ -492,18 +497,14 @@ impl<'r> StreamingRenderer<'r> {
                     word_offset: self.capacity as u32 * self.slot_pos_words,
                     scale: [0.0; 3],
                     attr_offset: self.capacity as u32 * self.slot_attr_words,
-                    kind: KIND_NODE,
+                    kind: self.packer.kind(0, last),
                     ..Default::default()
                 };
                 push(r, 1, &mut ranges);
                 continue;
             }
             let enc = &nodes[d.quant_node as usize];
-            let kind = if usize::from(d.level) == last {
-                KIND_PARTICLE
-            } else {
-                KIND_NODE
-            };
+            let kind = self.packer.kind(usize::from(d.level), last);
             let mut a = d.first;
             let end = d.first + d.count;
             while a < end {
@@ -530,6 +531,43 @@ impl<'r> StreamingRenderer<'r> {
             }
         }
         Ok((ranges, point_range))
+    }
+}
+
+impl CutSource for StreamingRenderer<'_> {
+    fn style(&self) -> PackStyle {
+        self.packer.style()
+    }
+
+    /// Binds the pool's pages for `draw`: the last [`StreamingRenderer::prepare`]d cut,
+    /// or any reordering or subset of its points (every page it touches is resident).
+    fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError> {
+        let (ranges, point_range) = self.ranges_of(draw)?;
+        let device = &self.renderer.ctx.device;
+        let ranges_buf = storage_buffer(device, "ranges", bytemuck::cast_slice(&ranges));
+        let point_range_buf =
+            storage_buffer(device, "point_range", bytemuck::cast_slice(&point_range));
+        let buffers = self.renderer.sphere_pass().bind(
+            device,
+            &SphereInputs {
+                positions: &self.positions,
+                attrs: &self.attrs,
+                ranges: &ranges_buf,
+                point_range: &point_range_buf,
+                species: &self.species,
+            },
+            point_range.len() as u32,
+        );
+        Ok(BoundCut {
+            buffers,
+            position_bits: self.file.position_bits(),
+            species_count: self.packer.species.len() as u32,
+            data_bytes: self.positions.size()
+                + self.attrs.size()
+                + ranges_buf.size()
+                + point_range_buf.size()
+                + self.species.size(),
+        })
     }
 }
 

@@ -844,7 +844,7 @@ fn splats_match_the_cpu_reference_and_keep_the_flux_at_every_level() {
 }
 
 #[test]
-fn splat_mode_renders_tone_mapped_and_refuses_streaming() {
+fn splat_mode_renders_tone_mapped() {
     let (_d, _p, f) = make_file(&cloud_frame(2000, 3), small_build(), &[]);
     let mut o = opts(64, 48);
     o.mode = mdlod_render::RenderMode::Splat {
@@ -866,10 +866,144 @@ fn splat_mode_renders_tone_mapped_and_refuses_streaming() {
     let (brighter, _) = render_image(renderer(), &f, &o).unwrap();
     let sum = |i: &RgbaImage| i.data.iter().map(|&v| u64::from(v)).sum::<u64>();
     assert!(sum(&brighter) > sum(&img));
-    let e = mdlod_render::render_streaming(renderer(), std::sync::Arc::new(f), &o, 1 << 20)
+}
+
+#[test]
+fn every_mode_but_sndfs_streams_through_a_small_pool_to_the_direct_image() {
+    use mdlod_render::density::DensitySettings;
+    use mdlod_render::{ColourMap, PointStyle, RenderMode, SpeciesStyle, StreamingRenderer};
+    let mut frame = fcc_frame(14);
+    let values: Vec<f32> = frame.positions.iter().map(|p| p[1].sin()).collect();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "e".into(),
+        values,
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let f = std::sync::Arc::new(f);
+    let (w, h) = (64u32, 48u32);
+    let error_px = 3.0;
+    // A close-up of one corner of the block.
+    let mut corner = camera_for(
+        &f,
+        &ViewSpec::Orbit {
+            azimuth_deg: 0.0,
+            elevation_deg: 90.0,
+            zoom: 5.0,
+            projection: Projection::Orthographic,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    corner.target = Vec3::new(6.0, 6.0, 45.0);
+    let view = ViewSpec::Camera(corner);
+    // A pool just large enough for the view's cut, well below the file: the view
+    // completes, after frames that start from the top node alone.
+    let (used, file_pages) = {
+        let mut o = opts(w, h);
+        o.error_px = error_px;
+        o.view = view.clone();
+        o.occlusion = false;
+        let (camera, traversal, _) = mdlod_render::frame_setup(renderer(), &f, &o).unwrap();
+        let mut s = StreamingRenderer::new(renderer(), f.clone(), 1 << 30).unwrap();
+        let mut used = 0;
+        for _ in 0..60 {
+            let (_, stats) = s.prepare(&camera, &traversal).unwrap();
+            used = stats.used_pages;
+            if stats.complete {
+                break;
+            }
+            s.wait_for_loads(std::time::Duration::from_secs(10));
+        }
+        (used as u64, s.file_pages())
+    };
+    assert!(used * 3 < file_pages * 2, "{used} of {file_pages} pages");
+    let pool = used * StreamingRenderer::slot_bytes(f.position_bits(), 256);
+    let colour_map = PointStyle {
+        colour_map: Some(ColourMap::Magma),
+        ..Default::default()
+    };
+    let hidden = PointStyle {
+        species: vec![SpeciesStyle {
+            name: "Ag".into(),
+            hidden: true,
+            ..Default::default()
+        }],
+        ..Default::default()
+    };
+    let iso = DensitySettings {
+        iso: Some(0.3),
+        slices: 48,
+        ..Default::default()
+    };
+    let cases = [
+        ("spheres, colour map", RenderMode::Spheres, colour_map),
+        ("spheres, a hidden species", RenderMode::Spheres, hidden),
+        (
+            "additive splats",
+            RenderMode::Splat {
+                by_attribute: false,
+            },
+            PointStyle::default(),
+        ),
+        (
+            "splats by attribute",
+            RenderMode::Splat { by_attribute: true },
+            PointStyle::default(),
+        ),
+        (
+            "sorted splats",
+            RenderMode::SplatOver { opacity: 0.6 },
+            PointStyle::default(),
+        ),
+        (
+            "density volume",
+            RenderMode::Density(DensitySettings {
+                slices: 48,
+                ..Default::default()
+            }),
+            PointStyle::default(),
+        ),
+        (
+            "iso-surface",
+            RenderMode::Density(iso),
+            PointStyle::default(),
+        ),
+    ];
+    for (name, mode, style) in cases {
+        let mut o = opts(w, h);
+        o.error_px = error_px;
+        o.view = view.clone();
+        o.mode = mode;
+        o.style = style;
+        let (direct, d) = render_image(renderer(), &f, &o).unwrap();
+        let (streamed, s) = mdlod_render::render_streaming(renderer(), f.clone(), &o, pool)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(s.frames > 2, "{name}: {} frames", s.frames);
+        assert!(!s.budget_limited, "{name}: the pool should hold the cut");
+        assert_eq!(
+            (s.particles_drawn, s.nodes_drawn),
+            (d.particles_drawn, d.nodes_drawn),
+            "{name}"
+        );
+        let (bad, _) = golden::compare(&direct, &streamed, 1);
+        assert_eq!(bad, 0, "{name}: {bad} pixels differ from the direct image");
+        // Not a blank picture (which any two paths would agree on).
+        let corner = &direct.data[..4];
+        let drawn = direct.data.chunks_exact(4).filter(|p| *p != corner).count();
+        assert!(drawn > 100, "{name}: {drawn} pixels drawn");
+    }
+    // S-NDFs go out of core through the S-MIP instead.
+    let mut o = opts(w, h);
+    o.mode = RenderMode::Sndf {
+        iterations: 1,
+        bins: 4,
+        binning: Default::default(),
+    };
+    let e = mdlod_render::render_streaming(renderer(), f.clone(), &o, pool)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("splat mode"), "{e}");
+    assert!(e.contains("--tiles"), "{e}");
 }
 
 #[test]

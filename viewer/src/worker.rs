@@ -460,7 +460,7 @@ impl<'r> Thread<'r> {
             }
             return;
         }
-        if opts.mode == RenderMode::Spheres && opts.style == Default::default() {
+        if !matches!(opts.mode, RenderMode::Sndf { .. }) {
             let pool = match self.gpu_memory {
                 GpuMemory::Direct => None,
                 GpuMemory::Pool(b) => Some(b),
@@ -509,8 +509,22 @@ impl<'r> Thread<'r> {
         opts: RenderOptions,
         pool: u64,
     ) {
-        if self.stream.as_ref().is_none_or(|s| s.path != path) {
-            match mdlod_render::StreamingRenderer::new(self.renderer, file, pool) {
+        // A pool holds its pages packed for one mode's passes and one look.
+        let (style, look) = mdlod_render::page_style(&opts);
+        if self
+            .stream
+            .as_ref()
+            .is_none_or(|s| s.path != path || s.renderer.style() != (style, &look))
+        {
+            self.stream = None;
+            match mdlod_render::StreamingRenderer::with_style(
+                self.renderer,
+                file,
+                pool,
+                mdlod_render::streaming::PAGE_POINTS,
+                style,
+                &look,
+            ) {
                 Ok(r) => {
                     self.stream = Some(Streaming {
                         path: path.to_path_buf(),
@@ -541,31 +555,27 @@ impl<'r> Thread<'r> {
             s.renderer
                 .wait_for_loads(std::time::Duration::from_millis(50));
         }
-        let file = s.renderer.file().clone();
-        let frame = mdlod_render::frame_setup(self.renderer, &file, &opts).and_then(
-            |(camera, traversal, settings)| s.renderer.render(&camera, &traversal, &settings),
-        );
-        match frame {
-            Ok((frame, draw, stats)) => {
+        match mdlod_render::render_stream_frame(self.renderer, &mut s.renderer, &opts) {
+            Ok((image, report, stats)) => {
                 let settled = stats.settled();
                 if settled {
                     s.pending = None;
                 }
                 let stats = FrameStats {
                     frame_ms: t0.elapsed().as_secs_f32() * 1e3,
-                    gpu_ms: frame.gpu_time.map(|d| d.as_secs_f32() * 1e3),
+                    gpu_ms: report.gpu_time.map(|d| d.as_secs_f32() * 1e3),
                     spp: opts.spp,
-                    particles: draw.particles,
-                    representatives: draw.representatives,
-                    error_px: draw.error_px,
-                    gpu_bytes: frame.gpu_data_bytes + frame.gpu_target_bytes,
-                    adapter: self.renderer.ctx.adapter_name().to_string(),
+                    particles: report.particles_drawn,
+                    representatives: report.nodes_drawn,
+                    error_px: report.error_px,
+                    gpu_bytes: report.gpu_data_bytes + report.gpu_target_bytes,
+                    adapter: report.adapter.clone(),
                     streaming: Some((stats.resident_pages, stats.capacity_pages, stats.pending)),
                     bins: None,
                 };
                 self.reply(Reply::Image {
                     id,
-                    image: frame.image,
+                    image,
                     stats,
                     interactive: false,
                     refined: settled,

@@ -207,43 +207,60 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
     );
 }
 
-/// With a GPU pool, sphere frames stream: the first image comes from what is resident,
-/// later ones refine as pages arrive, and the last equals the direct render.
+/// With a GPU pool, frames stream in every mode but S-NDFs: the first image comes from
+/// what is resident, later ones refine as pages arrive, and the last equals the direct
+/// render.
 #[test]
 fn streamed_frames_refine_to_the_direct_image() {
+    use mdlod_viewer::state::Mode;
     let dir = tempfile::tempdir().unwrap();
     let path = make_file(dir.path());
     let mut s = state(&path, [80, 60]);
     s.apply(&Action::Orbit { dx: 25.0, dy: 10.0 });
-    let w = Worker::start(backends(), GpuMemory::Pool(64 << 20), || {}).unwrap();
-    render(&w, &s, 1);
-    let mut frames = 0;
-    let last = loop {
-        match w.rx.recv_timeout(Duration::from_secs(120)).unwrap() {
-            Reply::Image {
-                id,
-                image,
-                stats,
-                refined,
-                ..
-            } => {
-                assert_eq!(id, 1);
-                frames += 1;
-                let (resident, capacity, _) = stats.streaming.expect("a streamed frame");
-                assert!(resident <= capacity);
-                if refined {
-                    break image;
-                }
-            }
-            Reply::Error(e) => panic!("{e}"),
-            Reply::Written { .. } => panic!("nothing was asked to be written"),
-        }
-    };
-    assert!(frames >= 2, "the first frame had nothing resident yet");
     let renderer = Renderer::new(GpuContext::with_backends(backends()).unwrap());
     let f = mdlod_format::MdlodFile::open(&path).unwrap();
-    let (direct, _) = render_image(&renderer, &f, &s.render_options([80, 60])).unwrap();
-    assert_eq!(last.data, direct.data);
+    let w = Worker::start(backends(), GpuMemory::Pool(64 << 20), || {}).unwrap();
+    for (id, mode) in [(1, Mode::Standard), (2, Mode::Splat), (3, Mode::Iso)] {
+        s.settings.mode = mode;
+        render(&w, &s, id);
+        let mut frames = 0;
+        let last = loop {
+            match w.rx.recv_timeout(Duration::from_secs(120)).unwrap() {
+                Reply::Image {
+                    id: got,
+                    image,
+                    stats,
+                    refined,
+                    ..
+                } => {
+                    assert_eq!(got, id);
+                    frames += 1;
+                    let (resident, capacity, _) = stats.streaming.expect("a streamed frame");
+                    assert!(resident <= capacity);
+                    if refined {
+                        break image;
+                    }
+                }
+                Reply::Error(e) => panic!("{e}"),
+                Reply::Written { .. } => panic!("nothing was asked to be written"),
+            }
+        };
+        if mode == Mode::Iso {
+            // Packed like the splats (by flux), so their pool serves it, full already.
+            assert_eq!(frames, 1, "{mode:?} reuses the splats' pages");
+        } else {
+            // Packed differently from the mode before: a new pool, from the top node.
+            assert!(
+                frames >= 2,
+                "{mode:?}: the first frame had nothing resident yet"
+            );
+        }
+        let (direct, _) = render_image(&renderer, &f, &s.render_options([80, 60])).unwrap();
+        assert!(
+            last.data == direct.data,
+            "{mode:?}: differs from the direct render"
+        );
+    }
 }
 
 /// Orthographic S-NDF views come from the S-MIP: a pan samples only the tiles that come

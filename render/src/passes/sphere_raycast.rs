@@ -277,63 +277,13 @@ pub fn pack_styled(
     style: PackStyle,
     look: &PointStyle,
 ) -> Result<PackedDraw, RenderError> {
-    let default_look = PointStyle::default();
-    let look = if style == PackStyle::Spheres {
-        look
-    } else {
-        &default_look
-    };
-    look.validate().map_err(RenderError::InvalidOptions)?;
-    let scale = look.radius_scale;
-    let radius = |n: &mdlod_format::NodeRecord| match style {
-        PackStyle::Spheres => representative_radius(n) * scale,
-        _ => n.area_sum.max(0.0).sqrt(),
-    };
-    // Colouring by the attribute: (map, attribute range, quantized values).
-    let mapped = match look.colour_map {
-        Some(map) => {
-            let info = file.metadata().attribute.clone().ok_or_else(|| {
-                RenderError::InvalidOptions(format!(
-                    "{} has no per-particle attribute to colour by",
-                    file.path().display()
-                ))
-            })?;
-            Some((map, info, file.attribute().unwrap_or_default()))
-        }
-        None => None,
-    };
-    let attribute = match style {
-        PackStyle::FluxAttribute => {
-            let info = file.metadata().attribute.clone().ok_or_else(|| {
-                RenderError::InvalidOptions(format!(
-                    "{} has no per-particle attribute to take intensities from",
-                    file.path().display()
-                ))
-            })?;
-            let values = file.attribute().unwrap_or_default();
-            Some((info, values))
-        }
-        _ => None,
-    };
+    let packer = AttrPacker::new(file, style, look)?;
     let bits = file.position_bits();
     let bytes_per_point = 3 * (bits as usize / 8);
-    let last = file.level_count() - 1;
     let nodes = file.nodes();
-    let levels = file.levels();
-    let meta = file.metadata();
-    let species_count = meta.species.len();
-    let bad_species = |particle: usize, s: u16| {
-        RenderError::Format(FormatError::Corrupt {
-            path: file.path().to_path_buf(),
-            place: format!("SPECIES, particle {particle}"),
-            problem: format!("species index {s} but only {species_count} species"),
-        })
-    };
     let mut out = PackedDraw {
         position_bits: bits,
-        species: look
-            .species_table(&meta.species)
-            .map_err(|e| RenderError::InvalidOptions(format!("{}: {e}", file.path().display())))?,
+        species: packer.species.clone(),
         ..Default::default()
     };
     out.point_range.reserve(draw.points as usize);
@@ -353,76 +303,7 @@ pub fn pack_styled(
             push_bytes_as_words(&mut out.positions, bytes);
             (enc.centroid, enc.quant_scale)
         };
-        let kind = if let Some((info, values)) = &attribute {
-            let span = info.max - info.min;
-            let sp = &file.species()[first.min(file.species().len())..];
-            for k in 0..count {
-                let (r, intensity) = if level == last {
-                    let s = sp.get(k).copied().unwrap_or(0);
-                    let r = meta
-                        .species
-                        .get(usize::from(s))
-                        .map(|s| s.radius)
-                        .ok_or_else(|| bad_species(first + k, s))?;
-                    let q = values.get(first + k).copied().unwrap_or(0);
-                    (r, f32::from(q) / 65535.0)
-                } else {
-                    let n = &nodes[levels[level].node_first as usize + first + k];
-                    let i = if span > 0.0 {
-                        ((n.attribute - info.min) / span).clamp(0.0, 1.0)
-                    } else {
-                        1.0
-                    };
-                    (radius(n), i)
-                };
-                out.attrs.push(r.to_bits());
-                out.attrs.push(intensity.to_bits());
-            }
-            KIND_INTENSITY
-        } else if let Some((map, info, values)) = &mapped {
-            // Radius and mapped colour per point, as cluster records are.
-            let span = info.max - info.min;
-            if level == last {
-                let sp = &file.species()[first..first + count];
-                for (k, &s) in sp.iter().enumerate() {
-                    let r = out
-                        .species
-                        .get(usize::from(s))
-                        .map(|e| e[3])
-                        .ok_or_else(|| bad_species(first + k, s))?;
-                    let q = values.get(first + k).copied().unwrap_or(0);
-                    out.attrs.push(r.to_bits());
-                    out.attrs
-                        .push(pack_colour(map.colour(f32::from(q) / 65535.0)));
-                }
-            } else {
-                let node_first = levels[level].node_first as usize + first;
-                for n in &nodes[node_first..node_first + count] {
-                    let t = if span > 0.0 {
-                        (n.attribute - info.min) / span
-                    } else {
-                        1.0
-                    };
-                    out.attrs.push(radius(n).to_bits());
-                    out.attrs.push(pack_colour(map.colour(t)));
-                }
-            }
-            KIND_NODE
-        } else if level == last {
-            let sp = &file.species()[first..first + count];
-            if let Some(k) = sp.iter().position(|&s| usize::from(s) >= species_count) {
-                return Err(bad_species(first + k, sp[k]));
-            }
-            push_bytes_as_words(&mut out.attrs, bytemuck::cast_slice(sp));
-            KIND_PARTICLE
-        } else {
-            let node_first = levels[level].node_first as usize + first;
-            for n in &nodes[node_first..node_first + count] {
-                out.attrs.push(radius(n).to_bits());
-                out.attrs.push(n.colour);
-            }
-            KIND_NODE
-        };
+        let kind = packer.push(file, level, first, count, &mut out.attrs)?;
         out.ranges.push(RangeGpu {
             base,
             word_offset,
@@ -437,6 +318,158 @@ pub fn pack_styled(
             .extend(std::iter::repeat_n(ri as u32, count));
     }
     Ok(out)
+}
+
+/// Makes the per-point attribute words of a cut's ranges for one [`PackStyle`] and look:
+/// the packer of whole cuts ([`pack_styled`]) and of the streaming pool's pages, so both
+/// draw the same points. At most two words per point.
+#[derive(Clone, Debug)]
+pub struct AttrPacker {
+    style: PackStyle,
+    radius_scale: f32,
+    /// Colouring by the attribute: the map and the attribute's range.
+    mapped: Option<(crate::style::ColourMap, mdlod_format::meta::AttributeInfo)>,
+    /// Intensities from the attribute ([`PackStyle::FluxAttribute`]).
+    intensity: Option<mdlod_format::meta::AttributeInfo>,
+    /// The styled species table: linear albedo and radius.
+    pub species: Vec<[f32; 4]>,
+    /// The file's species count (indices at or above it are corrupt).
+    species_count: usize,
+}
+
+impl AttrPacker {
+    /// Checks `look` against `file` (a colour map or attribute intensities need the
+    /// attribute; styled species must exist). `look` applies to spheres only.
+    pub fn new(file: &MdlodFile, style: PackStyle, look: &PointStyle) -> Result<Self, RenderError> {
+        let default_look = PointStyle::default();
+        let look = if style == PackStyle::Spheres {
+            look
+        } else {
+            &default_look
+        };
+        look.validate().map_err(RenderError::InvalidOptions)?;
+        let meta = file.metadata();
+        let attribute = |what: &str| {
+            meta.attribute.clone().ok_or_else(|| {
+                RenderError::InvalidOptions(format!(
+                    "{} has no per-particle attribute to {what}",
+                    file.path().display()
+                ))
+            })
+        };
+        let mapped = match look.colour_map {
+            Some(map) => Some((map, attribute("colour by")?)),
+            None => None,
+        };
+        let intensity = match style {
+            PackStyle::FluxAttribute => Some(attribute("take intensities from")?),
+            _ => None,
+        };
+        Ok(AttrPacker {
+            style,
+            radius_scale: look.radius_scale,
+            mapped,
+            intensity,
+            species: look.species_table(&meta.species).map_err(|e| {
+                RenderError::InvalidOptions(format!("{}: {e}", file.path().display()))
+            })?,
+            species_count: meta.species.len(),
+        })
+    }
+
+    /// The style the packer was made for.
+    pub fn style(&self) -> PackStyle {
+        self.style
+    }
+
+    /// The range kind of points on `level` (`last`: the file's finest level).
+    pub fn kind(&self, level: usize, last: usize) -> u32 {
+        if self.intensity.is_some() {
+            KIND_INTENSITY
+        } else if self.mapped.is_some() || level != last {
+            KIND_NODE
+        } else {
+            KIND_PARTICLE
+        }
+    }
+
+    fn radius(&self, n: &mdlod_format::NodeRecord) -> f32 {
+        match self.style {
+            PackStyle::Spheres => representative_radius(n) * self.radius_scale,
+            _ => n.area_sum.max(0.0).sqrt(),
+        }
+    }
+
+    /// Appends the attribute words of points `first..first + count` of `level` to
+    /// `attrs` and returns their range kind ([`Self::kind`]). Species indices are
+    /// checked here (opening a file does not read them), so a corrupt index is an error
+    /// naming the particle.
+    pub fn push(
+        &self,
+        file: &MdlodFile,
+        level: usize,
+        first: usize,
+        count: usize,
+        attrs: &mut Vec<u32>,
+    ) -> Result<u32, RenderError> {
+        let last = file.level_count() - 1;
+        let meta = file.metadata();
+        let bad_species = |particle: usize, s: u16| {
+            RenderError::Format(FormatError::Corrupt {
+                path: file.path().to_path_buf(),
+                place: format!("SPECIES, particle {particle}"),
+                problem: format!("species index {s} but only {} species", self.species_count),
+            })
+        };
+        let values = file.attribute().unwrap_or_default();
+        let node_first = || file.levels()[level].node_first as usize + first;
+        let unit = |info: &mdlod_format::meta::AttributeInfo, v: f32| {
+            let span = info.max - info.min;
+            if span > 0.0 {
+                ((v - info.min) / span).clamp(0.0, 1.0)
+            } else {
+                1.0
+            }
+        };
+        if level == last {
+            let sp = &file.species()[first..first + count];
+            if let Some(k) = sp
+                .iter()
+                .position(|&s| usize::from(s) >= self.species_count)
+            {
+                return Err(bad_species(first + k, sp[k]));
+            }
+            if self.intensity.is_some() {
+                for (k, &s) in sp.iter().enumerate() {
+                    let q = values.get(first + k).copied().unwrap_or(0);
+                    attrs.push(meta.species[usize::from(s)].radius.to_bits());
+                    attrs.push((f32::from(q) / 65535.0).to_bits());
+                }
+            } else if let Some((map, _)) = &self.mapped {
+                // Radius and mapped colour per point, as cluster records are.
+                for (k, &s) in sp.iter().enumerate() {
+                    let q = values.get(first + k).copied().unwrap_or(0);
+                    attrs.push(self.species[usize::from(s)][3].to_bits());
+                    attrs.push(pack_colour(map.colour(f32::from(q) / 65535.0)));
+                }
+            } else {
+                push_bytes_as_words(attrs, bytemuck::cast_slice(sp));
+            }
+        } else {
+            let nf = node_first();
+            for n in &file.nodes()[nf..nf + count] {
+                attrs.push(self.radius(n).to_bits());
+                attrs.push(if let Some(info) = &self.intensity {
+                    unit(info, n.attribute).to_bits()
+                } else if let Some((map, info)) = &self.mapped {
+                    pack_colour(map.colour(unit(info, n.attribute)))
+                } else {
+                    n.colour
+                });
+            }
+        }
+        Ok(self.kind(level, last))
+    }
 }
 
 /// A read-only storage buffer holding `bytes`; bindings must not be empty, so an empty
