@@ -22,7 +22,10 @@
 //! - **Ray casting.** A compute pass composites each stack front to back into a per-pixel
 //!   state: emission and absorption from a transfer function of φ, or the first crossing
 //!   of the iso-value (interpolated between slices, across stacks too) shaded with the
-//!   interpolated gradient. Rays stop when their opacity saturates or the data ends; a
+//!   interpolated gradient. The iso-surface's colour comes from one more pass over the
+//!   points once the hits are known: each adds its albedo weighted by `m_j W_j` at its
+//!   pixels' hit positions ([`colour_at`]), so each species shows its own colour and
+//!   blends where species meet. Rays stop when their opacity saturates or the data ends; a
 //!   counter of active rays, read back every few stacks, ends the frame once none is
 //!   left (early ray termination).
 //! - **Clipping.** A plane `n · p ≤ d` removes samples, not particles: points outside it
@@ -141,6 +144,8 @@ pub fn sample_alpha(phi: f32, s: &DensitySettings, step_over_ref: f32) -> f32 {
 pub struct DensityPoint {
     pub position: Vec3,
     pub radius: f32,
+    /// Linear RGB: a particle's species colour, a representative's mixture.
+    pub albedo: Vec3,
 }
 
 /// What the frame's rays share: their origins and directions come from the camera;
@@ -250,6 +255,22 @@ pub fn density_at(
     (phi * v, grad * v)
 }
 
+/// The colour of the iso-surface at `p`: the points' albedos weighted by their mass
+/// times kernel, `Σ m_j W_j c_j / Σ m_j W_j` (the density's own weights, so the colour
+/// blends where species meet and a representative's colour stands for its particles);
+/// `None` where no support reaches `p`.
+pub fn colour_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings) -> Option<Vec3> {
+    let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
+    for q in points {
+        let h = s.kernel_scale * q.radius;
+        // m W up to constant factors, which cancel.
+        let w = q.radius * q.radius * kernel(p.distance_squared(q.position), h);
+        sum += w * q.albedo;
+        weight += w;
+    }
+    (weight > 0.0).then(|| sum / weight)
+}
+
 /// Whether `p` is kept by the clip plane.
 pub fn kept(clip: Option<[f32; 4]>, p: Vec3) -> bool {
     clip.is_none_or(|c| Vec3::new(c[0], c[1], c[2]).dot(p) <= c[3])
@@ -261,7 +282,8 @@ pub fn iso_shade(albedo: Vec3, gradient: Vec3, dir: Vec3) -> Vec3 {
     albedo * (0.25 + 0.75 * n.dot(-dir).max(0.0))
 }
 
-/// Renders the density frame on the CPU, exactly as the GPU pipeline does.
+/// Renders the density frame on the CPU, exactly as the GPU pipeline does. `albedo`
+/// colours an iso-surface hit that no point's support reaches (see [`colour_at`]).
 pub fn reference(
     points: &[DensityPoint],
     camera: &crate::camera::Camera,
@@ -302,12 +324,14 @@ pub fn reference(
                             if p0 < iso && phi >= iso {
                                 let t = (iso - p0) / (phi - p0);
                                 hit[i] = lambda - slicing.step + t * slicing.step;
+                                let albedo = colour_at(points, o + v * hit[i], s).unwrap_or(albedo);
                                 c = iso_shade(albedo, g0.lerp(g, t), v);
                                 a = 1.0;
                                 break;
                             }
                         } else if phi >= iso {
                             hit[i] = lambda;
+                            let albedo = colour_at(points, p, s).unwrap_or(albedo);
                             c = iso_shade(albedo, g, v);
                             a = 1.0;
                             break;
@@ -337,14 +361,25 @@ pub fn density_points(
     for r in &draw.ranges {
         let level = usize::from(r.level);
         for i in r.first..r.first + r.count {
-            let radius = if level == last {
+            let (radius, albedo) = if level == last {
                 let s = species.get(i as usize).copied().unwrap_or(0);
-                table.get(usize::from(s)).map_or(0.0, |s| s.radius)
+                table
+                    .get(usize::from(s))
+                    .map_or((0.0, Vec3::ZERO), |s| (s.radius, Vec3::from(s.colour)))
             } else {
-                file.level_nodes(level)[i as usize].area_sum.max(0.0).sqrt()
+                let n = &file.level_nodes(level)[i as usize];
+                let c = n.colour.to_le_bytes();
+                (
+                    n.area_sum.max(0.0).sqrt(),
+                    Vec3::new(c[0].into(), c[1].into(), c[2].into()) / 255.0,
+                )
             };
             if let Some(&position) = p.next() {
-                out.push(DensityPoint { position, radius });
+                out.push(DensityPoint {
+                    position,
+                    radius,
+                    albedo,
+                });
             }
         }
     }

@@ -1652,11 +1652,14 @@ impl Renderer {
             SLICES_PLAIN
         };
         let stacks = slicing.slices.div_ceil(per_stack);
-        let albedo = file
+        // The iso-surface is lit in white here and coloured by its own pass afterwards
+        // (the first species' colour where no support reaches a hit).
+        let fallback_albedo = file
             .metadata()
             .species
             .first()
             .map_or([0.8; 3], |s| s.colour);
+        let albedo = [1.0f32; 3];
         let host_time = t0.elapsed();
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
@@ -1747,7 +1750,8 @@ impl Renderer {
                     dimension: wgpu::TextureDimension::D2,
                     format: SLICE_FORMAT,
                     usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                        | wgpu::TextureUsages::TEXTURE_BINDING,
+                        | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::COPY_SRC,
                     view_formats: &[],
                 })
             };
@@ -1889,12 +1893,79 @@ impl Renderer {
             let read = readback_buffer(device, "density rays readback", ray_bytes);
             let mut enc = device.create_command_encoder(&Default::default());
             enc.copy_buffer_to_buffer(&rays, 0, &read, 0, ray_bytes);
+            // The iso-surface's colour: every point's albedo weighted at the hits.
+            let colour_row = padded_row(width * 16);
+            let colour_read = settings.iso.is_some().then(|| {
+                let target = slice_tex("density iso colour");
+                let hits_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("density hits"),
+                    layout: &pass.hits_layout,
+                    entries: &[wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: rays.as_entire_binding(),
+                    }],
+                });
+                {
+                    let mut rp = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                        label: Some("density iso colour"),
+                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                            view: &target.create_view(&Default::default()),
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: wgpu::Operations {
+                                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                                store: wgpu::StoreOp::Store,
+                            },
+                        })],
+                        depth_stencil_attachment: None,
+                        timestamp_writes: None,
+                        occlusion_query_set: None,
+                        multiview_mask: None,
+                    });
+                    if buffers.points > 0 {
+                        rp.set_pipeline(&pass.colour);
+                        rp.set_bind_group(0, &buffers.bind_group, &[]);
+                        rp.set_bind_group(1, &slicing_group, &[0]);
+                        rp.set_bind_group(2, &hits_group, &[]);
+                        rp.draw(0..4, 0..buffers.points);
+                    }
+                }
+                let read = readback_buffer(
+                    device,
+                    "density iso colour readback",
+                    u64::from(colour_row) * u64::from(height),
+                );
+                copy_to_buffer(
+                    &mut enc,
+                    &target,
+                    wgpu::TextureAspect::All,
+                    &read,
+                    colour_row,
+                    size,
+                );
+                read
+            });
             queue.submit([enc.finish()]);
             let bytes = self.read_buffer(&read)?;
-            let rays: Vec<RayGpu> = bytes
+            let mut rays: Vec<RayGpu> = bytes
                 .chunks_exact(48)
                 .map(bytemuck::pod_read_unaligned)
                 .collect();
+            if let Some(read) = &colour_read {
+                let bytes = self.read_buffer(read)?;
+                let sums = unpad_rows(&bytes, colour_row, width as usize * 16, height);
+                for (ray, sum) in rays.iter_mut().zip(sums.chunks_exact(16)) {
+                    let sum: [f32; 4] = bytemuck::pod_read_unaligned(sum);
+                    let albedo = if sum[3] > 0.0 {
+                        [sum[0] / sum[3], sum[1] / sum[3], sum[2] / sum[3]]
+                    } else {
+                        fallback_albedo
+                    };
+                    for k in 0..3 {
+                        ray.colour[k] *= albedo[k];
+                    }
+                }
+            }
             self.count_samples(splatted.min(u64::from(u32::MAX)) as u32, 1);
             Ok(DensityFrame {
                 width,

@@ -169,6 +169,77 @@ fn iso_surface_matches_the_cpu_ray_marcher() {
 }
 
 #[test]
+fn the_iso_surface_takes_each_species_colour_where_it_lies() {
+    // A copper half and a silver half of one block: far from the interface the surface
+    // has the species' own colour (chromaticity), between them a blend, and the GPU's
+    // colour pass equals the CPU's weighted albedos.
+    let mut frame = fcc_frame(4);
+    let mid = 2.0 * 3.615;
+    frame.species_index = frame
+        .positions
+        .iter()
+        .map(|p| u16::from(p[0] > mid))
+        .collect();
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let (w, h) = (48u32, 36u32);
+    let cam = camera_zoom(&f, Projection::Perspective, w, h, 1.1);
+    let s = DensitySettings {
+        iso: Some(0.3),
+        slices: 128,
+        ..Default::default()
+    };
+    let (gpu, cpu, gh, ch, _) = both(&f, &cam, w, h, &s, None);
+    let albedo: Vec<Vec3> = f
+        .metadata()
+        .species
+        .iter()
+        .map(|s| Vec3::from(s.colour))
+        .collect();
+    assert!(
+        (albedo[0].normalize() - albedo[1].normalize()).length() > 0.05,
+        "the species need different colours: {albedo:?}"
+    );
+    let (mut seen, mut worst, mut worst_hue) = ([0usize; 2], 0.0f32, 0.0f32);
+    let support = s.kernel_scale * f.metadata().species[1].radius;
+    for i in 0..(w * h) as usize {
+        if !(gh[i].is_finite() && ch[i].is_finite()) {
+            continue;
+        }
+        let diff = (0..3)
+            .map(|k| (gpu[i][k] - cpu[i][k]).abs())
+            .fold(0.0, f32::max);
+        worst = worst.max(diff);
+        let (o, v) = mdlod_render::density::pixel_ray(
+            &cam,
+            (i as u32 % w) as f32 + 0.5,
+            (i as u32 / w) as f32 + 0.5,
+            w,
+            h,
+        );
+        let x = (o + v * gh[i]).x;
+        let side = if x < mid - support {
+            0
+        } else if x > mid + support {
+            1
+        } else {
+            continue;
+        };
+        seen[side] += 1;
+        let c = Vec3::new(gpu[i][0], gpu[i][1], gpu[i][2]);
+        worst_hue = worst_hue.max((c.normalize() - albedo[side].normalize()).length());
+    }
+    assert!(
+        seen[0] > 20 && seen[1] > 20,
+        "surface pixels far from the interface: {seen:?}"
+    );
+    assert!(worst < 0.02, "GPU and CPU colours differ by {worst}");
+    assert!(
+        worst_hue < 0.01,
+        "a pure species' surface is off its colour by {worst_hue}"
+    );
+}
+
+#[test]
 fn a_single_particle_makes_an_iso_sphere_of_the_kernel_radius() {
     // φ(r) = V m 315/(64 π h³) (1 − r²/h²)³ with m = 1, V = 4/3 π r_ref³, r = 1, h = 2.5:
     // the iso-value 0.2 lies at r_iso = h sqrt(1 − (0.2 / φ(0))^(1/3)).

@@ -56,7 +56,11 @@ pub struct RayGpu {
 /// The pipelines and the layouts of their own bindings.
 pub struct DensityPass {
     pub splat: wgpu::RenderPipeline,
+    /// The iso-surface's colour pass: albedos weighted at the hits, summed.
+    pub colour: wgpu::RenderPipeline,
     pub slicing_layout: wgpu::BindGroupLayout,
+    /// Group 2 of the colour pass: the rays' states, read-only.
+    pub hits_layout: wgpu::BindGroupLayout,
     pub composite: wgpu::ComputePipeline,
     pub composite_layout: wgpu::BindGroupLayout,
 }
@@ -124,7 +128,53 @@ impl DensityPass {
                 module: &module,
                 entry_point: Some("fs_splat"),
                 compilation_options: Default::default(),
-                targets: &[target.clone(), target],
+                targets: &[target.clone(), target.clone()],
+            }),
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                ..Default::default()
+            },
+            depth_stencil: None,
+            multisample: Default::default(),
+            multiview_mask: None,
+            cache: None,
+        });
+        let hits_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("density hits"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }],
+        });
+        let colour_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("density colour"),
+            bind_group_layouts: &[
+                Some(points_layout),
+                Some(&slicing_layout),
+                Some(&hits_layout),
+            ],
+            immediate_size: 0,
+        });
+        let colour = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("density colour"),
+            layout: Some(&colour_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_splat"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_colour"),
+                compilation_options: Default::default(),
+                targets: &[target],
             }),
             primitive: wgpu::PrimitiveState {
                 topology: wgpu::PrimitiveTopology::TriangleStrip,
@@ -185,7 +235,9 @@ impl DensityPass {
         });
         Some(DensityPass {
             splat,
+            colour,
             slicing_layout,
+            hits_layout,
             composite,
             composite_layout,
         })

@@ -3,7 +3,8 @@
 // each fragment evaluates the kernel at its own ray's sampling positions. Additive
 // blending into two float targets sums the points.
 //
-// Follows points.wgsl and density_common.wgsl. Group 1 holds the stack's slicing.
+// Follows points.wgsl and density_common.wgsl. Group 1 holds the stack's slicing; group
+// 2 the rays' states, for the iso-surface's colour pass (`fs_colour`).
 
 @group(1) @binding(0) var<uniform> dens: Density;
 
@@ -14,6 +15,7 @@ struct SplatOut {
     @location(0) @interpolate(flat) center: vec3<f32>,
     @location(1) @interpolate(flat) h: f32,
     @location(2) @interpolate(flat) mass: f32,
+    @location(3) @interpolate(flat) albedo: vec3<f32>,
 };
 
 @vertex
@@ -24,6 +26,7 @@ fn vs_splat(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     out.h = dens.slicing.z * pt.radius;
     let m = pt.radius * dens.slicing.w;
     out.mass = m * m;
+    out.albedo = pt.albedo;
     // The screen box of the support sphere: its world box's corners, projected. A box
     // reaching behind the eye covers the whole screen.
     let clip_from_world = frame.clip_from_view * frame.view_from_world;
@@ -99,4 +102,29 @@ fn fs_splat(in: SplatOut) -> SliceOut {
         out.b = vec4<f32>(rho[4], rho[5], rho[6], rho[7]);
     }
     return out;
+}
+
+@group(2) @binding(0) var<storage, read> hits: array<Ray>;
+
+// The iso-surface's colour, once the hits are known: every point adds its albedo
+// weighted by mass times kernel at its pixels' hit positions, and its weight, so the
+// host divides the sums (`density::colour_at` on the CPU).
+@fragment
+fn fs_colour(in: SplatOut) -> @location(0) vec4<f32> {
+    let px = vec2<u32>(in.clip.xy);
+    let ray = hits[px.y * u32(dens.size.x) + px.x];
+    if ray.state.w < 0.5 {
+        discard;
+    }
+    let r = pixel_ray(in.clip.xy, frame.view_from_world);
+    let d = r[0] + r[1] * ray.state.y - in.center;
+    let h2 = in.h * in.h;
+    let r2 = dot(d, d);
+    if r2 >= h2 {
+        discard;
+    }
+    let t = 1.0 - r2 / h2;
+    // m W up to constant factors, which cancel in the division.
+    let w = in.mass * t * t * t / (h2 * in.h);
+    return vec4<f32>(in.albedo * w, w);
 }

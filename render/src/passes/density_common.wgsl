@@ -1,6 +1,6 @@
 // Shared by density.wgsl and density_composite.wgsl: one stack's slicing (the Rust twin
-// is `DensityGpu` in density.rs) and the ray through a pixel. Each pass binds its own
-// `dens: Density` uniform.
+// is `DensityGpu` in density.rs), the per-pixel ray state (`RayGpu`) and the ray through
+// a pixel. Each pass binds its own `dens: Density` uniform.
 
 struct Density {
     world_from_clip: mat4x4<f32>,
@@ -39,3 +39,15 @@ fn pixel_ray(px: vec2<f32>, view_from_world: mat4x4<f32>) -> array<vec3<f32>, 2>
     }
     return array<vec3<f32>, 2>(origin, dir);
 }
+
+// A pixel's ray state between stacks (the composite pass writes it; the iso-surface's
+// colour pass reads the hits).
+struct Ray {
+    // Premultiplied colour and opacity.
+    colour: vec4<f32>,
+    // The previous sample: gradient and density (iso mode).
+    prev: vec4<f32>,
+    // x: 1 when done, y: iso hit distance, z: 1 once a previous sample exists, w: 1 on
+    // an iso hit.
+    state: vec4<f32>,
+};

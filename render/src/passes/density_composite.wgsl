@@ -5,16 +5,6 @@
 //
 // Follows density_common.wgsl.
 
-struct Ray {
-    // Premultiplied colour and opacity.
-    colour: vec4<f32>,
-    // The previous sample: gradient and density (iso mode).
-    prev: vec4<f32>,
-    // x: 1 when done, y: iso hit distance, z: 1 once a previous sample exists, w: 1 on
-    // an iso hit.
-    state: vec4<f32>,
-};
-
 @group(0) @binding(0) var<uniform> dens: Density;
 @group(0) @binding(1) var slice_a: texture_2d<f32>;
 @group(0) @binding(2) var slice_b: texture_2d<f32>;
