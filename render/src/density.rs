@@ -27,7 +27,10 @@
 //!   pixels' hit positions ([`colour_at`]), so each species shows its own colour and
 //!   blends where species meet. Rays stop when their opacity saturates or the data ends; a
 //!   counter of active rays, read back every few stacks, ends the frame once none is
-//!   left (early ray termination).
+//!   left (early ray termination). As in the paper's section 3.4, frames are coherent:
+//!   the renderer keeps the stacks the last frame needed and runs that many at once in
+//!   the next, with counts taken at checkpoints near the end and read back once, so a
+//!   still or slowly moving view waits on the GPU once per frame.
 //! - **Clipping.** A plane `n · p ≤ d` removes samples, not particles: points outside it
 //!   still add density inside, so a cut shows the true density at the cut.
 //!

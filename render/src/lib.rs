@@ -214,6 +214,9 @@ pub struct RenderReport {
     pub total_flux: Option<f64>,
     /// Density mode: slice stacks run before every ray was done, of those the volume spans.
     pub density_stacks: Option<(u32, u32)>,
+    /// Density: read-backs of the active rays (one per batch of stacks; one when the
+    /// previous frame's stack count was right).
+    pub density_readbacks: Option<u32>,
     /// Density mode: host work before the GPU passes (decoding, sorting, packing).
     pub density_host_time: Option<Duration>,
 }
@@ -370,6 +373,7 @@ impl RenderReport {
             exposure: None,
             total_flux: None,
             density_stacks: None,
+            density_readbacks: None,
             density_host_time: None,
         }
     }
@@ -485,6 +489,7 @@ fn draw_cut(
             };
             let mut report = report(&rendered);
             report.density_stacks = Some((frame.stacks_run, frame.stacks));
+            report.density_readbacks = Some(frame.readbacks);
             report.density_host_time = Some(frame.host_time);
             Ok((rendered.image, report))
         }

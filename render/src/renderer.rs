@@ -271,6 +271,12 @@ pub struct DensityFrame {
     /// done.
     pub stacks: u32,
     pub stacks_run: u32,
+    /// Stacks after which no ray was active (at the precision of the checkpoints).
+    pub stacks_needed: u32,
+    /// The previous frame's stack count, run as one batch (frame-to-frame coherence).
+    pub stacks_hint: Option<u32>,
+    /// Batches run, each ending with one read-back of the active rays.
+    pub readbacks: u32,
     /// Point splats drawn over all stacks.
     pub splatted: u64,
     pub gpu_data_bytes: u64,
@@ -398,6 +404,9 @@ pub struct Renderer {
     /// Particle samples drawn so far (points × samples), so that tests can check that
     /// re-lighting S-NDFs draws none.
     points_sampled: std::sync::atomic::AtomicU64,
+    /// The last density frame's (stacks, width, height, iso) and the stacks it needed:
+    /// the next such frame's first batch.
+    density_hint: std::sync::Mutex<Option<(DensityHintKey, u32)>>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -407,6 +416,10 @@ impl std::fmt::Debug for Renderer {
             .finish_non_exhaustive()
     }
 }
+
+/// What a density frame's stack count carries over between: stacks, width, height,
+/// iso-surface or not.
+type DensityHintKey = (u32, u32, u32, bool);
 
 /// Two timestamps around a frame's passes.
 struct FrameTimer {
@@ -508,6 +521,7 @@ impl Renderer {
             sndf,
             sndf_shade,
             points_sampled: Default::default(),
+            density_hint: Default::default(),
         }
     }
 
@@ -1529,6 +1543,14 @@ impl Renderer {
         })
     }
 
+    /// Forgets the last density frame's stack count, so the next density frame starts
+    /// without a hint (as a first frame does).
+    pub fn clear_density_hint(&self) {
+        if let Ok(mut h) = self.density_hint.lock() {
+            *h = None;
+        }
+    }
+
     /// Renders the density volume of `draw` (see [`crate::density`]): slices splatted a
     /// stack at a time and ray cast after each stack, until every ray is done.
     pub fn render_density(
@@ -1776,7 +1798,15 @@ impl Renderer {
                     | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            let active_read = readback_buffer(device, "active rays readback", 4);
+            // Active rays after each checkpoint stack of a batch (see below).
+            const MAX_CHECKS: u64 = 64;
+            let counts = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("density active counts"),
+                size: 4 * MAX_CHECKS,
+                usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let counts_read = readback_buffer(device, "active counts readback", 4 * MAX_CHECKS);
             let record = wgpu::BufferBinding {
                 buffer: &slicing_buf,
                 offset: 0,
@@ -1820,16 +1850,53 @@ impl Renderer {
                     },
                 ],
             });
-            // Stacks in groups; after each group the active rays are counted.
+            // Early ray termination with frame-to-frame coherence (the paper's section
+            // 3.4): the stacks run in batches, and the rays still active are counted at
+            // checkpoint stacks (the counter cleared before the stack, copied after it)
+            // and read back once per batch. Without a hint the batches are GROUP stacks
+            // long. With the previous frame's stack count as a hint, the first batch runs
+            // that many at once, with checkpoints every GROUP stacks and just before its
+            // end, so a still or slowly moving view reads back once; rays left over go on
+            // in batches. The stacks needed (the first checkpoint with no active ray) are
+            // the next frame's hint. A wrong hint costs time only: stacks after every ray
+            // is done change nothing.
             const GROUP: u32 = 8;
+            let hint_key = (stacks, width, height, settings.iso.is_some());
+            let hint = self
+                .density_hint
+                .lock()
+                .ok()
+                .and_then(|h| h.filter(|h| h.0 == hint_key).map(|h| h.1));
             let mut stacks_run = 0u32;
+            let mut needed = None;
+            let mut readbacks = 0u32;
             let mut splatted = 0u64;
             let mut st = 0u32;
-            while st < stacks {
+            while st < stacks && needed.is_none() {
+                let end = match hint {
+                    Some(h) if st == 0 => h.clamp(1, stacks),
+                    _ => (st + GROUP).min(stacks),
+                };
+                let mut checks: Vec<u32> = (st..end)
+                    .filter(|k| (k + 1 - st).is_multiple_of(GROUP))
+                    .chain(
+                        [16, 4, 2, 1, 0]
+                            .iter()
+                            .filter_map(|&c| (end - 1).checked_sub(c)),
+                    )
+                    .filter(|&k| k >= st)
+                    .collect();
+                checks.sort_unstable();
+                checks.dedup();
+                // Keep the last MAX_CHECKS (the end is always checked).
+                let drop = checks.len().saturating_sub(MAX_CHECKS as usize);
+                checks.drain(..drop);
                 let mut enc = device.create_command_encoder(&Default::default());
-                enc.clear_buffer(&active, 0, None);
-                let end = (st + GROUP).min(stacks);
                 for k in st..end {
+                    let slot = checks.binary_search(&k).ok();
+                    if slot.is_some() {
+                        enc.clear_buffer(&active, 0, None);
+                    }
                     let rec = &records[k as usize];
                     let (a, b) = (
                         rec.slicing[0],
@@ -1872,23 +1939,32 @@ impl Renderer {
                             splatted += u64::from(last - first);
                         }
                     }
-                    let mut cp = enc.begin_compute_pass(&Default::default());
-                    cp.set_pipeline(&pass.composite);
-                    cp.set_bind_group(0, &composite_group, &[offset]);
-                    cp.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+                    {
+                        let mut cp = enc.begin_compute_pass(&Default::default());
+                        cp.set_pipeline(&pass.composite);
+                        cp.set_bind_group(0, &composite_group, &[offset]);
+                        cp.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+                    }
+                    if let Some(j) = slot {
+                        enc.copy_buffer_to_buffer(&active, 0, &counts, 4 * j as u64, 4);
+                    }
                 }
-                enc.copy_buffer_to_buffer(&active, 0, &active_read, 0, 4);
+                let n = 4 * checks.len() as u64;
+                enc.copy_buffer_to_buffer(&counts, 0, &counts_read, 0, n);
                 queue.submit([enc.finish()]);
+                readbacks += 1;
                 stacks_run = end;
                 st = end;
-                let left = u32::from_le_bytes(
-                    self.read_buffer(&active_read)?[..4]
-                        .try_into()
-                        .unwrap_or([0; 4]),
-                );
-                if left == 0 {
-                    break;
-                }
+                let bytes = self.read_buffer(&counts_read)?;
+                needed = checks
+                    .iter()
+                    .zip(bytes.chunks_exact(4))
+                    .find(|(_, c)| u32::from_le_bytes([c[0], c[1], c[2], c[3]]) == 0)
+                    .map(|(&k, _)| k + 1);
+            }
+            let needed = needed.unwrap_or(stacks_run);
+            if let Ok(mut h) = self.density_hint.lock() {
+                *h = Some((hint_key, needed));
             }
             let read = readback_buffer(device, "density rays readback", ray_bytes);
             let mut enc = device.create_command_encoder(&Default::default());
@@ -1985,6 +2061,9 @@ impl Renderer {
                 slicing,
                 stacks,
                 stacks_run,
+                stacks_needed: needed,
+                stacks_hint: hint,
+                readbacks,
                 splatted,
                 gpu_data_bytes: cut.data_bytes,
                 host_time,

@@ -18,17 +18,23 @@ use mdlod_render::{
 
 fn renderer() -> &'static Renderer {
     static R: OnceLock<Renderer> = OnceLock::new();
-    R.get_or_init(|| {
-        let backends = if std::env::var_os("WGPU_BACKEND").is_some() {
-            BackendChoice::FromEnv
-        } else {
-            BackendChoice::Only(wgpu::Backends::VULKAN)
-        };
-        match GpuContext::with_backends(backends) {
-            Ok(ctx) => Renderer::new(ctx),
-            Err(e) => panic!("{e}"),
-        }
+    R.get_or_init(|| match GpuContext::with_backends(backends()) {
+        Ok(ctx) => Renderer::new(ctx),
+        Err(e) => panic!("{e}"),
     })
+}
+
+fn backends() -> BackendChoice {
+    if std::env::var_os("WGPU_BACKEND").is_some() {
+        BackendChoice::FromEnv
+    } else {
+        BackendChoice::Only(wgpu::Backends::VULKAN)
+    }
+}
+
+/// A renderer of its own, which has drawn no density frame (no stack hint).
+fn renderer_without_hints() -> Renderer {
+    Renderer::new(GpuContext::with_backends(backends()).unwrap())
 }
 
 fn camera(f: &MdlodFile, projection: Projection, w: u32, h: u32) -> Camera {
@@ -325,7 +331,7 @@ fn clipping_removes_samples_not_particles() {
 }
 
 #[test]
-fn rays_stop_once_opaque() {
+fn rays_stop_once_opaque_and_the_next_frame_runs_their_stacks_at_once() {
     let (_d, _p, f) = make_file(&fcc_frame(5), small_build(), &[]);
     let (w, h) = (24u32, 18u32);
     // Zoomed into the block: every ray meets dense matter at once.
@@ -339,4 +345,43 @@ fn rays_stop_once_opaque() {
     assert!(run <= all / 2, "{run} of {all} stacks run");
     assert!(gpu.iter().all(|p| p[3] >= 0.99), "a ray stayed open");
     assert!(max_diff(&gpu, &cpu) < 0.01);
+
+    // Frame-to-frame coherence lives in the renderer: one of this test's own, so that
+    // other tests' frames give it no hint.
+    let renderer = renderer_without_hints();
+    let draw = all_points(&f, &cam, w, h);
+    let render = |s: &DensitySettings| renderer.render_density(&f, &cam, &draw, w, h, s).unwrap();
+    let first = render(&s);
+    assert_eq!(first.stacks_hint, None);
+    assert_eq!(first.readbacks, first.stacks_run.div_ceil(8));
+    assert!(first.readbacks >= 2, "{} stacks run", first.stacks_run);
+    assert!(first.stacks_needed <= first.stacks_run);
+    // The same view again: the stacks the first needed, in one batch, the same picture
+    // (its checkpoints, finer near the end, may find fewer needed).
+    let second = render(&s);
+    assert_eq!(second.stacks_hint, Some(first.stacks_needed));
+    assert_eq!(
+        (second.readbacks, second.stacks_run),
+        (1, first.stacks_needed)
+    );
+    assert!(second.rgba == first.rgba, "the hint changed the picture");
+    assert!(second.stacks_needed <= first.stacks_needed);
+    // A thinner medium needs more stacks than the hint: the frame goes on past it and
+    // is the picture a renderer without a hint makes.
+    let thin = DensitySettings { opacity: 2.0, ..s };
+    let third = render(&thin);
+    assert_eq!(third.stacks_hint, Some(second.stacks_needed));
+    assert!(third.stacks_needed > second.stacks_needed && third.readbacks >= 2);
+    let fresh = renderer_without_hints()
+        .render_density(&f, &cam, &draw, w, h, &thin)
+        .unwrap();
+    assert!(
+        third.rgba == fresh.rgba,
+        "stopping late or early changed the picture"
+    );
+    // And a view needing fewer stacks than its hint stops at the checkpoints.
+    let fourth = render(&s);
+    assert_eq!(fourth.stacks_hint, Some(third.stacks_needed));
+    assert!(fourth.stacks_needed < third.stacks_needed);
+    assert!(fourth.rgba == first.rgba);
 }

@@ -359,7 +359,10 @@ pub fn run(args: Args) -> Result<()> {
         println!("  splats: total flux {f:.4e}, exposure {e:.4e}");
     }
     if let Some((run, all)) = r.density_stacks {
-        println!("  density: {run} of {all} slice stacks run before every ray was done");
+        println!(
+            "  density: {run} of {all} slice stacks run before every ray was done ({} read-backs)",
+            r.density_readbacks.unwrap_or(0)
+        );
     }
     let stream = match r.first_frame_time {
         Some(t) => format!(
