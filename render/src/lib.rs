@@ -58,7 +58,9 @@ pub use passes::sphere_raycast::{Lighting, PackStyle};
 pub use renderer::{FrameSettings, RenderedFrame, Renderer, SplatBlend, SplatFrame};
 pub use streaming::{StreamStats, StreamingRenderer};
 pub use style::{ColourMap, PointStyle, SpeciesStyle};
-pub use traversal::{traverse, traverse_with, DrawList, DrawRange, Residency, TraversalSettings};
+pub use traversal::{
+    traverse, traverse_with, DepthOrder, DrawList, DrawRange, Residency, TraversalSettings,
+};
 pub use view::ViewFile;
 
 /// Where the camera comes from.
@@ -136,7 +138,10 @@ pub enum RenderMode {
     Splat { by_attribute: bool },
     /// Translucent splats sorted back to front and composited with the over operator,
     /// for data that needs depth order; `opacity` is the splats' peak alpha.
-    SplatOver { opacity: f32 },
+    SplatOver {
+        opacity: f32,
+        order: traversal::DepthOrder,
+    },
     /// S-NDFs sampled with `iterations` jittered rays per pixel into `bins × bins`
     /// bins of `binning`, then shaded from the S-NDFs alone (see [`sndf`]).
     Sndf {
@@ -495,13 +500,13 @@ fn draw_cut(
         }
         RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => {
             let (splats, image, exposure) = match opts.mode {
-                RenderMode::SplatOver { opacity } => {
+                RenderMode::SplatOver { opacity, order } => {
                     if !(opacity.is_finite() && opacity > 0.0 && opacity <= 1.0) {
                         return Err(RenderError::InvalidOptions(format!(
                             "opacity {opacity} (must be in (0, 1])"
                         )));
                     }
-                    let sorted = traversal::sort_back_to_front(file, draw, camera);
+                    let sorted = traversal::sort_back_to_front_by(file, draw, camera, order);
                     let splats = renderer.render_splats_from(
                         source,
                         camera,

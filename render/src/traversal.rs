@@ -641,8 +641,107 @@ pub fn point_positions(file: &MdlodFile, draw: &DrawList) -> Vec<Vec3> {
     out
 }
 
+/// How blending that needs depth order sorts a cut, back to front.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DepthOrder {
+    /// The hierarchy's order (Hopf & Ertl 2003, section 6): the cut's clusters (each
+    /// range: the children of one node) bucket-sorted by the depth of their centroid,
+    /// linear in the clusters, then each cluster's points sorted. Exact within a
+    /// cluster; where clusters overlap in depth, their points do not interleave.
+    #[default]
+    Clusters,
+    /// Every point sorted by its own depth: exact, `O(n log n)` in the points.
+    Points,
+}
+
+impl DepthOrder {
+    pub fn name(self) -> &'static str {
+        match self {
+            DepthOrder::Clusters => "clusters",
+            DepthOrder::Points => "points",
+        }
+    }
+}
+
+/// `draw` as one range per point in `order`, back to front (farthest view depth first;
+/// ties by level and index).
+pub fn sort_back_to_front_by(
+    file: &MdlodFile,
+    draw: &DrawList,
+    camera: &Camera,
+    order: DepthOrder,
+) -> DrawList {
+    if order == DepthOrder::Points {
+        return sort_back_to_front(file, draw, camera);
+    }
+    let view = camera.view_from_world();
+    let depth: Vec<f32> = point_positions(file, draw)
+        .iter()
+        .map(|w| -view.transform_point3(*w).z)
+        .collect();
+    // Each cluster's centroid depth (depth is affine in position: the mean of its
+    // points' depths), and where its points start.
+    let mut clusters = Vec::with_capacity(draw.ranges.len());
+    let mut at = 0usize;
+    for r in &draw.ranges {
+        let n = (r.count as usize).min(depth.len() - at.min(depth.len()));
+        let d = &depth[at..at + n];
+        let mean = d.iter().map(|&v| f64::from(v)).sum::<f64>() / n.max(1) as f64;
+        clusters.push((mean as f32, at, n));
+        at += n;
+    }
+    // Bucket sort, farthest first: as many buckets as clusters (at least 1024), stable.
+    let (lo, hi) = clusters
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), c| {
+            (lo.min(c.0), hi.max(c.0))
+        });
+    let buckets = clusters.len().max(1024);
+    let span = (hi - lo).max(f32::MIN_POSITIVE);
+    let bucket = |d: f32| {
+        let b = ((hi - d) / span * buckets as f32) as usize;
+        if b >= buckets {
+            buckets - 1
+        } else {
+            b
+        }
+    };
+    let mut start = vec![0usize; buckets + 1];
+    for c in &clusters {
+        start[bucket(c.0) + 1] += 1;
+    }
+    for b in 0..buckets {
+        start[b + 1] += start[b];
+    }
+    let mut sorted = vec![0usize; clusters.len()];
+    for (k, c) in clusters.iter().enumerate() {
+        let b = bucket(c.0);
+        sorted[start[b]] = k;
+        start[b] += 1;
+    }
+    let mut ranges = Vec::with_capacity(depth.len());
+    let mut points: Vec<(f32, u32)> = Vec::new();
+    for k in sorted {
+        let (r, (_, at, n)) = (&draw.ranges[k], clusters[k]);
+        points.clear();
+        points.extend((0..n).map(|j| (depth[at + j], r.first + j as u32)));
+        points.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        ranges.extend(points.iter().map(|&(_, i)| DrawRange {
+            level: r.level,
+            first: i,
+            count: 1,
+            quant_node: r.quant_node,
+        }));
+    }
+    DrawList {
+        ranges,
+        ..draw.clone()
+    }
+}
+
 /// `draw` as one range per point, ordered back to front (farthest view depth first; ties
-/// by level and index), for blending that needs depth order.
+/// by level and index), for blending that needs depth order: [`DepthOrder::Points`].
 pub fn sort_back_to_front(file: &MdlodFile, draw: &DrawList, camera: &Camera) -> DrawList {
     let view = camera.view_from_world();
     let positions = point_positions(file, draw);

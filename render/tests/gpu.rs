@@ -953,7 +953,10 @@ fn every_mode_but_sndfs_streams_through_a_small_pool_to_the_direct_image() {
         ),
         (
             "sorted splats",
-            RenderMode::SplatOver { opacity: 0.6 },
+            RenderMode::SplatOver {
+                opacity: 0.6,
+                order: Default::default(),
+            },
             PointStyle::default(),
         ),
         (
@@ -1009,24 +1012,80 @@ fn every_mode_but_sndfs_streams_through_a_small_pool_to_the_direct_image() {
 #[test]
 fn sorted_over_blending_matches_a_cpu_compositor() {
     use mdlod_render::passes::splat::{over_alpha, TRUNCATION};
-    use mdlod_render::traversal::{point_positions, sort_back_to_front};
+    use mdlod_render::traversal::{point_positions, sort_back_to_front_by, DepthOrder};
     let (_d, _p, f) = make_file(&cloud_frame(1500, 7), small_build(), &[]);
     let (w, h) = (80u32, 60u32);
     let camera = camera_for(&f, &ViewSpec::default(), w, h).unwrap();
     let clip_from_view = camera.clip_from_view(w as f32 / h as f32);
     let clip_from_world = clip_from_view * camera.view_from_world();
     let opacity = 0.7;
-    for error_px in [0.0, 8.0] {
+    let view = camera.view_from_world();
+    let depth = |p: &Vec3| -view.transform_point3(*p).z;
+    let mut exact = vec![];
+    for (error_px, order) in [
+        (0.0, DepthOrder::Points),
+        (8.0, DepthOrder::Points),
+        (0.0, DepthOrder::Clusters),
+        (8.0, DepthOrder::Clusters),
+    ] {
         let draw = cut(&f, &camera, [w, h], error_px, OcclusionMode::Off);
-        let sorted = sort_back_to_front(&f, &draw, &camera);
+        let sorted = sort_back_to_front_by(&f, &draw, &camera, order);
         assert_eq!(sorted.points, draw.points);
-        // Back to front.
-        let view = camera.view_from_world();
-        let depths: Vec<f32> = point_positions(&f, &sorted)
-            .iter()
-            .map(|p| -view.transform_point3(*p).z)
-            .collect();
-        assert!(depths.windows(2).all(|d| d[0] >= d[1]));
+        // The same points, one range each.
+        let key = |d: &mdlod_render::DrawList| {
+            let mut k: Vec<(u8, u32)> = d
+                .ranges
+                .iter()
+                .flat_map(|r| (r.first..r.first + r.count).map(move |i| (r.level, i)))
+                .collect();
+            k.sort_unstable();
+            k
+        };
+        assert_eq!(key(&sorted), key(&draw));
+        assert!(sorted.ranges.iter().all(|r| r.count == 1));
+        let depths: Vec<f32> = point_positions(&f, &sorted).iter().map(depth).collect();
+        match order {
+            // Back to front, point by point.
+            DepthOrder::Points => assert!(depths.windows(2).all(|d| d[0] >= d[1])),
+            // Cluster by cluster: each cluster's points together and back to front, the
+            // clusters back to front by their centroids' depth (up to one bucket).
+            DepthOrder::Clusters => {
+                let mut cluster_of = std::collections::HashMap::new();
+                for (k, r) in draw.ranges.iter().enumerate() {
+                    for i in r.first..r.first + r.count {
+                        cluster_of.insert((r.level, i), k);
+                    }
+                }
+                let seq: Vec<usize> = sorted
+                    .ranges
+                    .iter()
+                    .map(|r| cluster_of[&(r.level, r.first)])
+                    .collect();
+                let mut seen = std::collections::HashSet::new();
+                let mut centroids = vec![];
+                for (j, c) in seq.iter().enumerate() {
+                    if j == 0 || seq[j - 1] != *c {
+                        assert!(seen.insert(*c), "cluster {c} is split");
+                        centroids.push(0.0f32);
+                    } else {
+                        assert!(depths[j - 1] >= depths[j], "cluster {c} out of order");
+                    }
+                }
+                let mut at = 0;
+                for c in centroids.iter_mut() {
+                    let n = draw.ranges[seq[at]].count as usize;
+                    *c = depths[at..at + n].iter().sum::<f32>() / n as f32;
+                    at += n;
+                }
+                let (lo, hi) = centroids
+                    .iter()
+                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &c| {
+                        (l.min(c), h.max(c))
+                    });
+                let bucket = (hi - lo) / centroids.len().max(1024) as f32;
+                assert!(centroids.windows(2).all(|c| c[0] >= c[1] - 1.001 * bucket));
+            }
+        }
 
         let blend = mdlod_render::SplatBlend::Over { opacity };
         let gpu = renderer()
@@ -1092,6 +1151,24 @@ fn sorted_over_blending_matches_a_cpu_compositor() {
             differ > 50,
             "{error_px} px: only {differ} pixels depend on the order"
         );
+        // The hierarchy's order against the exact one: where clusters overlap in depth
+        // their points do not interleave; few pixels show it.
+        match order {
+            DepthOrder::Points => exact.push(gpu.hdr),
+            DepthOrder::Clusters => {
+                let reference = &exact[usize::from(error_px > 0.0)];
+                let differ = reference
+                    .iter()
+                    .zip(&gpu.hdr)
+                    .filter(|(a, b)| (0..3).any(|k| (a[k] - b[k]).abs() > 0.02))
+                    .count();
+                eprintln!("{error_px} px: {differ} of {} pixels differ", w * h);
+                assert!(
+                    differ * 20 < (w * h) as usize,
+                    "{error_px} px: the cluster order changes {differ} pixels"
+                );
+            }
+        }
     }
 }
 

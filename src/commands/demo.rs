@@ -90,6 +90,7 @@ pub fn run(args: Args) -> Result<()> {
         absorption: 0.5,
         clip: None,
         opacity: 0.8,
+        sort: super::render::SortArg::Clusters,
         iterations: 16,
         bins: 8,
         binning: super::render::BinningArg::Projected,

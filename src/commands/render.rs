@@ -75,6 +75,10 @@ pub struct Args {
     /// splat-over mode: the splats' peak opacity, in (0, 1].
     #[arg(long, default_value_t = 0.8)]
     pub opacity: f32,
+    /// splat-over mode: the back-to-front order: the hierarchy's clusters bucket-sorted
+    /// by depth with each cluster's points sorted (fast), or every point sorted (exact).
+    #[arg(long, value_enum, default_value = "clusters")]
+    pub sort: SortArg,
     /// Splat mode: each point's light is its species colour, or its scalar attribute
     /// (the file's per-particle column, mapped from its range to [0, 1]).
     #[arg(long, value_enum, default_value = "species")]
@@ -267,6 +271,12 @@ impl BinningArg {
 }
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum SortArg {
+    Clusters,
+    Points,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum Intensity {
     Species,
     Attribute,
@@ -313,6 +323,10 @@ pub fn run(args: Args) -> Result<()> {
             },
             Mode::SplatOver => RenderMode::SplatOver {
                 opacity: args.opacity,
+                order: match args.sort {
+                    SortArg::Clusters => mdlod_render::DepthOrder::Clusters,
+                    SortArg::Points => mdlod_render::DepthOrder::Points,
+                },
             },
             Mode::Sndf => RenderMode::Sndf {
                 iterations: args.iterations,
