@@ -544,6 +544,47 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
     assert!(err.contains("index must be below the count"), "{err}");
 }
 
+/// The density volume and its iso-surface need no precomputation: they render every
+/// frame of a batch directory as converted, directly or streamed through a small GPU
+/// pool (the same pixels).
+#[test]
+fn density_and_iso_render_every_frame_of_a_batch_streamed_or_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d");
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    ok(&["batch", s(&input), "-o", s(&out), "--threads", "2"]);
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "mdlod"))
+        .collect();
+    frames.sort();
+    assert!(frames.len() >= 2, "{frames:?}");
+    let mut pictures = vec![];
+    for (k, frame) in frames.iter().enumerate() {
+        for mode in ["density", "iso"] {
+            let png = |tag: &str| dir.path().join(format!("{k}-{mode}-{tag}.png"));
+            let mut args = vec!["render", s(frame), "--mode", mode, "--slices", "48"];
+            args.extend(["--width", "96", "--height", "72", "--azimuth", "20"]);
+            let direct = png("direct");
+            let text = ok(&[args.as_slice(), &["-o", s(&direct)]].concat());
+            assert!(text.contains("slice stacks run"), "{text}");
+            let streamed = png("streamed");
+            let text = ok(&[
+                args.as_slice(),
+                &["-o", s(&streamed), "--gpu-memory", "256K"],
+            ]
+            .concat());
+            assert!(text.contains("first image after"), "{text}");
+            let (a, b) = (read_png(&direct).2, read_png(&streamed).2);
+            assert!(a == b, "frame {k}, {mode}: streaming changed the picture");
+            pictures.push(a);
+        }
+    }
+    // Each frame shows its own data.
+    assert!(pictures[0] != pictures[2] && pictures[1] != pictures[3]);
+}
+
 /// Runs mdlod under a file-size limit (`ulimit -f`, with SIGXFSZ ignored, so writes past
 /// it fail with EFBIG exactly as they would on a full disk with ENOSPC).
 #[cfg(unix)]
