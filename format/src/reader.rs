@@ -388,10 +388,21 @@ impl MdlodFile {
                 ),
             ));
         }
-        check_sum(ni)?;
-        let nodes: &[NodeRecord] = bytemuck::try_cast_slice(&map[range(ni)])
-            .map_err(|e| corrupt(&place_of(ni, &sections[ni]), format!("misaligned: {e}")))?;
-        validate_nodes(&path, nodes, levels, delta_n, metadata.species.len())?;
+        // The checksum runs beside the node checks (both read the whole table); its
+        // error, then a misaligned table's, comes first, as if run one after another.
+        let (sum, nodes) = std::thread::scope(|scope| {
+            let sum = scope.spawn(|| check_sum(ni));
+            let nodes = bytemuck::try_cast_slice::<u8, NodeRecord>(&map[range(ni)])
+                .map_err(|e| corrupt(&place_of(ni, &sections[ni]), format!("misaligned: {e}")))
+                .and_then(|nodes| {
+                    validate_nodes(&path, nodes, levels, delta_n, metadata.species.len())
+                        .map(|()| nodes)
+                });
+            let sum = sum.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
+            (sum, nodes)
+        });
+        sum?;
+        nodes?;
 
         // Per-point sections.
         let bytes_per_point = 3 * (header.position_bits as u64 / 8);
@@ -743,7 +754,11 @@ impl MdlodFile {
     }
 }
 
-/// Checks every node record against the level table; linear in the node count.
+/// Checks every node record against the level table; linear in the node count. Large
+/// levels are checked in chunks on several threads; each node's checks need only the
+/// records around it (its predecessor's children end where its own begin, when every
+/// node before it passed), so the first error reported is the one a single pass in
+/// index order finds.
 fn validate_nodes(
     path: &Path,
     nodes: &[NodeRecord],
@@ -751,104 +766,69 @@ fn validate_nodes(
     delta_n: usize,
     species_count: usize,
 ) -> Result<(), FormatError> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    validate_nodes_in(
+        path,
+        nodes,
+        levels,
+        delta_n,
+        species_count,
+        threads,
+        1 << 18,
+    )
+}
+
+/// [`validate_nodes`] on up to `threads` threads, in chunks of at least `chunk_min` nodes.
+fn validate_nodes_in(
+    path: &Path,
+    nodes: &[NodeRecord],
+    levels: &[LevelRecord],
+    delta_n: usize,
+    species_count: usize,
+    threads: usize,
+    chunk_min: usize,
+) -> Result<(), FormatError> {
     let last = levels.len() - 1;
-    let bad =
-        |id: usize, problem: String| FormatError::corrupt(path, format!("node {id}"), problem);
     for l in 0..last {
         let first = levels[l].node_first as usize;
         let count = levels[l].point_count as usize;
-        let next_count = levels[l + 1].point_count;
-        let mut expected_child: u64 = 0;
-        for i in 0..count {
-            let id = first + i;
-            let n = &nodes[id];
-            if usize::from(n.level) != l {
-                return Err(bad(id, format!("level {} (it lies on level {l})", n.level)));
-            }
-            if u64::from(n.child_first) != expected_child || n.child_count == 0 {
-                return Err(bad(id, format!(
-                    "children {}+{} do not continue the previous node's (expected first {expected_child}, count ≥ 1)",
-                    n.child_first, n.child_count
-                )));
-            }
-            expected_child += u64::from(n.child_count);
-            if expected_child > next_count {
-                return Err(bad(id, format!("children end at {expected_child}, beyond the {next_count} points of level {}", l + 1)));
-            }
-            let point_level = (l + delta_n).min(last);
-            if usize::from(n.point_level) != point_level {
-                return Err(bad(
-                    id,
-                    format!("point level {} (expected {point_level})", n.point_level),
-                ));
-            }
-            let pl_count = levels[point_level].point_count;
-            if u64::from(n.point_first) + u64::from(n.point_count) > pl_count || n.point_count == 0
-            {
-                return Err(bad(
-                    id,
-                    format!(
-                        "points {}+{} outside the {pl_count} points of level {point_level}",
-                        n.point_first, n.point_count
-                    ),
-                ));
-            }
-            if l == 0 {
-                if n.parent != u32::MAX {
-                    return Err(bad(id, "top node has a parent".into()));
-                }
-            } else {
-                let p = n.parent as usize;
-                let pfirst = levels[l - 1].node_first as usize;
-                let ok = p >= pfirst
-                    && p < first
-                    && (nodes[p].child_first as usize
-                        ..(nodes[p].child_first + nodes[p].child_count) as usize)
-                        .contains(&i);
-                if !ok {
-                    return Err(bad(id, format!("parent {p} does not list it as a child")));
-                }
-            }
-            // Encoding node: the ancestor on level max(0, point_level - delta_n).
-            let ql = point_level.saturating_sub(delta_n);
-            let mut anc = id;
-            for _ in ql..l {
-                anc = nodes[anc].parent as usize;
-            }
-            if n.quant_node as usize != anc {
-                return Err(bad(
-                    id,
-                    format!(
-                        "encoding node {} (expected its ancestor {anc} on level {ql})",
-                        n.quant_node
-                    ),
-                ));
-            }
-            let floats = n
-                .centroid
-                .iter()
-                .chain(&n.quant_scale)
-                .chain(&n.bounds_min)
-                .chain(&n.bounds_max)
-                .chain([&n.radius, &n.area_sum, &n.attribute, &n.rms_radius]);
-            let mut finite = true;
-            for v in floats {
-                finite &= v.is_finite();
-            }
-            if !finite
-                || n.radius < 0.0
-                || n.quant_scale.iter().any(|s| *s < 0.0)
-                || n.area_sum < 0.0
-            {
-                return Err(bad(id, "non-finite or negative geometry".into()));
-            }
-            if (0..3).any(|k| n.bounds_min[k] > n.bounds_max[k]) {
-                return Err(bad(id, "bounds_min exceeds bounds_max".into()));
-            }
-            if usize::from(n.species) >= species_count {
-                return Err(bad(id, format!("species {} of {species_count}", n.species)));
-            }
+        let check = |range: std::ops::Range<usize>| {
+            range
+                .into_iter()
+                .try_for_each(|i| check_node(path, nodes, levels, delta_n, species_count, l, i))
+        };
+        let chunks = if count >= 2 * chunk_min {
+            threads.min(count / chunk_min).max(1)
+        } else {
+            1
+        };
+        if chunks == 1 {
+            check(0..count)?;
+        } else {
+            let per = count.div_ceil(chunks);
+            let results: Vec<Result<(), FormatError>> = std::thread::scope(|scope| {
+                let handles: Vec<_> = (0..chunks)
+                    .map(|k| {
+                        let range = k * per..((k + 1) * per).min(count);
+                        scope.spawn(move || check(range))
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            });
+            // The first failing chunk holds the first failing node.
+            results.into_iter().collect::<Result<(), FormatError>>()?;
         }
+        let next_count = levels[l + 1].point_count;
+        let expected_child = match count {
+            0 => 0,
+            _ => {
+                let n = &nodes[first + count - 1];
+                u64::from(n.child_first) + u64::from(n.child_count)
+            }
+        };
         if expected_child != next_count {
             return Err(FormatError::corrupt(
                 path,
@@ -861,4 +841,211 @@ fn validate_nodes(
         }
     }
     Ok(())
+}
+
+/// The checks of node `i` of level `l` (see [`validate_nodes`]), assuming the nodes
+/// before it on its level passed theirs.
+#[allow(clippy::too_many_arguments)]
+fn check_node(
+    path: &Path,
+    nodes: &[NodeRecord],
+    levels: &[LevelRecord],
+    delta_n: usize,
+    species_count: usize,
+    l: usize,
+    i: usize,
+) -> Result<(), FormatError> {
+    let last = levels.len() - 1;
+    let bad =
+        |id: usize, problem: String| FormatError::corrupt(path, format!("node {id}"), problem);
+    let first = levels[l].node_first as usize;
+    let next_count = levels[l + 1].point_count;
+    let id = first + i;
+    // The children so far: where the previous node's end (it passed its checks).
+    let mut expected_child: u64 = if i == 0 {
+        0
+    } else {
+        let p = &nodes[id - 1];
+        u64::from(p.child_first) + u64::from(p.child_count)
+    };
+    let n = &nodes[id];
+    if usize::from(n.level) != l {
+        return Err(bad(id, format!("level {} (it lies on level {l})", n.level)));
+    }
+    if u64::from(n.child_first) != expected_child || n.child_count == 0 {
+        return Err(bad(id, format!(
+            "children {}+{} do not continue the previous node's (expected first {expected_child}, count ≥ 1)",
+            n.child_first, n.child_count
+        )));
+    }
+    expected_child += u64::from(n.child_count);
+    if expected_child > next_count {
+        return Err(bad(
+            id,
+            format!(
+                "children end at {expected_child}, beyond the {next_count} points of level {}",
+                l + 1
+            ),
+        ));
+    }
+    let point_level = (l + delta_n).min(last);
+    if usize::from(n.point_level) != point_level {
+        return Err(bad(
+            id,
+            format!("point level {} (expected {point_level})", n.point_level),
+        ));
+    }
+    let pl_count = levels[point_level].point_count;
+    if u64::from(n.point_first) + u64::from(n.point_count) > pl_count || n.point_count == 0 {
+        return Err(bad(
+            id,
+            format!(
+                "points {}+{} outside the {pl_count} points of level {point_level}",
+                n.point_first, n.point_count
+            ),
+        ));
+    }
+    if l == 0 {
+        if n.parent != u32::MAX {
+            return Err(bad(id, "top node has a parent".into()));
+        }
+    } else {
+        let p = n.parent as usize;
+        let pfirst = levels[l - 1].node_first as usize;
+        let ok = p >= pfirst
+            && p < first
+            && (nodes[p].child_first as usize
+                ..(nodes[p].child_first + nodes[p].child_count) as usize)
+                .contains(&i);
+        if !ok {
+            return Err(bad(id, format!("parent {p} does not list it as a child")));
+        }
+    }
+    // Encoding node: the ancestor on level max(0, point_level - delta_n).
+    let ql = point_level.saturating_sub(delta_n);
+    let mut anc = id;
+    for _ in ql..l {
+        anc = nodes[anc].parent as usize;
+    }
+    if n.quant_node as usize != anc {
+        return Err(bad(
+            id,
+            format!(
+                "encoding node {} (expected its ancestor {anc} on level {ql})",
+                n.quant_node
+            ),
+        ));
+    }
+    let floats = n
+        .centroid
+        .iter()
+        .chain(&n.quant_scale)
+        .chain(&n.bounds_min)
+        .chain(&n.bounds_max)
+        .chain([&n.radius, &n.area_sum, &n.attribute, &n.rms_radius]);
+    let mut finite = true;
+    for v in floats {
+        finite &= v.is_finite();
+    }
+    if !finite || n.radius < 0.0 || n.quant_scale.iter().any(|s| *s < 0.0) || n.area_sum < 0.0 {
+        return Err(bad(id, "non-finite or negative geometry".into()));
+    }
+    if (0..3).any(|k| n.bounds_min[k] > n.bounds_max[k]) {
+        return Err(bad(id, "bounds_min exceeds bounds_max".into()));
+    }
+    if usize::from(n.species) >= species_count {
+        return Err(bad(id, format!("species {} of {species_count}", n.species)));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A valid three-level hierarchy: a top node over `n` nodes, each over 2 particles.
+    fn hierarchy(n: usize) -> (Vec<NodeRecord>, Vec<LevelRecord>) {
+        let level = |point_count: usize, node_first: usize| LevelRecord {
+            point_count: point_count as u64,
+            node_first: node_first as u64,
+            reserved: [0; 2],
+        };
+        let levels = vec![level(1, 0), level(n, 1), level(2 * n, 1 + n)];
+        let node = |level: u8, child_first: usize, child_count: usize, parent: u32| NodeRecord {
+            centroid: [0.0; 3],
+            radius: 1.0,
+            quant_scale: [0.1; 3],
+            area_sum: 1.0,
+            bounds_min: [0.0; 3],
+            attribute: 0.0,
+            bounds_max: [1.0; 3],
+            colour: 0,
+            child_first: child_first as u32,
+            child_count: child_count as u32,
+            point_first: child_first as u32,
+            point_count: child_count as u32,
+            parent,
+            quant_node: 0,
+            rms_radius: 0.5,
+            level,
+            point_level: level + 1,
+            species: 0,
+        };
+        let mut nodes = vec![node(0, 0, n, u32::MAX)];
+        // A node encodes its own children (δn = 1).
+        nodes.extend((0..n).map(|i| NodeRecord {
+            quant_node: 1 + i as u32,
+            ..node(1, 2 * i, 2, 0)
+        }));
+        (nodes, levels)
+    }
+
+    #[test]
+    fn chunked_validation_reports_the_first_error_a_single_pass_finds() {
+        let path = Path::new("h.mdlod");
+        let n = 1000;
+        let (nodes, levels) = hierarchy(n);
+        let run = |nodes: &[NodeRecord], threads, chunk_min| {
+            validate_nodes_in(path, nodes, &levels, 1, 1, threads, chunk_min)
+                .err()
+                .map(|e| e.to_string())
+        };
+        assert_eq!(run(&nodes, 4, 16), None);
+        assert_eq!(run(&nodes, 1, usize::MAX / 4), None);
+        // Corruptions in several chunks: each pass reports the one at the lowest node,
+        // with the message a single pass gives.
+        type Corrupt = fn(&mut NodeRecord);
+        let corruptions: [(usize, Corrupt); 5] = [
+            (700, |r| r.child_count = 3),
+            (350, |r| r.radius = f32::NAN),
+            (351, |r| r.child_first += 1),
+            (900, |r| r.species = 7),
+            (10, |r| r.bounds_min[1] = 2.0),
+        ];
+        let mut bad = nodes.clone();
+        for (k, (i, corrupt)) in corruptions.iter().enumerate() {
+            corrupt(&mut bad[1 + i]);
+            let single = run(&bad, 1, usize::MAX / 4).expect("an error");
+            // The first corrupted node, or (a child count) its successor.
+            let lowest = 1 + corruptions[..=k].iter().map(|c| c.0).min().unwrap_or(0);
+            assert!(
+                [lowest, lowest + 1]
+                    .iter()
+                    .any(|id| single.contains(&format!("node {id}:"))),
+                "{single}"
+            );
+            for (threads, chunk_min) in [(2, 16), (4, 100), (8, 1)] {
+                assert_eq!(
+                    run(&bad, threads, chunk_min).as_deref(),
+                    Some(single.as_str())
+                );
+            }
+        }
+        // A level whose children fall short of the next level: found after the chunks.
+        let mut short = nodes.clone();
+        short[n].child_count = 1;
+        let single = run(&short, 1, usize::MAX / 4).expect("an error");
+        assert!(single.contains("level 1"), "{single}");
+        assert_eq!(run(&short, 4, 16).as_deref(), Some(single.as_str()));
+    }
 }
