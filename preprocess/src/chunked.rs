@@ -192,7 +192,7 @@ pub struct DumpSource {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Windows {
     /// By particle ranges ([`crate::readers::DumpFile::read_part`]: binary dumps, raw
-    /// arrays). The dump is opened afresh for every window, so the pages of the input it
+    /// arrays, GSD). The dump is opened afresh for every window, so the pages of the input it
     /// maps are released after each window and resident memory stays bounded.
     Parts,
     /// By lines ([`crate::readers::read_text_windows`]: uncompressed LAMMPS text, XYZ),
@@ -211,10 +211,20 @@ impl ParticleSource for DumpSource {
 
     fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError> {
         match self.windows {
-            Windows::Parts => windows_by_range(self.particles, window, f, |range| {
-                let dump = crate::readers::DumpFile::open(&self.path)?;
-                Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
-            }),
+            Windows::Parts => {
+                // Species a part would list differently from the whole frame (GSD radii
+                // from the whole frame's diameters), taken once.
+                let species =
+                    crate::readers::DumpFile::open(&self.path)?.frame_species(self.frame)?;
+                windows_by_range(self.particles, window, f, |range| {
+                    let dump = crate::readers::DumpFile::open(&self.path)?;
+                    let mut part = dump.read_part(self.frame, &self.options, range, &NoProgress)?;
+                    if let Some(s) = &species {
+                        part.species = s.clone();
+                    }
+                    Ok(part)
+                })
+            }
             Windows::Text => {
                 crate::readers::read_text_windows(&self.path, self.frame, &self.options, window, f)
             }

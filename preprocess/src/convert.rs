@@ -153,8 +153,8 @@ pub fn header_of(info: &crate::readers::FrameInfo) -> Frame {
 }
 
 /// A source that reads frame `k` of `dump` a window at a time, when its format allows
-/// (binary dumps and raw arrays by ranges, uncompressed text by lines); `None` for the
-/// formats that are read whole (GSD, compressed text, `%` piece sets).
+/// (binary dumps, raw arrays and GSD by ranges, uncompressed text by lines); `None` for
+/// the formats that are read whole (compressed text, `%` piece sets).
 pub fn window_source(
     dump: &crate::readers::DumpFile,
     k: usize,

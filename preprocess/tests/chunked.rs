@@ -178,3 +178,64 @@ fn a_truncated_text_dump_read_in_windows_names_the_file_and_line() {
         "working files left"
     );
 }
+
+/// The data location of chunk `name` of frame `frame` in a GSD file's bytes.
+fn gsd_chunk(bytes: &[u8], name: &str, frame: u64) -> usize {
+    let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) as usize;
+    let names: Vec<&[u8]> = bytes[u64_at(24)..]
+        .split(|&b| b == 0)
+        .take_while(|s| !s.is_empty())
+        .collect();
+    let id = names.iter().position(|n| *n == name.as_bytes()).unwrap();
+    (0..128)
+        .map(|i| u64_at(8) + 32 * i)
+        .find(|&at| {
+            u64_at(at) as u64 == frame
+                && usize::from(u16::from_le_bytes([bytes[at + 28], bytes[at + 29]])) == id
+        })
+        .map(|at| u64_at(at + 16))
+        .unwrap()
+}
+
+#[test]
+fn gsd_streams_into_the_same_file() {
+    // Frame 2 stores only positions, charges and the step: the rest comes from frame 0.
+    // Diameters made to differ along the file (each type's first 40 particles twice as
+    // wide): a part alone would give its types other radii than the whole frame's.
+    let mut bytes = std::fs::read(mdlod_datasets::gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let (types, diameters) = (
+        gsd_chunk(&bytes, "particles/typeid", 0),
+        gsd_chunk(&bytes, "particles/diameter", 0),
+    );
+    let mut seen = [0; 2];
+    for i in 0..300 {
+        let t = u32::from_le_bytes(bytes[types + 4 * i..types + 4 * i + 4].try_into().unwrap());
+        seen[t as usize] += 1;
+        let d = if t == 0 { 1.0f32 } else { 1.5 };
+        let d = if seen[t as usize] <= 40 { 2.0 * d } else { d };
+        bytes[diameters + 4 * i..diameters + 4 * i + 4].copy_from_slice(&d.to_le_bytes());
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mixture.gsd");
+    std::fs::write(&path, &bytes).unwrap();
+    let read = ReadOptions {
+        attribute: Some("charge".into()),
+        ..Default::default()
+    };
+    let f = streamed_equals_in_memory(&path, &read, 100);
+    let radii: Vec<(&str, f32)> = f
+        .metadata()
+        .species
+        .iter()
+        .map(|s| (s.name.as_str(), s.radius))
+        .collect();
+    let mean = |t: usize, d: f32| 0.5 * d * (2.0 * 40.0 + (seen[t] as f32 - 40.0)) / seen[t] as f32;
+    let expected = [("A", mean(0, 1.0)), ("B", mean(1, 1.5))];
+    for ((name, r), (en, er)) in radii.iter().zip(expected) {
+        assert!(
+            *name == en && (r - er).abs() < 1e-5,
+            "{radii:?} against {expected:?}"
+        );
+    }
+    assert!(f.metadata().attribute.is_some());
+}

@@ -18,6 +18,7 @@
 //!
 //! Errors name the byte offset of the damaged entry or value.
 
+use std::ops::Range;
 use std::path::Path;
 
 use rayon::prelude::*;
@@ -369,7 +370,7 @@ pub(crate) fn frame_info(
     })
 }
 
-/// Reads frame `k`.
+/// Reads frame `k` whole.
 pub(crate) fn read_frame(
     path: &Path,
     data: &[u8],
@@ -379,52 +380,43 @@ pub(crate) fn read_frame(
     progress: &dyn Progress,
 ) -> Result<Frame, ReadError> {
     let n = index.particles(path, data, k)?;
-    let chunk_of = |name: &str, m: usize, required: bool| -> Result<Option<&Entry>, ReadError> {
-        match index.chunk(k, name) {
-            None if required && n > 0 => Err(err(
-                path,
-                0,
-                format!("frame {k} has no `{name}` (and frame 0 has none either)"),
-            )),
-            None => Ok(None),
-            Some(e) if e.n != n || e.m != m => Err(err(
-                path,
-                e.at,
-                format!(
-                    "frame {k}: `{name}` is {} × {}, expected {n} × {m} for {n} particles",
-                    e.n, e.m
-                ),
-            )),
-            Some(e) => Ok(Some(e)),
-        }
-    };
-    progress.stage(&format!("reading frame {k}"), Some(n as u64), "particles");
-    let mut positions = vec![[0f32; 3]; n];
-    if let Some(e) = chunk_of("particles/position", 3, true)? {
-        if !matches!(e.ty, Ty::F32 | Ty::F64) {
-            return Err(err(
-                path,
-                e.at,
-                "`particles/position` is not floating point",
-            ));
-        }
-        let bytes = &data[e.location..e.location + n * 3 * e.ty.size()];
-        positions =
-            super::decode_positions(n, |i, k| 3 * i + k, |j| e.ty.get(bytes, j)).map_err(|j| {
-                err(
-                    path,
-                    e.location + j * e.ty.size(),
-                    format!(
-                        "frame {k}: particle {} has a position that is not finite",
-                        j / 3
-                    ),
-                )
-            })?;
-    }
-    progress.advance(n as u64);
+    read_range(path, data, index, k, opts, 0..n, progress)
+}
 
-    // Types: names from `particles/types` (N names of M characters), ids per particle.
-    let type_names: Vec<String> = match index.chunk(k, "particles/types") {
+/// A per-particle chunk of frame `k` checked to be `n × m` (`None` when the frame and
+/// frame 0 lack it and it is optional).
+fn chunk_of<'i>(
+    path: &Path,
+    index: &'i Index,
+    k: usize,
+    n: usize,
+    name: &str,
+    m: usize,
+    required: bool,
+) -> Result<Option<&'i Entry>, ReadError> {
+    match index.chunk(k, name) {
+        None if required && n > 0 => Err(err(
+            path,
+            0,
+            format!("frame {k} has no `{name}` (and frame 0 has none either)"),
+        )),
+        None => Ok(None),
+        Some(e) if e.n != n || e.m != m => Err(err(
+            path,
+            e.at,
+            format!(
+                "frame {k}: `{name}` is {} × {}, expected {n} × {m} for {n} particles",
+                e.n, e.m
+            ),
+        )),
+        Some(e) => Ok(Some(e)),
+    }
+}
+
+/// The type names of frame `k`: `particles/types` (N names of M characters), or one
+/// type `A`.
+fn type_names(path: &Path, data: &[u8], index: &Index, k: usize) -> Result<Vec<String>, ReadError> {
+    let names: Vec<String> = match index.chunk(k, "particles/types") {
         Some(e) if matches!(e.ty, Ty::I8 | Ty::U8 | Ty::Char) => data
             [e.location..e.location + e.n * e.m]
             .chunks(e.m.max(1))
@@ -436,30 +428,43 @@ pub(crate) fn read_frame(
         Some(e) => return Err(err(path, e.at, "`particles/types` is not text")),
         None => vec!["A".to_string()],
     };
-    if type_names.is_empty() || type_names.len() > 1 << 16 {
+    if names.is_empty() || names.len() > 1 << 16 {
         return Err(err(
             path,
             0,
             format!(
                 "frame {k}: {} particle types (1 to 65536 allowed)",
-                type_names.len()
+                names.len()
             ),
         ));
     }
-    let mut species_index = vec![0u16; n];
-    if let Some(e) = chunk_of("particles/typeid", 1, false)? {
+    Ok(names)
+}
+
+/// The type ids of particles `range` of frame `k` (all type 0 without `particles/typeid`).
+fn type_ids(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+    n: usize,
+    range: Range<usize>,
+    count: usize,
+) -> Result<Vec<u16>, ReadError> {
+    let mut species_index = vec![0u16; range.len()];
+    if let Some(e) = chunk_of(path, index, k, n, "particles/typeid", 1, false)? {
         let bytes = &data[e.location..e.location + n * e.ty.size()];
-        let count = type_names.len();
+        let first = range.start;
         let bad = species_index
             .par_iter_mut()
             .enumerate()
-            .find_map_first(|(i, s)| {
-                let t = e.ty.get(bytes, i);
+            .find_map_first(|(j, s)| {
+                let t = e.ty.get(bytes, first + j);
                 if t >= 0.0 && (t as usize) < count && t.fract() == 0.0 {
                     *s = t as u16;
                     None
                 } else {
-                    Some((i, t))
+                    Some((first + j, t))
                 }
             });
         if let Some((i, t)) = bad {
@@ -470,12 +475,29 @@ pub(crate) fn read_frame(
             ));
         }
     }
-    // Radii: half the mean diameter of each type's particles (default diameter 1).
-    let mut sum = vec![0f64; type_names.len()];
-    let mut count = vec![0u64; type_names.len()];
-    if let Some(e) = chunk_of("particles/diameter", 1, false)? {
+    Ok(species_index)
+}
+
+/// The species of particles `range` of frame `k`: every type, in the file's order, with
+/// the radius half the mean diameter of the type's particles in the range (default
+/// diameter 1).
+#[allow(clippy::too_many_arguments)]
+fn species_of(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+    n: usize,
+    range: Range<usize>,
+    names: &[String],
+    species_index: &[u16],
+) -> Result<Vec<SpeciesName>, ReadError> {
+    let mut sum = vec![0f64; names.len()];
+    let mut count = vec![0u64; names.len()];
+    if let Some(e) = chunk_of(path, index, k, n, "particles/diameter", 1, false)? {
         let bytes = &data[e.location..e.location + n * e.ty.size()];
-        for (i, &s) in species_index.iter().enumerate() {
+        for (j, &s) in species_index.iter().enumerate() {
+            let i = range.start + j;
             let d = e.ty.get(bytes, i);
             if !(d.is_finite() && d > 0.0) {
                 return Err(err(
@@ -488,7 +510,7 @@ pub(crate) fn read_frame(
             count[usize::from(s)] += 1;
         }
     }
-    let species = type_names
+    Ok(names
         .iter()
         .enumerate()
         .map(|(t, name)| SpeciesName {
@@ -500,7 +522,76 @@ pub(crate) fn read_frame(
                 0.5
             }),
         })
-        .collect();
+        .collect())
+}
+
+/// The species of frame `k` as [`read_frame`] lists them (radii from the whole frame's
+/// diameters), from one pass over the type ids and diameters alone: what every part of
+/// the frame read by [`read_range`] takes, so that a frame read in parts converts as the
+/// whole one does.
+pub(crate) fn frame_species(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+) -> Result<Vec<SpeciesName>, ReadError> {
+    let n = index.particles(path, data, k)?;
+    let names = type_names(path, data, index, k)?;
+    let ids = type_ids(path, data, index, k, n, 0..n, names.len())?;
+    species_of(path, data, index, k, n, 0..n, &names, &ids)
+}
+
+/// Reads particles `range` of frame `k` as a frame of their own: every type listed, radii
+/// from the range's diameters (see [`frame_species`] for the whole frame's).
+pub(crate) fn read_range(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+    opts: &ReadOptions,
+    range: Range<usize>,
+    progress: &dyn Progress,
+) -> Result<Frame, ReadError> {
+    let n = index.particles(path, data, k)?;
+    let first = range.start;
+    let len = range.len();
+    progress.stage(&format!("reading frame {k}"), Some(len as u64), "particles");
+    let mut positions = vec![[0f32; 3]; len];
+    if let Some(e) = chunk_of(path, index, k, n, "particles/position", 3, true)? {
+        if !matches!(e.ty, Ty::F32 | Ty::F64) {
+            return Err(err(
+                path,
+                e.at,
+                "`particles/position` is not floating point",
+            ));
+        }
+        let bytes = &data[e.location..e.location + n * 3 * e.ty.size()];
+        positions =
+            super::decode_positions(len, |i, c| 3 * (first + i) + c, |j| e.ty.get(bytes, j))
+                .map_err(|j| {
+                    err(
+                        path,
+                        e.location + j * e.ty.size(),
+                        format!(
+                            "frame {k}: particle {} has a position that is not finite",
+                            j / 3
+                        ),
+                    )
+                })?;
+    }
+    progress.advance(len as u64);
+    let names = type_names(path, data, index, k)?;
+    let species_index = type_ids(path, data, index, k, n, range.clone(), names.len())?;
+    let species = species_of(
+        path,
+        data,
+        index,
+        k,
+        n,
+        range.clone(),
+        &names,
+        &species_index,
+    )?;
 
     let attribute = match &opts.attribute {
         None => None,
@@ -510,7 +601,7 @@ pub(crate) fn read_frame(
             } else {
                 format!("particles/{name}")
             };
-            let Some(e) = chunk_of(&full, 1, false)? else {
+            let Some(e) = chunk_of(path, index, k, n, &full, 1, false)? else {
                 let available = frame_info(path, data, index, k)?.columns.join(" ");
                 return Err(err(
                     path,
@@ -524,8 +615,9 @@ pub(crate) fn read_frame(
                 return Err(err(path, e.at, format!("`{full}` is text, not numbers")));
             }
             let bytes = &data[e.location..e.location + n * e.ty.size()];
-            let values: Vec<f32> = (0..n).map(|i| e.ty.get(bytes, i) as f32).collect();
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            let values: Vec<f32> = range.clone().map(|i| e.ty.get(bytes, i) as f32).collect();
+            if let Some(j) = values.iter().position(|v| !v.is_finite()) {
+                let i = first + j;
                 return Err(err(
                     path,
                     e.location + i * e.ty.size(),

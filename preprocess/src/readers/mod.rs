@@ -462,7 +462,25 @@ impl DumpFile {
     /// True when [`DumpFile::read_part`] can read this dump's frames a range of particles
     /// at a time (binary formats with fixed-size records).
     pub fn reads_parts(&self) -> bool {
-        matches!(self.index, Index::Raw(_) | Index::LammpsBinary(_))
+        matches!(
+            self.index,
+            Index::Raw(_) | Index::LammpsBinary(_) | Index::Gsd(_)
+        )
+    }
+
+    /// The species every part of frame `k` read by [`DumpFile::read_part`] should list
+    /// for the parts to convert as the whole frame does, where a part's own would differ:
+    /// GSD radii are half the mean diameter of each type over the whole frame (one pass
+    /// over the type ids and diameters). `None` where a part's species are right as read.
+    pub fn frame_species(
+        &self,
+        k: usize,
+    ) -> Result<Option<Vec<crate::frame::SpeciesName>>, ReadError> {
+        self.check_frame(k)?;
+        match &self.index {
+            Index::Gsd(i) => gsd::frame_species(&self.path, self.bytes(), i, k).map(Some),
+            _ => Ok(None),
+        }
     }
 
     /// Reads particles `range` (in file order) of frame `k` as a frame of their own, for
@@ -497,6 +515,7 @@ impl DumpFile {
                 range,
                 progress,
             ),
+            Index::Gsd(i) => gsd::read_range(&self.path, self.bytes(), i, k, opts, range, progress),
             _ => Err(ReadError::Binary {
                 path: self.path.clone(),
                 offset: 0,
