@@ -198,6 +198,9 @@ pub enum Windows {
     /// By lines ([`crate::readers::read_text_windows`]: uncompressed LAMMPS text, XYZ),
     /// mapping the file afresh for every window.
     Text,
+    /// A `%` piece set: piece after piece in processor order, each a window at a time
+    /// as its own format allows (a compressed piece whole).
+    Pieces,
 }
 
 impl ParticleSource for DumpSource {
@@ -227,6 +230,39 @@ impl ParticleSource for DumpSource {
             }
             Windows::Text => {
                 crate::readers::read_text_windows(&self.path, self.frame, &self.options, window, f)
+            }
+            Windows::Pieces => {
+                let pieces = crate::readers::DumpFile::open(&self.path)?
+                    .piece_paths()
+                    .unwrap_or_else(|| vec![self.path.clone()]);
+                let mut offset = 0usize;
+                for piece in pieces {
+                    let dump = crate::readers::DumpFile::open(&piece)?;
+                    let n = dump.frame_info(self.frame)?.particles;
+                    let mut shifted = |start: usize, part: Frame| f(offset + start, part);
+                    if dump.reads_parts() {
+                        drop(dump);
+                        windows_by_range(n, window, &mut shifted, |range| {
+                            let dump = crate::readers::DumpFile::open(&piece)?;
+                            Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
+                        })?;
+                    } else if dump.reads_text_windows() {
+                        drop(dump);
+                        crate::readers::read_text_windows(
+                            &piece,
+                            self.frame,
+                            &self.options,
+                            window,
+                            &mut shifted,
+                        )?;
+                    } else {
+                        let part = dump.read_frame(self.frame, &self.options, &NoProgress)?;
+                        drop(dump);
+                        shifted(0, part)?;
+                    }
+                    offset += n;
+                }
+                Ok(())
             }
         }
     }

@@ -153,8 +153,8 @@ pub fn header_of(info: &crate::readers::FrameInfo) -> Frame {
 }
 
 /// A source that reads frame `k` of `dump` a window at a time, when its format allows
-/// (binary dumps, raw arrays and GSD by ranges, uncompressed text by lines); `None` for
-/// the formats that are read whole (compressed text, `%` piece sets).
+/// (binary dumps, raw arrays and GSD by ranges, uncompressed text by lines, `%` piece
+/// sets piece by piece); `None` for compressed text, which is read whole.
 pub fn window_source(
     dump: &crate::readers::DumpFile,
     k: usize,
@@ -165,6 +165,8 @@ pub fn window_source(
         crate::chunked::Windows::Parts
     } else if dump.reads_text_windows() {
         crate::chunked::Windows::Text
+    } else if dump.piece_paths().is_some() {
+        crate::chunked::Windows::Pieces
     } else {
         return None;
     };

@@ -1,6 +1,6 @@
 //! Out-of-core conversion from dumps read a window at a time: the file equals the one
 //! built from the whole frame in memory with the same chunks, for raw arrays, real LAMMPS
-//! binary and text dumps and XYZ files; a truncated text dump read in windows still names
+//! binary and text dumps, `%` piece sets, GSD and XYZ files; a truncated text dump read in windows still names
 //! the file and line.
 
 use std::path::Path;
@@ -37,7 +37,11 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
     let streamed = dir.path().join("streamed.mdlod");
     let opts = options(chunk_points);
     let dump = DumpFile::open(input).unwrap();
-    assert!(dump.reads_parts() || dump.reads_text_windows());
+    assert!(dump.reads_parts() || dump.reads_text_windows() || dump.piece_paths().is_some());
+    // Read a window at a time, not whole.
+    let last = dump.frame_count() - 1;
+    let info = dump.frame_info(last).unwrap();
+    assert!(mdlod_preprocess::convert::window_source(&dump, last, read, &info).is_some());
     let k = dump.frame_count() - 1;
     let n = dump.frame_info(k).unwrap().particles;
     assert!(
@@ -238,4 +242,17 @@ fn gsd_streams_into_the_same_file() {
         );
     }
     assert!(f.metadata().attribute.is_some());
+}
+
+#[test]
+fn piece_sets_stream_piece_by_piece_into_the_same_file() {
+    // LAMMPS `dump ... %` output of a 2-process run, as text and as binary pieces.
+    for name in ["cu_melt_mpi.%.dump", "cu_melt_mpi.%.bin"] {
+        let pattern = mdlod_datasets::lammps_sample_path(name);
+        let dump = DumpFile::open(&pattern).unwrap();
+        assert_eq!(dump.piece_paths().map(|p| p.len()), Some(2), "{name}");
+        let n = dump.frame_info(dump.frame_count() - 1).unwrap().particles;
+        // Chunks (and windows of 128) smaller than one piece.
+        streamed_equals_in_memory(&pattern, &ReadOptions::default(), n / 3);
+    }
 }

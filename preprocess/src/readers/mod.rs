@@ -468,6 +468,14 @@ impl DumpFile {
         )
     }
 
+    /// The piece files of a `%` piece set, in processor order (`None` for one file).
+    pub fn piece_paths(&self) -> Option<Vec<PathBuf>> {
+        match &self.index {
+            Index::Pieces(p) => Some(p.iter().map(|d| d.path().to_path_buf()).collect()),
+            _ => None,
+        }
+    }
+
     /// The species every part of frame `k` read by [`DumpFile::read_part`] should list
     /// for the parts to convert as the whole frame does, where a part's own would differ:
     /// GSD radii are half the mean diameter of each type over the whole frame (one pass
