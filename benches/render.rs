@@ -283,23 +283,28 @@ fn splat_table(renderer: &Renderer, adapter: &str, n: u64) {
     let file = MdlodFile::open(dataset(n)).unwrap();
     let mut rows = String::new();
     let mut reference = None;
+    // The whole data set, orthographic, no budget.
+    let splat_opts = |error_px: f32, mode: mdlod_render::RenderMode| RenderOptions {
+        width: W,
+        height: H,
+        view: ViewSpec::Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 25.0,
+            zoom: 1.0,
+            projection: Projection::Orthographic,
+        },
+        error_px,
+        budget: u64::MAX,
+        mode,
+        ..Default::default()
+    };
     for error_px in [0.0f32, 1.0, 4.0, 16.0, 64.0] {
-        let opts = RenderOptions {
-            width: W,
-            height: H,
-            view: ViewSpec::Orbit {
-                azimuth_deg: 30.0,
-                elevation_deg: 25.0,
-                zoom: 1.0,
-                projection: Projection::Orthographic,
-            },
+        let opts = splat_opts(
             error_px,
-            budget: u64::MAX,
-            mode: mdlod_render::RenderMode::Splat {
+            mdlod_render::RenderMode::Splat {
                 by_attribute: false,
             },
-            ..Default::default()
-        };
+        );
         let mut times = vec![];
         let mut last = None;
         for _ in 0..3 {
@@ -328,23 +333,13 @@ fn splat_table(renderer: &Renderer, adapter: &str, n: u64) {
             mdlod_render::DepthOrder::Points,
             mdlod_render::DepthOrder::Clusters,
         ] {
-            let opts = RenderOptions {
-                width: W,
-                height: H,
-                view: ViewSpec::Orbit {
-                    azimuth_deg: 30.0,
-                    elevation_deg: 25.0,
-                    zoom: 1.0,
-                    projection: Projection::Orthographic,
-                },
+            let opts = splat_opts(
                 error_px,
-                budget: u64::MAX,
-                mode: mdlod_render::RenderMode::SplatOver {
+                mdlod_render::RenderMode::SplatOver {
                     opacity: 0.8,
                     order,
                 },
-                ..Default::default()
-            };
+            );
             let (camera, traversal, _) = mdlod_render::frame_setup(renderer, &file, &opts).unwrap();
             let draw = mdlod_render::traverse(&camera, &file, &traversal);
             let mut sort_times = vec![];

@@ -551,18 +551,7 @@ fn draw_cut(
             Ok((frame.image, report))
         }
         RenderMode::Spheres => {
-            let frame = renderer.ctx.scoped(|| {
-                let cut = source.bind(draw)?;
-                let mut frame = renderer.render_bound(
-                    &cut.buffers,
-                    cut.position_bits,
-                    cut.species_count,
-                    camera,
-                    settings,
-                )?;
-                frame.gpu_data_bytes = cut.data_bytes;
-                Ok(frame)
-            })?;
+            let frame = renderer.render_from(source, camera, draw, settings)?;
             let report = report(&frame);
             Ok((frame.image, report))
         }

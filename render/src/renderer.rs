@@ -481,6 +481,37 @@ fn copy_to_buffer(
     );
 }
 
+/// Begins a render pass into `views` (no depth), clearing them to transparent.
+fn clear_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    views: &[&wgpu::TextureView],
+    timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
+) -> wgpu::RenderPass<'e> {
+    let attachments: Vec<Option<wgpu::RenderPassColorAttachment<'_>>> = views
+        .iter()
+        .map(|view| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        })
+        .collect();
+    enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &attachments,
+        depth_stencil_attachment: None,
+        timestamp_writes,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
+
 /// A buffer to read GPU results back into.
 pub(crate) fn readback_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
@@ -564,24 +595,37 @@ impl Renderer {
         settings: &FrameSettings,
     ) -> Result<RenderedFrame, RenderError> {
         self.check(settings)?;
-        let packed = crate::passes::sphere_raycast::pack_styled(
+        let source = PackedCut {
+            renderer: self,
             file,
-            draw,
-            crate::passes::sphere_raycast::PackStyle::Spheres,
-            &settings.style,
-        )?;
-        let limits = self.ctx.device.limits();
-        let largest = packed.largest_buffer_bytes();
-        if largest > limits.max_storage_buffer_binding_size || largest > limits.max_buffer_size {
-            return Err(RenderError::InvalidOptions(format!(
-                "the cut of {} points needs a {largest}-byte buffer, more than this adapter \
-                 allows ({} bytes): lower the point budget",
-                packed.points(),
-                limits.max_storage_buffer_binding_size
-            )));
-        }
-        self.ctx
-            .scoped(|| self.render_packed(&packed, camera, settings))
+            style: PackStyle::Spheres,
+            look: &settings.style,
+        };
+        self.render_from(&source, camera, draw, settings)
+    }
+
+    /// Draws the spheres of `draw` from the points `source` binds (a packed cut or a
+    /// streaming pool's pages).
+    pub fn render_from(
+        &self,
+        source: &dyn CutSource,
+        camera: &Camera,
+        draw: &DrawList,
+        settings: &FrameSettings,
+    ) -> Result<RenderedFrame, RenderError> {
+        check_source(source, PackStyle::Spheres, "the sphere pass")?;
+        self.ctx.scoped(|| {
+            let cut = source.bind(draw)?;
+            let mut frame = self.render_bound(
+                &cut.buffers,
+                cut.position_bits,
+                cut.species_count,
+                camera,
+                settings,
+            )?;
+            frame.gpu_data_bytes = cut.data_bytes;
+            Ok(frame)
+        })
     }
 
     /// Draws an already packed draw list.
@@ -1491,22 +1535,12 @@ impl Renderer {
             let timing = self.frame_timer();
             let mut enc = device.create_command_encoder(&Default::default());
             {
-                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("splat"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: None,
-                    timestamp_writes: timing.as_ref().map(|t| t.writes(true, true)),
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
+                let mut pass = clear_pass(
+                    &mut enc,
+                    "splat",
+                    &[&view],
+                    timing.as_ref().map(|t| t.writes(true, true)),
+                );
                 if buffers.points > 0 {
                     pass.set_pipeline(pipeline);
                     pass.set_bind_group(0, &buffers.bind_group, &[]);
@@ -1911,26 +1945,7 @@ impl Renderer {
                         instance_first[starts.partition_point(|&d| d <= b + h_max).max(skip)];
                     let offset = (u64::from(k) * stride) as u32;
                     {
-                        let clear = wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                            store: wgpu::StoreOp::Store,
-                        };
-                        let attach = |view| {
-                            Some(wgpu::RenderPassColorAttachment {
-                                view,
-                                depth_slice: None,
-                                resolve_target: None,
-                                ops: clear,
-                            })
-                        };
-                        let mut rp = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                            label: Some("density slices"),
-                            color_attachments: &[attach(&va), attach(&vb)],
-                            depth_stencil_attachment: None,
-                            timestamp_writes: None,
-                            occlusion_query_set: None,
-                            multiview_mask: None,
-                        });
+                        let mut rp = clear_pass(&mut enc, "density slices", &[&va, &vb], None);
                         if last > first {
                             rp.set_pipeline(&pass.splat);
                             rp.set_bind_group(0, &buffers.bind_group, &[]);
@@ -1982,22 +1997,8 @@ impl Renderer {
                     }],
                 });
                 {
-                    let mut rp = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("density iso colour"),
-                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                            view: &target.create_view(&Default::default()),
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                                store: wgpu::StoreOp::Store,
-                            },
-                        })],
-                        depth_stencil_attachment: None,
-                        timestamp_writes: None,
-                        occlusion_query_set: None,
-                        multiview_mask: None,
-                    });
+                    let view = target.create_view(&Default::default());
+                    let mut rp = clear_pass(&mut enc, "density iso colour", &[&view], None);
                     if buffers.points > 0 {
                         rp.set_pipeline(&pass.colour);
                         rp.set_bind_group(0, &buffers.bind_group, &[]);

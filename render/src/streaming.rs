@@ -394,18 +394,7 @@ impl<'r> StreamingRenderer<'r> {
             ));
         }
         let (draw, stats) = self.prepare(camera, traversal)?;
-        let frame = self.renderer.ctx.scoped(|| {
-            let cut = self.bind(&draw)?;
-            let mut frame = self.renderer.render_bound(
-                &cut.buffers,
-                cut.position_bits,
-                cut.species_count,
-                camera,
-                settings,
-            )?;
-            frame.gpu_data_bytes = cut.data_bytes;
-            Ok(frame)
-        })?;
+        let frame = self.renderer.render_from(self, camera, &draw, settings)?;
         Ok((frame, draw, stats))
     }
 

@@ -383,146 +383,151 @@ pub(crate) fn read_frame(
     read_range(path, data, index, k, opts, 0..n, progress)
 }
 
-/// A per-particle chunk of frame `k` checked to be `n × m` (`None` when the frame and
-/// frame 0 lack it and it is optional).
-fn chunk_of<'i>(
-    path: &Path,
-    index: &'i Index,
+/// Frame `k` of an opened file, with its `n` particles.
+struct FrameData<'a> {
+    path: &'a Path,
+    data: &'a [u8],
+    index: &'a Index,
     k: usize,
     n: usize,
-    name: &str,
-    m: usize,
-    required: bool,
-) -> Result<Option<&'i Entry>, ReadError> {
-    match index.chunk(k, name) {
-        None if required && n > 0 => Err(err(
-            path,
-            0,
-            format!("frame {k} has no `{name}` (and frame 0 has none either)"),
-        )),
-        None => Ok(None),
-        Some(e) if e.n != n || e.m != m => Err(err(
-            path,
-            e.at,
-            format!(
-                "frame {k}: `{name}` is {} × {}, expected {n} × {m} for {n} particles",
-                e.n, e.m
-            ),
-        )),
-        Some(e) => Ok(Some(e)),
-    }
 }
 
-/// The type names of frame `k`: `particles/types` (N names of M characters), or one
-/// type `A`.
-fn type_names(path: &Path, data: &[u8], index: &Index, k: usize) -> Result<Vec<String>, ReadError> {
-    let names: Vec<String> = match index.chunk(k, "particles/types") {
-        Some(e) if matches!(e.ty, Ty::I8 | Ty::U8 | Ty::Char) => data
-            [e.location..e.location + e.n * e.m]
-            .chunks(e.m.max(1))
-            .map(|s| {
-                let end = s.iter().position(|&b| b == 0).unwrap_or(s.len());
-                String::from_utf8_lossy(&s[..end]).into_owned()
-            })
-            .collect(),
-        Some(e) => return Err(err(path, e.at, "`particles/types` is not text")),
-        None => vec!["A".to_string()],
-    };
-    if names.is_empty() || names.len() > 1 << 16 {
-        return Err(err(
+impl<'a> FrameData<'a> {
+    fn new(path: &'a Path, data: &'a [u8], index: &'a Index, k: usize) -> Result<Self, ReadError> {
+        let n = index.particles(path, data, k)?;
+        Ok(FrameData {
             path,
-            0,
-            format!(
-                "frame {k}: {} particle types (1 to 65536 allowed)",
-                names.len()
-            ),
-        ));
+            data,
+            index,
+            k,
+            n,
+        })
     }
-    Ok(names)
-}
 
-/// The type ids of particles `range` of frame `k` (all type 0 without `particles/typeid`).
-fn type_ids(
-    path: &Path,
-    data: &[u8],
-    index: &Index,
-    k: usize,
-    n: usize,
-    range: Range<usize>,
-    count: usize,
-) -> Result<Vec<u16>, ReadError> {
-    let mut species_index = vec![0u16; range.len()];
-    if let Some(e) = chunk_of(path, index, k, n, "particles/typeid", 1, false)? {
-        let bytes = &data[e.location..e.location + n * e.ty.size()];
-        let first = range.start;
-        let bad = species_index
-            .par_iter_mut()
-            .enumerate()
-            .find_map_first(|(j, s)| {
-                let t = e.ty.get(bytes, first + j);
-                if t >= 0.0 && (t as usize) < count && t.fract() == 0.0 {
-                    *s = t as u16;
-                    None
-                } else {
-                    Some((first + j, t))
-                }
-            });
-        if let Some((i, t)) = bad {
-            return Err(err(
+    /// A per-particle chunk checked to be `n × m` (`None` when the frame and frame 0
+    /// lack it and it is optional).
+    fn chunk(&self, name: &str, m: usize, required: bool) -> Result<Option<&'a Entry>, ReadError> {
+        let (path, k, n) = (self.path, self.k, self.n);
+        match self.index.chunk(k, name) {
+            None if required && n > 0 => Err(err(
                 path,
-                e.location + i * e.ty.size(),
-                format!("frame {k}: particle {i} has type id {t}, but there are {count} types"),
+                0,
+                format!("frame {k} has no `{name}` (and frame 0 has none either)"),
+            )),
+            None => Ok(None),
+            Some(e) if e.n != n || e.m != m => Err(err(
+                path,
+                e.at,
+                format!(
+                    "frame {k}: `{name}` is {} × {}, expected {n} × {m} for {n} particles",
+                    e.n, e.m
+                ),
+            )),
+            Some(e) => Ok(Some(e)),
+        }
+    }
+
+    /// The type names: `particles/types` (N names of M characters), or one type `A`.
+    fn type_names(&self) -> Result<Vec<String>, ReadError> {
+        let names: Vec<String> = match self.index.chunk(self.k, "particles/types") {
+            Some(e) if matches!(e.ty, Ty::I8 | Ty::U8 | Ty::Char) => self.data
+                [e.location..e.location + e.n * e.m]
+                .chunks(e.m.max(1))
+                .map(|s| {
+                    let end = s.iter().position(|&b| b == 0).unwrap_or(s.len());
+                    String::from_utf8_lossy(&s[..end]).into_owned()
+                })
+                .collect(),
+            Some(e) => return Err(err(self.path, e.at, "`particles/types` is not text")),
+            None => vec!["A".to_string()],
+        };
+        if names.is_empty() || names.len() > 1 << 16 {
+            return Err(err(
+                self.path,
+                0,
+                format!(
+                    "frame {}: {} particle types (1 to 65536 allowed)",
+                    self.k,
+                    names.len()
+                ),
             ));
         }
+        Ok(names)
     }
-    Ok(species_index)
-}
 
-/// The species of particles `range` of frame `k`: every type, in the file's order, with
-/// the radius half the mean diameter of the type's particles in the range (default
-/// diameter 1).
-#[allow(clippy::too_many_arguments)]
-fn species_of(
-    path: &Path,
-    data: &[u8],
-    index: &Index,
-    k: usize,
-    n: usize,
-    range: Range<usize>,
-    names: &[String],
-    species_index: &[u16],
-) -> Result<Vec<SpeciesName>, ReadError> {
-    let mut sum = vec![0f64; names.len()];
-    let mut count = vec![0u64; names.len()];
-    if let Some(e) = chunk_of(path, index, k, n, "particles/diameter", 1, false)? {
-        let bytes = &data[e.location..e.location + n * e.ty.size()];
-        for (j, &s) in species_index.iter().enumerate() {
-            let i = range.start + j;
-            let d = e.ty.get(bytes, i);
-            if !(d.is_finite() && d > 0.0) {
+    /// The type ids of particles `range` (all 0 without `particles/typeid`).
+    fn type_ids(&self, range: Range<usize>, count: usize) -> Result<Vec<u16>, ReadError> {
+        let mut species_index = vec![0u16; range.len()];
+        if let Some(e) = self.chunk("particles/typeid", 1, false)? {
+            let bytes = &self.data[e.location..e.location + self.n * e.ty.size()];
+            let first = range.start;
+            let bad = species_index
+                .par_iter_mut()
+                .enumerate()
+                .find_map_first(|(j, s)| {
+                    let t = e.ty.get(bytes, first + j);
+                    if t >= 0.0 && (t as usize) < count && t.fract() == 0.0 {
+                        *s = t as u16;
+                        None
+                    } else {
+                        Some((first + j, t))
+                    }
+                });
+            if let Some((i, t)) = bad {
                 return Err(err(
-                    path,
+                    self.path,
                     e.location + i * e.ty.size(),
-                    format!("frame {k}: particle {i} has diameter {d}"),
+                    format!(
+                        "frame {}: particle {i} has type id {t}, but there are {count} types",
+                        self.k
+                    ),
                 ));
             }
-            sum[usize::from(s)] += d;
-            count[usize::from(s)] += 1;
         }
+        Ok(species_index)
     }
-    Ok(names
-        .iter()
-        .enumerate()
-        .map(|(t, name)| SpeciesName {
-            name: name.clone(),
-            numeric_type: false,
-            radius: Some(if count[t] > 0 {
-                (0.5 * sum[t] / count[t] as f64) as f32
-            } else {
-                0.5
-            }),
-        })
-        .collect())
+
+    /// The species of particles `range` (type ids `ids`): every type, in the file's
+    /// order, with the radius half the mean diameter of the type's particles in the range
+    /// (default diameter 1).
+    fn species(
+        &self,
+        range: Range<usize>,
+        names: &[String],
+        ids: &[u16],
+    ) -> Result<Vec<SpeciesName>, ReadError> {
+        let mut sum = vec![0f64; names.len()];
+        let mut count = vec![0u64; names.len()];
+        if let Some(e) = self.chunk("particles/diameter", 1, false)? {
+            let bytes = &self.data[e.location..e.location + self.n * e.ty.size()];
+            for (j, &s) in ids.iter().enumerate() {
+                let i = range.start + j;
+                let d = e.ty.get(bytes, i);
+                if !(d.is_finite() && d > 0.0) {
+                    return Err(err(
+                        self.path,
+                        e.location + i * e.ty.size(),
+                        format!("frame {}: particle {i} has diameter {d}", self.k),
+                    ));
+                }
+                sum[usize::from(s)] += d;
+                count[usize::from(s)] += 1;
+            }
+        }
+        Ok(names
+            .iter()
+            .enumerate()
+            .map(|(t, name)| SpeciesName {
+                name: name.clone(),
+                numeric_type: false,
+                radius: Some(if count[t] > 0 {
+                    (0.5 * sum[t] / count[t] as f64) as f32
+                } else {
+                    0.5
+                }),
+            })
+            .collect())
+    }
 }
 
 /// The species of frame `k` as [`read_frame`] lists them (radii from the whole frame's
@@ -535,10 +540,10 @@ pub(crate) fn frame_species(
     index: &Index,
     k: usize,
 ) -> Result<Vec<SpeciesName>, ReadError> {
-    let n = index.particles(path, data, k)?;
-    let names = type_names(path, data, index, k)?;
-    let ids = type_ids(path, data, index, k, n, 0..n, names.len())?;
-    species_of(path, data, index, k, n, 0..n, &names, &ids)
+    let f = FrameData::new(path, data, index, k)?;
+    let names = f.type_names()?;
+    let ids = f.type_ids(0..f.n, names.len())?;
+    f.species(0..f.n, &names, &ids)
 }
 
 /// Reads particles `range` of frame `k` as a frame of their own: every type listed, radii
@@ -552,12 +557,13 @@ pub(crate) fn read_range(
     range: Range<usize>,
     progress: &dyn Progress,
 ) -> Result<Frame, ReadError> {
-    let n = index.particles(path, data, k)?;
+    let f = FrameData::new(path, data, index, k)?;
+    let n = f.n;
     let first = range.start;
     let len = range.len();
     progress.stage(&format!("reading frame {k}"), Some(len as u64), "particles");
     let mut positions = vec![[0f32; 3]; len];
-    if let Some(e) = chunk_of(path, index, k, n, "particles/position", 3, true)? {
+    if let Some(e) = f.chunk("particles/position", 3, true)? {
         if !matches!(e.ty, Ty::F32 | Ty::F64) {
             return Err(err(
                 path,
@@ -580,18 +586,9 @@ pub(crate) fn read_range(
                 })?;
     }
     progress.advance(len as u64);
-    let names = type_names(path, data, index, k)?;
-    let species_index = type_ids(path, data, index, k, n, range.clone(), names.len())?;
-    let species = species_of(
-        path,
-        data,
-        index,
-        k,
-        n,
-        range.clone(),
-        &names,
-        &species_index,
-    )?;
+    let names = f.type_names()?;
+    let species_index = f.type_ids(range.clone(), names.len())?;
+    let species = f.species(range.clone(), &names, &species_index)?;
 
     let attribute = match &opts.attribute {
         None => None,
@@ -601,7 +598,7 @@ pub(crate) fn read_range(
             } else {
                 format!("particles/{name}")
             };
-            let Some(e) = chunk_of(path, index, k, n, &full, 1, false)? else {
+            let Some(e) = f.chunk(&full, 1, false)? else {
                 let available = frame_info(path, data, index, k)?.columns.join(" ");
                 return Err(err(
                     path,

@@ -97,11 +97,6 @@ impl DensityPass {
             label: Some("density.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("density splat"),
-            bind_group_layouts: &[Some(points_layout), Some(&slicing_layout)],
-            immediate_size: 0,
-        });
         let add = wgpu::BlendComponent {
             src_factor: wgpu::BlendFactor::One,
             dst_factor: wgpu::BlendFactor::One,
@@ -115,30 +110,48 @@ impl DensityPass {
             }),
             write_mask: wgpu::ColorWrites::ALL,
         });
-        let splat = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("density splat"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_splat"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_splat"),
-                compilation_options: Default::default(),
-                targets: &[target.clone(), target.clone()],
-            }),
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleStrip,
-                ..Default::default()
-            },
-            depth_stencil: None,
-            multisample: Default::default(),
-            multiview_mask: None,
-            cache: None,
-        });
+        // Both passes draw every point's support box (`vs_splat`) into additively
+        // blended float targets.
+        let pipeline = |label: &str,
+                        groups: &[Option<&wgpu::BindGroupLayout>],
+                        fragment: &str,
+                        targets: &[Option<wgpu::ColorTargetState>]| {
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: groups,
+                immediate_size: 0,
+            });
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_splat"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(fragment),
+                    compilation_options: Default::default(),
+                    targets,
+                }),
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleStrip,
+                    ..Default::default()
+                },
+                depth_stencil: None,
+                multisample: Default::default(),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let splat = pipeline(
+            "density splat",
+            &[Some(points_layout), Some(&slicing_layout)],
+            "fs_splat",
+            &[target.clone(), target.clone()],
+        );
         let hits_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("density hits"),
             entries: &[wgpu::BindGroupLayoutEntry {
@@ -152,39 +165,16 @@ impl DensityPass {
                 count: None,
             }],
         });
-        let colour_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("density colour"),
-            bind_group_layouts: &[
+        let colour = pipeline(
+            "density colour",
+            &[
                 Some(points_layout),
                 Some(&slicing_layout),
                 Some(&hits_layout),
             ],
-            immediate_size: 0,
-        });
-        let colour = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("density colour"),
-            layout: Some(&colour_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_splat"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_colour"),
-                compilation_options: Default::default(),
-                targets: &[target],
-            }),
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleStrip,
-                ..Default::default()
-            },
-            depth_stencil: None,
-            multisample: Default::default(),
-            multiview_mask: None,
-            cache: None,
-        });
+            "fs_colour",
+            &[target],
+        );
         let texture = |binding| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
