@@ -11,9 +11,9 @@ use mdlod_preprocess::species::parse_radius_override;
 
 use crate::progress::Bar;
 
-/// Convert one frame of a particle dump (LAMMPS text or binary, `%` piece sets, GSD, XYZ,
-/// extended XYZ, raw arrays with a .raw.json sidecar; .gz too) into a level-of-detail
-/// .mdlod file.
+/// Convert one frame of a particle dump (LAMMPS text or binary, `%` piece sets, GSD,
+/// MegaMol MMPLD, XYZ, extended XYZ, raw arrays with a .raw.json sidecar; .gz too) into a
+/// level-of-detail .mdlod file.
 #[derive(clap::Args)]
 #[command(
     after_help = "Example:\n  mdlod convert dump.lammpstrj.gz -o frame.mdlod --last --radius Cu=1.28 --attribute c_pe"

@@ -35,6 +35,7 @@
 //!   Errors name the byte offset instead of a line.
 //! - **GSD** (HOOMD-blue, `hoomd` schema, file layers 1.x and 2.x): see `gsd.rs`.
 //! - **Raw arrays** described by a JSON sidecar (`*.raw.json`): see `raw.rs`.
+//! - **MegaMol MMPLD** particle lists (`.mmpld`, versions 1.0-1.3): see `mmpld.rs`.
 //! - **Per-processor pieces**: a LAMMPS file name with `%` opens all its pieces as one
 //!   dump (see `pieces.rs`).
 //! - Files are memory-mapped; gzip files (single or multi-member) are decompressed into
@@ -45,6 +46,7 @@ mod float;
 mod gsd;
 mod lammps_binary;
 mod lammps_text;
+mod mmpld;
 mod pieces;
 mod raw;
 mod xyz;
@@ -160,6 +162,8 @@ pub enum InputFormat {
     Gsd,
     /// Raw binary arrays described by a JSON sidecar (`*.raw.json`).
     Raw,
+    /// MegaMol particle lists (`.mmpld`, versions 1.0 to 1.3).
+    Mmpld,
 }
 
 impl InputFormat {
@@ -180,6 +184,8 @@ impl InputFormat {
             Some(InputFormat::Gsd)
         } else if name.ends_with(".raw.json") {
             Some(InputFormat::Raw)
+        } else if name.ends_with(".mmpld") {
+            Some(InputFormat::Mmpld)
         } else if name.ends_with(".lammpstrj")
             || name.ends_with(".dump")
             || name.ends_with(".lammps")
@@ -216,6 +222,7 @@ impl fmt::Display for InputFormat {
             InputFormat::LammpsBinary => "LAMMPS binary dump",
             InputFormat::Gsd => "GSD",
             InputFormat::Raw => "raw arrays with a JSON sidecar",
+            InputFormat::Mmpld => "MegaMol MMPLD",
         })
     }
 }
@@ -265,6 +272,7 @@ enum Index {
     /// Per-processor pieces of one dump (a file name with `%`).
     Pieces(Vec<DumpFile>),
     Raw(Box<raw::Index>),
+    Mmpld(mmpld::Index),
 }
 
 /// An opened dump file and its frame index.
@@ -348,6 +356,7 @@ impl DumpFile {
             .or_else(|| InputFormat::from_path(path))
             .or_else(|| lammps_binary::sniff(data).then_some(InputFormat::LammpsBinary))
             .or_else(|| gsd::sniff(data).then_some(InputFormat::Gsd))
+            .or_else(|| mmpld::sniff(data).then_some(InputFormat::Mmpld))
             .or_else(|| InputFormat::sniff(data))
             .ok_or_else(|| {
                 let mut cursor = Cursor::new(data, 0);
@@ -373,6 +382,7 @@ impl DumpFile {
             }
             InputFormat::Gsd => Index::Gsd(gsd::Index::build(path, data)?),
             InputFormat::Raw => Index::Raw(Box::new(raw::Index::build(path, data)?)),
+            InputFormat::Mmpld => Index::Mmpld(mmpld::Index::build(path, data)?),
         };
         progress.advance(data.len() as u64);
         progress.finish_stage();
@@ -407,6 +417,7 @@ impl DumpFile {
             Index::Gsd(i) => i.len(),
             Index::Pieces(p) => p[0].frame_count(),
             Index::Raw(_) => 1,
+            Index::Mmpld(i) => i.len(),
         }
     }
 
@@ -420,6 +431,7 @@ impl DumpFile {
             Index::Gsd(i) => i.timestep(self.bytes(), k),
             Index::Pieces(p) => p[0].frame_timestep(k),
             Index::Raw(r) => (k == 0).then(|| r.timestep()).flatten(),
+            Index::Mmpld(i) => (k < i.len()).then_some(k as u64),
         }
     }
 
@@ -436,6 +448,10 @@ impl DumpFile {
         if let Index::Raw(r) = &self.index {
             self.check_frame(k)?;
             return Ok(r.frame_info());
+        }
+        if let Index::Mmpld(i) = &self.index {
+            self.check_frame(k)?;
+            return Ok(mmpld::frame_info(i, k));
         }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
@@ -464,7 +480,7 @@ impl DumpFile {
     pub fn reads_parts(&self) -> bool {
         matches!(
             self.index,
-            Index::Raw(_) | Index::LammpsBinary(_) | Index::Gsd(_)
+            Index::Raw(_) | Index::LammpsBinary(_) | Index::Gsd(_) | Index::Mmpld(_)
         )
     }
 
@@ -487,6 +503,7 @@ impl DumpFile {
         self.check_frame(k)?;
         match &self.index {
             Index::Gsd(i) => gsd::frame_species(&self.path, self.bytes(), i, k).map(Some),
+            Index::Mmpld(i) => mmpld::frame_species(&self.path, self.bytes(), i, k).map(Some),
             _ => Ok(None),
         }
     }
@@ -524,6 +541,9 @@ impl DumpFile {
                 progress,
             ),
             Index::Gsd(i) => gsd::read_range(&self.path, self.bytes(), i, k, opts, range, progress),
+            Index::Mmpld(i) => {
+                mmpld::read_range(&self.path, self.bytes(), i, k, opts, range, progress)
+            }
             _ => Err(ReadError::Binary {
                 path: self.path.clone(),
                 offset: 0,
@@ -556,6 +576,10 @@ impl DumpFile {
         if let Index::Raw(r) = &self.index {
             self.check_frame(k)?;
             return r.read_frame(opts, progress);
+        }
+        if let Index::Mmpld(i) = &self.index {
+            self.check_frame(k)?;
+            return mmpld::read_frame(&self.path, self.bytes(), i, k, opts, progress);
         }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
@@ -736,13 +760,15 @@ impl DumpFile {
         match &self.index {
             Index::Lammps(i) => i.header(&ctx, k),
             Index::Xyz(i) => i.header(&ctx, k),
-            Index::LammpsBinary(_) | Index::Gsd(_) | Index::Pieces(_) | Index::Raw(_) => {
-                Err(ReadError::Binary {
-                    path: self.path.clone(),
-                    offset: 0,
-                    message: "internal error: text header of a binary dump".into(),
-                })
-            }
+            Index::LammpsBinary(_)
+            | Index::Gsd(_)
+            | Index::Pieces(_)
+            | Index::Raw(_)
+            | Index::Mmpld(_) => Err(ReadError::Binary {
+                path: self.path.clone(),
+                offset: 0,
+                message: "internal error: text header of a binary dump".into(),
+            }),
         }
     }
 }

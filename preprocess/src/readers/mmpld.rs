@@ -1,0 +1,566 @@
+//! MegaMol particle list files (MMPLD, versions 1.0 to 1.3), so that MegaMol users can
+//! bring their data over.
+//!
+//! Layout (little-endian throughout):
+//! - a 60-byte header: `MMPLD\0`, the version as `100 · major + minor` (u16), the frame
+//!   count (u32), the data's bounding box and a clipping box (6 f32 each, lower corner
+//!   then upper);
+//! - a seek table of one u64 byte offset per frame (writers add one more: the end);
+//! - per frame: a timestamp (f32, version 1.2 and later), the number of particle lists
+//!   (i32), and the lists. A list header holds the vertex type (u8: 1 xyz f32, 2 xyzr
+//!   f32, 3 xyz i16, 4 xyz f64), the colour type (u8: 0 none, 1 rgb u8, 2 rgba u8,
+//!   3 intensity f32, 4 rgb f32, 5 rgba f32, 6 rgba u16, 7 intensity f64), the global
+//!   radius (f32, unless the vertices carry radii), the global colour (4 u8, colour type
+//!   0) or the intensity range (2 f32, intensity types), the particle count (u64), and in
+//!   version 1.3 the list's bounding box (6 f32). Interleaved particles follow: position
+//!   (and radius), then colour. Version 1.1 appends a block of cluster information to
+//!   each list (a u32 count and a u64 byte size, then that many bytes), which is skipped.
+//!
+//! How it maps: each list is a species named by its index (`0`, `1`, ..., numeric, so
+//! they sort as numbers), with its global radius, or with the mean of its particles'
+//! radii for `xyzr` lists. The attribute can be `intensity` (intensity lists) or `radius`
+//! (`xyzr` lists); colours are not kept. The frame's time is the timestamp, its timestep
+//! the frame number, its box the file's bounding box. Opening walks every frame's list
+//! headers with checked arithmetic, so counts and offsets that point past the file are
+//! errors naming the byte before any particle is read.
+
+use std::ops::Range;
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use super::{FrameInfo, ReadError, ReadOptions};
+use crate::frame::{Attribute, Frame, SimulationBox, SpeciesName};
+use crate::progress::Progress;
+
+const MAGIC: &[u8; 6] = b"MMPLD\0";
+const HEADER: usize = 60;
+
+pub(crate) fn sniff(data: &[u8]) -> bool {
+    data.starts_with(MAGIC)
+}
+
+fn err(path: &Path, offset: usize, message: impl Into<String>) -> ReadError {
+    ReadError::Binary {
+        path: path.to_path_buf(),
+        offset: offset as u64,
+        message: message.into(),
+    }
+}
+
+/// One particle list of a frame.
+#[derive(Clone, Debug)]
+struct List {
+    /// Byte offset of the list header.
+    at: usize,
+    /// Byte offset of the first particle.
+    data: usize,
+    particles: usize,
+    stride: usize,
+    vertex: u8,
+    colour: u8,
+    /// The global radius (`xyzr` lists: none).
+    radius: Option<f32>,
+}
+
+impl List {
+    fn has_radius(&self) -> bool {
+        self.vertex == 2
+    }
+
+    fn has_intensity(&self) -> bool {
+        matches!(self.colour, 3 | 7)
+    }
+
+    /// Coordinate `c` of particle `i`.
+    fn coordinate(&self, data: &[u8], i: usize, c: usize) -> f64 {
+        let at = self.data + i * self.stride;
+        match self.vertex {
+            3 => f64::from(i16::from_le_bytes(le(data, at + 2 * c))),
+            4 => f64::from_le_bytes(le(data, at + 8 * c)),
+            _ => f64::from(f32::from_le_bytes(le(data, at + 4 * c))),
+        }
+    }
+
+    fn particle_radius(&self, data: &[u8], i: usize) -> f32 {
+        f32::from_le_bytes(le(data, self.data + i * self.stride + 12))
+    }
+
+    fn intensity(&self, data: &[u8], i: usize) -> f64 {
+        let at = self.data + i * self.stride + vertex_size(self.vertex);
+        if self.colour == 7 {
+            f64::from_le_bytes(le(data, at))
+        } else {
+            f64::from(f32::from_le_bytes(le(data, at)))
+        }
+    }
+}
+
+/// `N` bytes at `at` (the index checked every list lies inside the file).
+fn le<const N: usize>(data: &[u8], at: usize) -> [u8; N] {
+    let mut b = [0u8; N];
+    b.copy_from_slice(&data[at..at + N]);
+    b
+}
+
+fn vertex_size(v: u8) -> usize {
+    match v {
+        1 => 12,
+        2 => 16,
+        3 => 6,
+        4 => 24,
+        _ => 0,
+    }
+}
+
+fn colour_size(c: u8) -> Option<usize> {
+    Some(match c {
+        0 => 0,
+        1 => 3,
+        2 => 4,
+        3 => 4,
+        4 => 12,
+        5 => 16,
+        6 => 8,
+        7 => 8,
+        _ => return None,
+    })
+}
+
+#[derive(Clone, Debug)]
+struct FrameIndex {
+    timestamp: Option<f32>,
+    lists: Vec<List>,
+}
+
+/// The frames of an MMPLD file and where their lists are.
+pub(crate) struct Index {
+    bounding_box: [f32; 6],
+    frames: Vec<FrameIndex>,
+}
+
+/// A little-endian reader over the file that turns running off its end into an error.
+struct Cursor<'a> {
+    path: &'a Path,
+    data: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Cursor<'a> {
+    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], ReadError> {
+        match self.data.get(self.at..self.at + N) {
+            Some(b) => {
+                self.at += N;
+                Ok(le(b, 0))
+            }
+            None => Err(err(
+                self.path,
+                self.at,
+                format!("file truncated in {what} ({} bytes)", self.data.len()),
+            )),
+        }
+    }
+}
+
+impl Index {
+    pub fn build(path: &Path, data: &[u8]) -> Result<Index, ReadError> {
+        if !sniff(data) {
+            return Err(err(path, 0, "not an MMPLD file (no `MMPLD` signature)"));
+        }
+        let mut c = Cursor { path, data, at: 6 };
+        let version = u16::from_le_bytes(c.take("the header")?);
+        if !(100..=103).contains(&version) {
+            return Err(err(
+                path,
+                6,
+                format!(
+                    "MMPLD version {}.{} (versions 1.0 to 1.3 are read)",
+                    version / 100,
+                    version % 100
+                ),
+            ));
+        }
+        let frames = u32::from_le_bytes(c.take("the header")?) as usize;
+        let mut bounding_box = [0f32; 6];
+        for v in &mut bounding_box {
+            *v = f32::from_le_bytes(c.take("the header")?);
+        }
+        c.at = HEADER;
+        // The seek table must fit in the file before anything is allocated for it.
+        let table_end = frames
+            .checked_mul(8)
+            .and_then(|b| b.checked_add(HEADER))
+            .filter(|&e| e <= data.len())
+            .ok_or_else(|| {
+                err(
+                    path,
+                    8,
+                    format!("{frames} frames, but the file is too short for their seek table"),
+                )
+            })?;
+        let mut offsets = Vec::with_capacity(frames);
+        for k in 0..frames {
+            let at = c.at;
+            let o = u64::from_le_bytes(c.take("the seek table")?);
+            let o = usize::try_from(o)
+                .ok()
+                .filter(|&o| o >= table_end && o < data.len());
+            match o {
+                Some(o) => offsets.push(o),
+                None => return Err(err(path, at, format!("frame {k} starts outside the file"))),
+            }
+        }
+        let mut out = Vec::with_capacity(frames);
+        for (k, &start) in offsets.iter().enumerate() {
+            let mut c = Cursor {
+                path,
+                data,
+                at: start,
+            };
+            let timestamp = if version >= 102 {
+                Some(f32::from_le_bytes(c.take("a frame header")?))
+            } else {
+                None
+            };
+            let lists_at = c.at;
+            let count = i32::from_le_bytes(c.take("a frame header")?);
+            let count = usize::try_from(count).map_err(|_| {
+                err(
+                    path,
+                    lists_at,
+                    format!("frame {k} has {count} particle lists"),
+                )
+            })?;
+            let mut lists = Vec::new();
+            for l in 0..count {
+                let at = c.at;
+                let [vertex, colour] = c.take::<2>("a list header")?;
+                let vsize = vertex_size(vertex);
+                let csize = colour_size(colour);
+                let Some(csize) = csize.filter(|_| vsize > 0) else {
+                    return Err(err(
+                        path,
+                        at,
+                        format!(
+                            "frame {k}, list {l}: vertex type {vertex} / colour type {colour} \
+                             (positions of type 1 to 4 and colours of type 0 to 7 are read)"
+                        ),
+                    ));
+                };
+                let radius = if vertex == 2 {
+                    None
+                } else {
+                    Some(f32::from_le_bytes(c.take("a list header")?))
+                };
+                match colour {
+                    0 => {
+                        c.take::<4>("a list header")?;
+                    }
+                    3 | 7 => {
+                        c.take::<8>("a list header")?;
+                    }
+                    _ => {}
+                }
+                let count_at = c.at;
+                let particles = u64::from_le_bytes(c.take("a list header")?);
+                if version == 103 {
+                    c.take::<24>("a list header")?;
+                }
+                let stride = vsize + csize;
+                let end = usize::try_from(particles)
+                    .ok()
+                    .and_then(|n| n.checked_mul(stride))
+                    .and_then(|b| b.checked_add(c.at))
+                    .filter(|&e| e <= data.len())
+                    .ok_or_else(|| {
+                        err(
+                            path,
+                            count_at,
+                            format!(
+                                "frame {k}, list {l}: {particles} particles of {stride} bytes \
+                                 run past the end of the file"
+                            ),
+                        )
+                    })?;
+                if let Some(r) = radius.filter(|r| !(r.is_finite() && *r >= 0.0)) {
+                    return Err(err(
+                        path,
+                        at + 2,
+                        format!("frame {k}, list {l}: radius {r}"),
+                    ));
+                }
+                lists.push(List {
+                    at,
+                    data: c.at,
+                    particles: particles as usize,
+                    stride,
+                    vertex,
+                    colour,
+                    radius,
+                });
+                c.at = end;
+                if version == 101 {
+                    // Cluster information, skipped.
+                    c.take::<4>("cluster information")?;
+                    let size_at = c.at;
+                    let size = u64::from_le_bytes(c.take("cluster information")?);
+                    c.at = usize::try_from(size)
+                        .ok()
+                        .and_then(|s| s.checked_add(c.at))
+                        .filter(|&e| e <= data.len())
+                        .ok_or_else(|| {
+                            err(
+                                path,
+                                size_at,
+                                format!("frame {k}, list {l}: {size} bytes of cluster information run past the end of the file"),
+                            )
+                        })?;
+                }
+            }
+            let total = lists
+                .iter()
+                .try_fold(0usize, |t, l| t.checked_add(l.particles));
+            if total.is_none_or(|t| t > u32::MAX as usize) {
+                return Err(err(
+                    path,
+                    start,
+                    format!("frame {k} holds more than 2^32 particles"),
+                ));
+            }
+            out.push(FrameIndex { timestamp, lists });
+        }
+        Ok(Index {
+            bounding_box,
+            frames: out,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    fn particles(&self, k: usize) -> usize {
+        self.frames[k].lists.iter().map(|l| l.particles).sum()
+    }
+
+    fn simulation_box(&self) -> SimulationBox {
+        let b = self.bounding_box.map(f64::from);
+        SimulationBox::orthogonal([b[0], b[1], b[2]], [b[3], b[4], b[5]])
+    }
+}
+
+pub(crate) fn frame_info(index: &Index, k: usize) -> FrameInfo {
+    let f = &index.frames[k];
+    let mut columns: Vec<String> = ["x", "y", "z"].map(String::from).to_vec();
+    if f.lists.iter().any(List::has_radius) {
+        columns.push("radius".into());
+    }
+    if f.lists.iter().any(List::has_intensity) {
+        columns.push("intensity".into());
+    }
+    FrameInfo {
+        particles: index.particles(k),
+        timestep: Some(k as u64),
+        time: f.timestamp.map(f64::from),
+        units: None,
+        simulation_box: Some(index.simulation_box()),
+        columns,
+    }
+}
+
+/// The species of particles `range` of frame `k`: one per list, with its global radius,
+/// or for `xyzr` lists the mean radius of its particles in the range.
+fn species_of(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+    range: Range<usize>,
+) -> Result<Vec<SpeciesName>, ReadError> {
+    let mut first = 0usize;
+    index.frames[k]
+        .lists
+        .iter()
+        .enumerate()
+        .map(|(l, list)| {
+            let lo = range.start.max(first).min(first + list.particles) - first;
+            let hi = range.end.max(first).min(first + list.particles) - first;
+            first += list.particles;
+            let radius = match list.radius {
+                Some(r) => r,
+                None => {
+                    let mut sum = 0f64;
+                    for i in lo..hi {
+                        let r = list.particle_radius(data, i);
+                        if !(r.is_finite() && r >= 0.0) {
+                            return Err(err(
+                                path,
+                                list.data + i * list.stride + 12,
+                                format!("frame {k}, list {l}: particle {i} has radius {r}"),
+                            ));
+                        }
+                        sum += f64::from(r);
+                    }
+                    if hi > lo {
+                        (sum / (hi - lo) as f64) as f32
+                    } else {
+                        0.5
+                    }
+                }
+            };
+            Ok(SpeciesName {
+                name: l.to_string(),
+                numeric_type: true,
+                radius: Some(radius),
+            })
+        })
+        .collect()
+}
+
+/// The species of frame `k` as [`read_frame`] lists them (radii of `xyzr` lists averaged
+/// over the whole list): what every part read by [`read_range`] takes, so that a frame
+/// read in parts converts as the whole one does.
+pub(crate) fn frame_species(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+) -> Result<Vec<SpeciesName>, ReadError> {
+    species_of(path, data, index, k, 0..index.particles(k))
+}
+
+/// Reads frame `k` whole.
+pub(crate) fn read_frame(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+    opts: &ReadOptions,
+    progress: &dyn Progress,
+) -> Result<Frame, ReadError> {
+    read_range(path, data, index, k, opts, 0..index.particles(k), progress)
+}
+
+/// Reads particles `range` of frame `k` (the lists one after another) as a frame of its
+/// own: every list a species, `xyzr` lists with the mean radius of their particles in the
+/// range (see [`frame_species`] for the whole frame's).
+pub(crate) fn read_range(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+    opts: &ReadOptions,
+    range: Range<usize>,
+    progress: &dyn Progress,
+) -> Result<Frame, ReadError> {
+    let f = &index.frames[k];
+    let want = match opts.attribute.as_deref() {
+        None => None,
+        Some(a @ ("intensity" | "radius")) => Some(a),
+        Some(other) => {
+            return Err(err(
+                path,
+                0,
+                format!(
+                    "no per-particle `{other}` in MMPLD; available: {}",
+                    frame_info(index, k).columns.join(" ")
+                ),
+            ))
+        }
+    };
+    if f.lists.len() > 1 << 16 {
+        return Err(err(
+            path,
+            f.lists.first().map_or(0, |l| l.at),
+            format!(
+                "frame {k} has {} lists (at most 65536 species)",
+                f.lists.len()
+            ),
+        ));
+    }
+    progress.stage(
+        &format!("reading frame {k}"),
+        Some(range.len() as u64),
+        "particles",
+    );
+    let mut positions = Vec::with_capacity(range.len());
+    let mut species_index = Vec::with_capacity(range.len());
+    let mut values = Vec::new();
+    let mut first = 0usize;
+    for (l, list) in f.lists.iter().enumerate() {
+        let lo = range.start.max(first);
+        let hi = range.end.min(first + list.particles);
+        first += list.particles;
+        if lo >= hi {
+            continue;
+        }
+        let local = lo - (first - list.particles)..hi - (first - list.particles);
+        let part = super::decode_positions(
+            local.len(),
+            |i, c| (local.start + i) * 3 + c,
+            |j| list.coordinate(data, j / 3, j % 3),
+        )
+        .map_err(|j| {
+            err(
+                path,
+                list.data + (j / 3) * list.stride,
+                format!(
+                    "frame {k}, list {l}: particle {} has a position that is not finite",
+                    j / 3
+                ),
+            )
+        })?;
+        positions.extend(part);
+        species_index.extend(std::iter::repeat_n(l as u16, local.len()));
+        if let Some(a) = want {
+            let ok = if a == "radius" {
+                list.has_radius()
+            } else {
+                list.has_intensity()
+            };
+            if !ok {
+                return Err(err(
+                    path,
+                    list.at,
+                    format!("frame {k}, list {l} has no per-particle `{a}`"),
+                ));
+            }
+            let v: Vec<f32> = local
+                .clone()
+                .into_par_iter()
+                .map(|i| {
+                    if a == "radius" {
+                        list.particle_radius(data, i)
+                    } else {
+                        list.intensity(data, i) as f32
+                    }
+                })
+                .collect();
+            if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+                let i = local.start + j;
+                return Err(err(
+                    path,
+                    list.data + i * list.stride,
+                    format!("frame {k}, list {l}: `{a}` of particle {i} is not finite"),
+                ));
+            }
+            values.extend(v);
+        }
+    }
+    let species = species_of(path, data, index, k, range.clone())?;
+    progress.advance(range.len() as u64);
+    progress.finish_stage();
+    Ok(Frame {
+        positions,
+        species_index,
+        species,
+        attribute: want.map(|a| Attribute {
+            name: a.to_string(),
+            values,
+        }),
+        simulation_box: Some(index.simulation_box()),
+        timestep: Some(k as u64),
+        time: f.timestamp.map(f64::from),
+        units: None,
+    })
+}

@@ -1,0 +1,400 @@
+//! MegaMol MMPLD reading, on files written here to the format's layout (versions 1.0 to
+//! 1.3, every vertex and colour type): positions, species and radii per list, the
+//! `intensity` and `radius` attributes, frames and their timestamps, reading in parts,
+//! conversion, and damaged files. (No MegaMol is at hand to write files of its own.)
+
+use std::path::{Path, PathBuf};
+
+use mdlod_format::MdlodFile;
+use mdlod_preprocess::convert::{convert_file, ConvertOptions, FrameSelect};
+use mdlod_preprocess::readers::{DumpFile, InputFormat, ReadOptions};
+use mdlod_preprocess::NoProgress;
+
+/// One particle list: vertex type, colour type, global radius, and per particle the
+/// position, radius (`xyzr`) and intensity (intensity colours).
+struct List {
+    vertex: u8,
+    colour: u8,
+    radius: f32,
+    particles: Vec<([f64; 3], f32, f64)>,
+}
+
+fn list(vertex: u8, colour: u8, radius: f32, n: usize, seed: f64) -> List {
+    List {
+        vertex,
+        colour,
+        radius,
+        particles: (0..n)
+            .map(|i| {
+                let t = i as f64 + seed;
+                (
+                    [(t * 1.7) % 9.0, (t * 2.3) % 7.0, (t * 0.9) % 5.0].map(|v| v.round()),
+                    0.5 + (i % 3) as f32 * 0.25,
+                    t * 0.125,
+                )
+            })
+            .collect(),
+    }
+}
+
+/// An MMPLD file of `frames` as the format lays it out (with the seek table's end entry
+/// writers add, and cluster information in version 1.1).
+fn write(version: u16, frames: &[Vec<List>]) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend_from_slice(b"MMPLD\0");
+    out.extend_from_slice(&version.to_le_bytes());
+    out.extend_from_slice(&(frames.len() as u32).to_le_bytes());
+    for v in [-1.0f32, -1.0, -1.0, 10.0, 8.0, 6.0] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    for v in [-2.0f32, -2.0, -2.0, 11.0, 9.0, 7.0] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    let table = out.len();
+    out.resize(table + 8 * (frames.len() + 1), 0);
+    for (k, lists) in frames.iter().enumerate() {
+        let at = out.len() as u64;
+        out[table + 8 * k..table + 8 * k + 8].copy_from_slice(&at.to_le_bytes());
+        if version >= 102 {
+            out.extend_from_slice(&(0.5 * k as f32).to_le_bytes());
+        }
+        out.extend_from_slice(&(lists.len() as i32).to_le_bytes());
+        for l in lists {
+            out.extend_from_slice(&[l.vertex, l.colour]);
+            if l.vertex != 2 {
+                out.extend_from_slice(&l.radius.to_le_bytes());
+            }
+            match l.colour {
+                0 => out.extend_from_slice(&[200, 100, 50, 255]),
+                3 | 7 => {
+                    out.extend_from_slice(&0f32.to_le_bytes());
+                    out.extend_from_slice(&100f32.to_le_bytes());
+                }
+                _ => {}
+            }
+            out.extend_from_slice(&(l.particles.len() as u64).to_le_bytes());
+            if version == 103 {
+                for v in [0f32, 0.0, 0.0, 9.0, 7.0, 5.0] {
+                    out.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            for &(p, r, intensity) in &l.particles {
+                match l.vertex {
+                    1 | 2 => p
+                        .iter()
+                        .for_each(|&v| out.extend_from_slice(&(v as f32).to_le_bytes())),
+                    3 => p
+                        .iter()
+                        .for_each(|&v| out.extend_from_slice(&(v as i16).to_le_bytes())),
+                    _ => p
+                        .iter()
+                        .for_each(|&v| out.extend_from_slice(&v.to_le_bytes())),
+                }
+                if l.vertex == 2 {
+                    out.extend_from_slice(&r.to_le_bytes());
+                }
+                match l.colour {
+                    1 => out.extend_from_slice(&[1, 2, 3]),
+                    2 => out.extend_from_slice(&[1, 2, 3, 4]),
+                    3 => out.extend_from_slice(&(intensity as f32).to_le_bytes()),
+                    4 => (0..3).for_each(|_| out.extend_from_slice(&0.5f32.to_le_bytes())),
+                    5 => (0..4).for_each(|_| out.extend_from_slice(&0.5f32.to_le_bytes())),
+                    6 => (0..4).for_each(|_| out.extend_from_slice(&7u16.to_le_bytes())),
+                    7 => out.extend_from_slice(&intensity.to_le_bytes()),
+                    _ => {}
+                }
+            }
+            if version == 101 {
+                out.extend_from_slice(&2u32.to_le_bytes());
+                out.extend_from_slice(&5u64.to_le_bytes());
+                out.extend_from_slice(&[9; 5]);
+            }
+        }
+    }
+    let end = out.len() as u64;
+    let k = frames.len();
+    out[table + 8 * k..table + 8 * k + 8].copy_from_slice(&end.to_le_bytes());
+    out
+}
+
+fn save(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// Every vertex type with the colour types around it, in two frames.
+fn mixed() -> Vec<Vec<List>> {
+    (0..2)
+        .map(|k| {
+            vec![
+                list(1, 0, 1.25, 40, k as f64),
+                list(2, 3, 0.0, 30, 3.0 + k as f64),
+                list(3, 2, 0.5, 20, 5.0),
+                list(4, 5, 2.0, 10, 7.0),
+                list(1, 1, 1.0, 5, 1.0),
+                list(1, 4, 1.0, 5, 2.0),
+                list(4, 6, 1.0, 5, 3.0),
+                list(3, 7, 1.0, 5, 4.0),
+            ]
+        })
+        .collect()
+}
+
+#[test]
+fn every_version_and_type_reads_positions_species_and_radii() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = mixed();
+    for version in [100u16, 101, 102, 103] {
+        let path = save(
+            dir.path(),
+            &format!("v{version}.mmpld"),
+            &write(version, &frames),
+        );
+        let dump = DumpFile::open(&path).unwrap();
+        assert_eq!(dump.format(), InputFormat::Mmpld);
+        assert_eq!(dump.frame_count(), 2);
+        assert!(dump.reads_parts());
+        for k in 0..2 {
+            let info = dump.frame_info(k).unwrap();
+            assert_eq!(info.particles, 120);
+            assert_eq!(info.timestep, Some(k as u64));
+            assert_eq!(info.time, (version >= 102).then_some(0.5 * k as f64));
+            assert_eq!(info.columns, ["x", "y", "z", "radius", "intensity"]);
+            let f = dump
+                .read_frame(k, &ReadOptions::default(), &NoProgress)
+                .unwrap();
+            let expected: Vec<[f32; 3]> = frames[k]
+                .iter()
+                .flat_map(|l| l.particles.iter().map(|p| p.0.map(|v| v as f32)))
+                .collect();
+            assert_eq!(f.positions, expected, "version {version}, frame {k}");
+            let ids: Vec<u16> = frames[k]
+                .iter()
+                .enumerate()
+                .flat_map(|(l, list)| std::iter::repeat_n(l as u16, list.particles.len()))
+                .collect();
+            assert_eq!(f.species_index, ids);
+            let radii: Vec<f32> = f.species.iter().map(|s| s.radius.unwrap()).collect();
+            // The xyzr list: its particles' mean radius (0.5, 0.75, 1.0 repeating).
+            let mean = frames[k][1].particles.iter().map(|p| p.1).sum::<f32>() / 30.0;
+            assert_eq!(radii, [1.25, mean, 0.5, 2.0, 1.0, 1.0, 1.0, 1.0]);
+            let names: Vec<&str> = f.species.iter().map(|s| s.name.as_str()).collect();
+            assert_eq!(names, ["0", "1", "2", "3", "4", "5", "6", "7"]);
+            let b = f.simulation_box.unwrap();
+            assert_eq!(
+                (b.origin, b.a[0], b.b[1], b.c[2]),
+                ([-1.0; 3], 11.0, 9.0, 7.0)
+            );
+        }
+    }
+}
+
+#[test]
+fn intensity_and_radius_attributes_come_from_the_lists_that_carry_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = vec![vec![list(1, 3, 1.0, 12, 0.0), list(4, 7, 1.0, 8, 1.0)]];
+    let path = save(dir.path(), "i.mmpld", &write(103, &frames));
+    let dump = DumpFile::open(&path).unwrap();
+    let read = |a: &str| {
+        dump.read_frame(
+            0,
+            &ReadOptions {
+                attribute: Some(a.into()),
+                ..Default::default()
+            },
+            &NoProgress,
+        )
+    };
+    let f = read("intensity").unwrap();
+    let a = f.attribute.unwrap();
+    let expected: Vec<f32> = frames[0]
+        .iter()
+        .flat_map(|l| l.particles.iter().map(|p| p.2 as f32))
+        .collect();
+    assert_eq!((a.name.as_str(), a.values), ("intensity", expected));
+    let e = read("radius").unwrap_err().to_string();
+    assert!(e.contains("list 0 has no per-particle `radius`"), "{e}");
+    let e = read("c_pe").unwrap_err().to_string();
+    assert!(e.contains("available: x y z intensity"), "{e}");
+
+    let frames = vec![vec![list(2, 0, 0.0, 9, 0.0)]];
+    let path = save(dir.path(), "r.mmpld", &write(100, &frames));
+    let f = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(
+            0,
+            &ReadOptions {
+                attribute: Some("radius".into()),
+                ..Default::default()
+            },
+            &NoProgress,
+        )
+        .unwrap();
+    let r: Vec<f32> = frames[0][0].particles.iter().map(|p| p.1).collect();
+    assert_eq!(f.attribute.unwrap().values, r);
+}
+
+#[test]
+fn parts_concatenate_to_the_frame_and_the_frame_converts() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = save(dir.path(), "m.mmpld", &write(102, &mixed()));
+    let dump = DumpFile::open(&path).unwrap();
+    let whole = dump
+        .read_frame(1, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    // Parts cut across lists.
+    let mut positions = vec![];
+    let mut ids = vec![];
+    for start in (0..120).step_by(17) {
+        let part = dump
+            .read_part(
+                1,
+                &ReadOptions::default(),
+                start..(start + 17).min(120),
+                &NoProgress,
+            )
+            .unwrap();
+        assert_eq!(part.species.len(), 8);
+        positions.extend(part.positions);
+        ids.extend(part.species_index);
+    }
+    assert_eq!((positions, ids), (whole.positions, whole.species_index));
+    // Every part takes the whole frame's radii.
+    assert_eq!(dump.frame_species(1).unwrap(), Some(whole.species.clone()));
+
+    let out = dir.path().join("m.mdlod");
+    convert_file(
+        &path,
+        &out,
+        FrameSelect::Last,
+        &ReadOptions::default(),
+        &ConvertOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    let f = MdlodFile::open(&out).unwrap();
+    f.verify().unwrap();
+    assert_eq!(f.particle_count(), 120);
+    let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
+    let expected: Vec<f32> = whole.species.iter().map(|s| s.radius.unwrap()).collect();
+    assert_eq!(radii, expected);
+}
+
+fn damaged(dir: &Path, bytes: &[u8]) -> String {
+    let path = save(dir, "bad.mmpld", bytes);
+    let msg = match DumpFile::open(&path) {
+        Err(e) => e.to_string(),
+        Ok(d) => (0..d.frame_count())
+            .find_map(|k| d.read_frame(k, &ReadOptions::default(), &NoProgress).err())
+            .map(|e| e.to_string())
+            .unwrap_or_default(),
+    };
+    if !msg.is_empty() {
+        assert!(msg.starts_with(&path.display().to_string()), "{msg}");
+    }
+    msg
+}
+
+#[test]
+fn damaged_files_are_errors_naming_the_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(101, &mixed());
+    // Truncations anywhere: an error naming a byte, never a panic.
+    let mut cut = 1;
+    while cut < good.len() - 8 {
+        let m = damaged(dir.path(), &good[..cut]);
+        assert!(m.contains("byte "), "cut {cut}: {m}");
+        cut += if cut < 200 { 3 } else { 97 };
+    }
+    let patch = |at: usize, bytes: &[u8]| {
+        let mut b = good.clone();
+        b[at..at + bytes.len()].copy_from_slice(bytes);
+        damaged(dir.path(), &b)
+    };
+    assert!(patch(6, &104u16.to_le_bytes()).contains("MMPLD version 1.4"));
+    assert!(patch(8, &u32::MAX.to_le_bytes()).contains("too short for their seek table"));
+    assert!(patch(60, &u64::MAX.to_le_bytes()).contains("frame 0 starts outside the file"));
+    let frame0 = u64::from_le_bytes(good[60..68].try_into().unwrap()) as usize;
+    let m = patch(frame0, &(-3i32).to_le_bytes());
+    assert!(
+        m.contains(&format!("byte {frame0}: frame 0 has -3 particle lists")),
+        "{m}"
+    );
+    let list0 = frame0 + 4;
+    assert!(patch(list0, &[9]).contains("vertex type 9"));
+    assert!(patch(list0 + 1, &[8]).contains("colour type 8"));
+    // Vertex 1, colour 0: radius (4), colour (4), then the count.
+    let m = patch(list0 + 10, &u64::MAX.to_le_bytes());
+    assert!(m.contains("run past the end of the file"), "{m}");
+    assert!(patch(list0 + 2, &f32::NAN.to_le_bytes()).contains("radius NaN"));
+    let first = list0 + 18;
+    let m = patch(first + 4, &f32::NAN.to_le_bytes());
+    assert!(
+        m.contains(&format!(
+            "byte {first}: frame 0, list 0: particle 0 has a position"
+        )),
+        "{m}"
+    );
+    assert!(damaged(dir.path(), b"MMPLE\0abc").contains("not an MMPLD file"));
+}
+
+#[test]
+fn a_frame_larger_than_a_chunk_streams_into_the_file_the_whole_frame_makes() {
+    use mdlod_preprocess::chunked::ChunkOptions;
+    use mdlod_preprocess::convert::{convert_frame, source_info, window_source};
+    let dir = tempfile::tempdir().unwrap();
+    // An xyzr list whose radii differ along it: a window alone would average others.
+    let frames = vec![vec![
+        list(1, 0, 1.0, 150, 0.0),
+        list(2, 3, 0.0, 250, 1.0),
+        list(4, 0, 0.8, 100, 2.0),
+    ]];
+    let path = save(dir.path(), "big.mmpld", &write(103, &frames));
+    let dump = DumpFile::open(&path).unwrap();
+    let info = dump.frame_info(0).unwrap();
+    let read = ReadOptions::default();
+    assert!(window_source(&dump, 0, &read, &info).is_some());
+    let opts = ConvertOptions {
+        build: mdlod_preprocess::hierarchy::BuildParams {
+            max_root_points: 64,
+            ..Default::default()
+        },
+        chunks: ChunkOptions {
+            chunk_points: 120,
+            memory_limit: 1 << 30,
+            temp_dir: None,
+            window_points: 64,
+        },
+        ..Default::default()
+    };
+    let streamed = dir.path().join("streamed.mdlod");
+    convert_file(
+        &path,
+        &streamed,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    let whole = dir.path().join("whole.mdlod");
+    let frame = dump.read_frame(0, &read, &NoProgress).unwrap();
+    convert_frame(
+        &frame,
+        Some(source_info(&path, 0)),
+        &whole,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(std::fs::read(&streamed).unwrap() == std::fs::read(&whole).unwrap());
+    assert_eq!(
+        MdlodFile::open(&streamed)
+            .unwrap()
+            .metadata()
+            .build
+            .chunk_points,
+        Some(120)
+    );
+}
