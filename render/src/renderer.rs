@@ -281,7 +281,7 @@ pub struct DensityFrame {
     pub splatted: u64,
     pub gpu_data_bytes: u64,
     /// Host work before the first GPU pass: decoding, depth-sorting and packing the
-    /// points.
+    /// points, and binding them (uploading a packed cut; a pool's pages are resident).
     pub host_time: std::time::Duration,
 }
 
@@ -1716,11 +1716,11 @@ impl Renderer {
             .first()
             .map_or([0.8; 3], |s| s.colour);
         let albedo = [1.0f32; 3];
-        let host_time = t0.elapsed();
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
             let cut = source.bind(&sorted_draw)?;
+            let host_time = t0.elapsed();
             let buffers = &cut.buffers;
             let aspect = width as f32 / height as f32;
             let uniforms = FrameUniforms::new(
