@@ -72,6 +72,11 @@ pub struct ChunkOptions {
     pub temp_dir: Option<PathBuf>,
     /// Particles read from the input at a time (the file does not depend on it).
     pub window_points: usize,
+    /// Largest gzip input (compressed bytes) decompressed in memory; a larger one is
+    /// decompressed into a working file and read from there a window at a time. `None`:
+    /// an eighth of `memory_limit` (text compresses about 4×, and its text should take
+    /// at most half the limit).
+    pub gzip_in_memory: Option<u64>,
 }
 
 impl Default for ChunkOptions {
@@ -83,12 +88,18 @@ impl Default for ChunkOptions {
             memory_limit: default_memory_limit(),
             temp_dir: None,
             window_points: WINDOW,
+            gzip_in_memory: None,
         }
     }
 }
 
 impl ChunkOptions {
     /// The directory working files go to when writing `output`.
+    /// The largest gzip input decompressed in memory (see [`Self::gzip_in_memory`]).
+    pub fn gzip_in_memory_max(&self) -> u64 {
+        self.gzip_in_memory.unwrap_or(self.memory_limit / 8)
+    }
+
     pub fn temp_dir_for(&self, output: &Path) -> PathBuf {
         match (&self.temp_dir, output.parent()) {
             (Some(d), _) => d.clone(),

@@ -56,6 +56,15 @@ pub enum ConvertError {
     },
     #[error("chunked conversion: {0}")]
     Chunked(String),
+    /// An error in the text a large gzip input was decompressed into (the place is a
+    /// line of that text).
+    #[error("{} (decompressed into {}): {source}", input.display(), text.display())]
+    Decompressed {
+        input: std::path::PathBuf,
+        text: std::path::PathBuf,
+        #[source]
+        source: Box<ConvertError>,
+    },
 }
 
 /// Builds the hierarchy of `frame` and writes it to `output`. `source` describes where
@@ -199,6 +208,49 @@ pub fn convert_file(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
+    // A large gzip input (see `ChunkOptions::gzip_in_memory`) is decompressed into a
+    // working file first, then read a window at a time from there like any uncompressed
+    // dump; smaller ones are decompressed in memory.
+    let compressed = std::fs::metadata(input).map_or(0, |m| m.len());
+    if compressed > options.chunks.gzip_in_memory_max() && crate::readers::is_gzip(input)? {
+        let parent = options.chunks.temp_dir_for(output);
+        let work = tempfile::Builder::new()
+            .prefix(".mdlod-convert-")
+            .tempdir_in(&parent)
+            .map_err(|e| ConvertError::Temp {
+                path: parent.clone(),
+                source: e,
+            })?;
+        let name = input
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let text = work
+            .path()
+            .join(name.strip_suffix(".gz").unwrap_or("input.txt"));
+        crate::readers::gunzip_to_file(input, &text, progress)?;
+        return convert_source(&text, input, output, frame, read, options, progress).map_err(
+            |source| ConvertError::Decompressed {
+                input: input.to_path_buf(),
+                text: text.clone(),
+                source: Box::new(source),
+            },
+        );
+    }
+    convert_source(input, input, output, frame, read, options, progress)
+}
+
+/// [`convert_file`] reading `input`, with `named` (the file the user named) recorded as
+/// the source in the metadata.
+fn convert_source(
+    input: &Path,
+    named: &Path,
+    output: &Path,
+    frame: FrameSelect,
+    read: &crate::readers::ReadOptions,
+    options: &ConvertOptions,
+    progress: &dyn Progress,
+) -> Result<ConvertReport, ConvertError> {
     let dump = crate::readers::DumpFile::open(input)?;
     let k = match frame {
         FrameSelect::Index(k) => k,
@@ -211,7 +263,7 @@ pub fn convert_file(
             drop(dump);
             let metadata = base_metadata(
                 &header_of(&info),
-                Some(source_info(input, k as u64)),
+                Some(source_info(named, k as u64)),
                 options,
             );
             return convert_chunked(source.as_ref(), metadata, output, options, progress);
@@ -225,7 +277,7 @@ pub fn convert_file(
     let read_time = t0.elapsed();
     let mut report = convert_frame(
         &frame,
-        Some(source_info(input, k as u64)),
+        Some(source_info(named, k as u64)),
         output,
         options,
         progress,

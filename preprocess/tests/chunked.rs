@@ -26,6 +26,7 @@ fn options(chunk_points: usize) -> ConvertOptions {
             memory_limit: 1 << 30,
             temp_dir: None,
             window_points: 128,
+            gzip_in_memory: None,
         },
     }
 }
@@ -255,4 +256,75 @@ fn piece_sets_stream_piece_by_piece_into_the_same_file() {
         // Chunks (and windows of 128) smaller than one piece.
         streamed_equals_in_memory(&pattern, &ReadOptions::default(), n / 3);
     }
+}
+
+#[test]
+fn a_large_gzip_dump_is_decompressed_into_a_working_file_and_read_in_windows() {
+    let gz = mdlod_datasets::lammps_sample_path("cu_melt.custom.dump.gz");
+    let read = ReadOptions {
+        attribute: Some("c_ke".into()),
+        ..Default::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    let mut opts = options(300);
+    opts.chunks.temp_dir = Some(work.clone());
+    let in_memory = dir.path().join("a.mdlod");
+    convert_file(
+        &gz,
+        &in_memory,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    // Every gzip input counts as large: decompressed into a working file, read from it a
+    // window at a time, into the same file.
+    opts.chunks.gzip_in_memory = Some(0);
+    let spooled = dir.path().join("b.mdlod");
+    convert_file(&gz, &spooled, FrameSelect::Last, &read, &opts, &NoProgress).unwrap();
+    assert!(std::fs::read(&in_memory).unwrap() == std::fs::read(&spooled).unwrap());
+    assert_eq!(
+        std::fs::read_dir(&work).unwrap().count(),
+        0,
+        "working files left"
+    );
+
+    // A damaged frame: the error names the input, the decompressed text and its line.
+    let mut text = Vec::new();
+    std::io::Read::read_to_end(
+        &mut flate2::read::MultiGzDecoder::new(std::fs::File::open(&gz).unwrap()),
+        &mut text,
+    )
+    .unwrap();
+    text.truncate(text.len() - 200);
+    let bad = dir.path().join("bad.dump.gz");
+    let mut enc = flate2::write::GzEncoder::new(
+        std::fs::File::create(&bad).unwrap(),
+        flate2::Compression::fast(),
+    );
+    std::io::Write::write_all(&mut enc, &text).unwrap();
+    enc.finish().unwrap();
+    let e = convert_file(
+        &bad,
+        &dir.path().join("c.mdlod"),
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.starts_with(&bad.display().to_string()) && e.contains("(decompressed into"),
+        "{e}"
+    );
+    assert!(e.contains("bad.dump:"), "{e}");
+    assert_eq!(
+        std::fs::read_dir(&work).unwrap().count(),
+        0,
+        "working files left"
+    );
 }

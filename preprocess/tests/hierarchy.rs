@@ -89,6 +89,7 @@ fn chunked(params: BuildParams, chunk_points: usize, memory_limit: u64) -> Conve
             memory_limit,
             temp_dir: None,
             window_points: 128,
+            gzip_in_memory: None,
         },
         ..Default::default()
     }

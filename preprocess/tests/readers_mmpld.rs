@@ -365,6 +365,7 @@ fn a_frame_larger_than_a_chunk_streams_into_the_file_the_whole_frame_makes() {
             memory_limit: 1 << 30,
             temp_dir: None,
             window_points: 64,
+            gzip_in_memory: None,
         },
         ..Default::default()
     };

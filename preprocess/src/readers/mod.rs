@@ -921,6 +921,77 @@ fn is_bzip2(data: &[u8]) -> bool {
 }
 
 /// Decompresses a (possibly multi-member) gzip file into memory.
+/// True when `path` starts with the gzip magic bytes.
+pub fn is_gzip(path: &Path) -> Result<bool, ReadError> {
+    let mut magic = [0u8; 2];
+    let mut f = File::open(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let n = f.read(&mut magic).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(n == 2 && magic == [0x1f, 0x8b])
+}
+
+/// Decompresses the gzip file `path` (single or multi-member) into the file `out` as a
+/// stream, holding a buffer's worth at a time; returns the decompressed size. Errors name
+/// `path` (decompression) or `out` (writing).
+pub fn gunzip_to_file(path: &Path, out: &Path, progress: &dyn Progress) -> Result<u64, ReadError> {
+    let input = File::open(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let total = input.metadata().map(|m| m.len()).ok();
+    struct Counting<'p> {
+        inner: File,
+        progress: &'p dyn Progress,
+    }
+    impl Read for Counting<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let n = self.inner.read(buf)?;
+            self.progress.advance(n as u64);
+            Ok(n)
+        }
+    }
+    progress.stage("decompressing", total, "bytes");
+    let mut decoder = flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(
+        1 << 20,
+        Counting {
+            inner: input,
+            progress,
+        },
+    ));
+    let file = File::create(out).map_err(|source| ReadError::Io {
+        path: out.to_path_buf(),
+        source,
+    })?;
+    let mut writer = std::io::BufWriter::with_capacity(1 << 20, file);
+    let mut buf = vec![0u8; 1 << 20];
+    let mut written = 0u64;
+    loop {
+        let n = decoder.read(&mut buf).map_err(|e| ReadError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(e.kind(), format!("gzip decompression failed: {e}")),
+        })?;
+        if n == 0 {
+            break;
+        }
+        std::io::Write::write_all(&mut writer, &buf[..n]).map_err(|source| ReadError::Io {
+            path: out.to_path_buf(),
+            source,
+        })?;
+        written += n as u64;
+    }
+    std::io::Write::flush(&mut writer).map_err(|source| ReadError::Io {
+        path: out.to_path_buf(),
+        source,
+    })?;
+    progress.finish_stage();
+    Ok(written)
+}
+
 fn gunzip(path: &Path, compressed: &[u8], progress: &dyn Progress) -> Result<Vec<u8>, ReadError> {
     struct Counting<'a, 'p> {
         inner: &'a [u8],
