@@ -2,8 +2,10 @@
 //! with a manifest `DIR/dataset.json`, resumable, and shardable over a cluster.
 //!
 //! How it works.
-//! 1. Every input is opened (multi-frame files, `%` piece sets and binary dumps alike)
-//!    and its frames listed with their timesteps (an input without timesteps numbers its
+//! 1. Every input is opened in turn (multi-frame files, `%` piece sets and binary dumps
+//!    alike; a gzip input's text is dropped again, and the worker converting its frames
+//!    reopens it, decompressing a large one into a working file) and its frames listed
+//!    with their timesteps (an input without timesteps numbers its
 //!    frames by their position in the whole list). Frames are sorted by timestep; two
 //!    frames with the same timestep are an error naming both sources.
 //! 2. With a shard `I/N`, this process takes the frames at positions `I, I + N, ...` of
@@ -209,7 +211,9 @@ fn entry_of(path: &Path, file: &MdlodFile) -> FrameEntry {
 /// One frame to convert.
 struct Job<'a> {
     input: &'a Path,
-    dump: &'a DumpFile,
+    /// The opened input; `None` for a gzip input, which is opened again by the worker
+    /// that converts it (its text is not kept in memory between).
+    dump: Option<&'a DumpFile>,
     frame: usize,
     timestep: u64,
     particles: u64,
@@ -237,22 +241,37 @@ pub fn batch(
         }
     }
 
-    let dumps = inputs
-        .iter()
-        .map(|p| DumpFile::open(p))
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut jobs: Vec<Job<'_>> = Vec::new();
+    // Inputs are indexed one at a time. Mapped files stay open; the text of a gzip input
+    // is dropped after indexing (with its frames' particle counts noted), so a batch of
+    // many compressed files never holds more than one at a time per worker.
+    let mut dumps: Vec<Option<DumpFile>> = Vec::with_capacity(inputs.len());
+    let mut listed: Vec<Vec<(u64, u64)>> = Vec::with_capacity(inputs.len());
     let mut position = 0u64;
-    for (input, dump) in inputs.iter().zip(&dumps) {
+    for p in inputs {
+        let dump = DumpFile::open(p)?;
+        let mut frames = Vec::with_capacity(dump.frame_count());
         for k in 0..dump.frame_count() {
             let timestep = dump.frame_timestep(k).unwrap_or(position);
             position += 1;
+            let particles = if dump.is_compressed() {
+                dump.frame_info(k)?.particles as u64
+            } else {
+                0
+            };
+            frames.push((timestep, particles));
+        }
+        listed.push(frames);
+        dumps.push((!dump.is_compressed()).then_some(dump));
+    }
+    let mut jobs: Vec<Job<'_>> = Vec::new();
+    for ((input, dump), frames) in inputs.iter().zip(&dumps).zip(&listed) {
+        for (k, &(timestep, particles)) in frames.iter().enumerate() {
             jobs.push(Job {
                 input,
-                dump,
+                dump: dump.as_ref(),
                 frame: k,
                 timestep,
-                particles: 0,
+                particles,
             });
         }
     }
@@ -291,11 +310,12 @@ pub fn batch(
         match complete {
             Some(f) => done.push(entry_of(&out, &f)),
             None => {
-                job.particles = job
-                    .dump
-                    .frame_info(job.frame)
-                    .map(|i| i.particles as u64)
-                    .unwrap_or(0);
+                if let Some(dump) = job.dump {
+                    job.particles = dump
+                        .frame_info(job.frame)
+                        .map(|i| i.particles as u64)
+                        .unwrap_or(0);
+                }
                 todo.push(job);
             }
         }
@@ -343,60 +363,97 @@ pub fn batch(
     let quiet = crate::progress::NoProgress;
     std::thread::scope(|s| {
         for _ in 0..jobs {
-            s.spawn(|| loop {
-                if failed.load(Ordering::Relaxed) {
-                    return;
-                }
-                let Some(job) = queue.lock().unwrap_or_else(|e| e.into_inner()).next() else {
-                    return;
-                };
-                let result = (|| -> Result<FrameEntry, BatchError> {
-                    let out = out_dir.join(frame_file_name(job.timestep));
-                    let source = fingerprint(job.input, job.frame as u64);
-                    let streamed = if job.particles as usize > convert.chunks.chunk_points {
-                        let info = job.dump.frame_info(job.frame)?;
-                        crate::convert::window_source(job.dump, job.frame, &opts.read, &info)
-                            .map(|s| (s, info))
-                    } else {
-                        None
-                    };
-                    if let Some((src, info)) = streamed {
-                        // Out of core: the frame is read a window at a time.
-                        crate::chunked::convert_chunked(
-                            src.as_ref(),
-                            crate::convert::base_metadata(
-                                &crate::convert::header_of(&info),
-                                Some(source),
-                                convert,
-                            ),
-                            &out,
-                            convert,
-                            &quiet,
-                        )?;
-                    } else {
-                        let frame = job.dump.read_frame(job.frame, &opts.read, &quiet)?;
-                        convert_frame(&frame, Some(source), &out, convert, &quiet)?;
-                    }
-                    let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
-                    Ok(entry_of(&out, &f))
-                })();
-                let recorded = result.and_then(|entry| {
-                    let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
-                    m.frames.push(entry);
-                    save(&mut m)
-                });
-                match recorded {
-                    Ok(()) => {
-                        converted.fetch_add(1, Ordering::Relaxed);
-                        progress.advance(job.particles);
-                    }
-                    Err(e) => {
-                        failed.store(true, Ordering::Relaxed);
-                        first_error
-                            .lock()
-                            .unwrap_or_else(|e| e.into_inner())
-                            .get_or_insert(e);
+            s.spawn(|| {
+                // This worker's last opened gzip input (frames of one file come in
+                // timestep order, so consecutive jobs often share it).
+                let mut opened: Option<(PathBuf, crate::convert::BoundedDump)> = None;
+                loop {
+                    if failed.load(Ordering::Relaxed) {
                         return;
+                    }
+                    let Some(job) = queue.lock().unwrap_or_else(|e| e.into_inner()).next() else {
+                        return;
+                    };
+                    let result = (|| -> Result<FrameEntry, BatchError> {
+                        let out = out_dir.join(frame_file_name(job.timestep));
+                        let source = fingerprint(job.input, job.frame as u64);
+                        let (dump, bounded) = match job.dump {
+                            Some(d) => (d, None),
+                            None => {
+                                let b = match &mut opened {
+                                    Some((p, b)) if p == job.input => &*b,
+                                    slot => {
+                                        // Release the previous input before opening this.
+                                        *slot = None;
+                                        let b = crate::convert::open_bounded(
+                                            job.input,
+                                            &convert.chunks,
+                                            &out,
+                                            &quiet,
+                                        )?;
+                                        &slot.insert((job.input.to_path_buf(), b)).1
+                                    }
+                                };
+                                (&b.dump, Some(b))
+                            }
+                        };
+                        let in_context = |e: BatchError| match (bounded, e) {
+                            (Some(b), BatchError::Convert(c)) => {
+                                BatchError::Convert(b.context(job.input, c))
+                            }
+                            (Some(b), BatchError::Read(r)) => {
+                                BatchError::Convert(b.context(job.input, r.into()))
+                            }
+                            (_, e) => e,
+                        };
+                        (|| -> Result<FrameEntry, BatchError> {
+                            let streamed = if job.particles as usize > convert.chunks.chunk_points {
+                                let info = dump.frame_info(job.frame)?;
+                                crate::convert::window_source(dump, job.frame, &opts.read, &info)
+                                    .map(|s| (s, info))
+                            } else {
+                                None
+                            };
+                            if let Some((src, info)) = streamed {
+                                // Out of core: the frame is read a window at a time.
+                                crate::chunked::convert_chunked(
+                                    src.as_ref(),
+                                    crate::convert::base_metadata(
+                                        &crate::convert::header_of(&info),
+                                        Some(source),
+                                        convert,
+                                    ),
+                                    &out,
+                                    convert,
+                                    &quiet,
+                                )?;
+                            } else {
+                                let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
+                                convert_frame(&frame, Some(source), &out, convert, &quiet)?;
+                            }
+                            let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
+                            Ok(entry_of(&out, &f))
+                        })()
+                        .map_err(in_context)
+                    })();
+                    let recorded = result.and_then(|entry| {
+                        let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
+                        m.frames.push(entry);
+                        save(&mut m)
+                    });
+                    match recorded {
+                        Ok(()) => {
+                            converted.fetch_add(1, Ordering::Relaxed);
+                            progress.advance(job.particles);
+                        }
+                        Err(e) => {
+                            failed.store(true, Ordering::Relaxed);
+                            first_error
+                                .lock()
+                                .unwrap_or_else(|e| e.into_inner())
+                                .get_or_insert(e);
+                            return;
+                        }
                     }
                 }
             });

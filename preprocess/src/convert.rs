@@ -1,6 +1,6 @@
 //! Conversion of one frame to a `.mdlod` file: species looks, hierarchy, metadata, write.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use mdlod_format::meta::{AttributeInfo, BuildInfo, Metadata, SourceInfo};
@@ -199,21 +199,28 @@ pub enum FrameSelect {
     Last,
 }
 
-/// Reads one frame of `input` (any format [`crate::readers`] knows) and converts it.
-pub fn convert_file(
+/// A dump opened within the memory limit (see [`open_bounded`]).
+pub struct BoundedDump {
+    pub dump: crate::readers::DumpFile,
+    /// The working file a large gzip input was decompressed into (`dump` reads it).
+    pub text: Option<PathBuf>,
+    /// Its working directory, removed when this is dropped.
+    _work: Option<tempfile::TempDir>,
+}
+
+/// Opens `input` as [`crate::readers::DumpFile::open`] does, except a large gzip input
+/// (see `ChunkOptions::gzip_in_memory`): that is decompressed as a stream into a working
+/// file in a fresh directory under `chunks.temp_dir_for(output)`, and the dump reads the
+/// file, a window at a time where a frame needs it, so memory stays within the limit.
+pub fn open_bounded(
     input: &Path,
+    chunks: &crate::chunked::ChunkOptions,
     output: &Path,
-    frame: FrameSelect,
-    read: &crate::readers::ReadOptions,
-    options: &ConvertOptions,
     progress: &dyn Progress,
-) -> Result<ConvertReport, ConvertError> {
-    // A large gzip input (see `ChunkOptions::gzip_in_memory`) is decompressed into a
-    // working file first, then read a window at a time from there like any uncompressed
-    // dump; smaller ones are decompressed in memory.
+) -> Result<BoundedDump, ConvertError> {
     let compressed = std::fs::metadata(input).map_or(0, |m| m.len());
-    if compressed > options.chunks.gzip_in_memory_max() && crate::readers::is_gzip(input)? {
-        let parent = options.chunks.temp_dir_for(output);
+    if compressed > chunks.gzip_in_memory_max() && crate::readers::is_gzip(input)? {
+        let parent = chunks.temp_dir_for(output);
         let work = tempfile::Builder::new()
             .prefix(".mdlod-convert-")
             .tempdir_in(&parent)
@@ -229,21 +236,66 @@ pub fn convert_file(
             .path()
             .join(name.strip_suffix(".gz").unwrap_or("input.txt"));
         crate::readers::gunzip_to_file(input, &text, progress)?;
-        return convert_source(&text, input, output, frame, read, options, progress).map_err(
-            |source| ConvertError::Decompressed {
+        let dump =
+            crate::readers::DumpFile::open(&text).map_err(|e| ConvertError::Decompressed {
                 input: input.to_path_buf(),
                 text: text.clone(),
-                source: Box::new(source),
-            },
-        );
+                source: Box::new(e.into()),
+            })?;
+        return Ok(BoundedDump {
+            dump,
+            text: Some(text),
+            _work: Some(work),
+        });
     }
-    convert_source(input, input, output, frame, read, options, progress)
+    Ok(BoundedDump {
+        dump: crate::readers::DumpFile::open(input)?,
+        text: None,
+        _work: None,
+    })
 }
 
-/// [`convert_file`] reading `input`, with `named` (the file the user named) recorded as
-/// the source in the metadata.
-fn convert_source(
+impl BoundedDump {
+    /// Names the input in an error met while reading a decompressed working file.
+    pub fn context(&self, input: &Path, e: ConvertError) -> ConvertError {
+        match &self.text {
+            Some(text) => ConvertError::Decompressed {
+                input: input.to_path_buf(),
+                text: text.clone(),
+                source: Box::new(e),
+            },
+            None => e,
+        }
+    }
+}
+
+/// Reads one frame of `input` (any format [`crate::readers`] knows) and converts it. A
+/// large gzip input is decompressed into a working file first ([`open_bounded`]).
+pub fn convert_file(
     input: &Path,
+    output: &Path,
+    frame: FrameSelect,
+    read: &crate::readers::ReadOptions,
+    options: &ConvertOptions,
+    progress: &dyn Progress,
+) -> Result<ConvertReport, ConvertError> {
+    let BoundedDump { dump, text, _work } = open_bounded(input, &options.chunks, output, progress)?;
+    let result = convert_dump(dump, input, output, frame, read, options, progress);
+    // The working file (if any) lives until the conversion is done.
+    match text {
+        Some(text) => result.map_err(|source| ConvertError::Decompressed {
+            input: input.to_path_buf(),
+            text,
+            source: Box::new(source),
+        }),
+        None => result,
+    }
+}
+
+/// Converts one frame of an opened dump, with `named` (the file the user named) recorded
+/// as the source in the metadata.
+pub fn convert_dump(
+    dump: crate::readers::DumpFile,
     named: &Path,
     output: &Path,
     frame: FrameSelect,
@@ -251,7 +303,6 @@ fn convert_source(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
-    let dump = crate::readers::DumpFile::open(input)?;
     let k = match frame {
         FrameSelect::Index(k) => k,
         FrameSelect::Last => dump.frame_count().saturating_sub(1),

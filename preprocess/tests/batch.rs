@@ -174,3 +174,42 @@ fn frames_above_the_chunk_size_are_built_out_of_core_and_match_convert() {
         assert_eq!(file.positions(last).bytes(), other.positions(last).bytes());
     }
 }
+
+#[test]
+fn gzip_inputs_are_reopened_by_their_worker_and_large_ones_decompressed_to_working_files() {
+    // The 6-frame real dump, gzip-compressed, three ways: frames in memory, decompressed
+    // into a working file per worker, and above the chunk size (read in windows from it).
+    let dir = tempfile::tempdir().unwrap();
+    let gz = dir.path().join("melt.dump.gz");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.dump.gz"), &gz).unwrap();
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    let run = |name: &str, spool: bool, chunk: Option<usize>| {
+        let mut o = opts();
+        o.convert.chunks.temp_dir = Some(work.clone());
+        o.convert.chunks.gzip_in_memory = spool.then_some(0);
+        o.convert.build.max_root_points = 64;
+        if let Some(c) = chunk {
+            o.convert.chunks.chunk_points = c;
+            o.convert.chunks.window_points = 128;
+        }
+        let out = dir.path().join(name);
+        let r = batch(std::slice::from_ref(&gz), &out, &o, &NoProgress).unwrap();
+        assert_eq!(r.converted, 6, "{name}");
+        let m = read_manifest(&out).unwrap();
+        check_manifest(&out, &m);
+        assert_eq!(
+            std::fs::read_dir(&work).unwrap().count(),
+            0,
+            "{name}: working files left"
+        );
+        m
+    };
+    let in_memory = run("a", false, None);
+    let spooled = run("b", true, None);
+    // The same frames from the same source: identical files.
+    assert_eq!(in_memory.frames, spooled.frames);
+    let chunked = run("c", true, Some(300));
+    let whole = run("d", false, Some(300));
+    assert_eq!(chunked.frames, whole.frames);
+}

@@ -399,6 +399,11 @@ impl DumpFile {
         &self.path
     }
 
+    /// True when the dump was decompressed into memory (a gzip file).
+    pub fn is_compressed(&self) -> bool {
+        self.compressed
+    }
+
     pub fn format(&self) -> InputFormat {
         self.format
     }
