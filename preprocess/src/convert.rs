@@ -236,12 +236,8 @@ pub fn open_bounded(
             .path()
             .join(name.strip_suffix(".gz").unwrap_or("input.txt"));
         crate::readers::gunzip_to_file(input, &text, progress)?;
-        let dump =
-            crate::readers::DumpFile::open(&text).map_err(|e| ConvertError::Decompressed {
-                input: input.to_path_buf(),
-                text: text.clone(),
-                source: Box::new(e.into()),
-            })?;
+        let dump = crate::readers::DumpFile::open(&text)
+            .map_err(|e| decompressed(input, Some(&text), e.into()))?;
         return Ok(BoundedDump {
             dump,
             text: Some(text),
@@ -258,14 +254,19 @@ pub fn open_bounded(
 impl BoundedDump {
     /// Names the input in an error met while reading a decompressed working file.
     pub fn context(&self, input: &Path, e: ConvertError) -> ConvertError {
-        match &self.text {
-            Some(text) => ConvertError::Decompressed {
-                input: input.to_path_buf(),
-                text: text.clone(),
-                source: Box::new(e),
-            },
-            None => e,
-        }
+        decompressed(input, self.text.as_deref(), e)
+    }
+}
+
+/// `e`, met reading `text` (the working file `input` was decompressed into, if any).
+fn decompressed(input: &Path, text: Option<&Path>, e: ConvertError) -> ConvertError {
+    match text {
+        Some(text) => ConvertError::Decompressed {
+            input: input.to_path_buf(),
+            text: text.to_path_buf(),
+            source: Box::new(e),
+        },
+        None => e,
     }
 }
 
@@ -280,16 +281,9 @@ pub fn convert_file(
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
     let BoundedDump { dump, text, _work } = open_bounded(input, &options.chunks, output, progress)?;
-    let result = convert_dump(dump, input, output, frame, read, options, progress);
     // The working file (if any) lives until the conversion is done.
-    match text {
-        Some(text) => result.map_err(|source| ConvertError::Decompressed {
-            input: input.to_path_buf(),
-            text,
-            source: Box::new(source),
-        }),
-        None => result,
-    }
+    convert_dump(dump, input, output, frame, read, options, progress)
+        .map_err(|e| decompressed(input, text.as_deref(), e))
 }
 
 /// Converts one frame of an opened dump, with `named` (the file the user named) recorded

@@ -19,8 +19,7 @@ use crate::error::RenderError;
 use crate::image::RgbaImage;
 use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
 use crate::passes::sphere_raycast::{
-    FrameUniforms, Lighting, PackedDraw, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT,
-    DEPTH_FORMAT,
+    FrameUniforms, Lighting, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT, DEPTH_FORMAT,
 };
 use crate::passes::sphere_raycast::{PackStyle, GBUFFER_FORMAT};
 use crate::passes::splat::{SplatPass, HDR_FORMAT};
@@ -626,26 +625,6 @@ impl Renderer {
             frame.gpu_data_bytes = cut.data_bytes;
             Ok(frame)
         })
-    }
-
-    /// Draws an already packed draw list.
-    pub fn render_packed(
-        &self,
-        packed: &PackedDraw,
-        camera: &Camera,
-        settings: &FrameSettings,
-    ) -> Result<RenderedFrame, RenderError> {
-        self.check(settings)?;
-        let buffers = self.sphere.upload(&self.ctx.device, packed);
-        let mut frame = self.render_bound(
-            &buffers,
-            packed.position_bits,
-            packed.species.len() as u32,
-            camera,
-            settings,
-        )?;
-        frame.gpu_data_bytes = packed.data_bytes();
-        Ok(frame)
     }
 
     /// The sphere pass, for callers that bind their own buffers (see

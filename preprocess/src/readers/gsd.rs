@@ -370,19 +370,6 @@ pub(crate) fn frame_info(
     })
 }
 
-/// Reads frame `k` whole.
-pub(crate) fn read_frame(
-    path: &Path,
-    data: &[u8],
-    index: &Index,
-    k: usize,
-    opts: &ReadOptions,
-    progress: &dyn Progress,
-) -> Result<Frame, ReadError> {
-    let n = index.particles(path, data, k)?;
-    read_range(path, data, index, k, opts, 0..n, progress)
-}
-
 /// Frame `k` of an opened file, with its `n` particles.
 struct FrameData<'a> {
     path: &'a Path,
@@ -530,7 +517,7 @@ impl<'a> FrameData<'a> {
     }
 }
 
-/// The species of frame `k` as [`read_frame`] lists them (radii from the whole frame's
+/// The species of frame `k` as the whole frame lists them (radii from the whole frame's
 /// diameters), from one pass over the type ids and diameters alone: what every part of
 /// the frame read by [`read_range`] takes, so that a frame read in parts converts as the
 /// whole one does.

@@ -417,7 +417,7 @@ fn species_of(
         .collect()
 }
 
-/// The species of frame `k` as [`read_frame`] lists them (radii of `xyzr` lists averaged
+/// The species of frame `k` as the whole frame lists them (radii of `xyzr` lists averaged
 /// over the whole list): what every part read by [`read_range`] takes, so that a frame
 /// read in parts converts as the whole one does.
 pub(crate) fn frame_species(
@@ -427,18 +427,6 @@ pub(crate) fn frame_species(
     k: usize,
 ) -> Result<Vec<SpeciesName>, ReadError> {
     species_of(path, data, index, k, 0..index.particles(k))
-}
-
-/// Reads frame `k` whole.
-pub(crate) fn read_frame(
-    path: &Path,
-    data: &[u8],
-    index: &Index,
-    k: usize,
-    opts: &ReadOptions,
-    progress: &dyn Progress,
-) -> Result<Frame, ReadError> {
-    read_range(path, data, index, k, opts, 0..index.particles(k), progress)
 }
 
 /// Reads particles `range` of frame `k` (the lists one after another) as a frame of its

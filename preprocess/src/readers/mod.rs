@@ -570,9 +570,10 @@ impl DumpFile {
         opts: &ReadOptions,
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
-        if let Index::Gsd(i) = &self.index {
-            self.check_frame(k)?;
-            return gsd::read_frame(&self.path, self.bytes(), i, k, opts, progress);
+        if let Index::Gsd(_) | Index::Mmpld(_) = &self.index {
+            // The whole frame is its one part.
+            let n = self.frame_info(k)?.particles;
+            return self.read_part(k, opts, 0..n, progress);
         }
         if let Index::Pieces(p) = &self.index {
             self.check_frame(k)?;
@@ -581,10 +582,6 @@ impl DumpFile {
         if let Index::Raw(r) = &self.index {
             self.check_frame(k)?;
             return r.read_frame(opts, progress);
-        }
-        if let Index::Mmpld(i) = &self.index {
-            self.check_frame(k)?;
-            return mmpld::read_frame(&self.path, self.bytes(), i, k, opts, progress);
         }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;

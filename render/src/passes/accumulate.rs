@@ -87,11 +87,7 @@ impl AccumulatePass {
                 cache: None,
             })
         };
-        let add = wgpu::BlendComponent {
-            src_factor: wgpu::BlendFactor::One,
-            dst_factor: wgpu::BlendFactor::One,
-            operation: wgpu::BlendOperation::Add,
-        };
+        let add = super::ADD;
         let accumulate = make(
             "accumulate",
             ACCUM_FORMAT,

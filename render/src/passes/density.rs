@@ -97,16 +97,11 @@ impl DensityPass {
             label: Some("density.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let add = wgpu::BlendComponent {
-            src_factor: wgpu::BlendFactor::One,
-            dst_factor: wgpu::BlendFactor::One,
-            operation: wgpu::BlendOperation::Add,
-        };
         let target = Some(wgpu::ColorTargetState {
             format: SLICE_FORMAT,
             blend: Some(wgpu::BlendState {
-                color: add,
-                alpha: add,
+                color: super::ADD,
+                alpha: super::ADD,
             }),
             write_mask: wgpu::ColorWrites::ALL,
         });
@@ -121,30 +116,14 @@ impl DensityPass {
                 bind_group_layouts: groups,
                 immediate_size: 0,
             });
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_splat"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(fragment),
-                    compilation_options: Default::default(),
-                    targets,
-                }),
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleStrip,
-                    ..Default::default()
-                },
-                depth_stencil: None,
-                multisample: Default::default(),
-                multiview_mask: None,
-                cache: None,
-            })
+            super::quad_pipeline(
+                device,
+                label,
+                &layout,
+                &module,
+                ("vs_splat", fragment),
+                targets,
+            )
         };
         let splat = pipeline(
             "density splat",

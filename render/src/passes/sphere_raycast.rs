@@ -244,7 +244,7 @@ pub fn push_bytes_as_words(out: &mut Vec<u32>, bytes: &[u8]) {
 /// Flattens `draw` for the GPU. Species indices are checked here (opening a file does not
 /// read them), so a corrupt index is an error naming the particle, not a wrong colour.
 pub fn pack(file: &MdlodFile, draw: &DrawList) -> Result<PackedDraw, RenderError> {
-    pack_with(file, draw, PackStyle::Spheres)
+    pack_styled(file, draw, PackStyle::Spheres, &PointStyle::default())
 }
 
 /// What the per-point attributes of a packed cut carry.
@@ -260,17 +260,8 @@ pub enum PackStyle {
     FluxAttribute,
 }
 
-/// [`pack`] in a given style.
-pub fn pack_with(
-    file: &MdlodFile,
-    draw: &DrawList,
-    style: PackStyle,
-) -> Result<PackedDraw, RenderError> {
-    pack_styled(file, draw, style, &PointStyle::default())
-}
-
-/// [`pack_with`] with the points' look changed by `look` (spheres only; see
-/// [`crate::style`]).
+/// Flattens `draw` for the GPU with the points packed as `style` says and their look
+/// changed by `look` (spheres only; see [`crate::style`]).
 pub fn pack_styled(
     file: &MdlodFile,
     draw: &DrawList,
