@@ -63,11 +63,17 @@ const RECT_GROW_PX: f32 = 0.5;
 /// swept in) at the price of more reads.
 const QUERY_SPAN: u32 = 8;
 
-/// The per-pixel depth bound and its max pyramid.
+/// The per-pixel depth bound and its max pyramid, over the whole image or over one
+/// rectangular window of it (a tile of the parallel traversal).
 pub struct OcclusionBuffer {
     mode: OcclusionMode,
+    /// The window's size in pixels; its pixel `(x, y)` is the image's
+    /// `(origin[0] + x, origin[1] + y)`.
     width: u32,
     height: u32,
+    origin: [u32; 2],
+    /// The whole image's size (projections are the image's).
+    image: [u32; 2],
     /// `levels[k]` is `dims[k].0 × dims[k].1`, row-major; level 0 is the image.
     levels: Vec<Vec<f32>>,
     dims: Vec<(u32, u32)>,
@@ -85,7 +91,23 @@ impl OcclusionBuffer {
     /// An empty buffer (nothing occludes) for `camera` at `viewport`; `None` for
     /// [`OcclusionMode::Off`] or an empty viewport.
     pub fn new(camera: &Camera, viewport: [u32; 2], mode: OcclusionMode) -> Option<Self> {
-        let [width, height] = viewport;
+        Self::window(camera, viewport, mode, [0, 0], viewport)
+    }
+
+    /// An empty buffer for the window of `size` pixels at `origin` of the image
+    /// `viewport`: spheres are recorded only where they cover the window, and a box whose
+    /// samples all lie outside the window counts as hidden (this window cannot see it).
+    /// `None` for [`OcclusionMode::Off`] or an empty window; the window is clipped to
+    /// the image.
+    pub fn window(
+        camera: &Camera,
+        viewport: [u32; 2],
+        mode: OcclusionMode,
+        origin: [u32; 2],
+        size: [u32; 2],
+    ) -> Option<Self> {
+        let width = size[0].min(viewport[0].saturating_sub(origin[0]));
+        let height = size[1].min(viewport[1].saturating_sub(origin[1]));
         if mode == OcclusionMode::Off || width == 0 || height == 0 {
             return None;
         }
@@ -101,7 +123,7 @@ impl OcclusionBuffer {
         let (sin_max, cos_min) = match camera.projection {
             Projection::Perspective => {
                 let t = (camera.fov_y_deg.to_radians() * 0.5).tan()
-                    * (1.0 + (width as f32 / height as f32).powi(2)).sqrt();
+                    * (1.0 + (viewport[0] as f32 / viewport[1] as f32).powi(2)).sqrt();
                 let n = (1.0 + t * t).sqrt();
                 // Rounded outwards.
                 ((t / n + 1e-4).min(1.0), (1.0 / n - 1e-4).max(0.0))
@@ -116,6 +138,8 @@ impl OcclusionBuffer {
             mode,
             width,
             height,
+            origin,
+            image: viewport,
             levels,
             dims,
             clip_from_world: camera.clip_from_world(viewport, glam::Vec2::ZERO),
@@ -127,12 +151,13 @@ impl OcclusionBuffer {
         })
     }
 
-    /// The stored depth bound of pixel `(x, y)` (rows top to bottom).
+    /// The stored depth bound of pixel `(x, y)` of the window (rows top to bottom).
     pub fn depth_at(&self, x: u32, y: u32) -> f32 {
         self.levels[0][(y * self.width + x) as usize]
     }
 
-    /// Pixel coordinates (x right, y down; pixel `i` spans `[i, i + 1)`) of a point.
+    /// Window pixel coordinates (x right, y down; pixel `i` spans `[i, i + 1)`) of a
+    /// point.
     fn to_px(&self, world: Vec3) -> Option<(f32, f32)> {
         let c = self.clip_from_world * world.extend(1.0);
         if c.w.is_nan() || c.w <= 0.0 {
@@ -140,8 +165,8 @@ impl OcclusionBuffer {
         }
         let ndc = c.xy() / c.w;
         Some((
-            (ndc.x + 1.0) * 0.5 * self.width as f32,
-            (1.0 - ndc.y) * 0.5 * self.height as f32,
+            (ndc.x + 1.0) * 0.5 * self.image[0] as f32 - self.origin[0] as f32,
+            (1.0 - ndc.y) * 0.5 * self.image[1] as f32 - self.origin[1] as f32,
         ))
     }
 
@@ -162,12 +187,12 @@ impl OcclusionBuffer {
         let Some((cx, cy)) = self.to_px(center) else {
             return;
         };
-        let rho = radius * rho_px_per_world(&self.camera, d, self.height);
+        let rho = radius * rho_px_per_world(&self.camera, d, self.image[1]);
         let rho = rho * (1.0 - RADIUS_SHRINK_REL) - RADIUS_SHRINK_PX;
         if rho.is_nan() || rho <= 0.0 || !cx.is_finite() || !cy.is_finite() {
             return;
         }
-        let ppw = rho_px_per_world(&self.camera, d, self.height);
+        let ppw = rho_px_per_world(&self.camera, d, self.image[1]);
         let r2 = radius * radius;
         let (sin_max, cos_min) = (self.sin_max, self.cos_min);
         // Depth bound at a sample `dist_px` from the projected centre (see `new`).
@@ -330,7 +355,7 @@ impl OcclusionBuffer {
         let (px0, py0) = (px0.max(0.0), py0.max(0.0));
         let (px1, py1) = (px1.min(w - 1.0), py1.min(h - 1.0));
         if px0 > px1 || py0 > py1 {
-            // No sample of the image can see it.
+            // No sample of the window can see it.
             return true;
         }
         let far = self.max_depth(px0 as u32, py0 as u32, px1 as u32, py1 as u32);
@@ -423,6 +448,63 @@ mod tests {
                 assert!(!buf.box_hidden(side - half, side + half, 0.0));
             }
         }
+    }
+
+    #[test]
+    fn a_window_records_and_tests_exactly_what_the_whole_image_does_there() {
+        let cam = camera(Projection::Perspective);
+        let (w, h) = (96u32, 64u32);
+        let (origin, size) = ([40u32, 24u32], [32u32, 32u32]);
+        for mode in [OcclusionMode::PixelCentres, OcclusionMode::WholePixels] {
+            let mut whole = OcclusionBuffer::new(&cam, [w, h], mode).unwrap();
+            let mut tile = OcclusionBuffer::window(&cam, [w, h], mode, origin, size).unwrap();
+            let spheres = [
+                (Vec3::ZERO, 3.0),
+                (cam.right() * 4.0 + cam.up() * 2.0, 2.5),
+                (cam.right() * -7.0, 4.0),
+            ];
+            for &(c, r) in &spheres {
+                whole.add_sphere(c, r);
+                tile.add_sphere(c, r);
+            }
+            let mut recorded = 0;
+            for y in 0..size[1] {
+                for x in 0..size[0] {
+                    let d = tile.depth_at(x, y);
+                    assert_eq!(d, whole.depth_at(origin[0] + x, origin[1] + y));
+                    recorded += usize::from(d.is_finite());
+                }
+            }
+            assert!(recorded > 100, "{mode:?}: {recorded} pixels recorded");
+            // A box behind the spheres inside the window: hidden in both. One whose
+            // pixels all lie outside the window: the window cannot see it.
+            let toward_eye = cam.back();
+            let half = Vec3::splat(0.3);
+            let behind = -toward_eye * 6.0;
+            assert!(whole.box_hidden(behind - half, behind + half, 0.0));
+            assert!(tile.box_hidden(behind - half, behind + half, 0.0));
+            let outside = cam.right() * -9.0 + cam.up() * 5.0 + toward_eye * 8.0;
+            assert!(!whole.box_hidden(outside - half, outside + half, 0.0));
+            assert!(tile.box_hidden(outside - half, outside + half, 0.0));
+        }
+        // Clipped to the image; nothing left is no buffer.
+        let clipped = OcclusionBuffer::window(
+            &cam,
+            [w, h],
+            OcclusionMode::PixelCentres,
+            [80, 60],
+            [32, 32],
+        )
+        .unwrap();
+        assert_eq!((clipped.width, clipped.height), (16, 4));
+        assert!(OcclusionBuffer::window(
+            &cam,
+            [w, h],
+            OcclusionMode::PixelCentres,
+            [96, 0],
+            [8, 8]
+        )
+        .is_none());
     }
 
     #[test]

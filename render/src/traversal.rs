@@ -39,13 +39,24 @@
 //! With occlusion culling ([`TraversalSettings::occlusion`], on by default) the same
 //! cut is walked *nearest first* instead: a node whose box is hidden behind the spheres
 //! already committed (see [`crate::occlusion`]) is dropped with its whole subtree; a node
-//! small enough is committed as its representative; any other is opened, and particle
-//! children are committed at once. Every commitment is recorded in the occlusion buffer,
-//! so what is behind it is culled as the walk goes deeper. Without a budget the result
-//! is exactly the cut above minus hidden subtrees, and no pixel changes. The budget
-//! counts committed points; when they exceed it the walk starts over with the error
-//! 1.5× coarser (reported in [`DrawList::restarts`] and as `budget_limited`), so a
+//! small enough is committed as its representative; any other is opened. When a node is
+//! opened, its particle children are committed at once, and so are its node children
+//! small enough to be drawn (each after its own hidden test); only the larger ones go
+//! into the queue. Every commitment is recorded in the occlusion buffer, so what is
+//! behind it is culled as the walk goes deeper. Without a budget the result is exactly
+//! the cut above minus hidden subtrees, and no pixel changes. The budget counts
+//! committed points; when they exceed it the walk starts over with the error 1.5×
+//! coarser (reported in [`DrawList::restarts`] and as `budget_limited`), so a
 //! budget-limited cut is uniformly coarser rather than fine in front and coarse behind.
+//!
+//! [`traverse`] runs that walk on every core: the image is cut into tiles of 128×128
+//! pixels, each walked with an occlusion buffer of its own pixels, visiting only the
+//! nodes whose boxes reach them. Opening and drawing depend on projected size alone, so
+//! the tiles agree on them; the cut is the union of what the tiles opened and drew, and
+//! a node is left out when no tile can see it. Nodes on tile borders are visited by each
+//! tile they reach (about a tenth more work). The tiles do not depend on the thread
+//! count, so neither does the cut. Streaming ([`traverse_with`]) walks the whole image
+//! at once, because the residency answers in the order it is asked.
 //!
 //! Streaming plugs in through [`Residency`]: a node whose children's data are not on the
 //! GPU is not opened but stays drawn (so a missing subtree is drawn by its nearest
@@ -230,7 +241,10 @@ struct Marks {
 }
 
 const OPENED: u8 = 1;
-const HIDDEN: u8 = 2;
+/// Drawn as its representative (the occlusion traversal records what it draws; the
+/// largest-first cut draws every child of an opened node that is neither opened nor
+/// outside the frustum).
+const DRAWN: u8 = 2;
 
 impl Marks {
     fn new(nodes: usize) -> Self {
@@ -245,8 +259,8 @@ impl Marks {
         self.open.push(id);
     }
 
-    fn hide(&mut self, id: u32) {
-        self.state[id as usize] = HIDDEN;
+    fn commit(&mut self, id: u32) {
+        self.state[id as usize] = DRAWN;
     }
 
     fn get(&self, id: u32) -> u8 {
@@ -290,7 +304,11 @@ impl Residency for AllResident {
 
 /// Chooses the cut for `camera` (see the module docs).
 pub fn traverse(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings) -> DrawList {
-    traverse_with(camera, file, settings, &mut AllResident)
+    if settings.occlusion == OcclusionMode::Off || settings.viewport.contains(&0) {
+        traverse_with(camera, file, settings, &mut AllResident)
+    } else {
+        traverse_tiled(camera, file, settings)
+    }
 }
 
 /// [`traverse`] where opening a node also needs `residency`'s consent; a refused node
@@ -302,6 +320,13 @@ pub fn traverse_with(
     residency: &mut dyn Residency,
 ) -> DrawList {
     if settings.occlusion != OcclusionMode::Off {
+        let proj = Projector::new(camera, settings.viewport);
+        if !proj.visible(&file.nodes()[0]) {
+            return DrawList {
+                culled_nodes: 1,
+                ..Default::default()
+            };
+        }
         let mut error_px = settings.error_px;
         for attempt in 0..MAX_RESTARTS {
             let Some(mut buffer) =
@@ -309,9 +334,27 @@ pub fn traverse_with(
             else {
                 break;
             };
-            if let Some(mut list) =
-                front_to_back(camera, file, settings, error_px, residency, &mut buffer)
-            {
+            if let Some(d) = front_to_back(
+                camera,
+                file,
+                settings,
+                error_px,
+                residency,
+                &mut buffer,
+                None,
+            ) {
+                let mut list = DrawList {
+                    deferred_nodes: d.deferred,
+                    ..Default::default()
+                };
+                let mut marks = Marks::new(file.nodes().len());
+                for &id in &d.committed {
+                    marks.commit(id);
+                }
+                for &id in &d.opened {
+                    marks.open(id);
+                }
+                list = emit(file, &proj, marks, true, d.achieved, list);
                 list.restarts = attempt;
                 list.budget_limited = attempt > 0;
                 return list;
@@ -321,6 +364,109 @@ pub fn traverse_with(
         }
     }
     largest_first(camera, file, settings, residency)
+}
+
+/// Side of the square tiles the parallel occlusion traversal splits the image into.
+const TILE_PX: u32 = 128;
+
+/// The points the tiles of one parallel pass have committed, summed (a point drawn by
+/// several tiles counts for each): when the sum passes `limit`, the pass is given up.
+struct SharedCount {
+    sum: std::sync::atomic::AtomicU64,
+    limit: u64,
+}
+
+impl SharedCount {
+    /// Adds `k`; false once the sum is past the limit.
+    fn add(&self, k: u64) -> bool {
+        let before = self.sum.fetch_add(k, std::sync::atomic::Ordering::Relaxed);
+        before.saturating_add(k) <= self.limit
+    }
+}
+
+/// How many commitments a tile makes between updates of the shared count.
+const SHARED_BATCH: u64 = 1024;
+
+/// A parallel pass is given up when the tiles' summed commitments pass the budget by
+/// this factor: the tiles overlap by about a tenth (nodes on tile borders are visited by
+/// each), so a pass that far past the budget cannot fit it; below that, the pass is
+/// completed and the union of the tiles' cuts is checked against the budget exactly.
+const SHARED_SLACK: f64 = 1.5;
+
+/// [`traverse`] with occlusion culling, one front-to-back pass per tile of the image on
+/// every core. Each tile has its own occlusion buffer over its pixels and visits only
+/// the nodes whose boxes reach them; whether a node is opened or drawn depends on its
+/// projected size alone, so the tiles agree on it, and the cut is the union of what the
+/// tiles opened and drew (a node is left out when no tile can see it). The tiles do not
+/// depend on the thread count, so neither does the cut. When the union exceeds the
+/// budget, every tile starts over with the error 1.5× coarser.
+fn traverse_tiled(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings) -> DrawList {
+    use rayon::prelude::*;
+    let proj = Projector::new(camera, settings.viewport);
+    if !proj.visible(&file.nodes()[0]) {
+        return DrawList {
+            culled_nodes: 1,
+            ..Default::default()
+        };
+    }
+    let [w, h] = settings.viewport;
+    let tiles: Vec<[u32; 2]> = (0..h.div_ceil(TILE_PX))
+        .flat_map(|ty| (0..w.div_ceil(TILE_PX)).map(move |tx| [tx * TILE_PX, ty * TILE_PX]))
+        .collect();
+    let budget = settings.budget_points.max(1);
+    let mut error_px = settings.error_px;
+    for attempt in 0..MAX_RESTARTS {
+        let shared = SharedCount {
+            sum: 0.into(),
+            limit: (budget as f64 * SHARED_SLACK).min(u64::MAX as f64) as u64,
+        };
+        let passes: Option<Vec<Decisions>> = tiles
+            .par_iter()
+            .map(|&origin| {
+                let mut buffer = OcclusionBuffer::window(
+                    camera,
+                    settings.viewport,
+                    settings.occlusion,
+                    origin,
+                    [TILE_PX, TILE_PX],
+                )?;
+                front_to_back(
+                    camera,
+                    file,
+                    settings,
+                    error_px,
+                    &mut AllResident,
+                    &mut buffer,
+                    Some(&shared),
+                )
+            })
+            .collect();
+        if let Some(passes) = passes {
+            let mut marks = Marks::new(file.nodes().len());
+            let mut achieved = 0.0f32;
+            for d in &passes {
+                achieved = achieved.max(d.achieved);
+                for &id in &d.committed {
+                    marks.commit(id);
+                }
+            }
+            for d in &passes {
+                for &id in &d.opened {
+                    if marks.get(id) != OPENED {
+                        marks.open(id);
+                    }
+                }
+            }
+            let mut list = emit(file, &proj, marks, true, achieved, DrawList::default());
+            if list.points <= budget {
+                list.restarts = attempt;
+                list.budget_limited = attempt > 0;
+                return list;
+            }
+        }
+        error_px = (error_px * 1.5).max(0.5);
+    }
+    largest_first(camera, file, settings, &mut AllResident)
 }
 
 /// Coarsening steps (×1.5 each) the occlusion traversal tries before it falls back to
@@ -389,14 +535,27 @@ fn largest_first(
             }
         }
     }
-    emit(file, &proj, marks, achieved, list)
+    emit(file, &proj, marks, false, achieved, list)
+}
+
+/// What one occlusion pass decided, over the whole image or one tile of it.
+#[derive(Default)]
+struct Decisions {
+    /// Nodes opened (replaced by their children), in the order they were opened.
+    opened: Vec<u32>,
+    /// Nodes drawn as their representatives.
+    committed: Vec<u32>,
+    /// Largest projected size of a committed node.
+    achieved: f32,
+    /// Nodes refused by the residency.
+    deferred: u64,
 }
 
 /// The cut with occlusion culling: nodes are visited nearest first; a node hidden by the
 /// spheres committed so far is dropped with its subtree, one small enough (or not
 /// resident) is committed as its representative, and the others are opened, committing
 /// their particle children at once. `None` when the committed points exceed the budget
-/// (the caller starts over with a coarser error).
+/// (the caller starts over with a coarser error). The top node must be in the frustum.
 fn front_to_back(
     camera: &Camera,
     file: &MdlodFile,
@@ -404,7 +563,8 @@ fn front_to_back(
     error_px: f32,
     residency: &mut dyn Residency,
     buffer: &mut OcclusionBuffer,
-) -> Option<DrawList> {
+    shared: Option<&SharedCount>,
+) -> Option<Decisions> {
     let nodes = file.nodes();
     let levels = file.levels();
     let last = file.level_count() - 1;
@@ -426,11 +586,7 @@ fn front_to_back(
     } else {
         f32::INFINITY
     };
-    let mut list = DrawList::default();
-    if !proj.visible(&nodes[0]) {
-        list.culled_nodes = 1;
-        return Some(list);
-    }
+    let mut out = Decisions::default();
 
     // The sphere a node is drawn as when it is not opened, exactly as the GPU decodes it.
     let representative = |id: u32| -> (Vec3, f32) {
@@ -447,35 +603,53 @@ fn front_to_back(
         (Vec3::from(p), representative_radius(n))
     };
 
-    let mut marks = Marks::new(nodes.len());
     let mut heap: BinaryHeap<(Reverse<Size>, Reverse<u32>)> = BinaryHeap::new();
     heap.push((Reverse(Size(proj.near_depth(&nodes[0]))), Reverse(0)));
+    // The visible children of the node being considered: (index on their level,
+    // projected size, representative radius), computed once for the node's own test
+    // and for committing or queueing them.
+    let mut kids: Vec<(u32, f32, f32)> = Vec::new();
     let mut committed: u64 = 0;
+    let mut reported: u64 = 0;
     let mut achieved = 0.0f32;
     while let Some((_, Reverse(id))) = heap.pop() {
+        if let Some(shared) = shared {
+            if committed - reported >= SHARED_BATCH {
+                if !shared.add(committed - reported) {
+                    return None;
+                }
+                reported = committed;
+            }
+        }
         let n = &nodes[id as usize];
         let size = proj.size_px(n);
         let child_level = usize::from(n.level) + 1;
         let children = n.child_first..n.child_first + n.child_count;
+        kids.clear();
         // The largest representative that can be drawn for this subtree: its own when
-        // it is small enough to be drawn, else its children's (none below a node whose
-        // children are particles). A node that is then refused by the residency is
-        // drawn as its representative: a streaming frame, never the converged image,
-        // may miss where that larger sphere pokes out of a hidden box.
+        // it is small enough to be drawn, else its visible children's (none below a
+        // node whose children are particles). A node that is then refused by the
+        // residency is drawn as its representative: a streaming frame, never the
+        // converged image, may miss where that larger sphere pokes out of a hidden box.
         let reach = if size <= error_px {
             representative_radius(n)
         } else if child_level == last {
             0.0
         } else {
             let first = levels[child_level].node_first as usize;
-            children.clone().fold(0.0f32, |m, c| {
-                m.max(representative_radius(&nodes[first + c as usize]))
-            })
+            let mut reach = 0.0f32;
+            for c in children.clone() {
+                let cn = &nodes[first + c as usize];
+                if proj.visible(cn) {
+                    let r = representative_radius(cn);
+                    reach = reach.max(r);
+                    kids.push((c, proj.size_px(cn), r));
+                }
+            }
+            reach
         };
         let margin = (reach - r_min).max(0.0) + quant;
         if buffer.box_hidden(n.bounds_min.into(), n.bounds_max.into(), margin) {
-            marks.hide(id);
-            list.occluded_nodes += 1;
             continue;
         }
         let commit = size <= error_px || {
@@ -488,7 +662,7 @@ fn front_to_back(
                 return None;
             }
             let refused = !residency.can_open(file, id, size);
-            list.deferred_nodes += u64::from(refused);
+            out.deferred += u64::from(refused);
             refused
         };
         if commit {
@@ -497,25 +671,46 @@ fn front_to_back(
             if committed > budget {
                 return None;
             }
+            out.committed.push(id);
             let (c, r) = representative(id);
             buffer.add_sphere(c, r);
             continue;
         }
-        marks.open(id);
+        out.opened.push(id);
+        let enc = &nodes[children_encoder(file, id as usize)];
+        let positions = file.positions(child_level);
         if child_level < last {
+            // Children too large are queued by depth; the others are final, so each is
+            // tested and committed at once rather than after a round through the queue
+            // (what is nearer than their parent is committed already; the queue would
+            // only add what lies between the two depths).
             let first = levels[child_level].node_first as usize;
-            for c in children {
-                let cn = &nodes[first + c as usize];
-                if proj.visible(cn) {
-                    heap.push((
-                        Reverse(Size(proj.near_depth(cn))),
-                        Reverse((first + c as usize) as u32),
-                    ));
+            for &(c, csize, r) in &kids {
+                let cid = first + c as usize;
+                let cn = &nodes[cid];
+                if csize > error_px {
+                    heap.push((Reverse(Size(proj.near_depth(cn))), Reverse(cid as u32)));
+                    continue;
                 }
+                let margin = (r - r_min).max(0.0) + quant;
+                if buffer.box_hidden(cn.bounds_min.into(), cn.bounds_max.into(), margin) {
+                    continue;
+                }
+                achieved = achieved.max(csize);
+                committed += 1;
+                if committed > budget {
+                    return None;
+                }
+                out.committed.push(cid as u32);
+                let p = quantize::decode3(
+                    positions.get(c as usize),
+                    enc.centroid,
+                    enc.quant_scale,
+                    bits,
+                );
+                buffer.add_sphere(Vec3::from(p), r);
             }
         } else {
-            let enc = &nodes[children_encoder(file, id as usize)];
-            let positions = file.positions(last);
             for c in children {
                 let p = quantize::decode3(
                     positions.get(c as usize),
@@ -533,15 +728,19 @@ fn front_to_back(
             committed += u64::from(n.child_count);
         }
     }
-    Some(emit(file, &proj, marks, achieved, list))
+    out.achieved = achieved;
+    Some(out)
 }
 
-/// Turns the opened nodes into draw ranges: each opened node draws its children that
-/// are neither opened, hidden nor outside the frustum.
+/// Turns the opened nodes into draw ranges. Each opened node draws its particle
+/// children, and of its node children those marked drawn (`recorded`: the occlusion
+/// traversal marks what it draws, and a child it neither drew nor opened inside the
+/// frustum was hidden) or else those neither opened nor outside the frustum.
 fn emit(
     file: &MdlodFile,
     proj: &Projector,
     mut marks: Marks,
+    recorded: bool,
     achieved: f32,
     mut list: DrawList,
 ) -> DrawList {
@@ -549,7 +748,8 @@ fn emit(
     let levels = file.levels();
     let last = file.level_count() - 1;
     if marks.get(0) != OPENED {
-        if marks.get(0) == HIDDEN {
+        if recorded && marks.get(0) != DRAWN {
+            list.occluded_nodes = 1;
             return list;
         }
         list.ranges.push(DrawRange {
@@ -591,14 +791,20 @@ fn emit(
                 true
             } else {
                 let cid = levels[child_level].node_first as u32 + c;
-                let cn = &nodes[cid as usize];
-                if marks.get(cid) != 0 {
-                    false
-                } else if proj.visible(cn) {
-                    true
-                } else {
-                    list.culled_nodes += 1;
-                    false
+                match marks.get(cid) {
+                    OPENED => false,
+                    DRAWN => true,
+                    _ => {
+                        if !proj.visible(&nodes[cid as usize]) {
+                            list.culled_nodes += 1;
+                            false
+                        } else if recorded {
+                            list.occluded_nodes += 1;
+                            false
+                        } else {
+                            true
+                        }
+                    }
                 }
             };
             match (&mut run, draw) {

@@ -445,6 +445,64 @@ fn occlusion_culling_drops_hidden_clusters_and_keeps_every_visible_sphere() {
 }
 
 #[test]
+fn the_parallel_occlusion_cut_is_the_same_on_any_thread_count_and_hides_what_one_pass_does() {
+    // The image is split into tiles traversed in parallel: the cut must not depend on
+    // the thread count, and must show every pixel as the single front-to-back pass
+    // (through `traverse_with`) and the cut without occlusion do.
+    let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
+    let cam = camera_for(&f, &ViewSpec::default(), VIEWPORT[0], VIEWPORT[1]).unwrap();
+    for (error_px, budget) in [(0.0, u64::MAX), (4.0, u64::MAX), (0.0, 400)] {
+        let settings = |occlusion| TraversalSettings {
+            viewport: VIEWPORT,
+            error_px,
+            budget_points: budget,
+            occlusion,
+        };
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| traverse(&cam, &f, &settings(OcclusionMode::PixelCentres)))
+        };
+        let tiled = on(1);
+        assert_eq!(tiled, on(3), "error {error_px}, budget {budget}");
+        let single = mdlod_render::traverse_with(
+            &cam,
+            &f,
+            &settings(OcclusionMode::PixelCentres),
+            &mut mdlod_render::traversal::AllResident,
+        );
+        check_counts(&f, &tiled);
+        assert!(coverage(&f, &tiled).iter().all(|&c| c <= 1));
+        assert!(tiled.points <= budget && tiled.occluded_nodes > 0);
+        // Within a tenth of the points the single pass draws.
+        assert!(
+            tiled.points.abs_diff(single.points) * 10 <= single.points,
+            "{} against {}",
+            tiled.points,
+            single.points
+        );
+        assert_eq!(
+            tiled.restarts, single.restarts,
+            "error {error_px}, budget {budget}"
+        );
+        let hits = |d: &DrawList| nearest_hits(&cam, &drawn_spheres(&f, d));
+        let reference = if budget == u64::MAX {
+            hits(&traverse(&cam, &f, &settings(OcclusionMode::Off)))
+        } else {
+            hits(&single)
+        };
+        let differing = hits(&tiled)
+            .iter()
+            .zip(&reference)
+            .filter(|(x, y)| x != y)
+            .count();
+        assert_eq!(differing, 0, "error {error_px}: {differing} pixels change");
+    }
+}
+
+#[test]
 fn occlusion_traversal_meets_the_budget_by_coarsening() {
     let (_d, _p, f) = make_file(&fcc_frame(9), small_build(), &[]);
     let cam = fitted_camera(&f);
