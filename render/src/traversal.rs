@@ -692,8 +692,16 @@ fn front_to_back(
                     heap.push((Reverse(Size(proj.near_depth(cn))), Reverse(cid as u32)));
                     continue;
                 }
-                let margin = (r - r_min).max(0.0) + quant;
-                if buffer.box_hidden(cn.bounds_min.into(), cn.bounds_max.into(), margin) {
+                // The one sphere drawn for it, as the GPU decodes it: its bounding box
+                // (grown by the quantization error, against rounding) is a much tighter
+                // test than the node's box grown by the radius.
+                let p = Vec3::from(quantize::decode3(
+                    positions.get(c as usize),
+                    enc.centroid,
+                    enc.quant_scale,
+                    bits,
+                ));
+                if buffer.box_hidden(p, p, r + quant) {
                     continue;
                 }
                 achieved = achieved.max(csize);
@@ -702,13 +710,7 @@ fn front_to_back(
                     return None;
                 }
                 out.committed.push(cid as u32);
-                let p = quantize::decode3(
-                    positions.get(c as usize),
-                    enc.centroid,
-                    enc.quant_scale,
-                    bits,
-                );
-                buffer.add_sphere(Vec3::from(p), r);
+                buffer.add_sphere(p, r);
             }
         } else {
             for c in children {
