@@ -32,13 +32,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let t = Instant::now();
         let d = traverse(&camera, &file, &settings);
         println!(
-            "traverse {:.1} ms: {} points ({} particles), {} ranges, {} opened, {} hidden, error {:.2} px, {} restarts",
+            "traverse {:.1} ms: {} points ({} particles), {} ranges, {} opened, {} hidden nodes, {} hidden particles, error {:.2} px, {} restarts",
             t.elapsed().as_secs_f64() * 1e3,
             d.points,
             d.particles,
             d.ranges.len(),
             d.opened_nodes,
             d.occluded_nodes,
+            d.occluded_particles,
             d.error_px,
             d.restarts
         );

@@ -7,9 +7,10 @@
 //! 3. [`traversal::traverse`] picks the cut through the hierarchy on the CPU: nodes no
 //!    larger than `error_px` pixels on screen are drawn as their representative, larger
 //!    ones are opened, up to a point budget; subtrees outside the view frustum are culled,
-//!    and so are those hidden behind spheres already chosen ([`occlusion`]: the cut is
-//!    walked nearest first against a conservative CPU depth pyramid, so no visible pixel
-//!    changes). The result is a list of contiguous point ranges.
+//!    and so are subtrees, clusters and particles hidden behind spheres already chosen
+//!    ([`occlusion`]: the cut is walked nearest first against a conservative CPU depth
+//!    pyramid, in tiles of the image on every core, so no visible pixel changes). The
+//!    result is a list of contiguous point ranges.
 //! 4. [`passes::sphere_raycast`] uploads those ranges' raw quantized positions and draws
 //!    one ray-cast, depth-correct sphere per point, decoding positions on the GPU;
 //!    [`renderer`] runs it once per sample (jittered supersampling), averages and reads
@@ -191,6 +192,8 @@ pub struct RenderReport {
     pub nodes_opened: u64,
     /// Nodes left out as hidden behind drawn spheres (occlusion culling).
     pub nodes_occluded: u64,
+    /// Particles left out as hidden behind drawn spheres (occlusion culling).
+    pub particles_occluded: u64,
     /// Largest projected size (px) of a representative drawn (0: only particles).
     pub error_px: f32,
     /// True when the point budget stopped refinement.
@@ -362,6 +365,7 @@ impl RenderReport {
             ranges: draw.ranges.len(),
             nodes_opened: draw.opened_nodes,
             nodes_occluded: draw.occluded_nodes,
+            particles_occluded: draw.occluded_particles,
             error_px: draw.error_px,
             budget_limited: draw.budget_limited,
             budget: traversal.budget_points,

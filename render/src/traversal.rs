@@ -40,9 +40,12 @@
 //! cut is walked *nearest first* instead: a node whose box is hidden behind the spheres
 //! already committed (see [`crate::occlusion`]) is dropped with its whole subtree; a node
 //! small enough is committed as its representative; any other is opened. When a node is
-//! opened, its particle children are committed at once, and so are its node children
-//! small enough to be drawn (each after its own hidden test); only the larger ones go
-//! into the queue. Every commitment is recorded in the occlusion buffer, so what is
+//! opened, its particle children and its node children small enough to be drawn are
+//! committed at once, each after a hidden test of the box around the one sphere drawn
+//! for it (much tighter than its node's box grown by the radius); only the larger
+//! children go into the queue. Which particles of a node are drawn is kept as a 64-bit
+//! mask (nodes of more than 64 particles draw them all), so the cut's particle ranges
+//! are the runs of drawn particles. Every commitment is recorded in the occlusion buffer, so what is
 //! behind it is culled as the walk goes deeper. Without a budget the result is exactly
 //! the cut above minus hidden subtrees, and no pixel changes. The budget counts
 //! committed points; when they exceed it the walk starts over with the error 1.5×
@@ -136,6 +139,9 @@ pub struct DrawList {
     pub deferred_nodes: u64,
     /// Nodes left out because spheres already drawn hide them (occlusion culling).
     pub occluded_nodes: u64,
+    /// Particles left out because spheres already drawn hide them (occlusion culling;
+    /// tested one by one below nodes of at most 64 children).
+    pub occluded_particles: u64,
     /// Times the occlusion traversal started over with a coarser error to meet the
     /// budget.
     pub restarts: u32,
@@ -354,7 +360,8 @@ pub fn traverse_with(
                 for &id in &d.opened {
                     marks.open(id);
                 }
-                list = emit(file, &proj, marks, true, d.achieved, list);
+                let masks = join_masks(d.particles);
+                list = emit(file, &proj, marks, Some(&masks), d.achieved, list);
                 list.restarts = attempt;
                 list.budget_limited = attempt > 0;
                 return list;
@@ -457,7 +464,15 @@ fn traverse_tiled(camera: &Camera, file: &MdlodFile, settings: &TraversalSetting
                     }
                 }
             }
-            let mut list = emit(file, &proj, marks, true, achieved, DrawList::default());
+            let masks = join_masks(passes.into_iter().flat_map(|d| d.particles).collect());
+            let mut list = emit(
+                file,
+                &proj,
+                marks,
+                Some(&masks),
+                achieved,
+                DrawList::default(),
+            );
             if list.points <= budget {
                 list.restarts = attempt;
                 list.budget_limited = attempt > 0;
@@ -535,7 +550,7 @@ fn largest_first(
             }
         }
     }
-    emit(file, &proj, marks, false, achieved, list)
+    emit(file, &proj, marks, None, achieved, list)
 }
 
 /// What one occlusion pass decided, over the whole image or one tile of it.
@@ -549,6 +564,23 @@ struct Decisions {
     achieved: f32,
     /// Nodes refused by the residency.
     deferred: u64,
+    /// For opened nodes whose children are particles (at most 64 of them): which
+    /// children are drawn (bit `k`: child `k`); the others are hidden.
+    particles: Vec<(u32, u64)>,
+}
+
+/// Sorts `(node, drawn children)` masks by node and joins a node's masks (a child is
+/// drawn when any tile draws it).
+fn join_masks(mut masks: Vec<(u32, u64)>) -> Vec<(u32, u64)> {
+    masks.sort_unstable_by_key(|&(id, _)| id);
+    masks.dedup_by(|later, kept| {
+        let same = later.0 == kept.0;
+        if same {
+            kept.1 |= later.1;
+        }
+        same
+    });
+    masks
 }
 
 /// The cut with occlusion culling: nodes are visited nearest first; a node hidden by the
@@ -653,14 +685,6 @@ fn front_to_back(
             continue;
         }
         let commit = size <= error_px || {
-            let particles = if child_level == last {
-                u64::from(n.child_count)
-            } else {
-                0
-            };
-            if committed + particles > budget {
-                return None;
-            }
             let refused = !residency.can_open(file, id, size);
             out.deferred += u64::from(refused);
             refused
@@ -713,36 +737,55 @@ fn front_to_back(
                 buffer.add_sphere(p, r);
             }
         } else {
-            for c in children {
-                let p = quantize::decode3(
+            // Particles: each is tested by the box of its own sphere (as for small
+            // children above) when the node has at most 64, so that a mask can say
+            // which are drawn; more than that are all drawn.
+            let masked = n.child_count <= 64;
+            let mut mask = 0u64;
+            let mut drawn = 0u64;
+            for (k, c) in children.enumerate() {
+                let p = Vec3::from(quantize::decode3(
                     positions.get(c as usize),
                     enc.centroid,
                     enc.quant_scale,
                     bits,
-                );
+                ));
                 let s = species
                     .get(c as usize)
                     .map_or(0, |&s| usize::from(s).min(radii.len().saturating_sub(1)));
-                if let Some(&r) = radii.get(s) {
-                    buffer.add_sphere(Vec3::from(p), r);
+                let r = radii.get(s).copied().unwrap_or(0.0);
+                if masked {
+                    if buffer.box_hidden(p, p, r + quant) {
+                        continue;
+                    }
+                    mask |= 1 << k;
                 }
+                drawn += 1;
+                buffer.add_sphere(p, r);
             }
-            committed += u64::from(n.child_count);
+            if masked {
+                out.particles.push((id, mask));
+            }
+            committed += drawn;
+            if committed > budget {
+                return None;
+            }
         }
     }
     out.achieved = achieved;
     Some(out)
 }
 
-/// Turns the opened nodes into draw ranges. Each opened node draws its particle
-/// children, and of its node children those marked drawn (`recorded`: the occlusion
-/// traversal marks what it draws, and a child it neither drew nor opened inside the
-/// frustum was hidden) or else those neither opened nor outside the frustum.
+/// Turns the opened nodes into draw ranges. With `recorded` (the occlusion traversal's
+/// particle masks, sorted by node), an opened node draws its node children marked drawn
+/// (a child neither drawn nor opened inside the frustum was hidden) and its particle
+/// children that its mask draws (all of them without a mask). Without, it draws its
+/// node children neither opened nor outside the frustum and every particle child.
 fn emit(
     file: &MdlodFile,
     proj: &Projector,
     mut marks: Marks,
-    recorded: bool,
+    recorded: Option<&[(u32, u64)]>,
     achieved: f32,
     mut list: DrawList,
 ) -> DrawList {
@@ -750,7 +793,7 @@ fn emit(
     let levels = file.levels();
     let last = file.level_count() - 1;
     if marks.get(0) != OPENED {
-        if recorded && marks.get(0) != DRAWN {
+        if recorded.is_some() && marks.get(0) != DRAWN {
             list.occluded_nodes = 1;
             return list;
         }
@@ -788,9 +831,20 @@ fn emit(
                 }
             }
         };
-        for c in children {
+        let mask = if child_level == last {
+            recorded.and_then(|m| {
+                m.binary_search_by_key(&id, |&(node, _)| node)
+                    .ok()
+                    .map(|i| m[i].1)
+            })
+        } else {
+            None
+        };
+        for (k, c) in children.enumerate() {
             let draw = if child_level == last {
-                true
+                let drawn = mask.is_none_or(|m| m >> k & 1 == 1);
+                list.occluded_particles += u64::from(!drawn);
+                drawn
             } else {
                 let cid = levels[child_level].node_first as u32 + c;
                 match marks.get(cid) {
@@ -800,7 +854,7 @@ fn emit(
                         if !proj.visible(&nodes[cid as usize]) {
                             list.culled_nodes += 1;
                             false
-                        } else if recorded {
+                        } else if recorded.is_some() {
                             list.occluded_nodes += 1;
                             false
                         } else {

@@ -422,6 +422,11 @@ fn occlusion_culling_drops_hidden_clusters_and_keeps_every_visible_sphere() {
                 seen.occluded_nodes > 0,
                 "{view:?} {error_px}: nothing hidden"
             );
+            if error_px == 0.0 {
+                // Every particle is drawn but those hidden one by one.
+                assert!(seen.occluded_particles > 0, "{view:?}: no particle hidden");
+                assert!(seen.particles + seen.occluded_particles <= all.particles);
+            }
             assert!(
                 seen.points * 3 < all.points * 2,
                 "{view:?} {error_px}: {} of {} points kept",

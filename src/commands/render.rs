@@ -352,7 +352,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let r = render_to_png(&args.file, &args.output, &opts)?;
     println!(
-        "wrote {} ({}x{}, {} spp) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} hidden clusters left out), error {:.2} px{}",
+        "wrote {} ({}x{}, {} spp) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} hidden clusters and {} hidden particles left out), error {:.2} px{}",
         args.output.display(),
         r.width,
         r.height,
@@ -363,6 +363,7 @@ pub fn run(args: Args) -> Result<()> {
         r.nodes_drawn,
         r.ranges,
         r.nodes_occluded,
+        r.particles_occluded,
         r.error_px,
         if r.budget_limited { " (budget reached)" } else { "" }
     );
