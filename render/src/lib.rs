@@ -60,7 +60,8 @@ pub use renderer::{FrameSettings, RenderedFrame, Renderer, SplatBlend, SplatFram
 pub use streaming::{StreamStats, StreamingRenderer};
 pub use style::{ColourMap, PointStyle, SpeciesStyle};
 pub use traversal::{
-    traverse, traverse_with, DepthOrder, DrawList, DrawRange, Residency, TraversalSettings,
+    traverse, traverse_shared, traverse_with, DepthOrder, DrawList, DrawRange, Residency,
+    SharedResidency, TraversalSettings,
 };
 pub use view::ViewFile;
 

@@ -12,14 +12,17 @@
 //!   slot holding the top node; there is no fragmentation.
 //! - Each frame first installs the pages the loader has finished: into a free slot, or
 //!   else into the least recently used slot not used by the previous frame (an
-//!   eviction). Then it runs the traversal ([`crate::traversal::traverse_with`]) with a
-//!   [`Residency`] that lets a node open only when every page holding its children is
-//!   resident. A node whose pages are missing stays drawn as its representative, so a
-//!   missing subtree is drawn by its nearest resident ancestor, and its pages are
-//!   requested with the node's projected size as priority. A node whose pages would not
-//!   fit in the pool together with the pages already used this frame is neither opened
-//!   nor requested (the pool, like the point budget, caps the cut), so the working set
-//!   of a still view always fits and loading converges.
+//!   eviction). Then it runs the traversal ([`crate::traversal::traverse_shared`], in
+//!   tiles on every core), which lets a node open only when every page holding its
+//!   children is resident. A node whose pages are missing stays drawn as its
+//!   representative, so a missing subtree is drawn by its nearest resident ancestor,
+//!   and its pages are requested with the node's projected size as priority. The nodes
+//!   the cut asked to open are then answered once more in one order, those opened
+//!   first and then the others largest first, through a [`Residency`] that marks their
+//!   pages used this frame: a missing node whose pages would not fit in the pool
+//!   together with the pages already used is not requested (the pool, like the point
+//!   budget, caps the cut), so the working set of a still view always fits and loading
+//!   converges.
 //! - Requests go to the loader thread largest first; it copies the pages out of the
 //!   memory-mapped file (taking the page faults off the render thread) and sends them
 //!   back. Each drawn range is split at page boundaries and points into its slots.
@@ -44,7 +47,7 @@ use crate::passes::sphere_raycast::{
 };
 use crate::renderer::{BoundCut, CutSource, FrameSettings, RenderedFrame, Renderer};
 use crate::style::PointStyle;
-use crate::traversal::{traverse_with, DrawList, Residency, TraversalSettings};
+use crate::traversal::{traverse_shared, DrawList, Residency, SharedResidency, TraversalSettings};
 
 /// Default points per page.
 pub const PAGE_POINTS: u32 = 256;
@@ -424,6 +427,19 @@ impl<'r> StreamingRenderer<'r> {
         }
 
         let file = self.file.clone();
+        // The cut, on every core, opening the nodes whose pages are all resident; then
+        // the nodes it asked to open are answered again in one order (those drawn
+        // first, then largest first) to mark the pages in use and request the missing
+        // ones within the pool's capacity.
+        let (draw, asked) = traverse_shared(
+            camera,
+            &file,
+            traversal,
+            &PagesResident {
+                page_points: self.page_points,
+                resident: &self.resident,
+            },
+        );
         let mut residency = PoolResidency {
             page_points: self.page_points,
             resident: &self.resident,
@@ -434,7 +450,12 @@ impl<'r> StreamingRenderer<'r> {
             wanted: Vec::new(),
             pool_limited: false,
         };
-        let draw = traverse_with(camera, &file, traversal, &mut residency);
+        let (drawn, missing): (Vec<_>, Vec<_>) = asked.into_iter().partition(|&(id, _)| {
+            pages_of(&file, id, self.page_points).all(|p| self.resident.contains_key(&p))
+        });
+        for (id, size) in drawn.into_iter().chain(missing) {
+            residency.can_open(&file, id, size);
+        }
         let (used, mut wanted, pool_limited) = (
             residency.used.len(),
             residency.wanted,
@@ -582,13 +603,30 @@ struct PoolResidency<'a> {
     pool_limited: bool,
 }
 
+/// The pages holding the children of node `id`.
+fn pages_of(file: &MdlodFile, id: u32, page_points: u32) -> impl Iterator<Item = PageId> + Clone {
+    let n = &file.nodes()[id as usize];
+    let level = n.level + 1;
+    let first_page = n.child_first / page_points;
+    let last_page = (n.child_first + n.child_count - 1) / page_points;
+    (first_page..=last_page).map(move |page| PageId { level, page })
+}
+
+/// What the parallel traversal asks: are all of a node's child pages in the pool?
+struct PagesResident<'a> {
+    page_points: u32,
+    resident: &'a HashMap<PageId, u32>,
+}
+
+impl SharedResidency for PagesResident<'_> {
+    fn resident(&self, file: &MdlodFile, id: u32) -> bool {
+        pages_of(file, id, self.page_points).all(|p| self.resident.contains_key(&p))
+    }
+}
+
 impl Residency for PoolResidency<'_> {
     fn can_open(&mut self, file: &MdlodFile, id: u32, size_px: f32) -> bool {
-        let n = &file.nodes()[id as usize];
-        let level = n.level + 1;
-        let first_page = n.child_first / self.page_points;
-        let last_page = (n.child_first + n.child_count - 1) / self.page_points;
-        let pages = (first_page..=last_page).map(|page| PageId { level, page });
+        let pages = pages_of(file, id, self.page_points);
         let new = pages.clone().filter(|p| !self.used.contains(p)).count();
         if self.used.len() + new > self.capacity {
             self.pool_limited = true;

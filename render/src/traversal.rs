@@ -308,13 +308,73 @@ impl Residency for AllResident {
     }
 }
 
+/// Whether a node's children can be drawn now, asked by every tile of the parallel
+/// traversal at once ([`traverse_shared`]); unlike [`Residency`] it records nothing.
+pub trait SharedResidency: Sync {
+    /// True when the children of node `id` may be drawn in this frame.
+    fn resident(&self, file: &MdlodFile, id: u32) -> bool;
+}
+
+impl SharedResidency for AllResident {
+    fn resident(&self, _file: &MdlodFile, _id: u32) -> bool {
+        true
+    }
+}
+
+/// A tile's [`Residency`]: answers from the shared one and remembers what it was asked.
+struct TileResidency<'a> {
+    shared: &'a dyn SharedResidency,
+    asked: Vec<(u32, f32)>,
+}
+
+impl Residency for TileResidency<'_> {
+    fn can_open(&mut self, file: &MdlodFile, id: u32, size_px: f32) -> bool {
+        self.asked.push((id, size_px));
+        self.shared.resident(file, id)
+    }
+
+    fn restart(&mut self) {
+        self.asked.clear();
+    }
+}
+
 /// Chooses the cut for `camera` (see the module docs).
 pub fn traverse(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings) -> DrawList {
+    traverse_shared(camera, file, settings, &AllResident).0
+}
+
+/// [`traverse`] where opening a node also needs `residency`'s consent, on every core
+/// with occlusion culling (in one pass without). A refused node stays drawn as its
+/// representative and refinement goes on with the others. Also returns the nodes the
+/// cut asked to open, each once with its projected size, largest first (a streaming
+/// pool requests the missing ones in that order).
+pub fn traverse_shared(
+    camera: &Camera,
+    file: &MdlodFile,
+    settings: &TraversalSettings,
+    residency: &dyn SharedResidency,
+) -> (DrawList, Vec<(u32, f32)>) {
     if settings.occlusion == OcclusionMode::Off || settings.viewport.contains(&0) {
-        traverse_with(camera, file, settings, &mut AllResident)
+        let mut tile = TileResidency {
+            shared: residency,
+            asked: Vec::new(),
+        };
+        let list = traverse_with(camera, file, settings, &mut tile);
+        (list, largest_first_once(tile.asked))
     } else {
-        traverse_tiled(camera, file, settings)
+        traverse_tiled(camera, file, settings, residency)
     }
+}
+
+/// Nodes a traversal asked to open, with their projected sizes.
+pub type Asked = Vec<(u32, f32)>;
+
+/// Each asked node once (the largest size it was asked with), largest first, ties by id.
+fn largest_first_once(mut asked: Vec<(u32, f32)>) -> Vec<(u32, f32)> {
+    asked.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)));
+    asked.dedup_by_key(|a| a.0);
+    asked.sort_unstable_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    asked
 }
 
 /// [`traverse`] where opening a node also needs `residency`'s consent; a refused node
@@ -407,14 +467,20 @@ const SHARED_SLACK: f64 = 1.5;
 /// tiles opened and drew (a node is left out when no tile can see it). The tiles do not
 /// depend on the thread count, so neither does the cut. When the union exceeds the
 /// budget, every tile starts over with the error 1.5× coarser.
-fn traverse_tiled(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings) -> DrawList {
+fn traverse_tiled(
+    camera: &Camera,
+    file: &MdlodFile,
+    settings: &TraversalSettings,
+    residency: &dyn SharedResidency,
+) -> (DrawList, Vec<(u32, f32)>) {
     use rayon::prelude::*;
     let proj = Projector::new(camera, settings.viewport);
     if !proj.visible(&file.nodes()[0]) {
-        return DrawList {
+        let list = DrawList {
             culled_nodes: 1,
             ..Default::default()
         };
+        return (list, Vec::new());
     }
     let [w, h] = settings.viewport;
     let tiles: Vec<[u32; 2]> = (0..h.div_ceil(TILE_PX))
@@ -427,7 +493,7 @@ fn traverse_tiled(camera: &Camera, file: &MdlodFile, settings: &TraversalSetting
             sum: 0.into(),
             limit: (budget as f64 * SHARED_SLACK).min(u64::MAX as f64) as u64,
         };
-        let passes: Option<Vec<Decisions>> = tiles
+        let passes: Option<Vec<(Decisions, Asked)>> = tiles
             .par_iter()
             .map(|&origin| {
                 let mut buffer = OcclusionBuffer::window(
@@ -437,18 +503,26 @@ fn traverse_tiled(camera: &Camera, file: &MdlodFile, settings: &TraversalSetting
                     origin,
                     [TILE_PX, TILE_PX],
                 )?;
-                front_to_back(
+                let mut tile = TileResidency {
+                    shared: residency,
+                    asked: Vec::new(),
+                };
+                let d = front_to_back(
                     camera,
                     file,
                     settings,
                     error_px,
-                    &mut AllResident,
+                    &mut tile,
                     &mut buffer,
                     Some(&shared),
-                )
+                )?;
+                Some((d, tile.asked))
             })
             .collect();
         if let Some(passes) = passes {
+            let (passes, asked): (Vec<Decisions>, Vec<Vec<(u32, f32)>>) =
+                passes.into_iter().unzip();
+            let asked = largest_first_once(asked.concat());
             let mut marks = Marks::new(file.nodes().len());
             let mut achieved = 0.0f32;
             for d in &passes {
@@ -476,12 +550,21 @@ fn traverse_tiled(camera: &Camera, file: &MdlodFile, settings: &TraversalSetting
             if list.points <= budget {
                 list.restarts = attempt;
                 list.budget_limited = attempt > 0;
-                return list;
+                list.deferred_nodes = asked
+                    .iter()
+                    .filter(|&&(id, _)| !residency.resident(file, id))
+                    .count() as u64;
+                return (list, asked);
             }
         }
         error_px = (error_px * 1.5).max(0.5);
     }
-    largest_first(camera, file, settings, &mut AllResident)
+    let mut tile = TileResidency {
+        shared: residency,
+        asked: Vec::new(),
+    };
+    let list = largest_first(camera, file, settings, &mut tile);
+    (list, largest_first_once(tile.asked))
 }
 
 /// Coarsening steps (×1.5 each) the occlusion traversal tries before it falls back to

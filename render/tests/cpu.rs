@@ -340,6 +340,68 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
     assert_eq!(other, patchy.refused.len() as u64);
 }
 
+/// Refuses the even nodes of one level, from every tile at once.
+struct SharedPatchy(u8);
+
+impl mdlod_render::SharedResidency for SharedPatchy {
+    fn resident(&self, file: &MdlodFile, id: u32) -> bool {
+        !(file.nodes()[id as usize].level == self.0 && id.is_multiple_of(2))
+    }
+}
+
+#[test]
+fn the_parallel_traversal_draws_refused_nodes_and_lists_what_it_asked_largest_first() {
+    let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
+    let cam = camera_for(&f, &ViewSpec::default(), VIEWPORT[0], VIEWPORT[1]).unwrap();
+    let settings = TraversalSettings {
+        viewport: VIEWPORT,
+        error_px: 0.0,
+        budget_points: u64::MAX,
+        occlusion: OcclusionMode::PixelCentres,
+    };
+    let on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| mdlod_render::traverse_shared(&cam, &f, &settings, &SharedPatchy(2)))
+    };
+    let (d, asked) = on(1);
+    assert_eq!((d.clone(), asked.clone()), on(3));
+    check_counts(&f, &d);
+    assert!(coverage(&f, &d).iter().all(|&c| c <= 1));
+    // Each node once, largest first; the refused ones are those of level 2 with even ids.
+    assert!(asked.windows(2).all(|w| w[0].1 >= w[1].1));
+    let mut ids: Vec<u32> = asked.iter().map(|a| a.0).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    assert_eq!(ids.len(), asked.len());
+    let refused: Vec<u32> = ids
+        .iter()
+        .copied()
+        .filter(|&id| f.nodes()[id as usize].level == 2 && id.is_multiple_of(2))
+        .collect();
+    assert!(!refused.is_empty());
+    assert_eq!(d.deferred_nodes as usize, refused.len());
+    // A refused node that is drawn is drawn whole: nothing below it.
+    for &id in &refused {
+        let i = id - f.levels()[2].node_first as u32;
+        let (a, b) = particles_below(&f, 2, i as usize, 1);
+        let below = d.ranges.iter().filter(|r| r.level > 2).any(|r| {
+            let (ra, rb) =
+                particles_below(&f, r.level as usize, r.first as usize, r.count as usize);
+            ra < b && a < rb
+        });
+        assert!(!below, "node {id} is refused but its descendants are drawn");
+    }
+    // Everything resident: the same cut as `traverse`, and nothing refused.
+    let (all, asked_all) =
+        mdlod_render::traverse_shared(&cam, &f, &settings, &mdlod_render::traversal::AllResident);
+    assert_eq!(all, traverse(&cam, &f, &settings));
+    assert_eq!(all.deferred_nodes, 0);
+    assert_eq!(asked_all.len() as u64, all.opened_nodes);
+}
+
 /// Per pixel centre, the nearest sphere hit (key and ray parameter), by CPU ray casting.
 fn nearest_hits(cam: &Camera, spheres: &[((u8, u32), Vec3, f32)]) -> Vec<Option<((u8, u32), f32)>> {
     let [w, h] = VIEWPORT;
