@@ -78,6 +78,7 @@ pub struct OcclusionBuffer {
     levels: Vec<Vec<f32>>,
     dims: Vec<(u32, u32)>,
     clip_from_world: Mat4,
+    clip_from_view: Mat4,
     view_from_world: Mat4,
     camera: Camera,
     /// Sine and cosine bounds of the angle between any view ray and the view axis.
@@ -143,6 +144,7 @@ impl OcclusionBuffer {
             levels,
             dims,
             clip_from_world: camera.clip_from_world(viewport, glam::Vec2::ZERO),
+            clip_from_view: camera.jittered_clip_from_view(viewport, glam::Vec2::ZERO),
             view_from_world: camera.view_from_world(),
             camera: camera.clone(),
             sin_max,
@@ -332,6 +334,49 @@ impl OcclusionBuffer {
             x1 = x1.max(x);
             y1 = y1.max(y);
         }
+        self.rect_hidden(nearest, [x0, y0, x1, y1])
+    }
+
+    /// True when nothing of the sphere can be seen past what is recorded: as
+    /// [`Self::box_hidden`] for the box around it aligned with the view, whose nearest
+    /// depth is the sphere's own (`depth − radius`).
+    pub fn sphere_hidden(&self, centre: Vec3, radius: f32) -> bool {
+        let v = self.view_from_world.transform_point3(centre);
+        let nearest = -v.z - radius;
+        if !(nearest.is_finite() && radius >= 0.0)
+            || (self.camera.projection == Projection::Perspective && nearest <= self.camera.near)
+        {
+            return false;
+        }
+        let (mut x0, mut y0) = (f32::INFINITY, f32::INFINITY);
+        let (mut x1, mut y1) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        // The image x of a point depends on its view x and depth alone, y on its view y
+        // and depth: the extremes are at the box's corners.
+        for k in 0..8 {
+            let p = v + Vec3::new(
+                if k & 1 == 0 { -radius } else { radius },
+                if k & 2 == 0 { -radius } else { radius },
+                if k & 4 == 0 { -radius } else { radius },
+            );
+            let c = self.clip_from_view * p.extend(1.0);
+            if c.w.is_nan() || c.w <= 0.0 {
+                return false;
+            }
+            let (x, y) = (
+                (c.x / c.w + 1.0) * 0.5 * self.image[0] as f32 - self.origin[0] as f32,
+                (1.0 - c.y / c.w) * 0.5 * self.image[1] as f32 - self.origin[1] as f32,
+            );
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x);
+            y1 = y1.max(y);
+        }
+        self.rect_hidden(nearest, [x0, y0, x1, y1])
+    }
+
+    /// True when every sample of the window inside the image rectangle `x0, y0, x1, y1`
+    /// (window pixels) has a recorded bound nearer than `nearest`, or when there is none.
+    fn rect_hidden(&self, nearest: f32, [x0, y0, x1, y1]: [f32; 4]) -> bool {
         if !(nearest.is_finite() && x0.is_finite() && y0.is_finite()) {
             return false;
         }
@@ -505,6 +550,71 @@ mod tests {
             [8, 8]
         )
         .is_none());
+    }
+
+    #[test]
+    fn a_hidden_sphere_has_no_pixel_whose_ray_meets_it_before_the_recorded_bound() {
+        // Random occluders, then random spheres: whenever the sphere test says hidden,
+        // no pixel sample's ray reaches the sphere nearer than the bound recorded there
+        // (CPU ray casting); and the test hides some.
+        for projection in [Projection::Perspective, Projection::Orthographic] {
+            let cam = camera(projection);
+            let (w, h) = (64u32, 48u32);
+            let mut buf = OcclusionBuffer::new(&cam, [w, h], OcclusionMode::PixelCentres).unwrap();
+            let mut state = 99u64;
+            let mut rnd = move || {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 40) as f32 / (1u64 << 24) as f32
+            };
+            let toward_eye = cam.back();
+            for _ in 0..60 {
+                let c = cam.right() * (rnd() * 16.0 - 8.0)
+                    + cam.up() * (rnd() * 12.0 - 6.0)
+                    + toward_eye * (rnd() * 4.0);
+                buf.add_sphere(c, 1.0 + rnd() * 2.0);
+            }
+            let clip_inv = buf.clip_from_world.inverse();
+            let mut hidden = 0;
+            for _ in 0..400 {
+                let c = cam.right() * (rnd() * 18.0 - 9.0) + cam.up() * (rnd() * 14.0 - 7.0)
+                    - toward_eye * (rnd() * 8.0 - 2.0);
+                let r = 0.2 + rnd();
+                if !buf.sphere_hidden(c, r) {
+                    continue;
+                }
+                hidden += 1;
+                for y in 0..h {
+                    for x in 0..w {
+                        let ndc_x = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
+                        let ndc_y = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
+                        let (eye, dir) = match projection {
+                            Projection::Perspective => {
+                                let p = clip_inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.5));
+                                (cam.eye(), (p - cam.eye()).normalize())
+                            }
+                            Projection::Orthographic => {
+                                let p = clip_inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.0));
+                                (p, -toward_eye)
+                            }
+                        };
+                        let oc = eye - c;
+                        let b = oc.dot(dir);
+                        let disc = b * b - (oc.dot(oc) - r * r);
+                        if disc < 0.0 {
+                            continue;
+                        }
+                        let hit = buf.depth(eye + dir * (-b - disc.sqrt()));
+                        assert!(
+                            buf.depth_at(x, y) < hit,
+                            "{projection:?}: pixel ({x}, {y}) sees the hidden sphere at {hit}"
+                        );
+                    }
+                }
+            }
+            assert!(hidden > 20, "{projection:?}: only {hidden} spheres hidden");
+        }
     }
 
     #[test]

@@ -41,8 +41,9 @@
 //! already committed (see [`crate::occlusion`]) is dropped with its whole subtree; a node
 //! small enough is committed as its representative; any other is opened. When a node is
 //! opened, its particle children and its node children small enough to be drawn are
-//! committed at once, each after a hidden test of the box around the one sphere drawn
-//! for it (much tighter than its node's box grown by the radius); only the larger
+//! committed at once, each after a hidden test of the one sphere drawn for it (its
+//! view-aligned box at the sphere's nearest depth: much tighter than its node's box
+//! grown by the radius); only the larger
 //! children go into the queue. Which particles of a node are drawn is kept as a 64-bit
 //! mask (nodes of more than 64 particles draw them all), so the cut's particle ranges
 //! are the runs of drawn particles. Every commitment is recorded in the occlusion buffer, so what is
@@ -799,16 +800,16 @@ fn front_to_back(
                     heap.push((Reverse(Size(proj.near_depth(cn))), Reverse(cid as u32)));
                     continue;
                 }
-                // The one sphere drawn for it, as the GPU decodes it: its bounding box
-                // (grown by the quantization error, against rounding) is a much tighter
-                // test than the node's box grown by the radius.
+                // The one sphere drawn for it, as the GPU decodes it (grown by the
+                // quantization error, against rounding), is a much tighter test than
+                // the node's box grown by the radius.
                 let p = Vec3::from(quantize::decode3(
                     positions.get(c as usize),
                     enc.centroid,
                     enc.quant_scale,
                     bits,
                 ));
-                if buffer.box_hidden(p, p, r + quant) {
+                if buffer.sphere_hidden(p, r + quant) {
                     continue;
                 }
                 achieved = achieved.max(csize);
@@ -838,7 +839,7 @@ fn front_to_back(
                     .map_or(0, |&s| usize::from(s).min(radii.len().saturating_sub(1)));
                 let r = radii.get(s).copied().unwrap_or(0.0);
                 if masked {
-                    if buffer.box_hidden(p, p, r + quant) {
+                    if buffer.sphere_hidden(p, r + quant) {
                         continue;
                     }
                     mask |= 1 << k;
