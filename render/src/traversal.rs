@@ -314,11 +314,20 @@ impl Residency for AllResident {
 pub trait SharedResidency: Sync {
     /// True when the children of node `id` may be drawn in this frame.
     fn resident(&self, file: &MdlodFile, id: u32) -> bool;
+
+    /// Whether the caller wants the nodes asked about ([`traverse_shared`]'s list).
+    fn wants_asked(&self) -> bool {
+        true
+    }
 }
 
 impl SharedResidency for AllResident {
     fn resident(&self, _file: &MdlodFile, _id: u32) -> bool {
         true
+    }
+
+    fn wants_asked(&self) -> bool {
+        false
     }
 }
 
@@ -330,7 +339,9 @@ struct TileResidency<'a> {
 
 impl Residency for TileResidency<'_> {
     fn can_open(&mut self, file: &MdlodFile, id: u32, size_px: f32) -> bool {
-        self.asked.push((id, size_px));
+        if self.shared.wants_asked() {
+            self.asked.push((id, size_px));
+        }
         self.shared.resident(file, id)
     }
 
@@ -348,7 +359,8 @@ pub fn traverse(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings)
 /// with occlusion culling (in one pass without). A refused node stays drawn as its
 /// representative and refinement goes on with the others. Also returns the nodes the
 /// cut asked to open, each once with its projected size, largest first (a streaming
-/// pool requests the missing ones in that order).
+/// pool requests the missing ones in that order), unless the residency does not want
+/// them.
 pub fn traverse_shared(
     camera: &Camera,
     file: &MdlodFile,
