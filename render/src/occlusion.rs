@@ -30,6 +30,12 @@
 //!   read at the level where the rectangle spans at most 2×2 texels, which covers a
 //!   superset of the rectangle and so stays conservative.
 //!
+//! - A sphere (a particle, or a cluster drawn as one sphere) is tested more tightly: its
+//!   view-aligned box at its own nearest depth; and when that box spans at most 8×8
+//!   pixels with one sample per pixel, sample by sample: each pixel centre whose ray
+//!   enters the sphere must have a bound nearer than the entry depth (shrunk by a
+//!   relative 10⁻⁵ against rounding). That is the GPU's own depth test, made ahead.
+//!
 //! Nothing the GPU would show is removed: a culled node's every fragment would fail the
 //! depth test against spheres that are drawn. Depths are compared in view space, which
 //! is monotone along every ray, as the GPU's depth buffer is.
@@ -57,6 +63,14 @@ const RADIUS_SHRINK_PX: f32 = 0.02;
 /// Relative growth of an occluder's depth, and of an occludee's rectangle in pixels.
 const DEPTH_GROW_REL: f32 = 1e-5;
 const RECT_GROW_PX: f32 = 0.5;
+
+/// Spheres whose projected box is at most this many pixels wide and high are tested
+/// sample by sample (one ray per pixel centre) rather than against the box's pyramid
+/// maximum.
+const EXACT_SPHERE_PX: f32 = 8.0;
+/// Relative decrease of an occludee's entry depth in the sample test (against the GPU
+/// computing the same hit with other rounding).
+const SAMPLE_DEPTH_SHRINK_REL: f32 = 1e-5;
 
 /// A query reads the pyramid level where the rectangle spans fewer than this many
 /// texels per axis: finer levels bound the rectangle more tightly (less uncovered border
@@ -371,7 +385,66 @@ impl OcclusionBuffer {
             x1 = x1.max(x);
             y1 = y1.max(y);
         }
+        if self.mode == OcclusionMode::PixelCentres
+            && x1 - x0 <= EXACT_SPHERE_PX
+            && y1 - y0 <= EXACT_SPHERE_PX
+        {
+            return self.sphere_samples_hidden(v, radius, [x0, y0, x1, y1]);
+        }
         self.rect_hidden(nearest, [x0, y0, x1, y1])
+    }
+
+    /// The sphere test of a small sphere, sample by sample: every pixel centre of the
+    /// window inside `rect` whose ray enters the sphere (centre `v` in view space) must
+    /// have a recorded bound nearer than that entry depth.
+    fn sphere_samples_hidden(&self, v: Vec3, radius: f32, [x0, y0, x1, y1]: [f32; 4]) -> bool {
+        if !(x0.is_finite() && y0.is_finite() && x1.is_finite() && y1.is_finite()) {
+            return false;
+        }
+        let (w, h) = (self.width as f32, self.height as f32);
+        let px0 = (x0 - RECT_GROW_PX - 0.5).ceil().max(0.0);
+        let py0 = (y0 - RECT_GROW_PX - 0.5).ceil().max(0.0);
+        let px1 = (x1 + RECT_GROW_PX - 0.5).floor().min(w - 1.0);
+        let py1 = (y1 + RECT_GROW_PX - 0.5).floor().min(h - 1.0);
+        let p = &self.clip_from_view;
+        let (sx, sy) = (p.x_axis.x, p.y_axis.y);
+        let perspective = self.camera.projection == Projection::Perspective;
+        let r2 = radius * radius;
+        let mut j = py0;
+        while j <= py1 {
+            let ndc_y = 1.0 - (j + self.origin[1] as f32 + 0.5) / self.image[1] as f32 * 2.0;
+            let mut i = px0;
+            while i <= px1 {
+                let ndc_x = (i + self.origin[0] as f32 + 0.5) / self.image[0] as f32 * 2.0 - 1.0;
+                // The sample's ray, parametrised by view depth t: origin + t · dir.
+                let (origin, dir) = if perspective {
+                    (
+                        Vec3::ZERO,
+                        Vec3::new((ndc_x + p.z_axis.x) / sx, (ndc_y + p.z_axis.y) / sy, -1.0),
+                    )
+                } else {
+                    (
+                        Vec3::new((ndc_x - p.w_axis.x) / sx, (ndc_y - p.w_axis.y) / sy, 0.0),
+                        Vec3::new(0.0, 0.0, -1.0),
+                    )
+                };
+                let oc = origin - v;
+                let (a, b, c) = (dir.dot(dir), dir.dot(oc), oc.dot(oc) - r2);
+                let disc = b * b - a * c;
+                if disc >= 0.0 {
+                    let entry = (-b - disc.sqrt()) / a;
+                    let bound = self.levels[0][(j as u32 * self.width + i as u32) as usize];
+                    let entry = entry * (1.0 - SAMPLE_DEPTH_SHRINK_REL);
+                    // Seen unless certainly behind the bound (NaN counts as seen).
+                    if bound.partial_cmp(&entry) != Some(std::cmp::Ordering::Less) {
+                        return false;
+                    }
+                }
+                i += 1.0;
+            }
+            j += 1.0;
+        }
+        true
     }
 
     /// True when every sample of the window inside the image rectangle `x0, y0, x1, y1`

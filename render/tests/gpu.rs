@@ -707,6 +707,36 @@ fn occlusion_culling_changes_no_pixel() {
     }
 }
 
+#[test]
+fn occlusion_culling_changes_no_pixel_where_particles_are_about_a_pixel_wide() {
+    // Small spheres take the sample-by-sample test (one ray per pixel centre against the
+    // recorded bounds): it must hide most of the block and still change no pixel.
+    let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
+    for (error_px, zoom) in [(0.0, 1.0), (2.0, 1.6)] {
+        let mut o = opts(200, 150);
+        o.error_px = error_px;
+        o.view = ViewSpec::Orbit {
+            azimuth_deg: 35.0,
+            elevation_deg: 25.0,
+            zoom,
+            projection: Projection::Perspective,
+        };
+        let (culled, r) = render_image(renderer(), &f, &o).unwrap();
+        o.occlusion = false;
+        let (all, r_all) = render_image(renderer(), &f, &o).unwrap();
+        let drawn = |r: &mdlod_render::RenderReport| r.particles_drawn + r.nodes_drawn;
+        assert!(
+            drawn(&r) * 4 < drawn(&r_all),
+            "{} of {} spheres drawn",
+            drawn(&r),
+            drawn(&r_all)
+        );
+        assert!(r.particles_occluded > 0);
+        let (failing, _) = golden::compare(&all, &culled, 0);
+        assert_eq!(failing, 0, "error {error_px}: {failing} pixels differ");
+    }
+}
+
 /// CPU reference of the splat pass: every point of the cut deposits
 /// `π r_px² · colour` with the pass's normalised Gaussian.
 fn splat_reference(
