@@ -690,6 +690,91 @@ mod tests {
         }
     }
 
+    /// Where the ray `origin + t · dir` enters the box `min..max`: the smallest `t ≥ 0`
+    /// inside it (0 when the origin is inside), or `None` when it misses.
+    fn ray_box_entry(origin: Vec3, dir: Vec3, min: Vec3, max: Vec3) -> Option<f32> {
+        let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
+        for a in 0..3 {
+            let (o, d) = (origin[a], dir[a]);
+            if d == 0.0 {
+                if o < min[a] || o > max[a] {
+                    return None;
+                }
+                continue;
+            }
+            let (u, v) = ((min[a] - o) / d, (max[a] - o) / d);
+            t0 = t0.max(u.min(v));
+            t1 = t1.min(u.max(v));
+        }
+        (t0 <= t1 && t0.is_finite()).then_some(t0)
+    }
+
+    #[test]
+    fn a_hidden_box_has_no_pixel_whose_ray_meets_it_before_the_recorded_bound() {
+        // As for spheres: random small boxes (sample-by-sample test) and larger ones
+        // (pyramid test) against random occluders, checked by CPU ray casting.
+        for projection in [Projection::Perspective, Projection::Orthographic] {
+            let cam = camera(projection);
+            let (w, h) = (64u32, 48u32);
+            let mut buf = OcclusionBuffer::new(&cam, [w, h], OcclusionMode::PixelCentres).unwrap();
+            let mut state = 7u64;
+            let mut rnd = move || {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 40) as f32 / (1u64 << 24) as f32
+            };
+            let toward_eye = cam.back();
+            for _ in 0..60 {
+                let c = cam.right() * (rnd() * 16.0 - 8.0)
+                    + cam.up() * (rnd() * 12.0 - 6.0)
+                    + toward_eye * (rnd() * 4.0);
+                buf.add_sphere(c, 1.0 + rnd() * 2.0);
+            }
+            let clip_inv = buf.clip_from_world.inverse();
+            let mut hidden = 0;
+            for k in 0..400 {
+                let c = cam.right() * (rnd() * 18.0 - 9.0) + cam.up() * (rnd() * 14.0 - 7.0)
+                    - toward_eye * (rnd() * 8.0 - 2.0);
+                let half = Vec3::new(rnd(), rnd(), rnd()) * if k % 4 == 0 { 3.0 } else { 0.8 };
+                let margin = rnd() * 0.3;
+                if !buf.box_hidden(c - half, c + half, margin) {
+                    continue;
+                }
+                hidden += 1;
+                let (lo, hi) = (
+                    c - half - Vec3::splat(margin),
+                    c + half + Vec3::splat(margin),
+                );
+                for y in 0..h {
+                    for x in 0..w {
+                        let ndc_x = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
+                        let ndc_y = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
+                        let (eye, dir) = match projection {
+                            Projection::Perspective => {
+                                let p = clip_inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.5));
+                                (cam.eye(), (p - cam.eye()).normalize())
+                            }
+                            Projection::Orthographic => {
+                                let p = clip_inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.0));
+                                (p, -toward_eye)
+                            }
+                        };
+                        let Some(t) = ray_box_entry(eye, dir, lo, hi) else {
+                            continue;
+                        };
+                        let hit = buf.depth(eye + dir * t);
+                        assert!(
+                            buf.depth_at(x, y) < hit,
+                            "{projection:?}: pixel ({x}, {y}) sees the hidden box at {hit}"
+                        );
+                    }
+                }
+            }
+            assert!(hidden > 20, "{projection:?}: only {hidden} boxes hidden");
+        }
+    }
+
     #[test]
     fn recorded_pixels_are_inside_the_sphere_silhouette() {
         // Every pixel marked by a sphere has its sample ray hit the sphere at a depth no
