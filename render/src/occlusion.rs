@@ -625,16 +625,21 @@ mod tests {
         .is_none());
     }
 
-    #[test]
-    fn a_hidden_sphere_has_no_pixel_whose_ray_meets_it_before_the_recorded_bound() {
-        // Random occluders, then random spheres: whenever the sphere test says hidden,
-        // no pixel sample's ray reaches the sphere nearer than the bound recorded there
-        // (CPU ray casting); and the test hides some.
+    /// Random occluders, then 400 random shapes around random centres (`make`): whenever
+    /// `hidden` says one is hidden, no pixel centre's ray (CPU ray casting; `entry` gives
+    /// the ray parameter where a unit-speed ray enters the shape) reaches it nearer than
+    /// the bound recorded there; and more than 20 are hidden.
+    fn check_hidden_shapes<S>(
+        seed: u64,
+        make: impl Fn(&mut dyn FnMut() -> f32, Vec3, usize) -> S,
+        hidden: impl Fn(&OcclusionBuffer, &S) -> bool,
+        entry: impl Fn(&S, Vec3, Vec3) -> Option<f32>,
+    ) {
         for projection in [Projection::Perspective, Projection::Orthographic] {
             let cam = camera(projection);
             let (w, h) = (64u32, 48u32);
             let mut buf = OcclusionBuffer::new(&cam, [w, h], OcclusionMode::PixelCentres).unwrap();
-            let mut state = 99u64;
+            let mut state = seed;
             let mut rnd = move || {
                 state = state
                     .wrapping_mul(6364136223846793005)
@@ -649,15 +654,15 @@ mod tests {
                 buf.add_sphere(c, 1.0 + rnd() * 2.0);
             }
             let clip_inv = buf.clip_from_world.inverse();
-            let mut hidden = 0;
-            for _ in 0..400 {
+            let mut count = 0;
+            for k in 0..400 {
                 let c = cam.right() * (rnd() * 18.0 - 9.0) + cam.up() * (rnd() * 14.0 - 7.0)
                     - toward_eye * (rnd() * 8.0 - 2.0);
-                let r = 0.2 + rnd();
-                if !buf.sphere_hidden(c, r) {
+                let shape = make(&mut rnd, c, k);
+                if !hidden(&buf, &shape) {
                     continue;
                 }
-                hidden += 1;
+                count += 1;
                 for y in 0..h {
                     for x in 0..w {
                         let ndc_x = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
@@ -672,22 +677,34 @@ mod tests {
                                 (p, -toward_eye)
                             }
                         };
-                        let oc = eye - c;
-                        let b = oc.dot(dir);
-                        let disc = b * b - (oc.dot(oc) - r * r);
-                        if disc < 0.0 {
+                        let Some(t) = entry(&shape, eye, dir) else {
                             continue;
-                        }
-                        let hit = buf.depth(eye + dir * (-b - disc.sqrt()));
+                        };
+                        let hit = buf.depth(eye + dir * t);
                         assert!(
                             buf.depth_at(x, y) < hit,
-                            "{projection:?}: pixel ({x}, {y}) sees the hidden sphere at {hit}"
+                            "{projection:?}: pixel ({x}, {y}) sees a hidden shape at {hit}"
                         );
                     }
                 }
             }
-            assert!(hidden > 20, "{projection:?}: only {hidden} spheres hidden");
+            assert!(count > 20, "{projection:?}: only {count} shapes hidden");
         }
+    }
+
+    #[test]
+    fn a_hidden_sphere_has_no_pixel_whose_ray_meets_it_before_the_recorded_bound() {
+        check_hidden_shapes(
+            99,
+            |rnd, c, _| (c, 0.2 + rnd()),
+            |buf, &(c, r)| buf.sphere_hidden(c, r),
+            |&(c, r), eye, dir| {
+                let oc = eye - c;
+                let b = oc.dot(dir);
+                let disc = b * b - (oc.dot(oc) - r * r);
+                (disc >= 0.0).then(|| -b - disc.sqrt())
+            },
+        );
     }
 
     /// Where the ray `origin + t · dir` enters the box `min..max`: the smallest `t ≥ 0`
@@ -711,68 +728,18 @@ mod tests {
 
     #[test]
     fn a_hidden_box_has_no_pixel_whose_ray_meets_it_before_the_recorded_bound() {
-        // As for spheres: random small boxes (sample-by-sample test) and larger ones
-        // (pyramid test) against random occluders, checked by CPU ray casting.
-        for projection in [Projection::Perspective, Projection::Orthographic] {
-            let cam = camera(projection);
-            let (w, h) = (64u32, 48u32);
-            let mut buf = OcclusionBuffer::new(&cam, [w, h], OcclusionMode::PixelCentres).unwrap();
-            let mut state = 7u64;
-            let mut rnd = move || {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (state >> 40) as f32 / (1u64 << 24) as f32
-            };
-            let toward_eye = cam.back();
-            for _ in 0..60 {
-                let c = cam.right() * (rnd() * 16.0 - 8.0)
-                    + cam.up() * (rnd() * 12.0 - 6.0)
-                    + toward_eye * (rnd() * 4.0);
-                buf.add_sphere(c, 1.0 + rnd() * 2.0);
-            }
-            let clip_inv = buf.clip_from_world.inverse();
-            let mut hidden = 0;
-            for k in 0..400 {
-                let c = cam.right() * (rnd() * 18.0 - 9.0) + cam.up() * (rnd() * 14.0 - 7.0)
-                    - toward_eye * (rnd() * 8.0 - 2.0);
+        // Small boxes and, one in four, larger ones; each grown by a random margin.
+        check_hidden_shapes(
+            7,
+            |rnd, c, k| {
                 let half = Vec3::new(rnd(), rnd(), rnd()) * if k % 4 == 0 { 3.0 } else { 0.8 };
-                let margin = rnd() * 0.3;
-                if !buf.box_hidden(c - half, c + half, margin) {
-                    continue;
-                }
-                hidden += 1;
-                let (lo, hi) = (
-                    c - half - Vec3::splat(margin),
-                    c + half + Vec3::splat(margin),
-                );
-                for y in 0..h {
-                    for x in 0..w {
-                        let ndc_x = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
-                        let ndc_y = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
-                        let (eye, dir) = match projection {
-                            Projection::Perspective => {
-                                let p = clip_inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.5));
-                                (cam.eye(), (p - cam.eye()).normalize())
-                            }
-                            Projection::Orthographic => {
-                                let p = clip_inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.0));
-                                (p, -toward_eye)
-                            }
-                        };
-                        let Some(t) = ray_box_entry(eye, dir, lo, hi) else {
-                            continue;
-                        };
-                        let hit = buf.depth(eye + dir * t);
-                        assert!(
-                            buf.depth_at(x, y) < hit,
-                            "{projection:?}: pixel ({x}, {y}) sees the hidden box at {hit}"
-                        );
-                    }
-                }
-            }
-            assert!(hidden > 20, "{projection:?}: only {hidden} boxes hidden");
-        }
+                (c - half, c + half, rnd() * 0.3)
+            },
+            |buf, &(lo, hi, margin)| buf.box_hidden(lo, hi, margin),
+            |&(lo, hi, margin), eye, dir| {
+                ray_box_entry(eye, dir, lo - Vec3::splat(margin), hi + Vec3::splat(margin))
+            },
+        );
     }
 
     #[test]
