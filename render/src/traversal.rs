@@ -885,9 +885,6 @@ fn emit(
     achieved: f32,
     mut list: DrawList,
 ) -> DrawList {
-    let nodes = file.nodes();
-    let levels = file.levels();
-    let last = file.level_count() - 1;
     if marks.get(0) != OPENED {
         if recorded.is_some() && marks.get(0) != DRAWN {
             list.occluded_nodes = 1;
@@ -904,73 +901,108 @@ fn emit(
         list.error_px = achieved;
         return list;
     }
+    use rayon::prelude::*;
     let mut open = std::mem::take(&mut marks.open);
-    open.sort_unstable();
-    for &id in &open {
-        let n = &nodes[id as usize];
-        let child_level = usize::from(n.level) + 1;
-        let enc = children_encoder(file, id as usize) as u32;
-        let children = n.child_first..n.child_first + n.child_count;
-        let mut run: Option<(u32, u32)> = None;
-        let flush = |run: &mut Option<(u32, u32)>, list: &mut DrawList| {
-            if let Some((first, count)) = run.take() {
-                list.ranges.push(DrawRange {
-                    level: child_level as u8,
-                    first,
-                    count,
-                    quant_node: enc,
-                });
-                if child_level == last {
-                    list.particles += u64::from(count);
-                } else {
-                    list.representatives += u64::from(count);
-                }
+    open.par_sort_unstable();
+    // Each chunk of opened nodes on its own core; the parts are joined in order.
+    let parts: Vec<DrawList> = open
+        .par_chunks(EMIT_CHUNK)
+        .map(|chunk| {
+            let mut part = DrawList::default();
+            for &id in chunk {
+                emit_node(file, proj, &marks, recorded, id, &mut part);
             }
-        };
-        let mask = if child_level == last {
-            recorded.and_then(|m| {
-                m.binary_search_by_key(&id, |&(node, _)| node)
-                    .ok()
-                    .map(|i| m[i].1)
-            })
-        } else {
-            None
-        };
-        for (k, c) in children.enumerate() {
-            let draw = if child_level == last {
-                let drawn = mask.is_none_or(|m| m >> k & 1 == 1);
-                list.occluded_particles += u64::from(!drawn);
-                drawn
-            } else {
-                let cid = levels[child_level].node_first as u32 + c;
-                match marks.get(cid) {
-                    OPENED => false,
-                    DRAWN => true,
-                    _ => {
-                        if !proj.visible(&nodes[cid as usize]) {
-                            list.culled_nodes += 1;
-                            false
-                        } else if recorded.is_some() {
-                            list.occluded_nodes += 1;
-                            false
-                        } else {
-                            true
-                        }
-                    }
-                }
-            };
-            match (&mut run, draw) {
-                (Some((_, count)), true) => *count += 1,
-                (None, true) => run = Some((c, 1)),
-                (_, false) => flush(&mut run, &mut list),
-            }
-        }
-        flush(&mut run, &mut list);
+            part
+        })
+        .collect();
+    for part in parts {
+        list.ranges.extend(part.ranges);
+        list.particles += part.particles;
+        list.representatives += part.representatives;
+        list.culled_nodes += part.culled_nodes;
+        list.occluded_nodes += part.occluded_nodes;
+        list.occluded_particles += part.occluded_particles;
     }
     list.opened_nodes = open.len() as u64;
     list.points = list.particles + list.representatives;
     list.error_px = achieved;
     list
+}
+
+/// Opened nodes per chunk of the parallel emission.
+const EMIT_CHUNK: usize = 4096;
+
+/// The ranges of opened node `id`'s drawn children, added to `list` (see [`emit`]).
+fn emit_node(
+    file: &MdlodFile,
+    proj: &Projector,
+    marks: &Marks,
+    recorded: Option<&[(u32, u64)]>,
+    id: u32,
+    list: &mut DrawList,
+) {
+    let nodes = file.nodes();
+    let levels = file.levels();
+    let last = file.level_count() - 1;
+    let n = &nodes[id as usize];
+    let child_level = usize::from(n.level) + 1;
+    let enc = children_encoder(file, id as usize) as u32;
+    let children = n.child_first..n.child_first + n.child_count;
+    let mut run: Option<(u32, u32)> = None;
+    let flush = |run: &mut Option<(u32, u32)>, list: &mut DrawList| {
+        if let Some((first, count)) = run.take() {
+            list.ranges.push(DrawRange {
+                level: child_level as u8,
+                first,
+                count,
+                quant_node: enc,
+            });
+            if child_level == last {
+                list.particles += u64::from(count);
+            } else {
+                list.representatives += u64::from(count);
+            }
+        }
+    };
+    let mask = if child_level == last {
+        recorded.and_then(|m| {
+            m.binary_search_by_key(&id, |&(node, _)| node)
+                .ok()
+                .map(|i| m[i].1)
+        })
+    } else {
+        None
+    };
+    for (k, c) in children.enumerate() {
+        let draw = if child_level == last {
+            let drawn = mask.is_none_or(|m| m >> k & 1 == 1);
+            list.occluded_particles += u64::from(!drawn);
+            drawn
+        } else {
+            let cid = levels[child_level].node_first as u32 + c;
+            match marks.get(cid) {
+                OPENED => false,
+                DRAWN => true,
+                _ => {
+                    if !proj.visible(&nodes[cid as usize]) {
+                        list.culled_nodes += 1;
+                        false
+                    } else if recorded.is_some() {
+                        list.occluded_nodes += 1;
+                        false
+                    } else {
+                        true
+                    }
+                }
+            }
+        };
+        match (&mut run, draw) {
+            (Some((_, count)), true) => *count += 1,
+            (None, true) => run = Some((c, 1)),
+            (_, false) => flush(&mut run, list),
+        }
+    }
+    flush(&mut run, list);
 }
 
 /// World positions of every point of `draw`, in draw order, decoded as the GPU does.
