@@ -362,29 +362,42 @@ impl OcclusionBuffer {
         {
             return false;
         }
-        let (mut x0, mut y0) = (f32::INFINITY, f32::INFINITY);
-        let (mut x1, mut y1) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
-        // The image x of a point depends on its view x and depth alone, y on its view y
-        // and depth: the extremes are at the box's corners.
-        for k in 0..8 {
-            let p = v + Vec3::new(
-                if k & 1 == 0 { -radius } else { radius },
-                if k & 2 == 0 { -radius } else { radius },
-                if k & 4 == 0 { -radius } else { radius },
-            );
-            let c = self.clip_from_view * p.extend(1.0);
-            if c.w.is_nan() || c.w <= 0.0 {
-                return false;
+        // The view-aligned box around the sphere, projected: a point's image x depends
+        // on its view x and depth alone (x / depth in perspective, monotone in each), y
+        // likewise, so the extremes come from the box's faces.
+        let p = &self.clip_from_view;
+        let (sx, sy) = (p.x_axis.x, p.y_axis.y);
+        let ((nx0, nx1), (ny0, ny1)) = match self.camera.projection {
+            Projection::Perspective => {
+                let (near_t, far_t) = (nearest, -v.z + radius);
+                let lo = |a: f32| (a / near_t).min(a / far_t);
+                let hi = |a: f32| (a / near_t).max(a / far_t);
+                (
+                    (
+                        sx * lo(v.x - radius) - p.z_axis.x,
+                        sx * hi(v.x + radius) - p.z_axis.x,
+                    ),
+                    (
+                        sy * lo(v.y - radius) - p.z_axis.y,
+                        sy * hi(v.y + radius) - p.z_axis.y,
+                    ),
+                )
             }
-            let (x, y) = (
-                (c.x / c.w + 1.0) * 0.5 * self.image[0] as f32 - self.origin[0] as f32,
-                (1.0 - c.y / c.w) * 0.5 * self.image[1] as f32 - self.origin[1] as f32,
-            );
-            x0 = x0.min(x);
-            y0 = y0.min(y);
-            x1 = x1.max(x);
-            y1 = y1.max(y);
-        }
+            Projection::Orthographic => (
+                (
+                    sx * (v.x - radius) + p.w_axis.x,
+                    sx * (v.x + radius) + p.w_axis.x,
+                ),
+                (
+                    sy * (v.y - radius) + p.w_axis.y,
+                    sy * (v.y + radius) + p.w_axis.y,
+                ),
+            ),
+        };
+        let (w, h) = (self.image[0] as f32, self.image[1] as f32);
+        let (ox, oy) = (self.origin[0] as f32, self.origin[1] as f32);
+        let (x0, x1) = ((nx0 + 1.0) * 0.5 * w - ox, (nx1 + 1.0) * 0.5 * w - ox);
+        let (y0, y1) = ((1.0 - ny1) * 0.5 * h - oy, (1.0 - ny0) * 0.5 * h - oy);
         if self.mode == OcclusionMode::PixelCentres
             && x1 - x0 <= EXACT_SPHERE_PX
             && y1 - y0 <= EXACT_SPHERE_PX
