@@ -326,23 +326,39 @@ impl OcclusionBuffer {
     /// what is recorded.
     pub fn box_hidden(&self, min: Vec3, max: Vec3, margin: f32) -> bool {
         let (min, max) = (min - Vec3::splat(margin), max + Vec3::splat(margin));
+        // Clip coordinates and view depths are affine in the point: the corners are the
+        // lower corner's plus a sum of the edge vectors' images.
+        let e = max - min;
+        let (m, v) = (&self.clip_from_world, &self.view_from_world);
+        let c0 = *m * min.extend(1.0);
+        let (cx, cy, cz) = (m.x_axis * e.x, m.y_axis * e.y, m.z_axis * e.z);
+        let d0 = -v.transform_point3(min).z;
+        let (dx, dy, dz) = (-v.x_axis.z * e.x, -v.y_axis.z * e.y, -v.z_axis.z * e.z);
+        let (w, h) = (self.image[0] as f32, self.image[1] as f32);
+        let (ox, oy) = (self.origin[0] as f32, self.origin[1] as f32);
+        let perspective = self.camera.projection == Projection::Perspective;
         let mut nearest = f32::INFINITY;
         let (mut x0, mut y0) = (f32::INFINITY, f32::INFINITY);
         let (mut x1, mut y1) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
         for k in 0..8 {
-            let p = Vec3::new(
-                if k & 1 == 0 { min.x } else { max.x },
-                if k & 2 == 0 { min.y } else { max.y },
-                if k & 4 == 0 { min.z } else { max.z },
+            let (a, b, c) = (
+                (k & 1) as f32, // 0 or 1
+                ((k >> 1) & 1) as f32,
+                ((k >> 2) & 1) as f32,
             );
-            let d = self.depth(p);
+            let d = d0 + a * dx + b * dy + c * dz;
             nearest = nearest.min(d);
-            if self.camera.projection == Projection::Perspective && d <= self.camera.near {
+            if perspective && d <= self.camera.near {
                 return false;
             }
-            let Some((x, y)) = self.to_px(p) else {
+            let q = c0 + cx * a + cy * b + cz * c;
+            if q.w.is_nan() || q.w <= 0.0 {
                 return false;
-            };
+            }
+            let (x, y) = (
+                (q.x / q.w + 1.0) * 0.5 * w - ox,
+                (1.0 - q.y / q.w) * 0.5 * h - oy,
+            );
             x0 = x0.min(x);
             y0 = y0.min(y);
             x1 = x1.max(x);
