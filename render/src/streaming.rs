@@ -431,15 +431,11 @@ impl<'r> StreamingRenderer<'r> {
         // the nodes it asked to open are answered again in one order (those drawn
         // first, then largest first) to mark the pages in use and request the missing
         // ones within the pool's capacity.
-        let (draw, asked) = traverse_shared(
-            camera,
-            &file,
-            traversal,
-            &PagesResident {
-                page_points: self.page_points,
-                resident: &self.resident,
-            },
-        );
+        let pages_resident = PagesResident {
+            page_points: self.page_points,
+            resident: &self.resident,
+        };
+        let (draw, asked) = traverse_shared(camera, &file, traversal, &pages_resident);
         let mut residency = PoolResidency {
             page_points: self.page_points,
             resident: &self.resident,
@@ -450,9 +446,9 @@ impl<'r> StreamingRenderer<'r> {
             wanted: Vec::new(),
             pool_limited: false,
         };
-        let (drawn, missing): (Vec<_>, Vec<_>) = asked.into_iter().partition(|&(id, _)| {
-            pages_of(&file, id, self.page_points).all(|p| self.resident.contains_key(&p))
-        });
+        let (drawn, missing): (Vec<_>, Vec<_>) = asked
+            .into_iter()
+            .partition(|&(id, _)| pages_resident.resident(&file, id));
         for (id, size) in drawn.into_iter().chain(missing) {
             residency.can_open(&file, id, size);
         }

@@ -422,19 +422,9 @@ pub fn traverse_with(
                 &mut buffer,
                 None,
             ) {
-                let mut list = DrawList {
-                    deferred_nodes: d.deferred,
-                    ..Default::default()
-                };
-                let mut marks = Marks::new(file.nodes().len());
-                for &id in &d.committed {
-                    marks.commit(id);
-                }
-                for &id in &d.opened {
-                    marks.open(id);
-                }
-                let masks = join_masks(d.particles);
-                list = emit(file, &proj, marks, Some(&masks), d.achieved, list);
+                let deferred = d.deferred;
+                let mut list = cut_of(file, &proj, vec![d]);
+                list.deferred_nodes = deferred;
                 list.restarts = attempt;
                 list.budget_limited = attempt > 0;
                 return list;
@@ -444,6 +434,35 @@ pub fn traverse_with(
         }
     }
     largest_first(camera, file, settings, residency)
+}
+
+/// The cut that occlusion passes (the whole image's, or its tiles') decided together:
+/// what any of them opened, drew, or kept of an opened node's particles.
+fn cut_of(file: &MdlodFile, proj: &Projector, passes: Vec<Decisions>) -> DrawList {
+    let mut marks = Marks::new(file.nodes().len());
+    let mut achieved = 0.0f32;
+    for d in &passes {
+        achieved = achieved.max(d.achieved);
+        for &id in &d.committed {
+            marks.commit(id);
+        }
+    }
+    for d in &passes {
+        for &id in &d.opened {
+            if marks.get(id) != OPENED {
+                marks.open(id);
+            }
+        }
+    }
+    let masks = join_masks(passes.into_iter().flat_map(|d| d.particles).collect());
+    emit(
+        file,
+        proj,
+        marks,
+        Some(&masks),
+        achieved,
+        DrawList::default(),
+    )
 }
 
 /// Side of the square tiles the parallel occlusion traversal splits the image into.
@@ -536,30 +555,7 @@ fn traverse_tiled(
             let (passes, asked): (Vec<Decisions>, Vec<Vec<(u32, f32)>>) =
                 passes.into_iter().unzip();
             let asked = largest_first_once(asked.concat());
-            let mut marks = Marks::new(file.nodes().len());
-            let mut achieved = 0.0f32;
-            for d in &passes {
-                achieved = achieved.max(d.achieved);
-                for &id in &d.committed {
-                    marks.commit(id);
-                }
-            }
-            for d in &passes {
-                for &id in &d.opened {
-                    if marks.get(id) != OPENED {
-                        marks.open(id);
-                    }
-                }
-            }
-            let masks = join_masks(passes.into_iter().flat_map(|d| d.particles).collect());
-            let mut list = emit(
-                file,
-                &proj,
-                marks,
-                Some(&masks),
-                achieved,
-                DrawList::default(),
-            );
+            let mut list = cut_of(file, &proj, passes);
             if list.points <= budget {
                 list.restarts = attempt;
                 list.budget_limited = attempt > 0;
