@@ -626,6 +626,25 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
         err.contains(&format!("{}: File too large", out.display())),
         "{err}"
     );
+    // Out of core, the first working files to outgrow the limit are the partition's
+    // cells, written on their own thread: the error still names one.
+    let run = mdlod_limited(
+        2,
+        &[
+            "convert",
+            s(&input),
+            "-o",
+            s(&out),
+            "--chunk-points",
+            "10000",
+        ],
+    );
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        err.contains("working file") && err.contains(".cell: File too large"),
+        "{err}"
+    );
     let batch_dir = dir.path().join("batch");
     let run = mdlod_limited(100, &["batch", s(&input), "-o", s(&batch_dir)]);
     let err = String::from_utf8_lossy(&run.stderr);

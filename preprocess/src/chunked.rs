@@ -347,8 +347,10 @@ impl RecordLayout {
         }
     }
 
+    #[inline(always)]
     fn position(self, r: &[u8]) -> [f32; 3] {
-        [0, 1, 2].map(|k| f32::from_le_bytes([r[4 * k], r[4 * k + 1], r[4 * k + 2], r[4 * k + 3]]))
+        let at = |k: usize| f32::from_le_bytes(r[4 * k..4 * k + 4].try_into().expect("4 bytes"));
+        [at(0), at(1), at(2)]
     }
 }
 
@@ -362,19 +364,18 @@ struct Cell {
 }
 
 /// The cell (Morton code) of `x` in an 8×8×8 grid over `lo..hi`.
+#[inline(always)]
 fn cell_of(x: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> usize {
     let cells = 1u32 << GRID_BITS;
     let mut code = 0usize;
-    let idx: [u32; 3] = [0, 1, 2].map(|k| {
+    for k in 0..3 {
         let ext = hi[k] - lo[k];
-        if ext > 0.0 && x[k].is_finite() {
+        let i = if ext > 0.0 && x[k].is_finite() {
             (((x[k] - lo[k]) / ext * cells as f32).max(0.0) as u32).min(cells - 1)
         } else {
             0
-        }
-    });
-    for b in 0..GRID_BITS {
-        for (k, i) in idx.iter().enumerate() {
+        };
+        for b in 0..GRID_BITS {
             code |= (((i >> b) & 1) as usize) << (3 * b + k as u32) as usize;
         }
     }
@@ -390,6 +391,10 @@ struct Partitioner {
     hi: [f32; 3],
     writers: Vec<Option<BufWriter<File>>>,
     cells: Vec<Cell>,
+    /// The window's cell ids and its records sorted by cell, kept between windows so
+    /// that their memory is touched once.
+    ids: Vec<u16>,
+    sorted: Vec<u8>,
 }
 
 impl Partitioner {
@@ -409,6 +414,8 @@ impl Partitioner {
                     hi: [f32::NEG_INFINITY; 3],
                 })
                 .collect(),
+            ids: Vec::new(),
+            sorted: Vec::new(),
         }
     }
 
@@ -416,12 +423,14 @@ impl Partitioner {
     fn add(&mut self, bytes: &[u8]) -> Result<(), ConvertError> {
         let size = self.layout.size();
         let (lo, hi, layout) = (self.lo, self.hi, self.layout);
-        let ids: Vec<u16> = bytes
+        let mut ids = std::mem::take(&mut self.ids);
+        ids.clear();
+        bytes
             .par_chunks_exact(size)
             .map(|r| cell_of(layout.position(r), lo, hi) as u16)
-            .collect();
+            .collect_into_vec(&mut ids);
         // A stable counting sort of the window by cell, so that each cell's records go
-        // out in one write, in input order.
+        // out in one write, in input order; the cells' bounds grow on the way.
         let mut start = vec![0usize; CELLS + 1];
         for &id in &ids {
             start[usize::from(id) + 1] += 1;
@@ -430,36 +439,42 @@ impl Partitioner {
             start[c + 1] += start[c];
         }
         let mut next = start.clone();
-        let mut sorted = vec![0u8; bytes.len()];
+        let mut sorted = std::mem::take(&mut self.sorted);
+        sorted.resize(bytes.len(), 0);
         for (r, &id) in bytes.chunks_exact(size).zip(&ids) {
-            let at = &mut next[usize::from(id)];
+            let id = usize::from(id);
+            let at = &mut next[id];
             sorted[*at * size..(*at + 1) * size].copy_from_slice(r);
             *at += 1;
-        }
-        for id in 0..CELLS {
-            let (a, b) = (start[id], start[id + 1]);
-            if a == b {
-                continue;
-            }
-            let part = &sorted[a * size..b * size];
+            let x = layout.position(r);
             let cell = &mut self.cells[id];
-            if self.writers[id].is_none() {
-                cell.path = self.dir.join(format!("{}-{id:03}.cell", self.prefix));
-                let f = File::create(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
-                self.writers[id] = Some(BufWriter::with_capacity(1 << 16, f));
-            }
-            let w = self.writers[id].as_mut().expect("opened above");
-            w.write_all(part).map_err(|e| temp_err(&cell.path, e))?;
-            cell.count += b - a;
-            for r in part.chunks_exact(size) {
-                let x = layout.position(r);
-                for k in 0..3 {
-                    cell.lo[k] = cell.lo[k].min(x[k]);
-                    cell.hi[k] = cell.hi[k].max(x[k]);
-                }
+            for k in 0..3 {
+                cell.lo[k] = cell.lo[k].min(x[k]);
+                cell.hi[k] = cell.hi[k].max(x[k]);
             }
         }
-        Ok(())
+        let written = (|| {
+            for id in 0..CELLS {
+                let (a, b) = (start[id], start[id + 1]);
+                if a == b {
+                    continue;
+                }
+                let part = &sorted[a * size..b * size];
+                let cell = &mut self.cells[id];
+                if self.writers[id].is_none() {
+                    cell.path = self.dir.join(format!("{}-{id:03}.cell", self.prefix));
+                    let f = File::create(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
+                    self.writers[id] = Some(BufWriter::with_capacity(1 << 16, f));
+                }
+                let w = self.writers[id].as_mut().expect("opened above");
+                w.write_all(part).map_err(|e| temp_err(&cell.path, e))?;
+                cell.count += b - a;
+            }
+            Ok(())
+        })();
+        self.ids = ids;
+        self.sorted = sorted;
+        written
     }
 
     /// The non-empty cells in Morton order.
@@ -472,6 +487,53 @@ impl Partitioner {
             }
         }
         Ok(out)
+    }
+}
+
+/// A [`Partitioner`] on a thread of its own: windows of records reach it through a
+/// channel of one slot, in order, so the next window is read while the last is sorted
+/// and written; their buffers come back for reuse.
+struct CellWriter<'scope> {
+    to: Option<std::sync::mpsc::SyncSender<Vec<u8>>>,
+    back: std::sync::mpsc::Receiver<Vec<u8>>,
+    thread: std::thread::ScopedJoinHandle<'scope, Result<Vec<Cell>, ConvertError>>,
+}
+
+impl<'scope> CellWriter<'scope> {
+    fn spawn<'env>(scope: &'scope std::thread::Scope<'scope, 'env>, mut p: Partitioner) -> Self {
+        let (to, windows) = std::sync::mpsc::sync_channel::<Vec<u8>>(1);
+        let (give_back, back) = std::sync::mpsc::channel();
+        let thread = scope.spawn(move || {
+            for bytes in windows {
+                p.add(&bytes)?;
+                // The reader may have finished; then the buffer is simply dropped.
+                let _ = give_back.send(bytes);
+            }
+            p.finish()
+        });
+        CellWriter {
+            to: Some(to),
+            back,
+            thread,
+        }
+    }
+
+    /// A buffer for the next window's records: one that came back, or a new one.
+    fn buffer(&self) -> Vec<u8> {
+        self.back.try_recv().unwrap_or_default()
+    }
+
+    /// Queues a window of records; false when the writer has stopped on an error.
+    fn send(&self, bytes: Vec<u8>) -> bool {
+        self.to.as_ref().is_some_and(|t| t.send(bytes).is_ok())
+    }
+
+    /// Waits for the queued windows and returns the cells, or the writer's error.
+    fn finish(mut self) -> Result<Vec<Cell>, ConvertError> {
+        drop(self.to.take());
+        self.thread
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
     }
 }
 
@@ -732,77 +794,104 @@ pub fn convert_chunked(
     progress.stage("partitioning", Some(n as u64), "particles");
     let mut merge = SpeciesMerge::default();
     let mut layout = None;
-    let mut partitioner = None;
     let mut attribute_name = None;
     let mut range = (f32::INFINITY, f32::NEG_INFINITY);
     let mut seen = 0usize;
-    source.windows(window, &mut |start, f| {
-        seen += f.len();
-        let lay = *layout.get_or_insert(RecordLayout {
-            attribute: f.attribute.is_some(),
+    // The records are sorted into cells and written on a thread of their own while the
+    // next window is read.
+    let cells = std::thread::scope(|scope| {
+        let mut writer: Option<CellWriter<'_>> = None;
+        let read = source.windows(window, &mut |start, f| {
+            seen += f.len();
+            let lay = *layout.get_or_insert(RecordLayout {
+                attribute: f.attribute.is_some(),
+            });
+            if lay.attribute != f.attribute.is_some() || f.positions.len() != f.species_index.len()
+            {
+                return Err(ConvertError::Chunked(format!(
+                    "particles {start}..: the window's columns differ from the first window's"
+                )));
+            }
+            let w = writer.get_or_insert_with(|| {
+                CellWriter::spawn(
+                    scope,
+                    Partitioner::new(dir, "cell".into(), lay, bounds.0, bounds.1),
+                )
+            });
+            let map = merge.add(&f.species)?;
+            if let Some(index) = f
+                .positions
+                .par_iter()
+                .position_first(|x| x.iter().any(|v| !v.is_finite()))
+            {
+                return Err(ConvertError::Build {
+                    path: output.display().to_string(),
+                    source: BuildError::NonFinite {
+                        index: start + index,
+                        position: f.positions[index],
+                    },
+                });
+            }
+            if let Some(i) = f
+                .species_index
+                .par_iter()
+                .position_first(|&s| usize::from(s) >= map.len())
+            {
+                return Err(ConvertError::Build {
+                    path: output.display().to_string(),
+                    source: BuildError::BadSpecies {
+                        index: start + i,
+                        species: f.species_index[i],
+                        count: map.len(),
+                    },
+                });
+            }
+            if let Some(a) = &f.attribute {
+                let (lo, hi) = a
+                    .values
+                    .par_iter()
+                    .fold(
+                        || (f32::INFINITY, f32::NEG_INFINITY),
+                        |(lo, hi), &v| (lo.min(v), hi.max(v)),
+                    )
+                    .reduce(
+                        || (f32::INFINITY, f32::NEG_INFINITY),
+                        |a, b| (a.0.min(b.0), a.1.max(b.1)),
+                    );
+                range = (range.0.min(lo), range.1.max(hi));
+            }
+            let size = lay.size();
+            let mut bytes = w.buffer();
+            bytes.resize(f.len() * size, 0);
+            bytes
+                .par_chunks_exact_mut(size)
+                .enumerate()
+                .for_each(|(i, r)| {
+                    for (k, v) in f.positions[i].iter().enumerate() {
+                        r[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+                    }
+                    let s = map[usize::from(f.species_index[i])];
+                    r[12..14].copy_from_slice(&s.to_le_bytes());
+                    if let Some(a) = &f.attribute {
+                        r[14..18].copy_from_slice(&a.values[i].to_le_bytes());
+                    }
+                });
+            if let Some(a) = &f.attribute {
+                attribute_name.get_or_insert_with(|| a.name.clone());
+            }
+            if !w.send(bytes) {
+                // The writer stopped on an error, which `finish` returns.
+                return Err(ConvertError::Chunked("the cell writer stopped".into()));
+            }
+            progress.advance(f.len() as u64);
+            Ok(())
         });
-        if lay.attribute != f.attribute.is_some() || f.positions.len() != f.species_index.len() {
-            return Err(ConvertError::Chunked(format!(
-                "particles {start}..: the window's columns differ from the first window's"
-            )));
+        let written = writer.map(CellWriter::finish);
+        match (read, written) {
+            (_, Some(Err(e))) | (Err(e), _) => Err(e),
+            (Ok(()), Some(Ok(cells))) => Ok(cells),
+            (Ok(()), None) => Err(ConvertError::Chunked("the input has no particles".into())),
         }
-        let p = partitioner
-            .get_or_insert_with(|| Partitioner::new(dir, "cell".into(), lay, bounds.0, bounds.1));
-        let map = merge.add(&f.species)?;
-        if let Some(index) = f
-            .positions
-            .iter()
-            .position(|x| x.iter().any(|v| !v.is_finite()))
-        {
-            return Err(ConvertError::Build {
-                path: output.display().to_string(),
-                source: BuildError::NonFinite {
-                    index: start + index,
-                    position: f.positions[index],
-                },
-            });
-        }
-        if let Some(i) = f
-            .species_index
-            .iter()
-            .position(|&s| usize::from(s) >= map.len())
-        {
-            return Err(ConvertError::Build {
-                path: output.display().to_string(),
-                source: BuildError::BadSpecies {
-                    index: start + i,
-                    species: f.species_index[i],
-                    count: map.len(),
-                },
-            });
-        }
-        if let Some(a) = &f.attribute {
-            range = a
-                .values
-                .iter()
-                .fold(range, |(lo, hi), &v| (lo.min(v), hi.max(v)));
-        }
-        let size = lay.size();
-        let mut bytes = vec![0u8; f.len() * size];
-        bytes
-            .par_chunks_exact_mut(size)
-            .enumerate()
-            .for_each(|(i, r)| {
-                for (k, v) in f.positions[i].iter().enumerate() {
-                    r[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
-                }
-                let s = map[usize::from(f.species_index[i])];
-                r[12..14].copy_from_slice(&s.to_le_bytes());
-                if let Some(a) = &f.attribute {
-                    r[14..18].copy_from_slice(&a.values[i].to_le_bytes());
-                }
-            });
-        if let Some(a) = &f.attribute {
-            attribute_name.get_or_insert_with(|| a.name.clone());
-        }
-        p.add(&bytes)?;
-        progress.advance(f.len() as u64);
-        Ok(())
     })?;
     progress.finish_stage();
     if seen != n {
@@ -811,7 +900,6 @@ pub fn convert_chunked(
         )));
     }
     let layout = layout.expect("at least one window");
-    let cells = partitioner.expect("at least one window").finish()?;
     let mut leaves = Vec::new();
     for cell in cells {
         refine(cell, layout, chunk.chunk_points, 0, &mut leaves)?;

@@ -110,20 +110,23 @@ impl Ty {
         }
     }
 
+    /// Value `i` of an array of this type in `b`, read in place.
+    #[inline(always)]
     fn get(self, b: &[u8], i: usize, big: bool) -> f64 {
-        let s = self.size();
-        let mut w = [0u8; 8];
-        w[..s].copy_from_slice(&b[i * s..(i + 1) * s]);
-        if big {
-            w[..s].reverse();
+        fn at<const N: usize>(b: &[u8], i: usize, big: bool) -> [u8; N] {
+            let mut w: [u8; N] = b[i * N..(i + 1) * N].try_into().expect("N bytes");
+            if big {
+                w.reverse();
+            }
+            w
         }
         match self {
-            Ty::U8 => f64::from(w[0]),
-            Ty::U16 => f64::from(u16::from_le_bytes([w[0], w[1]])),
-            Ty::U32 => f64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])),
-            Ty::I32 => f64::from(i32::from_le_bytes([w[0], w[1], w[2], w[3]])),
-            Ty::F32 => f64::from(f32::from_le_bytes([w[0], w[1], w[2], w[3]])),
-            Ty::F64 => f64::from_le_bytes(w),
+            Ty::U8 => f64::from(b[i]),
+            Ty::U16 => f64::from(u16::from_le_bytes(at(b, i, big))),
+            Ty::U32 => f64::from(u32::from_le_bytes(at(b, i, big))),
+            Ty::I32 => f64::from(i32::from_le_bytes(at(b, i, big))),
+            Ty::F32 => f64::from(f32::from_le_bytes(at(b, i, big))),
+            Ty::F64 => f64::from_le_bytes(at(b, i, big)),
         }
     }
 }
