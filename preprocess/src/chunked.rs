@@ -6,14 +6,16 @@
 //!    particle goes to one of the 512 cells of an 8×8×8 grid over the box (the dump's
 //!    box, or the particles' bounds when it has none; particles outside it go to the
 //!    nearest cell) and is appended to that cell's working file: position, species and
-//!    attribute. A cell that ends with more than `chunk_points` particles is split the
+//!    attribute. A thread of its own sorts each window by cell and writes it while the
+//!    next window is read. A cell that ends with more than `chunk_points` particles is split the
 //!    same way over its own bounds (and by file order when all its particles coincide).
 //!    The leaf cells, in Morton order, are grouped greedily into chunks of at most
 //!    `chunk_points` particles.
 //! 2. **Chunks.** Each chunk is loaded and built into a complete hierarchy by the
 //!    in-memory builder ([`crate::hierarchy::build_with`]), as many chunks at a time as
 //!    the memory limit allows. Its node table, quantized positions and per-particle data
-//!    go to working files; its cell files are removed.
+//!    stay in memory while the limit has room beside the builds at work, and go to
+//!    working files otherwise; its cell files are removed.
 //! 3. **Assembly.** The chunk roots become the children of one top node, in chunk order.
 //!    Chunks whose hierarchy is shallower than the deepest are padded under the top with
 //!    single-child copies of their root, so that every particle lies on the last level.
@@ -21,6 +23,8 @@
 //!    indices rebased, quantized positions are copied unchanged except on the levels the
 //!    top node encodes (re-encoded from the kept unquantized positions), and each working
 //!    file is removed as soon as its last part is copied.
+//!
+//! Which chunks' results stay in memory depends on timing; the file never does.
 //!
 //! The file depends only on the input and `chunk_points` (recorded in the metadata):
 //! never on the memory limit or the thread count, which only decide how many chunks are
@@ -628,10 +632,70 @@ struct ChunkResult {
     /// Unquantized positions of the chunk's levels `0..δn`.
     top_positions: Vec<Vec<[f32; 3]>>,
     max_error: f64,
-    nodes_file: PathBuf,
-    positions_file: PathBuf,
-    species_file: PathBuf,
-    attribute_file: Option<PathBuf>,
+    nodes: Kept<NodeRecord>,
+    /// The quantized positions of levels 1.., one level after the other.
+    positions: Kept<[u16; 3]>,
+    species: Kept<u16>,
+    attribute: Option<Kept<u16>>,
+}
+
+/// One of a chunk's results waiting for the assembly: kept in memory while the memory
+/// limit leaves room for it (no working file to write and read back), else in a
+/// working file.
+enum Kept<T> {
+    Memory(Vec<T>),
+    File(PathBuf),
+}
+
+impl<T: bytemuck::Pod> Kept<T> {
+    /// Keeps `data` in memory, or writes it to `path`.
+    fn store(data: Vec<T>, path: PathBuf, in_memory: bool) -> Result<Self, ConvertError> {
+        if in_memory {
+            return Ok(Kept::Memory(data));
+        }
+        write_file(&path, bytemuck::cast_slice(&data))?;
+        Ok(Kept::File(path))
+    }
+
+    fn len_bytes(&self) -> u64 {
+        match self {
+            Kept::Memory(v) => std::mem::size_of_val(v.as_slice()) as u64,
+            Kept::File(p) => fs::metadata(p).map_or(0, |m| m.len()),
+        }
+    }
+
+    /// Fills `out` with the bytes from `offset` on.
+    fn read_exact_at(&self, out: &mut [u8], offset: u64) -> Result<(), ConvertError> {
+        match self {
+            Kept::Memory(v) => {
+                let bytes: &[u8] = bytemuck::cast_slice(v);
+                let part = usize::try_from(offset)
+                    .ok()
+                    .and_then(|o| bytes.get(o..o.checked_add(out.len())?))
+                    .ok_or_else(|| {
+                        ConvertError::Chunked(format!(
+                            "a chunk result of {} bytes has no bytes {offset}..+{}",
+                            bytes.len(),
+                            out.len()
+                        ))
+                    })?;
+                out.copy_from_slice(part);
+                Ok(())
+            }
+            Kept::File(p) => File::open(p)
+                .and_then(|f| f.read_exact_at(out, offset))
+                .map_err(|e| temp_err(p, e)),
+        }
+    }
+
+    /// Removes the working file once its last part is copied (memory goes with the
+    /// chunk).
+    fn remove(&self) -> Result<(), ConvertError> {
+        match self {
+            Kept::Memory(_) => Ok(()),
+            Kept::File(p) => fs::remove_file(p).map_err(|e| temp_err(p, e)),
+        }
+    }
 }
 
 impl ChunkResult {
@@ -647,6 +711,9 @@ struct ChunkInput<'a> {
     options: &'a ConvertOptions,
     extras: &'a BuildExtras,
     dir: &'a Path,
+    /// Bytes of chunk results the memory limit leaves room for, and those kept so far.
+    keep_budget: u64,
+    kept: &'a std::sync::atomic::AtomicU64,
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ConvertError> {
@@ -696,43 +763,46 @@ fn build_chunk(
         })?;
     drop((positions, attribute));
     let stem = |ext: &str| input.dir.join(format!("chunk-{c:05}.{ext}"));
-    let nodes_file = stem("nodes");
-    write_file(&nodes_file, bytemuck::cast_slice(&h.nodes))?;
-    let positions_file = stem("positions");
-    {
-        let mut w = BufWriter::with_capacity(
-            1 << 20,
-            File::create(&positions_file).map_err(|e| temp_err(&positions_file, e))?,
-        );
-        for q in h.quantized.iter().skip(1) {
-            w.write_all(bytemuck::cast_slice(q))
-                .map_err(|e| temp_err(&positions_file, e))?;
-        }
-        w.flush().map_err(|e| temp_err(&positions_file, e))?;
-    }
-    let species_file = stem("species");
-    write_file(&species_file, bytemuck::cast_slice(&h.species_index))?;
-    let attribute_file = match &h.attribute {
-        Some((a, _, _)) => {
-            let p = stem("attribute");
-            write_file(&p, bytemuck::cast_slice(a))?;
-            Some(p)
-        }
-        None => None,
-    };
+    let positions: Vec<[u16; 3]> = h.quantized.iter().skip(1).flatten().copied().collect();
+    drop(h.quantized);
+    let attribute = h.attribute.map(|(a, _, _)| a);
+    let bytes = std::mem::size_of_val(h.nodes.as_slice())
+        + std::mem::size_of_val(positions.as_slice())
+        + std::mem::size_of_val(h.species_index.as_slice())
+        + attribute
+            .as_ref()
+            .map_or(0, |a| std::mem::size_of_val(a.as_slice()));
+    let bytes = bytes as u64;
+    // Kept in memory if the room left under the limit holds it (which chunks fit
+    // depends on timing; the file does not).
+    let in_memory = input
+        .kept
+        .fetch_update(
+            std::sync::atomic::Ordering::Relaxed,
+            std::sync::atomic::Ordering::Relaxed,
+            |k| (k + bytes <= input.keep_budget).then_some(k + bytes),
+        )
+        .is_ok();
+    let root_scale = h.nodes[0].quant_scale;
+    let nodes = Kept::store(h.nodes, stem("nodes"), in_memory)?;
+    let positions = Kept::store(positions, stem("positions"), in_memory)?;
+    let species = Kept::store(h.species_index, stem("species"), in_memory)?;
+    let attribute = attribute
+        .map(|a| Kept::store(a, stem("attribute"), in_memory))
+        .transpose()?;
     for cell in cells {
         fs::remove_file(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
     }
     Ok(ChunkResult {
-        levels: h.levels.clone(),
+        levels: h.levels,
         root: h.root,
-        root_scale: h.nodes[0].quant_scale,
+        root_scale,
         top_positions: h.top_positions,
         max_error: h.max_position_error,
-        nodes_file,
-        positions_file,
-        species_file,
-        attribute_file,
+        nodes,
+        positions,
+        species,
+        attribute,
     })
 }
 
@@ -957,6 +1027,9 @@ pub fn convert_chunked(
         attribute_range: layout.attribute.then_some(range),
         keep_levels: params.delta_n as usize,
     };
+    // What the builds at work and a margin leave under the limit holds finished chunks'
+    // results until the assembly.
+    let kept = std::sync::atomic::AtomicU64::new(0);
     let input = ChunkInput {
         layout,
         species: &species,
@@ -964,6 +1037,10 @@ pub fn convert_chunked(
         options,
         extras: &extras,
         dir,
+        keep_budget: chunk
+            .memory_limit
+            .saturating_sub(jobs as u64 * need + chunk.memory_limit / 8),
+        kept: &kept,
     };
     progress.stage(
         &format!("building {} chunks", groups.len()),
@@ -1207,16 +1284,10 @@ fn assemble(
     let total_bytes: u64 = chunks
         .iter()
         .map(|c| {
-            [
-                Some(&c.nodes_file),
-                Some(&c.positions_file),
-                Some(&c.species_file),
-                c.attribute_file.as_ref(),
-            ]
-            .into_iter()
-            .flatten()
-            .map(|p| fs::metadata(p).map_or(0, |m| m.len()))
-            .sum::<u64>()
+            c.nodes.len_bytes()
+                + c.positions.len_bytes()
+                + c.species.len_bytes()
+                + c.attribute.as_ref().map_or(0, Kept::len_bytes)
         })
         .sum();
     progress.stage("writing", Some(total_bytes), "bytes");
@@ -1266,17 +1337,15 @@ fn assemble(
                 let local = &ch.levels;
                 let first = local[j].node_first;
                 let count = local[j].point_count;
-                let file = File::open(&ch.nodes_file).map_err(|e| temp_err(&ch.nodes_file, e))?;
                 let step = 1u64 << 16;
                 let mut at = 0u64;
                 while at < count {
                     let len = step.min(count - at);
                     buf.resize(len as usize, bytemuck::Zeroable::zeroed());
-                    file.read_exact_at(
+                    ch.nodes.read_exact_at(
                         bytemuck::cast_slice_mut(&mut buf),
                         (first + at) * std::mem::size_of::<NodeRecord>() as u64,
-                    )
-                    .map_err(|e| temp_err(&ch.nodes_file, e))?;
+                    )?;
                     for n in &mut buf {
                         n.child_first += lay.offset[g + 1][c] as u32;
                         n.point_first += lay.offset[pl][c] as u32;
@@ -1303,7 +1372,7 @@ fn assemble(
                     at += len;
                 }
                 if g == last - 1 {
-                    fs::remove_file(&ch.nodes_file).map_err(|e| temp_err(&ch.nodes_file, e))?;
+                    ch.nodes.remove()?;
                 }
             }
         }
@@ -1311,7 +1380,7 @@ fn assemble(
     }
     if last == 1 {
         for ch in chunks {
-            fs::remove_file(&ch.nodes_file).map_err(|e| temp_err(&ch.nodes_file, e))?;
+            ch.nodes.remove()?;
         }
     }
 
@@ -1349,58 +1418,52 @@ fn assemble(
                 let j = m - 1 - pad;
                 let before: u64 = ch.levels[1..j].iter().map(|l| l.point_count).sum();
                 let count = ch.levels[j].point_count;
-                let file =
-                    File::open(&ch.positions_file).map_err(|e| temp_err(&ch.positions_file, e))?;
                 let step = 1u64 << 18;
                 let mut at = 0u64;
                 while at < count {
                     let len = step.min(count - at);
                     qbuf.resize(len as usize, [0; 3]);
-                    file.read_exact_at(bytemuck::cast_slice_mut(&mut qbuf), (before + at) * 6)
-                        .map_err(|e| temp_err(&ch.positions_file, e))?;
+                    ch.positions
+                        .read_exact_at(bytemuck::cast_slice_mut(&mut qbuf), (before + at) * 6)?;
                     put(&mut s, &qbuf)?;
                     progress.advance(len * 6);
                     at += len;
                 }
             }
             if m == last {
-                fs::remove_file(&ch.positions_file).map_err(|e| temp_err(&ch.positions_file, e))?;
+                ch.positions.remove()?;
             }
         }
         s.end()?;
     }
 
     // Per-particle sections.
-    let copy =
-        |w: &mut Writer, kind: SectionKind, files: Vec<&PathBuf>| -> Result<(), ConvertError> {
-            let mut s = w.section(kind, last as u32)?;
-            let mut buf = vec![0u8; 1 << 22];
-            for path in files {
-                let mut f = File::open(path).map_err(|e| temp_err(path, e))?;
-                loop {
-                    let got = f.read(&mut buf).map_err(|e| temp_err(path, e))?;
-                    if got == 0 {
-                        break;
-                    }
-                    s.write_bytes(&buf[..got])?;
-                    progress.advance(got as u64);
-                }
-                fs::remove_file(path).map_err(|e| temp_err(path, e))?;
+    let copy = |w: &mut Writer, kind: SectionKind, parts: Vec<&Kept<u16>>| {
+        let mut s = w.section(kind, last as u32)?;
+        let mut buf = vec![0u8; 1 << 22];
+        for part in parts {
+            let len = part.len_bytes();
+            let mut at = 0u64;
+            while at < len {
+                let n = (len - at).min(buf.len() as u64) as usize;
+                part.read_exact_at(&mut buf[..n], at)?;
+                s.write_bytes(&buf[..n])?;
+                progress.advance(n as u64);
+                at += n as u64;
             }
-            s.end()?;
-            Ok(())
-        };
+            part.remove()?;
+        }
+        s.end()?;
+        Ok::<(), ConvertError>(())
+    };
     copy(
         &mut w,
         SectionKind::Species,
-        chunks.iter().map(|c| &c.species_file).collect(),
+        chunks.iter().map(|c| &c.species).collect(),
     )?;
-    let attribute_files: Vec<&PathBuf> = chunks
-        .iter()
-        .filter_map(|c| c.attribute_file.as_ref())
-        .collect();
-    if !attribute_files.is_empty() {
-        copy(&mut w, SectionKind::Attribute, attribute_files)?;
+    let attributes: Vec<&Kept<u16>> = chunks.iter().filter_map(|c| c.attribute.as_ref()).collect();
+    if !attributes.is_empty() {
+        copy(&mut w, SectionKind::Attribute, attributes)?;
     }
     w.finish()?;
     progress.finish_stage();

@@ -32,7 +32,9 @@ fn options(chunk_points: usize) -> ConvertOptions {
 }
 
 /// Converts `input` out of core (window by window) and from the whole frame in memory,
-/// both in chunks of `chunk_points`, and checks the two files are identical.
+/// both in chunks of `chunk_points`, and checks the two files are identical. The first
+/// has room to keep the chunks' results in memory until the assembly; the second's limit
+/// is the least its chunks need, so they go through working files.
 fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usize) -> MdlodFile {
     let dir = tempfile::tempdir().unwrap();
     let streamed = dir.path().join("streamed.mdlod");
@@ -60,11 +62,13 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
     .unwrap();
     let frame = dump.read_frame(k, read, &NoProgress).unwrap();
     let whole = dir.path().join("whole.mdlod");
+    let mut tight = opts.clone();
+    tight.chunks.memory_limit = mdlod_preprocess::chunked::chunk_memory(chunk_points);
     convert_frame(
         &frame,
         Some(source_info(input, k as u64)),
         &whole,
-        &opts,
+        &tight,
         &NoProgress,
     )
     .unwrap();
