@@ -56,6 +56,8 @@ use crate::species::species_table;
 pub const DEFAULT_CHUNK_POINTS: usize = 1 << 22;
 /// Working memory of the in-memory builder per particle (measured peak, with margin).
 pub const BUILD_BYTES_PER_PARTICLE: u64 = 110;
+/// Particles per parallel task when a window is checked.
+const SCAN_BLOCK: usize = 1 << 14;
 /// Particles read from the input per window.
 const WINDOW: usize = 1 << 22;
 /// Cells per axis of one partition step, as a power of two.
@@ -889,11 +891,13 @@ pub fn convert_chunked(
                 )
             });
             let map = merge.add(&f.species)?;
-            if let Some(index) = f
-                .positions
-                .par_iter()
-                .position_first(|x| x.iter().any(|v| !v.is_finite()))
-            {
+            let first_bad = |bad: &(dyn Fn(usize) -> bool + Sync)| {
+                (0..f.len())
+                    .into_par_iter()
+                    .step_by(SCAN_BLOCK)
+                    .find_map_first(|b| (b..(b + SCAN_BLOCK).min(f.len())).find(|&i| bad(i)))
+            };
+            if let Some(index) = first_bad(&|i| f.positions[i].iter().any(|v| !v.is_finite())) {
                 return Err(ConvertError::Build {
                     path: output.display().to_string(),
                     source: BuildError::NonFinite {
@@ -902,11 +906,7 @@ pub fn convert_chunked(
                     },
                 });
             }
-            if let Some(i) = f
-                .species_index
-                .par_iter()
-                .position_first(|&s| usize::from(s) >= map.len())
-            {
+            if let Some(i) = first_bad(&|i| usize::from(f.species_index[i]) >= map.len()) {
                 return Err(ConvertError::Build {
                     path: output.display().to_string(),
                     source: BuildError::BadSpecies {

@@ -449,16 +449,19 @@ impl<'a> FrameData<'a> {
             let bytes = &self.data[e.location..e.location + self.n * e.ty.size()];
             let first = range.start;
             let bad = species_index
-                .par_iter_mut()
+                .par_chunks_mut(super::SCAN_BLOCK)
                 .enumerate()
-                .find_map_first(|(j, s)| {
-                    let t = e.ty.get(bytes, first + j);
-                    if t >= 0.0 && (t as usize) < count && t.fract() == 0.0 {
-                        *s = t as u16;
-                        None
-                    } else {
-                        Some((first + j, t))
+                .find_map_first(|(b, block)| {
+                    for (o, s) in block.iter_mut().enumerate() {
+                        let j = b * super::SCAN_BLOCK + o;
+                        let t = e.ty.get(bytes, first + j);
+                        if t >= 0.0 && (t as usize) < count && t.fract() == 0.0 {
+                            *s = t as u16;
+                        } else {
+                            return Some((first + j, t));
+                        }
                     }
+                    None
                 });
             if let Some((i, t)) = bad {
                 return Err(err(

@@ -472,32 +472,35 @@ pub(crate) fn read_range(
         let out = lo - range.start;
         let range = out..out + count;
         // Returns the index (within the chunk) and column of the first bad value.
+        let block = super::SCAN_BLOCK;
         let bad = positions[range.clone()]
-            .par_iter_mut()
-            .zip(types[range.clone()].par_iter_mut())
-            .zip(bytes.par_chunks_exact(stride))
+            .par_chunks_mut(block)
+            .zip(types[range.clone()].par_chunks_mut(block))
+            .zip(bytes.par_chunks(block * stride))
             .enumerate()
-            .map(|(i, ((p, t), atom))| {
-                let mut x = [0f64; 3];
-                for k in 0..3 {
-                    x[k] = value(atom, coords[k]);
-                    if !x[k].is_finite() {
-                        return Some((i, coords[k]));
+            .find_map_first(|(b, ((ps, ts), atoms))| {
+                let atoms = atoms.chunks_exact(stride);
+                for (o, ((p, t), atom)) in ps.iter_mut().zip(ts.iter_mut()).zip(atoms).enumerate() {
+                    let i = b * block + o;
+                    let mut x = [0f64; 3];
+                    for k in 0..3 {
+                        x[k] = value(atom, coords[k]);
+                        if !x[k].is_finite() {
+                            return Some((i, coords[k]));
+                        }
                     }
-                }
-                let x = if scaled { bx.from_fractional(x) } else { x };
-                *p = x.map(|v| v as f32);
-                if let Some(c) = species_col {
-                    let v = value(atom, c);
-                    if !(v.is_finite() && v.fract() == 0.0 && v.abs() < 1e15) {
-                        return Some((i, c));
+                    let x = if scaled { bx.from_fractional(x) } else { x };
+                    *p = x.map(|v| v as f32);
+                    if let Some(c) = species_col {
+                        let v = value(atom, c);
+                        if !(v.is_finite() && v.fract() == 0.0 && v.abs() < 1e15) {
+                            return Some((i, c));
+                        }
+                        *t = v as i64;
                     }
-                    *t = v as i64;
                 }
                 None
-            })
-            .find_first(Option::is_some)
-            .flatten();
+            });
         if let Some((i, c)) = bad {
             let offset = (chunk.start + i * stride + 8 * c) as u64;
             return Err(err(
@@ -516,13 +519,22 @@ pub(crate) fn read_range(
             ));
         }
         if let (Some(values), Some(c)) = (attribute.as_mut(), attribute_col) {
+            let block = super::SCAN_BLOCK;
             let bad = values[range.clone()]
-                .par_iter_mut()
-                .zip(bytes.par_chunks_exact(stride))
-                .position_first(|(out, atom)| {
-                    let v = value(atom, c);
-                    *out = v as f32;
-                    !v.is_finite()
+                .par_chunks_mut(block)
+                .zip(bytes.par_chunks(block * stride))
+                .enumerate()
+                .find_map_first(|(b, (outs, atoms))| {
+                    for (o, (out, atom)) in
+                        outs.iter_mut().zip(atoms.chunks_exact(stride)).enumerate()
+                    {
+                        let v = value(atom, c);
+                        *out = v as f32;
+                        if !v.is_finite() {
+                            return Some(b * block + o);
+                        }
+                    }
+                    None
                 });
             if let Some(i) = bad {
                 return Err(err(

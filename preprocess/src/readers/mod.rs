@@ -775,6 +775,11 @@ impl DumpFile {
     }
 }
 
+/// Particles per parallel task of a checked decoding pass. The first bad value is
+/// searched block by block: rayon's `find_first` and `position_first` check a shared
+/// flag before every item, which costs more than decoding one.
+pub(crate) const SCAN_BLOCK: usize = 1 << 14;
+
 /// Decodes `n` positions in parallel: coordinate `k` of particle `i` is `value(at(i, k))`.
 /// On a non-finite value, the `at` index of the first one (in particle order).
 pub(crate) fn decode_positions(
@@ -785,16 +790,19 @@ pub(crate) fn decode_positions(
     use rayon::prelude::*;
     let mut positions = vec![[0f32; 3]; n];
     let bad = positions
-        .par_iter_mut()
+        .par_chunks_mut(SCAN_BLOCK)
         .enumerate()
-        .find_map_first(|(i, p)| {
-            for k in 0..3 {
-                let j = at(i, k);
-                let v = value(j);
-                if !v.is_finite() {
-                    return Some(j);
+        .find_map_first(|(b, block)| {
+            for (o, p) in block.iter_mut().enumerate() {
+                let i = b * SCAN_BLOCK + o;
+                for k in 0..3 {
+                    let j = at(i, k);
+                    let v = value(j);
+                    if !v.is_finite() {
+                        return Some(j);
+                    }
+                    p[k] = v as f32;
                 }
-                p[k] = v as f32;
             }
             None
         });

@@ -418,17 +418,46 @@ impl Index {
         let bytes = p.bytes();
         let size = p.ty.size();
         let planar = self.planar;
-        let positions = super::decode_positions(
-            n,
-            |i, k| {
-                if planar {
-                    k * total + first + i
-                } else {
-                    3 * (first + i) + k
+        let interleaved_f32 = (p.ty == Ty::F32 && !p.big && !planar)
+            .then(|| bytes.get(12 * first..12 * (first + n)))
+            .flatten();
+        let positions = if let Some(b) = interleaved_f32 {
+            // The common layout, x y z as little-endian `f32` side by side, read in place.
+            let at = |c: &[u8], k: usize| {
+                f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().expect("4 bytes"))
+            };
+            let mut v = Vec::new();
+            b.par_chunks_exact(12)
+                .map(|c| [at(c, 0), at(c, 1), at(c, 2)])
+                .collect_into_vec(&mut v);
+            match v
+                .par_chunks(super::SCAN_BLOCK)
+                .enumerate()
+                .find_map_first(|(b, block)| {
+                    let o = block
+                        .iter()
+                        .position(|x| !x.iter().all(|c| c.is_finite()))?;
+                    Some(b * super::SCAN_BLOCK + o)
+                }) {
+                Some(i) => {
+                    let k = v[i].iter().position(|c| !c.is_finite()).unwrap_or(0);
+                    Err(3 * (first + i) + k)
                 }
-            },
-            |j| p.ty.get(bytes, j, p.big),
-        )
+                None => Ok(v),
+            }
+        } else {
+            super::decode_positions(
+                n,
+                |i, k| {
+                    if planar {
+                        k * total + first + i
+                    } else {
+                        3 * (first + i) + k
+                    }
+                },
+                |j| p.ty.get(bytes, j, p.big),
+            )
+        }
         .map_err(|j| {
             err(
                 &p.path,
@@ -451,10 +480,14 @@ impl Index {
             ),
             Some((m, names)) => {
                 let b = m.bytes();
-                let raw: Vec<f64> = (first..first + n)
-                    .into_par_iter()
-                    .map(|i| m.ty.get(b, i, m.big))
-                    .collect();
+                let raw: Vec<f64> = match (m.ty, b.get(first..first + n)) {
+                    // One byte per particle: read in place.
+                    (Ty::U8, Some(b)) => b.par_iter().map(|&v| f64::from(v)).collect(),
+                    _ => (first..first + n)
+                        .into_par_iter()
+                        .map(|i| m.ty.get(b, i, m.big))
+                        .collect(),
+                };
                 let count = if names.is_empty() {
                     raw.iter().fold(0.0f64, |a, &v| a.max(v + 1.0)).min(65536.0) as usize
                 } else {
@@ -496,10 +529,17 @@ impl Index {
         let attribute = match (&self.attribute, &opts.attribute) {
             (Some((m, name)), wanted) if wanted.as_deref().is_none_or(|w| w == name) => {
                 let b = m.bytes();
-                let values: Vec<f32> = (first..first + n)
-                    .into_par_iter()
-                    .map(|i| m.ty.get(b, i, m.big) as f32)
-                    .collect();
+                let values: Vec<f32> = match (m.ty, m.big, b.get(4 * first..4 * (first + n))) {
+                    // Little-endian `f32`: read in place.
+                    (Ty::F32, false, Some(b)) => b
+                        .par_chunks_exact(4)
+                        .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+                        .collect(),
+                    _ => (first..first + n)
+                        .into_par_iter()
+                        .map(|i| m.ty.get(b, i, m.big) as f32)
+                        .collect(),
+                };
                 if let Some(i) = values.iter().position(|v| !v.is_finite()) {
                     let i = first + i;
                     return Err(err(
