@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Installs what mdlod needs on a fresh Debian/Ubuntu machine that has Rust (cargo) already:
 # Mesa's software Vulkan driver (lavapipe), so the renderer and its tests run without a GPU,
-# and Xvfb, a virtual X display for the viewer's window tests.
+# Xvfb, a virtual X display for the viewer's window tests, and a C compiler with make for
+# jemalloc, the allocator the mdlod binary is built with.
 set -euo pipefail
-packages=(mesa-vulkan-drivers libvulkan1 xvfb)
+packages=(mesa-vulkan-drivers libvulkan1 xvfb gcc make)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -928,7 +928,8 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
         s(&input),
     ]);
     assert!(made.contains("120000 particles"), "{made}");
-    // Chunks of 30 000: one at a time under 100 MiB, both threads with 8 GiB.
+    // Chunks of 30 000: one at a time under 68 MiB, whose chunk results then go through
+    // working files; both threads with 8 GiB, which keeps the results in memory.
     let convert = |out: &Path, limit: &str, threads: &str| {
         ok(&[
             "convert",
@@ -950,7 +951,7 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
         ])
     };
     let (a, b) = (dir.path().join("a.mdlod"), dir.path().join("b.mdlod"));
-    convert(&a, "100M", "1");
+    convert(&a, "68M", "1");
     convert(&b, "8G", "2");
     assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap());
     let info = ok(&["info", s(&a), "--json"]);
@@ -1038,6 +1039,10 @@ fn convert_until_chunks_are_built(dir: &Path, input: &Path, out: &Path) -> std::
             "64",
             "--threads",
             "1",
+            // No room to keep chunk results in memory: they go to working files, which
+            // tell that chunks were built.
+            "--memory-limit",
+            "66M",
         ])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())

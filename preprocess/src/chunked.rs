@@ -33,7 +33,7 @@
 
 use std::collections::HashMap;
 use std::fs::{self, File};
-use std::io::{BufWriter, Read, Write};
+use std::io::{BufWriter, Write};
 use std::ops::Range;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
@@ -684,9 +684,26 @@ impl<T: bytemuck::Pod> Kept<T> {
                 out.copy_from_slice(part);
                 Ok(())
             }
-            Kept::File(p) => File::open(p)
-                .and_then(|f| f.read_exact_at(out, offset))
-                .map_err(|e| temp_err(p, e)),
+            Kept::File(p) => {
+                // Mapped: one copy out of the page cache, by the assembly itself.
+                let map = File::open(p)
+                    .and_then(|f| mdlod_format::mmap::map_file(&f))
+                    .map_err(|e| temp_err(p, e))?;
+                let part = usize::try_from(offset)
+                    .ok()
+                    .and_then(|o| map.get(o..o.checked_add(out.len())?))
+                    .ok_or_else(|| {
+                        temp_err(
+                            p,
+                            std::io::Error::new(
+                                std::io::ErrorKind::UnexpectedEof,
+                                format!("no bytes {offset}..+{}", out.len()),
+                            ),
+                        )
+                    })?;
+                out.copy_from_slice(part);
+                Ok(())
+            }
         }
     }
 
@@ -737,10 +754,19 @@ fn build_chunk(
     let mut species_index = Vec::with_capacity(n);
     let mut attribute = layout.attribute.then(|| Vec::with_capacity(n));
     for cell in cells {
-        let mut bytes = vec![0u8; cell.count * size];
-        File::open(&cell.path)
-            .and_then(|mut f| f.read_exact(&mut bytes))
+        // Mapped, not read: the records are converted straight from the page cache.
+        let map = File::open(&cell.path)
+            .and_then(|f| mdlod_format::mmap::map_file(&f))
             .map_err(|e| temp_err(&cell.path, e))?;
+        let bytes = map.get(..cell.count * size).ok_or_else(|| {
+            temp_err(
+                &cell.path,
+                std::io::Error::new(
+                    std::io::ErrorKind::UnexpectedEof,
+                    format!("holds fewer than its {} records", cell.count),
+                ),
+            )
+        })?;
         for r in bytes.chunks_exact(size) {
             positions.push(layout.position(r));
             let s = u16::from_le_bytes([r[12], r[13]]);
