@@ -7,8 +7,9 @@
 //!    box, or the particles' bounds when it has none; particles outside it go to the
 //!    nearest cell) and is appended to that cell's working file: position, species and
 //!    attribute. A thread of its own sorts each window by cell and writes it while the
-//!    next window is read. A cell that ends with more than `chunk_points` particles is split the
-//!    same way over its own bounds (and by file order when all its particles coincide).
+//!    next window is read. A cell that ends with more than `chunk_points` particles is
+//!    split the same way over its own bounds (and by file order when all its particles
+//!    coincide).
 //!    The leaf cells, in Morton order, are grouped greedily into chunks of at most
 //!    `chunk_points` particles.
 //! 2. **Chunks.** Each chunk is loaded and built into a complete hierarchy by the
