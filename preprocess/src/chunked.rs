@@ -57,8 +57,6 @@ use crate::species::species_table;
 pub const DEFAULT_CHUNK_POINTS: usize = 1 << 22;
 /// Working memory of the in-memory builder per particle (measured peak, with margin).
 pub const BUILD_BYTES_PER_PARTICLE: u64 = 110;
-/// Particles per parallel task when a window is checked.
-const SCAN_BLOCK: usize = 1 << 14;
 /// Particles read from the input per window.
 const WINDOW: usize = 1 << 22;
 /// Cells per axis of one partition step, as a power of two.
@@ -667,45 +665,13 @@ impl<T: bytemuck::Pod> Kept<T> {
         }
     }
 
-    /// Fills `out` with the bytes from `offset` on.
-    fn read_exact_at(&self, out: &mut [u8], offset: u64) -> Result<(), ConvertError> {
-        match self {
-            Kept::Memory(v) => {
-                let bytes: &[u8] = bytemuck::cast_slice(v);
-                let part = usize::try_from(offset)
-                    .ok()
-                    .and_then(|o| bytes.get(o..o.checked_add(out.len())?))
-                    .ok_or_else(|| {
-                        ConvertError::Chunked(format!(
-                            "a chunk result of {} bytes has no bytes {offset}..+{}",
-                            bytes.len(),
-                            out.len()
-                        ))
-                    })?;
-                out.copy_from_slice(part);
-                Ok(())
-            }
-            Kept::File(p) => {
-                // Mapped: one copy out of the page cache, by the assembly itself.
-                let map = File::open(p)
-                    .and_then(|f| mdlod_format::mmap::map_file(&f))
-                    .map_err(|e| temp_err(p, e))?;
-                let part = usize::try_from(offset)
-                    .ok()
-                    .and_then(|o| map.get(o..o.checked_add(out.len())?))
-                    .ok_or_else(|| {
-                        temp_err(
-                            p,
-                            std::io::Error::new(
-                                std::io::ErrorKind::UnexpectedEof,
-                                format!("no bytes {offset}..+{}", out.len()),
-                            ),
-                        )
-                    })?;
-                out.copy_from_slice(part);
-                Ok(())
-            }
-        }
+    /// The bytes, for the assembly to copy from: borrowed from memory, or the working
+    /// file mapped once.
+    fn bytes(&self) -> Result<KeptBytes<'_>, ConvertError> {
+        Ok(match self {
+            Kept::Memory(v) => KeptBytes::Memory(bytemuck::cast_slice(v)),
+            Kept::File(p) => KeptBytes::Mapped(map_working_file(p)?, p),
+        })
     }
 
     /// Removes the working file once its last part is copied (memory goes with the
@@ -716,6 +682,50 @@ impl<T: bytemuck::Pod> Kept<T> {
             Kept::File(p) => fs::remove_file(p).map_err(|e| temp_err(p, e)),
         }
     }
+}
+
+/// What [`Kept::bytes`] gives.
+enum KeptBytes<'a> {
+    Memory(&'a [u8]),
+    Mapped(mdlod_format::mmap::Mmap, &'a Path),
+}
+
+impl KeptBytes<'_> {
+    fn all(&self) -> &[u8] {
+        match self {
+            KeptBytes::Memory(b) => b,
+            KeptBytes::Mapped(m, _) => m,
+        }
+    }
+
+    /// Bytes `offset..offset + len`; an error when the result is shorter.
+    fn range(&self, offset: u64, len: usize) -> Result<&[u8], ConvertError> {
+        let all = self.all();
+        usize::try_from(offset)
+            .ok()
+            .and_then(|o| all.get(o..o.checked_add(len)?))
+            .ok_or_else(|| {
+                let short = format!("no bytes {offset}..+{len} in {} bytes", all.len());
+                match self {
+                    KeptBytes::Memory(_) => {
+                        ConvertError::Chunked(format!("a chunk result: {short}"))
+                    }
+                    KeptBytes::Mapped(_, p) => temp_err(p, short_file(short)),
+                }
+            })
+    }
+}
+
+/// Maps one of the conversion's own working files (cells, chunk results).
+fn map_working_file(path: &Path) -> Result<mdlod_format::mmap::Mmap, ConvertError> {
+    File::open(path)
+        .and_then(|f| mdlod_format::mmap::map_file(&f))
+        .map_err(|e| temp_err(path, e))
+}
+
+/// The error of a working file shorter than what was written to it.
+fn short_file(message: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::UnexpectedEof, message)
 }
 
 impl ChunkResult {
@@ -756,17 +766,10 @@ fn build_chunk(
     let mut attribute = layout.attribute.then(|| Vec::with_capacity(n));
     for cell in cells {
         // Mapped, not read: the records are converted straight from the page cache.
-        let map = File::open(&cell.path)
-            .and_then(|f| mdlod_format::mmap::map_file(&f))
-            .map_err(|e| temp_err(&cell.path, e))?;
+        let map = map_working_file(&cell.path)?;
         let bytes = map.get(..cell.count * size).ok_or_else(|| {
-            temp_err(
-                &cell.path,
-                std::io::Error::new(
-                    std::io::ErrorKind::UnexpectedEof,
-                    format!("holds fewer than its {} records", cell.count),
-                ),
-            )
+            let short = format!("holds fewer than its {} records", cell.count);
+            temp_err(&cell.path, short_file(short))
         })?;
         for r in bytes.chunks_exact(size) {
             positions.push(layout.position(r));
@@ -918,12 +921,8 @@ pub fn convert_chunked(
                 )
             });
             let map = merge.add(&f.species)?;
-            let first_bad = |bad: &(dyn Fn(usize) -> bool + Sync)| {
-                (0..f.len())
-                    .into_par_iter()
-                    .step_by(SCAN_BLOCK)
-                    .find_map_first(|b| (b..(b + SCAN_BLOCK).min(f.len())).find(|&i| bad(i)))
-            };
+            let first_bad =
+                |bad: &(dyn Fn(usize) -> bool + Sync)| crate::readers::first_index(f.len(), bad);
             if let Some(index) = first_bad(&|i| f.positions[i].iter().any(|v| !v.is_finite())) {
                 return Err(ConvertError::Build {
                     path: output.display().to_string(),
@@ -1364,15 +1363,16 @@ fn assemble(
                 let local = &ch.levels;
                 let first = local[j].node_first;
                 let count = local[j].point_count;
+                let src = ch.nodes.bytes()?;
+                let size = std::mem::size_of::<NodeRecord>();
                 let step = 1u64 << 16;
                 let mut at = 0u64;
                 while at < count {
                     let len = step.min(count - at);
                     buf.resize(len as usize, bytemuck::Zeroable::zeroed());
-                    ch.nodes.read_exact_at(
-                        bytemuck::cast_slice_mut(&mut buf),
-                        (first + at) * std::mem::size_of::<NodeRecord>() as u64,
-                    )?;
+                    bytemuck::cast_slice_mut(&mut buf).copy_from_slice(
+                        src.range((first + at) * size as u64, len as usize * size)?,
+                    );
                     for n in &mut buf {
                         n.child_first += lay.offset[g + 1][c] as u32;
                         n.point_first += lay.offset[pl][c] as u32;
@@ -1445,13 +1445,14 @@ fn assemble(
                 let j = m - 1 - pad;
                 let before: u64 = ch.levels[1..j].iter().map(|l| l.point_count).sum();
                 let count = ch.levels[j].point_count;
+                let src = ch.positions.bytes()?;
                 let step = 1u64 << 18;
                 let mut at = 0u64;
                 while at < count {
                     let len = step.min(count - at);
                     qbuf.resize(len as usize, [0; 3]);
-                    ch.positions
-                        .read_exact_at(bytemuck::cast_slice_mut(&mut qbuf), (before + at) * 6)?;
+                    bytemuck::cast_slice_mut(&mut qbuf)
+                        .copy_from_slice(src.range((before + at) * 6, len as usize * 6)?);
                     put(&mut s, &qbuf)?;
                     progress.advance(len * 6);
                     at += len;
@@ -1467,17 +1468,12 @@ fn assemble(
     // Per-particle sections.
     let copy = |w: &mut Writer, kind: SectionKind, parts: Vec<&Kept<u16>>| {
         let mut s = w.section(kind, last as u32)?;
-        let mut buf = vec![0u8; 1 << 22];
         for part in parts {
-            let len = part.len_bytes();
-            let mut at = 0u64;
-            while at < len {
-                let n = (len - at).min(buf.len() as u64) as usize;
-                part.read_exact_at(&mut buf[..n], at)?;
-                s.write_bytes(&buf[..n])?;
-                progress.advance(n as u64);
-                at += n as u64;
-            }
+            // Written straight from memory or the mapping, no copy in between.
+            let bytes = part.bytes()?;
+            s.write_bytes(bytes.all())?;
+            progress.advance(bytes.all().len() as u64);
+            drop(bytes);
             part.remove()?;
         }
         s.end()?;

@@ -780,6 +780,14 @@ impl DumpFile {
 /// flag before every item, which costs more than decoding one.
 pub(crate) const SCAN_BLOCK: usize = 1 << 14;
 
+/// The first `i < n` for which `bad(i)` holds, searched on every core a block at a time.
+pub(crate) fn first_index(n: usize, bad: impl Fn(usize) -> bool + Sync) -> Option<usize> {
+    use rayon::prelude::*;
+    (0..n.div_ceil(SCAN_BLOCK))
+        .into_par_iter()
+        .find_map_first(|b| (b * SCAN_BLOCK..((b + 1) * SCAN_BLOCK).min(n)).find(|&i| bad(i)))
+}
+
 /// Decodes `n` positions in parallel: coordinate `k` of particle `i` is `value(at(i, k))`.
 /// On a non-finite value, the `at` index of the first one (in particle order).
 pub(crate) fn decode_positions(

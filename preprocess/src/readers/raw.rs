@@ -430,15 +430,7 @@ impl Index {
             b.par_chunks_exact(12)
                 .map(|c| [at(c, 0), at(c, 1), at(c, 2)])
                 .collect_into_vec(&mut v);
-            match v
-                .par_chunks(super::SCAN_BLOCK)
-                .enumerate()
-                .find_map_first(|(b, block)| {
-                    let o = block
-                        .iter()
-                        .position(|x| !x.iter().all(|c| c.is_finite()))?;
-                    Some(b * super::SCAN_BLOCK + o)
-                }) {
+            match super::first_index(n, |i| !v[i].iter().all(|c| c.is_finite())) {
                 Some(i) => {
                     let k = v[i].iter().position(|c| !c.is_finite()).unwrap_or(0);
                     Err(3 * (first + i) + k)
