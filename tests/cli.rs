@@ -645,6 +645,25 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
         err.contains("working file") && err.contains(".cell: File too large"),
         "{err}"
     );
+    // Room for every cell but not the output, which goes through its own writing
+    // thread with direct I/O: the error still names the output.
+    let run = mdlod_limited(
+        200,
+        &[
+            "convert",
+            s(&input),
+            "-o",
+            s(&out),
+            "--chunk-points",
+            "10000",
+        ],
+    );
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        err.contains(&format!("{}: File too large", out.display())),
+        "{err}"
+    );
     let batch_dir = dir.path().join("batch");
     let run = mdlod_limited(100, &["batch", s(&input), "-o", s(&batch_dir)]);
     let err = String::from_utf8_lossy(&run.stderr);

@@ -2,6 +2,10 @@
 //! the target, each hashed while it is written; [`Writer::finish`] appends the section
 //! table, writes the header, syncs and renames the file into place. Dropping a writer
 //! without finishing removes the temporary file.
+//!
+//! The bytes go through a [`Sink`]: a buffered file by default, or one the caller
+//! supplies ([`Writer::create_with`]), such as a writer that bypasses the page cache for
+//! files of many gigabytes.
 
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -14,11 +18,32 @@ use crate::layout::{
     align_up, Header, SectionEntry, SectionKind, FORMAT_VERSION, HEADER_SIZE, MAGIC,
 };
 
+/// Where a [`Writer`]'s bytes go: appended in order from the start of the file.
+pub trait Sink: Send {
+    /// Appends `bytes`. An error may also surface at a later call, for bytes appended
+    /// before (a sink may write in the background).
+    fn write_all(&mut self, bytes: &[u8]) -> std::io::Result<()>;
+
+    /// Writes everything appended so far and returns a handle on the file, through which
+    /// the writer fills in the header and syncs.
+    fn finish(self: Box<Self>) -> std::io::Result<File>;
+}
+
+impl Sink for BufWriter<File> {
+    fn write_all(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        Write::write_all(self, bytes)
+    }
+
+    fn finish(self: Box<Self>) -> std::io::Result<File> {
+        self.into_inner().map_err(|e| e.into_error())
+    }
+}
+
 /// Writes one `.mdlod` file.
 pub struct Writer {
     path: PathBuf,
     tmp: Option<tempfile::NamedTempFile>,
-    out: BufWriter<File>,
+    out: Box<dyn Sink>,
     offset: u64,
     position_bits: u32,
     sections: Vec<SectionEntry>,
@@ -27,6 +52,19 @@ pub struct Writer {
 impl Writer {
     /// Starts writing `path` (created or replaced only by [`Writer::finish`]).
     pub fn create(path: &Path, position_bits: u32) -> Result<Writer, FormatError> {
+        Writer::create_with(path, position_bits, |tmp| {
+            let file = std::fs::OpenOptions::new().write(true).open(tmp)?;
+            Ok(Box::new(BufWriter::with_capacity(1 << 20, file)))
+        })
+    }
+
+    /// Like [`Writer::create`], with the bytes going to the sink `open` makes for the
+    /// temporary file at the path it is given (created, empty).
+    pub fn create_with(
+        path: &Path,
+        position_bits: u32,
+        open: impl FnOnce(&Path) -> std::io::Result<Box<dyn Sink>>,
+    ) -> Result<Writer, FormatError> {
         if position_bits != 8 && position_bits != 16 {
             return Err(FormatError::Write {
                 path: path.into(),
@@ -46,8 +84,7 @@ impl Writer {
             .suffix(".tmp")
             .tempfile_in(dir)
             .map_err(|e| FormatError::io(dir, e))?;
-        let file = tmp.reopen().map_err(|e| FormatError::io(path, e))?;
-        let mut out = BufWriter::with_capacity(1 << 20, file);
+        let mut out = open(tmp.path()).map_err(|e| FormatError::io(path, e))?;
         out.write_all(&[0u8; HEADER_SIZE])
             .map_err(|e| FormatError::io(path, e))?;
         Ok(Writer {
@@ -144,12 +181,11 @@ impl Writer {
         };
         header.header_checksum = xxh3_64(&bytemuck::bytes_of(&header)[..56]);
         let io = |e| FormatError::io(&tmp_path, e);
-        self.out.seek(SeekFrom::Start(0)).map_err(io)?;
-        self.out
-            .write_all(bytemuck::bytes_of(&header))
-            .map_err(io)?;
-        self.out.flush().map_err(io)?;
-        self.out.get_ref().sync_all().map_err(io)?;
+        let out = std::mem::replace(&mut self.out, Box::new(Finished));
+        let mut file = out.finish().map_err(io)?;
+        file.seek(SeekFrom::Start(0)).map_err(io)?;
+        file.write_all(bytemuck::bytes_of(&header)).map_err(io)?;
+        file.sync_all().map_err(io)?;
         let tmp = self
             .tmp
             .take()
@@ -158,6 +194,19 @@ impl Writer {
         tmp.persist(&self.path)
             .map_err(|e| FormatError::io(&self.path, e.error))?;
         Ok(())
+    }
+}
+
+/// Stands in for a sink that has been finished.
+struct Finished;
+
+impl Sink for Finished {
+    fn write_all(&mut self, _: &[u8]) -> std::io::Result<()> {
+        Err(std::io::Error::other("the file was already finished"))
+    }
+
+    fn finish(self: Box<Self>) -> std::io::Result<File> {
+        Err(std::io::Error::other("the file was already finished"))
     }
 }
 

@@ -7,12 +7,13 @@
 //!    box, or the particles' bounds when it has none; particles outside it go to the
 //!    nearest cell) and is appended to that cell's working file: position, species and
 //!    attribute. A thread of its own sorts each window by cell and writes it while the
-//!    next window is read. A cell that ends with more than `chunk_points` particles is
+//!    next window is read, with direct I/O past the page cache ([`crate::direct`]). A cell that ends with more than `chunk_points` particles is
 //!    split the same way over its own bounds (and by file order when all its particles
 //!    coincide).
 //!    The leaf cells, in Morton order, are grouped greedily into chunks of at most
 //!    `chunk_points` particles.
-//! 2. **Chunks.** Each chunk is loaded and built into a complete hierarchy by the
+//! 2. **Chunks.** A reader thread loads the chunks' cells in order, one chunk ahead of
+//!    the builds, with direct reads. Each chunk is built into a complete hierarchy by the
 //!    in-memory builder ([`crate::hierarchy::build_with`]), as many chunks at a time as
 //!    the memory limit allows. Its node table, quantized positions and per-particle data
 //!    stay in memory while the limit has room beside the builds at work, and go to
@@ -23,7 +24,8 @@
 //!    The file is then written level by level: node records are copied with their
 //!    indices rebased, quantized positions are copied unchanged except on the levels the
 //!    top node encodes (re-encoded from the kept unquantized positions), and each working
-//!    file is removed as soon as its last part is copied.
+//!    file is removed as soon as its last part is copied. The file goes out through a
+//!    writing thread of its own with direct I/O ([`crate::direct::DirectSink`]).
 //!
 //! Which chunks' results stay in memory depends on timing; the file never does.
 //!
@@ -394,7 +396,9 @@ struct Partitioner {
     layout: RecordLayout,
     lo: [f32; 3],
     hi: [f32; 3],
-    writers: Vec<Option<BufWriter<File>>>,
+    writers: Vec<Option<crate::direct::Appender>>,
+    /// The block cells' records are copied through on their way to the disk.
+    scratch: crate::direct::Block,
     cells: Vec<Cell>,
     /// The window's cell ids and its records sorted by cell, kept between windows so
     /// that their memory is touched once.
@@ -411,6 +415,7 @@ impl Partitioner {
             lo,
             hi,
             writers: (0..CELLS).map(|_| None).collect(),
+            scratch: crate::direct::Block::with_len(crate::direct::SCRATCH),
             cells: (0..CELLS)
                 .map(|_| Cell {
                     path: PathBuf::new(),
@@ -468,11 +473,13 @@ impl Partitioner {
                 let cell = &mut self.cells[id];
                 if self.writers[id].is_none() {
                     cell.path = self.dir.join(format!("{}-{id:03}.cell", self.prefix));
-                    let f = File::create(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
-                    self.writers[id] = Some(BufWriter::with_capacity(1 << 16, f));
+                    let f = crate::direct::Appender::create(&cell.path)
+                        .map_err(|e| temp_err(&cell.path, e))?;
+                    self.writers[id] = Some(f);
                 }
                 let w = self.writers[id].as_mut().expect("opened above");
-                w.write_all(part).map_err(|e| temp_err(&cell.path, e))?;
+                w.append(part, &mut self.scratch)
+                    .map_err(|e| temp_err(&cell.path, e))?;
                 cell.count += b - a;
             }
             Ok(())
@@ -486,8 +493,8 @@ impl Partitioner {
     fn finish(self) -> Result<Vec<Cell>, ConvertError> {
         let mut out = Vec::new();
         for (w, cell) in self.writers.into_iter().zip(self.cells) {
-            if let Some(mut w) = w {
-                w.flush().map_err(|e| temp_err(&cell.path, e))?;
+            if let Some(w) = w {
+                w.finish().map_err(|e| temp_err(&cell.path, e))?;
                 out.push(cell);
             }
         }
@@ -753,9 +760,32 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ConvertError> {
     w.flush().map_err(|e| temp_err(path, e))
 }
 
+/// The records of a chunk's cells, one block each, read while an earlier chunk builds.
+fn load_cells(
+    cells: &[Cell],
+    layout: RecordLayout,
+) -> Result<Vec<crate::direct::Block>, ConvertError> {
+    cells
+        .iter()
+        .map(|cell| {
+            let len = cell.count * layout.size();
+            let mut buf = crate::direct::Block::with_len(len);
+            crate::direct::read_whole(&cell.path, len, &mut buf).map_err(|e| match e.kind() {
+                std::io::ErrorKind::UnexpectedEof => temp_err(
+                    &cell.path,
+                    short_file(format!("holds fewer than its {} records", cell.count)),
+                ),
+                _ => temp_err(&cell.path, e),
+            })?;
+            Ok(buf)
+        })
+        .collect()
+}
+
 fn build_chunk(
     c: usize,
     cells: &[Cell],
+    loaded: Vec<crate::direct::Block>,
     input: &ChunkInput<'_>,
 ) -> Result<ChunkResult, ConvertError> {
     let layout = input.layout;
@@ -764,13 +794,8 @@ fn build_chunk(
     let mut positions = Vec::with_capacity(n);
     let mut species_index = Vec::with_capacity(n);
     let mut attribute = layout.attribute.then(|| Vec::with_capacity(n));
-    for cell in cells {
-        // Mapped, not read: the records are converted straight from the page cache.
-        let map = map_working_file(&cell.path)?;
-        let bytes = map.get(..cell.count * size).ok_or_else(|| {
-            let short = format!("holds fewer than its {} records", cell.count);
-            temp_err(&cell.path, short_file(short))
-        })?;
+    for (cell, buf) in cells.iter().zip(&loaded) {
+        let bytes = &buf.data()[..cell.count * size];
         for r in bytes.chunks_exact(size) {
             positions.push(layout.position(r));
             let s = u16::from_le_bytes([r[12], r[13]]);
@@ -780,6 +805,7 @@ fn build_chunk(
             }
         }
     }
+    drop(loaded);
     let particles = Particles {
         positions: &positions,
         species_index: &species_index,
@@ -1053,8 +1079,9 @@ pub fn convert_chunked(
         attribute_range: layout.attribute.then_some(range),
         keep_levels: params.delta_n as usize,
     };
-    // What the builds at work and a margin leave under the limit holds finished chunks'
-    // results until the assembly.
+    // What the builds at work, the two chunks read ahead and a margin leave under the
+    // limit holds finished chunks' results until the assembly.
+    let read_ahead = 2 * (largest * layout.size()) as u64;
     let kept = std::sync::atomic::AtomicU64::new(0);
     let input = ChunkInput {
         layout,
@@ -1065,7 +1092,7 @@ pub fn convert_chunked(
         dir,
         keep_budget: chunk
             .memory_limit
-            .saturating_sub(jobs as u64 * need + chunk.memory_limit / 8),
+            .saturating_sub(jobs as u64 * need + read_ahead + chunk.memory_limit / 8),
         kept: &kept,
     };
     progress.stage(
@@ -1073,24 +1100,44 @@ pub fn convert_chunked(
         Some(n as u64),
         "particles",
     );
-    // `jobs` workers take the next chunk as they finish one (each build is parallel
-    // itself); results are kept by chunk index, so the order never depends on timing.
-    let next = std::sync::atomic::AtomicUsize::new(0);
+    // A reader thread loads the chunks' cells in order, one chunk ahead (its disk reads
+    // overlap the builds); `jobs` workers take the next loaded chunk as they finish one
+    // (each build is parallel itself). Results are kept by chunk index, so the order
+    // never depends on timing.
     let failed = std::sync::atomic::AtomicBool::new(false);
     let results: Vec<std::sync::Mutex<Option<Result<ChunkResult, ConvertError>>>> = (0..groups
         .len())
         .map(|_| std::sync::Mutex::new(None))
         .collect();
+    type Loaded = (usize, Result<Vec<crate::direct::Block>, ConvertError>);
+    let (to_builds, loaded) = std::sync::mpsc::sync_channel::<Loaded>(1);
+    // Dropped with the last worker, which ends the reader should the workers stop first.
+    let loaded = std::sync::Arc::new(std::sync::Mutex::new(loaded));
     std::thread::scope(|scope| {
+        let (groups, leaves, failed) = (&groups, &leaves, &failed);
+        scope.spawn(move || {
+            for (c, g) in groups.iter().enumerate() {
+                if failed.load(std::sync::atomic::Ordering::Relaxed) {
+                    return;
+                }
+                let cells = load_cells(&leaves[g.clone()], layout);
+                if to_builds.send((c, cells)).is_err() {
+                    return;
+                }
+            }
+        });
         for _ in 0..jobs.min(groups.len()) {
-            scope.spawn(|| loop {
+            let loaded = loaded.clone();
+            let (input, results) = (&input, &results);
+            scope.spawn(move || loop {
                 use std::sync::atomic::Ordering::Relaxed;
-                let c = next.fetch_add(1, Relaxed);
-                if c >= groups.len() || failed.load(Relaxed) {
+                let next = loaded.lock().unwrap_or_else(|e| e.into_inner()).recv();
+                let Ok((c, cells_read)) = next else { return };
+                if failed.load(Relaxed) {
                     return;
                 }
                 let cells = &leaves[groups[c].clone()];
-                let r = build_chunk(c, cells, &input);
+                let r = cells_read.and_then(|l| build_chunk(c, cells, l, input));
                 match &r {
                     Ok(_) => progress.advance(cells.iter().map(|c| c.count as u64).sum()),
                     Err(_) => failed.store(true, Relaxed),
@@ -1098,6 +1145,7 @@ pub fn convert_chunked(
                 *results[c].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
             });
         }
+        drop(loaded);
     });
     let mut chunks = Vec::with_capacity(groups.len());
     for r in results {
@@ -1317,7 +1365,8 @@ fn assemble(
         })
         .sum();
     progress.stage("writing", Some(total_bytes), "bytes");
-    let mut w = Writer::create(output, bits)?;
+    // Gigabytes: written from a thread of its own, past the page cache.
+    let mut w = Writer::create_with(output, bits, crate::direct::open)?;
     w.write_section(SectionKind::Metadata, 0, &json)?;
     w.write_pod_section(SectionKind::Levels, 0, &lay.levels)?;
 

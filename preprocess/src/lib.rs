@@ -4,6 +4,7 @@
 pub mod batch;
 pub mod chunked;
 pub mod convert;
+pub mod direct;
 pub mod frame;
 pub mod hierarchy;
 pub mod progress;
