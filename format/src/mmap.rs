@@ -2,8 +2,8 @@
 
 use std::fs::File;
 
-/// A read-only file mapping (what [`map_file`] returns).
-pub use memmap2::Mmap;
+/// A read-only file mapping (what [`map_file`] returns), and the access hints it takes.
+pub use memmap2::{Advice, Mmap};
 
 /// Maps `file` read-only.
 ///

@@ -38,7 +38,6 @@ use std::collections::HashMap;
 use std::fs::{self, File};
 use std::io::{BufWriter, Write};
 use std::ops::Range;
-use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -556,11 +555,17 @@ fn read_records(
     range: Range<usize>,
 ) -> Result<Vec<u8>, ConvertError> {
     let size = layout.size();
-    let mut buf = vec![0u8; range.len() * size];
-    let f = File::open(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
-    f.read_exact_at(&mut buf, (range.start * size) as u64)
-        .map_err(|e| temp_err(&cell.path, e))?;
-    Ok(buf)
+    // Direct reads: the cells were written past the page cache, and reads through it
+    // would wait on one small read-ahead at a time.
+    let mut buf = crate::direct::Block::with_len(0);
+    crate::direct::read_at(
+        &cell.path,
+        (range.start * size) as u64,
+        range.len() * size,
+        &mut buf,
+    )
+    .map(<[u8]>::to_vec)
+    .map_err(|e| temp_err(&cell.path, e))
 }
 
 /// Splits `cell` until every leaf holds at most `max` records; leaves in order.

@@ -340,6 +340,20 @@ impl Appender {
 /// allows, into `buf` (grown as needed): the returned slice of it. Fewer bytes in the
 /// file is an `UnexpectedEof` error.
 pub fn read_whole<'b>(path: &Path, len: usize, buf: &'b mut Block) -> io::Result<&'b [u8]> {
+    read_at(path, 0, len, buf)
+}
+
+/// Bytes `offset..offset + len` of the file at `path`, as [`read_whole`] reads them (from
+/// the aligned offset below `offset`).
+pub fn read_at<'b>(
+    path: &Path,
+    offset: u64,
+    len: usize,
+    buf: &'b mut Block,
+) -> io::Result<&'b [u8]> {
+    let skip = (offset % ALIGN as u64) as usize;
+    let base = offset - skip as u64;
+    let len = skip + len;
     let rounded = len.div_ceil(ALIGN) * ALIGN;
     if buf.len < rounded {
         *buf = Block::with_len(rounded);
@@ -350,7 +364,7 @@ pub fn read_whole<'b>(path: &Path, len: usize, buf: &'b mut Block) -> io::Result
         let data = &mut buf.data_mut()[..rounded];
         loop {
             // Whole blocks from an aligned offset; the file's end may cut the last one.
-            match f.read_at(&mut data[got..], got as u64) {
+            match f.read_at(&mut data[got..], base + got as u64) {
                 Ok(0) => break,
                 Ok(n) => {
                     got += n;
@@ -367,9 +381,9 @@ pub fn read_whole<'b>(path: &Path, len: usize, buf: &'b mut Block) -> io::Result
     if got < len {
         // No direct I/O here (or it stopped short of `len`): the rest, read plainly.
         let f = File::open(path)?;
-        f.read_exact_at(&mut buf.data_mut()[got..len], got as u64)?;
+        f.read_exact_at(&mut buf.data_mut()[got..len], base + got as u64)?;
     }
-    Ok(&buf.data()[..len])
+    Ok(&buf.data()[skip..len])
 }
 
 #[cfg(test)]
@@ -440,6 +454,14 @@ mod tests {
         let mut buf = Block::with_len(1);
         assert!(read_whole(&path, want.len(), &mut buf).unwrap() == want.as_slice());
         assert!(read_whole(&path, 100, &mut buf).unwrap() == &want[..100]);
+        // From unaligned offsets, to the end and short of it.
+        for (at, n) in [
+            (17usize, 5000usize),
+            (ALIGN + 3, want.len() - ALIGN - 3),
+            (want.len() - 1, 1),
+        ] {
+            assert!(read_at(&path, at as u64, n, &mut buf).unwrap() == &want[at..at + n]);
+        }
         let err = read_whole(&path, want.len() + 1, &mut buf).unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::UnexpectedEof);
     }
