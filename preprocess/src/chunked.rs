@@ -8,8 +8,8 @@
 //!    nearest cell) and is appended to that cell's working file: position, species and
 //!    attribute. A thread of its own sorts each window by cell and writes it while the
 //!    next window is read, with direct I/O past the page cache ([`crate::direct`]). A cell that ends with more than `chunk_points` particles is
-//!    split the same way over its own bounds (and by file order when all its particles
-//!    coincide).
+//!    split the same way over its own bounds, by a grid only as fine as its count needs
+//!    ([`refine_bits`]; by file order when all its particles coincide).
 //!    The leaf cells, in Morton order, are grouped greedily into chunks of at most
 //!    `chunk_points` particles.
 //! 2. **Chunks.** A reader thread loads the chunks' cells in order, one chunk ahead of
@@ -62,7 +62,19 @@ pub const BUILD_BYTES_PER_PARTICLE: u64 = 110;
 const WINDOW: usize = 1 << 22;
 /// Cells per axis of one partition step, as a power of two.
 const GRID_BITS: u32 = 3;
-const CELLS: usize = 1 << (3 * GRID_BITS);
+
+/// Bits per axis of the grid a cell of `count` particles is split by, when it holds more
+/// than `max`: the coarsest grid (2×2×2 upward, at most the partition's own) whose cells
+/// hold at most a sixteenth of `max` on average, so that one more pass almost always
+/// suffices however uneven the particles. Finer than needed, the split would leave
+/// thousands of tiny cells to write and read back one by one.
+fn refine_bits(count: usize, max: usize) -> u32 {
+    let mut bits = 1;
+    while bits < GRID_BITS && (count as u128) * 16 > (max as u128) << (3 * bits) {
+        bits += 1;
+    }
+    bits
+}
 /// Deeper splits than this go by order (no spatial progress is left in `f32`).
 const MAX_SPLIT_DEPTH: u32 = 10;
 
@@ -369,10 +381,10 @@ struct Cell {
     hi: [f32; 3],
 }
 
-/// The cell (Morton code) of `x` in an 8×8×8 grid over `lo..hi`.
+/// The cell (Morton code) of `x` in a grid of `2^bits` cells per axis over `lo..hi`.
 #[inline(always)]
-fn cell_of(x: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> usize {
-    let cells = 1u32 << GRID_BITS;
+fn cell_of(x: [f32; 3], lo: [f32; 3], hi: [f32; 3], bits: u32) -> usize {
+    let cells = 1u32 << bits;
     let mut code = 0usize;
     for k in 0..3 {
         let ext = hi[k] - lo[k];
@@ -381,7 +393,7 @@ fn cell_of(x: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> usize {
         } else {
             0
         };
-        for b in 0..GRID_BITS {
+        for b in 0..bits {
             code |= (((i >> b) & 1) as usize) << (3 * b + k as u32) as usize;
         }
     }
@@ -395,6 +407,8 @@ struct Partitioner {
     layout: RecordLayout,
     lo: [f32; 3],
     hi: [f32; 3],
+    /// Bits per axis of the grid.
+    bits: u32,
     writers: Vec<Option<crate::direct::Appender>>,
     /// The block cells' records are copied through on their way to the disk.
     scratch: crate::direct::Block,
@@ -406,16 +420,24 @@ struct Partitioner {
 }
 
 impl Partitioner {
-    fn new(dir: &Path, prefix: String, layout: RecordLayout, lo: [f32; 3], hi: [f32; 3]) -> Self {
+    fn new(
+        dir: &Path,
+        prefix: String,
+        layout: RecordLayout,
+        (lo, hi): ([f32; 3], [f32; 3]),
+        bits: u32,
+    ) -> Self {
+        let cells = 1usize << (3 * bits);
         Partitioner {
             dir: dir.to_path_buf(),
             prefix,
             layout,
             lo,
             hi,
-            writers: (0..CELLS).map(|_| None).collect(),
+            bits,
+            writers: (0..cells).map(|_| None).collect(),
             scratch: crate::direct::Block::with_len(crate::direct::SCRATCH),
-            cells: (0..CELLS)
+            cells: (0..cells)
                 .map(|_| Cell {
                     path: PathBuf::new(),
                     count: 0,
@@ -431,20 +453,21 @@ impl Partitioner {
     /// Appends the records in `bytes`, in order.
     fn add(&mut self, bytes: &[u8]) -> Result<(), ConvertError> {
         let size = self.layout.size();
-        let (lo, hi, layout) = (self.lo, self.hi, self.layout);
+        let (lo, hi, layout, bits) = (self.lo, self.hi, self.layout, self.bits);
+        let cells = self.cells.len();
         let mut ids = std::mem::take(&mut self.ids);
         ids.clear();
         bytes
             .par_chunks_exact(size)
-            .map(|r| cell_of(layout.position(r), lo, hi) as u16)
+            .map(|r| cell_of(layout.position(r), lo, hi, bits) as u16)
             .collect_into_vec(&mut ids);
         // A stable counting sort of the window by cell, so that each cell's records go
         // out in one write, in input order; the cells' bounds grow on the way.
-        let mut start = vec![0usize; CELLS + 1];
+        let mut start = vec![0usize; cells + 1];
         for &id in &ids {
             start[usize::from(id) + 1] += 1;
         }
-        for c in 0..CELLS {
+        for c in 0..cells {
             start[c + 1] += start[c];
         }
         let mut next = start.clone();
@@ -463,7 +486,7 @@ impl Partitioner {
             }
         }
         let written = (|| {
-            for id in 0..CELLS {
+            for id in 0..cells {
                 let (a, b) = (start[id], start[id + 1]);
                 if a == b {
                     continue;
@@ -590,7 +613,8 @@ fn refine(
     let dir = cell.path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut children = Vec::new();
     if !flat && depth < MAX_SPLIT_DEPTH {
-        let mut p = Partitioner::new(&dir, prefix.clone(), layout, cell.lo, cell.hi);
+        let bits = refine_bits(cell.count, max);
+        let mut p = Partitioner::new(&dir, prefix.clone(), layout, (cell.lo, cell.hi), bits);
         for start in (0..cell.count).step_by(WINDOW) {
             let bytes = read_records(&cell, layout, start..(start + WINDOW).min(cell.count))?;
             p.add(&bytes)?;
@@ -948,7 +972,7 @@ pub fn convert_chunked(
             let w = writer.get_or_insert_with(|| {
                 CellWriter::spawn(
                     scope,
-                    Partitioner::new(dir, "cell".into(), lay, bounds.0, bounds.1),
+                    Partitioner::new(dir, "cell".into(), lay, bounds, GRID_BITS),
                 )
             });
             let map = merge.add(&f.species)?;
@@ -1545,4 +1569,32 @@ fn assemble(
     w.finish()?;
     progress.finish_stage();
     Ok((last + 1, node_count, metadata.max_position_error))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cell_is_refined_by_the_coarsest_grid_that_leaves_room() {
+        let m = 1000;
+        // Just over a chunk: 4×4×4 (64 cells of about a sixty-fourth), not 8×8×8.
+        assert_eq!(refine_bits(m + 1, m), 2);
+        assert_eq!(refine_bits(4 * m, m), 2);
+        assert_eq!(refine_bits(4 * m + 1, m), 3);
+        // Never finer than the partition's own grid.
+        assert_eq!(refine_bits(usize::MAX, m), GRID_BITS);
+        // A cell within a sixteenth of a 2×2×2 grid's room.
+        assert_eq!(refine_bits(m / 2, m), 1);
+    }
+
+    #[test]
+    fn morton_codes_of_a_coarser_grid_are_the_finer_codes_high_bits() {
+        let (lo, hi) = ([0.0f32; 3], [1.0f32; 3]);
+        for x in [[0.1f32, 0.7, 0.3], [0.9, 0.2, 0.55], [0.0, 1.0, 0.5]] {
+            let fine = cell_of(x, lo, hi, 3);
+            assert_eq!(cell_of(x, lo, hi, 2), fine >> 3);
+            assert_eq!(cell_of(x, lo, hi, 1), fine >> 6);
+        }
+    }
 }
