@@ -7,13 +7,13 @@
 //!    box, or the particles' bounds when it has none; particles outside it go to the
 //!    nearest cell) and is appended to that cell's working file: position, species and
 //!    attribute. A thread of its own sorts each window by cell and writes it while the
-//!    next window is read, with direct I/O past the page cache ([`crate::direct`]). A cell that ends with more than `chunk_points` particles is
+//!    next window is read. A cell that ends with more than `chunk_points` particles is
 //!    split the same way over its own bounds, by a grid only as fine as its count needs
 //!    ([`refine_bits`]; by file order when all its particles coincide).
 //!    The leaf cells, in Morton order, are grouped greedily into chunks of at most
 //!    `chunk_points` particles.
 //! 2. **Chunks.** A reader thread loads the chunks' cells in order, one chunk ahead of
-//!    the builds, with direct reads. Each chunk is built into a complete hierarchy by the
+//!    the builds. Each chunk is built into a complete hierarchy by the
 //!    in-memory builder ([`crate::hierarchy::build_with`]), as many chunks at a time as
 //!    the memory limit allows. Its node table, quantized positions and per-particle data
 //!    stay in memory while the limit has room beside the builds at work, and go to
@@ -62,6 +62,11 @@ pub const BUILD_BYTES_PER_PARTICLE: u64 = 110;
 const WINDOW: usize = 1 << 22;
 /// Cells per axis of one partition step, as a power of two.
 const GRID_BITS: u32 = 3;
+/// Cells go through the page cache, not direct I/O: timed alternately at 2×10^8 on the
+/// benchmark VM, direct cells were no faster (57.6-63.0 s against 56.5-58.7 s), and at
+/// 10^9 the page cache keeps much of the cells between the passes and the builds, which
+/// direct I/O sends to the disk and back.
+const CELLS_DIRECT: bool = false;
 
 /// Bits per axis of the grid a cell of `count` particles is split by, when it holds more
 /// than `max`: the coarsest grid (2×2×2 upward, at most the partition's own) whose cells
@@ -495,7 +500,7 @@ impl Partitioner {
                 let cell = &mut self.cells[id];
                 if self.writers[id].is_none() {
                     cell.path = self.dir.join(format!("{}-{id:03}.cell", self.prefix));
-                    let f = crate::direct::Appender::create(&cell.path)
+                    let f = crate::direct::Appender::create(&cell.path, CELLS_DIRECT)
                         .map_err(|e| temp_err(&cell.path, e))?;
                     self.writers[id] = Some(f);
                 }
@@ -586,6 +591,7 @@ fn read_records(
         (range.start * size) as u64,
         range.len() * size,
         &mut buf,
+        CELLS_DIRECT,
     )
     .map(<[u8]>::to_vec)
     .map_err(|e| temp_err(&cell.path, e))
@@ -799,13 +805,15 @@ fn load_cells(
         .map(|cell| {
             let len = cell.count * layout.size();
             let mut buf = crate::direct::Block::with_len(len);
-            crate::direct::read_whole(&cell.path, len, &mut buf).map_err(|e| match e.kind() {
-                std::io::ErrorKind::UnexpectedEof => temp_err(
-                    &cell.path,
-                    short_file(format!("holds fewer than its {} records", cell.count)),
-                ),
-                _ => temp_err(&cell.path, e),
-            })?;
+            crate::direct::read_whole(&cell.path, len, &mut buf, CELLS_DIRECT).map_err(
+                |e| match e.kind() {
+                    std::io::ErrorKind::UnexpectedEof => temp_err(
+                        &cell.path,
+                        short_file(format!("holds fewer than its {} records", cell.count)),
+                    ),
+                    _ => temp_err(&cell.path, e),
+                },
+            )?;
             Ok(buf)
         })
         .collect()

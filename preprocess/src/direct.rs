@@ -1,21 +1,23 @@
 //! Writing and reading the files of an out-of-core conversion past the page cache.
 //!
-//! Out of core, a conversion writes gigabytes that it reads back once (the partition's
-//! cells) or not at all (the output). Through the page cache the kernel copies every
-//! byte into pages it must first allocate; on this project's benchmark machine, a
-//! virtual machine, that copy ran at about 1 GB/s and was a fifth of the partition's
-//! time and most of the final write. With `O_DIRECT` (Linux) the disk reads from and
-//! writes into this process's own buffers, which are reused.
+//! Out of core, a conversion writes gigabytes it does not read back (the output).
+//! Through the page cache the kernel copies every byte into pages it must first
+//! allocate; on this project's benchmark machine, a virtual machine, that copy ran at
+//! about 1 GB/s and was most of the final write. With `O_DIRECT` (Linux) the disk reads
+//! from and writes into this process's own buffers, which are reused. The partition's
+//! cells, which are read back, use the same [`Appender`] and [`read_at`] through the page
+//! cache (`direct` false): there direct I/O was measured no faster, and the page cache
+//! keeps cells for their next reader.
 //!
 //! How it works:
 //! - [`DirectSink`], the output: the caller's bytes are copied into one of a few aligned
 //!   blocks; each full block goes to a thread of its own, which writes it at its offset
 //!   while the caller fills the next. An error is reported by the next call after the
 //!   thread met it.
-//! - [`Appender`], a cell: appended window after window in whole aligned blocks through
-//!   a scratch block shared by the cells; the last partial block waits in a small tail.
-//! - [`read_whole`], a cell read back with direct reads (the kernel first writes back
-//!   whatever of it went through the page cache).
+//! - [`Appender`], a file appended piece after piece in whole aligned blocks through a
+//!   scratch block shared by many files; the last partial block waits in a small tail.
+//! - [`read_whole`] and [`read_at`], such a file read back in large reads (direct ones
+//!   first make the kernel write back whatever of it went through the page cache).
 //!
 //! A file's last partial block goes through an ordinary handle, and so does everything
 //! where the filesystem refuses direct I/O (`EINVAL`): the bytes in the file are the
@@ -267,12 +269,16 @@ pub struct Appender {
 }
 
 impl Appender {
-    /// Creates (or truncates) `path`.
-    pub fn create(path: &Path) -> io::Result<Appender> {
-        let direct = open_direct_with(
-            OpenOptions::new().write(true).create(true).truncate(true),
-            path,
-        )?;
+    /// Creates (or truncates) `path`; with `direct` false, through the page cache.
+    pub fn create(path: &Path, direct: bool) -> io::Result<Appender> {
+        let direct = if direct {
+            open_direct_with(
+                OpenOptions::new().write(true).create(true).truncate(true),
+                path,
+            )?
+        } else {
+            None
+        };
         let plain = match direct {
             Some(_) => None,
             None => Some(File::create(path)?),
@@ -339,17 +345,23 @@ impl Appender {
 /// The first `len` bytes of the file at `path`, read with direct I/O where the filesystem
 /// allows, into `buf` (grown as needed): the returned slice of it. Fewer bytes in the
 /// file is an `UnexpectedEof` error.
-pub fn read_whole<'b>(path: &Path, len: usize, buf: &'b mut Block) -> io::Result<&'b [u8]> {
-    read_at(path, 0, len, buf)
+pub fn read_whole<'b>(
+    path: &Path,
+    len: usize,
+    buf: &'b mut Block,
+    direct: bool,
+) -> io::Result<&'b [u8]> {
+    read_at(path, 0, len, buf, direct)
 }
 
 /// Bytes `offset..offset + len` of the file at `path`, as [`read_whole`] reads them (from
-/// the aligned offset below `offset`).
+/// the aligned offset below `offset`); with `direct` false, through the page cache.
 pub fn read_at<'b>(
     path: &Path,
     offset: u64,
     len: usize,
     buf: &'b mut Block,
+    direct: bool,
 ) -> io::Result<&'b [u8]> {
     let skip = (offset % ALIGN as u64) as usize;
     let base = offset - skip as u64;
@@ -358,7 +370,11 @@ pub fn read_at<'b>(
     if buf.len < rounded {
         *buf = Block::with_len(rounded);
     }
-    let direct = open_direct_with(OpenOptions::new().read(true), path)?;
+    let direct = if direct {
+        open_direct_with(OpenOptions::new().read(true), path)?
+    } else {
+        None
+    };
     let mut got = 0usize;
     if let Some(f) = &direct {
         let data = &mut buf.data_mut()[..rounded];
@@ -434,10 +450,17 @@ mod tests {
 
     #[test]
     fn an_appended_file_reads_back_whole() {
+        // Direct and through the page cache alike.
+        for direct in [true, false] {
+            appended_file_reads_back_whole(direct);
+        }
+    }
+
+    fn appended_file_reads_back_whole(direct: bool) {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("cell");
         let mut scratch = Block::with_len(SCRATCH);
-        let mut a = Appender::create(&path).unwrap();
+        let mut a = Appender::create(&path, direct).unwrap();
         let sizes = [17, ALIGN, 3 * SCRATCH + 11, 0, ALIGN - 17, 5];
         let pieces: Vec<Vec<u8>> = sizes
             .iter()
@@ -452,17 +475,17 @@ mod tests {
         assert!(std::fs::read(&path).unwrap() == want);
         // Read back whole, and a prefix, into a block too small at first.
         let mut buf = Block::with_len(1);
-        assert!(read_whole(&path, want.len(), &mut buf).unwrap() == want.as_slice());
-        assert!(read_whole(&path, 100, &mut buf).unwrap() == &want[..100]);
+        assert!(read_whole(&path, want.len(), &mut buf, direct).unwrap() == want.as_slice());
+        assert!(read_whole(&path, 100, &mut buf, direct).unwrap() == &want[..100]);
         // From unaligned offsets, to the end and short of it.
         for (at, n) in [
             (17usize, 5000usize),
             (ALIGN + 3, want.len() - ALIGN - 3),
             (want.len() - 1, 1),
         ] {
-            assert!(read_at(&path, at as u64, n, &mut buf).unwrap() == &want[at..at + n]);
+            assert!(read_at(&path, at as u64, n, &mut buf, direct).unwrap() == &want[at..at + n]);
         }
-        let err = read_whole(&path, want.len() + 1, &mut buf).unwrap_err();
+        let err = read_whole(&path, want.len() + 1, &mut buf, direct).unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::UnexpectedEof);
     }
 
@@ -479,14 +502,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("cell");
         let mut scratch = misaligned(SCRATCH);
-        let mut a = Appender::create(&path).unwrap();
+        let mut a = Appender::create(&path, true).unwrap();
         let want = pattern(2 * SCRATCH + 99, 7);
         a.append(&want[..5000], &mut scratch).unwrap();
         a.append(&want[5000..], &mut scratch).unwrap();
         a.finish().unwrap();
         assert!(std::fs::read(&path).unwrap() == want);
         let mut buf = misaligned(want.len().div_ceil(ALIGN) * ALIGN);
-        assert!(read_whole(&path, want.len(), &mut buf).unwrap() == want.as_slice());
+        assert!(read_whole(&path, want.len(), &mut buf, true).unwrap() == want.as_slice());
     }
 
     #[cfg(target_os = "linux")]
