@@ -628,17 +628,15 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
     );
     // Out of core, the first working files to outgrow the limit are the partition's
     // cells, written on their own thread: the error still names one.
-    let run = mdlod_limited(
-        2,
-        &[
-            "convert",
-            s(&input),
-            "-o",
-            s(&out),
-            "--chunk-points",
-            "10000",
-        ],
-    );
+    let chunked = [
+        "convert",
+        s(&input),
+        "-o",
+        s(&out),
+        "--chunk-points",
+        "10000",
+    ];
+    let run = mdlod_limited(2, &chunked);
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success());
     assert!(
@@ -647,17 +645,7 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
     );
     // Room for every cell but not the output, which goes through its own writing
     // thread with direct I/O: the error still names the output.
-    let run = mdlod_limited(
-        200,
-        &[
-            "convert",
-            s(&input),
-            "-o",
-            s(&out),
-            "--chunk-points",
-            "10000",
-        ],
-    );
+    let run = mdlod_limited(200, &chunked);
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success());
     assert!(

@@ -576,24 +576,21 @@ impl<'scope> CellWriter<'scope> {
     }
 }
 
-/// Reads a cell's records `range` (in records).
-fn read_records(
+/// Reads a cell's records `range` (in records) into `buf`, which is reused.
+fn read_records<'b>(
     cell: &Cell,
     layout: RecordLayout,
     range: Range<usize>,
-) -> Result<Vec<u8>, ConvertError> {
+    buf: &'b mut crate::direct::Block,
+) -> Result<&'b [u8], ConvertError> {
     let size = layout.size();
-    // Direct reads: the cells were written past the page cache, and reads through it
-    // would wait on one small read-ahead at a time.
-    let mut buf = crate::direct::Block::with_len(0);
     crate::direct::read_at(
         &cell.path,
         (range.start * size) as u64,
         range.len() * size,
-        &mut buf,
+        buf,
         CELLS_DIRECT,
     )
-    .map(<[u8]>::to_vec)
     .map_err(|e| temp_err(&cell.path, e))
 }
 
@@ -618,12 +615,13 @@ fn refine(
     );
     let dir = cell.path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut children = Vec::new();
+    let mut buf = crate::direct::Block::with_len(0);
     if !flat && depth < MAX_SPLIT_DEPTH {
         let bits = refine_bits(cell.count, max);
         let mut p = Partitioner::new(&dir, prefix.clone(), layout, (cell.lo, cell.hi), bits);
         for start in (0..cell.count).step_by(WINDOW) {
-            let bytes = read_records(&cell, layout, start..(start + WINDOW).min(cell.count))?;
-            p.add(&bytes)?;
+            let range = start..(start + WINDOW).min(cell.count);
+            p.add(read_records(&cell, layout, range, &mut buf)?)?;
         }
         children = p.finish()?;
     }
@@ -640,7 +638,7 @@ fn refine(
             let mut lo = [f32::INFINITY; 3];
             let mut hi = [f32::NEG_INFINITY; 3];
             for s in (start..end).step_by(WINDOW) {
-                let bytes = read_records(&cell, layout, s..(s + WINDOW).min(end))?;
+                let bytes = read_records(&cell, layout, s..(s + WINDOW).min(end), &mut buf)?;
                 for r in bytes.chunks_exact(layout.size()) {
                     let x = layout.position(r);
                     for k in 0..3 {
@@ -648,7 +646,7 @@ fn refine(
                         hi[k] = hi[k].max(x[k]);
                     }
                 }
-                w.write_all(&bytes).map_err(|e| temp_err(&path, e))?;
+                w.write_all(bytes).map_err(|e| temp_err(&path, e))?;
             }
             w.flush().map_err(|e| temp_err(&path, e))?;
             children.push(Cell {
@@ -1536,10 +1534,15 @@ fn assemble(
                 let mut at = 0u64;
                 while at < count {
                     let len = step.min(count - at);
-                    qbuf.resize(len as usize, [0; 3]);
-                    bytemuck::cast_slice_mut(&mut qbuf)
-                        .copy_from_slice(src.range((before + at) * 6, len as usize * 6)?);
-                    put(&mut s, &qbuf)?;
+                    let part = src.range((before + at) * 6, len as usize * 6)?;
+                    if bits == 16 {
+                        // Stored as written: straight from memory or the mapping.
+                        s.write_bytes(part)?;
+                    } else {
+                        qbuf.resize(len as usize, [0; 3]);
+                        bytemuck::cast_slice_mut(&mut qbuf).copy_from_slice(part);
+                        put(&mut s, &qbuf)?;
+                    }
                     progress.advance(len * 6);
                     at += len;
                 }

@@ -223,6 +223,21 @@ fn refused(e: &io::Error) -> bool {
     }
 }
 
+/// Writes `data` (aligned, whole blocks) at `offset` through the direct handle: false
+/// where there is none, or where the filesystem refuses it (the handle is then dropped
+/// and the caller writes through an ordinary one).
+fn write_direct(direct: &mut Option<File>, data: &[u8], offset: u64) -> io::Result<bool> {
+    let Some(f) = direct else { return Ok(false) };
+    match f.write_all_at(data, offset) {
+        Ok(()) => Ok(true),
+        Err(e) if refused(&e) => {
+            *direct = None;
+            Ok(false)
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// The writing thread: whole aligned blocks through the direct handle, the rest (and
 /// everything once direct I/O is refused) through an ordinary one, which it returns.
 fn write_jobs(
@@ -235,16 +250,11 @@ fn write_jobs(
     for job in jobs {
         let data = &job.block.data()[..job.len];
         let whole = job.len / ALIGN * ALIGN;
-        let mut done = 0;
-        if let Some(f) = &direct {
-            if whole > 0 {
-                match f.write_all_at(&data[..whole], job.offset) {
-                    Ok(()) => done = whole,
-                    Err(e) if refused(&e) => direct = None,
-                    Err(e) => return Err(e),
-                }
-            }
-        }
+        let done = if whole > 0 && write_direct(&mut direct, &data[..whole], job.offset)? {
+            whole
+        } else {
+            0
+        };
         if done < job.len {
             plain.write_all_at(&data[done..], job.offset + done as u64)?;
         }
@@ -299,8 +309,17 @@ impl Appender {
         Ok(self.plain.as_ref().expect("opened above"))
     }
 
-    /// Appends `bytes`, copying them through `scratch` (a block of [`SCRATCH`] bytes).
+    /// Appends `bytes`: for direct I/O, copying them through `scratch` (a block of
+    /// [`SCRATCH`] bytes); otherwise in one write.
     pub fn append(&mut self, mut bytes: &[u8], scratch: &mut Block) -> io::Result<()> {
+        if self.direct.is_none() {
+            let (offset, tail) = (self.offset, std::mem::take(&mut self.tail));
+            let f = self.plain()?;
+            f.write_all_at(&tail, offset)?;
+            f.write_all_at(bytes, offset + tail.len() as u64)?;
+            self.offset += (tail.len() + bytes.len()) as u64;
+            return Ok(());
+        }
         while !bytes.is_empty() {
             let s = scratch.data_mut();
             let t = self.tail.len();
@@ -315,15 +334,7 @@ impl Appender {
                 continue;
             }
             let data = &scratch.data()[..whole];
-            let mut done = false;
-            if let Some(f) = &self.direct {
-                match f.write_all_at(data, self.offset) {
-                    Ok(()) => done = true,
-                    Err(e) if refused(&e) => self.direct = None,
-                    Err(e) => return Err(e),
-                }
-            }
-            if !done {
+            if !write_direct(&mut self.direct, data, self.offset)? {
                 let offset = self.offset;
                 self.plain()?.write_all_at(data, offset)?;
             }
