@@ -3,10 +3,10 @@
 //!
 //! How it works:
 //! 1. **Partition**, one pass over the input a window of particles at a time. Every
-//!    particle goes to one of the 512 cells of an 8×8×8 grid over the box (the dump's
-//!    box, or the particles' bounds when it has none; particles outside it go to the
-//!    nearest cell) and is appended to that cell's working file: position, species and
-//!    attribute. A thread of its own sorts each window by cell and writes it while the
+//!    particle goes to one cell of an 8×8×8 grid over the box (finer for frames of more
+//!    than 64 chunks: [`first_bits`]; the dump's box, or the particles' bounds when it
+//!    has none; particles outside it go to the nearest cell) and is appended to that
+//!    cell's working file: position, species and attribute. A thread of its own sorts each window by cell and writes it while the
 //!    next window is read. A cell that ends with more than `chunk_points` particles is
 //!    split the same way over its own bounds, by a grid only as fine as its count needs
 //!    ([`refine_bits`]; by file order when all its particles coincide).
@@ -60,8 +60,24 @@ pub const DEFAULT_CHUNK_POINTS: usize = 1 << 22;
 pub const BUILD_BYTES_PER_PARTICLE: u64 = 110;
 /// Particles read from the input per window.
 const WINDOW: usize = 1 << 22;
-/// Cells per axis of one partition step, as a power of two.
+/// Cells per axis of a refining partition step (and of the first at most
+/// [`first_bits`]`(..) == GRID_BITS` particles), as a power of two.
 const GRID_BITS: u32 = 3;
+/// The finest first grid: 32×32×32 cells (their ids fit the `u16` of the sort).
+const MAX_FIRST_BITS: u32 = 5;
+
+/// Bits per axis of the first partition grid for `count` particles and chunks of `max`:
+/// the coarsest grid, 8×8×8 upward, whose cells hold at most an eighth of a chunk on
+/// average. A coarser grid leaves most particles in cells too large for a chunk, which
+/// go through a second pass (read back and written again); at 10^9 particles that pass
+/// was the larger part of the partition.
+fn first_bits(count: usize, max: usize) -> u32 {
+    let mut bits = GRID_BITS;
+    while bits < MAX_FIRST_BITS && (count as u128) * 8 > (max as u128) << (3 * bits) {
+        bits += 1;
+    }
+    bits
+}
 /// Cells go through the page cache, not direct I/O: timed alternately at 2×10^8 on the
 /// benchmark VM, direct cells were no faster (57.6-63.0 s against 56.5-58.7 s), and at
 /// 10^9 the page cache keeps much of the cells between the passes and the builds, which
@@ -398,11 +414,20 @@ fn cell_of(x: [f32; 3], lo: [f32; 3], hi: [f32; 3], bits: u32) -> usize {
         } else {
             0
         };
-        for b in 0..bits {
-            code |= (((i >> b) & 1) as usize) << (3 * b + k as u32) as usize;
-        }
+        code |= spread_bits(i) << k;
     }
     code
+}
+
+/// The low 10 bits of `i` moved to bits 0, 3, 6, ..., 27: one axis of a Morton code.
+#[inline(always)]
+fn spread_bits(i: u32) -> usize {
+    let mut x = u64::from(i & 0x3ff);
+    x = (x | x << 16) & 0x0300_00ff;
+    x = (x | x << 8) & 0x0300_f00f;
+    x = (x | x << 4) & 0x030c_30c3;
+    x = (x | x << 2) & 0x0924_9249;
+    x as usize
 }
 
 /// Appends windows of records to the cells of a grid over `lo..hi`.
@@ -415,6 +440,8 @@ struct Partitioner {
     /// Bits per axis of the grid.
     bits: u32,
     writers: Vec<Option<crate::direct::Appender>>,
+    /// Whether every cell's file may stay open (else each is closed after each append).
+    keep_open: bool,
     /// The block cells' records are copied through on their way to the disk.
     scratch: crate::direct::Block,
     cells: Vec<Cell>,
@@ -422,6 +449,9 @@ struct Partitioner {
     /// that their memory is touched once.
     ids: Vec<u16>,
     sorted: Vec<u8>,
+    /// For grids finer than [`GRID_BITS`]: the window sorted by its coarser cells first.
+    coarse: Vec<u8>,
+    coarse_ids: Vec<u16>,
 }
 
 impl Partitioner {
@@ -441,6 +471,7 @@ impl Partitioner {
             hi,
             bits,
             writers: (0..cells).map(|_| None).collect(),
+            keep_open: crate::direct::room_for_open_files(cells),
             scratch: crate::direct::Block::with_len(crate::direct::SCRATCH),
             cells: (0..cells)
                 .map(|_| Cell {
@@ -452,6 +483,8 @@ impl Partitioner {
                 .collect(),
             ids: Vec::new(),
             sorted: Vec::new(),
+            coarse: Vec::new(),
+            coarse_ids: Vec::new(),
         }
     }
 
@@ -475,10 +508,30 @@ impl Partitioner {
         for c in 0..cells {
             start[c + 1] += start[c];
         }
+        // A grid finer than 8×8×8 is sorted in two stable passes, by the 512 cells of its
+        // high bits and then within them: a scatter over thousands of cells at once
+        // touches a new page with almost every record.
+        let shift = 3 * bits.saturating_sub(GRID_BITS);
+        let mut coarse = std::mem::take(&mut self.coarse);
+        let mut coarse_ids = std::mem::take(&mut self.coarse_ids);
+        let (records, record_ids) = if shift == 0 {
+            (bytes, &ids)
+        } else {
+            let mut next: Vec<usize> = (0..cells >> shift).map(|c| start[c << shift]).collect();
+            coarse.resize(bytes.len(), 0);
+            coarse_ids.resize(ids.len(), 0);
+            for (r, &id) in bytes.chunks_exact(size).zip(&ids) {
+                let at = &mut next[usize::from(id) >> shift];
+                coarse[*at * size..(*at + 1) * size].copy_from_slice(r);
+                coarse_ids[*at] = id;
+                *at += 1;
+            }
+            (&coarse[..], &coarse_ids)
+        };
         let mut next = start.clone();
         let mut sorted = std::mem::take(&mut self.sorted);
         sorted.resize(bytes.len(), 0);
-        for (r, &id) in bytes.chunks_exact(size).zip(&ids) {
+        for (r, &id) in records.chunks_exact(size).zip(record_ids) {
             let id = usize::from(id);
             let at = &mut next[id];
             sorted[*at * size..(*at + 1) * size].copy_from_slice(r);
@@ -507,12 +560,17 @@ impl Partitioner {
                 let w = self.writers[id].as_mut().expect("opened above");
                 w.append(part, &mut self.scratch)
                     .map_err(|e| temp_err(&cell.path, e))?;
+                if !self.keep_open {
+                    w.release();
+                }
                 cell.count += b - a;
             }
             Ok(())
         })();
         self.ids = ids;
         self.sorted = sorted;
+        self.coarse = coarse;
+        self.coarse_ids = coarse_ids;
         written
     }
 
@@ -978,7 +1036,13 @@ pub fn convert_chunked(
             let w = writer.get_or_insert_with(|| {
                 CellWriter::spawn(
                     scope,
-                    Partitioner::new(dir, "cell".into(), lay, bounds, GRID_BITS),
+                    Partitioner::new(
+                        dir,
+                        "cell".into(),
+                        lay,
+                        bounds,
+                        first_bits(n, chunk.chunk_points),
+                    ),
                 )
             });
             let map = merge.add(&f.species)?;
@@ -1597,6 +1661,64 @@ mod tests {
         assert_eq!(refine_bits(usize::MAX, m), GRID_BITS);
         // A cell within a sixteenth of a 2×2×2 grid's room.
         assert_eq!(refine_bits(m / 2, m), 1);
+    }
+
+    #[test]
+    fn the_first_grid_is_refined_only_past_64_chunks() {
+        let m = 1000;
+        assert_eq!(first_bits(1, m), GRID_BITS);
+        assert_eq!(first_bits(64 * m, m), GRID_BITS);
+        assert_eq!(first_bits(64 * m + 1, m), 4);
+        assert_eq!(first_bits(512 * m, m), 4);
+        assert_eq!(first_bits(512 * m + 1, m), 5);
+        assert_eq!(first_bits(usize::MAX, m), MAX_FIRST_BITS);
+        // The benchmark's sizes with the default chunks: 2×10^8 keeps 8×8×8, 10^9 16×16×16.
+        assert_eq!(first_bits(200_000_000, DEFAULT_CHUNK_POINTS), 3);
+        assert_eq!(first_bits(1_000_000_000, DEFAULT_CHUNK_POINTS), 4);
+    }
+
+    #[test]
+    fn cells_closed_between_appends_hold_the_same_records() {
+        let layout = RecordLayout { attribute: false };
+        let records: Vec<u8> = (0..5000u32)
+            .flat_map(|i| {
+                let x = [(i % 17) as f32, (i % 13) as f32 * 2.0, (i % 7) as f32 * 3.0];
+                let mut r: Vec<u8> = x.iter().flat_map(|v| v.to_le_bytes()).collect();
+                r.extend_from_slice(&(i as u16).to_le_bytes());
+                r
+            })
+            .collect();
+        let cells = |keep_open: bool| {
+            let dir = tempfile::tempdir().unwrap();
+            let bounds = ([0.0; 3], [16.0, 24.0, 18.0]);
+            let mut p = Partitioner::new(dir.path(), "t".into(), layout, bounds, 2);
+            p.keep_open = keep_open;
+            for window in records.chunks(14 * 700) {
+                p.add(window).unwrap();
+            }
+            let cells = p.finish().unwrap();
+            cells
+                .iter()
+                .map(|c| (c.count, c.lo, c.hi, fs::read(&c.path).unwrap()))
+                .collect::<Vec<_>>()
+        };
+        let open = cells(true);
+        assert!(open.len() > 8, "{} cells", open.len());
+        assert_eq!(open.iter().map(|c| c.0).sum::<usize>(), 5000);
+        assert_eq!(open, cells(false));
+    }
+
+    #[test]
+    fn spread_bits_interleaves_one_axis() {
+        for i in 0..1024u32 {
+            let slow = (0..10).fold(0usize, |c, b| c | (((i >> b) & 1) as usize) << (3 * b));
+            assert_eq!(spread_bits(i), slow, "{i}");
+        }
+        assert_eq!(cell_of([1.0, 0.0, 0.0], [0.0; 3], [1.0; 3], 1), 0b001);
+        assert_eq!(cell_of([0.0, 1.0, 0.0], [0.0; 3], [1.0; 3], 1), 0b010);
+        assert_eq!(cell_of([0.0, 0.0, 1.0], [0.0; 3], [1.0; 3], 1), 0b100);
+        // x in column 3 (0b11), y in 0, z in 2 (0b10): bits 0 and 3 from x, 5 from z.
+        assert_eq!(cell_of([0.9, 0.1, 0.6], [0.0; 3], [1.0; 3], 2), 0b101_001);
     }
 
     #[test]

@@ -343,6 +343,14 @@ impl Appender {
         Ok(())
     }
 
+    /// Closes an ordinary handle until the next append reopens it: for a caller
+    /// appending to more files than may be open at once. A direct handle stays open.
+    pub fn release(&mut self) {
+        if self.direct.is_none() {
+            self.plain = None;
+        }
+    }
+
     /// Writes the tail; the file then holds every byte appended.
     pub fn finish(mut self) -> io::Result<()> {
         if !self.tail.is_empty() {
@@ -351,6 +359,28 @@ impl Appender {
         }
         Ok(())
     }
+}
+
+/// Descriptors left for everything but the files asked for in [`room_for_open_files`].
+const OTHER_FILES: u64 = 256;
+
+/// Whether `files` more files may stay open at once: when the soft open-file limit is too
+/// low for them, it is raised as far as needed, if the hard limit allows.
+pub fn room_for_open_files(files: usize) -> bool {
+    use rustix::process::{getrlimit, setrlimit, Resource};
+    let need = files as u64 + OTHER_FILES;
+    let limit = getrlimit(Resource::Nofile);
+    if limit.current.is_none_or(|c| c >= need) {
+        return true;
+    }
+    if limit.maximum.is_some_and(|m| m < need) {
+        return false;
+    }
+    let raised = rustix::process::Rlimit {
+        current: Some(need),
+        maximum: limit.maximum,
+    };
+    setrlimit(Resource::Nofile, raised).is_ok()
 }
 
 /// The first `len` bytes of the file at `path`, read with direct I/O where the filesystem

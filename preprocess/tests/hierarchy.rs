@@ -332,6 +332,34 @@ fn chunked_round_trip_u8_delta3() {
 }
 
 #[test]
+fn chunked_round_trip_with_a_finer_first_grid() {
+    // About 16 500 particles in chunks of at most 200: more than 64 chunks' worth, so the
+    // first partition grid is 16×16×16 rather than 8×8×8; the file still does not depend
+    // on the thread count.
+    let frame = test_frame(20);
+    let opts = chunked(
+        BuildParams {
+            max_root_points: 200,
+            ..Default::default()
+        },
+        200,
+        1 << 30,
+    );
+    check_round_trip_with(&frame, &opts);
+    let bytes = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mdlod");
+        pool.install(|| convert_frame(&frame, None, &path, &opts, &NoProgress).unwrap());
+        std::fs::read(&path).unwrap()
+    };
+    assert_eq!(bytes(1), bytes(3));
+}
+
+#[test]
 fn chunked_round_trip_of_coincident_points() {
     // 3000 copies of one point exceed a chunk: they are split by order.
     let mut frame = test_frame(6);
