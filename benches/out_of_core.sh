@@ -34,6 +34,12 @@ PY
   out="$DIR/crater-$n.mdlod"
   rm -f "$out"
   sync
+  # Every size starts from a cold page cache where this user may drop it (root), so
+  # that the input is read from the disk as in a first conversion.
+  cold=no
+  if [ -w /proc/sys/vm/drop_caches ] && echo 1 > /proc/sys/vm/drop_caches 2>/dev/null; then
+    cold=yes
+  fi
   peak_tmp=0
   /usr/bin/time -v "$BIN" convert "$input" -o "$out" --radius 1=1.28 --memory-limit "$LIMIT" \
     >"$DIR/convert-$n.log" 2>"$DIR/time-$n.log" &
@@ -63,7 +69,7 @@ print(f'| {n:.1e} | {${in_bytes}/1e9:.1f} | $LIMIT | {wall:.0f} | $read_s | $bui
 done
 cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')
 mem=$(awk '/MemTotal/ {printf "%.0f", $2/1048576}' /proc/meminfo)
-table="Machine: $cores cores ($cpu), $mem GiB RAM. Input: generated crater as raw arrays (\`mdlod generate --format raw\`), \`mdlod convert --memory-limit $LIMIT\`, one run each.
+table="Machine: $cores cores ($cpu), $mem GiB RAM. Input: generated crater as raw arrays (\`mdlod generate --format raw\`), \`mdlod convert --memory-limit $LIMIT\`, one run each; page cache dropped before each run: $cold.
 
 | particles | input GB | limit | wall s | partition s | chunks s | assembly s | M particles/s | per core | peak RSS GiB | peak working files GB | .mdlod GB | levels | max position error |
 |---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"

@@ -8,7 +8,8 @@ mod progress;
 /// jemalloc instead of the system allocator. A conversion builds chunk after chunk with
 /// the same large buffers; glibc returns every block over 32 MiB to the kernel when it is
 /// freed, so each chunk faulted in and zeroed its memory afresh (a tenth of a 2×10^8
-/// conversion's time). jemalloc reuses it; its settings are in `.cargo/config.toml`.
+/// conversion's time). jemalloc reuses it, in transparent huge pages where the kernel
+/// allows them; its settings are in `.cargo/config.toml`.
 #[cfg(all(target_os = "linux", not(target_env = "musl")))]
 #[global_allocator]
 static ALLOCATOR: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
