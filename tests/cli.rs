@@ -589,16 +589,62 @@ fn density_and_iso_render_every_frame_of_a_batch_streamed_or_not() {
 /// it fail with EFBIG exactly as they would on a full disk with ENOSPC).
 #[cfg(unix)]
 fn mdlod_limited(blocks: u32, args: &[&str]) -> Output {
+    mdlod_in_shell(&format!("ulimit -f {blocks}; trap '' XFSZ"), args)
+}
+
+/// Runs mdlod after the shell commands `setup` (resource limits).
+#[cfg(unix)]
+fn mdlod_in_shell(setup: &str, args: &[&str]) -> Output {
     let quoted: Vec<String> = args.iter().map(|a| format!("'{a}'")).collect();
     Command::new("sh")
         .arg("-c")
         .arg(format!(
-            "ulimit -f {blocks}; trap '' XFSZ; exec '{}' {}",
+            "{setup}; exec '{}' {}",
             env!("CARGO_BIN_EXE_mdlod"),
             quoted.join(" ")
         ))
         .output()
         .unwrap()
+}
+
+/// 40 000 particles in chunks of 500 are partitioned into 16×16×16 cells first, more
+/// files than a limit of 64 open files (soft and hard) lets stay open: each cell's file
+/// is then reopened for every append, and the file is the same byte for byte.
+#[cfg(unix)]
+#[test]
+fn a_low_open_file_limit_gives_the_same_out_of_core_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.lammpstrj");
+    ok(&["generate", "alloy", "-n", "40000", "-o", s(&input)]);
+    let args = |out: &Path| {
+        let out = out.to_str().unwrap().to_owned();
+        let input = s(&input).to_owned();
+        [
+            "convert".to_owned(),
+            input,
+            "-o".into(),
+            out,
+            "--chunk-points".into(),
+            "500".into(),
+            "--root-points".into(),
+            "500".into(),
+        ]
+    };
+    let free = dir.path().join("free.mdlod");
+    let a = args(&free);
+    ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let limited = dir.path().join("limited.mdlod");
+    let a = args(&limited);
+    let run = mdlod_in_shell(
+        "ulimit -n 64",
+        &a.iter().map(String::as_str).collect::<Vec<_>>(),
+    );
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(std::fs::read(&free).unwrap() == std::fs::read(&limited).unwrap());
 }
 
 #[cfg(unix)]
