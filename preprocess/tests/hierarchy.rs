@@ -346,17 +346,19 @@ fn chunked_round_trip_with_a_finer_first_grid() {
         1 << 30,
     );
     check_round_trip_with(&frame, &opts);
-    let bytes = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("t.mdlod");
-        pool.install(|| convert_frame(&frame, None, &path, &opts, &NoProgress).unwrap());
-        std::fs::read(&path).unwrap()
-    };
-    assert_eq!(bytes(1), bytes(3));
+    assert_eq!(converted(&frame, &opts, 1), converted(&frame, &opts, 3));
+}
+
+/// The bytes of `frame` converted with `opts` on `threads` threads.
+fn converted(frame: &Frame, opts: &ConvertOptions, threads: usize) -> Vec<u8> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.mdlod");
+    pool.install(|| convert_frame(frame, None, &path, opts, &NoProgress).unwrap());
+    std::fs::read(&path).unwrap()
 }
 
 #[test]
@@ -390,15 +392,7 @@ fn chunked_output_is_identical_whatever_the_memory_limit_and_threads() {
         ..Default::default()
     };
     let bytes = |threads: usize, limit: u64| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("t.mdlod");
-        let opts = chunked(params.clone(), 1000, limit);
-        pool.install(|| convert_frame(&frame, None, &path, &opts, &NoProgress).unwrap());
-        std::fs::read(&path).unwrap()
+        converted(&frame, &chunked(params.clone(), 1000, limit), threads)
     };
     // One chunk at a time, then several.
     let one_at_a_time = mdlod_preprocess::chunked::chunk_memory(1000);
