@@ -2,7 +2,11 @@
 //!
 //! How it works:
 //! - **Index.** One `memchr::memmem` scan finds every line that is exactly
-//!   `ITEM: TIMESTEP`; the next line gives the frame's timestep. LAMMPS writes
+//!   `ITEM: TIMESTEP`; the next line gives the frame's timestep. A file larger than
+//!   [`SCAN_SEGMENT`] is scanned a segment at a time, each through a fresh mapping that is
+//!   dropped after it, so the pages read leave this process's resident memory (they stay
+//!   in the page cache): a 9 GB dump indexed through one mapping counted 9 GB of resident
+//!   memory until the mapping went, above an out-of-core conversion's memory limit. LAMMPS writes
 //!   `ITEM: UNITS` (first frame only) and `ITEM: TIME` *before* `ITEM: TIMESTEP`, so each
 //!   frame start is moved back over up to two such two-line blocks; the first `UNITS`
 //!   value found is kept for all frames. Frame `k` spans from its start to the next
@@ -34,7 +38,14 @@ use super::{
 };
 use crate::frame::SimulationBox;
 
+/// Bytes of a file indexed through one mapping.
+pub(crate) const SCAN_SEGMENT: usize = 256 << 20;
+
+/// The line every frame has.
+const TIMESTEP: &[u8] = b"ITEM: TIMESTEP";
+
 /// Byte range and timestep of one frame.
+#[derive(Debug, PartialEq)]
 struct Span {
     start: usize,
     end: usize,
@@ -42,6 +53,7 @@ struct Span {
 }
 
 /// The frames of a LAMMPS text dump.
+#[derive(Debug, PartialEq)]
 pub(crate) struct Index {
     frames: Vec<Span>,
     /// `ITEM: UNITS`, which LAMMPS writes in the first frame only.
@@ -67,18 +79,60 @@ fn prev_line(data: &[u8], line_start: usize) -> Option<(usize, &[u8])> {
 }
 
 impl Index {
-    pub fn build(ctx: &Ctx<'_>) -> Result<Index, ReadError> {
+    /// Indexes `ctx.data`. `file`, when given, is the file `ctx.data` maps: a larger one
+    /// than `segment` bytes is scanned a segment at a time through fresh mappings of it.
+    pub fn build(
+        ctx: &Ctx<'_>,
+        file: Option<&std::fs::File>,
+        segment: usize,
+    ) -> Result<Index, ReadError> {
         let data = ctx.data;
         let mut frames: Vec<Span> = Vec::new();
         let mut units = None;
-        for p in memmem::find_iter(data, b"ITEM: TIMESTEP") {
+        let mut visit = |data: &[u8], p: usize| Index::visit(data, p, &mut frames, &mut units);
+        let segment = segment.max(1);
+        match file {
+            Some(file) if data.len() > segment => {
+                let finder = memmem::Finder::new(TIMESTEP);
+                let io = |source| ReadError::Io {
+                    path: ctx.path.to_path_buf(),
+                    source,
+                };
+                let mut start = 0;
+                while start < data.len() {
+                    let map = mdlod_format::mmap::map_file(file).map_err(io)?;
+                    if map.len() != data.len() {
+                        return Err(ctx
+                            .malformed(start, "the file changed size while it was being indexed"));
+                    }
+                    let end = (start + segment).min(data.len());
+                    // Matches starting in this segment (the last may run into the next).
+                    let hay = &map[start..(end + TIMESTEP.len() - 1).min(map.len())];
+                    for p in finder.find_iter(hay) {
+                        visit(&map, start + p);
+                    }
+                    start = end;
+                }
+            }
+            _ => {
+                for p in memmem::find_iter(data, TIMESTEP) {
+                    visit(data, p);
+                }
+            }
+        }
+        Index::finish(ctx, frames, units)
+    }
+
+    /// Records the frame whose `ITEM: TIMESTEP` may start at `p`.
+    fn visit(data: &[u8], p: usize, frames: &mut Vec<Span>, units: &mut Option<String>) {
+        {
             if p > 0 && data[p - 1] != b'\n' {
-                continue;
+                return;
             }
             let mut cursor = Cursor::new(data, p);
             match cursor.next_line() {
-                Some((_, line)) if trim(line) == b"ITEM: TIMESTEP" => {}
-                _ => continue,
+                Some((_, line)) if trim(line) == TIMESTEP => {}
+                _ => return,
             }
             let timestep = cursor.next_line().and_then(|(_, l)| parse_int::<u64>(l));
             let floor = frames.last().map_or(0, |f| f.start);
@@ -96,7 +150,7 @@ impl Index {
                 }
                 if item == b"ITEM: UNITS" {
                     if units.is_none() {
-                        units = Some(String::from_utf8_lossy(trim(value)).into_owned());
+                        *units = Some(String::from_utf8_lossy(trim(value)).into_owned());
                     }
                 } else if item != b"ITEM: TIME" {
                     break;
@@ -112,6 +166,11 @@ impl Index {
                 timestep,
             });
         }
+    }
+
+    /// The index of the frames found, checked: the file starts with the first.
+    fn finish(ctx: &Ctx<'_>, frames: Vec<Span>, units: Option<String>) -> Result<Index, ReadError> {
+        let data = ctx.data;
         let Some(first) = frames.first() else {
             return Err(ctx.malformed(0, "no `ITEM: TIMESTEP` line found: not a LAMMPS text dump"));
         };
@@ -350,4 +409,50 @@ fn parse_box(
         b.periodic = Some([flags[0] == b"pp", flags[1] == b"pp", flags[2] == b"pp"]);
     }
     Ok(b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_index_built_in_segments_equals_one_built_whole() {
+        let frame = |t: u64| {
+            format!(
+                "ITEM: TIME\n{t}.5\nITEM: TIMESTEP\n{t}\nITEM: NUMBER OF ATOMS\n2\n\
+                 ITEM: BOX BOUNDS pp pp pp\n0 1\n0 1\n0 1\nITEM: ATOMS id type x y z\n\
+                 1 1 0 0 0\n2 1 0.5 0.5 0.5\n"
+            )
+        };
+        let text = format!(
+            "ITEM: UNITS\nmetal\n{}{}{}",
+            frame(0),
+            frame(100),
+            frame(200)
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.lammpstrj");
+        std::fs::write(&path, &text).unwrap();
+        let file = std::fs::File::open(&path).unwrap();
+        let ctx = Ctx {
+            path: &path,
+            data: text.as_bytes(),
+        };
+        let whole = Index::build(&ctx, None, usize::MAX).unwrap();
+        assert_eq!(whole.len(), 3);
+        assert_eq!(whole.timestep(2), Some(200));
+        assert_eq!(whole.units.as_deref(), Some("metal"));
+        // Every segment size, so that `ITEM: TIMESTEP` and the lines before it straddle
+        // a segment's end in every way.
+        for segment in 1..=text.len() {
+            let segmented = Index::build(&ctx, Some(&file), segment).unwrap();
+            assert_eq!(segmented, whole, "segment of {segment} bytes");
+        }
+        // A file that is not the one indexed (another size) is an error, not a guess.
+        let other = dir.path().join("other");
+        std::fs::write(&other, "ITEM: TIMESTEP\n0\n").unwrap();
+        let other = std::fs::File::open(&other).unwrap();
+        let err = Index::build(&ctx, Some(&other), 64).unwrap_err();
+        assert!(err.to_string().contains("changed size"), "{err}");
+    }
 }

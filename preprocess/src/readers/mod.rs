@@ -375,7 +375,11 @@ impl DumpFile {
         let ctx = Ctx { path, data };
         progress.stage("indexing frames", Some(data.len() as u64), "bytes");
         let index = match format {
-            InputFormat::LammpsText => Index::Lammps(lammps_text::Index::build(&ctx)?),
+            InputFormat::LammpsText => Index::Lammps(lammps_text::Index::build(
+                &ctx,
+                (!compressed).then_some(&file),
+                lammps_text::SCAN_SEGMENT,
+            )?),
             InputFormat::Xyz => Index::Xyz(xyz::Index::build(&ctx)?),
             InputFormat::LammpsBinary => {
                 Index::LammpsBinary(lammps_binary::Index::build(path, data)?)
