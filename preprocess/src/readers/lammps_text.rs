@@ -3,10 +3,8 @@
 //! How it works:
 //! - **Index.** One `memchr::memmem` scan finds every line that is exactly
 //!   `ITEM: TIMESTEP`; the next line gives the frame's timestep. A file larger than
-//!   [`SCAN_SEGMENT`] is scanned a segment at a time, each through a fresh mapping that is
-//!   dropped after it, so the pages read leave this process's resident memory (they stay
-//!   in the page cache): a 9 GB dump indexed through one mapping counted 9 GB of resident
-//!   memory until the mapping went, above an out-of-core conversion's memory limit. LAMMPS writes
+//!   [`super::SCAN_SEGMENT`] is scanned a segment at a time, each through a fresh mapping
+//!   dropped after it, so that the memory resident stays bounded. LAMMPS writes
 //!   `ITEM: UNITS` (first frame only) and `ITEM: TIME` *before* `ITEM: TIMESTEP`, so each
 //!   frame start is moved back over up to two such two-line blocks; the first `UNITS`
 //!   value found is kept for all frames. Frame `k` spans from its start to the next
@@ -37,9 +35,6 @@ use super::{
     fields, parse_f64, parse_int, shorten, trim, Ctx, Cursor, FrameInfo, Header, ReadError,
 };
 use crate::frame::SimulationBox;
-
-/// Bytes of a file indexed through one mapping.
-pub(crate) const SCAN_SEGMENT: usize = 256 << 20;
 
 /// The line every frame has.
 const TIMESTEP: &[u8] = b"ITEM: TIMESTEP";
@@ -94,17 +89,9 @@ impl Index {
         match file {
             Some(file) if data.len() > segment => {
                 let finder = memmem::Finder::new(TIMESTEP);
-                let io = |source| ReadError::Io {
-                    path: ctx.path.to_path_buf(),
-                    source,
-                };
                 let mut start = 0;
                 while start < data.len() {
-                    let map = mdlod_format::mmap::map_file(file).map_err(io)?;
-                    if map.len() != data.len() {
-                        return Err(ctx
-                            .malformed(start, "the file changed size while it was being indexed"));
-                    }
+                    let map = super::mapped_again(ctx, file, start)?;
                     let end = (start + segment).min(data.len());
                     // Matches starting in this segment (the last may run into the next).
                     let hay = &map[start..(end + TIMESTEP.len() - 1).min(map.len())];

@@ -378,9 +378,13 @@ impl DumpFile {
             InputFormat::LammpsText => Index::Lammps(lammps_text::Index::build(
                 &ctx,
                 (!compressed).then_some(&file),
-                lammps_text::SCAN_SEGMENT,
+                SCAN_SEGMENT,
             )?),
-            InputFormat::Xyz => Index::Xyz(xyz::Index::build(&ctx)?),
+            InputFormat::Xyz => Index::Xyz(xyz::Index::build(
+                &ctx,
+                (!compressed).then_some(&file),
+                SCAN_SEGMENT,
+            )?),
             InputFormat::LammpsBinary => {
                 Index::LammpsBinary(lammps_binary::Index::build(path, data)?)
             }
@@ -933,6 +937,52 @@ pub(crate) fn skip_lines(data: &[u8], mut pos: usize, mut n: usize) -> usize {
     } else {
         data.len()
     }
+}
+
+/// Bytes of a large uncompressed file scanned through one mapping while indexing it: each
+/// segment gets a fresh mapping, dropped after it, so that the pages read leave this
+/// process's resident memory (they stay in the page cache). Indexed through the one
+/// mapping a reader keeps, a 9 GB dump counted 9 GB of resident memory.
+pub(crate) const SCAN_SEGMENT: usize = 256 << 20;
+
+/// [`skip_lines`] over `ctx.data`, read through fresh mappings of `file` (the file
+/// `ctx.data` maps) a `segment` of bytes at a time.
+pub(crate) fn skip_lines_mapped(
+    ctx: &Ctx<'_>,
+    file: &File,
+    mut pos: usize,
+    mut n: usize,
+    segment: usize,
+) -> Result<usize, ReadError> {
+    let len = ctx.data.len();
+    while n > 0 && pos < len {
+        let map = mapped_again(ctx, file, pos)?;
+        let end = (pos + segment.max(1)).min(len);
+        let count = memchr::memchr_iter(b'\n', &map[pos..end]).count();
+        if count >= n {
+            return Ok(skip_lines(&map[..end], pos, n));
+        }
+        n -= count;
+        pos = end;
+    }
+    Ok(if n == 0 { pos } else { len })
+}
+
+/// A fresh mapping of `file`, which must still be as long as `ctx.data` (`at`: where the
+/// reader is, for the error).
+pub(crate) fn mapped_again(
+    ctx: &Ctx<'_>,
+    file: &File,
+    at: usize,
+) -> Result<mdlod_format::mmap::Mmap, ReadError> {
+    let map = mdlod_format::mmap::map_file(file).map_err(|source| ReadError::Io {
+        path: ctx.path.to_path_buf(),
+        source,
+    })?;
+    if map.len() != ctx.data.len() {
+        return Err(ctx.malformed(at, "the file changed size while it was being indexed"));
+    }
+    Ok(map)
 }
 
 fn is_bzip2(data: &[u8]) -> bool {

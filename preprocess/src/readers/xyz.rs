@@ -28,6 +28,7 @@ use super::{
 use crate::frame::SimulationBox;
 
 /// Byte range and timestep of one frame.
+#[derive(Debug, PartialEq)]
 struct Span {
     start: usize,
     end: usize,
@@ -35,12 +36,20 @@ struct Span {
 }
 
 /// The frames of an XYZ file.
+#[derive(Debug, PartialEq)]
 pub(crate) struct Index {
     frames: Vec<Span>,
 }
 
 impl Index {
-    pub fn build(ctx: &Ctx<'_>) -> Result<Index, ReadError> {
+    /// Indexes `ctx.data`. `file`, when given, is the file `ctx.data` maps: atom lines are
+    /// then skipped through fresh mappings of it, `segment` bytes at a time, so that the
+    /// pages read do not stay resident.
+    pub fn build(
+        ctx: &Ctx<'_>,
+        file: Option<&std::fs::File>,
+        segment: usize,
+    ) -> Result<Index, ReadError> {
         let data = ctx.data;
         let mut frames = Vec::new();
         let mut cursor = Cursor::new(data, 0);
@@ -58,7 +67,12 @@ impl Index {
                 )
             })?;
             let timestep = cursor.next_line().and_then(|(_, c)| comment_timestep(c));
-            let end = skip_lines(data, cursor.pos, n);
+            let end = match file {
+                Some(file) if data.len() > segment => {
+                    super::skip_lines_mapped(ctx, file, cursor.pos, n, segment)?
+                }
+                _ => skip_lines(data, cursor.pos, n),
+            };
             cursor.pos = end;
             frames.push(Span {
                 start: at,
@@ -351,4 +365,31 @@ pub(crate) fn key_values(line: &str) -> Vec<(String, String)> {
         out.push((key, value));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_index_skipping_lines_in_segments_equals_one_built_whole() {
+        // Frames of 3, 0 and 2 atoms, then one announcing more lines than are left.
+        let text = "3\nTimestep=0\nCu 0 0 0\nCu 1 0 0\nCu 0 1 0\n0\nempty\n\
+                    2\nstep 5\nAg 0 0 1\nAg 1 1 1\n4\nlast\nCu 2 2 2\n";
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.xyz");
+        std::fs::write(&path, text).unwrap();
+        let file = std::fs::File::open(&path).unwrap();
+        let ctx = Ctx {
+            path: &path,
+            data: text.as_bytes(),
+        };
+        let whole = Index::build(&ctx, None, usize::MAX).unwrap();
+        assert_eq!(whole.len(), 4);
+        assert_eq!(whole.frames[3].end, text.len());
+        for segment in 1..=text.len() {
+            let segmented = Index::build(&ctx, Some(&file), segment).unwrap();
+            assert_eq!(segmented, whole, "segment of {segment} bytes");
+        }
+    }
 }
