@@ -236,6 +236,9 @@ pub struct DumpSource {
     pub simulation_box: Option<SimulationBox>,
     /// How the windows are read.
     pub windows: Windows,
+    /// For [`Windows::Text`]: the frame's header, from the dump already opened (indexing
+    /// it again would read the whole file once more).
+    pub(crate) text_header: Option<crate::readers::Header>,
 }
 
 /// How a [`DumpSource`] reads its windows.
@@ -278,9 +281,14 @@ impl ParticleSource for DumpSource {
                     Ok(part)
                 })
             }
-            Windows::Text => {
-                crate::readers::read_text_windows(&self.path, self.frame, &self.options, window, f)
-            }
+            Windows::Text => crate::readers::read_text_windows(
+                &self.path,
+                self.frame,
+                self.text_header.clone(),
+                &self.options,
+                window,
+                f,
+            ),
             Windows::Pieces => {
                 let pieces = crate::readers::DumpFile::open(&self.path)?
                     .piece_paths()
@@ -301,6 +309,7 @@ impl ParticleSource for DumpSource {
                         crate::readers::read_text_windows(
                             &piece,
                             self.frame,
+                            None,
                             &self.options,
                             window,
                             &mut shifted,

@@ -185,6 +185,9 @@ pub fn window_source(
         options: read.clone(),
         particles: info.particles,
         simulation_box: info.simulation_box.clone(),
+        text_header: (windows == crate::chunked::Windows::Text)
+            .then(|| dump.header(k).ok())
+            .flatten(),
         windows,
     }))
 }

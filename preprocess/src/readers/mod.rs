@@ -252,6 +252,7 @@ pub struct FrameInfo {
 }
 
 /// A frame's parsed header: the public part plus where its atoms are and how to read them.
+#[derive(Clone, Debug)]
 pub(crate) struct Header {
     pub info: FrameInfo,
     pub layout: atoms::AtomLayout,
@@ -680,17 +681,22 @@ fn text_columns<'h>(
 /// its atoms as a frame of their own (their own species list). The file is mapped afresh
 /// for every window, so the pages already parsed are released and resident memory stays
 /// bounded whatever the frame's size. Errors name the file and line as whole-frame
-/// reading does.
-pub fn read_text_windows<E: From<ReadError>>(
+/// reading does. `header`, when given, is frame `k`'s header from a [`DumpFile`] of the
+/// same uncompressed file, which then is not indexed again (a whole pass over it).
+pub(crate) fn read_text_windows<E: From<ReadError>>(
     path: &Path,
     k: usize,
+    header: Option<Header>,
     opts: &ReadOptions,
     window: usize,
     mut f: impl FnMut(usize, Frame) -> Result<(), E>,
 ) -> Result<(), E> {
-    let (header, compressed) = {
-        let dump = DumpFile::open(path)?;
-        (dump.header(k)?, dump.compressed)
+    let (header, compressed) = match header {
+        Some(h) => (h, false),
+        None => {
+            let dump = DumpFile::open(path)?;
+            (dump.header(k)?, dump.compressed)
+        }
     };
     if compressed {
         return Err(ReadError::Unsupported {
@@ -764,7 +770,7 @@ impl DumpFile {
         }
     }
 
-    fn header(&self, k: usize) -> Result<Header, ReadError> {
+    pub(crate) fn header(&self, k: usize) -> Result<Header, ReadError> {
         self.check_frame(k)?;
         let ctx = self.ctx();
         match &self.index {
