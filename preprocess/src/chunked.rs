@@ -6,12 +6,12 @@
 //!    particle goes to one cell of an 8×8×8 grid over the box (finer for frames of more
 //!    than 64 chunks: [`first_bits`]; the dump's box, or the particles' bounds when it
 //!    has none; particles outside it go to the nearest cell) and is appended to that
-//!    cell's working file: position, species and attribute. A thread of its own sorts each window by cell and writes it while the
-//!    next window is read. A cell that ends with more than `chunk_points` particles is
-//!    split the same way over its own bounds, by a grid only as fine as its count needs
-//!    ([`refine_bits`]; by file order when all its particles coincide).
-//!    The leaf cells, in Morton order, are grouped greedily into chunks of at most
-//!    `chunk_points` particles.
+//!    cell's working file: position, species and attribute. A thread of its own sorts
+//!    each window by cell and writes it while the next window is read. A cell that ends
+//!    with more than `chunk_points` particles is split the same way over its own bounds,
+//!    by a grid only as fine as its count needs ([`refine_bits`]; by file order when all
+//!    its particles coincide). The leaf cells, in Morton order, are grouped greedily into
+//!    chunks of at most `chunk_points` particles.
 //! 2. **Chunks.** A reader thread loads the chunks' cells in order, one chunk ahead of
 //!    the builds. Each chunk is built into a complete hierarchy by the
 //!    in-memory builder ([`crate::hierarchy::build_with`]), as many chunks at a time as
@@ -60,8 +60,8 @@ pub const DEFAULT_CHUNK_POINTS: usize = 1 << 22;
 pub const BUILD_BYTES_PER_PARTICLE: u64 = 110;
 /// Particles read from the input per window.
 const WINDOW: usize = 1 << 22;
-/// Cells per axis of a refining partition step (and of the first at most
-/// [`first_bits`]`(..) == GRID_BITS` particles), as a power of two.
+/// Cells per axis of a refining partition step, and of the first one for frames of up to
+/// 64 chunks' worth of particles ([`first_bits`]), as a power of two.
 const GRID_BITS: u32 = 3;
 /// The finest first grid: 32×32×32 cells (their ids fit the `u16` of the sort).
 const MAX_FIRST_BITS: u32 = 5;
