@@ -78,11 +78,6 @@ fn first_bits(count: usize, max: usize) -> u32 {
     }
     bits
 }
-/// Cells go through the page cache, not direct I/O: timed alternately at 2×10^8 on the
-/// benchmark VM, direct cells were no faster (57.6-63.0 s against 56.5-58.7 s), and at
-/// 10^9 the page cache keeps much of the cells between the passes and the builds, which
-/// direct I/O sends to the disk and back.
-const CELLS_DIRECT: bool = false;
 
 /// Bits per axis of the grid a cell of `count` particles is split by, when it holds more
 /// than `max`: the coarsest grid (2×2×2 upward, at most the partition's own) whose cells
@@ -402,6 +397,80 @@ impl RecordLayout {
     }
 }
 
+/// A cell's working file, appended window after window through the page cache. (Written
+/// and read with direct I/O instead, the cells made conversions no faster, timed
+/// alternately on the benchmark VM: at 2×10^8 57.6-63.0 s against 56.5-58.7 s, at 10^9
+/// 262 s against 253 s; the page cache keeps cells for the chunk loads.)
+struct CellFile {
+    path: PathBuf,
+    /// Closed by [`CellFile::release`] until the next append.
+    file: Option<File>,
+    len: u64,
+}
+
+impl CellFile {
+    /// Creates (or truncates) `path`.
+    fn create(path: &Path) -> std::io::Result<CellFile> {
+        Ok(CellFile {
+            path: path.to_path_buf(),
+            file: Some(File::create(path)?),
+            len: 0,
+        })
+    }
+
+    /// Appends `bytes` in one write, reopening the file if it was released.
+    fn append(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        use std::os::unix::fs::FileExt;
+        if self.file.is_none() {
+            self.file = Some(fs::OpenOptions::new().write(true).open(&self.path)?);
+        }
+        let f = self.file.as_ref().expect("opened above");
+        f.write_all_at(bytes, self.len)?;
+        self.len += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Closes the file until the next append: for more cells than may be open at once.
+    fn release(&mut self) {
+        self.file = None;
+    }
+}
+
+/// Bytes `offset..offset + len` of the file at `path`, read into `buf` (reused).
+fn read_file_range<'b>(
+    path: &Path,
+    offset: u64,
+    len: usize,
+    buf: &'b mut Vec<u8>,
+) -> std::io::Result<&'b [u8]> {
+    use std::os::unix::fs::FileExt;
+    buf.resize(len, 0);
+    File::open(path)?.read_exact_at(buf, offset)?;
+    Ok(buf)
+}
+
+/// Descriptors left for everything but the files asked for in [`room_for_open_files`].
+const OTHER_FILES: u64 = 256;
+
+/// Whether `files` more files may stay open at once: when the soft open-file limit is too
+/// low for them, it is raised as far as needed, if the hard limit allows.
+fn room_for_open_files(files: usize) -> bool {
+    use rustix::process::{getrlimit, setrlimit, Resource, Rlimit};
+    let need = files as u64 + OTHER_FILES;
+    let limit = getrlimit(Resource::Nofile);
+    if limit.current.is_none_or(|c| c >= need) {
+        return true;
+    }
+    if limit.maximum.is_some_and(|m| m < need) {
+        return false;
+    }
+    let raised = Rlimit {
+        current: Some(need),
+        maximum: limit.maximum,
+    };
+    setrlimit(Resource::Nofile, raised).is_ok()
+}
+
 /// One cell of the partition: a working file of records.
 #[derive(Debug)]
 struct Cell {
@@ -448,11 +517,9 @@ struct Partitioner {
     hi: [f32; 3],
     /// Bits per axis of the grid.
     bits: u32,
-    writers: Vec<Option<crate::direct::Appender>>,
+    writers: Vec<Option<CellFile>>,
     /// Whether every cell's file may stay open (else each is closed after each append).
     keep_open: bool,
-    /// The block cells' records are copied through on their way to the disk.
-    scratch: crate::direct::Block,
     cells: Vec<Cell>,
     /// The window's cell ids and its records sorted by cell, kept between windows so
     /// that their memory is touched once.
@@ -480,8 +547,7 @@ impl Partitioner {
             hi,
             bits,
             writers: (0..cells).map(|_| None).collect(),
-            keep_open: crate::direct::room_for_open_files(cells),
-            scratch: crate::direct::Block::with_len(crate::direct::SCRATCH),
+            keep_open: room_for_open_files(cells),
             cells: (0..cells)
                 .map(|_| Cell {
                     path: PathBuf::new(),
@@ -562,13 +628,11 @@ impl Partitioner {
                 let cell = &mut self.cells[id];
                 if self.writers[id].is_none() {
                     cell.path = self.dir.join(format!("{}-{id:03}.cell", self.prefix));
-                    let f = crate::direct::Appender::create(&cell.path, CELLS_DIRECT)
-                        .map_err(|e| temp_err(&cell.path, e))?;
+                    let f = CellFile::create(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
                     self.writers[id] = Some(f);
                 }
                 let w = self.writers[id].as_mut().expect("opened above");
-                w.append(part, &mut self.scratch)
-                    .map_err(|e| temp_err(&cell.path, e))?;
+                w.append(part).map_err(|e| temp_err(&cell.path, e))?;
                 if !self.keep_open {
                     w.release();
                 }
@@ -584,15 +648,8 @@ impl Partitioner {
     }
 
     /// The non-empty cells in Morton order.
-    fn finish(self) -> Result<Vec<Cell>, ConvertError> {
-        let mut out = Vec::new();
-        for (w, cell) in self.writers.into_iter().zip(self.cells) {
-            if let Some(w) = w {
-                w.finish().map_err(|e| temp_err(&cell.path, e))?;
-                out.push(cell);
-            }
-        }
-        Ok(out)
+    fn finish(self) -> Vec<Cell> {
+        self.cells.into_iter().filter(|c| c.count > 0).collect()
     }
 }
 
@@ -615,7 +672,7 @@ impl<'scope> CellWriter<'scope> {
                 // The reader may have finished; then the buffer is simply dropped.
                 let _ = give_back.send(bytes);
             }
-            p.finish()
+            Ok(p.finish())
         });
         CellWriter {
             to: Some(to),
@@ -648,15 +705,14 @@ fn read_records<'b>(
     cell: &Cell,
     layout: RecordLayout,
     range: Range<usize>,
-    buf: &'b mut crate::direct::Block,
+    buf: &'b mut Vec<u8>,
 ) -> Result<&'b [u8], ConvertError> {
     let size = layout.size();
-    crate::direct::read_at(
+    read_file_range(
         &cell.path,
         (range.start * size) as u64,
         range.len() * size,
         buf,
-        CELLS_DIRECT,
     )
     .map_err(|e| temp_err(&cell.path, e))
 }
@@ -682,7 +738,7 @@ fn refine(
     );
     let dir = cell.path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut children = Vec::new();
-    let mut buf = crate::direct::Block::with_len(0);
+    let mut buf = Vec::new();
     if !flat && depth < MAX_SPLIT_DEPTH {
         let bits = refine_bits(cell.count, max);
         let mut p = Partitioner::new(&dir, prefix.clone(), layout, (cell.lo, cell.hi), bits);
@@ -690,7 +746,7 @@ fn refine(
             let range = start..(start + WINDOW).min(cell.count);
             p.add(read_records(&cell, layout, range, &mut buf)?)?;
         }
-        children = p.finish()?;
+        children = p.finish();
     }
     if children.len() <= 1 {
         // No spatial progress: split by order.
@@ -860,25 +916,21 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ConvertError> {
     w.flush().map_err(|e| temp_err(path, e))
 }
 
-/// The records of a chunk's cells, one block each, read while an earlier chunk builds.
-fn load_cells(
-    cells: &[Cell],
-    layout: RecordLayout,
-) -> Result<Vec<crate::direct::Block>, ConvertError> {
+/// The records of a chunk's cells, one buffer each, read while an earlier chunk builds.
+fn load_cells(cells: &[Cell], layout: RecordLayout) -> Result<Vec<Vec<u8>>, ConvertError> {
     cells
         .iter()
         .map(|cell| {
-            let len = cell.count * layout.size();
-            let mut buf = crate::direct::Block::with_len(len);
-            crate::direct::read_whole(&cell.path, len, &mut buf, CELLS_DIRECT).map_err(
-                |e| match e.kind() {
+            let mut buf = Vec::new();
+            read_file_range(&cell.path, 0, cell.count * layout.size(), &mut buf).map_err(|e| {
+                match e.kind() {
                     std::io::ErrorKind::UnexpectedEof => temp_err(
                         &cell.path,
                         short_file(format!("holds fewer than its {} records", cell.count)),
                     ),
                     _ => temp_err(&cell.path, e),
-                },
-            )?;
+                }
+            })?;
             Ok(buf)
         })
         .collect()
@@ -887,7 +939,7 @@ fn load_cells(
 fn build_chunk(
     c: usize,
     cells: &[Cell],
-    loaded: Vec<crate::direct::Block>,
+    loaded: Vec<Vec<u8>>,
     input: &ChunkInput<'_>,
 ) -> Result<ChunkResult, ConvertError> {
     let layout = input.layout;
@@ -897,7 +949,7 @@ fn build_chunk(
     let mut species_index = Vec::with_capacity(n);
     let mut attribute = layout.attribute.then(|| Vec::with_capacity(n));
     for (cell, buf) in cells.iter().zip(&loaded) {
-        let bytes = &buf.data()[..cell.count * size];
+        let bytes = &buf[..cell.count * size];
         for r in bytes.chunks_exact(size) {
             positions.push(layout.position(r));
             let s = u16::from_le_bytes([r[12], r[13]]);
@@ -1217,7 +1269,7 @@ pub fn convert_chunked(
         .len())
         .map(|_| std::sync::Mutex::new(None))
         .collect();
-    type Loaded = (usize, Result<Vec<crate::direct::Block>, ConvertError>);
+    type Loaded = (usize, Result<Vec<Vec<u8>>, ConvertError>);
     let (to_builds, loaded) = std::sync::mpsc::sync_channel::<Loaded>(1);
     // Dropped with the last worker, which ends the reader should the workers stop first.
     let loaded = std::sync::Arc::new(std::sync::Mutex::new(loaded));
@@ -1705,7 +1757,7 @@ mod tests {
             for window in records.chunks(14 * 700) {
                 p.add(window).unwrap();
             }
-            let cells = p.finish().unwrap();
+            let cells = p.finish();
             cells
                 .iter()
                 .map(|c| (c.count, c.lo, c.hi, fs::read(&c.path).unwrap()))
@@ -1715,6 +1767,39 @@ mod tests {
         assert!(open.len() > 8, "{} cells", open.len());
         assert_eq!(open.iter().map(|c| c.0).sum::<usize>(), 5000);
         assert_eq!(open, cells(false));
+    }
+
+    #[test]
+    fn a_cell_file_reads_back_what_was_appended_released_or_not() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cell");
+        let mut f = CellFile::create(&path).unwrap();
+        let pieces: Vec<Vec<u8>> = [17usize, 4096, 0, 70_001, 5]
+            .iter()
+            .enumerate()
+            .map(|(i, &n)| (0..n).map(|j| (j * 7 + i * 31) as u8).collect())
+            .collect();
+        for (i, p) in pieces.iter().enumerate() {
+            f.append(p).unwrap();
+            if i % 2 == 1 {
+                f.release();
+            }
+        }
+        let want = pieces.concat();
+        assert!(fs::read(&path).unwrap() == want);
+        // Ranges from any offset into one reused buffer; a read past the end fails.
+        let mut buf = Vec::new();
+        for (at, n) in [
+            (0usize, want.len()),
+            (17, 5000),
+            (4099, 60_000),
+            (want.len() - 1, 1),
+        ] {
+            let got = read_file_range(&path, at as u64, n, &mut buf).unwrap();
+            assert!(got == &want[at..at + n], "{at}+{n}");
+        }
+        let err = read_file_range(&path, 0, want.len() + 1, &mut buf).unwrap_err();
+        assert_eq!(err.kind(), std::io::ErrorKind::UnexpectedEof);
     }
 
     #[test]
