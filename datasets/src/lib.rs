@@ -258,7 +258,47 @@ pub struct Summary {
 pub fn write_lammps_dump<W: Write + ?Sized>(
     opts: &GenerateOptions,
     out: &mut W,
+    progress: impl FnMut(u64),
+) -> io::Result<Summary> {
+    write_text(opts, out, progress, TextFormat::Lammps)
+}
+
+/// Writes the same frames as [`write_lammps_dump`] as extended XYZ to `out`: per frame
+/// the atom count, a comment line with the box (`Lattice`, `Origin`, `pbc="T T T"`),
+/// `Properties=species:S:1:pos:R:3:<extra>:R:1` and `Timestep`, then one line per atom
+/// (`<type> x y z <extra>`: the LAMMPS type number as the species name, the values
+/// exactly those of the dump, without the ids).
+///
+/// ```
+/// use mdlod_datasets::{write_xyz, GenerateOptions, Kind};
+///
+/// let mut out = Vec::new();
+/// let summary = write_xyz(&GenerateOptions::new(Kind::Crater, 500), &mut out, |_| {}).unwrap();
+/// let text = String::from_utf8(out).unwrap();
+/// assert_eq!(summary.total_particles, 500);
+/// assert_eq!(text.lines().count(), 2 + 500);
+/// assert!(text.lines().nth(1).unwrap().contains("Properties=species:S:1:pos:R:3:c_ke:R:1"));
+/// ```
+pub fn write_xyz<W: Write + ?Sized>(
+    opts: &GenerateOptions,
+    out: &mut W,
+    progress: impl FnMut(u64),
+) -> io::Result<Summary> {
+    write_text(opts, out, progress, TextFormat::Xyz)
+}
+
+/// The text formats the generator writes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum TextFormat {
+    Lammps,
+    Xyz,
+}
+
+fn write_text<W: Write + ?Sized>(
+    opts: &GenerateOptions,
+    out: &mut W,
     mut progress: impl FnMut(u64),
+    format: TextFormat,
 ) -> io::Result<Summary> {
     opts.validate()?;
     let base = opts.particles - opts.duplicates;
@@ -269,6 +309,9 @@ pub fn write_lammps_dump<W: Write + ?Sized>(
     };
     debug_assert!(plan.total() >= base);
     let mut sink = sink::Sink::new(out, &mut progress);
+    if format == TextFormat::Xyz {
+        sink.set_without_ids();
+    }
     let first_box = plan.bounds(0).rounded();
     let mut bounds = first_box;
     let column = opts.kind.extra_column();
@@ -276,18 +319,32 @@ pub fn write_lammps_dump<W: Write + ?Sized>(
         let bx = plan.bounds(f).rounded();
         bounds = bounds.union(bx);
         let v = sink::format_fixed4;
-        let header = format!(
-            "ITEM: TIMESTEP\n{}\nITEM: NUMBER OF ATOMS\n{}\nITEM: BOX BOUNDS pp pp pp\n\
-             {} {}\n{} {}\n{} {}\nITEM: ATOMS id type x y z {column}\n",
-            100 * f as u64,
-            opts.particles,
-            v(bx.lo[0]),
-            v(bx.hi[0]),
-            v(bx.lo[1]),
-            v(bx.hi[1]),
-            v(bx.lo[2]),
-            v(bx.hi[2]),
-        );
+        let header = match format {
+            TextFormat::Lammps => format!(
+                "ITEM: TIMESTEP\n{}\nITEM: NUMBER OF ATOMS\n{}\nITEM: BOX BOUNDS pp pp pp\n\
+                 {} {}\n{} {}\n{} {}\nITEM: ATOMS id type x y z {column}\n",
+                100 * f as u64,
+                opts.particles,
+                v(bx.lo[0]),
+                v(bx.hi[0]),
+                v(bx.lo[1]),
+                v(bx.hi[1]),
+                v(bx.lo[2]),
+                v(bx.hi[2]),
+            ),
+            TextFormat::Xyz => format!(
+                "{}\nLattice=\"{} 0 0 0 {} 0 0 0 {}\" Origin=\"{} {} {}\" pbc=\"T T T\" \
+                 Properties=species:S:1:pos:R:3:{column}:R:1 Timestep={}\n",
+                opts.particles,
+                v(bx.hi[0] - bx.lo[0]),
+                v(bx.hi[1] - bx.lo[1]),
+                v(bx.hi[2] - bx.lo[2]),
+                v(bx.lo[0]),
+                v(bx.lo[1]),
+                v(bx.lo[2]),
+                100 * f as u64,
+            ),
+        };
         sink.raw(header.as_bytes())?;
         sink.begin_frame(base, opts.duplicates, [bx.hi[0], bx.hi[1]]);
         plan.emit(opts.seed, f, &mut sink)?;

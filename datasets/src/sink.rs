@@ -128,6 +128,8 @@ pub(crate) struct Sink<'a, W: Write + ?Sized> {
     wrap: [i64; 2],
     /// Raw arrays instead of text: positions go to `out` as little-endian f32 triples.
     binary: Option<BinaryOut<'a>>,
+    /// Lines start with the type (XYZ) instead of the id and the type (LAMMPS).
+    without_ids: bool,
 }
 
 /// The other arrays of a raw-array output: types (u8, 0-based) and the extra column
@@ -170,7 +172,13 @@ impl<'a, W: Write + ?Sized> Sink<'a, W> {
             next_dup_at: u64::MAX,
             wrap: [i64::MAX; 2],
             binary: None,
+            without_ids: false,
         }
+    }
+
+    /// Writes atom lines without ids from now on: `<type> x y z <extra>` (XYZ).
+    pub(crate) fn set_without_ids(&mut self) {
+        self.without_ids = true;
     }
 
     /// Starts a frame: `base` distinct particles, then `dups` extra lines repeating an
@@ -322,11 +330,15 @@ impl<'a, W: Write + ?Sized> Sink<'a, W> {
             return;
         }
         let l = &mut self.buf[self.pos..self.pos + LINE_MAX];
-        // Fixed-size copy (no call); the bytes past the id are overwritten below.
-        l[..24].copy_from_slice(&self.id_text);
-        let mut n = self.id_len;
-        l[n] = b' ';
-        n = put_u64(l, n + 1, ty as u64);
+        let mut n = if self.without_ids {
+            put_u64(l, 0, ty as u64)
+        } else {
+            // Fixed-size copy (no call); the bytes past the id are overwritten below.
+            l[..24].copy_from_slice(&self.id_text);
+            let n = self.id_len;
+            l[n] = b' ';
+            put_u64(l, n + 1, ty as u64)
+        };
         for v in [q[0], q[1], q[2], e] {
             l[n] = b' ';
             n = put_fixed4(l, n + 1, v);

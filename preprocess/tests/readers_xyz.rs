@@ -177,3 +177,45 @@ fn gzip_xyz() {
     let f = read_k(&path, 0, None);
     assert_eq!(f.positions, vec![[1.0, 2.0, 3.0]]);
 }
+
+/// The generator's extended XYZ holds the same frames as its LAMMPS dump: positions,
+/// species, the extra column, the box and the timestep (the large-scale XYZ benchmark
+/// converts such files).
+#[test]
+fn generated_xyz_reads_as_the_generated_lammps_dump() {
+    use mdlod_datasets::{write_lammps_dump, write_xyz, GenerateOptions, Kind};
+    let dir = tempfile::tempdir().unwrap();
+    let mut opts = GenerateOptions::new(Kind::Alloy, 3000);
+    opts.frames = 2;
+    let (mut lammps, mut xyz) = (Vec::new(), Vec::new());
+    write_lammps_dump(&opts, &mut lammps, |_| {}).unwrap();
+    write_xyz(&opts, &mut xyz, |_| {}).unwrap();
+    let lammps_path = dir.path().join("alloy.lammpstrj");
+    std::fs::write(&lammps_path, lammps).unwrap();
+    let xyz_path = dir.path().join("alloy.xyz");
+    std::fs::write(&xyz_path, xyz).unwrap();
+    let (l, x) = (
+        DumpFile::open(&lammps_path).unwrap(),
+        DumpFile::open(&xyz_path).unwrap(),
+    );
+    assert_eq!(x.format(), InputFormat::Xyz);
+    assert_eq!(x.frame_count(), 2);
+    for k in 0..2 {
+        let a = read_k(&lammps_path, k, Some("c_pe"));
+        let b = read_k(&xyz_path, k, Some("c_pe"));
+        assert_eq!(a.positions, b.positions, "frame {k}");
+        let per_particle = |f: &Frame| -> Vec<String> {
+            f.species_index
+                .iter()
+                .map(|&s| f.species[usize::from(s)].name.clone())
+                .collect()
+        };
+        assert_eq!(per_particle(&a), per_particle(&b), "frame {k}");
+        assert!(per_particle(&b).iter().any(|s| s == "2"), "frame {k}");
+        assert_eq!(a.attribute, b.attribute, "frame {k}");
+        assert_eq!(b.timestep, Some(100 * k as u64));
+        assert_eq!(l.frame_timestep(k), x.frame_timestep(k));
+        let (ba, bb) = (a.simulation_box.unwrap(), b.simulation_box.unwrap());
+        assert_eq!(format!("{ba:?}"), format!("{bb:?}"), "frame {k}");
+    }
+}

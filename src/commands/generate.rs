@@ -1,4 +1,5 @@
-//! `mdlod generate`: deterministic MD-like test data as a LAMMPS text dump.
+//! `mdlod generate`: deterministic MD-like test data as a LAMMPS text dump, extended XYZ
+//! or raw arrays.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -6,7 +7,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use mdlod_datasets::{write_lammps_dump_to_path, GenerateOptions, Kind};
 
-/// Write deterministic MD-like particle data as a LAMMPS text dump: an FCC copper slab
+/// Write deterministic MD-like particle data as a LAMMPS text dump (or extended XYZ, or raw
+/// arrays): an FCC copper slab
 /// with a laser-ablation crater (crater), a copper block with silver spheres (alloy), or a
 /// liquid layer torn into droplets (droplets).
 #[derive(clap::Args)]
@@ -27,8 +29,9 @@ pub struct Args {
     /// Number of frames (timesteps 0, 100, 200, ...).
     #[arg(long, default_value_t = 1)]
     pub frames: u32,
-    /// Output format: a LAMMPS text dump, or raw arrays with a sidecar (give the output
-    /// as NAME.raw.json; one frame; the fastest input for huge conversions).
+    /// Output format: a LAMMPS text dump, extended XYZ (the same values, the type
+    /// number as species), or raw arrays with a sidecar (give the output as
+    /// NAME.raw.json; one frame; the fastest input for huge conversions).
     #[arg(long, value_enum, default_value = "lammps")]
     pub format: OutputFormat,
 }
@@ -36,6 +39,7 @@ pub struct Args {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum OutputFormat {
     Lammps,
+    Xyz,
     Raw,
 }
 
@@ -45,6 +49,7 @@ pub fn run(args: Args) -> Result<()> {
     opts.frames = args.frames;
     let summary = match args.format {
         OutputFormat::Lammps => generate(&opts, &args.output)?,
+        OutputFormat::Xyz => generate_xyz(&opts, &args.output)?,
         OutputFormat::Raw => generate_raw(&opts, &args.output)?,
     };
     println!(
@@ -115,6 +120,28 @@ pub fn generate(
     }
     let bar = bar(opts.particles * u64::from(opts.frames));
     let summary = write_lammps_dump_to_path(opts, output, |n| {
+        if let Some(b) = &bar {
+            b.set_position(n);
+        }
+    })
+    .with_context(|| format!("cannot write {}", output.display()))?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    Ok(summary)
+}
+
+fn generate_xyz(
+    opts: &GenerateOptions,
+    output: &std::path::Path,
+) -> Result<mdlod_datasets::Summary> {
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    let bar = bar(opts.particles * u64::from(opts.frames));
+    let mut file = std::fs::File::create(output)
+        .with_context(|| format!("cannot create {}", output.display()))?;
+    let summary = mdlod_datasets::write_xyz(opts, &mut file, |n| {
         if let Some(b) = &bar {
             b.set_position(n);
         }
