@@ -51,6 +51,7 @@ impl Positions<'_> {
     }
 
     /// The quantized value of point `i`, widened to u16.
+    #[inline]
     pub fn get(&self, i: usize) -> [u16; 3] {
         match self {
             Positions::U8(p) => p[i].map(u16::from),
@@ -497,18 +498,22 @@ impl MdlodFile {
         &self.metadata
     }
 
+    #[inline]
     pub fn position_bits(&self) -> u32 {
         self.header.position_bits
     }
 
+    #[inline]
     pub fn delta_n(&self) -> usize {
         self.metadata.build.delta_n as usize
     }
 
+    #[inline]
     pub fn levels(&self) -> &[LevelRecord] {
         bytemuck::cast_slice(&self.map[self.levels_range.clone()])
     }
 
+    #[inline]
     pub fn level_count(&self) -> usize {
         self.levels().len()
     }
@@ -518,6 +523,7 @@ impl MdlodFile {
     }
 
     /// All nodes, level by level; node `levels()[l].node_first + i` is point `i` of level `l`.
+    #[inline]
     pub fn nodes(&self) -> &[NodeRecord] {
         bytemuck::cast_slice(&self.map[self.nodes_range.clone()])
     }
@@ -532,6 +538,7 @@ impl MdlodFile {
     }
 
     /// Quantized positions of level `l` (empty for level 0, whose single point is node 0).
+    #[inline]
     pub fn positions(&self, l: usize) -> Positions<'_> {
         let bytes = &self.map[self.positions[l].clone()];
         match self.header.position_bits {
@@ -542,6 +549,7 @@ impl MdlodFile {
 
     /// Species index of every particle. Values are checked only by [`verify`](Self::verify):
     /// look them up in the species table with `get`.
+    #[inline]
     pub fn species(&self) -> &[u16] {
         bytemuck::cast_slice(&self.map[self.species_range.clone()])
     }

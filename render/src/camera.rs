@@ -278,6 +278,31 @@ impl Camera {
         })
     }
 
+    /// [`Self::box_in_frustum`], also telling whether the box lies wholly inside every
+    /// plane: `None` outside, `Some(true)` wholly inside (then so is every box inside it),
+    /// `Some(false)` crossing a plane.
+    pub fn box_against_frustum(planes: &[Vec4; 6], min: Vec3, max: Vec3) -> Option<bool> {
+        let mut inside = true;
+        for p in planes {
+            let n = p.truncate();
+            let far = Vec3::new(
+                if p.x >= 0.0 { max.x } else { min.x },
+                if p.y >= 0.0 { max.y } else { min.y },
+                if p.z >= 0.0 { max.z } else { min.z },
+            );
+            if n.dot(far) + p.w < 0.0 {
+                return None;
+            }
+            let near = Vec3::new(
+                if p.x >= 0.0 { min.x } else { max.x },
+                if p.y >= 0.0 { min.y } else { max.y },
+                if p.z >= 0.0 { min.z } else { max.z },
+            );
+            inside &= n.dot(near) + p.w >= 0.0;
+        }
+        Some(inside)
+    }
+
     /// True when the box may intersect the frustum (a conservative test).
     pub fn box_in_frustum(planes: &[Vec4; 6], min: Vec3, max: Vec3) -> bool {
         planes.iter().all(|p| {
@@ -420,5 +445,52 @@ mod tests {
         // Far off to the side.
         let side = c.target + c.right() * 100.0;
         assert!(!Camera::box_in_frustum(&planes, side - 0.1, side + 0.1));
+    }
+    /// The three-way test agrees with the two-way one, and a box it finds wholly inside
+    /// has every box inside it in the frustum.
+    #[test]
+    fn wholly_inside_boxes_contain_only_visible_boxes() {
+        let mut c = Camera::default();
+        let b = Bounds::new([-1.0; 3], [1.0; 3]);
+        c.fit(&b, 1.0);
+        c.azimuth_deg = 30.0;
+        c.elevation_deg = 20.0;
+        let planes = Camera::frustum_planes(&(c.clip_from_view(1.0) * c.view_from_world()));
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (mut inside, mut crossing, mut outside) = (0, 0, 0);
+        for _ in 0..4000 {
+            let centre = Vec3::new(next(), next(), next()) * 5.0 - 2.5;
+            let half = Vec3::new(next(), next(), next()) * 0.8;
+            let (lo, hi) = (centre - half, centre + half);
+            let class = Camera::box_against_frustum(&planes, lo, hi);
+            assert_eq!(class.is_some(), Camera::box_in_frustum(&planes, lo, hi));
+            match class {
+                None => outside += 1,
+                Some(false) => crossing += 1,
+                Some(true) => {
+                    inside += 1;
+                    for _ in 0..8 {
+                        let a = lo + (hi - lo) * Vec3::new(next(), next(), next());
+                        let z = lo + (hi - lo) * Vec3::new(next(), next(), next());
+                        let (sub_lo, sub_hi) = (a.min(z), a.max(z));
+                        assert!(Camera::box_in_frustum(&planes, sub_lo, sub_hi));
+                        assert_eq!(
+                            Camera::box_against_frustum(&planes, sub_lo, sub_hi),
+                            Some(true)
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            inside > 100 && crossing > 100 && outside > 100,
+            "{inside} {crossing} {outside}"
+        );
     }
 }

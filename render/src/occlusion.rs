@@ -439,11 +439,20 @@ impl OcclusionBuffer {
         let (sx, sy) = (p.x_axis.x, p.y_axis.y);
         let perspective = self.camera.projection == Projection::Perspective;
         let r2 = radius * radius;
+        // No ray enters the sphere nearer than its nearest depth: a sample whose bound is
+        // nearer than that hides it without its ray being traced.
+        let surely_behind = (-v.z - radius) * (1.0 - SAMPLE_DEPTH_SHRINK_REL);
         let mut j = py0;
         while j <= py1 {
             let ndc_y = 1.0 - (j + self.origin[1] as f32 + 0.5) / self.image[1] as f32 * 2.0;
+            let row = (j as u32 * self.width) as usize;
             let mut i = px0;
             while i <= px1 {
+                let bound = self.levels[0][row + i as usize];
+                if bound < surely_behind {
+                    i += 1.0;
+                    continue;
+                }
                 let ndc_x = (i + self.origin[0] as f32 + 0.5) / self.image[0] as f32 * 2.0 - 1.0;
                 // The sample's ray, parametrised by view depth t: origin + t · dir.
                 let (origin, dir) = if perspective {
@@ -462,7 +471,6 @@ impl OcclusionBuffer {
                 let disc = b * b - a * c;
                 if disc >= 0.0 {
                     let entry = (-b - disc.sqrt()) / a;
-                    let bound = self.levels[0][(j as u32 * self.width + i as u32) as usize];
                     let entry = entry * (1.0 - SAMPLE_DEPTH_SHRINK_REL);
                     // Seen unless certainly behind the bound (NaN counts as seen).
                     if bound.partial_cmp(&entry) != Some(std::cmp::Ordering::Less) {

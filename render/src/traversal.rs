@@ -214,6 +214,12 @@ impl Projector {
     pub fn visible(&self, n: &NodeRecord) -> bool {
         Camera::box_in_frustum(&self.planes, n.bounds_min.into(), n.bounds_max.into())
     }
+
+    /// [`Self::visible`] as `Some`, holding whether the box lies wholly inside the
+    /// frustum, so that the node's descendants (whose boxes lie in its box) need no test.
+    pub fn frustum(&self, n: &NodeRecord) -> Option<bool> {
+        Camera::box_against_frustum(&self.planes, n.bounds_min.into(), n.bounds_max.into())
+    }
 }
 
 /// The radius a node's representative sphere is drawn with: the *coverage radius*
@@ -230,9 +236,15 @@ impl Projector {
 /// radius bounds every representative radius in its subtree.
 pub fn representative_radius(n: &NodeRecord) -> f32 {
     let e = Vec3::from(n.bounds_max) - Vec3::from(n.bounds_min);
-    let cap = 0.5 * (e.x.max(0.0) * e.y.max(0.0) * e.z.max(0.0)).cbrt();
+    let volume = e.x.max(0.0) * e.y.max(0.0) * e.z.max(0.0);
     let coverage = n.area_sum.max(0.0).sqrt();
-    let r = coverage.min(cap).max(n.radius);
+    // The cap's cube root only when the cap may be the smaller (coverage³ > volume / 8).
+    let smaller = if 8.0 * coverage * coverage * coverage <= volume {
+        coverage
+    } else {
+        coverage.min(0.5 * volume.cbrt())
+    };
+    let r = smaller.max(n.radius);
     if r.is_finite() {
         r
     } else {
@@ -675,6 +687,14 @@ fn join_masks(mut masks: Vec<(u32, u64)>) -> Vec<(u32, u64)> {
     masks
 }
 
+/// A key ordering nodes by depth as [`f32::total_cmp`] does, then by id: the depth's
+/// bits made monotone as an unsigned integer, above the id.
+fn depth_key(depth: f32, id: u32) -> u64 {
+    let b = depth.to_bits();
+    let ordered = if b >> 31 == 1 { !b } else { b | 0x8000_0000 };
+    (u64::from(ordered) << 32) | u64::from(id)
+}
+
 /// The cut with occlusion culling: nodes are visited nearest first; a node hidden by the
 /// spheres committed so far is dropped with its subtree, one small enough (or not
 /// resident) is committed as its representative, and the others are opened, committing
@@ -727,16 +747,22 @@ fn front_to_back(
         (Vec3::from(p), representative_radius(n))
     };
 
-    let mut heap: BinaryHeap<(Reverse<Size>, Reverse<u32>)> = BinaryHeap::new();
-    heap.push((Reverse(Size(proj.near_depth(&nodes[0]))), Reverse(0)));
+    // Nearest first (ties by id), with whether the node's box lies wholly inside the
+    // frustum (then its descendants' boxes do too and are not tested).
+    let mut heap: BinaryHeap<Reverse<(u64, bool)>> = BinaryHeap::new();
+    heap.push(Reverse((
+        depth_key(proj.near_depth(&nodes[0]), 0),
+        proj.frustum(&nodes[0]) == Some(true),
+    )));
     // The visible children of the node being considered: (index on their level,
-    // projected size, representative radius), computed once for the node's own test
-    // and for committing or queueing them.
-    let mut kids: Vec<(u32, f32, f32)> = Vec::new();
+    // projected size, representative radius, wholly inside the frustum), computed once
+    // for the node's own test and for committing or queueing them.
+    let mut kids: Vec<(u32, f32, f32, bool)> = Vec::new();
     let mut committed: u64 = 0;
     let mut reported: u64 = 0;
     let mut achieved = 0.0f32;
-    while let Some((_, Reverse(id))) = heap.pop() {
+    while let Some(Reverse((key, inside))) = heap.pop() {
+        let id = key as u32;
         if let Some(shared) = shared {
             if committed - reported >= SHARED_BATCH {
                 if !shared.add(committed - reported) {
@@ -764,10 +790,11 @@ fn front_to_back(
             let mut reach = 0.0f32;
             for c in children.clone() {
                 let cn = &nodes[first + c as usize];
-                if proj.visible(cn) {
+                let within = if inside { Some(true) } else { proj.frustum(cn) };
+                if let Some(within) = within {
                     let r = representative_radius(cn);
                     reach = reach.max(r);
-                    kids.push((c, proj.size_px(cn), r));
+                    kids.push((c, proj.size_px(cn), r, within));
                 }
             }
             reach
@@ -801,11 +828,14 @@ fn front_to_back(
             // (what is nearer than their parent is committed already; the queue would
             // only add what lies between the two depths).
             let first = levels[child_level].node_first as usize;
-            for &(c, csize, r) in &kids {
+            for &(c, csize, r, within) in &kids {
                 let cid = first + c as usize;
                 let cn = &nodes[cid];
                 if csize > error_px {
-                    heap.push((Reverse(Size(proj.near_depth(cn))), Reverse(cid as u32)));
+                    heap.push(Reverse((
+                        depth_key(proj.near_depth(cn), cid as u32),
+                        within,
+                    )));
                     continue;
                 }
                 // The one sphere drawn for it, as the GPU decodes it (grown by the
@@ -1155,5 +1185,37 @@ pub fn sort_back_to_front(file: &MdlodFile, draw: &DrawList, camera: &Camera) ->
     DrawList {
         ranges: points.into_iter().map(|(_, r)| r).collect(),
         ..draw.clone()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The heap key orders by depth exactly as `f32::total_cmp`, then by id.
+    #[test]
+    fn depth_keys_order_as_total_cmp_then_id() {
+        let depths = [
+            f32::NEG_INFINITY,
+            -1e30,
+            -2.5,
+            -f32::MIN_POSITIVE,
+            -0.0,
+            0.0,
+            f32::MIN_POSITIVE,
+            1e-3,
+            1.0,
+            1.000_000_1,
+            7e20,
+            f32::INFINITY,
+        ];
+        for &a in &depths {
+            for &b in &depths {
+                for (ia, ib) in [(0u32, 1u32), (5, 5), (u32::MAX, 0)] {
+                    let want = a.total_cmp(&b).then(ia.cmp(&ib));
+                    assert_eq!(depth_key(a, ia).cmp(&depth_key(b, ib)), want, "{a} {b}");
+                }
+            }
+        }
     }
 }
