@@ -119,11 +119,13 @@ impl GpuContext {
         };
         let info = adapter.get_info();
         // Optional features, taken when the adapter has them: GPU timing, early depth
-        // tests for the sphere pass's conservative depth, float blending for splats.
+        // tests for the sphere pass's conservative depth, float blending for splats,
+        // 64-bit atomics for the compute raster of small spheres.
         let required_features = adapter.features()
             & (wgpu::Features::TIMESTAMP_QUERY
                 | wgpu::Features::SHADER_EARLY_DEPTH_TEST
-                | wgpu::Features::FLOAT32_BLENDABLE);
+                | wgpu::Features::FLOAT32_BLENDABLE
+                | crate::passes::sphere_raycast::SMALL_SPHERES_FEATURES);
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("mdlod-render"),

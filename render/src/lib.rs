@@ -428,6 +428,7 @@ pub fn render_image(
             points: draw.points as u32,
             gpu_data_bytes: sndf.hist.len() as u64 * 16,
             gpu_target_bytes: u64::from(opts.width) * u64::from(opts.height) * 20,
+            impostors: None,
         };
         let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
         report.traversal_time = traversal_time;
@@ -496,6 +497,7 @@ fn draw_cut(
                 points: draw.points as u32,
                 gpu_data_bytes: frame.gpu_data_bytes,
                 gpu_target_bytes: pixels * (32 + 48),
+                impostors: None,
             };
             let mut report = report(&rendered);
             report.density_stacks = Some((frame.stacks_run, frame.stacks));
@@ -549,6 +551,7 @@ fn draw_cut(
                 points: splats.points,
                 gpu_data_bytes: splats.gpu_data_bytes,
                 gpu_target_bytes: pixels * 32,
+                impostors: None,
             };
             let mut report = report(&frame);
             report.exposure = exposure;
@@ -801,6 +804,7 @@ pub fn sample_to_file_at(
         points: draw.points as u32,
         gpu_data_bytes: sndf.hist.len() as u64 * 16,
         gpu_target_bytes: 0,
+        impostors: None,
     };
     let mut report = RenderReport::new(&renderer, opts, camera, &traversal, &draw, &frame);
     report.spp = iterations;

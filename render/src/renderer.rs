@@ -152,6 +152,9 @@ pub struct RenderedFrame {
     pub gpu_time: Option<Duration>,
     /// Points drawn.
     pub points: u32,
+    /// With the compute raster of small spheres: how many spheres it left to impostor
+    /// quads (the larger ones); `None` when every sphere was an impostor.
+    pub impostors: Option<u32>,
     /// Bytes of point data the frame read on the GPU: the uploaded cut, or the
     /// streaming pool's position and attribute buffers plus its range tables.
     pub gpu_data_bytes: u64,
@@ -406,6 +409,9 @@ pub struct Renderer {
     /// The last density frame's (stacks, width, height, iso) and the stacks it needed:
     /// the next such frame's first batch.
     density_hint: std::sync::Mutex<Option<(DensityHintKey, u32)>>,
+    /// Sphere frames draw spheres a few pixels wide with the compute raster
+    /// (`small_spheres.wgsl`) where the device has it.
+    small_spheres: bool,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -542,6 +548,10 @@ impl Renderer {
         let density = crate::passes::density::DensityPass::new(&ctx.device, &sphere.layout);
         let sndf = SndfPass::new(&ctx.device);
         let sndf_shade = SndfShadePass::new(&ctx.device);
+        // `MDLOD_SMALL_SPHERES=0` draws every sphere as an impostor quad (to compare, or
+        // to step around a driver's trouble with 64-bit atomics).
+        let small_spheres = sphere.small.is_some()
+            && std::env::var("MDLOD_SMALL_SPHERES").map_or(true, |v| v.trim() != "0");
         Renderer {
             ctx,
             sphere,
@@ -552,7 +562,20 @@ impl Renderer {
             sndf_shade,
             points_sampled: Default::default(),
             density_hint: Default::default(),
+            small_spheres,
         }
+    }
+
+    /// Whether sphere frames draw small spheres with the compute raster.
+    pub fn small_sphere_raster(&self) -> bool {
+        self.small_spheres
+    }
+
+    /// Turns the compute raster of small spheres on or off (on only where the device
+    /// has 64-bit atomics); returns whether it is on.
+    pub fn set_small_sphere_raster(&mut self, on: bool) -> bool {
+        self.small_spheres = on && self.sphere.small.is_some();
+        self.small_spheres
     }
 
     /// The most points one frame can draw on this device (storage buffer limits: a
@@ -700,6 +723,15 @@ impl Renderer {
             )
         });
         let timing = self.frame_timer();
+        let small = self
+            .sphere
+            .small
+            .as_ref()
+            .filter(|_| self.small_spheres)
+            .and_then(|p| Some((p, p.prepare(device, w, h, buffers.points)?)));
+        let args_readback = small
+            .as_ref()
+            .map(|_| readback_buffer(device, "impostor count readback", 16));
 
         let bg = settings
             .background_srgb
@@ -719,6 +751,14 @@ impl Renderer {
             let mut enc = device.create_command_encoder(&Default::default());
             let first = s == 0;
             let last = s + 1 == settings.spp;
+            if let Some((pass, targets)) = &small {
+                pass.reset(queue, targets);
+                let writes = timing
+                    .as_ref()
+                    .filter(|_| first)
+                    .map(|t| t.compute_writes(true, false));
+                pass.raster(&mut enc, buffers, targets, writes);
+            }
             {
                 let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("spheres"),
@@ -746,12 +786,15 @@ impl Renderer {
                     }),
                     timestamp_writes: timing
                         .as_ref()
-                        .filter(|_| first)
+                        .filter(|_| first && small.is_none())
                         .map(|t| t.writes(true, false)),
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
-                self.sphere.draw(&mut pass, buffers);
+                match &small {
+                    Some((small, targets)) => small.draw(&mut pass, buffers, targets),
+                    None => self.sphere.draw(&mut pass, buffers),
+                }
             }
             {
                 let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -821,6 +864,9 @@ impl Renderer {
                 if let Some(t) = &timing {
                     t.resolve(&mut enc);
                 }
+                if let (Some((_, targets)), Some(buf)) = (&small, &args_readback) {
+                    targets.copy_draw_args(&mut enc, buf);
+                }
             }
             queue.submit([enc.finish()]);
         }
@@ -838,6 +884,13 @@ impl Renderer {
             }
             None => None,
         };
+        let impostors = match &args_readback {
+            Some(buf) => {
+                let words: Vec<u32> = bytemuck::pod_collect_to_vec(&self.read_buffer(buf)?);
+                words.get(1).copied()
+            }
+            None => None,
+        };
         let gpu_time = self.gpu_time(timing.as_ref())?;
         // sample (RGBA8) + depth (f32) + accumulation (RGBA16F) + output (RGBA8) + readback.
         let gpu_target_bytes =
@@ -848,8 +901,10 @@ impl Renderer {
             depth,
             gpu_time,
             points: buffers.points,
+            impostors,
             gpu_data_bytes: 0,
-            gpu_target_bytes,
+            gpu_target_bytes: gpu_target_bytes
+                + small.as_ref().map_or(0, |(_, targets)| targets.bytes()),
         })
     }
 

@@ -1663,3 +1663,87 @@ fn a_hidden_species_leaves_the_picture_of_the_data_without_it() {
     assert!(differing(&all, &without) > 0.01, "silver atoms show");
     assert!(differing(&hidden, &without) < 0.002);
 }
+
+/// The compute raster of small spheres draws what impostor quads draw: the same pixels
+/// and depths up to rounding on silhouettes, in perspective and orthographic views, with
+/// one and with several jittered samples, and it hands the spheres too large for it to
+/// the impostors.
+#[test]
+fn small_sphere_raster_draws_what_impostor_quads_draw() {
+    let has = renderer()
+        .ctx
+        .device
+        .features()
+        .contains(mdlod_render::passes::sphere_raycast::SMALL_SPHERES_FEATURES);
+    let wanted = std::env::var("MDLOD_SMALL_SPHERES").map_or(true, |v| v.trim() != "0");
+    assert_eq!(renderer().small_sphere_raster(), has && wanted);
+    if !renderer().small_sphere_raster() {
+        eprintln!("the small-sphere raster is off on this device: nothing to compare");
+        return;
+    }
+    let mut quads = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    assert!(!quads.set_small_sphere_raster(false));
+    let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
+    let (w, h) = (200, 150);
+    for (zoom, projection, spp) in [
+        (1.0, Projection::Perspective, 1),
+        (1.0, Projection::Orthographic, 1),
+        (1.0, Projection::Perspective, 4),
+        (6.0, Projection::Perspective, 1),
+        (6.0, Projection::Orthographic, 1),
+    ] {
+        let view = ViewSpec::Orbit {
+            azimuth_deg: 35.0,
+            elevation_deg: 25.0,
+            zoom,
+            projection,
+        };
+        let camera = camera_for(&f, &view, w, h).unwrap();
+        let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::Off);
+        let settings = FrameSettings {
+            width: w,
+            height: h,
+            spp,
+            background_srgb: [0.0; 3],
+            read_depth: true,
+            ..Default::default()
+        };
+        let case = format!("zoom {zoom}, {projection:?}, {spp} spp");
+        let small = renderer().render(&f, &camera, &draw, &settings).unwrap();
+        let all_quads = quads.render(&f, &camera, &draw, &settings).unwrap();
+        assert_eq!(all_quads.impostors, None);
+        let impostors = small.impostors.unwrap();
+        if zoom == 1.0 {
+            assert_eq!(
+                impostors, 0,
+                "{case}: {impostors} of {} as quads",
+                small.points
+            );
+        } else {
+            assert!(
+                impostors > 0 && impostors < small.points,
+                "{case}: {impostors} of {} as quads",
+                small.points
+            );
+        }
+        let pixels = (w * h) as usize;
+        let (failing, _) = golden::compare(&all_quads.image, &small.image, 2);
+        assert!(failing * 1000 <= pixels, "{case}: {failing} pixels differ");
+        let covered = all_quads
+            .depth
+            .as_ref()
+            .unwrap()
+            .iter()
+            .filter(|&&d| d < 1.0)
+            .count();
+        assert!(covered * 4 > pixels, "{case}: {covered} pixels covered");
+        let deeper = all_quads
+            .depth
+            .unwrap()
+            .iter()
+            .zip(small.depth.unwrap())
+            .filter(|(a, b)| (*a - b).abs() > 1e-5)
+            .count();
+        assert!(deeper * 1000 <= pixels, "{case}: {deeper} depths differ");
+    }
+}

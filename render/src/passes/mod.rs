@@ -76,6 +76,17 @@ mod tests {
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
         }
+        // The small-sphere raster, with the 64-bit atomics it needs.
+        let src = super::sphere_raycast::SMALL_SPHERES_SHADER;
+        let module = naga::front::wgsl::parse_str(src)
+            .unwrap_or_else(|e| panic!("small_spheres.wgsl: {}", e.emit_to_string(src)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::SHADER_INT64
+                | naga::valid::Capabilities::SHADER_INT64_ATOMIC_MIN_MAX,
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("small_spheres.wgsl: {}", e.emit_to_string(src)));
         // The conservative-depth variant of the sphere pass.
         let src = super::sphere_raycast::shader_source(true);
         assert_eq!(

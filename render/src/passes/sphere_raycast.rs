@@ -21,12 +21,43 @@ use crate::traversal::{representative_radius, DrawList};
 /// with.
 pub const POINTS_WGSL: &str = include_str!("points.wgsl");
 
-/// WGSL source of the pass: `points.wgsl` followed by `sphere_raycast.wgsl`.
+/// WGSL source of the pass: `points.wgsl`, `pixel_rays.wgsl` and `sphere_raycast.wgsl`.
 pub const SHADER: &str = concat!(
     include_str!("points.wgsl"),
     "\n",
+    include_str!("pixel_rays.wgsl"),
+    "\n",
     include_str!("sphere_raycast.wgsl")
 );
+
+/// WGSL source of the small-sphere raster (a compute pass that needs 64-bit integer
+/// atomics): `points.wgsl`, `pixel_rays.wgsl` and `small_spheres.wgsl`.
+pub const SMALL_SPHERES_SHADER: &str = concat!(
+    include_str!("points.wgsl"),
+    "\n",
+    include_str!("pixel_rays.wgsl"),
+    "\n",
+    include_str!("small_spheres.wgsl")
+);
+
+/// The features the small-sphere raster needs.
+pub const SMALL_SPHERES_FEATURES: wgpu::Features =
+    wgpu::Features::SHADER_INT64.union(wgpu::Features::SHADER_INT64_ATOMIC_MIN_MAX);
+
+/// Largest side, in pixel centres, of a sphere's screen box that the small-sphere raster
+/// draws; larger spheres are drawn as impostor quads.
+pub const SMALL_SPHERE_MAX_SIDE: u32 = 8;
+
+/// `Raster` in `pixel_rays.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct RasterUniforms {
+    pub size: [u32; 2],
+    pub points: u32,
+    pub max_side: u32,
+    pub row: u32,
+    pub pad: [u32; 3],
+}
 
 /// The source with the fragment stage declared conservative (its depth is never nearer
 /// than the rasterized quad's), for devices with `SHADER_EARLY_DEPTH_TEST`.
@@ -481,6 +512,28 @@ pub struct SphereRaycastPass {
     pub pipeline: wgpu::RenderPipeline,
     pub gbuffer: wgpu::RenderPipeline,
     pub layout: wgpu::BindGroupLayout,
+    /// The small-sphere raster, where the device has [`SMALL_SPHERES_FEATURES`].
+    pub small: Option<SmallSpheres>,
+}
+
+/// The pipelines of the small-sphere raster (`small_spheres.wgsl`) and of the sphere
+/// pass's side of it (`fs_resolve`, `vs_listed`).
+pub struct SmallSpheres {
+    raster: wgpu::ComputePipeline,
+    resolve: wgpu::RenderPipeline,
+    listed: wgpu::RenderPipeline,
+    raster_layout: wgpu::BindGroupLayout,
+    draw_layout: wgpu::BindGroupLayout,
+}
+
+/// One frame's buffers of the small-sphere raster (see [`SmallSpheres::prepare`]).
+pub struct SmallSphereTargets {
+    visible: wgpu::Buffer,
+    args: wgpu::Buffer,
+    raster_group: wgpu::BindGroup,
+    draw_group: wgpu::BindGroup,
+    groups: [u32; 2],
+    bytes: u64,
 }
 
 /// The storage buffers the pass reads (see the WGSL bindings 1 to 5).
@@ -513,9 +566,12 @@ impl SphereRaycastPass {
                 .into(),
             ),
         });
+        // The points are read by the impostors' vertex stage, by the resolve of the
+        // small-sphere raster (fragment) and by that raster (compute).
+        let stages = wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE;
         let storage = |binding: u32| wgpu::BindGroupLayoutEntry {
             binding,
-            visibility: wgpu::ShaderStages::VERTEX,
+            visibility: stages,
             ty: wgpu::BindingType::Buffer {
                 ty: wgpu::BufferBindingType::Storage { read_only: true },
                 has_dynamic_offset: false,
@@ -528,7 +584,7 @@ impl SphereRaycastPass {
             entries: &[
                 wgpu::BindGroupLayoutEntry {
                     binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    visibility: stages,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Uniform,
                         has_dynamic_offset: false,
@@ -592,10 +648,15 @@ impl SphereRaycastPass {
             "fs_gbuffer",
             &[target(GBUFFER_FORMAT), target(GBUFFER_FORMAT)],
         );
+        let small = device
+            .features()
+            .contains(SMALL_SPHERES_FEATURES)
+            .then(|| SmallSpheres::new(device, &layout, &module));
         SphereRaycastPass {
             pipeline,
             gbuffer,
             layout,
+            small,
         }
     }
 
@@ -686,5 +747,252 @@ impl SphereRaycastPass {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &buffers.bind_group, &[]);
         pass.draw(0..4, 0..buffers.points);
+    }
+}
+
+impl SmallSpheres {
+    fn new(
+        device: &wgpu::Device,
+        points_layout: &wgpu::BindGroupLayout,
+        sphere_module: &wgpu::ShaderModule,
+    ) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("small_spheres.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SMALL_SPHERES_SHADER.into()),
+        });
+        let entry = |binding: u32, visibility, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        use wgpu::BufferBindingType as B;
+        use wgpu::ShaderStages as S;
+        let writable = B::Storage { read_only: false };
+        let raster_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("small spheres: raster"),
+            entries: &[
+                entry(0, S::COMPUTE, B::Uniform),
+                entry(1, S::COMPUTE, writable),
+                entry(2, S::COMPUTE, writable),
+                entry(3, S::COMPUTE, writable),
+            ],
+        });
+        let read = B::Storage { read_only: true };
+        let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("small spheres: draw"),
+            entries: &[
+                entry(0, S::FRAGMENT, B::Uniform),
+                entry(1, S::FRAGMENT, read),
+                entry(2, S::VERTEX, read),
+            ],
+        });
+        let raster = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("cs_small_spheres"),
+            layout: Some(
+                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("small spheres: raster"),
+                    bind_group_layouts: &[Some(points_layout), Some(&raster_layout)],
+                    immediate_size: 0,
+                }),
+            ),
+            module: &module,
+            entry_point: Some("cs_small_spheres"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let draw_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("small spheres: draw"),
+            bind_group_layouts: &[Some(points_layout), Some(&draw_layout)],
+            immediate_size: 0,
+        });
+        let make = |label: &str, vertex: &str, fragment: &str, strip: bool| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&draw_pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: sphere_module,
+                    entry_point: Some(vertex),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: if strip {
+                        wgpu::PrimitiveTopology::TriangleStrip
+                    } else {
+                        wgpu::PrimitiveTopology::TriangleList
+                    },
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: sphere_module,
+                    entry_point: Some(fragment),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: COLOUR_FORMAT,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        SmallSpheres {
+            raster,
+            resolve: make("fs_resolve", "vs_fullscreen", "fs_resolve", false),
+            listed: make("vs_listed", "vs_listed", "fs_main", true),
+            raster_layout,
+            draw_layout,
+        }
+    }
+
+    /// The buffers for drawing `points` points into a `width` × `height` image, or
+    /// `None` when a per-pixel buffer of 8 bytes or the list of points would not fit one
+    /// storage binding on this device (the impostors then draw every point).
+    pub fn prepare(
+        &self,
+        device: &wgpu::Device,
+        width: u32,
+        height: u32,
+        points: u32,
+    ) -> Option<SmallSphereTargets> {
+        let limits = device.limits();
+        let max = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let visible_bytes = u64::from(width) * u64::from(height) * 8;
+        let large_bytes = u64::from(points.max(1)) * 4;
+        if points == 0 || visible_bytes > max || large_bytes > max {
+            return None;
+        }
+        let groups = points.div_ceil(64);
+        let per_row = groups.min(limits.max_compute_workgroups_per_dimension.max(1));
+        let rows = groups.div_ceil(per_row);
+        if rows > limits.max_compute_workgroups_per_dimension {
+            return None;
+        }
+        let uniforms = RasterUniforms {
+            size: [width, height],
+            points,
+            max_side: SMALL_SPHERE_MAX_SIDE,
+            row: per_row * 64,
+            pad: [0; 3],
+        };
+        use wgpu::util::DeviceExt;
+        let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("small spheres: uniforms"),
+            contents: bytemuck::bytes_of(&uniforms),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        let visible = buffer("small spheres: visible", visible_bytes, U::COPY_DST);
+        let large = buffer("small spheres: impostors", large_bytes, U::empty());
+        let args = buffer(
+            "small spheres: draw",
+            16,
+            U::INDIRECT | U::COPY_DST | U::COPY_SRC,
+        );
+        let group = |layout: &wgpu::BindGroupLayout, buffers: &[&wgpu::Buffer]| {
+            let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+                .iter()
+                .enumerate()
+                .map(|(k, b)| wgpu::BindGroupEntry {
+                    binding: k as u32,
+                    resource: b.as_entire_binding(),
+                })
+                .collect();
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("small spheres"),
+                layout,
+                entries: &entries,
+            })
+        };
+        let raster_group = group(&self.raster_layout, &[&uniforms, &visible, &large, &args]);
+        let draw_group = group(&self.draw_layout, &[&uniforms, &visible, &large]);
+        Some(SmallSphereTargets {
+            visible,
+            args,
+            raster_group,
+            draw_group,
+            groups: [per_row, rows],
+            bytes: visible_bytes + large_bytes + 16 + std::mem::size_of::<RasterUniforms>() as u64,
+        })
+    }
+
+    /// Records the raster of one sample into `enc` (after `reset`, in a compute pass
+    /// of its own, with `timestamps` when given); the frame uniforms of `buffers` must
+    /// hold the sample's projection.
+    pub fn raster(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        buffers: &SphereBuffers,
+        targets: &SmallSphereTargets,
+        timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) {
+        enc.clear_buffer(&targets.visible, 0, None);
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("small spheres"),
+            timestamp_writes: timestamps,
+        });
+        pass.set_pipeline(&self.raster);
+        pass.set_bind_group(0, &buffers.bind_group, &[]);
+        pass.set_bind_group(1, &targets.raster_group, &[]);
+        pass.dispatch_workgroups(targets.groups[0], targets.groups[1], 1);
+    }
+
+    /// Sets the impostors' draw to none before a sample's raster (a queue write, so call
+    /// it before submitting the sample's commands).
+    pub fn reset(&self, queue: &wgpu::Queue, targets: &SmallSphereTargets) {
+        queue.write_buffer(&targets.args, 0, bytemuck::cast_slice(&[4u32, 0, 0, 0]));
+    }
+
+    /// Draws the raster's pixels, then the spheres it left to the impostors, into
+    /// `pass` (whose targets are the sphere pass's).
+    pub fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        buffers: &SphereBuffers,
+        targets: &SmallSphereTargets,
+    ) {
+        pass.set_bind_group(0, &buffers.bind_group, &[]);
+        pass.set_bind_group(1, &targets.draw_group, &[]);
+        pass.set_pipeline(&self.resolve);
+        pass.draw(0..3, 0..1);
+        pass.set_pipeline(&self.listed);
+        pass.draw_indirect(&targets.args, 0);
+    }
+}
+
+impl SmallSphereTargets {
+    /// Bytes of GPU memory the targets hold.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    /// Copies the impostors' indirect draw (4 words; the second is their count) to
+    /// `readback` (16 bytes, `COPY_DST`).
+    pub fn copy_draw_args(&self, enc: &mut wgpu::CommandEncoder, readback: &wgpu::Buffer) {
+        enc.copy_buffer_to_buffer(&self.args, 0, readback, 0, 16);
     }
 }

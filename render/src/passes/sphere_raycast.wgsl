@@ -13,7 +13,20 @@
 // (`@early_depth_test(greater_equal)`, added by sphere_raycast.rs), so fragments
 // behind what is already drawn are rejected before they are shaded.
 //
-// Follows points.wgsl (uniforms, bindings, point decoding).
+// Where the device has 64-bit atomics, spheres a few pixels wide are drawn by the compute
+// raster of small_spheres.wgsl instead: `fs_resolve` (a full-screen triangle drawn first
+// in the pass) shades each pixel's nearest small sphere and writes its depth, and
+// `vs_listed` draws the remaining spheres as impostors, against that depth.
+//
+// Follows points.wgsl (uniforms, bindings, point decoding) and pixel_rays.wgsl.
+
+// The compute raster's results, for `fs_resolve` and `vs_listed`.
+@group(1) @binding(0) var<uniform> raster: Raster;
+// Per pixel, the complement of the winning key (entry depth bits above, point index
+// below; 0: no small sphere), read as two 32-bit words, low first.
+@group(1) @binding(1) var<storage, read> visible_words: array<vec2<u32>>;
+// The points to draw as impostors.
+@group(1) @binding(2) var<storage, read> large: array<u32>;
 
 struct VsOut {
     @builtin(position) clip: vec4<f32>,
@@ -26,6 +39,17 @@ struct VsOut {
 
 @vertex
 fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VsOut {
+    return sphere_vertex(vi, ii);
+}
+
+// Instance `ii` of the impostors the compute raster left to this pass.
+@vertex
+fn vs_listed(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VsOut {
+    return sphere_vertex(vi, large[ii]);
+}
+
+// Corner `vi` of the quad of point `ii`.
+fn sphere_vertex(vi: u32, ii: u32) -> VsOut {
     let pt = load_point(ii);
     let world = pt.world;
     let radius = pt.radius;
@@ -110,21 +134,49 @@ fn hit_depth(in: VsOut, hit: Hit) -> f32 {
     return max(clamp(clip.z / clip.w, 0.0, 1.0), in.clip.z);
 }
 
-@fragment
-fn fs_main(in: VsOut) -> FsOut {
-    let hit = ray_hit(in);
-    let n = hit.normal;
+// Lambert + Blinn-Phong for unit normal `n`, unit vector towards the eye `v`.
+fn shade(n: vec3<f32>, v: vec3<f32>, albedo: vec3<f32>) -> vec3<f32> {
     let l = frame.light_dir_view.xyz;
-    let v = -hit.dir;
     let ndl = max(dot(n, l), 0.0);
     let h = normalize(l + v);
     let spec = select(0.0, pow(max(dot(n, h), 0.0), frame.material.w), ndl > 0.0);
-    let colour = in.albedo * (frame.material.x + frame.material.y * ndl)
+    return albedo * (frame.material.x + frame.material.y * ndl)
         + vec3<f32>(frame.material.z * spec);
+}
 
+@fragment
+fn fs_main(in: VsOut) -> FsOut {
+    let hit = ray_hit(in);
     var out: FsOut;
-    out.colour = vec4<f32>(colour, 1.0);
+    out.colour = vec4<f32>(shade(hit.normal, -hit.dir, in.albedo), 1.0);
     out.depth = hit_depth(in, hit);
+    return out;
+}
+
+// A triangle covering the image, for `fs_resolve`.
+@vertex
+fn vs_fullscreen(@builtin(vertex_index) vi: u32) -> @builtin(position) vec4<f32> {
+    let uv = vec2<f32>(f32((vi << 1u) & 2u), f32(vi & 2u));
+    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
+}
+
+// The pixel's nearest small sphere (the compute raster's winner), shaded, at its depth.
+@fragment
+fn fs_resolve(@builtin(position) pos: vec4<f32>) -> FsOut {
+    let v = visible_words[u32(pos.y) * raster.size.x + u32(pos.x)];
+    if v.x == 0u && v.y == 0u {
+        discard;
+    }
+    let pt = load_point(~v.x);
+    let c = (frame.view_from_world * vec4<f32>(pt.world, 1.0)).xyz;
+    let ray = pixel_ray(pos.xy, vec2<f32>(raster.size));
+    // The raster found a hit; a grazing one may round to a miss here (then the ray's
+    // closest approach stands in for it).
+    let h = ray_sphere(ray, c, pt.radius);
+    let hit = ray.origin + h.x * ray.dir;
+    var out: FsOut;
+    out.colour = vec4<f32>(shade(normalize(hit - c), -ray.dir, pt.albedo), 1.0);
+    out.depth = clamp(ndc_depth(hit), 0.0, 1.0);
     return out;
 }
 
