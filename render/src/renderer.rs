@@ -1263,6 +1263,12 @@ impl Renderer {
             },
         };
         let timing = self.frame_timer();
+        let small = self
+            .sphere
+            .small
+            .as_ref()
+            .filter(|_| self.small_spheres)
+            .and_then(|p| Some((p, p.prepare(device, width, height, buffers.points)?)));
         for s in 0..iterations {
             let layer = s % layers;
             let uniforms = FrameUniforms::new(
@@ -1285,6 +1291,14 @@ impl Renderer {
                 queue.write_buffer(&params, 0, bytemuck::bytes_of(&params_of(layer + 1)));
             }
             let mut enc = device.create_command_encoder(&Default::default());
+            if let Some((pass, targets)) = &small {
+                pass.reset(queue, targets);
+                let writes = timing
+                    .as_ref()
+                    .filter(|_| s == 0)
+                    .map(|t| t.compute_writes(true, false));
+                pass.raster(&mut enc, buffers, targets, writes);
+            }
             {
                 let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("sndf sample"),
@@ -1302,12 +1316,14 @@ impl Renderer {
                     }),
                     timestamp_writes: timing
                         .as_ref()
-                        .filter(|_| s == 0)
+                        .filter(|_| s == 0 && small.is_none())
                         .map(|t| t.writes(true, false)),
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
-                if buffers.points > 0 {
+                if let Some((small, targets)) = &small {
+                    small.draw_gbuffer(&mut pass, buffers, targets);
+                } else if buffers.points > 0 {
                     pass.set_pipeline(&self.sphere.gbuffer);
                     pass.set_bind_group(0, &buffers.bind_group, &[]);
                     pass.draw(0..4, 0..buffers.points);

@@ -1664,6 +1664,16 @@ fn a_hidden_species_leaves_the_picture_of_the_data_without_it() {
     assert!(differing(&hidden, &without) < 0.002);
 }
 
+/// A renderer that draws every sphere as an impostor quad.
+fn quads_renderer() -> &'static Renderer {
+    static R: OnceLock<Renderer> = OnceLock::new();
+    R.get_or_init(|| {
+        let mut r = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+        assert!(!r.set_small_sphere_raster(false));
+        r
+    })
+}
+
 /// The compute raster of small spheres draws what impostor quads draw: the same pixels
 /// and depths up to rounding on silhouettes, in perspective and orthographic views, with
 /// one and with several jittered samples, and it hands the spheres too large for it to
@@ -1681,8 +1691,7 @@ fn small_sphere_raster_draws_what_impostor_quads_draw() {
         eprintln!("the small-sphere raster is off on this device: nothing to compare");
         return;
     }
-    let mut quads = Renderer::new(GpuContext::with_backends(backends()).unwrap());
-    assert!(!quads.set_small_sphere_raster(false));
+    let quads = quads_renderer();
     let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
     let (w, h) = (200, 150);
     for (zoom, projection, spp) in [
@@ -1746,4 +1755,41 @@ fn small_sphere_raster_draws_what_impostor_quads_draw() {
             .count();
         assert!(deeper * 1000 <= pixels, "{case}: {deeper} depths differ");
     }
+}
+
+/// S-NDFs sampled through the compute raster of small spheres hold what those sampled
+/// through impostor quads hold: the same samples in the same bins, up to a few
+/// silhouette rays.
+#[test]
+fn small_sphere_raster_samples_the_sndfs_impostor_quads_sample() {
+    if !renderer().small_sphere_raster() {
+        eprintln!("the small-sphere raster is off on this device: nothing to compare");
+        return;
+    }
+    let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
+    let (w, h) = (120u32, 90u32);
+    let camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
+    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
+    let settings = mdlod_render::sndf::SndfSettings {
+        width: w,
+        height: h,
+        iterations: 8,
+        bins: 4,
+        binning: Default::default(),
+    };
+    let small = renderer()
+        .sample_sndf(&f, &camera, &draw, &settings)
+        .unwrap();
+    let quads = quads_renderer()
+        .sample_sndf(&f, &camera, &draw, &settings)
+        .unwrap();
+    let total: f64 = quads.hist.iter().map(|b| f64::from(b[3])).sum();
+    assert!(total > f64::from(w * h * 8) * 0.25, "{total} samples");
+    let moved: f64 = small
+        .hist
+        .iter()
+        .zip(&quads.hist)
+        .map(|(a, b)| f64::from((a[3] - b[3]).abs()))
+        .sum();
+    assert!(moved <= total * 2e-3, "{moved} of {total} samples differ");
 }

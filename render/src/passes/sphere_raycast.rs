@@ -7,7 +7,23 @@
 //! node's radius and colour (representatives), one [`RangeGpu`] per range (base, scale,
 //! offsets into the other arrays) and one range index per point. The pass draws
 //! `points` instances of a 4-vertex strip in a single call (measured faster on an H200
-//! than 6 non-instanced vertices per point); see the WGSL for the shading. The `#[repr(C)]` structs here mirror the WGSL structs field for field.
+//! than 6 non-instanced vertices per point); see the WGSL for the shading. The
+//! `#[repr(C)]` structs here mirror the WGSL structs field for field.
+//!
+//! Small spheres ([`SmallSpheres`], `small_spheres.wgsl`), where the device has 64-bit
+//! atomics: a sphere a pixel or two wide costs a rasterizer two triangles and a quad of
+//! fragments for one or two pixels, and in a dense data set seen whole almost every
+//! sphere is that small. Each sample of a sphere frame then starts with a compute pass,
+//! one invocation per point: a sphere whose screen box spans at most
+//! [`SMALL_SPHERE_MAX_SIDE`] pixel centres each way traces the rays of those centres and
+//! offers `(entry depth, point index)` to each pixel it covers, by a 64-bit atomic maximum
+//! of the key's complement (the nearest entry wins, ties to the lower index, so the
+//! result does not depend on the order the invocations run in). A sphere larger than
+//! that, or reaching the near or far plane, is appended to a list whose length is the
+//! instance count of an indirect draw. The render pass then draws a full-screen triangle
+//! that shades each pixel's winner and writes its depth (`fs_resolve`), and the listed
+//! spheres as impostors against that depth (`vs_listed`). The rays and the shading are
+//! those of the impostors, so the two paths agree up to rounding on silhouettes (tested).
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
@@ -522,6 +538,9 @@ pub struct SmallSpheres {
     raster: wgpu::ComputePipeline,
     resolve: wgpu::RenderPipeline,
     listed: wgpu::RenderPipeline,
+    /// The same into the S-NDF sampling's G-buffer (normal, albedo).
+    resolve_gbuffer: wgpu::RenderPipeline,
+    listed_gbuffer: wgpu::RenderPipeline,
     raster_layout: wgpu::BindGroupLayout,
     draw_layout: wgpu::BindGroupLayout,
 }
@@ -810,9 +829,24 @@ impl SmallSpheres {
             bind_group_layouts: &[Some(points_layout), Some(&draw_layout)],
             immediate_size: 0,
         });
-        let make = |label: &str, vertex: &str, fragment: &str, strip: bool| {
+        let colour = [Some(wgpu::ColorTargetState {
+            format: COLOUR_FORMAT,
+            blend: None,
+            write_mask: wgpu::ColorWrites::ALL,
+        })];
+        let gbuffer = [GBUFFER_FORMAT; 2].map(|format| {
+            Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })
+        });
+        let make = |vertex: &str,
+                    fragment: &str,
+                    strip: bool,
+                    targets: &[Option<wgpu::ColorTargetState>]| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
+                label: Some(fragment),
                 layout: Some(&draw_pipeline_layout),
                 vertex: wgpu::VertexState {
                     module: sphere_module,
@@ -840,11 +874,7 @@ impl SmallSpheres {
                     module: sphere_module,
                     entry_point: Some(fragment),
                     compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: COLOUR_FORMAT,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
+                    targets,
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -852,8 +882,10 @@ impl SmallSpheres {
         };
         SmallSpheres {
             raster,
-            resolve: make("fs_resolve", "vs_fullscreen", "fs_resolve", false),
-            listed: make("vs_listed", "vs_listed", "fs_main", true),
+            resolve: make("vs_fullscreen", "fs_resolve", false, &colour),
+            listed: make("vs_listed", "fs_main", true, &colour),
+            resolve_gbuffer: make("vs_fullscreen", "fs_resolve_gbuffer", false, &gbuffer),
+            listed_gbuffer: make("vs_listed", "fs_gbuffer", true, &gbuffer),
             raster_layout,
             draw_layout,
         }
@@ -980,6 +1012,21 @@ impl SmallSpheres {
         pass.set_pipeline(&self.resolve);
         pass.draw(0..3, 0..1);
         pass.set_pipeline(&self.listed);
+        pass.draw_indirect(&targets.args, 0);
+    }
+
+    /// [`Self::draw`] into the S-NDF sampling's G-buffer (normal, albedo).
+    pub fn draw_gbuffer(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        buffers: &SphereBuffers,
+        targets: &SmallSphereTargets,
+    ) {
+        pass.set_bind_group(0, &buffers.bind_group, &[]);
+        pass.set_bind_group(1, &targets.draw_group, &[]);
+        pass.set_pipeline(&self.resolve_gbuffer);
+        pass.draw(0..3, 0..1);
+        pass.set_pipeline(&self.listed_gbuffer);
         pass.draw_indirect(&targets.args, 0);
     }
 }

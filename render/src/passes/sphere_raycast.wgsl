@@ -160,9 +160,16 @@ fn vs_fullscreen(@builtin(vertex_index) vi: u32) -> @builtin(position) vec4<f32>
     return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
 }
 
-// The pixel's nearest small sphere (the compute raster's winner), shaded, at its depth.
-@fragment
-fn fs_resolve(@builtin(position) pos: vec4<f32>) -> FsOut {
+// The pixel's nearest small sphere (the compute raster's winner): its unit normal, the
+// unit vector towards the eye, its albedo and its depth; a discard where there is none.
+struct Resolved {
+    normal: vec3<f32>,
+    towards_eye: vec3<f32>,
+    albedo: vec3<f32>,
+    depth: f32,
+};
+
+fn resolve_pixel(pos: vec4<f32>) -> Resolved {
     let v = visible_words[u32(pos.y) * raster.size.x + u32(pos.x)];
     if v.x == 0u && v.y == 0u {
         discard;
@@ -174,9 +181,21 @@ fn fs_resolve(@builtin(position) pos: vec4<f32>) -> FsOut {
     // closest approach stands in for it).
     let h = ray_sphere(ray, c, pt.radius);
     let hit = ray.origin + h.x * ray.dir;
+    var r: Resolved;
+    r.normal = normalize(hit - c);
+    r.towards_eye = -ray.dir;
+    r.albedo = pt.albedo;
+    r.depth = clamp(ndc_depth(hit), 0.0, 1.0);
+    return r;
+}
+
+// The pixel's nearest small sphere, shaded, at its depth.
+@fragment
+fn fs_resolve(@builtin(position) pos: vec4<f32>) -> FsOut {
+    let r = resolve_pixel(pos);
     var out: FsOut;
-    out.colour = vec4<f32>(shade(normalize(hit - c), -ray.dir, pt.albedo), 1.0);
-    out.depth = clamp(ndc_depth(hit), 0.0, 1.0);
+    out.colour = vec4<f32>(shade(r.normal, r.towards_eye, r.albedo), 1.0);
+    out.depth = r.depth;
     return out;
 }
 
@@ -194,5 +213,16 @@ fn fs_gbuffer(in: VsOut) -> GBufferOut {
     out.normal = vec4<f32>(hit.normal, 1.0);
     out.albedo = vec4<f32>(in.albedo, 1.0);
     out.depth = hit_depth(in, hit);
+    return out;
+}
+
+// S-NDF sampling of the pixel's nearest small sphere.
+@fragment
+fn fs_resolve_gbuffer(@builtin(position) pos: vec4<f32>) -> GBufferOut {
+    let r = resolve_pixel(pos);
+    var out: GBufferOut;
+    out.normal = vec4<f32>(r.normal, 1.0);
+    out.albedo = vec4<f32>(r.albedo, 1.0);
+    out.depth = r.depth;
     return out;
 }
