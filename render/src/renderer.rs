@@ -21,7 +21,7 @@ use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
 use crate::passes::sphere_raycast::{
     FrameUniforms, Lighting, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT, DEPTH_FORMAT,
 };
-use crate::passes::sphere_raycast::{PackStyle, GBUFFER_FORMAT};
+use crate::passes::sphere_raycast::{PackStyle, SmallSphereTargets, SmallSpheres, GBUFFER_FORMAT};
 use crate::passes::splat::{SplatPass, HDR_FORMAT};
 use crate::sndf::{
     shade_table, AccumulateParams, ShadeLights, ShadeParams, Sndf, SndfPass, SndfSettings,
@@ -412,6 +412,8 @@ pub struct Renderer {
     /// Sphere frames draw spheres a few pixels wide with the compute raster
     /// (`small_spheres.wgsl`) where the device has it.
     small_spheres: bool,
+    /// That raster's buffers, kept between frames.
+    small_targets: std::sync::Mutex<Option<SmallSphereTargets>>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -563,6 +565,28 @@ impl Renderer {
             points_sampled: Default::default(),
             density_hint: Default::default(),
             small_spheres,
+            small_targets: Default::default(),
+        }
+    }
+
+    /// The small-sphere raster and its buffers for a frame of `points` points at
+    /// `size`, when it is on and they fit (the buffers kept from an earlier frame when
+    /// large enough); give them back with [`Self::keep_small_targets`].
+    fn small_targets(
+        &self,
+        size: [u32; 2],
+        points: u32,
+    ) -> Option<(&SmallSpheres, SmallSphereTargets)> {
+        let pass = self.sphere.small.as_ref().filter(|_| self.small_spheres)?;
+        let kept = self.small_targets.lock().ok().and_then(|mut k| k.take());
+        let targets = pass.prepare(&self.ctx.device, &self.ctx.queue, size, points, kept)?;
+        Some((pass, targets))
+    }
+
+    /// Keeps a frame's small-sphere buffers for the next frame.
+    fn keep_small_targets(&self, small: Option<(&SmallSpheres, SmallSphereTargets)>) {
+        if let (Some((_, targets)), Ok(mut kept)) = (small, self.small_targets.lock()) {
+            *kept = Some(targets);
         }
     }
 
@@ -723,12 +747,7 @@ impl Renderer {
             )
         });
         let timing = self.frame_timer();
-        let small = self
-            .sphere
-            .small
-            .as_ref()
-            .filter(|_| self.small_spheres)
-            .and_then(|p| Some((p, p.prepare(device, w, h, buffers.points)?)));
+        let small = self.small_targets([w, h], buffers.points);
         let args_readback = small
             .as_ref()
             .map(|_| readback_buffer(device, "impostor count readback", 16));
@@ -896,6 +915,8 @@ impl Renderer {
         let gpu_target_bytes =
             u64::from(w) * u64::from(h) * (4 + 4 + 8 + 4) + u64::from(colour_row) * u64::from(h);
         self.count_samples(buffers.points, settings.spp);
+        let small_bytes = small.as_ref().map_or(0, |(_, targets)| targets.bytes());
+        self.keep_small_targets(small);
         Ok(RenderedFrame {
             image,
             depth,
@@ -903,8 +924,7 @@ impl Renderer {
             points: buffers.points,
             impostors,
             gpu_data_bytes: 0,
-            gpu_target_bytes: gpu_target_bytes
-                + small.as_ref().map_or(0, |(_, targets)| targets.bytes()),
+            gpu_target_bytes: gpu_target_bytes + small_bytes,
         })
     }
 
@@ -1263,12 +1283,7 @@ impl Renderer {
             },
         };
         let timing = self.frame_timer();
-        let small = self
-            .sphere
-            .small
-            .as_ref()
-            .filter(|_| self.small_spheres)
-            .and_then(|p| Some((p, p.prepare(device, width, height, buffers.points)?)));
+        let small = self.small_targets([width, height], buffers.points);
         for s in 0..iterations {
             let layer = s % layers;
             let uniforms = FrameUniforms::new(
@@ -1348,6 +1363,7 @@ impl Renderer {
             }
             queue.submit([enc.finish()]);
         }
+        self.keep_small_targets(small);
         let gpu_time = self.gpu_time(timing.as_ref())?;
         self.count_samples(buffers.points, iterations);
         Ok(gpu_time)

@@ -547,12 +547,15 @@ pub struct SmallSpheres {
 
 /// One frame's buffers of the small-sphere raster (see [`SmallSpheres::prepare`]).
 pub struct SmallSphereTargets {
+    uniforms: wgpu::Buffer,
     visible: wgpu::Buffer,
+    large: wgpu::Buffer,
     args: wgpu::Buffer,
     raster_group: wgpu::BindGroup,
     draw_group: wgpu::BindGroup,
+    /// This frame's dispatch and the bytes of `visible` its image uses.
     groups: [u32; 2],
-    bytes: u64,
+    visible_bytes: u64,
 }
 
 /// The storage buffers the pass reads (see the WGSL bindings 1 to 5).
@@ -893,20 +896,23 @@ impl SmallSpheres {
 
     /// The buffers for drawing `points` points into a `width` × `height` image, or
     /// `None` when a per-pixel buffer of 8 bytes or the list of points would not fit one
-    /// storage binding on this device (the impostors then draw every point).
+    /// storage binding on this device (the impostors then draw every point). `reuse`,
+    /// the buffers of an earlier frame, are kept when they are large enough (a frame
+    /// costs no allocation then; the renderer keeps one set between frames).
     pub fn prepare(
         &self,
         device: &wgpu::Device,
-        width: u32,
-        height: u32,
+        queue: &wgpu::Queue,
+        [width, height]: [u32; 2],
         points: u32,
+        reuse: Option<SmallSphereTargets>,
     ) -> Option<SmallSphereTargets> {
         let limits = device.limits();
         let max = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
         let visible_bytes = u64::from(width) * u64::from(height) * 8;
-        let large_bytes = u64::from(points.max(1)) * 4;
+        let large_bytes = u64::from(points) * 4;
         if points == 0 || visible_bytes > max || large_bytes > max {
             return None;
         }
@@ -923,27 +929,53 @@ impl SmallSpheres {
             row: per_row * 64,
             pad: [0; 3],
         };
-        use wgpu::util::DeviceExt;
-        let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("small spheres: uniforms"),
-            contents: bytemuck::bytes_of(&uniforms),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let mut targets = match reuse {
+            Some(t) if t.visible.size() >= visible_bytes && t.large.size() >= large_bytes => t,
+            _ => {
+                // Room for a little more than asked, so that growing cuts and views
+                // settle on one set of buffers.
+                let grow = |bytes: u64| bytes.saturating_add(bytes / 4).min(max);
+                self.allocate(device, grow(visible_bytes), grow(large_bytes))
+            }
+        };
+        queue.write_buffer(&targets.uniforms, 0, bytemuck::bytes_of(&uniforms));
+        targets.groups = [per_row, rows];
+        targets.visible_bytes = visible_bytes;
+        Some(targets)
+    }
+
+    fn allocate(
+        &self,
+        device: &wgpu::Device,
+        visible_bytes: u64,
+        large_bytes: u64,
+    ) -> SmallSphereTargets {
+        // Whole 8-byte pixels and 4-byte points.
+        let (visible_bytes, large_bytes) = (visible_bytes & !7, large_bytes & !3);
         let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
-                usage: wgpu::BufferUsages::STORAGE | usage,
+                usage,
                 mapped_at_creation: false,
             })
         };
         use wgpu::BufferUsages as U;
-        let visible = buffer("small spheres: visible", visible_bytes, U::COPY_DST);
-        let large = buffer("small spheres: impostors", large_bytes, U::empty());
+        let uniforms = buffer(
+            "small spheres: uniforms",
+            std::mem::size_of::<RasterUniforms>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+        let visible = buffer(
+            "small spheres: visible",
+            visible_bytes,
+            U::STORAGE | U::COPY_DST,
+        );
+        let large = buffer("small spheres: impostors", large_bytes, U::STORAGE);
         let args = buffer(
             "small spheres: draw",
             16,
-            U::INDIRECT | U::COPY_DST | U::COPY_SRC,
+            U::STORAGE | U::INDIRECT | U::COPY_DST | U::COPY_SRC,
         );
         let group = |layout: &wgpu::BindGroupLayout, buffers: &[&wgpu::Buffer]| {
             let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
@@ -962,14 +994,16 @@ impl SmallSpheres {
         };
         let raster_group = group(&self.raster_layout, &[&uniforms, &visible, &large, &args]);
         let draw_group = group(&self.draw_layout, &[&uniforms, &visible, &large]);
-        Some(SmallSphereTargets {
+        SmallSphereTargets {
+            uniforms,
             visible,
+            large,
             args,
             raster_group,
             draw_group,
-            groups: [per_row, rows],
-            bytes: visible_bytes + large_bytes + 16 + std::mem::size_of::<RasterUniforms>() as u64,
-        })
+            groups: [0, 0],
+            visible_bytes: 0,
+        }
     }
 
     /// Records the raster of one sample into `enc` (after `reset`, in a compute pass
@@ -982,7 +1016,7 @@ impl SmallSpheres {
         targets: &SmallSphereTargets,
         timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
     ) {
-        enc.clear_buffer(&targets.visible, 0, None);
+        enc.clear_buffer(&targets.visible, 0, Some(targets.visible_bytes));
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("small spheres"),
             timestamp_writes: timestamps,
@@ -1034,7 +1068,7 @@ impl SmallSpheres {
 impl SmallSphereTargets {
     /// Bytes of GPU memory the targets hold.
     pub fn bytes(&self) -> u64 {
-        self.bytes
+        self.uniforms.size() + self.visible.size() + self.large.size() + self.args.size()
     }
 
     /// Copies the impostors' indirect draw (4 words; the second is their count) to
