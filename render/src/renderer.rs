@@ -21,7 +21,9 @@ use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
 use crate::passes::sphere_raycast::{
     FrameUniforms, Lighting, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT, DEPTH_FORMAT,
 };
-use crate::passes::sphere_raycast::{PackStyle, SmallSphereTargets, SmallSpheres, GBUFFER_FORMAT};
+use crate::passes::sphere_raycast::{
+    PackStyle, SmallSphereTargets, SmallSpheres, SphereOutput, GBUFFER_FORMAT,
+};
 use crate::passes::splat::{SplatPass, HDR_FORMAT};
 use crate::sndf::{
     shade_table, AccumulateParams, ShadeLights, ShadeParams, Sndf, SndfPass, SndfSettings,
@@ -811,7 +813,9 @@ impl Renderer {
                     multiview_mask: None,
                 });
                 match &small {
-                    Some((small, targets)) => small.draw(&mut pass, buffers, targets),
+                    Some((small, targets)) => {
+                        small.draw(&mut pass, buffers, targets, SphereOutput::Shaded)
+                    }
                     None => self.sphere.draw(&mut pass, buffers),
                 }
             }
@@ -1337,7 +1341,7 @@ impl Renderer {
                     multiview_mask: None,
                 });
                 if let Some((small, targets)) = &small {
-                    small.draw_gbuffer(&mut pass, buffers, targets);
+                    small.draw(&mut pass, buffers, targets, SphereOutput::GBuffer);
                 } else if buffers.points > 0 {
                     pass.set_pipeline(&self.sphere.gbuffer);
                     pass.set_bind_group(0, &buffers.bind_group, &[]);

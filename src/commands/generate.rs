@@ -5,7 +5,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use mdlod_datasets::{write_lammps_dump_to_path, GenerateOptions, Kind};
+use mdlod_datasets::{write_lammps_dump, write_xyz, GenerateOptions, Kind};
 
 /// Write deterministic MD-like particle data as a LAMMPS text dump (or extended XYZ, or raw
 /// arrays): an FCC copper slab
@@ -49,7 +49,7 @@ pub fn run(args: Args) -> Result<()> {
     opts.frames = args.frames;
     let summary = match args.format {
         OutputFormat::Lammps => generate(&opts, &args.output)?,
-        OutputFormat::Xyz => generate_xyz(&opts, &args.output)?,
+        OutputFormat::Xyz => generate_text(&opts, &args.output, OutputFormat::Xyz)?,
         OutputFormat::Raw => generate_raw(&opts, &args.output)?,
     };
     println!(
@@ -115,37 +115,30 @@ pub fn generate(
     opts: &GenerateOptions,
     output: &std::path::Path,
 ) -> Result<mdlod_datasets::Summary> {
-    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    }
-    let bar = bar(opts.particles * u64::from(opts.frames));
-    let summary = write_lammps_dump_to_path(opts, output, |n| {
-        if let Some(b) = &bar {
-            b.set_position(n);
-        }
-    })
-    .with_context(|| format!("cannot write {}", output.display()))?;
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    Ok(summary)
+    generate_text(opts, output, OutputFormat::Lammps)
 }
 
-fn generate_xyz(
+/// A LAMMPS text dump or extended XYZ at `output`, with a progress bar on a terminal.
+fn generate_text(
     opts: &GenerateOptions,
     output: &std::path::Path,
+    format: OutputFormat,
 ) -> Result<mdlod_datasets::Summary> {
     if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
     let bar = bar(opts.particles * u64::from(opts.frames));
-    let mut file = std::fs::File::create(output)
-        .with_context(|| format!("cannot create {}", output.display()))?;
-    let summary = mdlod_datasets::write_xyz(opts, &mut file, |n| {
+    let progress = |n| {
         if let Some(b) = &bar {
             b.set_position(n);
         }
-    })
+    };
+    let mut file = std::fs::File::create(output)
+        .with_context(|| format!("cannot create {}", output.display()))?;
+    let summary = match format {
+        OutputFormat::Xyz => write_xyz(opts, &mut file, progress),
+        _ => write_lammps_dump(opts, &mut file, progress),
+    }
     .with_context(|| format!("cannot write {}", output.display()))?;
     if let Some(b) = bar {
         b.finish_and_clear();

@@ -1034,35 +1034,33 @@ impl SmallSpheres {
     }
 
     /// Draws the raster's pixels, then the spheres it left to the impostors, into
-    /// `pass` (whose targets are the sphere pass's).
+    /// `pass`, whose targets are the sphere pass's (`Shaded`) or the S-NDF sampling's
+    /// G-buffer (`GBuffer`: normal, albedo).
     pub fn draw(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         buffers: &SphereBuffers,
         targets: &SmallSphereTargets,
+        output: SphereOutput,
     ) {
+        let (resolve, listed) = match output {
+            SphereOutput::Shaded => (&self.resolve, &self.listed),
+            SphereOutput::GBuffer => (&self.resolve_gbuffer, &self.listed_gbuffer),
+        };
         pass.set_bind_group(0, &buffers.bind_group, &[]);
         pass.set_bind_group(1, &targets.draw_group, &[]);
-        pass.set_pipeline(&self.resolve);
+        pass.set_pipeline(resolve);
         pass.draw(0..3, 0..1);
-        pass.set_pipeline(&self.listed);
+        pass.set_pipeline(listed);
         pass.draw_indirect(&targets.args, 0);
     }
+}
 
-    /// [`Self::draw`] into the S-NDF sampling's G-buffer (normal, albedo).
-    pub fn draw_gbuffer(
-        &self,
-        pass: &mut wgpu::RenderPass<'_>,
-        buffers: &SphereBuffers,
-        targets: &SmallSphereTargets,
-    ) {
-        pass.set_bind_group(0, &buffers.bind_group, &[]);
-        pass.set_bind_group(1, &targets.draw_group, &[]);
-        pass.set_pipeline(&self.resolve_gbuffer);
-        pass.draw(0..3, 0..1);
-        pass.set_pipeline(&self.listed_gbuffer);
-        pass.draw_indirect(&targets.args, 0);
-    }
+/// What the sphere pass writes: shaded colour, or the S-NDF sampling's G-buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SphereOutput {
+    Shaded,
+    GBuffer,
 }
 
 impl SmallSphereTargets {
