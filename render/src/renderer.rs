@@ -733,7 +733,12 @@ impl Renderer {
         let add_bg = self
             .accumulate
             .bind(device, &sample_v, 1.0 / settings.spp as f32);
-        let resolve_bg = self.accumulate.bind(device, &accum_v, 1.0);
+        // One sample needs no sum: the resolve reads it directly (the same values, one
+        // full-screen pass fewer).
+        let single = settings.spp == 1;
+        let resolve_bg =
+            self.accumulate
+                .bind(device, if single { &sample_v } else { &accum_v }, 1.0);
 
         let colour_row = padded_row(w * 4);
         let readback = readback_buffer(
@@ -819,7 +824,7 @@ impl Renderer {
                     None => self.sphere.draw(&mut pass, buffers),
                 }
             }
-            {
+            if !single {
                 let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("accumulate"),
                     color_attachments: &[Some(wgpu::RenderPassColorAttachment {
