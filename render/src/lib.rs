@@ -12,9 +12,10 @@
 //!    pyramid, in tiles of the image on every core, so no visible pixel changes). The
 //!    result is a list of contiguous point ranges.
 //! 4. [`passes::sphere_raycast`] uploads those ranges' raw quantized positions and draws
-//!    one ray-cast, depth-correct sphere per point, decoding positions on the GPU;
-//!    [`renderer`] runs it once per sample (jittered supersampling), averages and reads
-//!    back an RGBA8 [`image::RgbaImage`].
+//!    one ray-cast, depth-correct sphere per point, decoding positions on the GPU (spheres
+//!    up to 8×8 pixels by a compute raster where the device has 64-bit atomics, the
+//!    others as impostor quads); [`renderer`] runs it once per sample (jittered
+//!    supersampling), averages and reads back an RGBA8 [`image::RgbaImage`].
 //!
 //! The other modes draw the same cut differently: [`passes::splat`] as additive or
 //! sorted translucent splats, [`sndf`] as screen-space normal distributions shaded
