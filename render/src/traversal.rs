@@ -749,11 +749,18 @@ fn front_to_back(
 
     // Nearest first (ties by id), with whether the node's box lies wholly inside the
     // frustum (then its descendants' boxes do too and are not tested).
-    let mut heap: BinaryHeap<Reverse<(u64, bool)>> = BinaryHeap::new();
-    heap.push(Reverse((
-        depth_key(proj.near_depth(&nodes[0]), 0),
+    // The flag rides in the key's bit above the id when ids leave it free (files of fewer
+    // than 2^31 nodes; larger ones test every node against the frustum).
+    let inside_bit: u64 = if nodes.len() <= 1 << 31 { 1 << 31 } else { 0 };
+    let entry = |depth: f32, id: u32, inside: bool| {
+        Reverse(depth_key(depth, id) | if inside { inside_bit } else { 0 })
+    };
+    let mut heap: BinaryHeap<Reverse<u64>> = BinaryHeap::new();
+    heap.push(entry(
+        proj.near_depth(&nodes[0]),
+        0,
         proj.frustum(&nodes[0]) == Some(true),
-    )));
+    ));
     // The visible children of the node being considered: (index on their level,
     // projected size, representative radius, wholly inside the frustum), computed once
     // for the node's own test and for committing or queueing them.
@@ -761,8 +768,9 @@ fn front_to_back(
     let mut committed: u64 = 0;
     let mut reported: u64 = 0;
     let mut achieved = 0.0f32;
-    while let Some(Reverse((key, inside))) = heap.pop() {
-        let id = key as u32;
+    while let Some(Reverse(key)) = heap.pop() {
+        let inside = key & inside_bit != 0;
+        let id = (key & !inside_bit) as u32;
         if let Some(shared) = shared {
             if committed - reported >= SHARED_BATCH {
                 if !shared.add(committed - reported) {
@@ -832,10 +840,7 @@ fn front_to_back(
                 let cid = first + c as usize;
                 let cn = &nodes[cid];
                 if csize > error_px {
-                    heap.push(Reverse((
-                        depth_key(proj.near_depth(cn), cid as u32),
-                        within,
-                    )));
+                    heap.push(entry(proj.near_depth(cn), cid as u32, within));
                     continue;
                 }
                 // The one sphere drawn for it, as the GPU decodes it (grown by the
