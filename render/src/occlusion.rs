@@ -222,16 +222,16 @@ impl OcclusionBuffer {
         match self.mode {
             OcclusionMode::Off => {}
             OcclusionMode::PixelCentres => {
-                let j0 = (cy - rho - 0.5).ceil().max(0.0);
-                let j1 = (cy + rho - 0.5).floor().min(h - 1.0);
+                let j0 = ceil_px(cy - rho - 0.5).max(0.0);
+                let j1 = floor_px(cy + rho - 0.5).min(h - 1.0);
                 let mut j = j0;
                 while j <= j1 {
                     let dy = j + 0.5 - cy;
                     let hw2 = rho2 - dy * dy;
                     if hw2 >= 0.0 {
                         let hw = hw2.sqrt();
-                        let i0 = (cx - hw - 0.5).ceil().max(0.0);
-                        let i1 = (cx + hw - 0.5).floor().min(w - 1.0);
+                        let i0 = ceil_px(cx - hw - 0.5).max(0.0);
+                        let i1 = floor_px(cx + hw - 0.5).min(w - 1.0);
                         let mut i = i0;
                         while i <= i1 {
                             let dx = i + 0.5 - cx;
@@ -243,16 +243,16 @@ impl OcclusionBuffer {
                 }
             }
             OcclusionMode::WholePixels => {
-                let j0 = (cy - rho).ceil().max(0.0);
-                let j1 = ((cy + rho).floor() - 1.0).min(h - 1.0);
+                let j0 = ceil_px(cy - rho).max(0.0);
+                let j1 = (floor_px(cy + rho) - 1.0).min(h - 1.0);
                 let mut j = j0;
                 while j <= j1 {
                     let dy = (j - cy).abs().max((j + 1.0 - cy).abs());
                     let hw2 = rho2 - dy * dy;
                     if hw2 >= 0.0 {
                         let hw = hw2.sqrt();
-                        let i0 = (cx - hw).ceil().max(0.0);
-                        let i1 = ((cx + hw).floor() - 1.0).min(w - 1.0);
+                        let i0 = ceil_px(cx - hw).max(0.0);
+                        let i1 = (floor_px(cx + hw) - 1.0).min(w - 1.0);
                         let mut i = i0;
                         while i <= i1 {
                             let dx = (i - cx).abs().max((i + 1.0 - cx).abs());
@@ -431,10 +431,10 @@ impl OcclusionBuffer {
             return false;
         }
         let (w, h) = (self.width as f32, self.height as f32);
-        let px0 = (x0 - RECT_GROW_PX - 0.5).ceil().max(0.0);
-        let py0 = (y0 - RECT_GROW_PX - 0.5).ceil().max(0.0);
-        let px1 = (x1 + RECT_GROW_PX - 0.5).floor().min(w - 1.0);
-        let py1 = (y1 + RECT_GROW_PX - 0.5).floor().min(h - 1.0);
+        let px0 = ceil_px(x0 - RECT_GROW_PX - 0.5).max(0.0);
+        let py0 = ceil_px(y0 - RECT_GROW_PX - 0.5).max(0.0);
+        let px1 = floor_px(x1 + RECT_GROW_PX - 0.5).min(w - 1.0);
+        let py1 = floor_px(y1 + RECT_GROW_PX - 0.5).min(h - 1.0);
         let p = &self.clip_from_view;
         let (sx, sy) = (p.x_axis.x, p.y_axis.y);
         let perspective = self.camera.projection == Projection::Perspective;
@@ -487,7 +487,8 @@ impl OcclusionBuffer {
     /// True when every sample of the window inside the image rectangle `x0, y0, x1, y1`
     /// (window pixels) has a recorded bound nearer than `nearest`, or when there is none.
     fn rect_hidden(&self, nearest: f32, [x0, y0, x1, y1]: [f32; 4]) -> bool {
-        if !(nearest.is_finite() && x0.is_finite() && y0.is_finite()) {
+        if !(nearest.is_finite() && x0.is_finite() && y0.is_finite()) || x1.is_nan() || y1.is_nan()
+        {
             return false;
         }
         let (x0, y0, x1, y1) = (
@@ -499,12 +500,12 @@ impl OcclusionBuffer {
         // Pixels whose samples can fall inside the rectangle.
         let (px0, py0, px1, py1) = match self.mode {
             OcclusionMode::PixelCentres => (
-                (x0 - 0.5).ceil(),
-                (y0 - 0.5).ceil(),
-                (x1 - 0.5).floor(),
-                (y1 - 0.5).floor(),
+                ceil_px(x0 - 0.5),
+                ceil_px(y0 - 0.5),
+                floor_px(x1 - 0.5),
+                floor_px(y1 - 0.5),
             ),
-            _ => (x0.floor(), y0.floor(), x1.floor(), y1.floor()),
+            _ => (floor_px(x0), floor_px(y0), floor_px(x1), floor_px(y1)),
         };
         let (w, h) = (self.width as f32, self.height as f32);
         let (px0, py0) = (px0.max(0.0), py0.max(0.0));
@@ -518,6 +519,31 @@ impl OcclusionBuffer {
     }
 }
 
+/// `x.floor()` for the pixel coordinates of these tests without a call into libm (the
+/// baseline x86-64 target has no rounding instruction). Exact for finite values below
+/// 2^31 in magnitude; larger ones and infinities come out at about ±2^31, which every
+/// caller clamps to the image as it did the infinities; callers keep NaN out.
+#[inline]
+fn floor_px(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
+/// `x.ceil()` likewise (see [`floor_px`]).
+#[inline]
+fn ceil_px(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t < x {
+        t + 1.0
+    } else {
+        t
+    }
+}
+
 /// Pixels per world unit at view depth `d`.
 fn rho_px_per_world(camera: &Camera, d: f32, height: u32) -> f32 {
     camera.pixels_per_world(d, height)
@@ -526,6 +552,29 @@ fn rho_px_per_world(camera: &Camera, d: f32, height: u32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The libm-free rounding agrees with `floor` and `ceil` wherever it is exact, and
+    /// lands beyond any image where it is not.
+    #[test]
+    fn pixel_rounding_matches_floor_and_ceil() {
+        let mut values = vec![
+            0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, 1e-7, -1e-7, 1279.5, -3.25,
+        ];
+        values.extend([8_388_607.5, 16_777_216.0, -16_777_217.0, 2.0e9, -2.0e9]);
+        let mut v = -300.0f32;
+        while v < 300.0 {
+            values.push(v);
+            v += 0.173;
+        }
+        for x in values {
+            assert_eq!(floor_px(x), x.floor(), "{x}");
+            assert_eq!(ceil_px(x), x.ceil(), "{x}");
+        }
+        for x in [3.0e9f32, f32::INFINITY, 1e30] {
+            assert!(floor_px(x) >= 2.0e9 && ceil_px(x) >= 2.0e9, "{x}");
+            assert!(floor_px(-x) <= -2.0e9 && ceil_px(-x) <= -2.0e9, "{x}");
+        }
+    }
     use crate::camera::Bounds;
 
     fn camera(projection: Projection) -> Camera {
