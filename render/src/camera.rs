@@ -305,14 +305,7 @@ impl Camera {
 
     /// True when the box may intersect the frustum (a conservative test).
     pub fn box_in_frustum(planes: &[Vec4; 6], min: Vec3, max: Vec3) -> bool {
-        planes.iter().all(|p| {
-            let v = Vec3::new(
-                if p.x >= 0.0 { max.x } else { min.x },
-                if p.y >= 0.0 { max.y } else { min.y },
-                if p.z >= 0.0 { max.z } else { min.z },
-            );
-            p.truncate().dot(v) + p.w >= 0.0
-        })
+        Self::box_against_frustum(planes, min, max).is_some()
     }
 }
 

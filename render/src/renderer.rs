@@ -574,7 +574,7 @@ impl Renderer {
     /// The small-sphere raster and its buffers for a frame of `points` points at
     /// `size`, when it is on and they fit (the buffers kept from an earlier frame when
     /// large enough); give them back with [`Self::keep_small_targets`].
-    fn small_targets(
+    fn take_small_targets(
         &self,
         size: [u32; 2],
         points: u32,
@@ -720,25 +720,29 @@ impl Renderer {
             U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
         );
         let depth = texture("depth", DEPTH_FORMAT, U::RENDER_ATTACHMENT | U::COPY_SRC);
-        let accum = texture(
-            "accum",
-            ACCUM_FORMAT,
-            U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
-        );
         let output = texture("output", OUTPUT_FORMAT, U::RENDER_ATTACHMENT | U::COPY_SRC);
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-        let (sample_v, depth_v, accum_v, output_v) =
-            (view(&sample), view(&depth), view(&accum), view(&output));
-
-        let add_bg = self
-            .accumulate
-            .bind(device, &sample_v, 1.0 / settings.spp as f32);
-        // One sample needs no sum: the resolve reads it directly (the same values, one
-        // full-screen pass fewer).
-        let single = settings.spp == 1;
-        let resolve_bg =
-            self.accumulate
-                .bind(device, if single { &sample_v } else { &accum_v }, 1.0);
+        let (sample_v, depth_v, output_v) = (view(&sample), view(&depth), view(&output));
+        // Several samples are summed into an accumulation target with weight 1/N; one
+        // sample needs no sum, and the resolve reads it directly.
+        let accumulation = (settings.spp > 1).then(|| {
+            let accum = texture(
+                "accum",
+                ACCUM_FORMAT,
+                U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
+            );
+            let add = self
+                .accumulate
+                .bind(device, &sample_v, 1.0 / settings.spp as f32);
+            (view(&accum), add)
+        });
+        let resolve_bg = self.accumulate.bind(
+            device,
+            accumulation
+                .as_ref()
+                .map_or(&sample_v, |(accum_v, _)| accum_v),
+            1.0,
+        );
 
         let colour_row = padded_row(w * 4);
         let readback = readback_buffer(
@@ -754,10 +758,7 @@ impl Renderer {
             )
         });
         let timing = self.frame_timer();
-        let small = self.small_targets([w, h], buffers.points);
-        let args_readback = small
-            .as_ref()
-            .map(|_| readback_buffer(device, "impostor count readback", 16));
+        let small = self.take_small_targets([w, h], buffers.points);
 
         let bg = settings
             .background_srgb
@@ -778,7 +779,6 @@ impl Renderer {
             let first = s == 0;
             let last = s + 1 == settings.spp;
             if let Some((pass, targets)) = &small {
-                pass.reset(queue, targets);
                 let writes = timing
                     .as_ref()
                     .filter(|_| first)
@@ -824,11 +824,11 @@ impl Renderer {
                     None => self.sphere.draw(&mut pass, buffers),
                 }
             }
-            if !single {
+            if let Some((accum_v, add_bg)) = &accumulation {
                 let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("accumulate"),
                     color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &accum_v,
+                        view: accum_v,
                         depth_slice: None,
                         resolve_target: None,
                         ops: wgpu::Operations {
@@ -846,7 +846,7 @@ impl Renderer {
                     multiview_mask: None,
                 });
                 pass.set_pipeline(&self.accumulate.accumulate);
-                pass.set_bind_group(0, &add_bg, &[]);
+                pass.set_bind_group(0, add_bg, &[]);
                 pass.draw(0..3, 0..1);
             }
             if last {
@@ -892,8 +892,8 @@ impl Renderer {
                 if let Some(t) = &timing {
                     t.resolve(&mut enc);
                 }
-                if let (Some((_, targets)), Some(buf)) = (&small, &args_readback) {
-                    targets.copy_draw_args(&mut enc, buf);
+                if let Some((_, targets)) = &small {
+                    targets.copy_draw_args(&mut enc);
                 }
             }
             queue.submit([enc.finish()]);
@@ -912,17 +912,21 @@ impl Renderer {
             }
             None => None,
         };
-        let impostors = match &args_readback {
-            Some(buf) => {
-                let words: Vec<u32> = bytemuck::pod_collect_to_vec(&self.read_buffer(buf)?);
-                words.get(1).copied()
+        let impostors = match &small {
+            Some((_, targets)) => {
+                let read = self.read_buffer(targets.draw_args_readback())?;
+                bytemuck::pod_collect_to_vec::<u8, u32>(&read)
+                    .get(1)
+                    .copied()
             }
             None => None,
         };
         let gpu_time = self.gpu_time(timing.as_ref())?;
-        // sample (RGBA8) + depth (f32) + accumulation (RGBA16F) + output (RGBA8) + readback.
+        // sample (RGBA8) + depth (f32) + accumulation (RGBA16F, several samples) + output
+        // (RGBA8) + readback.
+        let per_pixel = 4 + 4 + if accumulation.is_some() { 8 } else { 0 } + 4;
         let gpu_target_bytes =
-            u64::from(w) * u64::from(h) * (4 + 4 + 8 + 4) + u64::from(colour_row) * u64::from(h);
+            u64::from(w) * u64::from(h) * per_pixel + u64::from(colour_row) * u64::from(h);
         self.count_samples(buffers.points, settings.spp);
         let small_bytes = small.as_ref().map_or(0, |(_, targets)| targets.bytes());
         self.keep_small_targets(small);
@@ -1292,7 +1296,7 @@ impl Renderer {
             },
         };
         let timing = self.frame_timer();
-        let small = self.small_targets([width, height], buffers.points);
+        let small = self.take_small_targets([width, height], buffers.points);
         for s in 0..iterations {
             let layer = s % layers;
             let uniforms = FrameUniforms::new(
@@ -1316,7 +1320,6 @@ impl Renderer {
             }
             let mut enc = device.create_command_encoder(&Default::default());
             if let Some((pass, targets)) = &small {
-                pass.reset(queue, targets);
                 let writes = timing
                     .as_ref()
                     .filter(|_| s == 0)

@@ -747,10 +747,10 @@ fn front_to_back(
         (Vec3::from(p), representative_radius(n))
     };
 
-    // Nearest first (ties by id), with whether the node's box lies wholly inside the
-    // frustum (then its descendants' boxes do too and are not tested).
-    // The flag rides in the key's bit above the id when ids leave it free (files of fewer
-    // than 2^31 nodes; larger ones test every node against the frustum).
+    // Nearest first (ties by id), each with whether its box lies wholly inside the
+    // frustum (then its descendants' boxes do too and are not tested). The flag rides in
+    // the key's bit above the id when ids leave it free (files of fewer than 2^31 nodes;
+    // larger ones test every node against the frustum).
     let inside_bit: u64 = if nodes.len() <= 1 << 31 { 1 << 31 } else { 0 };
     let entry = |depth: f32, id: u32, inside: bool| {
         Reverse(depth_key(depth, id) | if inside { inside_bit } else { 0 })

@@ -541,6 +541,8 @@ pub struct SmallSpheres {
     /// The same into the S-NDF sampling's G-buffer (normal, albedo).
     resolve_gbuffer: wgpu::RenderPipeline,
     listed_gbuffer: wgpu::RenderPipeline,
+    /// The impostors' indirect draw with no instance, copied in before each raster.
+    args_init: wgpu::Buffer,
     raster_layout: wgpu::BindGroupLayout,
     draw_layout: wgpu::BindGroupLayout,
 }
@@ -551,6 +553,7 @@ pub struct SmallSphereTargets {
     visible: wgpu::Buffer,
     large: wgpu::Buffer,
     args: wgpu::Buffer,
+    args_read: wgpu::Buffer,
     raster_group: wgpu::BindGroup,
     draw_group: wgpu::BindGroup,
     /// This frame's dispatch and the bytes of `visible` its image uses.
@@ -626,49 +629,19 @@ impl SphereRaycastPass {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let make = |entry: &str, targets: &[Option<wgpu::ColorTargetState>]| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleStrip,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
-        let target = |format| {
-            Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })
-        };
-        let pipeline = make("fs_main", &[target(COLOUR_FORMAT)]);
-        let gbuffer = make(
-            "fs_gbuffer",
-            &[target(GBUFFER_FORMAT), target(GBUFFER_FORMAT)],
+        let pipeline = sphere_pipeline(
+            device,
+            &pipeline_layout,
+            &module,
+            ("vs_main", "fs_main"),
+            &colour_targets(&[COLOUR_FORMAT]),
+        );
+        let gbuffer = sphere_pipeline(
+            device,
+            &pipeline_layout,
+            &module,
+            ("vs_main", "fs_gbuffer"),
+            &colour_targets(&[GBUFFER_FORMAT; 2]),
         );
         let small = device
             .features()
@@ -772,6 +745,61 @@ impl SphereRaycastPass {
     }
 }
 
+/// Colour targets of `formats`, written whole without blending.
+fn colour_targets(formats: &[wgpu::TextureFormat]) -> Vec<Option<wgpu::ColorTargetState>> {
+    formats
+        .iter()
+        .map(|&format| {
+            Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })
+        })
+        .collect()
+}
+
+/// A pipeline of the sphere pass: triangle strips from `(vertex, fragment)` of `module`
+/// (a point's quad, or one full-screen triangle), depth-tested and written.
+fn sphere_pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    (vertex, fragment): (&str, &str),
+    targets: &[Option<wgpu::ColorTargetState>],
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(fragment),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some(vertex),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleStrip,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(fragment),
+            compilation_options: Default::default(),
+            targets,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
 impl SmallSpheres {
     fn new(
         device: &wgpu::Device,
@@ -832,63 +860,28 @@ impl SmallSpheres {
             bind_group_layouts: &[Some(points_layout), Some(&draw_layout)],
             immediate_size: 0,
         });
-        let colour = [Some(wgpu::ColorTargetState {
-            format: COLOUR_FORMAT,
-            blend: None,
-            write_mask: wgpu::ColorWrites::ALL,
-        })];
-        let gbuffer = [GBUFFER_FORMAT; 2].map(|format| {
-            Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })
-        });
-        let make = |vertex: &str,
-                    fragment: &str,
-                    strip: bool,
-                    targets: &[Option<wgpu::ColorTargetState>]| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(fragment),
-                layout: Some(&draw_pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: sphere_module,
-                    entry_point: Some(vertex),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: if strip {
-                        wgpu::PrimitiveTopology::TriangleStrip
-                    } else {
-                        wgpu::PrimitiveTopology::TriangleList
-                    },
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: sphere_module,
-                    entry_point: Some(fragment),
-                    compilation_options: Default::default(),
-                    targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+        let make = |entries, formats: &[wgpu::TextureFormat]| {
+            sphere_pipeline(
+                device,
+                &draw_pipeline_layout,
+                sphere_module,
+                entries,
+                &colour_targets(formats),
+            )
         };
+        let (colour, gbuffer) = (&[COLOUR_FORMAT][..], &[GBUFFER_FORMAT; 2][..]);
+        use wgpu::util::DeviceExt;
         SmallSpheres {
             raster,
-            resolve: make("vs_fullscreen", "fs_resolve", false, &colour),
-            listed: make("vs_listed", "fs_main", true, &colour),
-            resolve_gbuffer: make("vs_fullscreen", "fs_resolve_gbuffer", false, &gbuffer),
-            listed_gbuffer: make("vs_listed", "fs_gbuffer", true, &gbuffer),
+            resolve: make(("vs_fullscreen", "fs_resolve"), colour),
+            listed: make(("vs_listed", "fs_main"), colour),
+            resolve_gbuffer: make(("vs_fullscreen", "fs_resolve_gbuffer"), gbuffer),
+            listed_gbuffer: make(("vs_listed", "fs_gbuffer"), gbuffer),
+            args_init: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("small spheres: empty draw"),
+                contents: bytemuck::cast_slice(&[4u32, 0, 0, 0]),
+                usage: wgpu::BufferUsages::COPY_SRC,
+            }),
             raster_layout,
             draw_layout,
         }
@@ -977,6 +970,11 @@ impl SmallSpheres {
             16,
             U::STORAGE | U::INDIRECT | U::COPY_DST | U::COPY_SRC,
         );
+        let args_read = buffer(
+            "small spheres: draw read-back",
+            16,
+            U::MAP_READ | U::COPY_DST,
+        );
         let group = |layout: &wgpu::BindGroupLayout, buffers: &[&wgpu::Buffer]| {
             let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
                 .iter()
@@ -999,6 +997,7 @@ impl SmallSpheres {
             visible,
             large,
             args,
+            args_read,
             raster_group,
             draw_group,
             groups: [0, 0],
@@ -1006,9 +1005,9 @@ impl SmallSpheres {
         }
     }
 
-    /// Records the raster of one sample into `enc` (after `reset`, in a compute pass
-    /// of its own, with `timestamps` when given); the frame uniforms of `buffers` must
-    /// hold the sample's projection.
+    /// Records the raster of one sample into `enc`: the pixels and the impostors' list
+    /// emptied, then a compute pass of its own (with `timestamps` when given); the frame
+    /// uniforms of `buffers` must hold the sample's projection.
     pub fn raster(
         &self,
         enc: &mut wgpu::CommandEncoder,
@@ -1017,6 +1016,7 @@ impl SmallSpheres {
         timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
     ) {
         enc.clear_buffer(&targets.visible, 0, Some(targets.visible_bytes));
+        enc.copy_buffer_to_buffer(&self.args_init, 0, &targets.args, 0, 16);
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("small spheres"),
             timestamp_writes: timestamps,
@@ -1025,12 +1025,6 @@ impl SmallSpheres {
         pass.set_bind_group(0, &buffers.bind_group, &[]);
         pass.set_bind_group(1, &targets.raster_group, &[]);
         pass.dispatch_workgroups(targets.groups[0], targets.groups[1], 1);
-    }
-
-    /// Sets the impostors' draw to none before a sample's raster (a queue write, so call
-    /// it before submitting the sample's commands).
-    pub fn reset(&self, queue: &wgpu::Queue, targets: &SmallSphereTargets) {
-        queue.write_buffer(&targets.args, 0, bytemuck::cast_slice(&[4u32, 0, 0, 0]));
     }
 
     /// Draws the raster's pixels, then the spheres it left to the impostors, into
@@ -1070,8 +1064,13 @@ impl SmallSphereTargets {
     }
 
     /// Copies the impostors' indirect draw (4 words; the second is their count) to
-    /// `readback` (16 bytes, `COPY_DST`).
-    pub fn copy_draw_args(&self, enc: &mut wgpu::CommandEncoder, readback: &wgpu::Buffer) {
-        enc.copy_buffer_to_buffer(&self.args, 0, readback, 0, 16);
+    /// [`Self::draw_args_readback`].
+    pub fn copy_draw_args(&self, enc: &mut wgpu::CommandEncoder) {
+        enc.copy_buffer_to_buffer(&self.args, 0, &self.args_read, 0, 16);
+    }
+
+    /// The mappable copy of the impostors' indirect draw.
+    pub fn draw_args_readback(&self) -> &wgpu::Buffer {
+        &self.args_read
     }
 }
