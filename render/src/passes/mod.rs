@@ -33,8 +33,22 @@ pub(crate) fn quad_pipeline(
     label: &str,
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
+    entries: (&str, &str),
+    targets: &[Option<wgpu::ColorTargetState>],
+) -> wgpu::RenderPipeline {
+    strip_pipeline(device, label, layout, module, entries, targets, None)
+}
+
+/// A pipeline that draws triangle strips with no vertex buffers, from `(vertex,
+/// fragment)` of `module`, with the depth state `depth` when given.
+pub(crate) fn strip_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
     (vertex, fragment): (&str, &str),
     targets: &[Option<wgpu::ColorTargetState>],
+    depth: Option<wgpu::DepthStencilState>,
 ) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(label),
@@ -55,7 +69,7 @@ pub(crate) fn quad_pipeline(
             topology: wgpu::PrimitiveTopology::TriangleStrip,
             ..Default::default()
         },
-        depth_stencil: None,
+        depth_stencil: depth,
         multisample: Default::default(),
         multiview_mask: None,
         cache: None,
