@@ -110,7 +110,7 @@ fn every_real_lammps_sample_round_trips_within_the_recorded_bound() {
                 input_counts[sp as usize] += 1;
             }
             assert_eq!(counts, input_counts, "{}", sample.file);
-            let decoded = f.decode_level(f.level_count() - 1);
+            let decoded = f.decode_level(f.level_count() - 1).unwrap();
             let bound = f.metadata().max_position_error;
             let worst = max_nearest_distance(&frame.positions, &decoded, 1.0);
             assert!(

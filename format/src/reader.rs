@@ -13,6 +13,8 @@
 use std::fs::File;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::OnceLock;
 
 use xxhash_rust::xxh3::xxh3_64;
 
@@ -81,7 +83,22 @@ pub struct MdlodFile {
     positions: Vec<Range<usize>>,
     species_range: Range<usize>,
     attribute_range: Option<Range<usize>>,
+    /// Per node level: the index in `node_blocks` of its first block.
+    block_first: Vec<usize>,
+    /// Per block of [`NODE_BLOCK`] nodes of one level: [`BLOCK_VALID`] once its records
+    /// passed their checks (every block of the levels checked on open starts so).
+    node_blocks: Vec<AtomicU8>,
+    /// The first failed check of a block checked after open.
+    node_error: OnceLock<(String, String)>,
 }
+
+/// Node records are checked in blocks of this many nodes of one level.
+pub const NODE_BLOCK: usize = 4096;
+/// The leading levels holding at most this many nodes together are checked on open;
+/// the records of the levels below them, block by block before their first use.
+pub const EAGER_NODES: u64 = 1 << 20;
+const BLOCK_UNCHECKED: u8 = 0;
+const BLOCK_VALID: u8 = 1;
 
 /// What [`MdlodFile::verify`] checked.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -96,14 +113,31 @@ pub struct VerifyReport {
 
 impl MdlodFile {
     /// Opens and validates `path`.
+    ///
+    /// The node records of the top levels (up to [`EAGER_NODES`] nodes) are checked
+    /// here; those of larger levels block by block before first use
+    /// ([`Self::check_nodes`]); [`Self::verify`] checks everything.
     pub fn open(path: impl AsRef<Path>) -> Result<MdlodFile, FormatError> {
+        Self::open_with_eager_nodes(path, EAGER_NODES)
+    }
+
+    /// [`Self::open`] checking the records of the leading levels of at most
+    /// `eager_nodes` nodes together (all of them when the file has no more) on open.
+    pub fn open_with_eager_nodes(
+        path: impl AsRef<Path>,
+        eager_nodes: u64,
+    ) -> Result<MdlodFile, FormatError> {
         let path = path.as_ref().to_path_buf();
         let file = File::open(&path).map_err(|e| FormatError::io(&path, e))?;
         let map = crate::mmap::map_file(&file).map_err(|e| FormatError::io(&path, e))?;
-        Self::from_map(path, map)
+        Self::from_map(path, map, eager_nodes)
     }
 
-    fn from_map(path: PathBuf, map: memmap2::Mmap) -> Result<MdlodFile, FormatError> {
+    fn from_map(
+        path: PathBuf,
+        map: memmap2::Mmap,
+        eager_nodes: u64,
+    ) -> Result<MdlodFile, FormatError> {
         let len = map.len() as u64;
         let corrupt = |place: &str, problem: String| FormatError::corrupt(&path, place, problem);
 
@@ -389,21 +423,56 @@ impl MdlodFile {
                 ),
             ));
         }
+        // The leading levels of at most EAGER_NODES nodes together are checked now (all
+        // of a file that small, with the table's checksum); the records of larger levels
+        // are checked block by block before they are first used (`check_nodes`), so that
+        // opening a large file reads neither its whole node table nor, for the first
+        // coarse image, more than its top.
+        // The top node is always checked: every walk starts there.
+        let mut eager_levels = 1;
+        let mut eager_total = 1u64;
+        while eager_levels < last {
+            eager_total += levels[eager_levels].point_count;
+            if eager_total > eager_nodes && node_total > eager_nodes {
+                break;
+            }
+            eager_levels += 1;
+        }
+        let all_eager = eager_levels == last;
         // The checksum runs beside the node checks (both read the whole table); its
         // error, then a misaligned table's, comes first, as if run one after another.
         let (sum, nodes) = std::thread::scope(|scope| {
-            let sum = scope.spawn(|| check_sum(ni));
+            let sum = scope.spawn(|| if all_eager { check_sum(ni) } else { Ok(()) });
             let nodes = bytemuck::try_cast_slice::<u8, NodeRecord>(&map[range(ni)])
                 .map_err(|e| corrupt(&place_of(ni, &sections[ni]), format!("misaligned: {e}")))
                 .and_then(|nodes| {
-                    validate_nodes(&path, nodes, levels, delta_n, metadata.species.len())
-                        .map(|()| nodes)
+                    validate_nodes(
+                        &path,
+                        nodes,
+                        levels,
+                        delta_n,
+                        metadata.species.len(),
+                        eager_levels,
+                    )
+                    .map(|()| nodes)
                 });
             let sum = sum.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
             (sum, nodes)
         });
         sum?;
         nodes?;
+        let mut block_first = Vec::with_capacity(last);
+        let mut node_blocks = Vec::new();
+        for (l, lv) in levels[..last].iter().enumerate() {
+            block_first.push(node_blocks.len());
+            let state = if l < eager_levels {
+                BLOCK_VALID
+            } else {
+                BLOCK_UNCHECKED
+            };
+            let blocks = (lv.point_count as usize).div_ceil(NODE_BLOCK);
+            node_blocks.extend((0..blocks).map(|_| AtomicU8::new(state)));
+        }
 
         // Per-point sections.
         let bytes_per_point = 3 * (header.position_bits as u64 / 8);
@@ -479,6 +548,9 @@ impl MdlodFile {
             positions,
             species_range,
             attribute_range,
+            block_first,
+            node_blocks,
+            node_error: OnceLock::new(),
         })
     }
 
@@ -523,9 +595,108 @@ impl MdlodFile {
     }
 
     /// All nodes, level by level; node `levels()[l].node_first + i` is point `i` of level `l`.
+    ///
+    /// The records of the levels checked on open ([`EAGER_NODES`]) are valid; the others
+    /// only once [`Self::check_nodes`] (or [`Self::check_children`] of their parent)
+    /// has passed for them: until then they are bytes of the file, which may be corrupt.
     #[inline]
     pub fn nodes(&self) -> &[NodeRecord] {
         bytemuck::cast_slice(&self.map[self.nodes_range.clone()])
+    }
+
+    /// Checks the records of nodes `range` of level `l` (indices on the level; the
+    /// finest level has no records and always passes) against the level table, their
+    /// parents and the file's species, as [`Self::open`] checks the top levels: the
+    /// blocks of [`NODE_BLOCK`] nodes holding them, each once (their ancestors' blocks
+    /// first). Safe to call from several threads. The first failure is also kept for
+    /// [`Self::node_error`].
+    pub fn check_nodes(&self, l: usize, range: Range<usize>) -> Result<(), FormatError> {
+        let levels = self.levels();
+        if l + 1 >= levels.len() {
+            return Ok(());
+        }
+        let count = levels[l].point_count as usize;
+        let (start, end) = (range.start.min(count), range.end.min(count));
+        if start >= end {
+            return Ok(());
+        }
+        for b in start / NODE_BLOCK..=(end - 1) / NODE_BLOCK {
+            if self.node_blocks[self.block_first[l] + b].load(Ordering::Acquire) != BLOCK_VALID {
+                self.check_block(l, b).map_err(|e| self.keep_error(e))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// [`Self::check_nodes`] for the children of node `id` (a checked node): what a
+    /// traversal calls before it reads them.
+    #[inline]
+    pub fn check_children(&self, id: usize) -> Result<(), FormatError> {
+        let n = &self.nodes()[id];
+        let first = n.child_first as usize;
+        self.check_nodes(
+            usize::from(n.level) + 1,
+            first..first + n.child_count as usize,
+        )
+    }
+
+    /// Checks every node record (what [`Self::open`] leaves to [`Self::check_nodes`]).
+    pub fn check_all_nodes(&self) -> Result<(), FormatError> {
+        let levels = self.levels();
+        for l in 0..levels.len() - 1 {
+            self.check_nodes(l, 0..levels[l].point_count as usize)?;
+        }
+        Ok(())
+    }
+
+    /// The first failed [`Self::check_nodes`], if any: whoever used records that the
+    /// failing check left unread (a traversal stops at such nodes) reports it.
+    pub fn node_error(&self) -> Result<(), FormatError> {
+        match self.node_error.get() {
+            None => Ok(()),
+            Some((place, problem)) => Err(FormatError::corrupt(&self.path, place, problem)),
+        }
+    }
+
+    fn keep_error(&self, e: FormatError) -> FormatError {
+        if let FormatError::Corrupt { place, problem, .. } = &e {
+            let _ = self.node_error.set((place.clone(), problem.clone()));
+        }
+        e
+    }
+
+    /// Checks block `b` of level `l` (see [`Self::check_nodes`]): its nodes' parents lie
+    /// on the level above and their blocks are checked first, since a node's checks read
+    /// its ancestors' records.
+    fn check_block(&self, l: usize, b: usize) -> Result<(), FormatError> {
+        let (nodes, levels) = (self.nodes(), self.levels());
+        let first = levels[l].node_first as usize;
+        let count = levels[l].point_count as usize;
+        let range = b * NODE_BLOCK..((b + 1) * NODE_BLOCK).min(count);
+        if l > 0 {
+            let pfirst = levels[l - 1].node_first as usize;
+            let pcount = levels[l - 1].point_count as usize;
+            let (mut lo, mut hi) = (usize::MAX, 0);
+            for i in range.clone() {
+                let p = nodes[first + i].parent as usize;
+                if p < pfirst || p >= pfirst + pcount {
+                    return Err(FormatError::corrupt(
+                        &self.path,
+                        format!("node {}", first + i),
+                        format!("parent {p} does not list it as a child"),
+                    ));
+                }
+                lo = lo.min(p - pfirst);
+                hi = hi.max(p - pfirst);
+            }
+            self.check_nodes(l - 1, lo..hi + 1)?;
+        }
+        let species = self.metadata.species.len();
+        for i in range {
+            check_node(&self.path, nodes, levels, self.delta_n(), species, l, i)?;
+        }
+        self.node_blocks[self.block_first[l] + b].store(BLOCK_VALID, Ordering::Release);
+        Ok(())
     }
 
     /// The nodes of level `l` (empty for the finest level).
@@ -563,9 +734,12 @@ impl MdlodFile {
 
     /// For level `m ≥ 1`: the nodes that encode its points and, for each, the range of
     /// points it encodes, in order (the ranges tile the level).
-    pub fn encoding_ranges(&self, m: usize) -> Vec<(usize, Range<usize>)> {
+    pub fn encoding_ranges(&self, m: usize) -> Result<Vec<(usize, Range<usize>)>, FormatError> {
         let ql = m.saturating_sub(self.delta_n());
         let levels = self.levels();
+        for l in ql..m {
+            self.check_nodes(l, 0..levels[l].point_count as usize)?;
+        }
         let first = levels[ql].node_first as usize;
         let count = levels[ql].point_count as usize;
         // Descendant ranges of the level-ql nodes, pushed down one level at a time.
@@ -578,20 +752,21 @@ impl MdlodFile {
                 *r = a.child_first as usize..(b.child_first + b.child_count) as usize;
             }
         }
-        ranges
+        Ok(ranges
             .into_iter()
             .enumerate()
             .map(|(i, r)| (first + i, r))
-            .collect()
+            .collect())
     }
 
-    /// Decodes every point of level `m ≥ 1`, in order.
-    pub fn decode_level(&self, m: usize) -> Vec<[f32; 3]> {
+    /// Decodes every point of level `m ≥ 1`, in order (checking the node records it
+    /// reads first).
+    pub fn decode_level(&self, m: usize) -> Result<Vec<[f32; 3]>, FormatError> {
         let pos = self.positions(m);
         let nodes = self.nodes();
         let bits = self.position_bits();
         let mut out = Vec::with_capacity(pos.len());
-        for (node, r) in self.encoding_ranges(m) {
+        for (node, r) in self.encoding_ranges(m)? {
             let n = &nodes[node];
             for i in r {
                 out.push(quantize::decode3(
@@ -602,7 +777,7 @@ impl MdlodFile {
                 ));
             }
         }
-        out
+        Ok(out)
     }
 
     /// Checks every section checksum, that the padding between sections is zero, every
@@ -670,6 +845,8 @@ impl MdlodFile {
                 ),
             ));
         }
+        // The node records open left to be checked block by block.
+        self.check_all_nodes()?;
         let last = self.level_count() - 1;
         let nodes = self.nodes();
         // Every node's point range is its descendants on its point level.
@@ -704,7 +881,7 @@ impl MdlodFile {
             }
         }
         for m in 1..=last {
-            let pos = self.decode_level(m);
+            let pos = self.decode_level(m)?;
             let parents = self.level_nodes(m - 1);
             for (pi, parent) in parents.iter().enumerate() {
                 let r =
@@ -773,6 +950,7 @@ fn validate_nodes(
     levels: &[LevelRecord],
     delta_n: usize,
     species_count: usize,
+    eager_levels: usize,
 ) -> Result<(), FormatError> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     validate_nodes_in(
@@ -783,10 +961,13 @@ fn validate_nodes(
         species_count,
         threads,
         1 << 18,
+        eager_levels,
     )
 }
 
-/// [`validate_nodes`] on up to `threads` threads, in chunks of at least `chunk_min` nodes.
+/// [`validate_nodes`] on up to `threads` threads, in chunks of at least `chunk_min` nodes,
+/// for the first `eager_levels` levels (the others' ends only).
+#[allow(clippy::too_many_arguments)]
 fn validate_nodes_in(
     path: &Path,
     nodes: &[NodeRecord],
@@ -795,11 +976,17 @@ fn validate_nodes_in(
     species_count: usize,
     threads: usize,
     chunk_min: usize,
+    eager_levels: usize,
 ) -> Result<(), FormatError> {
     let last = levels.len() - 1;
     for l in 0..last {
-        let first = levels[l].node_first as usize;
         let count = levels[l].point_count as usize;
+        if l >= eager_levels {
+            // Checked block by block later; only the level's end against the next
+            // level's count now (one record read).
+            check_level_end(path, nodes, levels, l)?;
+            continue;
+        }
         let check = |range: std::ops::Range<usize>| {
             range
                 .into_iter()
@@ -829,24 +1016,37 @@ fn validate_nodes_in(
             // The first failing chunk holds the first failing node.
             results.into_iter().collect::<Result<(), FormatError>>()?;
         }
-        let next_count = levels[l + 1].point_count;
-        let expected_child = match count {
-            0 => 0,
-            _ => {
-                let n = &nodes[first + count - 1];
-                u64::from(n.child_first) + u64::from(n.child_count)
-            }
-        };
-        if expected_child != next_count {
-            return Err(FormatError::corrupt(
-                path,
-                format!("level {l}"),
-                format!(
-                    "nodes have {expected_child} children but level {} holds {next_count} points",
-                    l + 1
-                ),
-            ));
+        check_level_end(path, nodes, levels, l)?;
+    }
+    Ok(())
+}
+
+/// The children of level `l`'s last node end where level `l + 1` does.
+fn check_level_end(
+    path: &Path,
+    nodes: &[NodeRecord],
+    levels: &[LevelRecord],
+    l: usize,
+) -> Result<(), FormatError> {
+    let first = levels[l].node_first as usize;
+    let count = levels[l].point_count as usize;
+    let next_count = levels[l + 1].point_count;
+    let expected_child = match count {
+        0 => 0,
+        _ => {
+            let n = &nodes[first + count - 1];
+            u64::from(n.child_first) + u64::from(n.child_count)
         }
+    };
+    if expected_child != next_count {
+        return Err(FormatError::corrupt(
+            path,
+            format!("level {l}"),
+            format!(
+                "nodes have {expected_child} children but level {} holds {next_count} points",
+                l + 1
+            ),
+        ));
     }
     Ok(())
 }
@@ -1014,7 +1214,7 @@ mod tests {
         let n = 1000;
         let (nodes, levels) = hierarchy(n);
         let run = |nodes: &[NodeRecord], threads, chunk_min| {
-            validate_nodes_in(path, nodes, &levels, 1, 1, threads, chunk_min)
+            validate_nodes_in(path, nodes, &levels, 1, 1, threads, chunk_min, usize::MAX)
                 .err()
                 .map(|e| e.to_string())
         };

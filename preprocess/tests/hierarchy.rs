@@ -132,7 +132,7 @@ fn check_round_trip_with(frame: &Frame, opts: &ConvertOptions) {
 
     // Every particle decodes within the recorded bound, and the bound is honest:
     // within the theoretical half step of its encoding node.
-    let decoded = f.decode_level(last);
+    let decoded = f.decode_level(last).unwrap();
     let bound = f.metadata().max_position_error;
     // Match decoded particles to inputs: same multiset of (species, position within bound).
     // The file keeps no particle ids, so compare sorted by a spatial key of the input
@@ -442,7 +442,7 @@ fn single_particle_and_tiny_inputs() {
         let (_d, f) = convert(&frame, BuildParams::default());
         f.verify().unwrap();
         assert_eq!(f.level_count(), 2);
-        assert_eq!(f.decode_level(1).len(), n);
+        assert_eq!(f.decode_level(1).unwrap().len(), n);
     }
 }
 

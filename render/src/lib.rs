@@ -399,6 +399,7 @@ pub fn render_image(
     let t0 = Instant::now();
     let (camera, traversal, settings) = frame_setup(renderer, file, opts)?;
     let draw = traverse(&camera, file, &traversal);
+    file.node_error()?;
     let traversal_time = t0.elapsed();
     if let RenderMode::Sndf {
         iterations,
@@ -778,6 +779,7 @@ pub fn sample_to_file_at(
     let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     let (camera, traversal, _) = frame_setup(&renderer, &mdlod, opts)?;
     let draw = traverse(&camera, &mdlod, &traversal);
+    mdlod.node_error()?;
     let traversal_time = t0.elapsed();
     let sndf = renderer.sample_sndf_styled(
         &mdlod,

@@ -932,6 +932,7 @@ impl Smip {
                             occlusion: self.config.occlusion,
                         },
                     );
+                    file.node_error()?;
                     let cut = renderer
                         .ctx
                         .scoped(|| renderer.upload_cut(file, &draw, style))?;

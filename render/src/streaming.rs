@@ -436,6 +436,7 @@ impl<'r> StreamingRenderer<'r> {
             resident: &self.resident,
         };
         let (draw, asked) = traverse_shared(camera, &file, traversal, &pages_resident);
+        file.node_error()?;
         let mut residency = PoolResidency {
             page_points: self.page_points,
             resident: &self.resident,

@@ -67,6 +67,12 @@
 //! resident ancestor) and refinement continues with the other nodes; the residency
 //! records what it was asked for, largest first.
 //!
+//! Node records are read only once checked: a file of more than
+//! [`mdlod_format::reader::EAGER_NODES`] nodes has its top levels checked on open and
+//! the rest in blocks as walks reach them ([`MdlodFile::check_children`] before a node's
+//! children are read). A node whose children's records are corrupt is left out, and the
+//! error is kept for the caller to report ([`MdlodFile::node_error`]).
+//!
 //! This is a pure function of the camera, the file and the settings: no GPU involved.
 
 use std::cmp::{Ordering, Reverse};
@@ -362,7 +368,9 @@ impl Residency for TileResidency<'_> {
     }
 }
 
-/// Chooses the cut for `camera` (see the module docs).
+/// Chooses the cut for `camera` (see the module docs). Node records are checked as the
+/// walk reaches them ([`MdlodFile::check_children`]); a node whose children fail is left
+/// out and the failure kept in [`MdlodFile::node_error`], which callers report.
 pub fn traverse(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings) -> DrawList {
     traverse_shared(camera, file, settings, &AllResident).0
 }
@@ -622,6 +630,11 @@ fn largest_first(
         }
         let n = &nodes[id as usize];
         let child_level = usize::from(n.level) + 1;
+        if file.check_children(id as usize).is_err() {
+            // Corrupt records below: left out, the error kept for the caller
+            // (`MdlodFile::node_error`).
+            continue;
+        }
         let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
         let visible_children = if child_level == last {
             children.len() as u64
@@ -793,6 +806,10 @@ fn front_to_back(
             representative_radius(n)
         } else if child_level == last {
             0.0
+        } else if file.check_children(id as usize).is_err() {
+            // Corrupt records below: left out, the error kept for the caller
+            // (`MdlodFile::node_error`).
+            continue;
         } else {
             let first = levels[child_level].node_first as usize;
             let mut reach = 0.0f32;

@@ -188,7 +188,7 @@ fn nothing_outside_the_frustum_and_everything_inside_is_drawn() {
         }
     }
     // Every particle whose centre is well inside the frustum is drawn.
-    let decoded = f.decode_level(last);
+    let decoded = f.decode_level(last).unwrap();
     let mut inside = 0;
     for (i, p) in decoded.iter().enumerate() {
         let c = clip * Vec3::from(*p).extend(1.0);
@@ -230,7 +230,7 @@ fn delta_n_2_and_8_bit_positions_cover_once_and_pack_to_the_files_positions() {
                 if l == 0 {
                     vec![f.nodes()[0].centroid]
                 } else {
-                    f.decode_level(l)
+                    f.decode_level(l).unwrap()
                 }
             })
             .collect();
@@ -748,4 +748,78 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
     .unwrap_err()
     .to_string();
     assert!(err.contains("no per-particle attribute"), "{err}");
+}
+
+/// Files larger than `mdlod_format::reader::EAGER_NODES` nodes are opened without
+/// reading their node table: the traversal checks the records it reaches, block by
+/// block. A lazily opened file gives the cut an eagerly checked one gives; a corrupt
+/// record deep in the hierarchy is not read on open, is never read where no walk
+/// reaches it, and is reported (the file and the node) by the walk that does, which
+/// leaves that part out instead of following the corrupt links.
+#[test]
+fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
+    use mdlod_format::SectionKind;
+    let (_d, path, eager) = make_file(&cloud_frame(60_000, 21), small_build(), &[]);
+    let lazy = MdlodFile::open_with_eager_nodes(&path, 1).unwrap();
+    let cam = fitted_camera(&eager);
+    for occlusion in [OcclusionMode::Off, OcclusionMode::PixelCentres] {
+        let settings = TraversalSettings {
+            viewport: VIEWPORT,
+            error_px: 0.0,
+            budget_points: u64::MAX,
+            occlusion,
+        };
+        assert_eq!(
+            traverse(&cam, &lazy, &settings),
+            traverse(&cam, &eager, &settings)
+        );
+    }
+    assert!(lazy.node_error().is_ok());
+
+    // Break the child count of a node in the middle of the deepest node level (more
+    // than one block of records).
+    let deepest = eager.level_count() - 2;
+    let count = eager.levels()[deepest].point_count as usize;
+    assert!(count > mdlod_format::reader::NODE_BLOCK, "{count} nodes");
+    let id = node_of(&eager, deepest, count / 2);
+    let nodes_at = eager
+        .sections()
+        .iter()
+        .find(|s| SectionKind::from_code(s.kind) == Some(SectionKind::Nodes))
+        .unwrap()
+        .offset as usize;
+    let mut bytes = std::fs::read(&path).unwrap();
+    let at = nodes_at + 96 * id + 68;
+    bytes[at..at + 4].copy_from_slice(&0u32.to_le_bytes());
+    let bad = path.with_file_name("bad.mdlod");
+    std::fs::write(&bad, &bytes).unwrap();
+    let wants = |e: mdlod_format::FormatError| {
+        let msg = e.to_string();
+        assert!(
+            msg.contains("bad.mdlod") && msg.contains(&format!("node {id}")),
+            "{msg}"
+        );
+    };
+    // Checked on open, it is refused there (by the table's checksum, checked first).
+    let names = |e: mdlod_format::FormatError| assert!(e.to_string().contains("bad.mdlod"));
+    names(
+        MdlodFile::open_with_eager_nodes(&bad, u64::MAX)
+            .err()
+            .unwrap(),
+    );
+    // Lazily, open reads the top node only; a view that reaches nothing reads no other
+    // record.
+    let f = MdlodFile::open_with_eager_nodes(&bad, 1).unwrap();
+    let mut away = cam.clone();
+    away.target += away.back() * 3.0 * away.distance;
+    let none = cut(&f, &away, 0.0, u64::MAX);
+    assert_eq!(none.points, 0);
+    assert!(f.node_error().is_ok());
+    // The full walk reaches the node and reports it; nothing below it is drawn.
+    let d = cut(&f, &cam, 0.0, u64::MAX);
+    wants(f.node_error().err().unwrap());
+    assert!(d.points > 0 && d.points < cut(&eager, &cam, 0.0, u64::MAX).points);
+    // So do the checks of the whole table, and `verify` (by the checksum).
+    wants(f.check_all_nodes().err().unwrap());
+    names(f.verify().err().unwrap());
 }

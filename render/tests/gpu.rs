@@ -180,6 +180,7 @@ fn hit_depth_matches_a_cpu_ray_sphere_intersection() {
     let last = f.level_count() - 1;
     let spheres: Vec<(Vec3, f32)> = f
         .decode_level(last)
+        .unwrap()
         .into_iter()
         .map(|p| (Vec3::from(p), 1.7))
         .collect();

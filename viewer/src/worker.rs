@@ -940,6 +940,7 @@ fn sndf_setup(
     let (camera, traversal, _) =
         mdlod_render::frame_setup(renderer, file, opts).map_err(|e| e.to_string())?;
     let draw = traverse(&camera, file, &traversal);
+    file.node_error().map_err(|e| e.to_string())?;
     Ok((
         camera,
         draw,

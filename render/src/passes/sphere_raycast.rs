@@ -494,6 +494,9 @@ impl AttrPacker {
                 push_bytes_as_words(attrs, bytemuck::cast_slice(sp));
             }
         } else {
+            // Records a traversal did not read (a streaming page's others) may not have
+            // been checked yet.
+            file.check_nodes(level, first..first + count)?;
             let nf = node_first();
             for n in &file.nodes()[nf..nf + count] {
                 attrs.push(self.radius(n).to_bits());
