@@ -641,10 +641,30 @@ impl MdlodFile {
     }
 
     /// Checks every node record (what [`Self::open`] leaves to [`Self::check_nodes`]).
+    /// Level by level, each on every core in contiguous runs of blocks; the error
+    /// reported is that of the lowest failing run.
     pub fn check_all_nodes(&self) -> Result<(), FormatError> {
         let levels = self.levels();
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         for l in 0..levels.len() - 1 {
-            self.check_nodes(l, 0..levels[l].point_count as usize)?;
+            let count = levels[l].point_count as usize;
+            let blocks = count.div_ceil(NODE_BLOCK);
+            let runs = threads.min(blocks / 4).max(1);
+            if runs == 1 {
+                self.check_nodes(l, 0..count)?;
+                continue;
+            }
+            let per = blocks.div_ceil(runs) * NODE_BLOCK;
+            let results: Vec<Result<(), FormatError>> = std::thread::scope(|scope| {
+                let handles: Vec<_> = (0..runs)
+                    .map(|k| scope.spawn(move || self.check_nodes(l, k * per..(k + 1) * per)))
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            });
+            results.into_iter().collect::<Result<(), FormatError>>()?;
         }
         Ok(())
     }
