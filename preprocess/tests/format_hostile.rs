@@ -797,6 +797,55 @@ fn hostile_levels() {
     expect_refused(&p, &["LEVELS", "multiple of 32"]);
 }
 
+/// Levels of many blocks are checked on every core when checked whole
+/// (`check_all_nodes`, as `verify` runs it), and the failure reported is that of the
+/// lowest corrupt node, whichever core found which.
+#[test]
+fn lazily_checked_levels_report_their_lowest_corrupt_node() {
+    let dir = tempfile::tempdir().unwrap();
+    // 2·40³ + 200 particles in clusters of at most 4: more than 8 blocks of nodes on the
+    // deepest node level.
+    let b = valid_bytes_of(
+        40,
+        BuildParams {
+            max_cluster_size: 4,
+            max_root_points: 16,
+            ..Default::default()
+        },
+    );
+    let mut d = Doc::parse(&b);
+    let levels = d.levels();
+    let deepest = levels.len() - 2;
+    let first = levels[deepest].node_first as usize;
+    let count = levels[deepest].point_count as usize;
+    assert!(
+        count > 8 * mdlod_format::reader::NODE_BLOCK,
+        "{count} nodes"
+    );
+    let clean = d.nodes();
+    let (early, late) = (first + count / 3, first + 5 * count / 6);
+    for (corrupt, name, wants) in [
+        (vec![early, late], "two-corrupt.mdlod", early),
+        (vec![late], "late-corrupt.mdlod", late),
+    ] {
+        let mut nodes = clean.clone();
+        for &id in &corrupt {
+            nodes[id].bounds_min[0] = nodes[id].bounds_max[0] + 1.0;
+        }
+        d.set_nodes(&nodes);
+        let p = d.write(dir.path(), name);
+        let f = MdlodFile::open_with_eager_nodes(&p, 1).unwrap();
+        let msg = f.check_all_nodes().unwrap_err().to_string();
+        assert!(
+            msg.contains(name) && msg.contains(&format!("node {wants}:")),
+            "{msg}"
+        );
+        assert!(f.node_error().is_err());
+        let eager = MdlodFile::open(&p).err().unwrap().to_string();
+        assert!(eager.contains(&format!("node {wants}:")), "{eager}");
+    }
+}
+
 #[test]
 fn hostile_nodes() {
     let dir = tempfile::tempdir().unwrap();
