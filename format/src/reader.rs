@@ -3,12 +3,16 @@
 //! [`MdlodFile::open`] maps the file and checks, before anything is indexed: the header
 //! (signature, version range, checksum, stated size), the section table (checksum, every
 //! bound with checked arithmetic, alignment, no overlaps, required sections present once),
-//! the metadata, the level table and every node (checksum, level, child and point ranges,
-//! parent and quantization links, finite values). That is linear in the node count and
-//! reads no particle data, so opening a 10^9-particle file is quick. After it, the typed
-//! accessors cannot go out of bounds. [`MdlodFile::verify`] reads everything else: every
-//! section checksum, the (zero) padding between sections, every node's point range, every
-//! species index and every decoded point.
+//! the metadata, the level table and the node records (level, child and point ranges,
+//! parent and quantization links, finite values). It reads no particle data. The node
+//! records are checked on open for files of at most [`EAGER_NODES`] nodes (with the
+//! table's checksum); for larger files only those of the top levels, the rest in blocks
+//! of [`NODE_BLOCK`] nodes before they are first read ([`MdlodFile::check_nodes`],
+//! [`MdlodFile::check_children`]), so that opening a 10^9-particle file reads a few
+//! megabytes. The typed accessors cannot go out of bounds; the records returned by
+//! [`MdlodFile::nodes`] are trustworthy where checked. [`MdlodFile::verify`] reads
+//! everything: every section checksum, every node record, the (zero) padding between
+//! sections, every node's point range, every species index and every decoded point.
 
 use std::fs::File;
 use std::ops::Range;
@@ -70,7 +74,8 @@ impl Positions<'_> {
     }
 }
 
-/// An open, validated `.mdlod` file.
+/// An open `.mdlod` file whose structure is validated (its node records as described in
+/// the module docs).
 pub struct MdlodFile {
     path: PathBuf,
     map: memmap2::Mmap,
@@ -99,6 +104,7 @@ pub const NODE_BLOCK: usize = 4096;
 pub const EAGER_NODES: u64 = 1 << 20;
 const BLOCK_UNCHECKED: u8 = 0;
 const BLOCK_VALID: u8 = 1;
+const BLOCK_FAILED: u8 = 2;
 
 /// What [`MdlodFile::verify`] checked.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -439,7 +445,8 @@ impl MdlodFile {
             eager_levels += 1;
         }
         let all_eager = eager_levels == last;
-        // The checksum runs beside the node checks (both read the whole table); its
+        // The checksum runs beside the node checks (both read the whole table, when the
+        // file is small enough to be checked whole); its
         // error, then a misaligned table's, comes first, as if run one after another.
         let (sum, nodes) = std::thread::scope(|scope| {
             let sum = scope.spawn(|| if all_eager { check_sum(ni) } else { Ok(()) });
@@ -599,6 +606,7 @@ impl MdlodFile {
     /// The records of the levels checked on open ([`EAGER_NODES`]) are valid; the others
     /// only once [`Self::check_nodes`] (or [`Self::check_children`] of their parent)
     /// has passed for them: until then they are bytes of the file, which may be corrupt.
+    /// (Every access stays in bounds whatever they hold; only their values may be wrong.)
     #[inline]
     pub fn nodes(&self) -> &[NodeRecord] {
         bytemuck::cast_slice(&self.map[self.nodes_range.clone()])
@@ -609,35 +617,91 @@ impl MdlodFile {
     /// parents and the file's species, as [`Self::open`] checks the top levels: the
     /// blocks of [`NODE_BLOCK`] nodes holding them, each once (their ancestors' blocks
     /// first). Safe to call from several threads. The first failure is also kept for
-    /// [`Self::node_error`].
+    /// [`Self::node_error`]; a block that failed fails again with that error.
+    ///
+    /// Within a block the children of consecutive nodes are checked to be consecutive;
+    /// across blocks, against the neighbouring record as it is (checked or not), so that
+    /// two checked nodes of different blocks could claim overlapping children where the
+    /// records between them are corrupt. For node children [`Self::check_children`]
+    /// rules that out (with the parents' order checked here); for particle children
+    /// only a check of the whole level ([`Self::check_all_nodes`], `verify`) does.
+    /// Either way every range stays within its level.
     pub fn check_nodes(&self, l: usize, range: Range<usize>) -> Result<(), FormatError> {
         let levels = self.levels();
-        if l + 1 >= levels.len() {
+        if l + 1 >= levels.len() || range.start >= range.end {
             return Ok(());
         }
         let count = levels[l].point_count as usize;
-        let (start, end) = (range.start.min(count), range.end.min(count));
-        if start >= end {
-            return Ok(());
+        if range.end > count {
+            return Err(self.keep_error(FormatError::corrupt(
+                &self.path,
+                format!("level {l}"),
+                format!(
+                    "nodes {}..{} asked for, beyond its {count} nodes",
+                    range.start, range.end
+                ),
+            )));
         }
-        for b in start / NODE_BLOCK..=(end - 1) / NODE_BLOCK {
-            if self.node_blocks[self.block_first[l] + b].load(Ordering::Acquire) != BLOCK_VALID {
-                self.check_block(l, b).map_err(|e| self.keep_error(e))?;
+        for b in range.start / NODE_BLOCK..=(range.end - 1) / NODE_BLOCK {
+            match self.node_blocks[self.block_first[l] + b].load(Ordering::Acquire) {
+                BLOCK_VALID => {}
+                BLOCK_FAILED => return self.node_error(),
+                _ => {
+                    if let Err(e) = self.check_block(l, b) {
+                        let e = self.keep_error(e);
+                        self.node_blocks[self.block_first[l] + b]
+                            .store(BLOCK_FAILED, Ordering::Release);
+                        return Err(e);
+                    }
+                }
             }
         }
         Ok(())
     }
 
-    /// [`Self::check_nodes`] for the children of node `id` (a checked node): what a
-    /// traversal calls before it reads them.
+    /// [`Self::check_nodes`] for the children of node `id`, which must be a checked
+    /// node: what a traversal calls before it reads them. Node children must also be
+    /// `id`'s by their parent links, so that no two checked nodes share children.
     #[inline]
     pub fn check_children(&self, id: usize) -> Result<(), FormatError> {
-        let n = &self.nodes()[id];
+        let Some(n) = self.nodes().get(id) else {
+            return Err(self.keep_error(FormatError::corrupt(
+                &self.path,
+                format!("node {id}"),
+                "no such node",
+            )));
+        };
+        let l = usize::from(n.level) + 1;
         let first = n.child_first as usize;
-        self.check_nodes(
-            usize::from(n.level) + 1,
-            first..first + n.child_count as usize,
-        )
+        let last = first + n.child_count as usize - 1;
+        self.check_nodes(l, first..last + 1)?;
+        // Node children: the first and the last must name `id` as their parent; their
+        // parents being in order (checked with their blocks), so must every child
+        // between them, and no other checked node can claim them.
+        if l + 1 < self.level_count() {
+            let at = self.levels()[l].node_first as usize;
+            for k in [first, last] {
+                let p = self.nodes()[at + k].parent as usize;
+                if p != id {
+                    let lists = self.nodes().get(p).is_some_and(|q| {
+                        usize::from(q.level) + 1 == l
+                            && (q.child_first as usize..(q.child_first + q.child_count) as usize)
+                                .contains(&k)
+                    });
+                    let problem = if lists {
+                        format!("claimed as a child by node {id} and by its parent {p}")
+                    } else {
+                        format!("parent {p} does not list it as a child")
+                    };
+                    return Err(self.keep_error(FormatError::corrupt(
+                        &self.path,
+                        format!("node {}", at + k),
+                        problem,
+                    )));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Checks every node record (what [`Self::open`] leaves to [`Self::check_nodes`]).
@@ -657,7 +721,10 @@ impl MdlodFile {
             let per = blocks.div_ceil(runs) * NODE_BLOCK;
             let results: Vec<Result<(), FormatError>> = std::thread::scope(|scope| {
                 let handles: Vec<_> = (0..runs)
-                    .map(|k| scope.spawn(move || self.check_nodes(l, k * per..(k + 1) * per)))
+                    .map(|k| {
+                        let run = (k * per).min(count)..((k + 1) * per).min(count);
+                        scope.spawn(move || self.check_nodes(l, run))
+                    })
                     .collect();
                 handles
                     .into_iter()
@@ -669,8 +736,10 @@ impl MdlodFile {
         Ok(())
     }
 
-    /// The first failed [`Self::check_nodes`], if any: whoever used records that the
-    /// failing check left unread (a traversal stops at such nodes) reports it.
+    /// The first failed [`Self::check_nodes`] or [`Self::check_children`], if any:
+    /// whoever used records that the failing check left unread (a traversal stops at
+    /// such nodes) reports it. It stays: a file found corrupt once reports it to every
+    /// later caller, whichever part of it they read.
     pub fn node_error(&self) -> Result<(), FormatError> {
         match self.node_error.get() {
             None => Ok(()),
@@ -679,41 +748,51 @@ impl MdlodFile {
     }
 
     fn keep_error(&self, e: FormatError) -> FormatError {
-        if let FormatError::Corrupt { place, problem, .. } = &e {
-            let _ = self.node_error.set((place.clone(), problem.clone()));
-        }
+        let kept = match &e {
+            FormatError::Corrupt { place, problem, .. } => (place.clone(), problem.clone()),
+            other => ("node records".to_string(), other.to_string()),
+        };
+        let _ = self.node_error.set(kept);
         e
     }
 
-    /// Checks block `b` of level `l` (see [`Self::check_nodes`]): its nodes' parents lie
-    /// on the level above and their blocks are checked first, since a node's checks read
-    /// its ancestors' records.
+    /// Checks block `b` of level `l` (see [`Self::check_nodes`]) in node order, each
+    /// node's parent's block before it, since a node's checks read its ancestors'
+    /// records: the first failure is the one an eager pass over the levels would find
+    /// first among these nodes. A parent block is checked at most once, so however the
+    /// parent links point, the work stays within the level above's blocks.
     fn check_block(&self, l: usize, b: usize) -> Result<(), FormatError> {
         let (nodes, levels) = (self.nodes(), self.levels());
         let first = levels[l].node_first as usize;
         let count = levels[l].point_count as usize;
         let range = b * NODE_BLOCK..((b + 1) * NODE_BLOCK).min(count);
-        if l > 0 {
-            let pfirst = levels[l - 1].node_first as usize;
-            let pcount = levels[l - 1].point_count as usize;
-            let (mut lo, mut hi) = (usize::MAX, 0);
-            for i in range.clone() {
-                let p = nodes[first + i].parent as usize;
-                if p < pfirst || p >= pfirst + pcount {
+        let species = self.metadata.species.len();
+        for i in range {
+            // The parent's block first (once checked, one atomic load): the node's checks
+            // read its ancestors' records. A parent outside the level above is the
+            // node's own error, reported by its checks.
+            if l > 0 {
+                let pfirst = levels[l - 1].node_first as usize;
+                let p = (nodes[first + i].parent as usize).wrapping_sub(pfirst);
+                if p < levels[l - 1].point_count as usize {
+                    self.check_nodes(l - 1, p..p + 1)?;
+                }
+            }
+            check_node(&self.path, nodes, levels, self.delta_n(), species, l, i)?;
+            // Parents are in node order (children of consecutive nodes are consecutive):
+            // with `check_children`'s test of a node's first and last child, no two
+            // checked nodes share node children, whatever unchecked records lie between.
+            // The predecessor is read as a number only (its block may be unchecked).
+            if l > 0 && i > 0 {
+                let (p, q) = (nodes[first + i].parent, nodes[first + i - 1].parent);
+                if p < q {
                     return Err(FormatError::corrupt(
                         &self.path,
                         format!("node {}", first + i),
-                        format!("parent {p} does not list it as a child"),
+                        format!("parent {p} comes before its predecessor's parent {q}"),
                     ));
                 }
-                lo = lo.min(p - pfirst);
-                hi = hi.max(p - pfirst);
             }
-            self.check_nodes(l - 1, lo..hi + 1)?;
-        }
-        let species = self.metadata.species.len();
-        for i in range {
-            check_node(&self.path, nodes, levels, self.delta_n(), species, l, i)?;
         }
         self.node_blocks[self.block_first[l] + b].store(BLOCK_VALID, Ordering::Release);
         Ok(())

@@ -44,7 +44,10 @@ fuzz_target!(|data: &[u8]| {
         2 => Some("q".to_string()),
         _ => None,
     };
-    let opts = ReadOptions { attribute };
+    let opts = ReadOptions {
+        attribute,
+        ..Default::default()
+    };
     let dump = match DumpFile::open(&path) {
         Ok(d) => d,
         Err(e) => return check_error(&e, &path),

@@ -63,8 +63,34 @@ fn reseal(b: &mut [u8]) {
     b[..HEADER_SIZE].copy_from_slice(bytemuck::bytes_of(&h));
 }
 
+/// Walks the hierarchy from the top as a traversal does: a node's children are read
+/// only after `check_children` passed for it.
+fn walk(f: &MdlodFile) {
+    let levels = f.levels();
+    let last = levels.len() - 1;
+    let mut stack = vec![0usize];
+    while let Some(id) = stack.pop() {
+        if f.check_children(id).is_err() {
+            continue;
+        }
+        let n = &f.nodes()[id];
+        let l = usize::from(n.level) + 1;
+        let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
+        if l < last {
+            let at = levels[l].node_first as usize;
+            stack.extend(children.map(|c| at + c));
+        } else {
+            let p = f.positions(l);
+            for c in children {
+                let _ = p.get(c);
+            }
+        }
+    }
+}
+
 /// Uses every accessor of an opened file, as a renderer would.
 fn touch(f: &MdlodFile) {
+    walk(f);
     let _ = (
         f.header(),
         f.sections().len(),

@@ -846,6 +846,129 @@ fn lazily_checked_levels_report_their_lowest_corrupt_node() {
     }
 }
 
+/// Blocks of a lazily checked level are checked in whatever order they are asked for,
+/// each reporting its own corrupt node, first or last in the block; a block that is
+/// never asked for is never read, and a checked node cannot claim node children that
+/// belong to another checked node, whatever lies between them.
+#[test]
+fn lazily_checked_blocks_stand_on_their_own() {
+    use mdlod_format::reader::NODE_BLOCK;
+    let dir = tempfile::tempdir().unwrap();
+    let b = valid_bytes_of(
+        40,
+        BuildParams {
+            max_cluster_size: 4,
+            max_root_points: 16,
+            ..Default::default()
+        },
+    );
+    let mut d = Doc::parse(&b);
+    let levels = d.levels();
+    let clean = d.nodes();
+    let open = |d: &Doc, name: &str| {
+        let p = d.write(dir.path(), name);
+        MdlodFile::open_with_eager_nodes(&p, 1).unwrap()
+    };
+    // A level whose children are nodes, of at least three blocks.
+    let l = (1..levels.len() - 2)
+        .find(|&l| levels[l].point_count as usize > 2 * NODE_BLOCK)
+        .expect("a level of three blocks");
+    let first = levels[l].node_first as usize;
+    let count = levels[l].point_count as usize;
+    let blocks = count.div_ceil(NODE_BLOCK);
+
+    // The clean file, blocks asked for last first.
+    let f = open(&d, "clean.mdlod");
+    for b in (0..blocks).rev() {
+        f.check_nodes(l, b * NODE_BLOCK..((b + 1) * NODE_BLOCK).min(count))
+            .unwrap();
+    }
+    assert!(f.node_error().is_ok());
+
+    // The first node of block 1 and the last of block 0 broken: each block names its own.
+    for (id, name) in [
+        (first + NODE_BLOCK, "block-first.mdlod"),
+        (first + NODE_BLOCK - 1, "block-last.mdlod"),
+    ] {
+        let mut nodes = clean.clone();
+        nodes[id].radius = -1.0;
+        d.set_nodes(&nodes);
+        let f = open(&d, name);
+        let other = if id == first + NODE_BLOCK { 0 } else { 1 };
+        f.check_nodes(l, other * NODE_BLOCK..(other + 1) * NODE_BLOCK)
+            .unwrap();
+        let msg = f
+            .check_nodes(l, id - first..id - first + 1)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains(name) && msg.contains(&format!("node {id}:")),
+            "{msg}"
+        );
+        // Asked again, the failed block fails again, with the same message.
+        let again = f.check_nodes(l, id - first..id - first + 1).unwrap_err();
+        assert_eq!(again.to_string(), msg);
+    }
+
+    // Two checked nodes claiming the same node children across a block never checked:
+    // block 0's last node and block 2's first both claim everything from the former's
+    // first child to the latter's last, every one of those children names the former
+    // as its parent, and block 1's last node ends where block 2's first starts (block 1
+    // is broken: its other nodes no longer meet its last).
+    let (p0, x, p1) = (
+        first + NODE_BLOCK - 1,
+        first + 2 * NODE_BLOCK,
+        first + 2 * NODE_BLOCK - 1,
+    );
+    let mut nodes = clean.clone();
+    let (a, z) = (
+        nodes[p0].child_first,
+        nodes[x].child_first + nodes[x].child_count,
+    );
+    for id in [p0, x] {
+        nodes[id].child_first = a;
+        nodes[id].child_count = z - a;
+    }
+    nodes[p1].child_first = a - 1;
+    nodes[p1].child_count = 1;
+    let below = levels[l + 1].node_first as usize;
+    for c in a..z {
+        nodes[below + c as usize].parent = p0 as u32;
+    }
+    d.set_nodes(&nodes);
+    let f = open(&d, "overlap.mdlod");
+    f.check_nodes(l, 0..NODE_BLOCK).unwrap();
+    f.check_nodes(l, 2 * NODE_BLOCK..2 * NODE_BLOCK + 1)
+        .unwrap();
+    f.check_children(p0).unwrap();
+    let msg = f.check_children(x).unwrap_err().to_string();
+    assert!(
+        msg.contains("overlap.mdlod")
+            && msg.contains(&format!("node {}:", below + a as usize))
+            && msg.contains(&format!(
+                "claimed as a child by node {x} and by its parent {p0}"
+            )),
+        "{msg}"
+    );
+    assert!(f.check_all_nodes().is_err());
+
+    // The same claims, the shared children's first and last naming block 2's node and
+    // those between naming block 0's: their parents out of order.
+    nodes[below + a as usize].parent = x as u32;
+    nodes[below + z as usize - 1].parent = x as u32;
+    d.set_nodes(&nodes);
+    let f = open(&d, "interleaved.mdlod");
+    let msg = f.check_children(x).unwrap_err().to_string();
+    assert!(
+        msg.contains("interleaved.mdlod")
+            && msg.contains(&format!("node {}:", below + a as usize + 1))
+            && msg.contains(&format!(
+                "parent {p0} comes before its predecessor's parent {x}"
+            )),
+        "{msg}"
+    );
+}
+
 #[test]
 fn hostile_nodes() {
     let dir = tempfile::tempdir().unwrap();

@@ -70,8 +70,9 @@
 //! Node records are read only once checked: a file of more than
 //! [`mdlod_format::reader::EAGER_NODES`] nodes has its top levels checked on open and
 //! the rest in blocks as walks reach them ([`MdlodFile::check_children`] before a node's
-//! children are read). A node whose children's records are corrupt is left out, and the
-//! error is kept for the caller to report ([`MdlodFile::node_error`]).
+//! children are read). A node whose children's records are corrupt is drawn as its
+//! representative, and the error is kept for the caller to report
+//! ([`MdlodFile::node_error`]).
 //!
 //! This is a pure function of the camera, the file and the settings: no GPU involved.
 
@@ -369,8 +370,9 @@ impl Residency for TileResidency<'_> {
 }
 
 /// Chooses the cut for `camera` (see the module docs). Node records are checked as the
-/// walk reaches them ([`MdlodFile::check_children`]); a node whose children fail is left
-/// out and the failure kept in [`MdlodFile::node_error`], which callers report.
+/// walk reaches them ([`MdlodFile::check_children`]); a node whose children fail is drawn
+/// as its representative and the failure kept in [`MdlodFile::node_error`], which callers
+/// report.
 pub fn traverse(camera: &Camera, file: &MdlodFile, settings: &TraversalSettings) -> DrawList {
     traverse_shared(camera, file, settings, &AllResident).0
 }
@@ -631,8 +633,9 @@ fn largest_first(
         let n = &nodes[id as usize];
         let child_level = usize::from(n.level) + 1;
         if file.check_children(id as usize).is_err() {
-            // Corrupt records below: left out, the error kept for the caller
-            // (`MdlodFile::node_error`).
+            // Corrupt records below: drawn as its representative, the error kept for the
+            // caller (`MdlodFile::node_error`).
+            achieved = achieved.max(size);
             continue;
         }
         let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
@@ -802,14 +805,14 @@ fn front_to_back(
         // node whose children are particles). A node that is then refused by the
         // residency is drawn as its representative: a streaming frame, never the
         // converged image, may miss where that larger sphere pokes out of a hidden box.
-        let reach = if size <= error_px {
+        // Corrupt records below: drawn as its representative, as a node the residency
+        // refuses, the error kept for the caller (`MdlodFile::node_error`).
+        let corrupt =
+            size > error_px && child_level < last && file.check_children(id as usize).is_err();
+        let reach = if size <= error_px || corrupt {
             representative_radius(n)
         } else if child_level == last {
             0.0
-        } else if file.check_children(id as usize).is_err() {
-            // Corrupt records below: left out, the error kept for the caller
-            // (`MdlodFile::node_error`).
-            continue;
         } else {
             let first = levels[child_level].node_first as usize;
             let mut reach = 0.0f32;
@@ -828,7 +831,7 @@ fn front_to_back(
         if buffer.box_hidden(n.bounds_min.into(), n.bounds_max.into(), margin) {
             continue;
         }
-        let commit = size <= error_px || {
+        let commit = size <= error_px || corrupt || {
             let refused = !residency.can_open(file, id, size);
             out.deferred += u64::from(refused);
             refused

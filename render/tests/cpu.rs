@@ -753,9 +753,11 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
 /// Files larger than `mdlod_format::reader::EAGER_NODES` nodes are opened without
 /// reading their node table: the traversal checks the records it reaches, block by
 /// block. A lazily opened file gives the cut an eagerly checked one gives; a corrupt
-/// record deep in the hierarchy is not read on open, is never read where no walk
-/// reaches it, and is reported (the file and the node) by the walk that does, which
-/// leaves that part out instead of following the corrupt links.
+/// record deep in the hierarchy is not read on open, nor by a view that does not reach
+/// it (one looking away, one too coarse to open the level above it), and is reported
+/// (the file and the node) by the walk that does, with or without occlusion culling,
+/// which draws the node above as its representative instead of following the corrupt
+/// links.
 #[test]
 fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
     use mdlod_format::SectionKind;
@@ -808,17 +810,48 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             .unwrap(),
     );
     // Lazily, open reads the top node only; a view that reaches nothing reads no other
-    // record.
+    // record, nor does one that opens no node of the level above the corrupt one.
     let f = MdlodFile::open_with_eager_nodes(&bad, 1).unwrap();
     let mut away = cam.clone();
     away.target += away.back() * 3.0 * away.distance;
     let none = cut(&f, &away, 0.0, u64::MAX);
     assert_eq!(none.points, 0);
+    let proj = Projector::new(&cam, VIEWPORT);
+    let coarse_px = eager
+        .level_nodes(deepest - 1)
+        .iter()
+        .map(|n| proj.size_px(n))
+        .fold(0.0f32, f32::max);
+    let coarse = cut(&f, &cam, coarse_px, u64::MAX);
+    assert!(coarse.points > 1);
+    assert!(coarse.ranges.iter().all(|r| usize::from(r.level) < deepest));
     assert!(f.node_error().is_ok());
-    // The full walk reaches the node and reports it; nothing below it is drawn.
-    let d = cut(&f, &cam, 0.0, u64::MAX);
-    wants(f.node_error().err().unwrap());
-    assert!(d.points > 0 && d.points < cut(&eager, &cam, 0.0, u64::MAX).points);
+    // The full walk reaches the node and reports it, with or without occlusion culling;
+    // the node above it is drawn as its representative (unless hidden).
+    for occlusion in [OcclusionMode::Off, OcclusionMode::PixelCentres] {
+        let f = MdlodFile::open_with_eager_nodes(&bad, 1).unwrap();
+        let settings = TraversalSettings {
+            viewport: VIEWPORT,
+            error_px: 0.0,
+            budget_points: u64::MAX,
+            occlusion,
+        };
+        let d = traverse(&cam, &f, &settings);
+        wants(f.node_error().err().unwrap());
+        let clean = traverse(&cam, &eager, &settings);
+        assert!(d.points > 0 && d.points < clean.points, "{occlusion:?}");
+        let parent = f.nodes()[id].parent;
+        let parent_level = deepest - 1;
+        let at = parent as usize - f.levels()[parent_level].node_first as usize;
+        let drawn = d.ranges.iter().any(|r| {
+            usize::from(r.level) == parent_level
+                && (r.first as usize..(r.first + r.count) as usize).contains(&at)
+        });
+        assert!(
+            drawn || occlusion != OcclusionMode::Off,
+            "the corrupt node's parent is not drawn"
+        );
+    }
     // So do the checks of the whole table, and `verify` (by the checksum).
     wants(f.check_all_nodes().err().unwrap());
     names(f.verify().err().unwrap());
