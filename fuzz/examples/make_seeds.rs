@@ -81,9 +81,11 @@ fn main() {
         convert_frame(&frame(n, attribute), None, &path, &opts, &NoProgress).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         // Mode 1 (checksums recomputed) lets mutations reach the structural checks; mode 0
-        // keeps the file as it is.
+        // keeps the file as it is; mode 3 also leaves the node records to be checked as
+        // they are read (as for large files).
         put(mdlod, &format!("valid-{i}-resealed"), 1, &bytes);
         put(mdlod, &format!("valid-{i}"), 0, &bytes);
+        put(mdlod, &format!("valid-{i}-resealed-lazy"), 3, &bytes);
     }
 
     let lammps_custom = "ITEM: UNITS\nmetal\nITEM: TIME\n0.5\nITEM: TIMESTEP\n100\n\
