@@ -948,23 +948,21 @@ impl MdlodFile {
         self.check_all_nodes()?;
         let last = self.level_count() - 1;
         let nodes = self.nodes();
-        // Every node's point range is its descendants on its point level.
+        // Every node's point range is its descendants on its point level: the first
+        // descendant of its first child's line and the last of its last child's, node
+        // by node (no table of ranges: a level may hold 10^8 nodes).
         for l in 0..last {
             let point_level = (l + self.delta_n()).min(last);
-            let mut ranges: Vec<Range<usize>> = (0..self.levels()[l].point_count as usize)
-                .map(|i| i..i + 1)
-                .collect();
-            for d in l..point_level {
-                let dnodes = self.level_nodes(d);
-                for r in &mut ranges {
-                    let (a, b) = (&dnodes[r.start], &dnodes[r.end - 1]);
-                    *r = a.child_first as usize..(b.child_first + b.child_count) as usize;
-                }
-            }
             let first = self.levels()[l].node_first as usize;
-            for (i, r) in ranges.into_iter().enumerate() {
-                let n = &nodes[first + i];
-                if n.point_first as usize != r.start || n.point_count as usize != r.len() {
+            for (i, n) in self.level_nodes(l).iter().enumerate() {
+                let (mut a, mut b) = (i, i);
+                for d in l..point_level {
+                    let dnodes = self.level_nodes(d);
+                    let (x, y) = (&dnodes[a], &dnodes[b]);
+                    a = x.child_first as usize;
+                    b = (y.child_first + y.child_count) as usize - 1;
+                }
+                if n.point_first as usize != a || n.point_count as usize != b + 1 - a {
                     return Err(FormatError::corrupt(
                         &self.path,
                         format!("node {}", first + i),
@@ -972,15 +970,18 @@ impl MdlodFile {
                             "points {}+{} on level {point_level}, but its descendants there are {}+{}",
                             n.point_first,
                             n.point_count,
-                            r.start,
-                            r.len()
+                            a,
+                            b + 1 - a
                         ),
                     ));
                 }
             }
         }
+        // Every point, decoded by its parent's encoding node as it is read (no copy of
+        // the level), lies within its parent's bounds up to the quantization step.
+        let bits = self.position_bits();
         for m in 1..=last {
-            let pos = self.decode_level(m)?;
+            let positions = self.positions(m);
             let parents = self.level_nodes(m - 1);
             for (pi, parent) in parents.iter().enumerate() {
                 let r =
@@ -993,7 +994,8 @@ impl MdlodFile {
                     .map(|s| f64::from(*s))
                     .fold(0.0, f64::max);
                 for i in r {
-                    let p = pos[i];
+                    let p =
+                        quantize::decode3(positions.get(i), enc.centroid, enc.quant_scale, bits);
                     if p.iter().any(|v| !v.is_finite()) {
                         return Err(FormatError::corrupt(
                             &self.path,
