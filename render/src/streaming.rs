@@ -23,6 +23,10 @@
 //!   together with the pages already used is not requested (the pool, like the point
 //!   budget, caps the cut), so the working set of a still view always fits and loading
 //!   converges.
+//! - From the second frame of a still view on, the pages of the view's complete cut (the
+//!   traversal as if everything were resident) are requested once, after what the frame
+//!   itself uses and within the pool: a still view then completes in about three frames
+//!   instead of one frame per level of its cut.
 //! - Requests go to the loader thread largest first; it copies the pages out of the
 //!   memory-mapped file (taking the page faults off the render thread) and sends them
 //!   back. Each drawn range is split at page boundaries and points into its slots.
@@ -33,6 +37,7 @@
 //!   any pass (splats, the density volume: [`crate::render_stream_frame`]).
 
 use std::collections::{HashMap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -58,6 +63,39 @@ pub struct PageId {
     pub level: u8,
     pub page: u32,
 }
+
+/// Hashes a page id by multiplying and folding (a page id is five bytes): the default
+/// SipHash took a quarter of a 2×10^8-particle frame's bookkeeping, which looks up
+/// hundreds of thousands of pages.
+#[derive(Clone, Copy, Default)]
+struct PageHasher(u64);
+
+impl Hasher for PageHasher {
+    fn finish(&self) -> u64 {
+        self.0 ^ (self.0 >> 32)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    fn write_u8(&mut self, v: u8) {
+        self.write_u64(u64::from(v));
+    }
+
+    fn write_u32(&mut self, v: u32) {
+        self.write_u64(u64::from(v));
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+type PageMap<V> = HashMap<PageId, V, BuildHasherDefault<PageHasher>>;
+type PageSet = HashSet<PageId, BuildHasherDefault<PageHasher>>;
 
 /// What a streaming frame did.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -121,8 +159,10 @@ pub struct StreamingRenderer<'r> {
     packer: AttrPacker,
     look: PointStyle,
     slots: Vec<Option<Slot>>,
-    resident: HashMap<PageId, u32>,
-    pending: HashSet<PageId>,
+    resident: PageMap<u32>,
+    pending: PageSet,
+    /// Slots holding no page, lowest last (taken from the end).
+    free: Vec<u32>,
     frame: u64,
     evicted_total: u64,
     requests: Option<Sender<Vec<PageId>>>,
@@ -130,6 +170,9 @@ pub struct StreamingRenderer<'r> {
     /// Pages received by [`StreamingRenderer::wait_for_loads`], installed next frame.
     backlog: Vec<LoadedPage>,
     loader: Option<JoinHandle<()>>,
+    /// The view of the last frame, and whether its complete cut was requested already.
+    last_view: Option<(Camera, TraversalSettings)>,
+    looked_ahead: bool,
 }
 
 impl std::fmt::Debug for StreamingRenderer<'_> {
@@ -292,14 +335,17 @@ impl<'r> StreamingRenderer<'r> {
             packer,
             look: look.clone(),
             slots: vec![None; capacity],
-            resident: HashMap::new(),
-            pending: HashSet::new(),
+            resident: PageMap::default(),
+            pending: PageSet::default(),
+            free: (0..capacity as u32).rev().collect(),
             frame: 0,
             evicted_total: 0,
             requests: Some(req_tx),
             loaded: res_rx,
             backlog: Vec::new(),
             loader: Some(loader),
+            last_view: None,
+            looked_ahead: false,
         })
     }
 
@@ -332,7 +378,14 @@ impl<'r> StreamingRenderer<'r> {
         self.backlog.extend(arrived);
     }
 
-    fn install(&mut self, page: LoadedPage, stats: &mut StreamStats) -> Result<(), RenderError> {
+    /// Installs one arrived page; `victims` holds this frame's eviction candidates once
+    /// the pool is full (the next to evict last).
+    fn install(
+        &mut self,
+        page: LoadedPage,
+        stats: &mut StreamStats,
+        victims: &mut Option<Vec<u32>>,
+    ) -> Result<(), RenderError> {
         self.pending.remove(&page.id);
         if let Some(e) = page.error {
             return Err(RenderError::Gpu(e));
@@ -340,24 +393,34 @@ impl<'r> StreamingRenderer<'r> {
         if self.resident.contains_key(&page.id) {
             return Ok(());
         }
-        let slot = match self.slots.iter().position(Option::is_none) {
-            Some(s) => s,
+        let slot = match self.free.pop() {
+            Some(s) => s as usize,
             None => {
-                // Least recently used among the slots the previous frame did not use.
-                let Some((s, old)) = self
-                    .slots
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, s)| s.map(|s| (i, s)))
-                    .filter(|(_, s)| s.last_used + 1 < self.frame)
-                    .min_by_key(|(i, s)| (s.last_used, *i))
-                else {
+                // Least recently used among the slots the previous frame did not use,
+                // ties to the lowest slot: the candidates are listed and sorted once per
+                // frame (those installed meanwhile are used by this frame, so the list
+                // only shrinks), instead of a scan of the pool per page.
+                let frame = self.frame;
+                let victims = victims.get_or_insert_with(|| {
+                    let mut v: Vec<(u64, u32)> = self
+                        .slots
+                        .iter()
+                        .enumerate()
+                        .filter_map(|(i, s)| s.map(|s| (s.last_used, i as u32)))
+                        .filter(|&(last_used, _)| last_used + 1 < frame)
+                        .collect();
+                    v.sort_unstable_by(|a, b| b.cmp(a));
+                    v.into_iter().map(|(_, i)| i).collect()
+                });
+                let Some(s) = victims.pop() else {
                     return Ok(()); // No room now; asked for again if still wanted.
                 };
-                self.resident.remove(&old.page);
+                if let Some(old) = self.slots[s as usize] {
+                    self.resident.remove(&old.page);
+                }
                 stats.evicted += 1;
                 self.evicted_total += 1;
-                s
+                s as usize
             }
         };
         let queue = &self.renderer.ctx.queue;
@@ -422,8 +485,9 @@ impl<'r> StreamingRenderer<'r> {
         };
         let mut arrived: Vec<LoadedPage> = std::mem::take(&mut self.backlog);
         arrived.extend(self.loaded.try_iter());
+        let mut victims = None;
         for page in arrived {
-            self.install(page, &mut stats)?;
+            self.install(page, &mut stats, &mut victims)?;
         }
 
         let file = self.file.clone();
@@ -443,7 +507,7 @@ impl<'r> StreamingRenderer<'r> {
             slots: &mut self.slots,
             frame: self.frame,
             capacity: self.capacity,
-            used: HashSet::new(),
+            used: PageSet::default(),
             wanted: Vec::new(),
             pool_limited: false,
         };
@@ -453,6 +517,26 @@ impl<'r> StreamingRenderer<'r> {
         for (id, size) in drawn.into_iter().chain(missing) {
             residency.can_open(&file, id, size);
         }
+        // Look ahead once per still view: on its second frame, the pages of the
+        // complete cut (the traversal as if everything were resident) are requested
+        // at once, largest first within the pool, after those this frame uses. Without
+        // it each frame could ask only for the children of nodes it could draw, one
+        // level per frame (15 frames, most of them traversals, at 2×10^8 particles).
+        let view = (camera.clone(), *traversal);
+        let still = self.last_view.as_ref() == Some(&view);
+        if !still {
+            self.looked_ahead = false;
+        } else if !self.looked_ahead && (!residency.wanted.is_empty() || draw.deferred_nodes > 0) {
+            self.looked_ahead = true;
+            let (_, complete) = traverse_shared(camera, &file, traversal, &EveryPage);
+            file.node_error()?;
+            let limited = residency.pool_limited;
+            for (id, size) in complete {
+                residency.can_open(&file, id, size);
+            }
+            residency.pool_limited = limited;
+        }
+        self.last_view = Some(view);
         let (used, mut wanted, pool_limited) = (
             residency.used.len(),
             residency.wanted,
@@ -591,11 +675,11 @@ impl Drop for StreamingRenderer<'_> {
 
 struct PoolResidency<'a> {
     page_points: u32,
-    resident: &'a HashMap<PageId, u32>,
+    resident: &'a PageMap<u32>,
     slots: &'a mut Vec<Option<Slot>>,
     frame: u64,
     capacity: usize,
-    used: HashSet<PageId>,
+    used: PageSet,
     wanted: Vec<(f32, PageId)>,
     pool_limited: bool,
 }
@@ -609,10 +693,19 @@ fn pages_of(file: &MdlodFile, id: u32, page_points: u32) -> impl Iterator<Item =
     (first_page..=last_page).map(move |page| PageId { level, page })
 }
 
+/// The look-ahead's residency: every node may open, and the traversal lists them all.
+struct EveryPage;
+
+impl SharedResidency for EveryPage {
+    fn resident(&self, _file: &MdlodFile, _id: u32) -> bool {
+        true
+    }
+}
+
 /// What the parallel traversal asks: are all of a node's child pages in the pool?
 struct PagesResident<'a> {
     page_points: u32,
-    resident: &'a HashMap<PageId, u32>,
+    resident: &'a PageMap<u32>,
 }
 
 impl SharedResidency for PagesResident<'_> {
