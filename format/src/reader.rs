@@ -719,19 +719,9 @@ impl MdlodFile {
                 continue;
             }
             let per = blocks.div_ceil(runs) * NODE_BLOCK;
-            let results: Vec<Result<(), FormatError>> = std::thread::scope(|scope| {
-                let handles: Vec<_> = (0..runs)
-                    .map(|k| {
-                        let run = (k * per).min(count)..((k + 1) * per).min(count);
-                        scope.spawn(move || self.check_nodes(l, run))
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    .collect()
-            });
-            results.into_iter().collect::<Result<(), FormatError>>()?;
+            first_failure_of(runs, |k| {
+                self.check_nodes(l, (k * per).min(count)..((k + 1) * per).min(count))
+            })?;
         }
         Ok(())
     }
@@ -1102,24 +1092,33 @@ fn validate_nodes_in(
             check(0..count)?;
         } else {
             let per = count.div_ceil(chunks);
-            let results: Vec<Result<(), FormatError>> = std::thread::scope(|scope| {
-                let handles: Vec<_> = (0..chunks)
-                    .map(|k| {
-                        let range = k * per..((k + 1) * per).min(count);
-                        scope.spawn(move || check(range))
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    .collect()
-            });
             // The first failing chunk holds the first failing node.
-            results.into_iter().collect::<Result<(), FormatError>>()?;
+            first_failure_of(chunks, |k| check(k * per..((k + 1) * per).min(count)))?;
         }
         check_level_end(path, nodes, levels, l)?;
     }
     Ok(())
+}
+
+/// Runs `run(k)` for `k` in `0..runs`, each on a scoped thread of its own, and returns
+/// the failure of the lowest failing `k`: what running them in order would return.
+fn first_failure_of<F>(runs: usize, run: F) -> Result<(), FormatError>
+where
+    F: Fn(usize) -> Result<(), FormatError> + Sync,
+{
+    let results: Vec<Result<(), FormatError>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..runs)
+            .map(|k| {
+                let run = &run;
+                scope.spawn(move || run(k))
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    });
+    results.into_iter().collect()
 }
 
 /// The children of level `l`'s last node end where level `l + 1` does.

@@ -797,23 +797,26 @@ fn hostile_levels() {
     expect_refused(&p, &["LEVELS", "multiple of 32"]);
 }
 
-/// Levels of many blocks are checked on every core when checked whole
-/// (`check_all_nodes`, as `verify` runs it), and the failure reported is that of the
-/// lowest corrupt node, whichever core found which.
-#[test]
-fn lazily_checked_levels_report_their_lowest_corrupt_node() {
-    let dir = tempfile::tempdir().unwrap();
-    // 2·40³ + 200 particles in clusters of at most 4: more than 8 blocks of nodes on the
-    // deepest node level.
-    let b = valid_bytes_of(
+/// A valid file of 2·40³ + 200 particles in clusters of at most 4: its deepest node
+/// level spans more than 8 blocks of `NODE_BLOCK` nodes, the one above it three.
+fn many_blocks_bytes() -> Vec<u8> {
+    valid_bytes_of(
         40,
         BuildParams {
             max_cluster_size: 4,
             max_root_points: 16,
             ..Default::default()
         },
-    );
-    let mut d = Doc::parse(&b);
+    )
+}
+
+/// Levels of many blocks are checked on every core when checked whole
+/// (`check_all_nodes`, as `verify` runs it), and the failure reported is that of the
+/// lowest corrupt node, whichever core found which.
+#[test]
+fn lazily_checked_levels_report_their_lowest_corrupt_node() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut d = Doc::parse(&many_blocks_bytes());
     let levels = d.levels();
     let deepest = levels.len() - 2;
     let first = levels[deepest].node_first as usize;
@@ -854,15 +857,7 @@ fn lazily_checked_levels_report_their_lowest_corrupt_node() {
 fn lazily_checked_blocks_stand_on_their_own() {
     use mdlod_format::reader::NODE_BLOCK;
     let dir = tempfile::tempdir().unwrap();
-    let b = valid_bytes_of(
-        40,
-        BuildParams {
-            max_cluster_size: 4,
-            max_root_points: 16,
-            ..Default::default()
-        },
-    );
-    let mut d = Doc::parse(&b);
+    let mut d = Doc::parse(&many_blocks_bytes());
     let levels = d.levels();
     let clean = d.nodes();
     let open = |d: &Doc, name: &str| {
