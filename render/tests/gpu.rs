@@ -957,7 +957,8 @@ fn every_mode_but_sndfs_streams_through_a_small_pool_to_the_direct_image() {
         (used as u64, s.file_pages())
     };
     assert!(used * 3 < file_pages * 2, "{used} of {file_pages} pages");
-    let pool = used * StreamingRenderer::slot_bytes(f.position_bits(), 256);
+    let pool = used
+        * StreamingRenderer::slot_bytes(f.position_bits(), mdlod_render::streaming::PAGE_POINTS);
     let colour_map = PointStyle {
         colour_map: Some(ColourMap::Magma),
         ..Default::default()
