@@ -673,20 +673,23 @@ impl MdlodFile {
         };
         let l = usize::from(n.level) + 1;
         let first = n.child_first as usize;
-        let last = first + n.child_count as usize - 1;
-        self.check_nodes(l, first..last + 1)?;
+        let end = first + n.child_count as usize;
+        self.check_nodes(l, first..end)?;
+        // (A checked node has at least one child; `end > first` keeps an unchecked one
+        // from underflowing below.)
+        let last = end.saturating_sub(1).max(first);
         // Node children: the first and the last must name `id` as their parent; their
         // parents being in order (checked with their blocks), so must every child
         // between them, and no other checked node can claim them.
-        if l + 1 < self.level_count() {
+        if l + 1 < self.level_count() && end > first {
             let at = self.levels()[l].node_first as usize;
             for k in [first, last] {
                 let p = self.nodes()[at + k].parent as usize;
                 if p != id {
                     let lists = self.nodes().get(p).is_some_and(|q| {
-                        usize::from(q.level) + 1 == l
-                            && (q.child_first as usize..(q.child_first + q.child_count) as usize)
-                                .contains(&k)
+                        let children =
+                            q.child_first as usize..q.child_first as usize + q.child_count as usize;
+                        usize::from(q.level) + 1 == l && children.contains(&k)
                     });
                     let problem = if lists {
                         format!("claimed as a child by node {id} and by its parent {p}")
