@@ -164,8 +164,9 @@ pub struct StreamingRenderer<'r> {
     slots: Vec<Option<Slot>>,
     resident: PageMap<u32>,
     pending: PageSet,
-    /// Slots holding no page, lowest last (taken from the end).
-    free: Vec<u32>,
+    /// Slots from here on have never held a page (an evicted slot is refilled at once,
+    /// so these are the only empty ones).
+    unused: u32,
     frame: u64,
     evicted_total: u64,
     requests: Option<Sender<Vec<PageId>>>,
@@ -354,7 +355,7 @@ impl<'r> StreamingRenderer<'r> {
             slots: vec![None; capacity],
             resident: PageMap::default(),
             pending: PageSet::default(),
-            free: (0..capacity as u32).rev().collect(),
+            unused: 0,
             frame: 0,
             evicted_total: 0,
             requests: Some(req_tx),
@@ -411,35 +412,35 @@ impl<'r> StreamingRenderer<'r> {
         if self.resident.contains_key(&page.id) {
             return Ok(());
         }
-        let slot = match self.free.pop() {
-            Some(s) => s as usize,
-            None => {
-                // Least recently used among the slots the previous frame did not use,
-                // ties to the lowest slot: the candidates are listed and sorted once per
-                // frame (those installed meanwhile are used by this frame, so the list
-                // only shrinks), instead of a scan of the pool per page.
-                let frame = self.frame;
-                let victims = victims.get_or_insert_with(|| {
-                    let mut v: Vec<(u64, u32)> = self
-                        .slots
-                        .iter()
-                        .enumerate()
-                        .filter_map(|(i, s)| s.map(|s| (s.last_used, i as u32)))
-                        .filter(|&(last_used, _)| last_used + 1 < frame)
-                        .collect();
-                    v.sort_unstable_by(|a, b| b.cmp(a));
-                    v.into_iter().map(|(_, i)| i).collect()
-                });
-                let Some(s) = victims.pop() else {
-                    return Ok(()); // No room now; asked for again if still wanted.
-                };
-                if let Some(old) = self.slots[s as usize] {
-                    self.resident.remove(&old.page);
-                }
-                stats.evicted += 1;
-                self.evicted_total += 1;
-                s as usize
+        let slot = if (self.unused as usize) < self.capacity {
+            self.unused += 1;
+            self.unused as usize - 1
+        } else {
+            // Least recently used among the slots the previous frame did not use,
+            // ties to the lowest slot: the candidates are listed and sorted once per
+            // frame (those installed meanwhile are used by this frame, so the list
+            // only shrinks), instead of a scan of the pool per page.
+            let frame = self.frame;
+            let victims = victims.get_or_insert_with(|| {
+                let mut v: Vec<(u64, u32)> = self
+                    .slots
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, s)| s.map(|s| (s.last_used, i as u32)))
+                    .filter(|&(last_used, _)| last_used + 1 < frame)
+                    .collect();
+                v.sort_unstable_by(|a, b| b.cmp(a));
+                v.into_iter().map(|(_, i)| i).collect()
+            });
+            let Some(s) = victims.pop() else {
+                return Ok(()); // No room now; asked for again if still wanted.
+            };
+            if let Some(old) = self.slots[s as usize] {
+                self.resident.remove(&old.page);
             }
+            stats.evicted += 1;
+            self.evicted_total += 1;
+            s as usize
         };
         self.stage(slot as u32, &page);
         // Requested by the previous frame: as recently used as its pages.

@@ -1511,21 +1511,36 @@ fn zoomed_out_sndfs_beat_supersampling_with_as_many_iterations() {
     }
 }
 
+/// The default view of `f` at `w` × `h`, its cut at 0 px with whole-pixel occlusion,
+/// and S-NDF settings of `iterations` iterations and 4 × 4 projected-normal bins.
+fn sndf_scene(
+    f: &MdlodFile,
+    (w, h): (u32, u32),
+    iterations: u32,
+) -> (
+    Camera,
+    mdlod_render::DrawList,
+    mdlod_render::sndf::SndfSettings,
+) {
+    let camera = camera_for(f, &opts(w, h).view, w, h).unwrap();
+    let draw = cut(f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
+    let settings = mdlod_render::sndf::SndfSettings {
+        width: w,
+        height: h,
+        iterations,
+        bins: 4,
+        binning: Default::default(),
+    };
+    (camera, draw, settings)
+}
+
 /// S-NDFs kept on the GPU and refined there in batches (4, then 4) hold what one
 /// sampling of 8 iterations holds, and their GPU shading equals the host's.
 #[test]
 fn resident_sndfs_refine_on_the_gpu_like_one_sampling() {
     let (_d, _p, f) = make_file(&fcc_frame(5), small_build(), &[]);
     let (w, h) = (80u32, 70u32);
-    let camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
-    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
-    let settings = mdlod_render::sndf::SndfSettings {
-        width: w,
-        height: h,
-        iterations: 8,
-        bins: 4,
-        binning: Default::default(),
-    };
+    let (camera, draw, settings) = sndf_scene(&f, (w, h), 8);
     let r = renderer();
     let whole = r.sample_sndf(&f, &camera, &draw, &settings).unwrap();
     let mut resident = r
@@ -1568,15 +1583,8 @@ fn resident_sndfs_refine_on_the_gpu_like_one_sampling() {
 fn sndf_batches_add_up_to_one_sampling() {
     let (_d, _p, f) = make_file(&fcc_frame(5), small_build(), &[]);
     let (w, h) = (48u32, 36u32);
-    let camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
-    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
-    let settings = |iterations| mdlod_render::sndf::SndfSettings {
-        width: w,
-        height: h,
-        iterations,
-        bins: 4,
-        binning: Default::default(),
-    };
+    let (camera, draw, base) = sndf_scene(&f, (w, h), 8);
+    let settings = |iterations| mdlod_render::sndf::SndfSettings { iterations, ..base };
     let r = renderer();
     let whole = r.sample_sndf(&f, &camera, &draw, &settings(8)).unwrap();
     let mut sum = r
@@ -1778,15 +1786,7 @@ fn small_sphere_raster_samples_the_sndfs_impostor_quads_sample() {
     }
     let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
     let (w, h) = (120u32, 90u32);
-    let camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
-    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
-    let settings = mdlod_render::sndf::SndfSettings {
-        width: w,
-        height: h,
-        iterations: 8,
-        bins: 4,
-        binning: Default::default(),
-    };
+    let (camera, draw, settings) = sndf_scene(&f, (w, h), 8);
     let small = renderer()
         .sample_sndf(&f, &camera, &draw, &settings)
         .unwrap();
