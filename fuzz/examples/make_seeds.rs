@@ -1,6 +1,7 @@
 //! Writes seed inputs for the fuzz targets into `corpus/<target>/` (relative to the
 //! current directory, normally `fuzz/`): small valid `.mdlod` files made by
-//! `convert_frame`, and small LAMMPS and XYZ dumps. Each seed is one mode byte (see the
+//! `convert_frame`; small LAMMPS and XYZ dumps; the project's real LAMMPS binary dumps and
+//! GSD file (`datasets/`) and small MMPLD files. Each seed is one mode byte (see the
 //! targets) followed by the file. Runs on stable: `cargo run --example make_seeds`.
 
 use std::path::Path;
@@ -36,6 +37,88 @@ fn frame(n: usize, attribute: bool) -> Frame {
     }
 }
 
+/// An MMPLD file (format version `version`, 100-103) of `frames` frames, each of four
+/// particle lists with different vertex and colour types: intensities in every list
+/// (`intensity`), or mixed colour types.
+fn mmpld(version: u16, frames: usize, intensity: bool) -> Vec<u8> {
+    let mut out = b"MMPLD\0".to_vec();
+    out.extend_from_slice(&version.to_le_bytes());
+    out.extend_from_slice(&(frames as u32).to_le_bytes());
+    for v in [
+        0.0f32, 0.0, 0.0, 4.0, 4.0, 4.0, -1.0, -1.0, -1.0, 5.0, 5.0, 5.0,
+    ] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    let table = out.len();
+    out.resize(table + 8 * (frames + 1), 0);
+    for k in 0..=frames {
+        let at = out.len() as u64;
+        out[table + 8 * k..table + 8 * k + 8].copy_from_slice(&at.to_le_bytes());
+        if k == frames {
+            break;
+        }
+        if version >= 102 {
+            out.extend_from_slice(&(k as f32).to_le_bytes());
+        }
+        // (vertex type, colour type, particles): float xyzr, float xyz, double xyz and
+        // short xyz, with float or double intensities, or a global colour and RGBA bytes.
+        let lists = if intensity {
+            [(2u8, 3u8, 3usize), (1, 7, 2), (4, 3, 2), (3, 7, 2)]
+        } else {
+            [(2, 3, 3), (1, 0, 2), (4, 7, 2), (3, 2, 2)]
+        };
+        out.extend_from_slice(&(lists.len() as i32).to_le_bytes());
+        for (vertex, colour, n) in lists {
+            out.extend_from_slice(&[vertex, colour]);
+            if vertex != 2 {
+                out.extend_from_slice(&0.5f32.to_le_bytes());
+            }
+            match colour {
+                0 => out.extend_from_slice(&[200, 100, 50, 255]),
+                3 | 7 => [0f32, 10.0]
+                    .iter()
+                    .for_each(|v| out.extend_from_slice(&v.to_le_bytes())),
+                _ => {}
+            }
+            out.extend_from_slice(&(n as u64).to_le_bytes());
+            if version == 103 {
+                for v in [0f32, 0.0, 0.0, 4.0, 4.0, 4.0] {
+                    out.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            for i in 0..n {
+                let p = [i as f64, (i + k) as f64 * 0.5, 1.0];
+                match vertex {
+                    3 => p
+                        .iter()
+                        .for_each(|&v| out.extend_from_slice(&(v as i16).to_le_bytes())),
+                    4 => p
+                        .iter()
+                        .for_each(|&v| out.extend_from_slice(&v.to_le_bytes())),
+                    _ => p
+                        .iter()
+                        .for_each(|&v| out.extend_from_slice(&(v as f32).to_le_bytes())),
+                }
+                if vertex == 2 {
+                    out.extend_from_slice(&0.75f32.to_le_bytes());
+                }
+                match colour {
+                    2 => out.extend_from_slice(&[1, 2, 3, 4]),
+                    3 => out.extend_from_slice(&(i as f32).to_le_bytes()),
+                    7 => out.extend_from_slice(&(i as f64).to_le_bytes()),
+                    _ => {}
+                }
+            }
+            if version == 101 {
+                // No cluster information: a count and a byte size of 0.
+                out.extend_from_slice(&0u32.to_le_bytes());
+                out.extend_from_slice(&0u64.to_le_bytes());
+            }
+        }
+    }
+    out
+}
+
 fn put(dir: &Path, name: &str, mode: u8, bytes: &[u8]) {
     let mut seed = vec![mode];
     seed.extend_from_slice(bytes);
@@ -45,8 +128,39 @@ fn put(dir: &Path, name: &str, mode: u8, bytes: &[u8]) {
 fn main() {
     let mdlod = Path::new("corpus/mdlod_reader");
     let dumps = Path::new("corpus/lammps_dump");
+    let binary = Path::new("corpus/binary_dump");
     std::fs::create_dir_all(mdlod).unwrap();
     std::fs::create_dir_all(dumps).unwrap();
+    std::fs::create_dir_all(binary).unwrap();
+
+    // Real files (written by LAMMPS and by the `gsd` package; see `datasets/`), and
+    // MMPLD files. Mode bits 0-1 pick the name (.bin, .gsd, .mmpld, none: sniffed),
+    // bits 2-3 the attribute (c_pe, charge, intensity).
+    for (name, mode) in [
+        ("lammps/cu_melt.step.0.bin", 1 << 2),
+        ("lammps/cu_melt.atom.bin", 3),
+        ("lammps/lj_triclinic.custom.bin", 0),
+        ("gsd/hoomd_mixture.gsd", 1 | 2 << 2),
+    ] {
+        let bytes = std::fs::read(Path::new("../datasets").join(name)).unwrap();
+        put(binary, &name.replace('/', "-"), mode, &bytes);
+    }
+    for version in [100, 101, 102, 103] {
+        let frames = if version >= 102 { 2 } else { 1 };
+        put(
+            binary,
+            &format!("mmpld-{version}-intensity"),
+            2 | 3 << 2,
+            &mmpld(version, frames, true),
+        );
+        put(
+            binary,
+            &format!("mmpld-{version}"),
+            2,
+            &mmpld(version, frames, false),
+        );
+    }
+    put(binary, "mmpld-sniffed", 3, &mmpld(103, 1, false));
 
     let tmp = tempfile::tempdir().unwrap();
     let cases = [
@@ -122,8 +236,9 @@ fn main() {
     std::io::Write::write_all(&mut gz, xyz.as_bytes()).unwrap();
     put(dumps, "xyz-gz", 2, &gz.finish().unwrap());
     println!(
-        "seeds written to {} and {}",
+        "seeds written to {}, {} and {}",
         mdlod.display(),
-        dumps.display()
+        dumps.display(),
+        binary.display()
     );
 }

@@ -180,11 +180,27 @@ fn damaged_gsd_files_are_errors_naming_the_byte() {
         "{m}"
     );
     let (_, typeid) = find("particles/typeid", 0);
-    let mut bad = good;
+    let mut bad = good.clone();
     bad[typeid + 4 * 3..typeid + 4 * 4].copy_from_slice(&5u32.to_le_bytes());
     let m = damaged(&bad);
     assert!(
         m.contains("particle 3 has type id 5, but there are 2 types"),
         "{m}"
     );
+
+    // A particle count the positions do not back (4 × 10^9 particles claimed by a
+    // 22 kB file): an error before anything is allocated for them, for the species
+    // pass of the out-of-core converter as for reading.
+    let (_, count) = find("particles/N", 0);
+    let mut bad = good;
+    bad[count..count + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    let expected = "frame 0: `particles/position` is 300 × 3, expected 4294967295 × 3";
+    let m = damaged(&bad);
+    assert!(m.contains(expected), "{m}");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.gsd");
+    std::fs::write(&path, &bad).unwrap();
+    let d = DumpFile::open(&path).unwrap();
+    let m = d.frame_species(0).unwrap_err().to_string();
+    assert!(m.contains(expected), "{m}");
 }

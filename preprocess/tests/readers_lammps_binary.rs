@@ -286,6 +286,14 @@ fn truncated_and_corrupt_binary_dumps_are_errors_naming_the_byte() {
     bad[8..12].copy_from_slice(b"JUNK");
     let e = open_err(&bad);
     assert!(e.contains("not a LAMMPS binary dump"), "{e}");
+    // Magic string lengths out of range, down to the most negative one (whose length
+    // does not fit the integer it is read as).
+    for (first, len) in [(-65i64, "65"), (i64::MIN, "9223372036854775808")] {
+        let mut bad = good.clone();
+        bad[..8].copy_from_slice(&first.to_le_bytes());
+        let e = open_err(&bad);
+        assert!(e.contains(&format!("bad magic string length {len}")), "{e}");
+    }
     // An atom count the chunks do not hold.
     let mut bad = good.clone();
     bad[0x22..0x2a].copy_from_slice(&501i64.to_le_bytes());

@@ -382,13 +382,25 @@ struct FrameData<'a> {
 impl<'a> FrameData<'a> {
     fn new(path: &'a Path, data: &'a [u8], index: &'a Index, k: usize) -> Result<Self, ReadError> {
         let n = index.particles(path, data, k)?;
-        Ok(FrameData {
+        let f = FrameData {
             path,
             data,
             index,
             k,
             n,
-        })
+        };
+        // Every per-particle array is sized by N: a count that the file's positions do
+        // not back fails here, before anything is allocated for it.
+        if let Some(e) = f.chunk("particles/position", 3, true)? {
+            if !matches!(e.ty, Ty::F32 | Ty::F64) {
+                return Err(err(
+                    path,
+                    e.at,
+                    "`particles/position` is not floating point",
+                ));
+            }
+        }
+        Ok(f)
     }
 
     /// A per-particle chunk checked to be `n × m` (`None` when the frame and frame 0
@@ -553,14 +565,8 @@ pub(crate) fn read_range(
     let len = range.len();
     progress.stage(&format!("reading frame {k}"), Some(len as u64), "particles");
     let mut positions = vec![[0f32; 3]; len];
+    // (Checked to be N × 3 floating-point numbers by `FrameData::new`.)
     if let Some(e) = f.chunk("particles/position", 3, true)? {
-        if !matches!(e.ty, Ty::F32 | Ty::F64) {
-            return Err(err(
-                path,
-                e.at,
-                "`particles/position` is not floating point",
-            ));
-        }
         let bytes = &data[e.location..e.location + n * 3 * e.ty.size()];
         positions =
             super::decode_positions(len, |i, c| 3 * (first + i) + c, |j| e.ty.get(bytes, j))

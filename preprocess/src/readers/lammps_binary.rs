@@ -187,7 +187,10 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
         let len = usize::try_from(first.unsigned_abs())
             .ok()
             .filter(|&l| l <= 64)
-            .ok_or_else(|| r.err(start, format!("bad magic string length {}", -first)))?;
+            .ok_or_else(|| {
+                let len = first.unsigned_abs();
+                r.err(start, format!("bad magic string length {len}"))
+            })?;
         let at = r.pos;
         let magic = r.take(len, "magic string")?;
         if !magic.starts_with(b"DUMP") {

@@ -1,0 +1,120 @@
+//! Fuzzes the binary dump readers (LAMMPS binary dumps, GSD, MegaMol MMPLD): whatever
+//! the bytes, `DumpFile::open`, `frame_info`, `frame_species`, `read_frame` and
+//! `read_part` must return frames that are consistent, or an error whose message starts
+//! with the file's path; never panic, never allocate for particles the file cannot hold.
+//!
+//! Input: one mode byte, then the file. Bits 0-1 of the mode byte pick the file name
+//! (`.bin`, `.gsd`, `.mmpld`, or no extension, which makes the reader sniff the format by
+//! its magic bytes); bits 2-3 the attribute (`c_pe`, `charge`, `intensity` or none).
+//! Each frame read whole is also read in two parts, as the out-of-core converter reads
+//! it, and the parts must add up to the frame.
+
+#![no_main]
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use libfuzzer_sys::fuzz_target;
+use mdlod_preprocess::readers::{DumpFile, ReadError, ReadOptions};
+use mdlod_preprocess::{Frame, NoProgress};
+
+const NAMES: [&str; 4] = ["fuzz.bin", "fuzz.gsd", "fuzz.mmpld", "fuzz-input"];
+const ATTRIBUTES: [Option<&str>; 4] = [None, Some("c_pe"), Some("charge"), Some("intensity")];
+
+fn dir() -> &'static Path {
+    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+    DIR.get_or_init(|| tempfile::tempdir().expect("temporary directory"))
+        .path()
+}
+
+#[track_caller]
+fn check_error(e: &ReadError, path: &Path) {
+    let msg = e.to_string();
+    let name = path.display().to_string();
+    assert!(
+        msg.starts_with(&name),
+        "message does not start with the path: {msg}"
+    );
+}
+
+/// A frame read must be internally consistent.
+#[track_caller]
+fn check_frame(frame: &Frame, particles: usize, opts: &ReadOptions) {
+    let n = frame.len();
+    assert_eq!(n, particles);
+    assert_eq!(frame.species_index.len(), n);
+    assert!(frame
+        .species_index
+        .iter()
+        .all(|&s| usize::from(s) < frame.species.len()));
+    if let Some(a) = &frame.attribute {
+        assert_eq!(a.values.len(), n);
+        // GSD names it by its chunk (`particles/charge` for `charge`).
+        let asked = opts.attribute.as_deref().expect("an attribute asked for");
+        assert!(a.name == asked || a.name.ends_with(&format!("/{asked}")));
+    }
+}
+
+fuzz_target!(|data: &[u8]| {
+    let Some((&mode, bytes)) = data.split_first() else {
+        return;
+    };
+    let path: PathBuf = dir().join(NAMES[usize::from(mode & 3)]);
+    std::fs::write(&path, bytes).expect("write the input file");
+    let opts = ReadOptions {
+        attribute: ATTRIBUTES[usize::from((mode >> 2) & 3)].map(str::to_string),
+        ..Default::default()
+    };
+    let dump = match DumpFile::open(&path) {
+        Ok(d) => d,
+        Err(e) => return check_error(&e, &path),
+    };
+    let frames = dump.frame_count();
+    assert!(dump.frame_timestep(frames).is_none());
+    for k in 0..frames.min(3) {
+        let _ = dump.frame_timestep(k);
+        let info = match dump.frame_info(k) {
+            Ok(info) => info,
+            Err(e) => {
+                check_error(&e, &path);
+                continue;
+            }
+        };
+        if let Err(e) = dump.frame_species(k) {
+            check_error(&e, &path);
+        }
+        let whole = match dump.read_frame(k, &opts, &NoProgress) {
+            Err(e) => {
+                check_error(&e, &path);
+                continue;
+            }
+            Ok(frame) => {
+                check_frame(&frame, info.particles, &opts);
+                frame
+            }
+        };
+        if dump.reads_parts() {
+            let n = info.particles;
+            let mut read = 0;
+            for range in [0..n / 3, n / 3..n] {
+                match dump.read_part(k, &opts, range.clone(), &NoProgress) {
+                    Err(e) => check_error(&e, &path),
+                    Ok(part) => {
+                        check_frame(&part, range.len(), &opts);
+                        read += part.len();
+                    }
+                }
+            }
+            // Both parts of a frame that was read whole are readable.
+            assert_eq!(read, whole.len());
+            if let Err(e) = dump.read_part(k, &opts, n..n + 1, &NoProgress) {
+                check_error(&e, &path);
+            } else {
+                panic!("a part past the frame's {n} particles was read");
+            }
+        }
+    }
+    if let Err(e) = dump.read_frame(frames, &opts, &NoProgress) {
+        check_error(&e, &path);
+    }
+});
