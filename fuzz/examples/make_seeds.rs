@@ -161,6 +161,19 @@ fn main() {
         );
     }
     put(binary, "mmpld-sniffed", 3, &mmpld(103, 1, false));
+    // Raw-array sidecars (mode bit 4) naming the arrays the target writes beside them.
+    let raw_full = r#"{"mdlod_raw": 1, "particles": 10,
+        "positions": {"file": "pos.f32", "type": "f32", "layout": "interleaved"},
+        "species": {"file": "type.u8", "type": "u8", "names": ["Cu", "Ag", "Ni"]},
+        "radii": [1.28, 1.44, 1.25],
+        "attribute": {"file": "pe.f32", "type": "f32", "name": "c_pe"},
+        "box": {"origin": [0, 0, 0], "a": [10, 0, 0], "b": [0, 10, 0], "c": [0, 0, 10]},
+        "timestep": 1000, "time": 2.0, "units": "metal"}"#;
+    let raw_planar = r#"{"mdlod_raw": 1,
+        "positions": {"file": "pos.f64", "type": "f64", "layout": "planar", "offset": 0,
+                      "byte_order": "little"}}"#;
+    put(binary, "raw-full", 16 | 1 << 2, raw_full.as_bytes());
+    put(binary, "raw-planar", 16, raw_planar.as_bytes());
 
     let tmp = tempfile::tempdir().unwrap();
     let cases = [

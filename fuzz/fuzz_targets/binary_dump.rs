@@ -1,4 +1,5 @@
-//! Fuzzes the binary dump readers (LAMMPS binary dumps, GSD, MegaMol MMPLD): whatever
+//! Fuzzes the binary dump readers (LAMMPS binary dumps, GSD, MegaMol MMPLD, raw arrays
+//! with a JSON sidecar): whatever
 //! the bytes, `DumpFile::open`, `frame_info`, `frame_species`, `read_frame` and
 //! `read_part` must return frames that are consistent, or an error whose message starts
 //! with the file's path; never panic, never allocate for particles the file cannot hold.
@@ -6,6 +7,8 @@
 //! Input: one mode byte, then the file. Bits 0-1 of the mode byte pick the file name
 //! (`.bin`, `.gsd`, `.mmpld`, or no extension, which makes the reader sniff the format by
 //! its magic bytes); bits 2-3 the attribute (`c_pe`, `charge`, `intensity` or none).
+//! Bit 4 makes the file a raw-array sidecar (`.raw.json`) instead: the arrays it may name
+//! lie beside it (`pos.f32`, `pos.f64`, `type.u8`, `pe.f32`; see [`ARRAYS`]).
 //! Each frame read whole is also read in two parts, as the out-of-core converter reads
 //! it, and the parts must add up to the frame.
 
@@ -21,18 +24,42 @@ use mdlod_preprocess::{Frame, NoProgress};
 const NAMES: [&str; 4] = ["fuzz.bin", "fuzz.gsd", "fuzz.mmpld", "fuzz-input"];
 const ATTRIBUTES: [Option<&str>; 4] = [None, Some("c_pe"), Some("charge"), Some("intensity")];
 
+/// The arrays a fuzzed sidecar may name, written once beside it: 10 particles'
+/// positions (interleaved) in single and double precision, species indices 0-2 and an
+/// attribute.
+const ARRAYS: [&str; 4] = ["pos.f32", "pos.f64", "type.u8", "pe.f32"];
+
 fn dir() -> &'static Path {
     static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
-    DIR.get_or_init(|| tempfile::tempdir().expect("temporary directory"))
-        .path()
+    DIR.get_or_init(|| {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let values: Vec<f64> = (0..30).map(|i| f64::from(i) * 0.5).collect();
+        let f32s: Vec<u8> = values
+            .iter()
+            .flat_map(|&v| (v as f32).to_le_bytes())
+            .collect();
+        let f64s: Vec<u8> = values.iter().flat_map(|&v| v.to_le_bytes()).collect();
+        let types: Vec<u8> = (0..10).map(|i| i % 3).collect();
+        for (name, bytes) in ARRAYS
+            .iter()
+            .zip([&f32s, &f64s, &types, &f32s[..40].to_vec()])
+        {
+            std::fs::write(dir.path().join(name), bytes).expect("write an array");
+        }
+        dir
+    })
+    .path()
 }
 
 #[track_caller]
 fn check_error(e: &ReadError, path: &Path) {
     let msg = e.to_string();
     let name = path.display().to_string();
+    // A sidecar's arrays are files of their own: an error in one names that file (a
+    // missing one, a bad value's byte), which lies beside the sidecar.
+    let raw = name.ends_with(".raw.json") && msg.starts_with(&dir().display().to_string());
     assert!(
-        msg.starts_with(&name),
+        msg.starts_with(&name) || raw,
         "message does not start with the path: {msg}"
     );
 }
@@ -59,7 +86,12 @@ fuzz_target!(|data: &[u8]| {
     let Some((&mode, bytes)) = data.split_first() else {
         return;
     };
-    let path: PathBuf = dir().join(NAMES[usize::from(mode & 3)]);
+    let name = if mode & 16 != 0 {
+        "fuzz.raw.json"
+    } else {
+        NAMES[usize::from(mode & 3)]
+    };
+    let path: PathBuf = dir().join(name);
     std::fs::write(&path, bytes).expect("write the input file");
     let opts = ReadOptions {
         attribute: ATTRIBUTES[usize::from((mode >> 2) & 3)].map(str::to_string),

@@ -282,6 +282,13 @@ pub fn camera_for(
                     "zoom {zoom} (must be positive)"
                 )));
             }
+            for (what, v) in [("azimuth", azimuth_deg), ("elevation", elevation_deg)] {
+                if !v.is_finite() {
+                    return Err(RenderError::InvalidOptions(format!(
+                        "{what} {v}° (must be a finite angle)"
+                    )));
+                }
+            }
             let v = ViewFile {
                 projection: *projection,
                 azimuth_deg: *azimuth_deg,

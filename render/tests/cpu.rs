@@ -340,6 +340,29 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
     assert_eq!(other, patchy.refused.len() as u64);
 }
 
+#[test]
+fn orbit_views_with_angles_or_zoom_that_are_not_finite_are_errors() {
+    let (_d, _p, f) = make_file(&fcc_frame(3), small_build(), &[]);
+    let orbit = |azimuth_deg: f32, elevation_deg: f32, zoom: f32| ViewSpec::Orbit {
+        azimuth_deg,
+        elevation_deg,
+        zoom,
+        projection: Projection::Perspective,
+    };
+    for (view, says) in [
+        (orbit(f32::NAN, 20.0, 1.0), "azimuth NaN°"),
+        (orbit(30.0, f32::INFINITY, 1.0), "elevation inf°"),
+        (orbit(30.0, 20.0, 0.0), "zoom 0"),
+        (orbit(30.0, 20.0, f32::NAN), "zoom NaN"),
+    ] {
+        let e = camera_for(&f, &view, 64, 48).unwrap_err().to_string();
+        assert!(e.contains(says), "{e}");
+    }
+    // Elevations beyond the poles are clamped, not refused.
+    let c = camera_for(&f, &orbit(30.0, 1e30, 1.0), 64, 48).unwrap();
+    assert!(c.check().is_ok());
+}
+
 /// Refuses the even nodes of one level, from every tile at once.
 struct SharedPatchy(u8);
 
