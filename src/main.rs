@@ -45,6 +45,7 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    quiet_headless_gpu_probe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Convert(a) => commands::convert::run(a),
@@ -75,5 +76,20 @@ fn main() -> std::process::ExitCode {
             eprintln!("error: {message}");
             std::process::ExitCode::FAILURE
         }
+    }
+}
+
+/// Without a desktop session (`XDG_RUNTIME_DIR` unset: a batch job on a cluster node, an
+/// ssh login), Mesa's Vulkan device-selection layer tries to reach a Wayland display to
+/// learn which GPU drives the screen, and libwayland prints
+/// `error: XDG_RUNTIME_DIR is invalid or not set in the environment.` twice before a
+/// render that then succeeds. mdlod picks its adapter itself, so the layer is turned off
+/// there (`NODEVICE_SELECT`, Mesa's switch for it), unless the user has set that switch.
+/// Runs first in `main`, before any thread exists to read the environment concurrently.
+fn quiet_headless_gpu_probe() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none()
+        && std::env::var_os("NODEVICE_SELECT").is_none()
+    {
+        std::env::set_var("NODEVICE_SELECT", "1");
     }
 }

@@ -349,6 +349,41 @@ fn render_writes_a_picture_and_views_round_trip() {
 }
 
 #[test]
+fn a_headless_render_prints_no_display_errors() {
+    // A batch job without a desktop session: no XDG_RUNTIME_DIR. Mesa's device-selection
+    // layer (installed with its Vulkan drivers) would make libwayland print two `error:`
+    // lines about it before a render that succeeds.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a.mdlod");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("cu_melt.xyz")),
+        "-o",
+        s(&file),
+    ]);
+    let png = dir.path().join("x.png");
+    let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args([
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "32",
+            "--height",
+            "24",
+        ])
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(png.exists());
+    assert!(!err.contains("error"), "{err}");
+}
+
+#[test]
 fn render_without_an_adapter_says_how_to_get_one() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("a.mdlod");
