@@ -41,9 +41,13 @@ pub enum RenderError {
         #[source]
         source: std::io::Error,
     },
-    /// Encoding the PNG failed.
-    #[error("{path}: writing PNG: {message}")]
-    Png { path: PathBuf, message: String },
+    /// Encoding or decoding a PNG failed (`action`: "writing" or "reading").
+    #[error("{path}: {action} PNG: {message}")]
+    Png {
+        path: PathBuf,
+        action: &'static str,
+        message: String,
+    },
 }
 
 impl RenderError {

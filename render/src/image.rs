@@ -58,21 +58,31 @@ impl RgbaImage {
     pub fn save_png(&self, path: &Path) -> Result<(), RenderError> {
         let bytes = self.to_png().map_err(|message| RenderError::Png {
             path: path.to_path_buf(),
+            action: "writing",
             message,
         })?;
         write_atomic(path, &bytes)
     }
 
-    /// Reads an 8-bit RGB or RGBA PNG.
+    /// Reads an 8-bit RGB or RGBA PNG of at most [`MAX_LOAD_PIXELS`] pixels (checked
+    /// from its header, before the pixels are allocated: a few kilobytes of compressed
+    /// zeros can declare gigabytes of them).
     pub fn load_png(path: &Path) -> Result<RgbaImage, RenderError> {
         let bytes = std::fs::read(path).map_err(|e| RenderError::io(path, e))?;
         let png_err = |message: String| RenderError::Png {
             path: path.to_path_buf(),
+            action: "reading",
             message,
         };
         let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
         dec.set_transformations(png::Transformations::EXPAND);
         let mut reader = dec.read_info().map_err(|e| png_err(e.to_string()))?;
+        let (w, h) = (reader.info().width, reader.info().height);
+        if u64::from(w) * u64::from(h) > MAX_LOAD_PIXELS {
+            return Err(png_err(format!(
+                "{w}×{h} pixels, more than the {MAX_LOAD_PIXELS} an environment map or transfer function may have"
+            )));
+        }
         let size = reader
             .output_buffer_size()
             .ok_or_else(|| png_err("image too large".into()))?;
@@ -99,6 +109,9 @@ impl RgbaImage {
         })
     }
 }
+
+/// Most pixels [`RgbaImage::load_png`] reads (8192 × 8192).
+pub const MAX_LOAD_PIXELS: u64 = 1 << 26;
 
 /// Writes `bytes` to a temporary file beside `path`, then renames it into place, so a
 /// failed write never leaves a partial file at `path`.
@@ -139,6 +152,67 @@ mod tests {
         img.set_pixel(0, 0, [1, 2, 3, 4]);
         img.save_png(&path).unwrap();
         assert_eq!(RgbaImage::load_png(&path).unwrap(), img);
+    }
+
+    /// A PNG of the given header and one byte of pixel data (a zlib stream of one stored
+    /// block holding a single filter byte): enough for the header to be read.
+    fn header_only(path: &Path, width: u32, height: u32) {
+        let chunk = |kind: &[u8], data: &[u8]| {
+            let mut c = (data.len() as u32).to_be_bytes().to_vec();
+            c.extend_from_slice(kind);
+            c.extend_from_slice(data);
+            let crc = crc32(&[kind, data].concat());
+            c.extend_from_slice(&crc.to_be_bytes());
+            c
+        };
+        let mut ihdr = width.to_be_bytes().to_vec();
+        ihdr.extend_from_slice(&height.to_be_bytes());
+        ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
+        let mut bytes = b"\x89PNG\r\n\x1a\n".to_vec();
+        bytes.extend(chunk(b"IHDR", &ihdr));
+        let zlib = [0x78, 0x01, 0x01, 0x01, 0x00, 0xfe, 0xff, 0x00, 0x00, 0x01, 0x00, 0x01];
+        bytes.extend(chunk(b"IDAT", &zlib));
+        bytes.extend(chunk(b"IEND", &[]));
+        std::fs::write(path, bytes).unwrap();
+    }
+
+    /// CRC-32 (IEEE) as PNG chunks carry it.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in bytes {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 == 1 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+
+    #[test]
+    fn unreadable_pngs_are_errors_that_say_reading() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("in.png");
+        // 10^5 × 10^5 pixels declared in 69 bytes: refused before 40 GB are allocated.
+        header_only(&path, 100_000, 100_000);
+        let e = RgbaImage::load_png(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("reading PNG: 100000×100000 pixels, more than"),
+            "{e}"
+        );
+        // A plausible size with no pixel data, and an empty file.
+        header_only(&path, 4, 4);
+        let e = RgbaImage::load_png(&path).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!("{}: reading PNG", path.display())),
+            "{e}"
+        );
+        std::fs::write(&path, b"").unwrap();
+        let e = RgbaImage::load_png(&path).unwrap_err().to_string();
+        assert!(e.contains("reading PNG"), "{e}");
     }
 
     #[test]
