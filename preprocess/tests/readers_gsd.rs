@@ -192,7 +192,7 @@ fn damaged_gsd_files_are_errors_naming_the_byte() {
     // 22 kB file): an error before anything is allocated for them, for the species
     // pass of the out-of-core converter as for reading.
     let (_, count) = find("particles/N", 0);
-    let mut bad = good;
+    let mut bad = good.clone();
     bad[count..count + 4].copy_from_slice(&u32::MAX.to_le_bytes());
     let expected = "frame 0: `particles/position` is 300 × 3, expected 4294967295 × 3";
     let m = damaged(&bad);
@@ -203,4 +203,18 @@ fn damaged_gsd_files_are_errors_naming_the_byte() {
     let d = DumpFile::open(&path).unwrap();
     let m = d.frame_species(0).unwrap_err().to_string();
     assert!(m.contains(expected), "{m}");
+
+    // A count stored as a negative signed number (type 7, int32) is no count (it used to
+    // read as an empty frame).
+    let (at, count) = find("particles/N", 0);
+    let mut bad = good.clone();
+    bad[at + 30] = 7;
+    bad[count..count + 4].copy_from_slice(&(-1i32).to_le_bytes());
+    let m = damaged(&bad);
+    assert!(
+        m.contains(&format!(
+            "byte {count}: frame 0: `particles/N` is -1, not a particle count"
+        )),
+        "{m}"
+    );
 }

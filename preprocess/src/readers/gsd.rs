@@ -297,7 +297,20 @@ impl Index {
     /// Particle count of frame `k`.
     fn particles(&self, path: &Path, data: &[u8], k: usize) -> Result<usize, ReadError> {
         match self.chunk(k, "particles/N") {
-            Some(e) if e.n * e.m == 1 => Ok(e.ty.get(&data[e.location..], 0) as usize),
+            Some(e) if e.n * e.m == 1 => {
+                let v = e.ty.get(&data[e.location..], 0);
+                // A count: integral and not negative (a float or signed chunk could hold
+                // anything, which `as` would quietly turn into 0 or a huge count).
+                if v >= 0.0 && v.fract() == 0.0 && v <= u32::MAX as f64 {
+                    Ok(v as usize)
+                } else {
+                    Err(err(
+                        path,
+                        e.location,
+                        format!("frame {k}: `particles/N` is {v}, not a particle count"),
+                    ))
+                }
+            }
             Some(e) => Err(err(path, e.at, "`particles/N` is not a single number")),
             None => Ok(0),
         }
