@@ -381,6 +381,13 @@ fn xyz_errors() {
         None,
         "2: malformed `Properties` `species:S:1:pos:R`: expected name:type:count triples",
     );
+    // Counts multiply out to columns: a few bytes must not ask for millions of them.
+    assert_error(
+        "wide.xyz",
+        "1\nProperties=species:S:1:pos:R:3:f:R:29999999\nC 0 0 0\n",
+        None,
+        "2: `Properties` describes more than 4096 columns (`f` alone has 29999999)",
+    );
     assert_error(
         "nopos.xyz",
         "1\nProperties=species:S:1:velo:R:3\nC 0 0 0\n",

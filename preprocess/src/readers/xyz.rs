@@ -223,6 +223,10 @@ fn logical(s: &str) -> Option<bool> {
 }
 
 /// The column layout described by a `Properties=` value.
+/// Most columns a `Properties` key may describe: its counts multiply out to columns, so a
+/// few bytes could otherwise ask for millions of them.
+const MAX_COLUMNS: usize = 4096;
+
 fn properties_layout(value: &str) -> Result<AtomLayout, String> {
     let parts: Vec<&str> = value.split(':').collect();
     if parts.is_empty() || !parts.chunks_exact(3).remainder().is_empty() {
@@ -245,6 +249,11 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
             ));
         }
         let first = columns.len();
+        if count > MAX_COLUMNS - first {
+            return Err(format!(
+                "`Properties` describes more than {MAX_COLUMNS} columns (`{name}` alone has {count})"
+            ));
+        }
         if count == 1 {
             columns.push(name.to_string());
         } else {
