@@ -180,6 +180,11 @@ fn a_truncated_text_dump_read_in_windows_names_the_file_and_line() {
     .to_string();
     assert!(err.contains("cut.lammpstrj"), "{err}");
     assert!(err.contains("line"), "{err}");
+    // The frame's counts, not those of the window that found the end.
+    assert!(
+        err.contains("the header announces 500 atoms but only 400 atom lines follow"),
+        "{err}"
+    );
     assert!(!out.exists());
     assert_eq!(
         std::fs::read_dir(dir.path()).unwrap().count(),

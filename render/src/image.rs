@@ -170,7 +170,9 @@ mod tests {
         ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
         let mut bytes = b"\x89PNG\r\n\x1a\n".to_vec();
         bytes.extend(chunk(b"IHDR", &ihdr));
-        let zlib = [0x78, 0x01, 0x01, 0x01, 0x00, 0xfe, 0xff, 0x00, 0x00, 0x01, 0x00, 0x01];
+        let zlib = [
+            0x78, 0x01, 0x01, 0x01, 0x00, 0xfe, 0xff, 0x00, 0x00, 0x01, 0x00, 0x01,
+        ];
         bytes.extend(chunk(b"IDAT", &zlib));
         bytes.extend(chunk(b"IEND", &[]));
         std::fs::write(path, bytes).unwrap();

@@ -738,7 +738,20 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
             attribute,
             &format!("reading frame {k}"),
             &NoProgress,
-        )?;
+        )
+        // The window's counts, told as the frame's (what the header announced).
+        .map_err(|e| match e {
+            ReadError::Truncated { at, found, .. } => ReadError::Truncated {
+                at,
+                expected: total,
+                found: first + found,
+            },
+            ReadError::ExtraLines { at, .. } => ReadError::ExtraLines {
+                at,
+                expected: total,
+            },
+            other => other,
+        })?;
         let attribute = atoms.attribute.map(|values| Attribute {
             name: header.info.columns[attribute.unwrap_or_default()].clone(),
             values,
