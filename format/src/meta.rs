@@ -142,3 +142,70 @@ pub struct Metadata {
     /// The program that wrote the file, e.g. `mdlod 0.1.0`.
     pub writer: String,
 }
+
+impl Metadata {
+    /// The METADATA section's JSON, checked to read back as `self`: JSON has no NaN or
+    /// infinity (a non-finite number would be written as `null`, and the file could not
+    /// be opened), so a writer refuses such metadata instead of writing it.
+    pub fn to_json(&self) -> Result<Vec<u8>, String> {
+        let json = serde_json::to_vec_pretty(self).map_err(|e| e.to_string())?;
+        match serde_json::from_slice::<Metadata>(&json) {
+            Ok(back) if back == *self => Ok(json),
+            _ => Err(format!(
+                "the metadata holds a number that is not finite (maximum position error {}, time {:?}, box {:?})",
+                self.max_position_error, self.time, self.simulation_box
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn metadata() -> Metadata {
+        Metadata {
+            particles: 1,
+            simulation_box: None,
+            timestep: Some(3),
+            time: Some(0.25),
+            units: None,
+            species: vec![Species {
+                name: "Cu".into(),
+                radius: 1.28,
+                colour: [0.8, 0.5, 0.2],
+            }],
+            attribute: None,
+            source: None,
+            build: BuildInfo {
+                max_cluster_size: 8,
+                max_root_points: 4096,
+                delta_n: 1,
+                position_bits: 16,
+                chunk_points: None,
+            },
+            max_position_error: 1.5e-5,
+            writer: "mdlod test".into(),
+        }
+    }
+
+    #[test]
+    fn metadata_json_reads_back_or_is_refused() {
+        let m = metadata();
+        let json = m.to_json().unwrap();
+        assert_eq!(serde_json::from_slice::<Metadata>(&json).unwrap(), m);
+        for bad in [
+            Metadata {
+                max_position_error: f64::INFINITY,
+                ..metadata()
+            },
+            Metadata {
+                time: Some(f64::NAN),
+                ..metadata()
+            },
+        ] {
+            let e = bad.to_json().unwrap_err();
+            assert!(e.contains("not finite"), "{e}");
+        }
+    }
+}

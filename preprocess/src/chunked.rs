@@ -50,7 +50,9 @@ use crate::convert::{ConvertError, ConvertOptions, ConvertReport};
 use crate::frame::{Frame, SpeciesName};
 use crate::hierarchy::pca_split::Clusters;
 use crate::hierarchy::representative::{representatives, LevelPoints, Rep, Source};
-use crate::hierarchy::{build_with, BuildError, BuildExtras, Particles};
+use crate::hierarchy::{
+    build_with, check_scale, position_in_range, BuildError, BuildExtras, Particles,
+};
 use crate::progress::{NoProgress, Progress};
 use crate::species::species_table;
 
@@ -1118,6 +1120,15 @@ pub fn convert_chunked(
                     },
                 });
             }
+            if let Some(index) = first_bad(&|i| !position_in_range(&f.positions[i])) {
+                return Err(ConvertError::Build {
+                    path: output.display().to_string(),
+                    source: BuildError::OutOfRange {
+                        index: start + index,
+                        position: f.positions[index],
+                    },
+                });
+            }
             if let Some(i) = first_bad(&|i| usize::from(f.species_index[i]) >= map.len()) {
                 return Err(ConvertError::Build {
                     path: output.display().to_string(),
@@ -1214,6 +1225,11 @@ pub fn convert_chunked(
     let t1 = Instant::now();
     let (names, species_map) = merge.finish();
     let species = species_table(&names, &options.radii);
+    // Each chunk checks its own particles; the top node sums over all of them.
+    check_scale(n, &species).map_err(|source| ConvertError::Build {
+        path: output.display().to_string(),
+        source,
+    })?;
     let largest = groups
         .iter()
         .map(|g| leaves[g.clone()].iter().map(|c| c.count).sum::<usize>())
@@ -1514,7 +1530,12 @@ fn assemble(
         chunks.iter().map(|c| c.max_error).fold(0.0, f64::max)
     };
 
-    let json = serde_json::to_vec_pretty(&metadata).expect("metadata serializes");
+    let json = metadata
+        .to_json()
+        .map_err(|problem| mdlod_format::FormatError::Write {
+            path: output.to_path_buf(),
+            problem,
+        })?;
     let total_bytes: u64 = chunks
         .iter()
         .map(|c| {

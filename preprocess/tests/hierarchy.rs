@@ -492,3 +492,51 @@ fn non_finite_positions_are_refused() {
     );
     assert!(!dir.path().join("x.mdlod").exists());
 }
+
+#[test]
+fn coordinates_and_radii_that_overflow_single_precision_are_refused_not_written() {
+    let frame = test_frame(6);
+    let n = frame.len();
+    let chunks = chunked(
+        BuildParams {
+            max_root_points: 64,
+            ..Default::default()
+        },
+        300,
+        1 << 30,
+    );
+    for opts in [ConvertOptions::default(), chunks] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mdlod");
+        // A finite coordinate whose distance to the others overflows single precision.
+        let mut far = frame.clone();
+        far.positions[n - 1] = [0.0, 3e38, 0.0];
+        let e = convert_frame(&far, None, &path, &opts, &NoProgress)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!("particle {} at", n - 1)) && e.contains("lies beyond ±1e37"),
+            "{e}"
+        );
+        // A radius whose squares overflow summed over the frame, though not over one
+        // chunk of 300 (the top node sums them all).
+        let r = (1e38 / (n as f64 * 0.6)).sqrt() as f32;
+        let mut big = opts.clone();
+        big.radii = vec![("Cu".into(), r)];
+        let e = convert_frame(&frame, None, &path, &big, &NoProgress)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("species `Cu`") && e.contains("squared radii add up to 1.67e38"),
+            "{e}"
+        );
+        assert!(!path.exists());
+        // Just inside both bounds, the file is written and reads back whole.
+        far.positions[n - 1] = [0.0, 9e36, 0.0];
+        big.radii = vec![("Cu".into(), r / 2.0)];
+        convert_frame(&far, None, &path, &big, &NoProgress).unwrap();
+        let f = MdlodFile::open(&path).unwrap();
+        f.verify().unwrap();
+        assert_eq!(f.particle_count() as usize, n);
+    }
+}

@@ -69,6 +69,15 @@ pub enum BuildError {
     TooMany(usize),
     #[error("particle {index} has a non-finite position {position:?}")]
     NonFinite { index: usize, position: [f32; 3] },
+    #[error("particle {index} at {position:?} lies beyond ±{MAX_COORDINATE:e}, where differences of single-precision coordinates overflow; convert it in larger length units")]
+    OutOfRange { index: usize, position: [f32; 3] },
+    #[error("species `{name}`: radius {radius:e} for {particles} particles: their squared radii add up to {sum:.2e}, beyond the {MAX_AREA_SUM:e} single precision holds; convert it in larger length units")]
+    RadiusTooLarge {
+        name: String,
+        radius: f32,
+        particles: usize,
+        sum: f64,
+    },
     #[error("particle {index} has species index {species} but only {count} species are defined")]
     BadSpecies {
         index: usize,
@@ -154,7 +163,10 @@ impl Hierarchy {
             }
             (None, _) => metadata.attribute = None,
         }
-        let json = serde_json::to_vec_pretty(&metadata).expect("metadata serializes");
+        let json = metadata.to_json().map_err(|problem| FormatError::Write {
+            path: path.to_path_buf(),
+            problem,
+        })?;
         let mut w = Writer::create(path, self.params.position_bits)?;
         w.write_section(SectionKind::Metadata, 0, &json)?;
         w.write_pod_section(SectionKind::Levels, 0, &self.levels)?;
@@ -493,6 +505,39 @@ fn descendant_ranges(child_ranges: &[Vec<Range<u32>>], from: usize, to: usize) -
     ranges
 }
 
+/// Largest coordinate magnitude a build accepts: node boxes and the differences of
+/// coordinates stay finite in single precision (whose largest value is 3.4e38).
+pub const MAX_COORDINATE: f32 = 1e37;
+
+/// Largest sum of squared particle radii a build accepts: nodes record the sum of their
+/// particles' `r²` (the flux of Eq. 1) in single precision, the top node's over all.
+pub const MAX_AREA_SUM: f64 = 1e38;
+
+/// Whether a position is one a build accepts (finite is checked separately).
+#[inline]
+pub fn position_in_range(p: &[f32; 3]) -> bool {
+    p.iter().all(|v| v.abs() <= MAX_COORDINATE)
+}
+
+/// Checks that `particles` particles of the largest radius among `species` keep every
+/// node's sum of squared radii finite (an upper bound: each particle counted at that
+/// radius). For chunked builds, call it with the whole frame's count.
+pub fn check_scale(particles: usize, species: &[Species]) -> Result<(), BuildError> {
+    for s in species {
+        let r = f64::from(s.radius);
+        let sum = particles as f64 * r * r;
+        if !(sum <= MAX_AREA_SUM && r <= f64::from(MAX_COORDINATE)) {
+            return Err(BuildError::RadiusTooLarge {
+                name: s.name.clone(),
+                radius: s.radius,
+                particles,
+                sum,
+            });
+        }
+    }
+    Ok(())
+}
+
 fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
     if params.max_cluster_size < 2 {
         return Err(BuildError::Params(format!(
@@ -540,6 +585,13 @@ fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
             position: p.positions[index],
         });
     }
+    if let Some(index) = p.positions.iter().position(|x| !position_in_range(x)) {
+        return Err(BuildError::OutOfRange {
+            index,
+            position: p.positions[index],
+        });
+    }
+    check_scale(n, p.species)?;
     if let Some(index) = p
         .species_index
         .iter()
