@@ -248,10 +248,47 @@ fn main() {
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
     std::io::Write::write_all(&mut gz, xyz.as_bytes()).unwrap();
     put(dumps, "xyz-gz", 2, &gz.finish().unwrap());
+    // Particles for the converter (see convert_frame.rs): a jittered lattice, in memory
+    // and in chunks, with an attribute; coincident points; radii from the first record.
+    let particles = Path::new("corpus/convert_frame");
+    std::fs::create_dir_all(particles).unwrap();
+    let record = |p: [f32; 3], species: u8, value: u16| {
+        let mut r = Vec::with_capacity(16);
+        p.iter().for_each(|v| r.extend_from_slice(&v.to_le_bytes()));
+        r.push(species);
+        r.push(0);
+        r.extend_from_slice(&value.to_le_bytes());
+        r
+    };
+    let lattice: Vec<u8> = (0..300)
+        .flat_map(|i| {
+            let p = [(i % 7) as f32, ((i / 7) % 6) as f32, (i / 42) as f32];
+            record(
+                p.map(|v| v * 2.5 + (i % 3) as f32 * 0.1),
+                (i % 5 == 0) as u8,
+                i as u16,
+            )
+        })
+        .collect();
+    let same: Vec<u8> = (0..100).flat_map(|_| record([1.0; 3], 0, 0)).collect();
+    let mut radii = record([1.5, 0.25, 0.0], 0, 0);
+    radii.extend_from_slice(&lattice[..16 * 80]);
+    for (name, mode, bytes) in [
+        ("lattice", 2 | 32, &lattice),
+        ("lattice-chunked", 2 | 32 | 64, &lattice),
+        ("lattice-u8-dn2", 1 | 4 | 8, &lattice),
+        ("coincident", 2 | 64, &same),
+        ("radii", 2 | 128, &radii),
+    ] {
+        let mut seed = vec![mode, 40];
+        seed.extend_from_slice(bytes);
+        std::fs::write(particles.join(name), seed).unwrap();
+    }
     println!(
-        "seeds written to {}, {} and {}",
+        "seeds written to {}, {}, {} and {}",
         mdlod.display(),
         dumps.display(),
-        binary.display()
+        binary.display(),
+        particles.display()
     );
 }

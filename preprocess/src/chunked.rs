@@ -1140,6 +1140,15 @@ pub fn convert_chunked(
                 });
             }
             if let Some(a) = &f.attribute {
+                if let Some(index) = first_bad(&|i| !a.values[i].is_finite()) {
+                    return Err(ConvertError::Build {
+                        path: output.display().to_string(),
+                        source: BuildError::NonFiniteAttribute {
+                            index: start + index,
+                            value: a.values[index],
+                        },
+                    });
+                }
                 let (lo, hi) = a
                     .values
                     .par_iter()
@@ -1530,6 +1539,8 @@ fn assemble(
         chunks.iter().map(|c| c.max_error).fold(0.0, f64::max)
     };
 
+    // The δn in effect (see `Hierarchy::write`).
+    metadata.build.delta_n = metadata.build.delta_n.min(last as u32);
     let json = metadata
         .to_json()
         .map_err(|problem| mdlod_format::FormatError::Write {

@@ -494,7 +494,7 @@ fn non_finite_positions_are_refused() {
 }
 
 #[test]
-fn coordinates_and_radii_that_overflow_single_precision_are_refused_not_written() {
+fn values_that_overflow_or_are_not_finite_are_refused_not_written() {
     let frame = test_frame(6);
     let n = frame.len();
     let chunks = chunked(
@@ -518,6 +518,20 @@ fn coordinates_and_radii_that_overflow_single_precision_are_refused_not_written(
             e.contains(&format!("particle {} at", n - 1)) && e.contains("lies beyond ±1e37"),
             "{e}"
         );
+        // An attribute value that is not finite (the readers refuse them; the library
+        // takes frames from any caller).
+        let mut nan = frame.clone();
+        nan.attribute.as_mut().unwrap().values[n - 2] = f32::NAN;
+        let e = convert_frame(&nan, None, &path, &opts, &NoProgress)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "particle {} has a non-finite attribute value NaN",
+                n - 2
+            )),
+            "{e}"
+        );
         // A radius whose squares overflow summed over the frame, though not over one
         // chunk of 300 (the top node sums them all).
         let r = (1e38 / (n as f64 * 0.6)).sqrt() as f32;
@@ -538,5 +552,38 @@ fn coordinates_and_radii_that_overflow_single_precision_are_refused_not_written(
         let f = MdlodFile::open(&path).unwrap();
         f.verify().unwrap();
         assert_eq!(f.particle_count() as usize, n);
+    }
+}
+
+#[test]
+fn a_delta_n_deeper_than_the_hierarchy_is_recorded_as_the_delta_n_in_effect() {
+    // δn 8 over hierarchies of fewer levels: in memory (a frame under the root points:
+    // two levels) and in chunks. Every point level and encoding ancestor clamps to the
+    // hierarchy, so the file is that of δn = L − 1 and must say so to be readable.
+    let mut small = test_frame(2);
+    small.positions.truncate(20);
+    small.species_index.truncate(20);
+    small.attribute.as_mut().unwrap().values.truncate(20);
+    let deep = BuildParams {
+        delta_n: 8,
+        max_root_points: 64,
+        ..Default::default()
+    };
+    for (frame, opts) in [
+        (
+            small,
+            ConvertOptions {
+                build: deep.clone(),
+                ..Default::default()
+            },
+        ),
+        (test_frame(6), chunked(deep, 300, 1 << 30)),
+    ] {
+        let (_d, f) = convert_with(&frame, &opts);
+        f.verify().unwrap();
+        let last = f.level_count() as u32 - 1;
+        assert!(last < 8, "{last} levels below the top");
+        assert_eq!(f.metadata().build.delta_n, last);
+        assert_eq!(f.particle_count() as usize, frame.len());
     }
 }

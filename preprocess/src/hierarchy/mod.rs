@@ -69,6 +69,8 @@ pub enum BuildError {
     TooMany(usize),
     #[error("particle {index} has a non-finite position {position:?}")]
     NonFinite { index: usize, position: [f32; 3] },
+    #[error("particle {index} has a non-finite attribute value {value}")]
+    NonFiniteAttribute { index: usize, value: f32 },
     #[error("particle {index} at {position:?} lies beyond ±{MAX_COORDINATE:e}, where differences of single-precision coordinates overflow; convert it in larger length units")]
     OutOfRange { index: usize, position: [f32; 3] },
     #[error("species `{name}`: radius {radius:e} for {particles} particles: their squared radii add up to {sum:.2e}, beyond the {MAX_AREA_SUM:e} single precision holds; convert it in larger length units")]
@@ -145,7 +147,10 @@ impl Hierarchy {
         metadata.build = mdlod_format::meta::BuildInfo {
             max_cluster_size: self.params.max_cluster_size,
             max_root_points: self.params.max_root_points,
-            delta_n: self.params.delta_n,
+            // δn past the levels below the top changes nothing (every point level and
+            // encoding ancestor is clamped to the hierarchy): the file records the δn in
+            // effect, which readers require to be at most L − 1.
+            delta_n: self.params.delta_n.min(last as u32),
             position_bits: self.params.position_bits,
             chunk_points: metadata.build.chunk_points,
         };
@@ -590,6 +595,14 @@ fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
             index,
             position: p.positions[index],
         });
+    }
+    if let Some(a) = p.attribute {
+        if let Some(index) = a.iter().position(|v| !v.is_finite()) {
+            return Err(BuildError::NonFiniteAttribute {
+                index,
+                value: a[index],
+            });
+        }
     }
     check_scale(n, p.species)?;
     if let Some(index) = p
