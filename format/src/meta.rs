@@ -144,18 +144,34 @@ pub struct Metadata {
 }
 
 impl Metadata {
-    /// The METADATA section's JSON, checked to read back as `self`: JSON has no NaN or
-    /// infinity (a non-finite number would be written as `null`, and the file could not
-    /// be opened), so a writer refuses such metadata instead of writing it.
+    /// The METADATA section's JSON. JSON has no NaN or infinity: serialized, a non-finite
+    /// number becomes `null`, and the file could not be opened (or, for the optional
+    /// time, would lose it). A writer refuses such metadata instead of writing it.
     pub fn to_json(&self) -> Result<Vec<u8>, String> {
-        let json = serde_json::to_vec_pretty(self).map_err(|e| e.to_string())?;
-        match serde_json::from_slice::<Metadata>(&json) {
-            Ok(back) if back == *self => Ok(json),
-            _ => Err(format!(
-                "the metadata holds a number that is not finite (maximum position error {}, time {:?}, box {:?})",
-                self.max_position_error, self.time, self.simulation_box
-            )),
+        let mut numbers: Vec<(&str, f64)> =
+            vec![("maximum position error", self.max_position_error)];
+        if let Some(t) = self.time {
+            numbers.push(("time", t));
         }
+        if let Some(b) = &self.simulation_box {
+            for v in [b.origin, b.a, b.b, b.c].iter().flatten() {
+                numbers.push(("box", *v));
+            }
+        }
+        for s in &self.species {
+            numbers.push(("species radius", f64::from(s.radius)));
+            for c in s.colour {
+                numbers.push(("species colour", f64::from(c)));
+            }
+        }
+        if let Some(a) = &self.attribute {
+            numbers.push(("attribute range", f64::from(a.min)));
+            numbers.push(("attribute range", f64::from(a.max)));
+        }
+        if let Some((what, v)) = numbers.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(format!("the metadata's {what} is {v}, not a finite number"));
+        }
+        serde_json::to_vec_pretty(self).map_err(|e| e.to_string())
     }
 }
 
@@ -205,7 +221,7 @@ mod tests {
             },
         ] {
             let e = bad.to_json().unwrap_err();
-            assert!(e.contains("not finite"), "{e}");
+            assert!(e.contains("not a finite number"), "{e}");
         }
     }
 }
