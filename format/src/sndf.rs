@@ -183,6 +183,15 @@ fn check_tiles(path: &Path, h: &SndfHeader, t: &SndfTiles) -> Result<(), FormatE
     Ok(())
 }
 
+/// Whether `r` (colour sums r, g, b and the sample count) is a bin of a texel sampled
+/// with `rays` rays: finite, not negative, a count at most the rays, colour sums at most
+/// the count per channel.
+fn valid_bin(r: &[f32; 4], rays: f32) -> bool {
+    r.iter().all(|v| v.is_finite() && *v >= 0.0)
+        && r[3] <= rays * (1.0 + 1e-6)
+        && r[..3].iter().all(|&v| v <= r[3] * (1.0 + 1e-5) + 1e-6)
+}
+
 fn check_header(path: &Path, h: &SndfHeader) -> Result<usize, FormatError> {
     if h.width == 0 || h.height == 0 || h.width > MAX_SIDE || h.height > MAX_SIDE {
         return Err(corrupt(
@@ -229,6 +238,23 @@ impl SndfData {
             return Err(FormatError::Write {
                 path: path.to_path_buf(),
                 problem: format!("{} records for a header that needs {n}", self.hist.len()),
+            });
+        }
+        // What a reader would refuse is not written (a NaN from the sampler, say).
+        let runs = record_rays(&self.header);
+        let rays = runs
+            .iter()
+            .flat_map(|&(len, rays)| std::iter::repeat_n(rays, len));
+        if let Some((i, r)) = self
+            .hist
+            .iter()
+            .zip(rays)
+            .enumerate()
+            .find_map(|(i, (r, rays))| (!valid_bin(r, rays as f32)).then_some((i, r)))
+        {
+            return Err(FormatError::Write {
+                path: path.to_path_buf(),
+                problem: format!("record {i} {r:?} is not a bin (finite, count at most the rays, colour sums at most the count)"),
             });
         }
         let json = serde_json::to_vec(&self.header).map_err(|e| FormatError::Write {
@@ -348,10 +374,7 @@ impl SndfData {
             let rays = run.next().unwrap_or(header.rays) as f32;
             let r: [f32; 4] = [0, 1, 2, 3]
                 .map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap_or([0; 4])));
-            let ok = r.iter().all(|v| v.is_finite() && *v >= 0.0)
-                && r[3] <= rays * (1.0 + 1e-6)
-                && r[..3].iter().all(|&v| v <= r[3] * (1.0 + 1e-5) + 1e-6);
-            if !ok {
+            if !valid_bin(&r, rays) {
                 return Err(corrupt(
                     path,
                     &format!("record {i}"),
@@ -389,6 +412,37 @@ mod tests {
         SndfData { header, hist }
     }
 
+    /// The bytes of a saved file with record `i` replaced by `r`, its checksum matching.
+    fn patched(bytes: &[u8], i: usize, r: [f32; 4]) -> Vec<u8> {
+        let json_len = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+        let start = (FIXED + json_len).div_ceil(16) * 16;
+        let mut out = bytes.to_vec();
+        for (k, v) in r.iter().enumerate() {
+            let at = start + 16 * i + 4 * k;
+            out[at..at + 4].copy_from_slice(&v.to_le_bytes());
+        }
+        let sum = xxh3_64(&out[start..]);
+        out[16..24].copy_from_slice(&sum.to_le_bytes());
+        out
+    }
+
+    #[test]
+    fn records_a_reader_would_refuse_are_not_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("v.sndf");
+        for bad in [
+            [f32::NAN, 0.0, 0.0, 1.0],
+            [0.0, 0.0, 0.0, 5.0],
+            [2.0, 0.0, 0.0, 1.0],
+        ] {
+            let mut s = sample();
+            s.hist[7] = bad;
+            let e = s.save(&p).unwrap_err().to_string();
+            assert!(e.contains("record 7") && e.contains("is not a bin"), "{e}");
+            assert!(!p.exists());
+        }
+    }
+
     #[test]
     fn round_trips_and_refuses_damage() {
         let dir = tempfile::tempdir().unwrap();
@@ -410,11 +464,12 @@ mod tests {
                 assert_eq!(d.hist, s.hist, "byte {i}");
             }
         }
-        // A value that no sampling can give, with a matching checksum.
-        let mut wrong = s.clone();
-        wrong.hist[5][3] = 9.0;
+        // A value that no sampling can give, with a matching checksum (written past
+        // `save`, which refuses it).
+        let mut wrong = s.hist[5];
+        wrong[3] = 9.0;
         let q = dir.path().join("w.sndf");
-        wrong.save(&q).unwrap();
+        std::fs::write(&q, patched(&good, 5, wrong)).unwrap();
         let e = SndfData::load(&q).unwrap_err().to_string();
         assert!(
             e.contains("record 5") && e.contains("count at most 4"),
@@ -479,9 +534,9 @@ mod tests {
         sample().save(&q).unwrap();
         assert_eq!(&std::fs::read(&q).unwrap()[8..12], &[1, 0, 0, 0]);
         // A count above its own tile's rays (3), though below the other tile's (12).
-        let mut over = t.clone();
-        over.hist[10][3] = 5.0;
-        over.save(&p).unwrap();
+        let mut over = t.hist[10];
+        over[3] = 5.0;
+        std::fs::write(&p, patched(&bytes, 10, over)).unwrap();
         let e = SndfData::load(&p).unwrap_err().to_string();
         assert!(
             e.contains("record 10") && e.contains("count at most 3"),
