@@ -337,6 +337,19 @@ fn damaged_files_are_errors_naming_the_byte() {
         "{m}"
     );
     assert!(damaged(dir.path(), b"MMPLE\0abc").contains("not an MMPLD file"));
+
+    // Version 1.2 frames start with a timestamp, which must be a number.
+    let v102 = write(102, &mixed());
+    let frame0 = u64::from_le_bytes(v102[60..68].try_into().unwrap()) as usize;
+    let mut bad = v102.clone();
+    bad[frame0..frame0 + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let m = damaged(dir.path(), &bad);
+    assert!(
+        m.contains(&format!(
+            "byte {frame0}: frame 0: timestamp NaN is not a finite number"
+        )),
+        "{m}"
+    );
 }
 
 #[test]

@@ -218,7 +218,15 @@ impl Index {
                 at: start,
             };
             let timestamp = if version >= 102 {
-                Some(f32::from_le_bytes(c.take("a frame header")?))
+                let t = f32::from_le_bytes(c.take("a frame header")?);
+                if !t.is_finite() {
+                    return Err(err(
+                        path,
+                        start,
+                        format!("frame {k}: timestamp {t} is not a finite number"),
+                    ));
+                }
+                Some(t)
             } else {
                 None
             };
