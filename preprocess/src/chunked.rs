@@ -51,7 +51,7 @@ use crate::frame::{Frame, SpeciesName};
 use crate::hierarchy::pca_split::Clusters;
 use crate::hierarchy::representative::{representatives, LevelPoints, Rep, Source};
 use crate::hierarchy::{
-    build_with, check_scale, position_in_range, BuildError, BuildExtras, Particles,
+    build_with, check_species, position_in_range, BuildError, BuildExtras, Particles, MAX_SPECIES,
 };
 use crate::progress::{NoProgress, Progress};
 use crate::species::species_table;
@@ -350,9 +350,12 @@ impl SpeciesMerge {
                     known.radius = known.radius.or(s.radius);
                     return Ok(i);
                 }
-                let i = u16::try_from(self.list.len()).map_err(|_| {
-                    ConvertError::Chunked("more than 65536 species in one frame".into())
-                })?;
+                // (Refused as soon as the frame has more than a file can hold.)
+                if self.list.len() >= MAX_SPECIES {
+                    let e = BuildError::TooManySpecies(self.list.len() + 1);
+                    return Err(ConvertError::Chunked(e.to_string()));
+                }
+                let i = self.list.len() as u16;
                 self.by_name.insert(s.name.clone(), i);
                 self.list.push(s.clone());
                 Ok(i)
@@ -1234,8 +1237,8 @@ pub fn convert_chunked(
     let t1 = Instant::now();
     let (names, species_map) = merge.finish();
     let species = species_table(&names, &options.radii);
-    // Each chunk checks its own particles; the top node sums over all of them.
-    check_scale(n, &species).map_err(|source| ConvertError::Build {
+    // Each chunk checks its own particles' radii; the top node sums over all of them.
+    check_species(n, &species).map_err(|source| ConvertError::Build {
         path: output.display().to_string(),
         source,
     })?;

@@ -587,3 +587,37 @@ fn a_delta_n_deeper_than_the_hierarchy_is_recorded_as_the_delta_n_in_effect() {
         assert_eq!(f.particle_count() as usize, frame.len());
     }
 }
+
+#[test]
+fn more_species_than_a_file_holds_are_refused() {
+    // 65536 species (every u16 index in use; the format allows 1 to 65535), in memory and
+    // in chunks: refused before anything is written.
+    let n = 65536;
+    let frame = Frame {
+        positions: (0..n)
+            .map(|i| [(i % 41) as f32, ((i / 41) % 41) as f32, (i / 1681) as f32].map(|v| v * 2.0))
+            .collect(),
+        species_index: (0..n).map(|i| i as u16).collect(),
+        species: (0..n)
+            .map(|i| SpeciesName {
+                name: i.to_string(),
+                numeric_type: true,
+                radius: None,
+            })
+            .collect(),
+        ..Default::default()
+    };
+    let chunks = chunked(BuildParams::default(), 1 << 15, 1 << 30);
+    for opts in [ConvertOptions::default(), chunks] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mdlod");
+        let e = convert_frame(&frame, None, &path, &opts, &NoProgress)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("65536 species: a file holds at most 65535"),
+            "{e}"
+        );
+        assert!(!path.exists());
+    }
+}

@@ -69,6 +69,8 @@ pub enum BuildError {
     TooMany(usize),
     #[error("particle {index} has a non-finite position {position:?}")]
     NonFinite { index: usize, position: [f32; 3] },
+    #[error("{0} species: a file holds at most {MAX_SPECIES}")]
+    TooManySpecies(usize),
     #[error("particle {index} has a non-finite attribute value {value}")]
     NonFiniteAttribute { index: usize, value: f32 },
     #[error("particle {index} at {position:?} lies beyond ±{MAX_COORDINATE:e}, where differences of single-precision coordinates overflow; convert it in larger length units")]
@@ -524,10 +526,17 @@ pub fn position_in_range(p: &[f32; 3]) -> bool {
     p.iter().all(|v| v.abs() <= MAX_COORDINATE)
 }
 
-/// Checks that `particles` particles of the largest radius among `species` keep every
-/// node's sum of squared radii finite (an upper bound: each particle counted at that
-/// radius). For chunked builds, call it with the whole frame's count.
-pub fn check_scale(particles: usize, species: &[Species]) -> Result<(), BuildError> {
+/// Most species a file holds (FORMAT.md: 1 to 65535).
+pub const MAX_SPECIES: usize = 65535;
+
+/// Checks the species table: at most [`MAX_SPECIES`] species, and radii such that
+/// `particles` particles of the largest keep every node's sum of squared radii finite
+/// (an upper bound: each particle counted at that radius). For chunked builds, call it
+/// with the whole frame's count.
+pub fn check_species(particles: usize, species: &[Species]) -> Result<(), BuildError> {
+    if species.len() > MAX_SPECIES {
+        return Err(BuildError::TooManySpecies(species.len()));
+    }
     for s in species {
         let r = f64::from(s.radius);
         let sum = particles as f64 * r * r;
@@ -604,7 +613,7 @@ fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
             });
         }
     }
-    check_scale(n, p.species)?;
+    check_species(n, p.species)?;
     if let Some(index) = p
         .species_index
         .iter()
