@@ -348,19 +348,20 @@ fn render_writes_a_picture_and_views_round_trip() {
     assert_eq!(read_png(&a).2, read_png(&c).2);
 }
 
+/// The LAMMPS sample `name` converted to `dir/a.mdlod`.
+fn converted(dir: &Path, name: &str) -> PathBuf {
+    let file = dir.join("a.mdlod");
+    ok(&["convert", s(&lammps_sample_path(name)), "-o", s(&file)]);
+    file
+}
+
 #[test]
 fn a_headless_render_prints_no_display_errors() {
     // A batch job without a desktop session: no XDG_RUNTIME_DIR. Mesa's device-selection
     // layer (installed with its Vulkan drivers) would make libwayland print two `error:`
     // lines about it before a render that succeeds.
     let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("a.mdlod");
-    ok(&[
-        "convert",
-        s(&lammps_sample_path("cu_melt.xyz")),
-        "-o",
-        s(&file),
-    ]);
+    let file = converted(dir.path(), "cu_melt.xyz");
     let png = dir.path().join("x.png");
     let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
         .args([
@@ -386,13 +387,7 @@ fn a_headless_render_prints_no_display_errors() {
 #[test]
 fn render_without_an_adapter_says_how_to_get_one() {
     let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("a.mdlod");
-    ok(&[
-        "convert",
-        s(&lammps_sample_path("cu_melt.xyz")),
-        "-o",
-        s(&file),
-    ]);
+    let file = converted(dir.path(), "cu_melt.xyz");
     let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
         .args(["render", s(&file), "-o", s(&dir.path().join("x.png"))])
         .env("WGPU_BACKEND", "dx12")
