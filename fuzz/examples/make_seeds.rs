@@ -248,6 +248,35 @@ fn main() {
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
     std::io::Write::write_all(&mut gz, xyz.as_bytes()).unwrap();
     put(dumps, "xyz-gz", 2, &gz.finish().unwrap());
+    // Whole conversions of text dumps (see convert_dump.rs): the seeds of the text
+    // readers, and a 300-atom frame of a real LAMMPS dump (built in chunks of 64).
+    let conversions = Path::new("corpus/convert_dump");
+    std::fs::create_dir_all(conversions).unwrap();
+    for entry in std::fs::read_dir(dumps).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), conversions.join(entry.file_name())).unwrap();
+    }
+    let melt = std::fs::read_to_string("../datasets/lammps/cu_melt.custom.dump").unwrap();
+    let lines: Vec<&str> = melt.lines().collect();
+    let atoms = lines
+        .iter()
+        .position(|l| l.starts_with("ITEM: ATOMS"))
+        .unwrap();
+    let mut frame: Vec<String> = lines[..=atoms].iter().map(|l| l.to_string()).collect();
+    let count = lines
+        .iter()
+        .position(|l| *l == "ITEM: NUMBER OF ATOMS")
+        .unwrap()
+        + 1;
+    frame[count] = "300".into();
+    frame.extend(lines[atoms + 1..atoms + 301].iter().map(|l| l.to_string()));
+    put(
+        conversions,
+        "melt-300",
+        1 << 2,
+        (frame.join("\n") + "\n").as_bytes(),
+    );
+
     // Particles for the converter (see convert_frame.rs): a jittered lattice, in memory
     // and in chunks, with an attribute; coincident points; radii from the first record.
     let particles = Path::new("corpus/convert_frame");
