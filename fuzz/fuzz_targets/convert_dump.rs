@@ -10,9 +10,11 @@
 
 #![no_main]
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+mod common;
 
+use std::path::PathBuf;
+
+use common::{temp_dir, TEXT_NAMES};
 use libfuzzer_sys::fuzz_target;
 use mdlod_format::MdlodFile;
 use mdlod_preprocess::chunked::ChunkOptions;
@@ -21,23 +23,15 @@ use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_preprocess::readers::ReadOptions;
 use mdlod_preprocess::NoProgress;
 
-const NAMES: [&str; 4] = ["fuzz.lammpstrj", "fuzz.xyz", "fuzz.xyz.gz", "fuzz-input"];
-
-fn dir() -> &'static Path {
-    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
-    DIR.get_or_init(|| tempfile::tempdir().expect("temporary directory"))
-        .path()
-}
-
 fuzz_target!(|data: &[u8]| {
     let Some((&mode, text)) = data.split_first() else {
         return;
     };
     // Input and output in a directory of their own, so that any file left is seen.
-    let work = dir().join("work");
+    let work = temp_dir().join("work");
     let _ = std::fs::remove_dir_all(&work);
     std::fs::create_dir_all(&work).expect("a working directory");
-    let input: PathBuf = work.join(NAMES[usize::from(mode & 3)]);
+    let input: PathBuf = work.join(TEXT_NAMES[usize::from(mode & 3)]);
     std::fs::write(&input, text).expect("write the input file");
     let output = work.join("out.mdlod");
     let read = ReadOptions {
@@ -72,7 +66,7 @@ fuzz_target!(|data: &[u8]| {
                     .to_string_lossy()
                     .into_owned()
             })
-            .filter(|n| n != NAMES[usize::from(mode & 3)])
+            .filter(|n| n != TEXT_NAMES[usize::from(mode & 3)])
             .collect()
     };
     match convert_file(&input, &output, frame, &read, &opts, &NoProgress) {

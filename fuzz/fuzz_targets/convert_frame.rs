@@ -13,8 +13,9 @@
 
 #![no_main]
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+mod common;
+
+use std::path::PathBuf;
 
 use libfuzzer_sys::fuzz_target;
 use mdlod_format::MdlodFile;
@@ -24,12 +25,6 @@ use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_preprocess::{Attribute, Frame, NoProgress, SpeciesName};
 
 const MAX_PARTICLES: usize = 1024;
-
-fn dir() -> &'static Path {
-    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
-    DIR.get_or_init(|| tempfile::tempdir().expect("temporary directory"))
-        .path()
-}
 
 fn f32_at(b: &[u8]) -> f32 {
     f32::from_le_bytes([b[0], b[1], b[2], b[3]])
@@ -96,7 +91,7 @@ fuzz_target!(|data: &[u8]| {
             gzip_in_memory: None,
         },
     };
-    let path: PathBuf = dir().join("fuzz.mdlod");
+    let path: PathBuf = common::temp_dir().join("fuzz.mdlod");
     let _ = std::fs::remove_file(&path);
     match convert_frame(&frame, None, &path, &opts, &NoProgress) {
         Err(e) => {
