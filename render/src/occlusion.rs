@@ -34,7 +34,11 @@
 //!   view-aligned box at its own nearest depth; and when that box spans at most 8×8
 //!   pixels with one sample per pixel, sample by sample: each pixel centre whose ray
 //!   enters the sphere must have a bound nearer than the entry depth (shrunk by a
-//!   relative 10⁻⁵ against rounding). That is the GPU's own depth test, made ahead.
+//!   relative 10⁻⁵ against rounding). That is the GPU's own depth test, made ahead. The
+//!   entry is measured from the ray's point closest to the centre, as the shaders do: a
+//!   sphere of a pixel seen whole in a 10⁸-particle set lies thousands of radii from the
+//!   eye, where the quadratic taken from the eye (|o − c|² − r²) keeps no digit of the
+//!   radius in single precision.
 //!
 //! Nothing the GPU would show is removed: a culled node's every fragment would fail the
 //! depth test against spheres that are drawn. Depths are compared in view space, which
@@ -466,11 +470,15 @@ impl OcclusionBuffer {
                         Vec3::new(0.0, 0.0, -1.0),
                     )
                 };
-                let oc = origin - v;
-                let (a, b, c) = (dir.dot(dir), dir.dot(oc), oc.dot(oc) - r2);
-                let disc = b * b - a * c;
+                // Measured from the ray's point closest to the centre, as the GPU does:
+                // the textbook quadratic from the ray's origin loses every digit of a
+                // small sphere's radius to its distance (|v|² against r²).
+                let a = dir.dot(dir);
+                let tc = dir.dot(v - origin) / a;
+                let q = v - (origin + dir * tc);
+                let disc = r2 - q.dot(q);
                 if disc >= 0.0 {
-                    let entry = (-b - disc.sqrt()) / a;
+                    let entry = tc - (disc / a).sqrt();
                     let entry = entry * (1.0 - SAMPLE_DEPTH_SHRINK_REL);
                     // Seen unless certainly behind the bound (NaN counts as seen).
                     if bound.partial_cmp(&entry) != Some(std::cmp::Ordering::Less) {
@@ -576,6 +584,7 @@ mod tests {
         }
     }
     use crate::camera::Bounds;
+    use glam::DVec3;
 
     fn camera(projection: Projection) -> Camera {
         let mut c = Camera {
@@ -826,6 +835,119 @@ mod tests {
                 ray_box_entry(eye, dir, lo - Vec3::splat(margin), hi + Vec3::splat(margin))
             },
         );
+    }
+
+    /// A far camera with a narrow field of view, as for a large data set seen whole:
+    /// spheres of about a pixel at thousands of radii from the eye.
+    fn far_camera(projection: Projection) -> Camera {
+        let mut c = Camera {
+            projection,
+            fov_y_deg: 0.5,
+            ..Default::default()
+        };
+        let b = Bounds::new([-10.0; 3], [10.0; 3]);
+        c.fit(&b, 1.5);
+        assert!(c.distance > 3000.0, "{}", c.distance);
+        c
+    }
+
+    /// Where the pixel centre `(x, y)`'s ray (view space, exact to double precision,
+    /// parametrised by view depth) enters the sphere of view-space centre `v`.
+    fn exact_sphere_entry(buf: &OcclusionBuffer, x: u32, y: u32, v: DVec3, r: f64) -> Option<f64> {
+        let p = buf.clip_from_view.as_dmat4();
+        let ndc_x = (f64::from(x) + 0.5) / f64::from(buf.image[0]) * 2.0 - 1.0;
+        let ndc_y = 1.0 - (f64::from(y) + 0.5) / f64::from(buf.image[1]) * 2.0;
+        let (origin, dir) = match buf.camera.projection {
+            Projection::Perspective => (
+                DVec3::ZERO,
+                DVec3::new(
+                    (ndc_x + p.z_axis.x) / p.x_axis.x,
+                    (ndc_y + p.z_axis.y) / p.y_axis.y,
+                    -1.0,
+                ),
+            ),
+            Projection::Orthographic => (
+                DVec3::new(
+                    (ndc_x - p.w_axis.x) / p.x_axis.x,
+                    (ndc_y - p.w_axis.y) / p.y_axis.y,
+                    0.0,
+                ),
+                DVec3::new(0.0, 0.0, -1.0),
+            ),
+        };
+        let a = dir.dot(dir);
+        let tc = dir.dot(v - origin) / a;
+        let q = v - (origin + dir * tc);
+        let disc = r * r - q.dot(q);
+        (disc >= 0.0).then(|| tc - (disc / a).sqrt())
+    }
+
+    #[test]
+    fn small_spheres_far_from_the_eye_are_tested_as_exactly_as_the_gpu_draws_them() {
+        // A sphere of a pixel at 5000 radii from the eye: the textbook ray-sphere
+        // quadratic in single precision (|o − c|² − r² with |o − c|² ≈ 2.5·10⁷ r²) keeps
+        // no digit of r and both hid visible spheres and showed hidden ones. Against
+        // double-precision rays: a sphere some pixel sees clearly (its ray enters the
+        // sphere shrunk by 1 % before the bound) must not be hidden, and one no pixel can
+        // see (grown by 1 %) must be, so the test stays tight enough to cull.
+        for projection in [Projection::Perspective, Projection::Orthographic] {
+            let cam = far_camera(projection);
+            let (w, h) = (64u32, 48u32);
+            let mut buf = OcclusionBuffer::new(&cam, [w, h], OcclusionMode::PixelCentres).unwrap();
+            let mut state = 2024u64;
+            let mut rnd = move || {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 40) as f64 / (1u64 << 24) as f64
+            };
+            let toward_eye = cam.back();
+            let at = |rnd: &mut dyn FnMut() -> f64, depth: f64| {
+                cam.right() * (rnd() * 20.0 - 10.0) as f32
+                    + cam.up() * (rnd() * 14.0 - 7.0) as f32
+                    + toward_eye * depth as f32
+            };
+            // Occluders in front, covering part of the image.
+            for _ in 0..150 {
+                let depth = 2.0 + rnd() * 2.0;
+                let c = at(&mut rnd, depth);
+                buf.add_sphere(c, (0.3 + rnd() * 0.6) as f32);
+            }
+            let view = buf.view_from_world.as_dmat4();
+            let (mut seen, mut hidden) = (0, 0);
+            for _ in 0..3000 {
+                let depth = rnd() * 4.0 - 2.0;
+                let c = at(&mut rnd, depth);
+                let r = 0.2 + rnd() * 0.6;
+                let v = view.transform_point3(c.as_dvec3());
+                let sees = |grow: f64, bound_scale: f64| {
+                    (0..h).any(|y| {
+                        (0..w).any(|x| {
+                            exact_sphere_entry(&buf, x, y, v, r * grow)
+                                .is_some_and(|t| f64::from(buf.depth_at(x, y)) >= t * bound_scale)
+                        })
+                    })
+                };
+                let got = buf.sphere_hidden(c, r as f32);
+                if sees(0.99, 1.0 + 1e-4) {
+                    seen += 1;
+                    assert!(
+                        !got,
+                        "{projection:?}: a visible sphere at {c} (r {r}) is hidden"
+                    );
+                } else if !sees(1.01, 1.0 - 1e-4) {
+                    hidden += 1;
+                    assert!(
+                        got,
+                        "{projection:?}: a sphere no pixel sees at {c} (r {r}) is kept"
+                    );
+                }
+            }
+            assert!(
+                seen > 300 && hidden > 300,
+                "{projection:?}: {seen} seen, {hidden} hidden"
+            );
+        }
     }
 
     #[test]

@@ -4,7 +4,7 @@
 mod common;
 
 use common::*;
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use mdlod_format::MdlodFile;
 use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_render::passes::sphere_raycast::pack;
@@ -425,25 +425,29 @@ fn the_parallel_traversal_draws_refused_nodes_and_lists_what_it_asked_largest_fi
     assert!(asked_all.is_empty(), "AllResident wants no list");
 }
 
-/// Per pixel centre, the nearest sphere hit (key and ray parameter), by CPU ray casting.
-fn nearest_hits(cam: &Camera, spheres: &[((u8, u32), Vec3, f32)]) -> Vec<Option<((u8, u32), f32)>> {
+/// Per pixel centre, the nearest sphere hit (key and view depth), by CPU ray casting in
+/// double precision, measured from the ray's point closest to each centre so that small
+/// spheres far from the eye are hit as exactly as near ones.
+fn nearest_hits(cam: &Camera, spheres: &[((u8, u32), Vec3, f32)]) -> Vec<Option<((u8, u32), f64)>> {
     let [w, h] = VIEWPORT;
     let clip = cam.clip_from_world(VIEWPORT, Vec2::ZERO);
-    let inv = clip.inverse();
-    let view = cam.view_from_world();
-    let mut best: Vec<Option<((u8, u32), f32)>> = vec![None; (w * h) as usize];
+    let p = cam.jittered_clip_from_view(VIEWPORT, Vec2::ZERO).as_dmat4();
+    let view = cam.view_from_world().as_dmat4();
+    let mut best: Vec<Option<((u8, u32), f64)>> = vec![None; (w * h) as usize];
     for &(key, c, r) in spheres {
-        let d = -view.transform_point3(c).z;
+        let v = view.transform_point3(c.as_dvec3());
+        let r = f64::from(r);
+        let d = -v.z as f32;
         // A generous pixel rectangle around the sphere's projection.
         let (cx, cy, rho) = {
-            let p = clip.project_point3(c);
-            let cx = (p.x + 1.0) * 0.5 * w as f32;
-            let cy = (1.0 - p.y) * 0.5 * h as f32;
+            let q = clip.project_point3(c);
+            let cx = (q.x + 1.0) * 0.5 * w as f32;
+            let cy = (1.0 - q.y) * 0.5 * h as f32;
             let near = match cam.projection {
-                Projection::Perspective => (d - r).max(1e-3),
+                Projection::Perspective => (d - r as f32).max(1e-3),
                 Projection::Orthographic => d,
             };
-            (cx, cy, 1.5 * r * cam.pixels_per_world(near, h) + 2.0)
+            (cx, cy, 1.5 * r as f32 * cam.pixels_per_world(near, h) + 2.0)
         };
         let x0 = (cx - rho).floor().max(0.0) as u32;
         let y0 = (cy - rho).floor().max(0.0) as u32;
@@ -451,18 +455,35 @@ fn nearest_hits(cam: &Camera, spheres: &[((u8, u32), Vec3, f32)]) -> Vec<Option<
         let y1 = ((cy + rho).ceil().max(0.0) as u32).min(h - 1);
         for y in y0..=y1 {
             for x in x0..=x1 {
-                let ndc_x = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
-                let ndc_y = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
-                let a = inv.project_point3(Vec3::new(ndc_x, ndc_y, 0.0));
-                let b = inv.project_point3(Vec3::new(ndc_x, ndc_y, 1.0));
-                let dir = (b - a).normalize();
-                let oc = a - c;
-                let bb = oc.dot(dir);
-                let disc = bb * bb - (oc.dot(oc) - r * r);
+                let ndc_x = (f64::from(x) + 0.5) / f64::from(w) * 2.0 - 1.0;
+                let ndc_y = 1.0 - (f64::from(y) + 0.5) / f64::from(h) * 2.0;
+                // The pixel's ray in view space, parametrised by view depth.
+                let (origin, dir) = match cam.projection {
+                    Projection::Perspective => (
+                        DVec3::ZERO,
+                        DVec3::new(
+                            (ndc_x + p.z_axis.x) / p.x_axis.x,
+                            (ndc_y + p.z_axis.y) / p.y_axis.y,
+                            -1.0,
+                        ),
+                    ),
+                    Projection::Orthographic => (
+                        DVec3::new(
+                            (ndc_x - p.w_axis.x) / p.x_axis.x,
+                            (ndc_y - p.w_axis.y) / p.y_axis.y,
+                            0.0,
+                        ),
+                        DVec3::new(0.0, 0.0, -1.0),
+                    ),
+                };
+                let a = dir.dot(dir);
+                let tc = dir.dot(v - origin) / a;
+                let q = v - (origin + dir * tc);
+                let disc = r * r - q.dot(q);
                 if disc < 0.0 {
                     continue;
                 }
-                let t = -bb - disc.sqrt();
+                let t = tc - (disc / a).sqrt();
                 let slot = &mut best[(y * w + x) as usize];
                 if slot.is_none_or(|(k, bt)| (t, key) < (bt, k)) {
                     *slot = Some((key, t));
@@ -471,6 +492,42 @@ fn nearest_hits(cam: &Camera, spheres: &[((u8, u32), Vec3, f32)]) -> Vec<Option<
         }
     }
     best
+}
+
+#[test]
+fn occlusion_culling_keeps_every_visible_sphere_far_from_the_eye() {
+    // A large data set seen whole puts spheres of a few pixels thousands of radii from
+    // the eye. There, a single-precision ray-sphere quadratic taken from the eye kept no
+    // digit of the radius, and the culling hid spheres that showed (and kept hidden
+    // ones): here a narrow field of view puts the eye 6000 radii away.
+    let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
+    for projection in [Projection::Perspective, Projection::Orthographic] {
+        let mut cam = Camera {
+            projection,
+            fov_y_deg: 0.5,
+            ..Default::default()
+        };
+        cam.fit(
+            &mdlod_render::data_bounds(&f),
+            VIEWPORT[0] as f32 / VIEWPORT[1] as f32,
+        );
+        assert!(cam.distance > 5000.0, "{}", cam.distance);
+        let settings = |occlusion| TraversalSettings {
+            viewport: VIEWPORT,
+            error_px: 0.0,
+            budget_points: u64::MAX,
+            occlusion,
+        };
+        let all = traverse(&cam, &f, &settings(OcclusionMode::Off));
+        let seen = traverse(&cam, &f, &settings(OcclusionMode::PixelCentres));
+        check_counts(&f, &seen);
+        assert!(seen.occluded_particles > 0 && seen.points * 2 < all.points);
+        let a = nearest_hits(&cam, &drawn_spheres(&f, &all));
+        let b = nearest_hits(&cam, &drawn_spheres(&f, &seen));
+        let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        assert_eq!(differing, 0, "{projection:?}: {differing} pixels change");
+        assert!(a.iter().filter(|h| h.is_some()).count() > 5000);
+    }
 }
 
 #[test]
