@@ -39,6 +39,13 @@
 //!   sphere of a pixel seen whole in a 10⁸-particle set lies thousands of radii from the
 //!   eye, where the quadratic taken from the eye (|o − c|² − r²) keeps no digit of the
 //!   radius in single precision.
+//! - With one sample per pixel, a box that projects to at most 8×8 pixels is tested the
+//!   same way: each pixel centre whose ray enters the box (slabs in world space, the box
+//!   grown by a relative 10⁻⁵) must have a bound nearer than the entry depth. A cluster of
+//!   spheres of a pixel or two, just behind the surface, reaches pixels where the
+//!   surface in front is farther (the gaps between its spheres, the surface receding);
+//!   its box's nearest corner against the rectangle's maximum keeps it, although no ray
+//!   that reaches those pixels passes through the box.
 //!
 //! Nothing the GPU would show is removed: a culled node's every fragment would fail the
 //! depth test against spheres that are drawn. Depths are compared in view space, which
@@ -72,6 +79,11 @@ const RECT_GROW_PX: f32 = 0.5;
 /// sample by sample (one ray per pixel centre) rather than against the box's pyramid
 /// maximum.
 const EXACT_SPHERE_PX: f32 = 8.0;
+/// Boxes whose projection is at most this many pixels wide and high are tested sample
+/// by sample (one ray per pixel centre against the box).
+const EXACT_BOX_PX: f32 = 8.0;
+/// Relative growth of a box in the sample test, against rounding.
+const BOX_GROW_REL: f32 = 1e-5;
 /// Relative decrease of an occludee's entry depth in the sample test (against the GPU
 /// computing the same hit with other rounding).
 const SAMPLE_DEPTH_SHRINK_REL: f32 = 1e-5;
@@ -98,6 +110,10 @@ pub struct OcclusionBuffer {
     clip_from_world: Mat4,
     clip_from_view: Mat4,
     view_from_world: Mat4,
+    /// The eye and the view axes in world space (right, up, back): the view-to-world
+    /// map, exactly (a general matrix inverse loses digits to the eye's distance).
+    eye: Vec3,
+    axes: [Vec3; 3],
     camera: Camera,
     /// Sine and cosine bounds of the angle between any view ray and the view axis.
     sin_max: f32,
@@ -164,6 +180,8 @@ impl OcclusionBuffer {
             clip_from_world: camera.clip_from_world(viewport, glam::Vec2::ZERO),
             clip_from_view: camera.jittered_clip_from_view(viewport, glam::Vec2::ZERO),
             view_from_world: camera.view_from_world(),
+            eye: camera.eye(),
+            axes: [camera.right(), camera.up(), camera.back()],
             camera: camera.clone(),
             sin_max,
             cos_min,
@@ -368,7 +386,98 @@ impl OcclusionBuffer {
             x1 = x1.max(x);
             y1 = y1.max(y);
         }
+        if self.mode == OcclusionMode::PixelCentres
+            && x1 - x0 <= EXACT_BOX_PX
+            && y1 - y0 <= EXACT_BOX_PX
+        {
+            return self.box_samples_hidden(min, max, nearest, [x0, y0, x1, y1]);
+        }
         self.rect_hidden(nearest, [x0, y0, x1, y1])
+    }
+
+    /// The box test of a small box, sample by sample: every pixel centre of the window
+    /// inside `rect` whose ray enters the box `min..max` must have a recorded bound
+    /// nearer than the depth where it enters. A sample whose bound is nearer than the
+    /// box's `nearest` depth is hidden without its ray being traced.
+    fn box_samples_hidden(
+        &self,
+        min: Vec3,
+        max: Vec3,
+        nearest: f32,
+        [x0, y0, x1, y1]: [f32; 4],
+    ) -> bool {
+        if !(nearest.is_finite()
+            && x0.is_finite()
+            && y0.is_finite()
+            && x1.is_finite()
+            && y1.is_finite())
+        {
+            return false;
+        }
+        // Grown against rounding: rays that graze the box count as entering it.
+        let grow = (max - min).abs() * BOX_GROW_REL
+            + Vec3::splat(BOX_GROW_REL * (min.abs().max(max.abs())).max_element());
+        let (min, max) = (min - grow, max + grow);
+        let (w, h) = (self.width as f32, self.height as f32);
+        let px0 = ceil_px(x0 - RECT_GROW_PX - 0.5).max(0.0);
+        let py0 = ceil_px(y0 - RECT_GROW_PX - 0.5).max(0.0);
+        let px1 = floor_px(x1 + RECT_GROW_PX - 0.5).min(w - 1.0);
+        let py1 = floor_px(y1 + RECT_GROW_PX - 0.5).min(h - 1.0);
+        let p = &self.clip_from_view;
+        let (sx, sy) = (p.x_axis.x, p.y_axis.y);
+        let perspective = self.camera.projection == Projection::Perspective;
+        let surely_behind = nearer(nearest);
+        // Rays parametrised by view depth t: world origin + t · world direction; the
+        // view-to-world map is rigid, so t stays the view depth.
+        let [ax, ay, az] = self.axes;
+        let to_world = |v: Vec3| ax * v.x + ay * v.y + az * v.z;
+        let mut j = py0;
+        while j <= py1 {
+            let ndc_y = 1.0 - (j + self.origin[1] as f32 + 0.5) / self.image[1] as f32 * 2.0;
+            let row = (j as u32 * self.width) as usize;
+            let mut i = px0;
+            while i <= px1 {
+                let bound = self.levels[0][row + i as usize];
+                if bound < surely_behind {
+                    i += 1.0;
+                    continue;
+                }
+                let ndc_x = (i + self.origin[0] as f32 + 0.5) / self.image[0] as f32 * 2.0 - 1.0;
+                let (origin, dir) = if perspective {
+                    let d = Vec3::new((ndc_x + p.z_axis.x) / sx, (ndc_y + p.z_axis.y) / sy, -1.0);
+                    (self.eye, to_world(d))
+                } else {
+                    let o = Vec3::new((ndc_x - p.w_axis.x) / sx, (ndc_y - p.w_axis.y) / sy, 0.0);
+                    (self.eye + to_world(o), -az)
+                };
+                // Slabs: the ray is inside the box for t in [enter, leave].
+                let (mut enter, mut leave) = (f32::NEG_INFINITY, f32::INFINITY);
+                let mut missed = false;
+                for k in 0..3 {
+                    let (o, d) = (origin[k], dir[k]);
+                    if d == 0.0 {
+                        if o < min[k] || o > max[k] {
+                            missed = true;
+                        }
+                        continue;
+                    }
+                    let (ta, tb) = ((min[k] - o) / d, (max[k] - o) / d);
+                    enter = enter.max(ta.min(tb));
+                    leave = leave.min(ta.max(tb));
+                }
+                // NaN anywhere counts as entering (seen unless the bound says otherwise).
+                let enters = enter.partial_cmp(&leave) != Some(std::cmp::Ordering::Greater);
+                if !missed && enters {
+                    let entry = nearer(enter.max(nearest));
+                    if bound.partial_cmp(&entry) != Some(std::cmp::Ordering::Less) {
+                        return false;
+                    }
+                }
+                i += 1.0;
+            }
+            j += 1.0;
+        }
+        true
     }
 
     /// True when nothing of the sphere can be seen past what is recorded: as
@@ -445,7 +554,7 @@ impl OcclusionBuffer {
         let r2 = radius * radius;
         // No ray enters the sphere nearer than its nearest depth: a sample whose bound is
         // nearer than that hides it without its ray being traced.
-        let surely_behind = (-v.z - radius) * (1.0 - SAMPLE_DEPTH_SHRINK_REL);
+        let surely_behind = nearer(-v.z - radius);
         let mut j = py0;
         while j <= py1 {
             let ndc_y = 1.0 - (j + self.origin[1] as f32 + 0.5) / self.image[1] as f32 * 2.0;
@@ -479,7 +588,7 @@ impl OcclusionBuffer {
                 let disc = r2 - q.dot(q);
                 if disc >= 0.0 {
                     let entry = tc - (disc / a).sqrt();
-                    let entry = entry * (1.0 - SAMPLE_DEPTH_SHRINK_REL);
+                    let entry = nearer(entry);
                     // Seen unless certainly behind the bound (NaN counts as seen).
                     if bound.partial_cmp(&entry) != Some(std::cmp::Ordering::Less) {
                         return false;
@@ -550,6 +659,13 @@ fn ceil_px(x: f32) -> f32 {
     } else {
         t
     }
+}
+
+/// A depth moved towards the eye by [`SAMPLE_DEPTH_SHRINK_REL`] of its size, whatever
+/// its sign (orthographic depths may be negative).
+#[inline]
+fn nearer(depth: f32) -> f32 {
+    depth - depth.abs() * SAMPLE_DEPTH_SHRINK_REL
 }
 
 /// Pixels per world unit at view depth `d`.
@@ -945,6 +1061,109 @@ mod tests {
             }
             assert!(
                 seen > 300 && hidden > 300,
+                "{projection:?}: {seen} seen, {hidden} hidden"
+            );
+        }
+    }
+
+    #[test]
+    fn small_boxes_far_from_the_eye_are_tested_pixel_by_pixel() {
+        // A small box is hidden exactly when no pixel centre's ray enters it before the
+        // recorded bound (double-precision slabs; 1 % margins either way), so a cluster
+        // whose box pokes only into gaps between nearer spheres is still dropped whole.
+        for projection in [Projection::Perspective, Projection::Orthographic] {
+            let cam = far_camera(projection);
+            let (w, h) = (64u32, 48u32);
+            let mut buf = OcclusionBuffer::new(&cam, [w, h], OcclusionMode::PixelCentres).unwrap();
+            let mut state = 77u64;
+            let mut rnd = move || {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 40) as f32 / (1u64 << 24) as f32
+            };
+            let toward_eye = cam.back();
+            for _ in 0..400 {
+                let c = cam.right() * (rnd() * 20.0 - 10.0)
+                    + cam.up() * (rnd() * 14.0 - 7.0)
+                    + toward_eye * (2.0 + rnd() * 2.0);
+                buf.add_sphere(c, 0.4 + rnd() * 0.6);
+            }
+            let world_from_view = buf.view_from_world.as_dmat4().inverse();
+            let p = buf.clip_from_view.as_dmat4();
+            let ray = |x: u32, y: u32| {
+                let ndc_x = (f64::from(x) + 0.5) / f64::from(w) * 2.0 - 1.0;
+                let ndc_y = 1.0 - (f64::from(y) + 0.5) / f64::from(h) * 2.0;
+                let (o, d) = match projection {
+                    Projection::Perspective => (
+                        DVec3::ZERO,
+                        DVec3::new(
+                            (ndc_x + p.z_axis.x) / p.x_axis.x,
+                            (ndc_y + p.z_axis.y) / p.y_axis.y,
+                            -1.0,
+                        ),
+                    ),
+                    Projection::Orthographic => (
+                        DVec3::new(
+                            (ndc_x - p.w_axis.x) / p.x_axis.x,
+                            (ndc_y - p.w_axis.y) / p.y_axis.y,
+                            0.0,
+                        ),
+                        DVec3::new(0.0, 0.0, -1.0),
+                    ),
+                };
+                (
+                    world_from_view.transform_point3(o),
+                    world_from_view.transform_vector3(d),
+                )
+            };
+            let entry = |o: DVec3, d: DVec3, lo: DVec3, hi: DVec3| {
+                let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+                for k in 0..3 {
+                    if d[k] == 0.0 {
+                        if o[k] < lo[k] || o[k] > hi[k] {
+                            return None;
+                        }
+                        continue;
+                    }
+                    let (u, v) = ((lo[k] - o[k]) / d[k], (hi[k] - o[k]) / d[k]);
+                    t0 = t0.max(u.min(v));
+                    t1 = t1.min(u.max(v));
+                }
+                (t0 <= t1).then_some(t0)
+            };
+            let (mut seen, mut hidden) = (0, 0);
+            for _ in 0..2000 {
+                let c = cam.right() * (rnd() * 20.0 - 10.0)
+                    + cam.up() * (rnd() * 14.0 - 7.0)
+                    + toward_eye * (rnd() * 3.0 - 2.0);
+                let half = Vec3::new(rnd(), rnd(), rnd()) * 0.8 + Vec3::splat(0.05);
+                let (lo, hi) = (c - half, c + half);
+                let sees = |grow: f64, bound_scale: f64| {
+                    let g = half.as_dvec3() * (grow - 1.0);
+                    let (lo, hi) = (lo.as_dvec3() - g, hi.as_dvec3() + g);
+                    (0..h).any(|y| {
+                        (0..w).any(|x| {
+                            let (o, d) = ray(x, y);
+                            entry(o, d, lo, hi)
+                                .is_some_and(|t| f64::from(buf.depth_at(x, y)) >= t * bound_scale)
+                        })
+                    })
+                };
+                let got = buf.box_hidden(lo, hi, 0.0);
+                if sees(0.99, 1.0 + 1e-4) {
+                    seen += 1;
+                    assert!(!got, "{projection:?}: a visible box around {c} is hidden");
+                } else if !sees(1.01, 1.0 - 1e-4) {
+                    hidden += 1;
+                    assert!(
+                        got,
+                        "{projection:?}: a box no pixel sees around {c} is kept"
+                    );
+                }
+            }
+            assert!(
+                seen > 200 && hidden > 200,
                 "{projection:?}: {seen} seen, {hidden} hidden"
             );
         }
