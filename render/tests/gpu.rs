@@ -746,6 +746,41 @@ fn occlusion_culling_changes_no_pixel_where_particles_are_about_a_pixel_wide() {
     }
 }
 
+#[test]
+fn occlusion_culling_changes_no_pixel_far_from_the_eye() {
+    // A large data set seen whole puts spheres of a pixel or two thousands of radii from
+    // the eye (6700 units for radius 1.28 in the 2×10^8 crater). A narrow field of view
+    // puts this block's eye 6000 radii away: the culled image, through the small-sphere
+    // raster and the impostors, must be the unculled one.
+    let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
+    for projection in [Projection::Perspective, Projection::Orthographic] {
+        let mut camera = Camera {
+            projection,
+            azimuth_deg: 35.0,
+            elevation_deg: 25.0,
+            fov_y_deg: 0.5,
+            ..Default::default()
+        };
+        camera.fit(&mdlod_render::data_bounds(&f), 200.0 / 150.0);
+        assert!(camera.distance > 7000.0, "{}", camera.distance);
+        let mut o = opts(200, 150);
+        o.error_px = 0.0;
+        o.view = ViewSpec::Camera(camera);
+        let (culled, r) = render_image(renderer(), &f, &o).unwrap();
+        o.occlusion = false;
+        let (all, r_all) = render_image(renderer(), &f, &o).unwrap();
+        let drawn = |r: &mdlod_render::RenderReport| r.particles_drawn + r.nodes_drawn;
+        assert!(
+            drawn(&r) * 4 < drawn(&r_all),
+            "{} of {} spheres drawn",
+            drawn(&r),
+            drawn(&r_all)
+        );
+        let (failing, _) = golden::compare(&all, &culled, 0);
+        assert_eq!(failing, 0, "{projection:?}: {failing} pixels differ");
+    }
+}
+
 /// CPU reference of the splat pass: every point of the cut deposits
 /// `π r_px² · colour` with the pass's normalised Gaussian.
 fn splat_reference(
