@@ -191,6 +191,29 @@ impl Camera {
         shift * self.clip_from_view(w / h)
     }
 
+    /// [`Self::jittered_clip_from_view`] with reversed depth, for the depth buffer of the
+    /// sphere passes: z/w is 1 at the near plane and 0 at the far one. A 32-bit float
+    /// then resolves a relative 10⁻⁷ of the depth everywhere; the usual 0-at-near
+    /// mapping crowds every far depth next to 1.0 (steps of several units a thousand
+    /// units away once a close-up puts the near plane at 10⁻⁵ of the far one). x, y
+    /// and w are those of the usual matrix.
+    pub fn depth_clip_from_view(&self, size_px: [u32; 2], jitter_px: Vec2) -> Mat4 {
+        let mut m = self.jittered_clip_from_view(size_px, jitter_px);
+        let (n, f) = (self.near, self.far);
+        // Row z: z_clip = a·z_view + b, with z_view = −depth.
+        let (a, b) = match self.projection {
+            // z/w = n (f − d) / (d (f − n)), w = d.
+            Projection::Perspective => (n / (f - n), n * f / (f - n)),
+            // z/w = (f − d) / (f − n), w = 1.
+            Projection::Orthographic => (1.0 / (f - n), f / (f - n)),
+        };
+        m.x_axis.z = 0.0;
+        m.y_axis.z = 0.0;
+        m.z_axis.z = a;
+        m.w_axis.z = b;
+        m
+    }
+
     /// Pixels per world unit at view depth `depth` (distance along the view direction)
     /// in an image `height_px` pixels high.
     pub fn pixels_per_world(&self, depth: f32, height_px: u32) -> f32 {
@@ -315,6 +338,48 @@ mod tests {
 
     fn close(a: Vec3, b: Vec3) -> bool {
         (a - b).length() < 1e-4
+    }
+
+    #[test]
+    fn reversed_depth_is_one_at_near_zero_at_far_and_resolves_far_depths() {
+        for projection in [Projection::Perspective, Projection::Orthographic] {
+            // A close-up: the near plane at 10⁻⁵ of the far one.
+            let c = Camera {
+                projection,
+                near: 0.01,
+                far: 1000.0,
+                ..Default::default()
+            };
+            let size = [640, 480];
+            let usual = c.jittered_clip_from_view(size, Vec2::new(0.3, -0.2));
+            let reversed = c.depth_clip_from_view(size, Vec2::new(0.3, -0.2));
+            let z = |m: &Mat4, depth: f32| {
+                let p = *m * Vec4::new(1.5, -2.0, -depth, 1.0);
+                (p, p.z / p.w)
+            };
+            assert!((z(&reversed, 0.01).1 - 1.0).abs() < 1e-6, "{projection:?}");
+            assert!(z(&reversed, 1000.0).1.abs() < 1e-6, "{projection:?}");
+            for depth in [0.5f32, 10.0, 300.0, 999.0] {
+                let (pu, du) = z(&usual, depth);
+                let (pr, dr) = z(&reversed, depth);
+                // x, y and w as the usual matrix; z its complement.
+                assert_eq!((pu.x, pu.y, pu.w), (pr.x, pr.y, pr.w));
+                assert!(
+                    (du + dr - 1.0).abs() < 1e-5,
+                    "{projection:?} {depth}: {du} {dr}"
+                );
+            }
+            // Eleven depths 0.1 apart 990 units away: eleven values here, decreasing; in
+            // the usual buffer (steps of about 6 units there) at most two.
+            let depths: Vec<f32> = (0..11).map(|k| 990.0 + 0.1 * k as f32).collect();
+            let r: Vec<f32> = depths.iter().map(|&d| z(&reversed, d).1).collect();
+            assert!(r.windows(2).all(|w| w[0] > w[1]), "{projection:?}: {r:?}");
+            if projection == Projection::Perspective {
+                let mut u: Vec<f32> = depths.iter().map(|&d| z(&usual, d).1).collect();
+                u.dedup();
+                assert!(u.len() <= 2, "{u:?}");
+            }
+        }
     }
 
     #[test]

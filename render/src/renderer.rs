@@ -147,8 +147,10 @@ impl Default for FrameSettings {
 #[derive(Clone, Debug)]
 pub struct RenderedFrame {
     pub image: RgbaImage,
-    /// Depth in [0, 1] (WebGPU NDC z) per pixel, rows top to bottom, of the last sample;
-    /// 1 where nothing was hit. Only with [`FrameSettings::read_depth`].
+    /// Depth in [0, 1] (WebGPU NDC z of [`Camera::clip_from_view`]: 0 at the near plane, 1
+    /// at the far one) per pixel, rows top to bottom, of the last sample; 1 where nothing
+    /// was hit. Only with [`FrameSettings::read_depth`]. (The pass itself keeps reversed
+    /// depth, [`Camera::depth_clip_from_view`], whose complement this is.)
     pub depth: Option<Vec<f32>>,
     /// GPU time of the frame, when the device measures it.
     pub gpu_time: Option<Duration>,
@@ -767,7 +769,7 @@ impl Renderer {
         let ortho = camera.projection == Projection::Orthographic;
         for s in 0..settings.spp {
             let uniforms = FrameUniforms::new(
-                camera.jittered_clip_from_view([w, h], jitter(s, settings.spp)),
+                camera.depth_clip_from_view([w, h], jitter(s, settings.spp)),
                 view_from_world,
                 ortho,
                 &settings.lighting,
@@ -805,7 +807,8 @@ impl Renderer {
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view: &depth_v,
                         depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(1.0),
+                            // Reversed depth: 0 is the far plane.
+                            load: wgpu::LoadOp::Clear(0.0),
                             store: wgpu::StoreOp::Store,
                         }),
                         stencil_ops: None,
@@ -906,9 +909,11 @@ impl Renderer {
         let depth = match &depth_readback {
             Some(buf) => {
                 let bytes = self.read_buffer(buf)?;
-                Some(bytemuck::pod_collect_to_vec(&unpad_rows(
-                    &bytes, colour_row, row, h,
-                )))
+                let reversed: Vec<f32> =
+                    bytemuck::pod_collect_to_vec(&unpad_rows(&bytes, colour_row, row, h));
+                // The buffer holds reversed depth (`Camera::depth_clip_from_view`); the
+                // usual z/w from 0 at near to 1 at far is exactly its complement.
+                Some(reversed.into_iter().map(|d| 1.0 - d).collect())
             }
             None => None,
         };
@@ -1300,7 +1305,7 @@ impl Renderer {
         for s in 0..iterations {
             let layer = s % layers;
             let uniforms = FrameUniforms::new(
-                camera.jittered_clip_from_view(
+                camera.depth_clip_from_view(
                     [width, height],
                     // A lone first iteration is centred, as 1-spp ray casting is.
                     jitter(first + s, if first == 0 { iterations } else { u32::MAX }),
@@ -1336,7 +1341,8 @@ impl Renderer {
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view: &depth_v,
                         depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(1.0),
+                            // Reversed depth: 0 is the far plane.
+                            load: wgpu::LoadOp::Clear(0.0),
                             store: wgpu::StoreOp::Store,
                         }),
                         stencil_ops: None,

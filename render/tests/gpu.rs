@@ -781,6 +781,84 @@ fn occlusion_culling_changes_no_pixel_far_from_the_eye() {
     }
 }
 
+#[test]
+fn spheres_far_off_keep_their_depth_order_with_the_eye_inside_the_data() {
+    // With the eye inside the data's bounding sphere (any close-up), the near plane is
+    // as close as 10⁻⁵ of the far one. A depth buffer holding z/w from 0 at near to 1 at
+    // far then has steps of several units a thousand units away: a wall of red spheres
+    // and a wall of smaller blue ones 3 units further (each blue sphere's front 5 units
+    // behind a red one's, its outline inside the red one's) fell into the same steps, and
+    // draw order or point order chose the colour. Reversed depth (1 at near, 0 at far)
+    // keeps a relative 10⁻⁷ everywhere: no blue pixel may show. Spheres of 4 px go
+    // through the compute raster, of 11 px through impostors.
+    for (radius, w, h) in [(10.0f32, 160u32, 120u32), (25.0, 160, 120)] {
+        let spacing = 1.5 * radius;
+        let mut positions = vec![];
+        let mut species_index = vec![];
+        for wall in 0..2u16 {
+            for i in -6..=6 {
+                for j in -4..=4 {
+                    let x = 1000.0 + 3.0 * f32::from(wall);
+                    positions.push([x, i as f32 * spacing, j as f32 * spacing]);
+                    species_index.push(wall);
+                }
+            }
+        }
+        // Behind the eye, outside the view: it puts the eye inside the data's bounds.
+        positions.push([-50.0, 0.0, 0.0]);
+        species_index.push(0);
+        let frame = mdlod_preprocess::frame::Frame {
+            positions,
+            species_index,
+            species: ["Front", "Back"]
+                .iter()
+                .map(|n| mdlod_preprocess::frame::SpeciesName {
+                    name: n.to_string(),
+                    numeric_type: false,
+                    radius: None,
+                })
+                .collect(),
+            ..Default::default()
+        };
+        let (_d, _p, f) = make_file(
+            &frame,
+            small_build(),
+            &[("Front", radius), ("Back", radius - 2.0)],
+        );
+        let camera = Camera {
+            target: Vec3::new(1000.0, 0.0, 0.0),
+            azimuth_deg: 180.0,
+            elevation_deg: 0.0,
+            distance: 1000.0,
+            fov_y_deg: 30.0,
+            projection: Projection::Perspective,
+            ..Default::default()
+        };
+        let mut o = opts(w, h);
+        o.view = ViewSpec::Camera(camera);
+        o.occlusion = false;
+        let colour = |name: &str, c: [f32; 3]| mdlod_render::style::SpeciesStyle {
+            name: name.into(),
+            colour: Some(c),
+            radius: None,
+            hidden: false,
+        };
+        o.style.species = vec![
+            colour("Front", [1.0, 0.0, 0.0]),
+            colour("Back", [0.0, 0.0, 1.0]),
+        ];
+        let (image, _) = render_image(renderer(), &f, &o).unwrap();
+        let (mut red, mut blue) = (0, 0);
+        // (The highlights are white: a pixel is the colour that dominates it.)
+        for p in image.data.chunks_exact(4) {
+            red += usize::from(p[0] > 8 && p[0] > p[2]);
+            blue += usize::from(p[2] > 8 && p[2] > p[0]);
+        }
+        assert!(red > 1000, "radius {radius}: {red} red pixels");
+        assert_eq!(blue, 0, "radius {radius}: {blue} blue pixels ({red} red)");
+    }
+}
+
 /// CPU reference of the splat pass: every point of the cut deposits
 /// `π r_px² · colour` with the pass's normalised Gaussian.
 fn splat_reference(

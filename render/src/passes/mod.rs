@@ -104,7 +104,7 @@ mod tests {
         // The conservative-depth variant of the sphere pass.
         let src = super::sphere_raycast::shader_source(true);
         assert_eq!(
-            src.matches("@fragment @early_depth_test(greater_equal)")
+            src.matches("@fragment @early_depth_test(less_equal)")
                 .count(),
             2
         );

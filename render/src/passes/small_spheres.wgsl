@@ -1,8 +1,9 @@
 // The small-sphere raster: one invocation per point of the cut. A sphere whose screen box
 // spans at most `raster.max_side` pixel centres each way is drawn here: every pixel
-// centre in the box whose ray enters the sphere offers the key (entry depth, point) to
-// its pixel with a 64-bit atomic maximum of the key's complement, so that the nearest
-// entry wins (ties: the lower point index). The sphere pass's resolve
+// centre in the box whose ray enters the sphere offers the key (entry depth, complement
+// of the point index) to its pixel with a 64-bit atomic maximum. Depth is reversed (1 at
+// the near plane, 0 at the far one: `Camera::depth_clip_from_view`), so the nearest entry
+// wins (ties: the lower point index). The sphere pass's resolve
 // (`fs_resolve` in sphere_raycast.wgsl) then shades each pixel's winner. Larger spheres,
 // and spheres reaching the near or far plane, are listed in `large` (with their count in
 // the indirect draw's instance count) and drawn as impostor quads after the resolve,
@@ -39,9 +40,10 @@ fn cs_small_spheres(@builtin(global_invocation_id) gid: vec3<u32>) {
     // Depths along the view axis of the sphere's near and far sides.
     let t0 = -c.z - r;
     let t1 = -c.z + r;
-    // Wholly between the near and far planes, in front of the eye (NaN fails too).
-    let inside = r > 0.0 && (ortho || t0 > 0.0) && ndc_depth(vec3<f32>(0.0, 0.0, -t0)) > 0.0
-        && ndc_depth(vec3<f32>(0.0, 0.0, -t1)) < 1.0;
+    // Wholly between the near and far planes (reversed depth: below 1 and above 0), in
+    // front of the eye (NaN fails too).
+    let inside = r > 0.0 && (ortho || t0 > 0.0) && ndc_depth(vec3<f32>(0.0, 0.0, -t0)) < 1.0
+        && ndc_depth(vec3<f32>(0.0, 0.0, -t1)) > 0.0;
     if !inside {
         draw_as_impostor(ii);
         return;
@@ -87,8 +89,8 @@ fn cs_small_spheres(@builtin(global_invocation_id) gid: vec3<u32>) {
             let h = ray_sphere(ray, c, r);
             if h.y >= 0.0 {
                 let z = clamp(ndc_depth(ray.origin + h.x * ray.dir), 0.0, 1.0);
-                let key = (u64(bitcast<u32>(z)) << 32u) | u64(ii);
-                atomicMax(&visible[j * w + i], ~key);
+                let key = (u64(bitcast<u32>(z)) << 32u) | u64(~ii);
+                atomicMax(&visible[j * w + i], key);
             }
         }
     }

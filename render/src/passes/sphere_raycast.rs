@@ -76,18 +76,19 @@ pub struct RasterUniforms {
 }
 
 /// The source with the fragment stage declared conservative (its depth is never nearer
-/// than the rasterized quad's), for devices with `SHADER_EARLY_DEPTH_TEST`.
+/// than the rasterized quad's: never greater, in reversed depth), for devices with
+/// `SHADER_EARLY_DEPTH_TEST`.
 pub fn shader_source(early_depth: bool) -> String {
     if early_depth {
         // Both fragment stages write a depth never nearer than the rasterized quad's.
         SHADER
             .replace(
                 "@fragment\nfn fs_main",
-                "@fragment @early_depth_test(greater_equal)\nfn fs_main",
+                "@fragment @early_depth_test(less_equal)\nfn fs_main",
             )
             .replace(
                 "@fragment\nfn fs_gbuffer",
-                "@fragment @early_depth_test(greater_equal)\nfn fs_gbuffer",
+                "@fragment @early_depth_test(less_equal)\nfn fs_gbuffer",
             )
     } else {
         SHADER.to_string()
@@ -774,7 +775,8 @@ fn sphere_pipeline(
     let depth = wgpu::DepthStencilState {
         format: DEPTH_FORMAT,
         depth_write_enabled: Some(true),
-        depth_compare: Some(wgpu::CompareFunction::Less),
+        // Reversed depth (`Camera::depth_clip_from_view`): nearer is greater.
+        depth_compare: Some(wgpu::CompareFunction::Greater),
         stencil: Default::default(),
         bias: Default::default(),
     };

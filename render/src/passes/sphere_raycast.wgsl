@@ -8,10 +8,13 @@
 // view-facing quad that covers the sphere's projection, in the plane touching the
 // sphere's front. The fragment shader intersects the pixel's ray with the sphere, discards
 // misses, writes the hit's depth and shades it (Lambert + Blinn-Phong, one directional
-// light fixed in view space). Since the hit is never nearer than the quad, the pipeline
-// declares the written depth "greater or equal" where the device allows it
-// (`@early_depth_test(greater_equal)`, added by sphere_raycast.rs), so fragments
-// behind what is already drawn are rejected before they are shaded.
+// light fixed in view space). Depth is reversed (`frame.clip_from_view` here is
+// `Camera::depth_clip_from_view`: z/w is 1 at the near plane, 0 at the far one, and the
+// test keeps the greater), which resolves a relative 10⁻⁷ of the depth at any distance.
+// Since the hit is never nearer than the quad, the pipeline declares the written depth
+// "less or equal" where the device allows it (`@early_depth_test(less_equal)`, added by
+// sphere_raycast.rs), so fragments behind what is already drawn are rejected before they
+// are shaded.
 //
 // Where the device has 64-bit atomics, spheres a few pixels wide are drawn by the compute
 // raster of small_spheres.wgsl instead: `fs_resolve` (a full-screen triangle drawn first
@@ -22,8 +25,8 @@
 
 // The compute raster's results, for `fs_resolve` and `vs_listed`.
 @group(1) @binding(0) var<uniform> raster: Raster;
-// Per pixel, the complement of the winning key (entry depth bits above, point index
-// below; 0: no small sphere), read as two 32-bit words, low first.
+// Per pixel, the winning key (reversed entry depth bits above, the complement of the
+// point index below; 0: no small sphere), read as two 32-bit words, low first.
 @group(1) @binding(1) var<storage, read> visible_words: array<vec2<u32>>;
 // The points to draw as impostors.
 @group(1) @binding(2) var<storage, read> large: array<u32>;
@@ -127,11 +130,12 @@ fn ray_hit(in: VsOut) -> Hit {
     return h;
 }
 
-// The hit's depth, never nearer than the quad itself (it only differs by rounding): the
-// promise that lets the GPU reject hidden fragments before shading them (EARLY_DEPTH).
+// The hit's depth, never nearer than the quad itself (it only differs by rounding; nearer
+// is greater in reversed depth): the promise that lets the GPU reject hidden fragments
+// before shading them (EARLY_DEPTH).
 fn hit_depth(in: VsOut, hit: Hit) -> f32 {
     let clip = frame.clip_from_view * vec4<f32>(hit.point, 1.0);
-    return max(clamp(clip.z / clip.w, 0.0, 1.0), in.clip.z);
+    return min(clamp(clip.z / clip.w, 0.0, 1.0), in.clip.z);
 }
 
 // Lambert + Blinn-Phong for unit normal `n`, unit vector towards the eye `v`.
