@@ -1816,16 +1816,12 @@ impl Renderer {
                 cut.species_count,
             );
             queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
-            let world_from_clip =
-                (camera.clip_from_view(aspect) * camera.view_from_world()).inverse();
-            let eye = camera
-                .view_from_world()
-                .inverse()
-                .transform_point3(glam::Vec3::ZERO);
+            let basis = crate::density::ray_basis(camera, width, height);
+            let eye = camera.eye();
             let ortho = camera.projection == Projection::Orthographic;
             let records: Vec<DensityGpu> = (0..stacks)
                 .map(|st| DensityGpu {
-                    world_from_clip: world_from_clip.to_cols_array_2d(),
+                    basis: basis.to_cols_array_2d(),
                     eye: [eye.x, eye.y, eye.z, if ortho { 1.0 } else { 0.0 }],
                     slicing: [
                         slicing.lambda_min + (st * per_stack) as f32 * slicing.step,
@@ -1865,17 +1861,6 @@ impl Renderer {
                 mapped_at_creation: false,
             });
             queue.write_buffer(&slicing_buf, 0, bytemuck::cast_slice(&records));
-            let view_buf = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("density view"),
-                size: 64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            queue.write_buffer(
-                &view_buf,
-                0,
-                bytemuck::cast_slice(&camera.view_from_world().to_cols_array()),
-            );
             let size = wgpu::Extent3d {
                 width,
                 height,
@@ -1961,10 +1946,6 @@ impl Renderer {
                     wgpu::BindGroupEntry {
                         binding: 4,
                         resource: active.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: view_buf.as_entire_binding(),
                     },
                 ],
             });

@@ -33,7 +33,12 @@ pub const SLICES_GRADIENT: u32 = 2;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct DensityGpu {
-    pub world_from_clip: [[f32; 4]; 4],
+    /// The camera's basis in world space, columns right, up, back and eye; the w of
+    /// right and up are the view's half-extents at unit depth (perspective) or in world
+    /// units (orthographic), 1 / clip_from_view's x and y scales. Rays built from these
+    /// keep their digits at any distance, where an inverse of clip_from_world does not
+    /// (its depth row nearly cancels once the near plane is 10⁻⁵ of the far one).
+    pub basis: [[f32; 4]; 4],
     pub eye: [f32; 4],
     pub slicing: [f32; 4],
     pub mode: [f32; 4],
@@ -182,7 +187,6 @@ impl DensityPass {
                 texture(2),
                 storage(3),
                 storage(4),
-                uniform(5, wgpu::ShaderStages::COMPUTE, false),
             ],
         });
         let cmodule = device.create_shader_module(wgpu::ShaderModuleDescriptor {

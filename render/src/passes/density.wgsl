@@ -63,7 +63,7 @@ struct SliceOut {
 
 @fragment
 fn fs_splat(in: SplatOut) -> SliceOut {
-    let ray = pixel_ray(in.clip.xy, frame.view_from_world);
+    let ray = pixel_ray(in.clip.xy);
     let h2 = in.h * in.h;
     let norm = dens.mode.z * in.mass * 315.0 / (64.0 * PI * h2 * in.h);
     var out: SliceOut;
@@ -116,7 +116,7 @@ fn fs_colour(in: SplatOut) -> @location(0) vec4<f32> {
     if ray.state.w < 0.5 {
         discard;
     }
-    let r = pixel_ray(in.clip.xy, frame.view_from_world);
+    let r = pixel_ray(in.clip.xy);
     let d = r[0] + r[1] * ray.state.y - in.center;
     let h2 = in.h * in.h;
     let r2 = dot(d, d);

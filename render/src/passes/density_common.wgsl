@@ -3,7 +3,9 @@
 // a pixel. Each pass binds its own `dens: Density` uniform.
 
 struct Density {
-    world_from_clip: mat4x4<f32>,
+    // Columns: right (w: half-width at unit depth, or in world units when orthographic),
+    // up (w: half-height likewise), back, eye; world space.
+    basis: mat4x4<f32>,
     // xyz: the eye (perspective ray origin); w: 1 for orthographic.
     eye: vec4<f32>,
     // x: distance of the stack's first slice, y: slice step, z: kernel scale, w: 1 / r_ref.
@@ -24,20 +26,18 @@ struct Density {
     pad: array<vec4<f32>, 5>,
 };
 
-// The ray through pixel centre `px`: origin and unit direction, world space. The origin
-// is the eye in perspective views, the point of the ray in the eye's plane (view z = 0)
-// in orthographic ones.
-fn pixel_ray(px: vec2<f32>, view_from_world: mat4x4<f32>) -> array<vec3<f32>, 2> {
+// The ray through pixel centre `px`: origin and unit direction, world space, from the
+// camera's basis (density.rs's `pixel_ray` is the CPU twin). The origin is the eye in
+// perspective views, the point of the ray in the eye's plane (view z = 0) in
+// orthographic ones.
+fn pixel_ray(px: vec2<f32>) -> array<vec3<f32>, 2> {
     let ndc = vec2<f32>(2.0 * px.x / dens.size.x - 1.0, 1.0 - 2.0 * px.y / dens.size.y);
-    let n4 = dens.world_from_clip * vec4<f32>(ndc, 0.0, 1.0);
-    let f4 = dens.world_from_clip * vec4<f32>(ndc, 1.0, 1.0);
-    let near = n4.xyz / n4.w;
-    let dir = normalize(f4.xyz / f4.w - near);
-    var origin = dens.eye.xyz;
+    let b = dens.basis;
+    let across = b[0].xyz * (ndc.x * b[0].w) + b[1].xyz * (ndc.y * b[1].w);
     if dens.eye.w > 0.5 {
-        origin = near + dir * (view_from_world * vec4<f32>(near, 1.0)).z;
+        return array<vec3<f32>, 2>(b[3].xyz + across, -b[2].xyz);
     }
-    return array<vec3<f32>, 2>(origin, dir);
+    return array<vec3<f32>, 2>(b[3].xyz, normalize(across - b[2].xyz));
 }
 
 // A pixel's ray state between stacks (the composite pass writes it; the iso-surface's

@@ -10,7 +10,6 @@
 @group(0) @binding(2) var slice_b: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> rays: array<Ray>;
 @group(0) @binding(4) var<storage, read_write> active_rays: atomic<u32>;
-@group(0) @binding(5) var<uniform> view_from_world: mat4x4<f32>;
 
 const OPAQUE: f32 = 0.99;
 
@@ -45,7 +44,7 @@ fn cs_composite(@builtin(global_invocation_id) id: vec3<u32>) {
     if ray.state.x > 0.5 {
         return;
     }
-    let ray_ = pixel_ray(vec2<f32>(f32(id.x) + 0.5, f32(id.y) + 0.5), view_from_world);
+    let ray_ = pixel_ray(vec2<f32>(f32(id.x) + 0.5, f32(id.y) + 0.5));
     let origin = ray_[0];
     let dir = ray_[1];
     // A ray that has left the box of the points' supports (or never meets it) is done.
