@@ -301,6 +301,21 @@ impl Camera {
         })
     }
 
+    /// The frustum of this camera for a `size_px` image, as [`Self::frustum_planes`]
+    /// gives it, with the near and far planes taken from the camera itself: from the
+    /// matrix they are row 3 ∓ row 2, which nearly cancel once the near plane is 10⁻⁵ of
+    /// the far one (a close-up), putting the far plane a few tenths of a percent too
+    /// near.
+    pub fn frustum(&self, size_px: [u32; 2]) -> [Vec4; 6] {
+        let mut planes = Self::frustum_planes(&self.clip_from_world(size_px, Vec2::ZERO));
+        // View depth: (eye − p)·back, inside between near and far.
+        let (back, eye) = (self.back(), self.eye());
+        let at = back.dot(eye);
+        planes[4] = (-back).extend(at - self.near);
+        planes[5] = back.extend(self.far - at);
+        planes
+    }
+
     /// [`Self::box_in_frustum`], also telling whether the box lies wholly inside every
     /// plane: `None` outside, `Some(true)` wholly inside (then so is every box inside it),
     /// `Some(false)` crossing a plane.
@@ -504,6 +519,38 @@ mod tests {
         let side = c.target + c.right() * 100.0;
         assert!(!Camera::box_in_frustum(&planes, side - 0.1, side + 0.1));
     }
+    #[test]
+    fn close_up_frustum_keeps_its_far_plane_where_the_camera_puts_it() {
+        // The eye inside a box of 10⁴ units: near = far · 10⁻⁵. A point just before the
+        // far plane (a hundredth of its margin inside) is in the frustum, one just
+        // beyond it is not, and likewise at the near plane.
+        let mut c = Camera {
+            target: Vec3::new(5000.0, 5000.0, 2000.0),
+            distance: 50.0,
+            ..Default::default()
+        };
+        c.fit_depth_range(&Bounds::new([0.0; 3], [10000.0, 10000.0, 4000.0]));
+        assert!(c.near <= c.far * 1.01e-5);
+        let planes = c.frustum([1280, 720]);
+        let along = |depth: f32| c.eye() - c.back() * depth;
+        let tiny = Vec3::splat(1e-3);
+        for (depth, inside) in [
+            (c.far * 0.999, true),
+            (c.far * 1.001, false),
+            (c.near * 1.5, true),
+            (c.near * 0.5, false),
+        ] {
+            let p = along(depth);
+            assert_eq!(
+                Camera::box_in_frustum(&planes, p - tiny * depth * 1e-3, p + tiny * depth * 1e-3),
+                inside,
+                "depth {depth} (near {}, far {})",
+                c.near,
+                c.far
+            );
+        }
+    }
+
     /// The three-way test agrees with the two-way one, and a box it finds wholly inside
     /// has every box inside it in the frustum.
     #[test]

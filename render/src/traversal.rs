@@ -79,7 +79,7 @@
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Vec3};
 use mdlod_format::{quantize, MdlodFile, NodeRecord};
 
 use crate::camera::{Camera, Projection};
@@ -181,10 +181,9 @@ pub struct Projector {
 
 impl Projector {
     pub fn new(camera: &Camera, viewport: [u32; 2]) -> Self {
-        let clip = camera.clip_from_world(viewport, Vec2::ZERO);
         Projector {
             view_from_world: camera.view_from_world(),
-            planes: Camera::frustum_planes(&clip),
+            planes: camera.frustum(viewport),
             projection: camera.projection,
             near: camera.near,
             scale: camera.pixels_per_world(1.0, viewport[1]),
