@@ -73,6 +73,9 @@ const RADIUS_SHRINK_REL: f32 = 1e-3;
 const RADIUS_SHRINK_PX: f32 = 0.02;
 /// Relative growth of an occluder's depth, and of an occludee's rectangle in pixels.
 const DEPTH_GROW_REL: f32 = 1e-5;
+/// Units in the last place of a coordinate that the GPU's view-space depths may differ
+/// by from these (other rounding of the same single-precision transform).
+const POSITION_ULPS: f32 = 4.0 * f32::EPSILON;
 const RECT_GROW_PX: f32 = 0.5;
 
 /// Spheres whose projected box is at most this many pixels wide and high are tested
@@ -233,11 +236,17 @@ impl OcclusionBuffer {
         let ppw = rho_px_per_world(&self.camera, d, self.image[1]);
         let r2 = radius * radius;
         let (sin_max, cos_min) = (self.sin_max, self.cos_min);
-        // Depth bound at a sample `dist_px` from the projected centre (see `new`).
+        // The GPU computes the same depths from the same single-precision coordinates
+        // with other rounding: a few units in the last place of the larger of the eye's
+        // and the centre's coordinates, whatever the depth.
+        let rounding = POSITION_ULPS * (self.eye.abs().max_element() + center.abs().max_element());
+        // Depth bound at a sample `dist_px` from the projected centre (see `new`), moved
+        // away from the eye whatever its sign (orthographic depths may be negative).
         let bound = |dist_px: f32| -> f32 {
             let a = dist_px / ppw;
             let inside = (r2 - a * a).max(0.0).sqrt() - a * sin_max;
-            (d - cos_min * inside.max(0.0)) * (1.0 + DEPTH_GROW_REL)
+            let b = d - cos_min * inside.max(0.0);
+            b + b.abs() * DEPTH_GROW_REL + rounding
         };
         let rho2 = rho * rho;
         let (w, h) = (self.width as f32, self.height as f32);
@@ -1167,6 +1176,42 @@ mod tests {
                 "{projection:?}: {seen} seen, {hidden} hidden"
             );
         }
+    }
+
+    #[test]
+    fn recorded_bounds_stay_behind_the_surface_at_negative_depths() {
+        // Orthographic, with the eye's plane 5 units in front of a sphere's centre
+        // (depths are negative there): every recorded bound is at or behind the exact
+        // hit at its pixel. Growing a bound by a relative 10⁻⁵ moved a negative one
+        // nearer, in front of the sphere it came from.
+        let mut cam = camera(Projection::Orthographic);
+        cam.distance = 2.0;
+        cam.near = -50.0;
+        cam.far = 50.0;
+        let (w, h) = (48u32, 36u32);
+        let mut buf = OcclusionBuffer::new(&cam, [w, h], OcclusionMode::PixelCentres).unwrap();
+        let c = cam.eye() + cam.back() * 5.0 + cam.right() * 0.7;
+        let r = 6.0f64;
+        buf.add_sphere(c, r as f32);
+        let view = buf.view_from_world.as_dmat4();
+        let v = view.transform_point3(c.as_dvec3());
+        let mut checked = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let bound = buf.depth_at(x, y);
+                if !bound.is_finite() {
+                    continue;
+                }
+                let t = exact_sphere_entry(&buf, x, y, v, r).expect("a recorded pixel's ray hits");
+                assert!(t < 0.0, "depth {t}");
+                assert!(
+                    f64::from(bound) >= t,
+                    "({x}, {y}): bound {bound} in front of the hit {t}"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 300, "{checked} pixels");
     }
 
     #[test]
