@@ -686,6 +686,31 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
     );
 }
 
+/// Renders `o` with and without occlusion culling: the images must be identical, and
+/// the culled frame must draw fewer than `kept` of the spheres. Returns the culled
+/// frame's report.
+fn check_culling_changes_no_pixel(
+    f: &MdlodFile,
+    mut o: RenderOptions,
+    kept: f64,
+    what: &str,
+) -> mdlod_render::RenderReport {
+    o.occlusion = true;
+    let (culled, r) = render_image(renderer(), f, &o).unwrap();
+    o.occlusion = false;
+    let (all, r_all) = render_image(renderer(), f, &o).unwrap();
+    let drawn = |r: &mdlod_render::RenderReport| (r.particles_drawn + r.nodes_drawn) as f64;
+    assert!(
+        drawn(&r) < kept * drawn(&r_all),
+        "{what}: {} of {} spheres drawn",
+        drawn(&r),
+        drawn(&r_all)
+    );
+    let (failing, _) = golden::compare(&all, &culled, 0);
+    assert_eq!(failing, 0, "{what}: {failing} pixels differ");
+    r
+}
+
 #[test]
 fn occlusion_culling_changes_no_pixel() {
     let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
@@ -701,18 +726,7 @@ fn occlusion_culling_changes_no_pixel() {
             zoom: 1.3,
             projection,
         };
-        let (culled, r) = render_image(renderer(), &f, &o).unwrap();
-        o.occlusion = false;
-        let (all, r_all) = render_image(renderer(), &f, &o).unwrap();
-        let drawn = |r: &mdlod_render::RenderReport| r.particles_drawn + r.nodes_drawn;
-        assert!(
-            drawn(&r) * 3 < drawn(&r_all) * 2,
-            "{} of {} spheres drawn",
-            drawn(&r),
-            drawn(&r_all)
-        );
-        let (failing, _) = golden::compare(&all, &culled, 0);
-        assert_eq!(failing, 0, "{projection:?}: {failing} pixels differ");
+        check_culling_changes_no_pixel(&f, o, 2.0 / 3.0, &format!("{projection:?}"));
     }
 }
 
@@ -730,19 +744,8 @@ fn occlusion_culling_changes_no_pixel_where_particles_are_about_a_pixel_wide() {
             zoom,
             projection: Projection::Perspective,
         };
-        let (culled, r) = render_image(renderer(), &f, &o).unwrap();
-        o.occlusion = false;
-        let (all, r_all) = render_image(renderer(), &f, &o).unwrap();
-        let drawn = |r: &mdlod_render::RenderReport| r.particles_drawn + r.nodes_drawn;
-        assert!(
-            drawn(&r) * 4 < drawn(&r_all),
-            "{} of {} spheres drawn",
-            drawn(&r),
-            drawn(&r_all)
-        );
+        let r = check_culling_changes_no_pixel(&f, o, 0.25, &format!("error {error_px}"));
         assert!(r.particles_occluded > 0);
-        let (failing, _) = golden::compare(&all, &culled, 0);
-        assert_eq!(failing, 0, "error {error_px}: {failing} pixels differ");
     }
 }
 
@@ -766,18 +769,7 @@ fn occlusion_culling_changes_no_pixel_far_from_the_eye() {
         let mut o = opts(200, 150);
         o.error_px = 0.0;
         o.view = ViewSpec::Camera(camera);
-        let (culled, r) = render_image(renderer(), &f, &o).unwrap();
-        o.occlusion = false;
-        let (all, r_all) = render_image(renderer(), &f, &o).unwrap();
-        let drawn = |r: &mdlod_render::RenderReport| r.particles_drawn + r.nodes_drawn;
-        assert!(
-            drawn(&r) * 4 < drawn(&r_all),
-            "{} of {} spheres drawn",
-            drawn(&r),
-            drawn(&r_all)
-        );
-        let (failing, _) = golden::compare(&all, &culled, 0);
-        assert_eq!(failing, 0, "{projection:?}: {failing} pixels differ");
+        check_culling_changes_no_pixel(&f, o, 0.25, &format!("{projection:?}"));
     }
 }
 
