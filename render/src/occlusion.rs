@@ -197,6 +197,13 @@ impl OcclusionBuffer {
         self.levels[0][(y * self.width + x) as usize]
     }
 
+    /// How far the GPU's single-precision view transform of a point with coordinates up
+    /// to `coordinate` in size may put it from where this buffer's own transform does: a
+    /// few units in the last place of the larger of those and the eye's coordinates.
+    fn rounding(&self, coordinate: f32) -> f32 {
+        POSITION_ULPS * (self.eye.abs().max_element() + coordinate)
+    }
+
     /// Window pixel coordinates (x right, y down; pixel `i` spans `[i, i + 1)`) of a
     /// point.
     fn to_px(&self, world: Vec3) -> Option<(f32, f32)> {
@@ -239,7 +246,7 @@ impl OcclusionBuffer {
         // The GPU computes the same depths from the same single-precision coordinates
         // with other rounding: a few units in the last place of the larger of the eye's
         // and the centre's coordinates, whatever the depth.
-        let rounding = POSITION_ULPS * (self.eye.abs().max_element() + center.abs().max_element());
+        let rounding = self.rounding(center.abs().max_element());
         // Depth bound at a sample `dist_px` from the projected centre (see `new`), moved
         // away from the eye whatever its sign (orthographic depths may be negative).
         let bound = |dist_px: f32| -> f32 {
@@ -408,9 +415,11 @@ impl OcclusionBuffer {
     /// inside `rect` whose ray enters the box `min..max` must have a recorded bound
     /// nearer than the depth where it enters.
     fn box_samples_hidden(&self, min: Vec3, max: Vec3, nearest: f32, rect: [f32; 4]) -> bool {
-        // Grown against rounding: rays that graze the box count as entering it.
+        // Grown against rounding (here, and in the GPU's transform of what the box
+        // holds): rays that graze the box count as entering it.
+        let coordinate = min.abs().max(max.abs()).max_element();
         let grow = (max - min).abs() * BOX_GROW_REL
-            + Vec3::splat(BOX_GROW_REL * (min.abs().max(max.abs())).max_element());
+            + Vec3::splat(BOX_GROW_REL * coordinate + self.rounding(coordinate));
         let (min, max) = (min - grow, max + grow);
         // The view-to-world map is rigid, so the ray's parameter stays the view depth.
         let [ax, ay, az] = self.axes;
@@ -505,6 +514,9 @@ impl OcclusionBuffer {
     /// depth is the sphere's own (`depth − radius`).
     pub fn sphere_hidden(&self, centre: Vec3, radius: f32) -> bool {
         let v = self.view_from_world.transform_point3(centre);
+        // Grown by what the GPU's own transform of the centre may differ by, so that a
+        // ray grazing the sphere there is not a miss here.
+        let radius = radius + self.rounding(centre.abs().max_element());
         let nearest = -v.z - radius;
         if !(nearest.is_finite() && radius >= 0.0)
             || (self.camera.projection == Projection::Perspective && nearest <= self.camera.near)
