@@ -115,6 +115,10 @@ pub struct VerifyReport {
     /// Largest distance by which a decoded particle centre lies outside the bounding box
     /// of its parent node (0 for a consistent file, up to float rounding).
     pub max_outside_parent_bounds: f64,
+    /// Largest distance by which a decoded particle centre lies beyond its parent's
+    /// bounds shrunk by its radius (where its true centre lies): a lower bound of the
+    /// file's position error, at most the recorded one up to rounding.
+    pub max_particle_error_seen: f64,
 }
 
 impl MdlodFile {
@@ -873,8 +877,9 @@ impl MdlodFile {
     }
 
     /// Checks every section checksum, that the padding between sections is zero, every
-    /// node's point range, every species index and every decoded particle
-    /// (finite, inside its parent's bounds up to the quantization step).
+    /// node's point range, every species index and every decoded point (finite, inside
+    /// its parent's bounds up to the quantization step; a particle, inside them shrunk by
+    /// its radius up to the recorded position error).
     pub fn verify(&self) -> Result<VerifyReport, FormatError> {
         let mut report = VerifyReport::default();
         for (i, s) in self.sections.iter().enumerate() {
@@ -971,8 +976,26 @@ impl MdlodFile {
             }
         }
         // Every point, decoded by its parent's encoding node as it is read (no copy of
-        // the level), lies within its parent's bounds up to the quantization step.
+        // the level), lies within its parent's bounds up to the quantization step. A
+        // particle, more tightly: its parent's bounds are those of its particles'
+        // spheres, so its decoded centre lies inside them shrunk by its radius, up to
+        // the recorded position error and the bounds' single-precision rounding.
         let bits = self.position_bits();
+        let error = self.metadata.max_position_error;
+        if !(error.is_finite() && error >= 0.0) {
+            return Err(FormatError::corrupt(
+                &self.path,
+                "metadata",
+                format!("maximum position error {error} is not a finite non-negative number"),
+            ));
+        }
+        let radii: Vec<f64> = self
+            .metadata
+            .species
+            .iter()
+            .map(|s| f64::from(s.radius))
+            .collect();
+        let species = self.species();
         for m in 1..=last {
             let positions = self.positions(m);
             let parents = self.level_nodes(m - 1);
@@ -1011,6 +1034,42 @@ impl MdlodFile {
                             format!("level {m}, point {i}"),
                             format!("decodes {outside} outside the bounds of its parent node"),
                         ));
+                    }
+                    if m == last {
+                        let r = species
+                            .get(i)
+                            .and_then(|&k| radii.get(usize::from(k)))
+                            .copied()
+                            .unwrap_or(0.0);
+                        let mut beyond = 0.0f64;
+                        let mut size = r;
+                        for ((&v, &lo), &hi) in
+                            p.iter().zip(&parent.bounds_min).zip(&parent.bounds_max)
+                        {
+                            let (v, lo, hi) = (f64::from(v), f64::from(lo), f64::from(hi));
+                            // A box narrower than the sphere (rounding, tiny radii) leaves
+                            // the centre its middle.
+                            let (a, b) = if hi - lo >= 2.0 * r {
+                                (lo + r, hi - r)
+                            } else {
+                                ((lo + hi) / 2.0, (lo + hi) / 2.0)
+                            };
+                            beyond = beyond.max(a - v).max(v - b);
+                            size = size.max(lo.abs()).max(hi.abs());
+                        }
+                        let rounding = 8.0 * f64::from(f32::EPSILON) * size;
+                        if beyond > error + rounding {
+                            return Err(FormatError::corrupt(
+                                &self.path,
+                                format!("level {m}, particle {i}"),
+                                format!(
+                                    "decodes {beyond:.3e} beyond where its parent node's bounds \
+                                     put its centre, more than the recorded position error \
+                                     {error:.3e}"
+                                ),
+                            ));
+                        }
+                        report.max_particle_error_seen = report.max_particle_error_seen.max(beyond);
                     }
                 }
                 report.points_decoded += u64::from(parent.child_count);

@@ -1225,6 +1225,45 @@ fn hostile_per_particle_sections() {
 }
 
 #[test]
+fn a_position_error_the_particles_exceed_is_refused() {
+    // `verify` puts each decoded particle centre inside its cluster's bounds shrunk by
+    // its radius, up to the recorded position error: a file claiming a tenth of its
+    // real error, or a negative one, is refused. (8-bit positions: the error is far
+    // above the bounds' rounding.)
+    let dir = tempfile::tempdir().unwrap();
+    let b = valid_bytes(params_u8_delta2());
+    let recorded = Doc::parse(&b).meta()["max_position_error"]
+        .as_f64()
+        .unwrap();
+    assert!(recorded > 1e-3, "{recorded}");
+    let with = |name: &str, error: f64| {
+        let mut d = Doc::parse(&b);
+        let mut m = d.meta();
+        m["max_position_error"] = error.into();
+        d.set_meta(&m);
+        d.write(dir.path(), name)
+    };
+    expect_accepted(&with("as-recorded.mdlod", recorded));
+    let f = MdlodFile::open(with("as-recorded.mdlod", recorded)).unwrap();
+    let seen = f.verify().unwrap().max_particle_error_seen;
+    assert!(
+        seen > recorded / 5.0 && seen <= recorded * 1.001,
+        "{seen} against {recorded}"
+    );
+    expect_refused(
+        &with("understated.mdlod", recorded / 10.0),
+        &[
+            "particle",
+            "beyond where its parent node's bounds put its centre",
+        ],
+    );
+    expect_refused(
+        &with("negative.mdlod", -recorded),
+        &["maximum position error", "not a finite non-negative number"],
+    );
+}
+
+#[test]
 fn hostile_metadata() {
     let dir = tempfile::tempdir().unwrap();
     let b = valid_bytes(params_u16_delta1());

@@ -531,6 +531,52 @@ fn occlusion_culling_keeps_every_visible_sphere_far_from_the_eye() {
 }
 
 #[test]
+fn occlusion_culling_keeps_coarse_spheres_of_8_bit_files() {
+    // With 8-bit positions a cluster's sphere is decoded up to half a step of its
+    // encoding node's scale from its true centre: at coarse levels far more than the
+    // particles' recorded error. The culling must allow for where it is drawn.
+    let build = BuildParams {
+        position_bits: 8,
+        ..small_build()
+    };
+    let (_d, _p, f) = make_file(&cloud_frame(40000, 5), build, &[]);
+    for projection in [Projection::Perspective, Projection::Orthographic] {
+        let cam = camera_for(
+            &f,
+            &ViewSpec::Orbit {
+                azimuth_deg: 25.0,
+                elevation_deg: 15.0,
+                zoom: 1.2,
+                projection,
+            },
+            VIEWPORT[0],
+            VIEWPORT[1],
+        )
+        .unwrap();
+        let mut representatives = 0;
+        for error_px in [3.0, 6.0, 12.0, 24.0] {
+            let settings = |occlusion| TraversalSettings {
+                viewport: VIEWPORT,
+                error_px,
+                budget_points: u64::MAX,
+                occlusion,
+            };
+            let all = traverse(&cam, &f, &settings(OcclusionMode::Off));
+            let seen = traverse(&cam, &f, &settings(OcclusionMode::PixelCentres));
+            representatives += seen.representatives;
+            let a = nearest_hits(&cam, &drawn_spheres(&f, &all));
+            let b = nearest_hits(&cam, &drawn_spheres(&f, &seen));
+            let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+            assert_eq!(
+                differing, 0,
+                "{projection:?} {error_px} px: {differing} pixels change"
+            );
+        }
+        assert!(representatives > 100, "{representatives} clusters drawn");
+    }
+}
+
+#[test]
 fn occlusion_culling_drops_hidden_clusters_and_keeps_every_visible_sphere() {
     let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
     let views = [

@@ -26,5 +26,10 @@ pub fn run(args: Args) -> Result<()> {
         f.nodes().len(),
         t.elapsed().as_secs_f64()
     );
+    println!(
+        "  particle centres within {:.3e} of where their clusters' bounds put them (recorded position error {:.3e})",
+        r.max_particle_error_seen,
+        f.metadata().max_position_error
+    );
     Ok(())
 }
