@@ -146,23 +146,23 @@ fn single_sphere_covers_its_projected_disk_area() {
     }
 }
 
-/// Nearest hit of the ray `o + t d` with the spheres: `(t, graze)` with `graze` the
-/// discriminant over r² of the sphere hit (0 at the silhouette), and the smallest
-/// |discriminant| / r² over all spheres (small: some sphere is grazed or nearly hit, and
-/// rasterization rounding may go either way).
+/// Nearest hit of the ray `o + t d` (`d` of unit length) with the spheres: `(t, graze)`
+/// with `graze` the discriminant over r² of the sphere hit (0 at the silhouette), and the
+/// smallest |discriminant| / r² over all spheres (small: some sphere is grazed or nearly
+/// hit, and rasterization rounding may go either way). Measured from the ray's point
+/// closest to each centre, as the shaders do, so that it holds far from the eye too.
 fn cpu_hit(o: Vec3, d: Vec3, spheres: &[(Vec3, f32)]) -> (Option<(f32, f32)>, f32) {
     let mut best: Option<(f32, f32)> = None;
     let mut closest_call = f32::INFINITY;
     for &(c, r) in spheres {
-        let oc = o - c;
-        let b = oc.dot(d);
-        let cc = oc.dot(oc) - r * r;
-        let disc = b * b - cc;
+        let tc = (c - o).dot(d);
+        let q = c - (o + d * tc);
+        let disc = r * r - q.dot(q);
         closest_call = closest_call.min((disc / (r * r)).abs());
         if disc < 0.0 {
             continue;
         }
-        let t = -b - disc.sqrt();
+        let t = tc - disc.sqrt();
         if best.is_none_or(|(bt, _)| t < bt) {
             best = Some((t, disc / (r * r)));
         }
