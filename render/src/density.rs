@@ -225,14 +225,21 @@ pub fn pixel_ray(
 
 /// The camera's basis for pixel rays, as the density passes take it (`DensityGpu::basis`):
 /// columns right, up, back and eye in world space, the w of right and up the view's
-/// half-extents (at unit depth in perspective), 1 / `clip_from_view`'s x and y scales.
+/// half-extents (at unit depth in perspective), 1 / `clip_from_view`'s x and y scales,
+/// the eye's w 1 for orthographic views, else 0.
 pub fn ray_basis(camera: &crate::camera::Camera, width: u32, height: u32) -> glam::Mat4 {
     let p = camera.clip_from_view(width as f32 / height as f32);
     glam::Mat4::from_cols(
         camera.right().extend(1.0 / p.x_axis.x),
         camera.up().extend(1.0 / p.y_axis.y),
         camera.back().extend(0.0),
-        camera.eye().extend(0.0),
+        camera.eye().extend(
+            if camera.projection == crate::camera::Projection::Orthographic {
+                1.0
+            } else {
+                0.0
+            },
+        ),
     )
 }
 

@@ -117,6 +117,8 @@ pub struct OcclusionBuffer {
     /// map, exactly (a general matrix inverse loses digits to the eye's distance).
     eye: Vec3,
     axes: [Vec3; 3],
+    /// The largest of the eye's coordinates, in size (see `rounding`).
+    eye_size: f32,
     camera: Camera,
     /// Sine and cosine bounds of the angle between any view ray and the view axis.
     sin_max: f32,
@@ -185,6 +187,7 @@ impl OcclusionBuffer {
             view_from_world: camera.view_from_world(),
             eye: camera.eye(),
             axes: [camera.right(), camera.up(), camera.back()],
+            eye_size: camera.eye().abs().max_element(),
             camera: camera.clone(),
             sin_max,
             cos_min,
@@ -201,7 +204,7 @@ impl OcclusionBuffer {
     /// to `coordinate` in size may put it from where this buffer's own transform does: a
     /// few units in the last place of the larger of those and the eye's coordinates.
     fn rounding(&self, coordinate: f32) -> f32 {
-        POSITION_ULPS * (self.eye.abs().max_element() + coordinate)
+        POSITION_ULPS * (self.eye_size + coordinate)
     }
 
     /// Window pixel coordinates (x right, y down; pixel `i` spans `[i, i + 1)`) of a
@@ -902,23 +905,29 @@ mod tests {
         );
     }
 
-    /// Where the ray `origin + t · dir` enters the box `min..max`: the smallest `t ≥ 0`
-    /// inside it (0 when the origin is inside), or `None` when it misses.
-    fn ray_box_entry(origin: Vec3, dir: Vec3, min: Vec3, max: Vec3) -> Option<f32> {
-        let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
-        for a in 0..3 {
-            let (o, d) = (origin[a], dir[a]);
-            if d == 0.0 {
-                if o < min[a] || o > max[a] {
+    /// Where the ray `origin + t · dir` enters the box `lo..hi` in double precision: the
+    /// smallest `t ≥ t_min` inside it, or `None` when it misses.
+    fn slab_entry(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3, t_min: f64) -> Option<f64> {
+        let (mut t0, mut t1) = (t_min, f64::INFINITY);
+        for k in 0..3 {
+            if d[k] == 0.0 {
+                if o[k] < lo[k] || o[k] > hi[k] {
                     return None;
                 }
                 continue;
             }
-            let (u, v) = ((min[a] - o) / d, (max[a] - o) / d);
+            let (u, v) = ((lo[k] - o[k]) / d[k], (hi[k] - o[k]) / d[k]);
             t0 = t0.max(u.min(v));
             t1 = t1.min(u.max(v));
         }
         (t0 <= t1 && t0.is_finite()).then_some(t0)
+    }
+
+    /// Where the ray `origin + t · dir` enters the box `min..max`: the smallest `t ≥ 0`
+    /// inside it (0 when the origin is inside), or `None` when it misses.
+    fn ray_box_entry(origin: Vec3, dir: Vec3, min: Vec3, max: Vec3) -> Option<f32> {
+        let d = |v: Vec3| v.as_dvec3();
+        slab_entry(d(origin), d(dir), d(min), d(max), 0.0).map(|t| t as f32)
     }
 
     #[test]
@@ -997,19 +1006,7 @@ mod tests {
             world_from_view.transform_point3(o),
             world_from_view.transform_vector3(d),
         );
-        let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
-        for k in 0..3 {
-            if d[k] == 0.0 {
-                if o[k] < lo[k] || o[k] > hi[k] {
-                    return None;
-                }
-                continue;
-            }
-            let (u, v) = ((lo[k] - o[k]) / d[k], (hi[k] - o[k]) / d[k]);
-            t0 = t0.max(u.min(v));
-            t1 = t1.min(u.max(v));
-        }
-        (t0 <= t1).then_some(t0)
+        slab_entry(o, d, lo, hi, f64::NEG_INFINITY)
     }
 
     /// In both projections, from a far camera (64×48): 150 random occluders 2 to 4 units

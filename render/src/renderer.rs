@@ -1817,12 +1817,9 @@ impl Renderer {
             );
             queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
             let basis = crate::density::ray_basis(camera, width, height);
-            let eye = camera.eye();
-            let ortho = camera.projection == Projection::Orthographic;
             let records: Vec<DensityGpu> = (0..stacks)
                 .map(|st| DensityGpu {
                     basis: basis.to_cols_array_2d(),
-                    eye: [eye.x, eye.y, eye.z, if ortho { 1.0 } else { 0.0 }],
                     slicing: [
                         slicing.lambda_min + (st * per_stack) as f32 * slicing.step,
                         slicing.step,
@@ -1847,6 +1844,7 @@ impl Renderer {
                     pad: [
                         [bounds.0.x, bounds.0.y, bounds.0.z, 0.0],
                         [bounds.1.x, bounds.1.y, bounds.1.z, 0.0],
+                        [0.0; 4],
                         [0.0; 4],
                         [0.0; 4],
                         [0.0; 4],

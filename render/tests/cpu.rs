@@ -524,15 +524,7 @@ fn occlusion_culling_keeps_every_visible_sphere_far_from_the_eye() {
     // ones): here a narrow field of view puts the eye 6000 radii away.
     let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
     for projection in [Projection::Perspective, Projection::Orthographic] {
-        let mut cam = Camera {
-            projection,
-            fov_y_deg: 0.5,
-            ..Default::default()
-        };
-        cam.fit(
-            &mdlod_render::data_bounds(&f),
-            VIEWPORT[0] as f32 / VIEWPORT[1] as f32,
-        );
+        let cam = far_camera(&f, projection, VIEWPORT[0] as f32 / VIEWPORT[1] as f32);
         assert!(cam.distance > 5000.0, "{}", cam.distance);
         let (all, seen, differing, covered) = culled_and_full(&f, &cam, 0.0);
         check_counts(&f, &seen);

@@ -757,14 +757,7 @@ fn occlusion_culling_changes_no_pixel_far_from_the_eye() {
     // raster and the impostors, must be the unculled one.
     let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
     for projection in [Projection::Perspective, Projection::Orthographic] {
-        let mut camera = Camera {
-            projection,
-            azimuth_deg: 35.0,
-            elevation_deg: 25.0,
-            fov_y_deg: 0.5,
-            ..Default::default()
-        };
-        camera.fit(&mdlod_render::data_bounds(&f), 200.0 / 150.0);
+        let camera = far_camera(&f, projection, 200.0 / 150.0);
         assert!(camera.distance > 7000.0, "{}", camera.distance);
         let mut o = opts(200, 150);
         o.error_px = 0.0;

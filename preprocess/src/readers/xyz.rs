@@ -222,11 +222,11 @@ fn logical(s: &str) -> Option<bool> {
     }
 }
 
-/// The column layout described by a `Properties=` value.
 /// Most columns a `Properties` key may describe: its counts multiply out to columns, so a
 /// few bytes could otherwise ask for millions of them.
 const MAX_COLUMNS: usize = 4096;
 
+/// The column layout described by a `Properties=` value.
 fn properties_layout(value: &str) -> Result<AtomLayout, String> {
     let parts: Vec<&str> = value.split(':').collect();
     if parts.is_empty() || !parts.chunks_exact(3).remainder().is_empty() {

@@ -35,19 +35,22 @@ pub const SLICES_GRADIENT: u32 = 2;
 pub struct DensityGpu {
     /// The camera's basis in world space, columns right, up, back and eye; the w of
     /// right and up are the view's half-extents at unit depth (perspective) or in world
-    /// units (orthographic), 1 / clip_from_view's x and y scales. Rays built from these
+    /// units (orthographic), 1 / clip_from_view's x and y scales, the eye's is 1 for
+    /// orthographic views (`density::ray_basis`). Rays built from these
     /// keep their digits at any distance, where an inverse of clip_from_world does not
     /// (its depth row nearly cancels once the near plane is 10⁻⁵ of the far one).
     pub basis: [[f32; 4]; 4],
-    pub eye: [f32; 4],
     pub slicing: [f32; 4],
     pub mode: [f32; 4],
     pub size: [f32; 4],
     pub clip: [f32; 4],
     pub flags: [u32; 4],
     pub albedo: [f32; 4],
-    pub pad: [[f32; 4]; 5],
+    pub pad: [[f32; 4]; 6],
 }
+
+// The dynamic-offset stride of the uniform buffer.
+const _: () = assert!(std::mem::size_of::<DensityGpu>() == 256);
 
 /// `Ray` in the composite WGSL: per-pixel state between stacks.
 #[repr(C)]

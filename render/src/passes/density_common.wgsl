@@ -4,10 +4,8 @@
 
 struct Density {
     // Columns: right (w: half-width at unit depth, or in world units when orthographic),
-    // up (w: half-height likewise), back, eye; world space.
+    // up (w: half-height likewise), back, eye (w: 1 for orthographic); world space.
     basis: mat4x4<f32>,
-    // xyz: the eye (perspective ray origin); w: 1 for orthographic.
-    eye: vec4<f32>,
     // x: distance of the stack's first slice, y: slice step, z: kernel scale, w: 1 / r_ref.
     slicing: vec4<f32>,
     // x: slices in this stack, y: 1 with gradients (2 slices of rho + gradient) or 0
@@ -23,7 +21,7 @@ struct Density {
     // xyz: iso-surface albedo; w: absorption (opacity per r_ref at the top density).
     albedo: vec4<f32>,
     // 0, 1: the box of the points' supports (xyz); the rest unused (a 256-byte stride).
-    pad: array<vec4<f32>, 5>,
+    pad: array<vec4<f32>, 6>,
 };
 
 // The ray through pixel centre `px`: origin and unit direction, world space, from the
@@ -34,7 +32,7 @@ fn pixel_ray(px: vec2<f32>) -> array<vec3<f32>, 2> {
     let ndc = vec2<f32>(2.0 * px.x / dens.size.x - 1.0, 1.0 - 2.0 * px.y / dens.size.y);
     let b = dens.basis;
     let across = b[0].xyz * (ndc.x * b[0].w) + b[1].xyz * (ndc.y * b[1].w);
-    if dens.eye.w > 0.5 {
+    if b[3].w > 0.5 {
         return array<vec3<f32>, 2>(b[3].xyz + across, -b[2].xyz);
     }
     return array<vec3<f32>, 2>(b[3].xyz, normalize(across - b[2].xyz));

@@ -91,6 +91,23 @@ pub fn spheres_frame(positions: &[[f32; 3]]) -> Frame {
     }
 }
 
+/// The camera of a large data set seen whole, for a small one: the default angles, a
+/// 0.5° field of view fitted to `f`'s bounds for an image of `aspect`, which puts the
+/// eye thousands of particle radii away.
+pub fn far_camera(
+    f: &MdlodFile,
+    projection: mdlod_render::Projection,
+    aspect: f32,
+) -> mdlod_render::Camera {
+    let mut cam = mdlod_render::Camera {
+        projection,
+        fov_y_deg: 0.5,
+        ..Default::default()
+    };
+    cam.fit(&mdlod_render::data_bounds(f), aspect);
+    cam
+}
+
 /// Converts `frame` with the real converter into a temporary file and opens it.
 pub fn make_file(
     frame: &Frame,
