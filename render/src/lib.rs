@@ -404,7 +404,11 @@ pub fn render_image(
     opts: &RenderOptions,
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
     let t0 = Instant::now();
-    let (camera, traversal, settings) = frame_setup(renderer, file, opts)?;
+    let (camera, mut traversal, settings) = frame_setup(renderer, file, opts)?;
+    if matches!(opts.mode, RenderMode::Spheres) {
+        // The sphere pass draws a packed cut in batches: no storage binding limits it.
+        traversal.budget_points = opts.budget.max(1);
+    }
     let draw = traverse(&camera, file, &traversal);
     file.node_error()?;
     let traversal_time = t0.elapsed();

@@ -1,12 +1,16 @@
 //! Headless frames: traversal output in, an RGBA8 image (and optionally depth) out.
 //!
-//! How it works: the draw list is packed and uploaded once. Each of the `spp` samples
-//! draws the spheres with the projection shifted by a sub-pixel offset (Halton 2,3;
-//! none for one sample) into a float colour target cleared to the background, then adds
-//! that image with weight 1/spp into a float accumulation target. The sum is copied
-//! into an sRGB target (the format encodes) and read back. GPU time, when the device
-//! has timestamp queries, runs from the start of the first sample's sphere pass to the
-//! end of the resolve pass.
+//! How it works: the draw list is packed and uploaded once, in batches when it is too
+//! large for one storage binding ([`Renderer::batch_limits`]: about 15.7 M points a
+//! batch where bindings hold 128 MiB). Each of the `spp` samples draws the spheres, batch
+//! after batch into the same targets, with the projection shifted by a sub-pixel offset
+//! (Halton 2,3; none for one sample) into a float colour target cleared to the
+//! background, then adds that image with weight 1/spp into a float accumulation
+//! target. The sum is copied into an sRGB target (the format encodes) and read back.
+//! Later batches are depth-tested against the earlier ones, so the image is the one
+//! batch would give, up to exact depth ties between points of different batches. GPU time,
+//! when the device has timestamp queries, runs from the start of the first sample's
+//! sphere pass to the end of the resolve pass.
 
 use std::time::Duration;
 
@@ -52,6 +56,12 @@ pub trait CutSource {
     fn style(&self) -> PackStyle;
     /// Binds the points of `draw`, a cut of the source's file.
     fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError>;
+    /// Binds the points of `draw` in consecutive batches, drawn one after the other into
+    /// the same targets (at least one batch): one, unless the source splits cuts too
+    /// large for one storage binding.
+    fn bind_batches(&self, draw: &DrawList) -> Result<Vec<BoundCut>, RenderError> {
+        Ok(vec![self.bind(draw)?])
+    }
 }
 
 /// The cut packed from the mapped file and uploaded whole.
@@ -89,6 +99,16 @@ impl CutSource for PackedCut<'_> {
             species_count: packed.species.len() as u32,
             data_bytes: packed.data_bytes(),
         })
+    }
+
+    /// Packs and uploads one batch at a time (see [`Renderer::batch_limits`]), so the
+    /// host holds one batch's packing at most.
+    fn bind_batches(&self, draw: &DrawList) -> Result<Vec<BoundCut>, RenderError> {
+        let (points, ranges) = self.renderer.batch_limits();
+        draw.batches(points, ranges)
+            .iter()
+            .map(|batch| self.bind(batch))
+            .collect()
     }
 }
 
@@ -157,7 +177,8 @@ pub struct RenderedFrame {
     /// Points drawn.
     pub points: u32,
     /// With the compute raster of small spheres: how many spheres it left to impostor
-    /// quads (the larger ones); `None` when every sphere was an impostor.
+    /// quads (the larger ones); `None` when every sphere was an impostor, or when the
+    /// cut was drawn in several batches.
     pub impostors: Option<u32>,
     /// Bytes of point data the frame read on the GPU: the uploaded cut, or the
     /// streaming pool's position and attribute buffers plus its range tables.
@@ -418,6 +439,9 @@ pub struct Renderer {
     small_spheres: bool,
     /// That raster's buffers, kept between frames.
     small_targets: std::sync::Mutex<Option<SmallSphereTargets>>,
+    /// A smaller cap on the points of one batch of a sphere frame than the adapter's
+    /// (see [`Self::set_batch_points`]).
+    batch_points: Option<u32>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -570,7 +594,28 @@ impl Renderer {
             density_hint: Default::default(),
             small_spheres,
             small_targets: Default::default(),
+            batch_points: None,
         }
+    }
+
+    /// The most points and ranges one batch of a packed cut holds: each per-point array
+    /// (at most 8 bytes a point, and up to 4 bytes of padding a range) and the ranges
+    /// (48 bytes each) must fit one storage binding. Sphere frames draw larger cuts in
+    /// several batches.
+    pub fn batch_limits(&self) -> (u32, usize) {
+        let l = self.ctx.device.limits();
+        let max = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
+        let ranges = max / 64;
+        let points = ((max - 4 * ranges) / 8).min(u64::from(u32::MAX)) as u32;
+        let points = self.batch_points.map_or(points, |p| p.clamp(1, points));
+        (points, ranges as usize)
+    }
+
+    /// Caps the points of one batch of a sphere frame below the adapter's limit (`None`:
+    /// the adapter's limit): less host memory for packing at once, and the way tests
+    /// draw small cuts in several batches.
+    pub fn set_batch_points(&mut self, points: Option<u32>) {
+        self.batch_points = points;
     }
 
     /// The small-sphere raster and its buffers for a frame of `points` points at
@@ -665,15 +710,19 @@ impl Renderer {
     ) -> Result<RenderedFrame, RenderError> {
         check_source(source, PackStyle::Spheres, "the sphere pass")?;
         self.ctx.scoped(|| {
-            let cut = source.bind(draw)?;
+            let cuts = source.bind_batches(draw)?;
+            let Some(first) = cuts.first() else {
+                return Err(RenderError::Gpu("a cut bound in no batch".into()));
+            };
+            let batches: Vec<&SphereBuffers> = cuts.iter().map(|c| &c.buffers).collect();
             let mut frame = self.render_bound(
-                &cut.buffers,
-                cut.position_bits,
-                cut.species_count,
+                &batches,
+                first.position_bits,
+                first.species_count,
                 camera,
                 settings,
             )?;
-            frame.gpu_data_bytes = cut.data_bytes;
+            frame.gpu_data_bytes = cuts.iter().map(|c| c.data_bytes).sum();
             Ok(frame)
         })
     }
@@ -684,11 +733,13 @@ impl Renderer {
         &self.sphere
     }
 
-    /// Draws the points of bound sphere buffers. Call inside [`GpuContext::scoped`] to
-    /// turn GPU errors into [`RenderError::Gpu`].
+    /// Draws the points of bound sphere buffers: `batches`, one after the other into the
+    /// same colour and depth targets (each sample draws every batch), so a cut larger
+    /// than one storage binding draws as one would. Call inside [`GpuContext::scoped`]
+    /// to turn GPU errors into [`RenderError::Gpu`].
     pub fn render_bound(
         &self,
-        buffers: &SphereBuffers,
+        batches: &[&SphereBuffers],
         position_bits: u32,
         species_count: u32,
         camera: &Camera,
@@ -760,7 +811,11 @@ impl Renderer {
             )
         });
         let timing = self.frame_timer();
-        let small = self.take_small_targets([w, h], buffers.points);
+        let points: u32 = batches.iter().map(|b| b.points).sum();
+        let most = batches.iter().map(|b| b.points).max().unwrap_or(0);
+        // The raster's buffers are sized for the largest batch; each batch writes its
+        // own point count into them before its submission.
+        let mut small = self.take_small_targets([w, h], most);
 
         let bg = settings
             .background_srgb
@@ -776,130 +831,153 @@ impl Renderer {
                 position_bits,
                 species_count,
             );
-            queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
-            let mut enc = device.create_command_encoder(&Default::default());
-            let first = s == 0;
-            let last = s + 1 == settings.spp;
-            if let Some((pass, targets)) = &small {
-                let writes = timing
-                    .as_ref()
-                    .filter(|_| first)
-                    .map(|t| t.compute_writes(true, false));
-                pass.raster(&mut enc, buffers, targets, writes);
-            }
-            {
-                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("spheres"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &sample_v,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color {
-                                r: bg[0],
-                                g: bg[1],
-                                b: bg[2],
-                                a: 1.0,
-                            }),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth_v,
-                        depth_ops: Some(wgpu::Operations {
-                            // Reversed depth: 0 is the far plane.
-                            load: wgpu::LoadOp::Clear(0.0),
-                            store: wgpu::StoreOp::Store,
-                        }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: timing
-                        .as_ref()
-                        .filter(|_| first && small.is_none())
-                        .map(|t| t.writes(true, false)),
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                match &small {
-                    Some((small, targets)) => {
-                        small.draw(&mut pass, buffers, targets, SphereOutput::Shaded)
-                    }
-                    None => self.sphere.draw(&mut pass, buffers),
+            for (b, buffers) in batches.iter().enumerate() {
+                queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+                if let Some((pass, targets)) = small.take() {
+                    small = pass
+                        .prepare(device, queue, [w, h], buffers.points, Some(targets))
+                        .map(|t| (pass, t));
                 }
-            }
-            if let Some((accum_v, add_bg)) = &accumulation {
-                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("accumulate"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: accum_v,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: if first {
-                                wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
-                            } else {
-                                wgpu::LoadOp::Load
-                            },
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: None,
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                pass.set_pipeline(&self.accumulate.accumulate);
-                pass.set_bind_group(0, add_bg, &[]);
-                pass.draw(0..3, 0..1);
-            }
-            if last {
+                let mut enc = device.create_command_encoder(&Default::default());
+                // Each batch is its own submission: the raster's point count and the
+                // frame uniforms are written before it.
+                let first = s == 0 && b == 0;
+                let opens = b == 0;
+                let last = s + 1 == settings.spp && b + 1 == batches.len();
+                let sample_done = b + 1 == batches.len();
+                if let Some((pass, targets)) = &small {
+                    let writes = timing
+                        .as_ref()
+                        .filter(|_| first)
+                        .map(|t| t.compute_writes(true, false));
+                    pass.raster(&mut enc, buffers, targets, writes);
+                }
                 {
+                    // The first batch of a sample clears the targets; later batches draw
+                    // over what the earlier ones left, against their depth.
+                    let colour_load = if opens {
+                        wgpu::LoadOp::Clear(wgpu::Color {
+                            r: bg[0],
+                            g: bg[1],
+                            b: bg[2],
+                            a: 1.0,
+                        })
+                    } else {
+                        wgpu::LoadOp::Load
+                    };
+                    let depth_load = if opens {
+                        // Reversed depth: 0 is the far plane.
+                        wgpu::LoadOp::Clear(0.0)
+                    } else {
+                        wgpu::LoadOp::Load
+                    };
                     let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("resolve"),
+                        label: Some("spheres"),
                         color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                            view: &output_v,
+                            view: &sample_v,
                             depth_slice: None,
                             resolve_target: None,
                             ops: wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                                load: colour_load,
+                                store: wgpu::StoreOp::Store,
+                            },
+                        })],
+                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                            view: &depth_v,
+                            depth_ops: Some(wgpu::Operations {
+                                load: depth_load,
+                                store: wgpu::StoreOp::Store,
+                            }),
+                            stencil_ops: None,
+                        }),
+                        timestamp_writes: timing
+                            .as_ref()
+                            .filter(|_| first && small.is_none())
+                            .map(|t| t.writes(true, false)),
+                        occlusion_query_set: None,
+                        multiview_mask: None,
+                    });
+                    match &small {
+                        Some((small, targets)) => {
+                            small.draw(&mut pass, buffers, targets, SphereOutput::Shaded)
+                        }
+                        None => self.sphere.draw(&mut pass, buffers),
+                    }
+                }
+                if let (true, Some((accum_v, add_bg))) = (sample_done, &accumulation) {
+                    let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                        label: Some("accumulate"),
+                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                            view: accum_v,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: wgpu::Operations {
+                                load: if s == 0 {
+                                    wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
+                                } else {
+                                    wgpu::LoadOp::Load
+                                },
                                 store: wgpu::StoreOp::Store,
                             },
                         })],
                         depth_stencil_attachment: None,
-                        timestamp_writes: timing.as_ref().map(|t| t.writes(false, true)),
+                        timestamp_writes: None,
                         occlusion_query_set: None,
                         multiview_mask: None,
                     });
-                    pass.set_pipeline(&self.accumulate.resolve);
-                    pass.set_bind_group(0, &resolve_bg, &[]);
+                    pass.set_pipeline(&self.accumulate.accumulate);
+                    pass.set_bind_group(0, add_bg, &[]);
                     pass.draw(0..3, 0..1);
                 }
-                copy_to_buffer(
-                    &mut enc,
-                    &output,
-                    wgpu::TextureAspect::All,
-                    &readback,
-                    colour_row,
-                    size,
-                );
-                if let Some(buf) = &depth_readback {
+                if last {
+                    {
+                        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                            label: Some("resolve"),
+                            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                                view: &output_v,
+                                depth_slice: None,
+                                resolve_target: None,
+                                ops: wgpu::Operations {
+                                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                                    store: wgpu::StoreOp::Store,
+                                },
+                            })],
+                            depth_stencil_attachment: None,
+                            timestamp_writes: timing.as_ref().map(|t| t.writes(false, true)),
+                            occlusion_query_set: None,
+                            multiview_mask: None,
+                        });
+                        pass.set_pipeline(&self.accumulate.resolve);
+                        pass.set_bind_group(0, &resolve_bg, &[]);
+                        pass.draw(0..3, 0..1);
+                    }
                     copy_to_buffer(
                         &mut enc,
-                        &depth,
-                        wgpu::TextureAspect::DepthOnly,
-                        buf,
+                        &output,
+                        wgpu::TextureAspect::All,
+                        &readback,
                         colour_row,
                         size,
                     );
+                    if let Some(buf) = &depth_readback {
+                        copy_to_buffer(
+                            &mut enc,
+                            &depth,
+                            wgpu::TextureAspect::DepthOnly,
+                            buf,
+                            colour_row,
+                            size,
+                        );
+                    }
+                    if let Some(t) = &timing {
+                        t.resolve(&mut enc);
+                    }
+                    if let Some((_, targets)) = &small {
+                        targets.copy_draw_args(&mut enc);
+                    }
                 }
-                if let Some(t) = &timing {
-                    t.resolve(&mut enc);
-                }
-                if let Some((_, targets)) = &small {
-                    targets.copy_draw_args(&mut enc);
-                }
+                queue.submit([enc.finish()]);
             }
-            queue.submit([enc.finish()]);
         }
 
         let bytes = self.read_buffer(&readback)?;
@@ -918,13 +996,13 @@ impl Renderer {
             None => None,
         };
         let impostors = match &small {
-            Some((_, targets)) => {
+            Some((_, targets)) if batches.len() == 1 => {
                 let read = self.read_buffer(targets.draw_args_readback())?;
                 bytemuck::pod_collect_to_vec::<u8, u32>(&read)
                     .get(1)
                     .copied()
             }
-            None => None,
+            _ => None,
         };
         let gpu_time = self.gpu_time(timing.as_ref())?;
         // sample (RGBA8) + depth (f32) + accumulation (RGBA16F, several samples) + output
@@ -932,14 +1010,14 @@ impl Renderer {
         let per_pixel = 4 + 4 + if accumulation.is_some() { 8 } else { 0 } + 4;
         let gpu_target_bytes =
             u64::from(w) * u64::from(h) * per_pixel + u64::from(colour_row) * u64::from(h);
-        self.count_samples(buffers.points, settings.spp);
+        self.count_samples(points, settings.spp);
         let small_bytes = small.as_ref().map_or(0, |(_, targets)| targets.bytes());
         self.keep_small_targets(small);
         Ok(RenderedFrame {
             image,
             depth,
             gpu_time,
-            points: buffers.points,
+            points,
             impostors,
             gpu_data_bytes: 0,
             gpu_target_bytes: gpu_target_bytes + small_bytes,

@@ -155,6 +155,37 @@ pub struct DrawList {
     pub restarts: u32,
 }
 
+impl DrawList {
+    /// The ranges cut into consecutive batches of at most `max_points` points and
+    /// `max_ranges` ranges each (a range split where a batch fills up), in draw order:
+    /// the points of batch 0, then those of batch 1, and so on are exactly the list's.
+    /// Each batch has its ranges and its `points`; the other counts describe the whole
+    /// cut and are left at zero. An empty list gives one empty batch.
+    pub fn batches(&self, max_points: u32, max_ranges: usize) -> Vec<DrawList> {
+        let (max_points, max_ranges) = (max_points.max(1), max_ranges.max(1));
+        let mut out = vec![DrawList::default()];
+        for r in &self.ranges {
+            let (mut first, mut left) = (r.first, r.count);
+            while left > 0 {
+                let full = |b: &DrawList| {
+                    b.points == u64::from(max_points) || b.ranges.len() == max_ranges
+                };
+                if out.last().is_some_and(full) {
+                    out.push(DrawList::default());
+                }
+                let Some(b) = out.last_mut() else { break };
+                let room = max_points - b.points as u32;
+                let count = left.min(room);
+                b.ranges.push(DrawRange { first, count, ..*r });
+                b.points += u64::from(count);
+                first += count;
+                left -= count;
+            }
+        }
+        out
+    }
+}
+
 #[derive(Clone, Copy, PartialEq)]
 struct Size(f32);
 impl Eq for Size {}
@@ -1215,6 +1246,57 @@ pub fn sort_back_to_front(file: &MdlodFile, draw: &DrawList, camera: &Camera) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Batches hold the list's points in order, within both limits, each range cut only
+    /// where a batch fills up.
+    #[test]
+    fn batches_keep_every_point_in_order_within_the_limits() {
+        let range = |level: u8, first: u32, count: u32| DrawRange {
+            level,
+            first,
+            count,
+            quant_node: u32::from(level) * 10,
+        };
+        let draw = DrawList {
+            ranges: vec![
+                range(0, 0, 1),
+                range(2, 5, 7),
+                range(3, 0, 3),
+                range(3, 9, 12),
+            ],
+            points: 23,
+            ..Default::default()
+        };
+        let flat = |lists: &[DrawList]| -> Vec<(u8, u32, u32)> {
+            lists
+                .iter()
+                .flat_map(|l| &l.ranges)
+                .flat_map(|r| (r.first..r.first + r.count).map(move |i| (r.level, i, r.quant_node)))
+                .collect()
+        };
+        let want = flat(std::slice::from_ref(&draw));
+        for (max_points, max_ranges) in [(1, 1), (2, 8), (5, 2), (7, 3), (23, 4), (100, 100)] {
+            let batches = draw.batches(max_points, max_ranges);
+            assert_eq!(flat(&batches), want, "{max_points} {max_ranges}");
+            for b in &batches {
+                assert!(b.points <= u64::from(max_points) && b.ranges.len() <= max_ranges);
+                assert_eq!(
+                    b.points,
+                    b.ranges.iter().map(|r| u64::from(r.count)).sum::<u64>()
+                );
+                assert!(b.ranges.iter().all(|r| r.count > 0));
+            }
+            // Only the last batch may be short of both limits.
+            for b in &batches[..batches.len() - 1] {
+                assert!(b.points == u64::from(max_points) || b.ranges.len() == max_ranges);
+            }
+        }
+        assert_eq!(draw.batches(4, 4).len(), 6);
+        assert_eq!(draw.batches(100, 3).len(), 2);
+        let empty = DrawList::default().batches(10, 10);
+        assert_eq!(empty.len(), 1);
+        assert!(empty[0].ranges.is_empty());
+    }
 
     /// The heap key orders by depth exactly as `f32::total_cmp`, then by id.
     #[test]

@@ -1901,3 +1901,78 @@ fn small_sphere_raster_samples_the_sndfs_impostor_quads_sample() {
         .sum();
     assert!(moved <= total * 2e-3, "{moved} of {total} samples differ");
 }
+
+/// A cut drawn in many batches (each one submission into the same targets, as cuts
+/// larger than a storage binding are) draws exactly what one batch draws: colour and
+/// depth, through the compute raster and through impostor quads, with particles and
+/// representatives, with one and with several jittered samples.
+#[test]
+fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
+    let batched = |small: bool| {
+        let mut r = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+        r.set_small_sphere_raster(small);
+        // An odd size, so batches end inside ranges.
+        r.set_batch_points(Some(997));
+        r
+    };
+    let (small_batched, quads_batched) = (batched(true), batched(false));
+    assert!(small_batched.batch_limits().0 == 997 && quads_batched.batch_limits().0 == 997);
+    let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
+    let (w, h) = (200, 150);
+    for (zoom, error_px, spp) in [(1.0, 0.0, 1), (6.0, 0.0, 1), (1.0, 12.0, 1), (1.0, 0.0, 3)] {
+        let view = ViewSpec::Orbit {
+            azimuth_deg: 35.0,
+            elevation_deg: 25.0,
+            zoom,
+            projection: Projection::Perspective,
+        };
+        let camera = camera_for(&f, &view, w, h).unwrap();
+        let draw = cut(&f, &camera, [w, h], error_px, OcclusionMode::Off);
+        let batches = draw.batches(997, usize::MAX).len();
+        assert!(batches >= 3, "{batches} batches");
+        assert_eq!(
+            draw.representatives > 0,
+            error_px > 0.0,
+            "{} representatives",
+            draw.representatives
+        );
+        let settings = FrameSettings {
+            width: w,
+            height: h,
+            spp,
+            background_srgb: [0.0; 3],
+            read_depth: true,
+            ..Default::default()
+        };
+        for (one, many) in [
+            (renderer(), &small_batched),
+            (quads_renderer(), &quads_batched),
+        ] {
+            let case = format!(
+                "zoom {zoom}, error {error_px} px, {spp} spp, raster {}, {batches} batches",
+                many.small_sphere_raster()
+            );
+            let a = one.render(&f, &camera, &draw, &settings).unwrap();
+            let b = many.render(&f, &camera, &draw, &settings).unwrap();
+            assert_eq!(b.points, a.points, "{case}");
+            assert_eq!(b.points as u64, draw.points, "{case}");
+            let (failing, _) = golden::compare(&a.image, &b.image, 0);
+            assert_eq!(failing, 0, "{case}: pixels differ");
+            assert!(a.depth == b.depth, "{case}: depths differ");
+            assert!(
+                a.depth
+                    .as_ref()
+                    .unwrap()
+                    .iter()
+                    .filter(|&&d| d < 1.0)
+                    .count() as u32
+                    * 4
+                    > w * h,
+                "{case}: too little drawn to compare"
+            );
+        }
+    }
+    // Sphere frames take the budget as given: no storage binding limits their cut.
+    let (_img, report) = render_image(renderer(), &f, &opts(64, 48)).unwrap();
+    assert_eq!(report.budget, u64::MAX);
+}
