@@ -4,9 +4,12 @@
 //! table and rewrites the renderer section of BENCHMARKS.md (or of the file named by
 //! `MDLOD_BENCH_OUT`).
 //!
-//! `MDLOD_RENDER_SIZES` (default `1000000,10000000`): crater data sets generated and
-//! converted into `data/bench/` when missing. `MDLOD_RENDER_FULL_MAX` (default 2000000):
-//! the largest size also drawn without level of detail (every particle).
+//! `MDLOD_RENDER_SIZES` (default `1000000,10000000,100000000` for the main table,
+//! `1000000,10000000` for the others): crater data sets generated and converted into
+//! `data/bench/` when missing (text dumps up to 2×10^7 particles, raw arrays above,
+//! converted within 4 GiB). `MDLOD_RENDER_FULL_MAX` (default 100000000): the largest
+//! size also drawn without level of detail (every particle, in batches where the cut is
+//! larger than one storage binding).
 //! `MDLOD_RENDER_ERROR` (default 1) and `MDLOD_RENDER_BUDGET` (default 4000000): the
 //! screen error in pixels and the sphere budget of the level-of-detail frames.
 //! `MDLOD_RENDER_COMPARE_MAX` (default 20000000): the largest size also drawn without
@@ -17,7 +20,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use mdlod_datasets::{write_lammps_dump_to_path, GenerateOptions, Kind};
+use mdlod_datasets::{write_lammps_dump_to_path, write_raw_arrays, GenerateOptions, Kind};
 use mdlod_format::MdlodFile;
 use mdlod_preprocess::convert::{convert_file, ConvertOptions, FrameSelect};
 use mdlod_preprocess::readers::ReadOptions;
@@ -37,22 +40,52 @@ fn env_list(name: &str, default: &str) -> Vec<u64> {
         .collect()
 }
 
+/// Sizes above this are generated as raw arrays rather than as text dumps.
+const LARGE: u64 = 20_000_000;
+
+/// The converted crater of `n` particles in `data/bench/`, generated and converted when
+/// missing.
 fn dataset(n: u64) -> PathBuf {
     let mdlod = PathBuf::from(format!("data/bench/crater-{n}.mdlod"));
     if mdlod.exists() {
         return mdlod;
     }
     std::fs::create_dir_all("data/bench").unwrap();
+    let opts = ConvertOptions {
+        radii: vec![("1".into(), 1.28)],
+        ..Default::default()
+    };
+    if n > LARGE {
+        // Raw arrays (the values the text dump would hold, without its text), converted
+        // out of core within 4 GiB as `benches/out_of_core.sh` does, then removed.
+        let dir = PathBuf::from("data/bench/raw");
+        eprintln!(
+            "generating {n} particles as raw arrays in {}",
+            dir.display()
+        );
+        let gen = GenerateOptions::new(Kind::Crater, n);
+        let (sidecar, _) = write_raw_arrays(&gen, &dir, &format!("crater-{n}"), |_| {}).unwrap();
+        eprintln!("converting {}", sidecar.display());
+        let mut opts = opts;
+        opts.chunks.memory_limit = 4 << 30;
+        convert_file(
+            &sidecar,
+            &mdlod,
+            FrameSelect::Last,
+            &ReadOptions::default(),
+            &opts,
+            &NoProgress,
+        )
+        .unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        return mdlod;
+    }
     let dump = PathBuf::from(format!("data/bench/crater-{n}.lammpstrj"));
     if !dump.exists() {
         eprintln!("generating {}", dump.display());
         write_lammps_dump_to_path(&GenerateOptions::new(Kind::Crater, n), &dump, |_| {}).unwrap();
     }
     eprintln!("converting {}", dump.display());
-    let opts = ConvertOptions {
-        radii: vec![("1".into(), 1.28)],
-        ..Default::default()
-    };
     convert_file(
         &dump,
         &mdlod,
@@ -117,7 +150,7 @@ fn ms(d: Duration) -> f64 {
 
 fn main() {
     let sizes = env_list("MDLOD_RENDER_SIZES", "1000000,10000000");
-    let full_max = env_list("MDLOD_RENDER_FULL_MAX", "2000000")[0];
+    let full_max = env_list("MDLOD_RENDER_FULL_MAX", "100000000")[0];
     let error_px: f32 = std::env::var("MDLOD_RENDER_ERROR")
         .ok()
         .and_then(|v| v.parse().ok())
@@ -151,6 +184,11 @@ fn main() {
         errors_table(&renderer, &adapter, &sizes);
         return;
     }
+    // The main table spans 10^6 to 10^8 particles unless told otherwise.
+    let sizes = match std::env::var_os("MDLOD_RENDER_SIZES") {
+        Some(_) => sizes,
+        None => vec![1_000_000, 10_000_000, 100_000_000],
+    };
     let view = ViewSpec::Orbit {
         azimuth_deg: 30.0,
         elevation_deg: 25.0,
