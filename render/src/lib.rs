@@ -325,6 +325,8 @@ pub fn frame_setup(
     let traversal = TraversalSettings {
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,
+        // Within one storage binding: a streaming pool's cut and S-NDF sampling bind
+        // one batch ([`render_image`] lifts it where the cut is drawn in batches).
         budget_points: opts.budget.min(renderer.max_points()).max(1),
         occlusion: if !opts.occlusion
             || opts.style.changes_geometry()
@@ -405,8 +407,15 @@ pub fn render_image(
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
     let t0 = Instant::now();
     let (camera, mut traversal, settings) = frame_setup(renderer, file, opts)?;
-    if matches!(opts.mode, RenderMode::Spheres) {
-        // The sphere pass draws a packed cut in batches: no storage binding limits it.
+    if matches!(
+        opts.mode,
+        RenderMode::Spheres
+            | RenderMode::Splat { .. }
+            | RenderMode::SplatOver { .. }
+            | RenderMode::Density(_)
+    ) {
+        // These passes draw a packed cut in batches: no storage binding limits it (S-NDF
+        // sampling binds one batch, so its budget keeps `frame_setup`'s cap).
         traversal.budget_points = opts.budget.max(1);
     }
     let draw = traverse(&camera, file, &traversal);

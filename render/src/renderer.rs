@@ -600,8 +600,9 @@ impl Renderer {
 
     /// The most points and ranges one batch of a packed cut holds: each per-point array
     /// (at most 8 bytes a point, and up to 4 bytes of padding a range) and the ranges
-    /// (48 bytes each) must fit one storage binding. Sphere frames draw larger cuts in
-    /// several batches.
+    /// (48 bytes each) must fit one storage binding. Sphere, splat and density frames
+    /// draw larger cuts in several batches ([`CutSource::bind_batches`]); S-NDF sampling
+    /// binds one, so its budget stays within [`Self::max_points`].
     pub fn batch_limits(&self) -> (u32, usize) {
         let l = self.ctx.device.limits();
         let max = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
@@ -1659,8 +1660,12 @@ impl Renderer {
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
-            let cut = source.bind(draw)?;
-            let buffers = &cut.buffers;
+            // Batches are drawn in order in one pass: the blending sees the points in
+            // the order one batch would give it.
+            let cuts = source.bind_batches(draw)?;
+            let Some(cut) = cuts.first() else {
+                return Err(RenderError::Gpu("a cut bound in no batch".into()));
+            };
             let mut uniforms = FrameUniforms::new(
                 camera.clip_from_view(width as f32 / height as f32),
                 camera.view_from_world(),
@@ -1674,7 +1679,10 @@ impl Renderer {
                 SplatBlend::Over { opacity } => (&splat.over, 1.0, opacity),
             };
             uniforms.material = [width as f32, height as f32, intensity, opacity];
-            queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            for c in &cuts {
+                queue.write_buffer(&c.buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            }
+            let points: u32 = cuts.iter().map(|c| c.buffers.points).sum();
             let size = wgpu::Extent3d {
                 width,
                 height,
@@ -1703,10 +1711,12 @@ impl Renderer {
                     &[&view],
                     timing.as_ref().map(|t| t.writes(true, true)),
                 );
-                if buffers.points > 0 {
-                    pass.set_pipeline(pipeline);
-                    pass.set_bind_group(0, &buffers.bind_group, &[]);
-                    pass.draw(0..4, 0..buffers.points);
+                for buffers in cuts.iter().map(|c| &c.buffers) {
+                    if buffers.points > 0 {
+                        pass.set_pipeline(pipeline);
+                        pass.set_bind_group(0, &buffers.bind_group, &[]);
+                        pass.draw(0..4, 0..buffers.points);
+                    }
                 }
             }
             copy_to_buffer(
@@ -1727,14 +1737,14 @@ impl Renderer {
                 .map(bytemuck::pod_read_unaligned)
                 .collect();
             let gpu_time = self.gpu_time(timing.as_ref())?;
-            self.count_samples(buffers.points, 1);
+            self.count_samples(points, 1);
             Ok(SplatFrame {
                 width,
                 height,
                 hdr,
                 gpu_time,
-                points: buffers.points,
-                gpu_data_bytes: cut.data_bytes,
+                points,
+                gpu_data_bytes: cuts.iter().map(|c| c.data_bytes).sum(),
             })
         })
     }
@@ -1881,9 +1891,13 @@ impl Renderer {
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
-            let cut = source.bind(&sorted_draw)?;
+            // A cut too large for one storage binding comes in batches: instance `i` of
+            // the whole is instance `i − first` of the batch that starts at `first`.
+            let cuts = source.bind_batches(&sorted_draw)?;
+            let Some(cut) = cuts.first() else {
+                return Err(RenderError::Gpu("a cut bound in no batch".into()));
+            };
             let host_time = t0.elapsed();
-            let buffers = &cut.buffers;
             let aspect = width as f32 / height as f32;
             let uniforms = FrameUniforms::new(
                 camera.clip_from_view(aspect),
@@ -1893,7 +1907,24 @@ impl Renderer {
                 cut.position_bits,
                 cut.species_count,
             );
-            queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            let mut batch_first = Vec::with_capacity(cuts.len());
+            let mut all_points = 0u32;
+            for c in &cuts {
+                queue.write_buffer(&c.buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+                batch_first.push(all_points);
+                all_points += c.buffers.points;
+            }
+            // Draws instances `first..last` of the whole cut, batch by batch; the caller
+            // has set the pipeline and the other bind groups.
+            let draw_instances = |rp: &mut wgpu::RenderPass<'_>, first: u32, last: u32| {
+                for (c, &at) in cuts.iter().zip(&batch_first) {
+                    let (lo, hi) = (first.max(at), last.min(at + c.buffers.points));
+                    if lo < hi {
+                        rp.set_bind_group(0, &c.buffers.bind_group, &[]);
+                        rp.draw(0..4, lo - at..hi - at);
+                    }
+                }
+            };
             let basis = crate::density::ray_basis(camera, width, height);
             let records: Vec<DensityGpu> = (0..stacks)
                 .map(|st| DensityGpu {
@@ -2089,9 +2120,8 @@ impl Renderer {
                         let mut rp = clear_pass(&mut enc, "density slices", &[&va, &vb], None);
                         if last > first {
                             rp.set_pipeline(&pass.splat);
-                            rp.set_bind_group(0, &buffers.bind_group, &[]);
                             rp.set_bind_group(1, &slicing_group, &[offset]);
-                            rp.draw(0..4, first..last);
+                            draw_instances(&mut rp, first, last);
                             splatted += u64::from(last - first);
                         }
                     }
@@ -2140,12 +2170,11 @@ impl Renderer {
                 {
                     let view = target.create_view(&Default::default());
                     let mut rp = clear_pass(&mut enc, "density iso colour", &[&view], None);
-                    if buffers.points > 0 {
+                    if all_points > 0 {
                         rp.set_pipeline(&pass.colour);
-                        rp.set_bind_group(0, &buffers.bind_group, &[]);
                         rp.set_bind_group(1, &slicing_group, &[0]);
                         rp.set_bind_group(2, &hits_group, &[]);
-                        rp.draw(0..4, 0..buffers.points);
+                        draw_instances(&mut rp, 0, all_points);
                     }
                 }
                 let read = readback_buffer(
@@ -2207,7 +2236,7 @@ impl Renderer {
                 stacks_hint: hint,
                 readbacks,
                 splatted,
-                gpu_data_bytes: cut.data_bytes,
+                gpu_data_bytes: cuts.iter().map(|c| c.data_bytes).sum(),
                 host_time,
             })
         })

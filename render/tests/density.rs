@@ -385,3 +385,44 @@ fn rays_stop_once_opaque_and_the_next_frame_runs_their_stacks_at_once() {
     assert!(fourth.stacks_needed < third.stacks_needed);
     assert!(fourth.rgba == first.rgba);
 }
+
+/// A cut drawn in batches (as one larger than a storage binding is) gives the density
+/// volume and the iso-surface one batch gives: the batches hold the depth-sorted points
+/// in order, and each stack draws its interval of them batch by batch.
+#[test]
+fn a_cut_in_batches_gives_the_volume_of_one_batch() {
+    let (_d, _p, f) = make_file(&fcc_frame(6), small_build(), &[]);
+    let (w, h) = (48u32, 36u32);
+    let cam = camera(&f, Projection::Perspective, w, h);
+    let draw = all_points(&f, &cam, w, h);
+    let mut batched = renderer_without_hints();
+    batched.set_batch_points(Some(97));
+    assert!(draw.batches(97, usize::MAX).len() >= 8);
+    for s in [
+        DensitySettings {
+            slices: 48,
+            opacity: 1.5,
+            ..Default::default()
+        },
+        DensitySettings {
+            iso: Some(0.05),
+            slices: 48,
+            ..Default::default()
+        },
+    ] {
+        let one = renderer_without_hints()
+            .render_density(&f, &cam, &draw, w, h, &s)
+            .unwrap();
+        let many = batched.render_density(&f, &cam, &draw, w, h, &s).unwrap();
+        batched.clear_density_hint();
+        assert!(one.rgba.iter().filter(|p| p[3] > 0.05).count() > (w * h / 10) as usize);
+        assert!(one.rgba == many.rgba, "iso {:?}: colours differ", s.iso);
+        let same_hits = one
+            .hit
+            .iter()
+            .zip(&many.hit)
+            .all(|(a, b)| a == b || (a.is_nan() && b.is_nan()));
+        assert!(same_hits, "iso {:?}: hits differ", s.iso);
+        assert_eq!(one.splatted, many.splatted);
+    }
+}

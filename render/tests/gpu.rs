@@ -1902,10 +1902,11 @@ fn small_sphere_raster_samples_the_sndfs_impostor_quads_sample() {
     assert!(moved <= total * 2e-3, "{moved} of {total} samples differ");
 }
 
-/// A cut drawn in many batches (each one submission into the same targets, as cuts
-/// larger than a storage binding are) draws exactly what one batch draws: colour and
-/// depth, through the compute raster and through impostor quads, with particles and
-/// representatives, with one and with several jittered samples.
+/// A cut drawn in many batches (as cuts larger than a storage binding are) draws exactly
+/// what one batch draws. Spheres (each batch one submission into the same targets):
+/// colour and depth, through the compute raster and through impostor quads, with
+/// particles and representatives, with one and with several jittered samples. Splats
+/// (the batches in order in one pass): the same fluxes, added up and composited.
 #[test]
 fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
     let batched = |small: bool| {
@@ -1972,7 +1973,47 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
             );
         }
     }
-    // Sphere frames take the budget as given: no storage binding limits their cut.
-    let (_img, report) = render_image(renderer(), &f, &opts(64, 48)).unwrap();
-    assert_eq!(report.budget, u64::MAX);
+    // Splats, added up and composited back to front, in the same order.
+    use mdlod_render::traversal::{sort_back_to_front_by, DepthOrder};
+    use mdlod_render::SplatBlend;
+    let (_d, _p, cloud) = make_file(&cloud_frame(6000, 3), small_build(), &[]);
+    let camera = camera_for(&cloud, &ViewSpec::default(), w, h).unwrap();
+    for error_px in [0.0, 6.0] {
+        let draw = cut(&cloud, &camera, [w, h], error_px, OcclusionMode::Off);
+        let sorted = sort_back_to_front_by(&cloud, &draw, &camera, DepthOrder::Points);
+        for (blend, draw) in [
+            (
+                SplatBlend::Additive {
+                    intensity: 1.0,
+                    by_attribute: false,
+                },
+                &draw,
+            ),
+            (SplatBlend::Over { opacity: 0.6 }, &sorted),
+        ] {
+            assert!(draw.batches(997, usize::MAX).len() >= 3);
+            let splat = |r: &Renderer| r.render_splats(&cloud, &camera, draw, w, h, blend).unwrap();
+            let (a, b) = (splat(renderer()), splat(&small_batched));
+            assert_eq!(b.points, a.points, "{blend:?}, error {error_px} px");
+            assert!(
+                a.hdr == b.hdr,
+                "{blend:?}, error {error_px} px: fluxes differ"
+            );
+            assert!(a.total_flux()[3] > 0.0);
+        }
+    }
+    // Sphere and splat frames take the budget as given: no storage binding limits them.
+    for mode in [
+        mdlod_render::RenderMode::Spheres,
+        mdlod_render::RenderMode::Splat {
+            by_attribute: false,
+        },
+    ] {
+        let o = RenderOptions {
+            mode,
+            ..opts(64, 48)
+        };
+        let (_img, report) = render_image(renderer(), &f, &o).unwrap();
+        assert_eq!(report.budget, u64::MAX);
+    }
 }
