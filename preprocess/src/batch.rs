@@ -18,9 +18,11 @@
 //! 4. Frames are converted by a few workers at once, as many as the memory limit allows
 //!    (about [`BYTES_PER_PARTICLE`] per particle each, at most one per thread); each
 //!    conversion is itself parallel. Outputs appear by atomic rename only when complete,
-//!    and the manifest is rewritten (temporary file + rename) after every frame, listing
-//!    only complete ones: killing a batch at any moment leaves no file that looks
-//!    complete and a manifest that is true.
+//!    and the manifest is rewritten (temporary file + rename) as frames complete, at most
+//!    once a second ([`MANIFEST_INTERVAL`]) and once at the end, listing only complete
+//!    ones: killing a batch at any moment leaves no file that looks complete and a
+//!    manifest that is true (it may miss the frames of its last second, which a rerun
+//!    finds complete and lists).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -38,6 +40,11 @@ use crate::readers::{DumpFile, ReadError, ReadOptions};
 /// binary's allocator in huge pages: 125 MiB for 10^6 particles, 0.96 GiB for 10^7),
 /// with some headroom.
 pub const BYTES_PER_PARTICLE: u64 = 140;
+
+/// Least time between two rewrites of the manifest while frames are converted (it is
+/// rewritten once more at the end). Every rewrite writes the whole list: after every
+/// frame, a batch of thousands of small frames spent its time rewriting it.
+pub const MANIFEST_INTERVAL: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// The manifest's file name in a batch directory.
 pub const MANIFEST: &str = "dataset.json";
@@ -172,12 +179,15 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
         .suffix(".tmp")
         .tempfile_in(dir)
         .map_err(io(dir))?;
-    serde_json::to_writer_pretty(&mut tmp, value).map_err(|e| BatchError::Io {
+    // Serialized in memory and written at once: the writer's many small writes would
+    // each be a system call on the unbuffered file.
+    let mut text = serde_json::to_vec_pretty(value).map_err(|e| BatchError::Io {
         path: path.to_path_buf(),
         source: e.into(),
     })?;
+    text.push(b'\n');
     use std::io::Write;
-    tmp.write_all(b"\n").map_err(io(path))?;
+    tmp.write_all(&text).map_err(io(path))?;
     tmp.as_file().sync_all().map_err(io(path))?;
     mdlod_format::writer::make_readable(tmp.as_file()).map_err(io(path))?;
     tmp.persist(path).map_err(|e| BatchError::Io {
@@ -332,6 +342,9 @@ pub fn batch(
         write_json(&manifest_path, m)
     };
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
+    // When the manifest was last written: workers rewrite it at most every
+    // `MANIFEST_INTERVAL`, and once more at the end.
+    let saved_at = Mutex::new(std::time::Instant::now());
 
     // As many conversions at once as memory and threads allow.
     let threads = rayon::current_num_threads().max(1);
@@ -440,7 +453,13 @@ pub fn batch(
                     let recorded = result.and_then(|entry| {
                         let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
                         m.frames.push(entry);
-                        save(&mut m)
+                        let mut at = saved_at.lock().unwrap_or_else(|e| e.into_inner());
+                        if at.elapsed() < MANIFEST_INTERVAL {
+                            return Ok(());
+                        }
+                        save(&mut m)?;
+                        *at = std::time::Instant::now();
+                        Ok(())
                     });
                     match recorded {
                         Ok(()) => {
@@ -461,9 +480,12 @@ pub fn batch(
         }
     });
     progress.finish_stage();
+    // Every frame converted, also when another failed.
+    let last_save = save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()));
     if let Some(e) = first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
         return Err(e);
     }
+    last_save?;
     Ok(BatchReport {
         frames_total,
         frames_in_shard,

@@ -1,0 +1,93 @@
+#!/usr/bin/env bash
+# Whole trajectories: `mdlod batch` of generated multi-frame LAMMPS text dumps as
+# separate processes under /usr/bin/time: every frame from a cold page cache (dropped
+# where this user may), the same on one thread, a rerun with nothing to do, a rerun
+# after a quarter of the frames were deleted, the two shards of `--shard I/2` one after
+# the other and their `--merge`; then many small frames (what a frame costs beyond its
+# particles), and their rerun. Writes the table into BENCHMARKS.md between the batch
+# markers.
+#
+#   bash benches/batch.sh          # 20 frames of 10^6 particles, 3000 frames of 2000
+#   FRAMES=8 PARTICLES=4000000 MANY_FRAMES=10000 bash benches/batch.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+FRAMES=${FRAMES:-20}
+PARTICLES=${PARTICLES:-1000000}
+MANY_FRAMES=${MANY_FRAMES:-3000}
+MANY_PARTICLES=${MANY_PARTICLES:-2000}
+cargo build --release --bin mdlod >&2
+BIN=target/release/mdlod
+DIR=data/bench/batch
+mkdir -p "$DIR"
+# The dump of $2 frames of $1 particles, generated when missing.
+dump_of() {
+  local path="$DIR/crater-$1-x$2.lammpstrj"
+  [ -f "$path" ] || "$BIN" generate crater -n "$1" --frames "$2" -o "$path" >&2
+  echo "$path"
+}
+dump=$(dump_of "$PARTICLES" "$FRAMES")
+many=$(dump_of "$MANY_PARTICLES" "$MANY_FRAMES")
+out="$DIR/out"
+can_drop=no
+if [ -w /proc/sys/vm/drop_caches ]; then can_drop=yes; fi
+drop() {
+  sync
+  if [ "$can_drop" = yes ]; then echo 1 > /proc/sys/vm/drop_caches; fi
+}
+cores=$(nproc)
+rows=""
+# One run of `mdlod batch ARGS...` on frames of $2 particles: a table row named $1
+# (frames converted and skipped from the command's summary line).
+run() {
+  local name=$1 n=$2
+  shift 2
+  /usr/bin/time -f "%e %U %S %M" -o "$DIR/time.log" "$BIN" batch "$@" > "$DIR/stdout.log" 2> "$DIR/stderr.log" || {
+    cat "$DIR/stderr.log" >&2
+    exit 1
+  }
+  local summary converted skipped wall user sys rss
+  summary=$(grep -h "converted" "$DIR/stdout.log" "$DIR/stderr.log" | tail -1)
+  converted=$(sed -E 's/.* ([0-9]+) converted.*/\1/' <<< "$summary")
+  skipped=$(sed -E 's/.* ([0-9]+) already done.*/\1/' <<< "$summary")
+  read -r wall user sys rss < "$DIR/time.log"
+  rows="$rows
+$(python3 benches/batch_row.py "$name" "$n" "$converted" "$skipped" "$wall" "$user" "$sys" "$rss" "$cores")"
+}
+listed() {
+  python3 -c "import json, sys; print(len(json.load(open(sys.argv[1]))['frames']))" "$out/dataset.json"
+}
+gb() {
+  python3 -c "import os, sys; print(f'{os.path.getsize(sys.argv[1]) / 1e9:.2f}')" "$1"
+}
+radius=(--radius 1=1.28)
+N=$PARTICLES
+rm -rf "$out"
+drop
+run "every frame (cold page cache: $can_drop)" "$N" "$dump" -o "$out" "${radius[@]}"
+rm -rf "$out"
+run "every frame, \`--threads 1\`" "$N" "$dump" -o "$out" "${radius[@]}" --threads 1
+run "rerun, nothing changed" "$N" "$dump" -o "$out" "${radius[@]}"
+for f in $(ls "$out"/frame-*.mdlod | sort -V | awk -v q=$((FRAMES / 4)) 'NR % 4 == 0 && n++ < q'); do
+  rm "$f"
+done
+run "rerun after deleting a quarter of the frames" "$N" "$dump" -o "$out" "${radius[@]}"
+rm -rf "$out"
+run "\`--shard 0/2\`" "$N" "$dump" -o "$out" "${radius[@]}" --shard 0/2
+run "\`--shard 1/2\`" "$N" "$dump" -o "$out" "${radius[@]}" --shard 1/2
+/usr/bin/time -f "%e" -o "$DIR/time.log" "$BIN" batch --merge "$out" > /dev/null
+merge=$(cat "$DIR/time.log")
+merged=$(listed)
+rm -rf "$out"
+run "small frames" "$MANY_PARTICLES" "$many" -o "$out" "${radius[@]}"
+run "small frames, rerun" "$MANY_PARTICLES" "$many" -o "$out" "${radius[@]}"
+many_listed=$(listed)
+rm -rf "$out"
+cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')
+table="Machine: $cores cores ($cpu). Inputs: LAMMPS text dumps of $FRAMES frames of $PARTICLES crater particles ($(gb "$dump") GB) and of $MANY_FRAMES small frames of $MANY_PARTICLES ($(gb "$many") GB), from \`mdlod generate crater --frames\`, converted with \`mdlod batch --radius 1=1.28\` and the default memory limit; CPU is user + system time; throughput counts converted frames only.
+
+| run | particles a frame | frames converted | frames skipped | wall s | CPU s | frames/s | M particles/s | per core | peak RSS MiB |
+|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|$rows
+
+\`mdlod batch --merge\` of the two shards: $merge s, $merged frames in the joined manifest. The small frames' manifest lists $many_listed."
+echo "$table"
+python3 benches/write_section.py batch "bash benches/batch.sh" "## Timestep batches" "$table"
