@@ -325,8 +325,8 @@ pub fn frame_setup(
     let traversal = TraversalSettings {
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,
-        // Within one storage binding: a streaming pool's cut and S-NDF sampling bind
-        // one batch ([`render_image`] lifts it where the cut is drawn in batches).
+        // Within one storage binding: a streaming pool's cut is bound in one batch
+        // ([`render_image`], which packs the cut and draws it in batches, lifts it).
         budget_points: opts.budget.min(renderer.max_points()).max(1),
         occlusion: if !opts.occlusion
             || opts.style.changes_geometry()
@@ -413,9 +413,9 @@ pub fn render_image(
             | RenderMode::Splat { .. }
             | RenderMode::SplatOver { .. }
             | RenderMode::Density(_)
+            | RenderMode::Sndf { .. }
     ) {
-        // These passes draw a packed cut in batches: no storage binding limits it (S-NDF
-        // sampling binds one batch, so its budget keeps `frame_setup`'s cap).
+        // Every pass draws a packed cut in batches: no storage binding limits it.
         traversal.budget_points = opts.budget.max(1);
     }
     let draw = traverse(&camera, file, &traversal);

@@ -2,7 +2,8 @@
 //!
 //! How it works: the draw list is packed and uploaded once, in batches when it is too
 //! large for one storage binding ([`Renderer::batch_limits`]: about 15.7 M points a
-//! batch where bindings hold 128 MiB). Each of the `spp` samples draws the spheres, batch
+//! batch where bindings hold 128 MiB; the splat, density and S-NDF passes batch theirs
+//! too). Each of the `spp` samples draws the spheres, batch
 //! after batch into the same targets, with the projection shifted by a sub-pixel offset
 //! (Halton 2,3; none for one sample) into a float colour target cleared to the
 //! background, then adds that image with weight 1/spp into a float accumulation
@@ -393,7 +394,9 @@ impl ResidentSndf {
 
 /// A cut packed and uploaded for S-NDF sampling, kept to sample it again.
 pub(crate) struct UploadedCut {
-    buffers: crate::passes::sphere_raycast::SphereBuffers,
+    /// The cut's points in consecutive batches ([`Renderer::batch_limits`]), drawn one
+    /// after the other into the same G-buffer.
+    batches: Vec<SphereBuffers>,
     position_bits: u32,
     species: u32,
 }
@@ -600,9 +603,9 @@ impl Renderer {
 
     /// The most points and ranges one batch of a packed cut holds: each per-point array
     /// (at most 8 bytes a point, and up to 4 bytes of padding a range) and the ranges
-    /// (48 bytes each) must fit one storage binding. Sphere, splat and density frames
-    /// draw larger cuts in several batches ([`CutSource::bind_batches`]); S-NDF sampling
-    /// binds one, so its budget stays within [`Self::max_points`].
+    /// (48 bytes each) must fit one storage binding. Every pass draws a larger packed cut
+    /// in several batches ([`CutSource::bind_batches`]; S-NDF sampling packs its own the
+    /// same way); a streaming pool's cut is bound in one.
     pub fn batch_limits(&self) -> (u32, usize) {
         let l = self.ctx.device.limits();
         let max = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
@@ -1243,16 +1246,23 @@ impl Renderer {
         draw: &DrawList,
         style: &crate::style::PointStyle,
     ) -> Result<UploadedCut, RenderError> {
-        let packed = crate::passes::sphere_raycast::pack_styled(
-            file,
-            draw,
-            crate::passes::sphere_raycast::PackStyle::Spheres,
-            style,
-        )?;
+        let (points, ranges) = self.batch_limits();
+        let mut batches = Vec::new();
+        let mut species = 0;
+        for batch in draw.batches(points, ranges) {
+            let packed = crate::passes::sphere_raycast::pack_styled(
+                file,
+                &batch,
+                crate::passes::sphere_raycast::PackStyle::Spheres,
+                style,
+            )?;
+            species = packed.species.len() as u32;
+            batches.push(self.sphere.upload(&self.ctx.device, &packed));
+        }
         Ok(UploadedCut {
-            buffers: self.sphere.upload(&self.ctx.device, &packed),
-            position_bits: packed.position_bits,
-            species: packed.species.len() as u32,
+            batches,
+            position_bits: file.position_bits(),
+            species,
         })
     }
 
@@ -1284,7 +1294,6 @@ impl Renderer {
         );
         let device = &self.ctx.device;
         let queue = &self.ctx.queue;
-        let buffers = &cut.buffers;
         let layers = crate::sndf::ACCUMULATE_LAYERS.min(iterations).max(1);
         let texture = |label: &str, format, layers| {
             device.create_texture(&wgpu::TextureDescriptor {
@@ -1370,17 +1379,10 @@ impl Renderer {
                 },
             ],
         });
-        let clear = |v| wgpu::RenderPassColorAttachment {
-            view: v,
-            depth_slice: None,
-            resolve_target: None,
-            ops: wgpu::Operations {
-                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                store: wgpu::StoreOp::Store,
-            },
-        };
         let timing = self.frame_timer();
-        let small = self.take_small_targets([width, height], buffers.points);
+        let points: u32 = cut.batches.iter().map(|b| b.points).sum();
+        let most = cut.batches.iter().map(|b| b.points).max().unwrap_or(0);
+        let mut small = self.take_small_targets([width, height], most);
         for s in 0..iterations {
             let layer = s % layers;
             let uniforms = FrameUniforms::new(
@@ -1395,74 +1397,108 @@ impl Renderer {
                 cut.position_bits,
                 cut.species,
             );
-            queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
             let last = s + 1 == iterations;
             let full = layer + 1 == layers;
             if last && !full {
                 // The last group fills only some layers.
                 queue.write_buffer(&params, 0, bytemuck::bytes_of(&params_of(layer + 1)));
             }
-            let mut enc = device.create_command_encoder(&Default::default());
-            if let Some((pass, targets)) = &small {
-                let writes = timing
-                    .as_ref()
-                    .filter(|_| s == 0)
-                    .map(|t| t.compute_writes(true, false));
-                pass.raster(&mut enc, buffers, targets, writes);
-            }
-            {
-                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("sndf sample"),
-                    color_attachments: &[
-                        Some(clear(&normal_layers[layer as usize])),
-                        Some(clear(&albedo_layers[layer as usize])),
-                    ],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth_v,
-                        depth_ops: Some(wgpu::Operations {
-                            // Reversed depth: 0 is the far plane.
-                            load: wgpu::LoadOp::Clear(0.0),
+            // Each batch is its own submission (its point count and uniforms are written
+            // before it); the first clears the layer and the depth, the others draw over.
+            for (b, buffers) in cut.batches.iter().enumerate() {
+                queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+                if let Some((pass, targets)) = small.take() {
+                    small = pass
+                        .prepare(
+                            device,
+                            queue,
+                            [width, height],
+                            buffers.points,
+                            Some(targets),
+                        )
+                        .map(|t| (pass, t));
+                }
+                let opens = b == 0;
+                let closes = b + 1 == cut.batches.len();
+                let mut enc = device.create_command_encoder(&Default::default());
+                if let Some((pass, targets)) = &small {
+                    let writes = timing
+                        .as_ref()
+                        .filter(|_| s == 0 && opens)
+                        .map(|t| t.compute_writes(true, false));
+                    pass.raster(&mut enc, buffers, targets, writes);
+                }
+                {
+                    let layer_op = |v| wgpu::RenderPassColorAttachment {
+                        view: v,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: if opens {
+                                wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
+                            } else {
+                                wgpu::LoadOp::Load
+                            },
                             store: wgpu::StoreOp::Store,
+                        },
+                    };
+                    let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                        label: Some("sndf sample"),
+                        color_attachments: &[
+                            Some(layer_op(&normal_layers[layer as usize])),
+                            Some(layer_op(&albedo_layers[layer as usize])),
+                        ],
+                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                            view: &depth_v,
+                            depth_ops: Some(wgpu::Operations {
+                                // Reversed depth: 0 is the far plane.
+                                load: if opens {
+                                    wgpu::LoadOp::Clear(0.0)
+                                } else {
+                                    wgpu::LoadOp::Load
+                                },
+                                store: wgpu::StoreOp::Store,
+                            }),
+                            stencil_ops: None,
                         }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: timing
-                        .as_ref()
-                        .filter(|_| s == 0 && small.is_none())
-                        .map(|t| t.writes(true, false)),
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                if let Some((small, targets)) = &small {
-                    small.draw(&mut pass, buffers, targets, SphereOutput::GBuffer);
-                } else if buffers.points > 0 {
-                    pass.set_pipeline(&self.sphere.gbuffer);
-                    pass.set_bind_group(0, &buffers.bind_group, &[]);
-                    pass.draw(0..4, 0..buffers.points);
+                        timestamp_writes: timing
+                            .as_ref()
+                            .filter(|_| s == 0 && opens && small.is_none())
+                            .map(|t| t.writes(true, false)),
+                        occlusion_query_set: None,
+                        multiview_mask: None,
+                    });
+                    if let Some((small, targets)) = &small {
+                        small.draw(&mut pass, buffers, targets, SphereOutput::GBuffer);
+                    } else if buffers.points > 0 {
+                        pass.set_pipeline(&self.sphere.gbuffer);
+                        pass.set_bind_group(0, &buffers.bind_group, &[]);
+                        pass.draw(0..4, 0..buffers.points);
+                    }
                 }
-            }
-            if full || last {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("sndf accumulate"),
-                    timestamp_writes: timing
-                        .as_ref()
-                        .filter(|_| last)
-                        .map(|t| t.compute_writes(false, true)),
-                });
-                pass.set_pipeline(&self.sndf.pipeline);
-                pass.set_bind_group(0, &bind, &[]);
-                pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
-            }
-            if last {
-                if let Some(t) = &timing {
-                    t.resolve(&mut enc);
+                if closes && (full || last) {
+                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some("sndf accumulate"),
+                        timestamp_writes: timing
+                            .as_ref()
+                            .filter(|_| last)
+                            .map(|t| t.compute_writes(false, true)),
+                    });
+                    pass.set_pipeline(&self.sndf.pipeline);
+                    pass.set_bind_group(0, &bind, &[]);
+                    pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
                 }
+                if closes && last {
+                    if let Some(t) = &timing {
+                        t.resolve(&mut enc);
+                    }
+                }
+                queue.submit([enc.finish()]);
             }
-            queue.submit([enc.finish()]);
         }
         self.keep_small_targets(small);
         let gpu_time = self.gpu_time(timing.as_ref())?;
-        self.count_samples(buffers.points, iterations);
+        self.count_samples(points, iterations);
         Ok(gpu_time)
     }
 

@@ -927,7 +927,6 @@ impl Smip {
                             budget_points: (self.config.budget_points
                                 * ((x1 - x0) * (y1 - y0)) as u64
                                 / (MAX_RECT_TILES * MAX_RECT_TILES) as u64)
-                                .min(renderer.max_points())
                                 .max(1),
                             occlusion: self.config.occlusion,
                         },

@@ -1905,8 +1905,9 @@ fn small_sphere_raster_samples_the_sndfs_impostor_quads_sample() {
 /// A cut drawn in many batches (as cuts larger than a storage binding are) draws exactly
 /// what one batch draws. Spheres (each batch one submission into the same targets):
 /// colour and depth, through the compute raster and through impostor quads, with
-/// particles and representatives, with one and with several jittered samples. Splats
-/// (the batches in order in one pass): the same fluxes, added up and composited.
+/// particles and representatives, with one and with several jittered samples. S-NDFs:
+/// the same histograms. Splats (the batches in order in one pass): the same fluxes,
+/// added up and composited.
 #[test]
 fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
     let batched = |small: bool| {
@@ -1973,6 +1974,23 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
             );
         }
     }
+    // S-NDFs: every batch into the same G-buffer before each accumulation.
+    let (camera, draw, settings) = sndf_scene(&f, (120, 90), 6);
+    assert!(draw.batches(997, usize::MAX).len() >= 3);
+    for (one, many) in [
+        (renderer(), &small_batched),
+        (quads_renderer(), &quads_batched),
+    ] {
+        let a = one.sample_sndf(&f, &camera, &draw, &settings).unwrap();
+        let b = many.sample_sndf(&f, &camera, &draw, &settings).unwrap();
+        let rays: f64 = a.hist.iter().map(|b| f64::from(b[3])).sum();
+        assert!(rays > 120.0 * 90.0 * 6.0 * 0.25, "{rays} rays hit");
+        assert!(
+            a.hist == b.hist,
+            "S-NDFs differ (raster {})",
+            many.small_sphere_raster()
+        );
+    }
     // Splats, added up and composited back to front, in the same order.
     use mdlod_render::traversal::{sort_back_to_front_by, DepthOrder};
     use mdlod_render::SplatBlend;
@@ -2002,11 +2020,16 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
             assert!(a.total_flux()[3] > 0.0);
         }
     }
-    // Sphere and splat frames take the budget as given: no storage binding limits them.
+    // Frames take the budget as given: no storage binding limits them.
     for mode in [
         mdlod_render::RenderMode::Spheres,
         mdlod_render::RenderMode::Splat {
             by_attribute: false,
+        },
+        mdlod_render::RenderMode::Sndf {
+            iterations: 1,
+            bins: 4,
+            binning: Default::default(),
         },
     ] {
         let o = RenderOptions {
