@@ -407,17 +407,8 @@ pub fn render_image(
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
     let t0 = Instant::now();
     let (camera, mut traversal, settings) = frame_setup(renderer, file, opts)?;
-    if matches!(
-        opts.mode,
-        RenderMode::Spheres
-            | RenderMode::Splat { .. }
-            | RenderMode::SplatOver { .. }
-            | RenderMode::Density(_)
-            | RenderMode::Sndf { .. }
-    ) {
-        // Every pass draws a packed cut in batches: no storage binding limits it.
-        traversal.budget_points = opts.budget.max(1);
-    }
+    // Every pass draws a packed cut in batches: no storage binding limits it.
+    traversal.budget_points = opts.budget.max(1);
     let draw = traverse(&camera, file, &traversal);
     file.node_error()?;
     let traversal_time = t0.elapsed();

@@ -3,15 +3,15 @@
 //! How it works: the draw list is packed and uploaded once, in batches when it is too
 //! large for one storage binding ([`Renderer::batch_limits`]: about 15.7 M points a
 //! batch where bindings hold 128 MiB; the splat, density and S-NDF passes batch theirs
-//! too). Each of the `spp` samples draws the spheres, batch
-//! after batch into the same targets, with the projection shifted by a sub-pixel offset
-//! (Halton 2,3; none for one sample) into a float colour target cleared to the
-//! background, then adds that image with weight 1/spp into a float accumulation
-//! target. The sum is copied into an sRGB target (the format encodes) and read back.
-//! Later batches are depth-tested against the earlier ones, so the image is the one
-//! batch would give, up to exact depth ties between points of different batches. GPU time,
-//! when the device has timestamp queries, runs from the start of the first sample's
-//! sphere pass to the end of the resolve pass.
+//! too). Each of the `spp` samples draws the spheres, batch after batch into the same
+//! targets, with the projection shifted by a sub-pixel offset (Halton 2,3; none for one
+//! sample) into a float colour target cleared to the background, then adds that image
+//! with weight 1/spp into a float accumulation target. The sum is copied into an sRGB
+//! target (the format encodes) and read back. Later batches are depth-tested against
+//! the earlier ones, so the image is the one batch would give, up to exact depth ties
+//! between points of different batches. GPU time, when the device has timestamp
+//! queries, runs from the start of the first sample's sphere pass to the end of the
+//! resolve pass.
 
 use std::time::Duration;
 
@@ -442,8 +442,8 @@ pub struct Renderer {
     small_spheres: bool,
     /// That raster's buffers, kept between frames.
     small_targets: std::sync::Mutex<Option<SmallSphereTargets>>,
-    /// A smaller cap on the points of one batch of a sphere frame than the adapter's
-    /// (see [`Self::set_batch_points`]).
+    /// A smaller cap on the points of one batch than the adapter's (see
+    /// [`Self::set_batch_points`]).
     batch_points: Option<u32>,
 }
 
@@ -615,9 +615,9 @@ impl Renderer {
         (points, ranges as usize)
     }
 
-    /// Caps the points of one batch of a sphere frame below the adapter's limit (`None`:
-    /// the adapter's limit): less host memory for packing at once, and the way tests
-    /// draw small cuts in several batches.
+    /// Caps the points of one batch below the adapter's limit (`None`: the adapter's
+    /// limit): less host memory for packing at once, and the way tests draw small cuts
+    /// in several batches.
     pub fn set_batch_points(&mut self, points: Option<u32>) {
         self.batch_points = points;
     }
