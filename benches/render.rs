@@ -51,11 +51,11 @@ fn dataset(n: u64) -> PathBuf {
         return mdlod;
     }
     std::fs::create_dir_all("data/bench").unwrap();
-    let opts = ConvertOptions {
+    let mut opts = ConvertOptions {
         radii: vec![("1".into(), 1.28)],
         ..Default::default()
     };
-    if n > LARGE {
+    let (source, raw_dir) = if n > LARGE {
         // Raw arrays (the values the text dump would hold, without its text), converted
         // out of core within 4 GiB as `benches/out_of_core.sh` does, then removed.
         let dir = PathBuf::from("data/bench/raw");
@@ -65,29 +65,20 @@ fn dataset(n: u64) -> PathBuf {
         );
         let gen = GenerateOptions::new(Kind::Crater, n);
         let (sidecar, _) = write_raw_arrays(&gen, &dir, &format!("crater-{n}"), |_| {}).unwrap();
-        eprintln!("converting {}", sidecar.display());
-        let mut opts = opts;
         opts.chunks.memory_limit = 4 << 30;
-        convert_file(
-            &sidecar,
-            &mdlod,
-            FrameSelect::Last,
-            &ReadOptions::default(),
-            &opts,
-            &NoProgress,
-        )
-        .unwrap();
-        std::fs::remove_dir_all(&dir).unwrap();
-        return mdlod;
-    }
-    let dump = PathBuf::from(format!("data/bench/crater-{n}.lammpstrj"));
-    if !dump.exists() {
-        eprintln!("generating {}", dump.display());
-        write_lammps_dump_to_path(&GenerateOptions::new(Kind::Crater, n), &dump, |_| {}).unwrap();
-    }
-    eprintln!("converting {}", dump.display());
+        (sidecar, Some(dir))
+    } else {
+        let dump = PathBuf::from(format!("data/bench/crater-{n}.lammpstrj"));
+        if !dump.exists() {
+            eprintln!("generating {}", dump.display());
+            write_lammps_dump_to_path(&GenerateOptions::new(Kind::Crater, n), &dump, |_| {})
+                .unwrap();
+        }
+        (dump, None)
+    };
+    eprintln!("converting {}", source.display());
     convert_file(
-        &dump,
+        &source,
         &mdlod,
         FrameSelect::Last,
         &ReadOptions::default(),
@@ -95,6 +86,9 @@ fn dataset(n: u64) -> PathBuf {
         &NoProgress,
     )
     .unwrap();
+    if let Some(dir) = raw_dir {
+        std::fs::remove_dir_all(dir).unwrap();
+    }
     mdlod
 }
 

@@ -81,20 +81,20 @@ fn render_all(f: &MdlodFile, camera: &Camera, w: u32, h: u32, spp: u32) -> Rende
         },
     );
     renderer()
-        .render(
-            f,
-            &camera,
-            &draw,
-            &FrameSettings {
-                width: w,
-                height: h,
-                spp,
-                background_srgb: [0.0; 3],
-                read_depth: true,
-                ..Default::default()
-            },
-        )
+        .render(f, &camera, &draw, &depth_frame(w, h, spp))
         .unwrap()
+}
+
+/// Frame settings that read the depth back, on a black background.
+fn depth_frame(w: u32, h: u32, spp: u32) -> FrameSettings {
+    FrameSettings {
+        width: w,
+        height: h,
+        spp,
+        background_srgb: [0.0; 3],
+        read_depth: true,
+        ..Default::default()
+    }
 }
 
 fn ortho_camera(target: Vec3, distance: f32) -> Camera {
@@ -1825,14 +1825,7 @@ fn small_sphere_raster_draws_what_impostor_quads_draw() {
         };
         let camera = camera_for(&f, &view, w, h).unwrap();
         let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::Off);
-        let settings = FrameSettings {
-            width: w,
-            height: h,
-            spp,
-            background_srgb: [0.0; 3],
-            read_depth: true,
-            ..Default::default()
-        };
+        let settings = depth_frame(w, h, spp);
         let case = format!("zoom {zoom}, {projection:?}, {spp} spp");
         let small = renderer().render(&f, &camera, &draw, &settings).unwrap();
         let all_quads = quads.render(&f, &camera, &draw, &settings).unwrap();
@@ -1938,14 +1931,7 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
             "{} representatives",
             draw.representatives
         );
-        let settings = FrameSettings {
-            width: w,
-            height: h,
-            spp,
-            background_srgb: [0.0; 3],
-            read_depth: true,
-            ..Default::default()
-        };
+        let settings = depth_frame(w, h, spp);
         for (one, many) in [
             (renderer(), &small_batched),
             (quads_renderer(), &quads_batched),
