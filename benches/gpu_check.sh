@@ -13,8 +13,10 @@
 # and 2×10^8 particles (crater data generated and converted there: about two minutes on
 # 16 cores) into the BENCHMARKS.md sections `render-gpu`, `render-gpu-e4` and
 # `render-gpu-errors` of a copy of BENCHMARKS.md. Logs, the test results and that copy
-# go to $OUT (or target/gpu-check/out); copy the sections back from there. SIZES, SKIP_TESTS=1
-# and SKIP_BENCH=1 narrow a run; a dry run on this machine's software driver:
+# go to $OUT (or target/gpu-check/out); copy the sections back from there. The `render-gpu`
+# section also draws every particle up to FULL_MAX (default 2×10^8: about a minute
+# there, 15 GB of host memory). SIZES, FULL_MAX, SKIP_TESTS=1 and SKIP_BENCH=1 narrow a
+# run; a dry run on this machine's software driver:
 #   SIZES=200000,2000000 bash benches/gpu_check.sh run
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -105,7 +107,8 @@ run)
       if env "$@" "$DIR/bin/render-bench" > "$OUT/$log.log" 2>&1; then r=ok; else r=FAILED; fi
       echo "bench $log: $r" | tee -a "$OUT/summary.txt"
     }
-    bench render MDLOD_BENCH_SECTION=render-gpu
+    # The main section also draws every particle of the largest size (in batches).
+    bench render MDLOD_BENCH_SECTION=render-gpu MDLOD_RENDER_FULL_MAX="${FULL_MAX:-200000000}"
     bench render-e4 MDLOD_BENCH_SECTION=render-gpu-e4 MDLOD_RENDER_ERROR=4 \
       MDLOD_RENDER_BUDGET=1000000000
     bench errors MDLOD_BENCH_SECTION=render-gpu MDLOD_RENDER_ONLY=errors
