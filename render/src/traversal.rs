@@ -347,6 +347,13 @@ pub trait Residency {
 
     /// The traversal starts over (with a coarser error): forget this pass's requests.
     fn restart(&mut self) {}
+
+    /// True when the answers of [`Self::can_open`] do not depend on the order it is
+    /// asked in (a residency that records no state between questions), so a cut no budget
+    /// limits may visit the nodes in any order.
+    fn order_free(&self) -> bool {
+        false
+    }
 }
 
 /// Everything is resident (the whole file is at hand).
@@ -354,6 +361,10 @@ pub struct AllResident;
 
 impl Residency for AllResident {
     fn can_open(&mut self, _file: &MdlodFile, _id: u32, _size_px: f32) -> bool {
+        true
+    }
+
+    fn order_free(&self) -> bool {
         true
     }
 }
@@ -396,6 +407,12 @@ impl Residency for TileResidency<'_> {
 
     fn restart(&mut self) {
         self.asked.clear();
+    }
+
+    /// The shared residency answers without state, and the nodes asked are sorted by
+    /// size afterwards ([`largest_first_once`]).
+    fn order_free(&self) -> bool {
+        true
     }
 }
 
@@ -650,15 +667,29 @@ fn largest_first(
         return list;
     }
 
+    // With a residency whose answers do not depend on the order it is asked in, and a
+    // budget no cut can reach (a cut draws at most one point per particle), which nodes
+    // are opened does not depend on the order they are visited in either: they are then
+    // walked depth first, without the heap that orders them by size (most of the time
+    // of a cut of every particle).
+    let particles = levels.get(last).map_or(0, |l| l.point_count);
+    let mut frontier = if residency.order_free() && budget >= particles {
+        Frontier::AnyOrder(Vec::new())
+    } else {
+        Frontier::LargestFirst(BinaryHeap::new())
+    };
     let mut marks = Marks::new(nodes.len());
-    let mut heap: BinaryHeap<(Size, Reverse<u32>)> = BinaryHeap::new();
-    heap.push((Size(proj.size_px(&nodes[0])), Reverse(0)));
+    frontier.push(proj.size_px(&nodes[0]), 0);
     let mut drawn: u64 = 1;
     let mut achieved = 0.0f32;
-    while let Some((Size(size), Reverse(id))) = heap.pop() {
+    while let Some((size, id)) = frontier.pop() {
         if size <= settings.error_px {
+            // Drawn as its representative; largest first, so is everything left.
             achieved = achieved.max(size);
-            break;
+            match frontier {
+                Frontier::LargestFirst(_) => break,
+                Frontier::AnyOrder(_) => continue,
+            }
         }
         let n = &nodes[id as usize];
         let child_level = usize::from(n.level) + 1;
@@ -695,12 +726,35 @@ fn largest_first(
             for c in children {
                 let cn = &nodes[first + c];
                 if proj.visible(cn) {
-                    heap.push((Size(proj.size_px(cn)), Reverse((first + c) as u32)));
+                    frontier.push(proj.size_px(cn), (first + c) as u32);
                 }
             }
         }
     }
     emit(file, &proj, marks, None, achieved, list)
+}
+
+/// The nodes [`largest_first`] has yet to visit: by projected size, largest first (ties
+/// by id), or in any order (last in, first out) where the order changes nothing.
+enum Frontier {
+    LargestFirst(BinaryHeap<(Size, Reverse<u32>)>),
+    AnyOrder(Vec<(f32, u32)>),
+}
+
+impl Frontier {
+    fn push(&mut self, size: f32, id: u32) {
+        match self {
+            Frontier::LargestFirst(h) => h.push((Size(size), Reverse(id))),
+            Frontier::AnyOrder(v) => v.push((size, id)),
+        }
+    }
+
+    fn pop(&mut self) -> Option<(f32, u32)> {
+        match self {
+            Frontier::LargestFirst(h) => h.pop().map(|(Size(s), Reverse(id))| (s, id)),
+            Frontier::AnyOrder(v) => v.pop(),
+        }
+    }
 }
 
 /// What one occlusion pass decided, over the whole image or one tile of it.

@@ -124,6 +124,54 @@ fn intermediate_error_gives_a_mixed_cut_that_covers_once_and_honours_the_error()
     assert!(coarse < fine, "{coarse} vs {fine}");
 }
 
+/// A cut no budget can stop is walked in any order where the residency allows it: it
+/// opens, draws and reports exactly what the largest-first walk does, at every error,
+/// also where the view leaves part of the data out.
+#[test]
+fn a_cut_without_a_binding_budget_is_the_same_in_any_visiting_order() {
+    use mdlod_render::traversal::{traverse_with, AllResident, Residency};
+    /// Says yes to everything, but asks for the largest-first walk.
+    struct Ordered;
+    impl Residency for Ordered {
+        fn can_open(&mut self, _: &MdlodFile, _: u32, _: f32) -> bool {
+            true
+        }
+    }
+    assert!(AllResident.order_free() && !Ordered.order_free());
+    let (_d, _p, f) = make_file(&cloud_frame(4000, 3), small_build(), &[]);
+    let particles = f.levels()[f.level_count() - 1].point_count;
+    for zoom in [1.0, 3.0] {
+        let view = ViewSpec::Orbit {
+            azimuth_deg: 20.0,
+            elevation_deg: 30.0,
+            zoom,
+            projection: Projection::Perspective,
+        };
+        let cam = camera_for(&f, &view, VIEWPORT[0], VIEWPORT[1]).unwrap();
+        for error_px in [0.0f32, 1.0, 8.0, 50.0, 1e4] {
+            for budget in [particles, u64::MAX] {
+                let settings = TraversalSettings {
+                    viewport: VIEWPORT,
+                    error_px,
+                    budget_points: budget,
+                    occlusion: OcclusionMode::Off,
+                };
+                let any = traverse_with(&cam, &f, &settings, &mut AllResident);
+                let ordered = traverse_with(&cam, &f, &settings, &mut Ordered);
+                assert_eq!(
+                    any, ordered,
+                    "zoom {zoom}, error {error_px}, budget {budget}"
+                );
+                assert!(!any.budget_limited);
+            }
+        }
+        // The culled part of the zoomed view is what makes this a real comparison.
+        if zoom > 1.0 {
+            assert!(cut(&f, &cam, 0.0, u64::MAX).culled_nodes > 0);
+        }
+    }
+}
+
 #[test]
 fn budget_is_respected_and_refines_largest_first() {
     let (_d, _p, f) = make_file(&cloud_frame(4000, 4), small_build(), &[]);
