@@ -462,7 +462,7 @@ fn splat_table(renderer: &Renderer, adapter: &str, n: u64) {
                     order,
                 },
             );
-            let (camera, traversal, _) = mdlod_render::frame_setup(renderer, &file, &opts).unwrap();
+            let (camera, traversal, _) = mdlod_render::frame_setup(&file, &opts).unwrap();
             let draw = mdlod_render::traverse(&camera, &file, &traversal);
             let mut sort_times = vec![];
             let mut frame_times = vec![];

@@ -311,7 +311,6 @@ pub fn camera_for(
 /// The camera, traversal and frame settings `opts` asks for, checked (for callers that
 /// drive a [`StreamingRenderer`] themselves, like the viewer).
 pub fn frame_setup(
-    renderer: &Renderer,
     file: &MdlodFile,
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
@@ -325,9 +324,7 @@ pub fn frame_setup(
     let traversal = TraversalSettings {
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,
-        // Within one storage binding: a streaming pool's cut is bound in one batch
-        // ([`render_image`], which packs the cut and draws it in batches, lifts it).
-        budget_points: opts.budget.min(renderer.max_points()).max(1),
+        budget_points: opts.budget.max(1),
         occlusion: if !opts.occlusion
             || opts.style.changes_geometry()
             || matches!(
@@ -406,9 +403,7 @@ pub fn render_image(
     opts: &RenderOptions,
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
     let t0 = Instant::now();
-    let (camera, mut traversal, settings) = frame_setup(renderer, file, opts)?;
-    // Every pass draws a packed cut in batches: no storage binding limits it.
-    traversal.budget_points = opts.budget.max(1);
+    let (camera, traversal, settings) = frame_setup(file, opts)?;
     let draw = traverse(&camera, file, &traversal);
     file.node_error()?;
     let traversal_time = t0.elapsed();
@@ -590,7 +585,7 @@ pub fn render_stream_frame(
 ) -> Result<(RgbaImage, RenderReport, StreamStats), RenderError> {
     let t0 = Instant::now();
     let file = stream.file().clone();
-    let (camera, traversal, settings) = frame_setup(renderer, &file, opts)?;
+    let (camera, traversal, settings) = frame_setup(&file, opts)?;
     let (style, look) = page_style(opts);
     if stream.style() != (style, &look) {
         return Err(RenderError::InvalidOptions(
@@ -627,7 +622,7 @@ pub fn render_streaming(
         ));
     }
     let t0 = Instant::now();
-    let (camera, traversal, settings) = frame_setup(renderer, &file, opts)?;
+    let (camera, traversal, settings) = frame_setup(&file, opts)?;
     let (style, look) = page_style(opts);
     let mut stream = StreamingRenderer::with_style(
         renderer,
@@ -788,7 +783,7 @@ pub fn sample_to_file_at(
     let t0 = Instant::now();
     let mdlod = MdlodFile::open(file)?;
     let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
-    let (camera, traversal, _) = frame_setup(&renderer, &mdlod, opts)?;
+    let (camera, traversal, _) = frame_setup(&mdlod, opts)?;
     let draw = traverse(&camera, &mdlod, &traversal);
     mdlod.node_error()?;
     let traversal_time = t0.elapsed();

@@ -113,6 +113,47 @@ impl CutSource for PackedCut<'_> {
     }
 }
 
+/// A cut bound in batches ([`CutSource::bind_batches`]): at least one.
+struct Batches {
+    cuts: Vec<BoundCut>,
+}
+
+impl Batches {
+    fn of(source: &dyn CutSource, draw: &DrawList) -> Result<Self, RenderError> {
+        let cuts = source.bind_batches(draw)?;
+        if cuts.is_empty() {
+            return Err(RenderError::Gpu("a cut bound in no batch".into()));
+        }
+        Ok(Batches { cuts })
+    }
+
+    /// The first batch; its decoding (position bits, species) is every batch's.
+    fn first(&self) -> &BoundCut {
+        &self.cuts[0]
+    }
+
+    fn buffers(&self) -> impl Iterator<Item = &SphereBuffers> {
+        self.cuts.iter().map(|c| &c.buffers)
+    }
+
+    fn points(&self) -> u32 {
+        self.buffers().map(|b| b.points).sum()
+    }
+
+    fn data_bytes(&self) -> u64 {
+        self.cuts.iter().map(|c| c.data_bytes).sum()
+    }
+}
+
+/// `Clear(value)` for the first draw into a target, `Load` for those that follow it.
+fn cleared_if<V>(clear: bool, value: V) -> wgpu::LoadOp<V> {
+    if clear {
+        wgpu::LoadOp::Clear(value)
+    } else {
+        wgpu::LoadOp::Load
+    }
+}
+
 /// The packing a splat blend draws from.
 pub fn splat_style(blend: SplatBlend) -> PackStyle {
     match blend {
@@ -636,6 +677,31 @@ impl Renderer {
         Some((pass, targets))
     }
 
+    /// The raster's buffers for one batch of `points` points of a frame drawn in
+    /// `batches` batches: with several, the batch's point count is written into them
+    /// before its submission; with one, they stay as [`Self::take_small_targets`]
+    /// prepared them.
+    fn small_for_batch<'a>(
+        &self,
+        small: Option<(&'a SmallSpheres, SmallSphereTargets)>,
+        size: [u32; 2],
+        points: u32,
+        batches: usize,
+    ) -> Option<(&'a SmallSpheres, SmallSphereTargets)> {
+        match small {
+            Some((pass, targets)) if batches > 1 => pass
+                .prepare(
+                    &self.ctx.device,
+                    &self.ctx.queue,
+                    size,
+                    points,
+                    Some(targets),
+                )
+                .map(|t| (pass, t)),
+            small => small,
+        }
+    }
+
     /// Keeps a frame's small-sphere buffers for the next frame.
     fn keep_small_targets(&self, small: Option<(&SmallSpheres, SmallSphereTargets)>) {
         if let (Some((_, targets)), Ok(mut kept)) = (small, self.small_targets.lock()) {
@@ -653,14 +719,6 @@ impl Renderer {
     pub fn set_small_sphere_raster(&mut self, on: bool) -> bool {
         self.small_spheres = on && self.sphere.small.is_some();
         self.small_spheres
-    }
-
-    /// The most points one frame can draw on this device (storage buffer limits: a
-    /// representative needs 8 bytes of attributes, the largest per-point array), and
-    /// at most what one draw's instance indices can count.
-    pub fn max_points(&self) -> u64 {
-        let l = self.ctx.device.limits();
-        (l.max_storage_buffer_binding_size.min(l.max_buffer_size) / 8).min(u64::from(u32::MAX))
     }
 
     fn check(&self, s: &FrameSettings) -> Result<(), RenderError> {
@@ -714,19 +772,16 @@ impl Renderer {
     ) -> Result<RenderedFrame, RenderError> {
         check_source(source, PackStyle::Spheres, "the sphere pass")?;
         self.ctx.scoped(|| {
-            let cuts = source.bind_batches(draw)?;
-            let Some(first) = cuts.first() else {
-                return Err(RenderError::Gpu("a cut bound in no batch".into()));
-            };
-            let batches: Vec<&SphereBuffers> = cuts.iter().map(|c| &c.buffers).collect();
+            let cut = Batches::of(source, draw)?;
+            let batches: Vec<&SphereBuffers> = cut.buffers().collect();
             let mut frame = self.render_bound(
                 &batches,
-                first.position_bits,
-                first.species_count,
+                cut.first().position_bits,
+                cut.first().species_count,
                 camera,
                 settings,
             )?;
-            frame.gpu_data_bytes = cuts.iter().map(|c| c.data_bytes).sum();
+            frame.gpu_data_bytes = cut.data_bytes();
             Ok(frame)
         })
     }
@@ -837,11 +892,7 @@ impl Renderer {
             );
             for (b, buffers) in batches.iter().enumerate() {
                 queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
-                if let Some((pass, targets)) = small.take() {
-                    small = pass
-                        .prepare(device, queue, [w, h], buffers.points, Some(targets))
-                        .map(|t| (pass, t));
-                }
+                small = self.small_for_batch(small.take(), [w, h], buffers.points, batches.len());
                 let mut enc = device.create_command_encoder(&Default::default());
                 // Each batch is its own submission: the raster's point count and the
                 // frame uniforms are written before it.
@@ -859,21 +910,11 @@ impl Renderer {
                 {
                     // The first batch of a sample clears the targets; later batches draw
                     // over what the earlier ones left, against their depth.
-                    let colour_load = if opens {
-                        wgpu::LoadOp::Clear(wgpu::Color {
-                            r: bg[0],
-                            g: bg[1],
-                            b: bg[2],
-                            a: 1.0,
-                        })
-                    } else {
-                        wgpu::LoadOp::Load
-                    };
-                    let depth_load = if opens {
-                        // Reversed depth: 0 is the far plane.
-                        wgpu::LoadOp::Clear(0.0)
-                    } else {
-                        wgpu::LoadOp::Load
+                    let background = wgpu::Color {
+                        r: bg[0],
+                        g: bg[1],
+                        b: bg[2],
+                        a: 1.0,
                     };
                     let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                         label: Some("spheres"),
@@ -882,14 +923,15 @@ impl Renderer {
                             depth_slice: None,
                             resolve_target: None,
                             ops: wgpu::Operations {
-                                load: colour_load,
+                                load: cleared_if(opens, background),
                                 store: wgpu::StoreOp::Store,
                             },
                         })],
                         depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                             view: &depth_v,
                             depth_ops: Some(wgpu::Operations {
-                                load: depth_load,
+                                // Reversed depth: 0 is the far plane.
+                                load: cleared_if(opens, 0.0),
                                 store: wgpu::StoreOp::Store,
                             }),
                             stencil_ops: None,
@@ -916,11 +958,7 @@ impl Renderer {
                             depth_slice: None,
                             resolve_target: None,
                             ops: wgpu::Operations {
-                                load: if s == 0 {
-                                    wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
-                                } else {
-                                    wgpu::LoadOp::Load
-                                },
+                                load: cleared_if(s == 0, wgpu::Color::TRANSPARENT),
                                 store: wgpu::StoreOp::Store,
                             },
                         })],
@@ -1407,17 +1445,12 @@ impl Renderer {
             // before it); the first clears the layer and the depth, the others draw over.
             for (b, buffers) in cut.batches.iter().enumerate() {
                 queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
-                if let Some((pass, targets)) = small.take() {
-                    small = pass
-                        .prepare(
-                            device,
-                            queue,
-                            [width, height],
-                            buffers.points,
-                            Some(targets),
-                        )
-                        .map(|t| (pass, t));
-                }
+                small = self.small_for_batch(
+                    small.take(),
+                    [width, height],
+                    buffers.points,
+                    cut.batches.len(),
+                );
                 let opens = b == 0;
                 let closes = b + 1 == cut.batches.len();
                 let mut enc = device.create_command_encoder(&Default::default());
@@ -1434,11 +1467,7 @@ impl Renderer {
                         depth_slice: None,
                         resolve_target: None,
                         ops: wgpu::Operations {
-                            load: if opens {
-                                wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
-                            } else {
-                                wgpu::LoadOp::Load
-                            },
+                            load: cleared_if(opens, wgpu::Color::TRANSPARENT),
                             store: wgpu::StoreOp::Store,
                         },
                     };
@@ -1452,11 +1481,7 @@ impl Renderer {
                             view: &depth_v,
                             depth_ops: Some(wgpu::Operations {
                                 // Reversed depth: 0 is the far plane.
-                                load: if opens {
-                                    wgpu::LoadOp::Clear(0.0)
-                                } else {
-                                    wgpu::LoadOp::Load
-                                },
+                                load: cleared_if(opens, 0.0),
                                 store: wgpu::StoreOp::Store,
                             }),
                             stencil_ops: None,
@@ -1698,10 +1723,8 @@ impl Renderer {
             let queue = &self.ctx.queue;
             // Batches are drawn in order in one pass: the blending sees the points in
             // the order one batch would give it.
-            let cuts = source.bind_batches(draw)?;
-            let Some(cut) = cuts.first() else {
-                return Err(RenderError::Gpu("a cut bound in no batch".into()));
-            };
+            let cuts = Batches::of(source, draw)?;
+            let cut = cuts.first();
             let mut uniforms = FrameUniforms::new(
                 camera.clip_from_view(width as f32 / height as f32),
                 camera.view_from_world(),
@@ -1715,10 +1738,10 @@ impl Renderer {
                 SplatBlend::Over { opacity } => (&splat.over, 1.0, opacity),
             };
             uniforms.material = [width as f32, height as f32, intensity, opacity];
-            for c in &cuts {
-                queue.write_buffer(&c.buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            for buffers in cuts.buffers() {
+                queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
             }
-            let points: u32 = cuts.iter().map(|c| c.buffers.points).sum();
+            let points = cuts.points();
             let size = wgpu::Extent3d {
                 width,
                 height,
@@ -1747,7 +1770,7 @@ impl Renderer {
                     &[&view],
                     timing.as_ref().map(|t| t.writes(true, true)),
                 );
-                for buffers in cuts.iter().map(|c| &c.buffers) {
+                for buffers in cuts.buffers() {
                     if buffers.points > 0 {
                         pass.set_pipeline(pipeline);
                         pass.set_bind_group(0, &buffers.bind_group, &[]);
@@ -1780,7 +1803,7 @@ impl Renderer {
                 hdr,
                 gpu_time,
                 points,
-                gpu_data_bytes: cuts.iter().map(|c| c.data_bytes).sum(),
+                gpu_data_bytes: cuts.data_bytes(),
             })
         })
     }
@@ -1929,10 +1952,8 @@ impl Renderer {
             let queue = &self.ctx.queue;
             // A cut too large for one storage binding comes in batches: instance `i` of
             // the whole is instance `i − first` of the batch that starts at `first`.
-            let cuts = source.bind_batches(&sorted_draw)?;
-            let Some(cut) = cuts.first() else {
-                return Err(RenderError::Gpu("a cut bound in no batch".into()));
-            };
+            let cuts = Batches::of(source, &sorted_draw)?;
+            let cut = cuts.first();
             let host_time = t0.elapsed();
             let aspect = width as f32 / height as f32;
             let uniforms = FrameUniforms::new(
@@ -1943,20 +1964,20 @@ impl Renderer {
                 cut.position_bits,
                 cut.species_count,
             );
-            let mut batch_first = Vec::with_capacity(cuts.len());
+            let mut batch_first = Vec::with_capacity(cuts.cuts.len());
             let mut all_points = 0u32;
-            for c in &cuts {
-                queue.write_buffer(&c.buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+            for buffers in cuts.buffers() {
+                queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
                 batch_first.push(all_points);
-                all_points += c.buffers.points;
+                all_points += buffers.points;
             }
             // Draws instances `first..last` of the whole cut, batch by batch; the caller
             // has set the pipeline and the other bind groups.
             let draw_instances = |rp: &mut wgpu::RenderPass<'_>, first: u32, last: u32| {
-                for (c, &at) in cuts.iter().zip(&batch_first) {
-                    let (lo, hi) = (first.max(at), last.min(at + c.buffers.points));
+                for (buffers, &at) in cuts.buffers().zip(&batch_first) {
+                    let (lo, hi) = (first.max(at), last.min(at + buffers.points));
                     if lo < hi {
-                        rp.set_bind_group(0, &c.buffers.bind_group, &[]);
+                        rp.set_bind_group(0, &buffers.bind_group, &[]);
                         rp.draw(0..4, lo - at..hi - at);
                     }
                 }
@@ -2272,7 +2293,7 @@ impl Renderer {
                 stacks_hint: hint,
                 readbacks,
                 splatted,
-                gpu_data_bytes: cuts.iter().map(|c| c.data_bytes).sum(),
+                gpu_data_bytes: cuts.data_bytes(),
                 host_time,
             })
         })

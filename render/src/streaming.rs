@@ -546,6 +546,15 @@ impl<'r> StreamingRenderer<'r> {
         self.write_staged();
 
         let file = self.file.clone();
+        // The pool's cut is bound in one batch ([`CutSource::bind`]), so its budget stays
+        // within one storage binding.
+        let traversal = &TraversalSettings {
+            budget_points: traversal
+                .budget_points
+                .min(u64::from(self.renderer.batch_limits().0))
+                .max(1),
+            ..*traversal
+        };
         // The cut, on every core, opening the nodes whose pages are all resident; then
         // the nodes it asked to open are answered again in one order (those drawn
         // first, then largest first) to mark the pages in use and request the missing

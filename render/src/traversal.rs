@@ -163,13 +163,11 @@ impl DrawList {
     /// cut and are left at zero. An empty list gives one empty batch.
     pub fn batches(&self, max_points: u32, max_ranges: usize) -> Vec<DrawList> {
         let (max_points, max_ranges) = (max_points.max(1), max_ranges.max(1));
+        let full = |b: &DrawList| b.points == u64::from(max_points) || b.ranges.len() == max_ranges;
         let mut out = vec![DrawList::default()];
         for r in &self.ranges {
             let (mut first, mut left) = (r.first, r.count);
             while left > 0 {
-                let full = |b: &DrawList| {
-                    b.points == u64::from(max_points) || b.ranges.len() == max_ranges
-                };
                 if out.last().is_some_and(full) {
                     out.push(DrawList::default());
                 }

@@ -1041,7 +1041,7 @@ fn every_mode_but_sndfs_streams_through_a_small_pool_to_the_direct_image() {
         o.error_px = error_px;
         o.view = view.clone();
         o.occlusion = false;
-        let (camera, traversal, _) = mdlod_render::frame_setup(renderer(), &f, &o).unwrap();
+        let (camera, traversal, _) = mdlod_render::frame_setup(&f, &o).unwrap();
         let mut s = StreamingRenderer::new(renderer(), f.clone(), 1 << 30).unwrap();
         let mut used = 0;
         for _ in 0..60 {

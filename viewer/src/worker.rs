@@ -938,7 +938,7 @@ fn sndf_setup(
     // The cut `render --mode sndf` draws (whole-pixel occlusion, none for styles that
     // change sizes).
     let (camera, traversal, _) =
-        mdlod_render::frame_setup(renderer, file, opts).map_err(|e| e.to_string())?;
+        mdlod_render::frame_setup(file, opts).map_err(|e| e.to_string())?;
     let draw = traverse(&camera, file, &traversal);
     file.node_error().map_err(|e| e.to_string())?;
     Ok((
