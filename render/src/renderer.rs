@@ -154,6 +154,22 @@ fn cleared_if<V>(clear: bool, value: V) -> wgpu::LoadOp<V> {
     }
 }
 
+/// The sphere passes' depth target, cleared to the far plane (0: reversed depth) when
+/// `clear`, else loaded from the draws before.
+fn reversed_depth(
+    view: &wgpu::TextureView,
+    clear: bool,
+) -> wgpu::RenderPassDepthStencilAttachment<'_> {
+    wgpu::RenderPassDepthStencilAttachment {
+        view,
+        depth_ops: Some(wgpu::Operations {
+            load: cleared_if(clear, 0.0),
+            store: wgpu::StoreOp::Store,
+        }),
+        stencil_ops: None,
+    }
+}
+
 /// The packing a splat blend draws from.
 pub fn splat_style(blend: SplatBlend) -> PackStyle {
     match blend {
@@ -927,15 +943,7 @@ impl Renderer {
                                 store: wgpu::StoreOp::Store,
                             },
                         })],
-                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                            view: &depth_v,
-                            depth_ops: Some(wgpu::Operations {
-                                // Reversed depth: 0 is the far plane.
-                                load: cleared_if(opens, 0.0),
-                                store: wgpu::StoreOp::Store,
-                            }),
-                            stencil_ops: None,
-                        }),
+                        depth_stencil_attachment: Some(reversed_depth(&depth_v, opens)),
                         timestamp_writes: timing
                             .as_ref()
                             .filter(|_| first && small.is_none())
@@ -1477,15 +1485,7 @@ impl Renderer {
                             Some(layer_op(&normal_layers[layer as usize])),
                             Some(layer_op(&albedo_layers[layer as usize])),
                         ],
-                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                            view: &depth_v,
-                            depth_ops: Some(wgpu::Operations {
-                                // Reversed depth: 0 is the far plane.
-                                load: cleared_if(opens, 0.0),
-                                store: wgpu::StoreOp::Store,
-                            }),
-                            stencil_ops: None,
-                        }),
+                        depth_stencil_attachment: Some(reversed_depth(&depth_v, opens)),
                         timestamp_writes: timing
                             .as_ref()
                             .filter(|_| s == 0 && opens && small.is_none())
