@@ -97,8 +97,11 @@ pub struct MdlodFile {
     node_error: OnceLock<(String, String)>,
 }
 
-/// Node records are checked in blocks of this many nodes of one level.
-pub const NODE_BLOCK: usize = 4096;
+/// Node records are checked in blocks of this many nodes of one level. A view reaches
+/// few nodes of each block it touches: a 1 px frame of 2×10^8 particles reads 5.2 M node
+/// records and checks 7.1 M with blocks of 256 (11.1 M with 4096, 6.1 M with 64, at the
+/// cost of more block flags), about 0.2 s less of its first traversal than with 4096.
+pub const NODE_BLOCK: usize = 256;
 /// The leading levels holding at most this many nodes together are checked on open;
 /// the records of the levels below them, block by block before their first use.
 pub const EAGER_NODES: u64 = 1 << 20;

@@ -997,7 +997,16 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
         let d = traverse(&cam, &f, &settings);
         wants(f.node_error().err().unwrap());
         let clean = traverse(&cam, &eager, &settings);
-        assert!(d.points > 0 && d.points < clean.points, "{occlusion:?}");
+        // Without culling the parent's one sphere stands for its particles; with it, that
+        // sphere may hide fewer of the particles behind than they hid themselves, so only
+        // the cut's change is certain.
+        assert!(d.points > 0 && d.ranges != clean.ranges, "{occlusion:?}");
+        assert!(
+            d.points < clean.points || occlusion != OcclusionMode::Off,
+            "{} points, {} in the clean cut",
+            d.points,
+            clean.points
+        );
         let parent = f.nodes()[id].parent;
         let parent_level = deepest - 1;
         let at = parent as usize - f.levels()[parent_level].node_first as usize;
