@@ -1,11 +1,12 @@
 //! Writes seed inputs for the fuzz targets into `corpus/<target>/` (relative to the
 //! current directory, normally `fuzz/`): small valid `.mdlod` files made by
 //! `convert_frame`; small LAMMPS and XYZ dumps; the project's real LAMMPS binary dumps and
-//! GSD file (`datasets/`) and small MMPLD files. Each seed is one mode byte (see the
+//! GSD file (`datasets/`), small MMPLD files and small `.sndf` files. Each seed is one mode byte (see the
 //! targets) followed by the file. Runs on stable: `cargo run --example make_seeds`.
 
 use std::path::Path;
 
+use mdlod_format::sndf::{SndfData, SndfHeader, SndfTile, SndfTiles, SNDF_TILE};
 use mdlod_preprocess::convert::{convert_frame, ConvertOptions};
 use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_preprocess::{Attribute, Frame, NoProgress, SpeciesName};
@@ -313,11 +314,71 @@ fn main() {
         seed.extend_from_slice(bytes);
         std::fs::write(particles.join(name), seed).unwrap();
     }
+    // S-NDF files (see sndf_file.rs): one image of 6x4 texels and S-MIP tiles (one of
+    // level 0, one of level 1) of an orthographic view, 2x2 bins; checksums intact (mode
+    // bit 0 reseals mutated ones).
+    let sndfs = Path::new("corpus/sndf_file");
+    std::fs::create_dir_all(sndfs).unwrap();
+    let bin = |i: usize, rays: f32| {
+        let count = (i % 5) as f32 / 4.0 * rays;
+        [0.5 * count, 0.25 * count, 0.125 * count, count]
+    };
+    let image = SndfData {
+        header: SndfHeader {
+            width: 6,
+            height: 4,
+            bins: 2,
+            binning: "projected-normals".into(),
+            rays: 4,
+            view: serde_json::json!({"version": 1, "azimuth_deg": 30.0}),
+            source: Some("crater.mdlod".into()),
+            display_level: None,
+            smip: None,
+        },
+        hist: (0..6 * 4 * 4).map(|i| bin(i, 4.0)).collect(),
+    };
+    let tile_texels = (SNDF_TILE * SNDF_TILE * 4) as usize;
+    let tiles = SndfData {
+        header: SndfHeader {
+            width: 96,
+            height: 64,
+            bins: 2,
+            binning: "lambert-equal-area".into(),
+            rays: 2,
+            view: serde_json::json!({
+                "version": 1, "projection": "orthographic", "azimuth_deg": 30.0,
+                "elevation_deg": 20.0, "target": [0.0, 0.0, 0.0], "distance": 10.0,
+                "zoom": 1.0, "fov_y_deg": 30.0
+            }),
+            source: None,
+            display_level: Some(0),
+            smip: Some(SndfTiles {
+                texel0: 0.05,
+                origin: [-2.4, 1.6],
+                tile: SNDF_TILE,
+                tiles: vec![
+                    SndfTile { level: 0, x: 0, y: 0, rays: 4 },
+                    SndfTile { level: 1, x: 0, y: 0, rays: 2 },
+                ],
+            }),
+        },
+        hist: (0..2 * tile_texels)
+            .map(|i| bin(i, if i < tile_texels { 4.0 } else { 2.0 }))
+            .collect(),
+    };
+    let scratch = tempfile::tempdir().unwrap();
+    for (name, data) in [("image", &image), ("tiles", &tiles)] {
+        let file = scratch.path().join("seed.sndf");
+        data.save(&file).unwrap();
+        put(sndfs, name, 1, &std::fs::read(&file).unwrap());
+    }
+
     println!(
-        "seeds written to {}, {}, {} and {}",
+        "seeds written to {}, {}, {}, {} and {}",
         mdlod.display(),
         dumps.display(),
         binary.display(),
-        particles.display()
+        particles.display(),
+        sndfs.display()
     );
 }
