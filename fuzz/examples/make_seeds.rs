@@ -357,8 +357,18 @@ fn main() {
                 origin: [-2.4, 1.6],
                 tile: SNDF_TILE,
                 tiles: vec![
-                    SndfTile { level: 0, x: 0, y: 0, rays: 4 },
-                    SndfTile { level: 1, x: 0, y: 0, rays: 2 },
+                    SndfTile {
+                        level: 0,
+                        x: 0,
+                        y: 0,
+                        rays: 4,
+                    },
+                    SndfTile {
+                        level: 1,
+                        x: 0,
+                        y: 0,
+                        rays: 2,
+                    },
                 ],
             }),
         },
