@@ -63,6 +63,14 @@ pub trait CutSource {
     fn bind_batches(&self, draw: &DrawList) -> Result<Vec<BoundCut>, RenderError> {
         Ok(vec![self.bind(draw)?])
     }
+
+    /// The batches [`Self::bind_batches`] would bind, as draw lists that [`Self::bind`]
+    /// binds one at a time, when there are several; `None` for a source that binds in
+    /// one piece. A pass that draws each batch once binds, draws and drops them in
+    /// turn, so only one batch's points are in memory at a time.
+    fn batch_lists(&self, _draw: &DrawList) -> Option<Vec<DrawList>> {
+        None
+    }
 }
 
 /// The cut packed from the mapped file and uploaded whole.
@@ -118,6 +126,27 @@ impl CutSource for PackedCut<'_> {
             .iter()
             .map(|batch| self.bind(batch))
             .collect()
+    }
+
+    fn batch_lists(&self, draw: &DrawList) -> Option<Vec<DrawList>> {
+        let (points, ranges) = self.renderer.batch_limits();
+        Some(draw.batches(points, ranges)).filter(|b| b.len() > 1)
+    }
+}
+
+/// One batch of a sphere frame: bound for the whole frame, or bound for its one draw
+/// and dropped after it.
+enum BatchRef<'a> {
+    Kept(&'a SphereBuffers),
+    Streamed(BoundCut),
+}
+
+impl BatchRef<'_> {
+    fn buffers(&self) -> &SphereBuffers {
+        match self {
+            BatchRef::Kept(b) => b,
+            BatchRef::Streamed(c) => &c.buffers,
+        }
     }
 }
 
@@ -529,30 +558,51 @@ struct FrameTimer {
     set: wgpu::QuerySet,
     resolve: wgpu::Buffer,
     read: wgpu::Buffer,
+    /// Timed spans (begin and end stamps each); the GPU time is their sum.
+    spans: u32,
 }
 
 impl FrameTimer {
     /// Writes for a pass that begins (`begin`) and/or ends (`end`) the timed span.
     fn writes(&self, begin: bool, end: bool) -> wgpu::RenderPassTimestampWrites<'_> {
+        self.span_writes(0, begin, end)
+    }
+
+    /// The same for span `span` of a timer of several.
+    fn span_writes(
+        &self,
+        span: u32,
+        begin: bool,
+        end: bool,
+    ) -> wgpu::RenderPassTimestampWrites<'_> {
         wgpu::RenderPassTimestampWrites {
             query_set: &self.set,
-            beginning_of_pass_write_index: begin.then_some(0),
-            end_of_pass_write_index: end.then_some(1),
+            beginning_of_pass_write_index: begin.then_some(2 * span),
+            end_of_pass_write_index: end.then_some(2 * span + 1),
         }
     }
 
     /// The same for a compute pass.
     fn compute_writes(&self, begin: bool, end: bool) -> wgpu::ComputePassTimestampWrites<'_> {
+        self.compute_span_writes(0, begin, end)
+    }
+
+    fn compute_span_writes(
+        &self,
+        span: u32,
+        begin: bool,
+        end: bool,
+    ) -> wgpu::ComputePassTimestampWrites<'_> {
         wgpu::ComputePassTimestampWrites {
             query_set: &self.set,
-            beginning_of_pass_write_index: begin.then_some(0),
-            end_of_pass_write_index: end.then_some(1),
+            beginning_of_pass_write_index: begin.then_some(2 * span),
+            end_of_pass_write_index: end.then_some(2 * span + 1),
         }
     }
 
     fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
-        enc.resolve_query_set(&self.set, 0..2, &self.resolve, 0);
-        enc.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 16);
+        enc.resolve_query_set(&self.set, 0..2 * self.spans, &self.resolve, 0);
+        enc.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 16 * u64::from(self.spans));
     }
 }
 
@@ -795,6 +845,13 @@ impl Renderer {
         settings: &FrameSettings,
     ) -> Result<RenderedFrame, RenderError> {
         check_source(source, PackStyle::Spheres, "the sphere pass")?;
+        if settings.spp == 1 {
+            if let Some(lists) = source.batch_lists(draw) {
+                return self
+                    .ctx
+                    .scoped(|| self.render_streamed(source, &lists, camera, settings));
+            }
+        }
         self.ctx.scoped(|| {
             let cut = Batches::of(source, draw)?;
             let batches: Vec<&SphereBuffers> = cut.buffers().collect();
@@ -825,6 +882,65 @@ impl Renderer {
         batches: &[&SphereBuffers],
         position_bits: u32,
         species_count: u32,
+        camera: &Camera,
+        settings: &FrameSettings,
+    ) -> Result<RenderedFrame, RenderError> {
+        let counts: Vec<u32> = batches.iter().map(|b| b.points).collect();
+        self.render_batches(
+            &counts,
+            &mut |b| Ok(BatchRef::Kept(batches[b])),
+            false,
+            (position_bits, species_count),
+            camera,
+            settings,
+        )
+    }
+
+    /// One sample of a cut in several batches, each bound just before its draw and
+    /// dropped after it: the points in memory (host and GPU) are one batch's, however
+    /// large the cut (every particle of 10^8 is nine batches of 250 MB).
+    fn render_streamed(
+        &self,
+        source: &dyn CutSource,
+        lists: &[DrawList],
+        camera: &Camera,
+        settings: &FrameSettings,
+    ) -> Result<RenderedFrame, RenderError> {
+        let counts: Vec<u32> = lists.iter().map(|l| l.points as u32).collect();
+        // The first batch is bound ahead: its decoding (position bits, species) is every
+        // batch's, and the frame's uniforms need it.
+        let mut first = Some(source.bind(&lists[0])?);
+        let decoding = first
+            .as_ref()
+            .map_or((0, 0), |c| (c.position_bits, c.species_count));
+        let mut largest = 0u64;
+        let mut frame = self.render_batches(
+            &counts,
+            &mut |b| {
+                let cut = match first.take() {
+                    Some(cut) if b == 0 => cut,
+                    _ => source.bind(&lists[b])?,
+                };
+                largest = largest.max(cut.data_bytes);
+                Ok(BatchRef::Streamed(cut))
+            },
+            true,
+            decoding,
+            camera,
+            settings,
+        )?;
+        frame.gpu_data_bytes = largest;
+        Ok(frame)
+    }
+
+    /// Draws batches of `counts` points, `batch(b)` giving batch `b`'s buffers when it
+    /// is drawn (each sample draws every batch, in order).
+    fn render_batches<'b>(
+        &self,
+        counts: &[u32],
+        batch: &mut dyn FnMut(usize) -> Result<BatchRef<'b>, RenderError>,
+        timed_per_batch: bool,
+        (position_bits, species_count): (u32, u32),
         camera: &Camera,
         settings: &FrameSettings,
     ) -> Result<RenderedFrame, RenderError> {
@@ -893,9 +1009,13 @@ impl Renderer {
                 u64::from(colour_row) * u64::from(h),
             )
         });
-        let timing = self.frame_timer();
-        let points: u32 = batches.iter().map(|b| b.points).sum();
-        let most = batches.iter().map(|b| b.points).max().unwrap_or(0);
+        let timing = self.frame_timer_of(if timed_per_batch {
+            counts.len() as u32
+        } else {
+            1
+        });
+        let points: u32 = counts.iter().sum();
+        let most = counts.iter().copied().max().unwrap_or(0);
         // The raster's buffers are sized for the largest batch; each batch writes its
         // own point count into them before its submission.
         let mut small = self.take_small_targets([w, h], most);
@@ -914,21 +1034,28 @@ impl Renderer {
                 position_bits,
                 species_count,
             );
-            for (b, buffers) in batches.iter().enumerate() {
+            for b in 0..counts.len() {
+                let held = batch(b)?;
+                let buffers = held.buffers();
                 queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
-                small = self.small_for_batch(small.take(), [w, h], buffers.points, batches.len());
+                small = self.small_for_batch(small.take(), [w, h], buffers.points, counts.len());
                 let mut enc = device.create_command_encoder(&Default::default());
                 // Each batch is its own submission: the raster's point count and the
                 // frame uniforms are written before it.
                 let first = s == 0 && b == 0;
                 let opens = b == 0;
-                let last = s + 1 == settings.spp && b + 1 == batches.len();
-                let sample_done = b + 1 == batches.len();
+                let last = s + 1 == settings.spp && b + 1 == counts.len();
+                let sample_done = b + 1 == counts.len();
+                // The timed span this batch's passes stamp: one for the frame, or one per
+                // batch when each batch waits for its own upload (the GPU idles between).
+                let span = if timed_per_batch { b as u32 } else { 0 };
+                let span_opens = first || timed_per_batch;
+                let span_closes = timed_per_batch && !last;
                 if let Some((pass, targets)) = &small {
                     let writes = timing
                         .as_ref()
-                        .filter(|_| first)
-                        .map(|t| t.compute_writes(true, false));
+                        .filter(|_| span_opens)
+                        .map(|t| t.compute_span_writes(span, true, false));
                     pass.raster(&mut enc, buffers, targets, writes);
                 }
                 {
@@ -954,8 +1081,10 @@ impl Renderer {
                         depth_stencil_attachment: Some(reversed_depth(&depth_v, opens)),
                         timestamp_writes: timing
                             .as_ref()
-                            .filter(|_| first && small.is_none())
-                            .map(|t| t.writes(true, false)),
+                            .filter(|_| (span_opens && small.is_none()) || span_closes)
+                            .map(|t| {
+                                t.span_writes(span, span_opens && small.is_none(), span_closes)
+                            }),
                         occlusion_query_set: None,
                         multiview_mask: None,
                     });
@@ -1001,7 +1130,9 @@ impl Renderer {
                                 },
                             })],
                             depth_stencil_attachment: None,
-                            timestamp_writes: timing.as_ref().map(|t| t.writes(false, true)),
+                            timestamp_writes: timing
+                                .as_ref()
+                                .map(|t| t.span_writes(span, false, true)),
                             occlusion_query_set: None,
                             multiview_mask: None,
                         });
@@ -1054,7 +1185,7 @@ impl Renderer {
             None => None,
         };
         let impostors = match &small {
-            Some((_, targets)) if batches.len() == 1 => {
+            Some((_, targets)) if counts.len() == 1 => {
                 let read = self.read_buffer(targets.draw_args_readback())?;
                 bytemuck::pod_collect_to_vec::<u8, u32>(&read)
                     .get(1)
@@ -2309,32 +2440,44 @@ impl Renderer {
 
     /// Timestamp queries for a frame's passes, when the device has them.
     fn frame_timer(&self) -> Option<FrameTimer> {
+        self.frame_timer_of(1)
+    }
+
+    /// A timer of `spans` spans, whose GPU time is their sum (what the GPU worked, not
+    /// the gaps between spans where it waited for the host).
+    fn frame_timer_of(&self, spans: u32) -> Option<FrameTimer> {
         let device = &self.ctx.device;
+        let spans = spans.max(1);
         self.ctx.timestamps().then(|| FrameTimer {
             set: device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("frame time"),
                 ty: wgpu::QueryType::Timestamp,
-                count: 2,
+                count: 2 * spans,
             }),
             resolve: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("timestamps"),
-                size: 16,
+                size: 16 * u64::from(spans),
                 usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             }),
-            read: readback_buffer(device, "timestamps readback", 16),
+            read: readback_buffer(device, "timestamps readback", 16 * u64::from(spans)),
+            spans,
         })
     }
 
-    /// The time between the timer's two stamps (after the frame was submitted).
+    /// The sum of the timer's spans, each between its two stamps (after the frame was
+    /// submitted).
     fn gpu_time(&self, timer: Option<&FrameTimer>) -> Result<Option<Duration>, RenderError> {
         let Some(t) = timer else {
             return Ok(None);
         };
         let bytes = self.read_buffer(&t.read)?;
-        let t0 = u64::from_le_bytes(bytes[0..8].try_into().unwrap_or_default());
-        let t1 = u64::from_le_bytes(bytes[8..16].try_into().unwrap_or_default());
-        let ns = t1.saturating_sub(t0) as f64 * f64::from(self.ctx.queue.get_timestamp_period());
+        let stamp =
+            |k: usize| u64::from_le_bytes(bytes[8 * k..8 * k + 8].try_into().unwrap_or_default());
+        let ticks: u64 = (0..t.spans as usize)
+            .map(|k| stamp(2 * k + 1).saturating_sub(stamp(2 * k)))
+            .sum();
+        let ns = ticks as f64 * f64::from(self.ctx.queue.get_timestamp_period());
         Ok(Some(Duration::from_nanos(ns as u64)))
     }
 
