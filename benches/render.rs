@@ -9,7 +9,8 @@
 //! `data/bench/` when missing (text dumps up to 2×10^7 particles, raw arrays above,
 //! converted within 4 GiB). `MDLOD_RENDER_FULL_MAX` (default 100000000): the largest
 //! size also drawn without level of detail (every particle, in batches where the cut is
-//! larger than one storage binding).
+//! larger than one storage binding): its GPU time, summed over the batches, and the
+//! whole frame's wall time (traversal, packing, upload, drawing, read-back).
 //! `MDLOD_RENDER_ERROR` (default 1) and `MDLOD_RENDER_BUDGET` (default 4000000): the
 //! screen error in pixels and the sphere budget of the level-of-detail frames.
 //! `MDLOD_RENDER_COMPARE_MAX` (default 20000000): the largest size also drawn without
@@ -243,14 +244,15 @@ fn main() {
                 occlusion: false,
                 ..base.clone()
             };
-            let mut times = vec![];
+            let (mut times, mut walls) = (vec![], vec![]);
             let mut drawn = 0;
             for _ in 0..reps.min(3) {
                 let (_img, r) = render_image(&renderer, &file, &opts).unwrap();
                 times.push(r.gpu_time.unwrap_or(r.total_time));
+                walls.push(r.total_time);
                 drawn = r.particles_drawn + r.nodes_drawn;
             }
-            (median(times), drawn)
+            (median(times), drawn, median(walls))
         });
         let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
         let row = format!(
@@ -265,7 +267,7 @@ fn main() {
             plain.as_ref().map_or("—".into(), |p| format!("{:.1} / {:.1}", ms(p.0), ms(p.1))),
             ms(first),
             ms(complete),
-            full.map_or("—".into(), |f| format!("{:.1}", ms(f.0))),
+            full.map_or("—".into(), |f| format!("{:.1} / {:.0}", ms(f.0), ms(f.2))),
             full.map_or("—".into(), |f| f.1.to_string()),
             rss_after_stream,
             mib(r.gpu_data_bytes),
@@ -285,7 +287,7 @@ fn main() {
         "Adapter: **{adapter}**. Image {W}×{H}, 1 sample per pixel, perspective view fitting the whole crater data set, screen error {error_px} px, budget {budget} spheres. Frame times are GPU time (timestamp queries) when the adapter has them, else wall time; medians. Streaming pool {} MiB.\n\n",
         pool >> 20,
     ));
-    t.push_str("| particles | .mdlod MB | spheres drawn | hidden clusters left out | achieved error px | GPU frame ms | traversal ms | frame cost ms (traversal + GPU) | spheres without occlusion culling | without: GPU ms / cost ms | first image ms (open + coarse frame) | view complete ms (streaming) | frame ms (every particle) | spheres (every particle) | host RSS MiB | GPU MiB: cut / streaming pool + targets |\n");
+    t.push_str("| particles | .mdlod MB | spheres drawn | hidden clusters left out | achieved error px | GPU frame ms | traversal ms | frame cost ms (traversal + GPU) | spheres without occlusion culling | without: GPU ms / cost ms | first image ms (open + coarse frame) | view complete ms (streaming) | every particle: GPU ms / whole frame ms | spheres (every particle) | host RSS MiB | GPU MiB: cut / streaming pool + targets |\n");
     t.push_str(
         "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
