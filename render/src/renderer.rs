@@ -173,10 +173,6 @@ impl Batches {
         self.cuts.iter().map(|c| &c.buffers)
     }
 
-    fn points(&self) -> u32 {
-        self.buffers().map(|b| b.points).sum()
-    }
-
     fn data_bytes(&self) -> u64 {
         self.cuts.iter().map(|c| c.data_bytes).sum()
     }
@@ -641,6 +637,18 @@ fn clear_pass<'e>(
     views: &[&wgpu::TextureView],
     timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
 ) -> wgpu::RenderPass<'e> {
+    cleared_pass_if(enc, label, views, true, timestamp_writes)
+}
+
+/// A render pass into `views` that clears them to transparent when `clear`, else draws
+/// over what they hold.
+fn cleared_pass_if<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    views: &[&wgpu::TextureView],
+    clear: bool,
+    timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
+) -> wgpu::RenderPass<'e> {
     let attachments: Vec<Option<wgpu::RenderPassColorAttachment<'_>>> = views
         .iter()
         .map(|view| {
@@ -649,7 +657,7 @@ fn clear_pass<'e>(
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    load: cleared_if(clear, wgpu::Color::TRANSPARENT),
                     store: wgpu::StoreOp::Store,
                 },
             })
@@ -1860,27 +1868,32 @@ impl Renderer {
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
             let queue = &self.ctx.queue;
-            // Batches are drawn in order in one pass: the blending sees the points in
-            // the order one batch would give it.
-            let cuts = Batches::of(source, draw)?;
-            let cut = cuts.first();
+            // Batches are drawn in order, each in its own pass over what the ones before
+            // left: the blending sees the points in the order one batch would give it.
+            // A cut of several batches binds, draws and drops each in turn (the GPU holds
+            // one batch); the first is bound ahead, for its decoding.
+            let lists = source.batch_lists(draw).unwrap_or_default();
+            let mut next = Some(match lists.first() {
+                Some(list) => source.bind(list)?,
+                None => source.bind(draw)?,
+            });
+            let batches = lists.len().max(1);
+            let (position_bits, species_count) = next
+                .as_ref()
+                .map_or((0, 0), |c| (c.position_bits, c.species_count));
             let mut uniforms = FrameUniforms::new(
                 camera.clip_from_view(width as f32 / height as f32),
                 camera.view_from_world(),
                 camera.projection == Projection::Orthographic,
                 &Default::default(),
-                cut.position_bits,
-                cut.species_count,
+                position_bits,
+                species_count,
             );
             let (pipeline, intensity, opacity) = match blend {
                 SplatBlend::Additive { intensity, .. } => (&splat.pipeline, intensity, 0.0),
                 SplatBlend::Over { opacity } => (&splat.over, 1.0, opacity),
             };
             uniforms.material = [width as f32, height as f32, intensity, opacity];
-            for buffers in cuts.buffers() {
-                queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
-            }
-            let points = cuts.points();
             let size = wgpu::Extent3d {
                 width,
                 height,
@@ -1900,35 +1913,48 @@ impl Renderer {
             let row = padded_row(width * 16);
             let readback =
                 readback_buffer(device, "splat readback", u64::from(row) * u64::from(height));
-            let timing = self.frame_timer();
-            let mut enc = device.create_command_encoder(&Default::default());
-            {
-                let mut pass = clear_pass(
-                    &mut enc,
-                    "splat",
-                    &[&view],
-                    timing.as_ref().map(|t| t.writes(true, true)),
-                );
-                for buffers in cuts.buffers() {
+            // One span per batch: the GPU waits for the host between them.
+            let timing = self.frame_timer_of(batches as u32);
+            let (mut largest, mut points) = (0u64, 0u32);
+            for b in 0..batches {
+                let cut = match next.take() {
+                    Some(cut) => cut,
+                    None => source.bind(&lists[b])?,
+                };
+                largest = largest.max(cut.data_bytes);
+                let buffers = &cut.buffers;
+                points += buffers.points;
+                queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
+                let mut enc = device.create_command_encoder(&Default::default());
+                {
+                    let mut pass = cleared_pass_if(
+                        &mut enc,
+                        "splat",
+                        &[&view],
+                        b == 0,
+                        timing.as_ref().map(|t| t.span_writes(b as u32, true, true)),
+                    );
                     if buffers.points > 0 {
                         pass.set_pipeline(pipeline);
                         pass.set_bind_group(0, &buffers.bind_group, &[]);
                         pass.draw(0..4, 0..buffers.points);
                     }
                 }
+                if b + 1 == batches {
+                    copy_to_buffer(
+                        &mut enc,
+                        &target,
+                        wgpu::TextureAspect::All,
+                        &readback,
+                        row,
+                        size,
+                    );
+                    if let Some(t) = &timing {
+                        t.resolve(&mut enc);
+                    }
+                }
+                queue.submit([enc.finish()]);
             }
-            copy_to_buffer(
-                &mut enc,
-                &target,
-                wgpu::TextureAspect::All,
-                &readback,
-                row,
-                size,
-            );
-            if let Some(t) = &timing {
-                t.resolve(&mut enc);
-            }
-            queue.submit([enc.finish()]);
             let bytes = self.read_buffer(&readback)?;
             let hdr: Vec<[f32; 4]> = unpad_rows(&bytes, row, width as usize * 16, height)
                 .chunks_exact(16)
@@ -1942,7 +1968,7 @@ impl Renderer {
                 hdr,
                 gpu_time,
                 points,
-                gpu_data_bytes: cuts.data_bytes(),
+                gpu_data_bytes: largest,
             })
         })
     }

@@ -2009,6 +2009,13 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
             let splat = |r: &Renderer| r.render_splats(&cloud, &camera, draw, w, h, blend).unwrap();
             let (a, b) = (splat(renderer()), splat(&small_batched));
             assert_eq!(b.points, a.points, "{blend:?}, error {error_px} px");
+            // Each batch is bound, drawn and dropped in turn.
+            assert!(
+                b.gpu_data_bytes * 2 <= a.gpu_data_bytes,
+                "{blend:?}: {} bytes held, {} for the whole cut",
+                b.gpu_data_bytes,
+                a.gpu_data_bytes
+            );
             assert!(
                 a.hdr == b.hdr,
                 "{blend:?}, error {error_px} px: fluxes differ"
