@@ -105,8 +105,8 @@ impl CutSource for PackedCut<'_> {
             .upload(&self.renderer.ctx.device, &packed);
         // The upload's staging copies wait in the queue until its next submission: flush
         // them now, so that a cut bound in several batches does not hold every batch's
-        // staging copy (as large as the batch) until its first draw. At 10^8 particles
-        // drawn whole (9 batches) that took 21 s and 7.5 GB; flushed, 14 s and 6.6 GB.
+        // staging copy (as large as the batch) until its first draw (BENCHMARKS.md,
+        // "Drawing every particle of 10^8").
         self.renderer.ctx.queue.submit([]);
         // Reclaims the staging copies of earlier batches whose copies are done (no wait).
         let _ = self.renderer.ctx.device.poll(wgpu::PollType::Poll);
