@@ -198,6 +198,17 @@ fn main() {
                 position_bits: 8,
             },
         ),
+        // Node levels of more than one block of lazily checked records (256 nodes):
+        // mutations reach the block boundaries.
+        (
+            1200,
+            false,
+            BuildParams {
+                max_cluster_size: 2,
+                max_root_points: 8,
+                ..Default::default()
+            },
+        ),
     ];
     for (i, (n, attribute, build)) in cases.into_iter().enumerate() {
         let path = tmp.path().join("seed.mdlod");
