@@ -1,6 +1,6 @@
 //! Headless frames: traversal output in, an RGBA8 image (and optionally depth) out.
 //!
-//! How it works: the draw list is packed and uploaded once, in batches when it is too
+//! How it works: the draw list is packed and uploaded, in batches when it is too
 //! large for one storage binding ([`Renderer::batch_limits`]: about 15.7 M points a
 //! batch where bindings hold 128 MiB; the splat, density and S-NDF passes batch theirs
 //! too). Each of the `spp` samples draws the spheres, batch after batch into the same
@@ -9,9 +9,12 @@
 //! with weight 1/spp into a float accumulation target. The sum is copied into an sRGB
 //! target (the format encodes) and read back. Later batches are depth-tested against
 //! the earlier ones, so the image is the one batch would give, up to exact depth ties
-//! between points of different batches. GPU time, when the device has timestamp
-//! queries, runs from the start of the first sample's sphere pass to the end of the
-//! resolve pass.
+//! between points of different batches. With one sample (and in the splat pass) each
+//! batch is packed, uploaded, drawn and dropped in turn ([`BatchStream`]), so memory
+//! holds one batch however large the cut; several samples keep every batch bound.
+//! GPU time, when the device has timestamp queries, runs from the start of the first
+//! sample's sphere pass to the end of the resolve pass; for batches drawn in turn it is
+//! the sum of each batch's span, without the GPU's waits for the next upload.
 
 use std::time::Duration;
 
@@ -57,19 +60,20 @@ pub trait CutSource {
     fn style(&self) -> PackStyle;
     /// Binds the points of `draw`, a cut of the source's file.
     fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError>;
-    /// Binds the points of `draw` in consecutive batches, drawn one after the other into
-    /// the same targets (at least one batch): one, unless the source splits cuts too
-    /// large for one storage binding.
-    fn bind_batches(&self, draw: &DrawList) -> Result<Vec<BoundCut>, RenderError> {
-        Ok(vec![self.bind(draw)?])
-    }
-
-    /// The batches [`Self::bind_batches`] would bind, as draw lists that [`Self::bind`]
-    /// binds one at a time, when there are several; `None` for a source that binds in
-    /// one piece. A pass that draws each batch once binds, draws and drops them in
-    /// turn, so only one batch's points are in memory at a time.
+    /// The batches of `draw`, as draw lists that [`Self::bind`] binds one at a time,
+    /// when the source splits it (a cut too large for one storage binding); `None` for
+    /// one piece.
     fn batch_lists(&self, _draw: &DrawList) -> Option<Vec<DrawList>> {
         None
+    }
+
+    /// Binds the points of `draw` in its consecutive batches ([`Self::batch_lists`]),
+    /// for passes that draw every batch more than once; at least one batch.
+    fn bind_batches(&self, draw: &DrawList) -> Result<Vec<BoundCut>, RenderError> {
+        match self.batch_lists(draw) {
+            Some(lists) => lists.iter().map(|list| self.bind(list)).collect(),
+            None => Ok(vec![self.bind(draw)?]),
+        }
     }
 }
 
@@ -118,16 +122,8 @@ impl CutSource for PackedCut<'_> {
         })
     }
 
-    /// Packs and uploads one batch at a time (see [`Renderer::batch_limits`]), so the
-    /// host holds one batch's packing at most.
-    fn bind_batches(&self, draw: &DrawList) -> Result<Vec<BoundCut>, RenderError> {
-        let (points, ranges) = self.renderer.batch_limits();
-        draw.batches(points, ranges)
-            .iter()
-            .map(|batch| self.bind(batch))
-            .collect()
-    }
-
+    /// Batches within [`Renderer::batch_limits`], each packed and uploaded by its own
+    /// [`CutSource::bind`], so the host holds one batch's packing at most.
     fn batch_lists(&self, draw: &DrawList) -> Option<Vec<DrawList>> {
         let (points, ranges) = self.renderer.batch_limits();
         Some(draw.batches(points, ranges)).filter(|b| b.len() > 1)
@@ -147,6 +143,51 @@ impl BatchRef<'_> {
             BatchRef::Kept(b) => b,
             BatchRef::Streamed(c) => &c.buffers,
         }
+    }
+}
+
+/// A cut's batches for a pass that draws each once, in order: each is bound when it is
+/// drawn and dropped after, so host and GPU hold one batch's points however large the
+/// cut. The first is bound on opening: its decoding (position bits, species) is every
+/// batch's, and the pass's uniforms need it.
+struct BatchStream<'s> {
+    source: &'s dyn CutSource,
+    /// The batches; empty when the source binds the cut in one piece.
+    lists: Vec<DrawList>,
+    first: Option<BoundCut>,
+    /// Points of each batch.
+    counts: Vec<u32>,
+    decoding: (u32, u32),
+    /// The most point data one batch held.
+    largest: u64,
+}
+
+impl<'s> BatchStream<'s> {
+    fn open(source: &'s dyn CutSource, draw: &DrawList) -> Result<Self, RenderError> {
+        let lists = source.batch_lists(draw).unwrap_or_default();
+        let first = source.bind(lists.first().unwrap_or(draw))?;
+        let counts = match lists.len() {
+            0 => vec![first.buffers.points],
+            _ => lists.iter().map(|l| l.points as u32).collect(),
+        };
+        Ok(BatchStream {
+            source,
+            decoding: (first.position_bits, first.species_count),
+            lists,
+            first: Some(first),
+            counts,
+            largest: 0,
+        })
+    }
+
+    /// Batch `b`, bound now (batches are taken in order, each once).
+    fn take(&mut self, b: usize) -> Result<BoundCut, RenderError> {
+        let cut = match self.first.take() {
+            Some(cut) if b == 0 => cut,
+            _ => self.source.bind(&self.lists[b])?,
+        };
+        self.largest = self.largest.max(cut.data_bytes);
+        Ok(cut)
     }
 }
 
@@ -854,12 +895,11 @@ impl Renderer {
     ) -> Result<RenderedFrame, RenderError> {
         check_source(source, PackStyle::Spheres, "the sphere pass")?;
         if settings.spp == 1 {
-            if let Some(lists) = source.batch_lists(draw) {
-                return self
-                    .ctx
-                    .scoped(|| self.render_streamed(source, &lists, camera, settings));
-            }
+            return self
+                .ctx
+                .scoped(|| self.render_streamed(source, draw, camera, settings));
         }
+        // Several samples draw every batch each: they stay bound for the frame.
         self.ctx.scoped(|| {
             let cut = Batches::of(source, draw)?;
             let batches: Vec<&SphereBuffers> = cut.buffers().collect();
@@ -904,40 +944,26 @@ impl Renderer {
         )
     }
 
-    /// One sample of a cut in several batches, each bound just before its draw and
-    /// dropped after it: the points in memory (host and GPU) are one batch's, however
-    /// large the cut (every particle of 10^8 is nine batches of 250 MB).
+    /// One sample of a cut, its batches bound, drawn and dropped in turn
+    /// ([`BatchStream`]: every particle of 10^8 is nine batches of 250 MB).
     fn render_streamed(
         &self,
         source: &dyn CutSource,
-        lists: &[DrawList],
+        draw: &DrawList,
         camera: &Camera,
         settings: &FrameSettings,
     ) -> Result<RenderedFrame, RenderError> {
-        let counts: Vec<u32> = lists.iter().map(|l| l.points as u32).collect();
-        // The first batch is bound ahead: its decoding (position bits, species) is every
-        // batch's, and the frame's uniforms need it.
-        let mut first = Some(source.bind(&lists[0])?);
-        let decoding = first
-            .as_ref()
-            .map_or((0, 0), |c| (c.position_bits, c.species_count));
-        let mut largest = 0u64;
+        let mut stream = BatchStream::open(source, draw)?;
+        let (counts, decoding) = (stream.counts.clone(), stream.decoding);
         let mut frame = self.render_batches(
             &counts,
-            &mut |b| {
-                let cut = match first.take() {
-                    Some(cut) if b == 0 => cut,
-                    _ => source.bind(&lists[b])?,
-                };
-                largest = largest.max(cut.data_bytes);
-                Ok(BatchRef::Streamed(cut))
-            },
+            &mut |b| Ok(BatchRef::Streamed(stream.take(b)?)),
             true,
             decoding,
             camera,
             settings,
         )?;
-        frame.gpu_data_bytes = largest;
+        frame.gpu_data_bytes = stream.largest;
         Ok(frame)
     }
 
@@ -1439,22 +1465,19 @@ impl Renderer {
         draw: &DrawList,
         style: &crate::style::PointStyle,
     ) -> Result<UploadedCut, RenderError> {
-        let (points, ranges) = self.batch_limits();
-        let mut batches = Vec::new();
-        let mut species = 0;
-        for batch in draw.batches(points, ranges) {
-            let packed = crate::passes::sphere_raycast::pack_styled(
-                file,
-                &batch,
-                crate::passes::sphere_raycast::PackStyle::Spheres,
-                style,
-            )?;
-            species = packed.species.len() as u32;
-            batches.push(self.sphere.upload(&self.ctx.device, &packed));
-        }
+        let source = PackedCut {
+            renderer: self,
+            file,
+            style: PackStyle::Spheres,
+            look: style,
+        };
+        let cuts = source.bind_batches(draw)?;
+        let (position_bits, species) = cuts.first().map_or((file.position_bits(), 0), |c| {
+            (c.position_bits, c.species_count)
+        });
         Ok(UploadedCut {
-            batches,
-            position_bits: file.position_bits(),
+            batches: cuts.into_iter().map(|c| c.buffers).collect(),
+            position_bits,
             species,
         })
     }
@@ -1870,17 +1893,9 @@ impl Renderer {
             let queue = &self.ctx.queue;
             // Batches are drawn in order, each in its own pass over what the ones before
             // left: the blending sees the points in the order one batch would give it.
-            // A cut of several batches binds, draws and drops each in turn (the GPU holds
-            // one batch); the first is bound ahead, for its decoding.
-            let lists = source.batch_lists(draw).unwrap_or_default();
-            let mut next = Some(match lists.first() {
-                Some(list) => source.bind(list)?,
-                None => source.bind(draw)?,
-            });
-            let batches = lists.len().max(1);
-            let (position_bits, species_count) = next
-                .as_ref()
-                .map_or((0, 0), |c| (c.position_bits, c.species_count));
+            let mut stream = BatchStream::open(source, draw)?;
+            let batches = stream.counts.len();
+            let (position_bits, species_count) = stream.decoding;
             let mut uniforms = FrameUniforms::new(
                 camera.clip_from_view(width as f32 / height as f32),
                 camera.view_from_world(),
@@ -1915,13 +1930,9 @@ impl Renderer {
                 readback_buffer(device, "splat readback", u64::from(row) * u64::from(height));
             // One span per batch: the GPU waits for the host between them.
             let timing = self.frame_timer_of(batches as u32);
-            let (mut largest, mut points) = (0u64, 0u32);
+            let mut points = 0u32;
             for b in 0..batches {
-                let cut = match next.take() {
-                    Some(cut) => cut,
-                    None => source.bind(&lists[b])?,
-                };
-                largest = largest.max(cut.data_bytes);
+                let cut = stream.take(b)?;
                 let buffers = &cut.buffers;
                 points += buffers.points;
                 queue.write_buffer(&buffers.uniforms, 0, bytemuck::bytes_of(&uniforms));
@@ -1968,7 +1979,7 @@ impl Renderer {
                 hdr,
                 gpu_time,
                 points,
-                gpu_data_bytes: largest,
+                gpu_data_bytes: stream.largest,
             })
         })
     }
