@@ -1,7 +1,8 @@
 //! MegaMol MMPLD reading, on files written here to the format's layout (versions 1.0 to
 //! 1.3, every vertex and colour type): positions, species and radii per list, the
 //! `intensity` and `radius` attributes, frames and their timestamps, reading in parts,
-//! conversion, and damaged files. (No MegaMol is at hand to write files of its own.)
+//! conversion, and damaged files; and on the MegaMol project's own test files, written by
+//! MegaMol's MMPLD writer (`datasets/megamol/`).
 
 use std::path::{Path, PathBuf};
 
@@ -411,4 +412,124 @@ fn a_frame_larger_than_a_chunk_streams_into_the_file_the_whole_frame_makes() {
             .chunk_points,
         Some(120)
     );
+}
+
+/// The MegaMol project's own sphere-renderer test files, written by MegaMol's MMPLD
+/// writer (`datasets/megamol/README.md`): every vertex type and colour type it writes.
+fn megamol_files() -> Vec<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../datasets/megamol");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "mmpld"))
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn files_written_by_megamol_read_as_written_and_convert() {
+    let files = megamol_files();
+    assert_eq!(files.len(), 17, "{files:?}");
+    let dir = tempfile::tempdir().unwrap();
+    // Lists 1 to 3: five particles each along a box edge through (-2, -2, -2), at the
+    // coordinates the writer's loop reaches in Perl doubles, stored as f32.
+    let edge = [
+        2.0f64,
+        1.8,
+        1.6000000000000001,
+        1.4000000000000001,
+        1.2000000000000002,
+    ];
+    let mut expected: Vec<[f32; 3]> = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+    ];
+    for axis in 0..3 {
+        for &v in &edge {
+            let mut p = [-2.0f32; 3];
+            p[axis] = v as f32;
+            expected.push(p);
+        }
+    }
+    let ids: Vec<u16> = [0u16, 1, 2, 3]
+        .iter()
+        .flat_map(|&l| std::iter::repeat_n(l, if l == 0 { 4 } else { 5 }))
+        .collect();
+    for path in &files {
+        let name = path.file_stem().unwrap().to_str().unwrap().to_owned();
+        let xyzr = name.starts_with("test_xyzr_");
+        let intensity = name.contains("_int_");
+        let dump = DumpFile::open(path).unwrap();
+        assert_eq!(dump.format(), InputFormat::Mmpld, "{name}");
+        assert_eq!(dump.frame_count(), 1, "{name}");
+        let info = dump.frame_info(0).unwrap();
+        assert_eq!(info.particles, 19, "{name}");
+        assert_eq!(info.timestep, Some(0), "{name}");
+        assert_eq!(info.time, Some(f64::from(1.23f32)), "{name}");
+        let mut columns = vec!["x", "y", "z"];
+        if xyzr {
+            columns.push("radius");
+        }
+        if intensity {
+            columns.push("intensity");
+        }
+        assert_eq!(info.columns, columns, "{name}");
+
+        let f = dump
+            .read_frame(0, &ReadOptions::default(), &NoProgress)
+            .unwrap();
+        assert_eq!(f.positions, expected, "{name}");
+        assert_eq!(f.species_index, ids, "{name}");
+        let names: Vec<&str> = f.species.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["0", "1", "2", "3"], "{name}");
+        let radii: Vec<f32> = f.species.iter().map(|s| s.radius.unwrap()).collect();
+        // List 0: the global radius 0.1, or the mean of its particles' radii 0.5, 0.2,
+        // 0.3 and 0.4.
+        let first = if xyzr { 0.35 } else { 0.1 };
+        assert!((radii[0] - first).abs() < 1e-6, "{name}: {radii:?}");
+        assert_eq!(radii[1..], [0.1; 3], "{name}");
+        let b = f.simulation_box.unwrap();
+        assert_eq!(
+            (b.origin, b.a, b.b, b.c),
+            ([-2.0; 3], [4.0, 0.0, 0.0], [0.0, 4.0, 0.0], [0.0, 0.0, 4.0]),
+            "{name}"
+        );
+
+        // Only list 0 can carry intensities or radii: asked for either, the error names
+        // the first list that lacks it.
+        for (attribute, carried) in [("intensity", intensity), ("radius", xyzr)] {
+            let read = dump.read_frame(
+                0,
+                &ReadOptions {
+                    attribute: Some(attribute.into()),
+                    ..Default::default()
+                },
+                &NoProgress,
+            );
+            let e = read.unwrap_err().to_string();
+            let lacking = if carried { 1 } else { 0 };
+            let want = format!("list {lacking} has no per-particle `{attribute}`");
+            assert!(e.contains(&want), "{name}: {e}");
+            assert!(e.contains(&name), "{name}: {e}");
+        }
+
+        let out = dir.path().join(format!("{name}.mdlod"));
+        convert_file(
+            path,
+            &out,
+            FrameSelect::Last,
+            &ReadOptions::default(),
+            &ConvertOptions::default(),
+            &NoProgress,
+        )
+        .unwrap();
+        let m = MdlodFile::open(&out).unwrap();
+        m.verify().unwrap();
+        assert_eq!(m.particle_count(), 19, "{name}");
+        let stored: Vec<f32> = m.metadata().species.iter().map(|s| s.radius).collect();
+        assert_eq!(stored, radii, "{name}");
+    }
 }
