@@ -433,14 +433,11 @@ fn files_written_by_megamol_read_as_written_and_convert() {
     assert_eq!(files.len(), 17, "{files:?}");
     let dir = tempfile::tempdir().unwrap();
     // Lists 1 to 3: five particles each along a box edge through (-2, -2, -2), at the
-    // coordinates the writer's loop reaches in Perl doubles, stored as f32.
-    let edge = [
-        2.0f64,
-        1.8,
-        1.6000000000000001,
-        1.4000000000000001,
-        1.2000000000000002,
-    ];
+    // coordinates the writer's loop reaches in Perl doubles (2.0, less 0.2 each step),
+    // stored as f32.
+    let edge: Vec<f64> = std::iter::successors(Some(2.0f64), |x| Some(x - 0.2))
+        .take(5)
+        .collect();
     let mut expected: Vec<[f32; 3]> = vec![
         [0.0, 0.0, 0.0],
         [1.0, 0.0, 0.0],

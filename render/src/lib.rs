@@ -49,6 +49,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use mdlod_format::MdlodFile;
+pub use mdlod_format::{NoProgress, Progress};
 
 pub use camera::{Bounds, Camera, Projection};
 pub use context::{BackendChoice, GpuContext};
@@ -404,7 +405,9 @@ pub fn render_image(
 ) -> Result<(RgbaImage, RenderReport), RenderError> {
     let t0 = Instant::now();
     let (camera, traversal, settings) = frame_setup(file, opts)?;
+    renderer.reporter().stage("choosing the cut", None, "nodes");
     let draw = traverse(&camera, file, &traversal);
+    renderer.reporter().finish_stage();
     file.node_error()?;
     let traversal_time = t0.elapsed();
     if let RenderMode::Sndf {
@@ -670,9 +673,21 @@ pub fn render_to_png(
     out: &Path,
     opts: &RenderOptions,
 ) -> Result<RenderReport, RenderError> {
+    render_to_png_with(file, out, opts, None)
+}
+
+/// [`render_to_png`], reporting the choice of the cut and the drawing of a cut in
+/// several batches or samples to `progress` ([`Renderer::set_progress`]).
+pub fn render_to_png_with(
+    file: &Path,
+    out: &Path,
+    opts: &RenderOptions,
+    progress: Option<std::sync::Arc<dyn Progress + Send + Sync>>,
+) -> Result<RenderReport, RenderError> {
     let t0 = Instant::now();
     let file = MdlodFile::open(file)?;
-    let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
+    let mut renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
+    renderer.set_progress(progress);
     let (image, mut report) = match opts.gpu_memory {
         None => render_image(&renderer, &file, opts)?,
         Some(pool) => render_streaming(&renderer, std::sync::Arc::new(file), opts, pool)?,

@@ -16,10 +16,11 @@
 //! sample's sphere pass to the end of the resolve pass; for batches drawn in turn it is
 //! the sum of each batch's span, without the GPU's waits for the next upload.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use glam::Vec2;
-use mdlod_format::MdlodFile;
+use mdlod_format::{MdlodFile, NoProgress, Progress};
 
 use crate::camera::{Camera, Projection};
 use crate::context::GpuContext;
@@ -576,6 +577,62 @@ pub struct Renderer {
     /// A smaller cap on the points of one batch than the adapter's (see
     /// [`Self::set_batch_points`]).
     batch_points: Option<u32>,
+    /// Where passes of several submissions report them (see [`Self::set_progress`]).
+    progress: Option<Arc<dyn Progress + Send + Sync>>,
+}
+
+/// Reports a pass of several submissions (batches, samples) to the renderer's progress
+/// reporter as the GPU finishes them: after each submission the one before it is waited
+/// for, so the GPU always has the next one queued while the host packs the one after,
+/// as without a reporter. Passes of one submission report nothing.
+struct DrawProgress<'r> {
+    renderer: &'r Renderer,
+    on: bool,
+    pending: Option<wgpu::SubmissionIndex>,
+}
+
+impl<'r> DrawProgress<'r> {
+    fn begin(renderer: &'r Renderer, stage: &str, submissions: u64) -> Self {
+        let on = renderer.progress.is_some() && submissions > 1;
+        if on {
+            renderer
+                .reporter()
+                .stage(stage, Some(submissions), "submissions");
+        }
+        DrawProgress {
+            renderer,
+            on,
+            pending: None,
+        }
+    }
+
+    /// `index` was submitted: waits for the submission before it and counts that done.
+    fn submitted(&mut self, index: wgpu::SubmissionIndex) {
+        if !self.on {
+            return;
+        }
+        if let Some(before) = self.pending.replace(index) {
+            let _ = self.renderer.ctx.device.poll(wgpu::PollType::Wait {
+                submission_index: Some(before),
+                timeout: None,
+            });
+            self.renderer.reporter().advance(1);
+        }
+    }
+
+    /// The pass is over: waits for its last submission and counts it done.
+    fn finish(mut self) {
+        if let (true, Some(last)) = (self.on, self.pending.take()) {
+            let _ = self.renderer.ctx.device.poll(wgpu::PollType::Wait {
+                submission_index: Some(last),
+                timeout: None,
+            });
+            self.renderer.reporter().advance(1);
+        }
+        if self.on {
+            self.renderer.reporter().finish_stage();
+        }
+    }
 }
 
 impl std::fmt::Debug for Renderer {
@@ -762,6 +819,22 @@ impl Renderer {
             small_spheres,
             small_targets: Default::default(),
             batch_points: None,
+            progress: None,
+        }
+    }
+
+    /// Reports the traversal of large cuts and every pass of several submissions (a cut
+    /// drawn in batches, several samples per pixel) to `progress`, as the GPU finishes
+    /// each; `None` reports nothing (the default).
+    pub fn set_progress(&mut self, progress: Option<Arc<dyn Progress + Send + Sync>>) {
+        self.progress = progress;
+    }
+
+    /// The progress reporter ([`NoProgress`] when none is set).
+    pub fn reporter(&self) -> &dyn Progress {
+        match &self.progress {
+            Some(p) => p.as_ref(),
+            None => &NoProgress,
         }
     }
 
@@ -1059,6 +1132,11 @@ impl Renderer {
             .map(|c| f64::from(srgb_to_linear(c)));
         let view_from_world = camera.view_from_world();
         let ortho = camera.projection == Projection::Orthographic;
+        let mut progress = DrawProgress::begin(
+            self,
+            "drawing",
+            u64::from(settings.spp) * counts.len() as u64,
+        );
         for s in 0..settings.spp {
             let uniforms = FrameUniforms::new(
                 camera.depth_clip_from_view([w, h], jitter(s, settings.spp)),
@@ -1199,11 +1277,12 @@ impl Renderer {
                         targets.copy_draw_args(&mut enc);
                     }
                 }
-                queue.submit([enc.finish()]);
+                progress.submitted(queue.submit([enc.finish()]));
             }
         }
 
         let bytes = self.read_buffer(&readback)?;
+        progress.finish();
         let row = (w * 4) as usize;
         let mut image = RgbaImage::new(w, h);
         image.data = unpad_rows(&bytes, colour_row, row, h);
@@ -1599,6 +1678,11 @@ impl Renderer {
         let points: u32 = cut.batches.iter().map(|b| b.points).sum();
         let most = cut.batches.iter().map(|b| b.points).max().unwrap_or(0);
         let mut small = self.take_small_targets([width, height], most);
+        let mut progress = DrawProgress::begin(
+            self,
+            "sampling",
+            u64::from(iterations) * cut.batches.len() as u64,
+        );
         for s in 0..iterations {
             let layer = s % layers;
             let uniforms = FrameUniforms::new(
@@ -1688,9 +1772,10 @@ impl Renderer {
                         t.resolve(&mut enc);
                     }
                 }
-                queue.submit([enc.finish()]);
+                progress.submitted(queue.submit([enc.finish()]));
             }
         }
+        progress.finish();
         self.keep_small_targets(small);
         let gpu_time = self.gpu_time(timing.as_ref())?;
         self.count_samples(points, iterations);
@@ -1931,6 +2016,7 @@ impl Renderer {
             // One span per batch: the GPU waits for the host between them.
             let timing = self.frame_timer_of(batches as u32);
             let mut points = 0u32;
+            let mut progress = DrawProgress::begin(self, "splatting", batches as u64);
             for b in 0..batches {
                 let cut = stream.take(b)?;
                 let buffers = &cut.buffers;
@@ -1964,9 +2050,10 @@ impl Renderer {
                         t.resolve(&mut enc);
                     }
                 }
-                queue.submit([enc.finish()]);
+                progress.submitted(queue.submit([enc.finish()]));
             }
             let bytes = self.read_buffer(&readback)?;
+            progress.finish();
             let hdr: Vec<[f32; 4]> = unpad_rows(&bytes, row, width as usize * 16, height)
                 .chunks_exact(16)
                 .map(bytemuck::pod_read_unaligned)
@@ -2311,7 +2398,15 @@ impl Renderer {
             let mut readbacks = 0u32;
             let mut splatted = 0u64;
             let mut st = 0u32;
+            // Stacks as they are composited; a frame whose rays all end early stops
+            // short of the total.
+            let reporter = self.reporter();
+            let reported = self.progress.is_some() && stacks > 1;
+            if reported {
+                reporter.stage("density stacks", Some(u64::from(stacks)), "stacks");
+            }
             while st < stacks && needed.is_none() {
+                let group_start = st;
                 let end = match hint {
                     Some(h) if st == 0 => h.clamp(1, stacks),
                     _ => (st + GROUP).min(stacks),
@@ -2375,6 +2470,9 @@ impl Renderer {
                 stacks_run = end;
                 st = end;
                 let bytes = self.read_buffer(&counts_read)?;
+                if reported {
+                    reporter.advance(u64::from(end - group_start));
+                }
                 needed = checks
                     .iter()
                     .zip(bytes.chunks_exact(4))
@@ -2382,6 +2480,9 @@ impl Renderer {
                     .map(|(&k, _)| k + 1);
             }
             let needed = needed.unwrap_or(stacks_run);
+            if reported {
+                reporter.finish_stage();
+            }
             if let Ok(mut h) = self.density_hint.lock() {
                 *h = Some((hint_key, needed));
             }

@@ -348,10 +348,22 @@ fn rays_stop_once_opaque_and_the_next_frame_runs_their_stacks_at_once() {
 
     // Frame-to-frame coherence lives in the renderer: one of this test's own, so that
     // other tests' frames give it no hint.
-    let renderer = renderer_without_hints();
+    let mut renderer = renderer_without_hints();
+    let log = std::sync::Arc::new(Recorded::default());
+    renderer.set_progress(Some(log.clone()));
     let draw = all_points(&f, &cam, w, h);
     let render = |s: &DensitySettings| renderer.render_density(&f, &cam, &draw, w, h, s).unwrap();
     let first = render(&s);
+    // Reported as stacks are composited: those run of the frame's total, then ended.
+    assert_eq!(
+        log.take(),
+        [(
+            "density stacks".to_owned(),
+            Some(u64::from(first.stacks)),
+            u64::from(first.stacks_run),
+            true
+        )]
+    );
     assert_eq!(first.stacks_hint, None);
     assert_eq!(first.readbacks, first.stacks_run.div_ceil(8));
     assert!(first.readbacks >= 2, "{} stacks run", first.stacks_run);

@@ -4,7 +4,7 @@
 
 mod common;
 
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 use common::golden::{self, Tolerance};
 use common::*;
@@ -1910,7 +1910,11 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
         r.set_batch_points(Some(997));
         r
     };
-    let (small_batched, quads_batched) = (batched(true), batched(false));
+    let (mut small_batched, quads_batched) = (batched(true), batched(false));
+    // One of the two reports its passes (and waits for each submission to do so): the
+    // same pixels either way.
+    let log = Arc::new(Recorded::default());
+    small_batched.set_progress(Some(log.clone()));
     assert!(small_batched.batch_limits().0 == 997 && quads_batched.batch_limits().0 == 997);
     let (_d, _p, f) = make_file(&fcc_frame(30), small_build(), &[]);
     let (w, h) = (200, 150);
@@ -1942,6 +1946,9 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
             );
             let a = one.render(&f, &camera, &draw, &settings).unwrap();
             let b = many.render(&f, &camera, &draw, &settings).unwrap();
+            if many.small_sphere_raster() {
+                log.assert_one_stage("drawing", spp as u64 * batches as u64, &case);
+            }
             assert_eq!(b.points, a.points, "{case}");
             assert_eq!(b.points as u64, draw.points, "{case}");
             if spp == 1 {
@@ -1979,6 +1986,10 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
     ] {
         let a = one.sample_sndf(&f, &camera, &draw, &settings).unwrap();
         let b = many.sample_sndf(&f, &camera, &draw, &settings).unwrap();
+        if many.small_sphere_raster() {
+            let submissions = 6 * draw.batches(997, usize::MAX).len() as u64;
+            log.assert_one_stage("sampling", submissions, "S-NDFs");
+        }
         let rays: f64 = a.hist.iter().map(|b| f64::from(b[3])).sum();
         assert!(rays > 120.0 * 90.0 * 6.0 * 0.25, "{rays} rays hit");
         assert!(
@@ -2008,6 +2019,8 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
             assert!(draw.batches(997, usize::MAX).len() >= 3);
             let splat = |r: &Renderer| r.render_splats(&cloud, &camera, draw, w, h, blend).unwrap();
             let (a, b) = (splat(renderer()), splat(&small_batched));
+            let batches = draw.batches(997, usize::MAX).len() as u64;
+            log.assert_one_stage("splatting", batches, &format!("{blend:?}"));
             assert_eq!(b.points, a.points, "{blend:?}, error {error_px} px");
             // Each batch is bound, drawn and dropped in turn.
             assert!(

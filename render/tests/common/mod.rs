@@ -200,3 +200,42 @@ pub fn drawn_spheres_with(
     }
     out
 }
+
+/// One reported stage: its name and total, the units done, and whether it ended.
+pub type StageLog = (String, Option<u64>, u64, bool);
+
+/// A progress reporter that keeps the stages it is told of, in order.
+#[derive(Default)]
+pub struct Recorded(std::sync::Mutex<Vec<StageLog>>);
+
+impl mdlod_render::Progress for Recorded {
+    fn stage(&self, name: &str, total: Option<u64>, _unit: &'static str) {
+        self.0.lock().unwrap().push((name.into(), total, 0, false));
+    }
+    fn advance(&self, amount: u64) {
+        let mut stages = self.0.lock().unwrap();
+        let current = stages.last_mut().expect("an advance before any stage");
+        assert!(!current.3, "an advance after the stage ended");
+        current.2 += amount;
+    }
+    fn finish_stage(&self) {
+        self.0.lock().unwrap().last_mut().expect("no stage").3 = true;
+    }
+}
+
+impl Recorded {
+    /// The stages reported since the last call.
+    pub fn take(&self) -> Vec<StageLog> {
+        std::mem::take(&mut *self.0.lock().unwrap())
+    }
+
+    /// Since the last call: exactly one stage `name` of `total` units, all of them done,
+    /// then ended.
+    pub fn assert_one_stage(&self, name: &str, total: u64, case: &str) {
+        assert_eq!(
+            self.take(),
+            [(name.to_owned(), Some(total), total, true)],
+            "{case}: progress reported"
+        );
+    }
+}
