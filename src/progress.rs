@@ -1,7 +1,7 @@
 //! Progress bars on a terminal, silence in pipes.
 
 use std::io::IsTerminal;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -19,6 +19,14 @@ impl Bar {
             bar: Mutex::new(None),
             enabled: std::io::stderr().is_terminal(),
         }
+    }
+
+    /// A bar for the renderer when stderr is a terminal; none in a pipe, so that the
+    /// renderer does not wait for each submission to report it.
+    pub fn for_renderer() -> Option<Arc<dyn Progress + Send + Sync>> {
+        std::io::stderr()
+            .is_terminal()
+            .then(|| Arc::new(Bar::new()) as Arc<dyn Progress + Send + Sync>)
     }
 }
 

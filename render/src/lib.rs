@@ -704,7 +704,7 @@ pub fn sample_to_file(
     out: &Path,
     opts: &RenderOptions,
 ) -> Result<RenderReport, RenderError> {
-    sample_to_file_at(file, out, opts, None)
+    sample_to_file_at(file, out, opts, None, None)
 }
 
 /// Samples the S-MIP tiles an orthographic view of `file` shows (`opts` in the sndf
@@ -778,12 +778,15 @@ pub fn sample_tiles_to_file(
 }
 
 /// [`sample_to_file`] recording `display_level`: the S-MIP level that shows the intended
-/// image size when the S-NDFs were sampled finer (see [`level0_scale`]).
+/// image size when the S-NDFs were sampled finer (see [`level0_scale`]), and reporting
+/// the choice of the cut and the sampling's iterations to `progress`
+/// ([`Renderer::set_progress`]).
 pub fn sample_to_file_at(
     file: &Path,
     out: &Path,
     opts: &RenderOptions,
     display_level: Option<u32>,
+    progress: Option<std::sync::Arc<dyn Progress + Send + Sync>>,
 ) -> Result<RenderReport, RenderError> {
     let RenderMode::Sndf {
         iterations,
@@ -797,9 +800,12 @@ pub fn sample_to_file_at(
     };
     let t0 = Instant::now();
     let mdlod = MdlodFile::open(file)?;
-    let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
+    let mut renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
+    renderer.set_progress(progress);
     let (camera, traversal, _) = frame_setup(&mdlod, opts)?;
+    renderer.reporter().stage("choosing the cut", None, "nodes");
     let draw = traverse(&camera, &mdlod, &traversal);
+    renderer.reporter().finish_stage();
     mdlod.node_error()?;
     let traversal_time = t0.elapsed();
     let sndf = renderer.sample_sndf_styled(

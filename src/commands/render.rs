@@ -1,13 +1,10 @@
 //! `mdlod render`: a `.mdlod` file to a PNG, headless.
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use mdlod_render::{
-    parse_colour, render_to_png_with, Progress, Projection, RenderMode, RenderOptions, ViewFile,
-    ViewSpec,
+    parse_colour, render_to_png_with, Projection, RenderMode, RenderOptions, ViewFile, ViewSpec,
 };
 
 use crate::progress::Bar;
@@ -356,12 +353,8 @@ pub fn run(args: Args) -> Result<()> {
         ..Default::default()
     };
     // A bar for the choice of the cut and for cuts drawn in several batches or samples
-    // (every particle of 10^8 is nine batches), on a terminal only: in a pipe the
-    // renderer is given no reporter, so it does not wait for each batch to report it.
-    let progress: Option<Arc<dyn Progress + Send + Sync>> = std::io::stderr()
-        .is_terminal()
-        .then(|| Arc::new(Bar::new()) as Arc<dyn Progress + Send + Sync>);
-    let r = render_to_png_with(&args.file, &args.output, &opts, progress)?;
+    // (every particle of 10^8 is nine batches).
+    let r = render_to_png_with(&args.file, &args.output, &opts, Bar::for_renderer())?;
     println!(
         "wrote {} ({}x{}, {} spp) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} hidden clusters and {} hidden particles left out), error {:.2} px{}",
         args.output.display(),

@@ -6,6 +6,8 @@ use std::path::PathBuf;
 use anyhow::Result;
 use mdlod_render::{sample_to_file_at, RenderMode, RenderOptions};
 
+use crate::progress::Bar;
+
 use super::render::ViewArgs;
 
 /// Sample the screen-space normal distributions of one view of a .mdlod file and store
@@ -100,6 +102,7 @@ pub fn run(args: Args) -> Result<()> {
         &args.output,
         &opts,
         (scale > 1).then(|| scale.trailing_zeros()),
+        Bar::for_renderer(),
     )?;
     if scale > 1 {
         println!(
