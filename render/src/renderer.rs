@@ -10,11 +10,13 @@
 //! target (the format encodes) and read back. Later batches are depth-tested against
 //! the earlier ones, so the image is the one batch would give, up to exact depth ties
 //! between points of different batches. With one sample (and in the splat pass) each
-//! batch is packed, uploaded, drawn and dropped in turn ([`BatchStream`]), so memory
+//! batch is packed, uploaded, drawn and dropped in turn (`BatchStream`), so memory
 //! holds one batch however large the cut; several samples keep every batch bound.
 //! GPU time, when the device has timestamp queries, runs from the start of the first
 //! sample's sphere pass to the end of the resolve pass; for batches drawn in turn it is
 //! the sum of each batch's span, without the GPU's waits for the next upload.
+//! Given a progress reporter ([`Renderer::set_progress`]), a pass of several submissions
+//! counts each as the GPU finishes it (`DrawProgress`).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -608,27 +610,30 @@ impl<'r> DrawProgress<'r> {
 
     /// `index` was submitted: waits for the submission before it and counts that done.
     fn submitted(&mut self, index: wgpu::SubmissionIndex) {
-        if !self.on {
-            return;
-        }
-        if let Some(before) = self.pending.replace(index) {
-            let _ = self.renderer.ctx.device.poll(wgpu::PollType::Wait {
-                submission_index: Some(before),
-                timeout: None,
-            });
-            self.renderer.reporter().advance(1);
+        if let (true, Some(before)) = (self.on, self.pending.replace(index)) {
+            self.done(before);
         }
     }
 
     /// The pass is over: waits for its last submission and counts it done.
     fn finish(mut self) {
         if let (true, Some(last)) = (self.on, self.pending.take()) {
-            let _ = self.renderer.ctx.device.poll(wgpu::PollType::Wait {
-                submission_index: Some(last),
-                timeout: None,
-            });
-            self.renderer.reporter().advance(1);
+            self.done(last);
         }
+    }
+
+    fn done(&self, index: wgpu::SubmissionIndex) {
+        let _ = self.renderer.ctx.device.poll(wgpu::PollType::Wait {
+            submission_index: Some(index),
+            timeout: None,
+        });
+        self.renderer.reporter().advance(1);
+    }
+}
+
+/// The stage ends with the pass, also when an error ends it early.
+impl Drop for DrawProgress<'_> {
+    fn drop(&mut self) {
         if self.on {
             self.renderer.reporter().finish_stage();
         }
