@@ -332,29 +332,26 @@ pub fn build_with(
         };
         let point_level = (l + delta_n).min(last);
         let point_ranges = descendant_ranges(&child_ranges, l, point_level);
-        let level_nodes: Vec<NodeRecord> = order[l]
-            .par_iter()
-            .enumerate()
-            .map(|(i, &b)| {
-                let rep = src
-                    .reps()
-                    .expect("levels above the finest are representatives");
-                let rep = &rep.0[b as usize];
-                let cr = &child_ranges[l][i];
-                let pr = &point_ranges[i];
-                NodeRecord {
-                    child_first: cr.start,
-                    child_count: cr.end - cr.start,
-                    point_first: pr.start,
-                    point_count: pr.end - pr.start,
-                    parent: parent_of[i],
-                    quant_node: first + i as u32,
-                    point_level: point_level as u8,
-                    ..rep.node(l)
-                }
-            })
-            .collect();
-        nodes.extend(level_nodes);
+        // Written straight into `nodes` (its capacity holds every level): no temporary
+        // of the level, whose fresh pages the kernel would zero once more.
+        nodes.par_extend(order[l].par_iter().enumerate().map(|(i, &b)| {
+            let rep = src
+                .reps()
+                .expect("levels above the finest are representatives");
+            let rep = &rep.0[b as usize];
+            let cr = &child_ranges[l][i];
+            let pr = &point_ranges[i];
+            NodeRecord {
+                child_first: cr.start,
+                child_count: cr.end - cr.start,
+                point_first: pr.start,
+                point_count: pr.end - pr.start,
+                parent: parent_of[i],
+                quant_node: first + i as u32,
+                point_level: point_level as u8,
+                ..rep.node(l)
+            }
+        }));
     }
     // Encoding node = ancestor on level max(0, point_level - delta_n).
     for id in 0..nodes.len() {
