@@ -264,22 +264,27 @@ fn parts_concatenate_to_the_frame_and_the_frame_converts() {
     // Every part takes the whole frame's radii.
     assert_eq!(dump.frame_species(1).unwrap(), Some(whole.species.clone()));
 
-    let out = dir.path().join("m.mdlod");
+    let f = convert_verified(&path, &dir.path().join("m.mdlod"));
+    assert_eq!(f.particle_count(), 120);
+    let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
+    let expected: Vec<f32> = whole.species.iter().map(|s| s.radius.unwrap()).collect();
+    assert_eq!(radii, expected);
+}
+
+/// Converts the last frame of `path` with the default options and checks the whole file.
+fn convert_verified(path: &Path, out: &Path) -> MdlodFile {
     convert_file(
-        &path,
-        &out,
+        path,
+        out,
         FrameSelect::Last,
         &ReadOptions::default(),
         &ConvertOptions::default(),
         &NoProgress,
     )
     .unwrap();
-    let f = MdlodFile::open(&out).unwrap();
+    let f = MdlodFile::open(out).unwrap();
     f.verify().unwrap();
-    assert_eq!(f.particle_count(), 120);
-    let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
-    let expected: Vec<f32> = whole.species.iter().map(|s| s.radius.unwrap()).collect();
-    assert_eq!(radii, expected);
+    f
 }
 
 fn damaged(dir: &Path, bytes: &[u8]) -> String {
@@ -513,18 +518,7 @@ fn files_written_by_megamol_read_as_written_and_convert() {
             assert!(e.contains(&name), "{name}: {e}");
         }
 
-        let out = dir.path().join(format!("{name}.mdlod"));
-        convert_file(
-            path,
-            &out,
-            FrameSelect::Last,
-            &ReadOptions::default(),
-            &ConvertOptions::default(),
-            &NoProgress,
-        )
-        .unwrap();
-        let m = MdlodFile::open(&out).unwrap();
-        m.verify().unwrap();
+        let m = convert_verified(path, &dir.path().join(format!("{name}.mdlod")));
         assert_eq!(m.particle_count(), 19, "{name}");
         let stored: Vec<f32> = m.metadata().species.iter().map(|s| s.radius).collect();
         assert_eq!(stored, radii, "{name}");
