@@ -12,9 +12,12 @@
 //!    that sorted list, so N processes (a Slurm job array) split the work without talking
 //!    to each other; each writes its own manifest `dataset.shard-I-of-N.json`, and
 //!    [`merge`] joins them into `dataset.json`.
-//! 3. A frame whose output exists, opens (the reader validates its structure) and records
-//!    the same source (path, frame, size and modification time) is skipped; anything else
-//!    is converted again. Leftover temporary files of killed runs are removed first.
+//! 3. A frame whose output exists, opens (the reader validates its structure), records
+//!    the same source (path, frame, size and modification time) and was built with the
+//!    same settings (cluster size, root points, δn, position bits, the radii given now) is
+//!    skipped; anything else is converted again. Leftover temporary files of killed runs
+//!    are removed first: only this shard's own frames' (a shard running beside it never
+//!    writes those) and temporary manifests older than [`STALE_TEMP`].
 //! 4. Frames are converted by a few workers at once, as many as the memory limit allows
 //!    (about [`BYTES_PER_PARTICLE`] per particle each, at most one per thread); each
 //!    conversion is itself parallel. Outputs appear by atomic rename only when complete,
@@ -46,6 +49,11 @@ pub const BYTES_PER_PARTICLE: u64 = 140;
 /// frame, a batch of thousands of small frames spent its time rewriting it.
 pub const MANIFEST_INTERVAL: std::time::Duration = std::time::Duration::from_secs(1);
 
+/// Age from which a leftover temporary manifest is removed: writing one takes
+/// milliseconds, so one this old belongs to no live run (a temporary manifest's name
+/// does not say which shard writes it, so a younger one may be another shard's).
+pub const STALE_TEMP: std::time::Duration = std::time::Duration::from_secs(600);
+
 /// The manifest's file name in a batch directory.
 pub const MANIFEST: &str = "dataset.json";
 
@@ -73,6 +81,11 @@ pub struct Manifest {
     /// `[I, N]` for a shard's manifest; absent in a whole one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shard: Option<[u32; 2]>,
+    /// How many frames the run writing this manifest is responsible for (its shard's
+    /// share of the inputs). A manifest that lists fewer is incomplete: its run is still
+    /// going, failed or was killed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expected_frames: Option<u64>,
     pub frames: Vec<FrameEntry>,
 }
 
@@ -197,11 +210,12 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
     Ok(())
 }
 
-/// The manifest entry of a complete output file.
-fn entry_of(path: &Path, file: &MdlodFile) -> FrameEntry {
+/// The manifest entry of a complete output file of `timestep` (the input's own, or the
+/// frame's position in the whole list for an input without timesteps).
+fn entry_of(path: &Path, file: &MdlodFile, timestep: u64) -> FrameEntry {
     let m = file.metadata();
     FrameEntry {
-        timestep: m.timestep.unwrap_or(0),
+        timestep,
         time: m.time,
         particles: m.particles,
         simulation_box: m.simulation_box.clone(),
@@ -217,6 +231,68 @@ fn entry_of(path: &Path, file: &MdlodFile) -> FrameEntry {
             frame: 0,
         }),
     }
+}
+
+/// Whether `file` was built with the settings a conversion with `options` would use: the
+/// hierarchy parameters, and every radius given in `options` for a species it holds.
+fn same_build(file: &MdlodFile, options: &ConvertOptions) -> bool {
+    let (m, b) = (file.metadata(), &options.build);
+    let params = (
+        m.build.max_cluster_size,
+        m.build.max_root_points,
+        m.build.delta_n,
+        m.build.position_bits,
+    ) == (
+        b.max_cluster_size,
+        b.max_root_points,
+        b.delta_n,
+        b.position_bits,
+    );
+    params
+        && m.species.iter().all(
+            |s| match options.radii.iter().rev().find(|(n, _)| *n == s.name) {
+                Some((_, r)) => *r == s.radius,
+                None => true,
+            },
+        )
+}
+
+/// Removes what killed runs left in `out_dir`: temporary outputs of `timesteps` (this
+/// run's frames, which no other shard writes) and temporary manifests older than
+/// [`STALE_TEMP`]. A file already gone (a concurrent run removed it) is no error.
+fn remove_leftovers(
+    out_dir: &Path,
+    timesteps: &std::collections::HashSet<u64>,
+) -> Result<(), BatchError> {
+    for e in std::fs::read_dir(out_dir).map_err(io(out_dir))?.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(stem) = name.strip_suffix(".tmp") else {
+            continue;
+        };
+        let leftover = if let Some(rest) = stem.strip_prefix(".frame-") {
+            // `.frame-<timestep>.mdlod.<random>.tmp` (the writer's temporary file).
+            rest.split_once(".mdlod.")
+                .and_then(|(t, _)| t.parse::<u64>().ok())
+                .is_some_and(|t| timesteps.contains(&t))
+        } else if stem.starts_with(".dataset.") {
+            e.metadata()
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age > STALE_TEMP)
+        } else {
+            false
+        };
+        if leftover {
+            match std::fs::remove_file(e.path()) {
+                Err(err) if err.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(io(&e.path())(err))
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(())
 }
 
 /// One frame to convert.
@@ -243,14 +319,6 @@ pub fn batch(
         }
     }
     std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
-    // Leftovers of killed runs: temporary outputs and manifests.
-    for e in std::fs::read_dir(out_dir).map_err(io(out_dir))?.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        if (name.starts_with(".frame-") || name.starts_with(".dataset.")) && name.ends_with(".tmp")
-        {
-            std::fs::remove_file(e.path()).map_err(io(&e.path()))?;
-        }
-    }
 
     // Inputs are indexed one at a time. Mapped files stay open; the text of a gzip input
     // is dropped after indexing (with its frames' particle counts noted), so a batch of
@@ -258,21 +326,32 @@ pub fn batch(
     let mut dumps: Vec<Option<DumpFile>> = Vec::with_capacity(inputs.len());
     let mut listed: Vec<Vec<(u64, u64)>> = Vec::with_capacity(inputs.len());
     let mut position = 0u64;
+    // Indexing has the whole memory limit: one input at a time, before any conversion.
+    let mut index_chunks = opts.convert.chunks.clone();
+    index_chunks.memory_limit = opts.memory_limit;
     for p in inputs {
-        let dump = DumpFile::open(p)?;
+        // A large gzip input is decompressed into a working file (removed again below),
+        // not into memory.
+        let bounded =
+            crate::convert::open_bounded(p, &index_chunks, &out_dir.join(MANIFEST), progress)?;
+        let compressed = bounded.text.is_some() || bounded.dump.is_compressed();
+        let dump = &bounded.dump;
         let mut frames = Vec::with_capacity(dump.frame_count());
         for k in 0..dump.frame_count() {
             let timestep = dump.frame_timestep(k).unwrap_or(position);
             position += 1;
-            let particles = if dump.is_compressed() {
-                dump.frame_info(k)?.particles as u64
+            let particles = if compressed {
+                let info = dump
+                    .frame_info(k)
+                    .map_err(|e| bounded.context(p, e.into()))?;
+                info.particles as u64
             } else {
                 0
             };
             frames.push((timestep, particles));
         }
         listed.push(frames);
-        dumps.push((!dump.is_compressed()).then_some(dump));
+        dumps.push((!compressed).then_some(bounded.dump));
     }
     let mut jobs: Vec<Job<'_>> = Vec::new();
     for ((input, dump), frames) in inputs.iter().zip(&dumps).zip(&listed) {
@@ -307,6 +386,7 @@ pub fn batch(
             .collect(),
     };
     let frames_in_shard = mine.len();
+    remove_leftovers(out_dir, &mine.iter().map(|j| j.timestep).collect())?;
 
     // What is already done.
     let manifest_path = out_dir.join(manifest_name(opts.shard));
@@ -315,11 +395,11 @@ pub fn batch(
     for mut job in mine.drain(..) {
         let out = out_dir.join(frame_file_name(job.timestep));
         let want = fingerprint(job.input, job.frame as u64);
-        let complete = MdlodFile::open(&out)
-            .ok()
-            .filter(|f| f.metadata().source.as_ref() == Some(&want));
+        let complete = MdlodFile::open(&out).ok().filter(|f| {
+            f.metadata().source.as_ref() == Some(&want) && same_build(f, &opts.convert)
+        });
         match complete {
-            Some(f) => done.push(entry_of(&out, &f)),
+            Some(f) => done.push(entry_of(&out, &f, job.timestep)),
             None => {
                 if let Some(dump) = job.dump {
                     job.particles = dump
@@ -335,6 +415,7 @@ pub fn batch(
     let manifest = Mutex::new(Manifest {
         mdlod_dataset: 1,
         shard: opts.shard.map(|(i, n)| [i, n]),
+        expected_frames: Some(frames_in_shard as u64),
         frames: done,
     });
     let save = |m: &mut Manifest| -> Result<(), BatchError> {
@@ -355,13 +436,14 @@ pub fn batch(
         .max()
         .unwrap_or(1)
         .max(1);
-    let by_memory = (opts.memory_limit / (largest * BYTES_PER_PARTICLE)).max(1) as usize;
+    let by_memory = (opts.memory_limit / largest.saturating_mul(BYTES_PER_PARTICLE)).max(1);
+    let by_memory = usize::try_from(by_memory).unwrap_or(usize::MAX);
     let jobs = by_memory
         .min(threads)
         .min(opts.max_jobs.unwrap_or(usize::MAX))
         .min(todo.len())
         .max(1);
-    let total_particles: u64 = todo.iter().map(|j| j.particles).sum();
+    let total_particles = todo.iter().fold(0u64, |t, j| t.saturating_add(j.particles));
     let mut convert = opts.convert.clone();
     convert.chunks.memory_limit = opts.memory_limit / jobs as u64;
     let convert = &convert;
@@ -446,7 +528,7 @@ pub fn batch(
                                 convert_frame(&frame, Some(source), &out, convert, &quiet)?;
                             }
                             let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
-                            Ok(entry_of(&out, &f))
+                            Ok(entry_of(&out, &f, job.timestep))
                         })()
                         .map_err(in_context)
                     })();
@@ -541,6 +623,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         ));
     }
     let mut frames = Vec::new();
+    let mut expected_total = Some(0u64);
     for (_, _, path) in &shards {
         let text = std::fs::read(path).map_err(io(path))?;
         let m: Manifest = serde_json::from_slice(&text)
@@ -553,6 +636,23 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
                 ));
             }
         }
+        if let Some(expected) = m.expected_frames {
+            let listed = m.frames.len() as u64;
+            if listed < expected {
+                return Err(manifest_err(
+                    path,
+                    format!(
+                        "lists {listed} of the shard's {expected} frames: the shard has not \
+                         finished (it is still running, failed or was killed; rerun it, and \
+                         it converts only what is missing)"
+                    ),
+                ));
+            }
+        }
+        // Known only when every shard says (manifests of older runs do not).
+        expected_total = expected_total
+            .zip(m.expected_frames)
+            .map(|(t, e)| t.saturating_add(e));
         frames.extend(m.frames);
     }
     frames.sort_by_key(|f| f.timestep);
@@ -565,6 +665,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     let merged = Manifest {
         mdlod_dataset: 1,
         shard: None,
+        expected_frames: expected_total,
         frames,
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;

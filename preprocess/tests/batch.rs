@@ -213,3 +213,145 @@ fn gzip_inputs_are_reopened_by_their_worker_and_large_ones_decompressed_to_worki
     let whole = run("d", false, Some(300));
     assert_eq!(chunked.frames, whole.frames);
 }
+
+/// A 3-frame XYZ trajectory: no timesteps, so frames are numbered by position.
+fn xyz_trajectory(dir: &Path) -> PathBuf {
+    let p = dir.join("traj.xyz");
+    let mut text = String::new();
+    for frame in 0..3 {
+        text.push_str("40\nframe without a timestep\n");
+        for i in 0..40 {
+            let x = (i % 4) as f64 * 2.0 + frame as f64 * 0.1;
+            let y = ((i / 4) % 5) as f64 * 2.0;
+            let z = (i / 20) as f64 * 2.0;
+            text.push_str(&format!("Ar {x} {y} {z}\n"));
+        }
+    }
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn frames_without_timesteps_are_listed_by_position_and_shards_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = xyz_trajectory(dir.path());
+    let whole = dir.path().join("whole");
+    batch(std::slice::from_ref(&src), &whole, &opts(), &NoProgress).unwrap();
+    let m = read_manifest(&whole).unwrap();
+    assert_eq!(
+        m.frames
+            .iter()
+            .map(|f| (f.timestep, f.file.as_str(), f.source.frame))
+            .collect::<Vec<_>>(),
+        [
+            (0, "frame-0.mdlod", 0),
+            (1, "frame-1.mdlod", 1),
+            (2, "frame-2.mdlod", 2)
+        ]
+    );
+    assert_eq!(m.expected_frames, Some(3));
+    let sharded = dir.path().join("sharded");
+    for i in 0..2 {
+        let o = BatchOptions {
+            shard: Some((i, 2)),
+            ..opts()
+        };
+        batch(std::slice::from_ref(&src), &sharded, &o, &NoProgress).unwrap();
+    }
+    assert_eq!(merge(&sharded).unwrap().frames, m.frames);
+}
+
+#[test]
+fn merge_refuses_a_shard_that_has_not_finished() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("d");
+    for i in 0..2 {
+        let o = BatchOptions {
+            shard: Some((i, 2)),
+            ..opts()
+        };
+        batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    }
+    // Shard 1 as a killed run leaves it: one frame not yet listed.
+    let path = out.join("dataset.shard-1-of-2.json");
+    let mut m: Manifest = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!((m.frames.len(), m.expected_frames), (3, Some(3)));
+    m.frames.pop();
+    std::fs::write(&path, serde_json::to_vec(&m).unwrap()).unwrap();
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains("dataset.shard-1-of-2.json") && e.contains("lists 2 of the shard's 3 frames"),
+        "{e}"
+    );
+    // Rerunning the shard completes it, and the merge goes through.
+    let o = BatchOptions {
+        shard: Some((1, 2)),
+        ..opts()
+    };
+    let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 3));
+    let merged = merge(&out).unwrap();
+    assert_eq!((merged.frames.len(), merged.expected_frames), (6, Some(6)));
+}
+
+#[test]
+fn a_shard_removes_only_its_own_leftovers_and_stale_manifests() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("d");
+    std::fs::create_dir_all(&out).unwrap();
+    // Timesteps 0, 200, 400 are shard 0's; 100, 300, 500 shard 1's.
+    let leftover = |name: &str| {
+        let p = out.join(name);
+        std::fs::write(&p, b"partial").unwrap();
+        p
+    };
+    let own = leftover(".frame-200.mdlod.k1ll3d.tmp");
+    let others = leftover(".frame-300.mdlod.wr1t1n.tmp");
+    let fresh_manifest = leftover(".dataset.fr35h.tmp");
+    let stale_manifest = leftover(".dataset.0ld.tmp");
+    let f = std::fs::File::options()
+        .write(true)
+        .open(&stale_manifest)
+        .unwrap();
+    f.set_modified(std::time::SystemTime::now() - 2 * mdlod_preprocess::batch::STALE_TEMP)
+        .unwrap();
+    drop(f);
+    let o = BatchOptions {
+        shard: Some((0, 2)),
+        ..opts()
+    };
+    batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert!(!own.exists(), "this shard's leftover is removed");
+    assert!(
+        !stale_manifest.exists(),
+        "an old temporary manifest is removed"
+    );
+    assert!(others.exists(), "another shard's file in the making stays");
+    assert!(fresh_manifest.exists(), "a manifest being written stays");
+}
+
+#[test]
+fn changed_build_settings_redo_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("d");
+    batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    let mut o = opts();
+    o.convert.build.position_bits = 8;
+    let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (6, 0), "position bits changed");
+    let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 6), "nothing changed");
+    let species = MdlodFile::open(out.join("frame-0.mdlod"))
+        .unwrap()
+        .metadata()
+        .species[0]
+        .clone();
+    o.convert.radii = vec![(species.name.clone(), species.radius * 2.0)];
+    let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (6, 0), "a radius changed");
+    let file = MdlodFile::open(out.join("frame-0.mdlod")).unwrap();
+    assert_eq!(file.metadata().species[0].radius, species.radius * 2.0);
+}

@@ -17,8 +17,8 @@ use crate::progress::Bar;
     mdlod batch run/dump.*.lammpstrj -o run.mdlod.d --radius Cu=1.28\n  \
     mdlod batch traj.bin -o traj.d --shard 3/16        # one node of 16\n  \
     mdlod batch --merge traj.d                          # after all shards\n\n\
-    In a Slurm job array the shard defaults to SLURM_ARRAY_TASK_ID of \
-    SLURM_ARRAY_TASK_COUNT.")]
+    In a Slurm job array the shard defaults to the task's position in the array \
+    (from SLURM_ARRAY_TASK_ID, _MIN and _STEP) of SLURM_ARRAY_TASK_COUNT.")]
 pub struct Args {
     /// The inputs: files, file sets (shell globs), `%` piece sets.
     #[arg(required_unless_present = "merge")]
@@ -67,19 +67,32 @@ fn shard(args: &Args) -> Result<Option<(u32, u32)>> {
     if let Some(s) = &args.shard {
         return parse_shard(s).map(Some);
     }
-    let var = |name: &str| {
-        std::env::var(name)
-            .ok()
-            .and_then(|v| v.trim().parse::<u32>().ok())
+    slurm_shard(|name| std::env::var(name).ok())
+}
+
+/// The shard of a Slurm job array task: the task's position in the array, of the array's
+/// task count. Array indices may start anywhere and step (`--array=1-31:2` runs tasks 1,
+/// 3, ..., 31: 16 tasks, the task with ID 5 is shard 2 of 16).
+fn slurm_shard(var: impl Fn(&str) -> Option<String>) -> Result<Option<(u32, u32)>> {
+    let number = |name: &str| var(name).and_then(|v| v.trim().parse::<u32>().ok());
+    let (Some(id), Some(count)) = (
+        number("SLURM_ARRAY_TASK_ID"),
+        number("SLURM_ARRAY_TASK_COUNT"),
+    ) else {
+        return Ok(None);
     };
-    match (var("SLURM_ARRAY_TASK_ID"), var("SLURM_ARRAY_TASK_COUNT")) {
-        (Some(id), Some(count)) => {
-            // Array indices may start anywhere (--array=1-16).
-            let i = id.saturating_sub(var("SLURM_ARRAY_TASK_MIN").unwrap_or(0));
-            parse_shard(&format!("{i}/{count}")).map(Some)
-        }
-        _ => Ok(None),
+    let min = number("SLURM_ARRAY_TASK_MIN").unwrap_or(0);
+    let step = number("SLURM_ARRAY_TASK_STEP").unwrap_or(1).max(1);
+    let offset = id
+        .checked_sub(min)
+        .with_context(|| format!("SLURM_ARRAY_TASK_ID {id} is below SLURM_ARRAY_TASK_MIN {min}"))?;
+    if offset % step != 0 {
+        bail!(
+            "SLURM_ARRAY_TASK_ID {id} is not on the array's step {step} from {min}: \
+             give the shard with --shard I/N"
+        );
     }
+    parse_shard(&format!("{}/{count}", offset / step)).map(Some)
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -133,4 +146,67 @@ pub fn run(args: Args) -> Result<()> {
         report.manifest.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::slurm_shard;
+
+    fn env<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
+        move |name| {
+            vars.iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, v)| v.to_string())
+        }
+    }
+
+    #[test]
+    fn slurm_arrays_with_an_offset_and_a_step_give_every_shard_once() {
+        // --array=1-31:2: 16 tasks with IDs 1, 3, ..., 31.
+        let mut shards = vec![];
+        for id in (1..=31).step_by(2) {
+            let id = id.to_string();
+            let vars = [
+                ("SLURM_ARRAY_TASK_ID", id.as_str()),
+                ("SLURM_ARRAY_TASK_MIN", "1"),
+                ("SLURM_ARRAY_TASK_STEP", "2"),
+                ("SLURM_ARRAY_TASK_COUNT", "16"),
+            ];
+            shards.push(slurm_shard(env(&vars)).unwrap().unwrap());
+        }
+        assert_eq!(shards, (0..16).map(|i| (i, 16)).collect::<Vec<_>>());
+        // Without a step or a minimum: the ID itself.
+        let vars = [
+            ("SLURM_ARRAY_TASK_ID", "3"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ];
+        assert_eq!(slurm_shard(env(&vars)).unwrap(), Some((3, 4)));
+        // Not in an array: no shard.
+        assert_eq!(slurm_shard(env(&[])).unwrap(), None);
+    }
+
+    #[test]
+    fn slurm_ids_off_the_array_are_errors_not_wrong_shards() {
+        let off_step = [
+            ("SLURM_ARRAY_TASK_ID", "4"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_STEP", "2"),
+            ("SLURM_ARRAY_TASK_COUNT", "16"),
+        ];
+        let e = slurm_shard(env(&off_step)).unwrap_err().to_string();
+        assert!(e.contains("not on the array's step 2"), "{e}");
+        let below = [
+            ("SLURM_ARRAY_TASK_ID", "0"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_COUNT", "2"),
+        ];
+        let e = slurm_shard(env(&below)).unwrap_err().to_string();
+        assert!(e.contains("below SLURM_ARRAY_TASK_MIN"), "{e}");
+        let past = [
+            ("SLURM_ARRAY_TASK_ID", "5"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ];
+        let e = slurm_shard(env(&past)).unwrap_err().to_string();
+        assert!(e.contains("index must be below the count"), "{e}");
+    }
 }
