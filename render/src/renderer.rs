@@ -847,7 +847,8 @@ impl Renderer {
     /// (at most 8 bytes a point, and up to 4 bytes of padding a range) and the ranges
     /// (48 bytes each) must fit one storage binding. Every pass draws a larger packed cut
     /// in several batches ([`CutSource::bind_batches`]; S-NDF sampling packs its own the
-    /// same way); a streaming pool's cut is bound in one.
+    /// same way; a streaming pool's cut too, counting its ranges as split at page
+    /// boundaries).
     pub fn batch_limits(&self) -> (u32, usize) {
         let l = self.ctx.device.limits();
         let max = l.max_storage_buffer_binding_size.min(l.max_buffer_size);

@@ -29,15 +29,20 @@
 //!   instead of one frame per level of its cut.
 //! - Requests go to the loader thread largest first; it copies the pages out of the
 //!   memory-mapped file (taking the page faults off the render thread) and sends them
-//!   back. Each drawn range is split at page boundaries and points into its slots.
+//!   back, before each page taking in what later frames asked for, so the largest
+//!   page wanted goes first across frames. Each drawn range is split at page boundaries
+//!   and points into its slots; a cut larger than one storage binding is bound in
+//!   batches, as the passes bind any cut.
 //! - Once a frame requests nothing and has nothing in flight, it is *complete*: with a
 //!   pool large enough for the cut it draws exactly what [`crate::render_image`] draws.
 //! - [`StreamingRenderer::render`] draws spheres; [`StreamingRenderer::prepare`] does a
 //!   frame's bookkeeping alone, and the pool then binds the cut as a [`CutSource`] for
 //!   any pass (splats, the density volume: [`crate::render_stream_frame`]).
 
+use std::collections::BinaryHeap;
 use std::collections::{HashMap, HashSet};
 use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -169,8 +174,11 @@ pub struct StreamingRenderer<'r> {
     unused: u32,
     frame: u64,
     evicted_total: u64,
-    requests: Option<Sender<Vec<PageId>>>,
+    /// Requests to the loader: pages with their priority (projected size in pixels).
+    requests: Option<Sender<Vec<(f32, PageId)>>>,
     loaded: Receiver<LoadedPage>,
+    /// Tells the loader to stop at its next page (set when the renderer is dropped).
+    stop: Arc<AtomicBool>,
     /// Pages received by [`StreamingRenderer::wait_for_loads`], installed next frame.
     backlog: Vec<LoadedPage>,
     loader: Option<JoinHandle<()>>,
@@ -228,6 +236,71 @@ fn load_page(file: &MdlodFile, id: PageId, page_points: u32, packer: &AttrPacker
         positions,
         attrs,
         error,
+    }
+}
+
+/// A request in the loader's queue: larger pages first, then earlier requests.
+#[derive(PartialEq)]
+struct Queued {
+    size_px: f32,
+    order: u64,
+    id: PageId,
+}
+
+impl Eq for Queued {}
+
+impl Ord for Queued {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.size_px
+            .total_cmp(&other.size_px)
+            .then(other.order.cmp(&self.order))
+    }
+}
+
+impl PartialOrd for Queued {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+/// The loader thread: takes every batch of requests that has come in into one queue
+/// before each page, so a page a later frame asks for goes ahead of smaller pages of
+/// earlier frames (largest first across frames, not batch after batch), loads the
+/// largest with `load` and sends it back. Returns when `stop` is set (checked before
+/// every page: a dropped renderer does not wait for the queue to drain), when the
+/// requests end and the queue is empty, or when nobody receives.
+fn run_loader(
+    requests: &Receiver<Vec<(f32, PageId)>>,
+    loaded: &Sender<LoadedPage>,
+    stop: &AtomicBool,
+    load: impl Fn(PageId) -> LoadedPage,
+) {
+    let mut queue = BinaryHeap::new();
+    let mut order = 0u64;
+    let mut take = |batch: Vec<(f32, PageId)>, queue: &mut BinaryHeap<Queued>| {
+        for (size_px, id) in batch {
+            queue.push(Queued { size_px, order, id });
+            order += 1;
+        }
+    };
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return;
+        }
+        if queue.is_empty() {
+            match requests.recv() {
+                Ok(batch) => take(batch, &mut queue),
+                Err(_) => return,
+            }
+        }
+        while let Ok(batch) = requests.try_recv() {
+            take(batch, &mut queue);
+        }
+        let Some(next) = queue.pop() else { continue };
+        let page = load(next.id);
+        if stop.load(Ordering::Relaxed) || loaded.send(page).is_err() {
+            return;
+        }
     }
 }
 
@@ -322,22 +395,19 @@ impl<'r> StreamingRenderer<'r> {
         );
         let species = storage_buffer(device, "species", bytemuck::cast_slice(&packer.species));
 
-        let (req_tx, req_rx) = channel::<Vec<PageId>>();
+        let (req_tx, req_rx) = channel::<Vec<(f32, PageId)>>();
         let (res_tx, res_rx) = channel::<LoadedPage>();
+        let stop = Arc::new(AtomicBool::new(false));
+        let loader_stop = stop.clone();
         let loader_file = file.clone();
         let loader_page_points = page_points;
         let loader_packer = packer.clone();
         let loader = std::thread::Builder::new()
             .name("mdlod-page-loader".into())
             .spawn(move || {
-                while let Ok(batch) = req_rx.recv() {
-                    for id in batch {
-                        let page = load_page(&loader_file, id, loader_page_points, &loader_packer);
-                        if res_tx.send(page).is_err() {
-                            return;
-                        }
-                    }
-                }
+                run_loader(&req_rx, &res_tx, &loader_stop, |id| {
+                    load_page(&loader_file, id, loader_page_points, &loader_packer)
+                })
             })
             .map_err(|e| RenderError::Gpu(format!("cannot start the page loader: {e}")))?;
         Ok(StreamingRenderer {
@@ -360,6 +430,7 @@ impl<'r> StreamingRenderer<'r> {
             evicted_total: 0,
             requests: Some(req_tx),
             loaded: res_rx,
+            stop,
             backlog: Vec::new(),
             loader: Some(loader),
             last_view: None,
@@ -540,21 +611,20 @@ impl<'r> StreamingRenderer<'r> {
         let mut arrived: Vec<LoadedPage> = std::mem::take(&mut self.backlog);
         arrived.extend(self.loaded.try_iter());
         let mut victims = None;
+        // Every arrived page is taken off the pending list and the staged ones written
+        // also when one is bad, so the pool stays consistent for the next frame.
+        let mut bad = None;
         for page in arrived {
-            self.install(page, &mut stats, &mut victims)?;
+            if let Err(e) = self.install(page, &mut stats, &mut victims) {
+                bad.get_or_insert(e);
+            }
         }
         self.write_staged();
+        if let Some(e) = bad {
+            return Err(e);
+        }
 
         let file = self.file.clone();
-        // The pool's cut is bound in one batch ([`CutSource::bind`]), so its budget stays
-        // within one storage binding.
-        let traversal = &TraversalSettings {
-            budget_points: traversal
-                .budget_points
-                .min(u64::from(self.renderer.batch_limits().0))
-                .max(1),
-            ..*traversal
-        };
         // The cut, on every core, opening the nodes whose pages are all resident; then
         // the nodes it asked to open are answered again in one order (those drawn
         // first, then largest first) to mark the pages in use and request the missing
@@ -612,9 +682,9 @@ impl<'r> StreamingRenderer<'r> {
         // Requests, largest first.
         wanted.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         let mut batch = Vec::new();
-        for (_, id) in wanted {
+        for (size, id) in wanted {
             if self.pending.insert(id) {
-                batch.push(id);
+                batch.push((size, id));
             }
         }
         stats.requested = batch.len();
@@ -664,7 +734,7 @@ impl<'r> StreamingRenderer<'r> {
             let end = d.first + d.count;
             while a < end {
                 let page = a / self.page_points;
-                let b = end.min((page + 1) * self.page_points);
+                let b = page_end(page, self.page_points, end);
                 let id = PageId {
                     level: d.level,
                     page,
@@ -694,10 +764,27 @@ impl CutSource for StreamingRenderer<'_> {
         self.packer.style()
     }
 
+    /// Batches within one storage binding each, counting the ranges after their split at
+    /// page boundaries ([`stream_batch_limits`]).
+    fn batch_lists(&self, draw: &DrawList) -> Option<Vec<DrawList>> {
+        let (points, ranges) = self.renderer.batch_limits();
+        let (points, ranges) = stream_batch_limits(points, ranges, self.page_points);
+        Some(draw.batches(points, ranges)).filter(|b| b.len() > 1)
+    }
+
     /// Binds the pool's pages for `draw`: the last [`StreamingRenderer::prepare`]d cut,
     /// or any reordering or subset of its points (every page it touches is resident).
     fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError> {
         let (ranges, point_range) = self.ranges_of(draw)?;
+        let (max_points, max_ranges) = self.renderer.batch_limits();
+        if ranges.len() > max_ranges || point_range.len() > max_points as usize {
+            return Err(RenderError::InvalidOptions(format!(
+                "a batch of {} points in {} ranges is more than one storage binding holds \
+                 ({max_points} points, {max_ranges} ranges): bind it in batches",
+                point_range.len(),
+                ranges.len()
+            )));
+        }
         let device = &self.renderer.ctx.device;
         let ranges_buf = storage_buffer(device, "ranges", bytemuck::cast_slice(&ranges));
         let point_range_buf =
@@ -728,13 +815,25 @@ impl CutSource for StreamingRenderer<'_> {
 
 impl Drop for StreamingRenderer<'_> {
     fn drop(&mut self) {
+        // The loader stops at its next page instead of loading the rest of its queue.
+        self.stop.store(true, Ordering::Relaxed);
         self.requests.take();
-        // Unblock a loader waiting to send.
-        while self.loaded.try_recv().is_ok() {}
         if let Some(h) = self.loader.take() {
             let _ = h.join();
         }
     }
+}
+
+/// The points and ranges of one batch of a pool's cut such that, once its ranges are
+/// split at page boundaries, the batch stays within `max_points` points and `max_ranges`
+/// ranges: a range of `c` points becomes at most `c / page_points + 2` pieces, so a batch
+/// of `p` points in `r` ranges has at most `p / page_points + 2 r` of them.
+fn stream_batch_limits(max_points: u32, max_ranges: usize, page_points: u32) -> (u32, usize) {
+    let pp = page_points.max(1) as usize;
+    let half = max_ranges / 2;
+    let points = max_points.min(u32::try_from(half.saturating_mul(pp)).unwrap_or(u32::MAX));
+    let ranges = (max_ranges - points as usize / pp) / 2;
+    (points.max(1), ranges.max(1))
 }
 
 struct PoolResidency<'a> {
@@ -746,6 +845,13 @@ struct PoolResidency<'a> {
     used: PageSet,
     wanted: Vec<(f32, PageId)>,
     pool_limited: bool,
+}
+
+/// Where the part of a range ending at `end` that lies in page `page` ends: the page's
+/// end or `end`, whichever is first (a level's last page may end past `u32::MAX`).
+fn page_end(page: u32, page_points: u32, end: u32) -> u32 {
+    let page_end = (u64::from(page) + 1) * u64::from(page_points);
+    u32::try_from(page_end).map_or(end, |p| p.min(end))
 }
 
 /// The pages holding the children of node `id`.
@@ -808,5 +914,130 @@ impl Residency for PoolResidency<'_> {
         self.used.clear();
         self.wanted.clear();
         self.pool_limited = false;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn page(level: u8, page: u32) -> PageId {
+        PageId { level, page }
+    }
+
+    fn loaded(id: PageId) -> LoadedPage {
+        LoadedPage {
+            id,
+            positions: vec![],
+            attrs: vec![],
+            error: None,
+        }
+    }
+
+    #[test]
+    fn the_loader_takes_later_requests_into_one_queue_largest_first() {
+        let (req_tx, req_rx) = channel();
+        let (res_tx, res_rx) = channel();
+        // Two frames' requests queued before the loader starts: the second frame's
+        // larger page goes ahead of the first frame's smaller ones; equal sizes keep
+        // the order they were asked in.
+        req_tx
+            .send(vec![
+                (8.0, page(2, 0)),
+                (2.0, page(3, 0)),
+                (2.0, page(3, 1)),
+            ])
+            .unwrap();
+        req_tx
+            .send(vec![(30.0, page(1, 0)), (2.0, page(3, 2))])
+            .unwrap();
+        drop(req_tx);
+        run_loader(&req_rx, &res_tx, &AtomicBool::new(false), loaded);
+        let order: Vec<PageId> = res_rx.try_iter().map(|p| p.id).collect();
+        assert_eq!(
+            order,
+            [page(1, 0), page(2, 0), page(3, 0), page(3, 1), page(3, 2)]
+        );
+    }
+
+    #[test]
+    fn a_stopped_loader_does_not_load_the_rest_of_its_queue() {
+        let (req_tx, req_rx) = channel();
+        let (res_tx, res_rx) = channel();
+        req_tx
+            .send((0..1000).map(|i| (1.0, page(1, i))).collect())
+            .unwrap();
+        let stop = AtomicBool::new(false);
+        let count = std::cell::Cell::new(0);
+        // The renderer is dropped while the third page loads.
+        run_loader(&req_rx, &res_tx, &stop, |id| {
+            count.set(count.get() + 1);
+            if count.get() == 3 {
+                stop.store(true, Ordering::Relaxed);
+            }
+            loaded(id)
+        });
+        assert_eq!(count.get(), 3);
+        assert_eq!(res_rx.try_iter().count(), 2);
+        // A receiver gone stops it too.
+        let (req_tx, req_rx) = channel();
+        let (res_tx, res_rx) = channel();
+        req_tx
+            .send(vec![(1.0, page(1, 0)), (1.0, page(1, 1))])
+            .unwrap();
+        drop(res_rx);
+        let count = std::cell::Cell::new(0);
+        run_loader(&req_rx, &res_tx, &AtomicBool::new(false), |id| {
+            count.set(count.get() + 1);
+            loaded(id)
+        });
+        assert_eq!(count.get(), 1);
+    }
+
+    #[test]
+    fn page_ends_do_not_overflow_near_the_last_point_index() {
+        assert_eq!(page_end(0, 64, 100), 64);
+        assert_eq!(page_end(1, 64, 100), 100);
+        // The last page of a level holding nearly 2^32 points.
+        let last = u32::MAX / 64;
+        assert_eq!(page_end(last, 64, u32::MAX), u32::MAX);
+        assert_eq!(page_end(last - 1, 64, u32::MAX), last * 64);
+    }
+
+    #[test]
+    fn batches_of_a_pool_cut_fit_one_binding_once_split_at_pages() {
+        // Every range of every batch split at 4-point pages, counted against the limits,
+        // for ranges at all offsets and sizes.
+        for (max_points, max_ranges, pp) in [(1000, 60, 4), (1000, 600, 64), (7, 3, 4), (1, 1, 4)] {
+            let (points, ranges) = stream_batch_limits(max_points, max_ranges, pp);
+            let mut draw = DrawList::default();
+            let mut first = 0;
+            for k in 0..500u32 {
+                let count = 1 + (k * 37) % 29;
+                draw.ranges.push(crate::traversal::DrawRange {
+                    level: 1,
+                    first: first + k % 3,
+                    count,
+                    quant_node: 0,
+                });
+                draw.points += u64::from(count);
+                first += count + 5;
+            }
+            for b in draw.batches(points, ranges) {
+                let pieces: u32 = b
+                    .ranges
+                    .iter()
+                    .map(|r| (r.first + r.count - 1) / pp - r.first / pp + 1)
+                    .sum();
+                assert!(
+                    b.points <= u64::from(max_points),
+                    "{max_points} {max_ranges}"
+                );
+                assert!(
+                    pieces as usize <= max_ranges,
+                    "{pieces} pieces > {max_ranges} (limits {points}, {ranges})"
+                );
+            }
+        }
     }
 }

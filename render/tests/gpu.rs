@@ -684,6 +684,18 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
         stats.evicted_total > 0,
         "switching views should evict: {stats:?}"
     );
+    drop(tiny);
+
+    // A pool's cut larger than one batch (here made small: 61 points) is bound in
+    // batches, its ranges split at page boundaries: the same pixels.
+    let mut batched = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    batched.set_batch_points(Some(61));
+    let mut pool = StreamingRenderer::with_page_points(&batched, f.clone(), pool, PAGE).unwrap();
+    for (i, (camera, traversal, reference)) in references.iter().enumerate() {
+        let (frame, draw, _, _) = converge(&mut pool, camera, traversal, &settings);
+        assert!(draw.points > 4 * 61, "view {i}: {} points", draw.points);
+        assert_eq!(&frame.image, reference, "view {i}: batched pool");
+    }
 }
 
 /// Renders `o` with and without occlusion culling: the images must be identical, and
