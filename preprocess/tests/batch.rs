@@ -14,6 +14,14 @@ fn opts() -> BatchOptions {
     }
 }
 
+/// [`opts`] for shard `i` of `n`.
+fn shard(i: u32, n: u32) -> BatchOptions {
+    BatchOptions {
+        shard: Some((i, n)),
+        ..opts()
+    }
+}
+
 /// A copy of the 6-frame real dump (so its modification time can change).
 fn input(dir: &Path) -> PathBuf {
     let p = dir.join("melt.dump");
@@ -83,10 +91,7 @@ fn shards_merge_into_the_manifest_of_an_unsharded_run() {
     let sharded = dir.path().join("sharded");
     let mut counts = vec![];
     for i in 0..4 {
-        let o = BatchOptions {
-            shard: Some((i, 4)),
-            ..opts()
-        };
+        let o = shard(i, 4);
         let r = batch(std::slice::from_ref(&src), &sharded, &o, &NoProgress).unwrap();
         counts.push(r.frames_in_shard);
         if i == 2 {
@@ -117,10 +122,7 @@ fn conflicting_inputs_and_bad_shards_are_errors() {
         e.to_string().contains("melt.dump frame 0")
             && e.to_string().contains("cu_melt.step.0.bin frame 0")
     );
-    let o = BatchOptions {
-        shard: Some((4, 4)),
-        ..opts()
-    };
+    let o = shard(4, 4);
     assert!(matches!(
         batch(&[a], &dir.path().join("o"), &o, &NoProgress),
         Err(BatchError::BadShard(4, 4))
@@ -252,10 +254,7 @@ fn frames_without_timesteps_are_listed_by_position_and_shards_merge() {
     assert_eq!(m.expected_frames, Some(3));
     let sharded = dir.path().join("sharded");
     for i in 0..2 {
-        let o = BatchOptions {
-            shard: Some((i, 2)),
-            ..opts()
-        };
+        let o = shard(i, 2);
         batch(std::slice::from_ref(&src), &sharded, &o, &NoProgress).unwrap();
     }
     assert_eq!(merge(&sharded).unwrap().frames, m.frames);
@@ -267,10 +266,7 @@ fn merge_refuses_a_shard_that_has_not_finished() {
     let src = input(dir.path());
     let out = dir.path().join("d");
     for i in 0..2 {
-        let o = BatchOptions {
-            shard: Some((i, 2)),
-            ..opts()
-        };
+        let o = shard(i, 2);
         batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
     }
     // Shard 1 as a killed run leaves it: one frame not yet listed.
@@ -285,10 +281,7 @@ fn merge_refuses_a_shard_that_has_not_finished() {
         "{e}"
     );
     // Rerunning the shard completes it, and the merge goes through.
-    let o = BatchOptions {
-        shard: Some((1, 2)),
-        ..opts()
-    };
+    let o = shard(1, 2);
     let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (0, 3));
     let merged = merge(&out).unwrap();
@@ -318,10 +311,7 @@ fn a_shard_removes_only_its_own_leftovers_and_stale_manifests() {
     f.set_modified(std::time::SystemTime::now() - 2 * mdlod_preprocess::batch::STALE_TEMP)
         .unwrap();
     drop(f);
-    let o = BatchOptions {
-        shard: Some((0, 2)),
-        ..opts()
-    };
+    let o = shard(0, 2);
     batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
     assert!(!own.exists(), "this shard's leftover is removed");
     assert!(
