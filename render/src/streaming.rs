@@ -23,10 +23,14 @@
 //!   together with the pages already used is not requested (the pool, like the point
 //!   budget, caps the cut), so the working set of a still view always fits and loading
 //!   converges.
-//! - From the second frame of a still view on, the pages of the view's complete cut (the
-//!   traversal as if everything were resident) are requested once, after what the frame
-//!   itself uses and within the pool: a still view then completes in about three frames
-//!   instead of one frame per level of its cut.
+//! - On the second frame of a still view, the view's complete cut (the traversal as if
+//!   everything were resident) is computed once and its pages requested within the
+//!   pool: a still view then completes in about three frames instead of one frame per
+//!   level of its cut. From then on the complete cut's pages are marked before those the
+//!   frame draws, and the frame traverses at the error the complete cut was drawn at (a
+//!   budget can make it coarser than asked), so a pool that holds the complete cut
+//!   always reaches it: the pages of the coarser cuts drawn on the way are evicted for
+//!   it, never the other way round.
 //! - Requests go to the loader thread largest first; it copies the pages out of the
 //!   memory-mapped file (taking the page faults off the render thread) and sends them
 //!   back, before each page taking in what later frames asked for, so the largest
@@ -185,6 +189,9 @@ pub struct StreamingRenderer<'r> {
     /// The view of the last frame, and whether its complete cut was requested already.
     last_view: Option<(Camera, TraversalSettings)>,
     looked_ahead: bool,
+    /// The error the complete cut of the still view was drawn at and the nodes it
+    /// opens, with their sizes, once looked ahead (see [`StreamingRenderer::prepare`]).
+    complete_cut: Option<(f32, Vec<(u32, f32)>)>,
     /// Pages installed this frame and not yet written to the pool's buffers.
     staged: SlotWrites,
 }
@@ -435,6 +442,7 @@ impl<'r> StreamingRenderer<'r> {
             loader: Some(loader),
             last_view: None,
             looked_ahead: false,
+            complete_cut: None,
             staged: SlotWrites::default(),
         })
     }
@@ -633,7 +641,25 @@ impl<'r> StreamingRenderer<'r> {
             page_points: self.page_points,
             resident: &self.resident,
         };
-        let (draw, asked) = traverse_shared(camera, &file, traversal, &pages_resident);
+        let view = (camera.clone(), *traversal);
+        let still = self.last_view.as_ref() == Some(&view);
+        if !still {
+            self.looked_ahead = false;
+            self.complete_cut = None;
+        }
+        // Once the still view's complete cut is known, the frame's traversal starts at
+        // the error that cut was drawn at (coarser than asked when the occlusion
+        // traversal restarted to meet the budget): with its pages resident it then makes
+        // the complete cut's decisions, instead of a finer cut that defers nodes, which
+        // the pool, holding the complete cut, would never have room for.
+        let frame_traversal = match &self.complete_cut {
+            Some((error_px, _)) => TraversalSettings {
+                error_px: *error_px,
+                ..*traversal
+            },
+            None => *traversal,
+        };
+        let (draw, asked) = traverse_shared(camera, &file, &frame_traversal, &pages_resident);
         file.node_error()?;
         let mut residency = PoolResidency {
             page_points: self.page_points,
@@ -648,27 +674,37 @@ impl<'r> StreamingRenderer<'r> {
         let (drawn, missing): (Vec<_>, Vec<_>) = asked
             .into_iter()
             .partition(|&(id, _)| pages_resident.resident(&file, id));
+        // Look ahead once per still view: on its second frame, the pages of the
+        // complete cut (the traversal as if everything were resident) are requested
+        // at once, largest first within the pool. Without it each frame could ask only
+        // for the children of nodes it could draw, one level per frame (15 frames, most
+        // of them traversals, at 2×10^8 particles). The complete cut's nodes are kept
+        // and marked first on every later frame of the view, before those the frame
+        // draws: a coarser cut drawn on the way (under a point budget it may open nodes
+        // the complete cut does not) then never keeps the complete cut's pages out of a
+        // pool that holds them.
+        let unfinished = !missing.is_empty() || draw.deferred_nodes > 0;
+        if still && !self.looked_ahead && unfinished {
+            self.looked_ahead = true;
+            let (list, complete) = traverse_shared(camera, &file, traversal, &EveryPage);
+            file.node_error()?;
+            let error_px = crate::traversal::error_of_restarts(traversal.error_px, &list);
+            self.complete_cut = Some((error_px, complete));
+        }
+        let mut limited = None;
+        if let Some((_, complete)) = self.complete_cut.as_ref().filter(|_| unfinished) {
+            for &(id, size) in complete {
+                residency.can_open(&file, id, size);
+            }
+            // The pool is limited when it cannot hold the complete cut, not when the
+            // frame's own coarser nodes no longer fit beside it.
+            limited = Some(residency.pool_limited);
+        }
         for (id, size) in drawn.into_iter().chain(missing) {
             residency.can_open(&file, id, size);
         }
-        // Look ahead once per still view: on its second frame, the pages of the
-        // complete cut (the traversal as if everything were resident) are requested
-        // at once, largest first within the pool, after those this frame uses. Without
-        // it each frame could ask only for the children of nodes it could draw, one
-        // level per frame (15 frames, most of them traversals, at 2×10^8 particles).
-        let view = (camera.clone(), *traversal);
-        let still = self.last_view.as_ref() == Some(&view);
-        if !still {
-            self.looked_ahead = false;
-        } else if !self.looked_ahead && (!residency.wanted.is_empty() || draw.deferred_nodes > 0) {
-            self.looked_ahead = true;
-            let (_, complete) = traverse_shared(camera, &file, traversal, &EveryPage);
-            file.node_error()?;
-            let limited = residency.pool_limited;
-            for (id, size) in complete {
-                residency.can_open(&file, id, size);
-            }
-            residency.pool_limited = limited;
+        if let Some(l) = limited {
+            residency.pool_limited = l;
         }
         self.last_view = Some(view);
         let (used, mut wanted, pool_limited) = (

@@ -497,7 +497,7 @@ pub fn traverse_with(
                 return list;
             }
             residency.restart();
-            error_px = (error_px * 1.5).max(0.5);
+            error_px = coarser(error_px);
         }
     }
     largest_first(camera, file, settings, residency)
@@ -633,7 +633,7 @@ fn traverse_tiled(
                 return (list, asked);
             }
         }
-        error_px = (error_px * 1.5).max(0.5);
+        error_px = coarser(error_px);
     }
     let mut tile = TileResidency {
         shared: residency,
@@ -646,6 +646,17 @@ fn traverse_tiled(
 /// Coarsening steps (×1.5 each) the occlusion traversal tries before it falls back to
 /// the largest-first cut, which always meets the budget.
 const MAX_RESTARTS: u32 = 24;
+
+/// The error of the occlusion traversal's next attempt after one over the budget.
+fn coarser(error_px: f32) -> f32 {
+    (error_px * 1.5).max(0.5)
+}
+
+/// The error the occlusion traversal drew `list` at, when asked for `error_px`: coarser
+/// once per restart. Traversing at it from the start makes the same cut in one attempt.
+pub fn error_of_restarts(error_px: f32, list: &DrawList) -> f32 {
+    (0..list.restarts).fold(error_px, |e, _| coarser(e))
+}
 
 /// The cut without occlusion: largest projected size first, up to the budget.
 fn largest_first(

@@ -698,6 +698,82 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
     }
 }
 
+/// A pool just large enough for a view's cut under a point budget that binds: the
+/// pages of coarser cuts drawn on the way must not keep the final cut's pages out.
+#[test]
+fn a_tight_pool_under_a_binding_budget_settles_on_the_direct_image() {
+    use mdlod_render::StreamingRenderer;
+    const PAGE: u32 = 16;
+    let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
+    let f = std::sync::Arc::new(f);
+    let (w, h) = (160u32, 120u32);
+    let view = ViewSpec::Orbit {
+        azimuth_deg: 30.0,
+        elevation_deg: 20.0,
+        zoom: 0.6,
+        projection: Projection::Perspective,
+    };
+    let mut o = opts(w, h);
+    o.error_px = 1.0;
+    o.view = view.clone();
+    o.background = [0.2, 0.2, 0.2];
+    let (_, full) = render_image(renderer(), &f, &o).unwrap();
+    let settings = FrameSettings {
+        width: w,
+        height: h,
+        spp: 1,
+        background_srgb: o.background,
+        ..Default::default()
+    };
+    let camera = camera_for(&f, &view, w, h).unwrap();
+    for (share, occlusion) in [
+        (0.3, OcclusionMode::PixelCentres),
+        (0.6, OcclusionMode::PixelCentres),
+        (0.3, OcclusionMode::Off),
+        (0.6, OcclusionMode::Off),
+    ] {
+        o.occlusion = occlusion != OcclusionMode::Off;
+        o.budget = ((full.particles_drawn + full.nodes_drawn) as f64 * share) as u64;
+        let (reference, report) = render_image(renderer(), &f, &o).unwrap();
+        assert!(report.budget_limited, "share {share}, {occlusion:?}");
+        let traversal = TraversalSettings {
+            viewport: [w, h],
+            error_px: o.error_px,
+            budget_points: report.budget,
+            occlusion,
+        };
+        let used = {
+            let mut unlimited =
+                StreamingRenderer::with_page_points(renderer(), f.clone(), 1 << 30, PAGE).unwrap();
+            let (frame, _, stats, _) = converge(&mut unlimited, &camera, &traversal, &settings);
+            assert!(
+                frame.image == reference,
+                "share {share}, {occlusion:?}: unlimited pool"
+            );
+            stats.used_pages
+        };
+        let pool = used as u64 * StreamingRenderer::slot_bytes(f.position_bits(), PAGE);
+        let mut tight =
+            StreamingRenderer::with_page_points(renderer(), f.clone(), pool, PAGE).unwrap();
+        let mut last = None;
+        for i in 1..=40 {
+            let (frame, _, stats) = tight.render(&camera, &traversal, &settings).unwrap();
+            if stats.settled() {
+                last = Some((frame, stats, i));
+                break;
+            }
+            tight.wait_for_loads(std::time::Duration::from_secs(10));
+        }
+        let (frame, stats, frames) = last.expect("the tight pool did not settle in 40 frames");
+        assert!(
+            frame.image == reference,
+            "share {share}, {occlusion:?}: tight pool of {used} pages settled after {frames} frames on \
+             another image: {stats:?}"
+        );
+        assert!(stats.complete, "share {share}, {occlusion:?}: {stats:?}");
+    }
+}
+
 /// Renders `o` with and without occlusion culling: the images must be identical, and
 /// the culled frame must draw fewer than `kept` of the spheres. Returns the culled
 /// frame's report.
