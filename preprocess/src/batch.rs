@@ -237,6 +237,8 @@ fn entry_of(path: &Path, file: &MdlodFile, timestep: u64) -> FrameEntry {
 /// hierarchy parameters, and every radius given in `options` for a species it holds.
 fn same_build(file: &MdlodFile, options: &ConvertOptions) -> bool {
     let (m, b) = (file.metadata(), &options.build);
+    // The file records the δn in effect: at most its levels below the top.
+    let last = u32::try_from(file.level_count().saturating_sub(1)).unwrap_or(u32::MAX);
     let params = (
         m.build.max_cluster_size,
         m.build.max_root_points,
@@ -245,7 +247,7 @@ fn same_build(file: &MdlodFile, options: &ConvertOptions) -> bool {
     ) == (
         b.max_cluster_size,
         b.max_root_points,
-        b.delta_n,
+        b.delta_n.min(last),
         b.position_bits,
     );
     params

@@ -334,6 +334,16 @@ fn changed_build_settings_redo_the_frames() {
     assert_eq!((r.converted, r.skipped), (6, 0), "position bits changed");
     let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (0, 6), "nothing changed");
+    // The largest δn, past the frames' levels: recorded as the δn in effect, which a
+    // rerun with the same settings recognises.
+    let levels = MdlodFile::open(out.join("frame-0.mdlod"))
+        .unwrap()
+        .level_count();
+    assert!(levels < 9, "{levels} levels");
+    o.convert.build.delta_n = 8;
+    batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 6), "δn past the levels");
     let species = MdlodFile::open(out.join("frame-0.mdlod"))
         .unwrap()
         .metadata()

@@ -189,11 +189,21 @@ pub struct StreamingRenderer<'r> {
     /// The view of the last frame, and whether its complete cut was requested already.
     last_view: Option<(Camera, TraversalSettings)>,
     looked_ahead: bool,
-    /// The error the complete cut of the still view was drawn at and the nodes it
-    /// opens, with their sizes, once looked ahead (see [`StreamingRenderer::prepare`]).
-    complete_cut: Option<(f32, Vec<(u32, f32)>)>,
+    /// The complete cut of the still view, once looked ahead (see
+    /// [`StreamingRenderer::prepare`]).
+    complete_cut: Option<CompleteCut>,
     /// Pages installed this frame and not yet written to the pool's buffers.
     staged: SlotWrites,
+}
+
+/// A still view's complete cut: what the traversal decides with every page resident.
+struct CompleteCut {
+    /// The error it was drawn at: the asked one, coarser after each restart.
+    error_px: f32,
+    /// Times the occlusion traversal restarted coarser to meet the budget.
+    restarts: u32,
+    /// The nodes it opens, with their projected sizes, largest first.
+    nodes: Vec<(u32, f32)>,
 }
 
 /// A run of consecutive slots' words, written to the pool in one go.
@@ -653,13 +663,18 @@ impl<'r> StreamingRenderer<'r> {
         // the complete cut's decisions, instead of a finer cut that defers nodes, which
         // the pool, holding the complete cut, would never have room for.
         let frame_traversal = match &self.complete_cut {
-            Some((error_px, _)) => TraversalSettings {
-                error_px: *error_px,
+            Some(c) => TraversalSettings {
+                error_px: c.error_px,
                 ..*traversal
             },
             None => *traversal,
         };
-        let (draw, asked) = traverse_shared(camera, &file, &frame_traversal, &pages_resident);
+        let (mut draw, asked) = traverse_shared(camera, &file, &frame_traversal, &pages_resident);
+        if let Some(c) = &self.complete_cut {
+            // Started past the restarts: they still limited it.
+            draw.restarts += c.restarts;
+            draw.budget_limited |= c.restarts > 0;
+        }
         file.node_error()?;
         let mut residency = PoolResidency {
             page_points: self.page_points,
@@ -688,13 +703,21 @@ impl<'r> StreamingRenderer<'r> {
             self.looked_ahead = true;
             let (list, complete) = traverse_shared(camera, &file, traversal, &EveryPage);
             file.node_error()?;
-            let error_px = crate::traversal::error_of_restarts(traversal.error_px, &list);
-            self.complete_cut = Some((error_px, complete));
+            self.complete_cut = Some(CompleteCut {
+                error_px: crate::traversal::error_of_restarts(traversal.error_px, &list),
+                restarts: list.restarts,
+                nodes: complete,
+            });
         }
         let mut limited = None;
-        if let Some((_, complete)) = self.complete_cut.as_ref().filter(|_| unfinished) {
-            for &(id, size) in complete {
+        if let Some(c) = self.complete_cut.as_ref().filter(|_| unfinished) {
+            for &(id, size) in &c.nodes {
                 residency.can_open(&file, id, size);
+                // Full, and a node refused: nothing more of the cut fits (a pool too
+                // small for it would otherwise go through the whole cut every frame).
+                if residency.pool_limited && residency.used.len() >= residency.capacity {
+                    break;
+                }
             }
             // The pool is limited when it cannot hold the complete cut, not when the
             // frame's own coarser nodes no longer fit beside it.
