@@ -95,6 +95,10 @@ pub struct SourceInfo {
     /// Modification time, seconds since the Unix epoch, when the file system gives one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub modified_unix: Option<i64>,
+    /// Nanoseconds past `modified_unix` (0-999 999 999), where the file system keeps
+    /// them: a file rewritten within the same second is still told apart.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub modified_nanos: Option<u32>,
     /// Index of the frame within the source (0-based).
     #[serde(default)]
     pub frame: u64,

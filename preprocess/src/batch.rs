@@ -13,7 +13,8 @@
 //!    to each other; each writes its own manifest `dataset.shard-I-of-N.json`, and
 //!    [`merge`] joins them into `dataset.json`.
 //! 3. A frame whose output exists, opens (the reader validates its structure), records
-//!    the same source (path, frame, size and modification time) and was built with the
+//!    the same source (path, frame, size and modification time, to the nanosecond where
+//!    the file system keeps it) and was built with the
 //!    same settings (cluster size, root points, δn, position bits, the radii given now) is
 //!    skipped; anything else is converted again. Leftover temporary files of killed runs
 //!    are removed first: only this shard's own frames' (a shard running beside it never
@@ -154,22 +155,37 @@ pub fn fingerprint(input: &Path, frame: u64) -> SourceInfo {
         Ok(p) if !input.exists() => p,
         _ => vec![input.to_path_buf()],
     };
-    let mut size = 0;
-    let mut modified: Option<i64> = None;
+    let mut size = 0u64;
+    // The latest (seconds, nanoseconds) of the pieces.
+    let mut modified: Option<(i64, Option<u32>)> = None;
     for f in &files {
         let s = crate::convert::source_info(f, frame);
-        size += s.size;
-        modified = match (modified, s.modified_unix) {
-            (Some(a), Some(b)) => Some(a.max(b)),
-            (a, b) => a.or(b),
-        };
+        size = size.saturating_add(s.size);
+        let this = s.modified_unix.map(|t| (t, s.modified_nanos));
+        modified = modified.max(this);
     }
     SourceInfo {
         path: input.display().to_string(),
         size,
-        modified_unix: modified,
+        modified_unix: modified.map(|m| m.0),
+        modified_nanos: modified.and_then(|m| m.1),
         frame,
     }
+}
+
+/// Whether an output's recorded source is `now`'s: the same path, frame, size and
+/// modification time. A file written before sources recorded nanoseconds is compared
+/// to the second.
+fn same_source(recorded: &SourceInfo, now: &SourceInfo) -> bool {
+    let nanos = match recorded.modified_nanos {
+        Some(_) => now.modified_nanos,
+        None => None,
+    };
+    *recorded
+        == SourceInfo {
+            modified_nanos: nanos,
+            ..now.clone()
+        }
 }
 
 /// The output file name of a timestep.
@@ -228,6 +244,7 @@ fn entry_of(path: &Path, file: &MdlodFile, timestep: u64) -> FrameEntry {
             path: String::new(),
             size: 0,
             modified_unix: None,
+            modified_nanos: None,
             frame: 0,
         }),
     }
@@ -398,7 +415,11 @@ pub fn batch(
         let out = out_dir.join(frame_file_name(job.timestep));
         let want = fingerprint(job.input, job.frame as u64);
         let complete = MdlodFile::open(&out).ok().filter(|f| {
-            f.metadata().source.as_ref() == Some(&want) && same_build(f, &opts.convert)
+            f.metadata()
+                .source
+                .as_ref()
+                .is_some_and(|s| same_source(s, &want))
+                && same_build(f, &opts.convert)
         });
         match complete {
             Some(f) => done.push(entry_of(&out, &f, job.timestep)),
@@ -682,4 +703,42 @@ pub fn read_manifest(out_dir: &Path) -> Result<Manifest, BatchError> {
         path,
         message: format!("not a dataset manifest: {e}"),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sources_differ_by_nanoseconds_unless_recorded_without_them() {
+        let now = SourceInfo {
+            path: "dump.lammpstrj".into(),
+            size: 1000,
+            modified_unix: Some(1_700_000_000),
+            modified_nanos: Some(250),
+            frame: 3,
+        };
+        assert!(same_source(&now, &now));
+        let other_nanos = SourceInfo {
+            modified_nanos: Some(251),
+            ..now.clone()
+        };
+        assert!(!same_source(&other_nanos, &now));
+        // Written by a version that kept whole seconds only.
+        let seconds_only = SourceInfo {
+            modified_nanos: None,
+            ..now.clone()
+        };
+        assert!(same_source(&seconds_only, &now));
+        let other_second = SourceInfo {
+            modified_unix: Some(1_700_000_001),
+            ..seconds_only
+        };
+        assert!(!same_source(&other_second, &now));
+        let other_frame = SourceInfo {
+            frame: 4,
+            ..now.clone()
+        };
+        assert!(!same_source(&other_frame, &now));
+    }
 }

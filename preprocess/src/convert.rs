@@ -337,13 +337,15 @@ pub fn convert_dump(
 /// Describes a source file for the metadata.
 pub fn source_info(path: &Path, frame: u64) -> SourceInfo {
     let meta = std::fs::metadata(path).ok();
+    let modified = meta
+        .as_ref()
+        .and_then(|m| m.modified().ok())
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());
     SourceInfo {
         path: path.display().to_string(),
         size: meta.as_ref().map_or(0, |m| m.len()),
-        modified_unix: meta
-            .and_then(|m| m.modified().ok())
-            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-            .map(|d| d.as_secs() as i64),
+        modified_unix: modified.map(|d| i64::try_from(d.as_secs()).unwrap_or(i64::MAX)),
+        modified_nanos: modified.map(|d| d.subsec_nanos()),
         frame,
     }
 }

@@ -80,6 +80,23 @@ fn every_frame_converts_once_and_reruns_redo_only_what_changed() {
     drop(f);
     let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (6, 0));
+
+    // Rewritten within the same second, to the same size: told apart by the
+    // nanoseconds of its modification time.
+    let f = std::fs::File::options().write(true).open(&src).unwrap();
+    f.set_modified(
+        std::time::SystemTime::UNIX_EPOCH + std::time::Duration::new(1_000_000, 500_000_000),
+    )
+    .unwrap();
+    drop(f);
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(
+        (r.converted, r.skipped),
+        (6, 0),
+        "same second, other nanoseconds"
+    );
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 6));
 }
 
 #[test]
