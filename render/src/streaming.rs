@@ -148,7 +148,8 @@ struct LoadedPage {
     id: PageId,
     positions: Vec<u32>,
     attrs: Vec<u32>,
-    error: Option<String>,
+    /// Why the page could not be packed (a corrupt species index, a bad node record).
+    error: Option<RenderError>,
 }
 
 #[derive(Clone, Copy)]
@@ -244,10 +245,7 @@ fn load_page(file: &MdlodFile, id: PageId, page_points: u32, packer: &AttrPacker
         &file.positions(level).bytes()[r.start * bpp..r.end * bpp],
     );
     let mut attrs = Vec::new();
-    let error = packer
-        .push(file, level, r.start, r.len(), &mut attrs)
-        .err()
-        .map(|e| e.to_string());
+    let error = packer.push(file, level, r.start, r.len(), &mut attrs).err();
     LoadedPage {
         id,
         positions,
@@ -496,7 +494,7 @@ impl<'r> StreamingRenderer<'r> {
     ) -> Result<(), RenderError> {
         self.pending.remove(&page.id);
         if let Some(e) = page.error {
-            return Err(RenderError::Gpu(e));
+            return Err(e);
         }
         if self.resident.contains_key(&page.id) {
             return Ok(());

@@ -776,6 +776,109 @@ fn a_tight_pool_under_a_binding_budget_settles_on_the_direct_image() {
     }
 }
 
+/// A corrupt species index, found when its page is packed for the pool (opening reads no
+/// particle data): the frame that installs it fails with the file and the particle
+/// named, and the pool stays whole: the other pages that arrived with it are installed,
+/// so a view that does not reach the particle still completes to the intact file's image.
+#[test]
+fn a_corrupt_page_is_an_error_naming_the_particle_and_the_pool_stays_whole() {
+    use mdlod_format::SectionKind;
+    use mdlod_render::StreamingRenderer;
+    const PAGE: u32 = 16;
+    let (_d, path, intact) = make_file(&fcc_frame(12), small_build(), &[]);
+    let (w, h) = (160u32, 120u32);
+    // The whole crystal, and a close-up of one corner from above.
+    let whole = ViewSpec::Orbit {
+        azimuth_deg: 30.0,
+        elevation_deg: 20.0,
+        zoom: 0.6,
+        projection: Projection::Perspective,
+    };
+    let mut corner = camera_for(
+        &intact,
+        &ViewSpec::Orbit {
+            azimuth_deg: 0.0,
+            elevation_deg: 90.0,
+            zoom: 5.0,
+            projection: Projection::Orthographic,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    corner.target = Vec3::new(5.0, 5.0, 20.0);
+    let mut o = opts(w, h);
+    o.view = ViewSpec::Camera(corner.clone());
+    let (reference, _) = render_image(renderer(), &intact, &o).unwrap();
+    // A particle far from that corner gets species 999 (the file has one species).
+    let last = intact.level_count() - 1;
+    let positions = intact.decode_level(last).unwrap();
+    let bad = positions
+        .iter()
+        .position(|p| p[0] > 35.0 && p[1] > 35.0)
+        .unwrap();
+    let species = intact
+        .sections()
+        .iter()
+        .find(|s| SectionKind::from_code(s.kind) == Some(SectionKind::Species))
+        .unwrap()
+        .offset;
+    drop(intact);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let at = species as usize + 2 * bad;
+    bytes[at..at + 2].copy_from_slice(&999u16.to_le_bytes());
+    std::fs::write(&path, bytes).unwrap();
+    let f = std::sync::Arc::new(MdlodFile::open(&path).unwrap());
+
+    let mut pool =
+        StreamingRenderer::with_page_points(renderer(), f.clone(), 1 << 30, PAGE).unwrap();
+    let settings = FrameSettings {
+        width: w,
+        height: h,
+        spp: 1,
+        background_srgb: o.background,
+        ..Default::default()
+    };
+    let traversal = TraversalSettings {
+        viewport: [w, h],
+        error_px: 0.0,
+        budget_points: u64::MAX,
+        occlusion: OcclusionMode::PixelCentres,
+    };
+    let camera = camera_for(&f, &whole, w, h).unwrap();
+    let mut error = None;
+    for _ in 0..20 {
+        match pool.render(&camera, &traversal, &settings) {
+            Ok(_) => pool.wait_for_loads(std::time::Duration::from_secs(10)),
+            Err(e) => {
+                error = Some(e.to_string());
+                break;
+            }
+        }
+    }
+    let error = error.expect("the corrupt page was drawn without an error");
+    assert!(
+        error.contains("t.mdlod")
+            && error.contains(&format!("SPECIES, particle {bad}"))
+            && error.contains("species index 999"),
+        "{error}"
+    );
+    let traversal = TraversalSettings {
+        error_px: o.error_px,
+        budget_points: o.budget,
+        ..traversal
+    };
+    for frames in 1..=20 {
+        let (frame, _, stats) = pool.render(&corner, &traversal, &settings).unwrap();
+        if stats.complete {
+            assert!(frame.image == reference, "the corner after {frames} frames");
+            return;
+        }
+        pool.wait_for_loads(std::time::Duration::from_secs(5));
+    }
+    panic!("the corner view did not complete in 20 frames after the corrupt page");
+}
+
 /// Renders `o` with and without occlusion culling: the images must be identical, and
 /// the culled frame must draw fewer than `kept` of the spheres. Returns the culled
 /// frame's report.
