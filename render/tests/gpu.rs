@@ -551,6 +551,30 @@ fn timing_fcc_block() {
     }
 }
 
+/// A close-up from straight above, orthographic, of the part of `f` around `target`.
+fn corner_camera(f: &MdlodFile, w: u32, h: u32, target: Vec3) -> Camera {
+    let view = ViewSpec::Orbit {
+        azimuth_deg: 0.0,
+        elevation_deg: 90.0,
+        zoom: 5.0,
+        projection: Projection::Orthographic,
+    };
+    let mut camera = camera_for(f, &view, w, h).unwrap();
+    camera.target = target;
+    camera
+}
+
+/// Sphere frames of `w` × `h`, one sample per pixel, on `background`.
+fn stream_settings(w: u32, h: u32, background: [f32; 3]) -> FrameSettings {
+    FrameSettings {
+        width: w,
+        height: h,
+        spp: 1,
+        background_srgb: background,
+        ..Default::default()
+    }
+}
+
 /// Renders frames of one view through `s` until the stream is complete.
 fn converge(
     s: &mut mdlod_render::StreamingRenderer<'_>,
@@ -594,30 +618,12 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
         h,
     )
     .unwrap();
-    let mut corner = camera_for(
-        &f,
-        &ViewSpec::Orbit {
-            azimuth_deg: 0.0,
-            elevation_deg: 90.0,
-            zoom: 5.0,
-            projection: Projection::Orthographic,
-        },
-        w,
-        h,
-    )
-    .unwrap();
-    corner.target = Vec3::new(5.0, 5.0, 20.0);
+    let corner = corner_camera(&f, w, h, Vec3::new(5.0, 5.0, 20.0));
     let views = [ViewSpec::Camera(far), ViewSpec::Camera(corner)];
     let mut o = opts(w, h);
     o.error_px = 5.0;
     o.background = [0.2, 0.2, 0.2];
-    let settings = FrameSettings {
-        width: w,
-        height: h,
-        spp: 1,
-        background_srgb: o.background,
-        ..Default::default()
-    };
+    let settings = stream_settings(w, h, o.background);
     let mut references = vec![];
     let mut used = vec![];
     {
@@ -718,13 +724,7 @@ fn a_tight_pool_under_a_binding_budget_settles_on_the_direct_image() {
     o.view = view.clone();
     o.background = [0.2, 0.2, 0.2];
     let (_, full) = render_image(renderer(), &f, &o).unwrap();
-    let settings = FrameSettings {
-        width: w,
-        height: h,
-        spp: 1,
-        background_srgb: o.background,
-        ..Default::default()
-    };
+    let settings = stream_settings(w, h, o.background);
     let camera = camera_for(&f, &view, w, h).unwrap();
     for (share, occlusion) in [
         (0.3, OcclusionMode::PixelCentres),
@@ -794,19 +794,7 @@ fn a_corrupt_page_is_an_error_naming_the_particle_and_the_pool_stays_whole() {
         zoom: 0.6,
         projection: Projection::Perspective,
     };
-    let mut corner = camera_for(
-        &intact,
-        &ViewSpec::Orbit {
-            azimuth_deg: 0.0,
-            elevation_deg: 90.0,
-            zoom: 5.0,
-            projection: Projection::Orthographic,
-        },
-        w,
-        h,
-    )
-    .unwrap();
-    corner.target = Vec3::new(5.0, 5.0, 20.0);
+    let corner = corner_camera(&intact, w, h, Vec3::new(5.0, 5.0, 20.0));
     let mut o = opts(w, h);
     o.view = ViewSpec::Camera(corner.clone());
     let (reference, _) = render_image(renderer(), &intact, &o).unwrap();
@@ -832,13 +820,7 @@ fn a_corrupt_page_is_an_error_naming_the_particle_and_the_pool_stays_whole() {
 
     let mut pool =
         StreamingRenderer::with_page_points(renderer(), f.clone(), 1 << 30, PAGE).unwrap();
-    let settings = FrameSettings {
-        width: w,
-        height: h,
-        spp: 1,
-        background_srgb: o.background,
-        ..Default::default()
-    };
+    let settings = stream_settings(w, h, o.background);
     let traversal = TraversalSettings {
         viewport: [w, h],
         error_px: 0.0,
@@ -1213,19 +1195,7 @@ fn every_mode_but_sndfs_streams_through_a_small_pool_to_the_direct_image() {
     let (w, h) = (64u32, 48u32);
     let error_px = 3.0;
     // A close-up of one corner of the block.
-    let mut corner = camera_for(
-        &f,
-        &ViewSpec::Orbit {
-            azimuth_deg: 0.0,
-            elevation_deg: 90.0,
-            zoom: 5.0,
-            projection: Projection::Orthographic,
-        },
-        w,
-        h,
-    )
-    .unwrap();
-    corner.target = Vec3::new(6.0, 6.0, 45.0);
+    let corner = corner_camera(&f, w, h, Vec3::new(6.0, 6.0, 45.0));
     let view = ViewSpec::Camera(corner);
     // A pool just large enough for the view's cut, well below the file: the view
     // completes, after frames that start from the top node alone.
