@@ -60,6 +60,8 @@ fn dataset(n: u64) -> PathBuf {
         // Raw arrays (the values the text dump would hold, without its text), converted
         // out of core within 4 GiB as `benches/out_of_core.sh` does, then removed.
         let dir = PathBuf::from("data/bench/raw");
+        // A fresh clone has no such directory yet.
+        std::fs::create_dir_all(&dir).unwrap();
         eprintln!(
             "generating {n} particles as raw arrays in {}",
             dir.display()
