@@ -288,6 +288,10 @@ fn remove_leftovers(
         let Some(stem) = name.strip_suffix(".tmp") else {
             continue;
         };
+        // Only files are ours (a directory of that name is somebody else's).
+        if !e.file_type().is_ok_and(|t| t.is_file()) {
+            continue;
+        }
         let leftover = if let Some(rest) = stem.strip_prefix(".frame-") {
             // `.frame-<timestep>.mdlod.<random>.tmp` (the writer's temporary file).
             rest.split_once(".mdlod.")

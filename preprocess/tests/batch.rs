@@ -320,6 +320,9 @@ fn a_shard_removes_only_its_own_leftovers_and_stale_manifests() {
     let own = leftover(".frame-200.mdlod.k1ll3d.tmp");
     let others = leftover(".frame-300.mdlod.wr1t1n.tmp");
     let fresh_manifest = leftover(".dataset.fr35h.tmp");
+    // A directory named like a leftover is not one.
+    let not_ours = out.join(".frame-0.mdlod.d1r.tmp");
+    std::fs::create_dir(&not_ours).unwrap();
     let stale_manifest = leftover(".dataset.0ld.tmp");
     let f = std::fs::File::options()
         .write(true)
@@ -337,6 +340,7 @@ fn a_shard_removes_only_its_own_leftovers_and_stale_manifests() {
     );
     assert!(others.exists(), "another shard's file in the making stays");
     assert!(fresh_manifest.exists(), "a manifest being written stays");
+    assert!(not_ours.is_dir());
 }
 
 #[test]
