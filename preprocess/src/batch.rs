@@ -268,12 +268,9 @@ fn same_build(file: &MdlodFile, options: &ConvertOptions) -> bool {
         b.position_bits,
     );
     params
-        && m.species.iter().all(
-            |s| match options.radii.iter().rev().find(|(n, _)| *n == s.name) {
-                Some((_, r)) => *r == s.radius,
-                None => true,
-            },
-        )
+        && m.species.iter().all(|s| {
+            crate::species::radius_override(&options.radii, &s.name).is_none_or(|r| r == s.radius)
+        })
 }
 
 /// Removes what killed runs left in `out_dir`: temporary outputs of `timesteps` (this

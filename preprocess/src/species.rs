@@ -104,8 +104,8 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
             if let Some(r) = s.radius.filter(|r| r.is_finite() && *r > 0.0) {
                 radius = r;
             }
-            if let Some((_, r)) = overrides.iter().rev().find(|(n, _)| *n == s.name) {
-                radius = *r;
+            if let Some(r) = radius_override(overrides, &s.name) {
+                radius = r;
             }
             Species {
                 name: s.name.clone(),
@@ -114,6 +114,15 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
             }
         })
         .collect()
+}
+
+/// The radius `overrides` give species `name` (the last one naming it wins).
+pub fn radius_override(overrides: &[(String, f32)], name: &str) -> Option<f32> {
+    overrides
+        .iter()
+        .rev()
+        .find(|(n, _)| n == name)
+        .map(|(_, r)| *r)
 }
 
 /// Parses `NAME=RADIUS`.

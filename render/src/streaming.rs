@@ -187,11 +187,10 @@ pub struct StreamingRenderer<'r> {
     /// Pages received by [`StreamingRenderer::wait_for_loads`], installed next frame.
     backlog: Vec<LoadedPage>,
     loader: Option<JoinHandle<()>>,
-    /// The view of the last frame, and whether its complete cut was requested already.
+    /// The view of the last frame.
     last_view: Option<(Camera, TraversalSettings)>,
-    looked_ahead: bool,
-    /// The complete cut of the still view, once looked ahead (see
-    /// [`StreamingRenderer::prepare`]).
+    /// The complete cut of that view, once it was still for two frames and looked ahead
+    /// (see [`StreamingRenderer::prepare`]).
     complete_cut: Option<CompleteCut>,
     /// Pages installed this frame and not yet written to the pool's buffers.
     staged: SlotWrites,
@@ -199,9 +198,8 @@ pub struct StreamingRenderer<'r> {
 
 /// A still view's complete cut: what the traversal decides with every page resident.
 struct CompleteCut {
-    /// The error it was drawn at: the asked one, coarser after each restart.
-    error_px: f32,
-    /// Times the occlusion traversal restarted coarser to meet the budget.
+    /// Times the occlusion traversal restarted coarser to meet the budget (the error it
+    /// was drawn at follows: [`crate::traversal::error_of_restarts`]).
     restarts: u32,
     /// The nodes it opens, with their projected sizes, largest first.
     nodes: Vec<(u32, f32)>,
@@ -449,7 +447,6 @@ impl<'r> StreamingRenderer<'r> {
             backlog: Vec::new(),
             loader: Some(loader),
             last_view: None,
-            looked_ahead: false,
             complete_cut: None,
             staged: SlotWrites::default(),
         })
@@ -652,7 +649,6 @@ impl<'r> StreamingRenderer<'r> {
         let view = (camera.clone(), *traversal);
         let still = self.last_view.as_ref() == Some(&view);
         if !still {
-            self.looked_ahead = false;
             self.complete_cut = None;
         }
         // Once the still view's complete cut is known, the frame's traversal starts at
@@ -662,7 +658,7 @@ impl<'r> StreamingRenderer<'r> {
         // the pool, holding the complete cut, would never have room for.
         let frame_traversal = match &self.complete_cut {
             Some(c) => TraversalSettings {
-                error_px: c.error_px,
+                error_px: crate::traversal::error_of_restarts(traversal.error_px, c.restarts),
                 ..*traversal
             },
             None => *traversal,
@@ -697,12 +693,10 @@ impl<'r> StreamingRenderer<'r> {
         // the complete cut does not) then never keeps the complete cut's pages out of a
         // pool that holds them.
         let unfinished = !missing.is_empty() || draw.deferred_nodes > 0;
-        if still && !self.looked_ahead && unfinished {
-            self.looked_ahead = true;
+        if still && self.complete_cut.is_none() && unfinished {
             let (list, complete) = traverse_shared(camera, &file, traversal, &EveryPage);
             file.node_error()?;
             self.complete_cut = Some(CompleteCut {
-                error_px: crate::traversal::error_of_restarts(traversal.error_px, &list),
                 restarts: list.restarts,
                 nodes: complete,
             });

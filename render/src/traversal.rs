@@ -652,12 +652,12 @@ fn coarser(error_px: f32) -> f32 {
     (error_px * 1.5).max(0.5)
 }
 
-/// The error the occlusion traversal drew `list` at, when asked for `error_px`: coarser
-/// once per restart. Traversing at it from the start makes the same cut in one attempt.
+/// The error the occlusion traversal drew a cut at after `restarts` restarts
+/// ([`DrawList::restarts`]), when asked for `error_px`: coarser once per restart. Traversing at it from the start makes the same cut in one attempt.
 /// (After its last restart the traversal falls back to the largest-first cut, which
 /// records no restart: this is then the asked error, and the cut comes out the same way.)
-pub fn error_of_restarts(error_px: f32, list: &DrawList) -> f32 {
-    (0..list.restarts).fold(error_px, |e, _| coarser(e))
+pub fn error_of_restarts(error_px: f32, restarts: u32) -> f32 {
+    (0..restarts).fold(error_px, |e, _| coarser(e))
 }
 
 /// The cut without occlusion: largest projected size first, up to the budget.
