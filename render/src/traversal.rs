@@ -891,8 +891,18 @@ fn front_to_back(
             }
         }
         let n = &nodes[id as usize];
+        let (bounds_min, bounds_max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
+        // First with the node's own representative radius, which bounds every sphere
+        // drawn for its subtree (radii only grow up the hierarchy): hidden with that
+        // margin is hidden with the tighter one below, whose children need not be read.
+        let own = representative_radius(n);
+        let margin_of = |reach: f32| (reach - r_min).max(0.0) + quant;
         let size = proj.size_px(n);
         let child_level = usize::from(n.level) + 1;
+        let reads_children = size > error_px && child_level < last;
+        if reads_children && buffer.box_hidden(bounds_min, bounds_max, margin_of(own)) {
+            continue;
+        }
         let children = n.child_first..n.child_first + n.child_count;
         kids.clear();
         // The largest representative that can be drawn for this subtree: its own when
@@ -905,7 +915,7 @@ fn front_to_back(
         let corrupt =
             size > error_px && child_level < last && file.check_children(id as usize).is_err();
         let reach = if size <= error_px || corrupt {
-            representative_radius(n)
+            own
         } else if child_level == last {
             0.0
         } else {
@@ -922,8 +932,9 @@ fn front_to_back(
             }
             reach
         };
-        let margin = (reach - r_min).max(0.0) + quant;
-        if buffer.box_hidden(n.bounds_min.into(), n.bounds_max.into(), margin) {
+        if (!reads_children || reach < own)
+            && buffer.box_hidden(bounds_min, bounds_max, margin_of(reach))
+        {
             continue;
         }
         let commit = size <= error_px || corrupt || {
