@@ -1842,7 +1842,6 @@ impl Renderer {
         use wgpu::util::DeviceExt;
         let ((width, height, tiles_x), (bins, binning, rays)) = (size, sampling);
         let device = &self.ctx.device;
-        let texels = width * height;
         let bg = background_srgb.map(srgb_to_linear);
         let init = |label: &str, contents: &[u8], usage| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -1874,7 +1873,7 @@ impl Renderer {
             "sndf shade",
             (&self.sndf_shade.pipeline, &self.sndf_shade.layout),
             &[&params, &table, hist],
-            [texels.div_ceil(64), 1],
+            [width.div_ceil(8), height.div_ceil(8)],
             (width, height),
         )
     }

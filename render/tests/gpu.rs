@@ -1708,6 +1708,47 @@ fn rmse(a: &RgbaImage, b: &RgbaImage) -> f64 {
 }
 
 #[test]
+fn sndfs_of_more_texels_than_one_dispatch_row_holds_shade_on_the_gpu_as_on_the_host() {
+    // 2100 × 2000 texels: more than the 65535 × 64 texels of a one-dimensional dispatch
+    // of 64-texel workgroups. One bin each, so that the histograms fit one binding.
+    let (width, height, rays) = (2100u32, 2000u32, 4u32);
+    let hist: Vec<[f32; 4]> = (0..width * height)
+        .map(|t| {
+            let count = (t % (rays + 1)) as f32;
+            let albedo = [(t % 7) as f32 / 6.0, (t % 11) as f32 / 10.0, 0.5];
+            [
+                albedo[0] * count,
+                albedo[1] * count,
+                albedo[2] * count,
+                count,
+            ]
+        })
+        .collect();
+    let sndf = mdlod_render::sndf::Sndf {
+        width,
+        height,
+        bins: 1,
+        binning: mdlod_render::sndf::Binning::ProjectedNormals,
+        rays,
+        hist,
+        gpu_time: None,
+    };
+    let lights = mdlod_render::sndf::ShadeLights::from(&mdlod_render::Lighting::default());
+    let background = [0.2, 0.3, 0.4];
+    let host = sndf.shade_with(&lights, background);
+    let (gpu, _) = renderer().shade_sndf(&sndf, &lights, background).unwrap();
+    assert_eq!((gpu.width, gpu.height), (width, height));
+    let worst = host
+        .data
+        .iter()
+        .zip(&gpu.data)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    assert!(worst <= 1, "host and GPU shading differ by up to {worst}");
+}
+
+#[test]
 fn zoomed_out_sndfs_beat_supersampling_with_as_many_iterations() {
     // S-NDFs sampled once at 256×256 with K jittered rays per texel, then 2×2-averaged
     // into coarser S-MIP levels: at four zoom-out levels (4× to 32×, 64 to 8 pixels) the

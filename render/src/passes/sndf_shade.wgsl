@@ -33,12 +33,14 @@ fn to_srgb(c: f32) -> f32 {
     return 1.055 * pow(c, 1.0 / 2.4) - 0.055;
 }
 
-@compute @workgroup_size(64)
+// One invocation per texel, in 8x8 blocks over the image (a 1-D dispatch would pass
+// the 65535 workgroups per dimension at 4 Mi texels).
+@compute @workgroup_size(8, 8)
 fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
-    let t = id.x;
-    if t >= params.width * params.height {
+    if id.x >= params.width || id.y >= params.height {
         return;
     }
+    let t = id.y * params.width + id.x;
     let b2 = params.bins * params.bins;
     var texel = t;
     if params.tiled == 1u {
