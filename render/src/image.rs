@@ -120,6 +120,13 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
+    if !dir.is_dir() {
+        let missing = format!("the directory {} does not exist", dir.display());
+        return Err(RenderError::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, missing),
+        ));
+    }
     let mut builder = tempfile::Builder::new();
     builder.prefix(".mdlod-tmp");
     // Temporary files are private (0600); the result should be an ordinary file.

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use mdlod_preprocess::chunked::ChunkOptions;
 use mdlod_preprocess::convert::{convert_file, ConvertOptions, ConvertReport, FrameSelect};
 use mdlod_preprocess::hierarchy::BuildParams;
@@ -140,6 +140,15 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     }
     // Working files of an out-of-core build live in a directory of this run's own, which
     // a Ctrl-C (or SIGTERM from a scheduler) removes together with the partial output.
+    if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if !dir.is_dir() {
+            bail!(
+                "{}: the directory {} does not exist",
+                args.output.display(),
+                dir.display()
+            );
+        }
+    }
     let temp_parent = options.chunks.temp_dir_for(&args.output);
     let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
         format!(
