@@ -16,11 +16,19 @@
 //!    one iteration each, and one accumulation pass adds them all, so a texel's bins are
 //!    read and written once per [`ACCUMULATE_LAYERS`] iterations.
 //! 2. Shading ([`Sndf::shade`]) needs no particle: per bin, the lighting averaged over
-//!    the bin's part of the normal disk (the discrete form of Eq. 12-14), split into the
+//!    the bin's part of the normal disk weighted by projected solid angle (the discrete
+//!    form of Eq. 12-14; [`Binning::projected_density`]), split into the
 //!    part that multiplies the albedo (ambient + Lambert) and the part that does not
 //!    (Blinn-Phong highlight); a texel's colour is the bins' colour sums and counts
 //!    weighted by those, over the rays, plus the background's share.
 //! 3. Coarser S-MIP levels ([`Sndf::downsample`]) add 2×2 blocks of texels' bins.
+//!
+//! The view direction is the view axis (+z) for every texel, as in the paper's screen
+//! space: exact in orthographic views (the S-MIP takes no other). In a perspective view
+//! the normals are still binned in the camera's frame, so the diffuse terms are exact,
+//! but a texel off the axis by an angle α sees its highlights as if from the axis (the
+//! half vector off by up to α/2), and a normal facing away from the axis (the silhouette
+//! of a sphere seen off the axis) is binned with its mirror image across the image plane.
 //!
 //! Shading also takes an environment map and the normal-disk explorer
 //! ([`ShadeLights`]), and any zoom-out factor, trilinear between levels
@@ -211,6 +219,20 @@ impl Binning {
                 let k = (2.0 / (1.0 + n.z).max(1e-6)).sqrt() / std::f32::consts::SQRT_2;
                 ((n.x * k + 1.0) * 0.5, (n.y * k + 1.0) * 0.5)
             }
+        }
+    }
+
+    /// The projected solid angle σ⊥ per unit of cell area `du dv` at unit normal `n` (up
+    /// to a constant factor): how densely the normals a ray hits fall at that point of the
+    /// cell, since a surface's normals are seen in proportion to σ⊥ (Eq. 6). Uniform in
+    /// the projected disk; `n.z` for the equal-area projection (solid angle is uniform
+    /// there); `sin θ · cos θ` for the angles (`dω = sin θ dθ dφ`).
+    pub fn projected_density(self, n: Vec3) -> f32 {
+        let cos = n.z.clamp(0.0, 1.0);
+        match self {
+            Binning::ProjectedNormals => 1.0,
+            Binning::LambertEqualArea => cos,
+            Binning::Spherical => cos * (1.0 - cos * cos).max(0.0).sqrt(),
         }
     }
 
@@ -568,7 +590,8 @@ impl From<&Lighting> for ShadeLights {
 }
 
 /// Per bin (row-major, `by * bins + bx`), the lighting averaged over the bin's part of
-/// the normal disk, per colour channel, as (albedo factor: ambient + Σ diffuse ·
+/// the normal disk with the weight of projected solid angle (Eq. 12-14's L̃(D)/σ⊥(D):
+/// the bin's normals are seen in proportion to σ⊥), per colour channel, as (albedo factor: ambient + Σ diffuse ·
 /// max(n·l, 0) · colour; highlight: Σ specular · Blinn-Phong · colour), for the view
 /// direction +z. Bins outside the disk get the values at the nearest disk edge.
 pub fn bin_lighting(
@@ -624,7 +647,7 @@ pub fn bin_lighting(
     let mut out = Vec::with_capacity((bins * bins) as usize);
     for by in 0..bins {
         for bx in 0..bins {
-            let (mut a, mut s, mut n) = ([0f32; 3], [0f32; 3], 0u32);
+            let (mut a, mut s, mut n) = ([0f32; 3], [0f32; 3], 0f32);
             // A cell no normal maps to (a corner of a disk binning) takes the lighting
             // of the disk's edge towards its centre.
             let centre = (cell * (bx as f32 + 0.5), cell * (by as f32 + 0.5));
@@ -642,17 +665,18 @@ pub fn bin_lighting(
                     let u = cell * (bx as f32 + (i as f32 + 0.5) / SUB as f32);
                     let v = cell * (by as f32 + (j as f32 + 0.5) / SUB as f32);
                     if let Some(normal) = binning.normal(u, v) {
+                        let w = binning.projected_density(normal);
                         let val = shade(normal);
                         for k in 0..3 {
-                            a[k] += val.0[k];
-                            s[k] += val.1[k];
+                            a[k] += w * val.0[k];
+                            s[k] += w * val.1[k];
                         }
-                        n += 1;
+                        n += w;
                     }
                 }
             }
-            out.push(if n > 0 {
-                (a.map(|v| v / n as f32), s.map(|v| v / n as f32))
+            out.push(if n > 0.0 {
+                (a.map(|v| v / n), s.map(|v| v / n))
             } else {
                 fallback
             });
@@ -750,7 +774,8 @@ impl Sndf {
         } else {
             1.0
         };
-        let f = zoom_out.log2();
+        // Past the level of one texel every coarser level is the same texel.
+        let f = zoom_out.log2().min(self.coarsest_level() as f32);
         let l0 = f.floor() as u32;
         let t = f - l0 as f32;
         let mut level = self.clone();
@@ -796,7 +821,7 @@ impl Sndf {
             for x in 0..w {
                 // The output pixel's centre in level-0 texels, then in each level's.
                 let (px, py) = ((x as f32 + 0.5) * zoom_out, (y as f32 + 0.5) * zoom_out);
-                let s0 = (1u32 << l0) as f32;
+                let s0 = 2f32.powi(l0 as i32);
                 let a = bilinear(&images[0], px / s0, py / s0);
                 let b = bilinear(&images[1], px / (2.0 * s0), py / (2.0 * s0));
                 let c = [0, 1, 2].map(|k| a[k] * (1.0 - t) + b[k] * t);
@@ -808,19 +833,31 @@ impl Sndf {
         image
     }
 
+    /// Down-samplings until the image is one texel (each coarser level is that texel).
+    pub fn coarsest_level(&self) -> u32 {
+        let side = self.width.max(self.height).max(1);
+        u32::BITS - (side - 1).leading_zeros()
+    }
+
     /// The next coarser S-MIP level: each texel holds the sum of its 2×2 children's bins
     /// and four times the rays, i.e. their average S-NDF (a missing child at an odd edge
     /// counts as four rays that hit nothing).
     pub fn downsample(&self) -> Sndf {
         let (w, h) = (self.width.div_ceil(2), self.height.div_ceil(2));
         let b2 = (self.bins * self.bins) as usize;
+        // Four times the rays, or, where that passes u32, the same rays and a quarter of
+        // the sums (exact in floating point): the same S-NDF either way.
+        let (rays, scale) = match self.rays.checked_mul(4) {
+            Some(r) => (r, 1.0),
+            None => (self.rays, 0.25),
+        };
         let mut hist = vec![[0f32; 4]; w as usize * h as usize * b2];
         for y in 0..self.height {
             for x in 0..self.width {
                 let dst = ((y / 2) * w + x / 2) as usize * b2;
                 for (d, s) in hist[dst..dst + b2].iter_mut().zip(self.texel(x, y)) {
                     for k in 0..4 {
-                        d[k] += s[k];
+                        d[k] += s[k] * scale;
                     }
                 }
             }
@@ -830,7 +867,7 @@ impl Sndf {
             height: h,
             bins: self.bins,
             binning: self.binning,
-            rays: self.rays * 4,
+            rays,
             hist,
             gpu_time: None,
         }
@@ -894,6 +931,106 @@ mod tests {
             rays,
             hist,
             gpu_time: None,
+        }
+    }
+
+    #[test]
+    fn a_bin_averages_its_lighting_as_the_rays_hitting_a_sphere_see_it() {
+        // Rays of an orthographic view hit a sphere uniformly over its projected disk, so
+        // the normals they see are spread by projected solid angle, independently of any
+        // binning. The table's value of a bin must be the mean lighting of those hits
+        // that fall into it.
+        let (l, h) = (
+            Vec3::new(0.3, -0.5, 0.8).normalize(),
+            (Vec3::new(0.3, -0.5, 0.8).normalize() + Vec3::Z).normalize(),
+        );
+        let lights = ShadeLights {
+            ambient: 0.0,
+            lights: vec![(l, [1.0; 3])],
+            diffuse: 1.0,
+            specular: 0.5,
+            shininess: 8.0,
+            environment: None,
+            explorer: None,
+            transfer: None,
+        };
+        let bins = 4u32;
+        let mut state = 11u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let hits: Vec<Vec3> = std::iter::from_fn(|| Some((next(), next())))
+            .filter(|(x, y)| x * x + y * y < 1.0)
+            .take(400_000)
+            .map(|(x, y)| Vec3::new(x, y, (1.0 - x * x - y * y).sqrt()))
+            .collect();
+        for binning in [
+            Binning::ProjectedNormals,
+            Binning::Spherical,
+            Binning::LambertEqualArea,
+        ] {
+            let mut sums = vec![(0.0f64, 0.0f64, 0u32); (bins * bins) as usize];
+            for &n in &hits {
+                let (bx, by) = bin_of(n, bins, binning);
+                let ndl = n.dot(l).max(0.0);
+                let spec = if ndl > 0.0 {
+                    0.5 * n.dot(h).max(0.0).powf(8.0)
+                } else {
+                    0.0
+                };
+                let s = &mut sums[(by * bins + bx) as usize];
+                s.0 += f64::from(ndl);
+                s.1 += f64::from(spec);
+                s.2 += 1;
+            }
+            let table = bin_lighting(bins, binning, &lights);
+            for (i, &(diffuse, highlight, count)) in sums.iter().enumerate() {
+                if count < 2000 {
+                    continue;
+                }
+                let (a, s) = table[i];
+                let (ea, es) = (diffuse / f64::from(count), highlight / f64::from(count));
+                assert!(
+                    (f64::from(a[0]) - ea).abs() < 0.01 && (f64::from(s[0]) - es).abs() < 0.01,
+                    "{binning:?}, bin {i} ({count} hits): table {} / {}, hits {ea:.4} / {es:.4}",
+                    a[0],
+                    s[0]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn coarse_levels_past_u32_rays_and_one_texel_shade_like_the_last_one() {
+        // The same S-NDFs twice, at 2^30 and at 2^26 rays (the sums scaled alike: powers
+        // of two, so exactly).
+        let scaled = |rays: u32, factor: f32| {
+            let mut s = random_sndf(6, 5, 2, rays);
+            s.hist.iter_mut().flatten().for_each(|v| *v *= factor);
+            s
+        };
+        let s = scaled(1 << 30, (1 << 28) as f32);
+        assert_eq!(s.coarsest_level(), 3);
+        let lights = ShadeLights::from(&Lighting::default());
+        let bg = [0.1, 0.2, 0.3];
+        // 2^30 rays times 4 passes u32: the sums are quartered instead.
+        let (one, two) = (s.downsample(), s.downsample().downsample());
+        assert_eq!((one.rays, two.rays), (1 << 30, 1 << 30));
+        let expected = scaled(1 << 26, (1 << 24) as f32).downsample().downsample();
+        assert_eq!(expected.rays, 1 << 30);
+        let image = two.shade_with(&lights, bg);
+        assert!(image == expected.shade_with(&lights, bg));
+        assert!(
+            image.data.chunks(4).any(|p| p != &image.data[..4]),
+            "a uniform image"
+        );
+        // Zooming out past the one-texel level (any factor) shades that texel.
+        let last = s.shade_zoomed(&lights, bg, 8.0);
+        for zoom in [1e6, 1e30, f32::MAX] {
+            assert!(s.shade_zoomed(&lights, bg, zoom) == last, "zoom {zoom}");
         }
     }
 
