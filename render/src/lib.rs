@@ -919,7 +919,7 @@ pub fn shade_file(
                 ShadeLevel::Level(l) => l,
                 _ => data.header.display_level.unwrap_or(0),
             };
-            for _ in 0..levels {
+            for _ in 0..levels.min(s.coarsest_level()) {
                 s = s.downsample();
             }
             s.shade_with(lights, background_srgb)

@@ -996,7 +996,14 @@ impl Smip {
     fn downsample(&mut self, renderer: &Renderer, key: TileKey) -> Result<(), RenderError> {
         let children = key.children().expect("derivable tiles have children");
         let slots = children.map(|c| self.tiles[&c].slot);
-        let rays = self.tiles[&children[0]].rays * 4;
+        let rays = self.tiles[&children[0]]
+            .rays
+            .checked_mul(4)
+            .ok_or_else(|| {
+                RenderError::InvalidOptions(format!(
+                    "S-MIP tile {key:?}: its children's rays per texel times 4 pass 2^32"
+                ))
+            })?;
         let parent = self.tiles[&key].slot;
         renderer.ctx.scoped(|| {
             use wgpu::util::DeviceExt;
@@ -1262,7 +1269,8 @@ pub fn derive_tile(
     }
     Some(TileData {
         hist,
-        rays: rays * 4,
+        // Past u32 (4^16 rays: 16 levels above one ray per texel) it is not derived.
+        rays: rays.checked_mul(4)?,
     })
 }
 
