@@ -156,13 +156,16 @@ pub fn texel_in_tile(lx: u32, ly: u32) -> u32 {
 
 /// Bytes of one tile's histograms.
 pub fn tile_bytes(bins: u32) -> u64 {
-    u64::from(TILE * TILE) * u64::from(bins * bins) * 16
+    u64::from(TILE * TILE)
+        .saturating_mul(u64::from(bins).pow(2))
+        .saturating_mul(16)
 }
 
 /// Bytes of the histogram buffer that S-NDFs of `width × height` texels need (whole
 /// tiles).
 pub fn sndf_buffer_bytes(width: u32, height: u32, bins: u32) -> u64 {
-    u64::from(width.div_ceil(TILE)) * u64::from(height.div_ceil(TILE)) * tile_bytes(bins)
+    (u64::from(width.div_ceil(TILE)) * u64::from(height.div_ceil(TILE)))
+        .saturating_mul(tile_bytes(bins))
 }
 
 /// How the normals are binned (the cell coordinates `(u, v)` in `[0, 1]²`).
