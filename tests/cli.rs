@@ -266,6 +266,25 @@ fn bad_inputs_give_clear_errors_naming_the_file() {
     );
     let err = fails(&["verify", s(&dir.path().join("missing.mdlod"))]);
     assert!(err.contains("missing.mdlod"), "{err}");
+
+    // A directory where a file belongs, and an output in a directory that does not exist.
+    let sub = dir.path().join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    for args in [
+        vec!["convert", s(&sub), "-o", s(&out)],
+        vec!["info", s(&sub)],
+    ] {
+        let err = fails(&args);
+        assert!(err.contains("sub: is a directory"), "{err}");
+    }
+    let sample = lammps_sample_path("cu_melt.custom.dump");
+    let nowhere = dir.path().join("nowhere");
+    let err = fails(&["convert", s(&sample), "-o", s(&nowhere.join("a.mdlod"))]);
+    assert!(
+        err.contains("a.mdlod: the directory") && err.contains("nowhere does not exist"),
+        "{err}"
+    );
+    assert!(!nowhere.exists());
 }
 
 #[test]
