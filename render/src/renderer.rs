@@ -1515,7 +1515,12 @@ impl Renderer {
             self.shade_histograms(
                 &r.hist,
                 (r.width, r.height, Some(r.width.div_ceil(crate::sndf::TILE))),
-                (r.bins, r.binning, r.rays),
+                (
+                    r.bins,
+                    r.binning,
+                    r.rays,
+                    crate::sndf::TexelView::of(&r.camera, r.width, r.height),
+                ),
                 lights,
                 background_srgb,
             )
@@ -1540,6 +1545,7 @@ impl Renderer {
             rays: r.rays,
             hist: tiles_to_rows(&data, r.width, r.height, r.bins),
             gpu_time: None,
+            view: crate::sndf::TexelView::of(&r.camera, r.width, r.height),
         })
     }
 
@@ -1821,7 +1827,7 @@ impl Renderer {
             self.shade_histograms(
                 &hist,
                 (sndf.width, sndf.height, None),
-                (sndf.bins, sndf.binning, sndf.rays),
+                (sndf.bins, sndf.binning, sndf.rays, sndf.view),
                 lights,
                 background_srgb,
             )
@@ -1835,12 +1841,13 @@ impl Renderer {
         &self,
         hist: &wgpu::Buffer,
         size: (u32, u32, Option<u32>),
-        sampling: (u32, crate::sndf::Binning, u32),
+        sampling: (u32, crate::sndf::Binning, u32, crate::sndf::TexelView),
         lights: &ShadeLights,
         background_srgb: [f32; 3],
     ) -> Result<(RgbaImage, Option<Duration>), RenderError> {
         use wgpu::util::DeviceExt;
-        let ((width, height, tiles_x), (bins, binning, rays)) = (size, sampling);
+        let ((width, height, tiles_x), (bins, binning, rays, view)) = (size, sampling);
+        let (table, grid) = shade_table(bins, binning, lights, view);
         let device = &self.ctx.device;
         let bg = background_srgb.map(srgb_to_linear);
         let init = |label: &str, contents: &[u8], usage| {
@@ -1860,13 +1867,14 @@ impl Renderer {
                 background: [bg[0], bg[1], bg[2], 0.0],
                 tiled: u32::from(tiles_x.is_some()),
                 tiles_x: tiles_x.unwrap_or(0),
-                pad: [0; 2],
+                grid,
+                pad: 0,
             }),
             wgpu::BufferUsages::UNIFORM,
         );
         let table = init(
             "shade table",
-            bytemuck::cast_slice(&shade_table(bins, binning, lights)),
+            bytemuck::cast_slice(&table),
             wgpu::BufferUsages::STORAGE,
         );
         self.image_pass(

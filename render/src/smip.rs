@@ -53,7 +53,7 @@ use crate::error::RenderError;
 use crate::image::RgbaImage;
 use crate::occlusion::OcclusionMode;
 use crate::renderer::{linear_to_srgb, srgb_to_linear, Renderer, SndfPassSettings, UploadedCut};
-use crate::sndf::{shade_table, tile_bytes, Binning, ShadeLights, NO_SLOT, TILE};
+use crate::sndf::{shade_table, tile_bytes, Binning, ShadeLights, TexelView, NO_SLOT, TILE};
 use crate::style::PointStyle;
 use crate::traversal::{traverse, TraversalSettings};
 
@@ -731,7 +731,7 @@ impl Smip {
             let storage = wgpu::BufferUsages::STORAGE;
             let table = init(
                 "smip shade table",
-                bytemuck::cast_slice(&shade_table(bins, binning, lights)),
+                bytemuck::cast_slice(&shade_table(bins, binning, lights, TexelView::Axis).0),
                 storage,
             );
             let pages = init("smip pages", bytemuck::cast_slice(&pages), storage);
@@ -1176,6 +1176,7 @@ pub fn shade_tiles(
                 rays: t.rays,
                 hist: t.hist.clone(),
                 gpu_time: None,
+                view: crate::sndf::TexelView::Axis,
             };
             shaded.insert(key, sndf.shade_linear(lights, background_srgb));
         }

@@ -23,12 +23,14 @@
 //!    weighted by those, over the rays, plus the background's share.
 //! 3. Coarser S-MIP levels ([`Sndf::downsample`]) add 2×2 blocks of texels' bins.
 //!
-//! The view direction is the view axis (+z) for every texel, as in the paper's screen
-//! space: exact in orthographic views (the S-MIP takes no other). In a perspective view
-//! the normals are still binned in the camera's frame, so the diffuse terms are exact,
-//! but a texel off the axis by an angle α sees its highlights as if from the axis (the
-//! half vector off by up to α/2), and a normal facing away from the axis (the silhouette
-//! of a sphere seen off the axis) is binned with its mirror image across the image plane.
+//! The paper's screen space sees every texel along the view axis (+z), which is exact in
+//! orthographic views (the S-MIP takes no other). In a perspective view each texel sees
+//! along its own ray ([`TexelView`]): the normals are binned in the camera's frame, so
+//! ambient, diffuse and environment light, which do not depend on the eye, are exact;
+//! the highlights are tabulated at [`VIEW_GRID`]² view directions across the image and
+//! interpolated per texel. What stays approximate: a normal facing away from the axis
+//! (the silhouette of a sphere seen off the axis) is binned with its mirror image across
+//! the image plane.
 //!
 //! Shading also takes an environment map and the normal-disk explorer
 //! ([`ShadeLights`]), and any zoom-out factor, trilinear between levels
@@ -62,7 +64,9 @@ pub struct ShadeParams {
     pub tiled: u32,
     /// Tiles per row when tiled.
     pub tiles_x: u32,
-    pub pad: [u32; 2],
+    /// View directions per axis of the highlight grid ([`shade_table`]); 1: one table.
+    pub grid: u32,
+    pub pad: u32,
 }
 
 /// The GPU shading pipeline.
@@ -114,12 +118,142 @@ impl SndfShadePass {
     }
 }
 
-/// The per-bin table the shading pass reads: two rgba entries per bin.
-pub fn shade_table(bins: u32, binning: Binning, lights: &ShadeLights) -> Vec<[f32; 4]> {
-    bin_lighting(bins, binning, lights)
+/// The per-bin table the shading pass reads, and its grid of view directions per axis:
+/// two rgba entries per bin (albedo factor, highlight) for the view axis; then, when the
+/// highlights depend on the texel ([`TexelView::Perspective`] with a highlight), the
+/// highlights at `grid × grid` view directions (row-major from the image's top left
+/// corner, `bins²` entries each), which the texels interpolate bilinearly.
+pub fn shade_table(
+    bins: u32,
+    binning: Binning,
+    lights: &ShadeLights,
+    view: TexelView,
+) -> (Vec<[f32; 4]>, u32) {
+    let rgb = |c: &[f32; 3]| [c[0], c[1], c[2], 0.0];
+    let mut table: Vec<[f32; 4]> = bin_lighting(bins, binning, lights)
         .iter()
-        .flat_map(|(a, s)| [[a[0], a[1], a[2], 0.0], [s[0], s[1], s[2], 0.0]])
-        .collect()
+        .flat_map(|(a, s)| [rgb(a), rgb(s)])
+        .collect();
+    let grid = highlight_grid(bins, binning, lights, view);
+    let g = grid.as_ref().map_or(1, |(g, _)| *g);
+    if let Some((_, highlights)) = grid {
+        table.extend(highlights.iter().map(rgb));
+    }
+    (table, g)
+}
+
+/// The direction towards the eye at each texel of a view's S-NDFs, which places the
+/// highlights: the view axis, as in the paper's screen space, or each texel's own ray.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum TexelView {
+    /// The view axis (+z) everywhere: exact for orthographic views.
+    #[default]
+    Axis,
+    /// The ray through each texel's centre of a perspective view; `tan_half` holds the
+    /// tangents of half the field of view, horizontally and vertically.
+    Perspective { tan_half: [f32; 2] },
+}
+
+impl TexelView {
+    /// The texels of `camera`'s view at `width × height`.
+    pub fn of(camera: &crate::camera::Camera, width: u32, height: u32) -> TexelView {
+        match camera.projection {
+            crate::camera::Projection::Orthographic => TexelView::Axis,
+            crate::camera::Projection::Perspective => {
+                let y = (camera.fov_y_deg.to_radians() * 0.5).tan();
+                let x = y * width as f32 / height.max(1) as f32;
+                if x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 {
+                    TexelView::Perspective { tan_half: [x, y] }
+                } else {
+                    TexelView::Axis
+                }
+            }
+        }
+    }
+
+    /// The texels of the view a `.sndf` header stores (a view file's JSON); the axis
+    /// when it holds none.
+    pub fn of_view_file(view: &serde_json::Value, width: u32, height: u32) -> TexelView {
+        match serde_json::from_value::<crate::view::ViewFile>(view.clone()) {
+            Ok(v) if v.projection == crate::camera::Projection::Perspective => TexelView::of(
+                &crate::camera::Camera {
+                    fov_y_deg: v.fov_y_deg,
+                    projection: v.projection,
+                    ..Default::default()
+                },
+                width,
+                height,
+            ),
+            _ => TexelView::Axis,
+        }
+    }
+
+    /// The unit direction towards the eye at image point `(u, v)` of `[−1, 1]²` (u to
+    /// the right, v up), in view space.
+    pub fn towards_eye(self, u: f32, v: f32) -> Vec3 {
+        match self {
+            TexelView::Axis => Vec3::Z,
+            TexelView::Perspective { tan_half } => {
+                Vec3::new(-u * tan_half[0], -v * tan_half[1], 1.0).normalize_or(Vec3::Z)
+            }
+        }
+    }
+}
+
+/// View directions per axis at which a perspective view's highlights are tabulated:
+/// about 3.5° apart across the default 30° field of view.
+pub const VIEW_GRID: u32 = 9;
+
+/// Whether the lighting has a part that depends on the direction towards the eye.
+fn view_dependent(lights: &ShadeLights) -> bool {
+    lights.transfer.is_none()
+        && lights.explorer.is_none()
+        && lights.specular > 0.0
+        && !lights.lights.is_empty()
+}
+
+/// The highlights of every bin at [`VIEW_GRID`]² view directions across the image
+/// (row-major from the top left corner), when they differ from texel to texel.
+fn highlight_grid(
+    bins: u32,
+    binning: Binning,
+    lights: &ShadeLights,
+    view: TexelView,
+) -> Option<(u32, Vec<[f32; 3]>)> {
+    if view == TexelView::Axis || !view_dependent(lights) {
+        return None;
+    }
+    use rayon::prelude::*;
+    let g = VIEW_GRID;
+    let at = |k: u32| -1.0 + 2.0 * k as f32 / (g - 1) as f32;
+    let highlights = (0..g * g)
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let eye = view.towards_eye(at(i % g), -at(i / g));
+            bin_lighting_towards(bins, binning, lights, eye)
+                .into_iter()
+                .map(|(_, s)| s)
+        })
+        .collect();
+    Some((g, highlights))
+}
+
+/// The four grid points around texel `(x, y)` of a `width × height` image and their
+/// bilinear weights, for a grid of `g × g` view directions (g ≥ 2).
+fn grid_weights(x: u32, y: u32, width: u32, height: u32, g: u32) -> [(usize, f32); 4] {
+    let axis = |p: u32, n: u32| {
+        let f = ((p as f32 + 0.5) / n.max(1) as f32 * (g - 1) as f32).clamp(0.0, (g - 1) as f32);
+        let k = (f.floor() as u32).min(g - 2);
+        (k, f - k as f32)
+    };
+    let ((gx, tx), (gy, ty)) = (axis(x, width), axis(y, height));
+    let at = |i: u32, j: u32| (j * g + i) as usize;
+    [
+        (at(gx, gy), (1.0 - tx) * (1.0 - ty)),
+        (at(gx + 1, gy), tx * (1.0 - ty)),
+        (at(gx, gy + 1), (1.0 - tx) * ty),
+        (at(gx + 1, gy + 1), tx * ty),
+    ]
 }
 
 /// `Params` in the WGSL.
@@ -374,6 +508,8 @@ pub struct Sndf {
     pub hist: Vec<[f32; 4]>,
     /// GPU time of the sampling (all iterations), when measured.
     pub gpu_time: Option<std::time::Duration>,
+    /// Where the eye is seen from each texel (the highlights follow it).
+    pub view: TexelView,
 }
 
 /// The bin of a unit normal, as the WGSL computes it.
@@ -602,13 +738,24 @@ pub fn bin_lighting(
     binning: Binning,
     lights: &ShadeLights,
 ) -> Vec<([f32; 3], [f32; 3])> {
+    bin_lighting_towards(bins, binning, lights, Vec3::Z)
+}
+
+/// [`bin_lighting`] with the eye in direction `eye` (a unit vector in view space): the
+/// highlights move with it, the rest does not.
+pub fn bin_lighting_towards(
+    bins: u32,
+    binning: Binning,
+    lights: &ShadeLights,
+    eye: Vec3,
+) -> Vec<([f32; 3], [f32; 3])> {
     const SUB: u32 = 16;
     let dirs: Vec<(Vec3, Vec3, [f32; 3])> = lights
         .lights
         .iter()
         .map(|&(d, c)| {
             let l = d.normalize_or(Vec3::Z);
-            (l, (l + Vec3::Z).normalize_or(Vec3::Z), c)
+            (l, (l + eye).normalize_or(eye), c)
         })
         .collect();
     let environment = lights.environment.as_ref().map(EnvironmentMap::samples);
@@ -693,8 +840,14 @@ impl Sndf {
     /// refinement does: histograms and ray counts sum, so the result is one sampling
     /// of all the rays. Returns false, changing nothing, when the two do not match.
     pub fn add(&mut self, other: &Sndf) -> bool {
-        if (self.width, self.height, self.bins, self.binning)
-            != (other.width, other.height, other.bins, other.binning)
+        if (self.width, self.height, self.bins, self.binning, self.view)
+            != (
+                other.width,
+                other.height,
+                other.bins,
+                other.binning,
+                other.view,
+            )
         {
             return false;
         }
@@ -722,16 +875,29 @@ impl Sndf {
     /// texel, rows top to bottom.
     pub fn shade_linear(&self, lights: &ShadeLights, background_srgb: [f32; 3]) -> Vec<[f32; 3]> {
         let table = bin_lighting(self.bins, self.binning, lights);
+        let grid = highlight_grid(self.bins, self.binning, lights, self.view);
         let bg = background_srgb.map(srgb_to_linear);
         let rays = self.rays.max(1) as f32;
         let b2 = (self.bins * self.bins) as usize;
         use rayon::prelude::*;
         self.hist
             .par_chunks_exact(b2)
-            .map(|texel| {
+            .enumerate()
+            .map(|(t, texel)| {
                 let mut c = [0f32; 3];
                 let mut hits = 0.0;
-                for (bin, (a, s)) in texel.iter().zip(&table) {
+                // The texel's highlights: bilinear between the grid's view directions.
+                let corners = grid.as_ref().map(|(g, _)| {
+                    let (x, y) = (t as u32 % self.width, t as u32 / self.width);
+                    grid_weights(x, y, self.width, self.height, *g)
+                });
+                for (i, (bin, (a, s))) in texel.iter().zip(&table).enumerate() {
+                    let s = match (&grid, corners) {
+                        (Some((_, h)), Some(w)) => w.iter().fold([0f32; 3], |acc, &(p, f)| {
+                            [0, 1, 2].map(|k| acc[k] + f * h[p * b2 + i][k])
+                        }),
+                        _ => *s,
+                    };
                     for k in 0..3 {
                         c[k] += bin[k] * a[k] + bin[3] * s[k];
                     }
@@ -873,6 +1039,7 @@ impl Sndf {
             rays,
             hist,
             gpu_time: None,
+            view: self.view,
         }
     }
 
@@ -904,6 +1071,7 @@ impl Sndf {
             rays: d.header.rays,
             hist: d.hist.clone(),
             gpu_time: None,
+            view: TexelView::of_view_file(&d.header.view, d.header.width, d.header.height),
         }
     }
 }
@@ -934,6 +1102,7 @@ mod tests {
             rays,
             hist,
             gpu_time: None,
+            view: TexelView::Axis,
         }
     }
 

@@ -1695,6 +1695,76 @@ fn relighting_sndfs_matches_supersampling_under_the_new_light_and_draws_no_parti
     }
 }
 
+/// In a perspective view each texel sees the particles along its own ray: the
+/// highlights of re-lit S-NDFs follow it (as the ray caster's do), where shading every
+/// texel as if seen along the view axis puts them elsewhere.
+#[test]
+fn relit_sndfs_of_a_wide_perspective_view_place_highlights_along_each_texels_ray() {
+    let (_d, _p, f) = make_file(&fcc_frame(6), small_build(), &[]);
+    let (w, h) = (96u32, 64u32);
+    let mut camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
+    // A 70° field of view at about the same framing as the default 30°.
+    camera.distance *= (15f32.to_radians().tan() / 35f32.to_radians().tan()) * 0.9;
+    camera.fov_y_deg = 70.0;
+    let mut o = opts(w, h);
+    o.spp = 16;
+    o.background = [0.1, 0.1, 0.1];
+    o.view = ViewSpec::Camera(camera.clone());
+    let camera = camera_for(&f, &o.view, w, h).unwrap();
+    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
+    let sndf = renderer()
+        .sample_sndf(
+            &f,
+            &camera,
+            &draw,
+            &mdlod_render::sndf::SndfSettings {
+                width: w,
+                height: h,
+                iterations: 16,
+                bins: 8,
+                binning: Default::default(),
+            },
+        )
+        .unwrap();
+    assert!(matches!(
+        sndf.view,
+        mdlod_render::sndf::TexelView::Perspective { .. }
+    ));
+    let light = mdlod_render::Lighting {
+        direction_view: Vec3::new(0.6, 0.3, 1.0).normalize(),
+        specular: 0.8,
+        shininess: 24.0,
+        ..Default::default()
+    };
+    let relit = sndf.shade(&light, o.background);
+    let (on_gpu, _) = renderer()
+        .shade_sndf(
+            &sndf,
+            &mdlod_render::sndf::ShadeLights::from(&light),
+            o.background,
+        )
+        .unwrap();
+    let worst = relit
+        .data
+        .iter()
+        .zip(&on_gpu.data)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    assert!(worst <= 1, "host and GPU shading differ by up to {worst}");
+    o.lighting = light;
+    let (reference, _) = render_image(renderer(), &f, &o).unwrap();
+    let along_rays = mean_abs_diff(&relit, &reference);
+    let mut axis = sndf.clone();
+    axis.view = mdlod_render::sndf::TexelView::Axis;
+    let along_axis = mean_abs_diff(&axis.shade(&light, o.background), &reference);
+    assert!(
+        along_rays < 2.0 && along_axis > 1.5 * along_rays,
+        "mean difference to the ray-cast image: {along_rays:.2} along each texel's ray, \
+         {along_axis:.2} along the axis"
+    );
+}
+
 fn rmse(a: &RgbaImage, b: &RgbaImage) -> f64 {
     assert_eq!((a.width, a.height), (b.width, b.height));
     let n = a.data.len() as f64;
@@ -1732,6 +1802,7 @@ fn sndfs_of_more_texels_than_one_dispatch_row_holds_shade_on_the_gpu_as_on_the_h
         rays,
         hist,
         gpu_time: None,
+        view: mdlod_render::sndf::TexelView::Axis,
     };
     let lights = mdlod_render::sndf::ShadeLights::from(&mdlod_render::Lighting::default());
     let background = [0.2, 0.3, 0.4];

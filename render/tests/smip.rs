@@ -140,6 +140,7 @@ fn assemble(r: &Renderer, s: &Smip, level: u32, rect: [i32; 4]) -> Sndf {
         rays: rays.unwrap(),
         hist,
         gpu_time: None,
+        view: mdlod_render::sndf::TexelView::Axis,
     }
 }
 

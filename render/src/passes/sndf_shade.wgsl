@@ -16,12 +16,15 @@ struct ShadeParams {
     // (as sndf_accumulate.wgsl stores them).
     tiled: u32,
     tiles_x: u32,
-    pad0: u32,
+    // View directions per axis of the highlight grid; 1: the view axis for every texel.
+    grid: u32,
     pad1: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: ShadeParams;
-// Two per bin: the albedo factor (rgb) and the highlight (rgb).
+// Two per bin: the albedo factor (rgb) and the highlight (rgb) towards the view axis;
+// then, with a grid, the highlights at grid x grid view directions (rows from the
+// image's top left corner, bins^2 each), interpolated bilinearly per texel.
 @group(0) @binding(1) var<storage, read> table: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> hist: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read_write> pixels: array<u32>;
@@ -51,11 +54,39 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
         let slot = (y / 64u) * params.tiles_x + x / 64u;
         texel = slot * 4096u + ((ly / 8u) * 8u + lx / 8u) * 64u + (ly % 8u) * 8u + lx % 8u;
     }
+    // The texel's four grid points and weights (as grid_weights in sndf.rs).
+    var at = vec4<u32>(0u);
+    var w = vec4<f32>(1.0, 0.0, 0.0, 0.0);
+    let g = params.grid;
+    if g > 1u {
+        let last = f32(g - 1u);
+        let f = clamp(
+            (vec2<f32>(f32(id.x), f32(id.y)) + 0.5)
+                / vec2<f32>(f32(params.width), f32(params.height)) * last,
+            vec2<f32>(0.0),
+            vec2<f32>(last),
+        );
+        let k = min(vec2<u32>(floor(f)), vec2<u32>(g - 2u));
+        let t = f - vec2<f32>(k);
+        let base = 2u * b2;
+        at = base + b2 * vec4<u32>(
+            k.y * g + k.x,
+            k.y * g + k.x + 1u,
+            (k.y + 1u) * g + k.x,
+            (k.y + 1u) * g + k.x + 1u,
+        );
+        w = vec4<f32>((1.0 - t.x) * (1.0 - t.y), t.x * (1.0 - t.y), (1.0 - t.x) * t.y, t.x * t.y);
+    }
     var c = vec3<f32>(0.0);
     var hits = 0.0;
     for (var i = 0u; i < b2; i++) {
         let h = hist[texel * b2 + i];
-        c += h.xyz * table[2u * i].xyz + h.w * table[2u * i + 1u].xyz;
+        var s = table[2u * i + 1u].xyz;
+        if g > 1u {
+            s = w.x * table[at.x + i].xyz + w.y * table[at.y + i].xyz
+                + w.z * table[at.z + i].xyz + w.w * table[at.w + i].xyz;
+        }
+        c += h.xyz * table[2u * i].xyz + h.w * s;
         hits += h.w;
     }
     let miss = max(1.0 - hits / params.rays, 0.0);
