@@ -11,8 +11,9 @@
 //!   `V = 4/3 π r_ref³`: φ is a volume fraction (a close packing of reference spheres has
 //!   φ ≈ 0.74), the same for every zoom and level.
 //! - **Slices.** Each pixel's ray `p = o + λ v` (o: the eye in perspective, so the slices
-//!   are concentric spherical shells; the near plane in orthographic views) is sampled at
-//!   `λ_s = λ_min + s Δλ` from the data's nearest to its farthest distance. A pass splats
+//!   are concentric spherical shells; the eye's plane in orthographic views, where λ may
+//!   be negative down to the near plane) is sampled at `λ_s = λ_min + s Δλ` from the
+//!   data's nearest distance (not nearer than the near plane) to its farthest. A pass splats
 //!   every point whose support reaches a stack of slices as a perspective-correct
 //!   footprint (the projected box of its support sphere) into several float targets at
 //!   once (multiple render targets: 8 density slices, or 2 slices with gradients for the
@@ -181,7 +182,13 @@ impl Slicing {
             lo = 0.0;
             hi = 1.0;
         }
-        let lo = lo.max(0.0);
+        // Nothing nearer than the near plane is drawn: in perspective the eye (distances
+        // are never negative), in orthographic views the near plane, which may lie
+        // behind the eye's plane (a view zoomed into the data).
+        let lo = match camera.projection {
+            crate::camera::Projection::Perspective => lo.max(0.0),
+            crate::camera::Projection::Orthographic => lo.max(camera.near),
+        };
         let step = ((hi - lo) / s.slices as f32).max(f32::MIN_POSITIVE);
         Slicing {
             lambda_min: lo,

@@ -126,6 +126,39 @@ fn density_volume_matches_the_cpu_ray_marcher() {
     }
 }
 
+/// An orthographic view shows the same volume wherever its eye is along the view axis:
+/// with the eye inside the data (a view zoomed in), what lies between the near plane and
+/// the eye's plane is drawn too.
+#[test]
+fn an_orthographic_volume_does_not_depend_on_where_the_eye_is_along_the_axis() {
+    let (_d, _p, f) = make_file(&fcc_frame(3), small_build(), &[]);
+    let (w, h) = (40u32, 30u32);
+    let outside = camera(&f, Projection::Orthographic, w, h);
+    // A quarter of the distance, the same view height: the eye is inside the block.
+    let mut inside = outside.clone();
+    inside.distance *= 0.25;
+    let half = (inside.fov_y_deg.to_radians() * 0.5).tan() * 4.0;
+    inside.fov_y_deg = 2.0 * half.atan().to_degrees();
+    let inside = camera_for(&f, &ViewSpec::Camera(inside), w, h).unwrap();
+    assert!(inside.near < 0.0, "the eye is not inside the data");
+    assert!((inside.view_height_at_target() - outside.view_height_at_target()).abs() < 1e-3);
+    let s = DensitySettings {
+        slices: 64,
+        opacity: 1.5,
+        ..Default::default()
+    };
+    let (far, _, _, _, _) = both(&f, &outside, w, h, &s, None);
+    let (near, cpu, _, _, _) = both(&f, &inside, w, h, &s, None);
+    let lit = far.iter().filter(|p| p[3] > 0.05).count();
+    assert!(
+        lit > (w * h / 10) as usize,
+        "only {lit} pixels see the block"
+    );
+    let d = max_diff(&near, &far);
+    assert!(d < 0.01, "the eye inside the data changes the image by {d}");
+    assert!(max_diff(&near, &cpu) < 0.01);
+}
+
 #[test]
 fn iso_surface_matches_the_cpu_ray_marcher() {
     let (_d, _p, f) = make_file(&cloud_frame(300, 3), small_build(), &[]);
