@@ -2143,6 +2143,20 @@ impl Renderer {
             height,
             ..Default::default()
         })?;
+        // Every pixel's ray state is bound in one piece.
+        let ray_bytes = u64::from(width) * u64::from(height) * std::mem::size_of::<RayGpu>() as u64;
+        let limits = self.ctx.device.limits();
+        let most = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        if ray_bytes > most {
+            return Err(RenderError::InvalidOptions(format!(
+                "the density volume of {width}x{height} pixels keeps {ray_bytes} bytes of ray \
+                 state, more than one buffer of {} holds ({most} bytes): render at most {} pixels",
+                self.ctx.adapter_name(),
+                most / std::mem::size_of::<RayGpu>() as u64
+            )));
+        }
         // Ranges (a node's children: compact) sorted by their nearest distance along the
         // rays, so that a stack draws one interval of instances: from the first range
         // after which every range ends before the stack (a running maximum of the ends),

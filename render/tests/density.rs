@@ -12,8 +12,8 @@ use glam::Vec3;
 use mdlod_format::MdlodFile;
 use mdlod_render::density::{reference, DensityPoint, DensitySettings};
 use mdlod_render::{
-    camera_for, traverse, BackendChoice, Camera, GpuContext, OcclusionMode, Projection, Renderer,
-    TraversalSettings, ViewSpec,
+    camera_for, traverse, BackendChoice, Camera, GpuContext, OcclusionMode, Projection,
+    RenderError, Renderer, TraversalSettings, ViewSpec,
 };
 
 fn renderer() -> &'static Renderer {
@@ -157,6 +157,36 @@ fn an_orthographic_volume_does_not_depend_on_where_the_eye_is_along_the_axis() {
     let d = max_diff(&near, &far);
     assert!(d < 0.01, "the eye inside the data changes the image by {d}");
     assert!(max_diff(&near, &cpu) < 0.01);
+}
+
+/// A volume whose per-pixel ray state does not fit one buffer binding is refused with a
+/// message that says so, not a GPU validation error.
+#[test]
+fn a_volume_too_large_for_one_binding_is_refused_with_its_size() {
+    let (_d, _p, f) = make_file(&fcc_frame(2), small_build(), &[]);
+    let limits = renderer().ctx.device.limits();
+    let most = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    let per_ray = std::mem::size_of::<mdlod_render::passes::density::RayGpu>() as u64;
+    let side = u64::from(limits.max_texture_dimension_2d);
+    let (w, h) = (side.min(4096), (most / per_ray) / side.min(4096) + 1);
+    if h > side {
+        eprintln!("this adapter binds {most} bytes: no image is too large for the ray state");
+        return;
+    }
+    let (w, h) = (w as u32, h as u32);
+    let cam = camera(&f, Projection::Perspective, w, h);
+    let draw = all_points(&f, &cam, w, h);
+    match renderer().render_density(&f, &cam, &draw, w, h, &DensitySettings::default()) {
+        Err(RenderError::InvalidOptions(m)) => {
+            assert!(
+                m.contains("ray state") && m.contains(&format!("{w}x{h}")),
+                "{m}"
+            )
+        }
+        other => panic!("{w}x{h}: {:?}", other.map(|_| ())),
+    }
 }
 
 #[test]
