@@ -37,12 +37,16 @@ pub fn axis_sum(c: f32, sigma: f32) -> f32 {
     let limit = TRUNCATION * sigma;
     let inv = 1.0 / (2.0 * sigma * sigma);
     let mut sum = 0.0;
-    let mut x = (c - 0.5 - limit).ceil();
-    let last = (c - 0.5 + limit).floor();
-    while x <= last {
-        let d = x + 0.5 - c;
+    let first = (c - 0.5 - limit).ceil();
+    let span = (c - 0.5 + limit).floor() - first + 1.0;
+    // Counted, not stepped: past 2^24 px (a splat far off screen) x + 1 == x. An
+    // infinite or NaN centre has no pixels.
+    if !(span > 0.0 && span <= 2.0 * limit + 2.0) {
+        return 0.0;
+    }
+    for k in 0..span as u32 {
+        let d = first + k as f32 + 0.5 - c;
         sum += (-d * d * inv).exp();
-        x += 1.0;
     }
     sum
 }
@@ -128,6 +132,25 @@ impl SplatPass {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn splats_far_off_screen_end_their_sums() {
+        // Past 2^24 px a step of one pixel no longer changes a float: the sum is counted.
+        for c in [16_777_216.0, 33_554_432.5, 1e30, f32::INFINITY, f32::NAN] {
+            for sigma in [MIN_SIGMA_PX, 3.0, 31.0] {
+                let s = axis_sum(c, sigma);
+                assert!(s.is_finite() && s >= 0.0, "c {c}, sigma {sigma}: {s}");
+            }
+        }
+        // Where steps are exact, counting sums what stepping did.
+        let s = axis_sum(1000.3, 2.0);
+        let stepped: f32 = (990..=1010)
+            .map(|x| x as f32 + 0.5 - 1000.3)
+            .filter(|d| d.abs() <= TRUNCATION * 2.0)
+            .map(|d| (-d * d / 8.0).exp())
+            .sum();
+        assert!((s - stepped).abs() < 1e-5, "{s} against {stepped}");
+    }
 
     #[test]
     fn weights_sum_to_one_on_a_pixel_grid() {

@@ -33,15 +33,17 @@ fn axis_sum(c: f32, sigma: f32) -> f32 {
     let limit = TRUNCATION * sigma;
     let inv = 1.0 / (2.0 * sigma * sigma);
     var sum = 0.0;
-    var x = ceil(c - 0.5 - limit);
-    let last = floor(c - 0.5 + limit);
-    loop {
-        if x > last {
-            break;
-        }
-        let d = x + 0.5 - c;
+    let first = ceil(c - 0.5 - limit);
+    let span = floor(c - 0.5 + limit) - first + 1.0;
+    // Counted, not stepped: past 2^24 px (a splat far off screen) x + 1 == x. An
+    // infinite or NaN centre has no pixels.
+    if !(span > 0.0 && span <= 2.0 * limit + 2.0) {
+        return 0.0;
+    }
+    let n = u32(span);
+    for (var k = 0u; k < n; k++) {
+        let d = first + f32(k) + 0.5 - c;
         sum += exp(-d * d * inv);
-        x += 1.0;
     }
     return sum;
 }
