@@ -342,6 +342,12 @@ pub fn frame_setup(
         } else {
             OcclusionMode::WholePixels
         },
+        // Kernels reach past their nodes' boxes: nodes just outside the view add
+        // density inside it.
+        support_scale: match &opts.mode {
+            RenderMode::Density(d) => d.kernel_scale,
+            _ => 0.0,
+        },
     };
     let settings = FrameSettings {
         width: opts.width,

@@ -929,6 +929,7 @@ impl Smip {
                                 / (MAX_RECT_TILES * MAX_RECT_TILES) as u64)
                                 .max(1),
                             occlusion: self.config.occlusion,
+                            support_scale: 0.0,
                         },
                     );
                     file.node_error()?;

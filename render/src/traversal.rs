@@ -17,7 +17,10 @@
 //!    (nodes of the next level, each drawn as its own representative and queued in
 //!    turn, or particles, which are final). Children whose bounding box lies outside the
 //!    view frustum are culled with their whole subtree; particle children are kept
-//!    whenever their parent is visible (they are culled with their parent's box).
+//!    whenever their parent is visible (they are culled with their parent's box). Points
+//!    drawn as kernels wider than their spheres (the density volume,
+//!    [`TraversalSettings::support_scale`]) are culled by their boxes grown by the
+//!    kernels' reach, so that a node just outside the view still adds density inside it.
 //! 4. Opening a node changes the number of drawn points by `visible children − 1`. If
 //!    that would exceed `budget_points`, refinement stops there: largest first means
 //!    that what is left is uniformly as fine as the budget allows, and the size of that
@@ -96,6 +99,10 @@ pub struct TraversalSettings {
     pub budget_points: u64,
     /// Occlusion culling (see [`crate::occlusion`]); match it to the samples per pixel.
     pub occlusion: OcclusionMode,
+    /// Points drawn as kernels reaching this many times their radius (the density
+    /// volume's `kernel_scale`; see [`Projector::with_support`]); 0 for spheres and
+    /// splats, whose node boxes bound what they draw.
+    pub support_scale: f32,
 }
 
 impl Default for TraversalSettings {
@@ -105,6 +112,7 @@ impl Default for TraversalSettings {
             error_px: 1.0,
             budget_points: 4_000_000,
             occlusion: OcclusionMode::PixelCentres,
+            support_scale: 0.0,
         }
     }
 }
@@ -206,6 +214,8 @@ pub struct Projector {
     near: f32,
     /// Pixels per world unit at depth 1 (perspective) or everywhere (orthographic).
     scale: f32,
+    /// See [`Self::with_support`].
+    support_scale: f32,
 }
 
 impl Projector {
@@ -216,7 +226,39 @@ impl Projector {
             projection: camera.projection,
             near: camera.near,
             scale: camera.pixels_per_world(1.0, viewport[1]),
+            support_scale: 0.0,
         }
+    }
+
+    /// A projector whose frustum test keeps a node while the kernels of its subtree may
+    /// reach into the view: its box grown by `support_scale` times its flux radius
+    /// `√area_sum` (at least its radius), which bounds every kernel below it (area sums
+    /// only grow up the hierarchy). A node just outside the view still adds density
+    /// inside it.
+    pub fn with_support(camera: &Camera, viewport: [u32; 2], support_scale: f32) -> Self {
+        let support_scale = if support_scale.is_finite() {
+            support_scale.max(0.0)
+        } else {
+            0.0
+        };
+        Projector {
+            support_scale,
+            ..Self::new(camera, viewport)
+        }
+    }
+
+    /// The node's box as the frustum tests see it.
+    fn culled_box(&self, n: &NodeRecord) -> (Vec3, Vec3) {
+        let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
+        if self.support_scale == 0.0 {
+            return (min, max);
+        }
+        let reach = self.support_scale * n.area_sum.max(0.0).sqrt().max(n.radius);
+        if !reach.is_finite() {
+            // (Checked records hold finite values; nothing to grow by otherwise.)
+            return (min, max);
+        }
+        (min - Vec3::splat(reach), max + Vec3::splat(reach))
     }
 
     /// Diameter in pixels of the sphere around the node's bounding box.
@@ -247,13 +289,15 @@ impl Projector {
 
     /// True when the node's bounding box may intersect the view frustum.
     pub fn visible(&self, n: &NodeRecord) -> bool {
-        Camera::box_in_frustum(&self.planes, n.bounds_min.into(), n.bounds_max.into())
+        let (min, max) = self.culled_box(n);
+        Camera::box_in_frustum(&self.planes, min, max)
     }
 
     /// [`Self::visible`] as `Some`, holding whether the box lies wholly inside the
     /// frustum, so that the node's descendants (whose boxes lie in its box) need no test.
     pub fn frustum(&self, n: &NodeRecord) -> Option<bool> {
-        Camera::box_against_frustum(&self.planes, n.bounds_min.into(), n.bounds_max.into())
+        let (min, max) = self.culled_box(n);
+        Camera::box_against_frustum(&self.planes, min, max)
     }
 }
 
@@ -466,7 +510,7 @@ pub fn traverse_with(
     residency: &mut dyn Residency,
 ) -> DrawList {
     if settings.occlusion != OcclusionMode::Off {
-        let proj = Projector::new(camera, settings.viewport);
+        let proj = Projector::with_support(camera, settings.viewport, settings.support_scale);
         if !proj.visible(&file.nodes()[0]) {
             return DrawList {
                 culled_nodes: 1,
@@ -573,7 +617,7 @@ fn traverse_tiled(
     residency: &dyn SharedResidency,
 ) -> (DrawList, Vec<(u32, f32)>) {
     use rayon::prelude::*;
-    let proj = Projector::new(camera, settings.viewport);
+    let proj = Projector::with_support(camera, settings.viewport, settings.support_scale);
     if !proj.visible(&file.nodes()[0]) {
         let list = DrawList {
             culled_nodes: 1,
@@ -670,7 +714,7 @@ fn largest_first(
     let nodes = file.nodes();
     let levels = file.levels();
     let last = file.level_count() - 1;
-    let proj = Projector::new(camera, settings.viewport);
+    let proj = Projector::with_support(camera, settings.viewport, settings.support_scale);
     let budget = settings.budget_points.max(1);
     let mut list = DrawList::default();
     if !proj.visible(&nodes[0]) {
@@ -823,7 +867,7 @@ fn front_to_back(
     let nodes = file.nodes();
     let levels = file.levels();
     let last = file.level_count() - 1;
-    let proj = Projector::new(camera, settings.viewport);
+    let proj = Projector::with_support(camera, settings.viewport, settings.support_scale);
     let budget = settings.budget_points.max(1);
     let bits = file.position_bits();
     let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();

@@ -28,6 +28,7 @@ fn cut(f: &MdlodFile, cam: &Camera, error_px: f32, budget: u64) -> DrawList {
             error_px,
             budget_points: budget,
             occlusion: OcclusionMode::Off,
+            support_scale: 0.0,
         },
     )
 }
@@ -155,6 +156,7 @@ fn a_cut_without_a_binding_budget_is_the_same_in_any_visiting_order() {
                     error_px,
                     budget_points: budget,
                     occlusion: OcclusionMode::Off,
+                    support_scale: 0.0,
                 };
                 let any = traverse_with(&cam, &f, &settings, &mut AllResident);
                 let ordered = traverse_with(&cam, &f, &settings, &mut Ordered);
@@ -345,6 +347,7 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
         error_px: 0.0,
         budget_points: u64::MAX,
         occlusion: OcclusionMode::Off,
+        support_scale: 0.0,
     };
     let mut patchy = Patchy {
         level: 2,
@@ -429,6 +432,7 @@ fn the_parallel_traversal_draws_refused_nodes_and_lists_what_it_asked_largest_fi
         error_px: 0.0,
         budget_points: u64::MAX,
         occlusion: OcclusionMode::PixelCentres,
+        support_scale: 0.0,
     };
     let on = |threads: usize| {
         rayon::ThreadPoolBuilder::new()
@@ -554,6 +558,7 @@ fn culled_and_full(
         error_px,
         budget_points: u64::MAX,
         occlusion,
+        support_scale: 0.0,
     };
     let all = traverse(cam, f, &settings(OcclusionMode::Off));
     let seen = traverse(cam, f, &settings(OcclusionMode::PixelCentres));
@@ -682,6 +687,7 @@ fn the_parallel_occlusion_cut_is_the_same_on_any_thread_count_and_hides_what_one
             error_px,
             budget_points: budget,
             occlusion,
+            support_scale: 0.0,
         };
         let on = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
@@ -736,6 +742,7 @@ fn occlusion_traversal_meets_the_budget_by_coarsening() {
         error_px: 0.0,
         budget_points: 150,
         occlusion: OcclusionMode::PixelCentres,
+        support_scale: 0.0,
     };
     let d = traverse(&cam, &f, &settings);
     check_counts(&f, &d);
@@ -928,6 +935,7 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             error_px: 0.0,
             budget_points: u64::MAX,
             occlusion,
+            support_scale: 0.0,
         };
         assert_eq!(
             traverse(&cam, &lazy, &settings),
@@ -993,6 +1001,7 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             error_px: 0.0,
             budget_points: u64::MAX,
             occlusion,
+            support_scale: 0.0,
         };
         let d = traverse(&cam, &f, &settings);
         wants(f.node_error().err().unwrap());

@@ -66,6 +66,7 @@ fn all_points(f: &MdlodFile, camera: &Camera, w: u32, h: u32) -> mdlod_render::D
             error_px: 0.0,
             budget_points: u64::MAX,
             occlusion: OcclusionMode::Off,
+            support_scale: 0.0,
         },
     )
 }
@@ -186,6 +187,59 @@ fn a_volume_too_large_for_one_binding_is_refused_with_its_size() {
             )
         }
         other => panic!("{w}x{h}: {:?}", other.map(|_| ())),
+    }
+}
+
+/// A view inside a block: the particles just outside the view add density inside it
+/// (their kernels reach 2.5 radii), so the cut keeps them, and the volume is the one
+/// every particle of the file makes.
+#[test]
+fn kernels_reaching_into_the_view_from_outside_it_add_their_density() {
+    let (_d, _p, f) = make_file(&fcc_frame(8), small_build(), &[]);
+    let (w, h) = (40u32, 30u32);
+    let s = DensitySettings {
+        slices: 64,
+        opacity: 0.1,
+        ..Default::default()
+    };
+    let cut_of = |camera: &Camera, support_scale: f32| {
+        traverse(
+            camera,
+            &f,
+            &TraversalSettings {
+                viewport: [w, h],
+                error_px: 0.0,
+                budget_points: u64::MAX,
+                occlusion: OcclusionMode::Off,
+                support_scale,
+            },
+        )
+    };
+    let everything = cut_of(&camera_zoom(&f, Projection::Perspective, w, h, 0.5), 0.0);
+    assert_eq!(everything.particles, f.particle_count());
+    let every_point = mdlod_render::density::density_points(&f, &everything);
+    for projection in [Projection::Perspective, Projection::Orthographic] {
+        let cam = camera_zoom(&f, projection, w, h, 6.0);
+        let albedo = Vec3::from(f.metadata().species[0].colour);
+        // Culled by the particles' boxes (the kernels ignored), then by the kernels.
+        let mut differences = Vec::new();
+        for support_scale in [0.0, s.kernel_scale] {
+            let cut = cut_of(&cam, support_scale);
+            assert!(
+                cut.particles < f.particle_count(),
+                "{projection:?}: nothing culled at {support_scale}"
+            );
+            let frame = renderer().render_density(&f, &cam, &cut, w, h, &s).unwrap();
+            let all = reference(&every_point, &cam, w, h, &s, &frame.slicing, albedo);
+            differences.push(max_diff(&frame.rgba, &all.rgba));
+        }
+        assert!(
+            differences[1] < 1e-4 && differences[0] > 1e-3,
+            "{projection:?}: the cut's volume differs from every particle's by {} culled by \
+             boxes, {} by kernels",
+            differences[0],
+            differences[1]
+        );
     }
 }
 

@@ -62,6 +62,7 @@ fn cut(
             error_px,
             budget_points: u64::MAX,
             occlusion,
+            support_scale: 0.0,
         },
     )
 }
@@ -78,6 +79,7 @@ fn render_all(f: &MdlodFile, camera: &Camera, w: u32, h: u32, spp: u32) -> Rende
             error_px: 0.0,
             budget_points: u64::MAX,
             occlusion: OcclusionMode::Off,
+            support_scale: 0.0,
         },
     );
     renderer()
@@ -638,6 +640,7 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
                 error_px: o.error_px,
                 budget_points: report.budget,
                 occlusion: OcclusionMode::PixelCentres,
+                support_scale: 0.0,
             };
             let (frame, draw, stats, frames) =
                 converge(&mut unlimited, &camera, &traversal, &settings);
@@ -741,6 +744,7 @@ fn a_tight_pool_under_a_binding_budget_settles_on_the_direct_image() {
             error_px: o.error_px,
             budget_points: report.budget,
             occlusion,
+            support_scale: 0.0,
         };
         let used = {
             let mut unlimited =
@@ -826,6 +830,7 @@ fn a_corrupt_page_is_an_error_naming_the_particle_and_the_pool_stays_whole() {
         error_px: 0.0,
         budget_points: u64::MAX,
         occlusion: OcclusionMode::PixelCentres,
+        support_scale: 0.0,
     };
     let camera = camera_for(&f, &whole, w, h).unwrap();
     let mut error = None;
