@@ -1203,12 +1203,14 @@ fn every_mode_but_sndfs_streams_through_a_small_pool_to_the_direct_image() {
     let corner = corner_camera(&f, w, h, Vec3::new(6.0, 6.0, 45.0));
     let view = ViewSpec::Camera(corner);
     // A pool just large enough for the view's cut, well below the file: the view
-    // completes, after frames that start from the top node alone.
+    // completes, after frames that start from the top node alone. (The density volume's
+    // cut is the largest: it keeps nodes outside the view whose kernels reach into it.)
     let (used, file_pages) = {
         let mut o = opts(w, h);
         o.error_px = error_px;
         o.view = view.clone();
         o.occlusion = false;
+        o.mode = RenderMode::Density(DensitySettings::default());
         let (camera, traversal, _) = mdlod_render::frame_setup(&f, &o).unwrap();
         let mut s = StreamingRenderer::new(renderer(), f.clone(), 1 << 30).unwrap();
         let mut used = 0;
