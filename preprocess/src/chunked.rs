@@ -108,7 +108,8 @@ pub struct ChunkOptions {
     pub temp_dir: Option<PathBuf>,
     /// Particles read from the input at a time (the file does not depend on it).
     pub window_points: usize,
-    /// Largest gzip input (compressed bytes) decompressed in memory; a larger one is
+    /// Largest gzip input (compressed bytes) decompressed in memory; a larger one, or one
+    /// whose text is more than 4 times this ([`Self::gzip_text_in_memory_max`]), is
     /// decompressed into a working file and read from there a window at a time. `None`:
     /// an eighth of `memory_limit` (text compresses about 4×, and its text should take
     /// at most half the limit).
@@ -134,6 +135,13 @@ impl ChunkOptions {
     /// The largest gzip input decompressed in memory (see [`Self::gzip_in_memory`]).
     pub fn gzip_in_memory_max(&self) -> u64 {
         self.gzip_in_memory.unwrap_or(self.memory_limit / 8)
+    }
+
+    /// The most text of gzip inputs held in memory: 4 × [`Self::gzip_in_memory_max`]
+    /// (the usual ratio of text). A small input that decompresses to more (a high ratio)
+    /// is decompressed into a working file instead, as a large one is.
+    pub fn gzip_text_in_memory_max(&self) -> u64 {
+        self.gzip_in_memory_max().saturating_mul(4)
     }
 
     pub fn temp_dir_for(&self, output: &Path) -> PathBuf {
@@ -236,6 +244,10 @@ pub struct DumpSource {
     /// For [`Windows::Text`]: the frame's header, from the dump already opened (indexing
     /// it again would read the whole file once more).
     pub(crate) text_header: Option<crate::readers::Header>,
+    /// For [`Windows::Pieces`]: the files the dump already opened read its pieces from
+    /// (working files where [`crate::convert::open_bounded`] decompressed them); `None`:
+    /// the pieces `path` names.
+    pub(crate) pieces: Option<Vec<PathBuf>>,
 }
 
 /// How a [`DumpSource`] reads its windows.
@@ -287,15 +299,22 @@ impl ParticleSource for DumpSource {
                 f,
             ),
             Windows::Pieces => {
-                let pieces = crate::readers::DumpFile::open(&self.path)?
-                    .piece_paths()
-                    .unwrap_or_else(|| vec![self.path.clone()]);
+                // (Not the piece set opened again: that held every gzip piece's text.)
+                let pieces = match &self.pieces {
+                    Some(p) => p.clone(),
+                    None => crate::readers::piece_paths(&self.path)?,
+                };
                 let mut offset = 0usize;
                 for piece in pieces {
                     let dump = crate::readers::DumpFile::open(&piece)?;
                     let n = dump.frame_info(self.frame)?.particles;
                     let mut shifted = |start: usize, part: Frame| f(offset + start, part);
-                    if dump.reads_parts() {
+                    if dump.is_compressed() {
+                        // A small gzip piece, decompressed: read whole.
+                        let part = dump.read_frame(self.frame, &self.options, &NoProgress)?;
+                        drop(dump);
+                        shifted(0, part)?;
+                    } else if dump.reads_parts() {
                         drop(dump);
                         windows_by_range(n, window, &mut shifted, |range| {
                             let dump = crate::readers::DumpFile::open(&piece)?;
@@ -316,7 +335,13 @@ impl ParticleSource for DumpSource {
                         drop(dump);
                         shifted(0, part)?;
                     }
-                    offset += n;
+                    offset = offset.checked_add(n).ok_or_else(|| {
+                        ConvertError::Chunked(format!(
+                            "{}: frame {}: the pieces hold more atoms than can be counted",
+                            piece.display(),
+                            self.frame
+                        ))
+                    })?;
                 }
                 Ok(())
             }

@@ -188,6 +188,7 @@ pub fn window_source(
         text_header: (windows == crate::chunked::Windows::Text)
             .then(|| dump.header(k).ok())
             .flatten(),
+        pieces: dump.piece_paths(),
         windows,
     }))
 }
@@ -205,53 +206,110 @@ pub enum FrameSelect {
 /// A dump opened within the memory limit (see [`open_bounded`]).
 pub struct BoundedDump {
     pub dump: crate::readers::DumpFile,
-    /// The working file a large gzip input was decompressed into (`dump` reads it).
+    /// The working file a large gzip input was decompressed into (`dump` reads it); for a
+    /// `%` piece set, the working directory of its decompressed pieces.
     pub text: Option<PathBuf>,
     /// Its working directory, removed when this is dropped.
     _work: Option<tempfile::TempDir>,
 }
 
 /// Opens `input` as [`crate::readers::DumpFile::open`] does, except a large gzip input
-/// (see `ChunkOptions::gzip_in_memory`): that is decompressed as a stream into a working
-/// file in a fresh directory under `chunks.temp_dir_for(output)`, and the dump reads the
-/// file, a window at a time where a frame needs it, so memory stays within the limit.
+/// (see `ChunkOptions::gzip_in_memory`: more compressed bytes than that, or more text
+/// than [`crate::chunked::ChunkOptions::gzip_text_in_memory_max`], found by decompressing
+/// no more than that into memory): that is decompressed as a stream into a working file
+/// in a fresh directory under `chunks.temp_dir_for(output)`, and the dump reads the file,
+/// a window at a time where a frame needs it, so memory stays within the limit. The
+/// pieces of a `%` piece set are opened so one by one, the text limit holding for the
+/// text of all the pieces kept in memory together.
 pub fn open_bounded(
     input: &Path,
     chunks: &crate::chunked::ChunkOptions,
     output: &Path,
     progress: &dyn Progress,
 ) -> Result<BoundedDump, ConvertError> {
-    let compressed = std::fs::metadata(input).map_or(0, |m| m.len());
-    if compressed > chunks.gzip_in_memory_max() && crate::readers::is_gzip(input)? {
-        let parent = chunks.temp_dir_for(output);
-        let work = tempfile::Builder::new()
-            .prefix(".mdlod-convert-")
-            .tempdir_in(&parent)
-            .map_err(|e| ConvertError::Temp {
-                path: parent.clone(),
-                source: e,
-            })?;
-        let name = input
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let text = work
-            .path()
-            .join(name.strip_suffix(".gz").unwrap_or("input.txt"));
-        crate::readers::gunzip_to_file(input, &text, progress)?;
-        let dump = crate::readers::DumpFile::open(&text)
-            .map_err(|e| decompressed(input, Some(&text), e.into()))?;
-        return Ok(BoundedDump {
-            dump,
-            text: Some(text),
-            _work: Some(work),
-        });
+    if crate::readers::is_piece_pattern(input) {
+        return open_pieces_bounded(input, chunks, output, progress);
     }
+    let mut work = None;
+    let limit = chunks.gzip_text_in_memory_max();
+    let (dump, text) = open_piece_bounded(input, chunks, limit, output, &mut work, progress)?;
     Ok(BoundedDump {
-        dump: crate::readers::DumpFile::open(input)?,
-        text: None,
-        _work: None,
+        dump,
+        text,
+        _work: work,
     })
+}
+
+/// [`open_bounded`] of a `%` piece set: the pieces that are too large for memory are
+/// decompressed into working files of one directory (the `text` of the result).
+fn open_pieces_bounded(
+    pattern: &Path,
+    chunks: &crate::chunked::ChunkOptions,
+    output: &Path,
+    progress: &dyn Progress,
+) -> Result<BoundedDump, ConvertError> {
+    let mut work = None;
+    let mut left = chunks.gzip_text_in_memory_max();
+    let mut pieces = Vec::new();
+    for piece in crate::readers::piece_paths(pattern)? {
+        let (dump, _) = open_piece_bounded(&piece, chunks, left, output, &mut work, progress)?;
+        left = left.saturating_sub(dump.text_in_memory());
+        pieces.push(dump);
+    }
+    let dump = crate::readers::DumpFile::from_pieces(pattern, pieces)?;
+    Ok(BoundedDump {
+        dump,
+        text: work.as_ref().map(|w| w.path().to_path_buf()),
+        _work: work,
+    })
+}
+
+/// Opens the file `input` in memory when it is not a gzip file over the limits (at most
+/// `text_limit` bytes of text), else decompresses it into a working file in `work`
+/// (made on first use) and opens that: the dump and the working file, if any.
+fn open_piece_bounded(
+    input: &Path,
+    chunks: &crate::chunked::ChunkOptions,
+    text_limit: u64,
+    output: &Path,
+    work: &mut Option<tempfile::TempDir>,
+    progress: &dyn Progress,
+) -> Result<(crate::readers::DumpFile, Option<PathBuf>), ConvertError> {
+    let compressed = std::fs::metadata(input).map_or(0, |m| m.len());
+    let large = compressed > chunks.gzip_in_memory_max() && crate::readers::is_gzip(input)?;
+    if !large {
+        if let Some(dump) = crate::readers::DumpFile::open_within(input, text_limit, progress)? {
+            return Ok((dump, None));
+        }
+    }
+    let dir = match work {
+        Some(w) => w,
+        None => {
+            let parent = chunks.temp_dir_for(output);
+            let w = tempfile::Builder::new()
+                .prefix(".mdlod-convert-")
+                .tempdir_in(&parent)
+                .map_err(|e| ConvertError::Temp {
+                    path: parent.clone(),
+                    source: e,
+                })?;
+            work.insert(w)
+        }
+    };
+    let name = input
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    // Named as the input less `.gz`, so that the format is told from the name as the
+    // input's would be (else from the text); the pieces of a set have distinct names.
+    let text = dir.path().join(
+        name.strip_suffix(".gz")
+            .map_or_else(|| format!("{name}.txt"), String::from),
+    );
+    crate::readers::gunzip_to_file(input, &text, progress)?;
+    let dump = crate::readers::DumpFile::open(&text)
+        .map_err(|e| decompressed(input, Some(&text), e.into()))?;
+    Ok((dump, Some(text)))
 }
 
 impl BoundedDump {

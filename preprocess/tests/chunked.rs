@@ -337,3 +337,267 @@ fn a_large_gzip_dump_is_decompressed_into_a_working_file_and_read_in_windows() {
         "working files left"
     );
 }
+
+/// The first frame of the sample text dump (500 atoms) as lines, and the index of its
+/// first atom line.
+fn first_frame_lines() -> (Vec<String>, usize) {
+    let text =
+        std::fs::read_to_string(mdlod_datasets::lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let lines: Vec<String> = text.lines().map(String::from).collect();
+    let atoms_at = lines
+        .iter()
+        .position(|l| l.starts_with("ITEM: ATOMS"))
+        .unwrap()
+        + 1;
+    (lines[..atoms_at + 500].to_vec(), atoms_at)
+}
+
+#[test]
+fn an_extra_atom_line_read_in_windows_is_the_error_whole_frame_reading_gives() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut lines, atoms_at) = first_frame_lines();
+    // One atom line more than the 500 announced, then blank space (which is allowed).
+    lines.push(lines[atoms_at].clone());
+    let path = dir.path().join("extra.lammpstrj");
+    std::fs::write(&path, lines.join("\n") + "\n\n  \n").unwrap();
+    let whole = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        whole,
+        format!(
+            "{}:{}: more atom lines than the 500 the header announces",
+            path.display(),
+            atoms_at + 501
+        )
+    );
+    let out = dir.path().join("extra.mdlod");
+    // Windows of 128 lines, chunks of 300: the frame is read in windows.
+    let err = convert_file(
+        &path,
+        &out,
+        FrameSelect::Last,
+        &ReadOptions::default(),
+        &options(300),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains(&whole), "{err}");
+    assert!(!out.exists());
+
+    // Without the extra line, blank space after the atoms converts.
+    lines.pop();
+    std::fs::write(&path, lines.join("\n") + "\n\n  \n").unwrap();
+    convert_file(
+        &path,
+        &out,
+        FrameSelect::Last,
+        &ReadOptions::default(),
+        &options(300),
+        &NoProgress,
+    )
+    .unwrap();
+}
+
+#[test]
+fn a_text_dump_that_shrinks_between_windows_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let (lines, atoms_at) = first_frame_lines();
+    let path = dir.path().join("shrinks.lammpstrj");
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    let read = ReadOptions::default();
+    let info = dump.frame_info(0).unwrap();
+    let source = mdlod_preprocess::convert::window_source(&dump, 0, &read, &info).unwrap();
+    drop(dump);
+    // After the first window, the file is cut inside the atoms of that window.
+    let cut = lines[..atoms_at + 10].join("\n").len() as u64;
+    let mut windows = 0;
+    let e = source
+        .windows(128, &mut |first, part| {
+            assert_eq!((first, part.len()), (0, 128));
+            windows += 1;
+            std::fs::OpenOptions::new()
+                .write(true)
+                .open(&path)
+                .unwrap()
+                .set_len(cut)
+                .unwrap();
+            Ok(())
+        })
+        .unwrap_err()
+        .to_string();
+    assert_eq!(windows, 1);
+    assert!(
+        e.starts_with(&path.display().to_string())
+            && e.contains(&format!(
+                "the file changed size while frame 0 was being read ({cut} bytes now)"
+            )),
+        "{e}"
+    );
+}
+
+/// A one-frame LAMMPS text dump of atoms `ids` on a lattice, with a constant column: text
+/// that compresses far better than 4 to 1.
+fn lattice_dump(ids: std::ops::Range<usize>, total: usize) -> String {
+    let mut s = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{}\nITEM: BOX BOUNDS pp pp pp\n0 20\n0 20\n\
+         0 {}\nITEM: ATOMS id type x y z q\n",
+        ids.len(),
+        total / 400 + 1
+    );
+    for i in ids {
+        s += &format!(
+            "{} {} {}.5 {}.5 {}.5 0.000000000000\n",
+            i + 1,
+            1 + i % 2,
+            i % 20,
+            (i / 20) % 20,
+            i / 400
+        );
+    }
+    s
+}
+
+fn gzip(path: &Path, text: &str) -> u64 {
+    let mut enc = flate2::write::GzEncoder::new(
+        std::fs::File::create(path).unwrap(),
+        flate2::Compression::best(),
+    );
+    std::io::Write::write_all(&mut enc, text.as_bytes()).unwrap();
+    enc.finish().unwrap();
+    std::fs::metadata(path).unwrap().len()
+}
+
+#[test]
+fn a_small_gzip_dump_of_much_text_is_decompressed_into_a_working_file() {
+    use mdlod_preprocess::convert::open_bounded;
+    let dir = tempfile::tempdir().unwrap();
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    let text = lattice_dump(0..6000, 6000);
+    let gz = dir.path().join("lattice.dump.gz");
+    let compressed = gzip(&gz, &text);
+    assert!(
+        text.len() as u64 > 8 * compressed,
+        "{} / {compressed}",
+        text.len()
+    );
+    let mut opts = options(1000);
+    opts.chunks.temp_dir = Some(work.clone());
+    let out = dir.path().join("out.mdlod");
+    // Within both limits: in memory.
+    let b = open_bounded(&gz, &opts.chunks, &out, &NoProgress).unwrap();
+    assert!(b.text.is_none() && b.dump.is_compressed());
+    drop(b);
+    // Under the limit of compressed bytes, but more than 4 times that of text: not held
+    // in memory (a 1000:1 file expanded past any memory), decompressed into a file.
+    opts.chunks.gzip_in_memory = Some(compressed);
+    assert!(opts.chunks.gzip_text_in_memory_max() < text.len() as u64);
+    let b = open_bounded(&gz, &opts.chunks, &out, &NoProgress).unwrap();
+    let spooled = b.text.clone().unwrap();
+    assert!(spooled.starts_with(&work) && spooled.ends_with("lattice.dump"));
+    assert!(!b.dump.is_compressed());
+    assert_eq!(b.dump.frame_info(0).unwrap().particles, 6000);
+    assert_eq!(std::fs::read(&spooled).unwrap(), text.as_bytes());
+    drop(b);
+    assert_eq!(
+        std::fs::read_dir(&work).unwrap().count(),
+        0,
+        "working files left"
+    );
+    // And it converts as from memory.
+    let read = ReadOptions::default();
+    convert_file(&gz, &out, FrameSelect::Last, &read, &opts, &NoProgress).unwrap();
+    opts.chunks.gzip_in_memory = None;
+    let in_memory = dir.path().join("in_memory.mdlod");
+    convert_file(
+        &gz,
+        &in_memory,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(std::fs::read(&out).unwrap() == std::fs::read(&in_memory).unwrap());
+}
+
+#[test]
+fn gzip_pieces_are_opened_within_the_memory_limit_piece_by_piece() {
+    use mdlod_preprocess::convert::open_bounded;
+    let dir = tempfile::tempdir().unwrap();
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    let (t0, t1) = (lattice_dump(0..3000, 5500), lattice_dump(3000..5500, 5500));
+    let p0 = dir.path().join("run.0.dump.gz");
+    gzip(&p0, &t0);
+    gzip(&dir.path().join("run.1.dump.gz"), &t1);
+    let pattern = dir.path().join("run.%.dump.gz");
+    let mut opts = options(1000);
+    opts.chunks.temp_dir = Some(work.clone());
+    let out = dir.path().join("out.mdlod");
+    let (t0, t1) = (t0.len() as u64, t1.len() as u64);
+
+    // The readers' limit holds for the text of all the pieces together.
+    use mdlod_preprocess::readers::DumpFile;
+    assert!(DumpFile::open_within(&pattern, t0 + t1 - 1, &NoProgress)
+        .unwrap()
+        .is_none());
+    let d = DumpFile::open_within(&pattern, t0 + t1, &NoProgress)
+        .unwrap()
+        .unwrap();
+    assert_eq!((d.text_in_memory(), d.is_compressed()), (t0 + t1, true));
+    drop(d);
+
+    // Room for the text of piece 0, not of both: piece 1 goes to a working file (the
+    // pattern names no file: its size was taken as 0 and every piece held in memory).
+    opts.chunks.gzip_in_memory = Some(t0.div_ceil(4));
+    let b = open_bounded(&pattern, &opts.chunks, &out, &NoProgress).unwrap();
+    let pieces = b.dump.piece_paths().unwrap();
+    assert_eq!(pieces[0], p0);
+    assert!(pieces[1].starts_with(&work) && pieces[1].ends_with("run.1.dump"));
+    assert_eq!(b.text.as_deref(), pieces[1].parent());
+    assert!(b.dump.is_compressed());
+    assert_eq!(b.dump.text_in_memory(), t0);
+    assert_eq!(b.dump.frame_info(0).unwrap().particles, 5500);
+    drop(b);
+    // Every piece too large: both in working files.
+    opts.chunks.gzip_in_memory = Some(0);
+    let b = open_bounded(&pattern, &opts.chunks, &out, &NoProgress).unwrap();
+    let pieces = b.dump.piece_paths().unwrap();
+    assert!(pieces.iter().all(|p| p.starts_with(&work)), "{pieces:?}");
+    assert_eq!(b.dump.text_in_memory(), 0);
+    drop(b);
+    assert_eq!(
+        std::fs::read_dir(&work).unwrap().count(),
+        0,
+        "working files left"
+    );
+
+    // Converted (in windows: 5500 particles, chunks of 1000) from memory, partly from a
+    // working file, and wholly from working files: the same file.
+    let read = ReadOptions::default();
+    let mut files = Vec::new();
+    for limit in [None, Some(t0.div_ceil(4)), Some(0)] {
+        opts.chunks.gzip_in_memory = limit;
+        let out = dir.path().join(format!("out-{limit:?}.mdlod"));
+        convert_file(&pattern, &out, FrameSelect::Last, &read, &opts, &NoProgress).unwrap();
+        files.push(std::fs::read(&out).unwrap());
+    }
+    assert!(files[0] == files[1] && files[1] == files[2]);
+    assert_eq!(
+        MdlodFile::open(dir.path().join("out-Some(0).mdlod"))
+            .unwrap()
+            .particle_count(),
+        5500
+    );
+    assert_eq!(
+        std::fs::read_dir(&work).unwrap().count(),
+        0,
+        "working files left"
+    );
+}

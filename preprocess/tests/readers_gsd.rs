@@ -218,3 +218,141 @@ fn damaged_gsd_files_are_errors_naming_the_byte() {
         "{m}"
     );
 }
+
+#[test]
+fn frame_numbers_past_the_index_are_errors_not_billions_of_frames() {
+    let good = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let e0 = entry(&good, 0);
+    let slots = u64::from_le_bytes(good[16..24].try_into().unwrap());
+    for frame in [slots, 1u64 << 40, u64::MAX] {
+        let mut bad = good.clone();
+        bad[e0..e0 + 8].copy_from_slice(&frame.to_le_bytes());
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.gsd");
+        std::fs::write(&path, &bad).unwrap();
+        let m = DumpFile::open(&path).unwrap_err().to_string();
+        assert!(
+            m.starts_with(&format!("{}: byte {e0}: ", path.display()))
+                && m.contains(&format!(
+                    "chunk of frame {frame}, but the index has room for {slots} entries"
+                )),
+            "{m}"
+        );
+    }
+    // The last frame number the index has room for is read (its chunks missing from
+    // the frames between fall back to frame 0's).
+    let mut last = good.clone();
+    last[e0..e0 + 8].copy_from_slice(&(slots - 1).to_le_bytes());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("last.gsd");
+    std::fs::write(&path, &last).unwrap();
+    assert_eq!(DumpFile::open(&path).unwrap().frame_count(), slots as usize);
+}
+
+/// A GSD 2.0 file of one frame: `names` (0-separated) and `chunks` of
+/// (name id, type code, N, M, data).
+fn gsd_file(names: &[String], chunks: &[(u16, u8, u64, u32, Vec<u8>)]) -> Vec<u8> {
+    let mut out = vec![0u8; 256];
+    out[..8].copy_from_slice(&0x65DF_65DF_65DF_65DFu64.to_le_bytes());
+    out[44..48].copy_from_slice(&(2u32 << 16).to_le_bytes());
+    out[112..117].copy_from_slice(b"hoomd");
+    let mut locations = Vec::new();
+    for c in chunks {
+        locations.push(out.len() as u64);
+        out.extend_from_slice(&c.4);
+    }
+    let index_at = out.len() as u64;
+    for (c, location) in chunks.iter().zip(&locations) {
+        out.extend_from_slice(&0u64.to_le_bytes());
+        out.extend_from_slice(&c.2.to_le_bytes());
+        out.extend_from_slice(&location.to_le_bytes());
+        out.extend_from_slice(&c.3.to_le_bytes());
+        out.extend_from_slice(&c.0.to_le_bytes());
+        out.extend_from_slice(&[c.1, 0]);
+    }
+    let names_at = out.len() as u64;
+    let mut list: Vec<u8> = names
+        .iter()
+        .flat_map(|n| [n.as_bytes(), b"\0"].concat())
+        .collect();
+    list.resize(list.len().div_ceil(64) * 64 + 64, 0);
+    out.extend_from_slice(&list);
+    out[8..16].copy_from_slice(&index_at.to_le_bytes());
+    out[16..24].copy_from_slice(&(chunks.len() as u64).to_le_bytes());
+    out[24..32].copy_from_slice(&names_at.to_le_bytes());
+    out[32..40].copy_from_slice(&(list.len() as u64 / 64).to_le_bytes());
+    out
+}
+
+#[test]
+fn a_name_past_the_ids_an_entry_can_hold_is_no_chunk() {
+    // Name ids are 16 bits: `particles/diameter`, 65537th name, has no chunk. Taken for
+    // name id 65537 mod 65536 = 1, it was read as the positions (2 × 3 numbers).
+    let mut names = vec!["particles/N".to_string(), "particles/position".to_string()];
+    names.extend((2..65537).map(|i| format!("n{i}")));
+    names.push("particles/diameter".into());
+    assert_eq!(names[65537], "particles/diameter");
+    let positions: Vec<u8> = [0.0f32, 1.0, 2.0, 3.0, 4.0, 5.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let bytes = gsd_file(
+        &names,
+        &[
+            (0, 3, 1, 1, 2u32.to_le_bytes().to_vec()),
+            (1, 9, 2, 3, positions),
+        ],
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("names.gsd");
+    std::fs::write(&path, &bytes).unwrap();
+    let f = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert_eq!(f.positions, [[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]]);
+    // Without diameters, the default radius 0.5.
+    assert_eq!(f.species[0].radius, Some(0.5));
+}
+
+#[test]
+fn f64_positions_past_the_single_precision_range_are_errors_naming_the_byte() {
+    let good = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let names_at = u64::from_le_bytes(good[24..32].try_into().unwrap()) as usize;
+    let id = good[names_at..]
+        .split(|&b| b == 0)
+        .position(|n| n == b"particles/position")
+        .unwrap();
+    let at = (0..128)
+        .map(|i| entry(&good, i))
+        .find(|&at| {
+            u64::from_le_bytes(good[at..at + 8].try_into().unwrap()) == 0
+                && usize::from(u16::from_le_bytes([good[at + 28], good[at + 29]])) == id
+        })
+        .unwrap();
+    let location = u64::from_le_bytes(good[at + 16..at + 24].try_into().unwrap()) as usize;
+    // Frame 0's positions again as f64 (type 10) at the end of the file, particle 5's y
+    // made 1e39.
+    let mut bad = good.clone();
+    let end = bad.len();
+    for i in 0..300 * 3 {
+        let v = f32::from_le_bytes(
+            good[location + 4 * i..location + 4 * i + 4]
+                .try_into()
+                .unwrap(),
+        );
+        let v = if i == 5 * 3 + 1 { 1e39 } else { f64::from(v) };
+        bad.extend_from_slice(&v.to_le_bytes());
+    }
+    bad[at + 16..at + 24].copy_from_slice(&(end as u64).to_le_bytes());
+    bad[at + 30] = 10;
+    let m = damaged(&bad);
+    let byte = end + 8 * (5 * 3 + 1);
+    assert!(
+        m.contains(&format!(
+            "byte {byte}: frame 0: particle 5 has a position that is not finite in single \
+             precision (1e39 is beyond"
+        )),
+        "{m}"
+    );
+}

@@ -335,3 +335,67 @@ fn wrong_attribute_and_no_coordinates_are_clear_errors() {
         .to_string();
     assert!(e.contains("no coordinate columns"), "{e}");
 }
+
+/// Byte offset of the first atom of frame 0 of a current-revision binary dump.
+fn first_atom(bytes: &[u8]) -> usize {
+    let i32_at = |p: usize| i32::from_le_bytes(bytes[p..p + 4].try_into().unwrap());
+    let i64_at = |p: usize| i64::from_le_bytes(bytes[p..p + 8].try_into().unwrap());
+    let mut p = 8 + (-i64_at(0)) as usize + 8; // magic, endian + revision
+    let triclinic = i32_at(p + 16);
+    p += 8 + 8 + 4 + 24 + 48 + if triclinic == 1 { 24 } else { 0 } + 4;
+    p += 4 + i32_at(p) as usize; // units
+    p += if bytes[p] == 1 { 9 } else { 1 }; // time
+    p += 4 + i32_at(p) as usize; // columns
+    p + 4 + 4 // the chunk count, the first chunk's length
+}
+
+#[test]
+fn values_past_the_single_precision_range_are_errors_naming_the_input() {
+    // A coordinate of 1e39 (a finite f64, an infinite f32): the input's atom, column and
+    // byte are named (it used to reach the output as infinity, refused naming that file).
+    let good = std::fs::read(lammps_sample_path("cu_melt.custom.bin")).unwrap();
+    let first = first_atom(&good);
+    assert_eq!(first, 0xa6 + 4);
+    let x_of_atom_3 = first + 2 * 6 * 8 + 2 * 8;
+    let mut bad = good.clone();
+    bad[x_of_atom_3..x_of_atom_3 + 8].copy_from_slice(&1e39f64.to_le_bytes());
+    let e = open_err(&bad);
+    assert!(
+        e.contains(&format!(
+            "byte {x_of_atom_3}: atom 3 of timestep 0: column `x` is not a finite number in \
+             single precision (1e39 is beyond"
+        )),
+        "{e}"
+    );
+    // The attribute (`c_pe`, column 5) of atom 2.
+    let pe_of_atom_2 = first + 6 * 8 + 5 * 8;
+    let mut bad = good.clone();
+    bad[pe_of_atom_2..pe_of_atom_2 + 8].copy_from_slice(&(-2e40f64).to_le_bytes());
+    let e = open_err(&bad);
+    assert!(
+        e.contains(&format!(
+            "byte {pe_of_atom_2}: atom 2 of timestep 0: column `c_pe` is not a finite number \
+             in single precision (-2e40 is beyond"
+        )),
+        "{e}"
+    );
+    // A scaled coordinate that fits single precision until it is unscaled through the
+    // box (`dump atom`: id type xs ys zs; the box is 18 wide).
+    let atom = std::fs::read(lammps_sample_path("cu_melt.atom.bin")).unwrap();
+    let ys_of_atom_1 = first_atom(&atom) + 3 * 8;
+    let mut bad = atom.clone();
+    bad[ys_of_atom_1..ys_of_atom_1 + 8].copy_from_slice(&1e38f64.to_le_bytes());
+    let (_d, path) = temp_copy("scaled.bin", &bad);
+    let e = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with(&format!(
+            "{}: byte {ys_of_atom_1}: atom 1 of timestep 0",
+            path.display()
+        )) && e.contains("column `ys` is not a finite number in single precision once unscaled"),
+        "{e}"
+    );
+}

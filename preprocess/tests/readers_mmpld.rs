@@ -524,3 +524,48 @@ fn files_written_by_megamol_read_as_written_and_convert() {
         assert_eq!(stored, radii, "{name}");
     }
 }
+
+#[test]
+fn seek_entries_pointing_back_into_a_frame_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(102, &mixed());
+    let seek = |k: usize| u64::from_le_bytes(good[60 + 8 * k..68 + 8 * k].try_into().unwrap());
+    let (frame0, frame1) = (seek(0), seek(1));
+    // Every frame the same frame 0 (100 000 such entries made 10^10 lists of a 2 MB file).
+    let mut bad = good.clone();
+    bad[68..76].copy_from_slice(&frame0.to_le_bytes());
+    let m = damaged(dir.path(), &bad);
+    assert!(
+        m.contains(&format!(
+            "byte 68: frame 1 starts at byte {frame0}, before the end of frame 0 (byte {frame1})"
+        )),
+        "{m}"
+    );
+    // Frames in the wrong order, and a frame starting inside the one before.
+    let mut bad = good.clone();
+    bad[60..68].copy_from_slice(&frame1.to_le_bytes());
+    bad[68..76].copy_from_slice(&frame0.to_le_bytes());
+    assert!(damaged(dir.path(), &bad).contains("frame 1 starts at byte"));
+    let mut bad = good.clone();
+    bad[68..76].copy_from_slice(&(frame1 - 1).to_le_bytes());
+    assert!(damaged(dir.path(), &bad).contains("before the end of frame 0"));
+}
+
+#[test]
+fn f64_positions_past_the_single_precision_range_are_errors_naming_the_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    // Vertex type 4 (x y z as f64), no colour: 24 bytes a particle after an 18-byte list
+    // header.
+    let mut bytes = write(100, &[vec![list(4, 0, 1.0, 10, 0.0)]]);
+    let frame0 = u64::from_le_bytes(bytes[60..68].try_into().unwrap()) as usize;
+    let particle3 = frame0 + 4 + 18 + 3 * 24;
+    bytes[particle3 + 8..particle3 + 16].copy_from_slice(&1e39f64.to_le_bytes());
+    let m = damaged(dir.path(), &bytes);
+    assert!(
+        m.contains(&format!(
+            "byte {particle3}: frame 0, list 0: particle 3 has a position that is not finite \
+             in single precision (1e39 is beyond"
+        )),
+        "{m}"
+    );
+}

@@ -93,3 +93,32 @@ fn missing_or_disagreeing_pieces_are_clear_errors() {
         .to_string();
     assert!(e.contains("no files match `none.%.dump`"), "{e}");
 }
+
+#[test]
+fn piece_counts_that_add_up_past_any_count_are_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let piece = |i: usize, atoms: &str| {
+        let text = format!(
+            "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{atoms}\nITEM: BOX BOUNDS pp pp pp\n\
+             0 1\n0 1\n0 1\nITEM: ATOMS id type x y z\n{} 1 0.5 0.5 0.5\n",
+            i + 1
+        );
+        std::fs::write(dir.path().join(format!("run.{i}.dump")), text).unwrap();
+    };
+    // Two pieces announcing 2^64 - 1 atoms each (usize wrapped to 2^64 - 2).
+    piece(0, "18446744073709551615");
+    piece(1, "18446744073709551615");
+    let d = DumpFile::open(&dir.path().join("run.%.dump")).unwrap();
+    let e = d.frame_info(0).unwrap_err().to_string();
+    let second = dir.path().join("run.1.dump");
+    assert!(
+        e.starts_with(&format!("{}:1: frame 0:", second.display()))
+            && e.contains("more than can be counted"),
+        "{e}"
+    );
+    // Counts that add up are the sum (read, the pieces hold one atom each).
+    piece(0, "1");
+    piece(1, "1");
+    let d = DumpFile::open(&dir.path().join("run.%.dump")).unwrap();
+    assert_eq!(d.frame_info(0).unwrap().particles, 2);
+}

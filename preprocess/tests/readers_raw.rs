@@ -172,3 +172,24 @@ fn bad_sidecars_and_arrays_are_errors_naming_the_file() {
         assert!(e.contains(file) && e.contains(needle), "{json}\n  -> {e}");
     }
 }
+
+#[test]
+fn f64_positions_past_the_single_precision_range_are_errors_naming_the_array() {
+    let c = Case::new();
+    let mut p = positions(10);
+    p[4][2] = -3e39;
+    let pos: Vec<u8> = p.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+    let file = c.file("pos.f64", &pos);
+    let path =
+        c.sidecar(r#"{ "mdlod_raw": 1, "positions": { "file": "pos.f64", "type": "f64" } }"#);
+    let e = read(&path).unwrap_err();
+    let byte = 8 * (3 * 4 + 2);
+    assert!(
+        e.starts_with(&format!(
+            "{}: byte {byte}: particle 4: a coordinate is not finite in single precision \
+             (-3e39 is beyond",
+            file.display()
+        )),
+        "{e}"
+    );
+}

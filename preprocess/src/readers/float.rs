@@ -9,6 +9,11 @@
 //! to the standard library's `str::parse::<f64>`, so the result is always identical to
 //! `str::parse` — bit for bit, and `None` exactly where `str::parse` fails.
 
+/// The most digits the fast path reads; a longer number goes to the standard library.
+/// (It keeps the digit count and the decimal exponent, one a digit, far from overflowing
+/// their integers; dumps hold no such numbers.)
+pub(crate) const MAX_FAST_DIGITS: u32 = 800;
+
 /// Exact powers of ten representable as `f64`.
 const POW10: [f64; 23] = [
     1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
@@ -56,6 +61,9 @@ pub(crate) fn parse_prefix(s: &[u8]) -> Option<(f64, usize)> {
         if d > 9 {
             break;
         }
+        if digits == MAX_FAST_DIGITS {
+            return None;
+        }
         digits += 1;
         if mantissa != 0 || d != 0 {
             if significant == 19 {
@@ -72,6 +80,9 @@ pub(crate) fn parse_prefix(s: &[u8]) -> Option<(f64, usize)> {
             let d = c.wrapping_sub(b'0');
             if d > 9 {
                 break;
+            }
+            if digits == MAX_FAST_DIGITS {
+                return None;
             }
             digits += 1;
             if mantissa != 0 || d != 0 {
@@ -132,4 +143,39 @@ pub(crate) fn parse_prefix(s: &[u8]) -> Option<(f64, usize)> {
         return None;
     };
     Some((if negative { -value } else { value }, i))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn same_as_std(t: &str) {
+        assert_eq!(
+            parse_f64(t.as_bytes()).map(f64::to_bits),
+            t.parse::<f64>().ok().map(f64::to_bits),
+            "{} bytes",
+            t.len()
+        );
+    }
+
+    #[test]
+    fn numbers_of_more_digits_than_the_fast_path_reads_go_to_the_standard_library() {
+        let max = MAX_FAST_DIGITS as usize;
+        // Every digit is counted, leading zeros too (a token of 2^32 of them overflowed
+        // the counters): the fast path reads `max` digits, not one more.
+        let at_most = format!("{}1.5", "0".repeat(max - 2));
+        let past = format!("0{at_most}");
+        assert_eq!(parse_prefix(at_most.as_bytes()), Some((1.5, max + 1)));
+        assert_eq!(parse_prefix(past.as_bytes()), None);
+        // Zeros after the point lower the exponent one a digit.
+        let fraction = format!("0.{}1", "0".repeat(3 * max));
+        let zeros = "0".repeat(3 * max);
+        let negative = format!("-{past}e-3");
+        for t in [&past, &fraction, &zeros, &negative] {
+            assert_eq!(parse_prefix(t.as_bytes()), None, "{} bytes", t.len());
+        }
+        for t in [&at_most, &past, &fraction, &zeros, &negative] {
+            same_as_std(t);
+        }
+    }
 }

@@ -207,6 +207,11 @@ impl Index {
                 .collect()
         };
         let index_range = block(8, 16, ENTRY, "index")?;
+        // The most frames the index can describe. A frame that writes no chunk takes all
+        // of frame 0's (the schema's fallback), so frames without entries can exist, but
+        // a frame number past the index's room is no file a writer made: it would make
+        // a few bytes stand for billions of frames to read.
+        let slots = index_range.len() / ENTRY;
         let mut entries = Vec::new();
         for (k, e) in data[index_range.clone()].chunks_exact(ENTRY).enumerate() {
             let at = index_range.start + k * ENTRY;
@@ -215,6 +220,16 @@ impl Index {
                 break; // The end of the used entries.
             }
             let frame = u64_at(e, 0);
+            if usize::try_from(frame).map_or(true, |f| f >= slots) {
+                return Err(err(
+                    path,
+                    at,
+                    format!(
+                        "chunk of frame {frame}, but the index has room for {slots} entries \
+                         (frame numbers past it are not a GSD file's)"
+                    ),
+                ));
+            }
             let n = u64_at(e, 8);
             let m = u32::from_le_bytes(e[24..28].try_into().unwrap_or([0; 4]));
             let name = u16::from_le_bytes([e[28], e[29]]);
@@ -256,7 +271,11 @@ impl Index {
             });
         }
         entries.sort_by_key(|e| (e.frame, e.name));
-        let frames = entries.last().map_or(0, |e| e.frame as usize + 1);
+        // (Each frame number was checked to be below `slots`, itself below `usize::MAX`.)
+        let frames = entries
+            .last()
+            .and_then(|e| usize::try_from(e.frame).ok()?.checked_add(1))
+            .unwrap_or(0);
         if frames == 0 {
             return Err(err(path, index_range.start, "no frames"));
         }
@@ -273,7 +292,7 @@ impl Index {
 
     /// The chunk `name` of frame `k`, else of frame 0 (the schema's rule).
     fn chunk(&self, k: usize, name: &str) -> Option<&Entry> {
-        let id = self.names.iter().position(|n| n == name)? as u16;
+        let id = u16::try_from(self.names.iter().position(|n| n == name)?).ok()?;
         let find = |f: u64| {
             self.entries
                 .binary_search_by_key(&(f, id), |e| (e.frame, e.name))
@@ -583,13 +602,14 @@ pub(crate) fn read_range(
         let bytes = &data[e.location..e.location + n * 3 * e.ty.size()];
         positions =
             super::decode_positions(len, |i, c| 3 * (first + i) + c, |j| e.ty.get(bytes, j))
-                .map_err(|j| {
+                .map_err(|(j, v)| {
                     err(
                         path,
                         e.location + j * e.ty.size(),
                         format!(
-                            "frame {k}: particle {} has a position that is not finite",
-                            j / 3
+                            "frame {k}: particle {} has a position that is not finite{}",
+                            j / 3,
+                            super::single_precision_note(v)
                         ),
                     )
                 })?;

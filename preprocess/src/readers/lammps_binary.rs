@@ -474,7 +474,8 @@ pub(crate) fn read_range(
         let skipped = lo - first;
         let out = lo - range.start;
         let range = out..out + count;
-        // Returns the index (within the chunk) and column of the first bad value.
+        // Returns the index (within the chunk), the column and the value of the first
+        // bad value.
         let block = super::SCAN_BLOCK;
         let bad = positions[range.clone()]
             .par_chunks_mut(block)
@@ -489,22 +490,28 @@ pub(crate) fn read_range(
                     for k in 0..3 {
                         x[k] = value(atom, coords[k]);
                         if !x[k].is_finite() {
-                            return Some((i, coords[k]));
+                            return Some((i, coords[k], x[k]));
                         }
                     }
+                    // Scaled coordinates are Cartesian ones once through the box.
                     let x = if scaled { bx.from_fractional(x) } else { x };
-                    *p = x.map(|v| v as f32);
+                    for k in 0..3 {
+                        p[k] = x[k] as f32;
+                        if !p[k].is_finite() {
+                            return Some((i, coords[k], x[k]));
+                        }
+                    }
                     if let Some(c) = species_col {
                         let v = value(atom, c);
                         if !(v.is_finite() && v.fract() == 0.0 && v.abs() < 1e15) {
-                            return Some((i, c));
+                            return Some((i, c, f64::NAN));
                         }
                         *t = v as i64;
                     }
                 }
                 None
             });
-        if let Some((i, c)) = bad {
+        if let Some((i, c, v)) = bad {
             let offset = (chunk.start + i * stride + 8 * c) as u64;
             return Err(err(
                 offset,
@@ -514,9 +521,14 @@ pub(crate) fn read_range(
                     h.timestep,
                     names[c],
                     if Some(c) == species_col {
-                        " or not an integer type"
+                        " or not an integer type".to_string()
+                    } else if scaled && v.is_finite() {
+                        format!(
+                            " in single precision once unscaled through the box ({v:e} is \
+                             beyond ±3.4e38)"
+                        )
                     } else {
-                        ""
+                        super::single_precision_note(v)
                     }
                 ),
             ));
@@ -533,20 +545,21 @@ pub(crate) fn read_range(
                     {
                         let v = value(atom, c);
                         *out = v as f32;
-                        if !v.is_finite() {
-                            return Some(b * block + o);
+                        if !out.is_finite() {
+                            return Some((b * block + o, v));
                         }
                     }
                     None
                 });
-            if let Some(i) = bad {
+            if let Some((i, v)) = bad {
                 return Err(err(
                     (chunk.start + i * stride + 8 * c) as u64,
                     format!(
-                        "atom {} of timestep {}: column `{}` is not a finite number",
+                        "atom {} of timestep {}: column `{}` is not a finite number{}",
                         first + skipped + i + 1,
                         h.timestep,
-                        names[c]
+                        names[c],
+                        super::single_precision_note(v)
                     ),
                 ));
             }

@@ -211,7 +211,22 @@ impl Index {
             }
         }
         let mut out = Vec::with_capacity(frames);
+        // Where the previous frame's lists end: frames follow one another, so that every
+        // byte is walked once. (Seek entries pointing into one frame again and again made
+        // a small file stand for billions of lists.)
+        let mut previous_end = table_end;
         for (k, &start) in offsets.iter().enumerate() {
+            if start < previous_end {
+                return Err(err(
+                    path,
+                    HEADER + 8 * k,
+                    format!(
+                        "frame {k} starts at byte {start}, before the end of frame {} \
+                         (byte {previous_end}): frames must follow one another",
+                        k.saturating_sub(1)
+                    ),
+                ));
+            }
             let mut c = Cursor {
                 path,
                 data,
@@ -335,6 +350,7 @@ impl Index {
                     format!("frame {k} holds more than 2^32 particles"),
                 ));
             }
+            previous_end = c.at;
             out.push(FrameIndex { timestamp, lists });
         }
         Ok(Index {
@@ -496,13 +512,14 @@ pub(crate) fn read_range(
             |i, c| (local.start + i) * 3 + c,
             |j| list.coordinate(data, j / 3, j % 3),
         )
-        .map_err(|j| {
+        .map_err(|(j, v)| {
             err(
                 path,
                 list.data + (j / 3) * list.stride,
                 format!(
-                    "frame {k}, list {l}: particle {} has a position that is not finite",
-                    j / 3
+                    "frame {k}, list {l}: particle {} has a position that is not finite{}",
+                    j / 3,
+                    super::single_precision_note(v)
                 ),
             )
         })?;

@@ -309,20 +309,67 @@ impl DumpFile {
         format: Option<InputFormat>,
         progress: &dyn Progress,
     ) -> Result<DumpFile, ReadError> {
-        if path
-            .file_name()
-            .and_then(|n| n.to_str())
-            .is_some_and(|n| n.contains('%'))
-            && !path.exists()
-        {
-            let pieces = pieces::open(path, format, progress)?;
-            return Ok(DumpFile {
-                path: path.to_path_buf(),
-                bytes: Box::new(Vec::new()),
-                compressed: false,
-                format: pieces[0].format,
-                index: Index::Pieces(pieces),
+        // (Without a limit, every file opens or fails.)
+        DumpFile::open_limited(path, format, None, progress)?.ok_or_else(|| ReadError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::other("internal error: no dump opened without a limit"),
+        })
+    }
+
+    /// Like [`DumpFile::open`], except for gzip files whose text is larger than
+    /// `text_limit` bytes: `None`, after decompressing no more than `text_limit + 1`
+    /// bytes of it (the caller can then decompress it into a file with
+    /// [`gunzip_to_file`]). For a `%` piece set, the limit holds for the text of all
+    /// its pieces together.
+    pub fn open_within(
+        path: &Path,
+        text_limit: u64,
+        progress: &dyn Progress,
+    ) -> Result<Option<DumpFile>, ReadError> {
+        DumpFile::open_limited(path, None, Some(text_limit), progress)
+    }
+
+    /// The `%` piece set `pattern` made of its pieces, opened one by one (in processor
+    /// order, as [`piece_paths`] lists them, or from files they were decompressed into):
+    /// checked to hold the same frames.
+    pub fn from_pieces(pattern: &Path, pieces: Vec<DumpFile>) -> Result<DumpFile, ReadError> {
+        pieces::check(pattern, &pieces)?;
+        let Some(first) = pieces.first() else {
+            return Err(ReadError::Io {
+                path: pattern.to_path_buf(),
+                source: std::io::Error::new(std::io::ErrorKind::NotFound, "no pieces"),
             });
+        };
+        Ok(DumpFile {
+            path: pattern.to_path_buf(),
+            bytes: Box::new(Vec::new()),
+            compressed: pieces.iter().any(DumpFile::is_compressed),
+            format: first.format,
+            index: Index::Pieces(pieces),
+        })
+    }
+
+    /// Bytes of decompressed text this dump holds in memory (0 for mapped files).
+    pub fn text_in_memory(&self) -> u64 {
+        match &self.index {
+            Index::Pieces(p) => p.iter().map(DumpFile::text_in_memory).sum(),
+            _ if self.compressed => self.bytes().len() as u64,
+            _ => 0,
+        }
+    }
+
+    /// [`DumpFile::open_with`], or with `text_limit`, [`DumpFile::open_within`].
+    fn open_limited(
+        path: &Path,
+        format: Option<InputFormat>,
+        text_limit: Option<u64>,
+        progress: &dyn Progress,
+    ) -> Result<Option<DumpFile>, ReadError> {
+        if is_piece_pattern(path) {
+            let Some(pieces) = pieces::open(path, format, text_limit, progress)? else {
+                return Ok(None);
+            };
+            return DumpFile::from_pieces(path, pieces).map(Some);
         }
         let io = |source| ReadError::Io {
             path: path.to_path_buf(),
@@ -340,7 +387,10 @@ impl DumpFile {
         let map = mdlod_format::mmap::map_file(&file).map_err(io)?;
         let compressed = map.starts_with(&[0x1f, 0x8b]);
         let bytes: Bytes = if compressed {
-            Box::new(gunzip(path, &map, progress)?)
+            match gunzip(path, &map, text_limit, progress)? {
+                Some(text) => Box::new(text),
+                None => return Ok(None),
+            }
         } else if map.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) || is_bzip2(&map) {
             return Err(ReadError::Unsupported {
                 at: first_line(),
@@ -395,20 +445,21 @@ impl DumpFile {
         };
         progress.advance(data.len() as u64);
         progress.finish_stage();
-        Ok(DumpFile {
+        Ok(Some(DumpFile {
             path: path.to_path_buf(),
             bytes,
             compressed,
             format,
             index,
-        })
+        }))
     }
 
     pub fn path(&self) -> &Path {
         &self.path
     }
 
-    /// True when the dump was decompressed into memory (a gzip file).
+    /// True when the dump was decompressed into memory (a gzip file, or a piece set
+    /// with a gzip piece).
     pub fn is_compressed(&self) -> bool {
         self.compressed
     }
@@ -717,17 +768,40 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
     let mut pos = header.atoms.start;
     let mut first = 0usize;
     let window = window.max(1);
+    // The file's length when the first window is mapped: every window must find it so,
+    // the frame's atoms inside it.
+    let mut length: Option<usize> = None;
     while first < total {
         let map = mdlod_format::mmap::map_file(&file).map_err(io)?;
         let data: &[u8] = &map;
         let ctx = Ctx { path, data };
+        if *length.get_or_insert(data.len()) != data.len() || header.atoms.end > data.len() {
+            return Err(ctx
+                .malformed(
+                    pos,
+                    format!(
+                        "the file changed size while frame {k} was being read ({} bytes now)",
+                        data.len()
+                    ),
+                )
+                .into());
+        }
         let (coords, fractional, attribute) = text_columns(&ctx, &header, opts)?;
         let want = window.min(total - first);
-        let end_limit = header.atoms.end.min(data.len());
+        let end_limit = header.atoms.end;
         // The end of the `want`-th line from `pos` (or the block's end).
         let end = memchr::memchr_iter(b'\n', &data[pos..end_limit])
             .nth(want - 1)
             .map_or(end_limit, |i| pos + i + 1);
+        // Past the last announced atom only blank space may be left of the frame, as
+        // whole-frame reading requires (the first extra line is named).
+        if first + want == total && !data[end..end_limit].iter().all(u8::is_ascii_whitespace) {
+            return Err(ReadError::ExtraLines {
+                at: ctx.at(end),
+                expected: total,
+            }
+            .into());
+        }
         let atoms = atoms::parse(
             &ctx,
             pos..end,
@@ -815,13 +889,25 @@ pub(crate) fn first_index(n: usize, bad: impl Fn(usize) -> bool + Sync) -> Optio
         .find_map_first(|b| (b * SCAN_BLOCK..((b + 1) * SCAN_BLOCK).min(n)).find(|&i| bad(i)))
 }
 
+/// What follows "is not finite" in an error about the value `v` read from a file: nothing
+/// for NaN and infinities, the value for a finite one past the single-precision range
+/// (which the conversion to `f32` would make infinite).
+pub(crate) fn single_precision_note(v: f64) -> String {
+    if v.is_finite() {
+        format!(" in single precision ({v:e} is beyond ±3.4e38)")
+    } else {
+        String::new()
+    }
+}
+
 /// Decodes `n` positions in parallel: coordinate `k` of particle `i` is `value(at(i, k))`.
-/// On a non-finite value, the `at` index of the first one (in particle order).
+/// On a value that is not finite as an `f32` (NaN, infinite, or past the single-precision
+/// range), the `at` index and the value of the first one (in particle order).
 pub(crate) fn decode_positions(
     n: usize,
     at: impl Fn(usize, usize) -> usize + Sync,
     value: impl Fn(usize) -> f64 + Sync,
-) -> Result<Vec<[f32; 3]>, usize> {
+) -> Result<Vec<[f32; 3]>, (usize, f64)> {
     use rayon::prelude::*;
     let mut positions = vec![[0f32; 3]; n];
     let bad = positions
@@ -833,16 +919,17 @@ pub(crate) fn decode_positions(
                 for k in 0..3 {
                     let j = at(i, k);
                     let v = value(j);
-                    if !v.is_finite() {
-                        return Some(j);
+                    let single = v as f32;
+                    if !single.is_finite() {
+                        return Some((j, v));
                     }
-                    p[k] = v as f32;
+                    p[k] = single;
                 }
             }
             None
         });
     match bad {
-        Some(j) => Err(j),
+        Some(bad) => Err(bad),
         None => Ok(positions),
     }
 }
@@ -1004,6 +1091,14 @@ pub(crate) fn mapped_again(
     Ok(map)
 }
 
+/// True when `path` names a `%` piece set (a file name with `%` that is no file itself).
+pub fn is_piece_pattern(path: &Path) -> bool {
+    path.file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| n.contains('%'))
+        && !path.exists()
+}
+
 fn is_bzip2(data: &[u8]) -> bool {
     data.len() >= 10
         && data.starts_with(b"BZh")
@@ -1011,7 +1106,6 @@ fn is_bzip2(data: &[u8]) -> bool {
         && data[4..10] == [0x31, 0x41, 0x59, 0x26, 0x53, 0x59]
 }
 
-/// Decompresses a (possibly multi-member) gzip file into memory.
 /// True when `path` starts with the gzip magic bytes.
 pub fn is_gzip(path: &Path) -> Result<bool, ReadError> {
     let mut magic = [0u8; 2];
@@ -1083,7 +1177,15 @@ pub fn gunzip_to_file(path: &Path, out: &Path, progress: &dyn Progress) -> Resul
     Ok(written)
 }
 
-fn gunzip(path: &Path, compressed: &[u8], progress: &dyn Progress) -> Result<Vec<u8>, ReadError> {
+/// Decompresses the gzip bytes `compressed` of `path` (single or multi-member) into
+/// memory; `None` when the text is larger than `limit` bytes (of which at most one byte
+/// more is decompressed: a small file of a high ratio can expand far past memory).
+fn gunzip(
+    path: &Path,
+    compressed: &[u8],
+    limit: Option<u64>,
+    progress: &dyn Progress,
+) -> Result<Option<Vec<u8>>, ReadError> {
     struct Counting<'a, 'p> {
         inner: &'a [u8],
         progress: &'p dyn Progress,
@@ -1100,13 +1202,23 @@ fn gunzip(path: &Path, compressed: &[u8], progress: &dyn Progress) -> Result<Vec
         inner: compressed,
         progress,
     };
-    let mut out = Vec::with_capacity(compressed.len().saturating_mul(4));
+    let take = limit.map_or(u64::MAX, |l| l.saturating_add(1));
+    let mut out = Vec::with_capacity(
+        compressed
+            .len()
+            .saturating_mul(4)
+            .min(usize::try_from(take).unwrap_or(usize::MAX)),
+    );
     flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(1 << 20, reader))
+        .take(take)
         .read_to_end(&mut out)
         .map_err(|e| ReadError::Io {
             path: path.to_path_buf(),
             source: std::io::Error::new(e.kind(), format!("gzip decompression failed: {e}")),
         })?;
     progress.finish_stage();
-    Ok(out)
+    if limit.is_some_and(|l| out.len() as u64 > l) {
+        return Ok(None);
+    }
+    Ok(Some(out))
 }

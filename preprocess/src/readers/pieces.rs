@@ -64,17 +64,36 @@ pub fn piece_paths(pattern: &Path) -> Result<Vec<PathBuf>, ReadError> {
     Ok(found.into_iter().map(|(_, p)| p).collect())
 }
 
-/// Opens every piece and checks that they agree on the frames.
+/// Opens every piece and checks that they agree on the frames. With `text_limit`, `None`
+/// when the decompressed text of the gzip pieces is more than that in all.
 pub(crate) fn open(
     pattern: &Path,
     format: Option<InputFormat>,
+    mut text_limit: Option<u64>,
     progress: &dyn Progress,
-) -> Result<Vec<DumpFile>, ReadError> {
-    let pieces = piece_paths(pattern)?
-        .iter()
-        .map(|p| DumpFile::open_with(p, format, progress))
-        .collect::<Result<Vec<_>, _>>()?;
-    let first = &pieces[0];
+) -> Result<Option<Vec<DumpFile>>, ReadError> {
+    let mut pieces = Vec::new();
+    for p in piece_paths(pattern)? {
+        let Some(piece) = DumpFile::open_limited(&p, format, text_limit, progress)? else {
+            return Ok(None);
+        };
+        if let Some(left) = text_limit.as_mut() {
+            *left = left.saturating_sub(piece.text_in_memory());
+        }
+        pieces.push(piece);
+    }
+    check(pattern, &pieces)?;
+    Ok(Some(pieces))
+}
+
+/// Checks that the pieces of `pattern` agree on the frames.
+pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError> {
+    let Some(first) = pieces.first() else {
+        return Err(ReadError::Io {
+            path: pattern.to_path_buf(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no pieces"),
+        });
+    };
     for p in &pieces[1..] {
         let mismatch = |message: String| ReadError::Malformed {
             at: super::Location {
@@ -102,13 +121,27 @@ pub(crate) fn open(
             )));
         }
     }
-    Ok(pieces)
+    Ok(())
 }
 
 pub(crate) fn frame_info(pieces: &[DumpFile], k: usize) -> Result<FrameInfo, ReadError> {
     let mut info = pieces[0].frame_info(k)?;
     for p in &pieces[1..] {
-        info.particles += p.frame_info(k)?.particles;
+        let n = p.frame_info(k)?.particles;
+        info.particles = info.particles.checked_add(n).ok_or_else(|| {
+            // Counts as the headers announce them, not yet backed by atoms.
+            ReadError::Malformed {
+                at: super::Location {
+                    path: p.path().to_path_buf(),
+                    line: 1,
+                },
+                message: format!(
+                    "frame {k}: this piece's {n} atoms and the {} of the pieces before it \
+                     are more than can be counted",
+                    info.particles
+                ),
+            }
+        })?;
     }
     Ok(info)
 }

@@ -472,7 +472,7 @@ impl Index {
             match super::first_index(n, |i| !v[i].iter().all(|c| c.is_finite())) {
                 Some(i) => {
                     let k = v[i].iter().position(|c| !c.is_finite()).unwrap_or(0);
-                    Err(3 * (first + i) + k)
+                    Err((3 * (first + i) + k, f64::from(v[i][k])))
                 }
                 None => Ok(v),
             }
@@ -489,13 +489,14 @@ impl Index {
                 |j| p.ty.get(bytes, j, p.big),
             )
         }
-        .map_err(|j| {
+        .map_err(|(j, v)| {
             err(
                 &p.path,
                 (p.offset + j * size) as u64,
                 format!(
-                    "particle {}: a coordinate is not finite",
-                    if planar { j % total } else { j / 3 }
+                    "particle {}: a coordinate is not finite{}",
+                    if planar { j % total } else { j / 3 },
+                    super::single_precision_note(v)
                 ),
             )
         })?;
