@@ -1343,6 +1343,22 @@ fn plan_view(
                 "the view is too far from the S-MIP's origin".into(),
             ));
         }
+        // A level's texels are at most twice as fine as the pixels, so a view needs at
+        // most about four times its own area in tiles, unless the frame's texels are
+        // finer than its coarsest level can make up for (a hostile or corrupt texel
+        // size): then the rectangle would hold billions of tiles.
+        let most = 4.0
+            * (f64::from(width.div_ceil(TILE)) + 2.0)
+            * (f64::from(height.div_ceil(TILE)) + 2.0);
+        if (x1 - x0) * (y1 - y0) > most {
+            return Err(RenderError::InvalidOptions(format!(
+                "the S-MIP's texels ({:e} world units at level 0) are too fine for a view of \
+                 {:e} units per pixel: level {level} would need {:e} tiles",
+                frame.texel0,
+                p,
+                (x1 - x0) * (y1 - y0)
+            )));
+        }
         plans.push(LevelPlan {
             level,
             weight,
@@ -1560,6 +1576,13 @@ mod tests {
         let f = frame(0.1 * p0 as f32, 4.0);
         assert!(std::f64::consts::PI * (0.1 * p0 / f.texel0).powi(2) >= 4.0);
         assert!(std::f64::consts::PI * (0.1 * p0 / (2.0 * f.texel0)).powi(2) < 4.0);
+        // Texels far finer than the coarsest level can make up for (a hostile file's
+        // texel size): refused, not a rectangle of billions of tiles to visit.
+        let mut hostile = frame(10.0 * p0 as f32, 4.0);
+        assert!(plan_view(&hostile, 0, &camera, 100, 100).is_ok());
+        hostile.texel0 = p0 * 2f64.powi(-45);
+        let e = plan_view(&hostile, 0, &camera, 100, 100).unwrap_err();
+        assert!(e.to_string().contains("too fine"), "{e}");
         // Perspective is refused.
         let persp = Camera::default();
         assert!(SmipFrame::new(
