@@ -393,6 +393,15 @@ impl MdlodFile {
                 node_total += lv.point_count;
             }
         }
+        // Node indices are u32 (parent, quant_node), 0xFFFFFFFF meaning none.
+        if node_total > u64::from(u32::MAX) {
+            return Err(corrupt(
+                &format!("level {last}"),
+                format!(
+                    "{node_total} nodes above it (at most 2^32-1: nodes are numbered in 32 bits)"
+                ),
+            ));
+        }
         if metadata.particles != levels[last].point_count {
             return Err(corrupt(
                 "METADATA",

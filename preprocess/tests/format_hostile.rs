@@ -766,6 +766,18 @@ fn hostile_levels() {
             vec!["level 3".into(), "first node".into()],
         ),
         (
+            // Each level within 2^32-1 points, but more nodes in all than u32 numbers.
+            "more-nodes-than-32-bits-number",
+            Box::new(|l| {
+                let extra = u64::from(u32::MAX) - l[1].point_count;
+                l[1].point_count = u64::from(u32::MAX);
+                for r in &mut l[2..] {
+                    r.node_first += extra;
+                }
+            }),
+            vec![format!("level {last}"), "nodes above it".into()],
+        ),
+        (
             "last-level-more-points",
             Box::new(move |l| l[last].point_count += 1),
             vec!["METADATA".into(), "particles".into()],
