@@ -52,7 +52,7 @@ fn sndf_info(args: &Args) -> Result<()> {
     );
     println!("  shown at     level {}", h.display_level.unwrap_or(0));
     if let Some(s) = &h.source {
-        println!("  sampled from {s}");
+        println!("  sampled from {}", shown(s));
     }
     println!("  view         {}", h.view);
     Ok(())
@@ -101,7 +101,7 @@ pub fn run(args: Args) -> Result<()> {
         f.header().version_major,
         f.header().version_minor,
         file_size as f64 / (1 << 20) as f64,
-        m.writer
+        shown(&m.writer)
     );
     println!("  particles    {}", m.particles);
     println!(
@@ -117,11 +117,20 @@ pub fn run(args: Args) -> Result<()> {
     for s in &m.species {
         println!(
             "  species      {:<6} radius {:.3}  colour [{:.2} {:.2} {:.2}]",
-            s.name, s.radius, s.colour[0], s.colour[1], s.colour[2]
+            shown(&s.name),
+            s.radius,
+            s.colour[0],
+            s.colour[1],
+            s.colour[2]
         );
     }
     if let Some(a) = &m.attribute {
-        println!("  attribute    {} in [{}, {}]", a.name, a.min, a.max);
+        println!(
+            "  attribute    {} in [{}, {}]",
+            shown(&a.name),
+            a.min,
+            a.max
+        );
     }
     if let Some(b) = &m.simulation_box {
         println!(
@@ -136,12 +145,14 @@ pub fn run(args: Args) -> Result<()> {
         println!("  time         {t}");
     }
     if let Some(u) = &m.units {
-        println!("  units        {u}");
+        println!("  units        {}", shown(u));
     }
     if let Some(s) = &m.source {
         println!(
             "  source       {} (frame {}, {} bytes)",
-            s.path, s.frame, s.size
+            shown(&s.path),
+            s.frame,
+            s.size
         );
     }
     println!(
@@ -150,4 +161,29 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("  max position error {:.4e}", m.max_position_error);
     Ok(())
+}
+
+/// A name from the file as printed: control characters (a hostile file's terminal escape
+/// sequences) shown escaped, not sent to the terminal.
+fn shown(s: &str) -> String {
+    s.chars()
+        .flat_map(|c| {
+            let escaped: Vec<char> = if c.is_control() {
+                c.escape_default().collect()
+            } else {
+                vec![c]
+            };
+            escaped
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn control_characters_of_names_are_shown_escaped() {
+        assert_eq!(super::shown("Cu"), "Cu");
+        assert_eq!(super::shown("a\u{1b}[2Jb\n"), "a\\u{1b}[2Jb\\n");
+        assert_eq!(super::shown("Å µm"), "Å µm");
+    }
 }
