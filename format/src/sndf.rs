@@ -297,12 +297,45 @@ impl SndfData {
 
     /// Reads and validates `path`.
     pub fn load(path: &Path) -> Result<SndfData, FormatError> {
+        // The header first: a file whose length is not the one its header gives is
+        // refused before its data is read.
+        Self::load_header(path)?;
         let bytes = std::fs::read(path).map_err(|e| FormatError::io(path, e))?;
         Self::parse(path, &bytes)
     }
 
-    /// Validates and decodes the bytes of a `.sndf` file (`path` names it in errors).
-    pub fn parse(path: &Path, bytes: &[u8]) -> Result<SndfData, FormatError> {
+    /// Reads and validates the header of `path` alone, and that the file has the length
+    /// it gives (what `mdlod info` shows; the data is neither read nor checked): the
+    /// header and the length of the data in bytes.
+    pub fn load_header(path: &Path) -> Result<(SndfHeader, u64), FormatError> {
+        use std::io::Read;
+        let io = |e| FormatError::io(path, e);
+        let mut file = std::fs::File::open(path).map_err(io)?;
+        let len = file.metadata().map_err(io)?.len();
+        let mut prefix = Vec::new();
+        (&mut file)
+            .take((FIXED + MAX_HEADER) as u64)
+            .read_to_end(&mut prefix)
+            .map_err(io)?;
+        let (header, start, n, _) = Self::parse_header(path, &prefix, len)?;
+        let expected = n
+            .checked_mul(16)
+            .and_then(|d| d.checked_add(start))
+            .map(|e| e as u64);
+        if expected != Some(len) {
+            return Err(data_length_error(path, &header, expected, len));
+        }
+        Ok((header, len - start as u64))
+    }
+
+    /// The header of a file whose first bytes are `bytes` (at least the fixed part and
+    /// the JSON) and whose length is `file_len`: the header, where the data starts, the
+    /// number of records and the data's stored checksum.
+    fn parse_header(
+        path: &Path,
+        bytes: &[u8],
+        file_len: u64,
+    ) -> Result<(SndfHeader, usize, usize, u64), FormatError> {
         if bytes.len() < FIXED || bytes[..8] != SNDF_MAGIC {
             return Err(corrupt(
                 path,
@@ -328,31 +361,26 @@ impl SndfData {
             return Err(corrupt(
                 path,
                 "header",
-                format!(
-                    "header length {json_len} does not fit the file ({} bytes)",
-                    bytes.len()
-                ),
+                format!("header length {json_len} does not fit the file ({file_len} bytes)"),
             ));
         }
         let header: SndfHeader = serde_json::from_slice(&bytes[FIXED..FIXED + json_len])
             .map_err(|e| corrupt(path, "header", format!("invalid JSON: {e}")))?;
         let n = check_header(path, &header)?;
         let start = (FIXED + json_len).div_ceil(16) * 16;
+        Ok((header, start, n, checksum))
+    }
+
+    /// Validates and decodes the bytes of a `.sndf` file (`path` names it in errors).
+    pub fn parse(path: &Path, bytes: &[u8]) -> Result<SndfData, FormatError> {
+        let (header, start, n, checksum) = Self::parse_header(path, bytes, bytes.len() as u64)?;
         let expected = n.checked_mul(16).and_then(|d| d.checked_add(start));
         if expected != Some(bytes.len()) {
-            let what = match &header.smip {
-                Some(t) => format!("{} tiles", t.tiles.len()),
-                None => format!("{}x{} texels", header.width, header.height),
-            };
-            return Err(corrupt(
+            return Err(data_length_error(
                 path,
-                "data",
-                format!(
-                    "{what} of {}² bins need {} bytes in all, the file has {}",
-                    header.bins,
-                    expected.map_or("too many".into(), |e| e.to_string()),
-                    bytes.len()
-                ),
+                &header,
+                expected.map(|e| e as u64),
+                bytes.len() as u64,
             ));
         }
         let data = &bytes[start..];
@@ -365,6 +393,16 @@ impl SndfData {
                 computed,
             });
         }
+        Self::records(path, header, data, n)
+    }
+
+    /// The records of `data`, each checked against its rays.
+    fn records(
+        path: &Path,
+        header: SndfHeader,
+        data: &[u8],
+        n: usize,
+    ) -> Result<SndfData, FormatError> {
         let runs = record_rays(&header);
         let mut run = runs
             .iter()
@@ -385,6 +423,28 @@ impl SndfData {
         }
         Ok(SndfData { header, hist })
     }
+}
+
+/// The error of a file whose length is not the one its header gives.
+fn data_length_error(
+    path: &Path,
+    header: &SndfHeader,
+    expected: Option<u64>,
+    len: u64,
+) -> FormatError {
+    let what = match &header.smip {
+        Some(t) => format!("{} tiles", t.tiles.len()),
+        None => format!("{}x{} texels", header.width, header.height),
+    };
+    corrupt(
+        path,
+        "data",
+        format!(
+            "{what} of {}² bins need {} bytes in all, the file has {len}",
+            header.bins,
+            expected.map_or("too many".into(), |e| e.to_string()),
+        ),
+    )
 }
 
 #[cfg(test)]
@@ -475,6 +535,27 @@ mod tests {
             e.contains("record 5") && e.contains("count at most 4"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn the_header_loads_alone_and_a_file_longer_than_it_says_is_refused_unread() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("v.sndf");
+        let s = sample();
+        s.save(&p).unwrap();
+        let (header, bytes) = SndfData::load_header(&p).unwrap();
+        assert_eq!(header, s.header);
+        assert_eq!(bytes, s.hist.len() as u64 * 16);
+        // A sparse tail of a gigabyte: refused by length before the data is read.
+        let f = std::fs::OpenOptions::new().write(true).open(&p).unwrap();
+        f.set_len(1 << 30).unwrap();
+        for e in [
+            SndfData::load_header(&p).unwrap_err(),
+            SndfData::load(&p).unwrap_err(),
+        ] {
+            let e = e.to_string();
+            assert!(e.contains("the file has 1073741824"), "{e}");
+        }
     }
 
     fn tiled() -> SndfData {

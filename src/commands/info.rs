@@ -19,9 +19,8 @@ pub struct Args {
 
 /// A `.sndf` file's header.
 fn sndf_info(args: &Args) -> Result<()> {
-    let d = mdlod_format::sndf::SndfData::load(&args.file)?;
-    let h = &d.header;
-    let bytes = d.hist.len() * 16;
+    let (header, bytes) = mdlod_format::sndf::SndfData::load_header(&args.file)?;
+    let h = &header;
     if args.json {
         let v = json!({
             "file": args.file.display().to_string(),
