@@ -1665,23 +1665,8 @@ fn relighting_sndfs_matches_supersampling_under_the_new_light_and_draws_no_parti
                 direction_view: direction.normalize(),
                 ..Default::default()
             };
-            let relit = sndf.shade(&light, o.background);
-            // The GPU shading pass gives the same picture (to rounding).
-            let (on_gpu, _) = own
-                .shade_sndf(
-                    &sndf,
-                    &mdlod_render::sndf::ShadeLights::from(&light),
-                    o.background,
-                )
-                .unwrap();
-            assert!(
-                relit
-                    .data
-                    .iter()
-                    .zip(&on_gpu.data)
-                    .all(|(a, b)| a.abs_diff(*b) <= 1),
-                "host and GPU shading differ"
-            );
+            let lights = mdlod_render::sndf::ShadeLights::from(&light);
+            let relit = shaded_on_both(&own, &sndf, &lights, o.background);
             assert_eq!(own.points_sampled(), sampled, "re-lighting drew particles");
             o.lighting = light;
             let (reference, _) = render_image(renderer(), &f, &o).unwrap();
@@ -1743,22 +1728,8 @@ fn relit_sndfs_of_a_wide_perspective_view_place_highlights_along_each_texels_ray
         shininess: 24.0,
         ..Default::default()
     };
-    let relit = sndf.shade(&light, o.background);
-    let (on_gpu, _) = renderer()
-        .shade_sndf(
-            &sndf,
-            &mdlod_render::sndf::ShadeLights::from(&light),
-            o.background,
-        )
-        .unwrap();
-    let worst = relit
-        .data
-        .iter()
-        .zip(&on_gpu.data)
-        .map(|(a, b)| a.abs_diff(*b))
-        .max()
-        .unwrap();
-    assert!(worst <= 1, "host and GPU shading differ by up to {worst}");
+    let lights = mdlod_render::sndf::ShadeLights::from(&light);
+    let relit = shaded_on_both(renderer(), &sndf, &lights, o.background);
     o.lighting = light;
     let (reference, _) = render_image(renderer(), &f, &o).unwrap();
     let along_rays = mean_abs_diff(&relit, &reference);
@@ -1770,6 +1741,28 @@ fn relit_sndfs_of_a_wide_perspective_view_place_highlights_along_each_texels_ray
         "mean difference to the ray-cast image: {along_rays:.2} along each texel's ray, \
          {along_axis:.2} along the axis"
     );
+}
+
+/// `sndf` shaded on the host, after checking that the GPU's shading pass gives the same
+/// picture (to 1/255).
+fn shaded_on_both(
+    r: &Renderer,
+    sndf: &mdlod_render::sndf::Sndf,
+    lights: &mdlod_render::sndf::ShadeLights,
+    background: [f32; 3],
+) -> RgbaImage {
+    let host = sndf.shade_with(lights, background);
+    let (gpu, _) = r.shade_sndf(sndf, lights, background).unwrap();
+    assert_eq!((gpu.width, gpu.height), (host.width, host.height));
+    let worst = host
+        .data
+        .iter()
+        .zip(&gpu.data)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap_or(0);
+    assert!(worst <= 1, "host and GPU shading differ by up to {worst}");
+    host
 }
 
 fn rmse(a: &RgbaImage, b: &RgbaImage) -> f64 {
@@ -1813,17 +1806,8 @@ fn sndfs_of_more_texels_than_one_dispatch_row_holds_shade_on_the_gpu_as_on_the_h
     };
     let lights = mdlod_render::sndf::ShadeLights::from(&mdlod_render::Lighting::default());
     let background = [0.2, 0.3, 0.4];
-    let host = sndf.shade_with(&lights, background);
-    let (gpu, _) = renderer().shade_sndf(&sndf, &lights, background).unwrap();
-    assert_eq!((gpu.width, gpu.height), (width, height));
-    let worst = host
-        .data
-        .iter()
-        .zip(&gpu.data)
-        .map(|(a, b)| a.abs_diff(*b))
-        .max()
-        .unwrap();
-    assert!(worst <= 1, "host and GPU shading differ by up to {worst}");
+    let host = shaded_on_both(renderer(), &sndf, &lights, background);
+    assert_eq!((host.width, host.height), (width, height));
 }
 
 #[test]
