@@ -2223,6 +2223,13 @@ impl Renderer {
                 (lo.min(p.position - h), hi.max(p.position + h))
             },
         );
+        // An empty cut: a point-sized box (no density anywhere) rather than infinities,
+        // which the shader's slab test would multiply by zero.
+        let bounds = if bounds.0.cmple(bounds.1).all() {
+            bounds
+        } else {
+            (glam::Vec3::ZERO, glam::Vec3::ZERO)
+        };
         let per_stack = if settings.iso.is_some() {
             SLICES_GRADIENT
         } else {

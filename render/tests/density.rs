@@ -243,6 +243,39 @@ fn kernels_reaching_into_the_view_from_outside_it_add_their_density() {
     }
 }
 
+/// An axis-aligned orthographic view (every ray's direction has zero components) matches
+/// the CPU ray marcher, and an empty cut is a transparent frame.
+#[test]
+fn axis_aligned_rays_and_an_empty_cut_composite_cleanly() {
+    let (_d, _p, f) = make_file(&fcc_frame(3), small_build(), &[]);
+    let (w, h) = (40u32, 30u32);
+    let cam = camera_for(
+        &f,
+        &ViewSpec::Orbit {
+            azimuth_deg: 0.0,
+            elevation_deg: 0.0,
+            zoom: 1.3,
+            projection: Projection::Orthographic,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    let s = DensitySettings {
+        slices: 64,
+        opacity: 1.5,
+        ..Default::default()
+    };
+    let (gpu, cpu, _, _, _) = both(&f, &cam, w, h, &s, None);
+    assert!(cpu.iter().filter(|p| p[3] > 0.05).count() > (w * h / 10) as usize);
+    let d = max_diff(&gpu, &cpu);
+    assert!(d < 0.01, "GPU and CPU differ by {d}");
+    let empty = renderer()
+        .render_density(&f, &cam, &mdlod_render::DrawList::default(), w, h, &s)
+        .unwrap();
+    assert!(empty.rgba.iter().all(|p| p[3] == 0.0), "an empty cut drew");
+}
+
 #[test]
 fn iso_surface_matches_the_cpu_ray_marcher() {
     let (_d, _p, f) = make_file(&cloud_frame(300, 3), small_build(), &[]);

@@ -48,7 +48,9 @@ fn cs_composite(@builtin(global_invocation_id) id: vec3<u32>) {
     let origin = ray_[0];
     let dir = ray_[1];
     // A ray that has left the box of the points' supports (or never meets it) is done.
-    let inv = 1.0 / dir;
+    // (A zero component, an axis-aligned orthographic view, takes a tiny one instead:
+    // WGSL leaves 1 / 0 and 0 * inf undefined.)
+    let inv = 1.0 / select(dir, vec3<f32>(1e-30), abs(dir) < vec3<f32>(1e-30));
     let t0 = (dens.pad[0].xyz - origin) * inv;
     let t1 = (dens.pad[1].xyz - origin) * inv;
     let t_enter = max(max(min(t0.x, t1.x), min(t0.y, t1.y)), min(t0.z, t1.z));
