@@ -110,6 +110,27 @@ pub fn kernel(r2: f32, h: f32) -> f32 {
     315.0 / (64.0 * std::f32::consts::PI * h2 * h) * t * t * t
 }
 
+/// `(4/3) · 315/64`: the volume fraction `V · m · W(0, h)` at the centre of a point of
+/// radius `r = r_ref` and kernel scale 1 (see [`fraction`]).
+pub const PEAK_FRACTION: f32 = 4.0 / 3.0 * 315.0 / 64.0;
+
+/// The volume fraction a point of radius `r` adds at offset `d` from its centre, and its
+/// gradient: `V · m · W(|d|, h)` with `V = 4/3 π r_ref³`, `m = (r / r_ref)²` and
+/// `h = k r`, which is `PEAK_FRACTION · (r_ref / r) / k³ · t³` with `t = 1 − |d|²/h²`.
+/// Evaluated in that form, so that no power of a large radius is formed: stars in metres
+/// (a coarse node's radius of 10¹³) would overflow `h³` in single precision.
+pub fn fraction(d: Vec3, r: f32, r_ref: f32, k: f32) -> (f32, Vec3) {
+    let h = k * r;
+    let h2 = h * h;
+    let r2 = d.length_squared();
+    if !(r2 < h2) {
+        return (0.0, Vec3::ZERO);
+    }
+    let t = 1.0 - r2 / h2;
+    let norm = PEAK_FRACTION / (k * k * k) * (r_ref / r);
+    (norm * t * t * t, d * (-6.0 * norm / h2 * t * t))
+}
+
 /// `∇_p W(|p − p_j|, h)` for `d = p − p_j`.
 pub fn kernel_gradient(d: Vec3, h: f32) -> Vec3 {
     let h2 = h * h;
@@ -265,17 +286,14 @@ pub fn density_at(
     s: &DensitySettings,
     r_ref: f32,
 ) -> (f32, Vec3) {
-    let v = 4.0 / 3.0 * std::f32::consts::PI * r_ref.powi(3);
     let mut phi = 0.0;
     let mut grad = Vec3::ZERO;
     for q in points {
-        let h = s.kernel_scale * q.radius;
-        let m = (q.radius / r_ref).powi(2);
-        let d = p - q.position;
-        phi += m * kernel(d.length_squared(), h);
-        grad += m * kernel_gradient(d, h);
+        let (f, g) = fraction(p - q.position, q.radius, r_ref, s.kernel_scale);
+        phi += f;
+        grad += g;
     }
-    (phi * v, grad * v)
+    (phi, grad)
 }
 
 /// The colour of the iso-surface at `p`: the points' albedos weighted by their mass
@@ -286,8 +304,13 @@ pub fn colour_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings) -> Optio
     let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
     for q in points {
         let h = s.kernel_scale * q.radius;
-        // m W up to constant factors, which cancel.
-        let w = q.radius * q.radius * kernel(p.distance_squared(q.position), h);
+        let (r2, h2) = (p.distance_squared(q.position), h * h);
+        if !(r2 < h2) {
+            continue;
+        }
+        // m W up to constant factors, which cancel: t³ / r (no power of a large radius).
+        let t = 1.0 - r2 / h2;
+        let w = t * t * t / q.radius;
         sum += w * q.albedo;
         weight += w;
     }

@@ -2292,7 +2292,7 @@ impl Renderer {
                     mode: [
                         per_stack.min(slicing.slices - st * per_stack) as f32,
                         if settings.iso.is_some() { 1.0 } else { 0.0 },
-                        4.0 / 3.0 * std::f32::consts::PI * r_ref.powi(3),
+                        crate::density::PEAK_FRACTION / settings.kernel_scale.powi(3),
                         0.0,
                     ],
                     size: [

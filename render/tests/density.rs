@@ -276,6 +276,44 @@ fn axis_aligned_rays_and_an_empty_cut_composite_cleanly() {
     assert!(empty.rgba.iter().all(|p| p[3] == 0.0), "an empty cut drew");
 }
 
+/// A volume fraction does not depend on the length unit: the same block in units 10¹³
+/// times smaller (stars in metres have radii of 10⁹ and more; a coarse node's reaches
+/// 10¹³) gives the same volume, on the GPU and the CPU, with no power of a radius
+/// overflowing single precision.
+#[test]
+fn the_volume_does_not_depend_on_the_length_unit() {
+    let (w, h) = (40u32, 30u32);
+    let s = DensitySettings {
+        slices: 64,
+        opacity: 1.5,
+        ..Default::default()
+    };
+    let volume = |scale: f32| {
+        let mut frame = fcc_frame(3);
+        for p in &mut frame.positions {
+            *p = p.map(|c| c * scale);
+        }
+        let radii = [("Cu", 1.28 * scale), ("Ag", 1.44 * scale)];
+        let (_d, _p, f) = make_file(&frame, small_build(), &radii);
+        let cam = camera(&f, Projection::Perspective, w, h);
+        let (gpu, cpu, _, _, _) = both(&f, &cam, w, h, &s, None);
+        (gpu, cpu)
+    };
+    let (gpu, cpu) = volume(1.0);
+    assert!(cpu.iter().filter(|p| p[3] > 0.05).count() > (w * h / 10) as usize);
+    let (big_gpu, big_cpu) = volume(1e13);
+    let finite = |v: &[[f32; 4]]| v.iter().flatten().all(|c| c.is_finite());
+    assert!(
+        finite(&big_gpu) && finite(&big_cpu),
+        "a value is not finite"
+    );
+    let (dg, dc) = (max_diff(&big_gpu, &gpu), max_diff(&big_cpu, &cpu));
+    assert!(
+        dg < 0.01 && dc < 0.01,
+        "in units 1e13 times smaller the volume differs by {dg} (GPU), {dc} (CPU)"
+    );
+}
+
 #[test]
 fn iso_surface_matches_the_cpu_ray_marcher() {
     let (_d, _p, f) = make_file(&cloud_frame(300, 3), small_build(), &[]);

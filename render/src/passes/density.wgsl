@@ -8,7 +8,6 @@
 
 @group(1) @binding(0) var<uniform> dens: Density;
 
-const PI: f32 = 3.14159265;
 
 struct SplatOut {
     @builtin(position) clip: vec4<f32>,
@@ -65,10 +64,15 @@ struct SliceOut {
 fn fs_splat(in: SplatOut) -> SliceOut {
     let ray = pixel_ray(in.clip.xy);
     let h2 = in.h * in.h;
-    let norm = dens.mode.z * in.mass * 315.0 / (64.0 * PI * h2 * in.h);
     var out: SliceOut;
     out.a = vec4<f32>(0.0);
     out.b = vec4<f32>(0.0);
+    if !(in.h > 0.0) {
+        return out;
+    }
+    // V m W(0, h) = (4/3)(315/64) (r_ref / r) / k^3 (density::fraction): no power of a
+    // large radius, which would overflow (stars in metres). sqrt(mass) = r / r_ref.
+    let norm = dens.mode.z / sqrt(in.mass);
     let n = u32(dens.mode.x);
     if dens.mode.y > 0.5 {
         // Two slices of (gradient, density).
@@ -124,7 +128,8 @@ fn fs_colour(in: SplatOut) -> @location(0) vec4<f32> {
         discard;
     }
     let t = 1.0 - r2 / h2;
-    // m W up to constant factors, which cancel in the division.
-    let w = in.mass * t * t * t / (h2 * in.h);
+    // m W up to constant factors, which cancel in the division: t^3 / r, as
+    // density::colour_at (no power of a large radius).
+    let w = t * t * t / sqrt(in.mass);
     return vec4<f32>(in.albedo * w, w);
 }
