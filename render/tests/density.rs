@@ -98,10 +98,13 @@ fn both(
     )
 }
 
+/// The largest difference of two colour buffers; a NaN on either side counts as infinite
+/// (`f32::max` would skip it).
 fn max_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
     a.iter()
         .zip(b)
         .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
+        .map(|d| if d.is_nan() { f32::INFINITY } else { d })
         .fold(0.0, f32::max)
 }
 
