@@ -1482,6 +1482,10 @@ impl Layout {
                 node_first += count;
             }
         }
+        crate::hierarchy::check_node_total(&levels).map_err(|source| ConvertError::Build {
+            path: "the levels above the particles".into(),
+            source,
+        })?;
         Ok(Layout {
             pad,
             last,

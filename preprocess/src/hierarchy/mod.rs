@@ -58,6 +58,20 @@ impl Default for BuildParams {
     }
 }
 
+/// Refuses a level table whose nodes (every level but the last) are more than 32-bit
+/// indices number: `parent` and `quant_node` would wrap, and every reader refuses such a
+/// file (FORMAT.md, section 4) — better said before the file is written.
+pub fn check_node_total(levels: &[LevelRecord]) -> Result<(), BuildError> {
+    let nodes = levels
+        .iter()
+        .take(levels.len().saturating_sub(1))
+        .fold(0u64, |sum, l| sum.saturating_add(l.point_count));
+    if nodes > u64::from(u32::MAX) {
+        return Err(BuildError::TooManyNodes(nodes));
+    }
+    Ok(())
+}
+
 /// Errors of building a hierarchy.
 #[derive(Debug, thiserror::Error)]
 pub enum BuildError {
@@ -67,6 +81,8 @@ pub enum BuildError {
     Empty,
     #[error("{0} particles: a level holds at most 4294967295 points in format version 1")]
     TooMany(usize),
+    #[error("{0} nodes in all: format version 1 numbers nodes in 32 bits (at most 4294967295); build with a larger cluster size")]
+    TooManyNodes(u64),
     #[error("particle {index} has a non-finite position {position:?}")]
     NonFinite { index: usize, position: [f32; 3] },
     #[error("{0} species: a file holds at most {MAX_SPECIES}")]
@@ -306,6 +322,7 @@ pub fn build_with(
         node_first += ord.len() as u64;
     }
     levels[last].node_first = levels[last - 1].node_first + levels[last - 1].point_count;
+    check_node_total(&levels)?;
 
     progress.advance(n as u64 / 4);
     // 4. Nodes.
@@ -623,4 +640,31 @@ fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn more_nodes_than_32_bits_number_are_refused_before_writing() {
+        let table = |counts: &[u64]| -> Vec<LevelRecord> {
+            counts
+                .iter()
+                .map(|&point_count| LevelRecord {
+                    point_count,
+                    node_first: 0,
+                    reserved: [0; 2],
+                })
+                .collect()
+        };
+        // Every level within 2^32 − 1 points; the particles' own level does not count.
+        let fits = table(&[1, 1 << 31, (1 << 31) - 2, 1 << 32]);
+        assert!(check_node_total(&fits).is_ok());
+        let over = table(&[1, 1 << 31, (1 << 31) - 1, 5]);
+        match check_node_total(&over) {
+            Err(BuildError::TooManyNodes(n)) => assert_eq!(n, 1 << 32),
+            other => panic!("{other:?}"),
+        }
+    }
 }

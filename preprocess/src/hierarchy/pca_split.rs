@@ -200,7 +200,8 @@ fn split(
     max: usize,
     progress: &dyn Progress,
 ) -> Vec<u32> {
-    if items.len() < PARALLEL_MIN {
+    // Small enough to split on this thread, or small enough to be a cluster already.
+    if items.len() < PARALLEL_MIN || items.len() <= max {
         let mut sizes = Vec::with_capacity(items.len() / max * 2 + 1);
         split_into(items, scratch, order, stats, max, &mut sizes);
         progress.advance(items.len() as u64);
@@ -383,6 +384,15 @@ mod tests {
                 id: i as u32,
             })
             .collect()
+    }
+
+    #[test]
+    fn clusters_that_fit_are_not_split_at_any_cluster_size() {
+        // 100 000 points along a line, clusters of at most 65 536: one split at the mean
+        // makes two halves that fit (each above the size split on its own thread).
+        let pts: Vec<[f32; 3]> = (0..100_000).map(|i| [i as f32, 0.0, 0.0]).collect();
+        let c = cluster(items(&pts), 65_536, &crate::progress::NoProgress);
+        assert_eq!(c.offsets, vec![0, 50_000, 100_000]);
     }
 
     #[test]
