@@ -193,6 +193,39 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
         ],
         &env,
     );
+    // Back to the standard mode while S-NDFs refine (far more rays than the session
+    // lasts): the standard image stays and settles; no S-NDF batch replaces it.
+    std::fs::write(
+        d.join("mode-switch.json"),
+        serde_json::json!([
+            {"action": "mode", "mode": "sndf"},
+            {"action": "sndf_iterations", "n": 4096},
+            {"action": "pause", "seconds": 0.5},
+            {"action": "mode", "mode": "standard"},
+            {"action": "wait_still"},
+            {"action": "pause", "seconds": 1},
+            {"action": "screenshot", "path": p("switched.png")}
+        ])
+        .to_string(),
+    )
+    .unwrap();
+    mdlod(
+        &[
+            "view",
+            &p("runs"),
+            "--view",
+            &p("view.json"),
+            "--width",
+            w,
+            "--height",
+            h,
+            "--script",
+            &p("mode-switch.json"),
+            "--script-timeout",
+            "60",
+        ],
+        &env,
+    );
     // An error in a script ends it at once and fails the command, naming the cause.
     let bad = d.join("bad-session.json");
     std::fs::write(
@@ -227,6 +260,22 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
         t0.elapsed() < Duration::from_secs(120),
         "the failed script did not end"
     );
+    // A script that runs past its time limit fails the command too.
+    let slow = d.join("slow-session.json");
+    std::fs::write(
+        &slow,
+        serde_json::json!([{"action": "pause", "seconds": 600}]).to_string(),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args(["view", &p("runs"), "--width", "64", "--height", "48"])
+        .args(["--script-timeout", "2", "--script"])
+        .arg(&slow)
+        .envs(env.iter().copied())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("timed out"), "{err}");
     drop(x);
 
     let start = png(&d.join("start.png"));
@@ -252,6 +301,7 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
     let frame1 = p("runs/frame-100.mdlod");
     let headless = render(&frame0, &p("headless.png"), &[]);
     assert!(differing(&orbited, &headless, 2) < 0.002);
+    assert!(differing(&png(&d.join("switched.png")), &headless, 2) < 0.002);
     // S-NDFs refined to 16 rays in the viewer's batches look like `render --mode sndf`.
     let sndf = png(&d.join("sndf.png"));
     let sndf_headless = render(

@@ -8,13 +8,16 @@
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
+use std::sync::mpsc::{Receiver, TryRecvError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use eframe::egui;
 use mdlod_render::{RgbaImage, ViewFile};
 
-use crate::state::{adapt_error, Action, Changed, Mode, ViewerState};
+use crate::state::{
+    adapt_error, smip_preview_cap, Action, Changed, Mode, Requests, ViewerState, SMIP_MAX_COARSEN,
+};
 use crate::worker::{FrameStats, Reply, Request, Worker};
 
 /// Width of the control panel left of the image (logical pixels).
@@ -25,7 +28,6 @@ const MOVING: Duration = Duration::from_millis(150);
 
 /// The latest image from the render thread.
 struct Shown {
-    id: u64,
     image: RgbaImage,
     stats: FrameStats,
     interactive: bool,
@@ -44,7 +46,9 @@ impl Script {
         Script {
             actions: actions.into(),
             waiting: None,
-            deadline: Instant::now() + timeout,
+            deadline: Instant::now()
+                .checked_add(timeout)
+                .unwrap_or_else(|| Instant::now() + Duration::from_secs(u64::from(u32::MAX))),
         }
     }
 }
@@ -63,9 +67,12 @@ pub(crate) struct ViewerApp {
     worker: Worker,
     texture: Option<egui::TextureHandle>,
     shown: Option<Shown>,
-    next_id: u64,
-    /// The newest request sent and whether it was a preview.
-    requested: Option<(u64, bool)>,
+    /// The requests sent, the image shown and the status message.
+    requests: Requests,
+    /// The timestep changed: prefetch the next one after the render request.
+    prefetch: bool,
+    /// The render thread is gone (it panicked): nothing more will come.
+    worker_gone: bool,
     dirty: Changed,
     last_input: Option<Instant>,
     /// Screen error of previews, adapted to the target frame time.
@@ -75,7 +82,6 @@ pub(crate) struct ViewerApp {
     pending_writes: usize,
     /// The first error, for the exit status when a script runs.
     pub outcome: Arc<Mutex<Option<String>>>,
-    message: Option<String>,
     playing: bool,
     last_step: Instant,
     light_index: usize,
@@ -97,8 +103,9 @@ impl ViewerApp {
             worker,
             texture: None,
             shown: None,
-            next_id: 1,
-            requested: None,
+            requests: Requests::default(),
+            prefetch: false,
+            worker_gone: false,
             dirty: Changed {
                 scene: true,
                 lighting: false,
@@ -108,7 +115,6 @@ impl ViewerApp {
             script,
             pending_writes: 0,
             outcome,
-            message: None,
             playing: false,
             last_step: Instant::now(),
             light_index: 0,
@@ -119,7 +125,12 @@ impl ViewerApp {
     }
 
     fn fail(&mut self, message: String) {
-        self.message = Some(message.clone());
+        self.requests.note(message.clone());
+        self.script_failed(message);
+    }
+
+    /// The first error of a script fails it.
+    fn script_failed(&mut self, message: String) {
         if self.script.is_some() {
             let mut o = self.outcome.lock().unwrap_or_else(|e| e.into_inner());
             o.get_or_insert(message);
@@ -163,15 +174,20 @@ impl ViewerApp {
             }
             _ => {}
         }
-        let before = self.state.frame;
+        let before = (self.state.frame, self.state.settings.mode);
         let c = self.state.apply(&action);
         self.dirty.scene |= c.scene;
         self.dirty.lighting |= c.lighting;
         if user && c.scene {
             self.last_input = Some(Instant::now());
         }
-        if self.state.frame != before {
-            self.prefetch_next();
+        if self.state.frame != before.0 {
+            // After the render request (see `send_render`): the frame shown comes first.
+            self.prefetch = true;
+        }
+        if self.state.settings.mode != before.1 {
+            // Another mode costs another time: its previews adapt from the settled error.
+            self.moving_error = self.state.settings.error_px.max(1.0);
         }
     }
 
@@ -187,13 +203,15 @@ impl ViewerApp {
         self.last_input.is_some_and(|t| t.elapsed() < MOVING)
     }
 
-    /// The view shows the current state, as refined as the mode goes.
+    /// The view shows the current state, as refined as the mode goes (or its request
+    /// failed: the view gets no further).
     fn settled(&self) -> bool {
-        !self.dirty.scene
-            && !self.dirty.lighting
-            && self.requested.is_some_and(|(id, preview)| {
-                !preview && self.shown.as_ref().is_some_and(|s| s.id == id && s.refined)
-            })
+        !self.dirty.scene && !self.dirty.lighting && self.requests.finished()
+    }
+
+    /// A preview was the last request.
+    fn previewing(&self) -> bool {
+        self.requests.requested().is_some_and(|(_, p)| p)
     }
 
     fn send_render(&mut self) {
@@ -204,8 +222,7 @@ impl ViewerApp {
         } else {
             self.state.render_options(size)
         };
-        let id = self.next_id;
-        self.next_id += 1;
+        let id = self.requests.send(interactive);
         self.worker.send(Request::Render {
             id,
             path: self.state.frames[self.state.frame].path.clone(),
@@ -217,13 +234,21 @@ impl ViewerApp {
             } else {
                 0
             },
+            sphere_error_px: if interactive {
+                self.state.sphere_preview_error(self.moving_error)
+            } else {
+                self.state.settings.error_px
+            },
         });
-        self.requested = Some((id, interactive));
         self.dirty = Changed::default();
+        if std::mem::take(&mut self.prefetch) {
+            self.prefetch_next();
+        }
     }
 
     fn receive(&mut self, ctx: &egui::Context) {
-        while let Ok(reply) = self.worker.rx.try_recv() {
+        let (replies, disconnected) = drain(&self.worker.rx);
+        for reply in replies {
             match reply {
                 Reply::Image {
                     id,
@@ -233,14 +258,25 @@ impl ViewerApp {
                     refined,
                 } => {
                     // Images of requests overtaken by newer ones are still shown (they
-                    // are the nearest thing to the view), but do not settle it.
+                    // are the nearest thing to the view), but do not settle it; those
+                    // older than one answered are stale.
+                    if !self.requests.image(id, refined) {
+                        continue;
+                    }
                     if interactive {
-                        self.moving_error = adapt_error(
+                        let finest = self.state.settings.error_px.max(1.0);
+                        let adapted = adapt_error(
                             self.moving_error,
                             stats.frame_ms,
                             self.state.settings.target_frame_ms,
-                            self.state.settings.error_px.max(1.0),
+                            finest,
                         );
+                        // S-MIP previews (they have bins) coarsen by a few levels at most.
+                        self.moving_error = if stats.bins.is_some() {
+                            adapted.min(smip_preview_cap(finest))
+                        } else {
+                            adapted
+                        };
                     }
                     let colour = egui::ColorImage::from_rgba_unmultiplied(
                         [image.width as usize, image.height as usize],
@@ -257,22 +293,33 @@ impl ViewerApp {
                         }
                     }
                     self.shown = Some(Shown {
-                        id,
                         image,
                         stats,
                         interactive,
                         refined,
                     });
                 }
+                Reply::Bounds { path, bounds } => self.state.set_frame_bounds(&path, bounds),
                 Reply::Written { out, result } => {
                     self.pending_writes = self.pending_writes.saturating_sub(1);
                     match result {
-                        Ok(()) => self.message = Some(format!("wrote {}", out.display())),
+                        Ok(()) => self.requests.note(format!("wrote {}", out.display())),
                         Err(e) => self.fail(e),
                     }
                 }
-                Reply::Error(e) => self.fail(e),
+                Reply::Error { id, message } => {
+                    if self.requests.error(id, message.clone()) {
+                        // The view gets no further: playback stops at the bad frame.
+                        self.playing = false;
+                    }
+                    self.script_failed(message);
+                }
             }
+        }
+        if disconnected && !self.worker_gone {
+            self.worker_gone = true;
+            self.playing = false;
+            self.fail("the render thread stopped".into());
         }
     }
 
@@ -295,10 +342,11 @@ impl ViewerApp {
         };
         if Instant::now() > script.deadline {
             let left = script.actions.len();
-            self.script = None;
+            // While the script is still set: the timeout fails the command.
             self.fail(format!(
                 "the script timed out waiting for the view ({left} actions left)"
             ));
+            self.script = None;
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return false;
         }
@@ -441,7 +489,7 @@ impl ViewerApp {
                     actions.push(Action::Mode { mode });
                 }
             }
-            if i.key_pressed(Key::Space) {
+            if i.key_pressed(Key::Space) && self.state.can_play() {
                 self.playing = !self.playing;
             }
         });
@@ -541,13 +589,10 @@ impl ViewerApp {
             let mut colour = s.lights[self.light_index].colour;
             ui.horizontal(|ui| {
                 if ui.color_edit_button_rgb(&mut colour).changed() {
-                    let mut l = s.lights[self.light_index];
-                    l.colour = colour;
-                    actions.push(Action::RemoveLight {
+                    actions.push(Action::LightColour {
                         index: self.light_index,
+                        colour,
                     });
-                    actions.push(Action::AddLight { light: l });
-                    self.light_index = n - 1;
                 }
                 if ui.button("remove").clicked() {
                     actions.push(Action::RemoveLight {
@@ -740,15 +785,16 @@ impl ViewerApp {
             }
         }
         ui.label(format!("host {:.0} MiB resident", host_rss_mib()));
-        let waiting = self
-            .requested
-            .is_some_and(|(id, _)| self.shown.as_ref().is_none_or(|s| s.id != id));
         ui.label(format!(
             "queue: {}{} file(s) to write",
-            if waiting { "a frame, " } else { "" },
+            if self.requests.waiting() && !self.worker_gone {
+                "a frame, "
+            } else {
+                ""
+            },
             self.pending_writes
         ));
-        if let Some(m) = &self.message {
+        if let Some(m) = self.requests.message() {
             ui.label(m);
         }
     }
@@ -924,15 +970,13 @@ impl eframe::App for ViewerApp {
         }
         if self.dirty.scene || self.dirty.lighting {
             self.send_render();
-        } else if self
-            .requested
-            .is_some_and(|(_, preview)| preview && !self.moving())
-        {
+        } else if self.previewing() && !self.moving() {
             // The user stopped: the refined frame.
             self.dirty.scene = true;
             self.send_render();
         }
-        if scripted || self.moving() || self.playing || self.requested.is_some_and(|(_, p)| p) {
+        let busy = !self.worker_gone && (self.moving() || self.playing || self.previewing());
+        if scripted || busy {
             ctx.request_repaint_after(Duration::from_millis(16));
         }
     }
@@ -940,19 +984,55 @@ impl eframe::App for ViewerApp {
 
 /// S-MIP levels to coarsen an orthographic S-NDF view by while dragging: one per
 /// doubling of the preview's screen error over the settled one (the adaptation that
-/// holds the target frame time), at most 3.
+/// holds the target frame time), at most [`SMIP_MAX_COARSEN`].
 pub fn coarsen_levels(moving_error_px: f32, error_px: f32) -> u32 {
     let ratio = moving_error_px / error_px.max(0.25);
     if ratio.is_finite() && ratio >= 2.0 {
-        (ratio.log2().floor() as u32).min(3)
+        (ratio.log2().floor() as u32).min(SMIP_MAX_COARSEN)
     } else {
         0
     }
 }
 
+/// The replies waiting from the render thread, and whether it is gone (its end of the
+/// channel dropped: it panicked, as it only ends otherwise when the window does).
+fn drain(rx: &Receiver<Reply>) -> (Vec<Reply>, bool) {
+    let mut replies = vec![];
+    loop {
+        match rx.try_recv() {
+            Ok(r) => replies.push(r),
+            Err(TryRecvError::Empty) => return (replies, false),
+            Err(TryRecvError::Disconnected) => return (replies, true),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::coarsen_levels;
+    use super::{coarsen_levels, drain};
+    use crate::worker::Reply;
+
+    #[test]
+    fn a_stopped_render_thread_is_noticed() {
+        let (tx, rx) = std::sync::mpsc::channel();
+        tx.send(Reply::Error {
+            id: 1,
+            message: "a".into(),
+        })
+        .unwrap();
+        let (replies, gone) = drain(&rx);
+        assert_eq!((replies.len(), gone), (1, false));
+        tx.send(Reply::Error {
+            id: 2,
+            message: "b".into(),
+        })
+        .unwrap();
+        // The thread ends (a panic drops its sender): its last replies, then the news.
+        drop(tx);
+        let (replies, gone) = drain(&rx);
+        assert_eq!((replies.len(), gone), (1, true));
+        assert!(drain(&rx).1);
+    }
 
     #[test]
     fn slow_previews_coarsen_the_smip_level_per_doubling_of_the_error() {

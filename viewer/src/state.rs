@@ -5,7 +5,7 @@
 //! [`RenderOptions`] `mdlod render` uses, which is why a viewer screenshot and a headless
 //! render of the same view and settings are the same pixels.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use mdlod_render::camera::{Bounds, Camera, Projection};
@@ -234,6 +234,12 @@ pub enum Action {
     RemoveLight {
         index: usize,
     },
+    /// Set light `index`'s colour (linear RGB), keeping its place in the list (the
+    /// sphere modes use the first light).
+    LightColour {
+        index: usize,
+        colour: [f32; 3],
+    },
     /// Lambert only (`specular` 0) or Blinn-Phong with this weight and exponent.
     Brdf {
         specular: f32,
@@ -348,6 +354,10 @@ pub struct Changed {
 pub const ORBIT_DEG_PER_PX: f32 = 0.3;
 /// Light widget: degrees per pixel dragged.
 pub const LIGHT_DEG_PER_PX: f32 = 0.5;
+/// Zooming keeps the camera's distance between these multiples of the data's bounding
+/// radius: further out every render would fail (an infinite distance), further in the
+/// distance would shrink to a denormal.
+pub const ZOOM_RANGE: (f32, f32) = (1e-4, 1e4);
 
 /// The viewer's state.
 #[derive(Clone, Debug)]
@@ -357,8 +367,11 @@ pub struct ViewerState {
     /// The data set's frames (one for a single file) and the one shown.
     pub frames: Vec<FrameInfo>,
     pub frame: usize,
-    /// The shown frame's bounds (for fitting).
+    /// The shown frame's bounds (for fitting and zoom limits).
     pub bounds: Bounds,
+    /// Each frame's bounds, once known (the render thread reports them as it opens the
+    /// frames).
+    pub frame_bounds: Vec<Option<Bounds>>,
     /// The window's image size (pixels).
     pub size: [u32; 2],
     /// The data's species (name, linear colour) and scalar attribute, for the panel.
@@ -375,12 +388,17 @@ pub struct FrameInfo {
 
 impl ViewerState {
     pub fn new(frames: Vec<FrameInfo>, camera: Camera, bounds: Bounds, size: [u32; 2]) -> Self {
+        let mut frame_bounds = vec![None; frames.len()];
+        if let Some(b) = frame_bounds.first_mut() {
+            *b = Some(bounds);
+        }
         ViewerState {
             camera,
             settings: Settings::default(),
             frames,
             frame: 0,
             bounds,
+            frame_bounds,
             size,
             species: vec![],
             attribute: None,
@@ -415,11 +433,18 @@ impl ViewerState {
                 scene
             }
             Action::Zoom { factor } => {
-                if factor.is_finite() && *factor > 0.0 {
-                    self.camera.zoom(*factor);
-                    scene
-                } else {
+                if !(factor.is_finite() && *factor > 0.0) {
+                    return Changed::default();
+                }
+                let r = self.bounds.radius();
+                let r = if r.is_finite() && r > 1e-6 { r } else { 1.0 };
+                let before = self.camera.distance;
+                let d = (before / factor).clamp(ZOOM_RANGE.0 * r, ZOOM_RANGE.1 * r);
+                if d == before || !d.is_finite() {
                     Changed::default()
+                } else {
+                    self.camera.distance = d;
+                    scene
                 }
             }
             Action::Fit => {
@@ -468,6 +493,13 @@ impl ViewerState {
                     Changed::default()
                 }
             }
+            Action::LightColour { index, colour } => match s.lights.get_mut(*index) {
+                Some(l) if colour.iter().all(|c| c.is_finite()) => {
+                    l.colour = colour.map(|c| c.max(0.0));
+                    lighting
+                }
+                _ => Changed::default(),
+            },
             Action::Brdf {
                 specular,
                 shininess,
@@ -515,7 +547,7 @@ impl ViewerState {
             }
             Action::Frame { index } => {
                 if *index < self.frames.len() && *index != self.frame {
-                    self.frame = *index;
+                    self.go_to(*index);
                     scene
                 } else {
                     Changed::default()
@@ -526,7 +558,7 @@ impl ViewerState {
                 if n <= 1 {
                     return Changed::default();
                 }
-                self.frame = (self.frame as i64 + delta).rem_euclid(n) as usize;
+                self.go_to((self.frame as i64 + delta).rem_euclid(n) as usize);
                 scene
             }
             Action::ScreenError { px } => {
@@ -578,6 +610,35 @@ impl ViewerState {
 
     pub fn set_camera(&mut self, camera: Camera) {
         self.camera = camera;
+    }
+
+    /// Shows frame `index`, with its bounds when known (else the last frame's stand in
+    /// until the render thread reports them).
+    fn go_to(&mut self, index: usize) {
+        self.frame = index;
+        if let Some(Some(b)) = self.frame_bounds.get(index) {
+            self.bounds = *b;
+        }
+    }
+
+    /// The render thread opened `path`, whose data has these bounds: fitting, loading a
+    /// view and the zoom limits use them while that frame is shown.
+    pub fn set_frame_bounds(&mut self, path: &Path, bounds: Bounds) {
+        for (i, f) in self.frames.iter().enumerate() {
+            if f.path == path {
+                if let Some(b) = self.frame_bounds.get_mut(i) {
+                    *b = Some(bounds);
+                }
+                if i == self.frame {
+                    self.bounds = bounds;
+                }
+            }
+        }
+    }
+
+    /// Whether the timesteps can play: there is more than one.
+    pub fn can_play(&self) -> bool {
+        self.frames.len() > 1
     }
 
     /// The options of the refined image of the current view at `size`.
@@ -632,6 +693,9 @@ impl ViewerState {
         o.error_px = error_px.max(self.settings.error_px);
         // Orthographic S-NDF views pan and zoom over the S-MIP's cached tiles (the render
         // thread falls back to spheres for an orbit); perspective ones preview spheres.
+        // The S-MIP keeps the settled screen error (a new one would start a new cache);
+        // the render thread draws the sphere preview of an orbit at `error_px`
+        // ([`ViewerState::sphere_preview_error`]).
         if matches!(o.mode, RenderMode::Sndf { .. }) {
             if self.camera.projection == mdlod_render::Projection::Orthographic {
                 o.error_px = self.settings.error_px;
@@ -640,6 +704,125 @@ impl ViewerState {
             }
         }
         o
+    }
+
+    /// The screen error of a sphere preview at the adapted preview error `error_px`
+    /// (never finer than the settled error): the error of the previews of
+    /// [`ViewerState::interactive_options`], and of the spheres the render thread draws
+    /// instead of an orthographic S-NDF view while it orbits.
+    pub fn sphere_preview_error(&self, error_px: f32) -> f32 {
+        error_px.max(self.settings.error_px)
+    }
+}
+
+/// The most the preview error adapts to while the previews are S-MIP views: the error at
+/// which [`SMIP_MAX_COARSEN`] levels of coarsening are reached (the S-MIP coarsens no
+/// further, so a larger error would change nothing but stay, for the next sphere
+/// previews, far coarser than they need).
+pub fn smip_preview_cap(finest_px: f32) -> f32 {
+    finest_px.max(0.25) * (1u32 << SMIP_MAX_COARSEN) as f32
+}
+
+/// S-MIP levels an orthographic S-NDF preview is coarsened by at most.
+pub const SMIP_MAX_COARSEN: u32 = 3;
+
+/// The render requests sent and the replies taken: which image to show, whether the view
+/// is settled, whether a frame is on its way, and the status message.
+///
+/// Request ids only increase. An image of a request overtaken by a newer one is still
+/// shown (it is the nearest thing to the view) until the newer one answers; an image of
+/// a request older than one already answered (by its image or an error) is stale and
+/// is dropped.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Requests {
+    next_id: u64,
+    /// The newest request sent and whether it was a preview.
+    requested: Option<(u64, bool)>,
+    /// The request of the image shown, and whether that image is refined.
+    shown: Option<(u64, bool)>,
+    /// The newest request answered (by an image or an error).
+    answered: u64,
+    /// The newest request that ended in an error.
+    failed: Option<u64>,
+    /// The status message, and the first request whose image clears it.
+    message: Option<(String, u64)>,
+}
+
+impl Default for Requests {
+    fn default() -> Self {
+        Requests {
+            next_id: 1,
+            requested: None,
+            shown: None,
+            answered: 0,
+            failed: None,
+            message: None,
+        }
+    }
+}
+
+impl Requests {
+    /// A new request, a preview or not: its id.
+    pub fn send(&mut self, preview: bool) -> u64 {
+        let id = self.next_id;
+        self.next_id += 1;
+        self.requested = Some((id, preview));
+        id
+    }
+
+    /// The newest request and whether it is a preview.
+    pub fn requested(&self) -> Option<(u64, bool)> {
+        self.requested
+    }
+
+    /// An image of request `id` came: whether to show it (false for a stale one). A
+    /// message older than the request clears (the view recovered, or moved on).
+    pub fn image(&mut self, id: u64, refined: bool) -> bool {
+        if id < self.answered {
+            return false;
+        }
+        self.answered = id;
+        self.shown = Some((id, refined));
+        if self.message.as_ref().is_some_and(|(_, clear)| id >= *clear) {
+            self.message = None;
+        }
+        true
+    }
+
+    /// Request `id` failed with `message`: returns whether it is the newest request,
+    /// which then counts as finished (the view gets no further).
+    pub fn error(&mut self, id: u64, message: String) -> bool {
+        self.message = Some((message, id.saturating_add(1)));
+        self.answered = self.answered.max(id);
+        let current = self.requested.is_some_and(|(r, _)| r == id);
+        if current {
+            self.failed = Some(id);
+        }
+        current
+    }
+
+    /// A message about no request (a file written or not): it stays until an image of a
+    /// request sent after it comes.
+    pub fn note(&mut self, message: String) {
+        self.message = Some((message, self.next_id));
+    }
+
+    pub fn message(&self) -> Option<&str> {
+        self.message.as_ref().map(|(m, _)| m.as_str())
+    }
+
+    /// The newest request is done: its refined image is shown, or it failed.
+    pub fn finished(&self) -> bool {
+        self.requested.is_some_and(|(id, preview)| {
+            self.failed == Some(id) || (!preview && self.shown == Some((id, true)))
+        })
+    }
+
+    /// A frame is on its way: the newest request has neither its image nor an error.
+    pub fn waiting(&self) -> bool {
+        self.requested.is_some_and(|(id, _)| {
+            self.failed != Some(id) && self.shown.is_none_or(|(s, _)| s != id)
+        })
     }
 }
 
@@ -910,6 +1093,169 @@ mod tests {
         assert_eq!(adapt_error(1.0, 5.0, 33.0, 1.0), 1.0);
         // Within the band: unchanged.
         assert_eq!(adapt_error(4.0, 20.0, 33.0, 1.0), 4.0);
+    }
+
+    #[test]
+    fn zoom_keeps_the_camera_within_reach_of_the_data() {
+        let mut s = state();
+        let r = s.bounds.radius();
+        // Holding `-`: the distance stops growing, and `+` brings it back.
+        for _ in 0..2000 {
+            s.apply(&Action::Zoom { factor: 0.8 });
+        }
+        assert!(s.camera.distance.is_finite());
+        assert!((s.camera.distance - ZOOM_RANGE.1 * r).abs() <= 1e-3 * ZOOM_RANGE.1 * r);
+        s.camera.check().unwrap();
+        assert_eq!(s.apply(&Action::Zoom { factor: 0.8 }), Changed::default());
+        let far = s.camera.distance;
+        assert!(s.apply(&Action::Zoom { factor: 1.25 }).scene);
+        assert!((s.camera.distance - far / 1.25).abs() <= 1e-3 * far);
+        // Holding `+`: it stops well above the denormals.
+        for _ in 0..5000 {
+            s.apply(&Action::Zoom { factor: 1.25 });
+        }
+        assert!((s.camera.distance - ZOOM_RANGE.0 * r).abs() <= 1e-3 * ZOOM_RANGE.0 * r);
+        assert!(s.camera.distance.is_normal());
+        s.camera.check().unwrap();
+    }
+
+    #[test]
+    fn a_light_colour_changes_in_place() {
+        let mut s = state();
+        s.apply(&Action::AddLight {
+            light: Light {
+                direction: [1.0, 0.0, 0.0],
+                colour: [0.2, 0.3, 1.0],
+            },
+        });
+        let first = s.settings.lights[0].direction;
+        let c = s.apply(&Action::LightColour {
+            index: 0,
+            colour: [1.0, 0.5, 0.0],
+        });
+        assert_eq!(
+            c,
+            Changed {
+                scene: false,
+                lighting: true
+            }
+        );
+        // The first light is still first: the sphere modes still light from it.
+        assert_eq!(s.settings.lights.len(), 2);
+        assert_eq!(s.settings.lights[0].direction, first);
+        assert_eq!(s.settings.lights[0].colour, [1.0, 0.5, 0.0]);
+        assert_eq!(s.settings.lights[1].colour, [0.2, 0.3, 1.0]);
+        assert_eq!(
+            s.settings.sphere_lighting().direction_view,
+            Vec3::from(first).normalize()
+        );
+        assert_eq!(
+            s.apply(&Action::LightColour {
+                index: 2,
+                colour: [1.0; 3]
+            }),
+            Changed::default()
+        );
+    }
+
+    #[test]
+    fn fitting_uses_the_shown_frames_bounds() {
+        let mut s = state();
+        let first = s.bounds;
+        let second = Bounds::new([100.0, 0.0, 0.0], [140.0, 40.0, 40.0]);
+        // The render thread reports frame 1's bounds (here before it is shown).
+        s.set_frame_bounds(Path::new("b.mdlod"), second);
+        assert_eq!(s.bounds, first);
+        s.apply(&Action::Step { delta: 1 });
+        assert_eq!(s.bounds, second);
+        s.apply(&Action::Fit);
+        assert!((s.camera.target - second.center()).length() < 1e-4);
+        // Frame 2 is not known yet: the last bounds stand in until it is reported.
+        s.apply(&Action::Step { delta: 1 });
+        assert_eq!(s.bounds, second);
+        let third = Bounds::new([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]);
+        s.set_frame_bounds(Path::new("c.mdlod"), third);
+        assert_eq!(s.bounds, third);
+        s.apply(&Action::Frame { index: 0 });
+        assert_eq!(s.bounds, first);
+        s.apply(&Action::Fit);
+        assert!((s.camera.target - first.center()).length() < 1e-4);
+    }
+
+    #[test]
+    fn a_single_frame_does_not_play() {
+        let mut s = state();
+        assert!(s.can_play());
+        s.frames.truncate(1);
+        assert!(!s.can_play());
+    }
+
+    #[test]
+    fn orbiting_orthographic_sndf_previews_use_the_adapted_error() {
+        let mut s = state();
+        s.apply(&Action::Mode { mode: Mode::Sndf });
+        s.apply(&Action::Projection { orthographic: true });
+        // The S-MIP keeps the settled error; its sphere fallback takes the preview's.
+        let o = s.interactive_options([10, 10], 6.0);
+        assert!(matches!(o.mode, RenderMode::Sndf { .. }));
+        assert_eq!(o.error_px, 1.0);
+        assert_eq!(s.sphere_preview_error(6.0), 6.0);
+        assert_eq!(s.sphere_preview_error(0.5), 1.0);
+        // Slow S-MIP previews stop adapting where the S-MIP stops coarsening.
+        let mut e = 1.0;
+        for _ in 0..50 {
+            e = adapt_error(e, 500.0, 33.0, 1.0).min(smip_preview_cap(1.0));
+        }
+        assert_eq!(e, 8.0);
+        assert_eq!(crate::app::coarsen_levels(e, 1.0), SMIP_MAX_COARSEN);
+    }
+
+    #[test]
+    fn stale_images_are_dropped_and_the_newest_request_settles() {
+        let mut r = Requests::default();
+        let sndf = r.send(false);
+        assert!(r.image(sndf, false));
+        let preview = r.send(true);
+        // An image of an overtaken request still shows until the newer one answers.
+        assert!(r.image(sndf, false));
+        assert!(r.waiting());
+        assert!(r.image(preview, false));
+        let standard = r.send(false);
+        assert!(r.image(standard, true));
+        assert!(r.finished() && !r.waiting());
+        // Batches of the old S-NDF view arriving late do not replace the new image.
+        assert!(!r.image(sndf, false));
+        assert!(!r.image(preview, false));
+        assert!(r.finished());
+    }
+
+    #[test]
+    fn an_error_ends_the_request_and_its_message_clears_when_the_view_recovers() {
+        let mut r = Requests::default();
+        let a = r.send(false);
+        assert!(r.image(a, true));
+        let b = r.send(false);
+        assert!(r.waiting() && !r.finished());
+        // An error of the newest request: it is done (playback stops, no frame queued).
+        assert!(r.error(b, "frame-1.mdlod: missing".into()));
+        assert!(r.finished() && !r.waiting());
+        assert_eq!(r.message(), Some("frame-1.mdlod: missing"));
+        // Images of older requests are stale now.
+        assert!(!r.image(a, true));
+        // An error of an overtaken request does not end the newest one.
+        let c = r.send(false);
+        assert!(!r.error(b, "late".into()));
+        assert!(!r.finished() && r.waiting());
+        assert!(r.image(c, true));
+        assert!(r.finished());
+        assert_eq!(r.message(), None);
+        // A note stays until an image of a later request.
+        r.note("wrote a.png".into());
+        assert!(r.image(c, true));
+        assert_eq!(r.message(), Some("wrote a.png"));
+        let d = r.send(false);
+        assert!(r.image(d, true));
+        assert_eq!(r.message(), None);
     }
 
     #[test]

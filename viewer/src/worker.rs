@@ -13,7 +13,11 @@
 //!   iteration while the user drags, then refined tile by tile), and zooming out
 //!   down-samples the cached tiles. An orbit starts a new S-MIP: while dragging, those
 //!   frames are sphere previews, as in perspective.
-//! - Screenshots, saved S-NDFs and prefetches run in order between frames.
+//! - Only the newest request's view refines: a request ends what an older one left
+//!   refining (S-NDF batches, S-MIP tiles, streamed pages), so no image of an older view
+//!   follows it.
+//! - Screenshots and saved S-NDFs run in order between frames; of the prefetches only
+//!   the newest runs, after the render request.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -22,12 +26,13 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use mdlod_format::MdlodFile;
+use mdlod_render::camera::Bounds;
 use mdlod_render::renderer::ResidentSndf;
 use mdlod_render::smip::{Smip, SmipConfig, SmipFrame};
 use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
 use mdlod_render::{
-    render_image, traverse, BackendChoice, GpuContext, RenderError, RenderMode, RenderOptions,
-    Renderer, RgbaImage, ViewFile,
+    data_bounds, render_image, traverse, BackendChoice, GpuContext, RenderError, RenderMode,
+    RenderOptions, Renderer, RgbaImage, ViewFile,
 };
 
 /// Iterations in each progressive S-NDF batch.
@@ -46,6 +51,10 @@ pub enum Request {
         /// While the user drags an orthographic S-NDF view: show it this many S-MIP
         /// levels coarser than its pixels (a quarter of the texels per level).
         coarsen: u32,
+        /// The screen error of the sphere preview drawn instead of an orthographic S-NDF
+        /// view whose drag left the S-MIP's frame (an orbit); `opts.error_px` stays the
+        /// S-MIP's own.
+        sphere_error_px: f32,
     },
     /// Open a file ahead of need (the next timestep).
     Prefetch(PathBuf),
@@ -94,12 +103,16 @@ pub enum Reply {
         /// supersampling, the final cut).
         refined: bool,
     },
+    /// The bounds of the data of `path`, sent when a render request opens another file
+    /// (fitting and zooming use the shown frame's).
+    Bounds { path: PathBuf, bounds: Bounds },
     /// A screenshot or S-NDF file was written (or not).
     Written {
         out: PathBuf,
         result: Result<(), String>,
     },
-    Error(String),
+    /// Render request `id` failed: no more images of it come.
+    Error { id: u64, message: String },
 }
 
 /// The S-NDFs of one view, refined batch by batch on the GPU (they stay there: each
@@ -183,7 +196,8 @@ impl Worker {
                     renderer: &renderer,
                     gpu_memory,
                     stream: None,
-                    files: HashMap::new(),
+                    files: FileCache::new(FILES_KEPT),
+                    bounds_sent: None,
                     progressive: None,
                     smip: None,
                     tiled: None,
@@ -249,15 +263,17 @@ pub enum GpuMemory {
 struct Streaming<'r> {
     path: PathBuf,
     renderer: mdlod_render::StreamingRenderer<'r>,
-    /// The request being refined: id, options.
-    pending: Option<(u64, RenderOptions)>,
+    /// The request being refined: id, options, whether it is a preview.
+    pending: Option<(u64, RenderOptions, bool)>,
 }
 
 struct Thread<'r> {
     renderer: &'r Renderer,
     gpu_memory: GpuMemory,
     stream: Option<Streaming<'r>>,
-    files: HashMap<PathBuf, Arc<MdlodFile>>,
+    files: FileCache<Arc<MdlodFile>>,
+    /// The file whose bounds the window was sent last.
+    bounds_sent: Option<PathBuf>,
     progressive: Option<Progressive>,
     /// The S-MIP cache of orthographic S-NDF views, and the view it shows.
     smip: Option<Smip>,
@@ -279,13 +295,9 @@ impl<'r> Thread<'r> {
 
     fn file(&mut self, path: &Path) -> Result<Arc<MdlodFile>, String> {
         if let Some(f) = self.files.get(path) {
-            return Ok(f.clone());
+            return Ok(f);
         }
         let f = Arc::new(MdlodFile::open(path).map_err(|e| format!("{}: {e}", path.display()))?);
-        // Keep the shown frame and a few neighbours mapped.
-        if self.files.len() >= 4 {
-            self.files.clear();
-        }
         self.files.insert(path.to_path_buf(), f.clone());
         Ok(f)
     }
@@ -324,14 +336,9 @@ impl<'r> Thread<'r> {
                 }
             }
             pending.extend(requests.try_iter());
-            // The newest render request wins; the others run in order.
-            let newest = pending
-                .iter()
-                .rposition(|r| matches!(r, Request::Render { .. }));
-            for (i, r) in std::mem::take(&mut pending).into_iter().enumerate() {
+            for r in plan(std::mem::take(&mut pending)) {
                 match r {
                     Request::Quit => return,
-                    Request::Render { .. } if Some(i) != newest => {}
                     Request::Render {
                         id,
                         path,
@@ -339,7 +346,18 @@ impl<'r> Thread<'r> {
                         shade,
                         interactive,
                         coarsen,
-                    } => self.render(id, &path, opts, shade, interactive, coarsen),
+                        sphere_error_px,
+                    } => self.render(
+                        id,
+                        &path,
+                        opts,
+                        shade,
+                        Preview {
+                            interactive,
+                            coarsen,
+                            sphere_error_px,
+                        },
+                    ),
                     Request::Prefetch(path) => {
                         let _ = self.file(&path);
                     }
@@ -383,23 +401,45 @@ impl<'r> Thread<'r> {
         path: &Path,
         opts: RenderOptions,
         shade: ShadeLights,
-        interactive: bool,
-        coarsen: u32,
+        preview: Preview,
     ) {
         let t0 = Instant::now();
+        let Preview {
+            interactive,
+            coarsen,
+            sphere_error_px,
+        } = preview;
+        // Only this request refines from now on: whatever an older one left would keep
+        // sending images of its view. The S-MIP and the streaming pool are caches and
+        // stay; the progressive S-NDFs stay only for a re-shade of the same view.
+        self.tiled = None;
+        let previous = self.progressive.take();
+        if let Some(s) = self.stream.as_mut() {
+            s.pending = None;
+        }
+        let error = |e: &dyn std::fmt::Display| Reply::Error {
+            id,
+            message: format!("{}: {e}", path.display()),
+        };
         let file = match self.file(path) {
             Ok(f) => f,
-            Err(e) => return self.reply(Reply::Error(e)),
+            Err(message) => return self.reply(Reply::Error { id, message }),
         };
+        if self.bounds_sent.as_deref() != Some(path) {
+            self.bounds_sent = Some(path.to_path_buf());
+            self.reply(Reply::Bounds {
+                path: path.to_path_buf(),
+                bounds: data_bounds(&file),
+            });
+        }
         let mut opts = opts;
         if let RenderMode::Sndf { .. } = opts.mode {
             let camera = match mdlod_render::camera_for(&file, &opts.view, opts.width, opts.height)
             {
                 Ok(c) => c,
-                Err(e) => return self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+                Err(e) => return self.reply(error(&e)),
             };
             if camera.projection == mdlod_render::Projection::Orthographic {
-                self.progressive = None;
                 let coarsen = if interactive { coarsen } else { 0 };
                 match self.tiled_render(
                     id,
@@ -412,34 +452,29 @@ impl<'r> Thread<'r> {
                     interactive,
                 ) {
                     Ok(true) => return,
-                    // A preview of a new direction: spheres, below.
-                    Ok(false) => opts.mode = RenderMode::Spheres,
+                    // A preview of a new direction: spheres, below, at the preview's
+                    // error (the S-MIP's is the settled one).
+                    Ok(false) => sphere_fallback(&mut opts, sphere_error_px),
                     Err(e) => {
                         self.tiled = None;
-                        return self.reply(Reply::Error(format!("{}: {e}", path.display())));
+                        return self.reply(error(&e));
                     }
                 }
-            } else {
-                self.tiled = None;
             }
-        } else {
-            self.tiled = None;
         }
         if let RenderMode::Sndf { iterations, .. } = opts.mode {
-            if let Some(p) = self
-                .progressive
-                .as_mut()
-                .filter(|p| p.path == path && same_sampling(&p.opts, &opts))
+            if let Some(mut p) =
+                previous.filter(|p| p.path == path && same_sampling(&p.opts, &opts))
             {
                 // The same view under other lights: re-shade, sample nothing.
                 p.id = id;
                 p.target = iterations;
                 p.shade = shade;
                 p.opts = opts;
+                self.progressive = Some(p);
                 self.show_progress(t0);
                 return;
             }
-            self.progressive = None;
             match sndf_setup(self.renderer, &file, &opts) {
                 Ok((camera, draw, settings)) => {
                     self.progressive = Some(Progressive {
@@ -456,10 +491,11 @@ impl<'r> Thread<'r> {
                     });
                     self.refine_step();
                 }
-                Err(e) => self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+                Err(e) => self.reply(error(&e)),
             }
             return;
         }
+        drop(previous);
         if !matches!(opts.mode, RenderMode::Sndf { .. }) {
             let pool = match self.gpu_memory {
                 GpuMemory::Direct => None,
@@ -469,7 +505,7 @@ impl<'r> Thread<'r> {
                     .then_some(b),
             };
             if let Some(pool) = pool {
-                return self.stream_start(id, path, file, opts, pool);
+                return self.stream_start(id, path, file, opts, interactive, pool);
             }
         }
         self.stream = None;
@@ -495,7 +531,7 @@ impl<'r> Thread<'r> {
                     refined: !interactive,
                 });
             }
-            Err(e) => self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+            Err(e) => self.reply(error(&e)),
         }
     }
 
@@ -507,6 +543,7 @@ impl<'r> Thread<'r> {
         path: &Path,
         file: Arc<MdlodFile>,
         opts: RenderOptions,
+        interactive: bool,
         pool: u64,
     ) {
         // A pool holds its pages packed for one mode's passes and one look.
@@ -532,22 +569,26 @@ impl<'r> Thread<'r> {
                         pending: None,
                     })
                 }
-                Err(e) => return self.reply(Reply::Error(format!("{}: {e}", path.display()))),
+                Err(e) => {
+                    return self.reply(Reply::Error {
+                        id,
+                        message: format!("{}: {e}", path.display()),
+                    })
+                }
             }
         }
         if let Some(s) = self.stream.as_mut() {
-            s.pending = Some((id, opts));
+            s.pending = Some((id, opts, interactive));
         }
         self.stream_step();
     }
 
     /// One streamed frame of the pending view.
     fn stream_step(&mut self) {
-        let t0 = Instant::now();
         let Some(s) = self.stream.as_mut() else {
             return;
         };
-        let Some((id, opts)) = s.pending.clone() else {
+        let Some((id, opts, interactive)) = s.pending.clone() else {
             return;
         };
         if s.renderer.frames_drawn() > 0 {
@@ -555,6 +596,8 @@ impl<'r> Thread<'r> {
             s.renderer
                 .wait_for_loads(std::time::Duration::from_millis(50));
         }
+        // The frame's own time (the wait is not the frame's: previews adapt to it).
+        let t0 = Instant::now();
         match mdlod_render::render_stream_frame(self.renderer, &mut s.renderer, &opts) {
             Ok((image, report, stats)) => {
                 let settled = stats.settled();
@@ -577,14 +620,17 @@ impl<'r> Thread<'r> {
                     id,
                     image,
                     stats,
-                    interactive: false,
-                    refined: settled,
+                    interactive,
+                    refined: settled && !interactive,
                 });
             }
             Err(e) => {
                 let path = s.path.display().to_string();
                 self.stream = None;
-                self.reply(Reply::Error(format!("{path}: {e}")));
+                self.reply(Reply::Error {
+                    id,
+                    message: format!("{path}: {e}"),
+                });
             }
         }
     }
@@ -716,9 +762,12 @@ impl<'r> Thread<'r> {
                 self.show_tiled(t0, false);
             }
             Err(e) => {
-                let path = t.path.display().to_string();
+                let (id, path) = (t.id, t.path.display().to_string());
                 self.tiled = None;
-                self.reply(Reply::Error(format!("{path}: {e}")));
+                self.reply(Reply::Error {
+                    id,
+                    message: format!("{path}: {e}"),
+                });
             }
         }
     }
@@ -754,9 +803,12 @@ impl<'r> Thread<'r> {
                 self.reply(reply);
             }
             Err(e) => {
-                let path = t.path.display().to_string();
+                let (id, path) = (t.id, t.path.display().to_string());
                 self.tiled = None;
-                self.reply(Reply::Error(format!("{path}: {e}")));
+                self.reply(Reply::Error {
+                    id,
+                    message: format!("{path}: {e}"),
+                });
             }
         }
     }
@@ -798,9 +850,12 @@ impl<'r> Thread<'r> {
         match batch {
             Ok(_) => self.show_progress(t0),
             Err(e) => {
-                let path = p.path.display().to_string();
+                let (id, path) = (p.id, p.path.display().to_string());
                 self.progressive = None;
-                self.reply(Reply::Error(format!("{path}: {e}")));
+                self.reply(Reply::Error {
+                    id,
+                    message: format!("{path}: {e}"),
+                });
             }
         }
     }
@@ -819,9 +874,12 @@ impl<'r> Thread<'r> {
         {
             Ok((image, _)) => image,
             Err(e) => {
-                let path = p.path.display().to_string();
+                let (id, path) = (p.id, p.path.display().to_string());
                 self.progressive = None;
-                return self.reply(Reply::Error(format!("{path}: {e}")));
+                return self.reply(Reply::Error {
+                    id,
+                    message: format!("{path}: {e}"),
+                });
             }
         };
         let stats = FrameStats {
@@ -870,6 +928,88 @@ impl<'r> Thread<'r> {
         image
             .save_png(out)
             .map_err(|e| format!("{}: {e}", out.display()))
+    }
+}
+
+/// How a render request previews a moving view.
+#[derive(Clone, Copy, Debug)]
+struct Preview {
+    interactive: bool,
+    coarsen: u32,
+    sphere_error_px: f32,
+}
+
+/// An orthographic S-NDF preview the S-MIP cannot show (an orbit) becomes a sphere
+/// preview at the preview's screen error.
+fn sphere_fallback(opts: &mut RenderOptions, sphere_error_px: f32) {
+    opts.mode = RenderMode::Spheres;
+    if sphere_error_px.is_finite() {
+        opts.error_px = opts.error_px.max(sphere_error_px);
+    }
+}
+
+/// The order a batch of waiting requests runs in: only the newest render request is
+/// drawn (latest wins), screenshots and saved S-NDFs run in order, and only the newest
+/// prefetch runs, last (after the frame to show, which the window waits for).
+fn plan(pending: Vec<Request>) -> Vec<Request> {
+    let newest = pending
+        .iter()
+        .rposition(|r| matches!(r, Request::Render { .. }));
+    let mut prefetch = None;
+    let mut out = Vec::with_capacity(pending.len());
+    for (i, r) in pending.into_iter().enumerate() {
+        match r {
+            Request::Render { .. } if Some(i) != newest => {}
+            Request::Prefetch(_) => prefetch = Some(r),
+            r => out.push(r),
+        }
+    }
+    out.extend(prefetch);
+    out
+}
+
+/// Files the render thread keeps open: the shown frame and a few neighbours.
+const FILES_KEPT: usize = 4;
+
+/// The open files, by path; the least recently used one is dropped for a new one when
+/// the cache is full.
+struct FileCache<T> {
+    entries: HashMap<PathBuf, (T, u64)>,
+    capacity: usize,
+    clock: u64,
+}
+
+impl<T: Clone> FileCache<T> {
+    fn new(capacity: usize) -> Self {
+        FileCache {
+            entries: HashMap::new(),
+            capacity: capacity.max(1),
+            clock: 0,
+        }
+    }
+
+    fn get(&mut self, path: &Path) -> Option<T> {
+        self.clock += 1;
+        let clock = self.clock;
+        self.entries.get_mut(path).map(|(v, used)| {
+            *used = clock;
+            v.clone()
+        })
+    }
+
+    fn insert(&mut self, path: PathBuf, value: T) {
+        self.clock += 1;
+        if !self.entries.contains_key(&path) && self.entries.len() >= self.capacity {
+            let oldest = self
+                .entries
+                .iter()
+                .min_by_key(|(_, (_, used))| *used)
+                .map(|(p, _)| p.clone());
+            if let Some(p) = oldest {
+                self.entries.remove(&p);
+            }
+        }
+        self.entries.insert(path, (value, self.clock));
     }
 }
 
@@ -996,4 +1136,96 @@ pub fn save_sndf(
     sndf.to_data(view, Some(source.display().to_string()))
         .save(out)
         .map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn render(id: u64) -> Request {
+        Request::Render {
+            id,
+            path: "a.mdlod".into(),
+            opts: RenderOptions::default(),
+            shade: crate::state::Settings::default().shade_lights(),
+            interactive: false,
+            coarsen: 0,
+            sphere_error_px: 1.0,
+        }
+    }
+
+    /// What `plan` runs, as text.
+    fn names(requests: &[Request]) -> Vec<String> {
+        requests
+            .iter()
+            .map(|r| match r {
+                Request::Render { id, .. } => format!("render {id}"),
+                Request::Prefetch(p) => format!("prefetch {}", p.display()),
+                Request::Screenshot { out, .. } => format!("screenshot {}", out.display()),
+                Request::SaveSndf { out } => format!("save {}", out.display()),
+                Request::Quit => "quit".into(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn only_the_newest_prefetch_runs_and_after_the_frame_to_show() {
+        let pending = vec![
+            Request::Prefetch("1.mdlod".into()),
+            render(1),
+            Request::Prefetch("2.mdlod".into()),
+            Request::SaveSndf {
+                out: "a.sndf".into(),
+            },
+            Request::Prefetch("3.mdlod".into()),
+            render(2),
+        ];
+        assert_eq!(
+            names(&plan(pending)),
+            ["save a.sndf", "render 2", "prefetch 3.mdlod"]
+        );
+        assert_eq!(
+            names(&plan(vec![Request::Prefetch("1.mdlod".into())])),
+            ["prefetch 1.mdlod"]
+        );
+    }
+
+    #[test]
+    fn the_file_cache_drops_the_least_recently_used_file() {
+        let mut cache = FileCache::new(3);
+        for (i, p) in ["a", "b", "c"].into_iter().enumerate() {
+            cache.insert(p.into(), i);
+        }
+        // "a" is shown again: "b" is now the oldest.
+        assert_eq!(cache.get(Path::new("a")), Some(0));
+        cache.insert("d".into(), 3);
+        assert_eq!(cache.get(Path::new("b")), None);
+        assert_eq!(cache.get(Path::new("a")), Some(0));
+        assert_eq!(cache.get(Path::new("c")), Some(2));
+        assert_eq!(cache.get(Path::new("d")), Some(3));
+        // Inserting a file again replaces it without dropping another.
+        cache.insert("d".into(), 4);
+        assert_eq!(cache.entries.len(), 3);
+        assert_eq!(cache.get(Path::new("a")), Some(0));
+    }
+
+    #[test]
+    fn an_orbiting_orthographic_sndf_preview_is_drawn_at_the_preview_error() {
+        let mut opts = RenderOptions {
+            error_px: 1.0,
+            mode: RenderMode::Sndf {
+                iterations: 64,
+                bins: 8,
+                binning: Default::default(),
+            },
+            ..Default::default()
+        };
+        sphere_fallback(&mut opts, 12.0);
+        assert_eq!(opts.mode, RenderMode::Spheres);
+        assert_eq!(opts.error_px, 12.0);
+        // Never finer than asked, nor a bad error.
+        sphere_fallback(&mut opts, 0.5);
+        sphere_fallback(&mut opts, f32::NAN);
+        assert_eq!(opts.error_px, 12.0);
+    }
 }

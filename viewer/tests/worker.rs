@@ -70,8 +70,9 @@ fn next_image(w: &Worker) -> (u64, RgbaImage, u32, bool) {
                 refined,
                 ..
             }) => return (id, image, stats.spp, refined),
-            Ok(Reply::Error(e)) => panic!("{e}"),
+            Ok(Reply::Error { message, .. }) => panic!("{message}"),
             Ok(Reply::Written { result, .. }) => result.unwrap(),
+            Ok(Reply::Bounds { .. }) => {}
             Err(RecvTimeoutError::Timeout) => panic!("no image in 120 s"),
             Err(e) => panic!("{e}"),
         }
@@ -86,6 +87,7 @@ fn render(w: &Worker, s: &ViewerState, id: u64) {
         shade: s.settings.shade_lights(),
         interactive: false,
         coarsen: 0,
+        sphere_error_px: 1.0,
     });
 }
 
@@ -185,9 +187,13 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
         shade: s.settings.shade_lights(),
         interactive: false,
         coarsen: 0,
+        sphere_error_px: 1.0,
     });
     match w.rx.recv_timeout(Duration::from_secs(60)).unwrap() {
-        Reply::Error(e) => assert!(e.contains("missing.mdlod"), "{e}"),
+        Reply::Error { id, message } => {
+            assert_eq!(id, 4);
+            assert!(message.contains("missing.mdlod"), "{message}")
+        }
         _ => panic!("expected an error"),
     }
     render(&w, &s, 5);
@@ -241,8 +247,9 @@ fn streamed_frames_refine_to_the_direct_image() {
                         break image;
                     }
                 }
-                Reply::Error(e) => panic!("{e}"),
+                Reply::Error { message, .. } => panic!("{message}"),
                 Reply::Written { .. } => panic!("nothing was asked to be written"),
+                Reply::Bounds { .. } => {}
             }
         };
         if mode == Mode::Iso {
@@ -304,6 +311,7 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
         shade: s.settings.shade_lights(),
         interactive: true,
         coarsen: 0,
+        sphere_error_px: 1.0,
     });
     let (id, moving, spp, refined) = next_image(&w);
     assert_eq!((id, spp, refined), (2, 1, false));
@@ -318,6 +326,7 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
         shade: s.settings.shade_lights(),
         interactive: true,
         coarsen: 1,
+        sphere_error_px: 1.0,
     });
     let (id, coarse, _, refined) = next_image(&w);
     assert_eq!((id, refined), (20, false));
@@ -388,6 +397,7 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
         shade: s.settings.shade_lights(),
         interactive: true,
         coarsen: 0,
+        sphere_error_px: 1.0,
     });
     let (id, _, spp, refined) = next_image(&w);
     assert_eq!((id, spp, refined), (5, 1, false));
@@ -395,4 +405,147 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
     render(&w, &s, 6);
     let (_, spps) = until_refined(6);
     assert_eq!(spps, vec![SNDF_BATCH, 2 * SNDF_BATCH]);
+}
+
+/// The next reply within `ms` milliseconds, if any.
+fn reply_within(w: &Worker, ms: u64) -> Option<Reply> {
+    match w.rx.recv_timeout(Duration::from_millis(ms)) {
+        Ok(r) => Some(r),
+        Err(RecvTimeoutError::Timeout) => None,
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// The next image: id, whether a preview, whether refined, the cut's screen error.
+fn next_frame(w: &Worker) -> (u64, bool, bool, f32) {
+    loop {
+        match reply_within(w, 120_000).expect("no reply in 120 s") {
+            Reply::Image {
+                id,
+                interactive,
+                refined,
+                stats,
+                ..
+            } => return (id, interactive, refined, stats.error_px),
+            Reply::Error { message, .. } => panic!("{message}"),
+            Reply::Written { .. } => panic!("nothing was asked to be written"),
+            Reply::Bounds { .. } => {}
+        }
+    }
+}
+
+/// No image comes any more (of an older view refining on, say).
+fn quiet(w: &Worker) {
+    if let Some(r) = reply_within(w, 700) {
+        match r {
+            Reply::Image { id, .. } => panic!("an image of request {id} came after the last"),
+            Reply::Error { id, message } => panic!("request {id}: {message}"),
+            _ => panic!("an unexpected reply"),
+        }
+    }
+}
+
+/// A request ends whatever an older one left refining: no image of an old view follows
+/// the new one (S-NDF batches after a switch to the standard mode, S-MIP tiles after an
+/// orbit's sphere preview), and the orbit's preview is drawn at the preview's error.
+#[test]
+fn a_new_request_ends_the_refinement_of_an_older_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let mut s = state(&path, [64, 48]);
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    s.apply(&Action::Mode { mode: Mode::Sndf });
+    // Far more rays than the test waits for.
+    s.settings.sndf_iterations = 4096;
+    render(&w, &s, 1);
+    // The render thread reports the bounds of the file it opened first.
+    match reply_within(&w, 120_000).expect("a reply") {
+        Reply::Bounds { path: p, bounds } => {
+            assert_eq!(p, path);
+            let f = mdlod_format::MdlodFile::open(&path).unwrap();
+            assert_eq!(bounds, mdlod_render::data_bounds(&f));
+        }
+        _ => panic!("expected the bounds first"),
+    }
+    assert_eq!(next_frame(&w).0, 1);
+    s.apply(&Action::Mode {
+        mode: Mode::Standard,
+    });
+    render(&w, &s, 2);
+    loop {
+        let (id, _, refined, _) = next_frame(&w);
+        if id == 2 {
+            assert!(refined);
+            break;
+        }
+        assert_eq!(id, 1, "a batch of the S-NDF view already under way");
+    }
+    quiet(&w);
+    // An orthographic S-NDF view refining tile by tile, then an orbit's sphere preview.
+    s.apply(&Action::Mode { mode: Mode::Sndf });
+    s.apply(&Action::Projection { orthographic: true });
+    render(&w, &s, 3);
+    assert_eq!(next_frame(&w).0, 3);
+    s.apply(&Action::Orbit { dx: 40.0, dy: 0.0 });
+    w.send(Request::Render {
+        id: 4,
+        path: path.clone(),
+        opts: s.interactive_options(s.size, 100.0),
+        shade: s.settings.shade_lights(),
+        interactive: true,
+        coarsen: 0,
+        sphere_error_px: s.sphere_preview_error(100.0),
+    });
+    loop {
+        let (id, interactive, refined, error_px) = next_frame(&w);
+        if id == 4 {
+            assert!(interactive && !refined);
+            // Clusters drawn as one sphere (at the settled 1 px: only particles).
+            assert!(error_px > 1.0, "the orbit's preview at {error_px} px");
+            break;
+        }
+        assert_eq!(id, 3, "a batch of the S-MIP view already under way");
+    }
+    quiet(&w);
+}
+
+/// With a GPU pool: streamed previews say they are previews (the window adapts their
+/// screen error), and a released S-NDF drag is not followed by the preview's spheres.
+#[test]
+fn streamed_previews_are_previews_and_end_with_the_drag() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let mut s = state(&path, [80, 60]);
+    s.apply(&Action::Mode { mode: Mode::Sndf });
+    s.settings.sndf_iterations = 2 * SNDF_BATCH;
+    let w = Worker::start(backends(), GpuMemory::Pool(64 << 20), || {}).unwrap();
+    // Dragging a perspective S-NDF view: streamed sphere previews.
+    s.apply(&Action::Orbit { dx: 25.0, dy: 10.0 });
+    w.send(Request::Render {
+        id: 1,
+        path: path.clone(),
+        opts: s.interactive_options(s.size, 1.0),
+        shade: s.settings.shade_lights(),
+        interactive: true,
+        coarsen: 0,
+        sphere_error_px: 1.0,
+    });
+    let (id, interactive, refined, _) = next_frame(&w);
+    assert_eq!((id, interactive, refined), (1, true, false));
+    // Released: the S-NDF view, and nothing of the preview after it.
+    render(&w, &s, 2);
+    let mut seen_new = false;
+    loop {
+        let (id, interactive, refined, _) = next_frame(&w);
+        if id == 2 {
+            seen_new = true;
+            if refined {
+                break;
+            }
+        } else {
+            assert!(!seen_new, "a streamed preview came after the S-NDF image");
+            assert_eq!((id, interactive), (1, true));
+        }
+    }
+    quiet(&w);
 }
