@@ -238,18 +238,19 @@ impl OcclusionBuffer {
         let Some((cx, cy)) = self.to_px(center) else {
             return;
         };
-        let rho = radius * rho_px_per_world(&self.camera, d, self.image[1]);
+        let ppw = rho_px_per_world(&self.camera, d, self.image[1]);
+        // The GPU computes the same positions and depths from the same single-precision
+        // coordinates with other rounding: a few units in the last place of the larger of
+        // the eye's and the centre's coordinates, whatever the depth. Its centre may lie
+        // that far to any side, so the circle certainly covered shrinks by it too.
+        let rounding = self.rounding(center.abs().max_element());
+        let rho = (radius - rounding) * ppw;
         let rho = rho * (1.0 - RADIUS_SHRINK_REL) - RADIUS_SHRINK_PX;
         if rho.is_nan() || rho <= 0.0 || !cx.is_finite() || !cy.is_finite() {
             return;
         }
-        let ppw = rho_px_per_world(&self.camera, d, self.image[1]);
         let r2 = radius * radius;
         let (sin_max, cos_min) = (self.sin_max, self.cos_min);
-        // The GPU computes the same depths from the same single-precision coordinates
-        // with other rounding: a few units in the last place of the larger of the eye's
-        // and the centre's coordinates, whatever the depth.
-        let rounding = self.rounding(center.abs().max_element());
         // Depth bound at a sample `dist_px` from the projected centre (see `new`), moved
         // away from the eye whatever its sign (orthographic depths may be negative).
         let bound = |dist_px: f32| -> f32 {
@@ -1147,6 +1148,48 @@ mod tests {
             }
         }
         assert!(checked > 300, "{checked} pixels");
+    }
+
+    #[test]
+    fn recorded_pixels_stay_inside_the_silhouette_wherever_rounding_puts_the_centre() {
+        // A sphere of radius 1.5 at coordinates of 10⁴, seen from 40 units through a 3°
+        // field (its silhouette nearly its central disk): 23 px per unit, and the GPU's
+        // centre may lie about 0.01 units (0.2 px) from this buffer's.
+        let cam = Camera {
+            target: Vec3::splat(1.0e4),
+            distance: 40.0,
+            fov_y_deg: 3.0,
+            near: 1.0,
+            far: 100.0,
+            ..Default::default()
+        };
+        let (w, h) = (64u32, 48u32);
+        let mut buf = OcclusionBuffer::new(&cam, [w, h], OcclusionMode::PixelCentres).unwrap();
+        let (c, r) = (cam.target, 1.5f64);
+        buf.add_sphere(c, r as f32);
+        let slack = f64::from(buf.rounding(c.abs().max_element()));
+        assert!(slack > 0.005, "{slack}");
+        let v = buf
+            .view_from_world
+            .as_dmat4()
+            .transform_point3(c.as_dvec3());
+        let mut marked = 0;
+        for y in 0..h {
+            for x in 0..w {
+                if !buf.depth_at(x, y).is_finite() {
+                    continue;
+                }
+                marked += 1;
+                let (o, d) = exact_view_ray(&buf, x, y);
+                let dist = (v - o).cross(d).length() / d.length();
+                assert!(
+                    dist <= r - 0.5 * slack,
+                    "pixel ({x}, {y}) marked {:.4} from the silhouette (slack {slack:.4})",
+                    r - dist
+                );
+            }
+        }
+        assert!(marked > 1000, "only {marked} pixels marked");
     }
 
     #[test]
