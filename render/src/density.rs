@@ -123,7 +123,7 @@ pub fn fraction(d: Vec3, r: f32, r_ref: f32, k: f32) -> (f32, Vec3) {
     let h = k * r;
     let h2 = h * h;
     let r2 = d.length_squared();
-    if !(r2 < h2) {
+    if r2.partial_cmp(&h2) != Some(std::cmp::Ordering::Less) {
         return (0.0, Vec3::ZERO);
     }
     let t = 1.0 - r2 / h2;
@@ -305,7 +305,7 @@ pub fn colour_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings) -> Optio
     for q in points {
         let h = s.kernel_scale * q.radius;
         let (r2, h2) = (p.distance_squared(q.position), h * h);
-        if !(r2 < h2) {
+        if r2.partial_cmp(&h2) != Some(std::cmp::Ordering::Less) {
             continue;
         }
         // m W up to constant factors, which cancel: t³ / r (no power of a large radius).
