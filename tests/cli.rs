@@ -1266,3 +1266,236 @@ fn render_styles_points_by_attribute_and_species() {
     assert!(err.contains("radius"), "{err}");
     assert!(!d.join("x.png").exists());
 }
+
+#[test]
+fn an_output_onto_an_input_or_a_directory_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("dump.lammpstrj");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.dump"), &dump).unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let view = dir.path().join("v.json");
+    std::fs::write(&view, r#"{"version": 1}"#).unwrap();
+    let sndf = dir.path().join("v.sndf");
+    std::fs::write(&sndf, "not read: the output is refused first").unwrap();
+    let png = dir.path().join("x.png");
+    let sub = dir.path().join("outdir");
+    std::fs::create_dir(&sub).unwrap();
+    let before = |p: &Path| std::fs::read(p).unwrap();
+    let (dump0, frame0, view0, sndf0) =
+        (before(&dump), before(&frame), before(&view), before(&sndf));
+    // The same file, also under another spelling of its path.
+    let dotted = dir.path().join(".").join("dump.lammpstrj");
+    for args in [
+        vec!["convert", s(&dump), "-o", s(&dump)],
+        vec!["convert", s(&dump), "-o", s(&dotted)],
+        vec!["render", s(&frame), "-o", s(&frame)],
+        vec!["render", s(&frame), "-o", s(&view), "--view", s(&view)],
+        vec!["render", s(&frame), "-o", s(&png), "--save-view", s(&frame)],
+        vec!["sample", s(&frame), "-o", s(&frame)],
+        vec!["shade", s(&sndf), "-o", s(&sndf)],
+    ] {
+        let err = fails(&args);
+        assert!(
+            err.contains("is the input") || err.contains("is the --view file"),
+            "{args:?}: {err}"
+        );
+        assert!(err.contains("give another output path"), "{args:?}: {err}");
+    }
+    let err = fails(&["render", s(&frame), "-o", s(&png), "--save-view", s(&png)]);
+    assert!(err.contains("is the -o output too"), "{err}");
+    assert_eq!(
+        (before(&dump), before(&frame), before(&view), before(&sndf)),
+        (dump0, frame0, view0, sndf0),
+        "an input changed"
+    );
+    assert!(!png.exists());
+    // A directory as the output is refused at the start, naming it.
+    for args in [
+        vec!["convert", s(&dump), "-o", s(&sub)],
+        vec!["render", s(&frame), "-o", s(&sub)],
+        vec!["sample", s(&frame), "-o", s(&sub)],
+        vec!["shade", s(&sndf), "-o", s(&sub)],
+    ] {
+        let err = fails(&args);
+        assert!(
+            err.contains(&format!("-o {}: is a directory; give the name", s(&sub))),
+            "{args:?}: {err}"
+        );
+    }
+    assert_eq!(std::fs::read_dir(&sub).unwrap().count(), 0);
+    // A batch directory that holds an input under a frame's name, or is a file.
+    let d = dir.path().join("batch.d");
+    std::fs::create_dir(&d).unwrap();
+    let inside = d.join("frame-0.mdlod");
+    std::fs::copy(&dump, &inside).unwrap();
+    let err = fails(&["batch", s(&inside), "-o", s(&d)]);
+    assert!(err.contains("in the batch directory"), "{err}");
+    assert_eq!(before(&inside), before(&dump));
+    let err = fails(&["batch", s(&dump), "-o", s(&dump)]);
+    assert!(err.contains("is not a directory"), "{err}");
+    assert_eq!(
+        before(&dump),
+        before(&lammps_sample_path("cu_melt.custom.dump"))
+    );
+}
+
+#[test]
+fn radius_overrides_naming_no_species_are_errors_listing_the_species() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let out = dir.path().join("a.mdlod");
+    // The dump has numeric type 1 only: `Cu` names nothing.
+    let err = fails(&["convert", s(&input), "-o", s(&out), "--radius", "Cu=1.28"]);
+    assert!(
+        err.contains("no species named \"Cu\"") && err.contains("the input has 1"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    ok(&["convert", s(&input), "-o", s(&out), "--radius", "1=1.28"]);
+    // Every frame of a batch, also frames a previous run finished.
+    let d = dir.path().join("b.d");
+    let err = fails(&["batch", s(&input), "-o", s(&d), "--radius", "Cu=1.28"]);
+    assert!(err.contains("no species named \"Cu\""), "{err}");
+    ok(&["batch", s(&input), "-o", s(&d), "--radius", "1=1.28"]);
+    let err = fails(&[
+        "batch",
+        s(&input),
+        "-o",
+        s(&d),
+        "--radius",
+        "1=1.28",
+        "--radius",
+        "cu=1",
+    ]);
+    assert!(err.contains("no species named \"cu\""), "{err}");
+}
+
+#[test]
+fn options_are_checked_before_memory_or_work_goes_into_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("x.png");
+    let f = s(&frame);
+    let p = s(&png);
+    // Absurd image sizes: refused before the traversal, naming the cap.
+    for args in [
+        vec!["render", f, "-o", p, "--width", "4000000000"],
+        vec!["render", f, "-o", p, "--height", "40000", "--no-occlusion"],
+        vec![
+            "sample",
+            f,
+            "-o",
+            p,
+            "--width",
+            "300000000",
+            "--min-samples",
+            "64",
+        ],
+        vec![
+            "sample",
+            f,
+            "-o",
+            p,
+            "--width",
+            "4000000000",
+            "--tiles",
+            "--ortho",
+        ],
+    ] {
+        let err = fails(&args);
+        assert!(err.contains("must each be 1 to 32768"), "{args:?}: {err}");
+    }
+    let err = fails(&[
+        "sample",
+        f,
+        "-o",
+        p,
+        "--width",
+        "32768",
+        "--height",
+        "32768",
+        "--min-samples",
+        "1000000000",
+    ]);
+    assert!(
+        err.contains("--min-samples 1000000000") && err.contains("32768"),
+        "{err}"
+    );
+    // Splat exposure and the screen error.
+    for bad in ["nan", "-1", "0", "inf"] {
+        let exposure = format!("--exposure={bad}");
+        let err = fails(&["render", f, "-o", p, "--mode", "splat", &exposure]);
+        assert!(
+            err.contains("exposure") && err.contains("above 0"),
+            "{bad}: {err}"
+        );
+    }
+    let err = fails(&["render", f, "-o", p, "--screen-error", "inf"]);
+    assert!(err.contains("a finite number, 0 or more"), "{err}");
+    // Shading numbers (checked before the .sndf file is read).
+    let sndf = dir.path().join("v.sndf");
+    std::fs::write(&sndf, "x").unwrap();
+    for option in ["--ambient", "--diffuse", "--specular", "--exponent"] {
+        for bad in ["nan", "-1"] {
+            let arg = format!("{option}={bad}");
+            let err = fails(&["shade", s(&sndf), "-o", p, &arg]);
+            assert!(
+                err.contains(&format!(
+                    "{option} {}",
+                    if bad == "nan" { "NaN" } else { bad }
+                )) && err.contains("finite number, 0 or more"),
+                "{option} {bad}: {err}"
+            );
+        }
+    }
+    assert!(!png.exists());
+    // Build options are named, and refused before the input is read.
+    for (args, message) in [
+        (vec!["--cluster-size", "1"], "--cluster-size 1"),
+        (vec!["--delta-n", "0"], "--delta-n 0"),
+        (
+            vec!["--root-points", "4"],
+            "--root-points 4 is below --cluster-size 8",
+        ),
+    ] {
+        let mut all = vec!["convert", "missing.lammpstrj", "-o", "out.mdlod"];
+        all.extend(args);
+        let err = fails(&all);
+        assert!(err.contains(message), "{err}");
+    }
+    // A rejected particle count leaves an existing output alone.
+    let existing = dir.path().join("existing.lammpstrj");
+    std::fs::write(&existing, "keep me").unwrap();
+    let err = fails(&["generate", "crater", "-n", "0", "-o", s(&existing)]);
+    assert!(err.contains("--particles 0"), "{err}");
+    assert_eq!(std::fs::read_to_string(&existing).unwrap(), "keep me");
+    // A script timeout past the clock's range means no deadline, not a panic.
+    let script = dir.path().join("s.json");
+    std::fs::write(&script, "[]").unwrap();
+    let err = fails(&[
+        "view",
+        s(&dir.path().join("missing.mdlod")),
+        "--script",
+        s(&script),
+        "--script-timeout",
+        "18446744073709551615",
+    ]);
+    assert!(err.contains("missing.mdlod"), "{err}");
+}
+
+#[test]
+fn cameras_too_far_from_the_data_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("x.png");
+    let err = fails(&["render", s(&frame), "-o", s(&png), "--zoom", "1e-38"]);
+    assert!(
+        err.contains("zoom 1e-38") && err.contains("too far"),
+        "{err}"
+    );
+    let view = dir.path().join("far.json");
+    std::fs::write(&view, r#"{"version": 1, "distance": 1e38}"#).unwrap();
+    let err = fails(&["render", s(&frame), "-o", s(&png), "--view", s(&view)]);
+    assert!(err.contains("far.json") && err.contains("too far"), "{err}");
+    assert!(!png.exists());
+}

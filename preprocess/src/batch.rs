@@ -267,10 +267,16 @@ fn same_build(file: &MdlodFile, options: &ConvertOptions) -> bool {
         b.delta_n.min(last),
         b.position_bits,
     );
+    // An override naming none of the file's species is not what it was built with: the
+    // frame is converted again, which reports it.
     params
         && m.species.iter().all(|s| {
             crate::species::radius_override(&options.radii, &s.name).is_none_or(|r| r == s.radius)
         })
+        && options
+            .radii
+            .iter()
+            .all(|(n, _)| m.species.iter().any(|s| &s.name == n))
 }
 
 /// Removes what killed runs left in `out_dir`: temporary outputs of `timesteps` (this

@@ -168,6 +168,17 @@ pub fn chunk_memory(points: usize) -> u64 {
     points as u64 * BUILD_BYTES_PER_PARTICLE + (64 << 20)
 }
 
+/// A size for a message: bytes below a MiB (a limit of `1K` is not "0 MiB"), else MiB.
+fn size_text(bytes: u64) -> String {
+    if bytes < 1 << 20 {
+        format!("{bytes} bytes")
+    } else if bytes.is_multiple_of(1 << 20) {
+        format!("{} MiB", bytes >> 20)
+    } else {
+        format!("{:.1} MiB", bytes as f64 / f64::from(1 << 20))
+    }
+}
+
 /// Where a chunked conversion reads particles from, a range at a time.
 pub trait ParticleSource: Sync {
     /// Number of particles in the frame.
@@ -1068,6 +1079,25 @@ pub fn convert_chunked(
             source: BuildError::Empty,
         });
     }
+    // Everything that does not need the particles is checked before the partition pass
+    // reads them all.
+    params.check().map_err(|source| ConvertError::Build {
+        path: output.display().to_string(),
+        source,
+    })?;
+    // At most `max_root_points` chunks share the particles: the largest holds at least
+    // that share.
+    let least = chunk_memory(n.div_ceil(params.max_root_points as usize));
+    if least > chunk.memory_limit {
+        return Err(ConvertError::Chunked(format!(
+            "the memory limit of {} is below the {} a chunk needs: {n} particles in at most \
+             {} chunks (the root points) make a chunk of at least {} particles",
+            size_text(chunk.memory_limit),
+            size_text(least),
+            params.max_root_points,
+            n.div_ceil(params.max_root_points as usize)
+        )));
+    }
     if chunk.chunk_points < params.max_root_points as usize {
         return Err(ConvertError::Chunked(format!(
             "chunks of {} particles are smaller than the {} root points",
@@ -1261,6 +1291,7 @@ pub fn convert_chunked(
     // 2. Chunks.
     let t1 = Instant::now();
     let (names, species_map) = merge.finish();
+    crate::species::check_overrides(&names, &options.radii)?;
     let species = species_table(&names, &options.radii);
     // Each chunk checks its own particles' radii; the top node sums over all of them.
     check_species(n, &species).map_err(|source| ConvertError::Build {
@@ -1275,9 +1306,9 @@ pub fn convert_chunked(
     let need = chunk_memory(largest);
     if need > chunk.memory_limit {
         return Err(ConvertError::Chunked(format!(
-            "the memory limit of {} MiB is below the {} MiB one chunk of {largest} particles needs",
-            chunk.memory_limit >> 20,
-            need >> 20
+            "the memory limit of {} is below the {} one chunk of {largest} particles needs",
+            size_text(chunk.memory_limit),
+            size_text(need)
         )));
     }
     let jobs = ((chunk.memory_limit / need) as usize).clamp(1, rayon::current_num_threads());

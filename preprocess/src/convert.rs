@@ -54,6 +54,8 @@ pub enum ConvertError {
         #[source]
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Species(#[from] crate::species::UnknownSpecies),
     #[error("chunked conversion: {0}")]
     Chunked(String),
     /// An error in the text a large gzip input was decompressed into (the place is a
@@ -76,6 +78,7 @@ pub fn convert_frame(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
+    crate::species::check_overrides(&frame.species, &options.radii)?;
     if frame.len() > options.chunks.chunk_points {
         let metadata = base_metadata(frame, source, options);
         return convert_chunked(&FrameSource(frame), metadata, output, options, progress);

@@ -116,6 +116,35 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
         .collect()
 }
 
+/// A radius override naming none of the input's species.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("radius override {name}={radius}: no species named {name:?} (the input has {})", known.join(", "))]
+pub struct UnknownSpecies {
+    pub name: String,
+    pub radius: f32,
+    /// The input's species names.
+    pub known: Vec<String>,
+}
+
+/// Checks that every override names one of `names` (exactly: names are case-sensitive,
+/// numeric LAMMPS types are their numbers).
+pub fn check_overrides(
+    names: &[SpeciesName],
+    overrides: &[(String, f32)],
+) -> Result<(), UnknownSpecies> {
+    match overrides
+        .iter()
+        .find(|(n, _)| !names.iter().any(|s| &s.name == n))
+    {
+        Some((name, radius)) => Err(UnknownSpecies {
+            name: name.clone(),
+            radius: *radius,
+            known: names.iter().map(|s| s.name.clone()).collect(),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The radius `overrides` give species `name` (the last one naming it wins).
 pub fn radius_override(overrides: &[(String, f32)], name: &str) -> Option<f32> {
     overrides
@@ -171,5 +200,29 @@ mod tests {
         assert!(parse_radius_override("Cu=1.3").is_ok());
         assert!(parse_radius_override("Cu").is_err());
         assert!(parse_radius_override("Cu=-1").is_err());
+    }
+
+    #[test]
+    fn an_override_naming_no_species_is_an_error_listing_them() {
+        let names = [("1", true), ("2", true)].map(|(n, numeric)| SpeciesName {
+            name: n.into(),
+            numeric_type: numeric,
+            radius: None,
+        });
+        check_overrides(&names, &[("2".into(), 0.9)]).unwrap();
+        let e = check_overrides(&names, &[("2".into(), 0.9), ("Cu".into(), 1.28)])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("\"Cu\"") && e.contains("the input has 1, 2"),
+            "{e}"
+        );
+        // Names are exact: `cu` is not `Cu`.
+        let cu = [SpeciesName {
+            name: "Cu".into(),
+            numeric_type: false,
+            radius: None,
+        }];
+        assert!(check_overrides(&cu, &[("cu".into(), 1.0)]).is_err());
     }
 }

@@ -38,7 +38,7 @@ fn options(chunk_points: usize) -> ConvertOptions {
 fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usize) -> MdlodFile {
     let dir = tempfile::tempdir().unwrap();
     let streamed = dir.path().join("streamed.mdlod");
-    let opts = options(chunk_points);
+    let mut opts = options(chunk_points);
     let dump = DumpFile::open(input).unwrap();
     assert!(dump.reads_parts() || dump.reads_text_windows() || dump.piece_paths().is_some());
     // Read a window at a time, not whole.
@@ -51,6 +51,11 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
         n > chunk_points,
         "{n} particles do not need chunks of {chunk_points}"
     );
+    let frame = dump.read_frame(k, read, &NoProgress).unwrap();
+    // The radius override of LAMMPS type 1, for the inputs that have it (an override
+    // naming no species is an error).
+    opts.radii
+        .retain(|(name, _)| frame.species.iter().any(|s| &s.name == name));
     convert_file(
         input,
         &streamed,
@@ -60,7 +65,6 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
         &NoProgress,
     )
     .unwrap();
-    let frame = dump.read_frame(k, read, &NoProgress).unwrap();
     let whole = dir.path().join("whole.mdlod");
     let mut tight = opts.clone();
     tight.chunks.memory_limit = mdlod_preprocess::chunked::chunk_memory(chunk_points);

@@ -426,6 +426,91 @@ fn chunked_conversion_refuses_a_limit_below_one_chunk() {
     );
 }
 
+/// A source that counts the windows read from it.
+struct Counted<'a> {
+    inner: mdlod_preprocess::chunked::FrameSource<'a>,
+    windows: std::sync::atomic::AtomicUsize,
+}
+
+impl mdlod_preprocess::chunked::ParticleSource for Counted<'_> {
+    fn len(&self) -> usize {
+        self.inner.len()
+    }
+    fn simulation_box(&self) -> Option<&mdlod_format::meta::SimulationBox> {
+        self.inner.simulation_box()
+    }
+    fn windows(
+        &self,
+        window: usize,
+        f: &mut mdlod_preprocess::chunked::WindowFn<'_>,
+    ) -> Result<(), mdlod_preprocess::convert::ConvertError> {
+        self.inner.windows(window, &mut |start, frame| {
+            self.windows
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            f(start, frame)
+        })
+    }
+}
+
+#[test]
+fn chunked_conversion_checks_its_options_before_reading_the_particles() {
+    let frame = test_frame(8);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.mdlod");
+    let metadata =
+        mdlod_preprocess::convert::base_metadata(&frame, None, &ConvertOptions::default());
+    let bad = [
+        (
+            BuildParams {
+                max_cluster_size: 1,
+                max_root_points: 64,
+                ..Default::default()
+            },
+            1 << 30,
+            "max cluster size 1",
+        ),
+        (
+            BuildParams {
+                max_root_points: 64,
+                delta_n: 0,
+                ..Default::default()
+            },
+            1 << 30,
+            "delta_n 0",
+        ),
+        (
+            BuildParams {
+                max_root_points: 64,
+                ..Default::default()
+            },
+            1024,
+            "memory limit of 1024 bytes",
+        ),
+    ];
+    for (params, limit, message) in bad {
+        let source = Counted {
+            inner: mdlod_preprocess::chunked::FrameSource(&frame),
+            windows: 0.into(),
+        };
+        let err = mdlod_preprocess::chunked::convert_chunked(
+            &source,
+            metadata.clone(),
+            &path,
+            &chunked(params, 500, limit),
+            &NoProgress,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains(message), "{err}");
+        assert_eq!(
+            source.windows.into_inner(),
+            0,
+            "{message}: particles were read"
+        );
+        assert!(!path.exists());
+    }
+}
+
 #[test]
 fn single_particle_and_tiny_inputs() {
     for n in [1usize, 2, 3, 9] {

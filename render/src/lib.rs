@@ -262,6 +262,36 @@ pub fn data_bounds(file: &MdlodFile) -> Bounds {
     Bounds::new(top.bounds_min, top.bounds_max)
 }
 
+/// The largest image side any mode renders or samples, in pixels (adapters allow at
+/// most this many per side, many fewer). Checked before the traversal, whose tiles and
+/// occlusion buffers grow with the image.
+pub const MAX_IMAGE_SIDE: u32 = 32768;
+
+/// Checks an image size against [`MAX_IMAGE_SIDE`].
+pub fn check_image_size(width: u32, height: u32) -> Result<(), RenderError> {
+    if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(RenderError::InvalidOptions(format!(
+            "image size {width}x{height} (width and height must each be 1 to {MAX_IMAGE_SIDE})"
+        )));
+    }
+    Ok(())
+}
+
+/// Checks a camera built from finite inputs: its numbers finite and its depth range
+/// usable (`near < far`, both finite), which a view very far from the data breaks (the
+/// distance overflows, or the data's depth is lost in the distance's rounding).
+fn check_built_camera(c: &Camera) -> Result<(), String> {
+    let depth_ok = c.near.is_finite() && c.far.is_finite() && c.near < c.far;
+    if !(c.distance.is_finite() && c.eye().is_finite() && depth_ok) {
+        return Err(format!(
+            "the camera at distance {:e} from its target is too far from the data to draw it \
+             (depth range {:e} to {:e} in single precision); bring it closer",
+            c.distance, c.near, c.far
+        ));
+    }
+    c.check()
+}
+
 /// The camera `view` gives for `file` and an image of `width` × `height`.
 pub fn camera_for(
     file: &MdlodFile,
@@ -269,7 +299,17 @@ pub fn camera_for(
     width: u32,
     height: u32,
 ) -> Result<Camera, RenderError> {
-    let bounds = data_bounds(file);
+    camera_in(&data_bounds(file), view, width, height)
+}
+
+/// [`camera_for`] data within `bounds`.
+fn camera_in(
+    bounds: &Bounds,
+    view: &ViewSpec,
+    width: u32,
+    height: u32,
+) -> Result<Camera, RenderError> {
+    let bounds = *bounds;
     let aspect = width.max(1) as f32 / height.max(1) as f32;
     Ok(match view {
         ViewSpec::Orbit {
@@ -297,16 +337,45 @@ pub fn camera_for(
                 zoom: *zoom,
                 ..Default::default()
             };
-            v.to_camera(&bounds, aspect)
+            let c = v.to_camera(&bounds, aspect);
+            check_built_camera(&c)
+                .map_err(|e| RenderError::InvalidOptions(format!("zoom {zoom:e}: {e}")))?;
+            c
         }
-        ViewSpec::File(path) => ViewFile::load(path)?.to_camera(&bounds, aspect),
+        ViewSpec::File(path) => {
+            let c = ViewFile::load(path)?.to_camera(&bounds, aspect);
+            check_built_camera(&c).map_err(|message| RenderError::View {
+                path: path.clone(),
+                message,
+            })?;
+            c
+        }
         ViewSpec::Camera(c) => {
             c.check().map_err(RenderError::InvalidOptions)?;
             let mut c = c.clone();
             c.fit_depth_range(&bounds);
+            check_built_camera(&c).map_err(RenderError::InvalidOptions)?;
             c
         }
     })
+}
+
+/// The checks of [`frame_setup`] that need no file: the image size, the screen error,
+/// the exposure.
+fn check_numbers(opts: &RenderOptions) -> Result<(), RenderError> {
+    check_image_size(opts.width, opts.height)?;
+    if !(opts.error_px.is_finite() && opts.error_px >= 0.0) {
+        return Err(RenderError::InvalidOptions(format!(
+            "screen error {} px (must be a finite number, 0 or more)",
+            opts.error_px
+        )));
+    }
+    if let Some(e) = opts.exposure.filter(|e| !(e.is_finite() && *e > 0.0)) {
+        return Err(RenderError::InvalidOptions(format!(
+            "exposure {e} (must be a finite number above 0)"
+        )));
+    }
+    Ok(())
 }
 
 /// The camera, traversal and frame settings `opts` asks for, checked (for callers that
@@ -315,12 +384,7 @@ pub fn frame_setup(
     file: &MdlodFile,
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
-    if !(opts.error_px.is_finite() && opts.error_px >= 0.0) {
-        return Err(RenderError::InvalidOptions(format!(
-            "error {} px (must be 0 or more)",
-            opts.error_px
-        )));
-    }
+    check_numbers(opts)?;
     let camera = camera_for(file, &opts.view, opts.width, opts.height)?;
     let traversal = TraversalSettings {
         viewport: [opts.width, opts.height],
@@ -691,6 +755,8 @@ pub fn render_to_png_with(
     progress: Option<std::sync::Arc<dyn Progress + Send + Sync>>,
 ) -> Result<RenderReport, RenderError> {
     let t0 = Instant::now();
+    // Before the GPU opens.
+    check_numbers(opts)?;
     let file = MdlodFile::open(file)?;
     let mut renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     renderer.set_progress(progress);
@@ -734,9 +800,10 @@ pub fn sample_tiles_to_file(
             "sampling needs the sndf mode".into(),
         ));
     };
+    let (w, h) = (opts.width, opts.height);
+    check_numbers(opts)?;
     let mdlod = MdlodFile::open(file)?;
     let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
-    let (w, h) = (opts.width, opts.height);
     let camera = camera_for(&mdlod, &opts.view, w, h)?;
     if camera.projection != Projection::Orthographic {
         return Err(RenderError::InvalidOptions(
@@ -753,7 +820,11 @@ pub fn sample_tiles_to_file(
         binning,
         file.display().to_string(),
     )?;
-    let tiles = (w.div_ceil(sndf::TILE) + 1) * (h.div_ceil(sndf::TILE) + 1);
+    let tiles = (w.div_ceil(sndf::TILE) + 1)
+        .checked_mul(h.div_ceil(sndf::TILE) + 1)
+        .ok_or_else(|| {
+            RenderError::InvalidOptions(format!("a view of {w}x{h} pixels has too many tiles"))
+        })?;
     let mut cache = smip::Smip::new(
         &renderer,
         bins,
@@ -805,6 +876,7 @@ pub fn sample_to_file_at(
         ));
     };
     let t0 = Instant::now();
+    check_numbers(opts)?;
     let mdlod = MdlodFile::open(file)?;
     let mut renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     renderer.set_progress(progress);
@@ -911,6 +983,7 @@ pub fn shade_file(
     background_srgb: [f32; 3],
     level: ShadeLevel,
 ) -> Result<(u32, u32), RenderError> {
+    lights.check().map_err(RenderError::InvalidOptions)?;
     let data = mdlod_format::sndf::SndfData::load(input)?;
     if data.header.smip.is_some() {
         let image = shade_tiles_file(input, &data, lights, background_srgb, level)?;
@@ -984,6 +1057,71 @@ fn shade_tiles_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn absurd_sizes_and_exposures_are_refused_before_any_work() {
+        let opts = |width, height, exposure| RenderOptions {
+            width,
+            height,
+            exposure,
+            ..Default::default()
+        };
+        check_numbers(&opts(1280, 720, Some(2.0))).unwrap();
+        check_numbers(&opts(MAX_IMAGE_SIDE, MAX_IMAGE_SIDE, None)).unwrap();
+        for (w, h) in [(4_000_000_000, 720), (1280, MAX_IMAGE_SIDE + 1), (0, 1)] {
+            let e = check_numbers(&opts(w, h, None)).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("{w}x{h}")) && e.contains("32768"),
+                "{e}"
+            );
+        }
+        for bad in [f32::NAN, -1.0, 0.0, f32::INFINITY] {
+            let e = check_numbers(&opts(64, 64, Some(bad)))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("exposure") && e.contains("above 0"), "{e}");
+        }
+        let e = check_numbers(&RenderOptions {
+            error_px: f32::INFINITY,
+            ..Default::default()
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("a finite number, 0 or more"), "{e}");
+    }
+
+    #[test]
+    fn cameras_too_far_to_draw_from_finite_inputs_are_refused() {
+        let bounds = Bounds::new([0.0; 3], [10.0; 3]);
+        let orbit = |zoom| ViewSpec::Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            zoom,
+            projection: Projection::Perspective,
+        };
+        camera_in(&bounds, &orbit(1.0), 64, 64).unwrap();
+        // The distance overflows to infinity.
+        let e = camera_in(&bounds, &orbit(1e-38), 64, 64)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("zoom 1e-38") && e.contains("too far"), "{e}");
+        // A finite distance whose depth range collapses (near == far in f32).
+        let dir = tempfile::tempdir().unwrap();
+        let view = dir.path().join("far.json");
+        std::fs::write(&view, r#"{"version": 1, "distance": 1e38}"#).unwrap();
+        let e = camera_in(&bounds, &ViewSpec::File(view), 64, 64)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("far.json") && e.contains("too far"), "{e}");
+        let far = Camera {
+            distance: 1e38,
+            ..Default::default()
+        };
+        let e = camera_in(&bounds, &ViewSpec::Camera(far), 64, 64)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("too far"), "{e}");
+    }
 
     #[test]
     fn colours_parse() {

@@ -542,6 +542,31 @@ pub struct ShadeLights {
     pub transfer: Option<TransferImage>,
 }
 
+impl ShadeLights {
+    /// Checks the lighting numbers: ambient, diffuse, specular and shininess finite and 0
+    /// or more, light colours finite (a NaN shades every pixel black).
+    pub fn check(&self) -> Result<(), String> {
+        for (what, v) in [
+            ("ambient", self.ambient),
+            ("diffuse", self.diffuse),
+            ("specular", self.specular),
+            ("shininess (exponent)", self.shininess),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{what} {v} (must be a finite number, 0 or more)"));
+            }
+        }
+        if self
+            .lights
+            .iter()
+            .any(|(d, c)| !d.is_finite() || c.iter().any(|v| !v.is_finite()))
+        {
+            return Err("a light's direction or colour is not finite".into());
+        }
+        Ok(())
+    }
+}
+
 /// The linear RGB of every pixel of an sRGB image.
 fn linear_rgb(image: &RgbaImage) -> Vec<[f32; 3]> {
     image
@@ -1079,6 +1104,56 @@ impl Sndf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lighting_numbers_must_be_finite_and_not_negative() {
+        let lights = ShadeLights {
+            ambient: 0.15,
+            lights: vec![(Vec3::Z, [1.0; 3])],
+            diffuse: 0.85,
+            specular: 0.25,
+            shininess: 32.0,
+            environment: None,
+            explorer: None,
+            transfer: None,
+        };
+        lights.check().unwrap();
+        for bad in [f32::NAN, -0.5, f32::INFINITY] {
+            for (name, l) in [
+                (
+                    "ambient",
+                    ShadeLights {
+                        ambient: bad,
+                        ..lights.clone()
+                    },
+                ),
+                (
+                    "diffuse",
+                    ShadeLights {
+                        diffuse: bad,
+                        ..lights.clone()
+                    },
+                ),
+                (
+                    "specular",
+                    ShadeLights {
+                        specular: bad,
+                        ..lights.clone()
+                    },
+                ),
+                (
+                    "shininess",
+                    ShadeLights {
+                        shininess: bad,
+                        ..lights.clone()
+                    },
+                ),
+            ] {
+                let e = l.check().unwrap_err();
+                assert!(e.starts_with(name) && e.contains("0 or more"), "{e}");
+            }
+        }
+    }
 
     fn random_sndf(w: u32, h: u32, bins: u32, rays: u32) -> Sndf {
         let mut state = 7u64;

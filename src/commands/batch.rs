@@ -108,6 +108,8 @@ pub fn run(args: Args) -> Result<()> {
     let Some(out) = &args.output else {
         bail!("give the batch directory with -o DIR");
     };
+    super::check_batch_output(out, &args.inputs)?;
+    args.build.check()?;
     let (mut convert, read) = args.build.options();
     // Working files of out-of-core frames: a directory of this run's own, removed on
     // Ctrl-C and SIGTERM (partial frames are redone by the next run).

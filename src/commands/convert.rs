@@ -78,6 +78,25 @@ pub struct BuildArgs {
 }
 
 impl BuildArgs {
+    /// Checks the build options before any input is read (a library check of the same
+    /// rules comes only after an out-of-core frame's partition pass).
+    pub fn check(&self) -> Result<()> {
+        if self.cluster_size < 2 {
+            bail!("--cluster-size {} (must be at least 2)", self.cluster_size);
+        }
+        if self.root_points < self.cluster_size {
+            bail!(
+                "--root-points {} is below --cluster-size {} (must be at least that)",
+                self.root_points,
+                self.cluster_size
+            );
+        }
+        if !(1..=8).contains(&self.delta_n) {
+            bail!("--delta-n {} (must be 1 to 8)", self.delta_n);
+        }
+        Ok(())
+    }
+
     /// The library options these arguments ask for.
     pub fn options(&self) -> (ConvertOptions, ReadOptions) {
         let convert = ConvertOptions {
@@ -134,6 +153,8 @@ pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Sen
 }
 
 fn convert(args: &Args) -> Result<ConvertReport> {
+    super::check_output("-o", &args.output, &[("", &args.input)])?;
+    args.build.check()?;
     let (mut options, read) = args.build.options();
     if let Some(limit) = args.memory_limit {
         options.chunks.memory_limit = limit;

@@ -44,6 +44,13 @@ pub enum OutputFormat {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    // Before the output is created: a rejected count must not empty an existing file.
+    if args.particles == 0 {
+        anyhow::bail!("--particles 0 (must be at least 1)");
+    }
+    if args.frames == 0 {
+        anyhow::bail!("--frames 0 (must be at least 1)");
+    }
     let mut opts = GenerateOptions::new(args.kind, args.particles);
     opts.seed = args.seed;
     opts.frames = args.frames;

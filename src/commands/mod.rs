@@ -10,3 +10,145 @@ pub mod sample;
 pub mod shade;
 pub mod verify;
 pub mod view;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Result};
+
+/// Refuses, before any work, an output that cannot or must not be written: an existing
+/// directory, or the same file as one of `inputs` (outputs are written to a temporary
+/// file and renamed over the path, which would replace the input). `option` names the
+/// output on the command line (`-o`, `--save-view`); `inputs` are (option, path) pairs,
+/// the option empty for a positional input. A `%` piece set stands for its pieces.
+pub fn check_output(option: &str, output: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
+    if output.is_dir() {
+        bail!(
+            "{option} {}: is a directory; give the name of the file to write",
+            output.display()
+        );
+    }
+    for &(what, input) in inputs {
+        for file in files_of(input) {
+            if same_file(output, &file) {
+                let named = if what.is_empty() {
+                    "the input".to_string()
+                } else {
+                    format!("the {what} file")
+                };
+                bail!(
+                    "{option} {} is {named} {}: writing it would replace the input; \
+                     give another output path",
+                    output.display(),
+                    file.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// [`check_output`] for a batch directory: refuses an output that is an existing file,
+/// and an input that lies in the output directory under a name the batch writes there
+/// (`frame-<timestep>.mdlod`, `dataset*.json`, temporary `*.tmp` files).
+pub fn check_batch_output(output: &Path, inputs: &[PathBuf]) -> Result<()> {
+    if output.exists() && !output.is_dir() {
+        bail!(
+            "-o {}: is not a directory (batch writes a directory of frames and a manifest)",
+            output.display()
+        );
+    }
+    for input in inputs {
+        for file in files_of(input) {
+            let Some(name) = file.file_name().and_then(|n| n.to_str()) else {
+                continue;
+            };
+            let ours = (name.starts_with("frame-") && name.ends_with(".mdlod"))
+                || (name.starts_with("dataset") && name.ends_with(".json"))
+                || name.ends_with(".tmp");
+            let parent = match file.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d,
+                _ => Path::new("."),
+            };
+            if ours && file.exists() && same_file(parent, output) {
+                bail!(
+                    "the input {} is in the batch directory -o {} under a name the batch \
+                     writes there: give another output directory",
+                    file.display(),
+                    output.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The files an input path names: the pieces of a `%` piece set, else the path itself.
+fn files_of(input: &Path) -> Vec<PathBuf> {
+    if mdlod_preprocess::readers::is_piece_pattern(input) {
+        if let Ok(pieces) = mdlod_preprocess::readers::piece_paths(input) {
+            return pieces;
+        }
+    }
+    vec![input.to_path_buf()]
+}
+
+/// Whether `a` and `b` are the same existing file (through links and different
+/// spellings of the path): the same device and inode on unix, the same canonical path
+/// elsewhere. A path that does not exist is no file's.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (std::fs::metadata(a), std::fs::metadata(b)) {
+            (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        match (a.canonicalize(), b.canonicalize()) {
+            (Ok(x), Ok(y)) => x == y,
+            _ => false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_output_onto_an_input_or_a_directory_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("in.dump");
+        std::fs::write(&input, "x").unwrap();
+        // The same file under another spelling of its path.
+        let other = dir.path().join(".").join("in.dump");
+        let e = check_output("-o", &other, &[("", &input)]).unwrap_err();
+        assert!(e.to_string().contains("is the input"), "{e}");
+        let e = check_output("--save-view", &input, &[("view", &input)]).unwrap_err();
+        assert!(e.to_string().contains("the view file"), "{e}");
+        let e = check_output("-o", dir.path(), &[("", &input)]).unwrap_err();
+        assert!(e.to_string().contains("is a directory"), "{e}");
+        // A new file, or another existing one, is fine.
+        check_output("-o", &dir.path().join("new.mdlod"), &[("", &input)]).unwrap();
+        let b = dir.path().join("b.mdlod");
+        std::fs::write(&b, "y").unwrap();
+        check_output("-o", &b, &[("", &input)]).unwrap();
+        // The pieces of a `%` piece set are inputs too.
+        let piece = dir.path().join("p.0.bin");
+        std::fs::write(&piece, "z").unwrap();
+        let e = check_output("-o", &piece, &[("", &dir.path().join("p.%.bin"))]).unwrap_err();
+        assert!(e.to_string().contains("p.0.bin"), "{e}");
+
+        // A batch directory: not a file, and not holding an input under a frame's name.
+        let e = check_batch_output(&input, std::slice::from_ref(&input)).unwrap_err();
+        assert!(e.to_string().contains("is not a directory"), "{e}");
+        let frame = dir.path().join("frame-0.mdlod");
+        std::fs::write(&frame, "w").unwrap();
+        let e = check_batch_output(dir.path(), &[frame]).unwrap_err();
+        assert!(e.to_string().contains("in the batch directory"), "{e}");
+        check_batch_output(dir.path(), std::slice::from_ref(&input)).unwrap();
+        check_batch_output(&dir.path().join("new.d"), std::slice::from_ref(&input)).unwrap();
+    }
+}

@@ -306,6 +306,20 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let inputs = [("", args.file.as_path())]
+        .into_iter()
+        .chain(args.camera.view.as_deref().map(|v| ("--view", v)))
+        .collect::<Vec<_>>();
+    super::check_output("-o", &args.output, &inputs)?;
+    if let Some(p) = &args.save_view {
+        super::check_output("--save-view", p, &inputs)?;
+        if p == &args.output || super::same_file(p, &args.output) {
+            anyhow::bail!(
+                "--save-view {} is the -o output too: give the view file another name",
+                p.display()
+            );
+        }
+    }
     let view = args.camera.spec();
     let opts = RenderOptions {
         width: args.camera.width,

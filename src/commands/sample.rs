@@ -53,6 +53,11 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let inputs = [("", args.file.as_path())]
+        .into_iter()
+        .chain(args.camera.view.as_deref().map(|v| ("--view", v)))
+        .collect::<Vec<_>>();
+    super::check_output("-o", &args.output, &inputs)?;
     let opts = RenderOptions {
         width: args.camera.width,
         height: args.camera.height,
@@ -67,6 +72,7 @@ pub fn run(args: Args) -> Result<()> {
         style: args.style.style()?,
         ..Default::default()
     };
+    mdlod_render::check_image_size(opts.width, opts.height)?;
     if args.tiles {
         let (stats, tiles) = mdlod_render::sample_tiles_to_file(
             &args.file,
@@ -92,9 +98,24 @@ pub fn run(args: Args) -> Result<()> {
         args.iterations,
         args.min_samples,
     )?;
+    let scaled = |side: u32| {
+        side.checked_mul(scale)
+            .filter(|s| *s <= mdlod_render::MAX_IMAGE_SIDE)
+    };
+    let (Some(width), Some(height)) = (scaled(opts.width), scaled(opts.height)) else {
+        anyhow::bail!(
+            "--min-samples {} asks for sampling at {scale}x the image size of {}x{}, past \
+             the largest image of {} pixels per side: give a smaller --width and --height \
+             or fewer --min-samples",
+            args.min_samples,
+            opts.width,
+            opts.height,
+            mdlod_render::MAX_IMAGE_SIDE
+        );
+    };
     let opts = RenderOptions {
-        width: opts.width * scale,
-        height: opts.height * scale,
+        width,
+        height,
         ..opts
     };
     let r = sample_to_file_at(

@@ -103,6 +103,22 @@ fn parse_light(s: &str) -> Result<(Vec3, [f32; 3])> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let inputs = [("", args.input.as_path())]
+        .into_iter()
+        .chain(args.envmap.as_deref().map(|p| ("--envmap", p)))
+        .chain(args.transfer.as_deref().map(|p| ("--transfer", p)))
+        .collect::<Vec<_>>();
+    super::check_output("-o", &args.output, &inputs)?;
+    for (option, v) in [
+        ("--ambient", args.ambient),
+        ("--diffuse", args.diffuse),
+        ("--specular", args.specular),
+        ("--exponent", args.exponent),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{option} {v} (must be a finite number, 0 or more)");
+        }
+    }
     let mut lights = args
         .lights
         .iter()

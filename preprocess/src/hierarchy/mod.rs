@@ -566,31 +566,41 @@ pub fn check_species(particles: usize, species: &[Species]) -> Result<(), BuildE
     Ok(())
 }
 
+impl BuildParams {
+    /// Checks the parameters (before any particle is read: see
+    /// [`crate::chunked::convert_chunked`]).
+    pub fn check(&self) -> Result<(), BuildError> {
+        let params = self;
+        if params.max_cluster_size < 2 {
+            return Err(BuildError::Params(format!(
+                "max cluster size {} (must be at least 2)",
+                params.max_cluster_size
+            )));
+        }
+        if params.max_root_points < params.max_cluster_size {
+            return Err(BuildError::Params(format!(
+                "max root points {} is below the max cluster size {}",
+                params.max_root_points, params.max_cluster_size
+            )));
+        }
+        if params.position_bits != 8 && params.position_bits != 16 {
+            return Err(BuildError::Params(format!(
+                "position bits {} (must be 8 or 16)",
+                params.position_bits
+            )));
+        }
+        if params.delta_n == 0 || params.delta_n > 8 {
+            return Err(BuildError::Params(format!(
+                "delta_n {} (must be 1 to 8)",
+                params.delta_n
+            )));
+        }
+        Ok(())
+    }
+}
+
 fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
-    if params.max_cluster_size < 2 {
-        return Err(BuildError::Params(format!(
-            "max cluster size {} (must be at least 2)",
-            params.max_cluster_size
-        )));
-    }
-    if params.max_root_points < params.max_cluster_size {
-        return Err(BuildError::Params(format!(
-            "max root points {} is below the max cluster size {}",
-            params.max_root_points, params.max_cluster_size
-        )));
-    }
-    if params.position_bits != 8 && params.position_bits != 16 {
-        return Err(BuildError::Params(format!(
-            "position bits {} (must be 8 or 16)",
-            params.position_bits
-        )));
-    }
-    if params.delta_n == 0 || params.delta_n > 8 {
-        return Err(BuildError::Params(format!(
-            "delta_n {} (must be 1 to 8)",
-            params.delta_n
-        )));
-    }
+    params.check()?;
     let n = p.positions.len();
     if n == 0 {
         return Err(BuildError::Empty);
