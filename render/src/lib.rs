@@ -385,7 +385,24 @@ pub fn frame_setup(
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     check_numbers(opts)?;
-    let camera = camera_for(file, &opts.view, opts.width, opts.height)?;
+    let mut camera = camera_for(file, &opts.view, opts.width, opts.height)?;
+    // The data's bounds hold the particles' own spheres; a style that draws them larger
+    // reaches past them, and a sphere in front of the near plane is clipped whole (its
+    // quad lies at its front). The depth range grows by as much.
+    let species = &file.metadata().species;
+    if let Ok(table) = opts.style.species_table(species) {
+        let extra = table
+            .iter()
+            .zip(species)
+            .map(|(styled, s)| styled[3] - s.radius)
+            .fold(0.0f32, f32::max);
+        if extra > 0.0 && extra.is_finite() {
+            let b = data_bounds(file);
+            let reach = glam::Vec3::splat(extra);
+            let grown = Bounds::new(b.min - reach, b.max + reach);
+            camera.fit_depth_range(&grown);
+        }
+    }
     let traversal = TraversalSettings {
         viewport: [opts.width, opts.height],
         error_px: opts.error_px,

@@ -1765,6 +1765,25 @@ fn shaded_on_both(
     host
 }
 
+/// Spheres a style draws larger than the file's radii reach past the data's bounds: the
+/// near plane moves so that they are drawn, not clipped whole (an impostor lies at its
+/// sphere's front).
+#[test]
+fn spheres_drawn_larger_than_the_data_bounds_are_not_clipped_by_the_near_plane() {
+    let (_d, _p, f) = make_file(&spheres_frame(&[[0.0, 0.0, 0.0]]), small_build(), &[]);
+    let (w, h) = (32u32, 24u32);
+    let mut o = opts(w, h);
+    o.background = [0.0, 0.0, 0.0];
+    o.style.radius_scale = 4.0;
+    let (image, report) = render_image(renderer(), &f, &o).unwrap();
+    assert_eq!(report.particles_drawn, 1);
+    let centre = &image.data[((h / 2 * w + w / 2) * 4) as usize..][..3];
+    assert!(
+        centre.iter().any(|&c| c > 0),
+        "the sphere was clipped: {centre:?}"
+    );
+}
+
 fn rmse(a: &RgbaImage, b: &RgbaImage) -> f64 {
     assert_eq!((a.width, a.height), (b.width, b.height));
     let n = a.data.len() as f64;
