@@ -146,31 +146,53 @@ fn check_round_trip_with(frame: &Frame, opts: &ConvertOptions) {
         input_counts[s as usize] += 1;
     }
     assert_eq!(species_counts, input_counts);
-    let mut grid = std::collections::HashMap::<[i64; 3], Vec<[f32; 3]>>::new();
+    let mut grid = std::collections::HashMap::<[i64; 3], Vec<([f32; 3], usize)>>::new();
     let cell = 2.0f32;
     let key = |p: [f32; 3]| p.map(|v| (v / cell).floor() as i64);
-    for p in &frame.positions {
-        grid.entry(key(*p)).or_default().push(*p);
+    for (j, p) in frame.positions.iter().enumerate() {
+        grid.entry(key(*p)).or_default().push((*p, j));
     }
+    // Each particle keeps its own species and attribute: those of the input nearest to
+    // where it decodes (the file reorders particles; per-particle data must follow).
+    let info = f.metadata().attribute.clone().unwrap();
+    let attribute = f.attribute().unwrap();
+    let inputs = frame.attribute.as_ref().unwrap();
+    let attribute_step = (info.max - info.min) / 65535.0;
     let mut worst = 0.0f64;
-    for d in &decoded {
+    for (i, d) in decoded.iter().enumerate() {
         let k = key(*d);
         let mut best = f64::INFINITY;
+        let mut nearest = usize::MAX;
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
                     if let Some(v) = grid.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
-                        for p in v {
+                        for (p, j) in v {
                             let e: f64 = (0..3)
-                                .map(|i| (f64::from(p[i]) - f64::from(d[i])).powi(2))
+                                .map(|c| (f64::from(p[c]) - f64::from(d[c])).powi(2))
                                 .sum();
-                            best = best.min(e.sqrt());
+                            if e.sqrt() < best {
+                                (best, nearest) = (e.sqrt(), *j);
+                            }
                         }
                     }
                 }
             }
         }
         worst = worst.max(best);
+        if nearest != usize::MAX {
+            assert_eq!(
+                f.species()[i],
+                frame.species_index[nearest],
+                "particle {i} (input {nearest}): species"
+            );
+            let value = info.decode(attribute[i]);
+            assert!(
+                (value - inputs.values[nearest]).abs() <= attribute_step,
+                "particle {i} (input {nearest}): attribute {value} for {}",
+                inputs.values[nearest]
+            );
+        }
     }
     assert!(
         worst <= bound + 1e-12,
@@ -260,7 +282,6 @@ fn check_round_trip_with(frame: &Frame, opts: &ConvertOptions) {
     assert!(levels[1].point_count <= u64::from(params.max_root_points));
 
     // Attribute survives within its quantization step.
-    let info = f.metadata().attribute.clone().unwrap();
     assert_eq!(info.name, "c_pe");
     let a = f.attribute().unwrap();
     let step = (info.max - info.min) / 65535.0;

@@ -101,6 +101,8 @@ fn both(
 /// The largest difference of two colour buffers; a NaN on either side counts as infinite
 /// (`f32::max` would skip it).
 fn max_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
+    assert_eq!(a.len(), b.len(), "the buffers differ in length");
+    assert!(!a.is_empty(), "empty buffers");
     a.iter()
         .zip(b)
         .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))

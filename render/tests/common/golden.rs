@@ -33,6 +33,11 @@ pub fn failures_dir() -> PathBuf {
 
 /// Difference statistics of two images of the same size.
 pub fn compare(expected: &RgbaImage, actual: &RgbaImage, per_channel: u8) -> (usize, RgbaImage) {
+    assert_eq!(
+        (actual.width, actual.height),
+        (expected.width, expected.height),
+        "the images differ in size"
+    );
     let mut diff = RgbaImage::new(actual.width, actual.height);
     let mut failing = 0;
     for y in 0..actual.height {
