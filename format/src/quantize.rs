@@ -60,6 +60,13 @@ mod tests {
             let base = 12.5f32;
             let max = 3.7f64;
             let s = scale_for([max; 3], bits)[0];
+            // The step is the extent over the code range (with its small headroom), not
+            // something coarser that this test's tolerance would follow.
+            let finest = max / f64::from(half_range(bits));
+            assert!(
+                f64::from(s) >= finest && f64::from(s) <= finest * (1.0 + 1e-5),
+                "bits {bits}: step {s} for an extent of ±{max} (finest {finest})"
+            );
             let mut x = -max;
             while x <= max {
                 let v = f64::from(base) + x;

@@ -1515,6 +1515,48 @@ mod tests {
             m >= a.min(b) - 1.0 && m <= a.max(b) + 1.0,
             "{m} not between {a} and {b}"
         );
+        // Pixel by pixel at 2^1.25: a quarter of the way from level 1 to level 2, each
+        // level sampled bilinearly at the pixel's centre (texel centres at +0.5, clamped
+        // at the edges), the linear colours mixed 3:1.
+        let zoom = 2f32.powf(1.25);
+        let image = s.shade_zoomed(&lights, bg, zoom);
+        let levels = [s.downsample(), s.downsample().downsample()];
+        let linear = levels
+            .each_ref()
+            .map(|l| (l.width, l.shade_linear(&lights, bg)));
+        let sample = |(w, img): &(u32, Vec<[f32; 3]>), x: f32, y: f32| -> [f32; 3] {
+            let h = img.len() as u32 / w;
+            let (x, y) = (
+                (x - 0.5).clamp(0.0, (w - 1) as f32),
+                (y - 0.5).clamp(0.0, (h - 1) as f32),
+            );
+            let (x0, y0) = (x.floor() as u32, y.floor() as u32);
+            let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+            let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+            let at = |x: u32, y: u32| img[(y * w + x) as usize];
+            [0, 1, 2].map(|k| {
+                (at(x0, y0)[k] * (1.0 - fx) + at(x1, y0)[k] * fx) * (1.0 - fy)
+                    + (at(x0, y1)[k] * (1.0 - fx) + at(x1, y1)[k] * fx) * fy
+            })
+        };
+        for y in 0..image.height {
+            for x in 0..image.width {
+                let (px, py) = ((x as f32 + 0.5) * zoom, (y as f32 + 0.5) * zoom);
+                let a = sample(&linear[0], px / 2.0, py / 2.0);
+                let b = sample(&linear[1], px / 4.0, py / 4.0);
+                let want = [0, 1, 2].map(|k| {
+                    let v = (0.75 * a[k] + 0.25 * b[k]).clamp(0.0, 1.0);
+                    (linear_to_srgb(v) * 255.0 + 0.5) as u8
+                });
+                let got = image.pixel(x, y);
+                for k in 0..3 {
+                    assert!(
+                        got[k].abs_diff(want[k]) <= 1,
+                        "pixel ({x}, {y}): {got:?} against {want:?}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
