@@ -914,6 +914,30 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     assert_eq!((w, h), (48, 32));
     let (_, _, before) = read_png(&shaded);
     assert_ne!(px.len(), before.len());
+    // The lights and the BRDF take effect: the same level under the default light, and
+    // under the same lights with highlights, differ from it.
+    let level = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec!["shade", s(&sndf), "-o", s(&out), "--level", "1"];
+        args.extend_from_slice(extra);
+        ok(&args);
+        read_png(&out).2
+    };
+    assert_ne!(level("default-lit.png", &[]), px, "--light was ignored");
+    let phong = level(
+        "phong.png",
+        &[
+            "--light",
+            "-1,0.2,0.5:#ff8040",
+            "--light",
+            "1,1,1",
+            "--brdf",
+            "blinn-phong",
+            "--specular",
+            "0.8",
+        ],
+    );
+    assert_ne!(phong, px, "--brdf was ignored");
     // The explorer pattern and an environment map, also without the particles.
     let explored = dir.path().join("explored.png");
     ok(&["shade", s(&sndf), "-o", s(&explored), "--explorer", "6"]);

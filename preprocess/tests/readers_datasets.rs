@@ -1,6 +1,6 @@
 //! Cross-checks on real LAMMPS outputs in `datasets/lammps/` (see `make-samples.sh` there):
-//! the same run dumped in different styles must give the same positions. Each test is
-//! skipped (with a note) when its files are absent.
+//! the same run dumped in different styles must give the same positions. The files are
+//! committed: a missing one fails its test (a rename must not turn it into a no-op).
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -12,12 +12,12 @@ fn sample(name: &str) -> Option<PathBuf> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../datasets/lammps")
         .join(name);
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!("skipped: {} not present", path.display());
-        None
-    }
+    assert!(
+        path.exists(),
+        "{} is missing (committed with the repository)",
+        path.display()
+    );
+    Some(path)
 }
 
 fn read(dump: &DumpFile, k: usize, attribute: Option<&str>) -> Frame {
@@ -149,6 +149,18 @@ fn cuag_alloy_elements_and_unwrapped() {
         assert!(f.species.iter().all(|s| !s.numeric_type));
         assert_eq!(f.attribute.as_ref().unwrap().values.len(), f.len());
     }
+    // Unwrapped coordinates (xu yu zu): by the last frame some atoms of the melt have
+    // left the periodic box [0, 21.69)³, where wrapped coordinates would keep them.
+    let last = read(&dump, dump.frame_count() - 1, None);
+    let outside = last
+        .positions
+        .iter()
+        .filter(|p| p.iter().any(|&c| !(0.0..21.69).contains(&c)))
+        .count();
+    assert!(
+        outside > 0,
+        "every atom inside the box: coordinates wrapped?"
+    );
 }
 
 #[test]

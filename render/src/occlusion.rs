@@ -712,24 +712,51 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (state >> 33) as u32
         };
+        // Every pixel written (an unwritten one is +inf, which every query would see),
+        // then lowered at random.
+        for y in 0..23 {
+            for x in 0..37 {
+                buf.write(x, y, 1000.0 + (rnd() % 1000) as f32);
+            }
+        }
         for _ in 0..400 {
             let (x, y) = (rnd() % 37, rnd() % 23);
             buf.write(x, y, (rnd() % 1000) as f32);
         }
+        let brute = |x0: u32, y0: u32, x1: u32, y1: u32| {
+            let mut m = f32::NEG_INFINITY;
+            for y in y0..=y1.min(22) {
+                for x in x0..=x1.min(36) {
+                    m = m.max(buf.depth_at(x, y));
+                }
+            }
+            m
+        };
         for _ in 0..2000 {
             let (xa, xb) = (rnd() % 37, rnd() % 37);
             let (ya, yb) = (rnd() % 23, rnd() % 23);
             let (x0, x1, y0, y1) = (xa.min(xb), xa.max(xb), ya.min(yb), ya.max(yb));
-            let mut brute = f32::NEG_INFINITY;
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    brute = brute.max(buf.depth_at(x, y));
-                }
-            }
+            let exact = brute(x0, y0, x1, y1);
             let got = buf.max_depth(x0, y0, x1, y1);
-            assert!(got >= brute, "pyramid {got} below the true maximum {brute}");
+            assert!(got >= exact, "pyramid {got} below the true maximum {exact}");
+            // And no more than the maximum over the texels of the level it reads, which
+            // cover the rectangle (not, say, the whole image's maximum).
+            let mut k = 0;
+            while (x1 >> k) - (x0 >> k) >= QUERY_SPAN || (y1 >> k) - (y0 >> k) >= QUERY_SPAN {
+                k += 1;
+            }
+            let cover = brute(
+                (x0 >> k) << k,
+                (y0 >> k) << k,
+                (((x1 >> k) + 1) << k) - 1,
+                (((y1 >> k) + 1) << k) - 1,
+            );
+            assert!(
+                got <= cover,
+                "pyramid {got} above its texels' maximum {cover}"
+            );
             if x0 == x1 && y0 == y1 {
-                assert_eq!(got, brute);
+                assert_eq!(got, exact);
             }
         }
         // Fill everything: the root is then the global maximum.
