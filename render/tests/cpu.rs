@@ -191,12 +191,35 @@ fn budget_is_respected_and_refines_largest_first() {
         assert!(d.budget_limited);
         assert!(coverage(&f, &d).iter().all(|&c| c == 1), "budget {budget}");
         // Largest first: no drawn node is larger than the reported error.
+        let mut stopped_at = None;
         for r in d.ranges.iter().filter(|r| (r.level as usize) < last) {
             for i in r.first..r.first + r.count {
                 let n = &f.nodes()[node_of(&f, r.level as usize, i as usize)];
                 assert!(proj.size_px(n) <= d.error_px);
+                if proj.size_px(n) == d.error_px {
+                    stopped_at = Some(n);
+                }
             }
         }
+        // And the cut is as fine as the budget allows: opening the node refinement
+        // stopped at (the largest drawn) would pass the budget.
+        let n = stopped_at.expect("a drawn node of the reported error");
+        let child_level = usize::from(n.level) + 1;
+        let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
+        let visible = if child_level == last {
+            children.len() as u64
+        } else {
+            let first = f.levels()[child_level].node_first as usize;
+            children
+                .filter(|&c| proj.visible(&f.nodes()[first + c]))
+                .count() as u64
+        };
+        assert!(
+            d.points - 1 + visible > budget,
+            "budget {budget}: {} points, and opening the largest drawn node adds {} more",
+            d.points,
+            visible - 1
+        );
     }
     assert_eq!(cut(&f, &cam, 0.0, 4000).points, 4000);
     assert!(!cut(&f, &cam, 0.0, 4000).budget_limited);
