@@ -1376,7 +1376,8 @@ fn radius_overrides_naming_no_species_are_errors_listing_the_species() {
     );
     assert!(!out.exists());
     ok(&["convert", s(&input), "-o", s(&out), "--radius", "1=1.28"]);
-    // Every frame of a batch, also frames a previous run finished.
+    // A batch: an override naming a species no frame holds (a species may appear in
+    // some frames only), also when a previous run finished every frame.
     let d = dir.path().join("b.d");
     let err = fails(&["batch", s(&input), "-o", s(&d), "--radius", "Cu=1.28"]);
     assert!(err.contains("no species named \"Cu\""), "{err}");

@@ -90,6 +90,7 @@ fuzz_target!(|data: &[u8]| {
             window_points: 64,
             gzip_in_memory: None,
         },
+        radii_may_be_absent: true,
     };
     let path: PathBuf = common::temp_dir().join("fuzz.mdlod");
     let _ = std::fs::remove_file(&path);

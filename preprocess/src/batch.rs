@@ -267,16 +267,12 @@ fn same_build(file: &MdlodFile, options: &ConvertOptions) -> bool {
         b.delta_n.min(last),
         b.position_bits,
     );
-    // An override naming none of the file's species is not what it was built with: the
-    // frame is converted again, which reports it.
+    // (An override naming none of the frame's species changes nothing in it: a species
+    // may appear in some frames of a trajectory only.)
     params
         && m.species.iter().all(|s| {
             crate::species::radius_override(&options.radii, &s.name).is_none_or(|r| r == s.radius)
         })
-        && options
-            .radii
-            .iter()
-            .all(|(n, _)| m.species.iter().any(|s| &s.name == n))
 }
 
 /// Removes what killed runs left in `out_dir`: temporary outputs of `timesteps` (this
@@ -418,6 +414,12 @@ pub fn batch(
     let manifest_path = out_dir.join(manifest_name(opts.shard));
     let mut done = Vec::new();
     let mut todo = Vec::new();
+    // The species names the frames hold, for the radius overrides' check at the end.
+    let seen = Mutex::new(std::collections::BTreeSet::<String>::new());
+    let note_species = |f: &MdlodFile| {
+        let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
+        seen.extend(f.metadata().species.iter().map(|s| s.name.clone()));
+    };
     for mut job in mine.drain(..) {
         let out = out_dir.join(frame_file_name(job.timestep));
         let want = fingerprint(job.input, job.frame as u64);
@@ -429,7 +431,10 @@ pub fn batch(
                 && same_build(f, &opts.convert)
         });
         match complete {
-            Some(f) => done.push(entry_of(&out, &f, job.timestep)),
+            Some(f) => {
+                note_species(&f);
+                done.push(entry_of(&out, &f, job.timestep));
+            }
             None => {
                 if let Some(dump) = job.dump {
                     job.particles = dump
@@ -475,6 +480,8 @@ pub fn batch(
         .max(1);
     let total_particles = todo.iter().fold(0u64, |t, j| t.saturating_add(j.particles));
     let mut convert = opts.convert.clone();
+    // A species may appear in some frames of a trajectory only.
+    convert.radii_may_be_absent = true;
     convert.chunks.memory_limit = opts.memory_limit / jobs as u64;
     let convert = &convert;
     progress.stage(
@@ -558,6 +565,7 @@ pub fn batch(
                                 convert_frame(&frame, Some(source), &out, convert, &quiet)?;
                             }
                             let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
+                            note_species(&f);
                             Ok(entry_of(&out, &f, job.timestep))
                         })()
                         .map_err(in_context)
@@ -598,6 +606,21 @@ pub fn batch(
         return Err(e);
     }
     last_save?;
+    // A species may appear in some frames only, but a radius override that names none
+    // of any frame's is a misspelt name. (A shard sees only its own frames.)
+    let seen = seen.into_inner().unwrap_or_else(|e| e.into_inner());
+    let whole = opts.shard.is_none_or(|(_, n)| n == 1);
+    if whole && !seen.is_empty() {
+        if let Some((name, radius)) = opts.convert.radii.iter().find(|(n, _)| !seen.contains(n)) {
+            return Err(BatchError::Convert(ConvertError::Species(
+                crate::species::UnknownSpecies {
+                    name: name.clone(),
+                    radius: *radius,
+                    known: seen.into_iter().collect(),
+                },
+            )));
+        }
+    }
     Ok(BatchReport {
         frames_total,
         frames_in_shard,

@@ -1291,7 +1291,9 @@ pub fn convert_chunked(
     // 2. Chunks.
     let t1 = Instant::now();
     let (names, species_map) = merge.finish();
-    crate::species::check_overrides(&names, &options.radii)?;
+    if !options.radii_may_be_absent {
+        crate::species::check_overrides(&names, &options.radii)?;
+    }
     let species = species_table(&names, &options.radii);
     // Each chunk checks its own particles' radii; the top node sums over all of them.
     check_species(n, &species).map_err(|source| ConvertError::Build {

@@ -20,6 +20,10 @@ pub struct ConvertOptions {
     pub radii: Vec<(String, f32)>,
     /// When and how frames are built in chunks (out of core).
     pub chunks: ChunkOptions,
+    /// Whether an override may name a species the frame does not hold: true for the
+    /// frames of a trajectory, where a species may appear in some frames only; false
+    /// (the default) makes it an error listing the frame's species (a misspelt name).
+    pub radii_may_be_absent: bool,
 }
 
 /// What a conversion built.
@@ -78,7 +82,9 @@ pub fn convert_frame(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
-    crate::species::check_overrides(&frame.species, &options.radii)?;
+    if !options.radii_may_be_absent {
+        crate::species::check_overrides(&frame.species, &options.radii)?;
+    }
     if frame.len() > options.chunks.chunk_points {
         let metadata = base_metadata(frame, source, options);
         return convert_chunked(&FrameSource(frame), metadata, output, options, progress);

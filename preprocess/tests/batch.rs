@@ -376,3 +376,40 @@ fn changed_build_settings_redo_the_frames() {
     let file = MdlodFile::open(out.join("frame-0.mdlod")).unwrap();
     assert_eq!(file.metadata().species[0].radius, species.radius * 2.0);
 }
+
+/// A species that appears in later frames only (a deposition): a radius given for it
+/// holds where it is present, and the frames without it convert too (a single frame's
+/// conversion refuses an override naming none of its species; a trajectory's may not).
+#[test]
+fn a_radius_for_a_species_of_later_frames_only_converts_every_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("deposit.xyz");
+    let mut text = String::new();
+    for frame in 0..3 {
+        text.push_str("40\nframe\n");
+        for i in 0..40 {
+            let element = if frame == 2 && i % 5 == 0 { "Ag" } else { "Cu" };
+            let (x, y, z) = ((i % 4) * 2, ((i / 4) % 5) * 2, (i / 20) * 2);
+            text.push_str(&format!("{element} {x} {y} {z}\n"));
+        }
+    }
+    std::fs::write(&src, text).unwrap();
+    let out = dir.path().join("out");
+    let mut o = opts();
+    o.convert.radii = vec![("Ag".into(), 1.44)];
+    let report = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert_eq!((report.converted, report.skipped), (3, 0));
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(m.frames.len(), 3);
+    let last = MdlodFile::open(out.join(&m.frames[2].file)).unwrap();
+    let ag = last
+        .metadata()
+        .species
+        .iter()
+        .find(|s| s.name == "Ag")
+        .unwrap();
+    assert_eq!(ag.radius, 1.44);
+    // A rerun finds every frame built with these settings.
+    let again = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert_eq!((again.converted, again.skipped), (0, 3));
+}

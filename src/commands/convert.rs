@@ -115,6 +115,7 @@ impl BuildArgs {
                 temp_dir: self.temp_dir.clone(),
                 ..ChunkOptions::default()
             },
+            radii_may_be_absent: false,
         };
         let read = ReadOptions {
             attribute: self.attribute.clone(),
