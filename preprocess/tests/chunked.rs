@@ -28,6 +28,8 @@ fn options(chunk_points: usize) -> ConvertOptions {
             window_points: 128,
             gzip_in_memory: None,
         },
+        // Some inputs here have no type 1.
+        radii_may_be_absent: true,
     }
 }
 
@@ -441,6 +443,42 @@ fn a_text_dump_that_shrinks_between_windows_is_an_error() {
                 "the file changed size while frame 0 was being read ({cut} bytes now)"
             )),
         "{e}"
+    );
+}
+
+/// A dump a running simulation appends to while a large frame is read in windows: the
+/// frame reads whole (what is appended lies past it).
+#[test]
+fn a_text_dump_appended_to_between_windows_reads_its_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let (lines, _) = first_frame_lines();
+    let path = dir.path().join("grows.lammpstrj");
+    let text = lines.join("\n") + "\n";
+    std::fs::write(&path, &text).unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    let read = ReadOptions::default();
+    let info = dump.frame_info(0).unwrap();
+    let whole = dump.read_frame(0, &read, &NoProgress).unwrap();
+    let source = mdlod_preprocess::convert::window_source(&dump, 0, &read, &info).unwrap();
+    drop(dump);
+    let mut positions = Vec::new();
+    source
+        .windows(128, &mut |first, part| {
+            assert_eq!(first, positions.len());
+            positions.extend_from_slice(&part.positions);
+            // The next frame arrives.
+            use std::io::Write;
+            let mut f = std::fs::OpenOptions::new()
+                .append(true)
+                .open(&path)
+                .unwrap();
+            f.write_all(text.as_bytes()).unwrap();
+            Ok(())
+        })
+        .unwrap();
+    assert!(
+        positions == whole.positions,
+        "the frame read in windows differs"
     );
 }
 

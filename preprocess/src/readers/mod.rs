@@ -768,14 +768,15 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
     let mut pos = header.atoms.start;
     let mut first = 0usize;
     let window = window.max(1);
-    // The file's length when the first window is mapped: every window must find it so,
-    // the frame's atoms inside it.
+    // The file's length when the first window is mapped: every window must find at
+    // least that much, the frame's atoms inside it (a simulation still running may
+    // append frames; a file cut short or replaced by a shorter one is an error).
     let mut length: Option<usize> = None;
     while first < total {
         let map = mdlod_format::mmap::map_file(&file).map_err(io)?;
         let data: &[u8] = &map;
         let ctx = Ctx { path, data };
-        if *length.get_or_insert(data.len()) != data.len() || header.atoms.end > data.len() {
+        if *length.get_or_insert(data.len()) > data.len() || header.atoms.end > data.len() {
             return Err(ctx
                 .malformed(
                     pos,
