@@ -226,11 +226,23 @@ fn highlight_grid(
     use rayon::prelude::*;
     let g = VIEW_GRID;
     let at = |k: u32| -1.0 + 2.0 * k as f32 / (g - 1) as f32;
+    // The highlights alone: the rest (ambient, diffuse, and the environment's 512
+    // samples per normal) does not depend on the eye and is not wanted here.
+    let highlights_only = ShadeLights {
+        ambient: 0.0,
+        lights: lights.lights.clone(),
+        diffuse: 0.0,
+        specular: lights.specular,
+        shininess: lights.shininess,
+        environment: None,
+        explorer: None,
+        transfer: None,
+    };
     let highlights = (0..g * g)
         .into_par_iter()
         .flat_map_iter(|i| {
             let eye = view.towards_eye(at(i % g), -at(i / g));
-            bin_lighting_towards(bins, binning, lights, eye)
+            bin_lighting_towards(bins, binning, &highlights_only, eye)
                 .into_iter()
                 .map(|(_, s)| s)
         })
@@ -1246,6 +1258,31 @@ mod tests {
                     a[0],
                     s[0]
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn the_highlight_grid_holds_the_highlights_of_the_full_lighting() {
+        let lights = ShadeLights {
+            ambient: 0.1,
+            lights: vec![(Vec3::new(0.4, 0.5, 0.8), [1.0, 0.8, 0.6])],
+            diffuse: 0.7,
+            specular: 0.5,
+            shininess: 16.0,
+            environment: Some(EnvironmentMap::from_image(&RgbaImage::new(8, 4))),
+            explorer: None,
+            transfer: None,
+        };
+        let view = TexelView::Perspective {
+            tan_half: [0.5, 0.3],
+        };
+        let (g, grid) = highlight_grid(4, Binning::ProjectedNormals, &lights, view).unwrap();
+        for (k, corner) in [(0u32, (-1.0, 1.0)), (g * g - 1, (1.0, -1.0))] {
+            let eye = view.towards_eye(corner.0, corner.1);
+            let full = bin_lighting_towards(4, Binning::ProjectedNormals, &lights, eye);
+            for (i, (_, s)) in full.iter().enumerate() {
+                assert_eq!(grid[k as usize * 16 + i], *s, "grid point {k}, bin {i}");
             }
         }
     }
