@@ -413,7 +413,7 @@ impl<'r> Thread<'r> {
         // sending images of its view. The S-MIP and the streaming pool are caches and
         // stay; the progressive S-NDFs stay only for a re-shade of the same view.
         self.tiled = None;
-        let previous = self.progressive.take();
+        let mut previous = self.progressive.take();
         if let Some(s) = self.stream.as_mut() {
             s.pending = None;
         }
@@ -440,6 +440,9 @@ impl<'r> Thread<'r> {
                 Err(e) => return self.reply(error(&e)),
             };
             if camera.projection == mdlod_render::Projection::Orthographic {
+                // The perspective view's S-NDFs are freed before the S-MIP's pool is made
+                // (an orthographic view never re-shades them).
+                drop(previous.take());
                 let coarsen = if interactive { coarsen } else { 0 };
                 match self.tiled_render(
                     id,
