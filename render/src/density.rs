@@ -100,16 +100,6 @@ impl DensitySettings {
 /// Opacity at which a ray stops (the paper's threshold).
 pub const OPAQUE: f32 = 0.99;
 
-/// `W(r, h)`, the normalised poly6 kernel.
-pub fn kernel(r2: f32, h: f32) -> f32 {
-    let h2 = h * h;
-    if r2 >= h2 {
-        return 0.0;
-    }
-    let t = 1.0 - r2 / h2;
-    315.0 / (64.0 * std::f32::consts::PI * h2 * h) * t * t * t
-}
-
 /// `(4/3) · 315/64`: the volume fraction `V · m · W(0, h)` at the centre of a point of
 /// radius `r = r_ref` and kernel scale 1 (see [`fraction`]).
 pub const PEAK_FRACTION: f32 = 4.0 / 3.0 * 315.0 / 64.0;
@@ -129,17 +119,6 @@ pub fn fraction(d: Vec3, r: f32, r_ref: f32, k: f32) -> (f32, Vec3) {
     let t = 1.0 - r2 / h2;
     let norm = PEAK_FRACTION / (k * k * k) * (r_ref / r);
     (norm * t * t * t, d * (-6.0 * norm / h2 * t * t))
-}
-
-/// `∇_p W(|p − p_j|, h)` for `d = p − p_j`.
-pub fn kernel_gradient(d: Vec3, h: f32) -> Vec3 {
-    let h2 = h * h;
-    let r2 = d.length_squared();
-    if r2 >= h2 {
-        return Vec3::ZERO;
-    }
-    let t = 1.0 - r2 / h2;
-    d * (-6.0 * 315.0 / (64.0 * std::f32::consts::PI * h2 * h * h2) * t * t)
 }
 
 /// The transfer function: colour (linear RGB) of a volume fraction `t = φ / φ_max`

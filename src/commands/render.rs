@@ -213,6 +213,17 @@ pub struct ViewArgs {
 }
 
 impl ViewArgs {
+    /// The files a command reads, for [`super::check_output`]: `file` and the view file.
+    pub fn inputs<'a>(
+        &'a self,
+        file: &'a std::path::Path,
+    ) -> Vec<(&'static str, &'a std::path::Path)> {
+        [("", file)]
+            .into_iter()
+            .chain(self.view.as_deref().map(|v| ("--view", v)))
+            .collect()
+    }
+
     pub fn spec(&self) -> ViewSpec {
         match &self.view {
             Some(p) => ViewSpec::File(p.clone()),
@@ -306,10 +317,7 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let inputs = [("", args.file.as_path())]
-        .into_iter()
-        .chain(args.camera.view.as_deref().map(|v| ("--view", v)))
-        .collect::<Vec<_>>();
+    let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
     if let Some(p) = &args.save_view {
         super::check_output("--save-view", p, &inputs)?;

@@ -53,10 +53,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let inputs = [("", args.file.as_path())]
-        .into_iter()
-        .chain(args.camera.view.as_deref().map(|v| ("--view", v)))
-        .collect::<Vec<_>>();
+    let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
     let opts = RenderOptions {
         width: args.camera.width,
