@@ -6,7 +6,9 @@
 //! too). Each of the `spp` samples draws the spheres, batch after batch into the same
 //! targets, with the projection shifted by a sub-pixel offset (Halton 2,3; none for one
 //! sample) into a float colour target cleared to the background, then adds that image
-//! with weight 1/spp into a float accumulation target. The sum is copied into an sRGB
+//! with weight 1/spp to a single-precision sum (two targets in turn, each pass reading
+//! one and writing the other: additive blending into half floats rounded equal samples
+//! the same way every time, 4/255 too dark at 256 samples). The sum is copied into an sRGB
 //! target (the format encodes) and read back. Later batches are depth-tested against
 //! the earlier ones, so the image is the one batch would give, up to exact depth ties
 //! between points of different batches. With one sample (and in the splat pass) each
@@ -1088,26 +1090,31 @@ impl Renderer {
         let output = texture("output", OUTPUT_FORMAT, U::RENDER_ATTACHMENT | U::COPY_SRC);
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
         let (sample_v, depth_v, output_v) = (view(&sample), view(&depth), view(&output));
-        // Several samples are summed into an accumulation target with weight 1/N; one
-        // sample needs no sum, and the resolve reads it directly.
+        // Several samples are summed with weight 1/N into two targets in turn (sample
+        // `s` writes the sum into `sums[(s + 1) % 2]`, reading the other); one sample
+        // needs no sum, and the resolve reads it directly.
         let accumulation = (settings.spp > 1).then(|| {
-            let accum = texture(
-                "accum",
-                ACCUM_FORMAT,
-                U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
-            );
-            let add = self
-                .accumulate
-                .bind(device, &sample_v, 1.0 / settings.spp as f32);
-            (view(&accum), add)
+            let target = |label| {
+                view(&texture(
+                    label,
+                    ACCUM_FORMAT,
+                    U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
+                ))
+            };
+            let sums = [target("sum a"), target("sum b")];
+            let weight = 1.0 / settings.spp as f32;
+            // Bind group `k` reads the sum from `sums[k]`: for the samples that write
+            // `sums[1 - k]`.
+            let adds = [
+                self.accumulate.bind(device, &sample_v, weight, &sums[0]),
+                self.accumulate.bind(device, &sample_v, weight, &sums[1]),
+            ];
+            (sums, adds)
         });
-        let resolve_bg = self.accumulate.bind(
-            device,
-            accumulation
-                .as_ref()
-                .map_or(&sample_v, |(accum_v, _)| accum_v),
-            1.0,
-        );
+        let total = accumulation
+            .as_ref()
+            .map_or(&sample_v, |(sums, _)| &sums[(settings.spp % 2) as usize]);
+        let resolve_bg = self.accumulate.bind(device, total, 1.0, total);
 
         let colour_row = padded_row(w * 4);
         let readback = readback_buffer(
@@ -1213,15 +1220,17 @@ impl Renderer {
                         None => self.sphere.draw(&mut pass, buffers),
                     }
                 }
-                if let (true, Some((accum_v, add_bg))) = (sample_done, &accumulation) {
+                if let (true, Some((sums, adds))) = (sample_done, &accumulation) {
+                    let written = ((s + 1) % 2) as usize;
                     let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                         label: Some("accumulate"),
                         color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                            view: accum_v,
+                            view: &sums[written],
                             depth_slice: None,
                             resolve_target: None,
                             ops: wgpu::Operations {
-                                load: cleared_if(s == 0, wgpu::Color::TRANSPARENT),
+                                // Every pixel is written.
+                                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
                                 store: wgpu::StoreOp::Store,
                             },
                         })],
@@ -1230,8 +1239,12 @@ impl Renderer {
                         occlusion_query_set: None,
                         multiview_mask: None,
                     });
-                    pass.set_pipeline(&self.accumulate.accumulate);
-                    pass.set_bind_group(0, add_bg, &[]);
+                    pass.set_pipeline(if s == 0 {
+                        &self.accumulate.first
+                    } else {
+                        &self.accumulate.accumulate
+                    });
+                    pass.set_bind_group(0, &adds[1 - written], &[]);
                     pass.draw(0..3, 0..1);
                 }
                 if last {
@@ -1313,9 +1326,9 @@ impl Renderer {
             _ => None,
         };
         let gpu_time = self.gpu_time(timing.as_ref())?;
-        // sample (RGBA8) + depth (f32) + accumulation (RGBA16F, several samples) + output
+        // sample (RGBA16F) + depth (f32) + two sums (RGBA32F, several samples) + output
         // (RGBA8) + readback.
-        let per_pixel = 4 + 4 + if accumulation.is_some() { 8 } else { 0 } + 4;
+        let per_pixel = 8 + 4 + if accumulation.is_some() { 32 } else { 0 } + 4;
         let gpu_target_bytes =
             u64::from(w) * u64::from(h) * per_pixel + u64::from(colour_row) * u64::from(h);
         self.count_samples(points, settings.spp);

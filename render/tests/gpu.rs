@@ -345,6 +345,47 @@ fn supersampling_converges_to_the_reference() {
 }
 
 #[test]
+fn many_samples_of_a_flat_background_average_to_that_background() {
+    // The average of N equal samples is the sample. Summed by additive blending into a
+    // half-float target, each step rounded the same way: 256 samples of 0.5 (sRGB) came
+    // out 123 instead of 127, of 0.3 75 instead of 77.
+    let (_d, _p, f) = make_file(&fcc_frame(2), small_build(), &[]);
+    let mut cam = camera_for(&f, &ViewSpec::default(), 32, 32).unwrap();
+    // The data covers a few pixels at the centre; the corners see the background.
+    cam.distance *= 20.0;
+    cam.fit_depth_range(&mdlod_render::data_bounds(&f));
+    let draw = cut(&f, &cam, [32, 32], 0.0, OcclusionMode::Off);
+    assert!(draw.points > 0);
+    for bg in [[0.3f32, 0.5, 0.7], [0.11, 0.13, 0.17], [0.9, 0.95, 0.99]] {
+        let frame = |spp| {
+            let settings = FrameSettings {
+                width: 32,
+                height: 32,
+                spp,
+                background_srgb: bg,
+                ..Default::default()
+            };
+            renderer().render(&f, &cam, &draw, &settings).unwrap().image
+        };
+        let one = frame(1);
+        let corners = [(0, 0), (31, 0), (0, 31), (31, 31)];
+        for &(x, y) in &corners {
+            let p = one.pixel(x, y);
+            for c in 0..3 {
+                let expected = bg[c] * 255.0;
+                assert!((f32::from(p[c]) - expected).abs() <= 0.5 + 1e-3, "{p:?} {bg:?}");
+            }
+        }
+        for spp in [2, 3, 64, 256] {
+            let many = frame(spp);
+            for &(x, y) in &corners {
+                assert_eq!(many.pixel(x, y), one.pixel(x, y), "{spp} spp, {bg:?}");
+            }
+        }
+    }
+}
+
+#[test]
 fn view_file_and_orbit_options_give_the_same_image() {
     let (dir, _p, f) = make_file(&cloud_frame(800, 31), small_build(), &[]);
     let view = dir.path().join("view.json");

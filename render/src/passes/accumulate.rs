@@ -1,12 +1,14 @@
 //! Supersample accumulation and resolve (`accumulate.wgsl`): full-screen passes that add
-//! a jittered sample image into a float target with weight 1/N, and copy the sum into
-//! the sRGB output.
+//! a jittered sample image with weight 1/N to the sum so far (two single-precision
+//! targets in turn: the sum is read from one and written to the other), and copy the
+//! sum into the sRGB output.
 
 /// WGSL source of the pass.
 pub const SHADER: &str = include_str!("accumulate.wgsl");
 
-/// Format of the accumulation target.
-pub const ACCUM_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// Format of the two accumulation targets: single precision, so that a sum of many
+/// equal samples does not round the same way at every step (see `accumulate.wgsl`).
+pub const ACCUM_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 /// Format of the final image (sRGB encoding on store).
 pub const OUTPUT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
@@ -17,8 +19,10 @@ pub struct WeightUniforms {
     pub weight: [f32; 4],
 }
 
-/// Two pipelines over one layout: additive accumulation and the plain resolve copy.
+/// Three pipelines over one layout: the first sample's weighted copy, the sum of the
+/// sum so far and a weighted sample, and the plain resolve copy.
 pub struct AccumulatePass {
+    pub first: wgpu::RenderPipeline,
     pub accumulate: wgpu::RenderPipeline,
     pub resolve: wgpu::RenderPipeline,
     pub layout: wgpu::BindGroupLayout,
@@ -53,6 +57,16 @@ impl AccumulatePass {
                     },
                     count: None,
                 },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -60,7 +74,7 @@ impl AccumulatePass {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let make = |label: &str, format: wgpu::TextureFormat, blend: Option<wgpu::BlendState>| {
+        let make = |label: &str, format: wgpu::TextureFormat, entry: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&pipeline_layout),
@@ -75,11 +89,11 @@ impl AccumulatePass {
                 multisample: Default::default(),
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
-                    entry_point: Some("fs_weighted"),
+                    entry_point: Some(entry),
                     compilation_options: Default::default(),
                     targets: &[Some(wgpu::ColorTargetState {
                         format,
-                        blend,
+                        blend: None,
                         write_mask: wgpu::ColorWrites::ALL,
                     })],
                 }),
@@ -87,29 +101,25 @@ impl AccumulatePass {
                 cache: None,
             })
         };
-        let add = super::ADD;
-        let accumulate = make(
-            "accumulate",
-            ACCUM_FORMAT,
-            Some(wgpu::BlendState {
-                color: add,
-                alpha: add,
-            }),
-        );
-        let resolve = make("resolve", OUTPUT_FORMAT, None);
+        let first = make("accumulate first", ACCUM_FORMAT, "fs_weighted");
+        let accumulate = make("accumulate", ACCUM_FORMAT, "fs_sum");
+        let resolve = make("resolve", OUTPUT_FORMAT, "fs_weighted");
         AccumulatePass {
+            first,
             accumulate,
             resolve,
             layout,
         }
     }
 
-    /// A bind group reading `src` with `weight`.
+    /// A bind group reading `src` with `weight` and the sum so far from `sum` (which
+    /// the pass bound to it must not write; the first and resolve passes ignore it).
     pub fn bind(
         &self,
         device: &wgpu::Device,
         src: &wgpu::TextureView,
         weight: f32,
+        sum: &wgpu::TextureView,
     ) -> wgpu::BindGroup {
         use wgpu::util::DeviceExt;
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -130,6 +140,10 @@ impl AccumulatePass {
                 wgpu::BindGroupEntry {
                     binding: 1,
                     resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(sum),
                 },
             ],
         })
