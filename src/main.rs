@@ -46,13 +46,20 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     quiet_headless_gpu_probe();
-    let cli = Cli::parse();
+    let matches = <Cli as clap::CommandFactory>::command().get_matches();
+    let cli = match <Cli as clap::FromArgMatches>::from_arg_matches(&matches) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
     let result = match cli.command {
         Command::Convert(a) => commands::convert::run(a),
         Command::Batch(a) => commands::batch::run(a),
         Command::Info(a) => commands::info::run(a),
         Command::Verify(a) => commands::verify::run(a),
-        Command::Render(a) => commands::render::run(a),
+        Command::Render(a) => matches
+            .subcommand_matches("render")
+            .map_or(Ok(()), |m| commands::render::check_mode_options(&a, m))
+            .and_then(|()| commands::render::run(a)),
         Command::Sample(a) => commands::sample::run(a),
         Command::Shade(a) => commands::shade::run(a),
         Command::Generate(a) => commands::generate::run(a),

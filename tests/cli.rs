@@ -1396,6 +1396,69 @@ fn radius_overrides_naming_no_species_are_errors_listing_the_species() {
 }
 
 #[test]
+fn options_the_chosen_mode_does_not_read_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("x.png");
+    let (f, p) = (s(&frame), s(&png));
+    for (extra, message) in [
+        (
+            vec!["--mode", "density", "--radius-scale", "2"],
+            "--radius-scale has no effect with --mode density: it applies to --mode spheres or sndf",
+        ),
+        (
+            vec!["--mode", "splat", "--spp", "4"],
+            "--spp has no effect with --mode splat: it applies to --mode spheres",
+        ),
+        (
+            vec!["--mode", "iso", "--absorption", "0.3"],
+            "--absorption has no effect with --mode iso: it applies to --mode density",
+        ),
+        (
+            vec!["--iterations", "4"],
+            "--iterations has no effect with --mode spheres: it applies to --mode sndf",
+        ),
+        (
+            vec!["--mode", "splat-over", "--hide-species", "1"],
+            "--hide-species has no effect with --mode splat-over",
+        ),
+    ] {
+        let mut args = vec!["render", f, "-o", p];
+        args.extend(extra);
+        let err = fails(&args);
+        assert!(err.contains(message), "{args:?}: {err}");
+        assert!(!png.exists(), "{args:?} wrote an image");
+    }
+    // The same options with their modes pass the check (and fail later, at a size
+    // check that needs no GPU).
+    for extra in [
+        vec!["--mode", "density", "--slices", "8", "--absorption", "0.3"],
+        vec!["--mode", "iso", "--kernel-scale", "2", "--iso-value", "0.2"],
+        vec![
+            "--mode",
+            "splat",
+            "--exposure",
+            "2",
+            "--intensity",
+            "attribute",
+        ],
+        vec!["--mode", "sndf", "--iterations", "4", "--radius-scale", "2"],
+        vec![
+            "--spp",
+            "4",
+            "--species-colour",
+            "1=#ff0000",
+            "--no-occlusion",
+        ],
+    ] {
+        let mut args = vec!["render", f, "-o", p, "--width", "40000"];
+        args.extend(extra);
+        let err = fails(&args);
+        assert!(err.contains("must each be 1 to 32768"), "{args:?}: {err}");
+    }
+}
+
+#[test]
 fn options_are_checked_before_memory_or_work_goes_into_them() {
     let dir = tempfile::tempdir().unwrap();
     let frame = converted(dir.path(), "cu_melt.custom.dump");

@@ -373,7 +373,10 @@ fn many_samples_of_a_flat_background_average_to_that_background() {
             let p = one.pixel(x, y);
             for c in 0..3 {
                 let expected = bg[c] * 255.0;
-                assert!((f32::from(p[c]) - expected).abs() <= 0.5 + 1e-3, "{p:?} {bg:?}");
+                assert!(
+                    (f32::from(p[c]) - expected).abs() <= 0.5 + 1e-3,
+                    "{p:?} {bg:?}"
+                );
             }
         }
         for spp in [2, 3, 64, 256] {

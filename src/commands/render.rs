@@ -241,7 +241,7 @@ impl ViewArgs {
     }
 }
 
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Mode {
     Spheres,
     Splat,
@@ -249,6 +249,64 @@ pub enum Mode {
     Sndf,
     Density,
     Iso,
+}
+
+/// The options that only some modes read, by argument id, with those modes. Given on
+/// the command line with another mode, such an option would be silently ignored (a
+/// `--radius-scale 2` that the density volume never sees): that is an error instead.
+const MODE_OPTIONS: &[(&str, &[Mode])] = {
+    use Mode::*;
+    const STYLED: &[Mode] = &[Spheres, Sndf];
+    const VOLUME: &[Mode] = &[Density, Iso];
+    &[
+        ("spp", &[Spheres]),
+        ("no_occlusion", STYLED),
+        ("iso_value", &[Iso]),
+        ("slices", VOLUME),
+        ("kernel_scale", VOLUME),
+        ("clip", VOLUME),
+        ("density_max", &[Density]),
+        ("absorption", &[Density]),
+        ("iterations", &[Sndf]),
+        ("bins", &[Sndf]),
+        ("binning", &[Sndf]),
+        ("opacity", &[SplatOver]),
+        ("sort", &[SplatOver]),
+        ("intensity", &[Splat]),
+        ("exposure", &[Splat]),
+        ("colour_map", STYLED),
+        ("radius_scale", STYLED),
+        ("species_colour", STYLED),
+        ("species_radius", STYLED),
+        ("hide_species", STYLED),
+    ]
+};
+
+fn mode_name(mode: Mode) -> String {
+    use clap::ValueEnum;
+    mode.to_possible_value()
+        .map_or_else(|| format!("{mode:?}"), |v| v.get_name().to_string())
+}
+
+/// Refuses an option given on the command line (`matches`: the `render` subcommand's)
+/// that the chosen mode does not read.
+pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
+    for (id, modes) in MODE_OPTIONS {
+        let given = matches!(
+            matches.value_source(id),
+            Some(clap::parser::ValueSource::CommandLine)
+        );
+        if given && !modes.contains(&args.mode) {
+            let names: Vec<String> = modes.iter().map(|&m| mode_name(m)).collect();
+            anyhow::bail!(
+                "--{} has no effect with --mode {}: it applies to --mode {}",
+                id.replace('_', "-"),
+                mode_name(args.mode),
+                names.join(" or ")
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Parses `nx,ny,nz,d`.
@@ -425,4 +483,22 @@ pub fn run(args: Args) -> Result<()> {
         println!("  view saved to {}", p.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Args as _;
+
+    #[test]
+    fn every_mode_option_names_an_argument_of_render() {
+        let cmd = Args::augment_args(clap::Command::new("render"));
+        for (id, modes) in MODE_OPTIONS {
+            assert!(
+                cmd.get_arguments().any(|a| a.get_id() == *id),
+                "{id} is no argument of render"
+            );
+            assert!(!modes.is_empty());
+        }
+    }
 }
