@@ -509,6 +509,9 @@ fn tiles_to_rows(bytes: &[u8], width: u32, height: u32, bins: u32) -> Vec<[f32; 
 /// reads them there, and nothing is read back unless asked.
 pub struct ResidentSndf {
     hist: wgpu::Buffer,
+    /// Tiles one binding holds: the histograms are accumulated (and shaded) in windows
+    /// of that many consecutive tiles when they are larger than one binding.
+    window_tiles: u64,
     cut: UploadedCut,
     camera: Camera,
     pub width: u32,
@@ -525,6 +528,44 @@ impl ResidentSndf {
     /// Bytes of histograms on the GPU.
     pub fn gpu_bytes(&self) -> u64 {
         self.hist.size()
+    }
+
+    /// The histograms' windows, each no larger than one binding: its binding and its
+    /// page table (tile `t` of the image to slot `t − first` of the window, the tiles
+    /// of other windows to [`crate::sndf::NO_SLOT`]).
+    fn windows(&self) -> Vec<(wgpu::BufferBinding<'_>, Vec<u32>)> {
+        let tiles = u64::from(self.width.div_ceil(crate::sndf::TILE))
+            * u64::from(self.height.div_ceil(crate::sndf::TILE));
+        let per = self.window_tiles.max(1);
+        let tile_bytes = crate::sndf::tile_bytes(self.bins);
+        (0..tiles.div_ceil(per))
+            .map(|w| {
+                let first = w * per;
+                let count = per.min(tiles - first);
+                let pages = (0..tiles)
+                    .map(|t| {
+                        if (first..first + count).contains(&t) {
+                            (t - first) as u32
+                        } else {
+                            crate::sndf::NO_SLOT
+                        }
+                    })
+                    .collect();
+                let binding = wgpu::BufferBinding {
+                    buffer: &self.hist,
+                    offset: first * tile_bytes,
+                    size: wgpu::BufferSize::new(count * tile_bytes),
+                };
+                (binding, pages)
+            })
+            .collect()
+    }
+
+    /// True when the histograms are larger than one binding.
+    pub fn windowed(&self) -> bool {
+        let tiles = u64::from(self.width.div_ceil(crate::sndf::TILE))
+            * u64::from(self.height.div_ceil(crate::sndf::TILE));
+        tiles > self.window_tiles
     }
 }
 
@@ -581,6 +622,9 @@ pub struct Renderer {
     /// A smaller cap on the points of one batch than the adapter's (see
     /// [`Self::set_batch_points`]).
     batch_points: Option<u32>,
+    /// A smaller cap on the bytes of S-NDF histograms one binding holds than the
+    /// adapter's (see [`Self::set_sndf_window_bytes`]).
+    sndf_window_bytes: Option<u64>,
     /// Where passes of several submissions report them (see [`Self::set_progress`]).
     progress: Option<Arc<dyn Progress + Send + Sync>>,
 }
@@ -826,6 +870,7 @@ impl Renderer {
             small_spheres,
             small_targets: Default::default(),
             batch_points: None,
+            sndf_window_bytes: None,
             progress: None,
         }
     }
@@ -865,6 +910,25 @@ impl Renderer {
     /// in several batches.
     pub fn set_batch_points(&mut self, points: Option<u32>) {
         self.batch_points = points;
+    }
+
+    /// Caps the bytes of resident S-NDF histograms bound at once below the adapter's
+    /// binding size (`None`: the adapter's): the way tests sample small images in
+    /// several windows.
+    pub fn set_sndf_window_bytes(&mut self, bytes: Option<u64>) {
+        self.sndf_window_bytes = bytes;
+    }
+
+    /// Tiles of `bins × bins` histograms one storage binding holds (at least 1 where
+    /// one tile fits), and the largest buffer the device makes.
+    fn sndf_window_tiles(&self, bins: u32) -> (u64, u64) {
+        let l = self.ctx.device.limits();
+        let binding = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
+        let binding = self.sndf_window_bytes.map_or(binding, |b| b.min(binding));
+        (
+            binding / crate::sndf::tile_bytes(bins).max(1),
+            l.max_buffer_size,
+        )
     }
 
     /// The small-sphere raster and its buffers for a frame of `points` points at
@@ -1445,17 +1509,13 @@ impl Renderer {
             ..Default::default()
         })?;
         let bytes = crate::sndf::sndf_buffer_bytes(width, height, bins);
-        let limits = self.ctx.device.limits();
-        if !(1..=32).contains(&bins)
-            || bytes
-                > limits
-                    .max_storage_buffer_binding_size
-                    .min(limits.max_buffer_size)
-        {
+        // One buffer; bound a window of tiles at a time where it is larger than a
+        // binding (lavapipe binds 128 MiB: 1280×720 texels of 8×8 bins are 1 GiB).
+        let (window_tiles, max_buffer) = self.sndf_window_tiles(bins);
+        if !(1..=32).contains(&bins) || window_tiles == 0 || bytes > max_buffer {
             return Err(RenderError::InvalidOptions(format!(
                 "S-NDFs of {width}x{height} texels with {bins}x{bins} bins need {bytes} bytes, \
-                 more than one buffer of this adapter holds ({} bytes): use a smaller image or fewer bins",
-                limits.max_storage_buffer_binding_size
+                 more than one buffer of this adapter holds ({max_buffer} bytes): use a smaller image or fewer bins"
             )));
         }
         self.ctx.scoped(|| {
@@ -1472,6 +1532,7 @@ impl Renderer {
             self.ctx.queue.submit([enc.finish()]);
             Ok(ResidentSndf {
                 hist,
+                window_tiles,
                 cut: self.upload_cut(file, draw, style)?,
                 camera: camera.clone(),
                 width,
@@ -1494,8 +1555,11 @@ impl Renderer {
         if iterations == 0 {
             return Ok(None);
         }
-        let tiles = r.width.div_ceil(crate::sndf::TILE) * r.height.div_ceil(crate::sndf::TILE);
-        let pages: Vec<u32> = (0..tiles).collect();
+        let windows = r.windows();
+        let windows: Vec<_> = windows
+            .iter()
+            .map(|(binding, pages)| (binding.clone(), pages.as_slice()))
+            .collect();
         let gpu = self.ctx.scoped(|| {
             self.accumulate_uploaded(
                 &r.cut,
@@ -1508,8 +1572,7 @@ impl Renderer {
                     iterations,
                     first: r.rays,
                 },
-                &r.hist,
-                &pages,
+                &windows,
             )
         })?;
         r.rays += iterations;
@@ -1517,13 +1580,18 @@ impl Renderer {
     }
 
     /// Shades resident S-NDFs on the GPU (as [`Sndf::shade_with`] does, to rounding):
-    /// no particle is touched and only the image is read back.
+    /// no particle is touched and only the image is read back. Histograms larger than
+    /// one binding are read back and shaded on the host (no GPU time then).
     pub fn shade_resident(
         &self,
         r: &ResidentSndf,
         lights: &ShadeLights,
         background_srgb: [f32; 3],
     ) -> Result<(RgbaImage, Option<Duration>), RenderError> {
+        if r.windowed() {
+            let sndf = self.read_resident(r)?;
+            return Ok((sndf.shade_with(lights, background_srgb), None));
+        }
         self.ctx.scoped(|| {
             self.shade_histograms(
                 &r.hist,
@@ -1587,17 +1655,17 @@ impl Renderer {
     }
 
     /// Draws `iterations` G-buffers of an uploaded cut seen by `camera` (a `width ×
-    /// height` rectangle of texels) and adds them to the histograms in `hist`: tile `i`
-    /// of the rectangle (rows of 64×64-texel tiles) goes to slot `pages[i]` of the
-    /// buffer, or nowhere for [`crate::sndf::NO_SLOT`]. Returns the GPU time when
-    /// measured.
+    /// height` rectangle of texels) and adds them to the histograms of each window
+    /// `(hist, pages)`: tile `i` of the rectangle (rows of 64×64-texel tiles) goes to
+    /// slot `pages[i]` of the window's binding `hist`, or nowhere for
+    /// [`crate::sndf::NO_SLOT`]. Each G-buffer is drawn once for all windows. Returns the
+    /// GPU time when measured.
     pub(crate) fn accumulate_uploaded(
         &self,
         cut: &UploadedCut,
         camera: &Camera,
         settings: &SndfPassSettings,
-        hist: &wgpu::Buffer,
-        pages: &[u32],
+        windows: &[(wgpu::BufferBinding<'_>, &[u32])],
     ) -> Result<Option<Duration>, RenderError> {
         let SndfPassSettings {
             width,
@@ -1608,10 +1676,9 @@ impl Renderer {
             first,
         } = *settings;
         let tiles_x = width.div_ceil(crate::sndf::TILE);
-        debug_assert_eq!(
-            pages.len() as u32,
-            tiles_x * height.div_ceil(crate::sndf::TILE)
-        );
+        debug_assert!(windows
+            .iter()
+            .all(|(_, pages)| pages.len() as u32 == tiles_x * height.div_ceil(crate::sndf::TILE)));
         let device = &self.ctx.device;
         let queue = &self.ctx.queue;
         let layers = crate::sndf::ACCUMULATE_LAYERS.min(iterations).max(1);
@@ -1668,37 +1735,42 @@ impl Renderer {
             contents: bytemuck::bytes_of(&params_of(layers)),
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
-        let page_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("sndf page table"),
-            contents: bytemuck::cast_slice(pages),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("sndf accumulate"),
-            layout: &self.sndf.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&normals_a),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&albedos_a),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: hist.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: page_buffer.as_entire_binding(),
-                },
-            ],
-        });
+        let binds: Vec<wgpu::BindGroup> = windows
+            .iter()
+            .map(|(hist, pages)| {
+                let page_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("sndf page table"),
+                    contents: bytemuck::cast_slice(pages),
+                    usage: wgpu::BufferUsages::STORAGE,
+                });
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("sndf accumulate"),
+                    layout: &self.sndf.layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: params.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: wgpu::BindingResource::TextureView(&normals_a),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::TextureView(&albedos_a),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: wgpu::BindingResource::Buffer(hist.clone()),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 4,
+                            resource: page_buffer.as_entire_binding(),
+                        },
+                    ],
+                })
+            })
+            .collect();
         let timing = self.frame_timer();
         let points: u32 = cut.batches.iter().map(|b| b.points).sum();
         let most = cut.batches.iter().map(|b| b.points).max().unwrap_or(0);
@@ -1789,8 +1861,10 @@ impl Renderer {
                             .map(|t| t.compute_writes(false, true)),
                     });
                     pass.set_pipeline(&self.sndf.pipeline);
-                    pass.set_bind_group(0, &bind, &[]);
-                    pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+                    for bind in &binds {
+                        pass.set_bind_group(0, bind, &[]);
+                        pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+                    }
                 }
                 if closes && last {
                     if let Some(t) = &timing {
@@ -1823,9 +1897,8 @@ impl Renderer {
                 .max_storage_buffer_binding_size
                 .min(limits.max_buffer_size)
         {
-            return Err(RenderError::InvalidOptions(format!(
-                "{bytes} bytes of S-NDFs do not fit one buffer of this adapter"
-            )));
+            // More than one binding holds: shaded on the host (the same result).
+            return Ok((sndf.shade_with(lights, background_srgb), None));
         }
         self.ctx.scoped(|| {
             use wgpu::util::DeviceExt;

@@ -966,8 +966,7 @@ impl Smip {
                             iterations,
                             first: rays,
                         },
-                        &self.pool,
-                        &pages,
+                        &[(self.pool.as_entire_buffer_binding(), pages.as_slice())],
                     )
                 })?;
                 let draw_points = *points;

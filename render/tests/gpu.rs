@@ -2003,6 +2003,56 @@ fn resident_sndfs_refine_on_the_gpu_like_one_sampling() {
     );
 }
 
+/// S-NDFs larger than one storage binding (lavapipe binds 128 MiB, and 640×360 texels
+/// of 8×8 bins need 240 MiB) are accumulated in windows of tiles bound one after the
+/// other, from one G-buffer per iteration: the histograms equal those of one binding,
+/// and resident ones are shaded on the host with the GPU's result.
+#[test]
+fn sndfs_larger_than_one_binding_are_sampled_in_windows() {
+    let (_d, _p, f) = make_file(&fcc_frame(5), small_build(), &[]);
+    // 3 × 3 tiles of 64×64 texels; windows of 3 tiles: one row of tiles each.
+    let (w, h) = (192u32, 192u32);
+    let (camera, draw, settings) = sndf_scene(&f, (w, h), 3);
+    let one = renderer();
+    let mut windowed = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    windowed.set_sndf_window_bytes(Some(3 * mdlod_render::sndf::tile_bytes(settings.bins)));
+    let a = one.sample_sndf(&f, &camera, &draw, &settings).unwrap();
+    let b = windowed.sample_sndf(&f, &camera, &draw, &settings).unwrap();
+    // Every window (row of tiles) has sampled data.
+    let row_bins = (w * 64 * settings.bins * settings.bins) as usize;
+    for row in 0..3 {
+        assert!(
+            a.hist[row * row_bins..(row + 1) * row_bins]
+                .iter()
+                .any(|v| v[3] > 0.0),
+            "row {row} of tiles holds no ray hit"
+        );
+    }
+    assert!(a.hist == b.hist, "windowed histograms differ");
+
+    let lights = mdlod_render::sndf::ShadeLights::from(&mdlod_render::Lighting::default());
+    let resident = |r: &Renderer| {
+        let mut s = r
+            .resident_sndf(&f, &camera, &draw, &settings, &Default::default())
+            .unwrap();
+        r.refine_resident(&mut s, 3).unwrap();
+        s
+    };
+    let (ra, rb) = (resident(one), resident(&windowed));
+    assert!(!ra.windowed() && rb.windowed());
+    let (ia, _) = one.shade_resident(&ra, &lights, [0.2; 3]).unwrap();
+    let (ib, _) = windowed.shade_resident(&rb, &lights, [0.2; 3]).unwrap();
+    let worst = ia
+        .data
+        .iter()
+        .zip(&ib.data)
+        .map(|(x, y)| x.abs_diff(*y))
+        .max()
+        .unwrap();
+    assert_eq!(ia.data.len(), ib.data.len());
+    assert!(worst <= 1, "windowed shading differs by {worst}");
+}
+
 /// Progressive refinement: S-NDFs sampled in batches (2, then 3, then 3 iterations of one
 /// sub-pixel sequence) and added equal one sampling of all 8 iterations, and a batch of a
 /// different view size is refused.
