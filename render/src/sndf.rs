@@ -12,7 +12,10 @@
 //!    shade exactly; rays that hit nothing add nothing, and `1 − Σ counts / rays` is the
 //!    texel's background share. The GPU buffer holds the histograms in the S-MIP's
 //!    64×64-texel tiles (see [`crate::smip`]), each in 8×8-texel blocks (a workgroup's
-//!    writes stay together); they come back in rows. The G-buffer has several layers,
+//!    writes stay together); they come back in rows. Histograms larger than one storage
+//!    binding (1280×720 texels of 8×8 bins are 1 GiB; lavapipe binds 128 MiB) stay one
+//!    buffer, accumulated window of tiles by window from the same G-buffer, and resident
+//!    ones are then shaded on the host. The G-buffer has several layers,
 //!    one iteration each, and one accumulation pass adds them all, so a texel's bins are
 //!    read and written once per [`ACCUMULATE_LAYERS`] iterations.
 //! 2. Shading ([`Sndf::shade`]) needs no particle: per bin, the lighting averaged over
