@@ -32,7 +32,7 @@ pub enum RenderError {
     #[error("view file {path}: {message}")]
     View { path: PathBuf, message: String },
     /// Options that cannot be rendered (zero size, zero samples, ...).
-    #[error("invalid render options: {0}")]
+    #[error("invalid options: {0}")]
     InvalidOptions(String),
     /// Reading or writing a file failed.
     #[error("{path}: {source}")]

@@ -201,6 +201,9 @@ pub struct RenderReport {
     pub error_px: f32,
     /// True when the point budget stopped refinement.
     pub budget_limited: bool,
+    /// True when the streaming pool (GPU memory) could not hold the cut the view asked
+    /// for, so that coarser nodes were drawn in its place.
+    pub pool_limited: bool,
     /// The budget applied (the requested one, clamped to the GPU's limits).
     pub budget: u64,
     pub adapter: String,
@@ -464,6 +467,7 @@ impl RenderReport {
             particles_occluded: draw.occluded_particles,
             error_px: draw.error_px,
             budget_limited: draw.budget_limited,
+            pool_limited: false,
             budget: traversal.budget_points,
             adapter: renderer.ctx.adapter_name().to_string(),
             backend: format!("{:?}", renderer.ctx.backend()),
@@ -687,7 +691,7 @@ pub fn render_stream_frame(
     let (image, mut report) = draw_cut(
         renderer, &file, stream, &camera, &traversal, &draw, opts, &settings,
     )?;
-    report.budget_limited |= stats.pool_limited;
+    report.pool_limited = stats.pool_limited;
     report.traversal_time = traversal_time;
     report.total_time = t0.elapsed();
     Ok((image, report, stats))
@@ -742,7 +746,7 @@ pub fn render_streaming(
             )?;
             first_frame_time.get_or_insert_with(|| t0.elapsed());
             if last {
-                report.budget_limited |= stats.pool_limited;
+                report.pool_limited = stats.pool_limited;
                 report.traversal_time = traversal_time;
                 report.total_time = t0.elapsed();
                 report.frames = frames;
@@ -852,6 +856,18 @@ pub fn sample_tiles_to_file(
             ..Default::default()
         },
     )?;
+    // The pool holds the tiles of a view this size, unless one buffer of the adapter
+    // holds fewer tiles of this many bins: say which options to change.
+    let capacity = cache.capacity();
+    if capacity < tiles {
+        return Err(RenderError::InvalidOptions(format!(
+            "a {w}x{h} view needs up to {tiles} S-MIP tiles of 64x64 texels, more than the \
+             {capacity} tiles of {bins}x{bins} bins ({} MiB each) that one buffer of this GPU \
+             holds: give fewer --bins (a tile grows with their square) or a smaller --width \
+             and --height",
+            sndf::tile_bytes(bins) as f64 / f64::from(1 << 20),
+        )));
+    }
     let stats = cache.prepare(
         &renderer,
         &mdlod,

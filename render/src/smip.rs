@@ -866,7 +866,7 @@ impl Smip {
                 Ok(self.tiles.remove(&k).map(|t| t.slot).unwrap_or(0))
             }
             None => Err(RenderError::InvalidOptions(format!(
-                "the view needs more than the S-MIP pool's {} tiles: enlarge the pool or shrink the window",
+                "the view needs more than the S-MIP pool's {} tiles: a smaller view or fewer bins needs fewer",
                 self.capacity
             ))),
         }

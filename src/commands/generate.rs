@@ -21,6 +21,8 @@ pub struct Args {
     /// Number of particles per frame.
     #[arg(long, short = 'n', default_value_t = 100_000)]
     pub particles: u64,
+    /// The file to write: a LAMMPS dump, an extended XYZ file, or the NAME.raw.json
+    /// sidecar of raw arrays (--format).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Random seed.

@@ -72,7 +72,7 @@ pub fn run(args: Args) -> Result<()> {
     let levels: Vec<u64> = f.levels().iter().map(|l| l.point_count).collect();
     let file_size = std::fs::metadata(&args.file).map(|m| m.len()).unwrap_or(0);
     if args.json {
-        let v = json!({
+        let mut v = json!({
             "file": args.file.display().to_string(),
             "file_size": file_size,
             "format_version": format!("{}.{}", f.header().version_major, f.header().version_minor),
@@ -91,6 +91,10 @@ pub fn run(args: Args) -> Result<()> {
             "max_position_error": m.max_position_error,
             "writer": m.writer,
         });
+        // Radii, colours and the attribute's range are f32s: their shortest form, not
+        // their f64 widening (1.28, not 1.2799999713897705).
+        shortest_f32(&mut v["species"]);
+        shortest_f32(&mut v["attribute"]);
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
@@ -133,15 +137,18 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(b) = &m.simulation_box {
         println!(
-            "  box          origin {:?} a {:?} b {:?} c {:?}",
-            b.origin, b.a, b.b, b.c
+            "  box          origin {} a {} b {} c {}",
+            vector(b.origin),
+            vector(b.a),
+            vector(b.b),
+            vector(b.c)
         );
     }
     if let Some(t) = m.timestep {
         println!("  timestep     {t}");
     }
     if let Some(t) = m.time {
-        println!("  time         {t}");
+        println!("  time         {}", number(t));
     }
     if let Some(u) = &m.units {
         println!("  units        {}", shown(u));
@@ -160,6 +167,53 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("  max position error {:.4e}", m.max_position_error);
     Ok(())
+}
+
+/// A number as printed: an f32 widened to f64 (MMPLD and GSD boxes) as the f32's shortest
+/// form, others to 15 significant digits, the most an f64 holds exactly, so that
+/// rounding noise (LAMMPS writes `1.8075000000000003e+01`) does not show.
+fn number(x: f64) -> String {
+    if !x.is_finite() {
+        return format!("{x}");
+    }
+    if f64::from(x as f32) == x {
+        return format!("{:?}", x as f32);
+    }
+    let rounded: f64 = format!("{x:.14e}").parse().unwrap_or(x);
+    format!("{rounded:?}")
+}
+
+/// Every number of `v` that is an f32 widened to f64, as the f64 nearest to the f32's
+/// shortest decimal form (which reads back as the same f32).
+fn shortest_f32(v: &mut serde_json::Value) {
+    use serde_json::Value;
+    match v {
+        Value::Number(n) => {
+            if let Some(x) = n
+                .as_f64()
+                .filter(|x| !n.is_i64() && !n.is_u64() && x.is_finite())
+            {
+                if f64::from(x as f32) == x {
+                    if let Some(m) = (x as f32)
+                        .to_string()
+                        .parse()
+                        .ok()
+                        .and_then(serde_json::Number::from_f64)
+                    {
+                        *n = m;
+                    }
+                }
+            }
+        }
+        Value::Array(a) => a.iter_mut().for_each(shortest_f32),
+        Value::Object(o) => o.values_mut().for_each(shortest_f32),
+        _ => {}
+    }
+}
+
+/// A box vector as printed: `[x, y, z]`.
+fn vector(v: [f64; 3]) -> String {
+    format!("[{}, {}, {}]", number(v[0]), number(v[1]), number(v[2]))
 }
 
 /// A name from the file as printed: control characters (a hostile file's terminal escape
@@ -184,5 +238,27 @@ mod tests {
         assert_eq!(super::shown("Cu"), "Cu");
         assert_eq!(super::shown("a\u{1b}[2Jb\n"), "a\\u{1b}[2Jb\\n");
         assert_eq!(super::shown("Å µm"), "Å µm");
+    }
+
+    #[test]
+    fn numbers_print_without_rounding_noise() {
+        use super::number;
+        assert_eq!(number(18.075000000000003), "18.075");
+        assert_eq!(number(f64::from(0.1f32)), "0.1");
+        assert_eq!(number(0.0), "0.0");
+        assert_eq!(number(-2.0), "-2.0");
+        assert_eq!(number(0.1 + 0.2), "0.3");
+        assert_eq!(number(1234.5678901234), "1234.5678901234");
+        assert_eq!(number(1e-300), "1e-300");
+    }
+
+    #[test]
+    fn f32_numbers_of_json_get_their_shortest_form() {
+        let mut v = serde_json::json!({"radius": 1.28f32, "colour": [0.1f32, 1.0f32, 0], "n": 7});
+        super::shortest_f32(&mut v);
+        assert_eq!(
+            v.to_string(),
+            r#"{"colour":[0.1,1.0,0],"n":7,"radius":1.28}"#
+        );
     }
 }

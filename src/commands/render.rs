@@ -9,13 +9,16 @@ use mdlod_render::{
 
 use crate::progress::Bar;
 
-/// Render a .mdlod file to a PNG with no window: sphere ray casting of a level-of-detail
-/// cut chosen by screen-space error.
+/// Render a .mdlod file to a PNG with no window: a level-of-detail cut chosen by
+/// screen-space error, drawn as ray-cast spheres, splats, S-NDFs, a density volume or its
+/// iso-surface (--mode).
 #[derive(clap::Args)]
 #[command(
+    allow_negative_numbers = true,
     after_help = "Examples:\n  mdlod render frame.mdlod -o frame.png --azimuth 30 --elevation 20 --spp 4\n  mdlod render frame.mdlod -o close.png --view close.json --screen-error 0.5\n  mdlod render frame.mdlod -o big.png --gpu-memory 512M --save-view view.json"
 )]
 pub struct Args {
+    /// The .mdlod file to render.
     pub file: PathBuf,
     /// The PNG to write.
     #[arg(short, long)]
@@ -191,8 +194,10 @@ impl StyleArgs {
 /// The image size and the camera, shared by `render` and `sample`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct ViewArgs {
+    /// Image width, pixels.
     #[arg(long, default_value_t = 1280)]
     pub width: u32,
+    /// Image height, pixels.
     #[arg(long, default_value_t = 720)]
     pub height: u32,
     /// A JSON view file (as written by --save-view).
@@ -243,6 +248,7 @@ impl ViewArgs {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Mode {
+    #[value(alias = "standard")]
     Spheres,
     Splat,
     SplatOver,
@@ -435,12 +441,38 @@ pub fn run(args: Args) -> Result<()> {
     // A bar for the choice of the cut and for cuts drawn in several batches or samples
     // (every particle of 10^8 is nine batches).
     let r = render_to_png_with(&args.file, &args.output, &opts, Bar::for_renderer())?;
+    // The S-NDF mode reports its iterations as spp (--spp is refused there).
+    let samples = match args.mode {
+        Mode::Sndf => format!("{} rays per pixel", r.spp),
+        _ => format!("{} spp", r.spp),
+    };
+    let mut limits = vec![];
+    if r.budget_limited {
+        limits.push(if r.budget < args.budget {
+            format!(
+                "point budget reached: {} spheres, the most this GPU draws at once",
+                r.budget
+            )
+        } else {
+            format!(
+                "point budget of {} spheres reached: a larger --budget refines further",
+                r.budget
+            )
+        });
+    }
+    if r.pool_limited {
+        limits.push("GPU memory pool full: a larger --gpu-memory refines further".to_string());
+    }
+    let limits = if limits.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", limits.join("; "))
+    };
     println!(
-        "wrote {} ({}x{}, {} spp) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} hidden clusters and {} hidden particles left out), error {:.2} px{}",
+        "wrote {} ({}x{}, {samples}) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} hidden clusters and {} hidden particles left out), error {:.2} px{limits}",
         args.output.display(),
         r.width,
         r.height,
-        r.spp,
         r.adapter,
         r.backend,
         r.particles_drawn,
@@ -449,7 +481,6 @@ pub fn run(args: Args) -> Result<()> {
         r.nodes_occluded,
         r.particles_occluded,
         r.error_px,
-        if r.budget_limited { " (budget reached)" } else { "" }
     );
     let gpu = r.gpu_time.map_or(String::new(), |t| {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)

@@ -14,10 +14,14 @@ use super::render::ViewArgs;
 /// them (with the camera) in a .sndf file; `mdlod shade` then lights it any number of
 /// times with no particle data.
 #[derive(clap::Args)]
-#[command(after_help = "Example:\n  \
+#[command(
+    allow_negative_numbers = true,
+    after_help = "Example:\n  \
     mdlod sample frame.mdlod -o view.sndf --iterations 64 --width 640 --height 360\n  \
-    mdlod shade view.sndf -o lit.png --light -1,1,1 --light 1,0,0.5:#4060ff")]
+    mdlod shade view.sndf -o lit.png --light -1,1,1 --light 1,0,0.5:#4060ff"
+)]
 pub struct Args {
+    /// The .mdlod file to sample.
     pub file: PathBuf,
     /// The .sndf file to write.
     #[arg(short, long)]

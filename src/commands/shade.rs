@@ -143,7 +143,7 @@ pub fn run(args: Args) -> Result<()> {
         None => None,
     };
     if args.level.is_some_and(|l| l > 16) {
-        bail!("level {:?} (at most 16)", args.level);
+        bail!("--level {} (at most 16)", args.level.unwrap_or_default());
     }
     let shade = ShadeLights {
         ambient: args.ambient,

@@ -12,6 +12,7 @@ use mdlod_viewer::{Mode, ViewerOptions};
 /// modes (1-6), timesteps (, and ., space plays).
 #[derive(clap::Args)]
 #[command(
+    allow_negative_numbers = true,
     after_help = "Examples:\n  mdlod view frame.mdlod\n  mdlod view runs/ --mode sndf\n  mdlod view frame.mdlod --script session.json   # play actions, write screenshots, close"
 )]
 pub struct Args {
@@ -20,11 +21,15 @@ pub struct Args {
     /// Size of the image area of the window (logical pixels).
     #[arg(long, default_value_t = 1280)]
     pub width: u32,
+    /// Height of the image area of the window (logical pixels).
     #[arg(long, default_value_t = 720)]
     pub height: u32,
     /// Start from a view file (as `mdlod render --view` takes).
     #[arg(long)]
     pub view: Option<PathBuf>,
+    /// How to draw the points at the start (keys 1-6 switch): ray-cast spheres, the same
+    /// supersampled once the view is still, S-NDFs, splats, the density volume or its
+    /// iso-surface.
     #[arg(long, value_enum, default_value = "standard")]
     pub mode: ModeArg,
     /// Play a script: a JSON array of actions (orbit, pan, zoom, mode, light, step,
@@ -43,6 +48,7 @@ pub struct Args {
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum ModeArg {
+    #[value(alias = "spheres")]
     Standard,
     Supersampled,
     Sndf,

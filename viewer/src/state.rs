@@ -21,8 +21,10 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Mode {
-    /// Ray-cast spheres, one sample per pixel.
+    /// Ray-cast spheres, one sample per pixel (`spheres`, as `mdlod render` names it, is
+    /// accepted too).
     #[default]
+    #[serde(alias = "spheres")]
     Standard,
     /// Ray-cast spheres with jittered supersampling once the view is still.
     Supersampled,
@@ -1276,6 +1278,13 @@ mod tests {
             }
         );
         assert!(serde_json::from_str::<Vec<Action>>(r#"[{"action": "fly"}]"#).is_err());
+        // `render`'s name of the standard mode.
+        assert_eq!(
+            serde_json::from_str::<Action>(r#"{"action": "mode", "mode": "spheres"}"#).unwrap(),
+            Action::Mode {
+                mode: Mode::Standard
+            }
+        );
         assert!(
             serde_json::from_str::<Vec<Action>>(r#"[{"action": "zoom", "factr": 2}]"#).is_err()
         );
