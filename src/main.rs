@@ -1,9 +1,36 @@
 //! `mdlod`: the command-line program. Argument parsing and progress output only; the work
 //! lives in the library crates.
 
+/// `println!` for the commands' output, shadowing std's in this crate: when the reader
+/// of a pipe has gone (`mdlod info frame.mdlod | head -1`), the program ends quietly, as
+/// a SIGPIPE would end a C program, instead of std's panic ("failed printing to stdout").
+macro_rules! println {
+    () => {
+        $crate::print_line(format_args!(""))
+    };
+    ($($arg:tt)*) => {
+        $crate::print_line(format_args!($($arg)*))
+    };
+}
+
 mod commands;
 mod interrupt;
 mod progress;
+
+/// Writes a line of output (see `println!` above).
+fn print_line(line: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(line).and_then(|()| out.write_all(b"\n")) {
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            eprintln!("error: writing to standard output: {e}");
+            std::process::exit(1);
+        }
+        // Nobody reads what follows; the work itself is done or stopped as it would be
+        // by the signal.
+        std::process::exit(0);
+    }
+}
 
 /// jemalloc instead of the system allocator. A conversion builds chunk after chunk with
 /// the same large buffers; glibc returns every block over 32 MiB to the kernel when it is
