@@ -1371,7 +1371,7 @@ fn radius_overrides_naming_no_species_are_errors_listing_the_species() {
     // The dump has numeric type 1 only: `Cu` names nothing.
     let err = fails(&["convert", s(&input), "-o", s(&out), "--radius", "Cu=1.28"]);
     assert!(
-        err.contains("no species named \"Cu\"") && err.contains("the input has 1"),
+        err.contains("no species named \"Cu\"") && err.contains("the input's species are named 1"),
         "{err}"
     );
     assert!(!out.exists());
@@ -1586,4 +1586,399 @@ fn cameras_too_far_from_the_data_are_refused() {
     let err = fails(&["render", s(&frame), "-o", s(&png), "--view", s(&view)]);
     assert!(err.contains("far.json") && err.contains("too far"), "{err}");
     assert!(!png.exists());
+}
+
+#[test]
+fn negative_numbers_mode_aliases_and_levels_get_the_programs_own_answers() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("x.png");
+    let (f, p) = (s(&frame), s(&png));
+    // A negative number is a value, answered by the range check, not a clap tip to
+    // write `-- -1`.
+    for (args, message) in [
+        (vec!["render", f, "-o", p, "--zoom", "-1"], "zoom"),
+        (
+            vec!["render", f, "-o", p, "--screen-error", "-1"],
+            "a finite number, 0 or more",
+        ),
+        (
+            vec!["sample", f, "-o", p, "--screen-error", "-1"],
+            "a finite number, 0 or more",
+        ),
+        (vec!["view", f, "--width", "-1"], "--width"),
+    ] {
+        let err = fails(&args);
+        assert!(
+            err.contains(message) && !err.contains("unexpected argument"),
+            "{args:?}: {err}"
+        );
+    }
+    // Each command's name of the sphere mode is the other's alias (a size check that
+    // needs no GPU answers render; the missing file answers view).
+    let err = fails(&[
+        "render", f, "-o", p, "--mode", "standard", "--width", "40000",
+    ]);
+    assert!(err.contains("must each be 1 to 32768"), "{err}");
+    let missing = dir.path().join("missing.mdlod");
+    let err = fails(&["view", s(&missing), "--mode", "spheres"]);
+    assert!(err.contains("missing.mdlod"), "{err}");
+    let script = dir.path().join("s.json");
+    std::fs::write(&script, r#"[{"action": "mode", "mode": "spheres"}]"#).unwrap();
+    let err = fails(&["view", s(&missing), "--script", s(&script)]);
+    assert!(
+        err.contains("missing.mdlod") && !err.contains("variant"),
+        "{err}"
+    );
+    // Levels print as numbers.
+    let sndf = dir.path().join("v.sndf");
+    std::fs::write(&sndf, "x").unwrap();
+    let err = fails(&["shade", s(&sndf), "-o", p, "--level", "17"]);
+    assert!(err.contains("--level 17 (at most 16)"), "{err}");
+    assert!(!png.exists());
+    // Help names every render mode and describes the positional file.
+    let help = ok(&["--help"]);
+    let render = help
+        .lines()
+        .find(|l| l.trim_start().starts_with("render"))
+        .unwrap();
+    assert!(
+        render.contains("splats") && render.contains("iso-surface"),
+        "{help}"
+    );
+    let help = ok(&["render", "--help"]);
+    assert!(help.contains("The .mdlod file to render"), "{help}");
+}
+
+#[test]
+fn info_prints_boxes_without_rounding_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    // LAMMPS writes this box as 1.8075000000000003e+01.
+    let frame = dir.path().join("a.mdlod");
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    ok(&["convert", s(&input), "-o", s(&frame), "--radius", "1=1.28"]);
+    let text = ok(&["info", s(&frame)]);
+    assert!(
+        text.contains("a [18.075, 0.0, 0.0]") && !text.contains("00000"),
+        "{text}"
+    );
+    let json = ok(&["info", s(&frame), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    // Radii are f32s: their shortest form, not their f64 widening.
+    assert_eq!(v["species"][0]["radius"].to_string(), "1.28", "{json}");
+}
+
+#[test]
+fn render_and_sample_summaries_name_the_limit_that_applied() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("x.png");
+    let (f, p) = (s(&frame), s(&png));
+    let small = ["--width", "48", "--height", "32"];
+    let text = ok(&[&["render", f, "-o", p, "--budget", "10"][..], &small].concat());
+    assert!(
+        text.contains("point budget of 10 spheres reached") && !text.contains("memory pool"),
+        "{text}"
+    );
+    let text = ok(&[
+        &[
+            "render",
+            f,
+            "-o",
+            p,
+            "--gpu-memory",
+            "4K",
+            "--budget",
+            "100000000",
+        ][..],
+        &small,
+    ]
+    .concat());
+    assert!(
+        text.contains("GPU memory pool full: a larger --gpu-memory")
+            && !text.contains("point budget"),
+        "{text}"
+    );
+    let text = ok(&[
+        &["render", f, "-o", p, "--mode", "sndf", "--iterations", "2"][..],
+        &small,
+    ]
+    .concat());
+    assert!(
+        text.contains("2 rays per pixel") && !text.contains("spp"),
+        "{text}"
+    );
+    // More tiles than one buffer holds: the advice names sample's options, not the
+    // viewer's pool and window.
+    let sndf = dir.path().join("t.sndf");
+    let err = fails(&[
+        "sample",
+        f,
+        "-o",
+        s(&sndf),
+        "--tiles",
+        "--ortho",
+        "--bins",
+        "32",
+        "--width",
+        "4096",
+        "--height",
+        "4096",
+    ]);
+    assert!(
+        err.contains("--bins")
+            && err.contains("--width")
+            && !err.contains("window")
+            && !err.contains("render options"),
+        "{err}"
+    );
+    assert!(!sndf.exists());
+}
+
+/// The `frame-*.mdlod` files of a batch directory (none when it does not exist).
+fn batch_frames(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .map(|d| {
+            d.flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.starts_with("frame-") && n.ends_with(".mdlod"))
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    names
+}
+
+/// A radius override that no frame can hold (an element symbol where the species are
+/// LAMMPS type numbers, a type number where they come from an `element` column) is
+/// refused before any frame is converted, in every shard, saying what to write instead;
+/// a name that may occur in some frame only is checked at the end, as before.
+#[test]
+fn batch_refuses_a_radius_no_frame_can_hold_before_converting_anything() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("a.lammpstrj");
+    ok(&[
+        "generate",
+        "alloy",
+        "-n",
+        "2000",
+        "--frames",
+        "3",
+        "-o",
+        s(&input),
+    ]);
+    let d = dir.path().join("d");
+    for shard in [None, Some("0/2"), Some("1/2")] {
+        let mut args = vec!["batch", s(&input), "-o", s(&d), "--radius", "Cu=1.28"];
+        if let Some(sh) = shard {
+            args.extend(["--shard", sh]);
+        }
+        let err = fails(&args);
+        assert!(
+            err.contains(s(&input))
+                && err.contains("--radius Cu=1.28")
+                && err.contains("no species named \"Cu\"")
+                && err.contains("LAMMPS type number")
+                && err.contains("--radius 1=1.28 for type 1"),
+            "{shard:?}: {err}"
+        );
+        assert_eq!(batch_frames(&d), Vec::<String>::new(), "{shard:?}");
+    }
+    // A number that names no frame's species may belong to a later frame: checked at
+    // the end, listing the species.
+    let err = fails(&["batch", s(&input), "-o", s(&d), "--radius", "3=1"]);
+    assert!(
+        err.contains("no species named \"3\"")
+            && err.contains("the input's species are named 1, 2")
+            && !err.contains("the input has"),
+        "{err}"
+    );
+    ok(&[
+        "batch",
+        s(&input),
+        "-o",
+        s(&d),
+        "--radius",
+        "1=1.28",
+        "--radius",
+        "2=1.44",
+    ]);
+    assert_eq!(batch_frames(&d).len(), 3);
+
+    // Species named by an `element` column: a type number names none of them.
+    let alloy = lammps_sample_path("cuag_alloy.unwrapped.dump");
+    let e = dir.path().join("e");
+    let err = fails(&["batch", s(&alloy), "-o", s(&e), "--radius", "1=1.3"]);
+    assert!(
+        err.contains(s(&alloy))
+            && err.contains("--radius 1=1.3")
+            && err.contains("`element` column")
+            && err.contains("--radius Cu=1.3 (type 1 is Cu)"),
+        "{err}"
+    );
+    assert_eq!(batch_frames(&e), Vec::<String>::new());
+    let out = dir.path().join("e.mdlod");
+    let err = fails(&["convert", s(&alloy), "-o", s(&out), "--radius", "1=1.3"]);
+    assert!(
+        err.contains(s(&alloy))
+            && err.contains("--radius 1=1.3")
+            && err.contains("the input's species are named Cu, Ag")
+            && err.contains("`element` column")
+            && err.contains("--radius Cu=1.3"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    ok(&["convert", s(&alloy), "-o", s(&out), "--radius", "Cu=1.3"]);
+    // And `convert` on type numbers says what to write too.
+    let err = fails(&["convert", s(&input), "-o", s(&out), "--radius", "Ag=1.44"]);
+    assert!(
+        err.contains(s(&input))
+            && err.contains("the input's species are named 1, 2")
+            && err.contains("--radius 1=1.44 for type 1"),
+        "{err}"
+    );
+}
+
+/// The attribute of every frame of a batch directory (`None`: none).
+fn batch_attributes(dir: &Path) -> Vec<Option<String>> {
+    batch_frames(dir)
+        .iter()
+        .map(|f| {
+            MdlodFile::open(dir.join(f))
+                .unwrap()
+                .metadata()
+                .attribute
+                .as_ref()
+                .map(|a| a.name.clone())
+        })
+        .collect()
+}
+
+/// A rerun asking for another attribute, or none, or one where there was none, converts
+/// the frames again; a column the input lacks is an error naming it and the file.
+#[test]
+fn a_batch_rerun_with_another_attribute_converts_the_frames_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("a.lammpstrj");
+    ok(&[
+        "generate",
+        "alloy",
+        "-n",
+        "2000",
+        "--frames",
+        "3",
+        "-o",
+        s(&input),
+    ]);
+    let d = dir.path().join("d");
+    let run = |attribute: Option<&str>| {
+        let mut args = vec!["batch", s(&input), "-o", s(&d)];
+        if let Some(a) = attribute {
+            args.extend(["--attribute", a]);
+        }
+        ok(&args)
+    };
+    let some = |a: &str| vec![Some(a.to_string()); 3];
+    assert!(run(Some("c_pe")).contains("3 converted, 0 already done"));
+    assert_eq!(batch_attributes(&d), some("c_pe"));
+    assert!(run(Some("c_pe")).contains("0 converted, 3 already done"));
+    assert!(run(Some("x")).contains("3 converted, 0 already done"));
+    assert_eq!(batch_attributes(&d), some("x"));
+    assert!(run(None).contains("3 converted, 0 already done"));
+    assert_eq!(batch_attributes(&d), vec![None; 3]);
+    assert!(run(None).contains("0 converted, 3 already done"));
+    assert!(run(Some("c_pe")).contains("3 converted, 0 already done"));
+    assert_eq!(batch_attributes(&d), some("c_pe"));
+    let err = fails(&["batch", s(&input), "-o", s(&d), "--attribute", "nosuch"]);
+    assert!(
+        err.contains(s(&input)) && err.contains("`nosuch`") && err.contains("c_pe"),
+        "{err}"
+    );
+    // Nothing was touched.
+    assert_eq!(batch_attributes(&d), some("c_pe"));
+
+    // A gzip input (its text is dropped after indexing) and a binary dump alike.
+    for (sample, first, other) in [
+        ("cu_melt.custom.dump.gz", "c_ke", "vx"),
+        ("cu_melt.custom.bin", "c_pe", "x"),
+    ] {
+        let input = lammps_sample_path(sample);
+        let d = dir.path().join(sample);
+        let run = |a: &str| ok(&["batch", s(&input), "-o", s(&d), "--attribute", a]);
+        let n = batch_frames(&d).len();
+        assert!(run(first).contains(", 0 already done"), "{sample}");
+        let frames = batch_frames(&d).len();
+        assert!(frames > n);
+        assert!(
+            run(first).contains(&format!("0 converted, {frames} already done")),
+            "{sample}"
+        );
+        assert!(
+            run(other).contains(&format!("{frames} converted, 0 already done")),
+            "{sample}"
+        );
+        assert_eq!(batch_attributes(&d), vec![Some(other.to_string()); frames]);
+        let err = fails(&["batch", s(&input), "-o", s(&d), "--attribute", "nosuch"]);
+        assert!(err.contains(sample) && err.contains("`nosuch`"), "{err}");
+    }
+}
+
+/// The same data as extended XYZ and as a LAMMPS dump lists its species in the same
+/// order (numeric names numerically), so the colours do not swap with the format.
+#[test]
+fn xyz_and_lammps_forms_of_the_same_data_get_the_same_species_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut tables = vec![];
+    for (name, format) in [("d.xyz", "xyz"), ("d.lammpstrj", "lammps")] {
+        let input = dir.path().join(name);
+        ok(&[
+            "generate",
+            "droplets",
+            "-n",
+            "20000",
+            "--format",
+            format,
+            "-o",
+            s(&input),
+        ]);
+        for chunk_points in [None, Some("4096")] {
+            let out = dir.path().join(format!("{name}.mdlod"));
+            let mut args = vec!["convert", s(&input), "-o", s(&out)];
+            if let Some(c) = chunk_points {
+                args.extend(["--chunk-points", c]);
+            }
+            ok(&args);
+            let file = MdlodFile::open(&out).unwrap();
+            let species: Vec<(String, [u32; 3])> = file
+                .metadata()
+                .species
+                .iter()
+                .map(|s| (s.name.clone(), s.colour.map(f32::to_bits)))
+                .collect();
+            tables.push((name, chunk_points, species));
+        }
+    }
+    let names: Vec<&str> = tables[0].2.iter().map(|s| s.0.as_str()).collect();
+    assert_eq!(names, ["1", "2"]);
+    for t in &tables[1..] {
+        assert_eq!(t.2, tables[0].2, "{:?} vs {:?}", t, tables[0]);
+    }
+}
+
+#[test]
+fn a_closed_output_pipe_ends_the_program_quietly() {
+    // `mdlod info frame.mdlod | head -1`: the reader is gone before the program writes.
+    // std's println! panicked there ("failed printing to stdout: Broken pipe").
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args(["info", s(&frame)])
+        .stdout(writer)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.success(), "{:?}: {err}", out.status);
 }

@@ -8,6 +8,10 @@
 //!    with their timesteps (an input without timesteps numbers its
 //!    frames by their position in the whole list). Frames are sorted by timestep; two
 //!    frames with the same timestep are an error naming both sources.
+//!    While an input is open, how its first frame names species is noted (a radius
+//!    override that no frame can hold, such as `Cu` for LAMMPS type numbers, is refused
+//!    before anything is converted), and every frame's attribute is resolved (its name as
+//!    the reader records it; a column the frame lacks is an error then).
 //! 2. With a shard `I/N`, this process takes the frames at positions `I, I + N, ...` of
 //!    that sorted list, so N processes (a Slurm job array) split the work without talking
 //!    to each other; each writes its own manifest `dataset.shard-I-of-N.json`, and
@@ -15,7 +19,8 @@
 //! 3. A frame whose output exists, opens (the reader validates its structure), records
 //!    the same source (path, frame, size and modification time, to the nanosecond where
 //!    the file system keeps it) and was built with the
-//!    same settings (cluster size, root points, δn, position bits, the radii given now) is
+//!    same settings (cluster size, root points, δn, position bits, the radii given now,
+//!    the attribute asked for now, or none) is
 //!    skipped; anything else is converted again. Leftover temporary files of killed runs
 //!    are removed first: only this shard's own frames' (a shard running beside it never
 //!    writes those) and temporary manifests older than [`STALE_TEMP`].
@@ -39,6 +44,7 @@ use serde::{Deserialize, Serialize};
 use crate::convert::{convert_frame, ConvertError, ConvertOptions};
 use crate::progress::Progress;
 use crate::readers::{DumpFile, ReadError, ReadOptions};
+use crate::species::SpeciesNaming;
 
 /// Peak memory of one frame's conversion per particle (measured with the `mdlod`
 /// binary's allocator in huge pages: 125 MiB for 10^6 particles, 0.96 GiB for 10^7),
@@ -139,6 +145,19 @@ pub enum BatchError {
     Manifest { path: PathBuf, message: String },
     #[error("shard {0}/{1}: the shard index must be below the shard count")]
     BadShard(u32, u32),
+    /// A radius override names a species no frame of the inputs can hold (they name
+    /// their species another way): refused before any frame is converted.
+    #[error(
+        "{inputs}: --radius {name}={radius}: no species named {name:?} can occur there: {reason}"
+    )]
+    ImpossibleSpecies {
+        /// The input (or inputs) named.
+        inputs: String,
+        name: String,
+        radius: f32,
+        /// How the inputs name species instead, and what to write.
+        reason: String,
+    },
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> BatchError + '_ {
@@ -251,8 +270,9 @@ fn entry_of(path: &Path, file: &MdlodFile, timestep: u64) -> FrameEntry {
 }
 
 /// Whether `file` was built with the settings a conversion with `options` would use: the
-/// hierarchy parameters, and every radius given in `options` for a species it holds.
-fn same_build(file: &MdlodFile, options: &ConvertOptions) -> bool {
+/// hierarchy parameters, every radius given in `options` for a species it holds, and
+/// `attribute` (the name the reader gives the attribute asked for now; `None`: none).
+fn same_build(file: &MdlodFile, options: &ConvertOptions, attribute: Option<&str>) -> bool {
     let (m, b) = (file.metadata(), &options.build);
     // The file records the δn in effect: at most its levels below the top.
     let last = u32::try_from(file.level_count().saturating_sub(1)).unwrap_or(u32::MAX);
@@ -270,9 +290,24 @@ fn same_build(file: &MdlodFile, options: &ConvertOptions) -> bool {
     // (An override naming none of the frame's species changes nothing in it: a species
     // may appear in some frames of a trajectory only.)
     params
+        && m.attribute.as_ref().map(|a| a.name.as_str()) == attribute
         && m.species.iter().all(|s| {
             crate::species::radius_override(&options.radii, &s.name).is_none_or(|r| r == s.radius)
         })
+}
+
+/// The inputs of a batch as an error names them: the one, or the first and how many more.
+fn describe_inputs(inputs: &[PathBuf]) -> String {
+    match inputs {
+        [] => "the inputs".into(),
+        [one] => one.display().to_string(),
+        [first, rest @ ..] => format!(
+            "{} (and {} more input{})",
+            first.display(),
+            rest.len(),
+            if rest.len() == 1 { "" } else { "s" }
+        ),
+    }
 }
 
 /// Removes what killed runs left in `out_dir`: temporary outputs of `timesteps` (this
@@ -326,6 +361,8 @@ struct Job<'a> {
     frame: usize,
     timestep: u64,
     particles: u64,
+    /// The frame's attribute as the reader names it (`None`: no attribute).
+    attribute: Option<String>,
 }
 
 /// Converts every frame of `inputs` (this shard's share) into `out_dir`.
@@ -346,7 +383,9 @@ pub fn batch(
     // is dropped after indexing (with its frames' particle counts noted), so a batch of
     // many compressed files never holds more than one at a time per worker.
     let mut dumps: Vec<Option<DumpFile>> = Vec::with_capacity(inputs.len());
-    let mut listed: Vec<Vec<(u64, u64)>> = Vec::with_capacity(inputs.len());
+    let mut listed: Vec<Vec<(u64, u64, Option<String>)>> = Vec::with_capacity(inputs.len());
+    // How the first frame of each input names its species (for the radius overrides).
+    let mut namings: Vec<SpeciesNaming> = Vec::with_capacity(inputs.len());
     let mut position = 0u64;
     // Indexing has the whole memory limit: one input at a time, before any conversion.
     let mut index_chunks = opts.convert.chunks.clone();
@@ -370,21 +409,51 @@ pub fn batch(
             } else {
                 0
             };
-            frames.push((timestep, particles));
+            // The attribute asked for, resolved now (a gzip input's text is gone later): a
+            // column the frame lacks is an error before anything is converted.
+            let attribute = dump
+                .attribute_name(k, &opts.read)
+                .map_err(|e| bounded.context(p, e.into()))?;
+            frames.push((timestep, particles, attribute));
+        }
+        if !opts.convert.radii.is_empty() && dump.frame_count() > 0 {
+            // (Advisory: a frame that cannot be read fails where it is converted.)
+            namings.push(
+                dump.species_naming(0, &opts.read)
+                    .unwrap_or(SpeciesNaming::Given),
+            );
         }
         listed.push(frames);
         dumps.push((!compressed).then_some(bounded.dump));
     }
     let mut jobs: Vec<Job<'_>> = Vec::new();
     for ((input, dump), frames) in inputs.iter().zip(&dumps).zip(&listed) {
-        for (k, &(timestep, particles)) in frames.iter().enumerate() {
+        for (k, (timestep, particles, attribute)) in frames.iter().enumerate() {
             jobs.push(Job {
                 input,
                 dump: dump.as_ref(),
                 frame: k,
-                timestep,
-                particles,
+                timestep: *timestep,
+                particles: *particles,
+                attribute: attribute.clone(),
             });
+        }
+    }
+    // A species may appear in later frames only (checked at the end), but a name the
+    // inputs cannot hold (`Cu` where species are LAMMPS type numbers) is refused now,
+    // in every shard.
+    if !namings.is_empty() {
+        for (name, radius) in &opts.convert.radii {
+            let reasons: Option<Vec<String>> =
+                namings.iter().map(|n| n.excludes(name, *radius)).collect();
+            if let Some(reason) = reasons.and_then(|r| r.into_iter().next()) {
+                return Err(BatchError::ImpossibleSpecies {
+                    inputs: describe_inputs(inputs),
+                    name: name.clone(),
+                    radius: *radius,
+                    reason,
+                });
+            }
         }
     }
     let frames_total = jobs.len();
@@ -428,7 +497,7 @@ pub fn batch(
                 .source
                 .as_ref()
                 .is_some_and(|s| same_source(s, &want))
-                && same_build(f, &opts.convert)
+                && same_build(f, &opts.convert, job.attribute.as_deref())
         });
         match complete {
             Some(f) => {
@@ -612,13 +681,19 @@ pub fn batch(
     let whole = opts.shard.is_none_or(|(_, n)| n == 1);
     if whole && !seen.is_empty() {
         if let Some((name, radius)) = opts.convert.radii.iter().find(|(n, _)| !seen.contains(n)) {
-            return Err(BatchError::Convert(ConvertError::Species(
+            return Err(BatchError::Convert(ConvertError::Species(Box::new(
                 crate::species::UnknownSpecies {
                     name: name.clone(),
                     radius: *radius,
                     known: seen.into_iter().collect(),
+                    input: Some(describe_inputs(inputs)),
+                    // How the inputs name species, where they all agree.
+                    naming: namings
+                        .first()
+                        .filter(|n| namings.iter().all(|m| m == *n))
+                        .cloned(),
                 },
-            )));
+            ))));
         }
     }
     Ok(BatchReport {

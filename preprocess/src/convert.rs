@@ -58,8 +58,9 @@ pub enum ConvertError {
         #[source]
         source: std::io::Error,
     },
+    /// Boxed: the message's file and naming would make every conversion result large.
     #[error(transparent)]
-    Species(#[from] crate::species::UnknownSpecies),
+    Species(#[from] Box<crate::species::UnknownSpecies>),
     #[error("chunked conversion: {0}")]
     Chunked(String),
     /// An error in the text a large gzip input was decompressed into (the place is a
@@ -71,6 +72,12 @@ pub enum ConvertError {
         #[source]
         source: Box<ConvertError>,
     },
+}
+
+impl From<crate::species::UnknownSpecies> for ConvertError {
+    fn from(e: crate::species::UnknownSpecies) -> Self {
+        ConvertError::Species(Box::new(e))
+    }
 }
 
 /// Builds the hierarchy of `frame` and writes it to `output`. `source` describes where
@@ -372,6 +379,23 @@ pub fn convert_dump(
         FrameSelect::Last => dump.frame_count().saturating_sub(1),
     };
     let info = dump.frame_info(k)?;
+    // An override naming none of the species says how this input names them (a name
+    // that cannot occur in it: what to write instead).
+    let naming = if options.radii.is_empty() {
+        None
+    } else {
+        dump.species_naming(k, read).ok()
+    };
+    let explain = |e: ConvertError| match e {
+        ConvertError::Species(s) => {
+            ConvertError::Species(Box::new(crate::species::UnknownSpecies {
+                input: Some(named.display().to_string()),
+                naming: naming.clone(),
+                ..*s
+            }))
+        }
+        e => e,
+    };
     if info.particles > options.chunks.chunk_points {
         if let Some(source) = window_source(&dump, k, read, &info) {
             // Out of core: the frame is read a window at a time.
@@ -381,7 +405,8 @@ pub fn convert_dump(
                 Some(source_info(named, k as u64)),
                 options,
             );
-            return convert_chunked(source.as_ref(), metadata, output, options, progress);
+            return convert_chunked(source.as_ref(), metadata, output, options, progress)
+                .map_err(explain);
         }
     }
     let t0 = Instant::now();
@@ -396,7 +421,8 @@ pub fn convert_dump(
         output,
         options,
         progress,
-    )?;
+    )
+    .map_err(explain)?;
     report.read_time = read_time;
     Ok(report)
 }

@@ -11,7 +11,8 @@ pub use mdlod_format::meta::SimulationBox;
 pub struct SpeciesName {
     /// Element symbol (`Cu`), LAMMPS numeric type as text (`1`), or the XYZ species label.
     pub name: String,
-    /// True when `name` came from a numeric LAMMPS `type` column with no element given.
+    /// True when `name` is a number from a column of numbers only: a LAMMPS `type`
+    /// column with no element given, an XYZ species column of numbers, MMPLD list numbers.
     pub numeric_type: bool,
     /// The radius the input gives this species (GSD `particles/diameter` / 2), used
     /// unless the user overrides it.
@@ -26,8 +27,8 @@ pub struct Frame {
     pub positions: Vec<[f32; 3]>,
     /// Index into `species` for every particle (same length as `positions`).
     pub species_index: Vec<u16>,
-    /// The distinct species in order of first appearance (numeric LAMMPS types sorted
-    /// numerically instead).
+    /// The distinct species in order of first appearance (numeric types, LAMMPS or XYZ,
+    /// sorted numerically instead).
     pub species: Vec<SpeciesName>,
     /// Optional per-particle scalar (a named dump column), same length as `positions`.
     pub attribute: Option<Attribute>,

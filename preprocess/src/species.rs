@@ -116,14 +116,94 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
         .collect()
 }
 
+/// How an input names its species, as far as its first atom tells (see
+/// `DumpFile::species_naming`): what an override may call them.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum SpeciesNaming {
+    /// LAMMPS type numbers: a `type` column of numbers and no `element` column (text), or
+    /// any binary dump with a `type` column. Only a number can name one. `first` is the
+    /// first atom's type.
+    TypeNumbers { first: String },
+    /// A LAMMPS `element` column: the species are its symbols, never the type numbers
+    /// beside them. `first` is the first atom's element, `first_type` its type (when the
+    /// dump has a `type` column too).
+    ElementColumn {
+        first: String,
+        first_type: Option<String>,
+    },
+    /// Names as the input gives them (XYZ species, GSD types, raw sidecar names, MMPLD
+    /// lists, LAMMPS type labels, the one species `atom`): any name may occur.
+    Given,
+}
+
+/// Whether `name` is a number as numeric type names are (see `readers::atoms`).
+pub fn is_type_number(name: &str) -> bool {
+    name.parse::<i64>().is_ok()
+}
+
+impl SpeciesNaming {
+    /// When no species of an input named this way can be called `name`: why, and what to
+    /// write instead (for an override `name=radius`). `None` when one may be.
+    pub fn excludes(&self, name: &str, radius: f32) -> Option<String> {
+        match self {
+            SpeciesNaming::TypeNumbers { first } if !is_type_number(name) => Some(format!(
+                "the input names its species by LAMMPS type number (its `type` column; it has \
+                 no `element` column): give the type number instead, e.g. --radius \
+                 {first}={radius} for type {first}"
+            )),
+            SpeciesNaming::ElementColumn { first, first_type } if is_type_number(name) => {
+                let example = match first_type {
+                    Some(t) if t == name => {
+                        format!("--radius {first}={radius} (type {t} is {first})")
+                    }
+                    _ => format!("e.g. --radius {first}={radius}"),
+                };
+                Some(format!(
+                    "the input names its species by its `element` column, not by type \
+                     number: give the element symbol instead, {example}"
+                ))
+            }
+            _ => None,
+        }
+    }
+}
+
 /// A radius override naming none of the input's species.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("radius override {name}={radius}: no species named {name:?} (the input has {})", known.join(", "))]
 pub struct UnknownSpecies {
     pub name: String,
     pub radius: f32,
     /// The input's species names.
     pub known: Vec<String>,
+    /// The input (its path), when known.
+    pub input: Option<String>,
+    /// How the input names its species, when known: the message then says what to write
+    /// instead of a name that cannot occur.
+    pub naming: Option<SpeciesNaming>,
+}
+
+impl std::fmt::Display for UnknownSpecies {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if let Some(input) = &self.input {
+            write!(f, "{input}: ")?;
+        }
+        write!(
+            f,
+            "--radius {}={}: no species named {:?} (the input's species are named {})",
+            self.name,
+            self.radius,
+            self.name,
+            self.known.join(", ")
+        )?;
+        let why = self
+            .naming
+            .as_ref()
+            .and_then(|n| n.excludes(&self.name, self.radius));
+        if let Some(why) = why {
+            write!(f, "; {why}")?;
+        }
+        Ok(())
+    }
 }
 
 /// Checks that every override names one of `names` (exactly: names are case-sensitive,
@@ -131,16 +211,18 @@ pub struct UnknownSpecies {
 pub fn check_overrides(
     names: &[SpeciesName],
     overrides: &[(String, f32)],
-) -> Result<(), UnknownSpecies> {
+) -> Result<(), Box<UnknownSpecies>> {
     match overrides
         .iter()
         .find(|(n, _)| !names.iter().any(|s| &s.name == n))
     {
-        Some((name, radius)) => Err(UnknownSpecies {
+        Some((name, radius)) => Err(Box::new(UnknownSpecies {
             name: name.clone(),
             radius: *radius,
             known: names.iter().map(|s| s.name.clone()).collect(),
-        }),
+            input: None,
+            naming: None,
+        })),
         None => Ok(()),
     }
 }
@@ -214,9 +296,41 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("\"Cu\"") && e.contains("the input has 1, 2"),
+            e.contains("\"Cu\"") && e.contains("the input's species are named 1, 2"),
             "{e}"
         );
+        // How the input names its species says what to write instead of a name that
+        // cannot occur.
+        let e = UnknownSpecies {
+            naming: Some(SpeciesNaming::TypeNumbers { first: "1".into() }),
+            input: Some("a.dump".into()),
+            ..*check_overrides(&names, &[("Cu".into(), 1.28)]).unwrap_err()
+        }
+        .to_string();
+        assert_eq!(
+            e,
+            "a.dump: --radius Cu=1.28: no species named \"Cu\" (the input's species are named \
+             1, 2); the input names its species by LAMMPS type number (its `type` column; it \
+             has no `element` column): give the type number instead, e.g. --radius 1=1.28 for \
+             type 1"
+        );
+        let element = SpeciesNaming::ElementColumn {
+            first: "Cu".into(),
+            first_type: Some("1".into()),
+        };
+        assert!(element.excludes("Cu", 1.0).is_none());
+        assert!(element
+            .excludes("2", 1.0)
+            .unwrap()
+            .contains("e.g. --radius Cu=1"));
+        assert!(element
+            .excludes("1", 1.3)
+            .unwrap()
+            .contains("`element` column, not by type number: give the element symbol instead, --radius Cu=1.3 (type 1 is Cu)"));
+        let numbers = SpeciesNaming::TypeNumbers { first: "2".into() };
+        assert!(numbers.excludes("7", 1.0).is_none());
+        assert!(SpeciesNaming::Given.excludes("Cu", 1.0).is_none());
+        assert!(SpeciesNaming::Given.excludes("1", 1.0).is_none());
         // Names are exact: `cu` is not `Cu`.
         let cu = [SpeciesName {
             name: "Cu".into(),

@@ -413,3 +413,77 @@ fn a_radius_for_a_species_of_later_frames_only_converts_every_frame() {
     let again = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
     assert_eq!((again.converted, again.skipped), (0, 3));
 }
+
+/// What a rerun compares a file's attribute with is the name the reader gives it (GSD
+/// prefixes `particles/`, a raw sidecar's attribute is read also unasked), resolved
+/// without reading the particles: for every format it equals what reading the frame
+/// gives, error included, and an unchanged request finds every frame done.
+#[test]
+fn a_frames_attribute_is_resolved_as_reading_it_names_it_in_every_format() {
+    use mdlod_datasets::{gsd_sample_path, write_raw_arrays, GenerateOptions, Kind};
+    use mdlod_preprocess::readers::{DumpFile, ReadOptions};
+
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, _) = write_raw_arrays(
+        &GenerateOptions::new(Kind::Alloy, 500),
+        dir.path(),
+        "alloy",
+        |_| {},
+    )
+    .unwrap();
+    let megamol = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../datasets/megamol/test_xyz_float_int_float.mmpld");
+    let cases: Vec<(PathBuf, &str)> = vec![
+        (lammps_sample_path("cu_melt.custom.dump"), "c_pe"),
+        (lammps_sample_path("cu_melt.custom.dump.gz"), "c_ke"),
+        (lammps_sample_path("cu_melt.custom.bin"), "c_pe"),
+        (lammps_sample_path("cu_melt_mpi.%.dump"), "c_pe"),
+        (lammps_sample_path("cu_melt.xyz"), "x"),
+        (gsd_sample_path("hoomd_mixture.gsd"), "charge"),
+        (megamol, "intensity"),
+        (raw.clone(), "c_pe"),
+    ];
+    for (input, column) in &cases {
+        let dump = DumpFile::open(input).unwrap();
+        for attribute in [None, Some(column.to_string()), Some("nosuch".to_string())] {
+            let read = ReadOptions {
+                attribute,
+                ..Default::default()
+            };
+            for k in 0..dump.frame_count() {
+                let resolved = dump.attribute_name(k, &read).map_err(|e| e.to_string());
+                let from_frame = dump
+                    .read_frame(k, &read, &NoProgress)
+                    .map(|f| f.attribute.map(|a| a.name))
+                    .map_err(|e| e.to_string());
+                assert_eq!(
+                    resolved,
+                    from_frame,
+                    "{} frame {k}: {read:?}",
+                    input.display()
+                );
+            }
+        }
+    }
+    // Reruns of the formats whose recorded name is not the one asked for.
+    for (input, attribute) in [
+        (gsd_sample_path("hoomd_mixture.gsd"), Some("charge")),
+        (raw, None),
+    ] {
+        let out = dir.path().join(format!(
+            "{}.d",
+            input.file_name().unwrap().to_string_lossy()
+        ));
+        let mut o = opts();
+        o.read.attribute = attribute.map(String::from);
+        let first = batch(std::slice::from_ref(&input), &out, &o, &NoProgress).unwrap();
+        assert_eq!(first.skipped, 0);
+        let again = batch(std::slice::from_ref(&input), &out, &o, &NoProgress).unwrap();
+        assert_eq!(
+            (again.converted, again.skipped),
+            (0, first.converted),
+            "{}",
+            input.display()
+        );
+    }
+}

@@ -174,3 +174,76 @@ fn cu_slab_shrink_wrapped_boundary() {
     assert_eq!(b.periodic, Some([true, true, false]));
     assert_eq!(f.units.as_deref(), Some("metal"));
 }
+
+/// How an input names its species, told from its first atom: what a radius override can
+/// call them (`Cu` never names a LAMMPS type number, `1` never an `element` column's).
+#[test]
+fn species_naming_follows_the_species_column() {
+    use mdlod_preprocess::species::SpeciesNaming;
+    let naming = |path: &std::path::Path| {
+        DumpFile::open(path)
+            .unwrap()
+            .species_naming(0, &ReadOptions::default())
+            .unwrap()
+    };
+    let numbers = SpeciesNaming::TypeNumbers { first: "1".into() };
+    for name in [
+        "cu_melt.custom.dump",
+        "cu_melt.custom.dump.gz",
+        "cu_melt.atom.dump",
+        "cu_melt.custom.bin",
+        "cu_melt.atom.bin",
+    ] {
+        assert_eq!(naming(&sample(name).unwrap()), numbers, "{name}");
+    }
+    for pieces in ["cu_melt_mpi.%.dump", "cu_melt_mpi.%.bin"] {
+        let path = sample("cu_melt_mpi.0.dump").unwrap().with_file_name(pieces);
+        assert_eq!(naming(&path), numbers, "{pieces}");
+    }
+    assert_eq!(
+        naming(&sample("cuag_alloy.unwrapped.dump").unwrap()),
+        SpeciesNaming::ElementColumn {
+            first: "Cu".into(),
+            first_type: Some("1".into())
+        }
+    );
+    assert_eq!(
+        naming(&sample("cu_melt.xyz").unwrap()),
+        SpeciesNaming::Given
+    );
+    // Type labels, no species column, no atoms: any name may occur.
+    let dir = tempfile::tempdir().unwrap();
+    let header = "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n";
+    let box_ = "ITEM: BOX BOUNDS pp pp pp\n0 1\n0 1\n0 1\n";
+    for (name, text) in [
+        (
+            "labels",
+            format!("{header}1\n{box_}ITEM: ATOMS id type x y z\n1 Cu 0 0 0\n"),
+        ),
+        (
+            "untyped",
+            format!("{header}1\n{box_}ITEM: ATOMS id x y z\n1 0 0 0\n"),
+        ),
+        (
+            "empty",
+            format!("{header}0\n{box_}ITEM: ATOMS id type x y z\n"),
+        ),
+    ] {
+        let path = dir.path().join(format!("{name}.lammpstrj"));
+        std::fs::write(&path, text).unwrap();
+        assert_eq!(naming(&path), SpeciesNaming::Given, "{name}");
+    }
+    let only_element = dir.path().join("element.lammpstrj");
+    std::fs::write(
+        &only_element,
+        format!("{header}1\n{box_}ITEM: ATOMS id element x y z\n1 Ag 0 0 0\n"),
+    )
+    .unwrap();
+    assert_eq!(
+        naming(&only_element),
+        SpeciesNaming::ElementColumn {
+            first: "Ag".into(),
+            first_type: None
+        }
+    );
+}

@@ -219,3 +219,37 @@ fn generated_xyz_reads_as_the_generated_lammps_dump() {
         assert_eq!(format!("{ba:?}"), format!("{bb:?}"), "frame {k}");
     }
 }
+
+/// Species are ordered as the LAMMPS text reader orders them, so the same data gives the
+/// same species table (and colours) in either format: numbers numerically (flagged as
+/// numeric types), element symbols and labels in order of first appearance.
+#[test]
+fn species_are_ordered_as_lammps_text_orders_them() {
+    use mdlod_datasets::{write_lammps_dump, write_xyz, GenerateOptions, Kind};
+    let dir = tempfile::tempdir().unwrap();
+    let numbers = "4\nplain\n10 0 0 0\n2 1 0 0\n9 0 1 0\n2 0 0 1\n";
+    let f = read_k(&write(dir.path(), "n.xyz", numbers), 0, None);
+    assert_eq!(names(&f), ["2", "9", "10"]);
+    assert!(f.species.iter().all(|s| s.numeric_type));
+    assert_eq!(f.species_index, [2, 0, 1, 0]);
+    let extended = "3\nProperties=pos:R:3:Z:I:1\n0 0 0 29\n1 0 0 8\n0 1 0 29\n";
+    let f = read_k(&write(dir.path(), "z.xyz", extended), 0, None);
+    assert_eq!(names(&f), ["8", "29"]);
+    assert_eq!(f.species_index, [1, 0, 1]);
+    // Not all numbers: first appearance, as an `element` column.
+    let mixed = "3\nmixed\nO 0 0 0\n1 1 0 0\nH 0 1 0\n";
+    let f = read_k(&write(dir.path(), "m.xyz", mixed), 0, None);
+    assert_eq!(names(&f), ["O", "1", "H"]);
+    assert!(f.species.iter().all(|s| !s.numeric_type));
+
+    // The generator's data (its first atoms are type 2) in both formats.
+    let opts = GenerateOptions::new(Kind::Droplets, 3000);
+    let xyz = dir.path().join("d.xyz");
+    let lammps = dir.path().join("d.lammpstrj");
+    write_xyz(&opts, &mut std::fs::File::create(&xyz).unwrap(), |_| {}).unwrap();
+    write_lammps_dump(&opts, &mut std::fs::File::create(&lammps).unwrap(), |_| {}).unwrap();
+    let (x, l) = (read_k(&xyz, 0, None), read_k(&lammps, 0, None));
+    assert_eq!(l.species_index[0], 1, "the data starts with type 2");
+    assert_eq!(x.species, l.species);
+    assert_eq!(x.species_index, l.species_index);
+}

@@ -14,7 +14,7 @@ use crate::progress::Bar;
 /// DIR/dataset.json. Reruns skip finished frames whose source is unchanged.
 #[derive(clap::Args)]
 #[command(after_help = "Examples:\n  \
-    mdlod batch run/dump.*.lammpstrj -o run.mdlod.d --radius Cu=1.28\n  \
+    mdlod batch run/dump.*.lammpstrj -o run.mdlod.d --radius 1=1.28\n  \
     mdlod batch traj.bin -o traj.d --shard 3/16        # one node of 16\n  \
     mdlod batch --merge traj.d                          # after all shards\n\n\
     In a Slurm job array the shard defaults to the task's position in the array \

@@ -45,7 +45,9 @@ pub struct Args {
 /// How frames are read and built, shared by `convert` and `batch`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BuildArgs {
-    /// Radius of a species, NAME=RADIUS (element or numeric LAMMPS type); repeatable.
+    /// Radius of a species, NAME=RADIUS, the species named as the input names it: by
+    /// element symbol where a LAMMPS dump has an `element` column, else by type number
+    /// (XYZ: its species column; GSD: type name); repeatable.
     #[arg(long = "radius", value_name = "NAME=R", value_parser = parse_radius_override)]
     pub radii: Vec<(String, f32)>,
     /// Dump column to keep as the per-particle scalar attribute.

@@ -14,7 +14,8 @@
 //!    species, attribute, or skip). Numbers go through [`parse_f64`]; species tokens are
 //!    looked up in a small per-chunk table and stored as chunk-local ids.
 //! 4. The per-chunk species tables are merged in chunk order (so "first appearance" order
-//!    is kept), optionally sorted numerically (LAMMPS `type`), and every chunk's local ids
+//!    is kept), optionally sorted numerically (LAMMPS `type`, XYZ species, when every name
+//!    is an integer), and every chunk's local ids
 //!    are rewritten to global ids in parallel.
 //!
 //! Errors carry the byte offset of the offending field or line; the line number is only
@@ -46,7 +47,7 @@ pub(crate) struct AtomLayout {
     /// Column holding the species (element or type), if any.
     pub species: Option<usize>,
     /// Species names that all parse as integers are sorted numerically and flagged
-    /// `numeric_type` (LAMMPS `type` column without `element`).
+    /// `numeric_type` (LAMMPS `type` column without `element`, XYZ species).
     pub numeric_species: bool,
 }
 

@@ -453,6 +453,66 @@ pub(crate) fn frame_species(
     species_of(path, data, index, k, 0..index.particles(k))
 }
 
+/// The attribute `opts` asks for: `intensity`, `radius` or none; another name is an error.
+fn wanted(
+    path: &Path,
+    index: &Index,
+    k: usize,
+    opts: &ReadOptions,
+) -> Result<Option<&'static str>, ReadError> {
+    match opts.attribute.as_deref() {
+        None => Ok(None),
+        Some("intensity") => Ok(Some("intensity")),
+        Some("radius") => Ok(Some("radius")),
+        Some(other) => Err(err(
+            path,
+            0,
+            format!(
+                "no per-particle `{other}` in MMPLD; available: {}",
+                frame_info(index, k).columns.join(" ")
+            ),
+        )),
+    }
+}
+
+/// Whether `list` holds the attribute `a` (`intensity` or `radius`) per particle.
+fn carries(list: &List, a: &str) -> bool {
+    if a == "radius" {
+        list.has_radius()
+    } else {
+        list.has_intensity()
+    }
+}
+
+/// The error for list `l` of frame `k`, which lacks the attribute `a`.
+fn lacks(path: &Path, k: usize, l: usize, list: &List, a: &str) -> ReadError {
+    err(
+        path,
+        list.at,
+        format!("frame {k}, list {l} has no per-particle `{a}`"),
+    )
+}
+
+/// The name of the attribute `opts` asks of frame `k` (`None`: none), or the error
+/// reading the frame with it gives (a list holding particles without it), without
+/// reading a particle.
+pub(crate) fn attribute_name(
+    path: &Path,
+    index: &Index,
+    k: usize,
+    opts: &ReadOptions,
+) -> Result<Option<String>, ReadError> {
+    let want = wanted(path, index, k, opts)?;
+    if let Some(a) = want {
+        for (l, list) in index.frames[k].lists.iter().enumerate() {
+            if list.particles > 0 && !carries(list, a) {
+                return Err(lacks(path, k, l, list, a));
+            }
+        }
+    }
+    Ok(want.map(String::from))
+}
+
 /// Reads particles `range` of frame `k` (the lists one after another) as a frame of its
 /// own: every list a species, `xyzr` lists with the mean radius of their particles in the
 /// range (see [`frame_species`] for the whole frame's).
@@ -466,20 +526,7 @@ pub(crate) fn read_range(
     progress: &dyn Progress,
 ) -> Result<Frame, ReadError> {
     let f = &index.frames[k];
-    let want = match opts.attribute.as_deref() {
-        None => None,
-        Some(a @ ("intensity" | "radius")) => Some(a),
-        Some(other) => {
-            return Err(err(
-                path,
-                0,
-                format!(
-                    "no per-particle `{other}` in MMPLD; available: {}",
-                    frame_info(index, k).columns.join(" ")
-                ),
-            ))
-        }
-    };
+    let want = wanted(path, index, k, opts)?;
     if f.lists.len() > 1 << 16 {
         return Err(err(
             path,
@@ -526,17 +573,8 @@ pub(crate) fn read_range(
         positions.extend(part);
         species_index.extend(std::iter::repeat_n(l as u16, local.len()));
         if let Some(a) = want {
-            let ok = if a == "radius" {
-                list.has_radius()
-            } else {
-                list.has_intensity()
-            };
-            if !ok {
-                return Err(err(
-                    path,
-                    list.at,
-                    format!("frame {k}, list {l} has no per-particle `{a}`"),
-                ));
+            if !carries(list, a) {
+                return Err(lacks(path, k, l, list, a));
             }
             let v: Vec<f32> = local
                 .clone()

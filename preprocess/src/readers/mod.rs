@@ -28,7 +28,9 @@
 //!   numerically), else all atoms are one species named `atom`.
 //! - **XYZ / extended XYZ**: `Lattice`, `Origin`, `pbc`, `Time`, `Timestep`/`step` and
 //!   `Properties` (column order and counts honoured; a property of count `n > 1` is `n`
-//!   columns `name[0]`...); plain XYZ columns are `species x y z col5 col6 ...`.
+//!   columns `name[0]`...); plain XYZ columns are `species x y z col5 col6 ...`. Species
+//!   are ordered as LAMMPS text orders them: numerically when every name is an integer,
+//!   else by first appearance.
 //! - Any numeric column can be the per-particle attribute ([`ReadOptions::attribute`]).
 //!   NaN and infinite numbers in used columns are errors. Atom order is kept.
 //! - **LAMMPS binary dumps** (`.bin`, both header revisions): see `lammps_binary.rs`.
@@ -570,6 +572,122 @@ impl DumpFile {
             Index::Gsd(i) => gsd::frame_species(&self.path, self.bytes(), i, k).map(Some),
             Index::Mmpld(i) => mmpld::frame_species(&self.path, self.bytes(), i, k).map(Some),
             _ => Ok(None),
+        }
+    }
+
+    /// How frame `k` names its species, from its header and first atom (see
+    /// [`SpeciesNaming`](crate::species::SpeciesNaming)): LAMMPS text with an `element`
+    /// column names them by element; LAMMPS text with a `type` column of numbers (no
+    /// `element`) and LAMMPS binary dumps with a `type` column by type number; anything
+    /// else (type labels, XYZ, GSD, raw arrays, MMPLD, a frame without atoms) as given.
+    /// `opts` supplies the column names of old-revision binary dumps.
+    pub fn species_naming(
+        &self,
+        k: usize,
+        opts: &ReadOptions,
+    ) -> Result<crate::species::SpeciesNaming, ReadError> {
+        use crate::species::{is_type_number, SpeciesNaming};
+        self.check_frame(k)?;
+        match &self.index {
+            Index::Lammps(_) => {
+                let header = self.header(k)?;
+                let (Some(col), true) = (header.layout.species, header.info.particles > 0) else {
+                    return Ok(SpeciesNaming::Given);
+                };
+                let first = Cursor::new(&self.bytes()[..header.atoms.end], header.atoms.start)
+                    .next_line()
+                    .map_or(&[][..], |(_, l)| l);
+                let field = |c: usize| {
+                    fields(first)
+                        .nth(c)
+                        .map(|f| String::from_utf8_lossy(f).into_owned())
+                };
+                let Some(token) = field(col) else {
+                    return Ok(SpeciesNaming::Given);
+                };
+                let columns = &header.info.columns;
+                Ok(if columns[col] == "element" {
+                    SpeciesNaming::ElementColumn {
+                        first: token,
+                        first_type: columns.iter().position(|c| c == "type").and_then(field),
+                    }
+                } else if header.layout.numeric_species && is_type_number(&token) {
+                    SpeciesNaming::TypeNumbers { first: token }
+                } else {
+                    SpeciesNaming::Given
+                })
+            }
+            Index::LammpsBinary(i) => {
+                let columns = lammps_binary::frame_info(&self.path, i.header(k), opts).columns;
+                if !columns.iter().any(|c| c == "type") || self.frame_info(k)?.particles == 0 {
+                    return Ok(SpeciesNaming::Given);
+                }
+                let plain = ReadOptions {
+                    attribute: None,
+                    columns: opts.columns.clone(),
+                };
+                let part = self.read_part(k, &plain, 0..1, &NoProgress)?;
+                Ok(match part.species.first() {
+                    Some(s) if s.numeric_type => SpeciesNaming::TypeNumbers {
+                        first: s.name.clone(),
+                    },
+                    _ => SpeciesNaming::Given,
+                })
+            }
+            // (A piece may hold no atoms: the first that tells.)
+            Index::Pieces(p) => {
+                for piece in p {
+                    let naming = piece.species_naming(k, opts)?;
+                    if naming != SpeciesNaming::Given {
+                        return Ok(naming);
+                    }
+                }
+                Ok(SpeciesNaming::Given)
+            }
+            Index::Xyz(_) | Index::Gsd(_) | Index::Raw(_) | Index::Mmpld(_) => {
+                Ok(SpeciesNaming::Given)
+            }
+        }
+    }
+
+    /// The name frame `k`'s attribute gets when read with `opts` (`None`: no attribute),
+    /// or the error reading it gives, such as a column the frame lacks. Reads the header
+    /// only (binary formats: no particle at all).
+    pub fn attribute_name(
+        &self,
+        k: usize,
+        opts: &ReadOptions,
+    ) -> Result<Option<String>, ReadError> {
+        self.check_frame(k)?;
+        match &self.index {
+            // A raw sidecar's attribute is read also when none is asked for.
+            Index::Raw(_) => {}
+            _ if opts.attribute.is_none() => return Ok(None),
+            _ => {}
+        }
+        match &self.index {
+            Index::Lammps(_) | Index::Xyz(_) => {
+                let header = self.header(k)?;
+                let (_, _, attribute) = text_columns(&self.ctx(), &header, opts)?;
+                Ok(attribute.map(|c| header.info.columns[c].clone()))
+            }
+            // Every piece is read (each may lack it); the first's names it.
+            Index::Pieces(p) => {
+                let mut name = None;
+                for (i, piece) in p.iter().enumerate() {
+                    let n = piece.attribute_name(k, opts)?;
+                    if i == 0 {
+                        name = n;
+                    }
+                }
+                Ok(name)
+            }
+            // (Each list of a frame may or may not carry it.)
+            Index::Mmpld(i) => mmpld::attribute_name(&self.path, i, k, opts),
+            Index::Raw(_) | Index::LammpsBinary(_) | Index::Gsd(_) => Ok(self
+                .read_part(k, opts, 0..0, &NoProgress)?
+                .attribute
+                .map(|a| a.name)),
         }
     }
 

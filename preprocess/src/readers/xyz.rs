@@ -16,7 +16,10 @@
 //!   Without `Properties` the columns are `species:S:1:pos:R:3` followed by whatever extra
 //!   columns the first atom line has, named `col5`, `col6`, ... (1-based position).
 //! - **Columns.** Positions come from the `pos` property (Cartesian), species from
-//!   `species` (or atomic numbers `Z`) in order of first appearance. A property with count
+//!   `species` (or atomic numbers `Z`) ordered as the LAMMPS text reader orders its
+//!   species, so that the same data gives the same species table in either format: when
+//!   every name is an integer (type numbers, atomic numbers) numerically, flagged
+//!   `numeric_type`, else (element symbols, labels) in order of first appearance. A property with count
 //!   1 is one column named after it; a property with count `n > 1` is `n` columns named
 //!   `name[0]` ... `name[n-1]`. Any numeric column can be the attribute.
 //! - **Atoms.** The atom lines go to the shared parallel parser.
@@ -193,7 +196,8 @@ impl Index {
                     columns,
                     coords: Some(([1, 2, 3], false)),
                     species: Some(0),
-                    numeric_species: false,
+                    // Numbers sorted as LAMMPS types are.
+                    numeric_species: true,
                 }
             }
         };
@@ -276,7 +280,8 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
         columns,
         coords,
         species: species.or(atomic_number),
-        numeric_species: false,
+        // Numbers sorted as LAMMPS types are.
+        numeric_species: true,
     })
 }
 
