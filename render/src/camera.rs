@@ -42,12 +42,27 @@ impl Bounds {
     }
 
     pub fn center(&self) -> Vec3 {
-        (self.min + self.max) * 0.5
+        // Halved first: the sum of coordinates near f32::MAX overflows.
+        self.min * 0.5 + self.max * 0.5
     }
 
-    /// Radius of the sphere through the corners, around [`Self::center`].
+    /// Radius of the sphere through the corners, around [`Self::center`]. In double
+    /// precision: the squared extent of data spanning 10^20 (stars in metres) overflows
+    /// single precision.
     pub fn radius(&self) -> f32 {
-        (self.max - self.min).length() * 0.5
+        ((self.max.as_dvec3() - self.min.as_dvec3()).length() * 0.5) as f32
+    }
+
+    /// The radius a view is fitted to: [`Self::radius`], or for bounds of no extent a
+    /// millionth of their distance from the origin, so that the fit scales with the data
+    /// at any size (data in metres spans 10^-10).
+    pub fn fit_radius(&self) -> f32 {
+        let r = self.radius();
+        if r > 0.0 {
+            r
+        } else {
+            (self.center().abs().max_element() * 1e-6).max(1e-30)
+        }
     }
 }
 
@@ -160,12 +175,20 @@ impl Camera {
     /// View to clip space for an image of the given aspect ratio (width / height).
     pub fn clip_from_view(&self, aspect: f32) -> Mat4 {
         match self.projection {
-            Projection::Perspective => glam::camera::rh::proj::directx::perspective(
-                self.fov_y_deg.to_radians(),
-                aspect,
-                self.near,
-                self.far,
-            ),
+            Projection::Perspective => {
+                // Right-handed, depth 0 at near and 1 at far (as glam's DirectX-style
+                // matrix), with the translation formed as near · (far / (far − near)):
+                // glam forms near · far first, which overflows single precision for data
+                // beyond 10^19 (stars in metres) and made every depth NaN.
+                let h = 1.0 / (self.fov_y_deg.to_radians() * 0.5).tan();
+                let ratio = self.far / (self.far - self.near);
+                Mat4::from_cols(
+                    Vec4::new(h / aspect, 0.0, 0.0, 0.0),
+                    Vec4::new(0.0, h, 0.0, 0.0),
+                    Vec4::new(0.0, 0.0, -ratio, -1.0),
+                    Vec4::new(0.0, 0.0, -self.near * ratio, 0.0),
+                )
+            }
             Projection::Orthographic => {
                 let hh = self.view_height_at_target() * 0.5;
                 let hw = hh * aspect;
@@ -203,7 +226,9 @@ impl Camera {
         // Row z: z_clip = a·z_view + b, with z_view = −depth.
         let (a, b) = match self.projection {
             // z/w = n (f − d) / (d (f − n)), w = d.
-            Projection::Perspective => (n / (f - n), n * f / (f - n)),
+            // n · (f / (f − n)), not (n · f) / (f − n): the product overflows single
+            // precision for data beyond 10^19 (stars in metres).
+            Projection::Perspective => (n / (f - n), n * (f / (f - n))),
             // z/w = (f − d) / (f − n), w = 1.
             Projection::Orthographic => (1.0 / (f - n), f / (f - n)),
         };
@@ -255,7 +280,7 @@ impl Camera {
     /// the bounding sphere just fits an image of `aspect` (width / height), and sets the
     /// depth range around it.
     pub fn fit(&mut self, bounds: &Bounds, aspect: f32) {
-        let r = bounds.radius().max(1e-6);
+        let r = bounds.fit_radius();
         let tan_half_y = (self.fov_y_deg.to_radians() * 0.5).tan();
         let tan_half = tan_half_y * aspect.min(1.0);
         self.target = bounds.center();
@@ -269,13 +294,14 @@ impl Camera {
     /// Sets `near` and `far` to enclose the bounding sphere of `bounds` (with a small
     /// margin); in perspective `near` stays positive, at least `far / 10^5`.
     pub fn fit_depth_range(&mut self, bounds: &Bounds) {
-        let r = bounds.radius().max(1e-6) * 1.01;
+        let r = bounds.fit_radius() * 1.01;
         let depth = (self.eye() - bounds.center()).dot(self.back());
         let far = depth + r;
         let near = depth - r;
         match self.projection {
             Projection::Perspective => {
-                let far = far.max(1e-5);
+                // Positive even for data behind the eye, at the data's scale.
+                let far = far.max(r * 1e-5);
                 self.far = far;
                 self.near = near.max(far * 1e-5);
             }
@@ -439,10 +465,26 @@ mod tests {
     }
 
     #[test]
-    fn fitted_bounds_are_inside_the_frustum() {
-        let b = Bounds::new([-3.0, 0.0, 10.0], [5.0, 2.0, 12.0]);
-        for p in [Projection::Perspective, Projection::Orthographic] {
-            for aspect in [0.5, 1.0, 2.0] {
+    fn fitted_bounds_are_inside_the_frustum_and_fill_it_at_any_scale() {
+        // Data in metres (10^-10), in code units, and stars in metres (10^20, whose
+        // squared extent overflows single precision; 10^36 near its largest value). The
+        // fit used a radius of at least 10^-6, so data of 10^-10 was a dot, and lengths
+        // squared in single precision, so data of 10^19 could not be fitted at all.
+        for (scale, p, aspect) in [1e-12f32, 1e-10, 1.0, 1e20, 1e36]
+            .into_iter()
+            .flat_map(|s| {
+                [Projection::Perspective, Projection::Orthographic]
+                    .into_iter()
+                    .map(move |p| (s, p))
+            })
+            .flat_map(|(s, p)| [0.5, 1.0, 2.0].into_iter().map(move |a| (s, p, a)))
+        {
+            let b = Bounds::new(
+                Vec3::new(-3.0, 0.0, 10.0) * scale,
+                Vec3::new(5.0, 2.0, 12.0) * scale,
+            );
+            {
+                let mut widest = 0.0f32;
                 let mut c = Camera {
                     projection: p,
                     azimuth_deg: 70.0,
@@ -461,9 +503,14 @@ mod tests {
                     let ndc = clip.truncate() / clip.w;
                     assert!(
                         ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 && (0.0..=1.0).contains(&ndc.z),
-                        "{p:?} aspect {aspect}: corner {corner} at {ndc}"
+                        "scale {scale} {p:?} aspect {aspect}: corner {corner} at {ndc}"
                     );
+                    widest = widest.max(ndc.x.abs()).max(ndc.y.abs());
                 }
+                assert!(
+                    widest > 0.4,
+                    "scale {scale} {p:?} aspect {aspect}: the data spans {widest} of the view"
+                );
             }
         }
     }

@@ -264,11 +264,14 @@ impl Projector {
     /// Diameter in pixels of the sphere around the node's bounding box.
     pub fn size_px(&self, n: &NodeRecord) -> f32 {
         let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
-        let r = (max - min).length() * 0.5;
+        let r = half_diagonal(max - min);
         match self.projection {
             Projection::Orthographic => 2.0 * r * self.scale,
             Projection::Perspective => {
-                let depth = -self.view_from_world.transform_point3((min + max) * 0.5).z;
+                let depth = -self
+                    .view_from_world
+                    .transform_point3(min * 0.5 + max * 0.5)
+                    .z;
                 let nearest = depth - r;
                 if nearest <= self.near.max(0.0) {
                     f32::INFINITY
@@ -283,8 +286,12 @@ impl Projector {
     /// node's bounding box: the order in which the occlusion traversal visits nodes.
     pub fn near_depth(&self, n: &NodeRecord) -> f32 {
         let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
-        let r = (max - min).length() * 0.5;
-        -self.view_from_world.transform_point3((min + max) * 0.5).z - r
+        let r = half_diagonal(max - min);
+        -self
+            .view_from_world
+            .transform_point3(min * 0.5 + max * 0.5)
+            .z
+            - r
     }
 
     /// True when the node's bounding box may intersect the view frustum.
@@ -298,6 +305,18 @@ impl Projector {
     pub fn frustum(&self, n: &NodeRecord) -> Option<bool> {
         let (min, max) = self.culled_box(n);
         Camera::box_against_frustum(&self.planes, min, max)
+    }
+}
+
+/// Half the length of a box's diagonal `e`: in double precision where its square
+/// overflows single precision (boxes past 1.8·10^19: stars in metres).
+#[inline]
+fn half_diagonal(e: Vec3) -> f32 {
+    let l2 = e.length_squared();
+    if l2.is_finite() {
+        l2.sqrt() * 0.5
+    } else {
+        (e.as_dvec3().length() * 0.5) as f32
     }
 }
 

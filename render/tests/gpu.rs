@@ -389,6 +389,51 @@ fn many_samples_of_a_flat_background_average_to_that_background() {
 }
 
 #[test]
+fn data_in_metres_or_light_years_renders_as_in_angstroms() {
+    // The same block at 10^-10 (atoms in metres) and 5·10^17 scale (the eye 2·10^19 away,
+    // as for stars in metres; the format's f32 area sums, Σ r², cap the radii there). The
+    // view was fitted to a radius of at least 10^-6 (the atoms a dot), and lengths were
+    // squared in single precision on the host and in the impostor shader (no image at
+    // all past 10^19: the camera fit, the projection and every depth overflowed).
+    let frame = fcc_frame(3);
+    let image = |scale: f32| {
+        let mut scaled = frame.clone();
+        for p in &mut scaled.positions {
+            *p = p.map(|v| v * scale);
+        }
+        let (_d, _p, f) = make_file(
+            &scaled,
+            small_build(),
+            &[("Cu", 1.28 * scale), ("Ag", 1.44 * scale)],
+        );
+        let mut o = opts(96, 96);
+        o.view = ViewSpec::Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            zoom: 1.0,
+            projection: Projection::Perspective,
+        };
+        render_image(renderer(), &f, &o).unwrap().0
+    };
+    let reference = image(1.0);
+    let covered = reference.data.chunks(4).filter(|p| p[0] > 0).count();
+    assert!(covered > 96 * 96 / 4, "{covered} pixels show the block");
+    for scale in [1e-10, 5e17] {
+        let other = image(scale);
+        let differing = reference
+            .data
+            .chunks(4)
+            .zip(other.data.chunks(4))
+            .filter(|(a, b)| a.iter().zip(*b).any(|(x, y)| x.abs_diff(*y) > 8))
+            .count();
+        assert!(
+            differing * 100 <= covered,
+            "scale {scale}: {differing} of {covered} pixels differ"
+        );
+    }
+}
+
+#[test]
 fn view_file_and_orbit_options_give_the_same_image() {
     let (dir, _p, f) = make_file(&cloud_frame(800, 31), small_build(), &[]);
     let view = dir.path().join("view.json");

@@ -438,8 +438,9 @@ impl ViewerState {
                 if !(factor.is_finite() && *factor > 0.0) {
                     return Changed::default();
                 }
-                let r = self.bounds.radius();
-                let r = if r.is_finite() && r > 1e-6 { r } else { 1.0 };
+                // At the data's own scale (it may span 10^-10 or 10^20).
+                let r = self.bounds.fit_radius();
+                let r = if r.is_finite() { r } else { 1.0 };
                 let before = self.camera.distance;
                 let d = (before / factor).clamp(ZOOM_RANGE.0 * r, ZOOM_RANGE.1 * r);
                 if d == before || !d.is_finite() {

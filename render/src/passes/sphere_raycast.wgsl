@@ -52,6 +52,20 @@ fn vs_listed(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -
 }
 
 // Corner `vi` of the quad of point `ii`.
+// The largest coordinate of `v` in size (1 for the zero vector, so that dividing by it
+// leaves that unchanged).
+fn max_component(v: vec3<f32>) -> f32 {
+    let m = max(abs(v.x), max(abs(v.y), abs(v.z)));
+    return select(1.0, m, m > 0.0);
+}
+
+// |v| without squaring its coordinates: view positions of stars in metres (10^20) square
+// past single precision.
+fn scaled_length(v: vec3<f32>) -> f32 {
+    let m = max_component(v);
+    return m * length(v / m);
+}
+
 fn sphere_vertex(vi: u32, ii: u32) -> VsOut {
     let pt = load_point(ii);
     let world = pt.world;
@@ -70,7 +84,7 @@ fn sphere_vertex(vi: u32, ii: u32) -> VsOut {
         // in the plane touching the sphere's front.
         p = center + vec3<f32>(corner * radius, radius);
     } else {
-        let d = length(center);
+        let d = scaled_length(center);
         if d <= radius * 1.0001 {
             // The eye is inside the sphere: draw nothing (a degenerate quad).
             out.clip = vec4<f32>(0.0, 0.0, -1.0, 1.0);
@@ -85,7 +99,8 @@ fn sphere_vertex(vi: u32, ii: u32) -> VsOut {
         let u = normalize(cross(helper, dir));
         let v = cross(dir, u);
         let front = d - radius;
-        let half_size = radius * front / sqrt(d * d - radius * radius);
+        // sqrt(d² − r²) without the squares, which overflow past 1.8e19.
+        let half_size = radius * front / (sqrt(d - radius) * sqrt(d + radius));
         p = dir * front + (u * corner.x + v * corner.y) * half_size;
     }
     out.view_pos = p;
@@ -111,7 +126,7 @@ fn ray_hit(in: VsOut) -> Hit {
     if frame.params.x > 0.5 {
         dir = vec3<f32>(0.0, 0.0, -1.0);
     } else {
-        dir = normalize(in.view_pos);
+        dir = normalize(in.view_pos / max_component(in.view_pos));
     }
     // Ray from the quad point (close to the sphere, so the quadratic stays well
     // conditioned far from the eye); t may be negative (in front of the quad).
