@@ -83,7 +83,8 @@ impl DensitySettings {
         };
         positive(self.kernel_scale, "kernel scale")?;
         positive(self.density_max, "density maximum")?;
-        positive(self.opacity, "opacity")?;
+        // Named as `mdlod render` names it.
+        positive(self.opacity, "--absorption")?;
         if let Some(v) = self.iso {
             positive(v, "iso-value")?;
         }

@@ -193,9 +193,10 @@ pub struct RenderReport {
     pub ranges: usize,
     /// Nodes opened by the traversal.
     pub nodes_opened: u64,
-    /// Nodes left out as hidden behind drawn spheres (occlusion culling).
+    /// Nodes left out by occlusion culling: hidden behind drawn spheres, or seen by no
+    /// sample at all (between pixel centres); see [`DrawList::occluded_nodes`].
     pub nodes_occluded: u64,
-    /// Particles left out as hidden behind drawn spheres (occlusion culling).
+    /// Particles left out likewise: hidden, or between pixel centres.
     pub particles_occluded: u64,
     /// Largest projected size (px) of a representative drawn (0: only particles).
     pub error_px: f32,
@@ -223,7 +224,8 @@ pub struct RenderReport {
     /// pool) and render targets, in bytes.
     pub gpu_data_bytes: u64,
     pub gpu_target_bytes: u64,
-    /// Splat mode: the tone-mapping exposure used and the image's total flux.
+    /// Splat mode: the tone-mapping exposure used and the image's total flux of light
+    /// ([`SplatFrame::total_light`]: the attribute's light with attribute intensities).
     pub exposure: Option<f32>,
     pub total_flux: Option<f64>,
     /// Density mode: slice stacks run before every ray was done, of those the volume spans.
@@ -657,7 +659,7 @@ fn draw_cut(
             };
             let mut report = report(&frame);
             report.exposure = exposure;
-            report.total_flux = exposure.map(|_| splats.total_flux()[3]);
+            report.total_flux = exposure.map(|_| splats.total_light());
             Ok((frame.image, report))
         }
         RenderMode::Spheres => {

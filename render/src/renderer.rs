@@ -342,6 +342,10 @@ pub struct SplatFrame {
     pub width: u32,
     pub height: u32,
     pub hdr: Vec<[f32; 4]>,
+    /// The points' light is their scalar attribute (`SplatBlend::Additive` with
+    /// `by_attribute`): r, g and b carry it (grey), a their disks' flux whatever their
+    /// attribute.
+    pub by_attribute: bool,
     pub gpu_time: Option<Duration>,
     pub points: u32,
     pub gpu_data_bytes: u64,
@@ -359,13 +363,35 @@ impl SplatFrame {
         t
     }
 
+    /// A pixel's flux of light: its total (a) for species light, which the albedos then
+    /// split among r, g and b; the attribute's light (r = g = b) when the points' light
+    /// is their attribute.
+    pub fn light(&self, p: &[f32; 4]) -> f32 {
+        if self.by_attribute {
+            p[0]
+        } else {
+            p[3]
+        }
+    }
+
+    /// The image's total flux of light ([`Self::light`] summed over the pixels).
+    pub fn total_light(&self) -> f64 {
+        self.hdr.iter().map(|p| f64::from(self.light(p))).sum()
+    }
+
     /// Tone maps to an sRGB image over `background_srgb`: each channel's flux `f` adds
     /// `1 − exp(−exposure · f)` of light. Without an exposure, the one that maps the
-    /// 99.5th percentile of the lit pixels' total flux to 0.86 (1 − e⁻²). Returns the
-    /// image and the exposure used.
+    /// 99.5th percentile of the lit pixels' light ([`Self::light`]: the total flux, or
+    /// the attribute's light) to 0.86 (1 − e⁻²). Returns the image and the exposure
+    /// used.
     pub fn tone_map(&self, exposure: Option<f32>, background_srgb: [f32; 3]) -> (RgbaImage, f32) {
         let exposure = exposure.unwrap_or_else(|| {
-            let mut lit: Vec<f32> = self.hdr.iter().map(|p| p[3]).filter(|v| *v > 0.0).collect();
+            let mut lit: Vec<f32> = self
+                .hdr
+                .iter()
+                .map(|p| self.light(p))
+                .filter(|v| *v > 0.0)
+                .collect();
             if lit.is_empty() {
                 return 1.0;
             }
@@ -2163,6 +2189,7 @@ impl Renderer {
                 width,
                 height,
                 hdr,
+                by_attribute: splat_style(blend) == PackStyle::FluxAttribute,
                 gpu_time,
                 points,
                 gpu_data_bytes: stream.largest,

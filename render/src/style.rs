@@ -7,11 +7,12 @@
 //! particle data is rewritten. Particles take their species' styled colour and radius,
 //! or, with a colour map, the map's colour of their own attribute value (they are then
 //! packed like cluster records: radius and colour per point). Clusters take the map's
-//! colour of their area-weighted mean attribute, and their coverage radius times the
-//! radius scale; their colour is otherwise the mixture baked into the file, so
-//! per-species colours and hiding are exact at the particle level only, and a cluster
-//! drawn in place of a hidden species' particles still shows them. Styles that change
-//! sizes or hide particles turn occlusion culling off (it assumes the file's radii).
+//! colour of their area-weighted mean attribute (both mapped to [0, 1] by
+//! [`AttributeScale`]), and their coverage radius times the radius scale; their colour
+//! is otherwise the mixture baked into the file, so per-species colours and hiding are
+//! exact at the particle level only, and a cluster drawn in place of a hidden species'
+//! particles still shows them. Styles that change sizes or hide particles turn
+//! occlusion culling off (it assumes the file's radii).
 
 use serde::{Deserialize, Serialize};
 
@@ -206,6 +207,73 @@ impl PointStyle {
     }
 }
 
+/// How the scalar attribute maps to [0, 1] for colour maps and splat intensities:
+/// linearly from the file's range (`min` to 0, `max` to 1), an affine map, so that a
+/// cluster's area-weighted mean attribute maps to the mean of its particles' values. A
+/// constant attribute (equal-mass SPH particles, say), whose range is empty or no wider
+/// than the single-precision rounding of its values, maps every value to 1: every point
+/// the same full light or the map's last colour, particles and clusters alike (its
+/// particles are quantized to 0 and its cluster means carry rounding noise, neither of
+/// which means anything).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttributeScale {
+    min: f32,
+    max: f32,
+    constant: bool,
+}
+
+impl AttributeScale {
+    /// Ranges at most this many units in the last place of their values wide are
+    /// rounding, not data.
+    const ROUNDING_ULPS: f64 = 8.0;
+
+    pub fn new(info: &mdlod_format::meta::AttributeInfo) -> Self {
+        let (min, max) = (f64::from(info.min), f64::from(info.max));
+        let rounding = Self::ROUNDING_ULPS * f64::from(f32::EPSILON) * min.abs().max(max.abs());
+        AttributeScale {
+            min: info.min,
+            max: info.max,
+            // Also constant: a range that is no range (non-finite or reversed ends).
+            constant: !(max - min > rounding && (max - min).is_finite()),
+        }
+    }
+
+    /// True when the attribute is constant (every value maps to 1).
+    pub fn is_constant(&self) -> bool {
+        self.constant
+    }
+
+    /// A value (a cluster's mean) in [0, 1].
+    pub fn of_value(&self, v: f32) -> f32 {
+        if self.constant {
+            return 1.0;
+        }
+        let span = self.max - self.min;
+        let t = if span.is_finite() {
+            (v - self.min) / span
+        } else {
+            // Ends of opposite signs near f32::MAX: their difference overflows f32.
+            ((f64::from(v) - f64::from(self.min)) / (f64::from(self.max) - f64::from(self.min)))
+                as f32
+        };
+        if t.is_nan() {
+            0.0
+        } else {
+            t.clamp(0.0, 1.0)
+        }
+    }
+
+    /// A particle's quantized value `q` (FORMAT.md: `min + (max − min) · q / 65535`) in
+    /// [0, 1].
+    pub fn of_quantized(&self, q: u16) -> f32 {
+        if self.constant {
+            1.0
+        } else {
+            f32::from(q) / 65535.0
+        }
+    }
+}
+
 /// Packs a linear RGB colour as the file's node colours are: RGBA8, R in the low byte.
 pub fn pack_colour(c: [f32; 3]) -> u32 {
     let b = c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32);
@@ -234,6 +302,42 @@ mod tests {
             .map(|i| luma(ColourMap::Viridis.colour(i as f32 / 10.0)))
             .collect();
         assert!(l.windows(2).all(|w| w[1] > w[0]), "{l:?}");
+    }
+
+    #[test]
+    fn attribute_scales_map_ranges_linearly_and_constants_to_one() {
+        let scale = |min: f32, max: f32| {
+            AttributeScale::new(&mdlod_format::meta::AttributeInfo {
+                name: "a".into(),
+                min,
+                max,
+            })
+        };
+        let s = scale(-2.0, 2.0);
+        assert!(!s.is_constant());
+        assert_eq!(
+            (s.of_value(0.0), s.of_value(-5.0), s.of_value(3.0)),
+            (0.5, 0.0, 1.0)
+        );
+        assert_eq!((s.of_quantized(0), s.of_quantized(65535)), (0.0, 1.0));
+        assert_eq!(s.of_value(f32::NAN), 0.0);
+        let m = 2.5e-6f32;
+        for c in [
+            scale(m, m),
+            scale(m, f32::from_bits(m.to_bits() + 3)),
+            scale(0.0, 0.0),
+        ] {
+            assert!(c.is_constant(), "{c:?}");
+            assert_eq!(
+                (c.of_value(m), c.of_value(-1.0), c.of_quantized(0)),
+                (1.0, 1.0, 1.0)
+            );
+        }
+        assert!(!scale(m, m * 1.001).is_constant());
+        // Ends whose difference overflows single precision.
+        let wide = scale(-f32::MAX, f32::MAX);
+        assert!(!wide.is_constant());
+        assert_eq!(wide.of_value(0.0), 0.5);
     }
 
     #[test]

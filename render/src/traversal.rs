@@ -153,10 +153,13 @@ pub struct DrawList {
     /// Nodes that should have been opened but whose children were not resident
     /// (streaming); they are drawn as their representatives.
     pub deferred_nodes: u64,
-    /// Nodes left out because spheres already drawn hide them (occlusion culling).
+    /// Nodes left out by occlusion culling: no sample of the image sees them in front of
+    /// spheres already drawn, because those hide them or because they fall between the
+    /// samples (pixel centres) altogether; the two are not told apart.
     pub occluded_nodes: u64,
-    /// Particles left out because spheres already drawn hide them (occlusion culling;
-    /// tested one by one below nodes of at most 64 children).
+    /// Particles left out likewise: hidden by spheres already drawn, or between pixel
+    /// centres (a sphere narrower than a pixel whose disk holds none); tested one by one
+    /// below nodes of at most 64 children.
     pub occluded_particles: u64,
     /// Times the occlusion traversal started over with a coarser error to meet the
     /// budget.

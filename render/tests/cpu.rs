@@ -1055,3 +1055,134 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
     wants(f.check_all_nodes().err().unwrap());
     names(f.verify().err().unwrap());
 }
+
+/// A constant attribute (equal-mass SPH particles) maps to one value: every point of a
+/// fine and of a coarse cut packs intensity 1 for attribute-lit splats, and the colour
+/// map's last colour for spheres. The file quantizes its particles to 0 and keeps the
+/// clusters' means; a zero range made those 0 (black at full resolution) and 1 (lit
+/// clusters), so the cuts disagreed. A range no wider than rounding counts as constant
+/// too; a true range still maps linearly.
+#[test]
+fn a_constant_attribute_packs_one_intensity_and_one_colour_at_every_level() {
+    use mdlod_render::passes::sphere_raycast::{pack_styled, PackStyle};
+    use mdlod_render::style::{pack_colour, ColourMap, PointStyle};
+    let unpack = |c: [f32; 3]| {
+        let p = pack_colour(c).to_le_bytes();
+        [p[0], p[1], p[2]].map(|v| f32::from(v) / 255.0)
+    };
+    let mass = 2.5e-6f32;
+    let next = f32::from_bits(mass.to_bits() + 1);
+    for (what, values) in [
+        ("constant", vec![mass; 1500]),
+        (
+            "constant up to rounding",
+            (0..1500)
+                .map(|i| if i % 2 == 0 { mass } else { next })
+                .collect(),
+        ),
+    ] {
+        let mut frame = cloud_frame(1500, 4);
+        frame.attribute = Some(mdlod_preprocess::Attribute {
+            name: "mass".into(),
+            values,
+        });
+        let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+        let cam = fitted_camera(&f);
+        let last = f.level_count() - 1;
+        for error_px in [0.0, 30.0] {
+            let d = cut(&f, &cam, error_px, u64::MAX);
+            let levels: Vec<bool> = d.ranges.iter().map(|r| r.level as usize == last).collect();
+            assert!(levels.contains(&(error_px == 0.0)), "{what}, {error_px} px");
+            let splats =
+                pack_styled(&f, &d, PackStyle::FluxAttribute, &Default::default()).unwrap();
+            let spheres = pack_styled(
+                &f,
+                &d,
+                PackStyle::Spheres,
+                &PointStyle {
+                    colour_map: Some(ColourMap::Viridis),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let one = unpack(ColourMap::Viridis.colour(1.0));
+            for i in 0..d.points as u32 {
+                assert_eq!(
+                    splats.decode_point(i).2,
+                    [1.0; 3],
+                    "{what}, {error_px} px: {i}"
+                );
+                assert_eq!(spheres.decode_point(i).2, one, "{what}, {error_px} px: {i}");
+            }
+        }
+    }
+    // A range wider than rounding maps linearly, particles by their quantized values.
+    let mut frame = cloud_frame(600, 5);
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "m".into(),
+        values: (0..600)
+            .map(|i| mass * (1.0 + (i % 3) as f32 * 1e-3))
+            .collect(),
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let d = cut(&f, &fitted_camera(&f), 0.0, u64::MAX);
+    let splats = pack_styled(&f, &d, PackStyle::FluxAttribute, &Default::default()).unwrap();
+    let mut i = 0u32;
+    for r in &d.ranges {
+        assert_eq!(r.level as usize, f.level_count() - 1);
+        for k in r.first..r.first + r.count {
+            let q = f.attribute().unwrap()[k as usize];
+            assert_eq!(splats.decode_point(i).2, [f32::from(q) / 65535.0; 3]);
+            i += 1;
+        }
+    }
+    assert!(f.attribute().unwrap().contains(&0));
+    assert!(f.attribute().unwrap().contains(&65535));
+}
+
+/// The splat mode's automatic exposure is chosen from the points' light: the total flux
+/// for species light, the attribute's light (r = g = b) when the points' light is their
+/// attribute. Attribute light far below the disks' flux (intensities of 1 %) was
+/// exposed as if it were the flux: near black.
+#[test]
+fn the_automatic_exposure_of_attribute_light_is_chosen_from_that_light() {
+    use mdlod_render::SplatFrame;
+    let frame = |by_attribute: bool| SplatFrame {
+        width: 20,
+        height: 10,
+        hdr: (0..200)
+            .map(|i| {
+                if i % 4 == 0 {
+                    [0.0; 4]
+                } else {
+                    let flux = 1.0 + (i % 7) as f32;
+                    [0.01 * flux, 0.01 * flux, 0.01 * flux, flux]
+                }
+            })
+            .collect(),
+        by_attribute,
+        gpu_time: None,
+        points: 0,
+        gpu_data_bytes: 0,
+    };
+    let brightest = |img: &mdlod_render::RgbaImage| {
+        img.data
+            .chunks_exact(4)
+            .map(|p| p[0].max(p[1]).max(p[2]))
+            .max()
+            .unwrap()
+    };
+    // Species light: the 99.5th percentile of the total flux (7) maps to 1 − e⁻².
+    let (img, e) = frame(false).tone_map(None, [0.0; 3]);
+    assert!((e - 2.0 / 7.0).abs() < 1e-6, "{e}");
+    assert!(brightest(&img) < 60, "{}", brightest(&img));
+    // Attribute light: that of the attribute's light (0.07), well exposed.
+    let attr = frame(true);
+    let (img, e) = attr.tone_map(None, [0.0; 3]);
+    assert!((e - 2.0 / 0.07).abs() < 1e-3, "{e}");
+    assert!(brightest(&img) > 230, "{}", brightest(&img));
+    let total: f64 = attr.hdr.iter().map(|p| f64::from(p[0])).sum();
+    assert!((attr.total_light() - total).abs() < 1e-9 * total);
+    // A given exposure is used as given.
+    assert_eq!(attr.tone_map(Some(3.0), [0.0; 3]).1, 3.0);
+}

@@ -2483,3 +2483,92 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
         assert_eq!(report.budget, u64::MAX);
     }
 }
+/// A constant attribute (equal-mass SPH particles) lights every splat alike: intensity
+/// 1, so a fine and a coarse cut both carry the disks' whole flux as light (the
+/// particles were quantized to 0, black at full resolution, while the clusters' means
+/// lit up).
+#[test]
+fn a_constant_attribute_lights_every_splat_alike_at_every_level() {
+    let mut frame = cloud_frame(2000, 3);
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "mass".into(),
+        values: vec![2.5e-6; 2000],
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let (w, h) = (64u32, 48u32);
+    let camera = camera_for(&f, &ViewSpec::default(), w, h).unwrap();
+    let blend = mdlod_render::SplatBlend::Additive {
+        intensity: 1.0,
+        by_attribute: true,
+    };
+    let mut lights = vec![];
+    for error_px in [0.0, 8.0, 24.0] {
+        let draw = cut(&f, &camera, [w, h], error_px, OcclusionMode::Off);
+        let s = renderer()
+            .render_splats(&f, &camera, &draw, w, h, blend)
+            .unwrap();
+        let t = s.total_flux();
+        assert!(
+            t[3] > 0.0 && (t[0] - t[3]).abs() <= 1e-4 * t[3],
+            "{error_px} px ({} points): light {} of flux {}",
+            draw.points,
+            t[0],
+            t[3]
+        );
+        lights.push(s.total_light());
+    }
+    for l in &lights[1..] {
+        assert!((l - lights[0]).abs() <= 1e-3 * lights[0], "{lights:?}");
+    }
+    // The tone-mapped picture at full resolution is lit.
+    let mut o = opts(w, h);
+    o.mode = mdlod_render::RenderMode::Splat { by_attribute: true };
+    let (img, _) = render_image(renderer(), &f, &o).unwrap();
+    let lit = img.data.chunks_exact(4).filter(|p| p[0] > 40).count();
+    assert!(lit > 50, "{lit} lit pixels");
+}
+
+/// The automatic exposure of attribute-lit splats is chosen from their light, as that of
+/// species-lit ones is from theirs: an attribute mostly at 2 % of its range is as well
+/// exposed as species light (it was exposed as the disks' flux: near black).
+#[test]
+fn the_automatic_exposure_of_attribute_splats_is_chosen_from_their_light() {
+    let mut frame = cloud_frame(3000, 11);
+    let values = (0..3000)
+        .map(|i| match i {
+            0 => 0.0,
+            1 => 1.0,
+            _ => 0.02,
+        })
+        .collect();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "w".into(),
+        values,
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let bright = |by_attribute: bool| {
+        let mut o = opts(96, 72);
+        o.mode = mdlod_render::RenderMode::Splat { by_attribute };
+        o.error_px = 2.0;
+        let (img, report) = render_image(renderer(), &f, &o).unwrap();
+        // The 99th percentile of the lit pixels' brightest channel.
+        let mut lit: Vec<u8> = img
+            .data
+            .chunks_exact(4)
+            .map(|p| p[0].max(p[1]).max(p[2]))
+            .filter(|&v| v > 0)
+            .collect();
+        assert!(lit.len() > 100, "{} lit pixels", lit.len());
+        lit.sort_unstable();
+        (lit[lit.len() * 99 / 100], report.exposure.unwrap())
+    };
+    let (species, species_exposure) = bright(false);
+    let (attribute, attribute_exposure) = bright(true);
+    assert!(species > 180, "species light: {species}");
+    assert!(
+        attribute > 180,
+        "attribute light: {attribute} (exposure {attribute_exposure}, species \
+         {species_exposure})"
+    );
+    assert!(attribute_exposure > 10.0 * species_exposure);
+}

@@ -31,8 +31,8 @@ pub struct Args {
     /// Largest on-screen size, in pixels, of a cluster drawn as one sphere.
     #[arg(long, default_value_t = 1.0)]
     pub screen_error: f32,
-    /// Most spheres to draw; refinement stops there, largest on screen first.
-    #[arg(long, default_value_t = 4_000_000)]
+    /// Most spheres to draw (at least 1); refinement stops there, largest on screen first.
+    #[arg(long, default_value_t = 4_000_000, value_parser = parse_budget)]
     pub budget: u64,
     /// Draw clusters hidden behind nearer spheres too (occlusion culling is exact, so
     /// this only costs time; for comparisons).
@@ -85,10 +85,12 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "clusters")]
     pub sort: SortArg,
     /// Splat mode: each point's light is its species colour, or its scalar attribute
-    /// (the file's per-particle column, mapped from its range to [0, 1]).
+    /// (the file's per-particle column, mapped from its range to [0, 1]; a constant
+    /// column to 1).
     #[arg(long, value_enum, default_value = "species")]
     pub intensity: Intensity,
-    /// Splat mode: light added per unit of flux (default: chosen from the image).
+    /// Splat mode: light added per unit of flux (default: chosen from the image's light,
+    /// the attribute's with --intensity attribute).
     #[arg(long)]
     pub exposure: Option<f32>,
     /// Background colour: #rrggbb or r,g,b in [0, 1] (default white for spheres, black
@@ -315,6 +317,18 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     Ok(())
 }
 
+/// Parses a point budget: a count of spheres, at least 1 (a budget of 0 would draw
+/// nothing; the traversal always draws at least the top node).
+pub fn parse_budget(s: &str) -> Result<u64, String> {
+    const ZERO: &str = "0 spheres draw nothing: the budget is at least 1 (1 draws the whole \
+                        data set as one sphere)";
+    match s.trim().parse::<u64>() {
+        Ok(0) => Err(ZERO.into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("{s:?} is not a whole number of spheres")),
+    }
+}
+
 /// Parses `nx,ny,nz,d`.
 fn parse_plane(s: &str) -> Result<[f32; 4], String> {
     let v: Vec<f32> = s
@@ -469,7 +483,7 @@ pub fn run(args: Args) -> Result<()> {
         format!(" ({})", limits.join("; "))
     };
     println!(
-        "wrote {} ({}x{}, {samples}) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} hidden clusters and {} hidden particles left out), error {:.2} px{limits}",
+        "wrote {} ({}x{}, {samples}) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} clusters and {} particles left out as hidden or between pixel centres), error {:.2} px{limits}",
         args.output.display(),
         r.width,
         r.height,

@@ -45,7 +45,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1.0)]
     pub screen_error: f32,
     /// Most spheres to draw.
-    #[arg(long, default_value_t = 4_000_000)]
+    #[arg(long, value_parser = super::render::parse_budget, default_value_t = 4_000_000)]
     pub budget: u64,
     #[command(flatten)]
     pub style: super::render::StyleArgs,

@@ -30,7 +30,7 @@ use glam::{Mat4, Vec3};
 use mdlod_format::{FormatError, MdlodFile};
 
 use crate::error::RenderError;
-use crate::style::{pack_colour, PointStyle};
+use crate::style::{pack_colour, AttributeScale, PointStyle};
 use crate::traversal::{representative_radius, DrawList};
 
 /// The shared point decoding (uniforms, bindings, `load_point`) every point pass starts
@@ -263,6 +263,10 @@ impl PackedDraw {
             let s = ((self.attrs[(hw >> 1) as usize] >> ((hw & 1) * 16)) & 0xffff) as usize;
             let sp = self.species[s.min(self.species.len() - 1)];
             (pos, sp[3], [sp[0], sp[1], sp[2]])
+        } else if r.kind == KIND_INTENSITY {
+            let a = (r.attr_offset + 2 * j) as usize;
+            let v = f32::from_bits(self.attrs[a + 1]);
+            (pos, f32::from_bits(self.attrs[a]), [v; 3])
         } else {
             let a = (r.attr_offset + 2 * j) as usize;
             let c = self.attrs[a + 1].to_le_bytes();
@@ -304,7 +308,8 @@ pub enum PackStyle {
     FluxColour,
     /// Flux-preserving splats whose intensity is the scalar attribute, mapped linearly
     /// from its range to [0, 1] (an affine map keeps the area-weighted means of the
-    /// representatives exact): every point is a [`KIND_INTENSITY`] record.
+    /// representatives exact; a constant attribute maps to 1, see
+    /// [`AttributeScale`]): every point is a [`KIND_INTENSITY`] record.
     FluxAttribute,
 }
 
@@ -366,10 +371,10 @@ pub fn pack_styled(
 pub struct AttrPacker {
     style: PackStyle,
     radius_scale: f32,
-    /// Colouring by the attribute: the map and the attribute's range.
-    mapped: Option<(crate::style::ColourMap, mdlod_format::meta::AttributeInfo)>,
+    /// Colouring by the attribute: the map and the attribute's scale.
+    mapped: Option<(crate::style::ColourMap, AttributeScale)>,
     /// Intensities from the attribute ([`PackStyle::FluxAttribute`]).
-    intensity: Option<mdlod_format::meta::AttributeInfo>,
+    intensity: Option<AttributeScale>,
     /// The styled species table: linear albedo and radius.
     pub species: Vec<[f32; 4]>,
     /// The file's species count (indices at or above it are corrupt).
@@ -389,12 +394,15 @@ impl AttrPacker {
         look.validate().map_err(RenderError::InvalidOptions)?;
         let meta = file.metadata();
         let attribute = |what: &str| {
-            meta.attribute.clone().ok_or_else(|| {
-                RenderError::InvalidOptions(format!(
-                    "{} has no per-particle attribute to {what}",
-                    file.path().display()
-                ))
-            })
+            meta.attribute
+                .as_ref()
+                .map(AttributeScale::new)
+                .ok_or_else(|| {
+                    RenderError::InvalidOptions(format!(
+                        "{} has no per-particle attribute to {what}",
+                        file.path().display()
+                    ))
+                })
         };
         let mapped = match look.colour_map {
             Some(map) => Some((map, attribute("colour by")?)),
@@ -462,14 +470,6 @@ impl AttrPacker {
         };
         let values = file.attribute().unwrap_or_default();
         let node_first = || file.levels()[level].node_first as usize + first;
-        let unit = |info: &mdlod_format::meta::AttributeInfo, v: f32| {
-            let span = info.max - info.min;
-            if span > 0.0 {
-                ((v - info.min) / span).clamp(0.0, 1.0)
-            } else {
-                1.0
-            }
-        };
         if level == last {
             let sp = &file.species()[first..first + count];
             if let Some(k) = sp
@@ -478,18 +478,18 @@ impl AttrPacker {
             {
                 return Err(bad_species(first + k, sp[k]));
             }
-            if self.intensity.is_some() {
+            if let Some(scale) = &self.intensity {
                 for (k, &s) in sp.iter().enumerate() {
                     let q = values.get(first + k).copied().unwrap_or(0);
                     attrs.push(meta.species[usize::from(s)].radius.to_bits());
-                    attrs.push((f32::from(q) / 65535.0).to_bits());
+                    attrs.push(scale.of_quantized(q).to_bits());
                 }
-            } else if let Some((map, _)) = &self.mapped {
+            } else if let Some((map, scale)) = &self.mapped {
                 // Radius and mapped colour per point, as cluster records are.
                 for (k, &s) in sp.iter().enumerate() {
                     let q = values.get(first + k).copied().unwrap_or(0);
                     attrs.push(self.species[usize::from(s)][3].to_bits());
-                    attrs.push(pack_colour(map.colour(f32::from(q) / 65535.0)));
+                    attrs.push(pack_colour(map.colour(scale.of_quantized(q))));
                 }
             } else {
                 push_bytes_as_words(attrs, bytemuck::cast_slice(sp));
@@ -501,10 +501,10 @@ impl AttrPacker {
             let nf = node_first();
             for n in &file.nodes()[nf..nf + count] {
                 attrs.push(self.radius(n).to_bits());
-                attrs.push(if let Some(info) = &self.intensity {
-                    unit(info, n.attribute).to_bits()
-                } else if let Some((map, info)) = &self.mapped {
-                    pack_colour(map.colour(unit(info, n.attribute)))
+                attrs.push(if let Some(scale) = &self.intensity {
+                    scale.of_value(n.attribute).to_bits()
+                } else if let Some((map, scale)) = &self.mapped {
+                    pack_colour(map.colour(scale.of_value(n.attribute)))
                 } else {
                     n.colour
                 });
