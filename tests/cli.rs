@@ -1982,3 +1982,144 @@ fn a_closed_output_pipe_ends_the_program_quietly() {
     assert!(!err.contains("panicked"), "{err}");
     assert!(out.status.success(), "{:?}: {err}", out.status);
 }
+/// Ten spheres of radius 0.1 spread over 90 units, each narrower than a pixel, with a
+/// constant attribute (equal masses), as a LAMMPS dump converted.
+fn sparse_equal_masses(dir: &Path) -> PathBuf {
+    let dump = dir.join("sparse.lammpstrj");
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n10\nITEM: BOX BOUNDS pp pp pp\n\
+         -1 91\n-1 1\n-1 1\nITEM: ATOMS id type x y z mass\n",
+    );
+    for i in 0..10 {
+        text.push_str(&format!("{} 1 {} 0 0 2.5e-6\n", i + 1, 10 * i));
+    }
+    std::fs::write(&dump, text).unwrap();
+    let out = dir.join("sparse.mdlod");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&out),
+        "--radius",
+        "1=0.1",
+        "--attribute",
+        "mass",
+    ]);
+    out
+}
+
+/// Spheres that fall between pixel centres are left out like hidden ones (nothing would
+/// show them), and the summary says so rather than calling them hidden; splats lit by a
+/// constant attribute show every point (they were black: the constant mapped to 0).
+#[test]
+fn render_says_what_it_left_out_and_lights_a_constant_attribute() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let file = sparse_equal_masses(d);
+    let png = d.join("x.png");
+    let size = ["--width", "400", "--height", "200"];
+    let mut args = vec!["render", s(&file), "-o", s(&png)];
+    args.extend(size);
+    let out = ok(&args);
+    assert!(
+        out.contains("10 particles left out as hidden or between pixel centres"),
+        "{out}"
+    );
+    assert!(!out.contains("hidden particles"), "{out}");
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--mode", "splat"];
+    args.extend(size);
+    args.extend(["--intensity", "attribute", "--screen-error", "0"]);
+    ok(&args);
+    let (_, _, img) = read_png(&png);
+    let lit = img
+        .chunks_exact(4)
+        .filter(|p| p[0] > 100 && p[0] == p[1] && p[1] == p[2])
+        .count();
+    assert!(lit >= 10, "{lit} lit pixels");
+}
+
+/// A budget of 0 spheres is refused (it was taken as 1 and reported as "a point budget
+/// of 1"); a negative absorption is reported under its option's name (it said
+/// "opacity").
+#[test]
+fn render_refuses_a_zero_budget_and_names_the_absorption() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let file = sparse_equal_masses(d);
+    let png = d.join("x.png");
+    let err = fails(&["render", s(&file), "-o", s(&png), "--budget", "0"]);
+    assert!(
+        err.contains("--budget") && err.contains("at least 1"),
+        "{err}"
+    );
+    let err = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--mode",
+        "density",
+        "--absorption",
+        "-1",
+    ]);
+    assert!(
+        err.contains("--absorption -1") && !err.contains("opacity"),
+        "{err}"
+    );
+    assert!(!png.exists());
+    // A budget of 1 draws the whole data set as one sphere.
+    let out = ok(&["render", s(&file), "-o", s(&png), "--budget", "1"]);
+    assert!(out.contains("point budget of 1 spheres reached"), "{out}");
+}
+
+/// A batch skips a frame without particles (it cannot be a `.mdlod` file), saying which
+/// frame of which input and why, counts it in its summary, and does the same on a rerun
+/// (it failed the whole batch, on every rerun, without naming the frame); `convert` of
+/// such a frame stays an error, naming the frame and its timestep.
+#[test]
+fn batch_skips_an_empty_frame_saying_which_and_convert_names_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("thresh.dump");
+    let mut text = String::new();
+    for (step, n) in [(0, 3), (100, 0), (200, 2)] {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n\
+             0 10\n0 10\n0 10\nITEM: ATOMS id type x y z\n"
+        ));
+        for i in 0..n {
+            text.push_str(&format!("{} 1 {i} {i} {i}\n", i + 1));
+        }
+    }
+    std::fs::write(&input, text).unwrap();
+    let d = dir.path().join("d");
+    let skipped = format!(
+        "{}: frame 1 (timestep 100) has no particles: skipped, as a .mdlod file needs at \
+         least one (not written, not in the manifest)\n",
+        s(&input)
+    );
+    let out = ok(&["batch", s(&input), "-o", s(&d)]);
+    assert!(out.starts_with(&skipped), "{out}");
+    assert!(
+        out.contains(
+            "3 frames in the inputs, 3 here: 2 converted, 0 already done, 1 empty frame skipped;"
+        ),
+        "{out}"
+    );
+    assert_eq!(batch_frames(&d), ["frame-0.mdlod", "frame-200.mdlod"]);
+    let again = ok(&["batch", s(&input), "-o", s(&d)]);
+    assert!(again.starts_with(&skipped), "{again}");
+    assert!(
+        again.contains(": 0 converted, 2 already done, 1 empty frame skipped;"),
+        "{again}"
+    );
+    let frame = dir.path().join("f.mdlod");
+    let err = fails(&["convert", s(&input), "-o", s(&frame), "--frame", "1"]);
+    assert!(
+        err.contains(&format!(
+            "{}: frame 1 (timestep 100): no particles, and a .mdlod file needs at least one",
+            s(&input)
+        )),
+        "{err}"
+    );
+    assert!(!frame.exists());
+}

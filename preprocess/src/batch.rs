@@ -16,14 +16,21 @@
 //!    that sorted list, so N processes (a Slurm job array) split the work without talking
 //!    to each other; each writes its own manifest `dataset.shard-I-of-N.json`, and
 //!    [`merge`] joins them into `dataset.json`.
-//! 3. A frame whose output exists, opens (the reader validates its structure), records
-//!    the same source (path, frame, size and modification time, to the nanosecond where
-//!    the file system keeps it) and was built with the
-//!    same settings (cluster size, root points, δn, position bits, the radii given now,
-//!    the attribute asked for now, or none) is
-//!    skipped; anything else is converted again. Leftover temporary files of killed runs
-//!    are removed first: only this shard's own frames' (a shard running beside it never
-//!    writes those) and temporary manifests older than [`STALE_TEMP`].
+//! 3. A frame without particles cannot be a `.mdlod` file: it is left out (not written,
+//!    not listed, not expected of the shard) and reported ([`BatchReport::empty`]), told
+//!    from its header alone on every run. A frame whose output exists, opens (the reader
+//!    validates its structure), records the same source (path, frame, size and
+//!    modification time, to the nanosecond where the file system keeps it) and was built
+//!    with the same settings is skipped; anything else is converted again. The settings
+//!    are everything the file depends on ([`same_build`]): cluster size, root points, δn,
+//!    position bits, the chunk size where the frame is above it (a chunked build differs
+//!    from a whole one), every species' radius (as given now, else as the input gives it
+//!    or its default), the attribute asked for now (or none), and for LAMMPS binary dumps
+//!    the column names given (`--columns`; the file does not record them, the manifests
+//!    do: a frame no manifest lists with its checksum is converted again). Leftover
+//!    temporary files of killed runs are removed first: only this shard's own frames' (a
+//!    shard running beside it never writes those) and temporary manifests older than
+//!    [`STALE_TEMP`].
 //! 4. Frames are converted by a few workers at once, as many as the memory limit allows
 //!    (about [`BYTES_PER_PARTICLE`] per particle each, at most one per thread); each
 //!    conversion is itself parallel. Outputs appear by atomic rename only when complete,
@@ -43,7 +50,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::convert::{convert_frame, ConvertError, ConvertOptions};
 use crate::progress::Progress;
-use crate::readers::{DumpFile, ReadError, ReadOptions};
+use crate::readers::{DumpFile, InputFormat, ReadError, ReadOptions};
 use crate::species::SpeciesNaming;
 
 /// Peak memory of one frame's conversion per particle (measured with the `mdlod`
@@ -79,6 +86,10 @@ pub struct FrameEntry {
     /// checksum, so it identifies the whole content.
     pub checksum: String,
     pub source: SourceInfo,
+    /// The column names given for a LAMMPS binary dump (`--columns`), which decide what
+    /// its values are and which the file does not record; absent when none were given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub columns: Option<Vec<String>>,
 }
 
 /// `dataset.json`: the frames of a batch directory, by timestep.
@@ -89,8 +100,9 @@ pub struct Manifest {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shard: Option<[u32; 2]>,
     /// How many frames the run writing this manifest is responsible for (its shard's
-    /// share of the inputs). A manifest that lists fewer is incomplete: its run is still
-    /// going, failed or was killed.
+    /// share of the inputs, less the frames without particles, which are never listed).
+    /// A manifest that lists fewer is incomplete: its run is still going, failed or was
+    /// killed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub expected_frames: Option<u64>,
     pub frames: Vec<FrameEntry>,
@@ -109,15 +121,45 @@ pub struct BatchOptions {
     pub max_jobs: Option<usize>,
 }
 
+/// A frame without particles, which a batch leaves out: a `.mdlod` file needs at least
+/// one particle.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmptyFrame {
+    pub input: PathBuf,
+    /// The frame's index in the input.
+    pub frame: usize,
+    /// The input's own timestep of the frame, where it records one.
+    pub timestep: Option<u64>,
+    /// The frame's number in the batch (its timestep, else its position in the inputs).
+    pub number: u64,
+}
+
+impl std::fmt::Display for EmptyFrame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: frame {}", self.input.display(), self.frame)?;
+        match self.timestep {
+            Some(t) => write!(f, " (timestep {t})")?,
+            None => write!(f, " (number {} in the batch)", self.number)?,
+        }
+        write!(
+            f,
+            " has no particles: skipped, as a .mdlod file needs at least one \
+             (not written, not in the manifest)"
+        )
+    }
+}
+
 /// What a batch did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BatchReport {
     /// Frames of all inputs.
     pub frames_total: usize,
-    /// Frames this shard is responsible for.
+    /// Frames this shard is responsible for (empty ones included).
     pub frames_in_shard: usize,
     pub converted: usize,
     pub skipped: usize,
+    /// This shard's frames without particles, left out (in timestep order).
+    pub empty: Vec<EmptyFrame>,
     /// Concurrent conversions used.
     pub jobs: usize,
     pub manifest: PathBuf,
@@ -246,8 +288,14 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
 }
 
 /// The manifest entry of a complete output file of `timestep` (the input's own, or the
-/// frame's position in the whole list for an input without timesteps).
-fn entry_of(path: &Path, file: &MdlodFile, timestep: u64) -> FrameEntry {
+/// frame's position in the whole list for an input without timesteps), read with
+/// `columns` given.
+fn entry_of(
+    path: &Path,
+    file: &MdlodFile,
+    timestep: u64,
+    columns: Option<Vec<String>>,
+) -> FrameEntry {
     let m = file.metadata();
     FrameEntry {
         timestep,
@@ -266,14 +314,27 @@ fn entry_of(path: &Path, file: &MdlodFile, timestep: u64) -> FrameEntry {
             modified_nanos: None,
             frame: 0,
         }),
+        columns,
     }
 }
 
 /// Whether `file` was built with the settings a conversion with `options` would use: the
-/// hierarchy parameters, every radius given in `options` for a species it holds, and
-/// `attribute` (the name the reader gives the attribute asked for now; `None`: none).
-fn same_build(file: &MdlodFile, options: &ConvertOptions, attribute: Option<&str>) -> bool {
+/// hierarchy parameters, the chunk size where the frame is above it (the file records it
+/// then, and a chunked build differs from a whole one), `attribute` (the name the reader
+/// gives the attribute asked for now; `None`: none) and every species' radius: the one
+/// `options` give it, else the one the input gives (`given`, asked only when needed:
+/// the radii the frame's file gives by species, `None` when they cannot be read), else
+/// its element's or the default. (A radius given by an earlier run and left out now
+/// must not survive: the species takes the input's own again.)
+fn same_build(
+    file: &MdlodFile,
+    options: &ConvertOptions,
+    attribute: Option<&str>,
+    given: impl FnOnce() -> Option<Vec<(String, f32)>>,
+) -> bool {
     let (m, b) = (file.metadata(), &options.build);
+    let chunk = options.chunks.chunk_points as u64;
+    let chunked = (m.particles > chunk).then_some(chunk);
     // The file records the δn in effect: at most its levels below the top.
     let last = u32::try_from(file.level_count().saturating_sub(1)).unwrap_or(u32::MAX);
     let params = (
@@ -287,13 +348,62 @@ fn same_build(file: &MdlodFile, options: &ConvertOptions, attribute: Option<&str
         b.delta_n.min(last),
         b.position_bits,
     );
+    if !(params
+        && m.build.chunk_points == chunked
+        && m.attribute.as_ref().map(|a| a.name.as_str()) == attribute)
+    {
+        return false;
+    }
     // (An override naming none of the frame's species changes nothing in it: a species
     // may appear in some frames of a trajectory only.)
-    params
-        && m.attribute.as_ref().map(|a| a.name.as_str()) == attribute
-        && m.species.iter().all(|s| {
-            crate::species::radius_override(&options.radii, &s.name).is_none_or(|r| r == s.radius)
-        })
+    let mut given = Some(given);
+    let mut from_input: Option<Option<Vec<(String, f32)>>> = None;
+    m.species.iter().all(|s| {
+        let want = match crate::species::radius_override(&options.radii, &s.name) {
+            Some(r) => r,
+            None => {
+                let Some(radii) = from_input.get_or_insert_with(|| given.take().and_then(|f| f()))
+                else {
+                    return false;
+                };
+                let own = radii.iter().find(|(n, _)| *n == s.name).map(|(_, r)| *r);
+                if own.is_some_and(|r| !(r.is_finite() && r > 0.0)) {
+                    // A conversion now refuses it: converted again, to say so.
+                    return false;
+                }
+                crate::species::radius_without_override(&s.name, own)
+            }
+        };
+        want == s.radius
+    })
+}
+
+/// The column names each listed frame was read with, from every manifest of `out_dir`
+/// (whole and shards', of this run's earlier attempts or of other shardings), by file
+/// name and checksum. Unreadable manifests are passed over.
+fn recorded_columns(
+    out_dir: &Path,
+) -> std::collections::HashMap<(String, String), Option<Vec<String>>> {
+    let mut known = std::collections::HashMap::new();
+    let Ok(dir) = std::fs::read_dir(out_dir) else {
+        return known;
+    };
+    for e in dir.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !(name == MANIFEST || name.starts_with("dataset.shard-") && name.ends_with(".json")) {
+            continue;
+        }
+        let Some(m) = std::fs::read(e.path())
+            .ok()
+            .and_then(|t| serde_json::from_slice::<Manifest>(&t).ok())
+        else {
+            continue;
+        };
+        for f in m.frames {
+            known.insert((f.file, f.checksum), f.columns);
+        }
+    }
+    known
 }
 
 /// The inputs of a batch as an error names them: the one, or the first and how many more.
@@ -358,12 +468,30 @@ struct Job<'a> {
     /// The opened input; `None` for a gzip input, which is opened again by the worker
     /// that converts it (its text is not kept in memory between).
     dump: Option<&'a DumpFile>,
+    format: InputFormat,
     frame: usize,
+    /// The input's own timestep of the frame, where it records one.
+    own_timestep: Option<u64>,
     timestep: u64,
+    /// The particle count (known from indexing for a gzip input; for others, read from
+    /// the frame's header when needed).
     particles: u64,
     /// The frame's attribute as the reader names it (`None`: no attribute).
     attribute: Option<String>,
+    /// For a gzip input whose frame has an output already: the radii the frame gives its
+    /// species (see [`DumpFile::given_radii`]; `None` when they cannot be read).
+    given_radii: Option<Vec<(String, f32)>>,
 }
+
+/// A frame as it was listed while its input was open: (the input's own timestep, the
+/// batch's number, particles, attribute, given radii); see [`Job`].
+type Listed = (
+    Option<u64>,
+    u64,
+    u64,
+    Option<String>,
+    Option<Vec<(String, f32)>>,
+);
 
 /// Converts every frame of `inputs` (this shard's share) into `out_dir`.
 pub fn batch(
@@ -383,7 +511,8 @@ pub fn batch(
     // is dropped after indexing (with its frames' particle counts noted), so a batch of
     // many compressed files never holds more than one at a time per worker.
     let mut dumps: Vec<Option<DumpFile>> = Vec::with_capacity(inputs.len());
-    let mut listed: Vec<Vec<(u64, u64, Option<String>)>> = Vec::with_capacity(inputs.len());
+    let mut formats: Vec<InputFormat> = Vec::with_capacity(inputs.len());
+    let mut listed: Vec<Vec<Listed>> = Vec::with_capacity(inputs.len());
     // How the first frame of each input names its species (for the radius overrides).
     let mut namings: Vec<SpeciesNaming> = Vec::with_capacity(inputs.len());
     let mut position = 0u64;
@@ -399,22 +528,30 @@ pub fn batch(
         let dump = &bounded.dump;
         let mut frames = Vec::with_capacity(dump.frame_count());
         for k in 0..dump.frame_count() {
-            let timestep = dump.frame_timestep(k).unwrap_or(position);
+            let own = dump.frame_timestep(k);
+            let timestep = own.unwrap_or(position);
             position += 1;
-            let particles = if compressed {
+            let (particles, given) = if compressed {
                 let info = dump
                     .frame_info(k)
                     .map_err(|e| bounded.context(p, e.into()))?;
-                info.particles as u64
+                // What a rerun compares an existing output's radii with (the text is
+                // gone later).
+                let given = out_dir
+                    .join(frame_file_name(timestep))
+                    .is_file()
+                    .then(|| dump.given_radii(k).ok())
+                    .flatten();
+                (info.particles as u64, given)
             } else {
-                0
+                (0, None)
             };
             // The attribute asked for, resolved now (a gzip input's text is gone later): a
             // column the frame lacks is an error before anything is converted.
             let attribute = dump
                 .attribute_name(k, &opts.read)
                 .map_err(|e| bounded.context(p, e.into()))?;
-            frames.push((timestep, particles, attribute));
+            frames.push((own, timestep, particles, attribute, given));
         }
         if !opts.convert.radii.is_empty() && dump.frame_count() > 0 {
             // (Advisory: a frame that cannot be read fails where it is converted.)
@@ -424,18 +561,22 @@ pub fn batch(
             );
         }
         listed.push(frames);
+        formats.push(dump.format());
         dumps.push((!compressed).then_some(bounded.dump));
     }
     let mut jobs: Vec<Job<'_>> = Vec::new();
-    for ((input, dump), frames) in inputs.iter().zip(&dumps).zip(&listed) {
-        for (k, (timestep, particles, attribute)) in frames.iter().enumerate() {
+    for (((input, dump), format), frames) in inputs.iter().zip(&dumps).zip(&formats).zip(listed) {
+        for (k, (own, timestep, particles, attribute, given)) in frames.into_iter().enumerate() {
             jobs.push(Job {
                 input,
                 dump: dump.as_ref(),
+                format: *format,
                 frame: k,
-                timestep: *timestep,
-                particles: *particles,
-                attribute: attribute.clone(),
+                own_timestep: own,
+                timestep,
+                particles,
+                attribute,
+                given_radii: given,
             });
         }
     }
@@ -483,33 +624,72 @@ pub fn batch(
     let manifest_path = out_dir.join(manifest_name(opts.shard));
     let mut done = Vec::new();
     let mut todo = Vec::new();
+    let mut empty = Vec::new();
     // The species names the frames hold, for the radius overrides' check at the end.
     let seen = Mutex::new(std::collections::BTreeSet::<String>::new());
     let note_species = |f: &MdlodFile| {
         let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
         seen.extend(f.metadata().species.iter().map(|s| s.name.clone()));
     };
+    // The column names given apply to LAMMPS binary dumps only; what an existing output
+    // was read with, the manifests tell.
+    let columns_for = |job: &Job<'_>| {
+        (job.format == InputFormat::LammpsBinary)
+            .then(|| opts.read.columns.clone())
+            .flatten()
+    };
+    let known_columns = if mine.iter().any(|j| j.format == InputFormat::LammpsBinary) {
+        recorded_columns(out_dir)
+    } else {
+        Default::default()
+    };
     for mut job in mine.drain(..) {
+        if let Some(dump) = job.dump {
+            // (A header that cannot be read fails where the frame is converted.)
+            match dump.frame_info(job.frame) {
+                Ok(info) => job.particles = info.particles as u64,
+                Err(_) => job.particles = u64::MAX,
+            }
+        }
+        if job.particles == 0 {
+            empty.push(EmptyFrame {
+                input: job.input.to_path_buf(),
+                frame: job.frame,
+                timestep: job.own_timestep,
+                number: job.timestep,
+            });
+            continue;
+        }
         let out = out_dir.join(frame_file_name(job.timestep));
         let want = fingerprint(job.input, job.frame as u64);
+        let columns = columns_for(&job);
         let complete = MdlodFile::open(&out).ok().filter(|f| {
+            let given = || match job.dump {
+                Some(d) => d.given_radii(job.frame).ok(),
+                None => job.given_radii.take(),
+            };
+            let same_columns = job.format != InputFormat::LammpsBinary
+                || known_columns
+                    .get(&(
+                        frame_file_name(job.timestep),
+                        format!("{:016x}", f.header().section_table_checksum),
+                    ))
+                    .is_some_and(|c| *c == columns);
             f.metadata()
                 .source
                 .as_ref()
                 .is_some_and(|s| same_source(s, &want))
-                && same_build(f, &opts.convert, job.attribute.as_deref())
+                && same_columns
+                && same_build(f, &opts.convert, job.attribute.as_deref(), given)
         });
         match complete {
             Some(f) => {
                 note_species(&f);
-                done.push(entry_of(&out, &f, job.timestep));
+                done.push(entry_of(&out, &f, job.timestep, columns));
             }
             None => {
-                if let Some(dump) = job.dump {
-                    job.particles = dump
-                        .frame_info(job.frame)
-                        .map(|i| i.particles as u64)
-                        .unwrap_or(0);
+                if job.particles == u64::MAX {
+                    job.particles = 0;
                 }
                 todo.push(job);
             }
@@ -519,7 +699,7 @@ pub fn batch(
     let manifest = Mutex::new(Manifest {
         mdlod_dataset: 1,
         shard: opts.shard.map(|(i, n)| [i, n]),
-        expected_frames: Some(frames_in_shard as u64),
+        expected_frames: Some((frames_in_shard - empty.len()) as u64),
         frames: done,
     });
     let save = |m: &mut Manifest| -> Result<(), BatchError> {
@@ -635,7 +815,7 @@ pub fn batch(
                             }
                             let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                             note_species(&f);
-                            Ok(entry_of(&out, &f, job.timestep))
+                            Ok(entry_of(&out, &f, job.timestep, columns_for(job)))
                         })()
                         .map_err(in_context)
                     })();
@@ -701,6 +881,7 @@ pub fn batch(
         frames_in_shard,
         converted: converted.into_inner(),
         skipped,
+        empty,
         jobs,
         manifest: manifest_path,
     })

@@ -1074,10 +1074,10 @@ pub fn convert_chunked(
     let n = source.len();
     let params = &options.build;
     if n == 0 {
-        return Err(ConvertError::Build {
-            path: output.display().to_string(),
-            source: BuildError::Empty,
-        });
+        return Err(ConvertError::EmptyFrame(crate::convert::FramePlace::of(
+            metadata.source.as_ref(),
+            metadata.timestep,
+        )));
     }
     // Everything that does not need the particles is checked before the partition pass
     // reads them all.
@@ -1294,6 +1294,7 @@ pub fn convert_chunked(
     if !options.radii_may_be_absent {
         crate::species::check_overrides(&names, &options.radii)?;
     }
+    crate::convert::check_radii(&names, options, metadata.source.as_ref(), metadata.timestep)?;
     let species = species_table(&names, &options.radii);
     // Each chunk checks its own particles' radii; the top node sums over all of them.
     check_species(n, &species).map_err(|source| ConvertError::Build {

@@ -63,6 +63,12 @@ pub enum ConvertError {
     Species(#[from] Box<crate::species::UnknownSpecies>),
     #[error("chunked conversion: {0}")]
     Chunked(String),
+    /// A frame without particles: a `.mdlod` file needs at least one.
+    #[error("{0}: no particles, and a .mdlod file needs at least one")]
+    EmptyFrame(FramePlace),
+    /// Boxed: a species whose radius from the input cannot be drawn.
+    #[error(transparent)]
+    UnusableRadius(Box<UnusableRadius>),
     /// An error in the text a large gzip input was decompressed into (the place is a
     /// line of that text).
     #[error("{} (decompressed into {}): {source}", input.display(), text.display())]
@@ -72,6 +78,77 @@ pub enum ConvertError {
         #[source]
         source: Box<ConvertError>,
     },
+}
+
+/// Which frame of which input: `path: frame K (timestep T)`, as far as known.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FramePlace {
+    /// The input (`input` when unknown).
+    pub path: String,
+    /// The frame's index in the input.
+    pub frame: Option<u64>,
+    pub timestep: Option<u64>,
+}
+
+impl FramePlace {
+    /// The place of a frame converted from `source` (if known) with `timestep`.
+    pub fn of(source: Option<&SourceInfo>, timestep: Option<u64>) -> FramePlace {
+        FramePlace {
+            path: source.map_or_else(|| "input".to_string(), |s| s.path.clone()),
+            frame: source.map(|s| s.frame),
+            timestep,
+        }
+    }
+}
+
+impl std::fmt::Display for FramePlace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.path)?;
+        match (self.frame, self.timestep) {
+            (Some(k), Some(t)) => write!(f, ": frame {k} (timestep {t})"),
+            (Some(k), None) => write!(f, ": frame {k}"),
+            (None, Some(t)) => write!(f, ": timestep {t}"),
+            (None, None) => Ok(()),
+        }
+    }
+}
+
+/// A species whose radius from the input is zero, below or not a number, with no
+/// `--radius` for it: refused rather than drawn with a made-up size.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub struct UnusableRadius {
+    pub place: FramePlace,
+    pub species: String,
+    /// The radius the input gives.
+    pub radius: f32,
+    /// The input's format, where known: it says what the species is (an MMPLD list, a
+    /// GSD type) and where its size comes from.
+    pub format: Option<crate::readers::InputFormat>,
+}
+
+impl std::fmt::Display for UnusableRadius {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use crate::readers::InputFormat;
+        let (place, name, r) = (&self.place, &self.species, self.radius);
+        let (what, size) = match self.format {
+            Some(InputFormat::Mmpld) => ("list", format!("radius {r}")),
+            Some(InputFormat::Gsd) => (
+                "type",
+                format!("a particle diameter of {}", 2.0 * f64::from(r)),
+            ),
+            _ => ("species", format!("radius {r}")),
+        };
+        let sep = if place.frame.is_some() || place.timestep.is_some() {
+            ", "
+        } else {
+            ": "
+        };
+        write!(
+            f,
+            "{place}{sep}{what} {name}: the file gives {size}, and a radius must be a positive \
+             number; give the {what} its radius with --radius {name}=R"
+        )
+    }
 }
 
 impl From<crate::species::UnknownSpecies> for ConvertError {
@@ -89,9 +166,16 @@ pub fn convert_frame(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
+    if frame.is_empty() {
+        return Err(ConvertError::EmptyFrame(FramePlace::of(
+            source.as_ref(),
+            frame.timestep,
+        )));
+    }
     if !options.radii_may_be_absent {
         crate::species::check_overrides(&frame.species, &options.radii)?;
     }
+    check_radii(&frame.species, options, source.as_ref(), frame.timestep)?;
     if frame.len() > options.chunks.chunk_points {
         let metadata = base_metadata(frame, source, options);
         return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
@@ -132,6 +216,25 @@ pub fn convert_frame(
         write_time,
         file_size,
     })
+}
+
+/// Refuses a species whose radius from the input is zero, below or not a number, unless
+/// `options` override it; `source` and `timestep` place the frame for the message.
+pub fn check_radii(
+    species: &[crate::frame::SpeciesName],
+    options: &ConvertOptions,
+    source: Option<&SourceInfo>,
+    timestep: Option<u64>,
+) -> Result<(), ConvertError> {
+    let Some((name, radius)) = crate::species::unusable_radius(species, &options.radii) else {
+        return Ok(());
+    };
+    Err(ConvertError::UnusableRadius(Box::new(UnusableRadius {
+        place: FramePlace::of(source, timestep),
+        species: name.to_string(),
+        radius,
+        format: source.and_then(|s| crate::readers::format_of_file(Path::new(&s.path))),
+    })))
 }
 
 /// The metadata of `frame` before its hierarchy is built (species, attribute range and

@@ -116,6 +116,30 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
         .collect()
 }
 
+/// The radius a species named `name` gets without an override: `given` (the radius the
+/// input gives it) when that is a positive number, else its element's, else the default
+/// (as [`species_table`] chooses; numeric type names are no element's).
+pub fn radius_without_override(name: &str, given: Option<f32>) -> f32 {
+    match given.filter(|r| r.is_finite() && *r > 0.0) {
+        Some(r) => r,
+        None => element(name).map_or(DEFAULT_RADIUS, |(r, _)| r),
+    }
+}
+
+/// The first species whose radius from the input is zero, below or not a number and
+/// that `overrides` do not give one: such a size cannot be drawn, and must not quietly
+/// become the default.
+pub fn unusable_radius<'a>(
+    names: &'a [SpeciesName],
+    overrides: &[(String, f32)],
+) -> Option<(&'a str, f32)> {
+    names.iter().find_map(|s| {
+        let r = s.radius?;
+        let bad = !(r.is_finite() && r > 0.0) && radius_override(overrides, &s.name).is_none();
+        bad.then_some((s.name.as_str(), r))
+    })
+}
+
 /// How an input names its species, as far as its first atom tells (see
 /// `DumpFile::species_naming`): what an override may call them.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -487,3 +487,392 @@ fn a_frames_attribute_is_resolved_as_reading_it_names_it_in_every_format() {
         );
     }
 }
+
+/// The radius of species `name` in every frame of a batch directory's manifest.
+fn radii_of(out: &Path, name: &str) -> Vec<f32> {
+    read_manifest(out)
+        .unwrap()
+        .frames
+        .iter()
+        .map(|f| {
+            let file = MdlodFile::open(out.join(&f.file)).unwrap();
+            file.metadata()
+                .species
+                .iter()
+                .find(|s| s.name == name)
+                .unwrap()
+                .radius
+        })
+        .collect()
+}
+
+/// A radius given by an earlier run and left out now must not survive a rerun: the
+/// species take their own radius again (the input's, as GSD diameters give it, or the
+/// default), and a rerun after that finds every frame done.
+#[test]
+fn a_rerun_without_a_radius_given_before_gives_the_species_their_own_again() {
+    use mdlod_datasets::gsd_sample_path;
+    let dir = tempfile::tempdir().unwrap();
+    for (src, name, own) in [
+        (gsd_sample_path("hoomd_mixture.gsd"), "B", 0.75),
+        (input(dir.path()), "1", 0.5),
+    ] {
+        let out = dir
+            .path()
+            .join(format!("{}.d", src.file_name().unwrap().to_string_lossy()));
+        let mut o = opts();
+        o.convert.radii = vec![(name.into(), 2.0)];
+        let first = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        let n = first.converted;
+        assert!(n >= 3);
+        assert_eq!(radii_of(&out, name), vec![2.0; n]);
+        let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+        assert_eq!((r.converted, r.skipped), (n, 0), "{}", src.display());
+        assert_eq!(radii_of(&out, name), vec![own; n]);
+        let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+        assert_eq!((r.converted, r.skipped), (0, n), "{}", src.display());
+        // The input's own radius given explicitly builds the same file.
+        o.convert.radii = vec![(name.into(), own)];
+        let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        assert_eq!((r.converted, r.skipped), (0, n), "{}", src.display());
+    }
+}
+
+/// A frame above the chunk size is built in chunks, and the chunk size decides the file
+/// (FORMAT.md, "Chunked builds"): a rerun with another one converts such frames again; for
+/// frames below both sizes nothing changes.
+#[test]
+fn a_rerun_with_another_chunk_size_converts_the_frames_it_changes() {
+    // The real binary dump: 3 frames of 500 atoms.
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("melt.bin");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.bin"), &src).unwrap();
+    let out = dir.path().join("out");
+    let run = |chunk_points: usize| {
+        let mut o = opts();
+        o.convert.build.max_root_points = 64;
+        o.convert.chunks.chunk_points = chunk_points;
+        let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        (r.converted, r.skipped)
+    };
+    assert_eq!(run(300), (3, 0));
+    assert_eq!(run(300), (0, 3));
+    let chunks = || {
+        MdlodFile::open(out.join("frame-0.mdlod"))
+            .unwrap()
+            .metadata()
+            .build
+            .chunk_points
+    };
+    assert_eq!(run(400), (3, 0), "another chunk size");
+    assert_eq!(chunks(), Some(400));
+    assert_eq!(run(1000), (3, 0), "whole frames now");
+    assert_eq!(chunks(), None);
+    assert_eq!(run(5000), (0, 3), "whole frames either way");
+    assert_eq!(run(300), (3, 0), "chunks again");
+}
+
+/// Column names given for a LAMMPS binary dump decide what its values are, and the file
+/// does not record them: the manifest does, and a rerun with other names (or none)
+/// converts the frames again.
+#[test]
+fn a_rerun_with_other_column_names_for_a_binary_dump_converts_again() {
+    use mdlod_preprocess::readers::DumpFile;
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("melt.bin");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.bin"), &src).unwrap();
+    let own = DumpFile::open(&src).unwrap().frame_info(0).unwrap().columns;
+    let swapped: Vec<String> = own
+        .iter()
+        .map(|c| match c.as_str() {
+            "x" => "y".to_string(),
+            "y" => "x".to_string(),
+            other => other.to_string(),
+        })
+        .collect();
+    assert_ne!(own, swapped);
+    let out = dir.path().join("out");
+    let run = |columns: Option<&Vec<String>>| {
+        let mut o = opts();
+        o.read.columns = columns.cloned();
+        let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        (r.converted, r.skipped)
+    };
+    let first_checksum = || read_manifest(&out).unwrap().frames[0].checksum.clone();
+    assert_eq!(run(None), (3, 0));
+    let plain = first_checksum();
+    assert_eq!(run(None), (0, 3));
+    assert_eq!(run(Some(&swapped)), (3, 0), "x and y swapped");
+    assert_ne!(first_checksum(), plain);
+    assert_eq!(
+        read_manifest(&out).unwrap().frames[0].columns.as_ref(),
+        Some(&swapped)
+    );
+    assert_eq!(run(Some(&swapped)), (0, 3));
+    assert_eq!(run(None), (3, 0), "the file's own names again");
+    assert_eq!(first_checksum(), plain);
+    // Names for a text dump change nothing (only binary dumps take them).
+    let text = input(dir.path());
+    let t = dir.path().join("text");
+    batch(std::slice::from_ref(&text), &t, &opts(), &NoProgress).unwrap();
+    let mut o = opts();
+    o.read.columns = Some(swapped.clone());
+    let r = batch(std::slice::from_ref(&text), &t, &o, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 6));
+}
+
+/// An MMPLD file (version 1.2) of `frames`, each a list of particle lists (vertex type 1,
+/// no colour, radius 0.5) given by their particle counts.
+fn mmpld(frames: &[&[usize]]) -> Vec<u8> {
+    let mut out = b"MMPLD\0".to_vec();
+    out.extend_from_slice(&102u16.to_le_bytes());
+    out.extend_from_slice(&(frames.len() as u32).to_le_bytes());
+    for v in [
+        0f32, 0.0, 0.0, 10.0, 10.0, 10.0, 0.0, 0.0, 0.0, 10.0, 10.0, 10.0,
+    ] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    let table = out.len();
+    out.resize(table + 8 * (frames.len() + 1), 0);
+    for (k, lists) in frames.iter().enumerate() {
+        let at = out.len() as u64;
+        out[table + 8 * k..table + 8 * k + 8].copy_from_slice(&at.to_le_bytes());
+        out.extend_from_slice(&(k as f32).to_le_bytes());
+        out.extend_from_slice(&(lists.len() as i32).to_le_bytes());
+        for &n in lists.iter() {
+            out.extend_from_slice(&[1, 0]);
+            out.extend_from_slice(&0.5f32.to_le_bytes());
+            out.extend_from_slice(&[200, 100, 50, 255]);
+            out.extend_from_slice(&(n as u64).to_le_bytes());
+            for i in 0..n {
+                for v in [i % 7, (i / 7) % 7, i / 49] {
+                    out.extend_from_slice(&(v as f32 + 0.1 * k as f32).to_le_bytes());
+                }
+            }
+        }
+    }
+    let end = out.len() as u64;
+    out[table + 8 * frames.len()..table + 8 * frames.len() + 8].copy_from_slice(&end.to_le_bytes());
+    out
+}
+
+/// A LAMMPS text dump of frames at timesteps 0, 100, 200 with `counts` atoms.
+fn lammps_with_counts(dir: &Path, counts: [usize; 3]) -> PathBuf {
+    let mut text = String::new();
+    for (k, n) in counts.iter().enumerate() {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{}\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n\
+             0 10\n0 10\n0 10\nITEM: ATOMS id type x y z\n",
+            100 * k
+        ));
+        for i in 0..*n {
+            text.push_str(&format!("{} 1 {} {} 1\n", i + 1, i % 9, i / 9));
+        }
+    }
+    let p = dir.join("thresh.dump");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// A frame without particles cannot be a `.mdlod` file: a batch leaves it out (not
+/// written, not listed, not expected of its shard), reports it with its input, frame and
+/// timestep, and does the same on every rerun without trying to convert it; shards merge.
+#[test]
+fn an_empty_frame_is_skipped_reported_and_left_out_of_the_manifest() {
+    use mdlod_preprocess::batch::EmptyFrame;
+    let dir = tempfile::tempdir().unwrap();
+    let src = lammps_with_counts(dir.path(), [30, 0, 20]);
+    let out = dir.path().join("out");
+    let empty = vec![EmptyFrame {
+        input: src.clone(),
+        frame: 1,
+        timestep: Some(100),
+        number: 100,
+    }];
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(
+        (r.frames_total, r.frames_in_shard, r.converted, r.skipped),
+        (3, 3, 2, 0)
+    );
+    assert_eq!(r.empty, empty);
+    assert_eq!(
+        empty[0].to_string(),
+        format!(
+            "{}: frame 1 (timestep 100) has no particles: skipped, as a .mdlod file needs at \
+             least one (not written, not in the manifest)",
+            src.display()
+        )
+    );
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(
+        m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>(),
+        [0, 200]
+    );
+    assert_eq!(m.expected_frames, Some(2));
+    check_manifest(&out, &m);
+    assert!(!out.join("frame-100.mdlod").exists());
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped, r.empty.clone()), (0, 2, empty));
+    // Shards: the one holding the empty frame expects one frame fewer; the merge goes
+    // through.
+    let sharded = dir.path().join("sharded");
+    for i in 0..2 {
+        batch(
+            std::slice::from_ref(&src),
+            &sharded,
+            &shard(i, 2),
+            &NoProgress,
+        )
+        .unwrap();
+    }
+    let merged = merge(&sharded).unwrap();
+    assert_eq!((merged.frames, merged.expected_frames), (m.frames, Some(2)));
+
+    // An MMPLD frame with no lists: numbered by its position (MMPLD has no timesteps).
+    let zl = dir.path().join("zerolists.mmpld");
+    std::fs::write(&zl, mmpld(&[&[10, 5], &[], &[12]])).unwrap();
+    let out = dir.path().join("zl");
+    let r = batch(std::slice::from_ref(&zl), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (2, 0));
+    assert_eq!(
+        r.empty,
+        [EmptyFrame {
+            input: zl.clone(),
+            frame: 1,
+            timestep: None,
+            number: 1,
+        }]
+    );
+    assert!(r.empty[0]
+        .to_string()
+        .contains("frame 1 (number 1 in the batch)"));
+    let r = batch(std::slice::from_ref(&zl), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped, r.empty.len()), (0, 2, 1));
+}
+
+/// A GSD chunk: name, type code, N, M, data.
+type GsdChunk<'a> = (&'a str, u8, u64, u32, Vec<u8>);
+
+/// A GSD file (layer 2.0) of frames given as chunks; a frame's missing chunks come from
+/// frame 0.
+fn gsd(frames: &[Vec<GsdChunk<'_>>]) -> Vec<u8> {
+    let mut names: Vec<&str> = vec![];
+    for f in frames {
+        for c in f {
+            if !names.contains(&c.0) {
+                names.push(c.0);
+            }
+        }
+    }
+    let mut out = vec![0u8; 256];
+    out[..8].copy_from_slice(&0x65DF_65DF_65DF_65DFu64.to_le_bytes());
+    out[44..48].copy_from_slice(&(2u32 << 16).to_le_bytes());
+    out[112..117].copy_from_slice(b"hoomd");
+    let mut entries = vec![];
+    for (k, f) in frames.iter().enumerate() {
+        for c in f {
+            let id = names.iter().position(|n| *n == c.0).unwrap() as u16;
+            entries.push((k as u64, c.2, out.len() as u64, c.3, id, c.1));
+            out.extend_from_slice(&c.4);
+        }
+    }
+    let index_at = out.len() as u64;
+    for e in &entries {
+        out.extend_from_slice(&e.0.to_le_bytes());
+        out.extend_from_slice(&e.1.to_le_bytes());
+        out.extend_from_slice(&e.2.to_le_bytes());
+        out.extend_from_slice(&e.3.to_le_bytes());
+        out.extend_from_slice(&e.4.to_le_bytes());
+        out.extend_from_slice(&[e.5, 0]);
+    }
+    let names_at = out.len() as u64;
+    let mut list: Vec<u8> = names
+        .iter()
+        .flat_map(|n| [n.as_bytes(), b"\0"].concat())
+        .collect();
+    list.resize(list.len().div_ceil(64) * 64 + 64, 0);
+    out.extend_from_slice(&list);
+    out[8..16].copy_from_slice(&index_at.to_le_bytes());
+    out[16..24].copy_from_slice(&(entries.len() as u64).to_le_bytes());
+    out[24..32].copy_from_slice(&names_at.to_le_bytes());
+    out[32..40].copy_from_slice(&(list.len() as u64 / 64).to_le_bytes());
+    out
+}
+
+/// Frames without timesteps are numbered by their position in the whole list of inputs,
+/// whatever the format: an MMPLD file set (each file numbers its frames from 0, and MMPLD
+/// records no timestep) and GSD files that record no `configuration/step` batch like an
+/// XYZ file set; GSD files with steps keep them.
+#[test]
+fn mmpld_and_gsd_file_sets_without_timesteps_are_numbered_by_position() {
+    let dir = tempfile::tempdir().unwrap();
+    let parts: Vec<PathBuf> = (1..=2)
+        .map(|i| {
+            let p = dir.path().join(format!("part{i}.mmpld"));
+            std::fs::write(&p, mmpld(&[&[10], &[12, 3]])).unwrap();
+            p
+        })
+        .collect();
+    let out = dir.path().join("set.d");
+    let r = batch(&parts, &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.frames_total, r.converted), (4, 4));
+    let m = read_manifest(&out).unwrap();
+    let listed: Vec<(u64, String, u64)> = m
+        .frames
+        .iter()
+        .map(|f| (f.timestep, f.source.path.clone(), f.source.frame))
+        .collect();
+    let name = |i: usize| parts[i].display().to_string();
+    assert_eq!(
+        listed,
+        [
+            (0, name(0), 0),
+            (1, name(0), 1),
+            (2, name(1), 0),
+            (3, name(1), 1)
+        ]
+    );
+    // The files record no timestep either.
+    let f = MdlodFile::open(out.join("frame-2.mdlod")).unwrap();
+    assert_eq!(f.metadata().timestep, None);
+
+    let positions: Vec<u8> = (0..12)
+        .flat_map(|i| (i as f32 * 0.5).to_le_bytes())
+        .collect();
+    let frame = |step: Option<u64>| {
+        let mut chunks = vec![
+            ("particles/N", 3u8, 1u64, 1u32, 4u32.to_le_bytes().to_vec()),
+            ("particles/position", 9, 4, 3, positions.clone()),
+        ];
+        if let Some(s) = step {
+            chunks.push(("configuration/step", 4, 1, 1, s.to_le_bytes().to_vec()));
+        }
+        chunks
+    };
+    let no_steps: Vec<PathBuf> = (0..2)
+        .map(|i| {
+            let p = dir.path().join(format!("nostep{i}.gsd"));
+            std::fs::write(&p, gsd(&[frame(None), frame(None)])).unwrap();
+            p
+        })
+        .collect();
+    let out = dir.path().join("nostep.d");
+    let r = batch(&no_steps, &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.frames_total, r.converted), (4, 4));
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(
+        m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>(),
+        [0, 1, 2, 3]
+    );
+    // With steps (the second frame inherits none: it records its own), they number the
+    // frames.
+    let steps = dir.path().join("steps.gsd");
+    std::fs::write(&steps, gsd(&[frame(Some(10)), frame(Some(20))])).unwrap();
+    let out = dir.path().join("steps.d");
+    batch(std::slice::from_ref(&steps), &out, &opts(), &NoProgress).unwrap();
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(
+        m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>(),
+        [10, 20]
+    );
+}

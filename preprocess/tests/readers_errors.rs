@@ -277,7 +277,7 @@ fn unknown_format_and_unsupported_compression() {
         "mystery.txt",
         "hello world\n",
         None,
-        "1: cannot tell the format from the name or the first line `hello world`; expected a LAMMPS text dump (`ITEM: ...`) or an XYZ file (atom count)",
+        "1: cannot tell the format from the name or the first line `hello world`; expected a LAMMPS text dump (`ITEM: ...`), an XYZ file (atom count) or a raw sidecar (a JSON object with `\"mdlod_raw\": 1`)",
     );
     let dir = tempfile::tempdir().unwrap();
     let path = write(

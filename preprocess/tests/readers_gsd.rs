@@ -356,3 +356,120 @@ fn f64_positions_past_the_single_precision_range_are_errors_naming_the_byte() {
         "{m}"
     );
 }
+
+/// The data location of chunk `name` of frame `frame` in a GSD file's bytes.
+fn chunk_data(bytes: &[u8], name: &str, frame: u64) -> usize {
+    let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) as usize;
+    let names: Vec<&[u8]> = bytes[u64_at(24)..]
+        .split(|&b| b == 0)
+        .take_while(|s| !s.is_empty())
+        .collect();
+    let id = names.iter().position(|n| *n == name.as_bytes()).unwrap();
+    (0..128)
+        .map(|i| u64_at(8) + 32 * i)
+        .find(|&at| {
+            u64_at(at) as u64 == frame
+                && usize::from(u16::from_le_bytes([bytes[at + 28], bytes[at + 29]])) == id
+        })
+        .map(|at| u64_at(at + 16))
+        .unwrap()
+}
+
+/// A diameter of zero or below is refused as an MMPLD list radius of zero is: the message
+/// names the file, the frame and the type and says `--radius` gives it one, and with that
+/// the conversion succeeds (the diameters were checked before the overrides applied).
+#[test]
+fn a_diameter_of_zero_or_below_is_refused_unless_the_type_is_given_a_radius() {
+    let mut bytes = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let (types, diameters) = (
+        chunk_data(&bytes, "particles/typeid", 0),
+        chunk_data(&bytes, "particles/diameter", 0),
+    );
+    // The fourth particle of type B (1) gets diameter 0, the sixth -1.
+    let mut b = 0;
+    for i in 0..300 {
+        let t = u32::from_le_bytes(bytes[types + 4 * i..types + 4 * i + 4].try_into().unwrap());
+        if t == 1 {
+            b += 1;
+            let d: f32 = match b {
+                4 => 0.0,
+                6 => -1.0,
+                _ => continue,
+            };
+            bytes[diameters + 4 * i..diameters + 4 * i + 4].copy_from_slice(&d.to_le_bytes());
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("zero.gsd");
+    std::fs::write(&path, &bytes).unwrap();
+    let out = dir.path().join("zero.mdlod");
+    let convert = |radii: Vec<(String, f32)>, chunk_points: usize| {
+        let mut options = ConvertOptions {
+            radii,
+            ..Default::default()
+        };
+        options.chunks.chunk_points = chunk_points;
+        options.build.max_root_points = 64;
+        convert_file(
+            &path,
+            &out,
+            FrameSelect::Index(1),
+            &ReadOptions::default(),
+            &options,
+            &NoProgress,
+        )
+        .map(|_| {
+            mdlod_format::MdlodFile::open(&out)
+                .unwrap()
+                .metadata()
+                .species
+                .iter()
+                .map(|s| s.radius)
+                .collect::<Vec<_>>()
+        })
+        .map_err(|e| e.to_string())
+    };
+    // In one piece and in chunks of 100 (the frame has 300 particles).
+    for chunk_points in [1 << 22, 100] {
+        let e = convert(vec![], chunk_points).unwrap_err();
+        assert_eq!(
+            e,
+            format!(
+                "{}: frame 1 (timestep 100), type B: the file gives a particle diameter of 0, \
+                 and a radius must be a positive number; give the type its radius with \
+                 --radius B=R",
+                path.display()
+            )
+        );
+        assert!(!out.exists());
+        assert_eq!(
+            convert(vec![("B".into(), 2.0)], chunk_points),
+            Ok(vec![0.5, 2.0])
+        );
+        std::fs::remove_file(&out).unwrap();
+    }
+}
+
+/// The attribute error lists the chunks an attribute can be (one number per particle):
+/// not the positions, which it would then refuse.
+#[test]
+fn the_attribute_error_lists_only_chunks_of_one_number_per_particle() {
+    let e = DumpFile::open(&gsd_sample_path("hoomd_mixture.gsd"))
+        .unwrap()
+        .read_frame(
+            0,
+            &ReadOptions {
+                attribute: Some("nosuch".into()),
+                ..Default::default()
+            },
+            &NoProgress,
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no per-particle chunk `particles/nosuch`")
+            && e.contains("particles/charge")
+            && !e.contains("particles/position"),
+        "{e}"
+    );
+}

@@ -159,7 +159,8 @@ fn every_version_and_type_reads_positions_species_and_radii() {
         for k in 0..2 {
             let info = dump.frame_info(k).unwrap();
             assert_eq!(info.particles, 120);
-            assert_eq!(info.timestep, Some(k as u64));
+            // MMPLD records no timestep (a batch numbers frames by position).
+            assert_eq!(info.timestep, None);
             assert_eq!(info.time, (version >= 102).then_some(0.5 * k as f64));
             assert_eq!(info.columns, ["x", "y", "z", "radius", "intensity"]);
             let f = dump
@@ -469,7 +470,7 @@ fn files_written_by_megamol_read_as_written_and_convert() {
         assert_eq!(dump.frame_count(), 1, "{name}");
         let info = dump.frame_info(0).unwrap();
         assert_eq!(info.particles, 19, "{name}");
-        assert_eq!(info.timestep, Some(0), "{name}");
+        assert_eq!(info.timestep, None, "{name}");
         assert_eq!(info.time, Some(f64::from(1.23f32)), "{name}");
         let mut columns = vec!["x", "y", "z"];
         if xyzr {
@@ -568,4 +569,71 @@ fn f64_positions_past_the_single_precision_range_are_errors_naming_the_byte() {
         )),
         "{m}"
     );
+}
+
+/// A radius of zero or below from the file (a list's, or a particle's of an `xyzr` list)
+/// is refused as a GSD diameter of zero is, naming the file, the frame and the list and
+/// saying `--radius` gives it one (it became the default 0.5 unsaid, and a negative list
+/// radius failed the opening whatever the overrides); with the override the conversion
+/// succeeds, in one piece and in chunks.
+#[test]
+fn a_radius_of_zero_or_below_is_refused_unless_the_list_is_given_one() {
+    let mut xyzr = list(2, 0, 0.0, 300, 2.0);
+    xyzr.particles[5].1 = -1.0;
+    let frames = vec![vec![
+        list(1, 0, 0.0, 300, 0.0),
+        list(1, 0, -2.0, 300, 1.0),
+        xyzr,
+        list(1, 0, 0.4, 300, 3.0),
+    ]];
+    let dir = tempfile::tempdir().unwrap();
+    let path = save(dir.path(), "r0.mmpld", &write(102, &frames));
+    let out = dir.path().join("r0.mdlod");
+    let convert = |radii: &[(&str, f32)], chunk_points: usize| {
+        let mut options = ConvertOptions {
+            radii: radii.iter().map(|(n, r)| (n.to_string(), *r)).collect(),
+            ..Default::default()
+        };
+        options.chunks.chunk_points = chunk_points;
+        options.build.max_root_points = 64;
+        convert_file(
+            &path,
+            &out,
+            FrameSelect::Last,
+            &ReadOptions::default(),
+            &options,
+            &NoProgress,
+        )
+        .map(|_| {
+            MdlodFile::open(&out)
+                .unwrap()
+                .metadata()
+                .species
+                .iter()
+                .map(|s| s.radius)
+                .collect::<Vec<_>>()
+        })
+        .map_err(|e| e.to_string())
+    };
+    let refused = |list: usize, radius: &str| {
+        format!(
+            "{}: frame 0, list {list}: the file gives radius {radius}, and a radius must be a \
+             positive number; give the list its radius with --radius {list}=R",
+            path.display()
+        )
+    };
+    for chunk_points in [1 << 22, 500] {
+        assert_eq!(convert(&[], chunk_points), Err(refused(0, "0")));
+        assert_eq!(convert(&[("0", 0.3)], chunk_points), Err(refused(1, "-2")));
+        assert_eq!(
+            convert(&[("0", 0.3), ("1", 0.2)], chunk_points),
+            Err(refused(2, "-1"))
+        );
+        assert!(!out.exists());
+        assert_eq!(
+            convert(&[("0", 0.3), ("1", 0.2), ("2", 0.1)], chunk_points),
+            Ok(vec![0.3, 0.2, 0.1, 0.4])
+        );
+        std::fs::remove_file(&out).unwrap();
+    }
 }

@@ -193,3 +193,90 @@ fn f64_positions_past_the_single_precision_range_are_errors_naming_the_array() {
         "{e}"
     );
 }
+
+/// A sidecar is recognised by its content whatever its name (as README says the format
+/// is sniffed), a damaged one too (so that reading it says what is wrong); other JSON is
+/// not taken for one.
+#[test]
+fn a_sidecar_not_named_raw_json_is_recognised_by_its_content() {
+    let c = Case::new();
+    let pos: Vec<u8> = positions(10)
+        .iter()
+        .flatten()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    c.file("pos.f32", &pos);
+    let json = r#"
+        { "mdlod_raw": 1, "positions": { "file": "pos.f32", "type": "f32" }, "timestep": 7 }"#;
+    let named = read(&c.sidecar(json)).unwrap();
+    let side = c.file("side.json", json.as_bytes());
+    let dump = DumpFile::open(&side).unwrap();
+    assert_eq!(dump.format(), InputFormat::Raw);
+    let sniffed = read(&side).unwrap();
+    assert_eq!(sniffed.positions, named.positions);
+    assert_eq!(sniffed.timestep, Some(7));
+    let bad = c.file("bad.json", br#"{ "mdlod_raw": 1, "positions": 3 }"#);
+    let e = read(&bad).unwrap_err();
+    assert!(e.contains("bad.json") && e.contains("raw sidecar"), "{e}");
+    let other = c.file("view.json", br#"{ "azimuth": 30 }"#);
+    let e = read(&other).unwrap_err();
+    assert!(
+        e.contains("view.json:1: cannot tell the format") && e.contains("raw sidecar"),
+        "{e}"
+    );
+}
+
+/// An attribute the sidecar lacks is an error naming the sidecar, the line of its
+/// `attribute` entry and the attribute asked for (it named the positions file).
+#[test]
+fn a_missing_attribute_is_an_error_naming_the_sidecar() {
+    let c = Case::new();
+    let pos: Vec<u8> = positions(10)
+        .iter()
+        .flatten()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    c.file("plum.pos", &pos);
+    c.file("plum.rho", &[0u8; 40]);
+    let read_h = |json: &str| {
+        let path = c.sidecar(json);
+        let e = DumpFile::open(&path)
+            .and_then(|d| {
+                d.read_frame(
+                    0,
+                    &ReadOptions {
+                        attribute: Some("h".into()),
+                        ..Default::default()
+                    },
+                    &NoProgress,
+                )
+            })
+            .unwrap_err()
+            .to_string();
+        (path, e)
+    };
+    let (path, e) = read_h(
+        r#"{ "mdlod_raw": 1,
+  "positions": { "file": "plum.pos", "type": "f32" },
+  "attribute": { "file": "plum.rho", "type": "f32", "name": "density" } }"#,
+    );
+    assert_eq!(
+        e,
+        format!(
+            "{}:3: --attribute h: no attribute `h` in the sidecar (its attribute is \
+             `density`, from {})",
+            path.display(),
+            c.dir.path().join("plum.rho").display()
+        )
+    );
+    let (path, e) =
+        read_h(r#"{ "mdlod_raw": 1, "positions": { "file": "plum.pos", "type": "f32" } }"#);
+    assert_eq!(
+        e,
+        format!(
+            "{}:1: --attribute h: no attribute `h` in the sidecar (it names none: add an \
+             `attribute` entry)",
+            path.display()
+        )
+    );
+}

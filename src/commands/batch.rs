@@ -11,7 +11,8 @@ use crate::progress::Bar;
 
 /// Convert every frame of one or more inputs (multi-frame dumps, file sets such as
 /// dump.*.bin, % piece sets) into DIR/frame-<timestep>.mdlod with a manifest
-/// DIR/dataset.json. Reruns skip finished frames whose source is unchanged.
+/// DIR/dataset.json. Reruns skip finished frames whose source and build settings are
+/// unchanged; frames without particles are skipped and reported.
 #[derive(clap::Args)]
 #[command(after_help = "Examples:\n  \
     mdlod batch run/dump.*.lammpstrj -o run.mdlod.d --radius 1=1.28\n  \
@@ -138,8 +139,16 @@ pub fn run(args: Args) -> Result<()> {
     let shard = opts
         .shard
         .map_or(String::new(), |(i, n)| format!(" (shard {i} of {n})"));
+    for e in &report.empty {
+        println!("{e}");
+    }
+    let empty = match report.empty.len() {
+        0 => String::new(),
+        1 => ", 1 empty frame skipped".to_string(),
+        n => format!(", {n} empty frames skipped"),
+    };
     println!(
-        "{} frames in the inputs, {} here{shard}: {} converted, {} already done; {} at a time; manifest {}",
+        "{} frames in the inputs, {} here{shard}: {} converted, {} already done{empty}; {} at a time; manifest {}",
         report.frames_total,
         report.frames_in_shard,
         report.converted,

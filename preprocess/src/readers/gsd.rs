@@ -9,10 +9,13 @@
 //! - `particles/N` (u32), `particles/position` (f32 or f64, N×3), `particles/typeid`
 //!   (u32, default 0), `particles/types` (N×M characters, default `A`),
 //!   `particles/diameter` (f32, default 1: the species radius is half its mean per
-//!   type), `configuration/step` (u64, default 0), `configuration/box` (f32 ×6:
-//!   `Lx Ly Lz xy xz yz`, centred on the origin).
+//!   type; a type with a diameter of zero or below is refused by the conversion unless
+//!   `--radius` names it), `configuration/step` (u64, default 0), `configuration/box`
+//!   (f32 ×6: `Lx Ly Lz xy xz yz`, centred on the origin).
 //! - As the schema says, a chunk missing from frame `k` is taken from frame 0, and one
-//!   missing from both has its default: writers store only what changed.
+//!   missing from both has its default: writers store only what changed. A file with no
+//!   `configuration/step` at all has no timesteps for a batch to number its frames by
+//!   ([`crate::readers::DumpFile::frame_timestep`] is `None`; the frames record 0).
 //! - The attribute may be any per-particle chunk of N numbers (`charge`, `mass`,
 //!   `particles/charge`, ...).
 //!
@@ -302,6 +305,16 @@ impl Index {
         find(k as u64).or_else(|| find(0))
     }
 
+    /// Whether any frame of the file records `configuration/step`. A file where none
+    /// does has no timesteps to number its frames by (the schema's default 0 would give
+    /// every frame the same one).
+    pub fn records_steps(&self) -> bool {
+        self.names
+            .iter()
+            .position(|n| n == "configuration/step")
+            .is_some_and(|id| self.entries.iter().any(|e| usize::from(e.name) == id))
+    }
+
     pub fn timestep(&self, data: &[u8], k: usize) -> Option<u64> {
         if k >= self.frames {
             return None;
@@ -400,6 +413,24 @@ pub(crate) fn frame_info(
         simulation_box: Some(index.simulation_box(path, data, k)?),
         columns,
     })
+}
+
+/// The chunks of frame `k` (of `particles` particles) an attribute can be: one number
+/// per particle.
+fn attribute_chunks(index: &Index, k: usize, particles: usize) -> Vec<String> {
+    let mut names: Vec<String> = index
+        .names
+        .iter()
+        .filter(|n| {
+            n.starts_with("particles/")
+                && index
+                    .chunk(k, n)
+                    .is_some_and(|e| e.n == particles && e.m == 1 && e.ty != Ty::Char)
+        })
+        .cloned()
+        .collect();
+    names.sort();
+    names
 }
 
 /// Frame `k` of an opened file, with its `n` particles.
@@ -523,7 +554,9 @@ impl<'a> FrameData<'a> {
 
     /// The species of particles `range` (type ids `ids`): every type, in the file's
     /// order, with the radius half the mean diameter of the type's particles in the range
-    /// (default diameter 1).
+    /// (default diameter 1). A type with a particle of diameter zero or below gets half
+    /// the first such diameter, which the conversion refuses unless `--radius` gives the
+    /// type its radius (a diameter that is not a number is an error here).
     fn species(
         &self,
         range: Range<usize>,
@@ -532,17 +565,21 @@ impl<'a> FrameData<'a> {
     ) -> Result<Vec<SpeciesName>, ReadError> {
         let mut sum = vec![0f64; names.len()];
         let mut count = vec![0u64; names.len()];
+        let mut bad: Vec<Option<f64>> = vec![None; names.len()];
         if let Some(e) = self.chunk("particles/diameter", 1, false)? {
             let bytes = &self.data[e.location..e.location + self.n * e.ty.size()];
             for (j, &s) in ids.iter().enumerate() {
                 let i = range.start + j;
                 let d = e.ty.get(bytes, i);
-                if !(d.is_finite() && d > 0.0) {
+                if !d.is_finite() {
                     return Err(err(
                         self.path,
                         e.location + i * e.ty.size(),
                         format!("frame {}: particle {i} has diameter {d}", self.k),
                     ));
+                }
+                if d <= 0.0 {
+                    bad[usize::from(s)].get_or_insert(d);
                 }
                 sum[usize::from(s)] += d;
                 count[usize::from(s)] += 1;
@@ -554,10 +591,10 @@ impl<'a> FrameData<'a> {
             .map(|(t, name)| SpeciesName {
                 name: name.clone(),
                 numeric_type: false,
-                radius: Some(if count[t] > 0 {
-                    (0.5 * sum[t] / count[t] as f64) as f32
-                } else {
-                    0.5
+                radius: Some(match bad[t] {
+                    Some(d) => (0.5 * d) as f32,
+                    None if count[t] > 0 => (0.5 * sum[t] / count[t] as f64) as f32,
+                    None => 0.5,
                 }),
             })
             .collect())
@@ -628,7 +665,7 @@ pub(crate) fn read_range(
                 format!("particles/{name}")
             };
             let Some(e) = f.chunk(&full, 1, false)? else {
-                let available = frame_info(path, data, index, k)?.columns.join(" ");
+                let available = attribute_chunks(index, k, n).join(" ");
                 return Err(err(
                     path,
                     0,

@@ -18,11 +18,14 @@
 //!
 //! How it maps: each list is a species named by its index (`0`, `1`, ..., numeric, so
 //! they sort as numbers), with its global radius, or with the mean of its particles'
-//! radii for `xyzr` lists. The attribute can be `intensity` (intensity lists) or `radius`
-//! (`xyzr` lists); colours are not kept. The frame's time is the timestamp, its timestep
-//! the frame number, its box the file's bounding box. Opening walks every frame's list
-//! headers with checked arithmetic, so counts and offsets that point past the file are
-//! errors naming the byte before any particle is read.
+//! radii for `xyzr` lists; a radius of zero or below (a list's, or a particle's of an
+//! `xyzr` list) is refused by the conversion unless `--radius` names the list. The
+//! attribute can be `intensity` (intensity lists) or `radius` (`xyzr` lists); colours are
+//! not kept. The frame's time is the timestamp, its box the file's bounding box; MMPLD
+//! records no timestep (a batch numbers the frames by their position among its inputs).
+//! Opening walks every frame's list headers with checked arithmetic, so counts and
+//! offsets that point past the file are errors naming the byte before any particle is
+//! read.
 
 use std::ops::Range;
 use std::path::Path;
@@ -305,7 +308,8 @@ impl Index {
                             ),
                         )
                     })?;
-                if let Some(r) = radius.filter(|r| !(r.is_finite() && *r >= 0.0)) {
+                // (Zero and below are refused where the radius is used, unless overridden.)
+                if let Some(r) = radius.filter(|r| !r.is_finite()) {
                     return Err(err(
                         path,
                         at + 2,
@@ -384,7 +388,7 @@ pub(crate) fn frame_info(index: &Index, k: usize) -> FrameInfo {
     }
     FrameInfo {
         particles: index.particles(k),
-        timestep: Some(k as u64),
+        timestep: None,
         time: f.timestamp.map(f64::from),
         units: None,
         simulation_box: Some(index.simulation_box()),
@@ -393,7 +397,8 @@ pub(crate) fn frame_info(index: &Index, k: usize) -> FrameInfo {
 }
 
 /// The species of particles `range` of frame `k`: one per list, with its global radius,
-/// or for `xyzr` lists the mean radius of its particles in the range.
+/// or for `xyzr` lists the mean radius of its particles in the range (the first radius of
+/// zero or below where there is one, which the conversion refuses unless overridden).
 fn species_of(
     path: &Path,
     data: &[u8],
@@ -414,18 +419,24 @@ fn species_of(
                 Some(r) => r,
                 None => {
                     let mut sum = 0f64;
+                    let mut bad = None;
                     for i in lo..hi {
                         let r = list.particle_radius(data, i);
-                        if !(r.is_finite() && r >= 0.0) {
+                        if !r.is_finite() {
                             return Err(err(
                                 path,
                                 list.data + i * list.stride + 12,
                                 format!("frame {k}, list {l}: particle {i} has radius {r}"),
                             ));
                         }
+                        if r <= 0.0 {
+                            bad.get_or_insert(r);
+                        }
                         sum += f64::from(r);
                     }
-                    if hi > lo {
+                    if let Some(r) = bad {
+                        r
+                    } else if hi > lo {
                         (sum / (hi - lo) as f64) as f32
                     } else {
                         0.5
@@ -610,7 +621,7 @@ pub(crate) fn read_range(
             values,
         }),
         simulation_box: Some(index.simulation_box()),
-        timestep: Some(k as u64),
+        timestep: None,
         time: f.timestamp.map(f64::from),
         units: None,
     })

@@ -36,7 +36,8 @@
 //! - **LAMMPS binary dumps** (`.bin`, both header revisions): see `lammps_binary.rs`.
 //!   Errors name the byte offset instead of a line.
 //! - **GSD** (HOOMD-blue, `hoomd` schema, file layers 1.x and 2.x): see `gsd.rs`.
-//! - **Raw arrays** described by a JSON sidecar (`*.raw.json`): see `raw.rs`.
+//! - **Raw arrays** described by a JSON sidecar (`*.raw.json`, or any file whose content
+//!   is a JSON object with the key `mdlod_raw`): see `raw.rs`.
 //! - **MegaMol MMPLD** particle lists (`.mmpld`, versions 1.0-1.3): see `mmpld.rs`.
 //! - **Per-processor pieces**: a LAMMPS file name with `%` opens all its pieces as one
 //!   dump (see `pieces.rs`).
@@ -410,6 +411,7 @@ impl DumpFile {
             .or_else(|| lammps_binary::sniff(data).then_some(InputFormat::LammpsBinary))
             .or_else(|| gsd::sniff(data).then_some(InputFormat::Gsd))
             .or_else(|| mmpld::sniff(data).then_some(InputFormat::Mmpld))
+            .or_else(|| raw::sniff(data).then_some(InputFormat::Raw))
             .or_else(|| InputFormat::sniff(data))
             .ok_or_else(|| {
                 let mut cursor = Cursor::new(data, 0);
@@ -420,7 +422,7 @@ impl DumpFile {
                 ReadError::Unsupported {
                     at: first_line(),
                     message: format!(
-                        "cannot tell the format from the name or the first line `{}`; expected a LAMMPS text dump (`ITEM: ...`) or an XYZ file (atom count)",
+                        "cannot tell the format from the name or the first line `{}`; expected a LAMMPS text dump (`ITEM: ...`), an XYZ file (atom count) or a raw sidecar (a JSON object with `\"mdlod_raw\": 1`)",
                         shorten(line)
                     ),
                 }
@@ -489,16 +491,20 @@ impl DumpFile {
     }
 
     /// Timestep of frame `k` from the index (no parsing). `None` when `k` is out of range or
-    /// the frame does not record one (XYZ files without `Timestep=`/`step=`).
+    /// the frame does not record one (XYZ files without `Timestep=`/`step=`, raw sidecars
+    /// without `timestep`, MMPLD files, GSD files without any `configuration/step`).
     pub fn frame_timestep(&self, k: usize) -> Option<u64> {
         match &self.index {
             Index::Lammps(i) => i.timestep(k),
             Index::Xyz(i) => i.timestep(k),
             Index::LammpsBinary(i) => i.timestep(k),
-            Index::Gsd(i) => i.timestep(self.bytes(), k),
+            Index::Gsd(i) => i
+                .records_steps()
+                .then(|| i.timestep(self.bytes(), k))
+                .flatten(),
             Index::Pieces(p) => p[0].frame_timestep(k),
             Index::Raw(r) => (k == 0).then(|| r.timestep()).flatten(),
-            Index::Mmpld(i) => (k < i.len()).then_some(k as u64),
+            Index::Mmpld(_) => None,
         }
     }
 
@@ -573,6 +579,24 @@ impl DumpFile {
             Index::Mmpld(i) => mmpld::frame_species(&self.path, self.bytes(), i, k).map(Some),
             _ => Ok(None),
         }
+    }
+
+    /// The radii frame `k`'s file gives its species, by name: GSD types (half their mean
+    /// diameter), MMPLD lists, a raw sidecar's `radii`; empty for formats that give none
+    /// (the species then take their element's radius or the default). A radius of zero or
+    /// below is listed as it is (a conversion refuses it unless overridden). GSD and
+    /// MMPLD `xyzr` lists take one pass over the frame's types and sizes.
+    pub fn given_radii(&self, k: usize) -> Result<Vec<(String, f32)>, ReadError> {
+        self.check_frame(k)?;
+        Ok(match &self.index {
+            Index::Raw(r) => r.given_radii(),
+            _ => self
+                .frame_species(k)?
+                .unwrap_or_default()
+                .into_iter()
+                .filter_map(|s| Some((s.name, s.radius?)))
+                .collect(),
+        })
     }
 
     /// How frame `k` names its species, from its header and first atom (see
@@ -1208,6 +1232,28 @@ pub(crate) fn mapped_again(
         return Err(ctx.malformed(at, "the file changed size while it was being indexed"));
     }
     Ok(map)
+}
+
+/// The format of the file `path` as its name tells, else as its first bytes tell the
+/// binary formats (GSD, MMPLD, LAMMPS binary); `None` when neither does. For messages:
+/// nothing is indexed.
+pub fn format_of_file(path: &Path) -> Option<InputFormat> {
+    if let Some(f) = InputFormat::from_path(path) {
+        return Some(f);
+    }
+    let mut head = Vec::with_capacity(64);
+    File::open(path)
+        .ok()?
+        .take(64)
+        .read_to_end(&mut head)
+        .ok()?;
+    if gsd::sniff(&head) {
+        Some(InputFormat::Gsd)
+    } else if mmpld::sniff(&head) {
+        Some(InputFormat::Mmpld)
+    } else {
+        None
+    }
 }
 
 /// True when `path` names a `%` piece set (a file name with `%` that is no file itself).

@@ -1,4 +1,5 @@
-//! Raw binary arrays described by a small JSON sidecar (`*.raw.json`): for codes that
+//! Raw binary arrays described by a small JSON sidecar (`*.raw.json`, or any name: a
+//! JSON object with the key `mdlod_raw` is recognised by its content): for codes that
 //! can dump their arrays but have no standard format (or for a quick `numpy.tofile`).
 //!
 //! The sidecar names the files (relative to itself) and how to read them:
@@ -169,8 +170,20 @@ impl Mapped {
     }
 }
 
+/// True when `data` is a raw sidecar whatever its name: a small JSON object with the
+/// key `mdlod_raw` (a damaged one too, so that reading it says what is wrong).
+pub(crate) fn sniff(data: &[u8]) -> bool {
+    // (A sidecar is a few lines; a large file is none, and is not searched.)
+    data.len() <= 1 << 20
+        && data.trim_ascii_start().starts_with(b"{")
+        && memchr::memmem::find(data, b"\"mdlod_raw\"").is_some()
+}
+
 /// An opened sidecar and its arrays.
 pub(crate) struct Index {
+    /// The sidecar, and the line of its `attribute` key (1 without one), for errors.
+    sidecar: PathBuf,
+    attribute_line: u64,
     particles: usize,
     positions: Mapped,
     planar: bool,
@@ -381,7 +394,12 @@ impl Index {
                 })
             }
         };
+        let attribute_line = memchr::memmem::find(text, b"\"attribute\"").map_or(1, |at| {
+            memchr::memchr_iter(b'\n', &text[..at]).count() as u64 + 1
+        });
         Ok(Index {
+            sidecar: path.to_path_buf(),
+            attribute_line,
             particles,
             positions,
             planar,
@@ -397,6 +415,29 @@ impl Index {
 
     pub fn timestep(&self) -> Option<u64> {
         self.timestep
+    }
+
+    /// The radii the sidecar gives its species, by name (as [`Index::read_range`] names
+    /// them).
+    pub fn given_radii(&self) -> Vec<(String, f32)> {
+        let Some(radii) = &self.radii else {
+            return Vec::new();
+        };
+        match &self.species {
+            None => radii
+                .first()
+                .map(|&r| (super::atoms::DEFAULT_SPECIES.to_string(), r))
+                .into_iter()
+                .collect(),
+            Some((_, names)) if !names.is_empty() => {
+                names.iter().cloned().zip(radii.iter().copied()).collect()
+            }
+            Some(_) => radii
+                .iter()
+                .enumerate()
+                .map(|(i, &r)| (i.to_string(), r))
+                .collect(),
+        }
     }
 
     pub fn frame_info(&self) -> FrameInfo {
@@ -586,15 +627,19 @@ impl Index {
                 })
             }
             (_, Some(wanted)) => {
-                return Err(malformed(
-                    &self.positions.path,
-                    format!(
-                        "no attribute `{wanted}` in the sidecar{}",
-                        self.attribute
-                            .as_ref()
-                            .map_or(String::new(), |(_, n)| format!(" (it has `{n}`)"))
+                return Err(ReadError::Malformed {
+                    at: super::Location {
+                        path: self.sidecar.clone(),
+                        line: self.attribute_line,
+                    },
+                    message: format!(
+                        "--attribute {wanted}: no attribute `{wanted}` in the sidecar ({})",
+                        self.attribute.as_ref().map_or(
+                            "it names none: add an `attribute` entry".to_string(),
+                            |(m, n)| format!("its attribute is `{n}`, from {}", m.path.display())
+                        )
                     ),
-                ))
+                })
             }
             (_, None) => None,
         };
