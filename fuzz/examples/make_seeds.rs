@@ -27,6 +27,7 @@ fn frame(n: usize, attribute: bool) -> Frame {
                 name: name.into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             })
             .to_vec(),
         attribute: attribute.then(|| Attribute {

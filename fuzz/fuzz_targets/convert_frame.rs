@@ -64,6 +64,7 @@ fuzz_target!(|data: &[u8]| {
                 name: name.into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             })
             .to_vec(),
         attribute,

@@ -160,6 +160,9 @@ pub struct BatchReport {
     pub skipped: usize,
     /// This shard's frames without particles, left out (in timestep order).
     pub empty: Vec<EmptyFrame>,
+    /// What the conversions of this run said the user should know, each once (see
+    /// [`crate::convert::ConvertReport::notes`]).
+    pub notes: Vec<String>,
     /// Concurrent conversions used.
     pub jobs: usize,
     pub manifest: PathBuf,
@@ -627,6 +630,10 @@ pub fn batch(
     let mut empty = Vec::new();
     // The species names the frames hold, for the radius overrides' check at the end.
     let seen = Mutex::new(std::collections::BTreeSet::<String>::new());
+    let notes = Mutex::new(std::collections::BTreeSet::<String>::new());
+    let keep_notes = |n: Vec<String>| {
+        notes.lock().unwrap_or_else(|e| e.into_inner()).extend(n);
+    };
     let note_species = |f: &MdlodFile| {
         let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
         seen.extend(f.metadata().species.iter().map(|s| s.name.clone()));
@@ -798,7 +805,7 @@ pub fn batch(
                             };
                             if let Some((src, info)) = streamed {
                                 // Out of core: the frame is read a window at a time.
-                                crate::chunked::convert_chunked(
+                                let report = crate::chunked::convert_chunked(
                                     src.as_ref(),
                                     crate::convert::base_metadata(
                                         &crate::convert::header_of(&info),
@@ -809,9 +816,12 @@ pub fn batch(
                                     convert,
                                     &quiet,
                                 )?;
+                                keep_notes(report.notes);
                             } else {
                                 let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
-                                convert_frame(&frame, Some(source), &out, convert, &quiet)?;
+                                let report =
+                                    convert_frame(&frame, Some(source), &out, convert, &quiet)?;
+                                keep_notes(report.notes);
                             }
                             let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                             note_species(&f);
@@ -882,6 +892,11 @@ pub fn batch(
         converted: converted.into_inner(),
         skipped,
         empty,
+        notes: notes
+            .into_inner()
+            .unwrap_or_else(|e| e.into_inner())
+            .into_iter()
+            .collect(),
         jobs,
         manifest: manifest_path,
     })

@@ -1443,6 +1443,7 @@ pub fn convert_chunked(
         build_time,
         write_time,
         file_size,
+        notes: crate::species::radius_notes(&names, &options.radii),
     })
 }
 

@@ -38,6 +38,9 @@ pub struct ConvertReport {
     pub build_time: Duration,
     pub write_time: Duration,
     pub file_size: u64,
+    /// What the user should know about the conversion (see
+    /// [`crate::species::radius_notes`]).
+    pub notes: Vec<String>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -215,6 +218,7 @@ pub fn convert_frame(
         build_time,
         write_time,
         file_size,
+        notes: crate::species::radius_notes(&frame.species, &options.radii),
     })
 }
 

@@ -7,7 +7,7 @@
 pub use mdlod_format::meta::SimulationBox;
 
 /// One species (atom type or element) as named in the input.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct SpeciesName {
     /// Element symbol (`Cu`), LAMMPS numeric type as text (`1`), or the XYZ species label.
     pub name: String,
@@ -17,6 +17,10 @@ pub struct SpeciesName {
     /// The radius the input gives this species (GSD `particles/diameter` / 2), used
     /// unless the user overrides it.
     pub radius: Option<f32>,
+    /// The smallest and largest radius of the species' particles where the input gives
+    /// each particle its own (GSD diameters, MMPLD `xyzr` lists): a `.mdlod` file keeps
+    /// one radius per species, their mean, and the conversion says so when they differ.
+    pub radius_range: Option<(f32, f32)>,
 }
 
 /// One timestep of particles, as read from a dump.

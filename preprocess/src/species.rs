@@ -90,6 +90,28 @@ pub fn element(symbol: &str) -> Option<(f32, [f32; 3])> {
         .map(|(_, r, c)| (*r, srgb_to_linear(*c)))
 }
 
+/// Notes for species whose particles the input gives radii that differ (GSD diameters,
+/// MMPLD `xyzr` lists), unless `overrides` set their radius: a `.mdlod` file keeps one
+/// radius per species, the particles' mean, and the user should know.
+pub fn radius_notes(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<String> {
+    names
+        .iter()
+        .filter(|s| radius_override(overrides, &s.name).is_none())
+        .filter_map(|s| {
+            let (lo, hi) = s.radius_range?;
+            let mean = s.radius?;
+            (hi > lo * (1.0 + 1e-3)).then(|| {
+                format!(
+                    "species {}: particle radii from {lo} to {hi}, all drawn with their mean \
+                     {mean} (a .mdlod file keeps one radius per species; --radius {}=R sets \
+                     another)",
+                    s.name, s.name
+                )
+            })
+        })
+        .collect()
+}
+
 /// The looks of every species: the radius the input gives, else the element's or the
 /// default, with `overrides` (name, radius) applied last.
 pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<Species> {
@@ -286,16 +308,19 @@ mod tests {
                 name: "Cu".into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             },
             SpeciesName {
                 name: "2".into(),
                 numeric_type: true,
                 radius: None,
+                ..Default::default()
             },
             SpeciesName {
                 name: "Xx".into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             },
         ];
         let t = species_table(&names, &[("2".into(), 0.9)]);
@@ -314,6 +339,7 @@ mod tests {
             name: n.into(),
             numeric_type: numeric,
             radius: None,
+            ..Default::default()
         });
         check_overrides(&names, &[("2".into(), 0.9)]).unwrap();
         let e = check_overrides(&names, &[("2".into(), 0.9), ("Cu".into(), 1.28)])
@@ -360,6 +386,7 @@ mod tests {
             name: "Cu".into(),
             numeric_type: false,
             radius: None,
+            ..Default::default()
         }];
         assert!(check_overrides(&cu, &[("cu".into(), 1.0)]).is_err());
     }

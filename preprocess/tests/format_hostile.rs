@@ -54,6 +54,7 @@ fn test_frame(n: usize) -> Frame {
                 name: name.into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             })
             .to_vec(),
         attribute: Some(Attribute {

@@ -45,11 +45,13 @@ fn test_frame(n_cells: usize) -> Frame {
                 name: "Cu".into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             },
             SpeciesName {
                 name: "Ag".into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             },
         ],
         attribute: Some(Attribute {
@@ -542,6 +544,7 @@ fn single_particle_and_tiny_inputs() {
                 name: "Cu".into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             }],
             ..Default::default()
         };
@@ -709,6 +712,7 @@ fn more_species_than_a_file_holds_are_refused() {
                 name: i.to_string(),
                 numeric_type: true,
                 radius: None,
+                ..Default::default()
             })
             .collect(),
         ..Default::default()

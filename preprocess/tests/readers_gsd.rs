@@ -473,3 +473,62 @@ fn the_attribute_error_lists_only_chunks_of_one_number_per_particle() {
         "{e}"
     );
 }
+
+/// Particles of one type with different diameters (a polydisperse colloid) are drawn with
+/// their mean radius, since a `.mdlod` file keeps one radius per species: the conversion
+/// says so, whole and in chunks, unless `--radius` gives the type its radius; a type of
+/// one size gets no note.
+#[test]
+fn differing_diameters_of_a_type_are_noted_with_the_mean_drawn() {
+    let sample = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("poly.mdlod");
+    let notes = |bytes: &[u8], radii: Vec<(String, f32)>, chunk_points: usize| {
+        let path = dir.path().join("poly.gsd");
+        std::fs::write(&path, bytes).unwrap();
+        let mut options = ConvertOptions {
+            radii,
+            ..Default::default()
+        };
+        options.chunks.chunk_points = chunk_points;
+        options.build.max_root_points = 64;
+        convert_file(
+            &path,
+            &out,
+            FrameSelect::Index(1),
+            &ReadOptions::default(),
+            &options,
+            &NoProgress,
+        )
+        .unwrap()
+        .notes
+    };
+    for chunk_points in [1 << 22, 100] {
+        assert_eq!(notes(&sample, vec![], chunk_points), Vec::<String>::new());
+    }
+    // The first particle of type A (0) gets diameter 5 (the others 1), in frame 0's
+    // chunks, which frame 1 takes.
+    let mut bytes = sample.clone();
+    let (types, diameters) = (
+        chunk_data(&bytes, "particles/typeid", 0),
+        chunk_data(&bytes, "particles/diameter", 0),
+    );
+    let i = (0..300)
+        .find(|&i| bytes[types + 4 * i..types + 4 * i + 4] == [0, 0, 0, 0])
+        .unwrap();
+    bytes[diameters + 4 * i..diameters + 4 * i + 4].copy_from_slice(&5.0f32.to_le_bytes());
+    for chunk_points in [1 << 22, 100] {
+        let n = notes(&bytes, vec![], chunk_points);
+        assert_eq!(n.len(), 1, "{n:?}");
+        assert!(
+            n[0].starts_with(
+                "species A: particle radii from 0.5 to 2.5, all drawn with their mean"
+            ) && n[0].contains("--radius A=R"),
+            "{n:?}"
+        );
+        assert_eq!(
+            notes(&bytes, vec![("A".into(), 1.2)], chunk_points),
+            Vec::<String>::new()
+        );
+    }
+}

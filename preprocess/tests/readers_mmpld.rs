@@ -181,6 +181,17 @@ fn every_version_and_type_reads_positions_species_and_radii() {
             // The xyzr list: its particles' mean radius (0.5, 0.75, 1.0 repeating).
             let mean = frames[k][1].particles.iter().map(|p| p.1).sum::<f32>() / 30.0;
             assert_eq!(radii, [1.25, mean, 0.5, 2.0, 1.0, 1.0, 1.0, 1.0]);
+            // Only the xyzr list's particles differ in radius: the conversion notes it.
+            let ranges: Vec<Option<(f32, f32)>> =
+                f.species.iter().map(|s| s.radius_range).collect();
+            assert_eq!(ranges[1], Some((0.5, 1.0)));
+            assert!(ranges
+                .iter()
+                .enumerate()
+                .all(|(i, r)| i == 1 || r.is_none()));
+            let notes = mdlod_preprocess::species::radius_notes(&f.species, &[]);
+            assert_eq!(notes.len(), 1, "{notes:?}");
+            assert!(notes[0].starts_with("species 1: particle radii from 0.5 to 1"));
             let names: Vec<&str> = f.species.iter().map(|s| s.name.as_str()).collect();
             assert_eq!(names, ["0", "1", "2", "3", "4", "5", "6", "7"]);
             let b = f.simulation_box.unwrap();

@@ -1070,6 +1070,7 @@ fn spheres_far_off_keep_their_depth_order_with_the_eye_inside_the_data() {
                     name: n.to_string(),
                     numeric_type: false,
                     radius: None,
+                    ..Default::default()
                 })
                 .collect(),
             ..Default::default()

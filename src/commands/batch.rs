@@ -142,6 +142,9 @@ pub fn run(args: Args) -> Result<()> {
     for e in &report.empty {
         println!("{e}");
     }
+    for n in &report.notes {
+        println!("note: {n}");
+    }
     let empty = match report.empty.len() {
         0 => String::new(),
         1 => ", 1 empty frame skipped".to_string(),

@@ -215,6 +215,9 @@ pub fn print_report(output: &std::path::Path, r: &ConvertReport) {
         r.write_time.as_secs_f64(),
         r.particles as f64 / total.as_secs_f64().max(1e-9) / 1e6
     );
+    for n in &r.notes {
+        println!("  note: {n}");
+    }
 }
 
 /// Peak resident memory of this process so far (Linux), in MiB.

@@ -32,6 +32,7 @@ fn make_block(dir: &Path, n: usize) -> PathBuf {
             name: n.to_string(),
             numeric_type: false,
             radius: None,
+            ..Default::default()
         })
         .collect();
     let frame = Frame {

@@ -216,6 +216,7 @@ pub(crate) fn parse(
             name: DEFAULT_SPECIES.to_string(),
             numeric_type: false,
             radius: None,
+            ..Default::default()
         }]
     } else {
         Vec::new()
@@ -302,6 +303,7 @@ fn merge_species(
             name: String::from_utf8_lossy(n).into_owned(),
             numeric_type,
             radius: None,
+            ..Default::default()
         })
         .collect())
 }

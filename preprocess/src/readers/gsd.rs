@@ -566,6 +566,7 @@ impl<'a> FrameData<'a> {
         let mut sum = vec![0f64; names.len()];
         let mut count = vec![0u64; names.len()];
         let mut bad: Vec<Option<f64>> = vec![None; names.len()];
+        let mut spread = vec![(f64::INFINITY, f64::NEG_INFINITY); names.len()];
         if let Some(e) = self.chunk("particles/diameter", 1, false)? {
             let bytes = &self.data[e.location..e.location + self.n * e.ty.size()];
             for (j, &s) in ids.iter().enumerate() {
@@ -583,6 +584,8 @@ impl<'a> FrameData<'a> {
                 }
                 sum[usize::from(s)] += d;
                 count[usize::from(s)] += 1;
+                let r = &mut spread[usize::from(s)];
+                *r = (r.0.min(d), r.1.max(d));
             }
         }
         Ok(names
@@ -596,6 +599,8 @@ impl<'a> FrameData<'a> {
                     None if count[t] > 0 => (0.5 * sum[t] / count[t] as f64) as f32,
                     None => 0.5,
                 }),
+                radius_range: (count[t] > 0)
+                    .then(|| ((0.5 * spread[t].0) as f32, (0.5 * spread[t].1) as f32)),
             })
             .collect())
     }

@@ -576,6 +576,7 @@ pub(crate) fn read_range(
                 name: super::atoms::DEFAULT_SPECIES.into(),
                 numeric_type: false,
                 radius: None,
+                ..Default::default()
             }],
             vec![0u16; n],
         ),
@@ -596,6 +597,7 @@ pub(crate) fn read_range(
                     name: t.to_string(),
                     numeric_type: true,
                     radius: None,
+                    ..Default::default()
                 })
                 .collect();
             (names, index)

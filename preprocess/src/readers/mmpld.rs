@@ -415,6 +415,7 @@ fn species_of(
             let lo = range.start.max(first).min(first + list.particles) - first;
             let hi = range.end.max(first).min(first + list.particles) - first;
             first += list.particles;
+            let mut spread: Option<(f32, f32)> = None;
             let radius = match list.radius {
                 Some(r) => r,
                 None => {
@@ -433,6 +434,7 @@ fn species_of(
                             bad.get_or_insert(r);
                         }
                         sum += f64::from(r);
+                        spread = Some(spread.map_or((r, r), |(a, b)| (a.min(r), b.max(r))));
                     }
                     if let Some(r) = bad {
                         r
@@ -447,6 +449,7 @@ fn species_of(
                 name: l.to_string(),
                 numeric_type: true,
                 radius: Some(radius),
+                radius_range: spread,
             })
         })
         .collect()

@@ -548,6 +548,7 @@ impl Index {
                     name: super::atoms::DEFAULT_SPECIES.into(),
                     numeric_type: false,
                     radius: self.radii.as_ref().and_then(|r| r.first().copied()),
+                    ..Default::default()
                 }],
                 vec![0u16; n],
             ),
@@ -594,6 +595,7 @@ impl Index {
                         name: name.clone(),
                         numeric_type: false,
                         radius: self.radii.as_ref().and_then(|r| r.get(i).copied()),
+                        ..Default::default()
                     })
                     .collect();
                 (species, raw.iter().map(|&v| v as u16).collect())

@@ -36,6 +36,7 @@ fn species(names: &[&str]) -> Vec<SpeciesName> {
             name: n.to_string(),
             numeric_type: false,
             radius: None,
+            ..Default::default()
         })
         .collect()
 }
