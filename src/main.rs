@@ -2,8 +2,9 @@
 //! lives in the library crates.
 
 /// `println!` for the commands' output, shadowing std's in this crate: when the reader
-/// of a pipe has gone (`mdlod info frame.mdlod | head -1`), the program ends quietly, as
-/// a SIGPIPE would end a C program, instead of std's panic ("failed printing to stdout").
+/// of a pipe has gone (`mdlod info frame.mdlod | head -1`), later output is dropped and
+/// the command finishes its work (files it writes, working files it removes), instead of
+/// std's panic ("failed printing to stdout") in the middle of it.
 macro_rules! println {
     () => {
         $crate::print_line(format_args!(""))
@@ -17,18 +18,26 @@ mod commands;
 mod interrupt;
 mod progress;
 
+/// Set once standard output has failed: nothing more is written to it.
+static OUTPUT_GONE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// Set when it failed otherwise than by its reader leaving (a full disk): the command
+/// then ends with a failure once its work is done.
+static OUTPUT_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 /// Writes a line of output (see `println!` above).
 fn print_line(line: std::fmt::Arguments) {
     use std::io::Write;
+    use std::sync::atomic::Ordering;
+    if OUTPUT_GONE.load(Ordering::Relaxed) {
+        return;
+    }
     let mut out = std::io::stdout().lock();
     if let Err(e) = out.write_fmt(line).and_then(|()| out.write_all(b"\n")) {
+        OUTPUT_GONE.store(true, Ordering::Relaxed);
         if e.kind() != std::io::ErrorKind::BrokenPipe {
             eprintln!("error: writing to standard output: {e}");
-            std::process::exit(1);
+            OUTPUT_FAILED.store(true, Ordering::Relaxed);
         }
-        // Nobody reads what follows; the work itself is done or stopped as it would be
-        // by the signal.
-        std::process::exit(0);
     }
 }
 
@@ -94,6 +103,9 @@ fn main() -> std::process::ExitCode {
         Command::View(a) => commands::view::run(a),
     };
     match result {
+        Ok(()) if OUTPUT_FAILED.load(std::sync::atomic::Ordering::Relaxed) => {
+            std::process::ExitCode::FAILURE
+        }
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             interrupt::defer_to_interrupt();

@@ -1966,21 +1966,42 @@ fn xyz_and_lammps_forms_of_the_same_data_get_the_same_species_table() {
 }
 
 #[test]
-fn a_closed_output_pipe_ends_the_program_quietly() {
+fn a_closed_output_pipe_drops_the_output_and_the_work_completes() {
     // `mdlod info frame.mdlod | head -1`: the reader is gone before the program writes.
-    // std's println! panicked there ("failed printing to stdout: Broken pipe").
+    // std's println! panicked there ("failed printing to stdout: Broken pipe"), and
+    // `render --save-view` printed its summary before saving the view, so the view file
+    // was never written.
     let dir = tempfile::tempdir().unwrap();
     let frame = converted(dir.path(), "cu_melt.custom.dump");
-    let (reader, writer) = std::io::pipe().unwrap();
-    drop(reader);
-    let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
-        .args(["info", s(&frame)])
-        .stdout(writer)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(out.status.success(), "{:?}: {err}", out.status);
+    let view = dir.path().join("v.json");
+    let png = dir.path().join("x.png");
+    for args in [
+        vec!["info", s(&frame)],
+        vec![
+            "render",
+            s(&frame),
+            "-o",
+            s(&png),
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--save-view",
+            s(&view),
+        ],
+    ] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+            .args(&args)
+            .stdout(writer)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(out.status.success(), "{args:?}: {:?}: {err}", out.status);
+    }
+    assert!(png.is_file() && view.is_file());
 }
 /// Ten spheres of radius 0.1 spread over 90 units, each narrower than a pixel, with a
 /// constant attribute (equal masses), as a LAMMPS dump converted.
