@@ -90,6 +90,11 @@ pub struct FrameEntry {
     /// its values are and which the file does not record; absent when none were given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub columns: Option<Vec<String>>,
+    /// The `--radius` overrides that named species of the frame when it was converted:
+    /// a rerun compares them with its own instead of reading the input again to learn
+    /// the radii it gives (absent in manifests of earlier versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radii: Option<Vec<(String, f32)>>,
 }
 
 /// `dataset.json`: the frames of a batch directory, by timestep.
@@ -298,8 +303,16 @@ fn entry_of(
     file: &MdlodFile,
     timestep: u64,
     columns: Option<Vec<String>>,
+    overrides: &[(String, f32)],
 ) -> FrameEntry {
     let m = file.metadata();
+    let radii = m
+        .species
+        .iter()
+        .filter_map(|s| {
+            crate::species::radius_override(overrides, &s.name).map(|r| (s.name.clone(), r))
+        })
+        .collect();
     FrameEntry {
         timestep,
         time: m.time,
@@ -318,6 +331,7 @@ fn entry_of(
             frame: 0,
         }),
         columns,
+        radii: Some(radii),
     }
 }
 
@@ -328,11 +342,14 @@ fn entry_of(
 /// `options` give it, else the one the input gives (`given`, asked only when needed:
 /// the radii the frame's file gives by species, `None` when they cannot be read), else
 /// its element's or the default. (A radius given by an earlier run and left out now
-/// must not survive: the species takes the input's own again.)
+/// must not survive: the species takes the input's own again.) Where the manifest
+/// recorded the overrides the file was built with (`recorded_radii`), those are compared
+/// with `options`' instead, and the input is not read.
 fn same_build(
     file: &MdlodFile,
     options: &ConvertOptions,
     attribute: Option<&str>,
+    recorded_radii: Option<&[(String, f32)]>,
     given: impl FnOnce() -> Option<Vec<(String, f32)>>,
 ) -> bool {
     let (m, b) = (file.metadata(), &options.build);
@@ -359,6 +376,27 @@ fn same_build(
     }
     // (An override naming none of the frame's species changes nothing in it: a species
     // may appear in some frames of a trajectory only.)
+    if let Some(recorded) = recorded_radii {
+        // The manifest says which overrides the file was built with: the others' radii
+        // came from the input, which is unchanged (its source was compared). The input
+        // is read again (a GSD frame's every diameter) only for a species whose override
+        // was left out, to learn its own radius.
+        let mut needs_input = false;
+        let same = m.species.iter().all(|s| {
+            let now = crate::species::radius_override(&options.radii, &s.name);
+            match (now, crate::species::radius_override(recorded, &s.name)) {
+                (n, r) if n == r => true,
+                (Some(n), _) => n == s.radius,
+                (None, _) => {
+                    needs_input = true;
+                    true
+                }
+            }
+        });
+        if !same || !needs_input {
+            return same;
+        }
+    }
     let mut given = Some(given);
     let mut from_input: Option<Option<Vec<(String, f32)>>> = None;
     m.species.iter().all(|s| {
@@ -381,12 +419,16 @@ fn same_build(
     })
 }
 
-/// The column names each listed frame was read with, from every manifest of `out_dir`
-/// (whole and shards', of this run's earlier attempts or of other shardings), by file
-/// name and checksum. Unreadable manifests are passed over.
-fn recorded_columns(
-    out_dir: &Path,
-) -> std::collections::HashMap<(String, String), Option<Vec<String>>> {
+/// What a listed frame was converted with that its file does not record.
+struct Recorded {
+    columns: Option<Vec<String>>,
+    radii: Option<Vec<(String, f32)>>,
+}
+
+/// The column names and radius overrides each listed frame was converted with, from
+/// every manifest of `out_dir` (whole and shards', of this run's earlier attempts or of
+/// other shardings), by file name and checksum. Unreadable manifests are passed over.
+fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String), Recorded> {
     let mut known = std::collections::HashMap::new();
     let Ok(dir) = std::fs::read_dir(out_dir) else {
         return known;
@@ -403,7 +445,13 @@ fn recorded_columns(
             continue;
         };
         for f in m.frames {
-            known.insert((f.file, f.checksum), f.columns);
+            known.insert(
+                (f.file, f.checksum),
+                Recorded {
+                    columns: f.columns,
+                    radii: f.radii,
+                },
+            );
         }
     }
     known
@@ -551,9 +599,13 @@ pub fn batch(
             };
             // The attribute asked for, resolved now (a gzip input's text is gone later): a
             // column the frame lacks is an error before anything is converted.
-            let attribute = dump
-                .attribute_name(k, &opts.read)
-                .map_err(|e| bounded.context(p, e.into()))?;
+            let attribute = match dump.attribute_name(k, &opts.read) {
+                Ok(a) => a,
+                // An empty frame is skipped, and its header may not name the column (a
+                // plain XYZ frame's extra columns come from its first atom line).
+                Err(_) if dump.frame_info(k).is_ok_and(|i| i.particles == 0) => None,
+                Err(e) => return Err(bounded.context(p, e.into()).into()),
+            };
             frames.push((own, timestep, particles, attribute, given));
         }
         if !opts.convert.radii.is_empty() && dump.frame_count() > 0 {
@@ -630,9 +682,18 @@ pub fn batch(
     let mut empty = Vec::new();
     // The species names the frames hold, for the radius overrides' check at the end.
     let seen = Mutex::new(std::collections::BTreeSet::<String>::new());
-    let notes = Mutex::new(std::collections::BTreeSet::<String>::new());
+    // Notes by what they are about (the text before the first `: `, e.g. `species A`),
+    // each with the distinct texts the frames gave.
+    let notes = Mutex::new(std::collections::BTreeMap::<
+        String,
+        std::collections::BTreeSet<String>,
+    >::new());
     let keep_notes = |n: Vec<String>| {
-        notes.lock().unwrap_or_else(|e| e.into_inner()).extend(n);
+        let mut notes = notes.lock().unwrap_or_else(|e| e.into_inner());
+        for text in n {
+            let about = text.split(": ").next().unwrap_or_default().to_string();
+            notes.entry(about).or_default().insert(text);
+        }
     };
     let note_species = |f: &MdlodFile| {
         let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
@@ -645,11 +706,7 @@ pub fn batch(
             .then(|| opts.read.columns.clone())
             .flatten()
     };
-    let known_columns = if mine.iter().any(|j| j.format == InputFormat::LammpsBinary) {
-        recorded_columns(out_dir)
-    } else {
-        Default::default()
-    };
+    let known = recorded_entries(out_dir);
     for mut job in mine.drain(..) {
         if let Some(dump) = job.dump {
             // (A header that cannot be read fails where the frame is converted.)
@@ -675,24 +732,35 @@ pub fn batch(
                 Some(d) => d.given_radii(job.frame).ok(),
                 None => job.given_radii.take(),
             };
+            let recorded = known.get(&(
+                frame_file_name(job.timestep),
+                format!("{:016x}", f.header().section_table_checksum),
+            ));
             let same_columns = job.format != InputFormat::LammpsBinary
-                || known_columns
-                    .get(&(
-                        frame_file_name(job.timestep),
-                        format!("{:016x}", f.header().section_table_checksum),
-                    ))
-                    .is_some_and(|c| *c == columns);
+                || recorded.is_some_and(|r| r.columns == columns);
             f.metadata()
                 .source
                 .as_ref()
                 .is_some_and(|s| same_source(s, &want))
                 && same_columns
-                && same_build(f, &opts.convert, job.attribute.as_deref(), given)
+                && same_build(
+                    f,
+                    &opts.convert,
+                    job.attribute.as_deref(),
+                    recorded.and_then(|r| r.radii.as_deref()),
+                    given,
+                )
         });
         match complete {
             Some(f) => {
                 note_species(&f);
-                done.push(entry_of(&out, &f, job.timestep, columns));
+                done.push(entry_of(
+                    &out,
+                    &f,
+                    job.timestep,
+                    columns,
+                    &opts.convert.radii,
+                ));
             }
             None => {
                 if job.particles == u64::MAX {
@@ -825,7 +893,13 @@ pub fn batch(
                             }
                             let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                             note_species(&f);
-                            Ok(entry_of(&out, &f, job.timestep, columns_for(job)))
+                            Ok(entry_of(
+                                &out,
+                                &f,
+                                job.timestep,
+                                columns_for(job),
+                                &convert.radii,
+                            ))
                         })()
                         .map_err(in_context)
                     })();
@@ -896,6 +970,20 @@ pub fn batch(
             .into_inner()
             .unwrap_or_else(|e| e.into_inner())
             .into_iter()
+            .map(|(about, texts)| {
+                let first = texts.iter().next().cloned().unwrap_or_default();
+                if texts.len() == 1 {
+                    first
+                } else {
+                    // Frames of a trajectory differ in their numbers: one line, not one
+                    // per frame.
+                    format!(
+                        "{about}: in {} frames, e.g. {}",
+                        texts.len(),
+                        first.strip_prefix(&format!("{about}: ")).unwrap_or(&first)
+                    )
+                }
+            })
             .collect(),
         jobs,
         manifest: manifest_path,

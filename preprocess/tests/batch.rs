@@ -748,6 +748,37 @@ fn an_empty_frame_is_skipped_reported_and_left_out_of_the_manifest() {
         .contains("frame 1 (number 1 in the batch)"));
     let r = batch(std::slice::from_ref(&zl), &out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped, r.empty.len()), (0, 2, 1));
+
+    // A plain XYZ trajectory whose atom lines carry a fifth column, with an empty frame,
+    // converted with that column as the attribute: the empty frame's header names no
+    // such column (a plain XYZ frame's extra columns come from its first atom line), and
+    // resolving the attribute there failed the whole batch.
+    let xyz = dir.path().join("t.xyz");
+    let atoms = |n: usize, t: usize| -> String {
+        (0..n)
+            .map(|i| format!("Cu {i}.0 {t}.5 0.25 {}.5\n", i + t))
+            .collect()
+    };
+    std::fs::write(
+        &xyz,
+        format!(
+            "3\nframe 0\n{}0\nframe 1\n2\nframe 2\n{}",
+            atoms(3, 0),
+            atoms(2, 2)
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("xyz");
+    let mut with_column = opts();
+    with_column.read.attribute = Some("col5".into());
+    let r = batch(std::slice::from_ref(&xyz), &out, &with_column, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.empty.len()), (2, 1));
+    let m = read_manifest(&out).unwrap();
+    for f in &m.frames {
+        let file = mdlod_format::MdlodFile::open(out.join(&f.file)).unwrap();
+        let a = file.metadata().attribute.clone().unwrap();
+        assert_eq!(a.name, "col5");
+    }
 }
 
 /// A GSD chunk: name, type code, N, M, data.
@@ -875,4 +906,95 @@ fn mmpld_and_gsd_file_sets_without_timesteps_are_numbered_by_position() {
         m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>(),
         [10, 20]
     );
+}
+
+/// A trajectory whose particles of one type differ in size, differently in each frame
+/// (particles growing): the batch says so once for the type, not once a frame.
+#[test]
+fn differing_radii_are_noted_once_per_species_for_a_whole_trajectory() {
+    let dir = tempfile::tempdir().unwrap();
+    let positions: Vec<u8> = (0..12)
+        .flat_map(|i| (i as f32 * 0.5).to_le_bytes())
+        .collect();
+    let frame = |step: u64| {
+        let diameters: Vec<u8> = (0..4)
+            .flat_map(|i| (1.0 + (i * step) as f32).to_le_bytes())
+            .collect();
+        vec![
+            ("particles/N", 3u8, 1u64, 1u32, 4u32.to_le_bytes().to_vec()),
+            ("particles/position", 9, 4, 3, positions.clone()),
+            ("particles/diameter", 9, 4, 1, diameters),
+            ("configuration/step", 4, 1, 1, step.to_le_bytes().to_vec()),
+        ]
+    };
+    let src = dir.path().join("grow.gsd");
+    std::fs::write(&src, gsd(&[frame(1), frame(2), frame(3)])).unwrap();
+    let r = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("grow.d"),
+        &opts(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!(r.converted, 3);
+    assert_eq!(r.notes.len(), 1, "{:?}", r.notes);
+    assert!(
+        r.notes[0].starts_with("species A: in 3 frames, e.g. particle radii from 0.5 to "),
+        "{:?}",
+        r.notes
+    );
+}
+
+/// A rerun learns which `--radius` overrides built a frame from the manifest, not by
+/// reading the input again (a GSD frame's every diameter, for every frame of a long
+/// trajectory): an input whose diameters changed in place, its size and time kept, is
+/// not read, while leaving out an override still rebuilds.
+#[test]
+fn a_rerun_compares_the_recorded_overrides_without_reading_the_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let positions: Vec<u8> = (0..12)
+        .flat_map(|i| (i as f32 * 0.5).to_le_bytes())
+        .collect();
+    let gsd_with = |d: f32| {
+        gsd(&[vec![
+            ("particles/N", 3u8, 1u64, 1u32, 4u32.to_le_bytes().to_vec()),
+            ("particles/position", 9, 4, 3, positions.clone()),
+            (
+                "particles/diameter",
+                9,
+                4,
+                1,
+                (0..4).flat_map(|_| d.to_le_bytes()).collect(),
+            ),
+        ]])
+    };
+    let src = dir.path().join("d.gsd");
+    std::fs::write(&src, gsd_with(2.0)).unwrap();
+    let out = dir.path().join("d.d");
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 1);
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(m.frames[0].radii, Some(vec![]));
+    // Diameters 3 instead of 2, the file's size and time as before.
+    let time = std::fs::metadata(&src).unwrap().modified().unwrap();
+    std::fs::write(&src, gsd_with(3.0)).unwrap();
+    std::fs::File::options()
+        .write(true)
+        .open(&src)
+        .unwrap()
+        .set_modified(time)
+        .unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 1), "the input was read again");
+    // An override is recorded, and leaving it out again rebuilds with the input's own.
+    let mut with = opts();
+    with.convert.radii = vec![("A".into(), 0.7)];
+    let r = batch(std::slice::from_ref(&src), &out, &with, &NoProgress).unwrap();
+    assert_eq!(r.converted, 1);
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(m.frames[0].radii, Some(vec![("A".to_string(), 0.7)]));
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 1);
+    let f = MdlodFile::open(out.join(&read_manifest(&out).unwrap().frames[0].file)).unwrap();
+    assert_eq!(f.metadata().species[0].radius, 1.5);
 }

@@ -647,4 +647,13 @@ fn a_radius_of_zero_or_below_is_refused_unless_the_list_is_given_one() {
         );
         std::fs::remove_file(&out).unwrap();
     }
+    // A list without particles draws nothing: its radius of zero refuses nothing (the
+    // default 0.5 stands in).
+    let frames = vec![vec![list(1, 0, 0.0, 0, 0.0), list(1, 0, 0.4, 300, 3.0)]];
+    // (Written over the file `convert` reads.)
+    save(dir.path(), "r0.mmpld", &write(102, &frames));
+    for chunk_points in [1 << 22, 500] {
+        assert_eq!(convert(&[], chunk_points), Ok(vec![0.5, 0.4]));
+        std::fs::remove_file(&out).unwrap();
+    }
 }

@@ -448,7 +448,9 @@ fn species_of(
             Ok(SpeciesName {
                 name: l.to_string(),
                 numeric_type: true,
-                radius: Some(radius),
+                // A list without particles draws nothing: a radius of zero there is no
+                // reason to refuse the frame (the default stands in).
+                radius: (list.particles > 0 || radius > 0.0).then_some(radius),
                 radius_range: spread,
             })
         })
