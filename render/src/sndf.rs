@@ -753,11 +753,11 @@ impl Explorer {
 }
 
 impl From<&Lighting> for ShadeLights {
-    /// The sphere renderer's single white light.
+    /// The sphere renderer's single light.
     fn from(l: &Lighting) -> Self {
         ShadeLights {
             ambient: l.ambient,
-            lights: vec![(l.direction_view, [1.0; 3])],
+            lights: vec![(l.direction_view, l.colour)],
             diffuse: l.diffuse,
             specular: l.specular,
             shininess: l.shininess,

@@ -434,6 +434,47 @@ fn data_in_metres_or_light_years_renders_as_in_angstroms() {
 }
 
 #[test]
+fn the_light_colour_tints_the_diffuse_and_specular_light() {
+    // One white sphere filling the view, lit head-on: under a blue light its red and
+    // green come from the (white) ambient light alone. The colour was not passed to the
+    // sphere passes (the viewer's first light lit them white whatever its colour).
+    let (_d, _p, f) = make_file(&spheres_frame(&[[0.0; 3]]), small_build(), &[("X", 2.0)]);
+    let render = |colour: [f32; 3]| {
+        let mut o = opts(48, 48);
+        o.view = ViewSpec::Orbit {
+            azimuth_deg: 0.0,
+            elevation_deg: 0.0,
+            zoom: 1.5,
+            projection: Projection::Orthographic,
+        };
+        o.style.species = vec![mdlod_render::SpeciesStyle {
+            name: "X".into(),
+            colour: Some([1.0; 3]),
+            ..Default::default()
+        }];
+        o.lighting = mdlod_render::Lighting {
+            direction_view: Vec3::Z,
+            colour,
+            ambient: 0.2,
+            diffuse: 0.6,
+            specular: 0.0,
+            ..Default::default()
+        };
+        render_image(renderer(), &f, &o).unwrap().0.pixel(24, 24)
+    };
+    let white = render([1.0; 3]);
+    let blue = render([0.0, 0.0, 1.0]);
+    // Linear 0.8 and 0.2 in sRGB: 231 and 124.
+    for c in 0..3 {
+        assert!(white[c].abs_diff(231) <= 2, "white light: {white:?}");
+    }
+    assert!(
+        blue[0].abs_diff(124) <= 2 && blue[1].abs_diff(124) <= 2 && blue[2].abs_diff(231) <= 2,
+        "blue light: {blue:?}"
+    );
+}
+
+#[test]
 fn view_file_and_orbit_options_give_the_same_image() {
     let (dir, _p, f) = make_file(&cloud_frame(800, 31), small_build(), &[]);
     let view = dir.path().join("view.json");

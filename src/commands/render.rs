@@ -93,8 +93,8 @@ pub struct Args {
     /// the attribute's with --intensity attribute).
     #[arg(long)]
     pub exposure: Option<f32>,
-    /// Background colour: #rrggbb or r,g,b in [0, 1] (default white for spheres, black
-    /// for splats).
+    /// Background colour: #rrggbb or r,g,b in [0, 1] (default black for splats and the
+    /// density volume, white otherwise).
     #[arg(long)]
     pub background: Option<String>,
     #[command(flatten)]

@@ -173,7 +173,8 @@ impl Settings {
         }
     }
 
-    /// The sphere renderer's lighting: its one light is the first of the list.
+    /// The sphere renderer's lighting: its one light is the first of the list, with its
+    /// colour.
     pub fn sphere_lighting(&self) -> Lighting {
         let direction = self
             .lights
@@ -183,6 +184,7 @@ impl Settings {
             .unwrap_or(Lighting::default().direction_view);
         Lighting {
             direction_view: direction,
+            colour: self.lights.first().map_or([1.0; 3], |l| l.colour),
             ambient: self.ambient,
             diffuse: self.diffuse,
             specular: self.specular,
@@ -611,6 +613,52 @@ impl ViewerState {
         }
     }
 
+    /// Refuses a script's action whose values `mdlod render` would refuse (the window's
+    /// own widgets clamp instead): `index` is the action's place in the script.
+    pub fn check_script_action(&self, index: usize, action: &Action) -> Result<(), String> {
+        let name = serde_json::to_value(action)
+            .ok()
+            .and_then(|v| v.get("action").and_then(|a| a.as_str()).map(str::to_owned))
+            .unwrap_or_default();
+        let refuse = |what: String| Err(format!("script action {index} ({name}): {what}"));
+        let lights = self.settings.lights.len();
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        match action {
+            Action::Light { index: i, .. }
+            | Action::DragLight { index: i, .. }
+            | Action::RemoveLight { index: i }
+            | Action::LightColour { index: i, .. }
+                if *i >= lights =>
+            {
+                refuse(format!("light index {i}, but there are {lights} light(s)"))
+            }
+            Action::Zoom { factor } if !positive(*factor) => {
+                refuse(format!("zoom factor {factor} is not positive"))
+            }
+            Action::RadiusScale { scale } if !positive(*scale) => {
+                refuse(format!("radius scale {scale} is not positive"))
+            }
+            Action::ScreenError { px } if !positive(*px) => {
+                refuse(format!("screen error {px} px is not positive"))
+            }
+            Action::Spp { n: 0 } => refuse("0 samples per pixel".into()),
+            Action::SndfIterations { n: 0 } => refuse("0 S-NDF iterations".into()),
+            Action::Frame { index: i } if *i >= self.frames.len() => refuse(format!(
+                "frame {i}, but the data has {} frame(s)",
+                self.frames.len()
+            )),
+            Action::Screenshot { width, height, .. } => match (width, height) {
+                (None, None) => Ok(()),
+                (Some(w), Some(h)) if *w > 0 && *h > 0 => Ok(()),
+                (Some(w), Some(h)) => refuse(format!("a {w}x{h} screenshot")),
+                _ => refuse(format!(
+                    "width {width:?} and height {height:?}: give both or neither"
+                )),
+            },
+            _ => Ok(()),
+        }
+    }
+
     pub fn set_camera(&mut self, camera: Camera) {
         self.camera = camera;
     }
@@ -676,7 +724,8 @@ impl ViewerState {
             },
             error_px: s.error_px,
             budget: s.budget,
-            background: if splat && s.mode == Mode::Splat {
+            // As `mdlod render` defaults: splats and the density volume on black.
+            background: if (splat && s.mode == Mode::Splat) || s.mode == Mode::Density {
                 [0.0; 3]
             } else {
                 s.background
@@ -919,6 +968,60 @@ mod tests {
     }
 
     #[test]
+    fn scripts_refuse_what_render_refuses() {
+        let s = state();
+        let refused = |a: Action, want: &str| {
+            let e = s.check_script_action(3, &a).unwrap_err();
+            assert!(e.starts_with("script action 3 ("), "{e}");
+            assert!(e.contains(want), "{e} lacks {want}");
+        };
+        refused(
+            Action::Light {
+                index: 9,
+                direction: [0.0, 0.0, 1.0],
+            },
+            "light index 9",
+        );
+        refused(
+            Action::LightColour {
+                index: 4,
+                colour: [1.0; 3],
+            },
+            "(light_colour): light index 4",
+        );
+        refused(Action::RadiusScale { scale: 0.0 }, "radius scale 0");
+        refused(Action::RadiusScale { scale: -1.0 }, "radius scale -1");
+        refused(Action::Zoom { factor: 0.0 }, "zoom factor 0");
+        refused(Action::Zoom { factor: -2.0 }, "zoom factor -2");
+        refused(Action::Spp { n: 0 }, "0 samples");
+        refused(Action::SndfIterations { n: 0 }, "0 S-NDF");
+        refused(Action::ScreenError { px: -1.0 }, "screen error -1");
+        refused(Action::Frame { index: 99 }, "frame 99");
+        refused(Action::Frame { index: 3 }, "frame 3");
+        let shot = |width, height| Action::Screenshot {
+            path: "a.png".into(),
+            width,
+            height,
+        };
+        refused(shot(Some(0), Some(50)), "0x50");
+        refused(shot(Some(64), None), "both or neither");
+        refused(shot(None, Some(64)), "both or neither");
+        for ok in [
+            shot(None, None),
+            shot(Some(64), Some(48)),
+            Action::Frame { index: 2 },
+            Action::Zoom { factor: 0.5 },
+            Action::Spp { n: 1 },
+            Action::Light {
+                index: 0,
+                direction: [0.0, 0.0, 1.0],
+            },
+        ] {
+            assert_eq!(s.check_script_action(0, &ok), Ok(()), "{ok:?}");
+        }
+    }
+
+    #[test]
     fn camera_actions_move_the_camera_and_fit_restores_it() {
         let mut s = state();
         let fitted = s.camera.clone();
@@ -1096,6 +1199,22 @@ mod tests {
         assert_eq!(adapt_error(1.0, 5.0, 33.0, 1.0), 1.0);
         // Within the band: unchanged.
         assert_eq!(adapt_error(4.0, 20.0, 33.0, 1.0), 4.0);
+    }
+
+    #[test]
+    fn the_sphere_modes_take_the_first_lights_colour_and_densities_a_black_background() {
+        let mut s = state();
+        s.apply(&Action::LightColour {
+            index: 0,
+            colour: [0.0, 0.0, 1.0],
+        });
+        let o = s.render_options([64, 48]);
+        assert_eq!(o.lighting.colour, [0.0, 0.0, 1.0]);
+        assert_eq!(o.background, [1.0; 3]);
+        s.apply(&Action::Mode {
+            mode: Mode::Density,
+        });
+        assert_eq!(s.render_options([64, 48]).background, [0.0; 3]);
     }
 
     #[test]

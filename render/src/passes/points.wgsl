@@ -15,6 +15,8 @@ struct Frame {
     params: vec4<f32>,
     // x: position bits (8 or 16), y: species count.
     counts: vec4<u32>,
+    // rgb: the light's colour (linear), scaling its diffuse and specular terms.
+    light_colour: vec4<f32>,
 };
 
 struct Range {

@@ -116,6 +116,8 @@ pub struct FrameUniforms {
     pub params: [f32; 4],
     /// x: position bits; y: species count.
     pub counts: [u32; 4],
+    /// rgb: the light's colour (linear; it scales the diffuse and specular terms).
+    pub light_colour: [f32; 4],
 }
 
 /// `Range` in the WGSL: one run of points decoded with one base and scale.
@@ -145,7 +147,7 @@ pub const KIND_NODE: u32 = 1;
 /// Per point a radius and a grey intensity, both f32 (splats by attribute).
 pub const KIND_INTENSITY: u32 = 2;
 
-const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 192);
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 208);
 const _: () = assert!(std::mem::size_of::<RangeGpu>() == 48);
 
 /// The lighting: one directional light fixed in view space.
@@ -153,6 +155,9 @@ const _: () = assert!(std::mem::size_of::<RangeGpu>() == 48);
 pub struct Lighting {
     /// Direction towards the light in view space (x right, y up, z towards the viewer).
     pub direction_view: Vec3,
+    /// The light's colour, linear (white by default): it scales the diffuse and
+    /// specular light; the ambient light stays white.
+    pub colour: [f32; 3],
     pub ambient: f32,
     pub diffuse: f32,
     pub specular: f32,
@@ -163,6 +168,7 @@ impl Default for Lighting {
     fn default() -> Self {
         Lighting {
             direction_view: Vec3::new(-0.35, 0.45, 1.0).normalize(),
+            colour: [1.0; 3],
             ambient: 0.15,
             diffuse: 0.85,
             specular: 0.25,
@@ -198,6 +204,12 @@ impl FrameUniforms {
                 0.0,
             ],
             counts: [position_bits, species_count, 0, 0],
+            light_colour: [
+                lighting.colour[0],
+                lighting.colour[1],
+                lighting.colour[2],
+                0.0,
+            ],
         }
     }
 }

@@ -159,8 +159,9 @@ fn shade(n: vec3<f32>, v: vec3<f32>, albedo: vec3<f32>) -> vec3<f32> {
     let ndl = max(dot(n, l), 0.0);
     let h = normalize(l + v);
     let spec = select(0.0, pow(max(dot(n, h), 0.0), frame.material.w), ndl > 0.0);
-    return albedo * (frame.material.x + frame.material.y * ndl)
-        + vec3<f32>(frame.material.z * spec);
+    let c = frame.light_colour.xyz;
+    return albedo * (frame.material.x + frame.material.y * ndl * c)
+        + frame.material.z * spec * c;
 }
 
 @fragment
