@@ -37,6 +37,8 @@ struct Shown {
 /// A script being played: the actions left and what the current one waits for.
 pub(crate) struct Script {
     pub actions: VecDeque<Action>,
+    /// The next action's index in the script (for error messages).
+    next: usize,
     waiting: Option<Wait>,
     deadline: Instant,
 }
@@ -45,6 +47,7 @@ impl Script {
     pub fn new(actions: Vec<Action>, timeout: Duration) -> Script {
         Script {
             actions: actions.into(),
+            next: 0,
             waiting: None,
             deadline: Instant::now()
                 .checked_add(timeout)
@@ -346,6 +349,8 @@ impl ViewerApp {
             self.fail(format!(
                 "the script timed out waiting for the view ({left} actions left)"
             ));
+            // Exit now, not once the frame in progress is done.
+            self.worker.abandon();
             self.script = None;
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return false;
@@ -380,6 +385,16 @@ impl ViewerApp {
         let Some(action) = script.actions.pop_front() else {
             self.script = None;
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return false;
+        };
+        let index = script.next;
+        script.next += 1;
+        // Values `mdlod render` refuses fail the script (the panel's widgets clamp).
+        if let Err(e) = self.state.check_script_action(index, &action) {
+            self.fail(e);
+            return true;
+        }
+        let Some(script) = self.script.as_mut() else {
             return false;
         };
         match action {
@@ -772,7 +787,7 @@ impl ViewerApp {
                 ));
                 ui.label(format!("GPU {:.0} MiB ({})", mib(t.gpu_bytes), t.adapter));
                 if let Some(b) = t.bins {
-                    ui.label(format!("S-NDF {b}×{b} bins"));
+                    ui.label(bins_label(b, self.state.settings.bins));
                 }
                 if let Some((resident, capacity, pending)) = t.streaming {
                     ui.label(format!(
@@ -1007,10 +1022,29 @@ fn drain(rx: &Receiver<Reply>) -> (Vec<Reply>, bool) {
     }
 }
 
+/// The status line's S-NDF bins: `sampled` per axis, and the `asked` ones when the
+/// adapter's buffers made the render thread halve them (a memory limit, not an error).
+pub fn bins_label(sampled: u32, asked: u32) -> String {
+    if sampled < asked {
+        format!("S-NDF {sampled}×{sampled} bins (asked {asked}×{asked}: GPU buffer limit)")
+    } else {
+        format!("S-NDF {sampled}×{sampled} bins")
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{coarsen_levels, drain};
+    use super::{bins_label, coarsen_levels, drain};
     use crate::worker::Reply;
+
+    #[test]
+    fn halved_bins_are_shown_with_the_asked_ones() {
+        assert_eq!(bins_label(8, 8), "S-NDF 8×8 bins");
+        assert_eq!(
+            bins_label(4, 8),
+            "S-NDF 4×4 bins (asked 8×8: GPU buffer limit)"
+        );
+    }
 
     #[test]
     fn a_stopped_render_thread_is_noticed() {

@@ -11,8 +11,10 @@
 //! - Orthographic S-NDF views go through a virtual S-MIP ([`mdlod_render::smip`]) that
 //!   outlives the view: a pan or zoom samples only the tiles that come into view (one
 //!   iteration while the user drags, then refined tile by tile), and zooming out
-//!   down-samples the cached tiles. An orbit starts a new S-MIP: while dragging, those
-//!   frames are sphere previews, as in perspective.
+//!   down-samples the cached tiles. Zooming in past the S-MIP's level 0 starts a new
+//!   S-MIP with a finer level 0 once the view is still (dragging previews the old level
+//!   0 enlarged). An orbit starts a new S-MIP: while dragging, those frames are sphere
+//!   previews, as in perspective.
 //! - Only the newest request's view refines: a request ends what an older one left
 //!   refining (S-NDF batches, S-MIP tiles, streamed pages), so no image of an older view
 //!   follows it.
@@ -161,6 +163,8 @@ pub struct Worker {
     pub rx: Receiver<Reply>,
     thread: Option<std::thread::JoinHandle<()>>,
     sampled: Arc<std::sync::atomic::AtomicU64>,
+    /// Dropping does not wait for the frame in progress (see [`Worker::abandon`]).
+    abandoned: bool,
 }
 
 impl Worker {
@@ -224,7 +228,16 @@ impl Worker {
             rx,
             thread: Some(thread),
             sampled,
+            abandoned: false,
         })
+    }
+
+    /// The process is about to end (a script timed out): dropping the handle then asks
+    /// the thread to quit but does not wait for the frame it is drawing (one renderer
+    /// call, which cannot be interrupted, may take many seconds); the thread ends with
+    /// the process.
+    pub fn abandon(&mut self) {
+        self.abandoned = true;
     }
 
     pub fn send(&self, r: Request) {
@@ -241,6 +254,9 @@ impl Worker {
 impl Drop for Worker {
     fn drop(&mut self) {
         let _ = self.tx.send(Request::Quit);
+        if self.abandoned {
+            return;
+        }
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
@@ -689,8 +705,18 @@ impl<'r> Thread<'r> {
         // What the tiles depend on besides the direction (the screen error is the
         // cache's own setting: a new one makes a new cache above).
         let content = format!("{} {:?} {}", path.display(), opts.style, binning.name());
+        // A still view zoomed in past level 0 needs a finer frame: the S-MIP has no level
+        // below 0, so it would show level 0 enlarged for good (a drag may preview it).
+        let pixel = f64::from(camera.view_height_at_target()) / f64::from(h.max(1));
         let frame = match smip.frame() {
-            Some(f) if f.fits(&camera) && f.content == content && f.bins == bins => f.clone(),
+            Some(f)
+                if f.fits(&camera)
+                    && f.content == content
+                    && f.bins == bins
+                    && (interactive || !finer_than_level0(f, pixel)) =>
+            {
+                f.clone()
+            }
             _ if interactive => return Ok(false),
             _ => SmipFrame::new(
                 &camera,
@@ -1126,6 +1152,12 @@ pub fn fitting_pool(renderer: &Renderer, tiles: u32, bins: u32) -> (u32, u32) {
     }
     let fit = u32::try_from(max / tile(b)).unwrap_or(u32::MAX);
     (b, tiles.min(fit).max(1))
+}
+
+/// Whether pixels `pixel` world units wide are finer than `frame`'s level 0 (beyond
+/// rounding): the S-MIP would show them its level 0 enlarged.
+pub fn finer_than_level0(frame: &SmipFrame, pixel: f64) -> bool {
+    pixel < frame.texel0 * (1.0 - 1e-3)
 }
 
 /// Saves S-NDFs with their camera.

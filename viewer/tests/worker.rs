@@ -408,6 +408,70 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
     assert_eq!(spps, vec![SNDF_BATCH, 2 * SNDF_BATCH]);
 }
 
+#[test]
+fn zooming_in_past_the_smip_level_0_samples_a_finer_level() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let mut s = state(&path, [64, 48]);
+    s.apply(&Action::Projection { orthographic: true });
+    s.apply(&Action::Mode { mode: Mode::Sndf });
+    s.settings.sndf_iterations = SNDF_BATCH;
+    let until_refined = |w: &Worker, id: u64| -> RgbaImage {
+        loop {
+            let (got, image, _, refined) = next_image(w);
+            assert_eq!(got, id);
+            if refined {
+                return image;
+            }
+        }
+    };
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    render(&w, &s, 1);
+    until_refined(&w, 1);
+    // Zoomed in: the S-MIP begun at the wider view must not show its level 0 enlarged.
+    s.apply(&Action::Zoom { factor: 4.0 });
+    render(&w, &s, 2);
+    let zoomed = until_refined(&w, 2);
+    let fresh = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    render(&fresh, &s, 1);
+    let direct = until_refined(&fresh, 1);
+    let differ = zoomed
+        .data
+        .iter()
+        .zip(&direct.data)
+        .filter(|(a, b)| a.abs_diff(**b) > 1)
+        .count();
+    assert!(
+        differ <= 16,
+        "{differ} channel values differ from a fresh view's"
+    );
+}
+
+#[test]
+fn an_abandoned_render_thread_is_not_waited_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let mut s = state(&path, [64, 48]);
+    s.apply(&Action::Mode { mode: Mode::Sndf });
+    s.settings.sndf_iterations = 64;
+    let mut w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    // A long frame (many seconds on a software device) in progress.
+    let out = dir.path().join("slow.png");
+    w.send(Request::Screenshot {
+        path: path.clone(),
+        opts: s.render_options([1024, 768]),
+        shade: s.settings.shade_lights(),
+        out: out.clone(),
+    });
+    std::thread::sleep(Duration::from_millis(50));
+    // A script timed out: the window closes without waiting for it.
+    w.abandon();
+    let t0 = std::time::Instant::now();
+    drop(w);
+    assert!(t0.elapsed() < Duration::from_millis(500));
+    assert!(!out.exists(), "the drop waited for the frame");
+}
+
 /// The next reply within `ms` milliseconds, if any.
 fn reply_within(w: &Worker, ms: u64) -> Option<Reply> {
     match w.rx.recv_timeout(Duration::from_millis(ms)) {
