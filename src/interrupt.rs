@@ -80,35 +80,114 @@ fn remove_partial(output: &Path) {
 }
 
 /// A fresh working directory in `parent` for an out-of-core build, named after this host
-/// and process (`.mdlod-convert-HOST-PID-XXXX`). Directories of earlier runs on this host
-/// whose process is gone (killed outright, where no handler could run) are removed first;
-/// other hosts' directories on a shared file system are left alone.
+/// and process (`.mdlod-convert-HOST-PID-XXXXXX`), so that a later run can tell whether
+/// its process is gone ([`remove_leftovers_of_killed_runs`]).
 pub fn work_dir(parent: &Path) -> std::io::Result<tempfile::TempDir> {
-    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .map(|h| h.trim().to_string())
-        .ok()
-        .filter(|h| {
-            !h.is_empty()
-                && h.chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.')
-        })
-        .unwrap_or_else(|| "host".into());
-    let ours = format!(".mdlod-convert-{host}-");
-    if let Ok(entries) = std::fs::read_dir(parent) {
+    tempfile::Builder::new()
+        .prefix(&format!("{}{}-", work_dir_prefix(), std::process::id()))
+        .tempdir_in(parent)
+}
+
+/// `.mdlod-convert-HOST-`: the start of this host's working directories.
+fn work_dir_prefix() -> String {
+    format!(".mdlod-convert-{}-", mdlod_format::writer::host_name())
+}
+
+/// Whether the process `pid` of this host has ended: `/proc/PID` is gone, or only its
+/// zombie is left (killed, not yet reaped by its parent). `false` where `/proc` cannot
+/// tell, and for this process.
+fn process_gone(pid: u32) -> bool {
+    if pid == std::process::id() || !Path::new("/proc/self").exists() {
+        return false;
+    }
+    let proc = PathBuf::from(format!("/proc/{pid}"));
+    let Ok(stat) = std::fs::read_to_string(proc.join("stat")) else {
+        return !proc.exists();
+    };
+    // `PID (COMMAND) STATE ...`; the command may hold spaces and parentheses.
+    let state = stat
+        .rsplit_once(')')
+        .and_then(|(_, rest)| rest.split_whitespace().next());
+    let zombie = matches!(state, Some("Z" | "X"));
+    // A zombie leader whose other threads still run is a live process.
+    let threads = std::fs::read_dir(proc.join("task")).map_or(1, |d| d.count());
+    zombie && threads <= 1
+}
+
+/// Bytes in `path` and below (links not followed).
+fn size_of(path: &Path) -> u64 {
+    let Ok(m) = std::fs::symlink_metadata(path) else {
+        return 0;
+    };
+    if !m.is_dir() {
+        return m.len();
+    }
+    std::fs::read_dir(path).map_or(0, |d| d.flatten().map(|e| size_of(&e.path())).sum())
+}
+
+/// Removes, in each of `dirs`, what runs of this host that were killed outright (where no
+/// handler could run: SIGKILL, a node's out-of-memory killer) left there: working
+/// directories `.mdlod-convert-HOST-PID-XXXXXX` and temporary outputs whose owner
+/// `temp_owner` reads from their name (`.NAME.HOST-PID-XXXXXX.tmp`, see
+/// [`mdlod_format::writer::temp_file_owner`]), of processes that are gone. Other hosts'
+/// (a shared file system), live processes' and names without a process are left alone.
+/// Returns what was removed, with its size in bytes.
+pub fn remove_leftovers_of_killed_runs(
+    dirs: &[&Path],
+    temp_owner: &dyn Fn(&str) -> Option<u32>,
+) -> Vec<(PathBuf, u64)> {
+    let prefix = work_dir_prefix();
+    let mut removed = Vec::new();
+    let mut seen: Vec<PathBuf> = Vec::new();
+    for dir in dirs {
+        if seen.iter().any(|d| crate::commands::same_file(d, dir)) {
+            continue;
+        }
+        seen.push(dir.to_path_buf());
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            continue;
+        };
         for e in entries.flatten() {
             let name = e.file_name().to_string_lossy().into_owned();
-            let Some(rest) = name.strip_prefix(&ours) else {
+            let Ok(kind) = e.file_type() else {
                 continue;
             };
-            let pid = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
-            if let Some(pid) = pid {
-                if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
-                    let _ = std::fs::remove_dir_all(e.path());
-                }
+            let owner = if kind.is_dir() {
+                name.strip_prefix(&prefix)
+                    .and_then(mdlod_format::writer::pid_and_random)
+            } else if kind.is_file() {
+                temp_owner(&name)
+            } else {
+                None
+            };
+            let Some(pid) = owner else {
+                continue;
+            };
+            if !process_gone(pid) {
+                continue;
+            }
+            let path = e.path();
+            let size = size_of(&path);
+            let gone = if kind.is_dir() {
+                std::fs::remove_dir_all(&path)
+            } else {
+                std::fs::remove_file(&path)
+            };
+            if gone.is_ok() {
+                removed.push((path, size));
             }
         }
     }
-    tempfile::Builder::new()
-        .prefix(&format!("{ours}{}-", std::process::id()))
-        .tempdir_in(parent)
+    removed
+}
+
+/// [`remove_leftovers_of_killed_runs`], saying what was removed.
+pub fn remove_and_report_leftovers(dirs: &[&Path], temp_owner: &dyn Fn(&str) -> Option<u32>) {
+    for (path, bytes) in remove_leftovers_of_killed_runs(dirs, temp_owner) {
+        println!(
+            "removed working files of an interrupted run: {} ({:.1} MB)",
+            path.display(),
+            bytes as f64 / 1e6
+        );
+    }
 }

@@ -2144,3 +2144,174 @@ fn batch_skips_an_empty_frame_saying_which_and_convert_names_it() {
     );
     assert!(!frame.exists());
 }
+
+/// A process that has ended: `true`, waited for.
+fn dead_pid() -> u32 {
+    let mut child = Command::new("true").spawn().unwrap();
+    child.wait().unwrap();
+    child.id()
+}
+
+#[test]
+fn leftovers_of_killed_runs_on_this_host_are_removed_and_named_by_the_next_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("alloy.lammpstrj");
+    ok(&[
+        "generate",
+        "alloy",
+        "-n",
+        "3000",
+        "--frames",
+        "2",
+        "-o",
+        s(&input),
+    ]);
+    let host = mdlod_format::writer::host_name();
+    let dead = dead_pid();
+    // Killed but not yet reaped by its parent: only its zombie is left in /proc.
+    let mut zombie = Command::new("sleep").arg("60").spawn().unwrap();
+    zombie.kill().unwrap();
+    let mut live = Command::new("sleep").arg("60").spawn().unwrap();
+    let (zombie_pid, live_pid) = (zombie.id(), live.id());
+    let work_dir = |parent: &Path, name: String, bytes: usize| {
+        let d = parent.join(name);
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::write(d.join("cell-000.cell"), vec![0u8; bytes]).unwrap();
+        d
+    };
+    let file = |parent: &Path, name: String| {
+        let f = parent.join(name);
+        std::fs::write(&f, b"partial").unwrap();
+        f
+    };
+
+    // A batch directory.
+    let out = dir.path().join("d");
+    std::fs::create_dir(&out).unwrap();
+    let removed = [
+        work_dir(
+            &out,
+            format!(".mdlod-convert-{host}-{dead}-abc123"),
+            2_000_000,
+        ),
+        work_dir(
+            &out,
+            format!(".mdlod-convert-{host}-{zombie_pid}-zzz123"),
+            10,
+        ),
+        file(&out, format!(".frame-900.mdlod.{host}-{dead}-abc123.tmp")),
+    ];
+    let kept = [
+        work_dir(&out, format!(".mdlod-convert-{host}-{live_pid}-liv123"), 10),
+        work_dir(&out, format!(".mdlod-convert-x{host}-{dead}-abc123"), 10),
+        work_dir(&out, format!(".mdlod-convert-{host}-abc123"), 10),
+        file(
+            &out,
+            format!(".frame-900.mdlod.{host}-{live_pid}-abc123.tmp"),
+        ),
+        file(&out, ".frame-900.mdlod.abc123.tmp".into()),
+        file(&out, format!(".frame-900.mdlod.x{host}-{dead}-abc123.tmp")),
+    ];
+    let said = ok(&["batch", s(&input), "-o", s(&out)]);
+    assert!(
+        said.contains(&format!(
+            "removed working files of an interrupted run: {} (2.0 MB)",
+            removed[0].display()
+        )),
+        "{said}"
+    );
+    for p in &removed {
+        assert!(!p.exists(), "{} left: {said}", p.display());
+        assert!(said.contains(&p.display().to_string()), "{said}");
+    }
+    for p in &kept {
+        assert!(p.exists(), "{} removed", p.display());
+    }
+
+    // A conversion with --temp-dir: working directories there and in the output's
+    // directory, and the output's temporary file.
+    let temp = dir.path().join("temp");
+    std::fs::create_dir(&temp).unwrap();
+    let output = dir.path().join("out.mdlod");
+    let removed = [
+        work_dir(&temp, format!(".mdlod-convert-{host}-{dead}-abc123"), 10),
+        work_dir(
+            dir.path(),
+            format!(".mdlod-convert-{host}-{dead}-def456"),
+            10,
+        ),
+        file(dir.path(), format!(".out.mdlod.{host}-{dead}-abc123.tmp")),
+    ];
+    let kept = [
+        file(dir.path(), format!(".other.mdlod.{host}-{dead}-abc123.tmp")),
+        file(
+            dir.path(),
+            format!(".out.mdlod.{host}-{live_pid}-abc123.tmp"),
+        ),
+        file(dir.path(), ".out.mdlod.abc123.tmp".into()),
+    ];
+    let said = ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&output),
+        "--temp-dir",
+        s(&temp),
+    ]);
+    for p in &removed {
+        assert!(!p.exists(), "{} left: {said}", p.display());
+        assert!(said.contains(&p.display().to_string()), "{said}");
+    }
+    for p in &kept {
+        assert!(p.exists(), "{} removed", p.display());
+    }
+    ok(&["verify", s(&output)]);
+    live.kill().unwrap();
+    live.wait().unwrap();
+    zombie.wait().unwrap();
+}
+
+#[test]
+fn sigterm_cleans_up_as_ctrl_c_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("alloy.raw.json");
+    ok(&[
+        "generate",
+        "alloy",
+        "-n",
+        "120000",
+        "--format",
+        "raw",
+        "-o",
+        s(&input),
+    ]);
+    let out = dir.path().join("terminated.mdlod");
+    let child = convert_until_chunks_are_built(dir.path(), &input, &out);
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let done = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&done.stderr);
+    assert_eq!(done.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted: working files removed"), "{err}");
+    assert!(!out.exists());
+    assert!(
+        working_entries(dir.path()).is_empty(),
+        "{:?}",
+        working_entries(dir.path())
+    );
+}
+
+#[test]
+fn viewing_a_batch_whose_shards_are_not_merged_says_to_merge_them() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("dataset.shard-0-of-2.json"), b"{}").unwrap();
+    let err = fails(&["view", s(dir.path())]);
+    assert!(
+        err.contains(&format!("mdlod batch --merge {}", dir.path().display()))
+            && err.contains("dataset.shard-0-of-2.json"),
+        "{err}"
+    );
+}

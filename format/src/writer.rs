@@ -80,7 +80,7 @@ impl Writer {
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "out".into());
         let tmp = tempfile::Builder::new()
-            .prefix(&format!(".{name}."))
+            .prefix(&temp_prefix(&name))
             .suffix(".tmp")
             .tempfile_in(dir)
             .map_err(|e| FormatError::io(dir, e))?;
@@ -260,4 +260,95 @@ pub fn make_readable(file: &std::fs::File) -> std::io::Result<()> {
     #[cfg(not(unix))]
     let _ = file;
     Ok(())
+}
+
+/// This host's name as the names of temporary files and working directories carry it
+/// (from `/proc/sys/kernel/hostname`; `host` where it cannot be read or holds other
+/// characters than letters, digits, `-` and `.`).
+pub fn host_name() -> &'static str {
+    static HOST: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    HOST.get_or_init(|| {
+        std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .map(|h| h.trim().to_string())
+            .ok()
+            .filter(|h| {
+                !h.is_empty()
+                    && h.chars()
+                        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.')
+            })
+            .unwrap_or_else(|| "host".into())
+    })
+}
+
+/// The start of the temporary file's name for an output named `name`:
+/// `.NAME.HOST-PID-`, followed by six random letters or digits and `.tmp`. The host and
+/// process let a later run tell the file of a killed process from a live one's.
+fn temp_prefix(name: &str) -> String {
+    format!(".{name}.{}-{}-", host_name(), std::process::id())
+}
+
+/// The process that wrote the temporary file `file_name` for the output named `name`,
+/// where the name is `.NAME.HOST-PID-XXXXXX.tmp` with this host's name ([`host_name`]);
+/// `None` for any other name (another host's, one without a process, not a writer's).
+pub fn temp_file_owner(file_name: &str, name: &str) -> Option<u32> {
+    let rest = file_name
+        .strip_prefix('.')?
+        .strip_prefix(name)?
+        .strip_prefix('.')?
+        .strip_prefix(host_name())?
+        .strip_prefix('-')?
+        .strip_suffix(".tmp")?;
+    pid_and_random(rest)
+}
+
+/// `PID-XXXXXX` (digits, then six random letters or digits, as `tempfile` makes them):
+/// the process id.
+pub fn pid_and_random(rest: &str) -> Option<u32> {
+    let (pid, random) = rest.split_once('-')?;
+    if pid.is_empty()
+        || !pid.bytes().all(|b| b.is_ascii_digit())
+        || random.len() != 6
+        || !random.bytes().all(|b| b.is_ascii_alphanumeric())
+    {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn temporary_files_are_named_after_host_and_process() {
+        let dir = tempfile::tempdir().unwrap();
+        let w = Writer::create(&dir.path().join("out.mdlod"), 16).unwrap();
+        let names: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+        assert_eq!(
+            temp_file_owner(&names[0], "out.mdlod"),
+            Some(std::process::id()),
+            "{names:?}"
+        );
+        assert_eq!(temp_file_owner(&names[0], "out"), None);
+        drop(w);
+        let host = host_name();
+        // Other hosts', other outputs' and names without a process are not owned.
+        for other in [
+            ".out.mdlod.abc123.tmp".to_string(),
+            format!(".out.mdlod.{host}-x-12-abc123.tmp"),
+            format!(".out.mdlod.{host}-12-abc12.tmp"),
+            format!(".out.mdlod.{host}-12-abc123.tmp.x"),
+            format!(".out.mdlod.other{host}-12-abc123.tmp"),
+        ] {
+            assert_eq!(temp_file_owner(&other, "out.mdlod"), None, "{other}");
+        }
+        assert_eq!(
+            temp_file_owner(&format!(".out.mdlod.{host}-12-aB3c9Z.tmp"), "out.mdlod"),
+            Some(12)
+        );
+    }
 }

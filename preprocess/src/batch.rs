@@ -40,11 +40,12 @@
 //!    manifest that is true (it may miss the frames of its last second, which a rerun
 //!    finds complete and lists).
 
+use std::fmt::Display;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
-use mdlod_format::meta::{SimulationBox, SourceInfo};
+use mdlod_format::meta::{BuildInfo, SimulationBox, SourceInfo};
 use mdlod_format::MdlodFile;
 use serde::{Deserialize, Serialize};
 
@@ -1036,6 +1037,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     }
     let mut frames = Vec::new();
     let mut expected_total = Some(0u64);
+    let mut settings = MergeSettings::default();
     for (_, _, path) in &shards {
         let text = std::fs::read(path).map_err(io(path))?;
         let m: Manifest = serde_json::from_slice(&text)
@@ -1047,6 +1049,9 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
                     format!("lists {} but the file is missing", f.file),
                 ));
             }
+            settings
+                .check(out_dir, path, f)
+                .map_err(|message| manifest_err(out_dir, message))?;
         }
         if let Some(expected) = m.expected_frames {
             let listed = m.frames.len() as u64;
@@ -1082,6 +1087,114 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
     Ok(merged)
+}
+
+/// The build settings of the frames a merge has seen, which every frame of a batch
+/// must share: shards run with other options (`--precision`, `--radius`, ...) make
+/// frames that differ in more than their particles.
+#[derive(Default)]
+struct MergeSettings {
+    /// The first frame: its name (with its manifest's) and build parameters.
+    first: Option<(String, BuildInfo, Option<String>)>,
+    /// A frame with a chunked build: its name and chunk size.
+    chunked: Option<(String, u64)>,
+    /// Every species' radius, the first frame holding it, and whether a `--radius`
+    /// override set it there.
+    radii: std::collections::HashMap<String, (f32, String, bool)>,
+}
+
+impl MergeSettings {
+    /// Compares the frame `f` of the shard manifest `manifest` with the frames before;
+    /// the error names the two frames and the setting they differ in.
+    fn check(&mut self, out_dir: &Path, manifest: &Path, f: &FrameEntry) -> Result<(), String> {
+        let file = MdlodFile::open(out_dir.join(&f.file)).map_err(|e| e.to_string())?;
+        let m = file.metadata();
+        let shard = manifest
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+        let this = format!("{} (in {shard})", f.file);
+        let attribute = m.attribute.as_ref().map(|a| a.name.clone());
+        let Some((first, build, first_attribute)) = &self.first else {
+            self.first = Some((this.clone(), m.build.clone(), attribute));
+            return self.check_chunks_and_radii(m, f, this);
+        };
+        let b = &m.build;
+        for (setting, a, x) in [
+            ("cluster size", build.max_cluster_size, b.max_cluster_size),
+            ("root points", build.max_root_points, b.max_root_points),
+            ("delta n", build.delta_n, b.delta_n),
+            ("position bits", build.position_bits, b.position_bits),
+        ] {
+            if a != x {
+                return Err(differ(first, &this, setting, a, x));
+            }
+        }
+        if *first_attribute != attribute {
+            let name = |a: &Option<String>| a.as_ref().map_or("none".into(), |a| format!("{a:?}"));
+            return Err(differ(
+                first,
+                &this,
+                "attribute",
+                name(first_attribute),
+                name(&attribute),
+            ));
+        }
+        self.check_chunks_and_radii(m, f, this)
+    }
+
+    fn check_chunks_and_radii(
+        &mut self,
+        m: &mdlod_format::meta::Metadata,
+        f: &FrameEntry,
+        this: String,
+    ) -> Result<(), String> {
+        // Only a frame above the chunk size records it.
+        if let Some(chunk) = m.build.chunk_points {
+            match &self.chunked {
+                Some((other, c)) if *c != chunk => {
+                    return Err(differ(other, &this, "chunk size", c, chunk))
+                }
+                Some(_) => {}
+                None => self.chunked = Some((this.clone(), chunk)),
+            }
+        }
+        for s in &m.species {
+            // Without overrides (in either frame, or where the manifest does not record
+            // them) a radius is the input's own, which may differ between frames (the
+            // mean of a polydisperse species); an override is the same in every frame.
+            let overridden = f
+                .radii
+                .as_ref()
+                .is_some_and(|r| crate::species::radius_override(r, &s.name).is_some());
+            match self.radii.get(&s.name) {
+                Some((r, other, o)) if (*o || overridden) && *r != s.radius => {
+                    return Err(differ(
+                        other,
+                        &this,
+                        &format!("radius of species {}", s.name),
+                        r,
+                        s.radius,
+                    ));
+                }
+                Some(_) => {}
+                None => {
+                    self.radii
+                        .insert(s.name.clone(), (s.radius, this.clone(), overridden));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The error of a merge whose frames `other` and `this` were built with `setting` `a`
+/// and `b`.
+fn differ(other: &str, this: &str, setting: &str, a: impl Display, b: impl Display) -> String {
+    format!(
+        "the shards were built with different settings: {other} has {setting} {a}, {this} \
+         has {setting} {b}; rerun the shards with the same options (a rerun converts again \
+         the frames whose settings changed), then merge"
+    )
 }
 
 /// Reads a batch directory's `dataset.json`.

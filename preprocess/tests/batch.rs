@@ -998,3 +998,45 @@ fn a_rerun_compares_the_recorded_overrides_without_reading_the_input() {
     let f = MdlodFile::open(out.join(&read_manifest(&out).unwrap().frames[0].file)).unwrap();
     assert_eq!(f.metadata().species[0].radius, 1.5);
 }
+
+#[test]
+fn merge_refuses_shards_built_with_other_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let species = {
+        let out = dir.path().join("probe");
+        let m = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+        let f = MdlodFile::open(out.join(&read_manifest(&out).unwrap().frames[0].file)).unwrap();
+        assert!(m.frames_total > 0);
+        f.metadata().species[0].clone()
+    };
+    // Shard 1 with another precision, then with a radius override.
+    let precision = |o: &mut BatchOptions| o.convert.build.position_bits = 8;
+    let radius = |o: &mut BatchOptions| {
+        o.convert.radii = vec![(species.name.clone(), species.radius * 2.0)];
+    };
+    type Change<'a> = &'a dyn Fn(&mut BatchOptions);
+    let cases: [(Change, &str); 2] = [
+        (&precision, "position bits 16"),
+        (&radius, &format!("radius of species {}", species.name)),
+    ];
+    for (k, (change, setting)) in cases.iter().enumerate() {
+        let out = dir.path().join(format!("d{k}"));
+        batch(std::slice::from_ref(&src), &out, &shard(0, 2), &NoProgress).unwrap();
+        let mut o = shard(1, 2);
+        change(&mut o);
+        batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        let e = merge(&out).unwrap_err().to_string();
+        assert!(
+            e.contains("different settings")
+                && e.contains(setting)
+                && e.contains("dataset.shard-0-of-2.json")
+                && e.contains("dataset.shard-1-of-2.json"),
+            "{e}"
+        );
+        assert!(!out.join("dataset.json").exists());
+        // Shard 1 rerun with the same options as shard 0: the merge goes through.
+        batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
+        assert_eq!(merge(&out).unwrap().frames.len(), 6);
+    }
+}

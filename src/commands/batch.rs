@@ -116,6 +116,14 @@ pub fn run(args: Args) -> Result<()> {
     // Ctrl-C and SIGTERM (partial frames are redone by the next run).
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let temp_parent = convert.chunks.temp_dir_for(&out.join("frame"));
+    // What runs killed outright left (no handler could remove it): working directories
+    // in the batch directory and the working one, and temporary frames
+    // (`.frame-<timestep>.mdlod.HOST-PID-XXXXXX.tmp`).
+    crate::interrupt::remove_and_report_leftovers(&[out, &temp_parent], &|file| {
+        let timestep = file.strip_prefix(".frame-")?.split_once(".mdlod.")?.0;
+        timestep.parse::<u64>().ok()?;
+        mdlod_format::writer::temp_file_owner(file, &format!("frame-{timestep}.mdlod"))
+    });
     let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
         format!(
             "cannot create a working directory in {}",

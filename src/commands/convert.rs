@@ -74,7 +74,8 @@ pub struct BuildArgs {
     #[arg(long, default_value_t = mdlod_preprocess::chunked::DEFAULT_CHUNK_POINTS)]
     pub chunk_points: usize,
     /// Directory for the working files of out-of-core builds (default: the output's
-    /// directory); they are removed on success, on failure and on Ctrl-C.
+    /// directory); they are removed on success, on failure and on Ctrl-C or SIGTERM, and
+    /// those of a run killed outright by the next run on this host.
     #[arg(long, value_name = "DIR")]
     pub temp_dir: Option<PathBuf>,
 }
@@ -174,6 +175,17 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         }
     }
     let temp_parent = options.chunks.temp_dir_for(&args.output);
+    // What runs killed outright left (no handler could remove it): working directories
+    // in the output's directory and the working one, and the output's temporary file.
+    let output_dir = ChunkOptions::default().temp_dir_for(&args.output);
+    let name = args
+        .output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    crate::interrupt::remove_and_report_leftovers(&[&output_dir, &temp_parent], &|file| {
+        mdlod_format::writer::temp_file_owner(file, &name)
+    });
     let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
         format!(
             "cannot create a working directory in {}",

@@ -58,6 +58,7 @@ pub enum ModeArg {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    unmerged_batch(&args.path)?;
     let mode = match args.mode {
         ModeArg::Standard => Mode::Standard,
         ModeArg::Supersampled => Mode::Supersampled,
@@ -80,5 +81,29 @@ pub fn run(args: Args) -> Result<()> {
         script: args.script,
         script_timeout: Duration::from_secs(args.script_timeout),
     })?;
+    Ok(())
+}
+
+/// Refuses a batch directory whose shards have not been merged yet (shard manifests, no
+/// dataset.json), saying how to merge them.
+pub fn unmerged_batch(path: &std::path::Path) -> Result<()> {
+    let manifest = mdlod_preprocess::batch::MANIFEST;
+    if !path.is_dir() || path.join(manifest).exists() {
+        return Ok(());
+    }
+    let shard = std::fs::read_dir(path).ok().and_then(|d| {
+        d.flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .find(|n| n.starts_with("dataset.shard-") && n.ends_with(".json"))
+    });
+    if let Some(shard) = shard {
+        anyhow::bail!(
+            "{}: no {manifest}, but shard manifests ({shard}, ...): the shards of this \
+             batch have not been merged; run `mdlod batch --merge {}` once all of them \
+             have finished",
+            path.display(),
+            path.display()
+        );
+    }
     Ok(())
 }
