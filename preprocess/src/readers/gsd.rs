@@ -393,18 +393,7 @@ pub(crate) fn frame_info(
     k: usize,
 ) -> Result<FrameInfo, ReadError> {
     let particles = index.particles(path, data, k)?;
-    let mut columns: Vec<String> = index
-        .names
-        .iter()
-        .filter(|n| {
-            n.starts_with("particles/")
-                && index
-                    .chunk(k, n)
-                    .is_some_and(|e| e.n == particles && e.ty != Ty::Char)
-        })
-        .cloned()
-        .collect();
-    columns.sort();
+    let columns = particle_chunks(index, k, particles, false);
     Ok(FrameInfo {
         particles,
         timestep: index.timestep(data, k),
@@ -418,6 +407,12 @@ pub(crate) fn frame_info(
 /// The chunks of frame `k` (of `particles` particles) an attribute can be: one number
 /// per particle.
 fn attribute_chunks(index: &Index, k: usize, particles: usize) -> Vec<String> {
+    particle_chunks(index, k, particles, true)
+}
+
+/// The names of frame `k`'s numeric per-particle chunks (of `particles` rows; with
+/// `single`, of one number each), sorted.
+fn particle_chunks(index: &Index, k: usize, particles: usize, single: bool) -> Vec<String> {
     let mut names: Vec<String> = index
         .names
         .iter()
@@ -425,7 +420,7 @@ fn attribute_chunks(index: &Index, k: usize, particles: usize) -> Vec<String> {
             n.starts_with("particles/")
                 && index
                     .chunk(k, n)
-                    .is_some_and(|e| e.n == particles && e.m == 1 && e.ty != Ty::Char)
+                    .is_some_and(|e| e.n == particles && (!single || e.m == 1) && e.ty != Ty::Char)
         })
         .cloned()
         .collect();
