@@ -21,6 +21,9 @@ pub struct SpeciesName {
     /// each particle its own (GSD diameters, MMPLD `xyzr` lists): a `.mdlod` file keeps
     /// one radius per species, their mean, and the conversion says so when they differ.
     pub radius_range: Option<(f32, f32)>,
+    /// The colour the input gives this species (sRGB bytes: an MMPLD list's global
+    /// colour), used instead of the element's or the palette's.
+    pub colour: Option<[u8; 3]>,
 }
 
 /// One timestep of particles, as read from a dump.

@@ -119,10 +119,13 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let (mut radius, colour) = match (s.numeric_type, element(&s.name)) {
+            let (mut radius, mut colour) = match (s.numeric_type, element(&s.name)) {
                 (false, Some(rc)) => rc,
                 _ => (DEFAULT_RADIUS, srgb_to_linear(PALETTE[i % PALETTE.len()])),
             };
+            if let Some(c) = s.colour {
+                colour = srgb_to_linear(c);
+            }
             if let Some(r) = s.radius.filter(|r| r.is_finite() && *r > 0.0) {
                 radius = r;
             }

@@ -192,6 +192,20 @@ fn every_version_and_type_reads_positions_species_and_radii() {
             let notes = mdlod_preprocess::species::radius_notes(&f.species, &[]);
             assert_eq!(notes.len(), 1, "{notes:?}");
             assert!(notes[0].starts_with("species 1: particle radii from 0.5 to 1"));
+            // The one list with a global colour (colour type 0) gives its species that
+            // colour, as MegaMol draws it; the others take the palette's.
+            let colours: Vec<Option<[u8; 3]>> = f.species.iter().map(|s| s.colour).collect();
+            assert_eq!(colours[0], Some([200, 100, 50]));
+            assert!(colours[1..].iter().all(Option::is_none));
+            let table = mdlod_preprocess::species::species_table(&f.species, &[]);
+            let linear = [200u8, 100, 50].map(|c| {
+                let v = f32::from(c) / 255.0;
+                ((v + 0.055) / 1.055).powf(2.4)
+            });
+            for c in 0..3 {
+                assert!((table[0].colour[c] - linear[c]).abs() < 1e-6);
+            }
+            assert_ne!(table[1].colour, table[0].colour);
             let names: Vec<&str> = f.species.iter().map(|s| s.name.as_str()).collect();
             assert_eq!(names, ["0", "1", "2", "3", "4", "5", "6", "7"]);
             let b = f.simulation_box.unwrap();

@@ -596,6 +596,7 @@ impl<'a> FrameData<'a> {
                 }),
                 radius_range: (count[t] > 0)
                     .then(|| ((0.5 * spread[t].0) as f32, (0.5 * spread[t].1) as f32)),
+                ..Default::default()
             })
             .collect())
     }

@@ -19,9 +19,10 @@
 //! How it maps: each list is a species named by its index (`0`, `1`, ..., numeric, so
 //! they sort as numbers), with its global radius, or with the mean of its particles'
 //! radii for `xyzr` lists; a radius of zero or below (a list's, or a particle's of an
-//! `xyzr` list) is refused by the conversion unless `--radius` names the list. The
-//! attribute can be `intensity` (intensity lists) or `radius` (`xyzr` lists); colours are
-//! not kept. The frame's time is the timestamp, its box the file's bounding box; MMPLD
+//! `xyzr` list) is refused by the conversion unless `--radius` names the list. A list's
+//! global colour (colour type 0) becomes its species' colour, as MegaMol draws it;
+//! per-particle colours are not kept (a species has one colour). The attribute can be
+//! `intensity` (intensity lists) or `radius` (`xyzr` lists). The frame's time is the timestamp, its box the file's bounding box; MMPLD
 //! records no timestep (a batch numbers the frames by their position among its inputs).
 //! Opening walks every frame's list headers with checked arithmetic, so counts and
 //! offsets that point past the file are errors naming the byte before any particle is
@@ -64,6 +65,8 @@ struct List {
     colour: u8,
     /// The global radius (`xyzr` lists: none).
     radius: Option<f32>,
+    /// The global colour (sRGB bytes) of a list whose particles carry no colour.
+    global_colour: Option<[u8; 3]>,
 }
 
 impl List {
@@ -278,9 +281,11 @@ impl Index {
                 } else {
                     Some(f32::from_le_bytes(c.take("a list header")?))
                 };
+                let mut global_colour = None;
                 match colour {
                     0 => {
-                        c.take::<4>("a list header")?;
+                        let [r, g, b, _] = c.take::<4>("a list header")?;
+                        global_colour = Some([r, g, b]);
                     }
                     3 | 7 => {
                         c.take::<8>("a list header")?;
@@ -324,6 +329,7 @@ impl Index {
                     vertex,
                     colour,
                     radius,
+                    global_colour,
                 });
                 c.at = end;
                 if version == 101 {
@@ -452,6 +458,7 @@ fn species_of(
                 // reason to refuse the frame (the default stands in).
                 radius: (list.particles > 0 || radius > 0.0).then_some(radius),
                 radius_range: spread,
+                colour: list.global_colour,
             })
         })
         .collect()
