@@ -37,6 +37,14 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `mdlod generate ARGS -o OUT`, which must succeed; its standard output.
+fn generate(args: &[&str], out: &Path) -> String {
+    let mut all = vec!["generate"];
+    all.extend(args);
+    all.extend(["-o", s(out)]);
+    ok(&all)
+}
+
 /// The nearest input particle of every decoded particle, through a hash grid.
 fn max_nearest_distance(inputs: &[[f32; 3]], decoded: &[[f32; 3]], cell: f32) -> f64 {
     let key = |p: &[f32; 3]| p.map(|v| (v / cell).floor() as i64);
@@ -514,16 +522,7 @@ fn check_batch_dir(dir: &Path, reference: &mdlod_preprocess::batch::Manifest) {
 fn killing_a_batch_at_any_moment_leaves_only_complete_frames_and_a_true_manifest() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("alloy.lammpstrj");
-    ok(&[
-        "generate",
-        "alloy",
-        "-n",
-        "60000",
-        "--frames",
-        "6",
-        "-o",
-        s(&input),
-    ]);
+    generate(&["alloy", "-n", "60000", "--frames", "6"], &input);
     let reference = dir.path().join("reference");
     ok(&["batch", s(&input), "-o", s(&reference), "--threads", "2"]);
     let reference = mdlod_preprocess::batch::read_manifest(&reference).unwrap();
@@ -706,16 +705,7 @@ fn a_low_open_file_limit_gives_the_same_out_of_core_file() {
 fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.lammpstrj");
-    ok(&[
-        "generate",
-        "alloy",
-        "-n",
-        "40000",
-        "--frames",
-        "2",
-        "-o",
-        s(&input),
-    ]);
+    generate(&["alloy", "-n", "40000", "--frames", "2"], &input);
     let out_dir = dir.path().join("out");
     std::fs::create_dir(&out_dir).unwrap();
     let out = out_dir.join("frame.mdlod");
@@ -1048,16 +1038,7 @@ fn working_entries(dir: &Path) -> Vec<String> {
 fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("alloy.raw.json");
-    let made = ok(&[
-        "generate",
-        "alloy",
-        "-n",
-        "120000",
-        "--format",
-        "raw",
-        "-o",
-        s(&input),
-    ]);
+    let made = generate(&["alloy", "-n", "120000", "--format", "raw"], &input);
     assert!(made.contains("120000 particles"), "{made}");
     // Chunks of 30 000: one at a time under 68 MiB, whose chunk results then go through
     // working files; both threads with 8 GiB, which keeps the results in memory.
@@ -1757,16 +1738,7 @@ fn batch_frames(dir: &Path) -> Vec<String> {
 fn batch_refuses_a_radius_no_frame_can_hold_before_converting_anything() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("a.lammpstrj");
-    ok(&[
-        "generate",
-        "alloy",
-        "-n",
-        "2000",
-        "--frames",
-        "3",
-        "-o",
-        s(&input),
-    ]);
+    generate(&["alloy", "-n", "2000", "--frames", "3"], &input);
     let d = dir.path().join("d");
     for shard in [None, Some("0/2"), Some("1/2")] {
         let mut args = vec!["batch", s(&input), "-o", s(&d), "--radius", "Cu=1.28"];
@@ -1860,16 +1832,7 @@ fn batch_attributes(dir: &Path) -> Vec<Option<String>> {
 fn a_batch_rerun_with_another_attribute_converts_the_frames_again() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("a.lammpstrj");
-    ok(&[
-        "generate",
-        "alloy",
-        "-n",
-        "2000",
-        "--frames",
-        "3",
-        "-o",
-        s(&input),
-    ]);
+    generate(&["alloy", "-n", "2000", "--frames", "3"], &input);
     let d = dir.path().join("d");
     let run = |attribute: Option<&str>| {
         let mut args = vec!["batch", s(&input), "-o", s(&d)];
@@ -2156,16 +2119,7 @@ fn dead_pid() -> u32 {
 fn leftovers_of_killed_runs_on_this_host_are_removed_and_named_by_the_next_run() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("alloy.lammpstrj");
-    ok(&[
-        "generate",
-        "alloy",
-        "-n",
-        "3000",
-        "--frames",
-        "2",
-        "-o",
-        s(&input),
-    ]);
+    generate(&["alloy", "-n", "3000", "--frames", "2"], &input);
     let host = mdlod_format::writer::host_name();
     let dead = dead_pid();
     // Killed but not yet reaped by its parent: only its zombie is left in /proc.
@@ -2275,16 +2229,7 @@ fn leftovers_of_killed_runs_on_this_host_are_removed_and_named_by_the_next_run()
 fn sigterm_cleans_up_as_ctrl_c_does() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("alloy.raw.json");
-    ok(&[
-        "generate",
-        "alloy",
-        "-n",
-        "120000",
-        "--format",
-        "raw",
-        "-o",
-        s(&input),
-    ]);
+    generate(&["alloy", "-n", "120000", "--format", "raw"], &input);
     let out = dir.path().join("terminated.mdlod");
     let child = convert_until_chunks_are_built(dir.path(), &input, &out);
     let status = Command::new("kill")

@@ -270,6 +270,11 @@ fn manifest_name(shard: Option<(u32, u32)>) -> String {
     }
 }
 
+/// Whether a file name is a shard's manifest ([`manifest_name`] of a shard).
+pub fn is_shard_manifest(name: &str) -> bool {
+    name.starts_with("dataset.shard-") && name.ends_with(".json")
+}
+
 /// Writes `value` as JSON to `path` atomically (temporary file + rename).
 fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
     let dir = path.parent().unwrap_or(Path::new("."));
@@ -436,7 +441,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
     };
     for e in dir.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        if !(name == MANIFEST || name.starts_with("dataset.shard-") && name.ends_with(".json")) {
+        if !(name == MANIFEST || is_shard_manifest(&name)) {
             continue;
         }
         let Some(m) = std::fs::read(e.path())

@@ -375,6 +375,31 @@ fn chunk_data(bytes: &[u8], name: &str, frame: u64) -> usize {
         .unwrap()
 }
 
+/// Converts frame 1 of `path` (taking frame 0's chunks) with `radii` overridden, in
+/// chunks of `chunk_points` when the frame is larger, root levels of at most 64 points.
+fn convert_frame_1(
+    path: &std::path::Path,
+    out: &std::path::Path,
+    radii: Vec<(String, f32)>,
+    chunk_points: usize,
+) -> Result<mdlod_preprocess::convert::ConvertReport, String> {
+    let mut options = ConvertOptions {
+        radii,
+        ..Default::default()
+    };
+    options.chunks.chunk_points = chunk_points;
+    options.build.max_root_points = 64;
+    convert_file(
+        path,
+        out,
+        FrameSelect::Index(1),
+        &ReadOptions::default(),
+        &options,
+        &NoProgress,
+    )
+    .map_err(|e| e.to_string())
+}
+
 /// A diameter of zero or below is refused as an MMPLD list radius of zero is: the message
 /// names the file, the frame and the type and says `--radius` gives it one, and with that
 /// the conversion succeeds (the diameters were checked before the overrides applied).
@@ -404,30 +429,17 @@ fn a_diameter_of_zero_or_below_is_refused_unless_the_type_is_given_a_radius() {
     std::fs::write(&path, &bytes).unwrap();
     let out = dir.path().join("zero.mdlod");
     let convert = |radii: Vec<(String, f32)>, chunk_points: usize| {
-        let mut options = ConvertOptions {
-            radii,
-            ..Default::default()
-        };
-        options.chunks.chunk_points = chunk_points;
-        options.build.max_root_points = 64;
-        convert_file(
-            &path,
-            &out,
-            FrameSelect::Index(1),
-            &ReadOptions::default(),
-            &options,
-            &NoProgress,
-        )
-        .map(|_| {
-            mdlod_format::MdlodFile::open(&out)
-                .unwrap()
-                .metadata()
-                .species
-                .iter()
-                .map(|s| s.radius)
-                .collect::<Vec<_>>()
-        })
-        .map_err(|e| e.to_string())
+        convert_frame_1(&path, &out, radii, chunk_points)
+            .map(|_| {
+                mdlod_format::MdlodFile::open(&out)
+                    .unwrap()
+                    .metadata()
+                    .species
+                    .iter()
+                    .map(|s| s.radius)
+                    .collect::<Vec<_>>()
+            })
+            .map_err(|e| e.to_string())
     };
     // In one piece and in chunks of 100 (the frame has 300 particles).
     for chunk_points in [1 << 22, 100] {
@@ -486,22 +498,9 @@ fn differing_diameters_of_a_type_are_noted_with_the_mean_drawn() {
     let notes = |bytes: &[u8], radii: Vec<(String, f32)>, chunk_points: usize| {
         let path = dir.path().join("poly.gsd");
         std::fs::write(&path, bytes).unwrap();
-        let mut options = ConvertOptions {
-            radii,
-            ..Default::default()
-        };
-        options.chunks.chunk_points = chunk_points;
-        options.build.max_root_points = 64;
-        convert_file(
-            &path,
-            &out,
-            FrameSelect::Index(1),
-            &ReadOptions::default(),
-            &options,
-            &NoProgress,
-        )
-        .unwrap()
-        .notes
+        convert_frame_1(&path, &out, radii, chunk_points)
+            .unwrap()
+            .notes
     };
     for chunk_points in [1 << 22, 100] {
         assert_eq!(notes(&sample, vec![], chunk_points), Vec::<String>::new());

@@ -560,8 +560,7 @@ impl ResidentSndf {
     /// page table (tile `t` of the image to slot `t − first` of the window, the tiles
     /// of other windows to [`crate::sndf::NO_SLOT`]).
     fn windows(&self) -> Vec<(wgpu::BufferBinding<'_>, Vec<u32>)> {
-        let tiles = u64::from(self.width.div_ceil(crate::sndf::TILE))
-            * u64::from(self.height.div_ceil(crate::sndf::TILE));
+        let tiles = self.tiles();
         let per = self.window_tiles.max(1);
         let tile_bytes = crate::sndf::tile_bytes(self.bins);
         (0..tiles.div_ceil(per))
@@ -589,9 +588,13 @@ impl ResidentSndf {
 
     /// True when the histograms are larger than one binding.
     pub fn windowed(&self) -> bool {
-        let tiles = u64::from(self.width.div_ceil(crate::sndf::TILE))
-            * u64::from(self.height.div_ceil(crate::sndf::TILE));
-        tiles > self.window_tiles
+        self.tiles() > self.window_tiles
+    }
+
+    /// The view's 64×64-texel tiles.
+    fn tiles(&self) -> u64 {
+        u64::from(self.width.div_ceil(crate::sndf::TILE))
+            * u64::from(self.height.div_ceil(crate::sndf::TILE))
     }
 }
 
@@ -923,8 +926,7 @@ impl Renderer {
     /// same way; a streaming pool's cut too, counting its ranges as split at page
     /// boundaries).
     pub fn batch_limits(&self) -> (u32, usize) {
-        let l = self.ctx.device.limits();
-        let max = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
+        let max = self.binding_bytes();
         let ranges = max / 64;
         let points = ((max - 4 * ranges) / 8).min(u64::from(u32::MAX)) as u32;
         let points = self.batch_points.map_or(points, |p| p.clamp(1, points));
@@ -948,13 +950,18 @@ impl Renderer {
     /// Tiles of `bins × bins` histograms one storage binding holds (at least 1 where
     /// one tile fits), and the largest buffer the device makes.
     fn sndf_window_tiles(&self, bins: u32) -> (u64, u64) {
-        let l = self.ctx.device.limits();
-        let binding = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
+        let binding = self.binding_bytes();
         let binding = self.sndf_window_bytes.map_or(binding, |b| b.min(binding));
         (
             binding / crate::sndf::tile_bytes(bins).max(1),
-            l.max_buffer_size,
+            self.ctx.device.limits().max_buffer_size,
         )
+    }
+
+    /// The most bytes one storage binding of the device holds.
+    pub fn binding_bytes(&self) -> u64 {
+        let l = self.ctx.device.limits();
+        l.max_storage_buffer_binding_size.min(l.max_buffer_size)
     }
 
     /// The small-sphere raster and its buffers for a frame of `points` points at
@@ -1916,13 +1923,8 @@ impl Renderer {
         lights: &ShadeLights,
         background_srgb: [f32; 3],
     ) -> Result<(RgbaImage, Option<Duration>), RenderError> {
-        let limits = self.ctx.device.limits();
         let bytes = sndf.hist.len() as u64 * 16;
-        if bytes
-            > limits
-                .max_storage_buffer_binding_size
-                .min(limits.max_buffer_size)
-        {
+        if bytes > self.binding_bytes() {
             // More than one binding holds: shaded on the host (the same result).
             return Ok((sndf.shade_with(lights, background_srgb), None));
         }
@@ -2258,10 +2260,7 @@ impl Renderer {
         })?;
         // Every pixel's ray state is bound in one piece.
         let ray_bytes = u64::from(width) * u64::from(height) * std::mem::size_of::<RayGpu>() as u64;
-        let limits = self.ctx.device.limits();
-        let most = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
+        let most = self.binding_bytes();
         if ray_bytes > most {
             return Err(RenderError::InvalidOptions(format!(
                 "the density volume of {width}x{height} pixels keeps {ray_bytes} bytes of ray \

@@ -411,10 +411,7 @@ impl Smip {
             )));
         }
         let device = &renderer.ctx.device;
-        let limits = device.limits();
-        let max = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
+        let max = renderer.binding_bytes();
         let fit = u32::try_from(max / tile_bytes(bins)).unwrap_or(u32::MAX);
         let capacity = config.pool_tiles.min(fit);
         if capacity == 0 {

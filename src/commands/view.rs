@@ -94,7 +94,7 @@ pub fn unmerged_batch(path: &std::path::Path) -> Result<()> {
     let shard = std::fs::read_dir(path).ok().and_then(|d| {
         d.flatten()
             .map(|e| e.file_name().to_string_lossy().into_owned())
-            .find(|n| n.starts_with("dataset.shard-") && n.ends_with(".json"))
+            .find(|n| mdlod_preprocess::batch::is_shard_manifest(n))
     });
     if let Some(shard) = shard {
         anyhow::bail!(

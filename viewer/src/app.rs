@@ -394,9 +394,6 @@ impl ViewerApp {
             self.fail(e);
             return true;
         }
-        let Some(script) = self.script.as_mut() else {
-            return false;
-        };
         match action {
             Action::Screenshot {
                 path,

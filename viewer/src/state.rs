@@ -616,11 +616,14 @@ impl ViewerState {
     /// Refuses a script's action whose values `mdlod render` would refuse (the window's
     /// own widgets clamp instead): `index` is the action's place in the script.
     pub fn check_script_action(&self, index: usize, action: &Action) -> Result<(), String> {
-        let name = serde_json::to_value(action)
-            .ok()
-            .and_then(|v| v.get("action").and_then(|a| a.as_str()).map(str::to_owned))
-            .unwrap_or_default();
-        let refuse = |what: String| Err(format!("script action {index} ({name}): {what}"));
+        let refuse = |what: String| {
+            // The action's name, for a refusal only.
+            let name = serde_json::to_value(action)
+                .ok()
+                .and_then(|v| v.get("action").and_then(|a| a.as_str()).map(str::to_owned))
+                .unwrap_or_default();
+            Err(format!("script action {index} ({name}): {what}"))
+        };
         let lights = self.settings.lights.len();
         let positive = |v: f32| v.is_finite() && v > 0.0;
         match action {
@@ -638,8 +641,9 @@ impl ViewerState {
             Action::RadiusScale { scale } if !positive(*scale) => {
                 refuse(format!("radius scale {scale} is not positive"))
             }
-            Action::ScreenError { px } if !positive(*px) => {
-                refuse(format!("screen error {px} px is not positive"))
+            // As render: 0 is allowed (every particle).
+            Action::ScreenError { px } if !(px.is_finite() && *px >= 0.0) => {
+                refuse(format!("screen error {px} px (must be 0 or more)"))
             }
             Action::Spp { n: 0 } => refuse("0 samples per pixel".into()),
             Action::SndfIterations { n: 0 } => refuse("0 S-NDF iterations".into()),
@@ -996,6 +1000,9 @@ mod tests {
         refused(Action::Spp { n: 0 }, "0 samples");
         refused(Action::SndfIterations { n: 0 }, "0 S-NDF");
         refused(Action::ScreenError { px: -1.0 }, "screen error -1");
+        assert!(s
+            .check_script_action(0, &Action::ScreenError { px: 0.0 })
+            .is_ok());
         refused(Action::Frame { index: 99 }, "frame 99");
         refused(Action::Frame { index: 3 }, "frame 3");
         let shot = |width, height| Action::Screenshot {

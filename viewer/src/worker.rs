@@ -163,8 +163,6 @@ pub struct Worker {
     pub rx: Receiver<Reply>,
     thread: Option<std::thread::JoinHandle<()>>,
     sampled: Arc<std::sync::atomic::AtomicU64>,
-    /// Dropping does not wait for the frame in progress (see [`Worker::abandon`]).
-    abandoned: bool,
 }
 
 impl Worker {
@@ -228,7 +226,6 @@ impl Worker {
             rx,
             thread: Some(thread),
             sampled,
-            abandoned: false,
         })
     }
 
@@ -237,7 +234,8 @@ impl Worker {
     /// call, which cannot be interrupted, may take many seconds); the thread ends with
     /// the process.
     pub fn abandon(&mut self) {
-        self.abandoned = true;
+        // A dropped join handle detaches the thread: nothing is left to wait for.
+        self.thread = None;
     }
 
     pub fn send(&self, r: Request) {
@@ -254,9 +252,6 @@ impl Worker {
 impl Drop for Worker {
     fn drop(&mut self) {
         let _ = self.tx.send(Request::Quit);
-        if self.abandoned {
-            return;
-        }
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
@@ -1126,10 +1121,7 @@ fn sndf_setup(
 /// The most bins per axis, at most `bins`, halving, whose histograms of a `width` ×
 /// `height` view fit one buffer of the adapter (software drivers allow 128 MiB).
 pub fn fitting_bins(renderer: &Renderer, width: u32, height: u32, bins: u32) -> u32 {
-    let limits = renderer.ctx.device.limits();
-    let max = limits
-        .max_storage_buffer_binding_size
-        .min(limits.max_buffer_size);
+    let max = renderer.binding_bytes();
     let mut b = bins.max(1);
     while b > 1 && mdlod_render::sndf::sndf_buffer_bytes(width, height, b) > max {
         b /= 2;
@@ -1141,10 +1133,7 @@ pub fn fitting_bins(renderer: &Renderer, width: u32, height: u32, bins: u32) -> 
 /// tiles fits one buffer of the adapter, and the pool's size in tiles (fewer when even
 /// one bin does not fit them all).
 pub fn fitting_pool(renderer: &Renderer, tiles: u32, bins: u32) -> (u32, u32) {
-    let limits = renderer.ctx.device.limits();
-    let max = limits
-        .max_storage_buffer_binding_size
-        .min(limits.max_buffer_size);
+    let max = renderer.binding_bytes();
     let tile = mdlod_render::sndf::tile_bytes;
     let mut b = bins.max(1);
     while b > 1 && u64::from(tiles) * tile(b) > max {

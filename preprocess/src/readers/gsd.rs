@@ -121,6 +121,8 @@ pub(crate) struct Index {
     /// Sorted by (frame, name).
     entries: Vec<Entry>,
     frames: usize,
+    /// Whether any frame records `configuration/step` (see [`Index::records_steps`]).
+    records_steps: bool,
 }
 
 /// True when `data` starts with the GSD magic number.
@@ -282,10 +284,17 @@ impl Index {
         if frames == 0 {
             return Err(err(path, index_range.start, "no frames"));
         }
+        // Found once: a batch asks for every frame's timestep, and a file recording no
+        // step would have every entry walked each time.
+        let records_steps = names
+            .iter()
+            .position(|n| n == "configuration/step")
+            .is_some_and(|id| entries.iter().any(|e| usize::from(e.name) == id));
         Ok(Index {
             names,
             entries,
             frames,
+            records_steps,
         })
     }
 
@@ -309,10 +318,7 @@ impl Index {
     /// does has no timesteps to number its frames by (the schema's default 0 would give
     /// every frame the same one).
     pub fn records_steps(&self) -> bool {
-        self.names
-            .iter()
-            .position(|n| n == "configuration/step")
-            .is_some_and(|id| self.entries.iter().any(|e| usize::from(e.name) == id))
+        self.records_steps
     }
 
     pub fn timestep(&self, data: &[u8], k: usize) -> Option<u64> {

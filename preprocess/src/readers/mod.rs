@@ -642,8 +642,8 @@ impl DumpFile {
                 })
             }
             Index::LammpsBinary(i) => {
-                let columns = lammps_binary::frame_info(&self.path, i.header(k), opts).columns;
-                if !columns.iter().any(|c| c == "type") || self.frame_info(k)?.particles == 0 {
+                let info = lammps_binary::frame_info(&self.path, i.header(k), opts);
+                if !info.columns.iter().any(|c| c == "type") || info.particles == 0 {
                     return Ok(SpeciesNaming::Given);
                 }
                 let plain = ReadOptions {
