@@ -405,6 +405,7 @@ fn same_build(
     }
     let mut given = Some(given);
     let mut from_input: Option<Option<Vec<(String, f32)>>> = None;
+    let labels = crate::species::letters_are_labels(m.species.iter().map(|s| s.name.as_str()));
     m.species.iter().all(|s| {
         let want = match crate::species::radius_override(&options.radii, &s.name) {
             Some(r) => r,
@@ -418,7 +419,7 @@ fn same_build(
                     // A conversion now refuses it: converted again, to say so.
                     return false;
                 }
-                crate::species::radius_without_override(&s.name, own)
+                crate::species::radius_without_override(&s.name, own, labels)
             }
         };
         want == s.radius

@@ -169,7 +169,7 @@ pub fn chunk_memory(points: usize) -> u64 {
 }
 
 /// A size for a message: bytes below a MiB (a limit of `1K` is not "0 MiB"), else MiB.
-fn size_text(bytes: u64) -> String {
+pub(crate) fn size_text(bytes: u64) -> String {
     if bytes < 1 << 20 {
         format!("{bytes} bytes")
     } else if bytes.is_multiple_of(1 << 20) {
@@ -376,27 +376,33 @@ struct SpeciesMerge {
 }
 
 impl SpeciesMerge {
-    /// Maps a window's species indices to merged (provisional) ones.
-    fn add(&mut self, part: &[SpeciesName]) -> Result<Vec<u16>, ConvertError> {
-        part.iter()
-            .map(|s| {
-                if let Some(&i) = self.by_name.get(&s.name) {
-                    let known = &mut self.list[usize::from(i)];
-                    known.numeric_type &= s.numeric_type;
-                    known.radius = known.radius.or(s.radius);
-                    return Ok(i);
-                }
-                // (Refused as soon as the frame has more than a file can hold.)
-                if self.list.len() >= MAX_SPECIES {
-                    let e = BuildError::TooManySpecies(self.list.len() + 1);
-                    return Err(ConvertError::Chunked(e.to_string()));
-                }
-                let i = self.list.len() as u16;
-                self.by_name.insert(s.name.clone(), i);
-                self.list.push(s.clone());
-                Ok(i)
-            })
-            .collect()
+    /// Maps a window's species indices to merged (provisional) ones, adding new names in
+    /// [`crate::species::merge_order`].
+    fn add(
+        &mut self,
+        part: &[SpeciesName],
+        species_index: &[u16],
+    ) -> Result<Vec<u16>, ConvertError> {
+        let mut map = vec![0u16; part.len()];
+        for i in crate::species::merge_order(part, species_index) {
+            let s = &part[i];
+            if let Some(&k) = self.by_name.get(&s.name) {
+                let known = &mut self.list[usize::from(k)];
+                known.numeric_type &= s.numeric_type;
+                known.radius = known.radius.or(s.radius);
+                map[i] = k;
+                continue;
+            }
+            // (Refused as soon as the frame has more than a file can hold.)
+            if self.list.len() >= MAX_SPECIES {
+                let e = BuildError::TooManySpecies(self.list.len() + 1);
+                return Err(ConvertError::Chunked(e.to_string()));
+            }
+            map[i] = self.list.len() as u16;
+            self.by_name.insert(s.name.clone(), map[i]);
+            self.list.push(s.clone());
+        }
+        Ok(map)
     }
 
     /// The final species list (numeric LAMMPS types sorted numerically, others in order
@@ -1166,7 +1172,7 @@ pub fn convert_chunked(
                     ),
                 )
             });
-            let map = merge.add(&f.species)?;
+            let map = merge.add(&f.species, &f.species_index)?;
             let first_bad =
                 |bad: &(dyn Fn(usize) -> bool + Sync)| crate::readers::first_index(f.len(), bad);
             if let Some(index) = first_bad(&|i| f.positions[i].iter().any(|v| !v.is_finite())) {

@@ -112,16 +112,37 @@ pub fn radius_notes(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<S
         .collect()
 }
 
+/// Whether a frame's single-letter species names are labels rather than element symbols:
+/// some single capital letter among them is no element (HOOMD-blue's `A`, `B`, `C`, a
+/// lattice's `X`), so `B` and `C` beside `A` are no boron and carbon. Names of two or more
+/// letters are unaffected, and so are frames whose single letters are all elements (`C`,
+/// `H`, `O`).
+pub fn letters_are_labels<'a>(names: impl IntoIterator<Item = &'a str>) -> bool {
+    names
+        .into_iter()
+        .any(|n| n.len() == 1 && n.as_bytes()[0].is_ascii_uppercase() && element(n).is_none())
+}
+
+/// The element a species name stands for, if any: never a single letter where
+/// [`letters_are_labels`] (and a type number is no element symbol).
+fn element_of(name: &str, letters_are_labels: bool) -> Option<(f32, [f32; 3])> {
+    if letters_are_labels && name.len() == 1 {
+        return None;
+    }
+    element(name)
+}
+
 /// The looks of every species: the radius the input gives, else the element's or the
 /// default, with `overrides` (name, radius) applied last.
 pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<Species> {
+    let labels = letters_are_labels(names.iter().map(|s| s.name.as_str()));
     names
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let (mut radius, mut colour) = match (s.numeric_type, element(&s.name)) {
-                (false, Some(rc)) => rc,
-                _ => (DEFAULT_RADIUS, srgb_to_linear(PALETTE[i % PALETTE.len()])),
+            let (mut radius, mut colour) = match element_of(&s.name, labels) {
+                Some(rc) => rc,
+                None => (DEFAULT_RADIUS, srgb_to_linear(PALETTE[i % PALETTE.len()])),
             };
             if let Some(c) = s.colour {
                 colour = srgb_to_linear(c);
@@ -141,13 +162,38 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
         .collect()
 }
 
+/// The order in which a part of a frame (a window, a piece) adds its species to the
+/// frame's list: the order its particles first use them when its reader sorted them
+/// numerically, else its list's order. Where the frame's species turn out not to be all
+/// numbers, the frame lists them by first appearance, as a whole-frame reader does; where
+/// they are, the frame sorts them anyway.
+pub(crate) fn merge_order(part: &[SpeciesName], species_index: &[u16]) -> Vec<usize> {
+    if part.len() < 2 || !part.iter().all(|s| s.numeric_type) {
+        return (0..part.len()).collect();
+    }
+    let mut order = Vec::with_capacity(part.len());
+    let mut seen = vec![false; part.len()];
+    for &i in species_index {
+        let i = usize::from(i);
+        if i < part.len() && !seen[i] {
+            seen[i] = true;
+            order.push(i);
+            if order.len() == part.len() {
+                break;
+            }
+        }
+    }
+    order.extend((0..part.len()).filter(|&i| !seen[i]));
+    order
+}
+
 /// The radius a species named `name` gets without an override: `given` (the radius the
-/// input gives it) when that is a positive number, else its element's, else the default
-/// (as [`species_table`] chooses; numeric type names are no element's).
-pub fn radius_without_override(name: &str, given: Option<f32>) -> f32 {
+/// input gives it) when that is a positive number, else its element's, else the default,
+/// as [`species_table`] chooses (`letters_are_labels` of the frame's names).
+pub fn radius_without_override(name: &str, given: Option<f32>, letters_are_labels: bool) -> f32 {
     match given.filter(|r| r.is_finite() && *r > 0.0) {
         Some(r) => r,
-        None => element(name).map_or(DEFAULT_RADIUS, |(r, _)| r),
+        None => element_of(name, letters_are_labels).map_or(DEFAULT_RADIUS, |(r, _)| r),
     }
 }
 
@@ -334,6 +380,49 @@ mod tests {
         assert!(parse_radius_override("Cu=1.3").is_ok());
         assert!(parse_radius_override("Cu").is_err());
         assert!(parse_radius_override("Cu=-1").is_err());
+    }
+
+    /// HOOMD-blue names types `A`, `B`, `C`: beside `A` (no element), `B` and `C` are
+    /// labels in palette colours with the default radius, not boron and carbon; `C`, `H`,
+    /// `O` alone are elements, and `Cu` stays copper beside `A`.
+    #[test]
+    fn single_letters_beside_a_letter_that_is_no_element_are_labels() {
+        let named = |names: &[&str]| -> Vec<SpeciesName> {
+            names
+                .iter()
+                .map(|n| SpeciesName {
+                    name: (*n).into(),
+                    ..Default::default()
+                })
+                .collect()
+        };
+        let palette = |i: usize| srgb_to_linear(PALETTE[i]);
+        let t = species_table(&named(&["A", "B", "C", "Cu"]), &[]);
+        for (i, s) in t.iter().enumerate().take(3) {
+            assert_eq!(
+                (s.radius, s.colour),
+                (DEFAULT_RADIUS, palette(i)),
+                "{}",
+                s.name
+            );
+        }
+        assert_eq!((t[3].radius, t[3].colour), element("Cu").unwrap());
+        let t = species_table(&named(&["C", "H", "O"]), &[]);
+        for s in &t {
+            assert_eq!(
+                (s.radius, s.colour),
+                element(&s.name).unwrap(),
+                "{}",
+                s.name
+            );
+        }
+        assert!(letters_are_labels(["A", "B"]));
+        assert!(!letters_are_labels(["B", "C", "Cu"]));
+        assert_eq!(radius_without_override("B", None, true), DEFAULT_RADIUS);
+        assert_eq!(
+            radius_without_override("B", None, false),
+            element("B").unwrap().0
+        );
     }
 
     #[test]

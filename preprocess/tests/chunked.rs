@@ -158,6 +158,36 @@ fn xyz_file_streams_into_the_same_file() {
     streamed_equals_in_memory(&path, &ReadOptions::default(), 300);
 }
 
+/// Species that are type numbers in the first windows and a name later: the whole-frame
+/// reader lists them in order of first appearance (not all are numbers), and so must the
+/// merge of the windows' lists, each of which the window's reader sorted numerically.
+#[test]
+fn mixed_numeric_and_named_species_keep_the_whole_frame_order_in_windows() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1000;
+    let mut text = format!("{n}\nmixed species\n");
+    for i in 0..n {
+        // Type 2 before type 1 in every window; oxygen only from the fourth window on.
+        let name = match i {
+            _ if i >= 600 && i % 3 == 0 => "O",
+            _ if i % 2 == 0 => "2",
+            _ => "1",
+        };
+        let (x, y, z) = (i % 10, (i / 10) % 10, i / 100);
+        text.push_str(&format!("{name} {x}.25 {y}.5 {z}.75\n"));
+    }
+    let path = dir.path().join("mixed.xyz");
+    std::fs::write(&path, text).unwrap();
+    let f = streamed_equals_in_memory(&path, &ReadOptions::default(), 300);
+    let names: Vec<&str> = f
+        .metadata()
+        .species
+        .iter()
+        .map(|s| s.name.as_str())
+        .collect();
+    assert_eq!(names, ["2", "1", "O"]);
+}
+
 #[test]
 fn a_truncated_text_dump_read_in_windows_names_the_file_and_line() {
     let dir = tempfile::tempdir().unwrap();

@@ -122,3 +122,34 @@ fn piece_counts_that_add_up_past_any_count_are_an_error() {
     let d = DumpFile::open(&dir.path().join("run.%.dump")).unwrap();
     assert_eq!(d.frame_info(0).unwrap().particles, 2);
 }
+
+/// A piece of type numbers (2 before 1) and a piece that also uses a type label: the
+/// merged frame lists its species as the single dump of the same atoms does, in order of
+/// first appearance (not all are numbers), not in the first piece's numeric order.
+#[test]
+fn pieces_of_numbers_and_labels_list_species_as_the_whole_dump() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = |atoms: &[(u32, &str)]| {
+        let mut s = format!(
+            "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{}\nITEM: BOX BOUNDS pp pp pp\n\
+             0 10\n0 10\n0 10\nITEM: ATOMS id type x y z\n",
+            atoms.len()
+        );
+        for (id, t) in atoms {
+            s.push_str(&format!("{id} {t} {id}.5 1 2\n"));
+        }
+        s
+    };
+    let first: [(u32, &str); 3] = [(1, "2"), (2, "1"), (3, "2")];
+    let second: [(u32, &str); 2] = [(4, "O"), (5, "1")];
+    std::fs::write(dir.path().join("mix.0.dump"), dump(&first)).unwrap();
+    std::fs::write(dir.path().join("mix.1.dump"), dump(&second)).unwrap();
+    let all: Vec<_> = first.iter().chain(&second).copied().collect();
+    std::fs::write(dir.path().join("mix.all.dump"), dump(&all)).unwrap();
+    let names = |f: &Frame| -> Vec<String> { f.species.iter().map(|s| s.name.clone()).collect() };
+    let merged = read(&dir.path().join("mix.%.dump"), 0);
+    let whole = read(&dir.path().join("mix.all.dump"), 0);
+    assert_eq!(names(&whole), ["2", "1", "O"]);
+    assert_eq!(names(&merged), names(&whole));
+    assert_eq!(atoms(&merged), atoms(&whole));
+}

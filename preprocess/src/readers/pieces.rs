@@ -161,7 +161,8 @@ pub(crate) fn read_frame(
     // order of first appearance.
     let mut species: Vec<SpeciesName> = Vec::new();
     for f in &frames {
-        for s in &f.species {
+        for i in crate::species::merge_order(&f.species, &f.species_index) {
+            let s = &f.species[i];
             if !species.iter().any(|g| g.name == s.name) {
                 species.push(s.clone());
             }
