@@ -1089,6 +1089,23 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
     assert!(err.contains("memory limit of 10 MiB"), "{err}");
     assert!(working_entries(dir.path()).is_empty());
 
+    // A frame within the chunk size is built in memory: a limit below what that needs
+    // is refused before the frame is read (out of core would need more than 12 MiB
+    // too); a limit of 0 is no limit to work within.
+    let c = dir.path().join("c.mdlod");
+    let err = fails(&["convert", s(&input), "-o", s(&c), "--memory-limit", "12M"]);
+    assert!(
+        err.contains("alloy.raw.json")
+            && err.contains("120000 particles are built in memory")
+            && err.contains("need about 16.0 MiB, above the memory limit of 12 MiB")
+            && err.trim_end().ends_with("raise --memory-limit"),
+        "{err}"
+    );
+    let err = fails(&["convert", s(&input), "-o", s(&c), "--memory-limit", "0"]);
+    assert!(err.contains("leaves no room"), "{err}");
+    assert!(!c.exists());
+    assert!(working_entries(dir.path()).is_empty());
+
     // Ctrl-C while chunks are being built removes the working files and the partial
     // output.
     let out = dir.path().join("interrupted.mdlod");

@@ -67,6 +67,15 @@ pub enum ConvertError {
     Species(#[from] Box<crate::species::UnknownSpecies>),
     #[error("chunked conversion: {0}")]
     Chunked(String),
+    /// A frame built in memory (within the chunk size) that needs more than the limit.
+    #[error("{place}: {particles} particles are built in memory (within --chunk-points {chunk_points}) and need about {}, above the memory limit of {}: raise --memory-limit{}", crate::chunked::size_text(*need), crate::chunked::size_text(*limit), chunk_hint(*particles, *limit))]
+    MemoryLimit {
+        place: FramePlace,
+        particles: usize,
+        chunk_points: usize,
+        need: u64,
+        limit: u64,
+    },
     /// A frame without particles: a `.mdlod` file needs at least one.
     #[error("{0}: no particles, and a .mdlod file needs at least one")]
     EmptyFrame(FramePlace),
@@ -82,6 +91,49 @@ pub enum ConvertError {
         #[source]
         source: Box<ConvertError>,
     },
+}
+
+/// The memory a frame of `particles` needs to be read and built in memory.
+pub fn in_memory_need(particles: usize) -> u64 {
+    (particles as u64).saturating_mul(crate::batch::BYTES_PER_PARTICLE)
+}
+
+/// Refuses to build a frame of `particles` in memory when that needs more than the limit.
+fn check_in_memory(
+    particles: usize,
+    options: &ConvertOptions,
+    place: impl FnOnce() -> FramePlace,
+) -> Result<(), ConvertError> {
+    let need = in_memory_need(particles);
+    let limit = options.chunks.memory_limit;
+    if need <= limit {
+        return Ok(());
+    }
+    Err(ConvertError::MemoryLimit {
+        place: place(),
+        particles,
+        chunk_points: options.chunks.chunk_points,
+        need,
+        limit,
+    })
+}
+
+/// How to build a frame of `particles` out of core within `limit`, if chunks of at least
+/// the default root points fit in it.
+fn chunk_hint(particles: usize, limit: u64) -> String {
+    let room = limit.saturating_sub(crate::chunked::chunk_memory(0));
+    let points = room / crate::chunked::BUILD_BYTES_PER_PARTICLE;
+    let least = u64::from(crate::hierarchy::BuildParams::default().max_root_points);
+    if points >= least && points < particles as u64 {
+        // A round number: two significant digits, downward.
+        let unit = 10u64.pow(points.ilog10().saturating_sub(1));
+        format!(
+            ", or build it out of core in smaller chunks (--chunk-points {})",
+            points / unit * unit
+        )
+    } else {
+        String::new()
+    }
 }
 
 /// Which frame of which input: `path: frame K (timestep T)`, as far as known.
@@ -184,6 +236,9 @@ pub fn convert_frame(
         let metadata = base_metadata(frame, source, options);
         return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
     }
+    check_in_memory(frame.len(), options, || {
+        FramePlace::of(source.as_ref(), frame.timestep)
+    })?;
     let species = species_table(&frame.species, &options.radii);
     let particles = Particles {
         positions: &frame.positions,
@@ -525,6 +580,13 @@ pub fn convert_dump(
                 .map_err(explain);
         }
     }
+    if info.particles <= options.chunks.chunk_points {
+        check_in_memory(info.particles, options, || FramePlace {
+            path: named.display().to_string(),
+            frame: Some(k as u64),
+            timestep: info.timestep,
+        })?;
+    }
     let t0 = Instant::now();
     let frame = dump.read_frame(k, read, progress)?;
     // The frame owns its data: release the mapped (or decompressed) dump before the
@@ -556,5 +618,48 @@ pub fn source_info(path: &Path, frame: u64) -> SourceInfo {
         modified_unix: modified.map(|d| i64::try_from(d.as_secs()).unwrap_or(i64::MAX)),
         modified_nanos: modified.map(|d| d.subsec_nanos()),
         frame,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The hint names chunks that fit the limit (after the chunk's fixed working memory),
+    /// rounded down to two digits, and only where such chunks are smaller than the frame
+    /// and hold at least the root points.
+    #[test]
+    fn the_memory_hint_names_chunks_that_fit_the_limit() {
+        let limit = 100u64 << 20;
+        let hint = chunk_hint(1_000_000, limit);
+        let fits =
+            (limit - crate::chunked::chunk_memory(0)) / crate::chunked::BUILD_BYTES_PER_PARTICLE;
+        assert_eq!(fits, 343_170);
+        assert_eq!(
+            hint,
+            ", or build it out of core in smaller chunks (--chunk-points 340000)"
+        );
+        assert!(crate::chunked::chunk_memory(340_000) <= limit);
+        // Room for fewer than the root points, or for the whole frame: no hint.
+        assert_eq!(chunk_hint(1_000_000, 64 << 20), "");
+        assert_eq!(chunk_hint(100_000, limit), "");
+        let options = ConvertOptions {
+            chunks: crate::chunked::ChunkOptions {
+                memory_limit: limit,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let place = || FramePlace::of(None, Some(7));
+        check_in_memory(700_000, &options, place).unwrap();
+        let e = check_in_memory(1_000_000, &options, place)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "input: timestep 7: 1000000 particles are built in memory (within --chunk-points \
+             4194304) and need about 133.5 MiB, above the memory limit of 100 MiB: raise \
+             --memory-limit, or build it out of core in smaller chunks (--chunk-points 340000)"
+        );
     }
 }

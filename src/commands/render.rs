@@ -373,7 +373,8 @@ pub enum Intensity {
     Attribute,
 }
 
-/// Parses `512M`, `2G`, `1048576`, `64KiB`.
+/// Parses `512M`, `2G`, `1048576`, `64KiB`; a size below one byte (0) is refused: no
+/// memory limit or pool can be empty.
 pub fn parse_bytes(s: &str) -> Result<u64, String> {
     let t = s.trim();
     let split = t
@@ -391,7 +392,11 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         "T" | "TB" | "TIB" => 1 << 40,
         _ => return Err(format!("unknown unit in {s:?} (use K, M, G or T)")),
     };
-    Ok((v * mult as f64) as u64)
+    let bytes = (v * mult as f64) as u64;
+    if bytes == 0 {
+        return Err(format!("{s:?} leaves no room: give a size such as 512M"));
+    }
+    Ok(bytes)
 }
 
 pub fn run(args: Args) -> Result<()> {
