@@ -80,6 +80,7 @@ impl Index {
         ctx: &Ctx<'_>,
         file: Option<&std::fs::File>,
         segment: usize,
+        reached: &super::Reached<'_>,
     ) -> Result<Index, ReadError> {
         let data = ctx.data;
         let mut frames: Vec<Span> = Vec::new();
@@ -99,6 +100,7 @@ impl Index {
                         visit(&map, start + p);
                     }
                     start = end;
+                    reached.at(start);
                 }
             }
             _ => {
@@ -425,21 +427,37 @@ mod tests {
             path: &path,
             data: text.as_bytes(),
         };
-        let whole = Index::build(&ctx, None, usize::MAX).unwrap();
+        let whole = Index::build(
+            &ctx,
+            None,
+            usize::MAX,
+            &super::super::Reached::new(&crate::NoProgress),
+        )
+        .unwrap();
         assert_eq!(whole.len(), 3);
         assert_eq!(whole.timestep(2), Some(200));
         assert_eq!(whole.units.as_deref(), Some("metal"));
         // Every segment size, so that `ITEM: TIMESTEP` and the lines before it straddle
         // a segment's end in every way.
+        // The bar moves a segment at a time.
         for segment in 1..=text.len() {
-            let segmented = Index::build(&ctx, Some(&file), segment).unwrap();
+            let steps = super::super::Steps::default();
+            let reached = super::super::Reached::new(&steps);
+            let segmented = Index::build(&ctx, Some(&file), segment, &reached).unwrap();
             assert_eq!(segmented, whole, "segment of {segment} bytes");
+            steps.check(&reached, text.len(), segment, segment);
         }
         // A file that is not the one indexed (another size) is an error, not a guess.
         let other = dir.path().join("other");
         std::fs::write(&other, "ITEM: TIMESTEP\n0\n").unwrap();
         let other = std::fs::File::open(&other).unwrap();
-        let err = Index::build(&ctx, Some(&other), 64).unwrap_err();
+        let err = Index::build(
+            &ctx,
+            Some(&other),
+            64,
+            &super::super::Reached::new(&crate::NoProgress),
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("changed size"), "{err}");
     }
 }

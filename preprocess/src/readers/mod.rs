@@ -429,16 +429,20 @@ impl DumpFile {
             })?;
         let ctx = Ctx { path, data };
         progress.stage("indexing frames", Some(data.len() as u64), "bytes");
+        // Text is scanned a segment at a time: the bar moves with each.
+        let reached = Reached::new(progress);
         let index = match format {
             InputFormat::LammpsText => Index::Lammps(lammps_text::Index::build(
                 &ctx,
                 (!compressed).then_some(&file),
                 SCAN_SEGMENT,
+                &reached,
             )?),
             InputFormat::Xyz => Index::Xyz(xyz::Index::build(
                 &ctx,
                 (!compressed).then_some(&file),
                 SCAN_SEGMENT,
+                &reached,
             )?),
             InputFormat::LammpsBinary => {
                 Index::LammpsBinary(lammps_binary::Index::build(path, data)?)
@@ -447,7 +451,7 @@ impl DumpFile {
             InputFormat::Raw => Index::Raw(Box::new(raw::Index::build(path, data)?)),
             InputFormat::Mmpld => Index::Mmpld(mmpld::Index::build(path, data)?),
         };
-        progress.advance(data.len() as u64);
+        reached.at(data.len());
         progress.finish_stage();
         Ok(Some(DumpFile {
             path: path.to_path_buf(),
@@ -1202,6 +1206,7 @@ pub(crate) fn skip_lines_mapped(
     mut pos: usize,
     mut n: usize,
     segment: usize,
+    reached: &Reached<'_>,
 ) -> Result<usize, ReadError> {
     let len = ctx.data.len();
     while n > 0 && pos < len {
@@ -1213,8 +1218,64 @@ pub(crate) fn skip_lines_mapped(
         }
         n -= count;
         pos = end;
+        reached.at(pos);
     }
     Ok(if n == 0 { pos } else { len })
+}
+
+/// The progress of a scan through a file: advances a stage's bar (counted in bytes) to
+/// each offset the scan reaches.
+pub(crate) struct Reached<'a> {
+    progress: &'a dyn Progress,
+    done: std::cell::Cell<usize>,
+}
+
+impl<'a> Reached<'a> {
+    pub(crate) fn new(progress: &'a dyn Progress) -> Self {
+        Reached {
+            progress,
+            done: std::cell::Cell::new(0),
+        }
+    }
+
+    /// The scan has reached byte `pos` (offsets before the furthest reached add nothing).
+    pub(crate) fn at(&self, pos: usize) {
+        let done = self.done.get();
+        if pos > done {
+            self.progress.advance((pos - done) as u64);
+            self.done.set(pos);
+        }
+    }
+}
+
+/// The steps a scan advanced its bar by (tests).
+#[cfg(test)]
+#[derive(Default)]
+pub(crate) struct Steps(std::sync::Mutex<Vec<u64>>);
+
+#[cfg(test)]
+impl Steps {
+    /// Checks that a scan of `len` bytes in segments of `segment` moved the bar by at
+    /// most `max_step` at a time and, with `Reached::at(len)` at its end, to `len`.
+    pub(crate) fn check(&self, reached: &Reached<'_>, len: usize, segment: usize, max_step: usize) {
+        let before: u64 = self.0.lock().unwrap().iter().sum();
+        assert!(before <= len as u64, "segment of {segment} bytes");
+        reached.at(len);
+        let steps = self.0.lock().unwrap();
+        assert_eq!(steps.iter().sum::<u64>(), len as u64);
+        assert!(
+            steps.iter().all(|&s| s as usize <= max_step),
+            "segment of {segment} bytes: steps {steps:?}"
+        );
+    }
+}
+
+#[cfg(test)]
+impl Progress for Steps {
+    fn stage(&self, _name: &str, _total: Option<u64>, _unit: &'static str) {}
+    fn advance(&self, amount: u64) {
+        self.0.lock().unwrap().push(amount);
+    }
 }
 
 /// A fresh mapping of `file`, which must still be as long as `ctx.data` (`at`: where the

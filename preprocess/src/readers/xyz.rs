@@ -52,6 +52,7 @@ impl Index {
         ctx: &Ctx<'_>,
         file: Option<&std::fs::File>,
         segment: usize,
+        reached: &super::Reached<'_>,
     ) -> Result<Index, ReadError> {
         let data = ctx.data;
         let mut frames = Vec::new();
@@ -72,11 +73,12 @@ impl Index {
             let timestep = cursor.next_line().and_then(|(_, c)| comment_timestep(c));
             let end = match file {
                 Some(file) if data.len() > segment => {
-                    super::skip_lines_mapped(ctx, file, cursor.pos, n, segment)?
+                    super::skip_lines_mapped(ctx, file, cursor.pos, n, segment, reached)?
                 }
                 _ => skip_lines(data, cursor.pos, n),
             };
             cursor.pos = end;
+            reached.at(end);
             frames.push(Span {
                 start: at,
                 end,
@@ -398,12 +400,23 @@ mod tests {
             path: &path,
             data: text.as_bytes(),
         };
-        let whole = Index::build(&ctx, None, usize::MAX).unwrap();
+        let whole = Index::build(
+            &ctx,
+            None,
+            usize::MAX,
+            &super::super::Reached::new(&crate::NoProgress),
+        )
+        .unwrap();
         assert_eq!(whole.len(), 4);
         assert_eq!(whole.frames[3].end, text.len());
+        // The bar moves a segment at a time, or over a frame's two header lines (at most
+        // 14 bytes here).
         for segment in 1..=text.len() {
-            let segmented = Index::build(&ctx, Some(&file), segment).unwrap();
+            let steps = super::super::Steps::default();
+            let reached = super::super::Reached::new(&steps);
+            let segmented = Index::build(&ctx, Some(&file), segment, &reached).unwrap();
             assert_eq!(segmented, whole, "segment of {segment} bytes");
+            steps.check(&reached, text.len(), segment, segment.max(1) + 14);
         }
     }
 }
