@@ -8,11 +8,13 @@
 //! or, with a colour map, the map's colour of their own attribute value (they are then
 //! packed like cluster records: radius and colour per point). Clusters take the map's
 //! colour of their area-weighted mean attribute (both mapped to [0, 1] by
-//! [`AttributeScale`]), and their coverage radius times the radius scale; their colour
-//! is otherwise the mixture baked into the file, so per-species colours and hiding are
-//! exact at the particle level only, and a cluster drawn in place of a hidden species'
-//! particles still shows them. Styles that change sizes or hide particles turn
-//! occlusion culling off (it assumes the file's radii).
+//! [`AttributeScale`]), and their coverage radius times the radius scale; without a map
+//! their stored mixture of species colours goes through the linear map that takes every
+//! species' colour to its styled one ([`PointStyle::cluster_recolour`]: exact for up to
+//! three species of independent colours, a least-squares fit beyond). Hiding is exact at
+//! the particle level only: a cluster drawn in place of a hidden species' particles
+//! still shows them. Styles that change sizes or hide particles turn occlusion culling
+//! off (it assumes the file's radii).
 
 use serde::{Deserialize, Serialize};
 
@@ -178,6 +180,72 @@ impl PointStyle {
             .collect())
     }
 
+    /// The linear map that recolours clusters when species take other colours, `None`
+    /// when none does (or a colour map colours the points).
+    ///
+    /// A cluster's stored colour is the area-weighted mean `C = Σ wᵢ cᵢ` of its
+    /// particles' species colours (`Σ wᵢ = 1`). A 3×3 matrix `T` with `T cᵢ = c′ᵢ` for every
+    /// species turns it into `T C = Σ wᵢ c′ᵢ`, the mean of the new colours, with no
+    /// per-species composition stored: `T = I + (C′ − C) C⁺`, `C` and `C′` the 3×k
+    /// matrices of the old and new colours and `C⁺` their pseudo-inverse. It is exact
+    /// for up to three species whose colours are linearly independent (and equal to the
+    /// identity on colours no species mixture makes); with more species, or dependent
+    /// colours, it is the least-squares fit of the species' new colours. `species` are
+    /// the file's, `styled` the [`Self::species_table`].
+    pub fn cluster_recolour(
+        &self,
+        species: &[mdlod_format::meta::Species],
+        styled: &[[f32; 4]],
+    ) -> Option<[[f32; 3]; 3]> {
+        if self.colour_map.is_some()
+            || species
+                .iter()
+                .zip(styled)
+                .all(|(s, t)| s.colour == [t[0], t[1], t[2]])
+        {
+            return None;
+        }
+        let k = species.len();
+        let c: Vec<[f64; 3]> = species.iter().map(|s| s.colour.map(f64::from)).collect();
+        let d: Vec<[f64; 3]> = species
+            .iter()
+            .zip(styled)
+            .map(|(s, t)| [0, 1, 2].map(|i| f64::from(t[i]) - f64::from(s.colour[i])))
+            .collect();
+        // C⁺ (k×3) from the smaller Gram matrix, regularised a little so that dependent
+        // colours give the least-squares fit instead of a singular system.
+        let pinv: Vec<[f64; 3]> = if k <= 3 {
+            // (CᵀC + εI)⁻¹ Cᵀ
+            let mut g: Vec<f64> = (0..k * k).map(|ij| dot(&c[ij / k], &c[ij % k])).collect();
+            let eps = 1e-9 * (0..k).map(|i| g[i * k + i]).sum::<f64>().max(1e-30);
+            (0..k).for_each(|i| g[i * k + i] += eps);
+            let inv = invert(k, g)?;
+            (0..k)
+                .map(|i| [0, 1, 2].map(|col| (0..k).map(|j| inv[i * k + j] * c[j][col]).sum()))
+                .collect()
+        } else {
+            // Cᵀ (CCᵀ + εI)⁻¹
+            let mut g: Vec<f64> = (0..9)
+                .map(|ij| c.iter().map(|v| v[ij / 3] * v[ij % 3]).sum())
+                .collect();
+            let eps = 1e-9 * (g[0] + g[4] + g[8]).max(1e-30);
+            [0, 4, 8].iter().for_each(|&i| g[i] += eps);
+            let inv = invert(3, g)?;
+            c.iter()
+                .map(|v| [0, 1, 2].map(|col| (0..3).map(|j| v[j] * inv[j * 3 + col]).sum()))
+                .collect()
+        };
+        let mut t = [[0.0f32; 3]; 3];
+        for (row, out) in t.iter_mut().enumerate() {
+            for (col, v) in out.iter_mut().enumerate() {
+                let identity = if row == col { 1.0 } else { 0.0 };
+                let change: f64 = (0..k).map(|i| d[i][row] * pinv[i][col]).sum();
+                *v = (identity + change) as f32;
+            }
+        }
+        t.iter().flatten().all(|v| v.is_finite()).then_some(t)
+    }
+
     /// Checks the numbers.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.radius_scale.is_finite() && self.radius_scale > 0.0) {
@@ -275,6 +343,52 @@ impl AttributeScale {
 }
 
 /// Packs a linear RGB colour as the file's node colours are: RGBA8, R in the low byte.
+fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The inverse of the `n`×`n` row-major matrix `m` by Gauss-Jordan elimination with
+/// partial pivoting; `None` when it is singular.
+fn invert(n: usize, mut m: Vec<f64>) -> Option<Vec<f64>> {
+    let mut inv: Vec<f64> = (0..n * n)
+        .map(|ij| if ij / n == ij % n { 1.0 } else { 0.0 })
+        .collect();
+    for col in 0..n {
+        let pivot =
+            (col..n).max_by(|&a, &b| m[a * n + col].abs().total_cmp(&m[b * n + col].abs()))?;
+        if m[pivot * n + col].abs() < 1e-300 {
+            return None;
+        }
+        for j in 0..n {
+            m.swap(col * n + j, pivot * n + j);
+            inv.swap(col * n + j, pivot * n + j);
+        }
+        let p = m[col * n + col];
+        for j in 0..n {
+            m[col * n + j] /= p;
+            inv[col * n + j] /= p;
+        }
+        for row in (0..n).filter(|&r| r != col) {
+            let f = m[row * n + col];
+            for j in 0..n {
+                m[row * n + j] -= f * m[col * n + j];
+                inv[row * n + j] -= f * inv[col * n + j];
+            }
+        }
+    }
+    Some(inv)
+}
+
+/// `t · c` for a [`PointStyle::cluster_recolour`] map and a linear colour.
+pub fn recoloured(t: &[[f32; 3]; 3], c: [f32; 3]) -> [f32; 3] {
+    t.map(|row| row[0] * c[0] + row[1] * c[1] + row[2] * c[2])
+}
+
+/// The linear colour of a packed RGBA8 colour ([`pack_colour`]).
+pub fn unpack_colour(c: u32) -> [f32; 3] {
+    [0, 8, 16].map(|shift| ((c >> shift) & 0xff) as f32 / 255.0)
+}
+
 pub fn pack_colour(c: [f32; 3]) -> u32 {
     let b = c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32);
     b[0] | (b[1] << 8) | (b[2] << 16) | (255 << 24)
@@ -283,6 +397,109 @@ pub fn pack_colour(c: [f32; 3]) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn species(colours: &[[f32; 3]]) -> Vec<mdlod_format::meta::Species> {
+        colours
+            .iter()
+            .enumerate()
+            .map(|(i, &colour)| mdlod_format::meta::Species {
+                name: format!("s{i}"),
+                radius: 1.0,
+                colour,
+            })
+            .collect()
+    }
+
+    fn recolour_of(old: &[[f32; 3]], new: &[(usize, [f32; 3])]) -> Option<[[f32; 3]; 3]> {
+        let style = PointStyle {
+            species: new
+                .iter()
+                .map(|&(i, c)| SpeciesStyle {
+                    name: format!("s{i}"),
+                    colour: Some(c),
+                    ..Default::default()
+                })
+                .collect(),
+            ..Default::default()
+        };
+        let file = species(old);
+        let table = style.species_table(&file).unwrap();
+        style.cluster_recolour(&file, &table)
+    }
+
+    fn close(a: [f32; 3], b: [f32; 3], tol: f32) -> bool {
+        (0..3).all(|k| (a[k] - b[k]).abs() <= tol)
+    }
+
+    /// Copper, silver and oxygen (linear), as a converted file colours them.
+    const CU: [f32; 3] = [0.578, 0.216, 0.033];
+    const AG: [f32; 3] = [0.527, 0.527, 0.527];
+    const O: [f32; 3] = [1.0, 0.004, 0.004];
+
+    /// Up to three species of independent colours: every old colour goes to its new one,
+    /// so every mixture goes to the same mixture of the new colours; species left alone
+    /// keep theirs.
+    #[test]
+    fn recolouring_clusters_is_exact_for_up_to_three_independent_colours() {
+        let red = [0.9, 0.05, 0.1];
+        let blue = [0.05, 0.1, 0.8];
+        type Case<'a> = (&'a [[f32; 3]], &'a [(usize, [f32; 3])]);
+        let cases: [Case<'_>; 4] = [
+            (&[CU], &[(0, red)]),
+            (&[CU, AG], &[(1, blue)]),
+            (&[CU, AG, O], &[(0, red)]),
+            (&[CU, AG, O], &[(0, blue), (1, red), (2, AG)]),
+        ];
+        for (old, new) in cases {
+            let t = recolour_of(old, new).unwrap();
+            let want: Vec<[f32; 3]> = (0..old.len())
+                .map(|i| new.iter().find(|n| n.0 == i).map_or(old[i], |n| n.1))
+                .collect();
+            for (c, w) in old.iter().zip(&want) {
+                assert!(close(recoloured(&t, *c), *w, 1e-5), "{old:?} {new:?}");
+            }
+            // A mixture of all of them, weights 0.5, 0.3, 0.2 (renormalised).
+            let wts = [0.5f32, 0.3, 0.2];
+            let sum: f32 = wts[..old.len()].iter().sum();
+            let mix = |cs: &[[f32; 3]]| {
+                [0, 1, 2].map(|k| (0..cs.len()).map(|i| wts[i] * cs[i][k]).sum::<f32>() / sum)
+            };
+            assert!(close(recoloured(&t, mix(old)), mix(&want), 1e-5));
+        }
+    }
+
+    /// More species than colour dimensions: the least-squares fit, which is exact where
+    /// the new colours are a linear map of the old ones (here: channels swapped).
+    #[test]
+    fn recolouring_more_than_three_species_fits_a_linear_map() {
+        let old = [CU, AG, O, [0.1, 0.6, 0.2]];
+        let swap = |c: [f32; 3]| [c[2], c[0], c[1]];
+        let new: Vec<(usize, [f32; 3])> = old.iter().map(|&c| swap(c)).enumerate().collect();
+        let t = recolour_of(&old, &new).unwrap();
+        for c in old {
+            assert!(close(recoloured(&t, c), swap(c), 1e-4), "{c:?}");
+        }
+        // Unchanged colours, or a colour map: nothing to recolour.
+        assert_eq!(recolour_of(&old, &[(1, AG)]), None);
+        let style = PointStyle {
+            colour_map: Some(ColourMap::Viridis),
+            species: vec![SpeciesStyle {
+                name: "s0".into(),
+                colour: Some([1.0, 0.0, 0.0]),
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        let file = species(&old);
+        assert_eq!(
+            style.cluster_recolour(&file, &style.species_table(&file).unwrap()),
+            None
+        );
+        assert_eq!(
+            unpack_colour(pack_colour([1.0, 0.5, 0.0])),
+            [1.0, 128.0 / 255.0, 0.0]
+        );
+    }
 
     #[test]
     fn colour_maps_run_from_their_first_to_their_last_stop() {

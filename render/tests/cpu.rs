@@ -838,10 +838,36 @@ fn coarse_cuts_cover_about_the_pixels_the_particles_cover() {
     }
 }
 
+/// The area-weighted mean of `colours` (per species) over the particles below point `i`
+/// of `level`: the colour a cluster would have been built with in these colours.
+fn new_mixture(f: &MdlodFile, level: usize, i: usize, colours: &[[f32; 3]]) -> [f32; 3] {
+    let last = f.level_count() - 1;
+    let (mut l, mut range) = (level, i..i + 1);
+    while l < last {
+        let nodes = &f.nodes()[node_of(f, l, range.start)..node_of(f, l, range.end)];
+        let first = nodes[0].child_first as usize;
+        let end = nodes
+            .last()
+            .map_or(first, |n| (n.child_first + n.child_count) as usize);
+        (l, range) = (l + 1, first..end);
+    }
+    let species = &f.metadata().species;
+    let (mut sum, mut area) = ([0.0f64; 3], 0.0f64);
+    for &s in &f.species()[range] {
+        let a = f64::from(species[usize::from(s)].radius).powi(2);
+        area += a;
+        for k in 0..3 {
+            sum[k] += a * f64::from(colours[usize::from(s)][k]);
+        }
+    }
+    sum.map(|v| (v / area) as f32)
+}
+
 /// Styled packing: every particle takes its species' overridden colour and radius times
 /// the scale (0 when hidden), or with a colour map the map's colour of its own attribute
 /// value; clusters their coverage radius times the scale and the map's colour of their
-/// mean attribute. Positions never change. A colour map needs an attribute.
+/// mean attribute, or without a map the mean of their particles' new species colours.
+/// Positions never change. A colour map needs an attribute.
 #[test]
 fn styles_recolour_resize_and_hide_points_when_packed() {
     use mdlod_render::passes::sphere_raycast::{pack_styled, PackStyle};
@@ -885,6 +911,17 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
         };
         let packed = pack_styled(&f, &d, PackStyle::Spheres, &style).unwrap();
         assert_eq!(packed.points(), base.points());
+        let table = style.species_table(&f.metadata().species).unwrap();
+        let new_colours: Vec<[f32; 3]> = table.iter().map(|t| [t[0], t[1], t[2]]).collect();
+        // The recolouring map's row-sum norm: how much it can enlarge a rounding error.
+        let norm = style
+            .cluster_recolour(&f.metadata().species, &table)
+            .map_or(1.0, |t| {
+                t.iter()
+                    .map(|row| row.iter().map(|v| v.abs()).sum::<f32>())
+                    .fold(0.0, f32::max)
+            });
+        let mut recoloured = 0;
         let mut i = 0u32;
         for r in &d.ranges {
             let level = r.level as usize;
@@ -912,17 +949,33 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
                 } else {
                     assert!((radius - radius0 * 1.5).abs() <= 1e-5 * radius0.max(1.0));
                     let n = &f.nodes()[node_of(&f, level, k as usize)];
-                    let want_c = match map {
-                        Some(m) => {
+                    match map {
+                        Some(m) => assert_eq!(
+                            albedo,
                             unpack(m.colour((n.attribute - info.min) / (info.max - info.min)))
+                        ),
+                        None => {
+                            // The mean of the new species colours over the cluster's
+                            // particles, weighted by their area, as the file's mixture
+                            // is of the old ones: up to the stored colour's rounding
+                            // (half a step of 1/255) through the map, and the packed
+                            // colour's own.
+                            let want = new_mixture(&f, level, k as usize, &new_colours);
+                            let tol = (norm + 1.0) * 0.5 / 255.0 + 1e-5;
+                            assert!(
+                                (0..3).all(|c| (albedo[c] - want[c]).abs() <= tol),
+                                "level {level} point {k}: {albedo:?}, want {want:?} (stored \
+                                 mixture {albedo0:?})"
+                            );
+                            recoloured += usize::from(albedo != albedo0);
                         }
-                        None => albedo0,
-                    };
-                    assert_eq!(albedo, want_c);
+                    }
                 }
                 i += 1;
             }
         }
+        // Clusters took the new colours (not only the stored mixture).
+        assert!(map.is_some() || recoloured > 0);
     }
     let err = pack_styled(
         &plain,

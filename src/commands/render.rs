@@ -114,8 +114,9 @@ pub struct StyleArgs {
     /// Multiply every radius by this (occlusion culling is then off).
     #[arg(long, default_value_t = 1.0)]
     pub radius_scale: f32,
-    /// A species' colour, e.g. `Cu=#c87533`; repeatable. Exact for particles; clusters
-    /// keep the mixture stored in the file.
+    /// A species' colour, e.g. `Cu=#c87533`; repeatable. Exact for particles, and for
+    /// clusters where the file has at most three species of independent colours (else a
+    /// least-squares fit of their mixtures).
     #[arg(long = "species-colour", value_name = "NAME=COLOUR")]
     pub species_colour: Vec<String>,
     /// A species' radius, e.g. `Ag=1.6`; repeatable.

@@ -389,6 +389,9 @@ pub struct AttrPacker {
     intensity: Option<AttributeScale>,
     /// The styled species table: linear albedo and radius.
     pub species: Vec<[f32; 4]>,
+    /// The map that recolours clusters after species colours changed
+    /// ([`PointStyle::cluster_recolour`]).
+    recolour: Option<[[f32; 3]; 3]>,
     /// The file's species count (indices at or above it are corrupt).
     species_count: usize,
 }
@@ -424,14 +427,16 @@ impl AttrPacker {
             PackStyle::FluxAttribute => Some(attribute("take intensities from")?),
             _ => None,
         };
+        let species = look
+            .species_table(&meta.species)
+            .map_err(|e| RenderError::InvalidOptions(format!("{}: {e}", file.path().display())))?;
         Ok(AttrPacker {
             style,
             radius_scale: look.radius_scale,
             mapped,
             intensity,
-            species: look.species_table(&meta.species).map_err(|e| {
-                RenderError::InvalidOptions(format!("{}: {e}", file.path().display()))
-            })?,
+            recolour: look.cluster_recolour(&meta.species, &species),
+            species,
             species_count: meta.species.len(),
         })
     }
@@ -517,6 +522,11 @@ impl AttrPacker {
                     scale.of_value(n.attribute).to_bits()
                 } else if let Some((map, scale)) = &self.mapped {
                     pack_colour(map.colour(scale.of_value(n.attribute)))
+                } else if let Some(t) = &self.recolour {
+                    pack_colour(crate::style::recoloured(
+                        t,
+                        crate::style::unpack_colour(n.colour),
+                    ))
                 } else {
                     n.colour
                 });
