@@ -140,19 +140,13 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let (mut radius, mut colour) = match element_of(&s.name, labels) {
-                Some(rc) => rc,
-                None => (DEFAULT_RADIUS, srgb_to_linear(PALETTE[i % PALETTE.len()])),
+            let colour = match (s.colour, element_of(&s.name, labels)) {
+                (Some(c), _) => srgb_to_linear(c),
+                (None, Some((_, c))) => c,
+                (None, None) => srgb_to_linear(PALETTE[i % PALETTE.len()]),
             };
-            if let Some(c) = s.colour {
-                colour = srgb_to_linear(c);
-            }
-            if let Some(r) = s.radius.filter(|r| r.is_finite() && *r > 0.0) {
-                radius = r;
-            }
-            if let Some(r) = radius_override(overrides, &s.name) {
-                radius = r;
-            }
+            let radius = radius_override(overrides, &s.name)
+                .unwrap_or_else(|| radius_without_override(&s.name, s.radius, labels));
             Species {
                 name: s.name.clone(),
                 radius,
