@@ -117,7 +117,7 @@ pub struct ChunkOptions {
 }
 
 impl Default for ChunkOptions {
-    /// Chunks of [`DEFAULT_CHUNK_POINTS`], half of the machine's memory, working files
+    /// Chunks of [`DEFAULT_CHUNK_POINTS`], half of the process's memory ([`default_memory_limit`]), working files
     /// next to the output.
     fn default() -> Self {
         ChunkOptions {
@@ -153,14 +153,58 @@ impl ChunkOptions {
     }
 }
 
-/// Half of the machine's physical memory (Linux), or 4 GiB when it cannot be read.
+/// Half of the memory this process may have (Linux): the machine's physical memory, or
+/// less where its control group is limited (a Slurm job's allocation, a container's);
+/// 4 GiB when neither can be read.
 pub fn default_memory_limit() -> u64 {
     let total = fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
         s.lines()
             .find(|l| l.starts_with("MemTotal:"))
             .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+            .map(|kib| kib.saturating_mul(1024))
     });
-    total.map_or(4 << 30, |kib| kib * 1024 / 2)
+    let cgroup = fs::read_to_string("/proc/self/cgroup")
+        .ok()
+        .and_then(|groups| cgroup_memory_limit(&groups, &|p| fs::read_to_string(p).ok()));
+    match (total, cgroup) {
+        (Some(t), Some(c)) => t.min(c) / 2,
+        (Some(m), None) | (None, Some(m)) => m / 2,
+        (None, None) => 4 << 30,
+    }
+}
+
+/// The tightest memory limit of the control groups a process is in (`groups`: its
+/// `/proc/self/cgroup`), over every group from its own up to the root: cgroup v2's
+/// `memory.max`, v1's `memory.limit_in_bytes` (whose "unlimited" is a number near 2^63,
+/// ignored above 2^60). `read` reads a file.
+fn cgroup_memory_limit(groups: &str, read: &dyn Fn(&str) -> Option<String>) -> Option<u64> {
+    let mut limits = Vec::new();
+    for line in groups.lines() {
+        let mut parts = line.splitn(3, ':');
+        let (Some(_), Some(controllers), Some(path)) = (parts.next(), parts.next(), parts.next())
+        else {
+            continue;
+        };
+        let (root, file) = if controllers.is_empty() {
+            ("/sys/fs/cgroup", "memory.max")
+        } else if controllers.split(',').any(|c| c == "memory") {
+            ("/sys/fs/cgroup/memory", "memory.limit_in_bytes")
+        } else {
+            continue;
+        };
+        let mut dir = path.trim_end_matches('/').to_string();
+        loop {
+            let limit = read(&format!("{root}{dir}/{file}"))
+                .and_then(|v| v.trim().parse::<u64>().ok())
+                .filter(|&v| v < 1 << 60);
+            limits.extend(limit);
+            match dir.rfind('/') {
+                Some(i) => dir.truncate(i),
+                None => break,
+            }
+        }
+    }
+    limits.into_iter().min()
 }
 
 /// The working memory one chunk of `points` particles needs, in bytes.
@@ -1815,6 +1859,46 @@ fn assemble(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A Slurm job's step in cgroup v2 (the limit on the job, not the task's own group),
+    /// and in v1 with v1's "unlimited"; no memory controller, no limit.
+    #[test]
+    fn the_memory_limit_of_the_control_groups_is_the_tightest_up_to_the_root() {
+        let files = [
+            ("/sys/fs/cgroup/memory.max", "max"),
+            (
+                "/sys/fs/cgroup/system.slice/slurmstepd.scope/memory.max",
+                "max",
+            ),
+            (
+                "/sys/fs/cgroup/system.slice/slurmstepd.scope/job_7/memory.max",
+                "68719476736\n",
+            ),
+            (
+                "/sys/fs/cgroup/system.slice/slurmstepd.scope/job_7/step_0/memory.max",
+                "max",
+            ),
+            (
+                "/sys/fs/cgroup/system.slice/slurmstepd.scope/job_7/step_0/user/task_0/memory.max",
+                "max",
+            ),
+            (
+                "/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                "9223372036854771712",
+            ),
+            (
+                "/sys/fs/cgroup/memory/box/memory.limit_in_bytes",
+                "2147483648",
+            ),
+        ];
+        let read = |p: &str| files.iter().find(|f| f.0 == p).map(|f| f.1.to_string());
+        let v2 = "0::/system.slice/slurmstepd.scope/job_7/step_0/user/task_0\n";
+        assert_eq!(cgroup_memory_limit(v2, &read), Some(64 << 30));
+        let v1 = "5:devices:/\n4:memory:/box\n1:cpu,cpuacct:/\n";
+        assert_eq!(cgroup_memory_limit(v1, &read), Some(2 << 30));
+        assert_eq!(cgroup_memory_limit("4:memory:/\n", &read), None);
+        assert_eq!(cgroup_memory_limit("1:cpu:/box\n", &read), None);
+    }
 
     #[test]
     fn a_cell_is_refined_by_the_coarsest_grid_that_leaves_room() {

@@ -33,7 +33,8 @@ pub struct Args {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Memory the conversion may use (e.g. 4G; default: half of the machine's memory).
+    /// Memory the conversion may use (e.g. 4G; default: half of the memory this process may
+    /// have: the machine's, or a Slurm job's or container's allocation).
     /// Frames above the chunk size are built out of core, as many chunks at a time as
     /// fit; the file does not depend on it.
     #[arg(long, value_parser = crate::commands::render::parse_bytes)]
