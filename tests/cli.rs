@@ -594,7 +594,22 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
     let merged = ok(&["batch", "--merge", s(&out)]);
     assert!(merged.contains("merged 6 frames"), "{merged}");
     let err = fails(&["batch", s(&input), "-o", s(&out), "--shard", "3/3"]);
-    assert!(err.contains("index must be below the count"), "{err}");
+    assert!(err.contains("index 3 must be below the count 3"), "{err}");
+    // A task id without the array's count converts nothing, naming what is missing.
+    let run = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args(["batch", s(&input), "-o", s(&dir.path().join("e"))])
+        .env("SLURM_ARRAY_TASK_ID", "1")
+        .env_remove("SLURM_ARRAY_TASK_COUNT")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        err.contains("SLURM_ARRAY_TASK_ID is set but not SLURM_ARRAY_TASK_COUNT"),
+        "{err}"
+    );
+    // The batch directory it would have made is not left behind.
+    assert!(!dir.path().join("e").exists());
 }
 
 /// The density volume and its iso-surface need no precomputation: they render every

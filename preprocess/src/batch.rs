@@ -172,6 +172,11 @@ pub struct BatchReport {
     /// Concurrent conversions used.
     pub jobs: usize,
     pub manifest: PathBuf,
+    /// The merged manifest a shard run removed, as the frames it converted outdate it.
+    pub removed_merged: Option<PathBuf>,
+    /// Files named like frames in the batch directory that no frame of the inputs (in
+    /// any shard) is written to: left by a run over other or longer inputs.
+    pub strays: Vec<String>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -243,19 +248,27 @@ pub fn fingerprint(input: &Path, frame: u64) -> SourceInfo {
     }
 }
 
-/// Whether an output's recorded source is `now`'s: the same path, frame, size and
-/// modification time. A file written before sources recorded nanoseconds is compared
-/// to the second.
+/// Whether an output's recorded source is `now`'s: the same frame, size and
+/// modification time, of a file of the same name. The path is recorded as it was typed,
+/// relative to where that run started: the same input named from another directory (a
+/// requeued cluster job) or by another path is the same file when its name, size and
+/// modification time to the nanosecond agree. A file written before sources recorded
+/// nanoseconds is compared to the second.
 fn same_source(recorded: &SourceInfo, now: &SourceInfo) -> bool {
     let nanos = match recorded.modified_nanos {
         Some(_) => now.modified_nanos,
         None => None,
     };
-    *recorded
-        == SourceInfo {
-            modified_nanos: nanos,
-            ..now.clone()
-        }
+    let name = |p: &str| Path::new(p).file_name().map(|n| n.to_os_string());
+    let same_file = recorded.path == now.path
+        || (name(&recorded.path).is_some() && name(&recorded.path) == name(&now.path));
+    same_file
+        && *recorded
+            == SourceInfo {
+                path: recorded.path.clone(),
+                modified_nanos: nanos,
+                ..now.clone()
+            }
 }
 
 /// The output file name of a timestep.
@@ -670,6 +683,25 @@ pub fn batch(
             });
         }
     }
+    // Frame files no frame of these inputs is written to (a run over other or longer
+    // inputs left them): named, left alone.
+    let numbers: std::collections::HashSet<u64> = jobs.iter().map(|j| j.timestep).collect();
+    let mut strays: Vec<String> = std::fs::read_dir(out_dir)
+        .map_err(io(out_dir))?
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().into_string().ok()?;
+            let number = name.strip_prefix("frame-")?.strip_suffix(".mdlod")?;
+            let number: u64 = number.parse().ok()?;
+            (frame_file_name(number) == name && !numbers.contains(&number)).then_some(name)
+        })
+        .collect();
+    strays.sort_by_key(|n| {
+        n.trim_start_matches("frame-")
+            .trim_end_matches(".mdlod")
+            .parse::<u64>()
+            .unwrap_or(u64::MAX)
+    });
     let mut mine: Vec<Job<'_>> = match opts.shard {
         None => jobs,
         Some((i, n)) => jobs
@@ -789,6 +821,17 @@ pub fn batch(
         write_json(&manifest_path, m)
     };
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
+    // A shard that converts anything outdates the merged manifest of an earlier merge
+    // (its checksums, its frames' sources): removed before the first frame changes, so
+    // that no `dataset.json` lists what is not there; `--merge` writes it again.
+    let mut removed_merged = None;
+    if opts.shard.is_some() && !todo.is_empty() {
+        let merged = out_dir.join(MANIFEST);
+        if merged.is_file() {
+            std::fs::remove_file(&merged).map_err(io(&merged))?;
+            removed_merged = Some(merged);
+        }
+    }
     // When the manifest was last written: workers rewrite it at most every
     // `MANIFEST_INTERVAL`, and once more at the end.
     let saved_at = Mutex::new(std::time::Instant::now());
@@ -968,6 +1011,8 @@ pub fn batch(
         }
     }
     Ok(BatchReport {
+        removed_merged,
+        strays,
         frames_total,
         frames_in_shard,
         converted: converted.into_inner(),
@@ -1107,7 +1152,13 @@ struct MergeSettings {
     /// Every species' radius, the first frame holding it, and whether a `--radius`
     /// override set it there.
     radii: std::collections::HashMap<String, (f32, String, bool)>,
+    /// Every source file's size and modification time as the first frame converted
+    /// from it saw them, with that frame.
+    sources: std::collections::HashMap<String, (SourceVersion, String)>,
 }
+
+/// A source file's size, modification time in seconds, and nanoseconds past it.
+type SourceVersion = (u64, Option<i64>, Option<u32>);
 
 impl MergeSettings {
     /// Compares the frame `f` of the shard manifest `manifest` with the frames before;
@@ -1119,6 +1170,29 @@ impl MergeSettings {
             .file_name()
             .map_or(String::new(), |n| n.to_string_lossy().into_owned());
         let this = format!("{} (in {shard})", f.file);
+        // Shards run before and after an input changed convert two versions of it.
+        let src = &f.source;
+        let version = (src.size, src.modified_unix, src.modified_nanos);
+        match self.sources.get(&src.path) {
+            Some((v, first)) if *v != version => {
+                return Err(format!(
+                    "{first} and {this} were converted from two versions of {} (it changed \
+                     between the shards' runs: {} and {} bytes, modified at {} and {} s): \
+                     rerun the shards whose frames are older, which convert only what changed, \
+                     then merge",
+                    src.path,
+                    v.0,
+                    version.0,
+                    v.1.map_or("?".into(), |t| t.to_string()),
+                    version.1.map_or("?".into(), |t| t.to_string()),
+                ));
+            }
+            Some(_) => {}
+            None => {
+                self.sources
+                    .insert(src.path.clone(), (version, this.clone()));
+            }
+        }
         let attribute = m.attribute.as_ref().map(|a| a.name.clone());
         let Some((first, build, first_attribute)) = &self.first else {
             self.first = Some((this.clone(), m.build.clone(), attribute));

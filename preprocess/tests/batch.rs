@@ -1040,3 +1040,80 @@ fn merge_refuses_shards_built_with_other_settings() {
         assert_eq!(merge(&out).unwrap().frames.len(), 6);
     }
 }
+
+/// After a merge, the input changes and one shard runs again: it removes the merged
+/// manifest, whose checksums it outdates, and the merge then refuses to join frames of
+/// the two versions of the input until the other shards have run again.
+#[test]
+fn a_shard_rerun_after_a_merge_outdates_it_and_merge_refuses_mixed_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("sharded");
+    for i in 0..2 {
+        batch(std::slice::from_ref(&src), &out, &shard(i, 2), &NoProgress).unwrap();
+    }
+    merge(&out).unwrap();
+    // Nothing to convert: the merged manifest stays.
+    let r = batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.removed_merged), (0, None));
+    assert!(read_manifest(&out).is_ok());
+    // The input changes (one more line at its end: a new size); shard 1 converts again.
+    let mut text = std::fs::read(&src).unwrap();
+    text.extend_from_slice(b"\n");
+    std::fs::write(&src, &text).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
+    assert_eq!(r.converted, 3);
+    assert_eq!(r.removed_merged, Some(out.join("dataset.json")));
+    assert!(!out.join("dataset.json").exists());
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains("two versions of") && e.contains("melt.dump") && e.contains("rerun the shards"),
+        "{e}"
+    );
+    batch(std::slice::from_ref(&src), &out, &shard(0, 2), &NoProgress).unwrap();
+    check_manifest(&out, &merge(&out).unwrap());
+}
+
+/// Frame files of an earlier run over a longer trajectory are named, not listed, and
+/// left alone.
+#[test]
+fn frame_files_of_no_input_frame_are_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert!(r.strays.is_empty());
+    for name in [
+        "frame-99000.mdlod",
+        "frame-7.mdlod",
+        "frame-07.mdlod",
+        "notes.txt",
+    ] {
+        std::fs::write(out.join(name), b"x").unwrap();
+    }
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    // `frame-07.mdlod` is no frame's name (frame 7 is `frame-7.mdlod`).
+    assert_eq!(r.strays, ["frame-7.mdlod", "frame-99000.mdlod"]);
+    assert_eq!(r.skipped, 6);
+    assert!(out.join("frame-99000.mdlod").exists());
+}
+
+/// The same input named by another path (from another directory, as a requeued job
+/// does) is the same source: nothing converts again. Another file of the same name,
+/// size and time would be too; one of another content has another size or time.
+#[test]
+fn the_same_input_by_another_path_is_not_converted_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    std::fs::create_dir(dir.path().join("sub")).unwrap();
+    let other = dir.path().join("sub").join("..").join("melt.dump");
+    let r = batch(&[other], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 6));
+    // A copy elsewhere, written now: another modification time.
+    let copy = dir.path().join("sub").join("melt.dump");
+    std::fs::copy(&src, &copy).unwrap();
+    let r = batch(&[copy], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 6);
+}

@@ -31,10 +31,10 @@ pub struct Args {
     #[arg(long, value_name = "DIR", conflicts_with_all = ["inputs", "output", "shard"])]
     pub merge: Option<PathBuf>,
     /// Convert only shard I of N (0-based), e.g. 3/16.
-    #[arg(long, value_name = "I/N")]
+    #[arg(long, value_name = "I/N", allow_hyphen_values = true)]
     pub shard: Option<String>,
     /// Memory all concurrent conversions may use together (e.g. 4G; default: half of
-    /// the machine's memory).
+    /// the memory this process may have: the machine's, or the Slurm job's allocation).
     #[arg(long, value_parser = parse_bytes)]
     pub memory_limit: Option<u64>,
     /// Worker threads (default: all cores).
@@ -52,13 +52,20 @@ fn parse_shard(s: &str) -> Result<(u32, u32)> {
     let (i, n): (u32, u32) = (
         i.trim()
             .parse()
-            .with_context(|| format!("shard {s:?}: bad index"))?,
+            .with_context(|| format!("shard {s:?}: the index is not a number from 0"))?,
         n.trim()
             .parse()
-            .with_context(|| format!("shard {s:?}: bad count"))?,
+            .with_context(|| format!("shard {s:?}: the count is not a number from 1"))?,
     );
-    if n == 0 || i >= n {
-        bail!("shard {s:?}: the index must be below the count (0-based)");
+    check_shard(i, n).with_context(|| format!("shard {s:?}"))
+}
+
+fn check_shard(i: u32, n: u32) -> Result<(u32, u32)> {
+    if n == 0 {
+        bail!("the count must be at least 1");
+    }
+    if i >= n {
+        bail!("the index {i} must be below the count {n} (shards are numbered from 0)");
     }
     Ok((i, n))
 }
@@ -73,27 +80,62 @@ fn shard(args: &Args) -> Result<Option<(u32, u32)>> {
 
 /// The shard of a Slurm job array task: the task's position in the array, of the array's
 /// task count. Array indices may start anywhere and step (`--array=1-31:2` runs tasks 1,
-/// 3, ..., 31: 16 tasks, the task with ID 5 is shard 2 of 16).
+/// 3, ..., 31: 16 tasks, the task with ID 5 is shard 2 of 16). An environment that names
+/// no position (one of the two main variables without the other, a value that is no
+/// number, an array given as a list such as `--array=1,3,7`, whose positions Slurm does
+/// not tell) is an error naming the variables: each task would otherwise convert every
+/// frame.
 fn slurm_shard(var: impl Fn(&str) -> Option<String>) -> Result<Option<(u32, u32)>> {
-    let number = |name: &str| var(name).and_then(|v| v.trim().parse::<u32>().ok());
-    let (Some(id), Some(count)) = (
-        number("SLURM_ARRAY_TASK_ID"),
-        number("SLURM_ARRAY_TASK_COUNT"),
-    ) else {
-        return Ok(None);
+    const HINT: &str = "give the shard with --shard I/N";
+    let number = |name: &str| -> Result<Option<u32>> {
+        match var(name) {
+            None => Ok(None),
+            Some(v) => match v.trim().parse::<u32>() {
+                Ok(n) => Ok(Some(n)),
+                Err(_) => bail!("{name} is {v:?}, not a task number: {HINT}"),
+            },
+        }
     };
-    let min = number("SLURM_ARRAY_TASK_MIN").unwrap_or(0);
-    let step = number("SLURM_ARRAY_TASK_STEP").unwrap_or(1).max(1);
+    let (id, count) = match (
+        number("SLURM_ARRAY_TASK_ID")?,
+        number("SLURM_ARRAY_TASK_COUNT")?,
+    ) {
+        (None, None) => return Ok(None),
+        (Some(id), Some(count)) => (id, count),
+        (Some(_), None) => {
+            bail!("SLURM_ARRAY_TASK_ID is set but not SLURM_ARRAY_TASK_COUNT: {HINT}")
+        }
+        (None, Some(_)) => {
+            bail!("SLURM_ARRAY_TASK_COUNT is set but not SLURM_ARRAY_TASK_ID: {HINT}")
+        }
+    };
+    let min = number("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+    let step = number("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1).max(1);
     let offset = id
         .checked_sub(min)
         .with_context(|| format!("SLURM_ARRAY_TASK_ID {id} is below SLURM_ARRAY_TASK_MIN {min}"))?;
     if offset % step != 0 {
-        bail!(
-            "SLURM_ARRAY_TASK_ID {id} is not on the array's step {step} from {min}: \
-             give the shard with --shard I/N"
-        );
+        bail!("SLURM_ARRAY_TASK_ID {id} is not on the array's step {step} from {min}: {HINT}");
     }
-    parse_shard(&format!("{}/{count}", offset / step)).map(Some)
+    if let Some(max) = number("SLURM_ARRAY_TASK_MAX")? {
+        // A range MIN-MAX:STEP holds (MAX - MIN) / STEP + 1 tasks; a list does not.
+        let range = max.checked_sub(min).map(|d| d / step + 1);
+        if range != Some(count) {
+            bail!(
+                "SLURM_ARRAY_TASK_COUNT {count} is not the number of tasks from \
+                 SLURM_ARRAY_TASK_MIN {min} to SLURM_ARRAY_TASK_MAX {max} in steps of {step} \
+                 (an array given as a list, such as --array=1,3,7?): {HINT}"
+            );
+        }
+    }
+    check_shard(offset / step, count)
+        .with_context(|| {
+            format!(
+                "SLURM_ARRAY_TASK_ID {id} (SLURM_ARRAY_TASK_MIN {min}, step {step}) is past \
+             SLURM_ARRAY_TASK_COUNT {count}: {HINT}"
+            )
+        })
+        .map(Some)
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -109,6 +151,18 @@ pub fn run(args: Args) -> Result<()> {
     let Some(out) = &args.output else {
         bail!("give the batch directory with -o DIR");
     };
+    // A batch directory this run creates and leaves empty (it failed before converting
+    // a frame: a missing input, a bad option) is removed again.
+    let created = !out.exists();
+    let result = run_batch(&args, out);
+    if result.is_err() && created {
+        // Fails, leaving it, unless it is empty.
+        let _ = std::fs::remove_dir(out);
+    }
+    result
+}
+
+fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
     super::check_batch_output(out, &args.inputs)?;
     args.build.check()?;
     let (mut convert, read) = args.build.options();
@@ -135,7 +189,7 @@ pub fn run(args: Args) -> Result<()> {
     let opts = BatchOptions {
         convert,
         read,
-        shard: shard(&args)?,
+        shard: shard(args)?,
         memory_limit: args
             .memory_limit
             .unwrap_or_else(mdlod_preprocess::chunked::default_memory_limit),
@@ -144,6 +198,33 @@ pub fn run(args: Args) -> Result<()> {
     let report = with_threads(args.threads, || {
         batch(&args.inputs, out, &opts, &Bar::new())
     })??;
+    if let Some(merged) = &report.removed_merged {
+        println!(
+            "removed {}, which the frames converted now outdate: run `mdlod batch --merge {}` \
+             once every shard has finished",
+            merged.display(),
+            out.display()
+        );
+    }
+    if !report.strays.is_empty() {
+        let shown: Vec<&str> = report.strays.iter().take(5).map(String::as_str).collect();
+        let more = report.strays.len() - shown.len();
+        let files = match report.strays.len() {
+            1 => "1 frame file".to_string(),
+            n => format!("{n} frame files"),
+        };
+        println!(
+            "note: {files} in {} belong to no frame of these inputs (a run over other or \
+             longer inputs wrote them; left alone, not in the manifest): {}{}",
+            out.display(),
+            shown.join(", "),
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        );
+    }
     let shard = opts
         .shard
         .map_or(String::new(), |(i, n)| format!(" (shard {i} of {n})"));
@@ -228,7 +309,73 @@ mod tests {
             ("SLURM_ARRAY_TASK_ID", "5"),
             ("SLURM_ARRAY_TASK_COUNT", "4"),
         ];
-        let e = slurm_shard(env(&past)).unwrap_err().to_string();
-        assert!(e.contains("index must be below the count"), "{e}");
+        let e = format!("{:#}", slurm_shard(env(&past)).unwrap_err());
+        assert!(
+            e.contains("SLURM_ARRAY_TASK_ID 5") && e.contains("past SLURM_ARRAY_TASK_COUNT 4"),
+            "{e}"
+        );
+    }
+
+    /// An environment that names no position fails, naming the variables, instead of
+    /// converting every frame in every task.
+    #[test]
+    fn incomplete_or_unusable_slurm_variables_are_errors() {
+        let cases: [(&[(&str, &str)], &str); 5] = [
+            (
+                &[("SLURM_ARRAY_TASK_ID", "1")],
+                "SLURM_ARRAY_TASK_ID is set but not SLURM_ARRAY_TASK_COUNT",
+            ),
+            (
+                &[("SLURM_ARRAY_TASK_COUNT", "4")],
+                "SLURM_ARRAY_TASK_COUNT is set but not SLURM_ARRAY_TASK_ID",
+            ),
+            (
+                &[
+                    ("SLURM_ARRAY_TASK_ID", "abc"),
+                    ("SLURM_ARRAY_TASK_COUNT", "4"),
+                ],
+                "SLURM_ARRAY_TASK_ID is \"abc\"",
+            ),
+            (
+                &[
+                    ("SLURM_ARRAY_TASK_ID", "1"),
+                    ("SLURM_ARRAY_TASK_COUNT", "4"),
+                    ("SLURM_ARRAY_TASK_MIN", "x"),
+                ],
+                "SLURM_ARRAY_TASK_MIN is \"x\"",
+            ),
+            // --array=1,3,7: Slurm says MIN 1, MAX 7, COUNT 3.
+            (
+                &[
+                    ("SLURM_ARRAY_TASK_ID", "3"),
+                    ("SLURM_ARRAY_TASK_COUNT", "3"),
+                    ("SLURM_ARRAY_TASK_MIN", "1"),
+                    ("SLURM_ARRAY_TASK_MAX", "7"),
+                    ("SLURM_ARRAY_TASK_STEP", "1"),
+                ],
+                "given as a list",
+            ),
+        ];
+        for (vars, want) in cases {
+            let e = slurm_shard(env(vars)).unwrap_err().to_string();
+            assert!(
+                e.contains(want) && e.contains("--shard I/N"),
+                "{vars:?}: {e}"
+            );
+        }
+        // A range with its MAX agrees.
+        let vars = [
+            ("SLURM_ARRAY_TASK_ID", "7"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_MAX", "7"),
+            ("SLURM_ARRAY_TASK_STEP", "2"),
+        ];
+        assert_eq!(slurm_shard(env(&vars)).unwrap(), Some((3, 4)));
+        // Shards on the command line: a count of 0 is named as such.
+        let e = format!("{:#}", super::parse_shard("1/0").unwrap_err());
+        assert!(e.contains("count must be at least 1"), "{e}");
+        let e = format!("{:#}", super::parse_shard("4/4").unwrap_err());
+        assert!(e.contains("index 4 must be below the count 4"), "{e}");
     }
 }
