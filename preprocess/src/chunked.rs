@@ -452,10 +452,12 @@ impl SpeciesMerge {
     /// The final species list (numeric LAMMPS types sorted numerically, others in order
     /// of first appearance, as the whole-frame readers list them) and the map from
     /// provisional to final indices.
-    fn finish(self) -> (Vec<SpeciesName>, Vec<u16>) {
+    fn finish(mut self) -> (Vec<SpeciesName>, Vec<u16>) {
         let mut order: Vec<usize> = (0..self.list.len()).collect();
         if self.list.iter().all(|s| s.numeric_type) {
             order.sort_by_key(|&i| self.list[i].name.parse::<i64>().unwrap_or(i64::MAX));
+        } else {
+            crate::species::not_all_numbers(&mut self.list);
         }
         let mut map = vec![0u16; self.list.len()];
         for (new, &old) in order.iter().enumerate() {

@@ -24,6 +24,10 @@ pub struct SpeciesName {
     /// The colour the input gives this species (sRGB bytes: an MMPLD list's global
     /// colour), used instead of the element's or the palette's.
     pub colour: Option<[u8; 3]>,
+    /// The species' place in the palette by the input's own numbering (LAMMPS type
+    /// `n`: `n − 1`), so that a type keeps its colour in frames that lack others; the
+    /// place in the frame's list when `None`.
+    pub palette_slot: Option<usize>,
 }
 
 /// One timestep of particles, as read from a dump.

@@ -133,7 +133,9 @@ fn element_of(name: &str, letters_are_labels: bool) -> Option<(f32, [f32; 3])> {
 }
 
 /// The looks of every species: the radius the input gives, else the element's or the
-/// default, with `overrides` (name, radius) applied last.
+/// default, with `overrides` (name, radius) applied last; the colour the input gives,
+/// else the element's, else the palette's at the species' own slot (a LAMMPS type's
+/// number, so that it keeps its colour in every frame), else at its place in the list.
 pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<Species> {
     let labels = letters_are_labels(names.iter().map(|s| s.name.as_str()));
     names
@@ -143,7 +145,9 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
             let colour = match (s.colour, element_of(&s.name, labels)) {
                 (Some(c), _) => srgb_to_linear(c),
                 (None, Some((_, c))) => c,
-                (None, None) => srgb_to_linear(PALETTE[i % PALETTE.len()]),
+                (None, None) => {
+                    srgb_to_linear(PALETTE[s.palette_slot.unwrap_or(i) % PALETTE.len()])
+                }
             };
             let radius = radius_override(overrides, &s.name)
                 .unwrap_or_else(|| radius_without_override(&s.name, s.radius, labels));
@@ -154,6 +158,16 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
             }
         })
         .collect()
+}
+
+/// Makes the merged species of a frame whose names are not all numbers what a
+/// whole-frame reader lists: no species is a numbered type, so none keeps a palette slot
+/// of its number (a part's numbers-only list gave them).
+pub(crate) fn not_all_numbers(species: &mut [SpeciesName]) {
+    for s in species {
+        s.numeric_type = false;
+        s.palette_slot = None;
+    }
 }
 
 /// The order in which a part of a frame (a window, a piece) adds its species to the

@@ -187,6 +187,28 @@ fn numeric_types_are_sorted_numerically() {
     assert_eq!(f.species_index, vec![2, 1, 0]);
 }
 
+/// A type keeps its palette colour in a frame that lacks the types before it (a
+/// deposition run's first frames, an evaporated species): type 2 alone is drawn as type
+/// 2 beside type 1, not as a frame's first species.
+#[test]
+fn a_type_number_keeps_its_colour_whatever_other_types_a_frame_has() {
+    let dir = tempfile::tempdir().unwrap();
+    let both = format!("{ORTHO}ITEM: ATOMS id type x y z\n1 2 0 0 0\n2 1 0 0 0\n3 2 0 0 0\n");
+    let alone = format!("{ORTHO}ITEM: ATOMS id type x y z\n1 2 0 0 0\n2 2 0 0 0\n3 2 0 0 0\n");
+    let colour_of_2 = |text: &str, name: &str| {
+        let f = read(&write(dir.path(), name, text), None);
+        let table = mdlod_preprocess::species::species_table(&f.species, &[]);
+        table.iter().find(|s| s.name == "2").unwrap().colour
+    };
+    let a = colour_of_2(&both, "both.lammpstrj");
+    let b = colour_of_2(&alone, "alone.lammpstrj");
+    assert_eq!(a, b);
+    // And type 1 (the first slot) differs from it.
+    let f = read(&dir.path().join("both.lammpstrj"), None);
+    let table = mdlod_preprocess::species::species_table(&f.species, &[]);
+    assert_ne!(table[0].colour, table[1].colour);
+}
+
 #[test]
 fn type_labels_keep_first_appearance() {
     let dir = tempfile::tempdir().unwrap();

@@ -303,6 +303,11 @@ fn merge_species(
             name: String::from_utf8_lossy(n).into_owned(),
             numeric_type,
             radius: None,
+            palette_slot: if numeric_type {
+                type_number_slot(n)
+            } else {
+                None
+            },
             ..Default::default()
         })
         .collect())
@@ -529,4 +534,10 @@ fn column_count(ctx: &Ctx<'_>, line_start: usize, expected: usize) -> ReadError 
         expected,
         found,
     }
+}
+
+/// The palette place of LAMMPS type `name` (a number from 1): `n − 1`.
+pub(crate) fn type_number_slot(name: &[u8]) -> Option<usize> {
+    let n: u64 = std::str::from_utf8(name).ok()?.trim().parse().ok()?;
+    usize::try_from(n.checked_sub(1)?).ok()
 }

@@ -597,6 +597,7 @@ pub(crate) fn read_range(
                     name: t.to_string(),
                     numeric_type: true,
                     radius: None,
+                    palette_slot: super::atoms::type_number_slot(t.to_string().as_bytes()),
                     ..Default::default()
                 })
                 .collect();

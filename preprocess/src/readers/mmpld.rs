@@ -459,6 +459,7 @@ fn species_of(
                 radius: (list.particles > 0 || radius > 0.0).then_some(radius),
                 radius_range: spread,
                 colour: list.global_colour,
+                palette_slot: None,
             })
         })
         .collect()
