@@ -6,7 +6,8 @@
 //! ```
 //!
 //! Only `version` is required. A file without `target` or `distance` is fitted to the
-//! data's bounds (`zoom` then moves closer: 2 is twice as close as the fit). Unknown
+//! data's bounds; `zoom` then moves closer (2 is twice as close as the fit, or as
+//! `distance`: a saved view, whose zoom is 1, is zoomed by editing it). Unknown
 //! fields are ignored, so later minor versions may add some; a file of another major
 //! version is refused with a message naming both. Near and far planes are not stored:
 //! they are recomputed from the data's bounds.
@@ -51,7 +52,7 @@ pub struct ViewFile {
     /// Eye-to-target distance; fitted to the data when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distance: Option<f32>,
-    /// Zoom relative to the fitted distance (used only when `distance` is absent).
+    /// Moves closer by this factor: from the fitted distance, or from `distance`.
     #[serde(default = "default_zoom")]
     pub zoom: f32,
     #[serde(default = "default_fov")]
@@ -162,10 +163,10 @@ impl ViewFile {
             ..Default::default()
         };
         c.fit(bounds, aspect);
-        match self.distance {
-            Some(d) => c.distance = d,
-            None => c.zoom(self.zoom),
+        if let Some(d) = self.distance {
+            c.distance = d;
         }
+        c.zoom(self.zoom);
         if let Some(t) = self.target {
             c.target = Vec3::from(t);
         }
@@ -208,6 +209,30 @@ mod tests {
             ),
             (12.0, -40.0, 45.0, Projection::Orthographic)
         );
+    }
+
+    /// A saved view (distance given, zoom 1) is zoomed by editing its zoom: 2 halves the
+    /// distance, in either projection (the orthographic height follows the distance).
+    #[test]
+    fn zoom_applies_to_a_given_distance() {
+        let bounds = Bounds {
+            min: Vec3::ZERO,
+            max: Vec3::splat(10.0),
+        };
+        for projection in ["perspective", "orthographic"] {
+            let text = |zoom: f32| {
+                format!(
+                    r#"{{"version": 1, "projection": "{projection}", "distance": 100, "zoom": {zoom}}}"#
+                )
+            };
+            let one = ViewFile::parse(&text(1.0)).unwrap().to_camera(&bounds, 1.5);
+            let two = ViewFile::parse(&text(2.0)).unwrap().to_camera(&bounds, 1.5);
+            assert_eq!((one.distance, two.distance), (100.0, 50.0), "{projection}");
+            // Saving the zoomed camera stores the distance it came to, with zoom 1.
+            let saved = ViewFile::from_camera(&two);
+            assert_eq!((saved.distance, saved.zoom), (Some(50.0), 1.0));
+            assert_eq!(saved.to_camera(&bounds, 1.5).distance, 50.0);
+        }
     }
 
     #[test]

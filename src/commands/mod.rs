@@ -15,6 +15,20 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 
+/// Refuses an image name whose extension says another format than the PNG written
+/// (`x.jpg` would hold PNG data under a JPEG name); a name without an extension is
+/// taken as it is.
+pub fn check_png_name(option: &str, output: &Path) -> Result<()> {
+    match output.extension().and_then(|e| e.to_str()) {
+        Some(e) if !e.eq_ignore_ascii_case("png") => bail!(
+            "{option} {}: mdlod writes PNG images; name the output .png (convert it \
+             afterwards for another format)",
+            output.display()
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// Refuses, before any work, an output that cannot or must not be written: an existing
 /// directory, or the same file as one of `inputs` (outputs are written to a temporary
 /// file and renamed over the path, which would replace the input). `option` names the
@@ -128,6 +142,15 @@ mod tests {
         assert!(e.to_string().contains("is the input"), "{e}");
         let e = check_output("--save-view", &input, &[("view", &input)]).unwrap_err();
         assert!(e.to_string().contains("the view file"), "{e}");
+        for bad in ["x.jpg", "x.JPEG", "movie/x.tif"] {
+            let e = check_png_name("-o", Path::new(bad))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("writes PNG images"), "{e}");
+        }
+        for good in ["x.png", "x.PNG", "x", "dir.d/x.png"] {
+            check_png_name("-o", Path::new(good)).unwrap();
+        }
         let e = check_output("-o", dir.path(), &[("", &input)]).unwrap_err();
         assert!(e.to_string().contains("is a directory"), "{e}");
         // A new file, or another existing one, is fine.

@@ -117,7 +117,11 @@ pub struct StyleArgs {
     /// A species' colour, e.g. `Cu=#c87533`; repeatable. Exact for particles, and for
     /// clusters where the file has at most three species of independent colours (else a
     /// least-squares fit of their mixtures).
-    #[arg(long = "species-colour", value_name = "NAME=COLOUR")]
+    #[arg(
+        long = "species-colour",
+        value_name = "NAME=COLOUR",
+        conflicts_with = "colour_map"
+    )]
     pub species_colour: Vec<String>,
     /// A species' radius, e.g. `Ag=1.6`; repeatable.
     #[arg(long = "species-radius", value_name = "NAME=R")]
@@ -403,6 +407,7 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 pub fn run(args: Args) -> Result<()> {
     let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
+    super::check_png_name("-o", &args.output)?;
     if let Some(p) = &args.save_view {
         super::check_output("--save-view", p, &inputs)?;
         if p == &args.output || super::same_file(p, &args.output) {

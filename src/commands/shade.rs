@@ -109,6 +109,7 @@ pub fn run(args: Args) -> Result<()> {
         .chain(args.transfer.as_deref().map(|p| ("--transfer", p)))
         .collect::<Vec<_>>();
     super::check_output("-o", &args.output, &inputs)?;
+    super::check_png_name("-o", &args.output)?;
     for (option, v) in [
         ("--ambient", args.ambient),
         ("--diffuse", args.diffuse),
