@@ -2292,3 +2292,96 @@ fn viewing_a_batch_whose_shards_are_not_merged_says_to_merge_them() {
         "{err}"
     );
 }
+
+/// A movie colours every frame over one attribute range: two frames whose values differ
+/// tenfold render alike with each file's own range, and differently over `--attribute-range`
+/// (as colours and as splat intensities). The option needs something that reads the
+/// attribute.
+#[test]
+fn an_attribute_range_colours_every_frame_alike() {
+    let dir = tempfile::tempdir().unwrap();
+    let cold = dir.path().join("cold.lammpstrj");
+    generate(&["alloy", "-n", "4000"], &cold);
+    let text = std::fs::read_to_string(&cold).unwrap();
+    let mut atoms = false;
+    let hot: Vec<String> = text
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            if atoms && f.len() == 6 {
+                let v: f64 = f[5].parse().unwrap();
+                format!("{} {} {} {} {} {}", f[0], f[1], f[2], f[3], f[4], v * 10.0)
+            } else {
+                atoms |= l.starts_with("ITEM: ATOMS");
+                l.to_string()
+            }
+        })
+        .collect();
+    let hot_path = dir.path().join("hot.lammpstrj");
+    std::fs::write(&hot_path, hot.join("\n") + "\n").unwrap();
+    let render = |input: &Path, extra: &[&str]| -> Vec<u8> {
+        let file = input.with_extension("mdlod");
+        if !file.exists() {
+            ok(&["convert", s(input), "-o", s(&file), "--attribute", "c_pe"]);
+        }
+        let png = dir.path().join("out.png");
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "64",
+            "--height",
+            "48",
+        ];
+        args.extend(extra);
+        ok(&args);
+        std::fs::read(&png).unwrap()
+    };
+    for mode in [
+        &["--colour-map", "viridis"][..],
+        &[
+            "--mode",
+            "splat",
+            "--intensity",
+            "attribute",
+            "--exposure",
+            "0.5",
+        ][..],
+    ] {
+        assert_eq!(render(&cold, mode), render(&hot_path, mode), "{mode:?}");
+        let ranged: Vec<&str> = mode
+            .iter()
+            .copied()
+            .chain(["--attribute-range", "-40:0"])
+            .collect();
+        assert_ne!(
+            render(&cold, &ranged),
+            render(&hot_path, &ranged),
+            "{mode:?}"
+        );
+    }
+    let file = cold.with_extension("mdlod");
+    let png = dir.path().join("x.png");
+    let err = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--attribute-range",
+        "0:1",
+    ]);
+    assert!(err.contains("no effect without --colour-map"), "{err}");
+    let err = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--colour-map",
+        "grey",
+        "--attribute-range",
+        "2:1",
+    ]);
+    assert!(err.contains("MAX must be above MIN"), "{err}");
+}

@@ -560,9 +560,13 @@ pub fn render_image(
 pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
     match opts.mode {
         RenderMode::Spheres | RenderMode::Sndf { .. } => (PackStyle::Spheres, opts.style.clone()),
-        RenderMode::Splat { by_attribute: true } => {
-            (PackStyle::FluxAttribute, PointStyle::default())
-        }
+        RenderMode::Splat { by_attribute: true } => (
+            PackStyle::FluxAttribute,
+            PointStyle {
+                attribute_range: opts.style.attribute_range,
+                ..Default::default()
+            },
+        ),
         RenderMode::Splat { .. } | RenderMode::SplatOver { .. } | RenderMode::Density(_) => {
             (PackStyle::FluxColour, PointStyle::default())
         }

@@ -122,6 +122,11 @@ pub struct PointStyle {
     pub radius_scale: f32,
     /// Colour by the scalar attribute instead of by species.
     pub colour_map: Option<ColourMap>,
+    /// The attribute values that map to the colour map's ends (and to splat
+    /// intensities 0 and 1), instead of the file's own range: the same in every frame of
+    /// a trajectory, so that a colour means one value throughout a movie.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attribute_range: Option<[f32; 2]>,
 }
 
 impl Default for PointStyle {
@@ -130,6 +135,7 @@ impl Default for PointStyle {
             species: vec![],
             radius_scale: 1.0,
             colour_map: None,
+            attribute_range: None,
         }
     }
 }
@@ -271,6 +277,13 @@ impl PointStyle {
                 ));
             }
         }
+        if let Some([lo, hi]) = self.attribute_range {
+            if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+                return Err(format!(
+                    "attribute range {lo} to {hi} (finite, the second above the first)"
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -288,6 +301,8 @@ pub struct AttributeScale {
     min: f32,
     max: f32,
     constant: bool,
+    /// The range shown instead of `min..max` ([`PointStyle::attribute_range`]).
+    shown: Option<[f32; 2]>,
 }
 
 impl AttributeScale {
@@ -303,6 +318,16 @@ impl AttributeScale {
             max: info.max,
             // Also constant: a range that is no range (non-finite or reversed ends).
             constant: !(max - min > rounding && (max - min).is_finite()),
+            shown: None,
+        }
+    }
+
+    /// The file's attribute (`info`) shown over `range` instead of its own: values map
+    /// linearly from `range` to [0, 1], clamped, a constant attribute included.
+    pub fn with_range(info: &mdlod_format::meta::AttributeInfo, range: Option<[f32; 2]>) -> Self {
+        AttributeScale {
+            shown: range,
+            ..Self::new(info)
         }
     }
 
@@ -313,16 +338,17 @@ impl AttributeScale {
 
     /// A value (a cluster's mean) in [0, 1].
     pub fn of_value(&self, v: f32) -> f32 {
-        if self.constant {
-            return 1.0;
-        }
-        let span = self.max - self.min;
+        let (lo, hi) = match self.shown {
+            Some([lo, hi]) => (lo, hi),
+            None if self.constant => return 1.0,
+            None => (self.min, self.max),
+        };
+        let span = hi - lo;
         let t = if span.is_finite() {
-            (v - self.min) / span
+            (v - lo) / span
         } else {
             // Ends of opposite signs near f32::MAX: their difference overflows f32.
-            ((f64::from(v) - f64::from(self.min)) / (f64::from(self.max) - f64::from(self.min)))
-                as f32
+            ((f64::from(v) - f64::from(lo)) / (f64::from(hi) - f64::from(lo))) as f32
         };
         if t.is_nan() {
             0.0
@@ -334,7 +360,15 @@ impl AttributeScale {
     /// A particle's quantized value `q` (FORMAT.md: `min + (max − min) · q / 65535`) in
     /// [0, 1].
     pub fn of_quantized(&self, q: u16) -> f32 {
-        if self.constant {
+        if self.shown.is_some() {
+            let (min, max) = (f64::from(self.min), f64::from(self.max));
+            let value = if self.constant {
+                min
+            } else {
+                min + (max - min) * f64::from(q) / 65535.0
+            };
+            self.of_value(value as f32)
+        } else if self.constant {
             1.0
         } else {
             f32::from(q) / 65535.0
@@ -342,7 +376,6 @@ impl AttributeScale {
     }
 }
 
-/// Packs a linear RGB colour as the file's node colours are: RGBA8, R in the low byte.
 fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
@@ -389,6 +422,7 @@ pub fn unpack_colour(c: u32) -> [f32; 3] {
     [0, 8, 16].map(|shift| ((c >> shift) & 0xff) as f32 / 255.0)
 }
 
+/// Packs a linear RGB colour as the file's node colours are: RGBA8, R in the low byte.
 pub fn pack_colour(c: [f32; 3]) -> u32 {
     let b = c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32);
     b[0] | (b[1] << 8) | (b[2] << 16) | (255 << 24)
@@ -521,6 +555,61 @@ mod tests {
         assert!(l.windows(2).all(|w| w[1] > w[0]), "{l:?}");
     }
 
+    /// A shown range maps values from it, not from each file's own range: a frame whose
+    /// values are ten times another's maps each value ten times further, and a constant
+    /// attribute to its place in the range.
+    #[test]
+    fn a_shown_attribute_range_is_the_same_for_every_file() {
+        let info = |min: f32, max: f32| mdlod_format::meta::AttributeInfo {
+            name: "c_ke".into(),
+            min,
+            max,
+        };
+        let range = Some([0.0, 8.0]);
+        let cold = AttributeScale::with_range(&info(0.0367, 0.7203), range);
+        let hot = AttributeScale::with_range(&info(0.367, 7.203), range);
+        assert_eq!(cold.of_value(0.5), 0.0625);
+        assert_eq!(hot.of_value(5.0), 0.625);
+        assert_eq!(hot.of_value(9.0), 1.0);
+        // Quantized particle values: the file's range, then the shown one.
+        for q in [0u16, 1000, 65535] {
+            let value = |i: &mdlod_format::meta::AttributeInfo| {
+                f64::from(i.min) + f64::from(i.max - i.min) * f64::from(q) / 65535.0
+            };
+            let (c, h) = (value(&info(0.0367, 0.7203)), value(&info(0.367, 7.203)));
+            assert!(
+                (f64::from(cold.of_quantized(q)) - c / 8.0).abs() < 1e-6,
+                "{q}"
+            );
+            assert!(
+                (f64::from(hot.of_quantized(q)) - h / 8.0).abs() < 1e-6,
+                "{q}"
+            );
+        }
+        // Without a range, both span the whole map.
+        let own = AttributeScale::new(&info(0.367, 7.203));
+        assert_eq!((own.of_quantized(0), own.of_quantized(65535)), (0.0, 1.0));
+        // A constant attribute at its value's place.
+        let constant = AttributeScale::with_range(&info(2.0, 2.0), range);
+        assert_eq!(
+            (constant.of_value(2.0), constant.of_quantized(7)),
+            (0.25, 0.25)
+        );
+        // Ranges that are none are refused.
+        for bad in [
+            [1.0, 1.0],
+            [2.0, 1.0],
+            [0.0, f32::INFINITY],
+            [f32::NAN, 1.0],
+        ] {
+            let style = PointStyle {
+                attribute_range: Some(bad),
+                ..Default::default()
+            };
+            assert!(style.validate().is_err(), "{bad:?}");
+        }
+    }
+
     #[test]
     fn attribute_scales_map_ranges_linearly_and_constants_to_one() {
         let scale = |min: f32, max: f32| {
@@ -580,6 +669,7 @@ mod tests {
             ],
             radius_scale: 2.0,
             colour_map: None,
+            attribute_range: None,
         };
         let file = [sp("A", 1.0), sp("B", 1.5), sp("C", 0.5)];
         let t = style.species_table(&file).unwrap();

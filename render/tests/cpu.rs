@@ -908,6 +908,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             ],
             radius_scale: 1.5,
             colour_map: map,
+            attribute_range: None,
         };
         let packed = pack_styled(&f, &d, PackStyle::Spheres, &style).unwrap();
         assert_eq!(packed.points(), base.points());

@@ -102,6 +102,7 @@ pub fn run(args: Args) -> Result<()> {
             species_colour: vec![],
             species_radius: vec![],
             hide_species: vec![],
+            attribute_range: None,
         },
         save_view: None,
     })?;

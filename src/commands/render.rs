@@ -130,6 +130,30 @@ pub struct StyleArgs {
     /// include them); repeatable.
     #[arg(long = "hide-species", value_name = "NAME")]
     pub hide_species: Vec<String>,
+    /// The attribute values at the ends of --colour-map (and of --intensity attribute),
+    /// e.g. `0:2.5`, instead of each file's own range: the same colours for the same
+    /// values in every frame of a movie.
+    #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true, value_parser = parse_range)]
+    pub attribute_range: Option<[f32; 2]>,
+}
+
+/// Parses `MIN:MAX` (finite, MAX above MIN).
+pub fn parse_range(s: &str) -> Result<[f32; 2], String> {
+    let (lo, hi) = s
+        .split_once(':')
+        .ok_or_else(|| format!("{s:?}: expected MIN:MAX, e.g. 0:2.5"))?;
+    let num = |v: &str| -> Result<f32, String> {
+        v.trim()
+            .parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("{s:?}: {v:?} is not a finite number"))
+    };
+    let (lo, hi) = (num(lo)?, num(hi)?);
+    if hi <= lo {
+        return Err(format!("{s:?}: MAX must be above MIN"));
+    }
+    Ok([lo, hi])
 }
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
@@ -188,6 +212,7 @@ impl StyleArgs {
         Ok(mdlod_render::PointStyle {
             species,
             radius_scale: self.radius_scale,
+            attribute_range: self.attribute_range,
             colour_map: self.colour_map.map(|m| match m {
                 ColourMapArg::Viridis => ColourMap::Viridis,
                 ColourMapArg::Magma => ColourMap::Magma,
@@ -292,6 +317,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("species_colour", STYLED),
         ("species_radius", STYLED),
         ("hide_species", STYLED),
+        ("attribute_range", &[Spheres, Sndf, Splat]),
     ]
 };
 
@@ -304,6 +330,14 @@ fn mode_name(mode: Mode) -> String {
 /// Refuses an option given on the command line (`matches`: the `render` subcommand's)
 /// that the chosen mode does not read.
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
+    let by_attribute = args.style.colour_map.is_some()
+        || (args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute));
+    if args.style.attribute_range.is_some() && !by_attribute {
+        anyhow::bail!(
+            "--attribute-range has no effect without --colour-map (spheres, sndf) or \
+             --intensity attribute (splat)"
+        );
+    }
     for (id, modes) in MODE_OPTIONS {
         let given = matches!(
             matches.value_source(id),

@@ -59,6 +59,9 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
+    if args.style.attribute_range.is_some() && args.style.colour_map.is_none() {
+        anyhow::bail!("--attribute-range has no effect without --colour-map");
+    }
     let opts = RenderOptions {
         width: args.camera.width,
         height: args.camera.height,

@@ -400,6 +400,8 @@ impl AttrPacker {
     /// Checks `look` against `file` (a colour map or attribute intensities need the
     /// attribute; styled species must exist). `look` applies to spheres only.
     pub fn new(file: &MdlodFile, style: PackStyle, look: &PointStyle) -> Result<Self, RenderError> {
+        // The attribute's shown range serves the intensities of splats too.
+        let range = look.attribute_range;
         let default_look = PointStyle::default();
         let look = if style == PackStyle::Spheres {
             look
@@ -407,11 +409,17 @@ impl AttrPacker {
             &default_look
         };
         look.validate().map_err(RenderError::InvalidOptions)?;
+        PointStyle {
+            attribute_range: range,
+            ..Default::default()
+        }
+        .validate()
+        .map_err(RenderError::InvalidOptions)?;
         let meta = file.metadata();
         let attribute = |what: &str| {
             meta.attribute
                 .as_ref()
-                .map(AttributeScale::new)
+                .map(|info| AttributeScale::with_range(info, range))
                 .ok_or_else(|| {
                     RenderError::InvalidOptions(format!(
                         "{} has no per-particle attribute to {what}",
