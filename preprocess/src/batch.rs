@@ -125,6 +125,22 @@ pub struct BatchOptions {
     pub memory_limit: u64,
     /// Most concurrent conversions (default: the number of threads).
     pub max_jobs: Option<usize>,
+    /// What to do with frames of one timestep (a run restarted into the same dump).
+    pub duplicates: Duplicates,
+}
+
+/// What a batch does with frames that have the same timestep (in the order the inputs
+/// and their frames are given).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Duplicates {
+    /// Refuse the batch, naming two of them.
+    #[default]
+    Error,
+    /// Convert the first and leave out the others.
+    First,
+    /// Convert the last (a restarted run's frames supersede the ones before the restart)
+    /// and leave out the others.
+    Last,
 }
 
 /// A frame without particles, which a batch leaves out: a `.mdlod` file needs at least
@@ -177,6 +193,9 @@ pub struct BatchReport {
     /// Files named like frames in the batch directory that no frame of the inputs (in
     /// any shard) is written to: left by a run over other or longer inputs.
     pub strays: Vec<String>,
+    /// The frames left out as duplicates of a timestep ([`BatchOptions::duplicates`]),
+    /// each with the one converted instead.
+    pub duplicates: Vec<String>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -191,7 +210,7 @@ pub enum BatchError {
         #[source]
         source: std::io::Error,
     },
-    #[error("timestep {timestep} appears twice: {first} and {second}")]
+    #[error("timestep {timestep} appears twice: {first} and {second} (a run restarted into the same dump? --duplicate-timesteps last keeps the later frame of each, first the earlier)")]
     DuplicateTimestep {
         timestep: u64,
         first: String,
@@ -672,17 +691,43 @@ pub fn batch(
             }
         }
     }
-    let frames_total = jobs.len();
+    // Stable: frames of one timestep stay in the order of the inputs and their frames.
     jobs.sort_by_key(|j| j.timestep);
-    for w in jobs.windows(2) {
-        if w[0].timestep == w[1].timestep {
+    let place = |j: &Job<'_>| format!("{} frame {}", j.input.display(), j.frame);
+    let mut duplicates = Vec::new();
+    if opts.duplicates == Duplicates::Error {
+        if let Some(w) = jobs.windows(2).find(|w| w[0].timestep == w[1].timestep) {
             return Err(BatchError::DuplicateTimestep {
                 timestep: w[0].timestep,
-                first: format!("{} frame {}", w[0].input.display(), w[0].frame),
-                second: format!("{} frame {}", w[1].input.display(), w[1].frame),
+                first: place(&w[0]),
+                second: place(&w[1]),
             });
         }
+    } else {
+        let mut kept: Vec<Job<'_>> = Vec::with_capacity(jobs.len());
+        let mut rest = jobs.into_iter().peekable();
+        while let Some(first) = rest.next() {
+            let mut group = vec![first];
+            while let Some(next) = rest.next_if(|j| j.timestep == group[0].timestep) {
+                group.push(next);
+            }
+            let keep = match opts.duplicates {
+                Duplicates::Last => group.len() - 1,
+                _ => 0,
+            };
+            for (_, j) in group.iter().enumerate().filter(|(i, _)| *i != keep) {
+                duplicates.push(format!(
+                    "timestep {}: {} left out, {} converted",
+                    j.timestep,
+                    place(j),
+                    place(&group[keep])
+                ));
+            }
+            kept.extend(group.into_iter().nth(keep));
+        }
+        jobs = kept;
     }
+    let frames_total = jobs.len();
     // Frame files no frame of these inputs is written to (a run over other or longer
     // inputs left them): named, left alone.
     let numbers: std::collections::HashSet<u64> = jobs.iter().map(|j| j.timestep).collect();
@@ -1013,6 +1058,7 @@ pub fn batch(
     Ok(BatchReport {
         removed_merged,
         strays,
+        duplicates,
         frames_total,
         frames_in_shard,
         converted: converted.into_inner(),

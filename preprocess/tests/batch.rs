@@ -1117,3 +1117,59 @@ fn the_same_input_by_another_path_is_not_converted_again() {
     let r = batch(&[copy], &out, &opts(), &NoProgress).unwrap();
     assert_eq!(r.converted, 6);
 }
+
+/// A run restarted into the same dump repeats timesteps: refused by default with the
+/// way out named; with `Last` the later frame of each converts (its source frame is
+/// recorded), with `First` the earlier; the others are reported.
+#[test]
+fn duplicate_timesteps_are_refused_or_resolved_as_asked() {
+    use mdlod_preprocess::batch::Duplicates;
+    let dir = tempfile::tempdir().unwrap();
+    // The real dump's first frame four times, as timesteps 0, 100, 100, 200.
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    // Its frames begin `ITEM: TIME`, then `ITEM: TIMESTEP`.
+    let start = text.find("ITEM: TIMESTEP").unwrap();
+    let end = start + text[start..].find("ITEM: TIME\n").unwrap();
+    let first_frame = &text[start..end];
+    let step_line = first_frame.lines().nth(1).unwrap();
+    let mut dump = String::new();
+    for t in [0, 100, 100, 200] {
+        dump.push_str(&first_frame.replacen(
+            &format!("ITEM: TIMESTEP\n{step_line}\n"),
+            &format!("ITEM: TIMESTEP\n{t}\n"),
+            1,
+        ));
+    }
+    let src = dir.path().join("restarted.dump");
+    std::fs::write(&src, dump).unwrap();
+    let e = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("e"),
+        &opts(),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("timestep 100 appears twice") && e.contains("--duplicate-timesteps last"),
+        "{e}"
+    );
+    for (policy, frame) in [(Duplicates::Last, 2), (Duplicates::First, 1)] {
+        let out = dir.path().join(format!("{policy:?}"));
+        let o = BatchOptions {
+            duplicates: policy,
+            ..opts()
+        };
+        let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        assert_eq!((r.frames_total, r.converted), (3, 3));
+        assert_eq!(r.duplicates.len(), 1, "{:?}", r.duplicates);
+        let m = read_manifest(&out).unwrap();
+        let hundred = m.frames.iter().find(|f| f.timestep == 100).unwrap();
+        assert_eq!(hundred.source.frame, frame, "{policy:?}");
+        assert!(
+            r.duplicates[0].contains(&format!("frame {frame} converted")),
+            "{:?}",
+            r.duplicates
+        );
+    }
+}

@@ -40,8 +40,20 @@ pub struct Args {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Frames with the same timestep (a run restarted into the same dump, or inputs
+    /// that overlap): an error, or convert the first or the last of each (in the order
+    /// of the inputs and their frames) and leave the others out.
+    #[arg(long, value_enum, default_value = "error")]
+    pub duplicate_timesteps: DuplicatesArg,
     #[command(flatten)]
     pub build: BuildArgs,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum DuplicatesArg {
+    Error,
+    First,
+    Last,
 }
 
 /// Parses `I/N`.
@@ -194,6 +206,11 @@ fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
             .memory_limit
             .unwrap_or_else(mdlod_preprocess::chunked::default_memory_limit),
         max_jobs: None,
+        duplicates: match args.duplicate_timesteps {
+            DuplicatesArg::Error => mdlod_preprocess::batch::Duplicates::Error,
+            DuplicatesArg::First => mdlod_preprocess::batch::Duplicates::First,
+            DuplicatesArg::Last => mdlod_preprocess::batch::Duplicates::Last,
+        },
     };
     let report = with_threads(args.threads, || {
         batch(&args.inputs, out, &opts, &Bar::new())
@@ -204,6 +221,19 @@ fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
              once every shard has finished",
             merged.display(),
             out.display()
+        );
+    }
+    if !report.duplicates.is_empty() {
+        let n = report.duplicates.len();
+        println!(
+            "note: {n} frame{} left out as duplicate timesteps: {}{}",
+            if n == 1 { "" } else { "s" },
+            report.duplicates[..n.min(3)].join("; "),
+            if n > 3 {
+                format!("; and {} more", n - 3)
+            } else {
+                String::new()
+            }
         );
     }
     if !report.strays.is_empty() {
