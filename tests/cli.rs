@@ -2385,3 +2385,39 @@ fn an_attribute_range_colours_every_frame_alike() {
     ]);
     assert!(err.contains("MAX must be above MIN"), "{err}");
 }
+
+/// A batch directory renders as a movie: one image per frame in time order, all with
+/// the camera fitted to every frame's bounds; a frame rendered alone with the saved view
+/// is the same image. The output must number the frames.
+#[test]
+fn a_batch_directory_renders_every_frame_with_one_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("t.lammpstrj");
+    generate(&["droplets", "-n", "3000", "--frames", "3"], &dump);
+    let d = dir.path().join("t.d");
+    ok(&["batch", s(&dump), "-o", s(&d)]);
+    let pattern = dir.path().join("movie").join("f-%03d.png");
+    let view = dir.path().join("v.json");
+    let size = ["--width", "48", "--height", "32"];
+    let mut args = vec!["render", s(&d), "-o", s(&pattern), "--save-view", s(&view)];
+    args.extend(size);
+    let out = ok(&args);
+    assert!(out.contains("rendered 3 frames"), "{out}");
+    let manifest = mdlod_preprocess::batch::read_manifest(&d).unwrap();
+    for (i, f) in manifest.frames.iter().enumerate() {
+        let image = dir.path().join("movie").join(format!("f-{i:03}.png"));
+        assert!(out.contains(&format!("timestep {}", f.timestep)), "{out}");
+        let alone = dir.path().join("alone.png");
+        let file = d.join(&f.file);
+        let mut args = vec!["render", s(&file), "-o", s(&alone), "--view", s(&view)];
+        args.extend(size);
+        ok(&args);
+        assert_eq!(
+            std::fs::read(&image).unwrap(),
+            std::fs::read(&alone).unwrap(),
+            "{i}"
+        );
+    }
+    let err = fails(&["render", s(&d), "-o", s(&dir.path().join("one.png"))]);
+    assert!(err.contains("one image per frame"), "{err}");
+}

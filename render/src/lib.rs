@@ -307,6 +307,17 @@ pub fn camera_for(
     camera_in(&data_bounds(file), view, width, height)
 }
 
+/// [`camera_for`] data within `bounds` (the union of several files' bounds, to frame a
+/// whole trajectory alike).
+pub fn camera_for_bounds(
+    bounds: &Bounds,
+    view: &ViewSpec,
+    width: u32,
+    height: u32,
+) -> Result<Camera, RenderError> {
+    camera_in(bounds, view, width, height)
+}
+
 /// [`camera_for`] data within `bounds`.
 fn camera_in(
     bounds: &Bounds,
@@ -787,9 +798,23 @@ pub fn render_to_png_with(
     let file = MdlodFile::open(file)?;
     let mut renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     renderer.set_progress(progress);
+    let mut report = render_file_to_png(&renderer, file, out, opts)?;
+    report.total_time = t0.elapsed();
+    Ok(report)
+}
+
+/// [`render_to_png`] on a renderer that is already open (frames of a movie share one).
+pub fn render_file_to_png(
+    renderer: &Renderer,
+    file: MdlodFile,
+    out: &Path,
+    opts: &RenderOptions,
+) -> Result<RenderReport, RenderError> {
+    let t0 = Instant::now();
+    check_numbers(opts)?;
     let (image, mut report) = match opts.gpu_memory {
-        None => render_image(&renderer, &file, opts)?,
-        Some(pool) => render_streaming(&renderer, std::sync::Arc::new(file), opts, pool)?,
+        None => render_image(renderer, &file, opts)?,
+        Some(pool) => render_streaming(renderer, std::sync::Arc::new(file), opts, pool)?,
     };
     image.save_png(out)?;
     report.total_time = t0.elapsed();

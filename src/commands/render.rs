@@ -1,6 +1,6 @@
 //! `mdlod render`: a `.mdlod` file to a PNG, headless.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mdlod_render::{
@@ -15,10 +15,11 @@ use crate::progress::Bar;
 #[derive(clap::Args)]
 #[command(
     allow_negative_numbers = true,
-    after_help = "Examples:\n  mdlod render frame.mdlod -o frame.png --azimuth 30 --elevation 20 --spp 4\n  mdlod render frame.mdlod -o close.png --view close.json --screen-error 0.5\n  mdlod render frame.mdlod -o big.png --gpu-memory 512M --save-view view.json"
+    after_help = "Examples:\n  mdlod render frame.mdlod -o frame.png --azimuth 30 --elevation 20 --spp 4\n  mdlod render frame.mdlod -o close.png --view close.json --screen-error 0.5\n  mdlod render frame.mdlod -o big.png --gpu-memory 512M --save-view view.json\n  mdlod render traj.d -o movie/frame-%05d.png --colour-map viridis --attribute-range 0:2"
 )]
 pub struct Args {
-    /// The .mdlod file to render.
+    /// The .mdlod file to render, or a batch directory (every frame of its dataset.json,
+    /// one image each: -o must number them, e.g. movie/frame-%05d.png).
     pub file: PathBuf,
     /// The PNG to write.
     #[arg(short, long)]
@@ -497,6 +498,9 @@ pub fn run(args: Args) -> Result<()> {
         style: args.style.style()?,
         ..Default::default()
     };
+    if args.file.is_dir() {
+        return render_frames(&args, opts);
+    }
     // A bar for the choice of the cut and for cuts drawn in several batches or samples
     // (every particle of 10^8 is nine batches).
     let r = render_to_png_with(&args.file, &args.output, &opts, Bar::for_renderer())?;
@@ -575,10 +579,129 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
+/// The image of frame `index` of a movie: `pattern` with its `%d` or `%0Nd` (as
+/// ffmpeg reads them) replaced by the index.
+fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
+    let name = pattern
+        .file_name()
+        .and_then(|n| n.to_str())
+        .with_context(|| format!("-o {}: no file name", pattern.display()))?;
+    let bad = || {
+        anyhow::anyhow!(
+            "-o {}: a batch directory renders one image per frame: give a name with one %d \
+             or %05d for the frame's number, e.g. movie/frame-%05d.png",
+            pattern.display()
+        )
+    };
+    let start = name.find('%').ok_or_else(bad)?;
+    let rest = &name[start + 1..];
+    let digits = rest.bytes().take_while(u8::is_ascii_digit).count();
+    // `%d` or `%0Nd`: digits without a leading 0 would pad with spaces.
+    let padded = digits == 0 || rest.starts_with('0');
+    if !padded || rest.as_bytes().get(digits) != Some(&b'd') || rest[digits + 1..].contains('%') {
+        return Err(bad());
+    }
+    let width: usize = if digits == 0 {
+        0
+    } else {
+        rest[..digits].parse().map_err(|_| bad())?
+    };
+    let file = format!("{}{index:0width$}{}", &name[..start], &rest[digits + 1..]);
+    Ok(pattern.with_file_name(file))
+}
+
+/// Renders every frame of a batch directory (`args.file`) in its manifest's order, one
+/// image each, all with one camera (fitted to the union of the frames' bounds, so that
+/// nothing leaves the picture) and, for splats, the first frame's exposure: a movie.
+fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
+    let dir = &args.file;
+    let manifest = mdlod_preprocess::batch::read_manifest(dir).with_context(|| {
+        format!(
+            "{}: a directory renders as the frames of a batch, listed in its dataset.json",
+            dir.display()
+        )
+    })?;
+    let n = manifest.frames.len();
+    if n == 0 {
+        anyhow::bail!("{}: dataset.json lists no frames", dir.display());
+    }
+    frame_output(&args.output, 0)?;
+    let mut bounds: Option<mdlod_render::Bounds> = None;
+    for f in &manifest.frames {
+        let path = dir.join(&f.file);
+        let file = mdlod_format::MdlodFile::open(&path)?;
+        let b = mdlod_render::data_bounds(&file);
+        bounds = Some(match bounds {
+            None => b,
+            Some(a) => mdlod_render::Bounds::new(a.min.min(b.min), a.max.max(b.max)),
+        });
+    }
+    let bounds = bounds.expect("at least one frame");
+    let camera = mdlod_render::camera_for_bounds(&bounds, &opts.view, opts.width, opts.height)?;
+    opts.view = ViewSpec::Camera(camera.clone());
+    if let Some(parent) = args.output.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
+    let t0 = std::time::Instant::now();
+    let renderer =
+        mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
+    for (i, f) in manifest.frames.iter().enumerate() {
+        let out = frame_output(&args.output, i)?;
+        let file = mdlod_format::MdlodFile::open(dir.join(&f.file))?;
+        let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
+        if i == 0 && opts.exposure.is_none() {
+            // Splats: one exposure for every frame, or the brightness drifts.
+            opts.exposure = r.exposure;
+        }
+        println!(
+            "wrote {} (frame {}/{n}, timestep {}): {} particles and {} cluster spheres, {:.0} ms",
+            out.display(),
+            i + 1,
+            f.timestep,
+            r.particles_drawn,
+            r.nodes_drawn,
+            r.total_time.as_secs_f64() * 1e3
+        );
+    }
+    let exposure = opts
+        .exposure
+        .map_or(String::new(), |e| format!(", splat exposure {e:.4e}"));
+    println!(
+        "rendered {n} frames in {:.1} s, one camera for all (fitted to every frame's bounds){exposure}",
+        t0.elapsed().as_secs_f64()
+    );
+    if let Some(p) = &args.save_view {
+        ViewFile::from_camera(&camera)
+            .save(p)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        println!("  view saved to {}", p.display());
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use clap::Args as _;
+
+    #[test]
+    fn movie_names_take_the_frame_number_as_ffmpeg_reads_them() {
+        let name = |p: &str, i| frame_output(Path::new(p), i).map(|p| p.display().to_string());
+        assert_eq!(name("m/f-%05d.png", 7).unwrap(), "m/f-00007.png");
+        assert_eq!(name("%d.png", 12).unwrap(), "12.png");
+        assert_eq!(name("x%03dy.png", 4).unwrap(), "x004y.png");
+        for bad in [
+            "m/f.png",
+            "f-%s.png",
+            "f-%d-%d.png",
+            "f-%5.png",
+            "f-%3d.png",
+        ] {
+            let e = name(bad, 0).unwrap_err().to_string();
+            assert!(e.contains("one image per frame"), "{bad}: {e}");
+        }
+    }
 
     #[test]
     fn every_mode_option_names_an_argument_of_render() {
