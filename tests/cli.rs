@@ -2421,3 +2421,67 @@ fn a_batch_directory_renders_every_frame_with_one_camera() {
     let err = fails(&["render", s(&d), "-o", s(&dir.path().join("one.png"))]);
     assert!(err.contains("one image per frame"), "{err}");
 }
+
+/// A movie of a trajectory whose species come and go: a style may name a species some
+/// frames lack (it applies where present); one no frame has is an error listing them.
+#[test]
+fn a_movie_styles_species_that_only_some_frames_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("a.lammpstrj");
+    generate(&["alloy", "-n", "2000", "--frames", "2"], &dump);
+    // The first frame: type 1 only.
+    let text = std::fs::read_to_string(&dump).unwrap();
+    let mut atoms = false;
+    let mut frame = 0;
+    let edited: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("ITEM: TIMESTEP") {
+                frame += 1;
+                atoms = false;
+            }
+            let f: Vec<&str> = l.split_whitespace().collect();
+            if atoms && frame == 1 && f.len() == 6 {
+                format!("{} 1 {} {} {} {}", f[0], f[2], f[3], f[4], f[5])
+            } else {
+                atoms |= l.starts_with("ITEM: ATOMS");
+                l.to_string()
+            }
+        })
+        .collect();
+    std::fs::write(&dump, edited.join("\n") + "\n").unwrap();
+    let d = dir.path().join("a.d");
+    ok(&["batch", s(&dump), "-o", s(&d)]);
+    let first = mdlod_preprocess::batch::read_manifest(&d).unwrap().frames[0]
+        .file
+        .clone();
+    let info = ok(&["info", s(&d.join(first))]);
+    assert!(!info.contains("species      2"), "{info}");
+    let pattern = dir.path().join("m-%02d.png");
+    let size = ["--width", "32", "--height", "24"];
+    let mut args = vec![
+        "render",
+        s(&d),
+        "-o",
+        s(&pattern),
+        "--species-colour",
+        "2=#ff0000",
+    ];
+    args.extend(size);
+    let out = ok(&args);
+    assert!(out.contains("rendered 2 frames"), "{out}");
+    let mut args = vec![
+        "render",
+        s(&d),
+        "-o",
+        s(&pattern),
+        "--species-colour",
+        "9=#ff0000",
+    ];
+    args.extend(size);
+    let err = fails(&args);
+    assert!(
+        err.contains("no frame") && err.contains("\"9\"") && err.contains("1, 2"),
+        "{err}"
+    );
+}

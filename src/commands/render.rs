@@ -627,9 +627,13 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     frame_output(&args.output, 0)?;
     let mut bounds: Option<mdlod_render::Bounds> = None;
+    // Species may come and go in a trajectory (a deposition, an evaporation): a style
+    // names any species of some frame, and applies in the frames that hold it.
+    let mut names = std::collections::BTreeSet::new();
     for f in &manifest.frames {
         let path = dir.join(&f.file);
         let file = mdlod_format::MdlodFile::open(&path)?;
+        names.extend(file.metadata().species.iter().map(|s| s.name.clone()));
         let b = mdlod_render::data_bounds(&file);
         bounds = Some(match bounds {
             None => b,
@@ -637,6 +641,15 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         });
     }
     let bounds = bounds.expect("at least one frame");
+    if let Some(s) = opts.style.species.iter().find(|s| !names.contains(&s.name)) {
+        anyhow::bail!(
+            "no frame of {} has a species named {:?} (its frames have {})",
+            dir.display(),
+            s.name,
+            names.iter().cloned().collect::<Vec<_>>().join(", ")
+        );
+    }
+    let style = opts.style.clone();
     let camera = mdlod_render::camera_for_bounds(&bounds, &opts.view, opts.width, opts.height)?;
     opts.view = ViewSpec::Camera(camera.clone());
     if let Some(parent) = args.output.parent().filter(|p| !p.as_os_str().is_empty()) {
@@ -649,6 +662,12 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     for (i, f) in manifest.frames.iter().enumerate() {
         let out = frame_output(&args.output, i)?;
         let file = mdlod_format::MdlodFile::open(dir.join(&f.file))?;
+        opts.style.species = style
+            .species
+            .iter()
+            .filter(|s| file.metadata().species.iter().any(|t| t.name == s.name))
+            .cloned()
+            .collect();
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         if i == 0 && opts.exposure.is_none() {
             // Splats: one exposure for every frame, or the brightness drifts.
