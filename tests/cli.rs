@@ -2485,3 +2485,23 @@ fn a_movie_styles_species_that_only_some_frames_hold() {
         "{err}"
     );
 }
+
+/// With no display (a cluster node, ssh without forwarding) the viewer says what to do,
+/// not where in the window toolkit's source it failed.
+#[test]
+fn the_viewer_without_a_display_says_what_to_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let run = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args(["view", s(&frame)])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("no display") && err.contains("xvfb-run") && !err.contains(".rs:"),
+        "{err}"
+    );
+}

@@ -49,6 +49,21 @@ pub enum ViewerError {
     Failed(String),
 }
 
+/// What to say when the window cannot open: where no display is named (a cluster node,
+/// an ssh session without forwarding), what to do instead of the toolkit's own message,
+/// which points into its source.
+fn window_error(message: &str) -> String {
+    let named = |v: &str| std::env::var_os(v).is_some_and(|d| !d.is_empty());
+    if cfg!(target_os = "linux") && !named("DISPLAY") && !named("WAYLAND_DISPLAY") {
+        "no display to open it on (neither DISPLAY nor WAYLAND_DISPLAY is set): run the \
+         viewer in a desktop session, over ssh -X, or under a virtual display (xvfb-run \
+         mdlod view ...); `mdlod render` makes images with no window"
+            .to_string()
+    } else {
+        message.to_string()
+    }
+}
+
 /// How to open the viewer.
 #[derive(Clone, Debug)]
 pub struct ViewerOptions {
@@ -168,7 +183,7 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
             )))
         }),
     )
-    .map_err(|e| ViewerError::Window(e.to_string()))?;
+    .map_err(|e| ViewerError::Window(window_error(&e.to_string())))?;
     let failure = result.lock().unwrap_or_else(|e| e.into_inner()).take();
     match failure {
         Some(message) => Err(ViewerError::Failed(message)),
