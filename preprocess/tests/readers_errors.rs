@@ -105,13 +105,21 @@ fn more_atom_lines_than_announced() {
     );
 }
 
+/// A file cut inside an atom line says so; a short line followed by a newline is a
+/// wrong column count.
 #[test]
 fn file_cut_in_the_middle_of_a_line() {
     assert_error(
         "cut.lammpstrj",
         &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 0.5 0."),
         None,
-        "12: expected 5 columns, found 4",
+        "12: the file ends inside this atom line, after 4 of its 5 columns (truncated file?)",
+    );
+    assert_error(
+        "short.lammpstrj",
+        &dump("1 1 0 0 0\n2 1 0 0 0\n3 1 0\n"),
+        None,
+        "12: expected 5 columns, found 3",
     );
 }
 

@@ -529,6 +529,16 @@ fn column_count(ctx: &Ctx<'_>, line_start: usize, expected: usize) -> ReadError 
             ),
         };
     }
+    if line_end == data.len() && found < expected {
+        // No newline after it: the file stops inside the line.
+        return ReadError::Malformed {
+            at: ctx.at(line_start),
+            message: format!(
+                "the file ends inside this atom line, after {found} of its {expected} \
+                 columns (truncated file?)"
+            ),
+        };
+    }
     ReadError::ColumnCount {
         at: ctx.at(line_start),
         expected,
