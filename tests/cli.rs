@@ -2505,3 +2505,26 @@ fn the_viewer_without_a_display_says_what_to_do() {
         "{err}"
     );
 }
+
+/// `verify DIR` checks a batch directory's frames against its manifest, and fails naming
+/// a frame that is not the one listed.
+#[test]
+fn verify_checks_a_batch_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d");
+    ok(&[
+        "batch",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&out),
+    ]);
+    let text = ok(&["verify", s(&out)]);
+    assert!(
+        text.contains("ok: 6 frames verified against dataset.json"),
+        "{text}"
+    );
+    let m = mdlod_preprocess::batch::read_manifest(&out).unwrap();
+    std::fs::copy(out.join(&m.frames[0].file), out.join(&m.frames[1].file)).unwrap();
+    let err = fails(&["verify", s(&out)]);
+    assert!(err.contains("1 problem (5 frames verified)"), "{err}");
+}

@@ -1324,6 +1324,117 @@ fn differ(other: &str, this: &str, setting: &str, a: impl Display, b: impl Displ
 }
 
 /// Reads a batch directory's `dataset.json`.
+/// What [`verify_dir`] found in a batch directory.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DirCheck {
+    /// The manifests read: `dataset.json`, or the shards' where it is absent.
+    pub manifests: Vec<String>,
+    /// Listed frames whose file verified and matched its entry.
+    pub frames_ok: usize,
+    /// What is wrong, each naming the frame or manifest.
+    pub problems: Vec<String>,
+    /// Frame files no manifest lists (left alone by batches: a run over other inputs).
+    pub unlisted: Vec<String>,
+}
+
+/// Checks a batch directory: every frame a manifest lists is there, verifies completely
+/// ([`MdlodFile::verify`]) and is the file the manifest describes (checksum, timestep,
+/// particles); every manifest lists the frames it expects; and which frame files no
+/// manifest lists. Without `dataset.json` the shards' manifests are checked (not merged
+/// yet). `progress` advances by frame.
+pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, BatchError> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .map_err(io(dir))?
+        .flatten()
+        .filter_map(|e| e.file_name().into_string().ok())
+        .collect();
+    names.sort();
+    let manifests: Vec<String> = if names.iter().any(|n| n == MANIFEST) {
+        vec![MANIFEST.to_string()]
+    } else {
+        names
+            .iter()
+            .filter(|n| is_shard_manifest(n))
+            .cloned()
+            .collect()
+    };
+    if manifests.is_empty() {
+        return Err(BatchError::Manifest {
+            path: dir.to_path_buf(),
+            message: "no dataset.json nor shard manifests: not a batch directory".into(),
+        });
+    }
+    let mut check = DirCheck {
+        manifests: manifests.clone(),
+        ..Default::default()
+    };
+    let mut listed = std::collections::HashSet::new();
+    let mut entries = Vec::new();
+    for name in &manifests {
+        let path = dir.join(name);
+        let text = std::fs::read(&path).map_err(io(&path))?;
+        let m: Manifest = serde_json::from_slice(&text).map_err(|e| BatchError::Manifest {
+            path: path.clone(),
+            message: format!("not a dataset manifest: {e}"),
+        })?;
+        if let Some(expected) = m.expected_frames {
+            if (m.frames.len() as u64) < expected {
+                check.problems.push(format!(
+                    "{name} lists {} of the {expected} frames its run expects: that run has \
+                     not finished (rerun it: it converts only what is missing)",
+                    m.frames.len()
+                ));
+            }
+        }
+        for f in m.frames {
+            listed.insert(f.file.clone());
+            entries.push((name.clone(), f));
+        }
+    }
+    progress.stage("verifying frames", Some(entries.len() as u64), "frames");
+    for (manifest, f) in &entries {
+        let place = format!("{} (timestep {}, in {manifest})", f.file, f.timestep);
+        let path = dir.join(&f.file);
+        let problem = match MdlodFile::open(&path).and_then(|file| file.verify().map(|_| file)) {
+            Err(e) if !path.exists() => Some(format!("{place}: listed but missing ({e})")),
+            Err(e) => Some(format!("{place}: {e}")),
+            Ok(file) => {
+                let checksum = format!("{:016x}", file.header().section_table_checksum);
+                let m = file.metadata();
+                if checksum != f.checksum {
+                    Some(format!(
+                        "{place}: checksum {checksum}, the manifest says {} (the file was \
+                         replaced after the manifest was written)",
+                        f.checksum
+                    ))
+                } else if m.timestep != Some(f.timestep) || file.particle_count() != f.particles {
+                    Some(format!(
+                        "{place}: the file holds timestep {:?} and {} particles, the manifest \
+                         says {} and {}",
+                        m.timestep,
+                        file.particle_count(),
+                        f.timestep,
+                        f.particles
+                    ))
+                } else {
+                    None
+                }
+            }
+        };
+        match problem {
+            Some(p) => check.problems.push(p),
+            None => check.frames_ok += 1,
+        }
+        progress.advance(1);
+    }
+    progress.finish_stage();
+    check.unlisted = names
+        .into_iter()
+        .filter(|n| n.starts_with("frame-") && n.ends_with(".mdlod") && !listed.contains(n))
+        .collect();
+    Ok(check)
+}
+
 pub fn read_manifest(out_dir: &Path) -> Result<Manifest, BatchError> {
     let path = out_dir.join(MANIFEST);
     let text = std::fs::read(&path).map_err(io(&path))?;

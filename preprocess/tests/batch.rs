@@ -1173,3 +1173,50 @@ fn duplicate_timesteps_are_refused_or_resolved_as_asked() {
         );
     }
 }
+
+/// A batch directory is verified against its manifest: every listed frame there, whole
+/// and the one described; what is missing, replaced or unlisted is named; shards not
+/// yet merged are checked through their own manifests.
+#[test]
+fn a_batch_directory_verifies_against_its_manifest() {
+    use mdlod_preprocess::batch::verify_dir;
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    assert_eq!((c.frames_ok, c.problems.len()), (6, 0), "{c:?}");
+    assert_eq!(c.manifests, ["dataset.json"]);
+    let m = read_manifest(&out).unwrap();
+    let (a, b) = (&m.frames[1].file, &m.frames[2].file);
+    std::fs::copy(out.join(b), out.join(a)).unwrap();
+    std::fs::remove_file(out.join(&m.frames[3].file)).unwrap();
+    std::fs::copy(out.join(b), out.join("frame-99.mdlod")).unwrap();
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    assert_eq!(c.frames_ok, 4, "{c:?}");
+    assert_eq!(c.problems.len(), 2, "{c:?}");
+    assert!(c
+        .problems
+        .iter()
+        .any(|p| p.starts_with(a.as_str()) && p.contains("checksum")));
+    assert!(c
+        .problems
+        .iter()
+        .any(|p| p.starts_with(m.frames[3].file.as_str()) && p.contains("listed but missing")));
+    assert_eq!(c.unlisted, ["frame-99.mdlod"]);
+    // Shards, not merged: checked through their manifests.
+    let sharded = dir.path().join("sharded");
+    for i in 0..2 {
+        batch(
+            std::slice::from_ref(&src),
+            &sharded,
+            &shard(i, 2),
+            &NoProgress,
+        )
+        .unwrap();
+    }
+    let c = verify_dir(&sharded, &NoProgress).unwrap();
+    assert_eq!(c.frames_ok, 6);
+    assert_eq!(c.manifests.len(), 2);
+    assert!(verify_dir(&dir.path().join("nothing-here"), &NoProgress).is_err());
+}

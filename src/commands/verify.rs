@@ -6,14 +6,65 @@ use anyhow::Result;
 use mdlod_format::MdlodFile;
 
 /// Check a .mdlod file completely: structure, every section checksum, every species
-/// index, and the decoding of every point.
+/// index, and the decoding of every point. A batch directory: every frame its manifest
+/// lists, against the manifest, and what is missing or unlisted.
 #[derive(clap::Args)]
-#[command(after_help = "Example:\n  mdlod verify frame.mdlod")]
+#[command(after_help = "Examples:\n  mdlod verify frame.mdlod\n  mdlod verify traj.d")]
 pub struct Args {
+    /// A .mdlod file, or a batch directory (with dataset.json, or shard manifests).
     pub file: PathBuf,
 }
 
+fn run_dir(args: &Args) -> Result<()> {
+    let t = std::time::Instant::now();
+    let dir = &args.file;
+    let c = mdlod_preprocess::batch::verify_dir(dir, &crate::progress::Bar::new())?;
+    for p in &c.problems {
+        println!("{}: {p}", dir.display());
+    }
+    if !c.unlisted.is_empty() {
+        let shown: Vec<&str> = c.unlisted.iter().take(5).map(String::as_str).collect();
+        println!(
+            "{}: note: {} frame file{} no manifest lists (left alone): {}{}",
+            dir.display(),
+            c.unlisted.len(),
+            if c.unlisted.len() == 1 { "" } else { "s" },
+            shown.join(", "),
+            if c.unlisted.len() > 5 { ", ..." } else { "" }
+        );
+    }
+    let merged = if c.manifests.len() == 1 && c.manifests[0] == mdlod_preprocess::batch::MANIFEST {
+        String::new()
+    } else {
+        format!(
+            " (not merged: {} shard manifests; run `mdlod batch --merge {}`)",
+            c.manifests.len(),
+            dir.display()
+        )
+    };
+    if !c.problems.is_empty() {
+        anyhow::bail!(
+            "{}: {} problem{} ({} frames verified){merged}",
+            dir.display(),
+            c.problems.len(),
+            if c.problems.len() == 1 { "" } else { "s" },
+            c.frames_ok
+        );
+    }
+    println!(
+        "{}: ok: {} frames verified against {} in {:.2} s{merged}",
+        dir.display(),
+        c.frames_ok,
+        c.manifests.join(", "),
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<()> {
+    if args.file.is_dir() {
+        return run_dir(&args);
+    }
     let t = std::time::Instant::now();
     let f = MdlodFile::open(&args.file)?;
     let r = f.verify()?;
