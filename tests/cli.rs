@@ -2293,6 +2293,30 @@ fn viewing_a_batch_whose_shards_are_not_merged_says_to_merge_them() {
     );
 }
 
+/// The text of the LAMMPS dump `path` with every atom line's fields changed by `edit`
+/// (given the frame's index, from 0).
+fn edit_atoms(path: &Path, mut edit: impl FnMut(usize, &mut Vec<String>)) -> String {
+    let mut out = String::new();
+    let (mut frame, mut atoms) = (None::<usize>, false);
+    for line in std::fs::read_to_string(path).unwrap().lines() {
+        if line.starts_with("ITEM:") {
+            if line.starts_with("ITEM: TIMESTEP") {
+                frame = Some(frame.map_or(0, |k| k + 1));
+            }
+            atoms = line.starts_with("ITEM: ATOMS");
+            out.push_str(line);
+        } else if atoms {
+            let mut fields: Vec<String> = line.split_whitespace().map(String::from).collect();
+            edit(frame.unwrap_or(0), &mut fields);
+            out.push_str(&fields.join(" "));
+        } else {
+            out.push_str(line);
+        }
+        out.push('\n');
+    }
+    out
+}
+
 /// A movie colours every frame over one attribute range: two frames whose values differ
 /// tenfold render alike with each file's own range, and differently over `--attribute-range`
 /// (as colours and as splat intensities). The option needs something that reads the
@@ -2302,23 +2326,12 @@ fn an_attribute_range_colours_every_frame_alike() {
     let dir = tempfile::tempdir().unwrap();
     let cold = dir.path().join("cold.lammpstrj");
     generate(&["alloy", "-n", "4000"], &cold);
-    let text = std::fs::read_to_string(&cold).unwrap();
-    let mut atoms = false;
-    let hot: Vec<String> = text
-        .lines()
-        .map(|l| {
-            let f: Vec<&str> = l.split_whitespace().collect();
-            if atoms && f.len() == 6 {
-                let v: f64 = f[5].parse().unwrap();
-                format!("{} {} {} {} {} {}", f[0], f[1], f[2], f[3], f[4], v * 10.0)
-            } else {
-                atoms |= l.starts_with("ITEM: ATOMS");
-                l.to_string()
-            }
-        })
-        .collect();
     let hot_path = dir.path().join("hot.lammpstrj");
-    std::fs::write(&hot_path, hot.join("\n") + "\n").unwrap();
+    let hot = edit_atoms(&cold, |_, f| {
+        let v: f64 = f[5].parse().unwrap();
+        f[5] = (v * 10.0).to_string();
+    });
+    std::fs::write(&hot_path, hot).unwrap();
     let render = |input: &Path, extra: &[&str]| -> Vec<u8> {
         let file = input.with_extension("mdlod");
         if !file.exists() {
@@ -2430,26 +2443,12 @@ fn a_movie_styles_species_that_only_some_frames_hold() {
     let dump = dir.path().join("a.lammpstrj");
     generate(&["alloy", "-n", "2000", "--frames", "2"], &dump);
     // The first frame: type 1 only.
-    let text = std::fs::read_to_string(&dump).unwrap();
-    let mut atoms = false;
-    let mut frame = 0;
-    let edited: Vec<String> = text
-        .lines()
-        .map(|l| {
-            if l.starts_with("ITEM: TIMESTEP") {
-                frame += 1;
-                atoms = false;
-            }
-            let f: Vec<&str> = l.split_whitespace().collect();
-            if atoms && frame == 1 && f.len() == 6 {
-                format!("{} 1 {} {} {} {}", f[0], f[2], f[3], f[4], f[5])
-            } else {
-                atoms |= l.starts_with("ITEM: ATOMS");
-                l.to_string()
-            }
-        })
-        .collect();
-    std::fs::write(&dump, edited.join("\n") + "\n").unwrap();
+    let edited = edit_atoms(&dump, |frame, f| {
+        if frame == 0 {
+            f[1] = "1".into();
+        }
+    });
+    std::fs::write(&dump, edited).unwrap();
     let d = dir.path().join("a.d");
     ok(&["batch", s(&dump), "-o", s(&d)]);
     let first = mdlod_preprocess::batch::read_manifest(&d).unwrap().frames[0]
