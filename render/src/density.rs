@@ -7,9 +7,14 @@
 //!   (poly6) kernel `W(r, h) = 315 / (64 π h³) · (1 − r²/h²)³` for `r < h`. A point's mass
 //!   is its area relative to the largest species' radius `r_ref`, `m_j = (ρ_j / r_ref)²`
 //!   with `ρ_j = sqrt(area_sum)` (a particle's own radius; a representative carries its
-//!   particles' mass, Eq. 1), its support `h_j = kernel_scale · ρ_j`, and
-//!   `V = 4/3 π r_ref³`: φ is a volume fraction (a close packing of reference spheres has
-//!   φ ≈ 0.74), the same for every zoom and level.
+//!   particles' mass, Eq. 1), and `V = 4/3 π r_ref³`. A particle's support is
+//!   `h_j = kernel_scale · ρ_j`; a representative's is `kernel_scale · s_j` with
+//!   `s_j = (r_ref ρ_j²)^{1/3}`, the radius of a sphere of its particles' volume (`n`
+//!   particles of radius `r_ref`: `n^{1/3} r_ref`), so a coarse cut spreads the same
+//!   volume over the same space as its particles do: φ is a volume fraction (a close
+//!   packing of reference spheres has φ ≈ 0.74), the same for every zoom and level. (A
+//!   support of `kernel_scale · ρ_j`, which grows as `√n`, thinned solids out at coarse
+//!   cuts, as `n^{-1/2}`.)
 //! - **Slices.** Each pixel's ray `p = o + λ v` (o: the eye in perspective, so the slices
 //!   are concentric spherical shells; the eye's plane in orthographic views, where λ may
 //!   be negative down to the near plane) is sampled at `λ_s = λ_min + s Δλ` from the
@@ -105,20 +110,22 @@ pub const OPAQUE: f32 = 0.99;
 /// radius `r = r_ref` and kernel scale 1 (see [`fraction`]).
 pub const PEAK_FRACTION: f32 = 4.0 / 3.0 * 315.0 / 64.0;
 
-/// The volume fraction a point of radius `r` adds at offset `d` from its centre, and its
-/// gradient: `V · m · W(|d|, h)` with `V = 4/3 π r_ref³`, `m = (r / r_ref)²` and
-/// `h = k r`, which is `PEAK_FRACTION · (r_ref / r) / k³ · t³` with `t = 1 − |d|²/h²`.
-/// Evaluated in that form, so that no power of a large radius is formed: stars in metres
-/// (a coarse node's radius of 10¹³) would overflow `h³` in single precision.
-pub fn fraction(d: Vec3, r: f32, r_ref: f32, k: f32) -> (f32, Vec3) {
-    let h = k * r;
+/// The volume fraction a point adds at offset `d` from its centre, and its gradient:
+/// `V · m · W(|d|, h)` with `V = 4/3 π r_ref³`, `m = (ρ / r_ref)²` and `h = k s` (`s` its
+/// [`DensityPoint::support`]), which is `PEAK_FRACTION / (k³ x) · t³` with
+/// `x = s³ / (ρ² r_ref)` ([`DensityPoint::spread`]: `r / r_ref` for a particle, 1 for a
+/// representative) and `t = 1 − |d|²/h²`. Evaluated in that form, so that no power of a
+/// large radius is formed: stars in metres (a coarse node's radius of 10¹³) would
+/// overflow `h³` in single precision.
+pub fn fraction(d: Vec3, support: f32, spread: f32, k: f32) -> (f32, Vec3) {
+    let h = k * support;
     let h2 = h * h;
     let r2 = d.length_squared();
     if r2.partial_cmp(&h2) != Some(std::cmp::Ordering::Less) {
         return (0.0, Vec3::ZERO);
     }
     let t = 1.0 - r2 / h2;
-    let norm = PEAK_FRACTION / (k * k * k) * (r_ref / r);
+    let norm = PEAK_FRACTION / (k * k * k) / spread;
     (norm * t * t * t, d * (-6.0 * norm / h2 * t * t))
 }
 
@@ -151,6 +158,31 @@ pub struct DensityPoint {
     pub radius: f32,
     /// Linear RGB: a particle's species colour, a representative's mixture.
     pub albedo: Vec3,
+    /// A representative of several particles (its support spreads their volume).
+    pub cluster: bool,
+}
+
+impl DensityPoint {
+    /// The kernel's support radius in units of the kernel scale: the particle's radius,
+    /// or a representative's volume-equivalent radius `(r_ref ρ²)^{1/3}`, formed as
+    /// `r_ref (ρ / r_ref)^{2/3}` (no power of a large radius).
+    pub fn support(&self, r_ref: f32) -> f32 {
+        if self.cluster {
+            r_ref * (self.radius / r_ref).powf(2.0 / 3.0)
+        } else {
+            self.radius
+        }
+    }
+
+    /// `s³ / (ρ² r_ref)` ([`fraction`]'s `x`): `r / r_ref` for a particle, 1 for a
+    /// representative.
+    pub fn spread(&self, r_ref: f32) -> f32 {
+        if self.cluster {
+            1.0
+        } else {
+            self.radius / r_ref
+        }
+    }
 }
 
 /// What the frame's rays share: their origins and directions come from the camera;
@@ -175,7 +207,7 @@ impl Slicing {
         let mut hi = f32::NEG_INFINITY;
         for p in points {
             let l = ray_distance(camera, p.position);
-            let h = s.kernel_scale * p.radius;
+            let h = s.kernel_scale * p.support(r_ref);
             lo = lo.min(l - h);
             hi = hi.max(l + h);
         }
@@ -269,7 +301,12 @@ pub fn density_at(
     let mut phi = 0.0;
     let mut grad = Vec3::ZERO;
     for q in points {
-        let (f, g) = fraction(p - q.position, q.radius, r_ref, s.kernel_scale);
+        let (f, g) = fraction(
+            p - q.position,
+            q.support(r_ref),
+            q.spread(r_ref),
+            s.kernel_scale,
+        );
         phi += f;
         grad += g;
     }
@@ -280,17 +317,23 @@ pub fn density_at(
 /// times kernel, `Σ m_j W_j c_j / Σ m_j W_j` (the density's own weights, so the colour
 /// blends where species meet and a representative's colour stands for its particles);
 /// `None` where no support reaches `p`.
-pub fn colour_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings) -> Option<Vec3> {
+pub fn colour_at(
+    points: &[DensityPoint],
+    p: Vec3,
+    s: &DensitySettings,
+    r_ref: f32,
+) -> Option<Vec3> {
     let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
     for q in points {
-        let h = s.kernel_scale * q.radius;
+        let h = s.kernel_scale * q.support(r_ref);
         let (r2, h2) = (p.distance_squared(q.position), h * h);
         if r2.partial_cmp(&h2) != Some(std::cmp::Ordering::Less) {
             continue;
         }
-        // m W up to constant factors, which cancel: t³ / r (no power of a large radius).
+        // m W up to constant factors, which cancel: t³ / x (`fraction`'s form, no power
+        // of a large radius).
         let t = 1.0 - r2 / h2;
-        let w = t * t * t / q.radius;
+        let w = t * t * t / q.spread(r_ref);
         sum += w * q.albedo;
         weight += w;
     }
@@ -350,14 +393,15 @@ pub fn reference(
                             if p0 < iso && phi >= iso {
                                 let t = (iso - p0) / (phi - p0);
                                 hit[i] = lambda - slicing.step + t * slicing.step;
-                                let albedo = colour_at(points, o + v * hit[i], s).unwrap_or(albedo);
+                                let albedo = colour_at(points, o + v * hit[i], s, slicing.r_ref)
+                                    .unwrap_or(albedo);
                                 c = iso_shade(albedo, g0.lerp(g, t), v);
                                 a = 1.0;
                                 break;
                             }
                         } else if phi >= iso {
                             hit[i] = lambda;
-                            let albedo = colour_at(points, p, s).unwrap_or(albedo);
+                            let albedo = colour_at(points, p, s, slicing.r_ref).unwrap_or(albedo);
                             c = iso_shade(albedo, g, v);
                             a = 1.0;
                             break;
@@ -405,6 +449,7 @@ pub fn density_points(
                     position,
                     radius,
                     albedo,
+                    cluster: level != last,
                 });
             }
         }

@@ -2322,7 +2322,7 @@ impl Renderer {
         let slicing = Slicing::new(&sorted, camera, settings, r_ref);
         let h_max = sorted
             .iter()
-            .map(|p| settings.kernel_scale * p.radius)
+            .map(|p| settings.kernel_scale * p.support(r_ref))
             .fold(0.0f32, f32::max);
         // The box of the points' supports: rays stop where they leave it.
         let bounds = sorted.iter().fold(
@@ -2331,7 +2331,7 @@ impl Renderer {
                 glam::Vec3::splat(f32::NEG_INFINITY),
             ),
             |(lo, hi), p| {
-                let h = glam::Vec3::splat(settings.kernel_scale * p.radius);
+                let h = glam::Vec3::splat(settings.kernel_scale * p.support(r_ref));
                 (lo.min(p.position - h), hi.max(p.position + h))
             },
         );

@@ -219,6 +219,16 @@ pub struct Projector {
     scale: f32,
     /// See [`Self::with_support`].
     support_scale: f32,
+    support_floor: f32,
+}
+
+/// The largest species radius of `file` (the density's `r_ref`).
+fn largest_radius(file: &MdlodFile) -> f32 {
+    file.metadata()
+        .species
+        .iter()
+        .map(|s| s.radius)
+        .fold(0.0f32, f32::max)
 }
 
 impl Projector {
@@ -230,22 +240,27 @@ impl Projector {
             near: camera.near,
             scale: camera.pixels_per_world(1.0, viewport[1]),
             support_scale: 0.0,
+            support_floor: 0.0,
         }
     }
 
     /// A projector whose frustum test keeps a node while the kernels of its subtree may
-    /// reach into the view: its box grown by `support_scale` times its flux radius
-    /// `√area_sum` (at least its radius), which bounds every kernel below it (area sums
-    /// only grow up the hierarchy). A node just outside the view still adds density
-    /// inside it.
-    pub fn with_support(camera: &Camera, viewport: [u32; 2], support_scale: f32) -> Self {
-        let support_scale = if support_scale.is_finite() {
-            support_scale.max(0.0)
-        } else {
-            0.0
-        };
+    /// reach into the view: its box grown by `support_scale` times the larger of its flux
+    /// radius `√area_sum` (at least its radius) and `support_floor` (the file's largest
+    /// species radius), which bounds every kernel below it: area sums only grow up the
+    /// hierarchy, and a representative's support `(r_ref ρ²)^{1/3}` is at most the larger
+    /// of `ρ` and `r_ref` (see `density::DensityPoint::support`). A node just outside the
+    /// view still adds density inside it.
+    pub fn with_support(
+        camera: &Camera,
+        viewport: [u32; 2],
+        support_scale: f32,
+        support_floor: f32,
+    ) -> Self {
+        let finite = |v: f32| if v.is_finite() { v.max(0.0) } else { 0.0 };
         Projector {
-            support_scale,
+            support_scale: finite(support_scale),
+            support_floor: finite(support_floor),
             ..Self::new(camera, viewport)
         }
     }
@@ -256,7 +271,12 @@ impl Projector {
         if self.support_scale == 0.0 {
             return (min, max);
         }
-        let reach = self.support_scale * n.area_sum.max(0.0).sqrt().max(n.radius);
+        let reach = self.support_scale
+            * n.area_sum
+                .max(0.0)
+                .sqrt()
+                .max(n.radius)
+                .max(self.support_floor);
         if !reach.is_finite() {
             // (Checked records hold finite values; nothing to grow by otherwise.)
             return (min, max);
@@ -532,7 +552,12 @@ pub fn traverse_with(
     residency: &mut dyn Residency,
 ) -> DrawList {
     if settings.occlusion != OcclusionMode::Off {
-        let proj = Projector::with_support(camera, settings.viewport, settings.support_scale);
+        let proj = Projector::with_support(
+            camera,
+            settings.viewport,
+            settings.support_scale,
+            largest_radius(file),
+        );
         if !proj.visible(&file.nodes()[0]) {
             return DrawList {
                 culled_nodes: 1,
@@ -639,7 +664,12 @@ fn traverse_tiled(
     residency: &dyn SharedResidency,
 ) -> (DrawList, Vec<(u32, f32)>) {
     use rayon::prelude::*;
-    let proj = Projector::with_support(camera, settings.viewport, settings.support_scale);
+    let proj = Projector::with_support(
+        camera,
+        settings.viewport,
+        settings.support_scale,
+        largest_radius(file),
+    );
     if !proj.visible(&file.nodes()[0]) {
         let list = DrawList {
             culled_nodes: 1,
@@ -736,7 +766,12 @@ fn largest_first(
     let nodes = file.nodes();
     let levels = file.levels();
     let last = file.level_count() - 1;
-    let proj = Projector::with_support(camera, settings.viewport, settings.support_scale);
+    let proj = Projector::with_support(
+        camera,
+        settings.viewport,
+        settings.support_scale,
+        largest_radius(file),
+    );
     let budget = settings.budget_points.max(1);
     let mut list = DrawList::default();
     if !proj.visible(&nodes[0]) {
@@ -889,7 +924,12 @@ fn front_to_back(
     let nodes = file.nodes();
     let levels = file.levels();
     let last = file.level_count() - 1;
-    let proj = Projector::with_support(camera, settings.viewport, settings.support_scale);
+    let proj = Projector::with_support(
+        camera,
+        settings.viewport,
+        settings.support_scale,
+        largest_radius(file),
+    );
     let budget = settings.budget_points.max(1);
     let bits = file.position_bits();
     let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();

@@ -22,9 +22,17 @@ fn vs_splat(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     let pt = load_point(ii);
     var out: SplatOut;
     out.center = pt.world;
-    out.h = dens.slicing.z * pt.radius;
-    let m = pt.radius * dens.slicing.w;
-    out.mass = m * m;
+    // slicing.w = 1 / r_ref. A particle's support is its radius; a representative's
+    // the radius of its particles' volume, r_ref (rho / r_ref)^(2/3), and its
+    // `sqrt(mass)` (density::fraction's x) 1 (density::DensityPoint).
+    let x = pt.radius * dens.slicing.w;
+    if pt.cluster {
+        out.h = dens.slicing.z * pow(x, 2.0 / 3.0) / dens.slicing.w;
+        out.mass = 1.0;
+    } else {
+        out.h = dens.slicing.z * pt.radius;
+        out.mass = x * x;
+    }
     out.albedo = pt.albedo;
     // The screen box of the support sphere: its world box's corners, projected. A box
     // reaching behind the eye covers the whole screen.

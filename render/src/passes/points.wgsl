@@ -73,6 +73,8 @@ struct Point {
     world: vec3<f32>,
     radius: f32,
     albedo: vec3<f32>,
+    // A representative of several particles (any range kind but particles).
+    cluster: bool,
 };
 
 // Point `ii` (instance index) of the packed cut, decoded as every reader does:
@@ -83,6 +85,7 @@ fn load_point(ii: u32) -> Point {
     let q = quantized(r, j);
     var p: Point;
     p.world = r.base + r.scale * (q - vec3<f32>(frame.params.y));
+    p.cluster = r.kind != KIND_PARTICLE;
     if r.kind == KIND_PARTICLE {
         let h = r.attr_offset * 2u + j;
         let s = min((attrs[h >> 1u] >> ((h & 1u) * 16u)) & 0xffffu, frame.counts.y - 1u);
