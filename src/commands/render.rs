@@ -505,22 +505,35 @@ pub fn run(args: Args) -> Result<()> {
     // (every particle of 10^8 is nine batches).
     let r = render_to_png_with(&args.file, &args.output, &opts, Bar::for_renderer())?;
     // The S-NDF mode reports its iterations as spp (--spp is refused there).
-    let samples = match args.mode {
-        Mode::Sndf => format!("{} rays per pixel", r.spp),
-        _ => format!("{} spp", r.spp),
+    // Spheres and S-NDFs sample pixels; splats and the volume draw each point once.
+    let (samples, points) = match args.mode {
+        Mode::Sndf => (format!(", {} rays per pixel", r.spp), "cluster spheres"),
+        Mode::Spheres => (format!(", {} spp", r.spp), "cluster spheres"),
+        Mode::Splat | Mode::SplatOver => (String::new(), "cluster splats"),
+        Mode::Density | Mode::Iso => (String::new(), "cluster kernels"),
     };
     let mut limits = vec![];
     if r.budget_limited {
-        limits.push(if r.budget < args.budget {
-            format!(
+        // The top node opens into the whole coarsest level at once: a budget below it
+        // leaves the data set one sphere.
+        let coarsest = mdlod_format::MdlodFile::open(&args.file)
+            .ok()
+            .and_then(|f| f.levels().get(1).map(|l| l.point_count));
+        let drawn = r.particles_drawn + r.nodes_drawn;
+        limits.push(match coarsest {
+            Some(c) if drawn == 1 && r.budget < c => format!(
+                "point budget of {}: below the {c} points of the coarsest level, so the whole \
+                 data set is one sphere; a budget of {c} or more refines",
+                r.budget
+            ),
+            _ if r.budget < args.budget => format!(
                 "point budget reached: {} spheres, the most this GPU draws at once",
                 r.budget
-            )
-        } else {
-            format!(
-                "point budget of {} spheres reached: a larger --budget refines further",
+            ),
+            _ => format!(
+                "point budget of {} reached: a larger --budget refines further",
                 r.budget
-            )
+            ),
         });
     }
     if r.pool_limited {
@@ -531,8 +544,16 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         format!(" ({})", limits.join("; "))
     };
+    let occluded = if r.nodes_occluded + r.particles_occluded > 0 {
+        format!(
+            " ({} clusters and {} particles left out as hidden or between pixel centres)",
+            r.nodes_occluded, r.particles_occluded
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "wrote {} ({}x{}, {samples}) on {} ({}): {} particles and {} cluster spheres in {} ranges ({} clusters and {} particles left out as hidden or between pixel centres), error {:.2} px{limits}",
+        "wrote {} ({}x{}{samples}) on {} ({}): {} particles and {} {points} in {} ranges{occluded}, error {:.2} px{limits}",
         args.output.display(),
         r.width,
         r.height,
@@ -541,19 +562,29 @@ pub fn run(args: Args) -> Result<()> {
         r.particles_drawn,
         r.nodes_drawn,
         r.ranges,
-        r.nodes_occluded,
-        r.particles_occluded,
         r.error_px,
     );
     let gpu = r.gpu_time.map_or(String::new(), |t| {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)
     });
     if let (Some(e), Some(f)) = (r.exposure, r.total_flux) {
-        println!("  splats: total flux {f:.4e}, exposure {e:.4e}");
+        println!(
+            "  splats: total flux {f:.4e} (the light summed over the image's pixels, each \
+             splat's area in pixels times its intensity: it grows as the zoom enlarges the \
+             data, and stays with the screen error), exposure {e:.4e}"
+        );
     }
     if let Some((run, all)) = r.density_stacks {
+        let saved = if run < all {
+            format!(
+                "the other {} skipped: every ray was opaque or past the data",
+                all - run
+            )
+        } else {
+            "rays reached the last".to_string()
+        };
         println!(
-            "  density: {run} of {all} slice stacks run before every ray was done ({} read-backs)",
+            "  density: {run} of {all} slice stacks run, {saved} ({} read-backs)",
             r.density_readbacks.unwrap_or(0)
         );
     }

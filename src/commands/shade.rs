@@ -66,8 +66,10 @@ pub struct Args {
     /// sampled finer).
     #[arg(long, conflicts_with = "zoom_out")]
     pub level: Option<u32>,
-    /// Zoom out by this factor (≥ 1, any value): trilinear between the two S-MIP levels
-    /// around it; the image is that many times smaller.
+    /// Zoom out by this factor (≥ 1, any value) from the sampled resolution (level 0,
+    /// as --level counts: a file sampled finer with `sample --min-samples` is shown at a
+    /// coarser level by default, so a factor below that level's makes a larger image
+    /// than the default); trilinear between the two S-MIP levels around it.
     #[arg(long, value_name = "FACTOR")]
     pub zoom_out: Option<f32>,
     /// Background colour for rays that hit nothing.
@@ -179,11 +181,22 @@ pub fn run(args: Args) -> Result<()> {
         parse_colour(&args.background)?,
         level,
     )?;
+    let lights = match shade.lights.len() {
+        1 => "1 light".to_string(),
+        n => format!("{n} lights"),
+    };
+    let lit = match (args.explorer, &args.envmap) {
+        (Some(slices), _) => format!("normals coloured by an explorer of {slices} slices"),
+        (None, Some(map)) if shade.lights.is_empty() => {
+            format!("lit by the environment map {}", map.display())
+        }
+        (None, Some(map)) => format!("lit by the environment map {} and {lights}", map.display()),
+        (None, None) => lights,
+    };
     println!(
-        "wrote {} ({w}x{h}, {level}) from {}, {} light(s), no particle data read",
+        "wrote {} ({w}x{h}, {level}) from {}, {lit}, no particle data read",
         args.output.display(),
         args.input.display(),
-        shade.lights.len()
     );
     Ok(())
 }
