@@ -1261,6 +1261,38 @@ fn render_styles_points_by_attribute_and_species() {
         &["--hide-species", "2", "--radius-scale", "0.8"],
     );
     let recoloured = png("recoloured.png", &["--species-colour", "1=#00ff00"]);
+    // The summary says how many of the particles drawn are hidden.
+    let out = ok(&[
+        "render",
+        s(&with),
+        "-o",
+        s(&d.join("h.png")),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--hide-species",
+        "2",
+        "--screen-error",
+        "0",
+    ]);
+    let count = |what: &str| -> u64 {
+        let i = out.find(what).unwrap_or_else(|| panic!("{what}: {out}"));
+        let digits: String = out[..i]
+            .chars()
+            .rev()
+            .skip(1)
+            .take_while(char::is_ascii_digit)
+            .collect();
+        digits.chars().rev().collect::<String>().parse().unwrap()
+    };
+    let (all, hidden_count) = (count("particles ("), count("of hidden species"));
+    let file = mdlod_format::MdlodFile::open(&with).unwrap();
+    let species_2 = file.species().iter().filter(|&&i| i == 1).count() as u64;
+    assert!(
+        all == file.particle_count() && hidden_count == species_2,
+        "{out}"
+    );
     for other in [&mapped, &hidden, &recoloured] {
         assert_ne!(&plain, other);
     }

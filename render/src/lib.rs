@@ -187,6 +187,9 @@ pub struct RenderReport {
     pub spp: u32,
     /// Particles (finest-level points) drawn.
     pub particles_drawn: u64,
+    /// Of those, particles of species the style hides (`--hide-species`): in the cut,
+    /// drawn as nothing.
+    pub particles_hidden: u64,
     /// Cluster representatives drawn.
     pub nodes_drawn: u64,
     /// Contiguous ranges drawn.
@@ -458,10 +461,39 @@ pub fn frame_setup(
     Ok((camera, traversal, settings))
 }
 
+/// The particles of `draw` whose species the style hides (sphere and S-NDF modes).
+fn hidden_particles(file: &MdlodFile, opts: &RenderOptions, draw: &DrawList) -> u64 {
+    let styled = matches!(opts.mode, RenderMode::Spheres | RenderMode::Sndf { .. });
+    let meta = file.metadata();
+    let hidden: Vec<bool> = meta
+        .species
+        .iter()
+        .map(|s| {
+            opts.style
+                .species
+                .iter()
+                .any(|st| st.hidden && st.name == s.name)
+        })
+        .collect();
+    if !styled || !hidden.contains(&true) {
+        return 0;
+    }
+    let last = file.level_count() - 1;
+    let species = file.species();
+    draw.ranges
+        .iter()
+        .filter(|r| usize::from(r.level) == last)
+        .flat_map(|r| species.get(r.first as usize..(r.first + r.count) as usize))
+        .flatten()
+        .filter(|&&s| hidden.get(usize::from(s)).copied().unwrap_or(false))
+        .count() as u64
+}
+
 impl RenderReport {
     /// The report of one drawn frame (times other than the GPU's left at zero).
     fn new(
         renderer: &Renderer,
+        file: &MdlodFile,
         opts: &RenderOptions,
         camera: Camera,
         traversal: &TraversalSettings,
@@ -473,6 +505,7 @@ impl RenderReport {
             height: opts.height,
             spp: opts.spp,
             particles_drawn: draw.particles,
+            particles_hidden: hidden_particles(file, opts, draw),
             nodes_drawn: draw.representatives,
             ranges: draw.ranges.len(),
             nodes_opened: draw.opened_nodes,
@@ -545,7 +578,7 @@ pub fn render_image(
             gpu_target_bytes: u64::from(opts.width) * u64::from(opts.height) * 20,
             impostors: None,
         };
-        let mut report = RenderReport::new(renderer, opts, camera, &traversal, &draw, &frame);
+        let mut report = RenderReport::new(renderer, file, opts, camera, &traversal, &draw, &frame);
         report.traversal_time = traversal_time;
         report.spp = iterations;
         report.total_time = sampled;
@@ -600,7 +633,7 @@ fn draw_cut(
     let (w, h) = (opts.width, opts.height);
     let pixels = u64::from(w) * u64::from(h);
     let report = |frame: &RenderedFrame| {
-        RenderReport::new(renderer, opts, camera.clone(), traversal, draw, frame)
+        RenderReport::new(renderer, file, opts, camera.clone(), traversal, draw, frame)
     };
     match opts.mode {
         RenderMode::Sndf { .. } => Err(RenderError::InvalidOptions(
@@ -978,7 +1011,7 @@ pub fn sample_to_file_at(
         gpu_target_bytes: 0,
         impostors: None,
     };
-    let mut report = RenderReport::new(&renderer, opts, camera, &traversal, &draw, &frame);
+    let mut report = RenderReport::new(&renderer, &mdlod, opts, camera, &traversal, &draw, &frame);
     report.spp = iterations;
     report.traversal_time = traversal_time;
     report.total_time = t0.elapsed();

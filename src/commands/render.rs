@@ -552,8 +552,16 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         String::new()
     };
+    let hidden = if r.particles_hidden > 0 {
+        format!(
+            " ({} of hidden species, drawn as nothing)",
+            r.particles_hidden
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "wrote {} ({}x{}{samples}) on {} ({}): {} particles and {} {points} in {} ranges{occluded}, error {:.2} px{limits}",
+        "wrote {} ({}x{}{samples}) on {} ({}): {} particles{hidden} and {} {points} in {} ranges{occluded}, error {:.2} px{limits}",
         args.output.display(),
         r.width,
         r.height,
