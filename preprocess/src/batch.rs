@@ -872,9 +872,11 @@ pub fn batch(
     let mut removed_merged = None;
     if opts.shard.is_some() && !todo.is_empty() {
         let merged = out_dir.join(MANIFEST);
-        if merged.is_file() {
-            std::fs::remove_file(&merged).map_err(io(&merged))?;
-            removed_merged = Some(merged);
+        // Shards starting together race for it: gone already is as good.
+        match std::fs::remove_file(&merged) {
+            Ok(()) => removed_merged = Some(merged),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(io(&merged)(e)),
         }
     }
     // When the manifest was last written: workers rewrite it at most every
