@@ -279,8 +279,12 @@ fn same_source(recorded: &SourceInfo, now: &SourceInfo) -> bool {
         None => None,
     };
     let name = |p: &str| Path::new(p).file_name().map(|n| n.to_os_string());
+    // Another path with the same name is the same file only where the time tells files
+    // apart: not when it has no nanoseconds (file systems of whole seconds, files
+    // unpacked from an archive), where two replicas' dumps share name, size and second.
+    let fine_time = recorded.modified_nanos.is_some_and(|n| n != 0);
     let same_file = recorded.path == now.path
-        || (name(&recorded.path).is_some() && name(&recorded.path) == name(&now.path));
+        || (fine_time && name(&recorded.path).is_some() && name(&recorded.path) == name(&now.path));
     same_file
         && *recorded
             == SourceInfo {
@@ -295,6 +299,17 @@ pub fn frame_file_name(timestep: u64) -> String {
     format!("frame-{timestep}.mdlod")
 }
 
+/// The timestep whose frame file `name` is ([`frame_file_name`] exactly: `frame-07.mdlod`
+/// is none).
+pub fn frame_file_number(name: &str) -> Option<u64> {
+    let number: u64 = name
+        .strip_prefix("frame-")?
+        .strip_suffix(".mdlod")?
+        .parse()
+        .ok()?;
+    (frame_file_name(number) == name).then_some(number)
+}
+
 fn manifest_name(shard: Option<(u32, u32)>) -> String {
     match shard {
         None => MANIFEST.to_string(),
@@ -305,6 +320,13 @@ fn manifest_name(shard: Option<(u32, u32)>) -> String {
 /// Whether a file name is a shard's manifest ([`manifest_name`] of a shard).
 pub fn is_shard_manifest(name: &str) -> bool {
     name.starts_with("dataset.shard-") && name.ends_with(".json")
+}
+
+/// `(I, N)` of a shard manifest's name (`dataset.shard-I-of-N.json`).
+fn shard_of(name: &str) -> Option<(u32, u32)> {
+    let rest = name.strip_prefix("dataset.shard-")?.strip_suffix(".json")?;
+    let (i, n) = rest.split_once("-of-")?;
+    Some((i.parse().ok()?, n.parse().ok()?))
 }
 
 /// Writes `value` as JSON to `path` atomically (temporary file + rename).
@@ -736,17 +758,11 @@ pub fn batch(
         .flatten()
         .filter_map(|e| {
             let name = e.file_name().into_string().ok()?;
-            let number = name.strip_prefix("frame-")?.strip_suffix(".mdlod")?;
-            let number: u64 = number.parse().ok()?;
-            (frame_file_name(number) == name && !numbers.contains(&number)).then_some(name)
+            let number = frame_file_number(&name)?;
+            (!numbers.contains(&number)).then_some(name)
         })
         .collect();
-    strays.sort_by_key(|n| {
-        n.trim_start_matches("frame-")
-            .trim_end_matches(".mdlod")
-            .parse::<u64>()
-            .unwrap_or(u64::MAX)
-    });
+    strays.sort_by_key(|n| frame_file_number(n));
     let mut mine: Vec<Job<'_>> = match opts.shard {
         None => jobs,
         Some((i, n)) => jobs
@@ -1096,16 +1112,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     let mut shards: Vec<(u32, u32, PathBuf)> = Vec::new();
     for e in std::fs::read_dir(out_dir).map_err(io(out_dir))?.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        let Some(rest) = name
-            .strip_prefix("dataset.shard-")
-            .and_then(|r| r.strip_suffix(".json"))
-        else {
-            continue;
-        };
-        let parsed = rest
-            .split_once("-of-")
-            .and_then(|(i, n)| Some((i.parse().ok()?, n.parse().ok()?)));
-        if let Some((i, n)) = parsed {
+        if let Some((i, n)) = shard_of(&name) {
             shards.push((i, n, e.path()));
         }
     }
@@ -1221,8 +1228,12 @@ impl MergeSettings {
         // Shards run before and after an input changed convert two versions of it.
         let src = &f.source;
         let version = (src.size, src.modified_unix, src.modified_nanos);
+        // Nanoseconds count where both frames have them (earlier runs recorded none).
+        let changed = |v: &SourceVersion| {
+            v.0 != version.0 || v.1 != version.1 || v.2.zip(version.2).is_some_and(|(a, b)| a != b)
+        };
         match self.sources.get(&src.path) {
-            Some((v, first)) if *v != version => {
+            Some((v, first)) if changed(v) => {
                 return Err(format!(
                     "{first} and {this} were converted from two versions of {} (it changed \
                      between the shards' runs: {} and {} bytes, modified at {} and {} s): \
@@ -1325,7 +1336,6 @@ fn differ(other: &str, this: &str, setting: &str, a: impl Display, b: impl Displ
     )
 }
 
-/// Reads a batch directory's `dataset.json`.
 /// What [`verify_dir`] found in a batch directory.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DirCheck {
@@ -1370,6 +1380,29 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         manifests: manifests.clone(),
         ..Default::default()
     };
+    // Not merged: every shard of one sharding must have written its manifest.
+    let shards: Vec<(u32, u32)> = manifests.iter().filter_map(|m| shard_of(m)).collect();
+    if let Some(&(_, n)) = shards.first() {
+        if shards.iter().any(|s| s.1 != n) {
+            check.problems.push(format!(
+                "shard manifests of different shardings ({}): merge or remove the older ones",
+                manifests.join(", ")
+            ));
+        } else {
+            let missing: Vec<String> = (0..n)
+                .filter(|i| !shards.iter().any(|s| s.0 == *i))
+                .map(|i| i.to_string())
+                .collect();
+            if !missing.is_empty() {
+                check.problems.push(format!(
+                    "shard{} {} of {n} wrote no manifest: not run yet, or failed before \
+                     converting (run it: --shard I/{n})",
+                    if missing.len() == 1 { "" } else { "s" },
+                    missing.join(", ")
+                ));
+            }
+        }
+    }
     let mut listed = std::collections::HashSet::new();
     let mut entries = Vec::new();
     for name in &manifests {
@@ -1432,11 +1465,12 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     progress.finish_stage();
     check.unlisted = names
         .into_iter()
-        .filter(|n| n.starts_with("frame-") && n.ends_with(".mdlod") && !listed.contains(n))
+        .filter(|n| frame_file_number(n).is_some() && !listed.contains(n))
         .collect();
     Ok(check)
 }
 
+/// Reads a batch directory's `dataset.json`.
 pub fn read_manifest(out_dir: &Path) -> Result<Manifest, BatchError> {
     let path = out_dir.join(MANIFEST);
     let text = std::fs::read(&path).map_err(io(&path))?;
@@ -1481,5 +1515,31 @@ mod tests {
             ..now.clone()
         };
         assert!(!same_source(&other_frame, &now));
+        // Another path of the same name: the same file where the time has nanoseconds,
+        // not where it has none or they are 0 (whole-second file systems, archives).
+        let elsewhere = |nanos| SourceInfo {
+            path: "/scratch/run2/dump.lammpstrj".into(),
+            modified_nanos: nanos,
+            ..now.clone()
+        };
+        assert!(same_source(
+            &elsewhere(Some(250)),
+            &SourceInfo {
+                modified_nanos: Some(250),
+                ..elsewhere(Some(250))
+            }
+        ));
+        assert!(same_source(&now, &elsewhere(Some(250))));
+        let whole = |n| SourceInfo {
+            modified_nanos: n,
+            ..now.clone()
+        };
+        assert!(!same_source(&whole(Some(0)), &elsewhere(Some(0))));
+        assert!(!same_source(&whole(None), &elsewhere(Some(0))));
+        let renamed = SourceInfo {
+            path: "/scratch/run2/other.lammpstrj".into(),
+            ..now.clone()
+        };
+        assert!(!same_source(&now, &renamed));
     }
 }

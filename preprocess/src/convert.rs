@@ -68,13 +68,15 @@ pub enum ConvertError {
     #[error("chunked conversion: {0}")]
     Chunked(String),
     /// A frame built in memory (within the chunk size) that needs more than the limit.
-    #[error("{place}: {particles} particles are built in memory (within --chunk-points {chunk_points}) and need about {}, above the memory limit of {}: raise --memory-limit{}", crate::chunked::size_text(*need), crate::chunked::size_text(*limit), chunk_hint(*particles, *limit))]
+    #[error("{place}: {particles} particles are built in memory (within --chunk-points {chunk_points}) and need about {}, above the memory limit of {}: raise --memory-limit{}", crate::chunked::size_text(*need), crate::chunked::size_text(*limit), chunk_hint(*particles, *limit, *root_points))]
     MemoryLimit {
         place: FramePlace,
         particles: usize,
         chunk_points: usize,
         need: u64,
         limit: u64,
+        /// The root points of the build: chunks hold at least as many.
+        root_points: u32,
     },
     /// A frame without particles: a `.mdlod` file needs at least one.
     #[error("{0}: no particles, and a .mdlod file needs at least one")]
@@ -115,21 +117,25 @@ fn check_in_memory(
         chunk_points: options.chunks.chunk_points,
         need,
         limit,
+        root_points: options.build.max_root_points,
     })
 }
 
 /// How to build a frame of `particles` out of core within `limit`, if chunks of at least
-/// the default root points fit in it.
-fn chunk_hint(particles: usize, limit: u64) -> String {
+/// the build's `root_points` fit in it.
+fn chunk_hint(particles: usize, limit: u64, root_points: u32) -> String {
     let room = limit.saturating_sub(crate::chunked::chunk_memory(0));
     let points = room / crate::chunked::BUILD_BYTES_PER_PARTICLE;
-    let least = u64::from(crate::hierarchy::BuildParams::default().max_root_points);
+    let least = u64::from(root_points);
+    // A round number: two significant digits, downward, but never below the root points.
+    let round = |p: u64| {
+        let unit = 10u64.pow(p.max(1).ilog10().saturating_sub(1));
+        (p / unit * unit).max(least)
+    };
     if points >= least && points < particles as u64 {
-        // A round number: two significant digits, downward.
-        let unit = 10u64.pow(points.ilog10().saturating_sub(1));
         format!(
             ", or build it out of core in smaller chunks (--chunk-points {})",
-            points / unit * unit
+            round(points)
         )
     } else {
         String::new()
@@ -631,7 +637,7 @@ mod tests {
     #[test]
     fn the_memory_hint_names_chunks_that_fit_the_limit() {
         let limit = 100u64 << 20;
-        let hint = chunk_hint(1_000_000, limit);
+        let hint = chunk_hint(1_000_000, limit, 4096);
         let fits =
             (limit - crate::chunked::chunk_memory(0)) / crate::chunked::BUILD_BYTES_PER_PARTICLE;
         assert_eq!(fits, 343_170);
@@ -641,8 +647,12 @@ mod tests {
         );
         assert!(crate::chunked::chunk_memory(340_000) <= limit);
         // Room for fewer than the root points, or for the whole frame: no hint.
-        assert_eq!(chunk_hint(1_000_000, 64 << 20), "");
-        assert_eq!(chunk_hint(100_000, limit), "");
+        assert_eq!(chunk_hint(1_000_000, 64 << 20, 4096), "");
+        assert_eq!(chunk_hint(100_000, limit, 4096), "");
+        // The build's own root points: no chunk below them is suggested.
+        assert_eq!(chunk_hint(1_000_000, limit, 500_000), "");
+        let just = crate::chunked::chunk_memory(4099);
+        assert!(chunk_hint(1_000_000, just, 4096).ends_with("(--chunk-points 4096)"));
         let options = ConvertOptions {
             chunks: crate::chunked::ChunkOptions {
                 memory_limit: limit,

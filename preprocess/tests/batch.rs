@@ -1216,7 +1216,15 @@ fn a_batch_directory_verifies_against_its_manifest() {
         .unwrap();
     }
     let c = verify_dir(&sharded, &NoProgress).unwrap();
-    assert_eq!(c.frames_ok, 6);
+    assert_eq!((c.frames_ok, c.problems.len()), (6, 0), "{c:?}");
     assert_eq!(c.manifests.len(), 2);
+    // A shard that never ran is a problem, though every frame listed verifies.
+    std::fs::remove_file(sharded.join("dataset.shard-1-of-2.json")).unwrap();
+    let c = verify_dir(&sharded, &NoProgress).unwrap();
+    assert_eq!(c.frames_ok, 3);
+    assert!(
+        c.problems.len() == 1 && c.problems[0].contains("shard 1 of 2 wrote no manifest"),
+        "{c:?}"
+    );
     assert!(verify_dir(&dir.path().join("nothing-here"), &NoProgress).is_err());
 }

@@ -164,8 +164,11 @@ pub fn run(args: Args) -> Result<()> {
         bail!("give the batch directory with -o DIR");
     };
     // A batch directory this run creates and leaves empty (it failed before converting
-    // a frame: a missing input, a bad option) is removed again.
-    let created = !out.exists();
+    // a frame: a missing input, a bad option) is removed again; not by a shard, whose
+    // siblings may be using it (with their working files elsewhere, it stays empty
+    // while they index their inputs).
+    let sharded = args.shard.is_some() || std::env::var_os("SLURM_ARRAY_TASK_ID").is_some();
+    let created = !out.exists() && !sharded;
     let result = run_batch(&args, out);
     if result.is_err() && created {
         // Fails, leaving it, unless it is empty.
