@@ -118,10 +118,16 @@ pub fn radius_notes(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<S
 /// letters are unaffected, and so are frames whose single letters are all elements (`C`,
 /// `H`, `O`).
 pub fn letters_are_labels<'a>(names: impl IntoIterator<Item = &'a str>) -> bool {
-    names
-        .into_iter()
-        .any(|n| n.len() == 1 && n.as_bytes()[0].is_ascii_uppercase() && element(n).is_none())
+    names.into_iter().any(|n| {
+        n.len() == 1 && n.as_bytes()[0].is_ascii_uppercase() && !SINGLE_LETTER_ELEMENTS.contains(&n)
+    })
 }
+
+/// Every element whose symbol is one letter (whether or not [`element`] knows its
+/// looks): a frame with iodine or yttrium beside carbon names elements, not labels.
+const SINGLE_LETTER_ELEMENTS: [&str; 14] = [
+    "H", "B", "C", "N", "O", "F", "P", "S", "K", "V", "Y", "I", "W", "U",
+];
 
 /// The element a species name stands for, if any: never a single letter where
 /// [`letters_are_labels`] (and a type number is no element symbol).
@@ -426,6 +432,9 @@ mod tests {
         }
         assert!(letters_are_labels(["A", "B"]));
         assert!(!letters_are_labels(["B", "C", "Cu"]));
+        // Iodine and yttrium are elements too (MAPbI3: Pb I C N H).
+        assert!(!letters_are_labels(["Pb", "I", "C", "N", "H"]));
+        assert!(!letters_are_labels(["Y", "O"]));
         assert_eq!(radius_without_override("B", None, true), DEFAULT_RADIUS);
         assert_eq!(
             radius_without_override("B", None, false),

@@ -253,3 +253,16 @@ fn species_are_ordered_as_lammps_text_orders_them() {
     assert_eq!(x.species, l.species);
     assert_eq!(x.species_index, l.species_index);
 }
+
+/// XYZ numbers take palette colours by their place, not as LAMMPS type numbers: species
+/// 0 and 1 (0-based), or atomic numbers 1 and 11, stay apart.
+#[test]
+fn numeric_xyz_species_take_distinct_palette_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    for (a, b) in [("0", "1"), ("1", "11")] {
+        let text = format!("2\nnumbers\n{a} 0 0 0\n{b} 1 0 0\n");
+        let f = read_k(&write(dir.path(), &format!("n{a}{b}.xyz"), &text), 0, None);
+        let table = mdlod_preprocess::species::species_table(&f.species, &[]);
+        assert_ne!(table[0].colour, table[1].colour, "{a} and {b}");
+    }
+}

@@ -49,6 +49,9 @@ pub(crate) struct AtomLayout {
     /// Species names that all parse as integers are sorted numerically and flagged
     /// `numeric_type` (LAMMPS `type` column without `element`, XYZ species).
     pub numeric_species: bool,
+    /// The species are LAMMPS type numbers (from 1): type `n` takes palette slot `n − 1`
+    /// (an XYZ file's numbers may be atomic numbers, or start at 0).
+    pub type_numbers: bool,
 }
 
 /// What a chunk parser does with one field.
@@ -209,6 +212,7 @@ pub(crate) fn parse(
             &local,
             &counts,
             layout.numeric_species,
+            layout.type_numbers,
             &mut species_index,
         )?
     } else if expected > 0 {
@@ -237,6 +241,7 @@ fn merge_species(
     local: &[SpeciesTable<'_>],
     counts: &[usize],
     numeric: bool,
+    type_numbers: bool,
     species_index: &mut [u16],
 ) -> Result<Vec<SpeciesName>, ReadError> {
     let mut names: Vec<&[u8]> = Vec::new();
@@ -269,6 +274,8 @@ fn merge_species(
         None
     };
     let numeric_type = values.is_some();
+    // LAMMPS types start at 1; a 0 or below is no type number to take a slot by.
+    let slots = type_numbers && values.as_ref().is_some_and(|v| v.iter().all(|&n| n >= 1));
     if let Some(values) = values {
         let mut order: Vec<usize> = (0..names.len()).collect();
         order.sort_by_key(|&i| values[i]);
@@ -303,11 +310,7 @@ fn merge_species(
             name: String::from_utf8_lossy(n).into_owned(),
             numeric_type,
             radius: None,
-            palette_slot: if numeric_type {
-                type_number_slot(n)
-            } else {
-                None
-            },
+            palette_slot: if slots { type_number_slot(n) } else { None },
             ..Default::default()
         })
         .collect())

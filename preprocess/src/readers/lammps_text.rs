@@ -285,6 +285,7 @@ impl Index {
             coords,
             species: element.or_else(|| find("type")),
             numeric_species: element.is_none(),
+            type_numbers: element.is_none(),
         };
         info.columns = columns;
         Ok(Header {

@@ -200,6 +200,7 @@ impl Index {
                     species: Some(0),
                     // Numbers sorted as LAMMPS types are.
                     numeric_species: true,
+                    type_numbers: false,
                 }
             }
         };
@@ -284,6 +285,7 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
         species: species.or(atomic_number),
         // Numbers sorted as LAMMPS types are.
         numeric_species: true,
+        type_numbers: false,
     })
 }
 
