@@ -9,9 +9,9 @@
 //! packed like cluster records: radius and colour per point). Clusters take the map's
 //! colour of their area-weighted mean attribute (both mapped to [0, 1] by
 //! [`AttributeScale`]), and their coverage radius times the radius scale; without a map
-//! their stored mixture of species colours goes through the linear map that takes every
+//! their stored mixture of species colours goes through the affine map that takes every
 //! species' colour to its styled one ([`PointStyle::cluster_recolour`]: exact for up to
-//! three species of independent colours, a least-squares fit beyond). Hiding is exact at
+//! four species of affinely independent colours, a least-squares fit beyond). Hiding is exact at
 //! the particle level only: a cluster drawn in place of a hidden species' particles
 //! still shows them. Styles that change sizes or hide particles turn occlusion culling
 //! off (it assumes the file's radii).
@@ -186,23 +186,26 @@ impl PointStyle {
             .collect())
     }
 
-    /// The linear map that recolours clusters when species take other colours, `None`
-    /// when none does (or a colour map colours the points).
+    /// The affine map that recolours clusters when species take other colours, `None`
+    /// when none does (or a colour map colours the points): rows of `[a b c d]`, a colour
+    /// `x` going to `a·x + d` per channel ([`recoloured`]).
     ///
     /// A cluster's stored colour is the area-weighted mean `C = Σ wᵢ cᵢ` of its
-    /// particles' species colours (`Σ wᵢ = 1`). A 3×3 matrix `T` with `T cᵢ = c′ᵢ` for every
-    /// species turns it into `T C = Σ wᵢ c′ᵢ`, the mean of the new colours, with no
-    /// per-species composition stored: `T = I + (C′ − C) C⁺`, `C` and `C′` the 3×k
-    /// matrices of the old and new colours and `C⁺` their pseudo-inverse. It is exact
-    /// for up to three species whose colours are linearly independent (and equal to the
-    /// identity on colours no species mixture makes); with more species, or dependent
-    /// colours, it is the least-squares fit of the species' new colours. `species` are
-    /// the file's, `styled` the [`Self::species_table`].
+    /// particles' species colours (`Σ wᵢ = 1`). A map `M` with `M cᵢ = c′ᵢ` for every
+    /// species turns it into `M C = Σ wᵢ c′ᵢ`, the mean of the new colours, with no
+    /// per-species composition stored; as the weights sum to 1 it may be affine, which
+    /// also tells apart colours on one line through black (white hydrogen and grey
+    /// carbon). With `ĉ = [c; 1]`: `M = [I | 0] + (C′ − C) Ĉ⁺`, `C` and `C′` the 3×k
+    /// matrices of the old and new colours and `Ĉ⁺` the pseudo-inverse of the 4×k
+    /// `Ĉ`. It is exact for up to four species whose colours are affinely independent
+    /// (and the identity on colours no species mixture makes); with more species, the
+    /// least-squares fit of the species' new colours. `species` are the file's, `styled`
+    /// the [`Self::species_table`].
     pub fn cluster_recolour(
         &self,
         species: &[mdlod_format::meta::Species],
         styled: &[[f32; 4]],
-    ) -> Option<[[f32; 3]; 3]> {
+    ) -> Option<[[f32; 4]; 3]> {
         if self.colour_map.is_some()
             || species
                 .iter()
@@ -212,36 +215,42 @@ impl PointStyle {
             return None;
         }
         let k = species.len();
-        let c: Vec<[f64; 3]> = species.iter().map(|s| s.colour.map(f64::from)).collect();
+        let c: Vec<[f64; 4]> = species
+            .iter()
+            .map(|s| {
+                let [r, g, b] = s.colour.map(f64::from);
+                [r, g, b, 1.0]
+            })
+            .collect();
         let d: Vec<[f64; 3]> = species
             .iter()
             .zip(styled)
             .map(|(s, t)| [0, 1, 2].map(|i| f64::from(t[i]) - f64::from(s.colour[i])))
             .collect();
-        // C⁺ (k×3) from the smaller Gram matrix, regularised a little so that dependent
+        // Ĉ⁺ (k×4) from the smaller Gram matrix, regularised a little so that dependent
         // colours give the least-squares fit instead of a singular system.
-        let pinv: Vec<[f64; 3]> = if k <= 3 {
-            // (CᵀC + εI)⁻¹ Cᵀ
-            let mut g: Vec<f64> = (0..k * k).map(|ij| dot(&c[ij / k], &c[ij % k])).collect();
+        let pinv: Vec<[f64; 4]> = if k <= 4 {
+            // (ĈᵀĈ + εI)⁻¹ Ĉᵀ
+            let mut g: Vec<f64> = (0..k * k).map(|ij| dot4(&c[ij / k], &c[ij % k])).collect();
             let eps = 1e-9 * (0..k).map(|i| g[i * k + i]).sum::<f64>().max(1e-30);
             (0..k).for_each(|i| g[i * k + i] += eps);
             let inv = invert(k, g)?;
             (0..k)
-                .map(|i| [0, 1, 2].map(|col| (0..k).map(|j| inv[i * k + j] * c[j][col]).sum()))
+                .map(|i| [0, 1, 2, 3].map(|col| (0..k).map(|j| inv[i * k + j] * c[j][col]).sum()))
                 .collect()
         } else {
-            // Cᵀ (CCᵀ + εI)⁻¹
-            let mut g: Vec<f64> = (0..9)
-                .map(|ij| c.iter().map(|v| v[ij / 3] * v[ij % 3]).sum())
+            // Ĉᵀ (ĈĈᵀ + εI)⁻¹
+            let mut g: Vec<f64> = (0..16)
+                .map(|ij| c.iter().map(|v| v[ij / 4] * v[ij % 4]).sum())
                 .collect();
-            let eps = 1e-9 * (g[0] + g[4] + g[8]).max(1e-30);
-            [0, 4, 8].iter().for_each(|&i| g[i] += eps);
-            let inv = invert(3, g)?;
+            let eps = 1e-9 * (g[0] + g[5] + g[10] + g[15]).max(1e-30);
+            [0, 5, 10, 15].iter().for_each(|&i| g[i] += eps);
+            let inv = invert(4, g)?;
             c.iter()
-                .map(|v| [0, 1, 2].map(|col| (0..3).map(|j| v[j] * inv[j * 3 + col]).sum()))
+                .map(|v| [0, 1, 2, 3].map(|col| (0..4).map(|j| v[j] * inv[j * 4 + col]).sum()))
                 .collect()
         };
-        let mut t = [[0.0f32; 3]; 3];
+        let mut t = [[0.0f32; 4]; 3];
         for (row, out) in t.iter_mut().enumerate() {
             for (col, v) in out.iter_mut().enumerate() {
                 let identity = if row == col { 1.0 } else { 0.0 };
@@ -376,8 +385,8 @@ impl AttributeScale {
     }
 }
 
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+fn dot4(a: &[f64; 4], b: &[f64; 4]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
 }
 
 /// The inverse of the `n`×`n` row-major matrix `m` by Gauss-Jordan elimination with
@@ -412,9 +421,9 @@ fn invert(n: usize, mut m: Vec<f64>) -> Option<Vec<f64>> {
     Some(inv)
 }
 
-/// `t · c` for a [`PointStyle::cluster_recolour`] map and a linear colour.
-pub fn recoloured(t: &[[f32; 3]; 3], c: [f32; 3]) -> [f32; 3] {
-    t.map(|row| row[0] * c[0] + row[1] * c[1] + row[2] * c[2])
+/// A linear colour through a [`PointStyle::cluster_recolour`] map.
+pub fn recoloured(t: &[[f32; 4]; 3], c: [f32; 3]) -> [f32; 3] {
+    t.map(|row| row[0] * c[0] + row[1] * c[1] + row[2] * c[2] + row[3])
 }
 
 /// The linear colour of a packed RGBA8 colour ([`pack_colour`]).
@@ -444,7 +453,7 @@ mod tests {
             .collect()
     }
 
-    fn recolour_of(old: &[[f32; 3]], new: &[(usize, [f32; 3])]) -> Option<[[f32; 3]; 3]> {
+    fn recolour_of(old: &[[f32; 3]], new: &[(usize, [f32; 3])]) -> Option<[[f32; 4]; 3]> {
         let style = PointStyle {
             species: new
                 .iter()
@@ -470,19 +479,24 @@ mod tests {
     const AG: [f32; 3] = [0.527, 0.527, 0.527];
     const O: [f32; 3] = [1.0, 0.004, 0.004];
 
-    /// Up to three species of independent colours: every old colour goes to its new one,
-    /// so every mixture goes to the same mixture of the new colours; species left alone
-    /// keep theirs.
+    /// Up to four species of affinely independent colours: every old colour goes to its
+    /// new one, so every mixture goes to the same mixture of the new colours; species
+    /// left alone keep theirs. White hydrogen and grey carbon lie on one line through
+    /// black, which a linear map could not tell apart (hydrogen clusters turned green
+    /// with carbon's new colour).
     #[test]
-    fn recolouring_clusters_is_exact_for_up_to_three_independent_colours() {
+    fn recolouring_clusters_is_exact_for_up_to_four_independent_colours() {
         let red = [0.9, 0.05, 0.1];
         let blue = [0.05, 0.1, 0.8];
+        let (h, c) = ([1.0, 1.0, 1.0], [0.279, 0.279, 0.279]);
         type Case<'a> = (&'a [[f32; 3]], &'a [(usize, [f32; 3])]);
-        let cases: [Case<'_>; 4] = [
+        let cases: [Case<'_>; 6] = [
             (&[CU], &[(0, red)]),
             (&[CU, AG], &[(1, blue)]),
             (&[CU, AG, O], &[(0, red)]),
             (&[CU, AG, O], &[(0, blue), (1, red), (2, AG)]),
+            (&[h, c], &[(1, [0.0, 1.0, 0.0])]),
+            (&[h, c, O, CU], &[(1, [0.0, 1.0, 0.0]), (3, blue)]),
         ];
         for (old, new) in cases {
             let t = recolour_of(old, new).unwrap();
@@ -492,8 +506,8 @@ mod tests {
             for (c, w) in old.iter().zip(&want) {
                 assert!(close(recoloured(&t, *c), *w, 1e-5), "{old:?} {new:?}");
             }
-            // A mixture of all of them, weights 0.5, 0.3, 0.2 (renormalised).
-            let wts = [0.5f32, 0.3, 0.2];
+            // A mixture of all of them, weights 0.4, 0.3, 0.2, 0.1 (renormalised).
+            let wts = [0.4f32, 0.3, 0.2, 0.1];
             let sum: f32 = wts[..old.len()].iter().sum();
             let mix = |cs: &[[f32; 3]]| {
                 [0, 1, 2].map(|k| (0..cs.len()).map(|i| wts[i] * cs[i][k]).sum::<f32>() / sum)
@@ -502,11 +516,12 @@ mod tests {
         }
     }
 
-    /// More species than colour dimensions: the least-squares fit, which is exact where
-    /// the new colours are a linear map of the old ones (here: channels swapped).
+    /// More species than an affine map of colours can tell apart: the least-squares fit,
+    /// which is exact where the new colours are such a map of the old ones (here:
+    /// channels swapped).
     #[test]
-    fn recolouring_more_than_three_species_fits_a_linear_map() {
-        let old = [CU, AG, O, [0.1, 0.6, 0.2]];
+    fn recolouring_more_than_four_species_fits_an_affine_map() {
+        let old = [CU, AG, O, [0.1, 0.6, 0.2], [0.3, 0.3, 0.9]];
         let swap = |c: [f32; 3]| [c[2], c[0], c[1]];
         let new: Vec<(usize, [f32; 3])> = old.iter().map(|&c| swap(c)).enumerate().collect();
         let t = recolour_of(&old, &new).unwrap();

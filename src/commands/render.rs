@@ -116,8 +116,8 @@ pub struct StyleArgs {
     #[arg(long, default_value_t = 1.0)]
     pub radius_scale: f32,
     /// A species' colour, e.g. `Cu=#c87533`; repeatable. Exact for particles, and for
-    /// clusters where the file has at most three species of independent colours (else a
-    /// least-squares fit of their mixtures).
+    /// clusters where the file has at most four species of affinely independent colours
+    /// (else a least-squares fit of their mixtures).
     #[arg(
         long = "species-colour",
         value_name = "NAME=COLOUR",

@@ -391,7 +391,7 @@ pub struct AttrPacker {
     pub species: Vec<[f32; 4]>,
     /// The map that recolours clusters after species colours changed
     /// ([`PointStyle::cluster_recolour`]).
-    recolour: Option<[[f32; 3]; 3]>,
+    recolour: Option<[[f32; 4]; 3]>,
     /// The file's species count (indices at or above it are corrupt).
     species_count: usize,
 }
