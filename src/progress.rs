@@ -9,8 +9,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use mdlod_preprocess::Progress;
 
 /// A [`Progress`] that draws on stderr when it is a terminal, and otherwise writes a line
-/// per [`Log::every`] to stderr for stages past [`Log::after`] (a Slurm job's log shows
-/// how far a long conversion is; short commands print nothing).
+/// to stderr as a stage past [`Log::after`] progresses, at most one per [`Log::every`] (a
+/// Slurm job's log shows how far a long conversion is; short commands print nothing).
 pub struct Bar {
     bar: Mutex<Option<ProgressBar>>,
     enabled: bool,

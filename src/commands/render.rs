@@ -696,6 +696,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             .with_context(|| format!("cannot create {}", parent.display()))?;
     }
     let t0 = std::time::Instant::now();
+    let mut limited_frames = 0usize;
     let renderer =
         mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
     for (i, f) in manifest.frames.iter().enumerate() {
@@ -712,21 +713,51 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             // Splats: one exposure for every frame, or the brightness drifts.
             opts.exposure = r.exposure;
         }
+        let points = match args.mode {
+            Mode::Spheres | Mode::Sndf => "cluster spheres",
+            Mode::Splat | Mode::SplatOver => "cluster splats",
+            Mode::Density | Mode::Iso => "cluster kernels",
+        };
+        let mut limits = vec![];
+        if r.budget_limited {
+            limits.push(format!("point budget of {} reached", r.budget));
+        }
+        if r.pool_limited {
+            limits.push("GPU memory pool full".to_string());
+        }
+        if r.particles_hidden > 0 {
+            limits.push(format!("{} of hidden species", r.particles_hidden));
+        }
+        limited_frames += usize::from(r.budget_limited || r.pool_limited);
         println!(
-            "wrote {} (frame {}/{n}, timestep {}): {} particles and {} cluster spheres, {:.0} ms",
+            "wrote {} (frame {}/{n}, timestep {}): {} particles and {} {points}{}, error {:.2} px, {:.0} ms",
             out.display(),
             i + 1,
             f.timestep,
             r.particles_drawn,
             r.nodes_drawn,
+            if limits.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", limits.join("; "))
+            },
+            r.error_px,
             r.total_time.as_secs_f64() * 1e3
         );
     }
     let exposure = opts
         .exposure
         .map_or(String::new(), |e| format!(", splat exposure {e:.4e}"));
+    let framing = match &args.camera.view {
+        Some(v) => format!("{}", v.display()),
+        None => "fitted to every frame's bounds".to_string(),
+    };
+    let limited = match limited_frames {
+        0 => String::new(),
+        k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
+    };
     println!(
-        "rendered {n} frames in {:.1} s, one camera for all (fitted to every frame's bounds){exposure}",
+        "rendered {n} frames in {:.1} s, one camera for all ({framing}){exposure}{limited}",
         t0.elapsed().as_secs_f64()
     );
     if let Some(p) = &args.save_view {

@@ -187,6 +187,12 @@ pub fn run(args: Args) -> Result<()> {
     };
     let lit = match (args.explorer, &args.envmap) {
         (Some(slices), _) => format!("normals coloured by an explorer of {slices} slices"),
+        _ if args.transfer.is_some() => format!(
+            "normals coloured by the transfer function {}",
+            args.transfer
+                .as_deref()
+                .map_or(String::new(), |p| p.display().to_string())
+        ),
         (None, Some(map)) if shade.lights.is_empty() => {
             format!("lit by the environment map {}", map.display())
         }
