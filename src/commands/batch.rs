@@ -180,6 +180,8 @@ pub fn run(args: Args) -> Result<()> {
 fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
     super::check_batch_output(out, &args.inputs)?;
     args.build.check()?;
+    // Before anything is created: a Slurm environment that names no shard fails here.
+    let shard = shard(args)?;
     let (mut convert, read) = args.build.options();
     // Working files of out-of-core frames: a directory of this run's own, removed on
     // Ctrl-C and SIGTERM (partial frames are redone by the next run).
@@ -204,7 +206,7 @@ fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
     let opts = BatchOptions {
         convert,
         read,
-        shard: shard(args)?,
+        shard,
         memory_limit: args
             .memory_limit
             .unwrap_or_else(mdlod_preprocess::chunked::default_memory_limit),
