@@ -30,7 +30,7 @@ use crate::camera::{Camera, Projection};
 use crate::context::GpuContext;
 use crate::error::RenderError;
 use crate::image::RgbaImage;
-use crate::passes::accumulate::{AccumulatePass, ACCUM_FORMAT, OUTPUT_FORMAT};
+use crate::passes::accumulate::{AccumulatePass, OUTPUT_FORMAT};
 use crate::passes::sphere_raycast::{
     FrameUniforms, Lighting, SphereBuffers, SphereRaycastPass, COLOUR_FORMAT, DEPTH_FORMAT,
 };
@@ -877,7 +877,10 @@ fn padded_row(bytes_per_row: u32) -> u32 {
 impl Renderer {
     pub fn new(ctx: GpuContext) -> Self {
         let sphere = SphereRaycastPass::new(&ctx.device);
-        let accumulate = AccumulatePass::new(&ctx.device);
+        let accumulate = AccumulatePass::new(
+            &ctx.device,
+            crate::passes::accumulate::accum_format(&ctx.adapter),
+        );
         let splat = SplatPass::new(&ctx.device, &sphere.layout);
         let density = crate::passes::density::DensityPass::new(&ctx.device, &sphere.layout);
         let sndf = SndfPass::new(&ctx.device);
@@ -1194,7 +1197,7 @@ impl Renderer {
             let target = |label| {
                 view(&texture(
                     label,
-                    ACCUM_FORMAT,
+                    self.accumulate.format,
                     U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
                 ))
             };

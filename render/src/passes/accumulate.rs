@@ -9,6 +9,21 @@ pub const SHADER: &str = include_str!("accumulate.wgsl");
 /// Format of the two accumulation targets: single precision, so that a sum of many
 /// equal samples does not round the same way at every step (see `accumulate.wgsl`).
 pub const ACCUM_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// The accumulation format an adapter can render to: [`ACCUM_FORMAT`], else half
+/// precision (GL renders to no single-precision target; a sum of many samples then
+/// rounds as it did before single precision).
+pub fn accum_format(adapter: &wgpu::Adapter) -> wgpu::TextureFormat {
+    let features = adapter.get_texture_format_features(ACCUM_FORMAT);
+    if features
+        .allowed_usages
+        .contains(wgpu::TextureUsages::RENDER_ATTACHMENT)
+    {
+        ACCUM_FORMAT
+    } else {
+        wgpu::TextureFormat::Rgba16Float
+    }
+}
 /// Format of the final image (sRGB encoding on store).
 pub const OUTPUT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
@@ -22,6 +37,8 @@ pub struct WeightUniforms {
 /// Three pipelines over one layout: the first sample's weighted copy, the sum of the
 /// sum so far and a weighted sample, and the plain resolve copy.
 pub struct AccumulatePass {
+    /// The accumulation targets' format ([`accum_format`]).
+    pub format: wgpu::TextureFormat,
     pub first: wgpu::RenderPipeline,
     pub accumulate: wgpu::RenderPipeline,
     pub resolve: wgpu::RenderPipeline,
@@ -29,7 +46,7 @@ pub struct AccumulatePass {
 }
 
 impl AccumulatePass {
-    pub fn new(device: &wgpu::Device) -> Self {
+    pub fn new(device: &wgpu::Device, format: wgpu::TextureFormat) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("accumulate.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
@@ -93,10 +110,11 @@ impl AccumulatePass {
                 cache: None,
             })
         };
-        let first = make("accumulate first", ACCUM_FORMAT, "fs_weighted");
-        let accumulate = make("accumulate", ACCUM_FORMAT, "fs_sum");
+        let first = make("accumulate first", format, "fs_weighted");
+        let accumulate = make("accumulate", format, "fs_sum");
         let resolve = make("resolve", OUTPUT_FORMAT, "fs_weighted");
         AccumulatePass {
+            format,
             first,
             accumulate,
             resolve,
