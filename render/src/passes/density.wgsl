@@ -43,7 +43,9 @@ fn vs_splat(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     for (var c = 0u; c < 8u; c++) {
         let s = vec3<f32>(f32(c & 1u), f32((c >> 1u) & 1u), f32((c >> 2u) & 1u)) * 2.0 - 1.0;
         let q = clip_from_world * vec4<f32>(pt.world + s * out.h, 1.0);
-        if q.w <= 1e-6 {
+        // Behind the eye, or on its plane: w is the view depth in world units (1 in
+        // orthographic views), so no fixed epsilon (data in metres spans 10^-10).
+        if q.w <= 0.0 {
             behind = true;
         } else {
             lo = min(lo, q.xy / q.w);
