@@ -243,11 +243,14 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> BatchError + '_ {
 }
 
 /// Size and modification time of an input; for a `%` piece set, the total size and the
-/// latest modification of its pieces.
+/// latest modification of its pieces; for a raw sidecar, of it and the arrays it names
+/// (new arrays behind an unchanged sidecar are new data).
 pub fn fingerprint(input: &Path, frame: u64) -> SourceInfo {
     let files = match crate::readers::piece_paths(input) {
         Ok(p) if !input.exists() => p,
-        _ => vec![input.to_path_buf()],
+        _ => std::iter::once(input.to_path_buf())
+            .chain(crate::readers::raw::data_files(input).into_iter().flatten())
+            .collect(),
     };
     let mut size = 0u64;
     // The latest (seconds, nanoseconds) of the pieces.

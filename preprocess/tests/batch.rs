@@ -1228,3 +1228,33 @@ fn a_batch_directory_verifies_against_its_manifest() {
     );
     assert!(verify_dir(&dir.path().join("nothing-here"), &NoProgress).is_err());
 }
+
+/// A raw sidecar's arrays are its data: new positions behind an unchanged sidecar are
+/// converted again (the rerun kept the old frame, its manifest entry checked out).
+#[test]
+fn new_raw_arrays_behind_an_unchanged_sidecar_are_converted_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let write_positions = |offset: f32| {
+        let pos: Vec<u8> = (0..300)
+            .flat_map(|i| [i as f32 + offset, (i % 7) as f32, (i % 11) as f32])
+            .flat_map(f32::to_le_bytes)
+            .collect();
+        std::fs::write(dir.path().join("pos.f32"), pos).unwrap();
+    };
+    write_positions(0.0);
+    let sidecar = dir.path().join("snap.raw.json");
+    std::fs::write(
+        &sidecar,
+        r#"{"mdlod_raw": 1, "positions": {"file": "pos.f32", "type": "f32"}, "timestep": 5}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let r = batch(std::slice::from_ref(&sidecar), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 1);
+    let before = read_manifest(&out).unwrap().frames[0].checksum.clone();
+    // The same length, other values: only the array changed.
+    write_positions(0.5);
+    let r = batch(std::slice::from_ref(&sidecar), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (1, 0));
+    assert_ne!(read_manifest(&out).unwrap().frames[0].checksum, before);
+}

@@ -119,9 +119,9 @@ pub fn run(args: Args) -> Result<()> {
     println!("  nodes        {}", f.nodes().len());
     for s in &m.species {
         println!(
-            "  species      {:<6} radius {:.3}  colour [{:.2} {:.2} {:.2}]",
+            "  species      {:<6} radius {:<6}  colour [{:.2} {:.2} {:.2}]",
             shown(&s.name),
-            s.radius,
+            radius_text(s.radius),
             s.colour[0],
             s.colour[1],
             s.colour[2]
@@ -167,6 +167,16 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("  max position error {:.4e}", m.max_position_error);
     Ok(())
+}
+
+/// A species radius: three decimals where that shows it (`1.280`), else its shortest
+/// form in scientific notation (`2e-12` for atoms in metres, not `0.000`; `1e16`).
+fn radius_text(r: f32) -> String {
+    if (1e-2..1e5).contains(&r.abs()) {
+        format!("{r:.3}")
+    } else {
+        format!("{r:e}")
+    }
 }
 
 /// A number as printed: an f32 widened to f64 (MMPLD and GSD boxes) as the f32's shortest
@@ -238,6 +248,15 @@ mod tests {
         assert_eq!(super::shown("Cu"), "Cu");
         assert_eq!(super::shown("a\u{1b}[2Jb\n"), "a\\u{1b}[2Jb\\n");
         assert_eq!(super::shown("Å µm"), "Å µm");
+    }
+
+    #[test]
+    fn radii_of_any_scale_print_readably() {
+        use super::radius_text;
+        assert_eq!(radius_text(1.28), "1.280");
+        assert_eq!(radius_text(2e-12), "2e-12");
+        assert_eq!(radius_text(1e16), "1e16");
+        assert_eq!(radius_text(0.5), "0.500");
     }
 
     #[test]

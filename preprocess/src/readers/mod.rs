@@ -51,7 +51,7 @@ mod lammps_binary;
 mod lammps_text;
 mod mmpld;
 mod pieces;
-mod raw;
+pub(crate) mod raw;
 mod xyz;
 
 use std::fmt;

@@ -39,6 +39,29 @@ use super::{FrameInfo, ReadError, ReadOptions};
 use crate::frame::{Attribute, Frame, SimulationBox, SpeciesName};
 use crate::progress::Progress;
 
+/// The array files a raw sidecar at `path` names (resolved next to it), when `path` is
+/// such a sidecar (a small JSON object with `mdlod_raw`); `None` otherwise. The arrays
+/// are the data: a batch rerun compares them as well as the sidecar.
+pub(crate) fn data_files(path: &Path) -> Option<Vec<PathBuf>> {
+    if std::fs::metadata(path).ok()?.len() > 1 << 20 {
+        return None;
+    }
+    let sidecar: Sidecar = serde_json::from_slice(&std::fs::read(path).ok()?).ok()?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let arrays = [
+        Some(&sidecar.positions),
+        sidecar.species.as_ref(),
+        sidecar.attribute.as_ref(),
+    ];
+    Some(
+        arrays
+            .into_iter()
+            .flatten()
+            .map(|a| dir.join(&a.file))
+            .collect(),
+    )
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Sidecar {
