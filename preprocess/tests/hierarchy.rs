@@ -650,7 +650,7 @@ fn values_that_overflow_or_are_not_finite_are_refused_not_written() {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("species `Cu`") && e.contains("squared radii add up to 1.67e38"),
+            e.contains("species `Cu`") && e.contains("squared radii of 1.67e38"),
             "{e}"
         );
         assert!(!path.exists());

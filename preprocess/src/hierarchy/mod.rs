@@ -116,7 +116,7 @@ pub enum BuildError {
     NonFiniteAttribute { index: usize, value: f32 },
     #[error("particle {index} at {position:?} lies beyond ±{MAX_COORDINATE:e}, where differences of single-precision coordinates overflow; convert it in larger length units")]
     OutOfRange { index: usize, position: [f32; 3] },
-    #[error("species `{name}`: radius {radius:e} for {particles} particles: their squared radii add up to {sum:.2e}, beyond the {MAX_AREA_SUM:e} single precision holds; convert it in larger length units")]
+    #[error("species `{name}`: radius {radius:e}: the frame's {particles} particles at that radius would add up to squared radii of {sum:.2e}, beyond the {MAX_AREA_SUM:e} single precision holds (a bound over the whole frame, as the top node sums every particle); convert it in larger length units")]
     RadiusTooLarge {
         name: String,
         radius: f32,
