@@ -5,11 +5,10 @@ cd "$(dirname "$0")/.."
 export WGPU_BACKEND="${WGPU_BACKEND:-vulkan}"
 mkdir -p target/xdg && chmod 700 target/xdg
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$PWD/target/xdg}"
+# Before each cargo command: see scripts/null-device.sh.
+bash scripts/null-device.sh
 cargo fmt --all -- --check
+bash scripts/null-device.sh
 cargo clippy --workspace --all-targets --locked -- -D warnings
-# cargo's rustc target probe has failed here in fresh clones after clippy (rustc read
-# a build-script probe's error text as its input), and cargo caches the failure: build
-# the tests, and on failure forget the cached probe and build them once more.
-cargo test --workspace --locked --no-run ||
-  { rm -f target/.rustc_info.json; cargo test --workspace --locked --no-run; }
+bash scripts/null-device.sh
 cargo test --workspace --locked
