@@ -2562,3 +2562,24 @@ fn verify_checks_a_batch_directory() {
     let err = fails(&["verify", s(&out)]);
     assert!(err.contains("1 problem (5 frames verified)"), "{err}");
 }
+
+/// A count that cannot fit on the disk is refused before anything is written (a typo of
+/// a few digits filled the disk before failing).
+#[test]
+fn generate_refuses_data_the_disk_cannot_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("huge.lammpstrj");
+    let err = fails(&[
+        "generate",
+        "crater",
+        "-n",
+        "1000000000000000",
+        "-o",
+        s(&out),
+    ]);
+    assert!(
+        err.contains("need about") && err.contains("GB free"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}

@@ -53,6 +53,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.frames == 0 {
         anyhow::bail!("--frames 0 (must be at least 1)");
     }
+    check_room(&args)?;
     let mut opts = GenerateOptions::new(args.kind, args.particles);
     opts.seed = args.seed;
     opts.frames = args.frames;
@@ -70,6 +71,49 @@ pub fn run(args: Args) -> Result<()> {
         summary.extra_column,
         summary.bytes as f64 / (1 << 20) as f64
     );
+    Ok(())
+}
+
+/// Bytes per particle of each output format, a little below what the generator writes
+/// (text: about 41 for a LAMMPS dump and 36 for XYZ; raw arrays 17), so that a refusal
+/// is sure.
+fn bytes_per_particle(format: OutputFormat) -> u64 {
+    match format {
+        OutputFormat::Lammps => 36,
+        OutputFormat::Xyz => 32,
+        OutputFormat::Raw => 16,
+    }
+}
+
+/// Refuses, before writing, data that cannot fit on the output's file system (a count
+/// mistyped by a few digits filled the disk with a 48 GB file before failing).
+fn check_room(args: &Args) -> Result<()> {
+    let need = args
+        .particles
+        .saturating_mul(u64::from(args.frames))
+        .saturating_mul(bytes_per_particle(args.format));
+    let dir = match args.output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    // Where the space cannot be read (the directory is missing: writing says so), go on.
+    let Ok(fs) = rustix::fs::statvfs(&dir) else {
+        return Ok(());
+    };
+    let free = fs.f_bavail.saturating_mul(fs.f_frsize);
+    // The output replaces an existing file, whose space comes back.
+    let replaced = std::fs::metadata(&args.output).map_or(0, |m| m.len());
+    if need > free.saturating_add(replaced) {
+        anyhow::bail!(
+            "{} frame(s) of {} particles need about {:.1} GB, more than the {:.1} GB free \
+             in {}",
+            args.frames,
+            args.particles,
+            need as f64 / 1e9,
+            free as f64 / 1e9,
+            dir.display()
+        );
+    }
     Ok(())
 }
 
