@@ -74,14 +74,25 @@ impl Log {
         }
     }
 
-    fn finish(&self) {
+    /// Ends the stage: "done" when it completed, "stopped" when the work ended without
+    /// completing it (an error: the log must not say done before the error).
+    fn end(&self, completed: bool) {
         let Some(s) = self.state.lock().unwrap_or_else(|e| e.into_inner()).take() else {
             return;
         };
         let took = s.started.elapsed();
         if s.written.is_some() || took >= self.after {
-            (self.write)(format!("{}: done in {}", s.name, clock(took)));
+            let how = if completed {
+                "done in"
+            } else {
+                "stopped after"
+            };
+            (self.write)(format!("{}: {how} {}", s.name, clock(took)));
         }
+    }
+
+    fn finish(&self) {
+        self.end(true);
     }
 }
 
@@ -200,10 +211,12 @@ impl Progress for Bar {
     }
 }
 
+/// A stage still open when its reporter goes (the work returned early, with an error)
+/// did not complete.
 impl Drop for Bar {
     fn drop(&mut self) {
         if let Some(log) = &self.log {
-            log.finish();
+            log.end(false);
         }
     }
 }
@@ -251,6 +264,16 @@ mod tests {
         log.stage("writing", None, "bytes");
         log.finish();
         assert!(lines.lock().unwrap().is_empty());
+        // A stage that ends without completing (an error) is not logged as done.
+        let (log, lines) = recording(Duration::ZERO, Duration::ZERO);
+        log.stage("converting 2 frames", Some(2), "frames");
+        log.advance(1);
+        log.end(false);
+        let lines = lines.lock().unwrap().clone();
+        assert!(
+            lines.len() == 2 && lines[1].starts_with("converting 2 frames: stopped after"),
+            "{lines:?}"
+        );
         assert_eq!(clock(Duration::from_secs(3723)), "1h02m03s");
         assert_eq!(clock(Duration::from_secs(125)), "2m05s");
     }

@@ -2468,6 +2468,64 @@ fn a_batch_directory_renders_every_frame_with_one_camera() {
     }
     let err = fails(&["render", s(&d), "-o", s(&dir.path().join("one.png"))]);
     assert!(err.contains("one image per frame"), "{err}");
+    // Each frame's line says why its cut stopped, as a single image's does.
+    let mut args = vec!["render", s(&d), "-o", s(&pattern), "--budget", "1"];
+    args.extend(size);
+    let out = ok(&args);
+    assert_eq!(out.matches("is one sphere").count(), 3, "{out}");
+    assert!(out.contains("3 coarsened by the point budget"), "{out}");
+}
+
+/// A movie coloured by the attribute maps one range, the union of its frames' ranges:
+/// each frame equals that frame rendered alone over that range.
+#[test]
+fn a_movie_colours_every_frame_over_one_attribute_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("t.lammpstrj");
+    generate(&["droplets", "-n", "2000", "--frames", "3"], &dump);
+    let d = dir.path().join("t.d");
+    ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "v_temp"]);
+    let manifest = mdlod_preprocess::batch::read_manifest(&d).unwrap();
+    let ranges: Vec<[f32; 2]> = manifest
+        .frames
+        .iter()
+        .map(|f| {
+            let a = mdlod_format::MdlodFile::open(d.join(&f.file))
+                .unwrap()
+                .metadata()
+                .attribute
+                .clone()
+                .expect("an attribute");
+            [a.min, a.max]
+        })
+        .collect();
+    let lo = ranges.iter().map(|r| r[0]).fold(f32::INFINITY, f32::min);
+    let hi = ranges
+        .iter()
+        .map(|r| r[1])
+        .fold(f32::NEG_INFINITY, f32::max);
+    assert!(ranges.iter().any(|r| *r != [lo, hi]), "{ranges:?}");
+    let pattern = dir.path().join("c-%d.png");
+    let view = dir.path().join("v.json");
+    let size = ["--width", "40", "--height", "30", "--colour-map", "viridis"];
+    let mut args = vec!["render", s(&d), "-o", s(&pattern), "--save-view", s(&view)];
+    args.extend(size);
+    let out = ok(&args);
+    assert!(out.contains(&format!("from {lo} to {hi}")), "{out}");
+    let range = format!("{lo}:{hi}");
+    for (i, f) in manifest.frames.iter().enumerate() {
+        let alone = dir.path().join("alone.png");
+        let file = d.join(&f.file);
+        let mut args = vec!["render", s(&file), "-o", s(&alone), "--view", s(&view)];
+        args.extend(size);
+        args.extend(["--attribute-range", &range]);
+        ok(&args);
+        assert_eq!(
+            std::fs::read(dir.path().join(format!("c-{i}.png"))).unwrap(),
+            std::fs::read(&alone).unwrap(),
+            "{i}"
+        );
+    }
 }
 
 /// A movie of a trajectory whose species come and go: a style may name a species some
@@ -2504,6 +2562,29 @@ fn a_movie_styles_species_that_only_some_frames_hold() {
     args.extend(size);
     let out = ok(&args);
     assert!(out.contains("rendered 2 frames"), "{out}");
+    // Species 2 is red where it is, and only there (with the copper around it hidden).
+    let mut args = vec![
+        "render",
+        s(&d),
+        "-o",
+        s(&pattern),
+        "--species-colour",
+        "2=#ff0000",
+        "--hide-species",
+        "1",
+        "--screen-error",
+        "0",
+    ];
+    args.extend(size);
+    ok(&args);
+    let red = |i: usize| {
+        let (_, _, px) = read_png(&dir.path().join(format!("m-{i:02}.png")));
+        px.chunks(4)
+            .filter(|p| p[0] > 200 && p[1] < 60 && p[2] < 60)
+            .count()
+    };
+    assert_eq!(red(0), 0);
+    assert!(red(1) > 0);
     let mut args = vec![
         "render",
         s(&d),
@@ -2561,6 +2642,27 @@ fn verify_checks_a_batch_directory() {
     std::fs::copy(out.join(&m.frames[0].file), out.join(&m.frames[1].file)).unwrap();
     let err = fails(&["verify", s(&out)]);
     assert!(err.contains("1 problem (5 frames verified)"), "{err}");
+    // A sharded run: the shards that wrote no manifest are named, the first few of a
+    // count read from a file name, however large.
+    let sharded = dir.path().join("s");
+    let dump = lammps_sample_path("cu_melt.custom.dump");
+    ok(&["batch", s(&dump), "-o", s(&sharded), "--shard", "0/3"]);
+    // The problems are listed on standard output, the count in the error.
+    let problems = |dir: &Path| {
+        let out = mdlod(&["verify", s(dir)]);
+        assert!(!out.status.success());
+        String::from_utf8(out.stdout).unwrap() + &String::from_utf8(out.stderr).unwrap()
+    };
+    let err = problems(&sharded);
+    assert!(err.contains("shards 1, 2 of 3 wrote no manifest"), "{err}");
+    let lone = sharded.join("dataset.shard-0-of-3.json");
+    std::fs::rename(&lone, sharded.join("dataset.shard-0-of-4000000000.json")).unwrap();
+    let err = problems(&sharded);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(
+        err.contains("shards 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, and 3999999989 more of 4000000000"),
+        "{err}"
+    );
 }
 
 /// A count that cannot fit on the disk is refused before anything is written (a typo of

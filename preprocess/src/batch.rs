@@ -1002,6 +1002,16 @@ pub fn batch(
                                 )?;
                                 keep_notes(report.notes);
                             } else {
+                                // Refused before the frame is read, not after.
+                                if let Ok(particles) = usize::try_from(job.particles) {
+                                    crate::convert::check_in_memory(particles, convert, || {
+                                        crate::convert::FramePlace {
+                                            path: job.input.display().to_string(),
+                                            frame: Some(job.frame as u64),
+                                            timestep: job.own_timestep,
+                                        }
+                                    })?;
+                                }
                                 let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
                                 let report =
                                     convert_frame(&frame, Some(source), &out, convert, &quiet)?;
@@ -1392,15 +1402,24 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                 manifests.join(", ")
             ));
         } else {
-            let missing: Vec<String> = (0..n)
-                .filter(|i| !shards.iter().any(|s| s.0 == *i))
-                .map(|i| i.to_string())
-                .collect();
-            if !missing.is_empty() {
+            // N comes from a file name: count the missing, and list the first few.
+            let present: std::collections::BTreeSet<u32> =
+                shards.iter().map(|s| s.0).filter(|&i| i < n).collect();
+            let count = u64::from(n) - present.len() as u64;
+            if count > 0 {
+                const LISTED: usize = 10;
+                let mut missing: Vec<String> = (0..n)
+                    .filter(|i| !present.contains(i))
+                    .take(LISTED)
+                    .map(|i| i.to_string())
+                    .collect();
+                if count > LISTED as u64 {
+                    missing.push(format!("and {} more", count - LISTED as u64));
+                }
                 check.problems.push(format!(
                     "shard{} {} of {n} wrote no manifest: not run yet, or failed before \
                      converting (run it: --shard I/{n})",
-                    if missing.len() == 1 { "" } else { "s" },
+                    if count == 1 { "" } else { "s" },
                     missing.join(", ")
                 ));
             }
@@ -1525,14 +1544,9 @@ mod tests {
             modified_nanos: nanos,
             ..now.clone()
         };
-        assert!(same_source(
-            &elsewhere(Some(250)),
-            &SourceInfo {
-                modified_nanos: Some(250),
-                ..elsewhere(Some(250))
-            }
-        ));
         assert!(same_source(&now, &elsewhere(Some(250))));
+        assert!(same_source(&elsewhere(Some(250)), &now));
+        assert!(!same_source(&now, &elsewhere(Some(251))));
         let whole = |n| SourceInfo {
             modified_nanos: n,
             ..now.clone()

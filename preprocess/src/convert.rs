@@ -101,7 +101,7 @@ pub fn in_memory_need(particles: usize) -> u64 {
 }
 
 /// Refuses to build a frame of `particles` in memory when that needs more than the limit.
-fn check_in_memory(
+pub(crate) fn check_in_memory(
     particles: usize,
     options: &ConvertOptions,
     place: impl FnOnce() -> FramePlace,

@@ -399,3 +399,30 @@ fn values_past_the_single_precision_range_are_errors_naming_the_input() {
         "{e}"
     );
 }
+
+/// Type n keeps palette slot n - 1 only where every type is a LAMMPS type (1 or more),
+/// as in the text reader: with a type 0 present, no type takes a slot by number.
+#[test]
+fn palette_slots_follow_type_numbers_only_from_one_up() {
+    let good = std::fs::read(lammps_sample_path("cu_melt.custom.bin")).unwrap();
+    let frame = read(
+        &lammps_sample_path("cu_melt.custom.bin"),
+        0,
+        &ReadOptions::default(),
+    );
+    let slots: Vec<_> = frame.species.iter().map(|s| s.palette_slot).collect();
+    assert_eq!(slots, [Some(0)], "{:?}", frame.species);
+    // Atom 0's type (column 1, a double) set to 0.
+    let type_of_atom_0 = first_atom(&good) + 8;
+    let mut zero = good.clone();
+    zero[type_of_atom_0..type_of_atom_0 + 8].copy_from_slice(&0f64.to_le_bytes());
+    let (_d, path) = temp_copy("type0.bin", &zero);
+    let frame = read(&path, 0, &ReadOptions::default());
+    let names: Vec<_> = frame.species.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["0", "1"]);
+    assert!(
+        frame.species.iter().all(|s| s.palette_slot.is_none()),
+        "{:?}",
+        frame.species
+    );
+}

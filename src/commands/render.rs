@@ -132,8 +132,8 @@ pub struct StyleArgs {
     #[arg(long = "hide-species", value_name = "NAME")]
     pub hide_species: Vec<String>,
     /// The attribute values at the ends of --colour-map (and of --intensity attribute),
-    /// e.g. `0:2.5`, instead of each file's own range: the same colours for the same
-    /// values in every frame of a movie.
+    /// e.g. `0:2.5`, instead of the file's own range (a movie's default: the range over
+    /// all its frames), so that images made apart compare.
     #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true, value_parser = parse_range)]
     pub attribute_range: Option<[f32; 2]>,
 }
@@ -506,56 +506,18 @@ pub fn run(args: Args) -> Result<()> {
     let r = render_to_png_with(&args.file, &args.output, &opts, Bar::for_renderer())?;
     // The S-NDF mode reports its iterations as spp (--spp is refused there).
     // Spheres and S-NDFs sample pixels; splats and the volume draw each point once.
-    let (samples, points) = match args.mode {
-        Mode::Sndf => (format!(", {} rays per pixel", r.spp), "cluster spheres"),
-        Mode::Spheres => (format!(", {} spp", r.spp), "cluster spheres"),
-        Mode::Splat | Mode::SplatOver => (String::new(), "cluster splats"),
-        Mode::Density | Mode::Iso => (String::new(), "cluster kernels"),
+    let samples = match args.mode {
+        Mode::Sndf => format!(", {} rays per pixel", r.spp),
+        Mode::Spheres => format!(", {} spp", r.spp),
+        Mode::Splat | Mode::SplatOver | Mode::Density | Mode::Iso => String::new(),
     };
-    let mut limits = vec![];
-    if r.budget_limited {
-        // The top node opens into the whole coarsest level at once: a budget below it
-        // leaves the data set one sphere.
-        let coarsest = mdlod_format::MdlodFile::open(&args.file)
-            .ok()
-            .and_then(|f| f.levels().get(1).map(|l| l.point_count));
-        let drawn = r.particles_drawn + r.nodes_drawn;
-        limits.push(match coarsest {
-            Some(c) if drawn == 1 && r.budget < c => format!(
-                "point budget of {}: below the {c} points of the coarsest level, so the whole \
-                 data set is one sphere; a budget of {c} or more refines",
-                r.budget
-            ),
-            _ if r.budget < args.budget => format!(
-                "point budget reached: {} spheres, the most this GPU draws at once",
-                r.budget
-            ),
-            _ => format!(
-                "point budget of {} reached: a larger --budget refines further",
-                r.budget
-            ),
-        });
-    }
-    if r.pool_limited {
-        limits.push("GPU memory pool full: a larger --gpu-memory refines further".to_string());
-    }
-    let limits = if limits.is_empty() {
-        String::new()
-    } else {
-        format!(" ({})", limits.join("; "))
-    };
+    let points = point_noun(args.mode);
+    let hidden = hidden_text(&r);
+    let limits = limits_text(&r, &args.file, args.budget);
     let occluded = if r.nodes_occluded + r.particles_occluded > 0 {
         format!(
             " ({} clusters and {} particles left out as hidden or between pixel centres)",
             r.nodes_occluded, r.particles_occluded
-        )
-    } else {
-        String::new()
-    };
-    let hidden = if r.particles_hidden > 0 {
-        format!(
-            " ({} of hidden species, drawn as nothing)",
-            r.particles_hidden
         )
     } else {
         String::new()
@@ -618,6 +580,66 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
+/// What a cut's nodes are drawn as: spheres and S-NDFs ray cast cluster spheres, splats
+/// and the volume draw each point once.
+fn point_noun(mode: Mode) -> &'static str {
+    match mode {
+        Mode::Spheres | Mode::Sndf => "cluster spheres",
+        Mode::Splat | Mode::SplatOver => "cluster splats",
+        Mode::Density | Mode::Iso => "cluster kernels",
+    }
+}
+
+/// After the particle count: how many of them belong to hidden species.
+fn hidden_text(r: &mdlod_render::RenderReport) -> String {
+    if r.particles_hidden > 0 {
+        format!(
+            " ({} of hidden species, drawn as nothing)",
+            r.particles_hidden
+        )
+    } else {
+        String::new()
+    }
+}
+
+/// Why the cut of `file` stopped refining before the screen error, and what would refine
+/// it, as " (reason; reason)"; empty when nothing stopped it. `budget` is the --budget
+/// asked for (the GPU may allow fewer points).
+fn limits_text(r: &mdlod_render::RenderReport, file: &Path, budget: u64) -> String {
+    let mut limits = vec![];
+    if r.budget_limited {
+        // The top node opens into the whole coarsest level at once: a budget below it
+        // leaves the data set one sphere.
+        let coarsest = mdlod_format::MdlodFile::open(file)
+            .ok()
+            .and_then(|f| f.levels().get(1).map(|l| l.point_count));
+        let drawn = r.particles_drawn + r.nodes_drawn;
+        limits.push(match coarsest {
+            Some(c) if drawn == 1 && r.budget < c => format!(
+                "point budget of {}: below the {c} points of the coarsest level, so the whole \
+                 data set is one sphere; a budget of {c} or more refines",
+                r.budget
+            ),
+            _ if r.budget < budget => format!(
+                "point budget reached: {} points, the most this GPU draws at once",
+                r.budget
+            ),
+            _ => format!(
+                "point budget of {} reached: a larger --budget refines further",
+                r.budget
+            ),
+        });
+    }
+    if r.pool_limited {
+        limits.push("GPU memory pool full: a larger --gpu-memory refines further".to_string());
+    }
+    if limits.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", limits.join("; "))
+    }
+}
+
 /// The image of frame `index` of a movie: `pattern` with its `%d` or `%0Nd` (as
 /// ffmpeg reads them) replaced by the index.
 fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
@@ -645,6 +667,13 @@ fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
     } else {
         rest[..digits].parse().map_err(|_| bad())?
     };
+    // A frame number has at most 20 digits.
+    if width > 20 {
+        anyhow::bail!(
+            "-o {}: frame numbers padded to {width} digits: give at most 20, e.g. %05d",
+            pattern.display()
+        );
+    }
     let file = format!("{}{index:0width$}{}", &name[..start], &rest[digits + 1..]);
     Ok(pattern.with_file_name(file))
 }
@@ -669,10 +698,25 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     // Species may come and go in a trajectory (a deposition, an evaporation): a style
     // names any species of some frame, and applies in the frames that hold it.
     let mut names = std::collections::BTreeSet::new();
+    // The attribute's range over every frame (None once a frame lacks it or names
+    // another): colours and splat intensities then mean the same values throughout.
+    let mut attribute: Option<Option<mdlod_format::meta::AttributeInfo>> = None;
     for f in &manifest.frames {
         let path = dir.join(&f.file);
         let file = mdlod_format::MdlodFile::open(&path)?;
         names.extend(file.metadata().species.iter().map(|s| s.name.clone()));
+        let own = file.metadata().attribute.clone();
+        attribute = Some(match (attribute, own) {
+            (None, own) => own,
+            (Some(Some(a)), Some(b)) if a.name == b.name => {
+                Some(mdlod_format::meta::AttributeInfo {
+                    min: a.min.min(b.min),
+                    max: a.max.max(b.max),
+                    ..a
+                })
+            }
+            _ => None,
+        });
         let b = mdlod_render::data_bounds(&file);
         bounds = Some(match bounds {
             None => b,
@@ -688,6 +732,22 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             names.iter().cloned().collect::<Vec<_>>().join(", ")
         );
     }
+    let by_attribute = opts.style.colour_map.is_some()
+        || matches!(opts.mode, RenderMode::Splat { by_attribute: true });
+    let mut range_note = String::new();
+    if by_attribute && opts.style.attribute_range.is_none() {
+        // Where the frames' union is no range (a constant attribute), each frame keeps
+        // its own constant look.
+        if let Some(Some(a)) = attribute.filter(|_| n > 1) {
+            if a.max > a.min {
+                opts.style.attribute_range = Some([a.min, a.max]);
+                range_note = format!(
+                    ", {} from {} to {} (every frame's range; --attribute-range sets another)",
+                    a.name, a.min, a.max
+                );
+            }
+        }
+    }
     let style = opts.style.clone();
     let camera = mdlod_render::camera_for_bounds(&bounds, &opts.view, opts.width, opts.height)?;
     opts.view = ViewSpec::Camera(camera.clone());
@@ -701,7 +761,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
     for (i, f) in manifest.frames.iter().enumerate() {
         let out = frame_output(&args.output, i)?;
-        let file = mdlod_format::MdlodFile::open(dir.join(&f.file))?;
+        let path = dir.join(&f.file);
+        let file = mdlod_format::MdlodFile::open(&path)?;
         opts.style.species = style
             .species
             .iter()
@@ -713,34 +774,17 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             // Splats: one exposure for every frame, or the brightness drifts.
             opts.exposure = r.exposure;
         }
-        let points = match args.mode {
-            Mode::Spheres | Mode::Sndf => "cluster spheres",
-            Mode::Splat | Mode::SplatOver => "cluster splats",
-            Mode::Density | Mode::Iso => "cluster kernels",
-        };
-        let mut limits = vec![];
-        if r.budget_limited {
-            limits.push(format!("point budget of {} reached", r.budget));
-        }
-        if r.pool_limited {
-            limits.push("GPU memory pool full".to_string());
-        }
-        if r.particles_hidden > 0 {
-            limits.push(format!("{} of hidden species", r.particles_hidden));
-        }
         limited_frames += usize::from(r.budget_limited || r.pool_limited);
         println!(
-            "wrote {} (frame {}/{n}, timestep {}): {} particles and {} {points}{}, error {:.2} px, {:.0} ms",
+            "wrote {} (frame {}/{n}, timestep {}): {} particles{} and {} {}{}, error {:.2} px, {:.0} ms",
             out.display(),
             i + 1,
             f.timestep,
             r.particles_drawn,
+            hidden_text(&r),
             r.nodes_drawn,
-            if limits.is_empty() {
-                String::new()
-            } else {
-                format!(" ({})", limits.join("; "))
-            },
+            point_noun(args.mode),
+            limits_text(&r, &path, args.budget),
             r.error_px,
             r.total_time.as_secs_f64() * 1e3
         );
@@ -757,7 +801,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
     };
     println!(
-        "rendered {n} frames in {:.1} s, one camera for all ({framing}){exposure}{limited}",
+        "rendered {n} frames in {:.1} s, one camera for all ({framing}){exposure}{range_note}{limited}",
         t0.elapsed().as_secs_f64()
     );
     if let Some(p) = &args.save_view {
@@ -789,6 +833,18 @@ mod tests {
         ] {
             let e = name(bad, 0).unwrap_err().to_string();
             assert!(e.contains("one image per frame"), "{bad}: {e}");
+        }
+        assert_eq!(name("%020d", 1).unwrap(), format!("{:020}", 1));
+        for huge in [
+            "f-%021d.png",
+            "f-%070000d.png",
+            "f-%099999999999999999999999d.png",
+        ] {
+            let e = name(huge, 0).unwrap_err().to_string();
+            assert!(
+                e.contains("at most 20") || e.contains("one image"),
+                "{huge}: {e}"
+            );
         }
     }
 

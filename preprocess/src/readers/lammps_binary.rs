@@ -591,13 +591,17 @@ pub(crate) fn read_range(
                 .par_iter()
                 .map(|t| distinct.binary_search(t).unwrap_or(0) as u16)
                 .collect();
+            // As the text reader: slots by type number only where every type is a
+            // LAMMPS type (1 or more).
+            let slots = distinct.first().is_some_and(|&t| t >= 1);
             let names = distinct
                 .iter()
                 .map(|t| SpeciesName {
                     name: t.to_string(),
                     numeric_type: true,
                     radius: None,
-                    palette_slot: super::atoms::type_number_slot(t.to_string().as_bytes()),
+                    palette_slot: super::atoms::type_number_slot(t.to_string().as_bytes())
+                        .filter(|_| slots),
                     ..Default::default()
                 })
                 .collect();

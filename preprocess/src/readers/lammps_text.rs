@@ -423,31 +423,16 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("d.lammpstrj");
         std::fs::write(&path, &text).unwrap();
-        let file = std::fs::File::open(&path).unwrap();
         let ctx = Ctx {
             path: &path,
             data: text.as_bytes(),
         };
-        let whole = Index::build(
-            &ctx,
-            None,
-            usize::MAX,
-            &super::super::Reached::new(&crate::NoProgress),
-        )
-        .unwrap();
+        // `ITEM: TIMESTEP` and the lines before it straddle a segment's end in every
+        // way; the bar moves a segment at a time.
+        let whole = super::super::check_segmented_index(&ctx, 0, Index::build);
         assert_eq!(whole.len(), 3);
         assert_eq!(whole.timestep(2), Some(200));
         assert_eq!(whole.units.as_deref(), Some("metal"));
-        // Every segment size, so that `ITEM: TIMESTEP` and the lines before it straddle
-        // a segment's end in every way.
-        // The bar moves a segment at a time.
-        for segment in 1..=text.len() {
-            let steps = super::super::Steps::default();
-            let reached = super::super::Reached::new(&steps);
-            let segmented = Index::build(&ctx, Some(&file), segment, &reached).unwrap();
-            assert_eq!(segmented, whole, "segment of {segment} bytes");
-            steps.check(&reached, text.len(), segment, segment);
-        }
         // A file that is not the one indexed (another size) is an error, not a guess.
         let other = dir.path().join("other");
         std::fs::write(&other, "ITEM: TIMESTEP\n0\n").unwrap();

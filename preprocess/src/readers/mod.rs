@@ -1248,6 +1248,29 @@ impl<'a> Reached<'a> {
     }
 }
 
+/// Indexes `text` (written to a file, `ctx.path`) whole, then in segments of every size
+/// from 1 byte up, so that each line straddles a segment's end in every way: each
+/// segmented index must equal the whole one, and the bar move at most a segment plus
+/// `slack` bytes at a time. Returns the whole index.
+#[cfg(test)]
+pub(crate) fn check_segmented_index<I: PartialEq + std::fmt::Debug>(
+    ctx: &Ctx<'_>,
+    slack: usize,
+    build: impl Fn(&Ctx<'_>, Option<&File>, usize, &Reached<'_>) -> Result<I, ReadError>,
+) -> I {
+    let whole = build(ctx, None, usize::MAX, &Reached::new(&crate::NoProgress)).unwrap();
+    let file = File::open(ctx.path).unwrap();
+    let len = ctx.data.len();
+    for segment in 1..=len {
+        let steps = Steps::default();
+        let reached = Reached::new(&steps);
+        let segmented = build(ctx, Some(&file), segment, &reached).unwrap();
+        assert_eq!(segmented, whole, "segment of {segment} bytes");
+        steps.check(&reached, len, segment, segment + slack);
+    }
+    whole
+}
+
 /// The steps a scan advanced its bar by (tests).
 #[cfg(test)]
 #[derive(Default)]

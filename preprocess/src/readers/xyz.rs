@@ -397,28 +397,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("d.xyz");
         std::fs::write(&path, text).unwrap();
-        let file = std::fs::File::open(&path).unwrap();
         let ctx = Ctx {
             path: &path,
             data: text.as_bytes(),
         };
-        let whole = Index::build(
-            &ctx,
-            None,
-            usize::MAX,
-            &super::super::Reached::new(&crate::NoProgress),
-        )
-        .unwrap();
-        assert_eq!(whole.len(), 4);
-        assert_eq!(whole.frames[3].end, text.len());
         // The bar moves a segment at a time, or over a frame's two header lines (at most
         // 14 bytes here).
-        for segment in 1..=text.len() {
-            let steps = super::super::Steps::default();
-            let reached = super::super::Reached::new(&steps);
-            let segmented = Index::build(&ctx, Some(&file), segment, &reached).unwrap();
-            assert_eq!(segmented, whole, "segment of {segment} bytes");
-            steps.check(&reached, text.len(), segment, segment.max(1) + 14);
-        }
+        let whole = super::super::check_segmented_index(&ctx, 14, Index::build);
+        assert_eq!(whole.len(), 4);
+        assert_eq!(whole.frames[3].end, text.len());
     }
 }
