@@ -2435,7 +2435,8 @@ fn an_attribute_range_colours_every_frame_alike() {
 }
 
 /// A batch directory renders as a movie: one image per frame in time order, all with
-/// the camera fitted to every frame's bounds; a frame rendered alone with the saved view
+/// the camera fitted to every frame's bounds and, coloured by the attribute, over the
+/// union of the frames' ranges; a frame rendered alone with the saved view and that range
 /// is the same image. The output must number the frames.
 #[test]
 fn a_batch_directory_renders_every_frame_with_one_camera() {
@@ -2443,15 +2444,32 @@ fn a_batch_directory_renders_every_frame_with_one_camera() {
     let dump = dir.path().join("t.lammpstrj");
     generate(&["droplets", "-n", "3000", "--frames", "3"], &dump);
     let d = dir.path().join("t.d");
-    ok(&["batch", s(&dump), "-o", s(&d)]);
+    ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "v_temp"]);
+    let manifest = mdlod_preprocess::batch::read_manifest(&d).unwrap();
+    let ranges: Vec<[f32; 2]> = manifest
+        .frames
+        .iter()
+        .map(|f| {
+            let file = mdlod_format::MdlodFile::open(d.join(&f.file)).unwrap();
+            let a = file.metadata().attribute.clone().expect("an attribute");
+            [a.min, a.max]
+        })
+        .collect();
+    let lo = ranges.iter().map(|r| r[0]).fold(f32::INFINITY, f32::min);
+    let hi = ranges
+        .iter()
+        .map(|r| r[1])
+        .fold(f32::NEG_INFINITY, f32::max);
+    assert!(ranges.iter().any(|r| *r != [lo, hi]), "{ranges:?}");
     let pattern = dir.path().join("movie").join("f-%03d.png");
     let view = dir.path().join("v.json");
-    let size = ["--width", "48", "--height", "32"];
+    let size = ["--width", "48", "--height", "32", "--colour-map", "viridis"];
     let mut args = vec!["render", s(&d), "-o", s(&pattern), "--save-view", s(&view)];
     args.extend(size);
     let out = ok(&args);
     assert!(out.contains("rendered 3 frames"), "{out}");
-    let manifest = mdlod_preprocess::batch::read_manifest(&d).unwrap();
+    assert!(out.contains(&format!("from {lo} to {hi}")), "{out}");
+    let range = format!("{lo}:{hi}");
     for (i, f) in manifest.frames.iter().enumerate() {
         let image = dir.path().join("movie").join(format!("f-{i:03}.png"));
         assert!(out.contains(&format!("timestep {}", f.timestep)), "{out}");
@@ -2459,6 +2477,7 @@ fn a_batch_directory_renders_every_frame_with_one_camera() {
         let file = d.join(&f.file);
         let mut args = vec!["render", s(&file), "-o", s(&alone), "--view", s(&view)];
         args.extend(size);
+        args.extend(["--attribute-range", &range]);
         ok(&args);
         assert_eq!(
             std::fs::read(&image).unwrap(),
@@ -2474,58 +2493,6 @@ fn a_batch_directory_renders_every_frame_with_one_camera() {
     let out = ok(&args);
     assert_eq!(out.matches("is one sphere").count(), 3, "{out}");
     assert!(out.contains("3 coarsened by the point budget"), "{out}");
-}
-
-/// A movie coloured by the attribute maps one range, the union of its frames' ranges:
-/// each frame equals that frame rendered alone over that range.
-#[test]
-fn a_movie_colours_every_frame_over_one_attribute_range() {
-    let dir = tempfile::tempdir().unwrap();
-    let dump = dir.path().join("t.lammpstrj");
-    generate(&["droplets", "-n", "2000", "--frames", "3"], &dump);
-    let d = dir.path().join("t.d");
-    ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "v_temp"]);
-    let manifest = mdlod_preprocess::batch::read_manifest(&d).unwrap();
-    let ranges: Vec<[f32; 2]> = manifest
-        .frames
-        .iter()
-        .map(|f| {
-            let a = mdlod_format::MdlodFile::open(d.join(&f.file))
-                .unwrap()
-                .metadata()
-                .attribute
-                .clone()
-                .expect("an attribute");
-            [a.min, a.max]
-        })
-        .collect();
-    let lo = ranges.iter().map(|r| r[0]).fold(f32::INFINITY, f32::min);
-    let hi = ranges
-        .iter()
-        .map(|r| r[1])
-        .fold(f32::NEG_INFINITY, f32::max);
-    assert!(ranges.iter().any(|r| *r != [lo, hi]), "{ranges:?}");
-    let pattern = dir.path().join("c-%d.png");
-    let view = dir.path().join("v.json");
-    let size = ["--width", "40", "--height", "30", "--colour-map", "viridis"];
-    let mut args = vec!["render", s(&d), "-o", s(&pattern), "--save-view", s(&view)];
-    args.extend(size);
-    let out = ok(&args);
-    assert!(out.contains(&format!("from {lo} to {hi}")), "{out}");
-    let range = format!("{lo}:{hi}");
-    for (i, f) in manifest.frames.iter().enumerate() {
-        let alone = dir.path().join("alone.png");
-        let file = d.join(&f.file);
-        let mut args = vec!["render", s(&file), "-o", s(&alone), "--view", s(&view)];
-        args.extend(size);
-        args.extend(["--attribute-range", &range]);
-        ok(&args);
-        assert_eq!(
-            std::fs::read(dir.path().join(format!("c-{i}.png"))).unwrap(),
-            std::fs::read(&alone).unwrap(),
-            "{i}"
-        );
-    }
 }
 
 /// A movie of a trajectory whose species come and go: a style may name a species some
@@ -2551,17 +2518,6 @@ fn a_movie_styles_species_that_only_some_frames_hold() {
     assert!(!info.contains("species      2"), "{info}");
     let pattern = dir.path().join("m-%02d.png");
     let size = ["--width", "32", "--height", "24"];
-    let mut args = vec![
-        "render",
-        s(&d),
-        "-o",
-        s(&pattern),
-        "--species-colour",
-        "2=#ff0000",
-    ];
-    args.extend(size);
-    let out = ok(&args);
-    assert!(out.contains("rendered 2 frames"), "{out}");
     // Species 2 is red where it is, and only there (with the copper around it hidden).
     let mut args = vec![
         "render",
@@ -2576,7 +2532,8 @@ fn a_movie_styles_species_that_only_some_frames_hold() {
         "0",
     ];
     args.extend(size);
-    ok(&args);
+    let out = ok(&args);
+    assert!(out.contains("rendered 2 frames"), "{out}");
     let red = |i: usize| {
         let (_, _, px) = read_png(&dir.path().join(format!("m-{i:02}.png")));
         px.chunks(4)
