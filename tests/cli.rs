@@ -2495,6 +2495,59 @@ fn a_batch_directory_renders_every_frame_with_one_camera() {
     assert!(out.contains("3 coarsened by the point budget"), "{out}");
 }
 
+/// Frames converted apart can give one species name different looks (labels take the
+/// palette by their place in the frame's list): a movie draws each name with one look.
+/// Here the second frame lists the same particles in another order, B before A; its
+/// image must be the first's.
+#[test]
+fn a_movie_keeps_each_species_look_across_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let atoms: Vec<(&str, [f32; 3])> = (0..216)
+        .map(|i| {
+            let p = [
+                (i % 6) as f32 * 2.0,
+                (i / 6 % 6) as f32 * 2.0,
+                (i / 36) as f32 * 2.0,
+            ];
+            (if p[0] < 5.0 { "A" } else { "B" }, p)
+        })
+        .collect();
+    let frame = |first: &str| {
+        let mut t = format!("{}\nframe\n", atoms.len());
+        for pass in [true, false] {
+            for (name, p) in &atoms {
+                if (*name == first) == pass {
+                    t += &format!("{name} {} {} {}\n", p[0], p[1], p[2]);
+                }
+            }
+        }
+        t
+    };
+    let xyz = dir.path().join("ab.xyz");
+    std::fs::write(&xyz, frame("A") + &frame("B")).unwrap();
+    let d = dir.path().join("ab.d");
+    ok(&["batch", s(&xyz), "-o", s(&d)]);
+    let pattern = dir.path().join("ab-%d.png");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&pattern),
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--screen-error",
+        "0",
+    ]);
+    assert!(
+        out.contains("1 frame(s) whose files gave a species another colour"),
+        "{out}"
+    );
+    let image = |i: u32| std::fs::read(dir.path().join(format!("ab-{i}.png"))).unwrap();
+    assert_eq!(image(0), image(1));
+}
+
 /// A movie of a trajectory whose species come and go: a style may name a species some
 /// frames lack (it applies where present); one no frame has is an error listing them.
 #[test]

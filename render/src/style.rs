@@ -28,6 +28,73 @@ pub struct SpeciesStyle {
     pub hidden: bool,
 }
 
+/// The look (colour, radius) each species name keeps throughout a trajectory whose
+/// frames were converted apart. A frame's file fixes its species' looks from that frame
+/// alone: palette colours by place in its list (GSD type lists in another order, a type
+/// present only later), single letters as elements or labels by the frame's names. A
+/// name takes its look in the frame holding the most species (the earliest of those),
+/// where the names are judged among the most others; names that frame lacks, in their
+/// first frame.
+pub fn trajectory_looks(
+    frames: &[&[mdlod_format::meta::Species]],
+) -> Vec<mdlod_format::meta::Species> {
+    let mut order: Vec<usize> = (0..frames.len()).collect();
+    order.sort_by_key(|&i| (std::cmp::Reverse(frames[i].len()), i));
+    let mut looks: Vec<mdlod_format::meta::Species> = Vec::new();
+    for i in order {
+        for s in frames[i] {
+            if !looks.iter().any(|l| l.name == s.name) {
+                looks.push(s.clone());
+            }
+        }
+    }
+    looks
+}
+
+/// The species styles that draw a frame's species (`own`) with the trajectory's looks
+/// ([`trajectory_looks`]), after the user's `styles` (which win: a colour or radius
+/// given there is kept, a hidden species stays hidden). Radii within 1 % of the look's
+/// are left alone (a per-frame mean of polydisperse diameters).
+pub fn keep_looks(
+    own: &[mdlod_format::meta::Species],
+    looks: &[mdlod_format::meta::Species],
+    styles: &[SpeciesStyle],
+) -> Vec<SpeciesStyle> {
+    let mut out: Vec<SpeciesStyle> = styles
+        .iter()
+        .filter(|st| own.iter().any(|s| s.name == st.name))
+        .cloned()
+        .collect();
+    for s in own {
+        let Some(look) = looks.iter().find(|l| l.name == s.name) else {
+            continue;
+        };
+        let colour = (look
+            .colour
+            .iter()
+            .zip(&s.colour)
+            .any(|(a, b)| (a - b).abs() > 1e-4))
+        .then_some(look.colour);
+        let radius = ((look.radius - s.radius).abs() > 0.01 * look.radius).then_some(look.radius);
+        if colour.is_none() && radius.is_none() {
+            continue;
+        }
+        match out.iter_mut().rfind(|st| st.name == s.name) {
+            Some(st) => {
+                st.colour = st.colour.or(colour);
+                st.radius = st.radius.or(radius);
+            }
+            None => out.push(SpeciesStyle {
+                name: s.name.clone(),
+                colour,
+                radius,
+                hidden: false,
+            }),
+        }
+    }
+    out
+}
+
 /// Colour maps for the scalar attribute (perceptually ordered, from low to high).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -439,6 +506,66 @@ pub fn pack_colour(c: [f32; 3]) -> u32 {
 
 #[cfg(test)]
 mod tests {
+    fn look(name: &str, colour: [f32; 3], radius: f32) -> mdlod_format::meta::Species {
+        mdlod_format::meta::Species {
+            name: name.into(),
+            radius,
+            colour,
+        }
+    }
+
+    /// A name keeps the look of the frame with the most species (the earliest of them),
+    /// a name that frame lacks that of its first frame; the user's styles win.
+    #[test]
+    fn species_keep_one_look_across_a_trajectory() {
+        let (red, blue, pink) = ([1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.7, 0.7]);
+        // Frame 0: B alone, as boron; frame 1: A and B as labels; frame 2: C appears.
+        let f0 = [look("B", pink, 0.84)];
+        let f1 = [look("A", red, 0.5), look("B", blue, 0.5)];
+        let f2 = [look("C", red, 0.5)];
+        let looks = trajectory_looks(&[&f0, &f1, &f2]);
+        let names: Vec<&str> = looks.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["A", "B", "C"]);
+        assert_eq!(looks[1], look("B", blue, 0.5));
+        // Frame 0's B takes frame 1's colour and radius; frame 1 needs nothing.
+        let b = keep_looks(&f0, &looks, &[]);
+        assert_eq!(
+            b,
+            [SpeciesStyle {
+                name: "B".into(),
+                colour: Some(blue),
+                radius: Some(0.5),
+                hidden: false
+            }]
+        );
+        assert!(keep_looks(&f1, &looks, &[]).is_empty());
+        // A radius within 1 % is the same look; the user's colour wins, their styles of
+        // species the frame lacks are dropped.
+        let near = [look("B", pink, 0.503)];
+        let user = [
+            SpeciesStyle {
+                name: "B".into(),
+                colour: Some(red),
+                ..Default::default()
+            },
+            SpeciesStyle {
+                name: "A".into(),
+                hidden: true,
+                ..Default::default()
+            },
+        ];
+        let styled = keep_looks(&near, &looks, &user);
+        assert_eq!(
+            styled,
+            [SpeciesStyle {
+                name: "B".into(),
+                colour: Some(red),
+                radius: None,
+                hidden: false
+            }]
+        );
+    }
+
     use super::*;
 
     fn species(colours: &[[f32; 3]]) -> Vec<mdlod_format::meta::Species> {

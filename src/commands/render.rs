@@ -701,10 +701,12 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     // The attribute's range over every frame (None once a frame lacks it or names
     // another): colours and splat intensities then mean the same values throughout.
     let mut attribute: Option<Option<mdlod_format::meta::AttributeInfo>> = None;
+    let mut frame_species = Vec::with_capacity(n);
     for f in &manifest.frames {
         let path = dir.join(&f.file);
         let file = mdlod_format::MdlodFile::open(&path)?;
         names.extend(file.metadata().species.iter().map(|s| s.name.clone()));
+        frame_species.push(file.metadata().species.clone());
         let own = file.metadata().attribute.clone();
         attribute = Some(match (attribute, own) {
             (None, own) => own,
@@ -748,6 +750,11 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             }
         }
     }
+    // Each frame's file fixed its species' looks alone: a name keeps one look throughout.
+    let looks = mdlod_render::style::trajectory_looks(
+        &frame_species.iter().map(Vec::as_slice).collect::<Vec<_>>(),
+    );
+    let (mut restyled, mut restyled_names) = (0usize, std::collections::BTreeSet::new());
     let style = opts.style.clone();
     let camera = mdlod_render::camera_for_bounds(&bounds, &opts.view, opts.width, opts.height)?;
     opts.view = ViewSpec::Camera(camera.clone());
@@ -763,12 +770,17 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         let out = frame_output(&args.output, i)?;
         let path = dir.join(&f.file);
         let file = mdlod_format::MdlodFile::open(&path)?;
-        opts.style.species = style
+        opts.style.species =
+            mdlod_render::style::keep_looks(&file.metadata().species, &looks, &style.species);
+        let changed: Vec<String> = opts
+            .style
             .species
             .iter()
-            .filter(|s| file.metadata().species.iter().any(|t| t.name == s.name))
-            .cloned()
+            .filter(|st| !style.species.contains(st))
+            .map(|st| st.name.clone())
             .collect();
+        restyled += usize::from(!changed.is_empty());
+        restyled_names.extend(changed);
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         if i == 0 && opts.exposure.is_none() {
             // Splats: one exposure for every frame, or the brightness drifts.
@@ -796,12 +808,22 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         Some(v) => format!("{}", v.display()),
         None => "fitted to every frame's bounds".to_string(),
     };
+    // Splats and the density volume draw the files' own colours.
+    let looks_note = match restyled {
+        0 => String::new(),
+        _ if !matches!(args.mode, Mode::Spheres | Mode::Sndf) => String::new(),
+        k => format!(
+            "; {k} frame(s) whose files gave a species another colour or radius drawn with \
+             its look in the rest ({})",
+            restyled_names.into_iter().collect::<Vec<_>>().join(", ")
+        ),
+    };
     let limited = match limited_frames {
         0 => String::new(),
         k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
     };
     println!(
-        "rendered {n} frames in {:.1} s, one camera for all ({framing}){exposure}{range_note}{limited}",
+        "rendered {n} frames in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{limited}",
         t0.elapsed().as_secs_f64()
     );
     if let Some(p) = &args.save_view {
