@@ -251,19 +251,28 @@ fn frame_numbers_past_the_index_are_errors_not_billions_of_frames() {
 
 /// A GSD 2.0 file of one frame: `names` (0-separated) and `chunks` of
 /// (name id, type code, N, M, data).
-fn gsd_file(names: &[String], chunks: &[(u16, u8, u64, u32, Vec<u8>)]) -> Vec<u8> {
+fn gsd_file(names: &[String], chunks: &[Chunk]) -> Vec<u8> {
+    let chunks: Vec<_> = chunks.iter().map(|c| (0, c.clone())).collect();
+    gsd_frames(names, &chunks)
+}
+
+/// A chunk: name id, type code, N, M, data.
+type Chunk = (u16, u8, u64, u32, Vec<u8>);
+
+/// A GSD 2.0 file of `chunks` of (frame, chunk).
+fn gsd_frames(names: &[String], chunks: &[(u64, Chunk)]) -> Vec<u8> {
     let mut out = vec![0u8; 256];
     out[..8].copy_from_slice(&0x65DF_65DF_65DF_65DFu64.to_le_bytes());
     out[44..48].copy_from_slice(&(2u32 << 16).to_le_bytes());
     out[112..117].copy_from_slice(b"hoomd");
     let mut locations = Vec::new();
-    for c in chunks {
+    for (_, c) in chunks {
         locations.push(out.len() as u64);
         out.extend_from_slice(&c.4);
     }
     let index_at = out.len() as u64;
-    for (c, location) in chunks.iter().zip(&locations) {
-        out.extend_from_slice(&0u64.to_le_bytes());
+    for ((frame, c), location) in chunks.iter().zip(&locations) {
+        out.extend_from_slice(&frame.to_le_bytes());
         out.extend_from_slice(&c.2.to_le_bytes());
         out.extend_from_slice(&location.to_le_bytes());
         out.extend_from_slice(&c.3.to_le_bytes());
@@ -530,4 +539,201 @@ fn differing_diameters_of_a_type_are_noted_with_the_mean_drawn() {
             Vec::<String>::new()
         );
     }
+}
+
+/// A diameter that is not finite (NaN, infinity) is refused as one of zero or below is,
+/// naming the type and saying that `--radius` gives it one; with that, the conversion
+/// succeeds. (It used to be an error that `--radius` could not get past.)
+#[test]
+fn a_diameter_not_finite_is_refused_unless_the_type_is_given_a_radius() {
+    for bad in [f32::NAN, f32::INFINITY] {
+        let mut bytes = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+        let (types, diameters) = (
+            chunk_data(&bytes, "particles/typeid", 0),
+            chunk_data(&bytes, "particles/diameter", 0),
+        );
+        // The third particle of type B (1) gets the diameter.
+        let i = (0..300)
+            .filter(|&i| bytes[types + 4 * i..types + 4 * i + 4] == [1, 0, 0, 0])
+            .nth(2)
+            .unwrap();
+        bytes[diameters + 4 * i..diameters + 4 * i + 4].copy_from_slice(&bad.to_le_bytes());
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("nan.gsd");
+        std::fs::write(&path, &bytes).unwrap();
+        let out = dir.path().join("nan.mdlod");
+        for chunk_points in [1 << 22, 100] {
+            let e = convert_frame_1(&path, &out, vec![], chunk_points).unwrap_err();
+            assert_eq!(
+                e,
+                format!(
+                    "{}: frame 1 (timestep 100), type B: the file gives a particle diameter of \
+                     {bad}, and a radius must be a positive number; give the type its radius \
+                     with --radius B=R",
+                    path.display()
+                )
+            );
+            assert!(!out.exists());
+            convert_frame_1(&path, &out, vec![("B".into(), 2.0)], chunk_points).unwrap();
+            let radii: Vec<f32> = mdlod_format::MdlodFile::open(&out)
+                .unwrap()
+                .metadata()
+                .species
+                .iter()
+                .map(|s| s.radius)
+                .collect();
+            assert_eq!(radii, [0.5, 2.0]);
+            std::fs::remove_file(&out).unwrap();
+        }
+    }
+}
+
+/// Chunks of one frame of two particles at (0,0,0) and (1,2,3): `particles/N`, the
+/// positions, and `extra` (name, type code, M, data), with the names they need.
+fn two_particles(extra: &[(&str, u8, u32, Vec<u8>)]) -> Vec<u8> {
+    let mut names = vec!["particles/N".to_string(), "particles/position".to_string()];
+    let positions: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 2.0, 3.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let mut chunks = vec![
+        (0, 3, 1, 1, 2u32.to_le_bytes().to_vec()),
+        (1, 9, 2, 3, positions),
+    ];
+    for (name, ty, m, data) in extra {
+        names.push(name.to_string());
+        let n = if *name == "particles/types" {
+            data.len() as u64 / u64::from(*m)
+        } else {
+            2
+        };
+        chunks.push((names.len() as u16 - 1, *ty, n, *m, data.clone()));
+    }
+    gsd_file(&names, &chunks)
+}
+
+/// Frame 0 of a file of `bytes` written in `dir` (and the file's path).
+fn read_frame_0(
+    dir: &std::path::Path,
+    bytes: &[u8],
+    opts: &ReadOptions,
+) -> (PathBuf, Result<mdlod_preprocess::Frame, String>) {
+    let path = dir.join("two.gsd");
+    std::fs::write(&path, bytes).unwrap();
+    let f = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, opts, &NoProgress)
+        .map_err(|e| e.to_string());
+    (path, f)
+}
+
+/// Two types of one name, or a type without a name, would be species no one can tell
+/// apart (or name with `--radius`): errors naming the file, the frame and the chunk.
+#[test]
+fn duplicate_or_empty_type_names_are_errors_naming_the_chunk() {
+    let dir = tempfile::tempdir().unwrap();
+    let typeid: Vec<u8> = [0u32, 1].iter().flat_map(|v| v.to_le_bytes()).collect();
+    for (types, expected) in [
+        (*b"A\0A\0", "types 0 and 1 are both named `A`"),
+        (*b"\0\0B\0", "type 0 has an empty name"),
+        (*b"B\0\0\0", "type 1 has an empty name"),
+    ] {
+        let bytes = two_particles(&[
+            ("particles/typeid", 3, 1, typeid.clone()),
+            ("particles/types", 5, 2, types.to_vec()),
+        ]);
+        let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
+        let e = f.unwrap_err();
+        assert!(
+            e.starts_with(&format!("{}: byte ", path.display()))
+                && e.ends_with(&format!(
+                    "frame 0: `particles/types`: {expected} (each type needs a name of its own)"
+                )),
+            "{e}"
+        );
+    }
+    // Distinct names read.
+    let bytes = two_particles(&[
+        ("particles/typeid", 3, 1, typeid),
+        ("particles/types", 5, 2, b"A\0B\0".to_vec()),
+    ]);
+    let f = read_frame_0(dir.path(), &bytes, &ReadOptions::default())
+        .1
+        .unwrap();
+    assert_eq!(f.species_index, [0, 1]);
+}
+
+/// An attribute chunk of several numbers per particle (`velocity`) is no damage to
+/// report as a size mismatch: the message says how many components it has and lists
+/// the chunks `--attribute` can take.
+#[test]
+fn an_attribute_of_several_components_is_named_as_such() {
+    let velocity: Vec<u8> = [1.0f32; 6].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let charge: Vec<u8> = [0.5f32, -0.5]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let bytes = two_particles(&[
+        ("particles/velocity", 9, 3, velocity),
+        ("particles/charge", 9, 1, charge),
+    ]);
+    let opts = |name: &str| ReadOptions {
+        attribute: Some(name.into()),
+        ..Default::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let e = read_frame_0(dir.path(), &bytes, &opts("velocity"))
+        .1
+        .unwrap_err();
+    assert!(
+        e.ends_with(
+            "frame 0: `particles/velocity` has 3 components per particle; --attribute takes \
+             a chunk of one number per particle: particles/charge"
+        ),
+        "{e}"
+    );
+    let f = read_frame_0(dir.path(), &bytes, &opts("charge")).1.unwrap();
+    assert_eq!(f.attribute.unwrap().values, [0.5, -0.5]);
+}
+
+/// A frame whose `particles/N` is 0 takes no per-particle chunk of frame 0 (of frame 0's
+/// particles): it is an empty frame, refused as every reader's is, not a size mismatch.
+#[test]
+fn a_frame_of_no_particles_is_the_empty_frame_error() {
+    let names: Vec<String> = ["configuration/step", "particles/N", "particles/position"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let positions: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 2.0, 3.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let bytes = gsd_frames(
+        &names,
+        &[
+            (0, (0, 4, 1, 1, 0u64.to_le_bytes().to_vec())),
+            (0, (1, 3, 1, 1, 2u32.to_le_bytes().to_vec())),
+            (0, (2, 9, 2, 3, positions)),
+            (1, (0, 4, 1, 1, 10u64.to_le_bytes().to_vec())),
+            (1, (1, 3, 1, 1, 0u32.to_le_bytes().to_vec())),
+        ],
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.gsd");
+    std::fs::write(&path, &bytes).unwrap();
+    let d = DumpFile::open(&path).unwrap();
+    assert_eq!(d.frame_info(1).unwrap().particles, 0);
+    assert!(d
+        .read_frame(1, &charge(), &NoProgress)
+        .unwrap()
+        .positions
+        .is_empty());
+    let e = convert_frame_1(&path, &dir.path().join("e.mdlod"), vec![], 1 << 22).unwrap_err();
+    assert_eq!(
+        e,
+        format!(
+            "{}: frame 1 (timestep 10): no particles, and a .mdlod file needs at least one",
+            path.display()
+        )
+    );
 }

@@ -443,3 +443,43 @@ fn empty_frame_is_fine() {
     assert!(f.is_empty());
     assert!(f.species.is_empty());
 }
+
+/// A `BOX BOUNDS` line whose lower bound is above its upper bound (`10 0`) is no box
+/// (it read as one of negative size): an error naming the line, for `lo hi` and
+/// `lo_bound hi_bound tilt` lines alike.
+#[test]
+fn box_bounds_with_lo_above_hi_are_errors_naming_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let atoms = "ITEM: ATOMS id type x y z\n1 1 0 0 0\n";
+    for (bounds, line, text) in [
+        ("pp pp pp\n0 10\n10 0\n0 10\n", 7, "10 0"),
+        ("xy xz yz pp pp pp\n0 10 0\n0 10 0\n4 -4 0\n", 8, "4 -4 0"),
+    ] {
+        let dump = format!(
+            "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS {bounds}{atoms}"
+        );
+        let path = write(dir.path(), "flip.lammpstrj", &dump);
+        let e = DumpFile::open(&path)
+            .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
+            .unwrap_err()
+            .to_string();
+        let (lo, hi) = {
+            let v: Vec<&str> = text.split(' ').collect();
+            (v[0], v[1])
+        };
+        assert_eq!(
+            e,
+            format!(
+                "{}:{line}: malformed BOX BOUNDS: `{text}` has its lower bound {lo} above its \
+                 upper bound {hi}",
+                path.display()
+            )
+        );
+    }
+    // A box of zero width on an axis (a 2D run's) still reads.
+    let dump = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n0 0\n{atoms}"
+    );
+    let path = write(dir.path(), "flat.lammpstrj", &dump);
+    assert_eq!(read(&path, None).len(), 1);
+}

@@ -426,3 +426,92 @@ fn palette_slots_follow_type_numbers_only_from_one_up() {
         frame.species
     );
 }
+
+/// An old-revision binary dump (no column names) of one frame: the box 0..30 on every
+/// axis, five values per atom (`id type` and the coordinates `coords(i)`), in two chunks.
+fn old_revision_dump(atoms: usize, coords: impl Fn(usize) -> [f64; 3]) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend_from_slice(&7i64.to_le_bytes()); // timestep
+    out.extend_from_slice(&(atoms as i64).to_le_bytes());
+    out.extend_from_slice(&0i32.to_le_bytes()); // orthogonal
+    out.extend_from_slice(&[0u8; 24]); // boundary
+    for v in [0.0f64, 30.0, 0.0, 30.0, 0.0, 30.0] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out.extend_from_slice(&5i32.to_le_bytes());
+    out.extend_from_slice(&2i32.to_le_bytes()); // chunks
+    let half = atoms / 2;
+    for range in [0..half, half..atoms] {
+        out.extend_from_slice(&(5 * range.len() as i32).to_le_bytes());
+        for i in range {
+            let [x, y, z] = coords(i);
+            for v in [(i + 1) as f64, 1.0, x, y, z] {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    out
+}
+
+/// `dump atom`'s scaled coordinates assumed for an old-revision dump that holds unscaled
+/// ones (0 to 30) were multiplied by the box without a word: more than a few atoms far
+/// outside the box (below -0.5 or above 1.5) are refused, saying the columns look
+/// unscaled and how to name them; with `--columns "id type x y z"` the dump reads.
+/// Scaled coordinates a little outside the box (atoms that moved since the last
+/// wrapping) still read.
+#[test]
+fn unscaled_coordinates_read_as_assumed_scaled_ones_are_refused() {
+    let at = |i: usize| {
+        let t = i as f64;
+        [(t * 7.3) % 30.0, (t * 3.1) % 30.0, 29.0 - (t * 1.3) % 28.0]
+    };
+    let far = (0..40)
+        .filter(|&i| at(i).iter().any(|v| !(-0.5..=1.5).contains(v)))
+        .count();
+    let unscaled = old_revision_dump(40, at);
+    let (_d, path) = temp_copy("old.bin", &unscaled);
+    let dump = DumpFile::open(&path).unwrap();
+    let e = dump
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    // Atom 1 is at (0, 0, 29): its `zs` (after the 100 bytes of header and chunk
+    // count, the chunk's length and four values) is the first far value.
+    let zs_of_atom_1 = 100 + 4 + 4 * 8;
+    assert_eq!(
+        e,
+        format!(
+            "{}: byte {zs_of_atom_1}: timestep 7: an old-revision binary dump names no \
+             columns, so `dump atom`'s scaled `id type xs ys zs` were assumed, but {far} of \
+             the first 40 atoms lie far outside the box (below -0.5 or above 1.5; atom 1: \
+             `zs` is 29): the columns look unscaled; give the column names (e.g. --columns \
+             \"id type x y z\")",
+            path.display()
+        )
+    );
+    // In parts (the out-of-core reader's windows), the same answer.
+    let e2 = dump
+        .read_part(0, &ReadOptions::default(), 30..40, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(e, e2);
+    let columns = ReadOptions {
+        columns: Some(["id", "type", "x", "y", "z"].map(String::from).to_vec()),
+        ..Default::default()
+    };
+    let f = dump.read_frame(0, &columns, &NoProgress).unwrap();
+    assert_eq!(f.positions[1], at(1).map(|v| v as f32));
+
+    // Scaled coordinates, three atoms far outside: read, unscaled through the box.
+    let scaled = old_revision_dump(40, |i| match i {
+        0..=2 => [2.0, 0.5, 0.5],
+        _ => [0.5, -0.1, 1.05],
+    });
+    let (_d, path) = temp_copy("scaled.bin", &scaled);
+    let f = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert_eq!(f.positions[0], [60.0, 15.0, 15.0]);
+    assert_eq!(f.positions[39], [15.0, -3.0, 31.5]);
+}

@@ -671,3 +671,53 @@ fn a_radius_of_zero_or_below_is_refused_unless_the_list_is_given_one() {
         std::fs::remove_file(&out).unwrap();
     }
 }
+
+/// A list count lower than the lists a frame holds (2 lists, counted 1) lost the lists
+/// past it without a word: where the seek table says where the frame ends (the next
+/// frame's start, or the end entry for the last frame), lists ending before it are an
+/// error naming the frame and both offsets. A count too high runs into a list header
+/// that the file does not hold, named with its frame and list.
+#[test]
+fn a_list_count_too_low_or_too_high_is_an_error_naming_the_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames: Vec<Vec<List>> = (0..2)
+        .map(|k| vec![list(1, 0, 0.5, 30, k as f64), list(1, 0, 0.8, 20, 2.0)])
+        .collect();
+    let good = write(103, &frames);
+    assert_eq!(damaged(dir.path(), &good), "");
+    let starts: Vec<usize> = (0..3)
+        .map(|k| u64::from_le_bytes(good[60 + 8 * k..68 + 8 * k].try_into().unwrap()) as usize)
+        .collect();
+    // Frame k's count (after its timestamp), and where its first list ends: its header
+    // (2 + 4 + 4 + 8 + 24 bytes) and 30 particles of 12 bytes.
+    for k in 0..2 {
+        let count = starts[k] + 4;
+        let mut bad = good.clone();
+        bad[count..count + 4].copy_from_slice(&1i32.to_le_bytes());
+        let end = count + 4 + 42 + 30 * 12;
+        let m = damaged(dir.path(), &bad);
+        assert!(
+            m.ends_with(&format!(
+                "byte {count}: frame {k}: its lists (1, as the frame header counts them) end \
+                 at byte {end}, but the seek table says the frame ends at byte {} (wrong list \
+                 count?)",
+                starts[k + 1]
+            )),
+            "{m}"
+        );
+    }
+    // One frame counting 3 lists: the third's header lies past the end of the file.
+    let one = write(103, &frames[..1]);
+    let mut bad = one.clone();
+    let count = u64::from_le_bytes(one[60..68].try_into().unwrap()) as usize + 4;
+    bad[count..count + 4].copy_from_slice(&3i32.to_le_bytes());
+    let m = damaged(dir.path(), &bad);
+    assert!(
+        m.ends_with(&format!(
+            "byte {}: file truncated in the header of frame 0, list 2 ({} bytes)",
+            one.len(),
+            one.len()
+        )),
+        "{m}"
+    );
+}

@@ -280,3 +280,84 @@ fn a_missing_attribute_is_an_error_naming_the_sidecar() {
         )
     );
 }
+
+/// Without `particles`, the positions file says how many particles there are: a species
+/// or attribute array of another length (another run's, another frame's) is an error
+/// naming both arrays and their counts, not read for its first values. `radii` must give
+/// one radius per species name (or one without `species`).
+#[test]
+fn arrays_of_different_lengths_and_radii_per_name_are_checked() {
+    let c = Case::new();
+    let pos: Vec<u8> = positions(10)
+        .iter()
+        .flatten()
+        .flat_map(|&v| v.to_le_bytes())
+        .collect();
+    let pos_path = c.file("pos.f64", &pos);
+    c.file("type.u8", &[0u8; 10]);
+    let long = c.file("long.u8", &[0u8; 500]);
+    let pe = c.file("pe.f32", &[0u8; 4 * 12 + 2]);
+    c.file("pe10.f32", &[0u8; 40]);
+    let sidecar = |species: &str, extra: &str| {
+        format!(
+            r#"{{ "mdlod_raw": 1, "positions": {{ "file": "pos.f64", "type": "f64" }},
+  "species": {{ "file": "{species}", "type": "u8", "names": ["A", "B"] }}{extra} }}"#
+        )
+    };
+    let path = c.sidecar(&sidecar("long.u8", ""));
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 0: species: 500 values from byte 0, but the positions ({}) hold 10 \
+             particles: the arrays differ in length",
+            long.display(),
+            pos_path.display()
+        )
+    );
+    let path = c.sidecar(&sidecar(
+        "type.u8",
+        r#", "attribute": { "file": "pe.f32", "type": "f32" }"#,
+    ));
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 0: attribute: 12 values and 2 bytes from byte 0, but the positions ({}) \
+             hold 10 particles: the arrays differ in length",
+            pe.display(),
+            pos_path.display()
+        )
+    );
+    // With `particles` given, arrays holding more are read for their first values.
+    let path = c.sidecar(&sidecar("long.u8", r#", "particles": 10"#));
+    assert_eq!(read(&path).unwrap().len(), 10);
+    let path = c.sidecar(&sidecar(
+        "type.u8",
+        r#", "attribute": { "file": "pe10.f32", "type": "f32" }, "radii": [0.5, 0.7]"#,
+    ));
+    assert_eq!(read(&path).unwrap().species[1].radius, Some(0.7));
+
+    for (radii, message) in [
+        ("[0.5]", "radii: 1 given for 2 species names"),
+        ("[0.5, 0.7, 0.9]", "radii: 3 given for 2 species names"),
+    ] {
+        let path = c.sidecar(&sidecar("type.u8", &format!(r#", "radii": {radii}"#)));
+        assert_eq!(
+            read(&path).unwrap_err(),
+            format!(
+                "{}:1: {message} (one radius per species, in their order)",
+                path.display()
+            )
+        );
+    }
+    let path = c.sidecar(
+        r#"{ "mdlod_raw": 1, "positions": { "file": "pos.f64", "type": "f64" }, "radii": [1, 2] }"#,
+    );
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}:1: radii: 2 given for 1 species (no `species` array) (one radius per \
+             species, in their order)",
+            path.display()
+        )
+    );
+}

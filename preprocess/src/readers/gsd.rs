@@ -9,15 +9,18 @@
 //! - `particles/N` (u32), `particles/position` (f32 or f64, N×3), `particles/typeid`
 //!   (u32, default 0), `particles/types` (N×M characters, default `A`),
 //!   `particles/diameter` (f32, default 1: the species radius is half its mean per
-//!   type; a type with a diameter of zero or below is refused by the conversion unless
-//!   `--radius` names it), `configuration/step` (u64, default 0), `configuration/box`
-//!   (f32 ×6: `Lx Ly Lz xy xz yz`, centred on the origin).
+//!   type; a type with a diameter of zero, below or not finite is refused by the
+//!   conversion unless `--radius` names it), `configuration/step` (u64, default 0),
+//!   `configuration/box` (f32 ×6: `Lx Ly Lz xy xz yz`, centred on the origin).
+//! - The type names must be distinct and not empty (the species are told by them).
 //! - As the schema says, a chunk missing from frame `k` is taken from frame 0, and one
 //!   missing from both has its default: writers store only what changed. A file with no
 //!   `configuration/step` at all has no timesteps for a batch to number its frames by
 //!   ([`crate::readers::DumpFile::frame_timestep`] is `None`; the frames record 0).
 //! - The attribute may be any per-particle chunk of N numbers (`charge`, `mass`,
-//!   `particles/charge`, ...).
+//!   `particles/charge`, ...); one of several components (`velocity`) is refused.
+//! - A frame whose `particles/N` is 0 has no particles: the chunks it takes from frame 0
+//!   (of frame 0's particles) do not apply to it.
 //!
 //! Errors name the byte offset of the damaged entry or value.
 
@@ -471,7 +474,12 @@ impl<'a> FrameData<'a> {
     /// lack it and it is optional).
     fn chunk(&self, name: &str, m: usize, required: bool) -> Result<Option<&'a Entry>, ReadError> {
         let (path, k, n) = (self.path, self.k, self.n);
-        match self.index.chunk(k, name) {
+        // An empty frame takes nothing of frame 0's particles.
+        let entry = self
+            .index
+            .chunk(k, name)
+            .filter(|e| n > 0 || e.frame == k as u64);
+        match entry {
             None if required && n > 0 => Err(err(
                 path,
                 0,
@@ -504,6 +512,27 @@ impl<'a> FrameData<'a> {
             Some(e) => return Err(err(self.path, e.at, "`particles/types` is not text")),
             None => vec!["A".to_string()],
         };
+        if let Some(e) = self.index.chunk(self.k, "particles/types") {
+            let at = |t: usize| e.location + t * e.m;
+            for (t, name) in names.iter().enumerate() {
+                let message = if name.is_empty() {
+                    format!("type {t} has an empty name")
+                } else if let Some(first) = names[..t].iter().position(|n| n == name) {
+                    format!("types {first} and {t} are both named `{name}`")
+                } else {
+                    continue;
+                };
+                return Err(err(
+                    self.path,
+                    at(t),
+                    format!(
+                        "frame {}: `particles/types`: {message} (each type needs a name of \
+                         its own)",
+                        self.k
+                    ),
+                ));
+            }
+        }
         if names.is_empty() || names.len() > 1 << 16 {
             return Err(err(
                 self.path,
@@ -555,9 +584,9 @@ impl<'a> FrameData<'a> {
 
     /// The species of particles `range` (type ids `ids`): every type, in the file's
     /// order, with the radius half the mean diameter of the type's particles in the range
-    /// (default diameter 1). A type with a particle of diameter zero or below gets half
-    /// the first such diameter, which the conversion refuses unless `--radius` gives the
-    /// type its radius (a diameter that is not a number is an error here).
+    /// (default diameter 1). A type with a particle of diameter zero, below or not finite
+    /// gets half the first such diameter, which the conversion refuses unless `--radius`
+    /// gives the type its radius.
     fn species(
         &self,
         range: Range<usize>,
@@ -573,15 +602,11 @@ impl<'a> FrameData<'a> {
             for (j, &s) in ids.iter().enumerate() {
                 let i = range.start + j;
                 let d = e.ty.get(bytes, i);
-                if !d.is_finite() {
-                    return Err(err(
-                        self.path,
-                        e.location + i * e.ty.size(),
-                        format!("frame {}: particle {i} has diameter {d}", self.k),
-                    ));
-                }
-                if d <= 0.0 {
+                if !(d.is_finite() && d > 0.0) {
                     bad[usize::from(s)].get_or_insert(d);
+                }
+                if !d.is_finite() {
+                    continue;
                 }
                 sum[usize::from(s)] += d;
                 count[usize::from(s)] += 1;
@@ -664,6 +689,8 @@ pub(crate) fn read_range(
     let species = f.species(range.clone(), &names, &species_index)?;
 
     let attribute = match &opts.attribute {
+        // (An empty frame has no values to take.)
+        Some(_) if n == 0 => None,
         None => None,
         Some(name) => {
             let full = if name.contains('/') {
@@ -671,6 +698,18 @@ pub(crate) fn read_range(
             } else {
                 format!("particles/{name}")
             };
+            if let Some(e) = index.chunk(k, &full).filter(|e| e.n == n && e.m != 1) {
+                let available = attribute_chunks(index, k, n).join(" ");
+                return Err(err(
+                    path,
+                    e.at,
+                    format!(
+                        "frame {k}: `{full}` has {} components per particle; --attribute \
+                         takes a chunk of one number per particle: {available}",
+                        e.m
+                    ),
+                ));
+            }
             let Some(e) = f.chunk(&full, 1, false)? else {
                 let available = attribute_chunks(index, k, n).join(" ");
                 return Err(err(

@@ -21,6 +21,9 @@
 //!
 //! The old revision names no columns: `dump atom`'s five (`id type xs ys zs`, eight with
 //! image flags) are assumed, anything else needs [`crate::readers::ReadOptions::columns`].
+//! Assumed scaled coordinates far outside the box (below −0.5 or above 1.5 for more than
+//! a few of the frame's first atoms) are refused: they are unscaled ones, which the
+//! columns must then name (`--columns "id type x y z"`).
 //! Opening scans the headers and skips the chunks by their lengths, checking every count
 //! against the file size with checked arithmetic, so a truncated or corrupt file is
 //! reported with the byte offset where it goes wrong, and frame `k` is then read without
@@ -45,6 +48,10 @@ const COORDINATE_STYLES: [([&str; 3], bool); 4] = [
 const MAX_VALUES_PER_ATOM: usize = 4096;
 /// Longest magic, unit or column string accepted.
 const MAX_STRING: usize = 1 << 16;
+/// Atoms at the start of a frame whose assumed scaled coordinates are checked to lie
+/// near the box, and how many of them may lie far from it (see [`check_assumed_scaled`]).
+const SCALED_SAMPLE: usize = 1000;
+const SCALED_FAR_ALLOWED: usize = 3;
 
 /// One frame's header, as read.
 #[derive(Clone, Debug)]
@@ -345,6 +352,56 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
     })
 }
 
+/// Refuses `dump atom`'s scaled coordinates assumed for an old-revision frame `h` (which
+/// names no columns) when more than a few of its first atoms lie far outside the box:
+/// unscaled coordinates taken for scaled ones would be multiplied by the box silently.
+/// Only the frame's first atoms are looked at, so that every part of a frame read in
+/// parts gives the same answer.
+fn check_assumed_scaled(
+    path: &Path,
+    data: &[u8],
+    h: &BinHeader,
+    coords: [usize; 3],
+    names: &[String],
+) -> Result<(), ReadError> {
+    let stride = h.values_per_atom * 8;
+    let (mut seen, mut far, mut first_far) = (0usize, 0usize, None);
+    'chunks: for chunk in &h.chunks {
+        for (j, atom) in data[chunk.clone()].chunks_exact(stride).enumerate() {
+            if seen == SCALED_SAMPLE {
+                break 'chunks;
+            }
+            let at = chunk.start + j * stride;
+            for &c in &coords {
+                let v = f64::from_le_bytes(atom[8 * c..8 * c + 8].try_into().unwrap_or([0; 8]));
+                if v.is_finite() && !(-0.5..=1.5).contains(&v) {
+                    far += 1;
+                    first_far.get_or_insert((seen, c, v, at + 8 * c));
+                    break;
+                }
+            }
+            seen += 1;
+        }
+    }
+    match first_far {
+        Some((i, c, v, offset)) if far > SCALED_FAR_ALLOWED => Err(ReadError::Binary {
+            path: path.to_path_buf(),
+            offset: offset as u64,
+            message: format!(
+                "timestep {}: an old-revision binary dump names no columns, so `dump atom`'s \
+                 scaled `{}` were assumed, but {far} of the first {seen} atoms lie far outside \
+                 the box (below -0.5 or above 1.5; atom {}: `{}` is {v}): the columns look \
+                 unscaled; give the column names (e.g. --columns \"id type x y z\")",
+                h.timestep,
+                names.join(" "),
+                i + 1,
+                names[c]
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// The column names of a frame: its own, the caller's, or `dump atom`'s defaults.
 fn columns(path: &Path, h: &BinHeader, opts: &ReadOptions) -> Result<Vec<String>, ReadError> {
     let err = |message: String| ReadError::Binary {
@@ -429,6 +486,9 @@ pub(crate) fn read_range(
             columns: names.join(" "),
         });
     };
+    if scaled && opts.columns.is_none() && h.columns.is_none() {
+        check_assumed_scaled(path, data, h, coords, &names)?;
+    }
     let species_col = find("type");
     let attribute_col = match &opts.attribute {
         None => None,

@@ -16,7 +16,8 @@
 //!   `lo_bound hi_bound tilt`, converted to the true bounds as the LAMMPS `dump` docs
 //!   describe: `xlo = xlo_bound - min(0, xy, xz, xy+xz)`, `xhi = xhi_bound - max(0, xy, xz,
 //!   xy+xz)`, `ylo = ylo_bound - min(0, yz)`, `yhi = yhi_bound - max(0, yz)`) and general
-//!   triclinic (`abc origin` keywords, lines `ax ay az originx` etc.). Boundary flags
+//!   triclinic (`abc origin` keywords, lines `ax ay az originx` etc.); a lower bound above
+//!   its upper bound is an error naming the line. Boundary flags
 //!   (`pp ff sm`) set [`SimulationBox::periodic`] (periodic where the flag is `pp`).
 //! - **Columns.** Coordinates come from the first complete triple in the order
 //!   `x y z` > `xu yu zu` > `xs ys zs` > `xsu ysu zsu`: wrapped Cartesian first, then
@@ -366,6 +367,19 @@ fn parse_box(
                     ),
                 )
             })?;
+        }
+        // (`lo hi` and `lo_bound hi_bound tilt` lines; a general triclinic line is a
+        // vector.)
+        if !general && row[0] > row[1] {
+            return Err(ctx.malformed(
+                at,
+                format!(
+                    "malformed BOX BOUNDS: `{}` has its lower bound {} above its upper bound {}",
+                    shorten(line),
+                    row[0],
+                    row[1]
+                ),
+            ));
         }
     }
     let mut b = if general {

@@ -263,7 +263,8 @@ impl Index {
             let mut lists = Vec::new();
             for l in 0..count {
                 let at = c.at;
-                let [vertex, colour] = c.take::<2>("a list header")?;
+                let header = format!("the header of frame {k}, list {l}");
+                let [vertex, colour] = c.take::<2>(&header)?;
                 let vsize = vertex_size(vertex);
                 let csize = colour_size(colour);
                 let Some(csize) = csize.filter(|_| vsize > 0) else {
@@ -279,23 +280,23 @@ impl Index {
                 let radius = if vertex == 2 {
                     None
                 } else {
-                    Some(f32::from_le_bytes(c.take("a list header")?))
+                    Some(f32::from_le_bytes(c.take(&header)?))
                 };
                 let mut global_colour = None;
                 match colour {
                     0 => {
-                        let [r, g, b, _] = c.take::<4>("a list header")?;
+                        let [r, g, b, _] = c.take::<4>(&header)?;
                         global_colour = Some([r, g, b]);
                     }
                     3 | 7 => {
-                        c.take::<8>("a list header")?;
+                        c.take::<8>(&header)?;
                     }
                     _ => {}
                 }
                 let count_at = c.at;
-                let particles = u64::from_le_bytes(c.take("a list header")?);
+                let particles = u64::from_le_bytes(c.take(&header)?);
                 if version == 103 {
-                    c.take::<24>("a list header")?;
+                    c.take::<24>(&header)?;
                 }
                 let stride = vsize + csize;
                 let end = usize::try_from(particles)
@@ -358,6 +359,30 @@ impl Index {
                     path,
                     start,
                     format!("frame {k} holds more than 2^32 particles"),
+                ));
+            }
+            // Where the seek table says the frame ends (the next frame's start, or for the
+            // last frame the end entry writers add, where the table has room for it):
+            // lists ending before it mean a list count too low, whose lists were lost.
+            let seek_end = match offsets.get(k + 1) {
+                Some(&next) => Some(next),
+                None if offsets.first().is_some_and(|&f| f >= table_end + 8) => {
+                    usize::try_from(u64::from_le_bytes(le(data, table_end)))
+                        .ok()
+                        .filter(|&e| e <= data.len())
+                }
+                None => None,
+            };
+            if let Some(seek_end) = seek_end.filter(|&e| c.at < e) {
+                return Err(err(
+                    path,
+                    lists_at,
+                    format!(
+                        "frame {k}: its lists ({count}, as the frame header counts them) end \
+                         at byte {}, but the seek table says the frame ends at byte \
+                         {seek_end} (wrong list count?)",
+                        c.at
+                    ),
                 ));
             }
             previous_end = c.at;

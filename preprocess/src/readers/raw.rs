@@ -19,10 +19,11 @@
 //!
 //! - `positions` is required: `type` `f32` or `f64`; `layout` `interleaved` (x y z per
 //!   particle, the default) or `planar` (all x, then all y, then all z). `particles` may
-//!   be left out when the positions file holds exactly the particles.
+//!   be left out when the positions file holds exactly the particles; then every other
+//!   array must hold exactly as many values (arrays of different lengths are an error).
 //! - `species` (optional): one integer per particle (`u8`, `u16`, `u32` or `i32`), an
 //!   index into `names` (default names are the numbers); `radii` optionally gives each
-//!   species' radius.
+//!   species' radius (one per name, or one without `species`).
 //! - `attribute` (optional): one `f32` or `f64` per particle.
 //! - Every array may have `offset` (bytes to skip, default 0) and `byte_order`
 //!   (`little`, the default, or `big`).
@@ -367,6 +368,28 @@ impl Index {
                     ),
                 ));
             }
+            // Without `particles`, the positions file says how many there are, and every
+            // other array must hold as many (a longer one is another frame's, or another
+            // run's, not these particles').
+            if sidecar.particles.is_none() && bytes != m.bytes().len() {
+                let size = m.ty.size();
+                let (values, rest) = (m.bytes().len() / size, m.bytes().len() % size);
+                return Err(err(
+                    &m.path,
+                    m.offset as u64,
+                    format!(
+                        "{what}: {values} values{} from byte {}, but the positions ({}) hold \
+                         {particles} particles: the arrays differ in length",
+                        if rest > 0 {
+                            format!(" and {rest} bytes")
+                        } else {
+                            String::new()
+                        },
+                        m.offset,
+                        positions.path.display()
+                    ),
+                ));
+            }
             Ok(())
         };
         need(&positions, 3, "positions")?;
@@ -395,6 +418,27 @@ impl Index {
                 return Err(malformed(
                     path,
                     "radii: every radius must be a positive number",
+                ));
+            }
+            // One radius per species: by name, or the one species without `species`.
+            // (Species numbered by the data itself are counted only when it is read.)
+            let names = match &species {
+                None => Some(1),
+                Some((_, names)) => (!names.is_empty()).then_some(names.len()),
+            };
+            if let Some(names) = names.filter(|&n| n != r.len()) {
+                return Err(malformed(
+                    path,
+                    format!(
+                        "radii: {} given for {names} species{} (one radius per species, in \
+                         their order)",
+                        r.len(),
+                        if sidecar.species.is_some() {
+                            " names"
+                        } else {
+                            " (no `species` array)"
+                        }
+                    ),
                 ));
             }
         }
