@@ -699,7 +699,7 @@ fn sndf_table(renderer: &Renderer, adapter: &str, n: u64) {
             error_px: 1.0,
             budget_points: 4_000_000,
             occlusion: mdlod_render::OcclusionMode::WholePixels,
-            support_scale: 0.0,
+            ..Default::default()
         },
     );
     let settings = SndfSettings {
@@ -941,7 +941,7 @@ fn smip_table(renderer: &Renderer, adapter: &str, n: u64) {
                 error_px: 1.0,
                 budget_points: budget,
                 occlusion: mdlod_render::OcclusionMode::WholePixels,
-                support_scale: 0.0,
+                ..Default::default()
             },
         );
         let settings = SndfSettings {

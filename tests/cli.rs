@@ -2548,6 +2548,85 @@ fn a_movie_keeps_each_species_look_across_frames() {
     assert_eq!(image(0), image(1));
 }
 
+/// Hidden species leave the clusters too: at a coarse error, no pixel takes a hidden
+/// species' colour (mixed clusters are refined until they hold none). Clusters recoloured
+/// only approximately (more than four species) are reported.
+#[test]
+fn hidden_species_leave_the_clusters_and_inexact_recolouring_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("a.lammpstrj");
+    generate(&["alloy", "-n", "20000"], &dump);
+    let file = dir.path().join("a.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file)]);
+    let png = dir.path().join("a.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(&png)];
+        args.extend(["--width", "64", "--height", "48", "--screen-error", "12"]);
+        args.extend([
+            "--species-colour",
+            "1=#ff0000",
+            "--species-colour",
+            "2=#0000ff",
+        ]);
+        args.extend(extra);
+        let out = ok(&args);
+        let (_, _, px) = read_png(&png);
+        let red = px
+            .chunks(4)
+            .filter(|p| p[0] > p[1].saturating_add(8))
+            .count();
+        (out, red)
+    };
+    let (out, red) = render(&[]);
+    assert!(red > 0 && out.contains("cluster spheres"), "{out}");
+    // Copper (type 1) hidden: the silver spheres alone, blue (white highlights only).
+    let (out, red) = render(&["--hide-species", "1"]);
+    assert_eq!(red, 0, "{out}");
+    assert!(!out.contains("approximately"), "{out}");
+    // Six labelled species, one restyled: the clusters' new colours are a fit.
+    let xyz = dir.path().join("six.xyz");
+    let mut text = String::from("30000\nsix\n");
+    for i in 0..30000u32 {
+        let x = |k: u32| (i.wrapping_mul(2654435761 + k) % 10007) as f32 / 100.0;
+        text += &format!(
+            "{} {} {} {}\n",
+            ["A", "Q", "R", "T", "X", "Z"][i as usize % 6],
+            x(0),
+            x(7),
+            x(13)
+        );
+    }
+    std::fs::write(&xyz, text).unwrap();
+    let six = dir.path().join("six.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&six)]);
+    let args = [
+        "render",
+        s(&six),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ];
+    let out = ok(&[
+        &args[..],
+        &["--species-colour", "Q=#0000ff", "--screen-error", "30"],
+    ]
+    .concat());
+    assert!(
+        out.contains("approximately") && out.contains("the 6 species"),
+        "{out}"
+    );
+    // At error 0 no cluster is drawn: nothing to say.
+    let out = ok(&[
+        &args[..],
+        &["--species-colour", "Q=#0000ff", "--screen-error", "0"],
+    ]
+    .concat());
+    assert!(!out.contains("approximately"), "{out}");
+}
+
 /// A movie of a trajectory whose species come and go: a style may name a species some
 /// frames lack (it applies where present); one no frame has is an error listing them.
 #[test]

@@ -18,7 +18,7 @@ use std::fs::File;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU8, Ordering};
-use std::sync::OnceLock;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use xxhash_rust::xxh3::xxh3_64;
 
@@ -95,7 +95,16 @@ pub struct MdlodFile {
     node_blocks: Vec<AtomicU8>,
     /// The first failed check of a block checked after open.
     node_error: OnceLock<(String, String)>,
+    /// The last [`Self::species_below`] computed, with its species mask.
+    species_below: Mutex<Option<(u64, Arc<[u8]>)>>,
 }
+
+/// [`MdlodFile::species_below`]: some particle below the node is of a species of the
+/// set.
+pub const BELOW_IN: u8 = 1;
+/// [`MdlodFile::species_below`]: some particle below the node is of a species outside
+/// the set.
+pub const BELOW_OUT: u8 = 2;
 
 /// Node records are checked in blocks of this many nodes of one level. A view reaches
 /// few nodes of each block it touches: a 1 px frame of 2×10^8 particles reads 5.2 M node
@@ -574,6 +583,7 @@ impl MdlodFile {
             block_first,
             node_blocks,
             node_error: OnceLock::new(),
+            species_below: Mutex::new(None),
         })
     }
 
@@ -626,6 +636,64 @@ impl MdlodFile {
     #[inline]
     pub fn nodes(&self) -> &[NodeRecord] {
         bytemuck::cast_slice(&self.map[self.nodes_range.clone()])
+    }
+
+    /// For a set of species (`mask`: bit `s` for species index `s`; indices of 64 and
+    /// more are never in it), per node (indexed as [`Self::nodes`]) which particles its
+    /// subtree holds: [`BELOW_IN`] when some are of the set, [`BELOW_OUT`] when some are
+    /// not, both for a mixed subtree. What a viewer hiding species needs: a cluster of
+    /// hidden species only draws nothing, a mixed one must be opened. One pass over the
+    /// species section and the node records, bottom up; the last result is kept.
+    ///
+    /// Node records not checked yet are read as they are: a corrupt child range (out of
+    /// its level) makes its node mixed, which stays in bounds and only asks for the node
+    /// to be opened, where [`Self::check_children`] refuses it.
+    pub fn species_below(&self, mask: u64) -> Arc<[u8]> {
+        let mut cache = self.species_below.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((m, kinds)) = &*cache {
+            if *m == mask {
+                return kinds.clone();
+            }
+        }
+        let kinds: Arc<[u8]> = self.compute_species_below(mask).into();
+        *cache = Some((mask, kinds.clone()));
+        kinds
+    }
+
+    fn compute_species_below(&self, mask: u64) -> Vec<u8> {
+        let (nodes, levels, species) = (self.nodes(), self.levels(), self.species());
+        let mut kinds = vec![0u8; nodes.len()];
+        let Some(last) = levels.len().checked_sub(1) else {
+            return kinds;
+        };
+        let of = |s: u16| {
+            if s < 64 && (mask >> s) & 1 == 1 {
+                BELOW_IN
+            } else {
+                BELOW_OUT
+            }
+        };
+        for l in (0..last).rev() {
+            let first = levels[l].node_first as usize;
+            for i in 0..levels[l].point_count as usize {
+                let id = first.saturating_add(i);
+                let Some(n) = nodes.get(id) else { break };
+                let a = n.child_first as usize;
+                let b = a.saturating_add(n.child_count as usize);
+                let kind = if l + 1 == last {
+                    species.get(a..b).map_or(BELOW_IN | BELOW_OUT, |c| {
+                        c.iter().fold(0, |k, &s| k | of(s))
+                    })
+                } else {
+                    let f = levels[l + 1].node_first as usize;
+                    kinds
+                        .get(f.saturating_add(a)..f.saturating_add(b))
+                        .map_or(BELOW_IN | BELOW_OUT, |c| c.iter().fold(0, |k, &c| k | c))
+                };
+                kinds[id] = kind;
+            }
+        }
+        kinds
     }
 
     /// Checks the records of nodes `range` of level `l` (indices on the level; the

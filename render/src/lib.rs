@@ -448,6 +448,11 @@ pub fn frame_setup(
             RenderMode::Density(d) => d.kernel_scale,
             _ => 0.0,
         },
+        // Only spheres and S-NDFs draw the style's species.
+        hidden_species: match opts.mode {
+            RenderMode::Spheres | RenderMode::Sndf { .. } => opts.style.hidden_mask(species),
+            _ => 0,
+        },
     };
     let settings = FrameSettings {
         width: opts.width,

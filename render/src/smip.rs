@@ -927,6 +927,7 @@ impl Smip {
                                 .max(1),
                             occlusion: self.config.occlusion,
                             support_scale: 0.0,
+                            hidden_species: style.hidden_mask(&file.metadata().species),
                         },
                     );
                     file.node_error()?;

@@ -253,6 +253,27 @@ impl PointStyle {
             .collect())
     }
 
+    /// The species this style hides, as a mask of species indices for
+    /// [`crate::TraversalSettings::hidden_species`]; 0 when none is hidden, or when one
+    /// of index 64 or more is (clusters then still hold hidden species' particles).
+    pub fn hidden_mask(&self, species: &[mdlod_format::meta::Species]) -> u64 {
+        let mut mask = 0u64;
+        for (i, s) in species.iter().enumerate() {
+            let hidden = self
+                .species
+                .iter()
+                .rfind(|st| st.name == s.name)
+                .is_some_and(|st| st.hidden);
+            if hidden {
+                if i >= 64 {
+                    return 0;
+                }
+                mask |= 1 << i;
+            }
+        }
+        mask
+    }
+
     /// The affine map that recolours clusters when species take other colours, `None`
     /// when none does (or a colour map colours the points): rows of `[a b c d]`, a colour
     /// `x` going to `a·x + d` per channel ([`recoloured`]).
@@ -326,6 +347,23 @@ impl PointStyle {
             }
         }
         t.iter().flatten().all(|v| v.is_finite()).then_some(t)
+    }
+
+    /// How far (largest channel difference, linear) the clusters' recolouring misses
+    /// a species' new colour: 0 where it is exact, more for a least-squares map (more
+    /// than four species, or colours affinely dependent); `None` when nothing is
+    /// recoloured or a species is unknown.
+    pub fn recolour_miss(&self, species: &[mdlod_format::meta::Species]) -> Option<f32> {
+        let styled = self.species_table(species).ok()?;
+        let map = self.cluster_recolour(species, &styled)?;
+        species
+            .iter()
+            .zip(&styled)
+            .map(|(s, t)| {
+                let c = recoloured(&map, s.colour);
+                (0..3).map(|k| (c[k] - t[k]).abs()).fold(0.0f32, f32::max)
+            })
+            .reduce(f32::max)
     }
 
     /// Checks the numbers.
@@ -655,6 +693,33 @@ mod tests {
         for c in old {
             assert!(close(recoloured(&t, c), swap(c), 1e-4), "{c:?}");
         }
+        // How far the fit misses, for the summary: nothing here; much where one of five
+        // species alone turns blue (no affine map does that).
+        let style_of = |new: &[(usize, [f32; 3])]| PointStyle {
+            species: new
+                .iter()
+                .map(|&(i, c)| SpeciesStyle {
+                    name: format!("s{i}"),
+                    colour: Some(c),
+                    ..Default::default()
+                })
+                .collect(),
+            ..Default::default()
+        };
+        let file = species(&old);
+        assert!(style_of(&new).recolour_miss(&file).unwrap() < 1e-4);
+        let one = style_of(&[(1, [0.0, 0.0, 1.0])])
+            .recolour_miss(&file)
+            .unwrap();
+        assert!(one > 0.05, "{one}");
+        assert_eq!(style_of(&[]).recolour_miss(&file), None);
+        let three = species(&old[..3]);
+        assert!(
+            style_of(&[(1, [0.0, 0.0, 1.0])])
+                .recolour_miss(&three)
+                .unwrap()
+                < 1e-4
+        );
         // Unchanged colours, or a colour map: nothing to recolour.
         assert_eq!(recolour_of(&old, &[(1, AG)]), None);
         let style = PointStyle {

@@ -83,6 +83,7 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
 use glam::{Mat4, Vec3};
+use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
 use mdlod_format::{quantize, MdlodFile, NodeRecord};
 
 use crate::camera::{Camera, Projection};
@@ -103,6 +104,11 @@ pub struct TraversalSettings {
     /// volume's `kernel_scale`; see [`Projector::with_support`]); 0 for spheres and
     /// splats, whose node boxes bound what they draw.
     pub support_scale: f32,
+    /// Species drawn as nothing (bit `s` for species index `s`): a cluster of them only
+    /// is culled, and one holding them and others is opened (its representative would
+    /// draw them), down to particles where the budget allows
+    /// ([`MdlodFile::species_below`]). The cut is then chosen without occlusion culling.
+    pub hidden_species: u64,
 }
 
 impl Default for TraversalSettings {
@@ -113,6 +119,7 @@ impl Default for TraversalSettings {
             budget_points: 4_000_000,
             occlusion: OcclusionMode::PixelCentres,
             support_scale: 0.0,
+            hidden_species: 0,
         }
     }
 }
@@ -520,7 +527,10 @@ pub fn traverse_shared(
     settings: &TraversalSettings,
     residency: &dyn SharedResidency,
 ) -> (DrawList, Vec<(u32, f32)>) {
-    if settings.occlusion == OcclusionMode::Off || settings.viewport.contains(&0) {
+    if settings.occlusion == OcclusionMode::Off
+        || settings.viewport.contains(&0)
+        || settings.hidden_species != 0
+    {
         let mut tile = TileResidency {
             shared: residency,
             asked: Vec::new(),
@@ -551,7 +561,7 @@ pub fn traverse_with(
     settings: &TraversalSettings,
     residency: &mut dyn Residency,
 ) -> DrawList {
-    if settings.occlusion != OcclusionMode::Off {
+    if settings.occlusion != OcclusionMode::Off && settings.hidden_species == 0 {
         let proj = Projector::with_support(
             camera,
             settings.viewport,
@@ -618,6 +628,7 @@ fn cut_of(file: &MdlodFile, proj: &Projector, passes: Vec<Decisions>) -> DrawLis
         proj,
         marks,
         Some(&masks),
+        None,
         achieved,
         DrawList::default(),
     )
@@ -774,7 +785,23 @@ fn largest_first(
     );
     let budget = settings.budget_points.max(1);
     let mut list = DrawList::default();
-    if !proj.visible(&nodes[0]) {
+    // With hidden species: clusters of them only are culled, mixed ones always opened
+    // (queued as infinitely large).
+    let below = (settings.hidden_species != 0).then(|| file.species_below(settings.hidden_species));
+    let hidden_only = |id: usize| below.as_ref().is_some_and(|k| k.get(id) == Some(&BELOW_IN));
+    let mixed = |id: usize| {
+        below
+            .as_ref()
+            .is_some_and(|k| k.get(id) == Some(&(BELOW_IN | BELOW_OUT)))
+    };
+    let key = |id: usize, n: &NodeRecord| {
+        if mixed(id) {
+            f32::INFINITY
+        } else {
+            proj.size_px(n)
+        }
+    };
+    if !proj.visible(&nodes[0]) || hidden_only(0) {
         list.culled_nodes = 1;
         return list;
     }
@@ -791,7 +818,7 @@ fn largest_first(
         Frontier::LargestFirst(BinaryHeap::new())
     };
     let mut marks = Marks::new(nodes.len());
-    frontier.push(proj.size_px(&nodes[0]), 0);
+    frontier.push(key(0, &nodes[0]), 0);
     let mut drawn: u64 = 1;
     let mut achieved = 0.0f32;
     while let Some((size, id)) = frontier.pop() {
@@ -804,6 +831,12 @@ fn largest_first(
             }
         }
         let n = &nodes[id as usize];
+        // A mixed node's key is no size: it is drawn at its own.
+        let size = if mixed(id as usize) {
+            proj.size_px(n)
+        } else {
+            size
+        };
         let child_level = usize::from(n.level) + 1;
         if file.check_children(id as usize).is_err() {
             // Corrupt records below: drawn as its representative, the error kept for the
@@ -818,7 +851,7 @@ fn largest_first(
             let first = levels[child_level].node_first as usize;
             children
                 .clone()
-                .filter(|&c| proj.visible(&nodes[first + c]))
+                .filter(|&c| proj.visible(&nodes[first + c]) && !hidden_only(first + c))
                 .count() as u64
         };
         if drawn - 1 + visible_children > budget {
@@ -837,13 +870,13 @@ fn largest_first(
             let first = levels[child_level].node_first as usize;
             for c in children {
                 let cn = &nodes[first + c];
-                if proj.visible(cn) {
-                    frontier.push(proj.size_px(cn), (first + c) as u32);
+                if proj.visible(cn) && !hidden_only(first + c) {
+                    frontier.push(key(first + c, cn), (first + c) as u32);
                 }
             }
         }
     }
-    emit(file, &proj, marks, None, achieved, list)
+    emit(file, &proj, marks, None, below.as_deref(), achieved, list)
 }
 
 /// The nodes [`largest_first`] has yet to visit: by projected size, largest first (ties
@@ -1145,6 +1178,7 @@ fn emit(
     proj: &Projector,
     mut marks: Marks,
     recorded: Option<&[(u32, u64)]>,
+    hidden: Option<&[u8]>,
     achieved: f32,
     mut list: DrawList,
 ) -> DrawList {
@@ -1173,7 +1207,7 @@ fn emit(
         .map(|chunk| {
             let mut part = DrawList::default();
             for &id in chunk {
-                emit_node(file, proj, &marks, recorded, id, &mut part);
+                emit_node(file, proj, &marks, recorded, hidden, id, &mut part);
             }
             part
         })
@@ -1201,6 +1235,7 @@ fn emit_node(
     proj: &Projector,
     marks: &Marks,
     recorded: Option<&[(u32, u64)]>,
+    hidden: Option<&[u8]>,
     id: u32,
     list: &mut DrawList,
 ) {
@@ -1247,7 +1282,9 @@ fn emit_node(
                 OPENED => false,
                 DRAWN => true,
                 _ => {
-                    if !proj.visible(&nodes[cid as usize]) {
+                    let hidden_only =
+                        hidden.is_some_and(|k| k.get(cid as usize) == Some(&BELOW_IN));
+                    if !proj.visible(&nodes[cid as usize]) || hidden_only {
                         list.culled_nodes += 1;
                         false
                     } else if recorded.is_some() {

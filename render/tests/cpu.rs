@@ -29,6 +29,7 @@ fn cut(f: &MdlodFile, cam: &Camera, error_px: f32, budget: u64) -> DrawList {
             budget_points: budget,
             occlusion: OcclusionMode::Off,
             support_scale: 0.0,
+            hidden_species: 0,
         },
     )
 }
@@ -157,6 +158,7 @@ fn a_cut_without_a_binding_budget_is_the_same_in_any_visiting_order() {
                     budget_points: budget,
                     occlusion: OcclusionMode::Off,
                     support_scale: 0.0,
+                    hidden_species: 0,
                 };
                 let any = traverse_with(&cam, &f, &settings, &mut AllResident);
                 let ordered = traverse_with(&cam, &f, &settings, &mut Ordered);
@@ -371,6 +373,7 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
         budget_points: u64::MAX,
         occlusion: OcclusionMode::Off,
         support_scale: 0.0,
+        hidden_species: 0,
     };
     let mut patchy = Patchy {
         level: 2,
@@ -456,6 +459,7 @@ fn the_parallel_traversal_draws_refused_nodes_and_lists_what_it_asked_largest_fi
         budget_points: u64::MAX,
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
+        hidden_species: 0,
     };
     let on = |threads: usize| {
         rayon::ThreadPoolBuilder::new()
@@ -582,6 +586,7 @@ fn culled_and_full(
         budget_points: u64::MAX,
         occlusion,
         support_scale: 0.0,
+        hidden_species: 0,
     };
     let all = traverse(cam, f, &settings(OcclusionMode::Off));
     let seen = traverse(cam, f, &settings(OcclusionMode::PixelCentres));
@@ -711,6 +716,7 @@ fn the_parallel_occlusion_cut_is_the_same_on_any_thread_count_and_hides_what_one
             budget_points: budget,
             occlusion,
             support_scale: 0.0,
+            hidden_species: 0,
         };
         let on = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
@@ -766,6 +772,7 @@ fn occlusion_traversal_meets_the_budget_by_coarsening() {
         budget_points: 150,
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
+        hidden_species: 0,
     };
     let d = traverse(&cam, &f, &settings);
     check_counts(&f, &d);
@@ -1013,6 +1020,7 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             budget_points: u64::MAX,
             occlusion,
             support_scale: 0.0,
+            hidden_species: 0,
         };
         assert_eq!(
             traverse(&cam, &lazy, &settings),
@@ -1079,6 +1087,7 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             budget_points: u64::MAX,
             occlusion,
             support_scale: 0.0,
+            hidden_species: 0,
         };
         let d = traverse(&cam, &f, &settings);
         wants(f.node_error().err().unwrap());
@@ -1239,4 +1248,73 @@ fn the_automatic_exposure_of_attribute_light_is_chosen_from_that_light() {
     assert!((attr.total_light() - total).abs() < 1e-9 * total);
     // A given exposure is used as given.
     assert_eq!(attr.tone_map(Some(3.0), [0.0; 3]).1, 3.0);
+}
+
+/// Hidden species: the cut draws no cluster holding any of their particles (a cluster of
+/// them only is culled, a mixed one opened), and still covers every other particle once,
+/// with or without occlusion culling asked for. Without hiding, the same cuts draw
+/// mixed clusters.
+#[test]
+fn hidden_species_leave_no_cluster_holding_them() {
+    let (_d, _p, f) = make_file(&cloud_frame(4000, 3), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let last = f.level_count() - 1;
+    let species = f.species();
+    let below_of = |level: usize, i: usize| {
+        let (a, b) = particles_below(&f, level, i, 1);
+        &species[a..b]
+    };
+    for mask in [0b001u64, 0b110] {
+        let hidden = |s: u16| (mask >> s) & 1 == 1;
+        // Which species each node's subtree holds, against the particles below it.
+        let kinds = f.species_below(mask);
+        for level in 0..last {
+            for i in 0..f.levels()[level].point_count as usize {
+                let s = below_of(level, i);
+                let want = u8::from(s.iter().any(|&s| hidden(s)))
+                    | (2 * u8::from(s.iter().any(|&s| !hidden(s))));
+                assert_eq!(kinds[node_of(&f, level, i)], want, "level {level} node {i}");
+            }
+        }
+        for (error, occlusion) in [
+            (8.0f32, OcclusionMode::Off),
+            (50.0, OcclusionMode::Off),
+            (50.0, OcclusionMode::PixelCentres),
+        ] {
+            let settings = TraversalSettings {
+                viewport: VIEWPORT,
+                error_px: error,
+                budget_points: u64::MAX,
+                occlusion,
+                hidden_species: mask,
+                ..Default::default()
+            };
+            let mixed_clusters = |d: &DrawList| {
+                d.ranges
+                    .iter()
+                    .filter(|r| (r.level as usize) < last)
+                    .flat_map(|r| (r.first..r.first + r.count).map(move |i| (r.level, i)))
+                    .filter(|&(l, i)| below_of(l as usize, i as usize).iter().any(|&s| hidden(s)))
+                    .count()
+            };
+            let d = traverse(&cam, &f, &settings);
+            check_counts(&f, &d);
+            assert_eq!(mixed_clusters(&d), 0, "mask {mask:b}, error {error}");
+            let cover = coverage(&f, &d);
+            for (i, &c) in cover.iter().enumerate() {
+                let want = if hidden(species[i]) { 0..=1 } else { 1..=1 };
+                assert!(want.contains(&c), "particle {i}: covered {c} times");
+            }
+            let plain = traverse(
+                &cam,
+                &f,
+                &TraversalSettings {
+                    hidden_species: 0,
+                    occlusion: OcclusionMode::Off,
+                    ..settings
+                },
+            );
+            assert!(mixed_clusters(&plain) > 0, "mask {mask:b}, error {error}");
+        }
+    }
 }

@@ -63,6 +63,7 @@ fn cut(
             budget_points: u64::MAX,
             occlusion,
             support_scale: 0.0,
+            hidden_species: 0,
         },
     )
 }
@@ -80,6 +81,7 @@ fn render_all(f: &MdlodFile, camera: &Camera, w: u32, h: u32, spp: u32) -> Rende
             budget_points: u64::MAX,
             occlusion: OcclusionMode::Off,
             support_scale: 0.0,
+            hidden_species: 0,
         },
     );
     renderer()
@@ -771,6 +773,7 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
                 budget_points: report.budget,
                 occlusion: OcclusionMode::PixelCentres,
                 support_scale: 0.0,
+                hidden_species: 0,
             };
             let (frame, draw, stats, frames) =
                 converge(&mut unlimited, &camera, &traversal, &settings);
@@ -875,6 +878,7 @@ fn a_tight_pool_under_a_binding_budget_settles_on_the_direct_image() {
             budget_points: report.budget,
             occlusion,
             support_scale: 0.0,
+            hidden_species: 0,
         };
         let used = {
             let mut unlimited =
@@ -961,6 +965,7 @@ fn a_corrupt_page_is_an_error_naming_the_particle_and_the_pool_stays_whole() {
         budget_points: u64::MAX,
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
+        hidden_species: 0,
     };
     let camera = camera_for(&f, &whole, w, h).unwrap();
     let mut error = None;

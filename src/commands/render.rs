@@ -127,8 +127,8 @@ pub struct StyleArgs {
     /// A species' radius, e.g. `Ag=1.6`; repeatable.
     #[arg(long = "species-radius", value_name = "NAME=R")]
     pub species_radius: Vec<String>,
-    /// Leave out the particles of a species (clusters drawn in their place still
-    /// include them); repeatable.
+    /// Leave out the particles of a species, and the clusters of them (a cluster holding
+    /// them and others is refined until it holds none); repeatable.
     #[arg(long = "hide-species", value_name = "NAME")]
     pub hide_species: Vec<String>,
     /// The attribute values at the ends of --colour-map (and of --intensity attribute),
@@ -534,6 +534,14 @@ pub fn run(args: Args) -> Result<()> {
         r.ranges,
         r.error_px,
     );
+    if r.nodes_drawn > 0 && matches!(args.mode, Mode::Spheres | Mode::Sndf) {
+        if let Ok(file) = mdlod_format::MdlodFile::open(&args.file) {
+            let miss = opts.style.recolour_miss(&file.metadata().species);
+            if let Some(note) = recolour_note(miss, file.metadata().species.len()) {
+                println!("{note}");
+            }
+        }
+    }
     let gpu = r.gpu_time.map_or(String::new(), |t| {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)
     });
@@ -588,6 +596,19 @@ fn point_noun(mode: Mode) -> &'static str {
         Mode::Splat | Mode::SplatOver => "cluster splats",
         Mode::Density | Mode::Iso => "cluster kernels",
     }
+}
+
+/// A note when clusters took new species colours only approximately (`miss`: the
+/// largest channel error of [`mdlod_render::PointStyle::recolour_miss`]).
+fn recolour_note(miss: Option<f32>, species: usize) -> Option<String> {
+    let miss = miss.filter(|&m| m > 0.02)?;
+    Some(format!(
+        "  note: clusters took the new species colours approximately (off by up to {:.0}% \
+         in a channel): the {species} species' colours allow no exact mixture map (exact \
+         for up to four distinct colours); a lower --screen-error draws more particles in \
+         their own colours",
+        miss * 100.0
+    ))
 }
 
 /// After the particle count: how many of them belong to hidden species.
@@ -755,6 +776,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         &frame_species.iter().map(Vec::as_slice).collect::<Vec<_>>(),
     );
     let (mut restyled, mut restyled_names) = (0usize, std::collections::BTreeSet::new());
+    let mut worst_miss: Option<(f32, usize)> = None;
     let style = opts.style.clone();
     let camera = mdlod_render::camera_for_bounds(&bounds, &opts.view, opts.width, opts.height)?;
     opts.view = ViewSpec::Camera(camera.clone());
@@ -781,6 +803,12 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             .collect();
         restyled += usize::from(!changed.is_empty());
         restyled_names.extend(changed);
+        if matches!(args.mode, Mode::Spheres | Mode::Sndf) {
+            let miss = opts.style.recolour_miss(&file.metadata().species);
+            if miss.is_some_and(|m| m > worst_miss.map_or(0.0, |w: (f32, usize)| w.0)) {
+                worst_miss = miss.map(|m| (m, file.metadata().species.len()));
+            }
+        }
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         if i == 0 && opts.exposure.is_none() {
             // Splats: one exposure for every frame, or the brightness drifts.
@@ -826,6 +854,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         "rendered {n} frames in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{limited}",
         t0.elapsed().as_secs_f64()
     );
+    if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
+        println!("{note}");
+    }
     if let Some(p) = &args.save_view {
         ViewFile::from_camera(&camera)
             .save(p)
