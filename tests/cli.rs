@@ -2627,6 +2627,36 @@ fn hidden_species_leave_the_clusters_and_inexact_recolouring_is_reported() {
     assert!(!out.contains("approximately"), "{out}");
 }
 
+/// A dump whose last frame is cut short (a run still writing): `convert` says which
+/// frame converts instead, `batch` converts the others and says so.
+#[test]
+fn a_dump_cut_in_its_last_frame_names_what_converts() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("t.lammpstrj");
+    generate(&["droplets", "-n", "2000", "--frames", "3"], &dump);
+    let text = std::fs::read(&dump).unwrap();
+    std::fs::write(&dump, &text[..text.len() - 20_000]).unwrap();
+    let err = fails(&["convert", s(&dump), "-o", s(&dir.path().join("t.mdlod"))]);
+    assert!(
+        err.contains("truncated frame") && err.contains("--frame 1 converts the last complete"),
+        "{err}"
+    );
+    let d = dir.path().join("t.d");
+    let err = fails(&["batch", s(&dump), "-o", s(&d)]);
+    assert!(
+        err.contains("truncated frame")
+            && err.contains("2 of the 3 frames to convert were converted"),
+        "{err}"
+    );
+    assert_eq!(
+        mdlod_preprocess::batch::read_manifest(&d)
+            .unwrap()
+            .frames
+            .len(),
+        2
+    );
+}
+
 /// A movie of a trajectory whose species come and go: a style may name a species some
 /// frames lack (it applies where present); one no frame has is an error listing them.
 #[test]

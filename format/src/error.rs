@@ -12,7 +12,10 @@ pub enum FormatError {
         source: std::io::Error,
     },
 
-    #[error("{path}: not an .mdlod file (the first 8 bytes are not the mdlod signature)")]
+    #[error(
+        "{path}: not an .mdlod file (the first 8 bytes are not the mdlod signature); a \
+         particle dump is converted to one with `mdlod convert`"
+    )]
     BadMagic { path: PathBuf },
 
     #[error(

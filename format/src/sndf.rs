@@ -339,8 +339,8 @@ impl SndfData {
         if bytes.len() < FIXED || bytes[..8] != SNDF_MAGIC {
             return Err(corrupt(
                 path,
-                "start",
-                "not an .sndf file (no S-NDF signature)",
+                "its first bytes",
+                "not an .sndf file (no S-NDF signature); `mdlod sample` writes one",
             ));
         }
         let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]);

@@ -220,6 +220,17 @@ pub enum BatchError {
     Manifest { path: PathBuf, message: String },
     #[error("shard {0}/{1}: the shard index must be below the shard count")]
     BadShard(u32, u32),
+    /// A frame failed (the first error); the others were converted all the same.
+    #[error(
+        "{source}\n  ({converted} of the {todo} frames to convert were converted and are listed \
+         in the manifest; a rerun converts only what is missing)"
+    )]
+    Incomplete {
+        converted: usize,
+        todo: usize,
+        #[source]
+        source: Box<BatchError>,
+    },
     /// A radius override names a species no frame of the inputs can hold (they name
     /// their species another way): refused before any frame is converted.
     #[error(
@@ -1062,7 +1073,11 @@ pub fn batch(
     // Every frame converted, also when another failed.
     let last_save = save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()));
     if let Some(e) = first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
-        return Err(e);
+        return Err(BatchError::Incomplete {
+            converted: converted.load(Ordering::Relaxed),
+            todo: todo.len(),
+            source: Box::new(e),
+        });
     }
     last_save?;
     // A species may appear in some frames only, but a radius override that names none

@@ -400,7 +400,7 @@ fn xyz_errors() {
         "nopos.xyz",
         "1\nProperties=species:S:1:velo:R:3\nC 0 0 0\n",
         None,
-        "2: no coordinate columns (need x y z, xu yu zu, xs ys zs or xsu ysu zsu); columns are: species velo[0] velo[1] velo[2]",
+        "2: `Properties` names no positions: they are read from a `pos:R:3` (or `position:R:3`, `positions:R:3`) entry; the entries name the columns species velo[0] velo[1] velo[2]",
     );
     assert_error(
         "attr.xyz",

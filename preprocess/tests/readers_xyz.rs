@@ -274,3 +274,37 @@ fn numeric_xyz_species_take_distinct_palette_colours() {
         assert_ne!(table[0].colour, table[1].colour, "{a} and {b}");
     }
 }
+
+/// Positions come from `pos`, `position` or `positions` with three numbers; a
+/// `Properties` naming none is an error in extended-XYZ terms, naming the line.
+#[test]
+fn properties_without_positions_say_what_names_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let ok = write(
+        dir.path(),
+        "ok.xyz",
+        "2\nProperties=species:S:1:position:R:3\nCu 0 0 0\nCu 1 2 3\n",
+    );
+    assert_eq!(read_k(&ok, 0, None).positions[1], [1.0, 2.0, 3.0]);
+    for props in ["species:S:1:pos:R:2", "species:S:1:coords:R:3"] {
+        let path = write(
+            dir.path(),
+            "bad.xyz",
+            &format!("1\nProperties={props}\nCu 0 0 0\n"),
+        );
+        let e = DumpFile::open(&path)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_else(|| {
+                DumpFile::open(&path)
+                    .unwrap()
+                    .read_frame(0, &ReadOptions::default(), &NoProgress)
+                    .unwrap_err()
+                    .to_string()
+            });
+        assert!(
+            e.contains("bad.xyz:2:") && e.contains("names no positions") && e.contains("`pos:R:3`"),
+            "{e}"
+        );
+    }
+}

@@ -240,14 +240,37 @@ pub struct RenderReport {
     pub density_host_time: Option<Duration>,
 }
 
-/// Parses a colour as `#rrggbb`, `rrggbb` or three numbers in [0, 1] separated by commas.
+/// Colours by name (sRGB, as `#rrggbb`).
+const NAMED_COLOURS: [(&str, &str); 12] = [
+    ("black", "000000"),
+    ("white", "ffffff"),
+    ("grey", "808080"),
+    ("gray", "808080"),
+    ("red", "ff0000"),
+    ("green", "00a000"),
+    ("blue", "0000ff"),
+    ("yellow", "ffff00"),
+    ("cyan", "00ffff"),
+    ("magenta", "ff00ff"),
+    ("orange", "ff8000"),
+    ("purple", "800080"),
+];
+
+/// Parses a colour as `#rrggbb`, `rrggbb`, three numbers in [0, 1] separated by commas,
+/// or a name ([`NAMED_COLOURS`]: `red`, `grey`, ...).
 pub fn parse_colour(s: &str) -> Result<[f32; 3], RenderError> {
     let bad = || {
+        let names: Vec<&str> = NAMED_COLOURS.iter().map(|(n, _)| *n).collect();
         RenderError::InvalidOptions(format!(
-            "colour {s:?} (use #rrggbb or r,g,b with each in 0..1)"
+            "colour {s:?} (use #rrggbb, r,g,b with each in 0..1, or one of {})",
+            names.join(", ")
         ))
     };
     let t = s.trim();
+    let t = NAMED_COLOURS
+        .iter()
+        .find(|(n, _)| n.eq_ignore_ascii_case(t))
+        .map_or(t, |(_, hex)| hex);
     let hex = t.strip_prefix('#').unwrap_or(t);
     if hex.len() == 6 && hex.chars().all(|c| c.is_ascii_hexdigit()) {
         let v = u32::from_str_radix(hex, 16).map_err(|_| bad())?;
@@ -349,10 +372,17 @@ fn camera_in(
                     )));
                 }
             }
+            // Past the pole the view would turn over: say so instead of clamping.
+            if !(-90.0..=90.0).contains(elevation_deg) {
+                return Err(RenderError::InvalidOptions(format!(
+                    "elevation {elevation_deg}° (must be -90 to 90: 90 looks straight down; \
+                     for the other side, add 180 to the azimuth)"
+                )));
+            }
             let v = ViewFile {
                 projection: *projection,
                 azimuth_deg: *azimuth_deg,
-                elevation_deg: elevation_deg.clamp(-90.0, 90.0),
+                elevation_deg: *elevation_deg,
                 zoom: *zoom,
                 ..Default::default()
             };
@@ -1230,8 +1260,14 @@ mod tests {
         assert_eq!(parse_colour("#ff0080").unwrap(), [1.0, 0.0, 128.0 / 255.0]);
         assert_eq!(parse_colour("000000").unwrap(), [0.0; 3]);
         assert_eq!(parse_colour("0.5, 1, 0").unwrap(), [0.5, 1.0, 0.0]);
-        for bad in ["#ff00", "1,2,3", "red", "0.1,0.2"] {
-            assert!(parse_colour(bad).is_err(), "{bad}");
+        assert_eq!(parse_colour("Red").unwrap(), [1.0, 0.0, 0.0]);
+        assert_eq!(
+            parse_colour("grey").unwrap(),
+            parse_colour("#808080").unwrap()
+        );
+        for bad in ["#ff00", "1,2,3", "reddish", "0.1,0.2"] {
+            let e = parse_colour(bad).unwrap_err().to_string();
+            assert!(e.contains("one of black, white"), "{bad}: {e}");
         }
     }
 }

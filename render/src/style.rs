@@ -377,8 +377,9 @@ impl PointStyle {
         for s in &self.species {
             if s.radius.is_some_and(|r| !(r.is_finite() && r > 0.0)) {
                 return Err(format!(
-                    "species {}: radius {:?} (must be positive)",
-                    s.name, s.radius
+                    "species {}: radius {} (must be positive)",
+                    s.name,
+                    s.radius.unwrap_or_default()
                 ));
             }
             if s.colour.is_some_and(|c| {

@@ -418,7 +418,7 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
 }
 
 #[test]
-fn orbit_views_with_angles_or_zoom_that_are_not_finite_are_errors() {
+fn orbit_views_with_angles_or_zoom_out_of_range_are_errors() {
     let (_d, _p, f) = make_file(&fcc_frame(3), small_build(), &[]);
     let orbit = |azimuth_deg: f32, elevation_deg: f32, zoom: f32| ViewSpec::Orbit {
         azimuth_deg,
@@ -431,13 +431,17 @@ fn orbit_views_with_angles_or_zoom_that_are_not_finite_are_errors() {
         (orbit(30.0, f32::INFINITY, 1.0), "elevation inf°"),
         (orbit(30.0, 20.0, 0.0), "zoom 0"),
         (orbit(30.0, 20.0, f32::NAN), "zoom NaN"),
+        // Beyond the poles: refused (it was clamped, so 100 and 180 looked like 90).
+        (orbit(30.0, 100.0, 1.0), "elevation 100° (must be -90 to 90"),
+        (orbit(30.0, -1e30, 1.0), "must be -90 to 90"),
     ] {
         let e = camera_for(&f, &view, 64, 48).unwrap_err().to_string();
         assert!(e.contains(says), "{e}");
     }
-    // Elevations beyond the poles are clamped, not refused.
-    let c = camera_for(&f, &orbit(30.0, 1e30, 1.0), 64, 48).unwrap();
-    assert!(c.check().is_ok());
+    for pole in [90.0, -90.0] {
+        let c = camera_for(&f, &orbit(30.0, pole, 1.0), 64, 48).unwrap();
+        assert!(c.check().is_ok());
+    }
 }
 
 /// Refuses the even nodes of one level, from every tile at once.

@@ -199,14 +199,34 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         Some(k) => FrameSelect::Index(k),
         None => FrameSelect::Last,
     };
-    Ok(convert_file(
+    match convert_file(
         &args.input,
         &args.output,
         frame,
         &read,
         &options,
         &Bar::new(),
-    )?)
+    ) {
+        Err(
+            e @ mdlod_preprocess::convert::ConvertError::Read(
+                mdlod_preprocess::readers::ReadError::Truncated { .. },
+            ),
+        ) if args.frame.is_none() => {
+            // The last frame of a run still writing: say which one converts.
+            let frames = mdlod_preprocess::readers::DumpFile::open(&args.input)
+                .map_or(0, |d| d.frame_count());
+            if frames > 1 {
+                bail!(
+                    "{e}; the last frame ({}) is incomplete (a run still writing?): \
+                     --frame {} converts the last complete one",
+                    frames - 1,
+                    frames - 2
+                );
+            }
+            Err(e.into())
+        }
+        r => Ok(r?),
+    }
 }
 
 pub fn print_report(output: &std::path::Path, r: &ConvertReport) {

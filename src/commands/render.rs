@@ -94,8 +94,8 @@ pub struct Args {
     /// the attribute's with --intensity attribute).
     #[arg(long)]
     pub exposure: Option<f32>,
-    /// Background colour: #rrggbb or r,g,b in [0, 1] (default black for splats and the
-    /// density volume, white otherwise).
+    /// Background colour: #rrggbb, r,g,b in [0, 1], or a name such as white or grey
+    /// (default black for splats and the density volume, white otherwise).
     #[arg(long)]
     pub background: Option<String>,
     #[command(flatten)]
@@ -189,7 +189,9 @@ impl StyleArgs {
         let mut colours = vec![];
         for c in &self.species_colour {
             let (name, colour) = split(c, "COLOUR")?;
-            let rgb = parse_colour(&colour)?.map(mdlod_render::renderer::srgb_to_linear);
+            let rgb = parse_colour(&colour)
+                .with_context(|| format!("--species-colour {c:?}"))?
+                .map(mdlod_render::renderer::srgb_to_linear);
             colours.push((entry(&name), rgb));
         }
         let mut radii = vec![];
@@ -197,7 +199,10 @@ impl StyleArgs {
             let (name, radius) = split(r, "R")?;
             let v: f32 = radius
                 .parse()
-                .with_context(|| format!("{r:?}: the radius is not a number"))?;
+                .with_context(|| format!("--species-radius {r:?}: the radius is not a number"))?;
+            if !(v.is_finite() && v > 0.0) {
+                anyhow::bail!("--species-radius {r:?}: the radius must be a positive number");
+            }
             radii.push((entry(&name), v));
         }
         let hidden: Vec<usize> = self.hide_species.iter().map(|n| entry(n)).collect();
@@ -463,7 +468,8 @@ pub fn run(args: Args) -> Result<()> {
         background: parse_colour(args.background.as_deref().unwrap_or(match args.mode {
             Mode::Spheres | Mode::Sndf | Mode::Iso => "#ffffff",
             Mode::Splat | Mode::SplatOver | Mode::Density => "#000000",
-        }))?,
+        }))
+        .context("--background")?,
         mode: match args.mode {
             Mode::Spheres => RenderMode::Spheres,
             Mode::Splat => RenderMode::Splat {

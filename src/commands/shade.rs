@@ -98,7 +98,9 @@ fn parse_light(s: &str) -> Result<(Vec3, [f32; 3])> {
         bail!("light {s:?}: the direction must be three finite numbers, not all zero");
     }
     let colour = match colour {
-        Some(c) => parse_colour(c)?.map(mdlod_render::renderer::srgb_to_linear),
+        Some(c) => parse_colour(c)
+            .with_context(|| format!("light {s:?}"))?
+            .map(mdlod_render::renderer::srgb_to_linear),
         None => [1.0; 3],
     };
     Ok((Vec3::new(v[0], v[1], v[2]).normalize(), colour))
@@ -178,7 +180,7 @@ pub fn run(args: Args) -> Result<()> {
         &args.input,
         &args.output,
         &shade,
-        parse_colour(&args.background)?,
+        parse_colour(&args.background).context("--background")?,
         level,
     )?;
     let lights = match shade.lights.len() {

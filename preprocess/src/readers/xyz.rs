@@ -267,7 +267,9 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
             columns.extend((0..count).map(|i| format!("{name}[{i}]")));
         }
         let numeric = matches!(kind, "R" | "I");
-        if (name.eq_ignore_ascii_case("pos") || name.eq_ignore_ascii_case("positions"))
+        if ["pos", "position", "positions"]
+            .iter()
+            .any(|p| name.eq_ignore_ascii_case(p))
             && count == 3
             && numeric
             && coords.is_none()
@@ -278,6 +280,13 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
         } else if name == "Z" && count == 1 && kind == "I" {
             atomic_number = Some(first);
         }
+    }
+    if coords.is_none() {
+        return Err(format!(
+            "`Properties` names no positions: they are read from a `pos:R:3` (or \
+             `position:R:3`, `positions:R:3`) entry; the entries name the columns {}",
+            columns.join(" ")
+        ));
     }
     Ok(AtomLayout {
         columns,
