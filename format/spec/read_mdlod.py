@@ -142,6 +142,7 @@ SPECIES_FIELDS = {
     "name": ("string", REQUIRED),
     "radius": ("f32", REQUIRED),
     "colour": ("f32[3]", REQUIRED),
+    "radius_range": ("f32[2]", OPTIONAL),
 }
 METADATA_FIELDS = {
     "particles": ("u64", REQUIRED),
@@ -500,6 +501,16 @@ class MdlodFile:
         species = meta["species"]
         if not 1 <= len(species) <= 65535:
             raise FormatError(place, f"{len(species)} species (must be 1 to 65535)")
+        for sp in species:
+            r = sp.get("radius_range")
+            if r is not None:
+                lo, hi = f32(r[0]), f32(r[1])
+                if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
+                    raise FormatError(
+                        place,
+                        f"species {sp['name']!r}: radius_range {r} (must be two positive "
+                        "numbers, the smaller first)",
+                    )
         # The radii and the attribute range are single precision (f32) numbers.
         self.radii = [f32(sp["radius"]) for sp in species]
         self.attribute = None

@@ -68,6 +68,10 @@ pub struct Species {
     pub radius: f32,
     /// Linear-light RGB albedo in [0, 1].
     pub colour: [f32; 3],
+    /// The smallest and largest radius of the species' particles in the input, where they
+    /// differ (polydisperse data, drawn at `radius`, their mean); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius_range: Option<[f32; 2]>,
 }
 
 /// The optional per-particle scalar and its quantization range.
@@ -164,6 +168,9 @@ impl Metadata {
         }
         for s in &self.species {
             numbers.push(("species radius", f64::from(s.radius)));
+            for r in s.radius_range.iter().flatten() {
+                numbers.push(("species radius range", f64::from(*r)));
+            }
             for c in s.colour {
                 numbers.push(("species colour", f64::from(c)));
             }
@@ -194,6 +201,7 @@ mod tests {
                 name: "Cu".into(),
                 radius: 1.28,
                 colour: [0.8, 0.5, 0.2],
+                radius_range: None,
             }],
             attribute: None,
             source: None,

@@ -442,6 +442,20 @@ impl MdlodFile {
                 format!("{} species (must be 1 to 65535)", metadata.species.len()),
             ));
         }
+        if let Some(s) = metadata.species.iter().find(|s| {
+            s.radius_range
+                .is_some_and(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi))
+        }) {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "species {:?}: radius_range {:?} (must be two positive numbers, the \
+                     smaller first)",
+                    s.name,
+                    s.radius_range.unwrap_or_default()
+                ),
+            ));
+        }
 
         // Nodes.
         let ni = require(SectionKind::Nodes, None)?;

@@ -155,12 +155,21 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
                     srgb_to_linear(PALETTE[s.palette_slot.unwrap_or(i) % PALETTE.len()])
                 }
             };
-            let radius = radius_override(overrides, &s.name)
-                .unwrap_or_else(|| radius_without_override(&s.name, s.radius, labels));
+            let given = radius_override(overrides, &s.name);
+            let radius =
+                given.unwrap_or_else(|| radius_without_override(&s.name, s.radius, labels));
+            // Particles of several sizes drawn at their mean: kept for `info`.
+            let radius_range = s
+                .radius_range
+                .filter(|&(lo, hi)| {
+                    given.is_none() && lo > 0.0 && hi.is_finite() && hi > lo * (1.0 + 1e-3)
+                })
+                .map(|(lo, hi)| [lo, hi]);
             Species {
                 name: s.name.clone(),
                 radius,
                 colour,
+                radius_range,
             }
         })
         .collect()
@@ -440,6 +449,24 @@ mod tests {
             radius_without_override("B", None, false),
             element("B").unwrap().0
         );
+    }
+
+    /// Particles of several sizes keep their range in the file (for `info`), unless
+    /// `--radius` gives the species one, or the sizes differ by rounding only.
+    #[test]
+    fn a_polydisperse_species_keeps_its_radius_range() {
+        let named = |name: &str, range| SpeciesName {
+            name: name.into(),
+            radius: Some(0.5),
+            radius_range: Some(range),
+            ..Default::default()
+        };
+        let names = [named("A", (0.3, 0.7)), named("B", (0.5, 0.50001))];
+        let table = species_table(&names, &[]);
+        assert_eq!(table[0].radius_range, Some([0.3, 0.7]));
+        assert_eq!(table[1].radius_range, None);
+        let table = species_table(&names, &[("A".into(), 0.6)]);
+        assert_eq!((table[0].radius, table[0].radius_range), (0.6, None));
     }
 
     #[test]

@@ -1310,6 +1310,19 @@ fn hostile_metadata() {
         m["species"] = serde_json::json!([])
     });
     expect_refused(&p, &["METADATA", "0 species"]);
+    // A polydisperse species' radius range: two positive numbers, the smaller first.
+    for (name, range) in [
+        ("range-reversed.mdlod", serde_json::json!([2.0, 1.0])),
+        ("range-zero.mdlod", serde_json::json!([0.0, 1.0])),
+    ] {
+        let p = with(name, &|m| m["species"][0]["radius_range"] = range.clone());
+        expect_refused(&p, &["METADATA", "radius_range"]);
+    }
+    let p = with("range-ok.mdlod", &|m| {
+        m["species"][0]["radius_range"] = serde_json::json!([0.5, 1.5])
+    });
+    let f = MdlodFile::open(&p).unwrap();
+    assert_eq!(f.metadata().species[0].radius_range, Some([0.5, 1.5]));
     let p = with("no-build.mdlod", &|m| {
         m.as_object_mut().unwrap().remove("build");
     });

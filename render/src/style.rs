@@ -550,6 +550,7 @@ mod tests {
             name: name.into(),
             radius,
             colour,
+            radius_range: None,
         }
     }
 
@@ -615,6 +616,7 @@ mod tests {
                 name: format!("s{i}"),
                 radius: 1.0,
                 colour,
+                radius_range: None,
             })
             .collect()
     }
@@ -860,6 +862,7 @@ mod tests {
             name: name.into(),
             radius: r,
             colour: [0.5, 0.5, 0.5],
+            radius_range: None,
         };
         let style = PointStyle {
             species: vec![

@@ -118,8 +118,16 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("  nodes        {}", f.nodes().len());
     for s in &m.species {
+        // Polydisperse species: drawn at the mean of the range their particles span.
+        let range = s.radius_range.map_or(String::new(), |[lo, hi]| {
+            format!(
+                "  (particles {} to {}, drawn at their mean)",
+                radius_text(lo),
+                radius_text(hi)
+            )
+        });
         println!(
-            "  species      {:<6} radius {:<6}  colour [{:.2} {:.2} {:.2}]",
+            "  species      {:<6} radius {:<6}  colour [{:.2} {:.2} {:.2}]{range}",
             shown(&s.name),
             radius_text(s.radius),
             s.colour[0],

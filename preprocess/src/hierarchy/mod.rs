@@ -720,6 +720,7 @@ mod tests {
             name: "X".into(),
             radius: 0.5,
             colour: [1.0; 3],
+            radius_range: None,
         }];
         let counted = Counted::default();
         build(
