@@ -207,11 +207,14 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         &options,
         &Bar::new(),
     ) {
-        Err(
-            e @ mdlod_preprocess::convert::ConvertError::Read(
-                mdlod_preprocess::readers::ReadError::Truncated { .. },
-            ),
-        ) if args.frame.is_none() => {
+        // A dump cut short: LAMMPS text frames with missing atom lines, GSD chunks past
+        // the end of the file.
+        Err(e)
+            if args.frame.is_none()
+                && matches!(&e, mdlod_preprocess::convert::ConvertError::Read(r)
+                    if matches!(r, mdlod_preprocess::readers::ReadError::Truncated { .. })
+                        || r.to_string().contains("(truncated?)")) =>
+        {
             // The last frame of a run still writing: say which one converts.
             let frames = mdlod_preprocess::readers::DumpFile::open(&args.input)
                 .map_or(0, |d| d.frame_count());

@@ -126,6 +126,11 @@ pub(crate) struct Index {
     frames: usize,
     /// Whether any frame records `configuration/step` (see [`Index::records_steps`]).
     records_steps: bool,
+    /// The first frame (after frame 0) with a chunk outside the file, where the error
+    /// about it points and says: a file cut short (a run killed while writing, a copy
+    /// that stopped) still has its complete frames; that frame fails when read, and the
+    /// frames after it are lost.
+    damaged: Option<(usize, usize, String)>,
 }
 
 /// True when `data` starts with the GSD magic number.
@@ -221,6 +226,7 @@ impl Index {
         // a few bytes stand for billions of frames to read.
         let slots = index_range.len() / ENTRY;
         let mut entries = Vec::new();
+        let mut damaged: Option<(usize, usize, String)> = None;
         for (k, e) in data[index_range.clone()].chunks_exact(ENTRY).enumerate() {
             let at = index_range.start + k * ENTRY;
             let location = u64_at(e, 16);
@@ -259,14 +265,19 @@ impl Index {
                 (l.checked_add(bytes)? <= data.len()).then_some((n, l))
             });
             let Some((n, location)) = fits else {
-                return Err(err(
-                    path,
-                    at,
-                    format!(
-                        "chunk `{}` of frame {frame} ({n} × {m} values at byte {location}) lies outside the file (truncated?)",
-                        names[usize::from(name)]
-                    ),
-                ));
+                let message = format!(
+                    "chunk `{}` of frame {frame} ({n} × {m} values at byte {location}) lies outside the file (truncated?)",
+                    names[usize::from(name)]
+                );
+                // (`frame` is below `slots`, so it fits a usize.)
+                let f = usize::try_from(frame).unwrap_or(usize::MAX);
+                if f == 0 {
+                    return Err(err(path, at, message));
+                }
+                if damaged.as_ref().is_none_or(|d| f < d.0) {
+                    damaged = Some((f, at, message));
+                }
+                continue;
             };
             entries.push(Entry {
                 frame,
@@ -279,11 +290,15 @@ impl Index {
             });
         }
         entries.sort_by_key(|e| (e.frame, e.name));
+        if let Some((f, ..)) = &damaged {
+            entries.retain(|e| e.frame <= *f as u64);
+        }
         // (Each frame number was checked to be below `slots`, itself below `usize::MAX`.)
         let frames = entries
             .last()
             .and_then(|e| usize::try_from(e.frame).ok()?.checked_add(1))
-            .unwrap_or(0);
+            .unwrap_or(0)
+            .max(damaged.as_ref().map_or(0, |d| d.0 + 1));
         if frames == 0 {
             return Err(err(path, index_range.start, "no frames"));
         }
@@ -298,6 +313,7 @@ impl Index {
             entries,
             frames,
             records_steps,
+            damaged,
         })
     }
 
@@ -337,6 +353,11 @@ impl Index {
 
     /// Particle count of frame `k`.
     fn particles(&self, path: &Path, data: &[u8], k: usize) -> Result<usize, ReadError> {
+        if let Some((f, at, message)) = &self.damaged {
+            if k >= *f {
+                return Err(err(path, *at, message.clone()));
+            }
+        }
         match self.chunk(k, "particles/N") {
             Some(e) if e.n * e.m == 1 => {
                 let v = e.ty.get(&data[e.location..], 0);
