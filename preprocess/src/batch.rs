@@ -220,7 +220,8 @@ pub enum BatchError {
     Manifest { path: PathBuf, message: String },
     #[error("shard {0}/{1}: the shard index must be below the shard count")]
     BadShard(u32, u32),
-    /// A frame failed (the first error); the others were converted all the same.
+    /// A frame failed (the first error); the frames converted before it, or beside it
+    /// on other workers, are in the manifest (no new frame starts after a failure).
     #[error(
         "{source}\n  ({converted} of the {todo} frames to convert were converted and are listed \
          in the manifest; a rerun converts only what is missing)"
@@ -1070,7 +1071,7 @@ pub fn batch(
         }
     });
     progress.finish_stage();
-    // Every frame converted, also when another failed.
+    // Every frame converted, also when another failed (and no new one started after).
     let last_save = save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()));
     if let Some(e) = first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
         return Err(BatchError::Incomplete {

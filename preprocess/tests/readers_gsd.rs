@@ -219,6 +219,38 @@ fn damaged_gsd_files_are_errors_naming_the_byte() {
     );
 }
 
+/// A file cut short (a run killed while writing) keeps its complete frames: the frame
+/// with a chunk past the end fails when read, naming it, and the file still opens.
+#[test]
+fn a_gsd_file_cut_short_keeps_its_complete_frames() {
+    let good = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cut.gsd");
+    std::fs::write(&path, &good[..good.len() - 8]).unwrap();
+    let d = DumpFile::open(&path).unwrap();
+    assert_eq!(d.frame_count(), 3);
+    let read: Vec<Result<_, String>> = (0..3)
+        .map(|k| {
+            d.read_frame(k, &ReadOptions::default(), &NoProgress)
+                .map(|f| f.len())
+                .map_err(|e| e.to_string())
+        })
+        .collect();
+    let first_bad = read
+        .iter()
+        .position(Result::is_err)
+        .expect("a damaged frame");
+    assert!(first_bad >= 1, "{read:?}");
+    assert!(read[..first_bad].iter().all(Result::is_ok), "{read:?}");
+    for r in &read[first_bad..] {
+        let e = r.as_ref().unwrap_err();
+        assert!(
+            e.starts_with(&path.display().to_string()) && e.contains("outside the file"),
+            "{e}"
+        );
+    }
+}
+
 #[test]
 fn frame_numbers_past_the_index_are_errors_not_billions_of_frames() {
     let good = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();

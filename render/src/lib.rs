@@ -187,8 +187,10 @@ pub struct RenderReport {
     pub spp: u32,
     /// Particles (finest-level points) drawn.
     pub particles_drawn: u64,
-    /// Of those, particles of species the style hides (`--hide-species`): in the cut,
-    /// drawn as nothing.
+    /// Particles of species the style hides (`--hide-species`), besides those drawn:
+    /// left out of the cut (where a hidden species' index is 64 or more, which
+    /// [`TraversalSettings::hidden_species`] cannot name, in the cut and drawn as
+    /// nothing, among `particles_drawn`).
     pub particles_hidden: u64,
     /// Cluster representatives drawn.
     pub nodes_drawn: u64,
@@ -540,7 +542,7 @@ impl RenderReport {
             height: opts.height,
             spp: opts.spp,
             particles_drawn: draw.particles,
-            particles_hidden: hidden_particles(file, opts, draw),
+            particles_hidden: hidden_particles(file, opts, draw) + draw.hidden_particles,
             nodes_drawn: draw.representatives,
             ranges: draw.ranges.len(),
             nodes_opened: draw.opened_nodes,

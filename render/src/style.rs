@@ -294,10 +294,20 @@ impl PointStyle {
         species: &[mdlod_format::meta::Species],
         styled: &[[f32; 4]],
     ) -> Option<[[f32; 4]; 3]> {
+        // Hidden species are in no cluster drawn (see [`Self::hidden_mask`]): the map
+        // need only fit the others.
+        let mask = self.hidden_mask(species);
+        let (species, styled): (Vec<&mdlod_format::meta::Species>, Vec<&[f32; 4]>) = species
+            .iter()
+            .zip(styled)
+            .enumerate()
+            .filter(|(i, _)| *i >= 64 || (mask >> i) & 1 == 0)
+            .map(|(_, p)| p)
+            .unzip();
         if self.colour_map.is_some()
             || species
                 .iter()
-                .zip(styled)
+                .zip(&styled)
                 .all(|(s, t)| s.colour == [t[0], t[1], t[2]])
         {
             return None;
@@ -312,7 +322,7 @@ impl PointStyle {
             .collect();
         let d: Vec<[f64; 3]> = species
             .iter()
-            .zip(styled)
+            .zip(&styled)
             .map(|(s, t)| [0, 1, 2].map(|i| f64::from(t[i]) - f64::from(s.colour[i])))
             .collect();
         // Ĉ⁺ (k×4) from the smaller Gram matrix, regularised a little so that dependent
@@ -356,10 +366,13 @@ impl PointStyle {
     pub fn recolour_miss(&self, species: &[mdlod_format::meta::Species]) -> Option<f32> {
         let styled = self.species_table(species).ok()?;
         let map = self.cluster_recolour(species, &styled)?;
+        let mask = self.hidden_mask(species);
         species
             .iter()
             .zip(&styled)
-            .map(|(s, t)| {
+            .enumerate()
+            .filter(|(i, _)| *i >= 64 || (mask >> i) & 1 == 0)
+            .map(|(_, (s, t))| {
                 let c = recoloured(&map, s.colour);
                 (0..3).map(|k| (c[k] - t[k]).abs()).fold(0.0f32, f32::max)
             })
@@ -717,6 +730,14 @@ mod tests {
         assert!(one > 0.05, "{one}");
         assert_eq!(style_of(&[]).recolour_miss(&file), None);
         let three = species(&old[..3]);
+        // A hidden species is in no cluster drawn: the other four fit exactly.
+        let mut hiding = style_of(&[(1, [0.0, 0.0, 1.0])]);
+        hiding.species.push(SpeciesStyle {
+            name: "s4".into(),
+            hidden: true,
+            ..Default::default()
+        });
+        assert!(hiding.recolour_miss(&file).unwrap() < 1e-4);
         assert!(
             style_of(&[(1, [0.0, 0.0, 1.0])])
                 .recolour_miss(&three)

@@ -168,6 +168,9 @@ pub struct DrawList {
     /// centres (a sphere narrower than a pixel whose disk holds none); tested one by one
     /// below nodes of at most 64 children.
     pub occluded_particles: u64,
+    /// Particles of hidden species ([`TraversalSettings::hidden_species`]) left out of
+    /// the opened nodes' runs.
+    pub hidden_particles: u64,
     /// Times the occlusion traversal started over with a coarser error to meet the
     /// budget.
     pub restarts: u32,
@@ -785,23 +788,30 @@ fn largest_first(
     );
     let budget = settings.budget_points.max(1);
     let mut list = DrawList::default();
-    // With hidden species: clusters of them only are culled, mixed ones always opened
-    // (queued as infinitely large).
+    if !proj.visible(&nodes[0]) {
+        list.culled_nodes = 1;
+        return list;
+    }
+    // With hidden species: clusters of them only are culled, and mixed ones opened also
+    // when small enough (after every larger node: see [`Frontier`]); hidden particles
+    // are left out. Every species hidden draws nothing.
+    let species_count = file.metadata().species.len();
+    let every =
+        species_count <= 64 && settings.hidden_species.count_ones() as usize == species_count;
+    if every {
+        list.culled_nodes = 1;
+        return list;
+    }
     let below = (settings.hidden_species != 0).then(|| file.species_below(settings.hidden_species));
-    let hidden_only = |id: usize| below.as_ref().is_some_and(|k| k.get(id) == Some(&BELOW_IN));
-    let mixed = |id: usize| {
-        below
-            .as_ref()
-            .is_some_and(|k| k.get(id) == Some(&(BELOW_IN | BELOW_OUT)))
-    };
-    let key = |id: usize, n: &NodeRecord| {
-        if mixed(id) {
-            f32::INFINITY
-        } else {
-            proj.size_px(n)
-        }
-    };
-    if !proj.visible(&nodes[0]) || hidden_only(0) {
+    let hidden = below.as_deref().map(|kinds| Hidden {
+        kinds,
+        species: file.species(),
+        mask: settings.hidden_species,
+    });
+    let hidden_only = |id: usize| hidden.as_ref().is_some_and(|h| h.node(id));
+    let hidden_particle = |i: usize| hidden.as_ref().is_some_and(|h| h.particle(i));
+    let mixed = |id: usize| hidden.as_ref().is_some_and(|h| h.mixed(id));
+    if hidden_only(0) {
         list.culled_nodes = 1;
         return list;
     }
@@ -815,28 +825,23 @@ fn largest_first(
     let mut frontier = if residency.order_free() && budget >= particles {
         Frontier::AnyOrder(Vec::new())
     } else {
-        Frontier::LargestFirst(BinaryHeap::new())
+        Frontier::LargestFirst(BinaryHeap::new(), BinaryHeap::new())
     };
     let mut marks = Marks::new(nodes.len());
-    frontier.push(key(0, &nodes[0]), 0);
+    let error_px = settings.error_px;
+    frontier.push(proj.size_px(&nodes[0]), 0, mixed(0), error_px);
     let mut drawn: u64 = 1;
     let mut achieved = 0.0f32;
-    while let Some((size, id)) = frontier.pop() {
-        if size <= settings.error_px {
+    while let Some((size, id)) = frontier.pop(error_px) {
+        if size <= error_px && !mixed(id as usize) {
             // Drawn as its representative; largest first, so is everything left.
             achieved = achieved.max(size);
             match frontier {
-                Frontier::LargestFirst(_) => break,
+                Frontier::LargestFirst(..) => break,
                 Frontier::AnyOrder(_) => continue,
             }
         }
         let n = &nodes[id as usize];
-        // A mixed node's key is no size: it is drawn at its own.
-        let size = if mixed(id as usize) {
-            proj.size_px(n)
-        } else {
-            size
-        };
         let child_level = usize::from(n.level) + 1;
         if file.check_children(id as usize).is_err() {
             // Corrupt records below: drawn as its representative, the error kept for the
@@ -846,7 +851,7 @@ fn largest_first(
         }
         let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
         let visible_children = if child_level == last {
-            children.len() as u64
+            children.clone().filter(|&c| !hidden_particle(c)).count() as u64
         } else {
             let first = levels[child_level].node_first as usize;
             children
@@ -871,34 +876,88 @@ fn largest_first(
             for c in children {
                 let cn = &nodes[first + c];
                 if proj.visible(cn) && !hidden_only(first + c) {
-                    frontier.push(key(first + c, cn), (first + c) as u32);
+                    frontier.push(
+                        proj.size_px(cn),
+                        (first + c) as u32,
+                        mixed(first + c),
+                        error_px,
+                    );
                 }
             }
         }
     }
-    emit(file, &proj, marks, None, below.as_deref(), achieved, list)
+    emit(file, &proj, marks, None, hidden.as_ref(), achieved, list)
 }
 
 /// The nodes [`largest_first`] has yet to visit: by projected size, largest first (ties
-/// by id), or in any order (last in, first out) where the order changes nothing.
+/// by id), or in any order (last in, first out) where the order changes nothing. With
+/// hidden species, clusters holding them and others are opened also when small enough:
+/// those go into a second queue (largest first), visited once every node larger than the
+/// error has been, so that a budget refines what is large on screen first.
 enum Frontier {
-    LargestFirst(BinaryHeap<(Size, Reverse<u32>)>),
+    LargestFirst(
+        BinaryHeap<(Size, Reverse<u32>)>,
+        BinaryHeap<(Size, Reverse<u32>)>,
+    ),
     AnyOrder(Vec<(f32, u32)>),
 }
 
 impl Frontier {
-    fn push(&mut self, size: f32, id: u32) {
+    /// Queues node `id` of projected size `size`; `mixed`: it must be opened whatever
+    /// its size.
+    fn push(&mut self, size: f32, id: u32, mixed: bool, error_px: f32) {
         match self {
-            Frontier::LargestFirst(h) => h.push((Size(size), Reverse(id))),
+            Frontier::LargestFirst(large, small) => {
+                if mixed && size <= error_px {
+                    small.push((Size(size), Reverse(id)));
+                } else {
+                    large.push((Size(size), Reverse(id)));
+                }
+            }
             Frontier::AnyOrder(v) => v.push((size, id)),
         }
     }
 
-    fn pop(&mut self) -> Option<(f32, u32)> {
+    fn pop(&mut self, error_px: f32) -> Option<(f32, u32)> {
+        let take = |h: &mut BinaryHeap<(Size, Reverse<u32>)>| {
+            h.pop().map(|(Size(s), Reverse(id))| (s, id))
+        };
         match self {
-            Frontier::LargestFirst(h) => h.pop().map(|(Size(s), Reverse(id))| (s, id)),
+            Frontier::LargestFirst(large, small) => {
+                if large.peek().is_some_and(|(Size(s), _)| *s > error_px) || small.is_empty() {
+                    take(large)
+                } else {
+                    take(small)
+                }
+            }
             Frontier::AnyOrder(v) => v.pop(),
         }
+    }
+}
+
+/// What a cut with hidden species leaves out: clusters of them only
+/// ([`MdlodFile::species_below`]), and their particles.
+struct Hidden<'a> {
+    kinds: &'a [u8],
+    species: &'a [u16],
+    mask: u64,
+}
+
+impl Hidden<'_> {
+    /// Node `id` holds hidden particles only.
+    fn node(&self, id: usize) -> bool {
+        self.kinds.get(id) == Some(&BELOW_IN)
+    }
+
+    /// Node `id` holds hidden particles and others.
+    fn mixed(&self, id: usize) -> bool {
+        self.kinds.get(id) == Some(&(BELOW_IN | BELOW_OUT))
+    }
+
+    fn particle(&self, i: usize) -> bool {
+        self.species
+            .get(i)
+            .is_some_and(|&s| s < 64 && (self.mask >> s) & 1 == 1)
     }
 }
 
@@ -1178,7 +1237,7 @@ fn emit(
     proj: &Projector,
     mut marks: Marks,
     recorded: Option<&[(u32, u64)]>,
-    hidden: Option<&[u8]>,
+    hidden: Option<&Hidden<'_>>,
     achieved: f32,
     mut list: DrawList,
 ) -> DrawList {
@@ -1219,6 +1278,7 @@ fn emit(
         list.culled_nodes += part.culled_nodes;
         list.occluded_nodes += part.occluded_nodes;
         list.occluded_particles += part.occluded_particles;
+        list.hidden_particles += part.hidden_particles;
     }
     list.opened_nodes = open.len() as u64;
     list.points = list.particles + list.representatives;
@@ -1235,7 +1295,7 @@ fn emit_node(
     proj: &Projector,
     marks: &Marks,
     recorded: Option<&[(u32, u64)]>,
-    hidden: Option<&[u8]>,
+    hidden: Option<&Hidden<'_>>,
     id: u32,
     list: &mut DrawList,
 ) {
@@ -1273,17 +1333,21 @@ fn emit_node(
     };
     for (k, c) in children.enumerate() {
         let draw = if child_level == last {
-            let drawn = mask.is_none_or(|m| m >> k & 1 == 1);
-            list.occluded_particles += u64::from(!drawn);
-            drawn
+            if hidden.is_some_and(|h| h.particle(c as usize)) {
+                list.hidden_particles += 1;
+                false
+            } else {
+                let drawn = mask.is_none_or(|m| m >> k & 1 == 1);
+                list.occluded_particles += u64::from(!drawn);
+                drawn
+            }
         } else {
             let cid = levels[child_level].node_first as u32 + c;
             match marks.get(cid) {
                 OPENED => false,
                 DRAWN => true,
                 _ => {
-                    let hidden_only =
-                        hidden.is_some_and(|k| k.get(cid as usize) == Some(&BELOW_IN));
+                    let hidden_only = hidden.is_some_and(|h| h.node(cid as usize));
                     if !proj.visible(&nodes[cid as usize]) || hidden_only {
                         list.culled_nodes += 1;
                         false
@@ -1465,6 +1529,28 @@ pub fn sort_back_to_front(file: &MdlodFile, draw: &DrawList, camera: &Camera) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Largest first; clusters holding hidden and shown species that are small enough
+    /// come after every node larger than the error (largest of them first), before the
+    /// small ones that end the walk.
+    #[test]
+    fn small_mixed_clusters_are_visited_after_every_large_node() {
+        let mut f = Frontier::LargestFirst(BinaryHeap::new(), BinaryHeap::new());
+        for (size, id, mixed) in [
+            (0.7, 1, false),
+            (0.5, 2, true),
+            (10.0, 3, false),
+            (0.9, 4, true),
+            (5.0, 5, true),
+            (2.0, 6, false),
+        ] {
+            f.push(size, id, mixed, 1.0);
+        }
+        let order: Vec<u32> = std::iter::from_fn(|| f.pop(1.0))
+            .map(|(_, id)| id)
+            .collect();
+        assert_eq!(order, [3, 5, 6, 4, 2, 1]);
+    }
 
     /// Batches hold the list's points in order, within both limits, each range cut only
     /// where a batch fills up.

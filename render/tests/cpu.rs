@@ -892,7 +892,19 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
     let (_d, _p, f) = make_file(&frame, small_build(), &[]);
     let (_d2, _p2, plain) = make_file(&cloud_frame(100, 4), small_build(), &[]);
     let cam = fitted_camera(&f);
-    let d = cut(&f, &cam, 30.0, u64::MAX);
+    // The cut a style hiding silver (species 1) draws: no cluster holds silver.
+    let d = traverse(
+        &cam,
+        &f,
+        &TraversalSettings {
+            viewport: VIEWPORT,
+            error_px: 30.0,
+            budget_points: u64::MAX,
+            occlusion: OcclusionMode::Off,
+            hidden_species: 0b10,
+            ..Default::default()
+        },
+    );
     let last = f.level_count() - 1;
     assert!(d.ranges.iter().any(|r| r.level as usize == last));
     assert!(d.ranges.iter().any(|r| (r.level as usize) < last));
@@ -1319,6 +1331,38 @@ fn hidden_species_leave_no_cluster_holding_them() {
                 },
             );
             assert!(mixed_clusters(&plain) > 0, "mask {mask:b}, error {error}");
+            // A budget the cut reaches: met, every shown particle still covered once,
+            // and hidden particles left out of the count.
+            for budget in [40, d.points / 2] {
+                let d = traverse(
+                    &cam,
+                    &f,
+                    &TraversalSettings {
+                        budget_points: budget,
+                        ..settings
+                    },
+                );
+                check_counts(&f, &d);
+                assert!(
+                    d.points <= budget && d.budget_limited,
+                    "{budget}: {}",
+                    d.points
+                );
+                let cover = coverage(&f, &d);
+                for (i, &c) in cover.iter().enumerate() {
+                    assert!(
+                        hidden(species[i]) && c <= 1 || c == 1,
+                        "{budget}: particle {i}"
+                    );
+                }
+            }
         }
+        // Every species hidden: nothing.
+        let all = TraversalSettings {
+            viewport: VIEWPORT,
+            hidden_species: 0b111,
+            ..Default::default()
+        };
+        assert_eq!(traverse(&cam, &f, &all).points, 0);
     }
 }

@@ -215,15 +215,27 @@ fn convert(args: &Args) -> Result<ConvertReport> {
                     if matches!(r, mdlod_preprocess::readers::ReadError::Truncated { .. })
                         || r.to_string().contains("(truncated?)")) =>
         {
-            // The last frame of a run still writing: say which one converts.
-            let frames = mdlod_preprocess::readers::DumpFile::open(&args.input)
-                .map_or(0, |d| d.frame_count());
+            // The last frame of a run still writing: say which one converts (indexing
+            // the input again, where that takes a moment: up to a few GB).
+            let small = std::fs::metadata(&args.input).is_ok_and(|m| m.len() <= 4 << 30);
+            let frames = if small {
+                mdlod_preprocess::readers::DumpFile::open(&args.input)
+                    .map_or(0, |d| d.frame_count())
+            } else {
+                0
+            };
             if frames > 1 {
                 bail!(
                     "{e}; the last frame ({}) is incomplete (a run still writing?): \
                      --frame {} converts the last complete one",
                     frames - 1,
                     frames - 2
+                );
+            }
+            if !small {
+                bail!(
+                    "{e}; the last frame is incomplete (a run still writing?): --frame K \
+                     converts an earlier one (`mdlod batch` converts every complete frame)"
                 );
             }
             Err(e.into())

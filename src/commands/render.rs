@@ -542,9 +542,17 @@ pub fn run(args: Args) -> Result<()> {
     );
     if r.nodes_drawn > 0 && matches!(args.mode, Mode::Spheres | Mode::Sndf) {
         if let Ok(file) = mdlod_format::MdlodFile::open(&args.file) {
-            let miss = opts.style.recolour_miss(&file.metadata().species);
-            if let Some(note) = recolour_note(miss, file.metadata().species.len()) {
+            let species = &file.metadata().species;
+            let miss = opts.style.recolour_miss(species);
+            if let Some(note) = recolour_note(miss, species.len()) {
                 println!("{note}");
+            }
+            if opts.style.species.iter().any(|s| s.hidden) && opts.style.hidden_mask(species) == 0 {
+                println!(
+                    "  note: clusters still hold the hidden species (only the first 64 \
+                     species can be left out of clusters); --screen-error 0 draws particles \
+                     only"
+                );
             }
         }
     }
@@ -611,19 +619,16 @@ fn recolour_note(miss: Option<f32>, species: usize) -> Option<String> {
     Some(format!(
         "  note: clusters took the new species colours approximately (off by up to {:.0}% \
          in a channel): the {species} species' colours allow no exact mixture map (exact \
-         for up to four distinct colours); a lower --screen-error draws more particles in \
-         their own colours",
+         for up to four shown species of affinely independent colours); a lower \
+         --screen-error draws more particles in their own colours",
         miss * 100.0
     ))
 }
 
-/// After the particle count: how many of them belong to hidden species.
+/// After the particle count: how many particles of hidden species were left out.
 fn hidden_text(r: &mdlod_render::RenderReport) -> String {
     if r.particles_hidden > 0 {
-        format!(
-            " ({} of hidden species, drawn as nothing)",
-            r.particles_hidden
-        )
+        format!(" (and {} of hidden species, left out)", r.particles_hidden)
     } else {
         String::new()
     }

@@ -533,12 +533,24 @@ impl<'a> FrameData<'a> {
             Some(e) => return Err(err(self.path, e.at, "`particles/types` is not text")),
             None => vec!["A".to_string()],
         };
+        if names.is_empty() || names.len() > 1 << 16 {
+            return Err(err(
+                self.path,
+                0,
+                format!(
+                    "frame {}: {} particle types (1 to 65536 allowed)",
+                    self.k,
+                    names.len()
+                ),
+            ));
+        }
         if let Some(e) = self.index.chunk(self.k, "particles/types") {
             let at = |t: usize| e.location + t * e.m;
+            let mut seen = std::collections::HashMap::with_capacity(names.len());
             for (t, name) in names.iter().enumerate() {
                 let message = if name.is_empty() {
                     format!("type {t} has an empty name")
-                } else if let Some(first) = names[..t].iter().position(|n| n == name) {
+                } else if let Some(first) = seen.insert(name.as_str(), t) {
                     format!("types {first} and {t} are both named `{name}`")
                 } else {
                     continue;
@@ -553,17 +565,6 @@ impl<'a> FrameData<'a> {
                     ),
                 ));
             }
-        }
-        if names.is_empty() || names.len() > 1 << 16 {
-            return Err(err(
-                self.path,
-                0,
-                format!(
-                    "frame {}: {} particle types (1 to 65536 allowed)",
-                    self.k,
-                    names.len()
-                ),
-            ));
         }
         Ok(names)
     }
