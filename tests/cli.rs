@@ -2412,6 +2412,23 @@ fn an_attribute_range_colours_every_frame_alike() {
     }
     let file = cold.with_extension("mdlod");
     let png = dir.path().join("x.png");
+    // The summary says what the colours mean.
+    let small = ["--width", "16", "--height", "12", "--colour-map", "viridis"];
+    let out = ok(&[&["render", s(&file), "-o", s(&png)][..], &small].concat());
+    assert!(
+        out.contains("colour map viridis: c_pe from ") && out.contains("(the file's range)"),
+        "{out}"
+    );
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&png)][..],
+        &small,
+        &["--attribute-range", "-40:0"],
+    ]
+    .concat());
+    assert!(
+        out.contains("colour map viridis: c_pe from -40 to 0 (--attribute-range)"),
+        "{out}"
+    );
     let err = fails(&[
         "render",
         s(&file),

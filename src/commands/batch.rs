@@ -21,7 +21,8 @@ use crate::progress::Bar;
     In a Slurm job array the shard defaults to the task's position in the array \
     (from SLURM_ARRAY_TASK_ID, _MIN and _STEP) of SLURM_ARRAY_TASK_COUNT.")]
 pub struct Args {
-    /// The inputs: files, file sets (shell globs), `%` piece sets.
+    /// The inputs: files, file sets (shell globs, or quoted patterns with * and ?), `%`
+    /// piece sets.
     #[arg(required_unless_present = "merge")]
     pub inputs: Vec<PathBuf>,
     /// The batch directory to write.
@@ -177,8 +178,65 @@ pub fn run(args: Args) -> Result<()> {
     result
 }
 
+/// The inputs with file-name patterns (`dump.*.bin`) expanded where the shell left
+/// them (quoted in a job script): `*` and `?` in the last component, matching files of
+/// its directory, in name order. A path that exists is taken as it is.
+fn expand_patterns(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::with_capacity(inputs.len());
+    for input in inputs {
+        let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if input.exists() || !name.contains(['*', '?']) {
+            out.push(input.clone());
+            continue;
+        }
+        let dir = match input.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let entries = std::fs::read_dir(&dir)
+            .with_context(|| format!("{}: cannot list {}", input.display(), dir.display()))?;
+        let mut found: Vec<PathBuf> = entries
+            .flatten()
+            .filter(|e| e.file_name().to_str().is_some_and(|n| wildcard(name, n)))
+            .map(|e| input.with_file_name(e.file_name()))
+            .collect();
+        if found.is_empty() {
+            bail!("{}: no file matches the pattern", input.display());
+        }
+        found.sort();
+        out.extend(found);
+    }
+    Ok(out)
+}
+
+/// Whether `name` matches `pattern`, where `*` stands for any run of characters and `?`
+/// for one.
+fn wildcard(pattern: &str, name: &str) -> bool {
+    let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
+    // Greedy with backtracking to the last `*`.
+    let (mut i, mut j, mut star, mut mark) = (0, 0, None, 0);
+    while j < n.len() {
+        if i < p.len() && (p[i] == '?' || p[i] == n[j]) {
+            i += 1;
+            j += 1;
+        } else if i < p.len() && p[i] == '*' {
+            star = Some(i);
+            mark = j;
+            i += 1;
+        } else if let Some(s) = star {
+            i = s + 1;
+            mark += 1;
+            j = mark;
+        } else {
+            return false;
+        }
+    }
+    p[i..].iter().all(|&c| c == '*')
+}
+
 fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
-    super::check_batch_output(out, &args.inputs)?;
+    let inputs = expand_patterns(&args.inputs)?;
+    super::check_batch_output(out, &inputs)?;
     args.build.check()?;
     // Before anything is created: a Slurm environment that names no shard fails here.
     let shard = shard(args)?;
@@ -217,9 +275,7 @@ fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
             DuplicatesArg::Last => mdlod_preprocess::batch::Duplicates::Last,
         },
     };
-    let report = with_threads(args.threads, || {
-        batch(&args.inputs, out, &opts, &Bar::new())
-    })??;
+    let report = with_threads(args.threads, || batch(&inputs, out, &opts, &Bar::new()))??;
     if let Some(merged) = &report.removed_merged {
         println!(
             "removed {}, which the frames converted now outdate: run `mdlod batch --merge {}` \
@@ -289,6 +345,29 @@ fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::slurm_shard;
+
+    #[test]
+    fn quoted_patterns_match_file_names() {
+        use super::wildcard;
+        assert!(wildcard("dump.*.bin", "dump.1000.bin"));
+        assert!(wildcard("dump.*.bin", "dump..bin"));
+        assert!(!wildcard("dump.*.bin", "dump.1000.bin.gz"));
+        assert!(wildcard("d?mp*", "dump.1"));
+        assert!(wildcard("*a*b", "xxaxxb"));
+        assert!(!wildcard("*a*b", "xxaxxbc"));
+        let dir = tempfile::tempdir().unwrap();
+        for n in ["dump.20.bin", "dump.10.bin", "other.bin"] {
+            std::fs::write(dir.path().join(n), "").unwrap();
+        }
+        let found = super::expand_patterns(&[dir.path().join("dump.*.bin")]).unwrap();
+        let names: Vec<_> = found
+            .iter()
+            .map(|p| p.file_name().unwrap().to_owned())
+            .collect();
+        assert_eq!(names, ["dump.10.bin", "dump.20.bin"]);
+        let e = super::expand_patterns(&[dir.path().join("none.*")]).unwrap_err();
+        assert!(e.to_string().contains("no file matches"), "{e}");
+    }
 
     fn env<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
         move |name| {

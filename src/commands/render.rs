@@ -540,6 +540,27 @@ pub fn run(args: Args) -> Result<()> {
         r.ranges,
         r.error_px,
     );
+    // What the colours (or splat intensities) mean: a picture's legend.
+    let by_attribute = args.style.colour_map.is_some()
+        || (args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute));
+    if by_attribute {
+        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        if let Some(a) = &file.metadata().attribute {
+            let ([lo, hi], whose) = match opts.style.attribute_range {
+                Some(range) => (range, "--attribute-range"),
+                None => ([a.min, a.max], "the file's range"),
+            };
+            let shown = match args.style.colour_map {
+                Some(m) => {
+                    use clap::ValueEnum;
+                    let name = m.to_possible_value().map(|v| v.get_name().to_string());
+                    format!("colour map {}", name.unwrap_or_default())
+                }
+                None => "splat intensity".to_string(),
+            };
+            println!("  {shown}: {} from {lo} to {hi} ({whose})", a.name);
+        }
+    }
     if r.nodes_drawn > 0 && matches!(args.mode, Mode::Spheres | Mode::Sndf) {
         if let Ok(file) = mdlod_format::MdlodFile::open(&args.file) {
             let species = &file.metadata().species;
