@@ -2558,7 +2558,7 @@ fn a_movie_keeps_each_species_look_across_frames() {
         "0",
     ]);
     assert!(
-        out.contains("1 frame(s) whose files gave a species another colour"),
+        out.contains("1 frame whose files gave a species another colour"),
         "{out}"
     );
     let image = |i: u32| std::fs::read(dir.path().join(format!("ab-{i}.png"))).unwrap();
@@ -2773,6 +2773,11 @@ fn verify_checks_a_batch_directory() {
     assert!(
         text.contains("ok: 6 frames verified against dataset.json"),
         "{text}"
+    );
+    let err = fails(&["info", s(&out)]);
+    assert!(
+        err.contains("is a batch directory") && err.contains("mdlod verify"),
+        "{err}"
     );
     let m = mdlod_preprocess::batch::read_manifest(&out).unwrap();
     std::fs::copy(out.join(&m.frames[0].file), out.join(&m.frames[1].file)).unwrap();

@@ -176,6 +176,19 @@ fn gzip_xyz() {
     std::fs::write(&path, enc.finish().unwrap()).unwrap();
     let f = read_k(&path, 0, None);
     assert_eq!(f.positions, vec![[1.0, 2.0, 3.0]]);
+    // A compressed file cut short says how to keep the text before the cut.
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    for i in 0..2000 {
+        writeln!(enc, "1\nframe {i}\nFe {i} 2 3").unwrap();
+    }
+    let whole = enc.finish().unwrap();
+    let cut = dir.path().join("cut.xyz.gz");
+    std::fs::write(&cut, &whole[..whole.len() / 2]).unwrap();
+    let Err(e) = DumpFile::open(&cut) else {
+        panic!("a cut gzip file opened")
+    };
+    let e = e.to_string();
+    assert!(e.contains("ends early") && e.contains("zcat"), "{e}");
 }
 
 /// The generator's extended XYZ holds the same frames as its LAMMPS dump: positions,

@@ -192,6 +192,9 @@ pub struct RenderReport {
     /// [`TraversalSettings::hidden_species`] cannot name, in the cut and drawn as
     /// nothing, among `particles_drawn`).
     pub particles_hidden: u64,
+    /// Clusters drawn that still hold hidden species (their refinement stopped at the
+    /// budget or at a node not yet resident).
+    pub clusters_mixed: u64,
     /// Cluster representatives drawn.
     pub nodes_drawn: u64,
     /// Contiguous ranges drawn.
@@ -543,6 +546,7 @@ impl RenderReport {
             spp: opts.spp,
             particles_drawn: draw.particles,
             particles_hidden: hidden_particles(file, opts, draw) + draw.hidden_particles,
+            clusters_mixed: draw.mixed_drawn,
             nodes_drawn: draw.representatives,
             ranges: draw.ranges.len(),
             nodes_opened: draw.opened_nodes,

@@ -69,6 +69,10 @@ pub fn keep_looks(
         let Some(look) = looks.iter().find(|l| l.name == s.name) else {
             continue;
         };
+        // A hidden species has no look to keep.
+        if styles.iter().any(|st| st.name == s.name && st.hidden) {
+            continue;
+        }
         let colour = (look
             .colour
             .iter()
@@ -592,6 +596,13 @@ mod tests {
             }]
         );
         assert!(keep_looks(&f1, &looks, &[]).is_empty());
+        // A hidden species keeps no look: only the user's style is left.
+        let hide_b = [SpeciesStyle {
+            name: "B".into(),
+            hidden: true,
+            ..Default::default()
+        }];
+        assert_eq!(keep_looks(&f0, &looks, &hide_b), hide_b);
         // A radius within 1 % is the same look; the user's colour wins, their styles of
         // species the frame lacks are dropped.
         let near = [look("B", pink, 0.503)];

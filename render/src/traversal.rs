@@ -171,6 +171,9 @@ pub struct DrawList {
     /// Particles of hidden species ([`TraversalSettings::hidden_species`]) left out of
     /// the opened nodes' runs.
     pub hidden_particles: u64,
+    /// Clusters drawn that still hold hidden species' particles: the budget (or a node
+    /// not yet resident) stopped their refinement.
+    pub mixed_drawn: u64,
     /// Times the occlusion traversal started over with a coarser error to meet the
     /// budget.
     pub restarts: u32,
@@ -1253,6 +1256,7 @@ fn emit(
             quant_node: 0,
         });
         list.representatives = 1;
+        list.mixed_drawn = u64::from(hidden.is_some_and(|h| h.mixed(0)));
         list.points = 1;
         list.error_px = achieved;
         return list;
@@ -1279,6 +1283,7 @@ fn emit(
         list.occluded_nodes += part.occluded_nodes;
         list.occluded_particles += part.occluded_particles;
         list.hidden_particles += part.hidden_particles;
+        list.mixed_drawn += part.mixed_drawn;
     }
     list.opened_nodes = open.len() as u64;
     list.points = list.particles + list.representatives;
@@ -1355,6 +1360,8 @@ fn emit_node(
                         list.occluded_nodes += 1;
                         false
                     } else {
+                        list.mixed_drawn +=
+                            u64::from(hidden.is_some_and(|h| h.mixed(cid as usize)));
                         true
                     }
                 }

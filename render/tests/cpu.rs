@@ -1348,6 +1348,8 @@ fn hidden_species_leave_no_cluster_holding_them() {
                     "{budget}: {}",
                     d.points
                 );
+                // Clusters the budget left holding hidden species are counted.
+                assert_eq!(d.mixed_drawn, mixed_clusters(&d) as u64, "{budget}");
                 let cover = coverage(&f, &d);
                 for (i, &c) in cover.iter().enumerate() {
                     assert!(

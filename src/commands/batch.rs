@@ -185,9 +185,16 @@ fn expand_patterns(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::with_capacity(inputs.len());
     for input in inputs {
         let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
-        if input.exists() || !name.contains(['*', '?']) {
+        if input.exists() || !name.contains(['*', '?', '[']) {
             out.push(input.clone());
             continue;
+        }
+        if name.contains('[') {
+            bail!(
+                "{}: a quoted pattern takes * and ? only, not [...] (leave it unquoted for \
+                 the shell to expand)",
+                input.display()
+            );
         }
         let dir = match input.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -367,6 +374,8 @@ mod tests {
         assert_eq!(names, ["dump.10.bin", "dump.20.bin"]);
         let e = super::expand_patterns(&[dir.path().join("none.*")]).unwrap_err();
         assert!(e.to_string().contains("no file matches"), "{e}");
+        let e = super::expand_patterns(&[dir.path().join("dump.[12]*.bin")]).unwrap_err();
+        assert!(e.to_string().contains("* and ? only"), "{e}");
     }
 
     fn env<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {

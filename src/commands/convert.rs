@@ -213,7 +213,7 @@ fn convert(args: &Args) -> Result<ConvertReport> {
             if args.frame.is_none()
                 && matches!(&e, mdlod_preprocess::convert::ConvertError::Read(r)
                     if matches!(r, mdlod_preprocess::readers::ReadError::Truncated { .. })
-                        || r.to_string().contains("(truncated?)")) =>
+                        || truncation(&r.to_string())) =>
         {
             // The last frame of a run still writing: say which one converts (indexing
             // the input again, where that takes a moment: up to a few GB).
@@ -242,6 +242,12 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         }
         r => Ok(r?),
     }
+}
+
+/// Whether a reader's message tells of a file cut short (a frame's atom lines, an atom
+/// line, a header, or a GSD chunk past the end).
+fn truncation(message: &str) -> bool {
+    message.contains("truncated") || message.contains("ends before its")
 }
 
 pub fn print_report(output: &std::path::Path, r: &ConvertReport) {

@@ -67,6 +67,16 @@ pub fn run(args: Args) -> Result<()> {
     if is_sndf {
         return sndf_info(&args);
     }
+    if args.file.join("dataset.json").is_file() {
+        anyhow::bail!(
+            "{} is a batch directory: `mdlod info` shows one of its frames \
+             ({}/frame-<timestep>.mdlod, listed in its dataset.json); `mdlod verify {}` checks \
+             them all",
+            args.file.display(),
+            args.file.display(),
+            args.file.display()
+        );
+    }
     let f = MdlodFile::open(&args.file)?;
     let m = f.metadata();
     let levels: Vec<u64> = f.levels().iter().map(|l| l.point_count).collect();

@@ -561,12 +561,33 @@ pub fn run(args: Args) -> Result<()> {
             println!("  {shown}: {} from {lo} to {hi} ({whose})", a.name);
         }
     }
+    if !args.style.hide_species.is_empty() {
+        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let species = &file.metadata().species;
+        if species
+            .iter()
+            .all(|s| args.style.hide_species.contains(&s.name))
+        {
+            println!("  note: every species is hidden: the image shows the background only");
+        }
+    }
     if r.nodes_drawn > 0 && matches!(args.mode, Mode::Spheres | Mode::Sndf) {
         if let Ok(file) = mdlod_format::MdlodFile::open(&args.file) {
             let species = &file.metadata().species;
             let miss = opts.style.recolour_miss(species);
             if let Some(note) = recolour_note(miss, species.len()) {
                 println!("{note}");
+            }
+            if r.clusters_mixed > 0 {
+                let (s, verb, pronoun) = match r.clusters_mixed {
+                    1 => ("", "s", "it"),
+                    _ => ("s", "", "them"),
+                };
+                println!(
+                    "  note: {} cluster sphere{s} still hold{verb} hidden species: the point \
+                     budget stopped refining {pronoun}; a larger --budget refines {pronoun}",
+                    r.clusters_mixed
+                );
             }
             if opts.style.species.iter().any(|s| s.hidden) && opts.style.hidden_mask(species) == 0 {
                 println!(
@@ -873,8 +894,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         0 => String::new(),
         _ if !matches!(args.mode, Mode::Spheres | Mode::Sndf) => String::new(),
         k => format!(
-            "; {k} frame(s) whose files gave a species another colour or radius drawn with \
+            "; {k} frame{} whose files gave a species another colour or radius drawn with \
              its look in the rest ({})",
+            if k == 1 { "" } else { "s" },
             restyled_names.into_iter().collect::<Vec<_>>().join(", ")
         ),
     };

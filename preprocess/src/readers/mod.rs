@@ -1405,10 +1405,7 @@ pub fn gunzip_to_file(path: &Path, out: &Path, progress: &dyn Progress) -> Resul
     let mut buf = vec![0u8; 1 << 20];
     let mut written = 0u64;
     loop {
-        let n = decoder.read(&mut buf).map_err(|e| ReadError::Io {
-            path: path.to_path_buf(),
-            source: std::io::Error::new(e.kind(), format!("gzip decompression failed: {e}")),
-        })?;
+        let n = decoder.read(&mut buf).map_err(|e| gzip_error(path, e))?;
         if n == 0 {
             break;
         }
@@ -1424,6 +1421,25 @@ pub fn gunzip_to_file(path: &Path, out: &Path, progress: &dyn Progress) -> Resul
     })?;
     progress.finish_stage();
     Ok(written)
+}
+
+/// A failed decompression of `path`: a stream that ends early (a file cut short, as a
+/// copy or a job killed while compressing leaves it) says how to keep what precedes the
+/// cut.
+fn gzip_error(path: &Path, e: std::io::Error) -> ReadError {
+    let message = if e.kind() == std::io::ErrorKind::UnexpectedEof {
+        format!(
+            "gzip decompression failed: {e}: the compressed file ends early (cut short?); \
+             `zcat {} > part` keeps the text before the cut, whose complete frames convert",
+            path.display()
+        )
+    } else {
+        format!("gzip decompression failed: {e}")
+    };
+    ReadError::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::new(e.kind(), message),
+    }
 }
 
 /// Decompresses the gzip bytes `compressed` of `path` (single or multi-member) into
@@ -1461,10 +1477,7 @@ fn gunzip(
     flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(1 << 20, reader))
         .take(take)
         .read_to_end(&mut out)
-        .map_err(|e| ReadError::Io {
-            path: path.to_path_buf(),
-            source: std::io::Error::new(e.kind(), format!("gzip decompression failed: {e}")),
-        })?;
+        .map_err(|e| gzip_error(path, e))?;
     progress.finish_stage();
     if limit.is_some_and(|l| out.len() as u64 > l) {
         return Ok(None);
