@@ -645,8 +645,9 @@ mod tests {
             .collect()
     }
 
-    fn recolour_of(old: &[[f32; 3]], new: &[(usize, [f32; 3])]) -> Option<[[f32; 4]; 3]> {
-        let style = PointStyle {
+    /// A style giving species `s{i}` colour `c` for each `(i, c)`.
+    fn style_of(new: &[(usize, [f32; 3])]) -> PointStyle {
+        PointStyle {
             species: new
                 .iter()
                 .map(|&(i, c)| SpeciesStyle {
@@ -656,7 +657,11 @@ mod tests {
                 })
                 .collect(),
             ..Default::default()
-        };
+        }
+    }
+
+    fn recolour_of(old: &[[f32; 3]], new: &[(usize, [f32; 3])]) -> Option<[[f32; 4]; 3]> {
+        let style = style_of(new);
         let file = species(old);
         let table = style.species_table(&file).unwrap();
         style.cluster_recolour(&file, &table)
@@ -722,17 +727,6 @@ mod tests {
         }
         // How far the fit misses, for the summary: nothing here; much where one of five
         // species alone turns blue (no affine map does that).
-        let style_of = |new: &[(usize, [f32; 3])]| PointStyle {
-            species: new
-                .iter()
-                .map(|&(i, c)| SpeciesStyle {
-                    name: format!("s{i}"),
-                    colour: Some(c),
-                    ..Default::default()
-                })
-                .collect(),
-            ..Default::default()
-        };
         let file = species(&old);
         assert!(style_of(&new).recolour_miss(&file).unwrap() < 1e-4);
         let one = style_of(&[(1, [0.0, 0.0, 1.0])])
