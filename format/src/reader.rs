@@ -99,6 +99,12 @@ pub struct MdlodFile {
     species_below: Mutex<Option<(u64, Arc<[u8]>)>>,
 }
 
+/// Whether species index `s` is in the set `mask` of [`MdlodFile::species_below`] (bit
+/// `s`; indices of 64 and more never are).
+pub fn in_species_set(mask: u64, s: usize) -> bool {
+    s < 64 && (mask >> s) & 1 == 1
+}
+
 /// [`MdlodFile::species_below`]: some particle below the node is of a species of the
 /// set.
 pub const BELOW_IN: u8 = 1;
@@ -685,7 +691,7 @@ impl MdlodFile {
             return kinds;
         };
         let of = |s: u16| {
-            if s < 64 && (mask >> s) & 1 == 1 {
+            if in_species_set(mask, usize::from(s)) {
                 BELOW_IN
             } else {
                 BELOW_OUT

@@ -795,6 +795,9 @@ pub fn batch(
     let mut done = Vec::new();
     let mut todo = Vec::new();
     let mut empty = Vec::new();
+    // Each input's fingerprint, taken once for all its frames (a raw sidecar's is read).
+    let mut fingerprints: std::collections::HashMap<&Path, SourceInfo> =
+        std::collections::HashMap::new();
     // The species names the frames hold, for the radius overrides' check at the end.
     let seen = Mutex::new(std::collections::BTreeSet::<String>::new());
     // Notes by what they are about (the text before the first `: `, e.g. `species A`),
@@ -840,7 +843,13 @@ pub fn batch(
             continue;
         }
         let out = out_dir.join(frame_file_name(job.timestep));
-        let want = fingerprint(job.input, job.frame as u64);
+        let want = SourceInfo {
+            frame: job.frame as u64,
+            ..fingerprints
+                .entry(job.input)
+                .or_insert_with(|| fingerprint(job.input, 0))
+                .clone()
+        };
         let columns = columns_for(&job);
         let complete = MdlodFile::open(&out).ok().filter(|f| {
             let given = || match job.dump {

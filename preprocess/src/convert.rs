@@ -48,6 +48,17 @@ pub struct ConvertReport {
 pub enum ConvertError {
     #[error(transparent)]
     Read(#[from] crate::readers::ReadError),
+    /// The last frame, converted by default, is cut short (a run still writing it).
+    #[error(
+        "{source}; the last frame ({frame}) is incomplete (a run still writing?): --frame {} \
+         converts the last complete one",
+        .frame - 1
+    )]
+    LastFrameIncomplete {
+        frame: usize,
+        #[source]
+        source: crate::readers::ReadError,
+    },
     #[error("{path}: {source}")]
     Build {
         path: String,
@@ -555,7 +566,18 @@ pub fn convert_dump(
         FrameSelect::Index(k) => k,
         FrameSelect::Last => dump.frame_count().saturating_sub(1),
     };
-    let info = dump.frame_info(k)?;
+    // The last frame asked for by default and cut short: say which frame converts.
+    let cut_short = |e: crate::readers::ReadError| {
+        if matches!(frame, FrameSelect::Last) && k > 0 && e.cut_short() {
+            ConvertError::LastFrameIncomplete {
+                frame: k,
+                source: e,
+            }
+        } else {
+            e.into()
+        }
+    };
+    let info = dump.frame_info(k).map_err(cut_short)?;
     // An override naming none of the species says how this input names them (a name
     // that cannot occur in it: what to write instead).
     let naming = if options.radii.is_empty() {
@@ -594,7 +616,7 @@ pub fn convert_dump(
         })?;
     }
     let t0 = Instant::now();
-    let frame = dump.read_frame(k, read, progress)?;
+    let frame = dump.read_frame(k, read, progress).map_err(cut_short)?;
     // The frame owns its data: release the mapped (or decompressed) dump before the
     // hierarchy's working memory is allocated.
     drop(dump);

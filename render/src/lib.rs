@@ -501,8 +501,10 @@ pub fn frame_setup(
     Ok((camera, traversal, settings))
 }
 
-/// The particles of `draw` whose species the style hides (sphere and S-NDF modes).
-fn hidden_particles(file: &MdlodFile, opts: &RenderOptions, draw: &DrawList) -> u64 {
+/// The particles of `draw` whose species the style hides (sphere and S-NDF modes) that
+/// are in its runs: only where the traversal cannot leave them out (a hidden species of
+/// index 64 or more, past [`TraversalSettings::hidden_species`]); else none.
+fn hidden_in_cut(file: &MdlodFile, opts: &RenderOptions, draw: &DrawList) -> u64 {
     let styled = matches!(opts.mode, RenderMode::Spheres | RenderMode::Sndf { .. });
     let meta = file.metadata();
     let hidden: Vec<bool> = meta
@@ -515,7 +517,7 @@ fn hidden_particles(file: &MdlodFile, opts: &RenderOptions, draw: &DrawList) -> 
                 .any(|st| st.hidden && st.name == s.name)
         })
         .collect();
-    if !styled || !hidden.contains(&true) {
+    if !styled || !hidden.contains(&true) || opts.style.hidden_mask(&meta.species) != 0 {
         return 0;
     }
     let last = file.level_count() - 1;
@@ -545,7 +547,7 @@ impl RenderReport {
             height: opts.height,
             spp: opts.spp,
             particles_drawn: draw.particles,
-            particles_hidden: hidden_particles(file, opts, draw) + draw.hidden_particles,
+            particles_hidden: hidden_in_cut(file, opts, draw) + draw.hidden_particles,
             clusters_mixed: draw.mixed_drawn,
             nodes_drawn: draw.representatives,
             ranges: draw.ranges.len(),

@@ -16,6 +16,7 @@
 //! still shows them. Styles that change sizes or hide particles turn occlusion culling
 //! off (it assumes the file's radii).
 
+use mdlod_format::reader::in_species_set;
 use serde::{Deserialize, Serialize};
 
 /// One species' look, by its name in the file (each `None` keeps the file's value).
@@ -305,7 +306,7 @@ impl PointStyle {
             .iter()
             .zip(styled)
             .enumerate()
-            .filter(|(i, _)| *i >= 64 || (mask >> i) & 1 == 0)
+            .filter(|(i, _)| !in_species_set(mask, *i))
             .map(|(_, p)| p)
             .unzip();
         if self.colour_map.is_some()
@@ -375,7 +376,7 @@ impl PointStyle {
             .iter()
             .zip(&styled)
             .enumerate()
-            .filter(|(i, _)| *i >= 64 || (mask >> i) & 1 == 0)
+            .filter(|(i, _)| !in_species_set(mask, *i))
             .map(|(_, (s, t))| {
                 let c = recoloured(&map, s.colour);
                 (0..3).map(|k| (c[k] - t[k]).abs()).fold(0.0f32, f32::max)

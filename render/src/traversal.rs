@@ -83,7 +83,7 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
 use glam::{Mat4, Vec3};
-use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
+use mdlod_format::reader::{in_species_set, BELOW_IN, BELOW_OUT};
 use mdlod_format::{quantize, MdlodFile, NodeRecord};
 
 use crate::camera::{Camera, Projection};
@@ -960,7 +960,7 @@ impl Hidden<'_> {
     fn particle(&self, i: usize) -> bool {
         self.species
             .get(i)
-            .is_some_and(|&s| s < 64 && (self.mask >> s) & 1 == 1)
+            .is_some_and(|&s| in_species_set(self.mask, usize::from(s)))
     }
 }
 

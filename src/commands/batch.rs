@@ -164,13 +164,14 @@ pub fn run(args: Args) -> Result<()> {
     let Some(out) = &args.output else {
         bail!("give the batch directory with -o DIR");
     };
+    // Before anything is created: a Slurm environment that names no shard fails here.
+    let shard = shard(&args)?;
     // A batch directory this run creates and leaves empty (it failed before converting
     // a frame: a missing input, a bad option) is removed again; not by a shard, whose
     // siblings may be using it (with their working files elsewhere, it stays empty
     // while they index their inputs).
-    let sharded = args.shard.is_some() || std::env::var_os("SLURM_ARRAY_TASK_ID").is_some();
-    let created = !out.exists() && !sharded;
-    let result = run_batch(&args, out);
+    let created = !out.exists() && shard.is_none();
+    let result = run_batch(&args, out, shard);
     if result.is_err() && created {
         // Fails, leaving it, unless it is empty.
         let _ = std::fs::remove_dir(out);
@@ -241,12 +242,10 @@ fn wildcard(pattern: &str, name: &str) -> bool {
     p[i..].iter().all(|&c| c == '*')
 }
 
-fn run_batch(args: &Args, out: &std::path::Path) -> Result<()> {
+fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> Result<()> {
     let inputs = expand_patterns(&args.inputs)?;
     super::check_batch_output(out, &inputs)?;
     args.build.check()?;
-    // Before anything is created: a Slurm environment that names no shard fails here.
-    let shard = shard(args)?;
     let (mut convert, read) = args.build.options();
     // Working files of out-of-core frames: a directory of this run's own, removed on
     // Ctrl-C and SIGTERM (partial frames are redone by the next run).

@@ -199,55 +199,14 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         Some(k) => FrameSelect::Index(k),
         None => FrameSelect::Last,
     };
-    match convert_file(
+    Ok(convert_file(
         &args.input,
         &args.output,
         frame,
         &read,
         &options,
         &Bar::new(),
-    ) {
-        // A dump cut short: LAMMPS text frames with missing atom lines, GSD chunks past
-        // the end of the file.
-        Err(e)
-            if args.frame.is_none()
-                && matches!(&e, mdlod_preprocess::convert::ConvertError::Read(r)
-                    if matches!(r, mdlod_preprocess::readers::ReadError::Truncated { .. })
-                        || truncation(&r.to_string())) =>
-        {
-            // The last frame of a run still writing: say which one converts (indexing
-            // the input again, where that takes a moment: up to a few GB).
-            let small = std::fs::metadata(&args.input).is_ok_and(|m| m.len() <= 4 << 30);
-            let frames = if small {
-                mdlod_preprocess::readers::DumpFile::open(&args.input)
-                    .map_or(0, |d| d.frame_count())
-            } else {
-                0
-            };
-            if frames > 1 {
-                bail!(
-                    "{e}; the last frame ({}) is incomplete (a run still writing?): \
-                     --frame {} converts the last complete one",
-                    frames - 1,
-                    frames - 2
-                );
-            }
-            if !small {
-                bail!(
-                    "{e}; the last frame is incomplete (a run still writing?): --frame K \
-                     converts an earlier one (`mdlod batch` converts every complete frame)"
-                );
-            }
-            Err(e.into())
-        }
-        r => Ok(r?),
-    }
-}
-
-/// Whether a reader's message tells of a file cut short (a frame's atom lines, an atom
-/// line, a header, or a GSD chunk past the end).
-fn truncation(message: &str) -> bool {
-    message.contains("truncated") || message.contains("ends before its")
+    )?)
 }
 
 pub fn print_report(output: &std::path::Path, r: &ConvertReport) {

@@ -67,11 +67,20 @@ pub fn run(args: Args) -> Result<()> {
     if is_sndf {
         return sndf_info(&args);
     }
-    if args.file.join("dataset.json").is_file() {
+    // A batch directory (merged, or shards' manifests only): say where its frames are.
+    let batch = args.file.is_dir()
+        && std::fs::read_dir(&args.file).is_ok_and(|entries| {
+            entries.flatten().any(|e| {
+                let name = e.file_name();
+                let name = name.to_string_lossy();
+                name == mdlod_preprocess::batch::MANIFEST
+                    || mdlod_preprocess::batch::is_shard_manifest(&name)
+            })
+        });
+    if batch {
         anyhow::bail!(
-            "{} is a batch directory: `mdlod info` shows one of its frames \
-             ({}/frame-<timestep>.mdlod, listed in its dataset.json); `mdlod verify {}` checks \
-             them all",
+            "{} is a batch directory: its frames are {}/frame-<timestep>.mdlod (listed in \
+             its manifest), and `mdlod verify {}` checks them all",
             args.file.display(),
             args.file.display(),
             args.file.display()

@@ -335,10 +335,15 @@ fn mode_name(mode: Mode) -> String {
 
 /// Refuses an option given on the command line (`matches`: the `render` subcommand's)
 /// that the chosen mode does not read.
+/// Whether the picture maps the scalar attribute: a colour map, or splats of attribute
+/// light.
+fn by_attribute(args: &Args) -> bool {
+    args.style.colour_map.is_some()
+        || (args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute))
+}
+
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
-    let by_attribute = args.style.colour_map.is_some()
-        || (args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute));
-    if args.style.attribute_range.is_some() && !by_attribute {
+    if args.style.attribute_range.is_some() && !by_attribute(args) {
         anyhow::bail!(
             "--attribute-range has no effect without --colour-map (spheres, sndf) or \
              --intensity attribute (splat)"
@@ -517,9 +522,12 @@ pub fn run(args: Args) -> Result<()> {
         Mode::Spheres => format!(", {} spp", r.spp),
         Mode::Splat | Mode::SplatOver | Mode::Density | Mode::Iso => String::new(),
     };
+    // The file again (a mapping, and its metadata) for what the summary explains.
+    let file = mdlod_format::MdlodFile::open(&args.file)?;
+    let species = &file.metadata().species;
     let points = point_noun(args.mode);
     let hidden = hidden_text(&r);
-    let limits = limits_text(&r, &args.file, args.budget);
+    let limits = limits_text(&r, coarsest_points(&file), args.budget);
     let occluded = if r.nodes_occluded + r.particles_occluded > 0 {
         format!(
             " ({} clusters and {} particles left out as hidden or between pixel centres)",
@@ -541,10 +549,7 @@ pub fn run(args: Args) -> Result<()> {
         r.error_px,
     );
     // What the colours (or splat intensities) mean: a picture's legend.
-    let by_attribute = args.style.colour_map.is_some()
-        || (args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute));
-    if by_attribute {
-        let file = mdlod_format::MdlodFile::open(&args.file)?;
+    if by_attribute(&args) {
         if let Some(a) = &file.metadata().attribute {
             let ([lo, hi], whose) = match opts.style.attribute_range {
                 Some(range) => (range, "--attribute-range"),
@@ -561,41 +566,33 @@ pub fn run(args: Args) -> Result<()> {
             println!("  {shown}: {} from {lo} to {hi} ({whose})", a.name);
         }
     }
-    if !args.style.hide_species.is_empty() {
-        let file = mdlod_format::MdlodFile::open(&args.file)?;
-        let species = &file.metadata().species;
-        if species
-            .iter()
-            .all(|s| args.style.hide_species.contains(&s.name))
-        {
-            println!("  note: every species is hidden: the image shows the background only");
-        }
+    if species
+        .iter()
+        .all(|s| args.style.hide_species.contains(&s.name))
+    {
+        println!("  note: every species is hidden: the image shows the background only");
     }
     if r.nodes_drawn > 0 && matches!(args.mode, Mode::Spheres | Mode::Sndf) {
-        if let Ok(file) = mdlod_format::MdlodFile::open(&args.file) {
-            let species = &file.metadata().species;
-            let miss = opts.style.recolour_miss(species);
-            if let Some(note) = recolour_note(miss, species.len()) {
-                println!("{note}");
-            }
-            if r.clusters_mixed > 0 {
-                let (s, verb, pronoun) = match r.clusters_mixed {
-                    1 => ("", "s", "it"),
-                    _ => ("s", "", "them"),
-                };
-                println!(
-                    "  note: {} cluster sphere{s} still hold{verb} hidden species: the point \
-                     budget stopped refining {pronoun}; a larger --budget refines {pronoun}",
-                    r.clusters_mixed
-                );
-            }
-            if opts.style.species.iter().any(|s| s.hidden) && opts.style.hidden_mask(species) == 0 {
-                println!(
-                    "  note: clusters still hold the hidden species (only the first 64 \
-                     species can be left out of clusters); --screen-error 0 draws particles \
-                     only"
-                );
-            }
+        let miss = opts.style.recolour_miss(species);
+        if let Some(note) = recolour_note(miss, species.len()) {
+            println!("{note}");
+        }
+        if r.clusters_mixed > 0 {
+            let (s, verb, pronoun) = match r.clusters_mixed {
+                1 => ("", "s", "it"),
+                _ => ("s", "", "them"),
+            };
+            println!(
+                "  note: {} cluster sphere{s} still hold{verb} hidden species: the point \
+                 budget stopped refining {pronoun}; a larger --budget refines {pronoun}",
+                r.clusters_mixed
+            );
+        }
+        if opts.style.species.iter().any(|s| s.hidden) && opts.style.hidden_mask(species) == 0 {
+            println!(
+                "  note: clusters still hold the hidden species (only the first 64 species \
+                 can be left out of clusters); --screen-error 0 draws particles only"
+            );
         }
     }
     let gpu = r.gpu_time.map_or(String::new(), |t| {
@@ -676,17 +673,20 @@ fn hidden_text(r: &mdlod_render::RenderReport) -> String {
     }
 }
 
-/// Why the cut of `file` stopped refining before the screen error, and what would refine
-/// it, as " (reason; reason)"; empty when nothing stopped it. `budget` is the --budget
-/// asked for (the GPU may allow fewer points).
-fn limits_text(r: &mdlod_render::RenderReport, file: &Path, budget: u64) -> String {
+/// The points of a file's coarsest level below its top node.
+fn coarsest_points(file: &mdlod_format::MdlodFile) -> Option<u64> {
+    file.levels().get(1).map(|l| l.point_count)
+}
+
+/// Why a cut stopped refining before the screen error, and what would refine it, as
+/// " (reason; reason)"; empty when nothing stopped it. `coarsest`: the points of the
+/// file's coarsest level ([`coarsest_points`]); `budget` is the --budget asked for (the
+/// GPU may allow fewer points).
+fn limits_text(r: &mdlod_render::RenderReport, coarsest: Option<u64>, budget: u64) -> String {
     let mut limits = vec![];
     if r.budget_limited {
         // The top node opens into the whole coarsest level at once: a budget below it
         // leaves the data set one sphere.
-        let coarsest = mdlod_format::MdlodFile::open(file)
-            .ok()
-            .and_then(|f| f.levels().get(1).map(|l| l.point_count));
         let drawn = r.particles_drawn + r.nodes_drawn;
         limits.push(match coarsest {
             Some(c) if drawn == 1 && r.budget < c => format!(
@@ -808,10 +808,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             names.iter().cloned().collect::<Vec<_>>().join(", ")
         );
     }
-    let by_attribute = opts.style.colour_map.is_some()
-        || matches!(opts.mode, RenderMode::Splat { by_attribute: true });
     let mut range_note = String::new();
-    if by_attribute && opts.style.attribute_range.is_none() {
+    if by_attribute(args) && opts.style.attribute_range.is_none() {
         // Where the frames' union is no range (a constant attribute), each frame keeps
         // its own constant look.
         if let Some(Some(a)) = attribute.filter(|_| n > 1) {
@@ -862,6 +860,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
                 worst_miss = miss.map(|m| (m, file.metadata().species.len()));
             }
         }
+        let coarsest = coarsest_points(&file);
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         if i == 0 && opts.exposure.is_none() {
             // Splats: one exposure for every frame, or the brightness drifts.
@@ -877,7 +876,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             hidden_text(&r),
             r.nodes_drawn,
             point_noun(args.mode),
-            limits_text(&r, &path, args.budget),
+            limits_text(&r, coarsest, args.budget),
             r.error_px,
             r.total_time.as_secs_f64() * 1e3
         );

@@ -153,7 +153,7 @@ struct Cursor<'a> {
 }
 
 impl<'a> Cursor<'a> {
-    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], ReadError> {
+    fn take<const N: usize>(&mut self, what: impl std::fmt::Display) -> Result<[u8; N], ReadError> {
         match self.data.get(self.at..self.at + N) {
             Some(b) => {
                 self.at += N;
@@ -165,6 +165,16 @@ impl<'a> Cursor<'a> {
                 format!("file truncated in {what} ({} bytes)", self.data.len()),
             )),
         }
+    }
+}
+
+/// "the header of frame K, list L", written only into an error.
+#[derive(Clone, Copy)]
+struct ListHeader(usize, usize);
+
+impl std::fmt::Display for ListHeader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "the header of frame {}, list {}", self.0, self.1)
     }
 }
 
@@ -263,8 +273,8 @@ impl Index {
             let mut lists = Vec::new();
             for l in 0..count {
                 let at = c.at;
-                let header = format!("the header of frame {k}, list {l}");
-                let [vertex, colour] = c.take::<2>(&header)?;
+                let header = ListHeader(k, l);
+                let [vertex, colour] = c.take::<2>(header)?;
                 let vsize = vertex_size(vertex);
                 let csize = colour_size(colour);
                 let Some(csize) = csize.filter(|_| vsize > 0) else {
@@ -280,23 +290,23 @@ impl Index {
                 let radius = if vertex == 2 {
                     None
                 } else {
-                    Some(f32::from_le_bytes(c.take(&header)?))
+                    Some(f32::from_le_bytes(c.take(header)?))
                 };
                 let mut global_colour = None;
                 match colour {
                     0 => {
-                        let [r, g, b, _] = c.take::<4>(&header)?;
+                        let [r, g, b, _] = c.take::<4>(header)?;
                         global_colour = Some([r, g, b]);
                     }
                     3 | 7 => {
-                        c.take::<8>(&header)?;
+                        c.take::<8>(header)?;
                     }
                     _ => {}
                 }
                 let count_at = c.at;
-                let particles = u64::from_le_bytes(c.take(&header)?);
+                let particles = u64::from_le_bytes(c.take(header)?);
                 if version == 103 {
-                    c.take::<24>(&header)?;
+                    c.take::<24>(header)?;
                 }
                 let stride = vsize + csize;
                 let end = usize::try_from(particles)

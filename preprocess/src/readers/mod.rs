@@ -152,6 +152,21 @@ pub enum ReadError {
     },
 }
 
+impl ReadError {
+    /// Whether the error is a file cut short: a frame's atom lines, an atom line or a
+    /// frame header missing at the end, or a GSD chunk past the end of the file (what a
+    /// run still writing, or a copy that stopped, leaves).
+    pub fn cut_short(&self) -> bool {
+        if matches!(self, ReadError::Truncated { .. }) {
+            return true;
+        }
+        let m = self.to_string();
+        m.contains("(truncated file?)")
+            || m.contains("(truncated?)")
+            || m.contains("ends before its")
+    }
+}
+
 /// The dump formats this module reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InputFormat {
