@@ -2826,3 +2826,104 @@ fn generate_refuses_data_the_disk_cannot_hold() {
     );
     assert!(!out.exists());
 }
+
+/// `--species-name` gives numbered LAMMPS types their elements' looks: the file names
+/// them by element, `--radius` and render's `--hide-species` take the new names, two
+/// types given one name are one species, and a batch converts a frame again when the
+/// renames change (and skips it when they do not).
+#[test]
+fn species_names_give_numbered_types_their_elements() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("a.lammpstrj");
+    // Copper (type 1) and silver (type 2), by number only.
+    generate(&["alloy", "-n", "2000", "--frames", "2"], &input);
+    let out = dir.path().join("a.mdlod");
+    let species = |p: &Path| -> Vec<(String, f32)> {
+        let f = MdlodFile::open(p).unwrap();
+        f.metadata()
+            .species
+            .iter()
+            .map(|s| (s.name.clone(), s.radius))
+            .collect()
+    };
+    let cu = mdlod_preprocess::species::element("Cu").unwrap().0;
+    ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&out),
+        "--species-name",
+        "1=Cu",
+        "--species-name",
+        "2=Ag",
+        "--radius",
+        "Ag=1.5",
+    ]);
+    assert_eq!(
+        species(&out),
+        [("Cu".to_string(), cu), ("Ag".to_string(), 1.5)]
+    );
+    let info = ok(&["info", s(&out)]);
+    assert!(info.contains("Cu") && info.contains("Ag"), "{info}");
+    // Both types one species.
+    ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&out),
+        "--species-name",
+        "1=M",
+        "--species-name",
+        "2=M",
+    ]);
+    assert_eq!(species(&out).len(), 1);
+    assert_eq!(MdlodFile::open(&out).unwrap().particle_count(), 2000);
+    // A type the input lacks, and a radius by the old number, are errors.
+    let err = fails(&["convert", s(&input), "-o", s(&out), "--species-name", "3=O"]);
+    assert!(
+        err.contains("--species-name 3=O: no species named \"3\"") && err.contains("named 1, 2"),
+        "{err}"
+    );
+    let err = fails(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&out),
+        "--species-name",
+        "1=Cu",
+        "--radius",
+        "1=1.3",
+    ]);
+    assert!(err.contains("named Cu, 2"), "{err}");
+    let err = fails(&["convert", s(&input), "-o", s(&out), "--species-name", "1"]);
+    assert!(err.contains("expected NAME=NEW_NAME"), "{err}");
+    // Without renames, a radius by element says how to name the type.
+    let err = fails(&["convert", s(&input), "-o", s(&out), "--radius", "Cu=1.3"]);
+    assert!(err.contains("--species-name 1=Cu --radius Cu=1.3"), "{err}");
+
+    // A batch records the renames: the same ones skip finished frames, others redo them.
+    let d = dir.path().join("d");
+    let renames = ["--species-name", "1=Cu", "--species-name", "2=Ag"];
+    let batch = |extra: &[&str]| {
+        let mut args = vec!["batch", s(&input), "-o", s(&d)];
+        args.extend(extra);
+        ok(&args)
+    };
+    batch(&renames);
+    let frames = batch_frames(&d);
+    assert_eq!(frames.len(), 2);
+    for f in &frames {
+        assert_eq!(species(&d.join(f))[0], ("Cu".to_string(), cu));
+    }
+    let again = batch(&renames);
+    assert!(again.contains("0 converted, 2 already done"), "{again}");
+    batch(&[]);
+    for f in &frames {
+        assert_eq!(species(&d.join(f))[0].0, "1", "{f}: converted again");
+    }
+    // A rename no frame's species has is an error at the end.
+    let mut args = vec!["batch", s(&input), "-o", s(&d)];
+    args.extend(["--species-name", "7=O"]);
+    let err = fails(&args);
+    assert!(err.contains("--species-name 7=O"), "{err}");
+}

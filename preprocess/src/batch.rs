@@ -96,6 +96,10 @@ pub struct FrameEntry {
     /// the radii it gives (absent in manifests of earlier versions).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radii: Option<Vec<(String, f32)>>,
+    /// The `--species-name` renames the frame was converted with; absent when none were
+    /// given (and in manifests of earlier versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub species_names: Option<Vec<(String, String)>>,
 }
 
 /// `dataset.json`: the frames of a batch directory, by timestep.
@@ -378,8 +382,9 @@ fn entry_of(
     file: &MdlodFile,
     timestep: u64,
     columns: Option<Vec<String>>,
-    overrides: &[(String, f32)],
+    options: &ConvertOptions,
 ) -> FrameEntry {
+    let overrides = &options.radii;
     let m = file.metadata();
     let radii = m
         .species
@@ -407,6 +412,7 @@ fn entry_of(
         }),
         columns,
         radii: Some(radii),
+        species_names: (!options.species_names.is_empty()).then(|| options.species_names.clone()),
     }
 }
 
@@ -483,7 +489,11 @@ fn same_build(
                 else {
                     return false;
                 };
-                let own = radii.iter().find(|(n, _)| *n == s.name).map(|(_, r)| *r);
+                // (The input names species as it did before any renames.)
+                let own = radii
+                    .iter()
+                    .find(|(n, _)| crate::species::renamed(&options.species_names, n) == s.name)
+                    .map(|(_, r)| *r);
                 if own.is_some_and(|r| !(r.is_finite() && r > 0.0)) {
                     // A conversion now refuses it: converted again, to say so.
                     return false;
@@ -499,6 +509,7 @@ fn same_build(
 struct Recorded {
     columns: Option<Vec<String>>,
     radii: Option<Vec<(String, f32)>>,
+    species_names: Option<Vec<(String, String)>>,
 }
 
 /// The column names and radius overrides each listed frame was converted with, from
@@ -526,6 +537,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
                 Recorded {
                     columns: f.columns,
                     radii: f.radii,
+                    species_names: f.species_names,
                 },
             );
         }
@@ -862,11 +874,19 @@ pub fn batch(
             ));
             let same_columns = job.format != InputFormat::LammpsBinary
                 || recorded.is_some_and(|r| r.columns == columns);
+            // Renames change the file: a frame converted with others (or, without a
+            // record of them, when renames are asked for now) is converted again.
+            let renames = &opts.convert.species_names;
+            let same_names = match recorded.and_then(|r| r.species_names.as_ref()) {
+                Some(names) => names == renames,
+                None => renames.is_empty(),
+            };
             f.metadata()
                 .source
                 .as_ref()
                 .is_some_and(|s| same_source(s, &want))
                 && same_columns
+                && same_names
                 && same_build(
                     f,
                     &opts.convert,
@@ -878,13 +898,7 @@ pub fn batch(
         match complete {
             Some(f) => {
                 note_species(&f);
-                done.push(entry_of(
-                    &out,
-                    &f,
-                    job.timestep,
-                    columns,
-                    &opts.convert.radii,
-                ));
+                done.push(entry_of(&out, &f, job.timestep, columns, &opts.convert));
             }
             None => {
                 if job.particles == u64::MAX {
@@ -1040,13 +1054,7 @@ pub fn batch(
                             }
                             let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                             note_species(&f);
-                            Ok(entry_of(
-                                &out,
-                                &f,
-                                job.timestep,
-                                columns_for(job),
-                                &convert.radii,
-                            ))
+                            Ok(entry_of(&out, &f, job.timestep, columns_for(job), convert))
                         })()
                         .map_err(in_context)
                     })();
@@ -1107,6 +1115,23 @@ pub fn batch(
                         .first()
                         .filter(|n| namings.iter().all(|m| m == *n))
                         .cloned(),
+                },
+            ))));
+        }
+        // The same for a rename: its new name is in no file (unless another species
+        // had it already, which this cannot tell apart).
+        if let Some((from, to)) = opts
+            .convert
+            .species_names
+            .iter()
+            .find(|(_, to)| !seen.contains(to))
+        {
+            return Err(BatchError::Convert(ConvertError::UnknownRename(Box::new(
+                crate::species::UnknownRename {
+                    from: from.clone(),
+                    to: to.clone(),
+                    known: seen.into_iter().collect(),
+                    input: Some(describe_inputs(inputs)),
                 },
             ))));
         }

@@ -1343,6 +1343,19 @@ pub fn convert_chunked(
     // 2. Chunks.
     let t1 = Instant::now();
     let (names, species_map) = merge.finish();
+    // Renamed species (`--species-name`), merged where two take one name: the merged
+    // list's indices map on to the renamed list's.
+    if !options.radii_may_be_absent {
+        crate::species::check_renames(&names, &options.species_names)?;
+    }
+    let (names, species_map) = match crate::species::rename_species(&names, &options.species_names)
+    {
+        (renamed, Some(map)) => {
+            let composed = species_map.iter().map(|&i| map[usize::from(i)]).collect();
+            (renamed, composed)
+        }
+        (renamed, None) => (renamed, species_map),
+    };
     if !options.radii_may_be_absent {
         crate::species::check_overrides(&names, &options.radii)?;
     }

@@ -24,6 +24,11 @@ pub struct ConvertOptions {
     /// frames of a trajectory, where a species may appear in some frames only; false
     /// (the default) makes it an error listing the frame's species (a misspelt name).
     pub radii_may_be_absent: bool,
+    /// Species renamed (`--species-name 1=O`), input name to the file's, applied before
+    /// the radii and looks are chosen (so `radii` name species by their new names); two
+    /// species given one name become one. A name the input lacks is an error unless
+    /// `radii_may_be_absent`.
+    pub species_names: Vec<(String, String)>,
 }
 
 /// What a conversion built.
@@ -76,6 +81,9 @@ pub enum ConvertError {
     /// Boxed: the message's file and naming would make every conversion result large.
     #[error(transparent)]
     Species(#[from] Box<crate::species::UnknownSpecies>),
+    /// Boxed, as [`ConvertError::Species`].
+    #[error(transparent)]
+    UnknownRename(#[from] Box<crate::species::UnknownRename>),
     #[error("chunked conversion: {0}")]
     Chunked(String),
     /// A frame built in memory (within the chunk size) that needs more than the limit.
@@ -246,9 +254,13 @@ pub fn convert_frame(
         )));
     }
     if !options.radii_may_be_absent {
-        crate::species::check_overrides(&frame.species, &options.radii)?;
+        crate::species::check_renames(&frame.species, &options.species_names)?;
     }
-    check_radii(&frame.species, options, source.as_ref(), frame.timestep)?;
+    let (names, merged) = crate::species::rename_species(&frame.species, &options.species_names);
+    if !options.radii_may_be_absent {
+        crate::species::check_overrides(&names, &options.radii)?;
+    }
+    check_radii(&names, options, source.as_ref(), frame.timestep)?;
     if frame.len() > options.chunks.chunk_points {
         let metadata = base_metadata(frame, source, options);
         return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
@@ -256,10 +268,18 @@ pub fn convert_frame(
     check_in_memory(frame.len(), options, || {
         FramePlace::of(source.as_ref(), frame.timestep)
     })?;
-    let species = species_table(&frame.species, &options.radii);
+    let species = species_table(&names, &options.radii);
+    // Species merged by their new names: the particles' indices into the new list.
+    let merged_index: Option<Vec<u16>> = merged.map(|map| {
+        frame
+            .species_index
+            .iter()
+            .map(|&i| map.get(usize::from(i)).copied().unwrap_or(i))
+            .collect()
+    });
     let particles = Particles {
         positions: &frame.positions,
-        species_index: &frame.species_index,
+        species_index: merged_index.as_deref().unwrap_or(&frame.species_index),
         species: &species,
         attribute: frame.attribute.as_ref().map(|a| a.values.as_slice()),
     };
@@ -291,7 +311,7 @@ pub fn convert_frame(
         build_time,
         write_time,
         file_size,
-        notes: crate::species::radius_notes(&frame.species, &options.radii),
+        notes: crate::species::radius_notes(&names, &options.radii),
     })
 }
 
@@ -327,7 +347,10 @@ pub fn base_metadata(
         timestep: frame.timestep,
         time: frame.time,
         units: frame.units.clone(),
-        species: species_table(&frame.species, &options.radii),
+        species: species_table(
+            &crate::species::rename_species(&frame.species, &options.species_names).0,
+            &options.radii,
+        ),
         attribute: frame.attribute.as_ref().map(|a| AttributeInfo {
             name: a.name.clone(),
             min: 0.0,
@@ -580,7 +603,8 @@ pub fn convert_dump(
     let info = dump.frame_info(k).map_err(cut_short)?;
     // An override naming none of the species says how this input names them (a name
     // that cannot occur in it: what to write instead).
-    let naming = if options.radii.is_empty() {
+    // (Renamed species are named as the user chose, not as the input names them.)
+    let naming = if options.radii.is_empty() || !options.species_names.is_empty() {
         None
     } else {
         dump.species_naming(k, read).ok()
@@ -591,6 +615,12 @@ pub fn convert_dump(
                 input: Some(named.display().to_string()),
                 naming: naming.clone(),
                 ..*s
+            }))
+        }
+        ConvertError::UnknownRename(r) => {
+            ConvertError::UnknownRename(Box::new(crate::species::UnknownRename {
+                input: Some(named.display().to_string()),
+                ..*r
             }))
         }
         e => e,

@@ -267,7 +267,8 @@ impl SpeciesNaming {
             SpeciesNaming::TypeNumbers { first } if !is_type_number(name) => Some(format!(
                 "the input names its species by LAMMPS type number (its `type` column; it has \
                  no `element` column): give the type number instead, e.g. --radius \
-                 {first}={radius} for type {first}"
+                 {first}={radius} for type {first}, or name the type first: \
+                 --species-name {first}={name} --radius {name}={radius}"
             )),
             SpeciesNaming::ElementColumn { first, first_type } if is_type_number(name) => {
                 let example = match first_type {
@@ -352,6 +353,124 @@ pub fn radius_override(overrides: &[(String, f32)], name: &str) -> Option<f32> {
         .rev()
         .find(|(n, _)| n == name)
         .map(|(_, r)| *r)
+}
+
+/// Parses `FROM=TO` (`--species-name`): a species the input names `FROM` is called `TO`
+/// in the file (a LAMMPS type number its element symbol).
+pub fn parse_species_name(s: &str) -> Result<(String, String), String> {
+    let (from, to) = s
+        .split_once('=')
+        .ok_or_else(|| format!("expected NAME=NEW_NAME, e.g. 1=O, got {s:?}"))?;
+    let (from, to) = (from.trim(), to.trim());
+    if from.is_empty() || to.is_empty() {
+        return Err(format!("{s:?}: both names must be given, e.g. 1=O"));
+    }
+    if to
+        .chars()
+        .any(|c| c.is_whitespace() || c == '=' || c == ',')
+    {
+        return Err(format!(
+            "{s:?}: the new name {to:?} holds a space, `=` or `,` (a species name is one word)"
+        ));
+    }
+    if to.len() > MAX_NAME_LEN {
+        return Err(format!(
+            "{s:?}: the new name is {} bytes long (at most {MAX_NAME_LEN})",
+            to.len()
+        ));
+    }
+    Ok((from.to_string(), to.to_string()))
+}
+
+/// The longest name `--species-name` gives a species.
+const MAX_NAME_LEN: usize = 64;
+
+/// A `--species-name` naming none of the input's species.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "{}--species-name {from}={to}: no species named {from:?} (the input's species are named {})",
+    input.as_ref().map(|i| format!("{i}: ")).unwrap_or_default(),
+    known.join(", ")
+)]
+pub struct UnknownRename {
+    pub from: String,
+    pub to: String,
+    /// The input's species names.
+    pub known: Vec<String>,
+    /// The input (its path), when known.
+    pub input: Option<String>,
+}
+
+/// Checks that every `--species-name` names one of the input's species `names`.
+pub fn check_renames(
+    names: &[SpeciesName],
+    renames: &[(String, String)],
+) -> Result<(), Box<UnknownRename>> {
+    match renames
+        .iter()
+        .find(|(from, _)| !names.iter().any(|s| &s.name == from))
+    {
+        Some((from, to)) => Err(Box::new(UnknownRename {
+            from: from.clone(),
+            to: to.clone(),
+            known: names.iter().map(|s| s.name.clone()).collect(),
+            input: None,
+        })),
+        None => Ok(()),
+    }
+}
+
+/// The name `renames` give a species the input names `name` (the last one naming it
+/// wins), else its own.
+pub fn renamed<'a>(renames: &'a [(String, String)], name: &'a str) -> &'a str {
+    renames
+        .iter()
+        .rev()
+        .find(|(from, _)| from == name)
+        .map_or(name, |(_, to)| to.as_str())
+}
+
+/// The species list after `--species-name` renames (see [`renamed`]), and, where two
+/// species end with one name (types 1 and 3 both `O`) and are merged into the first, the
+/// map from each input species' index to its index in the new list (`None`: the list
+/// keeps its order and length, and indices are unchanged). A renamed species is no
+/// longer a numbered type but keeps its palette slot (its colour where the new name is
+/// no element), so a renamed list keeps the input's order; a merged species takes the
+/// first radius given and the union of the radius ranges.
+pub fn rename_species(
+    names: &[SpeciesName],
+    renames: &[(String, String)],
+) -> (Vec<SpeciesName>, Option<Vec<u16>>) {
+    if renames.is_empty() {
+        return (names.to_vec(), None);
+    }
+    let mut list: Vec<SpeciesName> = Vec::with_capacity(names.len());
+    let mut map = Vec::with_capacity(names.len());
+    for s in names {
+        let name = renamed(renames, &s.name);
+        let changed = name != s.name;
+        if let Some(k) = list.iter().position(|t| t.name == name) {
+            let known = &mut list[k];
+            known.numeric_type = false;
+            known.radius = known.radius.or(s.radius);
+            known.radius_range = match (known.radius_range, s.radius_range) {
+                (Some((a, b)), Some((c, d))) => Some((a.min(c), b.max(d))),
+                (a, b) => a.or(b),
+            };
+            known.colour = known.colour.or(s.colour);
+            map.push(k as u16);
+            continue;
+        }
+        let mut t = s.clone();
+        if changed {
+            t.name = name.to_string();
+            t.numeric_type = false;
+        }
+        map.push(list.len() as u16);
+        list.push(t);
+    }
+    let identity = list.len() == names.len();
+    (list, (!identity).then_some(map))
 }
 
 /// Parses `NAME=RADIUS`.
@@ -498,7 +617,7 @@ mod tests {
             "a.dump: --radius Cu=1.28: no species named \"Cu\" (the input's species are named \
              1, 2); the input names its species by LAMMPS type number (its `type` column; it \
              has no `element` column): give the type number instead, e.g. --radius 1=1.28 for \
-             type 1"
+             type 1, or name the type first: --species-name 1=Cu --radius Cu=1.28"
         );
         let element = SpeciesNaming::ElementColumn {
             first: "Cu".into(),
@@ -525,5 +644,93 @@ mod tests {
             ..Default::default()
         }];
         assert!(check_overrides(&cu, &[("cu".into(), 1.0)]).is_err());
+    }
+
+    fn numbered(types: &[&str]) -> Vec<SpeciesName> {
+        types
+            .iter()
+            .map(|t| SpeciesName {
+                name: (*t).into(),
+                numeric_type: true,
+                palette_slot: Some(t.parse::<usize>().unwrap() - 1),
+                ..Default::default()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn renamed_types_take_their_elements_looks_and_keep_the_order() {
+        let names = numbered(&["1", "2", "3"]);
+        let renames = vec![("1".to_string(), "O".to_string()), ("2".into(), "H".into())];
+        let (list, map) = rename_species(&names, &renames);
+        assert!(map.is_none(), "nothing merged: indices unchanged");
+        let got: Vec<_> = list.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(got, ["O", "H", "3"]);
+        assert!(!list[0].numeric_type && !list[1].numeric_type && list[2].numeric_type);
+        let table = species_table(&list, &[]);
+        let (o_radius, o_colour) = element("O").unwrap();
+        assert_eq!((table[0].radius, table[0].colour), (o_radius, o_colour));
+        assert_eq!(table[1].radius, element("H").unwrap().0);
+        // The unrenamed type keeps the palette colour of its number.
+        assert_eq!(table[2].colour, srgb_to_linear(PALETTE[2]));
+        assert_eq!(table[2].radius, DEFAULT_RADIUS);
+        // Overrides name the new names.
+        let table = species_table(&list, &[("O".into(), 1.7)]);
+        assert_eq!(table[0].radius, 1.7);
+        // No renames: the list as it was.
+        assert_eq!(rename_species(&names, &[]), (names.clone(), None));
+    }
+
+    #[test]
+    fn two_types_given_one_name_are_merged_into_the_first() {
+        let mut names = numbered(&["1", "2", "3", "4"]);
+        names[2].radius = Some(0.7);
+        names[1].radius_range = Some((0.5, 0.6));
+        names[3].radius_range = Some((0.4, 0.55));
+        let renames = vec![
+            ("1".to_string(), "O".to_string()),
+            ("3".into(), "O".into()),
+            ("2".into(), "X".into()),
+            ("4".into(), "X".into()),
+        ];
+        let (list, map) = rename_species(&names, &renames);
+        let got: Vec<_> = list.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(got, ["O", "X"]);
+        assert_eq!(map, Some(vec![0, 1, 0, 1]));
+        assert_eq!(list[0].radius, Some(0.7), "the radius type 3 gives");
+        assert_eq!(list[1].radius_range, Some((0.4, 0.6)));
+        // A type renamed to another's number joins it.
+        let (list, map) = rename_species(&numbered(&["1", "2"]), &[("2".into(), "1".into())]);
+        assert_eq!(list.len(), 1);
+        assert!(!list[0].numeric_type);
+        assert_eq!(map, Some(vec![0, 0]));
+        // The last rename of a name wins.
+        assert_eq!(
+            renamed(&[("1".into(), "N".into()), ("1".into(), "O".into())], "1"),
+            "O"
+        );
+    }
+
+    #[test]
+    fn species_names_are_parsed_and_checked() {
+        assert_eq!(
+            parse_species_name(" 1 = O ").unwrap(),
+            ("1".to_string(), "O".to_string())
+        );
+        for bad in ["1", "=O", "1=", "1=O H", "1=a=b", "1=O,H"] {
+            assert!(parse_species_name(bad).is_err(), "{bad}");
+        }
+        assert!(parse_species_name(&format!("1={}", "x".repeat(65))).is_err());
+        let names = numbered(&["1", "2"]);
+        assert!(check_renames(&names, &[("2".into(), "H".into())]).is_ok());
+        let e = UnknownRename {
+            input: Some("water.dump".into()),
+            ..*check_renames(&names, &[("OW".into(), "O".into())]).unwrap_err()
+        };
+        assert_eq!(
+            e.to_string(),
+            "water.dump: --species-name OW=O: no species named \"OW\" (the input's species \
+             are named 1, 2)"
+        );
     }
 }

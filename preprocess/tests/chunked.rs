@@ -30,6 +30,7 @@ fn options(chunk_points: usize) -> ConvertOptions {
         },
         // Some inputs here have no type 1.
         radii_may_be_absent: true,
+        species_names: Vec::new(),
     }
 }
 
@@ -186,6 +187,86 @@ fn mixed_numeric_and_named_species_keep_the_whole_frame_order_in_windows() {
         .map(|s| s.name.as_str())
         .collect();
     assert_eq!(names, ["2", "1", "O"]);
+}
+
+/// `--species-name` renames and merges species the same way whether the frame is built
+/// whole, in chunks from memory, or in chunks read a window at a time: types 1 and 3
+/// become one species `Cu` with copper's looks, type 2 `Ag`.
+#[test]
+fn renamed_and_merged_species_are_the_same_whole_chunked_and_streamed() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1000;
+    let mut text = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n\
+         0 10\nITEM: ATOMS id type x y z\n"
+    );
+    let mut types = Vec::new();
+    for i in 0..n {
+        // Type 3 only from the second window on, type 2 before type 1 in each.
+        let t = if i >= 400 && i % 5 == 0 { 3 } else { 2 - i % 2 };
+        types.push(t);
+        let (x, y, z) = (i % 10, (i / 10) % 10, i / 100);
+        text.push_str(&format!("{} {t} {x}.25 {y}.5 {z}.75\n", i + 1));
+    }
+    let path = dir.path().join("alloy.lammpstrj");
+    std::fs::write(&path, text).unwrap();
+    let mut opts = options(300);
+    opts.radii = vec![("Ag".into(), 1.6)];
+    opts.radii_may_be_absent = false;
+    opts.species_names = vec![
+        ("1".into(), "Cu".into()),
+        ("3".into(), "Cu".into()),
+        ("2".into(), "Ag".into()),
+    ];
+    let read = ReadOptions::default();
+    let streamed = dir.path().join("streamed.mdlod");
+    convert_file(
+        &path,
+        &streamed,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    let frame = dump.read_frame(0, &read, &NoProgress).unwrap();
+    let chunked = dir.path().join("chunked.mdlod");
+    let source = || Some(source_info(&path, 0));
+    convert_frame(&frame, source(), &chunked, &opts, &NoProgress).unwrap();
+    assert!(
+        std::fs::read(&streamed).unwrap() == std::fs::read(&chunked).unwrap(),
+        "streamed and in-memory chunked files differ"
+    );
+    let mut whole_opts = opts.clone();
+    whole_opts.chunks.chunk_points = 1 << 20;
+    let whole = dir.path().join("whole.mdlod");
+    convert_frame(&frame, source(), &whole, &whole_opts, &NoProgress).unwrap();
+    let cu = mdlod_preprocess::species::element("Cu").unwrap();
+    let want_cu = types.iter().filter(|&&t| t != 2).count();
+    for p in [&streamed, &whole] {
+        let f = MdlodFile::open(p).unwrap();
+        f.verify().unwrap();
+        let species = &f.metadata().species;
+        let names: Vec<&str> = species.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["Cu", "Ag"], "{}", p.display());
+        assert_eq!((species[0].radius, species[0].colour), cu);
+        assert_eq!(species[1].radius, 1.6);
+        let copper = f.species().iter().filter(|&&s| s == 0).count();
+        assert_eq!(copper, want_cu, "{}", p.display());
+        assert_eq!(f.species().len(), n);
+    }
+    // A name the input lacks is an error that lists its species.
+    let mut bad = whole_opts.clone();
+    bad.species_names.push(("4".into(), "O".into()));
+    let e = convert_file(&path, &whole, FrameSelect::Last, &read, &bad, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("alloy.lammpstrj: --species-name 4=O: no species named \"4\"")
+            && e.contains("named 1, 2, 3"),
+        "{e}"
+    );
 }
 
 #[test]

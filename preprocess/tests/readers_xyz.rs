@@ -263,26 +263,30 @@ fn species_are_ordered_as_lammps_text_orders_them() {
     write_lammps_dump(&opts, &mut std::fs::File::create(&lammps).unwrap(), |_| {}).unwrap();
     let (x, l) = (read_k(&xyz, 0, None), read_k(&lammps, 0, None));
     assert_eq!(l.species_index[0], 1, "the data starts with type 2");
-    // The same species, in the same order (LAMMPS type numbers also keep their palette
-    // slots, which XYZ numbers, possibly atomic numbers or from 0, do not).
-    let plain = |f: &mdlod_preprocess::Frame| -> Vec<(String, bool)> {
+    // The same species, in the same order, with the same palette slots.
+    let plain = |f: &mdlod_preprocess::Frame| -> Vec<(String, bool, Option<usize>)> {
         f.species
             .iter()
-            .map(|s| (s.name.clone(), s.numeric_type))
+            .map(|s| (s.name.clone(), s.numeric_type, s.palette_slot))
             .collect()
     };
     assert_eq!(plain(&x), plain(&l));
     assert_eq!(x.species_index, l.species_index);
 }
 
-/// XYZ numbers take palette colours by their place, not as LAMMPS type numbers: species
-/// 0 and 1 (0-based), or atomic numbers 1 and 11, stay apart.
+/// XYZ numbers that are no type numbers take palette colours by their place: species 0
+/// and 1 (0-based), or atomic numbers 1 and 11 (`Z:I:1`), stay apart.
 #[test]
 fn numeric_xyz_species_take_distinct_palette_colours() {
     let dir = tempfile::tempdir().unwrap();
-    for (a, b) in [("0", "1"), ("1", "11")] {
-        let text = format!("2\nnumbers\n{a} 0 0 0\n{b} 1 0 0\n");
+    for (a, b, properties) in [("0", "1", "numbers"), ("1", "11", "Properties=pos:R:3:Z:I:1")] {
+        let text = if properties == "numbers" {
+            format!("2\n{properties}\n{a} 0 0 0\n{b} 1 0 0\n")
+        } else {
+            format!("2\n{properties}\n0 0 0 {a}\n1 0 0 {b}\n")
+        };
         let f = read_k(&write(dir.path(), &format!("n{a}{b}.xyz"), &text), 0, None);
+        assert!(f.species.iter().all(|s| s.palette_slot.is_none()), "{a} and {b}");
         let table = mdlod_preprocess::species::species_table(&f.species, &[]);
         assert_ne!(table[0].colour, table[1].colour, "{a} and {b}");
     }
@@ -319,5 +323,83 @@ fn properties_without_positions_say_what_names_them() {
             e.contains("bad.xyz:2:") && e.contains("names no positions") && e.contains("`pos:R:3`"),
             "{e}"
         );
+    }
+}
+
+/// A plain XYZ comment line is free text: CP2K's `i = 0, time = 0.000, E = ...` gives
+/// time 0 (its comma ends the value), and another tool's `time=1.5fs` or `step 5` is no
+/// time or timestep, not an error.
+#[test]
+fn free_text_comment_lines_do_not_stop_a_conversion() {
+    let dir = tempfile::tempdir().unwrap();
+    let cp2k = "2\n i =        0, time =        0.000, E =       -17.1643)\n\
+                O 0 0 0\nH 1 0 0\n\
+                2\n i =        1, time =        0.500, E =       -17.1650\n\
+                O 0 0 1\nH 1 0 1\n";
+    let path = write(dir.path(), "cp2k.xyz", cp2k);
+    let f = read_k(&path, 0, None);
+    assert_eq!((f.time, f.len()), (Some(0.0), 2));
+    assert_eq!(read_k(&path, 1, None).time, Some(0.5));
+
+    let other = "1\nMD step 5 time=1.5fs\nAr 0 0 0\n1\nMD step = 6, time = 2fs\nAr 0 0 1\n";
+    let path = write(dir.path(), "other.xyz", other);
+    let dump = DumpFile::open(&path).unwrap();
+    // `step 5` is no `step=` (and no LAMMPS `Timestep:`); CP2K-style `step = 6,` is.
+    assert_eq!(dump.frame_timestep(0), None);
+    assert_eq!(dump.frame_timestep(1), Some(6));
+    let f = read_k(&path, 0, None);
+    assert_eq!((f.time, f.timestep, f.len()), (None, None, 1));
+    let f = read_k(&path, 1, None);
+    assert_eq!((f.time, f.timestep), (None, Some(6)));
+}
+
+/// In extended XYZ (`Properties=`) the comment line is `key=value` pairs: a `Time` that is
+/// no number is an error naming the key as the file spells it.
+#[test]
+fn extended_xyz_refuses_a_time_that_is_no_number_naming_its_key() {
+    let dir = tempfile::tempdir().unwrap();
+    for key in ["time", "Time", "TIME"] {
+        let text = format!("1\nProperties=species:S:1:pos:R:3 {key}=1.5fs\nAr 0 0 0\n");
+        let path = write(dir.path(), "ext.xyz", &text);
+        let e = DumpFile::open(&path)
+            .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
+            .err()
+            .expect("a non-numeric time read")
+            .to_string();
+        assert!(
+            e.contains("ext.xyz:2:") && e.contains(&format!("`{key}` is not a number: `1.5fs`")),
+            "{e}"
+        );
+    }
+    // A number is a time, with or without a trailing comma.
+    let text = "1\nProperties=species:S:1:pos:R:3 Time=2.5, Timestep=7,\nAr 0 0 0\n";
+    let f = read_k(&write(dir.path(), "ok.xyz", text), 0, None);
+    assert_eq!((f.time, f.timestep), (Some(2.5), Some(7)));
+}
+
+/// Numbered XYZ species take the palette colours LAMMPS gives the same type numbers
+/// (type `n`: the `n`-th colour), so that the same data looks the same in either format.
+#[test]
+fn numbered_xyz_species_take_the_colours_of_the_same_lammps_types() {
+    use mdlod_preprocess::species::species_table;
+    let dir = tempfile::tempdir().unwrap();
+    let lammps = "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n3\n\
+                  ITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n0 10\n\
+                  ITEM: ATOMS id type x y z\n1 6 0 0 0\n2 1 1 0 0\n3 8 0 1 0\n";
+    let l = read_k(&write(dir.path(), "d.lammpstrj", lammps), 0, None);
+    let plain = "3\ntypes\n6 0 0 0\n1 1 0 0\n8 0 1 0\n";
+    let extended = "3\nProperties=species:S:1:pos:R:3\n6 0 0 0\n1 1 0 0\n8 0 1 0\n";
+    let colours = |f: &Frame| -> Vec<(String, [f32; 3])> {
+        species_table(&f.species, &[])
+            .into_iter()
+            .map(|s| (s.name, s.colour))
+            .collect()
+    };
+    let expected = colours(&l);
+    assert_eq!(expected.len(), 3);
+    for (name, text) in [("p.xyz", plain), ("e.xyz", extended)] {
+        let x = read_k(&write(dir.path(), name, text), 0, None);
+        assert_eq!(colours(&x), expected, "{name}");
+        assert_eq!(x.species, l.species, "{name}");
     }
 }

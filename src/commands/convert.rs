@@ -7,7 +7,7 @@ use mdlod_preprocess::chunked::ChunkOptions;
 use mdlod_preprocess::convert::{convert_file, ConvertOptions, ConvertReport, FrameSelect};
 use mdlod_preprocess::hierarchy::BuildParams;
 use mdlod_preprocess::readers::ReadOptions;
-use mdlod_preprocess::species::parse_radius_override;
+use mdlod_preprocess::species::{parse_radius_override, parse_species_name};
 
 use crate::progress::Bar;
 
@@ -16,7 +16,7 @@ use crate::progress::Bar;
 /// level-of-detail .mdlod file.
 #[derive(clap::Args)]
 #[command(
-    after_help = "Example:\n  mdlod convert dump.lammpstrj.gz -o frame.mdlod --last --radius Cu=1.28 --attribute c_pe"
+    after_help = "Example:\n  mdlod convert dump.lammpstrj.gz -o frame.mdlod --last --radius Cu=1.28 --attribute c_pe\n  mdlod convert water.dump -o water.mdlod --species-name 1=O --species-name 2=H"
 )]
 pub struct Args {
     /// The dump to read.
@@ -48,9 +48,16 @@ pub struct Args {
 pub struct BuildArgs {
     /// Radius of a species, NAME=RADIUS, the species named as the input names it: by
     /// element symbol where a LAMMPS dump has an `element` column, else by type number
-    /// (XYZ: its species column; GSD: type name); repeatable.
+    /// (XYZ: its species column; GSD: type name), or by the name --species-name gives it;
+    /// repeatable.
     #[arg(long = "radius", value_name = "NAME=R", value_parser = parse_radius_override)]
     pub radii: Vec<(String, f32)>,
+    /// Give a species another name, NAME=NEW: a LAMMPS type number its element (`1=O`,
+    /// `2=H`), so that it is drawn with the element's radius and colour and named by it
+    /// everywhere (--radius, and render's --species-colour and --hide-species, take the
+    /// new name); two species given one name become one (`1=O` with `3=O`); repeatable.
+    #[arg(long = "species-name", value_name = "NAME=NEW", value_parser = parse_species_name)]
+    pub species_names: Vec<(String, String)>,
     /// Dump column to keep as the per-particle scalar attribute.
     #[arg(long)]
     pub attribute: Option<String>,
@@ -120,6 +127,7 @@ impl BuildArgs {
                 ..ChunkOptions::default()
             },
             radii_may_be_absent: false,
+            species_names: self.species_names.clone(),
         };
         let read = ReadOptions {
             attribute: self.attribute.clone(),

@@ -42,6 +42,7 @@ pub fn run(args: Args) -> Result<()> {
         build: super::convert::BuildArgs {
             // The generator writes copper as LAMMPS type 1.
             radii: vec![("1".into(), 1.28)],
+            species_names: Vec::new(),
             attribute: Some(Kind::Crater.extra_column().to_string()),
             columns: None,
             precision: super::convert::Precision::U16,
