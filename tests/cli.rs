@@ -373,6 +373,38 @@ fn render_writes_a_picture_and_views_round_trip() {
     let text = from_view(&c, &["--gpu-memory", "16M"]);
     assert!(text.contains("first image after"), "{text}");
     assert_eq!(read_png(&a).2, read_png(&c).2);
+
+    // Angles given with --view replace the saved ones: the same image as the orbit at
+    // those angles (the fitted distance does not depend on them).
+    let d = dir.path().join("d.png");
+    from_view(&d, &["--azimuth", "50", "--elevation", "10"]);
+    let e = dir.path().join("e.png");
+    let mut args = vec!["render", s(&file), "-o", s(&e), "--azimuth", "50"];
+    args.extend(["--elevation", "10", "--width", "160", "--height", "120"]);
+    args.extend(["--spp", "2", "--background", "#000000"]);
+    ok(&args);
+    assert_eq!(read_png(&d).2, read_png(&e).2);
+    assert_ne!(read_png(&a).2, read_png(&d).2);
+    let err = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&d),
+        "--view",
+        s(&view),
+        "--elevation",
+        "100",
+    ]);
+    assert!(err.contains("elevation_deg 100"), "{err}");
+    // A field this version does not read (a misspelt one) is named, not silently lost.
+    let typo = dir.path().join("typo.json");
+    std::fs::write(&typo, r#"{"version": 1, "azimuth": 90}"#).unwrap();
+    let out = mdlod(&["render", s(&file), "-o", s(&d), "--view", s(&typo)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && err.contains("field \"azimuth\" is not one this mdlod reads"),
+        "{err}"
+    );
 }
 
 /// The LAMMPS sample `name` converted to `dir/a.mdlod`.

@@ -80,8 +80,28 @@ pub enum ViewSpec {
     },
     /// A JSON view file (see [`view`]).
     File(PathBuf),
+    /// A JSON view file with some of its settings changed (the command line's
+    /// `--view v.json --azimuth 60`).
+    FileWith(PathBuf, ViewChanges),
     /// An explicit camera (its near/far planes are refitted to the data).
     Camera(Camera),
+}
+
+/// Changes to a view file's camera: angles replace the file's, a zoom multiplies its
+/// zoom (2: twice as close as the view saved), `orthographic` switches the projection.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ViewChanges {
+    pub azimuth_deg: Option<f32>,
+    pub elevation_deg: Option<f32>,
+    pub zoom: Option<f32>,
+    pub orthographic: bool,
+}
+
+impl ViewChanges {
+    /// Whether anything changes.
+    pub fn is_empty(&self) -> bool {
+        *self == ViewChanges::default()
+    }
 }
 
 impl Default for ViewSpec {
@@ -398,6 +418,33 @@ fn camera_in(
         }
         ViewSpec::File(path) => {
             let c = ViewFile::load(path)?.to_camera(&bounds, aspect);
+            check_built_camera(&c).map_err(|message| RenderError::View {
+                path: path.clone(),
+                message,
+            })?;
+            c
+        }
+        ViewSpec::FileWith(path, changes) => {
+            let mut v = ViewFile::load(path)?;
+            let base = v.clone();
+            if let Some(a) = changes.azimuth_deg {
+                v.azimuth_deg = a;
+            }
+            if let Some(e) = changes.elevation_deg {
+                v.elevation_deg = e;
+            }
+            if let Some(z) = changes.zoom {
+                v.zoom *= z;
+            }
+            if changes.orthographic {
+                v.projection = Projection::Orthographic;
+            }
+            if v != base {
+                v.check().map_err(|e| {
+                    RenderError::InvalidOptions(format!("{} changed: {e}", path.display()))
+                })?;
+            }
+            let c = v.to_camera(&bounds, aspect);
             check_built_camera(&c).map_err(|message| RenderError::View {
                 path: path.clone(),
                 message,

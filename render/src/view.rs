@@ -7,8 +7,10 @@
 //!
 //! Only `version` is required. A file without `target` or `distance` is fitted to the
 //! data's bounds; `zoom` then moves closer (2 is twice as close as the fit, or as
-//! `distance`: a saved view, whose zoom is 1, is zoomed by editing it). Unknown
-//! fields are ignored, so later minor versions may add some; a file of another major
+//! `distance`: a saved view, whose zoom is 1, is zoomed by editing it, or by `--zoom`
+//! with `--view`). Unknown
+//! fields are ignored, so later minor versions may add some (the command line names
+//! them, in case one is misspelt); a file of another major
 //! version is refused with a message naming both. Near and far planes are not stored:
 //! they are recomputed from the data's bounds.
 
@@ -84,6 +86,32 @@ impl ViewFile {
         })
     }
 
+    /// The fields this version reads.
+    pub const FIELDS: [&'static str; 8] = [
+        "version",
+        "projection",
+        "azimuth_deg",
+        "elevation_deg",
+        "target",
+        "distance",
+        "zoom",
+        "fov_y_deg",
+    ];
+
+    /// The fields of view-file JSON that this version does not read (ignored: a later
+    /// minor version's, or misspelt ones, which the user should hear about); empty when
+    /// the text is no JSON object.
+    pub fn unknown_fields(text: &str) -> Vec<String> {
+        match serde_json::from_str::<serde_json::Value>(text) {
+            Ok(serde_json::Value::Object(map)) => map
+                .keys()
+                .filter(|k| !Self::FIELDS.contains(&k.as_str()))
+                .cloned()
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+
     /// Parses and checks view-file JSON; the error says what is wrong.
     pub fn parse(text: &str) -> Result<ViewFile, String> {
         let v: ViewFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
@@ -91,7 +119,8 @@ impl ViewFile {
         Ok(v)
     }
 
-    fn check(&self) -> Result<(), String> {
+    /// Checks the numbers: the version, finite values, angles and distances in range.
+    pub fn check(&self) -> Result<(), String> {
         if self.version != VIEW_VERSION {
             return Err(format!(
                 "version {} (this mdlod reads view files of version {VIEW_VERSION})",
@@ -237,7 +266,10 @@ mod tests {
 
     #[test]
     fn minimal_file_fits_and_zooms() {
-        let v = ViewFile::parse(r#"{"version": 1, "zoom": 2, "future_field": true}"#).unwrap();
+        let text = r#"{"version": 1, "zoom": 2, "future_field": true, "azimuth": 3}"#;
+        let v = ViewFile::parse(text).unwrap();
+        assert_eq!(ViewFile::unknown_fields(text), ["azimuth", "future_field"]);
+        assert!(ViewFile::unknown_fields(&serde_json::to_string(&v).unwrap()).is_empty());
         let b = Bounds::new([0.0; 3], [10.0; 3]);
         let fitted = ViewFile::parse(r#"{"version": 1}"#)
             .unwrap()

@@ -181,7 +181,7 @@ pub fn run(args: Args) -> Result<()> {
 
 /// The inputs with file-name patterns (`dump.*.bin`) expanded where the shell left
 /// them (quoted in a job script): `*` and `?` in the last component, matching files of
-/// its directory, in name order. A path that exists is taken as it is.
+/// its directory, in natural order (see [`natural_cmp`]). A path that exists is taken as it is.
 fn expand_patterns(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::with_capacity(inputs.len());
     for input in inputs {
@@ -211,7 +211,7 @@ fn expand_patterns(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         if found.is_empty() {
             bail!("{}: no file matches the pattern", input.display());
         }
-        found.sort();
+        found.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
         out.extend(found);
     }
     Ok(out)
@@ -242,8 +242,47 @@ fn wildcard(pattern: &str, name: &str) -> bool {
     p[i..].iter().all(|&c| c == '*')
 }
 
+/// Orders paths as people number file sets: runs of digits by their value, so that
+/// `water.2.xyz` comes before `water.10.xyz` (the shell's order puts it after), the rest
+/// character by character.
+fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
+    let (mut a, mut b) = (a.as_bytes(), b.as_bytes());
+    loop {
+        match (a.first(), b.first()) {
+            (None, None) => return std::cmp::Ordering::Equal,
+            (None, Some(_)) => return std::cmp::Ordering::Less,
+            (Some(_), None) => return std::cmp::Ordering::Greater,
+            (Some(x), Some(y)) if x.is_ascii_digit() && y.is_ascii_digit() => {
+                let run = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
+                let (na, nb) = (run(a), run(b));
+                let trim = |s: &[u8]| -> usize { s.iter().take_while(|&&c| c == b'0').count() };
+                let (da, db) = (&a[trim(&a[..na]).min(na)..na], &b[trim(&b[..nb]).min(nb)..nb]);
+                // By value (length, then digits), then by the zeros in front (`01` after `1`).
+                let order = da
+                    .len()
+                    .cmp(&db.len())
+                    .then_with(|| da.cmp(db))
+                    .then_with(|| na.cmp(&nb));
+                if order != std::cmp::Ordering::Equal {
+                    return order;
+                }
+                (a, b) = (&a[na..], &b[nb..]);
+            }
+            (Some(x), Some(y)) => {
+                if x != y {
+                    return x.cmp(y);
+                }
+                (a, b) = (&a[1..], &b[1..]);
+            }
+        }
+    }
+}
+
 fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> Result<()> {
-    let inputs = expand_patterns(&args.inputs)?;
+    let mut inputs = expand_patterns(&args.inputs)?;
+    // Frames without timesteps are numbered by their input's place in the list: a file
+    // set the shell expanded (`water.1 water.10 water.2`) goes in its numbers' order.
+    inputs.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
     super::check_batch_output(out, &inputs)?;
     args.build.check()?;
     let (mut convert, read) = args.build.options();
@@ -371,6 +410,12 @@ mod tests {
             .map(|p| p.file_name().unwrap().to_owned())
             .collect();
         assert_eq!(names, ["dump.10.bin", "dump.20.bin"]);
+        let mut set = vec!["w.10.xyz", "w.2.xyz", "w.1.xyz", "w.02.xyz", "v.xyz", "w.1a.xyz"];
+        set.sort_by(|a, b| super::natural_cmp(a, b));
+        assert_eq!(
+            set,
+            ["v.xyz", "w.1.xyz", "w.1a.xyz", "w.2.xyz", "w.02.xyz", "w.10.xyz"]
+        );
         let e = super::expand_patterns(&[dir.path().join("none.*")]).unwrap_err();
         assert!(e.to_string().contains("no file matches"), "{e}");
         let e = super::expand_patterns(&[dir.path().join("dump.[12]*.bin")]).unwrap_err();

@@ -238,18 +238,22 @@ pub struct ViewArgs {
     /// Image height, pixels.
     #[arg(long, default_value_t = 720)]
     pub height: u32,
-    /// A JSON view file (as written by --save-view).
-    #[arg(long, conflicts_with_all = ["azimuth", "elevation", "zoom", "ortho"])]
+    /// A JSON view file (as written by --save-view); --azimuth, --elevation, --zoom and
+    /// --ortho given with it change the saved view.
+    #[arg(long)]
     pub view: Option<PathBuf>,
-    /// Orbit angle around the vertical axis, degrees.
-    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
-    pub azimuth: f32,
-    /// Angle above the horizontal, degrees.
-    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
-    pub elevation: f32,
-    /// 1 fits the data; 2 is twice as close.
-    #[arg(long, default_value_t = 1.0)]
-    pub zoom: f32,
+    /// Orbit angle around the vertical axis (z), degrees [default: 30; with --view, the
+    /// file's].
+    #[arg(long, allow_negative_numbers = true)]
+    pub azimuth: Option<f32>,
+    /// Angle above the horizontal (the x-y plane), degrees [default: 20; with --view, the
+    /// file's].
+    #[arg(long, allow_negative_numbers = true)]
+    pub elevation: Option<f32>,
+    /// 1 fits the data; 2 is twice as close (with --view: twice as close as the saved
+    /// view) [default: 1].
+    #[arg(long)]
+    pub zoom: Option<f32>,
     /// Orthographic instead of perspective projection.
     #[arg(long)]
     pub ortho: bool,
@@ -267,13 +271,37 @@ impl ViewArgs {
             .collect()
     }
 
+    /// Says which fields of the view file this version does not read (a misspelt
+    /// `azimuth` would otherwise leave the default angle without a word).
+    pub fn note_unknown_fields(&self) {
+        let Some(path) = &self.view else { return };
+        let Ok(text) = std::fs::read_to_string(path) else {
+            return; // (The render says why it cannot read it.)
+        };
+        for field in ViewFile::unknown_fields(&text) {
+            eprintln!(
+                "note: {}: field {field:?} is not one this mdlod reads, ignored (a view file \
+                 has {})",
+                path.display(),
+                ViewFile::FIELDS.join(", ")
+            );
+        }
+    }
+
     pub fn spec(&self) -> ViewSpec {
+        let changes = mdlod_render::ViewChanges {
+            azimuth_deg: self.azimuth,
+            elevation_deg: self.elevation,
+            zoom: self.zoom,
+            orthographic: self.ortho,
+        };
         match &self.view {
-            Some(p) => ViewSpec::File(p.clone()),
+            Some(p) if changes.is_empty() => ViewSpec::File(p.clone()),
+            Some(p) => ViewSpec::FileWith(p.clone(), changes),
             None => ViewSpec::Orbit {
-                azimuth_deg: self.azimuth,
-                elevation_deg: self.elevation,
-                zoom: self.zoom,
+                azimuth_deg: self.azimuth.unwrap_or(30.0),
+                elevation_deg: self.elevation.unwrap_or(20.0),
+                zoom: self.zoom.unwrap_or(1.0),
                 projection: if self.ortho {
                     Projection::Orthographic
                 } else {
@@ -450,6 +478,7 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    args.camera.note_unknown_fields();
     let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
     super::check_png_name("-o", &args.output)?;

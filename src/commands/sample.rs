@@ -65,7 +65,10 @@ pub fn run(args: Args) -> Result<()> {
     let opts = RenderOptions {
         width: args.camera.width,
         height: args.camera.height,
-        view: args.camera.spec(),
+        view: {
+            args.camera.note_unknown_fields();
+            args.camera.spec()
+        },
         error_px: args.screen_error,
         budget: args.budget,
         mode: RenderMode::Sndf {
