@@ -2959,3 +2959,63 @@ fn species_names_give_numbered_types_their_elements() {
     let err = fails(&args);
     assert!(err.contains("--species-name 7=O"), "{err}");
 }
+
+/// Inputs no reader can index and outputs a conversion must not replace are refused
+/// before anything is read or written.
+#[test]
+fn convert_refuses_streams_and_replacing_other_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    // A PNG (or any file that is no .mdlod file) named as the output stays as it was.
+    let png = dir.path().join("picture.png");
+    std::fs::write(&png, b"\x89PNG\r\n\x1a\n not really").unwrap();
+    let err = fails(&["convert", s(&input), "-o", s(&png)]);
+    assert!(
+        err.contains("picture.png: exists and is no .mdlod file"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(&png).unwrap(),
+        b"\x89PNG\r\n\x1a\n not really"
+    );
+    // An earlier .mdlod file is replaced.
+    let out = dir.path().join("a.mdlod");
+    ok(&["convert", s(&input), "-o", s(&out)]);
+    ok(&["convert", s(&input), "-o", s(&out), "--frame", "0"]);
+    // Standard input and pipes: the reader would see an empty file.
+    let err = fails(&["convert", "-", "-o", s(&out)]);
+    assert!(err.contains("standard input is not supported"), "{err}");
+    let fifo = dir.path().join("pipe.lammpstrj");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|st| st.success()) {
+        let err = fails(&["convert", s(&fifo), "-o", s(&out)]);
+        assert!(err.contains("is a pipe or device, not a file"), "{err}");
+        let err = fails(&["batch", s(&fifo), "-o", s(&dir.path().join("d"))]);
+        assert!(err.contains("is a pipe or device, not a file"), "{err}");
+    }
+}
+
+/// A memory limit below what one chunk needs says both ways out: the limit a chunk
+/// needs, and the chunk size within the limit (which then converts).
+#[test]
+fn a_limit_below_a_chunk_names_the_chunk_size_that_fits() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "20000"], &input);
+    let out = dir.path().join("c.mdlod");
+    let args = |chunk: &'static str| {
+        let mut a = vec!["convert", s(&input), "-o", s(&out)];
+        a.extend(["--memory-limit", "65M", "--chunk-points", chunk]);
+        a
+    };
+    let err = fails(&args("10000"));
+    let fit = err
+        .split("lower --chunk-points to ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(err.contains("raise --memory-limit to at least"), "{err}");
+    let fit: &'static str = Box::leak(fit.to_string().into_boxed_str());
+    ok(&args(fit));
+    assert_eq!(MdlodFile::open(&out).unwrap().particle_count(), 20000);
+}

@@ -212,6 +212,14 @@ pub fn chunk_memory(points: usize) -> u64 {
     points as u64 * BUILD_BYTES_PER_PARTICLE + (64 << 20)
 }
 
+/// The most particles a chunk may hold for [`chunk_memory`] to stay within `limit`.
+fn chunk_points_within(limit: u64) -> Option<usize> {
+    let room = limit.checked_sub(64 << 20)?;
+    usize::try_from(room / BUILD_BYTES_PER_PARTICLE)
+        .ok()
+        .filter(|&p| p > 0)
+}
+
 /// A size for a message: bytes below a MiB (a limit of `1K` is not "0 MiB"), else MiB.
 pub(crate) fn size_text(bytes: u64) -> String {
     if bytes < 1 << 20 {
@@ -1374,9 +1382,17 @@ pub fn convert_chunked(
     let need = chunk_memory(largest);
     if need > chunk.memory_limit {
         return Err(ConvertError::Chunked(format!(
-            "the memory limit of {} is below the {} one chunk of {largest} particles needs",
+            "the memory limit of {} is below the {} one chunk of {largest} particles needs: \
+             raise --memory-limit to at least {}{}",
             size_text(chunk.memory_limit),
-            size_text(need)
+            size_text(need),
+            size_text(need),
+            match chunk_points_within(chunk.memory_limit) {
+                Some(points) if points >= params.max_root_points as usize => format!(
+                    ", or lower --chunk-points to {points} or less (chunks within the limit)"
+                ),
+                _ => String::new(),
+            }
         )));
     }
     let jobs = ((chunk.memory_limit / need) as usize).clamp(1, rayon::current_num_threads());

@@ -256,7 +256,10 @@ fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
                 let run = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
                 let (na, nb) = (run(a), run(b));
                 let trim = |s: &[u8]| -> usize { s.iter().take_while(|&&c| c == b'0').count() };
-                let (da, db) = (&a[trim(&a[..na]).min(na)..na], &b[trim(&b[..nb]).min(nb)..nb]);
+                let (da, db) = (
+                    &a[trim(&a[..na]).min(na)..na],
+                    &b[trim(&b[..nb]).min(nb)..nb],
+                );
                 // By value (length, then digits), then by the zeros in front (`01` after `1`).
                 let order = da
                     .len()
@@ -283,6 +286,9 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     // Frames without timesteps are numbered by their input's place in the list: a file
     // set the shell expanded (`water.1 water.10 water.2`) goes in its numbers' order.
     inputs.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
+    for input in &inputs {
+        super::check_input_file(input)?;
+    }
     super::check_batch_output(out, &inputs)?;
     args.build.check()?;
     let (mut convert, read) = args.build.options();
@@ -410,7 +416,9 @@ mod tests {
             .map(|p| p.file_name().unwrap().to_owned())
             .collect();
         assert_eq!(names, ["dump.10.bin", "dump.20.bin"]);
-        let mut set = vec!["w.10.xyz", "w.2.xyz", "w.1.xyz", "w.02.xyz", "v.xyz", "w.1a.xyz"];
+        let mut set = vec![
+            "w.10.xyz", "w.2.xyz", "w.1.xyz", "w.02.xyz", "v.xyz", "w.1a.xyz",
+        ];
         set.sort_by(|a, b| super::natural_cmp(a, b));
         assert_eq!(
             set,

@@ -140,6 +140,29 @@ impl BuildArgs {
     }
 }
 
+/// Refuses an output that exists and is not a `.mdlod` file (a PNG, a dump given as
+/// `-o` by mistake): the conversion would replace it without a word. An earlier
+/// `.mdlod` file, whole or cut short, is replaced as the option says.
+fn check_replaces_only_mdlod(output: &std::path::Path) -> Result<()> {
+    use std::io::Read;
+    let Ok(mut f) = std::fs::File::open(output) else {
+        return Ok(()); // (None there, or unreadable: the write says why.)
+    };
+    if !f.metadata().is_ok_and(|m| m.is_file() && m.len() > 0) {
+        return Ok(());
+    }
+    let mut head = Vec::with_capacity(8);
+    let _ = f.by_ref().take(8).read_to_end(&mut head);
+    if head[..] != mdlod_format::MAGIC[..] {
+        bail!(
+            "-o {}: exists and is no .mdlod file; converting would replace it: remove it \
+             first or give another name",
+            output.display()
+        );
+    }
+    Ok(())
+}
+
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum Precision {
     U8,
@@ -167,6 +190,8 @@ pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Sen
 
 fn convert(args: &Args) -> Result<ConvertReport> {
     super::check_output("-o", &args.output, &[("", &args.input)])?;
+    check_replaces_only_mdlod(&args.output)?;
+    super::check_input_file(&args.input)?;
     args.build.check()?;
     let (mut options, read) = args.build.options();
     if let Some(limit) = args.memory_limit {

@@ -61,6 +61,26 @@ pub fn check_output(option: &str, output: &Path, inputs: &[(&str, &Path)]) -> Re
     Ok(())
 }
 
+/// Refuses an input that is no file the readers can index: standard input (`-`) or a
+/// pipe, which a reader would take for an empty file (frames are indexed in one pass
+/// and read again). A path that does not exist is left to the reader's message.
+pub fn check_input_file(input: &Path) -> Result<()> {
+    let save_it = "the converter reads its input twice (frames are indexed, then read): \
+                   save the stream to a file first";
+    if input.as_os_str() == "-" && !input.exists() {
+        bail!("-: reading standard input is not supported; {save_it}");
+    }
+    if let Ok(m) = std::fs::metadata(input) {
+        if !m.is_file() && !m.is_dir() {
+            bail!(
+                "{}: is a pipe or device, not a file; {save_it}",
+                input.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// [`check_output`] for a batch directory: refuses an output that is an existing file,
 /// and an input that lies in the output directory under a name the batch writes there
 /// (`frame-<timestep>.mdlod`, `dataset*.json`, temporary `*.tmp` files).

@@ -422,7 +422,9 @@ impl AttrPacker {
                 .map(|info| AttributeScale::with_range(info, range))
                 .ok_or_else(|| {
                     RenderError::InvalidOptions(format!(
-                        "{} has no per-particle attribute to {what}",
+                        "{} has no per-particle attribute to {what} (a file keeps the one \
+                         dump column `mdlod convert --attribute COLUMN` names, e.g. \
+                         --attribute c_pe)",
                         file.path().display()
                     ))
                 })
