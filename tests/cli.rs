@@ -3019,3 +3019,62 @@ fn a_limit_below_a_chunk_names_the_chunk_size_that_fits() {
     ok(&args(fit));
     assert_eq!(MdlodFile::open(&out).unwrap().particle_count(), 20000);
 }
+
+/// Positions that will not draw as the user expects are noted at conversion: an atom
+/// lost far outside the box (whole and chunked builds), and coordinates so far from the
+/// origin that single precision snaps them to a grid coarser than the particles.
+#[test]
+fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    let far = dir.path().join("far.lammpstrj");
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n500\nITEM: BOX BOUNDS pp pp pp\n0 30\n\
+         0 30\n0 30\nITEM: ATOMS id type x y z\n",
+    );
+    for i in 0..500 {
+        let x = if i == 499 {
+            3000.0
+        } else {
+            (i % 10) as f64 * 3.0
+        };
+        text += &format!("{} 1 {x} {} {}\n", i + 1, (i / 10 % 10) * 3, i / 100 * 3);
+    }
+    std::fs::write(&far, text).unwrap();
+    let out = dir.path().join("far.mdlod");
+    let whole = ok(&["convert", s(&far), "-o", s(&out)]);
+    assert!(
+        whole.contains("note: 1 particle lies more than 10 box lengths outside the box")
+            && whole.contains("the farthest at (3000, 27, 12)"),
+        "{whole}"
+    );
+    let mut args = vec!["convert", s(&far), "-o", s(&out)];
+    args.extend(["--chunk-points", "100", "--root-points", "16"]);
+    let chunked = ok(&args);
+    assert!(
+        chunked.contains("note: particles lie more than 10 box lengths outside the box"),
+        "{chunked}"
+    );
+    // Inside the box (the sample's atoms): no note.
+    let sample = lammps_sample_path("cu_melt.custom.dump");
+    assert!(!ok(&["convert", s(&sample), "-o", s(&out)]).contains("note:"));
+
+    // A blob of width 0.05 around 10^5, particles of radius 0.002: f32 keeps steps of
+    // 2^-7 there.
+    let offset = dir.path().join("offset.xyz");
+    let mut text = String::from("300\nProperties=species:S:1:pos:R:3\n");
+    for i in 0..300 {
+        let d = f64::from(i) * 1.7e-4;
+        text += &format!("A {:.9} {:.9} {:.9}\n", 1e5 + d, 1e5 - d, 1e5 + d / 2.0);
+    }
+    std::fs::write(&offset, text).unwrap();
+    let noted = ok(&["convert", s(&offset), "-o", s(&out), "--radius", "A=0.002"]);
+    assert!(
+        noted.contains("coordinates reach 1.000e5")
+            && noted.contains("steps of 7.81e-3")
+            && noted.contains("subtract its centre"),
+        "{noted}"
+    );
+    // Particles as large as the steps: no note.
+    let fine = ok(&["convert", s(&offset), "-o", s(&out), "--radius", "A=1"]);
+    assert!(!fine.contains("note:"), "{fine}");
+}

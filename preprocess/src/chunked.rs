@@ -1524,12 +1524,39 @@ pub fn convert_chunked(
         build_time,
         write_time,
         file_size,
-        notes: crate::species::radius_notes(&names, &options.radii),
+        notes: {
+            let mut notes = crate::species::radius_notes(&names, &options.radii);
+            // The particles' bounds are the cells'; how many lie outside the box is not
+            // counted (the corners of the bounds stand for them).
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for cell in &leaves {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(cell.lo[k]);
+                    hi[k] = hi[k].max(cell.hi[k]);
+                }
+            }
+            let far =
+                crate::convert::far_outside(&[lo, hi], metadata.simulation_box.as_ref()).map(|f| {
+                    crate::convert::FarOutside {
+                        count: None,
+                        farthest: None,
+                        ..f
+                    }
+                });
+            notes.extend(crate::convert::position_notes(
+                lo,
+                hi,
+                &metadata.species,
+                far,
+            ));
+            notes
+        },
     })
 }
 
 /// The axis-aligned bounds of a (possibly triclinic) box.
-fn box_bounds(b: &SimulationBox) -> ([f32; 3], [f32; 3]) {
+pub(crate) fn box_bounds(b: &SimulationBox) -> ([f32; 3], [f32; 3]) {
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
     for corner in 0..8 {

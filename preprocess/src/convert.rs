@@ -293,6 +293,10 @@ pub fn convert_frame(
             source: e,
         })?;
     let build_time = t0.elapsed();
+    let mut notes = crate::species::radius_notes(&names, &options.radii);
+    let (lo, hi) = position_bounds(&frame.positions);
+    let far = far_outside(&frame.positions, frame.simulation_box.as_ref());
+    notes.extend(position_notes(lo, hi, &species, far));
     let mut metadata = base_metadata(frame, source, options);
     metadata.species = species;
     metadata.max_position_error = h.max_position_error;
@@ -311,8 +315,118 @@ pub fn convert_frame(
         build_time,
         write_time,
         file_size,
-        notes: crate::species::radius_notes(&names, &options.radii),
+        notes,
     })
+}
+
+/// How far outside its box, in box lengths (the box's largest extent), a particle must
+/// lie to be noted as lost.
+const FAR_OUTSIDE_BOXES: f32 = 10.0;
+
+/// Where particles lie far outside the box (`simulation_box`'s axis-aligned bounds):
+/// how many (when counted) and the farthest one's position (when known), or `None`.
+pub(crate) struct FarOutside {
+    pub count: Option<usize>,
+    /// The farthest distance outside the box's bounds.
+    pub beyond: f32,
+    pub farthest: Option<[f32; 3]>,
+}
+
+/// The particles of `positions` farther outside the box than [`FAR_OUTSIDE_BOXES`].
+pub(crate) fn far_outside(
+    positions: &[[f32; 3]],
+    simulation_box: Option<&mdlod_format::meta::SimulationBox>,
+) -> Option<FarOutside> {
+    let (blo, bhi) = crate::chunked::box_bounds(simulation_box?);
+    let edge = (0..3).map(|k| bhi[k] - blo[k]).fold(0.0f32, f32::max);
+    if !(edge > 0.0 && edge.is_finite()) {
+        return None;
+    }
+    let limit = FAR_OUTSIDE_BOXES * edge;
+    let outside = |p: &[f32; 3]| {
+        (0..3)
+            .map(|k| (blo[k] - p[k]).max(p[k] - bhi[k]))
+            .fold(0.0f32, f32::max)
+    };
+    let mut far: Option<FarOutside> = None;
+    for p in positions {
+        let d = outside(p);
+        if d > limit {
+            let f = far.get_or_insert(FarOutside {
+                count: Some(0),
+                beyond: 0.0,
+                farthest: None,
+            });
+            f.count = f.count.map(|c| c + 1);
+            if d > f.beyond {
+                f.beyond = d;
+                f.farthest = Some(*p);
+            }
+        }
+    }
+    far
+}
+
+/// Notes on positions that will not draw as the user expects, from the particles'
+/// bounds `lo..hi`: coordinates so large that single precision (in which positions are
+/// read and stored) snaps them to a grid coarse against the particles' size (a galaxy
+/// zoom in comoving coordinates far from the origin), and particles far outside the box
+/// (lost atoms of a run that blew up), which the view's fit includes.
+pub(crate) fn position_notes(
+    lo: [f32; 3],
+    hi: [f32; 3],
+    species: &[mdlod_format::meta::Species],
+    far: Option<FarOutside>,
+) -> Vec<String> {
+    let mut notes = Vec::new();
+    let largest = lo.iter().chain(&hi).map(|v| v.abs()).fold(0.0f32, f32::max);
+    let smallest_radius = species
+        .iter()
+        .map(|s| s.radius)
+        .fold(f32::INFINITY, f32::min);
+    // The spacing of single-precision numbers near the largest coordinate.
+    // (The power of two at or below it, times the machine epsilon.)
+    let step = f32::from_bits(largest.to_bits() & 0x7f80_0000) * f32::EPSILON;
+    if largest.is_finite() && smallest_radius.is_finite() && step > 0.05 * smallest_radius {
+        notes.push(format!(
+            "coordinates reach {largest:.3e}, where single precision (in which positions are \
+             read and stored) holds steps of {step:.2e}, {:.0}% of the smallest radius \
+             ({smallest_radius}): particles snap to a grid (the position error is measured \
+             after it); shift the data near the origin (subtract its centre) before converting",
+            100.0 * step / smallest_radius
+        ));
+    }
+    if let Some(f) = far {
+        let many = match f.count {
+            Some(1) => "1 particle lies".to_string(),
+            Some(n) => format!("{n} particles lie"),
+            None => "particles lie".to_string(),
+        };
+        let at = f
+            .farthest
+            .map(|p| format!(", the farthest at ({}, {}, {})", p[0], p[1], p[2]))
+            .unwrap_or_default();
+        notes.push(format!(
+            "{many} more than {FAR_OUTSIDE_BOXES} box lengths outside the box (up to {:.3e} \
+             beyond it{at}): lost atoms of a run that blew up? The hierarchy and a fitted view \
+             include them, so the rest may draw small",
+            f.beyond
+        ));
+    }
+    notes
+}
+
+/// The bounds of `positions` (infinite for none).
+fn position_bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in positions {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
 }
 
 /// Refuses a species whose radius from the input is zero, below or not a number, unless
