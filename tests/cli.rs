@@ -2677,7 +2677,9 @@ fn hidden_species_leave_the_clusters_and_inexact_recolouring_is_reported() {
 }
 
 /// A dump whose last frame is cut short (a run still writing): `convert` says which
-/// frame converts instead, `batch` converts the others and says so.
+/// frame converts instead; `batch` converts the others, leaves the cut frame out of the
+/// manifest and its expected count (the directory verifies), says so, and converts it
+/// once the dump is complete. A frame cut short that is not its input's last fails.
 #[test]
 fn a_dump_cut_in_its_last_frame_names_what_converts() {
     let dir = tempfile::tempdir().unwrap();
@@ -2691,18 +2693,46 @@ fn a_dump_cut_in_its_last_frame_names_what_converts() {
         "{err}"
     );
     let d = dir.path().join("t.d");
-    let err = fails(&["batch", s(&dump), "-o", s(&d)]);
+    let out = ok(&["batch", s(&dump), "-o", s(&d)]);
+    assert!(
+        out.contains("frame 2 (timestep 200), the input's last, is cut short")
+            && out.contains("truncated frame")
+            && out.contains("2 converted, 0 already done, 1 cut short and left for a rerun"),
+        "{out}"
+    );
+    let manifest = mdlod_preprocess::batch::read_manifest(&d).unwrap();
+    assert_eq!(manifest.frames.len(), 2);
+    assert_eq!(manifest.expected_frames, Some(2));
+    ok(&["verify", s(&d)]);
+    let again = ok(&["batch", s(&dump), "-o", s(&d)]);
+    assert!(
+        again.contains("0 converted, 2 already done, 1 cut short"),
+        "{again}"
+    );
+    // Complete now: every frame (the dump changed, so all are converted again).
+    std::fs::write(&dump, &text).unwrap();
+    let done = ok(&["batch", s(&dump), "-o", s(&d)]);
+    assert!(!done.contains("cut short"), "{done}");
+    assert_eq!(batch_frames(&d).len(), 3);
+    ok(&["verify", s(&d)]);
+    // Cut in a frame before the last (lines lost in the middle): an error.
+    let lines: Vec<&str> = std::str::from_utf8(&text).unwrap().lines().collect();
+    let second = lines
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.starts_with("ITEM: TIMESTEP"))
+        .nth(1)
+        .unwrap()
+        .0;
+    let mut cut: Vec<&str> = lines.clone();
+    cut.drain(second - 100..second);
+    std::fs::write(&dump, cut.join("\n") + "\n").unwrap();
+    let d2 = dir.path().join("t2.d");
+    let err = fails(&["batch", s(&dump), "-o", s(&d2)]);
     assert!(
         err.contains("truncated frame")
-            && err.contains("2 of the 3 frames to convert were converted"),
+            && err.contains("of the 3 frames to convert were converted"),
         "{err}"
-    );
-    assert_eq!(
-        mdlod_preprocess::batch::read_manifest(&d)
-            .unwrap()
-            .frames
-            .len(),
-        2
     );
 }
 

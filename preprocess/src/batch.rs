@@ -200,6 +200,37 @@ pub struct BatchReport {
     /// The frames left out as duplicates of a timestep ([`BatchOptions::duplicates`]),
     /// each with the one converted instead.
     pub duplicates: Vec<String>,
+    /// Last frames of their inputs that are cut short (a run still writing them): left
+    /// out, not expected of this run, converted by a rerun once complete.
+    pub incomplete: Vec<IncompleteFrame>,
+}
+
+/// The last frame of an input, cut short, which a batch leaves out (see
+/// [`BatchReport::incomplete`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct IncompleteFrame {
+    pub input: PathBuf,
+    /// The frame's index in the input.
+    pub frame: usize,
+    /// The input's own timestep of the frame, where it records one.
+    pub timestep: Option<u64>,
+    /// What the reader said.
+    pub reason: String,
+}
+
+impl std::fmt::Display for IncompleteFrame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: frame {}", self.input.display(), self.frame)?;
+        if let Some(t) = self.timestep {
+            write!(f, " (timestep {t})")?;
+        }
+        write!(
+            f,
+            ", the input's last, is cut short (a run still writing it?): left out; a rerun \
+             converts it once complete ({})",
+            self.reason
+        )
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -249,6 +280,25 @@ pub enum BatchError {
         /// How the inputs name species instead, and what to write.
         reason: String,
     },
+}
+
+impl BatchError {
+    /// Whether the error is an input cut short (see [`ReadError::cut_short`]).
+    fn cut_short(&self) -> bool {
+        fn convert(e: &ConvertError) -> bool {
+            match e {
+                ConvertError::Read(r) => r.cut_short(),
+                ConvertError::LastFrameIncomplete { .. } => true,
+                ConvertError::Decompressed { source, .. } => convert(source),
+                _ => false,
+            }
+        }
+        match self {
+            BatchError::Read(r) => r.cut_short(),
+            BatchError::Convert(c) => convert(c),
+            _ => false,
+        }
+    }
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> BatchError + '_ {
@@ -620,6 +670,8 @@ struct Job<'a> {
     /// For a gzip input whose frame has an output already: the radii the frame gives its
     /// species (see [`DumpFile::given_radii`]; `None` when they cannot be read).
     given_radii: Option<Vec<(String, f32)>>,
+    /// Whether the frame is its input's last (one a running simulation may be writing).
+    last_of_input: bool,
 }
 
 /// A frame as it was listed while its input was open: (the input's own timestep, the
@@ -709,6 +761,7 @@ pub fn batch(
     }
     let mut jobs: Vec<Job<'_>> = Vec::new();
     for (((input, dump), format), frames) in inputs.iter().zip(&dumps).zip(&formats).zip(listed) {
+        let count = frames.len();
         for (k, (own, timestep, particles, attribute, given)) in frames.into_iter().enumerate() {
             jobs.push(Job {
                 input,
@@ -720,6 +773,7 @@ pub fn batch(
                 particles,
                 attribute,
                 given_radii: given,
+                last_of_input: k + 1 == count,
             });
         }
     }
@@ -967,6 +1021,7 @@ pub fn batch(
     let queue = Mutex::new(todo.iter());
     let failed = AtomicBool::new(false);
     let first_error: Mutex<Option<BatchError>> = Mutex::new(None);
+    let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(Vec::new());
     let converted = std::sync::atomic::AtomicUsize::new(0);
     let quiet = crate::progress::NoProgress;
     std::thread::scope(|s| {
@@ -1074,6 +1129,19 @@ pub fn batch(
                             converted.fetch_add(1, Ordering::Relaxed);
                             progress.advance(job.particles);
                         }
+                        // The last frame of a dump a running simulation is writing: left
+                        // for a rerun, not a failure of the others.
+                        Err(e) if job.last_of_input && e.cut_short() => {
+                            incomplete.lock().unwrap_or_else(|e| e.into_inner()).push(
+                                IncompleteFrame {
+                                    input: job.input.to_path_buf(),
+                                    frame: job.frame,
+                                    timestep: job.own_timestep,
+                                    reason: e.to_string(),
+                                },
+                            );
+                            progress.advance(job.particles);
+                        }
                         Err(e) => {
                             failed.store(true, Ordering::Relaxed);
                             first_error
@@ -1088,8 +1156,17 @@ pub fn batch(
         }
     });
     progress.finish_stage();
-    // Every frame converted, also when another failed (and no new one started after).
-    let last_save = save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()));
+    let mut incomplete = incomplete.into_inner().unwrap_or_else(|e| e.into_inner());
+    incomplete.sort_by(|a, b| (&a.input, a.frame).cmp(&(&b.input, b.frame)));
+    // Every frame converted, also when another failed (and no new one started after);
+    // frames cut short are not expected of this run.
+    let last_save = {
+        let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(e) = m.expected_frames.as_mut() {
+            *e = e.saturating_sub(incomplete.len() as u64);
+        }
+        save(&mut m)
+    };
     if let Some(e) = first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
         return Err(BatchError::Incomplete {
             converted: converted.load(Ordering::Relaxed),
@@ -1140,6 +1217,7 @@ pub fn batch(
         removed_merged,
         strays,
         duplicates,
+        incomplete,
         frames_total,
         frames_in_shard,
         converted: converted.into_inner(),

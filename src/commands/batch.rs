@@ -373,6 +373,9 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     for e in &report.empty {
         println!("{e}");
     }
+    for e in &report.incomplete {
+        println!("note: {e}");
+    }
     for n in &report.notes {
         println!("note: {n}");
     }
@@ -380,6 +383,10 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         0 => String::new(),
         1 => ", 1 empty frame skipped".to_string(),
         n => format!(", {n} empty frames skipped"),
+    };
+    let empty = match report.incomplete.len() {
+        0 => empty,
+        n => format!("{empty}, {n} cut short and left for a rerun"),
     };
     println!(
         "{} frames in the inputs, {} here{shard}: {} converted, {} already done{empty}; {} at a time; manifest {}",
