@@ -623,6 +623,13 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
             "{text}"
         );
     }
+    // Before the merge, a movie of the directory says to merge (not "no dataset.json").
+    let png = dir.path().join("m").join("f-%03d.png");
+    let err = fails(&["render", s(&out), "-o", s(&png)]);
+    assert!(
+        err.contains("have not been merged; run `mdlod batch --merge"),
+        "{err}"
+    );
     let merged = ok(&["batch", "--merge", s(&out)]);
     assert!(merged.contains("merged 6 frames"), "{merged}");
     let err = fails(&["batch", s(&input), "-o", s(&out), "--shard", "3/3"]);

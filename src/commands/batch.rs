@@ -39,7 +39,7 @@ pub struct Args {
     #[arg(long, value_parser = parse_bytes)]
     pub memory_limit: Option<u64>,
     /// Worker threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub threads: Option<usize>,
     /// Frames with the same timestep (a run restarted into the same dump, or inputs
     /// that overlap): an error, or convert the first or the last of each (in the order
@@ -389,8 +389,9 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         n => format!("{empty}, {n} cut short and left for a rerun"),
     };
     println!(
-        "{} frames in the inputs, {} here{shard}: {} converted, {} already done{empty}; {} at a time; manifest {}",
+        "{} frame{} in the inputs, {} here{shard}: {} converted, {} already done{empty}; {} at a time; manifest {}",
         report.frames_total,
+        if report.frames_total == 1 { "" } else { "s" },
         report.frames_in_shard,
         report.converted,
         report.skipped,

@@ -786,6 +786,7 @@ fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
 /// nothing leaves the picture) and, for splats, the first frame's exposure: a movie.
 fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let dir = &args.file;
+    super::view::unmerged_batch(dir)?;
     let manifest = mdlod_preprocess::batch::read_manifest(dir).with_context(|| {
         format!(
             "{}: a directory renders as the frames of a batch, listed in its dataset.json",
@@ -933,7 +934,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
     };
     println!(
-        "rendered {n} frames in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{limited}",
+        "rendered {n} frame{} in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{limited}",
+        if n == 1 { "" } else { "s" },
         t0.elapsed().as_secs_f64()
     );
     if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
