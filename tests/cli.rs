@@ -373,6 +373,13 @@ fn render_writes_a_picture_and_views_round_trip() {
     let text = from_view(&c, &["--gpu-memory", "16M"]);
     assert!(text.contains("first image after"), "{text}");
     assert_eq!(read_png(&a).2, read_png(&c).2);
+    // A pool too small for the coarsest level would draw one sphere for all: refused.
+    let out = mdlod(&["render", s(&file), "-o", s(&c), "--gpu-memory", "1K"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("cannot hold the file's coarsest level"),
+        "{err}"
+    );
 
     // Angles given with --view replace the saved ones: the same image as the orbit at
     // those angles (the fitted distance does not depend on them).

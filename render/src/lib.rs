@@ -855,6 +855,19 @@ pub fn render_streaming(
                 .into(),
         ));
     }
+    // A pool that cannot hold the coarsest level draws one sphere for everything.
+    let coarsest = file.levels().get(1).map_or(0, |l| l.point_count);
+    let page = u64::from(streaming::PAGE_POINTS);
+    let need = coarsest.div_ceil(page)
+        * StreamingRenderer::slot_bytes(file.position_bits(), streaming::PAGE_POINTS);
+    if pool_bytes < need {
+        return Err(RenderError::InvalidOptions(format!(
+            "a GPU memory pool (--gpu-memory) of {pool_bytes} bytes cannot hold the file's \
+             coarsest level ({coarsest} points in {} bytes): give at least {}K",
+            need,
+            need.div_ceil(1024)
+        )));
+    }
     let t0 = Instant::now();
     let (camera, traversal, settings) = frame_setup(&file, opts)?;
     let (style, look) = page_style(opts);
