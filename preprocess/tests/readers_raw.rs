@@ -361,3 +361,130 @@ fn arrays_of_different_lengths_and_radii_per_name_are_checked() {
         )
     );
 }
+
+/// Positions (or an attribute) whose file holds exactly what the other float type needs
+/// are likely declared with the wrong `type` (`f32` data declared `f64`, or the reverse):
+/// the size error says so, naming the file and the byte, instead of only "truncated?" or
+/// "the arrays differ in length".
+#[test]
+fn a_file_of_the_other_float_types_size_is_said_to_be_of_that_type() {
+    let c = Case::new();
+    let p = positions(10);
+    let f32s: Vec<u8> = p
+        .iter()
+        .flatten()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    let f64s: Vec<u8> = p.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+    let pos32 = c.file("pos.f32", &f32s);
+    c.file("pos.f64", &f64s);
+    let odd32 = c.file("odd.f32", &f32s[..5 * 12]);
+    c.file("type.u8", &[0u8; 10]);
+    let pe64 = c.file("pe.f64", &[0u8; 80]);
+    let pe32 = c.file("pe.f32", &[0u8; 40]);
+    let sidecar = |file: &str, ty: &str, extra: &str| {
+        c.sidecar(&format!(
+            r#"{{ "mdlod_raw": 1, "positions": {{ "file": "{file}", "type": "{ty}" }}{extra} }}"#
+        ))
+    };
+    let species = r#", "species": { "file": "type.u8", "type": "u8" }"#;
+
+    // `particles` given: f32 data declared f64 is half the size needed.
+    let path = sidecar("pos.f32", "f64", r#", "particles": 10"#);
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 120: positions: 10 particles need 240 bytes from byte 0, the file has \
+             120; it holds exactly 10 particles of f32: is its type f32, not f64?",
+            pos32.display()
+        )
+    );
+    // An attribute of f32 declared f64 (the positions right).
+    let attribute = r#", "attribute": { "file": "pe.f32", "type": "f64" }"#;
+    let path = sidecar(
+        "pos.f32",
+        "f32",
+        &format!(r#"{attribute}, "particles": 10"#),
+    );
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 40: attribute: 10 particles need 80 bytes from byte 0, the file has 40; \
+             it holds exactly 10 particles of f32: is its type f32, not f64?",
+            pe32.display()
+        )
+    );
+    // Without `particles` the sizes fit the data all `f32` (the attribute's type wrong)
+    // or all `f64` (the positions'): both are said.
+    let path = sidecar("pos.f32", "f32", attribute);
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 40: attribute: 10 particles need 80 bytes from byte 0, the file has 40; \
+             it holds exactly 10 particles of f32, and the positions read as f64 exactly 5: \
+             is its type f32, or theirs f64?",
+            pe32.display()
+        )
+    );
+    // A size that fits neither type is still "truncated?".
+    let path = sidecar("pos.f32", "f32", r#", "particles": 11"#);
+    assert!(read(&path)
+        .unwrap_err()
+        .ends_with("the file has 120 (truncated?)"));
+
+    // No `particles`: the positions' declared type sets the count, so another array
+    // seems of another length, longer (f32 declared f64) or shorter (the reverse).
+    let path = sidecar("pos.f32", "f64", species);
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 0: species: 10 values from byte 0, but the positions ({}) hold 5 \
+             particles: the arrays differ in length; or the positions read as f32 hold \
+             exactly 10 particles: is their type f32, not f64?",
+            c.dir.path().join("type.u8").display(),
+            pos32.display()
+        )
+    );
+    let path = sidecar("pos.f64", "f32", species);
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 10: species: 20 particles need 20 bytes from byte 0, the file has 10; \
+             the positions read as f64 hold exactly 10 particles: is their type f64, not f32?",
+            c.dir.path().join("type.u8").display(),
+        )
+    );
+    // An attribute of f64 declared f32, the positions right.
+    let path = sidecar(
+        "pos.f32",
+        "f32",
+        r#", "attribute": { "file": "pe.f64", "type": "f32" }"#,
+    );
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 0: attribute: 20 values from byte 0, but the positions ({}) hold 10 \
+             particles: the arrays differ in length; or it holds exactly 10 particles of \
+             f64: is its type f64, not f32?",
+            pe64.display(),
+            pos32.display()
+        )
+    );
+    // Positions that are no whole number of f64 positions but are of f32 ones.
+    let path = sidecar("odd.f32", "f64", "");
+    assert_eq!(
+        read(&path).unwrap_err(),
+        format!(
+            "{}: byte 0: 60 bytes are not a whole number of f64 positions, but exactly 5 of \
+             f32: is its type f32, not f64? (else give `particles`)",
+            odd32.display()
+        )
+    );
+    // The right types read.
+    let path = sidecar(
+        "pos.f64",
+        "f64",
+        r#", "attribute": { "file": "pe.f64", "type": "f64" }"#,
+    );
+    assert_eq!(read(&path).unwrap().len(), 10);
+}

@@ -279,14 +279,20 @@ fn species_are_ordered_as_lammps_text_orders_them() {
 #[test]
 fn numeric_xyz_species_take_distinct_palette_colours() {
     let dir = tempfile::tempdir().unwrap();
-    for (a, b, properties) in [("0", "1", "numbers"), ("1", "11", "Properties=pos:R:3:Z:I:1")] {
+    for (a, b, properties) in [
+        ("0", "1", "numbers"),
+        ("1", "11", "Properties=pos:R:3:Z:I:1"),
+    ] {
         let text = if properties == "numbers" {
             format!("2\n{properties}\n{a} 0 0 0\n{b} 1 0 0\n")
         } else {
             format!("2\n{properties}\n0 0 0 {a}\n1 0 0 {b}\n")
         };
         let f = read_k(&write(dir.path(), &format!("n{a}{b}.xyz"), &text), 0, None);
-        assert!(f.species.iter().all(|s| s.palette_slot.is_none()), "{a} and {b}");
+        assert!(
+            f.species.iter().all(|s| s.palette_slot.is_none()),
+            "{a} and {b}"
+        );
         let table = mdlod_preprocess::species::species_table(&f.species, &[]);
         assert_ne!(table[0].colour, table[1].colour, "{a} and {b}");
     }
@@ -363,8 +369,7 @@ fn extended_xyz_refuses_a_time_that_is_no_number_naming_its_key() {
         let path = write(dir.path(), "ext.xyz", &text);
         let e = DumpFile::open(&path)
             .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
-            .err()
-            .expect("a non-numeric time read")
+            .expect_err("a non-numeric time read")
             .to_string();
         assert!(
             e.contains("ext.xyz:2:") && e.contains(&format!("`{key}` is not a number: `1.5fs`")),

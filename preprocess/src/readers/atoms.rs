@@ -49,8 +49,10 @@ pub(crate) struct AtomLayout {
     /// Species names that all parse as integers are sorted numerically and flagged
     /// `numeric_type` (LAMMPS `type` column without `element`, XYZ species).
     pub numeric_species: bool,
-    /// The species are LAMMPS type numbers (from 1): type `n` takes palette slot `n − 1`
-    /// (an XYZ file's numbers may be atomic numbers, or start at 0).
+    /// The species are type numbers (from 1), LAMMPS's or an XYZ species column's: type
+    /// `n` takes palette slot `n − 1`, as in every reader of type numbers, so that the
+    /// same types look the same in every format (not for atomic numbers, XYZ `Z`, where
+    /// H = 1 and Na = 11 would share a colour; numbers from 0 take none either).
     pub type_numbers: bool,
 }
 

@@ -135,6 +135,28 @@ impl Ty {
         }
     }
 
+    /// The type's name, as a sidecar writes it.
+    fn name(self) -> &'static str {
+        match self {
+            Ty::F32 => "f32",
+            Ty::F64 => "f64",
+            Ty::U8 => "u8",
+            Ty::U16 => "u16",
+            Ty::U32 => "u32",
+            Ty::I32 => "i32",
+        }
+    }
+
+    /// The float type a float array declared as this one may really hold: `f32` data
+    /// declared `f64` (or the reverse) is the commonest slip writing a sidecar.
+    fn other_float(self) -> Option<Ty> {
+        match self {
+            Ty::F32 => Some(Ty::F64),
+            Ty::F64 => Some(Ty::F32),
+            _ => None,
+        }
+    }
+
     /// Value `i` of an array of this type in `b`, read in place.
     #[inline(always)]
     fn get(self, b: &[u8], i: usize, big: bool) -> f64 {
@@ -201,6 +223,15 @@ pub(crate) fn sniff(data: &[u8]) -> bool {
     data.len() <= 1 << 20
         && data.trim_ascii_start().starts_with(b"{")
         && memchr::memmem::find(data, b"\"mdlod_raw\"").is_some()
+}
+
+/// The other float type of `m`'s declared one when `m` holds exactly `count` particles
+/// (`per` values each) of it: a file of that exact size is no truncated or foreign one,
+/// but one whose `type` the sidecar gives wrong.
+fn other_type_fits(m: &Mapped, per: usize, count: usize) -> Option<Ty> {
+    let t = m.ty.other_float()?;
+    let bytes = count.checked_mul(per)?.checked_mul(t.size())?;
+    (bytes == m.bytes().len()).then_some(t)
 }
 
 /// An opened sidecar and its arrays.
@@ -338,18 +369,56 @@ impl Index {
         let particles = match sidecar.particles {
             Some(n) => usize::try_from(n).map_err(|_| malformed(path, "particles: too many"))?,
             None => {
-                if positions.bytes().len() % (3 * positions.ty.size()) != 0 {
+                let len = positions.bytes().len();
+                if len % (3 * positions.ty.size()) != 0 {
+                    let declared = positions.ty.name();
+                    // (Only `f64` declared can be `f32` here: a whole number of `f64`
+                    // positions is one of `f32` positions.)
+                    let advice = match positions.ty.other_float() {
+                        Some(t) if len.is_multiple_of(3 * t.size()) => format!(
+                            ", but exactly {} of {t}: is its type {t}, not {declared}? (else \
+                             give `particles`)",
+                            len / (3 * t.size()),
+                            t = t.name()
+                        ),
+                        _ => "; give `particles`".to_string(),
+                    };
                     return Err(err(
                         &positions.path,
                         positions.offset as u64,
                         format!(
-                            "{} bytes are not a whole number of {} positions; give `particles`",
-                            positions.bytes().len(),
-                            sidecar.positions.ty
+                            "{len} bytes are not a whole number of {declared} positions{advice}"
                         ),
                     ));
                 }
                 available
+            }
+        };
+        // Why `m` may be of the wrong size, when its size or the positions' is that of the
+        // other float type: `m`'s own `type` wrong or, without `particles`, the positions'
+        // (their `type` sets the count). Both fit when the two are declared of different
+        // float types (the data all `f32`, or all `f64`): then both are said.
+        let wrong_type = |m: &Mapped, per: usize| -> Option<String> {
+            let own = other_type_fits(m, per, particles);
+            let size = per * m.ty.size();
+            let count = m.bytes().len() / size;
+            let theirs = (sidecar.particles.is_none() && m.bytes().len().is_multiple_of(size))
+                .then(|| other_type_fits(&positions, 3, count))
+                .flatten();
+            let (d, pd) = (m.ty.name(), positions.ty.name());
+            match (own.map(Ty::name), theirs.map(Ty::name)) {
+                (Some(t), None) => Some(format!(
+                    "it holds exactly {particles} particles of {t}: is its type {t}, not {d}?"
+                )),
+                (None, Some(pt)) => Some(format!(
+                    "the positions read as {pt} hold exactly {count} particles: is their type \
+                     {pt}, not {pd}?"
+                )),
+                (Some(t), Some(pt)) => Some(format!(
+                    "it holds exactly {particles} particles of {t}, and the positions read as \
+                     {pt} exactly {count}: is its type {t}, or theirs {pt}?"
+                )),
+                (None, None) => None,
             }
         };
         let need = |m: &Mapped, per: usize, what: &str| -> Result<(), ReadError> {
@@ -358,11 +427,14 @@ impl Index {
                 .and_then(|v| v.checked_mul(m.ty.size()))
                 .ok_or_else(|| malformed(path, format!("{what}: size overflows")))?;
             if bytes > m.bytes().len() {
+                let cause =
+                    wrong_type(m, per).map_or(" (truncated?)".to_string(), |c| format!("; {c}"));
                 return Err(err(
                     &m.path,
                     m.map.len() as u64,
                     format!(
-                        "{what}: {particles} particles need {bytes} bytes from byte {}, the file has {} (truncated?)",
+                        "{what}: {particles} particles need {bytes} bytes from byte {}, the file \
+                         has {}{cause}",
                         m.offset,
                         m.bytes().len()
                     ),
@@ -374,12 +446,13 @@ impl Index {
             if sidecar.particles.is_none() && bytes != m.bytes().len() {
                 let size = m.ty.size();
                 let (values, rest) = (m.bytes().len() / size, m.bytes().len() % size);
+                let cause = wrong_type(m, per).map_or(String::new(), |c| format!("; or {c}"));
                 return Err(err(
                     &m.path,
                     m.offset as u64,
                     format!(
                         "{what}: {values} values{} from byte {}, but the positions ({}) hold \
-                         {particles} particles: the arrays differ in length",
+                         {particles} particles: the arrays differ in length{cause}",
                         if rest > 0 {
                             format!(" and {rest} bytes")
                         } else {

@@ -11,7 +11,11 @@
 //!   `Lattice="ax ay az bx by bz cx cy cz"` gives the cell vectors, `Origin="x y z"`
 //!   (OVITO) its origin, `pbc="T T F"` its periodicity (default `T T T` when a lattice is
 //!   given, as the extended-XYZ convention says), `Time=` the time, and `Timestep=` or
-//!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes) the timestep.
+//!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes) the timestep. Spaces
+//!   around `=` and a comma ending a number are allowed, as CP2K writes them
+//!   (`i = 0, time = 0.000, E = -17.16`). A timestep that is no number is none; so is a
+//!   time without `Properties`, where the line is free text (`MD step 5 time=1.5fs`); with
+//!   it, a `Time` that is no number is an error.
 //!   `Properties=name:type:count:...` names the columns in order; types `S`, `R`, `I`, `L`.
 //!   Without `Properties` the columns are `species:S:1:pos:R:3` followed by whatever extra
 //!   columns the first atom line has, named `col5`, `col6`, ... (1-based position).
@@ -19,9 +23,11 @@
 //!   `species` (or atomic numbers `Z`) ordered as the LAMMPS text reader orders its
 //!   species, so that the same data gives the same species table in either format: when
 //!   every name is an integer (type numbers, atomic numbers) numerically, flagged
-//!   `numeric_type`, else (element symbols, labels) in order of first appearance. A property with count
-//!   1 is one column named after it; a property with count `n > 1` is `n` columns named
-//!   `name[0]` ... `name[n-1]`. Any numeric column can be the attribute.
+//!   `numeric_type`, and a species column's numbers (not atomic numbers `Z`) from 1 up
+//!   take the palette slots of the same LAMMPS types; else (element symbols, labels) in
+//!   order of first appearance. A property with count 1 is one column named after it; a
+//!   property with count `n > 1` is `n` columns named `name[0]` ... `name[n-1]`. Any
+//!   numeric column can be the attribute.
 //! - **Atoms.** The atom lines go to the shared parallel parser.
 
 use super::atoms::AtomLayout;
@@ -163,18 +169,20 @@ impl Index {
                 })
             }
         };
-        let time = match get("Time") {
+        let properties = get("Properties");
+        let time = match pairs.iter().find(|(k, _)| k.eq_ignore_ascii_case("Time")) {
             None => None,
-            Some(v) => Some(
-                v.trim()
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|t| t.is_finite())
-                    .ok_or_else(|| bad(format!("`Time` is not a number: `{v}`")))?,
-            ),
+            Some((key, v)) => match comment_value(v).parse::<f64>() {
+                Ok(t) if t.is_finite() => Some(t),
+                // Without `Properties` the comment line is free text (`MD step 5
+                // time=1.5fs`): a `time` in it that is no number is no time, and must not
+                // stop a conversion. Extended XYZ promises `key=value` pairs.
+                _ if properties.is_none() => None,
+                _ => return Err(bad(format!("`{key}` is not a number: `{v}`"))),
+            },
         };
 
-        let layout = match get("Properties") {
+        let layout = match properties {
             Some(p) => properties_layout(p).map_err(bad)?,
             None => {
                 // Plain XYZ: species x y z, plus any extra columns of the first atom line.
@@ -198,9 +206,10 @@ impl Index {
                     columns,
                     coords: Some(([1, 2, 3], false)),
                     species: Some(0),
-                    // Numbers sorted as LAMMPS types are.
+                    // Numbers sorted as LAMMPS types are, and coloured as they are (type
+                    // `n` the palette's `n`-th colour; numbers from 0 by place).
                     numeric_species: true,
-                    type_numbers: false,
+                    type_numbers: true,
                 }
             }
         };
@@ -291,10 +300,11 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
     Ok(AtomLayout {
         columns,
         coords,
+        // Numbers sorted as LAMMPS types are; a `species` column's coloured as they are
+        // too, atomic numbers `Z` by place (H = 1 and Na = 11 would share a colour).
+        type_numbers: species.is_some(),
         species: species.or(atomic_number),
-        // Numbers sorted as LAMMPS types are.
         numeric_species: true,
-        type_numbers: false,
     })
 }
 
@@ -305,7 +315,7 @@ fn comment_timestep(comment: &[u8]) -> Option<u64> {
     if text.contains('=') {
         for (k, v) in key_values(&text) {
             if k.eq_ignore_ascii_case("timestep") || k.eq_ignore_ascii_case("step") {
-                if let Ok(t) = v.trim().parse() {
+                if let Ok(t) = comment_value(&v).parse() {
                     return Some(t);
                 }
             }
@@ -318,6 +328,13 @@ fn comment_timestep(comment: &[u8]) -> Option<u64> {
         }
     }
     None
+}
+
+/// A comment-line value as a number is written: trimmed, less the comma that ends it in
+/// CP2K's `i = 0, time = 0.000, E = -17.16`.
+fn comment_value(v: &str) -> &str {
+    let v = v.trim();
+    v.strip_suffix(',').unwrap_or(v)
 }
 
 /// Splits an extended-XYZ comment line into `key=value` pairs. A bare `key` gets value
