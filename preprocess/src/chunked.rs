@@ -464,6 +464,7 @@ impl SpeciesMerge {
         let mut order: Vec<usize> = (0..self.list.len()).collect();
         if self.list.iter().all(|s| s.numeric_type) {
             order.sort_by_key(|&i| self.list[i].name.parse::<i64>().unwrap_or(i64::MAX));
+            crate::species::slots_as_whole(&mut self.list);
         } else {
             crate::species::not_all_numbers(&mut self.list);
         }

@@ -185,6 +185,17 @@ pub(crate) fn not_all_numbers(species: &mut [SpeciesName]) {
     }
 }
 
+/// Makes the merged species of a frame of numbers only take palette slots as a
+/// whole-frame reader gives them: by number only where every species has one (a part
+/// holding a type 0 gave its species none, as the whole frame gives none then).
+pub(crate) fn slots_as_whole(species: &mut [SpeciesName]) {
+    if species.iter().any(|s| s.palette_slot.is_none()) {
+        for s in species {
+            s.palette_slot = None;
+        }
+    }
+}
+
 /// The order in which a part of a frame (a window, a piece) adds its species to the
 /// frame's list: the order its particles first use them when its reader sorted them
 /// numerically, else its list's order. Where the frame's species turn out not to be all

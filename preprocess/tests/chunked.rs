@@ -159,6 +159,40 @@ fn xyz_file_streams_into_the_same_file() {
     streamed_equals_in_memory(&path, &ReadOptions::default(), 300);
 }
 
+/// Numbered species from 0, the 0 only in later windows: the whole frame gives no
+/// species a palette slot by number (a 0 is no LAMMPS type), and neither may the merge
+/// of windows whose own numbers all start at 1.
+#[test]
+fn numbers_from_zero_in_later_windows_colour_as_the_whole_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1000;
+    let mut text = format!("{n}\nnumbered\n");
+    for i in 0..n {
+        let name = match i {
+            _ if i >= 600 && i % 3 == 0 => "0",
+            _ if i % 2 == 0 => "2",
+            _ => "1",
+        };
+        let (x, y, z) = (i % 10, (i / 10) % 10, i / 100);
+        text.push_str(&format!("{name} {x}.25 {y}.5 {z}.75\n"));
+    }
+    let path = dir.path().join("numbered.xyz");
+    std::fs::write(&path, text).unwrap();
+    let f = streamed_equals_in_memory(&path, &ReadOptions::default(), 300);
+    let colours: Vec<[f32; 3]> = f.metadata().species.iter().map(|s| s.colour).collect();
+    let frame = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    let whole: Vec<[f32; 3]> = mdlod_preprocess::species::species_table(&frame.species, &[])
+        .iter()
+        .map(|s| s.colour)
+        .collect();
+    assert_eq!(colours, whole);
+    assert_eq!(colours.len(), 3);
+    assert!(colours[0] != colours[1] && colours[1] != colours[2]);
+}
+
 /// Species that are type numbers in the first windows and a name later: the whole-frame
 /// reader lists them in order of first appearance (not all are numbers), and so must the
 /// merge of the windows' lists, each of which the window's reader sorted numerically.

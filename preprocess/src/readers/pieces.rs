@@ -170,6 +170,7 @@ pub(crate) fn read_frame(
     }
     if species.iter().all(|s| s.numeric_type) {
         species.sort_by_key(|s| s.name.parse::<i64>().unwrap_or(i64::MAX));
+        crate::species::slots_as_whole(&mut species);
     } else {
         crate::species::not_all_numbers(&mut species);
     }
