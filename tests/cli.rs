@@ -3122,3 +3122,39 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
     let fine = ok(&["convert", s(&offset), "-o", s(&out), "--radius", "A=1"]);
     assert!(!fine.contains("note:"), "{fine}");
 }
+
+/// `--frame` counts from the end when negative, and the summary says which frame of
+/// how many was converted.
+#[test]
+fn frames_count_from_the_end_and_the_summary_names_the_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("a.lammpstrj");
+    generate(&["alloy", "-n", "500", "--frames", "3"], &input);
+    let out = dir.path().join("a.mdlod");
+    let timestep = |args: &[&str]| {
+        let mut all = vec!["convert", s(&input), "-o", s(&out)];
+        all.extend(args);
+        let text = ok(&all);
+        (text, MdlodFile::open(&out).unwrap().metadata().timestep)
+    };
+    let (last, t_last) = timestep(&[]);
+    assert!(last.contains("(frame 2, the last of 3)"), "{last}");
+    assert_eq!(timestep(&["--frame", "-1"]).1, t_last);
+    let (second, t_second) = timestep(&["--frame", "-2"]);
+    assert!(
+        second.contains("(frame 1 of 3, counted from 0)"),
+        "{second}"
+    );
+    assert_eq!(t_second, timestep(&["--frame", "1"]).1);
+    assert_ne!(t_second, t_last);
+    let err = fails(&["convert", s(&input), "-o", s(&out), "--frame", "-4"]);
+    assert!(
+        err.contains("frame -4 does not exist; the file has 3 frame(s)"),
+        "{err}"
+    );
+    // A single-frame input says nothing of frames.
+    let one = dir.path().join("one.lammpstrj");
+    generate(&["alloy", "-n", "500"], &one);
+    let text = ok(&["convert", s(&one), "-o", s(&out)]);
+    assert!(!text.contains("(frame"), "{text}");
+}

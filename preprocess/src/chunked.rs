@@ -1553,6 +1553,7 @@ pub fn convert_chunked(
             ));
             notes
         },
+        frame: None,
     })
 }
 

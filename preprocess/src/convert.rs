@@ -47,6 +47,9 @@ pub struct ConvertReport {
     /// What the user should know about the conversion (see
     /// [`crate::species::radius_notes`]).
     pub notes: Vec<String>,
+    /// The frame converted and how many frames the input has (set by
+    /// [`convert_dump`] and [`convert_file`]; `None` for a frame given in memory).
+    pub frame: Option<(usize, usize)>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -316,6 +319,7 @@ pub fn convert_frame(
         write_time,
         file_size,
         notes,
+        frame: None,
     })
 }
 
@@ -534,6 +538,8 @@ pub enum FrameSelect {
     /// The last frame.
     #[default]
     Last,
+    /// Frame `n` from the end (1: the last), as `--frame -n` asks.
+    FromEnd(usize),
 }
 
 /// A dump opened within the memory limit (see [`open_bounded`]).
@@ -699,13 +705,29 @@ pub fn convert_dump(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
+    let count = dump.frame_count();
     let k = match frame {
         FrameSelect::Index(k) => k,
-        FrameSelect::Last => dump.frame_count().saturating_sub(1),
+        FrameSelect::Last => count.saturating_sub(1),
+        FrameSelect::FromEnd(n) => match count.checked_sub(n) {
+            Some(k) if n > 0 => k,
+            _ => {
+                return Err(crate::readers::ReadError::NoSuchFrameFromEnd {
+                    path: named.to_path_buf(),
+                    back: n,
+                    count,
+                }
+                .into())
+            }
+        },
+    };
+    let which = |mut r: ConvertReport| {
+        r.frame = Some((k, count));
+        r
     };
     // The last frame asked for by default and cut short: say which frame converts.
     let cut_short = |e: crate::readers::ReadError| {
-        if matches!(frame, FrameSelect::Last) && k > 0 && e.cut_short() {
+        if matches!(frame, FrameSelect::Last | FrameSelect::FromEnd(1)) && k > 0 && e.cut_short() {
             ConvertError::LastFrameIncomplete {
                 frame: k,
                 source: e,
@@ -749,6 +771,7 @@ pub fn convert_dump(
                 options,
             );
             return convert_chunked(source.as_ref(), metadata, output, options, progress)
+                .map(which)
                 .map_err(explain);
         }
     }
@@ -774,7 +797,7 @@ pub fn convert_dump(
     )
     .map_err(explain)?;
     report.read_time = read_time;
-    Ok(report)
+    Ok(which(report))
 }
 
 /// Describes a source file for the metadata.

@@ -488,3 +488,27 @@ fn a_file_of_the_other_float_types_size_is_said_to_be_of_that_type() {
     );
     assert_eq!(read(&path).unwrap().len(), 10);
 }
+
+/// Big-endian positions declared little-endian: a coordinate that reads as NaN is
+/// refused, naming the particle and saying the other byte order reads a number.
+#[test]
+fn a_non_finite_coordinate_that_the_other_byte_order_reads_suggests_it() {
+    let c = Case::new();
+    // 0x0000c07f read big-endian is a tiny number; read little-endian, a NaN.
+    let mut values = [1.0f32; 30];
+    values[13] = f32::from_bits(0x0000_c07f);
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
+    c.file("pos.f32", &bytes);
+    let json = r#"{ "mdlod_raw": 1, "positions": { "file": "pos.f32", "type": "f32" } }"#;
+    let e = read(&c.sidecar(json)).unwrap_err();
+    assert!(
+        e.contains("particle 4: a coordinate is not finite")
+            && e.contains("read in the other byte order it is")
+            && e.contains("is `byte_order` big?"),
+        "{e}"
+    );
+    // Declared big-endian, it reads.
+    let json = r#"{ "mdlod_raw": 1, "positions": { "file": "pos.f32", "type": "f32",
+                    "byte_order": "big" } }"#;
+    assert_eq!(read(&c.sidecar(json)).unwrap().len(), 10);
+}

@@ -408,3 +408,29 @@ fn numbered_xyz_species_take_the_colours_of_the_same_lammps_types() {
         assert_eq!(x.species, l.species, "{name}");
     }
 }
+
+/// A name that says one text format over content that says the other is read by its
+/// content: LAMMPS `dump xyz` output named `dump.water`, a LAMMPS text dump named `.xyz`.
+#[test]
+fn text_content_decides_over_a_name_that_says_the_other_format() {
+    use mdlod_preprocess::readers::{DumpFile, InputFormat, ReadOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("dump.water");
+    std::fs::write(&xyz, "2\nwater\nO 0 0 0\nH 0.96 0 0\n").unwrap();
+    let d = DumpFile::open(&xyz).unwrap();
+    assert_eq!(d.format(), InputFormat::Xyz);
+    let f = d
+        .read_frame(0, &ReadOptions::default(), &mdlod_preprocess::NoProgress)
+        .unwrap();
+    assert_eq!(f.len(), 2);
+    let lammps = dir.path().join("traj.xyz");
+    std::fs::write(
+        &lammps,
+        "ITEM: TIMESTEP\n5\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS pp pp pp\n0 1\n0 1\n\
+         0 1\nITEM: ATOMS id type x y z\n1 1 0.5 0.5 0.5\n",
+    )
+    .unwrap();
+    let d = DumpFile::open(&lammps).unwrap();
+    assert_eq!(d.format(), InputFormat::LammpsText);
+    assert_eq!(d.frame_timestep(0), Some(5));
+}

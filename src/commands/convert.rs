@@ -24,9 +24,9 @@ pub struct Args {
     /// The .mdlod file to write (replaced atomically).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Frame to convert (0-based).
-    #[arg(long, conflicts_with = "last")]
-    pub frame: Option<usize>,
+    /// Frame to convert (0-based; -1 is the last, -2 the one before).
+    #[arg(long, conflicts_with = "last", allow_negative_numbers = true)]
+    pub frame: Option<i64>,
     /// Convert the last frame (the default).
     #[arg(long)]
     pub last: bool,
@@ -229,7 +229,10 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     crate::interrupt::remove_on_interrupt(work.path(), Some(&args.output));
     options.chunks.temp_dir = Some(work.path().to_path_buf());
     let frame = match args.frame {
-        Some(k) => FrameSelect::Index(k),
+        Some(k) if k < 0 => {
+            FrameSelect::FromEnd(usize::try_from(k.unsigned_abs()).unwrap_or(usize::MAX))
+        }
+        Some(k) => FrameSelect::Index(usize::try_from(k).unwrap_or(usize::MAX)),
         None => FrameSelect::Last,
     };
     Ok(convert_file(
@@ -244,8 +247,14 @@ fn convert(args: &Args) -> Result<ConvertReport> {
 
 pub fn print_report(output: &std::path::Path, r: &ConvertReport) {
     let total = r.read_time + r.build_time + r.write_time;
+    // Which frame, where the input has several (the last by default).
+    let which = match r.frame {
+        Some((k, n)) if n > 1 && k + 1 == n => format!(" (frame {k}, the last of {n})"),
+        Some((k, n)) if n > 1 => format!(" (frame {k} of {n}, counted from 0)"),
+        _ => String::new(),
+    };
     println!(
-        "wrote {}: {} particles, {} levels, {} nodes, {:.1} MiB, max position error {:.3e}",
+        "wrote {}{which}: {} particles, {} levels, {} nodes, {:.1} MiB, max position error {:.3e}",
         output.display(),
         r.particles,
         r.levels,

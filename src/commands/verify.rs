@@ -37,8 +37,10 @@ fn run_dir(args: &Args) -> Result<()> {
         String::new()
     } else {
         format!(
-            " (not merged: {} shard manifests; run `mdlod batch --merge {}`)",
+            " (not merged: {} shard manifest{}; once every shard has finished, `mdlod batch \
+             --merge {}` joins them)",
             c.manifests.len(),
+            if c.manifests.len() == 1 { "" } else { "s" },
             dir.display()
         )
     };

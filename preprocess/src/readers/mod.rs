@@ -102,6 +102,12 @@ pub enum ReadError {
         frame: usize,
         count: usize,
     },
+    #[error("{}: frame -{back} does not exist; the file has {count} frame(s)", path.display())]
+    NoSuchFrameFromEnd {
+        path: PathBuf,
+        back: usize,
+        count: usize,
+    },
     /// A header line (LAMMPS `ITEM:` block, XYZ count or comment line) is not as expected.
     #[error("{at}: {message}")]
     Malformed { at: Location, message: String },
@@ -421,8 +427,18 @@ impl DumpFile {
         if data.iter().all(|b| b.is_ascii_whitespace()) {
             return Err(ReadError::Empty { at: first_line() });
         }
+        // A name that says one text format over a first line that says the other (LAMMPS
+        // `dump xyz` output named `dump.water`, a LAMMPS dump named `.xyz`; a text dump
+        // named `.bin`): the content decides, as no file starts both ways.
+        let by_name = InputFormat::from_path(path).map(|f| match (f, InputFormat::sniff(data)) {
+            (InputFormat::LammpsText, Some(InputFormat::Xyz)) => InputFormat::Xyz,
+            (InputFormat::Xyz | InputFormat::LammpsBinary, Some(InputFormat::LammpsText)) => {
+                InputFormat::LammpsText
+            }
+            _ => f,
+        });
         let format = format
-            .or_else(|| InputFormat::from_path(path))
+            .or(by_name)
             .or_else(|| lammps_binary::sniff(data).then_some(InputFormat::LammpsBinary))
             .or_else(|| gsd::sniff(data).then_some(InputFormat::Gsd))
             .or_else(|| mmpld::sniff(data).then_some(InputFormat::Mmpld))

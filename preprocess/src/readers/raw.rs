@@ -675,9 +675,19 @@ impl Index {
                 &p.path,
                 (p.offset + j * size) as u64,
                 format!(
-                    "particle {}: a coordinate is not finite{}",
+                    "particle {}: a coordinate is not finite{}{}",
                     if planar { j % total } else { j / 3 },
-                    super::single_precision_note(v)
+                    super::single_precision_note(v),
+                    // Big-endian data read as little (or the reverse) is mostly garbage
+                    // that is now and then not finite: say so where the other order
+                    // reads a plain number.
+                    match p.ty.get(bytes, j, !p.big) {
+                        o if o.is_finite() && o.abs() < 1e12 => format!(
+                            "; read in the other byte order it is {o}: is `byte_order` {}?",
+                            if p.big { "little" } else { "big" }
+                        ),
+                        _ => String::new(),
+                    }
                 ),
             )
         })?;
