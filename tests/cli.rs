@@ -1771,14 +1771,20 @@ fn render_and_sample_summaries_name_the_limit_that_applied() {
         text.contains("point budget of 10: below the") && !text.contains("memory pool"),
         "{text}"
     );
+    // A pool that holds the coarse levels (the least that is accepted) and little more:
+    // 20 000 particles, at most 4096 on the coarsest level (57 KiB).
+    let dump = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "20000"], &dump);
+    let larger = dir.path().join("c.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&larger)]);
     let text = ok(&[
         &[
             "render",
-            f,
+            s(&larger),
             "-o",
             p,
             "--gpu-memory",
-            "4K",
+            "64K",
             "--budget",
             "100000000",
         ][..],
