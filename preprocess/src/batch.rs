@@ -1024,136 +1024,142 @@ pub fn batch(
     let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(Vec::new());
     let converted = std::sync::atomic::AtomicUsize::new(0);
     let quiet = crate::progress::NoProgress;
-    std::thread::scope(|s| {
-        for _ in 0..jobs {
-            s.spawn(|| {
-                // This worker's last opened gzip input (frames of one file come in
-                // timestep order, so consecutive jobs often share it).
-                let mut opened: Option<(PathBuf, crate::convert::BoundedDump)> = None;
-                loop {
-                    if failed.load(Ordering::Relaxed) {
-                        return;
-                    }
-                    let Some(job) = queue.lock().unwrap_or_else(|e| e.into_inner()).next() else {
-                        return;
-                    };
-                    let result = (|| -> Result<FrameEntry, BatchError> {
-                        let out = out_dir.join(frame_file_name(job.timestep));
-                        let source = fingerprint(job.input, job.frame as u64);
-                        let (dump, bounded) = match job.dump {
-                            Some(d) => (d, None),
-                            None => {
-                                let b = match &mut opened {
-                                    Some((p, b)) if p == job.input => &*b,
-                                    slot => {
-                                        // Release the previous input before opening this.
-                                        *slot = None;
-                                        let b = crate::convert::open_bounded(
-                                            job.input,
-                                            &convert.chunks,
-                                            &out,
-                                            &quiet,
-                                        )?;
-                                        &slot.insert((job.input.to_path_buf(), b)).1
-                                    }
-                                };
-                                (&b.dump, Some(b))
-                            }
-                        };
-                        let in_context = |e: BatchError| match (bounded, e) {
-                            (Some(b), BatchError::Convert(c)) => {
-                                BatchError::Convert(b.context(job.input, c))
-                            }
-                            (Some(b), BatchError::Read(r)) => {
-                                BatchError::Convert(b.context(job.input, r.into()))
-                            }
-                            (_, e) => e,
-                        };
-                        (|| -> Result<FrameEntry, BatchError> {
-                            let streamed = if job.particles as usize > convert.chunks.chunk_points {
-                                let info = dump.frame_info(job.frame)?;
-                                crate::convert::window_source(dump, job.frame, &opts.read, &info)
-                                    .map(|s| (s, info))
-                            } else {
-                                None
-                            };
-                            if let Some((src, info)) = streamed {
-                                // Out of core: the frame is read a window at a time.
-                                let report = crate::chunked::convert_chunked(
-                                    src.as_ref(),
-                                    crate::convert::base_metadata(
-                                        &crate::convert::header_of(&info),
-                                        Some(source),
-                                        convert,
-                                    ),
+    // The calling thread is one of the workers (one job: the only one), so that a
+    // single conversion allocates on the threads a lone `convert` would: each thread
+    // more keeps freed memory in an arena of its own (BENCHMARKS.md, "The memory limit
+    // at small limits").
+    let worker = || {
+        // This worker's last opened gzip input (frames of one file come in
+        // timestep order, so consecutive jobs often share it).
+        let mut opened: Option<(PathBuf, crate::convert::BoundedDump)> = None;
+        loop {
+            if failed.load(Ordering::Relaxed) {
+                return;
+            }
+            let Some(job) = queue.lock().unwrap_or_else(|e| e.into_inner()).next() else {
+                return;
+            };
+            let result = (|| -> Result<FrameEntry, BatchError> {
+                let out = out_dir.join(frame_file_name(job.timestep));
+                let source = fingerprint(job.input, job.frame as u64);
+                let (dump, bounded) = match job.dump {
+                    Some(d) => (d, None),
+                    None => {
+                        let b = match &mut opened {
+                            Some((p, b)) if p == job.input => &*b,
+                            slot => {
+                                // Release the previous input before opening this.
+                                *slot = None;
+                                let b = crate::convert::open_bounded(
+                                    job.input,
+                                    &convert.chunks,
                                     &out,
-                                    convert,
                                     &quiet,
                                 )?;
-                                keep_notes(report.notes);
-                            } else {
-                                // Refused before the frame is read, not after.
-                                if let Ok(particles) = usize::try_from(job.particles) {
-                                    crate::convert::check_in_memory(particles, convert, || {
-                                        crate::convert::FramePlace {
-                                            path: job.input.display().to_string(),
-                                            frame: Some(job.frame as u64),
-                                            timestep: job.own_timestep,
-                                        }
-                                    })?;
-                                }
-                                let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
-                                let report =
-                                    convert_frame(&frame, Some(source), &out, convert, &quiet)?;
-                                keep_notes(report.notes);
+                                &slot.insert((job.input.to_path_buf(), b)).1
                             }
-                            let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
-                            note_species(&f);
-                            Ok(entry_of(&out, &f, job.timestep, columns_for(job), convert))
-                        })()
-                        .map_err(in_context)
-                    })();
-                    let recorded = result.and_then(|entry| {
-                        let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
-                        m.frames.push(entry);
-                        let mut at = saved_at.lock().unwrap_or_else(|e| e.into_inner());
-                        if at.elapsed() < MANIFEST_INTERVAL {
-                            return Ok(());
-                        }
-                        save(&mut m)?;
-                        *at = std::time::Instant::now();
-                        Ok(())
-                    });
-                    match recorded {
-                        Ok(()) => {
-                            converted.fetch_add(1, Ordering::Relaxed);
-                            progress.advance(job.particles);
-                        }
-                        // The last frame of a dump a running simulation is writing: left
-                        // for a rerun, not a failure of the others.
-                        Err(e) if job.last_of_input && e.cut_short() => {
-                            incomplete.lock().unwrap_or_else(|e| e.into_inner()).push(
-                                IncompleteFrame {
-                                    input: job.input.to_path_buf(),
-                                    frame: job.frame,
-                                    timestep: job.own_timestep,
-                                    reason: e.to_string(),
-                                },
-                            );
-                            progress.advance(job.particles);
-                        }
-                        Err(e) => {
-                            failed.store(true, Ordering::Relaxed);
-                            first_error
-                                .lock()
-                                .unwrap_or_else(|e| e.into_inner())
-                                .get_or_insert(e);
-                            return;
-                        }
+                        };
+                        (&b.dump, Some(b))
                     }
+                };
+                let in_context = |e: BatchError| match (bounded, e) {
+                    (Some(b), BatchError::Convert(c)) => {
+                        BatchError::Convert(b.context(job.input, c))
+                    }
+                    (Some(b), BatchError::Read(r)) => {
+                        BatchError::Convert(b.context(job.input, r.into()))
+                    }
+                    (_, e) => e,
+                };
+                (|| -> Result<FrameEntry, BatchError> {
+                    let streamed = if job.particles as usize > convert.chunks.chunk_points {
+                        let info = dump.frame_info(job.frame)?;
+                        crate::convert::window_source(dump, job.frame, &opts.read, &info)
+                            .map(|s| (s, info))
+                    } else {
+                        None
+                    };
+                    if let Some((src, info)) = streamed {
+                        // Out of core: the frame is read a window at a time.
+                        let report = crate::chunked::convert_chunked(
+                            src.as_ref(),
+                            crate::convert::base_metadata(
+                                &crate::convert::header_of(&info),
+                                Some(source),
+                                convert,
+                            ),
+                            &out,
+                            convert,
+                            &quiet,
+                        )?;
+                        keep_notes(report.notes);
+                    } else {
+                        // Refused before the frame is read, not after.
+                        if let Ok(particles) = usize::try_from(job.particles) {
+                            crate::convert::check_in_memory(particles, convert, || {
+                                crate::convert::FramePlace {
+                                    path: job.input.display().to_string(),
+                                    frame: Some(job.frame as u64),
+                                    timestep: job.own_timestep,
+                                }
+                            })?;
+                        }
+                        let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
+                        let report = convert_frame(&frame, Some(source), &out, convert, &quiet)?;
+                        keep_notes(report.notes);
+                    }
+                    let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
+                    note_species(&f);
+                    Ok(entry_of(&out, &f, job.timestep, columns_for(job), convert))
+                })()
+                .map_err(in_context)
+            })();
+            let recorded = result.and_then(|entry| {
+                let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
+                m.frames.push(entry);
+                let mut at = saved_at.lock().unwrap_or_else(|e| e.into_inner());
+                if at.elapsed() < MANIFEST_INTERVAL {
+                    return Ok(());
                 }
+                save(&mut m)?;
+                *at = std::time::Instant::now();
+                Ok(())
             });
+            match recorded {
+                Ok(()) => {
+                    converted.fetch_add(1, Ordering::Relaxed);
+                    progress.advance(job.particles);
+                }
+                // The last frame of a dump a running simulation is writing: left
+                // for a rerun, not a failure of the others.
+                Err(e) if job.last_of_input && e.cut_short() => {
+                    incomplete
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .push(IncompleteFrame {
+                            input: job.input.to_path_buf(),
+                            frame: job.frame,
+                            timestep: job.own_timestep,
+                            reason: e.to_string(),
+                        });
+                    progress.advance(job.particles);
+                }
+                Err(e) => {
+                    failed.store(true, Ordering::Relaxed);
+                    first_error
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .get_or_insert(e);
+                    return;
+                }
+            }
         }
+    };
+    std::thread::scope(|s| {
+        for _ in 1..jobs {
+            s.spawn(worker);
+        }
+        worker();
     });
     progress.finish_stage();
     let mut incomplete = incomplete.into_inner().unwrap_or_else(|e| e.into_inner());
