@@ -1396,7 +1396,12 @@ pub fn convert_chunked(
             }
         )));
     }
-    let jobs = ((chunk.memory_limit / need) as usize).clamp(1, rayon::current_num_threads());
+    // The two chunks read ahead come out of the limit before the builds at work do (a
+    // build of 4.2 M particles needs about 500 MiB: at 1G, two of them and the read-ahead
+    // passed it).
+    let read_ahead = 2 * (largest * layout.size()) as u64;
+    let jobs = ((chunk.memory_limit.saturating_sub(read_ahead) / need) as usize)
+        .clamp(1, rayon::current_num_threads());
     // Each chunk narrows to about max_root_points / K points under its root, so that the
     // levels under the top grow as gradually as in a single build.
     let mut chunk_options = options.clone();
@@ -1410,7 +1415,6 @@ pub fn convert_chunked(
     };
     // What the builds at work, the two chunks read ahead and a margin leave under the
     // limit holds finished chunks' results until the assembly.
-    let read_ahead = 2 * (largest * layout.size()) as u64;
     let kept = std::sync::atomic::AtomicU64::new(0);
     let input = ChunkInput {
         layout,
