@@ -2733,6 +2733,10 @@ fn a_dump_cut_in_its_last_frame_names_what_converts() {
     std::fs::write(&dump, &text).unwrap();
     let done = ok(&["batch", s(&dump), "-o", s(&d)]);
     assert!(!done.contains("cut short"), "{done}");
+    assert!(
+        done.contains("2 frames already converted were converted again: 2 whose source changed"),
+        "{done}"
+    );
     assert_eq!(batch_frames(&d).len(), 3);
     ok(&["verify", s(&d)]);
     // Cut in a frame before the last (lines lost in the middle): an error.
@@ -2999,7 +3003,13 @@ fn species_names_give_numbered_types_their_elements() {
     }
     let again = batch(&renames);
     assert!(again.contains("0 converted, 2 already done"), "{again}");
-    batch(&[]);
+    let redone = batch(&[]);
+    assert!(
+        redone.contains(
+            "note: 2 frames already converted were converted again: 2 built with other settings"
+        ),
+        "{redone}"
+    );
     for f in &frames {
         assert_eq!(species(&d.join(f))[0].0, "1", "{f}: converted again");
     }

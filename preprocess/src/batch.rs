@@ -200,9 +200,22 @@ pub struct BatchReport {
     /// The frames left out as duplicates of a timestep ([`BatchOptions::duplicates`]),
     /// each with the one converted instead.
     pub duplicates: Vec<String>,
+    /// Frames whose outputs existed and were converted again.
+    pub redone: Redone,
     /// Last frames of their inputs that are cut short (a run still writing them): left
     /// out, not expected of this run, converted by a rerun once complete.
     pub incomplete: Vec<IncompleteFrame>,
+}
+
+/// Frames of a rerun whose outputs existed and were converted again, by why.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Redone {
+    /// The source changed (size or modification time: a dump appended to, a file
+    /// replaced).
+    pub source: usize,
+    /// The settings changed (a build option, a radius, the attribute, renames, the
+    /// columns).
+    pub settings: usize,
 }
 
 /// The last frame of an input, cut short, which a batch leaves out (see
@@ -891,6 +904,7 @@ pub fn batch(
             .flatten()
     };
     let known = recorded_entries(out_dir);
+    let mut redone = Redone::default();
     for mut job in mine.drain(..) {
         if let Some(dump) = job.dump {
             // (A header that cannot be read fails where the frame is converted.)
@@ -917,6 +931,8 @@ pub fn batch(
                 .clone()
         };
         let columns = columns_for(&job);
+        // Why an existing output is converted again (for the summary).
+        let mut stale: Option<bool> = None;
         let complete = MdlodFile::open(&out).ok().filter(|f| {
             let given = || match job.dump {
                 Some(d) => d.given_radii(job.frame).ok(),
@@ -935,11 +951,16 @@ pub fn batch(
                 Some(names) => names == renames,
                 None => renames.is_empty(),
             };
-            f.metadata()
+            if !f
+                .metadata()
                 .source
                 .as_ref()
                 .is_some_and(|s| same_source(s, &want))
-                && same_columns
+            {
+                stale = Some(true);
+                return false;
+            }
+            let same = same_columns
                 && same_names
                 && same_build(
                     f,
@@ -947,8 +968,17 @@ pub fn batch(
                     job.attribute.as_deref(),
                     recorded.and_then(|r| r.radii.as_deref()),
                     given,
-                )
+                );
+            if !same {
+                stale = Some(false);
+            }
+            same
         });
+        match stale {
+            Some(true) => redone.source += 1,
+            Some(false) => redone.settings += 1,
+            None => {}
+        }
         match complete {
             Some(f) => {
                 note_species(&f);
@@ -963,6 +993,7 @@ pub fn batch(
         }
     }
     let skipped = done.len();
+    let redone = redone;
     let manifest = Mutex::new(Manifest {
         mdlod_dataset: 1,
         shard: opts.shard.map(|(i, n)| [i, n]),
@@ -1224,6 +1255,7 @@ pub fn batch(
         strays,
         duplicates,
         incomplete,
+        redone,
         frames_total,
         frames_in_shard,
         converted: converted.into_inner(),

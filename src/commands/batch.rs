@@ -376,6 +376,35 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     for e in &report.incomplete {
         println!("note: {e}");
     }
+    let again = report.redone;
+    if again.source + again.settings > 0 {
+        let mut why = Vec::new();
+        if again.source > 0 {
+            why.push(format!("{} whose source changed", again.source));
+        }
+        if again.settings > 0 {
+            why.push(format!(
+                "{} built with other settings (build options, --radius, --attribute, \
+                 --species-name or --columns)",
+                again.settings
+            ));
+        }
+        println!(
+            "note: {} frame{} already converted {} converted again: {}",
+            again.source + again.settings,
+            if again.source + again.settings == 1 {
+                ""
+            } else {
+                "s"
+            },
+            if again.source + again.settings == 1 {
+                "was"
+            } else {
+                "were"
+            },
+            why.join("; ")
+        );
+    }
     for n in &report.notes {
         println!("note: {n}");
     }
