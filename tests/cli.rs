@@ -3174,3 +3174,65 @@ fn frames_count_from_the_end_and_the_summary_names_the_frame() {
     let text = ok(&["convert", s(&one), "-o", s(&out)]);
     assert!(!text.contains("(frame"), "{text}");
 }
+
+/// A view hiding species fits what it shows: a small solute in a large box of solvent,
+/// the solvent hidden, fills the image instead of a tenth of it.
+#[test]
+fn hiding_species_fits_the_view_to_the_species_shown() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("solvated.xyz");
+    let mut atoms = Vec::new();
+    // Solvent W on a lattice filling 0..60; solute S in a ball of radius 4 at the centre.
+    for i in 0..20 {
+        for j in 0..20 {
+            for k in 0..20 {
+                let p = [i as f32 * 3.0, j as f32 * 3.0, k as f32 * 3.0];
+                let r2: f32 = p.iter().map(|v| (v - 30.0).powi(2)).sum();
+                if r2 > 25.0 {
+                    atoms.push(format!("W {} {} {}", p[0], p[1], p[2]));
+                }
+            }
+        }
+    }
+    for i in 0..400 {
+        let t = i as f32 * 0.7;
+        let r = 4.0 * ((i % 20) as f32 / 20.0).sqrt();
+        let (x, y, z) = (r * t.cos(), r * t.sin(), 4.0 * ((i as f32 / 400.0) - 0.5));
+        atoms.push(format!("S {} {} {}", 30.0 + x, 30.0 + y, 30.0 + z));
+    }
+    std::fs::write(
+        &xyz,
+        format!("{}\nsolvated\n{}\n", atoms.len(), atoms.join("\n")),
+    )
+    .unwrap();
+    let file = dir.path().join("s.mdlod");
+    ok(&[
+        "convert",
+        s(&xyz),
+        "-o",
+        s(&file),
+        "--radius",
+        "W=1",
+        "--radius",
+        "S=1",
+    ]);
+    let png = dir.path().join("s.png");
+    let covered_rows = |extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "64"];
+        args.extend(["--height", "64", "--background", "#000000"]);
+        args.extend(extra);
+        ok(&args);
+        let (w, _, px) = read_png(&png);
+        let rows: Vec<usize> = px
+            .chunks(4 * w as usize)
+            .enumerate()
+            .filter(|(_, row)| row.chunks(4).any(|p| p[..3] != [0, 0, 0]))
+            .map(|(y, _)| y)
+            .collect();
+        rows.last().map_or(0, |l| l - rows[0] + 1)
+    };
+    let shown = covered_rows(&["--hide-species", "W"]);
+    assert!(shown >= 32, "the solute spans {shown} of 64 rows");
+    // Without hiding, the whole box: the solute is inside it, the box spans the image.
+    assert!(covered_rows(&[]) >= 32);
+}

@@ -318,6 +318,75 @@ pub fn data_bounds(file: &MdlodFile) -> Bounds {
     Bounds::new(top.bounds_min, top.bounds_max)
 }
 
+/// The bounds of what a view hiding the species of `hidden` (a species mask, see
+/// [`TraversalSettings::hidden_species`]) draws, for fitting the view to it: the union of
+/// the boxes of the nodes holding shown species only, found by opening mixed nodes level
+/// by level (at most [`SHOWN_BOUNDS_NODES`] of them; a mixed node not opened adds its
+/// own box). A mixed node whose children are particles adds its shown particles'
+/// spheres, where the particles are encoded relative to it (δn = 1; else its box).
+/// `None` when nothing is hidden, or every particle is.
+pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
+    use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
+    if hidden == 0 {
+        return None;
+    }
+    let kinds = file.species_below(hidden);
+    let (nodes, levels) = (file.nodes(), file.levels());
+    let last = levels.len().checked_sub(1)?;
+    let mut lo = glam::Vec3::splat(f32::INFINITY);
+    let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
+    let mut queue = std::collections::VecDeque::from([0usize]);
+    let mut opened = 0usize;
+    while let Some(id) = queue.pop_front() {
+        let Some(n) = nodes.get(id) else { continue };
+        let kind = kinds.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT);
+        if kind & BELOW_OUT == 0 {
+            continue; // Hidden species only.
+        }
+        let child_level = usize::from(n.level) + 1;
+        let mixed = kind & BELOW_IN != 0;
+        if mixed && child_level == last && file.delta_n() == 1 && file.check_children(id).is_ok() {
+            // The particles themselves: position relative to this node, the species'
+            // radius around it.
+            let (pos, species) = (file.positions(last), file.species());
+            let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
+            for c in n.child_first as usize..(n.child_first + n.child_count) as usize {
+                let Some(&sp) = species.get(c) else { continue };
+                if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
+                    continue;
+                }
+                let p = glam::Vec3::from(mdlod_format::quantize::decode3(
+                    pos.get(c),
+                    n.centroid,
+                    n.quant_scale,
+                    file.position_bits(),
+                ));
+                let r = radii.get(usize::from(sp)).copied().unwrap_or(0.0);
+                lo = lo.min(p - r);
+                hi = hi.max(p + r);
+            }
+            continue;
+        }
+        let open = mixed
+            && child_level < last
+            && opened < SHOWN_BOUNDS_NODES
+            && file.check_children(id).is_ok();
+        if open {
+            opened += 1;
+            let first = levels[child_level].node_first as usize;
+            let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
+            queue.extend(children.map(|c| first + c));
+            continue;
+        }
+        lo = lo.min(glam::Vec3::from(n.bounds_min));
+        hi = hi.max(glam::Vec3::from(n.bounds_max));
+    }
+    (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then(|| Bounds::new(lo, hi))
+}
+
+/// The most mixed nodes [`shown_bounds`] opens (a few milliseconds' work).
+pub const SHOWN_BOUNDS_NODES: usize = 1 << 16;
+
 /// The largest image side any mode renders or samples, in pixels (adapters allow at
 /// most this many per side, many fewer). Checked before the traversal, whose tiles and
 /// occlusion buffers grow with the image.
@@ -486,7 +555,23 @@ pub fn frame_setup(
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     check_numbers(opts)?;
-    let mut camera = camera_for(file, &opts.view, opts.width, opts.height)?;
+    // Hidden species are left out of the fit (a solute without its solvent fills the
+    // image); the depth range still holds all the data, as clusters holding hidden
+    // species may be drawn where a budget stops the refinement.
+    let hidden = match opts.mode {
+        RenderMode::Spheres | RenderMode::Sndf { .. } => {
+            opts.style.hidden_mask(&file.metadata().species)
+        }
+        _ => 0,
+    };
+    let mut camera = match shown_bounds(file, hidden) {
+        Some(shown) => {
+            let mut c = camera_in(&shown, &opts.view, opts.width, opts.height)?;
+            c.fit_depth_range(&data_bounds(file));
+            c
+        }
+        None => camera_for(file, &opts.view, opts.width, opts.height)?,
+    };
     // The data's bounds hold the particles' own spheres; a style that draws them larger
     // reaches past them, and a sphere in front of the near plane is clipped whole (its
     // quad lies at its front). The depth range grows by as much.
