@@ -27,6 +27,14 @@ pub fn defer_to_interrupt() {
 /// Working directories, and outputs whose hidden partial files go with them.
 static TARGETS: Mutex<Vec<(PathBuf, Option<PathBuf>)>> = Mutex::new(Vec::new());
 
+/// What the interrupted command adds to its last line (what was kept, how to go on).
+static SAYING: Mutex<Option<String>> = Mutex::new(None);
+
+/// Sets what the message of an interrupted run adds (see [`remove_on_interrupt`]).
+pub fn on_interrupt_say(text: impl Into<String>) {
+    *SAYING.lock().unwrap_or_else(|e| e.into_inner()) = Some(text.into());
+}
+
 /// Removes `work_dir` (and the partial `.NAME.*.tmp` of `output`) if the program is
 /// interrupted.
 pub fn remove_on_interrupt(work_dir: &Path, output: Option<&Path>) {
@@ -53,7 +61,11 @@ pub fn remove_on_interrupt(work_dir: &Path, output: Option<&Path>) {
                     remove_partial(out);
                 }
             }
-            eprintln!("interrupted: working files removed");
+            let saying = SAYING.lock().unwrap_or_else(|e| e.into_inner());
+            match saying.as_deref() {
+                Some(text) => eprintln!("interrupted: working files removed; {text}"),
+                None => eprintln!("interrupted: working files removed"),
+            }
             std::process::exit(130);
         });
     });

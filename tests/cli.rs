@@ -581,7 +581,7 @@ fn killing_a_batch_at_any_moment_leaves_only_complete_frames_and_a_true_manifest
         let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
             .args(["batch", s(&input), "-o", s(&work), "--threads", "2"])
             .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
         std::thread::sleep(std::time::Duration::from_millis(delay_ms));
@@ -590,7 +590,15 @@ fn killing_a_batch_at_any_moment_leaves_only_complete_frames_and_a_true_manifest
             .status()
             .unwrap();
         assert!(status.success() || child.try_wait().unwrap().is_some());
-        child.wait().unwrap();
+        let ended = child.wait_with_output().unwrap();
+        // An interrupt the handler caught says how to go on.
+        if ended.status.code() == Some(130) {
+            let err = String::from_utf8_lossy(&ended.stderr);
+            assert!(
+                err.contains("a rerun of the same command converts only the rest"),
+                "{err}"
+            );
+        }
         check_batch_dir(&work, &reference);
         frames_seen
             .push(mdlod_preprocess::batch::read_manifest(&work).map_or(0, |m| m.frames.len()));

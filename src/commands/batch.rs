@@ -311,6 +311,9 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         )
     })?;
     crate::interrupt::remove_on_interrupt(work.path(), None);
+    crate::interrupt::on_interrupt_say(
+        "the frames finished are kept, and a rerun of the same command converts only the rest",
+    );
     convert.chunks.temp_dir = Some(work.path().to_path_buf());
     let opts = BatchOptions {
         convert,
