@@ -931,8 +931,6 @@ pub fn batch(
                 .clone()
         };
         let columns = columns_for(&job);
-        // Why an existing output is converted again (for the summary).
-        let mut stale: Option<bool> = None;
         let complete = MdlodFile::open(&out).ok().filter(|f| {
             let given = || match job.dump {
                 Some(d) => d.given_radii(job.frame).ok(),
@@ -957,7 +955,7 @@ pub fn batch(
                 .as_ref()
                 .is_some_and(|s| same_source(s, &want))
             {
-                stale = Some(true);
+                redone.source += 1;
                 return false;
             }
             let same = same_columns
@@ -970,15 +968,10 @@ pub fn batch(
                     given,
                 );
             if !same {
-                stale = Some(false);
+                redone.settings += 1;
             }
             same
         });
-        match stale {
-            Some(true) => redone.source += 1,
-            Some(false) => redone.settings += 1,
-            None => {}
-        }
         match complete {
             Some(f) => {
                 note_species(&f);
@@ -993,7 +986,6 @@ pub fn batch(
         }
     }
     let skipped = done.len();
-    let redone = redone;
     let manifest = Mutex::new(Manifest {
         mdlod_dataset: 1,
         shard: opts.shard.map(|(i, n)| [i, n]),

@@ -212,12 +212,16 @@ pub fn chunk_memory(points: usize) -> u64 {
     points as u64 * BUILD_BYTES_PER_PARTICLE + (64 << 20)
 }
 
-/// The most particles a chunk may hold for [`chunk_memory`] to stay within `limit`.
-fn chunk_points_within(limit: u64) -> Option<usize> {
-    let room = limit.checked_sub(64 << 20)?;
-    usize::try_from(room / BUILD_BYTES_PER_PARTICLE)
-        .ok()
-        .filter(|&p| p > 0)
+/// A chunk size within `limit` (see [`chunk_memory`]) to suggest: the most particles a
+/// chunk may hold, rounded down to two significant digits but never below the build's
+/// `root_points`; `None` where not even chunks of the root points fit.
+pub(crate) fn chunk_points_within(limit: u64, root_points: u32) -> Option<u64> {
+    let points = limit.saturating_sub(chunk_memory(0)) / BUILD_BYTES_PER_PARTICLE;
+    let least = u64::from(root_points);
+    (points >= least).then(|| {
+        let unit = 10u64.pow(points.max(1).ilog10().saturating_sub(1));
+        (points / unit * unit).max(least)
+    })
 }
 
 /// A size for a message: bytes below a MiB (a limit of `1K` is not "0 MiB"), else MiB.
@@ -1388,8 +1392,8 @@ pub fn convert_chunked(
             size_text(chunk.memory_limit),
             size_text(need),
             size_text(need),
-            match chunk_points_within(chunk.memory_limit) {
-                Some(points) if points >= params.max_root_points as usize => format!(
+            match chunk_points_within(chunk.memory_limit, params.max_root_points) {
+                Some(points) => format!(
                     ", or lower --chunk-points to {points} or less (chunks within the limit)"
                 ),
                 _ => String::new(),
@@ -1541,13 +1545,12 @@ pub fn convert_chunked(
                     hi[k] = hi[k].max(cell.hi[k]);
                 }
             }
-            let far =
-                crate::convert::far_outside(&[lo, hi], metadata.simulation_box.as_ref()).map(|f| {
-                    crate::convert::FarOutside {
-                        count: None,
-                        farthest: None,
-                        ..f
-                    }
+            let far = crate::convert::survey_positions(&[lo, hi], metadata.simulation_box.as_ref())
+                .2
+                .map(|f| crate::convert::FarOutside {
+                    count: None,
+                    farthest: None,
+                    ..f
                 });
             notes.extend(crate::convert::position_notes(
                 lo,

@@ -146,21 +146,11 @@ pub(crate) fn check_in_memory(
 /// How to build a frame of `particles` out of core within `limit`, if chunks of at least
 /// the build's `root_points` fit in it.
 fn chunk_hint(particles: usize, limit: u64, root_points: u32) -> String {
-    let room = limit.saturating_sub(crate::chunked::chunk_memory(0));
-    let points = room / crate::chunked::BUILD_BYTES_PER_PARTICLE;
-    let least = u64::from(root_points);
-    // A round number: two significant digits, downward, but never below the root points.
-    let round = |p: u64| {
-        let unit = 10u64.pow(p.max(1).ilog10().saturating_sub(1));
-        (p / unit * unit).max(least)
-    };
-    if points >= least && points < particles as u64 {
-        format!(
-            ", or build it out of core in smaller chunks (--chunk-points {})",
-            round(points)
-        )
-    } else {
-        String::new()
+    match crate::chunked::chunk_points_within(limit, root_points) {
+        Some(points) if points < particles as u64 => {
+            format!(", or build it out of core in smaller chunks (--chunk-points {points})")
+        }
+        _ => String::new(),
     }
 }
 
@@ -297,8 +287,7 @@ pub fn convert_frame(
         })?;
     let build_time = t0.elapsed();
     let mut notes = crate::species::radius_notes(&names, &options.radii);
-    let (lo, hi) = position_bounds(&frame.positions);
-    let far = far_outside(&frame.positions, frame.simulation_box.as_ref());
+    let (lo, hi, far) = survey_positions(&frame.positions, frame.simulation_box.as_ref());
     notes.extend(position_notes(lo, hi, &species, far));
     let mut metadata = base_metadata(frame, source, options);
     metadata.species = species;
@@ -336,25 +325,32 @@ pub(crate) struct FarOutside {
     pub farthest: Option<[f32; 3]>,
 }
 
-/// The particles of `positions` farther outside the box than [`FAR_OUTSIDE_BOXES`].
-pub(crate) fn far_outside(
+/// In one pass over `positions`: their bounds (infinite for none), and those farther
+/// outside the box than [`FAR_OUTSIDE_BOXES`] (none counted without a usable box).
+pub(crate) fn survey_positions(
     positions: &[[f32; 3]],
     simulation_box: Option<&mdlod_format::meta::SimulationBox>,
-) -> Option<FarOutside> {
-    let (blo, bhi) = crate::chunked::box_bounds(simulation_box?);
-    let edge = (0..3).map(|k| bhi[k] - blo[k]).fold(0.0f32, f32::max);
-    if !(edge > 0.0 && edge.is_finite()) {
-        return None;
-    }
-    let limit = FAR_OUTSIDE_BOXES * edge;
-    let outside = |p: &[f32; 3]| {
-        (0..3)
-            .map(|k| (blo[k] - p[k]).max(p[k] - bhi[k]))
-            .fold(0.0f32, f32::max)
-    };
+) -> ([f32; 3], [f32; 3], Option<FarOutside>) {
+    // The box's bounds and how far outside them a particle is lost.
+    let far_box = simulation_box.and_then(|b| {
+        let (blo, bhi) = crate::chunked::box_bounds(b);
+        let edge = (0..3).map(|k| bhi[k] - blo[k]).fold(0.0f32, f32::max);
+        (edge > 0.0 && edge.is_finite()).then_some((blo, bhi, FAR_OUTSIDE_BOXES * edge))
+    });
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
     let mut far: Option<FarOutside> = None;
     for p in positions {
-        let d = outside(p);
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+        let Some((blo, bhi, limit)) = far_box else {
+            continue;
+        };
+        let d = (0..3)
+            .map(|k| (blo[k] - p[k]).max(p[k] - bhi[k]))
+            .fold(0.0f32, f32::max);
         if d > limit {
             let f = far.get_or_insert(FarOutside {
                 count: Some(0),
@@ -368,7 +364,7 @@ pub(crate) fn far_outside(
             }
         }
     }
-    far
+    (lo, hi, far)
 }
 
 /// Notes on positions that will not draw as the user expects, from the particles'
@@ -420,19 +416,6 @@ pub(crate) fn position_notes(
     notes
 }
 
-/// The bounds of `positions` (infinite for none).
-fn position_bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for p in positions {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    (lo, hi)
-}
-
 /// Refuses a species whose radius from the input is zero, below or not a number, unless
 /// `options` override it; `source` and `timestep` place the frame for the message.
 pub fn check_radii(
@@ -465,10 +448,7 @@ pub fn base_metadata(
         timestep: frame.timestep,
         time: frame.time,
         units: frame.units.clone(),
-        species: species_table(
-            &crate::species::rename_species(&frame.species, &options.species_names).0,
-            &options.radii,
-        ),
+        species: species_table(&frame.species, &options.radii),
         attribute: frame.attribute.as_ref().map(|a| AttributeInfo {
             name: a.name.clone(),
             min: 0.0,

@@ -102,6 +102,24 @@ impl ViewChanges {
     pub fn is_empty(&self) -> bool {
         *self == ViewChanges::default()
     }
+
+    /// Changes `v`; whether it changed.
+    fn apply(&self, v: &mut ViewFile) -> bool {
+        let before = v.clone();
+        if let Some(a) = self.azimuth_deg {
+            v.azimuth_deg = a;
+        }
+        if let Some(e) = self.elevation_deg {
+            v.elevation_deg = e;
+        }
+        if let Some(z) = self.zoom {
+            v.zoom *= z;
+        }
+        if self.orthographic {
+            v.projection = Projection::Orthographic;
+        }
+        *v != before
+    }
 }
 
 impl Default for ViewSpec {
@@ -335,6 +353,8 @@ pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
     let last = levels.len().checked_sub(1)?;
     let mut lo = glam::Vec3::splat(f32::INFINITY);
     let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
+    let (pos, species) = (file.positions(last), file.species());
+    let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
     let mut queue = std::collections::VecDeque::from([0usize]);
     let mut opened = 0usize;
     while let Some(id) = queue.pop_front() {
@@ -348,8 +368,6 @@ pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
         if mixed && child_level == last && file.delta_n() == 1 && file.check_children(id).is_ok() {
             // The particles themselves: position relative to this node, the species'
             // radius around it.
-            let (pos, species) = (file.positions(last), file.species());
-            let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
             for c in n.child_first as usize..(n.child_first + n.child_count) as usize {
                 let Some(&sp) = species.get(c) else { continue };
                 if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
@@ -485,33 +503,14 @@ fn camera_in(
                 .map_err(|e| RenderError::InvalidOptions(format!("zoom {zoom:e}: {e}")))?;
             c
         }
-        ViewSpec::File(path) => {
-            let c = ViewFile::load(path)?.to_camera(&bounds, aspect);
-            check_built_camera(&c).map_err(|message| RenderError::View {
-                path: path.clone(),
-                message,
-            })?;
-            c
-        }
-        ViewSpec::FileWith(path, changes) => {
+        ViewSpec::File(path) | ViewSpec::FileWith(path, _) => {
             let mut v = ViewFile::load(path)?;
-            let base = v.clone();
-            if let Some(a) = changes.azimuth_deg {
-                v.azimuth_deg = a;
-            }
-            if let Some(e) = changes.elevation_deg {
-                v.elevation_deg = e;
-            }
-            if let Some(z) = changes.zoom {
-                v.zoom *= z;
-            }
-            if changes.orthographic {
-                v.projection = Projection::Orthographic;
-            }
-            if v != base {
-                v.check().map_err(|e| {
-                    RenderError::InvalidOptions(format!("{} changed: {e}", path.display()))
-                })?;
+            if let ViewSpec::FileWith(_, changes) = view {
+                if changes.apply(&mut v) {
+                    v.check().map_err(|e| {
+                        RenderError::InvalidOptions(format!("{} changed: {e}", path.display()))
+                    })?;
+                }
             }
             let c = v.to_camera(&bounds, aspect);
             check_built_camera(&c).map_err(|message| RenderError::View {

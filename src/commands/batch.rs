@@ -376,11 +376,15 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     for e in &report.empty {
         println!("{e}");
     }
+    for n in &report.notes {
+        println!("note: {n}");
+    }
     for e in &report.incomplete {
         println!("note: {e}");
     }
     let again = report.redone;
-    if again.source + again.settings > 0 {
+    let n = again.source + again.settings;
+    if n > 0 {
         let mut why = Vec::new();
         if again.source > 0 {
             why.push(format!("{} whose source changed", again.source));
@@ -392,24 +396,11 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
                 again.settings
             ));
         }
+        let (s, verb) = if n == 1 { ("", "was") } else { ("s", "were") };
         println!(
-            "note: {} frame{} already converted {} converted again: {}",
-            again.source + again.settings,
-            if again.source + again.settings == 1 {
-                ""
-            } else {
-                "s"
-            },
-            if again.source + again.settings == 1 {
-                "was"
-            } else {
-                "were"
-            },
+            "note: {n} frame{s} already converted {verb} converted again: {}",
             why.join("; ")
         );
-    }
-    for n in &report.notes {
-        println!("note: {n}");
     }
     let empty = match report.empty.len() {
         0 => String::new(),
