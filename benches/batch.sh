@@ -2,7 +2,8 @@
 # Whole trajectories: `mdlod batch` of generated multi-frame LAMMPS text dumps as
 # separate processes under /usr/bin/time: every frame from a cold page cache (dropped
 # where this user may), the same on one thread, a rerun with nothing to do, a rerun
-# after a quarter of the frames were deleted, the two shards of `--shard I/2` one after
+# after a quarter of the frames were deleted, a rerun after the dump grew (half its
+# frames converted first, the rest appended) and after it was touched, the two shards of `--shard I/2` one after
 # the other and their `--merge`; then many small frames (what a frame costs beyond its
 # particles), and their rerun. Writes the table into BENCHMARKS.md between the batch
 # markers.
@@ -71,6 +72,20 @@ for f in $(ls "$out"/frame-*.mdlod | sort -V | awk -v q=$((FRAMES / 4)) 'NR % 4 
   rm "$f"
 done
 run "rerun after deleting a quarter of the frames" "$N" "$dump" -o "$out" "${radius[@]}"
+# A dump a running simulation is still writing: converted with half its frames, then
+# rerun once the rest are appended (the old frames' bytes are read and compared), then
+# touched (every frame's bytes compared, nothing converted).
+half=$((FRAMES / 2))
+cut=$(grep -a -b -m $((half + 1)) "^ITEM: TIMESTEP" "$dump" | tail -1 | cut -d: -f1)
+growing="$DIR/growing.lammpstrj"
+head -c "$cut" "$dump" > "$growing"
+rm -rf "$out"
+"$BIN" batch "$growing" -o "$out" "${radius[@]}" > /dev/null
+tail -c +$((cut + 1)) "$dump" >> "$growing"
+run "rerun after the dump grew from $half to $FRAMES frames" "$N" "$growing" -o "$out" "${radius[@]}"
+touch "$growing"
+run "rerun after \`touch\` (every frame's bytes compared)" "$N" "$growing" -o "$out" "${radius[@]}"
+rm -f "$growing"
 rm -rf "$out"
 run "\`--shard 0/2\`" "$N" "$dump" -o "$out" "${radius[@]}" --shard 0/2
 run "\`--shard 1/2\`" "$N" "$dump" -o "$out" "${radius[@]}" --shard 1/2

@@ -106,6 +106,21 @@ pub struct SourceInfo {
     /// Index of the frame within the source (0-based).
     #[serde(default)]
     pub frame: u64,
+    /// Where the frame's bytes lie in the source and their checksum: recorded by batch
+    /// conversions of uncompressed dumps whose frames are contiguous byte ranges, so
+    /// that a rerun over a dump that has grown since (a simulation still writing it)
+    /// keeps the frames whose bytes are unchanged instead of converting them again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bytes: Option<FrameBytes>,
+}
+
+/// A frame's byte range in its source, `[start, end)`, and the XXH3-64 of those bytes.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FrameBytes {
+    pub start: u64,
+    pub end: u64,
+    /// XXH3-64 (seed 0) of the bytes, as 16 lowercase hexadecimal digits.
+    pub xxh3: String,
 }
 
 /// The parameters the hierarchy was built with.

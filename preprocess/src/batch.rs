@@ -21,7 +21,13 @@
 //!    from its header alone on every run. A frame whose output exists, opens (the reader
 //!    validates its structure), records the same source (path, frame, size and
 //!    modification time, to the nanosecond where the file system keeps it) and was built
-//!    with the same settings is skipped; anything else is converted again. The settings
+//!    with the same settings is skipped; anything else is converted again, except that
+//!    a frame whose input changed but whose own bytes did not is kept: the frames of an
+//!    uncompressed LAMMPS text or binary dump or XYZ file are byte ranges of it, each
+//!    recorded with its range and checksum ([`FrameBytes`]), so a rerun over a dump a
+//!    running simulation has appended to reads the old frames once to compare them
+//!    and converts only the new ones (and lists the kept ones with the input's size and
+//!    time now, so the next rerun need not read them again). The settings
 //!    are everything the file depends on ([`same_build`]): cluster size, root points, δn,
 //!    position bits, the chunk size where the frame is above it (a chunked build differs
 //!    from a whole one), every species' radius (as given now, else as the input gives it
@@ -45,7 +51,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
-use mdlod_format::meta::{BuildInfo, SimulationBox, SourceInfo};
+use mdlod_format::meta::{BuildInfo, FrameBytes, SimulationBox, SourceInfo};
 use mdlod_format::MdlodFile;
 use serde::{Deserialize, Serialize};
 
@@ -202,6 +208,10 @@ pub struct BatchReport {
     pub duplicates: Vec<String>,
     /// Frames whose outputs existed and were converted again.
     pub redone: Redone,
+    /// Frames whose input changed since they were converted (a dump a simulation has
+    /// appended frames to since, a file touched) but whose own bytes did not: kept
+    /// (counted in `skipped` too).
+    pub kept_unchanged: usize,
     /// Last frames of their inputs that are cut short (a run still writing them): left
     /// out, not expected of this run, converted by a rerun once complete.
     pub incomplete: Vec<IncompleteFrame>,
@@ -210,8 +220,9 @@ pub struct BatchReport {
 /// Frames of a rerun whose outputs existed and were converted again, by why.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Redone {
-    /// The source changed (size or modification time: a dump appended to, a file
-    /// replaced).
+    /// The source changed: a file replaced, a frame's bytes changed (an input whose
+    /// frames are not byte ranges of their own, such as a gzip dump or a GSD file,
+    /// changed in size or modification time).
     pub source: usize,
     /// The settings changed (a build option, a radius, the attribute, renames, the
     /// columns).
@@ -346,6 +357,7 @@ pub fn fingerprint(input: &Path, frame: u64) -> SourceInfo {
         modified_unix: modified.map(|m| m.0),
         modified_nanos: modified.and_then(|m| m.1),
         frame,
+        bytes: None,
     }
 }
 
@@ -372,8 +384,69 @@ fn same_source(recorded: &SourceInfo, now: &SourceInfo) -> bool {
             == SourceInfo {
                 path: recorded.path.clone(),
                 modified_nanos: nanos,
+                bytes: recorded.bytes.clone(),
                 ..now.clone()
             }
+}
+
+/// Whether two sources name files of the same name (the frame's bytes tell the rest).
+fn same_name(recorded: &SourceInfo, now: &SourceInfo) -> bool {
+    let name = |p: &str| Path::new(p).file_name().map(|n| n.to_os_string());
+    name(&recorded.path).is_some() && name(&recorded.path) == name(&now.path)
+}
+
+/// The XXH3-64 of `range` of the file at `path`, read through a buffer (the pages read
+/// do not stay mapped into the process), as [`FrameBytes::xxh3`] writes it.
+pub fn range_checksum(
+    path: &Path,
+    range: std::ops::Range<u64>,
+    progress: &dyn Progress,
+) -> std::io::Result<String> {
+    use std::io::{Read, Seek};
+    let mut file = std::fs::File::open(path)?;
+    file.seek(std::io::SeekFrom::Start(range.start))?;
+    let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+    let mut buffer = vec![0u8; 1 << 20];
+    let mut at = range.start;
+    while at < range.end {
+        let want = usize::try_from(range.end - at).map_or(buffer.len(), |n| n.min(buffer.len()));
+        let n = match file.read(&mut buffer[..want]) {
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            r => r?,
+        };
+        if n == 0 {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!(
+                    "ends at byte {at}, before the frame's end at byte {}",
+                    range.end
+                ),
+            ));
+        }
+        hasher.update(&buffer[..n]);
+        at += n as u64;
+        progress.advance(n as u64);
+    }
+    Ok(format!("{:016x}", hasher.digest()))
+}
+
+/// A frame's byte range and checksum in its input, for inputs whose frames are
+/// contiguous byte ranges ([`DumpFile::frame_bytes`]); `None` for others.
+fn frame_bytes(
+    input: &Path,
+    dump: Option<&DumpFile>,
+    frame: usize,
+) -> Result<Option<FrameBytes>, BatchError> {
+    let Some(range) = dump.and_then(|d| d.frame_bytes(frame)) else {
+        return Ok(None);
+    };
+    let xxh3 =
+        range_checksum(input, range.clone(), &crate::progress::NoProgress).map_err(io(input))?;
+    Ok(Some(FrameBytes {
+        start: range.start,
+        end: range.end,
+        xxh3,
+    }))
 }
 
 /// The output file name of a timestep.
@@ -472,6 +545,7 @@ fn entry_of(
             modified_unix: None,
             modified_nanos: None,
             frame: 0,
+            bytes: None,
         }),
         columns,
         radii: Some(radii),
@@ -568,8 +642,21 @@ fn same_build(
     })
 }
 
+/// What the planning decided about an existing output.
+enum Verdict {
+    /// Complete and current: kept, listed with the manifest's record of its source when
+    /// that is newer than the file's own (see [`FrameBytes`]).
+    Keep(MdlodFile, Option<SourceInfo>),
+    /// Built with the same settings from an input that changed since: kept when the
+    /// frame's bytes are unchanged.
+    CheckBytes(MdlodFile, FrameBytes),
+    Redo,
+}
+
 /// What a listed frame was converted with that its file does not record.
 struct Recorded {
+    /// The source as the manifest lists it.
+    source: SourceInfo,
     columns: Option<Vec<String>>,
     radii: Option<Vec<(String, f32)>>,
     species_names: Option<Vec<(String, String)>>,
@@ -598,6 +685,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
             known.insert(
                 (f.file, f.checksum),
                 Recorded {
+                    source: f.source,
                     columns: f.columns,
                     radii: f.radii,
                     species_names: f.species_names,
@@ -905,6 +993,8 @@ pub fn batch(
     };
     let known = recorded_entries(out_dir);
     let mut redone = Redone::default();
+    // Outputs whose input changed, to be compared by their frames' bytes.
+    let mut unsure = Vec::new();
     for mut job in mine.drain(..) {
         if let Some(dump) = job.dump {
             // (A header that cannot be read fails where the frame is converted.)
@@ -931,7 +1021,7 @@ pub fn batch(
                 .clone()
         };
         let columns = columns_for(&job);
-        let complete = MdlodFile::open(&out).ok().filter(|f| {
+        let verdict = MdlodFile::open(&out).ok().map(|f| {
             let given = || match job.dump {
                 Some(d) => d.given_radii(job.frame).ok(),
                 None => job.given_radii.take(),
@@ -949,19 +1039,29 @@ pub fn batch(
                 Some(names) => names == renames,
                 None => renames.is_empty(),
             };
-            if !f
-                .metadata()
-                .source
-                .as_ref()
-                .is_some_and(|s| same_source(s, &want))
-            {
-                redone.source += 1;
-                return false;
-            }
+            let own = f.metadata().source.as_ref();
+            // The source as the manifest lists it: a frame kept by its bytes is listed
+            // with the input's size and time then, so the next rerun need not read it.
+            let listed = recorded
+                .map(|r| &r.source)
+                .filter(|l| l.bytes.is_some() && own.is_some_and(|o| o.bytes == l.bytes));
+            let source = if own.is_some_and(|s| same_source(s, &want)) {
+                None
+            } else if let Some(l) = listed.filter(|l| same_source(l, &want)) {
+                Some(Ok(l.clone()))
+            } else {
+                match own.and_then(|s| s.bytes.clone().filter(|_| same_name(s, &want))) {
+                    Some(b) => Some(Err(b)),
+                    None => {
+                        redone.source += 1;
+                        return Verdict::Redo;
+                    }
+                }
+            };
             let same = same_columns
                 && same_names
                 && same_build(
-                    f,
+                    &f,
                     &opts.convert,
                     job.attribute.as_deref(),
                     recorded.and_then(|r| r.radii.as_deref()),
@@ -969,21 +1069,83 @@ pub fn batch(
                 );
             if !same {
                 redone.settings += 1;
+                return Verdict::Redo;
             }
-            same
+            match source {
+                None => Verdict::Keep(f, None),
+                Some(Ok(listed)) => Verdict::Keep(f, Some(listed)),
+                Some(Err(bytes)) => Verdict::CheckBytes(f, bytes),
+            }
         });
-        match complete {
-            Some(f) => {
+        match verdict {
+            Some(Verdict::Keep(f, listed)) => {
                 note_species(&f);
-                done.push(entry_of(&out, &f, job.timestep, columns, &opts.convert));
+                let mut entry = entry_of(&out, &f, job.timestep, columns, &opts.convert);
+                if let Some(l) = listed {
+                    entry.source = l;
+                }
+                done.push(entry);
             }
-            None => {
+            Some(Verdict::CheckBytes(f, bytes)) => unsure.push((job, f, bytes, want)),
+            Some(Verdict::Redo) | None => {
                 if job.particles == u64::MAX {
                     job.particles = 0;
                 }
                 todo.push(job);
             }
         }
+    }
+    // Outputs of frames whose input changed since (a dump a simulation has appended
+    // frames to since, a file touched) are kept when the frame's bytes are the ones
+    // converted: read again and compared by checksum.
+    let mut kept_unchanged = 0;
+    if !unsure.is_empty() {
+        let total = unsure.iter().map(|u| u.2.end - u.2.start).sum();
+        progress.stage(
+            &format!(
+                "checking {} frame{} of changed inputs",
+                unsure.len(),
+                if unsure.len() == 1 { "" } else { "s" }
+            ),
+            Some(total),
+            "bytes",
+        );
+        for (mut job, f, bytes, want) in unsure {
+            let range = bytes.start..bytes.end;
+            let dump = job.dump;
+            let unchanged = want.size >= bytes.end
+                && dump.and_then(|d| d.frame_bytes(job.frame)) == Some(range.clone())
+                // A text dump's unit style is written in its first frame only.
+                && dump.and_then(|d| d.frame_info(job.frame).ok()).map(|i| i.units)
+                    == Some(f.metadata().units.clone())
+                && range_checksum(job.input, range, progress).map_err(io(job.input))?
+                    == bytes.xxh3;
+            if unchanged {
+                kept_unchanged += 1;
+                note_species(&f);
+                let mut entry = entry_of(
+                    &out_dir.join(frame_file_name(job.timestep)),
+                    &f,
+                    job.timestep,
+                    columns_for(&job),
+                    &opts.convert,
+                );
+                entry.source = SourceInfo {
+                    bytes: Some(bytes),
+                    ..want
+                };
+                done.push(entry);
+            } else {
+                redone.source += 1;
+                if job.particles == u64::MAX {
+                    job.particles = 0;
+                }
+                todo.push(job);
+            }
+        }
+        progress.finish_stage();
+        done.sort_by_key(|e| e.timestep);
+        todo.sort_by_key(|j| j.timestep);
     }
     let skipped = done.len();
     let manifest = Mutex::new(Manifest {
@@ -1064,7 +1226,12 @@ pub fn batch(
             };
             let result = (|| -> Result<FrameEntry, BatchError> {
                 let out = out_dir.join(frame_file_name(job.timestep));
-                let source = fingerprint(job.input, job.frame as u64);
+                // Its bytes first: they are read into the page cache for the conversion.
+                let bytes = frame_bytes(job.input, job.dump, job.frame)?;
+                let source = SourceInfo {
+                    bytes,
+                    ..fingerprint(job.input, job.frame as u64)
+                };
                 let (dump, bounded) = match job.dump {
                     Some(d) => (d, None),
                     None => {
@@ -1248,6 +1415,7 @@ pub fn batch(
         duplicates,
         incomplete,
         redone,
+        kept_unchanged,
         frames_total,
         frames_in_shard,
         converted: converted.into_inner(),
@@ -1672,6 +1840,7 @@ mod tests {
             modified_unix: Some(1_700_000_000),
             modified_nanos: Some(250),
             frame: 3,
+            bytes: None,
         };
         assert!(same_source(&now, &now));
         let other_nanos = SourceInfo {
@@ -1716,5 +1885,15 @@ mod tests {
             ..now.clone()
         };
         assert!(!same_source(&now, &renamed));
+        // The frame's bytes recorded: the same source when size and time agree.
+        let with_bytes = SourceInfo {
+            bytes: Some(FrameBytes {
+                start: 10,
+                end: 900,
+                xxh3: "0123456789abcdef".into(),
+            }),
+            ..now.clone()
+        };
+        assert!(same_source(&with_bytes, &now));
     }
 }

@@ -793,6 +793,7 @@ pub fn source_info(path: &Path, frame: u64) -> SourceInfo {
         modified_unix: modified.map(|d| i64::try_from(d.as_secs()).unwrap_or(i64::MAX)),
         modified_nanos: modified.map(|d| d.subsec_nanos()),
         frame,
+        bytes: None,
     }
 }
 

@@ -73,16 +73,16 @@ fn every_frame_converts_once_and_reruns_redo_only_what_changed() {
     let again = read_manifest(&out).unwrap();
     assert_eq!(again, m, "the redone frame is byte-identical");
 
-    // A changed source: everything is redone.
+    // A changed modification time: every frame's bytes are compared, and kept.
     let f = std::fs::File::options().write(true).open(&src).unwrap();
     f.set_modified(std::time::SystemTime::UNIX_EPOCH + std::time::Duration::from_secs(1_000_000))
         .unwrap();
     drop(f);
     let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
-    assert_eq!((r.converted, r.skipped), (6, 0));
+    assert_eq!((r.converted, r.skipped, r.kept_unchanged), (0, 6, 6));
 
-    // Rewritten within the same second, to the same size: told apart by the
-    // nanoseconds of its modification time.
+    // Written again within the same second, to the same size: told apart by the
+    // nanoseconds of its modification time, so the bytes are compared again.
     let f = std::fs::File::options().write(true).open(&src).unwrap();
     f.set_modified(
         std::time::SystemTime::UNIX_EPOCH + std::time::Duration::new(1_000_000, 500_000_000),
@@ -91,12 +91,25 @@ fn every_frame_converts_once_and_reruns_redo_only_what_changed() {
     drop(f);
     let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
     assert_eq!(
-        (r.converted, r.skipped),
-        (6, 0),
+        (r.converted, r.skipped, r.kept_unchanged),
+        (0, 6, 6),
         "same second, other nanoseconds"
     );
     let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
-    assert_eq!((r.converted, r.skipped), (0, 6));
+    assert_eq!((r.converted, r.skipped, r.kept_unchanged), (0, 6, 0));
+
+    // Replaced by another run's dump of the same frames: everything is redone.
+    let mut other = std::fs::read(&src).unwrap();
+    let at = other.len() / 7;
+    let digit = (at..other.len()).find(|&i| other[i] == b'1').unwrap();
+    other[digit] = b'2';
+    std::fs::write(&src, &other).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(
+        (r.converted, r.redone.source),
+        (1, 1),
+        "only frame 0's bytes changed"
+    );
 }
 
 #[test]
@@ -1057,12 +1070,13 @@ fn a_shard_rerun_after_a_merge_outdates_it_and_merge_refuses_mixed_inputs() {
     let r = batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
     assert_eq!((r.converted, r.removed_merged), (0, None));
     assert!(read_manifest(&out).is_ok());
-    // The input changes (one more line at its end: a new size); shard 1 converts again.
+    // The input changes (one more line at its end: a new size, and the last frame's
+    // bytes); shard 1 converts that frame again and keeps its other two.
     let mut text = std::fs::read(&src).unwrap();
     text.extend_from_slice(b"\n");
     std::fs::write(&src, &text).unwrap();
     let r = batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
-    assert_eq!(r.converted, 3);
+    assert_eq!((r.converted, r.kept_unchanged), (1, 2));
     assert_eq!(r.removed_merged, Some(out.join("dataset.json")));
     assert!(!out.join("dataset.json").exists());
     let e = merge(&out).unwrap_err().to_string();
@@ -1100,7 +1114,8 @@ fn frame_files_of_no_input_frame_are_reported() {
 
 /// The same input named by another path (from another directory, as a requeued job
 /// does) is the same source: nothing converts again. Another file of the same name,
-/// size and time would be too; one of another content has another size or time.
+/// size and time would be too; one of another time has its frames' bytes compared, and
+/// only those that differ convert again.
 #[test]
 fn the_same_input_by_another_path_is_not_converted_again() {
     let dir = tempfile::tempdir().unwrap();
@@ -1111,11 +1126,21 @@ fn the_same_input_by_another_path_is_not_converted_again() {
     let other = dir.path().join("sub").join("..").join("melt.dump");
     let r = batch(&[other], &out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (0, 6));
-    // A copy elsewhere, written now: another modification time.
+    // A copy elsewhere, written now: another modification time, the same bytes.
     let copy = dir.path().join("sub").join("melt.dump");
     std::fs::copy(&src, &copy).unwrap();
+    let r = batch(std::slice::from_ref(&copy), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.kept_unchanged), (0, 6));
+    // Another run's dump of the same name: its last frame differs.
+    let mut text = std::fs::read(&src).unwrap();
+    let at = text.len() - 20;
+    let digit = (at..text.len())
+        .find(|&i| text[i].is_ascii_digit() && text[i] != b'9')
+        .unwrap();
+    text[digit] += 1;
+    std::fs::write(&copy, &text).unwrap();
     let r = batch(&[copy], &out, &opts(), &NoProgress).unwrap();
-    assert_eq!(r.converted, 6);
+    assert_eq!((r.converted, r.kept_unchanged, r.redone.source), (1, 5, 1));
 }
 
 /// A run restarted into the same dump repeats timesteps: refused by default with the
@@ -1257,4 +1282,105 @@ fn new_raw_arrays_behind_an_unchanged_sidecar_are_converted_again() {
     let r = batch(std::slice::from_ref(&sidecar), &out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (1, 0));
     assert_ne!(read_manifest(&out).unwrap().frames[0].checksum, before);
+}
+
+/// The dump a running simulation is still writing: a rerun over it once it has grown
+/// converts only the new frames (the old ones' bytes are read and compared once), the
+/// next rerun reads nothing, and a frame whose bytes changed is converted again. In each
+/// format whose frames are byte ranges: LAMMPS text and binary dumps, XYZ files.
+#[test]
+fn a_dump_that_grows_converts_only_its_new_frames() {
+    use mdlod_preprocess::readers::DumpFile;
+    for name in ["cu_melt.custom.dump", "cu_melt.custom.bin", "cu_melt.xyz"] {
+        let dir = tempfile::tempdir().unwrap();
+        let whole = std::fs::read(lammps_sample_path(name)).unwrap();
+        let frames = DumpFile::open(&lammps_sample_path(name)).unwrap();
+        let count = frames.frame_count();
+        assert!(count >= 3, "{name}: {count} frames");
+        let end_of = |k: usize| frames.frame_bytes(k).unwrap().end as usize;
+        let src = dir.path().join(name);
+        let out = dir.path().join("out");
+        // Two frames written so far.
+        std::fs::write(&src, &whole[..end_of(1)]).unwrap();
+        let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+        assert_eq!((r.converted, r.skipped), (2, 0), "{name}");
+        let first = read_manifest(&out).unwrap();
+        let start_of_2 = frames.frame_bytes(2).unwrap().start as usize;
+        assert_eq!(start_of_2, end_of(1), "{name}: frames are adjacent");
+
+        // The rest appended.
+        std::fs::write(&src, &whole).unwrap();
+        let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+        assert_eq!(
+            (r.converted, r.skipped, r.kept_unchanged, r.redone.source),
+            (count - 2, 2, 2, 0),
+            "{name}"
+        );
+        let grown = read_manifest(&out).unwrap();
+        assert_eq!(grown.frames.len(), count);
+        for (a, b) in first.frames.iter().zip(&grown.frames) {
+            assert_eq!(
+                (&a.file, &a.checksum),
+                (&b.file, &b.checksum),
+                "{name}: kept as is"
+            );
+            // Listed with the input as it is now, so that the next rerun reads nothing.
+            assert_eq!(b.source.size, whole.len() as u64);
+            assert_eq!(a.source.bytes, b.source.bytes);
+        }
+        check_manifest(&out, &grown);
+
+        let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+        assert_eq!(
+            (r.converted, r.skipped, r.kept_unchanged),
+            (0, count, 0),
+            "{name}"
+        );
+
+        // Touched, and one frame's bytes changed: that frame alone is converted again.
+        if name.ends_with(".bin") {
+            continue;
+        }
+        let range = frames.frame_bytes(1).unwrap();
+        let mut changed = whole.clone();
+        let middle = (range.start + range.end) as usize / 2;
+        let digit = (middle..range.end as usize)
+            .find(|&i| changed[i].is_ascii_digit() && changed[i] != b'9')
+            .unwrap();
+        changed[digit] += 1;
+        std::fs::write(&src, &changed).unwrap();
+        let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+        assert_eq!(
+            (r.converted, r.kept_unchanged, r.redone.source),
+            (1, count - 1, 1),
+            "{name}"
+        );
+        let after = read_manifest(&out).unwrap();
+        assert_ne!(after.frames[1].checksum, grown.frames[1].checksum, "{name}");
+        check_manifest(&out, &after);
+    }
+}
+
+/// A frame being written when the batch runs is left for the rerun, which keeps the
+/// frames before it by their bytes.
+#[test]
+fn a_frame_cut_short_while_written_is_converted_by_the_rerun() {
+    use mdlod_preprocess::readers::DumpFile;
+    let dir = tempfile::tempdir().unwrap();
+    let name = "cu_melt.custom.dump";
+    let whole = std::fs::read(lammps_sample_path(name)).unwrap();
+    let frames = DumpFile::open(&lammps_sample_path(name)).unwrap();
+    let third = frames.frame_bytes(2).unwrap();
+    let src = dir.path().join(name);
+    let out = dir.path().join("out");
+    std::fs::write(&src, &whole[..(third.start + third.end) as usize / 2]).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.incomplete.len()), (2, 1));
+    std::fs::write(&src, &whole).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(
+        (r.converted, r.kept_unchanged, r.incomplete.len()),
+        (frames.frame_count() - 2, 2, 0)
+    );
+    check_manifest(&out, &read_manifest(&out).unwrap());
 }

@@ -382,6 +382,14 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     for e in &report.incomplete {
         println!("note: {e}");
     }
+    match report.kept_unchanged {
+        0 => {}
+        n => println!(
+            "note: {n} frame{} of inputs changed since their conversion (appended to, or \
+             touched) still hold the same bytes: kept",
+            if n == 1 { "" } else { "s" }
+        ),
+    }
     let again = report.redone;
     let n = again.source + again.settings;
     if n > 0 {

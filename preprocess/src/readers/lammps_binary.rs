@@ -65,6 +65,8 @@ pub(crate) struct BinHeader {
     pub columns: Option<Vec<String>>,
     /// Byte ranges of the chunks' doubles.
     pub chunks: Vec<std::ops::Range<usize>>,
+    /// The frame's byte range, header and chunks.
+    pub bytes: std::ops::Range<usize>,
 }
 
 /// The frames of a binary dump.
@@ -349,6 +351,7 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
         time,
         columns,
         chunks,
+        bytes: start..r.pos,
     })
 }
 

@@ -188,6 +188,12 @@ impl Index {
         self.frames.get(k)?.timestep
     }
 
+    /// The byte range of frame `k`, up to the next frame's first byte (the last frame's:
+    /// up to the end of the file).
+    pub fn bytes(&self, k: usize) -> Option<std::ops::Range<usize>> {
+        self.frames.get(k).map(|s| s.start..s.end)
+    }
+
     /// Parses the header of frame `k` (which must exist).
     pub fn header(&self, ctx: &Ctx<'_>, k: usize) -> Result<Header, ReadError> {
         let span = &self.frames[k];

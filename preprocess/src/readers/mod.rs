@@ -583,6 +583,22 @@ impl DumpFile {
         Ok(())
     }
 
+    /// Frame `k`'s byte range in the file, for uncompressed single files whose frames
+    /// are contiguous ranges (LAMMPS text and binary dumps, XYZ files); `None` for
+    /// others and for a `k` out of range.
+    pub fn frame_bytes(&self, k: usize) -> Option<std::ops::Range<u64>> {
+        if self.compressed {
+            return None;
+        }
+        let r = match &self.index {
+            Index::Lammps(i) => i.bytes(k)?,
+            Index::Xyz(i) => i.bytes(k)?,
+            Index::LammpsBinary(i) => (k < i.len()).then(|| i.header(k).bytes.clone())?,
+            _ => return None,
+        };
+        Some(r.start as u64..r.end as u64)
+    }
+
     /// True when [`DumpFile::read_part`] can read this dump's frames a range of particles
     /// at a time (binary formats with fixed-size records).
     pub fn reads_parts(&self) -> bool {
