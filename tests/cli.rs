@@ -3249,3 +3249,87 @@ fn hiding_species_fits_the_view_to_the_species_shown() {
     // Without hiding, the whole box: the solute is inside it, the box spans the image.
     assert!(covered_rows(&[]) >= 32);
 }
+
+/// Lost atoms far from the material (a non-periodic box's evaporated atoms) are left out
+/// of the fitted view, with a note that names the way back; `--fit-all` fits them too
+/// and the material shrinks to a few pixels.
+#[test]
+fn atoms_far_from_the_rest_are_left_out_of_the_fit_with_a_note() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("lost.xyz");
+    let mut atoms = Vec::new();
+    for i in 0..14 {
+        for j in 0..14 {
+            for k in 0..14 {
+                atoms.push(format!(
+                    "Cu {} {} {}",
+                    i as f32 * 2.5,
+                    j as f32 * 2.5,
+                    k as f32 * 2.5
+                ));
+            }
+        }
+    }
+    atoms.push("Cu 4000 10 10".into());
+    atoms.push("Cu 10 -3000 10".into());
+    std::fs::write(
+        &xyz,
+        format!("{}\nlost\n{}\n", atoms.len(), atoms.join("\n")),
+    )
+    .unwrap();
+    let file = dir.path().join("lost.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file)]);
+    let png = dir.path().join("lost.png");
+    let covered_rows = |extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "64"];
+        args.extend([
+            "--height",
+            "64",
+            "--background",
+            "#000000",
+            "--screen-error",
+            "0",
+        ]);
+        args.extend(extra);
+        let out = ok(&args);
+        let (w, _, px) = read_png(&png);
+        let rows: Vec<usize> = px
+            .chunks(4 * w as usize)
+            .enumerate()
+            .filter(|(_, row)| row.chunks(4).any(|p| p[..3] != [0, 0, 0]))
+            .map(|(y, _)| y)
+            .collect();
+        (rows.last().map_or(0, |l| l - rows[0] + 1), out)
+    };
+    let (rows, out) = covered_rows(&[]);
+    assert!(rows >= 32, "the block spans {rows} of 64 rows");
+    assert!(
+        out.contains("2 particles far from the rest are left out of the view's fit")
+            && out.contains("--fit-all"),
+        "{out}"
+    );
+    let (rows, out) = covered_rows(&["--fit-all"]);
+    assert!(
+        rows < 8,
+        "with every atom fitted the block spans {rows} rows"
+    );
+    assert!(!out.contains("far from the rest"), "{out}");
+    // A movie of a batch directory fits its frames alike, with the same note.
+    let d = dir.path().join("lost.d");
+    ok(&["batch", s(&xyz), "-o", s(&d)]);
+    let movie = dir.path().join("m-%d.png");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "32",
+        "--height",
+        "32",
+    ]);
+    assert!(
+        out.contains("2 particles (in 1 frame) far from the rest are left out"),
+        "{out}"
+    );
+}

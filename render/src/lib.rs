@@ -165,6 +165,9 @@ pub struct RenderOptions {
     /// Sphere and S-NDF modes: the points' look (species colours, radii, hiding, colour
     /// by the attribute); see [`style`].
     pub style: PointStyle,
+    /// Fit a fitted view to every particle, those far from the rest included (see
+    /// [`fit_bounds`]).
+    pub fit_all: bool,
 }
 
 /// How points are drawn.
@@ -213,6 +216,7 @@ impl Default for RenderOptions {
             mode: RenderMode::Spheres,
             exposure: None,
             style: PointStyle::default(),
+            fit_all: false,
         }
     }
 }
@@ -405,6 +409,233 @@ pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
 /// The most mixed nodes [`shown_bounds`] opens (a few milliseconds' work).
 pub const SHOWN_BOUNDS_NODES: usize = 1 << 16;
 
+/// What a fitted view is fitted to ([`fit_bounds`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FitBounds {
+    /// The bounds the view fits.
+    pub bounds: Bounds,
+    /// Particles (of the species shown) left outside them: far from the rest.
+    pub far_particles: u64,
+}
+
+/// How far from the bulk a particle is left out of a fitted view: the bulk's box (the
+/// 1st to 99th percentile of the data along each axis) grown on every side by this many
+/// times its largest extent.
+pub const FIT_MARGIN: f32 = 1.0;
+
+/// The bounds a fitted view frames: the shown data's ([`shown_bounds`], or the whole
+/// file's), less particles far from the rest (lost atoms flying off a non-periodic box,
+/// a sparse vapour around a droplet), which would shrink the material to a dot. A
+/// particle is far when it lies outside the box of the bulk (the 1st to 99th percentile
+/// along each axis, weighted by the clusters' areas on the first level of at least 1024
+/// nodes) grown by [`FIT_MARGIN`] times its largest extent. The far ones are left out
+/// only where that matters: when the whole shown data's bounding sphere is more than
+/// twice the rest's; else (and with `all`) the bounds are the shown data's, and none
+/// is counted far.
+pub fn fit_bounds(file: &MdlodFile, hidden: u64, all: bool) -> FitBounds {
+    let whole = shown_bounds(file, hidden).unwrap_or_else(|| data_bounds(file));
+    let untrimmed = FitBounds {
+        bounds: whole,
+        far_particles: 0,
+    };
+    if all {
+        return untrimmed;
+    }
+    match trimmed_bounds(file, hidden) {
+        Some(t) if t.far_particles > 0 && whole.radius() > 2.0 * t.bounds.radius() => t,
+        _ => untrimmed,
+    }
+}
+
+/// What a view fitted to the file frames under `opts` ([`fit_bounds`]). Hidden species
+/// are left out of the fit (a solute without its solvent fills the image); the depth
+/// range still holds all the data, as clusters holding hidden species may be drawn where
+/// a budget stops the refinement, and so do far particles.
+pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
+    let hidden = match opts.mode {
+        RenderMode::Spheres | RenderMode::Sndf { .. } => {
+            opts.style.hidden_mask(&file.metadata().species)
+        }
+        _ => 0,
+    };
+    fit_bounds(file, hidden, opts.fit_all)
+}
+
+/// [`fit_bounds`] without its test of whether trimming matters; `None` where the file
+/// has too few clusters to tell a bulk from its outliers.
+fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
+    use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
+    let (nodes, levels) = (file.nodes(), file.levels());
+    let last = levels.len().checked_sub(1)?;
+    let kinds = (hidden != 0).then(|| file.species_below(hidden));
+    let kind_of = |id: usize| match &kinds {
+        Some(k) => k.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT),
+        None => BELOW_OUT,
+    };
+    let (pos, species) = (file.positions(last), file.species());
+    let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
+    // What places the bulk: the centres of the clusters of the first level of at least
+    // 1024, weighted by their areas; in a file without one (a few thousand particles),
+    // the particles themselves, each weighted by its area.
+    let mut sample: Vec<(glam::Vec3, f32)> = Vec::new();
+    if let Some(level) = (0..last).find(|&l| levels[l].point_count >= 1024) {
+        let first = usize::try_from(levels[level].node_first).ok()?;
+        let count = usize::try_from(levels[level].point_count).ok()?;
+        file.check_nodes(level, 0..count).ok()?;
+        sample.extend(
+            nodes
+                .get(first..first.checked_add(count)?)?
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| kind_of(first + i) & BELOW_OUT != 0)
+                .map(|(_, n)| {
+                    let (a, b) = (
+                        glam::Vec3::from(n.bounds_min),
+                        glam::Vec3::from(n.bounds_max),
+                    );
+                    ((a + b) * 0.5, n.area_sum.max(f32::MIN_POSITIVE))
+                }),
+        );
+    } else if file.delta_n() == 1 {
+        let parents = last.checked_sub(1)?;
+        let first = usize::try_from(levels[parents].node_first).ok()?;
+        let count = usize::try_from(levels[parents].point_count).ok()?;
+        file.check_nodes(parents, 0..count).ok()?;
+        for n in nodes.get(first..first.checked_add(count)?)? {
+            for c in n.child_first as usize..(n.child_first + n.child_count) as usize {
+                let Some(&sp) = species.get(c) else { continue };
+                if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
+                    continue;
+                }
+                let p = glam::Vec3::from(mdlod_format::quantize::decode3(
+                    pos.get(c),
+                    n.centroid,
+                    n.quant_scale,
+                    file.position_bits(),
+                ));
+                let r = radii.get(usize::from(sp)).copied().unwrap_or(0.0);
+                sample.push((p, (r * r).max(f32::MIN_POSITIVE)));
+            }
+        }
+    }
+    sample.retain(|(c, w)| c.is_finite() && w.is_finite());
+    if sample.len() < 32 {
+        return None;
+    }
+    let total: f64 = sample.iter().map(|s| f64::from(s.1)).sum();
+    let quantile = |axis: usize, q: f64| {
+        let mut v: Vec<(f32, f32)> = sample.iter().map(|(c, w)| (c[axis], *w)).collect();
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut sum = 0.0;
+        for (x, w) in &v {
+            sum += f64::from(*w);
+            if sum >= q * total {
+                return *x;
+            }
+        }
+        v.last().map_or(0.0, |l| l.0)
+    };
+    let lo = glam::Vec3::new(quantile(0, 0.01), quantile(1, 0.01), quantile(2, 0.01));
+    let hi = glam::Vec3::new(quantile(0, 0.99), quantile(1, 0.99), quantile(2, 0.99));
+    let margin = glam::Vec3::splat((hi - lo).max_element() * FIT_MARGIN);
+    let (core_lo, core_hi) = (lo - margin, hi + margin);
+    let inside = |a: glam::Vec3, b: glam::Vec3| a.cmpge(core_lo).all() && b.cmple(core_hi).all();
+    let outside = |a: glam::Vec3, b: glam::Vec3| a.cmpgt(core_hi).any() || b.cmplt(core_lo).any();
+    let mut lo = glam::Vec3::splat(f32::INFINITY);
+    let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
+    let mut far = 0u64;
+    let mut queue = std::collections::VecDeque::from([0usize]);
+    let mut opened = 0usize;
+    while let Some(id) = queue.pop_front() {
+        let Some(n) = nodes.get(id) else { continue };
+        let kind = kind_of(id);
+        if kind & BELOW_OUT == 0 {
+            continue; // Hidden species only.
+        }
+        let (bmin, bmax) = (
+            glam::Vec3::from(n.bounds_min),
+            glam::Vec3::from(n.bounds_max),
+        );
+        let mixed = kind & BELOW_IN != 0;
+        if outside(bmin, bmax) {
+            far += particles_below(file, id);
+            continue;
+        }
+        if inside(bmin, bmax) && !mixed {
+            lo = lo.min(bmin);
+            hi = hi.max(bmax);
+            continue;
+        }
+        let child_level = usize::from(n.level) + 1;
+        if child_level == last && file.delta_n() == 1 && file.check_children(id).is_ok() {
+            // The particles themselves, encoded relative to this node.
+            for c in n.child_first as usize..(n.child_first + n.child_count) as usize {
+                let Some(&sp) = species.get(c) else { continue };
+                if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
+                    continue;
+                }
+                let p = glam::Vec3::from(mdlod_format::quantize::decode3(
+                    pos.get(c),
+                    n.centroid,
+                    n.quant_scale,
+                    file.position_bits(),
+                ));
+                let r = radii.get(usize::from(sp)).copied().unwrap_or(0.0);
+                if inside(p, p) {
+                    lo = lo.min(p - r);
+                    hi = hi.max(p + r);
+                } else {
+                    far += 1;
+                }
+            }
+            continue;
+        }
+        if child_level < last && opened < SHOWN_BOUNDS_NODES && file.check_children(id).is_ok() {
+            opened += 1;
+            let first = levels[child_level].node_first as usize;
+            let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
+            queue.extend(children.map(|c| first + c));
+            continue;
+        }
+        lo = lo.min(bmin);
+        hi = hi.max(bmax);
+    }
+    (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then(|| FitBounds {
+        bounds: Bounds::new(lo, hi),
+        far_particles: far,
+    })
+}
+
+/// The particles below node `id`: its descendants on the last level, a contiguous range
+/// from its first child's first child ... to its last child's last child. 0 where a
+/// record on the way cannot be read.
+fn particles_below(file: &MdlodFile, id: usize) -> u64 {
+    let (nodes, levels) = (file.nodes(), file.levels());
+    let last = levels.len().saturating_sub(1);
+    let (mut a, mut b) = (id, id);
+    loop {
+        let (Some(na), Some(nb)) = (nodes.get(a), nodes.get(b)) else {
+            return 0;
+        };
+        if file.check_children(a).is_err() || file.check_children(b).is_err() {
+            return 0;
+        }
+        let child_level = usize::from(na.level) + 1;
+        let (fa, lb) = (
+            u64::from(na.child_first),
+            u64::from(nb.child_first) + u64::from(nb.child_count),
+        );
+        if child_level >= last {
+            return lb.saturating_sub(fa);
+        }
+        let Some(base) = levels.get(child_level).map(|l| l.node_first) else {
+            return 0;
+        };
+        a = (base + fa) as usize;
+        b = (base + lb.saturating_sub(1)) as usize;
+    }
+}
+
 /// The largest image side any mode renders or samples, in pixels (adapters allow at
 /// most this many per side, many fewer). Checked before the traversal, whose tiles and
 /// occlusion buffers grow with the image.
@@ -554,23 +785,11 @@ pub fn frame_setup(
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     check_numbers(opts)?;
-    // Hidden species are left out of the fit (a solute without its solvent fills the
-    // image); the depth range still holds all the data, as clusters holding hidden
-    // species may be drawn where a budget stops the refinement.
-    let hidden = match opts.mode {
-        RenderMode::Spheres | RenderMode::Sndf { .. } => {
-            opts.style.hidden_mask(&file.metadata().species)
-        }
-        _ => 0,
-    };
-    let mut camera = match shown_bounds(file, hidden) {
-        Some(shown) => {
-            let mut c = camera_in(&shown, &opts.view, opts.width, opts.height)?;
-            c.fit_depth_range(&data_bounds(file));
-            c
-        }
-        None => camera_for(file, &opts.view, opts.width, opts.height)?,
-    };
+    let fit = fit_for(file, opts);
+    let mut camera = camera_in(&fit.bounds, &opts.view, opts.width, opts.height)?;
+    if fit.bounds != data_bounds(file) {
+        camera.fit_depth_range(&data_bounds(file));
+    }
     // The data's bounds hold the particles' own spheres; a style that draws them larger
     // reaches past them, and a sphere in front of the near plane is clipped whole (its
     // quad lies at its front). The depth range grows by as much.

@@ -1368,3 +1368,71 @@ fn hidden_species_leave_no_cluster_holding_them() {
         assert_eq!(traverse(&cam, &f, &all).points, 0);
     }
 }
+
+/// A fitted view frames the material, not the lost atoms flying off it: particles far
+/// from the bulk are left out of the fit (and counted) when they would shrink it to a
+/// fraction of the image; near ones, and every one with `all`, stay in.
+#[test]
+fn a_fitted_view_leaves_out_particles_far_from_the_rest() {
+    use mdlod_render::{data_bounds, fit_bounds};
+    let bulk = fcc_frame(12); // 6912 atoms in a cube of 43 Å.
+    let with = |extra: &[[f32; 3]]| {
+        let mut frame = bulk.clone();
+        frame.positions.extend_from_slice(extra);
+        frame.species_index.extend(extra.iter().map(|_| 0));
+        make_file(&frame, small_build(), &[])
+    };
+    // Alone: the fit is the data's.
+    let (_d, _p, f) = with(&[]);
+    let fit = fit_bounds(&f, 0, false);
+    assert_eq!((fit.bounds, fit.far_particles), (data_bounds(&f), 0));
+    let bulk_radius = data_bounds(&f).radius();
+
+    // Three atoms lost thousands of ångströms away, on two sides.
+    let lost = [
+        [5000.0, 20.0, 20.0],
+        [5003.0, 21.0, 19.0],
+        [-800.0, -2500.0, 10.0],
+    ];
+    let (_d, _p, f) = with(&lost);
+    let fit = fit_bounds(&f, 0, false);
+    assert_eq!(fit.far_particles, 3);
+    let b = fit.bounds;
+    assert!(
+        (b.radius() - bulk_radius).abs() < 0.05 * bulk_radius,
+        "fit radius {} against the bulk's {bulk_radius}",
+        b.radius()
+    );
+    // Every atom of the bulk is inside, with its sphere.
+    let r = f.metadata().species[0].radius;
+    for p in &bulk.positions {
+        let p = Vec3::from(*p);
+        assert!(
+            (p - r).cmpge(b.min - 1e-3).all() && (p + r).cmple(b.max + 1e-3).all(),
+            "{p}"
+        );
+    }
+    let all = fit_bounds(&f, 0, true);
+    assert_eq!((all.bounds, all.far_particles), (data_bounds(&f), 0));
+    // The view fitted to it still holds them in its depth range: drawn where seen.
+    let opts = mdlod_render::RenderOptions {
+        width: 64,
+        height: 48,
+        ..Default::default()
+    };
+    let (cam, _, _) = mdlod_render::frame_setup(&f, &opts).unwrap();
+    assert!(cam.distance < 10.0 * bulk_radius, "{}", cam.distance);
+    for p in lost {
+        let depth = (cam.eye() - Vec3::from(p)).dot(cam.back());
+        assert!(
+            depth < cam.far,
+            "{p:?} at depth {depth}, far plane {}",
+            cam.far
+        );
+    }
+
+    // A vapour atom a bulk's width above the surface is near: nothing is left out.
+    let (_d, _p, f) = with(&[[20.0, 20.0, 80.0]]);
+    let fit = fit_bounds(&f, 0, false);
+    assert_eq!((fit.bounds, fit.far_particles), (data_bounds(&f), 0));
+}

@@ -81,6 +81,7 @@ pub fn run(args: Args) -> Result<()> {
         screen_error: 1.0,
         budget: 4_000_000,
         no_occlusion: false,
+        fit_all: false,
         gpu_memory: None,
         background: None,
         mode: super::render::Mode::Spheres,

@@ -39,6 +39,12 @@ pub struct Args {
     /// this only costs time; for comparisons).
     #[arg(long)]
     pub no_occlusion: bool,
+    /// Fit the view to every particle: by default particles far from the rest (lost
+    /// atoms flying off a non-periodic box, a sparse vapour) are left out of the fit
+    /// when they would shrink the material to a fraction of the image (a note says how
+    /// many).
+    #[arg(long)]
+    pub fit_all: bool,
     /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G).
     #[arg(long, value_parser = parse_bytes)]
     pub gpu_memory: Option<u64>,
@@ -536,6 +542,7 @@ pub fn run(args: Args) -> Result<()> {
         gpu_memory: args.gpu_memory,
         occlusion: !args.no_occlusion,
         style: args.style.style()?,
+        fit_all: args.fit_all,
         ..Default::default()
     };
     if args.file.is_dir() {
@@ -600,6 +607,11 @@ pub fn run(args: Args) -> Result<()> {
         .all(|s| args.style.hide_species.contains(&s.name))
     {
         println!("  note: every species is hidden: the image shows the background only");
+    }
+    if matches!(opts.view, ViewSpec::Orbit { .. }) {
+        if let Some(note) = far_note(mdlod_render::fit_for(&file, &opts).far_particles, None) {
+            println!("{note}");
+        }
     }
     if r.nodes_drawn > 0 && matches!(args.mode, Mode::Spheres | Mode::Sndf) {
         let miss = opts.style.recolour_miss(species);
@@ -690,6 +702,25 @@ fn recolour_note(miss: Option<f32>, species: usize) -> Option<String> {
          for up to four shown species of affinely independent colours); a lower \
          --screen-error draws more particles in their own colours",
         miss * 100.0
+    ))
+}
+
+/// The note for particles a fitted view left out of its fit as far from the rest
+/// (`frames`: in how many frames of a movie).
+fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
+    if far == 0 {
+        return None;
+    }
+    let (s, verb) = if far == 1 { ("", "is") } else { ("s", "are") };
+    let whose = match frames {
+        Some(1) => " (in 1 frame)".to_string(),
+        Some(n) => format!(" (in {n} frames together)"),
+        None => String::new(),
+    };
+    Some(format!(
+        "  note: {far} particle{s}{whose} far from the rest {verb} left out of the view's \
+         fit (they would shrink the material to a fraction of the image): --fit-all fits \
+         every particle, --zoom below 1 widens the view"
     ))
 }
 
@@ -799,6 +830,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     frame_output(&args.output, 0)?;
     let mut bounds: Option<mdlod_render::Bounds> = None;
+    // Particles left out of the fit as far from the rest, and in how many frames.
+    let mut far = (0u64, 0usize);
+    let fitted = matches!(opts.view, ViewSpec::Orbit { .. });
     // Species may come and go in a trajectory (a deposition, an evaporation): a style
     // names any species of some frame, and applies in the frames that hold it.
     let mut names = std::collections::BTreeSet::new();
@@ -823,7 +857,12 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             }
             _ => None,
         });
-        let b = mdlod_render::data_bounds(&file);
+        let fit = mdlod_render::fit_for(&file, &opts);
+        if fit.far_particles > 0 {
+            far.0 += fit.far_particles;
+            far.1 += 1;
+        }
+        let b = fit.bounds;
         bounds = Some(match bounds {
             None => b,
             Some(a) => mdlod_render::Bounds::new(a.min.min(b.min), a.max.max(b.max)),
@@ -939,6 +978,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
+        println!("{note}");
+    }
+    if let Some(note) = far_note(far.0, Some(far.1)).filter(|_| fitted) {
         println!("{note}");
     }
     if let Some(p) = &args.save_view {

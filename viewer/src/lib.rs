@@ -28,7 +28,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use mdlod_format::MdlodFile;
-use mdlod_render::{camera_for, data_bounds, BackendChoice, ViewSpec};
+use mdlod_render::{BackendChoice, ViewSpec};
 
 pub use state::{Action, FrameInfo, Mode, ViewerState};
 
@@ -142,8 +142,11 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         Some(p) => ViewSpec::File(p.clone()),
         None => ViewSpec::default(),
     };
-    let camera = camera_for(&first, &view, w, h)?;
-    let mut state = ViewerState::new(frames, camera, data_bounds(&first), [w, h]);
+    // The material, less atoms lost far from it ([`mdlod_render::fit_bounds`]), as
+    // `mdlod render` fits it.
+    let bounds = mdlod_render::fit_bounds(&first, 0, false).bounds;
+    let camera = mdlod_render::camera_for_bounds(&bounds, &view, w, h)?;
+    let mut state = ViewerState::new(frames, camera, bounds, [w, h]);
     state.settings.mode = opts.mode;
     let meta = first.metadata();
     state.species = meta

@@ -33,8 +33,8 @@ use mdlod_render::renderer::ResidentSndf;
 use mdlod_render::smip::{Smip, SmipConfig, SmipFrame};
 use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
 use mdlod_render::{
-    data_bounds, render_image, traverse, BackendChoice, GpuContext, RenderError, RenderMode,
-    RenderOptions, Renderer, RgbaImage, ViewFile,
+    render_image, traverse, BackendChoice, GpuContext, RenderError, RenderMode, RenderOptions,
+    Renderer, RgbaImage, ViewFile,
 };
 
 /// Iterations in each progressive S-NDF batch.
@@ -440,7 +440,7 @@ impl<'r> Thread<'r> {
             self.bounds_sent = Some(path.to_path_buf());
             self.reply(Reply::Bounds {
                 path: path.to_path_buf(),
-                bounds: data_bounds(&file),
+                bounds: mdlod_render::fit_bounds(&file, 0, false).bounds,
             });
         }
         let mut opts = opts;
