@@ -3333,3 +3333,91 @@ fn atoms_far_from_the_rest_are_left_out_of_the_fit_with_a_note() {
         "{out}"
     );
 }
+
+/// The diverging map puts its white at 0 for values of both signs (a velocity, a
+/// stress), in one file and throughout a movie, and says so; a range given stays.
+#[test]
+fn cool_warm_centres_signed_values_on_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("v.lammpstrj");
+    let mut text = String::new();
+    for (frame, shift) in [(0, 5.0), (100, 3.0)] {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{frame}\nITEM: NUMBER OF ATOMS\n400\nITEM: BOX BOUNDS pp pp pp\n\
+             0 40\n0 40\n0 2\nITEM: ATOMS id type x y z vz\n"
+        ));
+        for i in 0..400 {
+            let (x, y) = ((i % 20) as f32 * 2.0, (i / 20) as f32 * 2.0);
+            text.push_str(&format!("{} 1 {x} {y} 1 {}\n", i + 1, x / 2.0 - shift));
+        }
+    }
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("v.mdlod");
+    // (The last frame: vz from -3 to 16.)
+    ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "vz"]);
+    let png = dir.path().join("v.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "40",
+            "--height",
+            "40",
+        ];
+        args.extend(["--colour-map", "cool-warm", "--elevation", "90"]);
+        args.extend(extra);
+        (ok(&args), read_png(&png).2)
+    };
+    let (out, centred) = render(&[]);
+    assert!(
+        out.contains(
+            "vz from -16 to 16 (centred on 0, the map's white; the file's range is -3 to 16"
+        ),
+        "{out}"
+    );
+    let (out, own) = render(&["--attribute-range=-5:14"]);
+    assert!(
+        out.contains("vz from -5 to 14 (--attribute-range)"),
+        "{out}"
+    );
+    assert_ne!(centred, own);
+    // Viridis has no middle: the file's range.
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "40",
+        "--height",
+        "40",
+        "--colour-map",
+        "viridis",
+    ]);
+    assert!(out.contains("vz from -3 to 16 (the file's range)"), "{out}");
+    // A movie: every frame's range (-5 to 16 over both), centred.
+    let d = dir.path().join("v.d");
+    ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "vz"]);
+    let movie = dir.path().join("m-%d.png");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--colour-map",
+        "cool-warm",
+    ]);
+    assert!(
+        out.contains(
+            "vz from -16 to 16 (centred on 0, the map's white; every frame's range is -5 to 16"
+        ),
+        "{out}"
+    );
+}

@@ -133,6 +133,20 @@ impl ColourMap {
         ColourMap::ALL.into_iter().find(|m| m.name() == name)
     }
 
+    /// True for maps whose middle colour means zero (cool-warm: blue below, red above).
+    pub fn is_diverging(self) -> bool {
+        self == ColourMap::CoolWarm
+    }
+
+    /// The range a diverging map shows `[lo, hi]` over: centred on 0 where the values
+    /// take both signs (`[-m, m]`, `m` the larger magnitude), so that white is 0 and a
+    /// colour's depth means the same magnitude on both sides; `None` for other maps and
+    /// for values of one sign.
+    pub fn centred_range(self, [lo, hi]: [f32; 2]) -> Option<[f32; 2]> {
+        let m = lo.abs().max(hi.abs());
+        (self.is_diverging() && lo < 0.0 && hi > 0.0 && m.is_finite()).then_some([-m, m])
+    }
+
     /// sRGB control points, evenly spaced over [0, 1].
     fn stops(self) -> &'static [[f32; 3]] {
         match self {
@@ -632,6 +646,20 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn a_diverging_map_centres_signed_values_on_zero() {
+        let c = ColourMap::CoolWarm;
+        assert_eq!(c.centred_range([-2.0, 5.0]), Some([-5.0, 5.0]));
+        assert_eq!(c.centred_range([-7.5, 0.5]), Some([-7.5, 7.5]));
+        // One sign, or zero at an end: the values' own range.
+        assert_eq!(c.centred_range([0.0, 5.0]), None);
+        assert_eq!(c.centred_range([-3.0, -1.0]), None);
+        assert_eq!(ColourMap::Viridis.centred_range([-2.0, 5.0]), None);
+        // White is 0: the map's middle.
+        let [lo, hi] = c.centred_range([-2.0, 5.0]).unwrap();
+        assert_eq!((0.0 - lo) / (hi - lo), 0.5);
+    }
 
     fn species(colours: &[[f32; 3]]) -> Vec<mdlod_format::meta::Species> {
         colours

@@ -498,7 +498,7 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     let view = args.camera.spec();
-    let opts = RenderOptions {
+    let mut opts = RenderOptions {
         width: args.camera.width,
         height: args.camera.height,
         view,
@@ -548,6 +548,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.file.is_dir() {
         return render_frames(&args, opts);
     }
+    let centred = centre_diverging(&mut opts.style, &args.file)?;
     // A bar for the choice of the cut and for cuts drawn in several batches or samples
     // (every particle of 10^8 is nine batches).
     let r = render_to_png_with(&args.file, &args.output, &opts, Bar::for_renderer())?;
@@ -587,9 +588,16 @@ pub fn run(args: Args) -> Result<()> {
     // What the colours (or splat intensities) mean: a picture's legend.
     if by_attribute(&args) {
         if let Some(a) = &file.metadata().attribute {
-            let ([lo, hi], whose) = match opts.style.attribute_range {
-                Some(range) => (range, "--attribute-range"),
-                None => ([a.min, a.max], "the file's range"),
+            let ([lo, hi], whose) = match (opts.style.attribute_range, centred) {
+                (Some(range), Some([min, max])) => (
+                    range,
+                    format!(
+                        "centred on 0, the map's white; the file's range is {min} to {max}, \
+                         --attribute-range sets another"
+                    ),
+                ),
+                (Some(range), None) => (range, "--attribute-range".to_string()),
+                (None, _) => ([a.min, a.max], "the file's range".to_string()),
             };
             let shown = match args.style.colour_map {
                 Some(m) => {
@@ -703,6 +711,26 @@ fn recolour_note(miss: Option<f32>, species: usize) -> Option<String> {
          --screen-error draws more particles in their own colours",
         miss * 100.0
     ))
+}
+
+/// A diverging colour map over signed values, without a range given, is centred on 0
+/// ([`mdlod_render::style::ColourMap::centred_range`]): sets the style's range and
+/// returns the file's own, for the legend.
+pub fn centre_diverging(
+    style: &mut mdlod_render::PointStyle,
+    path: &std::path::Path,
+) -> Result<Option<[f32; 2]>> {
+    let (Some(map), None) = (style.colour_map, style.attribute_range) else {
+        return Ok(None);
+    };
+    let file = mdlod_format::MdlodFile::open(path)?;
+    let Some(a) = &file.metadata().attribute else {
+        return Ok(None);
+    };
+    Ok(map.centred_range([a.min, a.max]).map(|range| {
+        style.attribute_range = Some(range);
+        [a.min, a.max]
+    }))
 }
 
 /// The note for particles a fitted view left out of its fit as far from the rest
@@ -881,7 +909,19 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     if by_attribute(args) && opts.style.attribute_range.is_none() {
         // Where the frames' union is no range (a constant attribute), each frame keeps
         // its own constant look.
-        if let Some(Some(a)) = attribute.filter(|_| n > 1) {
+        let centred = attribute.clone().flatten().and_then(|a| {
+            let range = opts.style.colour_map?.centred_range([a.min, a.max])?;
+            Some((a, range))
+        });
+        if let Some((a, range)) = centred {
+            // A diverging map over signed values: white is 0 in every frame.
+            opts.style.attribute_range = Some(range);
+            range_note = format!(
+                ", {} from {} to {} (centred on 0, the map's white; every frame's range is \
+                 {} to {}; --attribute-range sets another)",
+                a.name, range[0], range[1], a.min, a.max
+            );
+        } else if let Some(Some(a)) = attribute.filter(|_| n > 1) {
             if a.max > a.min {
                 opts.style.attribute_range = Some([a.min, a.max]);
                 range_note = format!(

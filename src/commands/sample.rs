@@ -62,7 +62,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.style.attribute_range.is_some() && args.style.colour_map.is_none() {
         anyhow::bail!("--attribute-range has no effect without --colour-map");
     }
-    let opts = RenderOptions {
+    let mut opts = RenderOptions {
         width: args.camera.width,
         height: args.camera.height,
         view: {
@@ -80,6 +80,14 @@ pub fn run(args: Args) -> Result<()> {
         ..Default::default()
     };
     mdlod_render::check_image_size(opts.width, opts.height)?;
+    if let Some([min, max]) = super::render::centre_diverging(&mut opts.style, &args.file)? {
+        let [lo, hi] = opts.style.attribute_range.unwrap_or_default();
+        let map = opts.style.colour_map.map_or("", |m| m.name());
+        println!(
+            "colour map {map} centred on 0, its white: from {lo} to {hi} (the file's range \
+             is {min} to {max}; --attribute-range sets another)"
+        );
+    }
     if args.tiles {
         let (stats, tiles) = mdlod_render::sample_tiles_to_file(
             &args.file,
