@@ -3421,3 +3421,68 @@ fn cool_warm_centres_signed_values_on_zero() {
         "{out}"
     );
 }
+
+/// `--log-scale` maps decades evenly: a kinetic energy from 0 starts 4 decades below
+/// its top, as the legend says; it needs a map (or attribute splats) and a positive
+/// range.
+#[test]
+fn a_log_scale_colours_decades_and_says_where_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "3000"], &dump);
+    let file = dir.path().join("c.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "c_ke"]);
+    let png = dir.path().join("c.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "48",
+            "--height",
+            "36",
+        ];
+        args.extend(extra);
+        (ok(&args), read_png(&png).2)
+    };
+    let (_, linear) = render(&["--colour-map", "viridis"]);
+    let (out, log) = render(&["--colour-map", "viridis", "--log-scale"]);
+    assert!(out.contains("on a log scale"), "{out}");
+    assert_ne!(linear, log);
+    let (out, _) = render(&[
+        "--colour-map",
+        "viridis",
+        "--log-scale",
+        "--attribute-range",
+        "0.01:10",
+    ]);
+    assert!(
+        out.contains("from 0.01 to 10 (--attribute-range), on a log scale\n"),
+        "{out}"
+    );
+    let (out, splats) = render(&["--mode", "splat", "--intensity", "attribute", "--log-scale"]);
+    assert!(
+        out.contains("splat intensity") && out.contains("on a log scale"),
+        "{out}"
+    );
+    assert!(splats.chunks(4).any(|p| p[..3] != [0, 0, 0]));
+    let e = fails(&["render", s(&file), "-o", s(&png), "--log-scale"]);
+    assert!(
+        e.contains("--log-scale has no effect without --colour-map"),
+        "{e}"
+    );
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--colour-map",
+        "magma",
+        "--log-scale",
+        "--attribute-range",
+        "0:10",
+    ]);
+    assert!(e.contains("log scale") && e.contains("above 0"), "{e}");
+}

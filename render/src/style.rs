@@ -213,6 +213,10 @@ pub struct PointStyle {
     /// a trajectory, so that a colour means one value throughout a movie.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attribute_range: Option<[f32; 2]>,
+    /// Map the attribute's logarithm instead of its value (densities, energies spanning
+    /// decades); see [`AttributeScale::with_log`].
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub log_scale: bool,
 }
 
 impl Default for PointStyle {
@@ -222,6 +226,7 @@ impl Default for PointStyle {
             radius_scale: 1.0,
             colour_map: None,
             attribute_range: None,
+            log_scale: false,
         }
     }
 }
@@ -430,6 +435,11 @@ impl PointStyle {
                     "attribute range {lo} to {hi} (finite, the second above the first)"
                 ));
             }
+            if self.log_scale && lo <= 0.0 {
+                return Err(format!(
+                    "attribute range {lo} to {hi} on a log scale (both ends must be above 0)"
+                ));
+            }
         }
         Ok(())
     }
@@ -450,6 +460,8 @@ pub struct AttributeScale {
     constant: bool,
     /// The range shown instead of `min..max` ([`PointStyle::attribute_range`]).
     shown: Option<[f32; 2]>,
+    /// Logarithmic: `ln v` mapped from `ln lo` to `ln hi` ([`Self::with_log`]).
+    log: bool,
 }
 
 impl AttributeScale {
@@ -466,7 +478,41 @@ impl AttributeScale {
             // Also constant: a range that is no range (non-finite or reversed ends).
             constant: !(max - min > rounding && (max - min).is_finite()),
             shown: None,
+            log: false,
         }
+    }
+
+    /// The largest span of a log scale, in factors of 10: where the range's low end is 0
+    /// or below (a kinetic energy from 0), the scale starts this many decades below its
+    /// high end, and values at or below that take the map's first colour.
+    pub const LOG_DECADES: f64 = 4.0;
+
+    /// This scale on a logarithmic axis: a value `v` maps to `(ln v − ln lo) / (ln hi −
+    /// ln lo)` over the shown range (or the file's), clamped; with a low end of 0 or
+    /// below, `lo` is `hi / 10^LOG_DECADES` ([`Self::log_range`]). A cluster's mean maps
+    /// through the same curve (the log of a mean, not the mean of logs). A range without
+    /// a positive high end stays linear.
+    pub fn with_log(self, log: bool) -> Self {
+        AttributeScale { log, ..self }
+    }
+
+    /// The ends a log scale maps, `None` when it is linear (not asked for, a constant
+    /// attribute, or no positive high end).
+    pub fn log_range(&self) -> Option<[f64; 2]> {
+        if !self.log {
+            return None;
+        }
+        let (lo, hi) = match self.shown {
+            Some([lo, hi]) => (f64::from(lo), f64::from(hi)),
+            None if self.constant => return None,
+            None => (f64::from(self.min), f64::from(self.max)),
+        };
+        if !(hi > 0.0 && hi.is_finite()) {
+            return None;
+        }
+        let floor = hi / 10f64.powf(Self::LOG_DECADES);
+        let lo = if lo > 0.0 { lo.min(hi) } else { floor };
+        (hi > lo).then_some([lo, hi])
     }
 
     /// The file's attribute (`info`) shown over `range` instead of its own: values map
@@ -485,6 +531,13 @@ impl AttributeScale {
 
     /// A value (a cluster's mean) in [0, 1].
     pub fn of_value(&self, v: f32) -> f32 {
+        if let Some([lo, hi]) = self.log_range() {
+            let v = f64::from(v);
+            if v.is_nan() || v <= lo {
+                return 0.0;
+            }
+            return ((v.ln() - lo.ln()) / (hi.ln() - lo.ln())).clamp(0.0, 1.0) as f32;
+        }
         let (lo, hi) = match self.shown {
             Some([lo, hi]) => (lo, hi),
             None if self.constant => return 1.0,
@@ -507,7 +560,7 @@ impl AttributeScale {
     /// A particle's quantized value `q` (FORMAT.md: `min + (max − min) · q / 65535`) in
     /// [0, 1].
     pub fn of_quantized(&self, q: u16) -> f32 {
-        if self.shown.is_some() {
+        if self.shown.is_some() || self.log_range().is_some() {
             let (min, max) = (f64::from(self.min), f64::from(self.max));
             let value = if self.constant {
                 min
@@ -646,6 +699,65 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn a_log_scale_maps_decades_evenly_and_starts_below_a_zero_low_end() {
+        let info = |min: f32, max: f32| mdlod_format::meta::AttributeInfo {
+            name: "rho".into(),
+            min,
+            max,
+        };
+        let log = AttributeScale::new(&info(1.0, 1000.0)).with_log(true);
+        assert_eq!(log.log_range(), Some([1.0, 1000.0]));
+        for (v, t) in [
+            (1.0, 0.0),
+            (10.0, 1.0 / 3.0),
+            (100.0, 2.0 / 3.0),
+            (1000.0, 1.0),
+        ] {
+            assert!(
+                (log.of_value(v) - t).abs() < 1e-6,
+                "{v}: {}",
+                log.of_value(v)
+            );
+        }
+        assert_eq!(log.of_value(0.5), 0.0);
+        assert_eq!(log.of_value(f32::NAN), 0.0);
+        assert_eq!(log.of_quantized(65535), 1.0);
+        // Linear, as before, without it.
+        let linear = AttributeScale::new(&info(1.0, 1000.0));
+        assert!((linear.of_value(10.0) - 9.0 / 999.0).abs() < 1e-6);
+        // From 0: four decades below the top; values at or below take the first colour.
+        let from_zero = AttributeScale::new(&info(0.0, 2e4)).with_log(true);
+        let [lo, hi] = from_zero.log_range().unwrap();
+        assert!((lo - 2.0).abs() < 1e-9 && hi == 2e4, "{lo} {hi}");
+        assert_eq!(from_zero.of_quantized(0), 0.0);
+        assert!((from_zero.of_value(200.0) - 0.5).abs() < 1e-6);
+        // A range given replaces the file's; no positive end, or a constant: linear.
+        let shown = AttributeScale::with_range(&info(0.0, 2e4), Some([10.0, 1e3])).with_log(true);
+        assert!((shown.of_value(100.0) - 0.5).abs() < 1e-6);
+        assert_eq!(
+            AttributeScale::new(&info(-5.0, -1.0))
+                .with_log(true)
+                .log_range(),
+            None
+        );
+        assert_eq!(
+            AttributeScale::new(&info(3.0, 3.0))
+                .with_log(true)
+                .of_value(3.0),
+            1.0
+        );
+        // A range on a log scale must be positive.
+        let style = |range| PointStyle {
+            attribute_range: Some(range),
+            log_scale: true,
+            ..Default::default()
+        };
+        assert!(style([0.1, 2.0]).validate().is_ok());
+        let e = style([0.0, 2.0]).validate().unwrap_err();
+        assert!(e.contains("log scale") && e.contains("above 0"), "{e}");
+    }
 
     #[test]
     fn a_diverging_map_centres_signed_values_on_zero() {
@@ -936,6 +1048,7 @@ mod tests {
             radius_scale: 2.0,
             colour_map: None,
             attribute_range: None,
+            log_scale: false,
         };
         let file = [sp("A", 1.0), sp("B", 1.5), sp("C", 0.5)];
         let t = style.species_table(&file).unwrap();

@@ -932,6 +932,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             radius_scale: 1.5,
             colour_map: map,
             attribute_range: None,
+            log_scale: false,
         };
         let packed = pack_styled(&f, &d, PackStyle::Spheres, &style).unwrap();
         assert_eq!(packed.points(), base.points());

@@ -105,6 +105,7 @@ pub fn run(args: Args) -> Result<()> {
             species_radius: vec![],
             hide_species: vec![],
             attribute_range: None,
+            log_scale: false,
         },
         save_view: None,
     })?;

@@ -142,6 +142,11 @@ pub struct StyleArgs {
     /// all its frames), so that images made apart compare.
     #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true, value_parser = parse_range)]
     pub attribute_range: Option<[f32; 2]>,
+    /// Map the attribute's logarithm (densities, energies spanning decades) with
+    /// --colour-map or --intensity attribute; a range whose low end is 0 or below (a
+    /// kinetic energy from 0) starts 4 decades below its high end.
+    #[arg(long)]
+    pub log_scale: bool,
 }
 
 /// Parses `MIN:MAX` (finite, MAX above MIN).
@@ -225,6 +230,7 @@ impl StyleArgs {
             species,
             radius_scale: self.radius_scale,
             attribute_range: self.attribute_range,
+            log_scale: self.log_scale,
             colour_map: self.colour_map.map(|m| match m {
                 ColourMapArg::Viridis => ColourMap::Viridis,
                 ColourMapArg::Magma => ColourMap::Magma,
@@ -358,6 +364,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("species_radius", STYLED),
         ("hide_species", STYLED),
         ("attribute_range", &[Spheres, Sndf, Splat]),
+        ("log_scale", &[Spheres, Sndf, Splat]),
     ]
 };
 
@@ -377,11 +384,16 @@ fn by_attribute(args: &Args) -> bool {
 }
 
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
-    if args.style.attribute_range.is_some() && !by_attribute(args) {
-        anyhow::bail!(
-            "--attribute-range has no effect without --colour-map (spheres, sndf) or \
-             --intensity attribute (splat)"
-        );
+    for (given, name) in [
+        (args.style.attribute_range.is_some(), "--attribute-range"),
+        (args.style.log_scale, "--log-scale"),
+    ] {
+        if given && !by_attribute(args) {
+            anyhow::bail!(
+                "{name} has no effect without --colour-map (spheres, sndf) or --intensity \
+                 attribute (splat)"
+            );
+        }
     }
     for (id, modes) in MODE_OPTIONS {
         let given = matches!(
@@ -607,7 +619,11 @@ pub fn run(args: Args) -> Result<()> {
                 }
                 None => "splat intensity".to_string(),
             };
-            println!("  {shown}: {} from {lo} to {hi} ({whose})", a.name);
+            println!(
+                "  {shown}: {} from {lo} to {hi} ({whose}){}",
+                a.name,
+                log_text(a, &opts.style)
+            );
         }
     }
     if species
@@ -720,7 +736,8 @@ pub fn centre_diverging(
     style: &mut mdlod_render::PointStyle,
     path: &std::path::Path,
 ) -> Result<Option<[f32; 2]>> {
-    let (Some(map), None) = (style.colour_map, style.attribute_range) else {
+    let (Some(map), None, false) = (style.colour_map, style.attribute_range, style.log_scale)
+    else {
         return Ok(None);
     };
     let file = mdlod_format::MdlodFile::open(path)?;
@@ -731,6 +748,26 @@ pub fn centre_diverging(
         style.attribute_range = Some(range);
         [a.min, a.max]
     }))
+}
+
+/// How a log scale (`--log-scale`) maps the attribute, after the legend's range: the ends
+/// it spans, where the low end is not the range's own (0 or below), or why it is linear.
+fn log_text(a: &mdlod_format::meta::AttributeInfo, style: &mdlod_render::PointStyle) -> String {
+    if !style.log_scale {
+        return String::new();
+    }
+    let scale =
+        mdlod_render::style::AttributeScale::with_range(a, style.attribute_range).with_log(true);
+    let low = style.attribute_range.map_or(a.min, |r| r[0]);
+    match scale.log_range() {
+        Some(_) if f64::from(low) > 0.0 => ", on a log scale".to_string(),
+        Some([lo, hi]) => format!(
+            ", on a log scale from {lo:.4e} ({} decades below {hi}): values at or below it \
+             take the map's first colour",
+            mdlod_render::style::AttributeScale::LOG_DECADES
+        ),
+        None => ", linear: a log scale needs values above 0".to_string(),
+    }
 }
 
 /// The note for particles a fitted view left out of its fit as far from the rest
@@ -910,6 +947,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         // Where the frames' union is no range (a constant attribute), each frame keeps
         // its own constant look.
         let centred = attribute.clone().flatten().and_then(|a| {
+            if opts.style.log_scale {
+                return None;
+            }
             let range = opts.style.colour_map?.centred_range([a.min, a.max])?;
             Some((a, range))
         });

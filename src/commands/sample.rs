@@ -62,6 +62,9 @@ pub fn run(args: Args) -> Result<()> {
     if args.style.attribute_range.is_some() && args.style.colour_map.is_none() {
         anyhow::bail!("--attribute-range has no effect without --colour-map");
     }
+    if args.style.log_scale && args.style.colour_map.is_none() {
+        anyhow::bail!("--log-scale has no effect without --colour-map");
+    }
     let mut opts = RenderOptions {
         width: args.camera.width,
         height: args.camera.height,

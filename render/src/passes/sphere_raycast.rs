@@ -400,8 +400,8 @@ impl AttrPacker {
     /// Checks `look` against `file` (a colour map or attribute intensities need the
     /// attribute; styled species must exist). `look` applies to spheres only.
     pub fn new(file: &MdlodFile, style: PackStyle, look: &PointStyle) -> Result<Self, RenderError> {
-        // The attribute's shown range serves the intensities of splats too.
-        let range = look.attribute_range;
+        // The attribute's shown range and scale serve the intensities of splats too.
+        let (range, log) = (look.attribute_range, look.log_scale);
         let default_look = PointStyle::default();
         let look = if style == PackStyle::Spheres {
             look
@@ -411,6 +411,7 @@ impl AttrPacker {
         look.validate().map_err(RenderError::InvalidOptions)?;
         PointStyle {
             attribute_range: range,
+            log_scale: log,
             ..Default::default()
         }
         .validate()
@@ -419,7 +420,7 @@ impl AttrPacker {
         let attribute = |what: &str| {
             meta.attribute
                 .as_ref()
-                .map(|info| AttributeScale::with_range(info, range))
+                .map(|info| AttributeScale::with_range(info, range).with_log(log))
                 .ok_or_else(|| {
                     RenderError::InvalidOptions(format!(
                         "{} has no per-particle attribute to {what} (a file keeps the one \
