@@ -3486,3 +3486,51 @@ fn a_log_scale_colours_decades_and_says_where_it_starts() {
     ]);
     assert!(e.contains("log scale") && e.contains("above 0"), "{e}");
 }
+
+/// `--background none`: a PNG whose uncovered pixels are transparent, for figures laid
+/// over anything; the modes that blend into a background refuse it.
+#[test]
+fn a_transparent_background_is_a_png_with_alpha() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "3000"], &dump);
+    let file = dir.path().join("c.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file)]);
+    let png = dir.path().join("c.png");
+    ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--background",
+        "none",
+        "--spp",
+        "4",
+    ]);
+    let (_, _, px) = read_png(&png);
+    let alphas: Vec<u8> = px.chunks(4).map(|p| p[3]).collect();
+    assert_eq!(alphas[0], 0, "a corner is clear");
+    assert!(alphas.contains(&255), "the crater is opaque");
+    assert!(
+        alphas.iter().any(|&a| a > 0 && a < 255),
+        "edges are partly clear"
+    );
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--mode",
+        "splat",
+        "--background",
+        "none",
+    ]);
+    assert!(
+        e.contains("transparent background is drawn in the spheres mode only"),
+        "{e}"
+    );
+}

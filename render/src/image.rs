@@ -15,6 +15,25 @@ pub struct RgbaImage {
 }
 
 impl RgbaImage {
+    /// Turns sRGB-encoded premultiplied colour (the mean of a pixel's samples over a
+    /// transparent background) into the straight colour PNG stores with its alpha: each
+    /// channel decoded, divided by the alpha, and encoded again. Opaque and empty pixels
+    /// are left as they are.
+    pub fn unpremultiply(&mut self) {
+        use crate::renderer::{linear_to_srgb, srgb_to_linear};
+        for p in self.data.chunks_exact_mut(4) {
+            let a = p[3];
+            if a == 0 || a == 255 {
+                continue;
+            }
+            let alpha = f32::from(a) / 255.0;
+            for c in &mut p[..3] {
+                let straight = srgb_to_linear(f32::from(*c) / 255.0) / alpha;
+                *c = (linear_to_srgb(straight.min(1.0)) * 255.0).round() as u8;
+            }
+        }
+    }
+
     pub fn new(width: u32, height: u32) -> Self {
         RgbaImage {
             width,

@@ -168,6 +168,8 @@ pub struct RenderOptions {
     /// Fit a fitted view to every particle, those far from the rest included (see
     /// [`fit_bounds`]).
     pub fit_all: bool,
+    /// No background (sphere mode): see [`FrameSettings::transparent`].
+    pub transparent: bool,
 }
 
 /// How points are drawn.
@@ -217,6 +219,7 @@ impl Default for RenderOptions {
             exposure: None,
             style: PointStyle::default(),
             fit_all: false,
+            transparent: false,
         }
     }
 }
@@ -785,6 +788,13 @@ pub fn frame_setup(
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     check_numbers(opts)?;
+    if opts.transparent && opts.mode != RenderMode::Spheres {
+        return Err(RenderError::InvalidOptions(
+            "a transparent background is drawn in the spheres mode only (splats add light \
+             to a background, the volume and S-NDFs blend into one)"
+                .into(),
+        ));
+    }
     let fit = fit_for(file, opts);
     let mut camera = camera_in(&fit.bounds, &opts.view, opts.width, opts.height)?;
     if fit.bounds != data_bounds(file) {
@@ -844,6 +854,7 @@ pub fn frame_setup(
         height: opts.height,
         spp: opts.spp,
         background_srgb: opts.background,
+        transparent: opts.transparent,
         lighting: opts.lighting,
         read_depth: false,
         style: opts.style.clone(),

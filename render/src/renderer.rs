@@ -284,6 +284,9 @@ pub struct FrameSettings {
     pub read_depth: bool,
     /// The points' look (species colours, radii, hiding, colour map).
     pub style: crate::style::PointStyle,
+    /// No background: pixels no sphere covers are transparent, and a pixel's alpha is
+    /// the share of its samples that hit a sphere (its colour the mean of theirs).
+    pub transparent: bool,
 }
 
 impl Default for FrameSettings {
@@ -296,6 +299,7 @@ impl Default for FrameSettings {
             lighting: Lighting::default(),
             read_depth: false,
             style: Default::default(),
+            transparent: false,
         }
     }
 }
@@ -1286,11 +1290,17 @@ impl Renderer {
                 {
                     // The first batch of a sample clears the targets; later batches draw
                     // over what the earlier ones left, against their depth.
-                    let background = wgpu::Color {
-                        r: bg[0],
-                        g: bg[1],
-                        b: bg[2],
-                        a: 1.0,
+                    let background = if settings.transparent {
+                        // Summed with the samples that hit: premultiplied colour, and
+                        // alpha the share of hits.
+                        wgpu::Color::TRANSPARENT
+                    } else {
+                        wgpu::Color {
+                            r: bg[0],
+                            g: bg[1],
+                            b: bg[2],
+                            a: 1.0,
+                        }
                     };
                     let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                         label: Some("spheres"),
@@ -1405,6 +1415,9 @@ impl Renderer {
         let row = (w * 4) as usize;
         let mut image = RgbaImage::new(w, h);
         image.data = unpad_rows(&bytes, colour_row, row, h);
+        if settings.transparent {
+            image.unpremultiply();
+        }
         let depth = match &depth_readback {
             Some(buf) => {
                 let bytes = self.read_buffer(buf)?;

@@ -150,6 +150,75 @@ fn single_sphere_covers_its_projected_disk_area() {
     }
 }
 
+/// Without a background the pixels no sphere covers are transparent and the covered ones
+/// opaque with the colours of the opaque image; with several samples a silhouette's
+/// pixels are partly transparent, alpha the share of samples that hit, and their straight
+/// colour that of the sphere's edge (not darkened towards a background).
+#[test]
+fn a_transparent_background_leaves_uncovered_pixels_clear_and_edges_partial() {
+    let (_d, _p, f) = make_file(
+        &spheres_frame(&[[1.0, 2.0, 3.0]]),
+        small_build(),
+        &[("X", 2.0)],
+    );
+    let size = 64u32;
+    let mut cam = ortho_camera(Vec3::new(1.0, 2.0, 3.0), 5.0);
+    cam.fit_depth_range(&mdlod_render::data_bounds(&f));
+    let draw = cut(&f, &cam, [size, size], 0.0, OcclusionMode::Off);
+    let frame = |spp: u32, transparent: bool, background: [f32; 3]| {
+        let settings = FrameSettings {
+            width: size,
+            height: size,
+            spp,
+            background_srgb: background,
+            transparent,
+            ..Default::default()
+        };
+        renderer().render(&f, &cam, &draw, &settings).unwrap().image
+    };
+    let opaque = frame(1, false, [0.0; 3]);
+    let clear = frame(1, true, [1.0, 0.0, 1.0]);
+    let mut covered = 0;
+    for (o, c) in opaque.data.chunks_exact(4).zip(clear.data.chunks_exact(4)) {
+        if o[..3] == [0, 0, 0] {
+            assert_eq!(c[3], 0, "an uncovered pixel is transparent");
+        } else {
+            covered += 1;
+            assert_eq!(c, o, "a covered pixel keeps its colour, opaque");
+        }
+    }
+    assert!(covered > 500, "{covered}");
+    // Supersampled: partial alphas on the silhouette only, their colour the sphere's
+    // own (over black, the same pixel is darker by its alpha).
+    let soft = frame(16, true, [0.0; 3]);
+    let over_black = frame(16, false, [0.0; 3]);
+    let mut partial = 0;
+    for (s, b) in soft
+        .data
+        .chunks_exact(4)
+        .zip(over_black.data.chunks_exact(4))
+    {
+        let a = f32::from(s[3]) / 255.0;
+        if s[3] == 0 || s[3] == 255 {
+            continue;
+        }
+        partial += 1;
+        for k in 0..3 {
+            let straight = mdlod_render::renderer::srgb_to_linear(f32::from(s[k]) / 255.0);
+            let dark = mdlod_render::renderer::srgb_to_linear(f32::from(b[k]) / 255.0);
+            assert!(
+                (straight * a - dark).abs() < 0.02,
+                "channel {k}: straight {straight} at alpha {a}, over black {dark}"
+            );
+        }
+    }
+    let r_px = 2.0 * f64::from(size) / 10.0;
+    assert!(
+        partial as f64 > 2.0 * std::f64::consts::PI * r_px * 0.5,
+        "{partial} partly covered pixels on a silhouette of radius {r_px} px"
+    );
+}
+
 /// Nearest hit of the ray `o + t d` (`d` of unit length) with the spheres: `(t, graze)`
 /// with `graze` the discriminant over r² of the sphere hit (0 at the silhouette), and the
 /// smallest |discriminant| / r² over all spheres (small: some sphere is grazed or nearly

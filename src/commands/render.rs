@@ -101,7 +101,9 @@ pub struct Args {
     #[arg(long)]
     pub exposure: Option<f32>,
     /// Background colour: #rrggbb, r,g,b in [0, 1], or a name such as white or grey
-    /// (default black for splats and the density volume, white otherwise).
+    /// (default black for splats and the density volume, white otherwise); `none` for a
+    /// transparent one (spheres mode: a PNG with alpha, edges partly transparent with
+    /// --spp).
     #[arg(long)]
     pub background: Option<String>,
     #[command(flatten)]
@@ -376,6 +378,14 @@ fn mode_name(mode: Mode) -> String {
 
 /// Refuses an option given on the command line (`matches`: the `render` subcommand's)
 /// that the chosen mode does not read.
+/// Whether `--background` asks for none.
+fn transparent(background: Option<&str>) -> bool {
+    background.is_some_and(|b| {
+        let b = b.trim();
+        b.eq_ignore_ascii_case("none") || b.eq_ignore_ascii_case("transparent")
+    })
+}
+
 /// Whether the picture maps the scalar attribute: a colour map, or splats of attribute
 /// light.
 fn by_attribute(args: &Args) -> bool {
@@ -517,10 +527,16 @@ pub fn run(args: Args) -> Result<()> {
         spp: args.spp,
         error_px: args.screen_error,
         budget: args.budget,
-        background: parse_colour(args.background.as_deref().unwrap_or(match args.mode {
-            Mode::Spheres | Mode::Sndf | Mode::Iso => "#ffffff",
-            Mode::Splat | Mode::SplatOver | Mode::Density => "#000000",
-        }))
+        transparent: transparent(args.background.as_deref()),
+        background: parse_colour(
+            args.background
+                .as_deref()
+                .filter(|b| !transparent(Some(b)))
+                .unwrap_or(match args.mode {
+                    Mode::Spheres | Mode::Sndf | Mode::Iso => "#ffffff",
+                    Mode::Splat | Mode::SplatOver | Mode::Density => "#000000",
+                }),
+        )
         .context("--background")?,
         mode: match args.mode {
             Mode::Spheres => RenderMode::Spheres,
