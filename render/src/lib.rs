@@ -360,7 +360,6 @@ pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
     let last = levels.len().checked_sub(1)?;
     let mut lo = glam::Vec3::splat(f32::INFINITY);
     let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
-    let (pos, species) = (file.positions(last), file.species());
     let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
     let mut queue = std::collections::VecDeque::from([0usize]);
     let mut opened = 0usize;
@@ -375,18 +374,7 @@ pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
         if mixed && child_level == last && file.delta_n() == 1 && file.check_children(id).is_ok() {
             // The particles themselves: position relative to this node, the species'
             // radius around it.
-            for c in n.child_first as usize..(n.child_first + n.child_count) as usize {
-                let Some(&sp) = species.get(c) else { continue };
-                if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
-                    continue;
-                }
-                let p = glam::Vec3::from(mdlod_format::quantize::decode3(
-                    pos.get(c),
-                    n.centroid,
-                    n.quant_scale,
-                    file.position_bits(),
-                ));
-                let r = radii.get(usize::from(sp)).copied().unwrap_or(0.0);
+            for (p, r) in shown_particles(file, n, hidden, &radii) {
                 lo = lo.min(p - r);
                 hi = hi.max(p + r);
             }
@@ -407,6 +395,31 @@ pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
         hi = hi.max(glam::Vec3::from(n.bounds_max));
     }
     (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then(|| Bounds::new(lo, hi))
+}
+
+/// The particles of node `n` (whose children are particles, encoded relative to it:
+/// δn = 1) that are not of the species of `hidden`: position and their species' radius.
+fn shown_particles<'a>(
+    file: &'a MdlodFile,
+    n: &'a mdlod_format::NodeRecord,
+    hidden: u64,
+    radii: &'a [f32],
+) -> impl Iterator<Item = (glam::Vec3, f32)> + 'a {
+    let last = file.level_count().saturating_sub(1);
+    let (pos, species) = (file.positions(last), file.species());
+    (n.child_first as usize..(n.child_first + n.child_count) as usize).filter_map(move |c| {
+        let sp = *species.get(c)?;
+        if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
+            return None;
+        }
+        let p = glam::Vec3::from(mdlod_format::quantize::decode3(
+            pos.get(c),
+            n.centroid,
+            n.quant_scale,
+            file.position_bits(),
+        ));
+        Some((p, radii.get(usize::from(sp)).copied().unwrap_or(0.0)))
+    })
 }
 
 /// The most mixed nodes [`shown_bounds`] opens (a few milliseconds' work).
@@ -475,7 +488,6 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
         Some(k) => k.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT),
         None => BELOW_OUT,
     };
-    let (pos, species) = (file.positions(last), file.species());
     let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
     // What places the bulk: the centres of the clusters of the first level of at least
     // 1024, weighted by their areas; in a file without one (a few thousand particles),
@@ -505,20 +517,10 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
         let count = usize::try_from(levels[parents].point_count).ok()?;
         file.check_nodes(parents, 0..count).ok()?;
         for n in nodes.get(first..first.checked_add(count)?)? {
-            for c in n.child_first as usize..(n.child_first + n.child_count) as usize {
-                let Some(&sp) = species.get(c) else { continue };
-                if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
-                    continue;
-                }
-                let p = glam::Vec3::from(mdlod_format::quantize::decode3(
-                    pos.get(c),
-                    n.centroid,
-                    n.quant_scale,
-                    file.position_bits(),
-                ));
-                let r = radii.get(usize::from(sp)).copied().unwrap_or(0.0);
-                sample.push((p, (r * r).max(f32::MIN_POSITIVE)));
-            }
+            sample.extend(
+                shown_particles(file, n, hidden, &radii)
+                    .map(|(p, r)| (p, (r * r).max(f32::MIN_POSITIVE))),
+            );
         }
     }
     sample.retain(|(c, w)| c.is_finite() && w.is_finite());
@@ -572,18 +574,7 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
         let child_level = usize::from(n.level) + 1;
         if child_level == last && file.delta_n() == 1 && file.check_children(id).is_ok() {
             // The particles themselves, encoded relative to this node.
-            for c in n.child_first as usize..(n.child_first + n.child_count) as usize {
-                let Some(&sp) = species.get(c) else { continue };
-                if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
-                    continue;
-                }
-                let p = glam::Vec3::from(mdlod_format::quantize::decode3(
-                    pos.get(c),
-                    n.centroid,
-                    n.quant_scale,
-                    file.position_bits(),
-                ));
-                let r = radii.get(usize::from(sp)).copied().unwrap_or(0.0);
+            for (p, r) in shown_particles(file, n, hidden, &radii) {
                 if inside(p, p) {
                     lo = lo.min(p - r);
                     hi = hi.max(p + r);
