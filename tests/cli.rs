@@ -3534,3 +3534,56 @@ fn a_transparent_background_is_a_png_with_alpha() {
         "{e}"
     );
 }
+
+/// `--turntable N`: N views a full turn apart about z, each the image a single render at
+/// that azimuth gives; one file only.
+#[test]
+fn a_turntable_renders_a_full_turn_of_views() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("a.lammpstrj");
+    generate(&["alloy", "-n", "3000"], &dump);
+    let file = dir.path().join("a.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file)]);
+    let pattern = dir.path().join("spin").join("v-%02d.png");
+    let size = ["--width", "40", "--height", "30", "--elevation", "15"];
+    let mut args = vec![
+        "render",
+        s(&file),
+        "-o",
+        s(&pattern),
+        "--turntable",
+        "4",
+        "--azimuth",
+        "10",
+    ];
+    args.extend(size);
+    let out = ok(&args);
+    assert!(
+        out.contains("rendered 4 views")
+            && out.contains("from azimuth 10°")
+            && out.contains("azimuth 280.0°"),
+        "{out}"
+    );
+    let single = dir.path().join("single.png");
+    for (view, azimuth) in [(0, "10"), (2, "190")] {
+        let mut args = vec!["render", s(&file), "-o", s(&single), "--azimuth", azimuth];
+        args.extend(size);
+        ok(&args);
+        let spun = dir.path().join("spin").join(format!("v-{view:02}.png"));
+        assert_eq!(
+            read_png(&spun),
+            read_png(&single),
+            "view {view} at {azimuth}°"
+        );
+    }
+    assert_ne!(
+        read_png(&dir.path().join("spin/v-01.png")),
+        read_png(&dir.path().join("spin/v-03.png"))
+    );
+    let e = fails(&["render", s(&file), "-o", s(&single), "--turntable", "4"]);
+    assert!(e.contains("%d"), "{e}");
+    let d = dir.path().join("a.d");
+    ok(&["batch", s(&dump), "-o", s(&d)]);
+    let e = fails(&["render", s(&d), "-o", s(&pattern), "--turntable", "4"]);
+    assert!(e.contains("--turntable spins one file"), "{e}");
+}

@@ -82,6 +82,7 @@ pub fn run(args: Args) -> Result<()> {
         budget: 4_000_000,
         no_occlusion: false,
         fit_all: false,
+        turntable: None,
         gpu_memory: None,
         background: None,
         mode: super::render::Mode::Spheres,

@@ -45,6 +45,10 @@ pub struct Args {
     /// many).
     #[arg(long)]
     pub fit_all: bool,
+    /// Render N views turning a full circle about the vertical axis (z) from the view's
+    /// azimuth, for a talk's turntable: -o must number them (e.g. spin/view-%03d.png).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..=100_000))]
+    pub turntable: Option<u32>,
     /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G).
     #[arg(long, value_parser = parse_bytes)]
     pub gpu_memory: Option<u64>,
@@ -574,9 +578,20 @@ pub fn run(args: Args) -> Result<()> {
         ..Default::default()
     };
     if args.file.is_dir() {
+        if args.turntable.is_some() {
+            anyhow::bail!(
+                "--turntable spins one file; {} is a batch directory (render one of its \
+                 frame files, e.g. {})",
+                args.file.display(),
+                args.file.join("frame-0.mdlod").display()
+            );
+        }
         return render_frames(&args, opts);
     }
     let centred = centre_diverging(&mut opts.style, &args.file)?;
+    if let Some(n) = args.turntable {
+        return render_turntable(&args, opts, n, centred);
+    }
     // A bar for the choice of the cut and for cuts drawn in several batches or samples
     // (every particle of 10^8 is nine batches).
     let r = render_to_png_with(&args.file, &args.output, &opts, Bar::for_renderer())?;
@@ -891,6 +906,84 @@ fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
     }
     let file = format!("{}{index:0width$}{}", &name[..start], &rest[digits + 1..]);
     Ok(pattern.with_file_name(file))
+}
+
+/// `--turntable N`: `n` views of one file, the azimuth turning by 360°/n from view to
+/// view around the fitted (or saved) target, the same distance throughout; for splats the
+/// first view's exposure holds for all.
+fn render_turntable(
+    args: &Args,
+    mut opts: RenderOptions,
+    n: u32,
+    centred: Option<[f32; 2]>,
+) -> Result<()> {
+    frame_output(&args.output, 0)?;
+    let start = match (&args.camera.view, args.camera.azimuth) {
+        (Some(p), None) => ViewFile::load(p)?.azimuth_deg,
+        (_, a) => a.unwrap_or(30.0),
+    };
+    if let Some(parent) = args.output.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
+    let t0 = std::time::Instant::now();
+    let renderer =
+        mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
+    let (mut limited, mut first_camera) = (0usize, None);
+    for i in 0..n {
+        let azimuth = start + 360.0 * i as f32 / n as f32;
+        opts.view = ViewArgs {
+            azimuth: Some(azimuth),
+            ..args.camera.clone()
+        }
+        .spec();
+        let out = frame_output(&args.output, i as usize)?;
+        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let coarsest = coarsest_points(&file);
+        let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
+        if i == 0 {
+            // Splats: one exposure for every view, or the brightness flickers.
+            opts.exposure = opts.exposure.or(r.exposure);
+            first_camera = Some(r.camera.clone());
+        }
+        limited += usize::from(r.budget_limited || r.pool_limited);
+        println!(
+            "wrote {} (view {}/{n}, azimuth {:.1}°): {} particles{} and {} {}{}, error {:.2} px, {:.0} ms",
+            out.display(),
+            i + 1,
+            azimuth.rem_euclid(360.0),
+            r.particles_drawn,
+            hidden_text(&r),
+            r.nodes_drawn,
+            point_noun(args.mode),
+            limits_text(&r, coarsest, args.budget),
+            r.error_px,
+            r.total_time.as_secs_f64() * 1e3
+        );
+    }
+    let exposure = opts
+        .exposure
+        .filter(|_| matches!(args.mode, Mode::Splat))
+        .map_or(String::new(), |e| format!(", splat exposure {e:.4e}"));
+    let limited = match limited {
+        0 => String::new(),
+        k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
+    };
+    let centred = centred.map_or(String::new(), |[lo, hi]| {
+        format!(", the colour map centred on 0 (the file's range is {lo} to {hi})")
+    });
+    println!(
+        "rendered {n} views in {:.1} s, a full turn about the vertical axis (z) from azimuth \
+         {start}°{exposure}{centred}{limited}",
+        t0.elapsed().as_secs_f64()
+    );
+    if let (Some(p), Some(camera)) = (&args.save_view, first_camera) {
+        ViewFile::from_camera(&camera)
+            .save(p)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        println!("  the first view saved to {}", p.display());
+    }
+    Ok(())
 }
 
 /// Renders every frame of a batch directory (`args.file`) in its manifest's order, one
