@@ -2714,7 +2714,13 @@ fn a_dump_cut_in_its_last_frame_names_what_converts() {
     let dump = dir.path().join("t.lammpstrj");
     generate(&["droplets", "-n", "2000", "--frames", "3"], &dump);
     let text = std::fs::read(&dump).unwrap();
-    std::fs::write(&dump, &text[..text.len() - 20_000]).unwrap();
+    // Cut after a whole atom line (one cut inside a line is the next test's).
+    let cut = text[..text.len() - 20_000]
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .unwrap()
+        + 1;
+    std::fs::write(&dump, &text[..cut]).unwrap();
     let err = fails(&["convert", s(&dump), "-o", s(&dir.path().join("t.mdlod"))]);
     assert!(
         err.contains("truncated frame") && err.contains("--frame 1 converts the last complete"),
@@ -2744,7 +2750,7 @@ fn a_dump_cut_in_its_last_frame_names_what_converts() {
     assert!(!done.contains("cut short"), "{done}");
     assert!(
         done.contains(
-            "2 frames of inputs changed since their conversion (appended to, or touched) \
+            "2 frames of inputs changed since their conversion (appended to, touched or copied) \
              still hold the same bytes: kept"
         ) && done.contains("1 converted, 2 already done")
             && !done.contains("converted again"),
@@ -3380,7 +3386,7 @@ fn cool_warm_centres_signed_values_on_zero() {
     );
     let (out, own) = render(&["--attribute-range=-5:14"]);
     assert!(
-        out.contains("vz from -5 to 14 (--attribute-range)"),
+        out.contains("vz from -5 to 14 (--attribute-range), the map's white at 4.5 (not 0"),
         "{out}"
     );
     assert_ne!(centred, own);
@@ -3473,18 +3479,41 @@ fn a_log_scale_colours_decades_and_says_where_it_starts() {
         e.contains("--log-scale has no effect without --colour-map"),
         "{e}"
     );
-    let e = fails(&[
-        "render",
-        s(&file),
-        "-o",
-        s(&png),
+    // A range from 0, as a movie's union of ranges may be: 4 decades below its top.
+    let (out, _) = render(&[
         "--colour-map",
         "magma",
         "--log-scale",
         "--attribute-range",
         "0:10",
     ]);
-    assert!(e.contains("log scale") && e.contains("above 0"), "{e}");
+    assert!(
+        out.contains("on a log scale from 1.0000e-3 (4 decades below 10)"),
+        "{out}"
+    );
+    // A movie's frames over a range from 0, in the summary too.
+    let d = dir.path().join("c.d");
+    ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "c_ke"]);
+    let movie = dir.path().join("m-%d.png");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "24",
+        "--height",
+        "18",
+        "--colour-map",
+        "magma",
+        "--log-scale",
+        "--attribute-range",
+        "0:1",
+    ]);
+    assert!(
+        out.contains("on a log scale from 1.0000e-4 (4 decades below 1)"),
+        "{out}"
+    );
 }
 
 /// `--background none`: a PNG whose uncovered pixels are transparent, for figures laid

@@ -1147,6 +1147,23 @@ pub fn batch(
         done.sort_by_key(|e| e.timestep);
         todo.sort_by_key(|j| j.timestep);
     }
+    // The last frame of a text dump whose last line has no line end may be cut inside a
+    // number: left for the rerun.
+    let (cut, rest): (Vec<Job<'_>>, Vec<Job<'_>>) = todo
+        .into_iter()
+        .partition(|j| j.last_of_input && j.dump.is_some_and(DumpFile::ends_mid_line));
+    todo = rest;
+    let ends_mid_line: Vec<IncompleteFrame> = cut
+        .into_iter()
+        .map(|job| IncompleteFrame {
+            input: job.input.to_path_buf(),
+            frame: job.frame,
+            timestep: job.own_timestep,
+            reason: "its last line has no line end: the run writing it may have stopped \
+                     inside a number (if the file is complete, add a line end to it)"
+                .into(),
+        })
+        .collect();
     let skipped = done.len();
     let manifest = Mutex::new(Manifest {
         mdlod_dataset: 1,
@@ -1206,7 +1223,7 @@ pub fn batch(
     let queue = Mutex::new(todo.iter());
     let failed = AtomicBool::new(false);
     let first_error: Mutex<Option<BatchError>> = Mutex::new(None);
-    let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(Vec::new());
+    let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(ends_mid_line);
     let converted = std::sync::atomic::AtomicUsize::new(0);
     let quiet = crate::progress::NoProgress;
     // The calling thread is one of the workers (one job: the only one), so that a

@@ -408,8 +408,10 @@ pub(crate) fn position_notes(
             .unwrap_or_default();
         notes.push(format!(
             "{many} more than {FAR_OUTSIDE_BOXES} box lengths outside the box (up to {:.3e} \
-             beyond it{at}): lost atoms of a run that blew up? The hierarchy and a fitted view \
-             include them, so the rest may draw small",
+             beyond it{at}): lost atoms of a run that blew up? The hierarchy includes them (its \
+             coarsest clusters span them; in a file of a few thousand particles the \
+             positions' precision drops with that span); a fitted view leaves them out, \
+             `render --fit-all` includes them",
             f.beyond
         ));
     }

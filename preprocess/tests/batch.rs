@@ -1384,3 +1384,48 @@ fn a_frame_cut_short_while_written_is_converted_by_the_rerun() {
     );
     check_manifest(&out, &read_manifest(&out).unwrap());
 }
+
+/// Wherever a run still writing its dump stops, in its last frame's header or its data,
+/// in text, XYZ and binary dumps alike: the frames before it convert, the cut one is
+/// left for the rerun with a note, and the directory verifies.
+#[test]
+fn a_dump_cut_anywhere_in_its_last_frame_converts_the_frames_before() {
+    use mdlod_preprocess::readers::DumpFile;
+    for name in ["cu_melt.custom.dump", "cu_melt.xyz", "cu_melt.custom.bin"] {
+        let whole = std::fs::read(lammps_sample_path(name)).unwrap();
+        let frames = DumpFile::open(&lammps_sample_path(name)).unwrap();
+        let third = frames.frame_bytes(2).unwrap();
+        let (start, end) = (third.start as usize, third.end as usize);
+        // Cuts in the header's first bytes and lines, and in the atoms' data.
+        let mut cuts: Vec<usize> = vec![start + 1, start + 7, (start + end) / 2, end - 3];
+        if !name.ends_with(".bin") {
+            // After each of the header's first lines (`ITEM: TIMESTEP`, its value, ...).
+            let lines = whole[start..end]
+                .iter()
+                .enumerate()
+                .filter(|(_, &b)| b == b'\n')
+                .map(|(i, _)| start + i + 1)
+                .take(9);
+            cuts.extend(lines);
+        } else {
+            cuts.extend([start + 8, start + 40, start + 100]);
+        }
+        for cut in cuts {
+            let dir = tempfile::tempdir().unwrap();
+            let src = dir.path().join(name);
+            let out = dir.path().join("out");
+            std::fs::write(&src, &whole[..cut]).unwrap();
+            let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress)
+                .unwrap_or_else(|e| panic!("{name} cut at byte {cut}: {e}"));
+            assert_eq!(
+                (r.converted, r.incomplete.len()),
+                (2, 1),
+                "{name} cut at byte {cut} ({} into its third frame)",
+                cut - start
+            );
+            let m = read_manifest(&out).unwrap();
+            assert_eq!((m.frames.len(), m.expected_frames), (2, Some(2)));
+            check_manifest(&out, &m);
+        }
+    }
+}

@@ -435,11 +435,6 @@ impl PointStyle {
                     "attribute range {lo} to {hi} (finite, the second above the first)"
                 ));
             }
-            if self.log_scale && lo <= 0.0 {
-                return Err(format!(
-                    "attribute range {lo} to {hi} on a log scale (both ends must be above 0)"
-                ));
-            }
         }
         Ok(())
     }
@@ -748,15 +743,10 @@ mod tests {
                 .of_value(3.0),
             1.0
         );
-        // A range on a log scale must be positive.
-        let style = |range| PointStyle {
-            attribute_range: Some(range),
-            log_scale: true,
-            ..Default::default()
-        };
-        assert!(style([0.1, 2.0]).validate().is_ok());
-        let e = style([0.0, 2.0]).validate().unwrap_err();
-        assert!(e.contains("log scale") && e.contains("above 0"), "{e}");
+        // A range given from 0 (a movie's union of its frames' ranges) starts 4 decades
+        // below its top too.
+        let given = AttributeScale::with_range(&info(1.0, 2.0), Some([0.0, 100.0])).with_log(true);
+        assert_eq!(given.log_range(), Some([0.01, 100.0]));
     }
 
     #[test]

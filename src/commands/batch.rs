@@ -385,8 +385,8 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     match report.kept_unchanged {
         0 => {}
         n => println!(
-            "note: {n} frame{} of inputs changed since their conversion (appended to, or \
-             touched) still hold the same bytes: kept",
+            "note: {n} frame{} of inputs changed since their conversion (appended to, touched or \
+             copied) still hold the same bytes: kept",
             if n == 1 { "" } else { "s" }
         ),
     }

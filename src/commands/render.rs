@@ -653,7 +653,7 @@ pub fn run(args: Args) -> Result<()> {
             println!(
                 "  {shown}: {} from {lo} to {hi} ({whose}){}",
                 a.name,
-                log_text(a, &opts.style)
+                log_text(a, &opts.style) + &white_text(&opts.style)
             );
         }
     }
@@ -793,11 +793,36 @@ fn log_text(a: &mdlod_format::meta::AttributeInfo, style: &mdlod_render::PointSt
     match scale.log_range() {
         Some(_) if f64::from(low) > 0.0 => ", on a log scale".to_string(),
         Some([lo, hi]) => format!(
-            ", on a log scale from {lo:.4e} ({} decades below {hi}): values at or below it \
-             take the map's first colour",
-            mdlod_render::style::AttributeScale::LOG_DECADES
+            ", on a log scale from {:.4e} ({} decades below {}): values at or below it \
+             take the map's first colour{}",
+            lo as f32,
+            mdlod_render::style::AttributeScale::LOG_DECADES,
+            hi as f32,
+            if low < 0.0 {
+                ", the negative ones too (a log scale suits quantities above 0)"
+            } else {
+                ""
+            }
         ),
         None => ", linear: a log scale needs values above 0".to_string(),
+    }
+}
+
+/// Where a diverging map's white falls when a range given puts it off 0 (cool-warm over
+/// `--attribute-range -2:10`: white at 4).
+fn white_text(style: &mdlod_render::PointStyle) -> String {
+    match (style.colour_map, style.attribute_range) {
+        (Some(map), Some([lo, hi])) if map.is_diverging() && !style.log_scale => {
+            let mid = lo * 0.5 + hi * 0.5;
+            if mid == 0.0 {
+                String::new()
+            } else {
+                format!(
+                    ", the map's white at {mid} (not 0: a range symmetric about 0 puts it there)"
+                )
+            }
+        }
+        _ => String::new(),
     }
 }
 
@@ -1070,7 +1095,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
                  {} to {}; --attribute-range sets another)",
                 a.name, range[0], range[1], a.min, a.max
             );
-        } else if let Some(Some(a)) = attribute.filter(|_| n > 1) {
+        } else if let Some(Some(a)) = attribute.clone().filter(|_| n > 1) {
             if a.max > a.min {
                 opts.style.attribute_range = Some([a.min, a.max]);
                 range_note = format!(
@@ -1078,6 +1103,12 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
                     a.name, a.min, a.max
                 );
             }
+        }
+    }
+    if let Some(Some(a)) = &attribute {
+        if by_attribute(args) {
+            range_note.push_str(&log_text(a, &opts.style));
+            range_note.push_str(&white_text(&opts.style));
         }
     }
     // Each frame's file fixed its species' looks alone: a name keeps one look throughout.
@@ -1144,7 +1175,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         .map_or(String::new(), |e| format!(", splat exposure {e:.4e}"));
     let framing = match &args.camera.view {
         Some(v) => format!("{}", v.display()),
-        None => "fitted to every frame's bounds".to_string(),
+        None => "fitted to every frame's material".to_string(),
     };
     // Splats and the density volume draw the files' own colours.
     let looks_note = match restyled {

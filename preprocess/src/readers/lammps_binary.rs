@@ -69,9 +69,22 @@ pub(crate) struct BinHeader {
     pub bytes: std::ops::Range<usize>,
 }
 
+/// How a read past the end of the file starts its message.
+const TRUNCATED: &str = "truncated:";
+
 /// The frames of a binary dump.
 pub(crate) struct Index {
     frames: Vec<BinHeader>,
+    /// A last frame the file ends inside (a run still writing it): counted as a frame,
+    /// whose every read is a "truncated file?" error ([`ReadError::cut_short`]), so that
+    /// a batch leaves it out with a note and converts the frames before it.
+    cut: Option<Cut>,
+}
+
+/// Where and how the file ends inside its last frame.
+struct Cut {
+    offset: usize,
+    message: String,
 }
 
 struct Reader<'a> {
@@ -95,7 +108,7 @@ impl<'a> Reader<'a> {
             return Err(self.err(
                 self.pos,
                 format!(
-                    "truncated: {what} needs {n} bytes, {} left",
+                    "{TRUNCATED} {what} needs {n} bytes, {} left",
                     self.data.len() - self.pos
                 ),
             ));
@@ -158,8 +171,22 @@ impl Index {
         let mut r = Reader { path, data, pos: 0 };
         let mut frames = Vec::new();
         let mut units: Option<String> = None;
+        let mut cut = None;
         while r.pos < data.len() {
-            let mut h = header(&mut r)?;
+            let start = r.pos;
+            let mut h = match header(&mut r) {
+                Ok(h) => h,
+                // The file ends inside this frame (header or chunks): a run still
+                // writing it, or a copy that stopped.
+                Err(ReadError::Binary { message, .. }) if message.starts_with(TRUNCATED) => {
+                    cut = Some(Cut {
+                        offset: start,
+                        message,
+                    });
+                    break;
+                }
+                Err(e) => return Err(e),
+            };
             // The unit style is written once, in the first frame.
             if h.units.is_some() {
                 units.clone_from(&h.units);
@@ -168,22 +195,39 @@ impl Index {
             }
             frames.push(h);
         }
-        if frames.is_empty() {
+        if frames.is_empty() && cut.is_none() {
             return Err(r.err(0, "no frames"));
         }
-        Ok(Index { frames })
+        Ok(Index { frames, cut })
     }
 
+    /// The frames, the one the file ends inside included.
     pub fn len(&self) -> usize {
-        self.frames.len()
+        self.frames.len() + usize::from(self.cut.is_some())
     }
 
     pub fn timestep(&self, k: usize) -> Option<u64> {
         self.frames.get(k).map(|h| h.timestep)
     }
 
-    pub fn header(&self, k: usize) -> &BinHeader {
-        &self.frames[k]
+    /// Frame `k`'s header; for the frame the file ends inside, the error saying so.
+    pub fn header(&self, path: &Path, k: usize) -> Result<&BinHeader, ReadError> {
+        match (self.frames.get(k), &self.cut) {
+            (Some(h), _) => Ok(h),
+            (None, Some(c)) => Err(ReadError::Binary {
+                path: path.to_path_buf(),
+                offset: c.offset as u64,
+                message: format!(
+                    "frame {k} starts here and the file ends inside it: {} (truncated file?)",
+                    c.message
+                ),
+            }),
+            (None, None) => Err(ReadError::NoSuchFrame {
+                path: path.to_path_buf(),
+                frame: k,
+                count: self.len(),
+            }),
+        }
     }
 }
 

@@ -64,6 +64,48 @@ const COORDINATE_STYLES: [([&str; 3], bool); 4] = [
     (["xsu", "ysu", "zsu"], true),
 ];
 
+/// Where the dump's last lines begin a frame header that the file ends inside without
+/// reaching its `ITEM: TIMESTEP` line whole: optional `ITEM: UNITS` and `ITEM: TIME`
+/// lines (each with its value, or the value cut or missing), then possibly the start of
+/// a header line cut at the end (`ITEM: TIMES`). `None` when the dump ends otherwise,
+/// or only where the frame starting at `floor` began.
+fn cut_header_start(data: &[u8], floor: usize) -> Option<usize> {
+    const ITEMS: [&[u8]; 3] = [b"ITEM: TIMESTEP", b"ITEM: TIME", b"ITEM: UNITS"];
+    // The last five lines, earliest first, the final one without its line end if cut.
+    let mut lines: Vec<(usize, &[u8])> = Vec::new();
+    let mut end = data.len();
+    if data.ends_with(b"\n") {
+        end -= 1;
+    }
+    while lines.len() < 5 && end > floor {
+        let start = data[floor..end]
+            .iter()
+            .rposition(|&b| b == b'\n')
+            .map_or(floor, |p| floor + p + 1);
+        lines.push((start, &data[start..end]));
+        end = start.saturating_sub(1);
+    }
+    lines.reverse();
+    let cut = !data.ends_with(b"\n");
+    // The earliest of those lines from which the rest is such a beginning.
+    (0..lines.len()).find_map(|first| {
+        let rest = &lines[first..];
+        let mut i = 0;
+        while i < rest.len() {
+            let line = trim(rest[i].1);
+            let last = i + 1 == rest.len();
+            if line == b"ITEM: UNITS" || line == b"ITEM: TIME" {
+                i += 2; // Its value, whole, cut or missing.
+            } else if last && cut && !line.is_empty() && ITEMS.iter().any(|t| t.starts_with(line)) {
+                i += 1;
+            } else {
+                return None;
+            }
+        }
+        (rest[0].0 > floor).then_some(rest[0].0)
+    })
+}
+
 /// The line ending at `line_start - 1` (its start and bytes), if any.
 fn prev_line(data: &[u8], line_start: usize) -> Option<(usize, &[u8])> {
     if line_start == 0 {
@@ -159,8 +201,25 @@ impl Index {
     }
 
     /// The index of the frames found, checked: the file starts with the first.
-    fn finish(ctx: &Ctx<'_>, frames: Vec<Span>, units: Option<String>) -> Result<Index, ReadError> {
+    fn finish(
+        ctx: &Ctx<'_>,
+        mut frames: Vec<Span>,
+        units: Option<String>,
+    ) -> Result<Index, ReadError> {
         let data = ctx.data;
+        // A dump that ends in the first lines of a frame not yet written whole (`ITEM:
+        // TIMES`): those lines are a frame of their own, cut short, not more atom lines
+        // of the frame before.
+        if let Some(last) = frames.last_mut() {
+            if let Some(start) = cut_header_start(data, last.start) {
+                last.end = start;
+                frames.push(Span {
+                    start,
+                    end: data.len(),
+                    timestep: None,
+                });
+            }
+        }
         let Some(first) = frames.first() else {
             return Err(ctx.malformed(0, "no `ITEM: TIMESTEP` line found: not a LAMMPS text dump"));
         };
@@ -196,6 +255,29 @@ impl Index {
 
     /// Parses the header of frame `k` (which must exist).
     pub fn header(&self, ctx: &Ctx<'_>, k: usize) -> Result<Header, ReadError> {
+        let span = &self.frames[k];
+        self.parse_header(ctx, k).map_err(|e| {
+            // The file ends inside the last frame's header (a run still writing it): told
+            // apart from a malformed header by the `ITEM: ATOMS` line it has not reached.
+            let text = &ctx.data[span.start..span.end];
+            let reached_atoms = memchr::memmem::find(text, b"ITEM: ATOMS")
+                .is_some_and(|at| text[at..].contains(&b'\n'));
+            if span.end == ctx.data.len()
+                && k + 1 == self.frames.len()
+                && !reached_atoms
+                && !e.cut_short()
+            {
+                ctx.malformed(
+                    span.end,
+                    format!("frame {k} ends before its `ITEM: ATOMS` line ({e})"),
+                )
+            } else {
+                e
+            }
+        })
+    }
+
+    fn parse_header(&self, ctx: &Ctx<'_>, k: usize) -> Result<Header, ReadError> {
         let span = &self.frames[k];
         let data = &ctx.data[..span.end];
         let mut cursor = Cursor::new(data, span.start);

@@ -565,7 +565,7 @@ impl DumpFile {
             self.check_frame(k)?;
             return Ok(lammps_binary::frame_info(
                 &self.path,
-                i.header(k),
+                i.header(&self.path, k)?,
                 &ReadOptions::default(),
             ));
         }
@@ -583,6 +583,14 @@ impl DumpFile {
         Ok(())
     }
 
+    /// True for a text dump (LAMMPS text, XYZ) whose last line has no line end: a run
+    /// still writing it may have stopped inside a number (`0.41` of `0.4156`), which
+    /// reads as a whole value.
+    pub fn ends_mid_line(&self) -> bool {
+        matches!(self.index, Index::Lammps(_) | Index::Xyz(_))
+            && self.bytes().last().is_some_and(|&b| b != b'\n')
+    }
+
     /// Frame `k`'s byte range in the file, for uncompressed single files whose frames
     /// are contiguous ranges (LAMMPS text and binary dumps, XYZ files); `None` for
     /// others and for a `k` out of range.
@@ -593,7 +601,7 @@ impl DumpFile {
         let r = match &self.index {
             Index::Lammps(i) => i.bytes(k)?,
             Index::Xyz(i) => i.bytes(k)?,
-            Index::LammpsBinary(i) => (k < i.len()).then(|| i.header(k).bytes.clone())?,
+            Index::LammpsBinary(i) => i.header(&self.path, k).ok()?.bytes.clone(),
             _ => return None,
         };
         Some(r.start as u64..r.end as u64)
@@ -693,7 +701,7 @@ impl DumpFile {
                 })
             }
             Index::LammpsBinary(i) => {
-                let info = lammps_binary::frame_info(&self.path, i.header(k), opts);
+                let info = lammps_binary::frame_info(&self.path, i.header(&self.path, k)?, opts);
                 if !info.columns.iter().any(|c| c == "type") || info.particles == 0 {
                     return Ok(SpeciesNaming::Given);
                 }
@@ -793,7 +801,7 @@ impl DumpFile {
             Index::LammpsBinary(i) => lammps_binary::read_range(
                 &self.path,
                 self.bytes(),
-                i.header(k),
+                i.header(&self.path, k)?,
                 opts,
                 range,
                 progress,
@@ -841,7 +849,7 @@ impl DumpFile {
             return lammps_binary::read_frame(
                 &self.path,
                 self.bytes(),
-                i.header(k),
+                i.header(&self.path, k)?,
                 opts,
                 progress,
             );

@@ -195,9 +195,14 @@ impl Index {
                 let mut columns: Vec<String> =
                     ["species", "x", "y", "z"].map(String::from).to_vec();
                 if particles > 0 {
-                    let first = Cursor::new(data, atoms_at)
-                        .next_line()
-                        .map_or(&[][..], |l| l.1);
+                    let Some((_, first)) = Cursor::new(data, atoms_at).next_line() else {
+                        // The file ends after the comment line (a run still writing).
+                        return Err(ReadError::Truncated {
+                            at: ctx.at(span.end),
+                            expected: particles,
+                            found: 0,
+                        });
+                    };
                     let n = fields(first).count();
                     if n < 4 {
                         return Err(ReadError::ColumnCount {
