@@ -3514,6 +3514,69 @@ fn a_log_scale_colours_decades_and_says_where_it_starts() {
         out.contains("on a log scale from 1.0000e-4 (4 decades below 1)"),
         "{out}"
     );
+
+    // Frozen wall atoms at 0 among moving ones from 0.05: the scale starts at 0.05, not
+    // four decades below the top, in one frame and in a movie.
+    let frozen = dir.path().join("frozen.lammpstrj");
+    let mut text = String::new();
+    for step in [0, 100] {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n400\nITEM: BOX BOUNDS pp pp pp\n\
+             0 40\n0 40\n0 2\nITEM: ATOMS id type x y z c_ke\n"
+        ));
+        for i in 0..400 {
+            let (x, y) = ((i % 20) as f32 * 2.0, (i / 20) as f32 * 2.0);
+            let ke = if i < 20 {
+                0.0
+            } else {
+                0.05 + 0.55 * (i as f32 / 400.0)
+            };
+            text.push_str(&format!("{} 1 {x} {y} 1 {ke}\n", i + 1));
+        }
+    }
+    std::fs::write(&frozen, text).unwrap();
+    let file = dir.path().join("frozen.mdlod");
+    ok(&["convert", s(&frozen), "-o", s(&file), "--attribute", "c_ke"]);
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "24",
+        "--height",
+        "18",
+        "--colour-map",
+        "magma",
+        "--log-scale",
+    ]);
+    let legend = out
+        .lines()
+        .find(|l| l.contains("colour map magma"))
+        .unwrap();
+    assert!(
+        legend.contains("c_ke from 0.07") && legend.contains("from the smallest value above 0"),
+        "{out}"
+    );
+    let d = dir.path().join("frozen.d");
+    ok(&["batch", s(&frozen), "-o", s(&d), "--attribute", "c_ke"]);
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "24",
+        "--height",
+        "18",
+        "--colour-map",
+        "magma",
+        "--log-scale",
+    ]);
+    assert!(
+        out.contains("c_ke from 0.07") && out.contains("every frame's range is 0 to"),
+        "{out}"
+    );
 }
 
 /// `--background none`: a PNG whose uncovered pixels are transparent, for figures laid

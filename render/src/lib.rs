@@ -337,6 +337,40 @@ pub fn parse_colour(s: &str) -> Result<[f32; 3], RenderError> {
     }
 }
 
+/// Where a log scale of the file's attribute starts when its range reaches 0 or below
+/// (kinetic energies with frozen wall atoms at 0), instead of the
+/// [`style::AttributeScale::LOG_DECADES`] floor that a few zeros would pull it down to:
+/// in a file of at most 2^20 particles the smallest positive value of a particle; in a
+/// larger one the smallest positive cluster mean on the deepest level of at most 65 536
+/// clusters, a value the bulk of the data reaches. `None` without an attribute or a
+/// positive value.
+pub fn log_floor(file: &MdlodFile) -> Option<f32> {
+    let info = file.metadata().attribute.as_ref()?;
+    let levels = file.levels();
+    let last = levels.len().checked_sub(1)?;
+    if levels[last].point_count <= 1 << 20 {
+        let (min, max) = (f64::from(info.min), f64::from(info.max));
+        return file
+            .attribute()?
+            .iter()
+            .map(|&q| (min + (max - min) * f64::from(q) / 65535.0) as f32)
+            .filter(|&v| v > 0.0 && v.is_finite())
+            .min_by(f32::total_cmp);
+    }
+    let level = (0..last)
+        .rev()
+        .find(|&l| levels[l].point_count <= 1 << 16)?;
+    let first = usize::try_from(levels[level].node_first).ok()?;
+    let count = usize::try_from(levels[level].point_count).ok()?;
+    file.check_nodes(level, 0..count).ok()?;
+    file.nodes()
+        .get(first..first.checked_add(count)?)?
+        .iter()
+        .map(|n| n.attribute)
+        .filter(|&a| a > 0.0 && a.is_finite())
+        .min_by(f32::total_cmp)
+}
+
 /// The bounds of everything in the file (the top node's box).
 pub fn data_bounds(file: &MdlodFile) -> Bounds {
     let top = &file.nodes()[0];

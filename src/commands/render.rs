@@ -149,8 +149,9 @@ pub struct StyleArgs {
     #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true, value_parser = parse_range)]
     pub attribute_range: Option<[f32; 2]>,
     /// Map the attribute's logarithm (densities, energies spanning decades) with
-    /// --colour-map or --intensity attribute; a range whose low end is 0 or below (a
-    /// kinetic energy from 0) starts 4 decades below its high end.
+    /// --colour-map or --intensity attribute; values from 0 (kinetic energies of frozen
+    /// atoms) start at the smallest value above 0, a range given from 0 four decades
+    /// below its top.
     #[arg(long)]
     pub log_scale: bool,
 }
@@ -588,7 +589,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         return render_frames(&args, opts);
     }
-    let centred = centre_diverging(&mut opts.style, &args.file)?;
+    let centred = derive_range(&mut opts.style, &args.file, by_attribute(&args))?;
     if let Some(n) = args.turntable {
         return render_turntable(&args, opts, n, centred);
     }
@@ -631,14 +632,10 @@ pub fn run(args: Args) -> Result<()> {
     // What the colours (or splat intensities) mean: a picture's legend.
     if by_attribute(&args) {
         if let Some(a) = &file.metadata().attribute {
-            let ([lo, hi], whose) = match (opts.style.attribute_range, centred) {
-                (Some(range), Some([min, max])) => (
-                    range,
-                    format!(
-                        "centred on 0, the map's white; the file's range is {min} to {max}, \
-                         --attribute-range sets another"
-                    ),
-                ),
+            let ([lo, hi], whose) = match (opts.style.attribute_range, &centred) {
+                (Some(range), Some(why)) => {
+                    (range, format!("{why}; --attribute-range sets another"))
+                }
                 (Some(range), None) => (range, "--attribute-range".to_string()),
                 (None, _) => ([a.min, a.max], "the file's range".to_string()),
             };
@@ -760,25 +757,57 @@ fn recolour_note(miss: Option<f32>, species: usize) -> Option<String> {
     ))
 }
 
-/// A diverging colour map over signed values, without a range given, is centred on 0
-/// ([`mdlod_render::style::ColourMap::centred_range`]): sets the style's range and
-/// returns the file's own, for the legend.
-pub fn centre_diverging(
+/// The range the attribute is shown over when none is given and the file's own would
+/// mislead (`mapped`: a colour map or attribute splats draw it): a diverging map over
+/// signed values is centred on 0 ([`mdlod_render::style::ColourMap::centred_range`]); a
+/// log scale of values from 0 or below starts at the smallest positive one
+/// ([`mdlod_render::log_floor`]). Sets the style's range and says why, for the legend.
+pub fn derive_range(
     style: &mut mdlod_render::PointStyle,
     path: &std::path::Path,
-) -> Result<Option<[f32; 2]>> {
-    let (Some(map), None, false) = (style.colour_map, style.attribute_range, style.log_scale)
-    else {
+    mapped: bool,
+) -> Result<Option<String>> {
+    if !mapped || style.attribute_range.is_some() {
         return Ok(None);
-    };
+    }
     let file = mdlod_format::MdlodFile::open(path)?;
     let Some(a) = &file.metadata().attribute else {
         return Ok(None);
     };
-    Ok(map.centred_range([a.min, a.max]).map(|range| {
-        style.attribute_range = Some(range);
-        [a.min, a.max]
-    }))
+    let (range, why) = if style.log_scale {
+        match log_start([a.min, a.max], mdlod_render::log_floor(&file)) {
+            Some(r) => r,
+            None => return Ok(None),
+        }
+    } else {
+        match style
+            .colour_map
+            .and_then(|m| m.centred_range([a.min, a.max]))
+        {
+            Some(range) => (range, "centred on 0, the map's white".to_string()),
+            None => return Ok(None),
+        }
+    };
+    style.attribute_range = Some(range);
+    Ok(Some(format!(
+        "{why}; the file's range is {} to {}",
+        a.min, a.max
+    )))
+}
+
+/// A log scale's range for values `[min, max]` reaching 0 or below: from `floor`, the
+/// smallest positive value (no lower than 10^-8 of the top), and why; `None` where the
+/// values are all above 0 or none is.
+fn log_start([min, max]: [f32; 2], floor: Option<f32>) -> Option<([f32; 2], String)> {
+    let floor = floor?.max(max * 1e-8);
+    (min <= 0.0 && max > floor).then(|| {
+        (
+            [floor, max],
+            "from the smallest value above 0, on a log scale: values at or below it take \
+             the map's first colour"
+                .to_string(),
+        )
+    })
 }
 
 /// How a log scale (`--log-scale`) maps the attribute, after the legend's range: the ends
@@ -940,7 +969,7 @@ fn render_turntable(
     args: &Args,
     mut opts: RenderOptions,
     n: u32,
-    centred: Option<[f32; 2]>,
+    centred: Option<String>,
 ) -> Result<()> {
     frame_output(&args.output, 0)?;
     let start = match (&args.camera.view, args.camera.azimuth) {
@@ -994,9 +1023,10 @@ fn render_turntable(
         0 => String::new(),
         k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
     };
-    let centred = centred.map_or(String::new(), |[lo, hi]| {
-        format!(", the colour map centred on 0 (the file's range is {lo} to {hi})")
-    });
+    let centred = match (centred, opts.style.attribute_range) {
+        (Some(why), Some([lo, hi])) => format!(", the attribute shown from {lo} to {hi} ({why})"),
+        _ => String::new(),
+    };
     println!(
         "rendered {n} views in {:.1} s, a full turn about the vertical axis (z) from azimuth \
          {start}°{exposure}{centred}{limited}",
@@ -1031,6 +1061,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let mut bounds: Option<mdlod_render::Bounds> = None;
     // Particles left out of the fit as far from the rest, and in how many frames.
     let mut far = (0u64, 0usize);
+    // With a log scale: the smallest value above 0 of any frame.
+    let mut floor: Option<f32> = None;
     let fitted = matches!(opts.view, ViewSpec::Orbit { .. });
     // Species may come and go in a trajectory (a deposition, an evaporation): a style
     // names any species of some frame, and applies in the frames that hold it.
@@ -1056,6 +1088,11 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             }
             _ => None,
         });
+        if opts.style.log_scale {
+            if let Some(f) = mdlod_render::log_floor(&file) {
+                floor = Some(floor.map_or(f, |g: f32| g.min(f)));
+            }
+        }
         let fit = mdlod_render::fit_for(&file, &opts);
         if fit.far_particles > 0 {
             far.0 += fit.far_particles;
@@ -1087,7 +1124,19 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             let range = opts.style.colour_map?.centred_range([a.min, a.max])?;
             Some((a, range))
         });
-        if let Some((a, range)) = centred {
+        let floored = attribute
+            .clone()
+            .flatten()
+            .filter(|_| opts.style.log_scale)
+            .and_then(|a| log_start([a.min, a.max], floor).map(|(r, why)| (a, r, why)));
+        if let Some((a, range, why)) = floored {
+            opts.style.attribute_range = Some(range);
+            range_note = format!(
+                ", {} from {} to {} ({why}; every frame's range is {} to {}; \
+                 --attribute-range sets another)",
+                a.name, range[0], range[1], a.min, a.max
+            );
+        } else if let Some((a, range)) = centred {
             // A diverging map over signed values: white is 0 in every frame.
             opts.style.attribute_range = Some(range);
             range_note = format!(

@@ -83,13 +83,11 @@ pub fn run(args: Args) -> Result<()> {
         ..Default::default()
     };
     mdlod_render::check_image_size(opts.width, opts.height)?;
-    if let Some([min, max]) = super::render::centre_diverging(&mut opts.style, &args.file)? {
+    let mapped = opts.style.colour_map.is_some();
+    if let Some(why) = super::render::derive_range(&mut opts.style, &args.file, mapped)? {
         let [lo, hi] = opts.style.attribute_range.unwrap_or_default();
         let map = opts.style.colour_map.map_or("", |m| m.name());
-        println!(
-            "colour map {map} centred on 0, its white: from {lo} to {hi} (the file's range \
-             is {min} to {max}; --attribute-range sets another)"
-        );
+        println!("colour map {map}: from {lo} to {hi} ({why}; --attribute-range sets another)");
     }
     if args.tiles {
         let (stats, tiles) = mdlod_render::sample_tiles_to_file(
