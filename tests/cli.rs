@@ -3679,3 +3679,17 @@ fn a_turntable_renders_a_full_turn_of_views() {
     let e = fails(&["render", s(&d), "-o", s(&pattern), "--turntable", "4"]);
     assert!(e.contains("--turntable spins one file"), "{e}");
 }
+
+/// A text dump whose last line has no line end converts (a hand-written file may lack
+/// it) with a note: a run still writing it may have stopped inside a number.
+#[test]
+fn a_last_line_without_a_line_end_is_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("nl.xyz");
+    std::fs::write(&xyz, "2\nplain\nCu 0 0 0\nCu 2.5 0 0.41").unwrap();
+    let out = ok(&["convert", s(&xyz), "-o", s(&dir.path().join("nl.mdlod"))]);
+    assert!(out.contains("its last line has no line end"), "{out}");
+    std::fs::write(&xyz, "2\nplain\nCu 0 0 0\nCu 2.5 0 0.41\n").unwrap();
+    let out = ok(&["convert", s(&xyz), "-o", s(&dir.path().join("nl2.mdlod"))]);
+    assert!(!out.contains("line end"), "{out}");
+}

@@ -667,10 +667,21 @@ pub fn convert_file(
     // Opening indexes the frames (a pass over a text dump): part of reading the input,
     // which the throughput printed from the report must include.
     let opened = t0.elapsed();
+    // A text dump whose last line has no line end may be cut inside a number.
+    let cut_line = dump
+        .ends_mid_line()
+        .then(|| dump.frame_count().saturating_sub(1));
     // The working file (if any) lives until the conversion is done.
     convert_dump(dump, input, output, frame, read, options, progress)
         .map(|mut report| {
             report.read_time += opened;
+            if cut_line.is_some() && cut_line == report.frame.map(|f| f.0) {
+                report.notes.push(format!(
+                    "{}: its last line has no line end: if a run is still writing it, the \
+                     last atom's values may be cut inside a number (`0.41` of `0.4156`)",
+                    input.display()
+                ));
+            }
             report
         })
         .map_err(|e| decompressed(input, text.as_deref(), e))
