@@ -3693,3 +3693,72 @@ fn a_last_line_without_a_line_end_is_noted() {
     let out = ok(&["convert", s(&xyz), "-o", s(&dir.path().join("nl2.mdlod"))]);
     assert!(!out.contains("line end"), "{out}");
 }
+
+/// `--hide-species` in the splat and volume modes: the light or density of the species
+/// shown only, as a file of those species alone gives (at screen error 0, the same
+/// particles).
+#[test]
+fn hidden_species_leave_the_splats_and_the_volume() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("a.lammpstrj");
+    generate(&["alloy", "-n", "3000"], &dump);
+    // The same dump with its silver (type 2) atoms only.
+    let text = std::fs::read_to_string(&dump).unwrap();
+    let (head, atoms) = text.split_once("ITEM: ATOMS").unwrap();
+    let (columns, lines) = atoms.split_once('\n').unwrap();
+    let silver: Vec<&str> = lines
+        .lines()
+        .filter(|l| l.split_whitespace().nth(1) == Some("2"))
+        .collect();
+    assert!(silver.len() > 100, "{} silver atoms", silver.len());
+    let count = text.lines().nth(3).unwrap();
+    let head = head.replacen(&format!("\n{count}\n"), &format!("\n{}\n", silver.len()), 1);
+    let only = dir.path().join("silver.lammpstrj");
+    std::fs::write(
+        &only,
+        format!("{head}ITEM: ATOMS{columns}\n{}\n", silver.join("\n")),
+    )
+    .unwrap();
+    let (all, ag) = (dir.path().join("a.mdlod"), dir.path().join("ag.mdlod"));
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&all),
+        "--radius",
+        "1=1.28",
+        "--radius",
+        "2=1.44",
+    ]);
+    ok(&["convert", s(&only), "-o", s(&ag), "--radius", "2=1.44"]);
+    for mode in ["iso", "density", "splat"] {
+        let render = |file: &Path, name: &str, extra: &[&str]| {
+            let png = dir.path().join(format!("{mode}-{name}.png"));
+            let mut args = vec!["render", s(file), "-o", s(&png), "--mode", mode];
+            args.extend(["--width", "48", "--height", "36", "--screen-error", "0"]);
+            args.extend(extra);
+            let out = ok(&args);
+            (out, read_png(&png).2)
+        };
+        let (out, hidden) = render(&all, "hidden", &["--hide-species", "1"]);
+        assert!(out.contains("hidden species, left out"), "{mode}: {out}");
+        let (_, alone) = render(&ag, "alone", &[]);
+        let (_, everything) = render(&all, "all", &[]);
+        let diff = |a: &[u8], b: &[u8]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| f64::from(x.abs_diff(*y)))
+                .sum::<f64>()
+                / a.len() as f64
+        };
+        assert!(
+            diff(&hidden, &alone) < 2.0,
+            "{mode}: {}",
+            diff(&hidden, &alone)
+        );
+        assert!(
+            diff(&hidden, &everything) > 4.0 * diff(&hidden, &alone).max(0.5),
+            "{mode}"
+        );
+    }
+}

@@ -502,12 +502,7 @@ pub fn fit_bounds(file: &MdlodFile, hidden: u64, all: bool) -> FitBounds {
 /// range still holds all the data, as clusters holding hidden species may be drawn where
 /// a budget stops the refinement, and so do far particles.
 pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
-    let hidden = match opts.mode {
-        RenderMode::Spheres | RenderMode::Sndf { .. } => {
-            opts.style.hidden_mask(&file.metadata().species)
-        }
-        _ => 0,
-    };
+    let hidden = opts.style.hidden_mask(&file.metadata().species);
     fit_bounds(file, hidden, opts.fit_all)
 }
 
@@ -820,6 +815,26 @@ pub fn frame_setup(
                 .into(),
         ));
     }
+    // The splats and the volume draw no style's species table, which the spheres use to
+    // draw a species past the first 64 as nothing: the traversal's mask must name it.
+    let styled = matches!(opts.mode, RenderMode::Spheres | RenderMode::Sndf { .. });
+    let species = &file.metadata().species;
+    if let Some(s) = species.iter().skip(64).find(|s| {
+        !styled
+            && opts
+                .style
+                .species
+                .iter()
+                .any(|st| st.hidden && st.name == s.name)
+    }) {
+        return Err(RenderError::InvalidOptions(format!(
+            "species {:?} is hidden, but the splat and volume modes hide only a file's first \
+             64 species (it is species {} of {})",
+            s.name,
+            species.iter().position(|x| x.name == s.name).unwrap_or(0) + 1,
+            species.len()
+        )));
+    }
     let fit = fit_for(file, opts);
     let mut camera = camera_in(&fit.bounds, &opts.view, opts.width, opts.height)?;
     if fit.bounds != data_bounds(file) {
@@ -868,11 +883,9 @@ pub fn frame_setup(
             RenderMode::Density(d) => d.kernel_scale,
             _ => 0.0,
         },
-        // Only spheres and S-NDFs draw the style's species.
-        hidden_species: match opts.mode {
-            RenderMode::Spheres | RenderMode::Sndf { .. } => opts.style.hidden_mask(species),
-            _ => 0,
-        },
+        // Every mode leaves hidden species out of the cut (splats, the volume: the
+        // light or density of the species shown).
+        hidden_species: opts.style.hidden_mask(species),
     };
     let settings = FrameSettings {
         width: opts.width,

@@ -369,7 +369,6 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("radius_scale", STYLED),
         ("species_colour", STYLED),
         ("species_radius", STYLED),
-        ("hide_species", STYLED),
         ("attribute_range", &[Spheres, Sndf, Splat]),
         ("log_scale", &[Spheres, Sndf, Splat]),
     ]
@@ -665,10 +664,12 @@ pub fn run(args: Args) -> Result<()> {
             println!("{note}");
         }
     }
-    if r.nodes_drawn > 0 && matches!(args.mode, Mode::Spheres | Mode::Sndf) {
-        let miss = opts.style.recolour_miss(species);
-        if let Some(note) = recolour_note(miss, species.len()) {
-            println!("{note}");
+    if r.nodes_drawn > 0 {
+        if matches!(args.mode, Mode::Spheres | Mode::Sndf) {
+            let miss = opts.style.recolour_miss(species);
+            if let Some(note) = recolour_note(miss, species.len()) {
+                println!("{note}");
+            }
         }
         if r.clusters_mixed > 0 {
             let (s, verb, pronoun) = match r.clusters_mixed {
@@ -676,9 +677,10 @@ pub fn run(args: Args) -> Result<()> {
                 _ => ("s", "", "them"),
             };
             println!(
-                "  note: {} cluster sphere{s} still hold{verb} hidden species: the point \
-                 budget stopped refining {pronoun}; a larger --budget refines {pronoun}",
-                r.clusters_mixed
+                "  note: {} {}{s} still hold{verb} hidden species: the point budget stopped \
+                 refining {pronoun}; a larger --budget refines {pronoun}",
+                r.clusters_mixed,
+                point_noun(args.mode).trim_end_matches('s')
             );
         }
         if opts.style.species.iter().any(|s| s.hidden) && opts.style.hidden_mask(species) == 0 {
