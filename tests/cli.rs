@@ -3468,12 +3468,17 @@ fn a_log_scale_colours_decades_and_says_where_it_starts() {
         out.contains("from 0.01 to 10 (--attribute-range), on a log scale\n"),
         "{out}"
     );
+    let (_, linear_splats) = render(&["--mode", "splat", "--intensity", "attribute"]);
     let (out, splats) = render(&["--mode", "splat", "--intensity", "attribute", "--log-scale"]);
     assert!(
         out.contains("splat intensity") && out.contains("on a log scale"),
         "{out}"
     );
     assert!(splats.chunks(4).any(|p| p[..3] != [0, 0, 0]));
+    assert_ne!(
+        splats, linear_splats,
+        "the log scale changes the splats' light"
+    );
     let e = fails(&["render", s(&file), "-o", s(&png), "--log-scale"]);
     assert!(
         e.contains("--log-scale has no effect without --colour-map"),

@@ -1050,6 +1050,7 @@ pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
             PackStyle::FluxAttribute,
             PointStyle {
                 attribute_range: opts.style.attribute_range,
+                log_scale: opts.style.log_scale,
                 ..Default::default()
             },
         ),
