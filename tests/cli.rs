@@ -3767,3 +3767,60 @@ fn hidden_species_leave_the_splats_and_the_volume() {
         );
     }
 }
+
+/// `--mode splat --colour-map`: the image's light (projected flux or attribute) through
+/// the map, with `--log-scale` on a log axis, and the legend says over which range; a
+/// movie keeps the first frame's range.
+#[test]
+fn splats_colour_their_projection_through_a_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "3000", "--frames", "2"], &dump);
+    let file = dir.path().join("c.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "c_ke"]);
+    let png = dir.path().join("p.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--mode", "splat"];
+        args.extend(["--width", "48", "--height", "36"]);
+        args.extend(extra);
+        (ok(&args), read_png(&png).2)
+    };
+    let (_, toned) = render(&[]);
+    let (out, mapped) = render(&["--colour-map", "magma", "--log-scale"]);
+    assert!(
+        out.contains("colour map magma: the image's light (the projected flux) from")
+            && out.contains("on a log scale (its lit pixels' 0.5th to 99.5th percentile"),
+        "{out}"
+    );
+    assert_ne!(toned, mapped);
+    let (out, linear) = render(&["--colour-map", "magma"]);
+    assert!(
+        out.contains("(0 to its lit pixels' 99.5th percentile"),
+        "{out}"
+    );
+    assert_ne!(linear, mapped);
+    let (out, _) = render(&["--colour-map", "viridis", "--intensity", "attribute"]);
+    assert!(
+        out.contains("splat intensity: c_ke from")
+            && out.contains("the image's light (the projected attribute)"),
+        "{out}"
+    );
+    let d = dir.path().join("c.d");
+    ok(&["batch", s(&dump), "-o", s(&d)]);
+    let movie = dir.path().join("m-%d.png");
+    ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--mode",
+        "splat",
+        "--colour-map",
+        "magma",
+        "--log-scale",
+        "--width",
+        "24",
+        "--height",
+        "18",
+    ]);
+}

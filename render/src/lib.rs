@@ -162,6 +162,9 @@ pub struct RenderOptions {
     /// Splat mode: tone-mapping exposure (light added per unit of flux); `None` picks one
     /// from the image.
     pub exposure: Option<f32>,
+    /// Splat mode with a colour map ([`PointStyle::colour_map`]): the image's light at
+    /// the map's ends ([`SplatFrame::colour_mapped`]); `None` takes it from the image.
+    pub light_range: Option<[f32; 2]>,
     /// Sphere and S-NDF modes: the points' look (species colours, radii, hiding, colour
     /// by the attribute); see [`style`].
     pub style: PointStyle,
@@ -220,6 +223,7 @@ impl Default for RenderOptions {
             style: PointStyle::default(),
             fit_all: false,
             transparent: false,
+            light_range: None,
         }
     }
 }
@@ -281,6 +285,8 @@ pub struct RenderReport {
     /// ([`SplatFrame::total_light`]: the attribute's light with attribute intensities).
     pub exposure: Option<f32>,
     pub total_flux: Option<f64>,
+    /// Splat mode with a colour map: the image's light at the map's ends.
+    pub light_range: Option<[f32; 2]>,
     /// Density mode: slice stacks run before every ray was done, of those the volume spans.
     pub density_stacks: Option<(u32, u32)>,
     /// Density: read-backs of the active rays (one per batch of stacks; one when the
@@ -969,6 +975,7 @@ impl RenderReport {
             gpu_target_bytes: frame.gpu_target_bytes,
             exposure: None,
             total_flux: None,
+            light_range: None,
             density_stacks: None,
             density_readbacks: None,
             density_host_time: None,
@@ -1050,7 +1057,9 @@ pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
             PackStyle::FluxAttribute,
             PointStyle {
                 attribute_range: opts.style.attribute_range,
-                log_scale: opts.style.log_scale,
+                // With a colour map the log is the image's (a projection's), not each
+                // point's.
+                log_scale: opts.style.log_scale && opts.style.colour_map.is_none(),
                 ..Default::default()
             },
         ),
@@ -1118,7 +1127,7 @@ fn draw_cut(
                         SplatBlend::Over { opacity },
                     )?;
                     let image = splats.composite_over(opts.background);
-                    (splats, image, None)
+                    (splats, image, None::<Result<f32, [f32; 2]>>)
                 }
                 _ => {
                     let splats = renderer.render_splats_from(
@@ -1135,8 +1144,23 @@ fn draw_cut(
                             ),
                         },
                     )?;
-                    let (image, exposure) = splats.tone_map(opts.exposure, opts.background);
-                    (splats, image, Some(exposure))
+                    let (image, tone) = match opts.style.colour_map {
+                        // A projection: the image's light through the map.
+                        Some(map) => {
+                            let (image, range) = splats.colour_mapped(
+                                map,
+                                opts.style.log_scale,
+                                opts.light_range,
+                                opts.background,
+                            );
+                            (image, Err(range))
+                        }
+                        None => {
+                            let (image, exposure) = splats.tone_map(opts.exposure, opts.background);
+                            (image, Ok(exposure))
+                        }
+                    };
+                    (splats, image, Some(tone))
                 }
             };
             let frame = RenderedFrame {
@@ -1149,7 +1173,8 @@ fn draw_cut(
                 impostors: None,
             };
             let mut report = report(&frame);
-            report.exposure = exposure;
+            report.exposure = exposure.and_then(|t| t.ok());
+            report.light_range = exposure.and_then(|t| t.err());
             report.total_flux = exposure.map(|_| splats.total_light());
             Ok((frame.image, report))
         }

@@ -421,6 +421,62 @@ impl SplatFrame {
 }
 
 impl SplatFrame {
+    /// Colours the image's light ([`Self::light`]: the projected flux, or the projected
+    /// attribute) through `map`, as a map of column density is drawn: light `lo` and
+    /// below takes the map's first colour, `hi` and above its last, linearly between or
+    /// with `log` on a log axis. `range` gives `[lo, hi]`, else the image does: `hi` the
+    /// 99.5th percentile of the lit pixels' light, `lo` 0 (linear) or their 0.5th
+    /// percentile (log). Pixels without light keep the background. Returns the image and
+    /// the range used.
+    pub fn colour_mapped(
+        &self,
+        map: crate::style::ColourMap,
+        log: bool,
+        range: Option<[f32; 2]>,
+        background_srgb: [f32; 3],
+    ) -> (RgbaImage, [f32; 2]) {
+        let range = range.unwrap_or_else(|| {
+            let mut lit: Vec<f32> = self
+                .hdr
+                .iter()
+                .map(|p| self.light(p))
+                .filter(|v| *v > 0.0 && v.is_finite())
+                .collect();
+            if lit.is_empty() {
+                return [0.0, 1.0];
+            }
+            lit.sort_unstable_by(f32::total_cmp);
+            let at = |q: f64| lit[((lit.len() as f64 * q) as usize).min(lit.len() - 1)];
+            let hi = at(0.995);
+            let lo = if log { at(0.005).min(hi * 0.5) } else { 0.0 };
+            [lo, hi]
+        });
+        let [lo, hi] = range;
+        let (llo, lhi) = (
+            f64::from(lo.max(f32::MIN_POSITIVE)).ln(),
+            f64::from(hi).ln(),
+        );
+        let bg = background_srgb.map(|c| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+        let mut image = RgbaImage::new(self.width, self.height);
+        for (i, p) in self.hdr.iter().enumerate() {
+            let light = self.light(p);
+            let px = if !(light > 0.0) {
+                [bg[0], bg[1], bg[2], 255]
+            } else {
+                let t = if log {
+                    ((f64::from(light).ln() - llo) / (lhi - llo)) as f32
+                } else {
+                    (light - lo) / (hi - lo)
+                };
+                let c = map.colour(if t.is_finite() { t } else { 1.0 });
+                let e = c.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);
+                [e[0], e[1], e[2], 255]
+            };
+            image.data[4 * i..4 * i + 4].copy_from_slice(&px);
+        }
+        (image, range)
+    }
+
     /// An over-blended frame (premultiplied colour and coverage) over `background_srgb`.
     pub fn composite_over(&self, background_srgb: [f32; 3]) -> RgbaImage {
         composite_over(&self.hdr, self.width, self.height, background_srgb)
@@ -2805,6 +2861,53 @@ impl Renderer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A projection's colour map: decades evenly on a log axis between the range's ends,
+    /// clamped outside them, the background where no light fell; linear from 0 without.
+    #[test]
+    fn a_projection_maps_its_light_through_the_colour_map() {
+        use crate::style::ColourMap;
+        let lights = [0.0f32, 1.0, 10.0, 100.0, 1000.0, 5000.0];
+        let frame = SplatFrame {
+            width: lights.len() as u32,
+            height: 1,
+            hdr: lights.iter().map(|&l| [l, l, l, l]).collect(),
+            by_attribute: true,
+            gpu_time: None,
+            points: 0,
+            gpu_data_bytes: 0,
+        };
+        let map = ColourMap::Magma;
+        let encode = |t: f32| {
+            map.colour(t)
+                .map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8)
+        };
+        let (image, range) = frame.colour_mapped(map, true, Some([1.0, 1000.0]), [0.2, 0.4, 0.6]);
+        assert_eq!(range, [1.0, 1000.0]);
+        let px = |i: usize| {
+            [
+                image.data[4 * i],
+                image.data[4 * i + 1],
+                image.data[4 * i + 2],
+            ]
+        };
+        assert_eq!(px(0), [51, 102, 153], "no light: the background");
+        for (i, t) in [(1, 0.0), (2, 1.0 / 3.0), (3, 2.0 / 3.0), (4, 1.0), (5, 1.0)] {
+            let want = encode(t);
+            let got = px(i);
+            assert!(
+                (0..3).all(|k| got[k].abs_diff(want[k]) <= 1),
+                "light {}: {got:?} against {want:?}",
+                lights[i]
+            );
+        }
+        // Linear, from the image: 0 to the lit pixels' 99.5th percentile (the brightest
+        // of these five).
+        let (image, range) = frame.colour_mapped(map, false, None, [0.0; 3]);
+        assert_eq!(range, [0.0, 5000.0]);
+        let got = [image.data[8], image.data[9], image.data[10]];
+        assert_eq!(got, encode(10.0 / 5000.0));
+    }
 
     #[test]
     fn jitter_offsets_are_sub_pixel_and_centred() {

@@ -365,7 +365,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("sort", &[SplatOver]),
         ("intensity", &[Splat]),
         ("exposure", &[Splat]),
-        ("colour_map", STYLED),
+        ("colour_map", &[Spheres, Sndf, Splat]),
         ("radius_scale", STYLED),
         ("species_colour", STYLED),
         ("species_radius", STYLED),
@@ -393,14 +393,21 @@ fn transparent(background: Option<&str>) -> bool {
 /// Whether the picture maps the scalar attribute: a colour map, or splats of attribute
 /// light.
 fn by_attribute(args: &Args) -> bool {
-    args.style.colour_map.is_some()
-        || (args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute))
+    match args.mode {
+        Mode::Splat => matches!(args.intensity, Intensity::Attribute),
+        _ => args.style.colour_map.is_some(),
+    }
+}
+
+/// Whether the splats' image goes through a colour map (a projection's map).
+fn projected(args: &Args) -> bool {
+    args.mode == Mode::Splat && args.style.colour_map.is_some()
 }
 
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
     for (given, name) in [
         (args.style.attribute_range.is_some(), "--attribute-range"),
-        (args.style.log_scale, "--log-scale"),
+        (args.style.log_scale && !projected(args), "--log-scale"),
     ] {
         if given && !by_attribute(args) {
             anyhow::bail!(
@@ -588,7 +595,12 @@ pub fn run(args: Args) -> Result<()> {
         }
         return render_frames(&args, opts);
     }
-    let centred = derive_range(&mut opts.style, &args.file, by_attribute(&args))?;
+    // (A projection's log is the image's, not the points'.)
+    let centred = derive_range(
+        &mut opts.style,
+        &args.file,
+        by_attribute(&args) && !projected(&args),
+    )?;
     if let Some(n) = args.turntable {
         return render_turntable(&args, opts, n, centred);
     }
@@ -638,7 +650,7 @@ pub fn run(args: Args) -> Result<()> {
                 (Some(range), None) => (range, "--attribute-range".to_string()),
                 (None, _) => ([a.min, a.max], "the file's range".to_string()),
             };
-            let shown = match args.style.colour_map {
+            let shown = match args.style.colour_map.filter(|_| args.mode != Mode::Splat) {
                 Some(m) => {
                     use clap::ValueEnum;
                     let name = m.to_possible_value().map(|v| v.get_name().to_string());
@@ -693,6 +705,25 @@ pub fn run(args: Args) -> Result<()> {
     let gpu = r.gpu_time.map_or(String::new(), |t| {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)
     });
+    if let (Some([lo, hi]), Some(m)) = (r.light_range, opts.style.colour_map) {
+        let light = match args.intensity {
+            Intensity::Attribute => "the projected attribute",
+            Intensity::Species => "the projected flux",
+        };
+        let (scale, from) = if opts.style.log_scale {
+            (
+                " on a log scale",
+                "its lit pixels' 0.5th to 99.5th percentile",
+            )
+        } else {
+            ("", "0 to its lit pixels' 99.5th percentile")
+        };
+        println!(
+            "  colour map {}: the image's light ({light}) from {lo:.4e} to {hi:.4e}{scale} \
+             ({from}; unlit pixels show the background)",
+            m.name(),
+        );
+    }
     if let (Some(e), Some(f)) = (r.exposure, r.total_flux) {
         println!(
             "  splats: total flux {f:.4e} (the light summed over the image's pixels, each \
@@ -1000,6 +1031,7 @@ fn render_turntable(
         if i == 0 {
             // Splats: one exposure for every view, or the brightness flickers.
             opts.exposure = opts.exposure.or(r.exposure);
+            opts.light_range = opts.light_range.or(r.light_range);
             first_camera = Some(r.camera.clone());
         }
         limited += usize::from(r.budget_limited || r.pool_limited);
@@ -1205,6 +1237,10 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         if i == 0 && opts.exposure.is_none() {
             // Splats: one exposure for every frame, or the brightness drifts.
             opts.exposure = r.exposure;
+        }
+        if i == 0 && opts.light_range.is_none() {
+            // A projection's colour map: one range for every frame.
+            opts.light_range = r.light_range;
         }
         limited_frames += usize::from(r.budget_limited || r.pool_limited);
         println!(
