@@ -460,7 +460,7 @@ impl SplatFrame {
         let mut image = RgbaImage::new(self.width, self.height);
         for (i, p) in self.hdr.iter().enumerate() {
             let light = self.light(p);
-            let px = if !(light > 0.0) {
+            let px = if light.is_nan() || light <= 0.0 {
                 [bg[0], bg[1], bg[2], 255]
             } else {
                 let t = if log {
