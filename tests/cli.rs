@@ -3678,7 +3678,10 @@ fn a_turntable_renders_a_full_turn_of_views() {
         read_png(&dir.path().join("spin/v-03.png"))
     );
     let e = fails(&["render", s(&file), "-o", s(&single), "--turntable", "4"]);
-    assert!(e.contains("%d"), "{e}");
+    assert!(
+        e.contains("--turntable renders one image per view") && e.contains("%d"),
+        "{e}"
+    );
     let d = dir.path().join("a.d");
     ok(&["batch", s(&dump), "-o", s(&d)]);
     let e = fails(&["render", s(&d), "-o", s(&pattern), "--turntable", "4"]);

@@ -327,6 +327,16 @@ fn arrays_of_different_lengths_and_radii_per_name_are_checked() {
             pos_path.display()
         )
     );
+    // A missing array: the sidecar's line of the key that names it.
+    let path = c.sidecar(&sidecar("typo.u8", ""));
+    let e = read(&path).unwrap_err();
+    assert!(
+        e.starts_with(&format!(
+            "{}:2: species: `file` \"typo.u8\": cannot open",
+            path.display()
+        )),
+        "{e}"
+    );
     // With `particles` given, arrays holding more are read for their first values.
     let path = c.sidecar(&sidecar("long.u8", r#", "particles": 10"#));
     assert_eq!(read(&path).unwrap().len(), 10);
@@ -344,7 +354,7 @@ fn arrays_of_different_lengths_and_radii_per_name_are_checked() {
         assert_eq!(
             read(&path).unwrap_err(),
             format!(
-                "{}:1: {message} (one radius per species, in their order)",
+                "{}:2: {message} (one radius per species, in their order)",
                 path.display()
             )
         );

@@ -1004,7 +1004,13 @@ fn render_turntable(
     n: u32,
     centred: Option<String>,
 ) -> Result<()> {
-    frame_output(&args.output, 0)?;
+    frame_output(&args.output, 0).map_err(|_| {
+        anyhow::anyhow!(
+            "-o {}: --turntable renders one image per view: give a name with one %d or %03d \
+             for the view's number, e.g. spin/view-%03d.png",
+            args.output.display()
+        )
+    })?;
     let start = match (&args.camera.view, args.camera.azimuth) {
         (Some(p), None) => ViewFile::load(p)?.azimuth_deg,
         (_, a) => a.unwrap_or(30.0),

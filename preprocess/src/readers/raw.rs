@@ -259,13 +259,23 @@ fn err(path: &Path, offset: u64, message: impl Into<String>) -> ReadError {
     }
 }
 
-fn malformed(path: &Path, message: impl Into<String>) -> ReadError {
+/// A sidecar error at the line of the key the message starts with (`attribute: ...` at
+/// the line of `"attribute"`), else at its first line.
+fn malformed_in(path: &Path, text: &[u8], message: impl Into<String>) -> ReadError {
+    let message = message.into();
+    let key = message.split(':').next().unwrap_or_default().trim();
+    let line = (!key.is_empty() && !key.contains(' '))
+        .then(|| memchr::memmem::find(text, format!("\"{key}\"").as_bytes()))
+        .flatten()
+        .map_or(1, |at| {
+            1 + text[..at].iter().filter(|&&b| b == b'\n').count() as u64
+        });
     ReadError::Malformed {
         at: super::Location {
             path: path.to_path_buf(),
-            line: 1,
+            line,
         },
-        message: message.into(),
+        message,
     }
 }
 
@@ -279,8 +289,9 @@ impl Index {
             message: format!("raw sidecar: {e}"),
         })?;
         if sidecar.mdlod_raw != 1 {
-            return Err(malformed(
+            return Err(malformed_in(
                 path,
+                text,
                 format!(
                     "raw sidecar version {} (this reader knows 1)",
                     sidecar.mdlod_raw
@@ -297,15 +308,17 @@ impl Index {
                 "u32" => Ty::U32,
                 "i32" => Ty::I32,
                 t => {
-                    return Err(malformed(
+                    return Err(malformed_in(
                         path,
+                        text,
                         format!("{what}: type `{t}` (use one of {})", allowed.join(", ")),
                     ))
                 }
             };
             if !allowed.contains(&a.ty.as_str()) {
-                return Err(malformed(
+                return Err(malformed_in(
                     path,
+                    text,
                     format!(
                         "{what}: type `{}` (use one of {})",
                         a.ty,
@@ -317,16 +330,25 @@ impl Index {
                 None | Some("little") => false,
                 Some("big") => true,
                 Some(o) => {
-                    return Err(malformed(
+                    return Err(malformed_in(
                         path,
+                        text,
                         format!("{what}: byte_order `{o}` (use little or big)"),
                     ))
                 }
             };
             let file_path = dir.join(&a.file);
-            let file = std::fs::File::open(&file_path).map_err(|e| ReadError::Io {
-                path: file_path.clone(),
-                source: e,
+            let file = std::fs::File::open(&file_path).map_err(|e| {
+                // The sidecar and its key name the file: say which asked for it.
+                malformed_in(
+                    path,
+                    text,
+                    format!(
+                        "{what}: `file` {:?}: cannot open {}: {e}",
+                        a.file,
+                        file_path.display()
+                    ),
+                )
             })?;
             let map = mdlod_format::mmap::map_file(&file).map_err(|e| ReadError::Io {
                 path: file_path.clone(),
@@ -359,15 +381,18 @@ impl Index {
             None | Some("interleaved") => false,
             Some("planar") => true,
             Some(l) => {
-                return Err(malformed(
+                return Err(malformed_in(
                     path,
+                    text,
                     format!("positions: layout `{l}` (use interleaved or planar)"),
                 ))
             }
         };
         let available = positions.bytes().len() / (3 * positions.ty.size());
         let particles = match sidecar.particles {
-            Some(n) => usize::try_from(n).map_err(|_| malformed(path, "particles: too many"))?,
+            Some(n) => {
+                usize::try_from(n).map_err(|_| malformed_in(path, text, "particles: too many"))?
+            }
             None => {
                 let len = positions.bytes().len();
                 if len % (3 * positions.ty.size()) != 0 {
@@ -425,7 +450,7 @@ impl Index {
             let bytes = particles
                 .checked_mul(per)
                 .and_then(|v| v.checked_mul(m.ty.size()))
-                .ok_or_else(|| malformed(path, format!("{what}: size overflows")))?;
+                .ok_or_else(|| malformed_in(path, text, format!("{what}: size overflows")))?;
             if bytes > m.bytes().len() {
                 let cause =
                     wrong_type(m, per).map_or(" (truncated?)".to_string(), |c| format!("; {c}"));
@@ -473,7 +498,7 @@ impl Index {
                 need(&m, 1, "species")?;
                 let names = a.names.clone().unwrap_or_default();
                 if names.len() > 1 << 16 {
-                    return Err(malformed(path, "species: more than 65536 names"));
+                    return Err(malformed_in(path, text, "species: more than 65536 names"));
                 }
                 Some((m, names))
             }
@@ -488,8 +513,9 @@ impl Index {
         };
         if let Some(r) = &sidecar.radii {
             if r.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-                return Err(malformed(
+                return Err(malformed_in(
                     path,
+                    text,
                     "radii: every radius must be a positive number",
                 ));
             }
@@ -500,8 +526,9 @@ impl Index {
                 Some((_, names)) => (!names.is_empty()).then_some(names.len()),
             };
             if let Some(names) = names.filter(|&n| n != r.len()) {
-                return Err(malformed(
+                return Err(malformed_in(
                     path,
+                    text,
                     format!(
                         "radii: {} given for {names} species{} (one radius per species, in \
                          their order)",
@@ -523,7 +550,7 @@ impl Index {
                     .flatten()
                     .any(|v| !v.is_finite())
                 {
-                    return Err(malformed(path, "box: not finite"));
+                    return Err(malformed_in(path, text, "box: not finite"));
                 }
                 Some(SimulationBox {
                     origin: b.origin,
