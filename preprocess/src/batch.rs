@@ -588,7 +588,8 @@ fn same_build(
     );
     if !(params
         && m.build.chunk_points == chunked
-        && m.attribute.as_ref().map(|a| a.name.as_str()) == attribute)
+        && m.attribute.as_ref().map(|a| a.name.clone())
+            == attribute.map(|a| crate::convert::attribute_name(a, options)))
     {
         return false;
     }

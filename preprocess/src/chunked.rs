@@ -1262,18 +1262,30 @@ pub fn convert_chunked(
                     },
                 });
             }
-            if let Some(a) = &f.attribute {
-                if let Some(index) = first_bad(&|i| !a.values[i].is_finite()) {
+            // The attribute as stored: its logarithm with `attribute_log10`.
+            let logged = match (&f.attribute, options.attribute_log10) {
+                (Some(a), true) => Some(crate::convert::log10_attribute(
+                    &a.values,
+                    start,
+                    &a.name,
+                    metadata.source.as_ref(),
+                )?),
+                _ => None,
+            };
+            let values = logged
+                .as_deref()
+                .or(f.attribute.as_ref().map(|a| a.values.as_slice()));
+            if let Some(values) = values {
+                if let Some(index) = first_bad(&|i| !values[i].is_finite()) {
                     return Err(ConvertError::Build {
                         path: output.display().to_string(),
                         source: BuildError::NonFiniteAttribute {
                             index: start + index,
-                            value: a.values[index],
+                            value: values[index],
                         },
                     });
                 }
-                let (lo, hi) = a
-                    .values
+                let (lo, hi) = values
                     .par_iter()
                     .fold(
                         || (f32::INFINITY, f32::NEG_INFINITY),
@@ -1297,12 +1309,13 @@ pub fn convert_chunked(
                     }
                     let s = map[usize::from(f.species_index[i])];
                     r[12..14].copy_from_slice(&s.to_le_bytes());
-                    if let Some(a) = &f.attribute {
-                        r[14..18].copy_from_slice(&a.values[i].to_le_bytes());
+                    if let Some(values) = values {
+                        r[14..18].copy_from_slice(&values[i].to_le_bytes());
                     }
                 });
             if let Some(a) = &f.attribute {
-                attribute_name.get_or_insert_with(|| a.name.clone());
+                attribute_name
+                    .get_or_insert_with(|| crate::convert::attribute_name(&a.name, options));
             }
             if !w.send(bytes) {
                 // The writer stopped on an error, which `finish` returns.
@@ -1535,6 +1548,11 @@ pub fn convert_chunked(
         file_size,
         notes: {
             let mut notes = crate::species::radius_notes(&names, &options.radii);
+            if let Some(a) = &metadata.attribute {
+                notes.extend(crate::convert::attribute_span_note(
+                    &a.name, a.min, a.max, options,
+                ));
+            }
             // The particles' bounds are the cells'; how many lie outside the box is not
             // counted (the corners of the bounds stand for them).
             let mut lo = [f32::INFINITY; 3];

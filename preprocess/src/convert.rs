@@ -29,6 +29,10 @@ pub struct ConvertOptions {
     /// species given one name become one. A name the input lacks is an error unless
     /// `radii_may_be_absent`.
     pub species_names: Vec<(String, String)>,
+    /// Store the attribute's base-10 logarithm (named `log10(NAME)`), so that 16 bits
+    /// keep every decade of a quantity spanning many (SPH densities): values must be
+    /// above 0 ([`log10_attribute`]).
+    pub attribute_log10: bool,
 }
 
 /// What a conversion built.
@@ -56,6 +60,17 @@ pub struct ConvertReport {
 pub enum ConvertError {
     #[error(transparent)]
     Read(#[from] crate::readers::ReadError),
+    /// `--attribute-log10` and an attribute value that has no logarithm.
+    #[error(
+        "{place}: attribute {name}: particle {index} has the value {value}: its logarithm \
+         (--attribute-log10) needs values above 0"
+    )]
+    AttributeNotPositive {
+        place: FramePlace,
+        name: String,
+        index: usize,
+        value: f32,
+    },
     /// The last frame, converted by default, is cut short (a run still writing it).
     #[error(
         "{source}; the last frame ({frame}) is incomplete (a run still writing?): --frame {} \
@@ -270,11 +285,17 @@ pub fn convert_frame(
             .map(|&i| map.get(usize::from(i)).copied().unwrap_or(i))
             .collect()
     });
+    let logged = match (&frame.attribute, options.attribute_log10) {
+        (Some(a), true) => Some(log10_attribute(&a.values, 0, &a.name, source.as_ref())?),
+        _ => None,
+    };
     let particles = Particles {
         positions: &frame.positions,
         species_index: merged_index.as_deref().unwrap_or(&frame.species_index),
         species: &species,
-        attribute: frame.attribute.as_ref().map(|a| a.values.as_slice()),
+        attribute: logged
+            .as_deref()
+            .or(frame.attribute.as_ref().map(|a| a.values.as_slice())),
     };
     let t0 = Instant::now();
     let source_name = source
@@ -287,6 +308,9 @@ pub fn convert_frame(
         })?;
     let build_time = t0.elapsed();
     let mut notes = crate::species::radius_notes(&names, &options.radii);
+    if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
+        notes.extend(attribute_span_note(&a.name, *min, *max, options));
+    }
     let (lo, hi, far) = survey_positions(&frame.positions, frame.simulation_box.as_ref());
     notes.extend(position_notes(lo, hi, &species, far));
     let mut metadata = base_metadata(frame, source, options);
@@ -437,6 +461,59 @@ pub fn check_radii(
     })))
 }
 
+/// The name a file gives the attribute the input calls `name`: `log10(name)` when its
+/// logarithm is stored ([`ConvertOptions::attribute_log10`]).
+pub fn attribute_name(name: &str, options: &ConvertOptions) -> String {
+    if options.attribute_log10 {
+        format!("log10({name})")
+    } else {
+        name.to_string()
+    }
+}
+
+/// A note for an attribute whose 16-bit linear steps erase its lowest decades: values
+/// above 0 spanning more than four decades, stored as they are.
+pub fn attribute_span_note(
+    name: &str,
+    min: f32,
+    max: f32,
+    options: &ConvertOptions,
+) -> Option<String> {
+    let decades = (f64::from(max) / f64::from(min)).log10();
+    (!options.attribute_log10 && min > 0.0 && decades > 4.0).then(|| {
+        format!(
+            "attribute {name} spans {decades:.1} decades ({min:e} to {max:e}), kept in 16-bit \
+             steps of {:.2e}: the values below about {:.0e} lose their digits; \
+             --attribute-log10 keeps its logarithm, every decade alike",
+            (f64::from(max) - f64::from(min)) / 65535.0,
+            (f64::from(max) - f64::from(min)) / 65535.0 * 100.0
+        )
+    })
+}
+
+/// The base-10 logarithms of attribute values (of particles from `first` on); a value
+/// not above 0 (or not finite) is an error naming the particle.
+pub fn log10_attribute(
+    values: &[f32],
+    first: usize,
+    name: &str,
+    source: Option<&SourceInfo>,
+) -> Result<Vec<f32>, ConvertError> {
+    use rayon::prelude::*;
+    let bad = crate::readers::first_index(values.len(), |i: usize| {
+        !(values[i] > 0.0 && values[i].is_finite())
+    });
+    if let Some(i) = bad {
+        return Err(ConvertError::AttributeNotPositive {
+            place: FramePlace::of(source, None),
+            name: name.to_string(),
+            index: first + i,
+            value: values[i],
+        });
+    }
+    Ok(values.par_iter().map(|v| v.log10()).collect())
+}
+
 /// The metadata of `frame` before its hierarchy is built (species, attribute range and
 /// error bound are filled in by the build).
 pub fn base_metadata(
@@ -452,7 +529,7 @@ pub fn base_metadata(
         units: frame.units.clone(),
         species: species_table(&frame.species, &options.radii),
         attribute: frame.attribute.as_ref().map(|a| AttributeInfo {
-            name: a.name.clone(),
+            name: attribute_name(&a.name, options),
             min: 0.0,
             max: 0.0,
         }),

@@ -1429,3 +1429,27 @@ fn a_dump_cut_anywhere_in_its_last_frame_converts_the_frames_before() {
         }
     }
 }
+
+/// A rerun with `attribute_log10` as before keeps the frames (the atom ids, all above 0,
+/// stand for a positive quantity); turning it on or off
+/// converts them again (the file holds `log10(NAME)` or `NAME`).
+#[test]
+fn a_rerun_keeps_or_redoes_frames_by_the_attributes_logarithm() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    let with = |log: bool| {
+        let mut o = opts();
+        o.read.attribute = Some("id".into());
+        o.convert.attribute_log10 = log;
+        o
+    };
+    let r = batch(std::slice::from_ref(&src), &out, &with(true), &NoProgress).unwrap();
+    assert_eq!(r.converted, 6);
+    let f = MdlodFile::open(out.join("frame-0.mdlod")).unwrap();
+    assert_eq!(f.metadata().attribute.as_ref().unwrap().name, "log10(id)");
+    let r = batch(std::slice::from_ref(&src), &out, &with(true), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 6));
+    let r = batch(std::slice::from_ref(&src), &out, &with(false), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.redone.settings), (6, 6));
+}

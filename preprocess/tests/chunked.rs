@@ -31,6 +31,7 @@ fn options(chunk_points: usize) -> ConvertOptions {
         // Some inputs here have no type 1.
         radii_may_be_absent: true,
         species_names: Vec::new(),
+        attribute_log10: false,
     }
 }
 
@@ -786,5 +787,125 @@ fn gzip_pieces_are_opened_within_the_memory_limit_piece_by_piece() {
         std::fs::read_dir(&work).unwrap().count(),
         0,
         "working files left"
+    );
+}
+
+/// `attribute_log10`: the attribute's logarithm is stored, named `log10(NAME)`, every
+/// decade in 16 bits alike, streamed out of core as in memory; a value not above 0 is an
+/// error naming the particle; without it, a note says the lowest decades lose digits.
+#[test]
+fn an_attribute_spanning_decades_keeps_its_logarithm() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1000;
+    let mut text = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n\
+         0 10\nITEM: ATOMS id type x y z rho\n"
+    );
+    // Densities from 1e-6 to 1e3, nine decades.
+    let rho = |i: usize| 10f64.powf(-6.0 + 9.0 * i as f64 / (n - 1) as f64);
+    for i in 0..n {
+        let (x, y, z) = (i % 10, (i / 10) % 10, i / 100);
+        text.push_str(&format!("{} 1 {x}.25 {y}.5 {z}.75 {:e}\n", i + 1, rho(i)));
+    }
+    let path = dir.path().join("sph.lammpstrj");
+    std::fs::write(&path, &text).unwrap();
+    let read = ReadOptions {
+        attribute: Some("rho".into()),
+        ..Default::default()
+    };
+    let mut opts = options(300);
+    opts.attribute_log10 = true;
+    let (streamed, whole) = (dir.path().join("s.mdlod"), dir.path().join("w.mdlod"));
+    let r = convert_file(
+        &path,
+        &streamed,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        !r.notes.iter().any(|n| n.contains("decades")),
+        "{:?}",
+        r.notes
+    );
+    let dump = DumpFile::open(&path).unwrap();
+    let frame = dump.read_frame(0, &read, &NoProgress).unwrap();
+    convert_frame(
+        &frame,
+        Some(source_info(&path, 0)),
+        &whole,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!(
+        std::fs::read(&streamed).unwrap(),
+        std::fs::read(&whole).unwrap()
+    );
+    let f = MdlodFile::open(&streamed).unwrap();
+    let info = f.metadata().attribute.clone().unwrap();
+    assert_eq!(info.name, "log10(rho)");
+    assert!(
+        (info.min + 6.0).abs() < 1e-5 && (info.max - 3.0).abs() < 1e-5,
+        "{info:?}"
+    );
+    // Every particle's value within a 16-bit step of its logarithm: 1e-6 and 1e-5 told
+    // apart as well as 100 and 1000.
+    let step = 9.0 / 65535.0;
+    let mut seen: Vec<f64> = f
+        .attribute()
+        .unwrap()
+        .iter()
+        .map(|&q| f64::from(info.decode(q)))
+        .collect();
+    seen.sort_by(f64::total_cmp);
+    for (i, v) in seen.iter().enumerate() {
+        assert!((v - rho(i).log10()).abs() <= step, "particle {i}: {v}");
+    }
+
+    // Stored as they are: a note, in memory and streamed.
+    opts.attribute_log10 = false;
+    let r = convert_file(
+        &path,
+        &streamed,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n.contains("attribute rho spans 9.0 decades")
+                && n.contains("--attribute-log10")),
+        "{:?}",
+        r.notes
+    );
+    let r = convert_frame(&frame, None, &whole, &opts, &NoProgress).unwrap();
+    assert!(
+        r.notes.iter().any(|n| n.contains("spans 9.0 decades")),
+        "{:?}",
+        r.notes
+    );
+
+    // A density of 0 has no logarithm.
+    std::fs::write(&path, text.replacen(" 1e-6\n", " 0\n", 1)).unwrap();
+    opts.attribute_log10 = true;
+    let e = convert_file(
+        &path,
+        &streamed,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("attribute rho: particle 0 has the value 0") && e.contains("above 0"),
+        "{e}"
     );
 }

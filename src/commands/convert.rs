@@ -61,6 +61,12 @@ pub struct BuildArgs {
     /// Dump column to keep as the per-particle scalar attribute.
     #[arg(long)]
     pub attribute: Option<String>,
+    /// Keep the attribute's base-10 logarithm instead (named log10(NAME); every value
+    /// must be above 0): the file keeps 16 bits per value, evenly over its range, so a
+    /// quantity spanning many decades (an SPH density) keeps only its top four or five
+    /// otherwise.
+    #[arg(long, requires = "attribute")]
+    pub attribute_log10: bool,
     /// Column names, space separated, for dumps that do not name them (old-revision
     /// LAMMPS binary dumps other than `dump atom`), e.g. "id type x y z c_pe".
     #[arg(long, value_name = "NAMES")]
@@ -128,6 +134,7 @@ impl BuildArgs {
             },
             radii_may_be_absent: false,
             species_names: self.species_names.clone(),
+            attribute_log10: self.attribute_log10,
         };
         let read = ReadOptions {
             attribute: self.attribute.clone(),

@@ -44,6 +44,7 @@ pub fn run(args: Args) -> Result<()> {
             radii: vec![("1".into(), 1.28)],
             species_names: Vec::new(),
             attribute: Some(Kind::Crater.extra_column().to_string()),
+            attribute_log10: false,
             columns: None,
             precision: super::convert::Precision::U16,
             cluster_size: 8,
