@@ -1518,8 +1518,8 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
             "--iterations has no effect with --mode spheres: it applies to --mode sndf",
         ),
         (
-            vec!["--mode", "splat-over", "--hide-species", "1"],
-            "--hide-species has no effect with --mode splat-over",
+            vec!["--mode", "density", "--colour-map", "magma"],
+            "--colour-map has no effect with --mode density",
         ),
     ] {
         let mut args = vec!["render", f, "-o", p];
