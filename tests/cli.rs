@@ -3750,6 +3750,13 @@ fn hidden_species_leave_the_splats_and_the_volume() {
         };
         let (out, hidden) = render(&all, "hidden", &["--hide-species", "1"]);
         assert!(out.contains("hidden species, left out"), "{mode}: {out}");
+        // The volume's legend: the spheres' packing, not an attribute.
+        let legend = match mode {
+            "iso" => "iso-surface where the particles' spheres fill a volume fraction of 0.3",
+            "density" => "colours: the volume fraction the particles' spheres fill",
+            _ => "splats: total flux",
+        };
+        assert!(out.contains(legend), "{mode}: {out}");
         let (_, alone) = render(&ag, "alone", &[]);
         let (_, everything) = render(&all, "all", &[]);
         let diff = |a: &[u8], b: &[u8]| {

@@ -744,6 +744,21 @@ pub fn run(args: Args) -> Result<()> {
             "  density: {run} of {all} slice stacks run, {saved} ({} read-backs)",
             r.density_readbacks.unwrap_or(0)
         );
+        // What the colours mean: the particles' own packing, not an attribute.
+        match args.mode {
+            Mode::Iso => println!(
+                "  iso-surface where the particles' spheres fill a volume fraction of {} \
+                 (0.74: close-packed spheres of the largest species), coloured by the \
+                 particles around it",
+                args.iso_value
+            ),
+            _ => println!(
+                "  colours: the volume fraction the particles' spheres fill (not an attribute), \
+                 from 0 (clear) through dark blue and red to yellow at {} (--density-max; \
+                 0.74: close-packed spheres of the largest species), absorption {} per radius",
+                args.density_max, args.absorption
+            ),
+        }
     }
     let stream = match r.first_frame_time {
         Some(t) => format!(
