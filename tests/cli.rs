@@ -3834,3 +3834,33 @@ fn splats_colour_their_projection_through_a_map() {
         "18",
     ]);
 }
+
+/// A text input's per-particle sizes (a granular run's `radius`, an extended XYZ radius
+/// property) are not read as radii: the conversion says so and how to use them.
+#[test]
+fn a_radius_column_is_noted_not_silently_dropped() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("r.xyz");
+    std::fs::write(
+        &xyz,
+        "2\nProperties=species:S:1:pos:R:3:radius:R:1\nCu 0 0 0 1.2\nCu 2.5 0 0 1.4\n",
+    )
+    .unwrap();
+    let out = ok(&["convert", s(&xyz), "-o", s(&dir.path().join("r.mdlod"))]);
+    assert!(
+        out.contains("column `radius` holds per-particle sizes, which are not read as radii")
+            && out.contains("--attribute radius"),
+        "{out}"
+    );
+    let out = ok(&[
+        "convert",
+        s(&xyz),
+        "-o",
+        s(&dir.path().join("r2.mdlod")),
+        "--attribute",
+        "radius",
+    ]);
+    assert!(!out.contains("per-particle sizes"), "{out}");
+    let out = ok(&["batch", s(&xyz), "-o", s(&dir.path().join("r.d"))]);
+    assert!(out.contains("per-particle sizes"), "{out}");
+}

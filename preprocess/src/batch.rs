@@ -1280,6 +1280,11 @@ pub fn batch(
                     (_, e) => e,
                 };
                 (|| -> Result<FrameEntry, BatchError> {
+                    keep_notes(
+                        crate::convert::dump_radius_note(dump, job.input, job.frame, &opts.read)
+                            .into_iter()
+                            .collect(),
+                    );
                     let streamed = if job.particles as usize > convert.chunks.chunk_points {
                         let info = dump.frame_info(job.frame)?;
                         crate::convert::window_source(dump, job.frame, &opts.read, &info)

@@ -791,8 +791,11 @@ pub fn convert_dump(
             }
         },
     };
+    // Per-particle radii the frame's columns hold (read only as an attribute).
+    let radius_note = dump_radius_note(&dump, named, k, read);
     let which = |mut r: ConvertReport| {
         r.frame = Some((k, count));
+        r.notes.extend(radius_note.clone());
         r
     };
     // The last frame asked for by default and cut short: say which frame converts.
@@ -868,6 +871,42 @@ pub fn convert_dump(
     .map_err(explain)?;
     report.read_time = read_time;
     Ok(which(report))
+}
+
+/// A note for a text input whose columns hold per-particle radii or diameters (a
+/// granular run's `radius`, an extended XYZ `radius` property), which the conversion
+/// does not read as sizes: every particle of a species is drawn at its one radius.
+pub fn radius_column_note(
+    input: &Path,
+    columns: &[String],
+    read: &crate::readers::ReadOptions,
+) -> Option<String> {
+    let column = columns.iter().find(|c| {
+        let c = c.to_ascii_lowercase();
+        (c == "radius" || c == "diameter") && read.attribute.as_deref() != Some(c.as_str())
+    })?;
+    Some(format!(
+        "{}: column `{column}` holds per-particle sizes, which are not read as radii: every \
+         particle of a species is drawn at the species' one radius (its default, or \
+         --radius NAME=R); --attribute {column} keeps the values to colour by",
+        input.display()
+    ))
+}
+
+/// [`radius_column_note`] for frame `k` of a dump whose reader takes no sizes from its
+/// columns (LAMMPS text and binary dumps, XYZ files; GSD and MMPLD readers read theirs).
+pub fn dump_radius_note(
+    dump: &crate::readers::DumpFile,
+    input: &Path,
+    k: usize,
+    read: &crate::readers::ReadOptions,
+) -> Option<String> {
+    use crate::readers::InputFormat::{LammpsBinary, LammpsText, Xyz};
+    if !matches!(dump.format(), LammpsText | LammpsBinary | Xyz) {
+        return None;
+    }
+    let info = dump.frame_info(k).ok()?;
+    radius_column_note(input, &info.columns, read)
 }
 
 /// Describes a source file for the metadata.
