@@ -1010,6 +1010,27 @@ fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
     Ok(pattern.with_file_name(file))
 }
 
+/// The line for one image of a movie or a turntable (`which` names it): what it drew.
+fn image_line(
+    out: &Path,
+    which: &str,
+    r: &mdlod_render::RenderReport,
+    args: &Args,
+    coarsest: Option<u64>,
+) -> String {
+    format!(
+        "wrote {} ({which}): {} particles{} and {} {}{}, error {:.2} px, {:.0} ms",
+        out.display(),
+        r.particles_drawn,
+        hidden_text(r),
+        r.nodes_drawn,
+        point_noun(args.mode),
+        limits_text(r, coarsest, args.budget),
+        r.error_px,
+        r.total_time.as_secs_f64() * 1e3
+    )
+}
+
 /// `--turntable N`: `n` views of one file, the azimuth turning by 360°/n from view to
 /// view around the fitted (or saved) target, the same distance throughout; for splats the
 /// first view's exposure holds for all.
@@ -1056,19 +1077,8 @@ fn render_turntable(
             first_camera = Some(r.camera.clone());
         }
         limited += usize::from(r.budget_limited || r.pool_limited);
-        println!(
-            "wrote {} (view {}/{n}, azimuth {:.1}°): {} particles{} and {} {}{}, error {:.2} px, {:.0} ms",
-            out.display(),
-            i + 1,
-            azimuth.rem_euclid(360.0),
-            r.particles_drawn,
-            hidden_text(&r),
-            r.nodes_drawn,
-            point_noun(args.mode),
-            limits_text(&r, coarsest, args.budget),
-            r.error_px,
-            r.total_time.as_secs_f64() * 1e3
-        );
+        let which = format!("view {}/{n}, azimuth {:.1}°", i + 1, azimuth.rem_euclid(360.0));
+        println!("{}", image_line(&out, &which, &r, args, coarsest));
     }
     let exposure = opts
         .exposure
@@ -1264,19 +1274,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             opts.light_range = r.light_range;
         }
         limited_frames += usize::from(r.budget_limited || r.pool_limited);
-        println!(
-            "wrote {} (frame {}/{n}, timestep {}): {} particles{} and {} {}{}, error {:.2} px, {:.0} ms",
-            out.display(),
-            i + 1,
-            f.timestep,
-            r.particles_drawn,
-            hidden_text(&r),
-            r.nodes_drawn,
-            point_noun(args.mode),
-            limits_text(&r, coarsest, args.budget),
-            r.error_px,
-            r.total_time.as_secs_f64() * 1e3
-        );
+        let which = format!("frame {}/{n}, timestep {}", i + 1, f.timestep);
+        println!("{}", image_line(&out, &which, &r, args, coarsest));
     }
     let exposure = opts
         .exposure
