@@ -1077,7 +1077,11 @@ fn render_turntable(
             first_camera = Some(r.camera.clone());
         }
         limited += usize::from(r.budget_limited || r.pool_limited);
-        let which = format!("view {}/{n}, azimuth {:.1}°", i + 1, azimuth.rem_euclid(360.0));
+        let which = format!(
+            "view {}/{n}, azimuth {:.1}°",
+            i + 1,
+            azimuth.rem_euclid(360.0)
+        );
         println!("{}", image_line(&out, &which, &r, args, coarsest));
     }
     let exposure = opts
