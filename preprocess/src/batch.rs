@@ -1283,6 +1283,7 @@ pub fn batch(
                     keep_notes(
                         crate::convert::dump_radius_note(dump, job.input, job.frame, &opts.read)
                             .into_iter()
+                            .chain(dump.frame_notes(job.frame))
                             .collect(),
                     );
                     let streamed = if job.particles as usize > convert.chunks.chunk_points {

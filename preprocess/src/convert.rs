@@ -791,11 +791,14 @@ pub fn convert_dump(
             }
         },
     };
-    // Per-particle radii the frame's columns hold (read only as an attribute).
-    let radius_note = dump_radius_note(&dump, named, k, read);
+    // What the input's columns or arrays hold that the conversion does not read.
+    let notes: Vec<String> = dump_radius_note(&dump, named, k, read)
+        .into_iter()
+        .chain(dump.frame_notes(k))
+        .collect();
     let which = |mut r: ConvertReport| {
         r.frame = Some((k, count));
-        r.notes.extend(radius_note.clone());
+        r.notes.extend(notes.iter().cloned());
         r
     };
     // The last frame asked for by default and cut short: say which frame converts.

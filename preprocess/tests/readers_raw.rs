@@ -340,6 +340,17 @@ fn arrays_of_different_lengths_and_radii_per_name_are_checked() {
     // With `particles` given, arrays holding more are read for their first values.
     let path = c.sidecar(&sidecar("long.u8", r#", "particles": 10"#));
     assert_eq!(read(&path).unwrap().len(), 10);
+    // ... and said (a mistyped count reads too few).
+    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
+    assert_eq!(
+        notes,
+        [format!(
+            "{}: species: the array holds 490 particles' values past the 10 that `particles` \
+             in {} names, which alone are read",
+            long.display(),
+            path.display()
+        )]
+    );
     let path = c.sidecar(&sidecar(
         "type.u8",
         r#", "attribute": { "file": "pe10.f32", "type": "f32" }, "radii": [0.5, 0.7]"#,

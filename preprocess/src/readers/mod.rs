@@ -583,6 +583,15 @@ impl DumpFile {
         Ok(())
     }
 
+    /// What a conversion of frame `k` should say about how it was read (a raw sidecar's
+    /// arrays holding values past its `particles`).
+    pub fn frame_notes(&self, _k: usize) -> Vec<String> {
+        match &self.index {
+            Index::Raw(r) => r.notes().to_vec(),
+            _ => Vec::new(),
+        }
+    }
+
     /// True for a text dump (LAMMPS text, XYZ) whose last line has no line end: a run
     /// still writing it may have stopped inside a number (`0.41` of `0.4156`), which
     /// reads as a whole value.

@@ -249,6 +249,8 @@ pub(crate) struct Index {
     timestep: Option<u64>,
     time: Option<f64>,
     units: Option<String>,
+    /// What a conversion should say about the arrays (values past `particles`).
+    notes: Vec<String>,
 }
 
 fn err(path: &Path, offset: u64, message: impl Into<String>) -> ReadError {
@@ -259,17 +261,21 @@ fn err(path: &Path, offset: u64, message: impl Into<String>) -> ReadError {
     }
 }
 
+/// The sidecar's line of its first `"key"` (a key without spaces).
+fn key_line(text: &[u8], key: &str) -> Option<u64> {
+    if key.is_empty() || key.contains(' ') {
+        return None;
+    }
+    let at = memchr::memmem::find(text, format!("\"{key}\"").as_bytes())?;
+    Some(memchr::memchr_iter(b'\n', &text[..at]).count() as u64 + 1)
+}
+
 /// A sidecar error at the line of the key the message starts with (`attribute: ...` at
 /// the line of `"attribute"`), else at its first line.
 fn malformed_in(path: &Path, text: &[u8], message: impl Into<String>) -> ReadError {
     let message = message.into();
     let key = message.split(':').next().unwrap_or_default().trim();
-    let line = (!key.is_empty() && !key.contains(' '))
-        .then(|| memchr::memmem::find(text, format!("\"{key}\"").as_bytes()))
-        .flatten()
-        .map_or(1, |at| {
-            1 + text[..at].iter().filter(|&&b| b == b'\n').count() as u64
-        });
+    let line = key_line(text, key).unwrap_or(1);
     ReadError::Malformed {
         at: super::Location {
             path: path.to_path_buf(),
@@ -561,10 +567,31 @@ impl Index {
                 })
             }
         };
-        let attribute_line = memchr::memmem::find(text, b"\"attribute\"").map_or(1, |at| {
-            memchr::memchr_iter(b'\n', &text[..at]).count() as u64 + 1
-        });
+        let attribute_line = key_line(text, "attribute").unwrap_or(1);
+        // With `particles` given, longer arrays are read for their first values (a file of
+        // several frames' values, one at a time): said, as a count mistyped reads too few.
+        let mut notes = Vec::new();
+        if sidecar.particles.is_some() {
+            let arrays = [(Some(&positions), 3, "positions")]
+                .into_iter()
+                .chain([(species.as_ref().map(|s| &s.0), 1, "species")])
+                .chain([(attribute.as_ref().map(|a| &a.0), 1, "attribute")]);
+            for (m, per, what) in arrays {
+                let Some(m) = m else { continue };
+                let read = particles.saturating_mul(per).saturating_mul(m.ty.size());
+                let more = m.bytes().len().saturating_sub(read) / m.ty.size() / per;
+                if more > 0 {
+                    notes.push(format!(
+                        "{}: {what}: the array holds {more} particles' values past the \
+                         {particles} that `particles` in {} names, which alone are read",
+                        m.path.display(),
+                        path.display()
+                    ));
+                }
+            }
+        }
         Ok(Index {
+            notes,
             sidecar: path.to_path_buf(),
             attribute_line,
             particles,
@@ -605,6 +632,11 @@ impl Index {
                 .map(|(i, &r)| (i.to_string(), r))
                 .collect(),
         }
+    }
+
+    /// What a conversion should say about the arrays.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     pub fn frame_info(&self) -> FrameInfo {
