@@ -3864,3 +3864,165 @@ fn a_radius_column_is_noted_not_silently_dropped() {
     let out = ok(&["batch", s(&xyz), "-o", s(&dir.path().join("r.d"))]);
     assert!(out.contains("per-particle sizes"), "{out}");
 }
+
+/// A movie whose first frame shows nothing (every particle of a hidden species, as a
+/// deposition starts): the splats' exposure comes from the first frame that shows
+/// anything, and the camera fits the frames that show the species, not the empty one's
+/// box.
+#[test]
+fn a_movie_starting_with_nothing_shown_takes_its_look_from_the_frames_that_show_some() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("dep.lammpstrj");
+    let mut text = String::new();
+    for (step, deposited) in [(0, false), (100, true)] {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n420\nITEM: BOX BOUNDS pp pp pp\n\
+             0 60\n0 60\n0 60\nITEM: ATOMS id type x y z\n"
+        ));
+        for i in 0..400 {
+            let (x, y) = ((i % 20) as f32 * 3.0, (i / 20) as f32 * 3.0);
+            text.push_str(&format!("{} 1 {x} {y} 1\n", i + 1));
+        }
+        // A small cluster of type 2 (type 1 before it lands).
+        for i in 0..20 {
+            let t = if deposited { 2 } else { 1 };
+            let (x, y, z) = (30.0 + (i % 4) as f32, 30.0 + (i / 4) as f32, 20.0);
+            text.push_str(&format!("{} {t} {x} {y} {z}\n", 401 + i));
+        }
+    }
+    std::fs::write(&dump, text).unwrap();
+    let d = dir.path().join("dep.d");
+    ok(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&d),
+        "--radius",
+        "1=1.28",
+        "--radius",
+        "2=1.44",
+    ]);
+    let last = dir.path().join("last.mdlod");
+    let lpng = dir.path().join("l.png");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&last),
+        "--radius",
+        "1=1.28",
+        "--radius",
+        "2=1.44",
+    ]);
+    let exposure = |out: &str| {
+        let at = out.find("exposure ").unwrap() + "exposure ".len();
+        out[at..]
+            .split(|c: char| c.is_whitespace() || c == ',' || c == ';')
+            .next()
+            .unwrap()
+            .to_string()
+    };
+    let size = ["--width", "32", "--height", "24", "--hide-species", "1"];
+    let movie = dir.path().join("m-%d.png");
+    let mut args = vec!["render", s(&d), "-o", s(&movie), "--mode", "splat"];
+    args.extend(size);
+    let out = ok(&args);
+    let mut args = vec!["render", s(&last), "-o", s(&lpng), "--mode", "splat"];
+    args.extend(size);
+    let single = ok(&args);
+    assert_eq!(exposure(&out), exposure(&single), "{out}\n{single}");
+    // The camera: the deposited cluster's, as the last frame alone fits it.
+    let (mv, sv) = (
+        dir.path().join("movie.json"),
+        dir.path().join("single.json"),
+    );
+    let mut args = vec!["render", s(&d), "-o", s(&movie), "--save-view", s(&mv)];
+    args.extend(size);
+    ok(&args);
+    let mut args = vec!["render", s(&last), "-o", s(&lpng), "--save-view", s(&sv)];
+    args.extend(size);
+    ok(&args);
+    let view = |p: &Path| {
+        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let (m, s1) = (view(&mv), view(&sv));
+    assert_eq!(m["target"], s1["target"]);
+    let (dm, ds) = (
+        m["distance"].as_f64().unwrap(),
+        s1["distance"].as_f64().unwrap(),
+    );
+    assert!((dm - ds).abs() < 1e-3 * ds, "movie {dm}, single {ds}");
+}
+
+/// Options that cannot mean anything here are refused or explained: `--fit-all` with a
+/// view file that fits nothing, `--log-scale` of an attribute already a logarithm, a log
+/// scale of signed values, a range that misses every value.
+#[test]
+fn log_scales_ranges_and_fits_that_mean_nothing_are_refused_or_explained() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("v.lammpstrj");
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n100\nITEM: BOX BOUNDS pp pp pp\n0 20\n0 20\n\
+         0 2\nITEM: ATOMS id type x y z vx rho\n",
+    );
+    for i in 0..100 {
+        let (x, y) = ((i % 10) as f32 * 2.0, (i / 10) as f32 * 2.0);
+        text.push_str(&format!(
+            "{} 1 {x} {y} 1 {} {:e}\n",
+            i + 1,
+            i as f32 / 10.0 - 3.0,
+            10f32.powi(i % 7 - 3)
+        ));
+    }
+    std::fs::write(&dump, text).unwrap();
+    let (vx, rho) = (dir.path().join("vx.mdlod"), dir.path().join("rho.mdlod"));
+    ok(&["convert", s(&dump), "-o", s(&vx), "--attribute", "vx"]);
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&rho),
+        "--attribute",
+        "rho",
+        "--attribute-log10",
+    ]);
+    let png = dir.path().join("x.png");
+    fn run<'a>(file: &'a Path, png: &'a Path, extra: &[&'a str]) -> Vec<&'a str> {
+        let mut args = vec![
+            "render",
+            s(file),
+            "-o",
+            s(png),
+            "--width",
+            "24",
+            "--height",
+            "18",
+        ];
+        args.extend(extra);
+        args
+    }
+    let e = fails(&run(&rho, &png, &["--colour-map", "magma", "--log-scale"]));
+    assert!(
+        e.contains("already a logarithm") && e.contains("log10(rho)"),
+        "{e}"
+    );
+    let out = ok(&run(&vx, &png, &["--colour-map", "viridis", "--log-scale"]));
+    assert!(
+        out.contains("note: vx takes values below 0 (down to -3)"),
+        "{out}"
+    );
+    let out = ok(&run(
+        &rho,
+        &png,
+        &["--colour-map", "viridis", "--attribute-range", "100:1000"],
+    ));
+    assert!(
+        out.contains("misses the file's values (log10(rho) from -3 to 3)"),
+        "{out}"
+    );
+    // A view file with its target and distance fits nothing.
+    let view = dir.path().join("v.json");
+    ok(&run(&vx, &png, &["--save-view", s(&view)]));
+    let e = fails(&run(&vx, &png, &["--view", s(&view), "--fit-all"]));
+    assert!(e.contains("--fit-all has no effect with --view"), "{e}");
+}

@@ -62,8 +62,8 @@ pub enum ConvertError {
     Read(#[from] crate::readers::ReadError),
     /// `--attribute-log10` and an attribute value that has no logarithm.
     #[error(
-        "{place}: attribute {name}: particle {index} has the value {value}: its logarithm \
-         (--attribute-log10) needs values above 0"
+        "{place}: attribute {name}: particle {index} (counting from 0, in the input's order) \
+         has the value {value}: its logarithm (--attribute-log10) needs values above 0"
     )]
     AttributeNotPositive {
         place: FramePlace,
@@ -432,10 +432,10 @@ pub(crate) fn position_notes(
             .unwrap_or_default();
         notes.push(format!(
             "{many} more than {FAR_OUTSIDE_BOXES} box lengths outside the box (up to {:.3e} \
-             beyond it{at}): lost atoms of a run that blew up? The hierarchy includes them (its \
-             coarsest clusters span them; in a file of a few thousand particles the \
-             positions' precision drops with that span); a fitted view leaves them out, \
-             `render --fit-all` includes them",
+             beyond it{at}): lost atoms of a run that blew up? The hierarchy includes them: the \
+             clusters spanning them quantize their members' positions more coarsely (the \
+             summary's position error grows); a fitted view leaves them out, `render \
+             --fit-all` includes them",
             f.beyond
         ));
     }

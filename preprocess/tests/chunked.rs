@@ -905,7 +905,9 @@ fn an_attribute_spanning_decades_keeps_its_logarithm() {
     .unwrap_err()
     .to_string();
     assert!(
-        e.contains("attribute rho: particle 0 has the value 0") && e.contains("above 0"),
+        e.contains(
+            "attribute rho: particle 0 (counting from 0, in the input's order) has the value 0"
+        ) && e.contains("above 0"),
         "{e}"
     );
 }

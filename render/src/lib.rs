@@ -472,6 +472,9 @@ pub struct FitBounds {
     pub bounds: Bounds,
     /// Particles (of the species shown) left outside them: far from the rest.
     pub far_particles: u64,
+    /// False when every particle is of a hidden species: `bounds` are then the whole
+    /// file's, and a movie's fit leaves the frame out.
+    pub shows_any: bool,
 }
 
 /// How far from the bulk a particle is left out of a fitted view: the bulk's box (the
@@ -489,12 +492,15 @@ pub const FIT_MARGIN: f32 = 1.0;
 /// twice the rest's; else (and with `all`) the bounds are the shown data's, and none
 /// is counted far.
 pub fn fit_bounds(file: &MdlodFile, hidden: u64, all: bool) -> FitBounds {
-    let whole = shown_bounds(file, hidden).unwrap_or_else(|| data_bounds(file));
+    let shown = shown_bounds(file, hidden);
+    let shows_any = hidden == 0 || shown.is_some();
+    let whole = shown.unwrap_or_else(|| data_bounds(file));
     let untrimmed = FitBounds {
         bounds: whole,
         far_particles: 0,
+        shows_any,
     };
-    if all {
+    if all || !shows_any {
         return untrimmed;
     }
     match trimmed_bounds(file, hidden) {
@@ -632,6 +638,7 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
     (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then(|| FitBounds {
         bounds: Bounds::new(lo, hi),
         far_particles: far,
+        shows_any: true,
     })
 }
 

@@ -382,6 +382,20 @@ fn mode_name(mode: Mode) -> String {
 
 /// Refuses an option given on the command line (`matches`: the `render` subcommand's)
 /// that the chosen mode does not read.
+/// Whether a view is fitted to the data: orbit options, or a view file without a target
+/// or a distance (which the fit then gives).
+fn view_fits(view: &ViewSpec) -> bool {
+    match view {
+        ViewSpec::Orbit { .. } => true,
+        // (A file that cannot be read fails where it is loaded, saying why.)
+        ViewSpec::File(p) | ViewSpec::FileWith(p, _) => match ViewFile::load(p) {
+            Ok(v) => v.target.is_none() || v.distance.is_none(),
+            Err(_) => true,
+        },
+        ViewSpec::Camera(_) => false,
+    }
+}
+
 /// Whether `--background` asks for none.
 fn transparent(background: Option<&str>) -> bool {
     background.is_some_and(|b| {
@@ -531,6 +545,17 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     let view = args.camera.spec();
+    if args.fit_all && !view_fits(&view) {
+        anyhow::bail!(
+            "--fit-all has no effect with --view {}: the view file gives the target and the \
+             distance, so nothing is fitted (leave them out of the file to fit the data)",
+            args.camera
+                .view
+                .as_deref()
+                .unwrap_or(Path::new(""))
+                .display()
+        );
+    }
     let mut opts = RenderOptions {
         width: args.camera.width,
         height: args.camera.height,
@@ -661,8 +686,30 @@ pub fn run(args: Args) -> Result<()> {
             println!(
                 "  {shown}: {} from {lo} to {hi} ({whose}){}",
                 a.name,
-                log_text(a, &opts.style) + &white_text(&opts.style)
+                log_text(a, &opts.style, &args) + &white_text(&opts.style)
             );
+            if opts.style.log_scale && !projected(&args) && a.min < 0.0 {
+                let fate = if args.mode == Mode::Splat {
+                    "give no light"
+                } else {
+                    "take the map's first colour"
+                };
+                println!(
+                    "  note: {} takes values below 0 (down to {}): on a log scale they {fate}; \
+                     a log scale suits quantities above 0 (cool-warm without it centres a \
+                     signed one on 0)",
+                    a.name, a.min
+                );
+            }
+            if let Some([lo, hi]) = opts.style.attribute_range {
+                if hi < a.min || lo > a.max {
+                    println!(
+                        "  note: the range {lo} to {hi} misses the file's values ({} from {} to \
+                         {}): every particle takes one end of the map",
+                        a.name, a.min, a.max
+                    );
+                }
+            }
         }
     }
     if species
@@ -671,7 +718,7 @@ pub fn run(args: Args) -> Result<()> {
     {
         println!("  note: every species is hidden: the image shows the background only");
     }
-    if matches!(opts.view, ViewSpec::Orbit { .. }) {
+    if view_fits(&opts.view) {
         if let Some(note) = far_note(mdlod_render::fit_for(&file, &opts).far_particles, None) {
             println!("{note}");
         }
@@ -815,13 +862,17 @@ pub fn derive_range(
     path: &std::path::Path,
     mapped: bool,
 ) -> Result<Option<String>> {
-    if !mapped || style.attribute_range.is_some() {
+    if !mapped {
         return Ok(None);
     }
     let file = mdlod_format::MdlodFile::open(path)?;
     let Some(a) = &file.metadata().attribute else {
         return Ok(None);
     };
+    check_not_logged(style, a, path)?;
+    if style.attribute_range.is_some() {
+        return Ok(None);
+    }
     let (range, why) = if style.log_scale {
         match log_start([a.min, a.max], mdlod_render::log_floor(&file)) {
             Some(r) => r,
@@ -843,6 +894,25 @@ pub fn derive_range(
     )))
 }
 
+/// `--log-scale` of an attribute stored as its logarithm (`--attribute-log10`) would take
+/// the log of the log: refused, naming what to do instead.
+fn check_not_logged(
+    style: &mdlod_render::PointStyle,
+    a: &mdlod_format::meta::AttributeInfo,
+    path: &Path,
+) -> Result<()> {
+    if style.log_scale && a.name.starts_with("log10(") {
+        anyhow::bail!(
+            "--log-scale: {} holds {}, already a logarithm (converted with \
+             --attribute-log10): without --log-scale the map spreads its decades evenly \
+             (and --attribute-range takes log10 units)",
+            path.display(),
+            a.name
+        );
+    }
+    Ok(())
+}
+
 /// A log scale's range for values `[min, max]` reaching 0 or below: from `floor`, the
 /// smallest positive value (no lower than 10^-8 of the top), and why; `None` where the
 /// values are all above 0 or none is.
@@ -851,8 +921,8 @@ fn log_start([min, max]: [f32; 2], floor: Option<f32>) -> Option<([f32; 2], Stri
     (min <= 0.0 && max > floor).then(|| {
         (
             [floor, max],
-            "from the smallest value above 0, on a log scale: values at or below it take \
-             the map's first colour"
+            "from the smallest value above 0: values at or below it take the scale's \
+             start"
                 .to_string(),
         )
     })
@@ -860,26 +930,31 @@ fn log_start([min, max]: [f32; 2], floor: Option<f32>) -> Option<([f32; 2], Stri
 
 /// How a log scale (`--log-scale`) maps the attribute, after the legend's range: the ends
 /// it spans, where the low end is not the range's own (0 or below), or why it is linear.
-fn log_text(a: &mdlod_format::meta::AttributeInfo, style: &mdlod_render::PointStyle) -> String {
-    if !style.log_scale {
+/// Nothing where the points' values are not on it (a splat projection's map takes the
+/// log of the image instead).
+fn log_text(
+    a: &mdlod_format::meta::AttributeInfo,
+    style: &mdlod_render::PointStyle,
+    args: &Args,
+) -> String {
+    if !style.log_scale || projected(args) {
         return String::new();
     }
+    let fate = if args.mode == Mode::Splat {
+        "give no light"
+    } else {
+        "take the map's first colour"
+    };
     let scale =
         mdlod_render::style::AttributeScale::with_range(a, style.attribute_range).with_log(true);
     let low = style.attribute_range.map_or(a.min, |r| r[0]);
     match scale.log_range() {
         Some(_) if f64::from(low) > 0.0 => ", on a log scale".to_string(),
         Some([lo, hi]) => format!(
-            ", on a log scale from {:.4e} ({} decades below {}): values at or below it \
-             take the map's first colour{}",
+            ", on a log scale from {:.4e} ({} decades below {}): values at or below it {fate}",
             lo as f32,
             mdlod_render::style::AttributeScale::LOG_DECADES,
             hi as f32,
-            if low < 0.0 {
-                ", the negative ones too (a log scale suits quantities above 0)"
-            } else {
-                ""
-            }
         ),
         None => ", linear: a log scale needs values above 0".to_string(),
     }
@@ -1071,10 +1146,13 @@ fn render_turntable(
         let coarsest = coarsest_points(&file);
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         if i == 0 {
-            // Splats: one exposure for every view, or the brightness flickers.
+            first_camera = Some(r.camera.clone());
+        }
+        // Splats: one exposure (a projection's map: one range) for every view, or the
+        // brightness flickers: the first view that shows anything sets it.
+        if r.particles_drawn + r.nodes_drawn > 0 {
             opts.exposure = opts.exposure.or(r.exposure);
             opts.light_range = opts.light_range.or(r.light_range);
-            first_camera = Some(r.camera.clone());
         }
         limited += usize::from(r.budget_limited || r.pool_limited);
         let which = format!(
@@ -1101,6 +1179,12 @@ fn render_turntable(
          {start}°{exposure}{centred}{limited}",
         t0.elapsed().as_secs_f64()
     );
+    if view_fits(&args.camera.spec()) {
+        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        if let Some(note) = far_note(mdlod_render::fit_for(&file, &opts).far_particles, None) {
+            println!("{note}");
+        }
+    }
     if let (Some(p), Some(camera)) = (&args.save_view, first_camera) {
         ViewFile::from_camera(&camera)
             .save(p)
@@ -1128,11 +1212,12 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     frame_output(&args.output, 0)?;
     let mut bounds: Option<mdlod_render::Bounds> = None;
+    let mut hidden_bounds: Option<mdlod_render::Bounds> = None;
     // Particles left out of the fit as far from the rest, and in how many frames.
     let mut far = (0u64, 0usize);
     // With a log scale: the smallest value above 0 of any frame.
     let mut floor: Option<f32> = None;
-    let fitted = matches!(opts.view, ViewSpec::Orbit { .. });
+    let fitted = view_fits(&opts.view);
     // Species may come and go in a trajectory (a deposition, an evaporation): a style
     // names any species of some frame, and applies in the frames that hold it.
     let mut names = std::collections::BTreeSet::new();
@@ -1146,6 +1231,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         names.extend(file.metadata().species.iter().map(|s| s.name.clone()));
         frame_species.push(file.metadata().species.clone());
         let own = file.metadata().attribute.clone();
+        if let Some(a) = own.as_ref().filter(|_| by_attribute(args)) {
+            check_not_logged(&opts.style, a, &path)?;
+        }
         attribute = Some(match (attribute, own) {
             (None, own) => own,
             (Some(Some(a)), Some(b)) if a.name == b.name => {
@@ -1167,13 +1255,20 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             far.0 += fit.far_particles;
             far.1 += 1;
         }
+        // A frame whose every particle is hidden shows nothing to fit (its whole box
+        // stands in only when no frame shows anything).
+        let slot = if fit.shows_any {
+            &mut bounds
+        } else {
+            &mut hidden_bounds
+        };
         let b = fit.bounds;
-        bounds = Some(match bounds {
+        *slot = Some(match *slot {
             None => b,
             Some(a) => mdlod_render::Bounds::new(a.min.min(b.min), a.max.max(b.max)),
         });
     }
-    let bounds = bounds.expect("at least one frame");
+    let bounds = bounds.or(hidden_bounds).expect("at least one frame");
     if let Some(s) = opts.style.species.iter().find(|s| !names.contains(&s.name)) {
         anyhow::bail!(
             "no frame of {} has a species named {:?} (its frames have {})",
@@ -1225,7 +1320,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     if let Some(Some(a)) = &attribute {
         if by_attribute(args) {
-            range_note.push_str(&log_text(a, &opts.style));
+            range_note.push_str(&log_text(a, &opts.style, args));
             range_note.push_str(&white_text(&opts.style));
         }
     }
@@ -1269,13 +1364,11 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         }
         let coarsest = coarsest_points(&file);
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
-        if i == 0 && opts.exposure.is_none() {
-            // Splats: one exposure for every frame, or the brightness drifts.
-            opts.exposure = r.exposure;
-        }
-        if i == 0 && opts.light_range.is_none() {
-            // A projection's colour map: one range for every frame.
-            opts.light_range = r.light_range;
+        // Splats: one exposure (a projection's map: one range) for every frame, or the
+        // brightness drifts: the first frame that shows anything sets it.
+        if r.particles_drawn + r.nodes_drawn > 0 {
+            opts.exposure = opts.exposure.or(r.exposure);
+            opts.light_range = opts.light_range.or(r.light_range);
         }
         limited_frames += usize::from(r.budget_limited || r.pool_limited);
         let which = format!("frame {}/{n}, timestep {}", i + 1, f.timestep);
@@ -1286,6 +1379,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         .map_or(String::new(), |e| format!(", splat exposure {e:.4e}"));
     let framing = match &args.camera.view {
         Some(v) => format!("{}", v.display()),
+        None if args.fit_all => "fitted to every frame's particles".to_string(),
         None => "fitted to every frame's material".to_string(),
     };
     // Splats and the density volume draw the files' own colours.
