@@ -3627,9 +3627,33 @@ fn a_transparent_background_is_a_png_with_alpha() {
         "none",
     ]);
     assert!(
-        e.contains("transparent background is drawn in the spheres mode only"),
+        e.contains("a transparent background is drawn in the spheres, splat-over, density"),
         "{e}"
     );
+    // The iso-surface and the volume: alpha their opacity.
+    for mode in ["iso", "density", "splat-over"] {
+        ok(&[
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--mode",
+            mode,
+            "--background",
+            "none",
+            "--width",
+            "48",
+            "--height",
+            "36",
+        ]);
+        let (_, _, px) = read_png(&png);
+        let alphas: Vec<u8> = px.chunks(4).map(|p| p[3]).collect();
+        assert_eq!(alphas[0], 0, "{mode}: a corner is clear");
+        assert!(
+            alphas.iter().any(|&a| a > 128),
+            "{mode}: the material shows"
+        );
+    }
 }
 
 /// `--turntable N`: N views a full turn apart about z, each the image a single render at

@@ -821,10 +821,15 @@ pub fn frame_setup(
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     check_numbers(opts)?;
-    if opts.transparent && opts.mode != RenderMode::Spheres {
+    if opts.transparent
+        && matches!(
+            opts.mode,
+            RenderMode::Splat { .. } | RenderMode::Sndf { .. }
+        )
+    {
         return Err(RenderError::InvalidOptions(
-            "a transparent background is drawn in the spheres mode only (splats add light \
-             to a background, the volume and S-NDFs blend into one)"
+            "a transparent background is drawn in the spheres, splat-over, density and iso \
+             modes (additive splats add light to a background, S-NDFs shade onto one)"
                 .into(),
         ));
     }
@@ -1102,7 +1107,7 @@ fn draw_cut(
             let frame =
                 renderer.render_density_from(source, file, camera, draw, w, h, &settings)?;
             let rendered = RenderedFrame {
-                image: frame.image(opts.background),
+                image: frame.image((!opts.transparent).then_some(opts.background)),
                 depth: None,
                 gpu_time: None,
                 points: draw.points as u32,
@@ -1133,7 +1138,8 @@ fn draw_cut(
                         h,
                         SplatBlend::Over { opacity },
                     )?;
-                    let image = splats.composite_over(opts.background);
+                    let image =
+                        splats.composite_over((!opts.transparent).then_some(opts.background));
                     (splats, image, None::<Result<f32, [f32; 2]>>)
                 }
                 _ => {

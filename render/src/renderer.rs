@@ -477,29 +477,34 @@ impl SplatFrame {
         (image, range)
     }
 
-    /// An over-blended frame (premultiplied colour and coverage) over `background_srgb`.
-    pub fn composite_over(&self, background_srgb: [f32; 3]) -> RgbaImage {
+    /// An over-blended frame (premultiplied colour and coverage) over `background_srgb`,
+    /// or with `None` over nothing (the coverage as alpha, the colour unpremultiplied).
+    pub fn composite_over(&self, background_srgb: Option<[f32; 3]>) -> RgbaImage {
         composite_over(&self.hdr, self.width, self.height, background_srgb)
     }
 }
 
 /// Premultiplied linear colour and coverage per pixel, composited over
-/// `background_srgb` and encoded as sRGB.
+/// `background_srgb` and encoded as sRGB; with `None`, over nothing: the coverage is the
+/// alpha and the colour is divided by it (PNG stores straight colour).
 fn composite_over(
     rgba: &[[f32; 4]],
     width: u32,
     height: u32,
-    background_srgb: [f32; 3],
+    background_srgb: Option<[f32; 3]>,
 ) -> RgbaImage {
-    let bg = background_srgb.map(srgb_to_linear);
+    let bg = background_srgb.map(|b| b.map(srgb_to_linear));
     let mut image = RgbaImage::new(width, height);
     for (i, p) in rgba.iter().enumerate() {
         let a = p[3].clamp(0.0, 1.0);
         let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
-            if k == 3 {
-                return 255;
-            }
-            let v = p[k] + (1.0 - a) * bg[k];
+            let v = match (k, bg) {
+                (3, Some(_)) => return 255,
+                (3, None) => return (a * 255.0 + 0.5) as u8,
+                (_, Some(bg)) => p[k] + (1.0 - a) * bg[k],
+                (_, None) if a > 0.0 => p[k] / a,
+                (_, None) => 0.0,
+            };
             (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
         });
         image.data[4 * i..4 * i + 4].copy_from_slice(&px);
@@ -537,7 +542,7 @@ pub struct DensityFrame {
 
 impl DensityFrame {
     /// Composites over the background and encodes sRGB.
-    pub fn image(&self, background_srgb: [f32; 3]) -> RgbaImage {
+    pub fn image(&self, background_srgb: Option<[f32; 3]>) -> RgbaImage {
         composite_over(&self.rgba, self.width, self.height, background_srgb)
     }
 }

@@ -106,8 +106,8 @@ pub struct Args {
     pub exposure: Option<f32>,
     /// Background colour: #rrggbb, r,g,b in [0, 1], or a name such as white or grey
     /// (default black for splats and the density volume, white otherwise); `none` for a
-    /// transparent one (spheres mode: a PNG with alpha, edges partly transparent with
-    /// --spp).
+    /// transparent one (a PNG with alpha: spheres, with edges partly transparent at
+    /// --spp above 1, splat-over, density and iso; not additive splats).
     #[arg(long)]
     pub background: Option<String>,
     #[command(flatten)]
