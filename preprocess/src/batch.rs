@@ -969,16 +969,22 @@ pub fn batch(
     // The species names the frames hold, for the radius overrides' check at the end.
     let seen = Mutex::new(std::collections::BTreeSet::<String>::new());
     // Notes by what they are about (the text before the first `: `, e.g. `species A`),
-    // each with the distinct texts the frames gave.
-    let notes = Mutex::new(std::collections::BTreeMap::<
+    // each with the distinct texts the frames gave, and the timesteps that gave them.
+    type Notes = std::collections::BTreeMap<
         String,
-        std::collections::BTreeSet<String>,
-    >::new());
-    let keep_notes = |n: Vec<String>| {
+        std::collections::BTreeMap<String, std::collections::BTreeSet<u64>>,
+    >;
+    let notes = Mutex::new(Notes::new());
+    let keep_notes = |timestep: u64, n: Vec<String>| {
         let mut notes = notes.lock().unwrap_or_else(|e| e.into_inner());
         for text in n {
             let about = text.split(": ").next().unwrap_or_default().to_string();
-            notes.entry(about).or_default().insert(text);
+            notes
+                .entry(about)
+                .or_default()
+                .entry(text)
+                .or_default()
+                .insert(timestep);
         }
     };
     let note_species = |f: &MdlodFile| {
@@ -1281,6 +1287,7 @@ pub fn batch(
                 };
                 (|| -> Result<FrameEntry, BatchError> {
                     keep_notes(
+                        job.timestep,
                         crate::convert::dump_radius_note(dump, job.input, job.frame, &opts.read)
                             .into_iter()
                             .chain(dump.frame_notes(job.frame))
@@ -1306,7 +1313,7 @@ pub fn batch(
                             convert,
                             &quiet,
                         )?;
-                        keep_notes(report.notes);
+                        keep_notes(job.timestep, report.notes);
                     } else {
                         // Refused before the frame is read, not after.
                         if let Ok(particles) = usize::try_from(job.particles) {
@@ -1320,7 +1327,7 @@ pub fn batch(
                         }
                         let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
                         let report = convert_frame(&frame, Some(source), &out, convert, &quiet)?;
-                        keep_notes(report.notes);
+                        keep_notes(job.timestep, report.notes);
                     }
                     let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                     note_species(&f);
@@ -1433,6 +1440,7 @@ pub fn batch(
             ))));
         }
     }
+    let converted_frames = converted.load(Ordering::Relaxed);
     Ok(BatchReport {
         removed_merged,
         strays,
@@ -1450,14 +1458,22 @@ pub fn batch(
             .unwrap_or_else(|e| e.into_inner())
             .into_iter()
             .map(|(about, texts)| {
-                let first = texts.iter().next().cloned().unwrap_or_default();
+                let first = texts.keys().next().cloned().unwrap_or_default();
+                let steps: std::collections::BTreeSet<u64> =
+                    texts.values().flatten().copied().collect();
+                // Which frames, when not every one converted.
+                let which = if steps.len() == converted_frames {
+                    String::new()
+                } else {
+                    format!(" ({})", timesteps_text(&steps))
+                };
                 if texts.len() == 1 {
-                    first
+                    format!("{first}{which}")
                 } else {
                     // Frames of a trajectory differ in their numbers: one line, not one
                     // per frame.
                     format!(
-                        "{about}: in {} frames, e.g. {}",
+                        "{about}: in {} frames{which}, e.g. {}",
                         texts.len(),
                         first.strip_prefix(&format!("{about}: ")).unwrap_or(&first)
                     )
@@ -1467,6 +1483,16 @@ pub fn batch(
         jobs,
         manifest: manifest_path,
     })
+}
+
+/// `timestep 5` or `timesteps 0, 100, 200 and 7 more`.
+fn timesteps_text(steps: &std::collections::BTreeSet<u64>) -> String {
+    let shown: Vec<String> = steps.iter().take(3).map(u64::to_string).collect();
+    match steps.len() {
+        1 => format!("timestep {}", shown[0]),
+        n if n <= 3 => format!("timesteps {}", shown.join(", ")),
+        n => format!("timesteps {} and {} more", shown.join(", "), n - 3),
+    }
 }
 
 /// Joins the shard manifests of `out_dir` into `dataset.json`: every shard `0..N` must be

@@ -1453,3 +1453,39 @@ fn a_rerun_keeps_or_redoes_frames_by_the_attributes_logarithm() {
     let r = batch(std::slice::from_ref(&src), &out, &with(false), &NoProgress).unwrap();
     assert_eq!((r.converted, r.redone.settings), (6, 6));
 }
+
+/// A note that only some frames give says which: a lost atom in one frame of three.
+#[test]
+fn a_note_of_some_frames_names_their_timesteps() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::new();
+    for step in [0, 100, 200] {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n50\nITEM: BOX BOUNDS pp pp pp\n\
+             0 10\n0 10\n0 10\nITEM: ATOMS id type x y z\n"
+        ));
+        for i in 0..50 {
+            let x = if step == 100 && i == 0 {
+                5000.0
+            } else {
+                (i % 10) as f32
+            };
+            text.push_str(&format!("{} 1 {x} {} 1\n", i + 1, i / 10));
+        }
+    }
+    let src = dir.path().join("lost.lammpstrj");
+    std::fs::write(&src, text).unwrap();
+    let r = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("out"),
+        &opts(),
+        &NoProgress,
+    )
+    .unwrap();
+    let note = r
+        .notes
+        .iter()
+        .find(|n| n.contains("box lengths outside"))
+        .unwrap();
+    assert!(note.ends_with("(timestep 100)"), "{note}");
+}
