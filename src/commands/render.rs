@@ -621,13 +621,13 @@ pub fn run(args: Args) -> Result<()> {
         return render_frames(&args, opts);
     }
     // (A projection's log is the image's, not the points'.)
-    let centred = derive_range(
+    let derived = derive_range(
         &mut opts.style,
         &args.file,
         by_attribute(&args) && !projected(&args),
     )?;
     if let Some(n) = args.turntable {
-        return render_turntable(&args, opts, n, centred);
+        return render_turntable(&args, opts, n, derived);
     }
     // A bar for the choice of the cut and for cuts drawn in several batches or samples
     // (every particle of 10^8 is nine batches).
@@ -668,7 +668,7 @@ pub fn run(args: Args) -> Result<()> {
     // What the colours (or splat intensities) mean: a picture's legend.
     if by_attribute(&args) {
         if let Some(a) = &file.metadata().attribute {
-            let ([lo, hi], whose) = match (opts.style.attribute_range, &centred) {
+            let ([lo, hi], whose) = match (opts.style.attribute_range, &derived) {
                 (Some(range), Some(why)) => {
                     (range, format!("{why}; --attribute-range sets another"))
                 }
@@ -1113,7 +1113,7 @@ fn render_turntable(
     args: &Args,
     mut opts: RenderOptions,
     n: u32,
-    centred: Option<String>,
+    derived: Option<String>,
 ) -> Result<()> {
     frame_output(&args.output, 0).map_err(|_| {
         anyhow::anyhow!(
@@ -1170,13 +1170,13 @@ fn render_turntable(
         0 => String::new(),
         k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
     };
-    let centred = match (centred, opts.style.attribute_range) {
+    let derived = match (derived, opts.style.attribute_range) {
         (Some(why), Some([lo, hi])) => format!(", the attribute shown from {lo} to {hi} ({why})"),
         _ => String::new(),
     };
     println!(
         "rendered {n} views in {:.1} s, a full turn about the vertical axis (z) from azimuth \
-         {start}°{exposure}{centred}{limited}",
+         {start}°{exposure}{derived}{limited}",
         t0.elapsed().as_secs_f64()
     );
     if view_fits(&args.camera.spec()) {
