@@ -3426,6 +3426,25 @@ fn cool_warm_centres_signed_values_on_zero() {
         ),
         "{out}"
     );
+    // A range that misses every frame's values: said.
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--colour-map",
+        "viridis",
+        "--attribute-range",
+        "100:200",
+    ]);
+    assert!(
+        out.contains("misses every frame's values (vz from -5 to 16)"),
+        "{out}"
+    );
 }
 
 /// `--log-scale` maps decades evenly: a kinetic energy from 0 starts 4 decades below
@@ -3773,7 +3792,10 @@ fn hidden_species_leave_the_splats_and_the_volume() {
             (out, read_png(&png).2)
         };
         let (out, hidden) = render(&all, "hidden", &["--hide-species", "1"]);
-        assert!(out.contains("hidden species, left out"), "{mode}: {out}");
+        assert!(
+            out.contains("of hidden species left out of the clusters drawn"),
+            "{mode}: {out}"
+        );
         // The volume's legend: the spheres' packing, not an attribute.
         let legend = match mode {
             "iso" => "iso-surface where the particles' spheres fill a volume fraction of 0.3",

@@ -107,7 +107,7 @@ pub struct Args {
     /// Background colour: #rrggbb, r,g,b in [0, 1], or a name such as white or grey
     /// (default black for splats and the density volume, white otherwise); `none` for a
     /// transparent one (a PNG with alpha: spheres, with edges partly transparent at
-    /// --spp above 1, splat-over, density and iso; not additive splats).
+    /// --spp above 1, splat-over, density and iso; not additive splats nor S-NDFs).
     #[arg(long)]
     pub background: Option<String>,
     #[command(flatten)]
@@ -425,8 +425,8 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     ] {
         if given && !by_attribute(args) {
             anyhow::bail!(
-                "{name} has no effect without --colour-map (spheres, sndf) or --intensity \
-                 attribute (splat)"
+                "{name} has no effect without --colour-map (spheres, sndf, splat) or \
+                 --intensity attribute (splat)"
             );
         }
     }
@@ -1000,7 +1000,11 @@ fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
 /// After the particle count: how many particles of hidden species were left out.
 fn hidden_text(r: &mdlod_render::RenderReport) -> String {
     if r.particles_hidden > 0 {
-        format!(" (and {} of hidden species, left out)", r.particles_hidden)
+        format!(
+            " (and {} of hidden species left out of the clusters drawn; clusters of them only \
+             are left out whole)",
+            r.particles_hidden
+        )
     } else {
         String::new()
     }
@@ -1407,6 +1411,15 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     if let Some(note) = far_note(far.0, Some(far.1)).filter(|_| fitted) {
         println!("{note}");
+    }
+    if let (Some([lo, hi]), Some(Some(a))) = (args.style.attribute_range, &attribute) {
+        if by_attribute(args) && (hi < a.min || lo > a.max) {
+            println!(
+                "  note: the range {lo} to {hi} misses every frame's values ({} from {} to {}): \
+                 every particle takes one end of the map",
+                a.name, a.min, a.max
+            );
+        }
     }
     if let Some(p) = &args.save_view {
         ViewFile::from_camera(&camera)
