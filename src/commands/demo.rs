@@ -9,7 +9,9 @@ use mdlod_format::MdlodFile;
 /// Generate a crater data set, convert it to .mdlod, verify it, print what was built and
 /// render a picture of it.
 #[derive(clap::Args)]
-#[command(after_help = "Example:\n  mdlod demo --particles 1000000\n  cargo run --release -- demo   (from a source checkout)")]
+#[command(
+    after_help = "Example:\n  mdlod demo --particles 1000000\n  cargo run --release -- demo   (from a source checkout)"
+)]
 pub struct Args {
     /// Number of particles to generate.
     #[arg(long, short = 'n', default_value_t = 1_000_000)]
