@@ -372,13 +372,11 @@ fn same_source(recorded: &SourceInfo, now: &SourceInfo) -> bool {
         Some(_) => now.modified_nanos,
         None => None,
     };
-    let name = |p: &str| Path::new(p).file_name().map(|n| n.to_os_string());
     // Another path with the same name is the same file only where the time tells files
     // apart: not when it has no nanoseconds (file systems of whole seconds, files
     // unpacked from an archive), where two replicas' dumps share name, size and second.
     let fine_time = recorded.modified_nanos.is_some_and(|n| n != 0);
-    let same_file = recorded.path == now.path
-        || (fine_time && name(&recorded.path).is_some() && name(&recorded.path) == name(&now.path));
+    let same_file = recorded.path == now.path || (fine_time && same_name(recorded, now));
     same_file
         && *recorded
             == SourceInfo {
@@ -1286,13 +1284,7 @@ pub fn batch(
                     (_, e) => e,
                 };
                 (|| -> Result<FrameEntry, BatchError> {
-                    keep_notes(
-                        job.timestep,
-                        crate::convert::dump_radius_note(dump, job.input, job.frame, &opts.read)
-                            .into_iter()
-                            .chain(dump.frame_notes(job.frame))
-                            .collect(),
-                    );
+                    keep_notes(job.timestep, dump.frame_notes(job.frame, &opts.read));
                     let streamed = if job.particles as usize > convert.chunks.chunk_points {
                         let info = dump.frame_info(job.frame)?;
                         crate::convert::window_source(dump, job.frame, &opts.read, &info)

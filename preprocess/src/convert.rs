@@ -744,21 +744,10 @@ pub fn convert_file(
     // Opening indexes the frames (a pass over a text dump): part of reading the input,
     // which the throughput printed from the report must include.
     let opened = t0.elapsed();
-    // A text dump whose last line has no line end may be cut inside a number.
-    let cut_line = dump
-        .ends_mid_line()
-        .then(|| dump.frame_count().saturating_sub(1));
     // The working file (if any) lives until the conversion is done.
     convert_dump(dump, input, output, frame, read, options, progress)
         .map(|mut report| {
             report.read_time += opened;
-            if cut_line.is_some() && cut_line == report.frame.map(|f| f.0) {
-                report.notes.push(format!(
-                    "{}: its last line has no line end: if a run is still writing it, the \
-                     last atom's values may be cut inside a number (`0.41` of `0.4156`)",
-                    input.display()
-                ));
-            }
             report
         })
         .map_err(|e| decompressed(input, text.as_deref(), e))
@@ -791,11 +780,8 @@ pub fn convert_dump(
             }
         },
     };
-    // What the input's columns or arrays hold that the conversion does not read.
-    let notes: Vec<String> = dump_radius_note(&dump, named, k, read)
-        .into_iter()
-        .chain(dump.frame_notes(k))
-        .collect();
+    // What the input holds that the conversion does not read.
+    let notes = dump.frame_notes(k, read);
     let which = |mut r: ConvertReport| {
         r.frame = Some((k, count));
         r.notes.extend(notes.iter().cloned());
@@ -874,42 +860,6 @@ pub fn convert_dump(
     .map_err(explain)?;
     report.read_time = read_time;
     Ok(which(report))
-}
-
-/// A note for a text input whose columns hold per-particle radii or diameters (a
-/// granular run's `radius`, an extended XYZ `radius` property), which the conversion
-/// does not read as sizes: every particle of a species is drawn at its one radius.
-pub fn radius_column_note(
-    input: &Path,
-    columns: &[String],
-    read: &crate::readers::ReadOptions,
-) -> Option<String> {
-    let column = columns.iter().find(|c| {
-        let c = c.to_ascii_lowercase();
-        (c == "radius" || c == "diameter") && read.attribute.as_deref() != Some(c.as_str())
-    })?;
-    Some(format!(
-        "{}: column `{column}` holds per-particle sizes, which are not read as radii: every \
-         particle of a species is drawn at the species' one radius (its default, or \
-         --radius NAME=R); --attribute {column} keeps the values to colour by",
-        input.display()
-    ))
-}
-
-/// [`radius_column_note`] for frame `k` of a dump whose reader takes no sizes from its
-/// columns (LAMMPS text and binary dumps, XYZ files; GSD and MMPLD readers read theirs).
-pub fn dump_radius_note(
-    dump: &crate::readers::DumpFile,
-    input: &Path,
-    k: usize,
-    read: &crate::readers::ReadOptions,
-) -> Option<String> {
-    use crate::readers::InputFormat::{LammpsBinary, LammpsText, Xyz};
-    if !matches!(dump.format(), LammpsText | LammpsBinary | Xyz) {
-        return None;
-    }
-    let info = dump.frame_info(k).ok()?;
-    radius_column_note(input, &info.columns, read)
 }
 
 /// Describes a source file for the metadata.

@@ -583,13 +583,45 @@ impl DumpFile {
         Ok(())
     }
 
-    /// What a conversion of frame `k` should say about how it was read (a raw sidecar's
-    /// arrays holding values past its `particles`).
-    pub fn frame_notes(&self, _k: usize) -> Vec<String> {
-        match &self.index {
-            Index::Raw(r) => r.notes().to_vec(),
-            _ => Vec::new(),
+    /// What a conversion of frame `k` read with `read` should say about what the input
+    /// holds and the conversion does not read: a raw sidecar's arrays holding values past
+    /// its `particles`; a text or binary dump's per-particle sizes (a granular run's
+    /// `radius`, an extended XYZ radius property: every particle of a species is drawn at
+    /// its one radius; GSD and MMPLD readers read theirs); the last frame of a text dump
+    /// whose last line has no line end ([`DumpFile::ends_mid_line`]).
+    pub fn frame_notes(&self, k: usize, read: &ReadOptions) -> Vec<String> {
+        let mut notes = Vec::new();
+        if let Index::Raw(r) = &self.index {
+            notes.extend(r.notes().iter().cloned());
         }
+        let sized = matches!(
+            self.format,
+            InputFormat::LammpsText | InputFormat::LammpsBinary | InputFormat::Xyz
+        );
+        let info = sized.then(|| self.frame_info(k).ok()).flatten();
+        let column = info.as_ref().and_then(|i| {
+            i.columns.iter().find(|c| {
+                let c = c.to_ascii_lowercase();
+                (c == "radius" || c == "diameter") && read.attribute.as_deref() != Some(c.as_str())
+            })
+        });
+        if let Some(column) = column {
+            notes.push(format!(
+                "{}: column `{column}` holds per-particle sizes, which are not read as radii: \
+                 every particle of a species is drawn at the species' one radius (its \
+                 default, or --radius NAME=R); --attribute {column} keeps the values to \
+                 colour by",
+                self.path.display()
+            ));
+        }
+        if self.ends_mid_line() && k + 1 == self.frame_count() {
+            notes.push(format!(
+                "{}: its last line has no line end: if a run is still writing it, the last \
+                 atom's values may be cut inside a number (`0.41` of `0.4156`)",
+                self.path.display()
+            ));
+        }
+        notes
     }
 
     /// True for a text dump (LAMMPS text, XYZ) whose last line has no line end: a run
