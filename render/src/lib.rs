@@ -355,11 +355,10 @@ pub fn log_floor(file: &MdlodFile) -> Option<f32> {
     let levels = file.levels();
     let last = levels.len().checked_sub(1)?;
     if levels[last].point_count <= 1 << 20 {
-        let (min, max) = (f64::from(info.min), f64::from(info.max));
         return file
             .attribute()?
             .iter()
-            .map(|&q| (min + (max - min) * f64::from(q) / 65535.0) as f32)
+            .map(|&q| info.decode(q))
             .filter(|&v| v > 0.0 && v.is_finite())
             .min_by(f32::total_cmp);
     }
@@ -391,50 +390,10 @@ pub fn data_bounds(file: &MdlodFile) -> Bounds {
 /// spheres, where the particles are encoded relative to it (δn = 1; else its box).
 /// `None` when nothing is hidden, or every particle is.
 pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
-    use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
     if hidden == 0 {
         return None;
     }
-    let kinds = file.species_below(hidden);
-    let (nodes, levels) = (file.nodes(), file.levels());
-    let last = levels.len().checked_sub(1)?;
-    let mut lo = glam::Vec3::splat(f32::INFINITY);
-    let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
-    let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
-    let mut queue = std::collections::VecDeque::from([0usize]);
-    let mut opened = 0usize;
-    while let Some(id) = queue.pop_front() {
-        let Some(n) = nodes.get(id) else { continue };
-        let kind = kinds.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT);
-        if kind & BELOW_OUT == 0 {
-            continue; // Hidden species only.
-        }
-        let child_level = usize::from(n.level) + 1;
-        let mixed = kind & BELOW_IN != 0;
-        if mixed && child_level == last && file.delta_n() == 1 && file.check_children(id).is_ok() {
-            // The particles themselves: position relative to this node, the species'
-            // radius around it.
-            for (p, r) in shown_particles(file, n, hidden, &radii) {
-                lo = lo.min(p - r);
-                hi = hi.max(p + r);
-            }
-            continue;
-        }
-        let open = mixed
-            && child_level < last
-            && opened < SHOWN_BOUNDS_NODES
-            && file.check_children(id).is_ok();
-        if open {
-            opened += 1;
-            let first = levels[child_level].node_first as usize;
-            let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
-            queue.extend(children.map(|c| first + c));
-            continue;
-        }
-        lo = lo.min(glam::Vec3::from(n.bounds_min));
-        hi = hi.max(glam::Vec3::from(n.bounds_max));
-    }
-    (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then(|| Bounds::new(lo, hi))
+    bounds_walk(file, hidden, None).map(|(b, _)| b)
 }
 
 /// The particles of node `n` (whose children are particles, encoded relative to it:
@@ -569,24 +528,60 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
         return None;
     }
     let total: f64 = sample.iter().map(|s| f64::from(s.1)).sum();
-    let quantile = |axis: usize, q: f64| {
+    // The 1st and 99th weighted percentiles along `axis`, from one sort.
+    let percentiles = |axis: usize| {
         let mut v: Vec<(f32, f32)> = sample.iter().map(|(c, w)| (c[axis], *w)).collect();
         v.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut sum = 0.0;
-        for (x, w) in &v {
-            sum += f64::from(*w);
-            if sum >= q * total {
-                return *x;
-            }
-        }
-        v.last().map_or(0.0, |l| l.0)
+        let at = |q: f64| {
+            let mut sum = 0.0;
+            v.iter()
+                .find(|(_, w)| {
+                    sum += f64::from(*w);
+                    sum >= q * total
+                })
+                .or(v.last())
+                .map_or(0.0, |p| p.0)
+        };
+        (at(0.01), at(0.99))
     };
-    let lo = glam::Vec3::new(quantile(0, 0.01), quantile(1, 0.01), quantile(2, 0.01));
-    let hi = glam::Vec3::new(quantile(0, 0.99), quantile(1, 0.99), quantile(2, 0.99));
+    let [(x0, x1), (y0, y1), (z0, z1)] = [0, 1, 2].map(percentiles);
+    let (lo, hi) = (glam::Vec3::new(x0, y0, z0), glam::Vec3::new(x1, y1, z1));
     let margin = glam::Vec3::splat((hi - lo).max_element() * FIT_MARGIN);
-    let (core_lo, core_hi) = (lo - margin, hi + margin);
-    let inside = |a: glam::Vec3, b: glam::Vec3| a.cmpge(core_lo).all() && b.cmple(core_hi).all();
-    let outside = |a: glam::Vec3, b: glam::Vec3| a.cmpgt(core_hi).any() || b.cmplt(core_lo).any();
+    let (bounds, far) = bounds_walk(file, hidden, Some([lo - margin, hi + margin]))?;
+    Some(FitBounds {
+        bounds,
+        far_particles: far,
+        shows_any: true,
+    })
+}
+
+/// The bounds of the particles not of the species of `hidden` (a mask) within the box
+/// `core` (everywhere without one), and how many lie outside it: from the top node
+/// down, a node holding hidden species only is passed over, one inside `core` holding
+/// shown species only adds its box, one wholly outside counts its particles, and any
+/// other is opened (at most [`SHOWN_BOUNDS_NODES`] of them; one not opened adds its
+/// box) down to the particles, decoded where they are encoded relative to it (δn = 1;
+/// else its box). `None` when nothing is shown.
+fn bounds_walk(
+    file: &MdlodFile,
+    hidden: u64,
+    core: Option<[glam::Vec3; 2]>,
+) -> Option<(Bounds, u64)> {
+    use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
+    let (nodes, levels) = (file.nodes(), file.levels());
+    let last = levels.len().checked_sub(1)?;
+    let kinds = (hidden != 0).then(|| file.species_below(hidden));
+    let kind_of = |id: usize| match &kinds {
+        Some(k) => k.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT),
+        None => BELOW_OUT,
+    };
+    let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
+    let inside = |a: glam::Vec3, b: glam::Vec3| {
+        core.is_none_or(|[lo, hi]| a.cmpge(lo).all() && b.cmple(hi).all())
+    };
+    let outside = |a: glam::Vec3, b: glam::Vec3| {
+        core.is_some_and(|[lo, hi]| a.cmpgt(hi).any() || b.cmplt(lo).any())
+    };
     let mut lo = glam::Vec3::splat(f32::INFINITY);
     let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
     let mut far = 0u64;
@@ -635,11 +630,7 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
         lo = lo.min(bmin);
         hi = hi.max(bmax);
     }
-    (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then(|| FitBounds {
-        bounds: Bounds::new(lo, hi),
-        far_particles: far,
-        shows_any: true,
-    })
+    (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then(|| (Bounds::new(lo, hi), far))
 }
 
 /// The particles below node `id`: its descendants on the last level, a contiguous range
@@ -853,9 +844,14 @@ pub fn frame_setup(
             species.len()
         )));
     }
-    let fit = fit_for(file, opts);
-    let mut camera = camera_in(&fit.bounds, &opts.view, opts.width, opts.height)?;
-    if fit.bounds != data_bounds(file) {
+    // A camera given whole (the viewer's, every frame) fits nothing: its depth range
+    // takes the data's bounds, and the fit is not computed.
+    let fitted = match opts.view {
+        ViewSpec::Camera(_) => data_bounds(file),
+        _ => fit_for(file, opts).bounds,
+    };
+    let mut camera = camera_in(&fitted, &opts.view, opts.width, opts.height)?;
+    if fitted != data_bounds(file) {
         camera.fit_depth_range(&data_bounds(file));
     }
     // The data's bounds hold the particles' own spheres; a style that draws them larger
