@@ -2618,11 +2618,76 @@ fn a_movie_keeps_each_species_look_across_frames() {
         "0",
     ]);
     assert!(
-        out.contains("1 frame whose files gave a species another colour"),
+        out.contains("1 frame whose files read a species' name otherwise"),
         "{out}"
     );
     let image = |i: u32| std::fs::read(dir.path().join(format!("ab-{i}.png"))).unwrap();
     assert_eq!(image(0), image(1));
+}
+
+/// A radius a frame's data gives (here a raw sidecar's `radii`; a GSD frame's diameters
+/// alike) is the frame's own: particles that grow over a run are drawn growing, and the
+/// movie's summary says so.
+#[test]
+fn a_movie_draws_each_frame_with_its_own_radii() {
+    let dir = tempfile::tempdir().unwrap();
+    let positions: Vec<u8> = (0..64)
+        .flat_map(|i| {
+            [
+                (i % 4) as f32 * 3.0,
+                (i / 4 % 4) as f32 * 3.0,
+                (i / 16) as f32 * 3.0,
+            ]
+        })
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    std::fs::write(dir.path().join("pos.f32"), &positions).unwrap();
+    let mut inputs = Vec::new();
+    for (step, radius) in [(0, 0.5), (100, 1.0)] {
+        let sidecar = dir.path().join(format!("grow-{step}.raw.json"));
+        std::fs::write(
+            &sidecar,
+            format!(
+                r#"{{"mdlod_raw": 1, "positions": {{"file": "pos.f32", "type": "f32"}},
+                    "radii": [{radius}], "timestep": {step}}}"#
+            ),
+        )
+        .unwrap();
+        inputs.push(sidecar);
+    }
+    let d = dir.path().join("grow.d");
+    ok(&["batch", s(&inputs[0]), s(&inputs[1]), "-o", s(&d)]);
+    let pattern = dir.path().join("grow-%d.png");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&pattern),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--screen-error",
+        "0",
+    ]);
+    assert!(
+        out.contains(
+            "radii change over the frames (atom 0.5 to 1): each frame is drawn with its own"
+        ),
+        "{out}"
+    );
+    assert!(!out.contains("otherwise"), "{out}");
+    // Larger spheres cover more of the background (white).
+    let covered = |i: u32| {
+        let (_, _, rgba) = read_png(&dir.path().join(format!("grow-{i}.png")));
+        rgba.chunks(4).filter(|p| p[..3] != [255, 255, 255]).count()
+    };
+    assert!(
+        covered(1) > covered(0) + 100,
+        "{} {}",
+        covered(0),
+        covered(1)
+    );
 }
 
 /// Hidden species leave the clusters too: at a coarse error, no pixel takes a hidden

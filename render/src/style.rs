@@ -54,8 +54,11 @@ pub fn trajectory_looks(
 
 /// The species styles that draw a frame's species (`own`) with the trajectory's looks
 /// ([`trajectory_looks`]), after the user's `styles` (which win: a colour or radius
-/// given there is kept, a hidden species stays hidden). Radii within 1 % of the look's
-/// are left alone (a per-frame mean of polydisperse diameters).
+/// given there is kept, a hidden species stays hidden). A radius is the frame's data
+/// (a GSD frame's diameters, an MMPLD list's radius: particles that grow or shrink over
+/// a run) and is kept, unless the frame read the name otherwise, as its other colour
+/// says (`B` as boron where no `A` made it a label); radii within 1 % of the look's are
+/// left alone then too (a per-frame mean of polydisperse diameters).
 pub fn keep_looks(
     own: &[mdlod_format::meta::Species],
     looks: &[mdlod_format::meta::Species],
@@ -80,7 +83,8 @@ pub fn keep_looks(
             .zip(&s.colour)
             .any(|(a, b)| (a - b).abs() > 1e-4))
         .then_some(look.colour);
-        let radius = ((look.radius - s.radius).abs() > 0.01 * look.radius).then_some(look.radius);
+        let radius = (colour.is_some() && (look.radius - s.radius).abs() > 0.01 * look.radius)
+            .then_some(look.radius);
         if colour.is_none() && radius.is_none() {
             continue;
         }
@@ -666,6 +670,10 @@ mod tests {
             ..Default::default()
         }];
         assert_eq!(keep_looks(&f0, &looks, &hide_b), hide_b);
+        // A frame whose B has frame 1's colour keeps its own radius: a particle that
+        // grew over the run.
+        let grown = [look("B", blue, 0.75)];
+        assert!(keep_looks(&grown, &looks, &[]).is_empty());
         // A radius within 1 % is the same look; the user's colour wins, their styles of
         // species the frame lacks are dropped.
         let near = [look("B", pink, 0.503)];

@@ -1333,6 +1333,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         &frame_species.iter().map(Vec::as_slice).collect::<Vec<_>>(),
     );
     let (mut restyled, mut restyled_names) = (0usize, std::collections::BTreeSet::new());
+    // Each name's smallest and largest radius as drawn: a frame's own radii are data.
+    let mut radii: std::collections::BTreeMap<String, [f32; 2]> = Default::default();
     let mut worst_miss: Option<(f32, usize)> = None;
     let style = opts.style.clone();
     let camera = mdlod_render::camera_for_bounds(&bounds, &opts.view, opts.width, opts.height)?;
@@ -1360,6 +1362,17 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             .collect();
         restyled += usize::from(!changed.is_empty());
         restyled_names.extend(changed);
+        for sp in &file.metadata().species {
+            let drawn = opts
+                .style
+                .species
+                .iter()
+                .rfind(|st| st.name == sp.name)
+                .and_then(|st| st.radius)
+                .unwrap_or(sp.radius);
+            let span = radii.entry(sp.name.clone()).or_insert([drawn; 2]);
+            *span = [span[0].min(drawn), span[1].max(drawn)];
+        }
         if matches!(args.mode, Mode::Spheres | Mode::Sndf) {
             let miss = opts.style.recolour_miss(&file.metadata().species);
             if miss.is_some_and(|m| m > worst_miss.map_or(0.0, |w: (f32, usize)| w.0)) {
@@ -1391,10 +1404,22 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         0 => String::new(),
         _ if !matches!(args.mode, Mode::Spheres | Mode::Sndf) => String::new(),
         k => format!(
-            "; {k} frame{} whose files gave a species another colour or radius drawn with \
-             its look in the rest ({})",
+            "; {k} frame{} whose files read a species' name otherwise (another colour) drawn \
+             with its look in the rest ({})",
             if k == 1 { "" } else { "s" },
             restyled_names.into_iter().collect::<Vec<_>>().join(", ")
+        ),
+    };
+    let changing: Vec<String> = radii
+        .iter()
+        .filter(|(_, [lo, hi])| hi > &(lo * 1.01))
+        .map(|(name, [lo, hi])| format!("{name} {lo} to {hi}"))
+        .collect();
+    let radii_note = match changing.is_empty() {
+        true => String::new(),
+        false => format!(
+            "; radii change over the frames ({}): each frame is drawn with its own",
+            changing.join(", ")
         ),
     };
     let limited = match limited_frames {
@@ -1402,7 +1427,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
     };
     println!(
-        "rendered {n} frame{} in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{limited}",
+        "rendered {n} frame{} in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{radii_note}{limited}",
         if n == 1 { "" } else { "s" },
         t0.elapsed().as_secs_f64()
     );
