@@ -2690,6 +2690,77 @@ fn a_movie_draws_each_frame_with_its_own_radii() {
     );
 }
 
+/// `--clip` cuts the data away in the sphere and splat modes (OVITO's Slice): the cut
+/// face's particles are counted, a camera on the kept side is told where the face
+/// looks, and the volume modes, which clip their samples by one plane, refuse two.
+#[test]
+fn clip_planes_cut_the_particles_away() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cuag_alloy.unwrapped.dump");
+    let file = dir.path().join("a.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file)]);
+    let top = MdlodFile::open(&file).unwrap().nodes()[0];
+    let mid = 0.5 * (top.bounds_min[0] + top.bounds_max[0]);
+    let plane = format!("1,0,0,{mid}");
+    let render = |name: &str, extra: &[&str]| {
+        let png = dir.path().join(name);
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "64",
+            "--height",
+            "48",
+        ];
+        args.extend_from_slice(extra);
+        let out = ok(&args);
+        (out, read_png(&png).2)
+    };
+    let (whole, whole_png) = render("whole.png", &[]);
+    assert!(!whole.contains("--clip"), "{whole}");
+    let mut notes = 0;
+    for azimuth in ["0", "180"] {
+        let (out, png) = render("cut.png", &["--clip", &plane, "--azimuth", azimuth]);
+        assert!(out.contains("cut away by --clip"), "{out}");
+        assert_ne!(png, whole_png);
+        notes += usize::from(out.contains("on the kept side of --clip plane 1"));
+    }
+    assert_eq!(notes, 1, "one of two opposite cameras sees the face");
+    // A slab by two facing planes, in the splat modes too.
+    let slab = format!("-1,0,0,{}", -(mid - 2.0));
+    for mode in ["splat", "splat-over", "spheres"] {
+        let (out, _) = render(
+            "slab.png",
+            &["--mode", mode, "--clip", &plane, "--clip", &slab],
+        );
+        assert!(out.contains("cut away by --clip"), "{mode}: {out}");
+    }
+    let err = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&dir.path().join("d.png")),
+        "--mode",
+        "density",
+        "--clip",
+        &plane,
+        "--clip",
+        &slab,
+    ]);
+    assert!(err.contains("takes one --clip plane (2 given)"), "{err}");
+    let err = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&dir.path().join("d.png")),
+        "--clip",
+        "0,0,0,1",
+    ]);
+    assert!(err.contains("non-zero normal"), "{err}");
+}
+
 /// Hidden species leave the clusters too: at a coarse error, no pixel takes a hidden
 /// species' colour (mixed clusters are refined until they hold none). Clusters recoloured
 /// only approximately (more than four species) are reported.

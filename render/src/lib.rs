@@ -62,8 +62,8 @@ pub use renderer::{FrameSettings, RenderedFrame, Renderer, SplatBlend, SplatFram
 pub use streaming::{StreamStats, StreamingRenderer};
 pub use style::{ColourMap, PointStyle, SpeciesStyle};
 pub use traversal::{
-    traverse, traverse_shared, traverse_with, DepthOrder, DrawList, DrawRange, Residency,
-    SharedResidency, TraversalSettings,
+    traverse, traverse_shared, traverse_with, ClipPlanes, ClipSide, DepthOrder, DrawList,
+    DrawRange, Residency, SharedResidency, TraversalSettings, MAX_CLIP_PLANES,
 };
 pub use view::ViewFile;
 
@@ -244,6 +244,12 @@ pub struct RenderReport {
     /// Clusters drawn that still hold hidden species (their refinement stopped at the
     /// budget or at a node not yet resident).
     pub clusters_mixed: u64,
+    /// Particles cut away by the style's clip planes ([`PointStyle::clip`]) from the
+    /// clusters drawn (clusters wholly beyond a plane are left out whole, uncounted).
+    pub particles_clipped: u64,
+    /// Clusters drawn across a clip plane (their refinement stopped at the budget or at
+    /// a node not yet resident): drawn whole.
+    pub clusters_across: u64,
     /// Cluster representatives drawn.
     pub nodes_drawn: u64,
     /// Contiguous ranges drawn.
@@ -900,6 +906,20 @@ pub fn frame_setup(
         // Every mode leaves hidden species out of the cut (splats, the volume: the
         // light or density of the species shown).
         hidden_species: opts.style.hidden_mask(species),
+        // The density volume clips its samples, not the points (DensitySettings::clip).
+        clip: match opts.mode {
+            RenderMode::Density(_) if !opts.style.clip.is_empty() => {
+                return Err(RenderError::InvalidOptions(
+                    "the density volume clips its samples (its own clip plane), not the \
+                     points: leave the style's clip planes empty"
+                        .into(),
+                ))
+            }
+            _ => opts
+                .style
+                .clip_planes()
+                .map_err(RenderError::InvalidOptions)?,
+        },
     };
     let settings = FrameSettings {
         width: opts.width,
@@ -962,6 +982,8 @@ impl RenderReport {
             particles_drawn: draw.particles,
             particles_hidden: hidden_in_cut(file, opts, draw) + draw.hidden_particles,
             clusters_mixed: draw.mixed_drawn,
+            particles_clipped: draw.clipped_particles,
+            clusters_across: draw.across_drawn,
             nodes_drawn: draw.representatives,
             ranges: draw.ranges.len(),
             nodes_opened: draw.opened_nodes,

@@ -928,6 +928,7 @@ impl Smip {
                             occlusion: self.config.occlusion,
                             support_scale: 0.0,
                             hidden_species: style.hidden_mask(&file.metadata().species),
+                            clip: style.clip_planes().map_err(RenderError::InvalidOptions)?,
                         },
                     );
                     file.node_error()?;

@@ -221,6 +221,12 @@ pub struct PointStyle {
     /// decades); see [`AttributeScale::with_log`].
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub log_scale: bool,
+    /// Planes `[nx, ny, nz, d]` that cut the points away: only particles with `n·p ≤ d`
+    /// for every plane are drawn (see [`crate::TraversalSettings::clip`]). Sphere,
+    /// splat and S-NDF modes; the density volume clips its samples instead
+    /// ([`crate::density::DensitySettings::clip`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clip: Vec<[f32; 4]>,
 }
 
 impl Default for PointStyle {
@@ -231,6 +237,7 @@ impl Default for PointStyle {
             colour_map: None,
             attribute_range: None,
             log_scale: false,
+            clip: Vec::new(),
         }
     }
 }
@@ -279,6 +286,11 @@ impl PointStyle {
                 [c[0], c[1], c[2], r]
             })
             .collect())
+    }
+
+    /// [`Self::clip`] as the traversal takes it; an error says what is wrong with a plane.
+    pub fn clip_planes(&self) -> Result<crate::ClipPlanes, String> {
+        crate::ClipPlanes::new(&self.clip)
     }
 
     /// The species this style hides, as a mask of species indices for
@@ -1047,6 +1059,7 @@ mod tests {
             colour_map: None,
             attribute_range: None,
             log_scale: false,
+            clip: vec![],
         };
         let file = [sp("A", 1.0), sp("B", 1.5), sp("C", 0.5)];
         let t = style.species_table(&file).unwrap();

@@ -109,6 +109,91 @@ pub struct TraversalSettings {
     /// draw them), down to particles where the budget allows
     /// ([`MdlodFile::species_below`]). The cut is then chosen without occlusion culling.
     pub hidden_species: u64,
+    /// Planes that cut the data away (OVITO's Slice): particles whose centres lie beyond
+    /// any are left out, clusters wholly beyond are culled, and clusters across a plane
+    /// are opened down to particles where the budget allows, as for hidden species.
+    /// The cut is then chosen without occlusion culling.
+    pub clip: ClipPlanes,
+}
+
+/// At most this many clip planes cut a view.
+pub const MAX_CLIP_PLANES: usize = 6;
+
+/// Half-spaces `n·p ≤ d` that keep a particle whose centre `p` lies inside every one
+/// ([`TraversalSettings::clip`]); none keeps everything.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ClipPlanes {
+    planes: [[f32; 4]; MAX_CLIP_PLANES],
+    count: usize,
+}
+
+/// Where a box lies against clip planes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ClipSide {
+    /// Inside every half-space: nothing in it is cut away.
+    Kept,
+    /// Wholly beyond one plane: everything in it is cut away.
+    Beyond,
+    /// Across a plane: some of it may be cut away.
+    Across,
+}
+
+impl ClipPlanes {
+    /// Planes `[nx, ny, nz, d]`, each keeping `n·p ≤ d`: at most [`MAX_CLIP_PLANES`],
+    /// finite, with a non-zero normal.
+    pub fn new(planes: &[[f32; 4]]) -> Result<ClipPlanes, String> {
+        if planes.len() > MAX_CLIP_PLANES {
+            return Err(format!(
+                "{} clip planes: at most {MAX_CLIP_PLANES} cut one view",
+                planes.len()
+            ));
+        }
+        let mut out = ClipPlanes::default();
+        for p in planes {
+            if p.iter().any(|v| !v.is_finite()) || p[..3].iter().all(|&v| v == 0.0) {
+                return Err(format!(
+                    "clip plane {p:?}: needs finite numbers and a non-zero normal nx,ny,nz"
+                ));
+            }
+            out.planes[out.count] = *p;
+            out.count += 1;
+        }
+        Ok(out)
+    }
+
+    pub fn planes(&self) -> &[[f32; 4]] {
+        &self.planes[..self.count]
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// The particle centred at `p` is kept.
+    pub fn keeps(&self, p: Vec3) -> bool {
+        self.planes()
+            .iter()
+            .all(|c| Vec3::new(c[0], c[1], c[2]).dot(p) <= c[3])
+    }
+
+    /// Where the box `min..max`, grown by `grow` on every side, lies.
+    pub fn side(&self, min: Vec3, max: Vec3, grow: f32) -> ClipSide {
+        let mut side = ClipSide::Kept;
+        for c in self.planes() {
+            let n = Vec3::new(c[0], c[1], c[2]);
+            // The box's smallest and largest n·p: each axis at its end along n.
+            let lo = n.min(Vec3::ZERO).dot(max) + n.max(Vec3::ZERO).dot(min);
+            let hi = n.max(Vec3::ZERO).dot(max) + n.min(Vec3::ZERO).dot(min);
+            let g = n.length() * grow;
+            if lo - g > c[3] {
+                return ClipSide::Beyond;
+            }
+            if hi + g > c[3] {
+                side = ClipSide::Across;
+            }
+        }
+        side
+    }
 }
 
 impl Default for TraversalSettings {
@@ -120,6 +205,7 @@ impl Default for TraversalSettings {
             occlusion: OcclusionMode::PixelCentres,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: ClipPlanes::default(),
         }
     }
 }
@@ -171,6 +257,12 @@ pub struct DrawList {
     /// Particles of hidden species ([`TraversalSettings::hidden_species`]) left out of
     /// the opened nodes' runs.
     pub hidden_particles: u64,
+    /// Particles cut away by the clip planes ([`TraversalSettings::clip`]) from the
+    /// opened nodes' runs (those of hidden species counted as hidden).
+    pub clipped_particles: u64,
+    /// Clusters drawn across a clip plane: the budget (or a node not yet resident)
+    /// stopped their refinement.
+    pub across_drawn: u64,
     /// Clusters drawn that still hold hidden species' particles: the budget (or a node
     /// not yet resident) stopped their refinement.
     pub mixed_drawn: u64,
@@ -536,6 +628,7 @@ pub fn traverse_shared(
     if settings.occlusion == OcclusionMode::Off
         || settings.viewport.contains(&0)
         || settings.hidden_species != 0
+        || !settings.clip.is_empty()
     {
         let mut tile = TileResidency {
             shared: residency,
@@ -567,7 +660,10 @@ pub fn traverse_with(
     settings: &TraversalSettings,
     residency: &mut dyn Residency,
 ) -> DrawList {
-    if settings.occlusion != OcclusionMode::Off && settings.hidden_species == 0 {
+    if settings.occlusion != OcclusionMode::Off
+        && settings.hidden_species == 0
+        && settings.clip.is_empty()
+    {
         let proj = Projector::with_support(
             camera,
             settings.viewport,
@@ -806,13 +902,19 @@ fn largest_first(
         return list;
     }
     let below = (settings.hidden_species != 0).then(|| file.species_below(settings.hidden_species));
-    let hidden = below.as_deref().map(|kinds| Hidden {
-        kinds,
-        species: file.species(),
-        mask: settings.hidden_species,
+    let hidden = (below.is_some() || !settings.clip.is_empty()).then(|| Hidden {
+        species: below
+            .as_deref()
+            .map(|kinds| (kinds, file.species(), settings.hidden_species)),
+        clip: settings.clip,
+        file,
     });
     let hidden_only = |id: usize| hidden.as_ref().is_some_and(|h| h.node(id));
-    let hidden_particle = |i: usize| hidden.as_ref().is_some_and(|h| h.particle(i));
+    let hidden_particle = |i: usize, parent: usize| {
+        hidden
+            .as_ref()
+            .is_some_and(|h| h.particle(i, parent).is_some())
+    };
     let mixed = |id: usize| hidden.as_ref().is_some_and(|h| h.mixed(id));
     if hidden_only(0) {
         list.culled_nodes = 1;
@@ -854,7 +956,10 @@ fn largest_first(
         }
         let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
         let visible_children = if child_level == last {
-            children.clone().filter(|&c| !hidden_particle(c)).count() as u64
+            children
+                .clone()
+                .filter(|&c| !hidden_particle(c, id as usize))
+                .count() as u64
         } else {
             let first = levels[child_level].node_first as usize;
             children
@@ -938,29 +1043,84 @@ impl Frontier {
     }
 }
 
-/// What a cut with hidden species leaves out: clusters of them only
-/// ([`MdlodFile::species_below`]), and their particles.
+/// What a cut with hidden species or clip planes leaves out: clusters of hidden species
+/// only ([`MdlodFile::species_below`]) or wholly beyond a plane, and the particles of
+/// hidden species or beyond a plane.
 struct Hidden<'a> {
-    kinds: &'a [u8],
-    species: &'a [u16],
-    mask: u64,
+    /// The species below each node, the particles' species and the hidden set.
+    species: Option<(&'a [u8], &'a [u16], u64)>,
+    clip: ClipPlanes,
+    file: &'a MdlodFile,
+}
+
+/// Why a particle is left out.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum LeftOut {
+    Species,
+    Clipped,
 }
 
 impl Hidden<'_> {
-    /// Node `id` holds hidden particles only.
+    fn clip_side(&self, id: usize) -> ClipSide {
+        if self.clip.is_empty() {
+            return ClipSide::Kept;
+        }
+        let Some(n) = self.file.nodes().get(id) else {
+            return ClipSide::Across;
+        };
+        // Decoded centres stray from the box by at most the quantization error.
+        let grow = self.file.metadata().max_position_error as f32;
+        let grow = if grow.is_finite() {
+            grow.max(0.0)
+        } else {
+            f32::INFINITY
+        };
+        self.clip
+            .side(Vec3::from(n.bounds_min), Vec3::from(n.bounds_max), grow)
+    }
+
+    /// Node `id` holds hidden particles only, or lies wholly beyond a clip plane.
     fn node(&self, id: usize) -> bool {
-        self.kinds.get(id) == Some(&BELOW_IN)
-    }
-
-    /// Node `id` holds hidden particles and others.
-    fn mixed(&self, id: usize) -> bool {
-        self.kinds.get(id) == Some(&(BELOW_IN | BELOW_OUT))
-    }
-
-    fn particle(&self, i: usize) -> bool {
         self.species
-            .get(i)
-            .is_some_and(|&s| in_species_set(self.mask, usize::from(s)))
+            .is_some_and(|(kinds, _, _)| kinds.get(id) == Some(&BELOW_IN))
+            || self.clip_side(id) == ClipSide::Beyond
+    }
+
+    /// Node `id` holds hidden particles and others, or lies across a clip plane.
+    fn mixed(&self, id: usize) -> bool {
+        let kind = self
+            .species
+            .and_then(|(kinds, _, _)| kinds.get(id).copied());
+        match self.clip_side(id) {
+            ClipSide::Beyond => false,
+            ClipSide::Across => kind != Some(BELOW_IN),
+            ClipSide::Kept => kind == Some(BELOW_IN | BELOW_OUT),
+        }
+    }
+
+    /// Why particle `i`, a child of node `parent`, is left out, if it is.
+    fn particle(&self, i: usize, parent: usize) -> Option<LeftOut> {
+        if self.species.is_some_and(|(_, species, mask)| {
+            species
+                .get(i)
+                .is_some_and(|&s| in_species_set(mask, usize::from(s)))
+        }) {
+            return Some(LeftOut::Species);
+        }
+        if self.clip.is_empty() {
+            return None;
+        }
+        // The centre as the GPU decodes it.
+        let file = self.file;
+        let last = file.level_count() - 1;
+        let enc = &file.nodes()[children_encoder(file, parent)];
+        let p = quantize::decode3(
+            file.positions(last).get(i),
+            enc.centroid,
+            enc.quant_scale,
+            file.position_bits(),
+        );
+        (!self.clip.keeps(Vec3::from(p))).then_some(LeftOut::Clipped)
     }
 }
 
@@ -1256,7 +1416,7 @@ fn emit(
             quant_node: 0,
         });
         list.representatives = 1;
-        list.mixed_drawn = u64::from(hidden.is_some_and(|h| h.mixed(0)));
+        count_mixed(hidden, 0, &mut list);
         list.points = 1;
         list.error_px = achieved;
         return list;
@@ -1283,12 +1443,26 @@ fn emit(
         list.occluded_nodes += part.occluded_nodes;
         list.occluded_particles += part.occluded_particles;
         list.hidden_particles += part.hidden_particles;
+        list.clipped_particles += part.clipped_particles;
         list.mixed_drawn += part.mixed_drawn;
+        list.across_drawn += part.across_drawn;
     }
     list.opened_nodes = open.len() as u64;
     list.points = list.particles + list.representatives;
     list.error_px = achieved;
     list
+}
+
+/// Counts node `id`, drawn as its representative, when it still holds hidden species
+/// or lies across a clip plane.
+fn count_mixed(hidden: Option<&Hidden<'_>>, id: usize, list: &mut DrawList) {
+    if let Some(h) = hidden {
+        list.mixed_drawn += u64::from(
+            h.species
+                .is_some_and(|(kinds, _, _)| kinds.get(id) == Some(&(BELOW_IN | BELOW_OUT))),
+        );
+        list.across_drawn += u64::from(h.clip_side(id) == ClipSide::Across);
+    }
 }
 
 /// Opened nodes per chunk of the parallel emission.
@@ -1338,8 +1512,12 @@ fn emit_node(
     };
     for (k, c) in children.enumerate() {
         let draw = if child_level == last {
-            if hidden.is_some_and(|h| h.particle(c as usize)) {
-                list.hidden_particles += 1;
+            let left_out = hidden.and_then(|h| h.particle(c as usize, id as usize));
+            if let Some(why) = left_out {
+                match why {
+                    LeftOut::Species => list.hidden_particles += 1,
+                    LeftOut::Clipped => list.clipped_particles += 1,
+                }
                 false
             } else {
                 let drawn = mask.is_none_or(|m| m >> k & 1 == 1);
@@ -1360,8 +1538,7 @@ fn emit_node(
                         list.occluded_nodes += 1;
                         false
                     } else {
-                        list.mixed_drawn +=
-                            u64::from(hidden.is_some_and(|h| h.mixed(cid as usize)));
+                        count_mixed(hidden, cid as usize, list);
                         true
                     }
                 }

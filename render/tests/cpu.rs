@@ -30,6 +30,7 @@ fn cut(f: &MdlodFile, cam: &Camera, error_px: f32, budget: u64) -> DrawList {
             occlusion: OcclusionMode::Off,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: Default::default(),
         },
     )
 }
@@ -159,6 +160,7 @@ fn a_cut_without_a_binding_budget_is_the_same_in_any_visiting_order() {
                     occlusion: OcclusionMode::Off,
                     support_scale: 0.0,
                     hidden_species: 0,
+                    clip: Default::default(),
                 };
                 let any = traverse_with(&cam, &f, &settings, &mut AllResident);
                 let ordered = traverse_with(&cam, &f, &settings, &mut Ordered);
@@ -374,6 +376,7 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
         occlusion: OcclusionMode::Off,
         support_scale: 0.0,
         hidden_species: 0,
+        clip: Default::default(),
     };
     let mut patchy = Patchy {
         level: 2,
@@ -464,6 +467,7 @@ fn the_parallel_traversal_draws_refused_nodes_and_lists_what_it_asked_largest_fi
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
         hidden_species: 0,
+        clip: Default::default(),
     };
     let on = |threads: usize| {
         rayon::ThreadPoolBuilder::new()
@@ -591,6 +595,7 @@ fn culled_and_full(
         occlusion,
         support_scale: 0.0,
         hidden_species: 0,
+        clip: Default::default(),
     };
     let all = traverse(cam, f, &settings(OcclusionMode::Off));
     let seen = traverse(cam, f, &settings(OcclusionMode::PixelCentres));
@@ -721,6 +726,7 @@ fn the_parallel_occlusion_cut_is_the_same_on_any_thread_count_and_hides_what_one
             occlusion,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: Default::default(),
         };
         let on = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
@@ -777,6 +783,7 @@ fn occlusion_traversal_meets_the_budget_by_coarsening() {
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
         hidden_species: 0,
+        clip: Default::default(),
     };
     let d = traverse(&cam, &f, &settings);
     check_counts(&f, &d);
@@ -933,6 +940,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             colour_map: map,
             attribute_range: None,
             log_scale: false,
+            clip: vec![],
         };
         let packed = pack_styled(&f, &d, PackStyle::Spheres, &style).unwrap();
         assert_eq!(packed.points(), base.points());
@@ -1038,6 +1046,7 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             occlusion,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: Default::default(),
         };
         assert_eq!(
             traverse(&cam, &lazy, &settings),
@@ -1105,6 +1114,7 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             occlusion,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: Default::default(),
         };
         let d = traverse(&cam, &f, &settings);
         wants(f.node_error().err().unwrap());
@@ -1368,6 +1378,174 @@ fn hidden_species_leave_no_cluster_holding_them() {
         };
         assert_eq!(traverse(&cam, &f, &all).points, 0);
     }
+}
+
+/// A box against clip planes: kept inside every half-space, beyond one wholly, across
+/// otherwise (grown by the quantization error); bad planes are refused with a reason.
+#[test]
+fn clip_planes_classify_boxes_and_refuse_bad_planes() {
+    use mdlod_render::{ClipPlanes, ClipSide, MAX_CLIP_PLANES};
+    let (lo, hi) = (Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0));
+    let one = |p: [f32; 4]| ClipPlanes::new(&[p]).unwrap();
+    assert_eq!(one([1.0, 0.0, 0.0, 1.5]).side(lo, hi, 0.0), ClipSide::Kept);
+    assert_eq!(
+        one([1.0, 0.0, 0.0, 0.5]).side(lo, hi, 0.0),
+        ClipSide::Across
+    );
+    assert_eq!(
+        one([-1.0, 0.0, 0.0, -1.5]).side(lo, hi, 0.0),
+        ClipSide::Beyond
+    );
+    // The growth reaches across: a box just short of the plane is across it.
+    assert_eq!(
+        one([1.0, 0.0, 0.0, 1.05]).side(lo, hi, 0.1),
+        ClipSide::Across
+    );
+    // An oblique normal: the corner (1, 2, 3) has n·p = 6, the origin 0.
+    assert_eq!(one([1.0, 1.0, 1.0, 6.5]).side(lo, hi, 0.0), ClipSide::Kept);
+    assert_eq!(
+        one([1.0, 1.0, 1.0, 3.0]).side(lo, hi, 0.0),
+        ClipSide::Across
+    );
+    assert_eq!(
+        one([-1.0, -1.0, -1.0, -6.5]).side(lo, hi, 0.0),
+        ClipSide::Beyond
+    );
+    // Beyond one of two planes is beyond.
+    let two = ClipPlanes::new(&[[1.0, 0.0, 0.0, 0.5], [0.0, 0.0, 1.0, -1.0]]).unwrap();
+    assert_eq!(two.side(lo, hi, 0.0), ClipSide::Beyond);
+    assert!(two.keeps(Vec3::new(0.2, 5.0, -2.0)) && !two.keeps(Vec3::new(0.2, 5.0, 0.0)));
+    assert!(ClipPlanes::new(&[]).unwrap().keeps(Vec3::splat(1e30)));
+    for bad in [
+        [0.0, 0.0, 0.0, 1.0],
+        [f32::NAN, 1.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0, f32::INFINITY],
+    ] {
+        assert!(ClipPlanes::new(&[bad])
+            .unwrap_err()
+            .contains("non-zero normal"));
+    }
+    let many = vec![[1.0, 0.0, 0.0, 0.0]; MAX_CLIP_PLANES + 1];
+    assert!(ClipPlanes::new(&many).unwrap_err().contains("at most 6"));
+}
+
+/// Clip planes cut the data away as OVITO's Slice does: the cut draws exactly the
+/// particles whose decoded centres every plane keeps (each once), no cluster across or
+/// beyond a plane, at any error and whether occlusion culling was asked for; a budget
+/// that stops the refinement counts the clusters it left across a plane.
+#[test]
+fn clip_planes_keep_exactly_the_particles_on_their_side() {
+    use mdlod_render::{ClipPlanes, ClipSide};
+    let (_d, _p, f) = make_file(&cloud_frame(4000, 5), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let last = f.level_count() - 1;
+    // Every particle's centre as the GPU decodes it, from a cut of every particle.
+    let every = cut(&f, &cam, 0.0, u64::MAX);
+    assert_eq!(every.particles, f.particle_count());
+    let mut centre = vec![Vec3::ZERO; f.particle_count() as usize];
+    for ((level, i), c, _) in drawn_spheres(&f, &every) {
+        assert_eq!(level as usize, last);
+        centre[i as usize] = c;
+    }
+    let b = mdlod_render::data_bounds(&f);
+    let mid = (b.min + b.max) / 2.0;
+    let span = b.max - b.min;
+    let planes = [
+        // A half: x ≤ the middle.
+        vec![[1.0, 0.0, 0.0, mid.x]],
+        // A slab a fifth of the box thick, across y, by two facing planes.
+        vec![
+            [0.0, 1.0, 0.0, mid.y + 0.1 * span.y],
+            [0.0, -1.0, 0.0, -(mid.y - 0.1 * span.y)],
+        ],
+        // An oblique corner cut away.
+        vec![[1.0, 1.0, 1.0, mid.x + mid.y + mid.z + 0.2 * span.x]],
+    ];
+    let cluster_sides = |clip: &ClipPlanes, d: &DrawList| {
+        let grow = f.metadata().max_position_error as f32;
+        let mut across = 0;
+        for r in d.ranges.iter().filter(|r| (r.level as usize) < last) {
+            for i in r.first..r.first + r.count {
+                let n = &f.nodes()[f.levels()[r.level as usize].node_first as usize + i as usize];
+                let side = clip.side(Vec3::from(n.bounds_min), Vec3::from(n.bounds_max), grow);
+                assert_ne!(side, ClipSide::Beyond, "a cluster beyond is drawn");
+                across += u64::from(side == ClipSide::Across);
+            }
+        }
+        across
+    };
+    for planes in &planes {
+        let clip = ClipPlanes::new(planes).unwrap();
+        let kept: Vec<bool> = centre.iter().map(|&c| clip.keeps(c)).collect();
+        let n_kept = kept.iter().filter(|&&k| k).count();
+        assert!(n_kept > 200 && n_kept < 3800, "{planes:?}: {n_kept} kept");
+        for (error, occlusion) in [
+            (0.0f32, OcclusionMode::Off),
+            (6.0, OcclusionMode::Off),
+            (40.0, OcclusionMode::PixelCentres),
+        ] {
+            let settings = TraversalSettings {
+                viewport: VIEWPORT,
+                error_px: error,
+                budget_points: u64::MAX,
+                occlusion,
+                clip,
+                ..Default::default()
+            };
+            let d = traverse(&cam, &f, &settings);
+            check_counts(&f, &d);
+            assert_eq!(cluster_sides(&clip, &d), 0, "{planes:?} error {error}");
+            assert_eq!(d.across_drawn, 0);
+            let cover = coverage(&f, &d);
+            for (i, &c) in cover.iter().enumerate() {
+                assert_eq!(
+                    c,
+                    u32::from(kept[i]),
+                    "{planes:?} error {error}: particle {i}"
+                );
+            }
+            // Particles cut away from the clusters opened across a plane are counted.
+            for r in d.ranges.iter().filter(|r| r.level as usize == last) {
+                for i in r.first..r.first + r.count {
+                    assert!(kept[i as usize]);
+                }
+            }
+            assert!(d.clipped_particles > 0 && d.clipped_particles <= (4000 - n_kept) as u64);
+            // A budget the cut reaches: met, every kept particle still covered once, the
+            // clusters left across a plane counted.
+            let budget = d.points / 3;
+            let limited = traverse(
+                &cam,
+                &f,
+                &TraversalSettings {
+                    budget_points: budget,
+                    ..settings
+                },
+            );
+            check_counts(&f, &limited);
+            assert!(limited.points <= budget && limited.budget_limited);
+            assert_eq!(limited.across_drawn, cluster_sides(&clip, &limited));
+            for (i, &c) in coverage(&f, &limited).iter().enumerate() {
+                assert!(
+                    c == 1 || !kept[i] && c == 0,
+                    "budget: particle {i} covered {c}"
+                );
+            }
+        }
+    }
+    // Without planes nothing is cut away.
+    let plain = traverse(
+        &cam,
+        &f,
+        &TraversalSettings {
+            viewport: VIEWPORT,
+            error_px: 6.0,
+            occlusion: OcclusionMode::Off,
+            ..Default::default()
+        },
+    );
+    assert_eq!((plain.clipped_particles, plain.across_drawn), (0, 0));
+    assert!(coverage(&f, &plain).iter().all(|&c| c == 1));
 }
 
 /// A fitted view frames the material, not the lost atoms flying off it: particles far

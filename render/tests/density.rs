@@ -68,6 +68,7 @@ fn all_points(f: &MdlodFile, camera: &Camera, w: u32, h: u32) -> mdlod_render::D
             occlusion: OcclusionMode::Off,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: Default::default(),
         },
     )
 }
@@ -219,6 +220,7 @@ fn kernels_reaching_into_the_view_from_outside_it_add_their_density() {
                 occlusion: OcclusionMode::Off,
                 support_scale,
                 hidden_species: 0,
+                clip: Default::default(),
             },
         )
     };
@@ -709,6 +711,7 @@ fn coarse_cuts_keep_the_volume_fraction_of_their_particles() {
                 occlusion: OcclusionMode::Off,
                 support_scale: s.kernel_scale,
                 hidden_species: 0,
+                clip: Default::default(),
             },
         );
         assert!(draw.representatives > 100, "{error_px} px");
@@ -761,6 +764,7 @@ fn culling_keeps_every_cluster_whose_kernel_reaches_the_view() {
                 occlusion: OcclusionMode::Off,
                 support_scale,
                 hidden_species: 0,
+                clip: Default::default(),
             },
         )
     };

@@ -64,6 +64,7 @@ fn cut(
             occlusion,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: Default::default(),
         },
     )
 }
@@ -82,6 +83,7 @@ fn render_all(f: &MdlodFile, camera: &Camera, w: u32, h: u32, spp: u32) -> Rende
             occlusion: OcclusionMode::Off,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: Default::default(),
         },
     );
     renderer()
@@ -843,6 +845,7 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
                 occlusion: OcclusionMode::PixelCentres,
                 support_scale: 0.0,
                 hidden_species: 0,
+                clip: Default::default(),
             };
             let (frame, draw, stats, frames) =
                 converge(&mut unlimited, &camera, &traversal, &settings);
@@ -948,6 +951,7 @@ fn a_tight_pool_under_a_binding_budget_settles_on_the_direct_image() {
             occlusion,
             support_scale: 0.0,
             hidden_species: 0,
+            clip: Default::default(),
         };
         let used = {
             let mut unlimited =
@@ -1035,6 +1039,7 @@ fn a_corrupt_page_is_an_error_naming_the_particle_and_the_pool_stays_whole() {
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
         hidden_species: 0,
+        clip: Default::default(),
     };
     let camera = camera_for(&f, &whole, w, h).unwrap();
     let mut error = None;

@@ -94,7 +94,6 @@ pub fn run(args: Args) -> Result<()> {
         kernel_scale: 2.5,
         density_max: 0.8,
         absorption: 0.5,
-        clip: None,
         opacity: 0.8,
         sort: super::render::SortArg::Clusters,
         iterations: 16,
@@ -110,6 +109,7 @@ pub fn run(args: Args) -> Result<()> {
             hide_species: vec![],
             attribute_range: None,
             log_scale: false,
+            clip: vec![],
         },
         save_view: None,
     })?;

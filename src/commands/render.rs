@@ -75,10 +75,6 @@ pub struct Args {
     /// density mode: absorption, opacity per reference radius of path at the top density.
     #[arg(long, default_value_t = 0.5)]
     pub absorption: f32,
-    /// density and iso modes: keep only samples with n·p ≤ d, given as nx,ny,nz,d (world
-    /// units); particles beyond the plane still add density inside it.
-    #[arg(long, value_name = "NX,NY,NZ,D", value_parser = parse_plane, allow_hyphen_values = true)]
-    pub clip: Option<[f32; 4]>,
     /// sndf mode: jittered rays per pixel accumulated into the S-NDFs.
     #[arg(long, default_value_t = 16)]
     pub iterations: u32,
@@ -154,6 +150,15 @@ pub struct StyleArgs {
     /// below its top.
     #[arg(long)]
     pub log_scale: bool,
+    /// Cut the data away beyond a plane, as OVITO's Slice: keep the particles whose
+    /// centres p have n·p ≤ d, given as nx,ny,nz,d (world units, as `mdlod info` gives
+    /// the box); repeatable (two facing planes keep a slab, up to 6). Clusters across a
+    /// plane are refined down to particles, so the cut face is exact. The camera is
+    /// unchanged: look from the cut side (n·eye > d) to see the face. The density and
+    /// iso modes take one plane and clip their samples instead: particles beyond it
+    /// still add density inside it.
+    #[arg(long, value_name = "NX,NY,NZ,D", value_parser = parse_plane, allow_hyphen_values = true)]
+    pub clip: Vec<[f32; 4]>,
 }
 
 /// Parses `MIN:MAX` (finite, MAX above MIN).
@@ -238,6 +243,7 @@ impl StyleArgs {
             radius_scale: self.radius_scale,
             attribute_range: self.attribute_range,
             log_scale: self.log_scale,
+            clip: self.clip.clone(),
             colour_map: self.colour_map.map(|m| match m {
                 ColourMapArg::Viridis => ColourMap::Viridis,
                 ColourMapArg::Magma => ColourMap::Magma,
@@ -355,7 +361,6 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("iso_value", &[Iso]),
         ("slices", VOLUME),
         ("kernel_scale", VOLUME),
-        ("clip", VOLUME),
         ("density_max", &[Density]),
         ("absorption", &[Density]),
         ("iterations", &[Sndf]),
@@ -598,14 +603,30 @@ pub fn run(args: Args) -> Result<()> {
                     kernel_scale: args.kernel_scale,
                     density_max: args.density_max,
                     opacity: args.absorption,
-                    clip: args.clip,
+                    clip: match args.style.clip[..] {
+                        [] => None,
+                        [plane] => Some(plane),
+                        _ => anyhow::bail!(
+                            "--mode {} takes one --clip plane ({} given): the volume's \
+                             samples are clipped by one plane",
+                            mode_name(args.mode),
+                            args.style.clip.len()
+                        ),
+                    },
                 })
             }
         },
         exposure: args.exposure,
         gpu_memory: args.gpu_memory,
         occlusion: !args.no_occlusion,
-        style: args.style.style()?,
+        style: {
+            let mut style = args.style.style()?;
+            // The volume modes clip their samples (DensitySettings::clip), not the points.
+            if matches!(args.mode, Mode::Density | Mode::Iso) {
+                style.clip.clear();
+            }
+            style
+        },
         fit_all: args.fit_all,
         ..Default::default()
     };
@@ -748,6 +769,21 @@ pub fn run(args: Args) -> Result<()> {
                  can be left out of clusters); --screen-error 0 draws particles only"
             );
         }
+        if r.clusters_across > 0 {
+            let (s, is, pronoun) = match r.clusters_across {
+                1 => ("", "is", "it"),
+                _ => ("s", "are", "them"),
+            };
+            println!(
+                "  note: {} {}{s} across a --clip plane {is} drawn whole: the point budget \
+                 stopped refining {pronoun}; a larger --budget refines {pronoun}",
+                r.clusters_across,
+                point_noun(args.mode).trim_end_matches('s'),
+            );
+        }
+    }
+    if let Some(note) = clip_side_note(&opts.style.clip, &r.camera) {
+        println!("{note}");
     }
     let gpu = r.gpu_time.map_or(String::new(), |t| {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)
@@ -997,17 +1033,47 @@ fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
     ))
 }
 
-/// After the particle count: how many particles of hidden species were left out.
+/// After the particle count: how many particles of hidden species, or cut away by the
+/// clip planes, were left out.
 fn hidden_text(r: &mdlod_render::RenderReport) -> String {
+    let mut parts = vec![];
     if r.particles_hidden > 0 {
-        format!(
-            " (and {} of hidden species left out of the clusters drawn; clusters of them only \
-             are left out whole)",
+        parts.push(format!(
+            "{} of hidden species left out of the clusters drawn; clusters of them only are \
+             left out whole",
             r.particles_hidden
-        )
-    } else {
-        String::new()
+        ));
     }
+    if r.particles_clipped > 0 {
+        parts.push(format!(
+            "{} cut away by --clip from the clusters across it; clusters beyond it are left \
+             out whole",
+            r.particles_clipped
+        ));
+    }
+    match parts.is_empty() {
+        true => String::new(),
+        false => format!(" (and {})", parts.join("; ")),
+    }
+}
+
+/// A note when the camera looks at a clip plane from the side it keeps: the cut face
+/// then faces away, hidden behind the material kept (`n·eye ≤ d`).
+fn clip_side_note(planes: &[[f32; 4]], camera: &mdlod_render::Camera) -> Option<String> {
+    let eye = camera.eye();
+    let behind: Vec<String> = planes
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| mdlod_render::glam::Vec3::new(c[0], c[1], c[2]).dot(eye) <= c[3])
+        .map(|(k, c)| format!("{} ({},{},{},{})", k + 1, c[0], c[1], c[2], c[3]))
+        .collect();
+    (!behind.is_empty()).then(|| {
+        format!(
+            "  note: the camera is on the kept side of --clip plane {} (n·eye ≤ d): its cut \
+             face looks away; view it from the side cut away (e.g. --azimuth turned by 180)",
+            behind.join(", ")
+        )
+    })
 }
 
 /// The points of a file's coarsest level below its top node.
