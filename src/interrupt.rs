@@ -30,6 +30,20 @@ static TARGETS: Mutex<Vec<(PathBuf, Option<PathBuf>)>> = Mutex::new(Vec::new());
 /// What the interrupted command adds to its last line (what was kept, how to go on).
 static SAYING: Mutex<Option<String>> = Mutex::new(None);
 
+/// What the interrupted command still does before it exits (a batch writes the
+/// manifest of the frames it finished).
+type Hook = Box<dyn Fn() + Send>;
+static HOOKS: Mutex<Vec<Hook>> = Mutex::new(Vec::new());
+
+/// Runs `hook` on Ctrl-C or SIGTERM, after the working files are removed and before
+/// the program exits (a handler must be installed by [`remove_on_interrupt`]).
+pub fn on_interrupt_run(hook: impl Fn() + Send + 'static) {
+    HOOKS
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push(Box::new(hook));
+}
+
 /// Sets what the message of an interrupted run adds (see [`remove_on_interrupt`]).
 pub fn on_interrupt_say(text: impl Into<String>) {
     *SAYING.lock().unwrap_or_else(|e| e.into_inner()) = Some(text.into());
@@ -60,6 +74,9 @@ pub fn remove_on_interrupt(work_dir: &Path, output: Option<&Path>) {
                 if let Some(out) = output {
                     remove_partial(out);
                 }
+            }
+            for hook in HOOKS.lock().unwrap_or_else(|e| e.into_inner()).iter() {
+                hook();
             }
             let saying = SAYING.lock().unwrap_or_else(|e| e.into_inner());
             match saying.as_deref() {

@@ -576,6 +576,7 @@ fn killing_a_batch_at_any_moment_leaves_only_complete_frames_and_a_true_manifest
         ("INT", 250),
         ("KILL", 400),
         ("INT", 500),
+        ("TERM", 550),
         ("KILL", 600),
     ] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
@@ -4191,6 +4192,23 @@ fn log_scales_ranges_and_fits_that_mean_nothing_are_refused_or_explained() {
     let out = ok(&run(&vx, &png, &["--colour-map", "viridis", "--log-scale"]));
     assert!(
         out.contains("note: vx takes values below 0 (down to -3)"),
+        "{out}"
+    );
+    // No value above 0: the scale stays linear, said once, with no note on a log scale.
+    let out = ok(&run(
+        &vx,
+        &png,
+        &[
+            "--colour-map",
+            "viridis",
+            "--log-scale",
+            "--attribute-range",
+            "-3:-1",
+        ],
+    ));
+    assert!(
+        out.contains("linear (--log-scale left unused: no value of the range is above 0")
+            && !out.contains("on a log scale"),
         "{out}"
     );
     let out = ok(&run(

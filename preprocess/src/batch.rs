@@ -44,7 +44,8 @@
 //!    once a second ([`MANIFEST_INTERVAL`]) and once at the end, listing only complete
 //!    ones: killing a batch at any moment leaves no file that looks complete and a
 //!    manifest that is true (it may miss the frames of its last second, which a rerun
-//!    finds complete and lists).
+//!    finds complete and lists). A handler of SIGTERM (a scheduler's time limit) or
+//!    Ctrl-C lists those too before the program exits, through a [`ManifestHandle`].
 
 use std::fmt::Display;
 use std::path::{Path, PathBuf};
@@ -137,6 +138,47 @@ pub struct BatchOptions {
     pub max_jobs: Option<usize>,
     /// What to do with frames of one timestep (a run restarted into the same dump).
     pub duplicates: Duplicates,
+    /// Through this, a handler of SIGTERM (a scheduler's time limit) or Ctrl-C writes
+    /// the manifest of the frames completed so far before the program exits
+    /// ([`ManifestHandle::save_now`]).
+    pub handle: Option<ManifestHandle>,
+    /// Least time between two rewrites of the manifest while frames are converted
+    /// (default [`MANIFEST_INTERVAL`]).
+    pub manifest_interval: Option<std::time::Duration>,
+}
+
+/// The manifest of a running batch, for an interruption handler to write at once: the
+/// batch rewrites it at most every [`MANIFEST_INTERVAL`], so frames of the last second
+/// before an interruption would otherwise go unlisted until a rerun.
+#[derive(Clone, Default)]
+pub struct ManifestHandle(std::sync::Arc<ManifestSlot>);
+
+/// Where the running batch keeps its manifest, and the manifest's path.
+type ManifestSlot = Mutex<Option<(PathBuf, std::sync::Arc<Mutex<Manifest>>)>>;
+
+impl std::fmt::Debug for ManifestHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ManifestHandle")
+    }
+}
+
+impl ManifestHandle {
+    /// Writes the running batch's manifest as it is now (complete frames only); `false`
+    /// when no batch is running with this handle.
+    pub fn save_now(&self) -> Result<bool, BatchError> {
+        let slot = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let Some((path, manifest)) = slot.as_ref() else {
+            return Ok(false);
+        };
+        let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
+        m.frames.sort_by_key(|f| f.timestep);
+        write_json(path, &*m)?;
+        Ok(true)
+    }
+
+    fn set(&self, value: Option<(PathBuf, std::sync::Arc<Mutex<Manifest>>)>) {
+        *self.0.lock().unwrap_or_else(|e| e.into_inner()) = value;
+    }
 }
 
 /// What a batch does with frames that have the same timestep (in the order the inputs
@@ -1170,12 +1212,25 @@ pub fn batch(
         })
         .collect();
     let skipped = done.len();
-    let manifest = Mutex::new(Manifest {
+    let manifest = std::sync::Arc::new(Mutex::new(Manifest {
         mdlod_dataset: 1,
         shard: opts.shard.map(|(i, n)| [i, n]),
         expected_frames: Some((frames_in_shard - empty.len()) as u64),
         frames: done,
-    });
+    }));
+    // Unset again when the batch returns, however it returns.
+    struct Unset<'a>(Option<&'a ManifestHandle>);
+    impl Drop for Unset<'_> {
+        fn drop(&mut self) {
+            if let Some(h) = self.0 {
+                h.set(None);
+            }
+        }
+    }
+    let _unset = Unset(opts.handle.as_ref());
+    if let Some(h) = &opts.handle {
+        h.set(Some((manifest_path.clone(), manifest.clone())));
+    }
     let save = |m: &mut Manifest| -> Result<(), BatchError> {
         m.frames.sort_by_key(|f| f.timestep);
         write_json(&manifest_path, m)
@@ -1331,7 +1386,7 @@ pub fn batch(
                 let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
                 m.frames.push(entry);
                 let mut at = saved_at.lock().unwrap_or_else(|e| e.into_inner());
-                if at.elapsed() < MANIFEST_INTERVAL {
+                if at.elapsed() < opts.manifest_interval.unwrap_or(MANIFEST_INTERVAL) {
                     return Ok(());
                 }
                 save(&mut m)?;
@@ -1516,10 +1571,21 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         ));
     }
     let present: Vec<u32> = shards.iter().map(|s| s.0).collect();
-    if let Some(missing) = (0..n).find(|i| !present.contains(i)) {
+    let missing: Vec<String> = (0..n)
+        .filter(|i| !present.contains(i))
+        .map(|i| i.to_string())
+        .collect();
+    if !missing.is_empty() {
+        let (s, has) = match missing.len() {
+            1 => ("", "has"),
+            _ => ("s", "have"),
+        };
         return Err(manifest_err(
             out_dir,
-            format!("shard {missing} of {n} has no manifest yet (present: {present:?})"),
+            format!(
+                "shard{s} {} of {n} {has} no manifest yet (present: {present:?})",
+                missing.join(", ")
+            ),
         ));
     }
     let mut frames = Vec::new();

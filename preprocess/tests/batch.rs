@@ -124,8 +124,12 @@ fn shards_merge_into_the_manifest_of_an_unsharded_run() {
         let o = shard(i, 4);
         let r = batch(std::slice::from_ref(&src), &sharded, &o, &NoProgress).unwrap();
         counts.push(r.frames_in_shard);
+        // Not all shards yet: every missing one is named.
+        if i == 1 {
+            let e = merge(&sharded).unwrap_err().to_string();
+            assert!(e.contains("shards 2, 3 of 4 have no manifest"), "{e}");
+        }
         if i == 2 {
-            // Not all shards yet.
             let e = merge(&sharded).unwrap_err().to_string();
             assert!(e.contains("shard 3 of 4 has no manifest"), "{e}");
         }
@@ -1488,4 +1492,64 @@ fn a_note_of_some_frames_names_their_timesteps() {
         .find(|n| n.contains("box lengths outside"))
         .unwrap();
     assert!(note.ends_with("(timestep 100)"), "{note}");
+}
+
+/// Between the manifest's rewrites (at most once a second, here once an hour) the frames
+/// finished are listed by [`ManifestHandle::save_now`], which a handler of SIGTERM (a
+/// scheduler's time limit) calls before the program exits: the manifest then lists every
+/// frame finished, and only complete ones.
+#[test]
+fn a_manifest_handle_lists_the_frames_finished_between_rewrites() {
+    use mdlod_preprocess::batch::ManifestHandle;
+    use std::sync::Mutex;
+    struct SaveAfter {
+        handle: ManifestHandle,
+        dir: PathBuf,
+        converting: std::sync::atomic::AtomicBool,
+        done: std::sync::atomic::AtomicUsize,
+        seen: Mutex<Option<(usize, bool, usize)>>,
+    }
+    impl mdlod_preprocess::Progress for SaveAfter {
+        fn stage(&self, name: &str, _total: Option<u64>, _unit: &'static str) {
+            self.converting.store(
+                name.starts_with("converting"),
+                std::sync::atomic::Ordering::SeqCst,
+            );
+        }
+        fn advance(&self, _amount: u64) {
+            use std::sync::atomic::Ordering::SeqCst;
+            if !self.converting.load(SeqCst) || self.done.fetch_add(1, SeqCst) + 1 != 3 {
+                return;
+            }
+            // Three frames finished: the manifest on disk lists none yet.
+            let before = read_manifest(&self.dir).unwrap().frames.len();
+            let saved = self.handle.save_now().unwrap();
+            let after = read_manifest(&self.dir).unwrap();
+            check_manifest(&self.dir, &after);
+            *self.seen.lock().unwrap() = Some((before, saved, after.frames.len()));
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    let handle = ManifestHandle::default();
+    let progress = SaveAfter {
+        handle: handle.clone(),
+        dir: out.clone(),
+        converting: false.into(),
+        done: 0.into(),
+        seen: Mutex::new(None),
+    };
+    let o = BatchOptions {
+        handle: Some(handle.clone()),
+        manifest_interval: Some(std::time::Duration::from_secs(3600)),
+        max_jobs: Some(1),
+        ..opts()
+    };
+    let r = batch(std::slice::from_ref(&src), &out, &o, &progress).unwrap();
+    assert_eq!(r.converted, 6);
+    assert_eq!(*progress.seen.lock().unwrap(), Some((0, true, 3)));
+    // The batch is over: the handle has nothing to write.
+    assert!(!handle.save_now().unwrap());
+    assert_eq!(read_manifest(&out).unwrap().frames.len(), 6);
 }

@@ -315,6 +315,17 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         "the frames finished are kept, and a rerun of the same command converts only the rest",
     );
     convert.chunks.temp_dir = Some(work.path().to_path_buf());
+    // A scheduler's time limit (SIGTERM) or Ctrl-C: the manifest lists every frame
+    // finished, also those of the last second, which the batch had yet to write.
+    let handle = mdlod_preprocess::batch::ManifestHandle::default();
+    crate::interrupt::on_interrupt_run({
+        let handle = handle.clone();
+        move || {
+            if let Err(e) = handle.save_now() {
+                eprintln!("could not write the manifest of the frames finished: {e}");
+            }
+        }
+    });
     let opts = BatchOptions {
         convert,
         read,
@@ -328,6 +339,8 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             DuplicatesArg::First => mdlod_preprocess::batch::Duplicates::First,
             DuplicatesArg::Last => mdlod_preprocess::batch::Duplicates::Last,
         },
+        handle: Some(handle),
+        manifest_interval: None,
     };
     let report = with_threads(args.threads, || batch(&inputs, out, &opts, &Bar::new()))??;
     if let Some(merged) = &report.removed_merged {

@@ -709,7 +709,11 @@ pub fn run(args: Args) -> Result<()> {
                 a.name,
                 log_text(a, &opts.style, &args) + &white_text(&opts.style)
             );
-            if opts.style.log_scale && !projected(&args) && a.min < 0.0 {
+            if opts.style.log_scale
+                && !projected(&args)
+                && a.min < 0.0
+                && log_applies(a, &opts.style)
+            {
                 let fate = if args.mode == Mode::Splat {
                     "give no light"
                 } else {
@@ -992,8 +996,18 @@ fn log_text(
             mdlod_render::style::AttributeScale::LOG_DECADES,
             hi as f32,
         ),
-        None => ", linear: a log scale needs values above 0".to_string(),
+        None => ", linear (--log-scale left unused: no value of the range is above 0, and a \
+                  log scale shows only those)"
+            .to_string(),
     }
+}
+
+/// The attribute's range has values above 0, so `--log-scale` maps their logarithm.
+fn log_applies(a: &mdlod_format::meta::AttributeInfo, style: &mdlod_render::PointStyle) -> bool {
+    mdlod_render::style::AttributeScale::with_range(a, style.attribute_range)
+        .with_log(true)
+        .log_range()
+        .is_some()
 }
 
 /// Where a diverging map's white falls when a range given puts it off 0 (cool-warm over
