@@ -2762,6 +2762,84 @@ fn clip_planes_cut_the_particles_away() {
     assert!(err.contains("non-zero normal"), "{err}");
 }
 
+/// `--legend` writes what the colours mean as SVG: the colour map's bar over the range
+/// shown (a movie's: every frame's), the species shown in their colours, the density's
+/// transfer function; a name that is no SVG is refused before anything is drawn.
+#[test]
+fn a_legend_says_what_the_colours_mean() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let file = dir.path().join("m.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file), "--attribute", "c_pe"]);
+    let png = dir.path().join("m.png");
+    let svg = dir.path().join("m.svg");
+    let render = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--legend",
+            s(&svg),
+        ];
+        args.extend_from_slice(extra);
+        let out = ok(&args);
+        (out, std::fs::read_to_string(&svg).unwrap())
+    };
+    let (out, bar) = render(&["--colour-map", "viridis", "--attribute-range", "-4:-2"]);
+    assert!(
+        out.contains("legend written to") && out.contains("the colour map over c_pe"),
+        "{out}"
+    );
+    assert!(
+        bar.starts_with("<svg") && bar.contains(">c_pe</text>"),
+        "{bar}"
+    );
+    assert!(
+        bar.contains(">-4</text>") && bar.contains(">-2</text>") && bar.contains(">-3.0</text>"),
+        "{bar}"
+    );
+    let (_, key) = render(&["--species-colour", "1=#ff0000"]);
+    assert!(
+        key.contains(r##"fill="#ff0000""##) && key.contains(">1</text>"),
+        "{key}"
+    );
+    let (_, density) = render(&["--mode", "density"]);
+    assert!(density.contains("volume fraction"), "{density}");
+    // A movie writes one legend, over every frame's range.
+    let d = dir.path().join("m.d");
+    ok(&["batch", s(&input), "-o", s(&d), "--attribute", "c_pe"]);
+    let pattern = dir.path().join("f-%d.png");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&pattern),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--colour-map",
+        "magma",
+        "--legend",
+        s(&svg),
+    ]);
+    assert_eq!(out.matches("legend written to").count(), 1, "{out}");
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--legend",
+        s(&dir.path().join("l.png")),
+    ]);
+    assert!(e.contains("name it .svg"), "{e}");
+}
+
 /// Hidden species leave the clusters too: at a coarse error, no pixel takes a hidden
 /// species' colour (mixed clusters are refined until they hold none). Clusters recoloured
 /// only approximately (more than four species) are reported.

@@ -35,6 +35,7 @@ pub mod context;
 pub mod density;
 pub mod error;
 pub mod image;
+pub mod legend;
 pub mod occlusion;
 pub mod passes;
 pub mod renderer;

@@ -112,6 +112,7 @@ pub fn run(args: Args) -> Result<()> {
             clip: vec![],
         },
         save_view: None,
+        legend: None,
     })?;
     Ok(())
 }

@@ -111,6 +111,11 @@ pub struct Args {
     /// Write the camera used as a view file.
     #[arg(long)]
     pub save_view: Option<PathBuf>,
+    /// Write what the image's colours mean as an SVG, for a figure: the colour map's bar
+    /// (its range, round ticks, log scale), the density volume's transfer function, or a
+    /// key of the species shown in their colours. A movie or turntable writes one.
+    #[arg(long, value_name = "FILE.svg")]
+    pub legend: Option<PathBuf>,
 }
 
 /// The points' look, shared by `render` and `sample` (sphere and S-NDF modes).
@@ -549,6 +554,15 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
+    if let Some(p) = &args.legend {
+        super::check_output("--legend", p, &inputs)?;
+        if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg")) {
+            anyhow::bail!(
+                "--legend {}: the legend is written as SVG: name it .svg",
+                p.display()
+            );
+        }
+    }
     let view = args.camera.spec();
     if args.fit_all && !view_fits(&view) {
         anyhow::bail!(
@@ -866,6 +880,93 @@ pub fn run(args: Args) -> Result<()> {
             .with_context(|| format!("cannot write {}", p.display()))?;
         println!("  view saved to {}", p.display());
     }
+    write_legend(
+        &args,
+        &opts,
+        file.metadata().attribute.as_ref(),
+        species,
+        r.light_range,
+    )?;
+    Ok(())
+}
+
+/// Writes `--legend`: the bar of the colour map over the attribute (`attribute`, as
+/// `opts` shows it) or over a projection's light (`light_range`), the density volume's
+/// transfer function, or a key of the species shown (`species`) in the colours drawn.
+fn write_legend(
+    args: &Args,
+    opts: &RenderOptions,
+    attribute: Option<&mdlod_format::meta::AttributeInfo>,
+    species: &[mdlod_format::meta::Species],
+    light_range: Option<[f32; 2]>,
+) -> Result<()> {
+    use mdlod_render::legend;
+    let Some(path) = &args.legend else {
+        return Ok(());
+    };
+    let map = opts.style.colour_map;
+    let (svg, what) = match (args.mode, map, attribute) {
+        (Mode::Density, _, _) => (
+            legend::density_bar(args.density_max),
+            "the volume fraction's colours".to_string(),
+        ),
+        (Mode::Splat, Some(map), _) => {
+            let title = match (args.intensity, attribute) {
+                (Intensity::Attribute, Some(a)) => format!("projected {}", a.name),
+                _ => "projected flux".to_string(),
+            };
+            let Some(range) = light_range else {
+                anyhow::bail!(
+                    "--legend {}: the image has no light to map (nothing drawn)",
+                    path.display()
+                );
+            };
+            (
+                legend::light_bar(map, &title, range, opts.style.log_scale),
+                format!("the colour map over the {title}"),
+            )
+        }
+        (Mode::Spheres | Mode::Sndf, Some(map), Some(a)) => {
+            let scale =
+                mdlod_render::style::AttributeScale::with_range(a, opts.style.attribute_range)
+                    .with_log(opts.style.log_scale);
+            let range = opts.style.attribute_range.unwrap_or([a.min, a.max]);
+            (
+                legend::colour_bar(map, &scale, &a.name, range),
+                format!("the colour map over {}", a.name),
+            )
+        }
+        _ => {
+            // Spheres and S-NDFs draw the style's colours; splats and the iso-surface
+            // the file's.
+            let styled = matches!(args.mode, Mode::Spheres | Mode::Sndf);
+            let table = opts.style.species_table(species).ok();
+            let shown: Vec<(String, [f32; 3])> = species
+                .iter()
+                .enumerate()
+                .filter(|(_, s)| {
+                    !opts
+                        .style
+                        .species
+                        .iter()
+                        .any(|st| st.name == s.name && st.hidden)
+                })
+                .map(|(i, s)| {
+                    let colour = match (&table, styled) {
+                        (Some(t), true) => [t[i][0], t[i][1], t[i][2]],
+                        _ => s.colour,
+                    };
+                    (s.name.clone(), colour)
+                })
+                .collect();
+            (
+                legend::species_key(&shown),
+                format!("{} species in their colours", shown.len()),
+            )
+        }
+    };
+    std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))?;
+    println!("  legend written to {} ({what})", path.display());
     Ok(())
 }
 
@@ -1275,6 +1376,17 @@ fn render_turntable(
             .with_context(|| format!("cannot write {}", p.display()))?;
         println!("  the first view saved to {}", p.display());
     }
+    if args.legend.is_some() {
+        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let meta = file.metadata();
+        write_legend(
+            args,
+            &opts,
+            meta.attribute.as_ref(),
+            &meta.species,
+            opts.light_range,
+        )?;
+    }
     Ok(())
 }
 
@@ -1532,6 +1644,16 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             .with_context(|| format!("cannot write {}", p.display()))?;
         println!("  view saved to {}", p.display());
     }
+    // The movie's range (every frame's, or the one given) and its names' looks.
+    // The user's styles over the names' looks (each frame's own styles were for it).
+    opts.style.species = style.species;
+    write_legend(
+        args,
+        &opts,
+        attribute.flatten().as_ref(),
+        &looks,
+        opts.light_range,
+    )?;
     Ok(())
 }
 
