@@ -2840,6 +2840,83 @@ fn a_legend_says_what_the_colours_mean() {
     assert!(e.contains("name it .svg"), "{e}");
 }
 
+/// `--cell` draws the simulation cell's edges over the picture, in a colour given or one
+/// that contrasts with the background; a file without a cell says so, and the S-NDF
+/// mode, which shades no depth to hide edges behind, refuses it.
+#[test]
+fn the_cell_is_drawn_over_the_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("lj.mdlod");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("lj_triclinic.custom.bin")),
+        "-o",
+        s(&file),
+    ]);
+    let png = dir.path().join("c.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "96",
+            "--height",
+            "72",
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        read_png(&png).2
+    };
+    // Pixels mostly of the line's colour (its edges are antialiased).
+    let near = |rgba: &[u8], c: [u8; 3]| {
+        rgba.chunks(4)
+            .filter(|p| (0..3).all(|k| p[k].abs_diff(c[k]) < 60))
+            .count()
+    };
+    let plain = render(&[]);
+    let green = render(&["--cell", "#00ff00"]);
+    assert_eq!(near(&plain, [0, 255, 0]), 0);
+    assert!(
+        near(&green, [0, 255, 0]) > 60,
+        "{}",
+        near(&green, [0, 255, 0])
+    );
+    // Default: dark grey on the white background.
+    let grey = render(&["--cell"]);
+    assert!(near(&grey, [51, 51, 51]) > near(&plain, [51, 51, 51]) + 60);
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--mode",
+        "sndf",
+        "--cell",
+    ]);
+    assert!(e.contains("--cell has no effect with --mode sndf"), "{e}");
+    let e = fails(&["render", s(&file), "-o", s(&png), "--cell", "nocolour"]);
+    assert!(e.contains("--cell \"nocolour\""), "{e}");
+    // An XYZ file without a lattice has no cell.
+    let xyz = dir.path().join("a.xyz");
+    std::fs::write(&xyz, "2\nno lattice\nAr 0 0 0\nAr 3 0 0\n").unwrap();
+    let bare = dir.path().join("a.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&bare)]);
+    let out = ok(&[
+        "render",
+        s(&bare),
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--cell",
+    ]);
+    assert!(out.contains("records no simulation cell"), "{out}");
+}
+
 /// Hidden species leave the clusters too: at a coarse error, no pixel takes a hidden
 /// species' colour (mixed clusters are refined until they hold none). Clusters recoloured
 /// only approximately (more than four species) are reported.

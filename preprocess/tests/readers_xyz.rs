@@ -357,6 +357,12 @@ fn free_text_comment_lines_do_not_stop_a_conversion() {
     assert_eq!((f.time, f.timestep, f.len()), (None, None, 1));
     let f = read_k(&path, 1, None);
     assert_eq!((f.time, f.timestep), (None, Some(6)));
+
+    // The words of a cell's keys in free text give no cell.
+    let words = "1\nCu slab, no lattice or origin given, pbc off\nCu 0 0 0\n";
+    let path = write(dir.path(), "words.xyz", words);
+    let f = read_k(&path, 0, None);
+    assert_eq!((f.len(), f.simulation_box.is_none()), (1, true));
 }
 
 /// In extended XYZ (`Properties=`) the comment line is `key=value` pairs: a `Time` that is

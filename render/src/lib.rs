@@ -37,6 +37,7 @@ pub mod error;
 pub mod image;
 pub mod legend;
 pub mod occlusion;
+pub mod overlay;
 pub mod passes;
 pub mod renderer;
 pub mod smip;
@@ -174,6 +175,18 @@ pub struct RenderOptions {
     pub fit_all: bool,
     /// No background (sphere mode): see [`FrameSettings::transparent`].
     pub transparent: bool,
+    /// Draw the simulation cell's edges over the image (see [`overlay`]): hidden behind
+    /// the spheres in front of them; over splats and the volume, which have no depth.
+    pub cell: Option<CellLines>,
+}
+
+/// How the simulation cell's edges are drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellLines {
+    /// sRGB.
+    pub colour: [u8; 3],
+    /// Width in pixels.
+    pub width_px: f32,
 }
 
 /// How points are drawn.
@@ -225,6 +238,7 @@ impl Default for RenderOptions {
             fit_all: false,
             transparent: false,
             light_range: None,
+            cell: None,
         }
     }
 }
@@ -1138,7 +1152,9 @@ fn draw_cut(
             report.density_stacks = Some((frame.stacks_run, frame.stacks));
             report.density_readbacks = Some(frame.readbacks);
             report.density_host_time = Some(frame.host_time);
-            Ok((rendered.image, report))
+            let mut image = rendered.image;
+            draw_cell(file, opts, camera, &mut image, None);
+            Ok((image, report))
         }
         RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => {
             let (splats, image, exposure) = match opts.mode {
@@ -1208,14 +1224,51 @@ fn draw_cut(
             report.exposure = exposure.and_then(|t| t.ok());
             report.light_range = exposure.and_then(|t| t.err());
             report.total_flux = exposure.map(|_| splats.total_light());
-            Ok((frame.image, report))
+            let mut image = frame.image;
+            draw_cell(file, opts, camera, &mut image, None);
+            Ok((image, report))
         }
         RenderMode::Spheres => {
-            let frame = renderer.render_from(source, camera, draw, settings)?;
+            let cell = opts.cell.is_some() && file.metadata().simulation_box.is_some();
+            let settings = FrameSettings {
+                read_depth: settings.read_depth || cell,
+                ..settings.clone()
+            };
+            let mut frame = renderer.render_from(source, camera, draw, &settings)?;
             let report = report(&frame);
+            draw_cell(file, opts, camera, &mut frame.image, frame.depth.as_deref());
             Ok((frame.image, report))
         }
     }
+}
+
+/// Draws the cell's edges over `image` when `opts` asks and the file has a cell, hidden
+/// behind the surfaces of `depth` by more than the largest sphere radius drawn.
+fn draw_cell(
+    file: &MdlodFile,
+    opts: &RenderOptions,
+    camera: &Camera,
+    image: &mut RgbaImage,
+    depth: Option<&[f32]>,
+) {
+    let (Some(lines), Some(cell)) = (opts.cell, &file.metadata().simulation_box) else {
+        return;
+    };
+    let species = &file.metadata().species;
+    let radius = opts
+        .style
+        .species_table(species)
+        .map(|t| t.iter().map(|s| s[3]).fold(0.0f32, f32::max))
+        .unwrap_or_else(|_| species.iter().map(|s| s.radius).fold(0.0, f32::max));
+    overlay::draw_lines(
+        image,
+        depth,
+        camera,
+        &overlay::cell_edges(cell),
+        lines.colour,
+        lines.width_px,
+        radius,
+    );
 }
 
 /// One frame of a streamed view in `opts`'s mode (not S-NDFs), for callers that show

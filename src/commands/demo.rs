@@ -113,6 +113,7 @@ pub fn run(args: Args) -> Result<()> {
         },
         save_view: None,
         legend: None,
+        cell: None,
     })?;
     Ok(())
 }

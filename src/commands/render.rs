@@ -108,6 +108,11 @@ pub struct Args {
     pub background: Option<String>,
     #[command(flatten)]
     pub style: StyleArgs,
+    /// Draw the simulation cell's edges (triclinic too), hidden behind the spheres in
+    /// front of them (splats and the volume: over them); optionally in a colour (default:
+    /// dark grey on light backgrounds, light grey on dark ones).
+    #[arg(long, value_name = "COLOUR", num_args = 0..=1, default_missing_value = "auto")]
+    pub cell: Option<String>,
     /// Write the camera used as a view file.
     #[arg(long)]
     pub save_view: Option<PathBuf>,
@@ -381,6 +386,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("species_radius", STYLED),
         ("attribute_range", &[Spheres, Sndf, Splat]),
         ("log_scale", &[Spheres, Sndf, Splat]),
+        ("cell", &[Spheres, Splat, SplatOver, Density, Iso]),
     ]
 };
 
@@ -644,6 +650,25 @@ pub fn run(args: Args) -> Result<()> {
         fit_all: args.fit_all,
         ..Default::default()
     };
+    if let Some(colour) = &args.cell {
+        let srgb = match colour.as_str() {
+            // Contrast with the background (a transparent one is laid over anything).
+            "auto" => {
+                let [r, g, b] = opts.background;
+                let light = 0.2126 * r + 0.7152 * g + 0.0722 * b > 0.5 || opts.transparent;
+                if light {
+                    [0.2; 3]
+                } else {
+                    [0.8; 3]
+                }
+            }
+            c => parse_colour(c).with_context(|| format!("--cell {c:?}"))?,
+        };
+        opts.cell = Some(mdlod_render::CellLines {
+            colour: srgb.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8),
+            width_px: (args.camera.width.min(args.camera.height) as f32 / 360.0).max(1.5),
+        });
+    }
     if args.file.is_dir() {
         if args.turntable.is_some() {
             anyhow::bail!(
@@ -802,6 +827,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(note) = clip_side_note(&opts.style.clip, &r.camera) {
         println!("{note}");
+    }
+    if args.cell.is_some() && file.metadata().simulation_box.is_none() {
+        println!("  note: the file records no simulation cell (its input gave none): --cell draws nothing");
     }
     let gpu = r.gpu_time.map_or(String::new(), |t| {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)

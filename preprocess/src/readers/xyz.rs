@@ -141,8 +141,20 @@ impl Index {
         };
         let bad = |message: String| ctx.malformed(comment_at, message);
 
+        // A bare word (`no lattice`, a free-text comment of plain XYZ) is a flag, `T`;
+        // a cell needs its numbers given, `Lattice="..."`.
+        let given = |key: &str| {
+            pairs
+                .iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(key))
+                .filter(|(k, _)| {
+                    comment_text.contains(&format!("{k}="))
+                        || comment_text.contains(&format!("{k} ="))
+                })
+                .map(|(_, v)| v.as_str())
+        };
         let numbers = |key: &str, n: usize| -> Result<Option<Vec<f64>>, ReadError> {
-            let Some(v) = get(key) else { return Ok(None) };
+            let Some(v) = given(key) else { return Ok(None) };
             let values: Option<Vec<f64>> = v
                 .split_whitespace()
                 .map(|t| t.parse::<f64>().ok().filter(|x| x.is_finite()))
