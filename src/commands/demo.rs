@@ -79,6 +79,7 @@ pub fn run(args: Args) -> Result<()> {
             elevation: Some(25.0),
             zoom: Some(1.0),
             ortho: false,
+            look_along: None,
         },
         spp: 4,
         screen_error: 1.0,

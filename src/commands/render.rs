@@ -292,6 +292,43 @@ pub struct ViewArgs {
     /// Orthographic instead of perspective projection.
     #[arg(long)]
     pub ortho: bool,
+    /// Look in the direction X,Y,Z (world axes; e.g. `1,1,1` along a cubic crystal's
+    /// [111], `0,0,-1` straight down) instead of --azimuth and --elevation; z stays up
+    /// on screen (looking straight down or up, y is).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_direction, allow_hyphen_values = true, conflicts_with_all = ["azimuth", "elevation"])]
+    pub look_along: Option<[f32; 3]>,
+}
+
+/// Parses a direction `X,Y,Z` (finite, not zero).
+fn parse_direction(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{s:?}: expected three numbers X,Y,Z"))?;
+    let d = <[f32; 3]>::try_from(v).map_err(|_| format!("{s:?}: expected three numbers X,Y,Z"))?;
+    if d.iter().any(|c| !c.is_finite()) || d.iter().all(|&c| c == 0.0) {
+        return Err(format!(
+            "{s:?}: a direction needs finite numbers, not all 0"
+        ));
+    }
+    Ok(d)
+}
+
+/// The azimuth and elevation (degrees) of a camera looking in direction `d`: its eye
+/// lies towards `-d` from the target.
+pub fn angles_looking_along(d: [f32; 3]) -> (f32, f32) {
+    let v = mdlod_render::glam::DVec3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2]))
+        .normalize();
+    let back = -v;
+    let elevation = back.z.clamp(-1.0, 1.0).asin().to_degrees();
+    // Straight down or up: any azimuth; -90 puts +y up on screen.
+    let azimuth = if back.x.hypot(back.y) < 1e-9 {
+        -90.0
+    } else {
+        back.y.atan2(back.x).to_degrees()
+    };
+    (azimuth as f32, elevation as f32)
 }
 
 impl ViewArgs {
@@ -324,9 +361,13 @@ impl ViewArgs {
     }
 
     pub fn spec(&self) -> ViewSpec {
+        let (azimuth, elevation) = match self.look_along.map(angles_looking_along) {
+            Some((a, e)) => (Some(a), Some(e)),
+            None => (self.azimuth, self.elevation),
+        };
         let changes = mdlod_render::ViewChanges {
-            azimuth_deg: self.azimuth,
-            elevation_deg: self.elevation,
+            azimuth_deg: azimuth,
+            elevation_deg: elevation,
             zoom: self.zoom,
             orthographic: self.ortho,
         };
@@ -334,8 +375,8 @@ impl ViewArgs {
             Some(p) if changes.is_empty() => ViewSpec::File(p.clone()),
             Some(p) => ViewSpec::FileWith(p.clone(), changes),
             None => ViewSpec::Orbit {
-                azimuth_deg: self.azimuth.unwrap_or(30.0),
-                elevation_deg: self.elevation.unwrap_or(20.0),
+                azimuth_deg: azimuth.unwrap_or(30.0),
+                elevation_deg: elevation.unwrap_or(20.0),
                 zoom: self.zoom.unwrap_or(1.0),
                 projection: if self.ortho {
                     Projection::Orthographic
@@ -1335,7 +1376,12 @@ fn render_turntable(
             args.output.display()
         )
     })?;
-    let start = match (&args.camera.view, args.camera.azimuth) {
+    // A direction looked along sets the first view's angles.
+    let along = args.camera.look_along.map(angles_looking_along);
+    let start = match (
+        &args.camera.view,
+        args.camera.azimuth.or(along.map(|a| a.0)),
+    ) {
         (Some(p), None) => ViewFile::load(p)?.azimuth_deg,
         (_, a) => a.unwrap_or(30.0),
     };
@@ -1351,6 +1397,8 @@ fn render_turntable(
         let azimuth = start + 360.0 * i as f32 / n as f32;
         opts.view = ViewArgs {
             azimuth: Some(azimuth),
+            elevation: args.camera.elevation.or(along.map(|a| a.1)),
+            look_along: None,
             ..args.camera.clone()
         }
         .spec();
@@ -1689,6 +1737,30 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
 mod tests {
     use super::*;
     use clap::Args as _;
+
+    /// `--look-along D` puts the eye towards `-D` from the target: the camera's `back`
+    /// is `-D` normalised, straight down included.
+    #[test]
+    fn looking_along_a_direction_puts_the_eye_behind_it() {
+        for d in [
+            [1.0, 1.0, 1.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, 0.0, -1.0],
+            [0.0, 0.0, 2.0],
+            [1.0, -2.0, 0.5],
+        ] {
+            let (azimuth_deg, elevation_deg) = angles_looking_along(d);
+            let c = mdlod_render::Camera {
+                azimuth_deg,
+                elevation_deg,
+                ..Default::default()
+            };
+            let want = -mdlod_render::glam::Vec3::from(d).normalize();
+            assert!((c.back() - want).length() < 1e-5, "{d:?}: {:?}", c.back());
+        }
+        assert_eq!(angles_looking_along([-1.0, 0.0, 0.0]), (0.0, 0.0));
+        assert!(parse_direction("0,0,0").is_err() && parse_direction("1,2").is_err());
+    }
 
     #[test]
     fn movie_names_take_the_frame_number_as_ffmpeg_reads_them() {
