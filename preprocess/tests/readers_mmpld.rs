@@ -240,8 +240,9 @@ fn intensity_and_radius_attributes_come_from_the_lists_that_carry_them() {
         .flat_map(|l| l.particles.iter().map(|p| p.2 as f32))
         .collect();
     assert_eq!((a.name.as_str(), a.values), ("intensity", expected));
-    let e = read("radius").unwrap_err().to_string();
-    assert!(e.contains("list 0 has no per-particle `radius`"), "{e}");
+    // A list's global radius is each of its particles' radius.
+    let f = read("radius").unwrap();
+    assert_eq!(f.attribute.unwrap().values, [1.0; 20]);
     let e = read("c_pe").unwrap_err().to_string();
     assert!(e.contains("available: x y z intensity"), "{e}");
 
@@ -526,23 +527,28 @@ fn files_written_by_megamol_read_as_written_and_convert() {
             "{name}"
         );
 
-        // Only list 0 can carry intensities or radii: asked for either, the error names
-        // the first list that lacks it.
-        for (attribute, carried) in [("intensity", intensity), ("radius", xyzr)] {
-            let read = dump.read_frame(
+        // Only list 0 can carry intensities: asked for them, the error names the first
+        // list that lacks them.
+        let read = |attribute: &str| {
+            dump.read_frame(
                 0,
                 &ReadOptions {
                     attribute: Some(attribute.into()),
                     ..Default::default()
                 },
                 &NoProgress,
-            );
-            let e = read.unwrap_err().to_string();
-            let lacking = if carried { 1 } else { 0 };
-            let want = format!("list {lacking} has no per-particle `{attribute}`");
-            assert!(e.contains(&want), "{name}: {e}");
-            assert!(e.contains(&name), "{name}: {e}");
-        }
+            )
+        };
+        let e = read("intensity").unwrap_err().to_string();
+        let lacking = if intensity { 1 } else { 0 };
+        let want = format!("list {lacking} has no per-particle `intensity`");
+        assert!(e.contains(&want), "{name}: {e}");
+        assert!(e.contains(&name), "{name}: {e}");
+        // Radii: list 0's particles' own (xyzr) or its global one, the others' 0.1.
+        let radii_read = read("radius").unwrap().attribute.unwrap().values;
+        let own: &[f32] = if xyzr { &[0.5, 0.2, 0.3, 0.4] } else { &[0.1; 4] };
+        assert_eq!(radii_read[..4], *own, "{name}");
+        assert!(radii_read[4..].iter().all(|&r| r == 0.1), "{name}: {radii_read:?}");
 
         let m = convert_verified(path, &dir.path().join(format!("{name}.mdlod")));
         assert_eq!(m.particle_count(), 19, "{name}");

@@ -534,10 +534,11 @@ fn wanted(
     }
 }
 
-/// Whether `list` holds the attribute `a` (`intensity` or `radius`) per particle.
+/// Whether `list` gives the attribute `a` (`intensity` or `radius`) for its particles:
+/// per particle, or (a radius) one for the whole list, which each of them takes.
 fn carries(list: &List, a: &str) -> bool {
     if a == "radius" {
-        list.has_radius()
+        list.has_radius() || list.radius.is_some()
     } else {
         list.has_intensity()
     }
@@ -640,7 +641,10 @@ pub(crate) fn read_range(
                 .into_par_iter()
                 .map(|i| {
                     if a == "radius" {
-                        list.particle_radius(data, i)
+                        match list.radius {
+                            Some(r) if !list.has_radius() => r,
+                            _ => list.particle_radius(data, i),
+                        }
                     } else {
                         list.intensity(data, i) as f32
                     }
