@@ -544,11 +544,28 @@ fn files_written_by_megamol_read_as_written_and_convert() {
         let want = format!("list {lacking} has no per-particle `intensity`");
         assert!(e.contains(&want), "{name}: {e}");
         assert!(e.contains(&name), "{name}: {e}");
+        // List 0's own colours (RGB or RGBA of any type) are noted as not kept.
+        let coloured = name.contains("_rgb");
+        let notes = dump.frame_notes(0, &ReadOptions::default());
+        assert_eq!(
+            notes
+                .iter()
+                .any(|n| n.contains("list 0 carry colours of their own")),
+            coloured,
+            "{name}: {notes:?}"
+        );
         // Radii: list 0's particles' own (xyzr) or its global one, the others' 0.1.
         let radii_read = read("radius").unwrap().attribute.unwrap().values;
-        let own: &[f32] = if xyzr { &[0.5, 0.2, 0.3, 0.4] } else { &[0.1; 4] };
+        let own: &[f32] = if xyzr {
+            &[0.5, 0.2, 0.3, 0.4]
+        } else {
+            &[0.1; 4]
+        };
         assert_eq!(radii_read[..4], *own, "{name}");
-        assert!(radii_read[4..].iter().all(|&r| r == 0.1), "{name}: {radii_read:?}");
+        assert!(
+            radii_read[4..].iter().all(|&r| r == 0.1),
+            "{name}: {radii_read:?}"
+        );
 
         let m = convert_verified(path, &dir.path().join(format!("{name}.mdlod")));
         assert_eq!(m.particle_count(), 19, "{name}");

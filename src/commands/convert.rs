@@ -261,12 +261,12 @@ pub fn print_report(output: &std::path::Path, r: &ConvertReport) {
         _ => String::new(),
     };
     println!(
-        "wrote {}{which}: {} particles, {} levels, {} nodes, {:.1} MiB, max position error {:.3e}",
+        "wrote {}{which}: {} particles, {} levels, {} nodes, {}, max position error {:.3e}",
         output.display(),
         r.particles,
         r.levels,
         r.nodes,
-        r.file_size as f64 / (1 << 20) as f64,
+        super::size_text(r.file_size),
         r.max_position_error
     );
     let peak = peak_memory_mib().map_or(String::new(), |m| format!(", peak memory {m:.0} MiB"));

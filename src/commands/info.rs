@@ -119,10 +119,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     println!("{}", args.file.display());
     println!(
-        "  format {}.{}, {:.1} MiB, written by {}",
+        "  format {}.{}, {}, written by {}",
         f.header().version_major,
         f.header().version_minor,
-        file_size as f64 / (1 << 20) as f64,
+        super::size_text(file_size),
         shown(&m.writer)
     );
     println!("  particles    {}", m.particles);

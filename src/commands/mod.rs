@@ -147,6 +147,16 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// A file's size for a summary: KiB below a MiB (a small sample read as `0.0 MiB`), else
+/// MiB, one decimal.
+pub fn size_text(bytes: u64) -> String {
+    if bytes < 1 << 20 {
+        format!("{:.1} KiB", bytes as f64 / 1024.0)
+    } else {
+        format!("{:.1} MiB", bytes as f64 / f64::from(1 << 20))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

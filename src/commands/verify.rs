@@ -71,10 +71,10 @@ pub fn run(args: Args) -> Result<()> {
     let f = MdlodFile::open(&args.file)?;
     let r = f.verify()?;
     println!(
-        "{}: ok: {} sections ({:.1} MiB) checksummed, {} points decoded, {} nodes checked in {:.2} s",
+        "{}: ok: {} sections ({}) checksummed, {} points decoded, {} nodes checked in {:.2} s",
         args.file.display(),
         r.sections,
-        r.bytes_hashed as f64 / (1 << 20) as f64,
+        super::size_text(r.bytes_hashed),
         r.points_decoded,
         f.nodes().len(),
         t.elapsed().as_secs_f64()

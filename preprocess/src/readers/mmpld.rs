@@ -534,6 +534,21 @@ fn wanted(
     }
 }
 
+impl Index {
+    /// The lists of frame `k` whose particles carry colours of their own (colour types
+    /// 1, 2, 4, 5 and 6), which a species' one colour does not keep.
+    pub(crate) fn coloured_lists(&self, k: usize) -> Vec<usize> {
+        self.frames.get(k).map_or(vec![], |f| {
+            f.lists
+                .iter()
+                .enumerate()
+                .filter(|(_, l)| l.particles > 0 && matches!(l.colour, 1 | 2 | 4 | 5 | 6))
+                .map(|(i, _)| i)
+                .collect()
+        })
+    }
+}
+
 /// Whether `list` gives the attribute `a` (`intensity` or `radius`) for its particles:
 /// per particle, or (a radius) one for the whole list, which each of them takes.
 fn carries(list: &List, a: &str) -> bool {

@@ -614,6 +614,21 @@ impl DumpFile {
                 self.path.display()
             ));
         }
+        if let Index::Mmpld(i) = &self.index {
+            let lists = i.coloured_lists(k);
+            if !lists.is_empty() {
+                let names: Vec<String> = lists.iter().map(|l| l.to_string()).collect();
+                notes.push(format!(
+                    "{}: the particles of list{} {} carry colours of their own, which are not \
+                     kept: each list is a species, drawn in one colour (a palette's; render's \
+                     --species-colour {}=COLOUR sets it)",
+                    self.path.display(),
+                    if lists.len() == 1 { "" } else { "s" },
+                    names.join(", "),
+                    names[0]
+                ));
+            }
+        }
         if self.ends_mid_line() && k + 1 == self.frame_count() {
             notes.push(format!(
                 "{}: its last line has no line end: if a run is still writing it, the last \
