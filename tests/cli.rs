@@ -2917,6 +2917,29 @@ fn the_cell_is_drawn_over_the_picture() {
     assert!(out.contains("records no simulation cell"), "{out}");
 }
 
+/// `info` counts each species' particles (the GSD sample's companion XYZ files hold 143
+/// of type A and 157 of B), in text and JSON.
+#[test]
+fn info_counts_the_particles_of_each_species() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("g.mdlod");
+    let gsd = mdlod_datasets::gsd_sample_path("hoomd_mixture.gsd");
+    ok(&["convert", s(&gsd), "-o", s(&file)]);
+    let text = ok(&["info", s(&file)]);
+    assert!(
+        text.contains("143 particles") && text.contains("157 particles"),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", "--json", s(&file)])).unwrap();
+    let counts: Vec<u64> = json["species"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["count"].as_u64().unwrap())
+        .collect();
+    assert_eq!(counts, [143, 157]);
+}
+
 /// Hidden species leave the clusters too: at a coarse error, no pixel takes a hidden
 /// species' colour (mixed clusters are refined until they hold none). Clusters recoloured
 /// only approximately (more than four species) are reported.

@@ -65,6 +65,7 @@ pub fn run(args: Args) -> Result<()> {
     super::info::run(super::info::Args {
         file: out.clone(),
         json: false,
+        counts: false,
     })?;
     let png = args.dir.join("crater.png");
     println!("4. rendering {}", png.display());

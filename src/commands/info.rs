@@ -15,6 +15,25 @@ pub struct Args {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Count each species' particles also in files above 2×10^7 particles (it reads
+    /// every particle's species: 2 bytes each); smaller files are always counted.
+    #[arg(long)]
+    pub counts: bool,
+}
+
+/// Files of at most this many particles have their species counted by default.
+const COUNT_UP_TO: u64 = 20_000_000;
+
+/// The particles of each species (indices past the table, which `verify` reports, are
+/// not counted).
+fn species_counts(f: &MdlodFile) -> Vec<u64> {
+    let mut counts = vec![0u64; f.metadata().species.len()];
+    for &s in f.species() {
+        if let Some(c) = counts.get_mut(usize::from(s)) {
+            *c += 1;
+        }
+    }
+    counts
 }
 
 /// A `.sndf` file's header.
@@ -90,6 +109,7 @@ pub fn run(args: Args) -> Result<()> {
     let m = f.metadata();
     let levels: Vec<u64> = f.levels().iter().map(|l| l.point_count).collect();
     let file_size = std::fs::metadata(&args.file).map(|m| m.len()).unwrap_or(0);
+    let counts = (args.counts || m.particles <= COUNT_UP_TO).then(|| species_counts(&f));
     if args.json {
         let mut v = json!({
             "file": args.file.display().to_string(),
@@ -114,6 +134,11 @@ pub fn run(args: Args) -> Result<()> {
         // their f64 widening (1.28, not 1.2799999713897705).
         shortest_f32(&mut v["species"]);
         shortest_f32(&mut v["attribute"]);
+        if let (Some(counts), Some(list)) = (&counts, v["species"].as_array_mut()) {
+            for (s, c) in list.iter_mut().zip(counts) {
+                s["count"] = json!(c);
+            }
+        }
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
@@ -136,7 +161,10 @@ pub fn run(args: Args) -> Result<()> {
             .join(" ")
     );
     println!("  nodes        {}", f.nodes().len());
-    for s in &m.species {
+    for (k, s) in m.species.iter().enumerate() {
+        let count = counts
+            .as_ref()
+            .map_or(String::new(), |c| format!("  {} particles", c[k]));
         // Polydisperse species: drawn at the mean of the range their particles span.
         let range = s.radius_range.map_or(String::new(), |[lo, hi]| {
             format!(
@@ -146,12 +174,19 @@ pub fn run(args: Args) -> Result<()> {
             )
         });
         println!(
-            "  species      {:<6} radius {:<6}  colour [{:.2} {:.2} {:.2}]{range}",
+            "  species      {:<6} radius {:<6}  colour [{:.2} {:.2} {:.2}]{count}{range}",
             shown(&s.name),
             radius_text(s.radius),
             s.colour[0],
             s.colour[1],
             s.colour[2]
+        );
+    }
+    if counts.is_none() {
+        println!(
+            "  (species not counted above {COUNT_UP_TO} particles: --counts reads each \
+             particle's species, {})",
+            super::size_text(m.particles.saturating_mul(2))
         );
     }
     if let Some(a) = &m.attribute {
