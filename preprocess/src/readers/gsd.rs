@@ -403,11 +403,14 @@ impl Index {
             ));
         }
         let (lx, ly, lz, xy, xz, yz) = (v[0], v[1], v[2], v[3], v[4], v[5]);
+        // The box is single precision: vectors and origin derived from it are rounded to
+        // it too, so that a tilt of 0.1 gives 1.1, not the 1.10000001639 of its f32.
+        let single = |x: f64| f64::from(x as f32);
         let a = [lx, 0.0, 0.0];
-        let b = [xy * ly, ly, 0.0];
-        let c = [xz * lz, yz * lz, lz];
+        let b = [single(xy * ly), ly, 0.0];
+        let c = [single(xz * lz), single(yz * lz), lz];
         Ok(SimulationBox {
-            origin: [0, 1, 2].map(|i| -0.5 * (a[i] + b[i] + c[i])),
+            origin: [0, 1, 2].map(|i| single(-0.5 * (a[i] + b[i] + c[i]))),
             a,
             b,
             c,
