@@ -2726,10 +2726,17 @@ fn clip_planes_cut_the_particles_away() {
         let (out, png) = render("cut.png", &["--clip", &plane, "--azimuth", azimuth]);
         assert!(out.contains("cut away by --clip"), "{out}");
         assert_ne!(png, whole_png);
-        notes += usize::from(out.contains("on the kept side of --clip plane 1"));
+        notes += usize::from(out.contains("on the kept side of the --clip plane"));
+        // As OVITO's Slice: d is measured along the unit normal, however long n is.
+        let (_, longer) = render(
+            "cut2.png",
+            &["--clip", &format!("2.5,0,0,{mid}"), "--azimuth", azimuth],
+        );
+        assert_eq!(longer, png);
     }
     assert_eq!(notes, 1, "one of two opposite cameras sees the face");
-    // A slab by two facing planes, in the splat modes too.
+    // A slab by two facing planes, in the splat modes too; one of its faces always faces
+    // the camera, so no note.
     let slab = format!("-1,0,0,{}", -(mid - 2.0));
     for mode in ["splat", "splat-over", "spheres"] {
         let (out, _) = render(
@@ -2737,7 +2744,17 @@ fn clip_planes_cut_the_particles_away() {
             &["--mode", mode, "--clip", &plane, "--clip", &slab],
         );
         assert!(out.contains("cut away by --clip"), "{mode}: {out}");
+        assert!(!out.contains("kept side"), "{mode}: {out}");
     }
+    // A plane that keeps nothing says so.
+    let (out, _) = render(
+        "none.png",
+        &["--clip", &format!("1,0,0,{}", top.bounds_min[0] - 10.0)],
+    );
+    assert!(
+        out.contains("nothing is drawn: the --clip planes cut every particle away"),
+        "{out}"
+    );
     let err = fails(&[
         "render",
         s(&file),

@@ -160,13 +160,14 @@ pub struct StyleArgs {
     /// below its top.
     #[arg(long)]
     pub log_scale: bool,
-    /// Cut the data away beyond a plane, as OVITO's Slice: keep the particles whose
-    /// centres p have n·p ≤ d, given as nx,ny,nz,d (world units, as `mdlod info` gives
-    /// the box); repeatable (two facing planes keep a slab, up to 6). Clusters across a
-    /// plane are refined down to particles, so the cut face is exact. The camera is
-    /// unchanged: look from the cut side (n·eye > d) to see the face. The density and
-    /// iso modes take one plane and clip their samples instead: particles beyond it
-    /// still add density inside it.
+    /// Cut the data away beyond a plane, as OVITO's Slice: nx,ny,nz,d keeps the particles
+    /// whose centres p have n·p ≤ d, n the unit normal (nx,ny,nz made unit) and d the
+    /// plane's distance from the origin along it (world units, as `mdlod info` gives the
+    /// box); repeatable (two facing planes keep a slab, the clearest cross-section; up
+    /// to 6). Clusters across a plane are refined down to particles, so the cut face is
+    /// exact. The camera is unchanged: look from the cut side (n·eye > d) to see the
+    /// face. The density and iso modes take one plane and clip their samples instead:
+    /// particles beyond it still add density inside it.
     #[arg(long, value_name = "NX,NY,NZ,D", value_parser = parse_plane, allow_hyphen_values = true)]
     pub clip: Vec<[f32; 4]>,
 }
@@ -517,14 +518,25 @@ pub fn parse_budget(s: &str) -> Result<u64, String> {
     }
 }
 
-/// Parses `nx,ny,nz,d`.
+/// Parses `nx,ny,nz,d` as OVITO's Slice reads it: the plane at distance `d` from the
+/// origin along the unit normal `n/|n|` (so `1,1,0,d` and `2,2,0,d` are one plane); the
+/// result's normal is unit. A zero normal is left for the plane's check to refuse.
 fn parse_plane(s: &str) -> Result<[f32; 4], String> {
     let v: Vec<f32> = s
         .split(',')
         .map(|t| t.trim().parse::<f32>())
         .collect::<Result<_, _>>()
         .map_err(|_| format!("{s:?}: expected four numbers nx,ny,nz,d"))?;
-    <[f32; 4]>::try_from(v).map_err(|_| format!("{s:?}: expected four numbers nx,ny,nz,d"))
+    let [x, y, z, d] =
+        <[f32; 4]>::try_from(v).map_err(|_| format!("{s:?}: expected four numbers nx,ny,nz,d"))?;
+    let n = mdlod_render::glam::Vec3::new(x, y, z);
+    let len = n.length();
+    Ok(if len > 0.0 && len.is_finite() {
+        let u = n / len;
+        [u.x, u.y, u.z, d]
+    } else {
+        [x, y, z, d]
+    })
 }
 
 /// The S-NDF binnings.
@@ -866,7 +878,12 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
-    if let Some(note) = clip_side_note(&opts.style.clip, &r.camera) {
+    if !opts.style.clip.is_empty() && r.particles_drawn + r.nodes_drawn == 0 {
+        println!(
+            "  note: nothing is drawn: the --clip planes cut every particle away (each keeps \
+             n·p ≤ d, d the distance from the origin along the unit normal: check its sign)"
+        );
+    } else if let Some(note) = clip_side_note(&opts.style.clip, &r.camera) {
         println!("{note}");
     }
     if args.cell.is_some() && file.metadata().simulation_box.is_none() {
@@ -1244,18 +1261,23 @@ fn hidden_text(r: &mdlod_render::RenderReport) -> String {
 /// A note when the camera looks at a clip plane from the side it keeps: the cut face
 /// then faces away, hidden behind the material kept (`n·eye ≤ d`).
 fn clip_side_note(planes: &[[f32; 4]], camera: &mdlod_render::Camera) -> Option<String> {
+    // A slab's two faces look opposite ways: one faces the camera whatever its side.
     let eye = camera.eye();
-    let behind: Vec<String> = planes
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| mdlod_render::glam::Vec3::new(c[0], c[1], c[2]).dot(eye) <= c[3])
-        .map(|(k, c)| format!("{} ({},{},{},{})", k + 1, c[0], c[1], c[2], c[3]))
-        .collect();
-    (!behind.is_empty()).then(|| {
+    let kept_side = |c: &[f32; 4]| mdlod_render::glam::Vec3::new(c[0], c[1], c[2]).dot(eye) <= c[3];
+    (!planes.is_empty() && planes.iter().all(kept_side)).then(|| {
         format!(
-            "  note: the camera is on the kept side of --clip plane {} (n·eye ≤ d): its cut \
-             face looks away; view it from the side cut away (e.g. --azimuth turned by 180)",
-            behind.join(", ")
+            "  note: the camera is on the kept side of {}: the cut face{} away, \
+             behind the material kept; view from the side cut away (--azimuth turned by 180, \
+             or --look-along reversed)",
+            match planes.len() {
+                1 => "the --clip plane".to_string(),
+                n => format!("all {n} --clip planes"),
+            },
+            if planes.len() == 1 {
+                " looks"
+            } else {
+                "s look"
+            }
         )
     })
 }
