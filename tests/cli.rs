@@ -2855,6 +2855,119 @@ fn a_legend_says_what_the_colours_mean() {
         s(&dir.path().join("l.png")),
     ]);
     assert!(e.contains("name it .svg"), "{e}");
+
+    // A title of the user's, into a directory made for it.
+    let titled = dir.path().join("legends").join("t.svg");
+    ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--colour-map",
+        "magma",
+        "--legend",
+        s(&titled),
+        "--legend-title",
+        "E_pot (eV)",
+    ]);
+    assert!(std::fs::read_to_string(&titled)
+        .unwrap()
+        .contains(">E_pot (eV)</text>"));
+
+    // The key lists the species the picture shows: a plane cutting B away leaves A.
+    let xyz = dir.path().join("ab.xyz");
+    let mut text = String::from("54\ntwo blocks\n");
+    for i in 0..54 {
+        let (name, x) = if i < 27 { ("A", 0.0) } else { ("B", 10.0) };
+        let k = i % 27;
+        text += &format!(
+            "{name} {} {} {}\n",
+            x + (k % 3) as f32,
+            (k / 3 % 3) as f32,
+            (k / 9) as f32
+        );
+    }
+    std::fs::write(&xyz, text).unwrap();
+    let ab = dir.path().join("ab.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&ab)]);
+    let key = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&ab),
+            "-o",
+            s(&png),
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--legend",
+            s(&svg),
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        std::fs::read_to_string(&svg).unwrap()
+    };
+    let both = key(&[]);
+    assert!(
+        both.contains(">A</text>") && both.contains(">B</text>"),
+        "{both}"
+    );
+    let cut = key(&["--clip", "1,0,0,6"]);
+    assert!(
+        cut.contains(">A</text>") && !cut.contains(">B</text>"),
+        "{cut}"
+    );
+
+    // A constant attribute: one colour, said in the summary and the bar.
+    let flat = dir.path().join("flat.lammpstrj");
+    let mut dump = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n8\nITEM: BOX BOUNDS pp pp pp\n0 4\n0 4\n0 4\n\
+         ITEM: ATOMS id type x y z c_pe\n",
+    );
+    for i in 0..8 {
+        dump += &format!(
+            "{} 1 {} {} {} -3.54\n",
+            i + 1,
+            i % 2 * 2,
+            i / 2 % 2 * 2,
+            i / 4 * 2
+        );
+    }
+    std::fs::write(&flat, dump).unwrap();
+    let flat_file = dir.path().join("flat.mdlod");
+    ok(&[
+        "convert",
+        s(&flat),
+        "-o",
+        s(&flat_file),
+        "--attribute",
+        "c_pe",
+    ]);
+    let out = ok(&[
+        "render",
+        s(&flat_file),
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--colour-map",
+        "viridis",
+        "--legend",
+        s(&svg),
+    ]);
+    assert!(
+        out.contains("c_pe is constant in this file (-3.54)"),
+        "{out}"
+    );
+    assert!(std::fs::read_to_string(&svg)
+        .unwrap()
+        .contains("every value -3.54 (constant)"));
 }
 
 /// `--cell` draws the simulation cell's edges over the picture, in a colour given or one

@@ -71,15 +71,48 @@ pub fn tick_label(v: f64, step: f64) -> String {
     }
 }
 
-/// The label of a bar's end: a tenth of the step finer than the ticks, without trailing
-/// zeros (`2.5`, not `2.50`).
-fn end_label(v: f64, step: f64) -> String {
-    let text = tick_label(v, step);
-    if text.contains('.') && !text.contains('e') {
-        text.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        text
+/// The labels of a bar's ends, in one notation: three significant digits of each
+/// (`0.0348`, `0.7177`: an end rounded to the ticks' step would misstate the range),
+/// without trailing zeros; scientific notation where the larger magnitude is below 10^-3
+/// or from 10^5.
+pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
+    let m = lo.abs().max(hi.abs());
+    if m == 0.0 || !m.is_finite() {
+        return [lo, hi].map(|v| format!("{v}"));
     }
+    if !(1e-3..1e5).contains(&m) {
+        return [lo, hi].map(|v| {
+            let text = format!("{v:.2e}");
+            match text.split_once('e') {
+                Some((mantissa, exp)) => {
+                    let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+                    format!("{mantissa}e{exp}")
+                }
+                None => text,
+            }
+        });
+    }
+    let decimals = |v: f64| {
+        if v == 0.0 {
+            0
+        } else {
+            (2 - v.abs().log10().floor() as i32).clamp(0, 6) as usize
+        }
+    };
+    let d = decimals(lo).max(decimals(hi));
+    [lo, hi].map(|v| {
+        let text = format!("{v:.d$}");
+        let text = if text.contains('.') {
+            text.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            text
+        };
+        if text == "-0" {
+            "0".into()
+        } else {
+            text
+        }
+    })
 }
 
 /// Round values from `lo` to `hi` (inclusive) about `count` steps apart: steps of 1, 2
@@ -185,8 +218,8 @@ fn bar_svg(
         BAR[1],
         escape(&ends[1])
     );
-    let mut free_from = BAR[0] + width_of(&ends[0]) + 6.0;
-    let free_to = BAR[1] - width_of(&ends[1]) - 6.0;
+    let mut free_from = BAR[0] + width_of(&ends[0]) + 10.0;
+    let free_to = BAR[1] - width_of(&ends[1]) - 10.0;
     for (v, label) in ticks {
         let x = x_of(position(*v));
         let _ = writeln!(
@@ -201,7 +234,7 @@ fn bar_svg(
                 r#"<text class="tick" x="{x:.2}" y="{row}" text-anchor="middle">{}</text>"#,
                 escape(label)
             );
-            free_from = x + half + 6.0;
+            free_from = x + half + 10.0;
         }
     }
     svg.push_str("</svg>\n");
@@ -213,6 +246,18 @@ fn bar_svg(
 pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f32; 2]) -> String {
     let colour = |t: f32| map.colour(t);
     let position = |v: f64| scale.of_value(v as f32);
+    // A constant attribute shown over no range: every particle takes the map's last
+    // colour, and no scale places it.
+    if range[0] >= range[1] {
+        let top = map.colour(1.0);
+        return bar_svg(
+            &format!("{name}: every value {} (constant)", range[0]),
+            &|_| top,
+            &|_| 1.0,
+            &[],
+            [String::new(), String::new()],
+        );
+    }
     match scale.log_range() {
         Some([lo, hi]) => {
             let ticks: Vec<(f64, String)> = log_ticks(lo, hi)
@@ -221,16 +266,17 @@ pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f3
                 .collect();
             // A range from 0 or below starts the scale decades below its top: values at
             // or below that take its colour.
+            let [low, high] = end_labels(lo, hi);
             let low = match range[0] <= 0.0 {
-                true => format!("≤ {}", end_label(lo, lo / 10.0)),
-                false => end_label(lo, lo / 10.0),
+                true => format!("≤ {low}"),
+                false => low,
             };
             bar_svg(
                 &format!("{name} (log scale)"),
                 &colour,
                 &position,
                 &ticks,
-                [low, end_label(hi, hi / 10.0)],
+                [low, high],
             )
         }
         None => {
@@ -240,14 +286,7 @@ pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f3
                 .into_iter()
                 .map(|v| (v, tick_label(v, step)))
                 .collect();
-            let end_step = if step > 0.0 { step / 10.0 } else { 0.0 };
-            bar_svg(
-                name,
-                &colour,
-                &position,
-                &ticks,
-                [lo, hi].map(|v| end_label(v, end_step)),
-            )
+            bar_svg(name, &colour, &position, &ticks, end_labels(lo, hi))
         }
     }
 }
@@ -277,7 +316,7 @@ pub fn density_bar(density_max: f32) -> String {
         &|t| crate::density::transfer_colour(t).to_array(),
         &|v| (v / max) as f32,
         &ticks,
-        ["0".into(), format!("≥ {}", end_label(max, step / 10.0))],
+        ["0".into(), format!("≥ {}", end_labels(0.0, max)[1])],
     )
 }
 
@@ -431,6 +470,36 @@ mod tests {
             ("Ag".into(), [0.0, 0.0, 1.0]),
         ]);
         assert!(key.contains(r##"fill="#ff0000""##) && key.contains(">Ag</text>"));
+    }
+
+    /// Ends keep three significant digits in one notation, so the range is not misstated.
+    #[test]
+    fn end_labels_state_the_range() {
+        assert_eq!(end_labels(0.0348, 0.7177), ["0.0348", "0.7177"]);
+        assert_eq!(end_labels(0.1595, 3.3), ["0.16", "3.3"]);
+        assert_eq!(end_labels(3.12e-4, 0.74), ["0.000312", "0.74"]);
+        assert_eq!(end_labels(-3.5972, -1.5666), ["-3.6", "-1.57"]);
+        assert_eq!(end_labels(1.36e-5, 1.56e-4), ["1.36e-5", "1.56e-4"]);
+        assert_eq!(end_labels(0.0, 2.5), ["0", "2.5"]);
+        assert_eq!(end_labels(12345.0, 250000.0), ["1.23e4", "2.5e5"]);
+    }
+
+    /// A constant attribute: one colour, the map's last, and the value in the title.
+    #[test]
+    fn a_constant_attribute_gets_one_colour_and_its_value() {
+        let info = mdlod_format::meta::AttributeInfo {
+            name: "c_pe".into(),
+            min: -3.54,
+            max: -3.54,
+        };
+        let scale = AttributeScale::with_range(&info, None);
+        let svg = colour_bar(ColourMap::Viridis, &scale, "c_pe", [-3.54, -3.54]);
+        let stops = stops_of(&svg);
+        assert!(stops
+            .iter()
+            .all(|c| *c == hex(ColourMap::Viridis.colour(1.0))));
+        assert!(svg.contains("c_pe: every value -3.54 (constant)"), "{svg}");
+        assert_eq!(ticks_of(&svg).0.len(), 0);
     }
 
     #[test]

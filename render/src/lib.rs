@@ -178,6 +178,9 @@ pub struct RenderOptions {
     /// Draw the simulation cell's edges over the image (see [`overlay`]): hidden behind
     /// the spheres in front of them; over splats and the volume, which have no depth.
     pub cell: Option<CellLines>,
+    /// Report which species the cut shows ([`RenderReport::species_drawn`]; it reads up
+    /// to every particle's species once).
+    pub species_drawn: bool,
 }
 
 /// How the simulation cell's edges are drawn.
@@ -239,6 +242,7 @@ impl Default for RenderOptions {
             transparent: false,
             light_range: None,
             cell: None,
+            species_drawn: false,
         }
     }
 }
@@ -265,6 +269,8 @@ pub struct RenderReport {
     /// Clusters drawn across a clip plane (their refinement stopped at the budget or at
     /// a node not yet resident): drawn whole.
     pub clusters_across: u64,
+    /// With [`RenderOptions::species_drawn`]: which species (by index) the cut shows.
+    pub species_drawn: Option<Vec<bool>>,
     /// Cluster representatives drawn.
     pub nodes_drawn: u64,
     /// Contiguous ranges drawn.
@@ -999,6 +1005,9 @@ impl RenderReport {
             clusters_mixed: draw.mixed_drawn,
             particles_clipped: draw.clipped_particles,
             clusters_across: draw.across_drawn,
+            species_drawn: opts
+                .species_drawn
+                .then(|| traversal::species_drawn(file, draw)),
             nodes_drawn: draw.representatives,
             ranges: draw.ranges.len(),
             nodes_opened: draw.opened_nodes,

@@ -1553,6 +1553,47 @@ fn emit_node(
     flush(&mut run, list);
 }
 
+/// Which species (by index) the cut `draw` shows: those of its particles and of the
+/// particles below its clusters (each cluster's descendants are one range of the finest
+/// level). Reads at most every particle's species once, stopping when all are seen;
+/// records of a corrupt file are read with checks, and what they do not reach is left out.
+pub fn species_drawn(file: &MdlodFile, draw: &DrawList) -> Vec<bool> {
+    let count = file.metadata().species.len();
+    let mut seen = vec![false; count];
+    let mut left = count;
+    let species = file.species();
+    let last = file.level_count().saturating_sub(1);
+    for r in &draw.ranges {
+        let (mut a, mut b) = (
+            r.first as usize,
+            (r.first as usize).saturating_add(r.count as usize),
+        );
+        let mut level = usize::from(r.level);
+        while level < last && a < b {
+            let nodes = file.level_nodes(level);
+            let (Some(na), Some(nb)) = (nodes.get(a), nodes.get(b - 1)) else {
+                a = b;
+                break;
+            };
+            a = na.child_first as usize;
+            b = (nb.child_first as usize).saturating_add(nb.child_count as usize);
+            level += 1;
+        }
+        for &s in species.get(a..b).unwrap_or(&[]) {
+            if let Some(x) = seen.get_mut(usize::from(s)) {
+                if !*x {
+                    *x = true;
+                    left -= 1;
+                }
+            }
+        }
+        if left == 0 {
+            break;
+        }
+    }
+    seen
+}
+
 /// World positions of every point of `draw`, in draw order, decoded as the GPU does.
 pub fn point_positions(file: &MdlodFile, draw: &DrawList) -> Vec<Vec3> {
     let nodes = file.nodes();

@@ -1380,6 +1380,57 @@ fn hidden_species_leave_no_cluster_holding_them() {
     }
 }
 
+/// The species a cut shows are exactly those of the particles it covers (drawn, or below
+/// a drawn cluster), at any error, with species hidden or cut away.
+#[test]
+fn species_drawn_are_those_of_the_particles_covered() {
+    use mdlod_render::traversal::species_drawn;
+    let (_d, _p, f) = make_file(&cloud_frame(3000, 7), small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let species = f.species();
+    let count = f.metadata().species.len();
+    assert!(count >= 2);
+    let b = mdlod_render::data_bounds(&f);
+    let mid = (b.min + b.max) / 2.0;
+    for (error, hidden, clip) in [
+        (0.0f32, 0u64, vec![]),
+        (8.0, 0, vec![]),
+        (40.0, 0b1, vec![]),
+        (
+            4.0,
+            0,
+            vec![[1.0, 0.0, 0.0, mid.x - 0.3 * (b.max.x - b.min.x)]],
+        ),
+    ] {
+        let d = traverse(
+            &cam,
+            &f,
+            &TraversalSettings {
+                viewport: VIEWPORT,
+                error_px: error,
+                occlusion: OcclusionMode::Off,
+                hidden_species: hidden,
+                clip: mdlod_render::ClipPlanes::new(&clip).unwrap(),
+                ..Default::default()
+            },
+        );
+        let mut want = vec![false; count];
+        for (i, &c) in coverage(&f, &d).iter().enumerate() {
+            if c > 0 {
+                want[usize::from(species[i])] = true;
+            }
+        }
+        assert_eq!(
+            species_drawn(&f, &d),
+            want,
+            "error {error} hidden {hidden:b}"
+        );
+        if hidden != 0 {
+            assert!(!want[0]);
+        }
+    }
+}
+
 /// A box against clip planes: kept inside every half-space, beyond one wholly, across
 /// otherwise (grown by the quantization error); bad planes are refused with a reason.
 #[test]

@@ -115,7 +115,9 @@ pub fn run(args: Args) -> Result<()> {
         },
         save_view: None,
         legend: None,
+        legend_title: None,
         cell: None,
+        cell_width: None,
     })?;
     Ok(())
 }

@@ -113,6 +113,10 @@ pub struct Args {
     /// dark grey on light backgrounds, light grey on dark ones).
     #[arg(long, value_name = "COLOUR", num_args = 0..=1, default_missing_value = "auto")]
     pub cell: Option<String>,
+    /// The cell's lines' width in pixels [default: the image's shorter side / 360, at
+    /// least 1.5].
+    #[arg(long, value_name = "PX", requires = "cell")]
+    pub cell_width: Option<f32>,
     /// Write the camera used as a view file.
     #[arg(long)]
     pub save_view: Option<PathBuf>,
@@ -121,6 +125,9 @@ pub struct Args {
     /// key of the species shown in their colours. A movie or turntable writes one.
     #[arg(long, value_name = "FILE.svg")]
     pub legend: Option<PathBuf>,
+    /// The colour bar's title instead of the attribute's name, e.g. "E_kin (eV)".
+    #[arg(long, value_name = "TEXT", requires = "legend")]
+    pub legend_title: Option<String>,
 }
 
 /// The points' look, shared by `render` and `sample` (sphere and S-NDF modes).
@@ -701,6 +708,8 @@ pub fn run(args: Args) -> Result<()> {
             style
         },
         fit_all: args.fit_all,
+        // The legend's key lists the species the picture shows.
+        species_drawn: args.legend.is_some(),
         ..Default::default()
     };
     if let Some(colour) = &args.cell {
@@ -719,7 +728,13 @@ pub fn run(args: Args) -> Result<()> {
         };
         opts.cell = Some(mdlod_render::CellLines {
             colour: srgb.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8),
-            width_px: (args.camera.width.min(args.camera.height) as f32 / 360.0).max(1.5),
+            width_px: match args.cell_width {
+                Some(w) if w.is_finite() && w > 0.0 && w <= 256.0 => w,
+                Some(w) => {
+                    anyhow::bail!("--cell-width {w}: a width of more than 0 and at most 256 pixels")
+                }
+                None => (args.camera.width.min(args.camera.height) as f32 / 360.0).max(1.5),
+            },
         });
     }
     if args.file.is_dir() {
@@ -801,6 +816,14 @@ pub fn run(args: Args) -> Result<()> {
                 a.name,
                 log_text(a, &opts.style, &args) + &white_text(&opts.style)
             );
+            if lo >= hi {
+                println!(
+                    "  note: {} is constant in this file ({lo}): every particle takes the \
+                     map's last colour, which means nothing on its own; --attribute-range \
+                     places the value on a scale (the range of the frames it is compared with)",
+                    a.name
+                );
+            }
             if opts.style.log_scale
                 && !projected(&args)
                 && a.min < 0.0
@@ -972,8 +995,23 @@ pub fn run(args: Args) -> Result<()> {
         file.metadata().attribute.as_ref(),
         species,
         r.light_range,
+        &drawn_names(&r, species, Default::default()),
     )?;
     Ok(())
+}
+
+/// `drawn` with the names of the species the render `r` of a file of `species` showed.
+fn drawn_names(
+    r: &mdlod_render::RenderReport,
+    species: &[mdlod_format::meta::Species],
+    mut drawn: std::collections::BTreeSet<String>,
+) -> std::collections::BTreeSet<String> {
+    for (s, shown) in species.iter().zip(r.species_drawn.iter().flatten()) {
+        if *shown {
+            drawn.insert(s.name.clone());
+        }
+    }
+    drawn
 }
 
 /// Writes `--legend`: the bar of the colour map over the attribute (`attribute`, as
@@ -985,6 +1023,7 @@ fn write_legend(
     attribute: Option<&mdlod_format::meta::AttributeInfo>,
     species: &[mdlod_format::meta::Species],
     light_range: Option<[f32; 2]>,
+    drawn: &std::collections::BTreeSet<String>,
 ) -> Result<()> {
     use mdlod_render::legend;
     let Some(path) = &args.legend else {
@@ -997,8 +1036,9 @@ fn write_legend(
             "the volume fraction's colours".to_string(),
         ),
         (Mode::Splat, Some(map), _) => {
-            let title = match (args.intensity, attribute) {
-                (Intensity::Attribute, Some(a)) => format!("projected {}", a.name),
+            let title = match (args.intensity, attribute, &args.legend_title) {
+                (_, _, Some(t)) => t.clone(),
+                (Intensity::Attribute, Some(a), None) => format!("projected {}", a.name),
                 _ => "projected flux".to_string(),
             };
             let Some(range) = light_range else {
@@ -1017,8 +1057,9 @@ fn write_legend(
                 mdlod_render::style::AttributeScale::with_range(a, opts.style.attribute_range)
                     .with_log(opts.style.log_scale);
             let range = opts.style.attribute_range.unwrap_or([a.min, a.max]);
+            let title = args.legend_title.as_deref().unwrap_or(&a.name);
             (
-                legend::colour_bar(map, &scale, &a.name, range),
+                legend::colour_bar(map, &scale, title, range),
                 format!("the colour map over {}", a.name),
             )
         }
@@ -1031,11 +1072,12 @@ fn write_legend(
                 .iter()
                 .enumerate()
                 .filter(|(_, s)| {
-                    !opts
-                        .style
-                        .species
-                        .iter()
-                        .any(|st| st.name == s.name && st.hidden)
+                    drawn.contains(&s.name)
+                        && !opts
+                            .style
+                            .species
+                            .iter()
+                            .any(|st| st.name == s.name && st.hidden)
                 })
                 .map(|(i, s)| {
                     let colour = match (&table, styled) {
@@ -1051,6 +1093,10 @@ fn write_legend(
             )
         }
     };
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
     std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))?;
     println!("  legend written to {} ({what})", path.display());
     Ok(())
@@ -1415,6 +1461,8 @@ fn render_turntable(
     let renderer =
         mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
     let (mut limited, mut first_camera) = (0usize, None);
+    // The species any view shows, for the legend's key.
+    let mut drawn = std::collections::BTreeSet::new();
     for i in 0..n {
         let azimuth = start + 360.0 * i as f32 / n as f32;
         opts.view = ViewArgs {
@@ -1427,7 +1475,9 @@ fn render_turntable(
         let out = frame_output(&args.output, i as usize)?;
         let file = mdlod_format::MdlodFile::open(&args.file)?;
         let coarsest = coarsest_points(&file);
+        let species = file.metadata().species.clone();
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
+        drawn = drawn_names(&r, &species, drawn);
         if i == 0 {
             first_camera = Some(r.camera.clone());
         }
@@ -1483,6 +1533,7 @@ fn render_turntable(
             meta.attribute.as_ref(),
             &meta.species,
             opts.light_range,
+            &drawn,
         )?;
     }
     Ok(())
@@ -1635,6 +1686,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     let t0 = std::time::Instant::now();
     let mut limited_frames = 0usize;
+    // The species any frame shows, for the legend's key.
+    let mut drawn = std::collections::BTreeSet::new();
     let renderer =
         mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
     for (i, f) in manifest.frames.iter().enumerate() {
@@ -1670,7 +1723,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             }
         }
         let coarsest = coarsest_points(&file);
+        let species = file.metadata().species.clone();
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
+        drawn = drawn_names(&r, &species, drawn);
         // Splats: one exposure (a projection's map: one range) for every frame, or the
         // brightness drifts: the first frame that shows anything sets it.
         if r.particles_drawn + r.nodes_drawn > 0 {
@@ -1751,6 +1806,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         attribute.flatten().as_ref(),
         &looks,
         opts.light_range,
+        &drawn,
     )?;
     Ok(())
 }
