@@ -3444,7 +3444,10 @@ fn species_names_give_numbered_types_their_elements() {
         "--radius",
         "1=1.3",
     ]);
-    assert!(err.contains("named Cu, 2"), "{err}");
+    assert!(
+        err.contains("--species-name renamed \"1\" to \"Cu\", and --radius takes the new name: --radius Cu=1.3"),
+        "{err}"
+    );
     let err = fails(&["convert", s(&input), "-o", s(&out), "--species-name", "1"]);
     assert!(err.contains("expected NAME=NEW_NAME"), "{err}");
     // Without renames, a radius by element says how to name the type.

@@ -1466,6 +1466,7 @@ pub fn batch(
                         .first()
                         .filter(|n| namings.iter().all(|m| m == *n))
                         .cloned(),
+                    renamed: opts.convert.species_names.clone(),
                 },
             ))));
         }

@@ -812,6 +812,7 @@ pub fn convert_dump(
             ConvertError::Species(Box::new(crate::species::UnknownSpecies {
                 input: Some(named.display().to_string()),
                 naming: naming.clone(),
+                renamed: options.species_names.clone(),
                 ..*s
             }))
         }

@@ -310,12 +310,23 @@ pub struct UnknownSpecies {
     /// How the input names its species, when known: the message then says what to write
     /// instead of a name that cannot occur.
     pub naming: Option<SpeciesNaming>,
+    /// The renames (`--species-name FROM=TO`) applied before the radii: a radius given
+    /// to a FROM name is said to take the new name.
+    pub renamed: Vec<(String, String)>,
 }
 
 impl std::fmt::Display for UnknownSpecies {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if let Some(input) = &self.input {
             write!(f, "{input}: ")?;
+        }
+        if let Some((_, to)) = self.renamed.iter().rfind(|(from, _)| *from == self.name) {
+            return write!(
+                f,
+                "--radius {}={}: --species-name renamed {:?} to {to:?}, and --radius takes the \
+                 new name: --radius {to}={}",
+                self.name, self.radius, self.name, self.radius
+            );
         }
         write!(
             f,
@@ -352,6 +363,7 @@ pub fn check_overrides(
             known: names.iter().map(|s| s.name.clone()).collect(),
             input: None,
             naming: None,
+            renamed: Vec::new(),
         })),
         None => Ok(()),
     }
