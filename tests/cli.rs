@@ -3149,8 +3149,9 @@ fn hidden_species_leave_the_clusters_and_inexact_recolouring_is_reported() {
     assert!(!out.contains("approximately"), "{out}");
 }
 
-/// A dump whose last frame is cut short (a run still writing): `convert` says which
-/// frame converts instead; `batch` converts the others, leaves the cut frame out of the
+/// A dump whose last frame is cut short (a run still writing): `convert` converts the
+/// frame before it with a note (`--last` refuses, saying which frame converts); `batch`
+/// converts the others, leaves the cut frame out of the
 /// manifest and its expected count (the directory verifies), says so, and converts it
 /// once the dump is complete. A frame cut short that is not its input's last fails.
 #[test]
@@ -3166,10 +3167,28 @@ fn a_dump_cut_in_its_last_frame_names_what_converts() {
         .unwrap()
         + 1;
     std::fs::write(&dump, &text[..cut]).unwrap();
-    let err = fails(&["convert", s(&dump), "-o", s(&dir.path().join("t.mdlod"))]);
+    let out_file = dir.path().join("t.mdlod");
+    let err = fails(&["convert", s(&dump), "-o", s(&out_file), "--last"]);
     assert!(
         err.contains("truncated frame") && err.contains("--frame 1 converts the last complete"),
         "{err}"
+    );
+    let run = mdlod(&["convert", s(&dump), "-o", s(&out_file)]);
+    let (out, note) = (
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr),
+    );
+    assert!(run.status.success(), "{note}");
+    assert!(
+        note.contains(
+            "the last frame (2) is incomplete (a run still writing it?): converting frame 1"
+        ),
+        "{note}"
+    );
+    assert!(out.contains("(frame 1 of 3, counted from 0)"), "{out}");
+    assert_eq!(
+        MdlodFile::open(&out_file).unwrap().metadata().timestep,
+        Some(100)
     );
     let d = dir.path().join("t.d");
     let out = ok(&["batch", s(&dump), "-o", s(&d)]);

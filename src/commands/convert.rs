@@ -27,7 +27,9 @@ pub struct Args {
     /// Frame to convert (0-based; -1 is the last, -2 the one before).
     #[arg(long, conflicts_with = "last", allow_negative_numbers = true)]
     pub frame: Option<i64>,
-    /// Convert the last frame (the default).
+    /// Convert the last frame, refusing it when it is cut short. The default converts
+    /// the last frame too, but takes the one before, with a note, when a run is still
+    /// writing the last.
     #[arg(long)]
     pub last: bool,
     /// Worker threads (default: all cores).
@@ -242,14 +244,31 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         Some(k) => FrameSelect::Index(usize::try_from(k).unwrap_or(usize::MAX)),
         None => FrameSelect::Last,
     };
-    Ok(convert_file(
-        &args.input,
-        &args.output,
-        frame,
-        &read,
-        &options,
-        &Bar::new(),
-    )?)
+    let run = |frame| {
+        convert_file(
+            &args.input,
+            &args.output,
+            frame,
+            &read,
+            &options,
+            &Bar::new(),
+        )
+    };
+    match run(frame) {
+        // The default, the last frame, of a dump a run is still writing: the last
+        // complete one, said (--last asks for the last one only).
+        Err(mdlod_preprocess::convert::ConvertError::LastFrameIncomplete { frame: k, source })
+            if args.frame.is_none() && !args.last =>
+        {
+            eprintln!(
+                "note: the last frame ({k}) is incomplete (a run still writing it?): converting \
+                 frame {}, the last complete one ({source})",
+                k - 1
+            );
+            Ok(run(FrameSelect::Index(k - 1))?)
+        }
+        r => Ok(r?),
+    }
 }
 
 pub fn print_report(output: &std::path::Path, r: &ConvertReport) {

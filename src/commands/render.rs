@@ -307,14 +307,20 @@ pub struct ViewArgs {
     pub look_along: Option<[f32; 3]>,
 }
 
-/// Parses a direction `X,Y,Z` (finite, not zero).
-fn parse_direction(s: &str) -> Result<[f32; 3], String> {
+/// Parses `N` comma-separated numbers; `what` names them in the error (`X,Y,Z`).
+fn parse_numbers<const N: usize>(s: &str, what: &str) -> Result<[f32; N], String> {
+    let expected = || format!("{s:?}: expected {N} numbers {what}");
     let v: Vec<f32> = s
         .split(',')
         .map(|t| t.trim().parse::<f32>())
         .collect::<Result<_, _>>()
-        .map_err(|_| format!("{s:?}: expected three numbers X,Y,Z"))?;
-    let d = <[f32; 3]>::try_from(v).map_err(|_| format!("{s:?}: expected three numbers X,Y,Z"))?;
+        .map_err(|_| expected())?;
+    <[f32; N]>::try_from(v).map_err(|_| expected())
+}
+
+/// Parses a direction `X,Y,Z` (finite, not zero).
+fn parse_direction(s: &str) -> Result<[f32; 3], String> {
+    let d = parse_numbers::<3>(s, "X,Y,Z")?;
     if d.iter().any(|c| !c.is_finite()) || d.iter().all(|&c| c == 0.0) {
         return Err(format!(
             "{s:?}: a direction needs finite numbers, not all 0"
@@ -529,13 +535,7 @@ pub fn parse_budget(s: &str) -> Result<u64, String> {
 /// origin along the unit normal `n/|n|` (so `1,1,0,d` and `2,2,0,d` are one plane); the
 /// result's normal is unit. A zero normal is left for the plane's check to refuse.
 fn parse_plane(s: &str) -> Result<[f32; 4], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("{s:?}: expected four numbers nx,ny,nz,d"))?;
-    let [x, y, z, d] =
-        <[f32; 4]>::try_from(v).map_err(|_| format!("{s:?}: expected four numbers nx,ny,nz,d"))?;
+    let [x, y, z, d] = parse_numbers::<4>(s, "nx,ny,nz,d")?;
     let n = mdlod_render::glam::Vec3::new(x, y, z);
     let len = n.length();
     Ok(if len > 0.0 && len.is_finite() {
