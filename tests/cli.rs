@@ -3047,6 +3047,77 @@ fn the_cell_is_drawn_over_the_picture() {
     assert!(out.contains("records no simulation cell"), "{out}");
 }
 
+/// `--target X,Y,Z` pans: the camera looks at that point from the fitted distance (the
+/// saved view says so), alone or changing a view file's target.
+#[test]
+fn a_target_pans_the_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a.mdlod");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("cuag_alloy.unwrapped.dump")),
+        "-o",
+        s(&file),
+    ]);
+    let png = dir.path().join("a.png");
+    let view = |extra: &[&str]| {
+        let saved = dir.path().join("v.json");
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "48",
+            "--height",
+            "32",
+            "--save-view",
+            s(&saved),
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();
+        let t: Vec<f64> = v["target"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        (t, v["distance"].as_f64().unwrap(), read_png(&png).2)
+    };
+    let (centre, distance, whole) = view(&[]);
+    let (t, d, panned) = view(&["--target", "1.5,-2,3"]);
+    assert_eq!(t, [1.5, -2.0, 3.0]);
+    assert!((d - distance).abs() < 1e-3 * distance, "{d} {distance}");
+    assert_ne!(panned, whole);
+    assert_ne!(centre, t);
+    // With a view file: its target replaced, its distance kept.
+    let saved = dir.path().join("keep.json");
+    ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--zoom",
+        "2",
+        "--save-view",
+        s(&saved),
+    ]);
+    let (t, d, _) = view(&["--view", s(&saved), "--target", "0,0,0"]);
+    assert_eq!(t, [0.0, 0.0, 0.0]);
+    assert!(
+        (d - distance / 2.0).abs() < 1e-3 * distance,
+        "{d} {distance}"
+    );
+    let e = fails(&["render", s(&file), "-o", s(&png), "--target", "1,nan,2"]);
+    assert!(e.contains("a point needs finite numbers"), "{e}");
+}
+
 /// `info` counts each species' particles (the GSD sample's companion XYZ files hold 143
 /// of type A and 157 of B), in text and JSON.
 #[test]

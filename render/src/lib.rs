@@ -87,6 +87,10 @@ pub enum ViewSpec {
     FileWith(PathBuf, ViewChanges),
     /// An explicit camera (its near/far planes are refitted to the data).
     Camera(Camera),
+    /// A view file's settings given in memory (the command line's angles with
+    /// `--target`): what it leaves out (the distance, the target) is fitted, as for a
+    /// [`ViewSpec::File`].
+    View(ViewFile),
 }
 
 /// Changes to a view file's camera: angles replace the file's, a zoom multiplies its
@@ -97,6 +101,8 @@ pub struct ViewChanges {
     pub elevation_deg: Option<f32>,
     pub zoom: Option<f32>,
     pub orthographic: bool,
+    /// The point looked at and orbited around, replacing the file's (a pan).
+    pub target: Option<[f32; 3]>,
 }
 
 impl ViewChanges {
@@ -119,6 +125,9 @@ impl ViewChanges {
         }
         if self.orthographic {
             v.projection = Projection::Orthographic;
+        }
+        if let Some(t) = self.target {
+            v.target = Some(t);
         }
         *v != before
     }
@@ -802,6 +811,12 @@ fn camera_in(
                 path: path.clone(),
                 message,
             })?;
+            c
+        }
+        ViewSpec::View(v) => {
+            v.check().map_err(RenderError::InvalidOptions)?;
+            let c = v.to_camera(&bounds, aspect);
+            check_built_camera(&c).map_err(RenderError::InvalidOptions)?;
             c
         }
         ViewSpec::Camera(c) => {

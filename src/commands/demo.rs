@@ -81,6 +81,7 @@ pub fn run(args: Args) -> Result<()> {
             zoom: Some(1.0),
             ortho: false,
             look_along: None,
+            target: None,
         },
         spp: 4,
         screen_error: 1.0,

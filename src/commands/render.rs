@@ -305,6 +305,20 @@ pub struct ViewArgs {
     /// on screen (looking straight down or up, y is).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_direction, allow_hyphen_values = true, conflicts_with_all = ["azimuth", "elevation"])]
     pub look_along: Option<[f32; 3]>,
+    /// The point looked at and orbited around, X,Y,Z in world units (a pan: with
+    /// --zoom, a close-up of one place), instead of the data's centre [default: with
+    /// --view, the file's]; the distance is fitted as without it.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
+    pub target: Option<[f32; 3]>,
+}
+
+/// Parses a point `X,Y,Z` (finite).
+fn parse_point(s: &str) -> Result<[f32; 3], String> {
+    let p = parse_numbers::<3>(s, "X,Y,Z")?;
+    match p.iter().all(|c| c.is_finite()) {
+        true => Ok(p),
+        false => Err(format!("{s:?}: a point needs finite numbers")),
+    }
 }
 
 /// Parses `N` comma-separated numbers; `what` names them in the error (`X,Y,Z`).
@@ -384,19 +398,30 @@ impl ViewArgs {
             elevation_deg: elevation,
             zoom: self.zoom,
             orthographic: self.ortho,
+            target: self.target,
         };
-        match &self.view {
-            Some(p) if changes.is_empty() => ViewSpec::File(p.clone()),
-            Some(p) => ViewSpec::FileWith(p.clone(), changes),
-            None => ViewSpec::Orbit {
+        let projection = if self.ortho {
+            Projection::Orthographic
+        } else {
+            Projection::Perspective
+        };
+        match (&self.view, self.target) {
+            (Some(p), _) if changes.is_empty() => ViewSpec::File(p.clone()),
+            (Some(p), _) => ViewSpec::FileWith(p.clone(), changes),
+            // A pan: the fitted distance, looking at the target.
+            (None, Some(t)) => ViewSpec::View(ViewFile {
+                projection,
                 azimuth_deg: azimuth.unwrap_or(30.0),
                 elevation_deg: elevation.unwrap_or(20.0),
                 zoom: self.zoom.unwrap_or(1.0),
-                projection: if self.ortho {
-                    Projection::Orthographic
-                } else {
-                    Projection::Perspective
-                },
+                target: Some(t),
+                ..Default::default()
+            }),
+            (None, None) => ViewSpec::Orbit {
+                azimuth_deg: azimuth.unwrap_or(30.0),
+                elevation_deg: elevation.unwrap_or(20.0),
+                zoom: self.zoom.unwrap_or(1.0),
+                projection,
             },
         }
     }
@@ -463,6 +488,7 @@ fn view_fits(view: &ViewSpec) -> bool {
             Ok(v) => v.target.is_none() || v.distance.is_none(),
             Err(_) => true,
         },
+        ViewSpec::View(v) => v.target.is_none() || v.distance.is_none(),
         ViewSpec::Camera(_) => false,
     }
 }
