@@ -65,6 +65,14 @@
 //! count, so neither does the cut. Streaming ([`traverse_with`]) walks the whole image
 //! at once, because the residency answers in the order it is asked.
 //!
+//! Hidden species and clip planes ([`TraversalSettings::hidden_species`],
+//! [`TraversalSettings::clip`]) take the walk without occlusion: a cluster of hidden
+//! species only, or whose box (grown by the quantization error) lies wholly beyond a
+//! plane, is culled with its subtree; one holding both kinds, or across a plane, is
+//! opened whatever its size (after every larger node, so that a budget refines what is
+//! large on screen first), down to particles, each left out by its species or by its
+//! decoded centre. The cut then draws exactly the particles kept and clusters of them only.
+//!
 //! Streaming plugs in through [`Residency`]: a node whose children's data are not on the
 //! GPU is not opened but stays drawn (so a missing subtree is drawn by its nearest
 //! resident ancestor) and refinement continues with the other nodes; the residency
