@@ -349,7 +349,7 @@ const NAMED_COLOURS: [(&str, &str); 12] = [
 ];
 
 /// Parses a colour as `#rrggbb`, `rrggbb`, three numbers in [0, 1] separated by commas,
-/// or a name ([`NAMED_COLOURS`]: `red`, `grey`, ...).
+/// or a name (`NAMED_COLOURS`: `red`, `grey`, ...).
 pub fn parse_colour(s: &str) -> Result<[f32; 3], RenderError> {
     let bad = || {
         let names: Vec<&str> = NAMED_COLOURS.iter().map(|(n, _)| *n).collect();

@@ -816,7 +816,7 @@ impl CutSource for StreamingRenderer<'_> {
     }
 
     /// Batches within one storage binding each, counting the ranges after their split at
-    /// page boundaries ([`stream_batch_limits`]).
+    /// page boundaries (`stream_batch_limits`).
     fn batch_lists(&self, draw: &DrawList) -> Option<Vec<DrawList>> {
         let (points, ranges) = self.renderer.batch_limits();
         let (points, ranges) = stream_batch_limits(points, ranges, self.page_points);
