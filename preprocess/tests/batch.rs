@@ -1403,13 +1403,17 @@ fn a_dump_cut_anywhere_in_its_last_frame_converts_the_frames_before() {
         // Cuts in the header's first bytes and lines, and in the atoms' data.
         let mut cuts: Vec<usize> = vec![start + 1, start + 7, (start + end) / 2, end - 3];
         if !name.ends_with(".bin") {
-            // After each of the header's first lines (`ITEM: TIMESTEP`, its value, ...).
+            // After each of the header's first lines (`ITEM: TIMESTEP`, its value, ...),
+            // and one and six bytes into the next (`I`, `ITEM: `: the next header line of
+            // the frame, not a new frame).
             let lines = whole[start..end]
                 .iter()
                 .enumerate()
                 .filter(|(_, &b)| b == b'\n')
                 .map(|(i, _)| start + i + 1)
-                .take(9);
+                .take(9)
+                .flat_map(|b| [b, b + 1, b + 6])
+                .filter(|&c| c < end);
             cuts.extend(lines);
         } else {
             cuts.extend([start + 8, start + 40, start + 100]);

@@ -96,7 +96,14 @@ fn cut_header_start(data: &[u8], floor: usize) -> Option<usize> {
             let last = i + 1 == rest.len();
             if line == b"ITEM: UNITS" || line == b"ITEM: TIME" {
                 i += 2; // Its value, whole, cut or missing.
-            } else if last && cut && !line.is_empty() && ITEMS.iter().any(|t| t.starts_with(line)) {
+            } else if last
+                && cut
+                && !line.is_empty()
+                && ITEMS.iter().any(|t| t.starts_with(line))
+                // `I` or `ITEM: ` cut after a header line of the frame in progress is
+                // that frame's next header line (`ITEM: NUMBER OF ATOMS`), not a new one.
+                && !(b"ITEM: ".starts_with(line) && header_in_progress(data, rest[i].0))
+            {
                 i += 1;
             } else {
                 return None;
@@ -104,6 +111,30 @@ fn cut_header_start(data: &[u8], floor: usize) -> Option<usize> {
         }
         (rest[0].0 > floor).then_some(rest[0].0)
     })
+}
+
+/// Whether the line starting at `line_start` follows, within a few lines, a frame
+/// header's `ITEM: TIMESTEP`, `ITEM: NUMBER OF ATOMS` or `ITEM: BOX BOUNDS` line: it
+/// continues that header (rather than following an `ITEM: ATOMS` line or atom lines).
+fn header_in_progress(data: &[u8], line_start: usize) -> bool {
+    let mut at = line_start;
+    for _ in 0..4 {
+        let Some((start, line)) = prev_line(data, at) else {
+            return false;
+        };
+        let line = trim(line);
+        if line.starts_with(b"ITEM:") {
+            return [
+                &b"ITEM: TIMESTEP"[..],
+                b"ITEM: NUMBER OF ATOMS",
+                b"ITEM: BOX BOUNDS",
+            ]
+            .iter()
+            .any(|h| line.starts_with(h));
+        }
+        at = start;
+    }
+    false
 }
 
 /// The line ending at `line_start - 1` (its start and bytes), if any.
