@@ -2776,7 +2776,19 @@ fn clip_planes_cut_the_particles_away() {
         "--clip",
         "0,0,0,1",
     ]);
-    assert!(err.contains("non-zero normal"), "{err}");
+    assert!(err.contains("a normal nx,ny,nz that is not zero"), "{err}");
+    // A plane beyond the data cuts nothing: no face, no note about one.
+    let (out, _) = render("far.png", &["--clip", "1,0,0,1e30"]);
+    assert!(
+        !out.contains("kept side") && !out.contains("cut away"),
+        "{out}"
+    );
+    // Normals of any magnitude single precision can write are one direction.
+    let (_, unit) = render("u.png", &["--clip", &plane]);
+    for tiny_or_huge in ["1e-38", "3e38", "1e300"] {
+        let (_, png) = render("t.png", &["--clip", &format!("{tiny_or_huge},0,0,{mid}")]);
+        assert_eq!(png, unit, "{tiny_or_huge}");
+    }
 }
 
 /// `--legend` writes what the colours mean as SVG: the colour map's bar over the range
@@ -2856,8 +2868,11 @@ fn a_legend_says_what_the_colours_mean() {
     ]);
     assert!(e.contains("name it .svg"), "{e}");
 
-    // A title of the user's, into a directory made for it.
+    // A title of the user's; as for -o, the directory must exist.
     let titled = dir.path().join("legends").join("t.svg");
+    let e = fails(&["render", s(&file), "-o", s(&png), "--legend", s(&titled)]);
+    assert!(e.contains("does not exist"), "{e}");
+    std::fs::create_dir(dir.path().join("legends")).unwrap();
     ok(&[
         "render",
         s(&file),
@@ -2963,6 +2978,23 @@ fn a_legend_says_what_the_colours_mean() {
     ]);
     assert!(
         out.contains("c_pe is constant in this file (-3.54)"),
+        "{out}"
+    );
+    let out = ok(&[
+        "render",
+        s(&flat_file),
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--colour-map",
+        "viridis",
+        "--log-scale",
+    ]);
+    assert!(
+        out.contains("--log-scale left unused: the attribute is constant"),
         "{out}"
     );
     assert!(std::fs::read_to_string(&svg)

@@ -320,22 +320,28 @@ pub fn density_bar(density_max: f32) -> String {
     )
 }
 
-/// A key of the species shown: a disc of each one's colour (linear RGB) and its name.
-pub fn species_key(entries: &[(String, [f32; 3])]) -> String {
+/// A key of the species shown: a disc of each one's colour (linear RGB) and its name,
+/// under `title` when given.
+pub fn species_key(entries: &[(String, [f32; 3])], title: Option<&str>) -> String {
     let row = 20.0;
-    let height = 10.0 + row * entries.len().max(1) as f32;
+    let top = if title.is_some() { row } else { 0.0 };
+    let height = 10.0 + top + row * entries.len().max(1) as f32;
     let width = 40.0
         + entries
             .iter()
             .map(|(n, _)| n.chars().count() as f32 * 7.5)
+            .chain(title.map(|t| t.chars().count() as f32 * 7.5 - 30.0))
             .fold(60.0, f32::max);
     let mut svg = String::new();
     let _ = writeln!(
         svg,
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="12">"#
     );
+    if let Some(t) = title {
+        let _ = writeln!(svg, r#"<text x="7" y="16">{}</text>"#, escape(t));
+    }
     for (k, (name, colour)) in entries.iter().enumerate() {
-        let y = 5.0 + row * (k as f32 + 0.5);
+        let y = 5.0 + top + row * (k as f32 + 0.5);
         let _ = writeln!(
             svg,
             r##"<circle cx="14" cy="{y}" r="7" fill="{}" stroke="#000" stroke-width="0.5"/>"##,
@@ -465,11 +471,16 @@ mod tests {
             svg.contains(">≥ 0.80</text>") || svg.contains(">≥ 0.8</text>"),
             "{svg}"
         );
-        let key = species_key(&[
-            ("Cu".into(), [1.0, 0.0, 0.0]),
-            ("Ag".into(), [0.0, 0.0, 1.0]),
-        ]);
+        let key = species_key(
+            &[
+                ("Cu".into(), [1.0, 0.0, 0.0]),
+                ("Ag".into(), [0.0, 0.0, 1.0]),
+            ],
+            None,
+        );
         assert!(key.contains(r##"fill="#ff0000""##) && key.contains(">Ag</text>"));
+        let titled = species_key(&[("Cu".into(), [1.0, 0.0, 0.0])], Some("Alloy & grain"));
+        assert!(titled.contains(">Alloy &amp; grain</text>"), "{titled}");
     }
 
     /// Ends keep three significant digits in one notation, so the range is not misstated.

@@ -356,7 +356,8 @@ pub fn angles_looking_along(d: [f32; 3]) -> (f32, f32) {
     } else {
         back.y.atan2(back.x).to_degrees()
     };
-    (azimuth as f32, elevation as f32)
+    // (+ 0.0: no -0 in a saved view.)
+    (azimuth as f32 + 0.0, elevation as f32 + 0.0)
 }
 
 impl ViewArgs {
@@ -561,15 +562,25 @@ pub fn parse_budget(s: &str) -> Result<u64, String> {
 /// origin along the unit normal `n/|n|` (so `1,1,0,d` and `2,2,0,d` are one plane); the
 /// result's normal is unit. A zero normal is left for the plane's check to refuse.
 fn parse_plane(s: &str) -> Result<[f32; 4], String> {
-    let [x, y, z, d] = parse_numbers::<4>(s, "nx,ny,nz,d")?;
-    let n = mdlod_render::glam::Vec3::new(x, y, z);
-    let len = n.length();
-    Ok(if len > 0.0 && len.is_finite() {
-        let u = n / len;
-        [u.x, u.y, u.z, d]
-    } else {
-        [x, y, z, d]
-    })
+    let expected = || format!("{s:?}: expected 4 numbers nx,ny,nz,d");
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| expected())?;
+    let [x, y, z, d] = <[f64; 4]>::try_from(v).map_err(|_| expected())?;
+    // In double precision, scaled first: a normal of 1e-38 or 3e38 is one direction too.
+    let m = x.abs().max(y.abs()).max(z.abs());
+    if !(m.is_finite() && m > 0.0 && d.is_finite()) {
+        return Err(format!(
+            "{s:?}: a plane needs finite numbers and a normal nx,ny,nz that is not zero"
+        ));
+    }
+    let n = mdlod_render::glam::DVec3::new(x / m, y / m, z / m).normalize();
+    if d.abs() > f64::from(f32::MAX) {
+        return Err(format!("{s:?}: the distance d is beyond single precision"));
+    }
+    Ok([n.x as f32, n.y as f32, n.z as f32, d as f32])
 }
 
 /// The S-NDF binnings.
@@ -648,6 +659,27 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(p) = &args.legend {
         super::check_output("--legend", p, &inputs)?;
+        // One legend for a movie's or turntable's images, not one per image.
+        if p.file_name()
+            .is_some_and(|n| n.to_string_lossy().contains('%'))
+        {
+            anyhow::bail!(
+                "--legend {}: the legend is one file, for every image a movie or turntable \
+                 writes (a name without %)",
+                p.display()
+            );
+        }
+        // As for -o: a single image's legend goes into a directory that exists.
+        let single = !args.file.is_dir() && args.turntable.is_none();
+        if let Some(dir) = p.parent().filter(|d| single && !d.as_os_str().is_empty()) {
+            if !dir.is_dir() {
+                anyhow::bail!(
+                    "--legend {}: the directory {} does not exist",
+                    p.display(),
+                    dir.display()
+                );
+            }
+        }
         if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg")) {
             anyhow::bail!(
                 "--legend {}: the legend is written as SVG: name it .svg",
@@ -932,7 +964,9 @@ pub fn run(args: Args) -> Result<()> {
             "  note: nothing is drawn: the --clip planes cut every particle away (each keeps \
              n·p ≤ d, d the distance from the origin along the unit normal: check its sign)"
         );
-    } else if let Some(note) = clip_side_note(&opts.style.clip, &r.camera) {
+    } else if let Some(note) =
+        clip_side_note(&opts.style.clip, &r.camera).filter(|_| r.particles_clipped > 0)
+    {
         println!("{note}");
     }
     if args.cell.is_some() && file.metadata().simulation_box.is_none() {
@@ -1114,7 +1148,7 @@ fn write_legend(
                 })
                 .collect();
             (
-                legend::species_key(&shown),
+                legend::species_key(&shown, args.legend_title.as_deref()),
                 format!("{} species in their colours", shown.len()),
             )
         }
@@ -1255,6 +1289,9 @@ fn log_text(
             mdlod_render::style::AttributeScale::LOG_DECADES,
             hi as f32,
         ),
+        None if style.attribute_range.is_none() && a.min >= a.max => {
+            ", linear (--log-scale left unused: the attribute is constant)".to_string()
+        }
         None => ", linear (--log-scale left unused: no value of the range is above 0, and a \
                   log scale shows only those)"
             .to_string(),
@@ -1535,8 +1572,9 @@ fn render_turntable(
     };
     println!(
         "rendered {n} views in {:.1} s, a full turn about the vertical axis (z) from azimuth \
-         {start}°{exposure}{derived}{limited}",
-        t0.elapsed().as_secs_f64()
+         {}°{exposure}{derived}{limited}",
+        t0.elapsed().as_secs_f64(),
+        start.rem_euclid(360.0)
     );
     if view_fits(&args.camera.spec()) {
         let file = mdlod_format::MdlodFile::open(&args.file)?;

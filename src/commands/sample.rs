@@ -161,5 +161,11 @@ pub fn run(args: Args) -> Result<()> {
         r.nodes_drawn,
         r.total_time.as_secs_f64() * 1e3
     );
+    if !args.style.clip.is_empty() && r.particles_drawn + r.nodes_drawn == 0 {
+        println!(
+            "  note: nothing is sampled: the --clip planes cut every particle away (each keeps \
+             n·p ≤ d, d the distance from the origin along the unit normal: check its sign)"
+        );
+    }
     Ok(())
 }
