@@ -3146,6 +3146,23 @@ fn a_target_pans_the_view() {
         (d - distance / 2.0).abs() < 1e-3 * distance,
         "{d} {distance}"
     );
+    // Looking away from the data draws nothing, and says so.
+    let far = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--target",
+        "10000,0,0",
+    ]);
+    assert!(
+        far.contains("nothing is drawn: none of the data is in view"),
+        "{far}"
+    );
     let e = fails(&["render", s(&file), "-o", s(&png), "--target", "1,nan,2"]);
     assert!(e.contains("a point needs finite numbers"), "{e}");
 }

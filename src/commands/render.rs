@@ -910,10 +910,10 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
     }
-    if species
+    let every_species_hidden = species
         .iter()
-        .all(|s| args.style.hide_species.contains(&s.name))
-    {
+        .all(|s| args.style.hide_species.contains(&s.name));
+    if every_species_hidden {
         println!("  note: every species is hidden: the image shows the background only");
     }
     if view_fits(&opts.view) {
@@ -958,6 +958,13 @@ pub fn run(args: Args) -> Result<()> {
                 point_noun(args.mode).trim_end_matches('s'),
             );
         }
+    }
+    if opts.style.clip.is_empty() && !every_species_hidden && r.particles_drawn + r.nodes_drawn == 0
+    {
+        println!(
+            "  note: nothing is drawn: none of the data is in view (a --target, --zoom or \
+             view file that looks elsewhere?)"
+        );
     }
     if !opts.style.clip.is_empty() && r.particles_drawn + r.nodes_drawn == 0 {
         println!(
