@@ -224,7 +224,8 @@ fn bad_inputs_give_clear_errors_naming_the_file() {
     let truncated = dir.path().join("cut.lammpstrj");
     let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
     std::fs::write(&truncated, &text[..text.len() - 200]).unwrap();
-    let err = fails(&["convert", s(&truncated), "-o", s(&out)]);
+    // (Without --last, the frame before the cut one converts: a run still writing.)
+    let err = fails(&["convert", s(&truncated), "-o", s(&out), "--last"]);
     assert!(
         err.contains("cut.lammpstrj:") && err.contains("truncated"),
         "{err}"
