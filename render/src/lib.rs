@@ -513,17 +513,24 @@ pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
     fit_bounds(file, hidden, opts.fit_all)
 }
 
+/// Which species are below node `id` with the species of `hidden` hidden
+/// ([`MdlodFile::species_below`]; every node's `BELOW_OUT` when none is).
+fn species_kinds(file: &MdlodFile, hidden: u64) -> impl Fn(usize) -> u8 + '_ {
+    use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
+    let kinds = (hidden != 0).then(|| file.species_below(hidden));
+    move |id| match &kinds {
+        Some(k) => k.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT),
+        None => BELOW_OUT,
+    }
+}
+
 /// [`fit_bounds`] without its test of whether trimming matters; `None` where the file
 /// has too few clusters to tell a bulk from its outliers.
 fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
-    use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
+    use mdlod_format::reader::BELOW_OUT;
     let (nodes, levels) = (file.nodes(), file.levels());
     let last = levels.len().checked_sub(1)?;
-    let kinds = (hidden != 0).then(|| file.species_below(hidden));
-    let kind_of = |id: usize| match &kinds {
-        Some(k) => k.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT),
-        None => BELOW_OUT,
-    };
+    let kind_of = species_kinds(file, hidden);
     let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
     // What places the bulk: the centres of the clusters of the first level of at least
     // 1024, weighted by their areas; in a file without one (a few thousand particles),
@@ -606,11 +613,7 @@ fn bounds_walk(
     use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
     let (nodes, levels) = (file.nodes(), file.levels());
     let last = levels.len().checked_sub(1)?;
-    let kinds = (hidden != 0).then(|| file.species_below(hidden));
-    let kind_of = |id: usize| match &kinds {
-        Some(k) => k.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT),
-        None => BELOW_OUT,
-    };
+    let kind_of = species_kinds(file, hidden);
     let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
     let inside = |a: glam::Vec3, b: glam::Vec3| {
         core.is_none_or(|[lo, hi]| a.cmpge(lo).all() && b.cmple(hi).all())

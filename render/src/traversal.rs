@@ -915,13 +915,14 @@ fn largest_first(
             .as_deref()
             .map(|kinds| (kinds, file.species(), settings.hidden_species)),
         clip: settings.clip,
+        grow: quantization_reach(file),
         file,
     });
     let hidden_only = |id: usize| hidden.as_ref().is_some_and(|h| h.node(id));
-    let hidden_particle = |i: usize, parent: usize| {
+    let hidden_particle = |i: usize, enc: usize| {
         hidden
             .as_ref()
-            .is_some_and(|h| h.particle(i, parent).is_some())
+            .is_some_and(|h| h.particle(i, enc).is_some())
     };
     let mixed = |id: usize| hidden.as_ref().is_some_and(|h| h.mixed(id));
     if hidden_only(0) {
@@ -964,9 +965,10 @@ fn largest_first(
         }
         let children = n.child_first as usize..(n.child_first + n.child_count) as usize;
         let visible_children = if child_level == last {
+            let enc = children_encoder(file, id as usize);
             children
                 .clone()
-                .filter(|&c| !hidden_particle(c, id as usize))
+                .filter(|&c| !hidden_particle(c, enc))
                 .count() as u64
         } else {
             let first = levels[child_level].node_first as usize;
@@ -1058,7 +1060,20 @@ struct Hidden<'a> {
     /// The species below each node, the particles' species and the hidden set.
     species: Option<(&'a [u8], &'a [u16], u64)>,
     clip: ClipPlanes,
+    /// How far decoded centres stray from their nodes' boxes ([`quantization_reach`]).
+    grow: f32,
     file: &'a MdlodFile,
+}
+
+/// The largest distance of a decoded centre from its input position (the file's recorded
+/// quantization error; infinite where that is not a number).
+fn quantization_reach(file: &MdlodFile) -> f32 {
+    let e = file.metadata().max_position_error as f32;
+    if e.is_finite() {
+        e.max(0.0)
+    } else {
+        f32::INFINITY
+    }
 }
 
 /// Why a particle is left out.
@@ -1077,14 +1092,11 @@ impl Hidden<'_> {
             return ClipSide::Across;
         };
         // Decoded centres stray from the box by at most the quantization error.
-        let grow = self.file.metadata().max_position_error as f32;
-        let grow = if grow.is_finite() {
-            grow.max(0.0)
-        } else {
-            f32::INFINITY
-        };
-        self.clip
-            .side(Vec3::from(n.bounds_min), Vec3::from(n.bounds_max), grow)
+        self.clip.side(
+            Vec3::from(n.bounds_min),
+            Vec3::from(n.bounds_max),
+            self.grow,
+        )
     }
 
     /// Node `id` holds hidden particles only, or lies wholly beyond a clip plane.
@@ -1106,8 +1118,9 @@ impl Hidden<'_> {
         }
     }
 
-    /// Why particle `i`, a child of node `parent`, is left out, if it is.
-    fn particle(&self, i: usize, parent: usize) -> Option<LeftOut> {
+    /// Why particle `i`, decoded with encoding node `enc` ([`children_encoder`] of its
+    /// parent), is left out, if it is.
+    fn particle(&self, i: usize, enc: usize) -> Option<LeftOut> {
         if self.species.is_some_and(|(_, species, mask)| {
             species
                 .get(i)
@@ -1121,7 +1134,7 @@ impl Hidden<'_> {
         // The centre as the GPU decodes it.
         let file = self.file;
         let last = file.level_count() - 1;
-        let enc = &file.nodes()[children_encoder(file, parent)];
+        let enc = &file.nodes()[enc];
         let p = quantize::decode3(
             file.positions(last).get(i),
             enc.centroid,
@@ -1204,12 +1217,7 @@ fn front_to_back(
     // the recorded quantization error.
     let r_min = radii.iter().copied().fold(f32::INFINITY, f32::min).max(0.0);
     let r_min = if r_min.is_finite() { r_min } else { 0.0 };
-    let quant = file.metadata().max_position_error as f32;
-    let quant = if quant.is_finite() {
-        quant.max(0.0)
-    } else {
-        f32::INFINITY
-    };
+    let quant = quantization_reach(file);
     let mut out = Decisions::default();
 
     // The sphere a node is drawn as when it is not opened, exactly as the GPU decodes it.
@@ -1520,7 +1528,7 @@ fn emit_node(
     };
     for (k, c) in children.enumerate() {
         let draw = if child_level == last {
-            let left_out = hidden.and_then(|h| h.particle(c as usize, id as usize));
+            let left_out = hidden.and_then(|h| h.particle(c as usize, enc as usize));
             if let Some(why) = left_out {
                 match why {
                     LeftOut::Species => list.hidden_particles += 1,

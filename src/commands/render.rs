@@ -314,7 +314,7 @@ pub struct ViewArgs {
 
 /// Parses a point `X,Y,Z` (finite).
 fn parse_point(s: &str) -> Result<[f32; 3], String> {
-    let p = parse_numbers::<3>(s, "X,Y,Z")?;
+    let p = parse_numbers::<f32, 3>(s, "X,Y,Z")?;
     match p.iter().all(|c| c.is_finite()) {
         true => Ok(p),
         false => Err(format!("{s:?}: a point needs finite numbers")),
@@ -322,19 +322,22 @@ fn parse_point(s: &str) -> Result<[f32; 3], String> {
 }
 
 /// Parses `N` comma-separated numbers; `what` names them in the error (`X,Y,Z`).
-fn parse_numbers<const N: usize>(s: &str, what: &str) -> Result<[f32; N], String> {
+fn parse_numbers<T: std::str::FromStr, const N: usize>(
+    s: &str,
+    what: &str,
+) -> Result<[T; N], String> {
     let expected = || format!("{s:?}: expected {N} numbers {what}");
-    let v: Vec<f32> = s
+    let v: Vec<T> = s
         .split(',')
-        .map(|t| t.trim().parse::<f32>())
+        .map(|t| t.trim().parse::<T>())
         .collect::<Result<_, _>>()
         .map_err(|_| expected())?;
-    <[f32; N]>::try_from(v).map_err(|_| expected())
+    <[T; N]>::try_from(v).map_err(|_| expected())
 }
 
 /// Parses a direction `X,Y,Z` (finite, not zero).
 fn parse_direction(s: &str) -> Result<[f32; 3], String> {
-    let d = parse_numbers::<3>(s, "X,Y,Z")?;
+    let d = parse_numbers::<f32, 3>(s, "X,Y,Z")?;
     if d.iter().any(|c| !c.is_finite()) || d.iter().all(|&c| c == 0.0) {
         return Err(format!(
             "{s:?}: a direction needs finite numbers, not all 0"
@@ -562,13 +565,7 @@ pub fn parse_budget(s: &str) -> Result<u64, String> {
 /// origin along the unit normal `n/|n|` (so `1,1,0,d` and `2,2,0,d` are one plane); the
 /// result's normal is unit. A zero normal is left for the plane's check to refuse.
 fn parse_plane(s: &str) -> Result<[f32; 4], String> {
-    let expected = || format!("{s:?}: expected 4 numbers nx,ny,nz,d");
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| expected())?;
-    let [x, y, z, d] = <[f64; 4]>::try_from(v).map_err(|_| expected())?;
+    let [x, y, z, d] = parse_numbers::<f64, 4>(s, "nx,ny,nz,d")?;
     // In double precision, scaled first: a normal of 1e-38 or 3e38 is one direction too.
     let m = x.abs().max(y.abs()).max(z.abs());
     if !(m.is_finite() && m > 0.0 && d.is_finite()) {
@@ -959,18 +956,15 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
-    if opts.style.clip.is_empty() && !every_species_hidden && r.particles_drawn + r.nodes_drawn == 0
-    {
-        println!(
-            "  note: nothing is drawn: none of the data is in view (a --target, --zoom or \
-             view file that looks elsewhere?)"
-        );
-    }
-    if !opts.style.clip.is_empty() && r.particles_drawn + r.nodes_drawn == 0 {
-        println!(
-            "  note: nothing is drawn: the --clip planes cut every particle away (each keeps \
-             n·p ≤ d, d the distance from the origin along the unit normal: check its sign)"
-        );
+    if r.particles_drawn + r.nodes_drawn == 0 && !every_species_hidden {
+        let why = match opts.style.clip.is_empty() {
+            true => {
+                "none of the data is in view (a --target, --zoom or view file that looks \
+                     elsewhere?)"
+            }
+            false => CLIP_CUTS_ALL,
+        };
+        println!("  note: nothing is drawn: {why}");
     } else if let Some(note) =
         clip_side_note(&opts.style.clip, &r.camera).filter(|_| r.particles_clipped > 0)
     {
@@ -1373,6 +1367,10 @@ fn hidden_text(r: &mdlod_render::RenderReport) -> String {
         false => format!(" (and {})", parts.join("; ")),
     }
 }
+
+/// Why a cut with clip planes holds nothing.
+pub const CLIP_CUTS_ALL: &str = "the --clip planes cut every particle away (each keeps n·p ≤ d, \
+     d the distance from the origin along the unit normal: check its sign)";
 
 /// A note when the camera looks at a clip plane from the side it keeps: the cut face
 /// then faces away, hidden behind the material kept (`n·eye ≤ d`).

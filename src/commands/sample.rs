@@ -163,8 +163,8 @@ pub fn run(args: Args) -> Result<()> {
     );
     if !args.style.clip.is_empty() && r.particles_drawn + r.nodes_drawn == 0 {
         println!(
-            "  note: nothing is sampled: the --clip planes cut every particle away (each keeps \
-             n·p ≤ d, d the distance from the origin along the unit normal: check its sign)"
+            "  note: nothing is sampled: {}",
+            super::render::CLIP_CUTS_ALL
         );
     }
     Ok(())
