@@ -12,6 +12,10 @@
 //! Orthographic views show a height of `2 · distance · tan(fov_y / 2)` world units, the
 //! height a perspective view shows at the target, so zooming (changing the distance)
 //! works the same in both and switching projections keeps the target's framing.
+//! A fitted view ([`Camera::fit`]) looks at the centre of the data's box from the
+//! distance where the box, as the camera's direction sees it, fills [`FIT_FILL`] of the
+//! image: the distance depends on the direction, so a turntable takes the largest of its
+//! views' distances for all of them.
 //! `near`/`far` are explicit; [`Camera::fit_depth_range`] sets them around a box.
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
@@ -65,6 +69,10 @@ impl Bounds {
         }
     }
 }
+
+/// The share of the image's width or height a fitted view's data spans, in the tighter of
+/// the two: a margin of 5 % on each side.
+pub const FIT_FILL: f64 = 0.9;
 
 /// An orbit camera. Angles are in degrees, lengths in world units.
 #[derive(Clone, Debug, PartialEq)]
@@ -277,18 +285,51 @@ impl Camera {
     }
 
     /// Aims at the centre of `bounds` from the current direction, at the distance where
-    /// the bounding sphere just fits an image of `aspect` (width / height), and sets the
-    /// depth range around it.
+    /// the box, as this direction sees it, spans [`FIT_FILL`] of an image of `aspect`
+    /// (width / height) in its tighter dimension, and sets the depth range around it.
     pub fn fit(&mut self, bounds: &Bounds, aspect: f32) {
-        let r = bounds.fit_radius();
-        let tan_half_y = (self.fov_y_deg.to_radians() * 0.5).tan();
-        let tan_half = tan_half_y * aspect.min(1.0);
         self.target = bounds.center();
-        self.distance = match self.projection {
-            Projection::Perspective => r / tan_half.atan().sin(),
-            Projection::Orthographic => r / tan_half,
-        };
+        self.distance = self.fitted_distance(bounds, aspect);
         self.fit_depth_range(bounds);
+    }
+
+    /// The eye's distance from the centre of `bounds` at which every corner of the box
+    /// lies inside the view, one of them at [`FIT_FILL`] of the way from the centre to
+    /// the image's edge, looking from this camera's direction. It depends on the
+    /// direction: a slab seen edge-on is fitted closer than seen across its diagonal.
+    /// In double precision (data may span 10^-10 or 10^36); a box of no extent is fitted
+    /// as a sphere of [`Bounds::fit_radius`].
+    pub fn fitted_distance(&self, bounds: &Bounds, aspect: f32) -> f32 {
+        let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan() * FIT_FILL;
+        let tan_x = tan_y * f64::from(aspect);
+        let half = (bounds.max.as_dvec3() - bounds.min.as_dvec3()) * 0.5;
+        let (r, u, b) = (
+            self.right().as_dvec3(),
+            self.up().as_dvec3(),
+            self.back().as_dvec3(),
+        );
+        let mut need = 0.0f64;
+        for i in 0..8 {
+            let sign = |bit: u32| if i & bit == 0 { -1.0 } else { 1.0 };
+            let o = glam::DVec3::new(sign(1) * half.x, sign(2) * half.y, sign(4) * half.z);
+            let across = (o.dot(r).abs() / tan_x).max(o.dot(u).abs() / tan_y);
+            need = need.max(match self.projection {
+                // The corner's depth from the eye is the distance less its offset
+                // towards the eye.
+                Projection::Perspective => o.dot(b) + across.max(half.length() * 1e-3),
+                Projection::Orthographic => across,
+            });
+        }
+        let fitted = need as f32;
+        if half.max_element() > 0.0 && fitted.is_finite() && fitted > 0.0 {
+            return fitted;
+        }
+        let rad = bounds.fit_radius();
+        let tan_half = (self.fov_y_deg.to_radians() * 0.5).tan() * aspect.min(1.0);
+        match self.projection {
+            Projection::Perspective => rad / tan_half.atan().sin(),
+            Projection::Orthographic => rad / tan_half,
+        }
     }
 
     /// Sets `near` and `far` to enclose the bounding sphere of `bounds` (with a small
@@ -483,12 +524,14 @@ mod tests {
                 Vec3::new(-3.0, 0.0, 10.0) * scale,
                 Vec3::new(5.0, 2.0, 12.0) * scale,
             );
+            for (azimuth_deg, elevation_deg) in
+                [(70.0, -35.0), (0.0, 0.0), (90.0, 90.0), (225.0, 30.0)]
             {
                 let mut widest = 0.0f32;
                 let mut c = Camera {
                     projection: p,
-                    azimuth_deg: 70.0,
-                    elevation_deg: -35.0,
+                    azimuth_deg,
+                    elevation_deg,
                     ..Default::default()
                 };
                 c.fit(&b, aspect);
@@ -507,9 +550,12 @@ mod tests {
                     );
                     widest = widest.max(ndc.x.abs()).max(ndc.y.abs());
                 }
+                // The tighter dimension is filled to FIT_FILL, as the direction sees the
+                // box (the bounding sphere's fit left 45-55 %).
                 assert!(
-                    widest > 0.4,
-                    "scale {scale} {p:?} aspect {aspect}: the data spans {widest} of the view"
+                    (widest - FIT_FILL as f32).abs() < 1e-3,
+                    "scale {scale} {p:?} aspect {aspect} ({azimuth_deg}°, {elevation_deg}°): \
+                     the data spans {widest} of the view"
                 );
             }
         }

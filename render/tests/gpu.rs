@@ -900,14 +900,14 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
     );
     drop(tiny);
 
-    // A pool's cut larger than one batch (here made small: 61 points) is bound in
+    // A pool's cut larger than one batch (here made small: 31 points) is bound in
     // batches, its ranges split at page boundaries: the same pixels.
     let mut batched = Renderer::new(GpuContext::with_backends(backends()).unwrap());
-    batched.set_batch_points(Some(61));
+    batched.set_batch_points(Some(31));
     let mut pool = StreamingRenderer::with_page_points(&batched, f.clone(), pool, PAGE).unwrap();
     for (i, (camera, traversal, reference)) in references.iter().enumerate() {
         let (frame, draw, _, _) = converge(&mut pool, camera, traversal, &settings);
-        assert!(draw.points > 4 * 61, "view {i}: {} points", draw.points);
+        assert!(draw.points > 4 * 31, "view {i}: {} points", draw.points);
         assert_eq!(&frame.image, reference, "view {i}: batched pool");
     }
 }
@@ -1648,7 +1648,9 @@ fn sorted_over_blending_matches_a_cpu_compositor() {
         for (i, (g, c)) in gpu.hdr.iter().zip(&img).enumerate() {
             for k in 0..4 {
                 assert!(
-                    (g[k] - c[k]).abs() <= 2e-4,
+                    // Single-precision rounding of the GPU's exp and blend over
+                    // the layers of splats a pixel gathers.
+                    (g[k] - c[k]).abs() <= 5e-4,
                     "{error_px} px: pixel {i} channel {k}: {} vs {}",
                     g[k],
                     c[k]

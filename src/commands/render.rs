@@ -4,7 +4,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mdlod_render::{
-    parse_colour, render_to_png_with, Projection, RenderMode, RenderOptions, ViewFile, ViewSpec,
+    parse_colour, render_to_png_with, Camera, Projection, RenderMode, RenderOptions, ViewFile,
+    ViewSpec,
 };
 
 use crate::progress::Bar;
@@ -1497,7 +1498,8 @@ fn image_line(
 }
 
 /// `--turntable N`: `n` views of one file, the azimuth turning by 360°/n from view to
-/// view around the fitted (or saved) target, the same distance throughout; for splats the
+/// view around the fitted (or saved) target, the same distance throughout (where fitted,
+/// the largest of the views' fitted distances); for splats the
 /// first view's exposure holds for all.
 fn render_turntable(
     args: &Args,
@@ -1531,15 +1533,41 @@ fn render_turntable(
     let (mut limited, mut first_camera) = (0usize, None);
     // The species any view shows, for the legend's key.
     let mut drawn = std::collections::BTreeSet::new();
-    for i in 0..n {
-        let azimuth = start + 360.0 * i as f32 / n as f32;
-        opts.view = ViewArgs {
-            azimuth: Some(azimuth),
-            elevation: args.camera.elevation.or(along.map(|a| a.1)),
-            look_along: None,
-            ..args.camera.clone()
-        }
-        .spec();
+    let azimuth = |i: u32| start + 360.0 * i as f32 / n as f32;
+    let mut views: Vec<ViewSpec> = (0..n)
+        .map(|i| {
+            ViewArgs {
+                azimuth: Some(azimuth(i)),
+                elevation: args.camera.elevation.or(along.map(|a| a.1)),
+                look_along: None,
+                ..args.camera.clone()
+            }
+            .spec()
+        })
+        .collect();
+    // A fitted distance depends on the direction: every view takes the largest, so the
+    // data keeps its size on screen through the turn and no view crops it.
+    if view_fits(&args.camera.spec()) {
+        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let bounds = mdlod_render::fit_for(&file, &opts).bounds;
+        let cameras = views
+            .iter()
+            .map(|v| mdlod_render::camera_for_bounds(&bounds, v, opts.width, opts.height))
+            .collect::<Result<Vec<_>, _>>()?;
+        let farthest = cameras.iter().map(|c| c.distance).fold(0.0f32, f32::max);
+        views = cameras
+            .into_iter()
+            .map(|c| {
+                ViewSpec::Camera(Camera {
+                    distance: farthest,
+                    ..c
+                })
+            })
+            .collect();
+    }
+    for (i, view) in (0..n).zip(views) {
+        let azimuth = azimuth(i);
+        opts.view = view;
         let out = frame_output(&args.output, i as usize)?;
         let file = mdlod_format::MdlodFile::open(&args.file)?;
         let coarsest = coarsest_points(&file);

@@ -1044,6 +1044,13 @@ mod tests {
         assert!((s.camera.target - target).length() > 0.0);
         // A bad zoom changes nothing.
         assert_eq!(s.apply(&Action::Zoom { factor: -1.0 }), Changed::default());
+        // A fit keeps the direction: turned back, it restores the first view.
+        s.apply(&Action::Fit);
+        assert!((s.camera.target - fitted.target).length() < 1e-4);
+        s.apply(&Action::Orbit {
+            dx: -50.0,
+            dy: -50.0,
+        });
         s.apply(&Action::Fit);
         assert!((s.camera.target - fitted.target).length() < 1e-4);
         assert!((s.camera.distance - fitted.distance).abs() < 1e-3);
