@@ -1764,6 +1764,25 @@ fn negative_numbers_mode_aliases_and_levels_get_the_programs_own_answers() {
     assert!(help.contains("The .mdlod file to render"), "{help}");
 }
 
+/// `info` gives the extent of the particles' spheres (the box a fitted view frames),
+/// which a simulation box need not match.
+#[test]
+fn info_gives_the_extent_of_the_particles() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("two.xyz");
+    std::fs::write(&xyz, "2\nplain\nCu 0 0 0\nCu 10 2 -3\n").unwrap();
+    let file = dir.path().join("two.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Cu=1"]);
+    let text = ok(&["info", s(&file)]);
+    assert!(
+        text.contains("extent       [-1, -1, -4] to [11, 3, 1] (the particles' spheres)"),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&file), "--json"])).unwrap();
+    assert_eq!(json["extent"]["min"], serde_json::json!([-1.0, -1.0, -4.0]));
+    assert_eq!(json["extent"]["max"], serde_json::json!([11.0, 3.0, 1.0]));
+}
+
 #[test]
 fn info_prints_boxes_without_rounding_noise() {
     let dir = tempfile::tempdir().unwrap();

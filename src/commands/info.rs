@@ -110,6 +110,8 @@ pub fn run(args: Args) -> Result<()> {
     let levels: Vec<u64> = f.levels().iter().map(|l| l.point_count).collect();
     let file_size = std::fs::metadata(&args.file).map(|m| m.len()).unwrap_or(0);
     let counts = (args.counts || m.particles <= COUNT_UP_TO).then(|| species_counts(&f));
+    // What the particles' spheres span: the top node's box.
+    let extent = f.nodes().first().map(|n| (n.bounds_min, n.bounds_max));
     if args.json {
         let mut v = json!({
             "file": args.file.display().to_string(),
@@ -122,6 +124,7 @@ pub fn run(args: Args) -> Result<()> {
             "species": m.species,
             "attribute": m.attribute,
             "box": m.simulation_box,
+            "extent": extent.map(|(lo, hi)| json!({ "min": lo, "max": hi })),
             "timestep": m.timestep,
             "time": m.time,
             "units": m.units,
@@ -134,6 +137,7 @@ pub fn run(args: Args) -> Result<()> {
         // their f64 widening (1.28, not 1.2799999713897705).
         shortest_f32(&mut v["species"]);
         shortest_f32(&mut v["attribute"]);
+        shortest_f32(&mut v["extent"]);
         if let (Some(counts), Some(list)) = (&counts, v["species"].as_array_mut()) {
             for (s, c) in list.iter_mut().zip(counts) {
                 s["count"] = json!(c);
@@ -204,6 +208,14 @@ pub fn run(args: Args) -> Result<()> {
             vector(b.a),
             vector(b.b),
             vector(b.c)
+        );
+    }
+    if let Some((lo, hi)) = extent {
+        let v = |p: [f32; 3]| format!("[{}, {}, {}]", p[0], p[1], p[2]);
+        println!(
+            "  extent       {} to {} (the particles' spheres)",
+            v(lo),
+            v(hi)
         );
     }
     if let Some(t) = m.timestep {
