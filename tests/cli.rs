@@ -2834,6 +2834,112 @@ fn clip_planes_cut_the_particles_away() {
     }
 }
 
+/// `--legend-in-image` draws the legend into the picture: only the panel in the corner
+/// asked for changes, every image of a movie gets it, and an image too small is refused.
+#[test]
+fn a_legend_drawn_into_the_image_changes_only_its_corner() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let file = dir.path().join("m.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file), "--attribute", "c_pe"]);
+    let (plain, with) = (dir.path().join("plain.png"), dir.path().join("with.png"));
+    let base = [
+        "--width",
+        "480",
+        "--height",
+        "240",
+        "--colour-map",
+        "viridis",
+        "--background",
+        "#000000",
+    ];
+    ok(&[&["render", s(&file), "-o", s(&plain)][..], &base].concat());
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&with)][..],
+        &base,
+        &["--legend-in-image", "--legend-title", "E_pot (eV)"],
+    ]
+    .concat());
+    assert!(out.contains("legend drawn into"), "{out}");
+    let ((w, h, a), (_, _, b)) = (read_png(&plain), read_png(&with));
+    // The panel: 360 × 66 pixels, 8 from the bottom right corner.
+    let panel = |x: u32, y: u32| x >= w - 8 - 360 && x < w - 8 && y >= h - 8 - 66 && y < h - 8;
+    let (mut inside, mut outside) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = 4 * (y * w + x) as usize;
+            if a[i..i + 4] != b[i..i + 4] {
+                if panel(x, y) {
+                    inside += 1;
+                } else {
+                    outside += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(outside, 0);
+    assert!(
+        inside > 360 * 66 / 2,
+        "{inside} pixels of the panel changed"
+    );
+    // Top left: the panel moves there.
+    ok(&[
+        &["render", s(&file), "-o", s(&with)][..],
+        &base,
+        &["--legend-in-image", "top-left"],
+    ]
+    .concat());
+    let (_, _, c) = read_png(&with);
+    assert_ne!(
+        a[4 * (10 * w + 10) as usize..][..4],
+        c[4 * (10 * w + 10) as usize..][..4]
+    );
+    assert_eq!(a[a.len() - 40..], c[c.len() - 40..]);
+    // Too small for the panel: refused with the size it needs.
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&with),
+        "--width",
+        "200",
+        "--height",
+        "120",
+        "--colour-map",
+        "viridis",
+        "--legend-in-image",
+    ]);
+    assert!(
+        e.contains("cannot hold the legend") && e.contains("at least 376×82"),
+        "{e}"
+    );
+    let e = fails(&["render", s(&file), "-o", s(&with), "--legend-title", "x"]);
+    assert!(e.contains("--legend-title titles a legend"), "{e}");
+    // Without a colour map, the key of the species shown.
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&with)][..],
+        &["--width", "480", "--height", "240", "--legend-in-image"],
+    ]
+    .concat());
+    assert!(out.contains("(1 species in their colours)"), "{out}");
+    // A movie: every frame gets the legend.
+    let d = dir.path().join("m.d");
+    ok(&["batch", s(&input), "-o", s(&d), "--attribute", "c_pe"]);
+    let pattern = dir.path().join("f-%d.png");
+    let out = ok(&[
+        &["render", s(&d), "-o", s(&pattern)][..],
+        &base,
+        &["--legend-in-image"],
+    ]
+    .concat());
+    assert!(out.contains("legend drawn into each of the"), "{out}");
+    for i in 0..2 {
+        let (_, _, f) = read_png(&dir.path().join(format!("f-{i}.png")));
+        let at = 4 * ((h - 8 - 33) * w + (w - 8 - 180)) as usize;
+        assert_ne!(f[at..at + 3], a[at..at + 3], "frame {i}");
+    }
+}
+
 /// `--legend` writes what the colours mean as SVG: the colour map's bar over the range
 /// shown (a movie's: every frame's), the species shown in their colours, the density's
 /// transfer function; a name that is no SVG is refused before anything is drawn.

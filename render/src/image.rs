@@ -58,6 +58,24 @@ impl RgbaImage {
         self.data[i..i + 4].copy_from_slice(&p);
     }
 
+    /// Lays `colour` (sRGB) with coverage `a` in [0, 1] over the pixel at column `x`, row
+    /// `y`, whose alpha is straight (not premultiplied), as the PNG stores it; pixels
+    /// outside the image are left alone.
+    pub fn blend_over(&mut self, x: u32, y: u32, colour: [u8; 3], a: f32) {
+        if x >= self.width || y >= self.height || a <= 0.0 {
+            return;
+        }
+        let i = (y as usize * self.width as usize + x as usize) * 4;
+        let px = &mut self.data[i..i + 4];
+        let a = a.min(1.0);
+        let below = f32::from(px[3]) / 255.0 * (1.0 - a);
+        let alpha = a + below;
+        for c in 0..3 {
+            px[c] = ((f32::from(colour[c]) * a + f32::from(px[c]) * below) / alpha).round() as u8;
+        }
+        px[3] = (alpha * 255.0).round() as u8;
+    }
+
     /// Encodes the image as a PNG (sRGB chunk set).
     pub fn to_png(&self) -> Result<Vec<u8>, String> {
         let mut out = Vec::new();

@@ -12,6 +12,8 @@
 
 use std::fmt::Write;
 
+use crate::font;
+use crate::image::RgbaImage;
 use crate::renderer::linear_to_srgb;
 use crate::style::{AttributeScale, ColourMap};
 
@@ -157,100 +159,398 @@ pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
         .collect()
 }
 
+/// Where a legend drawn into an image sits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Corner {
+    TopLeft,
+    TopRight,
+    BottomLeft,
+    BottomRight,
+}
+
+/// A legend: what an image's colours mean, written as SVG ([`Legend::svg`]) or drawn
+/// into the image ([`Legend::draw`]) from one layout, so the two cannot disagree. Lengths
+/// are in the SVG's pixels; text is 12 px high, its width taken as 7 px a character,
+/// which is the width of the bitmap font an image is drawn with.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Legend {
+    /// A horizontal colour bar, [`WIDTH`] × [`BAR_HEIGHT`].
+    Bar {
+        title: String,
+        /// The colours (linear RGB) at `BAR_SAMPLES` evenly spaced positions along the
+        /// bar, its ends included.
+        colours: Vec<[f32; 3]>,
+        /// Each tick's x, and its label where it leaves room to the ends' and the ticks'
+        /// before it.
+        ticks: Vec<(f32, Option<String>)>,
+        /// The labels under the bar's ends.
+        ends: [String; 2],
+    },
+    /// A key: a disc of each entry's colour (linear RGB) and its name, under the title.
+    Key {
+        title: Option<String>,
+        entries: Vec<(String, [f32; 3])>,
+    },
+}
+
+/// Height of a colour bar, px.
+const BAR_HEIGHT: f32 = 66.0;
+/// The bar's top and bottom, px.
+const BAR_Y: [f32; 2] = [22.0, 42.0];
+/// Baselines of the title and of the labels under the bar, px.
+const TITLE_ROW: f32 = 14.0;
+const LABEL_ROW: f32 = BAR_Y[1] + 17.0;
+/// Samples of a bar's colours: one at each end of each of its pixels.
+const BAR_SAMPLES: usize = (BAR[1] - BAR[0]) as usize + 1;
+/// A key's row height, px.
+const KEY_ROW: f32 = 20.0;
+/// Width of a character, px (the image font's; an estimate for the SVG's sans-serif).
+const CHAR_WIDTH: f32 = 7.0;
+
+/// How a text sits on its x.
+#[derive(Clone, Copy)]
+enum Anchor {
+    Start,
+    Middle,
+    End,
+}
+
 /// A horizontal colour bar: `title` above it, the gradient `colour(t)` for `t` in
 /// [0, 1] along it, and ticks at `ticks` (value, label), each at `position(value)` in
 /// [0, 1]; the ends labelled `ends` (with `≤`/`≥` where values beyond them take the
 /// ends' colours).
-fn bar_svg(
+fn bar(
     title: &str,
     colour: &dyn Fn(f32) -> [f32; 3],
     position: &dyn Fn(f64) -> f32,
     ticks: &[(f64, String)],
     ends: [String; 2],
-) -> String {
-    let height = 66.0;
-    let mut svg = String::new();
-    let _ = writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height}" viewBox="0 0 {WIDTH} {height}" font-family="sans-serif" font-size="12">"#
-    );
-    let _ = writeln!(
-        svg,
-        r#"<defs><linearGradient id="bar" x1="0" x2="1" y1="0" y2="0">"#
-    );
-    for k in 0..GRADIENT_STOPS {
-        let t = k as f32 / (GRADIENT_STOPS - 1) as f32;
-        let _ = writeln!(
-            svg,
-            r#"<stop offset="{t:.4}" stop-color="{}"/>"#,
-            hex(colour(t))
-        );
-    }
-    let _ = writeln!(svg, "</linearGradient></defs>");
-    let _ = writeln!(
-        svg,
-        r#"<text x="{}" y="14">{}</text>"#,
-        BAR[0],
-        escape(title)
-    );
-    let (y0, y1) = (22.0, 42.0);
-    let _ = writeln!(
-        svg,
-        r##"<rect x="{}" y="{y0}" width="{}" height="{}" fill="url(#bar)" stroke="#000" stroke-width="0.5"/>"##,
-        BAR[0],
-        BAR[1] - BAR[0],
-        y1 - y0
-    );
+) -> Legend {
+    let colours = (0..BAR_SAMPLES)
+        .map(|k| colour(k as f32 / (BAR_SAMPLES - 1) as f32))
+        .collect();
     let x_of = |t: f32| BAR[0] + t.clamp(0.0, 1.0) * (BAR[1] - BAR[0]);
-    // End labels, then the ticks' labels that leave room to them and to each other
-    // (widths estimated at 7 px a character).
-    let width_of = |text: &str| 7.0 * text.chars().count() as f32;
-    let row = y1 + 17.0;
-    let _ = writeln!(
-        svg,
-        r#"<text x="{}" y="{row}" text-anchor="start">{}</text>"#,
-        BAR[0],
-        escape(&ends[0])
-    );
-    let _ = writeln!(
-        svg,
-        r#"<text x="{}" y="{row}" text-anchor="end">{}</text>"#,
-        BAR[1],
-        escape(&ends[1])
-    );
+    // The ticks' labels that leave room to the ends' and to each other.
+    let width_of = |text: &str| CHAR_WIDTH * text.chars().count() as f32;
     let mut free_from = BAR[0] + width_of(&ends[0]) + 10.0;
     let free_to = BAR[1] - width_of(&ends[1]) - 10.0;
-    for (v, label) in ticks {
-        let x = x_of(position(*v));
-        let _ = writeln!(
-            svg,
-            r##"<line class="tick" x1="{x:.2}" y1="{y1}" x2="{x:.2}" y2="{}" stroke="#000" stroke-width="1"/>"##,
-            y1 + 5.0
-        );
-        let half = width_of(label) / 2.0;
-        if x - half >= free_from && x + half <= free_to {
-            let _ = writeln!(
-                svg,
-                r#"<text class="tick" x="{x:.2}" y="{row}" text-anchor="middle">{}</text>"#,
-                escape(label)
-            );
-            free_from = x + half + 10.0;
+    let ticks = ticks
+        .iter()
+        .map(|(v, label)| {
+            let x = x_of(position(*v));
+            let half = width_of(label) / 2.0;
+            let fits = x - half >= free_from && x + half <= free_to;
+            if fits {
+                free_from = x + half + 10.0;
+            }
+            (x, fits.then(|| label.clone()))
+        })
+        .collect();
+    Legend::Bar {
+        title: title.to_string(),
+        colours,
+        ticks,
+        ends,
+    }
+}
+
+impl Legend {
+    /// Width and height, px.
+    pub fn size(&self) -> (f32, f32) {
+        match self {
+            Legend::Bar { .. } => (WIDTH, BAR_HEIGHT),
+            Legend::Key { title, entries } => {
+                let top = if title.is_some() { KEY_ROW } else { 0.0 };
+                let height = 10.0 + top + KEY_ROW * entries.len().max(1) as f32;
+                let width = 40.0
+                    + entries
+                        .iter()
+                        .map(|(n, _)| n.chars().count() as f32 * 7.5)
+                        .chain(title.iter().map(|t| t.chars().count() as f32 * 7.5 - 30.0))
+                        .fold(60.0, f32::max);
+                (width, height)
+            }
         }
     }
-    svg.push_str("</svg>\n");
-    svg
+
+    /// The legend as an SVG document: plain text (a gradient, rectangles, circles, lines
+    /// and `<text>`), to edit and place beside the PNG in a figure tool.
+    pub fn svg(&self) -> String {
+        let (width, height) = self.size();
+        let mut svg = String::new();
+        let _ = writeln!(
+            svg,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="12">"#
+        );
+        match self {
+            Legend::Bar {
+                title,
+                colours,
+                ticks,
+                ends,
+            } => {
+                let _ = writeln!(
+                    svg,
+                    r#"<defs><linearGradient id="bar" x1="0" x2="1" y1="0" y2="0">"#
+                );
+                let every = (BAR_SAMPLES - 1) / (GRADIENT_STOPS - 1);
+                for k in 0..GRADIENT_STOPS {
+                    let t = k as f32 / (GRADIENT_STOPS - 1) as f32;
+                    let _ = writeln!(
+                        svg,
+                        r#"<stop offset="{t:.4}" stop-color="{}"/>"#,
+                        hex(colours[k * every])
+                    );
+                }
+                let _ = writeln!(svg, "</linearGradient></defs>");
+                let _ = writeln!(
+                    svg,
+                    r#"<text x="{}" y="{TITLE_ROW}">{}</text>"#,
+                    BAR[0],
+                    escape(title)
+                );
+                let [y0, y1] = BAR_Y;
+                let _ = writeln!(
+                    svg,
+                    r##"<rect x="{}" y="{y0}" width="{}" height="{}" fill="url(#bar)" stroke="#000" stroke-width="0.5"/>"##,
+                    BAR[0],
+                    BAR[1] - BAR[0],
+                    y1 - y0
+                );
+                let _ = writeln!(
+                    svg,
+                    r#"<text x="{}" y="{LABEL_ROW}" text-anchor="start">{}</text>"#,
+                    BAR[0],
+                    escape(&ends[0])
+                );
+                let _ = writeln!(
+                    svg,
+                    r#"<text x="{}" y="{LABEL_ROW}" text-anchor="end">{}</text>"#,
+                    BAR[1],
+                    escape(&ends[1])
+                );
+                for (x, label) in ticks {
+                    let _ = writeln!(
+                        svg,
+                        r##"<line class="tick" x1="{x:.2}" y1="{y1}" x2="{x:.2}" y2="{}" stroke="#000" stroke-width="1"/>"##,
+                        y1 + 5.0
+                    );
+                    if let Some(label) = label {
+                        let _ = writeln!(
+                            svg,
+                            r#"<text class="tick" x="{x:.2}" y="{LABEL_ROW}" text-anchor="middle">{}</text>"#,
+                            escape(label)
+                        );
+                    }
+                }
+            }
+            Legend::Key { title, entries } => {
+                let top = if title.is_some() { KEY_ROW } else { 0.0 };
+                if let Some(t) = title {
+                    let _ = writeln!(svg, r#"<text x="7" y="16">{}</text>"#, escape(t));
+                }
+                for (k, (name, colour)) in entries.iter().enumerate() {
+                    let y = 5.0 + top + KEY_ROW * (k as f32 + 0.5);
+                    let _ = writeln!(
+                        svg,
+                        r##"<circle cx="14" cy="{y}" r="7" fill="{}" stroke="#000" stroke-width="0.5"/>"##,
+                        hex(*colour)
+                    );
+                    let _ = writeln!(
+                        svg,
+                        r#"<text x="28" y="{}">{}</text>"#,
+                        y + 4.0,
+                        escape(name)
+                    );
+                }
+            }
+        }
+        svg.push_str("</svg>\n");
+        svg
+    }
+
+    /// Draws the legend into `image` at `corner`, `scale` image pixels to one of its own
+    /// (text in the 7×13 bitmap font of [`crate::font`]), on a white panel at 85 %
+    /// opacity so that it reads over any picture. Refuses an image too small to hold it
+    /// with a margin, saying how large it must be.
+    pub fn draw(&self, image: &mut RgbaImage, corner: Corner, scale: u32) -> Result<(), String> {
+        let s = scale.max(1);
+        let (w, h) = self.size();
+        let (pw, ph) = ((w * s as f32).ceil() as u32, (h * s as f32).ceil() as u32);
+        let margin = 8 * s;
+        if pw + 2 * margin > image.width || ph + 2 * margin > image.height {
+            return Err(format!(
+                "a {}×{} image cannot hold the legend ({pw}×{ph} pixels and a margin of \
+                 {margin}: at least {}×{})",
+                image.width,
+                image.height,
+                pw + 2 * margin,
+                ph + 2 * margin
+            ));
+        }
+        let x0 = match corner {
+            Corner::TopLeft | Corner::BottomLeft => margin,
+            Corner::TopRight | Corner::BottomRight => image.width - margin - pw,
+        };
+        let y0 = match corner {
+            Corner::TopLeft | Corner::TopRight => margin,
+            Corner::BottomLeft | Corner::BottomRight => image.height - margin - ph,
+        };
+        let mut panel = Painter {
+            image,
+            x0,
+            y0,
+            s,
+            size: (pw, ph),
+        };
+        panel.fill([0.0, 0.0], [w, h], [255; 3], 0.85);
+        let black = [0u8; 3];
+        match self {
+            Legend::Bar {
+                title,
+                colours,
+                ticks,
+                ends,
+            } => {
+                panel.text(BAR[0], TITLE_ROW, title, Anchor::Start);
+                // The gradient, one sample per image pixel's centre.
+                let [y0, y1] = BAR_Y;
+                let span = (BAR[1] - BAR[0]) * s as f32;
+                for px in 0..span.round() as u32 {
+                    let t = (px as f32 + 0.5) / span;
+                    let c = colours[(t * (BAR_SAMPLES - 1) as f32).round() as usize];
+                    let srgb = c.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8);
+                    let x = BAR[0] + (px as f32 + 0.5) / s as f32;
+                    panel.fill(
+                        [x - 0.5 / s as f32, y0],
+                        [x + 0.5 / s as f32, y1],
+                        srgb,
+                        1.0,
+                    );
+                }
+                let line = 1.0 / s as f32;
+                panel.fill([BAR[0], y0], [BAR[1], y0 + line], black, 1.0);
+                panel.fill([BAR[0], y1 - line], [BAR[1], y1], black, 1.0);
+                panel.fill([BAR[0], y0], [BAR[0] + line, y1], black, 1.0);
+                panel.fill([BAR[1] - line, y0], [BAR[1], y1], black, 1.0);
+                panel.text(BAR[0], LABEL_ROW, &ends[0], Anchor::Start);
+                panel.text(BAR[1], LABEL_ROW, &ends[1], Anchor::End);
+                for (x, label) in ticks {
+                    panel.fill([x - 0.5, y1], [x + 0.5, y1 + 5.0], black, 1.0);
+                    if let Some(label) = label {
+                        panel.text(*x, LABEL_ROW, label, Anchor::Middle);
+                    }
+                }
+            }
+            Legend::Key { title, entries } => {
+                let top = if title.is_some() { KEY_ROW } else { 0.0 };
+                if let Some(t) = title {
+                    panel.text(7.0, 16.0, t, Anchor::Start);
+                }
+                for (k, (name, colour)) in entries.iter().enumerate() {
+                    let y = 5.0 + top + KEY_ROW * (k as f32 + 0.5);
+                    let srgb =
+                        colour.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8);
+                    panel.disc([14.0, y], 7.0, srgb);
+                    panel.text(28.0, y + 4.0, name, Anchor::Start);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Paints a legend's shapes, in its own pixels, into an image region.
+struct Painter<'a> {
+    image: &'a mut RgbaImage,
+    /// The region's top left corner in the image.
+    x0: u32,
+    y0: u32,
+    /// Image pixels to one legend pixel.
+    s: u32,
+    /// The region's size in image pixels; nothing is painted outside it.
+    size: (u32, u32),
+}
+
+impl Painter<'_> {
+    /// Lays `colour` with coverage `a` over the image pixels whose centres lie in the
+    /// rectangle from `lo` to `hi` (legend pixels).
+    fn fill(&mut self, lo: [f32; 2], hi: [f32; 2], colour: [u8; 3], a: f32) {
+        let s = self.s as f32;
+        let range = |lo: f32, hi: f32, size: u32| {
+            let first = (lo * s - 0.5).ceil().max(0.0) as u32;
+            let end = ((hi * s - 0.5).ceil().max(0.0) as u32).min(size);
+            first..end
+        };
+        for y in range(lo[1], hi[1], self.size.1) {
+            for x in range(lo[0], hi[0], self.size.0) {
+                self.image.blend_over(self.x0 + x, self.y0 + y, colour, a);
+            }
+        }
+    }
+
+    /// A disc of `colour` with a black rim, centred at `c`.
+    fn disc(&mut self, c: [f32; 2], r: f32, colour: [u8; 3]) {
+        let s = self.s as f32;
+        let (lo, hi) = (((c[1] - r - 1.0) * s) as u32, ((c[1] + r + 1.0) * s) as u32);
+        for y in lo..hi.min(self.size.1) {
+            for x in ((c[0] - r - 1.0) * s) as u32..(((c[0] + r + 1.0) * s) as u32).min(self.size.0)
+            {
+                let d = ((x as f32 + 0.5) / s - c[0]).hypot((y as f32 + 0.5) / s - c[1]);
+                let (fill, rim) = if d <= r - 0.5 {
+                    (colour, 1.0)
+                } else {
+                    ([0; 3], (r + 0.5 - d).clamp(0.0, 1.0))
+                };
+                self.image.blend_over(self.x0 + x, self.y0 + y, fill, rim);
+            }
+        }
+    }
+
+    /// `text` in black on the baseline `y`, anchored at `x` (legend pixels).
+    fn text(&mut self, x: f32, y: f32, text: &str, anchor: Anchor) {
+        let s = self.s;
+        let width = CHAR_WIDTH * text.chars().count() as f32;
+        let left = match anchor {
+            Anchor::Start => x,
+            Anchor::Middle => x - width / 2.0,
+            Anchor::End => x - width,
+        };
+        // The font's baseline is 11 of its 13 rows down.
+        let top = ((y - 11.0) * s as f32).round().max(0.0) as u32;
+        let mut gx = (left * s as f32).round().max(0.0) as u32;
+        for c in text.chars() {
+            for (row, bits) in font::glyph(c).iter().enumerate() {
+                for col in 0..font::GLYPH_WIDTH {
+                    if bits & (0x40 >> col) == 0 {
+                        continue;
+                    }
+                    for dy in 0..s {
+                        for dx in 0..s {
+                            let (px, py) = (gx + col * s + dx, top + row as u32 * s + dy);
+                            if px < self.size.0 && py < self.size.1 {
+                                self.image
+                                    .blend_over(self.x0 + px, self.y0 + py, [0; 3], 1.0);
+                            }
+                        }
+                    }
+                }
+            }
+            gx += font::GLYPH_WIDTH * s;
+        }
+    }
 }
 
 /// The colour bar of `map` over an attribute named `name`, as `scale` (the renderer's,
 /// with the shown range and log flag) maps it; `range` is the range shown.
-pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f32; 2]) -> String {
+pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f32; 2]) -> Legend {
     let colour = |t: f32| map.colour(t);
     let position = |v: f64| scale.of_value(v as f32);
     // A constant attribute shown over no range: every particle takes the map's last
     // colour, and no scale places it.
     if range[0] >= range[1] {
         let top = map.colour(1.0);
-        return bar_svg(
+        return bar(
             &format!("{name}: every value {} (constant)", range[0]),
             &|_| top,
             &|_| 1.0,
@@ -271,7 +571,7 @@ pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f3
                 true => format!("≤ {low}"),
                 false => low,
             };
-            bar_svg(
+            bar(
                 &format!("{name} (log scale)"),
                 &colour,
                 &position,
@@ -286,14 +586,14 @@ pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f3
                 .into_iter()
                 .map(|v| (v, tick_label(v, step)))
                 .collect();
-            bar_svg(name, &colour, &position, &ticks, end_labels(lo, hi))
+            bar(name, &colour, &position, &ticks, end_labels(lo, hi))
         }
     }
 }
 
 /// The bar of a projected image's colour map: `title` (what the light is) over
 /// `[lo, hi]`, on a log scale when `log` (as `SplatFrame::colour_mapped` maps it).
-pub fn light_bar(map: ColourMap, title: &str, [lo, hi]: [f32; 2], log: bool) -> String {
+pub fn light_bar(map: ColourMap, title: &str, [lo, hi]: [f32; 2], log: bool) -> Legend {
     let info = mdlod_format::meta::AttributeInfo {
         name: String::new(),
         min: lo,
@@ -304,14 +604,14 @@ pub fn light_bar(map: ColourMap, title: &str, [lo, hi]: [f32; 2], log: bool) -> 
 }
 
 /// The density volume's transfer function: volume fraction φ from 0 to `density_max`.
-pub fn density_bar(density_max: f32) -> String {
+pub fn density_bar(density_max: f32) -> Legend {
     let max = f64::from(density_max);
     let (ticks, step) = linear_ticks(0.0, max, 4);
     let ticks: Vec<(f64, String)> = ticks
         .into_iter()
         .map(|v| (v, tick_label(v, step)))
         .collect();
-    bar_svg(
+    bar(
         "volume fraction φ",
         &|t| crate::density::transfer_colour(t).to_array(),
         &|v| (v / max) as f32,
@@ -322,40 +622,11 @@ pub fn density_bar(density_max: f32) -> String {
 
 /// A key of the species shown: a disc of each one's colour (linear RGB) and its name,
 /// under `title` when given.
-pub fn species_key(entries: &[(String, [f32; 3])], title: Option<&str>) -> String {
-    let row = 20.0;
-    let top = if title.is_some() { row } else { 0.0 };
-    let height = 10.0 + top + row * entries.len().max(1) as f32;
-    let width = 40.0
-        + entries
-            .iter()
-            .map(|(n, _)| n.chars().count() as f32 * 7.5)
-            .chain(title.map(|t| t.chars().count() as f32 * 7.5 - 30.0))
-            .fold(60.0, f32::max);
-    let mut svg = String::new();
-    let _ = writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="12">"#
-    );
-    if let Some(t) = title {
-        let _ = writeln!(svg, r#"<text x="7" y="16">{}</text>"#, escape(t));
+pub fn species_key(entries: &[(String, [f32; 3])], title: Option<&str>) -> Legend {
+    Legend::Key {
+        title: title.map(str::to_string),
+        entries: entries.to_vec(),
     }
-    for (k, (name, colour)) in entries.iter().enumerate() {
-        let y = 5.0 + top + row * (k as f32 + 0.5);
-        let _ = writeln!(
-            svg,
-            r##"<circle cx="14" cy="{y}" r="7" fill="{}" stroke="#000" stroke-width="0.5"/>"##,
-            hex(*colour)
-        );
-        let _ = writeln!(
-            svg,
-            r#"<text x="28" y="{}">{}</text>"#,
-            y + 4.0,
-            escape(name)
-        );
-    }
-    svg.push_str("</svg>\n");
-    svg
 }
 
 #[cfg(test)]
@@ -416,7 +687,7 @@ mod tests {
             max: 2.5,
         };
         let scale = AttributeScale::with_range(&info, None);
-        let svg = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5]);
+        let svg = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5]).svg();
         let stops = stops_of(&svg);
         assert_eq!(stops.len(), GRADIENT_STOPS);
         assert_eq!(stops[0], hex(ColourMap::Viridis.colour(0.0)));
@@ -439,7 +710,7 @@ mod tests {
             max: 10.0,
         };
         let scale = AttributeScale::with_range(&info, None).with_log(true);
-        let svg = colour_bar(ColourMap::Magma, &scale, "rho", [1e-3, 10.0]);
+        let svg = colour_bar(ColourMap::Magma, &scale, "rho", [1e-3, 10.0]).svg();
         let (xs, labels) = ticks_of(&svg);
         assert_eq!(xs.len(), 5);
         assert!((xs[2] - (BAR[0] + BAR[1]) / 2.0).abs() < 0.01, "{xs:?}");
@@ -448,16 +719,16 @@ mod tests {
         // From 0: the scale starts four decades below its top, values below take its
         // colour.
         let from_zero = AttributeScale::with_range(&info, Some([0.0, 10.0])).with_log(true);
-        let svg = colour_bar(ColourMap::Magma, &from_zero, "rho", [0.0, 10.0]);
+        let svg = colour_bar(ColourMap::Magma, &from_zero, "rho", [0.0, 10.0]).svg();
         assert!(svg.contains(">≤ 0.001</text>"), "{svg}");
         // A name with markup is escaped.
-        let svg = colour_bar(ColourMap::Grey, &scale, "a<b & c", [1e-3, 10.0]);
+        let svg = colour_bar(ColourMap::Grey, &scale, "a<b & c", [1e-3, 10.0]).svg();
         assert!(svg.contains("a&lt;b &amp; c (log scale)"));
     }
 
     #[test]
     fn the_density_bar_and_species_key_show_the_colours_drawn() {
-        let svg = density_bar(0.8);
+        let svg = density_bar(0.8).svg();
         let stops = stops_of(&svg);
         assert_eq!(
             stops[0],
@@ -477,9 +748,10 @@ mod tests {
                 ("Ag".into(), [0.0, 0.0, 1.0]),
             ],
             None,
-        );
+        )
+        .svg();
         assert!(key.contains(r##"fill="#ff0000""##) && key.contains(">Ag</text>"));
-        let titled = species_key(&[("Cu".into(), [1.0, 0.0, 0.0])], Some("Alloy & grain"));
+        let titled = species_key(&[("Cu".into(), [1.0, 0.0, 0.0])], Some("Alloy & grain")).svg();
         assert!(titled.contains(">Alloy &amp; grain</text>"), "{titled}");
     }
 
@@ -504,13 +776,104 @@ mod tests {
             max: -3.54,
         };
         let scale = AttributeScale::with_range(&info, None);
-        let svg = colour_bar(ColourMap::Viridis, &scale, "c_pe", [-3.54, -3.54]);
+        let svg = colour_bar(ColourMap::Viridis, &scale, "c_pe", [-3.54, -3.54]).svg();
         let stops = stops_of(&svg);
         assert!(stops
             .iter()
             .all(|c| *c == hex(ColourMap::Viridis.colour(1.0))));
         assert!(svg.contains("c_pe: every value -3.54 (constant)"), "{svg}");
         assert_eq!(ticks_of(&svg).0.len(), 0);
+    }
+
+    /// Drawn into an image, the bar shows the colour map at each pixel's position along
+    /// it, its ticks and labels in black, on a light panel in the corner asked for; the
+    /// rest of the image is untouched, at any scale.
+    #[test]
+    fn a_legend_drawn_into_an_image_shows_the_bar_where_the_svg_does() {
+        assert_eq!(CHAR_WIDTH, font::GLYPH_WIDTH as f32);
+        let info = mdlod_format::meta::AttributeInfo {
+            name: "c_ke".into(),
+            min: 0.0,
+            max: 2.5,
+        };
+        let scale = AttributeScale::with_range(&info, None);
+        let legend = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5]);
+        for s in [1u32, 2] {
+            let (w, h) = (400 * s, 100 * s);
+            let mut image = RgbaImage::new(w, h);
+            for p in image.data.chunks_mut(4) {
+                p.copy_from_slice(&[10, 20, 30, 255]);
+            }
+            legend.draw(&mut image, Corner::BottomRight, s).unwrap();
+            let (x0, y0) = (w - 8 * s - 360 * s, h - 8 * s - 66 * s);
+            // Outside the panel: untouched; the panel's corner: lightened.
+            assert_eq!(image.pixel(x0 - 1, y0 - 1), [10, 20, 30, 255]);
+            assert!(image.pixel(x0 + 1, y0 + 1)[0] > 200);
+            // Along the bar's middle row, the map's colour where the bar maps it.
+            let row = y0 + 32 * s;
+            for t in [0.1f32, 0.5, 0.9] {
+                let x = x0 + ((BAR[0] + t * (BAR[1] - BAR[0])) * s as f32) as u32;
+                let at = ((x - x0) as f32 + 0.5) / s as f32;
+                let want = ColourMap::Viridis
+                    .colour((at - BAR[0]) / (BAR[1] - BAR[0]))
+                    .map(|v| (linear_to_srgb(v) * 255.0).round() as u8);
+                let got = image.pixel(x, row);
+                for k in 0..3 {
+                    assert!(
+                        got[k].abs_diff(want[k]) <= 6,
+                        "s {s} t {t}: {got:?} {want:?}"
+                    );
+                }
+            }
+            // The tick at 1.0 is black just under the bar; labels are black text.
+            let Legend::Bar { ticks, .. } = &legend else {
+                unreachable!()
+            };
+            let (x, _) = ticks[2];
+            let at = x0 + (x * s as f32) as u32;
+            assert!(
+                [at - 1, at]
+                    .iter()
+                    .any(|&x| image.pixel(x, y0 + 44 * s) == [0, 0, 0, 255]),
+                "s {s}: no tick at {at}"
+            );
+            let dark = (y0 + 48 * s..y0 + 62 * s)
+                .flat_map(|y| (x0..x0 + 360 * s).map(move |x| (x, y)))
+                .filter(|&(x, y)| image.pixel(x, y) == [0, 0, 0, 255])
+                .count();
+            assert!(dark > 40 * (s * s) as usize, "s {s}: {dark} label pixels");
+        }
+        // Too small an image is refused with the size it needs.
+        let mut small = RgbaImage::new(300, 200);
+        let e = legend.draw(&mut small, Corner::TopLeft, 1).unwrap_err();
+        assert!(e.contains("at least 376×82"), "{e}");
+    }
+
+    /// Text is the font's glyphs, each bit a square of `scale` pixels, on its baseline.
+    #[test]
+    fn a_key_draws_its_names_in_the_bitmap_font() {
+        let key = species_key(&[("H".into(), [1.0, 0.0, 0.0])], None);
+        let mut image = RgbaImage::new(300, 120);
+        key.draw(&mut image, Corner::TopLeft, 2).unwrap();
+        // A margin of 8 legend pixels; the name's baseline at y = 5 + 10 + 4 = 19, its
+        // glyph's top 11 rows above it.
+        let (left, top) = (16 + 28 * 2, 16 + (19 - 11) * 2);
+        for (row, bits) in font::glyph('H').iter().enumerate() {
+            for col in 0..font::GLYPH_WIDTH {
+                let set = bits & (0x40 >> col) != 0;
+                for (dx, dy) in [(0, 0), (1, 1)] {
+                    let p = image.pixel(left + col * 2 + dx, top + row as u32 * 2 + dy);
+                    assert_eq!(p == [0, 0, 0, 255], set, "row {row} col {col}: {p:?}");
+                }
+            }
+        }
+        // The disc: red at its centre, (14, 15) legend pixels from the panel's corner.
+        assert_eq!(image.pixel(16 + 28, 16 + 30), [255, 0, 0, 255]);
+        // Every printable character has its own glyph.
+        for c in ' '..='~' {
+            assert!(font::GLYPHS.iter().any(|(g, _)| *g == c), "{c:?}");
+        }
+        assert_eq!(font::glyph('\u{1F600}'), font::glyph('?'));
     }
 
     #[test]

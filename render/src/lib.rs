@@ -34,6 +34,7 @@ pub mod camera;
 pub mod context;
 pub mod density;
 pub mod error;
+pub mod font;
 pub mod image;
 pub mod legend;
 pub mod occlusion;

@@ -123,17 +123,7 @@ pub fn draw_lines(
         }
     }
     for (k, &a) in cover.iter().enumerate() {
-        if a <= 0.0 {
-            continue;
-        }
-        // Over a pixel of straight (not premultiplied) alpha, as the PNG stores it.
-        let px = &mut image.data[k * 4..k * 4 + 4];
-        let below = f32::from(px[3]) / 255.0 * (1.0 - a);
-        let alpha = a + below;
-        for c in 0..3 {
-            px[c] = ((f32::from(colour[c]) * a + f32::from(px[c]) * below) / alpha).round() as u8;
-        }
-        px[3] = (alpha * 255.0).round() as u8;
+        image.blend_over(k as u32 % w, k as u32 / w, colour, a);
     }
 }
 

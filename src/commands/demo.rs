@@ -116,6 +116,7 @@ pub fn run(args: Args) -> Result<()> {
         },
         save_view: None,
         legend: None,
+        legend_in_image: None,
         legend_title: None,
         cell: None,
         cell_width: None,

@@ -126,8 +126,19 @@ pub struct Args {
     /// key of the species shown in their colours. A movie or turntable writes one.
     #[arg(long, value_name = "FILE.svg")]
     pub legend: Option<PathBuf>,
+    /// Draw the legend (what --legend writes) into the image itself, on a light panel in
+    /// a corner: top-left, top-right, bottom-left or bottom-right (the default); its text
+    /// 13 pixels high per 720 of the image's height. Every image of a movie or turntable
+    /// gets it.
+    #[arg(
+        long,
+        value_name = "CORNER",
+        num_args = 0..=1,
+        default_missing_value = "bottom-right"
+    )]
+    pub legend_in_image: Option<LegendCorner>,
     /// The colour bar's title instead of the attribute's name, e.g. "E_kin (eV)".
-    #[arg(long, value_name = "TEXT", requires = "legend")]
+    #[arg(long, value_name = "TEXT")]
     pub legend_title: Option<String>,
 }
 
@@ -432,6 +443,15 @@ impl ViewArgs {
     }
 }
 
+/// Where `--legend-in-image` draws the legend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LegendCorner {
+    TopLeft,
+    TopRight,
+    BottomLeft,
+    BottomRight,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Mode {
     #[value(alias = "standard")]
@@ -655,6 +675,11 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
+    if args.legend_title.is_some() && args.legend.is_none() && args.legend_in_image.is_none() {
+        anyhow::bail!(
+            "--legend-title titles a legend: give --legend FILE.svg or --legend-in-image"
+        );
+    }
     if let Some(p) = &args.legend {
         super::check_output("--legend", p, &inputs)?;
         // One legend for a movie's or turntable's images, not one per image.
@@ -765,7 +790,7 @@ pub fn run(args: Args) -> Result<()> {
         },
         fit_all: args.fit_all,
         // The legend's key lists the species the picture shows.
-        species_drawn: args.legend.is_some(),
+        species_drawn: args.legend.is_some() || args.legend_in_image.is_some(),
         ..Default::default()
     };
     if let Some(colour) = &args.cell {
@@ -1058,6 +1083,7 @@ pub fn run(args: Args) -> Result<()> {
         species,
         r.light_range,
         &drawn_names(&r, species, Default::default()),
+        std::slice::from_ref(&args.output),
     )?;
     Ok(())
 }
@@ -1086,13 +1112,18 @@ fn write_legend(
     species: &[mdlod_format::meta::Species],
     light_range: Option<[f32; 2]>,
     drawn: &std::collections::BTreeSet<String>,
+    images: &[PathBuf],
 ) -> Result<()> {
     use mdlod_render::legend;
-    let Some(path) = &args.legend else {
+    if args.legend.is_none() && args.legend_in_image.is_none() {
         return Ok(());
+    }
+    let name = match (&args.legend, args.legend_in_image) {
+        (Some(p), _) => format!("--legend {}", p.display()),
+        _ => "--legend-in-image".to_string(),
     };
     let map = opts.style.colour_map;
-    let (svg, what) = match (args.mode, map, attribute) {
+    let (drawn_legend, what) = match (args.mode, map, attribute) {
         (Mode::Density, _, _) => (
             legend::density_bar(args.density_max),
             "the volume fraction's colours".to_string(),
@@ -1104,10 +1135,7 @@ fn write_legend(
                 _ => "projected flux".to_string(),
             };
             let Some(range) = light_range else {
-                anyhow::bail!(
-                    "--legend {}: the image has no light to map (nothing drawn)",
-                    path.display()
-                );
+                anyhow::bail!("{name}: the image has no light to map (nothing drawn)");
             };
             (
                 legend::light_bar(map, &title, range, opts.style.log_scale),
@@ -1155,12 +1183,39 @@ fn write_legend(
             )
         }
     };
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("cannot create {}", parent.display()))?;
+    if let Some(path) = &args.legend {
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
+        }
+        std::fs::write(path, drawn_legend.svg())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("  legend written to {} ({what})", path.display());
     }
-    std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))?;
-    println!("  legend written to {} ({what})", path.display());
+    if let Some(corner) = args.legend_in_image {
+        let corner = match corner {
+            LegendCorner::TopLeft => legend::Corner::TopLeft,
+            LegendCorner::TopRight => legend::Corner::TopRight,
+            LegendCorner::BottomLeft => legend::Corner::BottomLeft,
+            LegendCorner::BottomRight => legend::Corner::BottomRight,
+        };
+        for image in images {
+            let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
+            // Text 13 px high per 720 px of the image's height.
+            let scale = ((png.height as f32 / 720.0).round() as u32).max(1);
+            drawn_legend
+                .draw(&mut png, corner, scale)
+                .map_err(|e| anyhow::anyhow!("--legend-in-image: {}: {e}", image.display()))?;
+            png.save_png(image)?;
+        }
+        println!(
+            "  legend drawn into {} ({what})",
+            match images {
+                [one] => one.display().to_string(),
+                _ => format!("each of the {} images", images.len()),
+            }
+        );
+    }
     Ok(())
 }
 
@@ -1565,10 +1620,12 @@ fn render_turntable(
             })
             .collect();
     }
+    let mut written = Vec::new();
     for (i, view) in (0..n).zip(views) {
         let azimuth = azimuth(i);
         opts.view = view;
         let out = frame_output(&args.output, i as usize)?;
+        written.push(out.clone());
         let file = mdlod_format::MdlodFile::open(&args.file)?;
         let coarsest = coarsest_points(&file);
         let species = file.metadata().species.clone();
@@ -1621,7 +1678,7 @@ fn render_turntable(
             .with_context(|| format!("cannot write {}", p.display()))?;
         println!("  the first view saved to {}", p.display());
     }
-    if args.legend.is_some() {
+    if args.legend.is_some() || args.legend_in_image.is_some() {
         let file = mdlod_format::MdlodFile::open(&args.file)?;
         let meta = file.metadata();
         write_legend(
@@ -1631,6 +1688,7 @@ fn render_turntable(
             &meta.species,
             opts.light_range,
             &drawn,
+            &written,
         )?;
     }
     Ok(())
@@ -1787,8 +1845,10 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let mut drawn = std::collections::BTreeSet::new();
     let renderer =
         mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
+    let mut written = Vec::new();
     for (i, f) in manifest.frames.iter().enumerate() {
         let out = frame_output(&args.output, i)?;
+        written.push(out.clone());
         let path = dir.join(&f.file);
         let file = mdlod_format::MdlodFile::open(&path)?;
         opts.style.species =
@@ -1904,6 +1964,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         &looks,
         opts.light_range,
         &drawn,
+        &written,
     )?;
     Ok(())
 }
