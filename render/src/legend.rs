@@ -24,9 +24,14 @@ const BAR: [f32; 2] = [20.0, 340.0];
 /// Samples of the gradient along the bar.
 const GRADIENT_STOPS: usize = 33;
 
+/// The 8-bit sRGB of a linear RGB colour.
+fn srgb8(linear: [f32; 3]) -> [u8; 3] {
+    linear.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8)
+}
+
 /// `#rrggbb` of a linear RGB colour.
 fn hex(linear: [f32; 3]) -> String {
-    let c = linear.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8);
+    let c = srgb8(linear);
     format!("#{:02x}{:02x}{:02x}", c[0], c[1], c[2])
 }
 
@@ -207,6 +212,13 @@ const KEY_ROW: f32 = 20.0;
 /// Width of a character, px (the image font's; an estimate for the SVG's sans-serif).
 const CHAR_WIDTH: f32 = 7.0;
 
+/// The middle of a key's row `k` (or, for `k` = the entries' count, of the row after the
+/// last), below a title's row when it has one.
+fn key_row(titled: bool, k: usize) -> f32 {
+    let top = if titled { KEY_ROW } else { 0.0 };
+    5.0 + top + KEY_ROW * (k as f32 + 0.5)
+}
+
 /// How a text sits on its x.
 #[derive(Clone, Copy)]
 enum Anchor {
@@ -260,8 +272,7 @@ impl Legend {
         match self {
             Legend::Bar { .. } => (WIDTH, BAR_HEIGHT),
             Legend::Key { title, entries } => {
-                let top = if title.is_some() { KEY_ROW } else { 0.0 };
-                let height = 10.0 + top + KEY_ROW * entries.len().max(1) as f32;
+                let height = key_row(title.is_some(), entries.len().max(1)) - KEY_ROW / 2.0 + 5.0;
                 let width = 40.0
                     + entries
                         .iter()
@@ -345,12 +356,11 @@ impl Legend {
                 }
             }
             Legend::Key { title, entries } => {
-                let top = if title.is_some() { KEY_ROW } else { 0.0 };
                 if let Some(t) = title {
                     let _ = writeln!(svg, r#"<text x="7" y="16">{}</text>"#, escape(t));
                 }
                 for (k, (name, colour)) in entries.iter().enumerate() {
-                    let y = 5.0 + top + KEY_ROW * (k as f32 + 0.5);
+                    let y = key_row(title.is_some(), k);
                     let _ = writeln!(
                         svg,
                         r##"<circle cx="14" cy="{y}" r="7" fill="{}" stroke="#000" stroke-width="0.5"/>"##,
@@ -419,7 +429,7 @@ impl Legend {
                 for px in 0..span.round() as u32 {
                     let t = (px as f32 + 0.5) / span;
                     let c = colours[(t * (BAR_SAMPLES - 1) as f32).round() as usize];
-                    let srgb = c.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8);
+                    let srgb = srgb8(c);
                     let x = BAR[0] + (px as f32 + 0.5) / s as f32;
                     panel.fill(
                         [x - 0.5 / s as f32, y0],
@@ -443,14 +453,12 @@ impl Legend {
                 }
             }
             Legend::Key { title, entries } => {
-                let top = if title.is_some() { KEY_ROW } else { 0.0 };
                 if let Some(t) = title {
                     panel.text(7.0, 16.0, t, Anchor::Start);
                 }
                 for (k, (name, colour)) in entries.iter().enumerate() {
-                    let y = 5.0 + top + KEY_ROW * (k as f32 + 0.5);
-                    let srgb =
-                        colour.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8);
+                    let y = key_row(title.is_some(), k);
+                    let srgb = srgb8(*colour);
                     panel.disc([14.0, y], 7.0, srgb);
                     panel.text(28.0, y + 4.0, name, Anchor::Start);
                 }
