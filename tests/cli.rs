@@ -3226,6 +3226,43 @@ fn the_cell_is_drawn_over_the_picture() {
         "--cell",
     ]);
     assert!(out.contains("records no simulation cell"), "{out}");
+
+    // A cell much larger than its atoms: with --cell the fit frames the whole cell (every
+    // edge inside the image, its depth range too), without it the atoms fill the image.
+    let xyz = dir.path().join("vacuum.xyz");
+    let mut text = String::from("27\nLattice=\"100 0 0 0 100 0 0 0 100\"\n");
+    for i in 0..27 {
+        let (x, y, z) = (i % 3, i / 3 % 3, i / 9);
+        text += &format!("Ar {} {} {}\n", 10 + 3 * x, 10 + 3 * y, 10 + 3 * z);
+    }
+    std::fs::write(&xyz, text).unwrap();
+    let vacuum = dir.path().join("vacuum.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&vacuum)]);
+    let (w, h) = (120u32, 90u32);
+    let drawn = |extra: &[&str]| {
+        let mut args = vec!["render", s(&vacuum), "-o", s(&png), "--width", "120"];
+        args.extend(["--height", "90", "--background", "#000000"]);
+        args.extend_from_slice(extra);
+        ok(&args);
+        let px = read_png(&png).2;
+        // The columns and rows of pixels drawn (any channel above 40).
+        let on = |x: u32, y: u32| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 40);
+        let cols: Vec<u32> = (0..w).filter(|&x| (0..h).any(|y| on(x, y))).collect();
+        let rows: Vec<u32> = (0..h).filter(|&y| (0..w).any(|x| on(x, y))).collect();
+        (cols[0], cols[cols.len() - 1], rows[0], rows[rows.len() - 1])
+    };
+    let (x0, x1, y0, y1) = drawn(&["--cell", "#ffffff"]);
+    assert!(
+        x0 >= 2 && x1 < w - 2 && y0 >= 2 && y1 < h - 2,
+        "{x0} {x1} {y0} {y1}"
+    );
+    // The cell spans nearly the image's height (its 12 edges all drawn).
+    assert!(y1 - y0 > h * 3 / 4, "{y0} {y1}");
+    let (_, _, y0, y1) = drawn(&[]);
+    assert!(
+        y1 - y0 > h * 3 / 5,
+        "the atoms alone span rows {y0} to {y1}"
+    );
 }
 
 /// `--target X,Y,Z` pans: the camera looks at that point from the fitted distance (the

@@ -509,9 +509,32 @@ pub fn fit_bounds(file: &MdlodFile, hidden: u64, all: bool) -> FitBounds {
 /// are left out of the fit (a solute without its solvent fills the image); the depth
 /// range still holds all the data, as clusters holding hidden species may be drawn where
 /// a budget stops the refinement, and so do far particles.
+/// With the cell drawn ([`RenderOptions::cell`]), the fit frames the cell too.
 pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
     let hidden = opts.style.hidden_mask(&file.metadata().species);
-    fit_bounds(file, hidden, opts.fit_all)
+    let fit = fit_bounds(file, hidden, opts.fit_all);
+    FitBounds {
+        bounds: with_drawn_cell(fit.bounds, file, opts),
+        ..fit
+    }
+}
+
+/// The box around `file`'s simulation cell (its eight corners), where it has one.
+pub fn cell_bounds(file: &MdlodFile) -> Option<Bounds> {
+    let cell = file.metadata().simulation_box.as_ref()?;
+    let (lo, hi) = overlay::cell_edges(cell).iter().flatten().fold(
+        (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    (lo.is_finite() && hi.is_finite()).then(|| Bounds::new(lo, hi))
+}
+
+/// `bounds` and, where `opts` draws the cell, the cell's box.
+fn with_drawn_cell(bounds: Bounds, file: &MdlodFile, opts: &RenderOptions) -> Bounds {
+    match (opts.cell, cell_bounds(file)) {
+        (Some(_), Some(c)) => Bounds::new(bounds.min.min(c.min), bounds.max.max(c.max)),
+        _ => bounds,
+    }
 }
 
 /// Which species are below node `id` with the species of `hidden` hidden
@@ -897,8 +920,10 @@ pub fn frame_setup(
         _ => fit_for(file, opts).bounds,
     };
     let mut camera = camera_in(&fitted, &opts.view, opts.width, opts.height)?;
-    if fitted != data_bounds(file) {
-        camera.fit_depth_range(&data_bounds(file));
+    // The depth range holds all the data, and the cell where it is drawn.
+    let depth = with_drawn_cell(data_bounds(file), file, opts);
+    if fitted != depth {
+        camera.fit_depth_range(&depth);
     }
     // The data's bounds hold the particles' own spheres; a style that draws them larger
     // reaches past them, and a sphere in front of the near plane is clipped whole (its
@@ -911,7 +936,7 @@ pub fn frame_setup(
             .map(|(styled, s)| styled[3] - s.radius)
             .fold(0.0f32, f32::max);
         if extra > 0.0 && extra.is_finite() {
-            let b = data_bounds(file);
+            let b = depth;
             let reach = glam::Vec3::splat(extra);
             let grown = Bounds::new(b.min - reach, b.max + reach);
             camera.fit_depth_range(&grown);
