@@ -2895,12 +2895,13 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
         c[4 * (10 * w + 10) as usize..][..4]
     );
     assert_eq!(a[a.len() - 40..], c[c.len() - 40..]);
-    // Too small for the panel: refused with the size it needs.
+    // Too small for the panel: refused with the size it needs, before anything is drawn.
+    let small = dir.path().join("small.png");
     let e = fails(&[
         "render",
         s(&file),
         "-o",
-        s(&with),
+        s(&small),
         "--width",
         "200",
         "--height",
@@ -2913,6 +2914,15 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
         e.contains("cannot hold the legend") && e.contains("at least 376×82"),
         "{e}"
     );
+    assert!(!small.exists());
+    // Corner names in any case; a character the image's font lacks is named.
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&with)][..],
+        &base,
+        &["--legend-in-image", "Top-Left", "--legend-title", "E (日)"],
+    ]
+    .concat());
+    assert!(out.contains("the image's font has no '日'"), "{out}");
     let e = fails(&["render", s(&file), "-o", s(&with), "--legend-title", "x"]);
     assert!(e.contains("--legend-title titles a legend"), "{e}");
     // Without a colour map, the key of the species shown.

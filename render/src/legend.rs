@@ -99,15 +99,15 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
             }
         });
     }
-    let decimals = |v: f64| {
+    // Decimals for `digits` significant digits of `v`.
+    let decimals = |v: f64, digits: i32| {
         if v == 0.0 {
             0
         } else {
-            (2 - v.abs().log10().floor() as i32).clamp(0, 6) as usize
+            (digits - 1 - v.abs().log10().floor() as i32).clamp(0, 12) as usize
         }
     };
-    let d = decimals(lo).max(decimals(hi));
-    [lo, hi].map(|v| {
+    let fixed = |v: f64, d: usize| {
         let text = format!("{v:.d$}");
         let text = if text.contains('.') {
             text.trim_end_matches('0').trim_end_matches('.').to_string()
@@ -119,7 +119,18 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
         } else {
             text
         }
-    })
+    };
+    // The decimals the smaller end needs, shared, but no end past four significant
+    // digits (0.00148 and 14.81, not 14.806337).
+    let d = decimals(lo, 3).max(decimals(hi, 3)).min(6);
+    let mut labels = [lo, hi].map(|v| fixed(v, d.min(decimals(v, 4))));
+    // A narrow range keeps its ends apart: more decimals until they differ.
+    let mut more = d;
+    while lo < hi && labels[0] == labels[1] && more < 12 {
+        more += 1;
+        labels = [lo, hi].map(|v| fixed(v, more));
+    }
+    labels
 }
 
 /// Round values from `lo` to `hi` (inclusive) about `count` steps apart: steps of 1, 2
@@ -270,7 +281,11 @@ impl Legend {
     /// Width and height, px.
     pub fn size(&self) -> (f32, f32) {
         match self {
-            Legend::Bar { .. } => (WIDTH, BAR_HEIGHT),
+            // Wider than the bar where the title needs it.
+            Legend::Bar { title, .. } => (
+                WIDTH.max(2.0 * BAR[0] + CHAR_WIDTH * title.chars().count() as f32),
+                BAR_HEIGHT,
+            ),
             Legend::Key { title, entries } => {
                 let height = key_row(title.is_some(), entries.len().max(1)) - KEY_ROW / 2.0 + 5.0;
                 let width = 40.0
@@ -379,6 +394,52 @@ impl Legend {
         svg
     }
 
+    /// The smallest image (width, height) that holds the legend drawn at `scale`, with its
+    /// margin.
+    pub fn room_needed(&self, scale: u32) -> (u32, u32) {
+        let s = scale.max(1);
+        let (w, h) = self.size();
+        let (pw, ph) = ((w * s as f32).ceil() as u32, (h * s as f32).ceil() as u32);
+        (pw + 16 * s, ph + 16 * s)
+    }
+
+    /// The scale to draw the legend at in a `width` × `height` image: whole steps of one
+    /// image pixel per legend pixel for each 1280 × 720 of the image (rounded down), less
+    /// where the image cannot hold it; `None` where it cannot hold it at 1.
+    pub fn scale_for(&self, width: u32, height: u32) -> Option<u32> {
+        let steps = (width / 1280).min(height / 720).max(1);
+        (1..=steps).rev().find(|&s| {
+            let (w, h) = self.room_needed(s);
+            w <= width && h <= height
+        })
+    }
+
+    /// The characters of the legend's texts the image font has no glyph for (drawn as
+    /// `?`), each once.
+    pub fn missing_glyphs(&self) -> Vec<char> {
+        let texts: Vec<&str> = match self {
+            Legend::Bar {
+                title, ticks, ends, ..
+            } => std::iter::once(title.as_str())
+                .chain(ends.iter().map(String::as_str))
+                .chain(ticks.iter().filter_map(|(_, l)| l.as_deref()))
+                .collect(),
+            Legend::Key { title, entries } => title
+                .iter()
+                .map(String::as_str)
+                .chain(entries.iter().map(|(n, _)| n.as_str()))
+                .collect(),
+        };
+        let mut missing: Vec<char> = texts
+            .iter()
+            .flat_map(|t| t.chars())
+            .filter(|&c| !font::has_glyph(c))
+            .collect();
+        missing.sort_unstable();
+        missing.dedup();
+        missing
+    }
+
     /// Draws the legend into `image` at `corner`, `scale` image pixels to one of its own
     /// (text in the 7×13 bitmap font of [`crate::font`]), on a white panel at 85 %
     /// opacity so that it reads over any picture. Refuses an image too small to hold it
@@ -388,14 +449,12 @@ impl Legend {
         let (w, h) = self.size();
         let (pw, ph) = ((w * s as f32).ceil() as u32, (h * s as f32).ceil() as u32);
         let margin = 8 * s;
-        if pw + 2 * margin > image.width || ph + 2 * margin > image.height {
+        let (need_w, need_h) = self.room_needed(s);
+        if need_w > image.width || need_h > image.height {
             return Err(format!(
                 "a {}×{} image cannot hold the legend ({pw}×{ph} pixels and a margin of \
-                 {margin}: at least {}×{})",
-                image.width,
-                image.height,
-                pw + 2 * margin,
-                ph + 2 * margin
+                 {margin}: at least {need_w}×{need_h})",
+                image.width, image.height
             ));
         }
         let x0 = match corner {
@@ -773,6 +832,10 @@ mod tests {
         assert_eq!(end_labels(1.36e-5, 1.56e-4), ["1.36e-5", "1.56e-4"]);
         assert_eq!(end_labels(0.0, 2.5), ["0", "2.5"]);
         assert_eq!(end_labels(12345.0, 250000.0), ["1.23e4", "2.5e5"]);
+        // No end past four significant digits; a narrow range keeps its ends apart.
+        assert_eq!(end_labels(0.00148, 14.806337), ["0.00148", "14.81"]);
+        assert_eq!(end_labels(0.30001, 0.30002), ["0.30001", "0.30002"]);
+        assert_eq!(end_labels(-0.5, 12345.678), ["-0.5", "12346"]);
     }
 
     /// A constant attribute: one colour, the map's last, and the value in the title.
@@ -855,6 +918,30 @@ mod tests {
         let mut small = RgbaImage::new(300, 200);
         let e = legend.draw(&mut small, Corner::TopLeft, 1).unwrap_err();
         assert!(e.contains("at least 376×82"), "{e}");
+        // Whole steps per 1280 × 720, rounded down; less where the image is narrow.
+        for ((w, h), want) in [
+            ((1280, 720), Some(1)),
+            ((1920, 1080), Some(1)),
+            ((2560, 1440), Some(2)),
+            ((3840, 2160), Some(3)),
+            ((600, 1200), Some(1)),
+            ((376, 82), Some(1)),
+            ((375, 82), None),
+        ] {
+            assert_eq!(legend.scale_for(w, h), want, "{w}×{h}");
+        }
+        // A long title widens the panel rather than being cut; the font's gaps are named.
+        let long = "Temperature of the liquid droplets after 200 ps, per-atom mean (K)";
+        let titled = colour_bar(ColourMap::Viridis, &scale, long, [0.0, 2.5]);
+        assert!(titled.size().0 >= 2.0 * BAR[0] + 7.0 * long.chars().count() as f32);
+        assert!(titled.missing_glyphs().is_empty());
+        let odd = colour_bar(
+            ColourMap::Viridis,
+            &scale,
+            "s⁻¹ cm⁻³ ± ö – 日本",
+            [0.0, 2.5],
+        );
+        assert_eq!(odd.missing_glyphs(), vec!['日', '本']);
     }
 
     /// Text is the font's glyphs, each bit a square of `scale` pixels, on its baseline.

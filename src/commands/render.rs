@@ -134,7 +134,8 @@ pub struct Args {
         long,
         value_name = "CORNER",
         num_args = 0..=1,
-        default_missing_value = "bottom-right"
+        default_missing_value = "bottom-right",
+        ignore_case = true
     )]
     pub legend_in_image: Option<LegendCorner>,
     /// The colour bar's title instead of the attribute's name, e.g. "E_kin (eV)".
@@ -818,6 +819,7 @@ pub fn run(args: Args) -> Result<()> {
             },
         });
     }
+    check_legend_room(&args, &opts)?;
     if args.file.is_dir() {
         if args.turntable.is_some() {
             anyhow::bail!(
@@ -1118,6 +1120,107 @@ fn write_legend(
     if args.legend.is_none() && args.legend_in_image.is_none() {
         return Ok(());
     }
+    let (drawn_legend, what) = build_legend(args, opts, attribute, species, light_range, drawn)?;
+    if let Some(path) = &args.legend {
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
+        }
+        std::fs::write(path, drawn_legend.svg())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("  legend written to {} ({what})", path.display());
+    }
+    if let Some(corner) = args.legend_in_image {
+        let corner = match corner {
+            LegendCorner::TopLeft => legend::Corner::TopLeft,
+            LegendCorner::TopRight => legend::Corner::TopRight,
+            LegendCorner::BottomLeft => legend::Corner::BottomLeft,
+            LegendCorner::BottomRight => legend::Corner::BottomRight,
+        };
+        for image in images {
+            let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
+            let scale = drawn_legend.scale_for(png.width, png.height).unwrap_or(1);
+            drawn_legend
+                .draw(&mut png, corner, scale)
+                .map_err(|e| anyhow::anyhow!("--legend-in-image: {}: {e}", image.display()))?;
+            png.save_png(image)?;
+        }
+        println!(
+            "  legend drawn into {} ({what})",
+            match images {
+                [one] => one.display().to_string(),
+                _ => format!("each of the {} images", images.len()),
+            }
+        );
+        let missing = drawn_legend.missing_glyphs();
+        if !missing.is_empty() {
+            let list: Vec<String> = missing.iter().map(|c| format!("{c:?}")).collect();
+            println!(
+                "  note: the image's font has no {} (drawn as ?; an SVG legend, --legend, \
+                 keeps {})",
+                list.join(", "),
+                if missing.len() == 1 { "it" } else { "them" }
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Refuses `--legend-in-image` before anything is drawn where the image cannot hold the
+/// legend: a colour bar's, or a key of every species the file (a batch's first frame)
+/// shows unhidden, which holds at least the species the picture will show.
+fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<()> {
+    if args.legend_in_image.is_none() {
+        return Ok(());
+    }
+    // (A file or directory that cannot be read fails where it is rendered, saying why.)
+    let path = if args.file.is_dir() {
+        let Ok(manifest) = mdlod_preprocess::batch::read_manifest(&args.file) else {
+            return Ok(());
+        };
+        match manifest.frames.first() {
+            Some(f) => args.file.join(&f.file),
+            None => return Ok(()),
+        }
+    } else {
+        args.file.clone()
+    };
+    let Ok(file) = mdlod_format::MdlodFile::open(&path) else {
+        return Ok(());
+    };
+    let meta = file.metadata();
+    let all = meta.species.iter().map(|s| s.name.clone()).collect();
+    let (legend, _) = build_legend(
+        args,
+        opts,
+        meta.attribute.as_ref(),
+        &meta.species,
+        Some([1.0, 2.0]),
+        &all,
+    )?;
+    if legend.scale_for(opts.width, opts.height).is_none() {
+        let (w, h) = legend.room_needed(1);
+        anyhow::bail!(
+            "--legend-in-image: a {}×{} image cannot hold the legend (at least {w}×{h} \
+             pixels with its margin); draw a larger image, or write the legend beside it \
+             with --legend FILE.svg",
+            opts.width,
+            opts.height
+        );
+    }
+    Ok(())
+}
+
+/// The legend `--legend` and `--legend-in-image` show, and what it is (for the summary).
+fn build_legend(
+    args: &Args,
+    opts: &RenderOptions,
+    attribute: Option<&mdlod_format::meta::AttributeInfo>,
+    species: &[mdlod_format::meta::Species],
+    light_range: Option<[f32; 2]>,
+    drawn: &std::collections::BTreeSet<String>,
+) -> Result<(mdlod_render::legend::Legend, String)> {
+    use mdlod_render::legend;
     let name = match (&args.legend, args.legend_in_image) {
         (Some(p), _) => format!("--legend {}", p.display()),
         _ => "--legend-in-image".to_string(),
@@ -1183,40 +1286,7 @@ fn write_legend(
             )
         }
     };
-    if let Some(path) = &args.legend {
-        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-            std::fs::create_dir_all(parent)
-                .with_context(|| format!("cannot create {}", parent.display()))?;
-        }
-        std::fs::write(path, drawn_legend.svg())
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        println!("  legend written to {} ({what})", path.display());
-    }
-    if let Some(corner) = args.legend_in_image {
-        let corner = match corner {
-            LegendCorner::TopLeft => legend::Corner::TopLeft,
-            LegendCorner::TopRight => legend::Corner::TopRight,
-            LegendCorner::BottomLeft => legend::Corner::BottomLeft,
-            LegendCorner::BottomRight => legend::Corner::BottomRight,
-        };
-        for image in images {
-            let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
-            // Text 13 px high per 720 px of the image's height.
-            let scale = ((png.height as f32 / 720.0).round() as u32).max(1);
-            drawn_legend
-                .draw(&mut png, corner, scale)
-                .map_err(|e| anyhow::anyhow!("--legend-in-image: {}: {e}", image.display()))?;
-            png.save_png(image)?;
-        }
-        println!(
-            "  legend drawn into {} ({what})",
-            match images {
-                [one] => one.display().to_string(),
-                _ => format!("each of the {} images", images.len()),
-            }
-        );
-    }
-    Ok(())
+    Ok((drawn_legend, what))
 }
 
 /// What a cut's nodes are drawn as: spheres and S-NDFs ray cast cluster spheres, splats
