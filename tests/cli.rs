@@ -1775,12 +1775,22 @@ fn info_gives_the_extent_of_the_particles() {
     ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Cu=1"]);
     let text = ok(&["info", s(&file)]);
     assert!(
-        text.contains("extent       [-1, -1, -4] to [11, 3, 1] (the particles' spheres)"),
+        text.contains(
+            "extent       [-1.0, -1.0, -4.0] to [11.0, 3.0, 1.0] (the particles' spheres)"
+        ),
         "{text}"
     );
     let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&file), "--json"])).unwrap();
     assert_eq!(json["extent"]["min"], serde_json::json!([-1.0, -1.0, -4.0]));
     assert_eq!(json["extent"]["max"], serde_json::json!([11.0, 3.0, 1.0]));
+    // Six significant digits, in scientific notation where large or small.
+    std::fs::write(&xyz, "2\nplain\nCu 3.72 4.72 -3.28\nCu 1e20 2e-10 0\n").unwrap();
+    ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Cu=1"]);
+    let text = ok(&["info", s(&file)]);
+    assert!(
+        text.contains("[2.72, -1.0, -4.28] to [1e20, 5.72, 1.0]"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -4457,6 +4467,88 @@ fn a_transparent_background_is_a_png_with_alpha() {
         assert!(
             alphas.iter().any(|&a| a > 128),
             "{mode}: the material shows"
+        );
+    }
+}
+
+/// A volume whose one clip plane cuts away every sample says so (its particles are drawn
+/// into nothing), and keeps quiet where the plane cuts through it.
+#[test]
+fn a_volume_clipped_to_nothing_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a.mdlod");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("cuag_alloy.unwrapped.dump")),
+        "-o",
+        s(&file),
+    ]);
+    let png = dir.path().join("v.png");
+    for (plane, says) in [("1,0,0,-100", true), ("1,0,0,10", false)] {
+        for mode in ["density", "iso"] {
+            let clip = format!("--clip={plane}");
+            let out = ok(&[
+                "render",
+                s(&file),
+                "-o",
+                s(&png),
+                "--width",
+                "32",
+                "--height",
+                "24",
+                "--mode",
+                mode,
+                &clip,
+            ]);
+            assert_eq!(
+                out.contains("cuts away every sample of the volume"),
+                says,
+                "{mode} {plane}: {out}"
+            );
+        }
+    }
+}
+
+/// A fitted view frames the particles as they are drawn: spheres enlarged by the style,
+/// a splat's Gaussian, a density kernel's support; never cropped, never tiny.
+#[test]
+fn a_fitted_view_frames_the_particles_as_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("one.xyz");
+    std::fs::write(&xyz, "1\none atom\nCu 3.72 5.72 -4.28\n").unwrap();
+    let file = dir.path().join("one.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file)]);
+    let png = dir.path().join("one.png");
+    let (w, h) = (80u32, 60u32);
+    // The first and last rows with a pixel brighter than 8 in any channel.
+    let rows = |extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "80"];
+        args.extend(["--height", "60", "--background", "#000000"]);
+        args.extend_from_slice(extra);
+        ok(&args);
+        let px = read_png(&png).2;
+        let lit =
+            |y: u32| (0..w).any(|x| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 8));
+        let on: Vec<u32> = (0..h).filter(|&y| lit(y)).collect();
+        (on[0], on[on.len() - 1])
+    };
+    for extra in [
+        &[][..],
+        &["--radius-scale", "3"],
+        &["--radius-scale", "0.3"],
+        &["--species-radius", "Cu=8"],
+        &["--mode", "splat"],
+        &["--mode", "splat-over"],
+        &["--mode", "density"],
+    ] {
+        let (top, bottom) = rows(extra);
+        assert!(
+            top >= 1 && bottom < h - 1,
+            "{extra:?}: rows {top} to {bottom} of {h}"
+        );
+        assert!(
+            bottom - top > h * 2 / 5,
+            "{extra:?}: rows {top} to {bottom} of {h}"
         );
     }
 }

@@ -134,7 +134,7 @@ impl Camera {
         }
         if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
             return Err(format!(
-                "camera fov_y_deg {} (must be between 0 and 180)",
+                "camera fov_y_deg {} (must be above 0 and below 180)",
                 self.fov_y_deg
             ));
         }

@@ -509,12 +509,21 @@ pub fn fit_bounds(file: &MdlodFile, hidden: u64, all: bool) -> FitBounds {
 /// are left out of the fit (a solute without its solvent fills the image); the depth
 /// range still holds all the data, as clusters holding hidden species may be drawn where
 /// a budget stops the refinement, and so do far particles.
-/// With the cell drawn ([`RenderOptions::cell`]), the fit frames the cell too.
+/// The fit frames the particles as `opts` draws them ([`drawn_reach`]), and with the cell
+/// drawn ([`RenderOptions::cell`]) the cell too.
 pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
     let hidden = opts.style.hidden_mask(&file.metadata().species);
     let fit = fit_bounds(file, hidden, opts.fit_all);
+    // The spheres, splats or kernels as drawn, not the file's spheres.
+    let reach = glam::Vec3::splat(drawn_reach(file, opts));
+    let drawn = Bounds::new(fit.bounds.min - reach, fit.bounds.max + reach);
+    let bounds = if drawn.min.cmple(drawn.max).all() {
+        drawn
+    } else {
+        fit.bounds
+    };
     FitBounds {
-        bounds: with_drawn_cell(fit.bounds, file, opts),
+        bounds: with_drawn_cell(bounds, file, opts),
         ..fit
     }
 }
@@ -527,6 +536,34 @@ pub fn cell_bounds(file: &MdlodFile) -> Option<Bounds> {
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     );
     (lo.is_finite() && hi.is_finite()).then(|| Bounds::new(lo, hi))
+}
+
+/// How far past a particle's own sphere `opts` draws it: the style's radii (`--radius-scale`,
+/// a species' radius) times what the mode's footprint reaches in radii (a splat's
+/// truncated Gaussian, a density kernel's support), less the file's radius; the largest
+/// over the species (negative where every species is drawn smaller than the file's
+/// spheres).
+fn drawn_reach(file: &MdlodFile, opts: &RenderOptions) -> f32 {
+    let species = &file.metadata().species;
+    let footprint = match &opts.mode {
+        RenderMode::Spheres | RenderMode::Sndf { .. } => 1.0,
+        RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => passes::splat::TRUNCATION * 0.5,
+        RenderMode::Density(d) => d.kernel_scale.max(1.0),
+    };
+    let drawn: Vec<f32> = match opts.style.species_table(species) {
+        Ok(table) => table.iter().map(|t| t[3]).collect(),
+        Err(_) => species.iter().map(|s| s.radius).collect(),
+    };
+    let reach = drawn
+        .iter()
+        .zip(species)
+        .map(|(r, s)| r * footprint - s.radius)
+        .fold(f32::NEG_INFINITY, f32::max);
+    if reach.is_finite() {
+        reach
+    } else {
+        0.0
+    }
 }
 
 /// `bounds` and, where `opts` draws the cell, the cell's box.
@@ -795,7 +832,7 @@ fn camera_in(
         } => {
             if !(zoom.is_finite() && *zoom > 0.0) {
                 return Err(RenderError::InvalidOptions(format!(
-                    "zoom {zoom} (must be positive)"
+                    "zoom {zoom} (must be positive and finite)"
                 )));
             }
             for (what, v) in [("azimuth", azimuth_deg), ("elevation", elevation_deg)] {

@@ -148,12 +148,15 @@ impl ViewFile {
         }
         if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
             return Err(format!(
-                "fov_y_deg {} (must be between 0 and 180)",
+                "fov_y_deg {} (must be above 0 and below 180)",
                 self.fov_y_deg
             ));
         }
-        if self.distance.is_some_and(|d| d <= 0.0) || self.zoom <= 0.0 {
-            return Err("distance and zoom must be positive".into());
+        if let Some(d) = self.distance.filter(|&d| d <= 0.0) {
+            return Err(format!("distance {d} (must be positive)"));
+        }
+        if self.zoom <= 0.0 {
+            return Err(format!("zoom {} (must be positive)", self.zoom));
         }
         Ok(())
     }

@@ -211,7 +211,9 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     if let Some((lo, hi)) = extent {
-        let v = |p: [f32; 3]| format!("[{}, {}, {}]", p[0], p[1], p[2]);
+        // Six significant digits: the corners are sums in single precision (5.7200003).
+        let n = |x: f32| number(format!("{x:.5e}").parse().unwrap_or(f64::from(x)));
+        let v = |p: [f32; 3]| format!("[{}, {}, {}]", n(p[0]), n(p[1]), n(p[2]));
         println!(
             "  extent       {} to {} (the particles' spheres)",
             v(lo),

@@ -993,6 +993,23 @@ pub fn run(args: Args) -> Result<()> {
             false => CLIP_CUTS_ALL,
         };
         println!("  note: nothing is drawn: {why}");
+    } else if let (Mode::Density | Mode::Iso, [[nx, ny, nz, d]]) = (args.mode, &args.style.clip[..])
+    {
+        // The volume keeps the samples with n·p ≤ d: none where every corner of the data's
+        // box lies beyond the plane.
+        let b = mdlod_render::data_bounds(&file);
+        let nearest = [b.min, b.max]
+            .iter()
+            .flat_map(|x| [b.min, b.max].map(move |y| (x.x, y.y)))
+            .flat_map(|(x, y)| [b.min.z, b.max.z].map(move |z| nx * x + ny * y + nz * z))
+            .fold(f32::INFINITY, f32::min);
+        if nearest > *d {
+            println!(
+                "  note: nothing is drawn: the --clip plane cuts away every sample of the \
+                 volume (it keeps n·p ≤ d, d the distance from the origin along the unit \
+                 normal: check its sign)"
+            );
+        }
     } else if let Some(note) =
         clip_side_note(&opts.style.clip, &r.camera).filter(|_| r.particles_clipped > 0)
     {
