@@ -4471,6 +4471,61 @@ fn a_transparent_background_is_a_png_with_alpha() {
     }
 }
 
+/// The volume and its iso-surface are the same picture at any scale of the data: a
+/// cloud in centimetres at galactic distances (5·10^19) as at 50 (a distance's square
+/// overflowed single precision past 1.8·10^19, and the volume came out empty).
+#[test]
+fn the_volume_is_the_same_picture_at_any_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let pictures: Vec<Vec<u8>> = [1f64, 1e18]
+        .iter()
+        .map(|&scale| {
+            let xyz = dir.path().join(format!("g{scale}.xyz"));
+            let mut text = String::from("125\ngrid\n");
+            for i in 0..125 {
+                let (x, y, z) = (i % 5, i / 5 % 5, i / 25);
+                let at = |k: i32| (40.0 + 2.5 * f64::from(k)) * scale;
+                text += &format!("Cu {:e} {:e} {:e}\n", at(x), at(y), at(z));
+            }
+            std::fs::write(&xyz, text).unwrap();
+            let file = xyz.with_extension("mdlod");
+            let radius = format!("Cu={:e}", 0.8 * scale);
+            ok(&["convert", s(&xyz), "-o", s(&file), "--radius", &radius]);
+            let mut all = Vec::new();
+            for mode in ["density", "iso"] {
+                let png = dir.path().join(format!("{mode}{scale}.png"));
+                ok(&[
+                    "render",
+                    s(&file),
+                    "-o",
+                    s(&png),
+                    "--width",
+                    "48",
+                    "--height",
+                    "36",
+                    "--mode",
+                    mode,
+                    "--background",
+                    "#000000",
+                ]);
+                all.extend(read_png(&png).2);
+            }
+            all
+        })
+        .collect();
+    let lit = pictures[1]
+        .chunks(4)
+        .filter(|p| p[..3].iter().any(|&v| v > 40))
+        .count();
+    assert!(lit > 200, "{lit} pixels show the volume at 5·10^19");
+    let off = pictures[0]
+        .iter()
+        .zip(&pictures[1])
+        .filter(|(a, b)| a.abs_diff(**b) > 8)
+        .count();
+    assert!(off * 100 < pictures[0].len(), "{off} channels differ");
+}
+
 /// A volume whose one clip plane cuts away every sample says so (its particles are drawn
 /// into nothing), and keeps quiet where the plane cuts through it.
 #[test]

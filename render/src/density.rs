@@ -237,7 +237,9 @@ impl Slicing {
 pub fn ray_distance(camera: &crate::camera::Camera, p: Vec3) -> f32 {
     let view = camera.view_from_world().transform_point3(p);
     match camera.projection {
-        crate::camera::Projection::Perspective => view.length(),
+        // In double precision: the square of a distance past 1.8·10^19 (data in
+        // centimetres or metres at galactic scales) overflows single precision.
+        crate::camera::Projection::Perspective => view.as_dvec3().length() as f32,
         crate::camera::Projection::Orthographic => -view.z,
     }
 }
