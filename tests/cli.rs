@@ -4608,10 +4608,10 @@ fn a_fitted_view_frames_the_particles_as_drawn() {
     }
 }
 
-/// `--turntable N`: N views a full turn apart about z, all from one distance: the largest
-/// of the views' fitted distances (a fit depends on the direction), so no view crops the
-/// data; each the image a single render of the first view, saved, turned to that azimuth
-/// gives; one file only.
+/// `--turntable N`: N views a full turn apart about z, all looking at the data's centre
+/// from one distance: the largest of the views' fitted distances (a fit depends on the
+/// direction), so no view crops the data; each the image a single render of the first
+/// view, saved, turned to that azimuth gives; one file only.
 #[test]
 fn a_turntable_renders_a_full_turn_of_views() {
     let dir = tempfile::tempdir().unwrap();
@@ -4658,9 +4658,33 @@ fn a_turntable_renders_a_full_turn_of_views() {
         farthest = farthest.max(distance(&fitted));
         nearest = nearest.min(distance(&fitted));
     }
-    // The square slab is fitted closer seen along an axis than across its diagonal.
+    // The square slab is fitted closer seen along an axis than across its diagonal. A
+    // still's fit centres the picture by moving its target, which brings it closer than
+    // a view of the data's centre: the turn is at least as far as each.
     assert!(farthest > nearest * 1.01, "{farthest} {nearest}");
-    assert_eq!(distance(&saved), farthest);
+    assert!(
+        distance(&saved) >= farthest,
+        "{} {farthest}",
+        distance(&saved)
+    );
+    assert!(
+        distance(&saved) < farthest * 1.2,
+        "{} {farthest}",
+        distance(&saved)
+    );
+    let info: serde_json::Value = serde_json::from_str(&ok(&["info", s(&file), "--json"])).unwrap();
+    let view: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();
+    for k in 0..3 {
+        let centre = 0.5
+            * (info["extent"]["min"][k].as_f64().unwrap()
+                + info["extent"]["max"][k].as_f64().unwrap());
+        let target = view["target"][k].as_f64().unwrap();
+        assert!(
+            (target - centre).abs() < 1e-3 * (1.0 + centre.abs()),
+            "{k}: {target} {centre}"
+        );
+    }
     for (view, azimuth) in [(0, "10"), (1, "130")] {
         let mut args = vec!["render", s(&file), "-o", s(&single), "--view", s(&saved)];
         args.extend(["--azimuth", azimuth, "--width", "40", "--height", "30"]);

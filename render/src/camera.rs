@@ -284,25 +284,97 @@ impl Camera {
         }
     }
 
-    /// Aims at the centre of `bounds` from the current direction, at the distance where
-    /// the box, as this direction sees it, spans [`FIT_FILL`] of an image of `aspect`
-    /// (width / height) in its tighter dimension, and sets the depth range around it.
+    /// Frames `bounds` from the current direction: the box, as this direction sees it,
+    /// spans [`FIT_FILL`] of an image of `aspect` (width / height) in its tighter
+    /// dimension, centred in the image; sets the depth range around it. In perspective the
+    /// box's nearer half looks larger than its farther one, so the target moves off the
+    /// box's centre, across the view, until the projected box is centred
+    /// ([`Self::fit_about_centre`] keeps it there, for orbits).
     pub fn fit(&mut self, bounds: &Bounds, aspect: f32) {
+        self.fit_about_centre(bounds, aspect);
+        if self.projection != Projection::Perspective {
+            return;
+        }
+        let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan();
+        let tan_x = tan_y * f64::from(aspect);
+        let before = (self.target, self.distance);
+        // Each round moves the target by the projected box's offset from the image's
+        // centre, as seen at the target's depth, and fits the distance again.
+        for _ in 0..12 {
+            let Some([cx, cy]) = self.projected_centre(bounds, tan_x, tan_y) else {
+                (self.target, self.distance) = before;
+                break;
+            };
+            let d = f64::from(self.distance);
+            let shift = self.right().as_dvec3() * (cx * d * tan_x)
+                + self.up().as_dvec3() * (cy * d * tan_y);
+            self.target = (self.target.as_dvec3() + shift).as_vec3();
+            self.distance = self.fitted_distance(bounds, aspect);
+            if cx.abs().max(cy.abs()) < 1e-4 {
+                break;
+            }
+        }
+        if !(self.target.is_finite() && self.distance.is_finite() && self.distance > 0.0) {
+            (self.target, self.distance) = before;
+        }
+        self.fit_depth_range(bounds);
+    }
+
+    /// [`Self::fit`] looking at the centre of `bounds`: the fitted distance at which every
+    /// corner is in view, the projected box centred only in orthographic views.
+    pub fn fit_about_centre(&mut self, bounds: &Bounds, aspect: f32) {
         self.target = bounds.center();
         self.distance = self.fitted_distance(bounds, aspect);
         self.fit_depth_range(bounds);
     }
 
-    /// The eye's distance from the centre of `bounds` at which every corner of the box
-    /// lies inside the view, one of them at [`FIT_FILL`] of the way from the centre to
-    /// the image's edge, looking from this camera's direction. It depends on the
-    /// direction: a slab seen edge-on is fitted closer than seen across its diagonal.
-    /// In double precision (data may span 10^-10 or 10^36); a box of no extent is fitted
-    /// as a sphere of [`Bounds::fit_radius`].
+    /// The centre of the box's projection, in normalised device coordinates (x right, y
+    /// up), for a perspective view with the given half-angle tangents; `None` where a
+    /// corner lies behind the eye.
+    fn projected_centre(&self, bounds: &Bounds, tan_x: f64, tan_y: f64) -> Option<[f64; 2]> {
+        let (r, u, b) = (
+            self.right().as_dvec3(),
+            self.up().as_dvec3(),
+            self.back().as_dvec3(),
+        );
+        let eye = self.target.as_dvec3() + b * f64::from(self.distance);
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for i in 0..8 {
+            let pick = |bit: u32, lo: f32, hi: f32| f64::from(if i & bit == 0 { lo } else { hi });
+            let corner = glam::DVec3::new(
+                pick(1, bounds.min.x, bounds.max.x),
+                pick(2, bounds.min.y, bounds.max.y),
+                pick(4, bounds.min.z, bounds.max.z),
+            );
+            let q = corner - eye;
+            let depth = -q.dot(b);
+            if depth.is_nan() || depth <= 0.0 {
+                return None;
+            }
+            let ndc = [q.dot(r) / (depth * tan_x), q.dot(u) / (depth * tan_y)];
+            for k in 0..2 {
+                lo[k] = lo[k].min(ndc[k]);
+                hi[k] = hi[k].max(ndc[k]);
+            }
+        }
+        let c = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+        c.iter().all(|v| v.is_finite()).then_some(c)
+    }
+
+    /// The eye's distance from the target at which every corner of `bounds` lies inside
+    /// the view, one of them at [`FIT_FILL`] of the way from the image's centre to its
+    /// edge, looking from this camera's direction. It depends on the direction: a slab
+    /// seen edge-on is fitted closer than seen across its diagonal. In double precision
+    /// (data may span 10^-10 or 10^36); a box of no extent is fitted as a sphere of
+    /// [`Bounds::fit_radius`].
     pub fn fitted_distance(&self, bounds: &Bounds, aspect: f32) -> f32 {
         let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan() * FIT_FILL;
         let tan_x = tan_y * f64::from(aspect);
         let half = (bounds.max.as_dvec3() - bounds.min.as_dvec3()) * 0.5;
+        // The box's centre from the target (not at the box's centre in a centred
+        // perspective fit).
+        let off =
+            bounds.min.as_dvec3() * 0.5 + bounds.max.as_dvec3() * 0.5 - self.target.as_dvec3();
         let (r, u, b) = (
             self.right().as_dvec3(),
             self.up().as_dvec3(),
@@ -311,7 +383,7 @@ impl Camera {
         let mut need = 0.0f64;
         for i in 0..8 {
             let sign = |bit: u32| if i & bit == 0 { -1.0 } else { 1.0 };
-            let o = glam::DVec3::new(sign(1) * half.x, sign(2) * half.y, sign(4) * half.z);
+            let o = off + glam::DVec3::new(sign(1) * half.x, sign(2) * half.y, sign(4) * half.z);
             let across = (o.dot(r).abs() / tan_x).max(o.dot(u).abs() / tan_y);
             need = need.max(match self.projection {
                 // The corner's depth from the eye is the distance less its offset
@@ -536,6 +608,7 @@ mod tests {
                 };
                 c.fit(&b, aspect);
                 let m = c.clip_from_view(aspect) * c.view_from_world();
+                let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
                 for i in 0..8 {
                     let corner = Vec3::new(
                         if i & 1 == 0 { b.min.x } else { b.max.x },
@@ -549,7 +622,16 @@ mod tests {
                         "scale {scale} {p:?} aspect {aspect}: corner {corner} at {ndc}"
                     );
                     widest = widest.max(ndc.x.abs()).max(ndc.y.abs());
+                    lo = lo.min(ndc.truncate());
+                    hi = hi.max(ndc.truncate());
                 }
+                // Centred, in perspective too (the nearer half of the box looks larger).
+                let centre = (lo + hi) * 0.5;
+                assert!(
+                    centre.abs().max_element() < 2e-3,
+                    "scale {scale} {p:?} aspect {aspect} ({azimuth_deg}°, {elevation_deg}°): \
+                     the box's projection is centred at {centre}"
+                );
                 // The tighter dimension is filled to FIT_FILL, as the direction sees the
                 // box (the bounding sphere's fit left 45-55 %).
                 assert!(

@@ -278,7 +278,7 @@ mod tests {
             .unwrap()
             .to_camera(&b, 1.0);
         let c = v.to_camera(&b, 1.0);
-        assert_eq!(c.target, b.center());
+        assert_eq!(c.target, fitted.target);
         assert!((c.distance * 2.0 - fitted.distance).abs() < 1e-4);
     }
 

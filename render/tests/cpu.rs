@@ -823,7 +823,7 @@ fn coarse_cuts_cover_about_the_pixels_the_particles_cover() {
         &ViewSpec::Orbit {
             azimuth_deg: 30.0,
             elevation_deg: 20.0,
-            zoom: 0.8,
+            zoom: 0.7,
             projection: Projection::Perspective,
         },
         VIEWPORT[0],
@@ -1304,7 +1304,7 @@ fn hidden_species_leave_no_cluster_holding_them() {
             }
         }
         for (error, occlusion) in [
-            (8.0f32, OcclusionMode::Off),
+            (12.0f32, OcclusionMode::Off),
             (50.0, OcclusionMode::Off),
             (50.0, OcclusionMode::PixelCentres),
         ] {

@@ -1910,8 +1910,9 @@ fn relit_sndfs_of_a_wide_perspective_view_place_highlights_along_each_texels_ray
     let (_d, _p, f) = make_file(&fcc_frame(6), small_build(), &[]);
     let (w, h) = (96u32, 64u32);
     let mut camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
-    // A 70° field of view at about the same framing as the default 30°.
-    camera.distance *= (15f32.to_radians().tan() / 35f32.to_radians().tan()) * 0.9;
+    // A 70° field of view at about the same framing as the default 30°, the block a
+    // little smaller than the fit makes it.
+    camera.distance *= (15f32.to_radians().tan() / 35f32.to_radians().tan()) * 1.05;
     camera.fov_y_deg = 70.0;
     let mut o = opts(w, h);
     o.spp = 16;
@@ -2619,7 +2620,15 @@ fn a_constant_attribute_lights_every_splat_alike_at_every_level() {
     });
     let (_d, _p, f) = make_file(&frame, small_build(), &[]);
     let (w, h) = (64u32, 48u32);
-    let camera = camera_for(&f, &ViewSpec::default(), w, h).unwrap();
+    // Zoomed out a little: every splat of every level inside the image, whose flux would
+    // otherwise fall past its edge.
+    let view = ViewSpec::Orbit {
+        azimuth_deg: 30.0,
+        elevation_deg: 20.0,
+        zoom: 0.7,
+        projection: Projection::Perspective,
+    };
+    let camera = camera_for(&f, &view, w, h).unwrap();
     let blend = mdlod_render::SplatBlend::Additive {
         intensity: 1.0,
         by_attribute: true,

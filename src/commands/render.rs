@@ -1688,14 +1688,34 @@ fn render_turntable(
         })
         .collect();
     // A fitted distance depends on the direction: every view takes the largest, so the
-    // data keeps its size on screen through the turn and no view crops it.
+    // data keeps its size on screen through the turn and no view crops it. A fitted
+    // target is the data's centre in every view (a still's fit moves it to centre the
+    // picture in perspective, which would make the turn wobble).
     if view_fits(&args.camera.spec()) {
         let file = mdlod_format::MdlodFile::open(&args.file)?;
         let bounds = mdlod_render::fit_for(&file, &opts).bounds;
+        let fitted_target = args.camera.target.is_none()
+            && args
+                .camera
+                .view
+                .as_ref()
+                .is_none_or(|p| ViewFile::load(p).map_or(true, |v| v.target.is_none()));
+        let aspect = opts.width.max(1) as f32 / opts.height.max(1) as f32;
         let cameras = views
             .iter()
-            .map(|v| mdlod_render::camera_for_bounds(&bounds, v, opts.width, opts.height))
-            .collect::<Result<Vec<_>, _>>()?;
+            .map(|v| {
+                let mut c = mdlod_render::camera_for_bounds(&bounds, v, opts.width, opts.height)?;
+                if fitted_target {
+                    // The zoom asked for: the fitted distance over the one given.
+                    let mut fitted = c.clone();
+                    fitted.fit(&bounds, aspect);
+                    let zoom = fitted.distance / c.distance;
+                    c.fit_about_centre(&bounds, aspect);
+                    c.distance /= zoom;
+                }
+                Ok(c)
+            })
+            .collect::<Result<Vec<_>, mdlod_render::RenderError>>()?;
         let farthest = cameras.iter().map(|c| c.distance).fold(0.0f32, f32::max);
         views = cameras
             .into_iter()
