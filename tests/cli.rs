@@ -2896,7 +2896,7 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     ok(&[
         &["render", s(&file), "-o", s(&with)][..],
         &base,
-        &["--legend-in-image", "top-left"],
+        &["--legend-in-image=top-left"],
     ]
     .concat());
     let (_, _, c) = read_png(&with);
@@ -2929,10 +2929,16 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     let out = ok(&[
         &["render", s(&file), "-o", s(&with)][..],
         &base,
-        &["--legend-in-image", "Top-Left", "--legend-title", "E (日)"],
+        &["--legend-in-image=Top-Left", "--legend-title", "E (日)"],
     ]
     .concat());
     assert!(out.contains("the image's font has no '日'"), "{out}");
+    // Before the file, the flag takes no value of it.
+    ok(&[
+        &["render", "--legend-in-image", s(&file), "-o", s(&with)][..],
+        &base,
+    ]
+    .concat());
     let e = fails(&["render", s(&file), "-o", s(&with), "--legend-title", "x"]);
     assert!(e.contains("--legend-title titles a legend"), "{e}");
     // Without a colour map, the key of the species shown.

@@ -127,13 +127,15 @@ pub struct Args {
     #[arg(long, value_name = "FILE.svg")]
     pub legend: Option<PathBuf>,
     /// Draw the legend (what --legend writes) into the image itself, on a light panel in
-    /// a corner: top-left, top-right, bottom-left or bottom-right (the default); its text
+    /// a corner: --legend-in-image=top-left, top-right, bottom-left or bottom-right (the
+    /// default); its text
     /// 13 pixels high per 720 of the image's height. Every image of a movie or turntable
     /// gets it.
     #[arg(
         long,
         value_name = "CORNER",
         num_args = 0..=1,
+        require_equals = true,
         default_missing_value = "bottom-right",
         ignore_case = true
     )]
