@@ -1123,9 +1123,10 @@ fn drawn_names(
     drawn
 }
 
-/// Writes `--legend`: the bar of the colour map over the attribute (`attribute`, as
-/// `opts` shows it) or over a projection's light (`light_range`), the density volume's
-/// transfer function, or a key of the species shown (`species`) in the colours drawn.
+/// Writes `--legend` and draws `--legend-in-image` into the PNGs `images`: the bar of
+/// the colour map over the attribute (`attribute`, as `opts` shows it) or over a
+/// projection's light (`light_range`), the density volume's transfer function, or a key
+/// of the species shown (`drawn`, of `species`) in the colours drawn ([`build_legend`]).
 fn write_legend(
     args: &Args,
     opts: &RenderOptions,
