@@ -4532,6 +4532,149 @@ fn the_volume_is_the_same_picture_at_any_scale() {
     assert!(off * 100 < pictures[0].len(), "{off} channels differ");
 }
 
+/// Splats lit by a value start its range at 0: a particle of the smallest mass still
+/// shines, a third as bright as one of three times its mass (the file's range gave it no
+/// light at all), in one image and in a movie.
+#[test]
+fn splats_lit_by_value_start_their_range_at_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("masses.lammpstrj");
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n128\nITEM: BOX BOUNDS pp pp pp\n\
+         0 16\n0 8\n0 2\nITEM: ATOMS id type x y z mass\n",
+    );
+    for i in 0..128 {
+        let (x, y, z) = (i % 16, i / 16 % 8, i / 128);
+        let mass = if x < 8 { 2.0 } else { 6.0 };
+        text += &format!("{} 1 {}.5 {}.5 {}.5 {mass}\n", i + 1, x, y, z);
+    }
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("masses.mdlod");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--attribute",
+        "mass",
+        "--radius",
+        "1=0.7",
+    ]);
+    let png = dir.path().join("m.png");
+    let (w, h) = (128u32, 64u32);
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--mode",
+        "splat",
+        "--intensity",
+        "attribute",
+        "--ortho",
+        "--look-along",
+        "0,0,-1",
+        "--width",
+        "128",
+        "--height",
+        "64",
+        "--exposure",
+        "0.02",
+    ]);
+    assert!(out.contains("mass from 0 to 6 (from 0, so that"), "{out}");
+    let px = read_png(&png).2;
+    // The mean grey of a column band of the picture.
+    let band = |x0: u32, x1: u32| {
+        let mut sum = 0u64;
+        for y in h / 4..3 * h / 4 {
+            for x in x0..x1 {
+                sum += u64::from(px[4 * (y * w + x) as usize]);
+            }
+        }
+        sum as f64 / f64::from((x1 - x0) * h / 2)
+    };
+    let (light, heavy) = (
+        band(w / 4 - 10, w / 4 + 10),
+        band(3 * w / 4 - 10, 3 * w / 4 + 10),
+    );
+    assert!(light > 10.0 && heavy > 1.5 * light, "{light} {heavy}");
+    // A movie of the frame starts at 0 too.
+    let d = dir.path().join("m.d");
+    ok(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&d),
+        "--attribute",
+        "mass",
+        "--radius",
+        "1=0.7",
+    ]);
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&dir.path().join("f-%d.png")),
+        "--mode",
+        "splat",
+        "--intensity",
+        "attribute",
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+    assert!(out.contains("mass from 0 to 6 (from 0, so that"), "{out}");
+}
+
+/// `--light-range` sets a projection's colour map ends, so that projections made apart
+/// share one scale; options that have no effect on a projection say what does.
+#[test]
+fn a_projection_takes_its_light_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = converted(dir.path(), "cu_melt.custom.dump");
+    let (a, b) = (dir.path().join("a.png"), dir.path().join("b.png"));
+    let base = |png: &Path, zoom: &str, range: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(png), "--mode", "splat"];
+        args.extend(["--colour-map", "magma", "--width", "48", "--height", "36"]);
+        args.extend(["--zoom", zoom]);
+        args.extend_from_slice(range);
+        ok(&args)
+    };
+    let out = base(&b, "1", &["--light-range", "0:5"]);
+    assert!(
+        out.contains("from 0.0000e0 to 5.0000e0 (--light-range;"),
+        "{out}"
+    );
+    let out = base(&b, "1", &["--light-range", "0:500"]);
+    let dim = read_png(&b).2;
+    base(&b, "1", &["--light-range", "0:5"]);
+    let bright = read_png(&b).2;
+    assert_ne!(dim, bright, "{out}");
+    for (extra, says) in [
+        (
+            &["--exposure", "2"][..],
+            "--light-range MIN:MAX sets its ends",
+        ),
+        (
+            &["--attribute-range", "0:1"][..],
+            "whose ends --light-range MIN:MAX sets",
+        ),
+        (
+            &["--log-scale", "--light-range", "0:5"][..],
+            "starts above 0",
+        ),
+    ] {
+        let mut args = vec!["render", s(&file), "-o", s(&a), "--mode", "splat"];
+        args.extend(["--colour-map", "magma"]);
+        args.extend_from_slice(extra);
+        let e = fails(&args);
+        assert!(e.contains(says), "{extra:?}: {e}");
+    }
+    let e = fails(&["render", s(&file), "-o", s(&a), "--light-range", "0:5"]);
+    assert!(e.contains("needs --mode splat and --colour-map"), "{e}");
+}
+
 /// A volume whose one clip plane cuts away every sample says so (its particles are drawn
 /// into nothing), and keeps quiet where the plane cuts through it.
 #[test]

@@ -104,6 +104,7 @@ pub fn run(args: Args) -> Result<()> {
         binning: super::render::BinningArg::Projected,
         intensity: super::render::Intensity::Species,
         exposure: None,
+        light_range: None,
         style: super::render::StyleArgs {
             colour_map: None,
             radius_scale: 1.0,

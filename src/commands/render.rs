@@ -101,6 +101,11 @@ pub struct Args {
     /// the attribute's with --intensity attribute).
     #[arg(long)]
     pub exposure: Option<f32>,
+    /// Splat mode with --colour-map (a projection): the image's light at the map's two
+    /// ends, e.g. 0:250 (on a log scale, above 0), instead of the image's own range, so
+    /// that projections made apart (a zoom and its overview, two runs) share one scale.
+    #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true, value_parser = parse_range)]
+    pub light_range: Option<[f32; 2]>,
     /// Background colour: #rrggbb, r,g,b in [0, 1], or a name such as white or grey
     /// (default black for splats and the density volume, white otherwise); `none` for a
     /// transparent one (a PNG with alpha: spheres, with edges partly transparent at
@@ -488,6 +493,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("sort", &[SplatOver]),
         ("intensity", &[Splat]),
         ("exposure", &[Splat]),
+        ("light_range", &[Splat]),
         ("colour_map", &[Spheres, Sndf, Splat]),
         ("radius_scale", STYLED),
         ("species_colour", STYLED),
@@ -544,6 +550,32 @@ fn projected(args: &Args) -> bool {
 }
 
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
+    if projected(args) {
+        if args.exposure.is_some() {
+            anyhow::bail!(
+                "--exposure has no effect with --mode splat --colour-map: the map spans the \
+                 image's light; --light-range MIN:MAX sets its ends"
+            );
+        }
+        if let Some([lo, _]) = args
+            .light_range
+            .filter(|[lo, _]| args.style.log_scale && *lo <= 0.0)
+        {
+            anyhow::bail!("--light-range {lo}:..: on a log scale the light's range starts above 0");
+        }
+        if args.style.attribute_range.is_some() && !by_attribute(args) {
+            anyhow::bail!(
+                "--attribute-range has no effect on a projection of species light: the map \
+                 spans the projected light, whose ends --light-range MIN:MAX sets \
+                 (--intensity attribute projects the attribute, over --attribute-range)"
+            );
+        }
+    } else if args.light_range.is_some() {
+        anyhow::bail!(
+            "--light-range sets the ends of a projection's colour map: it needs --mode splat \
+             and --colour-map"
+        );
+    }
     for (given, name) in [
         (args.style.attribute_range.is_some(), "--attribute-range"),
         (args.style.log_scale && !projected(args), "--log-scale"),
@@ -781,6 +813,7 @@ pub fn run(args: Args) -> Result<()> {
             }
         },
         exposure: args.exposure,
+        light_range: args.light_range,
         gpu_memory: args.gpu_memory,
         occlusion: !args.no_occlusion,
         style: {
@@ -838,6 +871,7 @@ pub fn run(args: Args) -> Result<()> {
         &mut opts.style,
         &args.file,
         by_attribute(&args) && !projected(&args),
+        lit_by_value(&args),
     )?;
     if let Some(n) = args.turntable {
         return render_turntable(&args, opts, n, derived);
@@ -1028,13 +1062,17 @@ pub fn run(args: Args) -> Result<()> {
             Intensity::Attribute => "the projected attribute",
             Intensity::Species => "the projected flux",
         };
-        let (scale, from) = if opts.style.log_scale {
-            (
+        let (scale, from) = match (opts.style.log_scale, args.light_range.is_some()) {
+            (true, false) => (
                 " on a log scale",
-                "its lit pixels' 0.5th to 99.5th percentile",
-            )
-        } else {
-            ("", "0 to its lit pixels' 99.5th percentile")
+                "its lit pixels' 0.5th to 99.5th percentile; --light-range sets another",
+            ),
+            (false, false) => (
+                "",
+                "0 to its lit pixels' 99.5th percentile; --light-range sets another",
+            ),
+            (true, true) => (" on a log scale", "--light-range"),
+            (false, true) => ("", "--light-range"),
         };
         println!(
             "  colour map {}: the image's light ({light}) from {lo:.4e} to {hi:.4e}{scale} \
@@ -1341,6 +1379,7 @@ pub fn derive_range(
     style: &mut mdlod_render::PointStyle,
     path: &std::path::Path,
     mapped: bool,
+    light: bool,
 ) -> Result<Option<String>> {
     if !mapped {
         return Ok(None);
@@ -1353,7 +1392,9 @@ pub fn derive_range(
     if style.attribute_range.is_some() {
         return Ok(None);
     }
-    let (range, why) = if style.log_scale {
+    let (range, why) = if let Some(range) = light_range_from_zero([a.min, a.max], style, light) {
+        (range, LIGHT_FROM_ZERO.to_string())
+    } else if style.log_scale {
         match log_start([a.min, a.max], mdlod_render::log_floor(&file)) {
             Some(r) => r,
             None => return Ok(None),
@@ -1372,6 +1413,28 @@ pub fn derive_range(
         "{why}; the file's range is {} to {}",
         a.min, a.max
     )))
+}
+
+/// Why splats lit by their values start their range at 0.
+const LIGHT_FROM_ZERO: &str = "from 0, so that each splat's light is its value times its \
+     disk's area (a particle at the smallest value still shines)";
+
+/// Whether the splats are lit by the attribute's value (`--intensity attribute` without a
+/// projection's colour map).
+fn lit_by_value(args: &Args) -> bool {
+    args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute) && !projected(args)
+}
+
+/// The range of splats lit by values of `range` (none of them negative) on a linear
+/// scale: from 0, so that light is proportional to value. The file's range would give the
+/// smallest value no light, and a mass of 2 against one of 6 a third of the light it
+/// carries.
+fn light_range_from_zero(
+    [lo, hi]: [f32; 2],
+    style: &mdlod_render::PointStyle,
+    light: bool,
+) -> Option<[f32; 2]> {
+    (light && !style.log_scale && lo > 0.0 && hi > lo).then_some([0.0, hi])
 }
 
 /// `--log-scale` of an attribute stored as its logarithm (`--attribute-log10`) would take
@@ -1888,6 +1951,19 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         );
     }
     let mut range_note = String::new();
+    if let Some((a, range)) = attribute.clone().flatten().and_then(|a| {
+        let range = light_range_from_zero([a.min, a.max], &opts.style, lit_by_value(args))?;
+        Some((a, range))
+    }) {
+        if opts.style.attribute_range.is_none() {
+            opts.style.attribute_range = Some(range);
+            range_note = format!(
+                ", {} from 0 to {} ({LIGHT_FROM_ZERO}; every frame's range is {} to {}; \
+                 --attribute-range sets another)",
+                a.name, range[1], a.min, a.max
+            );
+        }
+    }
     if by_attribute(args) && opts.style.attribute_range.is_none() {
         // Where the frames' union is no range (a constant attribute), each frame keeps
         // its own constant look.

@@ -84,7 +84,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     mdlod_render::check_image_size(opts.width, opts.height)?;
     let mapped = opts.style.colour_map.is_some();
-    if let Some(why) = super::render::derive_range(&mut opts.style, &args.file, mapped)? {
+    if let Some(why) = super::render::derive_range(&mut opts.style, &args.file, mapped, false)? {
         let [lo, hi] = opts.style.attribute_range.unwrap_or_default();
         let map = opts.style.colour_map.map_or("", |m| m.name());
         println!("colour map {map}: from {lo} to {hi} ({why}; --attribute-range sets another)");
