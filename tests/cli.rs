@@ -3955,6 +3955,22 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
     // Particles as large as the steps: no note.
     let fine = ok(&["convert", s(&offset), "-o", s(&out), "--radius", "A=1"]);
     assert!(!fine.contains("note:"), "{fine}");
+    // Data in centimetres around the origin with the default radius: no shift helps, the
+    // radius is what is out of scale.
+    let cgs = dir.path().join("cgs.xyz");
+    let mut text = String::from("27\nProperties=species:S:1:pos:R:3\n");
+    for i in 0..27 {
+        let at = |k: i32| f64::from(k - 1) * 3e21;
+        text += &format!("H {:e} {:e} {:e}\n", at(i % 3), at(i / 3 % 3), at(i / 9));
+    }
+    std::fs::write(&cgs, text).unwrap();
+    let noted = ok(&["convert", s(&cgs), "-o", s(&out), "--radius", "H=0.5"]);
+    assert!(
+        noted.contains("times the smallest radius")
+            && noted.contains("give --radius NAME=R in the data's own units")
+            && !noted.contains("subtract its centre"),
+        "{noted}"
+    );
 }
 
 /// `--frame` counts from the end when negative, and the summary says which frame of
@@ -4673,6 +4689,46 @@ fn a_projection_takes_its_light_range() {
     }
     let e = fails(&["render", s(&file), "-o", s(&a), "--light-range", "0:5"]);
     assert!(e.contains("needs --mode splat and --colour-map"), "{e}");
+}
+
+/// Values far from 1 (a mass in grams, a density in g/cm³) print in scientific notation,
+/// not as 34 digits.
+#[test]
+fn summaries_print_large_and_small_values_in_scientific_notation() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("cgs.lammpstrj");
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n8\nITEM: BOX BOUNDS pp pp pp\n\
+         0 4\n0 4\n0 4\nITEM: ATOMS id type x y z mass\n",
+    );
+    for i in 0..8 {
+        let mass = if i < 4 { "1.989e33" } else { "3.978e33" };
+        text += &format!(
+            "{} 1 {} {} {} {mass}\n",
+            i + 1,
+            i % 2 * 2,
+            i / 2 % 2 * 2,
+            i / 4 * 2
+        );
+    }
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("cgs.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "mass"]);
+    let info = ok(&["info", s(&file)]);
+    assert!(info.contains("mass in [1.989e33, 3.978e33]"), "{info}");
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&dir.path().join("m.png")),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--colour-map",
+        "viridis",
+    ]);
+    assert!(out.contains("mass from 1.989e33 to 3.978e33"), "{out}");
 }
 
 /// A volume whose one clip plane cuts away every sample says so (its particles are drawn

@@ -412,12 +412,26 @@ pub(crate) fn position_notes(
     // (The power of two at or below it, times the machine epsilon.)
     let step = f32::from_bits(largest.to_bits() & 0x7f80_0000) * f32::EPSILON;
     if largest.is_finite() && smallest_radius.is_finite() && step > 0.05 * smallest_radius {
+        let share = match step / smallest_radius {
+            r if r < 10.0 => format!("{:.0}% of", 100.0 * r),
+            r => format!("{r:.1e} times"),
+        };
+        // Data spanning about as far as it reaches from the origin is not helped by a
+        // shift: its radius is what is out of scale (a radius of 0.5 for data in cm).
+        let span = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f32, f32::max);
+        let remedy = if span > 0.25 * largest {
+            format!(
+                "the radius is tiny beside the data's extent ({span:.3e}): give --radius \
+                 NAME=R in the data's own units (about the particles' spacing)"
+            )
+        } else {
+            "shift the data near the origin (subtract its centre) before converting".to_string()
+        };
         notes.push(format!(
             "coordinates reach {largest:.3e}, where single precision (in which positions are \
-             read and stored) holds steps of {step:.2e}, {:.0}% of the smallest radius \
+             read and stored) holds steps of {step:.2e}, {share} the smallest radius \
              ({smallest_radius}): particles snap to a grid (the position error is measured \
-             after it); shift the data near the origin (subtract its centre) before converting",
-            100.0 * step / smallest_radius
+             after it); {remedy}"
         ));
     }
     if let Some(f) = far {

@@ -197,8 +197,8 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "  attribute    {} in [{}, {}]",
             shown(&a.name),
-            a.min,
-            a.max
+            super::Num(a.min),
+            super::Num(a.max)
         );
     }
     if let Some(b) = &m.simulation_box {

@@ -147,6 +147,22 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// A value of the data as a summary prints it: its shortest decimal form where that is
+/// short (10^-4 to 10^7), else in scientific notation (a mass of 1.989e33 g, a density of
+/// 5.2e-31 g/cm³, not 34 digits).
+pub struct Num(pub f32);
+
+impl std::fmt::Display for Num {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.0;
+        if v == 0.0 || !v.is_finite() || (1e-4..1e7).contains(&v.abs()) {
+            write!(f, "{v}")
+        } else {
+            write!(f, "{v:e}")
+        }
+    }
+}
+
 /// A file's size for a summary: KiB below a MiB (a small sample read as `0.0 MiB`), else
 /// MiB, one decimal.
 pub fn size_text(bytes: u64) -> String {

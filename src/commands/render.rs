@@ -8,6 +8,7 @@ use mdlod_render::{
     ViewSpec,
 };
 
+use super::Num;
 use crate::progress::Bar;
 
 /// Render a .mdlod file to a PNG with no window: a level-of-detail cut chosen by
@@ -931,16 +932,19 @@ pub fn run(args: Args) -> Result<()> {
                 None => "splat intensity".to_string(),
             };
             println!(
-                "  {shown}: {} from {lo} to {hi} ({whose}){}",
+                "  {shown}: {} from {} to {} ({whose}){}",
                 a.name,
+                Num(lo),
+                Num(hi),
                 log_text(a, &opts.style, &args) + &white_text(&opts.style)
             );
             if lo >= hi {
                 println!(
-                    "  note: {} is constant in this file ({lo}): every particle takes the \
+                    "  note: {} is constant in this file ({}): every particle takes the \
                      map's last colour, which means nothing on its own; --attribute-range \
                      places the value on a scale (the range of the frames it is compared with)",
-                    a.name
+                    a.name,
+                    Num(lo)
                 );
             }
             if opts.style.log_scale
@@ -963,9 +967,13 @@ pub fn run(args: Args) -> Result<()> {
             if let Some([lo, hi]) = opts.style.attribute_range {
                 if hi < a.min || lo > a.max {
                     println!(
-                        "  note: the range {lo} to {hi} misses the file's values ({} from {} to \
+                        "  note: the range {} to {} misses the file's values ({} from {} to \
                          {}): every particle takes one end of the map",
-                        a.name, a.min, a.max
+                        Num(lo),
+                        Num(hi),
+                        a.name,
+                        Num(a.min),
+                        Num(a.max)
                     );
                 }
             }
@@ -1411,7 +1419,8 @@ pub fn derive_range(
     style.attribute_range = Some(range);
     Ok(Some(format!(
         "{why}; the file's range is {} to {}",
-        a.min, a.max
+        Num(a.min),
+        Num(a.max)
     )))
 }
 
@@ -1830,7 +1839,11 @@ fn render_turntable(
         k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
     };
     let derived = match (derived, opts.style.attribute_range) {
-        (Some(why), Some([lo, hi])) => format!(", the attribute shown from {lo} to {hi} ({why})"),
+        (Some(why), Some([lo, hi])) => format!(
+            ", the attribute shown from {} to {} ({why})",
+            Num(lo),
+            Num(hi)
+        ),
         _ => String::new(),
     };
     println!(
@@ -1960,7 +1973,10 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             range_note = format!(
                 ", {} from 0 to {} ({LIGHT_FROM_ZERO}; every frame's range is {} to {}; \
                  --attribute-range sets another)",
-                a.name, range[1], a.min, a.max
+                a.name,
+                Num(range[1]),
+                Num(a.min),
+                Num(a.max)
             );
         }
     }
@@ -1984,7 +2000,11 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             range_note = format!(
                 ", {} from {} to {} ({why}; every frame's range is {} to {}; \
                  --attribute-range sets another)",
-                a.name, range[0], range[1], a.min, a.max
+                a.name,
+                Num(range[0]),
+                Num(range[1]),
+                Num(a.min),
+                Num(a.max)
             );
         } else if let Some((a, range)) = centred {
             // A diverging map over signed values: white is 0 in every frame.
@@ -1992,14 +2012,20 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             range_note = format!(
                 ", {} from {} to {} (centred on 0, the map's white; every frame's range is \
                  {} to {}; --attribute-range sets another)",
-                a.name, range[0], range[1], a.min, a.max
+                a.name,
+                Num(range[0]),
+                Num(range[1]),
+                Num(a.min),
+                Num(a.max)
             );
         } else if let Some(Some(a)) = attribute.clone().filter(|_| n > 1) {
             if a.max > a.min {
                 opts.style.attribute_range = Some([a.min, a.max]);
                 range_note = format!(
                     ", {} from {} to {} (every frame's range; --attribute-range sets another)",
-                    a.name, a.min, a.max
+                    a.name,
+                    Num(a.min),
+                    Num(a.max)
                 );
             }
         }
@@ -2128,9 +2154,13 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     if let (Some([lo, hi]), Some(Some(a))) = (args.style.attribute_range, &attribute) {
         if by_attribute(args) && (hi < a.min || lo > a.max) {
             println!(
-                "  note: the range {lo} to {hi} misses every frame's values ({} from {} to {}): \
+                "  note: the range {} to {} misses every frame's values ({} from {} to {}): \
                  every particle takes one end of the map",
-                a.name, a.min, a.max
+                Num(lo),
+                Num(hi),
+                a.name,
+                Num(a.min),
+                Num(a.max)
             );
         }
     }

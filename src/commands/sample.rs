@@ -87,7 +87,11 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(why) = super::render::derive_range(&mut opts.style, &args.file, mapped, false)? {
         let [lo, hi] = opts.style.attribute_range.unwrap_or_default();
         let map = opts.style.colour_map.map_or("", |m| m.name());
-        println!("colour map {map}: from {lo} to {hi} ({why}; --attribute-range sets another)");
+        println!(
+            "colour map {map}: from {} to {} ({why}; --attribute-range sets another)",
+            super::Num(lo),
+            super::Num(hi)
+        );
     }
     if args.tiles {
         let (stats, tiles) = mdlod_render::sample_tiles_to_file(
