@@ -4729,6 +4729,34 @@ fn summaries_print_large_and_small_values_in_scientific_notation() {
         "viridis",
     ]);
     assert!(out.contains("mass from 1.989e33 to 3.978e33"), "{out}");
+    // A log scale over six decades stored linearly: the low decades are a few steps, and
+    // the summary says how to keep them; over three decades, nothing to say.
+    let original = std::fs::read_to_string(&dump).unwrap();
+    for (small, says) in [("1e-6", true), ("1", false)] {
+        let text = original
+            .replace("1.989e33", small)
+            .replace("3.978e33", "1000");
+        std::fs::write(&dump, text).unwrap();
+        ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "mass"]);
+        let out = ok(&[
+            "render",
+            s(&file),
+            "-o",
+            s(&dir.path().join("m.png")),
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--colour-map",
+            "viridis",
+            "--log-scale",
+        ]);
+        assert_eq!(
+            out.contains("convert with --attribute-log10 to keep them"),
+            says,
+            "{out}"
+        );
+    }
 }
 
 /// A volume whose one clip plane cuts away every sample says so (its particles are drawn

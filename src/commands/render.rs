@@ -1500,13 +1500,30 @@ fn log_text(
     let scale =
         mdlod_render::style::AttributeScale::with_range(a, style.attribute_range).with_log(true);
     let low = style.attribute_range.map_or(a.min, |r| r[0]);
+    // The file keeps 16-bit steps of the linear range: the scale's lowest decades may hold
+    // only a few of them.
+    let step = (f64::from(a.max) - f64::from(a.min)) / 65535.0;
+    let coarse = |lo: f64| {
+        if !a.name.starts_with("log10(") && step > 10.0 * lo {
+            format!(
+                "; the file stores the values linearly in steps of {}, so the decades below \
+                 {} show a few steps each (convert with --attribute-log10 to keep them)",
+                Num(step as f32),
+                Num((step * 1000.0) as f32)
+            )
+        } else {
+            String::new()
+        }
+    };
     match scale.log_range() {
-        Some(_) if f64::from(low) > 0.0 => ", on a log scale".to_string(),
+        Some([lo, _]) if f64::from(low) > 0.0 => format!(", on a log scale{}", coarse(lo)),
         Some([lo, hi]) => format!(
-            ", on a log scale from {:.4e} ({} decades below {}): values at or below it {fate}",
+            ", on a log scale from {:.4e} ({} decades below {}): values at or below it \
+             {fate}{}",
             lo as f32,
             mdlod_render::style::AttributeScale::LOG_DECADES,
             hi as f32,
+            coarse(lo),
         ),
         None if style.attribute_range.is_none() && a.min >= a.max => {
             ", linear (--log-scale left unused: the attribute is constant)".to_string()
