@@ -3152,9 +3152,27 @@ fn a_legend_says_what_the_colours_mean() {
         s(&svg),
     ]);
     assert!(
-        out.contains("c_pe is constant in this file (-3.54)"),
+        out.contains("c_pe is constant in this file (-3.54): every particle takes the map's"),
         "{out}"
     );
+    // Splats lit by it all give the same light, a projection's map or not.
+    for extra in [&[][..], &["--colour-map", "viridis"]] {
+        let mut args = vec!["render", s(&flat_file), "-o", s(&png), "--mode", "splat"];
+        args.extend([
+            "--intensity",
+            "attribute",
+            "--width",
+            "32",
+            "--height",
+            "24",
+        ]);
+        args.extend_from_slice(extra);
+        let out = ok(&args);
+        assert!(
+            out.contains("constant in this file (-3.54): every splat gives the same light"),
+            "{extra:?}: {out}"
+        );
+    }
     let out = ok(&[
         "render",
         s(&flat_file),

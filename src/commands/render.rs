@@ -939,9 +939,16 @@ pub fn run(args: Args) -> Result<()> {
                 log_text(a, &opts.style, &args) + &white_text(&opts.style)
             );
             if lo >= hi {
+                // Splats lit by a constant all give the same light; a colour map over the
+                // particles gives them its last colour.
+                let fate = match args.mode {
+                    Mode::Splat => "every splat gives the same light (intensity 1)",
+                    _ => {
+                        "every particle takes the map's last colour, which means nothing on its own"
+                    }
+                };
                 println!(
-                    "  note: {} is constant in this file ({}): every particle takes the \
-                     map's last colour, which means nothing on its own; --attribute-range \
+                    "  note: {} is constant in this file ({}): {fate}; --attribute-range \
                      places the value on a scale (the range of the frames it is compared with)",
                     a.name,
                     Num(lo)
