@@ -1063,6 +1063,14 @@ fn sndfs_sampled_once_shade_without_the_particles() {
         info.contains("96x64 texels, 8x8 lambert-equal-area bins, 8 rays each"),
         "{info}"
     );
+    // The camera's numbers in their single-precision shortest form.
+    let view = info.lines().find(|l| l.contains("view ")).unwrap();
+    let digits = view
+        .split(|c: char| !c.is_ascii_digit() && c != '.')
+        .map(|n| n.trim_start_matches('.').len())
+        .max()
+        .unwrap_or(0);
+    assert!(digits <= 10, "{view}");
     // Sampled finer so that every atom gets enough samples; shown at the asked size.
     let fine = dir.path().join("fine.sndf");
     ok(&[

@@ -40,6 +40,10 @@ fn species_counts(f: &MdlodFile) -> Vec<u64> {
 fn sndf_info(args: &Args) -> Result<()> {
     let (header, bytes) = mdlod_format::sndf::SndfData::load_header(&args.file)?;
     let h = &header;
+    // The camera's numbers are f32s: their shortest form (63.43495, not 63.4349479675293;
+    // read back from text, a widened f32 may be a unit of the last place off it).
+    let mut view = h.view.clone();
+    as_f32(&mut view);
     if args.json {
         let v = json!({
             "file": args.file.display().to_string(),
@@ -51,7 +55,7 @@ fn sndf_info(args: &Args) -> Result<()> {
             "rays": h.rays,
             "display_level": h.display_level.unwrap_or(0),
             "source": h.source,
-            "view": h.view,
+            "view": view,
             "data_bytes": bytes,
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -72,7 +76,7 @@ fn sndf_info(args: &Args) -> Result<()> {
     if let Some(s) = &h.source {
         println!("  sampled from {}", shown(s));
     }
-    println!("  view         {}", h.view);
+    println!("  view         {view}");
     Ok(())
 }
 
@@ -293,6 +297,26 @@ fn shortest_f32(v: &mut serde_json::Value) {
         }
         Value::Array(a) => a.iter_mut().for_each(shortest_f32),
         Value::Object(o) => o.values_mut().for_each(shortest_f32),
+        _ => {}
+    }
+}
+
+/// Every fractional number of `v` as the shortest decimal form of the nearest f32.
+fn as_f32(v: &mut serde_json::Value) {
+    use serde_json::Value;
+    match v {
+        Value::Number(n) if !n.is_i64() && !n.is_u64() => {
+            if let Some(m) = n
+                .as_f64()
+                .filter(|x| x.is_finite())
+                .and_then(|x| (x as f32).to_string().parse().ok())
+                .and_then(serde_json::Number::from_f64)
+            {
+                *n = m;
+            }
+        }
+        Value::Array(a) => a.iter_mut().for_each(as_f32),
+        Value::Object(o) => o.values_mut().for_each(as_f32),
         _ => {}
     }
 }
