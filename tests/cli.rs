@@ -4823,6 +4823,61 @@ fn a_volume_clipped_to_nothing_says_so() {
     }
 }
 
+/// A ball of atoms fills the image as a ball does: the fit frames its clusters, not its
+/// box's empty corners (which left it at about two thirds of the height).
+#[test]
+fn a_ball_of_atoms_fills_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("ball.xyz");
+    let mut atoms = Vec::new();
+    for i in -12i32..=12 {
+        for j in -12i32..=12 {
+            for k in -12i32..=12 {
+                if i * i + j * j + k * k <= 144 {
+                    atoms.push(format!("Ar {} {} {}", i, j, k));
+                }
+            }
+        }
+    }
+    std::fs::write(
+        &xyz,
+        format!("{}\nball\n{}\n", atoms.len(), atoms.join("\n")),
+    )
+    .unwrap();
+    let file = dir.path().join("ball.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Ar=0.5"]);
+    let png = dir.path().join("ball.png");
+    let (w, h) = (96u32, 72u32);
+    for extra in [
+        &[][..],
+        &["--ortho"],
+        &["--elevation", "60", "--azimuth", "200"],
+    ] {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "96"];
+        args.extend(["--height", "72", "--background", "#000000"]);
+        args.extend_from_slice(extra);
+        ok(&args);
+        let px = read_png(&png).2;
+        let lit =
+            |y: u32| (0..w).any(|x| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 8));
+        let rows: Vec<u32> = (0..h).filter(|&y| lit(y)).collect();
+        let (top, bottom) = (rows[0], rows[rows.len() - 1]);
+        assert!(
+            top >= 1 && bottom < h - 1,
+            "{extra:?}: rows {top} to {bottom}"
+        );
+        assert!(
+            bottom - top + 1 >= h * 4 / 5,
+            "{extra:?}: rows {top} to {bottom} of {h}"
+        );
+        // Centred: as many empty rows above as below, within a few.
+        assert!(
+            (top as i32 - (h - 1 - bottom) as i32).abs() <= 3,
+            "{extra:?}: {top} {bottom}"
+        );
+    }
+}
+
 /// A fitted view frames the particles as they are drawn: spheres enlarged by the style,
 /// a splat's Gaussian, a density kernel's support; never cropped, never tiny.
 #[test]

@@ -70,6 +70,18 @@ impl Bounds {
     }
 }
 
+/// The eight corners of a box, in double precision.
+fn corners(b: &Bounds) -> [glam::DVec3; 8] {
+    std::array::from_fn(|i| {
+        let pick = |bit: usize, lo: f32, hi: f32| f64::from(if i & bit == 0 { lo } else { hi });
+        glam::DVec3::new(
+            pick(1, b.min.x, b.max.x),
+            pick(2, b.min.y, b.max.y),
+            pick(4, b.min.z, b.max.z),
+        )
+    })
+}
+
 /// The share of the image's width or height a fitted view's data spans, in the tighter of
 /// the two: a margin of 5 % on each side.
 pub const FIT_FILL: f64 = 0.9;
@@ -291,28 +303,44 @@ impl Camera {
     /// box's centre, across the view, until the projected box is centred
     /// ([`Self::fit_about_centre`] keeps it there, for orbits).
     pub fn fit(&mut self, bounds: &Bounds, aspect: f32) {
-        self.fit_about_centre(bounds, aspect);
-        if self.projection != Projection::Perspective {
-            return;
-        }
+        self.fit_boxes(bounds, std::slice::from_ref(bounds), aspect);
+    }
+
+    /// [`Self::fit`] of what lies in `boxes` (the data's clusters, say, inside its
+    /// `bounds`): every corner of every box in view, the projection of their union
+    /// centred and filling [`FIT_FILL`], so that data which does not fill its bounding
+    /// box (a sphere of atoms, a disc seen from above) is framed as it looks. The depth
+    /// range holds `bounds`. No boxes frame `bounds`.
+    pub fn fit_boxes(&mut self, bounds: &Bounds, boxes: &[Bounds], aspect: f32) {
+        let boxes = if boxes.is_empty() {
+            std::slice::from_ref(bounds)
+        } else {
+            boxes
+        };
+        let hull = boxes.iter().skip(1).fold(boxes[0], |u, b| {
+            Bounds::new(u.min.min(b.min), u.max.max(b.max))
+        });
+        self.target = hull.center();
+        self.distance = self.distance_for(boxes, &hull, aspect);
         let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan();
         let tan_x = tan_y * f64::from(aspect);
         let before = (self.target, self.distance);
-        // Each round moves the target by the projected box's offset from the image's
-        // centre, as seen at the target's depth, and fits the distance again.
+        // Each round moves the target by the projection's offset from the image's centre,
+        // as seen at the target's depth, and fits the distance again (once is exact in
+        // orthographic views; the box of the whole data is centred there already).
         for _ in 0..12 {
-            let Some([cx, cy]) = self.projected_centre(bounds, tan_x, tan_y) else {
+            let Some([cx, cy]) = self.projected_centre(boxes, tan_x, tan_y) else {
                 (self.target, self.distance) = before;
                 break;
             };
+            if cx.abs().max(cy.abs()) < 1e-5 {
+                break;
+            }
             let d = f64::from(self.distance);
             let shift = self.right().as_dvec3() * (cx * d * tan_x)
                 + self.up().as_dvec3() * (cy * d * tan_y);
             self.target = (self.target.as_dvec3() + shift).as_vec3();
-            self.distance = self.fitted_distance(bounds, aspect);
-            if cx.abs().max(cy.abs()) < 1e-4 {
-                break;
-            }
+            self.distance = self.distance_for(boxes, &hull, aspect);
         }
         if !(self.target.is_finite() && self.distance.is_finite() && self.distance > 0.0) {
             (self.target, self.distance) = before;
@@ -328,26 +356,25 @@ impl Camera {
         self.fit_depth_range(bounds);
     }
 
-    /// The centre of the box's projection, in normalised device coordinates (x right, y
-    /// up), for a perspective view with the given half-angle tangents; `None` where a
-    /// corner lies behind the eye.
-    fn projected_centre(&self, bounds: &Bounds, tan_x: f64, tan_y: f64) -> Option<[f64; 2]> {
+    /// The centre of the projection of the boxes' corners, in normalised device
+    /// coordinates (x right, y up), for the given half-angle tangents; `None` where a
+    /// corner lies behind the eye of a perspective view.
+    fn projected_centre(&self, boxes: &[Bounds], tan_x: f64, tan_y: f64) -> Option<[f64; 2]> {
         let (r, u, b) = (
             self.right().as_dvec3(),
             self.up().as_dvec3(),
             self.back().as_dvec3(),
         );
-        let eye = self.target.as_dvec3() + b * f64::from(self.distance);
+        let d = f64::from(self.distance);
+        let eye = self.target.as_dvec3() + b * d;
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for i in 0..8 {
-            let pick = |bit: u32, lo: f32, hi: f32| f64::from(if i & bit == 0 { lo } else { hi });
-            let corner = glam::DVec3::new(
-                pick(1, bounds.min.x, bounds.max.x),
-                pick(2, bounds.min.y, bounds.max.y),
-                pick(4, bounds.min.z, bounds.max.z),
-            );
+        for corner in boxes.iter().flat_map(corners) {
             let q = corner - eye;
-            let depth = -q.dot(b);
+            let depth = match self.projection {
+                Projection::Perspective => -q.dot(b),
+                // The view's size does not change with depth.
+                Projection::Orthographic => d,
+            };
             if depth.is_nan() || depth <= 0.0 {
                 return None;
             }
@@ -368,22 +395,24 @@ impl Camera {
     /// (data may span 10^-10 or 10^36); a box of no extent is fitted as a sphere of
     /// [`Bounds::fit_radius`].
     pub fn fitted_distance(&self, bounds: &Bounds, aspect: f32) -> f32 {
+        self.distance_for(std::slice::from_ref(bounds), bounds, aspect)
+    }
+
+    /// [`Self::fitted_distance`] of every corner of `boxes`, whose union is `hull`.
+    fn distance_for(&self, boxes: &[Bounds], hull: &Bounds, aspect: f32) -> f32 {
         let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan() * FIT_FILL;
         let tan_x = tan_y * f64::from(aspect);
-        let half = (bounds.max.as_dvec3() - bounds.min.as_dvec3()) * 0.5;
-        // The box's centre from the target (not at the box's centre in a centred
-        // perspective fit).
-        let off =
-            bounds.min.as_dvec3() * 0.5 + bounds.max.as_dvec3() * 0.5 - self.target.as_dvec3();
+        let half = (hull.max.as_dvec3() - hull.min.as_dvec3()) * 0.5;
         let (r, u, b) = (
             self.right().as_dvec3(),
             self.up().as_dvec3(),
             self.back().as_dvec3(),
         );
+        let target = self.target.as_dvec3();
         let mut need = 0.0f64;
-        for i in 0..8 {
-            let sign = |bit: u32| if i & bit == 0 { -1.0 } else { 1.0 };
-            let o = off + glam::DVec3::new(sign(1) * half.x, sign(2) * half.y, sign(4) * half.z);
+        for corner in boxes.iter().flat_map(corners) {
+            // The corner from the target (not the box's centre in a centred fit).
+            let o = corner - target;
             let across = (o.dot(r).abs() / tan_x).max(o.dot(u).abs() / tan_y);
             need = need.max(match self.projection {
                 // The corner's depth from the eye is the distance less its offset
@@ -396,7 +425,7 @@ impl Camera {
         if half.max_element() > 0.0 && fitted.is_finite() && fitted > 0.0 {
             return fitted;
         }
-        let rad = bounds.fit_radius();
+        let rad = hull.fit_radius();
         let tan_half = (self.fov_y_deg.to_radians() * 0.5).tan() * aspect.min(1.0);
         match self.projection {
             Projection::Perspective => rad / tan_half.atan().sin(),
@@ -638,6 +667,55 @@ mod tests {
                     (widest - FIT_FILL as f32).abs() < 1e-3,
                     "scale {scale} {p:?} aspect {aspect} ({azimuth_deg}°, {elevation_deg}°): \
                      the data spans {widest} of the view"
+                );
+            }
+        }
+    }
+
+    /// Boxes inside the bounds (a cloud's clusters) are framed as they lie: every corner
+    /// in view, their projection centred and filling FIT_FILL, from closer than the bounds'
+    /// fit where they leave its corners empty.
+    #[test]
+    fn fitted_boxes_are_framed_as_they_lie() {
+        let b = Bounds::new([-10.0; 3], [10.0; 3]);
+        // Six small boxes at the faces' centres: an octahedron's worth of a sphere.
+        let boxes: Vec<Bounds> = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z]
+            .iter()
+            .map(|d| Bounds::new(*d * 9.0 - 1.0, *d * 9.0 + 1.0))
+            .collect();
+        for p in [Projection::Perspective, Projection::Orthographic] {
+            for (azimuth_deg, elevation_deg) in [(30.0, 20.0), (0.0, 90.0), (200.0, -40.0)] {
+                let mut c = Camera {
+                    projection: p,
+                    azimuth_deg,
+                    elevation_deg,
+                    ..Default::default()
+                };
+                c.fit(&b, 1.5);
+                let whole = c.distance;
+                c.fit_boxes(&b, &boxes, 1.5);
+                // Never farther; closer seen obliquely (straight down an axis, the
+                // face boxes reach the bounds' outline).
+                let closer = if elevation_deg == 90.0 { 1.0001 } else { 0.95 };
+                assert!(
+                    c.distance <= whole * closer,
+                    "{p:?} {azimuth_deg}: {} {whole}",
+                    c.distance
+                );
+                let m = c.clip_from_view(1.5) * c.view_from_world();
+                let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+                for corner in boxes.iter().flat_map(corners) {
+                    let clip = m * corner.as_vec3().extend(1.0);
+                    let ndc = clip.truncate() / clip.w;
+                    assert!(ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0, "{p:?}: {ndc}");
+                    lo = lo.min(ndc.truncate());
+                    hi = hi.max(ndc.truncate());
+                }
+                let widest = lo.abs().max(hi.abs()).max_element();
+                assert!((widest - FIT_FILL as f32).abs() < 2e-3, "{p:?}: {widest}");
+                assert!(
+                    ((lo + hi) * 0.5).abs().max_element() < 2e-3,
+                    "{p:?}: {lo} {hi}"
                 );
             }
         }

@@ -566,6 +566,55 @@ fn drawn_reach(file: &MdlodFile, opts: &RenderOptions) -> f32 {
     }
 }
 
+/// Clusters the fit frames in place of the whole box `fitted` ([`fit_for`]'s): the boxes
+/// of the first level of at least [`FRAMING_NODES`] nodes that hold a species shown, grown
+/// as [`drawn_reach`] grows the bounds and clipped to `fitted` (so that atoms the fit
+/// leaves out stay out), with the cell where it is drawn. A sphere of atoms, a droplet or
+/// a disc seen obliquely then fills the image, where its box's empty corners made it
+/// small. Empty where the file has too few clusters.
+fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
+    use mdlod_format::reader::BELOW_OUT;
+    let levels = file.levels();
+    let last = levels.len().saturating_sub(1);
+    let Some(level) = (0..last).find(|&l| levels[l].point_count >= FRAMING_NODES) else {
+        return Vec::new();
+    };
+    let (Ok(first), Ok(count)) = (
+        usize::try_from(levels[level].node_first),
+        usize::try_from(levels[level].point_count),
+    ) else {
+        return Vec::new();
+    };
+    if file.check_nodes(level, 0..count).is_err() {
+        return Vec::new();
+    }
+    let kind_of = species_kinds(file, opts.style.hidden_mask(&file.metadata().species));
+    let reach = glam::Vec3::splat(drawn_reach(file, opts).max(0.0));
+    let Some(nodes) = first
+        .checked_add(count)
+        .and_then(|end| file.nodes().get(first..end))
+    else {
+        return Vec::new();
+    };
+    let mut boxes: Vec<Bounds> = nodes
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| kind_of(first + i) & BELOW_OUT != 0)
+        .filter_map(|(_, n)| {
+            let lo = (glam::Vec3::from(n.bounds_min) - reach).max(fitted.min);
+            let hi = (glam::Vec3::from(n.bounds_max) + reach).min(fitted.max);
+            lo.cmple(hi).all().then(|| Bounds::new(lo, hi))
+        })
+        .collect();
+    if let (Some(_), Some(c), false) = (opts.cell, cell_bounds(file), boxes.is_empty()) {
+        boxes.push(c);
+    }
+    boxes
+}
+
+/// The nodes a fit frames come from the first level with at least this many.
+pub const FRAMING_NODES: u64 = 64;
+
 /// `bounds` and, where `opts` draws the cell, the cell's box.
 fn with_drawn_cell(bounds: Bounds, file: &MdlodFile, opts: &RenderOptions) -> Bounds {
     match (opts.cell, cell_bounds(file)) {
@@ -800,7 +849,15 @@ pub fn camera_for(
     width: u32,
     height: u32,
 ) -> Result<Camera, RenderError> {
-    camera_in(&data_bounds(file), view, width, height)
+    // The camera a render with default options takes ([`frame_setup`]): the material's
+    // fit, framed by its clusters.
+    let opts = RenderOptions {
+        view: view.clone(),
+        width,
+        height,
+        ..Default::default()
+    };
+    Ok(frame_setup(file, &opts)?.0)
 }
 
 /// [`camera_for`] data within `bounds` (the union of several files' bounds, to frame a
@@ -817,6 +874,18 @@ pub fn camera_for_bounds(
 /// [`camera_for`] data within `bounds`.
 fn camera_in(
     bounds: &Bounds,
+    view: &ViewSpec,
+    width: u32,
+    height: u32,
+) -> Result<Camera, RenderError> {
+    camera_framing(bounds, &[], view, width, height)
+}
+
+/// [`camera_in`] framing `boxes` inside `bounds` where the view is fitted
+/// ([`Camera::fit_boxes`]).
+fn camera_framing(
+    bounds: &Bounds,
+    boxes: &[Bounds],
     view: &ViewSpec,
     width: u32,
     height: u32,
@@ -856,7 +925,7 @@ fn camera_in(
                 zoom: *zoom,
                 ..Default::default()
             };
-            let c = v.to_camera(&bounds, aspect);
+            let c = v.to_camera_framing(&bounds, boxes, aspect);
             check_built_camera(&c)
                 .map_err(|e| RenderError::InvalidOptions(format!("zoom {zoom:e}: {e}")))?;
             c
@@ -870,7 +939,7 @@ fn camera_in(
                     })?;
                 }
             }
-            let c = v.to_camera(&bounds, aspect);
+            let c = v.to_camera_framing(&bounds, boxes, aspect);
             check_built_camera(&c).map_err(|message| RenderError::View {
                 path: path.clone(),
                 message,
@@ -879,7 +948,7 @@ fn camera_in(
         }
         ViewSpec::View(v) => {
             v.check().map_err(RenderError::InvalidOptions)?;
-            let c = v.to_camera(&bounds, aspect);
+            let c = v.to_camera_framing(&bounds, boxes, aspect);
             check_built_camera(&c).map_err(RenderError::InvalidOptions)?;
             c
         }
@@ -956,7 +1025,12 @@ pub fn frame_setup(
         ViewSpec::Camera(_) => data_bounds(file),
         _ => fit_for(file, opts).bounds,
     };
-    let mut camera = camera_in(&fitted, &opts.view, opts.width, opts.height)?;
+    // The clusters of a coarse level frame data that does not fill its box.
+    let boxes = match opts.view {
+        ViewSpec::Camera(_) => Vec::new(),
+        _ => framing_boxes(file, opts, &fitted),
+    };
+    let mut camera = camera_framing(&fitted, &boxes, &opts.view, opts.width, opts.height)?;
     // The depth range holds all the data, and the cell where it is drawn.
     let depth = with_drawn_cell(data_bounds(file), file, opts);
     if fitted != depth {
@@ -1545,7 +1619,7 @@ pub fn sample_tiles_to_file(
     check_numbers(opts)?;
     let mdlod = MdlodFile::open(file)?;
     let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
-    let camera = camera_for(&mdlod, &opts.view, w, h)?;
+    let camera = frame_setup(&mdlod, opts)?.0;
     if camera.projection != Projection::Orthographic {
         return Err(RenderError::InvalidOptions(
             "S-MIP tiles need an orthographic view (--ortho): under perspective a pan moves the eye".into(),
@@ -1687,7 +1761,7 @@ pub fn level0_scale(
     if min_samples == 0 {
         return Ok(1);
     }
-    let camera = camera_for(file, &opts.view, opts.width, opts.height)?;
+    let camera = frame_setup(file, opts)?.0;
     let bounds = data_bounds(file);
     let far = (camera.eye() - bounds.center()).dot(camera.back()) + bounds.radius();
     let r_min = file

@@ -187,6 +187,12 @@ impl ViewFile {
     /// The camera for data within `bounds` and an image of `aspect` (width / height),
     /// with near and far planes around the bounds.
     pub fn to_camera(&self, bounds: &Bounds, aspect: f32) -> Camera {
+        self.to_camera_framing(bounds, &[], aspect)
+    }
+
+    /// [`Self::to_camera`] framing `boxes` inside `bounds` where the view is fitted
+    /// ([`Camera::fit_boxes`]; none: `bounds`).
+    pub fn to_camera_framing(&self, bounds: &Bounds, boxes: &[Bounds], aspect: f32) -> Camera {
         let mut c = Camera {
             projection: self.projection,
             azimuth_deg: self.azimuth_deg,
@@ -194,7 +200,7 @@ impl ViewFile {
             fov_y_deg: self.fov_y_deg,
             ..Default::default()
         };
-        c.fit(bounds, aspect);
+        c.fit_boxes(bounds, boxes, aspect);
         if let Some(d) = self.distance {
             c.distance = d;
         }
