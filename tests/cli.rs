@@ -4785,6 +4785,43 @@ fn summaries_print_large_and_small_values_in_scientific_notation() {
     }
 }
 
+/// Splats of species light take `--species-colour`, particles and clusters alike, and
+/// keep their flux (the file's radii); splats lit by the attribute refuse it.
+#[test]
+fn splats_take_species_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("s.png");
+    // The summed red and green of the picture.
+    let colours = |extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "48"];
+        args.extend(["--height", "36"]);
+        args.extend_from_slice(extra);
+        ok(&args);
+        read_png(&png).2.chunks(4).fold([0u64; 3], |mut sum, p| {
+            for k in 0..3 {
+                sum[k] += u64::from(p[k]);
+            }
+            sum
+        })
+    };
+    for mode in ["splat", "splat-over"] {
+        for error in ["0", "16"] {
+            let base = ["--mode", mode, "--screen-error", error];
+            let plain = colours(&base);
+            let green = colours(&[&base[..], &["--species-colour", "1=#00ff00"]].concat());
+            assert!(
+                green[1] > green[0] * 2 && plain[0] > plain[1],
+                "{mode} at {error} px: {plain:?} against {green:?}"
+            );
+        }
+    }
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--mode", "splat"];
+    args.extend(["--species-colour", "1=#00ff00", "--intensity", "attribute"]);
+    let e = fails(&args);
+    assert!(e.contains("--species-colour"), "{e}");
+}
+
 /// A volume whose one clip plane cuts away every sample says so (its particles are drawn
 /// into nothing), and keeps quiet where the plane cuts through it.
 #[test]

@@ -1272,9 +1272,12 @@ pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
                 ..Default::default()
             },
         ),
-        RenderMode::Splat { .. } | RenderMode::SplatOver { .. } | RenderMode::Density(_) => {
-            (PackStyle::FluxColour, PointStyle::default())
+        // Splats of species light take the style's species colours (the packer keeps the
+        // file's radii, their flux).
+        RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => {
+            (PackStyle::FluxColour, opts.style.clone())
         }
+        RenderMode::Density(_) => (PackStyle::FluxColour, PointStyle::default()),
     }
 }
 

@@ -497,7 +497,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("light_range", &[Splat]),
         ("colour_map", &[Spheres, Sndf, Splat]),
         ("radius_scale", STYLED),
-        ("species_colour", STYLED),
+        ("species_colour", &[Spheres, Sndf, Splat, SplatOver]),
         ("species_radius", STYLED),
         ("attribute_range", &[Spheres, Sndf, Splat]),
         ("log_scale", &[Spheres, Sndf, Splat]),
@@ -551,6 +551,14 @@ fn projected(args: &Args) -> bool {
 }
 
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
+    let uncoloured = matches!(args.intensity, Intensity::Attribute) || projected(args);
+    if args.mode == Mode::Splat && uncoloured && !args.style.species_colour.is_empty() {
+        anyhow::bail!(
+            "--species-colour has no effect on splats lit by the attribute or drawn through a \
+             projection's --colour-map: their light has no species colour (--intensity \
+             species without --colour-map draws the species' colours)"
+        );
+    }
     if projected(args) {
         if args.exposure.is_some() {
             anyhow::bail!(
@@ -1332,7 +1340,10 @@ fn build_legend(
         _ => {
             // Spheres and S-NDFs draw the style's colours; splats and the iso-surface
             // the file's.
-            let styled = matches!(args.mode, Mode::Spheres | Mode::Sndf);
+            let styled = matches!(
+                args.mode,
+                Mode::Spheres | Mode::Sndf | Mode::Splat | Mode::SplatOver
+            );
             let table = opts.style.species_table(species).ok();
             let shown: Vec<(String, [f32; 3])> = species
                 .iter()

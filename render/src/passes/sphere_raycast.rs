@@ -403,10 +403,26 @@ impl AttrPacker {
         // The attribute's shown range and scale serve the intensities of splats too.
         let (range, log) = (look.attribute_range, look.log_scale);
         let default_look = PointStyle::default();
-        let look = if style == PackStyle::Spheres {
-            look
-        } else {
-            &default_look
+        let colours_only;
+        let look = match style {
+            PackStyle::Spheres => look,
+            // Splats take the species' colours and keep the file's radii: a splat's flux
+            // is its disk's area.
+            PackStyle::FluxColour => {
+                colours_only = PointStyle {
+                    species: look
+                        .species
+                        .iter()
+                        .map(|s| crate::style::SpeciesStyle {
+                            radius: None,
+                            ..s.clone()
+                        })
+                        .collect(),
+                    ..Default::default()
+                };
+                &colours_only
+            }
+            PackStyle::FluxAttribute => &default_look,
         };
         look.validate().map_err(RenderError::InvalidOptions)?;
         PointStyle {
