@@ -4913,6 +4913,20 @@ fn a_ball_of_atoms_fills_the_image() {
             "{extra:?}: {top} {bottom}"
         );
     }
+    // A movie frames its frames' clusters the same way.
+    let d = dir.path().join("ball.d");
+    ok(&["batch", s(&xyz), "-o", s(&d), "--radius", "Ar=0.5"]);
+    let frames = dir.path().join("f-%d.png");
+    let mut args = vec!["render", s(&d), "-o", s(&frames), "--width", "96"];
+    args.extend(["--height", "72", "--background", "#000000"]);
+    ok(&args);
+    let px = read_png(&dir.path().join("f-0.png")).2;
+    let lit = |y: u32| (0..w).any(|x| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 8));
+    let rows: Vec<u32> = (0..h).filter(|&y| lit(y)).collect();
+    assert!(
+        rows.len() as u32 >= h * 4 / 5 && rows[0] >= 1,
+        "movie: rows {rows:?}"
+    );
 }
 
 /// A fitted view frames the particles as they are drawn: spheres enlarged by the style,

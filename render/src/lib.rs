@@ -572,7 +572,7 @@ fn drawn_reach(file: &MdlodFile, opts: &RenderOptions) -> f32 {
 /// leaves out stay out), with the cell where it is drawn. A sphere of atoms, a droplet or
 /// a disc seen obliquely then fills the image, where its box's empty corners made it
 /// small. Empty where the file has too few clusters.
-fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
+pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
     use mdlod_format::reader::BELOW_OUT;
     let levels = file.levels();
     let last = levels.len().saturating_sub(1);
@@ -869,6 +869,19 @@ pub fn camera_for_bounds(
     height: u32,
 ) -> Result<Camera, RenderError> {
     camera_in(bounds, view, width, height)
+}
+
+/// [`camera_for_bounds`] framing `boxes` inside `bounds` where the view is fitted
+/// ([`Camera::fit_boxes`]; [`framing_boxes`] gives a file's): a trajectory's frames'
+/// clusters, say.
+pub fn camera_for_framing(
+    bounds: &Bounds,
+    boxes: &[Bounds],
+    view: &ViewSpec,
+    width: u32,
+    height: u32,
+) -> Result<Camera, RenderError> {
+    camera_framing(bounds, boxes, view, width, height)
 }
 
 /// [`camera_for`] data within `bounds`.

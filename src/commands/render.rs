@@ -1915,9 +1915,14 @@ fn render_turntable(
     Ok(())
 }
 
+/// The most cluster boxes a movie's fit frames (every frame's; past this, the union of
+/// the frames' boxes alone).
+const MOVIE_FRAMING_BOXES: usize = 1 << 18;
+
 /// Renders every frame of a batch directory (`args.file`) in its manifest's order, one
-/// image each, all with one camera (fitted to the union of the frames' bounds, so that
-/// nothing leaves the picture) and, for splats, the first frame's exposure: a movie.
+/// image each, all with one camera (fitted to every frame's clusters, within the union of
+/// their bounds, so that nothing leaves the picture) and, for splats, the first frame's
+/// exposure: a movie.
 fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let dir = &args.file;
     super::view::unmerged_batch(dir)?;
@@ -1932,6 +1937,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         anyhow::bail!("{}: dataset.json lists no frames", dir.display());
     }
     frame_output(&args.output, 0)?;
+    let mut boxes: Option<Vec<mdlod_render::Bounds>> = Some(Vec::new());
     let mut bounds: Option<mdlod_render::Bounds> = None;
     let mut hidden_bounds: Option<mdlod_render::Bounds> = None;
     // Particles left out of the fit as far from the rest, and in how many frames.
@@ -1988,8 +1994,19 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             None => b,
             Some(a) => mdlod_render::Bounds::new(a.min.min(b.min), a.max.max(b.max)),
         });
+        // Every frame's clusters frame the movie (a still frames its own), up to a cap
+        // past which the frames' boxes alone do.
+        if fit.shows_any {
+            if let Some(all) = &mut boxes {
+                all.extend(mdlod_render::framing_boxes(&file, &opts, &b));
+                if all.len() > MOVIE_FRAMING_BOXES {
+                    boxes = None;
+                }
+            }
+        }
     }
     let bounds = bounds.or(hidden_bounds).expect("at least one frame");
+    let boxes = boxes.unwrap_or_default();
     if let Some(s) = opts.style.species.iter().find(|s| !names.contains(&s.name)) {
         anyhow::bail!(
             "no frame of {} has a species named {:?} (its frames have {})",
@@ -2080,7 +2097,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let mut radii: std::collections::BTreeMap<String, [f32; 2]> = Default::default();
     let mut worst_miss: Option<(f32, usize)> = None;
     let style = opts.style.clone();
-    let camera = mdlod_render::camera_for_bounds(&bounds, &opts.view, opts.width, opts.height)?;
+    let camera =
+        mdlod_render::camera_for_framing(&bounds, &boxes, &opts.view, opts.width, opts.height)?;
     opts.view = ViewSpec::Camera(camera.clone());
     if let Some(parent) = args.output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
