@@ -2187,6 +2187,11 @@ fn render_says_what_it_left_out_and_lights_a_constant_attribute() {
         out.contains("10 particles left out as hidden or between pixel centres"),
         "{out}"
     );
+    // Nothing drawn: said as what it is, not as data out of view.
+    assert!(
+        out.contains("nothing is drawn: every sphere in view is narrower than the pixels"),
+        "{out}"
+    );
     assert!(!out.contains("hidden particles"), "{out}");
     let mut args = vec!["render", s(&file), "-o", s(&png), "--mode", "splat"];
     args.extend(size);
@@ -4640,6 +4645,18 @@ fn splats_lit_by_value_start_their_range_at_zero() {
         band(3 * w / 4 - 10, 3 * w / 4 + 10),
     );
     assert!(light > 10.0 && heavy > 1.5 * light, "{light} {heavy}");
+    // Through a projection's colour map too (its log is the image's, not the splats').
+    for extra in [&[][..], &["--log-scale"]] {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--mode", "splat"];
+        args.extend(["--intensity", "attribute", "--colour-map", "grey"]);
+        args.extend(["--width", "32", "--height", "24"]);
+        args.extend_from_slice(extra);
+        let out = ok(&args);
+        assert!(
+            out.contains("mass from 0 to 6 (from 0, so that"),
+            "{extra:?}: {out}"
+        );
+    }
     // A movie of the frame starts at 0 too.
     let d = dir.path().join("m.d");
     ok(&[

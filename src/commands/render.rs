@@ -880,7 +880,7 @@ pub fn run(args: Args) -> Result<()> {
         &mut opts.style,
         &args.file,
         by_attribute(&args) && !projected(&args),
-        lit_by_value(&args),
+        lit_linearly(&args),
     )?;
     if let Some(n) = args.turntable {
         return render_turntable(&args, opts, n, derived);
@@ -1044,12 +1044,21 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     if r.particles_drawn + r.nodes_drawn == 0 && !every_species_hidden {
-        let why = match opts.style.clip.is_empty() {
-            true => {
+        let why = match (
+            opts.style.clip.is_empty(),
+            r.nodes_occluded + r.particles_occluded,
+        ) {
+            // Every sphere in view fell between pixel centres.
+            (true, n) if n > 0 => {
+                "every sphere in view is narrower than the pixels and falls between their \
+                 centres (atoms far away fitted with --fit-all shrink the rest to a dot?): \
+                 --zoom, --radius-scale or a larger image shows them"
+            }
+            (true, _) => {
                 "none of the data is in view (a --target, --zoom or view file that looks \
                      elsewhere?)"
             }
-            false => CLIP_CUTS_ALL,
+            (false, _) => CLIP_CUTS_ALL,
         };
         println!("  note: nothing is drawn: {why}");
     } else if let (Mode::Density | Mode::Iso, [[nx, ny, nz, d]]) = (args.mode, &args.style.clip[..])
@@ -1407,19 +1416,23 @@ pub fn derive_range(
     mapped: bool,
     light: bool,
 ) -> Result<Option<String>> {
-    if !mapped {
+    if !mapped && !light {
         return Ok(None);
     }
     let file = mdlod_format::MdlodFile::open(path)?;
     let Some(a) = &file.metadata().attribute else {
         return Ok(None);
     };
-    check_not_logged(style, a, path)?;
+    if mapped {
+        check_not_logged(style, a, path)?;
+    }
     if style.attribute_range.is_some() {
         return Ok(None);
     }
-    let (range, why) = if let Some(range) = light_range_from_zero([a.min, a.max], style, light) {
+    let (range, why) = if let Some(range) = light_range_from_zero([a.min, a.max], light) {
         (range, LIGHT_FROM_ZERO.to_string())
+    } else if !mapped {
+        return Ok(None);
     } else if style.log_scale {
         match log_start([a.min, a.max], mdlod_render::log_floor(&file)) {
             Some(r) => r,
@@ -1449,19 +1462,21 @@ const LIGHT_FROM_ZERO: &str = "from 0, so that each splat's light is its value t
 /// Whether the splats are lit by the attribute's value (`--intensity attribute` without a
 /// projection's colour map).
 fn lit_by_value(args: &Args) -> bool {
-    args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute) && !projected(args)
+    args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute)
+}
+
+/// Splats lit by values on a linear scale: no `--log-scale`, or a projection's (the
+/// image's log, not each splat's).
+fn lit_linearly(args: &Args) -> bool {
+    lit_by_value(args) && (!args.style.log_scale || projected(args))
 }
 
 /// The range of splats lit by values of `range` (none of them negative) on a linear
 /// scale: from 0, so that light is proportional to value. The file's range would give the
 /// smallest value no light, and a mass of 2 against one of 6 a third of the light it
 /// carries.
-fn light_range_from_zero(
-    [lo, hi]: [f32; 2],
-    style: &mdlod_render::PointStyle,
-    light: bool,
-) -> Option<[f32; 2]> {
-    (light && !style.log_scale && lo > 0.0 && hi > lo).then_some([0.0, hi])
+fn light_range_from_zero([lo, hi]: [f32; 2], light: bool) -> Option<[f32; 2]> {
+    (light && lo > 0.0 && hi > lo).then_some([0.0, hi])
 }
 
 /// `--log-scale` of an attribute stored as its logarithm (`--attribute-log10`) would take
@@ -2017,7 +2032,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     let mut range_note = String::new();
     if let Some((a, range)) = attribute.clone().flatten().and_then(|a| {
-        let range = light_range_from_zero([a.min, a.max], &opts.style, lit_by_value(args))?;
+        let range = light_range_from_zero([a.min, a.max], lit_linearly(args))?;
         Some((a, range))
     }) {
         if opts.style.attribute_range.is_none() {
