@@ -4103,6 +4103,36 @@ fn hiding_species_fits_the_view_to_the_species_shown() {
     assert!(shown >= 32, "the solute spans {shown} of 64 columns");
     // Without hiding, the whole box: the solute is inside it, the box spans the image.
     assert!(covered(&[]) >= 48);
+
+    // Silver spheres in a copper block: the clusters holding both are opened, so the fit
+    // frames the silver, not the copper around it.
+    let dump = dir.path().join("alloy.lammpstrj");
+    generate(&["alloy", "-n", "30000"], &dump);
+    let alloy = dir.path().join("alloy.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&alloy)]);
+    let mut args = vec!["render", s(&alloy), "-o", s(&png), "--width", "64"];
+    args.extend([
+        "--height",
+        "64",
+        "--background",
+        "#000000",
+        "--hide-species",
+        "1",
+    ]);
+    ok(&args);
+    let (w, _, px) = read_png(&png);
+    let rows: Vec<usize> = px
+        .chunks(4 * w as usize)
+        .enumerate()
+        .filter(|(_, row)| row.chunks(4).any(|p| p[..3] != [0, 0, 0]))
+        .map(|(y, _)| y)
+        .collect();
+    let span = rows.last().map_or(0, |l| l - rows[0] + 1);
+    // 53 of 64 rows; 49 when mixed clusters were framed whole.
+    assert!(
+        span >= 52 && rows[0] >= 1 && rows[rows.len() - 1] < 63,
+        "{rows:?}"
+    );
 }
 
 /// Lost atoms far from the material (a non-periodic box's evaporated atoms) are left out

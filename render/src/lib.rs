@@ -571,7 +571,9 @@ fn drawn_reach(file: &MdlodFile, opts: &RenderOptions) -> f32 {
 /// as [`drawn_reach`] grows the bounds and clipped to `fitted` (so that atoms the fit
 /// leaves out stay out), with the cell where it is drawn. A sphere of atoms, a droplet or
 /// a disc seen obliquely then fills the image, where its box's empty corners made it
-/// small. Empty where the file has too few clusters.
+/// small. Clusters holding both shown and hidden species are opened, down to the level
+/// above the particles and up to [`FRAMING_OPEN`] nodes. Empty where the file has too few
+/// clusters.
 pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
     use mdlod_format::reader::BELOW_OUT;
     let levels = file.levels();
@@ -579,33 +581,52 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
     let Some(level) = (0..last).find(|&l| levels[l].point_count >= FRAMING_NODES) else {
         return Vec::new();
     };
-    let (Ok(first), Ok(count)) = (
-        usize::try_from(levels[level].node_first),
-        usize::try_from(levels[level].point_count),
-    ) else {
+    let Ok(count) = usize::try_from(levels[level].point_count) else {
         return Vec::new();
     };
     if file.check_nodes(level, 0..count).is_err() {
         return Vec::new();
     }
+    use mdlod_format::reader::BELOW_IN;
     let kind_of = species_kinds(file, opts.style.hidden_mask(&file.metadata().species));
     let reach = glam::Vec3::splat(drawn_reach(file, opts).max(0.0));
-    let Some(nodes) = first
-        .checked_add(count)
-        .and_then(|end| file.nodes().get(first..end))
-    else {
-        return Vec::new();
+    let clipped = |n: &mdlod_format::NodeRecord| {
+        let lo = (glam::Vec3::from(n.bounds_min) - reach).max(fitted.min);
+        let hi = (glam::Vec3::from(n.bounds_max) + reach).min(fitted.max);
+        lo.cmple(hi).all().then(|| Bounds::new(lo, hi))
     };
-    let mut boxes: Vec<Bounds> = nodes
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| kind_of(first + i) & BELOW_OUT != 0)
-        .filter_map(|(_, n)| {
-            let lo = (glam::Vec3::from(n.bounds_min) - reach).max(fitted.min);
-            let hi = (glam::Vec3::from(n.bounds_max) + reach).min(fitted.max);
-            lo.cmple(hi).all().then(|| Bounds::new(lo, hi))
-        })
-        .collect();
+    // Nodes holding shown and hidden species are opened (down to the level above the
+    // particles, within a budget), so that a solute's fit is not its solvent's boxes.
+    let mut work: Vec<(usize, usize)> = (0..count).map(|i| (level, i)).collect();
+    let mut opened = 0usize;
+    let mut boxes = Vec::new();
+    while let Some((l, i)) = work.pop() {
+        let Some(id) = usize::try_from(levels[l].node_first)
+            .ok()
+            .and_then(|f| f.checked_add(i))
+        else {
+            continue;
+        };
+        let Some(n) = file.nodes().get(id) else {
+            continue;
+        };
+        let kind = kind_of(id);
+        if kind & BELOW_OUT == 0 {
+            continue;
+        }
+        let (cf, cc) = (n.child_first as usize, n.child_count as usize);
+        let mixed = kind & BELOW_IN != 0;
+        if mixed
+            && l + 2 < levels.len()
+            && opened + cc <= FRAMING_OPEN
+            && file.check_nodes(l + 1, cf..cf + cc).is_ok()
+        {
+            opened += cc;
+            work.extend((cf..cf + cc).map(|c| (l + 1, c)));
+        } else if let Some(b) = clipped(n) {
+            boxes.push(b);
+        }
+    }
     if let (Some(_), Some(c), false) = (opts.cell, cell_bounds(file), boxes.is_empty()) {
         boxes.push(c);
     }
@@ -614,6 +635,9 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
 
 /// The nodes a fit frames come from the first level with at least this many.
 pub const FRAMING_NODES: u64 = 64;
+
+/// The most nodes [`framing_boxes`] opens below mixed ones.
+const FRAMING_OPEN: usize = 1 << 14;
 
 /// `bounds` and, where `opts` draws the cell, the cell's box.
 fn with_drawn_cell(bounds: Bounds, file: &MdlodFile, opts: &RenderOptions) -> Bounds {
