@@ -895,19 +895,6 @@ pub fn camera_for_bounds(
     camera_in(bounds, view, width, height)
 }
 
-/// [`camera_for_bounds`] framing `boxes` inside `bounds` where the view is fitted
-/// ([`Camera::fit_boxes`]; [`framing_boxes`] gives a file's): a trajectory's frames'
-/// clusters, say.
-pub fn camera_for_framing(
-    bounds: &Bounds,
-    boxes: &[Bounds],
-    view: &ViewSpec,
-    width: u32,
-    height: u32,
-) -> Result<Camera, RenderError> {
-    camera_framing(bounds, boxes, view, width, height)
-}
-
 /// [`camera_for`] data within `bounds`.
 fn camera_in(
     bounds: &Bounds,
@@ -915,12 +902,13 @@ fn camera_in(
     width: u32,
     height: u32,
 ) -> Result<Camera, RenderError> {
-    camera_framing(bounds, &[], view, width, height)
+    camera_for_framing(bounds, &[], view, width, height)
 }
 
-/// [`camera_in`] framing `boxes` inside `bounds` where the view is fitted
-/// ([`Camera::fit_boxes`]).
-fn camera_framing(
+/// [`camera_for_bounds`] framing `boxes` inside `bounds` where the view is fitted
+/// ([`Camera::fit_boxes`]; [`framing_boxes`] gives a file's): a still's clusters, or a
+/// trajectory's frames'.
+pub fn camera_for_framing(
     bounds: &Bounds,
     boxes: &[Bounds],
     view: &ViewSpec,
@@ -1067,7 +1055,7 @@ pub fn frame_setup(
         ViewSpec::Camera(_) => Vec::new(),
         _ => framing_boxes(file, opts, &fitted),
     };
-    let mut camera = camera_framing(&fitted, &boxes, &opts.view, opts.width, opts.height)?;
+    let mut camera = camera_for_framing(&fitted, &boxes, &opts.view, opts.width, opts.height)?;
     // The depth range holds all the data, and the cell where it is drawn.
     let depth = with_drawn_cell(data_bounds(file), file, opts);
     if fitted != depth {
