@@ -12,9 +12,10 @@
 //! Orthographic views show a height of `2 · distance · tan(fov_y / 2)` world units, the
 //! height a perspective view shows at the target, so zooming (changing the distance)
 //! works the same in both and switching projections keeps the target's framing.
-//! A fitted view ([`Camera::fit`]) looks at the centre of the data's box from the
-//! distance where the box, as the camera's direction sees it, fills [`FIT_FILL`] of the
-//! image: the distance depends on the direction, so a turntable takes the largest of its
+//! A fitted view ([`Camera::fit_boxes`]) projects boxes (the data's clusters) as the
+//! camera's direction sees them, fills [`FIT_FILL`] of the image with them and centres
+//! them, moving the target off the data's centre in perspective. The distance depends on
+//! the direction, so a turntable ([`Camera::fit_about_centre`]) takes the largest of its
 //! views' distances for all of them.
 //! `near`/`far` are explicit; [`Camera::fit_depth_range`] sets them around a box.
 
@@ -326,8 +327,8 @@ impl Camera {
         let tan_x = tan_y * f64::from(aspect);
         let before = (self.target, self.distance);
         // Each round moves the target by the projection's offset from the image's centre,
-        // as seen at the target's depth, and fits the distance again (once is exact in
-        // orthographic views; the box of the whole data is centred there already).
+        // as seen at the target's depth, and fits the distance again (one round is exact
+        // in orthographic views, where the size does not change with depth).
         for _ in 0..12 {
             let Some([cx, cy]) = self.projected_centre(boxes, tan_x, tan_y) else {
                 (self.target, self.distance) = before;

@@ -544,12 +544,18 @@ pub fn cell_bounds(file: &MdlodFile) -> Option<Bounds> {
 /// over the species (negative where every species is drawn smaller than the file's
 /// spheres).
 fn drawn_reach(file: &MdlodFile, opts: &RenderOptions) -> f32 {
-    let species = &file.metadata().species;
     let footprint = match &opts.mode {
         RenderMode::Spheres | RenderMode::Sndf { .. } => 1.0,
         RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => passes::splat::TRUNCATION * 0.5,
         RenderMode::Density(d) => d.kernel_scale.max(1.0),
     };
+    styled_reach(file, opts, footprint)
+}
+
+/// How far past the file's spheres the style's radii reach, each times `footprint`: the
+/// largest over the species, 0 where the style cannot be applied.
+fn styled_reach(file: &MdlodFile, opts: &RenderOptions, footprint: f32) -> f32 {
+    let species = &file.metadata().species;
     let drawn: Vec<f32> = match opts.style.species_table(species) {
         Ok(table) => table.iter().map(|t| t[3]).collect(),
         Err(_) => species.iter().map(|s| s.radius).collect(),
@@ -575,7 +581,7 @@ fn drawn_reach(file: &MdlodFile, opts: &RenderOptions) -> f32 {
 /// above the particles and up to [`FRAMING_OPEN`] nodes. Empty where the file has too few
 /// clusters.
 pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
-    use mdlod_format::reader::BELOW_OUT;
+    use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
     let levels = file.levels();
     let last = levels.len().saturating_sub(1);
     let Some(level) = (0..last).find(|&l| levels[l].point_count >= FRAMING_NODES) else {
@@ -587,7 +593,6 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
     if file.check_nodes(level, 0..count).is_err() {
         return Vec::new();
     }
-    use mdlod_format::reader::BELOW_IN;
     let kind_of = species_kinds(file, opts.style.hidden_mask(&file.metadata().species));
     let reach = glam::Vec3::splat(drawn_reach(file, opts).max(0.0));
     let clipped = |n: &mdlod_format::NodeRecord| {
@@ -1065,18 +1070,10 @@ pub fn frame_setup(
     // reaches past them, and a sphere in front of the near plane is clipped whole (its
     // quad lies at its front). The depth range grows by as much.
     let species = &file.metadata().species;
-    if let Ok(table) = opts.style.species_table(species) {
-        let extra = table
-            .iter()
-            .zip(species)
-            .map(|(styled, s)| styled[3] - s.radius)
-            .fold(0.0f32, f32::max);
-        if extra > 0.0 && extra.is_finite() {
-            let b = depth;
-            let reach = glam::Vec3::splat(extra);
-            let grown = Bounds::new(b.min - reach, b.max + reach);
-            camera.fit_depth_range(&grown);
-        }
+    let extra = styled_reach(file, opts, 1.0);
+    if extra > 0.0 {
+        let reach = glam::Vec3::splat(extra);
+        camera.fit_depth_range(&Bounds::new(depth.min - reach, depth.max + reach));
     }
     let traversal = TraversalSettings {
         viewport: [opts.width, opts.height],

@@ -40,10 +40,9 @@ fn species_counts(f: &MdlodFile) -> Vec<u64> {
 fn sndf_info(args: &Args) -> Result<()> {
     let (header, bytes) = mdlod_format::sndf::SndfData::load_header(&args.file)?;
     let h = &header;
-    // The camera's numbers are f32s: their shortest form (63.43495, not 63.4349479675293;
-    // read back from text, a widened f32 may be a unit of the last place off it).
+    // The camera's numbers are f32s: their shortest form (63.43495, not 63.4349479675293).
     let mut view = h.view.clone();
-    as_f32(&mut view);
+    shortest_f32(&mut view);
     if args.json {
         let v = json!({
             "file": args.file.display().to_string(),
@@ -273,36 +272,10 @@ fn number(x: f64) -> String {
     format!("{rounded:?}")
 }
 
-/// Every number of `v` that is an f32 widened to f64, as the f64 nearest to the f32's
-/// shortest decimal form (which reads back as the same f32).
+/// Every fractional number of `v` (each an f32 widened to f64, possibly a unit of the last
+/// place off it once read back from text) as the f64 nearest to the f32's shortest
+/// decimal form.
 fn shortest_f32(v: &mut serde_json::Value) {
-    use serde_json::Value;
-    match v {
-        Value::Number(n) => {
-            if let Some(x) = n
-                .as_f64()
-                .filter(|x| !n.is_i64() && !n.is_u64() && x.is_finite())
-            {
-                if f64::from(x as f32) == x {
-                    if let Some(m) = (x as f32)
-                        .to_string()
-                        .parse()
-                        .ok()
-                        .and_then(serde_json::Number::from_f64)
-                    {
-                        *n = m;
-                    }
-                }
-            }
-        }
-        Value::Array(a) => a.iter_mut().for_each(shortest_f32),
-        Value::Object(o) => o.values_mut().for_each(shortest_f32),
-        _ => {}
-    }
-}
-
-/// Every fractional number of `v` as the shortest decimal form of the nearest f32.
-fn as_f32(v: &mut serde_json::Value) {
     use serde_json::Value;
     match v {
         Value::Number(n) if !n.is_i64() && !n.is_u64() => {
@@ -315,8 +288,8 @@ fn as_f32(v: &mut serde_json::Value) {
                 *n = m;
             }
         }
-        Value::Array(a) => a.iter_mut().for_each(as_f32),
-        Value::Object(o) => o.values_mut().for_each(as_f32),
+        Value::Array(a) => a.iter_mut().for_each(shortest_f32),
+        Value::Object(o) => o.values_mut().for_each(shortest_f32),
         _ => {}
     }
 }

@@ -134,9 +134,8 @@ pub struct Args {
     pub legend: Option<PathBuf>,
     /// Draw the legend (what --legend writes) into the image itself, on a light panel in
     /// a corner: --legend-in-image=top-left, top-right, bottom-left or bottom-right (the
-    /// default); its text
-    /// 13 pixels high per 720 of the image's height. Every image of a movie or turntable
-    /// gets it.
+    /// default), enlarged in whole steps per 1280x720 of the image. Every image of a movie
+    /// or turntable gets it.
     #[arg(
         long,
         value_name = "CORNER",
@@ -551,12 +550,12 @@ fn projected(args: &Args) -> bool {
 }
 
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
-    let uncoloured = matches!(args.intensity, Intensity::Attribute) || projected(args);
-    if args.mode == Mode::Splat && uncoloured && !args.style.species_colour.is_empty() {
+    // (With --colour-map, which colours by the attribute or the light, the parser refuses
+    // --species-colour.)
+    if lit_by_value(args) && !args.style.species_colour.is_empty() {
         anyhow::bail!(
-            "--species-colour has no effect on splats lit by the attribute or drawn through a \
-             projection's --colour-map: their light has no species colour (--intensity \
-             species without --colour-map draws the species' colours)"
+            "--species-colour has no effect on splats lit by the attribute: their light has \
+             no species colour (--intensity species draws the species' colours)"
         );
     }
     if projected(args) {
@@ -1066,11 +1065,14 @@ pub fn run(args: Args) -> Result<()> {
         // The volume keeps the samples with n·p ≤ d: none where every corner of the data's
         // box lies beyond the plane.
         let b = mdlod_render::data_bounds(&file);
-        let nearest = [b.min, b.max]
-            .iter()
-            .flat_map(|x| [b.min, b.max].map(move |y| (x.x, y.y)))
-            .flat_map(|(x, y)| [b.min.z, b.max.z].map(move |z| nx * x + ny * y + nz * z))
-            .fold(f32::INFINITY, f32::min);
+        let nearest: f32 = [
+            (nx, b.min.x, b.max.x),
+            (ny, b.min.y, b.max.y),
+            (nz, b.min.z, b.max.z),
+        ]
+        .iter()
+        .map(|&(n, lo, hi)| (n * lo).min(n * hi))
+        .sum();
         if nearest > *d {
             println!(
                 "  note: nothing is drawn: the --clip plane cuts away every sample of the \
@@ -1459,8 +1461,8 @@ pub fn derive_range(
 const LIGHT_FROM_ZERO: &str = "from 0, so that each splat's light is its value times its \
      disk's area (a particle at the smallest value still shines)";
 
-/// Whether the splats are lit by the attribute's value (`--intensity attribute` without a
-/// projection's colour map).
+/// Whether the splats are lit by the attribute's value (`--intensity attribute`, through
+/// a projection's colour map or not).
 fn lit_by_value(args: &Args) -> bool {
     args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute)
 }
