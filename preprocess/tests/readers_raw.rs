@@ -117,6 +117,27 @@ fn planar_big_endian_f64_with_an_offset_and_a_derived_count() {
         assert_eq!(*a, b.map(|v| v as f32));
     }
     assert_eq!(f.species.len(), 1);
+    // The same file named as fewer particles would read y from the x values: refused,
+    // with the count the array holds; its own count is read as before.
+    let fewer = c.sidecar(
+        r#"{ "mdlod_raw": 1, "particles": 200,
+             "positions": { "file": "pos.f64be", "type": "f64", "layout": "planar",
+                            "byte_order": "big", "offset": 16 } }"#,
+    );
+    let e = read(&fewer).unwrap_err();
+    assert!(
+        e.contains("frame.raw.json")
+            && e.contains("particles: 200")
+            && e.contains("hold 771 values")
+            && e.contains("array's own count (257)"),
+        "{e}"
+    );
+    let own = c.sidecar(
+        r#"{ "mdlod_raw": 1, "particles": 257,
+             "positions": { "file": "pos.f64be", "type": "f64", "layout": "planar",
+                            "byte_order": "big", "offset": 16 } }"#,
+    );
+    assert_eq!(read(&own).unwrap().positions, f.positions);
 }
 
 #[test]

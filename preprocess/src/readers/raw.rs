@@ -21,6 +21,8 @@
 //!   particle, the default) or `planar` (all x, then all y, then all z). `particles` may
 //!   be left out when the positions file holds exactly the particles; then every other
 //!   array must hold exactly as many values (arrays of different lengths are an error).
+//!   With it, longer arrays are read for their first values, except planar positions:
+//!   their y follow every particle's x, so a shorter count would read y from x values.
 //! - `species` (optional): one integer per particle (`u8`, `u16`, `u32` or `i32`), an
 //!   index into `names` (default names are the numbers); `radii` optionally gives each
 //!   species' radius (one per name, or one without `species`).
@@ -425,6 +427,25 @@ impl Index {
                 available
             }
         };
+        // Planar positions put y after every particle's x: with fewer particles named than
+        // the array holds, y and z would be read from the middle of the x and y values.
+        if planar && sidecar.particles.is_some() {
+            let values = positions.bytes().len() / positions.ty.size();
+            if values > 3 * particles {
+                return Err(malformed_in(
+                    path,
+                    text,
+                    format!(
+                        "particles: {particles}, but the planar positions in {} hold {values} \
+                         values: planar arrays are read as every particle's x, then every y, \
+                         then every z, so `particles` must be the array's own count ({}); \
+                         leave it out to read them all",
+                        positions.path.display(),
+                        values / 3
+                    ),
+                ));
+            }
+        }
         // Why `m` may be of the wrong size, when its size or the positions' is that of the
         // other float type: `m`'s own `type` wrong or, without `particles`, the positions'
         // (their `type` sets the count). Both fit when the two are declared of different
