@@ -4762,6 +4762,34 @@ fn a_projection_takes_its_light_range() {
     }
     let e = fails(&["render", s(&file), "-o", s(&a), "--light-range", "0:5"]);
     assert!(e.contains("needs --mode splat and --colour-map"), "{e}");
+    // White attribute light has no scale a legend could show (it used to get a key of
+    // the species, which the picture does not show); with a map it has a bar.
+    let svg = dir.path().join("l.svg");
+    let pe = dir.path().join("pe.mdlod");
+    let dump = lammps_sample_path("cu_melt.custom.dump");
+    ok(&["convert", s(&dump), "-o", s(&pe), "--attribute", "c_pe"]);
+    for legend in [&["--legend", s(&svg)][..], &["--legend-in-image"][..]] {
+        let mut args = vec!["render", s(&pe), "-o", s(&a), "--mode", "splat"];
+        args.extend([
+            "--intensity",
+            "attribute",
+            "--width",
+            "400",
+            "--height",
+            "240",
+        ]);
+        args.extend_from_slice(legend);
+        let e = fails(&args);
+        assert!(e.contains("add --colour-map (grey keeps it white)"), "{e}");
+        assert!(!a.exists(), "refused before drawing");
+        args.extend(["--colour-map", "grey"]);
+        let out = ok(&args);
+        assert!(
+            out.contains("the colour map over the projected c_pe"),
+            "{out}"
+        );
+        std::fs::remove_file(&a).unwrap();
+    }
 }
 
 /// Values far from 1 (a mass in grams, a density in g/cm³) print in scientific notation,

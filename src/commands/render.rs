@@ -558,6 +558,22 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
              no species colour (--intensity species draws the species' colours)"
         );
     }
+    if lit_by_value(args)
+        && args.style.colour_map.is_none()
+        && (args.legend.is_some() || args.legend_in_image.is_some())
+    {
+        anyhow::bail!(
+            "{}: splats lit by the attribute without --colour-map are white light, tone \
+             mapped by each image's exposure, which no legend can read values from; add \
+             --colour-map (grey keeps it white) to map the projected attribute through a \
+             scale the legend shows",
+            if args.legend.is_some() {
+                "--legend"
+            } else {
+                "--legend-in-image"
+            }
+        );
+    }
     if projected(args) {
         if args.exposure.is_some() {
             anyhow::bail!(
