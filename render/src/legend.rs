@@ -87,8 +87,8 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
     if m == 0.0 || !m.is_finite() {
         return [lo, hi].map(|v| format!("{v}"));
     }
-    if !(1e-3..1e5).contains(&m) {
-        return [lo, hi].map(|v| {
+    let scientific = || {
+        [lo, hi].map(|v| {
             let text = format!("{v:.2e}");
             match text.split_once('e') {
                 Some((mantissa, exp)) => {
@@ -97,7 +97,10 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
                 }
                 None => text,
             }
-        });
+        })
+    };
+    if !(1e-3..1e5).contains(&m) {
+        return scientific();
     }
     // Decimals for `digits` significant digits of `v`.
     let decimals = |v: f64, digits: i32| {
@@ -129,6 +132,17 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
     while lo < hi && labels[0] == labels[1] && more < 12 {
         more += 1;
         labels = [lo, hi].map(|v| fixed(v, more));
+    }
+    // An end far below the other (a log scale's decades) loses its digits to the shared
+    // decimals, down to "0" for 3·10⁻⁹: both ends then take scientific notation.
+    let lost = [lo, hi].iter().zip(&labels).any(|(&v, label)| {
+        v != 0.0
+            && label
+                .parse::<f64>()
+                .map_or(true, |shown| ((shown - v) / v).abs() > 0.05)
+    });
+    if lost {
+        return scientific();
     }
     labels
 }
@@ -836,6 +850,10 @@ mod tests {
         assert_eq!(end_labels(0.00148, 14.806337), ["0.00148", "14.81"]);
         assert_eq!(end_labels(0.30001, 0.30002), ["0.30001", "0.30002"]);
         assert_eq!(end_labels(-0.5, 12345.678), ["-0.5", "12346"]);
+        // A log scale's low end decades below the top keeps its digits.
+        assert_eq!(end_labels(3.1968022e-9, 0.9997898), ["3.2e-9", "1e0"]);
+        assert_eq!(end_labels(1.3159e-14, 8.16), ["1.32e-14", "8.16e0"]);
+        assert_eq!(end_labels(3.7752e-6, 0.5), ["3.78e-6", "5e-1"]);
     }
 
     /// A constant attribute: one colour, the map's last, and the value in the title.
