@@ -1210,6 +1210,11 @@ pub fn convert_chunked(
         let mut writer: Option<CellWriter<'_>> = None;
         let read = source.windows(window, &mut |start, f| {
             seen += f.len();
+            if options.attribute_log10 && f.attribute.is_none() {
+                return Err(ConvertError::NoAttributeToLog(
+                    crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep),
+                ));
+            }
             let lay = *layout.get_or_insert(RecordLayout {
                 attribute: f.attribute.is_some(),
             });

@@ -71,6 +71,12 @@ pub enum ConvertError {
         index: usize,
         value: f32,
     },
+    /// `--attribute-log10` for an input that keeps no attribute.
+    #[error(
+        "{0}: --attribute-log10: the input keeps no per-particle attribute to take the \
+         logarithm of (name its column with --attribute COLUMN)"
+    )]
+    NoAttributeToLog(FramePlace),
     /// The last frame, converted by default, is cut short (a run still writing it).
     #[error(
         "{source}; the last frame ({frame}) is incomplete (a run still writing?): --frame {} \
@@ -287,6 +293,12 @@ pub fn convert_frame(
     });
     let logged = match (&frame.attribute, options.attribute_log10) {
         (Some(a), true) => Some(log10_attribute(&a.values, 0, &a.name, source.as_ref())?),
+        (None, true) => {
+            return Err(ConvertError::NoAttributeToLog(FramePlace::of(
+                source.as_ref(),
+                frame.timestep,
+            )))
+        }
         _ => None,
     };
     let particles = Particles {

@@ -910,4 +910,28 @@ fn an_attribute_spanning_decades_keeps_its_logarithm() {
         ) && e.contains("above 0"),
         "{e}"
     );
+
+    // No attribute kept (no column named): an error streamed and in memory, not a file
+    // silently without the logarithm asked for.
+    std::fs::write(&path, &text).unwrap();
+    let plain = ReadOptions::default();
+    let e = convert_file(
+        &path,
+        &streamed,
+        FrameSelect::Last,
+        &plain,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("sph.lammpstrj") && e.contains("--attribute-log10: the input keeps no"),
+        "{e}"
+    );
+    let bare = dump.read_frame(0, &plain, &NoProgress).unwrap();
+    let e = convert_frame(&bare, None, &whole, &opts, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("name its column with --attribute COLUMN"), "{e}");
 }

@@ -66,8 +66,9 @@ pub struct BuildArgs {
     /// Keep the attribute's base-10 logarithm instead (named log10(NAME); every value
     /// must be above 0): the file keeps 16 bits per value, evenly over its range, so a
     /// quantity spanning many decades (an SPH density) keeps only its top four or five
-    /// otherwise.
-    #[arg(long, requires = "attribute")]
+    /// otherwise. Applies to the column --attribute names, or to the attribute an input
+    /// keeps by itself (a raw sidecar's `attribute`).
+    #[arg(long)]
     pub attribute_log10: bool,
     /// Column names, space separated, for dumps that do not name them (old-revision
     /// LAMMPS binary dumps other than `dump atom`), e.g. "id type x y z c_pe".
