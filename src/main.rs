@@ -97,7 +97,10 @@ fn main() -> std::process::ExitCode {
             .map_or(Ok(()), |m| commands::render::check_mode_options(&a, m))
             .and_then(|()| commands::render::run(a)),
         Command::Sample(a) => commands::sample::run(a),
-        Command::Shade(a) => commands::shade::run(a),
+        Command::Shade(a) => matches
+            .subcommand_matches("shade")
+            .map_or(Ok(()), |m| commands::shade::check_options(m))
+            .and_then(|()| commands::shade::run(a)),
         Command::Generate(a) => commands::generate::run(a),
         Command::Demo(a) => commands::demo::run(a),
         Command::View(a) => commands::view::run(a),

@@ -1058,6 +1058,30 @@ fn sndfs_sampled_once_shade_without_the_particles() {
         "no fully covered green pixel"
     );
     assert!(pixels.iter().all(|p| p[1] >= p[0] && p[1] >= p[2]));
+    // Options that change nothing in the image asked for are refused, not ignored.
+    for (extra, says) in [
+        (
+            &["--explorer", "6", "--light", "1,1,1:#ff0000"][..],
+            "--light has no effect with --explorer",
+        ),
+        (
+            &["--transfer", s(&painted), "--ambient", "0.9"][..],
+            "--ambient has no effect with --transfer",
+        ),
+        (
+            &["--brdf", "lambert", "--exponent", "2"][..],
+            "--exponent has no effect with --brdf lambert",
+        ),
+        (
+            &["--explorer-disk", "10"][..],
+            "--explorer-disk has no effect without --explorer",
+        ),
+    ] {
+        let mut args = vec!["shade", s(&sndf), "-o", s(&green)];
+        args.extend_from_slice(extra);
+        let e = fails(&args);
+        assert!(e.contains(says), "{extra:?}: {e}");
+    }
     let info = ok(&["info", s(&sndf)]);
     assert!(
         info.contains("96x64 texels, 8x8 lambert-equal-area bins, 8 rays each"),

@@ -14,6 +14,7 @@ use mdlod_render::sndf::ShadeLights;
 #[command(after_help = "Example:\n  \
     mdlod shade view.sndf -o lit.png --light -1,1,1 --light 1,0,0.5:#4060ff --brdf lambert")]
 pub struct Args {
+    /// The .sndf file to shade (written by `mdlod sample`).
     pub input: PathBuf,
     /// The PNG to write.
     #[arg(short, long)]
@@ -36,9 +37,10 @@ pub struct Args {
     /// Reflectance: Lambert only, or Lambert plus a Blinn-Phong highlight.
     #[arg(long, value_enum, default_value = "blinn-phong")]
     pub brdf: Brdf,
-    /// Blinn-Phong highlight weight and exponent.
+    /// Blinn-Phong highlight weight (with --brdf blinn-phong).
     #[arg(long, default_value_t = 0.25)]
     pub specular: f32,
+    /// Blinn-Phong highlight exponent: larger is a smaller, sharper highlight.
     #[arg(long, default_value_t = 32.0)]
     pub exponent: f32,
     /// An environment map (equirectangular PNG in view space, like a material capture):
@@ -104,6 +106,61 @@ fn parse_light(s: &str) -> Result<(Vec3, [f32; 3])> {
         None => [1.0; 3],
     };
     Ok((Vec3::new(v[0], v[1], v[2]).normalize(), colour))
+}
+
+/// Refuses options given on the command line that change nothing in the image the others
+/// ask for: lights under a colouring of the normals, a highlight's settings with
+/// `--brdf lambert`, the explorer's settings without `--explorer`.
+pub fn check_options(matches: &clap::ArgMatches) -> Result<()> {
+    let given = |id: &str| {
+        matches!(
+            matches.value_source(id),
+            Some(clap::parser::ValueSource::CommandLine)
+        )
+    };
+    let colouring = if given("explorer") {
+        Some("--explorer")
+    } else if given("transfer") {
+        Some("--transfer")
+    } else {
+        None
+    };
+    let lighting = [
+        "lights", "ambient", "diffuse", "brdf", "specular", "exponent", "envmap",
+    ];
+    for id in lighting {
+        if let Some(colouring) = colouring.filter(|_| given(id)) {
+            bail!(
+                "--{} has no effect with {colouring}: the normals are coloured, not lit",
+                option_name(id)
+            );
+        }
+    }
+    let lambert = matches
+        .get_one::<Brdf>("brdf")
+        .is_some_and(|b| matches!(b, Brdf::Lambert));
+    for id in ["specular", "exponent"] {
+        if lambert && given(id) {
+            bail!(
+                "--{} has no effect with --brdf lambert: it sets the Blinn-Phong highlight",
+                option_name(id)
+            );
+        }
+    }
+    for id in ["explorer_disk", "explorer_tolerance"] {
+        if given(id) && !given("explorer") {
+            bail!("--{} has no effect without --explorer", option_name(id));
+        }
+    }
+    Ok(())
+}
+
+/// The command-line spelling of argument `id`.
+fn option_name(id: &str) -> String {
+    match id {
+        "lights" => "light".into(),
+        _ => id.replace('_', "-"),
+    }
 }
 
 pub fn run(args: Args) -> Result<()> {
