@@ -1794,6 +1794,14 @@ fn negative_numbers_mode_aliases_and_levels_get_the_programs_own_answers() {
     );
     let help = ok(&["render", "--help"]);
     assert!(help.contains("The .mdlod file to render"), "{help}");
+    // sample shares render's style options; its help speaks only of what it has.
+    let help = ok(&["sample", "--help"]);
+    for absent in ["--intensity", "movie", "density and iso"] {
+        assert!(!help.contains(absent), "{absent}: {help}");
+    }
+    assert!(help.contains("views sampled apart compare"), "{help}");
+    let help = ok(&["shade", "--help"]);
+    assert!(help.contains("The .sndf file to shade"), "{help}");
 }
 
 /// `info` gives the extent of the particles' spheres (the box a fitted view frames),

@@ -11,6 +11,7 @@ use serde_json::json;
 #[derive(clap::Args)]
 #[command(after_help = "Example:\n  mdlod info frame.mdlod --json | jq .particles")]
 pub struct Args {
+    /// The .mdlod or .sndf file to describe.
     pub file: PathBuf,
     /// Print JSON instead of text.
     #[arg(long)]

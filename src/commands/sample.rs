@@ -16,6 +16,26 @@ use super::render::ViewArgs;
 #[derive(clap::Args)]
 #[command(
     allow_negative_numbers = true,
+    // The style options are render's; their help speaks of what sample has.
+    mut_arg("attribute_range", |a| {
+        let text = "The attribute values at the ends of --colour-map, e.g. `0:2.5`, instead \
+                    of the file's own range, so that views sampled apart compare";
+        a.help(text).long_help(text)
+    }),
+    mut_arg("log_scale", |a| {
+        let text = "Map the attribute's logarithm with --colour-map (densities, energies \
+                    spanning decades); values from 0 start at the smallest value above 0, a \
+                    range given from 0 four decades below its top";
+        a.help(text).long_help(text)
+    }),
+    mut_arg("clip", |a| {
+        let text = "Cut the data away beyond a plane, as OVITO's Slice: nx,ny,nz,d keeps the \
+                    particles whose centres p have n·p ≤ d, n the unit normal and d the \
+                    plane's distance from the origin along it (world units); repeatable (up \
+                    to 6). Clusters across a plane are refined down to particles, so the cut \
+                    face is exact; look from the cut side to see it";
+        a.help(text).long_help(text)
+    }),
     after_help = "Example:\n  \
     mdlod sample frame.mdlod -o view.sndf --iterations 64 --width 640 --height 360\n  \
     mdlod shade view.sndf -o lit.png --light -1,1,1 --light 1,0,0.5:#4060ff"

@@ -27,9 +27,9 @@ pub struct Args {
     /// Start from a view file (as `mdlod render --view` takes).
     #[arg(long)]
     pub view: Option<PathBuf>,
-    /// How to draw the points at the start (keys 1-6 switch): ray-cast spheres, the same
-    /// supersampled once the view is still, S-NDFs, splats, the density volume or its
-    /// iso-surface.
+    /// How to draw the points at the start (keys 1-6 switch): ray-cast spheres
+    /// (`standard`, also called `spheres`, as render names them), the same supersampled
+    /// once the view is still, S-NDFs, splats, the density volume or its iso-surface.
     #[arg(long, value_enum, default_value = "standard")]
     pub mode: ModeArg,
     /// Play a script: a JSON array of actions (orbit, pan, zoom, mode, light, step,
