@@ -2269,7 +2269,9 @@ fn render_refuses_a_zero_budget_and_names_the_absorption() {
     // A budget of 1 draws the whole data set as one sphere.
     let out = ok(&["render", s(&file), "-o", s(&png), "--budget", "1"]);
     assert!(
-        out.contains("point budget of 1: below the") && out.contains("is one sphere"),
+        out.contains("point budget of 1: below the")
+            && out.contains("points the top node opens into (level 1")
+            && out.contains("is one sphere"),
         "{out}"
     );
 }

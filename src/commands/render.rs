@@ -1700,8 +1700,9 @@ fn limits_text(r: &mdlod_render::RenderReport, coarsest: Option<u64>, budget: u6
         let drawn = r.particles_drawn + r.nodes_drawn;
         limits.push(match coarsest {
             Some(c) if drawn == 1 && r.budget < c => format!(
-                "point budget of {}: below the {c} points of the coarsest level, so the whole \
-                 data set is one sphere; a budget of {c} or more refines",
+                "point budget of {}: below the {c} points the top node opens into (level 1, \
+                 as `mdlod info` counts levels), so the whole data set is one sphere; a \
+                 budget of {c} or more refines",
                 r.budget
             ),
             _ if r.budget < budget => format!(
