@@ -1823,6 +1823,17 @@ fn info_gives_the_extent_of_the_particles() {
     let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&file), "--json"])).unwrap();
     assert_eq!(json["extent"]["min"], serde_json::json!([-1.0, -1.0, -4.0]));
     assert_eq!(json["extent"]["max"], serde_json::json!([11.0, 3.0, 1.0]));
+    // The colour is printed linear, as stored, with the sRGB #rrggbb that
+    // --species-colour takes beside it: the one back to the other within a step.
+    let line = text.lines().find(|l| l.contains("species ")).unwrap();
+    let hex = line.split("linear, #").nth(1).unwrap();
+    let stored = json["species"][0]["colour"].as_array().unwrap();
+    for k in 0..3 {
+        let v = u8::from_str_radix(&hex[2 * k..2 * k + 2], 16).unwrap();
+        let linear = mdlod_render::renderer::srgb_to_linear(f32::from(v) / 255.0);
+        let want = stored[k].as_f64().unwrap() as f32;
+        assert!((linear - want).abs() < 0.01, "{line}: channel {k}");
+    }
     // Six significant digits, in scientific notation where large or small.
     std::fs::write(&xyz, "2\nplain\nCu 3.72 4.72 -3.28\nCu 1e20 2e-10 0\n").unwrap();
     ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Cu=1"]);

@@ -181,8 +181,13 @@ pub fn run(args: Args) -> Result<()> {
                 radius_text(hi)
             )
         });
+        // The stored linear colour, and the sRGB `#rrggbb` that --species-colour takes.
+        let [r, g, b] = s.colour.map(|c| {
+            (mdlod_render::renderer::linear_to_srgb(c.clamp(0.0, 1.0)) * 255.0).round() as u8
+        });
         println!(
-            "  species      {:<6} radius {:<6}  colour [{:.2} {:.2} {:.2}]{count}{range}",
+            "  species      {:<6} radius {:<6}  colour [{:.2} {:.2} {:.2}] linear, \
+             #{r:02x}{g:02x}{b:02x}{count}{range}",
             shown(&s.name),
             radius_text(s.radius),
             s.colour[0],
