@@ -943,6 +943,11 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     ]
     .concat());
     assert!(sampled.contains("8 rays each"), "{sampled}");
+    // The file's size is said: 96·64 texels of 8·8 bins of 16 bytes, and its header.
+    let bytes = std::fs::metadata(&sndf).unwrap().len();
+    assert!(bytes > 96 * 64 * 64 * 16, "{bytes}");
+    let said = format!("({:.1} MiB: 96x64 texels", bytes as f64 / 1048576.0);
+    assert!(sampled.contains(&said), "{said}: {sampled}");
     let direct = dir.path().join("direct.png");
     ok(&[
         &[

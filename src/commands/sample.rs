@@ -76,6 +76,9 @@ pub struct Args {
     pub tiles: bool,
 }
 
+/// The size from which `sample` says, before sampling, how large its file will be.
+const LARGE_SNDF: u64 = 256 << 20;
+
 pub fn run(args: Args) -> Result<()> {
     let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
@@ -158,6 +161,17 @@ pub fn run(args: Args) -> Result<()> {
         height,
         ..opts
     };
+    // 16 bytes a bin (FORMAT.md, S-NDF files): said before a large file is sampled.
+    let bytes = u64::from(width) * u64::from(height) * u64::from(args.bins).pow(2) * 16;
+    if bytes >= LARGE_SNDF {
+        println!(
+            "  note: {width}x{height} texels of {b}x{b} bins make a .sndf of {:.1} GiB (16 bytes \
+             a bin); a smaller image or fewer --bins{} make it smaller",
+            bytes as f64 / f64::from(1u32 << 30),
+            if scale > 1 { " or --min-samples" } else { "" },
+            b = args.bins,
+        );
+    }
     let r = sample_to_file_at(
         &args.file,
         &args.output,
@@ -172,9 +186,11 @@ pub fn run(args: Args) -> Result<()> {
             scale.trailing_zeros()
         );
     }
+    let size = std::fs::metadata(&args.output).map_or(0, |m| m.len());
     println!(
-        "wrote {} ({}x{} texels, {}x{} bins, {} rays each) on {}: {} particles and {} cluster spheres, {:.0} ms",
+        "wrote {} ({:.1} MiB: {}x{} texels, {}x{} bins, {} rays each) on {}: {} particles and {} cluster spheres, {:.0} ms",
         args.output.display(),
+        size as f64 / f64::from(1u32 << 20),
         r.width,
         r.height,
         args.bins,
