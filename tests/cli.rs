@@ -948,6 +948,19 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     assert!(bytes > 96 * 64 * 64 * 16, "{bytes}");
     let said = format!("({:.1} MiB: 96x64 texels", bytes as f64 / 1048576.0);
     assert!(sampled.contains(&said), "{said}: {sampled}");
+    // An .sndf where an .mdlod is read says what it is and what reads it.
+    for cmd in ["render", "verify"] {
+        let png = dir.path().join("wrong.png");
+        let mut args = vec![cmd, s(&sndf)];
+        if cmd == "render" {
+            args.extend(["-o", s(&png)]);
+        }
+        let e = fails(&args);
+        assert!(
+            e.contains("view.sndf: an S-NDF file") && e.contains("`mdlod shade` lights it"),
+            "{cmd}: {e}"
+        );
+    }
     let direct = dir.path().join("direct.png");
     ok(&[
         &[

@@ -18,6 +18,13 @@ pub enum FormatError {
     )]
     BadMagic { path: PathBuf },
 
+    /// An S-NDF file where a `.mdlod` file is read: it holds no particles.
+    #[error(
+        "{path}: an S-NDF file (written by `mdlod sample`), not an .mdlod file: it holds no \
+         particles; `mdlod shade` lights it and `mdlod info` describes it"
+    )]
+    SndfNotMdlod { path: PathBuf },
+
     #[error(
         "{path}: format version {major}.{minor} is not readable by this mdlod, which reads \
          major versions {readable_min} to {readable_max}; {hint}"

@@ -170,6 +170,9 @@ impl MdlodFile {
         let corrupt = |place: &str, problem: String| FormatError::corrupt(&path, place, problem);
 
         // Header.
+        if map.get(..8) == Some(&crate::sndf::SNDF_MAGIC[..]) {
+            return Err(FormatError::SndfNotMdlod { path });
+        }
         if map.len() < HEADER_SIZE {
             if map.len() >= 8 && map[..8] != MAGIC {
                 return Err(FormatError::BadMagic { path });

@@ -83,7 +83,7 @@ pub struct BuildArgs {
     /// The coarsest level holds at most this many points.
     #[arg(long, default_value_t = 4096)]
     pub root_points: u32,
-    /// Levels between a node and the points it is drawn with (δn).
+    /// Levels between a node and the points it is drawn with (δn), 1 to 8.
     #[arg(long, default_value_t = 1)]
     pub delta_n: u32,
     /// Frames above this many particles are built out of core, in spatial chunks of at
