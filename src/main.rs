@@ -99,7 +99,7 @@ fn main() -> std::process::ExitCode {
         Command::Sample(a) => commands::sample::run(a),
         Command::Shade(a) => matches
             .subcommand_matches("shade")
-            .map_or(Ok(()), |m| commands::shade::check_options(m))
+            .map_or(Ok(()), commands::shade::check_options)
             .and_then(|()| commands::shade::run(a)),
         Command::Generate(a) => commands::generate::run(a),
         Command::Demo(a) => commands::demo::run(a),

@@ -2920,8 +2920,9 @@ fn clip_planes_cut_the_particles_away() {
     }
 }
 
-/// `--legend-in-image` draws the legend into the picture: only the panel in the corner
-/// asked for changes, every image of a movie gets it, and an image too small is refused.
+/// `--legend-in-image` draws the legend into the picture: from a given view only the
+/// panel in the corner asked for changes, a fitted view frames the data clear of it,
+/// every image of a movie gets it, and an image too small is refused.
 #[test]
 fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     let dir = tempfile::tempdir().unwrap();
@@ -2939,11 +2940,18 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
         "--background",
         "#000000",
     ];
-    ok(&[&["render", s(&file), "-o", s(&plain)][..], &base].concat());
+    let view = dir.path().join("v.json");
+    ok(&[
+        &["render", s(&file), "-o", s(&plain)][..],
+        &base,
+        &["--save-view", s(&view)],
+    ]
+    .concat());
     let out = ok(&[
         &["render", s(&file), "-o", s(&with)][..],
         &base,
         &["--legend-in-image", "--legend-title", "E_pot (eV)"],
+        &["--view", s(&view)],
     ]
     .concat());
     assert!(out.contains("legend drawn into"), "{out}");
@@ -2968,6 +2976,31 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
         inside > 360 * 66 / 2,
         "{inside} pixels of the panel changed"
     );
+    // Fitted, the data lies wholly above the panel's band or wholly beside it (the
+    // plain fit's data reaches into the corner).
+    let room = [376, 82];
+    let clear = |png: &Path| {
+        let (_, _, px) = read_png(png);
+        let data: Vec<(u32, u32)> = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| !panel(x, y) && px[4 * (y * w + x) as usize..][..3] != [0, 0, 0])
+            .collect();
+        assert!(!data.is_empty());
+        let above = data.iter().all(|&(_, y)| y < h - room[1]);
+        let beside = data.iter().all(|&(x, _)| x < w - room[0]);
+        above || beside
+    };
+    assert!(
+        !clear(&plain),
+        "the plain fit already leaves the corner free"
+    );
+    ok(&[
+        &["render", s(&file), "-o", s(&with)][..],
+        &base,
+        &["--legend-in-image", "--legend-title", "E_pot (eV)"],
+    ]
+    .concat());
+    assert!(clear(&with), "the fitted data reaches under the legend");
     // Top left: the panel moves there.
     ok(&[
         &["render", s(&file), "-o", s(&with)][..],

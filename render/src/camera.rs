@@ -87,6 +87,43 @@ fn corners(b: &Bounds) -> [glam::DVec3; 8] {
 /// the two: a margin of 5 % on each side.
 pub const FIT_FILL: f64 = 0.9;
 
+/// A part of the image a fit frames the data in, in normalised device coordinates (x
+/// right, y up; the whole image is −1..1 on both axes): the image less the corner a
+/// legend is drawn in, say.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FitWindow {
+    pub min: [f64; 2],
+    pub max: [f64; 2],
+}
+
+impl FitWindow {
+    /// The whole image.
+    pub const WHOLE: FitWindow = FitWindow {
+        min: [-1.0, -1.0],
+        max: [1.0, 1.0],
+    };
+
+    /// The window's centre and half sizes, in normalised device coordinates; `None` for a
+    /// window that does not hold the image's centre in its interior or is not finite (a
+    /// fit keeps the target on the view's axis, which must see into the window).
+    fn centre_and_half(&self) -> Option<([f64; 2], [f64; 2])> {
+        let ok = (0..2).all(|k| {
+            self.min[k].is_finite()
+                && self.max[k].is_finite()
+                && self.min[k] < 0.0
+                && self.max[k] > 0.0
+                && self.min[k] >= -1.0
+                && self.max[k] <= 1.0
+        });
+        ok.then(|| {
+            (
+                [0, 1].map(|k| 0.5 * (self.min[k] + self.max[k])),
+                [0, 1].map(|k| 0.5 * (self.max[k] - self.min[k])),
+            )
+        })
+    }
+}
+
 /// An orbit camera. Angles are in degrees, lengths in world units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
@@ -313,6 +350,44 @@ impl Camera {
     /// box (a sphere of atoms, a disc seen from above) is framed as it looks. The depth
     /// range holds `bounds`. No boxes frame `bounds`.
     pub fn fit_boxes(&mut self, bounds: &Bounds, boxes: &[Bounds], aspect: f32) {
+        self.fit_boxes_in(bounds, boxes, aspect, &[FitWindow::WHOLE]);
+    }
+
+    /// [`Self::fit_boxes`] into the best of `windows`: the one where the data is framed
+    /// largest (the smallest fitted distance), the projection centred in it and filling
+    /// [`FIT_FILL`] of its tighter dimension. Windows that do not hold the image's centre
+    /// are passed over; none left frames the whole image.
+    pub fn fit_boxes_in(
+        &mut self,
+        bounds: &Bounds,
+        boxes: &[Bounds],
+        aspect: f32,
+        windows: &[FitWindow],
+    ) {
+        let start = self.clone();
+        let mut best: Option<Camera> = None;
+        for w in windows.iter().filter(|w| w.centre_and_half().is_some()) {
+            let mut c = start.clone();
+            c.fit_window(bounds, boxes, aspect, w);
+            if best.as_ref().is_none_or(|b| c.distance < b.distance) {
+                best = Some(c);
+            }
+        }
+        *self = match best {
+            Some(c) => c,
+            None => {
+                let mut c = start;
+                c.fit_window(bounds, boxes, aspect, &FitWindow::WHOLE);
+                c
+            }
+        };
+    }
+
+    /// [`Self::fit_boxes_in`] of one window (which holds the image's centre).
+    fn fit_window(&mut self, bounds: &Bounds, boxes: &[Bounds], aspect: f32, window: &FitWindow) {
+        let Some((centre, _)) = window.centre_and_half() else {
+            return;
+        };
         let boxes = if boxes.is_empty() {
             std::slice::from_ref(bounds)
         } else {
@@ -322,26 +397,43 @@ impl Camera {
             Bounds::new(u.min.min(b.min), u.max.max(b.max))
         });
         self.target = hull.center();
-        self.distance = self.distance_for(boxes, &hull, aspect);
+        self.distance = self.distance_in(boxes, &hull, aspect, window);
         let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan();
         let tan_x = tan_y * f64::from(aspect);
         let before = (self.target, self.distance);
-        // Each round moves the target by the projection's offset from the image's centre,
-        // as seen at the target's depth, and fits the distance again (one round is exact
-        // in orthographic views, where the size does not change with depth).
-        for _ in 0..12 {
-            let Some([cx, cy]) = self.projected_centre(boxes, tan_x, tan_y) else {
+        // Each round moves the target by the projection's offset from the window's
+        // centre, as seen at the target's depth, and fits the distance again (one round
+        // is exact in orthographic views, where the size does not change with depth). In
+        // perspective, corners nearer than the target move further on screen than the
+        // target's depth says, up to twice as far off the image's centre: each axis's
+        // step is scaled by the inverse of the response its last step had (a secant
+        // step), which settles where a full step would swing from side to side.
+        let mut gain = [1.0f64; 2];
+        let mut last: Option<([f64; 2], [f64; 2])> = None;
+        for _ in 0..40 {
+            let Some([px, py]) = self.projected_centre(boxes, tan_x, tan_y) else {
                 (self.target, self.distance) = before;
                 break;
             };
-            if cx.abs().max(cy.abs()) < 1e-5 {
+            let off = [px - centre[0], py - centre[1]];
+            if off[0].abs().max(off[1].abs()) < 1e-5 {
                 break;
             }
+            if let Some((was, step)) = last {
+                for k in 0..2 {
+                    let response = (was[k] - off[k]) / step[k];
+                    if step[k] != 0.0 && response.is_finite() && response > 0.0 {
+                        gain[k] = (1.0 / response).clamp(0.05, 2.0);
+                    }
+                }
+            }
+            let step = [0, 1].map(|k| off[k] * gain[k]);
             let d = f64::from(self.distance);
-            let shift = self.right().as_dvec3() * (cx * d * tan_x)
-                + self.up().as_dvec3() * (cy * d * tan_y);
+            let shift = self.right().as_dvec3() * (step[0] * d * tan_x)
+                + self.up().as_dvec3() * (step[1] * d * tan_y);
             self.target = (self.target.as_dvec3() + shift).as_vec3();
-            self.distance = self.distance_for(boxes, &hull, aspect);
+            self.distance = self.distance_in(boxes, &hull, aspect, window);
+            last = Some((off, step));
         }
         if !(self.target.is_finite() && self.distance.is_finite() && self.distance > 0.0) {
             (self.target, self.distance) = before;
@@ -401,8 +493,36 @@ impl Camera {
 
     /// [`Self::fitted_distance`] of every corner of `boxes`, whose union is `hull`.
     fn distance_for(&self, boxes: &[Bounds], hull: &Bounds, aspect: f32) -> f32 {
-        let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan() * FIT_FILL;
+        self.distance_in(boxes, hull, aspect, &FitWindow::WHOLE)
+    }
+
+    /// [`Self::distance_for`] inside `window`: every corner within [`FIT_FILL`] of the
+    /// window's half sizes around its centre. A corner `o` from the target, at depth `z`
+    /// from the eye, projects to `o·r / (z·tan_x)`, which must lie between the window's
+    /// ends `a_lo` and `a_hi` (one below 0, one above): `z ≥ o·r / (a_hi·tan_x)` for
+    /// `o·r > 0`, `z ≥ o·r / (a_lo·tan_x)` for `o·r < 0`; the same upwards. For the
+    /// whole image that is `|o·r| / (FIT_FILL·tan_x)`.
+    fn distance_in(&self, boxes: &[Bounds], hull: &Bounds, aspect: f32, window: &FitWindow) -> f32 {
+        let (centre, half) = window.centre_and_half().unwrap_or(([0.0; 2], [1.0; 2]));
+        let ends = [0, 1].map(|k| {
+            [
+                centre[k] - half[k] * FIT_FILL,
+                centre[k] + half[k] * FIT_FILL,
+            ]
+        });
+        let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan();
         let tan_x = tan_y * f64::from(aspect);
+        // The depth a coordinate `v` across the view (world units from the target's ray)
+        // needs to lie inside `[lo, hi]` of the view's half-angle tangent `tan`.
+        let needs = |v: f64, [lo, hi]: [f64; 2], tan: f64| {
+            if v > 0.0 {
+                v / (hi * tan)
+            } else if v < 0.0 {
+                v / (lo * tan)
+            } else {
+                0.0
+            }
+        };
         let half = (hull.max.as_dvec3() - hull.min.as_dvec3()) * 0.5;
         let (r, u, b) = (
             self.right().as_dvec3(),
@@ -414,7 +534,7 @@ impl Camera {
         for corner in boxes.iter().flat_map(corners) {
             // The corner from the target (not the box's centre in a centred fit).
             let o = corner - target;
-            let across = (o.dot(r).abs() / tan_x).max(o.dot(u).abs() / tan_y);
+            let across = needs(o.dot(r), ends[0], tan_x).max(needs(o.dot(u), ends[1], tan_y));
             need = need.max(match self.projection {
                 // The corner's depth from the eye is the distance less its offset
                 // towards the eye.
@@ -669,6 +789,88 @@ mod tests {
                     "scale {scale} {p:?} aspect {aspect} ({azimuth_deg}°, {elevation_deg}°): \
                      the data spans {widest} of the view"
                 );
+            }
+        }
+    }
+
+    /// Fitted into a window (the image less a legend's corner), the box lies inside the
+    /// window, centred in it and filling FIT_FILL of its tighter dimension; of two
+    /// windows the fit takes the one that frames the box larger; a window that does not
+    /// hold the image's centre is passed over.
+    #[test]
+    fn a_fit_into_a_window_frames_the_box_there() {
+        let b = Bounds::new(Vec3::new(-3.0, 0.0, 10.0), Vec3::new(5.0, 2.0, 12.0));
+        let below = FitWindow {
+            min: [-1.0, -0.6],
+            max: [1.0, 1.0],
+        };
+        let beside = FitWindow {
+            min: [-1.0, -1.0],
+            max: [0.3, 1.0],
+        };
+        for p in [Projection::Perspective, Projection::Orthographic] {
+            for (azimuth_deg, elevation_deg) in [(70.0, -35.0), (0.0, 0.0), (225.0, 30.0)] {
+                let aspect = 16.0 / 9.0;
+                let start = Camera {
+                    projection: p,
+                    azimuth_deg,
+                    elevation_deg,
+                    ..Default::default()
+                };
+                let ndc_box = |c: &Camera| {
+                    let m = c.clip_from_view(aspect) * c.view_from_world();
+                    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                    for corner in corners(&b) {
+                        let clip = m * corner.as_vec3().extend(1.0);
+                        for k in 0..2 {
+                            let v = f64::from(clip[k] / clip.w);
+                            lo[k] = lo[k].min(v);
+                            hi[k] = hi[k].max(v);
+                        }
+                    }
+                    (lo, hi)
+                };
+                let mut fitted = Vec::new();
+                for w in [below, beside] {
+                    let mut c = start.clone();
+                    c.fit_boxes_in(&b, &[], aspect, &[w]);
+                    let (lo, hi) = ndc_box(&c);
+                    let what = format!("{p:?} ({azimuth_deg}°, {elevation_deg}°) in {w:?}");
+                    let mut fill = 0.0f64;
+                    for k in 0..2 {
+                        assert!(
+                            lo[k] >= w.min[k] - 1e-4 && hi[k] <= w.max[k] + 1e-4,
+                            "{what}"
+                        );
+                        let centre = 0.5 * (w.min[k] + w.max[k]);
+                        assert!(
+                            (0.5 * (lo[k] + hi[k]) - centre).abs() < 2e-3,
+                            "{what}: axis {k} from {} to {}",
+                            lo[k],
+                            hi[k]
+                        );
+                        fill = fill.max((hi[k] - lo[k]) / (w.max[k] - w.min[k]));
+                    }
+                    assert!((fill - FIT_FILL).abs() < 2e-3, "{what}: fills {fill}");
+                    fitted.push(c);
+                }
+                // Both offered: the nearer fit, the box drawn larger.
+                let mut both = start.clone();
+                both.fit_boxes_in(&b, &[], aspect, &[below, beside]);
+                let nearest = fitted
+                    .iter()
+                    .map(|c| c.distance)
+                    .fold(f32::INFINITY, f32::min);
+                assert_eq!(both.distance, nearest);
+                // A window off the image's centre frames the whole image.
+                let (mut whole, mut off) = (start.clone(), start.clone());
+                whole.fit(&b, aspect);
+                let away = FitWindow {
+                    min: [0.2, -1.0],
+                    max: [1.0, 1.0],
+                };
+                off.fit_boxes_in(&b, &[], aspect, &[away]);
+                assert_eq!(off, whole);
             }
         }
     }

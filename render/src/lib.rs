@@ -54,7 +54,7 @@ use std::time::{Duration, Instant};
 use mdlod_format::MdlodFile;
 pub use mdlod_format::{NoProgress, Progress};
 
-pub use camera::{Bounds, Camera, Projection};
+pub use camera::{Bounds, Camera, FitWindow, Projection};
 pub use context::{BackendChoice, GpuContext};
 pub use error::RenderError;
 pub use glam;
@@ -191,6 +191,10 @@ pub struct RenderOptions {
     /// Report which species the cut shows ([`RenderReport::species_drawn`]; it reads up
     /// to every particle's species once).
     pub species_drawn: bool,
+    /// Where a fitted view may place the data: the best of these parts of the image
+    /// ([`Camera::fit_boxes_in`]), so that a legend drawn into a corner covers none of
+    /// it. Empty: the whole image.
+    pub fit_windows: Vec<FitWindow>,
 }
 
 /// How the simulation cell's edges are drawn.
@@ -253,6 +257,7 @@ impl Default for RenderOptions {
             light_range: None,
             cell: None,
             species_drawn: false,
+            fit_windows: Vec::new(),
         }
     }
 }
@@ -920,6 +925,24 @@ pub fn camera_for_framing(
     width: u32,
     height: u32,
 ) -> Result<Camera, RenderError> {
+    camera_for_framing_in(bounds, boxes, view, width, height, &[])
+}
+
+/// [`camera_for_framing`] fitting into the best of `windows` of the image (none: the
+/// whole image; [`RenderOptions::fit_windows`]).
+pub fn camera_for_framing_in(
+    bounds: &Bounds,
+    boxes: &[Bounds],
+    view: &ViewSpec,
+    width: u32,
+    height: u32,
+    windows: &[FitWindow],
+) -> Result<Camera, RenderError> {
+    let windows = if windows.is_empty() {
+        &[FitWindow::WHOLE][..]
+    } else {
+        windows
+    };
     let bounds = *bounds;
     let aspect = width.max(1) as f32 / height.max(1) as f32;
     Ok(match view {
@@ -955,7 +978,7 @@ pub fn camera_for_framing(
                 zoom: *zoom,
                 ..Default::default()
             };
-            let c = v.to_camera_framing(&bounds, boxes, aspect);
+            let c = v.to_camera_framing_in(&bounds, boxes, aspect, windows);
             check_built_camera(&c)
                 .map_err(|e| RenderError::InvalidOptions(format!("zoom {zoom:e}: {e}")))?;
             c
@@ -969,7 +992,7 @@ pub fn camera_for_framing(
                     })?;
                 }
             }
-            let c = v.to_camera_framing(&bounds, boxes, aspect);
+            let c = v.to_camera_framing_in(&bounds, boxes, aspect, windows);
             check_built_camera(&c).map_err(|message| RenderError::View {
                 path: path.clone(),
                 message,
@@ -978,7 +1001,7 @@ pub fn camera_for_framing(
         }
         ViewSpec::View(v) => {
             v.check().map_err(RenderError::InvalidOptions)?;
-            let c = v.to_camera_framing(&bounds, boxes, aspect);
+            let c = v.to_camera_framing_in(&bounds, boxes, aspect, windows);
             check_built_camera(&c).map_err(RenderError::InvalidOptions)?;
             c
         }
@@ -1060,7 +1083,14 @@ pub fn frame_setup(
         ViewSpec::Camera(_) => Vec::new(),
         _ => framing_boxes(file, opts, &fitted),
     };
-    let mut camera = camera_for_framing(&fitted, &boxes, &opts.view, opts.width, opts.height)?;
+    let mut camera = camera_for_framing_in(
+        &fitted,
+        &boxes,
+        &opts.view,
+        opts.width,
+        opts.height,
+        &opts.fit_windows,
+    )?;
     // The depth range holds all the data, and the cell where it is drawn.
     let depth = with_drawn_cell(data_bounds(file), file, opts);
     if fitted != depth {

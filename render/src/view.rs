@@ -19,7 +19,7 @@ use std::path::Path;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{Bounds, Camera, Projection};
+use crate::camera::{Bounds, Camera, FitWindow, Projection};
 use crate::error::RenderError;
 
 /// The view file version this crate writes and reads.
@@ -193,6 +193,18 @@ impl ViewFile {
     /// [`Self::to_camera`] framing `boxes` inside `bounds` where the view is fitted
     /// ([`Camera::fit_boxes`]; none: `bounds`).
     pub fn to_camera_framing(&self, bounds: &Bounds, boxes: &[Bounds], aspect: f32) -> Camera {
+        self.to_camera_framing_in(bounds, boxes, aspect, &[FitWindow::WHOLE])
+    }
+
+    /// [`Self::to_camera_framing`] fitting into the best of `windows`
+    /// ([`Camera::fit_boxes_in`]).
+    pub fn to_camera_framing_in(
+        &self,
+        bounds: &Bounds,
+        boxes: &[Bounds],
+        aspect: f32,
+        windows: &[FitWindow],
+    ) -> Camera {
         let mut c = Camera {
             projection: self.projection,
             azimuth_deg: self.azimuth_deg,
@@ -200,7 +212,7 @@ impl ViewFile {
             fov_y_deg: self.fov_y_deg,
             ..Default::default()
         };
-        c.fit_boxes(bounds, boxes, aspect);
+        c.fit_boxes_in(bounds, boxes, aspect, windows);
         if let Some(d) = self.distance {
             c.distance = d;
         }

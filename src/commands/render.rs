@@ -879,7 +879,7 @@ pub fn run(args: Args) -> Result<()> {
             },
         });
     }
-    check_legend_room(&args, &opts)?;
+    opts.fit_windows = check_legend_room(&args, &opts)?;
     if args.file.is_dir() {
         if args.turntable.is_some() {
             anyhow::bail!(
@@ -1278,24 +1278,28 @@ fn write_legend(
 /// Refuses `--legend-in-image` before anything is drawn where the image cannot hold the
 /// legend: a colour bar's, or a key of every species the file (a batch's first frame)
 /// shows unhidden, which holds at least the species the picture will show.
-fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<()> {
-    if args.legend_in_image.is_none() {
-        return Ok(());
-    }
+///
+/// Returns where a fitted view places the data so that the legend covers none of it: the
+/// image less a band along the legend's side, above or below it, or beside it, whichever
+/// frames the data larger ([`RenderOptions::fit_windows`]); none without a legend.
+fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_render::FitWindow>> {
+    let Some(corner) = args.legend_in_image else {
+        return Ok(Vec::new());
+    };
     // (A file or directory that cannot be read fails where it is rendered, saying why.)
     let path = if args.file.is_dir() {
         let Ok(manifest) = mdlod_preprocess::batch::read_manifest(&args.file) else {
-            return Ok(());
+            return Ok(Vec::new());
         };
         match manifest.frames.first() {
             Some(f) => args.file.join(&f.file),
-            None => return Ok(()),
+            None => return Ok(Vec::new()),
         }
     } else {
         args.file.clone()
     };
     let Ok(file) = mdlod_format::MdlodFile::open(&path) else {
-        return Ok(());
+        return Ok(Vec::new());
     };
     let meta = file.metadata();
     let all = meta.species.iter().map(|s| s.name.clone()).collect();
@@ -1307,7 +1311,7 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<()> {
         Some([1.0, 2.0]),
         &all,
     )?;
-    if legend.scale_for(opts.width, opts.height).is_none() {
+    let Some(scale) = legend.scale_for(opts.width, opts.height) else {
         let (w, h) = legend.room_needed(1);
         anyhow::bail!(
             "--legend-in-image: a {}×{} image cannot hold the legend (at least {w}×{h} \
@@ -1316,8 +1320,39 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<()> {
             opts.width,
             opts.height
         );
+    };
+    let (w, h) = legend.room_needed(scale);
+    Ok(legend_windows(corner, [w, h], [opts.width, opts.height]))
+}
+
+/// The two parts of a `size` image that leave a legend of `room` pixels in `corner` free:
+/// all but a band of its height (at the top or bottom), all but a band of its width (at
+/// the side), in normalised device coordinates (y up).
+fn legend_windows(
+    corner: LegendCorner,
+    room: [u32; 2],
+    size: [u32; 2],
+) -> Vec<mdlod_render::FitWindow> {
+    let band = [0, 1].map(|k| 2.0 * f64::from(room[k]) / f64::from(size[k].max(1)));
+    let (top, left) = match corner {
+        LegendCorner::TopLeft => (true, true),
+        LegendCorner::TopRight => (true, false),
+        LegendCorner::BottomLeft => (false, true),
+        LegendCorner::BottomRight => (false, false),
+    };
+    let mut below_or_above = mdlod_render::FitWindow::WHOLE;
+    if top {
+        below_or_above.max[1] = 1.0 - band[1];
+    } else {
+        below_or_above.min[1] = -1.0 + band[1];
     }
-    Ok(())
+    let mut beside = mdlod_render::FitWindow::WHOLE;
+    if left {
+        beside.min[0] = -1.0 + band[0];
+    } else {
+        beside.max[0] = 1.0 - band[0];
+    }
+    vec![below_or_above, beside]
 }
 
 /// The legend `--legend` and `--legend-in-image` show, and what it is (for the summary).
@@ -2132,8 +2167,14 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let mut radii: std::collections::BTreeMap<String, [f32; 2]> = Default::default();
     let mut worst_miss: Option<(f32, usize)> = None;
     let style = opts.style.clone();
-    let camera =
-        mdlod_render::camera_for_framing(&bounds, &boxes, &opts.view, opts.width, opts.height)?;
+    let camera = mdlod_render::camera_for_framing_in(
+        &bounds,
+        &boxes,
+        &opts.view,
+        opts.width,
+        opts.height,
+        &opts.fit_windows,
+    )?;
     opts.view = ViewSpec::Camera(camera.clone());
     if let Some(parent) = args.output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
