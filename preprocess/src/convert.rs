@@ -730,9 +730,10 @@ fn open_piece_bounded(
         name.strip_suffix(".gz")
             .map_or_else(|| format!("{name}.txt"), String::from),
     );
-    crate::readers::gunzip_to_file(input, &text, progress)?;
+    let (_, cut) = crate::readers::gunzip_to_file(input, &text, progress)?;
     let dump = crate::readers::DumpFile::open(&text)
         .map_err(|e| decompressed(input, Some(&text), e.into()))?;
+    let dump = if cut { dump.with_gzip_cut(input) } else { dump };
     Ok((dump, Some(text)))
 }
 

@@ -176,7 +176,8 @@ fn gzip_xyz() {
     std::fs::write(&path, enc.finish().unwrap()).unwrap();
     let f = read_k(&path, 0, None);
     assert_eq!(f.positions, vec![[1.0, 2.0, 3.0]]);
-    // A compressed file cut short says how to keep the text before the cut.
+    // A compressed file cut short (a run still writing it: `dump custom/gz` flushes
+    // frame by frame) reads the text before the cut, and says so with its last frame.
     let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
     for i in 0..2000 {
         writeln!(enc, "1\nframe {i}\nFe {i} 2 3").unwrap();
@@ -184,8 +185,23 @@ fn gzip_xyz() {
     let whole = enc.finish().unwrap();
     let cut = dir.path().join("cut.xyz.gz");
     std::fs::write(&cut, &whole[..whole.len() / 2]).unwrap();
+    let dump = DumpFile::open(&cut).unwrap();
+    let n = dump.frame_count();
+    assert!(n > 100 && n < 2000, "{n} frames");
+    let f = read_k(&cut, 100, None);
+    assert_eq!(f.positions, vec![[100.0, 2.0, 3.0]]);
+    let notes = dump.frame_notes(n - 1, &ReadOptions::default());
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.contains("cut.xyz.gz: the compressed stream ends early")),
+        "{notes:?}"
+    );
+    assert!(dump.frame_notes(0, &ReadOptions::default()).is_empty());
+    // Cut inside its first block, nothing decompresses: the error says how to keep text.
+    std::fs::write(&cut, &whole[..12]).unwrap();
     let Err(e) = DumpFile::open(&cut) else {
-        panic!("a cut gzip file opened")
+        panic!("a gzip file of no text opened")
     };
     let e = e.to_string();
     assert!(e.contains("ends early") && e.contains("zcat"), "{e}");

@@ -306,6 +306,9 @@ pub struct DumpFile {
     bytes: Bytes,
     /// True when `bytes` were decompressed (not a map of the file).
     compressed: bool,
+    /// The gzip file whose compressed stream ended early (a run still writing it, a copy
+    /// cut short): the text decompressed before the cut is what is read.
+    gzip_cut: Option<PathBuf>,
     format: InputFormat,
     index: Index,
 }
@@ -368,6 +371,7 @@ impl DumpFile {
             path: pattern.to_path_buf(),
             bytes: Box::new(Vec::new()),
             compressed: pieces.iter().any(DumpFile::is_compressed),
+            gzip_cut: pieces.iter().find_map(|p| p.gzip_cut.clone()),
             format: first.format,
             index: Index::Pieces(pieces),
         })
@@ -410,9 +414,13 @@ impl DumpFile {
         }
         let map = mdlod_format::mmap::map_file(&file).map_err(io)?;
         let compressed = map.starts_with(&[0x1f, 0x8b]);
+        let mut gzip_cut = None;
         let bytes: Bytes = if compressed {
             match gunzip(path, &map, text_limit, progress)? {
-                Some(text) => Box::new(text),
+                Some((text, cut)) => {
+                    gzip_cut = cut.then(|| path.to_path_buf());
+                    Box::new(text)
+                }
                 None => return Ok(None),
             }
         } else if map.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) || is_bzip2(&map) {
@@ -488,9 +496,17 @@ impl DumpFile {
             path: path.to_path_buf(),
             bytes,
             compressed,
+            gzip_cut,
             format,
             index,
         }))
+    }
+
+    /// Marks this dump, read from the working file `input` was decompressed into
+    /// ([`gunzip_to_file`]), as the text before a cut in `input`'s compressed stream.
+    pub fn with_gzip_cut(mut self, input: &Path) -> DumpFile {
+        self.gzip_cut = Some(input.to_path_buf());
+        self
     }
 
     pub fn path(&self) -> &Path {
@@ -628,6 +644,18 @@ impl DumpFile {
                     names[0]
                 ));
             }
+        }
+        if let Some(gz) = self
+            .gzip_cut
+            .as_ref()
+            .filter(|_| k + 1 == self.frame_count())
+        {
+            notes.push(format!(
+                "{}: the compressed stream ends early (a run still writing it, or a copy cut \
+                 short): the text before the cut is read, a frame it cuts is left out, and a \
+                 rerun reads the rest once the file is complete",
+                gz.display()
+            ));
         }
         if self.ends_mid_line() && k + 1 == self.frame_count() {
             notes.push(format!(
@@ -1481,9 +1509,14 @@ pub fn is_gzip(path: &Path) -> Result<bool, ReadError> {
 }
 
 /// Decompresses the gzip file `path` (single or multi-member) into the file `out` as a
-/// stream, holding a buffer's worth at a time; returns the decompressed size. Errors name
-/// `path` (decompression) or `out` (writing).
-pub fn gunzip_to_file(path: &Path, out: &Path, progress: &dyn Progress) -> Result<u64, ReadError> {
+/// stream, holding a buffer's worth at a time; returns the decompressed size, and whether
+/// the compressed stream ended early (a run still writing it: what precedes the cut is
+/// kept). Errors name `path` (decompression) or `out` (writing).
+pub fn gunzip_to_file(
+    path: &Path,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<(u64, bool), ReadError> {
     let input = File::open(path).map_err(|source| ReadError::Io {
         path: path.to_path_buf(),
         source,
@@ -1515,8 +1548,16 @@ pub fn gunzip_to_file(path: &Path, out: &Path, progress: &dyn Progress) -> Resul
     let mut writer = std::io::BufWriter::with_capacity(1 << 20, file);
     let mut buf = vec![0u8; 1 << 20];
     let mut written = 0u64;
+    let mut cut = false;
     loop {
-        let n = decoder.read(&mut buf).map_err(|e| gzip_error(path, e))?;
+        let n = match decoder.read(&mut buf) {
+            Ok(n) => n,
+            Err(e) if ends_early(&e) && written > 0 => {
+                cut = true;
+                0
+            }
+            Err(e) => return Err(gzip_error(path, e)),
+        };
         if n == 0 {
             break;
         }
@@ -1531,7 +1572,13 @@ pub fn gunzip_to_file(path: &Path, out: &Path, progress: &dyn Progress) -> Resul
         source,
     })?;
     progress.finish_stage();
-    Ok(written)
+    Ok((written, cut))
+}
+
+/// A compressed stream that ends before its end (no more input inside a block, or no
+/// trailer): what was decompressed before it is sound.
+fn ends_early(e: &std::io::Error) -> bool {
+    e.kind() == std::io::ErrorKind::UnexpectedEof
 }
 
 /// A failed decompression of `path`: a stream that ends early (a file cut short, as a
@@ -1554,14 +1601,15 @@ fn gzip_error(path: &Path, e: std::io::Error) -> ReadError {
 }
 
 /// Decompresses the gzip bytes `compressed` of `path` (single or multi-member) into
-/// memory; `None` when the text is larger than `limit` bytes (of which at most one byte
-/// more is decompressed: a small file of a high ratio can expand far past memory).
+/// memory, with whether the stream ended early (what precedes the cut is kept); `None`
+/// when the text is larger than `limit` bytes (of which at most one byte more is
+/// decompressed: a small file of a high ratio can expand far past memory).
 fn gunzip(
     path: &Path,
     compressed: &[u8],
     limit: Option<u64>,
     progress: &dyn Progress,
-) -> Result<Option<Vec<u8>>, ReadError> {
+) -> Result<Option<(Vec<u8>, bool)>, ReadError> {
     struct Counting<'a, 'p> {
         inner: &'a [u8],
         progress: &'p dyn Progress,
@@ -1585,13 +1633,19 @@ fn gunzip(
             .saturating_mul(4)
             .min(usize::try_from(take).unwrap_or(usize::MAX)),
     );
-    flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(1 << 20, reader))
-        .take(take)
-        .read_to_end(&mut out)
-        .map_err(|e| gzip_error(path, e))?;
+    // (On an error, `read_to_end` keeps what it read before it.)
+    let cut =
+        match flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(1 << 20, reader))
+            .take(take)
+            .read_to_end(&mut out)
+        {
+            Ok(_) => false,
+            Err(e) if ends_early(&e) && !out.is_empty() => true,
+            Err(e) => return Err(gzip_error(path, e)),
+        };
     progress.finish_stage();
     if limit.is_some_and(|l| out.len() as u64 > l) {
         return Ok(None);
     }
-    Ok(Some(out))
+    Ok(Some((out, cut)))
 }
