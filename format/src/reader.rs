@@ -357,6 +357,12 @@ impl MdlodFile {
             ));
         }
         check_sum(mi)?;
+        if let Err(e) = std::str::from_utf8(&map[range(mi)]) {
+            return Err(corrupt(
+                "METADATA",
+                format!("not UTF-8 text (byte {} of the section)", e.valid_up_to()),
+            ));
+        }
         let metadata: Metadata =
             serde_json::from_slice(&map[range(mi)]).map_err(|source| FormatError::Metadata {
                 path: path.clone(),
@@ -451,6 +457,46 @@ impl MdlodFile {
                 format!("{} species (must be 1 to 65535)", metadata.species.len()),
             ));
         }
+        if let Some(s) = metadata
+            .species
+            .iter()
+            .find(|s| !(s.radius.is_finite() && s.radius > 0.0))
+        {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "species {:?}: radius {} (must be a finite number above 0)",
+                    s.name, s.radius
+                ),
+            ));
+        }
+        if let Some(s) = metadata
+            .species
+            .iter()
+            .find(|s| !s.colour.iter().all(|c| (0.0..=1.0).contains(c)))
+        {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "species {:?}: colour {:?} (must be three numbers from 0 to 1)",
+                    s.name, s.colour
+                ),
+            ));
+        }
+        if let Some(a) = metadata
+            .attribute
+            .as_ref()
+            .filter(|a| !(a.min.is_finite() && a.max.is_finite() && a.min <= a.max))
+        {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "attribute {:?}: range {} to {} (must be two finite numbers, the smaller \
+                     first)",
+                    a.name, a.min, a.max
+                ),
+            ));
+        }
         if let Some(s) = metadata.species.iter().find(|s| {
             s.radius_range
                 .is_some_and(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi))
@@ -505,8 +551,13 @@ impl MdlodFile {
                         &path,
                         nodes,
                         levels,
-                        delta_n,
-                        metadata.species.len(),
+                        NodeRules {
+                            delta_n,
+                            species_count: metadata.species.len(),
+                            half_range: crate::quantize::half_range(u32::from(
+                                header.position_bits,
+                            )),
+                        },
                         eager_levels,
                     )
                     .map(|()| nodes)
@@ -872,7 +923,11 @@ impl MdlodFile {
         let first = levels[l].node_first as usize;
         let count = levels[l].point_count as usize;
         let range = b * NODE_BLOCK..((b + 1) * NODE_BLOCK).min(count);
-        let species = self.metadata.species.len();
+        let rules = NodeRules {
+            delta_n: self.delta_n(),
+            species_count: self.metadata.species.len(),
+            half_range: crate::quantize::half_range(self.position_bits()),
+        };
         for i in range {
             // The parent's block first (once checked, one atomic load): the node's checks
             // read its ancestors' records. A parent outside the level above is the
@@ -884,7 +939,7 @@ impl MdlodFile {
                     self.check_nodes(l - 1, p..p + 1)?;
                 }
             }
-            check_node(&self.path, nodes, levels, self.delta_n(), species, l, i)?;
+            check_node(&self.path, nodes, levels, rules, l, i)?;
             // Parents are in node order (children of consecutive nodes are consecutive):
             // with `check_children`'s test of a node's first and last child, no two
             // checked nodes share node children, whatever unchecked records lie between.
@@ -1206,25 +1261,25 @@ impl MdlodFile {
 /// records around it (its predecessor's children end where its own begin, when every
 /// node before it passed), so the first error reported is the one a single pass in
 /// index order finds.
+/// What a node record is checked against beside its neighbours: the file's δn, its
+/// species count, and the half range of its quantized offsets (0: the encoding scale is
+/// not checked against the node's bounds).
+#[derive(Clone, Copy, Debug)]
+struct NodeRules {
+    delta_n: usize,
+    species_count: usize,
+    half_range: f32,
+}
+
 fn validate_nodes(
     path: &Path,
     nodes: &[NodeRecord],
     levels: &[LevelRecord],
-    delta_n: usize,
-    species_count: usize,
+    rules: NodeRules,
     eager_levels: usize,
 ) -> Result<(), FormatError> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    validate_nodes_in(
-        path,
-        nodes,
-        levels,
-        delta_n,
-        species_count,
-        threads,
-        1 << 18,
-        eager_levels,
-    )
+    validate_nodes_in(path, nodes, levels, rules, threads, 1 << 18, eager_levels)
 }
 
 /// [`validate_nodes`] on up to `threads` threads, in chunks of at least `chunk_min` nodes,
@@ -1234,8 +1289,7 @@ fn validate_nodes_in(
     path: &Path,
     nodes: &[NodeRecord],
     levels: &[LevelRecord],
-    delta_n: usize,
-    species_count: usize,
+    rules: NodeRules,
     threads: usize,
     chunk_min: usize,
     eager_levels: usize,
@@ -1252,7 +1306,7 @@ fn validate_nodes_in(
         let check = |range: std::ops::Range<usize>| {
             range
                 .into_iter()
-                .try_for_each(|i| check_node(path, nodes, levels, delta_n, species_count, l, i))
+                .try_for_each(|i| check_node(path, nodes, levels, rules, l, i))
         };
         let chunks = if count >= 2 * chunk_min {
             threads.min(count / chunk_min).max(1)
@@ -1329,11 +1383,15 @@ fn check_node(
     path: &Path,
     nodes: &[NodeRecord],
     levels: &[LevelRecord],
-    delta_n: usize,
-    species_count: usize,
+    rules: NodeRules,
     l: usize,
     i: usize,
 ) -> Result<(), FormatError> {
+    let NodeRules {
+        delta_n,
+        species_count,
+        half_range,
+    } = rules;
     let last = levels.len() - 1;
     let bad =
         |id: usize, problem: String| FormatError::corrupt(path, format!("node {id}"), problem);
@@ -1432,6 +1490,23 @@ fn check_node(
     if (0..3).any(|k| n.bounds_min[k] > n.bounds_max[k]) {
         return Err(bad(id, "bounds_min exceeds bounds_max".into()));
     }
+    // The points a node encodes lie inside its bounds, so a writer's scale spreads at
+    // most the bounds' reach from the centroid over the code range (`scale_for`); twice
+    // that is allowed. A forged scale would put decoded points anywhere (kernels and
+    // splats of any size, a render that never ends).
+    if let Some(k) = (0..3).find(|&k| {
+        let reach = (n.bounds_max[k] - n.centroid[k]).max(n.centroid[k] - n.bounds_min[k]);
+        n.quant_scale[k] * half_range > 2.0 * reach.max(0.0) + f32::EPSILON * n.centroid[k].abs()
+    }) {
+        return Err(bad(
+            id,
+            format!(
+                "quantization scale {:e} on axis {k} spreads its points past twice its \
+                 bounds' reach from its centroid",
+                n.quant_scale[k]
+            ),
+        ));
+    }
     if usize::from(n.species) >= species_count {
         return Err(bad(id, format!("species {} of {species_count}", n.species)));
     }
@@ -1485,7 +1560,12 @@ mod tests {
         let n = 1000;
         let (nodes, levels) = hierarchy(n);
         let run = |nodes: &[NodeRecord], threads, chunk_min| {
-            validate_nodes_in(path, nodes, &levels, 1, 1, threads, chunk_min, usize::MAX)
+            let rules = NodeRules {
+                delta_n: 1,
+                species_count: 1,
+                half_range: 0.0,
+            };
+            validate_nodes_in(path, nodes, &levels, rules, threads, chunk_min, usize::MAX)
                 .err()
                 .map(|e| e.to_string())
         };

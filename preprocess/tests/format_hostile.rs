@@ -1131,7 +1131,10 @@ fn hostile_nodes() {
         (
             "huge-quant-scale",
             Box::new(move |n| n[l1_second].quant_scale = [3e38; 3]),
-            vec!["level 2, point".into()],
+            vec![
+                id(l1_second),
+                "quantization scale 3e38 on axis 0 spreads its points past".into(),
+            ],
         ),
         (
             "centroid-moved-away",
@@ -1323,6 +1326,53 @@ fn hostile_metadata() {
     });
     let f = MdlodFile::open(&p).unwrap();
     assert_eq!(f.metadata().species[0].radius_range, Some([0.5, 1.5]));
+    // A species radius past single precision (infinite once read), 0 or negative would
+    // draw kernels and splats of any size (a density render ran for minutes); a colour
+    // outside 0..1 or an attribute range reversed or past single precision: refused on
+    // open, so verify, info and render all say so.
+    for (name, field, value, says) in [
+        (
+            "radius-inf.mdlod",
+            "radius",
+            serde_json::json!(1e300),
+            "radius inf",
+        ),
+        (
+            "radius-0.mdlod",
+            "radius",
+            serde_json::json!(0.0),
+            "radius 0",
+        ),
+        (
+            "radius-neg.mdlod",
+            "radius",
+            serde_json::json!(-1.0),
+            "radius -1",
+        ),
+        (
+            "colour.mdlod",
+            "colour",
+            serde_json::json!([1e30, -5.0, 2.0]),
+            "must be three numbers from 0 to 1",
+        ),
+    ] {
+        let p = with(name, &|m| m["species"][0][field] = value.clone());
+        expect_refused(&p, &["METADATA", says]);
+    }
+    for (name, range, says) in [
+        ("attribute-reversed.mdlod", [2.0, 1.0], "range 2 to 1"),
+        ("attribute-huge.mdlod", [-1e39, 1.0], "range -inf to 1"),
+    ] {
+        let p =
+            with(
+                name,
+                &|m| {
+                    m["attribute"] =
+                        serde_json::json!({"name": "c_pe", "min": range[0], "max": range[1]})
+                },
+            );
+        expect_refused(&p, &["METADATA", "attribute \"c_pe\"", says]);
+    }
     let p = with("no-build.mdlod", &|m| {
         m.as_object_mut().unwrap().remove("build");
     });
@@ -1344,7 +1394,7 @@ fn hostile_metadata() {
     let p = raw("json-array.mdlod", b"[1, 2, 3]");
     expect_refused(&p, &["METADATA section: invalid JSON"]);
     let p = raw("not-utf8.mdlod", b"{\"writer\": \"\xff\xfe\"}");
-    expect_refused(&p, &["METADATA section: invalid JSON"]);
+    expect_refused(&p, &["METADATA", "not UTF-8 text (byte 12 of the section)"]);
     let deep = format!("{}{}", "[".repeat(100_000), "]".repeat(100_000));
     let p = raw("deep-json.mdlod", deep.as_bytes());
     expect_refused(&p, &["METADATA section: invalid JSON"]);
