@@ -554,9 +554,7 @@ impl MdlodFile {
                         NodeRules {
                             delta_n,
                             species_count: metadata.species.len(),
-                            half_range: crate::quantize::half_range(u32::from(
-                                header.position_bits,
-                            )),
+                            half_range: crate::quantize::half_range(header.position_bits),
                         },
                         eager_levels,
                     )
