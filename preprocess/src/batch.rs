@@ -15,7 +15,9 @@
 //! 2. With a shard `I/N`, this process takes the frames at positions `I, I + N, ...` of
 //!    that sorted list, so N processes (a Slurm job array) split the work without talking
 //!    to each other; each writes its own manifest `dataset.shard-I-of-N.json`, and
-//!    [`merge`] joins them into `dataset.json`.
+//!    [`merge`] joins them into `dataset.json`. Each records which list it split
+//!    ([`InputFrames`]): shards started before and after a file set grew take every N-th
+//!    frame of different lists, leaving frames to none, and the merge refuses them.
 //! 3. A frame without particles cannot be a `.mdlod` file: it is left out (not written,
 //!    not listed, not expected of the shard) and reported ([`BatchReport::empty`]), told
 //!    from its header alone on every run. A frame whose output exists, opens (the reader
@@ -122,7 +124,92 @@ pub struct Manifest {
     /// killed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub expected_frames: Option<u64>,
+    /// The list of input frames the run split into shards (every shard's frames and the
+    /// others'), which every shard of one sharding must have seen alike: a file set that
+    /// grew between two array tasks' starts gives them different lists, and taking every
+    /// N-th frame of each leaves some frames to no shard. Absent in manifests of earlier
+    /// versions (unknown: not compared).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_frames: Option<InputFrames>,
     pub frames: Vec<FrameEntry>,
+}
+
+/// What identifies the list of input frames a batch split into shards
+/// ([`Manifest::input_frames`]).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InputFrames {
+    /// How many frames the inputs held (less the duplicates left out), in all shards.
+    pub count: u64,
+    /// XXH3-64 (hex) of the ordered list of the frames' (input file name, timestep). The
+    /// file name without its directory: a requeued task may name the same inputs from
+    /// another directory.
+    pub xxh3: String,
+}
+
+impl InputFrames {
+    /// The identity of the list of frames `(input, timestep)`, in the order the shards
+    /// take them.
+    fn of<'a>(frames: impl Iterator<Item = (&'a Path, u64)>) -> Self {
+        let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+        let mut count = 0u64;
+        for (input, timestep) in frames {
+            let name = input.file_name().unwrap_or(input.as_os_str());
+            let name = name.to_string_lossy();
+            // Length-prefixed: no two lists hash the same bytes.
+            hasher.update(&(name.len() as u64).to_le_bytes());
+            hasher.update(name.as_bytes());
+            hasher.update(&timestep.to_le_bytes());
+            count += 1;
+        }
+        InputFrames {
+            count,
+            xxh3: format!("{:016x}", hasher.digest()),
+        }
+    }
+}
+
+/// Where shard manifests (name, list of input frames) record different lists of input
+/// frames, the message saying which shards saw which; manifests that record none (of
+/// earlier versions) are passed over.
+fn different_input_lists(manifests: &[(String, Option<InputFrames>)]) -> Option<String> {
+    // The distinct lists in order of first appearance, each with its manifests.
+    let mut groups: Vec<(&InputFrames, Vec<&str>)> = Vec::new();
+    for (name, list) in manifests {
+        let Some(list) = list else { continue };
+        match groups.iter_mut().find(|(l, _)| *l == list) {
+            Some((_, names)) => names.push(name),
+            None => groups.push((list, vec![name])),
+        }
+    }
+    if groups.len() < 2 {
+        return None;
+    }
+    let counts: Vec<u64> = groups.iter().map(|(l, _)| l.count).collect();
+    let saw: Vec<String> = groups
+        .iter()
+        .map(|(l, names)| {
+            // The same count twice: the lists differ in their files or timesteps.
+            let same_count = counts.iter().filter(|&&c| c == l.count).count() > 1;
+            format!(
+                "{} saw {} frame{}{}",
+                names.join(", "),
+                l.count,
+                if l.count == 1 { "" } else { "s" },
+                if same_count {
+                    " (of other files or timesteps)"
+                } else {
+                    ""
+                }
+            )
+        })
+        .collect();
+    Some(format!(
+        "the shards split different lists of input frames: {}. The inputs changed between \
+         the shards' runs (a file set that grew, a dump still being written), so some \
+         frames belong to no shard and others to two: rerun every shard over the same, \
+         complete inputs (each converts only what it lacks), then merge",
+        saw.join("; ")
+    ))
 }
 
 /// How to run a batch.
@@ -973,6 +1060,8 @@ pub fn batch(
         jobs = kept;
     }
     let frames_total = jobs.len();
+    // The list the shards split: the same in every shard only when the inputs were.
+    let input_frames = InputFrames::of(jobs.iter().map(|j| (j.input, j.timestep)));
     // Frame files no frame of these inputs is written to (a run over other or longer
     // inputs left them): named, left alone.
     let numbers: std::collections::HashSet<u64> = jobs.iter().map(|j| j.timestep).collect();
@@ -1216,6 +1305,7 @@ pub fn batch(
         mdlod_dataset: 1,
         shard: opts.shard.map(|(i, n)| [i, n]),
         expected_frames: Some((frames_in_shard - empty.len()) as u64),
+        input_frames: Some(input_frames),
         frames: done,
     }));
     // Unset again when the batch returns, however it returns.
@@ -1589,13 +1679,32 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
             ),
         ));
     }
-    let mut frames = Vec::new();
-    let mut expected_total = Some(0u64);
-    let mut settings = MergeSettings::default();
+    let mut manifests = Vec::with_capacity(shards.len());
     for (_, _, path) in &shards {
         let text = std::fs::read(path).map_err(io(path))?;
         let m: Manifest = serde_json::from_slice(&text)
             .map_err(|e| manifest_err(path, format!("not a shard manifest: {e}")))?;
+        manifests.push((path, m));
+    }
+    // Before the frames: shards over different lists of frames have each converted
+    // frames of their own list, which no merge can join (checked where the manifests
+    // record their lists).
+    let lists: Vec<(String, Option<InputFrames>)> = manifests
+        .iter()
+        .map(|(p, m)| (file_name_of(p), m.input_frames.clone()))
+        .collect();
+    if let Some(message) = different_input_lists(&lists) {
+        return Err(manifest_err(out_dir, message));
+    }
+    let input_frames = match lists.first() {
+        Some((_, Some(l))) if lists.iter().all(|(_, x)| x.is_some()) => Some(l.clone()),
+        _ => None,
+    };
+    let mut frames = Vec::new();
+    let mut expected_total = Some(0u64);
+    let mut settings = MergeSettings::default();
+    for (path, m) in manifests {
+        let path = path.as_path();
         for f in &m.frames {
             if !out_dir.join(&f.file).is_file() {
                 return Err(manifest_err(
@@ -1637,10 +1746,19 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         mdlod_dataset: 1,
         shard: None,
         expected_frames: expected_total,
+        input_frames,
         frames,
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
     Ok(merged)
+}
+
+/// The file name of `path`, as messages name manifests.
+fn file_name_of(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
 }
 
 /// The build settings of the frames a merge has seen, which every frame of a batch
@@ -1862,6 +1980,7 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     }
     let mut listed = std::collections::HashSet::new();
     let mut entries = Vec::new();
+    let mut lists = Vec::new();
     for name in &manifests {
         let path = dir.join(name);
         let text = std::fs::read(&path).map_err(io(&path))?;
@@ -1878,11 +1997,14 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                 ));
             }
         }
+        lists.push((name.clone(), m.input_frames));
         for f in m.frames {
             listed.insert(f.file.clone());
             entries.push((name.clone(), f));
         }
     }
+    // Shards not merged yet: they must have split one list of frames (see [`merge`]).
+    check.problems.extend(different_input_lists(&lists));
     progress.stage("verifying frames", Some(entries.len() as u64), "frames");
     for (manifest, f) in &entries {
         let place = format!("{} (timestep {}, in {manifest})", f.file, f.timestep);

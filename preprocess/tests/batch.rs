@@ -1557,3 +1557,76 @@ fn a_manifest_handle_lists_the_frames_finished_between_rewrites() {
     assert!(!handle.save_now().unwrap());
     assert_eq!(read_manifest(&out).unwrap().frames.len(), 6);
 }
+
+/// The 6-frame real dump split into a file set in `dir`, one file per frame
+/// (`dump.<timestep>.txt`), by timestep.
+fn file_set(dir: &Path) -> Vec<PathBuf> {
+    use mdlod_preprocess::readers::DumpFile;
+    std::fs::create_dir_all(dir).unwrap();
+    let path = lammps_sample_path("cu_melt.custom.dump");
+    let whole = std::fs::read(&path).unwrap();
+    let frames = DumpFile::open(&path).unwrap();
+    (0..frames.frame_count())
+        .map(|k| {
+            let r = frames.frame_bytes(k).unwrap();
+            let t = frames.frame_timestep(k).unwrap();
+            let p = dir.join(format!("dump.{t}.txt"));
+            std::fs::write(&p, &whole[r.start as usize..r.end as usize]).unwrap();
+            p
+        })
+        .collect()
+}
+
+/// Array tasks started before and after a file set grew split different lists of
+/// frames (shard 0 of 2 takes 0, 200 of four frames, shard 1 takes 100, 300, 500 of
+/// six: 400 belongs to neither): the merge refuses, naming the shards and what each saw,
+/// and so does verify; rerun over the whole set, they merge. Manifests of earlier
+/// versions, which record no list, are not refused.
+#[test]
+fn merge_refuses_shards_that_split_different_lists_of_frames() {
+    use mdlod_preprocess::batch::verify_dir;
+    let dir = tempfile::tempdir().unwrap();
+    let all = file_set(&dir.path().join("src"));
+    let out = dir.path().join("out");
+    batch(&all[..4], &out, &shard(0, 2), &NoProgress).unwrap();
+    batch(&all, &out, &shard(1, 2), &NoProgress).unwrap();
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains("different lists of input frames")
+            && e.contains("dataset.shard-0-of-2.json saw 4 frames")
+            && e.contains("dataset.shard-1-of-2.json saw 6 frames")
+            && e.contains("rerun every shard over the same, complete inputs"),
+        "{e}"
+    );
+    assert!(!out.join("dataset.json").exists());
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    assert!(
+        c.problems
+            .iter()
+            .any(|p| p.contains("different lists of input frames")),
+        "{c:?}"
+    );
+    // The same count, other timesteps: told apart by the digest.
+    let other = dir.path().join("other");
+    let mut swapped = all[..3].to_vec();
+    swapped.push(all[4].clone());
+    batch(&all[..4], &other, &shard(0, 2), &NoProgress).unwrap();
+    batch(&swapped, &other, &shard(1, 2), &NoProgress).unwrap();
+    let e = merge(&other).unwrap_err().to_string();
+    assert!(e.contains("4 frames (of other files or timesteps)"), "{e}");
+
+    batch(&all, &out, &shard(0, 2), &NoProgress).unwrap();
+    let m = merge(&out).unwrap();
+    assert_eq!(m.frames.len(), 6);
+    assert_eq!(m.input_frames.as_ref().map(|l| l.count), Some(6));
+    check_manifest(&out, &m);
+
+    // A manifest without the list (an earlier version's) is not compared.
+    let path = out.join("dataset.shard-0-of-2.json");
+    let mut old: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    old.as_object_mut().unwrap().remove("input_frames").unwrap();
+    std::fs::write(&path, serde_json::to_vec(&old).unwrap()).unwrap();
+    let m = merge(&out).unwrap();
+    assert_eq!((m.frames.len(), m.input_frames), (6, None));
+}
