@@ -46,7 +46,9 @@
 //!    once a second ([`MANIFEST_INTERVAL`]) and once at the end, listing only complete
 //!    ones: killing a batch at any moment leaves no file that looks complete and a
 //!    manifest that is true (it may miss the frames of its last second, which a rerun
-//!    finds complete and lists). A handler of SIGTERM (a scheduler's time limit) or
+//!    finds complete and lists). A run that fails before any output is written (an
+//!    error every frame meets, such as a binary dump's missing `--columns`) puts the
+//!    manifest back as it was (none, if there was none). A handler of SIGTERM (a scheduler's time limit) or
 //!    Ctrl-C lists those too before the program exits, through a [`ManifestHandle`].
 
 use std::fmt::Display;
@@ -613,12 +615,6 @@ fn shard_of(name: &str) -> Option<(u32, u32)> {
 
 /// Writes `value` as JSON to `path` atomically (temporary file + rename).
 fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".dataset.")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(io(dir))?;
     // Serialized in memory and written at once: the writer's many small writes would
     // each be a system call on the unbuffered file.
     let mut text = serde_json::to_vec_pretty(value).map_err(|e| BatchError::Io {
@@ -626,8 +622,20 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
         source: e.into(),
     })?;
     text.push(b'\n');
+    write_bytes(path, &text)
+}
+
+/// Writes `text` to `path` atomically (temporary file + rename), readable by all as the
+/// manifests are.
+fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".dataset.")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(io(dir))?;
     use std::io::Write;
-    tmp.write_all(&text).map_err(io(path))?;
+    tmp.write_all(text).map_err(io(path))?;
     tmp.as_file().sync_all().map_err(io(path))?;
     mdlod_format::writer::make_readable(tmp.as_file()).map_err(io(path))?;
     tmp.persist(path).map_err(|e| BatchError::Io {
@@ -1325,6 +1333,13 @@ pub fn batch(
         m.frames.sort_by_key(|f| f.timestep);
         write_json(&manifest_path, m)
     };
+    // The manifest as it was before this run (its bytes; `Err(NotFound)`: none), put
+    // back where the run fails before any output was written: an error every frame
+    // meets (an option the inputs need, such as `--columns` for an old-revision binary
+    // dump) would otherwise leave a manifest without the frames it is to convert again,
+    // and the corrected rerun, finding no record of how they were read, would convert
+    // every one again for "other settings".
+    let previous = std::fs::read(&manifest_path).map_err(|e| e.kind());
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
     // A shard that converts anything outdates the merged manifest of an earlier merge
     // (its checksums, its frames' sources): removed before the first frame changes, so
@@ -1375,6 +1390,8 @@ pub fn batch(
     let first_error: Mutex<Option<BatchError>> = Mutex::new(None);
     let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(ends_mid_line);
     let converted = std::sync::atomic::AtomicUsize::new(0);
+    // Whether any conversion has written its output (renamed into place).
+    let wrote = AtomicBool::new(false);
     let quiet = crate::progress::NoProgress;
     // The calling thread is one of the workers (one job: the only one), so that a
     // single conversion allocates on the threads a lone `convert` would: each thread
@@ -1450,6 +1467,7 @@ pub fn batch(
                             convert,
                             &quiet,
                         )?;
+                        wrote.store(true, Ordering::Relaxed);
                         keep_notes(job.timestep, report.notes);
                     } else {
                         // Refused before the frame is read, not after.
@@ -1464,6 +1482,7 @@ pub fn batch(
                         }
                         let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
                         let report = convert_frame(&frame, Some(source), &out, convert, &quiet)?;
+                        wrote.store(true, Ordering::Relaxed);
                         keep_notes(job.timestep, report.notes);
                     }
                     let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
@@ -1532,6 +1551,20 @@ pub fn batch(
         save(&mut m)
     };
     if let Some(e) = first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
+        if !wrote.load(Ordering::Relaxed) {
+            // No output changed: the earlier manifest is as true as it was. (Where it
+            // cannot be put back, the one written stands, also true.)
+            if let Some(h) = &opts.handle {
+                h.set(None);
+            }
+            let _ = match previous {
+                Ok(bytes) => write_bytes(&manifest_path, &bytes),
+                Err(std::io::ErrorKind::NotFound) => {
+                    std::fs::remove_file(&manifest_path).map_err(io(&manifest_path))
+                }
+                Err(_) => Ok(()),
+            };
+        }
         return Err(BatchError::Incomplete {
             converted: converted.load(Ordering::Relaxed),
             todo: todo.len(),
