@@ -408,6 +408,9 @@ pub enum BatchError {
     },
     #[error("{}: {message}", path.display())]
     Manifest { path: PathBuf, message: String },
+    /// A quoted file-name pattern that names no inputs.
+    #[error("{}: {message}", pattern.display())]
+    Pattern { pattern: PathBuf, message: String },
     #[error("shard {0}/{1}: the shard index must be below the shard count")]
     BadShard(u32, u32),
     /// A frame failed (the first error); the frames converted before it, or beside it
@@ -886,6 +889,136 @@ fn remove_leftovers(
         }
     }
     Ok(())
+}
+
+/// The inputs with file-name patterns (`dump.*.bin`) expanded where the shell left
+/// them (quoted in a job script): `*` and `?` in the last component, matching files of
+/// its directory, in natural order (see [`natural_cmp`]). A path that exists is taken as
+/// it is. A pattern matches files only, as the inputs must be: not directories (the
+/// batch directory itself, for `'run/*' -o run/out`), not hidden files unless it starts
+/// with a dot (as the shell's), and not what a batch writes in `out_dir` (frames,
+/// manifests, temporary files), which a rerun would otherwise take for inputs.
+pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf>, BatchError> {
+    let out_dir = std::fs::canonicalize(out_dir).ok();
+    let mut out = Vec::with_capacity(inputs.len());
+    for input in inputs {
+        let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if input.exists() || !name.contains(['*', '?', '[']) {
+            out.push(input.clone());
+            continue;
+        }
+        let err = |message: String| BatchError::Pattern {
+            pattern: input.clone(),
+            message,
+        };
+        if name.contains('[') {
+            return Err(err(
+                "a quoted pattern takes * and ? only, not [...] (leave it unquoted for the \
+                 shell to expand)"
+                    .into(),
+            ));
+        }
+        let dir = match input.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let entries = std::fs::read_dir(&dir)
+            .map_err(|e| err(format!("cannot list {}: {e}", dir.display())))?;
+        // The batch directory's own files, where the pattern's directory is it.
+        let in_out_dir = out_dir.is_some() && std::fs::canonicalize(&dir).ok() == out_dir;
+        let mut found: Vec<PathBuf> = entries
+            .flatten()
+            .filter(|e| {
+                let Some(n) = e.file_name().to_str().map(str::to_owned) else {
+                    return false;
+                };
+                wildcard(name, &n)
+                    && (name.starts_with('.') || !n.starts_with('.'))
+                    && !(in_out_dir && written_by_batch(&n))
+                    // (Following links: a link to a file is one.)
+                    && e.path().is_file()
+            })
+            .map(|e| input.with_file_name(e.file_name()))
+            .collect();
+        if found.is_empty() {
+            return Err(err("no file matches the pattern".into()));
+        }
+        found.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
+        out.extend(found);
+    }
+    Ok(out)
+}
+
+/// Whether a file of this name in a batch directory is one a batch writes: a frame, a
+/// manifest (whole, a shard's) or a temporary file.
+pub fn written_by_batch(name: &str) -> bool {
+    (name.starts_with("frame-") && name.ends_with(".mdlod"))
+        || (name.starts_with("dataset") && name.ends_with(".json"))
+        || name.ends_with(".tmp")
+}
+
+/// Whether `name` matches `pattern`, where `*` stands for any run of characters and `?`
+/// for one.
+fn wildcard(pattern: &str, name: &str) -> bool {
+    let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
+    // Greedy with backtracking to the last `*`.
+    let (mut i, mut j, mut star, mut mark) = (0, 0, None, 0);
+    while j < n.len() {
+        if i < p.len() && (p[i] == '?' || p[i] == n[j]) {
+            i += 1;
+            j += 1;
+        } else if i < p.len() && p[i] == '*' {
+            star = Some(i);
+            mark = j;
+            i += 1;
+        } else if let Some(s) = star {
+            i = s + 1;
+            mark += 1;
+            j = mark;
+        } else {
+            return false;
+        }
+    }
+    p[i..].iter().all(|&c| c == '*')
+}
+
+/// Orders paths as people number file sets: runs of digits by their value, so that
+/// `water.2.xyz` comes before `water.10.xyz` (the shell's order puts it after), the rest
+/// character by character.
+pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
+    let (mut a, mut b) = (a.as_bytes(), b.as_bytes());
+    loop {
+        match (a.first(), b.first()) {
+            (None, None) => return std::cmp::Ordering::Equal,
+            (None, Some(_)) => return std::cmp::Ordering::Less,
+            (Some(_), None) => return std::cmp::Ordering::Greater,
+            (Some(x), Some(y)) if x.is_ascii_digit() && y.is_ascii_digit() => {
+                let run = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
+                let (na, nb) = (run(a), run(b));
+                let trim = |s: &[u8]| -> usize { s.iter().take_while(|&&c| c == b'0').count() };
+                let (da, db) = (
+                    &a[trim(&a[..na]).min(na)..na],
+                    &b[trim(&b[..nb]).min(nb)..nb],
+                );
+                // By value (length, then digits), then by the zeros in front (`01` after `1`).
+                let order = da
+                    .len()
+                    .cmp(&db.len())
+                    .then_with(|| da.cmp(db))
+                    .then_with(|| na.cmp(&nb));
+                if order != std::cmp::Ordering::Equal {
+                    return order;
+                }
+                (a, b) = (&a[na..], &b[nb..]);
+            }
+            (Some(x), Some(y)) => {
+                if x != y {
+                    return x.cmp(y);
+                }
+                (a, b) = (&a[1..], &b[1..]);
+            }
+        }
+    }
 }
 
 /// One frame to convert.
@@ -2095,6 +2228,41 @@ pub fn read_manifest(out_dir: &Path) -> Result<Manifest, BatchError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quoted_patterns_match_file_names() {
+        use super::wildcard;
+        assert!(wildcard("dump.*.bin", "dump.1000.bin"));
+        assert!(wildcard("dump.*.bin", "dump..bin"));
+        assert!(!wildcard("dump.*.bin", "dump.1000.bin.gz"));
+        assert!(wildcard("d?mp*", "dump.1"));
+        assert!(wildcard("*a*b", "xxaxxb"));
+        assert!(!wildcard("*a*b", "xxaxxbc"));
+        let dir = tempfile::tempdir().unwrap();
+        for n in ["dump.20.bin", "dump.10.bin", "other.bin"] {
+            std::fs::write(dir.path().join(n), "").unwrap();
+        }
+        let found =
+            super::expand_patterns(&[dir.path().join("dump.*.bin")], Path::new("out")).unwrap();
+        let names: Vec<_> = found
+            .iter()
+            .map(|p| p.file_name().unwrap().to_owned())
+            .collect();
+        assert_eq!(names, ["dump.10.bin", "dump.20.bin"]);
+        let mut set = vec![
+            "w.10.xyz", "w.2.xyz", "w.1.xyz", "w.02.xyz", "v.xyz", "w.1a.xyz",
+        ];
+        set.sort_by(|a, b| super::natural_cmp(a, b));
+        assert_eq!(
+            set,
+            ["v.xyz", "w.1.xyz", "w.1a.xyz", "w.2.xyz", "w.02.xyz", "w.10.xyz"]
+        );
+        let e = super::expand_patterns(&[dir.path().join("none.*")], Path::new("out")).unwrap_err();
+        assert!(e.to_string().contains("no file matches"), "{e}");
+        let e = super::expand_patterns(&[dir.path().join("dump.[12]*.bin")], Path::new("out"))
+            .unwrap_err();
+        assert!(e.to_string().contains("* and ? only"), "{e}");
+    }
 
     #[test]
     fn sources_differ_by_nanoseconds_unless_recorded_without_them() {

@@ -1716,3 +1716,41 @@ fn a_rerun_failing_before_any_output_leaves_the_manifest_as_it_was() {
         );
     }
 }
+
+/// A quoted pattern over the directory that holds the batch directory (`'fs2/*' -o
+/// fs2/out`) matches the inputs again on a rerun, not the batch directory; over the
+/// batch directory itself, not the frames and manifests the batch wrote there; and not
+/// hidden files, as the shell's.
+#[test]
+fn a_quoted_pattern_skips_directories_and_the_batchs_own_files() {
+    use mdlod_preprocess::batch::expand_patterns;
+    let dir = tempfile::tempdir().unwrap();
+    let fs2 = dir.path().join("fs2");
+    let all = file_set(&fs2);
+    let names = |v: &[PathBuf]| -> Vec<String> {
+        v.iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect()
+    };
+    let pattern = fs2.join("*");
+    let out = fs2.join("out");
+    std::fs::write(fs2.join(".hidden.txt"), "not an input").unwrap();
+    for run in 0..2 {
+        let inputs = expand_patterns(std::slice::from_ref(&pattern), &out).unwrap();
+        assert_eq!(names(&inputs), names(&all), "run {run}");
+        let r = batch(&inputs, &out, &opts(), &NoProgress).unwrap();
+        assert_eq!(r.frames_total, 6);
+    }
+    // The batch directory is the pattern's: its frames and manifest are not inputs.
+    let inputs = expand_patterns(std::slice::from_ref(&pattern), &fs2).unwrap();
+    batch(&inputs, &fs2, &opts(), &NoProgress).unwrap();
+    assert!(fs2.join("dataset.json").exists() && fs2.join("frame-0.mdlod").exists());
+    let again = expand_patterns(std::slice::from_ref(&pattern), &fs2).unwrap();
+    assert_eq!(names(&again), names(&all));
+    // Elsewhere, files of such names are inputs like any others.
+    let e = expand_patterns(&[fs2.join("out").join("*.mdlod")], &fs2).unwrap();
+    assert_eq!(e.len(), 6);
+    // Nothing but directories: no file matches.
+    let e = expand_patterns(&[fs2.join("ou*")], &fs2).unwrap_err();
+    assert!(e.to_string().contains("no file matches"), "{e}");
+}
