@@ -343,8 +343,10 @@ pub struct BatchReport {
     /// appended frames to since, a file touched) but whose own bytes did not: kept
     /// (counted in `skipped` too).
     pub kept_unchanged: usize,
-    /// Last frames of their inputs that are cut short (a run still writing them): left
-    /// out, not expected of this run, converted by a rerun once complete.
+    /// Last frames of the newest input that are cut short (a run still writing them),
+    /// and a newest input of a set that is empty: left out, not expected of this run,
+    /// converted by a rerun once complete. (An older input cut short is an error,
+    /// [`BatchError::CutShortBeforeNewest`].)
     pub incomplete: Vec<IncompleteFrame>,
 }
 
@@ -371,10 +373,21 @@ pub struct IncompleteFrame {
     pub timestep: Option<u64>,
     /// What the reader said.
     pub reason: String,
+    /// Whether the whole input is empty (the newest file of a set, just opened): no
+    /// frame of it is known.
+    pub empty_file: bool,
 }
 
 impl std::fmt::Display for IncompleteFrame {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.empty_file {
+            return write!(
+                f,
+                "{}, the newest input, is empty (a run still writing it?): left out; a rerun \
+                 converts its frames once written",
+                self.input.display()
+            );
+        }
         write!(f, "{}: frame {}", self.input.display(), self.frame)?;
         if let Some(t) = self.timestep {
             write!(f, " (timestep {t})")?;
@@ -408,6 +421,22 @@ pub enum BatchError {
     },
     #[error("{}: {message}", path.display())]
     Manifest { path: PathBuf, message: String },
+    /// An input cut short that is not the newest ([`newest_inputs`]): a run writes one
+    /// file of a set at a time, so an older one is damaged (a copy that stopped), not
+    /// being written, and leaving its frame out would lose it unnoticed.
+    #[error(
+        "{} is cut short, but it is not the newest input ({newest}), and \
+         only the newest may be one a run is still writing: replace it with a complete copy, \
+         or leave it out of the inputs; {reason}",
+        input.display()
+    )]
+    CutShortBeforeNewest {
+        input: PathBuf,
+        /// The newest input.
+        newest: String,
+        /// What is cut short, as the reader said.
+        reason: String,
+    },
     /// A quoted file-name pattern that names no inputs.
     #[error("{}: {message}", pattern.display())]
     Pattern { pattern: PathBuf, message: String },
@@ -1042,6 +1071,37 @@ struct Job<'a> {
     given_radii: Option<Vec<(String, f32)>>,
     /// Whether the frame is its input's last (one a running simulation may be writing).
     last_of_input: bool,
+    /// Whether its input is the newest of the inputs ([`newest_inputs`]), the only one
+    /// whose last frame may be cut short.
+    newest: bool,
+}
+
+impl Job<'_> {
+    /// Whether the frame may be one a running simulation is still writing: the last of
+    /// the newest input. A file set's older files are complete (a run writes one file at
+    /// a time), so one of them cut short is damaged, and an error.
+    fn may_be_cut(&self) -> bool {
+        self.last_of_input && self.newest
+    }
+}
+
+/// Which inputs are the newest, given their frames as listed: those holding the greatest
+/// timestep of the inputs, and the last input, as inputs are given in their order (the
+/// CLI sorts them by their numbers): a file cut in its first frame's header records no
+/// timestep, or a part of one (`50` of `500`, the line cut short), and formats without
+/// timesteps have none.
+fn newest_inputs(listed: &[Vec<Listed>]) -> Vec<bool> {
+    let latest: Vec<Option<u64>> = listed
+        .iter()
+        .map(|frames| frames.iter().filter_map(|f| f.0).max())
+        .collect();
+    let greatest = latest.iter().flatten().max().copied();
+    let last = latest.len().checked_sub(1);
+    latest
+        .iter()
+        .enumerate()
+        .map(|(i, t)| Some(i) == last || (t.is_some() && *t == greatest))
+        .collect()
 }
 
 /// A frame as it was listed while its input was open: (the input's own timestep, the
@@ -1080,7 +1140,29 @@ pub fn batch(
     // Indexing has the whole memory limit: one input at a time, before any conversion.
     let mut index_chunks = opts.convert.chunks.clone();
     index_chunks.memory_limit = opts.memory_limit;
-    for p in inputs {
+    // The newest input of a set, as empty files are told (see [`newest_inputs`]).
+    let last_input = inputs.len().checked_sub(1);
+    let mut empty_inputs = Vec::new();
+    for (i, p) in inputs.iter().enumerate() {
+        // An empty newest file of a set is one LAMMPS has just opened: left out with a
+        // note, as a frame cut short is. (Elsewhere, or alone, it is the reader's error.)
+        if inputs.len() > 1
+            && Some(i) == last_input
+            && std::fs::metadata(p).is_ok_and(|m| m.is_file() && m.len() == 0)
+        {
+            empty_inputs.push(IncompleteFrame {
+                input: p.clone(),
+                frame: 0,
+                timestep: None,
+                reason: "the file is empty (a run has just opened it?)".into(),
+                empty_file: true,
+            });
+            // No frames: the format and dump stand in for none.
+            listed.push(Vec::new());
+            formats.push(InputFormat::LammpsText);
+            dumps.push(None);
+            continue;
+        }
         // A large gzip input is decompressed into a working file (removed again below),
         // not into memory.
         let bounded =
@@ -1129,8 +1211,24 @@ pub fn batch(
         formats.push(dump.format());
         dumps.push((!compressed).then_some(bounded.dump));
     }
+    let newest = newest_inputs(&listed);
+    // The newest input, as an error about an older one cut short names it (the last of
+    // them in order, where the one holding the latest timestep is not the last).
+    let newest_text = inputs
+        .iter()
+        .zip(&newest)
+        .filter(|(_, n)| **n)
+        .map(|(p, _)| p.display().to_string())
+        .next_back()
+        .unwrap_or_default();
     let mut jobs: Vec<Job<'_>> = Vec::new();
-    for (((input, dump), format), frames) in inputs.iter().zip(&dumps).zip(&formats).zip(listed) {
+    for ((((input, dump), format), frames), newest) in inputs
+        .iter()
+        .zip(&dumps)
+        .zip(&formats)
+        .zip(listed)
+        .zip(newest)
+    {
         let count = frames.len();
         for (k, (own, timestep, particles, attribute, given)) in frames.into_iter().enumerate() {
             jobs.push(Job {
@@ -1144,6 +1242,7 @@ pub fn batch(
                 attribute,
                 given_radii: given,
                 last_of_input: k + 1 == count,
+                newest,
             });
         }
     }
@@ -1430,6 +1529,16 @@ pub fn batch(
         .into_iter()
         .partition(|j| j.last_of_input && j.dump.is_some_and(DumpFile::ends_mid_line));
     todo = rest;
+    // Not the newest input: a file of a set that no run is writing any more.
+    if let Some(job) = cut.iter().find(|j| !j.newest) {
+        return Err(BatchError::CutShortBeforeNewest {
+            input: job.input.to_path_buf(),
+            newest: newest_text.clone(),
+            reason: "its last line has no line end: the run writing it may have stopped \
+                     inside a number (if the file is complete, add a line end to it)"
+                .into(),
+        });
+    }
     let ends_mid_line: Vec<IncompleteFrame> = cut
         .into_iter()
         .map(|job| IncompleteFrame {
@@ -1439,6 +1548,7 @@ pub fn batch(
             reason: "its last line has no line end: the run writing it may have stopped \
                      inside a number (if the file is complete, add a line end to it)"
                 .into(),
+            empty_file: false,
         })
         .collect();
     let skipped = done.len();
@@ -1642,7 +1752,7 @@ pub fn batch(
                 }
                 // The last frame of a dump a running simulation is writing: left
                 // for a rerun, not a failure of the others.
-                Err(e) if job.last_of_input && e.cut_short() => {
+                Err(e) if job.may_be_cut() && e.cut_short() => {
                     incomplete
                         .lock()
                         .unwrap_or_else(|e| e.into_inner())
@@ -1651,10 +1761,21 @@ pub fn batch(
                             frame: job.frame,
                             timestep: job.own_timestep,
                             reason: e.to_string(),
+                            empty_file: false,
                         });
                     progress.advance(job.particles);
                 }
                 Err(e) => {
+                    // An older file of a set cut short: damaged, not being written.
+                    let e = if job.last_of_input && e.cut_short() {
+                        BatchError::CutShortBeforeNewest {
+                            input: job.input.to_path_buf(),
+                            newest: newest_text.clone(),
+                            reason: e.to_string(),
+                        }
+                    } else {
+                        e
+                    };
                     failed.store(true, Ordering::Relaxed);
                     first_error
                         .lock()
@@ -1683,6 +1804,8 @@ pub fn batch(
         }
         save(&mut m)
     };
+    // (An empty newest file has no frames to expect.)
+    incomplete.extend(empty_inputs);
     if let Some(e) = first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
         if !wrote.load(Ordering::Relaxed) {
             // No output changed: the earlier manifest is as true as it was. (Where it

@@ -1754,3 +1754,61 @@ fn a_quoted_pattern_skips_directories_and_the_batchs_own_files() {
     let e = expand_patterns(&[fs2.join("ou*")], &fs2).unwrap_err();
     assert!(e.to_string().contains("no file matches"), "{e}");
 }
+
+/// Only the newest file of a set may be one a run is still writing: one cut short before
+/// it (in its atoms, its header or its last line) is an error naming it, where the newest
+/// cut so is left out with a note; an empty newest file (just opened) is left out too,
+/// an empty older one is an error.
+#[test]
+fn only_the_newest_file_of_a_set_may_be_cut_short() {
+    use mdlod_preprocess::batch::BatchReport;
+    let dir = tempfile::tempdir().unwrap();
+    let all = file_set(&dir.path().join("src"));
+    let whole: Vec<Vec<u8>> = all.iter().map(|p| std::fs::read(p).unwrap()).collect();
+    type Cut = fn(&[u8]) -> &[u8];
+    let cuts: [(&str, Cut); 4] = [
+        ("in its atoms", |b| &b[..b.len() / 2]),
+        ("in its header", |b| &b[..30]),
+        ("inside its last line", |b| &b[..b.len() - 2]),
+        ("to nothing", |b| &b[..0]),
+    ];
+    for (how, cut) in cuts {
+        for (which, k) in [("older", 2), ("newest", 5)] {
+            let run = dir.path().join(format!("{how} {which}"));
+            let set = run.join("set");
+            std::fs::create_dir_all(&set).unwrap();
+            let inputs: Vec<PathBuf> = all
+                .iter()
+                .zip(&whole)
+                .enumerate()
+                .map(|(i, (p, bytes))| {
+                    let q = set.join(p.file_name().unwrap());
+                    std::fs::write(&q, if i == k { cut(bytes) } else { &bytes[..] }).unwrap();
+                    q
+                })
+                .collect();
+            let r: Result<BatchReport, BatchError> =
+                batch(&inputs, &run.join("out"), &opts(), &NoProgress);
+            let name = inputs[k].display().to_string();
+            match (which, r) {
+                ("older", Err(e)) => {
+                    let e = e.to_string();
+                    assert!(e.contains(&name), "{how} {which}: {e}");
+                    let newest = format!("not the newest input ({})", inputs[5].display());
+                    assert!(
+                        e.contains(&newest) || e.contains("file is empty"),
+                        "{how} {which}: {e}"
+                    );
+                }
+                ("newest", Ok(r)) => {
+                    assert_eq!((r.converted, r.incomplete.len()), (5, 1), "{how} {which}");
+                    let note = r.incomplete[0].to_string();
+                    assert!(note.starts_with(&name), "{how}: {note}");
+                    let m = read_manifest(&run.join("out")).unwrap();
+                    assert_eq!((m.frames.len(), m.expected_frames), (5, Some(5)), "{how}");
+                }
+                (_, r) => panic!("{how} {which}: {:?}", r.map(|r| r.converted)),
+            }
+        }
+    }
+}
