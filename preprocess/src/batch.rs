@@ -1624,7 +1624,11 @@ pub fn batch(
     convert.chunks.memory_limit = opts.memory_limit / jobs as u64;
     let convert = &convert;
     progress.stage(
-        &format!("converting {} frames, {jobs} at a time", todo.len()),
+        &format!(
+            "converting {} frame{}, {jobs} at a time",
+            todo.len(),
+            if todo.len() == 1 { "" } else { "s" }
+        ),
         Some(total_particles),
         "particles",
     );
@@ -1963,8 +1967,13 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         return Err(manifest_err(
             out_dir,
             format!(
-                "shard{s} {} of {n} {has} no manifest yet (present: {present:?})",
-                missing.join(", ")
+                "shard{s} {} of {n} {has} no manifest yet (present: {})",
+                missing.join(", "),
+                present
+                    .iter()
+                    .map(u32::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
         ));
     }
@@ -2312,9 +2321,10 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                     ))
                 } else if m.timestep != Some(f.timestep) || file.particle_count() != f.particles {
                     Some(format!(
-                        "{place}: the file holds timestep {:?} and {} particles, the manifest \
-                         says {} and {}",
-                        m.timestep,
+                        "{place}: the file holds {} and {} particles, the manifest says \
+                         timestep {} and {} particles",
+                        m.timestep
+                            .map_or("no timestep".into(), |t| format!("timestep {t}")),
                         file.particle_count(),
                         f.timestep,
                         f.particles

@@ -1233,6 +1233,22 @@ fn a_batch_directory_verifies_against_its_manifest() {
         .iter()
         .any(|p| p.starts_with(m.frames[3].file.as_str()) && p.contains("listed but missing")));
     assert_eq!(c.unlisted, ["frame-99.mdlod"]);
+    // A manifest entry of other particles: the file's timestep named as a number.
+    let mut wrong = read_manifest(&out).unwrap();
+    wrong.frames[0].particles += 1;
+    std::fs::write(
+        out.join("dataset.json"),
+        serde_json::to_vec(&wrong).unwrap(),
+    )
+    .unwrap();
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    let want = format!(
+        "the file holds timestep 0 and {} particles, the manifest says timestep 0 and {} \
+         particles",
+        m.frames[0].particles,
+        m.frames[0].particles + 1
+    );
+    assert!(c.problems.iter().any(|p| p.ends_with(&want)), "{c:?}");
     // Shards, not merged: checked through their manifests.
     let sharded = dir.path().join("sharded");
     for i in 0..2 {

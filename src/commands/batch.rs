@@ -155,8 +155,9 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(dir) = &args.merge {
         let m = merge(dir)?;
         println!(
-            "merged {} frames into {}",
+            "merged {} frame{} into {}",
             m.frames.len(),
+            if m.frames.len() == 1 { "" } else { "s" },
             dir.join(mdlod_preprocess::batch::MANIFEST).display()
         );
         return Ok(());
