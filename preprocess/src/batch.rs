@@ -1947,13 +1947,14 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         ));
     }
     shards.sort();
-    let n = shards[0].1;
-    if let Some((_, m, p)) = shards.iter().find(|s| s.1 != n) {
-        return Err(manifest_err(
-            p,
-            format!("a shard of {m}, but others are of {n}"),
-        ));
+    let named: Vec<(u32, u32, String)> = shards
+        .iter()
+        .map(|(i, n, p)| (*i, *n, file_name_of(p)))
+        .collect();
+    if let Some(message) = different_shardings(&named) {
+        return Err(manifest_err(out_dir, message));
     }
+    let n = shards[0].1;
     let present: Vec<u32> = shards.iter().map(|s| s.0).collect();
     let missing: Vec<String> = (0..n)
         .filter(|i| !present.contains(i))
@@ -2049,6 +2050,72 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
     Ok(merged)
+}
+
+/// Where shard manifests `(I, N, file name)` are of different shard counts N, the
+/// message naming them and what to do. The sharding with the most manifests is taken
+/// for the array's, the others for strays: a task resubmitted alone (`sbatch --array=2`)
+/// finds SLURM_ARRAY_TASK_COUNT 1 and runs as shard 0 of 1.
+fn different_shardings(shards: &[(u32, u32, String)]) -> Option<String> {
+    let mut by_count: std::collections::BTreeMap<u32, Vec<(u32, &str)>> =
+        std::collections::BTreeMap::new();
+    for (i, n, name) in shards {
+        by_count.entry(*n).or_default().push((*i, name));
+    }
+    if by_count.len() < 2 {
+        return None;
+    }
+    let (&n, main) = by_count.iter().max_by_key(|(n, v)| (v.len(), **n))?;
+    let strays: Vec<&str> = by_count
+        .iter()
+        .filter(|(m, _)| **m != n)
+        .flat_map(|(_, v)| v.iter().map(|(_, name)| *name))
+        .collect();
+    let missing: Vec<u32> = (0..n)
+        .filter(|i| !main.iter().any(|(j, _)| j == i))
+        .collect();
+    let listed = |names: &[&str]| match names {
+        [] => String::new(),
+        [one] => (*one).to_string(),
+        [first @ .., last] => format!("{} and {last}", first.join(", ")),
+    };
+    const SHOWN: usize = 3;
+    let main_names: Vec<&str> = main.iter().map(|(_, name)| *name).take(SHOWN).collect();
+    let rerun = match missing.as_slice() {
+        [] => "rerun the stray task with its place in the whole array".to_string(),
+        [i] => format!("rerun the task with --shard {i}/{n}"),
+        more if more.len() <= SHOWN => format!(
+            "rerun the tasks with --shard {}",
+            more.iter()
+                .map(|i| format!("{i}/{n}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        more => format!("rerun the {} missing tasks with --shard I/{n}", more.len()),
+    };
+    Some(format!(
+        "shard manifests of different shardings: {} {} of {n} shards, but {} {} of {}. A \
+         failed task resubmitted alone (sbatch --array=2) runs as shard 0 of 1, as \
+         SLURM_ARRAY_TASK_COUNT is 1 then: {rerun} (or resubmit it with the array's whole \
+         range; it converts only what is missing), then delete {} and merge",
+        listed(&main_names),
+        if main.len() > SHOWN {
+            format!("(and {} more) are", main.len() - SHOWN)
+        } else if main.len() == 1 {
+            "is".to_string()
+        } else {
+            "are".to_string()
+        },
+        listed(&strays),
+        if strays.len() == 1 { "is" } else { "are" },
+        by_count
+            .keys()
+            .filter(|m| **m != n)
+            .map(u32::to_string)
+            .collect::<Vec<_>>()
+            .join(" and "),
+        listed(&strays),
+    ))
 }
 
 /// The file name of `path`, as messages name manifests.
@@ -2247,11 +2314,12 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     // Not merged: every shard of one sharding must have written its manifest.
     let shards: Vec<(u32, u32)> = manifests.iter().filter_map(|m| shard_of(m)).collect();
     if let Some(&(_, n)) = shards.first() {
-        if shards.iter().any(|s| s.1 != n) {
-            check.problems.push(format!(
-                "shard manifests of different shardings ({}): merge or remove the older ones",
-                manifests.join(", ")
-            ));
+        let named: Vec<(u32, u32, String)> = manifests
+            .iter()
+            .filter_map(|m| shard_of(m).map(|(i, n)| (i, n, m.clone())))
+            .collect();
+        if let Some(message) = different_shardings(&named) {
+            check.problems.push(message);
         } else {
             // N comes from a file name: count the missing, and list the first few.
             let present: std::collections::BTreeSet<u32> =

@@ -1828,3 +1828,36 @@ fn only_the_newest_file_of_a_set_may_be_cut_short() {
         }
     }
 }
+
+/// A failed array task resubmitted alone (`sbatch --array=2`) runs as shard 0 of 1: the
+/// merge names the manifests of the two shardings and says how to rerun the missing
+/// task and that the stray manifest can then be deleted; done so, the shards merge.
+#[test]
+fn merge_of_a_task_resubmitted_alone_names_the_stray_manifest_and_the_shard_to_rerun() {
+    use mdlod_preprocess::batch::verify_dir;
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    for i in [0, 1, 3] {
+        batch(std::slice::from_ref(&src), &out, &shard(i, 4), &NoProgress).unwrap();
+    }
+    batch(std::slice::from_ref(&src), &out, &shard(0, 1), &NoProgress).unwrap();
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains(
+            "dataset.shard-0-of-4.json, dataset.shard-1-of-4.json and dataset.shard-3-of-4.json \
+             are of 4 shards, but dataset.shard-0-of-1.json is of 1"
+        ) && e.contains("rerun the task with --shard 2/4")
+            && e.contains("then delete dataset.shard-0-of-1.json and merge"),
+        "{e}"
+    );
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    assert!(
+        c.problems.iter().any(|p| p.contains("--shard 2/4")),
+        "{c:?}"
+    );
+    let r = batch(std::slice::from_ref(&src), &out, &shard(2, 4), &NoProgress).unwrap();
+    assert_eq!(r.converted, 0, "shard 0 of 1 converted its frames already");
+    std::fs::remove_file(out.join("dataset.shard-0-of-1.json")).unwrap();
+    check_manifest(&out, &merge(&out).unwrap());
+}
