@@ -40,7 +40,8 @@
 //!    shard running beside it never writes those) and temporary manifests older than
 //!    [`STALE_TEMP`].
 //! 4. Frames are converted by a few workers at once, as many as the memory limit allows
-//!    (about [`BYTES_PER_PARTICLE`] per particle each, at most one per thread); each
+//!    (about [`BYTES_PER_PARTICLE`] per particle each, or one chunk's build for a frame
+//!    above the chunk size, at most one per thread); each
 //!    conversion is itself parallel. Outputs appear by atomic rename only when complete,
 //!    and the manifest is rewritten (temporary file + rename) as frames complete, at most
 //!    once a second ([`MANIFEST_INTERVAL`]) and once at the end, listing only complete
@@ -1603,14 +1604,31 @@ pub fn batch(
 
     // As many conversions at once as memory and threads allow.
     let threads = rayon::current_num_threads().max(1);
-    // A frame above the chunk size is built a chunk at a time.
+    // What one frame's conversion needs, which each frame's share of the limit must
+    // hold (the conversion refuses less): in memory, about `BYTES_PER_PARTICLE` each; a
+    // frame above the chunk size is built a chunk at a time, and one chunk's build needs
+    // `chunk_memory`, whose fixed part dominates small chunks (dividing the limit by the
+    // particles alone, a batch of such frames ran too many at once, and each failed).
+    let chunk_points = opts.convert.chunks.chunk_points as u64;
+    let need = |particles: u64| {
+        let in_memory = particles
+            .min(chunk_points)
+            .saturating_mul(BYTES_PER_PARTICLE);
+        if particles > chunk_points {
+            let chunk = usize::try_from(chunk_points).unwrap_or(usize::MAX);
+            in_memory.max(crate::chunked::chunk_memory(chunk))
+        } else {
+            in_memory
+        }
+    };
     let largest = todo
         .iter()
-        .map(|j| j.particles.min(opts.convert.chunks.chunk_points as u64))
+        .map(|j| need(j.particles))
         .max()
         .unwrap_or(1)
         .max(1);
-    let by_memory = (opts.memory_limit / largest.saturating_mul(BYTES_PER_PARTICLE)).max(1);
+    // At least one: a frame that does not fit the whole limit fails, naming it.
+    let by_memory = (opts.memory_limit / largest).max(1);
     let by_memory = usize::try_from(by_memory).unwrap_or(usize::MAX);
     let jobs = by_memory
         .min(threads)

@@ -1861,3 +1861,33 @@ fn merge_of_a_task_resubmitted_alone_names_the_stray_manifest_and_the_shard_to_r
     std::fs::remove_file(out.join("dataset.shard-0-of-1.json")).unwrap();
     check_manifest(&out, &merge(&out).unwrap());
 }
+
+/// Frames above the chunk size each need one chunk's build (its fixed part dominating
+/// small chunks): a batch runs as few at once as fit the memory limit rather than
+/// dividing it into shares too small for any, and where one frame does not fit the
+/// whole limit, the error names the limit given.
+#[test]
+fn a_batch_runs_fewer_chunked_frames_at_once_to_fit_the_memory_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("melt.bin");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.bin"), &src).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(4)
+        .build()
+        .unwrap();
+    let run = |limit: u64, out: &str| {
+        let mut o = opts();
+        o.convert.build.max_root_points = 64;
+        o.convert.chunks.chunk_points = 300;
+        o.memory_limit = limit;
+        let out = dir.path().join(out);
+        pool.install(|| batch(std::slice::from_ref(&src), &out, &o, &NoProgress))
+    };
+    // One chunk of 300 needs 64 MiB and a little: one frame at a time.
+    let r = run(100 << 20, "fits").unwrap();
+    assert_eq!((r.converted, r.jobs), (3, 1));
+    let r = run(140 << 20, "two").unwrap();
+    assert_eq!((r.converted, r.jobs), (3, 2));
+    let e = run(50 << 20, "small").unwrap_err().to_string();
+    assert!(e.contains("the memory limit of 50 MiB is below"), "{e}");
+}
