@@ -15,7 +15,9 @@
 //! 2. With a shard `I/N`, this process takes the frames at positions `I, I + N, ...` of
 //!    that sorted list, so N processes (a Slurm job array) split the work without talking
 //!    to each other; each writes its own manifest `dataset.shard-I-of-N.json`, and
-//!    [`merge`] joins them into `dataset.json`.
+//!    [`merge`] joins them into `dataset.json`. Each records which list it split
+//!    ([`InputFrames`]): shards started before and after a file set grew take every N-th
+//!    frame of different lists, leaving frames to none, and the merge refuses them.
 //! 3. A frame without particles cannot be a `.mdlod` file: it is left out (not written,
 //!    not listed, not expected of the shard) and reported ([`BatchReport::empty`]), told
 //!    from its header alone on every run. A frame whose output exists, opens (the reader
@@ -38,13 +40,16 @@
 //!    shard running beside it never writes those) and temporary manifests older than
 //!    [`STALE_TEMP`].
 //! 4. Frames are converted by a few workers at once, as many as the memory limit allows
-//!    (about [`BYTES_PER_PARTICLE`] per particle each, at most one per thread); each
+//!    (about [`BYTES_PER_PARTICLE`] per particle each, or one chunk's build for a frame
+//!    above the chunk size, at most one per thread); each
 //!    conversion is itself parallel. Outputs appear by atomic rename only when complete,
 //!    and the manifest is rewritten (temporary file + rename) as frames complete, at most
 //!    once a second ([`MANIFEST_INTERVAL`]) and once at the end, listing only complete
 //!    ones: killing a batch at any moment leaves no file that looks complete and a
 //!    manifest that is true (it may miss the frames of its last second, which a rerun
-//!    finds complete and lists). A handler of SIGTERM (a scheduler's time limit) or
+//!    finds complete and lists). A run that fails before any output is written (an
+//!    error every frame meets, such as a binary dump's missing `--columns`) puts the
+//!    manifest back as it was (none, if there was none). A handler of SIGTERM (a scheduler's time limit) or
 //!    Ctrl-C lists those too before the program exits, through a [`ManifestHandle`].
 
 use std::fmt::Display;
@@ -122,7 +127,92 @@ pub struct Manifest {
     /// killed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub expected_frames: Option<u64>,
+    /// The list of input frames the run split into shards (every shard's frames and the
+    /// others'), which every shard of one sharding must have seen alike: a file set that
+    /// grew between two array tasks' starts gives them different lists, and taking every
+    /// N-th frame of each leaves some frames to no shard. Absent in manifests of earlier
+    /// versions (unknown: not compared).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_frames: Option<InputFrames>,
     pub frames: Vec<FrameEntry>,
+}
+
+/// What identifies the list of input frames a batch split into shards
+/// ([`Manifest::input_frames`]).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InputFrames {
+    /// How many frames the inputs held (less the duplicates left out), in all shards.
+    pub count: u64,
+    /// XXH3-64 (hex) of the ordered list of the frames' (input file name, timestep). The
+    /// file name without its directory: a requeued task may name the same inputs from
+    /// another directory.
+    pub xxh3: String,
+}
+
+impl InputFrames {
+    /// The identity of the list of frames `(input, timestep)`, in the order the shards
+    /// take them.
+    fn of<'a>(frames: impl Iterator<Item = (&'a Path, u64)>) -> Self {
+        let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+        let mut count = 0u64;
+        for (input, timestep) in frames {
+            let name = input.file_name().unwrap_or(input.as_os_str());
+            let name = name.to_string_lossy();
+            // Length-prefixed: no two lists hash the same bytes.
+            hasher.update(&(name.len() as u64).to_le_bytes());
+            hasher.update(name.as_bytes());
+            hasher.update(&timestep.to_le_bytes());
+            count += 1;
+        }
+        InputFrames {
+            count,
+            xxh3: format!("{:016x}", hasher.digest()),
+        }
+    }
+}
+
+/// Where shard manifests (name, list of input frames) record different lists of input
+/// frames, the message saying which shards saw which; manifests that record none (of
+/// earlier versions) are passed over.
+fn different_input_lists(manifests: &[(String, Option<InputFrames>)]) -> Option<String> {
+    // The distinct lists in order of first appearance, each with its manifests.
+    let mut groups: Vec<(&InputFrames, Vec<&str>)> = Vec::new();
+    for (name, list) in manifests {
+        let Some(list) = list else { continue };
+        match groups.iter_mut().find(|(l, _)| *l == list) {
+            Some((_, names)) => names.push(name),
+            None => groups.push((list, vec![name])),
+        }
+    }
+    if groups.len() < 2 {
+        return None;
+    }
+    let counts: Vec<u64> = groups.iter().map(|(l, _)| l.count).collect();
+    let saw: Vec<String> = groups
+        .iter()
+        .map(|(l, names)| {
+            // The same count twice: the lists differ in their files or timesteps.
+            let same_count = counts.iter().filter(|&&c| c == l.count).count() > 1;
+            format!(
+                "{} saw {} frame{}{}",
+                names.join(", "),
+                l.count,
+                if l.count == 1 { "" } else { "s" },
+                if same_count {
+                    " (of other files or timesteps)"
+                } else {
+                    ""
+                }
+            )
+        })
+        .collect();
+    Some(format!(
+        "the shards split different lists of input frames: {}. The inputs changed between \
+         the shards' runs (a file set that grew, a dump still being written), so some \
+         frames belong to no shard and others to two: rerun every shard over the same, \
+         complete inputs (each converts only what it lacks), then merge",
+        saw.join("; ")
+    ))
 }
 
 /// How to run a batch.
@@ -254,8 +344,10 @@ pub struct BatchReport {
     /// appended frames to since, a file touched) but whose own bytes did not: kept
     /// (counted in `skipped` too).
     pub kept_unchanged: usize,
-    /// Last frames of their inputs that are cut short (a run still writing them): left
-    /// out, not expected of this run, converted by a rerun once complete.
+    /// Last frames of the newest input that are cut short (a run still writing them),
+    /// and a newest input of a set that is empty: left out, not expected of this run,
+    /// converted by a rerun once complete. (An older input cut short is an error,
+    /// [`BatchError::CutShortBeforeNewest`].)
     pub incomplete: Vec<IncompleteFrame>,
 }
 
@@ -282,10 +374,21 @@ pub struct IncompleteFrame {
     pub timestep: Option<u64>,
     /// What the reader said.
     pub reason: String,
+    /// Whether the whole input is empty (the newest file of a set, just opened): no
+    /// frame of it is known.
+    pub empty_file: bool,
 }
 
 impl std::fmt::Display for IncompleteFrame {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.empty_file {
+            return write!(
+                f,
+                "{}, the newest input, is empty (a run still writing it?): left out; a rerun \
+                 converts its frames once written",
+                self.input.display()
+            );
+        }
         write!(f, "{}: frame {}", self.input.display(), self.frame)?;
         if let Some(t) = self.timestep {
             write!(f, " (timestep {t})")?;
@@ -319,6 +422,25 @@ pub enum BatchError {
     },
     #[error("{}: {message}", path.display())]
     Manifest { path: PathBuf, message: String },
+    /// An input cut short that is not the newest ([`newest_inputs`]): a run writes one
+    /// file of a set at a time, so an older one is damaged (a copy that stopped), not
+    /// being written, and leaving its frame out would lose it unnoticed.
+    #[error(
+        "{} is cut short, but it is not the newest input ({newest}), and \
+         only the newest may be one a run is still writing: replace it with a complete copy, \
+         or leave it out of the inputs; {reason}",
+        input.display()
+    )]
+    CutShortBeforeNewest {
+        input: PathBuf,
+        /// The newest input.
+        newest: String,
+        /// What is cut short, as the reader said.
+        reason: String,
+    },
+    /// A quoted file-name pattern that names no inputs.
+    #[error("{}: {message}", pattern.display())]
+    Pattern { pattern: PathBuf, message: String },
     #[error("shard {0}/{1}: the shard index must be below the shard count")]
     BadShard(u32, u32),
     /// A frame failed (the first error); the frames converted before it, or beside it
@@ -526,12 +648,6 @@ fn shard_of(name: &str) -> Option<(u32, u32)> {
 
 /// Writes `value` as JSON to `path` atomically (temporary file + rename).
 fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".dataset.")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(io(dir))?;
     // Serialized in memory and written at once: the writer's many small writes would
     // each be a system call on the unbuffered file.
     let mut text = serde_json::to_vec_pretty(value).map_err(|e| BatchError::Io {
@@ -539,8 +655,20 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
         source: e.into(),
     })?;
     text.push(b'\n');
+    write_bytes(path, &text)
+}
+
+/// Writes `text` to `path` atomically (temporary file + rename), readable by all as the
+/// manifests are.
+fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".dataset.")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(io(dir))?;
     use std::io::Write;
-    tmp.write_all(&text).map_err(io(path))?;
+    tmp.write_all(text).map_err(io(path))?;
     tmp.as_file().sync_all().map_err(io(path))?;
     mdlod_format::writer::make_readable(tmp.as_file()).map_err(io(path))?;
     tmp.persist(path).map_err(|e| BatchError::Io {
@@ -793,6 +921,136 @@ fn remove_leftovers(
     Ok(())
 }
 
+/// The inputs with file-name patterns (`dump.*.bin`) expanded where the shell left
+/// them (quoted in a job script): `*` and `?` in the last component, matching files of
+/// its directory, in natural order (see [`natural_cmp`]). A path that exists is taken as
+/// it is. A pattern matches files only, as the inputs must be: not directories (the
+/// batch directory itself, for `'run/*' -o run/out`), not hidden files unless it starts
+/// with a dot (as the shell's), and not what a batch writes in `out_dir` (frames,
+/// manifests, temporary files), which a rerun would otherwise take for inputs.
+pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf>, BatchError> {
+    let out_dir = std::fs::canonicalize(out_dir).ok();
+    let mut out = Vec::with_capacity(inputs.len());
+    for input in inputs {
+        let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if input.exists() || !name.contains(['*', '?', '[']) {
+            out.push(input.clone());
+            continue;
+        }
+        let err = |message: String| BatchError::Pattern {
+            pattern: input.clone(),
+            message,
+        };
+        if name.contains('[') {
+            return Err(err(
+                "a quoted pattern takes * and ? only, not [...] (leave it unquoted for the \
+                 shell to expand)"
+                    .into(),
+            ));
+        }
+        let dir = match input.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let entries = std::fs::read_dir(&dir)
+            .map_err(|e| err(format!("cannot list {}: {e}", dir.display())))?;
+        // The batch directory's own files, where the pattern's directory is it.
+        let in_out_dir = out_dir.is_some() && std::fs::canonicalize(&dir).ok() == out_dir;
+        let mut found: Vec<PathBuf> = entries
+            .flatten()
+            .filter(|e| {
+                let Some(n) = e.file_name().to_str().map(str::to_owned) else {
+                    return false;
+                };
+                wildcard(name, &n)
+                    && (name.starts_with('.') || !n.starts_with('.'))
+                    && !(in_out_dir && written_by_batch(&n))
+                    // (Following links: a link to a file is one.)
+                    && e.path().is_file()
+            })
+            .map(|e| input.with_file_name(e.file_name()))
+            .collect();
+        if found.is_empty() {
+            return Err(err("no file matches the pattern".into()));
+        }
+        found.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
+        out.extend(found);
+    }
+    Ok(out)
+}
+
+/// Whether a file of this name in a batch directory is one a batch writes: a frame, a
+/// manifest (whole, a shard's) or a temporary file.
+pub fn written_by_batch(name: &str) -> bool {
+    (name.starts_with("frame-") && name.ends_with(".mdlod"))
+        || (name.starts_with("dataset") && name.ends_with(".json"))
+        || name.ends_with(".tmp")
+}
+
+/// Whether `name` matches `pattern`, where `*` stands for any run of characters and `?`
+/// for one.
+fn wildcard(pattern: &str, name: &str) -> bool {
+    let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
+    // Greedy with backtracking to the last `*`.
+    let (mut i, mut j, mut star, mut mark) = (0, 0, None, 0);
+    while j < n.len() {
+        if i < p.len() && (p[i] == '?' || p[i] == n[j]) {
+            i += 1;
+            j += 1;
+        } else if i < p.len() && p[i] == '*' {
+            star = Some(i);
+            mark = j;
+            i += 1;
+        } else if let Some(s) = star {
+            i = s + 1;
+            mark += 1;
+            j = mark;
+        } else {
+            return false;
+        }
+    }
+    p[i..].iter().all(|&c| c == '*')
+}
+
+/// Orders paths as people number file sets: runs of digits by their value, so that
+/// `water.2.xyz` comes before `water.10.xyz` (the shell's order puts it after), the rest
+/// character by character.
+pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
+    let (mut a, mut b) = (a.as_bytes(), b.as_bytes());
+    loop {
+        match (a.first(), b.first()) {
+            (None, None) => return std::cmp::Ordering::Equal,
+            (None, Some(_)) => return std::cmp::Ordering::Less,
+            (Some(_), None) => return std::cmp::Ordering::Greater,
+            (Some(x), Some(y)) if x.is_ascii_digit() && y.is_ascii_digit() => {
+                let run = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
+                let (na, nb) = (run(a), run(b));
+                let trim = |s: &[u8]| -> usize { s.iter().take_while(|&&c| c == b'0').count() };
+                let (da, db) = (
+                    &a[trim(&a[..na]).min(na)..na],
+                    &b[trim(&b[..nb]).min(nb)..nb],
+                );
+                // By value (length, then digits), then by the zeros in front (`01` after `1`).
+                let order = da
+                    .len()
+                    .cmp(&db.len())
+                    .then_with(|| da.cmp(db))
+                    .then_with(|| na.cmp(&nb));
+                if order != std::cmp::Ordering::Equal {
+                    return order;
+                }
+                (a, b) = (&a[na..], &b[nb..]);
+            }
+            (Some(x), Some(y)) => {
+                if x != y {
+                    return x.cmp(y);
+                }
+                (a, b) = (&a[1..], &b[1..]);
+            }
+        }
+    }
+}
+
 /// One frame to convert.
 struct Job<'a> {
     input: &'a Path,
@@ -814,6 +1072,37 @@ struct Job<'a> {
     given_radii: Option<Vec<(String, f32)>>,
     /// Whether the frame is its input's last (one a running simulation may be writing).
     last_of_input: bool,
+    /// Whether its input is the newest of the inputs ([`newest_inputs`]), the only one
+    /// whose last frame may be cut short.
+    newest: bool,
+}
+
+impl Job<'_> {
+    /// Whether the frame may be one a running simulation is still writing: the last of
+    /// the newest input. A file set's older files are complete (a run writes one file at
+    /// a time), so one of them cut short is damaged, and an error.
+    fn may_be_cut(&self) -> bool {
+        self.last_of_input && self.newest
+    }
+}
+
+/// Which inputs are the newest, given their frames as listed: those holding the greatest
+/// timestep of the inputs, and the last input, as inputs are given in their order (the
+/// CLI sorts them by their numbers): a file cut in its first frame's header records no
+/// timestep, or a part of one (`50` of `500`, the line cut short), and formats without
+/// timesteps have none.
+fn newest_inputs(listed: &[Vec<Listed>]) -> Vec<bool> {
+    let latest: Vec<Option<u64>> = listed
+        .iter()
+        .map(|frames| frames.iter().filter_map(|f| f.0).max())
+        .collect();
+    let greatest = latest.iter().flatten().max().copied();
+    let last = latest.len().checked_sub(1);
+    latest
+        .iter()
+        .enumerate()
+        .map(|(i, t)| Some(i) == last || (t.is_some() && *t == greatest))
+        .collect()
 }
 
 /// A frame as it was listed while its input was open: (the input's own timestep, the
@@ -852,7 +1141,29 @@ pub fn batch(
     // Indexing has the whole memory limit: one input at a time, before any conversion.
     let mut index_chunks = opts.convert.chunks.clone();
     index_chunks.memory_limit = opts.memory_limit;
-    for p in inputs {
+    // The newest input of a set, as empty files are told (see [`newest_inputs`]).
+    let last_input = inputs.len().checked_sub(1);
+    let mut empty_inputs = Vec::new();
+    for (i, p) in inputs.iter().enumerate() {
+        // An empty newest file of a set is one LAMMPS has just opened: left out with a
+        // note, as a frame cut short is. (Elsewhere, or alone, it is the reader's error.)
+        if inputs.len() > 1
+            && Some(i) == last_input
+            && std::fs::metadata(p).is_ok_and(|m| m.is_file() && m.len() == 0)
+        {
+            empty_inputs.push(IncompleteFrame {
+                input: p.clone(),
+                frame: 0,
+                timestep: None,
+                reason: "the file is empty (a run has just opened it?)".into(),
+                empty_file: true,
+            });
+            // No frames: the format and dump stand in for none.
+            listed.push(Vec::new());
+            formats.push(InputFormat::LammpsText);
+            dumps.push(None);
+            continue;
+        }
         // A large gzip input is decompressed into a working file (removed again below),
         // not into memory.
         let bounded =
@@ -901,8 +1212,24 @@ pub fn batch(
         formats.push(dump.format());
         dumps.push((!compressed).then_some(bounded.dump));
     }
+    let newest = newest_inputs(&listed);
+    // The newest input, as an error about an older one cut short names it (the last of
+    // them in order, where the one holding the latest timestep is not the last).
+    let newest_text = inputs
+        .iter()
+        .zip(&newest)
+        .filter(|(_, n)| **n)
+        .map(|(p, _)| p.display().to_string())
+        .next_back()
+        .unwrap_or_default();
     let mut jobs: Vec<Job<'_>> = Vec::new();
-    for (((input, dump), format), frames) in inputs.iter().zip(&dumps).zip(&formats).zip(listed) {
+    for ((((input, dump), format), frames), newest) in inputs
+        .iter()
+        .zip(&dumps)
+        .zip(&formats)
+        .zip(listed)
+        .zip(newest)
+    {
         let count = frames.len();
         for (k, (own, timestep, particles, attribute, given)) in frames.into_iter().enumerate() {
             jobs.push(Job {
@@ -916,6 +1243,7 @@ pub fn batch(
                 attribute,
                 given_radii: given,
                 last_of_input: k + 1 == count,
+                newest,
             });
         }
     }
@@ -973,6 +1301,8 @@ pub fn batch(
         jobs = kept;
     }
     let frames_total = jobs.len();
+    // The list the shards split: the same in every shard only when the inputs were.
+    let input_frames = InputFrames::of(jobs.iter().map(|j| (j.input, j.timestep)));
     // Frame files no frame of these inputs is written to (a run over other or longer
     // inputs left them): named, left alone.
     let numbers: std::collections::HashSet<u64> = jobs.iter().map(|j| j.timestep).collect();
@@ -1200,6 +1530,16 @@ pub fn batch(
         .into_iter()
         .partition(|j| j.last_of_input && j.dump.is_some_and(DumpFile::ends_mid_line));
     todo = rest;
+    // Not the newest input: a file of a set that no run is writing any more.
+    if let Some(job) = cut.iter().find(|j| !j.newest) {
+        return Err(BatchError::CutShortBeforeNewest {
+            input: job.input.to_path_buf(),
+            newest: newest_text.clone(),
+            reason: "its last line has no line end: the run writing it may have stopped \
+                     inside a number (if the file is complete, add a line end to it)"
+                .into(),
+        });
+    }
     let ends_mid_line: Vec<IncompleteFrame> = cut
         .into_iter()
         .map(|job| IncompleteFrame {
@@ -1209,6 +1549,7 @@ pub fn batch(
             reason: "its last line has no line end: the run writing it may have stopped \
                      inside a number (if the file is complete, add a line end to it)"
                 .into(),
+            empty_file: false,
         })
         .collect();
     let skipped = done.len();
@@ -1216,6 +1557,7 @@ pub fn batch(
         mdlod_dataset: 1,
         shard: opts.shard.map(|(i, n)| [i, n]),
         expected_frames: Some((frames_in_shard - empty.len()) as u64),
+        input_frames: Some(input_frames),
         frames: done,
     }));
     // Unset again when the batch returns, however it returns.
@@ -1235,6 +1577,13 @@ pub fn batch(
         m.frames.sort_by_key(|f| f.timestep);
         write_json(&manifest_path, m)
     };
+    // The manifest as it was before this run (its bytes; `Err(NotFound)`: none), put
+    // back where the run fails before any output was written: an error every frame
+    // meets (an option the inputs need, such as `--columns` for an old-revision binary
+    // dump) would otherwise leave a manifest without the frames it is to convert again,
+    // and the corrected rerun, finding no record of how they were read, would convert
+    // every one again for "other settings".
+    let previous = std::fs::read(&manifest_path).map_err(|e| e.kind());
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
     // A shard that converts anything outdates the merged manifest of an earlier merge
     // (its checksums, its frames' sources): removed before the first frame changes, so
@@ -1255,14 +1604,31 @@ pub fn batch(
 
     // As many conversions at once as memory and threads allow.
     let threads = rayon::current_num_threads().max(1);
-    // A frame above the chunk size is built a chunk at a time.
+    // What one frame's conversion needs, which each frame's share of the limit must
+    // hold (the conversion refuses less): in memory, about `BYTES_PER_PARTICLE` each; a
+    // frame above the chunk size is built a chunk at a time, and one chunk's build needs
+    // `chunk_memory`, whose fixed part dominates small chunks (dividing the limit by the
+    // particles alone, a batch of such frames ran too many at once, and each failed).
+    let chunk_points = opts.convert.chunks.chunk_points as u64;
+    let need = |particles: u64| {
+        let in_memory = particles
+            .min(chunk_points)
+            .saturating_mul(BYTES_PER_PARTICLE);
+        if particles > chunk_points {
+            let chunk = usize::try_from(chunk_points).unwrap_or(usize::MAX);
+            in_memory.max(crate::chunked::chunk_memory(chunk))
+        } else {
+            in_memory
+        }
+    };
     let largest = todo
         .iter()
-        .map(|j| j.particles.min(opts.convert.chunks.chunk_points as u64))
+        .map(|j| need(j.particles))
         .max()
         .unwrap_or(1)
         .max(1);
-    let by_memory = (opts.memory_limit / largest.saturating_mul(BYTES_PER_PARTICLE)).max(1);
+    // At least one: a frame that does not fit the whole limit fails, naming it.
+    let by_memory = (opts.memory_limit / largest).max(1);
     let by_memory = usize::try_from(by_memory).unwrap_or(usize::MAX);
     let jobs = by_memory
         .min(threads)
@@ -1276,7 +1642,11 @@ pub fn batch(
     convert.chunks.memory_limit = opts.memory_limit / jobs as u64;
     let convert = &convert;
     progress.stage(
-        &format!("converting {} frames, {jobs} at a time", todo.len()),
+        &format!(
+            "converting {} frame{}, {jobs} at a time",
+            todo.len(),
+            if todo.len() == 1 { "" } else { "s" }
+        ),
         Some(total_particles),
         "particles",
     );
@@ -1285,6 +1655,8 @@ pub fn batch(
     let first_error: Mutex<Option<BatchError>> = Mutex::new(None);
     let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(ends_mid_line);
     let converted = std::sync::atomic::AtomicUsize::new(0);
+    // Whether any conversion has written its output (renamed into place).
+    let wrote = AtomicBool::new(false);
     let quiet = crate::progress::NoProgress;
     // The calling thread is one of the workers (one job: the only one), so that a
     // single conversion allocates on the threads a lone `convert` would: each thread
@@ -1360,6 +1732,7 @@ pub fn batch(
                             convert,
                             &quiet,
                         )?;
+                        wrote.store(true, Ordering::Relaxed);
                         keep_notes(job.timestep, report.notes);
                     } else {
                         // Refused before the frame is read, not after.
@@ -1374,6 +1747,7 @@ pub fn batch(
                         }
                         let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
                         let report = convert_frame(&frame, Some(source), &out, convert, &quiet)?;
+                        wrote.store(true, Ordering::Relaxed);
                         keep_notes(job.timestep, report.notes);
                     }
                     let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
@@ -1400,7 +1774,7 @@ pub fn batch(
                 }
                 // The last frame of a dump a running simulation is writing: left
                 // for a rerun, not a failure of the others.
-                Err(e) if job.last_of_input && e.cut_short() => {
+                Err(e) if job.may_be_cut() && e.cut_short() => {
                     incomplete
                         .lock()
                         .unwrap_or_else(|e| e.into_inner())
@@ -1409,10 +1783,21 @@ pub fn batch(
                             frame: job.frame,
                             timestep: job.own_timestep,
                             reason: e.to_string(),
+                            empty_file: false,
                         });
                     progress.advance(job.particles);
                 }
                 Err(e) => {
+                    // An older file of a set cut short: damaged, not being written.
+                    let e = if job.last_of_input && e.cut_short() {
+                        BatchError::CutShortBeforeNewest {
+                            input: job.input.to_path_buf(),
+                            newest: newest_text.clone(),
+                            reason: e.to_string(),
+                        }
+                    } else {
+                        e
+                    };
                     failed.store(true, Ordering::Relaxed);
                     first_error
                         .lock()
@@ -1441,7 +1826,23 @@ pub fn batch(
         }
         save(&mut m)
     };
+    // (An empty newest file has no frames to expect.)
+    incomplete.extend(empty_inputs);
     if let Some(e) = first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
+        if !wrote.load(Ordering::Relaxed) {
+            // No output changed: the earlier manifest is as true as it was. (Where it
+            // cannot be put back, the one written stands, also true.)
+            if let Some(h) = &opts.handle {
+                h.set(None);
+            }
+            let _ = match previous {
+                Ok(bytes) => write_bytes(&manifest_path, &bytes),
+                Err(std::io::ErrorKind::NotFound) => {
+                    std::fs::remove_file(&manifest_path).map_err(io(&manifest_path))
+                }
+                Err(_) => Ok(()),
+            };
+        }
         return Err(BatchError::Incomplete {
             converted: converted.load(Ordering::Relaxed),
             todo: todo.len(),
@@ -1564,13 +1965,14 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         ));
     }
     shards.sort();
-    let n = shards[0].1;
-    if let Some((_, m, p)) = shards.iter().find(|s| s.1 != n) {
-        return Err(manifest_err(
-            p,
-            format!("a shard of {m}, but others are of {n}"),
-        ));
+    let named: Vec<(u32, u32, String)> = shards
+        .iter()
+        .map(|(i, n, p)| (*i, *n, file_name_of(p)))
+        .collect();
+    if let Some(message) = different_shardings(&named) {
+        return Err(manifest_err(out_dir, message));
     }
+    let n = shards[0].1;
     let present: Vec<u32> = shards.iter().map(|s| s.0).collect();
     let missing: Vec<String> = (0..n)
         .filter(|i| !present.contains(i))
@@ -1584,18 +1986,42 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         return Err(manifest_err(
             out_dir,
             format!(
-                "shard{s} {} of {n} {has} no manifest yet (present: {present:?})",
-                missing.join(", ")
+                "shard{s} {} of {n} {has} no manifest yet (present: {})",
+                missing.join(", "),
+                present
+                    .iter()
+                    .map(u32::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
         ));
     }
-    let mut frames = Vec::new();
-    let mut expected_total = Some(0u64);
-    let mut settings = MergeSettings::default();
+    let mut manifests = Vec::with_capacity(shards.len());
     for (_, _, path) in &shards {
         let text = std::fs::read(path).map_err(io(path))?;
         let m: Manifest = serde_json::from_slice(&text)
             .map_err(|e| manifest_err(path, format!("not a shard manifest: {e}")))?;
+        manifests.push((path, m));
+    }
+    // Before the frames: shards over different lists of frames have each converted
+    // frames of their own list, which no merge can join (checked where the manifests
+    // record their lists).
+    let lists: Vec<(String, Option<InputFrames>)> = manifests
+        .iter()
+        .map(|(p, m)| (file_name_of(p), m.input_frames.clone()))
+        .collect();
+    if let Some(message) = different_input_lists(&lists) {
+        return Err(manifest_err(out_dir, message));
+    }
+    let input_frames = match lists.first() {
+        Some((_, Some(l))) if lists.iter().all(|(_, x)| x.is_some()) => Some(l.clone()),
+        _ => None,
+    };
+    let mut frames = Vec::new();
+    let mut expected_total = Some(0u64);
+    let mut settings = MergeSettings::default();
+    for (path, m) in manifests {
+        let path = path.as_path();
         for f in &m.frames {
             if !out_dir.join(&f.file).is_file() {
                 return Err(manifest_err(
@@ -1637,10 +2063,85 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         mdlod_dataset: 1,
         shard: None,
         expected_frames: expected_total,
+        input_frames,
         frames,
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
     Ok(merged)
+}
+
+/// Where shard manifests `(I, N, file name)` are of different shard counts N, the
+/// message naming them and what to do. The sharding with the most manifests is taken
+/// for the array's, the others for strays: a task resubmitted alone (`sbatch --array=2`)
+/// finds SLURM_ARRAY_TASK_COUNT 1 and runs as shard 0 of 1.
+fn different_shardings(shards: &[(u32, u32, String)]) -> Option<String> {
+    let mut by_count: std::collections::BTreeMap<u32, Vec<(u32, &str)>> =
+        std::collections::BTreeMap::new();
+    for (i, n, name) in shards {
+        by_count.entry(*n).or_default().push((*i, name));
+    }
+    if by_count.len() < 2 {
+        return None;
+    }
+    let (&n, main) = by_count.iter().max_by_key(|(n, v)| (v.len(), **n))?;
+    let strays: Vec<&str> = by_count
+        .iter()
+        .filter(|(m, _)| **m != n)
+        .flat_map(|(_, v)| v.iter().map(|(_, name)| *name))
+        .collect();
+    let missing: Vec<u32> = (0..n)
+        .filter(|i| !main.iter().any(|(j, _)| j == i))
+        .collect();
+    let listed = |names: &[&str]| match names {
+        [] => String::new(),
+        [one] => (*one).to_string(),
+        [first @ .., last] => format!("{} and {last}", first.join(", ")),
+    };
+    const SHOWN: usize = 3;
+    let main_names: Vec<&str> = main.iter().map(|(_, name)| *name).take(SHOWN).collect();
+    let rerun = match missing.as_slice() {
+        [] => "rerun the stray task with its place in the whole array".to_string(),
+        [i] => format!("rerun the task with --shard {i}/{n}"),
+        more if more.len() <= SHOWN => format!(
+            "rerun the tasks with --shard {}",
+            more.iter()
+                .map(|i| format!("{i}/{n}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        more => format!("rerun the {} missing tasks with --shard I/{n}", more.len()),
+    };
+    Some(format!(
+        "shard manifests of different shardings: {} {} of {n} shards, but {} {} of {}. A \
+         failed task resubmitted alone (sbatch --array=2) runs as shard 0 of 1, as \
+         SLURM_ARRAY_TASK_COUNT is 1 then: {rerun} (or resubmit it with the array's whole \
+         range; it converts only what is missing), then delete {} and merge",
+        listed(&main_names),
+        if main.len() > SHOWN {
+            format!("(and {} more) are", main.len() - SHOWN)
+        } else if main.len() == 1 {
+            "is".to_string()
+        } else {
+            "are".to_string()
+        },
+        listed(&strays),
+        if strays.len() == 1 { "is" } else { "are" },
+        by_count
+            .keys()
+            .filter(|m| **m != n)
+            .map(u32::to_string)
+            .collect::<Vec<_>>()
+            .join(" and "),
+        listed(&strays),
+    ))
+}
+
+/// The file name of `path`, as messages name manifests.
+fn file_name_of(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
 }
 
 /// The build settings of the frames a merge has seen, which every frame of a batch
@@ -1831,11 +2332,12 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     // Not merged: every shard of one sharding must have written its manifest.
     let shards: Vec<(u32, u32)> = manifests.iter().filter_map(|m| shard_of(m)).collect();
     if let Some(&(_, n)) = shards.first() {
-        if shards.iter().any(|s| s.1 != n) {
-            check.problems.push(format!(
-                "shard manifests of different shardings ({}): merge or remove the older ones",
-                manifests.join(", ")
-            ));
+        let named: Vec<(u32, u32, String)> = manifests
+            .iter()
+            .filter_map(|m| shard_of(m).map(|(i, n)| (i, n, m.clone())))
+            .collect();
+        if let Some(message) = different_shardings(&named) {
+            check.problems.push(message);
         } else {
             // N comes from a file name: count the missing, and list the first few.
             let present: std::collections::BTreeSet<u32> =
@@ -1862,6 +2364,7 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     }
     let mut listed = std::collections::HashSet::new();
     let mut entries = Vec::new();
+    let mut lists = Vec::new();
     for name in &manifests {
         let path = dir.join(name);
         let text = std::fs::read(&path).map_err(io(&path))?;
@@ -1878,11 +2381,14 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                 ));
             }
         }
+        lists.push((name.clone(), m.input_frames));
         for f in m.frames {
             listed.insert(f.file.clone());
             entries.push((name.clone(), f));
         }
     }
+    // Shards not merged yet: they must have split one list of frames (see [`merge`]).
+    check.problems.extend(different_input_lists(&lists));
     progress.stage("verifying frames", Some(entries.len() as u64), "frames");
     for (manifest, f) in &entries {
         let place = format!("{} (timestep {}, in {manifest})", f.file, f.timestep);
@@ -1901,9 +2407,10 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                     ))
                 } else if m.timestep != Some(f.timestep) || file.particle_count() != f.particles {
                     Some(format!(
-                        "{place}: the file holds timestep {:?} and {} particles, the manifest \
-                         says {} and {}",
-                        m.timestep,
+                        "{place}: the file holds {} and {} particles, the manifest says \
+                         timestep {} and {} particles",
+                        m.timestep
+                            .map_or("no timestep".into(), |t| format!("timestep {t}")),
                         file.particle_count(),
                         f.timestep,
                         f.particles
@@ -1940,6 +2447,41 @@ pub fn read_manifest(out_dir: &Path) -> Result<Manifest, BatchError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quoted_patterns_match_file_names() {
+        use super::wildcard;
+        assert!(wildcard("dump.*.bin", "dump.1000.bin"));
+        assert!(wildcard("dump.*.bin", "dump..bin"));
+        assert!(!wildcard("dump.*.bin", "dump.1000.bin.gz"));
+        assert!(wildcard("d?mp*", "dump.1"));
+        assert!(wildcard("*a*b", "xxaxxb"));
+        assert!(!wildcard("*a*b", "xxaxxbc"));
+        let dir = tempfile::tempdir().unwrap();
+        for n in ["dump.20.bin", "dump.10.bin", "other.bin"] {
+            std::fs::write(dir.path().join(n), "").unwrap();
+        }
+        let found =
+            super::expand_patterns(&[dir.path().join("dump.*.bin")], Path::new("out")).unwrap();
+        let names: Vec<_> = found
+            .iter()
+            .map(|p| p.file_name().unwrap().to_owned())
+            .collect();
+        assert_eq!(names, ["dump.10.bin", "dump.20.bin"]);
+        let mut set = vec![
+            "w.10.xyz", "w.2.xyz", "w.1.xyz", "w.02.xyz", "v.xyz", "w.1a.xyz",
+        ];
+        set.sort_by(|a, b| super::natural_cmp(a, b));
+        assert_eq!(
+            set,
+            ["v.xyz", "w.1.xyz", "w.1a.xyz", "w.2.xyz", "w.02.xyz", "w.10.xyz"]
+        );
+        let e = super::expand_patterns(&[dir.path().join("none.*")], Path::new("out")).unwrap_err();
+        assert!(e.to_string().contains("no file matches"), "{e}");
+        let e = super::expand_patterns(&[dir.path().join("dump.[12]*.bin")], Path::new("out"))
+            .unwrap_err();
+        assert!(e.to_string().contains("* and ? only"), "{e}");
+    }
 
     #[test]
     fn sources_differ_by_nanoseconds_unless_recorded_without_them() {

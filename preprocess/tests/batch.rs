@@ -1233,6 +1233,22 @@ fn a_batch_directory_verifies_against_its_manifest() {
         .iter()
         .any(|p| p.starts_with(m.frames[3].file.as_str()) && p.contains("listed but missing")));
     assert_eq!(c.unlisted, ["frame-99.mdlod"]);
+    // A manifest entry of other particles: the file's timestep named as a number.
+    let mut wrong = read_manifest(&out).unwrap();
+    wrong.frames[0].particles += 1;
+    std::fs::write(
+        out.join("dataset.json"),
+        serde_json::to_vec(&wrong).unwrap(),
+    )
+    .unwrap();
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    let want = format!(
+        "the file holds timestep 0 and {} particles, the manifest says timestep 0 and {} \
+         particles",
+        m.frames[0].particles,
+        m.frames[0].particles + 1
+    );
+    assert!(c.problems.iter().any(|p| p.ends_with(&want)), "{c:?}");
     // Shards, not merged: checked through their manifests.
     let sharded = dir.path().join("sharded");
     for i in 0..2 {
@@ -1556,4 +1572,322 @@ fn a_manifest_handle_lists_the_frames_finished_between_rewrites() {
     // The batch is over: the handle has nothing to write.
     assert!(!handle.save_now().unwrap());
     assert_eq!(read_manifest(&out).unwrap().frames.len(), 6);
+}
+
+/// The 6-frame real dump split into a file set in `dir`, one file per frame
+/// (`dump.<timestep>.txt`), by timestep.
+fn file_set(dir: &Path) -> Vec<PathBuf> {
+    use mdlod_preprocess::readers::DumpFile;
+    std::fs::create_dir_all(dir).unwrap();
+    let path = lammps_sample_path("cu_melt.custom.dump");
+    let whole = std::fs::read(&path).unwrap();
+    let frames = DumpFile::open(&path).unwrap();
+    (0..frames.frame_count())
+        .map(|k| {
+            let r = frames.frame_bytes(k).unwrap();
+            let t = frames.frame_timestep(k).unwrap();
+            let p = dir.join(format!("dump.{t}.txt"));
+            std::fs::write(&p, &whole[r.start as usize..r.end as usize]).unwrap();
+            p
+        })
+        .collect()
+}
+
+/// Array tasks started before and after a file set grew split different lists of
+/// frames (shard 0 of 2 takes 0, 200 of four frames, shard 1 takes 100, 300, 500 of
+/// six: 400 belongs to neither): the merge refuses, naming the shards and what each saw,
+/// and so does verify; rerun over the whole set, they merge. Manifests of earlier
+/// versions, which record no list, are not refused.
+#[test]
+fn merge_refuses_shards_that_split_different_lists_of_frames() {
+    use mdlod_preprocess::batch::verify_dir;
+    let dir = tempfile::tempdir().unwrap();
+    let all = file_set(&dir.path().join("src"));
+    let out = dir.path().join("out");
+    batch(&all[..4], &out, &shard(0, 2), &NoProgress).unwrap();
+    batch(&all, &out, &shard(1, 2), &NoProgress).unwrap();
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains("different lists of input frames")
+            && e.contains("dataset.shard-0-of-2.json saw 4 frames")
+            && e.contains("dataset.shard-1-of-2.json saw 6 frames")
+            && e.contains("rerun every shard over the same, complete inputs"),
+        "{e}"
+    );
+    assert!(!out.join("dataset.json").exists());
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    assert!(
+        c.problems
+            .iter()
+            .any(|p| p.contains("different lists of input frames")),
+        "{c:?}"
+    );
+    // The same count, other timesteps: told apart by the digest.
+    let other = dir.path().join("other");
+    let mut swapped = all[..3].to_vec();
+    swapped.push(all[4].clone());
+    batch(&all[..4], &other, &shard(0, 2), &NoProgress).unwrap();
+    batch(&swapped, &other, &shard(1, 2), &NoProgress).unwrap();
+    let e = merge(&other).unwrap_err().to_string();
+    assert!(e.contains("4 frames (of other files or timesteps)"), "{e}");
+
+    batch(&all, &out, &shard(0, 2), &NoProgress).unwrap();
+    let m = merge(&out).unwrap();
+    assert_eq!(m.frames.len(), 6);
+    assert_eq!(m.input_frames.as_ref().map(|l| l.count), Some(6));
+    check_manifest(&out, &m);
+
+    // A manifest without the list (an earlier version's) is not compared.
+    let path = out.join("dataset.shard-0-of-2.json");
+    let mut old: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    old.as_object_mut().unwrap().remove("input_frames").unwrap();
+    std::fs::write(&path, serde_json::to_vec(&old).unwrap()).unwrap();
+    let m = merge(&out).unwrap();
+    assert_eq!((m.frames.len(), m.input_frames), (6, None));
+}
+
+/// Rewrites a current-revision binary dump in the old layout (no magic, endian,
+/// revision, units, time or column names), as in `readers_lammps_binary.rs`.
+fn to_old_revision(new: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut p = 0usize;
+    let i32_at = |p: usize| i32::from_le_bytes(new[p..p + 4].try_into().unwrap());
+    let i64_at = |p: usize| i64::from_le_bytes(new[p..p + 8].try_into().unwrap());
+    while p < new.len() {
+        let len = (-i64_at(p)) as usize;
+        p += 8 + len + 8; // marker, magic, endian + revision
+        let triclinic = i32_at(p + 16);
+        let fixed = 8 + 8 + 4 + 24 + 48 + if triclinic == 1 { 24 } else { 0 } + 4;
+        out.extend_from_slice(&new[p..p + fixed]);
+        p += fixed;
+        let units = i32_at(p) as usize;
+        p += 4 + units;
+        p += if new[p] == 1 { 9 } else { 1 };
+        let columns = i32_at(p) as usize;
+        p += 4 + columns;
+        let start = p;
+        let nchunk = i32_at(p) as usize;
+        p += 4;
+        for _ in 0..nchunk {
+            p += 4 + 8 * i32_at(p) as usize;
+        }
+        out.extend_from_slice(&new[start..p]);
+    }
+    out
+}
+
+/// An old-revision binary dump needs `--columns`: a rerun that forgets them fails on
+/// every frame before writing anything, and leaves the manifest as it was (a first run
+/// leaves none), so the corrected rerun keeps every frame instead of converting them
+/// all again for "other settings".
+#[test]
+fn a_rerun_failing_before_any_output_leaves_the_manifest_as_it_was() {
+    use mdlod_preprocess::readers::DumpFile;
+    let dir = tempfile::tempdir().unwrap();
+    let new = lammps_sample_path("cu_melt.custom.bin");
+    let columns = DumpFile::open(&new).unwrap().frame_info(0).unwrap().columns;
+    let src = dir.path().join("old.bin");
+    std::fs::write(&src, to_old_revision(&std::fs::read(&new).unwrap())).unwrap();
+    let with_columns = |o: BatchOptions| {
+        let mut o = o;
+        o.read.columns = Some(columns.clone());
+        o
+    };
+    // A first run without them writes no manifest.
+    let fresh = dir.path().join("fresh");
+    let e = batch(std::slice::from_ref(&src), &fresh, &opts(), &NoProgress).unwrap_err();
+    assert!(e.to_string().contains("give the column names"), "{e}");
+    assert!(!fresh.join("dataset.json").exists());
+
+    for (out, o) in [("whole", opts()), ("sharded", shard(1, 2))] {
+        let out = dir.path().join(out);
+        let r = batch(
+            std::slice::from_ref(&src),
+            &out,
+            &with_columns(o.clone()),
+            &NoProgress,
+        )
+        .unwrap();
+        assert!(r.converted > 0);
+        let before = std::fs::read(&r.manifest).unwrap();
+        let e = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap_err();
+        assert!(e.to_string().contains("give the column names"), "{e}");
+        assert_eq!(
+            std::fs::read(&r.manifest).unwrap(),
+            before,
+            "{}",
+            r.manifest.display()
+        );
+        let again = batch(
+            std::slice::from_ref(&src),
+            &out,
+            &with_columns(o),
+            &NoProgress,
+        )
+        .unwrap();
+        assert_eq!(
+            (again.converted, again.skipped, again.redone.settings),
+            (0, r.converted, 0)
+        );
+    }
+}
+
+/// A quoted pattern over the directory that holds the batch directory (`'fs2/*' -o
+/// fs2/out`) matches the inputs again on a rerun, not the batch directory; over the
+/// batch directory itself, not the frames and manifests the batch wrote there; and not
+/// hidden files, as the shell's.
+#[test]
+fn a_quoted_pattern_skips_directories_and_the_batchs_own_files() {
+    use mdlod_preprocess::batch::expand_patterns;
+    let dir = tempfile::tempdir().unwrap();
+    let fs2 = dir.path().join("fs2");
+    let all = file_set(&fs2);
+    let names = |v: &[PathBuf]| -> Vec<String> {
+        v.iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect()
+    };
+    let pattern = fs2.join("*");
+    let out = fs2.join("out");
+    std::fs::write(fs2.join(".hidden.txt"), "not an input").unwrap();
+    for run in 0..2 {
+        let inputs = expand_patterns(std::slice::from_ref(&pattern), &out).unwrap();
+        assert_eq!(names(&inputs), names(&all), "run {run}");
+        let r = batch(&inputs, &out, &opts(), &NoProgress).unwrap();
+        assert_eq!(r.frames_total, 6);
+    }
+    // The batch directory is the pattern's: its frames and manifest are not inputs.
+    let inputs = expand_patterns(std::slice::from_ref(&pattern), &fs2).unwrap();
+    batch(&inputs, &fs2, &opts(), &NoProgress).unwrap();
+    assert!(fs2.join("dataset.json").exists() && fs2.join("frame-0.mdlod").exists());
+    let again = expand_patterns(std::slice::from_ref(&pattern), &fs2).unwrap();
+    assert_eq!(names(&again), names(&all));
+    // Elsewhere, files of such names are inputs like any others.
+    let e = expand_patterns(&[fs2.join("out").join("*.mdlod")], &fs2).unwrap();
+    assert_eq!(e.len(), 6);
+    // Nothing but directories: no file matches.
+    let e = expand_patterns(&[fs2.join("ou*")], &fs2).unwrap_err();
+    assert!(e.to_string().contains("no file matches"), "{e}");
+}
+
+/// Only the newest file of a set may be one a run is still writing: one cut short before
+/// it (in its atoms, its header or its last line) is an error naming it, where the newest
+/// cut so is left out with a note; an empty newest file (just opened) is left out too,
+/// an empty older one is an error.
+#[test]
+fn only_the_newest_file_of_a_set_may_be_cut_short() {
+    use mdlod_preprocess::batch::BatchReport;
+    let dir = tempfile::tempdir().unwrap();
+    let all = file_set(&dir.path().join("src"));
+    let whole: Vec<Vec<u8>> = all.iter().map(|p| std::fs::read(p).unwrap()).collect();
+    type Cut = fn(&[u8]) -> &[u8];
+    let cuts: [(&str, Cut); 4] = [
+        ("in its atoms", |b| &b[..b.len() / 2]),
+        ("in its header", |b| &b[..30]),
+        ("inside its last line", |b| &b[..b.len() - 2]),
+        ("to nothing", |b| &b[..0]),
+    ];
+    for (how, cut) in cuts {
+        for (which, k) in [("older", 2), ("newest", 5)] {
+            let run = dir.path().join(format!("{how} {which}"));
+            let set = run.join("set");
+            std::fs::create_dir_all(&set).unwrap();
+            let inputs: Vec<PathBuf> = all
+                .iter()
+                .zip(&whole)
+                .enumerate()
+                .map(|(i, (p, bytes))| {
+                    let q = set.join(p.file_name().unwrap());
+                    std::fs::write(&q, if i == k { cut(bytes) } else { &bytes[..] }).unwrap();
+                    q
+                })
+                .collect();
+            let r: Result<BatchReport, BatchError> =
+                batch(&inputs, &run.join("out"), &opts(), &NoProgress);
+            let name = inputs[k].display().to_string();
+            match (which, r) {
+                ("older", Err(e)) => {
+                    let e = e.to_string();
+                    assert!(e.contains(&name), "{how} {which}: {e}");
+                    let newest = format!("not the newest input ({})", inputs[5].display());
+                    assert!(
+                        e.contains(&newest) || e.contains("file is empty"),
+                        "{how} {which}: {e}"
+                    );
+                }
+                ("newest", Ok(r)) => {
+                    assert_eq!((r.converted, r.incomplete.len()), (5, 1), "{how} {which}");
+                    let note = r.incomplete[0].to_string();
+                    assert!(note.starts_with(&name), "{how}: {note}");
+                    let m = read_manifest(&run.join("out")).unwrap();
+                    assert_eq!((m.frames.len(), m.expected_frames), (5, Some(5)), "{how}");
+                }
+                (_, r) => panic!("{how} {which}: {:?}", r.map(|r| r.converted)),
+            }
+        }
+    }
+}
+
+/// A failed array task resubmitted alone (`sbatch --array=2`) runs as shard 0 of 1: the
+/// merge names the manifests of the two shardings and says how to rerun the missing
+/// task and that the stray manifest can then be deleted; done so, the shards merge.
+#[test]
+fn merge_of_a_task_resubmitted_alone_names_the_stray_manifest_and_the_shard_to_rerun() {
+    use mdlod_preprocess::batch::verify_dir;
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    for i in [0, 1, 3] {
+        batch(std::slice::from_ref(&src), &out, &shard(i, 4), &NoProgress).unwrap();
+    }
+    batch(std::slice::from_ref(&src), &out, &shard(0, 1), &NoProgress).unwrap();
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains(
+            "dataset.shard-0-of-4.json, dataset.shard-1-of-4.json and dataset.shard-3-of-4.json \
+             are of 4 shards, but dataset.shard-0-of-1.json is of 1"
+        ) && e.contains("rerun the task with --shard 2/4")
+            && e.contains("then delete dataset.shard-0-of-1.json and merge"),
+        "{e}"
+    );
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    assert!(
+        c.problems.iter().any(|p| p.contains("--shard 2/4")),
+        "{c:?}"
+    );
+    let r = batch(std::slice::from_ref(&src), &out, &shard(2, 4), &NoProgress).unwrap();
+    assert_eq!(r.converted, 0, "shard 0 of 1 converted its frames already");
+    std::fs::remove_file(out.join("dataset.shard-0-of-1.json")).unwrap();
+    check_manifest(&out, &merge(&out).unwrap());
+}
+
+/// Frames above the chunk size each need one chunk's build (its fixed part dominating
+/// small chunks): a batch runs as few at once as fit the memory limit rather than
+/// dividing it into shares too small for any, and where one frame does not fit the
+/// whole limit, the error names the limit given.
+#[test]
+fn a_batch_runs_fewer_chunked_frames_at_once_to_fit_the_memory_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("melt.bin");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.bin"), &src).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(4)
+        .build()
+        .unwrap();
+    let run = |limit: u64, out: &str| {
+        let mut o = opts();
+        o.convert.build.max_root_points = 64;
+        o.convert.chunks.chunk_points = 300;
+        o.memory_limit = limit;
+        let out = dir.path().join(out);
+        pool.install(|| batch(std::slice::from_ref(&src), &out, &o, &NoProgress))
+    };
+    // One chunk of 300 needs 64 MiB and a little: one frame at a time.
+    let r = run(100 << 20, "fits").unwrap();
+    assert_eq!((r.converted, r.jobs), (3, 1));
+    let r = run(140 << 20, "two").unwrap();
+    assert_eq!((r.converted, r.jobs), (3, 2));
+    let e = run(50 << 20, "small").unwrap_err().to_string();
+    assert!(e.contains("the memory limit of 50 MiB is below"), "{e}");
 }

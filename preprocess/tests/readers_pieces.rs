@@ -87,6 +87,21 @@ fn missing_or_disagreeing_pieces_are_clear_errors() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("run.1.dump") && e.contains("frames"), "{e}");
+    // The same frames at another timestep: named as timesteps, of the whole piece (no
+    // line of it).
+    copy("cu_melt_mpi.0.dump", "run.0.dump");
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt_mpi.1.dump")).unwrap();
+    let text = text.replace("ITEM: TIMESTEP\n250\n", "ITEM: TIMESTEP\n260\n");
+    std::fs::write(dir.path().join("run.1.dump"), text).unwrap();
+    let e = DumpFile::open(&dir.path().join("run.%.dump"))
+        .unwrap_err()
+        .to_string();
+    let piece = dir.path().join("run.1.dump").display().to_string();
+    assert!(
+        e.starts_with(&format!("{piece}: frame 1 is timestep 260, but in "))
+            && e.ends_with("run.0.dump it is timestep 250"),
+        "{e}"
+    );
     // Nothing at all.
     let e = DumpFile::open(&dir.path().join("none.%.dump"))
         .unwrap_err()

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use mdlod_preprocess::batch::{batch, merge, BatchOptions};
+use mdlod_preprocess::batch::{batch, expand_patterns, merge, natural_cmp, BatchOptions};
 
 use super::convert::{with_threads, BuildArgs};
 use super::render::parse_bytes;
@@ -155,8 +155,9 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(dir) = &args.merge {
         let m = merge(dir)?;
         println!(
-            "merged {} frames into {}",
+            "merged {} frame{} into {}",
             m.frames.len(),
+            if m.frames.len() == 1 { "" } else { "s" },
             dir.join(mdlod_preprocess::batch::MANIFEST).display()
         );
         return Ok(());
@@ -179,110 +180,8 @@ pub fn run(args: Args) -> Result<()> {
     result
 }
 
-/// The inputs with file-name patterns (`dump.*.bin`) expanded where the shell left
-/// them (quoted in a job script): `*` and `?` in the last component, matching files of
-/// its directory, in natural order (see [`natural_cmp`]). A path that exists is taken as it is.
-fn expand_patterns(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::with_capacity(inputs.len());
-    for input in inputs {
-        let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
-        if input.exists() || !name.contains(['*', '?', '[']) {
-            out.push(input.clone());
-            continue;
-        }
-        if name.contains('[') {
-            bail!(
-                "{}: a quoted pattern takes * and ? only, not [...] (leave it unquoted for \
-                 the shell to expand)",
-                input.display()
-            );
-        }
-        let dir = match input.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let entries = std::fs::read_dir(&dir)
-            .with_context(|| format!("{}: cannot list {}", input.display(), dir.display()))?;
-        let mut found: Vec<PathBuf> = entries
-            .flatten()
-            .filter(|e| e.file_name().to_str().is_some_and(|n| wildcard(name, n)))
-            .map(|e| input.with_file_name(e.file_name()))
-            .collect();
-        if found.is_empty() {
-            bail!("{}: no file matches the pattern", input.display());
-        }
-        found.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
-        out.extend(found);
-    }
-    Ok(out)
-}
-
-/// Whether `name` matches `pattern`, where `*` stands for any run of characters and `?`
-/// for one.
-fn wildcard(pattern: &str, name: &str) -> bool {
-    let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
-    // Greedy with backtracking to the last `*`.
-    let (mut i, mut j, mut star, mut mark) = (0, 0, None, 0);
-    while j < n.len() {
-        if i < p.len() && (p[i] == '?' || p[i] == n[j]) {
-            i += 1;
-            j += 1;
-        } else if i < p.len() && p[i] == '*' {
-            star = Some(i);
-            mark = j;
-            i += 1;
-        } else if let Some(s) = star {
-            i = s + 1;
-            mark += 1;
-            j = mark;
-        } else {
-            return false;
-        }
-    }
-    p[i..].iter().all(|&c| c == '*')
-}
-
-/// Orders paths as people number file sets: runs of digits by their value, so that
-/// `water.2.xyz` comes before `water.10.xyz` (the shell's order puts it after), the rest
-/// character by character.
-fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
-    let (mut a, mut b) = (a.as_bytes(), b.as_bytes());
-    loop {
-        match (a.first(), b.first()) {
-            (None, None) => return std::cmp::Ordering::Equal,
-            (None, Some(_)) => return std::cmp::Ordering::Less,
-            (Some(_), None) => return std::cmp::Ordering::Greater,
-            (Some(x), Some(y)) if x.is_ascii_digit() && y.is_ascii_digit() => {
-                let run = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
-                let (na, nb) = (run(a), run(b));
-                let trim = |s: &[u8]| -> usize { s.iter().take_while(|&&c| c == b'0').count() };
-                let (da, db) = (
-                    &a[trim(&a[..na]).min(na)..na],
-                    &b[trim(&b[..nb]).min(nb)..nb],
-                );
-                // By value (length, then digits), then by the zeros in front (`01` after `1`).
-                let order = da
-                    .len()
-                    .cmp(&db.len())
-                    .then_with(|| da.cmp(db))
-                    .then_with(|| na.cmp(&nb));
-                if order != std::cmp::Ordering::Equal {
-                    return order;
-                }
-                (a, b) = (&a[na..], &b[nb..]);
-            }
-            (Some(x), Some(y)) => {
-                if x != y {
-                    return x.cmp(y);
-                }
-                (a, b) = (&a[1..], &b[1..]);
-            }
-        }
-    }
-}
-
 fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> Result<()> {
-    let mut inputs = expand_patterns(&args.inputs)?;
+    let mut inputs = expand_patterns(&args.inputs, out)?;
     // Frames without timesteps are numbered by their input's place in the list: a file
     // set the shell expanded (`water.1 water.10 water.2`) goes in its numbers' order.
     inputs.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
@@ -448,39 +347,6 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
 #[cfg(test)]
 mod tests {
     use super::slurm_shard;
-
-    #[test]
-    fn quoted_patterns_match_file_names() {
-        use super::wildcard;
-        assert!(wildcard("dump.*.bin", "dump.1000.bin"));
-        assert!(wildcard("dump.*.bin", "dump..bin"));
-        assert!(!wildcard("dump.*.bin", "dump.1000.bin.gz"));
-        assert!(wildcard("d?mp*", "dump.1"));
-        assert!(wildcard("*a*b", "xxaxxb"));
-        assert!(!wildcard("*a*b", "xxaxxbc"));
-        let dir = tempfile::tempdir().unwrap();
-        for n in ["dump.20.bin", "dump.10.bin", "other.bin"] {
-            std::fs::write(dir.path().join(n), "").unwrap();
-        }
-        let found = super::expand_patterns(&[dir.path().join("dump.*.bin")]).unwrap();
-        let names: Vec<_> = found
-            .iter()
-            .map(|p| p.file_name().unwrap().to_owned())
-            .collect();
-        assert_eq!(names, ["dump.10.bin", "dump.20.bin"]);
-        let mut set = vec![
-            "w.10.xyz", "w.2.xyz", "w.1.xyz", "w.02.xyz", "v.xyz", "w.1a.xyz",
-        ];
-        set.sort_by(|a, b| super::natural_cmp(a, b));
-        assert_eq!(
-            set,
-            ["v.xyz", "w.1.xyz", "w.1a.xyz", "w.2.xyz", "w.02.xyz", "w.10.xyz"]
-        );
-        let e = super::expand_patterns(&[dir.path().join("none.*")]).unwrap_err();
-        assert!(e.to_string().contains("no file matches"), "{e}");
-        let e = super::expand_patterns(&[dir.path().join("dump.[12]*.bin")]).unwrap_err();
-        assert!(e.to_string().contains("* and ? only"), "{e}");
-    }
 
     fn env<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
         move |name| {

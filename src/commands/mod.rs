@@ -96,9 +96,7 @@ pub fn check_batch_output(output: &Path, inputs: &[PathBuf]) -> Result<()> {
             let Some(name) = file.file_name().and_then(|n| n.to_str()) else {
                 continue;
             };
-            let ours = (name.starts_with("frame-") && name.ends_with(".mdlod"))
-                || (name.starts_with("dataset") && name.ends_with(".json"))
-                || name.ends_with(".tmp");
+            let ours = mdlod_preprocess::batch::written_by_batch(name);
             let parent = match file.parent() {
                 Some(d) if !d.as_os_str().is_empty() => d,
                 _ => Path::new("."),

@@ -46,17 +46,19 @@ fn run_dir(args: &Args) -> Result<()> {
     };
     if !c.problems.is_empty() {
         anyhow::bail!(
-            "{}: {} problem{} ({} frames verified){merged}",
+            "{}: {} problem{} ({} frame{} verified){merged}",
             dir.display(),
             c.problems.len(),
             if c.problems.len() == 1 { "" } else { "s" },
-            c.frames_ok
+            c.frames_ok,
+            if c.frames_ok == 1 { "" } else { "s" }
         );
     }
     println!(
-        "{}: ok: {} frames verified against {} in {:.2} s{merged}",
+        "{}: ok: {} frame{} verified against {} in {:.2} s{merged}",
         dir.display(),
         c.frames_ok,
+        if c.frames_ok == 1 { "" } else { "s" },
         c.manifests.join(", "),
         t.elapsed().as_secs_f64()
     );

@@ -149,6 +149,10 @@ pub enum ReadError {
     },
     #[error("{at}: more than 65536 distinct species")]
     TooManySpecies { at: Location },
+    /// The pieces of a `%` set disagree (in their frames, their timesteps): about the
+    /// whole piece, so no line or byte is named.
+    #[error("{}: {message}", path.display())]
+    Pieces { path: PathBuf, message: String },
     /// A binary input is malformed; `offset` is the byte where the problem is.
     #[error("{}: byte {offset}: {message}", path.display())]
     Binary {

@@ -95,11 +95,9 @@ pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError
         });
     };
     for p in &pieces[1..] {
-        let mismatch = |message: String| ReadError::Malformed {
-            at: super::Location {
-                path: p.path().to_path_buf(),
-                line: 1,
-            },
+        // About the whole piece, not a line of it (a binary piece has none).
+        let mismatch = |message: String| ReadError::Pieces {
+            path: p.path().to_path_buf(),
             message,
         };
         if p.frame_count() != first.frame_count() {
@@ -113,11 +111,13 @@ pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError
         if let Some(k) =
             (0..first.frame_count()).find(|&k| p.frame_timestep(k) != first.frame_timestep(k))
         {
+            let timestep =
+                |t: Option<u64>| t.map_or("without a timestep".into(), |t| format!("timestep {t}"));
             return Err(mismatch(format!(
-                "frame {k} is timestep {:?}, but in {} it is {:?}",
-                p.frame_timestep(k),
+                "frame {k} is {}, but in {} it is {}",
+                timestep(p.frame_timestep(k)),
                 first.path().display(),
-                first.frame_timestep(k)
+                timestep(first.frame_timestep(k))
             )));
         }
     }
