@@ -306,9 +306,14 @@ fn corrupt_gzip() {
     let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
     enc.write_all(dump("1 1 0 0 0\n").repeat(50).as_bytes())
         .unwrap();
-    let mut bytes = enc.finish().unwrap();
-    bytes.truncate(bytes.len() / 2);
-    let path = write(dir.path(), "bad.lammpstrj.gz", &bytes);
+    let bytes = enc.finish().unwrap();
+    // Garbage inside the compressed stream (not a stream that ends early, which reads
+    // the text before its end).
+    let mut garbled = bytes.clone();
+    for b in &mut garbled[12..bytes.len() - 8] {
+        *b = 0xff;
+    }
+    let path = write(dir.path(), "bad.lammpstrj.gz", &garbled);
     let err = DumpFile::open(&path).unwrap_err();
     assert!(matches!(err, ReadError::Io { .. }));
     let got = err.to_string();
@@ -316,6 +321,21 @@ fn corrupt_gzip() {
         got.starts_with(&format!("{}: gzip decompression failed", path.display())),
         "{got}"
     );
+    // Cut in half (50 frames): the frames before the cut read, the one it falls in is
+    // cut short, and said to be.
+    let path = write(dir.path(), "cut.lammpstrj.gz", &bytes[..bytes.len() / 2]);
+    let dump = DumpFile::open(&path).unwrap();
+    let n = dump.frame_count();
+    assert!((1..50).contains(&n), "{n} frames");
+    if n > 1 {
+        dump.read_frame(0, &ReadOptions::default(), &NoProgress)
+            .unwrap();
+    }
+    let got = dump
+        .read_frame(n - 1, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(got.starts_with(&format!("{}:", path.display())), "{got}");
 }
 
 #[test]
