@@ -1843,7 +1843,7 @@ impl Renderer {
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("sndf params"),
             contents: bytemuck::bytes_of(&params_of(layers)),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         });
         let binds: Vec<wgpu::BindGroup> = windows
             .iter()
@@ -2061,7 +2061,7 @@ impl Renderer {
                 grid,
                 pad: 0,
             }),
-            wgpu::BufferUsages::UNIFORM,
+            wgpu::BufferUsages::STORAGE,
         );
         let table = init(
             "shade table",
@@ -2507,7 +2507,7 @@ impl Renderer {
             let slicing_buf = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("density slicing"),
                 size: stride * u64::from(stacks),
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
             queue.write_buffer(&slicing_buf, 0, bytemuck::cast_slice(&records));

@@ -436,14 +436,14 @@ impl Smip {
             "smip_downsample.wgsl",
             DOWNSAMPLE_SHADER,
             "downsample",
-            &[T::Uniform, write],
+            &[read, write],
         );
         let composite = compute_pipeline(
             device,
             "smip_composite.wgsl",
             COMPOSITE_SHADER,
             "composite",
-            &[T::Uniform, read, read, read, read, write],
+            &[read, read, read, read, read, write],
         );
         Ok(Smip {
             config,
@@ -723,7 +723,7 @@ impl Smip {
                     background: [bg[0], bg[1], bg[2], 0.0],
                     level: levels,
                 }),
-                wgpu::BufferUsages::UNIFORM,
+                wgpu::BufferUsages::STORAGE,
             );
             let storage = wgpu::BufferUsages::STORAGE;
             let table = init(
@@ -1015,7 +1015,7 @@ impl Smip {
                     pad: [0; 2],
                     children: slots,
                 }),
-                usage: wgpu::BufferUsages::UNIFORM,
+                usage: wgpu::BufferUsages::STORAGE,
             });
             let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("smip downsample"),

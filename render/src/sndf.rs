@@ -98,7 +98,7 @@ impl SndfShadePass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sndf_shade"),
             entries: &[
-                buffer(0, wgpu::BufferBindingType::Uniform),
+                buffer(0, read),
                 buffer(1, read),
                 buffer(2, read),
                 buffer(3, wgpu::BufferBindingType::Storage { read_only: false }),
@@ -449,7 +449,7 @@ impl SndfPass {
                     binding: 0,
                     visibility: wgpu::ShaderStages::COMPUTE,
                     ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: false,
                         min_binding_size: None,
                     },

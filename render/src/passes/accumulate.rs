@@ -69,7 +69,7 @@ impl AccumulatePass {
                     binding: 1,
                     visibility: wgpu::ShaderStages::FRAGMENT,
                     ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: false,
                         min_binding_size: None,
                     },
@@ -137,7 +137,7 @@ impl AccumulatePass {
             contents: bytemuck::bytes_of(&WeightUniforms {
                 weight: [weight, 0.0, 0.0, 0.0],
             }),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: wgpu::BufferUsages::STORAGE,
         });
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("accumulate"),

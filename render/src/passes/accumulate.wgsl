@@ -14,7 +14,7 @@ struct Params {
 };
 
 @group(0) @binding(0) var src: texture_2d<f32>;
-@group(0) @binding(1) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> params: Params;
 // The sum so far (bound, and unread, in the first and resolve passes too).
 @group(0) @binding(2) var sum: texture_2d<f32>;
 

@@ -87,7 +87,7 @@ impl DensityPass {
             binding,
             visibility,
             ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
                 has_dynamic_offset: dynamic,
                 min_binding_size: None,
             },

@@ -6,7 +6,7 @@
 // Follows points.wgsl and density_common.wgsl. Group 1 holds the stack's slicing; group
 // 2 the rays' states, for the iso-surface's colour pass (`fs_colour`).
 
-@group(1) @binding(0) var<uniform> dens: Density;
+@group(1) @binding(0) var<storage, read> dens: Density;
 
 
 struct SplatOut {

@@ -5,7 +5,7 @@
 //
 // Follows density_common.wgsl.
 
-@group(0) @binding(0) var<uniform> dens: Density;
+@group(0) @binding(0) var<storage, read> dens: Density;
 @group(0) @binding(1) var slice_a: texture_2d<f32>;
 @group(0) @binding(2) var slice_b: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> rays: array<Ray>;

@@ -78,6 +78,32 @@ pub(crate) fn strip_pipeline(
 
 #[cfg(test)]
 mod tests {
+    /// No shader reads a uniform buffer: Mesa's software Vulkan driver compiles a shader
+    /// variant for each set of uniform contents that decide control flow and never frees
+    /// it (about a megabyte a frame; `tests/memory.rs`). Parameters are read-only storage.
+    #[test]
+    fn no_shader_reads_a_uniform_buffer() {
+        let all = super::SHADERS
+            .iter()
+            .map(|(name, src)| (*name, src.to_string()))
+            .chain([
+                (
+                    "small_spheres.wgsl",
+                    super::sphere_raycast::SMALL_SPHERES_SHADER.to_string(),
+                ),
+                (
+                    "sphere_raycast.wgsl, conservative depth",
+                    super::sphere_raycast::shader_source(true),
+                ),
+            ]);
+        for (name, src) in all {
+            assert!(
+                !src.contains("var<uniform>"),
+                "{name} reads a uniform buffer"
+            );
+        }
+    }
+
     #[test]
     fn every_shader_validates_with_naga() {
         for (name, src) in super::SHADERS {

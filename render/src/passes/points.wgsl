@@ -34,7 +34,7 @@ struct Range {
 const KIND_PARTICLE: u32 = 0u;
 const KIND_INTENSITY: u32 = 2u;
 
-@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(0) var<storage, read> frame: Frame;
 @group(0) @binding(1) var<storage, read> positions: array<u32>;
 @group(0) @binding(2) var<storage, read> attrs: array<u32>;
 @group(0) @binding(3) var<storage, read> ranges: array<Range>;

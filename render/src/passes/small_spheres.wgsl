@@ -15,7 +15,7 @@
 // Follows points.wgsl and pixel_rays.wgsl. Needs 64-bit integers and their atomic
 // minimum and maximum (SHADER_INT64, SHADER_INT64_ATOMIC_MIN_MAX).
 
-@group(1) @binding(0) var<uniform> raster: Raster;
+@group(1) @binding(0) var<storage, read> raster: Raster;
 @group(1) @binding(1) var<storage, read_write> visible: array<atomic<u64>>;
 @group(1) @binding(2) var<storage, read_write> large: array<u32>;
 // The indirect draw of the large spheres: vertex count, instance count, first vertex,

@@ -34,7 +34,7 @@ struct Params {
     level: array<Level, 2>,
 };
 
-@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(0) var<storage, read> params: Params;
 // Two per bin: the albedo factor (rgb) and the highlight (rgb).
 @group(0) @binding(1) var<storage, read> table: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> pool: array<vec4<f32>>;

@@ -16,7 +16,7 @@ struct DownParams {
     children: vec4<u32>,
 };
 
-@group(0) @binding(0) var<uniform> params: DownParams;
+@group(0) @binding(0) var<storage, read> params: DownParams;
 @group(0) @binding(1) var<storage, read_write> pool: array<vec4<f32>>;
 
 fn texel_index(lx: u32, ly: u32) -> u32 {

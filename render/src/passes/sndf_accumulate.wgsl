@@ -36,7 +36,7 @@ struct Params {
     pad1: u32,
 };
 
-@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var normals: texture_2d_array<f32>;
 @group(0) @binding(2) var albedos: texture_2d_array<f32>;
 @group(0) @binding(3) var<storage, read_write> hist: array<vec4<f32>>;

@@ -21,7 +21,7 @@ struct ShadeParams {
     pad1: u32,
 };
 
-@group(0) @binding(0) var<uniform> params: ShadeParams;
+@group(0) @binding(0) var<storage, read> params: ShadeParams;
 // Two per bin: the albedo factor (rgb) and the highlight (rgb) towards the view axis;
 // then, with a grid, the highlights at grid x grid view directions (rows from the
 // image's top left corner, bins^2 each), interpolated bilinearly per texel.

@@ -664,7 +664,7 @@ impl SphereRaycastPass {
                     binding: 0,
                     visibility: stages,
                     ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: false,
                         min_binding_size: None,
                     },
@@ -747,7 +747,7 @@ impl SphereRaycastPass {
         let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame uniforms"),
             size: std::mem::size_of::<FrameUniforms>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -863,20 +863,20 @@ impl SmallSpheres {
         use wgpu::BufferBindingType as B;
         use wgpu::ShaderStages as S;
         let writable = B::Storage { read_only: false };
+        let read = B::Storage { read_only: true };
         let raster_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("small spheres: raster"),
             entries: &[
-                entry(0, S::COMPUTE, B::Uniform),
+                entry(0, S::COMPUTE, read),
                 entry(1, S::COMPUTE, writable),
                 entry(2, S::COMPUTE, writable),
                 entry(3, S::COMPUTE, writable),
             ],
         });
-        let read = B::Storage { read_only: true };
         let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("small spheres: draw"),
             entries: &[
-                entry(0, S::FRAGMENT, B::Uniform),
+                entry(0, S::FRAGMENT, read),
                 entry(1, S::FRAGMENT, read),
                 entry(2, S::VERTEX, read),
             ],
@@ -997,7 +997,7 @@ impl SmallSpheres {
         let uniforms = buffer(
             "small spheres: uniforms",
             std::mem::size_of::<RasterUniforms>() as u64,
-            U::UNIFORM | U::COPY_DST,
+            U::STORAGE | U::COPY_DST,
         );
         let visible = buffer(
             "small spheres: visible",

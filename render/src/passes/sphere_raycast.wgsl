@@ -24,7 +24,7 @@
 // Follows points.wgsl (uniforms, bindings, point decoding) and pixel_rays.wgsl.
 
 // The compute raster's results, for `fs_resolve` and `vs_listed`.
-@group(1) @binding(0) var<uniform> raster: Raster;
+@group(1) @binding(0) var<storage, read> raster: Raster;
 // Per pixel, the winning key (reversed entry depth bits above, the complement of the
 // point index below; 0: no small sphere), read as two 32-bit words, low first.
 @group(1) @binding(1) var<storage, read> visible_words: array<vec2<u32>>;
