@@ -5608,3 +5608,45 @@ fn log_scales_ranges_and_fits_that_mean_nothing_are_refused_or_explained() {
     let e = fails(&run(&vx, &png, &["--view", s(&view), "--fit-all"]));
     assert!(e.contains("--fit-all has no effect with --view"), "{e}");
 }
+
+/// Outputs get the permissions any new file gets under the user's umask (private under
+/// `umask 077`, group-writable under `umask 002`), not a fixed 0644.
+#[cfg(unix)]
+#[test]
+fn outputs_honour_the_umask() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    for (umask, want) in [("077", 0o600), ("002", 0o664)] {
+        let file = dir.path().join(format!("u{umask}.mdlod"));
+        let png = dir.path().join(format!("u{umask}.png"));
+        let batch = dir.path().join(format!("b{umask}"));
+        std::fs::create_dir(&batch).unwrap();
+        let bin = env!("CARGO_BIN_EXE_mdlod");
+        let script = format!(
+            "umask {umask} && {bin} convert {} -o {} && {bin} render {} -o {} --width 32 \
+             --height 24 && {bin} batch {} -o {}",
+            s(&input),
+            s(&file),
+            s(&file),
+            s(&png),
+            s(&input),
+            s(&batch)
+        );
+        let out = Command::new("sh").args(["-c", &script]).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        for p in [
+            &file,
+            &png,
+            &batch.join("dataset.json"),
+            &batch.join("frame-0.mdlod"),
+        ] {
+            assert_eq!(mode(p), want, "{} under umask {umask}", p.display());
+        }
+    }
+}

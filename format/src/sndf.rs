@@ -282,14 +282,13 @@ impl SndfData {
             _ => Path::new("."),
         };
         let io = |e| FormatError::io(path, e);
-        let mut tmp = tempfile::Builder::new()
+        let mut tmp = crate::writer::output_file_builder()
             .prefix(".sndf.")
             .suffix(".tmp")
             .tempfile_in(dir)
             .map_err(io)?;
         tmp.write_all(&out).map_err(io)?;
         tmp.as_file().sync_all().map_err(io)?;
-        crate::writer::make_readable(tmp.as_file()).map_err(io)?;
         tmp.persist(path)
             .map_err(|e| FormatError::io(path, e.error))?;
         Ok(())

@@ -79,7 +79,7 @@ impl Writer {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "out".into());
-        let tmp = tempfile::Builder::new()
+        let tmp = output_file_builder()
             .prefix(&temp_prefix(&name))
             .suffix(".tmp")
             .tempfile_in(dir)
@@ -190,7 +190,6 @@ impl Writer {
             .tmp
             .take()
             .expect("temporary file present until finish");
-        make_readable(tmp.as_file()).map_err(io)?;
         tmp.persist(&self.path)
             .map_err(|e| FormatError::io(&self.path, e.error))?;
         Ok(())
@@ -249,17 +248,18 @@ impl SectionWriter<'_> {
     }
 }
 
-/// Temporary files are created private (0600); a finished file gets the usual 0644, so
-/// that colleagues (and cluster jobs of other users in the group) can read it.
-pub fn make_readable(file: &std::fs::File) -> std::io::Result<()> {
+/// A builder of the temporary file a finished output is renamed from: created with the
+/// permissions any new file gets (0666 less the user's umask: 0644 usually, 0600 under
+/// `umask 077`, 0664 for a group's shared space), not a temporary file's private 0600.
+pub fn output_file_builder<'a, 'b>() -> tempfile::Builder<'a, 'b> {
+    #[allow(unused_mut)]
+    let mut builder = tempfile::Builder::new();
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
-        file.set_permissions(std::fs::Permissions::from_mode(0o644))?;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    #[cfg(not(unix))]
-    let _ = file;
-    Ok(())
+    builder
 }
 
 /// This host's name as the names of temporary files and working directories carry it

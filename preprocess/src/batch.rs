@@ -662,7 +662,7 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
 /// manifests are.
 fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
     let dir = path.parent().unwrap_or(Path::new("."));
-    let mut tmp = tempfile::Builder::new()
+    let mut tmp = mdlod_format::writer::output_file_builder()
         .prefix(".dataset.")
         .suffix(".tmp")
         .tempfile_in(dir)
@@ -670,7 +670,6 @@ fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
     use std::io::Write;
     tmp.write_all(text).map_err(io(path))?;
     tmp.as_file().sync_all().map_err(io(path))?;
-    mdlod_format::writer::make_readable(tmp.as_file()).map_err(io(path))?;
     tmp.persist(path).map_err(|e| BatchError::Io {
         path: path.to_path_buf(),
         source: e.error,

@@ -166,11 +166,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
     }
     let mut builder = tempfile::Builder::new();
     builder.prefix(".mdlod-tmp");
-    // Temporary files are private (0600); the result should be an ordinary file.
+    // Temporary files are private (0600); the result should be an ordinary file: 0666
+    // less the user's umask, as any new file.
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o644));
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
     let mut tmp = builder
         .tempfile_in(dir)
