@@ -845,7 +845,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
         }
         let Some(m) = std::fs::read(e.path())
             .ok()
-            .and_then(|t| serde_json::from_slice::<Manifest>(&t).ok())
+            .and_then(|t| parse_manifest(&e.path(), &t, "dataset").ok())
         else {
             continue;
         };
@@ -1553,7 +1553,7 @@ pub fn batch(
         .collect();
     let skipped = done.len();
     let manifest = std::sync::Arc::new(Mutex::new(Manifest {
-        mdlod_dataset: 1,
+        mdlod_dataset: MANIFEST_VERSION,
         shard: opts.shard.map(|(i, n)| [i, n]),
         expected_frames: Some((frames_in_shard - empty.len()) as u64),
         input_frames: Some(input_frames),
@@ -1996,10 +1996,19 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         ));
     }
     let mut manifests = Vec::with_capacity(shards.len());
-    for (_, _, path) in &shards {
+    for (i, n, path) in &shards {
         let text = std::fs::read(path).map_err(io(path))?;
-        let m: Manifest = serde_json::from_slice(&text)
-            .map_err(|e| manifest_err(path, format!("not a shard manifest: {e}")))?;
+        let m = parse_manifest(path, &text, "shard")?;
+        if m.shard != Some([*i, *n]) {
+            return Err(manifest_err(
+                path,
+                format!(
+                    "its shard field is {} but its name says shard {i} of {n}",
+                    m.shard
+                        .map_or("absent".to_string(), |[a, b]| format!("[{a}, {b}]"))
+                ),
+            ));
+        }
         manifests.push((path, m));
     }
     // Before the frames: shards over different lists of frames have each converted
@@ -2059,7 +2068,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         ));
     }
     let merged = Manifest {
-        mdlod_dataset: 1,
+        mdlod_dataset: MANIFEST_VERSION,
         shard: None,
         expected_frames: expected_total,
         input_frames,
@@ -2367,10 +2376,7 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     for name in &manifests {
         let path = dir.join(name);
         let text = std::fs::read(&path).map_err(io(&path))?;
-        let m: Manifest = serde_json::from_slice(&text).map_err(|e| BatchError::Manifest {
-            path: path.clone(),
-            message: format!("not a dataset manifest: {e}"),
-        })?;
+        let m = parse_manifest(&path, &text, "dataset")?;
         if let Some(expected) = m.expected_frames {
             if (m.frames.len() as u64) < expected {
                 check.problems.push(format!(
@@ -2437,11 +2443,48 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
 pub fn read_manifest(out_dir: &Path) -> Result<Manifest, BatchError> {
     let path = out_dir.join(MANIFEST);
     let text = std::fs::read(&path).map_err(io(&path))?;
-    serde_json::from_slice(&text).map_err(|e| BatchError::Manifest {
-        path,
-        message: format!("not a dataset manifest: {e}"),
-    })
+    parse_manifest(&path, &text, "dataset")
 }
+
+/// A manifest's JSON (`what`: "dataset" or "shard", for the message), checked: its
+/// version, its shard, and every frame's file a plain name inside the directory (a
+/// manifest is read from wherever a batch directory comes from: a `file` of `/etc/…` or
+/// `../…` would have a render or a verify read outside it).
+pub fn parse_manifest(path: &Path, text: &[u8], what: &str) -> Result<Manifest, BatchError> {
+    let bad = |message: String| BatchError::Manifest {
+        path: path.to_path_buf(),
+        message,
+    };
+    let m: Manifest =
+        serde_json::from_slice(text).map_err(|e| bad(format!("not a {what} manifest: {e}")))?;
+    if m.mdlod_dataset != MANIFEST_VERSION {
+        return Err(bad(format!(
+            "mdlod_dataset {} (this mdlod reads version {MANIFEST_VERSION})",
+            m.mdlod_dataset
+        )));
+    }
+    if let Some([i, n]) = m.shard.filter(|[i, n]| i >= n) {
+        return Err(bad(format!(
+            "shard [{i}, {n}] (the index must be below the count)"
+        )));
+    }
+    if let Some(f) = m.frames.iter().find(|f| {
+        let mut parts = Path::new(&f.file).components();
+        !matches!(
+            (parts.next(), parts.next()),
+            (Some(std::path::Component::Normal(_)), None)
+        )
+    }) {
+        return Err(bad(format!(
+            "frame of timestep {}: file {:?} is not a file name inside the directory",
+            f.timestep, f.file
+        )));
+    }
+    Ok(m)
+}
+
+/// The manifest version this mdlod writes and reads.
+const MANIFEST_VERSION: u32 = 1;
 
 #[cfg(test)]
 mod tests {

@@ -1891,3 +1891,67 @@ fn a_batch_runs_fewer_chunked_frames_at_once_to_fit_the_memory_limit() {
     let e = run(50 << 20, "small").unwrap_err().to_string();
     assert!(e.contains("the memory limit of 50 MiB is below"), "{e}");
 }
+
+/// A manifest is read from wherever a batch directory comes from: a frame file outside
+/// the directory, a version this mdlod does not read or a shard field that disagrees
+/// with the manifest's name are refused, naming the manifest.
+#[test]
+fn hostile_manifests_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    let path = out.join("dataset.json");
+    let good: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let with = |f: &dyn Fn(&mut serde_json::Value)| {
+        let mut v = good.clone();
+        f(&mut v);
+        std::fs::write(&path, serde_json::to_vec(&v).unwrap()).unwrap();
+        read_manifest(&out).map(|_| ()).map_err(|e| e.to_string())
+    };
+    assert_eq!(with(&|_| ()), Ok(()));
+    for (file, says) in [
+        (
+            "/etc/passwd",
+            "\"/etc/passwd\" is not a file name inside the directory",
+        ),
+        (
+            "../frame-0.mdlod",
+            "\"../frame-0.mdlod\" is not a file name",
+        ),
+        (
+            "sub/frame-0.mdlod",
+            "\"sub/frame-0.mdlod\" is not a file name",
+        ),
+    ] {
+        let e = with(&|v| v["frames"][0]["file"] = file.into()).unwrap_err();
+        assert!(e.contains("dataset.json") && e.contains(says), "{e}");
+    }
+    let e = with(&|v| v["mdlod_dataset"] = 2.into()).unwrap_err();
+    assert!(
+        e.contains("mdlod_dataset 2 (this mdlod reads version 1)"),
+        "{e}"
+    );
+    let e = with(&|v| v["shard"] = serde_json::json!([5, 2])).unwrap_err();
+    assert!(e.contains("shard [5, 2]"), "{e}");
+    // A shard manifest whose field disagrees with its name is refused by the merge.
+    let sharded = dir.path().join("sharded");
+    for i in 0..2 {
+        batch(
+            std::slice::from_ref(&src),
+            &sharded,
+            &shard(i, 2),
+            &NoProgress,
+        )
+        .unwrap();
+    }
+    let one = sharded.join("dataset.shard-1-of-2.json");
+    let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(&one).unwrap()).unwrap();
+    v["shard"] = serde_json::json!([0, 2]);
+    std::fs::write(&one, serde_json::to_vec(&v).unwrap()).unwrap();
+    let e = merge(&sharded).unwrap_err().to_string();
+    assert!(
+        e.contains("dataset.shard-1-of-2.json") && e.contains("its shard field is [0, 2]"),
+        "{e}"
+    );
+}
