@@ -1144,6 +1144,9 @@ pub fn convert_chunked(
             metadata.timestep,
         )));
     }
+    crate::convert::check_box(metadata.simulation_box.as_ref(), || {
+        crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep)
+    })?;
     // Everything that does not need the particles is checked before the partition pass
     // reads them all.
     params.check().map_err(|source| ConvertError::Build {

@@ -71,6 +71,9 @@ pub enum ConvertError {
         index: usize,
         value: f32,
     },
+    /// A simulation box that is not finite (bounds whose extent overflows, a NaN).
+    #[error("{place}: the simulation box is not finite ({problem}); the input's box bounds cannot be kept")]
+    BadBox { place: FramePlace, problem: String },
     /// `--attribute-log10` for an input that keeps no attribute.
     #[error(
         "{0}: --attribute-log10: the input keeps no per-particle attribute to take the \
@@ -267,6 +270,9 @@ pub fn convert_frame(
             frame.timestep,
         )));
     }
+    check_box(frame.simulation_box.as_ref(), || {
+        FramePlace::of(source.as_ref(), frame.timestep)
+    })?;
     if !options.radii_may_be_absent {
         crate::species::check_renames(&frame.species, &options.species_names)?;
     }
@@ -485,6 +491,27 @@ pub fn check_radii(
         radius,
         format: source.and_then(|s| crate::readers::format_of_file(Path::new(&s.path))),
     })))
+}
+
+/// Refuses a box with a coordinate that is not finite (`-1e308 1e308` bounds overflow
+/// their extent; a reader's NaN), naming the input, before any particle is built: it
+/// could not be written.
+pub fn check_box(
+    simulation_box: Option<&crate::frame::SimulationBox>,
+    place: impl Fn() -> FramePlace,
+) -> Result<(), ConvertError> {
+    let Some(b) = simulation_box else {
+        return Ok(());
+    };
+    for (name, v) in [("origin", b.origin), ("a", b.a), ("b", b.b), ("c", b.c)] {
+        if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+            return Err(ConvertError::BadBox {
+                place: place(),
+                problem: format!("its {name} vector holds {x}"),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// The name a file gives the attribute the input calls `name`: `log10(name)` when its

@@ -935,3 +935,46 @@ fn an_attribute_spanning_decades_keeps_its_logarithm() {
         .to_string();
     assert!(e.contains("name its column with --attribute COLUMN"), "{e}");
 }
+
+/// A box whose bounds overflow (`-1e308 1e308`: an extent past the largest double) is
+/// refused naming the input and its frame, streamed and in memory, before any particle
+/// is built (it used to reach the writer, whose message named the output).
+#[test]
+fn a_box_that_is_not_finite_is_refused_naming_the_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n7\nITEM: NUMBER OF ATOMS\n400\nITEM: BOX BOUNDS pp pp pp\n\
+         -1e308 1e308\n0 10\n0 10\nITEM: ATOMS id type x y z\n",
+    );
+    for i in 0..400 {
+        text.push_str(&format!(
+            "{} 1 {}.5 {}.5 {}.5\n",
+            i + 1,
+            i % 10,
+            (i / 10) % 10,
+            i / 100
+        ));
+    }
+    let path = dir.path().join("wide.lammpstrj");
+    std::fs::write(&path, &text).unwrap();
+    let out = dir.path().join("w.mdlod");
+    for chunk_points in [100, 1 << 20] {
+        let e = convert_file(
+            &path,
+            &out,
+            FrameSelect::Last,
+            &ReadOptions::default(),
+            &options(chunk_points),
+            &NoProgress,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("wide.lammpstrj")
+                && e.contains("timestep 7")
+                && e.contains("the simulation box is not finite (its a vector holds inf)"),
+            "{chunk_points}: {e}"
+        );
+        assert!(!out.exists());
+    }
+}
