@@ -951,6 +951,33 @@ fn sndfs_sampled_once_shade_without_the_particles() {
     assert!(bytes > 96 * 64 * 64 * 16, "{bytes}");
     let said = format!("({:.1} MiB: 96x64 texels", bytes as f64 / 1048576.0);
     assert!(sampled.contains(&said), "{said}: {sampled}");
+    // A header whose camera shade could not use (forged: a field of view of 0) is
+    // refused by shade and info, naming the file, as a --view file's would be.
+    let forged = dir.path().join("forged.sndf");
+    let bytes = std::fs::read(&sndf).unwrap();
+    let j = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let data_at = (24 + j).div_ceil(16) * 16;
+    let mut header: serde_json::Value = serde_json::from_slice(&bytes[24..24 + j]).unwrap();
+    header["view"]["fov_y_deg"] = 0.0.into();
+    let text = serde_json::to_vec(&header).unwrap();
+    let mut out = bytes[..12].to_vec();
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(&bytes[16..24]);
+    out.extend_from_slice(&text);
+    out.resize((24 + text.len()).div_ceil(16) * 16, 0);
+    out.extend_from_slice(&bytes[data_at..]);
+    std::fs::write(&forged, out).unwrap();
+    let png = dir.path().join("forged.png");
+    for args in [
+        vec!["shade", s(&forged), "-o", s(&png)],
+        vec!["info", s(&forged)],
+    ] {
+        let e = fails(&args);
+        assert!(
+            e.contains("forged.sndf: the camera in its header: fov_y_deg 0"),
+            "{args:?}: {e}"
+        );
+    }
     // An .sndf where an .mdlod is read says what it is and what reads it.
     for cmd in ["render", "verify"] {
         let png = dir.path().join("wrong.png");

@@ -31,6 +31,10 @@ pub enum RenderError {
     /// The view file could not be read or parsed.
     #[error("view file {path}: {message}")]
     View { path: PathBuf, message: String },
+
+    /// An `.sndf` file whose header the shading cannot use (its camera, its size).
+    #[error("{path}: {message}")]
+    Sndf { path: PathBuf, message: String },
     /// Options that cannot be rendered (zero size, zero samples, ...).
     #[error("invalid options: {0}")]
     InvalidOptions(String),

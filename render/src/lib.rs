@@ -1867,6 +1867,7 @@ pub fn shade_file(
 ) -> Result<(u32, u32), RenderError> {
     lights.check().map_err(RenderError::InvalidOptions)?;
     let data = mdlod_format::sndf::SndfData::load(input)?;
+    sndf_camera(input, &data.header.view)?;
     if data.header.smip.is_some() {
         let image = shade_tiles_file(input, &data, lights, background_srgb, level)?;
         image.save_png(out)?;
@@ -1890,6 +1891,18 @@ pub fn shade_file(
     Ok((image.width, image.height))
 }
 
+/// The camera an `.sndf` header stores (a view file's JSON), checked as `--view` files
+/// are: the shading's directions come from it.
+pub fn sndf_camera(path: &Path, view: &serde_json::Value) -> Result<ViewFile, RenderError> {
+    let bad = |message: String| RenderError::Sndf {
+        path: path.to_path_buf(),
+        message: format!("the camera in its header: {message}"),
+    };
+    let v: ViewFile = serde_json::from_value(view.clone()).map_err(|e| bad(e.to_string()))?;
+    v.check().map_err(bad)?;
+    Ok(v)
+}
+
 /// Shades a file of S-MIP tiles on the host: its view at its size, or `level` levels
 /// (or `zoom_out` times) coarser, the image that much smaller; coarser tiles missing
 /// from the file are made from the finer ones.
@@ -1900,12 +1913,11 @@ fn shade_tiles_file(
     background_srgb: [f32; 3],
     level: ShadeLevel,
 ) -> Result<RgbaImage, RenderError> {
-    let bad = |message: String| RenderError::View {
+    let bad = |message: String| RenderError::Sndf {
         path: input.to_path_buf(),
         message,
     };
-    let view: ViewFile = serde_json::from_value(data.header.view.clone())
-        .map_err(|e| bad(format!("the view in the header: {e}")))?;
+    let view = sndf_camera(input, &data.header.view)?;
     let (w, h) = (data.header.width, data.header.height);
     // The tiles do not bound the image a header asks for: cap it (512 MiB of pixels).
     if u64::from(w) * u64::from(h) > 1 << 27 {

@@ -41,6 +41,8 @@ fn species_counts(f: &MdlodFile) -> Vec<u64> {
 fn sndf_info(args: &Args) -> Result<()> {
     let (header, bytes) = mdlod_format::sndf::SndfData::load_header(&args.file)?;
     let h = &header;
+    // A camera shade could not use is refused here as there.
+    mdlod_render::sndf_camera(&args.file, &h.view)?;
     // The camera's numbers are f32s: their shortest form (63.43495, not 63.4349479675293).
     let mut view = h.view.clone();
     shortest_f32(&mut view);
