@@ -429,3 +429,39 @@ fn xyz_errors() {
         "2: no column `charge` for the attribute; available columns: species pos[0] pos[1] pos[2]",
     );
 }
+
+/// A header announcing more atoms than its frame's bytes can hold (a count that lies, or
+/// a frame cut short) is a truncated frame already in the frame's description, which a
+/// conversion reads before it plans memory for that many particles (it asked for
+/// 25 GiB chunks and named no file).
+#[test]
+fn a_count_the_frame_cannot_hold_is_a_truncated_frame_before_reading() {
+    let dir = tempfile::tempdir().unwrap();
+    let atoms: String = (0..300)
+        .map(|i| format!("{} 1 {}.5 0.5 0.5\n", i + 1, i % 10))
+        .collect();
+    let text = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1000000000000\nITEM: BOX BOUNDS pp pp pp\n\
+         0 10\n0 10\n0 10\nITEM: ATOMS id type x y z\n{atoms}"
+    );
+    let lammps = write(dir.path(), "lie.lammpstrj", text.as_bytes());
+    let xyz_atoms: String = (0..300)
+        .map(|i| format!("Cu {}.5 0.5 0.5\n", i % 10))
+        .collect();
+    let xyz = write(
+        dir.path(),
+        "lie.xyz",
+        format!("1000000000000\ncomment\n{xyz_atoms}").as_bytes(),
+    );
+    for path in [lammps, xyz] {
+        let dump = DumpFile::open(&path).unwrap();
+        let e = dump.frame_info(0).unwrap_err();
+        assert!(matches!(e, ReadError::Truncated { .. }), "{e}");
+        let e = e.to_string();
+        assert!(
+            e.starts_with(&format!("{}:", path.display()))
+                && e.contains("announces 1000000000000 atoms but only 300 atom lines follow"),
+            "{e}"
+        );
+    }
+}

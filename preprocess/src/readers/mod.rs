@@ -1150,7 +1150,7 @@ impl DumpFile {
     pub(crate) fn header(&self, k: usize) -> Result<Header, ReadError> {
         self.check_frame(k)?;
         let ctx = self.ctx();
-        match &self.index {
+        let header = match &self.index {
             Index::Lammps(i) => i.header(&ctx, k),
             Index::Xyz(i) => i.header(&ctx, k),
             Index::LammpsBinary(_)
@@ -1162,7 +1162,22 @@ impl DumpFile {
                 offset: 0,
                 message: "internal error: text header of a binary dump".into(),
             }),
+        }?;
+        // An atom line holds at least one character and a separator per column: a count
+        // the frame's bytes cannot hold is a frame cut short (or a header that lies),
+        // said here, before a conversion plans its memory for that many particles.
+        let atoms = &ctx.data[header.atoms.clone()];
+        let room = atoms.len() / (2 * header.layout.columns.len().max(1)) + 1;
+        if header.info.particles > room {
+            let lines = memchr::memchr_iter(b'\n', atoms).count()
+                + usize::from(atoms.last().is_some_and(|&b| b != b'\n'));
+            return Err(ReadError::Truncated {
+                at: ctx.at(header.atoms.end),
+                expected: header.info.particles,
+                found: lines,
+            });
         }
+        Ok(header)
     }
 }
 
