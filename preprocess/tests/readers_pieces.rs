@@ -120,15 +120,16 @@ fn piece_counts_that_add_up_past_any_count_are_an_error() {
         );
         std::fs::write(dir.path().join(format!("run.{i}.dump")), text).unwrap();
     };
-    // Two pieces announcing 2^64 - 1 atoms each (usize wrapped to 2^64 - 2).
+    // Two pieces announcing 2^64 - 1 atoms each (a sum past any count): each piece's
+    // count is more than its bytes can hold, said of the first, before any sum.
     piece(0, "18446744073709551615");
     piece(1, "18446744073709551615");
     let d = DumpFile::open(&dir.path().join("run.%.dump")).unwrap();
     let e = d.frame_info(0).unwrap_err().to_string();
-    let second = dir.path().join("run.1.dump");
+    let first = dir.path().join("run.0.dump");
     assert!(
-        e.starts_with(&format!("{}:1: frame 0:", second.display()))
-            && e.contains("more than can be counted"),
+        e.starts_with(&format!("{}:10: truncated frame", first.display()))
+            && e.contains("announces 18446744073709551615 atoms but only 1 atom lines follow"),
         "{e}"
     );
     // Counts that add up are the sum (read, the pieces hold one atom each).

@@ -1171,8 +1171,10 @@ impl DumpFile {
         if header.info.particles > room {
             let lines = memchr::memchr_iter(b'\n', atoms).count()
                 + usize::from(atoms.last().is_some_and(|&b| b != b'\n'));
+            // At the last atom line, as the reading's own check says.
+            let last = header.atoms.end.saturating_sub(1).max(header.atoms.start);
             return Err(ReadError::Truncated {
-                at: ctx.at(header.atoms.end),
+                at: ctx.at(last),
                 expected: header.info.particles,
                 found: lines,
             });
