@@ -1263,10 +1263,41 @@ pub fn batch(
             }
         }
     }
-    // Stable: frames of one timestep stay in the order of the inputs and their frames.
-    jobs.sort_by_key(|j| j.timestep);
     let place = |j: &Job<'_>| format!("{} frame {}", j.input.display(), j.frame);
     let mut duplicates = Vec::new();
+    // A restart (a frame, in the order of the inputs and their frames, at a timestep no
+    // later than one before it) supersedes every earlier frame from its timestep on,
+    // with a later twin or not: the abandoned run's frames past the restart's newest
+    // would otherwise sit between the restarted run's.
+    if opts.duplicates == Duplicates::Last {
+        let mut kept: Vec<Job<'_>> = Vec::with_capacity(jobs.len());
+        for j in jobs {
+            if kept.last().is_some_and(|k| j.timestep <= k.timestep) {
+                // (Those from the restart's timestep on, and those before it.)
+                let (new, old): (Vec<Job<'_>>, Vec<Job<'_>>) =
+                    kept.into_iter().partition(|k| k.timestep >= j.timestep);
+                for k in &new {
+                    // (Twins of one timestep are said below, as before.)
+                    if k.timestep != j.timestep {
+                        duplicates.push(format!(
+                            "timestep {}: {} left out, superseded by the restart at timestep \
+                             {} ({})",
+                            k.timestep,
+                            place(k),
+                            j.timestep,
+                            place(&j)
+                        ));
+                    }
+                }
+                kept = old;
+                kept.extend(new.into_iter().filter(|k| k.timestep == j.timestep));
+            }
+            kept.push(j);
+        }
+        jobs = kept;
+    }
+    // Stable: frames of one timestep stay in the order of the inputs and their frames.
+    jobs.sort_by_key(|j| j.timestep);
     if opts.duplicates == Duplicates::Error {
         if let Some(w) = jobs.windows(2).find(|w| w[0].timestep == w[1].timestep) {
             return Err(BatchError::DuplicateTimestep {

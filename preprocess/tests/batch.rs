@@ -1201,6 +1201,38 @@ fn duplicate_timesteps_are_refused_or_resolved_as_asked() {
             r.duplicates
         );
     }
+    // A restart supersedes every earlier frame from its timestep on, twin or not: the
+    // abandoned run's 300 and 400 are left out after a restart at 200 that reached 250.
+    let mut dump = String::new();
+    for t in [0, 100, 200, 300, 400, 200, 250] {
+        dump.push_str(&first_frame.replacen(
+            &format!("ITEM: TIMESTEP\n{step_line}\n"),
+            &format!("ITEM: TIMESTEP\n{t}\n"),
+            1,
+        ));
+    }
+    let src = dir.path().join("restarted-short.dump");
+    std::fs::write(&src, dump).unwrap();
+    let out = dir.path().join("restart");
+    let o = BatchOptions {
+        duplicates: Duplicates::Last,
+        ..opts()
+    };
+    let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    let m = read_manifest(&out).unwrap();
+    let kept: Vec<(u64, u64)> = m
+        .frames
+        .iter()
+        .map(|f| (f.timestep, f.source.frame))
+        .collect();
+    assert_eq!(kept, [(0, 0), (100, 1), (200, 5), (250, 6)]);
+    assert_eq!(r.duplicates.len(), 3, "{:?}", r.duplicates);
+    assert!(
+        r.duplicates.iter().any(|d| d.contains("timestep 400")
+            && d.contains("superseded by the restart at timestep 200")),
+        "{:?}",
+        r.duplicates
+    );
 }
 
 /// A batch directory is verified against its manifest: every listed frame there, whole

@@ -43,7 +43,8 @@ pub struct Args {
     pub threads: Option<usize>,
     /// Frames with the same timestep (a run restarted into the same dump, or inputs
     /// that overlap): an error, or convert the first or the last of each (in the order
-    /// of the inputs and their frames) and leave the others out.
+    /// of the inputs and their frames) and leave the others out; with `last`, a restart
+    /// also leaves out the earlier frames past its timestep that it did not reach.
     #[arg(long, value_enum, default_value = "error")]
     pub duplicate_timesteps: DuplicatesArg,
     #[command(flatten)]
