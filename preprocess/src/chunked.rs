@@ -1157,13 +1157,18 @@ pub fn convert_chunked(
     // that share.
     let least = chunk_memory(n.div_ceil(params.max_root_points as usize));
     if least > chunk.memory_limit {
+        let place = crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep);
         return Err(ConvertError::Chunked(format!(
-            "the memory limit of {} is below the {} a chunk needs: {n} particles in at most \
-             {} chunks (the root points) make a chunk of at least {} particles",
+            "{place}: the memory limit of {} is below the {} the smallest chunks need ({} of \
+             working buffers and about {BUILD_BYTES_PER_PARTICLE} bytes per particle: {n} \
+             particles in at most {} chunks, the root points, make chunks of at least {} \
+             particles); raise --memory-limit to at least {}",
             size_text(chunk.memory_limit),
             size_text(least),
+            size_text(chunk_memory(0)),
             params.max_root_points,
-            n.div_ceil(params.max_root_points as usize)
+            n.div_ceil(params.max_root_points as usize),
+            size_text(least),
         )));
     }
     if chunk.chunk_points < params.max_root_points as usize {
@@ -1407,11 +1412,14 @@ pub fn convert_chunked(
         .unwrap_or(0);
     let need = chunk_memory(largest);
     if need > chunk.memory_limit {
+        let place = crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep);
         return Err(ConvertError::Chunked(format!(
-            "the memory limit of {} is below the {} one chunk of {largest} particles needs: \
-             raise --memory-limit to at least {}{}",
+            "{place}: the memory limit of {} is below the {} one chunk of {largest} particles \
+             needs ({} of working buffers and about {BUILD_BYTES_PER_PARTICLE} bytes per \
+             particle): raise --memory-limit to at least {}{}",
             size_text(chunk.memory_limit),
             size_text(need),
+            size_text(chunk_memory(0)),
             size_text(need),
             match chunk_points_within(chunk.memory_limit, params.max_root_points) {
                 Some(points) => format!(

@@ -978,3 +978,45 @@ fn a_box_that_is_not_finite_is_refused_naming_the_input() {
         assert!(!out.exists());
     }
 }
+
+/// A memory limit no chunk fits in says what a chunk needs (its fixed working buffers
+/// and its particles), the limit that would do, and names the input: "64 MiB is below
+/// the 64.0 MiB a chunk needs … a chunk of at least 1 particles" read as a contradiction.
+#[test]
+fn a_limit_no_chunk_fits_says_what_a_chunk_needs_and_names_the_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n3\nITEM: NUMBER OF ATOMS\n1000\nITEM: BOX BOUNDS pp pp pp\n\
+         0 10\n0 10\n0 10\nITEM: ATOMS id type x y z\n",
+    );
+    for i in 0..1000 {
+        text.push_str(&format!(
+            "{} 1 {}.5 {}.5 {}.5\n",
+            i + 1,
+            i % 10,
+            (i / 10) % 10,
+            i / 100
+        ));
+    }
+    let path = dir.path().join("tight.lammpstrj");
+    std::fs::write(&path, &text).unwrap();
+    let mut opts = options(100);
+    opts.chunks.memory_limit = 64 << 20;
+    let e = convert_file(
+        &path,
+        &dir.path().join("t.mdlod"),
+        FrameSelect::Last,
+        &ReadOptions::default(),
+        &opts,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("tight.lammpstrj")
+            && e.contains("timestep 3")
+            && e.contains("64 MiB of working buffers")
+            && e.contains("raise --memory-limit to at least"),
+        "{e}"
+    );
+}
