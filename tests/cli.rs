@@ -5677,3 +5677,39 @@ fn outputs_honour_the_umask() {
         }
     }
 }
+
+/// The batch summary counts the frames left out as duplicate timesteps apart from the
+/// frames to convert ("3 frames in the inputs" of 4 read as a miscount).
+#[test]
+fn a_batch_summary_counts_duplicate_timesteps_apart() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let start = text.find("ITEM: TIMESTEP").unwrap();
+    let end = start + text[start..].find("ITEM: TIME\n").unwrap();
+    let frame = &text[start..end];
+    let step = frame.lines().nth(1).unwrap();
+    let dump: String = [0, 100, 100, 200]
+        .iter()
+        .map(|t| {
+            frame.replacen(
+                &format!("ITEM: TIMESTEP\n{step}\n"),
+                &format!("ITEM: TIMESTEP\n{t}\n"),
+                1,
+            )
+        })
+        .collect();
+    let input = dir.path().join("r.dump");
+    std::fs::write(&input, dump).unwrap();
+    let out = ok(&[
+        "batch",
+        s(&input),
+        "-o",
+        s(&dir.path().join("b")),
+        "--duplicate-timesteps",
+        "last",
+    ]);
+    assert!(
+        out.contains("3 frames in the inputs (1 more left out as duplicate timesteps), 3 here"),
+        "{out}"
+    );
+}

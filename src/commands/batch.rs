@@ -332,8 +332,13 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         0 => empty,
         n => format!("{empty}, {n} cut short and left for a rerun"),
     };
+    // Frames left out as duplicate timesteps are not among the frames to convert.
+    let kept = match report.duplicates.len() {
+        0 => String::new(),
+        d => format!(" ({d} more left out as duplicate timesteps)"),
+    };
     println!(
-        "{} frame{} in the inputs, {} here{shard}: {} converted, {} already done{empty}; {} at a time; manifest {}",
+        "{} frame{} in the inputs{kept}, {} here{shard}: {} converted, {} already done{empty}; {} at a time; manifest {}",
         report.frames_total,
         if report.frames_total == 1 { "" } else { "s" },
         report.frames_in_shard,
