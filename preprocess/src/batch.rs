@@ -1461,6 +1461,20 @@ pub fn batch(
                     Some(b) => Some(Err(b)),
                     None => {
                         redone.source += 1;
+                        // A frame of another size than before: a piece of a `%` set
+                        // gone or added, another run's file under the old name.
+                        let before = f.particle_count();
+                        if job.particles != u64::MAX && job.particles != before {
+                            keep_notes(
+                                job.timestep,
+                                vec![format!(
+                                    "particle counts changed since the last run: timestep {} \
+                                     holds {} particles, {before} before (a piece of a `%` \
+                                     set missing or added, another run's file?)",
+                                    job.timestep, job.particles
+                                )],
+                            );
+                        }
                         return Verdict::Redo;
                     }
                 }

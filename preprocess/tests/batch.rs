@@ -1987,3 +1987,36 @@ fn hostile_manifests_are_refused() {
         "{e}"
     );
 }
+
+/// A rerun that converts a frame again with another particle count says so: the last
+/// piece of a `%` set gone (no gap in the numbering shows it) rebuilt every frame with
+/// half the atoms, noted only as "source changed".
+#[test]
+fn a_rerun_whose_frames_change_size_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    for i in 0..2 {
+        std::fs::copy(
+            lammps_sample_path(&format!("cu_melt_mpi.{i}.bin")),
+            dir.path().join(format!("p.{i}.bin")),
+        )
+        .unwrap();
+    }
+    let pattern = dir.path().join("p.%.bin");
+    let out = dir.path().join("out");
+    let r = batch(std::slice::from_ref(&pattern), &out, &opts(), &NoProgress).unwrap();
+    assert!(
+        !r.notes.iter().any(|n| n.contains("particle counts")),
+        "{:?}",
+        r.notes
+    );
+    std::fs::remove_file(dir.path().join("p.1.bin")).unwrap();
+    let r = batch(std::slice::from_ref(&pattern), &out, &opts(), &NoProgress).unwrap();
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n.contains("particle counts changed since the last run")
+                && n.contains("holds 250 particles, 500 before")),
+        "{:?}",
+        r.notes
+    );
+}
