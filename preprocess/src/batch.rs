@@ -1132,6 +1132,8 @@ pub fn batch(
     // is dropped after indexing (with its frames' particle counts noted), so a batch of
     // many compressed files never holds more than one at a time per worker.
     let mut dumps: Vec<Option<DumpFile>> = Vec::with_capacity(inputs.len());
+    // Which inputs are gzip files whose compressed stream ends early.
+    let mut gzip_cut: Vec<bool> = Vec::with_capacity(inputs.len());
     let mut formats: Vec<InputFormat> = Vec::with_capacity(inputs.len());
     let mut listed: Vec<Vec<Listed>> = Vec::with_capacity(inputs.len());
     // How the first frame of each input names its species (for the radius overrides).
@@ -1146,21 +1148,28 @@ pub fn batch(
     for (i, p) in inputs.iter().enumerate() {
         // An empty newest file of a set is one LAMMPS has just opened: left out with a
         // note, as a frame cut short is. (Elsewhere, or alone, it is the reader's error.)
+        let no_text = || crate::readers::gzip_without_text(p);
         if inputs.len() > 1
             && Some(i) == last_input
-            && std::fs::metadata(p).is_ok_and(|m| m.is_file() && m.len() == 0)
+            && (std::fs::metadata(p).is_ok_and(|m| m.is_file() && m.len() == 0) || no_text())
         {
             empty_inputs.push(IncompleteFrame {
                 input: p.clone(),
                 frame: 0,
                 timestep: None,
-                reason: "the file is empty (a run has just opened it?)".into(),
+                reason: if no_text() {
+                    "its compressed stream ends before any text (a run has just opened it?)"
+                } else {
+                    "the file is empty (a run has just opened it?)"
+                }
+                .into(),
                 empty_file: true,
             });
             // No frames: the format and dump stand in for none.
             listed.push(Vec::new());
             formats.push(InputFormat::LammpsText);
             dumps.push(None);
+            gzip_cut.push(false);
             continue;
         }
         // A large gzip input is decompressed into a working file (removed again below),
@@ -1209,6 +1218,7 @@ pub fn batch(
         }
         listed.push(frames);
         formats.push(dump.format());
+        gzip_cut.push(dump.gzip_cut().is_some());
         dumps.push((!compressed).then_some(bounded.dump));
     }
     let newest = newest_inputs(&listed);
@@ -1221,6 +1231,19 @@ pub fn batch(
         .map(|(p, _)| p.display().to_string())
         .next_back()
         .unwrap_or_default();
+    // A gzip input cut short that is not the newest: its frames past the cut would be
+    // lost without a trace (no run writes an older file of a set any more).
+    if let Some((input, _)) = inputs
+        .iter()
+        .zip(gzip_cut.iter().zip(&newest))
+        .find(|(_, (cut, newest))| **cut && !**newest)
+    {
+        return Err(BatchError::CutShortBeforeNewest {
+            input: input.to_path_buf(),
+            newest: newest_text.clone(),
+            reason: "its compressed stream ends early: the frames past the cut are missing".into(),
+        });
+    }
     let mut jobs: Vec<Job<'_>> = Vec::new();
     for ((((input, dump), format), frames), newest) in inputs
         .iter()

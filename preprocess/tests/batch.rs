@@ -2020,3 +2020,78 @@ fn a_rerun_whose_frames_change_size_says_so() {
         r.notes
     );
 }
+
+/// An older gzip file of a set whose compressed stream ends early (cut right after a
+/// frame, as `dump custom/gz` flushes them) is an error naming it: its frames past the
+/// cut would vanish, where a newest file so cut is read up to the cut.
+#[test]
+fn an_older_gzip_file_cut_short_is_an_error() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let all = file_set(&dir.path().join("src"));
+    let texts: Vec<Vec<u8>> = all.iter().map(|p| std::fs::read(p).unwrap()).collect();
+    // Two frames in one gzip stream, flushed after the first and cut there.
+    let cut_after_first = |a: &[u8], b: &[u8]| {
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(a).unwrap();
+        enc.flush().unwrap();
+        let cut = enc.get_ref().clone();
+        enc.write_all(b).unwrap();
+        (cut, enc.finish().unwrap())
+    };
+    let gz = |bytes: &[u8]| {
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(bytes).unwrap();
+        enc.finish().unwrap()
+    };
+    for (which, at) in [("older", 0), ("newest", 4)] {
+        let set = dir.path().join(which);
+        std::fs::create_dir_all(&set).unwrap();
+        let mut inputs = Vec::new();
+        let mut k = 0;
+        while k < texts.len() {
+            let name = set.join(format!("dump.{k}.gz"));
+            if k == at {
+                let (cut, _) = cut_after_first(&texts[k], &texts[k + 1]);
+                std::fs::write(&name, cut).unwrap();
+                k += 2;
+            } else {
+                std::fs::write(&name, gz(&texts[k])).unwrap();
+                k += 1;
+            }
+            inputs.push(name);
+        }
+        let r = batch(&inputs, &set.join("out"), &opts(), &NoProgress);
+        match (which, r) {
+            ("older", Err(e)) => {
+                let e = e.to_string();
+                assert!(
+                    e.contains("dump.0.gz is cut short, but it is not the newest input")
+                        && e.contains("its compressed stream ends early"),
+                    "{e}"
+                );
+            }
+            ("newest", Ok(r)) => assert_eq!(r.converted, 5),
+            (_, r) => panic!("{which}: {:?}", r.map(|r| r.converted)),
+        }
+    }
+    // A newest gzip file holding its header and no text yet (just opened) is left out
+    // as an empty one is.
+    let set = dir.path().join("opened");
+    std::fs::create_dir_all(&set).unwrap();
+    let mut inputs = Vec::new();
+    for (k, text) in texts.iter().enumerate() {
+        let name = set.join(format!("dump.{k}.gz"));
+        let bytes = gz(text);
+        let keep = if k + 1 == texts.len() {
+            10
+        } else {
+            bytes.len()
+        };
+        std::fs::write(&name, &bytes[..keep]).unwrap();
+        inputs.push(name);
+    }
+    let r = batch(&inputs, &set.join("out"), &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.incomplete.len()), (texts.len() - 1, 1));
+    assert!(r.incomplete[0].empty_file, "{}", r.incomplete[0]);
+}

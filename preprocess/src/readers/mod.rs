@@ -506,6 +506,12 @@ impl DumpFile {
         }))
     }
 
+    /// The gzip input whose compressed stream ended early (a run still writing it), whose
+    /// text before the cut this dump reads.
+    pub fn gzip_cut(&self) -> Option<&Path> {
+        self.gzip_cut.as_deref()
+    }
+
     /// Marks this dump, read from the working file `input` was decompressed into
     /// ([`gunzip_to_file`]), as the text before a cut in `input`'s compressed stream.
     pub fn with_gzip_cut(mut self, input: &Path) -> DumpFile {
@@ -1527,6 +1533,22 @@ pub fn is_gzip(path: &Path) -> Result<bool, ReadError> {
         source,
     })?;
     Ok(n == 2 && magic == [0x1f, 0x8b])
+}
+
+/// True for a gzip file whose compressed stream ends before any text (a run has just
+/// opened it and written the gzip header, or a few bytes more): as good as empty.
+pub fn gzip_without_text(path: &Path) -> bool {
+    if !is_gzip(path).unwrap_or(false) {
+        return false;
+    }
+    let Ok(file) = File::open(path) else {
+        return false;
+    };
+    let mut byte = [0u8; 1];
+    match flate2::read::MultiGzDecoder::new(file).read(&mut byte) {
+        Ok(n) => n == 0,
+        Err(e) => ends_early(&e),
+    }
 }
 
 /// Decompresses the gzip file `path` (single or multi-member) into the file `out` as a
