@@ -880,7 +880,11 @@ fn smip_tiles_sampled_once_shade_without_the_particles() {
         "4",
     ];
     let out = ok(&[&["sample", s(&mdlod), "-o", s(&sndf), "--tiles"][..], &view].concat());
-    assert!(out.contains("S-MIP tiles"), "{out}");
+    let mib = std::fs::metadata(&sndf).unwrap().len() as f64 / 1048576.0;
+    assert!(
+        out.contains(&format!("({mib:.1} MiB: ")) && out.contains("S-MIP tiles"),
+        "{out}"
+    );
     let direct = dir.path().join("direct.png");
     ok(&[
         &["render", s(&mdlod), "-o", s(&direct), "--mode", "sndf"][..],
@@ -1123,6 +1127,10 @@ fn sndfs_sampled_once_shade_without_the_particles() {
         (
             &["--explorer-disk", "10"][..],
             "--explorer-disk has no effect without --explorer",
+        ),
+        (
+            &["--envmap", s(&painted), "--specular", "0.9"][..],
+            "--specular has no effect with --envmap and no --light",
         ),
     ] {
         let mut args = vec!["shade", s(&sndf), "-o", s(&green)];

@@ -1273,7 +1273,15 @@ pub fn batch(
     // inputs cannot hold (`Cu` where species are LAMMPS type numbers) is refused now,
     // in every shard.
     if !namings.is_empty() {
-        for (name, radius) in &opts.convert.radii {
+        // A name a rename gives (`--species-name 1=Cu --radius Cu=1.28`) is no input's
+        // own: the renames are checked against the inputs where the frames are read.
+        let renamed_to = |name: &str| {
+            opts.convert
+                .species_names
+                .iter()
+                .any(|(_, new)| new == name)
+        };
+        for (name, radius) in opts.convert.radii.iter().filter(|(n, _)| !renamed_to(n)) {
             let reasons: Option<Vec<String>> =
                 namings.iter().map(|n| n.excludes(name, *radius)).collect();
             if let Some(reason) = reasons.and_then(|r| r.into_iter().next()) {
@@ -2229,6 +2237,8 @@ struct MergeSettings {
     first: Option<(String, BuildInfo, Option<String>)>,
     /// A frame with a chunked build: its name and chunk size.
     chunked: Option<(String, u64)>,
+    /// The first frame's `--species-name` renames (none: none given), and its name.
+    renames: Option<(String, Vec<(String, String)>)>,
     /// Every species' radius, the first frame holding it, and whether a `--radius`
     /// override set it there.
     radii: std::collections::HashMap<String, (f32, String, bool)>,
@@ -2312,6 +2322,32 @@ impl MergeSettings {
         f: &FrameEntry,
         this: String,
     ) -> Result<(), String> {
+        // Renames give species other names, radii and colours: a movie of frames renamed
+        // and not flips between the two looks.
+        let renames = f.species_names.clone().unwrap_or_default();
+        match &self.renames {
+            Some((other, r)) if *r != renames => {
+                let text = |r: &[(String, String)]| {
+                    if r.is_empty() {
+                        "none".to_string()
+                    } else {
+                        r.iter()
+                            .map(|(a, b)| format!("{a}={b}"))
+                            .collect::<Vec<_>>()
+                            .join(" ")
+                    }
+                };
+                return Err(differ(
+                    other,
+                    &this,
+                    "--species-name",
+                    text(r),
+                    text(&renames),
+                ));
+            }
+            Some(_) => {}
+            None => self.renames = Some((this.clone(), renames)),
+        }
         // Only a frame above the chunk size records it.
         if let Some(chunk) = m.build.chunk_points {
             match &self.chunked {

@@ -2095,3 +2095,24 @@ fn an_older_gzip_file_cut_short_is_an_error() {
     assert_eq!((r.converted, r.incomplete.len()), (texts.len() - 1, 1));
     assert!(r.incomplete[0].empty_file, "{}", r.incomplete[0]);
 }
+
+/// Shards run with different `--species-name` renames make frames whose species differ
+/// in name, radius and colour (a movie flips between them): the merge refuses them.
+#[test]
+fn merge_refuses_shards_with_different_renames() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    let mut renamed = shard(0, 2);
+    renamed.convert.species_names = vec![("1".into(), "Cu".into())];
+    renamed.convert.radii = vec![("Cu".into(), 1.28)];
+    batch(std::slice::from_ref(&src), &out, &renamed, &NoProgress).unwrap();
+    batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains("built with different settings")
+            && e.contains("--species-name 1=Cu")
+            && e.contains("--species-name none"),
+        "{e}"
+    );
+}

@@ -123,9 +123,11 @@ pub fn run(args: Args) -> Result<()> {
             &opts,
             args.min_samples as f32,
         )?;
+        let size = std::fs::metadata(&args.output).map_or(0, |m| m.len());
         println!(
-            "wrote {} ({tiles} S-MIP tiles of 64x64 texels at level {}, {}x{} bins, {} rays each): {} rectangles, {} spheres drawn per iteration",
+            "wrote {} ({:.1} MiB: {tiles} S-MIP tiles of 64x64 texels at level {}, {}x{} bins, {} rays each): {} rectangles, {} spheres drawn per iteration",
             args.output.display(),
+            size as f64 / f64::from(1u32 << 20),
             stats.level,
             args.bins,
             args.bins,

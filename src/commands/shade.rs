@@ -147,6 +147,20 @@ pub fn check_options(matches: &clap::ArgMatches) -> Result<()> {
             );
         }
     }
+    // An environment map lights by its Lambert irradiance alone: without a --light the
+    // highlight has nothing to reflect.
+    if given("envmap") && !given("lights") {
+        for id in ["brdf", "specular", "exponent"] {
+            if given(id) {
+                bail!(
+                    "--{} has no effect with --envmap and no --light: the environment map \
+                     lights by its Lambert irradiance; the highlight is of the --light \
+                     directions",
+                    option_name(id)
+                );
+            }
+        }
+    }
     for id in ["explorer_disk", "explorer_tolerance"] {
         if given(id) && !given("explorer") {
             bail!("--{} has no effect without --explorer", option_name(id));
