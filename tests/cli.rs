@@ -3039,6 +3039,21 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     ]
     .concat());
     assert!(clear(&with), "the fitted data reaches under the legend");
+    // A turntable keeps the corner free in every view too.
+    let turn = dir.path().join("turn-%d.png");
+    ok(&[
+        &["render", s(&file), "-o", s(&turn)][..],
+        &base,
+        &["--legend-in-image", "--turntable", "3"],
+    ]
+    .concat());
+    for i in 0..3 {
+        let view = dir.path().join(format!("turn-{i}.png"));
+        assert!(
+            clear(&view),
+            "turntable view {i}: the data reaches under the legend"
+        );
+    }
     // Top left: the panel moves there.
     ok(&[
         &["render", s(&file), "-o", s(&with)][..],

@@ -1897,13 +1897,38 @@ fn render_turntable(
             })
             .collect::<Result<Vec<_>, mdlod_render::RenderError>>()?;
         let farthest = cameras.iter().map(|c| c.distance).fold(0.0f32, f32::max);
+        // An in-image legend's corner is kept free as a still's fit keeps it: the turn
+        // is fitted into the part of the image the legend leaves (the one that shows the
+        // data larger), a distance as much farther as that part is smaller, and every
+        // view panned so that the data's centre lies at the part's centre.
+        let window = opts
+            .fit_windows
+            .iter()
+            .map(|w| {
+                let half = [0.5 * (w.max[0] - w.min[0]), 0.5 * (w.max[1] - w.min[1])];
+                (w, half[0].min(half[1]).min(1.0))
+            })
+            .filter(|(_, shrink)| *shrink > 0.0)
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        let farthest = match window {
+            Some((_, shrink)) => farthest / shrink as f32,
+            None => farthest,
+        };
+        let tan_y = |c: &Camera| (f64::from(c.fov_y_deg).to_radians() * 0.5).tan();
         views = cameras
             .into_iter()
             .map(|c| {
-                ViewSpec::Camera(Camera {
+                let mut c = Camera {
                     distance: farthest,
                     ..c
-                })
+                };
+                if let Some((w, _)) = window {
+                    let centre = [0.5 * (w.min[0] + w.max[0]), 0.5 * (w.min[1] + w.max[1])];
+                    let (ty, d) = (tan_y(&c), f64::from(c.distance));
+                    let tx = ty * f64::from(aspect);
+                    c.pan((-centre[0] * d * tx) as f32, (-centre[1] * d * ty) as f32);
+                }
+                ViewSpec::Camera(c)
             })
             .collect();
     }
