@@ -2514,7 +2514,11 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                          replaced after the manifest was written)",
                         f.checksum
                     ))
-                } else if m.timestep != Some(f.timestep) || file.particle_count() != f.particles {
+                } else if m.timestep.is_some_and(|t| t != f.timestep)
+                    || file.particle_count() != f.particles
+                {
+                    // (A frame of an input without timesteps holds none: the manifest
+                    // numbers it by its position.)
                     Some(format!(
                         "{place}: the file holds {} and {} particles, the manifest says \
                          timestep {} and {} particles",

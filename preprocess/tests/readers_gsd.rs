@@ -769,3 +769,91 @@ fn a_frame_of_no_particles_is_the_empty_frame_error() {
         )
     );
 }
+
+/// The GSD documentation's own example: frame 0 of 4 particles with types and
+/// diameters, then frames of 5 and 6 particles writing positions only. As HOOMD's
+/// `gsd.hoomd` reads them, frame 0's per-particle chunks stand in only for a frame of as
+/// many particles; the others take the schema's defaults (type 0, diameter 1). A file
+/// recording no `configuration/step` gives its frames no timestep (not 0 each).
+#[test]
+fn frames_of_another_n_take_defaults_not_frame_0s_chunks() {
+    let dir = tempfile::tempdir().unwrap();
+    let names: Vec<String> = [
+        "particles/N",
+        "particles/position",
+        "particles/typeid",
+        "particles/types",
+        "particles/diameter",
+    ]
+    .map(String::from)
+    .to_vec();
+    let positions = |n: usize| -> Vec<u8> {
+        (0..3 * n)
+            .flat_map(|i| (i as f32 * 0.5).to_le_bytes())
+            .collect()
+    };
+    let mut chunks: Vec<(u64, Chunk)> = vec![
+        (0, (0, 3, 1, 1, 4u32.to_le_bytes().to_vec())),
+        (0, (1, 9, 4, 3, positions(4))),
+        (
+            0,
+            (
+                2,
+                3,
+                4,
+                1,
+                [0u32, 1, 1, 0]
+                    .iter()
+                    .flat_map(|v| v.to_le_bytes())
+                    .collect(),
+            ),
+        ),
+        (0, (3, 5, 2, 2, b"A\0B\0".to_vec())),
+        (
+            0,
+            (
+                4,
+                9,
+                4,
+                1,
+                [0.5f32, 2.0, 2.0, 0.5]
+                    .iter()
+                    .flat_map(|v| v.to_le_bytes())
+                    .collect(),
+            ),
+        ),
+    ];
+    for (frame, n) in [(1u64, 5usize), (2, 6)] {
+        chunks.push((frame, (0, 3, 1, 1, (n as u32).to_le_bytes().to_vec())));
+        chunks.push((frame, (1, 9, n as u64, 3, positions(n))));
+    }
+    let path = dir.path().join("grow.gsd");
+    std::fs::write(&path, gsd_frames(&names, &chunks)).unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    for (k, n) in [(0, 4), (1, 5), (2, 6)] {
+        let f = dump
+            .read_frame(k, &ReadOptions::default(), &NoProgress)
+            .unwrap_or_else(|e| panic!("frame {k}: {e}"));
+        assert_eq!(f.len(), n);
+        assert_eq!(f.timestep, None, "frame {k}");
+        assert_eq!(dump.frame_timestep(k), None);
+        if k > 0 {
+            // Type 0 (`A`) for every particle, at the default diameter 1.
+            assert!(f.species_index.iter().all(|&s| s == 0), "frame {k}");
+            assert_eq!(f.species[0].radius, Some(0.5), "frame {k}");
+        }
+    }
+    // A batch numbers them by position, and verifies: the frames hold no timestep to
+    // disagree with the manifest's numbers (they held 0 each, and verify failed).
+    use mdlod_preprocess::batch::{batch, verify_dir, BatchOptions};
+    let out = dir.path().join("out");
+    let opts = BatchOptions {
+        memory_limit: 1 << 30,
+        ..Default::default()
+    };
+    let r = batch(std::slice::from_ref(&path), &out, &opts, &NoProgress).unwrap();
+    assert_eq!(r.converted, 3);
+    let check = verify_dir(&out, &NoProgress).unwrap();
+    assert!(check.problems.is_empty(), "{:?}", check.problems);
+    assert_eq!(check.frames_ok, 3);
+}

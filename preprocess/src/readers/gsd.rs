@@ -16,7 +16,9 @@
 //! - As the schema says, a chunk missing from frame `k` is taken from frame 0, and one
 //!   missing from both has its default: writers store only what changed. A file with no
 //!   `configuration/step` at all has no timesteps for a batch to number its frames by
-//!   ([`crate::readers::DumpFile::frame_timestep`] is `None`; the frames record 0).
+//!   ([`crate::readers::DumpFile::frame_timestep`] is `None`, and the frames record none).
+//!   Frame 0's per-particle chunk stands in for a missing one only in a frame of as many
+//!   particles, as HOOMD's `gsd.hoomd` reads them; a frame of another N has the default.
 //! - The attribute may be any per-particle chunk of N numbers (`charge`, `mass`,
 //!   `particles/charge`, ...); one of several components (`velocity`) is refused.
 //! - A frame whose `particles/N` is 0 has no particles: the chunks it takes from frame 0
@@ -340,6 +342,15 @@ impl Index {
         self.records_steps
     }
 
+    /// Frame `k`'s timestep where the file records timesteps ([`Self::records_steps`]),
+    /// else none: a frame of such a file holds no timestep (not the schema's default 0,
+    /// which every frame would share), as a batch numbers it by position.
+    pub fn recorded_timestep(&self, data: &[u8], k: usize) -> Option<u64> {
+        self.records_steps()
+            .then(|| self.timestep(data, k))
+            .flatten()
+    }
+
     pub fn timestep(&self, data: &[u8], k: usize) -> Option<u64> {
         if k >= self.frames {
             return None;
@@ -429,7 +440,7 @@ pub(crate) fn frame_info(
     let columns = particle_chunks(index, k, particles, false);
     Ok(FrameInfo {
         particles,
-        timestep: index.timestep(data, k),
+        timestep: index.recorded_timestep(data, k),
         time: None,
         units: None,
         simulation_box: Some(index.simulation_box(path, data, k)?),
@@ -498,16 +509,22 @@ impl<'a> FrameData<'a> {
     /// lack it and it is optional).
     fn chunk(&self, name: &str, m: usize, required: bool) -> Result<Option<&'a Entry>, ReadError> {
         let (path, k, n) = (self.path, self.k, self.n);
-        // An empty frame takes nothing of frame 0's particles.
+        // Frame 0's chunk stands in for a missing one only where frame 0 has as many
+        // particles (as HOOMD's `gsd.hoomd` reads it: a frame of another N that leaves a
+        // chunk out has the schema's default, as its particles are not frame 0's); an
+        // empty frame takes nothing of frame 0's particles.
         let entry = self
             .index
             .chunk(k, name)
-            .filter(|e| n > 0 || e.frame == k as u64);
+            .filter(|e| e.frame == k as u64 || (n > 0 && e.n == n));
         match entry {
             None if required && n > 0 => Err(err(
                 path,
                 0,
-                format!("frame {k} has no `{name}` (and frame 0 has none either)"),
+                format!(
+                    "frame {k} has no `{name}` for its {n} particles (and frame 0 has none for \
+                     as many)"
+                ),
             )),
             None => Ok(None),
             Some(e) if e.n != n || e.m != m => Err(err(
@@ -768,7 +785,7 @@ pub(crate) fn read_range(
         species,
         attribute,
         simulation_box: Some(index.simulation_box(path, data, k)?),
-        timestep: index.timestep(data, k),
+        timestep: index.recorded_timestep(data, k),
         time: None,
         units: None,
     })

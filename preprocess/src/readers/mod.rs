@@ -559,10 +559,7 @@ impl DumpFile {
             Index::Lammps(i) => i.timestep(k),
             Index::Xyz(i) => i.timestep(k),
             Index::LammpsBinary(i) => i.timestep(k),
-            Index::Gsd(i) => i
-                .records_steps()
-                .then(|| i.timestep(self.bytes(), k))
-                .flatten(),
+            Index::Gsd(i) => i.recorded_timestep(self.bytes(), k),
             Index::Pieces(p) => p[0].frame_timestep(k),
             Index::Raw(r) => (k == 0).then(|| r.timestep()).flatten(),
             Index::Mmpld(_) => None,
