@@ -857,3 +857,33 @@ fn frames_of_another_n_take_defaults_not_frame_0s_chunks() {
     assert!(check.problems.is_empty(), "{:?}", check.problems);
     assert_eq!(check.frames_ok, 3);
 }
+
+/// An HPMC run's sizes: `particles/type_shapes` holds each type's shape as JSON, and
+/// `particles/diameter` is left at its default. Sphere shapes give their types' radii
+/// (both types were drawn at 0.5); other shapes keep the default.
+#[test]
+fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
+    let dir = tempfile::tempdir().unwrap();
+    let typeid: Vec<u8> = [0u32, 1].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let shapes = [
+        r#"{"type": "Sphere", "diameter": 2.0}"#,
+        r#"{"type": "Sphere", "diameter": 0.5}"#,
+        r#"{"type": "ConvexPolyhedron", "rounding_radius": 0}"#,
+    ];
+    let m = shapes.iter().map(|s| s.len() + 1).max().unwrap();
+    let mut text = Vec::new();
+    for s in shapes {
+        let mut row = s.as_bytes().to_vec();
+        row.resize(m, 0);
+        text.extend(row);
+    }
+    let bytes = two_particles(&[
+        ("particles/typeid", 3, 1, typeid),
+        ("particles/types", 5, 2, b"A\0B\0C\0".to_vec()),
+        ("particles/type_shapes", 5, m as u32, text),
+    ]);
+    let (_, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
+    let f = f.unwrap();
+    let radii: Vec<Option<f32>> = f.species.iter().map(|s| s.radius).collect();
+    assert_eq!(radii, [Some(1.0), Some(0.25), Some(0.5)]);
+}

@@ -9,7 +9,8 @@
 //! - `particles/N` (u32), `particles/position` (f32 or f64, N×3), `particles/typeid`
 //!   (u32, default 0), `particles/types` (N×M characters, default `A`),
 //!   `particles/diameter` (f32, default 1: the species radius is half its mean per
-//!   type; a type with a diameter of zero, below or not finite is refused by the
+//!   type; without it, an HPMC run's `particles/type_shapes` gives a `Sphere` type's
+//!   diameter; a type with a diameter of zero, below or not finite is refused by the
 //!   conversion unless `--radius` names it), `configuration/step` (u64, default 0),
 //!   `configuration/box` (f32 ×6: `Lx Ly Lz xy xz yz`, centred on the origin).
 //! - The type names must be distinct and not empty (the species are told by them).
@@ -639,6 +640,8 @@ impl<'a> FrameData<'a> {
         let mut count = vec![0u64; names.len()];
         let mut bad: Vec<Option<f64>> = vec![None; names.len()];
         let mut spread = vec![(f64::INFINITY, f64::NEG_INFINITY); names.len()];
+        // Without diameters, an HPMC run's sphere shapes give the types' sizes.
+        let shapes = self.sphere_shapes(names.len());
         if let Some(e) = self.chunk("particles/diameter", 1, false)? {
             let bytes = &self.data[e.location..e.location + self.n * e.ty.size()];
             for (j, &s) in ids.iter().enumerate() {
@@ -665,13 +668,42 @@ impl<'a> FrameData<'a> {
                 radius: Some(match bad[t] {
                     Some(d) => (0.5 * d) as f32,
                     None if count[t] > 0 => (0.5 * sum[t] / count[t] as f64) as f32,
-                    None => 0.5,
+                    None => shapes.get(t).copied().flatten().map_or(0.5, |d| 0.5 * d),
                 }),
                 radius_range: (count[t] > 0)
                     .then(|| ((0.5 * spread[t].0) as f32, (0.5 * spread[t].1) as f32)),
                 ..Default::default()
             })
             .collect())
+    }
+}
+
+impl FrameData<'_> {
+    /// Each type's sphere diameter from `particles/type_shapes` (HPMC writes one JSON
+    /// object per type there, `{"type": "Sphere", "diameter": 2.0}`, and leaves
+    /// `particles/diameter` at its default); `None` for other shapes or none given.
+    fn sphere_shapes(&self, types: usize) -> Vec<Option<f32>> {
+        let Some(e) = self.index.chunk(self.k, "particles/type_shapes") else {
+            return vec![None; types];
+        };
+        if !matches!(e.ty, Ty::I8 | Ty::U8 | Ty::Char) {
+            return vec![None; types];
+        }
+        let Some(bytes) = self.data.get(e.location..e.location + e.n * e.m) else {
+            return vec![None; types];
+        };
+        let mut shapes: Vec<Option<f32>> = bytes
+            .chunks(e.m.max(1))
+            .map(|s| {
+                let end = s.iter().position(|&b| b == 0).unwrap_or(s.len());
+                let v: serde_json::Value = serde_json::from_slice(&s[..end]).ok()?;
+                let sphere = v.get("type")?.as_str()? == "Sphere";
+                let d = v.get("diameter")?.as_f64()? as f32;
+                (sphere && d.is_finite() && d > 0.0).then_some(d)
+            })
+            .collect();
+        shapes.resize(types, None);
+        shapes
     }
 }
 
