@@ -4151,6 +4151,20 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
             && !noted.contains("subtract its centre"),
         "{noted}"
     );
+    // One atom lost at 10^30 beside a box of 30: the radius fits the box, the lost atom
+    // sets the coordinates' reach (it used to advise another radius).
+    let text = std::fs::read_to_string(&far)
+        .unwrap()
+        .replace("3000 27 12", "1e30 27 12");
+    std::fs::write(&far, text).unwrap();
+    let noted = ok(&["convert", s(&far), "-o", s(&out), "--radius", "1=1.28"]);
+    assert!(
+        noted.contains("coordinates reach 1.000e30")
+            && noted.contains("particles far outside the box (below): leave them out")
+            && noted.contains("1 particle lies more than 10 box lengths outside the box")
+            && !noted.contains("give --radius"),
+        "{noted}"
+    );
 }
 
 /// `--frame` counts from the end when negative, and the summary says which frame of

@@ -437,7 +437,12 @@ pub(crate) fn position_notes(
         // Data spanning about as far as it reaches from the origin is not helped by a
         // shift: its radius is what is out of scale (a radius of 0.5 for data in cm).
         let span = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f32, f32::max);
-        let remedy = if span > 0.25 * largest {
+        let remedy = if far.is_some() {
+            // The radius fits the box; lost particles set the reach.
+            "these coordinates are those of particles far outside the box (below): leave \
+             them out of the input, and the rest keep their digits"
+                .to_string()
+        } else if span > 0.25 * largest {
             format!(
                 "the radius is tiny beside the data's extent ({span:.3e}): give --radius \
                  NAME=R in the data's own units (about the particles' spacing)"
