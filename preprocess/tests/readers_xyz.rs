@@ -456,3 +456,22 @@ fn text_content_decides_over_a_name_that_says_the_other_format() {
     assert_eq!(d.format(), InputFormat::LammpsText);
     assert_eq!(d.frame_timestep(0), Some(5));
 }
+
+/// A comment line of megabytes is no extended-XYZ header: refused, naming its line,
+/// rather than split into millions of strings (a 260 kB gzip file took 1.6 GB).
+#[test]
+fn a_comment_line_of_megabytes_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("long.xyz");
+    let comment = "x".repeat(2 << 20);
+    std::fs::write(&path, format!("1\n{comment}\nCu 0 0 0\n")).unwrap();
+    let e = DumpFile::open(&path)
+        .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with(&format!("{}:2:", path.display()))
+            && e.contains("a comment line of 2097152 bytes (at most 1 MiB"),
+        "{e}"
+    );
+}

@@ -36,6 +36,9 @@ use super::{
 };
 use crate::frame::SimulationBox;
 
+/// The longest comment line read as a frame's header.
+const MAX_COMMENT: usize = 1 << 20;
+
 /// Byte range and timestep of one frame.
 #[derive(Debug, PartialEq)]
 struct Span {
@@ -131,6 +134,19 @@ impl Index {
             }
         };
         let atoms_at = cursor.pos;
+        // An extended-XYZ header holds a few keys; a comment line of megabytes is no
+        // header (its words would each become a string: a gzip file of 260 kB with a
+        // comment of 256 MiB took 1.6 GB to read).
+        if comment.len() > MAX_COMMENT {
+            return Err(ctx.malformed(
+                comment_at,
+                format!(
+                    "a comment line of {} bytes (at most {} MiB: longer is no XYZ header)",
+                    comment.len(),
+                    MAX_COMMENT >> 20
+                ),
+            ));
+        }
         let comment_text = String::from_utf8_lossy(comment);
         let pairs = key_values(&comment_text);
         let get = |key: &str| {
@@ -334,6 +350,10 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
 /// The timestep recorded in a comment line: `Timestep=N` or `step=N` (any case), or the
 /// `Timestep: N` LAMMPS `dump xyz` writes.
 fn comment_timestep(comment: &[u8]) -> Option<u64> {
+    // (A comment line too long to be a header is refused where the frame is read.)
+    if comment.len() > MAX_COMMENT {
+        return None;
+    }
     let text = String::from_utf8_lossy(comment);
     if text.contains('=') {
         for (k, v) in key_values(&text) {
