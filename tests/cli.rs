@@ -982,6 +982,16 @@ fn sndfs_sampled_once_shade_without_the_particles() {
             "{args:?}: {e}"
         );
     }
+    // Cut inside its fixed header: an .sndf cut short, not "no S-NDF signature".
+    let cut = dir.path().join("cut.sndf");
+    std::fs::write(&cut, &std::fs::read(&sndf).unwrap()[..8]).unwrap();
+    for args in [vec!["info", s(&cut)], vec!["shade", s(&cut), "-o", s(&png)]] {
+        let e = fails(&args);
+        assert!(
+            e.contains("an .sndf file cut short: 8 bytes"),
+            "{args:?}: {e}"
+        );
+    }
     // An .sndf where an .mdlod is read says what it is and what reads it.
     for cmd in ["render", "verify"] {
         let png = dir.path().join("wrong.png");

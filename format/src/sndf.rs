@@ -335,11 +335,22 @@ impl SndfData {
         bytes: &[u8],
         file_len: u64,
     ) -> Result<(SndfHeader, usize, usize, u64), FormatError> {
-        if bytes.len() < FIXED || bytes[..8] != SNDF_MAGIC {
+        if bytes.get(..8) != Some(&SNDF_MAGIC[..]) {
             return Err(corrupt(
                 path,
                 "its first bytes",
                 "not an .sndf file (no S-NDF signature); `mdlod sample` writes one",
+            ));
+        }
+        if bytes.len() < FIXED {
+            return Err(corrupt(
+                path,
+                "its header",
+                format!(
+                    "an .sndf file cut short: {} bytes, shorter than the {FIXED}-byte fixed \
+                     header",
+                    bytes.len()
+                ),
             ));
         }
         let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]);
