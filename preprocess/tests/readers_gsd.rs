@@ -887,3 +887,32 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
     let radii: Vec<Option<f32>> = f.species.iter().map(|s| s.radius).collect();
     assert_eq!(radii, [Some(1.0), Some(0.25), Some(0.5)]);
 }
+
+/// HOOMD leaves out a per-particle chunk that holds only the schema's default (a charge
+/// of 0 in frame 0, a mass of 1): asked for as the attribute, the frame takes the
+/// default (the batch aborted on frame 0); a chunk with no default is still an error.
+#[test]
+fn an_attribute_left_at_its_schema_default_takes_the_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = two_particles(&[]);
+    for (name, value) in [("charge", 0.0f32), ("mass", 1.0)] {
+        let opts = ReadOptions {
+            attribute: Some(name.into()),
+            ..Default::default()
+        };
+        let (_, f) = read_frame_0(dir.path(), &bytes, &opts);
+        let a = f.unwrap().attribute.unwrap();
+        assert_eq!(a.name, format!("particles/{name}"));
+        assert_eq!(a.values, [value, value]);
+    }
+    let opts = ReadOptions {
+        attribute: Some("log/particles/energy".into()),
+        ..Default::default()
+    };
+    let (_, f) = read_frame_0(dir.path(), &bytes, &opts);
+    let e = f.unwrap_err();
+    assert!(
+        e.contains("frame 0: no per-particle chunk `log/particles/energy`"),
+        "{e}"
+    );
+}

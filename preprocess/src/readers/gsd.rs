@@ -707,6 +707,17 @@ impl FrameData<'_> {
     }
 }
 
+/// The `hoomd` schema's default of a per-particle chunk of one number, which a writer
+/// leaves out where every particle has it.
+fn schema_default(name: &str) -> Option<f32> {
+    match name {
+        "particles/mass" | "particles/diameter" => Some(1.0),
+        "particles/charge" => Some(0.0),
+        "particles/body" => Some(-1.0),
+        _ => None,
+    }
+}
+
 /// The species of frame `k` as the whole frame lists them (radii from the whole frame's
 /// diameters), from one pass over the type ids and diameters alone: what every part of
 /// the frame read by [`read_range`] takes, so that a frame read in parts converts as the
@@ -784,29 +795,41 @@ pub(crate) fn read_range(
                     ),
                 ));
             }
-            let Some(e) = f.chunk(&full, 1, false)? else {
-                let available = attribute_chunks(index, k, n).join(" ");
-                return Err(err(
-                    path,
-                    0,
-                    format!(
-                        "no per-particle chunk `{full}` for the attribute; available: {available}"
-                    ),
-                ));
+            let values = match f.chunk(&full, 1, false)? {
+                // Writers leave out a chunk that holds only its schema default (HOOMD's
+                // charge of 0 in frame 0, a mass of 1): the default is every value.
+                None => match schema_default(&full) {
+                    Some(default) => vec![default; range.len()],
+                    None => {
+                        let available = attribute_chunks(index, k, n).join(" ");
+                        return Err(err(
+                            path,
+                            0,
+                            format!(
+                                "frame {k}: no per-particle chunk `{full}` for the attribute; \
+                                 available: {available}"
+                            ),
+                        ));
+                    }
+                },
+                Some(e) => {
+                    if e.ty == Ty::Char {
+                        return Err(err(path, e.at, format!("`{full}` is text, not numbers")));
+                    }
+                    let bytes = &data[e.location..e.location + n * e.ty.size()];
+                    let values: Vec<f32> =
+                        range.clone().map(|i| e.ty.get(bytes, i) as f32).collect();
+                    if let Some(j) = values.iter().position(|v| !v.is_finite()) {
+                        let i = first + j;
+                        return Err(err(
+                            path,
+                            e.location + i * e.ty.size(),
+                            format!("frame {k}: `{full}` of particle {i} is not finite"),
+                        ));
+                    }
+                    values
+                }
             };
-            if e.ty == Ty::Char {
-                return Err(err(path, e.at, format!("`{full}` is text, not numbers")));
-            }
-            let bytes = &data[e.location..e.location + n * e.ty.size()];
-            let values: Vec<f32> = range.clone().map(|i| e.ty.get(bytes, i) as f32).collect();
-            if let Some(j) = values.iter().position(|v| !v.is_finite()) {
-                let i = first + j;
-                return Err(err(
-                    path,
-                    e.location + i * e.ty.size(),
-                    format!("frame {k}: `{full}` of particle {i} is not finite"),
-                ));
-            }
             Some(Attribute { name: full, values })
         }
     };
