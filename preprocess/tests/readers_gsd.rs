@@ -909,10 +909,17 @@ fn an_attribute_left_at_its_schema_default_takes_the_default() {
         attribute: Some("log/particles/energy".into()),
         ..Default::default()
     };
-    let (_, f) = read_frame_0(dir.path(), &bytes, &opts);
+    // HOOMD's logged per-particle quantities are offered among the chunks available.
+    let energies: Vec<u8> = [-1.5f32, -2.5]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let logged = two_particles(&[("log/particles/md/pair/LJ/energies", 9, 1, energies)]);
+    let (_, f) = read_frame_0(dir.path(), &logged, &opts);
     let e = f.unwrap_err();
     assert!(
-        e.contains("frame 0: no per-particle chunk `log/particles/energy`"),
+        e.contains("frame 0: no per-particle chunk `log/particles/energy`")
+            && e.contains("available: log/particles/md/pair/LJ/energies"),
         "{e}"
     );
 }

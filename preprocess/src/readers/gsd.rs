@@ -462,7 +462,8 @@ fn particle_chunks(index: &Index, k: usize, particles: usize, single: bool) -> V
         .names
         .iter()
         .filter(|n| {
-            n.starts_with("particles/")
+            // HOOMD logs per-particle quantities (energies, virials) as `log/particles/...`.
+            (n.starts_with("particles/") || n.starts_with("log/particles/"))
                 && index
                     .chunk(k, n)
                     .is_some_and(|e| e.n == particles && (!single || e.m == 1) && e.ty != Ty::Char)
