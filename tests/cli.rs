@@ -5760,3 +5760,33 @@ fn a_batch_summary_counts_duplicate_timesteps_apart() {
         "{out}"
     );
 }
+
+/// A working directory that cannot be made names the option that chose its place.
+#[test]
+fn a_working_directory_that_cannot_be_made_names_its_option() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let out = dir.path().join("x.mdlod");
+    let missing = dir.path().join("none").join("deeper");
+    let e = fails(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&out),
+        "--temp-dir",
+        s(&missing),
+    ]);
+    assert!(
+        e.contains("cannot create a working directory in") && e.contains("(the --temp-dir given)"),
+        "{e}"
+    );
+    let e = fails(&[
+        "batch",
+        s(&input),
+        "-o",
+        s(&dir.path().join("b")),
+        "--temp-dir",
+        s(&missing),
+    ]);
+    assert!(e.contains("(the --temp-dir given)"), "{e}");
+}

@@ -196,6 +196,7 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     // Ctrl-C and SIGTERM (partial frames are redone by the next run).
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let temp_parent = convert.chunks.temp_dir_for(&out.join("frame"));
+    let temp_given = convert.chunks.temp_dir.is_some();
     // What runs killed outright left (no handler could remove it): working directories
     // in the batch directory and the working one, and temporary frames
     // (`.frame-<timestep>.mdlod.HOST-PID-XXXXXX.tmp`).
@@ -206,8 +207,13 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     });
     let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
         format!(
-            "cannot create a working directory in {}",
-            temp_parent.display()
+            "cannot create a working directory in {} ({})",
+            temp_parent.display(),
+            if temp_given {
+                "the --temp-dir given"
+            } else {
+                "the output's directory; --temp-dir names another"
+            }
         )
     })?;
     crate::interrupt::remove_on_interrupt(work.path(), None);

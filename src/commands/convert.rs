@@ -219,6 +219,7 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         }
     }
     let temp_parent = options.chunks.temp_dir_for(&args.output);
+    let temp_given = options.chunks.temp_dir.is_some();
     // What runs killed outright left (no handler could remove it): working directories
     // in the output's directory and the working one, and the output's temporary file.
     let output_dir = ChunkOptions::default().temp_dir_for(&args.output);
@@ -232,8 +233,13 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     });
     let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
         format!(
-            "cannot create a working directory in {}",
-            temp_parent.display()
+            "cannot create a working directory in {} ({})",
+            temp_parent.display(),
+            if temp_given {
+                "the --temp-dir given"
+            } else {
+                "the output's directory; --temp-dir names another"
+            }
         )
     })?;
     crate::interrupt::remove_on_interrupt(work.path(), Some(&args.output));
