@@ -5790,3 +5790,36 @@ fn a_working_directory_that_cannot_be_made_names_its_option() {
     ]);
     assert!(e.contains("(the --temp-dir given)"), "{e}");
 }
+
+/// A negative memory limit gets the size parser's answer, not clap's "unexpected
+/// argument '-1'"; one above the machine's memory is noted.
+#[test]
+fn memory_limits_past_the_machine_or_below_zero_are_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let out = dir.path().join("m.mdlod");
+    for cmd in ["convert", "batch"] {
+        let target = if cmd == "batch" {
+            dir.path().join("b")
+        } else {
+            out.clone()
+        };
+        let e = fails(&[cmd, s(&input), "-o", s(&target), "--memory-limit", "-1G"]);
+        assert!(
+            e.contains("\"-1G\" is not a size such as 512M"),
+            "{cmd}: {e}"
+        );
+        let said = ok(&[
+            cmd,
+            s(&input),
+            "-o",
+            s(&target),
+            "--memory-limit",
+            "100000T",
+        ]);
+        assert!(
+            said.contains("note: --memory-limit 102400000.0 GiB is above the"),
+            "{cmd}: {said}"
+        );
+    }
+}

@@ -36,7 +36,7 @@ pub struct Args {
     pub shard: Option<String>,
     /// Memory all concurrent conversions may use together (e.g. 4G; default: half of
     /// the memory this process may have: the machine's, or the Slurm job's allocation).
-    #[arg(long, value_parser = parse_bytes)]
+    #[arg(long, value_parser = parse_bytes, allow_hyphen_values = true)]
     pub memory_limit: Option<u64>,
     /// Worker threads (default: all cores).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
@@ -236,9 +236,13 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         convert,
         read,
         shard,
-        memory_limit: args
-            .memory_limit
-            .unwrap_or_else(mdlod_preprocess::chunked::default_memory_limit),
+        memory_limit: args.memory_limit.map_or_else(
+            mdlod_preprocess::chunked::default_memory_limit,
+            |limit| {
+                super::note_memory_limit(limit);
+                limit
+            },
+        ),
         max_jobs: None,
         duplicates: match args.duplicate_timesteps {
             DuplicatesArg::Error => mdlod_preprocess::batch::Duplicates::Error,

@@ -39,7 +39,7 @@ pub struct Args {
     /// have: the machine's, or a Slurm job's or container's allocation).
     /// Frames above the chunk size are built out of core, as many chunks at a time as
     /// fit; the file does not depend on it.
-    #[arg(long, value_parser = crate::commands::render::parse_bytes)]
+    #[arg(long, value_parser = crate::commands::render::parse_bytes, allow_hyphen_values = true)]
     pub memory_limit: Option<u64>,
     #[command(flatten)]
     pub build: BuildArgs,
@@ -205,6 +205,7 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     args.build.check()?;
     let (mut options, read) = args.build.options();
     if let Some(limit) = args.memory_limit {
+        super::note_memory_limit(limit);
         options.chunks.memory_limit = limit;
     }
     // Working files of an out-of-core build live in a directory of this run's own, which
