@@ -171,6 +171,21 @@ pub fn size_text(bytes: u64) -> String {
     }
 }
 
+/// Notes a `--memory-limit` above the memory this process may have (twice the default
+/// limit: the machine's, or a Slurm job's or container's allocation): the conversion
+/// plans for memory the kernel or the scheduler will not give.
+pub fn note_memory_limit(limit: u64) {
+    let available = mdlod_preprocess::chunked::default_memory_limit().saturating_mul(2);
+    if limit > available {
+        println!(
+            "note: --memory-limit {:.1} GiB is above the {:.1} GiB this process may have (the \
+             machine's, or the job's allocation): a conversion that uses it may be killed",
+            limit as f64 / f64::from(1u32 << 30),
+            available as f64 / f64::from(1u32 << 30)
+        );
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -217,20 +232,5 @@ mod tests {
         assert!(e.to_string().contains("in the batch directory"), "{e}");
         check_batch_output(dir.path(), std::slice::from_ref(&input)).unwrap();
         check_batch_output(&dir.path().join("new.d"), std::slice::from_ref(&input)).unwrap();
-    }
-}
-
-/// Notes a `--memory-limit` above the memory this process may have (twice the default
-/// limit: the machine's, or a Slurm job's or container's allocation): the conversion
-/// plans for memory the kernel or the scheduler will not give.
-pub fn note_memory_limit(limit: u64) {
-    let available = mdlod_preprocess::chunked::default_memory_limit().saturating_mul(2);
-    if limit > available {
-        println!(
-            "note: --memory-limit {:.1} GiB is above the {:.1} GiB this process may have (the \
-             machine's, or the job's allocation): a conversion that uses it may be killed",
-            limit as f64 / f64::from(1u32 << 30),
-            available as f64 / f64::from(1u32 << 30)
-        );
     }
 }
