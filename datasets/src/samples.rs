@@ -154,3 +154,34 @@ pub fn gsd_sample_path(file: &str) -> PathBuf {
 pub fn lammps_sample(file: &str) -> Option<&'static LammpsSample> {
     LAMMPS_SAMPLES.iter().find(|s| s.file == file)
 }
+
+/// Rewrites a current-revision binary dump in the old layout (no magic, endian, revision,
+/// units, time or column names): how LAMMPS wrote binary dumps before late 2020 (the samples are of
+/// the current revision; tests of the old one rewrite them).
+pub fn to_old_revision(new: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut p = 0usize;
+    let i32_at = |p: usize| i32::from_le_bytes(new[p..p + 4].try_into().unwrap());
+    let i64_at = |p: usize| i64::from_le_bytes(new[p..p + 8].try_into().unwrap());
+    while p < new.len() {
+        let len = (-i64_at(p)) as usize;
+        p += 8 + len + 8; // marker, magic, endian + revision
+        let triclinic = i32_at(p + 16);
+        let fixed = 8 + 8 + 4 + 24 + 48 + if triclinic == 1 { 24 } else { 0 } + 4;
+        out.extend_from_slice(&new[p..p + fixed]);
+        p += fixed;
+        let units = i32_at(p) as usize;
+        p += 4 + units;
+        p += if new[p] == 1 { 9 } else { 1 };
+        let columns = i32_at(p) as usize;
+        p += 4 + columns;
+        let start = p;
+        let nchunk = i32_at(p) as usize;
+        p += 4;
+        for _ in 0..nchunk {
+            p += 4 + 8 * i32_at(p) as usize;
+        }
+        out.extend_from_slice(&new[start..p]);
+    }
+    out
+}

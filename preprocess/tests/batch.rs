@@ -1679,36 +1679,6 @@ fn merge_refuses_shards_that_split_different_lists_of_frames() {
     assert_eq!((m.frames.len(), m.input_frames), (6, None));
 }
 
-/// Rewrites a current-revision binary dump in the old layout (no magic, endian,
-/// revision, units, time or column names), as in `readers_lammps_binary.rs`.
-fn to_old_revision(new: &[u8]) -> Vec<u8> {
-    let mut out = Vec::new();
-    let mut p = 0usize;
-    let i32_at = |p: usize| i32::from_le_bytes(new[p..p + 4].try_into().unwrap());
-    let i64_at = |p: usize| i64::from_le_bytes(new[p..p + 8].try_into().unwrap());
-    while p < new.len() {
-        let len = (-i64_at(p)) as usize;
-        p += 8 + len + 8; // marker, magic, endian + revision
-        let triclinic = i32_at(p + 16);
-        let fixed = 8 + 8 + 4 + 24 + 48 + if triclinic == 1 { 24 } else { 0 } + 4;
-        out.extend_from_slice(&new[p..p + fixed]);
-        p += fixed;
-        let units = i32_at(p) as usize;
-        p += 4 + units;
-        p += if new[p] == 1 { 9 } else { 1 };
-        let columns = i32_at(p) as usize;
-        p += 4 + columns;
-        let start = p;
-        let nchunk = i32_at(p) as usize;
-        p += 4;
-        for _ in 0..nchunk {
-            p += 4 + 8 * i32_at(p) as usize;
-        }
-        out.extend_from_slice(&new[start..p]);
-    }
-    out
-}
-
 /// An old-revision binary dump needs `--columns`: a rerun that forgets them fails on
 /// every frame before writing anything, and leaves the manifest as it was (a first run
 /// leaves none), so the corrected rerun keeps every frame instead of converting them
@@ -1720,7 +1690,11 @@ fn a_rerun_failing_before_any_output_leaves_the_manifest_as_it_was() {
     let new = lammps_sample_path("cu_melt.custom.bin");
     let columns = DumpFile::open(&new).unwrap().frame_info(0).unwrap().columns;
     let src = dir.path().join("old.bin");
-    std::fs::write(&src, to_old_revision(&std::fs::read(&new).unwrap())).unwrap();
+    std::fs::write(
+        &src,
+        mdlod_datasets::to_old_revision(&std::fs::read(&new).unwrap()),
+    )
+    .unwrap();
     let with_columns = |o: BatchOptions| {
         let mut o = o;
         o.read.columns = Some(columns.clone());

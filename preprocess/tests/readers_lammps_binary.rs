@@ -144,36 +144,6 @@ fn triclinic_binary_matches_the_text_dump() {
     }
 }
 
-/// Rewrites a current-revision binary dump in the old layout (no magic, endian, revision,
-/// units, time or column names): how LAMMPS wrote binary dumps before late 2020.
-fn to_old_revision(new: &[u8]) -> Vec<u8> {
-    let mut out = Vec::new();
-    let mut p = 0usize;
-    let i32_at = |p: usize| i32::from_le_bytes(new[p..p + 4].try_into().unwrap());
-    let i64_at = |p: usize| i64::from_le_bytes(new[p..p + 8].try_into().unwrap());
-    while p < new.len() {
-        let len = (-i64_at(p)) as usize;
-        p += 8 + len + 8; // marker, magic, endian + revision
-        let triclinic = i32_at(p + 16);
-        let fixed = 8 + 8 + 4 + 24 + 48 + if triclinic == 1 { 24 } else { 0 } + 4;
-        out.extend_from_slice(&new[p..p + fixed]);
-        p += fixed;
-        let units = i32_at(p) as usize;
-        p += 4 + units;
-        p += if new[p] == 1 { 9 } else { 1 };
-        let columns = i32_at(p) as usize;
-        p += 4 + columns;
-        let start = p;
-        let nchunk = i32_at(p) as usize;
-        p += 4;
-        for _ in 0..nchunk {
-            p += 4 + 8 * i32_at(p) as usize;
-        }
-        out.extend_from_slice(&new[start..p]);
-    }
-    out
-}
-
 fn temp_copy(name: &str, bytes: &[u8]) -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join(name);
@@ -185,7 +155,7 @@ fn temp_copy(name: &str, bytes: &[u8]) -> (tempfile::TempDir, PathBuf) {
 fn the_old_header_revision_reads_the_same_atoms() {
     for (file, attribute) in [("cu_melt.atom.bin", "id"), ("cu_melt.custom.bin", "c_pe")] {
         let new_path = lammps_sample_path(file);
-        let old = to_old_revision(&std::fs::read(&new_path).unwrap());
+        let old = mdlod_datasets::to_old_revision(&std::fs::read(&new_path).unwrap());
         let (_d, old_path) = temp_copy("old.bin", &old);
         let old_dump = DumpFile::open(&old_path).unwrap();
         assert_eq!(old_dump.frame_count(), 3);
