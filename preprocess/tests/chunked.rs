@@ -942,19 +942,7 @@ fn an_attribute_spanning_decades_keeps_its_logarithm() {
 #[test]
 fn a_box_that_is_not_finite_is_refused_naming_the_input() {
     let dir = tempfile::tempdir().unwrap();
-    let mut text = String::from(
-        "ITEM: TIMESTEP\n7\nITEM: NUMBER OF ATOMS\n400\nITEM: BOX BOUNDS pp pp pp\n\
-         -1e308 1e308\n0 10\n0 10\nITEM: ATOMS id type x y z\n",
-    );
-    for i in 0..400 {
-        text.push_str(&format!(
-            "{} 1 {}.5 {}.5 {}.5\n",
-            i + 1,
-            i % 10,
-            (i / 10) % 10,
-            i / 100
-        ));
-    }
+    let text = grid_dump(7, 400, "-1e308 1e308");
     let path = dir.path().join("wide.lammpstrj");
     std::fs::write(&path, &text).unwrap();
     let out = dir.path().join("w.mdlod");
@@ -985,19 +973,7 @@ fn a_box_that_is_not_finite_is_refused_naming_the_input() {
 #[test]
 fn a_limit_no_chunk_fits_says_what_a_chunk_needs_and_names_the_input() {
     let dir = tempfile::tempdir().unwrap();
-    let mut text = String::from(
-        "ITEM: TIMESTEP\n3\nITEM: NUMBER OF ATOMS\n1000\nITEM: BOX BOUNDS pp pp pp\n\
-         0 10\n0 10\n0 10\nITEM: ATOMS id type x y z\n",
-    );
-    for i in 0..1000 {
-        text.push_str(&format!(
-            "{} 1 {}.5 {}.5 {}.5\n",
-            i + 1,
-            i % 10,
-            (i / 10) % 10,
-            i / 100
-        ));
-    }
+    let text = grid_dump(3, 1000, "0 10");
     let path = dir.path().join("tight.lammpstrj");
     std::fs::write(&path, &text).unwrap();
     let mut opts = options(100);
@@ -1019,4 +995,23 @@ fn a_limit_no_chunk_fits_says_what_a_chunk_needs_and_names_the_input() {
             && e.contains("raise --memory-limit to at least"),
         "{e}"
     );
+}
+
+/// A LAMMPS text dump of `n` atoms on a grid of 10 per row in a 10-unit box whose x
+/// bounds are `x_bounds`, at `timestep`.
+fn grid_dump(timestep: u64, n: usize, x_bounds: &str) -> String {
+    let mut text = format!(
+        "ITEM: TIMESTEP\n{timestep}\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n\
+         {x_bounds}\n0 10\n0 10\nITEM: ATOMS id type x y z\n"
+    );
+    for i in 0..n {
+        text.push_str(&format!(
+            "{} 1 {}.5 {}.5 {}.5\n",
+            i + 1,
+            i % 10,
+            (i / 10) % 10,
+            i / 100
+        ));
+    }
+    text
 }
