@@ -205,17 +205,8 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         timestep.parse::<u64>().ok()?;
         mdlod_format::writer::temp_file_owner(file, &format!("frame-{timestep}.mdlod"))
     });
-    let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
-        format!(
-            "cannot create a working directory in {} ({})",
-            temp_parent.display(),
-            if temp_given {
-                "the --temp-dir given"
-            } else {
-                "the output's directory; --temp-dir names another"
-            }
-        )
-    })?;
+    let work = crate::interrupt::work_dir(&temp_parent)
+        .with_context(|| super::work_dir_context(&temp_parent, temp_given))?;
     crate::interrupt::remove_on_interrupt(work.path(), None);
     crate::interrupt::on_interrupt_say(
         "the frames finished are kept, and a rerun of the same command converts only the rest",

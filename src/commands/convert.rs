@@ -232,17 +232,8 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     crate::interrupt::remove_and_report_leftovers(&[&output_dir, &temp_parent], &|file| {
         mdlod_format::writer::temp_file_owner(file, &name)
     });
-    let work = crate::interrupt::work_dir(&temp_parent).with_context(|| {
-        format!(
-            "cannot create a working directory in {} ({})",
-            temp_parent.display(),
-            if temp_given {
-                "the --temp-dir given"
-            } else {
-                "the output's directory; --temp-dir names another"
-            }
-        )
-    })?;
+    let work = crate::interrupt::work_dir(&temp_parent)
+        .with_context(|| super::work_dir_context(&temp_parent, temp_given))?;
     crate::interrupt::remove_on_interrupt(work.path(), Some(&args.output));
     options.chunks.temp_dir = Some(work.path().to_path_buf());
     let frame = match args.frame {

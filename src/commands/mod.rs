@@ -186,6 +186,20 @@ pub fn note_memory_limit(limit: u64) {
     }
 }
 
+/// What a working directory that cannot be made in `parent` says: where, and the
+/// option that placed it there (`given`: `--temp-dir`; else the output's directory).
+pub fn work_dir_context(parent: &std::path::Path, given: bool) -> String {
+    format!(
+        "cannot create a working directory in {} ({})",
+        parent.display(),
+        if given {
+            "the --temp-dir given"
+        } else {
+            "the output's directory; --temp-dir names another"
+        }
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
