@@ -1418,6 +1418,22 @@ pub fn batch(
                 .insert(timestep);
         }
     };
+    // A frame converted again with another particle count than before: a piece of a
+    // `%` set gone or added, another run's file under the old name.
+    let note_count_change = |job: &Job<'_>, f: &MdlodFile| {
+        let before = f.particle_count();
+        if job.particles != u64::MAX && job.particles != before {
+            keep_notes(
+                job.timestep,
+                vec![format!(
+                    "particle counts changed since the last run: timestep {} holds {} \
+                     particles, {before} before (a piece of a `%` set missing or added, \
+                     another run's file?)",
+                    job.timestep, job.particles
+                )],
+            );
+        }
+    };
     let note_species = |f: &MdlodFile| {
         let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
         seen.extend(f.metadata().species.iter().map(|s| s.name.clone()));
@@ -1492,20 +1508,7 @@ pub fn batch(
                     Some(b) => Some(Err(b)),
                     None => {
                         redone.source += 1;
-                        // A frame of another size than before: a piece of a `%` set
-                        // gone or added, another run's file under the old name.
-                        let before = f.particle_count();
-                        if job.particles != u64::MAX && job.particles != before {
-                            keep_notes(
-                                job.timestep,
-                                vec![format!(
-                                    "particle counts changed since the last run: timestep {} \
-                                     holds {} particles, {before} before (a piece of a `%` \
-                                     set missing or added, another run's file?)",
-                                    job.timestep, job.particles
-                                )],
-                            );
-                        }
+                        note_count_change(&job, &f);
                         return Verdict::Redo;
                     }
                 }
@@ -1589,6 +1592,7 @@ pub fn batch(
                 done.push(entry);
             } else {
                 redone.source += 1;
+                note_count_change(&job, &f);
                 if job.particles == u64::MAX {
                     job.particles = 0;
                 }
@@ -2481,6 +2485,19 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         let path = dir.join(name);
         let text = std::fs::read(&path).map_err(io(&path))?;
         let m = parse_manifest(&path, &text, "dataset")?;
+        // A shard manifest says which shard it is twice: in its name and its field.
+        let named = shard_of(name).map(|(i, n)| [i, n]);
+        if m.shard != named {
+            let field = m
+                .shard
+                .map_or("absent".to_string(), |[a, b]| format!("[{a}, {b}]"));
+            check.problems.push(match named {
+                Some([i, n]) => {
+                    format!("{name}: its shard field is {field} but its name says shard {i} of {n}")
+                }
+                None => format!("{name}: a shard field {field} in the merged manifest"),
+            });
+        }
         if let Some(expected) = m.expected_frames {
             if (m.frames.len() as u64) < expected {
                 check.problems.push(format!(

@@ -1955,6 +1955,14 @@ fn hostile_manifests_are_refused() {
     let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(&one).unwrap()).unwrap();
     v["shard"] = serde_json::json!([0, 2]);
     std::fs::write(&one, serde_json::to_vec(&v).unwrap()).unwrap();
+    let check = mdlod_preprocess::batch::verify_dir(&sharded, &NoProgress).unwrap();
+    assert!(
+        check.problems.iter().any(|p| p.contains(
+            "dataset.shard-1-of-2.json: its shard field is [0, 2] but its name says shard 1 of 2"
+        )),
+        "{:?}",
+        check.problems
+    );
     let e = merge(&sharded).unwrap_err().to_string();
     assert!(
         e.contains("dataset.shard-1-of-2.json") && e.contains("its shard field is [0, 2]"),
@@ -1990,6 +1998,23 @@ fn a_rerun_whose_frames_change_size_says_so() {
             .iter()
             .any(|n| n.contains("particle counts changed since the last run")
                 && n.contains("holds 250 particles, 500 before")),
+        "{:?}",
+        r.notes
+    );
+    // A text dump whose frames' bytes changed (checked by their bytes) says so too.
+    let src = input(dir.path());
+    let text_out = dir.path().join("text");
+    batch(std::slice::from_ref(&src), &text_out, &opts(), &NoProgress).unwrap();
+    // The last frame loses its last atom.
+    let text = std::fs::read_to_string(&src).unwrap();
+    let at = text.rfind("NUMBER OF ATOMS\n500\n").unwrap();
+    let mut shorter = format!("{}NUMBER OF ATOMS\n499\n{}", &text[..at], &text[at + 20..]);
+    shorter.truncate(shorter.trim_end_matches('\n').rfind('\n').unwrap() + 1);
+    std::fs::write(&src, shorter).unwrap();
+    let r = batch(std::slice::from_ref(&src), &text_out, &opts(), &NoProgress).unwrap();
+    assert!(
+        r.notes.iter().any(|n| n.contains("particle counts changed")
+            && n.contains("holds 499 particles, 500 before")),
         "{:?}",
         r.notes
     );
