@@ -516,6 +516,16 @@ pub fn check_box(
             });
         }
     }
+    // Its far corner, which a view and the cell's drawing reach, too.
+    let corner: Vec<f64> = (0..3)
+        .map(|k| b.origin[k] + b.a[k] + b.b[k] + b.c[k])
+        .collect();
+    if let Some(x) = corner.iter().find(|x| !x.is_finite()) {
+        return Err(ConvertError::BadBox {
+            place: place(),
+            problem: format!("its far corner, origin + a + b + c, reaches {x}"),
+        });
+    }
     Ok(())
 }
 

@@ -965,6 +965,27 @@ fn a_box_that_is_not_finite_is_refused_naming_the_input() {
         );
         assert!(!out.exists());
     }
+    // Finite vectors whose sum is not: an XYZ origin and lattice of 1e308 each.
+    let xyz = dir.path().join("far.xyz");
+    std::fs::write(
+        &xyz,
+        "1\nLattice=\"1e308 0 0 0 1e308 0 0 0 1\" Origin=\"1e308 0 0\"\nCu 0 0 0\n",
+    )
+    .unwrap();
+    let e = convert_file(
+        &xyz,
+        &out,
+        FrameSelect::Last,
+        &ReadOptions::default(),
+        &options(1 << 20),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("far.xyz") && e.contains("its far corner, origin + a + b + c, reaches inf"),
+        "{e}"
+    );
 }
 
 /// A memory limit no chunk fits in says what a chunk needs (its fixed working buffers

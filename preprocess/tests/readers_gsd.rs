@@ -720,7 +720,8 @@ fn an_attribute_of_several_components_is_named_as_such() {
     assert!(
         e.ends_with(
             "frame 0: `particles/velocity` has 3 components per particle; --attribute takes \
-             a chunk of one number per particle: particles/charge"
+             a chunk of one number per particle: particles/body particles/charge \
+             particles/diameter particles/mass"
         ),
         "{e}"
     );
@@ -886,6 +887,20 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
     let f = f.unwrap();
     let radii: Vec<Option<f32>> = f.species.iter().map(|s| s.radius).collect();
     assert_eq!(radii, [Some(1.0), Some(0.25), Some(0.5)]);
+    // A sphere of diameter 0 is kept as such (the conversion refuses it, as a particle
+    // diameter of 0), not silently drawn at the default.
+    let mut row = br#"{"type": "Sphere", "diameter": 0}"#.to_vec();
+    row.resize(m, 0);
+    let mut zero = row.clone();
+    zero.extend(row);
+    let typeid: Vec<u8> = [0u32, 1].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let bytes = two_particles(&[
+        ("particles/typeid", 3, 1, typeid),
+        ("particles/types", 5, 2, b"A\0B\0".to_vec()),
+        ("particles/type_shapes", 5, m as u32, zero),
+    ]);
+    let (_, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
+    assert_eq!(f.unwrap().species[0].radius, Some(0.0));
 }
 
 /// HOOMD leaves out a per-particle chunk that holds only the schema's default (a charge

@@ -452,7 +452,20 @@ pub(crate) fn frame_info(
 /// The chunks of frame `k` (of `particles` particles) an attribute can be: one number
 /// per particle.
 fn attribute_chunks(index: &Index, k: usize, particles: usize) -> Vec<String> {
-    particle_chunks(index, k, particles, true)
+    let mut names = particle_chunks(index, k, particles, true);
+    // Those left out at their schema default are taken too.
+    for name in [
+        "particles/body",
+        "particles/charge",
+        "particles/diameter",
+        "particles/mass",
+    ] {
+        if !names.iter().any(|n| n == name) {
+            names.push(name.to_string());
+        }
+    }
+    names.sort();
+    names
 }
 
 /// The names of frame `k`'s numeric per-particle chunks (of `particles` rows; with
@@ -670,6 +683,8 @@ impl<'a> FrameData<'a> {
                     Some(d) => (0.5 * d) as f32,
                     None if count[t] > 0 => (0.5 * sum[t] / count[t] as f64) as f32,
                     None => shapes.get(t).copied().flatten().map_or(0.5, |d| 0.5 * d),
+                    // (A shape's diameter of zero or below gives a radius the conversion
+                    // refuses, naming the type, unless --radius gives one.)
                 }),
                 radius_range: (count[t] > 0)
                     .then(|| ((0.5 * spread[t].0) as f32, (0.5 * spread[t].1) as f32)),
@@ -698,9 +713,11 @@ impl FrameData<'_> {
             .map(|s| {
                 let end = s.iter().position(|&b| b == 0).unwrap_or(s.len());
                 let v: serde_json::Value = serde_json::from_slice(&s[..end]).ok()?;
+                // (A diameter of zero, below or not finite is kept, and refused as a
+                // particle's would be.)
                 let sphere = v.get("type")?.as_str()? == "Sphere";
                 let d = v.get("diameter")?.as_f64()? as f32;
-                (sphere && d.is_finite() && d > 0.0).then_some(d)
+                sphere.then_some(d)
             })
             .collect();
         shapes.resize(types, None);
