@@ -468,6 +468,18 @@ pub enum BatchError {
         /// How the inputs name species instead, and what to write.
         reason: String,
     },
+    /// A rename names a species no frame of the inputs can hold: refused before any frame
+    /// is converted (it would do nothing, or fail after every frame).
+    #[error(
+        "{inputs}: --species-name {old}={new}: no species named {old:?} can occur there: \
+         {reason}"
+    )]
+    ImpossibleRename {
+        inputs: String,
+        old: String,
+        new: String,
+        reason: String,
+    },
 }
 
 impl BatchError {
@@ -1209,7 +1221,9 @@ pub fn batch(
             };
             frames.push((own, timestep, particles, attribute, given));
         }
-        if !opts.convert.radii.is_empty() && dump.frame_count() > 0 {
+        if (!opts.convert.radii.is_empty() || !opts.convert.species_names.is_empty())
+            && dump.frame_count() > 0
+        {
             // (Advisory: a frame that cannot be read fails where it is converted.)
             namings.push(
                 dump.species_naming(0, &opts.read)
@@ -1281,6 +1295,18 @@ pub fn batch(
                 .iter()
                 .any(|(_, new)| new == name)
         };
+        for (old, new) in &opts.convert.species_names {
+            let reasons: Option<Vec<String>> =
+                namings.iter().map(|n| n.excludes_rename(old)).collect();
+            if let Some(reason) = reasons.and_then(|r| r.into_iter().next()) {
+                return Err(BatchError::ImpossibleRename {
+                    inputs: describe_inputs(inputs),
+                    old: old.clone(),
+                    new: new.clone(),
+                    reason,
+                });
+            }
+        }
         for (name, radius) in opts.convert.radii.iter().filter(|(n, _)| !renamed_to(n)) {
             let reasons: Option<Vec<String>> =
                 namings.iter().map(|n| n.excludes(name, *radius)).collect();

@@ -296,6 +296,22 @@ impl SpeciesNaming {
             _ => None,
         }
     }
+
+    /// Why a `--species-name OLD=...` rename cannot name a species of this input (it
+    /// names them another way), if it cannot.
+    pub fn excludes_rename(&self, old: &str) -> Option<String> {
+        match self {
+            SpeciesNaming::TypeNumbers { first } if !is_type_number(old) => Some(format!(
+                "the input names its species by LAMMPS type number (its `type` column; it has \
+                 no `element` column): rename a type number, e.g. --species-name {first}=NAME"
+            )),
+            SpeciesNaming::ElementColumn { first, .. } if is_type_number(old) => Some(format!(
+                "the input names its species by its `element` column, not by type number: \
+                 rename an element, e.g. --species-name {first}=NAME"
+            )),
+            _ => None,
+        }
+    }
 }
 
 /// A radius override naming none of the input's species.

@@ -2115,3 +2115,37 @@ fn merge_refuses_shards_with_different_renames() {
         "{e}"
     );
 }
+
+/// A rename of a species no frame can hold (a type number where the input names
+/// elements, an element where it names type numbers) is refused before any frame is
+/// converted, as a radius for one is; it did nothing, or failed after every frame.
+#[test]
+fn impossible_renames_are_refused_before_converting() {
+    let dir = tempfile::tempdir().unwrap();
+    for (sample, old, says) in [
+        (
+            "cuag_alloy.unwrapped.dump",
+            "1",
+            "names its species by its `element` column",
+        ),
+        (
+            "cu_melt.custom.dump",
+            "Zn",
+            "names its species by LAMMPS type number",
+        ),
+    ] {
+        let out = dir.path().join(sample);
+        let mut o = opts();
+        o.convert.species_names = vec![(old.into(), "X".into())];
+        let e = batch(&[lammps_sample_path(sample)], &out, &o, &NoProgress)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "--species-name {old}=X: no species named \"{old}\" can occur there"
+            )) && e.contains(says),
+            "{e}"
+        );
+        assert!(!out.join("dataset.json").exists());
+    }
+}
