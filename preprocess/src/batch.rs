@@ -1195,6 +1195,18 @@ pub fn batch(
             let own = dump.frame_timestep(k);
             let timestep = own.unwrap_or(position);
             position += 1;
+            // A last frame cut short in its atoms (a run still writing the input) is left
+            // out where it is read, with a note, as for an uncompressed input: its
+            // description is not needed here.
+            let cut_last = k + 1 == dump.frame_count()
+                && matches!(
+                    dump.frame_info(k),
+                    Err(crate::readers::ReadError::Truncated { .. })
+                );
+            if cut_last {
+                frames.push((own, timestep, u64::MAX, None, None));
+                continue;
+            }
             let (particles, given) = if compressed {
                 let info = dump
                     .frame_info(k)

@@ -2149,3 +2149,41 @@ fn impossible_renames_are_refused_before_converting() {
         assert!(!out.join("dataset.json").exists());
     }
 }
+
+/// A single gzip dump still being written, cut inside its last frame's atoms: the frames
+/// before the cut convert, the cut one is left out for a rerun, and the summary's notes
+/// say the compressed stream ends early (the frame's description, read while listing,
+/// failed the whole batch).
+#[test]
+fn a_gzip_dump_cut_inside_its_last_frame_converts_the_frames_before() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    // The last frame's first 3000 bytes (a tenth of its atoms: too few lines for the
+    // count its header announces), flushed as a run does.
+    let last = String::from_utf8_lossy(&text)
+        .rfind("ITEM: TIME\n")
+        .unwrap();
+    enc.write_all(&text[..last + 3000]).unwrap();
+    enc.flush().unwrap();
+    let cut = enc.get_ref().clone();
+    let src = dir.path().join("live.dump.gz");
+    std::fs::write(&src, cut).unwrap();
+    let r = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("out"),
+        &opts(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!((r.converted, r.incomplete.len()), (5, 1));
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n.contains("compressed stream cut short: ")
+                && n.contains("live.dump.gz ends early")),
+        "{:?}",
+        r.notes
+    );
+}

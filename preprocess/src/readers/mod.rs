@@ -652,15 +652,19 @@ impl DumpFile {
                 ));
             }
         }
+        // With the last frame and the one before it: the cut may fall inside the last,
+        // which is then left out, its notes unsaid.
         if let Some(gz) = self
             .gzip_cut
             .as_ref()
-            .filter(|_| k + 1 == self.frame_count())
+            .filter(|_| k + 2 >= self.frame_count())
         {
+            // (Said first what it is: a batch groups notes by what precedes their first
+            // `: `, and other notes about this file would hide it.)
             notes.push(format!(
-                "{}: the compressed stream ends early (a run still writing it, or a copy cut \
-                 short): the text before the cut is read, a frame it cuts is left out, and a \
-                 rerun reads the rest once the file is complete",
+                "compressed stream cut short: {} ends early (a run still writing it, or a \
+                 copy cut short): the text before the cut is read, a frame it cuts is left \
+                 out, and a rerun reads the rest once the file is complete",
                 gz.display()
             ));
         }
