@@ -1160,16 +1160,16 @@ pub fn batch(
     for (i, p) in inputs.iter().enumerate() {
         // An empty newest file of a set is one LAMMPS has just opened: left out with a
         // note, as a frame cut short is. (Elsewhere, or alone, it is the reader's error.)
-        let no_text = || crate::readers::gzip_without_text(p);
-        if inputs.len() > 1
-            && Some(i) == last_input
-            && (std::fs::metadata(p).is_ok_and(|m| m.is_file() && m.len() == 0) || no_text())
-        {
+        let newest_of_set = inputs.len() > 1 && Some(i) == last_input;
+        let empty =
+            newest_of_set && std::fs::metadata(p).is_ok_and(|m| m.is_file() && m.len() == 0);
+        let no_text = newest_of_set && !empty && crate::readers::gzip_without_text(p);
+        if empty || no_text {
             empty_inputs.push(IncompleteFrame {
                 input: p.clone(),
                 frame: 0,
                 timestep: None,
-                reason: if no_text() {
+                reason: if no_text {
                     "its compressed stream ends before any text (a run has just opened it?)"
                 } else {
                     "the file is empty (a run has just opened it?)"
@@ -1198,19 +1198,16 @@ pub fn batch(
             // A last frame cut short in its atoms (a run still writing the input) is left
             // out where it is read, with a note, as for an uncompressed input: its
             // description is not needed here.
-            let cut_last = k + 1 == dump.frame_count()
-                && matches!(
-                    dump.frame_info(k),
-                    Err(crate::readers::ReadError::Truncated { .. })
-                );
-            if cut_last {
+            // (Read once, where it is needed: a compressed input's every frame, the last.)
+            let info = (compressed || k + 1 == dump.frame_count()).then(|| dump.frame_info(k));
+            if k + 1 == dump.frame_count()
+                && matches!(info, Some(Err(crate::readers::ReadError::Truncated { .. })))
+            {
                 frames.push((own, timestep, u64::MAX, None, None));
                 continue;
             }
-            let (particles, given) = if compressed {
-                let info = dump
-                    .frame_info(k)
-                    .map_err(|e| bounded.context(p, e.into()))?;
+            let (particles, given) = if let (true, Some(info)) = (compressed, info) {
+                let info = info.map_err(|e| bounded.context(p, e.into()))?;
                 // What a rerun compares an existing output's radii with (the text is
                 // gone later).
                 let given = out_dir
@@ -2117,15 +2114,8 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     for (i, n, path) in &shards {
         let text = std::fs::read(path).map_err(io(path))?;
         let m = parse_manifest(path, &text, "shard")?;
-        if m.shard != Some([*i, *n]) {
-            return Err(manifest_err(
-                path,
-                format!(
-                    "its shard field is {} but its name says shard {i} of {n}",
-                    m.shard
-                        .map_or("absent".to_string(), |[a, b]| format!("[{a}, {b}]"))
-                ),
-            ));
+        if let Some(problem) = shard_field_problem(Some([*i, *n]), m.shard) {
+            return Err(manifest_err(path, problem));
         }
         manifests.push((path, m));
     }
@@ -2332,7 +2322,7 @@ impl MergeSettings {
         let attribute = m.attribute.as_ref().map(|a| a.name.clone());
         let Some((first, build, first_attribute)) = &self.first else {
             self.first = Some((this.clone(), m.build.clone(), attribute));
-            return self.check_chunks_and_radii(m, f, this);
+            return self.check_renames_chunks_and_radii(m, f, this);
         };
         let b = &m.build;
         for (setting, a, x) in [
@@ -2355,10 +2345,10 @@ impl MergeSettings {
                 name(&attribute),
             ));
         }
-        self.check_chunks_and_radii(m, f, this)
+        self.check_renames_chunks_and_radii(m, f, this)
     }
 
-    fn check_chunks_and_radii(
+    fn check_renames_chunks_and_radii(
         &mut self,
         m: &mdlod_format::meta::Metadata,
         f: &FrameEntry,
@@ -2523,18 +2513,9 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         let path = dir.join(name);
         let text = std::fs::read(&path).map_err(io(&path))?;
         let m = parse_manifest(&path, &text, "dataset")?;
-        // A shard manifest says which shard it is twice: in its name and its field.
         let named = shard_of(name).map(|(i, n)| [i, n]);
-        if m.shard != named {
-            let field = m
-                .shard
-                .map_or("absent".to_string(), |[a, b]| format!("[{a}, {b}]"));
-            check.problems.push(match named {
-                Some([i, n]) => {
-                    format!("{name}: its shard field is {field} but its name says shard {i} of {n}")
-                }
-                None => format!("{name}: a shard field {field} in the merged manifest"),
-            });
+        if let Some(problem) = shard_field_problem(named, m.shard) {
+            check.problems.push(format!("{name}: {problem}"));
         }
         if let Some(expected) = m.expected_frames {
             if (m.frames.len() as u64) < expected {
@@ -2644,6 +2625,19 @@ pub fn parse_manifest(path: &Path, text: &[u8], what: &str) -> Result<Manifest, 
         )));
     }
     Ok(m)
+}
+
+/// A shard manifest says which shard it is twice, in its name (`named`; `None`: the
+/// merged `dataset.json`) and its `shard` field: where they disagree, how.
+fn shard_field_problem(named: Option<[u32; 2]>, field: Option<[u32; 2]>) -> Option<String> {
+    let text = |f: Option<[u32; 2]>| f.map_or("absent".to_string(), |[a, b]| format!("[{a}, {b}]"));
+    (named != field).then(|| match named {
+        Some([i, n]) => format!(
+            "its shard field is {} but its name says shard {i} of {n}",
+            text(field)
+        ),
+        None => format!("a shard field {} in the merged manifest", text(field)),
+    })
 }
 
 /// The manifest version this mdlod writes and reads.

@@ -106,7 +106,7 @@ impl FitWindow {
     /// The window's centre and half sizes, in normalised device coordinates; `None` for a
     /// window that does not hold the image's centre in its interior or is not finite (a
     /// fit keeps the target on the view's axis, which must see into the window).
-    fn centre_and_half(&self) -> Option<([f64; 2], [f64; 2])> {
+    pub fn centre_and_half(&self) -> Option<([f64; 2], [f64; 2])> {
         let ok = (0..2).all(|k| {
             self.min[k].is_finite()
                 && self.max[k].is_finite()

@@ -1867,9 +1867,9 @@ pub fn shade_file(
 ) -> Result<(u32, u32), RenderError> {
     lights.check().map_err(RenderError::InvalidOptions)?;
     let data = mdlod_format::sndf::SndfData::load(input)?;
-    sndf_camera(input, &data.header.view)?;
+    let view = sndf_camera(input, &data.header.view)?;
     if data.header.smip.is_some() {
-        let image = shade_tiles_file(input, &data, lights, background_srgb, level)?;
+        let image = shade_tiles_file(input, &data, &view, lights, background_srgb, level)?;
         image.save_png(out)?;
         return Ok((image.width, image.height));
     }
@@ -1909,6 +1909,7 @@ pub fn sndf_camera(path: &Path, view: &serde_json::Value) -> Result<ViewFile, Re
 fn shade_tiles_file(
     input: &Path,
     data: &mdlod_format::sndf::SndfData,
+    view: &ViewFile,
     lights: &sndf::ShadeLights,
     background_srgb: [f32; 3],
     level: ShadeLevel,
@@ -1917,7 +1918,6 @@ fn shade_tiles_file(
         path: input.to_path_buf(),
         message,
     };
-    let view = sndf_camera(input, &data.header.view)?;
     let (w, h) = (data.header.width, data.header.height);
     // The tiles do not bound the image a header asks for: cap it (512 MiB of pixels).
     if u64::from(w) * u64::from(h) > 1 << 27 {

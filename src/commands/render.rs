@@ -1901,20 +1901,17 @@ fn render_turntable(
         // is fitted into the part of the image the legend leaves (the one that shows the
         // data larger), a distance as much farther as that part is smaller, and every
         // view panned so that the data's centre lies at the part's centre.
+        // (The windows a still's fit takes: see `FitWindow::centre_and_half`.)
         let window = opts
             .fit_windows
             .iter()
-            .map(|w| {
-                let half = [0.5 * (w.max[0] - w.min[0]), 0.5 * (w.max[1] - w.min[1])];
-                (w, half[0].min(half[1]).min(1.0))
-            })
-            .filter(|(_, shrink)| *shrink > 0.0)
+            .filter_map(|w| w.centre_and_half())
+            .map(|(centre, half)| (centre, half[0].min(half[1])))
             .max_by(|a, b| a.1.total_cmp(&b.1));
         let farthest = match window {
             Some((_, shrink)) => farthest / shrink as f32,
             None => farthest,
         };
-        let tan_y = |c: &Camera| (f64::from(c.fov_y_deg).to_radians() * 0.5).tan();
         views = cameras
             .into_iter()
             .map(|c| {
@@ -1922,11 +1919,14 @@ fn render_turntable(
                     distance: farthest,
                     ..c
                 };
-                if let Some((w, _)) = window {
-                    let centre = [0.5 * (w.min[0] + w.max[0]), 0.5 * (w.min[1] + w.max[1])];
-                    let (ty, d) = (tan_y(&c), f64::from(c.distance));
-                    let tx = ty * f64::from(aspect);
-                    c.pan((-centre[0] * d * tx) as f32, (-centre[1] * d * ty) as f32);
+                // The data's centre dragged to the window's centre, in pixels (y down).
+                if let Some((centre, _)) = window {
+                    let (w, h) = (f64::from(opts.width), f64::from(opts.height));
+                    c.pan_px(
+                        (centre[0] * 0.5 * w) as f32,
+                        (-centre[1] * 0.5 * h) as f32,
+                        opts.height,
+                    );
                 }
                 ViewSpec::Camera(c)
             })

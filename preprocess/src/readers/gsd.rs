@@ -654,8 +654,6 @@ impl<'a> FrameData<'a> {
         let mut count = vec![0u64; names.len()];
         let mut bad: Vec<Option<f64>> = vec![None; names.len()];
         let mut spread = vec![(f64::INFINITY, f64::NEG_INFINITY); names.len()];
-        // Without diameters, an HPMC run's sphere shapes give the types' sizes.
-        let shapes = self.sphere_shapes(names.len());
         if let Some(e) = self.chunk("particles/diameter", 1, false)? {
             let bytes = &self.data[e.location..e.location + self.n * e.ty.size()];
             for (j, &s) in ids.iter().enumerate() {
@@ -673,6 +671,13 @@ impl<'a> FrameData<'a> {
                 *r = (r.0.min(d), r.1.max(d));
             }
         }
+        // Without diameters, an HPMC run's sphere shapes give the types' sizes (read only
+        // where some type has no diameter).
+        let shapes = if count.contains(&0) {
+            self.sphere_shapes(names.len())
+        } else {
+            Vec::new()
+        };
         Ok(names
             .iter()
             .enumerate()
