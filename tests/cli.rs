@@ -5823,3 +5823,84 @@ fn memory_limits_past_the_machine_or_below_zero_are_said() {
         );
     }
 }
+
+/// A two-dimensional LAMMPS run's dump (`dimension 2`: every z 0, the box's z from -0.5
+/// to 0.5): `frames` frames of a 40 × 25 layer.
+fn flat_dump(path: &Path, frames: u32) {
+    let mut text = String::new();
+    for f in 0..frames {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{}\nITEM: NUMBER OF ATOMS\n1000\nITEM: BOX BOUNDS pp pp pp\n\
+             0 44\n0 27.5\n-0.5 0.5\nITEM: ATOMS id type x y z\n",
+            f * 100
+        ));
+        for i in 0..1000u32 {
+            let (x, y) = (f64::from(i % 40) * 1.1, f64::from(i / 40) * 1.1);
+            text.push_str(&format!("{} {} {x} {y} 0\n", i + 1, 1 + i % 2));
+        }
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn two_dimensional_data_is_seen_square_on_by_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("flat.lammpstrj");
+    flat_dump(&dump, 2);
+    let file = dir.path().join("flat.mdlod");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--radius",
+        "1=0.5",
+        "--radius",
+        "2=0.5",
+    ]);
+    let batch = dir.path().join("traj");
+    ok(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&batch),
+        "--radius",
+        "1=0.5",
+        "--radius",
+        "2=0.5",
+    ]);
+    let angles = |view: &Path| {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(view).unwrap()).unwrap();
+        (
+            v["azimuth_deg"].as_f64().unwrap(),
+            v["elevation_deg"].as_f64().unwrap(),
+        )
+    };
+    let size = ["--width", "64", "--height", "48"];
+    for (case, input, out, extra) in [
+        ("a still", &file, "still.png", vec![]),
+        ("a still, zoomed", &file, "still.png", vec!["--zoom", "2"]),
+        ("a movie", &batch, "movie/f-%03d.png", vec![]),
+    ] {
+        let view = dir.path().join("view.json");
+        let png = dir.path().join(out);
+        let mut args = vec!["render", s(input), "-o", s(&png), "--save-view", s(&view)];
+        args.extend(size);
+        args.extend(extra);
+        ok(&args);
+        let (azimuth, elevation) = angles(&view);
+        assert!(
+            (elevation - 90.0).abs() < 1e-3 && (azimuth + 90.0).abs() < 1e-3,
+            "{case}: ({azimuth}, {elevation})"
+        );
+    }
+    // An angle given is kept: the other takes the three-dimensional default.
+    let view = dir.path().join("view.json");
+    let png = dir.path().join("one.png");
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--save-view", s(&view)];
+    args.extend(size);
+    args.extend(["--azimuth", "10"]);
+    ok(&args);
+    assert_eq!(angles(&view), (10.0, 20.0));
+}

@@ -73,6 +73,17 @@ pub use view::ViewFile;
 /// Where the camera comes from.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ViewSpec {
+    /// The data's own view: an [`ViewSpec::Orbit`] at azimuth 30°, elevation 20° for
+    /// three-dimensional data; data whose particle centres all lie in one plane (a
+    /// two-dimensional simulation) is faced square on instead, with its first remaining
+    /// axis to the right ([`facing_angles`]). A `target` pans as a [`ViewSpec::View`]'s.
+    /// [`frame_setup`] resolves it against the file drawn ([`ViewSpec::resolved`]); where
+    /// no file is at hand it is the three-dimensional orbit.
+    Default {
+        zoom: f32,
+        projection: Projection,
+        target: Option<[f32; 3]>,
+    },
     /// Orbit around the data's centre, at the distance where the data fits, divided by
     /// `zoom` (2 = twice as close).
     Orbit {
@@ -136,12 +147,100 @@ impl ViewChanges {
 
 impl Default for ViewSpec {
     fn default() -> Self {
-        ViewSpec::Orbit {
-            azimuth_deg: 30.0,
-            elevation_deg: 20.0,
+        ViewSpec::Default {
             zoom: 1.0,
             projection: Projection::Perspective,
+            target: None,
         }
+    }
+}
+
+/// The azimuth and elevation of the default view of three-dimensional data.
+pub const DEFAULT_ANGLES: (f32, f32) = (30.0, 20.0);
+
+impl ViewSpec {
+    /// [`ViewSpec::Default`] made explicit for data flat across `flat_axis` (see
+    /// [`flat_axis`]; `None`: three-dimensional data); any other view as it is.
+    pub fn with_flat_axis(&self, flat_axis: Option<usize>) -> ViewSpec {
+        let ViewSpec::Default {
+            zoom,
+            projection,
+            target,
+        } = *self
+        else {
+            return self.clone();
+        };
+        let (azimuth_deg, elevation_deg) = flat_axis.map_or(DEFAULT_ANGLES, facing_angles);
+        match target {
+            None => ViewSpec::Orbit {
+                azimuth_deg,
+                elevation_deg,
+                zoom,
+                projection,
+            },
+            Some(t) => ViewSpec::View(ViewFile {
+                projection,
+                azimuth_deg,
+                elevation_deg,
+                zoom,
+                target: Some(t),
+                ..Default::default()
+            }),
+        }
+    }
+
+    /// [`ViewSpec::Default`] made explicit for `file`'s data; any other view as it is.
+    pub fn resolved(&self, file: &MdlodFile) -> ViewSpec {
+        match self {
+            ViewSpec::Default { .. } => self.with_flat_axis(flat_axis(file)),
+            _ => self.clone(),
+        }
+    }
+}
+
+/// The axis (0 x, 1 y, 2 z) across which `file`'s data is flat, if it is: every
+/// particle's centre in one plane normal to it (a two-dimensional simulation, or a single
+/// atomic layer), while the data spreads at least four times as far along both other
+/// axes. The test reads the top node's box, which holds every particle's sphere: across
+/// a flat axis it is no wider than the largest species' diameter.
+pub fn flat_axis(file: &MdlodFile) -> Option<usize> {
+    let radius = file
+        .metadata()
+        .species
+        .iter()
+        .map(|s| s.radius)
+        .fold(0.0f32, f32::max);
+    flat_axis_of(&data_bounds(file), radius)
+}
+
+/// [`flat_axis`] of data within `bounds` whose largest sphere has radius `radius`.
+pub fn flat_axis_of(bounds: &Bounds, radius: f32) -> Option<usize> {
+    let extent = bounds.max - bounds.min;
+    let e = [extent.x, extent.y, extent.z];
+    if !e.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let widest = e.iter().copied().fold(0.0f32, f32::max);
+    // Rounding of single-precision bounds far from the origin.
+    let slack = 1e-3 * (2.0 * radius) + 1e-6 * widest;
+    let flat: Vec<usize> = (0..3)
+        .filter(|&k| e[k] <= 2.0 * radius + slack)
+        .filter(|&k| (0..3).all(|j| j == k || e[j] >= 4.0 * e[k].max(f32::MIN_POSITIVE)))
+        .collect();
+    match flat[..] {
+        [k] => Some(k),
+        _ => None,
+    }
+}
+
+/// The azimuth and elevation (degrees) that face a plane normal to `axis` square on:
+/// z flat looks straight down with x to the right and y up; y flat looks along +y with x
+/// to the right; x flat looks along −x with y to the right; the other axis up.
+pub fn facing_angles(axis: usize) -> (f32, f32) {
+    match axis {
+        0 => (0.0, 0.0),
+        1 => (-90.0, 0.0),
+        _ => (-90.0, 90.0),
     }
 }
 
@@ -946,6 +1045,17 @@ pub fn camera_for_framing_in(
     let bounds = *bounds;
     let aspect = width.max(1) as f32 / height.max(1) as f32;
     Ok(match view {
+        ViewSpec::Default { .. } => {
+            // No file to ask whether the data is flat: the three-dimensional view.
+            return camera_for_framing_in(
+                &bounds,
+                boxes,
+                &view.with_flat_axis(None),
+                width,
+                height,
+                windows,
+            );
+        }
         ViewSpec::Orbit {
             azimuth_deg,
             elevation_deg,
@@ -1040,6 +1150,17 @@ pub fn frame_setup(
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     check_numbers(opts)?;
+    // The default view faces flat data square on.
+    let resolved;
+    let opts = if matches!(opts.view, ViewSpec::Default { .. }) {
+        resolved = RenderOptions {
+            view: opts.view.resolved(file),
+            ..opts.clone()
+        };
+        &resolved
+    } else {
+        opts
+    };
     if opts.transparent
         && matches!(
             opts.mode,

@@ -1666,3 +1666,91 @@ fn a_fitted_view_leaves_out_particles_far_from_the_rest() {
     let fit = fit_bounds(&f, 0, false);
     assert_eq!((fit.bounds, fit.far_particles), (data_bounds(&f), 0));
 }
+
+/// A layer of `nx × ny` particles 1.1 apart in the plane normal to `axis`, at `level` on
+/// that axis (far from the origin, where bounds round).
+fn layer(axis: usize, nx: usize, ny: usize, level: f32) -> Vec<[f32; 3]> {
+    let mut out = Vec::new();
+    for i in 0..nx {
+        for j in 0..ny {
+            let (u, v) = (i as f32 * 1.1, j as f32 * 1.1);
+            let p = match axis {
+                0 => [level, u, v],
+                1 => [u, level, v],
+                _ => [u, v, level],
+            };
+            out.push(p);
+        }
+    }
+    out
+}
+
+#[test]
+fn the_default_view_faces_flat_data_square_on_and_orbits_three_dimensional_data() {
+    let orbit = |(azimuth_deg, elevation_deg): (f32, f32)| ViewSpec::Orbit {
+        azimuth_deg,
+        elevation_deg,
+        zoom: 1.0,
+        projection: Projection::Perspective,
+    };
+    let axes = [Vec3::X, Vec3::Y, Vec3::Z];
+    for axis in 0..3 {
+        for level in [0.0, 5000.0] {
+            let (_d, _p, f) = make_file(
+                &spheres_frame(&layer(axis, 30, 20, level)),
+                small_build(),
+                &[("X", 0.5)],
+            );
+            assert_eq!(mdlod_render::flat_axis(&f), Some(axis), "level {level}");
+            let cam = fitted_camera(&f);
+            let angles = mdlod_render::facing_angles(axis);
+            assert_eq!(cam, camera_for(&f, &orbit(angles), 256, 192).unwrap());
+            // The eye looks along the flat axis; the layer's first other axis points
+            // right, and the up vector lies in the layer (z up for a vertical layer).
+            assert!(cam.back().abs().dot(axes[axis]) > 0.9999, "{axis}: {cam:?}");
+            let (right, up) = match axis {
+                0 => (Vec3::Y, Vec3::Z),
+                1 => (Vec3::X, Vec3::Z),
+                _ => (Vec3::X, Vec3::Y),
+            };
+            assert!(cam.right().dot(right) > 0.9999, "{axis}: {:?}", cam.right());
+            assert!(cam.up().dot(up) > 0.9999, "{axis}: {:?}", cam.up());
+            // The pan of a default view keeps the facing angles.
+            let target = [1.0, 2.0, 3.0];
+            let panned = camera_for(
+                &f,
+                &ViewSpec::Default {
+                    zoom: 1.0,
+                    projection: Projection::Perspective,
+                    target: Some(target),
+                },
+                256,
+                192,
+            )
+            .unwrap();
+            assert_eq!(panned.target, Vec3::from(target));
+            assert_eq!(panned.back(), cam.back());
+        }
+    }
+    // Three-dimensional data: a block, two atomic layers, a single line of particles
+    // (flat across two axes: no plane to face) and a single particle.
+    let two_layers: Vec<[f32; 3]> = layer(2, 30, 20, 0.0)
+        .into_iter()
+        .chain(layer(2, 30, 20, 1.1))
+        .collect();
+    let line: Vec<[f32; 3]> = (0..50).map(|i| [i as f32, 0.0, 0.0]).collect();
+    for (what, frame, radii) in [
+        ("block", fcc_frame(3), vec![]),
+        ("two layers", spheres_frame(&two_layers), vec![("X", 0.5)]),
+        ("line", spheres_frame(&line), vec![("X", 0.5)]),
+        ("one particle", spheres_frame(&[[1.0, 2.0, 3.0]]), vec![]),
+    ] {
+        let (_d, _p, f) = make_file(&frame, small_build(), &radii);
+        assert_eq!(mdlod_render::flat_axis(&f), None, "{what}");
+        assert_eq!(
+            fitted_camera(&f),
+            camera_for(&f, &orbit(mdlod_render::DEFAULT_ANGLES), 256, 192).unwrap(),
+            "{what}"
+        );
+    }
+}

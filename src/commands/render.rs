@@ -307,11 +307,12 @@ pub struct ViewArgs {
     #[arg(long)]
     pub view: Option<PathBuf>,
     /// Orbit angle around the vertical axis (z), degrees [default: 30; with --view, the
-    /// file's].
+    /// file's; without either angle, data whose particles lie in one plane (a 2D
+    /// simulation) is seen square on: straight down on an x-y layer].
     #[arg(long, allow_negative_numbers = true)]
     pub azimuth: Option<f32>,
     /// Angle above the horizontal (the x-y plane), degrees [default: 20; with --view, the
-    /// file's].
+    /// file's; flat data as for --azimuth].
     #[arg(long, allow_negative_numbers = true)]
     pub elevation: Option<f32>,
     /// 1 fits the data; 2 is twice as close (with --view: twice as close as the saved
@@ -433,6 +434,13 @@ impl ViewArgs {
         match (&self.view, self.target) {
             (Some(p), _) if changes.is_empty() => ViewSpec::File(p.clone()),
             (Some(p), _) => ViewSpec::FileWith(p.clone(), changes),
+            // No angle given: the data's default view (square on to flat data), panned to
+            // the target if one is given.
+            (None, target) if azimuth.is_none() && elevation.is_none() => ViewSpec::Default {
+                zoom: self.zoom.unwrap_or(1.0),
+                projection,
+                target,
+            },
             // A pan: the fitted distance, looking at the target.
             (None, Some(t)) => ViewSpec::View(ViewFile {
                 projection,
@@ -517,7 +525,7 @@ fn mode_name(mode: Mode) -> String {
 /// or a distance (which the fit then gives).
 fn view_fits(view: &ViewSpec) -> bool {
     match view {
-        ViewSpec::Orbit { .. } => true,
+        ViewSpec::Orbit { .. } | ViewSpec::Default { .. } => true,
         // (A file that cannot be read fails where it is loaded, saying why.)
         ViewSpec::File(p) | ViewSpec::FileWith(p, _) => match ViewFile::load(p) {
             Ok(v) => v.target.is_none() || v.distance.is_none(),
@@ -2047,9 +2055,17 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     // another): colours and splat intensities then mean the same values throughout.
     let mut attribute: Option<Option<mdlod_format::meta::AttributeInfo>> = None;
     let mut frame_species = Vec::with_capacity(n);
+    // The axis every frame is flat across, for the default view (None: some frame is
+    // three-dimensional, or flat across another axis).
+    let mut flat: Option<Option<usize>> = None;
     for f in &manifest.frames {
         let path = dir.join(&f.file);
         let file = mdlod_format::MdlodFile::open(&path)?;
+        let own_flat = mdlod_render::flat_axis(&file);
+        flat = Some(match flat {
+            None => own_flat,
+            Some(a) => a.filter(|_| a == own_flat),
+        });
         names.extend(file.metadata().species.iter().map(|s| s.name.clone()));
         frame_species.push(file.metadata().species.clone());
         let own = file.metadata().attribute.clone();
@@ -2192,6 +2208,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let mut radii: std::collections::BTreeMap<String, [f32; 2]> = Default::default();
     let mut worst_miss: Option<(f32, usize)> = None;
     let style = opts.style.clone();
+    opts.view = opts.view.with_flat_axis(flat.flatten());
     let camera = mdlod_render::camera_for_framing_in(
         &bounds,
         &boxes,

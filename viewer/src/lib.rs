@@ -140,7 +140,8 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     let [w, h] = opts.window;
     let view = match &opts.view {
         Some(p) => ViewSpec::File(p.clone()),
-        None => ViewSpec::default(),
+        // Square on to flat (two-dimensional) data.
+        None => ViewSpec::default().resolved(&first),
     };
     // The material, less atoms lost far from it ([`mdlod_render::fit_bounds`]), as
     // `mdlod render` fits it.
