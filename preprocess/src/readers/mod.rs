@@ -1334,7 +1334,13 @@ pub(crate) fn shorten(line: &[u8]) -> String {
 
 /// The offset just after the `n`-th newline from `pos`, or `data.len()` when there are fewer.
 /// Counts newlines a block at a time (vectorised), so skipping is several GB/s.
-pub(crate) fn skip_lines(data: &[u8], mut pos: usize, mut n: usize) -> usize {
+pub(crate) fn skip_lines(data: &[u8], pos: usize, n: usize) -> usize {
+    skip_lines_left(data, pos, n).0
+}
+
+/// [`skip_lines`], and how many of the `n` newlines the data did not hold (a last line
+/// without its newline counts among them).
+pub(crate) fn skip_lines_left(data: &[u8], mut pos: usize, mut n: usize) -> (usize, usize) {
     const BLOCK: usize = 1 << 16;
     while n > 0 && pos < data.len() {
         let end = (pos + BLOCK).min(data.len());
@@ -1348,14 +1354,14 @@ pub(crate) fn skip_lines(data: &[u8], mut pos: usize, mut n: usize) -> usize {
         for p in memchr::memchr_iter(b'\n', block) {
             n -= 1;
             if n == 0 {
-                return pos + p + 1;
+                return (pos + p + 1, 0);
             }
         }
     }
     if n == 0 {
-        pos
+        (pos, 0)
     } else {
-        data.len()
+        (data.len(), n)
     }
 }
 
@@ -1374,20 +1380,20 @@ pub(crate) fn skip_lines_mapped(
     mut n: usize,
     segment: usize,
     reached: &Reached<'_>,
-) -> Result<usize, ReadError> {
+) -> Result<(usize, usize), ReadError> {
     let len = ctx.data.len();
     while n > 0 && pos < len {
         let map = mapped_again(ctx, file, pos)?;
         let end = (pos + segment.max(1)).min(len);
         let count = memchr::memchr_iter(b'\n', &map[pos..end]).count();
         if count >= n {
-            return Ok(skip_lines(&map[..end], pos, n));
+            return Ok(skip_lines_left(&map[..end], pos, n));
         }
         n -= count;
         pos = end;
         reached.at(pos);
     }
-    Ok(if n == 0 { pos } else { len })
+    Ok(if n == 0 { (pos, 0) } else { (len, n) })
 }
 
 /// The progress of a scan through a file: advances a stage's bar (counted in bytes) to

@@ -32,12 +32,29 @@
 
 use super::atoms::AtomLayout;
 use super::{
-    fields, parse_int, shorten, skip_lines, trim, Ctx, Cursor, FrameInfo, Header, ReadError,
+    fields, parse_int, shorten, skip_lines_left, trim, Ctx, Cursor, FrameInfo, Header, ReadError,
 };
 use crate::frame::SimulationBox;
 
 /// The longest comment line read as a frame's header.
 const MAX_COMMENT: usize = 1 << 20;
+
+/// Where the atom lines (from `from`) of a frame that the file ends before it is whole
+/// hold a whole line of one integer: no atom line is that (an atom has a species and
+/// three coordinates), a frame's count line is. `None` for a frame cut short while it was
+/// written.
+fn overcounted(data: &[u8], from: usize) -> Option<usize> {
+    let mut cursor = Cursor::new(data, from);
+    while let Some((at, line)) = cursor.next_line() {
+        // The last line may be cut inside an atom's species ("1" of "1 0.5 ..."); a
+        // whole line ends with its newline.
+        let whole = at + line.len() < data.len();
+        if whole && parse_int::<u64>(line).is_some() {
+            return Some(at);
+        }
+    }
+    None
+}
 
 /// Byte range and timestep of one frame.
 #[derive(Debug, PartialEq)]
@@ -80,12 +97,30 @@ impl Index {
                 )
             })?;
             let timestep = cursor.next_line().and_then(|(_, c)| comment_timestep(c));
-            let end = match file {
+            let (end, left) = match file {
                 Some(file) if data.len() > segment => {
                     super::skip_lines_mapped(ctx, file, cursor.pos, n, segment, reached)?
                 }
-                _ => skip_lines(data, cursor.pos, n),
+                _ => skip_lines_left(data, cursor.pos, n),
             };
+            // A last line without its newline is one of the frame's lines.
+            let unterminated = usize::from(end > cursor.pos && !data.ends_with(b"\n"));
+            if left > unterminated {
+                if let Some(lone) = overcounted(data, cursor.pos) {
+                    return Err(ctx.malformed(
+                        lone,
+                        format!(
+                            "a line holding one integer among the atom lines of frame {}, whose \
+                             count (line {}) announces {n} atoms that the file does not hold: \
+                             this looks like a later frame's count line, so frame {}'s count \
+                             is too large (the frames after it would be read as its atoms)",
+                            frames.len(),
+                            ctx.at(at).line,
+                            frames.len()
+                        ),
+                    ));
+                }
+            }
             cursor.pos = end;
             reached.at(end);
             frames.push(Span {
@@ -475,5 +510,56 @@ mod tests {
         let whole = super::super::check_segmented_index(&ctx, 14, Index::build);
         assert_eq!(whole.len(), 4);
         assert_eq!(whole.frames[3].end, text.len());
+    }
+
+    #[test]
+    fn a_count_too_large_in_the_middle_is_an_error_and_a_last_frame_cut_short_is_not() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.xyz");
+        let index = |text: &str| {
+            std::fs::write(&path, text).unwrap();
+            let ctx = Ctx {
+                path: &path,
+                data: text.as_bytes(),
+            };
+            let progress = crate::progress::NoProgress;
+            // Whole and through mappings of 8 bytes at a time.
+            let whole = Index::build(
+                &ctx,
+                None,
+                usize::MAX,
+                &super::super::Reached::new(&progress),
+            );
+            let file = std::fs::File::open(&path).unwrap();
+            let mapped = Index::build(&ctx, Some(&file), 8, &super::super::Reached::new(&progress));
+            assert_eq!(
+                whole.as_ref().map_err(ToString::to_string),
+                mapped.as_ref().map_err(ToString::to_string)
+            );
+            whole
+        };
+        // Frame 1 says 50 atoms and holds 2: frame 2's count line is read as its third,
+        // and the file ends before its 50th.
+        let e = index(
+            "2\nstep=0\n1 0 0 0\n1 1 0 0\n50\nstep=1\n1 0 0 0\n1 1 0 0\n\
+             2\nstep=2\n1 0 0 0\n1 1 0 0\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("d.xyz:9:") && e.contains("frame 1's count is too large"),
+            "{e}"
+        );
+        assert!(e.contains("count (line 5) announces 50 atoms"), "{e}");
+        // A last frame cut while it was written, inside a line or after one, even just
+        // after a numeric species: the frames before it, and it as cut.
+        for text in [
+            "1\nstep=0\n1 0 0 0\n3\nstep=1\n1 0 0 0\n1 1",
+            "1\nstep=0\n1 0 0 0\n3\nstep=1\n1 0 0 0\n",
+            "1\nstep=0\n1 0 0 0\n3\nstep=1\n1 0 0 0\n1",
+            "1\nstep=0\n1 0 0 0\n2\nstep=1\n1 0 0 0\n1 2 3 4",
+        ] {
+            assert_eq!(index(text).unwrap().len(), 2, "{text:?}");
+        }
     }
 }
