@@ -634,7 +634,8 @@ fn two_particles(extra: &[(&str, u8, u32, Vec<u8>)]) -> Vec<u8> {
     ];
     for (name, ty, m, data) in extra {
         names.push(name.to_string());
-        let n = if *name == "particles/types" {
+        // (The per-type chunks hold a row per type; the others one per particle.)
+        let n = if *name == "particles/types" || *name == "particles/type_shapes" {
             data.len() as u64 / u64::from(*m)
         } else {
             2
@@ -879,14 +880,44 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
         text.extend(row);
     }
     let bytes = two_particles(&[
-        ("particles/typeid", 3, 1, typeid),
+        ("particles/typeid", 3, 1, typeid.clone()),
         ("particles/types", 5, 2, b"A\0B\0C\0".to_vec()),
         ("particles/type_shapes", 5, m as u32, text),
     ]);
-    let (_, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
+    let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     let f = f.unwrap();
     let radii: Vec<Option<f32>> = f.species.iter().map(|s| s.radius).collect();
     assert_eq!(radii, [Some(1.0), Some(0.25), Some(0.5)]);
+    // The shape drawn as a sphere of the default radius is named in a note.
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert!(
+        notes[0].contains("gives no sphere for type C (ConvexPolyhedron): it is drawn")
+            && notes[0].contains("radius 0.5"),
+        "{notes:?}"
+    );
+    // So are a type with no entry and one whose entry is no JSON.
+    let mut short = b"[not json".to_vec();
+    short.resize(m, 0);
+    let mut text = short.clone();
+    let mut sphere = shapes[0].as_bytes().to_vec();
+    sphere.resize(m, 0);
+    text.extend(sphere);
+    let bytes = two_particles(&[
+        ("particles/typeid", 3, 1, typeid.clone()),
+        ("particles/types", 5, 2, b"A\0B\0C\0".to_vec()),
+        ("particles/type_shapes", 5, m as u32, text),
+    ]);
+    let (path, _) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
+    assert!(
+        notes.len() == 1 && notes[0].contains("types A (an entry not read), C (no entry): they"),
+        "{notes:?}"
+    );
     // A sphere of diameter 0 is kept as such (the conversion refuses it, as a particle
     // diameter of 0), not silently drawn at the default.
     let mut row = br#"{"type": "Sphere", "diameter": 0}"#.to_vec();
@@ -899,8 +930,13 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
         ("particles/types", 5, 2, b"A\0B\0".to_vec()),
         ("particles/type_shapes", 5, m as u32, zero),
     ]);
-    let (_, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
+    let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     assert_eq!(f.unwrap().species[0].radius, Some(0.0));
+    // Every type has its sphere: nothing to note.
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
+    assert!(notes.is_empty(), "{notes:?}");
 }
 
 /// HOOMD leaves out a per-particle chunk that holds only the schema's default (a charge

@@ -704,30 +704,98 @@ impl FrameData<'_> {
     /// object per type there, `{"type": "Sphere", "diameter": 2.0}`, and leaves
     /// `particles/diameter` at its default); `None` for other shapes or none given.
     fn sphere_shapes(&self, types: usize) -> Vec<Option<f32>> {
-        let Some(e) = self.index.chunk(self.k, "particles/type_shapes") else {
-            return vec![None; types];
-        };
-        if !matches!(e.ty, Ty::I8 | Ty::U8 | Ty::Char) {
-            return vec![None; types];
-        }
-        let Some(bytes) = self.data.get(e.location..e.location + e.n * e.m) else {
-            return vec![None; types];
-        };
-        let mut shapes: Vec<Option<f32>> = bytes
-            .chunks(e.m.max(1))
-            .map(|s| {
-                let end = s.iter().position(|&b| b == 0).unwrap_or(s.len());
-                let v: serde_json::Value = serde_json::from_slice(&s[..end]).ok()?;
-                // (A diameter of zero, below or not finite is kept, and refused as a
-                // particle's would be.)
-                let sphere = v.get("type")?.as_str()? == "Sphere";
-                let d = v.get("diameter")?.as_f64()? as f32;
-                sphere.then_some(d)
+        let mut shapes: Vec<Option<f32>> = self
+            .shapes()
+            .unwrap_or_default()
+            .into_iter()
+            .map(|s| match s {
+                Shape::Sphere(d) => Some(d),
+                Shape::Other(_) | Shape::Unreadable => None,
             })
             .collect();
         shapes.resize(types, None);
         shapes
     }
+
+    /// The entries of `particles/type_shapes`, one per type listed; `None` without the
+    /// chunk (or one not of text).
+    fn shapes(&self) -> Option<Vec<Shape>> {
+        let e = self.index.chunk(self.k, "particles/type_shapes")?;
+        if !matches!(e.ty, Ty::I8 | Ty::U8 | Ty::Char) {
+            return None;
+        }
+        let bytes = self.data.get(e.location..e.location + e.n * e.m)?;
+        Some(
+            bytes
+                .chunks(e.m.max(1))
+                .map(|s| {
+                    let end = s.iter().position(|&b| b == 0).unwrap_or(s.len());
+                    let Ok(v) = serde_json::from_slice::<serde_json::Value>(&s[..end]) else {
+                        return Shape::Unreadable;
+                    };
+                    let Some(kind) = v.get("type").and_then(|t| t.as_str()) else {
+                        return Shape::Unreadable;
+                    };
+                    // (A diameter of zero, below or not finite is kept, and refused as a
+                    // particle's would be.)
+                    match (kind, v.get("diameter").and_then(|d| d.as_f64())) {
+                        ("Sphere", Some(d)) => Shape::Sphere(d as f32),
+                        ("Sphere", None) => Shape::Unreadable,
+                        (other, _) => Shape::Other(other.to_string()),
+                    }
+                })
+                .collect(),
+        )
+    }
+
+    /// What the frame's `particles/type_shapes` says that the conversion does not draw:
+    /// types without a sphere there (another shape, an entry not read, no entry) where
+    /// the shapes give the sizes (no `particles/diameter`), each then drawn at the
+    /// default radius 0.5.
+    fn shape_note(&self) -> Option<String> {
+        let shapes = self.shapes()?;
+        if self.chunk("particles/diameter", 1, false).ok()?.is_some() {
+            return None;
+        }
+        let names = self.type_names().ok()?;
+        let missed: Vec<String> = names
+            .iter()
+            .enumerate()
+            .filter_map(|(t, name)| match shapes.get(t) {
+                Some(Shape::Sphere(_)) => None,
+                Some(Shape::Other(kind)) => Some(format!("{name} ({kind})")),
+                Some(Shape::Unreadable) => Some(format!("{name} (an entry not read)")),
+                None => Some(format!("{name} (no entry)")),
+            })
+            .collect();
+        if missed.is_empty() {
+            return None;
+        }
+        Some(format!(
+            "{}: frame {}: particles/type_shapes gives no sphere for type{} {}: {} drawn as \
+             spheres of radius 0.5, the default, unless --radius NAME=R gives one",
+            self.path.display(),
+            self.k,
+            if missed.len() == 1 { "" } else { "s" },
+            missed.join(", "),
+            if missed.len() == 1 { "it is" } else { "they are" }
+        ))
+    }
+}
+
+/// An entry of `particles/type_shapes`.
+enum Shape {
+    /// A sphere of this diameter.
+    Sphere(f32),
+    /// Another shape (`ConvexPolyhedron`, `Ellipsoid`, ...).
+    Other(String),
+    /// No JSON object with a `type` (or a sphere without a diameter).
+    Unreadable,
+}
+
+/// [`FrameData::shape_note`] of frame `k`, if the frame can be read.
+pub(crate) fn shape_note(path: &Path, data: &[u8], index: &Index, k: usize) -> Option<String> {
+    FrameData::new(path, data, index, k).ok()?.shape_note()
 }
 
 /// The `hoomd` schema's default of a per-particle chunk of one number, which a writer

@@ -637,6 +637,9 @@ impl DumpFile {
                 self.path.display()
             ));
         }
+        if let Index::Gsd(i) = &self.index {
+            notes.extend(gsd::shape_note(&self.path, self.bytes(), i, k));
+        }
         if let Index::Mmpld(i) = &self.index {
             let lists = i.coloured_lists(k);
             if !lists.is_empty() {
