@@ -200,35 +200,65 @@ impl ViewSpec {
 
 /// The axis (0 x, 1 y, 2 z) across which `file`'s data is flat, if it is: every
 /// particle's centre in one plane normal to it (a two-dimensional simulation, or a single
-/// atomic layer), while the data spreads at least four times as far along both other
-/// axes. The test reads the top node's box, which holds every particle's sphere: across
-/// a flat axis it is no wider than the largest species' diameter.
+/// atomic layer), whatever the particles' radii. Data on a line is flat across two axes:
+/// the view then looks down z if z is one of them, else along y. `None` for
+/// three-dimensional data, or a single point.
+///
+/// Files of up to [`FLAT_TEST_POINTS`] particles are tested on their particles; larger
+/// ones on the representatives of their finest level of at most that many points (each a
+/// weighted mean of particles, so in their plane when they are flat).
 pub fn flat_axis(file: &MdlodFile) -> Option<usize> {
-    let radius = file
-        .metadata()
-        .species
-        .iter()
-        .map(|s| s.radius)
-        .fold(0.0f32, f32::max);
-    flat_axis_of(&data_bounds(file), radius)
+    let levels = file.levels();
+    let last = file.level_count().checked_sub(1)?;
+    if levels[last].point_count <= FLAT_TEST_POINTS as u64 {
+        let ranges = file.encoding_ranges(last).ok()?;
+        let (pos, nodes, bits) = (file.positions(last), file.nodes(), file.position_bits());
+        let points = ranges.into_iter().flat_map(|(node, range)| {
+            let n = &nodes[node];
+            range.filter(|&i| i < pos.len()).map(move |i| {
+                glam::Vec3::from(mdlod_format::quantize::decode3(
+                    pos.get(i),
+                    n.centroid,
+                    n.quant_scale,
+                    bits,
+                ))
+            })
+        });
+        return flat_axis_of(points);
+    }
+    let level = (0..last)
+        .rev()
+        .find(|&l| levels[l].point_count <= FLAT_TEST_POINTS as u64)?;
+    flat_axis_of(
+        file.level_nodes(level)
+            .iter()
+            .map(|n| glam::Vec3::from(n.centroid)),
+    )
 }
 
-/// [`flat_axis`] of data within `bounds` whose largest sphere has radius `radius`.
-pub fn flat_axis_of(bounds: &Bounds, radius: f32) -> Option<usize> {
-    let extent = bounds.max - bounds.min;
-    let e = [extent.x, extent.y, extent.z];
-    if !e.iter().all(|v| v.is_finite()) {
+/// The most points [`flat_axis`] looks at (a millisecond's work).
+pub const FLAT_TEST_POINTS: usize = 1 << 16;
+
+/// [`flat_axis`] of particles centred at `points`: an axis along which their centres
+/// spread no more than 10⁻⁵ of their widest spread (and single precision's rounding).
+pub fn flat_axis_of(points: impl IntoIterator<Item = glam::Vec3>) -> Option<usize> {
+    let (mut lo, mut hi) = (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY);
+    for p in points {
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    let extent = hi - lo;
+    if !extent.is_finite() {
         return None;
     }
-    let widest = e.iter().copied().fold(0.0f32, f32::max);
-    // Rounding of single-precision bounds far from the origin.
-    let slack = 1e-3 * (2.0 * radius) + 1e-6 * widest;
-    let flat: Vec<usize> = (0..3)
-        .filter(|&k| e[k] <= 2.0 * radius + slack)
-        .filter(|&k| (0..3).all(|j| j == k || e[j] >= 4.0 * e[k].max(f32::MIN_POSITIVE)))
-        .collect();
+    let far = lo.abs().max(hi.abs()).max_element();
+    let tolerance = 1e-5 * extent.max_element() + 8.0 * f32::EPSILON * far;
+    let flat: Vec<usize> = (0..3).filter(|&k| extent[k] <= tolerance).collect();
     match flat[..] {
         [k] => Some(k),
+        // On a line: looking down on it if it lies across z, else along y (the larger of
+        // the two axes, as they are in order).
+        [_, b] => Some(b),
         _ => None,
     }
 }

@@ -1732,17 +1732,40 @@ fn the_default_view_faces_flat_data_square_on_and_orbits_three_dimensional_data(
             assert_eq!(panned.back(), cam.back());
         }
     }
-    // Three-dimensional data: a block, two atomic layers, a single line of particles
-    // (flat across two axes: no plane to face) and a single particle.
+    // A layer of small particles with a few large ones in it (a colloid in a 2D fluid):
+    // the centres are flat, the spheres are not.
+    let mut mixed = spheres_frame(&layer(2, 30, 20, 0.0));
+    mixed.species = common::species(&["X", "Big"]);
+    for s in mixed.species_index.iter_mut().step_by(97) {
+        *s = 1;
+    }
+    let (_d, _p, f) = make_file(&mixed, small_build(), &[("X", 0.5), ("Big", 5.0)]);
+    assert_eq!(mdlod_render::flat_axis(&f), Some(2));
+    // Particles on a line: looked down on, or along y for a line along z.
+    for (line_axis, seen_along) in [(0, 2), (1, 2), (2, 1)] {
+        let line: Vec<[f32; 3]> = (0..3)
+            .map(|i| {
+                let mut p = [1.0, 2.0, 3.0];
+                p[line_axis] += 6.0 * i as f32;
+                p
+            })
+            .collect();
+        let (_d, _p, f) = make_file(&spheres_frame(&line), small_build(), &[("X", 0.5)]);
+        assert_eq!(mdlod_render::flat_axis(&f), Some(seen_along), "{line_axis}");
+    }
+    // A large file is tested on its representatives.
+    let big = layer(1, 300, 250, -40.0);
+    assert!(big.len() > mdlod_render::FLAT_TEST_POINTS);
+    let (_d, _p, f) = make_file(&spheres_frame(&big), Default::default(), &[("X", 0.5)]);
+    assert_eq!(mdlod_render::flat_axis(&f), Some(1));
+    // Three-dimensional data: a block, two atomic layers, and a single particle.
     let two_layers: Vec<[f32; 3]> = layer(2, 30, 20, 0.0)
         .into_iter()
         .chain(layer(2, 30, 20, 1.1))
         .collect();
-    let line: Vec<[f32; 3]> = (0..50).map(|i| [i as f32, 0.0, 0.0]).collect();
     for (what, frame, radii) in [
         ("block", fcc_frame(3), vec![]),
         ("two layers", spheres_frame(&two_layers), vec![("X", 0.5)]),
-        ("line", spheres_frame(&line), vec![("X", 0.5)]),
         ("one particle", spheres_frame(&[[1.0, 2.0, 3.0]]), vec![]),
     ] {
         let (_d, _p, f) = make_file(&frame, small_build(), &radii);

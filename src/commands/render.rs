@@ -324,7 +324,8 @@ pub struct ViewArgs {
     pub ortho: bool,
     /// Look in the direction X,Y,Z (world axes; e.g. `1,1,1` along a cubic crystal's
     /// [111], `0,0,-1` straight down) instead of --azimuth and --elevation; z stays up
-    /// on screen (looking straight down or up, y is).
+    /// on screen (looking straight down or up, y is; x points right looking down, left
+    /// looking up).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_direction, allow_hyphen_values = true, conflicts_with_all = ["azimuth", "elevation"])]
     pub look_along: Option<[f32; 3]>,
     /// The point looked at and orbited around, X,Y,Z in world units (a pan: with
@@ -375,9 +376,14 @@ pub fn angles_looking_along(d: [f32; 3]) -> (f32, f32) {
         .normalize();
     let back = -v;
     let elevation = back.z.clamp(-1.0, 1.0).asin().to_degrees();
-    // Straight down or up: any azimuth; -90 puts +y up on screen.
+    // Straight down or up: any azimuth; -90 puts +y up on screen looking down (x to the
+    // right), 90 looking up (x then to the left: the view is not mirrored).
     let azimuth = if back.x.hypot(back.y) < 1e-9 {
-        -90.0
+        if back.z > 0.0 {
+            -90.0
+        } else {
+            90.0
+        }
     } else {
         back.y.atan2(back.x).to_degrees()
     };
@@ -1770,6 +1776,34 @@ fn limits_text(r: &mdlod_render::RenderReport, coarsest: Option<u64>, budget: u6
 
 /// The image of frame `index` of a movie: `pattern` with its `%d` or `%0Nd` (as
 /// ffmpeg reads them) replaced by the index.
+/// A note naming the images numbered past the last of the `n` just written to `pattern`
+/// that an earlier run left (a longer movie or turntable into the same names): a player
+/// or `ffmpeg -i` reading the numbered series would take them as more frames.
+fn stale_images_note(pattern: &Path, n: usize) -> Option<String> {
+    let first = frame_output(pattern, n).ok().filter(|p| p.exists())?;
+    let mut last = first.clone();
+    let mut count = 1usize;
+    while let Some(p) = frame_output(pattern, n + count).ok().filter(|p| p.exists()) {
+        last = p;
+        count += 1;
+    }
+    let which = if count == 1 {
+        format!("{} remains", first.display())
+    } else {
+        format!(
+            "{count} images remain, {} to {}",
+            first.display(),
+            last.display()
+        )
+    };
+    Some(format!(
+        "  note: {which} from an earlier run, numbered past the last image written: a \
+         player or `ffmpeg -i` reading the series would show {} as more frames; delete {}",
+        if count == 1 { "it" } else { "them" },
+        if count == 1 { "it" } else { "them" }
+    ))
+}
+
 fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
     let name = pattern
         .file_name()
@@ -1990,6 +2024,9 @@ fn render_turntable(
         t0.elapsed().as_secs_f64(),
         start.rem_euclid(360.0)
     );
+    if let Some(note) = stale_images_note(&args.output, n as usize) {
+        println!("{note}");
+    }
     if view_fits(&args.camera.spec()) {
         let file = mdlod_format::MdlodFile::open(&args.file)?;
         if let Some(note) = far_note(mdlod_render::fit_for(&file, &opts).far_particles, None) {
@@ -2316,6 +2353,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         if n == 1 { "" } else { "s" },
         t0.elapsed().as_secs_f64()
     );
+    if let Some(note) = stale_images_note(&args.output, n) {
+        println!("{note}");
+    }
     if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
         println!("{note}");
     }
@@ -2382,7 +2422,44 @@ mod tests {
             assert!((c.back() - want).length() < 1e-5, "{d:?}: {:?}", c.back());
         }
         assert_eq!(angles_looking_along([-1.0, 0.0, 0.0]), (0.0, 0.0));
+        // Straight down or up, +y is up on screen.
+        for d in [[0.0, 0.0, -1.0], [0.0, 0.0, 3.0]] {
+            let (azimuth_deg, elevation_deg) = angles_looking_along(d);
+            let c = mdlod_render::Camera {
+                azimuth_deg,
+                elevation_deg,
+                ..Default::default()
+            };
+            assert!(c.up().y > 0.9999, "{d:?}: {:?}", c.up());
+        }
         assert!(parse_direction("0,0,0").is_err() && parse_direction("1,2").is_err());
+    }
+
+    #[test]
+    fn images_left_past_the_last_frame_by_an_earlier_run_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let pattern = dir.path().join("f-%03d.png");
+        let touch = |i: usize| std::fs::write(frame_output(&pattern, i).unwrap(), b"").unwrap();
+        for i in 0..5 {
+            touch(i);
+        }
+        assert_eq!(stale_images_note(&pattern, 5), None);
+        touch(5);
+        let one = stale_images_note(&pattern, 5).unwrap();
+        assert!(
+            one.contains("f-005.png remains from an earlier run"),
+            "{one}"
+        );
+        for i in 6..12 {
+            touch(i);
+        }
+        let many = stale_images_note(&pattern, 5).unwrap();
+        assert!(
+            many.contains("7 images remain")
+                && many.contains("f-005.png to ")
+                && many.contains("f-011.png"),
+            "{many}"
+        );
     }
 
     #[test]

@@ -778,7 +778,11 @@ impl FrameData<'_> {
             self.k,
             if missed.len() == 1 { "" } else { "s" },
             missed.join(", "),
-            if missed.len() == 1 { "it is" } else { "they are" }
+            if missed.len() == 1 {
+                "it is"
+            } else {
+                "they are"
+            }
         ))
     }
 }

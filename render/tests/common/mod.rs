@@ -29,7 +29,7 @@ impl Rng {
     }
 }
 
-fn species(names: &[&str]) -> Vec<SpeciesName> {
+pub fn species(names: &[&str]) -> Vec<SpeciesName> {
     names
         .iter()
         .map(|n| SpeciesName {
