@@ -24,7 +24,8 @@
 //!    part that multiplies the albedo (ambient + Lambert) and the part that does not
 //!    (Blinn-Phong highlight); a texel's colour is the bins' colour sums and counts
 //!    weighted by those, over the rays, plus the background's share.
-//! 3. Coarser S-MIP levels ([`Sndf::downsample`]) add 2×2 blocks of texels' bins.
+//! 3. Coarser S-MIP levels ([`Sndf::downsample`]) add 2×2 blocks of texels' bins (at an odd
+//!    edge, the children there are, scaled to four).
 //!
 //! The paper's screen space sees every texel along the view axis (+z), which is exact in
 //! orthographic views (the S-MIP takes no other). In a perspective view each texel sees
@@ -1049,8 +1050,11 @@ impl Sndf {
     }
 
     /// The next coarser S-MIP level: each texel holds the sum of its 2×2 children's bins
-    /// and four times the rays, i.e. their average S-NDF (a missing child at an odd edge
-    /// counts as four rays that hit nothing).
+    /// and four times the rays, i.e. their average S-NDF. At an odd edge, where a texel
+    /// has one or two children, it holds their average too (their sums scaled by 4 over
+    /// their count), as a texture's edge is clamped: the image's last row or column
+    /// stands for the half texel past it, which was never sampled. (Counting the missing
+    /// children as rays that hit nothing paled the edge towards the background.)
     pub fn downsample(&self) -> Sndf {
         let (w, h) = (self.width.div_ceil(2), self.height.div_ceil(2));
         let b2 = (self.bins * self.bins) as usize;
@@ -1060,13 +1064,17 @@ impl Sndf {
             Some(r) => (r, 1.0),
             None => (self.rays, 0.25),
         };
+        // Children of texel `i` of the coarse level along one axis of `n` fine texels.
+        let children = |i: u32, n: u32| if 2 * i + 1 < n { 2.0 } else { 1.0 };
         let mut hist = vec![[0f32; 4]; w as usize * h as usize * b2];
         for y in 0..self.height {
             for x in 0..self.width {
-                let dst = ((y / 2) * w + x / 2) as usize * b2;
+                let (cx, cy) = (x / 2, y / 2);
+                let edge = 4.0 / (children(cx, self.width) * children(cy, self.height));
+                let dst = (cy * w + cx) as usize * b2;
                 for (d, s) in hist[dst..dst + b2].iter_mut().zip(self.texel(x, y)) {
                     for k in 0..4 {
-                        d[k] += s[k] * scale;
+                        d[k] += s[k] * scale * edge;
                     }
                 }
             }
@@ -1318,6 +1326,51 @@ mod tests {
         let last = s.shade_zoomed(&lights, bg, 8.0);
         for zoom in [1e6, 1e30, f32::MAX] {
             assert!(s.shade_zoomed(&lights, bg, zoom) == last, "zoom {zoom}");
+        }
+    }
+
+    #[test]
+    fn downsampling_an_odd_edge_averages_the_children_there_are() {
+        // 5 × 3 texels: the coarse level's last column has one column of children, its
+        // last row one row, its corner one child; each holds its children's average.
+        let s = random_sndf(5, 3, 2, 64);
+        let d = s.downsample();
+        assert_eq!((d.width, d.height, d.rays), (3, 2, 256));
+        for (x, y, children) in [
+            (2u32, 0u32, vec![(4u32, 0u32), (4, 1)]),
+            (0, 1, vec![(0, 2), (1, 2)]),
+            (2, 1, vec![(4, 2)]),
+        ] {
+            let scale = 4.0 / children.len() as f32;
+            for b in 0..4 {
+                for k in 0..4 {
+                    let sum: f32 = children.iter().map(|&(cx, cy)| s.texel(cx, cy)[b][k]).sum();
+                    let want = sum * scale;
+                    let got = d.texel(x, y)[b][k];
+                    assert!(
+                        (got - want).abs() <= 1e-5 * want.abs(),
+                        "({x}, {y}): {got} {want}"
+                    );
+                }
+            }
+        }
+        // An image of one S-NDF throughout stays one at every level, edges included.
+        let mut uniform = random_sndf(5, 3, 2, 64);
+        let first: Vec<[f32; 4]> = uniform.texel(0, 0).to_vec();
+        for t in uniform.hist.chunks_mut(4) {
+            t.copy_from_slice(&first);
+        }
+        let lights = ShadeLights::from(&Lighting::default());
+        let mut level = uniform;
+        for _ in 0..3 {
+            level = level.downsample();
+            let shaded = level.shade_with(&lights, [1.0; 3]);
+            assert!(
+                shaded.data.chunks(4).all(|p| p == &shaded.data[..4]),
+                "{}×{}",
+                level.width,
+                level.height
+            );
         }
     }
 
