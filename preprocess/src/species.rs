@@ -54,7 +54,8 @@ const ELEMENTS: &[(&str, f32, [u8; 3])] = &[
     ("U", 1.56, [0, 143, 255]),
 ];
 
-/// Palette for numeric types (sRGB), cycled.
+/// Palette for numeric types (sRGB): its first colours; further slots take
+/// [`palette_colour`]'s.
 const PALETTE: &[[u8; 3]] = &[
     [230, 102, 51],
     [102, 102, 255],
@@ -67,6 +68,33 @@ const PALETTE: &[[u8; 3]] = &[
     [128, 128, 128],
     [51, 153, 102],
 ];
+
+/// The sRGB colour of palette slot `slot` (a LAMMPS type's number less one): the fixed
+/// palette's first ten, then hues a golden angle (137.5°) apart at two brightnesses, so
+/// that a run with many types does not repeat its first ten colours (the palette used to
+/// be cycled: type 11 drew as type 1).
+pub fn palette_colour(slot: usize) -> [u8; 3] {
+    if let Some(c) = PALETTE.get(slot) {
+        return *c;
+    }
+    let k = slot - PALETTE.len();
+    let hue = (20.0 + 137.507_76 * k as f64).rem_euclid(360.0);
+    let (saturation, value) = if k.is_multiple_of(2) { (0.55, 0.95) } else { (0.8, 0.7) };
+    // HSV to RGB.
+    let c = value * saturation;
+    let h = hue / 60.0;
+    let x = c * (1.0 - (h.rem_euclid(2.0) - 1.0).abs());
+    let (r, g, b) = match h as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let m = value - c;
+    [r, g, b].map(|v| ((v + m) * 255.0).round().clamp(0.0, 255.0) as u8)
+}
 
 /// Radius of a numeric type or unknown name, in the simulation's length unit.
 pub const DEFAULT_RADIUS: f32 = 0.5;
@@ -151,9 +179,7 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
             let colour = match (s.colour, element_of(&s.name, labels)) {
                 (Some(c), _) => srgb_to_linear(c),
                 (None, Some((_, c))) => c,
-                (None, None) => {
-                    srgb_to_linear(PALETTE[s.palette_slot.unwrap_or(i) % PALETTE.len()])
-                }
+                (None, None) => srgb_to_linear(palette_colour(s.palette_slot.unwrap_or(i))),
             };
             let given = radius_override(overrides, &s.name);
             let radius =
@@ -598,6 +624,10 @@ mod tests {
             );
         }
         assert!(letters_are_labels(["A", "B"]));
+        // Many types: no two of the first 64 slots share a colour.
+        let colours: std::collections::BTreeSet<[u8; 3]> = (0..64).map(palette_colour).collect();
+        assert_eq!(colours.len(), 64);
+        assert_eq!(palette_colour(0), PALETTE[0]);
         assert!(!letters_are_labels(["B", "C", "Cu"]));
         // Iodine and yttrium are elements too (MAPbI3: Pb I C N H).
         assert!(!letters_are_labels(["Pb", "I", "C", "N", "H"]));
