@@ -38,7 +38,8 @@ pub struct Args {
     #[arg(long, default_value_t = 4_000_000, value_parser = parse_budget)]
     pub budget: u64,
     /// Draw clusters hidden behind nearer spheres too (occlusion culling is exact, so
-    /// this only costs time; for comparisons).
+    /// the image is the same and this costs time; for comparisons, or a legend key
+    /// listing species wholly hidden behind others).
     #[arg(long)]
     pub no_occlusion: bool,
     /// Fit the view to every particle: by default particles far from the rest (lost
