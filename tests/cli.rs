@@ -3064,6 +3064,40 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
             "turntable view {i}: the data reaches under the legend"
         );
     }
+    // A short, wide image: the bands above the panel and beside it both leave out the
+    // image's centre; the data is framed beside the panel, the larger of the two.
+    let short = dir.path().join("short.png");
+    ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&short),
+        "--width",
+        "640",
+        "--height",
+        "120",
+        "--colour-map",
+        "viridis",
+        "--background",
+        "#000000",
+        "--legend-in-image",
+    ]);
+    let (sw, sh, px) = read_png(&short);
+    let data: Vec<(u32, u32)> = (0..sh)
+        .flat_map(|y| (0..sw).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let in_panel = x >= sw - 8 - 360 && y >= sh - 8 - 66;
+            !in_panel && px[4 * (y * sw + x) as usize..][..3] != [0, 0, 0]
+        })
+        .collect();
+    let right = data.iter().map(|&(x, _)| x).max().unwrap();
+    let (top, bottom) = (
+        data.iter().map(|&(_, y)| y).min().unwrap(),
+        data.iter().map(|&(_, y)| y).max().unwrap(),
+    );
+    assert!(right < sw - room[0], "the data reaches x = {right}");
+    // Filling the band's height (120 px less the margins), not shrunk into 38 px.
+    assert!(bottom - top > 80, "the data spans rows {top} to {bottom}");
     // Top left: the panel moves there.
     ok(&[
         &["render", s(&file), "-o", s(&with)][..],

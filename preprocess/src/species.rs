@@ -79,7 +79,11 @@ pub fn palette_colour(slot: usize) -> [u8; 3] {
     }
     let k = slot - PALETTE.len();
     let hue = (20.0 + 137.507_76 * k as f64).rem_euclid(360.0);
-    let (saturation, value) = if k.is_multiple_of(2) { (0.55, 0.95) } else { (0.8, 0.7) };
+    let (saturation, value) = if k.is_multiple_of(2) {
+        (0.55, 0.95)
+    } else {
+        (0.8, 0.7)
+    };
     // HSV to RGB.
     let c = value * saturation;
     let h = hue / 60.0;

@@ -104,14 +104,12 @@ impl FitWindow {
     };
 
     /// The window's centre and half sizes, in normalised device coordinates; `None` for a
-    /// window that does not hold the image's centre in its interior or is not finite (a
-    /// fit keeps the target on the view's axis, which must see into the window).
+    /// window that is empty, not finite or not inside the image.
     pub fn centre_and_half(&self) -> Option<([f64; 2], [f64; 2])> {
         let ok = (0..2).all(|k| {
             self.min[k].is_finite()
                 && self.max[k].is_finite()
-                && self.min[k] < 0.0
-                && self.max[k] > 0.0
+                && self.min[k] < self.max[k]
                 && self.min[k] >= -1.0
                 && self.max[k] <= 1.0
         });
@@ -383,11 +381,15 @@ impl Camera {
         };
     }
 
-    /// [`Self::fit_boxes_in`] of one window (which holds the image's centre).
+    /// [`Self::fit_boxes_in`] of one window.
     fn fit_window(&mut self, bounds: &Bounds, boxes: &[Bounds], aspect: f32, window: &FitWindow) {
-        let Some((centre, _)) = window.centre_and_half() else {
+        let Some((centre, half)) = window.centre_and_half() else {
             return;
         };
+        if !(0..2).all(|k| window.min[k] < 0.0 && window.max[k] > 0.0) {
+            self.fit_off_axis(bounds, boxes, aspect, centre, half);
+            return;
+        }
         let boxes = if boxes.is_empty() {
             std::slice::from_ref(bounds)
         } else {
@@ -452,7 +454,89 @@ impl Camera {
     /// The centre of the projection of the boxes' corners, in normalised device
     /// coordinates (x right, y up), for the given half-angle tangents; `None` where a
     /// corner lies behind the eye of a perspective view.
+    /// [`Self::fit_window`] of a window beside the view's axis (a short, wide image's
+    /// part beside a legend), centred at `centre` with half sizes `half`: the target,
+    /// on the axis, cannot lie in it, so the distance is not solved for the window's
+    /// edges but found by steps: first the fit into a window of the same size about the
+    /// image's centre, then the data moved to the window's centre and the distance
+    /// scaled by the size it shows there (in perspective, data off the axis shows larger
+    /// or smaller), until both settle.
+    fn fit_off_axis(
+        &mut self,
+        bounds: &Bounds,
+        boxes: &[Bounds],
+        aspect: f32,
+        centre: [f64; 2],
+        half: [f64; 2],
+    ) {
+        let centred = FitWindow {
+            min: [-half[0], -half[1]],
+            max: half,
+        };
+        self.fit_window(bounds, boxes, aspect, &centred);
+        let boxes = if boxes.is_empty() {
+            std::slice::from_ref(bounds)
+        } else {
+            boxes
+        };
+        let before = (self.target, self.distance);
+        let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan();
+        let tan_x = tan_y * f64::from(aspect);
+        // Each axis's step scaled by the inverse of its last step's response, as in
+        // `fit_window`.
+        let mut gain = [1.0f64; 2];
+        let mut last: Option<([f64; 2], [f64; 2])> = None;
+        for _ in 0..80 {
+            let Some((lo, hi)) = self.projected_extent(boxes, tan_x, tan_y) else {
+                (self.target, self.distance) = before;
+                break;
+            };
+            let off = [0, 1].map(|k| 0.5 * (lo[k] + hi[k]) - centre[k]);
+            let fill = (0..2)
+                .map(|k| (hi[k] - lo[k]) / (2.0 * half[k]))
+                .fold(0.0f64, f64::max);
+            let scale = fill / FIT_FILL;
+            if off[0].abs().max(off[1].abs()) < 1e-6 && (scale - 1.0).abs() < 1e-6 {
+                break;
+            }
+            if let Some((was, step)) = last {
+                for k in 0..2 {
+                    let response = (was[k] - off[k]) / step[k];
+                    if step[k] != 0.0 && response.is_finite() && response > 0.0 {
+                        gain[k] = (1.0 / response).clamp(0.05, 2.0);
+                    }
+                }
+            }
+            let step = [0, 1].map(|k| off[k] * gain[k]);
+            let d = f64::from(self.distance);
+            let shift = self.right().as_dvec3() * (step[0] * d * tan_x)
+                + self.up().as_dvec3() * (step[1] * d * tan_y);
+            self.target = (self.target.as_dvec3() + shift).as_vec3();
+            if scale.is_finite() && scale > 0.0 {
+                self.distance = (d * scale) as f32;
+            }
+            last = Some((off, step));
+        }
+        if !(self.target.is_finite() && self.distance.is_finite() && self.distance > 0.0) {
+            (self.target, self.distance) = before;
+        }
+        self.fit_depth_range(bounds);
+    }
+
     fn projected_centre(&self, boxes: &[Bounds], tan_x: f64, tan_y: f64) -> Option<[f64; 2]> {
+        let (lo, hi) = self.projected_extent(boxes, tan_x, tan_y)?;
+        let c = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+        c.iter().all(|v| v.is_finite()).then_some(c)
+    }
+
+    /// The corners of `boxes` projected: lowest and highest normalised device
+    /// coordinates; `None` when one lies at or behind the eye.
+    fn projected_extent(
+        &self,
+        boxes: &[Bounds],
+        tan_x: f64,
+        tan_y: f64,
+    ) -> Option<([f64; 2], [f64; 2])> {
         let (r, u, b) = (
             self.right().as_dvec3(),
             self.up().as_dvec3(),
@@ -477,8 +561,7 @@ impl Camera {
                 hi[k] = hi[k].max(ndc[k]);
             }
         }
-        let c = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
-        c.iter().all(|v| v.is_finite()).then_some(c)
+        Some((lo, hi))
     }
 
     /// The eye's distance from the target at which every corner of `bounds` lies inside
@@ -795,8 +878,8 @@ mod tests {
 
     /// Fitted into a window (the image less a legend's corner), the box lies inside the
     /// window, centred in it and filling FIT_FILL of its tighter dimension; of two
-    /// windows the fit takes the one that frames the box larger; a window that does not
-    /// hold the image's centre is passed over.
+    /// windows the fit takes the one that frames the box larger; so it does in a window
+    /// beside the image's centre.
     #[test]
     fn a_fit_into_a_window_frames_the_box_there() {
         let b = Bounds::new(Vec3::new(-3.0, 0.0, 10.0), Vec3::new(5.0, 2.0, 12.0));
@@ -862,15 +945,40 @@ mod tests {
                     .map(|c| c.distance)
                     .fold(f32::INFINITY, f32::min);
                 assert_eq!(both.distance, nearest);
-                // A window off the image's centre frames the whole image.
-                let (mut whole, mut off) = (start.clone(), start.clone());
-                whole.fit(&b, aspect);
-                let away = FitWindow {
-                    min: [0.2, -1.0],
-                    max: [1.0, 1.0],
-                };
-                off.fit_boxes_in(&b, &[], aspect, &[away]);
-                assert_eq!(off, whole);
+                // A window beside the image's centre (a short, wide image's part beside
+                // a legend) frames the box there too, centred and filling it.
+                for away in [
+                    FitWindow {
+                        min: [0.2, -1.0],
+                        max: [1.0, 1.0],
+                    },
+                    FitWindow {
+                        min: [-1.0, -1.0],
+                        max: [-0.1, 0.9],
+                    },
+                    FitWindow {
+                        min: [-0.9, 0.05],
+                        max: [0.9, 1.0],
+                    },
+                ] {
+                    let mut c = start.clone();
+                    c.fit_boxes_in(&b, &[], aspect, &[away]);
+                    let (lo, hi) = ndc_box(&c);
+                    let what = format!("{p:?} ({azimuth_deg}°, {elevation_deg}°) in {away:?}");
+                    let mut fill = 0.0f64;
+                    for k in 0..2 {
+                        assert!(
+                            lo[k] >= away.min[k] - 1e-4 && hi[k] <= away.max[k] + 1e-4,
+                            "{what}: axis {k} from {} to {}",
+                            lo[k],
+                            hi[k]
+                        );
+                        let centre = 0.5 * (away.min[k] + away.max[k]);
+                        assert!((0.5 * (lo[k] + hi[k]) - centre).abs() < 2e-3, "{what}");
+                        fill = fill.max((hi[k] - lo[k]) / (away.max[k] - away.min[k]));
+                    }
+                    assert!((fill - FIT_FILL).abs() < 2e-3, "{what}: fills {fill}");
+                }
             }
         }
     }
