@@ -5938,3 +5938,42 @@ fn two_dimensional_data_is_seen_square_on_by_default() {
     ok(&args);
     assert_eq!(angles(&view), (10.0, 20.0));
 }
+
+/// `sample` says the screen error its cut reached and what stopped it short, as
+/// `render` does: a budget below the cut the error asks for.
+#[test]
+fn sample_says_the_error_reached_and_the_budget_that_stopped_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "20000"], &input);
+    let file = dir.path().join("m.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file)]);
+    let coarsest = MdlodFile::open(&file).unwrap().levels()[1].point_count;
+    assert!(coarsest < 5000, "{coarsest}");
+    let out_file = dir.path().join("m.sndf");
+    let sample = |extra: &[&str]| {
+        ok(&[
+            &["sample", s(&file), "-o", s(&out_file)][..],
+            &["--width", "48", "--height", "32", "--iterations", "1"],
+            extra,
+        ]
+        .concat())
+    };
+    let fine = sample(&["--screen-error", "0"]);
+    assert!(fine.contains("error 0.00 px,"), "{fine}");
+    let limited = sample(&["--screen-error", "0", "--budget", "5000"]);
+    assert!(
+        limited.contains("(point budget of 5000 reached: a larger --budget refines further)")
+            && !limited.contains("error 0.00 px"),
+        "{limited}"
+    );
+    // Below the coarsest level: the whole data set one sphere, and the budget that
+    // refines it.
+    let one = sample(&["--budget", "40"]);
+    assert!(
+        one.contains(&format!(
+            "so the whole data set is one sphere; a budget of {coarsest} or more refines"
+        )),
+        "{one}"
+    );
+}

@@ -1734,7 +1734,7 @@ fn clip_side_note(planes: &[[f32; 4]], camera: &mdlod_render::Camera) -> Option<
 }
 
 /// The points of a file's coarsest level below its top node.
-fn coarsest_points(file: &mdlod_format::MdlodFile) -> Option<u64> {
+pub(super) fn coarsest_points(file: &mdlod_format::MdlodFile) -> Option<u64> {
     file.levels().get(1).map(|l| l.point_count)
 }
 
@@ -1742,7 +1742,11 @@ fn coarsest_points(file: &mdlod_format::MdlodFile) -> Option<u64> {
 /// " (reason; reason)"; empty when nothing stopped it. `coarsest`: the points of the
 /// file's coarsest level ([`coarsest_points`]); `budget` is the --budget asked for (the
 /// GPU may allow fewer points).
-fn limits_text(r: &mdlod_render::RenderReport, coarsest: Option<u64>, budget: u64) -> String {
+pub(super) fn limits_text(
+    r: &mdlod_render::RenderReport,
+    coarsest: Option<u64>,
+    budget: u64,
+) -> String {
     let mut limits = vec![];
     if r.budget_limited {
         // The top node opens into the whole coarsest level at once: a budget below it

@@ -189,8 +189,13 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     let size = std::fs::metadata(&args.output).map_or(0, |m| m.len());
+    // Where the cut stopped before the screen error asked for, as `render` says.
+    let coarsest = mdlod_format::MdlodFile::open(&args.file)
+        .ok()
+        .and_then(|f| super::render::coarsest_points(&f));
+    let limits = super::render::limits_text(&r, coarsest, args.budget);
     println!(
-        "wrote {} ({:.1} MiB: {}x{} texels, {}x{} bins, {} rays each) on {}: {} particles and {} cluster spheres, {:.0} ms",
+        "wrote {} ({:.1} MiB: {}x{} texels, {}x{} bins, {} rays each) on {}: {} particles and {} cluster spheres, error {:.2} px{limits}, {:.0} ms",
         args.output.display(),
         size as f64 / f64::from(1u32 << 20),
         r.width,
@@ -201,6 +206,7 @@ pub fn run(args: Args) -> Result<()> {
         r.adapter,
         r.particles_drawn,
         r.nodes_drawn,
+        r.error_px,
         r.total_time.as_secs_f64() * 1e3
     );
     if !args.style.clip.is_empty() && r.particles_drawn + r.nodes_drawn == 0 {
