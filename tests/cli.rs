@@ -5977,3 +5977,39 @@ fn sample_says_the_error_reached_and_the_budget_that_stopped_it() {
         "{one}"
     );
 }
+
+/// An iso-value no packing of the spheres reaches draws the background only, and says
+/// so; one the data reaches draws a surface and says nothing of the kind.
+#[test]
+fn an_iso_value_no_ray_meets_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("iso.png");
+    let iso = |value: &str| {
+        ok(&[
+            "render",
+            s(&frame),
+            "-o",
+            s(&png),
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--mode",
+            "iso",
+            "--iso-value",
+            value,
+        ])
+    };
+    let none = iso("5");
+    assert!(
+        none.contains("note: no ray meets a volume fraction of 5"),
+        "{none}"
+    );
+    let (_, _, px) = read_png(&png);
+    assert!(px.chunks(4).all(|p| p == &px[..4]));
+    let some = iso("0.3");
+    assert!(!some.contains("no ray meets"), "{some}");
+    let (_, _, px) = read_png(&png);
+    assert!(px.chunks(4).any(|p| p != &px[..4]));
+}

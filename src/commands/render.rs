@@ -1168,12 +1168,26 @@ pub fn run(args: Args) -> Result<()> {
         );
         // What the colours mean: the particles' own packing, not an attribute.
         match args.mode {
-            Mode::Iso => println!(
-                "  iso-surface where the particles' spheres fill a volume fraction of {} \
-                 (0.74: close-packed spheres of the largest species), coloured by the \
-                 particles around it",
-                args.iso_value
-            ),
+            Mode::Iso => {
+                println!(
+                    "  iso-surface where the particles' spheres fill a volume fraction of {} \
+                     (0.74: close-packed spheres of the largest species), coloured by the \
+                     particles around it",
+                    args.iso_value
+                );
+                // No ray met the surface: a value the packing never reaches, or below
+                // what any gap holds.
+                let empty = mdlod_render::image::RgbaImage::load_png(&args.output)
+                    .is_ok_and(|img| img.data.chunks(4).all(|p| p == &img.data[..4]));
+                if empty && r.particles_drawn + r.nodes_drawn > 0 {
+                    println!(
+                        "  note: no ray meets a volume fraction of {}: the image shows the \
+                         background only (the spheres' packing stays below it; a smaller \
+                         --iso-value finds a surface)",
+                        args.iso_value
+                    );
+                }
+            }
             _ => println!(
                 "  colours: the volume fraction the particles' spheres fill (not an attribute), \
                  from 0 (clear) through dark blue and red to yellow at {} (--density-max; \
