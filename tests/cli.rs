@@ -6013,3 +6013,43 @@ fn an_iso_value_no_ray_meets_is_named() {
     let (_, _, px) = read_png(&png);
     assert!(px.chunks(4).any(|p| p != &px[..4]));
 }
+
+/// A movie of a batch directory whose frame file was deleted names the manifest, the
+/// frame and the remedy, instead of the system's bare "No such file".
+#[test]
+fn a_movie_missing_a_frame_file_says_which_and_how_to_get_it_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("d.lammpstrj");
+    generate(&["droplets", "-n", "500", "--frames", "3"], &input);
+    let d = dir.path().join("d");
+    ok(&["batch", s(&input), "-o", s(&d)]);
+    std::fs::remove_file(d.join("frame-100.mdlod")).unwrap();
+    let movie = dir.path().join("m/f-%d.png");
+    let e = fails(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+    assert!(
+        e.contains("lists frame-100.mdlod (timestep 100), but the file is missing")
+            && e.contains("rerun the batch"),
+        "{e}"
+    );
+    // As it says: the rerun converts it again, and the movie renders.
+    ok(&["batch", s(&input), "-o", s(&d)]);
+    ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+}

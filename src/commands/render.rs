@@ -2116,6 +2116,17 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let mut flat: Option<Option<usize>> = None;
     for f in &manifest.frames {
         let path = dir.join(&f.file);
+        if !path.is_file() {
+            anyhow::bail!(
+                "{}: lists {} (timestep {}), but the file is missing (deleted or moved \
+                 since the batch wrote it): rerun the batch, which converts missing frames \
+                 again, or check the directory with `mdlod verify {}`",
+                dir.join(mdlod_preprocess::batch::MANIFEST).display(),
+                f.file,
+                f.timestep,
+                dir.display()
+            );
+        }
         let file = mdlod_format::MdlodFile::open(&path)?;
         let own_flat = mdlod_render::flat_axis(&file);
         flat = Some(match flat {
