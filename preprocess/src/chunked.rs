@@ -1589,6 +1589,7 @@ pub fn convert_chunked(
             notes.extend(crate::convert::position_notes(
                 lo,
                 hi,
+                n as u64,
                 &metadata.species,
                 far,
             ));

@@ -330,7 +330,13 @@ pub fn convert_frame(
         notes.extend(attribute_span_note(&a.name, *min, *max, options));
     }
     let (lo, hi, far) = survey_positions(&frame.positions, frame.simulation_box.as_ref());
-    notes.extend(position_notes(lo, hi, &species, far));
+    notes.extend(position_notes(
+        lo,
+        hi,
+        frame.positions.len() as u64,
+        &species,
+        far,
+    ));
     let mut metadata = base_metadata(frame, source, options);
     metadata.species = species;
     metadata.max_position_error = h.max_position_error;
@@ -409,6 +415,53 @@ pub(crate) fn survey_positions(
     (lo, hi, far)
 }
 
+/// How many mean spacings a radius may span before [`oversized_note`] speaks.
+const OVERSIZED_SPACINGS: f64 = 20.0;
+
+/// A note on radii far larger than the particles' mean spacing (the volume, area or
+/// length their centres' box spans, per particle, to the power of its dimension): the
+/// spheres melt into one blob. The usual cause is data in other units than the radius's
+/// (nanometre data in metres takes element radii of angströms, 10^9 times too large).
+fn oversized_note(
+    lo: [f32; 3],
+    hi: [f32; 3],
+    count: u64,
+    species: &[mdlod_format::meta::Species],
+) -> Option<String> {
+    if count < 2 {
+        return None;
+    }
+    let extent: Vec<f64> = (0..3)
+        .map(|k| f64::from(hi[k]) - f64::from(lo[k]))
+        .collect();
+    let widest = extent.iter().copied().fold(0.0f64, f64::max);
+    if !(widest.is_finite() && widest > 0.0) {
+        return None;
+    }
+    let spread: Vec<f64> = extent.into_iter().filter(|&e| e > 1e-6 * widest).collect();
+    let spacing = (spread.iter().product::<f64>() / count as f64).powf(1.0 / spread.len() as f64);
+    let over: Vec<String> = species
+        .iter()
+        .filter(|s| f64::from(s.radius) > OVERSIZED_SPACINGS * spacing)
+        .take(3)
+        .map(|s| format!("{} ({})", s.name, s.radius))
+        .collect();
+    if over.is_empty() {
+        return None;
+    }
+    let largest = species.iter().map(|s| s.radius).fold(0.0f32, f32::max);
+    Some(format!(
+        "the radi{} {} {} {:.1e} times the particles' mean spacing ({spacing:.3e}, from the \
+         box around them): the spheres overlap into one blob. If the data is in other units \
+         than the radii (nanometre data in metres), give --radius NAME=R in the data's own \
+         units (about half the spacing)",
+        if over.len() == 1 { "us of" } else { "i of" },
+        over.join(", "),
+        if over.len() == 1 { "is" } else { "are up to" },
+        f64::from(largest) / spacing
+    ))
+}
+
 /// Notes on positions that will not draw as the user expects, from the particles'
 /// bounds `lo..hi`: coordinates so large that single precision (in which positions are
 /// read and stored) snaps them to a grid coarse against the particles' size (a galaxy
@@ -417,10 +470,12 @@ pub(crate) fn survey_positions(
 pub(crate) fn position_notes(
     lo: [f32; 3],
     hi: [f32; 3],
+    count: u64,
     species: &[mdlod_format::meta::Species],
     far: Option<FarOutside>,
 ) -> Vec<String> {
     let mut notes = Vec::new();
+    notes.extend(oversized_note(lo, hi, count, species));
     let largest = lo.iter().chain(&hi).map(|v| v.abs()).fold(0.0f32, f32::max);
     let smallest_radius = species
         .iter()
@@ -952,6 +1007,58 @@ pub fn source_info(path: &Path, frame: u64) -> SourceInfo {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Radii many spacings wide are named (nanometre data in metres with angström
+    /// radii), in 3D, 2D and on a line; radii about the spacing are not.
+    #[test]
+    fn radii_far_wider_than_the_spacing_are_noted() {
+        let species = |r: &[f32]| -> Vec<mdlod_format::meta::Species> {
+            r.iter()
+                .enumerate()
+                .map(|(i, &radius)| mdlod_format::meta::Species {
+                    name: format!("S{i}"),
+                    radius,
+                    colour: [0.5; 3],
+                    radius_range: None,
+                })
+                .collect()
+        };
+        // 1000 particles in a 5 nm cube (spacing 0.5 nm), argon's 1.92.
+        let note = oversized_note([0.0; 3], [5e-9; 3], 1000, &species(&[1.92])).unwrap();
+        assert!(
+            note.contains("the radius of S0 (1.92) is 3.8e9 times the particles' mean spacing"),
+            "{note}"
+        );
+        // A copper crystal (spacing 2.28 Å) at 1.28; a 2D layer at 0.5 and spacing 1.1.
+        let cube = 2.28 * 1000f32.cbrt();
+        assert_eq!(
+            oversized_note([0.0; 3], [cube; 3], 1000, &species(&[1.28])),
+            None
+        );
+        let (lo, hi) = ([0.0, 0.0, 0.0], [44.0, 27.5, 0.0]);
+        assert_eq!(oversized_note(lo, hi, 1000, &species(&[0.5, 0.5])), None);
+        // The same layer in metres: its second species named too.
+        let (lo, hi) = ([0.0, 0.0, 0.0], [44e-9, 27.5e-9, 0.0]);
+        let note = oversized_note(lo, hi, 1000, &species(&[0.5, 0.7])).unwrap();
+        assert!(
+            note.contains("the radii of S0 (0.5), S1 (0.7) are up to"),
+            "{note}"
+        );
+        // Two particles 1 Å apart: one blob at 1.9 only when the data is in metres.
+        let (lo, hi) = ([0.0; 3], [1e-10, 0.0, 0.0]);
+        assert!(oversized_note(lo, hi, 2, &species(&[1.9])).is_some());
+        let (lo, hi) = ([0.0; 3], [3.0, 0.0, 0.0]);
+        assert_eq!(oversized_note(lo, hi, 2, &species(&[1.9])), None);
+        // One particle, or all in one place: no spacing to compare with.
+        assert_eq!(
+            oversized_note([1.0; 3], [1.0; 3], 1, &species(&[1.9])),
+            None
+        );
+        assert_eq!(
+            oversized_note([1.0; 3], [1.0; 3], 50, &species(&[1.9])),
+            None
+        );
+    }
 
     /// The hint names chunks that fit the limit (after the chunk's fixed working memory),
     /// rounded down to two digits, and only where such chunks are smaller than the frame
