@@ -1634,6 +1634,10 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
             vec!["--mode", "density", "--colour-map", "magma"],
             "--colour-map has no effect with --mode density",
         ),
+        (
+            vec!["--cell-width", "3"],
+            "--cell-width has no effect without --cell: it sets the width of the cell's edges",
+        ),
     ] {
         let mut args = vec!["render", f, "-o", p];
         args.extend(extra);

@@ -124,7 +124,7 @@ pub struct Args {
     pub cell: Option<String>,
     /// The cell's lines' width in pixels [default: the image's shorter side / 360, at
     /// least 1.5].
-    #[arg(long, value_name = "PX", requires = "cell")]
+    #[arg(long, value_name = "PX")]
     pub cell_width: Option<f32>,
     /// Write the camera used as a view file.
     #[arg(long)]
@@ -566,6 +566,12 @@ fn projected(args: &Args) -> bool {
 }
 
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
+    if args.cell_width.is_some() && args.cell.is_none() {
+        anyhow::bail!(
+            "--cell-width has no effect without --cell: it sets the width of the cell's \
+             edges, which --cell draws"
+        );
+    }
     // (With --colour-map, which colours by the attribute or the light, the parser refuses
     // --species-colour.)
     if lit_by_value(args) && !args.style.species_colour.is_empty() {
