@@ -921,6 +921,14 @@ fn smip_tiles_sampled_once_shade_without_the_particles() {
     let coarse = dir.path().join("coarse.png");
     ok(&["shade", s(&sndf), "-o", s(&coarse), "--level", "1"]);
     assert_eq!(read_png(&coarse).0, 48);
+    // 96 texels halve to one at level 7: the one-texel image, and nothing past it.
+    ok(&["shade", s(&sndf), "-o", s(&coarse), "--level", "7"]);
+    assert_eq!(read_png(&coarse).0, 1);
+    let e = fails(&["shade", s(&sndf), "-o", s(&coarse), "--level", "8"]);
+    assert!(
+        e.contains("96x64 texels halve to one at level 7 (levels 0 to 7)"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -2019,6 +2019,19 @@ pub fn shade_file(
     lights.check().map_err(RenderError::InvalidOptions)?;
     let data = mdlod_format::sndf::SndfData::load(input)?;
     let view = sndf_camera(input, &data.header.view)?;
+    if let ShadeLevel::Level(l) = level {
+        // Past the level of one texel, every level is that texel.
+        let (w, h) = (data.header.width, data.header.height);
+        let side = w.max(h).max(1);
+        let coarsest = u32::BITS - (side - 1).leading_zeros();
+        if l > coarsest {
+            return Err(RenderError::InvalidOptions(format!(
+                "level {l}: {}'s {w}x{h} texels halve to one at level {coarsest} (levels 0 \
+                 to {coarsest})",
+                input.display()
+            )));
+        }
+    }
     if data.header.smip.is_some() {
         let image = shade_tiles_file(input, &data, &view, lights, background_srgb, level)?;
         image.save_png(out)?;
