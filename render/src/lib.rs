@@ -162,6 +162,22 @@ impl ViewSpec {
     /// [`ViewSpec::Default`] made explicit for data flat across `flat_axis` (see
     /// [`flat_axis`]; `None`: three-dimensional data); any other view as it is.
     pub fn with_flat_axis(&self, flat_axis: Option<usize>) -> ViewSpec {
+        // A view file that gives no angle (nor do the changes to it) takes the default
+        // view's, as the command line's options do.
+        if let (ViewSpec::File(path) | ViewSpec::FileWith(path, _), Some(axis)) = (self, flat_axis)
+        {
+            let changes = match self {
+                ViewSpec::FileWith(_, c) => *c,
+                _ => ViewChanges::default(),
+            };
+            let angleless = changes.azimuth_deg.is_none() && changes.elevation_deg.is_none();
+            if let Some(mut v) = ViewFile::load_angleless(path).filter(|_| angleless) {
+                (v.azimuth_deg, v.elevation_deg) = facing_angles(axis);
+                changes.apply(&mut v);
+                return ViewSpec::View(v);
+            }
+            return self.clone();
+        }
         let ViewSpec::Default {
             zoom,
             projection,
@@ -192,7 +208,9 @@ impl ViewSpec {
     /// [`ViewSpec::Default`] made explicit for `file`'s data; any other view as it is.
     pub fn resolved(&self, file: &MdlodFile) -> ViewSpec {
         match self {
-            ViewSpec::Default { .. } => self.with_flat_axis(flat_axis(file)),
+            ViewSpec::Default { .. } | ViewSpec::File(_) | ViewSpec::FileWith(..) => {
+                self.with_flat_axis(flat_axis(file))
+            }
             _ => self.clone(),
         }
     }
@@ -1180,9 +1198,12 @@ pub fn frame_setup(
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     check_numbers(opts)?;
-    // The default view faces flat data square on.
+    // The default view (and a view file giving no angle) faces flat data square on.
     let resolved;
-    let opts = if matches!(opts.view, ViewSpec::Default { .. }) {
+    let opts = if matches!(
+        opts.view,
+        ViewSpec::Default { .. } | ViewSpec::File(_) | ViewSpec::FileWith(..)
+    ) {
         resolved = RenderOptions {
             view: opts.view.resolved(file),
             ..opts.clone()

@@ -86,6 +86,20 @@ impl ViewFile {
         })
     }
 
+    /// The view file at `path` if it is one and gives neither angle (they take the
+    /// default view's, which faces flat data square on: [`crate::ViewSpec::Default`]);
+    /// `None` otherwise, and for a file that cannot be read (its error is said where it
+    /// is loaded for the view).
+    pub fn load_angleless(path: &Path) -> Option<ViewFile> {
+        let text = std::fs::read_to_string(path).ok()?;
+        let v = Self::parse(&text).ok()?;
+        let json: serde_json::Value = serde_json::from_str(&text).ok()?;
+        let given = ["azimuth_deg", "elevation_deg"]
+            .iter()
+            .any(|k| json.get(k).is_some());
+        (!given).then_some(v)
+    }
+
     /// The fields this version reads.
     pub const FIELDS: [&'static str; 8] = [
         "version",

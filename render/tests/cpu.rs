@@ -1730,6 +1730,23 @@ fn the_default_view_faces_flat_data_square_on_and_orbits_three_dimensional_data(
             .unwrap();
             assert_eq!(panned.target, Vec3::from(target));
             assert_eq!(panned.back(), cam.back());
+            // A view file giving no angle faces it too; one giving an angle, or a change
+            // giving one, keeps the orbit's.
+            let dir = tempfile::tempdir().unwrap();
+            let view = dir.path().join("v.json");
+            std::fs::write(&view, r#"{"version": 1, "zoom": 2}"#).unwrap();
+            let zoomed = camera_for(&f, &ViewSpec::File(view.clone()), 256, 192).unwrap();
+            assert_eq!(zoomed.back(), cam.back());
+            assert!((zoomed.distance - cam.distance / 2.0).abs() < 1e-3 * cam.distance);
+            let turned = mdlod_render::ViewChanges {
+                azimuth_deg: Some(10.0),
+                ..Default::default()
+            };
+            let c = camera_for(&f, &ViewSpec::FileWith(view.clone(), turned), 256, 192).unwrap();
+            assert_eq!((c.azimuth_deg, c.elevation_deg), (10.0, 20.0));
+            std::fs::write(&view, r#"{"version": 1, "elevation_deg": 5}"#).unwrap();
+            let c = camera_for(&f, &ViewSpec::File(view), 256, 192).unwrap();
+            assert_eq!((c.azimuth_deg, c.elevation_deg), (30.0, 5.0));
         }
     }
     // A layer of small particles with a few large ones in it (a colloid in a 2D fluid):

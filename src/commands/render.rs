@@ -308,8 +308,8 @@ pub struct ViewArgs {
     #[arg(long)]
     pub view: Option<PathBuf>,
     /// Orbit angle around the vertical axis (z), degrees [default: 30; with --view, the
-    /// file's; without either angle, data whose particles lie in one plane (a 2D
-    /// simulation) is seen square on: straight down on an x-y layer].
+    /// file's; without either angle here or in the file, data whose particles lie in one
+    /// plane (a 2D simulation) is seen square on: straight down on an x-y layer].
     #[arg(long, allow_negative_numbers = true)]
     pub azimuth: Option<f32>,
     /// Angle above the horizontal (the x-y plane), degrees [default: 20; with --view, the
