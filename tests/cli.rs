@@ -3143,6 +3143,26 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
         "{e}"
     );
     assert!(!small.exists());
+    // Room for the panel but none for the data beside or above it: refused too (the data
+    // was drawn under the panel).
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&small),
+        "--width",
+        "400",
+        "--height",
+        "100",
+        "--colour-map",
+        "viridis",
+        "--legend-in-image",
+    ]);
+    assert!(
+        e.contains("leaves the data only 400×18 pixels above it or 24×100 beside it"),
+        "{e}"
+    );
+    assert!(!small.exists());
     // Corner names in any case; a character the image's font lacks is named.
     let out = ok(&[
         &["render", s(&file), "-o", s(&with)][..],
@@ -5983,6 +6003,27 @@ fn sample_says_the_error_reached_and_the_budget_that_stopped_it() {
     );
     // Below the coarsest level: the whole data set one sphere, and the budget that
     // refines it.
+    // A --min-samples the image size already gives says so.
+    let already = ok(&[
+        "sample",
+        s(&file),
+        "-o",
+        s(&out_file),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--iterations",
+        "64",
+        "--min-samples",
+        "1",
+    ]);
+    assert!(
+        already.contains(
+            "--min-samples 1: every sphere gets that many samples at the image size already"
+        ),
+        "{already}"
+    );
     let one = sample(&["--budget", "40"]);
     assert!(
         one.contains(&format!(
@@ -6066,4 +6107,110 @@ fn a_movie_missing_a_frame_file_says_which_and_how_to_get_it_back() {
         "--height",
         "24",
     ]);
+}
+
+/// Messages a newcomer meets: a style naming an element in a file of type numbers says
+/// how to name the type; a view file that does not exist is named as the view file.
+#[test]
+fn render_names_type_numbers_and_missing_view_files_plainly() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("x.png");
+    let e = fails(&[
+        "render",
+        s(&frame),
+        "-o",
+        s(&png),
+        "--species-colour",
+        "Cu=red",
+    ]);
+    assert!(
+        e.contains("no species named \"Cu\" (the file's species are named 1)")
+            && e.contains("name the type here (1), or convert with --species-name 1=Cu"),
+        "{e}"
+    );
+    let missing = dir.path().join("nofile.json");
+    let e = fails(&["render", s(&frame), "-o", s(&png), "--view", s(&missing)]);
+    assert!(
+        e.contains(&format!("view file {}: cannot read it", missing.display())),
+        "{e}"
+    );
+    assert!(!png.exists());
+}
+
+/// S-NDFs past the adapter's largest buffer are refused before any is allocated, naming
+/// the bins that fit.
+#[test]
+fn sndfs_past_the_largest_buffer_name_the_bins_that_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let out = dir.path().join("x.sndf");
+    // 2048×1152 texels of 32×32 bins: 38 GB.
+    let e = fails(&[
+        "sample",
+        s(&frame),
+        "-o",
+        s(&out),
+        "--width",
+        "2048",
+        "--height",
+        "1152",
+        "--bins",
+        "32",
+        "--iterations",
+        "1",
+    ]);
+    let fits: u32 = e
+        .split("bins fit (--bins ")
+        .nth(1)
+        .and_then(|rest| rest.split(')').next())
+        .and_then(|b| b.parse().ok())
+        .unwrap_or_else(|| panic!("{e}"));
+    assert!((1..32).contains(&fits), "{e}");
+    assert!(
+        e.contains("more than one buffer of this adapter holds"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
+
+/// A movie's summary of radii changing over the frames leaves out hidden species: B
+/// alone in frame 0 is boron, with the element's radius, and beside the label A after,
+/// a label with the default radius.
+#[test]
+fn a_movie_says_nothing_of_the_radii_of_hidden_species() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("dep.xyz");
+    let mut text = String::from("3\nTimestep=0\n");
+    for i in 0..3 {
+        text += &format!("B {i} 0 0\n");
+    }
+    text += "4\nTimestep=100\n";
+    for i in 0..3 {
+        text += &format!("B {i} 0 0\n");
+    }
+    text += "A 0 2 0\n";
+    std::fs::write(&xyz, text).unwrap();
+    let d = dir.path().join("d");
+    ok(&["batch", s(&xyz), "-o", s(&d)]);
+    let movie = dir.path().join("m/f-%d.png");
+    let args = [
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ];
+    // Shown, B keeps one look (its later frames') throughout; hidden, its files' own
+    // radii, which differ, are no concern of the picture's.
+    let shown = ok(&args);
+    assert!(
+        shown.contains("drawn with its look in the rest (B)"),
+        "{shown}"
+    );
+    let hidden = ok(&[&args[..], &["--hide-species", "B"]].concat());
+    assert!(!hidden.contains("radii change"), "{hidden}");
 }

@@ -353,7 +353,8 @@ fn missing_file_and_missing_frame() {
     assert_eq!(
         got,
         format!(
-            "{}: frame 1 does not exist; the file has 1 frame(s)",
+            "{}: frame 1 does not exist; the file has 1 frame(s), counted from 0 (the last is \
+             0)",
             path.display()
         )
     );

@@ -556,3 +556,44 @@ fn a_non_finite_coordinate_that_the_other_byte_order_reads_suggests_it() {
                     "byte_order": "big" } }"#;
     assert_eq!(read(&c.sidecar(json)).unwrap().len(), 10);
 }
+
+/// A bad value inside an array's object is reported at the line of its own key, not of
+/// the object's (a sidecar written one key per line).
+#[test]
+fn a_bad_value_in_an_array_names_the_line_of_its_key() {
+    let c = Case::new();
+    c.file("pos.f32", &[0u8; 120]);
+    c.file("type.u8", &[0u8; 10]);
+    let text = |layout: &str, ty: &str, order: &str| {
+        format!(
+            "{{\n  \"mdlod_raw\": 1,\n  \"positions\": {{\n    \"file\": \"pos.f32\",\n    \
+             \"type\": \"f32\",\n    \"layout\": \"{layout}\"\n  }},\n  \"species\": {{\n    \
+             \"file\": \"type.u8\",\n    \"type\": \"{ty}\",\n    \"byte_order\": \"{order}\"\n  \
+             }}\n}}\n"
+        )
+    };
+    for (json, line, says) in [
+        (
+            text("interleave", "u8", "little"),
+            6,
+            "positions: layout `interleave`",
+        ),
+        (
+            text("interleaved", "u64", "little"),
+            10,
+            "species: type `u64`",
+        ),
+        (
+            text("interleaved", "u8", "little-endian"),
+            11,
+            "species: byte_order `little-endian`",
+        ),
+    ] {
+        let path = c.sidecar(&json);
+        let e = read(&path).unwrap_err();
+        assert!(
+            e.starts_with(&format!("{}:{line}: {says}", path.display())),
+            "{e}"
+        );
+    }
+}

@@ -1623,9 +1623,18 @@ impl Renderer {
         // binding (lavapipe binds 128 MiB: 1280×720 texels of 8×8 bins are 1 GiB).
         let (window_tiles, max_buffer) = self.sndf_window_tiles(bins);
         if !(1..=32).contains(&bins) || window_tiles == 0 || bytes > max_buffer {
+            // The most bins this image fits.
+            let fits = (1..bins.min(33)).rev().find(|&b| {
+                self.sndf_window_tiles(b).0 > 0
+                    && crate::sndf::sndf_buffer_bytes(width, height, b) <= max_buffer
+            });
+            let advice = match fits {
+                Some(b) => format!("{b}x{b} bins fit (--bins {b}), or a smaller image"),
+                None => "use a smaller image".to_string(),
+            };
             return Err(RenderError::InvalidOptions(format!(
                 "S-NDFs of {width}x{height} texels with {bins}x{bins} bins need {bytes} bytes, \
-                 more than one buffer of this adapter holds ({max_buffer} bytes): use a smaller image or fewer bins"
+                 more than one buffer of this adapter holds ({max_buffer} bytes): {advice}"
             )));
         }
         self.ctx.scoped(|| {

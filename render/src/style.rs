@@ -262,8 +262,20 @@ impl PointStyle {
             .find(|st| !species.iter().any(|s| s.name == st.name))
         {
             let names: Vec<&str> = species.iter().map(|s| s.name.as_str()).collect();
+            // A file of LAMMPS type numbers, styled by an element's name.
+            let numbered =
+                names.iter().all(|n| n.parse::<u32>().is_ok()) && st.name.parse::<u32>().is_err();
+            let hint = if numbered {
+                format!(
+                    "; its species are type numbers: name the type here ({}), or convert \
+                     with --species-name {}={} to call it so",
+                    names[0], names[0], st.name
+                )
+            } else {
+                String::new()
+            };
             return Err(format!(
-                "no species named {:?} (the file has {})",
+                "no species named {:?} (the file's species are named {}){hint}",
                 st.name,
                 names.join(", ")
             ));

@@ -79,7 +79,10 @@ impl Default for ViewFile {
 impl ViewFile {
     /// Reads and checks a view file.
     pub fn load(path: &Path) -> Result<ViewFile, RenderError> {
-        let text = std::fs::read_to_string(path).map_err(|e| RenderError::io(path, e))?;
+        let text = std::fs::read_to_string(path).map_err(|e| RenderError::View {
+            path: path.to_path_buf(),
+            message: format!("cannot read it: {e}"),
+        })?;
         Self::parse(&text).map_err(|message| RenderError::View {
             path: path.to_path_buf(),
             message,

@@ -1080,7 +1080,10 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
+    // Whether a note has said the image is empty (and why).
+    let mut said_empty = false;
     if r.particles_drawn + r.nodes_drawn == 0 && !every_species_hidden {
+        said_empty = true;
         let why = match (
             opts.style.clip.is_empty(),
             r.nodes_occluded + r.particles_occluded,
@@ -1112,6 +1115,7 @@ pub fn run(args: Args) -> Result<()> {
         .map(|&(n, lo, hi)| (n * lo).min(n * hi))
         .sum();
         if nearest > *d {
+            said_empty = true;
             println!(
                 "  note: nothing is drawn: the --clip plane cuts away every sample of the \
                  volume (it keeps n·p ≤ d, d the distance from the origin along the unit \
@@ -1185,11 +1189,17 @@ pub fn run(args: Args) -> Result<()> {
                 // what any gap holds.
                 let empty = mdlod_render::image::RgbaImage::load_png(&args.output)
                     .is_ok_and(|img| img.data.chunks(4).all(|p| p == &img.data[..4]));
-                if empty && r.particles_drawn + r.nodes_drawn > 0 {
+                if empty && !said_empty && opts.style.clip.is_empty() {
                     println!(
                         "  note: no ray meets a volume fraction of {}: the image shows the \
                          background only (the spheres' packing stays below it; a smaller \
                          --iso-value finds a surface)",
+                        args.iso_value
+                    );
+                } else if empty && !said_empty {
+                    println!(
+                        "  note: no ray meets a volume fraction of {} in what the --clip \
+                         planes keep: the image shows the background only",
                         args.iso_value
                     );
                 }
@@ -1357,8 +1367,39 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_rend
         );
     };
     let (w, h) = legend.room_needed(scale);
-    Ok(legend_windows(corner, [w, h], [opts.width, opts.height]))
+    let windows = legend_windows(corner, [w, h], [opts.width, opts.height]);
+    // The data needs a part of the image of its own, or the fit falls back to the whole
+    // image, under the panel.
+    let size = [f64::from(opts.width), f64::from(opts.height)];
+    let room = |win: &mdlod_render::FitWindow| {
+        [0, 1].map(|k| ((win.max[k] - win.min[k]) * 0.5 * size[k]).round().max(0.0) as u32)
+    };
+    if !windows
+        .iter()
+        .any(|win| room(win).iter().all(|&px| px >= MIN_DATA_ROOM))
+    {
+        // (`legend_windows` gives the band above or below the panel, then the one beside.)
+        let [[aw, ah], [bw, bh]] = [room(&windows[0]), room(&windows[1])];
+        anyhow::bail!(
+            "--legend-in-image: a {}×{} image holds the legend ({w}×{h} pixels with its \
+             margin) but leaves the data only {aw}×{ah} pixels {} it or {bw}×{bh} beside it \
+             (at least {MIN_DATA_ROOM}×{MIN_DATA_ROOM}, or the legend would cover the data); \
+             draw a larger image, or write the legend beside it with --legend FILE.svg",
+            opts.width,
+            opts.height,
+            if matches!(corner, LegendCorner::TopLeft | LegendCorner::TopRight) {
+                "below"
+            } else {
+                "above"
+            }
+        );
+    }
+    Ok(windows)
 }
+
+/// The fewest pixels, across and down, of the part of the image an in-image legend
+/// leaves the data.
+const MIN_DATA_ROOM: u32 = 48;
 
 /// The two parts of a `size` image that leave a legend of `room` pixels in `corner` free:
 /// all but a band of its height (at the top or bottom), all but a band of its width (at
@@ -1735,7 +1776,14 @@ fn clip_side_note(planes: &[[f32; 4]], camera: &mdlod_render::Camera) -> Option<
     // A slab's two faces look opposite ways: one faces the camera whatever its side.
     let eye = camera.eye();
     let kept_side = |c: &[f32; 4]| mdlod_render::glam::Vec3::new(c[0], c[1], c[2]).dot(eye) <= c[3];
-    (!planes.is_empty() && planes.iter().all(kept_side)).then(|| {
+    // A plane seen edge-on (within 5°: a 2D layer seen square on, cut across) shows its
+    // cut face from neither side.
+    let edge_on = |c: &[f32; 4]| {
+        let n = mdlod_render::glam::Vec3::new(c[0], c[1], c[2]).normalize_or_zero();
+        n.dot(camera.back()).abs() < 5f32.to_radians().sin()
+    };
+    let noted = planes.iter().all(|c| kept_side(c) && !edge_on(c));
+    (!planes.is_empty() && noted).then(|| {
         format!(
             "  note: the camera is on the kept side of {}: the cut face{} away, \
              behind the material kept; view from the side cut away (--azimuth turned by 180, \
@@ -1801,6 +1849,39 @@ pub(super) fn limits_text(
 
 /// The image of frame `index` of a movie: `pattern` with its `%d` or `%0Nd` (as
 /// ffmpeg reads them) replaced by the index.
+/// How far the corners of `bounds` reach from the image's centre (normalised device
+/// coordinates, x and y) over the views of a turn, each seen from `distance`.
+fn turn_reach(
+    cameras: &[Camera],
+    distance: f32,
+    bounds: &mdlod_render::Bounds,
+    aspect: f32,
+) -> [f64; 2] {
+    let mut reach = [0.0f64; 2];
+    for c in cameras {
+        let c = Camera {
+            distance,
+            ..c.clone()
+        };
+        let m = c.clip_from_view(aspect) * c.view_from_world();
+        for i in 0..8 {
+            let pick = |k: usize, lo: f32, hi: f32| if i >> k & 1 == 1 { hi } else { lo };
+            let p = mdlod_render::glam::Vec3::new(
+                pick(0, bounds.min.x, bounds.max.x),
+                pick(1, bounds.min.y, bounds.max.y),
+                pick(2, bounds.min.z, bounds.max.z),
+            );
+            let clip = m * p.extend(1.0);
+            if clip.w > 0.0 {
+                for k in 0..2 {
+                    reach[k] = reach[k].max(f64::from((clip[k] / clip.w).abs()));
+                }
+            }
+        }
+    }
+    reach
+}
+
 /// A note naming the images numbered past the last of the `n` just written to `pattern`
 /// that an earlier run left (a longer movie or turntable into the same names): a player
 /// or `ffmpeg -i` reading the numbered series would take them as more frames.
@@ -1968,12 +2049,21 @@ fn render_turntable(
         // is fitted into the part of the image the legend leaves (the one that shows the
         // data larger), a distance as much farther as that part is smaller, and every
         // view panned so that the data's centre lies at the part's centre.
-        // (The windows a still's fit takes: see `FitWindow::centre_and_half`.)
+        // (The windows a still's fit takes: see `FitWindow::centre_and_half`.) The data's
+        // reach across the image, over the turn at the farthest distance, says how much
+        // farther each part needs it: a part as wide as the image but short shrinks a
+        // cube that a narrow, full-height part beside the legend holds whole.
+        let reach = turn_reach(&cameras, farthest, &bounds, aspect);
         let window = opts
             .fit_windows
             .iter()
             .filter_map(|w| w.centre_and_half())
-            .map(|(centre, half)| (centre, half[0].min(half[1])))
+            .map(|(centre, half)| {
+                let shrink = (0..2)
+                    .map(|k| half[k] * mdlod_render::camera::FIT_FILL / reach[k].max(1e-9))
+                    .fold(1.0f64, f64::min);
+                (centre, shrink)
+            })
             .max_by(|a, b| a.1.total_cmp(&b.1));
         let farthest = match window {
             Some((_, shrink)) => farthest / shrink as f32,
@@ -2319,13 +2409,12 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         restyled += usize::from(!changed.is_empty());
         restyled_names.extend(changed);
         for sp in &file.metadata().species {
-            let drawn = opts
-                .style
-                .species
-                .iter()
-                .rfind(|st| st.name == sp.name)
-                .and_then(|st| st.radius)
-                .unwrap_or(sp.radius);
+            let style = opts.style.species.iter().rfind(|st| st.name == sp.name);
+            // (A hidden species is drawn at no radius.)
+            if style.is_some_and(|st| st.hidden) {
+                continue;
+            }
+            let drawn = style.and_then(|st| st.radius).unwrap_or(sp.radius);
             let span = radii.entry(sp.name.clone()).or_insert([drawn; 2]);
             *span = [span[0].min(drawn), span[1].max(drawn)];
         }
@@ -2469,6 +2558,24 @@ mod tests {
             assert!(c.up().y > 0.9999, "{d:?}: {:?}", c.up());
         }
         assert!(parse_direction("0,0,0").is_err() && parse_direction("1,2").is_err());
+    }
+
+    /// The camera on the kept side of a plane is told to look from the other side,
+    /// unless it sees the plane edge-on (a 2D layer seen square on, cut across), where
+    /// neither side shows the cut face.
+    #[test]
+    fn the_kept_side_note_leaves_out_planes_seen_edge_on() {
+        let camera = |azimuth_deg: f32, elevation_deg: f32| mdlod_render::Camera {
+            target: mdlod_render::glam::Vec3::new(30.0, 20.0, 0.0),
+            azimuth_deg,
+            elevation_deg,
+            ..Default::default()
+        };
+        let plane = [[1.0, 0.0, 0.0, 40.0]];
+        assert_eq!(clip_side_note(&plane, &camera(-90.0, 90.0)), None);
+        assert!(clip_side_note(&plane, &camera(30.0, 20.0)).is_some());
+        // A plane facing the camera square on is noted looking down too.
+        assert!(clip_side_note(&[[0.0, 0.0, 1.0, 100.0]], &camera(-90.0, 90.0)).is_some());
     }
 
     #[test]

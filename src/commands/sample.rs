@@ -187,6 +187,12 @@ pub fn run(args: Args) -> Result<()> {
             args.min_samples,
             scale.trailing_zeros()
         );
+    } else if args.min_samples > 0 {
+        println!(
+            "  --min-samples {}: every sphere gets that many samples at the image size \
+             already ({} rays per texel), so it is sampled there",
+            args.min_samples, args.iterations
+        );
     }
     let size = std::fs::metadata(&args.output).map_or(0, |m| m.len());
     // Where the cut stopped before the screen error asked for, as `render` says.

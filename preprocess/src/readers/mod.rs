@@ -96,7 +96,7 @@ pub enum ReadError {
     /// Not a format this module reads (or a compression it does not decompress).
     #[error("{at}: {message}")]
     Unsupported { at: Location, message: String },
-    #[error("{}: frame {frame} does not exist; the file has {count} frame(s)", path.display())]
+    #[error("{}: frame {frame} does not exist; the file has {count} frame(s), counted from 0 (the last is {})", path.display(), count.saturating_sub(1))]
     NoSuchFrame {
         path: PathBuf,
         frame: usize,

@@ -272,12 +272,55 @@ fn key_line(text: &[u8], key: &str) -> Option<u64> {
     Some(memchr::memchr_iter(b'\n', &text[..at]).count() as u64 + 1)
 }
 
+/// The sidecar's line of `"child"` inside the object that its first `"parent"` key
+/// holds; `None` where that object has no such key.
+fn nested_key_line(text: &[u8], parent: &str, child: &str) -> Option<u64> {
+    if parent.is_empty() || child.is_empty() || parent.contains(' ') || child.contains(' ') {
+        return None;
+    }
+    let at = memchr::memmem::find(text, format!("\"{parent}\"").as_bytes())?;
+    let open = at + memchr::memchr(b'{', &text[at..])?;
+    // The object's end: its matching brace, outside strings.
+    let (mut depth, mut in_string, mut escaped, mut end) = (0usize, false, false, None);
+    for (i, &b) in text[open..].iter().enumerate() {
+        match (in_string, b) {
+            (true, _) if escaped => escaped = false,
+            (true, b'\\') => escaped = true,
+            (true, b'"') => in_string = false,
+            (true, _) => {}
+            (false, b'"') => in_string = true,
+            (false, b'{') => depth += 1,
+            (false, b'}') => {
+                depth -= 1;
+                if depth == 0 {
+                    end = Some(open + i);
+                    break;
+                }
+            }
+            _ => {}
+        }
+    }
+    let object = &text[open..end?];
+    let inside = memchr::memmem::find(object, format!("\"{child}\"").as_bytes())?;
+    Some(memchr::memchr_iter(b'\n', &text[..open + inside]).count() as u64 + 1)
+}
+
 /// A sidecar error at the line of the key the message starts with (`attribute: ...` at
 /// the line of `"attribute"`), else at its first line.
 fn malformed_in(path: &Path, text: &[u8], message: impl Into<String>) -> ReadError {
     let message = message.into();
-    let key = message.split(':').next().unwrap_or_default().trim();
-    let line = key_line(text, key).unwrap_or(1);
+    let (key, rest) = message.split_once(':').unwrap_or((message.as_str(), ""));
+    let key = key.trim();
+    // `positions: layout ...`: the line of `"layout"` inside the positions' object.
+    let child = rest
+        .trim_start()
+        .split([' ', ':'])
+        .next()
+        .unwrap_or_default()
+        .trim_matches('`');
+    let line = nested_key_line(text, key, child)
+        .or_else(|| key_line(text, key))
+        .unwrap_or(1);
     ReadError::Malformed {
         at: super::Location {
             path: path.to_path_buf(),
