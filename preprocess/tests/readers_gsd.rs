@@ -873,17 +873,23 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
         r#"{"type": "ConvexPolyhedron", "rounding_radius": 0}"#,
     ];
     let m = shapes.iter().map(|s| s.len() + 1).max().unwrap();
-    let mut text = Vec::new();
-    for s in shapes {
-        let mut row = s.as_bytes().to_vec();
-        row.resize(m, 0);
-        text.extend(row);
-    }
-    let bytes = two_particles(&[
-        ("particles/typeid", 3, 1, typeid.clone()),
-        ("particles/types", 5, 2, b"A\0B\0C\0".to_vec()),
-        ("particles/type_shapes", 5, m as u32, text),
-    ]);
+    // Three types A, B, C, with a row of `m` bytes per shape given.
+    let with_shapes = |rows: &[&str]| {
+        let text: Vec<u8> = rows
+            .iter()
+            .flat_map(|s| {
+                let mut row = s.as_bytes().to_vec();
+                row.resize(m, 0);
+                row
+            })
+            .collect();
+        two_particles(&[
+            ("particles/typeid", 3, 1, typeid.clone()),
+            ("particles/types", 5, 2, b"A\0B\0C\0".to_vec()),
+            ("particles/type_shapes", 5, m as u32, text),
+        ])
+    };
+    let bytes = with_shapes(&shapes);
     let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     let f = f.unwrap();
     let radii: Vec<Option<f32>> = f.species.iter().map(|s| s.radius).collect();
@@ -899,17 +905,7 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
         "{notes:?}"
     );
     // So are a type with no entry and one whose entry is no JSON.
-    let mut short = b"[not json".to_vec();
-    short.resize(m, 0);
-    let mut text = short.clone();
-    let mut sphere = shapes[0].as_bytes().to_vec();
-    sphere.resize(m, 0);
-    text.extend(sphere);
-    let bytes = two_particles(&[
-        ("particles/typeid", 3, 1, typeid.clone()),
-        ("particles/types", 5, 2, b"A\0B\0C\0".to_vec()),
-        ("particles/type_shapes", 5, m as u32, text),
-    ]);
+    let bytes = with_shapes(&["[not json", shapes[0]]);
     let (path, _) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     let notes = DumpFile::open(&path)
         .unwrap()

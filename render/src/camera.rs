@@ -122,6 +122,47 @@ impl FitWindow {
     }
 }
 
+/// Steps that move a camera's target until the data's projection lies where it should:
+/// each moves the target by the projection's offset as seen at the target's depth. In
+/// perspective, corners nearer than the target move further on screen than that depth
+/// says, up to twice as far off the image's centre: each axis's step is scaled by the
+/// inverse of the response its last step had (a secant step), which settles where a full
+/// step would swing from side to side.
+struct Recentring {
+    gain: [f64; 2],
+    /// The last step's offset and step.
+    last: Option<([f64; 2], [f64; 2])>,
+}
+
+impl Recentring {
+    fn new() -> Self {
+        Recentring {
+            gain: [1.0; 2],
+            last: None,
+        }
+    }
+
+    /// Moves `camera`'s target to undo `off`, the projection's offset (normalised device
+    /// coordinates) from where it should be; `tan_x`, `tan_y`: the view's half-angle
+    /// tangents.
+    fn step(&mut self, camera: &mut Camera, off: [f64; 2], tan_x: f64, tan_y: f64) {
+        if let Some((was, step)) = self.last {
+            for k in 0..2 {
+                let response = (was[k] - off[k]) / step[k];
+                if step[k] != 0.0 && response.is_finite() && response > 0.0 {
+                    self.gain[k] = (1.0 / response).clamp(0.05, 2.0);
+                }
+            }
+        }
+        let step = [0, 1].map(|k| off[k] * self.gain[k]);
+        let d = f64::from(camera.distance);
+        let shift = camera.right().as_dvec3() * (step[0] * d * tan_x)
+            + camera.up().as_dvec3() * (step[1] * d * tan_y);
+        camera.target = (camera.target.as_dvec3() + shift).as_vec3();
+        self.last = Some((off, step));
+    }
+}
+
 /// An orbit camera. Angles are in degrees, lengths in world units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
@@ -404,14 +445,10 @@ impl Camera {
         let tan_x = tan_y * f64::from(aspect);
         let before = (self.target, self.distance);
         // Each round moves the target by the projection's offset from the window's
-        // centre, as seen at the target's depth, and fits the distance again (one round
-        // is exact in orthographic views, where the size does not change with depth). In
-        // perspective, corners nearer than the target move further on screen than the
-        // target's depth says, up to twice as far off the image's centre: each axis's
-        // step is scaled by the inverse of the response its last step had (a secant
-        // step), which settles where a full step would swing from side to side.
-        let mut gain = [1.0f64; 2];
-        let mut last: Option<([f64; 2], [f64; 2])> = None;
+        // centre, as seen at the target's depth ([`Recentring`]), and fits the distance
+        // again (one round is exact in orthographic views, where the size does not
+        // change with depth).
+        let mut recentring = Recentring::new();
         for _ in 0..40 {
             let Some([px, py]) = self.projected_centre(boxes, tan_x, tan_y) else {
                 (self.target, self.distance) = before;
@@ -421,21 +458,8 @@ impl Camera {
             if off[0].abs().max(off[1].abs()) < 1e-5 {
                 break;
             }
-            if let Some((was, step)) = last {
-                for k in 0..2 {
-                    let response = (was[k] - off[k]) / step[k];
-                    if step[k] != 0.0 && response.is_finite() && response > 0.0 {
-                        gain[k] = (1.0 / response).clamp(0.05, 2.0);
-                    }
-                }
-            }
-            let step = [0, 1].map(|k| off[k] * gain[k]);
-            let d = f64::from(self.distance);
-            let shift = self.right().as_dvec3() * (step[0] * d * tan_x)
-                + self.up().as_dvec3() * (step[1] * d * tan_y);
-            self.target = (self.target.as_dvec3() + shift).as_vec3();
+            recentring.step(self, off, tan_x, tan_y);
             self.distance = self.distance_in(boxes, &hull, aspect, window);
-            last = Some((off, step));
         }
         if !(self.target.is_finite() && self.distance.is_finite() && self.distance > 0.0) {
             (self.target, self.distance) = before;
@@ -482,10 +506,7 @@ impl Camera {
         let before = (self.target, self.distance);
         let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan();
         let tan_x = tan_y * f64::from(aspect);
-        // Each axis's step scaled by the inverse of its last step's response, as in
-        // `fit_window`.
-        let mut gain = [1.0f64; 2];
-        let mut last: Option<([f64; 2], [f64; 2])> = None;
+        let mut recentring = Recentring::new();
         for _ in 0..80 {
             let Some((lo, hi)) = self.projected_extent(boxes, tan_x, tan_y) else {
                 (self.target, self.distance) = before;
@@ -499,23 +520,11 @@ impl Camera {
             if off[0].abs().max(off[1].abs()) < 1e-6 && (scale - 1.0).abs() < 1e-6 {
                 break;
             }
-            if let Some((was, step)) = last {
-                for k in 0..2 {
-                    let response = (was[k] - off[k]) / step[k];
-                    if step[k] != 0.0 && response.is_finite() && response > 0.0 {
-                        gain[k] = (1.0 / response).clamp(0.05, 2.0);
-                    }
-                }
-            }
-            let step = [0, 1].map(|k| off[k] * gain[k]);
             let d = f64::from(self.distance);
-            let shift = self.right().as_dvec3() * (step[0] * d * tan_x)
-                + self.up().as_dvec3() * (step[1] * d * tan_y);
-            self.target = (self.target.as_dvec3() + shift).as_vec3();
+            recentring.step(self, off, tan_x, tan_y);
             if scale.is_finite() && scale > 0.0 {
                 self.distance = (d * scale) as f32;
             }
-            last = Some((off, step));
         }
         if !(self.target.is_finite() && self.distance.is_finite() && self.distance > 0.0) {
             (self.target, self.distance) = before;
