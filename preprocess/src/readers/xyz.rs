@@ -43,17 +43,41 @@ const MAX_COMMENT: usize = 1 << 20;
 /// hold a whole line of one integer: no atom line is that (an atom has a species and
 /// three coordinates), a frame's count line is. `None` for a frame cut short while it was
 /// written.
-fn overcounted(data: &[u8], from: usize) -> Option<usize> {
-    let mut cursor = Cursor::new(data, from);
-    while let Some((at, line)) = cursor.next_line() {
-        // The last line may be cut inside an atom's species ("1" of "1 0.5 ..."); a
-        // whole line ends with its newline.
-        let whole = at + line.len() < data.len();
-        if whole && parse_int::<u64>(line).is_some() {
-            return Some(at);
+/// A large file (`file` given, longer than `segment`) is read through a fresh mapping
+/// of each `segment` bytes, as the index skips lines, so that its pages do not stay
+/// resident.
+fn overcounted(
+    ctx: &Ctx<'_>,
+    file: Option<&std::fs::File>,
+    from: usize,
+    segment: usize,
+) -> Result<Option<usize>, ReadError> {
+    let len = ctx.data.len();
+    let mut pos = from;
+    while pos < len {
+        let fresh;
+        let (data, end) = match file {
+            Some(f) if len > segment => {
+                fresh = super::mapped_again(ctx, f, pos)?;
+                (&fresh[..], (pos + segment.max(1)).min(len))
+            }
+            _ => (ctx.data, len),
+        };
+        let mut cursor = Cursor::new(data, pos);
+        while cursor.pos < end {
+            let Some((at, line)) = cursor.next_line() else {
+                return Ok(None);
+            };
+            // The last line may be cut inside an atom's species ("1" of "1 0.5 ..."); a
+            // whole line ends with its newline.
+            let whole = at + line.len() < len;
+            if whole && parse_int::<u64>(line).is_some() {
+                return Ok(Some(at));
+            }
         }
+        pos = cursor.pos;
     }
-    None
+    Ok(None)
 }
 
 /// Byte range and timestep of one frame.
@@ -106,7 +130,7 @@ impl Index {
             // A last line without its newline is one of the frame's lines.
             let unterminated = usize::from(end > cursor.pos && !data.ends_with(b"\n"));
             if left > unterminated {
-                if let Some(lone) = overcounted(data, cursor.pos) {
+                if let Some(lone) = overcounted(ctx, file, cursor.pos, segment)? {
                     return Err(ctx.malformed(
                         lone,
                         format!(
