@@ -43,6 +43,7 @@ const MAX_COMMENT: usize = 1 << 20;
 /// hold a whole line of one integer: no atom line is that (an atom has a species and
 /// three coordinates), a frame's count line is. `None` for a frame cut short while it was
 /// written.
+///
 /// A large file (`file` given, longer than `segment`) is read through a fresh mapping
 /// of each `segment` bytes, as the index skips lines, so that its pages do not stay
 /// resident.
