@@ -107,9 +107,10 @@ pub struct SourceInfo {
     #[serde(default)]
     pub frame: u64,
     /// Where the frame's bytes lie in the source and their checksum: recorded by batch
-    /// conversions of uncompressed dumps whose frames are contiguous byte ranges, so
-    /// that a rerun over a dump that has grown since (a simulation still writing it)
-    /// keeps the frames whose bytes are unchanged instead of converting them again.
+    /// conversions of uncompressed dumps whose frames are contiguous byte ranges (and of
+    /// GSD files, whose frames are their chunks and frame 0's they take), so that a
+    /// rerun over a dump that has grown since (a simulation still writing it) keeps the
+    /// frames whose bytes are unchanged instead of converting them again.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bytes: Option<FrameBytes>,
 }

@@ -26,7 +26,8 @@
 //!    with the same settings is skipped; anything else is converted again, except that
 //!    a frame whose input changed but whose own bytes did not is kept: the frames of an
 //!    uncompressed LAMMPS text or binary dump or XYZ file are byte ranges of it, each
-//!    recorded with its range and checksum ([`FrameBytes`]), so a rerun over a dump a
+//!    recorded with its range and checksum ([`FrameBytes`]; a GSD frame's checksum is of
+//!    its chunks and frame 0's it takes), so a rerun over a dump a
 //!    running simulation has appended to reads the old frames once to compare them
 //!    and converts only the new ones (and lists the kept ones with the input's size and
 //!    time now, so the next rerun need not read them again). The settings
@@ -355,8 +356,8 @@ pub struct BatchReport {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Redone {
     /// The source changed: a file replaced, a frame's bytes changed (an input whose
-    /// frames are not byte ranges of their own, such as a gzip dump or a GSD file,
-    /// changed in size or modification time).
+    /// frames are not byte ranges of their own, such as a gzip dump, changed in size or
+    /// modification time).
     pub source: usize,
     /// The settings changed (a build option, a radius, the attribute, renames, the
     /// columns).
@@ -576,11 +577,35 @@ pub fn range_checksum(
     range: std::ops::Range<u64>,
     progress: &dyn Progress,
 ) -> std::io::Result<String> {
-    use std::io::{Read, Seek};
+    ranges_checksum(path, std::slice::from_ref(&range), progress)
+}
+
+/// The XXH3-64 of `ranges` of the file at `path`, one after another (a GSD frame's
+/// chunks: [`DumpFile::frame_ranges`]).
+pub fn ranges_checksum(
+    path: &Path,
+    ranges: &[std::ops::Range<u64>],
+    progress: &dyn Progress,
+) -> std::io::Result<String> {
     let mut file = std::fs::File::open(path)?;
-    file.seek(std::io::SeekFrom::Start(range.start))?;
     let mut hasher = xxhash_rust::xxh3::Xxh3::new();
     let mut buffer = vec![0u8; 1 << 20];
+    for range in ranges {
+        hash_range(&mut file, range.clone(), &mut hasher, &mut buffer, progress)?;
+    }
+    Ok(format!("{:016x}", hasher.digest()))
+}
+
+/// Feeds `range` of `file` to `hasher` through `buffer`.
+fn hash_range(
+    file: &mut std::fs::File,
+    range: std::ops::Range<u64>,
+    hasher: &mut xxhash_rust::xxh3::Xxh3,
+    buffer: &mut [u8],
+    progress: &dyn Progress,
+) -> std::io::Result<()> {
+    use std::io::{Read, Seek};
+    file.seek(std::io::SeekFrom::Start(range.start))?;
     let mut at = range.start;
     while at < range.end {
         let want = usize::try_from(range.end - at).map_or(buffer.len(), |n| n.min(buffer.len()));
@@ -601,7 +626,22 @@ pub fn range_checksum(
         at += n as u64;
         progress.advance(n as u64);
     }
-    Ok(format!("{:016x}", hasher.digest()))
+    Ok(())
+}
+
+/// The checksum [`FrameBytes::xxh3`] records of frame `frame` of `input` (whose bytes
+/// span `range`): of the range, or of a GSD frame's chunks ([`DumpFile::frame_ranges`]).
+fn frame_checksum(
+    input: &Path,
+    dump: Option<&DumpFile>,
+    frame: usize,
+    range: std::ops::Range<u64>,
+    progress: &dyn Progress,
+) -> std::io::Result<String> {
+    match dump.and_then(|d| d.frame_ranges(frame)) {
+        Some(ranges) => ranges_checksum(input, &ranges, progress),
+        None => range_checksum(input, range, progress),
+    }
 }
 
 /// A frame's byte range and checksum in its input, for inputs whose frames are
@@ -614,8 +654,14 @@ fn frame_bytes(
     let Some(range) = dump.and_then(|d| d.frame_bytes(frame)) else {
         return Ok(None);
     };
-    let xxh3 =
-        range_checksum(input, range.clone(), &crate::progress::NoProgress).map_err(io(input))?;
+    let xxh3 = frame_checksum(
+        input,
+        dump,
+        frame,
+        range.clone(),
+        &crate::progress::NoProgress,
+    )
+    .map_err(io(input))?;
     Ok(Some(FrameBytes {
         start: range.start,
         end: range.end,
@@ -1608,7 +1654,8 @@ pub fn batch(
                 // A text dump's unit style is written in its first frame only.
                 && dump.and_then(|d| d.frame_info(job.frame).ok()).map(|i| i.units)
                     == Some(f.metadata().units.clone())
-                && range_checksum(job.input, range, progress).map_err(io(job.input))?
+                && frame_checksum(job.input, dump, job.frame, range, progress)
+                    .map_err(io(job.input))?
                     == bytes.xxh3;
             if unchanged {
                 kept_unchanged += 1;

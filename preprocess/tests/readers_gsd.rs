@@ -970,3 +970,63 @@ fn an_attribute_left_at_its_schema_default_takes_the_default() {
         "{e}"
     );
 }
+
+/// A HOOMD run still writing its GSD file appends frames: a batch rerun keeps the frames
+/// converted before (their chunks, and frame 0's they take, unchanged) and converts only
+/// the new ones, as it does for a growing LAMMPS dump. A frame 0 rewritten (another run
+/// in the same file) makes every frame that takes its chunks convert again.
+#[test]
+fn a_batch_over_a_growing_gsd_file_converts_only_the_new_frames() {
+    use mdlod_preprocess::batch::{batch, BatchOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.gsd");
+    let names: Vec<String> = [
+        "particles/N",
+        "particles/position",
+        "configuration/step",
+        "particles/types",
+        "particles/typeid",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    // Frame k: two particles, step 100 k; frame 0 holds the types (`types`) the others
+    // take.
+    let frames = |count: u64, types: &[u8]| {
+        let mut chunks = Vec::new();
+        for k in 0..count {
+            let x = k as f32;
+            let positions: Vec<u8> = [x, 0.0, 0.0, x + 1.5, 1.0, 0.5]
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .collect();
+            chunks.push((k, (0u16, 3u8, 1u64, 1u32, 2u32.to_le_bytes().to_vec())));
+            chunks.push((k, (1, 9, 2, 3, positions)));
+            chunks.push((k, (2, 4, 1, 1, (100 * k).to_le_bytes().to_vec())));
+            if k == 0 {
+                chunks.push((0, (3, 5, 2, 2, types.to_vec())));
+                let ids: Vec<u8> = [0u32, 1].iter().flat_map(|v| v.to_le_bytes()).collect();
+                chunks.push((0, (4, 3, 2, 1, ids)));
+            }
+        }
+        gsd_frames(&names, &chunks)
+    };
+    let opts = BatchOptions {
+        memory_limit: 1 << 30,
+        ..Default::default()
+    };
+    let out = dir.path().join("out");
+    std::fs::write(&path, frames(2, b"A\0B\0")).unwrap();
+    let r = batch(std::slice::from_ref(&path), &out, &opts, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.kept_unchanged), (2, 0));
+    // Grown by a frame: the first two are kept.
+    std::fs::write(&path, frames(3, b"A\0B\0")).unwrap();
+    let r = batch(std::slice::from_ref(&path), &out, &opts, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.kept_unchanged), (1, 2));
+    // Frame 0's types renamed: every frame takes them, every frame converts again.
+    std::fs::write(&path, frames(3, b"C\0D\0")).unwrap();
+    let r = batch(std::slice::from_ref(&path), &out, &opts, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.kept_unchanged), (3, 0));
+    let f = mdlod_format::MdlodFile::open(out.join("frame-200.mdlod")).unwrap();
+    assert_eq!(f.metadata().species[0].name, "C");
+}

@@ -336,6 +336,42 @@ impl Index {
         find(k as u64).or_else(|| find(0))
     }
 
+    /// The byte ranges of frame `k`'s own chunks, in the file's order.
+    pub fn own_ranges(&self, k: usize) -> Vec<Range<usize>> {
+        let first = self.entries.partition_point(|e| e.frame < k as u64);
+        let mut ranges: Vec<Range<usize>> = self.entries[first..]
+            .iter()
+            .take_while(|e| e.frame == k as u64)
+            .map(|e| e.location..e.location.saturating_add(e.n * e.m * e.ty.size()))
+            .collect();
+        ranges.sort_by_key(|r| (r.start, r.end));
+        ranges
+    }
+
+    /// The byte ranges frame `k` may be read from, in the file's order: its own chunks,
+    /// then frame 0's chunks of the names frame `k` leaves out (which it may take).
+    pub fn frame_ranges(&self, k: usize) -> Vec<Range<usize>> {
+        let mut ranges = self.own_ranges(k);
+        if k > 0 {
+            let first = self.entries.partition_point(|e| e.frame < k as u64);
+            let own: Vec<u16> = self.entries[first..]
+                .iter()
+                .take_while(|e| e.frame == k as u64)
+                .map(|e| e.name)
+                .collect();
+            let mut taken: Vec<Range<usize>> = self
+                .entries
+                .iter()
+                .take_while(|e| e.frame == 0)
+                .filter(|e| !own.contains(&e.name))
+                .map(|e| e.location..e.location.saturating_add(e.n * e.m * e.ty.size()))
+                .collect();
+            taken.sort_by_key(|r| (r.start, r.end));
+            ranges.extend(taken);
+        }
+        ranges
+    }
+
     /// Whether any frame of the file records `configuration/step`. A file where none
     /// does has no timesteps to number its frames by (the schema's default 0 would give
     /// every frame the same one).

@@ -700,9 +700,31 @@ impl DumpFile {
             Index::Lammps(i) => i.bytes(k)?,
             Index::Xyz(i) => i.bytes(k)?,
             Index::LammpsBinary(i) => i.header(&self.path, k).ok()?.bytes.clone(),
+            // The span of the frame's own chunks (a GSD writer appends a frame's chunks
+            // together); what the frame is read from is [`DumpFile::frame_ranges`].
+            Index::Gsd(i) if k < i.len() => {
+                let own = i.own_ranges(k);
+                own.first()?.start..own.iter().map(|r| r.end).max()?
+            }
             _ => return None,
         };
         Some(r.start as u64..r.end as u64)
+    }
+
+    /// The byte ranges frame `k` is read from, in order, where they are not just
+    /// [`DumpFile::frame_bytes`]: a GSD frame's own chunks, then the chunks of frame 0 it
+    /// may take (the types, say, which a HOOMD run writes once). `None` for the other
+    /// formats.
+    pub fn frame_ranges(&self, k: usize) -> Option<Vec<std::ops::Range<u64>>> {
+        match &self.index {
+            Index::Gsd(i) if !self.compressed && k < i.len() => Some(
+                i.frame_ranges(k)
+                    .into_iter()
+                    .map(|r| r.start as u64..r.end as u64)
+                    .collect(),
+            ),
+            _ => None,
+        }
     }
 
     /// True when [`DumpFile::read_part`] can read this dump's frames a range of particles
