@@ -326,7 +326,15 @@ fn properties_without_positions_say_what_names_them() {
         "2\nProperties=species:S:1:position:R:3\nCu 0 0 0\nCu 1 2 3\n",
     );
     assert_eq!(read_k(&ok, 0, None).positions[1], [1.0, 2.0, 3.0]);
-    for props in ["species:S:1:pos:R:2", "species:S:1:coords:R:3"] {
+    for (props, says) in [
+        (
+            "species:S:1:pos:R:2",
+            "entry `pos:R:2` is no position: positions are three real numbers (`pos:R:3`; \
+             a two-dimensional run writes z as 0)",
+        ),
+        ("species:S:1:pos:S:3", "entry `pos:S:3` is no position"),
+        ("species:S:1:coords:R:3", "names no positions"),
+    ] {
         let path = write(
             dir.path(),
             "bad.xyz",
@@ -343,7 +351,7 @@ fn properties_without_positions_say_what_names_them() {
                     .to_string()
             });
         assert!(
-            e.contains("bad.xyz:2:") && e.contains("names no positions") && e.contains("`pos:R:3`"),
+            e.contains("bad.xyz:2:") && e.contains(says) && e.contains("`pos:R:3`"),
             "{e}"
         );
     }

@@ -623,8 +623,16 @@ impl Painter<'_> {
 }
 
 /// The colour bar of `map` over an attribute named `name`, as `scale` (the renderer's,
-/// with the shown range and log flag) maps it; `range` is the range shown.
-pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f32; 2]) -> Legend {
+/// with the shown range and log flag) maps it; `range` is the range shown, `data` the
+/// smallest and largest value the particles hold: an end past which some lie (drawn in
+/// the end's colour) is labelled `≤` or `≥`.
+pub fn colour_bar(
+    map: ColourMap,
+    scale: &AttributeScale,
+    name: &str,
+    range: [f32; 2],
+    data: [f32; 2],
+) -> Legend {
     let colour = |t: f32| map.colour(t);
     let position = |v: f64| scale.of_value(v as f32);
     // A constant attribute shown over no range: every particle takes the map's last
@@ -648,7 +656,8 @@ pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f3
             // A range from 0 or below starts the scale decades below its top: values at
             // or below that take its colour.
             let [low, high] = end_labels(lo, hi);
-            let low = match range[0] <= 0.0 {
+            let [low, high] = beyond_marks([low, high], [lo, hi], data);
+            let low = match range[0] <= 0.0 && !low.starts_with('≤') {
                 true => format!("≤ {low}"),
                 false => low,
             };
@@ -667,9 +676,23 @@ pub fn colour_bar(map: ColourMap, scale: &AttributeScale, name: &str, range: [f3
                 .into_iter()
                 .map(|v| (v, tick_label(v, step)))
                 .collect();
-            bar(name, &colour, &position, &ticks, end_labels(lo, hi))
+            let labels = beyond_marks(end_labels(lo, hi), [lo, hi], data);
+            bar(name, &colour, &position, &ticks, labels)
         }
     }
+}
+
+/// End labels marked `≤` (`≥`) where `data` reaches below (above) the bar's ends
+/// `[lo, hi]`: particles there take the end's colour.
+fn beyond_marks([low, high]: [String; 2], [lo, hi]: [f64; 2], data: [f32; 2]) -> [String; 2] {
+    // (A range derived from the data is the data's own ends, up to rounding.)
+    let slack = 1e-6 * lo.abs().max(hi.abs());
+    let below = f64::from(data[0]) < lo - slack;
+    let above = f64::from(data[1]) > hi + slack;
+    [
+        if below { format!("≤ {low}") } else { low },
+        if above { format!("≥ {high}") } else { high },
+    ]
 }
 
 /// The bar of a projected image's colour map: `title` (what the light is) over
@@ -681,7 +704,7 @@ pub fn light_bar(map: ColourMap, title: &str, [lo, hi]: [f32; 2], log: bool) -> 
         max: hi,
     };
     let scale = AttributeScale::new(&info).with_log(log && lo > 0.0);
-    colour_bar(map, &scale, title, [lo, hi])
+    colour_bar(map, &scale, title, [lo, hi], [lo, hi])
 }
 
 /// The density volume's transfer function: volume fraction φ from 0 to `density_max`.
@@ -768,7 +791,7 @@ mod tests {
             max: 2.5,
         };
         let scale = AttributeScale::with_range(&info, None);
-        let svg = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5]).svg();
+        let svg = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5], [0.0, 2.5]).svg();
         let stops = stops_of(&svg);
         assert_eq!(stops.len(), GRADIENT_STOPS);
         assert_eq!(stops[0], hex(ColourMap::Viridis.colour(0.0)));
@@ -791,7 +814,7 @@ mod tests {
             max: 10.0,
         };
         let scale = AttributeScale::with_range(&info, None).with_log(true);
-        let svg = colour_bar(ColourMap::Magma, &scale, "rho", [1e-3, 10.0]).svg();
+        let svg = colour_bar(ColourMap::Magma, &scale, "rho", [1e-3, 10.0], [1e-3, 10.0]).svg();
         let (xs, labels) = ticks_of(&svg);
         assert_eq!(xs.len(), 5);
         assert!((xs[2] - (BAR[0] + BAR[1]) / 2.0).abs() < 0.01, "{xs:?}");
@@ -800,10 +823,52 @@ mod tests {
         // From 0: the scale starts four decades below its top, values below take its
         // colour.
         let from_zero = AttributeScale::with_range(&info, Some([0.0, 10.0])).with_log(true);
-        let svg = colour_bar(ColourMap::Magma, &from_zero, "rho", [0.0, 10.0]).svg();
+        let svg = colour_bar(
+            ColourMap::Magma,
+            &from_zero,
+            "rho",
+            [0.0, 10.0],
+            [0.0, 10.0],
+        )
+        .svg();
         assert!(svg.contains(">≤ 0.001</text>"), "{svg}");
+        // Data reaching below the log scale's start (zeros: frozen atoms) or past its
+        // end takes the end colours: marked, as a linear range narrower than the data.
+        let from_data = AttributeScale::with_range(&info, Some([1e-3, 1.0])).with_log(true);
+        let svg = colour_bar(
+            ColourMap::Magma,
+            &from_data,
+            "rho",
+            [1e-3, 1.0],
+            [0.0, 10.0],
+        )
+        .svg();
+        assert!(
+            svg.contains(">≤ 0.001</text>") && svg.contains(">≥ 1</text>"),
+            "{svg}"
+        );
+        let info = mdlod_format::meta::AttributeInfo {
+            name: "vx".into(),
+            min: -1.0,
+            max: 1.0,
+        };
+        let narrow = AttributeScale::with_range(&info, Some([-0.5, 0.5]));
+        let svg = colour_bar(ColourMap::CoolWarm, &narrow, "vx", [-0.5, 0.5], [-1.0, 1.0]).svg();
+        assert!(
+            svg.contains(">≤ -0.5</text>") && svg.contains(">≥ 0.5</text>"),
+            "{svg}"
+        );
+        let svg = colour_bar(ColourMap::CoolWarm, &narrow, "vx", [-0.5, 0.5], [-0.5, 0.2]).svg();
+        assert!(!svg.contains('≤') && !svg.contains('≥'), "{svg}");
         // A name with markup is escaped.
-        let svg = colour_bar(ColourMap::Grey, &scale, "a<b & c", [1e-3, 10.0]).svg();
+        let svg = colour_bar(
+            ColourMap::Grey,
+            &scale,
+            "a<b & c",
+            [1e-3, 10.0],
+            [1e-3, 10.0],
+        )
+        .svg();
         assert!(svg.contains("a&lt;b &amp; c (log scale)"));
     }
 
@@ -865,7 +930,14 @@ mod tests {
             max: -3.54,
         };
         let scale = AttributeScale::with_range(&info, None);
-        let svg = colour_bar(ColourMap::Viridis, &scale, "c_pe", [-3.54, -3.54]).svg();
+        let svg = colour_bar(
+            ColourMap::Viridis,
+            &scale,
+            "c_pe",
+            [-3.54, -3.54],
+            [-3.54, -3.54],
+        )
+        .svg();
         let stops = stops_of(&svg);
         assert!(stops
             .iter()
@@ -886,7 +958,7 @@ mod tests {
             max: 2.5,
         };
         let scale = AttributeScale::with_range(&info, None);
-        let legend = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5]);
+        let legend = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5], [0.0, 2.5]);
         for s in [1u32, 2] {
             let (w, h) = (400 * s, 100 * s);
             let mut image = RgbaImage::new(w, h);
@@ -950,13 +1022,14 @@ mod tests {
         }
         // A long title widens the panel rather than being cut; the font's gaps are named.
         let long = "Temperature of the liquid droplets after 200 ps, per-atom mean (K)";
-        let titled = colour_bar(ColourMap::Viridis, &scale, long, [0.0, 2.5]);
+        let titled = colour_bar(ColourMap::Viridis, &scale, long, [0.0, 2.5], [0.0, 2.5]);
         assert!(titled.size().0 >= 2.0 * BAR[0] + 7.0 * long.chars().count() as f32);
         assert!(titled.missing_glyphs().is_empty());
         let odd = colour_bar(
             ColourMap::Viridis,
             &scale,
             "s⁻¹ cm⁻³ ± ö – 日本",
+            [0.0, 2.5],
             [0.0, 2.5],
         );
         assert_eq!(odd.missing_glyphs(), vec!['日', '本']);

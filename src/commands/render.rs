@@ -1472,7 +1472,7 @@ fn build_legend(
             let range = opts.style.attribute_range.unwrap_or([a.min, a.max]);
             let title = args.legend_title.as_deref().unwrap_or(&a.name);
             (
-                legend::colour_bar(map, &scale, title, range),
+                legend::colour_bar(map, &scale, title, range, [a.min, a.max]),
                 format!("the colour map over {}", a.name),
             )
         }

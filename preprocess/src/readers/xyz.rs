@@ -390,6 +390,19 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
         }
     }
     if coords.is_none() {
+        // A position entry of another shape (a 2D run's `pos:R:2`) is named as such.
+        let near = parts.chunks(3).find(|t| {
+            ["pos", "position", "positions"]
+                .iter()
+                .any(|p| t[0].eq_ignore_ascii_case(p))
+        });
+        if let Some(t) = near {
+            return Err(format!(
+                "`Properties` entry `{}:{}:{}` is no position: positions are three real \
+                 numbers (`{}:R:3`; a two-dimensional run writes z as 0)",
+                t[0], t[1], t[2], t[0]
+            ));
+        }
         return Err(format!(
             "`Properties` names no positions: they are read from a `pos:R:3` (or \
              `position:R:3`, `positions:R:3`) entry; the entries name the columns {}",
