@@ -168,6 +168,7 @@ fn info_json_has_the_promised_fields() {
         assert!(!json[key].is_null(), "info --json lacks {key}: {json}");
     }
     assert_eq!(json["particles"], 864);
+    assert_eq!(json["flat_axis"], serde_json::Value::Null);
     assert_eq!(json["source"]["frame"], 2);
     assert_eq!(json["attribute"]["name"], "c_pe");
     let species = json["species"].as_array().unwrap();
@@ -5963,6 +5964,14 @@ fn two_dimensional_data_is_seen_square_on_by_default() {
             "{case}: ({azimuth}, {elevation})"
         );
     }
+    // `info` says so.
+    let text = ok(&["info", s(&file)]);
+    assert!(
+        text.contains("flat         every particle's centre at one z"),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&file), "--json"])).unwrap();
+    assert_eq!(json["flat_axis"], "z");
     // An angle given is kept: the other takes the three-dimensional default.
     let view = dir.path().join("view.json");
     let png = dir.path().join("one.png");

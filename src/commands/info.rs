@@ -118,6 +118,8 @@ pub fn run(args: Args) -> Result<()> {
     let counts = (args.counts || m.particles <= COUNT_UP_TO).then(|| species_counts(&f));
     // What the particles' spheres span: the top node's box.
     let extent = f.nodes().first().map(|n| (n.bounds_min, n.bounds_max));
+    // Two-dimensional data (every centre in one plane), which views face square on.
+    let flat = mdlod_render::flat_axis(&f);
     if args.json {
         let mut v = json!({
             "file": args.file.display().to_string(),
@@ -131,6 +133,7 @@ pub fn run(args: Args) -> Result<()> {
             "attribute": m.attribute,
             "box": m.simulation_box,
             "extent": extent.map(|(lo, hi)| json!({ "min": lo, "max": hi })),
+            "flat_axis": flat.map(|k| ["x", "y", "z"][k]),
             "timestep": m.timestep,
             "time": m.time,
             "units": m.units,
@@ -229,6 +232,13 @@ pub fn run(args: Args) -> Result<()> {
             "  extent       {} to {} (the particles' spheres)",
             v(lo),
             v(hi)
+        );
+    }
+    if let Some(k) = flat {
+        println!(
+            "  flat         every particle's centre at one {} (two-dimensional data: the \
+             default view faces it square on)",
+            ["x", "y", "z"][k]
         );
     }
     if let Some(t) = m.timestep {
