@@ -6223,3 +6223,69 @@ fn a_movie_says_nothing_of_the_radii_of_hidden_species() {
     let hidden = ok(&[&args[..], &["--hide-species", "B"]].concat());
     assert!(!hidden.contains("radii change"), "{hidden}");
 }
+
+/// Hostile paths and files in place of inputs: a device or a FIFO is refused before it
+/// is opened (a FIFO blocked every reader, /dev/zero as a view file or manifest grew the
+/// process without bound); a view file that is a list, or whose number overflows single
+/// precision, is named as such; a manifest whose frames' timesteps disagree with their
+/// files is refused.
+#[test]
+fn devices_fifos_and_odd_view_files_are_refused_plainly() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("x.png");
+    let size = ["--width", "32", "--height", "24"];
+    let render =
+        |extra: &[&str]| fails(&[&["render", s(&frame), "-o", s(&png)][..], &size, extra].concat());
+    let e = render(&["--view", "/dev/zero"]);
+    assert!(
+        e.contains("view file /dev/zero: cannot read it: not a regular file"),
+        "{e}"
+    );
+    let list = dir.path().join("list.json");
+    std::fs::write(&list, r#"[1, "orthographic", 45, 10]"#).unwrap();
+    let e = render(&["--view", s(&list)]);
+    assert!(e.contains("a view file is a JSON object"), "{e}");
+    let huge = dir.path().join("huge.json");
+    std::fs::write(&huge, "{\"version\": 1,\n\"azimuth_deg\": 1e300}").unwrap();
+    let e = render(&["--view", s(&huge)]);
+    assert!(
+        e.contains("azimuth_deg inf (not a finite number in single precision"),
+        "{e}"
+    );
+    let fifo = dir.path().join("fifo");
+    if std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|st| st.success())
+    {
+        // Each refused at once (a reader opening it would wait for a writer forever).
+        for args in [
+            vec!["info", s(&fifo)],
+            vec!["verify", s(&fifo)],
+            vec!["shade", s(&fifo), "-o", s(&png)],
+            vec!["render", s(&frame), "-o", s(&png), "--view", s(&fifo)],
+        ] {
+            let e = fails(&args);
+            assert!(e.contains("not a regular file"), "{args:?}: {e}");
+        }
+    }
+    // A manifest listing each frame as the other's timestep.
+    let input = dir.path().join("d.lammpstrj");
+    generate(&["droplets", "-n", "300", "--frames", "2"], &input);
+    let d = dir.path().join("d");
+    ok(&["batch", s(&input), "-o", s(&d)]);
+    let manifest = d.join("dataset.json");
+    let text = std::fs::read_to_string(&manifest)
+        .unwrap()
+        .replace("frame-0.mdlod", "frame-X.mdlod")
+        .replace("frame-100.mdlod", "frame-0.mdlod")
+        .replace("frame-X.mdlod", "frame-100.mdlod");
+    std::fs::write(&manifest, text).unwrap();
+    let movie = dir.path().join("m/f-%d.png");
+    let e = fails(&[&["render", s(&d), "-o", s(&movie)][..], &size].concat());
+    assert!(
+        e.contains("lists frame-100.mdlod as timestep 0, but the file holds timestep 100"),
+        "{e}"
+    );
+}

@@ -17,6 +17,7 @@
 //! This crate knows nothing of threads, command lines or GPUs.
 
 pub mod error;
+pub mod files;
 pub mod layout;
 pub mod meta;
 pub mod mmap;

@@ -14,7 +14,6 @@
 //! everything: every section checksum, every node record, the (zero) padding between
 //! sections, every node's point range, every species index and every decoded point.
 
-use std::fs::File;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -156,7 +155,7 @@ impl MdlodFile {
         eager_nodes: u64,
     ) -> Result<MdlodFile, FormatError> {
         let path = path.as_ref().to_path_buf();
-        let file = File::open(&path).map_err(|e| FormatError::io(&path, e))?;
+        let file = crate::files::open(&path).map_err(|e| FormatError::io(&path, e))?;
         let map = crate::mmap::map_file(&file).map_err(|e| FormatError::io(&path, e))?;
         Self::from_map(path, map, eager_nodes)
     }

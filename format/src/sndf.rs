@@ -309,7 +309,7 @@ impl SndfData {
     pub fn load_header(path: &Path) -> Result<(SndfHeader, u64), FormatError> {
         use std::io::Read;
         let io = |e| FormatError::io(path, e);
-        let mut file = std::fs::File::open(path).map_err(io)?;
+        let mut file = crate::files::open(path).map_err(io)?;
         let len = file.metadata().map_err(io)?.len();
         let mut prefix = Vec::new();
         (&mut file)

@@ -901,7 +901,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
         if !(name == MANIFEST || is_shard_manifest(&name)) {
             continue;
         }
-        let Some(m) = std::fs::read(e.path())
+        let Some(m) = read_manifest_bytes(&e.path())
             .ok()
             .and_then(|t| parse_manifest(&e.path(), &t, "dataset").ok())
         else {
@@ -1744,7 +1744,7 @@ pub fn batch(
     // dump) would otherwise leave a manifest without the frames it is to convert again,
     // and the corrected rerun, finding no record of how they were read, would convert
     // every one again for "other settings".
-    let previous = std::fs::read(&manifest_path).map_err(|e| e.kind());
+    let previous = read_manifest_bytes(&manifest_path).map_err(|e| e.kind());
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
     // A shard that converts anything outdates the merged manifest of an earlier merge
     // (its checksums, its frames' sources): removed before the first frame changes, so
@@ -2159,7 +2159,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     }
     let mut manifests = Vec::with_capacity(shards.len());
     for (i, n, path) in &shards {
-        let text = std::fs::read(path).map_err(io(path))?;
+        let text = read_manifest_bytes(path).map_err(io(path))?;
         let m = parse_manifest(path, &text, "shard")?;
         if let Some(problem) = shard_field_problem(Some([*i, *n]), m.shard) {
             return Err(manifest_err(path, problem));
@@ -2558,7 +2558,7 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     let mut lists = Vec::new();
     for name in &manifests {
         let path = dir.join(name);
-        let text = std::fs::read(&path).map_err(io(&path))?;
+        let text = read_manifest_bytes(&path).map_err(io(&path))?;
         let m = parse_manifest(&path, &text, "dataset")?;
         let named = shard_of(name).map(|(i, n)| [i, n]);
         if let Some(problem) = shard_field_problem(named, m.shard) {
@@ -2633,8 +2633,14 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
 /// Reads a batch directory's `dataset.json`.
 pub fn read_manifest(out_dir: &Path) -> Result<Manifest, BatchError> {
     let path = out_dir.join(MANIFEST);
-    let text = std::fs::read(&path).map_err(io(&path))?;
+    let text = read_manifest_bytes(&path).map_err(io(&path))?;
     parse_manifest(&path, &text, "dataset")
+}
+
+/// A manifest's bytes: a regular file of at most [`mdlod_format::files::MANIFEST_BYTES`]
+/// (a FIFO or a device in its place would block or never end).
+fn read_manifest_bytes(path: &Path) -> std::io::Result<Vec<u8>> {
+    mdlod_format::files::read_capped(path, mdlod_format::files::MANIFEST_BYTES)
 }
 
 /// A manifest's JSON (`what`: "dataset" or "shard", for the message), checked: its

@@ -1030,3 +1030,38 @@ fn a_batch_over_a_growing_gsd_file_converts_only_the_new_frames() {
     let f = mdlod_format::MdlodFile::open(out.join("frame-200.mdlod")).unwrap();
     assert_eq!(f.metadata().species[0].name, "C");
 }
+
+/// A `particles/type_shapes` chunk that is not text (floats, say) gives no shapes, and a
+/// note says so (the types' non-text names are an error; these were ignored silently).
+#[test]
+fn a_type_shapes_chunk_that_is_not_text_is_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    let names: Vec<String> = ["particles/N", "particles/position", "particles/type_shapes"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let positions: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 2.0, 3.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let shapes: Vec<u8> = [2.0f32].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let bytes = gsd_file(
+        &names,
+        &[
+            (0, 3, 1, 1, 2u32.to_le_bytes().to_vec()),
+            (1, 9, 2, 3, positions),
+            (2, 9, 1, 1, shapes),
+        ],
+    );
+    let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
+    assert_eq!(f.unwrap().species[0].radius, Some(0.5));
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
+    assert!(
+        notes.len() == 1
+            && notes[0].contains("particles/type_shapes is not text")
+            && notes[0].contains("radius 0.5"),
+        "{notes:?}"
+    );
+}

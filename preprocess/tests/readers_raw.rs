@@ -597,3 +597,20 @@ fn a_bad_value_in_an_array_names_the_line_of_its_key() {
         );
     }
 }
+
+/// A sidecar value of megabytes is named by its first characters.
+#[test]
+fn a_huge_bad_sidecar_value_is_named_briefly() {
+    let c = Case::new();
+    c.file("pos.f32", &[0u8; 12]);
+    let path = c.sidecar(&format!(
+        r#"{{"mdlod_raw": 1, "positions": {{"file": "pos.f32", "type": "{}"}}}}"#,
+        "y".repeat(3_000_000)
+    ));
+    let e = read(&path).unwrap_err();
+    assert!(
+        e.len() < 400 && e.contains("positions: type `yyy"),
+        "{}",
+        &e[..e.len().min(400)]
+    );
+}

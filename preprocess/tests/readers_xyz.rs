@@ -484,3 +484,22 @@ fn a_comment_line_of_megabytes_is_refused() {
         "{e}"
     );
 }
+
+/// A value of megabytes that is no number is named by its first characters (the whole
+/// token was repeated in the message).
+#[test]
+fn a_huge_bad_value_is_named_briefly() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!("2\nf\nCu 0 0 0\nCu 0 1 {}\n", "x".repeat(5_000_000));
+    let path = write(dir.path(), "huge.xyz", &text);
+    let e = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.len() < 300 && e.contains("huge.xyz:4:") && e.contains("xxx..."),
+        "{}",
+        &e[..e.len().min(300)]
+    );
+}

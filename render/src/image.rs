@@ -105,7 +105,10 @@ impl RgbaImage {
     /// from its header, before the pixels are allocated: a few kilobytes of compressed
     /// zeros can declare gigabytes of them).
     pub fn load_png(path: &Path) -> Result<RgbaImage, RenderError> {
-        let bytes = std::fs::read(path).map_err(|e| RenderError::io(path, e))?;
+        // (A PNG of the largest image is far below this; a device or a huge file is not
+        // read whole.)
+        let bytes = mdlod_format::files::read_capped(path, 1 << 30)
+            .map_err(|e| RenderError::io(path, e))?;
         let png_err = |message: String| RenderError::Png {
             path: path.to_path_buf(),
             action: "reading",

@@ -79,7 +79,8 @@ impl Default for ViewFile {
 impl ViewFile {
     /// Reads and checks a view file.
     pub fn load(path: &Path) -> Result<ViewFile, RenderError> {
-        let text = std::fs::read_to_string(path).map_err(|e| RenderError::View {
+        let text = mdlod_format::files::read_capped_string(path, mdlod_format::files::SMALL_JSON)
+            .map_err(|e| RenderError::View {
             path: path.to_path_buf(),
             message: format!("cannot read it: {e}"),
         })?;
@@ -94,7 +95,8 @@ impl ViewFile {
     /// `None` otherwise, and for a file that cannot be read (its error is said where it
     /// is loaded for the view).
     pub fn load_angleless(path: &Path) -> Option<ViewFile> {
-        let text = std::fs::read_to_string(path).ok()?;
+        let text =
+            mdlod_format::files::read_capped_string(path, mdlod_format::files::SMALL_JSON).ok()?;
         let v = Self::parse(&text).ok()?;
         let json: serde_json::Value = serde_json::from_str(&text).ok()?;
         let given = ["azimuth_deg", "elevation_deg"]
@@ -131,6 +133,11 @@ impl ViewFile {
 
     /// Parses and checks view-file JSON; the error says what is wrong.
     pub fn parse(text: &str) -> Result<ViewFile, String> {
+        // An object, not a list (serde reads a struct from a list of its fields in order).
+        let value: serde_json::Value = serde_json::from_str(text).map_err(|e| e.to_string())?;
+        if !value.is_object() {
+            return Err("a view file is a JSON object (`{\"version\": 1, ...}`)".into());
+        }
         let v: ViewFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
         v.check()?;
         Ok(v)
@@ -144,18 +151,23 @@ impl ViewFile {
                 self.version
             ));
         }
-        let finite = [
-            self.azimuth_deg,
-            self.elevation_deg,
-            self.zoom,
-            self.fov_y_deg,
+        // (A number past single precision's range, 1e300 say, reads as infinite.)
+        let numbers = [
+            ("azimuth_deg", Some(self.azimuth_deg)),
+            ("elevation_deg", Some(self.elevation_deg)),
+            ("zoom", Some(self.zoom)),
+            ("fov_y_deg", Some(self.fov_y_deg)),
+            ("distance", self.distance),
         ]
-        .iter()
-        .chain(self.target.iter().flatten())
-        .chain(self.distance.iter())
-        .all(|v| v.is_finite());
-        if !finite {
-            return Err("a number is not finite".into());
+        .into_iter()
+        .chain(self.target.iter().flatten().map(|&v| ("target", Some(v))));
+        for (key, v) in numbers {
+            if let Some(v) = v.filter(|v| !v.is_finite()) {
+                return Err(format!(
+                    "{key} {v} (not a finite number in single precision: at most about \
+                     3.4e38)"
+                ));
+            }
         }
         if !(-90.0..=90.0).contains(&self.elevation_deg) {
             return Err(format!(

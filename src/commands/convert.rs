@@ -155,8 +155,9 @@ impl BuildArgs {
 /// `.mdlod` file, whole or cut short, is replaced as the option says.
 fn check_replaces_only_mdlod(output: &std::path::Path) -> Result<()> {
     use std::io::Read;
-    let Ok(mut f) = std::fs::File::open(output) else {
-        return Ok(()); // (None there, or unreadable: the write says why.)
+    // (A FIFO in its place is not opened here: that would wait for a writer.)
+    let Ok(mut f) = mdlod_format::files::open(output) else {
+        return Ok(()); // (None there, unreadable or no file: the write says why.)
     };
     if !f.metadata().is_ok_and(|m| m.is_file() && m.len() > 0) {
         return Ok(());

@@ -408,7 +408,9 @@ impl ViewArgs {
     /// `azimuth` would otherwise leave the default angle without a word).
     pub fn note_unknown_fields(&self) {
         let Some(path) = &self.view else { return };
-        let Ok(text) = std::fs::read_to_string(path) else {
+        let Ok(text) =
+            mdlod_format::files::read_capped_string(path, mdlod_format::files::SMALL_JSON)
+        else {
             return; // (The render says why it cannot read it.)
         };
         for field in ViewFile::unknown_fields(&text) {
@@ -2212,7 +2214,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let mut flat: Option<Option<usize>> = None;
     for f in &manifest.frames {
         let path = dir.join(&f.file);
-        if !path.is_file() {
+        // (Something else in its place, a directory say, the reader names.)
+        if std::fs::symlink_metadata(&path).is_err() {
             anyhow::bail!(
                 "{}: lists {} (timestep {}), but the file is missing (deleted or moved \
                  since the batch wrote it): rerun the batch, which converts missing frames \
@@ -2224,6 +2227,17 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             );
         }
         let file = mdlod_format::MdlodFile::open(&path)?;
+        // A manifest edited or mixed with another run's frames labels the images wrongly.
+        if let Some(t) = file.metadata().timestep.filter(|&t| t != f.timestep) {
+            anyhow::bail!(
+                "{}: lists {} as timestep {}, but the file holds timestep {t}: the manifest \
+                 and the frame files disagree (`mdlod verify {}` checks them all)",
+                dir.join(mdlod_preprocess::batch::MANIFEST).display(),
+                f.file,
+                f.timestep,
+                dir.display()
+            );
+        }
         let own_flat = mdlod_render::flat_axis(&file);
         flat = Some(match flat {
             None => own_flat,

@@ -96,7 +96,9 @@ pub fn frames_of(path: &Path) -> Result<Vec<FrameInfo>, ViewerError> {
         path: manifest.clone(),
         message,
     };
-    let text = std::fs::read_to_string(&manifest).map_err(|e| err(e.to_string()))?;
+    let text =
+        mdlod_format::files::read_capped_string(&manifest, mdlod_format::files::MANIFEST_BYTES)
+            .map_err(|e| err(e.to_string()))?;
     let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| err(e.to_string()))?;
     let frames = json
         .get("frames")
@@ -128,7 +130,10 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
                 path: p.clone(),
                 message,
             };
-            let text = std::fs::read_to_string(p).map_err(|e| err(e.to_string()))?;
+            // (A script is a list of actions: far below the manifests' cap.)
+            let text =
+                mdlod_format::files::read_capped_string(p, mdlod_format::files::MANIFEST_BYTES)
+                    .map_err(|e| err(e.to_string()))?;
             let actions: Vec<Action> =
                 serde_json::from_str(&text).map_err(|e| err(e.to_string()))?;
             Some(app::Script::new(actions, opts.script_timeout))

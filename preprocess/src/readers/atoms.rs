@@ -501,7 +501,8 @@ fn number_slow(
         *i += 1;
     }
     let token = &bytes[start..*i];
-    let text = || String::from_utf8_lossy(token).into_owned();
+    // (A token of megabytes is named by its first characters.)
+    let text = || super::shorten(token);
     match parse_slow(token) {
         Some(v) if v.is_finite() => Ok(v),
         Some(_) => Err(ReadError::NonFinite {

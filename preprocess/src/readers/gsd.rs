@@ -789,10 +789,20 @@ impl FrameData<'_> {
     /// the shapes give the sizes (no `particles/diameter`), each then drawn at the
     /// default radius 0.5.
     fn shape_note(&self) -> Option<String> {
-        let shapes = self.shapes()?;
+        let e = self.index.chunk(self.k, "particles/type_shapes")?;
         if self.chunk("particles/diameter", 1, false).ok()?.is_some() {
             return None;
         }
+        if !matches!(e.ty, Ty::I8 | Ty::U8 | Ty::Char) {
+            return Some(format!(
+                "{}: frame {}: particles/type_shapes is not text (a JSON object per type), so \
+                 no type's shape is read: every type is drawn at radius 0.5, the default, \
+                 unless --radius NAME=R gives one",
+                self.path.display(),
+                self.k
+            ));
+        }
+        let shapes = self.shapes()?;
         let names = self.type_names().ok()?;
         let missed: Vec<String> = names
             .iter()

@@ -411,7 +411,7 @@ impl DumpFile {
             path: path.to_path_buf(),
             line: 1,
         };
-        let file = File::open(path).map_err(io)?;
+        let file = mdlod_format::files::open(path).map_err(io)?;
         let size = file.metadata().map_err(io)?.len();
         if size == 0 {
             return Err(ReadError::Empty { at: first_line() });
@@ -1524,7 +1524,7 @@ pub fn format_of_file(path: &Path) -> Option<InputFormat> {
         return Some(f);
     }
     let mut head = Vec::with_capacity(64);
-    File::open(path)
+    mdlod_format::files::open(path)
         .ok()?
         .take(64)
         .read_to_end(&mut head)
@@ -1556,7 +1556,7 @@ fn is_bzip2(data: &[u8]) -> bool {
 /// True when `path` starts with the gzip magic bytes.
 pub fn is_gzip(path: &Path) -> Result<bool, ReadError> {
     let mut magic = [0u8; 2];
-    let mut f = File::open(path).map_err(|source| ReadError::Io {
+    let mut f = mdlod_format::files::open(path).map_err(|source| ReadError::Io {
         path: path.to_path_buf(),
         source,
     })?;
@@ -1573,7 +1573,7 @@ pub fn gzip_without_text(path: &Path) -> bool {
     if !is_gzip(path).unwrap_or(false) {
         return false;
     }
-    let Ok(file) = File::open(path) else {
+    let Ok(file) = mdlod_format::files::open(path) else {
         return false;
     };
     let mut byte = [0u8; 1];
@@ -1592,7 +1592,7 @@ pub fn gunzip_to_file(
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<(u64, bool), ReadError> {
-    let input = File::open(path).map_err(|source| ReadError::Io {
+    let input = mdlod_format::files::open(path).map_err(|source| ReadError::Io {
         path: path.to_path_buf(),
         source,
     })?;

@@ -362,7 +362,11 @@ impl Index {
                     return Err(malformed_in(
                         path,
                         text,
-                        format!("{what}: type `{t}` (use one of {})", allowed.join(", ")),
+                        format!(
+                            "{what}: type `{}` (use one of {})",
+                            super::shorten(t.as_bytes()),
+                            allowed.join(", ")
+                        ),
                     ))
                 }
             };
@@ -384,20 +388,23 @@ impl Index {
                     return Err(malformed_in(
                         path,
                         text,
-                        format!("{what}: byte_order `{o}` (use little or big)"),
+                        format!(
+                            "{what}: byte_order `{}` (use little or big)",
+                            super::shorten(o.as_bytes())
+                        ),
                     ))
                 }
             };
             let file_path = dir.join(&a.file);
-            let file = std::fs::File::open(&file_path).map_err(|e| {
+            let file = mdlod_format::files::open(&file_path).map_err(|e| {
                 // The sidecar and its key name the file: say which asked for it.
                 malformed_in(
                     path,
                     text,
                     format!(
-                        "{what}: `file` {:?}: cannot open {}: {e}",
-                        a.file,
-                        file_path.display()
+                        "{what}: `file` \"{}\": cannot open {}: {e}",
+                        super::shorten(a.file.as_os_str().as_encoded_bytes()),
+                        super::shorten(file_path.as_os_str().as_encoded_bytes())
                     ),
                 )
             })?;
@@ -435,7 +442,10 @@ impl Index {
                 return Err(malformed_in(
                     path,
                     text,
-                    format!("positions: layout `{l}` (use interleaved or planar)"),
+                    format!(
+                        "positions: layout `{}` (use interleaved or planar)",
+                        super::shorten(l.as_bytes())
+                    ),
                 ))
             }
         };

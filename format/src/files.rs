@@ -1,0 +1,101 @@
+//! Opening the files mdlod reads. Only regular files: opening a FIFO for reading blocks
+//! until a writer comes (a `mkfifo` passed as an input hung every command), and a device
+//! such as `/dev/zero` never ends (a view file of it grew the process without bound).
+//! Files read whole (view files, manifests, images) are read under a size cap.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+/// Refuses a path that is not a regular file (following symbolic links), before anything
+/// opens it: a directory, a FIFO, a socket or a device.
+pub fn check_regular(path: &Path) -> std::io::Result<()> {
+    let kind = std::fs::metadata(path)?.file_type();
+    if kind.is_dir() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::IsADirectory,
+            "is a directory, not a file",
+        ));
+    }
+    if !kind.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file (a pipe or a device cannot be read here: write it to a file \
+             first)",
+        ));
+    }
+    Ok(())
+}
+
+/// Opens `path` for reading if it is a regular file ([`check_regular`]).
+pub fn open(path: &Path) -> std::io::Result<File> {
+    check_regular(path)?;
+    File::open(path)
+}
+
+/// Reads the regular file `path` whole if it holds at most `cap` bytes.
+pub fn read_capped(path: &Path, cap: u64) -> std::io::Result<Vec<u8>> {
+    let file = open(path)?;
+    let too_large = |len: u64| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("{len} bytes or more, past the {cap} bytes such a file may hold"),
+        )
+    };
+    let len = file.metadata()?.len();
+    if len > cap {
+        return Err(too_large(len));
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    // (A file growing while it is read stops at the cap.)
+    file.take(cap.saturating_add(1)).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > cap {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
+/// [`read_capped`] as UTF-8 text.
+pub fn read_capped_string(path: &Path, cap: u64) -> std::io::Result<String> {
+    String::from_utf8(read_capped(path, cap)?).map_err(|e| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text: {e}"),
+        )
+    })
+}
+
+/// The most bytes a JSON file mdlod reads whole may hold where nothing else bounds it
+/// (a view file): far past any real one.
+pub const SMALL_JSON: u64 = 1 << 20;
+
+/// The most bytes a batch manifest may hold (a million frames take about 400 MB).
+pub const MANIFEST_BYTES: u64 = 1 << 30;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_regular_files_open_and_whole_reads_are_capped() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = open(dir.path()).unwrap_err().to_string();
+        assert_eq!(e, "is a directory, not a file");
+        let e = open(Path::new("/dev/zero")).unwrap_err().to_string();
+        assert!(e.starts_with("not a regular file"), "{e}");
+        let fifo = dir.path().join("fifo");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            // Refused before it is opened: opening would wait for a writer.
+            let e = read_capped(&fifo, 10).unwrap_err().to_string();
+            assert!(e.starts_with("not a regular file"), "{e}");
+        }
+        let path = dir.path().join("v.json");
+        std::fs::write(&path, "0123456789").unwrap();
+        assert_eq!(read_capped(&path, 10).unwrap(), b"0123456789");
+        let e = read_capped(&path, 9).unwrap_err().to_string();
+        assert!(e.contains("past the 9 bytes"), "{e}");
+        std::fs::write(&path, [0xff, 0xfe]).unwrap();
+        assert!(read_capped_string(&path, 10).is_err());
+    }
+}
