@@ -2040,11 +2040,11 @@ pub fn shade_file(
     lights.check().map_err(RenderError::InvalidOptions)?;
     let data = mdlod_format::sndf::SndfData::load(input)?;
     let view = sndf_camera(input, &data.header.view)?;
+    // Past the level of one texel, every level is that texel.
+    let (w, h) = (data.header.width, data.header.height);
+    let side = w.max(h).max(1);
+    let coarsest = u32::BITS - (side - 1).leading_zeros();
     if let ShadeLevel::Level(l) = level {
-        // Past the level of one texel, every level is that texel.
-        let (w, h) = (data.header.width, data.header.height);
-        let side = w.max(h).max(1);
-        let coarsest = u32::BITS - (side - 1).leading_zeros();
         if l > coarsest {
             return Err(RenderError::InvalidOptions(format!(
                 "level {l}: {}'s {w}x{h} texels halve to one at level {coarsest} (levels 0 \
@@ -2052,6 +2052,21 @@ pub fn shade_file(
                 input.display()
             )));
         }
+    }
+    // (A tiled file's display level counts levels coarser than its view's pixels.)
+    let untiled = data.header.smip.is_none();
+    if let Some(l) = data
+        .header
+        .display_level
+        .filter(|&l| untiled && l > coarsest)
+    {
+        return Err(RenderError::Sndf {
+            path: input.to_path_buf(),
+            message: format!(
+                "its header's display_level {l} is past the level of one texel of its \
+                 {w}x{h} texels ({coarsest})"
+            ),
+        });
     }
     if data.header.smip.is_some() {
         let image = shade_tiles_file(input, &data, &view, lights, background_srgb, level)?;
@@ -2136,6 +2151,47 @@ fn shade_tiles_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A header's display level past the level of one texel (4 for 3x2 texels, whose
+    /// coarsest is 2) is refused, as `--level` there is; the coarsest itself shades.
+    #[test]
+    fn a_display_level_past_one_texel_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v.sndf");
+        let out = dir.path().join("v.png");
+        let save = |display_level| {
+            mdlod_format::sndf::SndfData {
+                header: mdlod_format::sndf::SndfHeader {
+                    width: 3,
+                    height: 2,
+                    bins: 2,
+                    binning: "projected-normals".into(),
+                    rays: 4,
+                    view: serde_json::json!({"version": 1}),
+                    source: None,
+                    display_level: Some(display_level),
+                    smip: None,
+                },
+                hist: vec![[0.0; 4]; 24],
+            }
+            .save(&path)
+            .unwrap();
+        };
+        let lights = sndf::ShadeLights::from(&Lighting::default());
+        save(4);
+        let e = shade_file(&path, &out, &lights, [1.0; 3], ShadeLevel::Display)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("display_level 4 is past the level of one texel of its 3x2 texels (2)"),
+            "{e}"
+        );
+        save(2);
+        assert_eq!(
+            shade_file(&path, &out, &lights, [1.0; 3], ShadeLevel::Display).unwrap(),
+            (1, 1)
+        );
+    }
 
     #[test]
     fn absurd_sizes_and_exposures_are_refused_before_any_work() {
