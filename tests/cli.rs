@@ -3938,6 +3938,29 @@ fn verify_checks_a_batch_directory() {
         "{err}"
     );
     let m = mdlod_preprocess::batch::read_manifest(&out).unwrap();
+    // A frame damaged on disk (one byte of its data flipped): verify finds it and says
+    // how to have it converted again, as a rerun trusts a frame that opens.
+    let damaged = out.join(&m.frames[2].file);
+    let mut bytes = std::fs::read(&damaged).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0xff;
+    std::fs::write(&damaged, bytes).unwrap();
+    let said = {
+        let o = mdlod(&["verify", s(&out)]);
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    assert!(
+        said.contains("delete it and rerun the batch, which converts it again"),
+        "{said}"
+    );
+    std::fs::remove_file(&damaged).unwrap();
+    ok(&[
+        "batch",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&out),
+    ]);
+    ok(&["verify", s(&out)]);
     std::fs::copy(out.join(&m.frames[0].file), out.join(&m.frames[1].file)).unwrap();
     let err = fails(&["verify", s(&out)]);
     assert!(err.contains("1 problem (5 frames verified)"), "{err}");

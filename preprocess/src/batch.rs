@@ -2587,7 +2587,10 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         let path = dir.join(&f.file);
         let problem = match MdlodFile::open(&path).and_then(|file| file.verify().map(|_| file)) {
             Err(e) if !path.exists() => Some(format!("{place}: listed but missing ({e})")),
-            Err(e) => Some(format!("{place}: {e}")),
+            // (A rerun trusts a frame that opens, without reading all its data.)
+            Err(e) => Some(format!(
+                "{place}: {e}; delete it and rerun the batch, which converts it again"
+            )),
             Ok(file) => {
                 let checksum = format!("{:016x}", file.header().section_table_checksum);
                 let m = file.metadata();

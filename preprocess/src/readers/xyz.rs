@@ -112,13 +112,25 @@ impl Index {
             std::iter::from_fn(|| cursor.next_line()).find(|(_, l)| !trim(l).is_empty())
         {
             let n: usize = parse_int(line).ok_or_else(|| {
+                let digits = {
+                    let t = trim(line);
+                    !t.is_empty() && t.iter().all(u8::is_ascii_digit)
+                };
                 ctx.malformed(
                     at,
-                    format!(
-                        "expected the atom count of frame {} (an integer), found `{}`",
-                        frames.len(),
-                        shorten(line)
-                    ),
+                    if digits {
+                        format!(
+                            "the atom count of frame {}, `{}`, is too large to be one",
+                            frames.len(),
+                            shorten(line)
+                        )
+                    } else {
+                        format!(
+                            "expected the atom count of frame {} (an integer), found `{}`",
+                            frames.len(),
+                            shorten(line)
+                        )
+                    },
                 )
             })?;
             let timestep = cursor.next_line().and_then(|(_, c)| comment_timestep(c));
@@ -576,6 +588,12 @@ mod tests {
             );
             whole
         };
+        // A count past any machine's: too large, not "no integer".
+        let e = index("99999999999999999999\nx\n").unwrap_err().to_string();
+        assert!(
+            e.contains("d.xyz:1: the atom count of frame 0, `99999999999999999999`, is too large"),
+            "{e}"
+        );
         // Frame 1 says 50 atoms and holds 2: frame 2's count line is read as its third,
         // and the file ends before its 50th.
         let e = index(
