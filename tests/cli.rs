@@ -3470,7 +3470,7 @@ fn the_cell_is_drawn_over_the_picture() {
             .count()
     };
     let plain = render(&[]);
-    let green = render(&["--cell", "#00ff00"]);
+    let green = render(&["--cell=#00ff00"]);
     assert_eq!(near(&plain, [0, 255, 0]), 0);
     assert!(
         near(&green, [0, 255, 0]) > 60,
@@ -3490,8 +3490,20 @@ fn the_cell_is_drawn_over_the_picture() {
         "--cell",
     ]);
     assert!(e.contains("--cell has no effect with --mode sndf"), "{e}");
-    let e = fails(&["render", s(&file), "-o", s(&png), "--cell", "nocolour"]);
+    let e = fails(&["render", s(&file), "-o", s(&png), "--cell=nocolour"]);
     assert!(e.contains("--cell \"nocolour\""), "{e}");
+    // The colour takes `=`: a file after a bare --cell is the file.
+    ok(&[
+        "render",
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--cell",
+        s(&file),
+    ]);
     // An XYZ file without a lattice has no cell.
     let xyz = dir.path().join("a.xyz");
     std::fs::write(&xyz, "2\nno lattice\nAr 0 0 0\nAr 3 0 0\n").unwrap();
@@ -3534,7 +3546,7 @@ fn the_cell_is_drawn_over_the_picture() {
         let rows: Vec<u32> = (0..h).filter(|&y| (0..w).any(|x| on(x, y))).collect();
         (cols[0], cols[cols.len() - 1], rows[0], rows[rows.len() - 1])
     };
-    let (x0, x1, y0, y1) = drawn(&["--cell", "#ffffff"]);
+    let (x0, x1, y0, y1) = drawn(&["--cell=#ffffff"]);
     assert!(
         x0 >= 2 && x1 < w - 2 && y0 >= 2 && y1 < h - 2,
         "{x0} {x1} {y0} {y1}"
@@ -6159,6 +6171,21 @@ fn render_names_type_numbers_and_missing_view_files_plainly() {
     assert!(
         e.contains("no species named \"Cu\" (the file's species are named 1)")
             && e.contains("name the type here (1), or convert with --species-name 1=Cu"),
+        "{e}"
+    );
+    // One species styled twice by one option: refused, not the last taken silently.
+    let e = fails(&[
+        "render",
+        s(&frame),
+        "-o",
+        s(&png),
+        "--species-colour",
+        "1=#00ff00",
+        "--species-colour",
+        "1=#ff0000",
+    ]);
+    assert!(
+        e.contains("--species-colour names \"1\" twice (\"1=#00ff00\", then \"1=#ff0000\")"),
         "{e}"
     );
     let missing = dir.path().join("nofile.json");

@@ -118,9 +118,16 @@ pub struct Args {
     #[command(flatten)]
     pub style: StyleArgs,
     /// Draw the simulation cell's edges (triclinic too), hidden behind the spheres in
-    /// front of them (splats and the volume: over them); optionally in a colour (default:
-    /// dark grey on light backgrounds, light grey on dark ones).
-    #[arg(long, value_name = "COLOUR", num_args = 0..=1, default_missing_value = "auto")]
+    /// front of them (splats and the volume: over them); optionally in a colour given
+    /// with `=` (`--cell=#1f77b4`; default: dark grey on light backgrounds, light grey on
+    /// dark ones), so that `--cell frame.mdlod` reads the file.
+    #[arg(
+        long,
+        value_name = "COLOUR",
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "auto"
+    )]
     pub cell: Option<String>,
     /// The cell's lines' width in pixels [default: the image's shorter side / 360, at
     /// least 1.5].
@@ -249,6 +256,28 @@ impl StyleArgs {
                 .map(|(a, b)| (a.trim().to_string(), b.trim().to_string()))
                 .with_context(|| format!("{s:?}: expected NAME={what}"))
         };
+        // A species styled twice by one option would take the last silently.
+        let once = |option: &str, given: &[String]| -> Result<()> {
+            let names: Vec<&str> = given
+                .iter()
+                .map(|g| g.split_once('=').map_or(g.as_str(), |(n, _)| n).trim())
+                .collect();
+            if let Some((i, n)) = names
+                .iter()
+                .enumerate()
+                .find(|(i, n)| names[..*i].contains(n))
+            {
+                let first = names.iter().position(|m| m == n).unwrap_or(0);
+                anyhow::bail!(
+                    "{option} names {n:?} twice ({:?}, then {:?}): give it once",
+                    given[first],
+                    given[i]
+                );
+            }
+            Ok(())
+        };
+        once("--species-colour", &self.species_colour)?;
+        once("--species-radius", &self.species_radius)?;
         let mut colours = vec![];
         for c in &self.species_colour {
             let (name, colour) = split(c, "COLOUR")?;
