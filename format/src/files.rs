@@ -10,7 +10,11 @@ use std::path::Path;
 /// Refuses a path that is not a regular file (following symbolic links), before anything
 /// opens it: a directory, a FIFO, a socket or a device.
 pub fn check_regular(path: &Path) -> std::io::Result<()> {
-    let kind = std::fs::metadata(path)?.file_type();
+    check_kind(std::fs::metadata(path)?.file_type())
+}
+
+/// [`check_regular`] of a file's type (also what [`crate::mmap::map_file`] maps).
+pub fn check_kind(kind: std::fs::FileType) -> std::io::Result<()> {
     if kind.is_dir() {
         return Err(std::io::Error::new(
             std::io::ErrorKind::IsADirectory,

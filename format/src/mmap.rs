@@ -11,19 +11,7 @@ pub use memmap2::{Advice, Mmap};
 /// Every reader in mdlod (the `.mdlod` reader and the dump readers) goes through here, so
 /// the project holds exactly one `unsafe` block for file mapping.
 pub fn map_file(file: &File) -> std::io::Result<memmap2::Mmap> {
-    let kind = file.metadata()?.file_type();
-    if kind.is_dir() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::IsADirectory,
-            "is a directory, not a file",
-        ));
-    }
-    if !kind.is_file() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            "not a regular file (a pipe or a device cannot be mapped: write it to a file first)",
-        ));
-    }
+    crate::files::check_kind(file.metadata()?.file_type())?;
     #[allow(unsafe_code)]
     // SAFETY: the mapping is read-only and every byte read from it is treated as untrusted
     // (lengths and offsets are validated before use, slices are produced with bytemuck's

@@ -635,8 +635,14 @@ fn two_particles(extra: &[(&str, u8, u32, Vec<u8>)]) -> Vec<u8> {
     for (name, ty, m, data) in extra {
         names.push(name.to_string());
         // (The per-type chunks hold a row per type; the others one per particle.)
+        let size = match ty {
+            2 | 6 => 2,
+            3 | 7 | 9 => 4,
+            4 | 8 | 10 => 8,
+            _ => 1,
+        };
         let n = if *name == "particles/types" || *name == "particles/type_shapes" {
-            data.len() as u64 / u64::from(*m)
+            data.len() as u64 / u64::from(*m) / size
         } else {
             2
         };
@@ -1036,23 +1042,8 @@ fn a_batch_over_a_growing_gsd_file_converts_only_the_new_frames() {
 #[test]
 fn a_type_shapes_chunk_that_is_not_text_is_noted() {
     let dir = tempfile::tempdir().unwrap();
-    let names: Vec<String> = ["particles/N", "particles/position", "particles/type_shapes"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-    let positions: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 2.0, 3.0]
-        .iter()
-        .flat_map(|v| v.to_le_bytes())
-        .collect();
     let shapes: Vec<u8> = [2.0f32].iter().flat_map(|v| v.to_le_bytes()).collect();
-    let bytes = gsd_file(
-        &names,
-        &[
-            (0, 3, 1, 1, 2u32.to_le_bytes().to_vec()),
-            (1, 9, 2, 3, positions),
-            (2, 9, 1, 1, shapes),
-        ],
-    );
+    let bytes = two_particles(&[("particles/type_shapes", 9, 1, shapes)]);
     let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     assert_eq!(f.unwrap().species[0].radius, Some(0.5));
     let notes = DumpFile::open(&path)
