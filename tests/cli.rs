@@ -3504,6 +3504,12 @@ fn the_cell_is_drawn_over_the_picture() {
         "--cell",
         s(&file),
     ]);
+    // A colour there (the old `--cell red`) is named as one.
+    let e = fails(&["render", "-o", s(&png), "--cell", "red"]);
+    assert!(
+        e.contains("red: no such file; is it --cell's colour? A colour goes with `=`: --cell=red"),
+        "{e}"
+    );
     // An XYZ file without a lattice has no cell.
     let xyz = dir.path().join("a.xyz");
     std::fs::write(&xyz, "2\nno lattice\nAr 0 0 0\nAr 3 0 0\n").unwrap();
@@ -6068,6 +6074,11 @@ fn sample_says_the_error_reached_and_the_budget_that_stopped_it() {
         ),
         "{already}"
     );
+    let hidden = sample(&["--hide-species", "1"]);
+    assert!(
+        hidden.contains("note: every species is hidden: nothing is sampled"),
+        "{hidden}"
+    );
     let one = sample(&["--budget", "40"]);
     assert!(
         one.contains(&format!(
@@ -6272,6 +6283,12 @@ fn a_movie_says_nothing_of_the_radii_of_hidden_species() {
     );
     let hidden = ok(&[&args[..], &["--hide-species", "B"]].concat());
     assert!(!hidden.contains("radii change"), "{hidden}");
+    assert!(!hidden.contains("every species is hidden"), "{hidden}");
+    let all = ok(&[&args[..], &["--hide-species", "B", "--hide-species", "A"]].concat());
+    assert!(
+        all.contains("note: every species is hidden: the images show the background only"),
+        "{all}"
+    );
 }
 
 /// Hostile paths and files in place of inputs: a device or a FIFO is refused before it

@@ -2071,8 +2071,10 @@ pub fn batch(
                 let first = texts.keys().next().cloned().unwrap_or_default();
                 let steps: std::collections::BTreeSet<u64> =
                     texts.values().flatten().copied().collect();
-                // Which frames, when not every one converted.
-                let which = if steps.len() == converted_frames {
+                // Which frames, when not every one converted (and the note is about
+                // frames, not about a whole file).
+                let which = if steps.len() == converted_frames || about == crate::readers::GZIP_CUT
+                {
                     String::new()
                 } else {
                     format!(" ({})", timesteps_text(&steps))
@@ -2147,13 +2149,16 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         return Err(manifest_err(
             out_dir,
             format!(
-                "shard{s} {} of {n} {has} no manifest yet (present: {})",
+                "shard{s} {} of {n} {has} no manifest yet (the manifests of shard{} {} are \
+                 there): run or rerun {} before merging",
                 missing.join(", "),
+                if present.len() == 1 { "" } else { "s" },
                 present
                     .iter()
                     .map(u32::to_string)
                     .collect::<Vec<_>>()
-                    .join(", ")
+                    .join(", "),
+                if missing.len() == 1 { "it" } else { "them" }
             ),
         ));
     }

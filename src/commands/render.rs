@@ -774,6 +774,13 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    // `--cell red frame.mdlod`: the colour takes `=`, so `red` was read as the file.
+    let named = args.file.to_string_lossy();
+    if args.cell.as_deref() == Some("auto") && !args.file.exists() && parse_colour(&named).is_ok() {
+        anyhow::bail!(
+            "{named}: no such file; is it --cell's colour? A colour goes with `=`: --cell={named}"
+        );
+    }
     args.camera.note_unknown_fields();
     let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
@@ -2523,6 +2530,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     );
     if let Some(note) = stale_images_note(&args.output, n) {
         println!("{note}");
+    }
+    if names.iter().all(|n| args.style.hide_species.contains(n)) {
+        println!("  note: every species is hidden: the images show the background only");
     }
     if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
         println!("{note}");

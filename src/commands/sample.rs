@@ -215,7 +215,15 @@ pub fn run(args: Args) -> Result<()> {
         r.error_px,
         r.total_time.as_secs_f64() * 1e3
     );
-    if !args.style.clip.is_empty() && r.particles_drawn + r.nodes_drawn == 0 {
+    let every_species_hidden = mdlod_format::MdlodFile::open(&args.file).is_ok_and(|f| {
+        f.metadata()
+            .species
+            .iter()
+            .all(|s| args.style.hide_species.contains(&s.name))
+    });
+    if every_species_hidden {
+        println!("  note: every species is hidden: nothing is sampled");
+    } else if !args.style.clip.is_empty() && r.particles_drawn + r.nodes_drawn == 0 {
         println!(
             "  note: nothing is sampled: {}",
             super::render::CLIP_CUTS_ALL

@@ -255,6 +255,10 @@ impl fmt::Display for InputFormat {
     }
 }
 
+/// What the note on a gzip dump cut short starts with: it is about the file, not the
+/// frames that carry it (the last two, as the cut may fall inside the last).
+pub const GZIP_CUT: &str = "compressed stream cut short";
+
 /// Choices for [`DumpFile::read_frame`].
 #[derive(Clone, Debug, Default)]
 pub struct ReadOptions {
@@ -665,7 +669,7 @@ impl DumpFile {
             // (Said first what it is: a batch groups notes by what precedes their first
             // `: `, and other notes about this file would hide it.)
             notes.push(format!(
-                "compressed stream cut short: {} ends early (a run still writing it, or a \
+                "{GZIP_CUT}: {} ends early (a run still writing it, or a \
                  copy cut short): the text before the cut is read, a frame it cuts is left \
                  out, and a rerun reads the rest once the file is complete",
                 gz.display()
