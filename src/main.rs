@@ -72,7 +72,8 @@ enum Command {
     Batch(commands::batch::Args),
     Info(commands::info::Args),
     Verify(commands::verify::Args),
-    Render(commands::render::Args),
+    // (Boxed: its options make it far larger than the other commands'.)
+    Render(Box<commands::render::Args>),
     Sample(commands::sample::Args),
     Shade(commands::shade::Args),
     Generate(commands::generate::Args),
@@ -95,7 +96,7 @@ fn main() -> std::process::ExitCode {
         Command::Render(a) => matches
             .subcommand_matches("render")
             .map_or(Ok(()), |m| commands::render::check_mode_options(&a, m))
-            .and_then(|()| commands::render::run(a)),
+            .and_then(|()| commands::render::run(*a)),
         Command::Sample(a) => commands::sample::run(a),
         Command::Shade(a) => matches
             .subcommand_matches("shade")

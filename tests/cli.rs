@@ -6356,3 +6356,80 @@ fn devices_fifos_and_odd_view_files_are_refused_plainly() {
         "{e}"
     );
 }
+
+/// The spheres and S-NDF modes take a light (direction in view space, colour), the
+/// ambient, diffuse and highlight weights, and the BRDF; other modes refuse them.
+#[test]
+fn render_takes_a_light_and_its_reflectance() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("one.xyz");
+    std::fs::write(&xyz, "1\nProperties=species:S:1:pos:R:3\nAr 0 0 0\n").unwrap();
+    let file = dir.path().join("one.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file)]);
+    let png = dir.path().join("lit.png");
+    // The summed (r, g, b) of the image's left and right halves.
+    let halves = |extra: &[&str]| {
+        ok(&[
+            &[
+                "render",
+                s(&file),
+                "-o",
+                s(&png),
+                "--width",
+                "64",
+                "--height",
+                "64",
+            ][..],
+            &["--ortho", "--background", "#000000"],
+            extra,
+        ]
+        .concat());
+        let (w, _, px) = read_png(&png);
+        let mut sums = [[0u64; 3]; 2];
+        for (i, p) in px.chunks(4).enumerate() {
+            let half = usize::from(i as u32 % w >= w / 2);
+            for k in 0..3 {
+                sums[half][k] += u64::from(p[k]);
+            }
+        }
+        sums
+    };
+    for mode in ["spheres", "sndf"] {
+        let right = halves(&["--mode", mode, "--light", "1,0,0.3"]);
+        assert!(2 * right[1][0] > 3 * right[0][0], "{mode}: {right:?}");
+        let left = halves(&["--mode", mode, "--light", "-1,0,0.3:#ff0000"]);
+        assert!(2 * left[0][0] > 3 * left[1][0], "{mode}: {left:?}");
+        // A red light adds no green nor blue: those are the ambient's on both sides.
+        for k in [1, 2] {
+            let (a, b) = (left[0][k] as f64, left[1][k] as f64);
+            assert!((a - b).abs() <= 0.02 * a.max(b), "{mode}: {left:?}");
+        }
+    }
+    // Only the ambient: both halves alike.
+    let flat = halves(&["--ambient", "1", "--diffuse", "0", "--brdf", "lambert"]);
+    let (a, b) = (flat[0][0] as f64, flat[1][0] as f64);
+    assert!((a - b).abs() < 0.05 * a.max(b), "{flat:?}");
+    let render =
+        |extra: &[&str]| fails(&[&["render", s(&file), "-o", s(&png)][..], extra].concat());
+    for (extra, says) in [
+        (
+            vec!["--brdf", "lambert", "--specular", "0.5"],
+            "--specular has no effect with --brdf lambert",
+        ),
+        (
+            vec!["--ambient", "-1"],
+            "--ambient -1 (must be a finite number, 0 or more)",
+        ),
+        (
+            vec!["--mode", "splat", "--light", "1,0,0"],
+            "--light has no effect with --mode splat",
+        ),
+        (
+            vec!["--light", "0,0,0"],
+            "--light: light \"0,0,0\": the direction must be",
+        ),
+    ] {
+        let e = render(&extra);
+        assert!(e.contains(says), "{extra:?}: {e}");
+    }
+}

@@ -42,6 +42,29 @@ pub struct Args {
     /// listing species wholly hidden behind others).
     #[arg(long)]
     pub no_occlusion: bool,
+    /// The light of the spheres and S-NDF modes: direction towards it in view space (x
+    /// right, y up, z to the viewer), optionally with a colour, e.g. `-1,1,1` or
+    /// `1,0,0.5:#ffe0c0` [default: white, from the upper left]. One light here; `mdlod
+    /// shade` lights sampled S-NDFs with several.
+    #[arg(long, value_name = "X,Y,Z[:COLOUR]", allow_hyphen_values = true)]
+    pub light: Option<String>,
+    /// Ambient light, spheres and S-NDF modes [default: 0.15].
+    #[arg(long)]
+    pub ambient: Option<f32>,
+    /// Lambert weight, spheres and S-NDF modes [default: 0.85].
+    #[arg(long)]
+    pub diffuse: Option<f32>,
+    /// Reflectance, spheres and S-NDF modes: Lambert only, or Lambert plus a Blinn-Phong
+    /// highlight [default: blinn-phong].
+    #[arg(long, value_enum)]
+    pub brdf: Option<super::shade::Brdf>,
+    /// Blinn-Phong highlight weight (with --brdf blinn-phong) [default: 0.25].
+    #[arg(long)]
+    pub specular: Option<f32>,
+    /// Blinn-Phong highlight exponent: larger is a smaller, sharper highlight [default:
+    /// 32].
+    #[arg(long)]
+    pub exponent: Option<f32>,
     /// Fit the view to every particle: by default particles far from the rest (lost
     /// atoms flying off a non-periodic box, a sparse vapour) are left out of the fit
     /// when they would shrink the material to a fraction of the image (a note says how
@@ -548,8 +571,53 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("attribute_range", &[Spheres, Sndf, Splat]),
         ("log_scale", &[Spheres, Sndf, Splat]),
         ("cell", &[Spheres, Splat, SplatOver, Density, Iso]),
+        ("light", STYLED),
+        ("ambient", STYLED),
+        ("diffuse", STYLED),
+        ("brdf", STYLED),
+        ("specular", STYLED),
+        ("exponent", STYLED),
     ]
 };
+
+/// The spheres' and S-NDFs' lighting the options ask for (the renderer's default where
+/// they give none).
+fn lighting(args: &Args) -> Result<mdlod_render::Lighting> {
+    let mut l = mdlod_render::Lighting::default();
+    if let Some(s) = &args.light {
+        let (direction, colour) = super::shade::parse_light(s).context("--light")?;
+        l.direction_view = direction;
+        l.colour = colour;
+    }
+    for (option, given, slot) in [
+        ("--ambient", args.ambient, &mut l.ambient),
+        ("--diffuse", args.diffuse, &mut l.diffuse),
+        ("--specular", args.specular, &mut l.specular),
+        ("--exponent", args.exponent, &mut l.shininess),
+    ] {
+        if let Some(v) = given {
+            if !(v.is_finite() && v >= 0.0) {
+                anyhow::bail!("{option} {v} (must be a finite number, 0 or more)");
+            }
+            *slot = v;
+        }
+    }
+    if matches!(args.brdf, Some(super::shade::Brdf::Lambert)) {
+        if let Some(option) = [
+            (args.specular.is_some(), "--specular"),
+            (args.exponent.is_some(), "--exponent"),
+        ]
+        .iter()
+        .find_map(|&(given, o)| given.then_some(o))
+        {
+            anyhow::bail!(
+                "{option} has no effect with --brdf lambert: it sets the Blinn-Phong highlight"
+            );
+        }
+        l.specular = 0.0;
+    }
+    Ok(l)
+}
 
 fn mode_name(mode: Mode) -> String {
     use clap::ValueEnum;
@@ -848,6 +916,7 @@ pub fn run(args: Args) -> Result<()> {
         spp: args.spp,
         error_px: args.screen_error,
         budget: args.budget,
+        lighting: lighting(&args)?,
         transparent: transparent(args.background.as_deref()),
         background: parse_colour(
             args.background

@@ -86,7 +86,7 @@ pub enum Brdf {
 }
 
 /// Parses `x,y,z` or `x,y,z:colour`.
-fn parse_light(s: &str) -> Result<(Vec3, [f32; 3])> {
+pub(super) fn parse_light(s: &str) -> Result<(Vec3, [f32; 3])> {
     let (dir, colour) = match s.split_once(':') {
         Some((d, c)) => (d, Some(c)),
         None => (s, None),
