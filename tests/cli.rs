@@ -3187,6 +3187,14 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     ]
     .concat());
     assert!(out.contains("(1 species in their colours)"), "{out}");
+    // Every species hidden: the key is empty, and said to be.
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&with)][..],
+        &["--width", "480", "--height", "240", "--legend-in-image"],
+        &["--hide-species", "1"],
+    ]
+    .concat());
+    assert!(out.contains("(an empty key: no species is shown)"), "{out}");
     // A movie: every frame gets the legend.
     let d = dir.path().join("m.d");
     ok(&["batch", s(&input), "-o", s(&d), "--attribute", "c_pe"]);

@@ -1610,9 +1610,14 @@ fn build_legend(
                     (s.name.clone(), colour)
                 })
                 .collect();
+            let what = match shown.len() {
+                // (Every species hidden, or none in view.)
+                0 => "an empty key: no species is shown".to_string(),
+                n => format!("{n} species in their colours"),
+            };
             (
                 legend::species_key(&shown, args.legend_title.as_deref()),
-                format!("{} species in their colours", shown.len()),
+                what,
             )
         }
     };
