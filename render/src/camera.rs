@@ -72,7 +72,7 @@ impl Bounds {
 }
 
 /// The eight corners of a box, in double precision.
-fn corners(b: &Bounds) -> [glam::DVec3; 8] {
+pub fn corners(b: &Bounds) -> [glam::DVec3; 8] {
     std::array::from_fn(|i| {
         let pick = |bit: usize, lo: f32, hi: f32| f64::from(if i & bit == 0 { lo } else { hi });
         glam::DVec3::new(

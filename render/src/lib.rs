@@ -162,21 +162,11 @@ impl ViewSpec {
     /// [`ViewSpec::Default`] made explicit for data flat across `flat_axis` (see
     /// [`flat_axis`]; `None`: three-dimensional data); any other view as it is.
     pub fn with_flat_axis(&self, flat_axis: Option<usize>) -> ViewSpec {
-        // A view file that gives no angle (nor do the changes to it) takes the default
-        // view's, as the command line's options do.
-        if let (ViewSpec::File(path) | ViewSpec::FileWith(path, _), Some(axis)) = (self, flat_axis)
-        {
-            let changes = match self {
-                ViewSpec::FileWith(_, c) => *c,
-                _ => ViewChanges::default(),
+        if let ViewSpec::File(_) | ViewSpec::FileWith(..) = self {
+            return match (self.angleless_file(), flat_axis) {
+                (Some((v, changes)), Some(axis)) => Self::facing(v, changes, axis),
+                _ => self.clone(),
             };
-            let angleless = changes.azimuth_deg.is_none() && changes.elevation_deg.is_none();
-            if let Some(mut v) = ViewFile::load_angleless(path).filter(|_| angleless) {
-                (v.azimuth_deg, v.elevation_deg) = facing_angles(axis);
-                changes.apply(&mut v);
-                return ViewSpec::View(v);
-            }
-            return self.clone();
         }
         let ViewSpec::Default {
             zoom,
@@ -205,14 +195,50 @@ impl ViewSpec {
         }
     }
 
+    /// Whether the view's angles depend on the data ([`ViewSpec::resolved`]): the
+    /// default view, and a view file (it may give no angle).
+    pub fn depends_on_data(&self) -> bool {
+        matches!(
+            self,
+            ViewSpec::Default { .. } | ViewSpec::File(_) | ViewSpec::FileWith(..)
+        )
+    }
+
     /// [`ViewSpec::Default`] made explicit for `file`'s data; any other view as it is.
     pub fn resolved(&self, file: &MdlodFile) -> ViewSpec {
         match self {
-            ViewSpec::Default { .. } | ViewSpec::File(_) | ViewSpec::FileWith(..) => {
-                self.with_flat_axis(flat_axis(file))
-            }
+            ViewSpec::Default { .. } => self.with_flat_axis(flat_axis(file)),
+            // (The data is looked at only for a file that gives no angle.)
+            ViewSpec::File(_) | ViewSpec::FileWith(..) => match self.angleless_file() {
+                Some((v, changes)) => match flat_axis(file) {
+                    Some(axis) => Self::facing(v, changes, axis),
+                    None => self.clone(),
+                },
+                None => self.clone(),
+            },
             _ => self.clone(),
         }
+    }
+
+    /// A view file's settings and the changes to them, where neither gives an angle (it
+    /// then takes the default view's, as the command line's options do).
+    fn angleless_file(&self) -> Option<(ViewFile, ViewChanges)> {
+        let (path, changes) = match self {
+            ViewSpec::File(path) => (path, ViewChanges::default()),
+            ViewSpec::FileWith(path, changes) => (path, *changes),
+            _ => return None,
+        };
+        if changes.azimuth_deg.is_some() || changes.elevation_deg.is_some() {
+            return None;
+        }
+        Some((ViewFile::load_angleless(path)?, changes))
+    }
+
+    /// The view file `v`, with `changes`, facing a plane normal to `axis`.
+    fn facing(mut v: ViewFile, changes: ViewChanges, axis: usize) -> ViewSpec {
+        (v.azimuth_deg, v.elevation_deg) = facing_angles(axis);
+        changes.apply(&mut v);
+        ViewSpec::View(v)
     }
 }
 
@@ -1200,10 +1226,7 @@ pub fn frame_setup(
     check_numbers(opts)?;
     // The default view (and a view file giving no angle) faces flat data square on.
     let resolved;
-    let opts = if matches!(
-        opts.view,
-        ViewSpec::Default { .. } | ViewSpec::File(_) | ViewSpec::FileWith(..)
-    ) {
+    let opts = if opts.view.depends_on_data() {
         resolved = RenderOptions {
             view: opts.view.resolved(file),
             ..opts.clone()
@@ -2042,8 +2065,7 @@ pub fn shade_file(
     let view = sndf_camera(input, &data.header.view)?;
     // Past the level of one texel, every level is that texel.
     let (w, h) = (data.header.width, data.header.height);
-    let side = w.max(h).max(1);
-    let coarsest = u32::BITS - (side - 1).leading_zeros();
+    let coarsest = sndf::coarsest_level(w, h);
     if let ShadeLevel::Level(l) = level {
         if l > coarsest {
             return Err(RenderError::InvalidOptions(format!(

@@ -1045,8 +1045,7 @@ impl Sndf {
 
     /// Down-samplings until the image is one texel (each coarser level is that texel).
     pub fn coarsest_level(&self) -> u32 {
-        let side = self.width.max(self.height).max(1);
-        u32::BITS - (side - 1).leading_zeros()
+        coarsest_level(self.width, self.height)
     }
 
     /// The next coarser S-MIP level: each texel holds the sum of its 2×2 children's bins
@@ -1122,6 +1121,13 @@ impl Sndf {
             view: TexelView::of_view_file(&d.header.view, d.header.width, d.header.height),
         }
     }
+}
+
+/// Down-samplings of `width`×`height` texels until one texel is left (each coarser
+/// level is that texel).
+pub fn coarsest_level(width: u32, height: u32) -> u32 {
+    let side = width.max(height).max(1);
+    u32::BITS - (side - 1).leading_zeros()
 }
 
 #[cfg(test)]

@@ -97,8 +97,7 @@ impl ViewFile {
     pub fn load_angleless(path: &Path) -> Option<ViewFile> {
         let text =
             mdlod_format::files::read_capped_string(path, mdlod_format::files::SMALL_JSON).ok()?;
-        let v = Self::parse(&text).ok()?;
-        let json: serde_json::Value = serde_json::from_str(&text).ok()?;
+        let (v, json) = Self::parse_with_json(&text).ok()?;
         let given = ["azimuth_deg", "elevation_deg"]
             .iter()
             .any(|k| json.get(k).is_some());
@@ -133,14 +132,19 @@ impl ViewFile {
 
     /// Parses and checks view-file JSON; the error says what is wrong.
     pub fn parse(text: &str) -> Result<ViewFile, String> {
+        Self::parse_with_json(text).map(|(v, _)| v)
+    }
+
+    /// [`Self::parse`], with the JSON object it was read from.
+    fn parse_with_json(text: &str) -> Result<(ViewFile, serde_json::Value), String> {
         // An object, not a list (serde reads a struct from a list of its fields in order).
         let value: serde_json::Value = serde_json::from_str(text).map_err(|e| e.to_string())?;
         if !value.is_object() {
             return Err("a view file is a JSON object (`{\"version\": 1, ...}`)".into());
         }
-        let v: ViewFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
+        let v = ViewFile::deserialize(&value).map_err(|e| e.to_string())?;
         v.check()?;
-        Ok(v)
+        Ok((v, value))
     }
 
     /// Checks the numbers: the version, finite values, angles and distances in range.

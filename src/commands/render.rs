@@ -596,9 +596,7 @@ fn lighting(args: &Args) -> Result<mdlod_render::Lighting> {
         ("--exponent", args.exponent, &mut l.shininess),
     ] {
         if let Some(v) = given {
-            if !(v.is_finite() && v >= 0.0) {
-                anyhow::bail!("{option} {v} (must be a finite number, 0 or more)");
-            }
+            super::shade::check_weights(&[(option, v)])?;
             *slot = v;
         }
     }
@@ -1976,14 +1974,8 @@ fn turn_reach(
             ..c.clone()
         };
         let m = c.clip_from_view(aspect) * c.view_from_world();
-        for i in 0..8 {
-            let pick = |k: usize, lo: f32, hi: f32| if i >> k & 1 == 1 { hi } else { lo };
-            let p = mdlod_render::glam::Vec3::new(
-                pick(0, bounds.min.x, bounds.max.x),
-                pick(1, bounds.min.y, bounds.max.y),
-                pick(2, bounds.min.z, bounds.max.z),
-            );
-            let clip = m * p.extend(1.0);
+        for p in mdlod_render::camera::corners(bounds) {
+            let clip = m * p.as_vec3().extend(1.0);
             if clip.w > 0.0 {
                 for k in 0..2 {
                     reach[k] = reach[k].max(f64::from((clip[k] / clip.w).abs()));

@@ -85,6 +85,16 @@ pub enum Brdf {
     BlinnPhong,
 }
 
+/// Refuses a lighting weight or exponent that is not a finite number, 0 or more.
+pub(super) fn check_weights(weights: &[(&str, f32)]) -> Result<()> {
+    for &(option, v) in weights {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{option} {v} (must be a finite number, 0 or more)");
+        }
+    }
+    Ok(())
+}
+
 /// Parses `x,y,z` or `x,y,z:colour`.
 pub(super) fn parse_light(s: &str) -> Result<(Vec3, [f32; 3])> {
     let (dir, colour) = match s.split_once(':') {
@@ -185,16 +195,12 @@ pub fn run(args: Args) -> Result<()> {
         .collect::<Vec<_>>();
     super::check_output("-o", &args.output, &inputs)?;
     super::check_png_name("-o", &args.output)?;
-    for (option, v) in [
+    check_weights(&[
         ("--ambient", args.ambient),
         ("--diffuse", args.diffuse),
         ("--specular", args.specular),
         ("--exponent", args.exponent),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            bail!("{option} {v} (must be a finite number, 0 or more)");
-        }
-    }
+    ])?;
     let mut lights = args
         .lights
         .iter()
