@@ -170,6 +170,7 @@ fn main() {
             species_index: &probe.species_index,
             species: &species,
             attribute: None,
+            radii: None,
         };
         let params = BuildParams::default();
         let time_build = |t: usize| {

@@ -5592,34 +5592,132 @@ fn splats_colour_their_projection_through_a_map() {
     ]);
 }
 
-/// A text input's per-particle sizes (a granular run's `radius`, an extended XYZ radius
-/// property) are not read as radii: the conversion says so and how to use them.
+/// Per-particle sizes in a text or binary dump (a granular run's `radius` or `diameter`
+/// column, an extended XYZ radius property) are each particle's radius: the file keeps
+/// them, whole or in chunks alike, `info` shows them, every mode renders them, and
+/// `--radius` gives a type one radius again.
 #[test]
-fn a_radius_column_is_noted_not_silently_dropped() {
+fn a_granular_runs_grain_sizes_are_kept_per_particle() {
     let dir = tempfile::tempdir().unwrap();
-    let xyz = dir.path().join("r.xyz");
+    let d = |n: &str| dir.path().join(n);
+    let info = |f: &Path| -> serde_json::Value {
+        serde_json::from_str(&ok(&["info", s(f), "--json"])).unwrap()
+    };
+    let text = lammps_sample_path("granular.dump");
+    let out = ok(&["convert", s(&text), "-o", s(&d("g.mdlod")), "--last"]);
+    assert!(!out.contains("note:"), "{out}");
+    let v = info(&d("g.mdlod"));
+    assert_eq!(v["format_version"], "1.1");
+    let (lo, hi) = (
+        v["radius"]["min"].as_f64().unwrap(),
+        v["radius"]["max"].as_f64().unwrap(),
+    );
+    assert!(
+        (0.3..0.35).contains(&lo) && (0.85..0.9).contains(&hi),
+        "{v}"
+    );
+    let text_info = ok(&["info", s(&d("g.mdlod"))]);
+    assert!(
+        text_info.contains("each drawn at its own")
+            && text_info.contains("radii        each particle's own"),
+        "{text_info}"
+    );
+    // The same frame built in chunks, and from the binary dump's diameters: the same
+    // grains (the binary's full precision within the text's six digits).
+    ok(&[
+        "convert",
+        s(&text),
+        "-o",
+        s(&d("gc.mdlod")),
+        "--last",
+        "--chunk-points",
+        "64",
+        "--root-points",
+        "16",
+    ]);
+    let bin = lammps_sample_path("granular.bin");
+    ok(&["convert", s(&bin), "-o", s(&d("gb.mdlod")), "--last"]);
+    let radii = |f: &Path| {
+        let f = MdlodFile::open(f).unwrap();
+        f.verify().unwrap();
+        let mut r: Vec<f32> = (0..f.particle_count() as usize)
+            .map(|i| f.particle_radius(i))
+            .collect();
+        r.sort_by(f32::total_cmp);
+        r
+    };
+    let (whole, chunked, binary) = (
+        radii(&d("g.mdlod")),
+        radii(&d("gc.mdlod")),
+        radii(&d("gb.mdlod")),
+    );
+    assert_eq!(whole, chunked);
+    assert_eq!(whole.len(), 252);
+    for (a, b) in whole.iter().zip(&binary) {
+        assert!((a - b).abs() < 2e-5, "{a} against {b}");
+    }
+    for mode in ["spheres", "sndf", "splat", "density"] {
+        ok(&[
+            "render",
+            s(&d("gc.mdlod")),
+            "-o",
+            s(&d(&format!("{mode}.png"))),
+            "--mode",
+            mode,
+            "--width",
+            "48",
+            "--height",
+            "36",
+        ]);
+    }
+    // An override gives the type one radius; the other keeps its grains' own.
+    ok(&[
+        "convert",
+        s(&text),
+        "-o",
+        s(&d("o.mdlod")),
+        "--last",
+        "--radius",
+        "2=0.75",
+    ]);
+    let v = info(&d("o.mdlod"));
+    assert_eq!(v["species"][1]["radius"], 0.75);
+    // (Its grains are stored at that radius, the range's end.)
+    assert_eq!(v["radius"]["max"], 0.75, "{v}");
+    assert!(v["radius"]["min"].as_f64().unwrap() < 0.35, "{v}");
+    ok(&[
+        "convert",
+        s(&text),
+        "-o",
+        s(&d("m.mdlod")),
+        "--last",
+        "--radius",
+        "1=0.4",
+        "--radius",
+        "2=0.75",
+    ]);
+    let v = info(&d("m.mdlod"));
+    assert!(v["radius"].is_null() && v["format_version"] == "1.0", "{v}");
+
+    // An extended XYZ radius property, also as the attribute.
+    let xyz = d("r.xyz");
     std::fs::write(
         &xyz,
         "2\nProperties=species:S:1:pos:R:3:radius:R:1\nCu 0 0 0 1.2\nCu 2.5 0 0 1.4\n",
     )
     .unwrap();
-    let out = ok(&["convert", s(&xyz), "-o", s(&dir.path().join("r.mdlod"))]);
-    assert!(
-        out.contains("column `radius` holds per-particle sizes, which are not read as radii")
-            && out.contains("--attribute radius"),
-        "{out}"
-    );
-    let out = ok(&[
-        "convert",
-        s(&xyz),
-        "-o",
-        s(&dir.path().join("r2.mdlod")),
-        "--attribute",
-        "radius",
-    ]);
-    assert!(!out.contains("per-particle sizes"), "{out}");
-    let out = ok(&["batch", s(&xyz), "-o", s(&dir.path().join("r.d"))]);
-    assert!(out.contains("per-particle sizes"), "{out}");
+    for extra in [&[][..], &["--attribute", "radius"][..]] {
+        let out = d("r.mdlod");
+        let mut args = vec!["convert", s(&xyz), "-o", s(&out)];
+        args.extend_from_slice(extra);
+        ok(&args);
+        let mut r = radii(&d("r.mdlod"));
+        r.dedup();
+        assert!(
+            (r[0] - 1.2).abs() < 1e-6 && (r[1] - 1.4).abs() < 1e-6,
+            "{r:?}"
+        );
+    }
 }
 
 /// A movie whose first frame shows nothing (every particle of a hidden species, as a

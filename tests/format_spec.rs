@@ -207,6 +207,21 @@ fn assert_same_decoding(file: &Path) {
         (None, None) => assert!(particles["attribute"].is_null(), "{name}: attribute"),
         _ => panic!("{name}: the Rust reader's attribute and metadata disagree"),
     }
+    match f.radii() {
+        Some(q) => {
+            let pr = &particles["radius"];
+            let pq: Vec<u16> = pr["q"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| u16::try_from(u64_of(v)).unwrap())
+                .collect();
+            assert_eq!(pq, q, "{name}: quantized radii");
+            let rust: Vec<f32> = (0..q.len()).map(|i| f.particle_radius(i)).collect();
+            assert_same_f32(&f32s(&pr["values"]), &rust, &format!("{name}: radii"));
+        }
+        None => assert!(particles["radius"].is_null(), "{name}: radii"),
+    }
 }
 
 /// Converts a real LAMMPS sample (two species, a `c_pe` column) and a generated data set
@@ -257,7 +272,17 @@ fn python_reader_decodes_exactly_what_the_rust_reader_decodes() {
         "--chunk-points",
         "1024",
     ]);
-    for file in [&sample, &u8_file, &u16_file] {
+    // Particles of their own sizes (version 1.1's RADIUS): MegaMol's `xyzr` list.
+    let sized = d("xyzr.mdlod");
+    mdlod(&[
+        "convert",
+        s(&Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("datasets/megamol/test_xyzr_float_none.mmpld")),
+        "-o",
+        s(&sized),
+    ]);
+    assert!(MdlodFile::open(&sized).unwrap().radii().is_some());
+    for file in [&sample, &u8_file, &u16_file, &sized] {
         assert_same_decoding(file);
     }
     let bits = |f: &Path| MdlodFile::open(f).unwrap().position_bits();

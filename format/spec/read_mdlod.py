@@ -102,7 +102,7 @@ SECTION = struct.Struct("<IIQQQ")
 SECTION_FIELDS = ("kind", "level", "offset", "length", "checksum")
 assert SECTION.size == 32
 
-METADATA, LEVELS, NODES, POSITIONS, SPECIES, ATTRIBUTE = 1, 2, 3, 4, 5, 6
+METADATA, LEVELS, NODES, POSITIONS, SPECIES, ATTRIBUTE, RADIUS = 1, 2, 3, 4, 5, 6, 7
 KIND_NAMES = {
     METADATA: "METADATA",
     LEVELS: "LEVELS",
@@ -110,8 +110,9 @@ KIND_NAMES = {
     POSITIONS: "POSITIONS",
     SPECIES: "SPECIES",
     ATTRIBUTE: "ATTRIBUTE",
+    RADIUS: "RADIUS",
 }
-PER_LEVEL_KINDS = (POSITIONS, SPECIES, ATTRIBUTE)
+PER_LEVEL_KINDS = (POSITIONS, SPECIES, ATTRIBUTE, RADIUS)
 METADATA_MAX = 16 << 20
 MAX_SECTIONS = 1 << 16
 
@@ -164,6 +165,8 @@ METADATA_FIELDS = {
         {"name": ("string", REQUIRED), "min": ("f32", REQUIRED), "max": ("f32", REQUIRED)},
         OPTIONAL,
     ),
+    # Version 1.1: the range of the RADIUS section's radii.
+    "radius": ({"min": ("f32", REQUIRED), "max": ("f32", REQUIRED)}, OPTIONAL),
     "source": (
         {
             "path": ("string", REQUIRED),
@@ -428,7 +431,8 @@ class MdlodFile:
         self.used = {}
 
     # A reader uses METADATA, LEVELS and NODES whatever their level field says (writers
-    # write 0), POSITIONS of levels 1 to L - 1, SPECIES and ATTRIBUTE of level L - 1. It
+    # write 0), POSITIONS of levels 1 to L - 1, SPECIES, ATTRIBUTE and RADIUS of level
+    # L - 1. It
     # skips every other section: unknown kinds and known kinds at other levels. A
     # section it uses must be the only one of its kind (and level, for per-level kinds).
 
@@ -516,6 +520,16 @@ class MdlodFile:
         self.attribute = None
         if meta.get("attribute") is not None:
             self.attribute = (f32(meta["attribute"]["min"]), f32(meta["attribute"]["max"]))
+        self.radius_range = None
+        if meta.get("radius") is not None:
+            lo, hi = f32(meta["radius"]["min"]), f32(meta["radius"]["max"])
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
+                raise FormatError(
+                    place,
+                    f"radius range {lo} to {hi} (must be two finite numbers from 0 up, the "
+                    "smaller first)",
+                )
+            self.radius_range = (lo, hi)
         build = meta["build"]
         if build["position_bits"] != self.header["position_bits"]:
             raise FormatError(
@@ -602,6 +616,17 @@ class MdlodFile:
             )
         if attribute is not None:
             expected.append((attribute, 2 * P))
+        radius = self.find(RADIUS, L - 1)
+        if (radius is None) != (self.radius_range is None):
+            raise FormatError(
+                "section table",
+                "a RADIUS section is present but the metadata gives no radius range"
+                if radius is not None
+                else f"the metadata gives a radius range but there is no RADIUS section "
+                f"for level {L - 1}",
+            )
+        if radius is not None:
+            expected.append((radius, 2 * P))
         for s, length in expected:
             if s["length"] != length:
                 raise FormatError(
@@ -751,6 +776,9 @@ class MdlodFile:
         self.attribute_q = None
         if self.attribute is not None:
             self.attribute_q = self.u16_array(self.used[(ATTRIBUTE, self.L - 1)])
+        self.radius_q = None
+        if self.radius_range is not None:
+            self.radius_q = self.u16_array(self.used[(RADIUS, self.L - 1)])
         # Every node's drawn range is exactly its descendants on point_level.
         for l in range(self.L - 1):
             for i in range(self.point_count(l)):
@@ -764,6 +792,7 @@ class MdlodFile:
                         f"but its descendants on level {node.point_level} are "
                         f"{a}..{b}",
                     )
+        self.own_radii = self.radius_values() if self.radius_q is not None else None
         # The decoding of every point: finite and inside its parent's bounds.
         self.positions = [self.decode_level(m) for m in range(self.L)]
         for m in range(1, self.L):
@@ -823,7 +852,8 @@ class MdlodFile:
                 )
             if not particles:
                 continue
-            r = self.radii[self.species[i]]
+            # Its own radius (RADIUS), else its species'.
+            r = self.own_radii[i] if self.radius_q is not None else self.radii[self.species[i]]
             beyond, size = 0.0, r
             for k in range(3):
                 # Where its centre lies: the bounds shrunk by r, or the box's middle
@@ -842,6 +872,12 @@ class MdlodFile:
                     f"shrunk by its radius {r}: more than max_position_error {error:.3e} "
                     f"+ 8 * 2^-23 * {size}",
                 )
+
+    def radius_values(self):
+        """Section 7: r = min + (max - min) * (q / 65535), in f32."""
+        lo, hi = self.radius_range
+        span = f32(hi - lo)
+        return [f32(lo + f32(span * f32(q / 65535))) for q in self.radius_q]
 
     def attribute_values(self):
         """Section 7: value = min + (max - min) * (q / 65535), in f32."""
@@ -870,7 +906,10 @@ class MdlodFile:
             "positions": levels[L - 1]["positions"],
             "species": self.species,
             "attribute": None,
+            "radius": None,
         }
+        if self.radius_q is not None:
+            particles["radius"] = {"q": self.radius_q, "values": self.own_radii}
         if self.attribute is not None:
             particles["attribute"] = {
                 "name": self.metadata["attribute"]["name"],

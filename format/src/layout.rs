@@ -11,6 +11,9 @@ pub const MAGIC: [u8; 8] = *b"\x89MDLOD\r\n";
 
 /// The format version this crate writes.
 pub const FORMAT_VERSION: (u16, u16) = (1, 0);
+/// The version of a file with per-particle radii (a RADIUS section), which readers of
+/// version 1.0 open as well, drawing each particle at its species' radius.
+pub const FORMAT_VERSION_RADII: (u16, u16) = (1, 1);
 
 /// The major versions this crate reads: files whose major version lies in this range
 /// are accepted whatever their minor version (minor versions only add sections or JSON
@@ -82,6 +85,8 @@ pub enum SectionKind {
     Species = 5,
     /// u16 quantized scalar attribute per particle of the finest level.
     Attribute = 6,
+    /// u16 quantized radius per particle of the finest level (version 1.1).
+    Radius = 7,
 }
 
 impl SectionKind {
@@ -93,6 +98,7 @@ impl SectionKind {
             4 => Self::Positions,
             5 => Self::Species,
             6 => Self::Attribute,
+            7 => Self::Radius,
             _ => return None,
         })
     }
@@ -105,6 +111,7 @@ impl SectionKind {
             Self::Positions => "POSITIONS",
             Self::Species => "SPECIES",
             Self::Attribute => "ATTRIBUTE",
+            Self::Radius => "RADIUS",
         }
     }
 }

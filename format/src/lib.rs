@@ -28,7 +28,9 @@ pub mod sndf;
 pub mod writer;
 
 pub use error::FormatError;
-pub use layout::{LevelRecord, NodeRecord, SectionKind, FORMAT_VERSION, MAGIC};
+pub use layout::{
+    LevelRecord, NodeRecord, SectionKind, FORMAT_VERSION, FORMAT_VERSION_RADII, MAGIC,
+};
 pub use meta::Metadata;
 pub use progress::{NoProgress, Progress};
 pub use reader::MdlodFile;

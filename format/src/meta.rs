@@ -74,6 +74,41 @@ pub struct Species {
     pub radius_range: Option<[f32; 2]>,
 }
 
+/// The range over which the per-particle radii are quantized.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RadiusInfo {
+    /// Radius of quantized 0.
+    pub min: f32,
+    /// Radius of quantized 65535.
+    pub max: f32,
+}
+
+impl RadiusInfo {
+    /// Decodes a quantized radius: `min + (max − min) · (q / 65535)` in `f32`.
+    #[inline]
+    pub fn decode(&self, q: u16) -> f32 {
+        self.min + (self.max - self.min) * (f32::from(q) / 65535.0)
+    }
+
+    /// The nearest quantized value of `radius` (clamped to the range).
+    #[inline]
+    pub fn encode(&self, radius: f32) -> u16 {
+        let span = self.max - self.min;
+        if span > 0.0 {
+            ((radius - self.min) / span * 65535.0)
+                .round()
+                .clamp(0.0, 65535.0) as u16
+        } else {
+            0
+        }
+    }
+
+    /// Whether the range is one a reader accepts: finite, `0 ≤ min ≤ max`.
+    pub fn is_valid(&self) -> bool {
+        self.min.is_finite() && self.max.is_finite() && 0.0 <= self.min && self.min <= self.max
+    }
+}
+
 /// The optional per-particle scalar and its quantization range.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AttributeInfo {
@@ -157,6 +192,10 @@ pub struct Metadata {
     pub species: Vec<Species>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attribute: Option<AttributeInfo>,
+    /// The range of the per-particle radii (the RADIUS section), where the particles of
+    /// a species differ in size.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius: Option<RadiusInfo>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub source: Option<SourceInfo>,
     pub build: BuildInfo,
@@ -195,6 +234,10 @@ impl Metadata {
             numbers.push(("attribute range", f64::from(a.min)));
             numbers.push(("attribute range", f64::from(a.max)));
         }
+        if let Some(r) = &self.radius {
+            numbers.push(("radius range", f64::from(r.min)));
+            numbers.push(("radius range", f64::from(r.max)));
+        }
         if let Some((what, v)) = numbers.iter().find(|(_, v)| !v.is_finite()) {
             return Err(format!("the metadata's {what} is {v}, not a finite number"));
         }
@@ -220,6 +263,7 @@ mod tests {
                 radius_range: None,
             }],
             attribute: None,
+            radius: None,
             source: None,
             build: BuildInfo {
                 max_cluster_size: 8,

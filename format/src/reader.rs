@@ -87,6 +87,7 @@ pub struct MdlodFile {
     positions: Vec<Range<usize>>,
     species_range: Range<usize>,
     attribute_range: Option<Range<usize>>,
+    radius_range: Option<Range<usize>>,
     /// Per node level: the index in `node_blocks` of its first block.
     block_first: Vec<usize>,
     /// Per block of [`NODE_BLOCK`] nodes of one level: [`BLOCK_VALID`] once its records
@@ -496,6 +497,16 @@ impl MdlodFile {
                 ),
             ));
         }
+        if let Some(r) = metadata.radius.as_ref().filter(|r| !r.is_valid()) {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "radius range {} to {} (must be two finite numbers from 0 up, the \
+                     smaller first)",
+                    r.min, r.max
+                ),
+            ));
+        }
         if let Some(s) = metadata.species.iter().find(|s| {
             s.radius_range
                 .is_some_and(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi))
@@ -637,6 +648,35 @@ impl MdlodFile {
             }
         };
 
+        let radius_range = match (
+            find(SectionKind::Radius, Some(last as u32))?,
+            &metadata.radius,
+        ) {
+            (Some(i), Some(_)) => {
+                if sections[i].length != n * 2 {
+                    return Err(corrupt(
+                        &place_of(i, &sections[i]),
+                        format!("{} bytes, expected {n} u16 radii", sections[i].length),
+                    ));
+                }
+                Some(range(i))
+            }
+            (None, None) => None,
+            (Some(_), None) => {
+                return Err(corrupt(
+                    "METADATA",
+                    "a RADIUS section is present but the metadata gives no radius range"
+                        .to_string(),
+                ))
+            }
+            (None, Some(_)) => {
+                return Err(corrupt(
+                    "section table",
+                    "the metadata gives a radius range but there is no RADIUS section".to_string(),
+                ))
+            }
+        };
+
         let levels_range = range(li);
         let nodes_range = range(ni);
         let species_range = range(si);
@@ -651,6 +691,7 @@ impl MdlodFile {
             positions,
             species_range,
             attribute_range,
+            radius_range,
             block_first,
             node_blocks,
             node_error: OnceLock::new(),
@@ -989,6 +1030,55 @@ impl MdlodFile {
             .map(|r| bytemuck::cast_slice(&self.map[r]))
     }
 
+    /// Quantized radius of every particle, when the file keeps them (decode with the
+    /// metadata's `radius`, or [`Self::particle_radius`]).
+    pub fn radii(&self) -> Option<&[u16]> {
+        self.radius_range
+            .clone()
+            .map(|r| bytemuck::cast_slice(&self.map[r]))
+    }
+
+    /// The radius of particle `i` (an index into the finest level) from its own size
+    /// where the file keeps one, else its species' radius (0 for an index out of range).
+    pub fn particle_radius(&self, i: usize) -> f32 {
+        let meta = &self.metadata;
+        if let (Some(q), Some(info)) = (self.radii(), meta.radius.as_ref()) {
+            return q.get(i).map_or(0.0, |&q| info.decode(q));
+        }
+        self.species()
+            .get(i)
+            .and_then(|&s| meta.species.get(usize::from(s)))
+            .map_or(0.0, |s| s.radius)
+    }
+
+    /// The smallest and largest radius particles of species `s` are drawn at: its
+    /// `radius_range` where the file keeps per-particle radii, else its radius twice
+    /// (`[0, 0]` for no such species).
+    pub fn species_radius_span(&self, s: usize) -> [f32; 2] {
+        self.metadata
+            .species
+            .get(s)
+            .map_or([0.0; 2], |sp| match (self.radii(), sp.radius_range) {
+                (Some(_), Some(range)) => range,
+                _ => [sp.radius; 2],
+            })
+    }
+
+    /// The largest radius a particle of the file may have: the radius range's end where
+    /// the file keeps per-particle radii, else the largest species radius.
+    pub fn max_particle_radius(&self) -> f32 {
+        let species = self
+            .metadata
+            .species
+            .iter()
+            .map(|s| s.radius)
+            .fold(0.0, f32::max);
+        self.metadata
+            .radius
+            .as_ref()
+            .map_or(species, |r| r.max.max(species))
+    }
+
     /// For level `m ≥ 1`: the nodes that encode its points and, for each, the range of
     /// points it encodes, in order (the ranges tile the level).
     pub fn encoding_ranges(&self, m: usize) -> Result<Vec<(usize, Range<usize>)>, FormatError> {
@@ -1150,13 +1240,6 @@ impl MdlodFile {
                 format!("maximum position error {error} is not a finite non-negative number"),
             ));
         }
-        let radii: Vec<f64> = self
-            .metadata
-            .species
-            .iter()
-            .map(|s| f64::from(s.radius))
-            .collect();
-        let species = self.species();
         for m in 1..=last {
             let positions = self.positions(m);
             let parents = self.level_nodes(m - 1);
@@ -1197,11 +1280,8 @@ impl MdlodFile {
                         ));
                     }
                     if m == last {
-                        let r = species
-                            .get(i)
-                            .and_then(|&k| radii.get(usize::from(k)))
-                            .copied()
-                            .unwrap_or(0.0);
+                        // The particle's own radius where the file keeps one.
+                        let r = f64::from(self.particle_radius(i));
                         let mut beyond = 0.0f64;
                         let mut size = r;
                         for ((&v, &lo), &hi) in

@@ -15,7 +15,8 @@ use xxhash_rust::xxh3::{xxh3_64, Xxh3};
 
 use crate::error::FormatError;
 use crate::layout::{
-    align_up, Header, SectionEntry, SectionKind, FORMAT_VERSION, HEADER_SIZE, MAGIC,
+    align_up, Header, SectionEntry, SectionKind, FORMAT_VERSION, FORMAT_VERSION_RADII, HEADER_SIZE,
+    MAGIC,
 };
 
 /// Where a [`Writer`]'s bytes go: appended in order from the start of the file.
@@ -166,10 +167,20 @@ impl Writer {
             .write_all(table)
             .map_err(|e| FormatError::io(&tmp_path, e))?;
         let file_size = table_offset + table.len() as u64;
+        // A file with per-particle radii is version 1.1; any other is 1.0.
+        let radii = self
+            .sections
+            .iter()
+            .any(|s| s.kind == SectionKind::Radius as u32);
+        let version = if radii {
+            FORMAT_VERSION_RADII
+        } else {
+            FORMAT_VERSION
+        };
         let mut header = Header {
             magic: MAGIC,
-            version_major: FORMAT_VERSION.0,
-            version_minor: FORMAT_VERSION.1,
+            version_major: version.0,
+            version_minor: version.1,
             flags: 0,
             section_count: self.sections.len() as u32,
             position_bits: self.position_bits,

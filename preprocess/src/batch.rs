@@ -1872,7 +1872,7 @@ pub fn batch(
                     (_, e) => e,
                 };
                 (|| -> Result<FrameEntry, BatchError> {
-                    keep_notes(job.timestep, dump.frame_notes(job.frame, &opts.read));
+                    keep_notes(job.timestep, dump.frame_notes(job.frame));
                     let streamed = if job.particles as usize > convert.chunks.chunk_points {
                         let info = dump.frame_info(job.frame)?;
                         crate::convert::window_source(dump, job.frame, &opts.read, &info)

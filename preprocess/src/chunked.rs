@@ -292,8 +292,9 @@ impl FrameSource<'_> {
             species: f.species.clone(),
             attribute: f.attribute.as_ref().map(|a| crate::frame::Attribute {
                 name: a.name.clone(),
-                values: a.values[range].to_vec(),
+                values: a.values[range.clone()].to_vec(),
             }),
+            radii: f.radii.as_ref().map(|r| r[range].to_vec()),
             ..f.clone_header()
         }
     }
@@ -445,7 +446,11 @@ impl SpeciesMerge {
             if let Some(&k) = self.by_name.get(&s.name) {
                 let known = &mut self.list[usize::from(k)];
                 known.numeric_type &= s.numeric_type;
-                known.radius = known.radius.or(s.radius);
+                if s.sized_count > 0 {
+                    crate::species::merge_sizes(known, s);
+                } else {
+                    known.radius = known.radius.or(s.radius);
+                }
                 map[i] = k;
                 continue;
             }
@@ -481,19 +486,22 @@ impl SpeciesMerge {
     }
 }
 
-/// Working records: position (3 × f32), species (u16), attribute (f32, when present).
+/// Working records: position (3 × f32), species (u16), attribute (f32, when present),
+/// the particle's own radius as the input gives it (f32, when present).
 #[derive(Clone, Copy)]
 struct RecordLayout {
     attribute: bool,
+    radius: bool,
 }
 
 impl RecordLayout {
     fn size(self) -> usize {
-        if self.attribute {
-            18
-        } else {
-            14
-        }
+        14 + 4 * usize::from(self.attribute) + 4 * usize::from(self.radius)
+    }
+
+    /// Where the radius lies in a record.
+    fn radius_at(self) -> usize {
+        14 + 4 * usize::from(self.attribute)
     }
 
     #[inline(always)]
@@ -907,6 +915,7 @@ struct ChunkResult {
     positions: Kept<[u16; 3]>,
     species: Kept<u16>,
     attribute: Option<Kept<u16>>,
+    radius: Option<Kept<u16>>,
 }
 
 /// One of a chunk's results waiting for the assembly: kept in memory while the memory
@@ -1054,6 +1063,8 @@ fn build_chunk(
     let mut positions = Vec::with_capacity(n);
     let mut species_index = Vec::with_capacity(n);
     let mut attribute = layout.attribute.then(|| Vec::with_capacity(n));
+    let mut radii = layout.radius.then(|| Vec::with_capacity(n));
+    let at = layout.radius_at();
     for (cell, buf) in cells.iter().zip(&loaded) {
         let bytes = &buf[..cell.count * size];
         for r in bytes.chunks_exact(size) {
@@ -1063,14 +1074,20 @@ fn build_chunk(
             if let Some(a) = attribute.as_mut() {
                 a.push(f32::from_le_bytes([r[14], r[15], r[16], r[17]]));
             }
+            if let Some(a) = radii.as_mut() {
+                a.push(f32::from_le_bytes([r[at], r[at + 1], r[at + 2], r[at + 3]]));
+            }
         }
     }
     drop(loaded);
+    // As the whole frame's table says: own sizes for the species of several.
+    let radii = crate::hierarchy::particle_radii(input.species, &species_index, radii.as_deref());
     let particles = Particles {
         positions: &positions,
         species_index: &species_index,
         species: input.species,
         attribute: attribute.as_deref(),
+        radii: radii.as_deref(),
     };
     let h =
         build_with(particles, &input.options.build, input.extras, &NoProgress).map_err(|e| {
@@ -1079,15 +1096,19 @@ fn build_chunk(
                 source: e,
             }
         })?;
-    drop((positions, attribute));
+    drop((positions, attribute, radii));
     let stem = |ext: &str| input.dir.join(format!("chunk-{c:05}.{ext}"));
     let positions: Vec<[u16; 3]> = h.quantized.iter().skip(1).flatten().copied().collect();
     drop(h.quantized);
     let attribute = h.attribute.map(|(a, _, _)| a);
+    let radius = h.radius.map(|(r, _)| r);
     let bytes = std::mem::size_of_val(h.nodes.as_slice())
         + std::mem::size_of_val(positions.as_slice())
         + std::mem::size_of_val(h.species_index.as_slice())
         + attribute
+            .as_ref()
+            .map_or(0, |a| std::mem::size_of_val(a.as_slice()))
+        + radius
             .as_ref()
             .map_or(0, |a| std::mem::size_of_val(a.as_slice()));
     let bytes = bytes as u64;
@@ -1108,6 +1129,9 @@ fn build_chunk(
     let attribute = attribute
         .map(|a| Kept::store(a, stem("attribute"), in_memory))
         .transpose()?;
+    let radius = radius
+        .map(|a| Kept::store(a, stem("radius"), in_memory))
+        .transpose()?;
     for cell in cells {
         fs::remove_file(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
     }
@@ -1121,6 +1145,7 @@ fn build_chunk(
         positions,
         species,
         attribute,
+        radius,
     })
 }
 
@@ -1225,8 +1250,12 @@ pub fn convert_chunked(
             }
             let lay = *layout.get_or_insert(RecordLayout {
                 attribute: f.attribute.is_some(),
+                radius: f.radii.is_some(),
             });
-            if lay.attribute != f.attribute.is_some() || f.positions.len() != f.species_index.len()
+            if lay.attribute != f.attribute.is_some()
+                || lay.radius != f.radii.is_some()
+                || f.positions.len() != f.species_index.len()
+                || f.radii.as_ref().is_some_and(|r| r.len() != f.len())
             {
                 return Err(ConvertError::Chunked(format!(
                     "particles {start}..: the window's columns differ from the first window's"
@@ -1324,6 +1353,10 @@ pub fn convert_chunked(
                     r[12..14].copy_from_slice(&s.to_le_bytes());
                     if let Some(values) = values {
                         r[14..18].copy_from_slice(&values[i].to_le_bytes());
+                    }
+                    if let Some(radii) = &f.radii {
+                        let at = lay.radius_at();
+                        r[at..at + 4].copy_from_slice(&radii[i].to_le_bytes());
                     }
                 });
             if let Some(a) = &f.attribute {
@@ -1445,6 +1478,8 @@ pub fn convert_chunked(
     let extras = BuildExtras {
         attribute_range: layout.attribute.then_some(range),
         keep_levels: params.delta_n as usize,
+        // One range for every chunk, from the whole frame's species.
+        radius_range: crate::hierarchy::radius_range(&species),
     };
     // What the builds at work, the two chunks read ahead and a margin leave under the
     // limit holds finished chunks' results until the assembly.
@@ -1530,6 +1565,10 @@ pub fn convert_chunked(
     // 3. Assembly.
     let t2 = Instant::now();
     metadata.particles = n as u64;
+    metadata.radius = layout
+        .radius
+        .then(|| crate::hierarchy::radius_range(&species))
+        .flatten();
     metadata.species = species;
     if let Some(info) = metadata.attribute.as_mut() {
         info.min = range.0;
@@ -1563,7 +1602,7 @@ pub fn convert_chunked(
         write_time,
         file_size,
         notes: {
-            let mut notes = crate::species::radius_notes(&names, &options.radii);
+            let mut notes = Vec::new();
             if let Some(a) = &metadata.attribute {
                 notes.extend(crate::convert::attribute_span_note(
                     &a.name, a.min, a.max, options,
@@ -1773,6 +1812,7 @@ fn assemble(
                 + c.positions.len_bytes()
                 + c.species.len_bytes()
                 + c.attribute.as_ref().map_or(0, Kept::len_bytes)
+                + c.radius.as_ref().map_or(0, Kept::len_bytes)
         })
         .sum();
     progress.stage("writing", Some(total_bytes), "bytes");
@@ -1953,6 +1993,10 @@ fn assemble(
     if !attributes.is_empty() {
         copy(&mut w, SectionKind::Attribute, attributes)?;
     }
+    let radii: Vec<&Kept<u16>> = chunks.iter().filter_map(|c| c.radius.as_ref()).collect();
+    if !radii.is_empty() {
+        copy(&mut w, SectionKind::Radius, radii)?;
+    }
     w.finish()?;
     progress.finish_stage();
     Ok((last + 1, node_count, metadata.max_position_error))
@@ -2031,7 +2075,10 @@ mod tests {
 
     #[test]
     fn cells_closed_between_appends_hold_the_same_records() {
-        let layout = RecordLayout { attribute: false };
+        let layout = RecordLayout {
+            attribute: false,
+            radius: false,
+        };
         let records: Vec<u8> = (0..5000u32)
             .flat_map(|i| {
                 let x = [(i % 17) as f32, (i % 13) as f32 * 2.0, (i % 7) as f32 * 3.0];

@@ -49,7 +49,7 @@ pub struct ConvertReport {
     pub write_time: Duration,
     pub file_size: u64,
     /// What the user should know about the conversion (see
-    /// [`crate::species::radius_notes`]).
+    /// [`crate::convert::position_notes`]).
     pub notes: Vec<String>,
     /// The frame converted and how many frames the input has (set by
     /// [`convert_dump`] and [`convert_file`]; `None` for a frame given in memory).
@@ -307,13 +307,16 @@ pub fn convert_frame(
         }
         _ => None,
     };
+    let species_index = merged_index.as_deref().unwrap_or(&frame.species_index);
+    let radii = hierarchy::particle_radii(&species, species_index, frame.radii.as_deref());
     let particles = Particles {
         positions: &frame.positions,
-        species_index: merged_index.as_deref().unwrap_or(&frame.species_index),
+        species_index,
         species: &species,
         attribute: logged
             .as_deref()
             .or(frame.attribute.as_ref().map(|a| a.values.as_slice())),
+        radii: radii.as_deref(),
     };
     let t0 = Instant::now();
     let source_name = source
@@ -325,7 +328,7 @@ pub fn convert_frame(
             source: e,
         })?;
     let build_time = t0.elapsed();
-    let mut notes = crate::species::radius_notes(&names, &options.radii);
+    let mut notes = Vec::new();
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         notes.extend(attribute_span_note(&a.name, *min, *max, options));
     }
@@ -656,6 +659,7 @@ pub fn base_metadata(
             min: 0.0,
             max: 0.0,
         }),
+        radius: None,
         source,
         build: BuildInfo {
             max_cluster_size: options.build.max_cluster_size,
@@ -905,7 +909,7 @@ pub fn convert_dump(
         },
     };
     // What the input holds that the conversion does not read.
-    let notes = dump.frame_notes(k, read);
+    let notes = dump.frame_notes(k);
     let which = |mut r: ConvertReport| {
         r.frame = Some((k, count));
         r.notes.extend(notes.iter().cloned());

@@ -18,12 +18,16 @@ pub struct SpeciesName {
     /// unless the user overrides it.
     pub radius: Option<f32>,
     /// The smallest and largest radius of the species' particles where the input gives
-    /// each particle its own (GSD diameters, MMPLD `xyzr` lists): a `.mdlod` file keeps
-    /// one radius per species, their mean, and the conversion says so when they differ.
+    /// each particle its own ([`Frame::radii`]) and they differ: `radius` is then their
+    /// mean, and the file keeps each particle's own.
     pub radius_range: Option<(f32, f32)>,
     /// The colour the input gives this species (sRGB bytes: an MMPLD list's global
     /// colour), used instead of the element's or the palette's.
     pub colour: Option<[u8; 3]>,
+    /// How many particles gave `radius` (their mean) and `radius_range` from their own
+    /// sizes (a text dump's size column), so that parts of a frame read apart combine
+    /// into the whole frame's mean; 0 otherwise.
+    pub sized_count: u64,
     /// The species' place in the palette by the input's own numbering (LAMMPS type
     /// `n`: `n − 1`), so that a type keeps its colour in frames that lack others; the
     /// place in the frame's list when `None`.
@@ -43,6 +47,11 @@ pub struct Frame {
     pub species: Vec<SpeciesName>,
     /// Optional per-particle scalar (a named dump column), same length as `positions`.
     pub attribute: Option<Attribute>,
+    /// Each particle's own radius, where the input gives one (GSD diameters / 2, MMPLD
+    /// `xyzr` lists, a dump's `radius` or `diameter` column), same length as
+    /// `positions`. A conversion keeps them where some species' particles differ in
+    /// size (see [`SpeciesName::radius_range`]).
+    pub radii: Option<Vec<f32>>,
     /// The simulation cell, when the dump has one.
     pub simulation_box: Option<SimulationBox>,
     /// The MD timestep number, when known.

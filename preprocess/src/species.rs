@@ -122,26 +122,28 @@ pub fn element(symbol: &str) -> Option<(f32, [f32; 3])> {
         .map(|(_, r, c)| (*r, srgb_to_linear(*c)))
 }
 
-/// Notes for species whose particles the input gives radii that differ (GSD diameters,
-/// MMPLD `xyzr` lists), unless `overrides` set their radius: a `.mdlod` file keeps one
-/// radius per species, the particles' mean, and the user should know.
-pub fn radius_notes(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<String> {
-    names
-        .iter()
-        .filter(|s| radius_override(overrides, &s.name).is_none())
-        .filter_map(|s| {
-            let (lo, hi) = s.radius_range?;
-            let mean = s.radius?;
-            (hi > lo * (1.0 + 1e-3)).then(|| {
-                format!(
-                    "species {}: particle radii from {lo} to {hi}, all drawn with their mean \
-                     {mean} (a .mdlod file keeps one radius per species; --radius {}=R sets \
-                     another)",
-                    s.name, s.name
-                )
-            })
-        })
-        .collect()
+/// Folds the sizes of a species as another part of the same frame read them
+/// ([`SpeciesName::sized_count`]) into `known`: the mean over both parts' particles and
+/// the union of their ranges, so that a frame read in parts (windows, a parallel run's
+/// pieces) lists the whole frame's.
+pub(crate) fn merge_sizes(known: &mut SpeciesName, part: &SpeciesName) {
+    if part.sized_count == 0 {
+        return;
+    }
+    if known.sized_count == 0 {
+        known.radius = part.radius;
+        known.radius_range = part.radius_range;
+        known.sized_count = part.sized_count;
+        return;
+    }
+    let (a, b) = (known.sized_count as f64, part.sized_count as f64);
+    let mean = |s: &SpeciesName| f64::from(s.radius.unwrap_or(0.0));
+    known.radius = Some(((mean(known) * a + mean(part) * b) / (a + b)) as f32);
+    known.radius_range = match (known.radius_range, part.radius_range) {
+        (Some((lo, hi)), Some((c, d))) => Some((lo.min(c), hi.max(d))),
+        (x, y) => x.or(y),
+    };
+    known.sized_count += part.sized_count;
 }
 
 /// Whether a frame's single-letter species names are labels rather than element symbols:
@@ -188,7 +190,8 @@ pub fn species_table(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<
             let given = radius_override(overrides, &s.name);
             let radius =
                 given.unwrap_or_else(|| radius_without_override(&s.name, s.radius, labels));
-            // Particles of several sizes drawn at their mean: kept for `info`.
+            // Particles of several sizes: each drawn at its own where the file keeps them
+            // (the conversion keeps them exactly where a species has this range).
             let radius_range = s
                 .radius_range
                 .filter(|&(lo, hi)| {

@@ -935,9 +935,10 @@ fn mmpld_and_gsd_file_sets_without_timesteps_are_numbered_by_position() {
 }
 
 /// A trajectory whose particles of one type differ in size, differently in each frame
-/// (particles growing): the batch says so once for the type, not once a frame.
+/// (particles growing): every frame keeps its particles' own radii, over its own range,
+/// with nothing to note.
 #[test]
-fn differing_radii_are_noted_once_per_species_for_a_whole_trajectory() {
+fn differing_radii_are_kept_per_particle_in_every_frame_of_a_trajectory() {
     let dir = tempfile::tempdir().unwrap();
     let positions: Vec<u8> = (0..12)
         .flat_map(|i| (i as f32 * 0.5).to_le_bytes())
@@ -963,12 +964,23 @@ fn differing_radii_are_noted_once_per_species_for_a_whole_trajectory() {
     )
     .unwrap();
     assert_eq!(r.converted, 3);
-    assert_eq!(r.notes.len(), 1, "{:?}", r.notes);
-    assert!(
-        r.notes[0].starts_with("species A: in 3 frames, e.g. particle radii from 0.5 to "),
-        "{:?}",
-        r.notes
-    );
+    assert_eq!(r.notes, Vec::<String>::new());
+    for step in 1..=3u64 {
+        let f = mdlod_format::MdlodFile::open(
+            dir.path()
+                .join("grow.d")
+                .join(format!("frame-{step}.mdlod")),
+        )
+        .unwrap();
+        let info = f.metadata().radius.expect("per-particle radii");
+        assert_eq!((info.min, info.max), (0.5, 0.5 + 1.5 * step as f32));
+        let mut radii: Vec<f32> = (0..4).map(|i| f.particle_radius(i)).collect();
+        radii.sort_by(f32::total_cmp);
+        let want: Vec<f32> = (0..4).map(|i| 0.5 + 0.5 * (i * step) as f32).collect();
+        for (r, w) in radii.iter().zip(&want) {
+            assert!((r - w).abs() <= 1e-4, "{radii:?} against {want:?}");
+        }
+    }
 }
 
 /// A rerun learns which `--radius` overrides built a frame from the manifest, not by

@@ -22,8 +22,9 @@ use xxhash_rust::xxh3::xxh3_64;
 // ---------------------------------------------------------------------------------------
 // A valid file.
 
-/// An FCC slab of `n × n × n/2` cells (two species) with a sparse cloud above it and a
-/// scalar attribute: `2 n³ + 200` particles.
+/// An FCC slab of `n × n × n/2` cells (two species) with a sparse cloud above it, a
+/// scalar attribute, and particles of their own sizes (the cloud's `Ag` from 1 to 2):
+/// `2 n³ + 200` particles.
 fn test_frame(n: usize) -> Frame {
     let (nz, ny) = (n / 2, n);
     let mut positions = mdlod_datasets::fcc_block([n, n, nz], 3.615);
@@ -42,9 +43,11 @@ fn test_frame(n: usize) -> Frame {
         s ^= s << 17;
         (s >> 40) as f32 / (1u64 << 24) as f32
     };
+    let mut radii = vec![1.44f32; positions.len()];
     for _ in 0..200 {
         positions.push([r() * 40.0, r() * 40.0, 30.0 + r() * 40.0]);
         species_index.push(1);
+        radii.push(1.0 + r());
     }
     let values = positions.iter().map(|p| p[0] - 0.25 * p[2]).collect();
     Frame {
@@ -53,7 +56,8 @@ fn test_frame(n: usize) -> Frame {
             .map(|name| SpeciesName {
                 name: name.into(),
                 numeric_type: false,
-                radius: None,
+                radius: (name == "Ag").then_some(1.44),
+                radius_range: (name == "Ag").then_some((1.0, 2.0)),
                 ..Default::default()
             })
             .to_vec(),
@@ -61,6 +65,7 @@ fn test_frame(n: usize) -> Frame {
             name: "c_pe".into(),
             values,
         }),
+        radii: Some(radii),
         timestep: Some(42),
         positions,
         ..Default::default()
@@ -367,6 +372,12 @@ fn fixtures_are_valid_and_round_trip_through_the_patch_helpers() {
         let b = valid_bytes(params);
         let f = MdlodFile::open(write(dir.path(), "v.mdlod", &b)).unwrap();
         assert!(f.level_count() >= 4, "{} levels", f.level_count());
+        // Per-particle radii: the cloud's own sizes, the rest their species'.
+        assert_eq!(
+            f.radii().map(<[u16]>::len),
+            Some(f.particle_count() as usize)
+        );
+        assert_eq!(f.header().version_minor, 1);
         f.verify().unwrap();
         // Recomputing every checksum of an untouched file changes nothing.
         let mut r = b.clone();
@@ -1229,6 +1240,43 @@ fn hostile_per_particle_sections() {
             "attribute-wrong-length",
             Box::new(move |d| d.section(SectionKind::Attribute, last).truncate(10)),
             vec!["ATTRIBUTE".into(), "expected".into()],
+        ),
+        (
+            "radius-without-metadata",
+            Box::new(|d| {
+                let mut m = d.meta();
+                m.as_object_mut().unwrap().remove("radius");
+                d.set_meta(&m);
+            }),
+            vec!["METADATA".into(), "RADIUS section is present".into()],
+        ),
+        (
+            "metadata-radius-without-section",
+            Box::new(move |d| d.remove(SectionKind::Radius, last)),
+            vec!["no RADIUS section".into()],
+        ),
+        (
+            "radius-wrong-length",
+            Box::new(move |d| d.section(SectionKind::Radius, last).extend([0, 0])),
+            vec!["RADIUS".into(), "expected".into(), "u16 radii".into()],
+        ),
+        (
+            "radius-range-reversed",
+            Box::new(|d| {
+                let mut m = d.meta();
+                m["radius"] = serde_json::json!({ "min": 2.0, "max": 1.0 });
+                d.set_meta(&m);
+            }),
+            vec!["METADATA".into(), "radius range 2 to 1".into()],
+        ),
+        (
+            "radius-range-negative",
+            Box::new(|d| {
+                let mut m = d.meta();
+                m["radius"] = serde_json::json!({ "min": -1.0, "max": 1.0 });
+                d.set_meta(&m);
+            }),
+            vec!["METADATA".into(), "radius range -1 to 1".into()],
         ),
     ];
     for (name, patch, wants) in cases {

@@ -527,24 +527,29 @@ fn the_attribute_error_lists_only_chunks_of_one_number_per_particle() {
     );
 }
 
-/// Particles of one type with different diameters (a polydisperse colloid) are drawn with
-/// their mean radius, since a `.mdlod` file keeps one radius per species: the conversion
-/// says so, whole and in chunks, unless `--radius` gives the type its radius; a type of
-/// one size gets no note.
+/// Particles of one type with different diameters (a polydisperse colloid) are each drawn
+/// at their own radius: the file keeps a RADIUS section (format 1.1), whole and in
+/// chunks, with the same radii; the particles' node bounds hold their own spheres
+/// (`verify`); `--radius` gives the type one radius again (no section, format 1.0), and
+/// so does a file whose types are each of one size.
 #[test]
-fn differing_diameters_of_a_type_are_noted_with_the_mean_drawn() {
+fn differing_diameters_of_a_type_are_kept_per_particle() {
     let sample = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("poly.mdlod");
-    let notes = |bytes: &[u8], radii: Vec<(String, f32)>, chunk_points: usize| {
+    let convert = |bytes: &[u8], radii: Vec<(String, f32)>, chunk_points: usize, name: &str| {
         let path = dir.path().join("poly.gsd");
         std::fs::write(&path, bytes).unwrap();
-        convert_frame_1(&path, &out, radii, chunk_points)
-            .unwrap()
-            .notes
+        let out = dir.path().join(name);
+        let report = convert_frame_1(&path, &out, radii, chunk_points).unwrap();
+        assert_eq!(report.notes, Vec::<String>::new());
+        let f = mdlod_format::MdlodFile::open(&out).unwrap();
+        f.verify().unwrap();
+        f
     };
     for chunk_points in [1 << 22, 100] {
-        assert_eq!(notes(&sample, vec![], chunk_points), Vec::<String>::new());
+        let f = convert(&sample, vec![], chunk_points, "mono.mdlod");
+        assert!(f.radii().is_none() && f.metadata().radius.is_none());
+        assert_eq!(f.header().version_minor, 0);
     }
     // The first particle of type A (0) gets diameter 5 (the others 1), in frame 0's
     // chunks, which frame 1 takes.
@@ -557,20 +562,49 @@ fn differing_diameters_of_a_type_are_noted_with_the_mean_drawn() {
         .find(|&i| bytes[types + 4 * i..types + 4 * i + 4] == [0, 0, 0, 0])
         .unwrap();
     bytes[diameters + 4 * i..diameters + 4 * i + 4].copy_from_slice(&5.0f32.to_le_bytes());
+    let mut kept = Vec::new();
     for chunk_points in [1 << 22, 100] {
-        let n = notes(&bytes, vec![], chunk_points);
-        assert_eq!(n.len(), 1, "{n:?}");
+        let f = convert(
+            &bytes,
+            vec![],
+            chunk_points,
+            &format!("poly-{chunk_points}.mdlod"),
+        );
+        assert_eq!(f.header().version_minor, 1);
+        let info = f.metadata().radius.expect("a radius range");
+        assert_eq!((info.min, info.max), (0.5, 2.5));
+        let radii: Vec<f32> = (0..f.particle_count() as usize)
+            .map(|i| f.particle_radius(i))
+            .collect();
+        assert_eq!(radii.iter().filter(|&&r| r == 2.5).count(), 1, "{radii:?}");
+        // Type B's 0.75, within half a step of the 16 bits over the range.
+        let step = (2.5 - 0.5) / 65535.0;
         assert!(
-            n[0].starts_with(
-                "species A: particle radii from 0.5 to 2.5, all drawn with their mean"
-            ) && n[0].contains("--radius A=R"),
-            "{n:?}"
+            radii
+                .iter()
+                .all(|&r| r == 2.5 || r == 0.5 || (r - 0.75).abs() <= step / 2.0),
+            "{radii:?}"
         );
-        assert_eq!(
-            notes(&bytes, vec![("A".into(), 1.2)], chunk_points),
-            Vec::<String>::new()
-        );
+        // The large particle's own sphere lies inside every ancestor's bounds.
+        let k = radii.iter().position(|&r| r == 2.5).unwrap();
+        let last = f.level_count() - 1;
+        let parent = f
+            .level_nodes(last - 1)
+            .iter()
+            .find(|n| (n.child_first..n.child_first + n.child_count).contains(&(k as u32)))
+            .unwrap();
+        let extent: f32 = (0..3)
+            .map(|d| parent.bounds_max[d] - parent.bounds_min[d])
+            .fold(f32::INFINITY, f32::min);
+        assert!(extent >= 5.0 - 1e-3, "{parent:?}");
+        assert!(f.metadata().species[0].radius > 0.5);
+        kept.push(radii.len());
+        // An override gives the type one radius.
+        let f = convert(&bytes, vec![("A".into(), 1.2)], chunk_points, "over.mdlod");
+        assert!(f.radii().is_none());
+        assert_eq!(f.metadata().species[0].radius, 1.2);
     }
+    assert_eq!(kept[0], kept[1]);
 }
 
 /// A diameter that is not finite (NaN, infinity) is refused as one of zero or below is,
@@ -901,9 +935,7 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
     let radii: Vec<Option<f32>> = f.species.iter().map(|s| s.radius).collect();
     assert_eq!(radii, [Some(1.0), Some(0.25), Some(0.5)]);
     // The shape drawn as a sphere of the default radius is named in a note.
-    let notes = DumpFile::open(&path)
-        .unwrap()
-        .frame_notes(0, &ReadOptions::default());
+    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
     assert_eq!(notes.len(), 1, "{notes:?}");
     assert!(
         notes[0].contains("gives no sphere for type C (ConvexPolyhedron): it is drawn")
@@ -913,9 +945,7 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
     // So are a type with no entry and one whose entry is no JSON.
     let bytes = with_shapes(&["[not json", shapes[0]]);
     let (path, _) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
-    let notes = DumpFile::open(&path)
-        .unwrap()
-        .frame_notes(0, &ReadOptions::default());
+    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
     assert!(
         notes.len() == 1 && notes[0].contains("types A (an entry not read), C (no entry): they"),
         "{notes:?}"
@@ -935,9 +965,7 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
     let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     assert_eq!(f.unwrap().species[0].radius, Some(0.0));
     // Every type has its sphere: nothing to note.
-    let notes = DumpFile::open(&path)
-        .unwrap()
-        .frame_notes(0, &ReadOptions::default());
+    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
     assert!(notes.is_empty(), "{notes:?}");
 }
 
@@ -1046,9 +1074,7 @@ fn a_type_shapes_chunk_that_is_not_text_is_noted() {
     let bytes = two_particles(&[("particles/type_shapes", 9, 1, shapes)]);
     let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     assert_eq!(f.unwrap().species[0].radius, Some(0.5));
-    let notes = DumpFile::open(&path)
-        .unwrap()
-        .frame_notes(0, &ReadOptions::default());
+    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
     assert!(
         notes.len() == 1
             && notes[0].contains("particles/type_shapes is not text")

@@ -485,3 +485,86 @@ fn unscaled_coordinates_read_as_assumed_scaled_ones_are_refused() {
     assert_eq!(f.positions[0], [60.0, 15.0, 15.0]);
     assert_eq!(f.positions[39], [15.0, -3.0, 31.5]);
 }
+
+/// A granular run's grains of their own sizes (`in.granular`): the text dump's `radius`
+/// column and the binary dump's `diameter` column of the same run give every grain the
+/// same radius, each type its grains' mean and range, and the range the input script
+/// drew them from.
+#[test]
+fn granular_sizes_read_as_radii_from_text_radius_and_binary_diameter_columns() {
+    let text_path = lammps_sample_path("granular.dump");
+    let bin_path = lammps_sample_path("granular.bin");
+    for k in 0..3 {
+        let text = read(&text_path, k, &with_attribute("id"));
+        let bin = read(&bin_path, k, &with_attribute("id"));
+        assert_eq!(text.len(), 252);
+        let radii_by_id = |f: &Frame| {
+            let ids = &f.attribute.as_ref().unwrap().values;
+            let r = f.radii.as_ref().expect("per-particle radii");
+            let mut order: Vec<usize> = (0..f.len()).collect();
+            order.sort_by(|&a, &b| ids[a].total_cmp(&ids[b]));
+            order.iter().map(|&i| r[i]).collect::<Vec<f32>>()
+        };
+        let (rt, rb) = (radii_by_id(&text), radii_by_id(&bin));
+        // The text dump prints 6 significant digits (these radii: 6 decimals).
+        for (i, (a, b)) in rt.iter().zip(&rb).enumerate() {
+            assert!((a - b).abs() <= 6e-7, "grain {}: {a} against {b}", i + 1);
+        }
+        assert_close(&by_id(&text), &by_id(&bin), 1e-5, "positions");
+        for f in [&text, &bin] {
+            let r = f.radii.as_ref().unwrap();
+            for (t, (lo, hi)) in [(0usize, (0.3, 0.5)), (1, (0.6, 0.9))] {
+                let s = &f.species[t];
+                let (a, b) = s.radius_range.expect("a range");
+                assert!(lo <= a && a < b && b <= hi, "type {}: {a} to {b}", s.name);
+                let own: Vec<f32> = (0..f.len())
+                    .filter(|&i| usize::from(f.species_index[i]) == t)
+                    .map(|i| r[i])
+                    .collect();
+                let mean = own.iter().map(|&v| f64::from(v)).sum::<f64>() / own.len() as f64;
+                assert!((f64::from(s.radius.unwrap()) - mean).abs() < 1e-6);
+            }
+        }
+    }
+}
+
+/// A size that is no size (negative, or not a number) is an error naming the line or the
+/// byte, not a sphere of no size.
+#[test]
+fn a_negative_or_nan_size_is_an_error_naming_its_place() {
+    let text = std::fs::read_to_string(lammps_sample_path("granular.dump")).unwrap();
+    let bad = text.replacen("1 1 0.", "1 1 -0.", 1);
+    assert_ne!(bad, text);
+    let (_d, path) = temp_copy("bad.lammpstrj", bad.as_bytes());
+    let e = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(":10:") && e.contains("`radius` -0.") && e.contains("no particle size"),
+        "{e}"
+    );
+
+    let mut bytes = std::fs::read(lammps_sample_path("granular.bin")).unwrap();
+    // The first atom's diameter (third of its six doubles) is the first 8 bytes that
+    // hold a value between 1.2 and 2 after the header (ids and types are whole numbers).
+    let at = (0..bytes.len() - 8)
+        .step_by(1)
+        .find(|&i| {
+            let v = f64::from_le_bytes(bytes[i..i + 8].try_into().unwrap());
+            (1.2..2.0).contains(&v) && v.fract() != 0.0
+        })
+        .unwrap();
+    bytes[at..at + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+    let (_d, path) = temp_copy("bad.bin", &bytes);
+    let e = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("`diameter`") && e.contains("no particle size"),
+        "{e}"
+    );
+}

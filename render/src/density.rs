@@ -418,8 +418,8 @@ pub fn reference(
     Reference { rgba, hit }
 }
 
-/// The points of `draw` in order, as the density pass packs them: a particle at its
-/// species' radius, a representative at `sqrt(area_sum)` (it carries its particles' mass).
+/// The points of `draw` in order, as the density pass packs them: a particle at its own
+/// radius where the file keeps one, else its species', a representative at `sqrt(area_sum)` (it carries its particles' mass).
 pub fn density_points(
     file: &mdlod_format::MdlodFile,
     draw: &crate::traversal::DrawList,
@@ -435,9 +435,13 @@ pub fn density_points(
         for i in r.first..r.first + r.count {
             let (radius, albedo) = if level == last {
                 let s = species.get(i as usize).copied().unwrap_or(0);
-                table
-                    .get(usize::from(s))
-                    .map_or((0.0, Vec3::ZERO), |s| (s.radius, Vec3::from(s.colour)))
+                table.get(usize::from(s)).map_or((0.0, Vec3::ZERO), |sp| {
+                    let r = match file.radii() {
+                        Some(_) => file.particle_radius(i as usize),
+                        None => sp.radius,
+                    };
+                    (r, Vec3::from(sp.colour))
+                })
             } else {
                 let n = &file.level_nodes(level)[i as usize];
                 let c = n.colour.to_le_bytes();

@@ -612,12 +612,12 @@ pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
 }
 
 /// The particles of node `n` (whose children are particles, encoded relative to it:
-/// δn = 1) that are not of the species of `hidden`: position and their species' radius.
+/// δn = 1) that are not of the species of `hidden`: position and radius (its own where
+/// the file keeps one, else its species').
 fn shown_particles<'a>(
     file: &'a MdlodFile,
     n: &'a mdlod_format::NodeRecord,
     hidden: u64,
-    radii: &'a [f32],
 ) -> impl Iterator<Item = (glam::Vec3, f32)> + 'a {
     let last = file.level_count().saturating_sub(1);
     let (pos, species) = (file.positions(last), file.species());
@@ -632,7 +632,7 @@ fn shown_particles<'a>(
             n.quant_scale,
             file.position_bits(),
         ));
-        Some((p, radii.get(usize::from(sp)).copied().unwrap_or(0.0)))
+        Some((p, file.particle_radius(c)))
     })
 }
 
@@ -738,10 +738,21 @@ fn styled_reach(file: &MdlodFile, opts: &RenderOptions, footprint: f32) -> f32 {
         Ok(table) => table.iter().map(|t| t[3]).collect(),
         Err(_) => species.iter().map(|s| s.radius).collect(),
     };
+    // A particle of radius ρ is drawn at ρ · drawn / radius: its reach past its sphere
+    // is largest at one end of the species' sizes.
     let reach = drawn
         .iter()
         .zip(species)
-        .map(|(r, s)| r * footprint - s.radius)
+        .enumerate()
+        .map(|(i, (r, s))| {
+            let per = if s.radius > 0.0 {
+                r / s.radius * footprint - 1.0
+            } else {
+                0.0
+            };
+            let [lo, hi] = file.species_radius_span(i);
+            (lo * per).max(hi * per)
+        })
         .fold(f32::NEG_INFINITY, f32::max);
     if reach.is_finite() {
         reach
@@ -848,7 +859,6 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
     let (nodes, levels) = (file.nodes(), file.levels());
     let last = levels.len().checked_sub(1)?;
     let kind_of = species_kinds(file, hidden);
-    let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
     // What places the bulk: the centres of the clusters of the first level of at least
     // 1024, weighted by their areas; in a file without one (a few thousand particles),
     // the particles themselves, each weighted by its area.
@@ -878,8 +888,7 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
         file.check_nodes(parents, 0..count).ok()?;
         for n in nodes.get(first..first.checked_add(count)?)? {
             sample.extend(
-                shown_particles(file, n, hidden, &radii)
-                    .map(|(p, r)| (p, (r * r).max(f32::MIN_POSITIVE))),
+                shown_particles(file, n, hidden).map(|(p, r)| (p, (r * r).max(f32::MIN_POSITIVE))),
             );
         }
     }
@@ -931,7 +940,6 @@ fn bounds_walk(
     let (nodes, levels) = (file.nodes(), file.levels());
     let last = levels.len().checked_sub(1)?;
     let kind_of = species_kinds(file, hidden);
-    let radii: Vec<f32> = file.metadata().species.iter().map(|s| s.radius).collect();
     let inside = |a: glam::Vec3, b: glam::Vec3| {
         core.is_none_or(|[lo, hi]| a.cmpge(lo).all() && b.cmple(hi).all())
     };
@@ -966,7 +974,7 @@ fn bounds_walk(
         let child_level = usize::from(n.level) + 1;
         if child_level == last && file.delta_n() == 1 && file.check_children(id).is_ok() {
             // The particles themselves, encoded relative to this node.
-            for (p, r) in shown_particles(file, n, hidden, &radii) {
+            for (p, r) in shown_particles(file, n, hidden) {
                 if inside(p, p) {
                     lo = lo.min(p - r);
                     hi = hi.max(p + r);
@@ -1669,11 +1677,25 @@ fn draw_cell(
         return;
     };
     let species = &file.metadata().species;
+    // The largest drawn: a species' largest particle scaled as the style scales it.
+    let largest = |i: usize, drawn: f32| {
+        let s = &species[i];
+        if s.radius > 0.0 {
+            drawn / s.radius * file.species_radius_span(i)[1]
+        } else {
+            drawn
+        }
+    };
     let radius = opts
         .style
         .species_table(species)
-        .map(|t| t.iter().map(|s| s[3]).fold(0.0f32, f32::max))
-        .unwrap_or_else(|_| species.iter().map(|s| s.radius).fold(0.0, f32::max));
+        .map(|t| {
+            t.iter()
+                .enumerate()
+                .map(|(i, s)| largest(i, s[3]))
+                .fold(0.0f32, f32::max)
+        })
+        .unwrap_or_else(|_| file.max_particle_radius());
     overlay::draw_lines(
         image,
         depth,
@@ -2014,11 +2036,8 @@ pub fn level0_scale(
     let camera = frame_setup(file, opts)?.0;
     let bounds = data_bounds(file);
     let far = (camera.eye() - bounds.center()).dot(camera.back()) + bounds.radius();
-    let r_min = file
-        .metadata()
-        .species
-        .iter()
-        .map(|s| s.radius)
+    let r_min = (0..file.metadata().species.len())
+        .map(|s| file.species_radius_span(s)[0])
         .fold(f32::INFINITY, f32::min);
     let r_px = r_min * camera.pixels_per_world(far.max(camera.near), opts.height);
     let per_sphere = std::f32::consts::PI * r_px * r_px * iterations.max(1) as f32;

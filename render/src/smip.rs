@@ -211,19 +211,26 @@ impl SmipFrame {
     }
 }
 
-/// The smallest sphere radius of `file` under `style` (species radii; clusters are
-/// larger).
+/// The smallest sphere radius of `file` under `style` (the species' smallest particles,
+/// scaled as the style scales their species; clusters are larger).
 pub fn min_radius(file: &MdlodFile, style: &PointStyle) -> f32 {
     file.metadata()
         .species
         .iter()
-        .map(|s| {
+        .enumerate()
+        .map(|(i, s)| {
             let own = style
                 .species
                 .iter()
                 .find(|x| x.name == s.name)
                 .and_then(|x| x.radius);
-            own.unwrap_or(s.radius) * style.radius_scale
+            let drawn = own.unwrap_or(s.radius) * style.radius_scale;
+            let smallest = file.species_radius_span(i)[0];
+            if s.radius > 0.0 {
+                drawn * smallest / s.radius
+            } else {
+                drawn
+            }
         })
         .fold(f32::INFINITY, f32::min)
 }

@@ -1215,7 +1215,12 @@ fn front_to_back(
     // smallest particle radius inside the box, with a radius no larger than the node's
     // (Eq. 2 makes radii grow up the hierarchy); every decoded centre moves by at most
     // the recorded quantization error.
-    let r_min = radii.iter().copied().fold(f32::INFINITY, f32::min).max(0.0);
+    let r_min = (0..radii.len())
+        .map(|s| file.species_radius_span(s)[0])
+        .fold(f32::INFINITY, f32::min)
+        .max(0.0);
+    // Particles' own radii, where the file keeps them.
+    let own_radii = file.radii().zip(file.metadata().radius);
     let r_min = if r_min.is_finite() { r_min } else { 0.0 };
     let quant = quantization_reach(file);
     let mut out = Decisions::default();
@@ -1383,7 +1388,10 @@ fn front_to_back(
                 let s = species
                     .get(c as usize)
                     .map_or(0, |&s| usize::from(s).min(radii.len().saturating_sub(1)));
-                let r = radii.get(s).copied().unwrap_or(0.0);
+                let r = match own_radii {
+                    Some((q, info)) => q.get(c as usize).map_or(0.0, |&q| info.decode(q)),
+                    None => radii.get(s).copied().unwrap_or(0.0),
+                };
                 if masked {
                     if buffer.sphere_hidden(p, r + quant) {
                         continue;

@@ -252,17 +252,52 @@ fn hit_depth_matches_a_cpu_ray_sphere_intersection() {
         .map(|_| [0; 3].map(|_| 20.0 * rng.next_f32()))
         .collect();
     let (_d, _p, f) = make_file(&spheres_frame(&centres), small_build(), &[("X", 1.7)]);
+    check_hit_depth(&f, |_| 1.7);
+}
+
+/// Particles of their own sizes (a polydisperse species, radii 0.4 to 3): each is drawn
+/// at its own radius, to the depth a CPU ray cast against those radii finds.
+#[test]
+fn particles_of_their_own_sizes_are_drawn_at_their_own_radii() {
+    let mut rng = Rng::new(12);
+    let centres: Vec<[f32; 3]> = (0..40)
+        .map(|_| [0; 3].map(|_| 20.0 * rng.next_f32()))
+        .collect();
+    let radii: Vec<f32> = (0..40).map(|_| 0.4 + 2.6 * rng.next_f32()).collect();
+    let mut frame = spheres_frame(&centres);
+    frame.species[0].radius = Some(1.7);
+    frame.species[0].radius_range = Some((0.4, 3.0));
+    frame.radii = Some(radii.clone());
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    assert!(f.radii().is_some());
+    // The file's radii are the input's, to 16 bits over their range.
+    let last = f.level_count() - 1;
+    let decoded = f.decode_level(last).unwrap();
+    for (i, p) in decoded.iter().enumerate() {
+        let k = centres
+            .iter()
+            .position(|c| Vec3::from(*c).distance(Vec3::from(*p)) < 1e-3)
+            .unwrap();
+        assert!((f.particle_radius(i) - radii[k]).abs() < 3e-5);
+    }
+    check_hit_depth(&f, |i| f.particle_radius(i));
+}
+
+/// Renders `f` (particles only on its finest level, no LOD: error 0) from two views and
+/// compares each pixel's depth with a CPU ray cast against the particles at `radius_of`.
+fn check_hit_depth(f: &MdlodFile, radius_of: impl Fn(usize) -> f32) {
     let last = f.level_count() - 1;
     let spheres: Vec<(Vec3, f32)> = f
         .decode_level(last)
         .unwrap()
         .into_iter()
-        .map(|p| (Vec3::from(p), 1.7))
+        .enumerate()
+        .map(|(i, p)| (Vec3::from(p), radius_of(i)))
         .collect();
     let (w, h) = (160u32, 120u32);
     for projection in [Projection::Perspective, Projection::Orthographic] {
         let mut cam = camera_for(
-            &f,
+            f,
             &ViewSpec::Orbit {
                 azimuth_deg: 35.0,
                 elevation_deg: 25.0,
@@ -273,8 +308,8 @@ fn hit_depth_matches_a_cpu_ray_sphere_intersection() {
             h,
         )
         .unwrap();
-        cam.fit_depth_range(&mdlod_render::data_bounds(&f));
-        let frame = render_all(&f, &cam, w, h, 1);
+        cam.fit_depth_range(&mdlod_render::data_bounds(f));
+        let frame = render_all(f, &cam, w, h, 1);
         let depth = frame.depth.unwrap();
         let clip_from_view = cam.clip_from_view(w as f32 / h as f32);
         let view_from_clip = clip_from_view.inverse();
@@ -1116,6 +1151,40 @@ fn occlusion_culling_changes_no_pixel() {
             projection,
         };
         check_culling_changes_no_pixel(&f, o, 2.0 / 3.0, &format!("{projection:?}"));
+    }
+}
+
+/// Occlusion culling of particles of their own sizes (radii from 0.3 to 2.2 in a block):
+/// the culling tests each against its own sphere, and the smallest bounds what
+/// representatives reach, so no pixel changes.
+#[test]
+fn occlusion_culling_of_particles_of_their_own_sizes_changes_no_pixel() {
+    let mut frame = fcc_frame(12);
+    let mut rng = Rng::new(5);
+    frame.radii = Some(
+        (0..frame.positions.len())
+            .map(|_| 0.3 + 1.9 * rng.next_f32())
+            .collect(),
+    );
+    for s in &mut frame.species {
+        s.radius = Some(1.25);
+        s.radius_range = Some((0.3, 2.2));
+    }
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    assert!(f.radii().is_some());
+    for (error_px, projection) in [
+        (0.0, Projection::Perspective),
+        (3.0, Projection::Orthographic),
+    ] {
+        let mut o = opts(160, 120);
+        o.error_px = error_px;
+        o.view = ViewSpec::Orbit {
+            azimuth_deg: 25.0,
+            elevation_deg: 15.0,
+            zoom: 1.3,
+            projection,
+        };
+        check_culling_changes_no_pixel(&f, o, 0.9, &format!("own sizes, {projection:?}"));
     }
 }
 

@@ -133,6 +133,7 @@ pub fn run(args: Args) -> Result<()> {
             "nodes": f.nodes().len(),
             "species": m.species,
             "attribute": m.attribute,
+            "radius": m.radius,
             "box": m.simulation_box,
             "extent": extent.map(|(lo, hi)| json!({ "min": lo, "max": hi })),
             "flat_axis": flat.map(|k| ["x", "y", "z"][k]),
@@ -148,6 +149,7 @@ pub fn run(args: Args) -> Result<()> {
         // their f64 widening (1.28, not 1.2799999713897705).
         shortest_f32(&mut v["species"]);
         shortest_f32(&mut v["attribute"]);
+        shortest_f32(&mut v["radius"]);
         shortest_f32(&mut v["extent"]);
         if let (Some(counts), Some(list)) = (&counts, v["species"].as_array_mut()) {
             for (s, c) in list.iter_mut().zip(counts) {
@@ -180,12 +182,18 @@ pub fn run(args: Args) -> Result<()> {
         let count = counts
             .as_ref()
             .map_or(String::new(), |c| format!("  {} particles", c[k]));
-        // Polydisperse species: drawn at the mean of the range their particles span.
+        // Polydisperse species: each particle drawn at its own radius where the file
+        // keeps them (files of format 1.0 kept only the mean).
         let range = s.radius_range.map_or(String::new(), |[lo, hi]| {
             format!(
-                "  (particles {} to {}, drawn at their mean)",
+                "  (particles {} to {}, {})",
                 radius_text(lo),
-                radius_text(hi)
+                radius_text(hi),
+                if m.radius.is_some() {
+                    "each drawn at its own"
+                } else {
+                    "drawn at their mean"
+                }
             )
         });
         // The stored linear colour, and the sRGB `#rrggbb` that --species-colour takes.
@@ -207,6 +215,13 @@ pub fn run(args: Args) -> Result<()> {
             "  (species not counted above {COUNT_UP_TO} particles: --counts reads each \
              particle's species, {})",
             super::size_text(m.particles.saturating_mul(2))
+        );
+    }
+    if let Some(r) = &m.radius {
+        println!(
+            "  radii        each particle's own, {} to {} (16 bits over that range)",
+            radius_text(r.min),
+            radius_text(r.max)
         );
     }
     if let Some(a) = &m.attribute {

@@ -201,7 +201,8 @@ pub struct StyleArgs {
         conflicts_with = "colour_map"
     )]
     pub species_colour: Vec<String>,
-    /// A species' radius, e.g. `Ag=1.6`; repeatable.
+    /// A species' radius, e.g. `Ag=1.6`; repeatable. Particles of their own sizes keep
+    /// their proportions (the species' mean becomes R).
     #[arg(long = "species-radius", value_name = "NAME=R")]
     pub species_radius: Vec<String>,
     /// Leave out the particles of a species, and the clusters of them (a cluster holding

@@ -112,6 +112,8 @@ pub enum BuildError {
     NonFinite { index: usize, position: [f32; 3] },
     #[error("{0} species: a file holds at most {MAX_SPECIES}")]
     TooManySpecies(usize),
+    #[error("particle {index} has radius {radius} (a particle's radius must be a finite number from 0 up)")]
+    BadRadius { index: usize, radius: f32 },
     #[error("particle {index} has a non-finite attribute value {value}")]
     NonFiniteAttribute { index: usize, value: f32 },
     #[error("particle {index} at {position:?} lies beyond ±{MAX_COORDINATE:e}, where differences of single-precision coordinates overflow; convert it in larger length units")]
@@ -138,6 +140,47 @@ pub struct Particles<'a> {
     pub species_index: &'a [u16],
     pub species: &'a [Species],
     pub attribute: Option<&'a [f32]>,
+    /// Each particle's own radius, where the file keeps them ([`particle_radii`]); the
+    /// species' radius otherwise.
+    pub radii: Option<&'a [f32]>,
+}
+
+/// Each particle's radius as a file with per-particle radii keeps it, or `None` where the
+/// file keeps none: where no species of `species` (the file's table, overrides applied)
+/// is of several sizes, or the input gives no sizes. A particle of such a species takes
+/// its own size from `radii`; any other its species' radius.
+pub fn particle_radii(
+    species: &[Species],
+    species_index: &[u16],
+    radii: Option<&[f32]>,
+) -> Option<Vec<f32>> {
+    let radii = radii?;
+    if !species.iter().any(|s| s.radius_range.is_some()) {
+        return None;
+    }
+    Some(
+        species_index
+            .par_iter()
+            .zip(radii)
+            .map(|(&s, &r)| match species.get(usize::from(s)) {
+                Some(sp) if sp.radius_range.is_none() => sp.radius,
+                _ => r,
+            })
+            .collect(),
+    )
+}
+
+/// The range the radii of [`particle_radii`] are quantized over, from the species table
+/// alone (so every chunk of a frame takes the same): the smallest and largest of the
+/// species' radius ranges and the other species' radii. `None` where no species is of
+/// several sizes.
+pub fn radius_range(species: &[Species]) -> Option<mdlod_format::meta::RadiusInfo> {
+    species.iter().find(|s| s.radius_range.is_some())?;
+    let (min, max) = species.iter().fold((f32::INFINITY, 0.0f32), |(lo, hi), s| {
+        let [a, b] = s.radius_range.unwrap_or([s.radius; 2]);
+        (lo.min(a), hi.max(b))
+    });
+    Some(mdlod_format::meta::RadiusInfo { min, max })
 }
 
 /// A built hierarchy, in final order, ready to be written.
@@ -154,6 +197,8 @@ pub struct Hierarchy {
     pub species_index: Vec<u16>,
     /// Quantized attribute per particle, final order, with its range.
     pub attribute: Option<(Vec<u16>, f32, f32)>,
+    /// Quantized radius per particle, final order, with its range.
+    pub radius: Option<(Vec<u16>, mdlod_format::meta::RadiusInfo)>,
     /// Largest distance between a decoded particle and its input position.
     pub max_position_error: f64,
     /// The top node's representative, at full precision.
@@ -170,6 +215,8 @@ pub struct BuildExtras {
     pub attribute_range: Option<(f32, f32)>,
     /// Keep the unquantized positions of this many levels from the top.
     pub keep_levels: usize,
+    /// Quantize the per-particle radii over this range instead of their own.
+    pub radius_range: Option<mdlod_format::meta::RadiusInfo>,
 }
 
 impl Hierarchy {
@@ -211,6 +258,7 @@ impl Hierarchy {
             }
             (None, _) => metadata.attribute = None,
         }
+        metadata.radius = self.radius.as_ref().map(|(_, info)| *info);
         let json = metadata.to_json().map_err(|problem| FormatError::Write {
             path: path.to_path_buf(),
             problem,
@@ -235,6 +283,9 @@ impl Hierarchy {
         if let Some((a, _, _)) = &self.attribute {
             w.write_pod_section(SectionKind::Attribute, last as u32, a)?;
         }
+        if let Some((r, _)) = &self.radius {
+            w.write_pod_section(SectionKind::Radius, last as u32, r)?;
+        }
         w.finish()
     }
 }
@@ -257,6 +308,28 @@ pub fn build_with(
 ) -> Result<Hierarchy, BuildError> {
     validate(&particles, params)?;
     let n = particles.positions.len();
+    // Per-particle radii are built from as readers decode them, so that every node's
+    // bounds and sizes hold the spheres drawn.
+    let radius_info = particles.radii.map(|r| {
+        extras.radius_range.unwrap_or_else(|| {
+            let (min, max) = r.iter().fold((f32::INFINITY, 0.0f32), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+            mdlod_format::meta::RadiusInfo { min, max }
+        })
+    });
+    let radius_q: Option<Vec<u16>> = particles
+        .radii
+        .zip(radius_info)
+        .map(|(r, info)| r.par_iter().map(|&v| info.encode(v)).collect());
+    let decoded: Option<Vec<f32>> = radius_q
+        .as_ref()
+        .zip(radius_info)
+        .map(|(q, info)| q.par_iter().map(|&q| info.decode(q)).collect());
+    let particles = Particles {
+        radii: decoded.as_deref(),
+        ..particles
+    };
     // Progress in particles: the finest clustering counts for one pass over them, the
     // rest of the build for another, each reported at half weight (the bar showed
     // 3,000,000 particles for a frame of 1,500,000).
@@ -521,6 +594,10 @@ pub fn build_with(
             .collect();
         (q, min, max)
     });
+    let radius = radius_q.zip(radius_info).map(|(q, info)| {
+        let ordered = particle_order.par_iter().map(|&i| q[i as usize]).collect();
+        (ordered, info)
+    });
     progress.advance(n as u64 - 3 * (n as u64 / 4));
     progress.finish_stage();
     Ok(Hierarchy {
@@ -531,6 +608,7 @@ pub fn build_with(
         particle_order,
         species_index,
         attribute,
+        radius,
         max_position_error: max_err,
         root,
         top_positions,
@@ -639,7 +717,10 @@ fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
     if n > u32::MAX as usize {
         return Err(BuildError::TooMany(n));
     }
-    if p.species_index.len() != n || p.attribute.is_some_and(|a| a.len() != n) {
+    if p.species_index.len() != n
+        || p.attribute.is_some_and(|a| a.len() != n)
+        || p.radii.is_some_and(|r| r.len() != n)
+    {
         return Err(BuildError::Params(
             "per-particle arrays differ in length".into(),
         ));
@@ -669,6 +750,24 @@ fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
         }
     }
     check_species(n, p.species)?;
+    if let Some(r) = p.radii {
+        if let Some(index) = r.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(BuildError::BadRadius {
+                index,
+                radius: r[index],
+            });
+        }
+        let largest = r.iter().fold(0.0f32, |m, &v| m.max(v));
+        let sum = n as f64 * f64::from(largest).powi(2);
+        if !(sum <= MAX_AREA_SUM && largest <= MAX_COORDINATE) {
+            return Err(BuildError::RadiusTooLarge {
+                name: "(a particle's own)".into(),
+                radius: largest,
+                particles: n,
+                sum,
+            });
+        }
+    }
     if let Some(index) = p
         .species_index
         .iter()
@@ -729,6 +828,7 @@ mod tests {
                 species_index: &species_index,
                 species: &species,
                 attribute: None,
+                radii: None,
             },
             &BuildParams::default(),
             &counted,
@@ -744,6 +844,97 @@ mod tests {
             )]
         );
         assert_eq!(counted.done.into_inner(), n as u64);
+    }
+
+    #[test]
+    fn particles_of_their_own_sizes_keep_flux_bounds_and_a_bounded_radius_error() {
+        // 20 000 particles of one species with radii from 0.1 to 2.9.
+        let n = 20_000;
+        let mut seed = 7u64;
+        let mut rand = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let positions: Vec<[f32; 3]> = (0..n)
+            .map(|_| [rand() * 50.0, rand() * 50.0, rand() * 50.0])
+            .collect();
+        let radii: Vec<f32> = (0..n).map(|_| 0.1 + 2.8 * rand()).collect();
+        let species_index = vec![0u16; n];
+        let species = [Species {
+            name: "grain".into(),
+            radius: 1.5,
+            colour: [0.5; 3],
+            radius_range: Some([0.1, 2.9]),
+        }];
+        let own = particle_radii(&species, &species_index, Some(&radii)).unwrap();
+        let h = build(
+            Particles {
+                positions: &positions,
+                species_index: &species_index,
+                species: &species,
+                attribute: None,
+                radii: Some(&own),
+            },
+            &BuildParams::default(),
+            &NoProgress,
+        )
+        .unwrap();
+        let (q, info) = h.radius.as_ref().expect("radii kept");
+        let lo = radii.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = radii.iter().copied().fold(0.0, f32::max);
+        assert_eq!((info.min, info.max), (lo, hi));
+        // Half a step of 16 bits over the range, and the single-precision rounding.
+        let bound = (hi - lo) / 65535.0 / 2.0 + 4.0 * f32::EPSILON * hi;
+        let decoded: Vec<f32> = q.iter().map(|&q| info.decode(q)).collect();
+        for (k, &i) in h.particle_order.iter().enumerate() {
+            let err = (decoded[k] - radii[i as usize]).abs();
+            assert!(err <= bound, "particle {i}: error {err} above {bound}");
+        }
+        // Flux (Eq. 1): the top node's Σ r² is the particles' own, as decoded.
+        let sum: f64 = decoded.iter().map(|&r| f64::from(r) * f64::from(r)).sum();
+        let top = f64::from(h.nodes[0].area_sum);
+        assert!((top - sum).abs() <= 1e-5 * sum, "{top} against {sum}");
+        // Every parent of particles holds its particles' own spheres, and is drawn at
+        // least as large as the largest.
+        let last = h.level_count() - 1;
+        let first = h.levels[last - 1].node_first as usize;
+        let count = h.levels[last - 1].point_count as usize;
+        for node in &h.nodes[first..first + count] {
+            for c in node.child_first..node.child_first + node.child_count {
+                let i = h.particle_order[c as usize] as usize;
+                let (p, r) = (positions[i], decoded[c as usize]);
+                for d in 0..3 {
+                    assert!(node.bounds_min[d] <= p[d] - r + 1e-4);
+                    assert!(node.bounds_max[d] >= p[d] + r - 1e-4);
+                }
+                assert!(node.radius >= r * (1.0 - 1e-6), "{} < {r}", node.radius);
+            }
+        }
+        // Without sizes of its own, or with the species of one size, none are kept.
+        let one = [Species {
+            radius_range: None,
+            ..species[0].clone()
+        }];
+        assert!(particle_radii(&one, &species_index, Some(&radii)).is_none());
+        assert!(particle_radii(&species, &species_index, None).is_none());
+        // A radius that is not a finite number from 0 up is refused, naming the particle.
+        let mut bad = own.clone();
+        bad[17] = f32::NAN;
+        let e = build(
+            Particles {
+                positions: &positions,
+                species_index: &species_index,
+                species: &species,
+                attribute: None,
+                radii: Some(&bad),
+            },
+            &BuildParams::default(),
+            &NoProgress,
+        )
+        .unwrap_err();
+        assert!(matches!(e, BuildError::BadRadius { index: 17, .. }), "{e}");
     }
 
     #[test]

@@ -63,7 +63,9 @@ impl<'a> Source<'a> {
     #[inline]
     pub fn radius(&self, i: usize) -> f32 {
         match self {
-            Source::Particles(p) => Self::species_of(p, i).radius,
+            Source::Particles(p) => p
+                .radii
+                .map_or_else(|| Self::species_of(p, i).radius, |r| r[i]),
             Source::Reps(r) => r.0[i].radius,
         }
     }
@@ -106,7 +108,7 @@ impl Source<'_> {
                 let species = p.species_index[i];
                 let sp = &p.species[usize::from(species)];
                 let x = p.positions[i];
-                let r = sp.radius;
+                let r = p.radii.map_or(sp.radius, |r| r[i]);
                 Member {
                     position: x,
                     radius: r,

@@ -54,6 +54,43 @@ pub(crate) struct AtomLayout {
     /// same types look the same in every format (not for atomic numbers, XYZ `Z`, where
     /// H = 1 and Na = 11 would share a colour; numbers from 0 take none either).
     pub type_numbers: bool,
+    /// The column of each particle's size and the factor that makes it a radius (1 for a
+    /// `radius` column, 0.5 for a `diameter`), if any ([`size_column`]).
+    pub size: Option<(usize, f64)>,
+}
+
+/// The column of per-particle sizes among `columns`: `radius` (a granular LAMMPS run's,
+/// OVITO's `Radius`), else `diameter`, in any case; with the factor that makes it a
+/// radius.
+pub(crate) fn size_column(columns: &[String]) -> Option<(usize, f64)> {
+    let find = |name: &str| columns.iter().position(|c| c.eq_ignore_ascii_case(name));
+    find("radius")
+        .map(|c| (c, 1.0))
+        .or_else(|| find("diameter").map(|c| (c, 0.5)))
+}
+
+/// Gives every species of particles with sizes its particles' mean radius and their
+/// range (the range kept for [`crate::frame::SpeciesName::radius_range`] even where
+/// they agree; the conversion keeps each particle's own where they differ).
+pub(crate) fn sized_species(species: &mut [SpeciesName], species_index: &[u16], radii: &[f32]) {
+    let mut sum = vec![0f64; species.len()];
+    let mut count = vec![0u64; species.len()];
+    let mut range = vec![(f32::INFINITY, f32::NEG_INFINITY); species.len()];
+    for (&s, &r) in species_index.iter().zip(radii) {
+        let s = usize::from(s);
+        if s < species.len() {
+            sum[s] += f64::from(r);
+            count[s] += 1;
+            range[s] = (range[s].0.min(r), range[s].1.max(r));
+        }
+    }
+    for (k, sp) in species.iter_mut().enumerate() {
+        if count[k] > 0 {
+            sp.radius = Some((sum[k] / count[k] as f64) as f32);
+            sp.radius_range = Some(range[k]);
+            sp.sized_count = count[k];
+        }
+    }
 }
 
 /// What a chunk parser does with one field.
@@ -65,11 +102,17 @@ enum Role {
     Attr,
     CoordAttr(usize),
     SpeciesAttr,
+    /// The particle's size, times the factor.
+    Size(f64),
+    /// The size, and the attribute too.
+    SizeAttr(f64),
 }
 
 /// Everything a chunk parser needs besides its bytes.
 struct Plan<'p> {
     roles: Vec<Role>,
+    /// The size column and its factor, when read.
+    size: Option<(usize, f64)>,
     columns: &'p [String],
     fractional: Option<&'p SimulationBox>,
 }
@@ -80,6 +123,8 @@ pub(crate) struct Atoms {
     pub species_index: Vec<u16>,
     pub species: Vec<SpeciesName>,
     pub attribute: Option<Vec<f32>>,
+    /// Each particle's radius, where the layout has a size column.
+    pub radii: Option<Vec<f32>>,
 }
 
 /// Parses `expected` atom lines from `block` (byte range into `ctx.data`, starting at a line
@@ -156,14 +201,24 @@ pub(crate) fn parse(
     for (k, &c) in coords.iter().enumerate() {
         roles[c] = Role::Coord(k);
     }
+    if let Some((c, factor)) = layout.size {
+        if roles[c] == Role::Skip {
+            roles[c] = Role::Size(factor);
+        }
+    }
     if let Some(a) = attribute {
         roles[a] = match roles[a] {
             Role::Coord(k) => Role::CoordAttr(k),
             Role::Species => Role::SpeciesAttr,
+            Role::Size(f) => Role::SizeAttr(f),
             _ => Role::Attr,
         };
     }
+    let sized = roles
+        .iter()
+        .any(|r| matches!(r, Role::Size(_) | Role::SizeAttr(_)));
     let plan = Plan {
+        size: layout.size.filter(|_| sized),
         roles,
         columns: &layout.columns,
         fractional,
@@ -171,11 +226,13 @@ pub(crate) fn parse(
     let mut positions = vec![[0f32; 3]; expected];
     let mut species_index = vec![0u16; expected];
     let mut attr_values = attribute.map(|_| vec![0f32; expected]);
+    let mut radii = sized.then(|| vec![0f32; expected]);
     let mut work = Vec::with_capacity(chunks.len());
     {
         let mut pos_rest = positions.as_mut_slice();
         let mut sp_rest = species_index.as_mut_slice();
         let mut attr_rest = attr_values.as_deref_mut();
+        let mut size_rest = radii.as_deref_mut();
         for (chunk, &n) in chunks.iter().zip(&counts) {
             let (p, pr) = pos_rest.split_at_mut(n);
             let (s, sr) = sp_rest.split_at_mut(n);
@@ -189,14 +246,22 @@ pub(crate) fn parse(
                 }
                 None => None,
             };
-            work.push((chunk.clone(), p, s, a));
+            let z = match size_rest.take() {
+                Some(rest) => {
+                    let (z, zr) = rest.split_at_mut(n);
+                    size_rest = Some(zr);
+                    Some(z)
+                }
+                None => None,
+            };
+            work.push((chunk.clone(), p, s, (a, z)));
         }
     }
     let tables: Vec<Result<SpeciesTable<'_>, ReadError>> = work
         .into_par_iter()
-        .map(|(chunk, p, s, a)| {
+        .map(|(chunk, p, s, (a, z))| {
             let len = chunk.len() as u64;
-            let r = parse_chunk(ctx, chunk, &plan, p, s, a);
+            let r = parse_chunk(ctx, chunk, &plan, p, s, a, z);
             progress.advance(len);
             r
         })
@@ -227,12 +292,17 @@ pub(crate) fn parse(
     } else {
         Vec::new()
     };
+    let mut species = species;
+    if let Some(r) = &radii {
+        sized_species(&mut species, &species_index, r);
+    }
     progress.finish_stage();
     Ok(Atoms {
         positions,
         species_index,
         species,
         attribute: attr_values,
+        radii,
     })
 }
 
@@ -379,6 +449,7 @@ fn parse_chunk<'a>(
     positions: &mut [[f32; 3]],
     species: &mut [u16],
     mut attribute: Option<&mut [f32]>,
+    mut sizes: Option<&mut [f32]>,
 ) -> Result<SpeciesTable<'a>, ReadError> {
     let bytes: &'a [u8] = &ctx.data[..chunk.end];
     let roles = plan.roles.as_slice();
@@ -389,6 +460,7 @@ fn parse_chunk<'a>(
         let mut col = 0usize;
         let mut p = [0f64; 3];
         let mut attr = 0f64;
+        let mut size = 0f64;
         let mut sp = 0u16;
         loop {
             while i < bytes.len() && bytes[i] <= b' ' && bytes[i] != b'\n' {
@@ -412,6 +484,11 @@ fn parse_chunk<'a>(
                 Role::CoordAttr(k) => {
                     p[k] = number(ctx, plan, bytes, &mut i, col)?;
                     attr = p[k];
+                }
+                Role::Size(factor) => size = factor * number(ctx, plan, bytes, &mut i, col)?,
+                Role::SizeAttr(factor) => {
+                    attr = number(ctx, plan, bytes, &mut i, col)?;
+                    size = factor * attr;
                 }
                 Role::Species | Role::SpeciesAttr => {
                     while i < bytes.len() && bytes[i] > b' ' {
@@ -456,6 +533,22 @@ fn parse_chunk<'a>(
                     at: ctx.at(line_start),
                     message: format!(
                         "attribute value {attr:?} is outside the single-precision range"
+                    ),
+                });
+            }
+            out[a] = v;
+        }
+        if let Some(out) = sizes.as_deref_mut() {
+            let v = size as f32;
+            if !(v.is_finite() && v >= 0.0) {
+                let (c, factor) = plan.size.unwrap_or((0, 1.0));
+                return Err(ReadError::Malformed {
+                    at: ctx.at(line_start),
+                    message: format!(
+                        "`{}` {} is no particle size (a finite number from 0 up, in single \
+                         precision)",
+                        plan.columns.get(c).map_or("size", String::as_str),
+                        size / factor
                     ),
                 });
             }

@@ -8,8 +8,9 @@
 //!
 //! - `particles/N` (u32), `particles/position` (f32 or f64, N×3), `particles/typeid`
 //!   (u32, default 0), `particles/types` (N×M characters, default `A`),
-//!   `particles/diameter` (f32, default 1: the species radius is half its mean per
-//!   type; without it, an HPMC run's `particles/type_shapes` gives a `Sphere` type's
+//!   `particles/diameter` (f32, default 1: each particle's radius is half its own, kept
+//!   where a type's particles differ in size, and the species' radius half the type's
+//!   mean; without it, an HPMC run's `particles/type_shapes` gives a `Sphere` type's
 //!   diameter; a type with a diameter of zero, below or not finite is refused by the
 //!   conversion unless `--radius` names it), `configuration/step` (u64, default 0),
 //!   `configuration/box` (f32 ×6: `Lx Ly Lz xy xz yz`, centred on the origin).
@@ -913,6 +914,19 @@ pub(crate) fn read_range(
     let names = f.type_names()?;
     let species_index = f.type_ids(range.clone(), names.len())?;
     let species = f.species(range.clone(), &names, &species_index)?;
+    // Each particle's own radius, half its diameter (kept where a type's differ).
+    let radii = match f.chunk("particles/diameter", 1, false)? {
+        Some(e) => {
+            let bytes = &data[e.location..e.location + n * e.ty.size()];
+            Some(
+                range
+                    .clone()
+                    .map(|i| (0.5 * e.ty.get(bytes, i)) as f32)
+                    .collect(),
+            )
+        }
+        None => None,
+    };
 
     let attribute = match &opts.attribute {
         // (An empty frame has no values to take.)
@@ -980,6 +994,7 @@ pub(crate) fn read_range(
         species_index,
         species,
         attribute,
+        radii,
         simulation_box: Some(index.simulation_box(path, data, k)?),
         timestep: index.recorded_timestep(data, k),
         time: None,

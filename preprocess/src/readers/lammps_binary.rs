@@ -559,6 +559,9 @@ pub(crate) fn read_range(
     let mut positions = vec![[0f32; 3]; n];
     let mut types = vec![0i64; n];
     let mut attribute = attribute_col.map(|_| vec![0f32; n]);
+    // Each particle's size (a granular run's `radius` or `diameter`), as a radius.
+    let size_col = super::atoms::size_column(&names);
+    let mut radii = size_col.map(|_| vec![0f32; n]);
     let value = |atom: &[u8], c: usize| {
         f64::from_le_bytes(atom[8 * c..8 * c + 8].try_into().unwrap_or([0; 8]))
     };
@@ -640,6 +643,37 @@ pub(crate) fn read_range(
                 ),
             ));
         }
+        if let (Some(values), Some((c, factor))) = (radii.as_mut(), size_col) {
+            let block = super::SCAN_BLOCK;
+            let bad = values[range.clone()]
+                .par_chunks_mut(block)
+                .zip(bytes.par_chunks(block * stride))
+                .enumerate()
+                .find_map_first(|(b, (outs, atoms))| {
+                    for (o, (out, atom)) in
+                        outs.iter_mut().zip(atoms.chunks_exact(stride)).enumerate()
+                    {
+                        let v = value(atom, c);
+                        *out = (v * factor) as f32;
+                        if !(out.is_finite() && *out >= 0.0) {
+                            return Some((b * block + o, v));
+                        }
+                    }
+                    None
+                });
+            if let Some((i, v)) = bad {
+                return Err(err(
+                    (chunk.start + i * stride + 8 * c) as u64,
+                    format!(
+                        "atom {} of timestep {}: column `{}` is {v}, no particle size (a \
+                         finite number from 0 up, in single precision)",
+                        first + skipped + i + 1,
+                        h.timestep,
+                        names[c],
+                    ),
+                ));
+            }
+        }
         if let (Some(values), Some(c)) = (attribute.as_mut(), attribute_col) {
             let block = super::SCAN_BLOCK;
             let bad = values[range.clone()]
@@ -715,6 +749,10 @@ pub(crate) fn read_range(
             (names, index)
         }
     };
+    let mut species = species;
+    if let Some(r) = &radii {
+        super::atoms::sized_species(&mut species, &species_index, r);
+    }
     Ok(Frame {
         positions,
         species_index,
@@ -723,6 +761,7 @@ pub(crate) fn read_range(
             name: names[c].clone(),
             values,
         }),
+        radii,
         simulation_box: Some(h.simulation_box.clone()),
         timestep: Some(h.timestep),
         time: h.time,

@@ -495,6 +495,7 @@ fn species_of(
                 radius_range: spread,
                 colour: list.global_colour,
                 palette_slot: None,
+                sized_count: 0,
             })
         })
         .collect()
@@ -590,7 +591,8 @@ pub(crate) fn attribute_name(
 
 /// Reads particles `range` of frame `k` (the lists one after another) as a frame of its
 /// own: every list a species, `xyzr` lists with the mean radius of their particles in the
-/// range (see [`frame_species`] for the whole frame's).
+/// range (see [`frame_species`] for the whole frame's) and each particle with its own
+/// radius where some list is of `xyzr` particles (the others at their list's).
 pub(crate) fn read_range(
     path: &Path,
     data: &[u8],
@@ -620,6 +622,9 @@ pub(crate) fn read_range(
     let mut positions = Vec::with_capacity(range.len());
     let mut species_index = Vec::with_capacity(range.len());
     let mut values = Vec::new();
+    // Each particle's own radius where some list is of `xyzr` particles.
+    let sized = f.lists.iter().any(|l| l.has_radius());
+    let mut radii = Vec::new();
     let mut first = 0usize;
     for (l, list) in f.lists.iter().enumerate() {
         let lo = range.start.max(first);
@@ -647,6 +652,18 @@ pub(crate) fn read_range(
         })?;
         positions.extend(part);
         species_index.extend(std::iter::repeat_n(l as u16, local.len()));
+        if sized {
+            if list.has_radius() {
+                let own: Vec<f32> = local
+                    .clone()
+                    .into_par_iter()
+                    .map(|i| list.particle_radius(data, i))
+                    .collect();
+                radii.extend(own);
+            } else {
+                radii.extend(std::iter::repeat_n(list.radius.unwrap_or(0.0), local.len()));
+            }
+        }
         if let Some(a) = want {
             if !carries(list, a) {
                 return Err(lacks(path, k, l, list, a));
@@ -687,6 +704,7 @@ pub(crate) fn read_range(
             name: a.to_string(),
             values,
         }),
+        radii: sized.then_some(radii),
         simulation_box: Some(index.simulation_box()),
         timestep: None,
         time: f.timestamp.map(f64::from),

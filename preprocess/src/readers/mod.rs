@@ -612,34 +612,12 @@ impl DumpFile {
 
     /// What a conversion of frame `k` read with `read` should say about what the input
     /// holds and the conversion does not read: a raw sidecar's arrays holding values past
-    /// its `particles`; a text or binary dump's per-particle sizes (a granular run's
-    /// `radius`, an extended XYZ radius property: every particle of a species is drawn at
-    /// its one radius; GSD and MMPLD readers read theirs); the last frame of a text dump
-    /// whose last line has no line end ([`DumpFile::ends_mid_line`]).
-    pub fn frame_notes(&self, k: usize, read: &ReadOptions) -> Vec<String> {
+    /// its `particles`; the last frame of a text dump whose last line has no line end
+    /// ([`DumpFile::ends_mid_line`]).
+    pub fn frame_notes(&self, k: usize) -> Vec<String> {
         let mut notes = Vec::new();
         if let Index::Raw(r) = &self.index {
             notes.extend(r.notes().iter().cloned());
-        }
-        let sized = matches!(
-            self.format,
-            InputFormat::LammpsText | InputFormat::LammpsBinary | InputFormat::Xyz
-        );
-        let info = sized.then(|| self.frame_info(k).ok()).flatten();
-        let column = info.as_ref().and_then(|i| {
-            i.columns.iter().find(|c| {
-                let c = c.to_ascii_lowercase();
-                (c == "radius" || c == "diameter") && read.attribute.as_deref() != Some(c.as_str())
-            })
-        });
-        if let Some(column) = column {
-            notes.push(format!(
-                "{}: column `{column}` holds per-particle sizes, which are not read as radii: \
-                 every particle of a species is drawn at the species' one radius (its \
-                 default, or --radius NAME=R); --attribute {column} keeps the values to \
-                 colour by",
-                self.path.display()
-            ));
         }
         if let Index::Gsd(i) = &self.index {
             notes.extend(gsd::shape_note(&self.path, self.bytes(), i, k));
@@ -1003,6 +981,7 @@ impl DumpFile {
             species_index: atoms.species_index,
             species: atoms.species,
             attribute,
+            radii: atoms.radii,
             simulation_box: info.simulation_box,
             timestep: info.timestep,
             time: info.time,
@@ -1163,6 +1142,7 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
                 species_index: atoms.species_index,
                 species: atoms.species,
                 attribute,
+                radii: atoms.radii,
                 simulation_box: header.info.simulation_box.clone(),
                 timestep: header.info.timestep,
                 time: header.info.time,

@@ -163,8 +163,9 @@ pub(crate) fn read_frame(
     for f in &frames {
         for i in crate::species::merge_order(&f.species, &f.species_index) {
             let s = &f.species[i];
-            if !species.iter().any(|g| g.name == s.name) {
-                species.push(s.clone());
+            match species.iter_mut().find(|g| g.name == s.name) {
+                Some(known) => crate::species::merge_sizes(known, s),
+                None => species.push(s.clone()),
             }
         }
     }
@@ -208,5 +209,15 @@ pub(crate) fn read_frame(
         }
     }
     out.attribute = attribute;
+    // Per-particle sizes where every piece gives them (the pieces of one dump share its
+    // columns).
+    if frames.iter().all(|f| f.radii.is_some()) {
+        out.radii = Some(
+            frames
+                .iter()
+                .flat_map(|f| f.radii.iter().flatten().copied())
+                .collect(),
+        );
+    }
     Ok(out)
 }

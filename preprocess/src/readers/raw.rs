@@ -934,6 +934,7 @@ impl Index {
             species_index,
             species,
             attribute,
+            radii: None,
             simulation_box: self.simulation_box.clone(),
             timestep: self.timestep,
             time: self.time,

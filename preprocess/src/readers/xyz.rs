@@ -321,6 +321,7 @@ impl Index {
                     // `n` the palette's `n`-th colour; numbers from 0 by place).
                     numeric_species: true,
                     type_numbers: true,
+                    size: None,
                 }
             }
         };
@@ -422,6 +423,7 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
         ));
     }
     Ok(AtomLayout {
+        size: super::atoms::size_column(&columns),
         columns,
         coords,
         // Numbers sorted as LAMMPS types are; a `species` column's coloured as they are

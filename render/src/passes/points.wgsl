@@ -33,6 +33,7 @@ struct Range {
 
 const KIND_PARTICLE: u32 = 0u;
 const KIND_INTENSITY: u32 = 2u;
+const KIND_SIZED: u32 = 3u;
 
 @group(0) @binding(0) var<storage, read> frame: Frame;
 @group(0) @binding(1) var<storage, read> positions: array<u32>;
@@ -85,13 +86,18 @@ fn load_point(ii: u32) -> Point {
     let q = quantized(r, j);
     var p: Point;
     p.world = r.base + r.scale * (q - vec3<f32>(frame.params.y));
-    p.cluster = r.kind != KIND_PARTICLE;
+    p.cluster = r.kind != KIND_PARTICLE && r.kind != KIND_SIZED;
     if r.kind == KIND_PARTICLE {
         let h = r.attr_offset * 2u + j;
         let s = min((attrs[h >> 1u] >> ((h & 1u) * 16u)) & 0xffffu, frame.counts.y - 1u);
         let sp = species[s];
         p.radius = sp.w;
         p.albedo = sp.xyz;
+    } else if r.kind == KIND_SIZED {
+        // A particle of its own size: species index, then radius.
+        let s = min(attrs[r.attr_offset + 2u * j], frame.counts.y - 1u);
+        p.radius = bitcast<f32>(attrs[r.attr_offset + 2u * j + 1u]);
+        p.albedo = species[s].xyz;
     } else if r.kind == KIND_INTENSITY {
         p.radius = bitcast<f32>(attrs[r.attr_offset + 2u * j]);
         p.albedo = vec3<f32>(bitcast<f32>(attrs[r.attr_offset + 2u * j + 1u]));

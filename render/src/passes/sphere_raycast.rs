@@ -133,7 +133,7 @@ pub struct RangeGpu {
     pub attr_offset: u32,
     /// Instance index of the range's first point.
     pub first_point: u32,
-    /// [`KIND_PARTICLE`] or [`KIND_NODE`].
+    /// [`KIND_PARTICLE`], [`KIND_NODE`], [`KIND_INTENSITY`] or [`KIND_SIZED`].
     pub kind: u32,
     /// Index of the range's first point within its block of words: point `j` of the
     /// range is point `j + point_offset` of the block starting at `word_offset` /
@@ -146,6 +146,9 @@ pub const KIND_PARTICLE: u32 = 0;
 pub const KIND_NODE: u32 = 1;
 /// Per point a radius and a grey intensity, both f32 (splats by attribute).
 pub const KIND_INTENSITY: u32 = 2;
+/// A particle of a file with per-particle radii: its species index (u32) and its drawn
+/// radius (f32).
+pub const KIND_SIZED: u32 = 3;
 
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 208);
 const _: () = assert!(std::mem::size_of::<RangeGpu>() == 48);
@@ -279,6 +282,15 @@ impl PackedDraw {
             let a = (r.attr_offset + 2 * j) as usize;
             let v = f32::from_bits(self.attrs[a + 1]);
             (pos, f32::from_bits(self.attrs[a]), [v; 3])
+        } else if r.kind == KIND_SIZED {
+            let a = (r.attr_offset + 2 * j) as usize;
+            let s = (self.attrs[a] as usize).min(self.species.len() - 1);
+            let sp = self.species[s];
+            (
+                pos,
+                f32::from_bits(self.attrs[a + 1]),
+                [sp[0], sp[1], sp[2]],
+            )
         } else {
             let a = (r.attr_offset + 2 * j) as usize;
             let c = self.attrs[a + 1].to_le_bytes();
@@ -394,6 +406,12 @@ pub struct AttrPacker {
     recolour: Option<[[f32; 4]; 3]>,
     /// The file's species count (indices at or above it are corrupt).
     species_count: usize,
+    /// Per species, the drawn radius of a particle of the file's per-particle radii
+    /// over its own: the styled radius over the file's (an override scales the
+    /// species' sizes; 0 when hidden).
+    size_factor: Vec<f32>,
+    /// The file keeps per-particle radii.
+    sized: bool,
 }
 
 impl AttrPacker {
@@ -457,7 +475,14 @@ impl AttrPacker {
         let species = look
             .species_table(&meta.species)
             .map_err(|e| RenderError::InvalidOptions(format!("{}: {e}", file.path().display())))?;
+        let size_factor = species
+            .iter()
+            .zip(&meta.species)
+            .map(|(t, s)| if s.radius > 0.0 { t[3] / s.radius } else { 0.0 })
+            .collect();
         Ok(AttrPacker {
+            size_factor,
+            sized: file.radii().is_some(),
             style,
             radius_scale: look.radius_scale,
             mapped,
@@ -479,6 +504,8 @@ impl AttrPacker {
             KIND_INTENSITY
         } else if self.mapped.is_some() || level != last {
             KIND_NODE
+        } else if self.sized {
+            KIND_SIZED
         } else {
             KIND_PARTICLE
         }
@@ -522,18 +549,32 @@ impl AttrPacker {
             {
                 return Err(bad_species(first + k, sp[k]));
             }
+            // Each particle's own radius where the file keeps them, as drawn (styled).
+            let own = file.radii().zip(meta.radius.as_ref());
+            let own_radius = |k: usize| own.map(|(q, info)| info.decode(q[first + k]));
             if let Some(scale) = &self.intensity {
                 for (k, &s) in sp.iter().enumerate() {
                     let q = values.get(first + k).copied().unwrap_or(0);
-                    attrs.push(meta.species[usize::from(s)].radius.to_bits());
+                    let r = own_radius(k).unwrap_or(meta.species[usize::from(s)].radius);
+                    attrs.push(r.to_bits());
                     attrs.push(scale.of_quantized(q).to_bits());
                 }
             } else if let Some((map, scale)) = &self.mapped {
                 // Radius and mapped colour per point, as cluster records are.
                 for (k, &s) in sp.iter().enumerate() {
                     let q = values.get(first + k).copied().unwrap_or(0);
-                    attrs.push(self.species[usize::from(s)][3].to_bits());
+                    let r = match own_radius(k) {
+                        Some(r) => r * self.size_factor[usize::from(s)],
+                        None => self.species[usize::from(s)][3],
+                    };
+                    attrs.push(r.to_bits());
                     attrs.push(pack_colour(map.colour(scale.of_quantized(q))));
+                }
+            } else if own.is_some() {
+                for (k, &s) in sp.iter().enumerate() {
+                    let r = own_radius(k).unwrap_or(0.0) * self.size_factor[usize::from(s)];
+                    attrs.push(u32::from(s));
+                    attrs.push(r.to_bits());
                 }
             } else {
                 push_bytes_as_words(attrs, bytemuck::cast_slice(sp));
