@@ -616,66 +616,51 @@ impl MdlodFile {
                 ),
             ));
         }
-        let attribute_range = match (
-            find(SectionKind::Attribute, Some(last as u32))?,
-            &metadata.attribute,
-        ) {
-            (Some(i), Some(_)) => {
-                if sections[i].length != n * 2 {
-                    return Err(corrupt(
-                        &place_of(i, &sections[i]),
-                        format!("{} bytes, expected {n} u16 values", sections[i].length),
-                    ));
+        // An optional per-particle section of `n` u16 `values`: present exactly when the
+        // metadata gives its `field` (`described`: how, for the message).
+        let optional = |kind: SectionKind, described: Option<String>, field: &str, values: &str| {
+            let name = kind.name();
+            let a = if name.starts_with(['A', 'E', 'I', 'O', 'U']) {
+                "an"
+            } else {
+                "a"
+            };
+            match (find(kind, Some(last as u32))?, described) {
+                (Some(i), Some(_)) => {
+                    if sections[i].length != n * 2 {
+                        return Err(corrupt(
+                            &place_of(i, &sections[i]),
+                            format!("{} bytes, expected {n} u16 {values}", sections[i].length),
+                        ));
+                    }
+                    Ok(Some(range(i)))
                 }
-                Some(range(i))
-            }
-            (None, None) => None,
-            (Some(_), None) => {
-                return Err(corrupt(
+                (None, None) => Ok(None),
+                (Some(_), None) => Err(corrupt(
                     "METADATA",
-                    "an ATTRIBUTE section is present but the metadata names no attribute"
-                        .to_string(),
-                ))
-            }
-            (None, Some(a)) => {
-                return Err(corrupt(
+                    format!("{a} {name} section is present but the metadata gives no {field}"),
+                )),
+                (None, Some(what)) => Err(corrupt(
                     "section table",
-                    format!(
-                        "metadata names attribute {:?} but there is no ATTRIBUTE section",
-                        a.name
-                    ),
-                ))
+                    format!("the metadata gives {what} but there is no {name} section"),
+                )),
             }
         };
-
-        let radius_range = match (
-            find(SectionKind::Radius, Some(last as u32))?,
-            &metadata.radius,
-        ) {
-            (Some(i), Some(_)) => {
-                if sections[i].length != n * 2 {
-                    return Err(corrupt(
-                        &place_of(i, &sections[i]),
-                        format!("{} bytes, expected {n} u16 radii", sections[i].length),
-                    ));
-                }
-                Some(range(i))
-            }
-            (None, None) => None,
-            (Some(_), None) => {
-                return Err(corrupt(
-                    "METADATA",
-                    "a RADIUS section is present but the metadata gives no radius range"
-                        .to_string(),
-                ))
-            }
-            (None, Some(_)) => {
-                return Err(corrupt(
-                    "section table",
-                    "the metadata gives a radius range but there is no RADIUS section".to_string(),
-                ))
-            }
-        };
+        let attribute_range = optional(
+            SectionKind::Attribute,
+            metadata
+                .attribute
+                .as_ref()
+                .map(|a| format!("attribute {:?}", a.name)),
+            "attribute",
+            "values",
+        )?;
+        let radius_range = optional(
+            SectionKind::Radius,
+            metadata.radius.map(|_| "a radius range".to_string()),
+            "radius range",
+            "radii",
+        )?;
 
         let levels_range = range(li);
         let nodes_range = range(ni);

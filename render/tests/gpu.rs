@@ -1138,6 +1138,12 @@ fn check_culling_changes_no_pixel(
 #[test]
 fn occlusion_culling_changes_no_pixel() {
     let (_d, _p, f) = make_file(&fcc_frame(12), small_build(), &[]);
+    check_culling_of_a_block(&f, 2.0 / 3.0, "");
+}
+
+/// [`check_culling_changes_no_pixel`] for a block seen from a corner, in perspective with
+/// no error and orthographic at 3 px.
+fn check_culling_of_a_block(f: &MdlodFile, kept: f64, what: &str) {
     for (error_px, projection) in [
         (0.0, Projection::Perspective),
         (3.0, Projection::Orthographic),
@@ -1150,7 +1156,7 @@ fn occlusion_culling_changes_no_pixel() {
             zoom: 1.3,
             projection,
         };
-        check_culling_changes_no_pixel(&f, o, 2.0 / 3.0, &format!("{projection:?}"));
+        check_culling_changes_no_pixel(f, o, kept, &format!("{what}{projection:?}"));
     }
 }
 
@@ -1172,20 +1178,7 @@ fn occlusion_culling_of_particles_of_their_own_sizes_changes_no_pixel() {
     }
     let (_d, _p, f) = make_file(&frame, small_build(), &[]);
     assert!(f.radii().is_some());
-    for (error_px, projection) in [
-        (0.0, Projection::Perspective),
-        (3.0, Projection::Orthographic),
-    ] {
-        let mut o = opts(160, 120);
-        o.error_px = error_px;
-        o.view = ViewSpec::Orbit {
-            azimuth_deg: 25.0,
-            elevation_deg: 15.0,
-            zoom: 1.3,
-            projection,
-        };
-        check_culling_changes_no_pixel(&f, o, 0.9, &format!("own sizes, {projection:?}"));
-    }
+    check_culling_of_a_block(&f, 0.9, "own sizes, ");
 }
 
 #[test]

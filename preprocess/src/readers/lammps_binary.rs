@@ -643,9 +643,11 @@ pub(crate) fn read_range(
                 ),
             ));
         }
-        if let (Some(values), Some((c, factor))) = (radii.as_mut(), size_col) {
+        // Reads column `c` times `factor` into `values` (this chunk's part), returning the
+        // first value `accept` refuses: its index within the chunk and the value read.
+        let scan = |values: &mut [f32], c: usize, factor: f64, accept: fn(f32) -> bool| {
             let block = super::SCAN_BLOCK;
-            let bad = values[range.clone()]
+            values[range.clone()]
                 .par_chunks_mut(block)
                 .zip(bytes.par_chunks(block * stride))
                 .enumerate()
@@ -655,13 +657,15 @@ pub(crate) fn read_range(
                     {
                         let v = value(atom, c);
                         *out = (v * factor) as f32;
-                        if !(out.is_finite() && *out >= 0.0) {
+                        if !accept(*out) {
                             return Some((b * block + o, v));
                         }
                     }
                     None
-                });
-            if let Some((i, v)) = bad {
+                })
+        };
+        if let (Some(values), Some((c, factor))) = (radii.as_mut(), size_col) {
+            if let Some((i, v)) = scan(values, c, factor, |r| r.is_finite() && r >= 0.0) {
                 return Err(err(
                     (chunk.start + i * stride + 8 * c) as u64,
                     format!(
@@ -675,24 +679,7 @@ pub(crate) fn read_range(
             }
         }
         if let (Some(values), Some(c)) = (attribute.as_mut(), attribute_col) {
-            let block = super::SCAN_BLOCK;
-            let bad = values[range.clone()]
-                .par_chunks_mut(block)
-                .zip(bytes.par_chunks(block * stride))
-                .enumerate()
-                .find_map_first(|(b, (outs, atoms))| {
-                    for (o, (out, atom)) in
-                        outs.iter_mut().zip(atoms.chunks_exact(stride)).enumerate()
-                    {
-                        let v = value(atom, c);
-                        *out = v as f32;
-                        if !out.is_finite() {
-                            return Some((b * block + o, v));
-                        }
-                    }
-                    None
-                });
-            if let Some((i, v)) = bad {
+            if let Some((i, v)) = scan(values, c, 1.0, f32::is_finite) {
                 return Err(err(
                     (chunk.start + i * stride + 8 * c) as u64,
                     format!(
