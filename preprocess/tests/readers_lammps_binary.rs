@@ -532,39 +532,31 @@ fn granular_sizes_read_as_radii_from_text_radius_and_binary_diameter_columns() {
 /// byte, not a sphere of no size.
 #[test]
 fn a_negative_or_nan_size_is_an_error_naming_its_place() {
+    let error_of = |name: &str, bytes: &[u8]| {
+        let (_d, path) = temp_copy(name, bytes);
+        DumpFile::open(&path)
+            .unwrap()
+            .read_frame(0, &ReadOptions::default(), &NoProgress)
+            .unwrap_err()
+            .to_string()
+    };
     let text = std::fs::read_to_string(lammps_sample_path("granular.dump")).unwrap();
     let bad = text.replacen("1 1 0.", "1 1 -0.", 1);
     assert_ne!(bad, text);
-    let (_d, path) = temp_copy("bad.lammpstrj", bad.as_bytes());
-    let e = DumpFile::open(&path)
-        .unwrap()
-        .read_frame(0, &ReadOptions::default(), &NoProgress)
-        .unwrap_err()
-        .to_string();
+    let e = error_of("bad.lammpstrj", bad.as_bytes());
     assert!(
         e.contains(":10:") && e.contains("`radius` -0.") && e.contains("no particle size"),
         "{e}"
     );
-
+    // The first atom's diameter: the third of its doubles (`id type diameter x y z`).
     let mut bytes = std::fs::read(lammps_sample_path("granular.bin")).unwrap();
-    // The first atom's diameter (third of its six doubles) is the first 8 bytes that
-    // hold a value between 1.2 and 2 after the header (ids and types are whole numbers).
-    let at = (0..bytes.len() - 8)
-        .step_by(1)
-        .find(|&i| {
-            let v = f64::from_le_bytes(bytes[i..i + 8].try_into().unwrap());
-            (1.2..2.0).contains(&v) && v.fract() != 0.0
-        })
-        .unwrap();
+    let at = first_atom(&bytes) + 2 * 8;
     bytes[at..at + 8].copy_from_slice(&f64::NAN.to_le_bytes());
-    let (_d, path) = temp_copy("bad.bin", &bytes);
-    let e = DumpFile::open(&path)
-        .unwrap()
-        .read_frame(0, &ReadOptions::default(), &NoProgress)
-        .unwrap_err()
-        .to_string();
+    let e = error_of("bad.bin", &bytes);
     assert!(
-        e.contains("`diameter`") && e.contains("no particle size"),
+        e.contains(&format!(
+            "byte {at}: atom 1 of timestep 0: column `diameter` is NaN"
+        )) && e.contains("no particle size"),
         "{e}"
     );
 }
