@@ -5720,6 +5720,210 @@ fn a_granular_runs_grain_sizes_are_kept_per_particle() {
     }
 }
 
+/// What can go wrong with particles' own sizes, as a granular user meets it: a size of 0
+/// is refused naming the type (as GSD's and MMPLD's are); sizes spanning decades are
+/// noted; a `diameter` column beside the `radius` read is noted; a parallel run's
+/// pieces that disagree on sizes are refused, whole or in chunks; an XYZ size property
+/// of two numbers is refused; the density's iso-surface shows every grain, the largest
+/// too; an output that is a symbolic link or a pipe is not replaced.
+#[test]
+fn particle_sizes_edge_cases_are_refused_or_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n);
+    let dump = |rows: &[(u32, f32, [f32; 3])], columns: &str| {
+        let mut t = format!(
+            "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{}\nITEM: BOX BOUNDS pp pp pp\n\
+             -5 60\n-5 5\n-5 5\nITEM: ATOMS id type {columns} x y z\n",
+            rows.len()
+        );
+        for (i, (t_, r, p)) in rows.iter().enumerate() {
+            let size = if columns.contains("diameter") && !columns.contains("radius") {
+                format!("{}", 2.0 * r)
+            } else if columns.contains("diameter") {
+                format!("{r} 3")
+            } else {
+                format!("{r}")
+            };
+            t.push_str(&format!(
+                "{} {t_} {size} {} {} {}\n",
+                i + 1,
+                p[0],
+                p[1],
+                p[2]
+            ));
+        }
+        t
+    };
+    let row = |r: f32, x: f32| (1u32, r, [x, 0.0, 0.0]);
+    // A grain of size 0.
+    std::fs::write(
+        d("z.dump"),
+        dump(&[row(0.0, 0.0), row(1.0, 10.0), row(2.0, 20.0)], "radius"),
+    )
+    .unwrap();
+    let e = fails(&["convert", s(&d("z.dump")), "-o", s(&d("z.mdlod"))]);
+    assert!(
+        e.contains("species 1: the file gives radius 0") && e.contains("--radius 1=R"),
+        "{e}"
+    );
+    // Decades.
+    std::fs::write(
+        d("dec.dump"),
+        dump(&[row(0.001, 0.0), row(100.0, 30.0)], "radius"),
+    )
+    .unwrap();
+    let out = ok(&["convert", s(&d("dec.dump")), "-o", s(&d("dec.mdlod"))]);
+    assert!(
+        out.contains("particle radii from 1e-3 to 1e2 are kept in 16-bit steps")
+            && out.contains("% off their size"),
+        "{out}"
+    );
+    // Both columns: `radius` read, `diameter` noted.
+    std::fs::write(
+        d("both.dump"),
+        dump(&[row(0.5, 0.0), row(1.0, 10.0)], "radius diameter"),
+    )
+    .unwrap();
+    let out = ok(&["convert", s(&d("both.dump")), "-o", s(&d("both.mdlod"))]);
+    assert!(
+        out.contains("sizes are read from column `radius`; column `diameter` is left alone"),
+        "{out}"
+    );
+    // Pieces of one run, one with sizes and one without.
+    std::fs::write(
+        d("gp.0.dump"),
+        dump(&[row(0.5, 0.0), row(1.0, 10.0)], "radius"),
+    )
+    .unwrap();
+    let plain = dump(&[row(0.5, 20.0), row(1.0, 30.0)], "radius").replace(" radius x", " x");
+    let plain: String = plain
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(' ').collect();
+            if f.len() == 6 && !l.starts_with("ITEM") {
+                format!("{} {} {} {} {}\n", f[0], f[1], f[3], f[4], f[5])
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    std::fs::write(d("gp.1.dump"), plain).unwrap();
+    let pieces = d("gp.%.dump");
+    let e = fails(&["convert", s(&pieces), "-o", s(&d("gp.mdlod"))]);
+    assert!(
+        e.contains("gp.1.dump") && e.contains("gives no particle sizes"),
+        "{e}"
+    );
+    let e = fails(&[
+        "convert",
+        s(&pieces),
+        "-o",
+        s(&d("gp.mdlod")),
+        "--chunk-points",
+        "2",
+        "--root-points",
+        "2",
+        "--cluster-size",
+        "2",
+    ]);
+    assert!(
+        e.contains("per-particle sizes") && e.contains("share their columns"),
+        "{e}"
+    );
+    // An XYZ size of two numbers.
+    std::fs::write(
+        d("r2.xyz"),
+        "1\nProperties=species:S:1:pos:R:3:radius:R:2\nCu 0 0 0 1 2\n",
+    )
+    .unwrap();
+    let e = fails(&["convert", s(&d("r2.xyz")), "-o", s(&d("r2.mdlod"))]);
+    assert!(e.contains("`radius:R:2` is no particle size"), "{e}");
+    // Five grains of one type, radii 0.5 to 1.5, 10 apart: the iso-surface shows five
+    // blobs, the largest wider than the smallest (it lost the largest when the density's
+    // reference radius was the type's mean).
+    let rows: Vec<_> = (0..5)
+        .map(|i| row(0.5 + 0.25 * i as f32, 10.0 * i as f32))
+        .collect();
+    std::fs::write(d("five.dump"), dump(&rows, "radius")).unwrap();
+    ok(&["convert", s(&d("five.dump")), "-o", s(&d("five.mdlod"))]);
+    ok(&[
+        "render",
+        s(&d("five.mdlod")),
+        "-o",
+        s(&d("iso.png")),
+        "--mode",
+        "iso",
+        "--ortho",
+        "--look-along",
+        "0,0,-1",
+        "--width",
+        "400",
+        "--height",
+        "100",
+        "--background",
+        "black",
+    ]);
+    let (w, h, px) = read_png(&d("iso.png"));
+    let lit = |x: u32| {
+        px[4 * ((h / 2) * w + x) as usize..][..3]
+            .iter()
+            .any(|&c| c > 0)
+    };
+    let mut runs = Vec::new();
+    let mut x = 0;
+    while x < w {
+        if lit(x) {
+            let start = x;
+            while x < w && lit(x) {
+                x += 1;
+            }
+            runs.push(x - start);
+        }
+        x += 1;
+    }
+    assert_eq!(runs.len(), 5, "{runs:?}");
+    // (Not in proportion: the density weighs a grain by its area, README.)
+    assert!(runs[4] > runs[0], "{runs:?}");
+    // Outputs that are no regular file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        std::os::unix::fs::symlink(d("five.mdlod"), d("link.mdlod")).unwrap();
+        let e = fails(&["convert", s(&d("five.dump")), "-o", s(&d("link.mdlod"))]);
+        assert!(
+            e.contains("link.mdlod") && e.contains("symbolic link"),
+            "{e}"
+        );
+        std::os::unix::fs::symlink(d("iso.png"), d("link.png")).unwrap();
+        let e = fails(&[
+            "render",
+            s(&d("five.mdlod")),
+            "-o",
+            s(&d("link.png")),
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ]);
+        assert!(e.contains("symbolic link"), "{e}");
+        let fifo = d("pipe.mdlod");
+        assert!(Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success());
+        let e = fails(&["convert", s(&d("five.dump")), "-o", s(&fifo)]);
+        assert!(
+            e.contains("pipe.mdlod") && e.contains("not a regular file"),
+            "{e}"
+        );
+        assert!(std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo());
+    }
+}
+
 /// A movie whose first frame shows nothing (every particle of a hidden species, as a
 /// deposition starts): the splats' exposure comes from the first frame that shows
 /// anything, and the camera fits the frames that show the species, not the empty one's

@@ -852,9 +852,26 @@ class MdlodFile:
                 )
             if not particles:
                 continue
-            # Its own radius (RADIUS), else its species'.
-            r = self.own_radii[i] if self.radius_q is not None else self.radii[self.species[i]]
-            beyond, size = 0.0, r
+            # Its own radius (RADIUS), else its species'; an own radius lies within its
+            # species' sizes (radius_range, else its radius) up to a quantization step.
+            sp = self.metadata["species"][self.species[i]]
+            if self.radius_q is not None:
+                r = self.own_radii[i]
+                s_lo, s_hi = (
+                    (f32(sp["radius_range"][0]), f32(sp["radius_range"][1]))
+                    if sp.get("radius_range") is not None
+                    else (self.radii[self.species[i]],) * 2
+                )
+                step = (self.radius_range[1] - self.radius_range[0]) / 65535
+                slack = step + 8 * 2.0**-23 * s_hi
+                if r < s_lo - slack or r > s_hi + slack:
+                    raise FormatError(
+                        f"RADIUS: particle {i}",
+                        f"radius {r} lies outside its species' sizes {s_lo} to {s_hi}",
+                    )
+            else:
+                r = self.radii[self.species[i]]
+            beyond, wider, size = 0.0, 0.0, r
             for k in range(3):
                 # Where its centre lies: the bounds shrunk by r, or the box's middle
                 # where it is narrower than the sphere.
@@ -863,8 +880,16 @@ class MdlodFile:
                 else:
                     a = b = (lo[k] + hi[k]) / 2
                 beyond = max(beyond, a - x[k], x[k] - b)
+                wider = max(wider, 2 * r - (hi[k] - lo[k]))
                 size = max(size, abs(lo[k]), abs(hi[k]))
             rounding = 8 * 2.0**-23 * size
+            if wider > 2 * (error + rounding):
+                raise FormatError(
+                    where,
+                    f"its sphere (radius {r}) is {wider:.3e} wider than its parent's bounds "
+                    f"{lo}..{hi} on an axis: more than 2 * (max_position_error + "
+                    f"8 * 2^-23 * {size})",
+                )
             if beyond > error + rounding:
                 raise FormatError(
                     where,

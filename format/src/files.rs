@@ -31,6 +31,33 @@ pub fn check_kind(kind: std::fs::FileType) -> std::io::Result<()> {
     Ok(())
 }
 
+/// Refuses an output path that exists and is not a regular file: mdlod writes a whole
+/// new file and renames it over the path, which would put a regular file in place of a
+/// device (`-o /dev/null` run as root), a pipe, or a symbolic link (not the file it
+/// points at). A path that does not exist yet, or a regular file, is fine.
+pub fn check_replaceable(path: &Path) -> std::io::Result<()> {
+    let kind = match std::fs::symlink_metadata(path) {
+        Ok(m) => m.file_type(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e),
+    };
+    if kind.is_file() {
+        return Ok(());
+    }
+    let what = if kind.is_dir() {
+        "a directory"
+    } else if kind.is_symlink() {
+        "a symbolic link (the new file would replace the link, not the file it points at: \
+         name that file)"
+    } else {
+        "not a regular file (a device or a pipe, which the new file would replace)"
+    };
+    Err(std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!("is {what}; the output must be a new or a regular file"),
+    ))
+}
+
 /// Opens `path` for reading if it is a regular file ([`check_regular`]).
 pub fn open(path: &Path) -> std::io::Result<File> {
     check_regular(path)?;

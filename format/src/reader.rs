@@ -1265,9 +1265,28 @@ impl MdlodFile {
                         ));
                     }
                     if m == last {
-                        // The particle's own radius where the file keeps one.
+                        // The particle's own radius where the file keeps one, within its
+                        // species' sizes up to a quantization step.
                         let r = f64::from(self.particle_radius(i));
+                        if let Some(info) = &self.metadata.radius {
+                            let s = self.species().get(i).copied().unwrap_or(0);
+                            let [lo, hi] = self.species_radius_span(usize::from(s));
+                            let (lo, hi) = (f64::from(lo), f64::from(hi));
+                            let slack = (f64::from(info.max) - f64::from(info.min)) / 65535.0
+                                + 8.0 * f64::from(f32::EPSILON) * hi;
+                            if r < lo - slack || r > hi + slack {
+                                return Err(FormatError::corrupt(
+                                    &self.path,
+                                    format!("RADIUS, particle {i}"),
+                                    format!(
+                                        "radius {} lies outside its species' sizes {} to {}",
+                                        r as f32, lo as f32, hi as f32
+                                    ),
+                                ));
+                            }
+                        }
                         let mut beyond = 0.0f64;
+                        let mut wider = 0.0f64;
                         let mut size = r;
                         for ((&v, &lo), &hi) in
                             p.iter().zip(&parent.bounds_min).zip(&parent.bounds_max)
@@ -1281,9 +1300,23 @@ impl MdlodFile {
                                 ((lo + hi) / 2.0, (lo + hi) / 2.0)
                             };
                             beyond = beyond.max(a - v).max(v - b);
+                            wider = wider.max(2.0 * r - (hi - lo));
                             size = size.max(lo.abs()).max(hi.abs());
                         }
                         let rounding = 8.0 * f64::from(f32::EPSILON) * size;
+                        // The bounds hold every particle's sphere: one wider than them
+                        // (beyond rounding) is a radius the bounds were not made for.
+                        if wider > 2.0 * (error + rounding) {
+                            return Err(FormatError::corrupt(
+                                &self.path,
+                                format!("level {m}, particle {i}"),
+                                format!(
+                                    "its sphere (radius {}) is {wider:.3e} wider than its \
+                                     parent node's bounds on an axis",
+                                    r as f32
+                                ),
+                            ));
+                        }
                         if beyond > error + rounding {
                             return Err(FormatError::corrupt(
                                 &self.path,

@@ -282,6 +282,7 @@ impl SndfData {
             _ => Path::new("."),
         };
         let io = |e| FormatError::io(path, e);
+        crate::files::check_replaceable(path).map_err(io)?;
         let mut tmp = crate::writer::output_file_builder()
             .prefix(".sndf.")
             .suffix(".tmp")

@@ -72,6 +72,7 @@ impl Writer {
                 problem: format!("position bits must be 8 or 16, not {position_bits}"),
             });
         }
+        crate::files::check_replaceable(path).map_err(|e| FormatError::io(path, e))?;
         let dir = match path.parent() {
             Some(d) if !d.as_os_str().is_empty() => d,
             _ => Path::new("."),

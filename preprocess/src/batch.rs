@@ -720,6 +720,7 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
 /// manifests are.
 fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
     let dir = path.parent().unwrap_or(Path::new("."));
+    mdlod_format::files::check_replaceable(path).map_err(io(path))?;
     let mut tmp = mdlod_format::writer::output_file_builder()
         .prefix(".dataset.")
         .suffix(".tmp")

@@ -1252,8 +1252,20 @@ pub fn convert_chunked(
                 attribute: f.attribute.is_some(),
                 radius: f.radii.is_some(),
             });
+            if lay.radius != f.radii.is_some() {
+                return Err(ConvertError::Chunked(format!(
+                    "{}particles {start}..: {} per-particle sizes (a `radius` or `diameter` \
+                     column) while the particles before them {}: the parts of a frame (a \
+                     parallel run's pieces) must share their columns",
+                    metadata
+                        .source
+                        .as_ref()
+                        .map_or(String::new(), |s| format!("{}: ", s.path)),
+                    if f.radii.is_some() { "give" } else { "give no" },
+                    if lay.radius { "do" } else { "do not" },
+                )));
+            }
             if lay.attribute != f.attribute.is_some()
-                || lay.radius != f.radii.is_some()
                 || f.positions.len() != f.species_index.len()
                 || f.radii.as_ref().is_some_and(|r| r.len() != f.len())
             {
@@ -1602,7 +1614,9 @@ pub fn convert_chunked(
         write_time,
         file_size,
         notes: {
-            let mut notes = Vec::new();
+            let mut notes: Vec<String> = crate::convert::radius_span_note(metadata.radius.as_ref())
+                .into_iter()
+                .collect();
             if let Some(a) = &metadata.attribute {
                 notes.extend(crate::convert::attribute_span_note(
                     &a.name, a.min, a.max, options,

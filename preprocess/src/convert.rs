@@ -332,6 +332,7 @@ pub fn convert_frame(
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         notes.extend(attribute_span_note(&a.name, *min, *max, options));
     }
+    notes.extend(radius_span_note(h.radius.as_ref().map(|(_, info)| info)));
     let (lo, hi, far) = survey_positions(&frame.positions, frame.simulation_box.as_ref());
     notes.extend(position_notes(
         lo,
@@ -613,6 +614,24 @@ pub fn attribute_span_note(
              --attribute-log10 keeps its logarithm, every decade alike",
             (f64::from(max) - f64::from(min)) / 65535.0,
             (f64::from(max) - f64::from(min)) / 65535.0 * 100.0
+        )
+    })
+}
+
+/// A note for per-particle radii whose 16-bit linear steps over the frame's range are
+/// more than 1 % of the smallest radius (radii spanning decades): those particles are
+/// drawn off their size by up to that share.
+pub fn radius_span_note(info: Option<&mdlod_format::meta::RadiusInfo>) -> Option<String> {
+    let info = info?;
+    let step = (f64::from(info.max) - f64::from(info.min)) / 65535.0;
+    let share = step / 2.0 / f64::from(info.min);
+    (info.min > 0.0 && share > 0.01).then(|| {
+        format!(
+            "particle radii from {:e} to {:e} are kept in 16-bit steps of {step:.2e} over \
+             that range: the smallest are drawn up to {:.0} % off their size",
+            info.min,
+            info.max,
+            100.0 * share
         )
     })
 }

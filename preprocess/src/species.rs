@@ -138,7 +138,12 @@ pub(crate) fn merge_sizes(known: &mut SpeciesName, part: &SpeciesName) {
     }
     let (a, b) = (known.sized_count as f64, part.sized_count as f64);
     let mean = |s: &SpeciesName| f64::from(s.radius.unwrap_or(0.0));
-    known.radius = Some(((mean(known) * a + mean(part) * b) / (a + b)) as f32);
+    // A part with a particle of size 0 gave radius 0, which the whole keeps (refused).
+    known.radius = Some(if mean(known) <= 0.0 || mean(part) <= 0.0 {
+        0.0
+    } else {
+        ((mean(known) * a + mean(part) * b) / (a + b)) as f32
+    });
     known.radius_range = match (known.radius_range, part.radius_range) {
         (Some((lo, hi)), Some((c, d))) => Some((lo.min(c), hi.max(d))),
         (x, y) => x.or(y),

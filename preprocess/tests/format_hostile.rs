@@ -1270,6 +1270,38 @@ fn hostile_per_particle_sections() {
             vec!["METADATA".into(), "radius range 2 to 1".into()],
         ),
         (
+            // The `Cu` particles (species 0, of one size, 1.28) at the range's start (1):
+            // smaller spheres, still inside their bounds, but outside their species'
+            // sizes.
+            "radius-outside-species-sizes",
+            Box::new(move |d| {
+                let species = d.section(SectionKind::Species, last).clone();
+                let r = d.section(SectionKind::Radius, last);
+                for (q, s) in r.chunks_exact_mut(2).zip(species.chunks_exact(2)) {
+                    if s == [0, 0] {
+                        q.copy_from_slice(&[0, 0]);
+                    }
+                }
+            }),
+            vec![
+                "RADIUS, particle".into(),
+                "outside its species' sizes 1.28".into(),
+            ],
+        ),
+        (
+            // The range and the cloud species' sizes stretched to 10^8, which the
+            // particles at the range's end now take: within their species' sizes, but
+            // spheres far wider than the bounds built for them.
+            "radius-wider-than-bounds",
+            Box::new(move |d| {
+                let mut m = d.meta();
+                m["radius"]["max"] = serde_json::json!(1e8);
+                m["species"][1]["radius_range"][1] = serde_json::json!(1e8);
+                d.set_meta(&m);
+            }),
+            vec!["wider than its parent node's bounds".into()],
+        ),
+        (
             "radius-range-negative",
             Box::new(|d| {
                 let mut m = d.meta();

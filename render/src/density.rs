@@ -5,7 +5,8 @@
 //! How it works:
 //! - **Density.** `φ(p) = V · Σ_j m_j W(|p − p_j|, h_j)` with the normalised smooth-step
 //!   (poly6) kernel `W(r, h) = 315 / (64 π h³) · (1 − r²/h²)³` for `r < h`. A point's mass
-//!   is its area relative to the largest species' radius `r_ref`, `m_j = (ρ_j / r_ref)²`
+//!   is its area relative to the largest particle radius `r_ref` (the largest species'
+//!   radius, or particle's own where the file keeps them), `m_j = (ρ_j / r_ref)²`
 //!   with `ρ_j = sqrt(area_sum)` (a particle's own radius; a representative carries its
 //!   particles' mass, Eq. 1), and `V = 4/3 π r_ref³`. A particle's support is
 //!   `h_j = kernel_scale · ρ_j`; a representative's is `kernel_scale · s_j` with

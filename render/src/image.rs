@@ -167,6 +167,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
             std::io::Error::new(std::io::ErrorKind::NotFound, missing),
         ));
     }
+    mdlod_format::files::check_replaceable(path).map_err(|e| RenderError::io(path, e))?;
     let mut builder = tempfile::Builder::new();
     builder.prefix(".mdlod-tmp");
     // Temporary files are private (0600); the result should be an ordinary file: 0666

@@ -2398,13 +2398,7 @@ impl Renderer {
         for s in &spans {
             instance_first.push(instance_first.last().copied().unwrap_or(0) + s.2.len() as u32);
         }
-        let r_ref = file
-            .metadata()
-            .species
-            .iter()
-            .map(|s| s.radius)
-            .fold(0.0f32, f32::max)
-            .max(f32::MIN_POSITIVE);
+        let r_ref = crate::traversal::largest_radius(file).max(f32::MIN_POSITIVE);
         let slicing = Slicing::new(&sorted, camera, settings, r_ref);
         let h_max = sorted
             .iter()

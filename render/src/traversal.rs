@@ -335,13 +335,10 @@ pub struct Projector {
     support_floor: f32,
 }
 
-/// The largest species radius of `file` (the density's `r_ref`).
-fn largest_radius(file: &MdlodFile) -> f32 {
-    file.metadata()
-        .species
-        .iter()
-        .map(|s| s.radius)
-        .fold(0.0f32, f32::max)
+/// The largest radius of `file`'s particles (the density's `r_ref`): its largest
+/// species radius, or the largest particle's own where the file keeps them.
+pub(crate) fn largest_radius(file: &MdlodFile) -> f32 {
+    file.max_particle_radius()
 }
 
 impl Projector {

@@ -114,6 +114,13 @@ pub enum BuildError {
     TooManySpecies(usize),
     #[error("particle {index} has radius {radius} (a particle's radius must be a finite number from 0 up)")]
     BadRadius { index: usize, radius: f32 },
+    #[error("particle {index}: radius {radius:e}: the frame's {particles} particles at that radius would add up to squared radii of {sum:.2e}, beyond the {MAX_AREA_SUM:e} single precision holds (a bound over the whole frame, as the top node sums every particle); convert it in larger length units")]
+    ParticleRadiusTooLarge {
+        index: usize,
+        radius: f32,
+        particles: usize,
+        sum: f64,
+    },
     #[error("particle {index} has a non-finite attribute value {value}")]
     NonFiniteAttribute { index: usize, value: f32 },
     #[error("particle {index} at {position:?} lies beyond ±{MAX_COORDINATE:e}, where differences of single-precision coordinates overflow; convert it in larger length units")]
@@ -749,7 +756,8 @@ fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
             });
         }
     }
-    check_species(n, p.species)?;
+    // Particles' own radii first: a huge one makes its species' mean huge too, and the
+    // message should name the particle.
     if let Some(r) = p.radii {
         if let Some(index) = r.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
             return Err(BuildError::BadRadius {
@@ -757,17 +765,19 @@ fn validate(p: &Particles<'_>, params: &BuildParams) -> Result<(), BuildError> {
                 radius: r[index],
             });
         }
-        let largest = r.iter().fold(0.0f32, |m, &v| m.max(v));
+        let index = (0..n).fold(0, |m, i| if r[i] > r[m] { i } else { m });
+        let largest = r[index];
         let sum = n as f64 * f64::from(largest).powi(2);
         if !(sum <= MAX_AREA_SUM && largest <= MAX_COORDINATE) {
-            return Err(BuildError::RadiusTooLarge {
-                name: "(a particle's own)".into(),
+            return Err(BuildError::ParticleRadiusTooLarge {
+                index,
                 radius: largest,
                 particles: n,
                 sum,
             });
         }
     }
+    check_species(n, p.species)?;
     if let Some(index) = p
         .species_index
         .iter()

@@ -71,7 +71,9 @@ pub(crate) fn size_column(columns: &[String]) -> Option<(usize, f64)> {
 
 /// Gives every species of particles with sizes its particles' mean radius and their
 /// range (the range kept for [`crate::frame::SpeciesName::radius_range`] even where
-/// they agree; the conversion keeps each particle's own where they differ).
+/// they agree; the conversion keeps each particle's own where they differ). A species
+/// with a particle of size 0 takes radius 0 instead, which the conversion refuses
+/// naming the species unless `--radius` gives it one (as GSD and MMPLD sizes of 0 are).
 pub(crate) fn sized_species(species: &mut [SpeciesName], species_index: &[u16], radii: &[f32]) {
     let mut sum = vec![0f64; species.len()];
     let mut count = vec![0u64; species.len()];
@@ -86,7 +88,12 @@ pub(crate) fn sized_species(species: &mut [SpeciesName], species_index: &[u16], 
     }
     for (k, sp) in species.iter_mut().enumerate() {
         if count[k] > 0 {
-            sp.radius = Some((sum[k] / count[k] as f64) as f32);
+            let zero = range[k].0 <= 0.0;
+            sp.radius = Some(if zero {
+                0.0
+            } else {
+                (sum[k] / count[k] as f64) as f32
+            });
             sp.radius_range = Some(range[k]);
             sp.sized_count = count[k];
         }

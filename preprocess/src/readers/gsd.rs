@@ -696,7 +696,8 @@ impl<'a> FrameData<'a> {
             for (j, &s) in ids.iter().enumerate() {
                 let i = range.start + j;
                 let d = e.ty.get(bytes, i);
-                if !(d.is_finite() && d > 0.0) {
+                // (A diameter whose half rounds to 0 in single precision is 0.)
+                if !(d.is_finite() && (0.5 * d) as f32 > 0.0) {
                     bad[usize::from(s)].get_or_insert(d);
                 }
                 if !d.is_finite() {

@@ -610,14 +610,29 @@ impl DumpFile {
         Ok(())
     }
 
-    /// What a conversion of frame `k` read with `read` should say about what the input
-    /// holds and the conversion does not read: a raw sidecar's arrays holding values past
-    /// its `particles`; the last frame of a text dump whose last line has no line end
+    /// What a conversion of frame `k` should say about what the input holds and the
+    /// conversion does not read: a raw sidecar's arrays holding values past its
+    /// `particles`; a dump's `diameter` column beside the `radius` column read as the
+    /// particles' sizes; the last frame of a text dump whose last line has no line end
     /// ([`DumpFile::ends_mid_line`]).
     pub fn frame_notes(&self, k: usize) -> Vec<String> {
         let mut notes = Vec::new();
         if let Index::Raw(r) = &self.index {
             notes.extend(r.notes().iter().cloned());
+        }
+        let named = matches!(
+            self.format,
+            InputFormat::LammpsText | InputFormat::LammpsBinary | InputFormat::Xyz
+        );
+        if let Some(info) = named.then(|| self.frame_info(k).ok()).flatten() {
+            let has = |n: &str| info.columns.iter().find(|c| c.eq_ignore_ascii_case(n));
+            if let (Some(r), Some(d)) = (has("radius"), has("diameter")) {
+                notes.push(format!(
+                    "{}: the particles' sizes are read from column `{r}`; column `{d}` is \
+                     left alone",
+                    self.path.display()
+                ));
+            }
         }
         if let Index::Gsd(i) = &self.index {
             notes.extend(gsd::shape_note(&self.path, self.bytes(), i, k));

@@ -157,6 +157,24 @@ pub(crate) fn read_frame(
         .iter()
         .map(|p| p.read_frame(k, opts, progress))
         .collect::<Result<Vec<_>, _>>()?;
+    // The pieces of one dump share its columns: sizes in some and not others would leave
+    // the particles of those without them no size of their own.
+    if let (Some(with), Some(without)) = (
+        frames.iter().position(|f| f.radii.is_some()),
+        frames.iter().position(|f| f.radii.is_none()),
+    ) {
+        return Err(ReadError::Malformed {
+            at: super::Location {
+                path: pieces[without].path().to_path_buf(),
+                line: 1,
+            },
+            message: format!(
+                "frame {k}: this piece gives no particle sizes (no `radius` or `diameter` \
+                 column) while {} does: the pieces of one run share their columns",
+                pieces[with].path().display()
+            ),
+        });
+    }
     // Species: the union by name; numeric LAMMPS types sorted numerically, others in
     // order of first appearance.
     let mut species: Vec<SpeciesName> = Vec::new();

@@ -388,6 +388,17 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
             columns.extend((0..count).map(|i| format!("{name}[{i}]")));
         }
         let numeric = matches!(kind, "R" | "I");
+        // A size property is read as each particle's radius: one number.
+        if ["radius", "diameter"]
+            .iter()
+            .any(|p| name.eq_ignore_ascii_case(p))
+            && !(count == 1 && numeric)
+        {
+            return Err(format!(
+                "`Properties` entry `{name}:{kind}:{count}` is no particle size: a radius or \
+                 diameter is one number per particle (`{name}:R:1`)"
+            ));
+        }
         if ["pos", "position", "positions"]
             .iter()
             .any(|p| name.eq_ignore_ascii_case(p))
