@@ -2863,7 +2863,7 @@ fn a_movie_draws_each_frame_with_its_own_radii() {
     ]);
     assert!(
         out.contains(
-            "radii change over the frames (atom 0.5 to 1): each frame is drawn with its own"
+            "radii change over the frames (atom 0.500 to 1.000): each frame is drawn with its own"
         ),
         "{out}"
     );

@@ -186,9 +186,8 @@ pub fn run(args: Args) -> Result<()> {
         // keeps them (files of format 1.0 kept only the mean).
         let range = s.radius_range.map_or(String::new(), |[lo, hi]| {
             format!(
-                "  (particles {} to {}, {})",
-                radius_text(lo),
-                radius_text(hi),
+                "  (particles {}, {})",
+                radius_range_text(lo, hi),
                 if m.radius.is_some() {
                     "each drawn at its own"
                 } else {
@@ -219,9 +218,8 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(r) = &m.radius {
         println!(
-            "  radii        each particle's own, {} to {} (16 bits over that range)",
-            radius_text(r.min),
-            radius_text(r.max)
+            "  radii        each particle's own, {} (16 bits over that range)",
+            radius_range_text(r.min, r.max)
         );
     }
     if let Some(a) = &m.attribute {
@@ -290,6 +288,17 @@ fn radius_text(r: f32) -> String {
         format!("{r:.3}")
     } else {
         format!("{r:e}")
+    }
+}
+
+/// `lo to hi` as [`radius_text`] writes them, both in one notation (`1e-3 to 1e1`, not
+/// `1e-3 to 10.000`).
+pub(crate) fn radius_range_text(lo: f32, hi: f32) -> String {
+    let plain = |r: f32| (1e-2..1e5).contains(&r.abs());
+    if plain(lo) && plain(hi) {
+        format!("{lo:.3} to {hi:.3}")
+    } else {
+        format!("{lo:.3e} to {hi:.3e}")
     }
 }
 

@@ -2577,7 +2577,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let changing: Vec<String> = radii
         .iter()
         .filter(|(_, [lo, hi])| hi > &(lo * 1.01))
-        .map(|(name, [lo, hi])| format!("{name} {lo} to {hi}"))
+        .map(|(name, [lo, hi])| format!("{name} {}", super::info::radius_range_text(*lo, *hi)))
         .collect();
     let radii_note = match changing.is_empty() {
         true => String::new(),
