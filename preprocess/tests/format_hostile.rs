@@ -1302,6 +1302,25 @@ fn hostile_per_particle_sections() {
             vec!["wider than its parent node's bounds".into()],
         ),
         (
+            // A list of the object's values, which serde alone would take.
+            "radius-range-a-list",
+            Box::new(|d| {
+                let mut m = d.meta();
+                m["radius"] = serde_json::json!([1.0, 2.0]);
+                d.set_meta(&m);
+            }),
+            vec!["METADATA".into(), "`radius` is not an object".into()],
+        ),
+        (
+            "attribute-a-list",
+            Box::new(|d| {
+                let mut m = d.meta();
+                m["attribute"] = serde_json::json!(["c_pe", -1.0, 1.0]);
+                d.set_meta(&m);
+            }),
+            vec!["METADATA".into(), "`attribute` is not an object".into()],
+        ),
+        (
             "radius-range-negative",
             Box::new(|d| {
                 let mut m = d.meta();
