@@ -5720,6 +5720,114 @@ fn a_granular_runs_grain_sizes_are_kept_per_particle() {
     }
 }
 
+/// The size column can be named (an SPH run's smoothing length `h` as the radius, a
+/// `d` as the diameter) or left out (`--no-sizes`); a batch converts its frames again
+/// when the choice changes; inputs whose sizes come from no column refuse a named one.
+#[test]
+fn size_columns_can_be_named_or_left_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n);
+    let info = |f: &Path| -> serde_json::Value {
+        serde_json::from_str(&ok(&["info", s(f), "--json"])).unwrap()
+    };
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n4\nITEM: BOX BOUNDS pp pp pp\n0 40\n0 4\n0 4\n\
+         ITEM: ATOMS id type x y z h d\n",
+    );
+    for i in 0..4 {
+        text.push_str(&format!(
+            "{} 1 {} 2 2 {} {}\n",
+            i + 1,
+            10 * i,
+            0.5 + i as f32,
+            3 * (i + 1)
+        ));
+    }
+    std::fs::write(d("sph.dump"), &text).unwrap();
+    let radii = |f: &Path| {
+        let f = MdlodFile::open(f).unwrap();
+        let mut r: Vec<f32> = (0..4).map(|i| f.particle_radius(i)).collect();
+        r.sort_by(f32::total_cmp);
+        r
+    };
+    ok(&[
+        "convert",
+        s(&d("sph.dump")),
+        "-o",
+        s(&d("h.mdlod")),
+        "--radius-column",
+        "h",
+    ]);
+    let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
+    assert!(
+        close(&radii(&d("h.mdlod")), &[0.5, 1.5, 2.5, 3.5]),
+        "{:?}",
+        radii(&d("h.mdlod"))
+    );
+    ok(&[
+        "convert",
+        s(&d("sph.dump")),
+        "-o",
+        s(&d("d.mdlod")),
+        "--diameter-column",
+        "d",
+    ]);
+    assert!(
+        close(&radii(&d("d.mdlod")), &[1.5, 3.0, 4.5, 6.0]),
+        "{:?}",
+        radii(&d("d.mdlod"))
+    );
+    // Without the option, neither `h` nor `d` is a size column.
+    ok(&["convert", s(&d("sph.dump")), "-o", s(&d("plain.mdlod"))]);
+    assert!(info(&d("plain.mdlod"))["radius"].is_null());
+    let e = fails(&[
+        "convert",
+        s(&d("sph.dump")),
+        "-o",
+        s(&d("x.mdlod")),
+        "--radius-column",
+        "rho",
+    ]);
+    assert!(
+        e.contains(
+            "sph.dump:9: no column `rho` for --radius-column; the columns are id type x y z h d"
+        ),
+        "{e}"
+    );
+    // `--no-sizes`: a granular dump's radius column is not read.
+    let gran = lammps_sample_path("granular.dump");
+    ok(&["convert", s(&gran), "-o", s(&d("n.mdlod")), "--no-sizes"]);
+    let v = info(&d("n.mdlod"));
+    assert!(
+        v["radius"].is_null() && v["species"][0]["radius_range"].is_null(),
+        "{v}"
+    );
+    let gsd = mdlod_datasets::gsd_sample_path("hoomd_mixture.gsd");
+    let e = fails(&[
+        "convert",
+        s(&gsd),
+        "-o",
+        s(&d("g.mdlod")),
+        "--radius-column",
+        "h",
+    ]);
+    assert!(
+        e.contains("--radius-column h names a column of a LAMMPS or XYZ dump"),
+        "{e}"
+    );
+    // A batch converts again when the choice changes, and keeps its frames otherwise.
+    let b = d("run.d");
+    ok(&["batch", s(&gran), "-o", s(&b)]);
+    let out = ok(&["batch", s(&gran), "-o", s(&b), "--no-sizes"]);
+    assert!(out.contains("3 converted, 0 already done"), "{out}");
+    let out = ok(&["batch", s(&gran), "-o", s(&b), "--no-sizes"]);
+    assert!(out.contains("0 converted, 3 already done"), "{out}");
+    let manifest = std::fs::read_to_string(b.join("dataset.json")).unwrap();
+    assert!(manifest.contains("\"sizes\": \"none\""), "{manifest}");
+    let out = ok(&["batch", s(&gran), "-o", s(&b)]);
+    assert!(out.contains("3 converted, 0 already done"), "{out}");
+}
+
 /// What can go wrong with particles' own sizes, as a granular user meets it: a size of 0
 /// is refused naming the type (as GSD's and MMPLD's are); sizes spanning decades are
 /// noted; a `diameter` column beside the `radius` read is noted; a parallel run's

@@ -1343,30 +1343,33 @@ impl MdlodFile {
     }
 
     /// Which field of the metadata JSON `bytes` (already read as [`Metadata`]) that FORMAT.md
-/// makes an object is something else, if any.
-fn not_an_object(bytes: &[u8]) -> Option<String> {
-    let v: serde_json::Value = serde_json::from_slice(bytes).ok()?;
-    let field = |v: &serde_json::Value, key: &str, name: &str| {
-        v.get(key)
-            .filter(|f| !(f.is_object() || f.is_null()))
-            .map(|_| format!("`{name}` is not an object (section 7 of FORMAT.md)"))
-    };
-    for key in ["box", "attribute", "radius", "source", "build"] {
-        if let Some(p) = field(&v, key, key) {
+    /// makes an object is something else, if any.
+    fn not_an_object(bytes: &[u8]) -> Option<String> {
+        let v: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+        let field = |v: &serde_json::Value, key: &str, name: &str| {
+            v.get(key)
+                .filter(|f| !(f.is_object() || f.is_null()))
+                .map(|_| format!("`{name}` is not an object (section 7 of FORMAT.md)"))
+        };
+        for key in ["box", "attribute", "radius", "source", "build"] {
+            if let Some(p) = field(&v, key, key) {
+                return Some(p);
+            }
+        }
+        if let Some(p) = v
+            .get("source")
+            .and_then(|s| field(s, "bytes", "source.bytes"))
+        {
             return Some(p);
         }
+        let species = v.get("species")?.as_array()?;
+        species
+            .iter()
+            .position(|s| !s.is_object())
+            .map(|i| format!("species {i} is not an object (section 7 of FORMAT.md)"))
     }
-    if let Some(p) = v.get("source").and_then(|s| field(s, "bytes", "source.bytes")) {
-        return Some(p);
-    }
-    let species = v.get("species")?.as_array()?;
-    species
-        .iter()
-        .position(|s| !s.is_object())
-        .map(|i| format!("species {i} is not an object (section 7 of FORMAT.md)"))
-}
 
-/// The node encoding the children of point `pi` of level `m - 1`.
+    /// The node encoding the children of point `pi` of level `m - 1`.
     fn encoding_node_of_children(&self, m: usize, pi: usize) -> usize {
         // Walk up from the parent (level m-1) to level max(0, m - delta_n).
         let ql = m.saturating_sub(self.delta_n());

@@ -113,6 +113,11 @@ pub struct FrameEntry {
     /// given (and in manifests of earlier versions).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub species_names: Option<Vec<(String, String)>>,
+    /// Where the particles' sizes were read from when not by default
+    /// ([`crate::readers::SizeColumn::record`]: `radius NAME`, `diameter NAME`, `none`);
+    /// absent for the default (and in manifests of earlier versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sizes: Option<String>,
 }
 
 /// `dataset.json`: the frames of a batch directory, by timestep.
@@ -745,6 +750,7 @@ fn entry_of(
     timestep: u64,
     columns: Option<Vec<String>>,
     options: &ConvertOptions,
+    sizes: &crate::readers::SizeColumn,
 ) -> FrameEntry {
     let overrides = &options.radii;
     let m = file.metadata();
@@ -776,6 +782,7 @@ fn entry_of(
         columns,
         radii: Some(radii),
         species_names: (!options.species_names.is_empty()).then(|| options.species_names.clone()),
+        sizes: sizes.record(),
     }
 }
 
@@ -887,6 +894,7 @@ struct Recorded {
     columns: Option<Vec<String>>,
     radii: Option<Vec<(String, f32)>>,
     species_names: Option<Vec<(String, String)>>,
+    sizes: Option<String>,
 }
 
 /// The column names and radius overrides each listed frame was converted with, from
@@ -916,6 +924,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
                     columns: f.columns,
                     radii: f.radii,
                     species_names: f.species_names,
+                    sizes: f.sizes,
                 },
             );
         }
@@ -1575,6 +1584,9 @@ pub fn batch(
                 Some(names) => names == renames,
                 None => renames.is_empty(),
             };
+            // So does another choice of size column (a frame listed by no manifest was
+            // converted with the default).
+            let same_sizes = recorded.and_then(|r| r.sizes.clone()) == opts.read.sizes.record();
             let own = f.metadata().source.as_ref();
             // The source as the manifest lists it: a frame kept by its bytes is listed
             // with the input's size and time then, so the next rerun need not read it.
@@ -1597,6 +1609,7 @@ pub fn batch(
             };
             let same = same_columns
                 && same_names
+                && same_sizes
                 && same_build(
                     &f,
                     &opts.convert,
@@ -1617,7 +1630,14 @@ pub fn batch(
         match verdict {
             Some(Verdict::Keep(f, listed)) => {
                 note_species(&f);
-                let mut entry = entry_of(&out, &f, job.timestep, columns, &opts.convert);
+                let mut entry = entry_of(
+                    &out,
+                    &f,
+                    job.timestep,
+                    columns,
+                    &opts.convert,
+                    &opts.read.sizes,
+                );
                 if let Some(l) = listed {
                     entry.source = l;
                 }
@@ -1667,6 +1687,7 @@ pub fn batch(
                     job.timestep,
                     columns_for(&job),
                     &opts.convert,
+                    &opts.read.sizes,
                 );
                 entry.source = SourceInfo {
                     bytes: Some(bytes),
@@ -1873,7 +1894,7 @@ pub fn batch(
                     (_, e) => e,
                 };
                 (|| -> Result<FrameEntry, BatchError> {
-                    keep_notes(job.timestep, dump.frame_notes(job.frame));
+                    keep_notes(job.timestep, dump.frame_notes(job.frame, &opts.read));
                     let streamed = if job.particles as usize > convert.chunks.chunk_points {
                         let info = dump.frame_info(job.frame)?;
                         crate::convert::window_source(dump, job.frame, &opts.read, &info)
@@ -1914,7 +1935,14 @@ pub fn batch(
                     }
                     let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                     note_species(&f);
-                    Ok(entry_of(&out, &f, job.timestep, columns_for(job), convert))
+                    Ok(entry_of(
+                        &out,
+                        &f,
+                        job.timestep,
+                        columns_for(job),
+                        convert,
+                        &opts.read.sizes,
+                    ))
                 })()
                 .map_err(in_context)
             })();

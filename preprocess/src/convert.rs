@@ -928,7 +928,7 @@ pub fn convert_dump(
         },
     };
     // What the input holds that the conversion does not read.
-    let notes = dump.frame_notes(k);
+    let notes = dump.frame_notes(k, read);
     let which = |mut r: ConvertReport| {
         r.frame = Some((k, count));
         r.notes.extend(notes.iter().cloned());

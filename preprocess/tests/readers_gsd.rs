@@ -935,7 +935,9 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
     let radii: Vec<Option<f32>> = f.species.iter().map(|s| s.radius).collect();
     assert_eq!(radii, [Some(1.0), Some(0.25), Some(0.5)]);
     // The shape drawn as a sphere of the default radius is named in a note.
-    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
     assert_eq!(notes.len(), 1, "{notes:?}");
     assert!(
         notes[0].contains("gives no sphere for type C (ConvexPolyhedron): it is drawn")
@@ -945,7 +947,9 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
     // So are a type with no entry and one whose entry is no JSON.
     let bytes = with_shapes(&["[not json", shapes[0]]);
     let (path, _) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
-    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
     assert!(
         notes.len() == 1 && notes[0].contains("types A (an entry not read), C (no entry): they"),
         "{notes:?}"
@@ -965,7 +969,9 @@ fn hpmc_sphere_shapes_give_the_radii_without_diameters() {
     let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     assert_eq!(f.unwrap().species[0].radius, Some(0.0));
     // Every type has its sphere: nothing to note.
-    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
     assert!(notes.is_empty(), "{notes:?}");
 }
 
@@ -1074,7 +1080,9 @@ fn a_type_shapes_chunk_that_is_not_text_is_noted() {
     let bytes = two_particles(&[("particles/type_shapes", 9, 1, shapes)]);
     let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
     assert_eq!(f.unwrap().species[0].radius, Some(0.5));
-    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
     assert!(
         notes.len() == 1
             && notes[0].contains("particles/type_shapes is not text")

@@ -543,7 +543,7 @@ fn files_written_by_megamol_read_as_written_and_convert() {
         assert!(e.contains(&name), "{name}: {e}");
         // List 0's own colours (RGB or RGBA of any type) are noted as not kept.
         let coloured = name.contains("_rgb");
-        let notes = dump.frame_notes(0);
+        let notes = dump.frame_notes(0, &ReadOptions::default());
         assert_eq!(
             notes
                 .iter()

@@ -362,7 +362,9 @@ fn arrays_of_different_lengths_and_radii_per_name_are_checked() {
     let path = c.sidecar(&sidecar("long.u8", r#", "particles": 10"#));
     assert_eq!(read(&path).unwrap().len(), 10);
     // ... and said (a mistyped count reads too few).
-    let notes = DumpFile::open(&path).unwrap().frame_notes(0);
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
     assert_eq!(
         notes,
         [format!(

@@ -190,7 +190,7 @@ fn gzip_xyz() {
     assert!(n > 100 && n < 2000, "{n} frames");
     let f = read_k(&cut, 100, None);
     assert_eq!(f.positions, vec![[100.0, 2.0, 3.0]]);
-    let notes = dump.frame_notes(n - 1);
+    let notes = dump.frame_notes(n - 1, &ReadOptions::default());
     assert!(
         notes
             .iter()
@@ -198,7 +198,7 @@ fn gzip_xyz() {
                 && n.contains("cut.xyz.gz ends early")),
         "{notes:?}"
     );
-    assert!(dump.frame_notes(0).is_empty());
+    assert!(dump.frame_notes(0, &ReadOptions::default()).is_empty());
     // Cut inside its first block, nothing decompresses: the error says how to keep text.
     std::fs::write(&cut, &whole[..12]).unwrap();
     let Err(e) = DumpFile::open(&cut) else {

@@ -6,7 +6,7 @@ use anyhow::{bail, Context, Result};
 use mdlod_preprocess::chunked::ChunkOptions;
 use mdlod_preprocess::convert::{convert_file, ConvertOptions, ConvertReport, FrameSelect};
 use mdlod_preprocess::hierarchy::BuildParams;
-use mdlod_preprocess::readers::ReadOptions;
+use mdlod_preprocess::readers::{ReadOptions, SizeColumn};
 use mdlod_preprocess::species::{parse_radius_override, parse_species_name};
 
 use crate::progress::Bar;
@@ -74,6 +74,18 @@ pub struct BuildArgs {
     /// LAMMPS binary dumps other than `dump atom`), e.g. "id type x y z c_pe".
     #[arg(long, value_name = "NAMES")]
     pub columns: Option<String>,
+    /// Dump column holding each particle's radius (an SPH run's smoothing length `h`, a
+    /// compute's `c_rad`); the default reads a `radius` column, else a `diameter` one.
+    #[arg(long, value_name = "NAME", conflicts_with_all = ["diameter_column", "no_sizes"])]
+    pub radius_column: Option<String>,
+    /// Dump column holding each particle's diameter.
+    #[arg(long, value_name = "NAME", conflicts_with = "no_sizes")]
+    pub diameter_column: Option<String>,
+    /// No sizes of their own: a dump's `radius`/`diameter` columns are not read (each
+    /// species takes its radius as without them), and GSD and MMPLD particles are drawn
+    /// at their species' mean size.
+    #[arg(long)]
+    pub no_sizes: bool,
     /// Bits per quantized coordinate.
     #[arg(long, value_enum, default_value = "u16")]
     pub precision: Precision,
@@ -145,6 +157,12 @@ impl BuildArgs {
                 .columns
                 .as_ref()
                 .map(|c| c.split_whitespace().map(str::to_string).collect()),
+            sizes: match (&self.radius_column, &self.diameter_column, self.no_sizes) {
+                (Some(c), _, _) => SizeColumn::Radius(c.clone()),
+                (_, Some(c), _) => SizeColumn::Diameter(c.clone()),
+                (_, _, true) => SizeColumn::Off,
+                _ => SizeColumn::Auto,
+            },
         };
         (convert, read)
     }

@@ -54,9 +54,6 @@ pub(crate) struct AtomLayout {
     /// same types look the same in every format (not for atomic numbers, XYZ `Z`, where
     /// H = 1 and Na = 11 would share a colour; numbers from 0 take none either).
     pub type_numbers: bool,
-    /// The column of each particle's size and the factor that makes it a radius (1 for a
-    /// `radius` column, 0.5 for a `diameter`), if any ([`size_column`]).
-    pub size: Option<(usize, f64)>,
 }
 
 /// The column of per-particle sizes among `columns`: `radius` (a granular LAMMPS run's,
@@ -135,7 +132,8 @@ pub(crate) struct Atoms {
 }
 
 /// Parses `expected` atom lines from `block` (byte range into `ctx.data`, starting at a line
-/// start). `count_line` is the offset of the header line that announced `expected`, for
+/// start), with the particles' sizes from column `size` (its factor making it a radius)
+/// where given. `count_line` is the offset of the header line that announced `expected`, for
 /// error messages.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn parse(
@@ -146,6 +144,7 @@ pub(crate) fn parse(
     coords: [usize; 3],
     fractional: Option<&SimulationBox>,
     attribute: Option<usize>,
+    size: Option<(usize, f64)>,
     label: &str,
     progress: &dyn Progress,
 ) -> Result<Atoms, ReadError> {
@@ -208,7 +207,7 @@ pub(crate) fn parse(
     for (k, &c) in coords.iter().enumerate() {
         roles[c] = Role::Coord(k);
     }
-    if let Some((c, factor)) = layout.size {
+    if let Some((c, factor)) = size {
         if roles[c] == Role::Skip {
             roles[c] = Role::Size(factor);
         }
@@ -225,7 +224,7 @@ pub(crate) fn parse(
         .iter()
         .any(|r| matches!(r, Role::Size(_) | Role::SizeAttr(_)));
     let plan = Plan {
-        size: layout.size.filter(|_| sized),
+        size: size.filter(|_| sized),
         roles,
         columns: &layout.columns,
         fractional,

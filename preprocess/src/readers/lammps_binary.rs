@@ -560,7 +560,10 @@ pub(crate) fn read_range(
     let mut types = vec![0i64; n];
     let mut attribute = attribute_col.map(|_| vec![0f32; n]);
     // Each particle's size (a granular run's `radius` or `diameter`), as a radius.
-    let size_col = super::atoms::size_column(&names);
+    let size_col = opts
+        .sizes
+        .resolve(&names)
+        .map_err(|m| err(first_chunk, m))?;
     let mut radii = size_col.map(|_| vec![0f32; n]);
     let value = |atom: &[u8], c: usize| {
         f64::from_le_bytes(atom[8 * c..8 * c + 8].try_into().unwrap_or([0; 8]))

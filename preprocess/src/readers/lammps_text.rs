@@ -406,7 +406,6 @@ impl Index {
             species: element.or_else(|| find("type")),
             numeric_species: element.is_none(),
             type_numbers: element.is_none(),
-            size: super::atoms::size_column(&columns),
         };
         info.columns = columns;
         Ok(Header {

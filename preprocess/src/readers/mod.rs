@@ -268,6 +268,71 @@ pub struct ReadOptions {
     /// Column names for inputs that do not name their columns (old-revision LAMMPS
     /// binary dumps); when given, they replace the file's own names.
     pub columns: Option<Vec<String>>,
+    /// Which column of a LAMMPS or XYZ dump gives each particle's size.
+    pub sizes: SizeColumn,
+}
+
+/// Which column gives each particle's size ([`Frame::radii`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum SizeColumn {
+    /// A dump's `radius` column, else its `diameter` column (any case), where it has one;
+    /// GSD diameters and MMPLD `xyzr` radii.
+    #[default]
+    Auto,
+    /// No sizes of their own: a dump's size columns are not read (its species take their
+    /// radii as without them), and GSD and MMPLD particles are drawn at their species'
+    /// mean.
+    Off,
+    /// This column of a LAMMPS or XYZ dump holds each particle's radius (an SPH run's
+    /// smoothing length `h`, a compute's `c_rad`).
+    Radius(String),
+    /// This column holds each particle's diameter.
+    Diameter(String),
+}
+
+impl SizeColumn {
+    /// The size column among `columns` and the factor that makes it a radius, `None`
+    /// where there is none to read; an error names a column asked for and not there.
+    pub fn resolve(&self, columns: &[String]) -> Result<Option<(usize, f64)>, String> {
+        let named = |name: &str, factor: f64, option: &str| {
+            columns
+                .iter()
+                .position(|c| c == name)
+                .map(|c| Some((c, factor)))
+                .ok_or_else(|| {
+                    format!(
+                        "no column `{name}` for {option}; the columns are {}",
+                        columns.join(" ")
+                    )
+                })
+        };
+        match self {
+            SizeColumn::Auto => Ok(atoms::size_column(columns)),
+            SizeColumn::Off => Ok(None),
+            SizeColumn::Radius(name) => named(name, 1.0, "--radius-column"),
+            SizeColumn::Diameter(name) => named(name, 0.5, "--diameter-column"),
+        }
+    }
+
+    /// How a batch manifest records the choice (`None`: the default).
+    pub fn record(&self) -> Option<String> {
+        match self {
+            SizeColumn::Auto => None,
+            SizeColumn::Off => Some("none".into()),
+            SizeColumn::Radius(n) => Some(format!("radius {n}")),
+            SizeColumn::Diameter(n) => Some(format!("diameter {n}")),
+        }
+    }
+
+    /// An error for inputs whose sizes come from no column (GSD, MMPLD, raw arrays):
+    /// `None` unless a column is named.
+    pub fn named_column(&self) -> Option<String> {
+        match self {
+            SizeColumn::Radius(n) => Some(format!("--radius-column {n}")),
+            SizeColumn::Diameter(n) => Some(format!("--diameter-column {n}")),
+            _ => None,
+        }
+    }
 }
 
 /// What a frame's header says, without its atoms.
@@ -610,20 +675,21 @@ impl DumpFile {
         Ok(())
     }
 
-    /// What a conversion of frame `k` should say about what the input holds and the
-    /// conversion does not read: a raw sidecar's arrays holding values past its
-    /// `particles`; a dump's `diameter` column beside the `radius` column read as the
+    /// What a conversion of frame `k` read with `read` should say about what the input
+    /// holds and the conversion does not read: a raw sidecar's arrays holding values past
+    /// its `particles`; a dump's `diameter` column beside the `radius` column read as the
     /// particles' sizes; the last frame of a text dump whose last line has no line end
     /// ([`DumpFile::ends_mid_line`]).
-    pub fn frame_notes(&self, k: usize) -> Vec<String> {
+    pub fn frame_notes(&self, k: usize, read: &ReadOptions) -> Vec<String> {
         let mut notes = Vec::new();
         if let Index::Raw(r) = &self.index {
             notes.extend(r.notes().iter().cloned());
         }
-        let named = matches!(
-            self.format,
-            InputFormat::LammpsText | InputFormat::LammpsBinary | InputFormat::Xyz
-        );
+        let named = read.sizes == SizeColumn::Auto
+            && matches!(
+                self.format,
+                InputFormat::LammpsText | InputFormat::LammpsBinary | InputFormat::Xyz
+            );
         if let Some(info) = named.then(|| self.frame_info(k).ok()).flatten() {
             let has = |n: &str| info.columns.iter().find(|c| c.eq_ignore_ascii_case(n));
             if let (Some(r), Some(d)) = (has("radius"), has("diameter")) {
@@ -825,6 +891,7 @@ impl DumpFile {
                 let plain = ReadOptions {
                     attribute: None,
                     columns: opts.columns.clone(),
+                    sizes: SizeColumn::Off,
                 };
                 let part = self.read_part(k, &plain, 0..1, &NoProgress)?;
                 Ok(match part.species.first() {
@@ -868,7 +935,7 @@ impl DumpFile {
         match &self.index {
             Index::Lammps(_) | Index::Xyz(_) => {
                 let header = self.header(k)?;
-                let (_, _, attribute) = text_columns(&self.ctx(), &header, opts)?;
+                let (_, _, attribute, _) = text_columns(&self.ctx(), &header, opts)?;
                 Ok(attribute.map(|c| header.info.columns[c].clone()))
             }
             // Every piece is read (each may lack it); the first's names it.
@@ -913,7 +980,8 @@ impl DumpFile {
                 ),
             });
         }
-        match &self.index {
+        self.check_sizes(opts)?;
+        let mut frame = match &self.index {
             Index::Raw(r) => r.read_range(opts, range, progress),
             Index::LammpsBinary(i) => lammps_binary::read_range(
                 &self.path,
@@ -932,6 +1000,34 @@ impl DumpFile {
                 offset: 0,
                 message: "this format is read a whole frame at a time".into(),
             }),
+        }?;
+        // GSD and MMPLD sizes left out: each species at its particles' mean.
+        if opts.sizes == SizeColumn::Off {
+            frame.radii = None;
+        }
+        Ok(frame)
+    }
+
+    /// Refuses a size column named for an input that gives sizes by no column: GSD
+    /// (`particles/diameter`), MMPLD (`xyzr` lists) and raw arrays (none).
+    fn check_sizes(&self, opts: &ReadOptions) -> Result<(), ReadError> {
+        let named = opts.sizes.named_column();
+        let how = match &self.index {
+            Index::Gsd(_) => "a GSD file gives each particle's size by `particles/diameter`",
+            Index::Mmpld(_) => "an MMPLD file gives each particle's size in its `xyzr` lists",
+            Index::Raw(_) => "raw arrays give no particle sizes",
+            _ => return Ok(()),
+        };
+        match named {
+            Some(option) => Err(ReadError::Binary {
+                path: self.path.clone(),
+                offset: 0,
+                message: format!(
+                    "{option} names a column of a LAMMPS or XYZ dump; {how} (--no-sizes draws \
+                     each species at one radius)"
+                ),
+            }),
+            None => Ok(()),
         }
     }
 
@@ -959,6 +1055,7 @@ impl DumpFile {
         }
         if let Index::Raw(r) = &self.index {
             self.check_frame(k)?;
+            self.check_sizes(opts)?;
             return r.read_frame(opts, progress);
         }
         if let Index::LammpsBinary(i) = &self.index {
@@ -973,7 +1070,7 @@ impl DumpFile {
         }
         let ctx = self.ctx();
         let header = self.header(k)?;
-        let (coords, fractional, attribute) = text_columns(&ctx, &header, opts)?;
+        let (coords, fractional, attribute, size) = text_columns(&ctx, &header, opts)?;
         let columns = &header.info.columns;
         let atoms = atoms::parse(
             &ctx,
@@ -983,6 +1080,7 @@ impl DumpFile {
             coords,
             fractional,
             attribute,
+            size,
             &format!("reading frame {k}"),
             progress,
         )?;
@@ -1012,7 +1110,7 @@ fn text_columns<'h>(
     ctx: &Ctx<'_>,
     header: &'h Header,
     opts: &ReadOptions,
-) -> Result<([usize; 3], Option<&'h SimulationBox>, Option<usize>), ReadError> {
+) -> Result<TextColumns<'h>, ReadError> {
     {
         let columns = &header.info.columns;
         let (coords, scaled) = header
@@ -1042,9 +1140,25 @@ fn text_columns<'h>(
                 }
             })?),
         };
-        Ok((coords, fractional, attribute))
+        let size = opts
+            .sizes
+            .resolve(columns)
+            .map_err(|message| ReadError::Malformed {
+                at: ctx.at(header.columns_at),
+                message,
+            })?;
+        Ok((coords, fractional, attribute, size))
     }
 }
+
+/// What [`text_columns`] finds: the coordinate columns, the box that unscales them
+/// (scaled coordinates), the attribute's column and the size column with its factor.
+type TextColumns<'h> = (
+    [usize; 3],
+    Option<&'h SimulationBox>,
+    Option<usize>,
+    Option<(usize, f64)>,
+);
 
 /// Reads frame `k` of the uncompressed text dump `path` (LAMMPS or XYZ) a window of at
 /// most `window` atom lines at a time, calling `f` with each window's first atom index and
@@ -1106,7 +1220,7 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
                 )
                 .into());
         }
-        let (coords, fractional, attribute) = text_columns(&ctx, &header, opts)?;
+        let (coords, fractional, attribute, size) = text_columns(&ctx, &header, opts)?;
         let want = window.min(total - first);
         let end_limit = header.atoms.end;
         // The end of the `want`-th line from `pos` (or the block's end).
@@ -1130,6 +1244,7 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
             coords,
             fractional,
             attribute,
+            size,
             &format!("reading frame {k}"),
             &NoProgress,
         )

@@ -321,7 +321,6 @@ impl Index {
                     // `n` the palette's `n`-th colour; numbers from 0 by place).
                     numeric_species: true,
                     type_numbers: true,
-                    size: None,
                 }
             }
         };
@@ -434,7 +433,6 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
         ));
     }
     Ok(AtomLayout {
-        size: super::atoms::size_column(&columns),
         columns,
         coords,
         // Numbers sorted as LAMMPS types are; a `species` column's coloured as they are
