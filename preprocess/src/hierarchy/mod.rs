@@ -668,12 +668,14 @@ pub fn check_species(particles: usize, species: &[Species]) -> Result<(), BuildE
         return Err(BuildError::TooManySpecies(species.len()));
     }
     for s in species {
-        let r = f64::from(s.radius);
+        // A species of several sizes: its largest particles'.
+        let largest = s.radius_range.map_or(s.radius, |[_, hi]| hi.max(s.radius));
+        let r = f64::from(largest);
         let sum = particles as f64 * r * r;
         if !(sum <= MAX_AREA_SUM && r <= f64::from(MAX_COORDINATE)) {
             return Err(BuildError::RadiusTooLarge {
                 name: s.name.clone(),
-                radius: s.radius,
+                radius: largest,
                 particles,
                 sum,
             });
