@@ -5670,6 +5670,21 @@ fn a_granular_runs_grain_sizes_are_kept_per_particle() {
             "36",
         ]);
     }
+    // Two types given one name: their grains' mean radius, whole and in chunks.
+    for chunks in [
+        &[][..],
+        &["--chunk-points", "64", "--root-points", "16"][..],
+    ] {
+        let out = d("merged.mdlod");
+        let mut args = vec!["convert", s(&text), "-o", s(&out), "--last"];
+        args.extend_from_slice(&["--species-name", "1=A", "--species-name", "2=A"]);
+        args.extend_from_slice(chunks);
+        ok(&args);
+        let mean = whole.iter().map(|&r| f64::from(r)).sum::<f64>() / whole.len() as f64;
+        let v = info(&out);
+        let r = v["species"][0]["radius"].as_f64().unwrap();
+        assert!((r - mean).abs() < 1e-4, "{r} against {mean}");
+    }
     // An override gives the type one radius; the other keeps its grains' own.
     ok(&[
         "convert",
@@ -5802,6 +5817,23 @@ fn size_columns_can_be_named_or_left_out() {
         v["radius"].is_null() && v["species"][0]["radius_range"].is_null(),
         "{v}"
     );
+    // A column that holds something else.
+    for (column, role) in [("type", "the species"), ("y", "a coordinate")] {
+        let e = fails(&[
+            "convert",
+            s(&d("sph.dump")),
+            "-o",
+            s(&d("x.mdlod")),
+            "--radius-column",
+            column,
+        ]);
+        assert!(
+            e.contains(&format!(
+                "column `{column}` holds {role}, not the particles' sizes"
+            )),
+            "{e}"
+        );
+    }
     let gsd = mdlod_datasets::gsd_sample_path("hoomd_mixture.gsd");
     let e = fails(&[
         "convert",
@@ -5826,6 +5858,38 @@ fn size_columns_can_be_named_or_left_out() {
     assert!(manifest.contains("\"sizes\": \"none\""), "{manifest}");
     let out = ok(&["batch", s(&gran), "-o", s(&b)]);
     assert!(out.contains("3 converted, 0 already done"), "{out}");
+    // Shards converted with other size columns are not merged.
+    let sh = d("shards.d");
+    ok(&["batch", s(&gran), "-o", s(&sh), "--shard", "0/2"]);
+    ok(&[
+        "batch",
+        s(&gran),
+        "-o",
+        s(&sh),
+        "--shard",
+        "1/2",
+        "--no-sizes",
+    ]);
+    let e = fails(&["batch", "--merge", s(&sh)]);
+    assert!(e.contains("size column") && e.contains("none"), "{e}");
+    // A file of a set that lacks the column named is refused before any frame is
+    // converted.
+    std::fs::write(d("set.1.dump"), &text).unwrap();
+    std::fs::write(d("set.2.dump"), text.replace(" h d\n", " hh d\n")).unwrap();
+    let e = fails(&[
+        "batch",
+        s(&d("set.1.dump")),
+        s(&d("set.2.dump")),
+        "-o",
+        s(&d("set.d")),
+        "--radius-column",
+        "h",
+    ]);
+    assert!(
+        e.contains("set.2.dump") && e.contains("no column `h` for --radius-column"),
+        "{e}"
+    );
+    assert!(!d("set.d").join("frame-0.mdlod").exists());
 }
 
 /// What can go wrong with particles' own sizes, as a granular user meets it: a size of 0
@@ -5871,7 +5935,7 @@ fn particle_sizes_edge_cases_are_refused_or_noted() {
     .unwrap();
     let e = fails(&["convert", s(&d("z.dump")), "-o", s(&d("z.mdlod"))]);
     assert!(
-        e.contains("species 1: the file gives radius 0") && e.contains("--radius 1=R"),
+        e.contains("z.dump:10: `radius` 0 is no particle size (a finite number above 0"),
         "{e}"
     );
     // Decades.
@@ -6025,6 +6089,65 @@ fn particle_sizes_edge_cases_are_refused_or_noted() {
             e.contains("pipe.mdlod") && e.contains("not a regular file"),
             "{e}"
         );
+        // The legend and the view file too, before anything is drawn (a legend was
+        // written through a link, and into a pipe it blocked).
+        std::os::unix::fs::symlink(d("iso.png"), d("legend.svg")).unwrap();
+        let fifo_svg = d("pipe.svg");
+        assert!(Command::new("mkfifo")
+            .arg(&fifo_svg)
+            .status()
+            .unwrap()
+            .success());
+        for (option, path) in [
+            ("--legend", d("legend.svg")),
+            ("--legend", fifo_svg),
+            ("--save-view", d("link.png")),
+        ] {
+            let e = fails(&[
+                "render",
+                s(&d("five.mdlod")),
+                "-o",
+                s(&d("new.png")),
+                "--width",
+                "8",
+                "--height",
+                "8",
+                option,
+                s(&path),
+            ]);
+            assert!(
+                e.contains(option)
+                    && (e.contains("symbolic link") || e.contains("not a regular file")),
+                "{e}"
+            );
+            assert!(!d("new.png").exists());
+        }
+        // `sample`: a directory that does not exist, and a file that is no S-NDF file.
+        let e = fails(&[
+            "sample",
+            s(&d("five.mdlod")),
+            "-o",
+            s(&d("nodir/x.sndf")),
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ]);
+        assert!(
+            e.contains("the directory") && e.contains("does not exist"),
+            "{e}"
+        );
+        let e = fails(&[
+            "sample",
+            s(&d("five.mdlod")),
+            "-o",
+            s(&d("five.dump")),
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ]);
+        assert!(e.contains("exists and is no .sndf file"), "{e}");
         assert!(std::fs::symlink_metadata(&fifo)
             .unwrap()
             .file_type()

@@ -1284,6 +1284,10 @@ pub fn batch(
                 Err(_) if dump.frame_info(k).is_ok_and(|i| i.particles == 0) => None,
                 Err(e) => return Err(bounded.context(p, e.into()).into()),
             };
+            // So is a size column a frame lacks.
+            if let Err(e) = dump.check_size_column(k, &opts.read) {
+                return Err(bounded.context(p, e.into()).into());
+            }
             frames.push((own, timestep, particles, attribute, given));
         }
         if (!opts.convert.radii.is_empty() || !opts.convert.species_names.is_empty())
@@ -2346,8 +2350,9 @@ fn file_name_of(path: &Path) -> String {
 /// frames that differ in more than their particles.
 #[derive(Default)]
 struct MergeSettings {
-    /// The first frame: its name (with its manifest's) and build parameters.
-    first: Option<(String, BuildInfo, Option<String>)>,
+    /// The first frame: its name (with its manifest's), build parameters, attribute and
+    /// size column.
+    first: Option<(String, BuildInfo, Option<String>, Option<String>)>,
     /// A frame with a chunked build: its name and chunk size.
     chunked: Option<(String, u64)>,
     /// The first frame's `--species-name` renames (none: none given), and its name.
@@ -2401,10 +2406,20 @@ impl MergeSettings {
             }
         }
         let attribute = m.attribute.as_ref().map(|a| a.name.clone());
-        let Some((first, build, first_attribute)) = &self.first else {
-            self.first = Some((this.clone(), m.build.clone(), attribute));
+        let Some((first, build, first_attribute, first_sizes)) = &self.first else {
+            self.first = Some((this.clone(), m.build.clone(), attribute, f.sizes.clone()));
             return self.check_renames_chunks_and_radii(m, f, this);
         };
+        if *first_sizes != f.sizes {
+            let name = |s: &Option<String>| s.clone().unwrap_or_else(|| "the default".into());
+            return Err(differ(
+                first,
+                &this,
+                "size column",
+                name(first_sizes),
+                name(&f.sizes),
+            ));
+        }
         let b = &m.build;
         for (setting, a, x) in [
             ("cluster size", build.max_cluster_size, b.max_cluster_size),

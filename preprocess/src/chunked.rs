@@ -430,6 +430,8 @@ fn temp_err(path: &Path, e: std::io::Error) -> ConvertError {
 struct SpeciesMerge {
     list: Vec<SpeciesName>,
     by_name: HashMap<String, u16>,
+    /// Particles of each merged species so far.
+    counts: Vec<u64>,
 }
 
 impl SpeciesMerge {
@@ -462,14 +464,21 @@ impl SpeciesMerge {
             map[i] = self.list.len() as u16;
             self.by_name.insert(s.name.clone(), map[i]);
             self.list.push(s.clone());
+            self.counts.push(0);
+        }
+        for (k, c) in crate::species::counts(part.len(), species_index)
+            .into_iter()
+            .enumerate()
+        {
+            self.counts[usize::from(map[k])] += c;
         }
         Ok(map)
     }
 
     /// The final species list (numeric LAMMPS types sorted numerically, others in order
-    /// of first appearance, as the whole-frame readers list them) and the map from
-    /// provisional to final indices.
-    fn finish(mut self) -> (Vec<SpeciesName>, Vec<u16>) {
+    /// of first appearance, as the whole-frame readers list them), the map from
+    /// provisional to final indices, and each final species' particles.
+    fn finish(mut self) -> (Vec<SpeciesName>, Vec<u16>, Vec<u64>) {
         let mut order: Vec<usize> = (0..self.list.len()).collect();
         if self.list.iter().all(|s| s.numeric_type) {
             order.sort_by_key(|&i| self.list[i].name.parse::<i64>().unwrap_or(i64::MAX));
@@ -482,7 +491,8 @@ impl SpeciesMerge {
             map[old] = new as u16;
         }
         let list = order.iter().map(|&i| self.list[i].clone()).collect();
-        (list, map)
+        let counts = order.iter().map(|&i| self.counts[i]).collect();
+        (list, map, counts)
     }
 }
 
@@ -1426,20 +1436,20 @@ pub fn convert_chunked(
 
     // 2. Chunks.
     let t1 = Instant::now();
-    let (names, species_map) = merge.finish();
+    let (names, species_map, counts) = merge.finish();
     // Renamed species (`--species-name`), merged where two take one name: the merged
     // list's indices map on to the renamed list's.
     if !options.radii_may_be_absent {
         crate::species::check_renames(&names, &options.species_names)?;
     }
-    let (names, species_map) = match crate::species::rename_species(&names, &options.species_names)
-    {
-        (renamed, Some(map)) => {
-            let composed = species_map.iter().map(|&i| map[usize::from(i)]).collect();
-            (renamed, composed)
-        }
-        (renamed, None) => (renamed, species_map),
-    };
+    let (names, species_map) =
+        match crate::species::rename_species(&names, &counts, &options.species_names) {
+            (renamed, Some(map)) => {
+                let composed = species_map.iter().map(|&i| map[usize::from(i)]).collect();
+                (renamed, composed)
+            }
+            (renamed, None) => (renamed, species_map),
+        };
     if !options.radii_may_be_absent {
         crate::species::check_overrides(&names, &options.radii)?;
     }

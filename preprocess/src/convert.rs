@@ -276,7 +276,9 @@ pub fn convert_frame(
     if !options.radii_may_be_absent {
         crate::species::check_renames(&frame.species, &options.species_names)?;
     }
-    let (names, merged) = crate::species::rename_species(&frame.species, &options.species_names);
+    let counts = crate::species::counts(frame.species.len(), &frame.species_index);
+    let (names, merged) =
+        crate::species::rename_species(&frame.species, &counts, &options.species_names);
     if !options.radii_may_be_absent {
         crate::species::check_overrides(&names, &options.radii)?;
     }
@@ -626,12 +628,15 @@ pub fn radius_span_note(info: Option<&mdlod_format::meta::RadiusInfo>) -> Option
     let step = (f64::from(info.max) - f64::from(info.min)) / 65535.0;
     let share = step / 2.0 / f64::from(info.min);
     (info.min > 0.0 && share > 0.01).then(|| {
+        let off = if share > 1.0 {
+            "more than twice their size".to_string()
+        } else {
+            format!("up to {:.0} % off their size", 100.0 * share)
+        };
         format!(
             "particle radii from {:e} to {:e} are kept in 16-bit steps of {step:.2e} over \
-             that range: the smallest are drawn up to {:.0} % off their size",
-            info.min,
-            info.max,
-            100.0 * share
+             that range: the smallest are drawn {off}",
+            info.min, info.max
         )
     })
 }

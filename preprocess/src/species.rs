@@ -122,6 +122,17 @@ pub fn element(symbol: &str) -> Option<(f32, [f32; 3])> {
         .map(|(_, r, c)| (*r, srgb_to_linear(*c)))
 }
 
+/// How many particles of `species_index` each of `len` species has.
+pub fn counts(len: usize, species_index: &[u16]) -> Vec<u64> {
+    let mut counts = vec![0u64; len];
+    for &s in species_index {
+        if let Some(c) = counts.get_mut(usize::from(s)) {
+            *c += 1;
+        }
+    }
+    counts
+}
+
 /// Folds the sizes of a species as another part of the same frame read them
 /// ([`SpeciesName::sized_count`]) into `known`: the mean over both parts' particles and
 /// the union of their ranges, so that a frame read in parts (windows, a parallel run's
@@ -513,23 +524,37 @@ pub fn renamed<'a>(renames: &'a [(String, String)], name: &'a str) -> &'a str {
 /// keeps its order and length, and indices are unchanged). A renamed species is no
 /// longer a numbered type but keeps its palette slot (its colour where the new name is
 /// no element), so a renamed list keeps the input's order; a merged species takes the
-/// first radius given and the union of the radius ranges.
+/// mean of the radii given, weighted by `counts` (the particles of each of `names`;
+/// the first radius given where they are not known), and the union of the radius
+/// ranges.
 pub fn rename_species(
     names: &[SpeciesName],
+    counts: &[u64],
     renames: &[(String, String)],
 ) -> (Vec<SpeciesName>, Option<Vec<u16>>) {
     if renames.is_empty() {
         return (names.to_vec(), None);
     }
     let mut list: Vec<SpeciesName> = Vec::with_capacity(names.len());
+    let mut list_counts: Vec<u64> = Vec::with_capacity(names.len());
     let mut map = Vec::with_capacity(names.len());
-    for s in names {
+    for (i, s) in names.iter().enumerate() {
         let name = renamed(renames, &s.name);
         let changed = name != s.name;
+        let count = counts.get(i).copied().unwrap_or(0);
         if let Some(k) = list.iter().position(|t| t.name == name) {
             let known = &mut list[k];
             known.numeric_type = false;
-            known.radius = known.radius.or(s.radius);
+            let (a, b) = (list_counts[k], count);
+            known.radius = match (known.radius, s.radius) {
+                // A radius of 0 or below stays, to be refused naming the species.
+                (Some(x), Some(y)) if x > 0.0 && y > 0.0 && a > 0 && b > 0 => Some(
+                    ((f64::from(x) * a as f64 + f64::from(y) * b as f64) / (a + b) as f64) as f32,
+                ),
+                (Some(x), Some(y)) if y <= 0.0 && x > 0.0 => Some(y),
+                (x, y) => x.or(y),
+            };
+            list_counts[k] += b;
             known.radius_range = match (known.radius_range, s.radius_range) {
                 (Some((a, b)), Some((c, d))) => Some((a.min(c), b.max(d))),
                 (a, b) => a.or(b),
@@ -543,6 +568,7 @@ pub fn rename_species(
             t.name = name.to_string();
             t.numeric_type = false;
         }
+        list_counts.push(count);
         map.push(list.len() as u16);
         list.push(t);
     }
@@ -743,7 +769,7 @@ mod tests {
     fn renamed_types_take_their_elements_looks_and_keep_the_order() {
         let names = numbered(&["1", "2", "3"]);
         let renames = vec![("1".to_string(), "O".to_string()), ("2".into(), "H".into())];
-        let (list, map) = rename_species(&names, &renames);
+        let (list, map) = rename_species(&names, &[], &renames);
         assert!(map.is_none(), "nothing merged: indices unchanged");
         let got: Vec<_> = list.iter().map(|s| s.name.as_str()).collect();
         assert_eq!(got, ["O", "H", "3"]);
@@ -759,7 +785,27 @@ mod tests {
         let table = species_table(&list, &[("O".into(), 1.7)]);
         assert_eq!(table[0].radius, 1.7);
         // No renames: the list as it was.
-        assert_eq!(rename_species(&names, &[]), (names.clone(), None));
+        assert_eq!(rename_species(&names, &[], &[]), (names.clone(), None));
+    }
+
+    #[test]
+    fn species_merged_by_a_rename_take_the_mean_radius_of_all_their_particles() {
+        let mut names = numbered(&["1", "2", "3"]);
+        names[0].radius = Some(0.5);
+        names[1].radius = Some(2.0);
+        names[2].radius = Some(1.0);
+        let renames = [("1".to_string(), "A".to_string()), ("2".into(), "A".into())];
+        // 3 particles of radius 0.5 and 1 of radius 2: (1.5 + 2) / 4.
+        let (list, _) = rename_species(&names, &[3, 1, 7], &renames);
+        assert_eq!(list[0].radius, Some(0.875));
+        assert_eq!(list[1].radius, Some(1.0));
+        // Counts not known: the first radius given.
+        let (list, _) = rename_species(&names, &[], &renames);
+        assert_eq!(list[0].radius, Some(0.5));
+        // A radius of 0 stays, to be refused.
+        names[1].radius = Some(0.0);
+        let (list, _) = rename_species(&names, &[3, 1, 7], &renames);
+        assert_eq!(list[0].radius, Some(0.0));
     }
 
     #[test]
@@ -774,14 +820,14 @@ mod tests {
             ("2".into(), "X".into()),
             ("4".into(), "X".into()),
         ];
-        let (list, map) = rename_species(&names, &renames);
+        let (list, map) = rename_species(&names, &[], &renames);
         let got: Vec<_> = list.iter().map(|s| s.name.as_str()).collect();
         assert_eq!(got, ["O", "X"]);
         assert_eq!(map, Some(vec![0, 1, 0, 1]));
         assert_eq!(list[0].radius, Some(0.7), "the radius type 3 gives");
         assert_eq!(list[1].radius_range, Some((0.4, 0.6)));
         // A type renamed to another's number joins it.
-        let (list, map) = rename_species(&numbered(&["1", "2"]), &[("2".into(), "1".into())]);
+        let (list, map) = rename_species(&numbered(&["1", "2"]), &[], &[("2".into(), "1".into())]);
         assert_eq!(list.len(), 1);
         assert!(!list[0].numeric_type);
         assert_eq!(map, Some(vec![0, 0]));

@@ -74,11 +74,14 @@ pub struct BuildArgs {
     /// LAMMPS binary dumps other than `dump atom`), e.g. "id type x y z c_pe".
     #[arg(long, value_name = "NAMES")]
     pub columns: Option<String>,
-    /// Dump column holding each particle's radius (an SPH run's smoothing length `h`, a
-    /// compute's `c_rad`); the default reads a `radius` column, else a `diameter` one.
+    /// Column of a LAMMPS dump (or extended-XYZ property) holding each particle's radius:
+    /// an SPH run's smoothing length `h`, a compute's `c_rad`. The default reads a
+    /// `radius` column, else a `diameter` one. (Splats' light grows as the radius
+    /// squared: a splat is a disk of that radius.)
     #[arg(long, value_name = "NAME", conflicts_with_all = ["diameter_column", "no_sizes"])]
     pub radius_column: Option<String>,
-    /// Dump column holding each particle's diameter.
+    /// Column of a LAMMPS dump (or extended-XYZ property) holding each particle's
+    /// diameter.
     #[arg(long, value_name = "NAME", conflicts_with = "no_sizes")]
     pub diameter_column: Option<String>,
     /// No sizes of their own: a dump's `radius`/`diameter` columns are not read (each

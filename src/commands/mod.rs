@@ -41,6 +41,20 @@ pub fn check_output(option: &str, output: &Path, inputs: &[(&str, &Path)]) -> Re
             output.display()
         );
     }
+    // A device, a pipe or a symbolic link in its place would be replaced, or (the legend,
+    // written in place) block: refused before any work.
+    if let Err(e) = mdlod_format::files::check_replaceable(output) {
+        bail!("{option} {}: {e}", output.display());
+    }
+    if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
+        if parent.exists() && !parent.is_dir() {
+            bail!(
+                "{option} {}: {} is a file, not a directory",
+                output.display(),
+                parent.display()
+            );
+        }
+    }
     for &(what, input) in inputs {
         for file in files_of(input) {
             if same_file(output, &file) {

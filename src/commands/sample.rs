@@ -76,12 +76,42 @@ pub struct Args {
     pub tiles: bool,
 }
 
+/// Refuses, before sampling, an output in a directory that does not exist, and one that
+/// exists and is no S-NDF file (a `.mdlod` or an image given as `-o` by mistake, which
+/// the file would replace without a word).
+fn check_replaces_only_sndf(output: &std::path::Path) -> Result<()> {
+    use std::io::Read;
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if !dir.is_dir() {
+            anyhow::bail!(
+                "-o {}: the directory {} does not exist",
+                output.display(),
+                dir.display()
+            );
+        }
+    }
+    // (A FIFO in its place was refused by check_output; this opens regular files only.)
+    let Ok(mut f) = mdlod_format::files::open(output) else {
+        return Ok(());
+    };
+    let mut magic = [0u8; 8];
+    let is_sndf = f.read_exact(&mut magic).is_ok() && magic == mdlod_format::sndf::SNDF_MAGIC;
+    if !is_sndf {
+        anyhow::bail!(
+            "-o {} exists and is no .sndf file: give another name, or remove it first",
+            output.display()
+        );
+    }
+    Ok(())
+}
+
 /// The size from which `sample` says, before sampling, how large its file will be.
 const LARGE_SNDF: u64 = 256 << 20;
 
 pub fn run(args: Args) -> Result<()> {
     let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
+    check_replaces_only_sndf(&args.output)?;
     if args.style.attribute_range.is_some() && args.style.colour_map.is_none() {
         anyhow::bail!("--attribute-range has no effect without --colour-map");
     }

@@ -546,12 +546,12 @@ fn parse_chunk<'a>(
         }
         if let Some(out) = sizes.as_deref_mut() {
             let v = size as f32;
-            if !(v.is_finite() && v >= 0.0) {
+            if !(v.is_finite() && v > 0.0) {
                 let (c, factor) = plan.size.unwrap_or((0, 1.0));
                 return Err(ReadError::Malformed {
                     at: ctx.at(line_start),
                     message: format!(
-                        "`{}` {} is no particle size (a finite number from 0 up, in single \
+                        "`{}` {} is no particle size (a finite number above 0, in single \
                          precision)",
                         plan.columns.get(c).map_or("size", String::as_str),
                         size / factor

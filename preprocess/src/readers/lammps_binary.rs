@@ -562,7 +562,7 @@ pub(crate) fn read_range(
     // Each particle's size (a granular run's `radius` or `diameter`), as a radius.
     let size_col = opts
         .sizes
-        .resolve(&names)
+        .resolve_beside(&names, coords, species_col)
         .map_err(|m| err(first_chunk, m))?;
     let mut radii = size_col.map(|_| vec![0f32; n]);
     let value = |atom: &[u8], c: usize| {
@@ -668,12 +668,12 @@ pub(crate) fn read_range(
                 })
         };
         if let (Some(values), Some((c, factor))) = (radii.as_mut(), size_col) {
-            if let Some((i, v)) = scan(values, c, factor, |r| r.is_finite() && r >= 0.0) {
+            if let Some((i, v)) = scan(values, c, factor, |r| r.is_finite() && r > 0.0) {
                 return Err(err(
                     (chunk.start + i * stride + 8 * c) as u64,
                     format!(
                         "atom {} of timestep {}: column `{}` is {v}, no particle size (a \
-                         finite number from 0 up, in single precision)",
+                         finite number above 0, in single precision)",
                         first + skipped + i + 1,
                         h.timestep,
                         names[c],

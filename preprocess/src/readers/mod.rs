@@ -314,6 +314,33 @@ impl SizeColumn {
         }
     }
 
+    /// [`Self::resolve`], refusing a column that holds the coordinates or the species
+    /// (which a named size column would silently not be read from).
+    pub fn resolve_beside(
+        &self,
+        columns: &[String],
+        coords: [usize; 3],
+        species: Option<usize>,
+    ) -> Result<Option<(usize, f64)>, String> {
+        let size = self.resolve(columns)?;
+        if let Some((c, _)) = size {
+            let role = if coords.contains(&c) {
+                Some("a coordinate")
+            } else if species == Some(c) {
+                Some("the species")
+            } else {
+                None
+            };
+            if let Some(role) = role {
+                return Err(format!(
+                    "column `{}` holds {role}, not the particles' sizes",
+                    columns[c]
+                ));
+            }
+        }
+        Ok(size)
+    }
+
     /// How a batch manifest records the choice (`None`: the default).
     pub fn record(&self) -> Option<String> {
         match self {
@@ -1008,6 +1035,30 @@ impl DumpFile {
         Ok(frame)
     }
 
+    /// Whether frame `k` has the size column `opts` names (a batch checks every frame
+    /// before converting any, as it does the attribute): an error names a column the
+    /// frame lacks, or an input that gives sizes by no column.
+    pub fn check_size_column(&self, k: usize, opts: &ReadOptions) -> Result<(), ReadError> {
+        if opts.sizes.named_column().is_none() {
+            return Ok(());
+        }
+        self.check_sizes(opts)?;
+        let info = self.frame_info(k)?;
+        // (Columns named nowhere, as an old binary dump's without --columns, and empty
+        // frames are judged where the frame is read.)
+        if info.columns.is_empty() || info.particles == 0 {
+            return Ok(());
+        }
+        opts.sizes
+            .resolve(&info.columns)
+            .map(|_| ())
+            .map_err(|message| ReadError::Binary {
+                path: self.path.clone(),
+                offset: 0,
+                message: format!("frame {k}: {message}"),
+            })
+    }
+
     /// Refuses a size column named for an input that gives sizes by no column: GSD
     /// (`particles/diameter`), MMPLD (`xyzr` lists) and raw arrays (none).
     fn check_sizes(&self, opts: &ReadOptions) -> Result<(), ReadError> {
@@ -1142,7 +1193,7 @@ fn text_columns<'h>(
         };
         let size = opts
             .sizes
-            .resolve(columns)
+            .resolve_beside(columns, coords, header.layout.species)
             .map_err(|message| ReadError::Malformed {
                 at: ctx.at(header.columns_at),
                 message,
