@@ -779,6 +779,12 @@ class MdlodFile:
         self.radius_q = None
         if self.radius_range is not None:
             self.radius_q = self.u16_array(self.used[(RADIUS, self.L - 1)])
+            if self.header["version_minor"] < 1:
+                raise FormatError(
+                    "header",
+                    f"version {self.header['version_major']}.{self.header['version_minor']} "
+                    "holds a RADIUS section, which version 1.1 added",
+                )
         # Every node's drawn range is exactly its descendants on point_level.
         for l in range(self.L - 1):
             for i in range(self.point_count(l)):

@@ -1168,6 +1168,18 @@ impl MdlodFile {
             }
             covered = covered.max(end);
         }
+        // A RADIUS section is version 1.1's: a file of an earlier minor version holding
+        // one was not written by a writer of that version.
+        if self.radii().is_some() && self.header.version_minor < 1 {
+            return Err(FormatError::corrupt(
+                &self.path,
+                "header",
+                format!(
+                    "version {}.{} holds a RADIUS section, which version 1.1 added",
+                    self.header.version_major, self.header.version_minor
+                ),
+            ));
+        }
         let species_count = self.metadata.species.len();
         if let Some(i) = self
             .species()

@@ -1340,6 +1340,19 @@ fn hostile_per_particle_sections() {
 }
 
 #[test]
+fn a_radius_section_under_a_version_1_0_header_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut b = valid_bytes(params_u16_delta1());
+    let mut h = header(&b);
+    assert_eq!((h.version_major, h.version_minor), (1, 1));
+    h.version_minor = 0;
+    put_header(&mut b, &h);
+    seal_header(&mut b);
+    let p = write(dir.path(), "radius-in-1-0.mdlod", &b);
+    expect_refused(&p, &["header", "version 1.0 holds a RADIUS section"]);
+}
+
+#[test]
 fn a_position_error_the_particles_exceed_is_refused() {
     // `verify` puts each decoded particle centre inside its cluster's bounds shrunk by
     // its radius, up to the recorded position error: a file claiming a tenth of its
