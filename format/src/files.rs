@@ -47,8 +47,8 @@ pub fn check_replaceable(path: &Path) -> std::io::Result<()> {
     let what = if kind.is_dir() {
         "a directory"
     } else if kind.is_symlink() {
-        "a symbolic link (the new file would replace the link, not the file it points at: \
-         name that file)"
+        "a symbolic link (the new file would replace the link, not the file it points at; \
+         remove the link, or write to the file it points at)"
     } else {
         "not a regular file (a device or a pipe, which the new file would replace)"
     };
