@@ -1442,13 +1442,17 @@ pub fn convert_chunked(
     if !options.radii_may_be_absent {
         crate::species::check_renames(&names, &options.species_names)?;
     }
-    let (names, species_map) =
+    let (names, species_map, counts) =
         match crate::species::rename_species(&names, &counts, &options.species_names) {
             (renamed, Some(map)) => {
                 let composed = species_map.iter().map(|&i| map[usize::from(i)]).collect();
-                (renamed, composed)
+                let mut merged = vec![0u64; renamed.len()];
+                for (old, &new) in map.iter().enumerate() {
+                    merged[usize::from(new)] += counts[old];
+                }
+                (renamed, composed, merged)
             }
-            (renamed, None) => (renamed, species_map),
+            (renamed, None) => (renamed, species_map, counts),
         };
     if !options.radii_may_be_absent {
         crate::species::check_overrides(&names, &options.radii)?;
@@ -1501,7 +1505,7 @@ pub fn convert_chunked(
         attribute_range: layout.attribute.then_some(range),
         keep_levels: params.delta_n as usize,
         // One range for every chunk, from the whole frame's species.
-        radius_range: crate::hierarchy::radius_range(&species),
+        radius_range: crate::hierarchy::radius_range(&species, &counts),
     };
     // What the builds at work, the two chunks read ahead and a margin leave under the
     // limit holds finished chunks' results until the assembly.
@@ -1589,7 +1593,7 @@ pub fn convert_chunked(
     metadata.particles = n as u64;
     metadata.radius = layout
         .radius
-        .then(|| crate::hierarchy::radius_range(&species))
+        .then(|| crate::hierarchy::radius_range(&species, &counts))
         .flatten();
     metadata.species = species;
     if let Some(info) = metadata.attribute.as_mut() {

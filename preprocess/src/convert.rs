@@ -324,11 +324,22 @@ pub fn convert_frame(
     let source_name = source
         .as_ref()
         .map_or_else(|| "input".to_string(), |s| s.path.clone());
-    let h =
-        hierarchy::build(particles, &options.build, progress).map_err(|e| ConvertError::Build {
+    // The radii's range from the species with particles, as a chunked build takes it.
+    let extras = hierarchy::BuildExtras {
+        radius_range: radii.as_ref().and_then(|_| {
+            hierarchy::radius_range(
+                &species,
+                &crate::species::counts(species.len(), species_index),
+            )
+        }),
+        ..Default::default()
+    };
+    let h = hierarchy::build_with(particles, &options.build, &extras, progress).map_err(|e| {
+        ConvertError::Build {
             path: source_name,
             source: e,
-        })?;
+        }
+    })?;
     let build_time = t0.elapsed();
     let mut notes = Vec::new();
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {

@@ -25,9 +25,10 @@ pub struct SpeciesName {
     /// colour), used instead of the element's or the palette's.
     pub colour: Option<[u8; 3]>,
     /// How many particles gave `radius` (their mean) and `radius_range` from their own
-    /// sizes (a text dump's size column), so that parts of a frame read apart combine
-    /// into the whole frame's mean; 0 otherwise.
+    /// sizes (a text dump's size column), and the sum of their radii, so that parts of a
+    /// frame read apart combine into the whole frame's mean exactly; 0 otherwise.
     pub sized_count: u64,
+    pub sized_sum: f64,
     /// The species' place in the palette by the input's own numbering (LAMMPS type
     /// `n`: `n − 1`), so that a type keeps its colour in frames that lack others; the
     /// place in the frame's list when `None`.

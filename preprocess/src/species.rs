@@ -145,21 +145,23 @@ pub(crate) fn merge_sizes(known: &mut SpeciesName, part: &SpeciesName) {
         known.radius = part.radius;
         known.radius_range = part.radius_range;
         known.sized_count = part.sized_count;
+        known.sized_sum = part.sized_sum;
         return;
     }
-    let (a, b) = (known.sized_count as f64, part.sized_count as f64);
-    let mean = |s: &SpeciesName| f64::from(s.radius.unwrap_or(0.0));
-    // A part with a particle of size 0 gave radius 0, which the whole keeps (refused).
-    known.radius = Some(if mean(known) <= 0.0 || mean(part) <= 0.0 {
-        0.0
-    } else {
-        ((mean(known) * a + mean(part) * b) / (a + b)) as f32
-    });
     known.radius_range = match (known.radius_range, part.radius_range) {
         (Some((lo, hi)), Some((c, d))) => Some((lo.min(c), hi.max(d))),
         (x, y) => x.or(y),
     };
     known.sized_count += part.sized_count;
+    known.sized_sum += part.sized_sum;
+    // The whole frame's mean, rounded once as a whole read rounds it; a part with a
+    // particle of size 0 gave radius 0, which the whole keeps (refused).
+    let zero = known.radius_range.is_some_and(|(lo, _)| lo <= 0.0);
+    known.radius = Some(if zero {
+        0.0
+    } else {
+        (known.sized_sum / known.sized_count as f64) as f32
+    });
 }
 
 /// Whether a frame's single-letter species names are labels rather than element symbols:
@@ -546,8 +548,28 @@ pub fn rename_species(
             let known = &mut list[k];
             known.numeric_type = false;
             let (a, b) = (list_counts[k], count);
+            // Sizes: the union, a species of one size counting as the range of its one
+            // radius (a list of one radius merged with one of several), and a species
+            // with no particles as none (where counts are known).
+            let span = |t: &SpeciesName, n: u64| {
+                if counts.is_empty() || n > 0 {
+                    t.radius_range.or(t.radius.map(|r| (r, r)))
+                } else {
+                    None
+                }
+            };
+            let sized = known.radius_range.is_some() || s.radius_range.is_some();
+            known.radius_range = match (span(known, a), span(s, b)) {
+                (Some((p, q)), Some((c, d))) if sized => Some((p.min(c), q.max(d))),
+                (p, q) if sized => p.or(q),
+                _ => None,
+            };
+            // The mean over both species' particles; a species with no particles gives
+            // none, and a radius of 0 or below of one with particles stays, to be
+            // refused naming the species.
             known.radius = match (known.radius, s.radius) {
-                // A radius of 0 or below stays, to be refused naming the species.
+                (Some(_), Some(y)) if a == 0 && b > 0 => Some(y),
+                (Some(x), Some(_)) if b == 0 && a > 0 => Some(x),
                 (Some(x), Some(y)) if x > 0.0 && y > 0.0 && a > 0 && b > 0 => Some(
                     ((f64::from(x) * a as f64 + f64::from(y) * b as f64) / (a + b) as f64) as f32,
                 ),
@@ -555,10 +577,6 @@ pub fn rename_species(
                 (x, y) => x.or(y),
             };
             list_counts[k] += b;
-            known.radius_range = match (known.radius_range, s.radius_range) {
-                (Some((a, b)), Some((c, d))) => Some((a.min(c), b.max(d))),
-                (a, b) => a.or(b),
-            };
             known.colour = known.colour.or(s.colour);
             map.push(k as u16);
             continue;
@@ -806,6 +824,20 @@ mod tests {
         names[1].radius = Some(0.0);
         let (list, _) = rename_species(&names, &[3, 1, 7], &renames);
         assert_eq!(list[0].radius, Some(0.0));
+        // A species with no particles gives the merged one neither its radius nor a 0.
+        let (list, _) = rename_species(&names, &[0, 1, 7], &renames);
+        assert_eq!(list[0].radius, Some(0.0));
+        names[1].radius = Some(2.0);
+        let (list, _) = rename_species(&names, &[0, 1, 7], &renames);
+        assert_eq!((list[0].radius, list[0].radius_range), (Some(2.0), None));
+        names[0].radius = Some(0.0);
+        let (list, _) = rename_species(&names, &[0, 1, 7], &renames);
+        assert_eq!(list[0].radius, Some(2.0));
+        // A species of several sizes merged with one of one size: the union holds both.
+        names[0].radius = Some(0.3);
+        names[0].radius_range = Some((0.1, 0.5));
+        let (list, _) = rename_species(&names, &[3, 1, 7], &renames);
+        assert_eq!(list[0].radius_range, Some((0.1, 2.0)));
     }
 
     #[test]

@@ -178,16 +178,21 @@ pub fn particle_radii(
 }
 
 /// The range the radii of [`particle_radii`] are quantized over, from the species table
-/// alone (so every chunk of a frame takes the same): the smallest and largest of the
-/// species' radius ranges and the other species' radii. `None` where no species is of
-/// several sizes.
-pub fn radius_range(species: &[Species]) -> Option<mdlod_format::meta::RadiusInfo> {
+/// and each species' particle count alone (so every chunk of a frame takes the same, and
+/// a whole build the same as its particles' smallest and largest radius): the smallest
+/// and largest of the radius ranges of the species of several sizes and the radii of
+/// the others, of the species with particles. `None` where no species is of several
+/// sizes.
+pub fn radius_range(species: &[Species], counts: &[u64]) -> Option<mdlod_format::meta::RadiusInfo> {
     species.iter().find(|s| s.radius_range.is_some())?;
-    let (min, max) = species.iter().fold((f32::INFINITY, 0.0f32), |(lo, hi), s| {
-        let [a, b] = s.radius_range.unwrap_or([s.radius; 2]);
-        (lo.min(a), hi.max(b))
-    });
-    Some(mdlod_format::meta::RadiusInfo { min, max })
+    let (min, max) = species.iter().zip(counts).filter(|(_, &n)| n > 0).fold(
+        (f32::INFINITY, 0.0f32),
+        |(lo, hi), (s, _)| {
+            let [a, b] = s.radius_range.unwrap_or([s.radius; 2]);
+            (lo.min(a), hi.max(b))
+        },
+    );
+    (min <= max).then_some(mdlod_format::meta::RadiusInfo { min, max })
 }
 
 /// A built hierarchy, in final order, ready to be written.
@@ -917,13 +922,29 @@ mod tests {
             for c in node.child_first..node.child_first + node.child_count {
                 let i = h.particle_order[c as usize] as usize;
                 let (p, r) = (positions[i], decoded[c as usize]);
-                for d in 0..3 {
-                    assert!(node.bounds_min[d] <= p[d] - r + 1e-4);
-                    assert!(node.bounds_max[d] >= p[d] + r - 1e-4);
+                // Its own sphere, and its species' (what a 1.0 reader draws).
+                for r in [r, 1.5] {
+                    for d in 0..3 {
+                        assert!(node.bounds_min[d] <= p[d] - r + 1e-4);
+                        assert!(node.bounds_max[d] >= p[d] + r - 1e-4);
+                    }
                 }
                 assert!(node.radius >= r * (1.0 - 1e-6), "{} < {r}", node.radius);
             }
         }
+        // The range: the species with particles only.
+        let two = [
+            species[0].clone(),
+            Species {
+                name: "unused".into(),
+                radius: 9.0,
+                colour: [0.5; 3],
+                radius_range: None,
+            },
+        ];
+        let info = radius_range(&two, &[n as u64, 0]).unwrap();
+        assert_eq!((info.min, info.max), (0.1, 2.9));
+        assert_eq!(radius_range(&two, &[n as u64, 1]).unwrap().max, 9.0);
         // Without sizes of its own, or with the species of one size, none are kept.
         let one = [Species {
             radius_range: None,

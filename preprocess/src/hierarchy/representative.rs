@@ -10,7 +10,8 @@
 //!   `Σ A_i c_i / A_j`): flux `= π A_j · colour_j`, and a splat of size `s_j` has intensity
 //!   `c_j = colour_j · A_j / r_j²`. Sums compose exactly from level to level.
 //! - attribute: area-weighted mean; species: that of the member with the largest area;
-//!   bounds: union of the members' bounds (particle spheres at the finest level).
+//!   bounds: union of the members' bounds (at the finest level, each particle's sphere
+//!   and, where the file keeps its own radius, its species' sphere too).
 
 use mdlod_format::meta::Species;
 
@@ -109,6 +110,9 @@ impl Source<'_> {
                 let sp = &p.species[usize::from(species)];
                 let x = p.positions[i];
                 let r = p.radii.map_or(sp.radius, |r| r[i]);
+                // The box holds the particle's own sphere and its species' (which a
+                // reader of format 1.0 draws and checks against).
+                let b = r.max(sp.radius);
                 Member {
                     position: x,
                     radius: r,
@@ -116,7 +120,7 @@ impl Source<'_> {
                     colour: sp.colour,
                     attribute: p.attribute.map_or(0.0, |a| a[i]),
                     species,
-                    bounds: (x.map(|v| v - r), x.map(|v| v + r)),
+                    bounds: (x.map(|v| v - b), x.map(|v| v + b)),
                 }
             }
             Source::Reps(r) => {

@@ -93,6 +93,7 @@ pub(crate) fn sized_species(species: &mut [SpeciesName], species_index: &[u16], 
             });
             sp.radius_range = Some(range[k]);
             sp.sized_count = count[k];
+            sp.sized_sum = sum[k];
         }
     }
 }

@@ -496,6 +496,7 @@ fn species_of(
                 colour: list.global_colour,
                 palette_slot: None,
                 sized_count: 0,
+                sized_sum: 0.0,
             })
         })
         .collect()
