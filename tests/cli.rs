@@ -6122,6 +6122,34 @@ fn particle_sizes_edge_cases_are_refused_or_noted() {
             );
             assert!(!d("new.png").exists());
         }
+        // A batch's frame file and a movie's image that are links: refused before any
+        // frame is converted or drawn.
+        let run = d("run.d");
+        std::fs::create_dir(&run).unwrap();
+        let gran = lammps_sample_path("granular.dump");
+        std::os::unix::fs::symlink(d("iso.png"), run.join("frame-4500.mdlod")).unwrap();
+        let e = fails(&["batch", s(&gran), "-o", s(&run)]);
+        assert!(
+            e.contains("frame-4500.mdlod") && e.contains("symbolic link"),
+            "{e}"
+        );
+        assert!(!run.join("frame-0.mdlod").exists());
+        std::fs::remove_file(run.join("frame-4500.mdlod")).unwrap();
+        ok(&["batch", s(&gran), "-o", s(&run)]);
+        std::fs::create_dir(d("movie")).unwrap();
+        std::os::unix::fs::symlink(d("iso.png"), d("movie/f-2.png")).unwrap();
+        let e = fails(&[
+            "render",
+            s(&run),
+            "-o",
+            s(&d("movie/f-%d.png")),
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ]);
+        assert!(e.contains("f-2.png") && e.contains("symbolic link"), "{e}");
+        assert!(!d("movie/f-0.png").exists());
         // `sample`: a directory that does not exist, and a file that is no S-NDF file.
         let e = fails(&[
             "sample",

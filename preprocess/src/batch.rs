@@ -1562,6 +1562,9 @@ pub fn batch(
             continue;
         }
         let out = out_dir.join(frame_file_name(job.timestep));
+        // A link, pipe or device in a frame file's place is refused before any frame is
+        // converted (it would be replaced, not written through).
+        mdlod_format::files::check_replaceable(&out).map_err(io(&out))?;
         let want = SourceInfo {
             frame: job.frame as u64,
             ..fingerprints

@@ -395,31 +395,50 @@ impl Camera {
     /// [`Self::fit_boxes`] into the best of `windows`: the one where the data is framed
     /// largest (the smallest fitted distance), the projection centred in it and filling
     /// [`FIT_FILL`] of its tighter dimension. Windows that do not hold the image's centre
-    /// are passed over; none left frames the whole image.
+    /// are passed over; none left frames the whole image. Returns the centre of the window
+    /// chosen (normalized device coordinates), where the data's projection is centred.
     pub fn fit_boxes_in(
         &mut self,
         bounds: &Bounds,
         boxes: &[Bounds],
         aspect: f32,
         windows: &[FitWindow],
-    ) {
+    ) -> [f64; 2] {
         let start = self.clone();
-        let mut best: Option<Camera> = None;
-        for w in windows.iter().filter(|w| w.centre_and_half().is_some()) {
+        let mut best: Option<(Camera, [f64; 2])> = None;
+        for w in windows.iter() {
+            let Some((centre, _)) = w.centre_and_half() else {
+                continue;
+            };
             let mut c = start.clone();
             c.fit_window(bounds, boxes, aspect, w);
-            if best.as_ref().is_none_or(|b| c.distance < b.distance) {
-                best = Some(c);
+            if best.as_ref().is_none_or(|(b, _)| c.distance < b.distance) {
+                best = Some((c, centre));
             }
         }
-        *self = match best {
-            Some(c) => c,
-            None => {
-                let mut c = start;
-                c.fit_window(bounds, boxes, aspect, &FitWindow::WHOLE);
-                c
-            }
-        };
+        let (c, centre) = best.unwrap_or_else(|| {
+            let mut c = start;
+            c.fit_window(bounds, boxes, aspect, &FitWindow::WHOLE);
+            (c, [0.0; 2])
+        });
+        *self = c;
+        centre
+    }
+
+    /// Moves closer by `factor` keeping the point of the target's plane seen at `ndc`
+    /// (normalized device coordinates) where it is: the data fitted into a window beside
+    /// the image's centre (a legend's room) stays in that window as it grows.
+    pub fn zoom_about(&mut self, factor: f32, ndc: [f64; 2], aspect: f32) {
+        let before = f64::from(self.distance);
+        self.zoom(factor);
+        let moved = before - f64::from(self.distance);
+        let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan();
+        let tan_x = tan_y * f64::from(aspect);
+        let shift = self.right().as_dvec3() * (ndc[0] * tan_x * moved)
+            + self.up().as_dvec3() * (ndc[1] * tan_y * moved);
+        if shift.is_finite() {
+            self.target += shift.as_vec3();
+        }
     }
 
     /// [`Self::fit_boxes_in`] of one window.
@@ -987,6 +1006,29 @@ mod tests {
                         fill = fill.max((hi[k] - lo[k]) / (away.max[k] - away.min[k]));
                     }
                     assert!((fill - FIT_FILL).abs() < 2e-3, "{what}: fills {fill}");
+                    // Zoomed in about the window's centre, the box stays centred there
+                    // (orthographic), or far nearer to it than zoomed about the view's
+                    // axis (perspective, where the nearer half grows more); zoomed about
+                    // the view's axis, it moved twice as far from the image's centre.
+                    let centre = c.clone().fit_boxes_in(&b, &[], aspect, &[away]);
+                    let mut axis = c.clone();
+                    axis.zoom(2.0);
+                    c.zoom_about(2.0, centre, aspect);
+                    let mid = |c: &Camera, k: usize| {
+                        let (lo, hi) = ndc_box(c);
+                        0.5 * (lo[k] + hi[k])
+                    };
+                    let off = (0..2)
+                        .map(|k| (mid(&c, k) - centre[k]).abs())
+                        .fold(0.0, f64::max);
+                    let off_axis = (0..2)
+                        .map(|k| (mid(&axis, k) - centre[k]).abs())
+                        .fold(0.0, f64::max);
+                    let near = match p {
+                        Projection::Orthographic => off < 1e-3,
+                        Projection::Perspective => off < 0.5 * off_axis,
+                    };
+                    assert!(near && off_axis > 0.3, "{what}, zoomed: {off} ({off_axis})");
                 }
             }
         }

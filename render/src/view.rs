@@ -245,11 +245,11 @@ impl ViewFile {
             fov_y_deg: self.fov_y_deg,
             ..Default::default()
         };
-        c.fit_boxes_in(bounds, boxes, aspect, windows);
+        let centre = c.fit_boxes_in(bounds, boxes, aspect, windows);
         if let Some(d) = self.distance {
             c.distance = d;
         }
-        c.zoom(self.zoom);
+        c.zoom_about(self.zoom, centre, aspect);
         if let Some(t) = self.target {
             c.target = Vec3::from(t);
         }

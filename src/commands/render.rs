@@ -2015,6 +2015,19 @@ fn stale_images_note(pattern: &Path, n: usize) -> Option<String> {
     ))
 }
 
+/// Refuses, before any image is drawn, a movie's or turntable's image `0..n` whose path
+/// holds a symbolic link, a pipe or a device (`check_output` judges `-o` itself, whose
+/// name is a pattern).
+fn check_numbered_outputs(pattern: &Path, n: usize) -> Result<()> {
+    for i in 0..n {
+        let out = frame_output(pattern, i)?;
+        if let Err(e) = mdlod_format::files::check_replaceable(&out) {
+            anyhow::bail!("-o {}: image {}: {e}", pattern.display(), out.display());
+        }
+    }
+    Ok(())
+}
+
 fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
     let name = pattern
         .file_name()
@@ -2089,6 +2102,7 @@ fn render_turntable(
             args.output.display()
         )
     })?;
+    check_numbered_outputs(&args.output, n as usize)?;
     // A direction looked along sets the first view's angles.
     let along = args.camera.look_along.map(angles_looking_along);
     let start = match (
@@ -2297,6 +2311,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         anyhow::bail!("{}: dataset.json lists no frames", dir.display());
     }
     frame_output(&args.output, 0)?;
+    check_numbered_outputs(&args.output, n)?;
     let mut boxes: Option<Vec<mdlod_render::Bounds>> = Some(Vec::new());
     let mut bounds: Option<mdlod_render::Bounds> = None;
     let mut hidden_bounds: Option<mdlod_render::Bounds> = None;
