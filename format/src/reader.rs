@@ -1054,6 +1054,25 @@ impl MdlodFile {
             })
     }
 
+    /// [`Self::species_radius_span`] of species `s` drawn at radius `drawn` instead of its
+    /// `radius` (a style's): each particle's size scaled alike.
+    pub fn species_radius_span_at(&self, s: usize, drawn: f32) -> [f32; 2] {
+        let own = self.metadata.species.get(s).map_or(0.0, |sp| sp.radius);
+        if own > 0.0 {
+            self.species_radius_span(s).map(|r| r * (drawn / own))
+        } else {
+            [drawn; 2]
+        }
+    }
+
+    /// The smallest radius a particle of the file may have: the smallest of its species'
+    /// sizes ([`Self::species_radius_span`]; infinite for a file of no species).
+    pub fn min_particle_radius(&self) -> f32 {
+        (0..self.metadata.species.len())
+            .map(|s| self.species_radius_span(s)[0])
+            .fold(f32::INFINITY, f32::min)
+    }
+
     /// The largest radius a particle of the file may have: the radius range's end where
     /// the file keeps per-particle radii, else the largest species radius.
     pub fn max_particle_radius(&self) -> f32 {

@@ -276,7 +276,11 @@ pub fn convert_frame(
     if !options.radii_may_be_absent {
         crate::species::check_renames(&frame.species, &options.species_names)?;
     }
-    let counts = crate::species::counts(frame.species.len(), &frame.species_index);
+    // (Particles per species, for the means of species a rename merges.)
+    let counts = match options.species_names.is_empty() {
+        true => Vec::new(),
+        false => crate::species::counts(frame.species.len(), &frame.species_index),
+    };
     let (names, merged) =
         crate::species::rename_species(&frame.species, &counts, &options.species_names);
     if !options.radii_may_be_absent {

@@ -437,11 +437,7 @@ pub fn density_points(
             let (radius, albedo) = if level == last {
                 let s = species.get(i as usize).copied().unwrap_or(0);
                 table.get(usize::from(s)).map_or((0.0, Vec3::ZERO), |sp| {
-                    let r = match file.radii() {
-                        Some(_) => file.particle_radius(i as usize),
-                        None => sp.radius,
-                    };
-                    (r, Vec3::from(sp.colour))
+                    (file.particle_radius(i as usize), Vec3::from(sp.colour))
                 })
             } else {
                 let n = &file.level_nodes(level)[i as usize];

@@ -738,20 +738,15 @@ fn styled_reach(file: &MdlodFile, opts: &RenderOptions, footprint: f32) -> f32 {
         Ok(table) => table.iter().map(|t| t[3]).collect(),
         Err(_) => species.iter().map(|s| s.radius).collect(),
     };
-    // A particle of radius ρ is drawn at ρ · drawn / radius: its reach past its sphere
-    // is largest at one end of the species' sizes.
+    // Particles of their own sizes are drawn scaled as their species: the reach past
+    // their spheres is largest at one end of the species' sizes.
     let reach = drawn
         .iter()
-        .zip(species)
         .enumerate()
-        .map(|(i, (r, s))| {
-            let per = if s.radius > 0.0 {
-                r / s.radius * footprint - 1.0
-            } else {
-                0.0
-            };
+        .map(|(i, &r)| {
             let [lo, hi] = file.species_radius_span(i);
-            (lo * per).max(hi * per)
+            let [drawn_lo, drawn_hi] = file.species_radius_span_at(i, r);
+            (drawn_lo * footprint - lo).max(drawn_hi * footprint - hi)
         })
         .fold(f32::NEG_INFINITY, f32::max);
     if reach.is_finite() {
@@ -1678,21 +1673,13 @@ fn draw_cell(
     };
     let species = &file.metadata().species;
     // The largest drawn: a species' largest particle scaled as the style scales it.
-    let largest = |i: usize, drawn: f32| {
-        let s = &species[i];
-        if s.radius > 0.0 {
-            drawn / s.radius * file.species_radius_span(i)[1]
-        } else {
-            drawn
-        }
-    };
     let radius = opts
         .style
         .species_table(species)
         .map(|t| {
             t.iter()
                 .enumerate()
-                .map(|(i, s)| largest(i, s[3]))
+                .map(|(i, s)| file.species_radius_span_at(i, s[3])[1])
                 .fold(0.0f32, f32::max)
         })
         .unwrap_or_else(|_| file.max_particle_radius());
@@ -2036,9 +2023,7 @@ pub fn level0_scale(
     let camera = frame_setup(file, opts)?.0;
     let bounds = data_bounds(file);
     let far = (camera.eye() - bounds.center()).dot(camera.back()) + bounds.radius();
-    let r_min = (0..file.metadata().species.len())
-        .map(|s| file.species_radius_span(s)[0])
-        .fold(f32::INFINITY, f32::min);
+    let r_min = file.min_particle_radius();
     let r_px = r_min * camera.pixels_per_world(far.max(camera.near), opts.height);
     let per_sphere = std::f32::consts::PI * r_px * r_px * iterations.max(1) as f32;
     let mut scale = 1u32;

@@ -2398,7 +2398,8 @@ impl Renderer {
         for s in &spans {
             instance_first.push(instance_first.last().copied().unwrap_or(0) + s.2.len() as u32);
         }
-        let r_ref = crate::traversal::largest_radius(file).max(f32::MIN_POSITIVE);
+        // The density's reference radius: the largest particle's.
+        let r_ref = file.max_particle_radius().max(f32::MIN_POSITIVE);
         let slicing = Slicing::new(&sorted, camera, settings, r_ref);
         let h_max = sorted
             .iter()

@@ -224,13 +224,7 @@ pub fn min_radius(file: &MdlodFile, style: &PointStyle) -> f32 {
                 .iter()
                 .find(|x| x.name == s.name)
                 .and_then(|x| x.radius);
-            let drawn = own.unwrap_or(s.radius) * style.radius_scale;
-            let smallest = file.species_radius_span(i)[0];
-            if s.radius > 0.0 {
-                drawn * smallest / s.radius
-            } else {
-                drawn
-            }
+            file.species_radius_span_at(i, own.unwrap_or(s.radius) * style.radius_scale)[0]
         })
         .fold(f32::INFINITY, f32::min)
 }

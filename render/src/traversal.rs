@@ -335,12 +335,6 @@ pub struct Projector {
     support_floor: f32,
 }
 
-/// The largest radius of `file`'s particles (the density's `r_ref`): its largest
-/// species radius, or the largest particle's own where the file keeps them.
-pub(crate) fn largest_radius(file: &MdlodFile) -> f32 {
-    file.max_particle_radius()
-}
-
 impl Projector {
     pub fn new(camera: &Camera, viewport: [u32; 2]) -> Self {
         Projector {
@@ -673,7 +667,7 @@ pub fn traverse_with(
             camera,
             settings.viewport,
             settings.support_scale,
-            largest_radius(file),
+            file.max_particle_radius(),
         );
         if !proj.visible(&file.nodes()[0]) {
             return DrawList {
@@ -786,7 +780,7 @@ fn traverse_tiled(
         camera,
         settings.viewport,
         settings.support_scale,
-        largest_radius(file),
+        file.max_particle_radius(),
     );
     if !proj.visible(&file.nodes()[0]) {
         let list = DrawList {
@@ -888,7 +882,7 @@ fn largest_first(
         camera,
         settings.viewport,
         settings.support_scale,
-        largest_radius(file),
+        file.max_particle_radius(),
     );
     let budget = settings.budget_points.max(1);
     let mut list = DrawList::default();
@@ -1201,7 +1195,7 @@ fn front_to_back(
         camera,
         settings.viewport,
         settings.support_scale,
-        largest_radius(file),
+        file.max_particle_radius(),
     );
     let budget = settings.budget_points.max(1);
     let bits = file.position_bits();
@@ -1212,10 +1206,7 @@ fn front_to_back(
     // smallest particle radius inside the box, with a radius no larger than the node's
     // (Eq. 2 makes radii grow up the hierarchy); every decoded centre moves by at most
     // the recorded quantization error.
-    let r_min = (0..radii.len())
-        .map(|s| file.species_radius_span(s)[0])
-        .fold(f32::INFINITY, f32::min)
-        .max(0.0);
+    let r_min = file.min_particle_radius().max(0.0);
     // Particles' own radii, where the file keeps them.
     let own_radii = file.radii().zip(file.metadata().radius);
     let r_min = if r_min.is_finite() { r_min } else { 0.0 };

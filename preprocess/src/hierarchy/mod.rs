@@ -886,18 +886,20 @@ mod tests {
             radius_range: Some([0.1, 2.9]),
         }];
         let own = particle_radii(&species, &species_index, Some(&radii)).unwrap();
-        let h = build(
-            Particles {
-                positions: &positions,
-                species_index: &species_index,
-                species: &species,
-                attribute: None,
-                radii: Some(&own),
-            },
-            &BuildParams::default(),
-            &NoProgress,
-        )
-        .unwrap();
+        let build_of = |radii: &[f32]| {
+            build(
+                Particles {
+                    positions: &positions,
+                    species_index: &species_index,
+                    species: &species,
+                    attribute: None,
+                    radii: Some(radii),
+                },
+                &BuildParams::default(),
+                &NoProgress,
+            )
+        };
+        let h = build_of(&own).unwrap();
         let (q, info) = h.radius.as_ref().expect("radii kept");
         let lo = radii.iter().copied().fold(f32::INFINITY, f32::min);
         let hi = radii.iter().copied().fold(0.0, f32::max);
@@ -955,18 +957,7 @@ mod tests {
         // A radius that is not a finite number from 0 up is refused, naming the particle.
         let mut bad = own.clone();
         bad[17] = f32::NAN;
-        let e = build(
-            Particles {
-                positions: &positions,
-                species_index: &species_index,
-                species: &species,
-                attribute: None,
-                radii: Some(&bad),
-            },
-            &BuildParams::default(),
-            &NoProgress,
-        )
-        .unwrap_err();
+        let e = build_of(&bad).unwrap_err();
         assert!(matches!(e, BuildError::BadRadius { index: 17, .. }), "{e}");
     }
 

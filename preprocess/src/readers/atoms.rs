@@ -56,16 +56,6 @@ pub(crate) struct AtomLayout {
     pub type_numbers: bool,
 }
 
-/// The column of per-particle sizes among `columns`: `radius` (a granular LAMMPS run's,
-/// OVITO's `Radius`), else `diameter`, in any case; with the factor that makes it a
-/// radius.
-pub(crate) fn size_column(columns: &[String]) -> Option<(usize, f64)> {
-    let find = |name: &str| columns.iter().position(|c| c.eq_ignore_ascii_case(name));
-    find("radius")
-        .map(|c| (c, 1.0))
-        .or_else(|| find("diameter").map(|c| (c, 0.5)))
-}
-
 /// Gives every species of particles with sizes its particles' mean radius and their
 /// range (the range kept for [`crate::frame::SpeciesName::radius_range`] even where
 /// they agree; the conversion keeps each particle's own where they differ). A species
@@ -245,22 +235,8 @@ pub(crate) fn parse(
             let (s, sr) = sp_rest.split_at_mut(n);
             pos_rest = pr;
             sp_rest = sr;
-            let a = match attr_rest.take() {
-                Some(rest) => {
-                    let (a, ar) = rest.split_at_mut(n);
-                    attr_rest = Some(ar);
-                    Some(a)
-                }
-                None => None,
-            };
-            let z = match size_rest.take() {
-                Some(rest) => {
-                    let (z, zr) = rest.split_at_mut(n);
-                    size_rest = Some(zr);
-                    Some(z)
-                }
-                None => None,
-            };
+            let a = split_off(&mut attr_rest, n);
+            let z = split_off(&mut size_rest, n);
             work.push((chunk.clone(), p, s, (a, z)));
         }
     }
@@ -311,6 +287,13 @@ pub(crate) fn parse(
         attribute: attr_values,
         radii,
     })
+}
+
+/// The first `n` values of an optional output, leaving the rest in `rest`.
+fn split_off<'a>(rest: &mut Option<&'a mut [f32]>, n: usize) -> Option<&'a mut [f32]> {
+    let (part, after) = rest.take()?.split_at_mut(n);
+    *rest = Some(after);
+    Some(part)
 }
 
 /// Merges per-chunk species tables and rewrites `species_index` to global ids.

@@ -915,8 +915,13 @@ pub(crate) fn read_range(
     let names = f.type_names()?;
     let species_index = f.type_ids(range.clone(), names.len())?;
     let species = f.species(range.clone(), &names, &species_index)?;
-    // Each particle's own radius, half its diameter (kept where a type's differ).
-    let radii = match f.chunk("particles/diameter", 1, false)? {
+    // Each particle's own radius, half its diameter (kept where a type's differ), unless
+    // sizes are left out (--no-sizes: each type at its mean).
+    let diameters = match opts.sizes {
+        super::SizeColumn::Off => None,
+        _ => f.chunk("particles/diameter", 1, false)?,
+    };
+    let radii = match diameters {
         Some(e) => {
             let bytes = &data[e.location..e.location + n * e.ty.size()];
             Some(

@@ -623,8 +623,9 @@ pub(crate) fn read_range(
     let mut positions = Vec::with_capacity(range.len());
     let mut species_index = Vec::with_capacity(range.len());
     let mut values = Vec::new();
-    // Each particle's own radius where some list is of `xyzr` particles.
-    let sized = f.lists.iter().any(|l| l.has_radius());
+    // Each particle's own radius where some list is of `xyzr` particles, unless sizes are
+    // left out (--no-sizes: each list at its mean).
+    let sized = opts.sizes != super::SizeColumn::Off && f.lists.iter().any(|l| l.has_radius());
     let mut radii = Vec::new();
     let mut first = 0usize;
     for (l, list) in f.lists.iter().enumerate() {

@@ -306,8 +306,13 @@ impl SizeColumn {
                     )
                 })
         };
+        // By default `radius` (a granular LAMMPS run's, OVITO's `Radius`), else
+        // `diameter`, in any case.
+        let find = |name: &str| columns.iter().position(|c| c.eq_ignore_ascii_case(name));
         match self {
-            SizeColumn::Auto => Ok(atoms::size_column(columns)),
+            SizeColumn::Auto => Ok(find("radius")
+                .map(|c| (c, 1.0))
+                .or_else(|| find("diameter").map(|c| (c, 0.5)))),
             SizeColumn::Off => Ok(None),
             SizeColumn::Radius(name) => named(name, 1.0, "--radius-column"),
             SizeColumn::Diameter(name) => named(name, 0.5, "--diameter-column"),
@@ -1008,7 +1013,7 @@ impl DumpFile {
             });
         }
         self.check_sizes(opts)?;
-        let mut frame = match &self.index {
+        match &self.index {
             Index::Raw(r) => r.read_range(opts, range, progress),
             Index::LammpsBinary(i) => lammps_binary::read_range(
                 &self.path,
@@ -1027,12 +1032,7 @@ impl DumpFile {
                 offset: 0,
                 message: "this format is read a whole frame at a time".into(),
             }),
-        }?;
-        // GSD and MMPLD sizes left out: each species at its particles' mean.
-        if opts.sizes == SizeColumn::Off {
-            frame.radii = None;
         }
-        Ok(frame)
     }
 
     /// Whether frame `k` has the size column `opts` names (a batch checks every frame
