@@ -663,6 +663,12 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
     );
     let merged = ok(&["batch", "--merge", s(&out)]);
     assert!(merged.contains("merged 6 frames"), "{merged}");
+    // A directory that is not there is named as such, with what --merge takes.
+    let err = fails(&["batch", "--merge", s(&dir.path().join("elsewhere"))]);
+    assert!(
+        err.contains("elsewhere: no such directory") && err.contains("--shard I/N"),
+        "{err}"
+    );
     let err = fails(&["batch", s(&input), "-o", s(&out), "--shard", "3/3"]);
     assert!(err.contains("index 3 must be below the count 3"), "{err}");
     // A task id without the array's count converts nothing, naming what is missing.
@@ -1642,6 +1648,23 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
         (
             vec!["--mode", "density", "--colour-map", "magma"],
             "--colour-map has no effect with --mode density",
+        ),
+        (
+            vec!["--mode", "iso", "--log-scale"],
+            "--log-scale has no effect without --colour-map (spheres, sndf, splat) or \
+             --intensity attribute (splat), or with --mode density",
+        ),
+        (
+            vec!["--density-min", "0.1"],
+            "--density-min has no effect with --mode spheres: it applies to --mode density",
+        ),
+        (
+            vec!["--mode", "density", "--density-min", "1"],
+            "--density-min 1 at or above --density-max 0.8",
+        ),
+        (
+            vec!["--mode", "density", "--log-scale", "--density-min", "0"],
+            "--density-min 0 on a log scale (must be above 0)",
         ),
         (
             vec!["--cell-width", "3"],
@@ -3261,6 +3284,20 @@ fn a_legend_says_what_the_colours_mean() {
     );
     let (_, density) = render(&["--mode", "density"]);
     assert!(density.contains("volume fraction"), "{density}");
+    // Density on a log scale: the bar says so and ticks its decades.
+    let (out, density) = render(&["--mode", "density", "--log-scale", "--density-max", "20"]);
+    assert!(
+        out.contains("from 0.002 (clear)") && out.contains("on a log scale"),
+        "{out}"
+    );
+    assert!(
+        density.contains("(log scale)") && density.contains(">≤ 0.002</text>"),
+        "{density}"
+    );
+    assert!(
+        density.contains(">0.1</text>") && density.contains(">1</text>"),
+        "{density}"
+    );
     // A movie writes one legend, over every frame's range.
     let d = dir.path().join("m.d");
     ok(&["batch", s(&input), "-o", s(&d), "--attribute", "c_pe"]);

@@ -2147,7 +2147,16 @@ fn timesteps_text(steps: &std::collections::BTreeSet<u64>) -> String {
 /// present, and every listed file must exist.
 pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     let mut shards: Vec<(u32, u32, PathBuf)> = Vec::new();
-    for e in std::fs::read_dir(out_dir).map_err(io(out_dir))?.flatten() {
+    let entries = std::fs::read_dir(out_dir).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => BatchError::Manifest {
+            path: out_dir.to_path_buf(),
+            message: "no such directory: --merge takes the output directory the shards \
+                      wrote their manifests to (the -o of `mdlod batch --shard I/N`)"
+                .into(),
+        },
+        _ => io(out_dir)(e),
+    })?;
+    for e in entries.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
         if let Some((i, n)) = shard_of(&name) {
             shards.push((i, n, e.path()));

@@ -56,6 +56,12 @@ pub struct DensitySettings {
     pub kernel_scale: f32,
     /// Volume fraction shown at the top of the transfer function.
     pub density_max: f32,
+    /// Volume fraction at the bottom of the transfer function: nothing at or below it
+    /// is shown (0 in linear scale; above 0 and below `density_max` in log scale).
+    pub density_min: f32,
+    /// The transfer function takes the logarithm of φ between `density_min` and
+    /// `density_max` (SPH and astrophysical densities spanning decades).
+    pub log: bool,
     /// Absorption: opacity per reference radius of path at `density_max`.
     pub opacity: f32,
     /// Keep samples with `n · p ≤ d` (`[n.x, n.y, n.z, d]`, world units).
@@ -69,6 +75,8 @@ impl Default for DensitySettings {
             slices: 256,
             kernel_scale: 2.5,
             density_max: 0.8,
+            density_min: 0.0,
+            log: false,
             opacity: 0.5,
             clip: None,
         }
@@ -89,6 +97,24 @@ impl DensitySettings {
         };
         positive(self.kernel_scale, "kernel scale")?;
         positive(self.density_max, "density maximum")?;
+        if !(self.density_min.is_finite() && self.density_min >= 0.0) {
+            return Err(format!(
+                "--density-min {} (must be 0 or above)",
+                self.density_min
+            ));
+        }
+        if self.density_min >= self.density_max {
+            return Err(format!(
+                "--density-min {} at or above --density-max {}",
+                self.density_min, self.density_max
+            ));
+        }
+        if self.log && self.density_min <= 0.0 {
+            return Err(format!(
+                "--density-min {} on a log scale (must be above 0)",
+                self.density_min
+            ));
+        }
         // Named as `mdlod render` names it.
         positive(self.opacity, "--absorption")?;
         if let Some(v) = self.iso {
@@ -146,9 +172,23 @@ pub fn transfer_colour(t: f32) -> Vec3 {
     }
 }
 
+/// Where a volume fraction `phi` falls on the transfer function, in [0, 1]: linearly
+/// between `density_min` and `density_max`, or by its logarithm between them.
+/// `transfer_t` in `density_common.wgsl` is the GPU's twin.
+pub fn transfer_t(phi: f32, s: &DensitySettings) -> f32 {
+    let (lo, hi) = (s.density_min, s.density_max);
+    if s.log {
+        if phi <= lo {
+            return 0.0;
+        }
+        return ((phi / lo).ln() / (hi / lo).ln()).clamp(0.0, 1.0);
+    }
+    ((phi - lo) / (hi - lo)).clamp(0.0, 1.0)
+}
+
 /// Opacity of one sample of volume fraction `phi` over a step `step / r_ref`.
 pub fn sample_alpha(phi: f32, s: &DensitySettings, step_over_ref: f32) -> f32 {
-    let t = (phi / s.density_max).clamp(0.0, 1.0);
+    let t = transfer_t(phi, s);
     1.0 - (-s.opacity * t * step_over_ref).exp()
 }
 
@@ -385,7 +425,7 @@ pub fn reference(
                 match s.iso {
                     None => {
                         let alpha = sample_alpha(phi, s, slicing.step / slicing.r_ref);
-                        c += (1.0 - a) * alpha * transfer_colour(phi / s.density_max);
+                        c += (1.0 - a) * alpha * transfer_colour(transfer_t(phi, s));
                         a += (1.0 - a) * alpha;
                         if a >= OPAQUE {
                             break;
@@ -465,6 +505,50 @@ mod tests {
     use super::*;
     use crate::camera::{Bounds, Camera, Projection};
     use glam::DVec3;
+
+    #[test]
+    fn the_transfer_function_places_densities_linearly_or_by_decade() {
+        let linear = DensitySettings {
+            density_min: 0.2,
+            density_max: 1.0,
+            ..Default::default()
+        };
+        for (phi, t) in [(0.0, 0.0), (0.2, 0.0), (0.6, 0.5), (1.0, 1.0), (3.0, 1.0)] {
+            assert!((transfer_t(phi, &linear) - t).abs() < 1e-6, "{phi}");
+        }
+        let log = DensitySettings {
+            density_min: 1e-2,
+            density_max: 1e2,
+            log: true,
+            ..Default::default()
+        };
+        for (phi, t) in [
+            (0.0, 0.0),
+            (1e-3, 0.0),
+            (1e-1, 0.25),
+            (1.0, 0.5),
+            (1e3, 1.0),
+        ] {
+            assert!((transfer_t(phi, &log) - t).abs() < 1e-6, "{phi}");
+        }
+        // Below the bottom nothing is absorbed.
+        assert_eq!(sample_alpha(0.005, &log, 1.0), 0.0);
+        assert!(sample_alpha(1.0, &log, 1.0) > 0.0);
+        // A log scale needs a bottom above 0 and below the top.
+        assert!(DensitySettings {
+            density_min: 0.0,
+            ..log
+        }
+        .validate()
+        .is_err());
+        assert!(DensitySettings {
+            density_min: 1e3,
+            ..log
+        }
+        .validate()
+        .is_err());
+        assert!(log.validate().is_ok() && linear.validate().is_ok());
+    }
 
     #[test]
     fn pixel_rays_keep_their_direction_in_a_close_up() {

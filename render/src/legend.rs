@@ -707,20 +707,40 @@ pub fn light_bar(map: ColourMap, title: &str, [lo, hi]: [f32; 2], log: bool) -> 
     colour_bar(map, &scale, title, [lo, hi], [lo, hi])
 }
 
-/// The density volume's transfer function: volume fraction φ from 0 to `density_max`.
-pub fn density_bar(density_max: f32) -> Legend {
-    let max = f64::from(density_max);
-    let (ticks, step) = linear_ticks(0.0, max, 4);
+/// The density volume's transfer function: volume fraction φ from `density_min` (clear
+/// at and below it) to `density_max`, or its logarithm between them when `log`
+/// ([`crate::density::transfer_t`]).
+pub fn density_bar(density_min: f32, density_max: f32, log: bool) -> Legend {
+    let (min, max) = (f64::from(density_min), f64::from(density_max));
+    let [low, high] = end_labels(min, max);
+    let high = format!("≥ {high}");
+    let colour = |t: f32| crate::density::transfer_colour(t).to_array();
+    if log && min > 0.0 && max > min {
+        let ticks: Vec<(f64, String)> = log_ticks(min, max)
+            .into_iter()
+            .map(|v| (v, tick_label(v, v)))
+            .collect();
+        let span = (max / min).ln();
+        return bar(
+            "volume fraction φ (log scale)",
+            &colour,
+            &|v| ((v / min).ln() / span) as f32,
+            &ticks,
+            [format!("≤ {low}"), high],
+        );
+    }
+    let (ticks, step) = linear_ticks(min, max, 4);
     let ticks: Vec<(f64, String)> = ticks
         .into_iter()
         .map(|v| (v, tick_label(v, step)))
         .collect();
+    let low = if min > 0.0 { format!("≤ {low}") } else { low };
     bar(
         "volume fraction φ",
-        &|t| crate::density::transfer_colour(t).to_array(),
-        &|v| (v / max) as f32,
+        &colour,
+        &|v| ((v - min) / (max - min)) as f32,
         &ticks,
-        ["0".into(), format!("≥ {}", end_labels(0.0, max)[1])],
+        [low, high],
     )
 }
 
@@ -874,7 +894,7 @@ mod tests {
 
     #[test]
     fn the_density_bar_and_species_key_show_the_colours_drawn() {
-        let svg = density_bar(0.8).svg();
+        let svg = density_bar(0.0, 0.8, false).svg();
         let stops = stops_of(&svg);
         assert_eq!(
             stops[0],
@@ -888,6 +908,35 @@ mod tests {
             svg.contains(">≥ 0.80</text>") || svg.contains(">≥ 0.8</text>"),
             "{svg}"
         );
+        // On a log scale from 10⁻³ to 10: a tick per decade, evenly spaced, and the
+        // colour at each tick the transfer function's there.
+        let s = crate::density::DensitySettings {
+            density_min: 1e-3,
+            density_max: 10.0,
+            log: true,
+            ..Default::default()
+        };
+        let svg = density_bar(s.density_min, s.density_max, true).svg();
+        assert!(svg.contains("volume fraction φ (log scale)"), "{svg}");
+        assert!(
+            svg.contains(">≤ 0.001</text>") && svg.contains(">≥ 10</text>"),
+            "{svg}"
+        );
+        let (xs, labels) = ticks_of(&svg);
+        assert_eq!(xs.len(), 5, "{svg}");
+        let gaps: Vec<f32> = xs.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(gaps.iter().all(|g| (g - gaps[0]).abs() < 0.01), "{xs:?}");
+        assert!(labels.contains(&"0.1".to_string()), "{labels:?}");
+        let t = crate::density::transfer_t(0.1, &s);
+        assert!((t - 0.5).abs() < 1e-6, "{t}");
+        let stops = stops_of(&svg);
+        assert_eq!(
+            stops[16],
+            hex(crate::density::transfer_colour(0.5).to_array())
+        );
+        // A linear bar from above 0 marks its low end as a bound.
+        let svg = density_bar(0.2, 0.8, false).svg();
+        assert!(svg.contains(">≤ 0.2</text>"), "{svg}");
         let key = species_key(
             &[
                 ("Cu".into(), [1.0, 0.0, 0.0]),

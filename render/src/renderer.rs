@@ -2486,7 +2486,7 @@ impl Renderer {
                         per_stack.min(slicing.slices - st * per_stack) as f32,
                         if settings.iso.is_some() { 1.0 } else { 0.0 },
                         crate::density::PEAK_FRACTION / settings.kernel_scale.powi(3),
-                        0.0,
+                        settings.density_min,
                     ],
                     size: [
                         width as f32,
@@ -2495,7 +2495,12 @@ impl Renderer {
                         settings.density_max,
                     ],
                     clip: settings.clip.unwrap_or([0.0; 4]),
-                    flags: [u32::from(settings.clip.is_some()), st, 0, 0],
+                    flags: [
+                        u32::from(settings.clip.is_some()),
+                        st,
+                        u32::from(settings.log),
+                        0,
+                    ],
                     albedo: [albedo[0], albedo[1], albedo[2], settings.opacity],
                     pad: [
                         [bounds.0.x, bounds.0.y, bounds.0.z, 0.0],

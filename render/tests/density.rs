@@ -134,6 +134,47 @@ fn density_volume_matches_the_cpu_ray_marcher() {
     }
 }
 
+/// The transfer function over the density's logarithm (SPH and n-body data): the GPU
+/// follows the CPU twin; with the top of the scale far above the data's density, a
+/// linear scale leaves the block nearly clear while the log scale shows it; and a
+/// bottom above the data's density shows nothing.
+#[test]
+fn a_log_transfer_function_matches_the_cpu_ray_marcher() {
+    let (_d, _p, f) = make_file(&fcc_frame(3), small_build(), &[]);
+    let (w, h) = (40u32, 30u32);
+    let cam = camera(&f, Projection::Perspective, w, h);
+    let linear = DensitySettings {
+        slices: 64,
+        opacity: 1.5,
+        density_max: 50.0,
+        ..Default::default()
+    };
+    let log = DensitySettings {
+        log: true,
+        density_min: 50.0 * 1e-4,
+        ..linear
+    };
+    let mean_alpha = |rgba: &[[f32; 4]]| rgba.iter().map(|p| p[3]).sum::<f32>() / rgba.len() as f32;
+    let (gpu_log, cpu_log, _, _, _) = both(&f, &cam, w, h, &log, None);
+    let d = max_diff(&gpu_log, &cpu_log);
+    assert!(d < 0.01, "log scale: GPU and CPU differ by {d}");
+    let (gpu_lin, cpu_lin, _, _, _) = both(&f, &cam, w, h, &linear, None);
+    assert!(max_diff(&gpu_lin, &cpu_lin) < 0.01);
+    let (a_log, a_lin) = (mean_alpha(&gpu_log), mean_alpha(&gpu_lin));
+    assert!(
+        a_log > 0.2 && a_log > 5.0 * a_lin,
+        "mean opacity {a_log} on a log scale against {a_lin} on a linear one"
+    );
+    // A bottom of the scale above every density the block reaches: clear.
+    let above = DensitySettings {
+        density_min: 40.0,
+        ..linear
+    };
+    let (gpu, cpu, _, _, _) = both(&f, &cam, w, h, &above, None);
+    assert!(max_diff(&gpu, &cpu) < 0.01);
+    assert!(mean_alpha(&gpu) == 0.0, "{}", mean_alpha(&gpu));
+}
+
 /// An orthographic view shows the same volume wherever its eye is along the view axis:
 /// with the eye inside the data (a view zoomed in), what lies between the near plane and
 /// the eye's plane is drawn too.

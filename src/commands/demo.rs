@@ -105,6 +105,7 @@ pub fn run(args: Args) -> Result<()> {
         slices: 256,
         kernel_scale: 2.5,
         density_max: 0.8,
+        density_min: None,
         absorption: 0.5,
         opacity: 0.8,
         sort: super::render::SortArg::Clusters,

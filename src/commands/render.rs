@@ -98,6 +98,10 @@ pub struct Args {
     /// density mode: the volume fraction at the top of the transfer function.
     #[arg(long, default_value_t = 0.8)]
     pub density_max: f32,
+    /// density mode: the volume fraction at the bottom of the transfer function, clear
+    /// at and below it [default: 0; with --log-scale four decades below --density-max]
+    #[arg(long)]
+    pub density_min: Option<f32>,
     /// density mode: absorption, opacity per reference radius of path at the top density.
     #[arg(long, default_value_t = 0.5)]
     pub absorption: f32,
@@ -217,7 +221,8 @@ pub struct StyleArgs {
     /// Map the attribute's logarithm (densities, energies spanning decades) with
     /// --colour-map or --intensity attribute; values from 0 (kinetic energies of frozen
     /// atoms) start at the smallest value above 0, a range given from 0 four decades
-    /// below its top.
+    /// below its top. In density mode, the volume fraction's logarithm from --density-min
+    /// to --density-max (an SPH or n-body run's core and halo in one image).
     #[arg(long)]
     pub log_scale: bool,
     /// Cut the data away beyond a plane, as OVITO's Slice: nx,ny,nz,d keeps the particles
@@ -556,6 +561,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("slices", VOLUME),
         ("kernel_scale", VOLUME),
         ("density_max", &[Density]),
+        ("density_min", &[Density]),
         ("absorption", &[Density]),
         ("iterations", &[Sndf]),
         ("bins", &[Sndf]),
@@ -570,7 +576,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("species_colour", &[Spheres, Sndf, Splat, SplatOver]),
         ("species_radius", STYLED),
         ("attribute_range", &[Spheres, Sndf, Splat]),
-        ("log_scale", &[Spheres, Sndf, Splat]),
+        ("log_scale", &[Spheres, Sndf, Splat, Density]),
         ("cell", &[Spheres, Splat, SplatOver, Density, Iso]),
         ("light", STYLED),
         ("ambient", STYLED),
@@ -658,6 +664,18 @@ fn by_attribute(args: &Args) -> bool {
     }
 }
 
+/// Density mode's bottom of the transfer function: as given, else 0, or four decades
+/// below the top on a log scale.
+fn density_min(args: &Args) -> f32 {
+    args.density_min.unwrap_or(if args.style.log_scale {
+        // Rounded once (0.002 for a top of 20, where 20 × 1e-4 in single precision
+        // prints 0.0019999999).
+        (f64::from(args.density_max) * 1e-4) as f32
+    } else {
+        0.0
+    })
+}
+
 /// Whether the splats' image goes through a colour map (a projection's map).
 fn projected(args: &Args) -> bool {
     args.mode == Mode::Splat && args.style.colour_map.is_some()
@@ -722,12 +740,19 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     }
     for (given, name) in [
         (args.style.attribute_range.is_some(), "--attribute-range"),
-        (args.style.log_scale && !projected(args), "--log-scale"),
+        (
+            args.style.log_scale && !projected(args) && args.mode != Mode::Density,
+            "--log-scale",
+        ),
     ] {
         if given && !by_attribute(args) {
+            let density = match name {
+                "--log-scale" => ", or with --mode density (the volume fraction's logarithm)",
+                _ => "",
+            };
             anyhow::bail!(
                 "{name} has no effect without --colour-map (spheres, sndf, splat) or \
-                 --intensity attribute (splat)"
+                 --intensity attribute (splat){density}"
             );
         }
     }
@@ -950,6 +975,8 @@ pub fn run(args: Args) -> Result<()> {
                     slices: args.slices,
                     kernel_scale: args.kernel_scale,
                     density_max: args.density_max,
+                    density_min: density_min(&args),
+                    log: args.style.log_scale,
                     opacity: args.absorption,
                     clip: match args.style.clip[..] {
                         [] => None,
@@ -970,9 +997,11 @@ pub fn run(args: Args) -> Result<()> {
         occlusion: !args.no_occlusion,
         style: {
             let mut style = args.style.style()?;
-            // The volume modes clip their samples (DensitySettings::clip), not the points.
+            // The volume modes clip their samples (DensitySettings::clip), not the points,
+            // and density mode's log scale is its transfer function's, not an attribute's.
             if matches!(args.mode, Mode::Density | Mode::Iso) {
                 style.clip.clear();
+                style.log_scale = false;
             }
             style
         },
@@ -1312,9 +1341,16 @@ pub fn run(args: Args) -> Result<()> {
             }
             _ => println!(
                 "  colours: the volume fraction the particles' spheres fill (not an attribute), \
-                 from 0 (clear) through dark blue and red to yellow at {} (--density-max; \
-                 0.74: close-packed spheres of the largest species), absorption {} per radius",
-                args.density_max, args.absorption
+                 from {} (clear) through dark blue and red to yellow at {} (--density-max; \
+                 0.74: close-packed spheres of the largest species){}, absorption {} per radius",
+                density_min(&args),
+                args.density_max,
+                if args.style.log_scale {
+                    " on a log scale"
+                } else {
+                    ""
+                },
+                args.absorption
             ),
         }
     }
@@ -1554,7 +1590,7 @@ fn build_legend(
     let map = opts.style.colour_map;
     let (drawn_legend, what) = match (args.mode, map, attribute) {
         (Mode::Density, _, _) => (
-            legend::density_bar(args.density_max),
+            legend::density_bar(density_min(&args), args.density_max, args.style.log_scale),
             "the volume fraction's colours".to_string(),
         ),
         (Mode::Splat, Some(map), _) => {

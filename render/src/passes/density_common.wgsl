@@ -9,14 +9,16 @@ struct Density {
     // x: distance of the stack's first slice, y: slice step, z: kernel scale, w: 1 / r_ref.
     slicing: vec4<f32>,
     // x: slices in this stack, y: 1 with gradients (2 slices of rho + gradient) or 0
-    // (8 slices of rho), z: reference volume 4/3 pi r_ref^3.
+    // (8 slices of rho), z: reference volume 4/3 pi r_ref^3, w: density at the bottom
+    // of the transfer function.
     mode: vec4<f32>,
     // xy: image size in pixels; z: iso-value (0: direct volume rendering); w: density
     // shown at the top of the transfer function.
     size: vec4<f32>,
     // xyz: clip plane normal, w: its offset (samples with n.p > w are left out).
     clip: vec4<f32>,
-    // x: 1 when the clip plane is on; y: the stack's index.
+    // x: 1 when the clip plane is on; y: the stack's index; z: 1 for a transfer
+    // function over the density's logarithm.
     flags: vec4<u32>,
     // xyz: iso-surface albedo; w: absorption (opacity per r_ref at the top density).
     albedo: vec4<f32>,
@@ -49,3 +51,18 @@ struct Ray {
     // an iso hit.
     state: vec4<f32>,
 };
+
+// Where density `phi` falls on the transfer function, in [0, 1]: linearly between the
+// bottom (mode.w) and the top (size.w), or by its logarithm (density.rs's `transfer_t`
+// is the CPU twin).
+fn transfer_t(phi: f32) -> f32 {
+    let lo = dens.mode.w;
+    let hi = dens.size.w;
+    if dens.flags.z == 1u {
+        if phi <= lo {
+            return 0.0;
+        }
+        return clamp(log(phi / lo) / log(hi / lo), 0.0, 1.0);
+    }
+    return clamp((phi - lo) / (hi - lo), 0.0, 1.0);
+}

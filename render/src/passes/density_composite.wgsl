@@ -86,9 +86,9 @@ fn cs_composite(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         if dens.size.z <= 0.0 {
             // Direct volume rendering.
-            let t = clamp(s.w / dens.size.w, 0.0, 1.0);
+            let t = transfer_t(s.w);
             let alpha = 1.0 - exp(-dens.albedo.w * t * dens.slicing.y * dens.slicing.w);
-            let c = transfer_colour(s.w / dens.size.w);
+            let c = transfer_colour(t);
             ray.colour = vec4<f32>(
                 ray.colour.xyz + (1.0 - ray.colour.w) * alpha * c,
                 ray.colour.w + (1.0 - ray.colour.w) * alpha,
