@@ -1590,7 +1590,7 @@ fn build_legend(
     let map = opts.style.colour_map;
     let (drawn_legend, what) = match (args.mode, map, attribute) {
         (Mode::Density, _, _) => (
-            legend::density_bar(density_min(&args), args.density_max, args.style.log_scale),
+            legend::density_bar(density_min(args), args.density_max, args.style.log_scale),
             "the volume fraction's colours".to_string(),
         ),
         (Mode::Splat, Some(map), _) => {
