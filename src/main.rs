@@ -81,9 +81,39 @@ enum Command {
     View(commands::view::Args),
 }
 
+/// The options whose value is optional and so must follow an equals sign: a value given
+/// after a space is read as the next argument (`--cell red frame.mdlod` makes `red` the
+/// file and `frame.mdlod` unexpected). Where the command line has one so, the tip that
+/// says how to write it.
+fn equals_tip(args: impl Iterator<Item = String>) -> Option<String> {
+    const OPTIONAL_VALUE: &[&str] = &["--cell", "--legend-in-image"];
+    let args: Vec<String> = args.collect();
+    args.windows(2).find_map(|w| {
+        (OPTIONAL_VALUE.contains(&w[0].as_str()) && !w[1].starts_with('-')).then(|| {
+            format!(
+                "{} takes its value after an equals sign: {}={} (with a space, `{}` is read \
+                 as the next argument)",
+                w[0], w[0], w[1], w[1]
+            )
+        })
+    })
+}
+
 fn main() -> std::process::ExitCode {
     quiet_headless_gpu_probe();
-    let matches = <Cli as clap::CommandFactory>::command().get_matches();
+    let matches = match <Cli as clap::CommandFactory>::command().try_get_matches() {
+        Ok(m) => m,
+        Err(e) => {
+            let tip = (e.kind() == clap::error::ErrorKind::UnknownArgument)
+                .then(|| equals_tip(std::env::args().skip(1)))
+                .flatten();
+            let _ = e.print();
+            if let Some(tip) = tip {
+                eprintln!("\n  tip: {tip}");
+            }
+            std::process::exit(e.exit_code());
+        }
+    };
     let cli = match <Cli as clap::FromArgMatches>::from_arg_matches(&matches) {
         Ok(cli) => cli,
         Err(e) => e.exit(),

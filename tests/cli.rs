@@ -1706,6 +1706,69 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
     }
 }
 
+/// Mistakes a figure maker makes first: an option whose value needs `=`, a view file's
+/// directory that is not there (said before a long render, not after), a numbered name
+/// for one image, a target far from the data.
+#[test]
+fn first_mistakes_are_named_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = converted(dir.path(), "cu_melt.custom.dump");
+    let png = dir.path().join("x.png");
+    let (f, p) = (s(&frame), s(&png));
+    let err = fails(&["render", f, "-o", p, "--cell", "red"]);
+    assert!(
+        err.contains("unexpected argument 'red'")
+            && err.contains("tip: --cell takes its value after an equals sign: --cell=red"),
+        "{err}"
+    );
+    let err = fails(&["render", "--legend-in-image", "top-left", f, "-o", p]);
+    assert!(err.contains("--legend-in-image=top-left"), "{err}");
+    let view = dir.path().join("nodir").join("v.json");
+    let err = fails(&["render", f, "-o", p, "--save-view", s(&view)]);
+    assert!(err.contains("does not exist"), "{err}");
+    assert!(!png.exists(), "the image was drawn before the check");
+    let numbered = dir.path().join("x-%03d.png");
+    let err = fails(&["render", f, "-o", s(&numbered)]);
+    assert!(
+        err.contains("numbered for a series") && err.contains("--turntable"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_dir(dir.path())
+            .unwrap()
+            .filter(|e| e
+                .as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "png"))
+            .count(),
+        0
+    );
+    let err = fails(&["render", f, "-o", p, "--target", "1e9,0,0"]);
+    assert!(
+        err.contains("target [1e9, 0, 0]") && err.contains("near the data"),
+        "{err}"
+    );
+    // A turntable's view goes where its images go, created with them.
+    let spin = dir.path().join("spin");
+    ok(&[
+        "render",
+        f,
+        "-o",
+        s(&spin.join("v-%d.png")),
+        "--turntable",
+        "2",
+        "--width",
+        "24",
+        "--height",
+        "16",
+        "--save-view",
+        s(&spin.join("views").join("first.json")),
+    ]);
+    assert!(spin.join("views").join("first.json").is_file());
+}
+
 #[test]
 fn options_are_checked_before_memory_or_work_goes_into_them() {
     let dir = tempfile::tempdir().unwrap();
@@ -3274,7 +3337,9 @@ fn a_legend_says_what_the_colours_mean() {
         "{bar}"
     );
     assert!(
-        bar.contains(">-4</text>") && bar.contains(">-2</text>") && bar.contains(">-3.0</text>"),
+        bar.contains(">\u{2212}4.0</text>")
+            && bar.contains(">\u{2212}2.0</text>")
+            && bar.contains(">\u{2212}3.0</text>"),
         "{bar}"
     );
     let (_, key) = render(&["--species-colour", "1=#ff0000"]);
@@ -3477,6 +3542,34 @@ fn a_legend_says_what_the_colours_mean() {
     assert!(std::fs::read_to_string(&svg)
         .unwrap()
         .contains("every value -3.54 (constant)"));
+    // A movie of frames that all hold the one value says so too.
+    let two = dir.path().join("two.lammpstrj");
+    let text = std::fs::read_to_string(&flat).unwrap();
+    std::fs::write(
+        &two,
+        text.clone() + &text.replacen("TIMESTEP\n0", "TIMESTEP\n10", 1),
+    )
+    .unwrap();
+    let movie = dir.path().join("two.d");
+    ok(&["batch", s(&two), "-o", s(&movie), "--attribute", "c_pe"]);
+    let out = ok(&[
+        "render",
+        s(&movie),
+        "-o",
+        s(&dir.path().join("m-%d.png")),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--colour-map",
+        "viridis",
+    ]);
+    assert!(
+        out.contains(
+            "c_pe is -3.54 in every frame (constant): every particle takes the map's last colour"
+        ),
+        "{out}"
+    );
 }
 
 /// `--cell` draws the simulation cell's edges over the picture, in a colour given or one

@@ -43,23 +43,42 @@ fn escape(text: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// `v` in scientific notation with three significant digits at most, without trailing
+/// zeros (1.00e-3 → 1e-3, 2.50e4 → 2.5e4); 0 is "0".
+fn scientific(v: f64) -> String {
+    if v == 0.0 {
+        return "0".into();
+    }
+    let text = format!("{v:.2e}");
+    match text.split_once('e') {
+        Some((mantissa, exp)) => {
+            let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+            format!("{mantissa}e{exp}")
+        }
+        None => text,
+    }
+}
+
+/// Whether a bar whose largest magnitude is `m` writes its numbers in scientific
+/// notation.
+fn needs_scientific(m: f64) -> bool {
+    m != 0.0 && !(1e-3..1e5).contains(&m)
+}
+
+/// A number's label as SVG text: escaped, with the typographic minus sign (U+2212) a
+/// figure prints rather than a hyphen. (The in-image font draws the hyphen.)
+fn number(label: &str) -> String {
+    escape(label).replace('-', "\u{2212}")
+}
+
 /// A value as a tick label: as many decimals as the step between ticks needs, or
 /// scientific notation for very large and very small magnitudes.
 pub fn tick_label(v: f64, step: f64) -> String {
     if v == 0.0 {
         return "0".into();
     }
-    let m = v.abs();
-    if !(1e-3..1e5).contains(&m) {
-        let text = format!("{v:.2e}");
-        // 1.00e-3 → 1e-3, 2.50e4 → 2.5e4.
-        return match text.split_once('e') {
-            Some((mantissa, exp)) => {
-                let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
-                format!("{mantissa}e{exp}")
-            }
-            None => text,
-        };
+    if needs_scientific(v.abs()) {
+        return scientific(v);
     }
     let decimals = if step > 0.0 && step.is_finite() {
         (-step.log10().floor()).max(0.0) as usize
@@ -87,19 +106,8 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
     if m == 0.0 || !m.is_finite() {
         return [lo, hi].map(|v| format!("{v}"));
     }
-    let scientific = || {
-        [lo, hi].map(|v| {
-            let text = format!("{v:.2e}");
-            match text.split_once('e') {
-                Some((mantissa, exp)) => {
-                    let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
-                    format!("{mantissa}e{exp}")
-                }
-                None => text,
-            }
-        })
-    };
-    if !(1e-3..1e5).contains(&m) {
+    let scientific = || [lo, hi].map(scientific);
+    if needs_scientific(m) {
         return scientific();
     }
     // Decimals for `digits` significant digits of `v`.
@@ -165,6 +173,44 @@ pub fn linear_ticks(lo: f64, hi: f64, count: usize) -> (Vec<f64>, f64) {
     let last = (hi / step).floor() as i64;
     let ticks = (first..=last).map(|k| k as f64 * step).collect();
     (ticks, step)
+}
+
+/// A linear bar's tick labels and end labels in one notation: every tick in scientific
+/// notation where the largest is (no `20000 … 1e5`), and ends written in fixed
+/// notation given at least the ticks' decimals (`-3.0 … -3.5`, not `-3 … -3.5`).
+fn linear_labels(
+    ticks: Vec<f64>,
+    step: f64,
+    [lo, hi]: [f64; 2],
+) -> (Vec<(f64, String)>, [String; 2]) {
+    let largest = ticks.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let ends = end_labels(lo, hi);
+    if needs_scientific(largest) {
+        return (
+            ticks.into_iter().map(|v| (v, scientific(v))).collect(),
+            ends,
+        );
+    }
+    let labels: Vec<(f64, String)> = ticks
+        .into_iter()
+        .map(|v| (v, tick_label(v, step)))
+        .collect();
+    let decimals = |text: &str| text.split_once('.').map_or(0, |(_, d)| d.len());
+    let wanted = labels.iter().map(|(_, t)| decimals(t)).max().unwrap_or(0);
+    let pad = |v: f64, text: String| {
+        if text.contains('e') || decimals(&text) >= wanted {
+            return text;
+        }
+        let padded = format!("{v:.wanted$}");
+        // Padding only: an end whose digits the ticks' decimals would round keeps them.
+        if padded.parse::<f64>().ok() == text.parse::<f64>().ok() {
+            padded
+        } else {
+            text
+        }
+    };
+    let [low, high] = ends;
+    (labels, [pad(lo, low), pad(hi, high)])
 }
 
 /// Powers of ten from `lo` to `hi` (both above 0); with fewer than two of them, also 2
@@ -361,13 +407,13 @@ impl Legend {
                     svg,
                     r#"<text x="{}" y="{LABEL_ROW}" text-anchor="start">{}</text>"#,
                     BAR[0],
-                    escape(&ends[0])
+                    number(&ends[0])
                 );
                 let _ = writeln!(
                     svg,
                     r#"<text x="{}" y="{LABEL_ROW}" text-anchor="end">{}</text>"#,
                     BAR[1],
-                    escape(&ends[1])
+                    number(&ends[1])
                 );
                 for (x, label) in ticks {
                     let _ = writeln!(
@@ -379,7 +425,7 @@ impl Legend {
                         let _ = writeln!(
                             svg,
                             r#"<text class="tick" x="{x:.2}" y="{LABEL_ROW}" text-anchor="middle">{}</text>"#,
-                            escape(label)
+                            number(label)
                         );
                     }
                 }
@@ -672,11 +718,8 @@ pub fn colour_bar(
         None => {
             let [lo, hi] = range.map(f64::from);
             let (ticks, step) = linear_ticks(lo, hi, 5);
-            let ticks: Vec<(f64, String)> = ticks
-                .into_iter()
-                .map(|v| (v, tick_label(v, step)))
-                .collect();
-            let labels = beyond_marks(end_labels(lo, hi), [lo, hi], data);
+            let (ticks, ends) = linear_labels(ticks, step, [lo, hi]);
+            let labels = beyond_marks(ends, [lo, hi], data);
             bar(name, &colour, &position, &ticks, labels)
         }
     }
@@ -712,10 +755,9 @@ pub fn light_bar(map: ColourMap, title: &str, [lo, hi]: [f32; 2], log: bool) -> 
 /// ([`crate::density::transfer_t`]).
 pub fn density_bar(density_min: f32, density_max: f32, log: bool) -> Legend {
     let (min, max) = (f64::from(density_min), f64::from(density_max));
-    let [low, high] = end_labels(min, max);
-    let high = format!("≥ {high}");
     let colour = |t: f32| crate::density::transfer_colour(t).to_array();
     if log && min > 0.0 && max > min {
+        let [low, high] = end_labels(min, max);
         let ticks: Vec<(f64, String)> = log_ticks(min, max)
             .into_iter()
             .map(|v| (v, tick_label(v, v)))
@@ -726,14 +768,12 @@ pub fn density_bar(density_min: f32, density_max: f32, log: bool) -> Legend {
             &colour,
             &|v| ((v / min).ln() / span) as f32,
             &ticks,
-            [format!("≤ {low}"), high],
+            [format!("≤ {low}"), format!("≥ {high}")],
         );
     }
     let (ticks, step) = linear_ticks(min, max, 4);
-    let ticks: Vec<(f64, String)> = ticks
-        .into_iter()
-        .map(|v| (v, tick_label(v, step)))
-        .collect();
+    let (ticks, [low, high]) = linear_labels(ticks, step, [min, max]);
+    let high = format!("≥ {high}");
     let low = if min > 0.0 { format!("≤ {low}") } else { low };
     bar(
         "volume fraction φ",
@@ -875,7 +915,7 @@ mod tests {
         let narrow = AttributeScale::with_range(&info, Some([-0.5, 0.5]));
         let svg = colour_bar(ColourMap::CoolWarm, &narrow, "vx", [-0.5, 0.5], [-1.0, 1.0]).svg();
         assert!(
-            svg.contains(">≤ -0.5</text>") && svg.contains(">≥ 0.5</text>"),
+            svg.contains(">≤ \u{2212}0.5</text>") && svg.contains(">≥ 0.5</text>"),
             "{svg}"
         );
         let svg = colour_bar(ColourMap::CoolWarm, &narrow, "vx", [-0.5, 0.5], [-0.5, 0.2]).svg();
@@ -1109,6 +1149,48 @@ mod tests {
             assert!(font::GLYPHS.iter().any(|(g, _)| *g == c), "{c:?}");
         }
         assert_eq!(font::glyph('\u{1F600}'), font::glyph('?'));
+    }
+
+    #[test]
+    fn a_bar_writes_its_numbers_in_one_notation() {
+        let labels = |lo: f32, hi: f32| {
+            let svg = light_bar(ColourMap::Viridis, "x", [lo, hi], false).svg();
+            let ends: Vec<String> = svg
+                .lines()
+                .filter(|l| {
+                    l.contains(r#"text-anchor="start""#) || l.contains(r#"text-anchor="end""#)
+                })
+                .map(|l| {
+                    l.split('>')
+                        .nth(1)
+                        .unwrap()
+                        .trim_end_matches("</text")
+                        .to_string()
+                })
+                .collect();
+            (ticks_of(&svg).1, ends)
+        };
+        // Large values: every tick in scientific notation, and 0 written as 0.
+        let (ticks, ends) = labels(0.0, 1e5);
+        assert_eq!(ends, ["0", "1e5"]);
+        assert!(
+            ticks.iter().all(|t| t.contains('e') || t == "0"),
+            "{ticks:?}"
+        );
+        let (_, ends) = labels(-1e6, 0.0);
+        assert_eq!(ends, ["\u{2212}1e6", "0"]);
+        // Ends take the ticks' decimals (a typographic minus in the SVG).
+        let (ticks, ends) = labels(-3.5, -3.0);
+        assert_eq!(ends, ["\u{2212}3.5", "\u{2212}3.0"]);
+        assert!(
+            ticks
+                .iter()
+                .all(|t| t.starts_with('\u{2212}') && t.contains('.')),
+            "{ticks:?}"
+        );
+        // Padding never drops an end's own digits.
+        let (_, ends) = labels(0.0348, 0.7177);
+        assert_eq!(ends, ["0.0348", "0.7177"]);
     }
 
     #[test]

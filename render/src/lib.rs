@@ -1043,10 +1043,23 @@ pub fn check_image_size(width: u32, height: u32) -> Result<(), RenderError> {
 fn check_built_camera(c: &Camera) -> Result<(), String> {
     let depth_ok = c.near.is_finite() && c.far.is_finite() && c.near < c.far;
     if !(c.distance.is_finite() && c.eye().is_finite() && depth_ok) {
+        // Name the target too: a target far from the data (a view file's, --target)
+        // leaves the data's depth to rounding at any distance.
+        let num = |v: f32| match v == 0.0 || (1e-3..1e5).contains(&v.abs()) {
+            true => format!("{v}"),
+            false => format!("{v:e}"),
+        };
+        let t = c.target;
         return Err(format!(
-            "the camera at distance {:e} from its target is too far from the data to draw it \
-             (depth range {:e} to {:e} in single precision); bring it closer",
-            c.distance, c.near, c.far
+            "the camera, {} from its target [{}, {}, {}], is too far from the data to draw \
+             it (depth range {:e} to {:e} in single precision): bring it closer, or look at a \
+             target near the data",
+            num(c.distance),
+            num(t.x),
+            num(t.y),
+            num(t.z),
+            c.near,
+            c.far
         ));
     }
     c.check()

@@ -664,6 +664,17 @@ fn by_attribute(args: &Args) -> bool {
     }
 }
 
+/// Writes `--save-view`'s file. A movie's or turntable's view may go into a directory
+/// that does not exist yet, as its images do (a still's was checked up front).
+fn save_view(p: &Path, camera: &Camera) -> Result<()> {
+    if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    ViewFile::from_camera(camera)
+        .save(p)
+        .with_context(|| format!("cannot write {}", p.display()))
+}
+
 /// Density mode's bottom of the transfer function: as given, else 0, or four decades
 /// below the top on a log scale.
 fn density_min(args: &Args) -> f32 {
@@ -877,6 +888,16 @@ pub fn run(args: Args) -> Result<()> {
     let inputs = args.camera.inputs(&args.file);
     super::check_output("-o", &args.output, &inputs)?;
     super::check_png_name("-o", &args.output)?;
+    let single = !args.file.is_dir() && args.turntable.is_none();
+    if single && frame_output(&args.output, 0).is_ok() {
+        anyhow::bail!(
+            "-o {}: a name numbered for a series, but {} is one file and renders one image: \
+             give a plain name, or --turntable N for numbered views (a batch directory \
+             renders one image per frame)",
+            args.output.display(),
+            args.file.display()
+        );
+    }
     if let Some(p) = &args.save_view {
         super::check_output("--save-view", p, &inputs)?;
         if p == &args.output || super::same_file(p, &args.output) {
@@ -884,6 +905,17 @@ pub fn run(args: Args) -> Result<()> {
                 "--save-view {} is the -o output too: give the view file another name",
                 p.display()
             );
+        }
+        // As for -o and --legend: a still's view goes into a directory that exists
+        // (checked now, not after the image is drawn).
+        if let Some(dir) = p.parent().filter(|d| single && !d.as_os_str().is_empty()) {
+            if !dir.is_dir() {
+                anyhow::bail!(
+                    "--save-view {}: the directory {} does not exist",
+                    p.display(),
+                    dir.display()
+                );
+            }
         }
     }
     if args.legend_title.is_some() && args.legend.is_none() && args.legend_in_image.is_none() {
@@ -904,7 +936,6 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
         // As for -o: a single image's legend goes into a directory that exists.
-        let single = !args.file.is_dir() && args.turntable.is_none();
         if let Some(dir) = p.parent().filter(|d| single && !d.as_os_str().is_empty()) {
             if !dir.is_dir() {
                 anyhow::bail!(
@@ -1368,9 +1399,7 @@ pub fn run(args: Args) -> Result<()> {
         r.traversal_time.as_secs_f64() * 1e3
     );
     if let Some(p) = &args.save_view {
-        ViewFile::from_camera(&r.camera)
-            .save(p)
-            .with_context(|| format!("cannot write {}", p.display()))?;
+        save_view(p, &r.camera)?;
         println!("  view saved to {}", p.display());
     }
     write_legend(
@@ -2304,9 +2333,7 @@ fn render_turntable(
         }
     }
     if let (Some(p), Some(camera)) = (&args.save_view, first_camera) {
-        ViewFile::from_camera(&camera)
-            .save(p)
-            .with_context(|| format!("cannot write {}", p.display()))?;
+        save_view(p, &camera)?;
         println!("  the first view saved to {}", p.display());
     }
     if args.legend.is_some() || args.legend_in_image.is_some() {
@@ -2521,6 +2548,18 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
                     Num(a.min),
                     Num(a.max)
                 );
+            } else {
+                // As a still says it: the map places no value of a constant attribute.
+                let fate = match args.mode {
+                    Mode::Splat => "every splat gives the same light",
+                    _ => "every particle takes the map's last colour",
+                };
+                range_note = format!(
+                    "; {} is {} in every frame (constant): {fate}; --attribute-range places \
+                     it on a scale",
+                    a.name,
+                    Num(a.min)
+                );
             }
         }
     }
@@ -2672,9 +2711,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         }
     }
     if let Some(p) = &args.save_view {
-        ViewFile::from_camera(&camera)
-            .save(p)
-            .with_context(|| format!("cannot write {}", p.display()))?;
+        save_view(p, &camera)?;
         println!("  view saved to {}", p.display());
     }
     // The movie's range (every frame's, or the one given) and its names' looks.
