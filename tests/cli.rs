@@ -3518,7 +3518,7 @@ fn a_legend_says_what_the_colours_mean() {
         args.extend_from_slice(extra);
         let out = ok(&args);
         assert!(
-            out.contains("constant in this file (-3.54): every splat gives the same light"),
+            out.contains("constant in this file (-3.54): every splat is lit at intensity 1 (its light its disk's area)"),
             "{extra:?}: {out}"
         );
     }
@@ -6065,7 +6065,61 @@ fn particle_sizes_edge_cases_are_refused_or_noted() {
     .unwrap();
     let e = fails(&["convert", s(&d("z.dump")), "-o", s(&d("z.mdlod"))]);
     assert!(
-        e.contains("z.dump:10: `radius` 0 is no particle size (a finite number above 0"),
+        e.contains("z.dump: frame 0 (timestep 0), species 1: the file gives a particle of size 0")
+            && e.contains("--radius 1=R"),
+        "{e}"
+    );
+    // A type whose particles all have size 0 beside one with sizes (an SPH dump's stars
+    // beside its gas) converts once --radius gives it one, whole and in chunks, and
+    // keeps the other type's own sizes.
+    let mut rows: Vec<(u32, f32, [f32; 3])> = (0..6000)
+        .map(|i| {
+            let x = (i % 20) as f32 * 2.5;
+            let y = ((i / 20) % 20) as f32 * 0.5 - 5.0;
+            let z = (i / 400) as f32 * 0.6 - 4.5;
+            if i % 3 == 0 {
+                (2, 0.0, [x, y, z])
+            } else {
+                (1, 0.1 + 0.01 * (i % 7) as f32, [x, y, z])
+            }
+        })
+        .collect();
+    rows[1].1 = 0.1;
+    std::fs::write(d("sph.dump"), dump(&rows, "radius")).unwrap();
+    let e = fails(&["convert", s(&d("sph.dump")), "-o", s(&d("sph.mdlod"))]);
+    assert!(
+        e.contains("species 2: the file gives a particle of size 0"),
+        "{e}"
+    );
+    let (sph, sph_file) = (d("sph.dump"), d("sph.mdlod"));
+    for extra in [&[][..], &["--chunk-points", "5000"]] {
+        let mut args = vec!["convert", s(&sph), "-o", s(&sph_file), "--radius", "2=0.05"];
+        args.extend_from_slice(extra);
+        ok(&args);
+        let info = ok(&["info", s(&d("sph.mdlod"))]);
+        assert!(
+            info.contains("particles 0.100 to 0.160, each drawn at its own")
+                && info.contains("radius 0.050"),
+            "{extra:?}: {info}"
+        );
+        ok(&["verify", s(&d("sph.mdlod"))]);
+    }
+    // Below 0 is no size at all: refused at its line.
+    std::fs::write(
+        d("neg.dump"),
+        dump(&[row(-1.0, 0.0), row(1.0, 10.0)], "radius"),
+    )
+    .unwrap();
+    let e = fails(&[
+        "convert",
+        s(&d("neg.dump")),
+        "-o",
+        s(&d("neg.mdlod")),
+        "--radius",
+        "1=1",
+    ]);
+    assert!(
+        e.contains("neg.dump:10: `radius` -1 is no particle size"),
         "{e}"
     );
     // Decades.
@@ -6454,6 +6508,16 @@ fn log_scales_ranges_and_fits_that_mean_nothing_are_refused_or_explained() {
         e.contains("already a logarithm") && e.contains("log10(rho)"),
         "{e}"
     );
+    // Splats lit by logarithms would add them: refused, projection or not.
+    for extra in [&[][..], &["--colour-map", "viridis"]] {
+        let mut args = vec!["--mode", "splat", "--intensity", "attribute"];
+        args.extend_from_slice(extra);
+        let e = fails(&run(&rho, &png, &args));
+        assert!(
+            e.contains("log10(rho), a logarithm") && e.contains("splats add their light"),
+            "{extra:?}: {e}"
+        );
+    }
     let out = ok(&run(&vx, &png, &["--colour-map", "viridis", "--log-scale"]));
     assert!(
         out.contains("note: vx takes values below 0 (down to -3)"),

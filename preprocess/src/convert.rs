@@ -234,6 +234,8 @@ impl std::fmt::Display for UnusableRadius {
                 "type",
                 format!("a particle diameter of {}", 2.0 * f64::from(r)),
             ),
+            // (A dump's size column of 0: the species' range starts there.)
+            _ if r == 0.0 => ("species", "a particle of size 0".to_string()),
             _ => ("species", format!("radius {r}")),
         };
         let sep = if place.frame.is_some() || place.timestep.is_some() {

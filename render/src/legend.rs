@@ -142,7 +142,8 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
         labels = [lo, hi].map(|v| fixed(v, more));
     }
     // An end far below the other (a log scale's decades) loses its digits to the shared
-    // decimals, down to "0" for 3·10⁻⁹: both ends then take scientific notation.
+    // decimals, down to "0" for 3·10⁻⁹: each end then takes its own three digits, in
+    // scientific notation where its magnitude needs it (`3.2e-9` … `8.16`, not `8.16e0`).
     let lost = [lo, hi].iter().zip(&labels).any(|(&v, label)| {
         v != 0.0
             && label
@@ -150,7 +151,10 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
                 .map_or(true, |shown| ((shown - v) / v).abs() > 0.05)
     });
     if lost {
-        return scientific();
+        return [lo, hi].map(|v| match needs_scientific(v.abs()) {
+            true => self::scientific(v),
+            false => fixed(v, decimals(v, 3)),
+        });
     }
     labels
 }
@@ -1005,9 +1009,9 @@ mod tests {
         assert_eq!(end_labels(0.30001, 0.30002), ["0.30001", "0.30002"]);
         assert_eq!(end_labels(-0.5, 12345.678), ["-0.5", "12346"]);
         // A log scale's low end decades below the top keeps its digits.
-        assert_eq!(end_labels(3.1968022e-9, 0.9997898), ["3.2e-9", "1e0"]);
-        assert_eq!(end_labels(1.3159e-14, 8.16), ["1.32e-14", "8.16e0"]);
-        assert_eq!(end_labels(3.7752e-6, 0.5), ["3.78e-6", "5e-1"]);
+        assert_eq!(end_labels(3.1968022e-9, 0.9997898), ["3.2e-9", "1"]);
+        assert_eq!(end_labels(1.3159e-14, 8.16), ["1.32e-14", "8.16"]);
+        assert_eq!(end_labels(3.7752e-6, 0.5), ["3.78e-6", "0.5"]);
     }
 
     /// A constant attribute: one colour, the map's last, and the value in the title.

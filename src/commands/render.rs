@@ -1153,7 +1153,7 @@ pub fn run(args: Args) -> Result<()> {
                 // Splats lit by a constant all give the same light; a colour map over the
                 // particles gives them its last colour.
                 let fate = match args.mode {
-                    Mode::Splat => "every splat gives the same light (intensity 1)",
+                    Mode::Splat => "every splat is lit at intensity 1 (its light its disk's area)",
                     _ => {
                         "every particle takes the map's last colour, which means nothing on its own"
                     }
@@ -1729,9 +1729,7 @@ pub fn derive_range(
     let Some(a) = &file.metadata().attribute else {
         return Ok(None);
     };
-    if mapped {
-        check_not_logged(style, a, path)?;
-    }
+    check_not_logged(style, a, path, light)?;
     if style.attribute_range.is_some() {
         return Ok(None);
     }
@@ -1786,12 +1784,24 @@ fn light_range_from_zero([lo, hi]: [f32; 2], light: bool) -> Option<[f32; 2]> {
 }
 
 /// `--log-scale` of an attribute stored as its logarithm (`--attribute-log10`) would take
-/// the log of the log: refused, naming what to do instead.
+/// the log of the log, and splats lit by it (`lit`) would add logarithms: refused, naming
+/// what to do instead.
 fn check_not_logged(
     style: &mdlod_render::PointStyle,
     a: &mdlod_format::meta::AttributeInfo,
     path: &Path,
+    lit: bool,
 ) -> Result<()> {
+    if lit && a.name.starts_with("log10(") {
+        anyhow::bail!(
+            "--intensity attribute: {} holds {}, a logarithm (converted with \
+             --attribute-log10): splats add their light, and a sum of logarithms is no \
+             projection of the values; convert without --attribute-log10 to project them \
+             (--log-scale then maps the projection's decades)",
+            path.display(),
+            a.name
+        );
+    }
     if style.log_scale && a.name.starts_with("log10(") {
         anyhow::bail!(
             "--log-scale: {} holds {}, already a logarithm (converted with \
@@ -2428,7 +2438,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         frame_species.push(file.metadata().species.clone());
         let own = file.metadata().attribute.clone();
         if let Some(a) = own.as_ref().filter(|_| by_attribute(args)) {
-            check_not_logged(&opts.style, a, &path)?;
+            let lit = args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute);
+            check_not_logged(&opts.style, a, &path, lit)?;
         }
         attribute = Some(match (attribute, own) {
             (None, own) => own,
@@ -2551,7 +2562,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             } else {
                 // As a still says it: the map places no value of a constant attribute.
                 let fate = match args.mode {
-                    Mode::Splat => "every splat gives the same light",
+                    Mode::Splat => "every splat is lit at intensity 1 (its light its disk's area)",
                     _ => "every particle takes the map's last colour",
                 };
                 range_note = format!(

@@ -530,13 +530,16 @@ fn parse_chunk<'a>(
         }
         if let Some(out) = sizes.as_deref_mut() {
             let v = size as f32;
-            if !(v.is_finite() && v > 0.0) {
+            // A size of 0 passes: a type of such particles (an SPH dump's stars and dark
+            // matter beside its gas, h = 0) is refused by name later, unless --radius
+            // gives it one (`species::unusable_radius`).
+            if !(v.is_finite() && v >= 0.0) {
                 let (c, factor) = plan.size.unwrap_or((0, 1.0));
                 return Err(ReadError::Malformed {
                     at: ctx.at(line_start),
                     message: format!(
-                        "`{}` {} is no particle size (a finite number above 0, in single \
-                         precision)",
+                        "`{}` {} is no particle size (a finite number from 0 up, in single \
+                         precision; a type of size 0 needs --radius)",
                         plan.columns.get(c).map_or("size", String::as_str),
                         size / factor
                     ),

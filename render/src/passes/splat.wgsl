@@ -3,47 +3,63 @@
 //
 // Each point deposits its radiant flux, pi * r_px^2 * colour (its disk's area on screen
 // in pixels times its colour; for a representative r = sqrt(area_sum), so that a cluster
-// carries exactly its particles' flux, Eq. 1), spread by a normalised Gaussian of
-// sigma = max(r_px / 2, 0.7 px) truncated at 3.5 sigma. A point smaller than a pixel
-// therefore keeps its energy while its peak brightness falls with r_px^2: Eq. 3's alpha
-// attenuation. The sum over the image of every point's weights is 1 to within 3e-4
-// (a Gaussian sampled at unit spacing with sigma >= 0.7), so the image's total flux is
-// the sum of the points' fluxes. Blending is additive into a 32-bit float target; tone
-// mapping happens on the host.
+// carries exactly its particles' flux, Eq. 1), spread by a normalised round kernel: a
+// Gaussian of sigma = max(r_px / 2, 0.7 px) cut at the radius R = 3.5 sigma and lowered
+// by its value there, exp(-d^2 / 2 sigma^2) - exp(-R^2 / 2 sigma^2), so that it falls
+// continuously to 0 on a circle (a square cut left every splat a hard-edged box on a log
+// map, 0.2 % of its peak high). A point smaller than a pixel therefore keeps its energy
+// while its peak brightness falls with r_px^2: Eq. 3's alpha attenuation. The kernel's
+// sum over the pixel centres it covers is taken exactly below sigma = 2 px and from its
+// integral above (sampled at unit spacing, a kernel continuous at its edge sums to its
+// integral within 1e-4 there), so the sum over the image of every point's weights is 1
+// to within 1e-4 and the image's total flux is the sum of the points' fluxes. Blending
+// is additive into a 32-bit float target; tone mapping happens on the host.
 //
 // Sorted over-blending (`fs_over`, Hopf et al. section 6) draws the same footprints as
 // translucent discs composited back to front with the over operator (the host orders the
-// points): alpha = opacity * exp(-d^2 / 2 sigma^2), attenuated by the square of the
-// diameter in pixels below one pixel (Eq. 3), colour premultiplied.
+// points): alpha = opacity times the kernel over its peak, attenuated by the square of
+// the diameter in pixels below one pixel (Eq. 3), colour premultiplied.
 //
 // Follows points.wgsl. Frame.material here: x, y = image width and height in pixels,
 // z = intensity scale, w = opacity (over-blending).
 
 const TRUNCATION: f32 = 3.5;
 const MIN_SIGMA_PX: f32 = 0.7;
-// sqrt(2 pi) * erf(3.5 / sqrt(2)): a unit Gaussian's mass inside the truncation.
-const AXIS_MASS: f32 = 2.50546287;
-const EXACT_BELOW: f32 = 32.0;
+// exp(-TRUNCATION^2 / 2): the Gaussian's value at the cut, taken off the whole kernel.
+const EDGE: f32 = 0.0021874911;
+const EXACT_BELOW: f32 = 2.0;
 
-// Sum over pixel centres (i + 0.5) within the truncation of exp(-(x - c)^2 / 2 sigma^2).
-fn axis_sum(c: f32, sigma: f32) -> f32 {
-    if sigma >= EXACT_BELOW {
-        return AXIS_MASS * sigma;
-    }
+// The kernel at squared distance `d2` (px^2) from the centre: 0 from the cut on.
+fn kernel(d2: f32, sigma: f32) -> f32 {
     let limit = TRUNCATION * sigma;
-    let inv = 1.0 / (2.0 * sigma * sigma);
-    var sum = 0.0;
+    if !(d2 < limit * limit) {
+        return 0.0;
+    }
+    return exp(-d2 / (2.0 * sigma * sigma)) - EDGE;
+}
+
+// Sum of the kernel over the pixel centres (i + 0.5, j + 0.5) around centre `c`.
+fn kernel_sum(c: vec2<f32>, sigma: f32) -> f32 {
+    let limit = TRUNCATION * sigma;
+    if sigma >= EXACT_BELOW {
+        // Its integral: 2 pi sigma^2 (1 - EDGE) - pi R^2 EDGE.
+        return 6.28318531 * sigma * sigma * (1.0 - EDGE) - 3.14159265 * limit * limit * EDGE;
+    }
     let first = ceil(c - 0.5 - limit);
     let span = floor(c - 0.5 + limit) - first + 1.0;
     // Counted, not stepped: past 2^24 px (a splat far off screen) x + 1 == x. An
     // infinite or NaN centre has no pixels.
-    if !(span > 0.0 && span <= 2.0 * limit + 2.0) {
+    if !(all(span > vec2<f32>(0.0)) && all(span <= vec2<f32>(2.0 * limit + 2.0))) {
         return 0.0;
     }
-    let n = u32(span);
-    for (var k = 0u; k < n; k++) {
-        let d = first + f32(k) + 0.5 - c;
-        sum += exp(-d * d * inv);
+    let n = vec2<u32>(span);
+    var sum = 0.0;
+    for (var j = 0u; j < n.y; j++) {
+        let dy = first.y + f32(j) + 0.5 - c.y;
+        for (var i = 0u; i < n.x; i++) {
+            let dx = first.x + f32(i) + 0.5 - c.x;
+            sum += kernel(dx * dx + dy * dy, sigma);
+        }
     }
     return sum;
 }
@@ -82,14 +98,14 @@ fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> 
     let flux = 3.14159265 * r_px * r_px * frame.material.z;
     let ndc = clip.xy / clip.w;
     out.center_px = vec2<f32>((ndc.x + 1.0) * 0.5 * size.x, (1.0 - ndc.y) * 0.5 * size.y);
-    let norm = 1.0 / (axis_sum(out.center_px.x, sigma) * axis_sum(out.center_px.y, sigma));
+    let norm = 1.0 / kernel_sum(out.center_px, sigma);
     out.energy = vec4<f32>(pt.albedo * flux, flux) * norm;
     let diameter = 2.0 * r_px;
     out.albedo_alpha = vec4<f32>(pt.albedo, frame.material.w * min(diameter * diameter, 1.0));
     out.sigma = sigma;
     let corner = vec2<f32>(f32(vi & 1u), f32((vi >> 1u) & 1u)) * 2.0 - 1.0;
-    // One pixel wider than the truncation square, which the fragment stage enforces
-    // exactly: rasterization rounding must not drop its edge pixels.
+    // One pixel wider than the cut's circle, which the fragment stage enforces exactly:
+    // rasterization rounding must not drop its edge pixels.
     let half_ndc = vec2<f32>(2.0, 2.0) * (TRUNCATION * sigma + 1.0) / size;
     out.clip = vec4<f32>((ndc + corner * half_ndc) * clip.w, 0.5 * clip.w, clip.w);
     return out;
@@ -98,21 +114,20 @@ fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> 
 @fragment
 fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let d = in.clip.xy - in.center_px;
-    let s2 = in.sigma * in.sigma;
-    let limit = TRUNCATION * in.sigma;
-    if abs(d.x) > limit || abs(d.y) > limit {
+    let k = kernel(dot(d, d), in.sigma);
+    if k <= 0.0 {
         discard;
     }
-    return in.energy * exp(-dot(d, d) / (2.0 * s2));
+    return in.energy * k;
 }
 
 @fragment
 fn fs_over(in: VsOut) -> @location(0) vec4<f32> {
     let d = in.clip.xy - in.center_px;
-    let limit = TRUNCATION * in.sigma;
-    if abs(d.x) > limit || abs(d.y) > limit {
+    let k = kernel(dot(d, d), in.sigma);
+    if k <= 0.0 {
         discard;
     }
-    let a = in.albedo_alpha.w * exp(-dot(d, d) / (2.0 * in.sigma * in.sigma));
+    let a = in.albedo_alpha.w * k / (1.0 - EDGE);
     return vec4<f32>(in.albedo_alpha.xyz * a, a);
 }
