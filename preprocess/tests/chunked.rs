@@ -144,6 +144,36 @@ fn raw_arrays_stream_into_the_same_file() {
     assert_eq!(names, ["Cu", "Ag", "Ni"]);
 }
 
+/// Raw arrays with each particle's size: chunks keep every radius, as a whole build does.
+#[test]
+fn raw_arrays_with_sizes_stream_into_the_same_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 5000usize;
+    let (mut pos, mut h) = (Vec::new(), Vec::new());
+    let mut s = 0x9E3779B97F4A7C15u64;
+    for i in 0..n {
+        for _ in 0..3 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            pos.extend_from_slice(&((s >> 40) as f32 / 1e5).to_le_bytes());
+        }
+        h.extend_from_slice(&(0.5 + (i % 11) as f32 * 0.05).to_le_bytes());
+    }
+    std::fs::write(dir.path().join("pos.f32"), &pos).unwrap();
+    std::fs::write(dir.path().join("h.f32"), &h).unwrap();
+    let sidecar = dir.path().join("frame.raw.json");
+    std::fs::write(
+        &sidecar,
+        r#"{"mdlod_raw": 1, "positions": {"file": "pos.f32", "type": "f32"},
+            "radius": {"file": "h.f32", "type": "f32", "name": "h"}}"#,
+    )
+    .unwrap();
+    let f = streamed_equals_in_memory(&sidecar, &ReadOptions::default(), 700);
+    let radii = f.radii().expect("per-particle radii");
+    assert_eq!(radii.len(), n);
+}
+
 #[test]
 fn lammps_text_dump_streams_into_the_same_file() {
     let path = mdlod_datasets::lammps_sample_path("cu_melt.custom.dump");

@@ -614,3 +614,103 @@ fn a_huge_bad_sidecar_value_is_named_briefly() {
         &e[..e.len().min(400)]
     );
 }
+
+/// An SPH code's smoothing lengths as a `radius` array (or diameters): each particle
+/// keeps its own size, a species of one size keeps it as its radius, `--no-sizes`
+/// leaves the array unread, and bad sizes name the array and the particle.
+#[test]
+fn per_particle_sizes_come_from_a_radius_or_diameter_array() {
+    let c = Case::new();
+    let n = 300usize;
+    let pos: Vec<u8> = positions(n)
+        .iter()
+        .flatten()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    c.file("pos.f32", &pos);
+    // Gas (0) with sizes 0.1 to 0.4, stars (1) all of size 0.05.
+    let types: Vec<u8> = (0..n).map(|i| u8::from(i % 4 == 0)).collect();
+    c.file("type.u8", &types);
+    let h: Vec<f64> = (0..n)
+        .map(|i| match i % 4 {
+            0 => 0.05,
+            k => 0.1 * k as f64 + 0.001 * (i % 7) as f64,
+        })
+        .collect();
+    c.file(
+        "h.f64",
+        &h.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>(),
+    );
+    let d2: Vec<u8> = h
+        .iter()
+        .flat_map(|v| ((2.0 * v) as f32).to_le_bytes())
+        .collect();
+    c.file("d.f32", &d2);
+    let sidecar = |sizes: &str| {
+        c.sidecar(&format!(
+            r#"{{ "mdlod_raw": 1, "positions": {{ "file": "pos.f32", "type": "f32" }},
+                 "species": {{ "file": "type.u8", "type": "u8", "names": ["gas", "star"] }},
+                 {sizes} }}"#
+        ))
+    };
+    for sizes in [
+        r#""radius": { "file": "h.f64", "type": "f64", "name": "h" }"#,
+        r#""diameter": { "file": "d.f32", "type": "f32" }"#,
+    ] {
+        let path = sidecar(sizes);
+        let f = read(&path).unwrap();
+        let radii = f.radii.as_ref().expect("per-particle radii");
+        for (i, (&r, &want)) in radii.iter().zip(&h).enumerate() {
+            assert!(
+                (f64::from(r) - want).abs() < 1e-6,
+                "{sizes}: particle {i}: {r} against {want}"
+            );
+        }
+        let (gas, star) = (&f.species[0], &f.species[1]);
+        let (lo, hi) = gas.radius_range.unwrap();
+        assert!(
+            (lo - 0.1).abs() < 1e-6 && (hi - 0.306).abs() < 1e-6,
+            "{lo} {hi}"
+        );
+        assert_eq!(star.radius_range, Some((0.05, 0.05)));
+        assert!((star.radius.unwrap() - 0.05).abs() < 1e-7);
+        let d = DumpFile::open(&path).unwrap();
+        let info = d.frame_info(0).unwrap();
+        assert!(info.columns.len() == 5, "{:?}", info.columns);
+        // --no-sizes: the array is not read.
+        let opts = ReadOptions {
+            sizes: mdlod_preprocess::readers::SizeColumn::Off,
+            ..Default::default()
+        };
+        let f = d.read_frame(0, &opts, &NoProgress).unwrap();
+        assert!(f.radii.is_none() && f.species[0].radius_range.is_none());
+    }
+    // Both, a negative size, a short array.
+    let e = read(&sidecar(
+        r#""radius": { "file": "h.f64", "type": "f64" }, "diameter": { "file": "d.f32", "type": "f32" }"#,
+    ))
+    .unwrap_err();
+    assert!(e.contains("radius and diameter: both given"), "{e}");
+    let mut bad = h.clone();
+    bad[17] = -1.0;
+    c.file(
+        "bad.f64",
+        &bad.iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect::<Vec<u8>>(),
+    );
+    let e = read(&sidecar(
+        r#""radius": { "file": "bad.f64", "type": "f64", "name": "h" }"#,
+    ))
+    .unwrap_err();
+    assert!(
+        e.contains("bad.f64") && e.contains("particle 17: `h` -1 is no particle size"),
+        "{e}"
+    );
+    c.file("short.f32", &d2[..400]);
+    let e = read(&sidecar(
+        r#""diameter": { "file": "short.f32", "type": "f32" }"#,
+    ))
+    .unwrap_err();
+    assert!(e.contains("short.f32") && e.contains("diameter"), "{e}");
+}

@@ -1066,7 +1066,10 @@ impl DumpFile {
         let how = match &self.index {
             Index::Gsd(_) => "a GSD file gives each particle's size by `particles/diameter`",
             Index::Mmpld(_) => "an MMPLD file gives each particle's size in its `xyzr` lists",
-            Index::Raw(_) => "raw arrays give no particle sizes",
+            Index::Raw(_) => {
+                "raw arrays give each particle's size by the sidecar's `radius` or `diameter` \
+                 array"
+            }
             _ => return Ok(()),
         };
         match named {

@@ -12,6 +12,7 @@
 //!   "species":   { "file": "type.u8", "type": "u8", "names": ["Cu", "Ag"] },
 //!   "radii":     [1.28, 1.44],
 //!   "attribute": { "file": "pe.f32", "type": "f32", "name": "c_pe" },
+//!   "radius":    { "file": "h.f32", "type": "f32", "name": "h" },
 //!   "box":       { "origin": [0, 0, 0], "a": [10, 0, 0], "b": [0, 10, 0], "c": [0, 0, 10] },
 //!   "timestep": 1000, "time": 2.0, "units": "metal"
 //! }
@@ -27,6 +28,11 @@
 //!   index into `names` (default names are the numbers); `radii` optionally gives each
 //!   species' radius (one per name, or one without `species`).
 //! - `attribute` (optional): one `f32` or `f64` per particle.
+//! - `radius` or `diameter` (optional, not both): each particle's size, one `f32` or
+//!   `f64` per particle (an SPH code's smoothing length `h` as `radius`; `name` says what
+//!   it is). Its particles are drawn at their own sizes, as a dump's size column's; a
+//!   size of 0 passes here and is refused by species unless `--radius` gives the
+//!   species one; `--no-sizes` leaves the array unread.
 //! - Every array may have `offset` (bytes to skip, default 0) and `byte_order`
 //!   (`little`, the default, or `big`).
 //! - Unknown keys are errors (a misspelt key must not be ignored silently); every size is
@@ -55,6 +61,8 @@ pub(crate) fn data_files(path: &Path) -> Option<Vec<PathBuf>> {
         Some(&sidecar.positions),
         sidecar.species.as_ref(),
         sidecar.attribute.as_ref(),
+        sidecar.radius.as_ref(),
+        sidecar.diameter.as_ref(),
     ];
     Some(
         arrays
@@ -78,6 +86,10 @@ struct Sidecar {
     radii: Option<Vec<f32>>,
     #[serde(default)]
     attribute: Option<Array>,
+    #[serde(default)]
+    radius: Option<Array>,
+    #[serde(default)]
+    diameter: Option<Array>,
     #[serde(default, rename = "box")]
     simulation_box: Option<BoxSpec>,
     #[serde(default)]
@@ -247,6 +259,9 @@ pub(crate) struct Index {
     species: Option<(Mapped, Vec<String>)>,
     radii: Option<Vec<f32>>,
     attribute: Option<(Mapped, String)>,
+    /// Each particle's size: the array, its name, and the factor to a radius (1 for a
+    /// `radius` array, 0.5 for a `diameter` one).
+    sizes: Option<(Mapped, String, f64)>,
     simulation_box: Option<SimulationBox>,
     timestep: Option<u64>,
     time: Option<f64>,
@@ -591,6 +606,25 @@ impl Index {
                 Some((m, a.name.clone().unwrap_or_else(|| "attribute".into())))
             }
         };
+        let sizes = match (&sidecar.radius, &sidecar.diameter) {
+            (Some(_), Some(_)) => {
+                return Err(malformed_in(
+                    path,
+                    text,
+                    "radius and diameter: both given; give each particle's size once",
+                ))
+            }
+            (Some(a), None) | (None, Some(a)) => {
+                let (what, factor) = match sidecar.radius.is_some() {
+                    true => ("radius", 1.0),
+                    false => ("diameter", 0.5),
+                };
+                let m = map(a, what, &["f32", "f64"])?;
+                need(&m, 1, what)?;
+                Some((m, a.name.clone().unwrap_or_else(|| what.into()), factor))
+            }
+            (None, None) => None,
+        };
         if let Some(r) = &sidecar.radii {
             if r.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
                 return Err(malformed_in(
@@ -649,7 +683,8 @@ impl Index {
             let arrays = [(Some(&positions), 3, "positions")]
                 .into_iter()
                 .chain([(species.as_ref().map(|s| &s.0), 1, "species")])
-                .chain([(attribute.as_ref().map(|a| &a.0), 1, "attribute")]);
+                .chain([(attribute.as_ref().map(|a| &a.0), 1, "attribute")])
+                .chain([(sizes.as_ref().map(|a| &a.0), 1, "sizes")]);
             for (m, per, what) in arrays {
                 let Some(m) = m else { continue };
                 let read = particles.saturating_mul(per).saturating_mul(m.ty.size());
@@ -674,6 +709,7 @@ impl Index {
             species,
             radii: sidecar.radii,
             attribute,
+            sizes,
             simulation_box,
             timestep: sidecar.timestep,
             time: sidecar.time.filter(|t| t.is_finite()),
@@ -683,6 +719,22 @@ impl Index {
 
     pub fn timestep(&self) -> Option<u64> {
         self.timestep
+    }
+
+    /// Values `first..first + n` of a one-value-per-particle float array, as `f64`.
+    fn floats(&self, m: &Mapped, first: usize, n: usize) -> Vec<f64> {
+        let b = m.bytes();
+        match (m.ty, m.big, b.get(4 * first..4 * (first + n))) {
+            // Little-endian `f32`: read in place.
+            (Ty::F32, false, Some(b)) => b
+                .par_chunks_exact(4)
+                .map(|c| f64::from(f32::from_le_bytes(c.try_into().expect("4 bytes"))))
+                .collect(),
+            _ => (first..first + n)
+                .into_par_iter()
+                .map(|i| m.ty.get(b, i, m.big))
+                .collect(),
+        }
     }
 
     /// The radii the sidecar gives its species, by name (as [`Index::read_range`] names
@@ -719,6 +771,9 @@ impl Index {
             columns.push("species".into());
         }
         if let Some((_, name)) = &self.attribute {
+            columns.push(name.clone());
+        }
+        if let Some((_, name, _)) = &self.sizes {
             columns.push(name.clone());
         }
         FrameInfo {
@@ -765,6 +820,13 @@ impl Index {
             m.read_ahead(ahead.clone(), 1);
         }
         if let Some((m, _)) = &self.attribute {
+            m.read_ahead(ahead.clone(), 1);
+        }
+        if let Some((m, _, _)) = self
+            .sizes
+            .as_ref()
+            .filter(|_| opts.sizes != super::SizeColumn::Off)
+        {
             m.read_ahead(ahead, 1);
         }
         let p = &self.positions;
@@ -884,6 +946,35 @@ impl Index {
                 (species, raw.iter().map(|&v| v as u16).collect())
             }
         };
+        // Each particle's own size (a radius), unless sizes are left out (--no-sizes).
+        let mut species = species;
+        let radii = match self
+            .sizes
+            .as_ref()
+            .filter(|_| opts.sizes != super::SizeColumn::Off)
+        {
+            None => None,
+            Some((m, name, factor)) => {
+                let values = self.floats(m, first, n);
+                let radii: Vec<f32> = values.iter().map(|&v| (v * factor) as f32).collect();
+                // (0 passes: a species of size 0 is refused by name later, unless --radius
+                // gives it one.)
+                if let Some(i) = radii.iter().position(|r| !(r.is_finite() && *r >= 0.0)) {
+                    let at = first + i;
+                    return Err(err(
+                        &m.path,
+                        (m.offset + at * m.ty.size()) as u64,
+                        format!(
+                            "particle {at}: `{name}` {} is no particle size (a finite number \
+                             from 0 up, in single precision)",
+                            values[i]
+                        ),
+                    ));
+                }
+                super::atoms::sized_species(&mut species, &species_index, &radii);
+                Some(radii)
+            }
+        };
         let attribute = match (&self.attribute, &opts.attribute) {
             (Some((m, name)), wanted) if wanted.as_deref().is_none_or(|w| w == name) => {
                 let b = m.bytes();
@@ -934,7 +1025,7 @@ impl Index {
             species_index,
             species,
             attribute,
-            radii: None,
+            radii,
             simulation_box: self.simulation_box.clone(),
             timestep: self.timestep,
             time: self.time,
