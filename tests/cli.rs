@@ -1706,6 +1706,88 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
     }
 }
 
+/// `--hide-attribute`: particles of the values given are left out (the summary says how
+/// many, by value); a range hiding every value says why nothing is drawn; bad ranges and
+/// a file without an attribute are refused.
+#[test]
+fn particles_are_hidden_by_their_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = mdlod_datasets::lammps_sample_path("cu_melt.custom.dump");
+    let file = dir.path().join("pe.mdlod");
+    ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&file),
+        "--last",
+        "--attribute",
+        "c_pe",
+    ]);
+    let png = dir.path().join("x.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "48",
+            "--height",
+            "32",
+        ];
+        args.extend_from_slice(extra);
+        args.iter().map(|a| a.to_string()).collect::<Vec<_>>()
+    };
+    let run = |extra: &[&str]| {
+        let args = render(extra);
+        ok(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let drawn = |out: &str| -> u64 {
+        let at = out.find(" particles").unwrap();
+        out[..at].rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    let all = drawn(&run(&["--screen-error", "0", "--no-occlusion"]));
+    let out = run(&["--screen-error", "0", "--hide-attribute", "-3.3:"]);
+    let some = drawn(&out);
+    assert!(some > 0 && some < all, "{some} of {all}: {out}");
+    assert!(
+        out.contains(&format!(
+            "{} of hidden values (--hide-attribute) left out",
+            all - some
+        )),
+        "{out}"
+    );
+    let out = run(&["--hide-attribute", ":0"]);
+    assert!(
+        out.contains("nothing is drawn: every particle in view has a value --hide-attribute hides"),
+        "{out}"
+    );
+    for (range, message) in [
+        (":", "both ends open"),
+        ("2:1", "MAX must not be below MIN"),
+        ("1", "expected MIN:MAX"),
+        ("a:1", "is not a finite number"),
+    ] {
+        let args = render(&["--hide-attribute", range]);
+        let e = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(e.contains(message), "{range}: {e}");
+    }
+    let plain = dir.path().join("plain.mdlod");
+    ok(&["convert", s(&input), "-o", s(&plain), "--last"]);
+    let e = fails(&[
+        "render",
+        s(&plain),
+        "-o",
+        s(&png),
+        "--hide-attribute",
+        "0:1",
+    ]);
+    assert!(
+        e.contains("no per-particle attribute to hide particles by"),
+        "{e}"
+    );
+}
+
 /// Mistakes a figure maker makes first: an option whose value needs `=`, a view file's
 /// directory that is not there (said before a long render, not after), a numbered name
 /// for one image, a target far from the data.

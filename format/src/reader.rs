@@ -95,14 +95,71 @@ pub struct MdlodFile {
     node_blocks: Vec<AtomicU8>,
     /// The first failed check of a block checked after open.
     node_error: OnceLock<(String, String)>,
-    /// The last [`Self::species_below`] computed, with its species mask.
-    species_below: Mutex<Option<(u64, Arc<[u8]>)>>,
+    /// The last [`Self::hidden_below`] computed, with its set.
+    species_below: Mutex<Option<(HiddenSet, Arc<[u8]>)>>,
 }
 
 /// Whether species index `s` is in the set `mask` of [`MdlodFile::species_below`] (bit
 /// `s`; indices of 64 and more never are).
 pub fn in_species_set(mask: u64, s: usize) -> bool {
     s < 64 && (mask >> s) & 1 == 1
+}
+
+/// The most value ranges a [`HiddenSet`] holds.
+pub const MAX_HIDDEN_RANGES: usize = 4;
+
+/// Particles a view leaves out: those of the species of `species` (bit `s` for species
+/// index `s`, as [`in_species_set`]) and those whose attribute value, decoded as
+/// [`crate::meta::AttributeInfo::decode`] gives it, lies in one of `ranges` (inclusive at
+/// both ends; a file without an attribute hides none by value).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HiddenSet {
+    pub species: u64,
+    ranges: [[f32; 2]; MAX_HIDDEN_RANGES],
+    count: usize,
+}
+
+impl HiddenSet {
+    /// The species of `species` only.
+    pub fn of_species(species: u64) -> HiddenSet {
+        HiddenSet {
+            species,
+            ..Default::default()
+        }
+    }
+
+    /// This set and the values in `ranges` (each `[lo, hi]`, `lo ≤ hi`, neither NaN;
+    /// an infinite end leaves that side open); `None` past [`MAX_HIDDEN_RANGES`] or
+    /// for a range that is not one.
+    pub fn with_ranges(self, ranges: &[[f32; 2]]) -> Option<HiddenSet> {
+        if ranges.len() > MAX_HIDDEN_RANGES
+            || ranges
+                .iter()
+                .any(|[lo, hi]| lo.is_nan() || hi.is_nan() || lo > hi)
+        {
+            return None;
+        }
+        let mut set = self;
+        set.count = ranges.len();
+        set.ranges[..ranges.len()].copy_from_slice(ranges);
+        Some(set)
+    }
+
+    /// The value ranges hidden.
+    pub fn ranges(&self) -> &[[f32; 2]] {
+        &self.ranges[..self.count]
+    }
+
+    /// Nothing is hidden.
+    pub fn is_empty(&self) -> bool {
+        self.species == 0 && self.count == 0
+    }
+
+    /// Whether a particle of species index `s` and attribute value `value` is hidden.
+    pub fn hides(&self, s: u16, value: Option<f32>) -> bool {
+        in_species_set(self.species, usize::from(s))
+            || value.is_some_and(|v| self.ranges().iter().any(|&[lo, hi]| lo <= v && v <= hi))
+    }
 }
 
 /// [`MdlodFile::species_below`]: some particle below the node is of a species of the
@@ -755,25 +812,50 @@ impl MdlodFile {
     /// 2×10^8 particles, a few seconds), which the lazy checks of [`Self::open`] avoid
     /// otherwise: a price paid only by views that hide species.
     pub fn species_below(&self, mask: u64) -> Arc<[u8]> {
+        self.hidden_below(&HiddenSet::of_species(mask))
+    }
+
+    /// [`Self::species_below`] for any [`HiddenSet`]: per node, [`BELOW_IN`] when some
+    /// particle below is hidden, [`BELOW_OUT`] when some is not. With value ranges, the
+    /// pass decodes the attribute section too.
+    pub fn hidden_below(&self, set: &HiddenSet) -> Arc<[u8]> {
         let mut cache = self.species_below.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((m, kinds)) = &*cache {
-            if *m == mask {
+            if m == set {
                 return kinds.clone();
             }
         }
-        let kinds: Arc<[u8]> = self.compute_species_below(mask).into();
-        *cache = Some((mask, kinds.clone()));
+        let kinds: Arc<[u8]> = self.compute_hidden_below(set).into();
+        *cache = Some((*set, kinds.clone()));
         kinds
     }
 
-    fn compute_species_below(&self, mask: u64) -> Vec<u8> {
+    /// Whether `set` hides particle `i` (its species and attribute value as stored; an
+    /// index past the particles is not hidden).
+    pub fn hides_particle(&self, set: &HiddenSet, i: usize) -> bool {
+        let Some(&s) = self.species().get(i) else {
+            return false;
+        };
+        set.hides(s, self.attribute_value(set, i))
+    }
+
+    /// Particle `i`'s decoded attribute value where `set` hides some by value.
+    fn attribute_value(&self, set: &HiddenSet, i: usize) -> Option<f32> {
+        if set.ranges().is_empty() {
+            return None;
+        }
+        let info = self.metadata().attribute.as_ref()?;
+        self.attribute()?.get(i).map(|&q| info.decode(q))
+    }
+
+    fn compute_hidden_below(&self, set: &HiddenSet) -> Vec<u8> {
         let (nodes, levels, species) = (self.nodes(), self.levels(), self.species());
         let mut kinds = vec![0u8; nodes.len()];
         let Some(last) = levels.len().checked_sub(1) else {
             return kinds;
         };
-        let of = |s: u16| {
-            if in_species_set(mask, usize::from(s)) {
+        let of = |i: usize, s: u16| {
+            if set.hides(s, self.attribute_value(set, i)) {
                 BELOW_IN
             } else {
                 BELOW_OUT
@@ -788,7 +870,7 @@ impl MdlodFile {
                 let b = a.saturating_add(n.child_count as usize);
                 let kind = if l + 1 == last {
                     species.get(a..b).map_or(BELOW_IN | BELOW_OUT, |c| {
-                        c.iter().fold(0, |k, &s| k | of(s))
+                        c.iter().zip(a..).fold(0, |k, (&s, i)| k | of(i, s))
                     })
                 } else if b as u64 <= levels[l + 1].point_count {
                     let f = levels[l + 1].node_first as usize;

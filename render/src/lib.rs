@@ -51,6 +51,7 @@ pub mod view;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+pub use mdlod_format::reader::HiddenSet;
 use mdlod_format::MdlodFile;
 pub use mdlod_format::{NoProgress, Progress};
 
@@ -597,33 +598,32 @@ pub fn data_bounds(file: &MdlodFile) -> Bounds {
     Bounds::new(top.bounds_min, top.bounds_max)
 }
 
-/// The bounds of what a view hiding the species of `hidden` (a species mask, see
-/// [`TraversalSettings::hidden_species`]) draws, for fitting the view to it: the union of
+/// The bounds of what a view hiding the particles of `hidden` (see
+/// [`TraversalSettings::hidden`]) draws, for fitting the view to it: the union of
 /// the boxes of the nodes holding shown species only, found by opening mixed nodes level
 /// by level (at most [`SHOWN_BOUNDS_NODES`] of them; a mixed node not opened adds its
 /// own box). A mixed node whose children are particles adds its shown particles'
 /// spheres, where the particles are encoded relative to it (δn = 1; else its box).
 /// `None` when nothing is hidden, or every particle is.
-pub fn shown_bounds(file: &MdlodFile, hidden: u64) -> Option<Bounds> {
-    if hidden == 0 {
+pub fn shown_bounds(file: &MdlodFile, hidden: HiddenSet) -> Option<Bounds> {
+    if hidden.is_empty() {
         return None;
     }
     bounds_walk(file, hidden, None).map(|(b, _)| b)
 }
 
 /// The particles of node `n` (whose children are particles, encoded relative to it:
-/// δn = 1) that are not of the species of `hidden`: position and radius (its own where
-/// the file keeps one, else its species').
+/// δn = 1) that `hidden` does not hide: position and radius (its own where the file
+/// keeps one, else its species').
 fn shown_particles<'a>(
     file: &'a MdlodFile,
     n: &'a mdlod_format::NodeRecord,
-    hidden: u64,
+    hidden: HiddenSet,
 ) -> impl Iterator<Item = (glam::Vec3, f32)> + 'a {
     let last = file.level_count().saturating_sub(1);
     let (pos, species) = (file.positions(last), file.species());
     (n.child_first as usize..(n.child_first + n.child_count) as usize).filter_map(move |c| {
-        let sp = *species.get(c)?;
-        if c >= pos.len() || mdlod_format::reader::in_species_set(hidden, sp.into()) {
+        if c >= pos.len() || c >= species.len() || file.hides_particle(&hidden, c) {
             return None;
         }
         let p = glam::Vec3::from(mdlod_format::quantize::decode3(
@@ -665,9 +665,9 @@ pub const FIT_MARGIN: f32 = 1.0;
 /// only where that matters: when the whole shown data's bounding sphere is more than
 /// twice the rest's; else (and with `all`) the bounds are the shown data's, and none
 /// is counted far.
-pub fn fit_bounds(file: &MdlodFile, hidden: u64, all: bool) -> FitBounds {
+pub fn fit_bounds(file: &MdlodFile, hidden: HiddenSet, all: bool) -> FitBounds {
     let shown = shown_bounds(file, hidden);
-    let shows_any = hidden == 0 || shown.is_some();
+    let shows_any = hidden.is_empty() || shown.is_some();
     let whole = shown.unwrap_or_else(|| data_bounds(file));
     let untrimmed = FitBounds {
         bounds: whole,
@@ -690,7 +690,7 @@ pub fn fit_bounds(file: &MdlodFile, hidden: u64, all: bool) -> FitBounds {
 /// The fit frames the particles as `opts` draws them ([`drawn_reach`]), and with the cell
 /// drawn ([`RenderOptions::cell`]) the cell too.
 pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
-    let hidden = opts.style.hidden_mask(&file.metadata().species);
+    let hidden = opts.style.hidden_set(file.metadata());
     let fit = fit_bounds(file, hidden, opts.fit_all);
     // The spheres, splats or kernels as drawn, not the file's spheres.
     let reach = glam::Vec3::splat(drawn_reach(file, opts));
@@ -777,7 +777,7 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
     if file.check_nodes(level, 0..count).is_err() {
         return Vec::new();
     }
-    let kind_of = species_kinds(file, opts.style.hidden_mask(&file.metadata().species));
+    let kind_of = species_kinds(file, opts.style.hidden_set(file.metadata()));
     let reach = glam::Vec3::splat(drawn_reach(file, opts).max(0.0));
     let clipped = |n: &mdlod_format::NodeRecord| {
         let lo = (glam::Vec3::from(n.bounds_min) - reach).max(fitted.min);
@@ -838,9 +838,9 @@ fn with_drawn_cell(bounds: Bounds, file: &MdlodFile, opts: &RenderOptions) -> Bo
 
 /// Which species are below node `id` with the species of `hidden` hidden
 /// ([`MdlodFile::species_below`]; every node's `BELOW_OUT` when none is).
-fn species_kinds(file: &MdlodFile, hidden: u64) -> impl Fn(usize) -> u8 + '_ {
+fn species_kinds(file: &MdlodFile, hidden: HiddenSet) -> impl Fn(usize) -> u8 + '_ {
     use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
-    let kinds = (hidden != 0).then(|| file.species_below(hidden));
+    let kinds = (!hidden.is_empty()).then(|| file.hidden_below(&hidden));
     move |id| match &kinds {
         Some(k) => k.get(id).copied().unwrap_or(BELOW_IN | BELOW_OUT),
         None => BELOW_OUT,
@@ -849,7 +849,7 @@ fn species_kinds(file: &MdlodFile, hidden: u64) -> impl Fn(usize) -> u8 + '_ {
 
 /// [`fit_bounds`] without its test of whether trimming matters; `None` where the file
 /// has too few clusters to tell a bulk from its outliers.
-fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
+fn trimmed_bounds(file: &MdlodFile, hidden: HiddenSet) -> Option<FitBounds> {
     use mdlod_format::reader::BELOW_OUT;
     let (nodes, levels) = (file.nodes(), file.levels());
     let last = levels.len().checked_sub(1)?;
@@ -928,7 +928,7 @@ fn trimmed_bounds(file: &MdlodFile, hidden: u64) -> Option<FitBounds> {
 /// else its box). `None` when nothing is shown.
 fn bounds_walk(
     file: &MdlodFile,
-    hidden: u64,
+    hidden: HiddenSet,
     core: Option<[glam::Vec3; 2]>,
 ) -> Option<(Bounds, u64)> {
     use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
@@ -1283,6 +1283,13 @@ pub fn frame_setup(
             species.len()
         )));
     }
+    if !opts.style.hidden_values.is_empty() && file.metadata().attribute.is_none() {
+        return Err(RenderError::InvalidOptions(
+            "the file has no per-particle attribute to hide particles by (a file keeps the \
+             one dump column `mdlod convert --attribute COLUMN` names, e.g. --attribute c_cna)"
+                .into(),
+        ));
+    }
     // A camera given whole (the viewer's, every frame) fits nothing: its depth range
     // takes the data's bounds, and the fit is not computed.
     let fitted = match opts.view {
@@ -1310,7 +1317,6 @@ pub fn frame_setup(
     // The data's bounds hold the particles' own spheres; a style that draws them larger
     // reaches past them, and a sphere in front of the near plane is clipped whole (its
     // quad lies at its front). The depth range grows by as much.
-    let species = &file.metadata().species;
     let extra = styled_reach(file, opts, 1.0);
     if extra > 0.0 {
         let reach = glam::Vec3::splat(extra);
@@ -1344,7 +1350,7 @@ pub fn frame_setup(
         },
         // Every mode leaves hidden species out of the cut (splats, the volume: the
         // light or density of the species shown).
-        hidden_species: opts.style.hidden_mask(species),
+        hidden: opts.style.hidden_set(file.metadata()),
         // The density volume clips its samples, not the points (DensitySettings::clip).
         clip: match opts.mode {
             RenderMode::Density(_) if !opts.style.clip.is_empty() => {

@@ -928,7 +928,7 @@ impl Smip {
                                 .max(1),
                             occlusion: self.config.occlusion,
                             support_scale: 0.0,
-                            hidden_species: style.hidden_mask(&file.metadata().species),
+                            hidden: style.hidden_set(file.metadata()),
                             clip: style.clip_planes().map_err(RenderError::InvalidOptions)?,
                         },
                     );

@@ -227,6 +227,12 @@ pub struct PointStyle {
     /// ([`crate::density::DensitySettings::clip`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub clip: Vec<[f32; 4]>,
+    /// Attribute values `[lo, hi]` (inclusive; an infinite end leaves that side open)
+    /// whose particles are drawn as nothing, as hidden species are (OVITO's expression
+    /// selection and delete: `--hide-attribute 0.5:1.5` leaves out a CNA column's fcc
+    /// atoms). At most [`mdlod_format::reader::MAX_HIDDEN_RANGES`].
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hidden_values: Vec<[f32; 2]>,
 }
 
 impl Default for PointStyle {
@@ -238,6 +244,7 @@ impl Default for PointStyle {
             attribute_range: None,
             log_scale: false,
             clip: Vec::new(),
+            hidden_values: Vec::new(),
         }
     }
 }
@@ -246,7 +253,22 @@ impl PointStyle {
     /// True when the style draws points at other sizes than the file's or hides some:
     /// occlusion culling, which assumes the file's radii, must then be off.
     pub fn changes_geometry(&self) -> bool {
-        self.radius_scale != 1.0 || self.species.iter().any(|s| s.hidden || s.radius.is_some())
+        self.radius_scale != 1.0
+            || !self.hidden_values.is_empty()
+            || self.species.iter().any(|s| s.hidden || s.radius.is_some())
+    }
+
+    /// The particles this style leaves out of a file with metadata `meta`, as the
+    /// traversal takes them ([`crate::TraversalSettings::hidden`]): its hidden species
+    /// ([`Self::hidden_mask`]) and, where the file has an attribute, its hidden values
+    /// (none past [`mdlod_format::reader::MAX_HIDDEN_RANGES`] or of a range that is not
+    /// one, which [`Self::validate`] refuses).
+    pub fn hidden_set(&self, meta: &mdlod_format::meta::Metadata) -> crate::HiddenSet {
+        let species = crate::HiddenSet::of_species(self.hidden_mask(&meta.species));
+        match meta.attribute {
+            Some(_) => species.with_ranges(&self.hidden_values).unwrap_or(species),
+            None => species,
+        }
     }
 
     /// The species table (linear colour, radius) after styling; hidden species get
@@ -456,6 +478,22 @@ impl PointStyle {
                     s.name, s.colour
                 ));
             }
+        }
+        if self.hidden_values.len() > mdlod_format::reader::MAX_HIDDEN_RANGES {
+            return Err(format!(
+                "{} hidden value ranges (at most {})",
+                self.hidden_values.len(),
+                mdlod_format::reader::MAX_HIDDEN_RANGES
+            ));
+        }
+        if let Some([lo, hi]) = self
+            .hidden_values
+            .iter()
+            .find(|[lo, hi]| lo.is_nan() || hi.is_nan() || lo > hi)
+        {
+            return Err(format!(
+                "hidden value range {lo} to {hi} (the second not below the first)"
+            ));
         }
         if let Some([lo, hi]) = self.attribute_range {
             if !(lo.is_finite() && hi.is_finite() && hi > lo) {
@@ -1072,6 +1110,7 @@ mod tests {
             attribute_range: None,
             log_scale: false,
             clip: vec![],
+            hidden_values: vec![],
         };
         let file = [sp("A", 1.0), sp("B", 1.5), sp("C", 0.5)];
         let t = style.species_table(&file).unwrap();

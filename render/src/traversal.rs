@@ -65,13 +65,13 @@
 //! count, so neither does the cut. Streaming ([`traverse_with`]) walks the whole image
 //! at once, because the residency answers in the order it is asked.
 //!
-//! Hidden species and clip planes ([`TraversalSettings::hidden_species`],
+//! Hidden species and values and clip planes ([`TraversalSettings::hidden`],
 //! [`TraversalSettings::clip`]) take the walk without occlusion: a cluster of hidden
 //! species only, or whose box (grown by the quantization error) lies wholly beyond a
 //! plane, is culled with its subtree; one holding both kinds, or across a plane, is
 //! opened whatever its size (after every larger node, so that a budget refines what is
-//! large on screen first), down to particles, each left out by its species or by its
-//! decoded centre. The cut then draws exactly the particles kept and clusters of them only.
+//! large on screen first), down to particles, each left out by its species, its
+//! attribute value or its decoded centre. The cut then draws exactly the particles kept and clusters of them only.
 //!
 //! Streaming plugs in through [`Residency`]: a node whose children's data are not on the
 //! GPU is not opened but stays drawn (so a missing subtree is drawn by its nearest
@@ -91,7 +91,7 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
 use glam::{Mat4, Vec3};
-use mdlod_format::reader::{in_species_set, BELOW_IN, BELOW_OUT};
+use mdlod_format::reader::{HiddenSet, BELOW_IN, BELOW_OUT};
 use mdlod_format::{quantize, MdlodFile, NodeRecord};
 
 use crate::camera::{Camera, Projection};
@@ -112,11 +112,12 @@ pub struct TraversalSettings {
     /// volume's `kernel_scale`; see [`Projector::with_support`]); 0 for spheres and
     /// splats, whose node boxes bound what they draw.
     pub support_scale: f32,
-    /// Species drawn as nothing (bit `s` for species index `s`): a cluster of them only
+    /// Particles drawn as nothing: of some species (bit `s` for species index `s`), or
+    /// of attribute values in some ranges (`--hide-attribute`). A cluster of them only
     /// is culled, and one holding them and others is opened (its representative would
     /// draw them), down to particles where the budget allows
-    /// ([`MdlodFile::species_below`]). The cut is then chosen without occlusion culling.
-    pub hidden_species: u64,
+    /// ([`MdlodFile::hidden_below`]). The cut is then chosen without occlusion culling.
+    pub hidden: HiddenSet,
     /// Planes that cut the data away (OVITO's Slice): particles whose centres lie beyond
     /// any are left out, clusters wholly beyond are culled, and clusters across a plane
     /// are opened down to particles where the budget allows, as for hidden species.
@@ -212,7 +213,7 @@ impl Default for TraversalSettings {
             budget_points: 4_000_000,
             occlusion: OcclusionMode::PixelCentres,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: HiddenSet::default(),
             clip: ClipPlanes::default(),
         }
     }
@@ -626,7 +627,7 @@ pub fn traverse_shared(
 ) -> (DrawList, Vec<(u32, f32)>) {
     if settings.occlusion == OcclusionMode::Off
         || settings.viewport.contains(&0)
-        || settings.hidden_species != 0
+        || !settings.hidden.is_empty()
         || !settings.clip.is_empty()
     {
         let mut tile = TileResidency {
@@ -660,7 +661,7 @@ pub fn traverse_with(
     residency: &mut dyn Residency,
 ) -> DrawList {
     if settings.occlusion != OcclusionMode::Off
-        && settings.hidden_species == 0
+        && settings.hidden.is_empty()
         && settings.clip.is_empty()
     {
         let proj = Projector::with_support(
@@ -895,16 +896,14 @@ fn largest_first(
     // are left out. Every species hidden draws nothing.
     let species_count = file.metadata().species.len();
     let every =
-        species_count <= 64 && settings.hidden_species.count_ones() as usize == species_count;
+        species_count <= 64 && settings.hidden.species.count_ones() as usize == species_count;
     if every {
         list.culled_nodes = 1;
         return list;
     }
-    let below = (settings.hidden_species != 0).then(|| file.species_below(settings.hidden_species));
+    let below = (!settings.hidden.is_empty()).then(|| file.hidden_below(&settings.hidden));
     let hidden = (below.is_some() || !settings.clip.is_empty()).then(|| Hidden {
-        species: below
-            .as_deref()
-            .map(|kinds| (kinds, file.species(), settings.hidden_species)),
+        species: below.as_deref().map(|kinds| (kinds, settings.hidden)),
         clip: settings.clip,
         grow: quantization_reach(file),
         file,
@@ -1048,8 +1047,8 @@ impl Frontier {
 /// only ([`MdlodFile::species_below`]) or wholly beyond a plane, and the particles of
 /// hidden species or beyond a plane.
 struct Hidden<'a> {
-    /// The species below each node, the particles' species and the hidden set.
-    species: Option<(&'a [u8], &'a [u16], u64)>,
+    /// What lies below each node ([`MdlodFile::hidden_below`]) and the hidden set.
+    species: Option<(&'a [u8], HiddenSet)>,
     clip: ClipPlanes,
     /// How far decoded centres stray from their nodes' boxes ([`quantization_reach`]).
     grow: f32,
@@ -1093,15 +1092,13 @@ impl Hidden<'_> {
     /// Node `id` holds hidden particles only, or lies wholly beyond a clip plane.
     fn node(&self, id: usize) -> bool {
         self.species
-            .is_some_and(|(kinds, _, _)| kinds.get(id) == Some(&BELOW_IN))
+            .is_some_and(|(kinds, _)| kinds.get(id) == Some(&BELOW_IN))
             || self.clip_side(id) == ClipSide::Beyond
     }
 
     /// Node `id` holds hidden particles and others, or lies across a clip plane.
     fn mixed(&self, id: usize) -> bool {
-        let kind = self
-            .species
-            .and_then(|(kinds, _, _)| kinds.get(id).copied());
+        let kind = self.species.and_then(|(kinds, _)| kinds.get(id).copied());
         match self.clip_side(id) {
             ClipSide::Beyond => false,
             ClipSide::Across => kind != Some(BELOW_IN),
@@ -1112,11 +1109,10 @@ impl Hidden<'_> {
     /// Why particle `i`, decoded with encoding node `enc` ([`children_encoder`] of its
     /// parent), is left out, if it is.
     fn particle(&self, i: usize, enc: usize) -> Option<LeftOut> {
-        if self.species.is_some_and(|(_, species, mask)| {
-            species
-                .get(i)
-                .is_some_and(|&s| in_species_set(mask, usize::from(s)))
-        }) {
+        if self
+            .species
+            .is_some_and(|(_, set)| self.file.hides_particle(&set, i))
+        {
             return Some(LeftOut::Species);
         }
         if self.clip.is_empty() {
@@ -1471,7 +1467,7 @@ fn count_mixed(hidden: Option<&Hidden<'_>>, id: usize, list: &mut DrawList) {
     if let Some(h) = hidden {
         list.mixed_drawn += u64::from(
             h.species
-                .is_some_and(|(kinds, _, _)| kinds.get(id) == Some(&(BELOW_IN | BELOW_OUT))),
+                .is_some_and(|(kinds, _)| kinds.get(id) == Some(&(BELOW_IN | BELOW_OUT))),
         );
         list.across_drawn += u64::from(h.clip_side(id) == ClipSide::Across);
     }

@@ -29,7 +29,7 @@ fn cut(f: &MdlodFile, cam: &Camera, error_px: f32, budget: u64) -> DrawList {
             budget_points: budget,
             occlusion: OcclusionMode::Off,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: mdlod_render::HiddenSet::default(),
             clip: Default::default(),
         },
     )
@@ -159,7 +159,7 @@ fn a_cut_without_a_binding_budget_is_the_same_in_any_visiting_order() {
                     budget_points: budget,
                     occlusion: OcclusionMode::Off,
                     support_scale: 0.0,
-                    hidden_species: 0,
+                    hidden: mdlod_render::HiddenSet::default(),
                     clip: Default::default(),
                 };
                 let any = traverse_with(&cam, &f, &settings, &mut AllResident);
@@ -375,7 +375,7 @@ fn non_resident_nodes_are_drawn_by_their_nearest_resident_ancestor() {
         budget_points: u64::MAX,
         occlusion: OcclusionMode::Off,
         support_scale: 0.0,
-        hidden_species: 0,
+        hidden: mdlod_render::HiddenSet::default(),
         clip: Default::default(),
     };
     let mut patchy = Patchy {
@@ -466,7 +466,7 @@ fn the_parallel_traversal_draws_refused_nodes_and_lists_what_it_asked_largest_fi
         budget_points: u64::MAX,
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
-        hidden_species: 0,
+        hidden: mdlod_render::HiddenSet::default(),
         clip: Default::default(),
     };
     let on = |threads: usize| {
@@ -594,7 +594,7 @@ fn culled_and_full(
         budget_points: u64::MAX,
         occlusion,
         support_scale: 0.0,
-        hidden_species: 0,
+        hidden: mdlod_render::HiddenSet::default(),
         clip: Default::default(),
     };
     let all = traverse(cam, f, &settings(OcclusionMode::Off));
@@ -725,7 +725,7 @@ fn the_parallel_occlusion_cut_is_the_same_on_any_thread_count_and_hides_what_one
             budget_points: budget,
             occlusion,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: mdlod_render::HiddenSet::default(),
             clip: Default::default(),
         };
         let on = |threads: usize| {
@@ -782,7 +782,7 @@ fn occlusion_traversal_meets_the_budget_by_coarsening() {
         budget_points: 150,
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
-        hidden_species: 0,
+        hidden: mdlod_render::HiddenSet::default(),
         clip: Default::default(),
     };
     let d = traverse(&cam, &f, &settings);
@@ -908,7 +908,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             error_px: 30.0,
             budget_points: u64::MAX,
             occlusion: OcclusionMode::Off,
-            hidden_species: 0b10,
+            hidden: mdlod_render::HiddenSet::of_species(0b10),
             ..Default::default()
         },
     );
@@ -941,6 +941,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             attribute_range: None,
             log_scale: false,
             clip: vec![],
+            hidden_values: vec![],
         };
         let packed = pack_styled(&f, &d, PackStyle::Spheres, &style).unwrap();
         assert_eq!(packed.points(), base.points());
@@ -1045,7 +1046,7 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             budget_points: u64::MAX,
             occlusion,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: mdlod_render::HiddenSet::default(),
             clip: Default::default(),
         };
         assert_eq!(
@@ -1113,7 +1114,7 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
             budget_points: u64::MAX,
             occlusion,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: mdlod_render::HiddenSet::default(),
             clip: Default::default(),
         };
         let d = traverse(&cam, &f, &settings);
@@ -1313,7 +1314,7 @@ fn hidden_species_leave_no_cluster_holding_them() {
                 error_px: error,
                 budget_points: u64::MAX,
                 occlusion,
-                hidden_species: mask,
+                hidden: mdlod_render::HiddenSet::of_species(mask),
                 ..Default::default()
             };
             let mixed_clusters = |d: &DrawList| {
@@ -1336,7 +1337,7 @@ fn hidden_species_leave_no_cluster_holding_them() {
                 &cam,
                 &f,
                 &TraversalSettings {
-                    hidden_species: 0,
+                    hidden: mdlod_render::HiddenSet::default(),
                     occlusion: OcclusionMode::Off,
                     ..settings
                 },
@@ -1373,11 +1374,136 @@ fn hidden_species_leave_no_cluster_holding_them() {
         // Every species hidden: nothing.
         let all = TraversalSettings {
             viewport: VIEWPORT,
-            hidden_species: 0b111,
+            hidden: mdlod_render::HiddenSet::of_species(0b111),
             ..Default::default()
         };
         assert_eq!(traverse(&cam, &f, &all).points, 0);
     }
+}
+
+/// Hidden values (`--hide-attribute`): the bottom-up pass marks each node by the decoded
+/// values below it, the cut draws no cluster holding a hidden value and covers every
+/// other particle once, alone and with a hidden species; a range holding every value
+/// draws nothing, and one holding none changes no cut.
+#[test]
+fn hidden_values_leave_no_cluster_holding_them() {
+    let mut frame = cloud_frame(4000, 3);
+    let n = frame.positions.len();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "c_cna".into(),
+        values: (0..n)
+            .map(|i| [1.0f32, 1.0, 1.0, 2.0, 5.0][(i * 7) % 5])
+            .collect(),
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let cam = fitted_camera(&f);
+    let last = f.level_count() - 1;
+    let (species, attr) = (f.species(), f.attribute().unwrap());
+    let info = f.metadata().attribute.clone().unwrap();
+    let value = |i: usize| info.decode(attr[i]);
+    let below_of = |level: usize, i: usize| particles_below(&f, level, i, 1);
+    for (ranges, mask) in [
+        (vec![[0.5f32, 1.5]], 0u64),
+        (vec![[f32::NEG_INFINITY, 1.5], [4.5, f32::INFINITY]], 0),
+        (vec![[0.5, 1.5]], 0b100),
+    ] {
+        let set = mdlod_render::HiddenSet::of_species(mask)
+            .with_ranges(&ranges)
+            .unwrap();
+        let hidden = |i: usize| {
+            (mask >> species[i]) & 1 == 1
+                || ranges
+                    .iter()
+                    .any(|&[lo, hi]| lo <= value(i) && value(i) <= hi)
+        };
+        let kinds = f.hidden_below(&set);
+        for level in 0..last {
+            for i in 0..f.levels()[level].point_count as usize {
+                let (a, b) = below_of(level, i);
+                let want =
+                    u8::from((a..b).any(hidden)) | (2 * u8::from((a..b).any(|p| !hidden(p))));
+                assert_eq!(
+                    kinds[node_of(&f, level, i)],
+                    want,
+                    "{ranges:?}: level {level} node {i}"
+                );
+            }
+        }
+        for error in [0.0f32, 12.0, 50.0] {
+            let d = traverse(
+                &cam,
+                &f,
+                &TraversalSettings {
+                    viewport: VIEWPORT,
+                    error_px: error,
+                    budget_points: u64::MAX,
+                    occlusion: OcclusionMode::PixelCentres,
+                    hidden: set,
+                    ..Default::default()
+                },
+            );
+            check_counts(&f, &d);
+            for r in d.ranges.iter().filter(|r| (r.level as usize) < last) {
+                for i in r.first..r.first + r.count {
+                    let (a, b) = below_of(r.level as usize, i as usize);
+                    assert!(
+                        !(a..b).any(hidden),
+                        "{ranges:?} error {error}: a cluster holds a hidden value"
+                    );
+                }
+            }
+            for (i, &c) in coverage(&f, &d).iter().enumerate() {
+                let want = if hidden(i) { 0 } else { 1 };
+                assert_eq!(
+                    c, want,
+                    "{ranges:?} error {error}: particle {i} covered {c} times"
+                );
+            }
+        }
+    }
+    // Every value hidden: nothing. No value hidden: the cut of no hiding.
+    let every = mdlod_render::HiddenSet::default()
+        .with_ranges(&[[0.0, 6.0]])
+        .unwrap();
+    let none = mdlod_render::HiddenSet::default()
+        .with_ranges(&[[2.5, 4.5]])
+        .unwrap();
+    let settings = TraversalSettings {
+        viewport: VIEWPORT,
+        error_px: 4.0,
+        occlusion: OcclusionMode::Off,
+        ..Default::default()
+    };
+    assert_eq!(
+        traverse(
+            &cam,
+            &f,
+            &TraversalSettings {
+                hidden: every,
+                ..settings
+            }
+        )
+        .points,
+        0
+    );
+    let plain = traverse(&cam, &f, &settings);
+    let with_none = traverse(
+        &cam,
+        &f,
+        &TraversalSettings {
+            hidden: none,
+            ..settings
+        },
+    );
+    assert_eq!(coverage(&f, &plain), coverage(&f, &with_none));
+    // At most four ranges; a reversed one is none.
+    let r = [0.0f32, 1.0];
+    assert!(mdlod_render::HiddenSet::default()
+        .with_ranges(&[r; 5])
+        .is_none());
+    assert!(mdlod_render::HiddenSet::default()
+        .with_ranges(&[[2.0, 1.0]])
+        .is_none());
 }
 
 /// The species a cut shows are exactly those of the particles it covers (drawn, or below
@@ -1409,7 +1535,7 @@ fn species_drawn_are_those_of_the_particles_covered() {
                 viewport: VIEWPORT,
                 error_px: error,
                 occlusion: OcclusionMode::Off,
-                hidden_species: hidden,
+                hidden: mdlod_render::HiddenSet::of_species(hidden),
                 clip: mdlod_render::ClipPlanes::new(&clip).unwrap(),
                 ..Default::default()
             },
@@ -1614,7 +1740,7 @@ fn a_fitted_view_leaves_out_particles_far_from_the_rest() {
     };
     // Alone: the fit is the data's.
     let (_d, _p, f) = with(&[]);
-    let fit = fit_bounds(&f, 0, false);
+    let fit = fit_bounds(&f, mdlod_render::HiddenSet::default(), false);
     assert_eq!((fit.bounds, fit.far_particles), (data_bounds(&f), 0));
     let bulk_radius = data_bounds(&f).radius();
 
@@ -1625,7 +1751,7 @@ fn a_fitted_view_leaves_out_particles_far_from_the_rest() {
         [-800.0, -2500.0, 10.0],
     ];
     let (_d, _p, f) = with(&lost);
-    let fit = fit_bounds(&f, 0, false);
+    let fit = fit_bounds(&f, mdlod_render::HiddenSet::default(), false);
     assert_eq!(fit.far_particles, 3);
     let b = fit.bounds;
     assert!(
@@ -1642,7 +1768,7 @@ fn a_fitted_view_leaves_out_particles_far_from_the_rest() {
             "{p}"
         );
     }
-    let all = fit_bounds(&f, 0, true);
+    let all = fit_bounds(&f, mdlod_render::HiddenSet::default(), true);
     assert_eq!((all.bounds, all.far_particles), (data_bounds(&f), 0));
     // The view fitted to it still holds them in its depth range: drawn where seen.
     let opts = mdlod_render::RenderOptions {
@@ -1663,7 +1789,7 @@ fn a_fitted_view_leaves_out_particles_far_from_the_rest() {
 
     // A vapour atom a bulk's width above the surface is near: nothing is left out.
     let (_d, _p, f) = with(&[[20.0, 20.0, 80.0]]);
-    let fit = fit_bounds(&f, 0, false);
+    let fit = fit_bounds(&f, mdlod_render::HiddenSet::default(), false);
     assert_eq!((fit.bounds, fit.far_particles), (data_bounds(&f), 0));
 }
 

@@ -67,7 +67,7 @@ fn all_points(f: &MdlodFile, camera: &Camera, w: u32, h: u32) -> mdlod_render::D
             budget_points: u64::MAX,
             occlusion: OcclusionMode::Off,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: mdlod_render::HiddenSet::default(),
             clip: Default::default(),
         },
     )
@@ -260,7 +260,7 @@ fn kernels_reaching_into_the_view_from_outside_it_add_their_density() {
                 budget_points: u64::MAX,
                 occlusion: OcclusionMode::Off,
                 support_scale,
-                hidden_species: 0,
+                hidden: mdlod_render::HiddenSet::default(),
                 clip: Default::default(),
             },
         )
@@ -751,7 +751,7 @@ fn coarse_cuts_keep_the_volume_fraction_of_their_particles() {
                 budget_points: u64::MAX,
                 occlusion: OcclusionMode::Off,
                 support_scale: s.kernel_scale,
-                hidden_species: 0,
+                hidden: mdlod_render::HiddenSet::default(),
                 clip: Default::default(),
             },
         );
@@ -804,7 +804,7 @@ fn culling_keeps_every_cluster_whose_kernel_reaches_the_view() {
                 budget_points: u64::MAX,
                 occlusion: OcclusionMode::Off,
                 support_scale,
-                hidden_species: 0,
+                hidden: mdlod_render::HiddenSet::default(),
                 clip: Default::default(),
             },
         )

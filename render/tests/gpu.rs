@@ -63,7 +63,7 @@ fn cut(
             budget_points: u64::MAX,
             occlusion,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: mdlod_render::HiddenSet::default(),
             clip: Default::default(),
         },
     )
@@ -82,7 +82,7 @@ fn render_all(f: &MdlodFile, camera: &Camera, w: u32, h: u32, spp: u32) -> Rende
             budget_points: u64::MAX,
             occlusion: OcclusionMode::Off,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: mdlod_render::HiddenSet::default(),
             clip: Default::default(),
         },
     );
@@ -879,7 +879,7 @@ fn streaming_with_a_tiny_pool_converges_to_the_unlimited_image() {
                 budget_points: report.budget,
                 occlusion: OcclusionMode::PixelCentres,
                 support_scale: 0.0,
-                hidden_species: 0,
+                hidden: mdlod_render::HiddenSet::default(),
                 clip: Default::default(),
             };
             let (frame, draw, stats, frames) =
@@ -985,7 +985,7 @@ fn a_tight_pool_under_a_binding_budget_settles_on_the_direct_image() {
             budget_points: report.budget,
             occlusion,
             support_scale: 0.0,
-            hidden_species: 0,
+            hidden: mdlod_render::HiddenSet::default(),
             clip: Default::default(),
         };
         let used = {
@@ -1073,7 +1073,7 @@ fn a_corrupt_page_is_an_error_naming_the_particle_and_the_pool_stays_whole() {
         budget_points: u64::MAX,
         occlusion: OcclusionMode::PixelCentres,
         support_scale: 0.0,
-        hidden_species: 0,
+        hidden: mdlod_render::HiddenSet::default(),
         clip: Default::default(),
     };
     let camera = camera_for(&f, &whole, w, h).unwrap();
@@ -2391,6 +2391,81 @@ fn a_hidden_species_leaves_the_picture_of_the_data_without_it() {
     };
     assert!(differing(&all, &without) > 0.01, "silver atoms show");
     assert!(differing(&hidden, &without) < 0.002);
+}
+
+/// Hiding values (`--hide-attribute`) draws exactly the picture of the data without the
+/// particles of those values, with a coarse cut too (clusters of kept particles only).
+#[test]
+fn hidden_values_leave_the_picture_of_the_data_without_them() {
+    use mdlod_render::PointStyle;
+    let mut frame = fcc_frame(4);
+    let n = frame.positions.len();
+    let values: Vec<f32> = (0..n).map(|i| (i % 3) as f32).collect();
+    let keep: Vec<bool> = values.iter().map(|&v| v != 1.0).collect();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "c_cna".into(),
+        values: values.clone(),
+    });
+    let mut kept = frame.clone();
+    kept.positions = frame
+        .positions
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(p, _)| *p)
+        .collect();
+    kept.species_index = frame
+        .species_index
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(s, _)| *s)
+        .collect();
+    kept.attribute = Some(mdlod_preprocess::Attribute {
+        name: "c_cna".into(),
+        values: values.iter().copied().filter(|&v| v != 1.0).collect(),
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let (_d2, _p2, g) = make_file(&kept, small_build(), &[]);
+    let (w, h) = (96u32, 72u32);
+    let camera = camera_for(&f, &ViewSpec::default(), w, h).unwrap();
+    let mut o = opts(w, h);
+    o.view = ViewSpec::Camera(camera);
+    o.error_px = 0.0;
+    let (all, _) = render_image(renderer(), &f, &o).unwrap();
+    let (without, _) = render_image(renderer(), &g, &o).unwrap();
+    o.style = PointStyle {
+        hidden_values: vec![[0.5, 1.5]],
+        ..Default::default()
+    };
+    let (hidden, report) = render_image(renderer(), &f, &o).unwrap();
+    assert_eq!(
+        report.nodes_occluded, 0,
+        "occlusion culling is off for hiding styles"
+    );
+    assert!(report.particles_drawn > 0);
+    let differing = |a: &RgbaImage, b: &RgbaImage| {
+        a.data
+            .chunks_exact(4)
+            .zip(b.data.chunks_exact(4))
+            .filter(|(p, q)| (0..3).any(|k| p[k].abs_diff(q[k]) > 2))
+            .count() as f64
+            / f64::from(w * h)
+    };
+    assert!(
+        differing(&all, &without) > 0.01,
+        "the hidden atoms show unhidden"
+    );
+    assert!(differing(&hidden, &without) < 0.002);
+    // A file with no attribute refuses to hide by value.
+    let (_d3, _p3, plain) = make_file(&fcc_frame(2), small_build(), &[]);
+    let e = render_image(renderer(), &plain, &o)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no per-particle attribute to hide particles by"),
+        "{e}"
+    );
 }
 
 /// A renderer that draws every sphere as an impostor quad.

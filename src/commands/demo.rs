@@ -121,6 +121,7 @@ pub fn run(args: Args) -> Result<()> {
             species_colour: vec![],
             species_radius: vec![],
             hide_species: vec![],
+            hide_attribute: vec![],
             attribute_range: None,
             log_scale: false,
             clip: vec![],

@@ -213,6 +213,19 @@ pub struct StyleArgs {
     /// them and others is refined until it holds none); repeatable.
     #[arg(long = "hide-species", value_name = "NAME")]
     pub hide_species: Vec<String>,
+    /// Leave out the particles whose attribute value lies from MIN to MAX (inclusive;
+    /// an end left empty is open: `:0.2`, `2.5:`), as OVITO's expression selection and
+    /// delete: `--hide-attribute 0.5:1.5` leaves out the atoms a common-neighbour
+    /// analysis column calls fcc (1), showing the defects and surfaces; clusters holding
+    /// them and others are refined until they hold none; repeatable (up to 4). The file
+    /// must keep an attribute (convert with --attribute)
+    #[arg(
+        long = "hide-attribute",
+        value_name = "MIN:MAX",
+        allow_hyphen_values = true,
+        value_parser = parse_open_range
+    )]
+    pub hide_attribute: Vec<[f32; 2]>,
     /// The attribute values at the ends of --colour-map (and of --intensity attribute),
     /// e.g. `0:2.5`, instead of the file's own range (a movie's default: the range over
     /// all its frames), so that images made apart compare.
@@ -238,6 +251,31 @@ pub struct StyleArgs {
 }
 
 /// Parses `MIN:MAX` (finite, MAX above MIN).
+/// `MIN:MAX` where either end may be left empty (open: infinite), `MIN ≤ MAX`.
+pub fn parse_open_range(s: &str) -> Result<[f32; 2], String> {
+    let (lo, hi) = s
+        .split_once(':')
+        .ok_or_else(|| format!("{s:?}: expected MIN:MAX, e.g. 0.5:1.5, :0.2 or 2.5:"))?;
+    let num = |v: &str, open: f32| -> Result<f32, String> {
+        if v.trim().is_empty() {
+            return Ok(open);
+        }
+        v.trim()
+            .parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("{s:?}: {v:?} is not a finite number"))
+    };
+    let (lo, hi) = (num(lo, f32::NEG_INFINITY)?, num(hi, f32::INFINITY)?);
+    if lo.is_infinite() && hi.is_infinite() {
+        return Err(format!("{s:?}: both ends open would hide every value"));
+    }
+    if hi < lo {
+        return Err(format!("{s:?}: MAX must not be below MIN"));
+    }
+    Ok([lo, hi])
+}
+
 pub fn parse_range(s: &str) -> Result<[f32; 2], String> {
     let (lo, hi) = s
         .split_once(':')
@@ -342,6 +380,7 @@ impl StyleArgs {
             attribute_range: self.attribute_range,
             log_scale: self.log_scale,
             clip: self.clip.clone(),
+            hidden_values: self.hide_attribute.clone(),
             colour_map: self.colour_map.map(|m| match m {
                 ColourMapArg::Viridis => ColourMap::Viridis,
                 ColourMapArg::Magma => ColourMap::Magma,
@@ -1102,7 +1141,7 @@ pub fn run(args: Args) -> Result<()> {
     let file = mdlod_format::MdlodFile::open(&args.file)?;
     let species = &file.metadata().species;
     let points = point_noun(args.mode);
-    let hidden = hidden_text(&r);
+    let hidden = hidden_text(&r, &args.style);
     let limits = limits_text(&r, coarsest_points(&file), args.budget);
     let occluded = if r.nodes_occluded + r.particles_occluded > 0 {
         format!(
@@ -1254,6 +1293,10 @@ pub fn run(args: Args) -> Result<()> {
             opts.style.clip.is_empty(),
             r.nodes_occluded + r.particles_occluded,
         ) {
+            _ if !args.style.hide_attribute.is_empty() => {
+                "every particle in view has a value --hide-attribute hides (or the view \
+                 looks elsewhere)"
+            }
             // Every sphere in view fell between pixel centres.
             (true, n) if n > 0 => {
                 "every sphere in view is narrower than the pixels and falls between their \
@@ -1930,12 +1973,20 @@ fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
 
 /// After the particle count: how many particles of hidden species, or cut away by the
 /// clip planes, were left out.
-fn hidden_text(r: &mdlod_render::RenderReport) -> String {
+fn hidden_text(r: &mdlod_render::RenderReport, style: &StyleArgs) -> String {
     let mut parts = vec![];
     if r.particles_hidden > 0 {
+        let what = match (
+            style.hide_species.is_empty(),
+            style.hide_attribute.is_empty(),
+        ) {
+            (false, true) => "of hidden species",
+            (true, false) => "of hidden values (--hide-attribute)",
+            _ => "of hidden species or values",
+        };
         parts.push(format!(
-            "{} of hidden species left out of the clusters drawn; clusters of them only are \
-             left out whole",
+            "{} {what} left out of the clusters drawn; clusters of them only are left out \
+             whole",
             r.particles_hidden
         ));
     }
@@ -2151,7 +2202,7 @@ fn image_line(
         "wrote {} ({which}): {} particles{} and {} {}{}, error {:.2} px, {:.0} ms",
         out.display(),
         r.particles_drawn,
-        hidden_text(r),
+        hidden_text(r, &args.style),
         r.nodes_drawn,
         point_noun(args.mode),
         limits_text(r, coarsest, args.budget),

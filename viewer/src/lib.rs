@@ -150,7 +150,7 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     };
     // The material, less atoms lost far from it ([`mdlod_render::fit_bounds`]), as
     // `mdlod render` fits it.
-    let bounds = mdlod_render::fit_bounds(&first, 0, false).bounds;
+    let bounds = mdlod_render::fit_bounds(&first, mdlod_render::HiddenSet::default(), false).bounds;
     let camera = mdlod_render::camera_for_bounds(&bounds, &view, w, h)?;
     let mut state = ViewerState::new(frames, camera, bounds, [w, h]);
     state.settings.mode = opts.mode;

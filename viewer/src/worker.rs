@@ -440,7 +440,8 @@ impl<'r> Thread<'r> {
             self.bounds_sent = Some(path.to_path_buf());
             self.reply(Reply::Bounds {
                 path: path.to_path_buf(),
-                bounds: mdlod_render::fit_bounds(&file, 0, false).bounds,
+                bounds: mdlod_render::fit_bounds(&file, mdlod_render::HiddenSet::default(), false)
+                    .bounds,
             });
         }
         let mut opts = opts;
