@@ -2381,16 +2381,8 @@ fn a_hidden_species_leaves_the_picture_of_the_data_without_it() {
         report.nodes_occluded, 0,
         "occlusion culling is off for hiding styles"
     );
-    let differing = |a: &RgbaImage, b: &RgbaImage| {
-        a.data
-            .chunks_exact(4)
-            .zip(b.data.chunks_exact(4))
-            .filter(|(p, q)| (0..3).any(|k| p[k].abs_diff(q[k]) > 2))
-            .count() as f64
-            / f64::from(w * h)
-    };
-    assert!(differing(&all, &without) > 0.01, "silver atoms show");
-    assert!(differing(&hidden, &without) < 0.002);
+    assert!(differing(&all, &without, w, h) > 0.01, "silver atoms show");
+    assert!(differing(&hidden, &without, w, h) < 0.002);
 }
 
 /// Hiding values (`--hide-attribute`) draws exactly the picture of the data without the
@@ -2444,19 +2436,11 @@ fn hidden_values_leave_the_picture_of_the_data_without_them() {
         "occlusion culling is off for hiding styles"
     );
     assert!(report.particles_drawn > 0);
-    let differing = |a: &RgbaImage, b: &RgbaImage| {
-        a.data
-            .chunks_exact(4)
-            .zip(b.data.chunks_exact(4))
-            .filter(|(p, q)| (0..3).any(|k| p[k].abs_diff(q[k]) > 2))
-            .count() as f64
-            / f64::from(w * h)
-    };
     assert!(
-        differing(&all, &without) > 0.01,
+        differing(&all, &without, w, h) > 0.01,
         "the hidden atoms show unhidden"
     );
-    assert!(differing(&hidden, &without) < 0.002);
+    assert!(differing(&hidden, &without, w, h) < 0.002);
     // A file with no attribute refuses to hide by value.
     let (_d3, _p3, plain) = make_file(&fcc_frame(2), small_build(), &[]);
     let e = render_image(renderer(), &plain, &o)
@@ -2466,6 +2450,17 @@ fn hidden_values_leave_the_picture_of_the_data_without_them() {
         e.contains("no per-particle attribute to hide particles by"),
         "{e}"
     );
+}
+
+/// The share of a `w` × `h` image's pixels whose colours differ by more than 2 in some
+/// channel.
+fn differing(a: &RgbaImage, b: &RgbaImage, w: u32, h: u32) -> f64 {
+    a.data
+        .chunks_exact(4)
+        .zip(b.data.chunks_exact(4))
+        .filter(|(p, q)| (0..3).any(|k| p[k].abs_diff(q[k]) > 2))
+        .count() as f64
+        / f64::from(w * h)
 }
 
 /// A renderer that draws every sphere as an impostor quad.
