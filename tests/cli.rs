@@ -3152,6 +3152,116 @@ fn clip_planes_cut_the_particles_away() {
 /// `--legend-in-image` draws the legend into the picture: from a given view only the
 /// panel in the corner asked for changes, a fitted view frames the data clear of it,
 /// every image of a movie gets it, and an image too small is refused.
+/// `--label`: each image gets its own values in the panel's corner and nothing else
+/// changes; a placeholder it does not fill, and the legend's corner, are refused before
+/// anything is drawn; a value the frames lack is noted.
+#[test]
+fn a_label_shows_each_frames_values_in_its_corner() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let d = |n: &str| dir.path().join(n);
+    let file = d("m.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file)]);
+    let base = [
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--background",
+        "#000000",
+    ];
+    let view = d("v.json");
+    ok(&[
+        &["render", s(&file), "-o", s(&d("plain.png"))][..],
+        &base,
+        &["--save-view", s(&view)],
+    ]
+    .concat());
+    ok(&[
+        &["render", s(&file), "-o", s(&d("with.png"))][..],
+        &base,
+        &[
+            "--view",
+            s(&view),
+            "--label",
+            "step {timestep}",
+            "--label-corner",
+            "bottom-right",
+        ],
+    ]
+    .concat());
+    let ((w, h, a), (_, _, b)) = (read_png(&d("plain.png")), read_png(&d("with.png")));
+    let (mut inside, mut outside) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = 4 * (y * w + x) as usize;
+            if a[i..i + 4] != b[i..i + 4] {
+                // "step 500": 8 characters of 7 px and a margin, one line of 22 px.
+                if x >= w - 8 - (14 + 7 * 8) && y >= h - 8 - 22 {
+                    inside += 1;
+                } else {
+                    outside += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        outside == 0 && inside > 500,
+        "{inside} inside, {outside} outside"
+    );
+    // A movie: each frame's own timestep, so the images' corners differ.
+    let movie = d("m.d");
+    ok(&["batch", s(&input), "-o", s(&movie)]);
+    let out = ok(&[
+        &["render", s(&movie), "-o", s(&d("f-%d.png"))][..],
+        &base,
+        &["--label", "step {timestep} t={time}"],
+    ]
+    .concat());
+    let corner = |png: &str| {
+        let (w, _, px) = read_png(&d(png));
+        (0..30u32)
+            .flat_map(|y| (0..80u32).map(move |x| (x, y)))
+            .map(|(x, y)| px[4 * (y * w + x) as usize])
+            .collect::<Vec<u8>>()
+    };
+    assert_ne!(corner("f-0.png"), corner("f-1.png"));
+    assert!(!out.contains("records no time"), "{out}");
+    // A dump without a time: said, and `?` drawn.
+    std::fs::write(
+        d("nt.dump"),
+        "ITEM: TIMESTEP\n7\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS pp pp pp\n0 4\n0 4\n0 4\n\
+         ITEM: ATOMS id type x y z\n1 1 1 1 1\n2 1 3 3 3\n",
+    )
+    .unwrap();
+    ok(&["convert", s(&d("nt.dump")), "-o", s(&d("nt.mdlod"))]);
+    let out = ok(&[
+        &["render", s(&d("nt.mdlod")), "-o", s(&d("nt.png"))][..],
+        &base,
+        &["--label", "t={time}"],
+    ]
+    .concat());
+    assert!(
+        out.contains("--label: the file records no time: {time} shows ?"),
+        "{out}"
+    );
+    for (extra, message) in [
+        (
+            &["--label", "{step}"][..],
+            "{step} is no value a label fills in",
+        ),
+        (
+            &["--label", "x", "--legend-in-image=top-left"][..],
+            "both draw at the top-left corner",
+        ),
+    ] {
+        let png = d("no.png");
+        let e = fails(&[&["render", s(&file), "-o", s(&png)][..], &base, extra].concat());
+        assert!(e.contains(message), "{e}");
+        assert!(!png.exists());
+    }
+}
+
 #[test]
 fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     let dir = tempfile::tempdir().unwrap();

@@ -271,7 +271,12 @@ pub enum Legend {
         title: Option<String>,
         entries: Vec<(String, [f32; 3])>,
     },
+    /// Lines of text (a movie's timestep, a figure's caption), drawn into images only.
+    Text { lines: Vec<String> },
 }
+
+/// Baseline step of [`Legend::Text`]'s lines, px.
+const TEXT_ROW: f32 = 16.0;
 
 /// Height of a colour bar, px.
 const BAR_HEIGHT: f32 = 66.0;
@@ -359,6 +364,13 @@ impl Legend {
                         .chain(title.iter().map(|t| t.chars().count() as f32 * 7.5 - 30.0))
                         .fold(60.0, f32::max);
                 (width, height)
+            }
+            Legend::Text { lines } => {
+                let longest = lines.iter().map(|l| l.chars().count()).max().unwrap_or(0);
+                (
+                    14.0 + CHAR_WIDTH * longest as f32,
+                    6.0 + TEXT_ROW * lines.len().max(1) as f32,
+                )
             }
         }
     }
@@ -453,6 +465,16 @@ impl Legend {
                     );
                 }
             }
+            Legend::Text { lines } => {
+                for (k, line) in lines.iter().enumerate() {
+                    let _ = writeln!(
+                        svg,
+                        r#"<text x="7" y="{}">{}</text>"#,
+                        text_row(k),
+                        escape(line)
+                    );
+                }
+            }
         }
         svg.push_str("</svg>\n");
         svg
@@ -493,6 +515,7 @@ impl Legend {
                 .map(String::as_str)
                 .chain(entries.iter().map(|(n, _)| n.as_str()))
                 .collect(),
+            Legend::Text { lines } => lines.iter().map(String::as_str).collect(),
         };
         let mut missing: Vec<char> = texts
             .iter()
@@ -586,9 +609,19 @@ impl Legend {
                     panel.text(28.0, y + 4.0, name, Anchor::Start);
                 }
             }
+            Legend::Text { lines } => {
+                for (k, line) in lines.iter().enumerate() {
+                    panel.text(7.0, text_row(k), line, Anchor::Start);
+                }
+            }
         }
         Ok(())
     }
+}
+
+/// The baseline of [`Legend::Text`]'s line `k`, px.
+fn text_row(k: usize) -> f32 {
+    TEXT_ROW * (k + 1) as f32
 }
 
 /// Paints a legend's shapes, in its own pixels, into an image region.

@@ -130,6 +130,8 @@ pub fn run(args: Args) -> Result<()> {
         legend: None,
         legend_in_image: None,
         legend_title: None,
+        label: vec![],
+        label_corner: super::render::LegendCorner::TopLeft,
         cell: None,
         cell_width: None,
     })?;

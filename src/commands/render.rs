@@ -184,6 +184,143 @@ pub struct Args {
     /// The colour bar's title instead of the attribute's name, e.g. "E_kin (eV)".
     #[arg(long, value_name = "TEXT")]
     pub legend_title: Option<String>,
+    /// A line of text drawn into the image on a light panel (OVITO's text label), with
+    /// each frame's values put in for {timestep}, {time}, {frame} (the image's number),
+    /// {particles} and {file}: `--label "t = {time} ps"` on a movie; repeatable, a line
+    /// each
+    #[arg(long, value_name = "TEXT")]
+    pub label: Vec<String>,
+    /// Where --label draws its panel
+    #[arg(
+        long,
+        value_name = "CORNER",
+        default_value = "top-left",
+        ignore_case = true
+    )]
+    pub label_corner: LegendCorner,
+}
+
+/// The placeholders `--label` fills in.
+const LABEL_FIELDS: &[&str] = &["timestep", "time", "frame", "particles", "file"];
+
+/// One image's values for `--label`.
+#[derive(Clone, Debug, Default)]
+struct LabelValues {
+    timestep: Option<u64>,
+    time: Option<f64>,
+    frame: usize,
+    particles: u64,
+    file: String,
+}
+
+impl LabelValues {
+    /// The values of `file` (an .mdlod), shown as image `frame`.
+    fn of_file(path: &Path, meta: &mdlod_format::meta::Metadata, frame: usize) -> LabelValues {
+        LabelValues {
+            timestep: meta.timestep,
+            time: meta.time,
+            frame,
+            particles: meta.particles,
+            file: path
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+        }
+    }
+
+    /// `text` with its placeholders filled in; a value the frame lacks (a dump without a
+    /// time) shows `?`, and its name is returned.
+    fn fill(&self, text: &str) -> (String, Vec<&'static str>) {
+        let mut out = text.to_string();
+        let mut missing = Vec::new();
+        for &field in LABEL_FIELDS {
+            let key = format!("{{{field}}}");
+            if !out.contains(&key) {
+                continue;
+            }
+            let value = match field {
+                "timestep" => self.timestep.map(|t| t.to_string()),
+                "time" => self.time.map(|t| super::Num(t as f32).to_string()),
+                "frame" => Some(self.frame.to_string()),
+                "particles" => Some(self.particles.to_string()),
+                _ => Some(self.file.clone()),
+            };
+            if value.is_none() {
+                missing.push(field);
+            }
+            out = out.replace(&key, value.as_deref().unwrap_or("?"));
+        }
+        (out, missing)
+    }
+}
+
+/// Refuses a `--label` naming a placeholder it does not fill, or drawn where the legend
+/// is, before anything is drawn.
+fn check_label(args: &Args) -> Result<()> {
+    for text in &args.label {
+        let mut rest = text.as_str();
+        while let Some(open) = rest.find('{') {
+            let after = &rest[open + 1..];
+            let Some(close) = after.find('}') else { break };
+            let name = &after[..close];
+            if !LABEL_FIELDS.contains(&name) {
+                anyhow::bail!(
+                    "--label {text:?}: {{{name}}} is no value a label fills in (it has {})",
+                    LABEL_FIELDS
+                        .iter()
+                        .map(|f| format!("{{{f}}}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+            rest = &after[close + 1..];
+        }
+    }
+    if !args.label.is_empty() && args.legend_in_image == Some(args.label_corner) {
+        anyhow::bail!(
+            "--label and --legend-in-image both draw at the {} corner: give --label-corner \
+             another",
+            clap::ValueEnum::to_possible_value(&args.label_corner)
+                .map_or_else(String::new, |v| v.get_name().to_string())
+        );
+    }
+    Ok(())
+}
+
+/// Draws `--label` into each image, with its own values.
+fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
+    use mdlod_render::legend;
+    if args.label.is_empty() {
+        return Ok(());
+    }
+    let corner = match args.label_corner {
+        LegendCorner::TopLeft => legend::Corner::TopLeft,
+        LegendCorner::TopRight => legend::Corner::TopRight,
+        LegendCorner::BottomLeft => legend::Corner::BottomLeft,
+        LegendCorner::BottomRight => legend::Corner::BottomRight,
+    };
+    let mut missing = std::collections::BTreeSet::new();
+    for (image, values) in images {
+        let lines: Vec<String> = args
+            .label
+            .iter()
+            .map(|t| {
+                let (line, lacking) = values.fill(t);
+                missing.extend(lacking);
+                line
+            })
+            .collect();
+        let label = legend::Legend::Text { lines };
+        let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
+        let scale = label.scale_for(png.width, png.height).unwrap_or(1);
+        label
+            .draw(&mut png, corner, scale)
+            .map_err(|e| anyhow::anyhow!("--label: {}: {e}", image.display()))?;
+        png.save_png(image)?;
+    }
+    for field in missing {
+        println!("  note: --label: the file records no {field}: {{{field}}} shows ?");
+    }
+    Ok(())
 }
 
 /// The points' look, shared by `render` and `sample` (sphere and S-NDF modes).
@@ -957,6 +1094,7 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
     }
+    check_label(&args)?;
     if args.legend_title.is_some() && args.legend.is_none() && args.legend_in_image.is_none() {
         anyhow::bail!(
             "--legend-title titles a legend: give --legend FILE.svg or --legend-in-image"
@@ -1453,6 +1591,13 @@ pub fn run(args: Args) -> Result<()> {
         r.light_range,
         &drawn_names(&r, species, Default::default()),
         std::slice::from_ref(&args.output),
+    )?;
+    write_labels(
+        &args,
+        &[(
+            args.output.clone(),
+            LabelValues::of_file(&args.file, file.metadata(), 0),
+        )],
     )?;
     Ok(())
 }
@@ -2410,6 +2555,20 @@ fn render_turntable(
             &written,
         )?;
     }
+    if !args.label.is_empty() {
+        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let labelled: Vec<(PathBuf, LabelValues)> = written
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                (
+                    p.clone(),
+                    LabelValues::of_file(&args.file, file.metadata(), i),
+                )
+            })
+            .collect();
+        write_labels(args, &labelled)?;
+    }
     Ok(())
 }
 
@@ -2788,6 +2947,22 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         &drawn,
         &written,
     )?;
+    let labelled: Vec<(PathBuf, LabelValues)> = written
+        .iter()
+        .zip(&manifest.frames)
+        .enumerate()
+        .map(|(i, (p, f))| {
+            let values = LabelValues {
+                timestep: Some(f.timestep),
+                time: f.time,
+                frame: i,
+                particles: f.particles,
+                file: f.file.clone(),
+            };
+            (p.clone(), values)
+        })
+        .collect();
+    write_labels(args, &labelled)?;
     Ok(())
 }
 
