@@ -3262,6 +3262,77 @@ fn a_label_shows_each_frames_values_in_its_corner() {
     }
 }
 
+/// `--legend-category`: a key of named values in the colour map's colours instead of
+/// the bar, without the values hidden; refused without a colour map or a legend.
+#[test]
+fn a_legend_can_name_the_values_of_categories() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let d = |n: &str| dir.path().join(n);
+    let file = d("m.mdlod");
+    ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&file),
+        "--last",
+        "--attribute",
+        "c_pe",
+    ]);
+    let (png, svg) = (d("k.png"), d("k.svg"));
+    let base = [
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "48",
+        "--height",
+        "32",
+    ];
+    let out = ok(&[
+        &base[..],
+        &["--colour-map", "magma", "--legend", s(&svg)],
+        &[
+            "--legend-category=-3.5=bulk",
+            "--legend-category=-3.0=surface",
+        ],
+        &["--legend-category=-2.9=adatom", "--hide-attribute=-2.95:"],
+    ]
+    .concat());
+    assert!(out.contains("2 categories of c_pe"), "{out}");
+    let key = std::fs::read_to_string(&svg).unwrap();
+    assert!(
+        key.contains(">bulk</text>") && key.contains(">surface</text>") && !key.contains("adatom"),
+        "{key}"
+    );
+    assert!(key.contains(">c_pe</text>"), "{key}");
+    for (extra, message) in [
+        (
+            &["--legend-category", "1=a", "--legend", s(&svg)][..],
+            "it needs --colour-map",
+        ),
+        (
+            &["--legend-category", "1=a", "--colour-map", "grey"][..],
+            "give --legend FILE.svg",
+        ),
+        (
+            &[
+                "--legend-category",
+                "x=a",
+                "--colour-map",
+                "grey",
+                "--legend",
+                s(&svg),
+            ][..],
+            "\"x\" is not a finite number",
+        ),
+    ] {
+        let e = fails(&[&base[..], extra].concat());
+        assert!(e.contains(message), "{extra:?}: {e}");
+    }
+}
+
 #[test]
 fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     let dir = tempfile::tempdir().unwrap();

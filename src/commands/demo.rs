@@ -131,6 +131,7 @@ pub fn run(args: Args) -> Result<()> {
         legend_in_image: None,
         legend_title: None,
         label: vec![],
+        legend_category: vec![],
         label_corner: super::render::LegendCorner::TopLeft,
         cell: None,
         cell_width: None,

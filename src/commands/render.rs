@@ -190,6 +190,12 @@ pub struct Args {
     /// each
     #[arg(long, value_name = "TEXT")]
     pub label: Vec<String>,
+    /// A key of named values instead of the colour bar, for an attribute of categories
+    /// (a CNA column's structure types): `--legend-category 1=FCC --legend-category
+    /// 2=HCP ...`, each name beside a disc of the colour --colour-map gives its value;
+    /// repeatable. Values --hide-attribute hides are left out of the key
+    #[arg(long, value_name = "VALUE=NAME")]
+    pub legend_category: Vec<String>,
     /// Where --label draws its panel
     #[arg(
         long,
@@ -198,6 +204,30 @@ pub struct Args {
         ignore_case = true
     )]
     pub label_corner: LegendCorner,
+}
+
+/// `--legend-category VALUE=NAME` entries, in the order given.
+fn legend_categories(args: &Args) -> Result<Vec<(f32, String)>> {
+    args.legend_category
+        .iter()
+        .map(|entry| {
+            let (value, name) = entry
+                .split_once('=')
+                .filter(|(_, n)| !n.trim().is_empty())
+                .ok_or_else(|| {
+                    anyhow::anyhow!("--legend-category {entry:?}: expected VALUE=NAME, e.g. 1=FCC")
+                })?;
+            let value: f32 = value
+                .trim()
+                .parse()
+                .ok()
+                .filter(|v: &f32| v.is_finite())
+                .ok_or_else(|| {
+                    anyhow::anyhow!("--legend-category {entry:?}: {value:?} is not a finite number")
+                })?;
+            Ok((value, name.trim().to_string()))
+        })
+        .collect()
 }
 
 /// The placeholders `--label` fills in.
@@ -1095,6 +1125,20 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     check_label(&args)?;
+    legend_categories(&args)?;
+    if !args.legend_category.is_empty()
+        && !(matches!(args.mode, Mode::Spheres | Mode::Sndf) && args.style.colour_map.is_some())
+    {
+        anyhow::bail!(
+            "--legend-category names the colours --colour-map gives values: it needs \
+             --colour-map, with --mode spheres or sndf"
+        );
+    }
+    if !args.legend_category.is_empty() && args.legend.is_none() && args.legend_in_image.is_none() {
+        anyhow::bail!(
+            "--legend-category makes a legend's key: give --legend FILE.svg or --legend-in-image"
+        );
+    }
     if args.legend_title.is_some() && args.legend.is_none() && args.legend_in_image.is_none() {
         anyhow::bail!(
             "--legend-title titles a legend: give --legend FILE.svg or --legend-in-image"
@@ -1823,6 +1867,29 @@ fn build_legend(
                 legend::light_bar(map, &title, range, opts.style.log_scale),
                 format!("the colour map over the {title}"),
             )
+        }
+        (Mode::Spheres | Mode::Sndf, Some(map), Some(a)) if !args.legend_category.is_empty() => {
+            let scale =
+                mdlod_render::style::AttributeScale::with_range(a, opts.style.attribute_range)
+                    .with_log(opts.style.log_scale);
+            let mut entries = Vec::new();
+            for (value, label) in legend_categories(args)? {
+                let hidden = opts
+                    .style
+                    .hidden_values
+                    .iter()
+                    .any(|&[lo, hi]| lo <= value && value <= hi);
+                if !hidden {
+                    entries.push((label, map.colour(scale.of_value(value))));
+                }
+            }
+            let what = format!(
+                "{} categories of {} in the colour map's colours",
+                entries.len(),
+                a.name
+            );
+            let title = args.legend_title.as_deref().unwrap_or(&a.name);
+            (legend::species_key(&entries, Some(title)), what)
         }
         (Mode::Spheres | Mode::Sndf, Some(map), Some(a)) => {
             let scale =
