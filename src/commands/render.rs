@@ -1126,9 +1126,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     check_label(&args)?;
     legend_categories(&args)?;
-    if !args.legend_category.is_empty()
-        && !(matches!(args.mode, Mode::Spheres | Mode::Sndf) && args.style.colour_map.is_some())
-    {
+    let mapped_spheres =
+        matches!(args.mode, Mode::Spheres | Mode::Sndf) && args.style.colour_map.is_some();
+    if !args.legend_category.is_empty() && !mapped_spheres {
         anyhow::bail!(
             "--legend-category names the colours --colour-map gives values: it needs \
              --colour-map, with --mode spheres or sndf"
