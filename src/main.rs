@@ -83,13 +83,15 @@ enum Command {
 
 /// The options whose value is optional and so must follow an equals sign: a value given
 /// after a space is read as the next argument (`--cell red frame.mdlod` makes `red` the
-/// file and `frame.mdlod` unexpected). Where the command line has one so, the tip that
-/// says how to write it.
-fn equals_tip(args: impl Iterator<Item = String>) -> Option<String> {
+/// file and `frame.mdlod` unexpected). Where the argument clap found unexpected,
+/// `unexpected`, is such a value or the one after it, the tip that says how to write it.
+fn equals_tip(args: impl Iterator<Item = String>, unexpected: &str) -> Option<String> {
     const OPTIONAL_VALUE: &[&str] = &["--cell", "--legend-in-image"];
-    let args: Vec<String> = args.collect();
-    args.windows(2).find_map(|w| {
-        (OPTIONAL_VALUE.contains(&w[0].as_str()) && !w[1].starts_with('-')).then(|| {
+    let mut args: Vec<String> = args.collect();
+    args.push(String::new());
+    args.windows(3).find_map(|w| {
+        let culprit = w[1] == unexpected || (!w[2].is_empty() && w[2] == unexpected);
+        (OPTIONAL_VALUE.contains(&w[0].as_str()) && !w[1].starts_with('-') && culprit).then(|| {
             format!(
                 "{} takes its value after an equals sign: {}={} (with a space, `{}` is read \
                  as the next argument)",
@@ -104,9 +106,20 @@ fn main() -> std::process::ExitCode {
     let matches = match <Cli as clap::CommandFactory>::command().try_get_matches() {
         Ok(m) => m,
         Err(e) => {
-            let tip = (e.kind() == clap::error::ErrorKind::UnknownArgument)
-                .then(|| equals_tip(std::env::args().skip(1)))
-                .flatten();
+            let unexpected = match e.get(clap::error::ContextKind::InvalidArg) {
+                Some(clap::error::ContextValue::String(a)) => Some(a.clone()),
+                _ => None,
+            };
+            let tip = unexpected
+                .filter(|_| e.kind() == clap::error::ErrorKind::UnknownArgument)
+                .and_then(|a| {
+                    equals_tip(
+                        std::env::args_os()
+                            .skip(1)
+                            .map(|a| a.to_string_lossy().into_owned()),
+                        &a,
+                    )
+                });
             let _ = e.print();
             if let Some(tip) = tip {
                 eprintln!("\n  tip: {tip}");

@@ -1805,6 +1805,12 @@ fn first_mistakes_are_named_before_any_work() {
     );
     let err = fails(&["render", "--legend-in-image", "top-left", f, "-o", p]);
     assert!(err.contains("--legend-in-image=top-left"), "{err}");
+    // Not where another argument is at fault (`--cell FILE` is right as it stands).
+    let err = fails(&["render", "--cell", f, "-o", p, "--widht", "10"]);
+    assert!(
+        err.contains("unexpected argument '--widht'") && !err.contains("after an equals sign"),
+        "{err}"
+    );
     let view = dir.path().join("nodir").join("v.json");
     let err = fails(&["render", f, "-o", p, "--save-view", s(&view)]);
     assert!(err.contains("does not exist"), "{err}");

@@ -109,10 +109,12 @@ impl DensitySettings {
                 self.density_min, self.density_max
             ));
         }
-        if self.log && self.density_min <= 0.0 {
+        // (Not subnormal either: a GPU may flush it to 0, and log(φ / 0) is no scale.)
+        if self.log && self.density_min < f32::MIN_POSITIVE {
             return Err(format!(
-                "--density-min {} on a log scale (must be above 0)",
-                self.density_min
+                "--density-min {} on a log scale (must be above 0, at least {:e})",
+                self.density_min,
+                f32::MIN_POSITIVE
             ));
         }
         // Named as `mdlod render` names it.

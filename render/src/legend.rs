@@ -195,9 +195,23 @@ fn linear_labels(
             ends,
         );
     }
+    // Fixed notation throughout, as many decimals as the step needs (0.0005 beside
+    // 0.0010, not 5e-4).
+    let places = if step > 0.0 && step.is_finite() {
+        ((-step.log10().floor()).max(0.0) as usize).min(12)
+    } else {
+        3
+    };
     let labels: Vec<(f64, String)> = ticks
         .into_iter()
-        .map(|v| (v, tick_label(v, step)))
+        .map(|v| {
+            let text = format!("{v:.places$}");
+            let zero = text
+                .trim_start_matches('-')
+                .chars()
+                .all(|c| c == '0' || c == '.');
+            (v, if zero { "0".to_string() } else { text })
+        })
         .collect();
     let decimals = |text: &str| text.split_once('.').map_or(0, |(_, d)| d.len());
     let wanted = labels.iter().map(|(_, t)| decimals(t)).max().unwrap_or(0);
@@ -215,6 +229,19 @@ fn linear_labels(
     };
     let [low, high] = ends;
     (labels, [pad(lo, low), pad(hi, high)])
+}
+
+/// A log bar's tick labels, in one notation: scientific for all where some tick needs it
+/// (`1e-4 … 1e-1`, not `1e-4, 0.001, …`), else each value's own shortest text.
+fn log_labels(ticks: Vec<f64>) -> Vec<(f64, String)> {
+    let scientific_all = ticks.iter().any(|v| needs_scientific(v.abs()));
+    ticks
+        .into_iter()
+        .map(|v| match scientific_all {
+            true => (v, scientific(v)),
+            false => (v, tick_label(v, v)),
+        })
+        .collect()
 }
 
 /// Powers of ten from `lo` to `hi` (both above 0); with fewer than two of them, also 2
@@ -732,10 +759,7 @@ pub fn colour_bar(
     }
     match scale.log_range() {
         Some([lo, hi]) => {
-            let ticks: Vec<(f64, String)> = log_ticks(lo, hi)
-                .into_iter()
-                .map(|v| (v, tick_label(v, v)))
-                .collect();
+            let ticks = log_labels(log_ticks(lo, hi));
             // A range from 0 or below starts the scale decades below its top: values at
             // or below that take its colour.
             let [low, high] = end_labels(lo, hi);
@@ -795,10 +819,7 @@ pub fn density_bar(density_min: f32, density_max: f32, log: bool) -> Legend {
     let colour = |t: f32| crate::density::transfer_colour(t).to_array();
     if log && min > 0.0 && max > min {
         let [low, high] = end_labels(min, max);
-        let ticks: Vec<(f64, String)> = log_ticks(min, max)
-            .into_iter()
-            .map(|v| (v, tick_label(v, v)))
-            .collect();
+        let ticks = log_labels(log_ticks(min, max));
         let span = (max / min).ln();
         return bar(
             "volume fraction φ (log scale)",
@@ -1228,6 +1249,17 @@ mod tests {
         // Padding never drops an end's own digits.
         let (_, ends) = labels(0.0348, 0.7177);
         assert_eq!(ends, ["0.0348", "0.7177"]);
+        // Small values: fixed notation throughout (no 5e-4 beside 0.0010).
+        let (ticks, _) = labels(0.0, 0.002);
+        assert!(ticks.iter().all(|t| !t.contains('e')), "{ticks:?}");
+        assert!(ticks.contains(&"0.0005".to_string()), "{ticks:?}");
+        // A log bar over decades below 10⁻³: every tick scientific.
+        let svg = density_bar(1e-4, 0.5, true).svg();
+        let (_, ticks) = ticks_of(&svg);
+        assert!(
+            ticks.len() >= 3 && ticks.iter().all(|t| t.contains('e')),
+            "{ticks:?}"
+        );
     }
 
     #[test]

@@ -1283,6 +1283,9 @@ pub fn frame_setup(
             species.len()
         )));
     }
+    // Every mode's style, checked whole here (the packers check the styles they draw
+    // with, which in the splat and volume modes are not the user's).
+    opts.style.validate().map_err(RenderError::InvalidOptions)?;
     if !opts.style.hidden_values.is_empty() && file.metadata().attribute.is_none() {
         return Err(RenderError::InvalidOptions(
             "the file has no per-particle attribute to hide particles by (a file keeps the \

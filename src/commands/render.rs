@@ -417,7 +417,6 @@ pub struct StyleArgs {
     pub clip: Vec<[f32; 4]>,
 }
 
-/// Parses `MIN:MAX` (finite, MAX above MIN).
 /// `MIN:MAX` where either end may be left empty (open: infinite), `MIN ≤ MAX`.
 pub fn parse_open_range(s: &str) -> Result<[f32; 2], String> {
     let (lo, hi) = s
@@ -443,6 +442,7 @@ pub fn parse_open_range(s: &str) -> Result<[f32; 2], String> {
     Ok([lo, hi])
 }
 
+/// Parses `MIN:MAX` (finite, MAX above MIN).
 pub fn parse_range(s: &str) -> Result<[f32; 2], String> {
     let (lo, hi) = s
         .split_once(':')
@@ -532,6 +532,14 @@ impl StyleArgs {
             radii.push((entry(&name), v));
         }
         let hidden: Vec<usize> = self.hide_species.iter().map(|n| entry(n)).collect();
+        if self.hide_attribute.len() > mdlod_format::reader::MAX_HIDDEN_RANGES {
+            anyhow::bail!(
+                "--hide-attribute given {} times: at most {} ranges (join neighbouring ones, \
+                 or leave an end open: `:0.2`, `2.5:`)",
+                self.hide_attribute.len(),
+                mdlod_format::reader::MAX_HIDDEN_RANGES
+            );
+        }
         for (i, c) in colours {
             species[i].colour = Some(c);
         }
@@ -1442,8 +1450,8 @@ pub fn run(args: Args) -> Result<()> {
                 _ => ("s", "", "them"),
             };
             println!(
-                "  note: {} {}{s} still hold{verb} hidden species: the point budget stopped \
-                 refining {pronoun}; a larger --budget refines {pronoun}",
+                "  note: {} {}{s} still hold{verb} hidden species or values: the point budget \
+                 stopped refining {pronoun}; a larger --budget refines {pronoun}",
                 r.clusters_mixed,
                 point_noun(args.mode).trim_end_matches('s')
             );
@@ -1475,15 +1483,15 @@ pub fn run(args: Args) -> Result<()> {
             opts.style.clip.is_empty(),
             r.nodes_occluded + r.particles_occluded,
         ) {
-            _ if !args.style.hide_attribute.is_empty() => {
-                "every particle in view has a value --hide-attribute hides (or the view \
-                 looks elsewhere)"
-            }
             // Every sphere in view fell between pixel centres.
             (true, n) if n > 0 => {
                 "every sphere in view is narrower than the pixels and falls between their \
                  centres (atoms far away fitted with --fit-all shrink the rest to a dot?): \
                  --zoom, --radius-scale or a larger image shows them"
+            }
+            (true, _) if !args.style.hide_attribute.is_empty() => {
+                "every particle in view has a value --hide-attribute hides (or the view \
+                 looks elsewhere)"
             }
             (true, _) => {
                 "none of the data is in view (a --target, --zoom or view file that looks \

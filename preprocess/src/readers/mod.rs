@@ -1060,7 +1060,8 @@ impl DumpFile {
     }
 
     /// Refuses a size column named for an input that gives sizes by no column: GSD
-    /// (`particles/diameter`), MMPLD (`xyzr` lists) and raw arrays (none).
+    /// (`particles/diameter`), MMPLD (`xyzr` lists) and raw arrays (their sidecar's
+    /// `radius` or `diameter` array).
     fn check_sizes(&self, opts: &ReadOptions) -> Result<(), ReadError> {
         let named = opts.sizes.named_column();
         let how = match &self.index {

@@ -25,7 +25,7 @@ pub const MIN_SIGMA_PX: f32 = 0.7;
 pub const EDGE: f32 = 0.002_187_491_1;
 /// Below this sigma (pixels) the kernel's sum over the pixels is taken pixel by pixel;
 /// from it on, its integral stands for it.
-const EXACT_BELOW: f32 = 2.0;
+const EXACT_BELOW: f32 = 2.5;
 
 /// The Gaussian's sigma (pixels) for a point of projected radius `r_px`.
 pub fn splat_sigma(r_px: f32) -> f32 {
@@ -44,7 +44,7 @@ pub fn kernel(d2: f32, sigma: f32) -> f32 {
 }
 
 /// The kernel's sum over the pixel centres `(i + 0.5, j + 0.5)` around a splat centred at
-/// `(cx, cy)`: exact below 2 px of sigma, its integral above (the WGSL's `kernel_sum`).
+/// `(cx, cy)`: exact below 2.5 px of sigma, its integral above (the WGSL's `kernel_sum`).
 pub fn kernel_sum(cx: f32, cy: f32, sigma: f32) -> f32 {
     let limit = TRUNCATION * sigma;
     if sigma >= EXACT_BELOW {
@@ -176,8 +176,10 @@ mod tests {
             0.9,
             1.0,
             1.99,
-            2.0,
+            2.06,
+            2.49,
             2.5,
+            2.56,
             7.9,
             31.0,
             40.0,
@@ -195,7 +197,7 @@ mod tests {
                         sum += f64::from(splat_weight(dx, dy, cx, cy, sigma));
                     }
                 }
-                // Exact below 2 px (up to f32 rounding), the continuous mass above.
+                // Exact below 2.5 px (up to f32 rounding), the continuous mass above.
                 let tol = if sigma < EXACT_BELOW { 1e-5 } else { 1e-4 };
                 assert!(
                     (sum - 1.0).abs() < tol,

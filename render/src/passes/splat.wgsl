@@ -9,9 +9,9 @@
 // continuously to 0 on a circle (a square cut left every splat a hard-edged box on a log
 // map, 0.2 % of its peak high). A point smaller than a pixel therefore keeps its energy
 // while its peak brightness falls with r_px^2: Eq. 3's alpha attenuation. The kernel's
-// sum over the pixel centres it covers is taken exactly below sigma = 2 px and from its
+// sum over the pixel centres it covers is taken exactly below sigma = 2.5 px and from its
 // integral above (sampled at unit spacing, a kernel continuous at its edge sums to its
-// integral within 1e-4 there), so the sum over the image of every point's weights is 1
+// integral within 7e-5 there), so the sum over the image of every point's weights is 1
 // to within 1e-4 and the image's total flux is the sum of the points' fluxes. Blending
 // is additive into a 32-bit float target; tone mapping happens on the host.
 //
@@ -27,7 +27,7 @@ const TRUNCATION: f32 = 3.5;
 const MIN_SIGMA_PX: f32 = 0.7;
 // exp(-TRUNCATION^2 / 2): the Gaussian's value at the cut, taken off the whole kernel.
 const EDGE: f32 = 0.0021874911;
-const EXACT_BELOW: f32 = 2.0;
+const EXACT_BELOW: f32 = 2.5;
 
 // The kernel at squared distance `d2` (px^2) from the centre: 0 from the cut on.
 fn kernel(d2: f32, sigma: f32) -> f32 {
