@@ -124,6 +124,36 @@ impl AttributeInfo {
     pub fn decode(&self, q: u16) -> f32 {
         self.min + (self.max - self.min) * (f32::from(q) / 65535.0)
     }
+
+    /// The quantized value a writer stores for `value`: the nearest, clamped to the
+    /// range (0 for a range of one value).
+    pub fn encode(&self, value: f32) -> u16 {
+        let span = self.max - self.min;
+        if span > 0.0 {
+            ((value - self.min) / span * 65535.0)
+                .round()
+                .clamp(0.0, 65535.0) as u16
+        } else {
+            0
+        }
+    }
+
+    /// The quantized values a writer stores for the values from `lo` to `hi`
+    /// (inclusive; either end may be infinite): the codes of the ends, so that a value
+    /// stored for an end is in the range whatever its rounding (`2:2` holds the 2s of a
+    /// column of integers). `None` where the range misses the attribute's.
+    pub fn codes(&self, [lo, hi]: [f32; 2]) -> Option<(u16, u16)> {
+        if lo.is_nan() || hi.is_nan() || lo > hi || hi < self.min || lo > self.max {
+            return None;
+        }
+        let a = if lo <= self.min { 0 } else { self.encode(lo) };
+        let b = if hi >= self.max {
+            u16::MAX
+        } else {
+            self.encode(hi)
+        };
+        Some((a, b))
+    }
 }
 
 /// Where the particles came from.
@@ -248,6 +278,62 @@ impl Metadata {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A range's ends are compared as the writer stores them: a column of integers 1 to 5
+    /// keeps 2, 3 and 4 a little off (2.00006), and `2:2` still holds every 2; a decimal
+    /// end holds the values stored for it; a range beside the attribute's holds nothing.
+    #[test]
+    fn value_ranges_hold_the_values_stored_for_their_ends() {
+        let info = AttributeInfo {
+            name: "c_cna".into(),
+            min: 1.0,
+            max: 5.0,
+        };
+        for v in [1.0f32, 2.0, 3.0, 4.0, 5.0] {
+            let q = info.encode(v);
+            let (a, b) = info.codes([v, v]).unwrap();
+            assert!(a <= q && q <= b, "{v}: {q} outside {a}..{b}");
+            // Its neighbours' codes are not in it.
+            for w in [v - 1.0, v + 1.0]
+                .into_iter()
+                .filter(|w| (1.0..=5.0).contains(w))
+            {
+                let r = info.encode(w);
+                assert!(!(a <= r && r <= b), "{v}:{v} holds {w}");
+            }
+        }
+        assert_ne!(
+            info.decode(info.encode(2.0)),
+            2.0,
+            "the test needs an inexact 2"
+        );
+        let (a, b) = info.codes([1.0, 2.0]).unwrap();
+        assert!(a <= info.encode(2.0) && info.encode(2.0) <= b);
+        let ke = AttributeInfo {
+            name: "c_ke".into(),
+            min: 0.0,
+            max: 0.7087,
+        };
+        let (a, b) = ke.codes([0.1, 0.3]).unwrap();
+        assert!(a <= ke.encode(0.3) && ke.encode(0.3) <= b && a <= ke.encode(0.1));
+        let (a, _) = ke.codes([0.2, f32::INFINITY]).unwrap();
+        assert!(a <= ke.encode(0.2));
+        assert_eq!(info.codes([6.0, 9.0]), None);
+        assert_eq!(info.codes([f32::NEG_INFINITY, 0.5]), None);
+        assert_eq!(
+            info.codes([f32::NEG_INFINITY, f32::INFINITY]),
+            Some((0, u16::MAX))
+        );
+        assert_eq!(info.codes([5.0, f32::INFINITY]), Some((u16::MAX, u16::MAX)));
+        // One value throughout: held by a range around it.
+        let flat = AttributeInfo {
+            name: "m".into(),
+            min: 2.0,
+            max: 2.0,
+        };
+        assert_eq!(flat.codes([1.0, 3.0]), Some((0, u16::MAX)));
+        assert_eq!(flat.codes([3.0, 4.0]), None);
+    }
 
     fn metadata() -> Metadata {
         Metadata {

@@ -155,10 +155,26 @@ impl HiddenSet {
         self.species == 0 && self.count == 0
     }
 
-    /// Whether a particle of species index `s` and attribute value `value` is hidden.
-    pub fn hides(&self, s: u16, value: Option<f32>) -> bool {
+    /// The ranges as quantized values of an attribute stored as `info` says
+    /// ([`AttributeInfo::codes`]): those that meet its range, and how many.
+    pub fn codes(
+        &self,
+        info: &crate::meta::AttributeInfo,
+    ) -> ([(u16, u16); MAX_HIDDEN_RANGES], usize) {
+        let mut out = [(0, 0); MAX_HIDDEN_RANGES];
+        let mut n = 0;
+        for c in self.ranges().iter().filter_map(|&r| info.codes(r)) {
+            out[n] = c;
+            n += 1;
+        }
+        (out, n)
+    }
+
+    /// Whether a particle of species index `s` and quantized attribute value `q` is
+    /// hidden, with the ranges as `codes` ([`Self::codes`]).
+    pub fn hides(&self, s: u16, q: Option<u16>, codes: &[(u16, u16)]) -> bool {
         in_species_set(self.species, usize::from(s))
-            || value.is_some_and(|v| self.ranges().iter().any(|&[lo, hi]| lo <= v && v <= hi))
+            || q.is_some_and(|q| codes.iter().any(|&(a, b)| a <= q && q <= b))
     }
 }
 
@@ -836,16 +852,25 @@ impl MdlodFile {
         let Some(&s) = self.species().get(i) else {
             return false;
         };
-        set.hides(s, self.attribute_value(set, i))
+        let (codes, n) = self.hidden_codes(set);
+        set.hides(s, self.attribute_code(&codes[..n], i), &codes[..n])
     }
 
-    /// Particle `i`'s decoded attribute value where `set` hides some by value.
-    fn attribute_value(&self, set: &HiddenSet, i: usize) -> Option<f32> {
-        if set.ranges().is_empty() {
+    /// `set`'s value ranges as this file's quantized attribute values (none without an
+    /// attribute), and how many.
+    fn hidden_codes(&self, set: &HiddenSet) -> ([(u16, u16); MAX_HIDDEN_RANGES], usize) {
+        match &self.metadata().attribute {
+            Some(info) if !set.ranges().is_empty() => set.codes(info),
+            _ => ([(0, 0); MAX_HIDDEN_RANGES], 0),
+        }
+    }
+
+    /// Particle `i`'s quantized attribute value where some range may hide it.
+    fn attribute_code(&self, codes: &[(u16, u16)], i: usize) -> Option<u16> {
+        if codes.is_empty() {
             return None;
         }
-        let info = self.metadata().attribute.as_ref()?;
-        self.attribute()?.get(i).map(|&q| info.decode(q))
+        self.attribute()?.get(i).copied()
     }
 
     fn compute_hidden_below(&self, set: &HiddenSet) -> Vec<u8> {
@@ -854,8 +879,10 @@ impl MdlodFile {
         let Some(last) = levels.len().checked_sub(1) else {
             return kinds;
         };
+        let (codes, n) = self.hidden_codes(set);
+        let codes = &codes[..n];
         let of = |i: usize, s: u16| {
-            if set.hides(s, self.attribute_value(set, i)) {
+            if set.hides(s, self.attribute_code(codes, i), codes) {
                 BELOW_IN
             } else {
                 BELOW_OUT

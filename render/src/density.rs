@@ -92,7 +92,7 @@ impl DensitySettings {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(format!("{what} {v} (must be positive)"))
+                Err(format!("{what} {v} (must be a finite number above 0)"))
             }
         };
         positive(self.kernel_scale, "kernel scale")?;

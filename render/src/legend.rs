@@ -216,7 +216,7 @@ fn linear_labels(
     let decimals = |text: &str| text.split_once('.').map_or(0, |(_, d)| d.len());
     let wanted = labels.iter().map(|(_, t)| decimals(t)).max().unwrap_or(0);
     let pad = |v: f64, text: String| {
-        if text.contains('e') || decimals(&text) >= wanted {
+        if text.contains('e') || text == "0" || decimals(&text) >= wanted {
             return text;
         }
         let padded = format!("{v:.wanted$}");
@@ -255,7 +255,14 @@ pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
         (lo.log10() - 1e-6).ceil() as i32,
         (hi.log10() + 1e-6).floor() as i32,
     );
-    let decades: Vec<f64> = (a..=b).map(|k| 10f64.powi(k)).collect();
+    // At most about eight ticks, evenly spaced: every decade, or every k-th (multiples
+    // of k, so 10⁻⁶, 10⁰, 10⁶, ... over 60 decades), so the labels the bar has room for
+    // are regular.
+    let step = ((b - a + 1) as usize).div_ceil(8).max(1) as i32;
+    let decades: Vec<f64> = (a..=b)
+        .filter(|k| k.rem_euclid(step) == 0)
+        .map(|k| 10f64.powi(k))
+        .collect();
     if decades.len() >= 2 {
         return decades;
     }
@@ -301,6 +308,9 @@ pub enum Legend {
     /// Lines of text (a movie's timestep, a figure's caption), drawn into images only.
     Text { lines: Vec<String> },
 }
+
+/// The least room between two labels under a bar, px.
+const LABEL_GAP: f32 = 6.0;
 
 /// Baseline step of [`Legend::Text`]'s lines, px.
 const TEXT_ROW: f32 = 16.0;
@@ -351,8 +361,8 @@ fn bar(
     let x_of = |t: f32| BAR[0] + t.clamp(0.0, 1.0) * (BAR[1] - BAR[0]);
     // The ticks' labels that leave room to the ends' and to each other.
     let width_of = |text: &str| CHAR_WIDTH * text.chars().count() as f32;
-    let mut free_from = BAR[0] + width_of(&ends[0]) + 10.0;
-    let free_to = BAR[1] - width_of(&ends[1]) - 10.0;
+    let mut free_from = BAR[0] + width_of(&ends[0]) + LABEL_GAP;
+    let free_to = BAR[1] - width_of(&ends[1]) - LABEL_GAP;
     let ticks = ticks
         .iter()
         .map(|(v, label)| {
@@ -360,7 +370,7 @@ fn bar(
             let half = width_of(label) / 2.0;
             let fits = x - half >= free_from && x + half <= free_to;
             if fits {
-                free_from = x + half + 10.0;
+                free_from = x + half + LABEL_GAP;
             }
             (x, fits.then(|| label.clone()))
         })
@@ -813,28 +823,29 @@ pub fn light_bar(map: ColourMap, title: &str, [lo, hi]: [f32; 2], log: bool) -> 
 
 /// The density volume's transfer function: volume fraction φ from `density_min` (clear
 /// at and below it) to `density_max`, or its logarithm between them when `log`
-/// ([`crate::density::transfer_t`]).
-pub fn density_bar(density_min: f32, density_max: f32, log: bool) -> Legend {
+/// ([`crate::density::transfer_t`]), under `title` (by default "volume fraction φ").
+pub fn density_bar(density_min: f32, density_max: f32, log: bool, title: Option<&str>) -> Legend {
+    let title = title.unwrap_or("volume fraction φ");
     let (min, max) = (f64::from(density_min), f64::from(density_max));
     let colour = |t: f32| crate::density::transfer_colour(t).to_array();
     if log && min > 0.0 && max > min {
         let [low, high] = end_labels(min, max);
         let ticks = log_labels(log_ticks(min, max));
         let span = (max / min).ln();
+        // (Below the bottom the volume is clear, not the bottom's colour: no `≤`.)
         return bar(
-            "volume fraction φ (log scale)",
+            &format!("{title} (log scale)"),
             &colour,
             &|v| ((v / min).ln() / span) as f32,
             &ticks,
-            [format!("≤ {low}"), format!("≥ {high}")],
+            [low, format!("≥ {high}")],
         );
     }
     let (ticks, step) = linear_ticks(min, max, 4);
     let (ticks, [low, high]) = linear_labels(ticks, step, [min, max]);
     let high = format!("≥ {high}");
-    let low = if min > 0.0 { format!("≤ {low}") } else { low };
     bar(
-        "volume fraction φ",
+        title,
         &colour,
         &|v| ((v - min) / (max - min)) as f32,
         &ticks,
@@ -992,7 +1003,7 @@ mod tests {
 
     #[test]
     fn the_density_bar_and_species_key_show_the_colours_drawn() {
-        let svg = density_bar(0.0, 0.8, false).svg();
+        let svg = density_bar(0.0, 0.8, false, None).svg();
         let stops = stops_of(&svg);
         assert_eq!(
             stops[0],
@@ -1014,10 +1025,10 @@ mod tests {
             log: true,
             ..Default::default()
         };
-        let svg = density_bar(s.density_min, s.density_max, true).svg();
+        let svg = density_bar(s.density_min, s.density_max, true, None).svg();
         assert!(svg.contains("volume fraction φ (log scale)"), "{svg}");
         assert!(
-            svg.contains(">≤ 0.001</text>") && svg.contains(">≥ 10</text>"),
+            svg.contains(">0.001</text>") && svg.contains(">≥ 10</text>"),
             "{svg}"
         );
         let (xs, labels) = ticks_of(&svg);
@@ -1033,8 +1044,11 @@ mod tests {
             hex(crate::density::transfer_colour(0.5).to_array())
         );
         // A linear bar from above 0 marks its low end as a bound.
-        let svg = density_bar(0.2, 0.8, false).svg();
-        assert!(svg.contains(">≤ 0.2</text>"), "{svg}");
+        let svg = density_bar(0.2, 0.8, false, Some("rho")).svg();
+        assert!(
+            svg.contains(">0.2</text>") && svg.contains(">rho</text>"),
+            "{svg}"
+        );
         let key = species_key(
             &[
                 ("Cu".into(), [1.0, 0.0, 0.0]),
@@ -1250,11 +1264,12 @@ mod tests {
         let (_, ends) = labels(0.0348, 0.7177);
         assert_eq!(ends, ["0.0348", "0.7177"]);
         // Small values: fixed notation throughout (no 5e-4 beside 0.0010).
-        let (ticks, _) = labels(0.0, 0.002);
+        let (ticks, ends) = labels(0.0, 0.002);
         assert!(ticks.iter().all(|t| !t.contains('e')), "{ticks:?}");
+        assert_eq!(ends[0], "0");
         assert!(ticks.contains(&"0.0005".to_string()), "{ticks:?}");
         // A log bar over decades below 10⁻³: every tick scientific.
-        let svg = density_bar(1e-4, 0.5, true).svg();
+        let svg = density_bar(1e-4, 0.5, true, None).svg();
         let (_, ticks) = ticks_of(&svg);
         assert!(
             ticks.len() >= 3 && ticks.iter().all(|t| t.contains('e')),

@@ -660,8 +660,8 @@ pub const FIT_MARGIN: f32 = 1.0;
 /// file's), less particles far from the rest (lost atoms flying off a non-periodic box,
 /// a sparse vapour around a droplet), which would shrink the material to a dot. A
 /// particle is far when it lies outside the box of the bulk (the 1st to 99th percentile
-/// along each axis, weighted by the clusters' areas on the first level of at least 1024
-/// nodes) grown by [`FIT_MARGIN`] times its largest extent. The far ones are left out
+/// along each axis, each cluster of the first level of at least 1024 counted
+/// once) grown by [`FIT_MARGIN`] times its largest extent. The far ones are left out
 /// only where that matters: when the whole shown data's bounding sphere is more than
 /// twice the rest's; else (and with `all`) the bounds are the shown data's, and none
 /// is counted far.
@@ -855,8 +855,11 @@ fn trimmed_bounds(file: &MdlodFile, hidden: HiddenSet) -> Option<FitBounds> {
     let last = levels.len().checked_sub(1)?;
     let kind_of = species_kinds(file, hidden);
     // What places the bulk: the centres of the clusters of the first level of at least
-    // 1024, weighted by their areas; in a file without one (a few thousand particles),
-    // the particles themselves, each weighted by its area.
+    // 1024, each counted once (the PCA splits cut clusters by count, so a level's
+    // clusters hold about as many particles each); in a file without one (a few
+    // thousand particles), the particles themselves. Not by area: particles of their own
+    // sizes spanning decades (an SPH run's smoothing lengths) made the small, dense ones
+    // "far" from the large ones' bulk.
     let mut sample: Vec<(glam::Vec3, f32)> = Vec::new();
     if let Some(level) = (0..last).find(|&l| levels[l].point_count >= 1024) {
         let first = usize::try_from(levels[level].node_first).ok()?;
@@ -873,7 +876,7 @@ fn trimmed_bounds(file: &MdlodFile, hidden: HiddenSet) -> Option<FitBounds> {
                         glam::Vec3::from(n.bounds_min),
                         glam::Vec3::from(n.bounds_max),
                     );
-                    ((a + b) * 0.5, n.area_sum.max(f32::MIN_POSITIVE))
+                    ((a + b) * 0.5, 1.0f32)
                 }),
         );
     } else if file.delta_n() == 1 {
@@ -882,9 +885,7 @@ fn trimmed_bounds(file: &MdlodFile, hidden: HiddenSet) -> Option<FitBounds> {
         let count = usize::try_from(levels[parents].point_count).ok()?;
         file.check_nodes(parents, 0..count).ok()?;
         for n in nodes.get(first..first.checked_add(count)?)? {
-            sample.extend(
-                shown_particles(file, n, hidden).map(|(p, r)| (p, (r * r).max(f32::MIN_POSITIVE))),
-            );
+            sample.extend(shown_particles(file, n, hidden).map(|(p, _)| (p, 1.0f32)));
         }
     }
     sample.retain(|(c, w)| c.is_finite() && w.is_finite());

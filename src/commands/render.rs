@@ -316,6 +316,26 @@ fn check_label(args: &Args) -> Result<()> {
     Ok(())
 }
 
+/// Says when `--hide-attribute`'s ranges all miss the attribute's values (which still
+/// turns occlusion culling off, at a cost).
+fn hides_nothing_note(
+    style: &StyleArgs,
+    attribute: Option<&mdlod_format::meta::AttributeInfo>,
+) -> Option<String> {
+    let a = attribute?;
+    if style.hide_attribute.is_empty() || style.hide_attribute.iter().any(|&r| a.codes(r).is_some())
+    {
+        return None;
+    }
+    Some(format!(
+        "  note: --hide-attribute hides no particle: {} lies from {} to {} here (and \
+         hiding turns occlusion culling off; leave it out to draw faster)",
+        a.name,
+        super::Num(a.min),
+        super::Num(a.max)
+    ))
+}
+
 /// Draws `--label` into each image, with its own values.
 fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
     use mdlod_render::legend;
@@ -1432,6 +1452,9 @@ pub fn run(args: Args) -> Result<()> {
     if every_species_hidden {
         println!("  note: every species is hidden: the image shows the background only");
     }
+    if let Some(note) = hides_nothing_note(&args.style, file.metadata().attribute.as_ref()) {
+        println!("{note}");
+    }
     if view_fits(&opts.view) {
         if let Some(note) = far_note(mdlod_render::fit_for(&file, &opts).far_particles, None) {
             println!("{note}");
@@ -1607,7 +1630,7 @@ pub fn run(args: Args) -> Result<()> {
                 "  colours: the volume fraction the particles' spheres fill (not an attribute), \
                  from {} (clear) through dark blue and red to yellow at {} (--density-max; \
                  0.74: close-packed spheres of the largest species){}, absorption {} per radius",
-                density_min(&args),
+                super::Num(density_min(&args)),
                 args.density_max,
                 if args.style.log_scale {
                     " on a log scale"
@@ -1859,7 +1882,12 @@ fn build_legend(
     let map = opts.style.colour_map;
     let (drawn_legend, what) = match (args.mode, map, attribute) {
         (Mode::Density, _, _) => (
-            legend::density_bar(density_min(args), args.density_max, args.style.log_scale),
+            legend::density_bar(
+                density_min(args),
+                args.density_max,
+                args.style.log_scale,
+                args.legend_title.as_deref(),
+            ),
             "the volume fraction's colours".to_string(),
         ),
         (Mode::Splat, Some(map), _) => {
@@ -2060,7 +2088,7 @@ fn check_not_logged(
             "--intensity attribute: {} holds {}, a logarithm (converted with \
              --attribute-log10): splats add their light, and a sum of logarithms is no \
              projection of the values; convert without --attribute-log10 to project them \
-             (--log-scale then maps the projection's decades)",
+             (--colour-map with --log-scale then maps the projection's decades)",
             path.display(),
             a.name
         );
@@ -2895,6 +2923,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let renderer =
         mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
     let mut written = Vec::new();
+    // The timesteps of the frames that drew nothing.
+    let mut empty_frames = Vec::new();
     for (i, f) in manifest.frames.iter().enumerate() {
         let out = frame_output(&args.output, i)?;
         written.push(out.clone());
@@ -2936,6 +2966,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         if r.particles_drawn + r.nodes_drawn > 0 {
             opts.exposure = opts.exposure.or(r.exposure);
             opts.light_range = opts.light_range.or(r.light_range);
+        } else {
+            empty_frames.push(f.timestep);
         }
         limited_frames += usize::from(r.budget_limited || r.pool_limited);
         let which = format!("frame {}/{n}, timestep {}", i + 1, f.timestep);
@@ -2986,6 +3018,18 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     if names.iter().all(|n| args.style.hide_species.contains(n)) {
         println!("  note: every species is hidden: the images show the background only");
+    } else if !empty_frames.is_empty() {
+        let shown: Vec<String> = empty_frames.iter().take(8).map(u64::to_string).collect();
+        let more = match empty_frames.len() {
+            k if k > 8 => format!(" and {} more", k - 8),
+            _ => String::new(),
+        };
+        println!(
+            "  note: {} of the {n} frames draw nothing (timestep {}{more}): every particle \
+             hidden (--hide-species, --hide-attribute), cut away (--clip) or out of view",
+            empty_frames.len(),
+            shown.join(", ")
+        );
     }
     if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
         println!("{note}");
