@@ -1338,7 +1338,7 @@ fn splat_reference(
         );
         for y in y0..=y1 {
             for x in x0..=x1 {
-                let wgt = splat_weight(x as f32 + 0.5 - cx, y as f32 + 0.5 - cy, cx, cy, sigma);
+                let wgt = splat_weight(x as f32 + 0.5 - cx, y as f32 + 0.5 - cy, sigma);
                 let px = &mut img[(y * w + x) as usize];
                 for k in 0..3 {
                     px[k] += f64::from(wgt * flux * colour[k]);
