@@ -1667,6 +1667,10 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
             "--density-min 0 on a log scale (must be above 0",
         ),
         (
+            vec!["--mode", "density", "--log-scale", "--density-max=1e-41"],
+            "four decades below it (a log scale's default bottom) is below single precision",
+        ),
+        (
             vec!["--cell-width", "3"],
             "--cell-width has no effect without --cell: it sets the width of the cell's edges",
         ),
@@ -1766,7 +1770,7 @@ fn particles_are_hidden_by_their_values() {
         (":", "both ends open"),
         ("2:1", "MAX must not be below MIN"),
         ("1", "expected MIN:MAX"),
-        ("a:1", "is not a finite number"),
+        ("a:1", "is not a number in single precision"),
     ] {
         let args = render(&["--hide-attribute", range]);
         let e = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
@@ -3301,6 +3305,10 @@ fn a_label_shows_each_frames_values_in_its_corner() {
             "{step} is no value a label fills in",
         ),
         (
+            &["--label", "a label far too long for an image of 160 pixels"][..],
+            "--label: a 160×120 image cannot hold the label",
+        ),
+        (
             &["--label", "x", "--legend-in-image=top-left"][..],
             "both draw at the top-left corner",
         ),
@@ -3376,6 +3384,19 @@ fn a_legend_can_name_the_values_of_categories() {
                 s(&svg),
             ][..],
             "\"x\" is not a finite number",
+        ),
+        (
+            &[
+                "--legend-category",
+                "-1=a",
+                "--legend-category",
+                "-1.0=b",
+                "--colour-map",
+                "grey",
+                "--legend",
+                s(&svg),
+            ][..],
+            "the value -1 is named twice (first \"a\")",
         ),
     ] {
         let e = fails(&[&base[..], extra].concat());

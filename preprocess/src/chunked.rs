@@ -1208,7 +1208,8 @@ pub fn convert_chunked(
     }
     if chunk.chunk_points < params.max_root_points as usize {
         return Err(ConvertError::Chunked(format!(
-            "chunks of {} particles are smaller than the {} root points",
+            "chunks of {} particles (--chunk-points) are smaller than the {} root points \
+             (--root-points): give chunks of at least as many, or fewer root points",
             chunk.chunk_points, params.max_root_points
         )));
     }

@@ -96,7 +96,7 @@ impl DensitySettings {
             }
         };
         positive(self.kernel_scale, "kernel scale")?;
-        positive(self.density_max, "density maximum")?;
+        positive(self.density_max, "--density-max")?;
         if !(self.density_min.is_finite() && self.density_min >= 0.0) {
             return Err(format!(
                 "--density-min {} (must be 0 or above)",

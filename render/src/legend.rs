@@ -576,9 +576,14 @@ impl Legend {
         let (need_w, need_h) = self.room_needed(s);
         if need_w > image.width || need_h > image.height {
             return Err(format!(
-                "a {}×{} image cannot hold the legend ({pw}×{ph} pixels and a margin of \
+                "a {}×{} image cannot hold the {} ({pw}×{ph} pixels and a margin of \
                  {margin}: at least {need_w}×{need_h})",
-                image.width, image.height
+                image.width,
+                image.height,
+                match self {
+                    Legend::Text { .. } => "label",
+                    _ => "legend",
+                }
             ));
         }
         let x0 = match corner {

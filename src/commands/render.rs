@@ -194,7 +194,7 @@ pub struct Args {
     /// (a CNA column's structure types): `--legend-category 1=FCC --legend-category
     /// 2=HCP ...`, each name beside a disc of the colour --colour-map gives its value;
     /// repeatable. Values --hide-attribute hides are left out of the key
-    #[arg(long, value_name = "VALUE=NAME")]
+    #[arg(long, value_name = "VALUE=NAME", allow_hyphen_values = true)]
     pub legend_category: Vec<String>,
     /// Where --label draws its panel
     #[arg(
@@ -227,7 +227,17 @@ fn legend_categories(args: &Args) -> Result<Vec<(f32, String)>> {
                 })?;
             Ok((value, name.trim().to_string()))
         })
-        .collect()
+        .collect::<Result<Vec<_>>>()
+        .and_then(|entries| {
+            for (k, (v, _)) in entries.iter().enumerate() {
+                if let Some((_, first)) = entries[..k].iter().find(|(w, _)| w == v) {
+                    anyhow::bail!(
+                        "--legend-category: the value {v} is named twice (first {first:?})"
+                    );
+                }
+            }
+            Ok(entries)
+        })
 }
 
 /// The placeholders `--label` fills in.
@@ -305,6 +315,34 @@ fn check_label(args: &Args) -> Result<()> {
             rest = &after[close + 1..];
         }
     }
+    if !args.label.is_empty() {
+        // The narrowest the panel can be: each line without its placeholders (the
+        // values filled in only widen it; a panel they make too wide is refused where
+        // it is drawn).
+        let panel = mdlod_render::legend::Legend::Text {
+            lines: args
+                .label
+                .iter()
+                .map(|t| {
+                    LABEL_FIELDS
+                        .iter()
+                        .fold(t.clone(), |l, f| l.replace(&format!("{{{f}}}"), ""))
+                })
+                .collect(),
+        };
+        if panel
+            .scale_for(args.camera.width, args.camera.height)
+            .is_none()
+        {
+            let (w, h) = panel.room_needed(1);
+            anyhow::bail!(
+                "--label: a {}×{} image cannot hold the label (at least {w}×{h} pixels with \
+                 its margin); draw a larger image, or a shorter label",
+                args.camera.width,
+                args.camera.height
+            );
+        }
+    }
     if !args.label.is_empty() && args.legend_in_image == Some(args.label_corner) {
         anyhow::bail!(
             "--label and --legend-in-image both draw at the {} corner: give --label-corner \
@@ -349,6 +387,7 @@ fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
         LegendCorner::BottomRight => legend::Corner::BottomRight,
     };
     let mut missing = std::collections::BTreeSet::new();
+    let mut glyphs = std::collections::BTreeSet::new();
     for (image, values) in images {
         let lines: Vec<String> = args
             .label
@@ -360,6 +399,7 @@ fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
             })
             .collect();
         let label = legend::Legend::Text { lines };
+        glyphs.extend(label.missing_glyphs());
         let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
         let scale = label.scale_for(png.width, png.height).unwrap_or(1);
         label
@@ -369,6 +409,13 @@ fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
     }
     for field in missing {
         println!("  note: --label: the file records no {field}: {{{field}}} shows ?");
+    }
+    if !glyphs.is_empty() {
+        let list: Vec<String> = glyphs.iter().map(|c| format!("{c:?}")).collect();
+        println!(
+            "  note: --label: the image's font has no {} (drawn as ?)",
+            list.join(", ")
+        );
     }
     Ok(())
 }
@@ -450,8 +497,15 @@ pub fn parse_open_range(s: &str) -> Result<[f32; 2], String> {
             .parse::<f32>()
             .ok()
             .filter(|v| v.is_finite())
-            .ok_or_else(|| format!("{s:?}: {v:?} is not a finite number"))
+            .ok_or_else(|| {
+                format!("{s:?}: {v:?} is not a number in single precision (finite, within ±3.4e38)")
+            })
     };
+    if hi.contains(':') {
+        return Err(format!(
+            "{s:?}: expected one MIN:MAX range; repeat --hide-attribute for more"
+        ));
+    }
     let (lo, hi) = (num(lo, f32::NEG_INFINITY)?, num(hi, f32::INFINITY)?);
     if lo.is_infinite() && hi.is_infinite() {
         return Err(format!("{s:?}: both ends open would hide every value"));
@@ -1154,6 +1208,17 @@ pub fn run(args: Args) -> Result<()> {
     }
     check_label(&args)?;
     legend_categories(&args)?;
+    if args.mode == Mode::Density
+        && args.style.log_scale
+        && args.density_min.is_none()
+        && density_min(&args) < f32::MIN_POSITIVE
+    {
+        anyhow::bail!(
+            "--density-max {}: four decades below it (a log scale's default bottom) is below \
+             single precision; give --density-min",
+            args.density_max
+        );
+    }
     let mapped_spheres =
         matches!(args.mode, Mode::Spheres | Mode::Sndf) && args.style.colour_map.is_some();
     if !args.legend_category.is_empty() && !mapped_spheres {
@@ -1631,7 +1696,7 @@ pub fn run(args: Args) -> Result<()> {
                  from {} (clear) through dark blue and red to yellow at {} (--density-max; \
                  0.74: close-packed spheres of the largest species){}, absorption {} per radius",
                 super::Num(density_min(&args)),
-                args.density_max,
+                super::Num(args.density_max),
                 if args.style.log_scale {
                     " on a log scale"
                 } else {

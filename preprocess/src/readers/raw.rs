@@ -611,7 +611,7 @@ impl Index {
                 return Err(malformed_in(
                     path,
                     text,
-                    "radius and diameter: both given; give each particle's size once",
+                    "diameter: given beside `radius`; give each particle's size once",
                 ))
             }
             (Some(a), None) | (None, Some(a)) => {
