@@ -93,19 +93,24 @@ impl RadiusInfo {
     /// The nearest quantized value of `radius` (clamped to the range).
     #[inline]
     pub fn encode(&self, radius: f32) -> u16 {
-        let span = self.max - self.min;
-        if span > 0.0 {
-            ((radius - self.min) / span * 65535.0)
-                .round()
-                .clamp(0.0, 65535.0) as u16
-        } else {
-            0
-        }
+        encode16(radius, self.min, self.max)
     }
 
     /// Whether the range is one a reader accepts: finite, `0 ≤ min ≤ max`.
     pub fn is_valid(&self) -> bool {
         self.min.is_finite() && self.max.is_finite() && 0.0 <= self.min && self.min <= self.max
+    }
+}
+
+/// The nearest 16-bit step of `value` over `[min, max]` (clamped to it; 0 for a range
+/// of one value), as writers quantize radii and attributes.
+#[inline]
+fn encode16(value: f32, min: f32, max: f32) -> u16 {
+    let span = max - min;
+    if span > 0.0 {
+        ((value - min) / span * 65535.0).round().clamp(0.0, 65535.0) as u16
+    } else {
+        0
     }
 }
 
@@ -128,14 +133,7 @@ impl AttributeInfo {
     /// The quantized value a writer stores for `value`: the nearest, clamped to the
     /// range (0 for a range of one value).
     pub fn encode(&self, value: f32) -> u16 {
-        let span = self.max - self.min;
-        if span > 0.0 {
-            ((value - self.min) / span * 65535.0)
-                .round()
-                .clamp(0.0, 65535.0) as u16
-        } else {
-            0
-        }
+        encode16(value, self.min, self.max)
     }
 
     /// The quantized values a writer stores for the values from `lo` to `hi`

@@ -690,7 +690,10 @@ fn per_particle_sizes_come_from_a_radius_or_diameter_array() {
         r#""radius": { "file": "h.f64", "type": "f64" }, "diameter": { "file": "d.f32", "type": "f32" }"#,
     ))
     .unwrap_err();
-    assert!(e.contains("frame.raw.json:3: diameter: given beside `radius`"), "{e}");
+    assert!(
+        e.contains("frame.raw.json:3: diameter: given beside `radius`"),
+        "{e}"
+    );
     let mut bad = h.clone();
     bad[17] = -1.0;
     c.file(

@@ -374,18 +374,36 @@ fn hides_nothing_note(
     ))
 }
 
+/// Draws a legend or label panel into the PNG `image` at `corner`, enlarged as the
+/// image's size asks; `option` names what asked for it in an error.
+fn draw_panel(
+    image: &Path,
+    panel: &mdlod_render::legend::Legend,
+    corner: LegendCorner,
+    option: &str,
+) -> Result<()> {
+    use mdlod_render::legend::Corner;
+    let corner = match corner {
+        LegendCorner::TopLeft => Corner::TopLeft,
+        LegendCorner::TopRight => Corner::TopRight,
+        LegendCorner::BottomLeft => Corner::BottomLeft,
+        LegendCorner::BottomRight => Corner::BottomRight,
+    };
+    let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
+    let scale = panel.scale_for(png.width, png.height).unwrap_or(1);
+    panel
+        .draw(&mut png, corner, scale)
+        .map_err(|e| anyhow::anyhow!("{option}: {}: {e}", image.display()))?;
+    png.save_png(image)?;
+    Ok(())
+}
+
 /// Draws `--label` into each image, with its own values.
 fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
     use mdlod_render::legend;
     if args.label.is_empty() {
         return Ok(());
     }
-    let corner = match args.label_corner {
-        LegendCorner::TopLeft => legend::Corner::TopLeft,
-        LegendCorner::TopRight => legend::Corner::TopRight,
-        LegendCorner::BottomLeft => legend::Corner::BottomLeft,
-        LegendCorner::BottomRight => legend::Corner::BottomRight,
-    };
     let mut missing = std::collections::BTreeSet::new();
     let mut glyphs = std::collections::BTreeSet::new();
     for (image, values) in images {
@@ -400,12 +418,7 @@ fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
             .collect();
         let label = legend::Legend::Text { lines };
         glyphs.extend(label.missing_glyphs());
-        let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
-        let scale = label.scale_for(png.width, png.height).unwrap_or(1);
-        label
-            .draw(&mut png, corner, scale)
-            .map_err(|e| anyhow::anyhow!("--label: {}: {e}", image.display()))?;
-        png.save_png(image)?;
+        draw_panel(image, &label, args.label_corner, "--label")?;
     }
     for field in missing {
         println!("  note: --label: the file records no {field}: {{{field}}} shows ?");
@@ -1769,7 +1782,6 @@ fn write_legend(
     drawn: &std::collections::BTreeSet<String>,
     images: &[PathBuf],
 ) -> Result<()> {
-    use mdlod_render::legend;
     if args.legend.is_none() && args.legend_in_image.is_none() {
         return Ok(());
     }
@@ -1784,19 +1796,8 @@ fn write_legend(
         println!("  legend written to {} ({what})", path.display());
     }
     if let Some(corner) = args.legend_in_image {
-        let corner = match corner {
-            LegendCorner::TopLeft => legend::Corner::TopLeft,
-            LegendCorner::TopRight => legend::Corner::TopRight,
-            LegendCorner::BottomLeft => legend::Corner::BottomLeft,
-            LegendCorner::BottomRight => legend::Corner::BottomRight,
-        };
         for image in images {
-            let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
-            let scale = drawn_legend.scale_for(png.width, png.height).unwrap_or(1);
-            drawn_legend
-                .draw(&mut png, corner, scale)
-                .map_err(|e| anyhow::anyhow!("--legend-in-image: {}: {e}", image.display()))?;
-            png.save_png(image)?;
+            draw_panel(image, &drawn_legend, corner, "--legend-in-image")?;
         }
         println!(
             "  legend drawn into {} ({what})",
