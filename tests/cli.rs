@@ -1836,6 +1836,68 @@ fn particles_are_hidden_by_their_values() {
     );
 }
 
+/// The real bicrystal's common-neighbour analysis (`datasets/lammps/cu_gb.cna.dump`):
+/// hiding its fcc atoms draws exactly its other atoms, the boundaries, as many as the
+/// dump holds, at every screen error (clusters of fcc atoms only are culled, mixed ones
+/// opened).
+#[test]
+fn hiding_a_real_bicrystals_fcc_atoms_leaves_its_boundaries() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_gb.cna.dump");
+    let text = std::fs::read_to_string(&input).unwrap();
+    let columns: Vec<&str> = text
+        .lines()
+        .find(|l| l.starts_with("ITEM: ATOMS"))
+        .unwrap()
+        .split_whitespace()
+        .skip(2)
+        .collect();
+    let cna = columns.iter().position(|c| *c == "c_cna").unwrap();
+    let atoms: Vec<&str> = text.lines().skip(9).collect();
+    let other = atoms
+        .iter()
+        .filter(|l| l.split_whitespace().nth(cna) != Some("1"))
+        .count();
+    assert!(
+        other > 100 && other < atoms.len() / 2,
+        "{other} of {}",
+        atoms.len()
+    );
+    let file = dir.path().join("gb.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file), "--attribute", "c_cna"]);
+    let png = dir.path().join("gb.png");
+    for error in ["0", "4", "16"] {
+        let out = ok(&[
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--screen-error",
+            error,
+            "--budget",
+            "1000000",
+            "--hide-attribute",
+            "0.5:1.5",
+        ]);
+        let drawn: u64 = {
+            let at = out.find(" particles").unwrap();
+            out[..at].rsplit(' ').next().unwrap().parse().unwrap()
+        };
+        // At 0 px every boundary atom is a particle; coarser, clusters of boundary atoms
+        // only stand in for some, and none holds an fcc atom.
+        if error == "0" {
+            assert_eq!(drawn, other as u64, "{out}");
+        } else {
+            assert!(drawn <= other as u64, "{out}");
+        }
+        assert!(!out.contains("still hold"), "{out}");
+    }
+}
+
 /// Mistakes a figure maker makes first: an option whose value needs `=`, a view file's
 /// directory that is not there (said before a long render, not after), a numbered name
 /// for one image, a target far from the data.

@@ -7,7 +7,7 @@ cd "$(dirname "$0")"
 export LAMMPS_POTENTIALS="${LAMMPS_POTENTIALS:-/usr/share/lammps/potentials}"
 export OMP_NUM_THREADS=1
 LMP="${LMP:-$(command -v lmp || command -v lmp_serial)}"
-for input in in.cu_melt in.cuag_alloy in.lj_triclinic in.cu_slab in.cu_melt_binary in.lj_triclinic_binary in.granular; do
+for input in in.cu_melt in.cuag_alloy in.lj_triclinic in.cu_slab in.cu_melt_binary in.lj_triclinic_binary in.granular in.cu_gb; do
     echo "== $LMP -in $input"
     "$LMP" -in "$input" -log none -screen none
 done
