@@ -1646,6 +1646,10 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
             "--iterations has no effect with --mode spheres: it applies to --mode sndf",
         ),
         (
+            vec!["--kernel-scale", "1"],
+            "--kernel-scale has no effect with --mode spheres: it applies to --mode density or iso or splat or splat-over",
+        ),
+        (
             vec!["--mode", "density", "--colour-map", "magma"],
             "--colour-map has no effect with --mode density",
         ),
@@ -1686,6 +1690,8 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
     for extra in [
         vec!["--mode", "density", "--slices", "8", "--absorption", "0.3"],
         vec!["--mode", "iso", "--kernel-scale", "2", "--iso-value", "0.2"],
+        vec!["--mode", "splat", "--kernel-scale", "1"],
+        vec!["--mode", "splat-over", "--kernel-scale", "2"],
         vec![
             "--mode",
             "splat",

@@ -345,6 +345,11 @@ pub struct RenderOptions {
     pub occlusion: bool,
     /// How points are drawn.
     pub mode: RenderMode,
+    /// Splat modes: how far a splat's kernel reaches, in radii (the Gaussian's cut
+    /// radius; σ = this / 3.5). [`passes::splat::DEFAULT_SUPPORT`] (1.75, σ = r / 2) by
+    /// default; an SPH run's own kernel convention sets another (a smoothing length
+    /// that is the kernel's full support: 1).
+    pub splat_support: f32,
     /// Splat mode: tone-mapping exposure (light added per unit of flux); `None` picks one
     /// from the image.
     pub exposure: Option<f32>,
@@ -424,6 +429,7 @@ impl Default for RenderOptions {
             gpu_memory: None,
             occlusion: true,
             mode: RenderMode::Spheres,
+            splat_support: passes::splat::DEFAULT_SUPPORT,
             exposure: None,
             style: PointStyle::default(),
             fit_all: false,
@@ -724,7 +730,7 @@ pub fn cell_bounds(file: &MdlodFile) -> Option<Bounds> {
 fn drawn_reach(file: &MdlodFile, opts: &RenderOptions) -> f32 {
     let footprint = match &opts.mode {
         RenderMode::Spheres | RenderMode::Sndf { .. } => 1.0,
-        RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => passes::splat::TRUNCATION * 0.5,
+        RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => opts.splat_support,
         RenderMode::Density(d) => d.kernel_scale.max(1.0),
     };
     styled_reach(file, opts, footprint)
@@ -1350,6 +1356,13 @@ pub fn frame_setup(
         // density inside it.
         support_scale: match &opts.mode {
             RenderMode::Density(d) => d.kernel_scale,
+            // Splats reaching farther than their default: nodes just outside the view
+            // add light inside it.
+            RenderMode::Splat { .. } | RenderMode::SplatOver { .. }
+                if opts.splat_support > passes::splat::DEFAULT_SUPPORT =>
+            {
+                opts.splat_support
+            }
             _ => 0.0,
         },
         // Every mode leaves hidden species out of the cut (splats, the volume: the
@@ -1605,20 +1618,21 @@ fn draw_cut(
                         )));
                     }
                     let sorted = traversal::sort_back_to_front_by(file, draw, camera, order);
-                    let splats = renderer.render_splats_from(
+                    let splats = renderer.render_splats_with(
                         source,
                         camera,
                         &sorted,
                         w,
                         h,
                         SplatBlend::Over { opacity },
+                        opts.splat_support,
                     )?;
                     let image =
                         splats.composite_over((!opts.transparent).then_some(opts.background));
                     (splats, image, None::<Result<f32, [f32; 2]>>)
                 }
                 _ => {
-                    let splats = renderer.render_splats_from(
+                    let splats = renderer.render_splats_with(
                         source,
                         camera,
                         draw,
@@ -1631,6 +1645,7 @@ fn draw_cut(
                                 RenderMode::Splat { by_attribute: true }
                             ),
                         },
+                        opts.splat_support,
                     )?;
                     let (image, tone) = match opts.style.colour_map {
                         // A projection: the image's light through the map.

@@ -2174,6 +2174,28 @@ impl Renderer {
         height: u32,
         blend: SplatBlend,
     ) -> Result<SplatFrame, RenderError> {
+        let support = crate::passes::splat::DEFAULT_SUPPORT;
+        self.render_splats_with(source, camera, draw, width, height, blend, support)
+    }
+
+    /// [`Self::render_splats_from`] with kernels reaching `support` radii
+    /// ([`crate::RenderOptions::splat_support`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_splats_with(
+        &self,
+        source: &dyn CutSource,
+        camera: &Camera,
+        draw: &DrawList,
+        width: u32,
+        height: u32,
+        blend: SplatBlend,
+        support: f32,
+    ) -> Result<SplatFrame, RenderError> {
+        if !(support.is_finite() && support > 0.0) {
+            return Err(RenderError::InvalidOptions(format!(
+                "splat kernel reach {support} radii (must be a finite number above 0)"
+            )));
+        }
         let Some(splat) = &self.splat else {
             return Err(RenderError::InvalidOptions(format!(
                 "splatting needs additive blending of 32-bit floats, which {} does not offer",
@@ -2207,6 +2229,8 @@ impl Renderer {
                 SplatBlend::Over { opacity } => (&splat.over, 1.0, opacity),
             };
             uniforms.material = [width as f32, height as f32, intensity, opacity];
+            // The Gaussian's sigma per projected radius (splat.wgsl).
+            uniforms.params[2] = support / crate::passes::splat::TRUNCATION;
             let size = wgpu::Extent3d {
                 width,
                 height,

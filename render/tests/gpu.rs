@@ -1305,7 +1305,26 @@ fn splat_reference(
     w: u32,
     h: u32,
 ) -> Vec<[f64; 4]> {
-    use mdlod_render::passes::splat::{splat_sigma, splat_weight, TRUNCATION};
+    splat_reference_reaching(
+        f,
+        camera,
+        draw,
+        w,
+        h,
+        mdlod_render::passes::splat::DEFAULT_SUPPORT,
+    )
+}
+
+/// [`splat_reference`] with kernels reaching `support` radii.
+fn splat_reference_reaching(
+    f: &MdlodFile,
+    camera: &Camera,
+    draw: &mdlod_render::DrawList,
+    w: u32,
+    h: u32,
+    support: f32,
+) -> Vec<[f64; 4]> {
+    use mdlod_render::passes::splat::{splat_sigma_reaching, splat_weight, TRUNCATION};
     let clip_from_view = camera.clip_from_view(w as f32 / h as f32);
     let clip_from_world = clip_from_view * camera.view_from_world();
     let meta = f.metadata();
@@ -1321,7 +1340,7 @@ fn splat_reference(
         let clip = clip_from_world * c.extend(1.0);
         let ppw = clip_from_view.y_axis.y * 0.5 * h as f32 / clip.w;
         let r_px = r * ppw;
-        let sigma = splat_sigma(r_px);
+        let sigma = splat_sigma_reaching(r_px, support);
         let flux = std::f32::consts::PI * r_px * r_px;
         let (cx, cy) = (
             (clip.x / clip.w + 1.0) * 0.5 * w as f32,
@@ -1348,6 +1367,88 @@ fn splat_reference(
         }
     }
     img
+}
+
+/// A kernel reaching other than 1.75 radii (an SPH code's convention, `--kernel-scale`):
+/// the GPU follows the CPU twin, the light is the same (each splat's is its disk's area),
+/// and a wider kernel spreads it (a lower peak).
+#[test]
+fn splats_of_another_kernel_reach_match_the_cpu_reference_with_the_same_light() {
+    // Radii of 3 units: splats of about a pixel.
+    let radii = [("Cu", 3.0), ("Ag", 3.0), ("O", 3.0)];
+    let (_d, _p, f) = make_file(&cloud_frame(1500, 3), small_build(), &radii);
+    let (w, h) = (80u32, 60u32);
+    let camera = camera_for(
+        &f,
+        &ViewSpec::Orbit {
+            azimuth_deg: 40.0,
+            elevation_deg: 30.0,
+            zoom: 0.45,
+            projection: Projection::Orthographic,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::Off);
+    let blend = mdlod_render::SplatBlend::Additive {
+        intensity: 1.0,
+        by_attribute: false,
+    };
+    let source = |support: f32| {
+        let frame = renderer()
+            .render_splats_with(
+                &mdlod_render::renderer::PackedCut {
+                    renderer: renderer(),
+                    file: &f,
+                    style: mdlod_render::renderer::splat_style(blend),
+                    look: &Default::default(),
+                },
+                &camera,
+                &draw,
+                w,
+                h,
+                blend,
+                support,
+            )
+            .unwrap();
+        let cpu = splat_reference_reaching(&f, &camera, &draw, w, h, support);
+        let peak = cpu.iter().map(|p| p[3]).fold(0.0, f64::max);
+        for (i, (g, c)) in frame.hdr.iter().zip(&cpu).enumerate() {
+            assert!(
+                (f64::from(g[3]) - c[3]).abs() <= 1e-4 * peak + 1e-5,
+                "reach {support}: pixel {i}: {} vs {}",
+                g[3],
+                c[3]
+            );
+        }
+        (frame.total_flux()[3], peak)
+    };
+    // (Splats of about a pixel: a reach below 2.5 radii keeps their sigma at the
+    // 0.7 px floor.)
+    let (light, peak) = source(mdlod_render::passes::splat::DEFAULT_SUPPORT);
+    let (wide_light, wide_peak) = source(5.0);
+    assert!(
+        (wide_light - light).abs() <= 2e-3 * light,
+        "{wide_light} against {light}"
+    );
+    assert!(wide_peak < 0.8 * peak, "{wide_peak} against {peak}");
+    assert!(renderer()
+        .render_splats_with(
+            &mdlod_render::renderer::PackedCut {
+                renderer: renderer(),
+                file: &f,
+                style: mdlod_render::renderer::splat_style(blend),
+                look: &Default::default(),
+            },
+            &camera,
+            &draw,
+            w,
+            h,
+            blend,
+            0.0,
+        )
+        .is_err());
 }
 
 #[test]

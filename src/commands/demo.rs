@@ -103,7 +103,7 @@ pub fn run(args: Args) -> Result<()> {
         mode: super::render::Mode::Spheres,
         iso_value: 0.3,
         slices: 256,
-        kernel_scale: 2.5,
+        kernel_scale: None,
         density_max: 0.8,
         density_min: None,
         absorption: 0.5,

@@ -92,9 +92,13 @@ pub struct Args {
     /// density and iso modes: slices from the data's nearest to its farthest point.
     #[arg(long, default_value_t = 256)]
     pub slices: u32,
-    /// density and iso modes: kernel support in point radii.
-    #[arg(long, default_value_t = 2.5)]
-    pub kernel_scale: f32,
+    /// How far a point's kernel reaches, in its radii [density and iso modes: 2.5;
+    /// splat modes: 1.75, a Gaussian of sigma r/2 cut at 3.5 sigma]. For an SPH run
+    /// converted with --radius-column h, the code's kernel convention: 1 where h is the
+    /// kernel's full support (Gadget), 2 where the support is 2h (Phantom); a splat's
+    /// light stays its disk's area
+    #[arg(long)]
+    pub kernel_scale: Option<f32>,
     /// density mode: the volume fraction at the top of the transfer function.
     #[arg(long, default_value_t = 0.8)]
     pub density_max: f32,
@@ -860,7 +864,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("no_occlusion", STYLED),
         ("iso_value", &[Iso]),
         ("slices", VOLUME),
-        ("kernel_scale", VOLUME),
+        ("kernel_scale", &[Density, Iso, Splat, SplatOver]),
         ("density_max", &[Density]),
         ("density_min", &[Density]),
         ("absorption", &[Density]),
@@ -1331,7 +1335,7 @@ pub fn run(args: Args) -> Result<()> {
                 RenderMode::Density(mdlod_render::density::DensitySettings {
                     iso: matches!(args.mode, Mode::Iso).then_some(args.iso_value),
                     slices: args.slices,
-                    kernel_scale: args.kernel_scale,
+                    kernel_scale: args.kernel_scale.unwrap_or(2.5),
                     density_max: args.density_max,
                     density_min: density_min(&args),
                     log: args.style.log_scale,
@@ -1352,6 +1356,10 @@ pub fn run(args: Args) -> Result<()> {
         exposure: args.exposure,
         light_range: args.light_range,
         gpu_memory: args.gpu_memory,
+        splat_support: args
+            .kernel_scale
+            .filter(|_| matches!(args.mode, Mode::Splat | Mode::SplatOver))
+            .unwrap_or(mdlod_render::passes::splat::DEFAULT_SUPPORT),
         occlusion: !args.no_occlusion,
         style: {
             let mut style = args.style.style()?;

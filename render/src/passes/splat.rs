@@ -23,9 +23,18 @@ pub const MIN_SIGMA_PX: f32 = 0.7;
 /// `exp(−TRUNCATION² / 2)`: the Gaussian's value at the cut, taken off the whole kernel so
 /// that it falls continuously to 0 there.
 pub const EDGE: f32 = 0.002_187_491_1;
-/// The Gaussian's sigma (pixels) for a point of projected radius `r_px`.
+/// How far a splat's kernel reaches by default, in radii: σ = r / 2, cut at 3.5 σ.
+pub const DEFAULT_SUPPORT: f32 = 0.5 * TRUNCATION;
+
+/// The Gaussian's sigma (pixels) for a point of projected radius `r_px`, by default.
 pub fn splat_sigma(r_px: f32) -> f32 {
-    (0.5 * r_px).max(MIN_SIGMA_PX)
+    splat_sigma_reaching(r_px, DEFAULT_SUPPORT)
+}
+
+/// The Gaussian's sigma (pixels) for a point of projected radius `r_px` whose kernel
+/// reaches `support` radii.
+pub fn splat_sigma_reaching(r_px: f32, support: f32) -> f32 {
+    (support / TRUNCATION * r_px).max(MIN_SIGMA_PX)
 }
 
 /// The unnormalised kernel at squared distance `d2` (px²) from a splat's centre: the

@@ -23,7 +23,8 @@
 // the diameter in pixels below one pixel (Eq. 3), colour premultiplied.
 //
 // Follows points.wgsl. Frame.material here: x, y = image width and height in pixels,
-// z = intensity scale, w = opacity (over-blending).
+// z = intensity scale, w = opacity (over-blending); frame.params.z = the Gaussian's sigma
+// per projected radius (the kernel's reach in radii / 3.5).
 
 const TRUNCATION: f32 = 3.5;
 const MIN_SIGMA_PX: f32 = 0.7;
@@ -77,7 +78,8 @@ fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> 
     // views and 1 in orthographic ones).
     let ppw = frame.clip_from_view[1][1] * 0.5 * size.y / clip.w;
     let r_px = pt.radius * ppw;
-    let sigma = max(0.5 * r_px, MIN_SIGMA_PX);
+    // params.z: sigma per projected radius (0.5 by default: the cut at 1.75 radii).
+    let sigma = max(frame.params.z * r_px, MIN_SIGMA_PX);
     let flux = 3.14159265 * r_px * r_px * frame.material.z;
     let ndc = clip.xy / clip.w;
     out.center_px = vec2<f32>((ndc.x + 1.0) * 0.5 * size.x, (1.0 - ndc.y) * 0.5 * size.y);
