@@ -154,27 +154,34 @@ impl HiddenSet {
     pub fn is_empty(&self) -> bool {
         self.species == 0 && self.count == 0
     }
+}
 
-    /// The ranges as quantized values of an attribute stored as `info` says
-    /// ([`AttributeInfo::codes`]): those that meet its range, and how many.
-    pub fn codes(
-        &self,
-        info: &crate::meta::AttributeInfo,
-    ) -> ([(u16, u16); MAX_HIDDEN_RANGES], usize) {
-        let mut out = [(0, 0); MAX_HIDDEN_RANGES];
-        let mut n = 0;
-        for c in self.ranges().iter().filter_map(|&r| info.codes(r)) {
-            out[n] = c;
-            n += 1;
-        }
-        (out, n)
+/// A [`HiddenSet`] as one file's particles are tested against it
+/// ([`MdlodFile::hidden_test`]): its value ranges turned once into the quantized values
+/// the file stores for them ([`crate::meta::AttributeInfo::codes`]), so a particle's
+/// test is a few integer comparisons.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HiddenTest {
+    species: u64,
+    codes: [(u16, u16); MAX_HIDDEN_RANGES],
+    count: usize,
+}
+
+impl HiddenTest {
+    /// Whether a particle of species index `s` and quantized attribute value `q` (none
+    /// without an attribute) is hidden.
+    pub fn hides(&self, s: u16, q: Option<u16>) -> bool {
+        in_species_set(self.species, usize::from(s))
+            || q.is_some_and(|q| {
+                self.codes[..self.count]
+                    .iter()
+                    .any(|&(a, b)| a <= q && q <= b)
+            })
     }
 
-    /// Whether a particle of species index `s` and quantized attribute value `q` is
-    /// hidden, with the ranges as `codes` ([`Self::codes`]).
-    pub fn hides(&self, s: u16, q: Option<u16>, codes: &[(u16, u16)]) -> bool {
-        in_species_set(self.species, usize::from(s))
-            || q.is_some_and(|q| codes.iter().any(|&(a, b)| a <= q && q <= b))
+    /// Some range meets the attribute's values (a particle's value must be read).
+    fn by_value(&self) -> bool {
+        self.count > 0
     }
 }
 
@@ -846,31 +853,34 @@ impl MdlodFile {
         kinds
     }
 
-    /// Whether `set` hides particle `i` (its species and attribute value as stored; an
-    /// index past the particles is not hidden).
-    pub fn hides_particle(&self, set: &HiddenSet, i: usize) -> bool {
+    /// `set` as this file's particles are tested against it: its ranges as the
+    /// quantized values the file stores (none meet a file without an attribute).
+    pub fn hidden_test(&self, set: &HiddenSet) -> HiddenTest {
+        let mut test = HiddenTest {
+            species: set.species,
+            codes: [(0, 0); MAX_HIDDEN_RANGES],
+            count: 0,
+        };
+        if let Some(info) = &self.metadata().attribute {
+            for c in set.ranges().iter().filter_map(|&r| info.codes(r)) {
+                test.codes[test.count] = c;
+                test.count += 1;
+            }
+        }
+        test
+    }
+
+    /// Whether `test` hides particle `i` (its species and attribute value as stored;
+    /// an index past the particles is not hidden).
+    pub fn hides_particle(&self, test: &HiddenTest, i: usize) -> bool {
         let Some(&s) = self.species().get(i) else {
             return false;
         };
-        let (codes, n) = self.hidden_codes(set);
-        set.hides(s, self.attribute_code(&codes[..n], i), &codes[..n])
-    }
-
-    /// `set`'s value ranges as this file's quantized attribute values (none without an
-    /// attribute), and how many.
-    fn hidden_codes(&self, set: &HiddenSet) -> ([(u16, u16); MAX_HIDDEN_RANGES], usize) {
-        match &self.metadata().attribute {
-            Some(info) if !set.ranges().is_empty() => set.codes(info),
-            _ => ([(0, 0); MAX_HIDDEN_RANGES], 0),
-        }
-    }
-
-    /// Particle `i`'s quantized attribute value where some range may hide it.
-    fn attribute_code(&self, codes: &[(u16, u16)], i: usize) -> Option<u16> {
-        if codes.is_empty() {
-            return None;
-        }
-        self.attribute()?.get(i).copied()
+        let q = match test.by_value() {
+            true => self.attribute().and_then(|a| a.get(i).copied()),
+            false => None,
+        };
+        test.hides(s, q)
     }
 
     fn compute_hidden_below(&self, set: &HiddenSet) -> Vec<u8> {
@@ -879,10 +889,10 @@ impl MdlodFile {
         let Some(last) = levels.len().checked_sub(1) else {
             return kinds;
         };
-        let (codes, n) = self.hidden_codes(set);
-        let codes = &codes[..n];
+        let test = self.hidden_test(set);
+        let values = self.attribute().filter(|_| test.by_value());
         let of = |i: usize, s: u16| {
-            if set.hides(s, self.attribute_code(codes, i), codes) {
+            if test.hides(s, values.and_then(|v| v.get(i).copied())) {
                 BELOW_IN
             } else {
                 BELOW_OUT

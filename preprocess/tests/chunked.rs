@@ -109,22 +109,26 @@ fn lammps_binary_dump_streams_into_the_same_file() {
     assert!(f.metadata().attribute.is_some());
 }
 
+/// `n` pseudo-random positions from 0 to about 168 (xorshift from `seed`), as the
+/// little-endian `f32` x y z a raw positions file holds.
+fn raw_positions(n: usize, seed: u64) -> Vec<u8> {
+    let mut s = seed;
+    let mut pos = Vec::with_capacity(12 * n);
+    for _ in 0..3 * n {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        pos.extend_from_slice(&((s >> 40) as f32 / 1e5).to_le_bytes());
+    }
+    pos
+}
+
 #[test]
 fn raw_arrays_stream_into_the_same_file() {
     let dir = tempfile::tempdir().unwrap();
     let n = 5000usize;
-    let mut pos = Vec::new();
-    let mut species = Vec::new();
-    let mut s = 0x2545F4914F6CDD1Du64;
-    for i in 0..n {
-        for _ in 0..3 {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            pos.extend_from_slice(&((s >> 40) as f32 / 1e5).to_le_bytes());
-        }
-        species.push((i % 3) as u8);
-    }
+    let pos = raw_positions(n, 0x2545F4914F6CDD1D);
+    let species: Vec<u8> = (0..n).map(|i| (i % 3) as u8).collect();
     std::fs::write(dir.path().join("pos.f32"), &pos).unwrap();
     std::fs::write(dir.path().join("type.u8"), &species).unwrap();
     let sidecar = dir.path().join("frame.raw.json");
@@ -149,17 +153,10 @@ fn raw_arrays_stream_into_the_same_file() {
 fn raw_arrays_with_sizes_stream_into_the_same_file() {
     let dir = tempfile::tempdir().unwrap();
     let n = 5000usize;
-    let (mut pos, mut h) = (Vec::new(), Vec::new());
-    let mut s = 0x9E3779B97F4A7C15u64;
-    for i in 0..n {
-        for _ in 0..3 {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            pos.extend_from_slice(&((s >> 40) as f32 / 1e5).to_le_bytes());
-        }
-        h.extend_from_slice(&(0.5 + (i % 11) as f32 * 0.05).to_le_bytes());
-    }
+    let pos = raw_positions(n, 0x9E3779B97F4A7C15);
+    let h: Vec<u8> = (0..n)
+        .flat_map(|i| (0.5 + (i % 11) as f32 * 0.05).to_le_bytes())
+        .collect();
     std::fs::write(dir.path().join("pos.f32"), &pos).unwrap();
     std::fs::write(dir.path().join("h.f32"), &h).unwrap();
     let sidecar = dir.path().join("frame.raw.json");

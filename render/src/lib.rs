@@ -628,8 +628,9 @@ fn shown_particles<'a>(
 ) -> impl Iterator<Item = (glam::Vec3, f32)> + 'a {
     let last = file.level_count().saturating_sub(1);
     let (pos, species) = (file.positions(last), file.species());
+    let test = file.hidden_test(&hidden);
     (n.child_first as usize..(n.child_first + n.child_count) as usize).filter_map(move |c| {
-        if c >= pos.len() || c >= species.len() || file.hides_particle(&hidden, c) {
+        if c >= pos.len() || c >= species.len() || file.hides_particle(&test, c) {
             return None;
         }
         let p = glam::Vec3::from(mdlod_format::quantize::decode3(
@@ -1618,7 +1619,7 @@ fn draw_cut(
                         )));
                     }
                     let sorted = traversal::sort_back_to_front_by(file, draw, camera, order);
-                    let splats = renderer.render_splats_with(
+                    let splats = renderer.render_splats_from(
                         source,
                         camera,
                         &sorted,
@@ -1632,7 +1633,7 @@ fn draw_cut(
                     (splats, image, None::<Result<f32, [f32; 2]>>)
                 }
                 _ => {
-                    let splats = renderer.render_splats_with(
+                    let splats = renderer.render_splats_from(
                         source,
                         camera,
                         draw,

@@ -2161,27 +2161,14 @@ impl Renderer {
             style: splat_style(blend),
             look: &Default::default(),
         };
-        self.render_splats_from(&source, camera, draw, width, height, blend)
-    }
-
-    /// [`Self::render_splats`] of the points `source` binds for `draw`.
-    pub fn render_splats_from(
-        &self,
-        source: &dyn CutSource,
-        camera: &Camera,
-        draw: &DrawList,
-        width: u32,
-        height: u32,
-        blend: SplatBlend,
-    ) -> Result<SplatFrame, RenderError> {
         let support = crate::passes::splat::DEFAULT_SUPPORT;
-        self.render_splats_with(source, camera, draw, width, height, blend, support)
+        self.render_splats_from(&source, camera, draw, width, height, blend, support)
     }
 
-    /// [`Self::render_splats_from`] with kernels reaching `support` radii
-    /// ([`crate::RenderOptions::splat_support`]).
+    /// [`Self::render_splats`] of the points `source` binds for `draw`, with kernels
+    /// reaching `support` radii ([`crate::RenderOptions::splat_support`]).
     #[allow(clippy::too_many_arguments)]
-    pub fn render_splats_with(
+    pub fn render_splats_from(
         &self,
         source: &dyn CutSource,
         camera: &Camera,

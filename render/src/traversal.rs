@@ -91,7 +91,7 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
 use glam::{Mat4, Vec3};
-use mdlod_format::reader::{HiddenSet, BELOW_IN, BELOW_OUT};
+use mdlod_format::reader::{HiddenSet, HiddenTest, BELOW_IN, BELOW_OUT};
 use mdlod_format::{quantize, MdlodFile, NodeRecord};
 
 use crate::camera::{Camera, Projection};
@@ -903,7 +903,9 @@ fn largest_first(
     }
     let below = (!settings.hidden.is_empty()).then(|| file.hidden_below(&settings.hidden));
     let hidden = (below.is_some() || !settings.clip.is_empty()).then(|| Hidden {
-        species: below.as_deref().map(|kinds| (kinds, settings.hidden)),
+        species: below
+            .as_deref()
+            .map(|kinds| (kinds, file.hidden_test(&settings.hidden))),
         clip: settings.clip,
         grow: quantization_reach(file),
         file,
@@ -1047,8 +1049,8 @@ impl Frontier {
 /// only ([`MdlodFile::species_below`]) or wholly beyond a plane, and the particles of
 /// hidden species or beyond a plane.
 struct Hidden<'a> {
-    /// What lies below each node ([`MdlodFile::hidden_below`]) and the hidden set.
-    species: Option<(&'a [u8], HiddenSet)>,
+    /// What lies below each node ([`MdlodFile::hidden_below`]) and the particles' test.
+    species: Option<(&'a [u8], HiddenTest)>,
     clip: ClipPlanes,
     /// How far decoded centres stray from their nodes' boxes ([`quantization_reach`]).
     grow: f32,
@@ -1111,7 +1113,7 @@ impl Hidden<'_> {
     fn particle(&self, i: usize, enc: usize) -> Option<LeftOut> {
         if self
             .species
-            .is_some_and(|(_, set)| self.file.hides_particle(&set, i))
+            .is_some_and(|(_, test)| self.file.hides_particle(&test, i))
         {
             return Some(LeftOut::Species);
         }

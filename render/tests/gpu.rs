@@ -1395,23 +1395,17 @@ fn splats_of_another_kernel_reach_match_the_cpu_reference_with_the_same_light() 
         intensity: 1.0,
         by_attribute: false,
     };
+    let look = Default::default();
+    let packed = mdlod_render::renderer::PackedCut {
+        renderer: renderer(),
+        file: &f,
+        style: mdlod_render::renderer::splat_style(blend),
+        look: &look,
+    };
+    let splats =
+        |support: f32| renderer().render_splats_from(&packed, &camera, &draw, w, h, blend, support);
     let source = |support: f32| {
-        let frame = renderer()
-            .render_splats_with(
-                &mdlod_render::renderer::PackedCut {
-                    renderer: renderer(),
-                    file: &f,
-                    style: mdlod_render::renderer::splat_style(blend),
-                    look: &Default::default(),
-                },
-                &camera,
-                &draw,
-                w,
-                h,
-                blend,
-                support,
-            )
-            .unwrap();
+        let frame = splats(support).unwrap();
         let cpu = splat_reference_reaching(&f, &camera, &draw, w, h, support);
         let peak = cpu.iter().map(|p| p[3]).fold(0.0, f64::max);
         for (i, (g, c)) in frame.hdr.iter().zip(&cpu).enumerate() {
@@ -1433,22 +1427,7 @@ fn splats_of_another_kernel_reach_match_the_cpu_reference_with_the_same_light() 
         "{wide_light} against {light}"
     );
     assert!(wide_peak < 0.8 * peak, "{wide_peak} against {peak}");
-    assert!(renderer()
-        .render_splats_with(
-            &mdlod_render::renderer::PackedCut {
-                renderer: renderer(),
-                file: &f,
-                style: mdlod_render::renderer::splat_style(blend),
-                look: &Default::default(),
-            },
-            &camera,
-            &draw,
-            w,
-            h,
-            blend,
-            0.0,
-        )
-        .is_err());
+    assert!(splats(0.0).is_err());
 }
 
 #[test]

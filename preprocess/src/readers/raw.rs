@@ -722,17 +722,18 @@ impl Index {
     }
 
     /// Values `first..first + n` of a one-value-per-particle float array, as `f64`.
-    fn floats(&self, m: &Mapped, first: usize, n: usize) -> Vec<f64> {
+    /// (The attribute and the sizes, in the single precision a frame keeps them in.)
+    fn floats(&self, m: &Mapped, first: usize, n: usize) -> Vec<f32> {
         let b = m.bytes();
         match (m.ty, m.big, b.get(4 * first..4 * (first + n))) {
             // Little-endian `f32`: read in place.
             (Ty::F32, false, Some(b)) => b
                 .par_chunks_exact(4)
-                .map(|c| f64::from(f32::from_le_bytes(c.try_into().expect("4 bytes"))))
+                .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
                 .collect(),
             _ => (first..first + n)
                 .into_par_iter()
-                .map(|i| m.ty.get(b, i, m.big))
+                .map(|i| m.ty.get(b, i, m.big) as f32)
                 .collect(),
         }
     }
@@ -956,7 +957,7 @@ impl Index {
             None => None,
             Some((m, name, factor)) => {
                 let values = self.floats(m, first, n);
-                let radii: Vec<f32> = values.iter().map(|&v| (v * factor) as f32).collect();
+                let radii: Vec<f32> = values.iter().map(|&v| v * *factor as f32).collect();
                 // (0 passes: a species of size 0 is refused by name later, unless --radius
                 // gives it one.)
                 if let Some(i) = radii.iter().position(|r| !(r.is_finite() && *r >= 0.0)) {
@@ -977,18 +978,7 @@ impl Index {
         };
         let attribute = match (&self.attribute, &opts.attribute) {
             (Some((m, name)), wanted) if wanted.as_deref().is_none_or(|w| w == name) => {
-                let b = m.bytes();
-                let values: Vec<f32> = match (m.ty, m.big, b.get(4 * first..4 * (first + n))) {
-                    // Little-endian `f32`: read in place.
-                    (Ty::F32, false, Some(b)) => b
-                        .par_chunks_exact(4)
-                        .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-                        .collect(),
-                    _ => (first..first + n)
-                        .into_par_iter()
-                        .map(|i| m.ty.get(b, i, m.big) as f32)
-                        .collect(),
-                };
+                let values = self.floats(m, first, n);
                 if let Some(i) = values.iter().position(|v| !v.is_finite()) {
                     let i = first + i;
                     return Err(err(
