@@ -1904,6 +1904,146 @@ fn hiding_a_real_bicrystals_fcc_atoms_leaves_its_boundaries() {
     }
 }
 
+/// The real bicrystal coloured by structure (`--species-column c_cna`): each structure
+/// type is a species, named, sized as the dump's element, hidden as species are (exactly
+/// the dump's non-fcc atoms drawn at 0 px, no fcc atom coarser), the same in chunks as
+/// whole, in text and binary; a continuous column gets a note, a radius for the element a
+/// hint.
+#[test]
+fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_gb.cna.dump");
+    let text = std::fs::read_to_string(&input).unwrap();
+    let other = text
+        .lines()
+        .skip(9)
+        .filter(|l| l.split_whitespace().nth(6) != Some("1"))
+        .count() as u64;
+    assert_eq!(
+        text.lines().nth(8).unwrap(),
+        "ITEM: ATOMS id type element x y z c_cna c_cs c_pe"
+    );
+    let names = ["--species-name", "1=FCC", "--species-name", "5=Other"];
+    let species_of = |file: &Path| -> Vec<(String, f32, u64)> {
+        let f = MdlodFile::open(file).unwrap();
+        let m = f.metadata();
+        let mut counts = vec![0u64; m.species.len()];
+        for &k in f.species() {
+            counts[usize::from(k)] += 1;
+        }
+        m.species
+            .iter()
+            .zip(counts)
+            .map(|(s, n)| (s.name.clone(), s.radius, n))
+            .collect()
+    };
+    let whole = dir.path().join("gb.mdlod");
+    let mut args = vec![
+        "convert",
+        s(&input),
+        "-o",
+        s(&whole),
+        "--species-column",
+        "c_cna",
+    ];
+    args.extend_from_slice(&names);
+    ok(&args);
+    let expected = vec![
+        ("FCC".to_string(), 1.28, 2552 - other),
+        ("Other".to_string(), 1.28, other),
+    ];
+    assert_eq!(species_of(&whole), expected);
+    // In chunks, and from the binary dump of the same step (no elements: sized by --radius).
+    let chunked = dir.path().join("chunked.mdlod");
+    let mut args = vec![
+        "convert",
+        s(&input),
+        "-o",
+        s(&chunked),
+        "--species-column",
+        "c_cna",
+    ];
+    args.extend_from_slice(&names);
+    args.extend_from_slice(&["--chunk-points", "1000", "--root-points", "256"]);
+    ok(&args);
+    assert_eq!(species_of(&chunked), expected);
+    let binary = dir.path().join("binary.mdlod");
+    let bin = lammps_sample_path("cu_gb.cna.bin");
+    let mut args = vec![
+        "convert",
+        s(&bin),
+        "-o",
+        s(&binary),
+        "--species-column",
+        "c_cna",
+    ];
+    args.extend_from_slice(&names);
+    args.extend_from_slice(&["--radius", "FCC=1.28", "--radius", "Other=1.28"]);
+    ok(&args);
+    assert_eq!(species_of(&binary), expected);
+    let png = dir.path().join("gb.png");
+    for file in [&whole, &chunked] {
+        for error in ["0", "4", "16"] {
+            let out = ok(&[
+                "render",
+                s(file),
+                "-o",
+                s(&png),
+                "--width",
+                "96",
+                "--height",
+                "64",
+                "--screen-error",
+                error,
+                "--budget",
+                "1000000",
+                "--hide-species",
+                "FCC",
+            ]);
+            let drawn: u64 = {
+                let at = out.find(" particles").unwrap();
+                out[..at].rsplit(' ').next().unwrap().parse().unwrap()
+            };
+            if error == "0" {
+                assert_eq!(drawn, other, "{out}");
+            } else {
+                assert!(drawn <= other, "{out}");
+            }
+        }
+    }
+    // A continuous column: a species per value, and a note saying what the option takes.
+    let pe = dir.path().join("pe.mdlod");
+    let out = ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&pe),
+        "--species-column",
+        "c_pe",
+    ]);
+    assert!(
+        out.contains("note: --species-column c_pe gave ")
+            && out.contains("a continuous quantity goes in --attribute"),
+        "{out}"
+    );
+    // The element is no species now: the hint names the values.
+    let err = fails(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&pe),
+        "--species-column",
+        "c_cna",
+        "--radius",
+        "Cu=1.3",
+    ]);
+    assert!(
+        err.contains("no species named \"Cu\"")
+            && err.contains("the species are the values of --species-column c_cna"),
+        "{err}"
+    );
+}
+
 /// Mistakes a figure maker makes first: an option whose value needs `=`, a view file's
 /// directory that is not there (said before a long render, not after), a numbered name
 /// for one image, a target far from the data.

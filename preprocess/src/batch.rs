@@ -118,6 +118,11 @@ pub struct FrameEntry {
     /// absent for the default (and in manifests of earlier versions).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sizes: Option<String>,
+    /// The column the particles' species were read from (`--species-column`), when not
+    /// the input's own `type` or `element`; absent then (and in manifests of earlier
+    /// versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub species_column: Option<String>,
 }
 
 /// `dataset.json`: the frames of a batch directory, by timestep.
@@ -750,7 +755,7 @@ fn entry_of(
     timestep: u64,
     columns: Option<Vec<String>>,
     options: &ConvertOptions,
-    sizes: &crate::readers::SizeColumn,
+    read: &crate::readers::ReadOptions,
 ) -> FrameEntry {
     let overrides = &options.radii;
     let m = file.metadata();
@@ -782,7 +787,8 @@ fn entry_of(
         columns,
         radii: Some(radii),
         species_names: (!options.species_names.is_empty()).then(|| options.species_names.clone()),
-        sizes: sizes.record(),
+        sizes: read.sizes.record(),
+        species_column: read.species_column.clone(),
     }
 }
 
@@ -895,6 +901,7 @@ struct Recorded {
     radii: Option<Vec<(String, f32)>>,
     species_names: Option<Vec<(String, String)>>,
     sizes: Option<String>,
+    species_column: Option<String>,
 }
 
 /// The column names and radius overrides each listed frame was converted with, from
@@ -925,6 +932,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
                     radii: f.radii,
                     species_names: f.species_names,
                     sizes: f.sizes,
+                    species_column: f.species_column,
                 },
             );
         }
@@ -1594,6 +1602,9 @@ pub fn batch(
             // So does another choice of size column (a frame listed by no manifest was
             // converted with the default).
             let same_sizes = recorded.and_then(|r| r.sizes.clone()) == opts.read.sizes.record();
+            // And another species column.
+            let same_species_column = recorded.and_then(|r| r.species_column.as_ref())
+                == opts.read.species_column.as_ref();
             let own = f.metadata().source.as_ref();
             // The source as the manifest lists it: a frame kept by its bytes is listed
             // with the input's size and time then, so the next rerun need not read it.
@@ -1617,6 +1628,7 @@ pub fn batch(
             let same = same_columns
                 && same_names
                 && same_sizes
+                && same_species_column
                 && same_build(
                     &f,
                     &opts.convert,
@@ -1637,14 +1649,8 @@ pub fn batch(
         match verdict {
             Some(Verdict::Keep(f, listed)) => {
                 note_species(&f);
-                let mut entry = entry_of(
-                    &out,
-                    &f,
-                    job.timestep,
-                    columns,
-                    &opts.convert,
-                    &opts.read.sizes,
-                );
+                let mut entry =
+                    entry_of(&out, &f, job.timestep, columns, &opts.convert, &opts.read);
                 if let Some(l) = listed {
                     entry.source = l;
                 }
@@ -1694,7 +1700,7 @@ pub fn batch(
                     job.timestep,
                     columns_for(&job),
                     &opts.convert,
-                    &opts.read.sizes,
+                    &opts.read,
                 );
                 entry.source = SourceInfo {
                     bytes: Some(bytes),
@@ -1948,7 +1954,7 @@ pub fn batch(
                         job.timestep,
                         columns_for(job),
                         convert,
-                        &opts.read.sizes,
+                        &opts.read,
                     ))
                 })()
                 .map_err(in_context)
@@ -2362,9 +2368,15 @@ fn file_name_of(path: &Path) -> String {
 /// frames that differ in more than their particles.
 #[derive(Default)]
 struct MergeSettings {
-    /// The first frame: its name (with its manifest's), build parameters, attribute and
-    /// size column.
-    first: Option<(String, BuildInfo, Option<String>, Option<String>)>,
+    /// The first frame: its name (with its manifest's), build parameters, attribute,
+    /// and size and species columns.
+    #[allow(clippy::type_complexity)]
+    first: Option<(
+        String,
+        BuildInfo,
+        Option<String>,
+        (Option<String>, Option<String>),
+    )>,
     /// A frame with a chunked build: its name and chunk size.
     chunked: Option<(String, u64)>,
     /// The first frame's `--species-name` renames (none: none given), and its name.
@@ -2418,8 +2430,14 @@ impl MergeSettings {
             }
         }
         let attribute = m.attribute.as_ref().map(|a| a.name.clone());
-        let Some((first, build, first_attribute, first_sizes)) = &self.first else {
-            self.first = Some((this.clone(), m.build.clone(), attribute, f.sizes.clone()));
+        let Some((first, build, first_attribute, (first_sizes, first_species))) = &self.first
+        else {
+            self.first = Some((
+                this.clone(),
+                m.build.clone(),
+                attribute,
+                (f.sizes.clone(), f.species_column.clone()),
+            ));
             return self.check_renames_chunks_and_radii(m, f, this);
         };
         if *first_sizes != f.sizes {
@@ -2430,6 +2448,19 @@ impl MergeSettings {
                 "size column",
                 name(first_sizes),
                 name(&f.sizes),
+            ));
+        }
+        if *first_species != f.species_column {
+            let name = |s: &Option<String>| {
+                s.clone()
+                    .unwrap_or_else(|| "none (the input's own species)".into())
+            };
+            return Err(differ(
+                first,
+                &this,
+                "species column",
+                name(first_species),
+                name(&f.species_column),
             ));
         }
         let b = &m.build;

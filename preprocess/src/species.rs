@@ -311,6 +311,9 @@ pub enum SpeciesNaming {
         first: String,
         first_type: Option<String>,
     },
+    /// The values of the column `--species-column` names (a structure type): `first` is
+    /// the first atom's.
+    Column { column: String, first: String },
     /// Names as the input gives them (XYZ species, GSD types, raw sidecar names, MMPLD
     /// lists, LAMMPS type labels, the one species `atom`): any name may occur.
     Given,
@@ -344,6 +347,11 @@ impl SpeciesNaming {
                      number: give the element symbol instead, {example}"
                 ))
             }
+            SpeciesNaming::Column { column, first } => Some(format!(
+                "the species are the values of --species-column {column}: give a value, e.g. \
+                 --radius {first}={radius}, or name it first: --species-name {first}={name} \
+                 --radius {name}={radius}"
+            )),
             _ => None,
         }
     }
@@ -359,6 +367,10 @@ impl SpeciesNaming {
             SpeciesNaming::ElementColumn { first, .. } if is_type_number(old) => Some(format!(
                 "the input names its species by its `element` column, not by type number: \
                  rename an element, e.g. --species-name {first}=NAME"
+            )),
+            SpeciesNaming::Column { column, first } => Some(format!(
+                "the species are the values of --species-column {column}: rename a value, \
+                 e.g. --species-name {first}=NAME"
             )),
             _ => None,
         }

@@ -2210,3 +2210,86 @@ fn a_gzip_dump_cut_inside_its_last_frame_converts_the_frames_before() {
         r.notes
     );
 }
+
+/// The species column is recorded per frame: a rerun with another converts every frame
+/// again, one with the same skips them, and shards converted with different ones do not
+/// merge.
+#[test]
+fn a_rerun_with_another_species_column_converts_again_and_shards_must_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("alloy.dump");
+    std::fs::copy(lammps_sample_path("cuag_alloy.unwrapped.dump"), &src).unwrap();
+    let out = dir.path().join("out");
+    let with = |column: Option<&str>, base: BatchOptions| {
+        let mut o = base;
+        o.read.species_column = column.map(String::from);
+        o
+    };
+    let run = |column: Option<&str>| {
+        let r = batch(
+            std::slice::from_ref(&src),
+            &out,
+            &with(column, opts()),
+            &NoProgress,
+        )
+        .unwrap();
+        (r.converted, r.skipped)
+    };
+    let species = || {
+        let m = read_manifest(&out).unwrap();
+        let f = MdlodFile::open(out.join(&m.frames[0].file)).unwrap();
+        let names: Vec<String> = f
+            .metadata()
+            .species
+            .iter()
+            .map(|s| s.name.clone())
+            .collect();
+        (names, m.frames[0].species_column.clone())
+    };
+    assert_eq!(run(None), (5, 0));
+    assert_eq!(species(), (vec!["Cu".to_string(), "Ag".to_string()], None));
+    assert_eq!(run(Some("type")), (5, 0));
+    assert_eq!(
+        species(),
+        (
+            vec!["1".to_string(), "2".to_string()],
+            Some("type".to_string())
+        )
+    );
+    assert_eq!(run(Some("type")), (0, 5));
+    assert_eq!(run(None), (5, 0));
+    assert_eq!(species().1, None);
+    // A column no frame has is an error before any frame is converted.
+    let e = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("none"),
+        &with(Some("c_nope"), opts()),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("no column `c_nope` for --species-column"), "{e}");
+    // Shards of other species columns.
+    let merged = dir.path().join("shards");
+    batch(
+        std::slice::from_ref(&src),
+        &merged,
+        &shard(0, 2),
+        &NoProgress,
+    )
+    .unwrap();
+    batch(
+        std::slice::from_ref(&src),
+        &merged,
+        &with(Some("type"), shard(1, 2)),
+        &NoProgress,
+    )
+    .unwrap();
+    let e = merge(&merged).unwrap_err().to_string();
+    assert!(
+        e.contains("different settings")
+            && e.contains("species column none (the input's own species)")
+            && e.contains("species column type;"),
+        "{e}"
+    );
+}

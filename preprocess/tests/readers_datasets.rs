@@ -247,3 +247,137 @@ fn species_naming_follows_the_species_column() {
         }
     );
 }
+
+/// `--species-column c_cna` on the real bicrystal, text and binary: every atom's species
+/// is its own common-neighbour-analysis value, the text dump's atoms keep their element's
+/// size (Cu, 1.28 Å), and both dumps agree atom by atom.
+#[test]
+fn a_species_column_makes_the_structure_types_species() {
+    let text_path = sample("cu_gb.cna.dump").unwrap();
+    let text = std::fs::read_to_string(&text_path).unwrap();
+    let header: Vec<&str> = text
+        .lines()
+        .find(|l| l.starts_with("ITEM: ATOMS"))
+        .unwrap()
+        .split_whitespace()
+        .skip(2)
+        .collect();
+    let cna = header.iter().position(|c| *c == "c_cna").unwrap();
+    let expected: Vec<&str> = text
+        .lines()
+        .skip(9)
+        .map(|l| l.split_whitespace().nth(cna).unwrap())
+        .collect();
+    let opts = ReadOptions {
+        species_column: Some("c_cna".into()),
+        ..Default::default()
+    };
+    let from_text = DumpFile::open(&text_path)
+        .unwrap()
+        .read_frame(0, &opts, &NoProgress)
+        .unwrap();
+    let from_binary = DumpFile::open(&sample("cu_gb.cna.bin").unwrap())
+        .unwrap()
+        .read_frame(0, &opts, &NoProgress)
+        .unwrap();
+    for frame in [&from_text, &from_binary] {
+        let names: Vec<&str> = frame.species.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["1", "5"]);
+        assert!(frame.species.iter().all(|s| s.numeric_type));
+        let got: Vec<&str> = frame
+            .species_index
+            .iter()
+            .map(|&s| names[usize::from(s)])
+            .collect();
+        // (Both dumps are sorted by id.)
+        assert_eq!(got, expected);
+    }
+    let radii = from_text
+        .radii
+        .as_ref()
+        .expect("sizes from the element column");
+    assert!(radii.iter().all(|&r| r == 1.28), "{:?}", &radii[..4]);
+    assert!(from_text.species.iter().all(|s| s.radius == Some(1.28)));
+    // A binary dump names no elements: its categories take their radii as types do.
+    assert!(from_binary.radii.is_none());
+    // Without the option the species are the dump's own.
+    let own = read(&DumpFile::open(&text_path).unwrap(), 0, None);
+    assert_eq!(own.species.len(), 1);
+    assert_eq!(own.species[0].name, "Cu");
+}
+
+/// Mistakes with `--species-column` name the file, the place and what the option takes.
+#[test]
+fn species_column_mistakes_are_named() {
+    let text = sample("cu_gb.cna.dump").unwrap();
+    let binary = sample("cu_gb.cna.bin").unwrap();
+    let err = |path: &std::path::Path, column: &str| {
+        let opts = ReadOptions {
+            species_column: Some(column.into()),
+            ..Default::default()
+        };
+        DumpFile::open(path)
+            .unwrap()
+            .read_frame(0, &opts, &NoProgress)
+            .unwrap_err()
+            .to_string()
+    };
+    let e = err(&text, "c_nope");
+    assert!(
+        e.contains("cu_gb.cna.dump:9:")
+            && e.contains("no column `c_nope` for --species-column")
+            && e.contains("id type element x y z c_cna c_cs c_pe"),
+        "{e}"
+    );
+    let e = err(&binary, "c_nope");
+    assert!(
+        e.contains("cu_gb.cna.bin") && e.contains("no column `c_nope` for --species-column"),
+        "{e}"
+    );
+    for path in [&text, &binary] {
+        let e = err(path, "y");
+        assert!(
+            e.contains("--species-column y: `y` holds the positions"),
+            "{e}"
+        );
+    }
+    // A binary dump's continuous column is no category.
+    let e = err(&binary, "c_pe");
+    assert!(
+        e.contains("atom 1 of timestep 100: column `c_pe`")
+            && e.contains("not a whole number (--species-column takes a column of categories"),
+        "{e}"
+    );
+}
+
+/// A text column of more distinct values than a file holds species is refused with what
+/// the option takes, at the line where the count ran out.
+#[test]
+fn a_species_column_of_continuous_values_is_refused_at_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 70_000;
+    let mut dump = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 1\n0 1\n0 1\n\
+         ITEM: ATOMS id type x y z c_pe\n"
+    );
+    for i in 0..n {
+        dump += &format!("{} 1 0.5 0.5 0.5 -3.{i:06}\n", i + 1);
+    }
+    let path = dir.path().join("pe.dump");
+    std::fs::write(&path, dump).unwrap();
+    let opts = ReadOptions {
+        species_column: Some("c_pe".into()),
+        ..Default::default()
+    };
+    let e = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &opts, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("pe.dump:")
+            && e.contains("more than 65536 distinct values in --species-column c_pe")
+            && e.contains("goes in --attribute"),
+        "{e}"
+    );
+}

@@ -167,7 +167,7 @@ fn the_old_header_revision_reads_the_same_atoms() {
         let opts = ReadOptions {
             attribute: Some(attribute.into()),
             columns: (file == "cu_melt.custom.bin").then(|| names.clone()),
-            sizes: Default::default(),
+            ..Default::default()
         };
         for k in 0..3 {
             let a = old_dump.read_frame(k, &opts, &NoProgress).unwrap();

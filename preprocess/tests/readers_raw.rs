@@ -717,3 +717,36 @@ fn per_particle_sizes_come_from_a_radius_or_diameter_array() {
     .unwrap_err();
     assert!(e.contains("short.f32") && e.contains("diameter"), "{e}");
 }
+
+/// Raw arrays give species by the sidecar's `species` array: a species column is
+/// refused, whole and in parts, naming the sidecar and where the species come from.
+#[test]
+fn a_species_column_is_refused_for_raw_arrays() {
+    let c = Case::new();
+    let pos: Vec<u8> = positions(10)
+        .iter()
+        .flatten()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    c.file("cat.pos", &pos);
+    let path =
+        c.sidecar(r#"{ "mdlod_raw": 1, "positions": { "file": "cat.pos", "type": "f32" } }"#);
+    let opts = ReadOptions {
+        species_column: Some("c_cna".into()),
+        ..Default::default()
+    };
+    let dump = DumpFile::open(&path).unwrap();
+    for e in [
+        dump.read_frame(0, &opts, &NoProgress).unwrap_err(),
+        dump.read_part(0, &opts, 0..5, &NoProgress).unwrap_err(),
+        dump.check_size_column(0, &opts).unwrap_err(),
+    ] {
+        let e = e.to_string();
+        assert!(
+            e.contains("frame.raw.json")
+                && e.contains("--species-column c_cna names a column of a LAMMPS or XYZ dump")
+                && e.contains("sidecar's `species` array"),
+            "{e}"
+        );
+    }
+}

@@ -503,3 +503,41 @@ fn a_huge_bad_value_is_named_briefly() {
         &e[..e.len().min(300)]
     );
 }
+
+/// An extended XYZ file's integer property as the species (`--species-column`): each
+/// atom keeps its element's size, so a category holding two elements draws each at its
+/// own (Cu 1.28, Ag 1.44 Å); and the option is refused where species come by no column.
+#[test]
+fn a_species_column_keeps_each_atoms_element_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("alloy.xyz");
+    std::fs::write(
+        &path,
+        "4\nLattice=\"10 0 0 0 10 0 0 0 10\" Properties=species:S:1:pos:R:3:structure:I:1\n\
+         Cu 0 0 0 1\nCu 1 0 0 2\nAg 0 1 0 1\nCu 0 0 1 1\n",
+    )
+    .unwrap();
+    let opts = ReadOptions {
+        species_column: Some("structure".into()),
+        ..Default::default()
+    };
+    let f = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &opts, &NoProgress)
+        .unwrap();
+    let names: Vec<&str> = f.species.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["1", "2"]);
+    assert_eq!(f.species_index, [0, 1, 0, 0]);
+    assert_eq!(f.radii.as_deref(), Some(&[1.28, 1.28, 1.44, 1.28][..]));
+    assert_eq!(f.species[0].radius_range, Some((1.28, 1.44)));
+    // --no-sizes: no sizes of their own, from elements either.
+    let off = ReadOptions {
+        sizes: mdlod_preprocess::readers::SizeColumn::Off,
+        ..opts.clone()
+    };
+    let f = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &off, &NoProgress)
+        .unwrap();
+    assert!(f.radii.is_none());
+}

@@ -80,6 +80,15 @@ pub struct BuildArgs {
     /// squared: a splat is a disk of that radius.)
     #[arg(long, value_name = "NAME", conflicts_with_all = ["diameter_column", "no_sizes"])]
     pub radius_column: Option<String>,
+    /// Column of a LAMMPS dump (or extended-XYZ property) to take each particle's species
+    /// from instead of its `type` or `element`: a column of categories, such as a
+    /// common-neighbour analysis's structure type (`c_cna`: 1 fcc, 2 hcp, 3 bcc, 4
+    /// icosahedral, 5 other). Each distinct value becomes a species, coloured, named
+    /// (`--species-name 1=FCC`), sized (`--radius 1=1.28`) and hidden as species are, and
+    /// averaged in clusters as species colours are (an attribute's values would be
+    /// averaged, mixing categories).
+    #[arg(long, value_name = "NAME")]
+    pub species_column: Option<String>,
     /// Column of a LAMMPS dump (or extended-XYZ property) holding each particle's
     /// diameter.
     #[arg(long, value_name = "NAME", conflicts_with = "no_sizes")]
@@ -166,6 +175,7 @@ impl BuildArgs {
                 (_, _, true) => SizeColumn::Off,
                 _ => SizeColumn::Auto,
             },
+            species_column: self.species_column.clone(),
         };
         (convert, read)
     }
@@ -204,7 +214,28 @@ pub enum Precision {
 pub fn run(args: Args) -> Result<()> {
     let report = with_threads(args.threads, || convert(&args))??;
     print_report(&args.output, &report);
+    if let Some(column) = &args.build.species_column {
+        if let Some(note) = categories_note(&args.output, column) {
+            println!("  note: {note}");
+        }
+    }
     Ok(())
+}
+
+/// More species than a column of categories would give: the column asked for by
+/// `--species-column` is likely a continuous quantity, each of whose values became a
+/// species of its own.
+pub fn categories_note(file: &std::path::Path, column: &str) -> Option<String> {
+    const MANY: usize = 64;
+    let f = mdlod_format::MdlodFile::open(file).ok()?;
+    let n = f.metadata().species.len();
+    (n > MANY).then(|| {
+        format!(
+            "--species-column {column} gave {n} species, one per distinct value: it takes a \
+             column of categories (a structure type, a molecule kind); a continuous quantity \
+             goes in --attribute"
+        )
+    })
 }
 
 pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {

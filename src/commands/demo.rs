@@ -49,6 +49,7 @@ pub fn run(args: Args) -> Result<()> {
             attribute_log10: false,
             columns: None,
             radius_column: None,
+            species_column: None,
             diameter_column: None,
             no_sizes: false,
             precision: super::convert::Precision::U16,

@@ -54,6 +54,10 @@ pub(crate) struct AtomLayout {
     /// same types look the same in every format (not for atomic numbers, XYZ `Z`, where
     /// H = 1 and Na = 11 would share a colour; numbers from 0 take none either).
     pub type_numbers: bool,
+    /// A column of element symbols whose radii are the particles' sizes where no column
+    /// gives sizes: the dump's `element` column when the species come from another
+    /// column (`--species-column`), so that each atom keeps its element's size.
+    pub element_sizes: Option<usize>,
 }
 
 /// Gives every species of particles with sizes its particles' mean radius and their
@@ -101,6 +105,8 @@ enum Role {
     Size(f64),
     /// The size, and the attribute too.
     SizeAttr(f64),
+    /// An element symbol, whose radius is the size.
+    ElementSize,
 }
 
 /// Everything a chunk parser needs besides its bytes.
@@ -202,6 +208,10 @@ pub(crate) fn parse(
         if roles[c] == Role::Skip {
             roles[c] = Role::Size(factor);
         }
+    } else if let Some(c) = layout.element_sizes {
+        if roles[c] == Role::Skip {
+            roles[c] = Role::ElementSize;
+        }
     }
     if let Some(a) = attribute {
         roles[a] = match roles[a] {
@@ -213,7 +223,7 @@ pub(crate) fn parse(
     }
     let sized = roles
         .iter()
-        .any(|r| matches!(r, Role::Size(_) | Role::SizeAttr(_)));
+        .any(|r| matches!(r, Role::Size(_) | Role::SizeAttr(_) | Role::ElementSize));
     let plan = Plan {
         size: size.filter(|_| sized),
         roles,
@@ -444,6 +454,8 @@ fn parse_chunk<'a>(
     let bytes: &'a [u8] = &ctx.data[..chunk.end];
     let roles = plan.roles.as_slice();
     let mut table = SpeciesTable::new();
+    // The last element symbol met and its radius (atoms of one element come in runs).
+    let mut element: (&[u8], f64) = (&[], 0.0);
     let mut i = chunk.start;
     for (a, (pos_out, sp_out)) in positions.iter_mut().zip(species.iter_mut()).enumerate() {
         let line_start = i;
@@ -479,6 +491,20 @@ fn parse_chunk<'a>(
                 Role::SizeAttr(factor) => {
                     attr = number(ctx, plan, bytes, &mut i, col)?;
                     size = factor * attr;
+                }
+                Role::ElementSize => {
+                    while i < bytes.len() && bytes[i] > b' ' {
+                        i += 1;
+                    }
+                    let token = &bytes[t0..i];
+                    if token != element.0 {
+                        let radius = std::str::from_utf8(token)
+                            .ok()
+                            .and_then(crate::species::element)
+                            .map_or(crate::species::DEFAULT_RADIUS, |(r, _)| r);
+                        element = (token, f64::from(radius));
+                    }
+                    size = element.1;
                 }
                 Role::Species | Role::SpeciesAttr => {
                     while i < bytes.len() && bytes[i] > b' ' {

@@ -536,7 +536,24 @@ pub(crate) fn read_range(
     if scaled && opts.columns.is_none() && h.columns.is_none() {
         check_assumed_scaled(path, data, h, coords, &names)?;
     }
-    let species_col = find("type");
+    let species_col = match &opts.species_column {
+        None => find("type"),
+        Some(name) => Some(find(name).ok_or_else(|| {
+            err(
+                first_chunk,
+                format!(
+                    "no column `{name}` for --species-column; the columns are {}",
+                    names.join(" ")
+                ),
+            )
+        })?),
+    };
+    if let Some(c) = species_col.filter(|c| coords.contains(c)) {
+        return Err(err(
+            first_chunk,
+            format!("--species-column {0}: `{0}` holds the positions", names[c]),
+        ));
+    }
     let attribute_col = match &opts.attribute {
         None => None,
         Some(name) => Some(find(name).ok_or_else(|| {
@@ -633,7 +650,11 @@ pub(crate) fn read_range(
                     first + skipped + i + 1,
                     h.timestep,
                     names[c],
-                    if Some(c) == species_col {
+                    if Some(c) == species_col && opts.species_column.is_some() {
+                        " or not a whole number (--species-column takes a column of \
+                         categories; a continuous quantity goes in --attribute)"
+                            .to_string()
+                    } else if Some(c) == species_col {
                         " or not an integer type".to_string()
                     } else if scaled && v.is_finite() {
                         format!(

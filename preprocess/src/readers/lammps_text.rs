@@ -406,6 +406,7 @@ impl Index {
             species: element.or_else(|| find("type")),
             numeric_species: element.is_none(),
             type_numbers: element.is_none(),
+            element_sizes: None,
         };
         info.columns = columns;
         Ok(Header {

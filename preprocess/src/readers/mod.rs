@@ -270,6 +270,12 @@ pub struct ReadOptions {
     pub columns: Option<Vec<String>>,
     /// Which column of a LAMMPS or XYZ dump gives each particle's size.
     pub sizes: SizeColumn,
+    /// A column of a LAMMPS or XYZ dump to take each particle's species from instead of
+    /// its `type` or `element`: a column of categories, such as the structure type of a
+    /// common-neighbour analysis (`c_cna`), so that each category is a species of its
+    /// own, with its own colour, averaged in clusters as species colours are, hidden
+    /// and named as species are. Each distinct value is one species.
+    pub species_column: Option<String>,
 }
 
 /// Which column gives each particle's size ([`Frame::radii`]).
@@ -887,9 +893,11 @@ impl DumpFile {
         use crate::species::{is_type_number, SpeciesNaming};
         self.check_frame(k)?;
         match &self.index {
-            Index::Lammps(_) => {
+            Index::Xyz(_) if opts.species_column.is_none() => Ok(SpeciesNaming::Given),
+            Index::Lammps(_) | Index::Xyz(_) => {
                 let header = self.header(k)?;
-                let (Some(col), true) = (header.layout.species, header.info.particles > 0) else {
+                let layout = species_layout(&self.ctx(), &header, opts)?;
+                let (Some(col), true) = (layout.species, header.info.particles > 0) else {
                     return Ok(SpeciesNaming::Given);
                 };
                 let first = Cursor::new(&self.bytes()[..header.atoms.end], header.atoms.start)
@@ -904,12 +912,17 @@ impl DumpFile {
                     return Ok(SpeciesNaming::Given);
                 };
                 let columns = &header.info.columns;
-                Ok(if columns[col] == "element" {
+                Ok(if let Some(column) = &opts.species_column {
+                    SpeciesNaming::Column {
+                        column: column.clone(),
+                        first: token,
+                    }
+                } else if columns[col] == "element" {
                     SpeciesNaming::ElementColumn {
                         first: token,
                         first_type: columns.iter().position(|c| c == "type").and_then(field),
                     }
-                } else if header.layout.numeric_species && is_type_number(&token) {
+                } else if layout.numeric_species && is_type_number(&token) {
                     SpeciesNaming::TypeNumbers { first: token }
                 } else {
                     SpeciesNaming::Given
@@ -917,16 +930,22 @@ impl DumpFile {
             }
             Index::LammpsBinary(i) => {
                 let info = lammps_binary::frame_info(&self.path, i.header(&self.path, k)?, opts);
-                if !info.columns.iter().any(|c| c == "type") || info.particles == 0 {
+                let species = opts.species_column.as_deref().unwrap_or("type");
+                if !info.columns.iter().any(|c| c == species) || info.particles == 0 {
                     return Ok(SpeciesNaming::Given);
                 }
                 let plain = ReadOptions {
                     attribute: None,
                     columns: opts.columns.clone(),
                     sizes: SizeColumn::Off,
+                    species_column: opts.species_column.clone(),
                 };
                 let part = self.read_part(k, &plain, 0..1, &NoProgress)?;
                 Ok(match part.species.first() {
+                    Some(s) if opts.species_column.is_some() => SpeciesNaming::Column {
+                        column: species.to_string(),
+                        first: s.name.clone(),
+                    },
                     Some(s) if s.numeric_type => SpeciesNaming::TypeNumbers {
                         first: s.name.clone(),
                     },
@@ -943,9 +962,7 @@ impl DumpFile {
                 }
                 Ok(SpeciesNaming::Given)
             }
-            Index::Xyz(_) | Index::Gsd(_) | Index::Raw(_) | Index::Mmpld(_) => {
-                Ok(SpeciesNaming::Given)
-            }
+            Index::Gsd(_) | Index::Raw(_) | Index::Mmpld(_) => Ok(SpeciesNaming::Given),
         }
     }
 
@@ -967,7 +984,7 @@ impl DumpFile {
         match &self.index {
             Index::Lammps(_) | Index::Xyz(_) => {
                 let header = self.header(k)?;
-                let (_, _, attribute, _) = text_columns(&self.ctx(), &header, opts)?;
+                let (_, _, attribute, _, _) = text_columns(&self.ctx(), &header, opts)?;
                 Ok(attribute.map(|c| header.info.columns[c].clone()))
             }
             // Every piece is read (each may lack it); the first's names it.
@@ -1013,6 +1030,7 @@ impl DumpFile {
             });
         }
         self.check_sizes(opts)?;
+        self.check_species_column(opts)?;
         match &self.index {
             Index::Raw(r) => r.read_range(opts, range, progress),
             Index::LammpsBinary(i) => lammps_binary::read_range(
@@ -1035,28 +1053,35 @@ impl DumpFile {
         }
     }
 
-    /// Whether frame `k` has the size column `opts` names (a batch checks every frame
-    /// before converting any, as it does the attribute): an error names a column the
-    /// frame lacks, or an input that gives sizes by no column.
+    /// Whether frame `k` has the size and species columns `opts` names (a batch checks
+    /// every frame before converting any, as it does the attribute): an error names a
+    /// column the frame lacks, or an input that gives sizes or species by no column.
     pub fn check_size_column(&self, k: usize, opts: &ReadOptions) -> Result<(), ReadError> {
-        if opts.sizes.named_column().is_none() {
+        if opts.sizes.named_column().is_none() && opts.species_column.is_none() {
             return Ok(());
         }
         self.check_sizes(opts)?;
+        self.check_species_column(opts)?;
         let info = self.frame_info(k)?;
         // (Columns named nowhere, as an old binary dump's without --columns, and empty
         // frames are judged where the frame is read.)
         if info.columns.is_empty() || info.particles == 0 {
             return Ok(());
         }
-        opts.sizes
-            .resolve(&info.columns)
-            .map(|_| ())
-            .map_err(|message| ReadError::Binary {
-                path: self.path.clone(),
-                offset: 0,
-                message: format!("frame {k}: {message}"),
-            })
+        let err = |message: String| ReadError::Binary {
+            path: self.path.clone(),
+            offset: 0,
+            message: format!("frame {k}: {message}"),
+        };
+        if let Some(name) = opts.species_column.as_ref() {
+            if !info.columns.contains(name) {
+                return Err(err(format!(
+                    "no column `{name}` for --species-column; the columns are {}",
+                    info.columns.join(" ")
+                )));
+            }
+        }
+        opts.sizes.resolve(&info.columns).map(|_| ()).map_err(err)
     }
 
     /// Refuses a size column named for an input that gives sizes by no column: GSD
@@ -1080,6 +1105,30 @@ impl DumpFile {
                 message: format!(
                     "{option} names a column of a LAMMPS or XYZ dump; {how} (--no-sizes draws \
                      each species at one radius)"
+                ),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Refuses a species column named for an input whose species come by no column:
+    /// GSD (`particles/typeid`), MMPLD (its lists) and raw arrays (the sidecar's
+    /// `species` array).
+    pub fn check_species_column(&self, opts: &ReadOptions) -> Result<(), ReadError> {
+        let how = match &self.index {
+            Index::Gsd(_) => "a GSD file gives each particle's type by `particles/typeid`",
+            Index::Mmpld(_) => "an MMPLD file gives each particle's kind by its list",
+            Index::Raw(_) => {
+                "raw arrays give each particle's species by the sidecar's `species` array"
+            }
+            _ => return Ok(()),
+        };
+        match &opts.species_column {
+            Some(name) => Err(ReadError::Binary {
+                path: self.path.clone(),
+                offset: 0,
+                message: format!(
+                    "--species-column {name} names a column of a LAMMPS or XYZ dump; {how}"
                 ),
             }),
             None => Ok(()),
@@ -1111,6 +1160,7 @@ impl DumpFile {
         if let Index::Raw(r) = &self.index {
             self.check_frame(k)?;
             self.check_sizes(opts)?;
+            self.check_species_column(opts)?;
             return r.read_frame(opts, progress);
         }
         if let Index::LammpsBinary(i) = &self.index {
@@ -1125,20 +1175,21 @@ impl DumpFile {
         }
         let ctx = self.ctx();
         let header = self.header(k)?;
-        let (coords, fractional, attribute, size) = text_columns(&ctx, &header, opts)?;
+        let (coords, fractional, attribute, size, layout) = text_columns(&ctx, &header, opts)?;
         let columns = &header.info.columns;
         let atoms = atoms::parse(
             &ctx,
             header.atoms.clone(),
             header.info.particles,
-            &header.layout,
+            &layout,
             coords,
             fractional,
             attribute,
             size,
             &format!("reading frame {k}"),
             progress,
-        )?;
+        )
+        .map_err(|e| categories_note(e, opts))?;
         let attribute = atoms.attribute.map(|values| Attribute {
             name: columns[attribute.unwrap_or_default()].clone(),
             values,
@@ -1195,24 +1246,82 @@ fn text_columns<'h>(
                 }
             })?),
         };
+        let layout = species_layout(ctx, header, opts)?;
         let size = opts
             .sizes
-            .resolve_beside(columns, coords, header.layout.species)
+            .resolve_beside(columns, coords, layout.species)
             .map_err(|message| ReadError::Malformed {
                 at: ctx.at(header.columns_at),
                 message,
             })?;
-        Ok((coords, fractional, attribute, size))
+        Ok((coords, fractional, attribute, size, layout))
     }
 }
 
+/// A species column of more distinct values than a file holds species is no column of
+/// categories: the error says what the option takes.
+fn categories_note(e: ReadError, opts: &ReadOptions) -> ReadError {
+    match (e, &opts.species_column) {
+        (ReadError::TooManySpecies { at }, Some(name)) => ReadError::Malformed {
+            at,
+            message: format!(
+                "more than 65536 distinct values in --species-column {name}: it takes a \
+                 column of categories (a structure type, a molecule kind); a continuous \
+                 quantity goes in --attribute"
+            ),
+        },
+        (e, _) => e,
+    }
+}
+
+/// The layout of a text frame's atom lines with the species taken from the column
+/// [`ReadOptions::species_column`] names, where it names one: its values are species
+/// names, sorted as numbers and coloured as type numbers where they all are integers.
+fn species_layout(
+    ctx: &Ctx<'_>,
+    header: &Header,
+    opts: &ReadOptions,
+) -> Result<atoms::AtomLayout, ReadError> {
+    let mut layout = header.layout.clone();
+    let Some(name) = &opts.species_column else {
+        return Ok(layout);
+    };
+    let columns = &header.info.columns;
+    let malformed = |message: String| ReadError::Malformed {
+        at: ctx.at(header.columns_at),
+        message,
+    };
+    let c = columns.iter().position(|c| c == name).ok_or_else(|| {
+        malformed(format!(
+            "no column `{name}` for --species-column; the columns are {}",
+            columns.join(" ")
+        ))
+    })?;
+    if layout.coords.is_some_and(|(xyz, _)| xyz.contains(&c)) {
+        return Err(malformed(format!(
+            "--species-column {name}: `{name}` holds the positions"
+        )));
+    }
+    // Each atom keeps its element's size where the dump names elements (a LAMMPS
+    // dump's `element` column, an XYZ file's species).
+    layout.element_sizes = header.layout.species.filter(|&e| {
+        matches!(columns[e].as_str(), "element" | "species") && opts.sizes != SizeColumn::Off
+    });
+    layout.species = Some(c);
+    layout.numeric_species = true;
+    layout.type_numbers = true;
+    Ok(layout)
+}
+
 /// What [`text_columns`] finds: the coordinate columns, the box that unscales them
-/// (scaled coordinates), the attribute's column and the size column with its factor.
+/// (scaled coordinates), the attribute's column, the size column with its factor, and
+/// the layout the atom lines are read with (the species column [`species_layout`] gives).
 type TextColumns<'h> = (
     [usize; 3],
     Option<&'h SimulationBox>,
     Option<usize>,
     Option<(usize, f64)>,
+    atoms::AtomLayout,
 );
 
 /// Reads frame `k` of the uncompressed text dump `path` (LAMMPS or XYZ) a window of at
@@ -1275,7 +1384,7 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
                 )
                 .into());
         }
-        let (coords, fractional, attribute, size) = text_columns(&ctx, &header, opts)?;
+        let (coords, fractional, attribute, size, layout) = text_columns(&ctx, &header, opts)?;
         let want = window.min(total - first);
         let end_limit = header.atoms.end;
         // The end of the `want`-th line from `pos` (or the block's end).
@@ -1295,7 +1404,7 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
             &ctx,
             pos..end,
             want,
-            &header.layout,
+            &layout,
             coords,
             fractional,
             attribute,
@@ -1304,7 +1413,7 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
             &NoProgress,
         )
         // The window's counts, told as the frame's (what the header announced).
-        .map_err(|e| match e {
+        .map_err(|e| match categories_note(e, opts) {
             ReadError::Truncated { at, found, .. } => ReadError::Truncated {
                 at,
                 expected: total,

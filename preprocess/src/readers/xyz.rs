@@ -321,6 +321,7 @@ impl Index {
                     // `n` the palette's `n`-th colour; numbers from 0 by place).
                     numeric_species: true,
                     type_numbers: true,
+                    element_sizes: None,
                 }
             }
         };
@@ -440,6 +441,7 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
         type_numbers: species.is_some(),
         species: species.or(atomic_number),
         numeric_species: true,
+        element_sizes: None,
     })
 }
 
