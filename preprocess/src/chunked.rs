@@ -1188,6 +1188,9 @@ pub fn convert_chunked(
         path: output.display().to_string(),
         source,
     })?;
+    // Where a particle's error is: the input's frame, not the file being written.
+    let place =
+        crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep).to_string();
     // At most `max_root_points` chunks share the particles: the largest holds at least
     // that share.
     let least = chunk_memory(n.div_ceil(params.max_root_points as usize));
@@ -1301,7 +1304,7 @@ pub fn convert_chunked(
                 |bad: &(dyn Fn(usize) -> bool + Sync)| crate::readers::first_index(f.len(), bad);
             if let Some(index) = first_bad(&|i| f.positions[i].iter().any(|v| !v.is_finite())) {
                 return Err(ConvertError::Build {
-                    path: output.display().to_string(),
+                    path: place.clone(),
                     source: BuildError::NonFinite {
                         index: start + index,
                         position: f.positions[index],
@@ -1310,7 +1313,7 @@ pub fn convert_chunked(
             }
             if let Some(index) = first_bad(&|i| !position_in_range(&f.positions[i])) {
                 return Err(ConvertError::Build {
-                    path: output.display().to_string(),
+                    path: place.clone(),
                     source: BuildError::OutOfRange {
                         index: start + index,
                         position: f.positions[index],
@@ -1319,7 +1322,7 @@ pub fn convert_chunked(
             }
             if let Some(i) = first_bad(&|i| usize::from(f.species_index[i]) >= map.len()) {
                 return Err(ConvertError::Build {
-                    path: output.display().to_string(),
+                    path: place.clone(),
                     source: BuildError::BadSpecies {
                         index: start + i,
                         species: f.species_index[i],
@@ -1343,7 +1346,7 @@ pub fn convert_chunked(
             if let Some(values) = values {
                 if let Some(index) = first_bad(&|i| !values[i].is_finite()) {
                     return Err(ConvertError::Build {
-                        path: output.display().to_string(),
+                        path: place.clone(),
                         source: BuildError::NonFiniteAttribute {
                             index: start + index,
                             value: values[index],
@@ -1462,7 +1465,7 @@ pub fn convert_chunked(
     let species = species_table(&names, &options.radii);
     // Each chunk checks its own particles' radii; the top node sums over all of them.
     check_species(n, &species).map_err(|source| ConvertError::Build {
-        path: output.display().to_string(),
+        path: place.clone(),
         source,
     })?;
     let largest = groups

@@ -1063,3 +1063,67 @@ fn grid_dump(timestep: u64, n: usize, x_bounds: &str) -> String {
     }
     text
 }
+
+/// Structure types as species (`--species-column c_cna`) read a window at a time, text
+/// and binary: the same file as the whole frame's, each window's types merged into the
+/// frame's list, the text dump's atoms keeping their element's size.
+#[test]
+fn a_species_column_streams_into_the_same_file() {
+    let read = ReadOptions {
+        species_column: Some("c_cna".into()),
+        ..Default::default()
+    };
+    for name in ["cu_gb.cna.dump", "cu_gb.cna.bin"] {
+        let path = mdlod_datasets::lammps_sample_path(name);
+        let f = streamed_equals_in_memory(&path, &read, 1000);
+        let species: Vec<(&str, f32)> = f
+            .metadata()
+            .species
+            .iter()
+            .map(|s| (s.name.as_str(), s.radius))
+            .collect();
+        // Type 1 (fcc) takes the override of `options`; 5 its element's size, or a
+        // type's default in a binary dump.
+        let other = if name.ends_with(".dump") { 1.28 } else { 0.5 };
+        assert_eq!(species, [("1", 1.28), ("5", other)], "{name}");
+    }
+}
+
+/// A particle that cannot be built, met in the partition pass of an out-of-core
+/// conversion, is named in the input's frame, not in the file being written.
+#[test]
+fn a_bad_particle_out_of_core_is_named_in_the_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 3000usize;
+    let mut pos = raw_positions(n, 0x9E3779B97F4A7C15);
+    pos[12 * 1500..12 * 1500 + 4].copy_from_slice(&3e38f32.to_le_bytes());
+    std::fs::write(dir.path().join("pos.f32"), &pos).unwrap();
+    let sidecar = dir.path().join("frame.raw.json");
+    std::fs::write(
+        &sidecar,
+        r#"{"mdlod_raw": 1, "positions": {"file": "pos.f32", "type": "f32"}, "timestep": 7}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("out.mdlod");
+    let mut opts = options(1000);
+    opts.radii.clear();
+    let e = convert_file(
+        &sidecar,
+        &out,
+        FrameSelect::Last,
+        &ReadOptions::default(),
+        &opts,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.starts_with(&format!(
+            "{}: frame 0 (timestep 7): particle 1500 at [3e38",
+            sidecar.display()
+        )) && e.contains("lies beyond ±1e37")
+            && !e.contains("out.mdlod"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
