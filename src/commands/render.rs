@@ -190,8 +190,8 @@ pub struct Args {
     pub legend_title: Option<String>,
     /// A line of text drawn into the image on a light panel (OVITO's text label), with
     /// each frame's values put in for {timestep}, {time}, {frame} (the image's number),
-    /// {particles} and {file}: `--label "t = {time} ps"` on a movie; repeatable, a line
-    /// each
+    /// {particles} and {file}: `--label "t = {time} ps"` on a movie; `{{` and `}}` are
+    /// braces themselves (`--label "{{111}} planes"`); repeatable, a line each
     #[arg(long, value_name = "TEXT")]
     pub label: Vec<String>,
     /// A key of named values instead of the colour bar, for an attribute of categories
@@ -272,51 +272,98 @@ impl LabelValues {
     }
 
     /// `text` with its placeholders filled in; a value the frame lacks (a dump without a
-    /// time) shows `?`, and its name is returned.
+    /// time) shows `?`, and its name is returned. (`text` passed [`label_parts`] in
+    /// [`check_label`].)
     fn fill(&self, text: &str) -> (String, Vec<&'static str>) {
-        let mut out = text.to_string();
+        let mut out = String::new();
         let mut missing = Vec::new();
-        for &field in LABEL_FIELDS {
-            let key = format!("{{{field}}}");
-            if !out.contains(&key) {
-                continue;
+        for part in label_parts(text).unwrap_or_default() {
+            match part {
+                LabelPart::Text(t) => out.push_str(&t),
+                LabelPart::Field(field) => {
+                    let value = match field {
+                        "timestep" => self.timestep.map(|t| t.to_string()),
+                        "time" => self.time.map(|t| super::Num(t as f32).to_string()),
+                        "frame" => Some(self.frame.to_string()),
+                        "particles" => Some(self.particles.to_string()),
+                        _ => Some(self.file.clone()),
+                    };
+                    if value.is_none() && !missing.contains(&field) {
+                        missing.push(field);
+                    }
+                    out.push_str(value.as_deref().unwrap_or("?"));
+                }
             }
-            let value = match field {
-                "timestep" => self.timestep.map(|t| t.to_string()),
-                "time" => self.time.map(|t| super::Num(t as f32).to_string()),
-                "frame" => Some(self.frame.to_string()),
-                "particles" => Some(self.particles.to_string()),
-                _ => Some(self.file.clone()),
-            };
-            if value.is_none() {
-                missing.push(field);
-            }
-            out = out.replace(&key, value.as_deref().unwrap_or("?"));
         }
         (out, missing)
     }
+}
+
+/// A piece of a `--label`: text as written, or a value to fill in.
+#[derive(Clone, Debug, PartialEq)]
+enum LabelPart {
+    Text(String),
+    Field(&'static str),
+}
+
+/// A `--label` cut into text and placeholders, as format strings are: `{name}` a value,
+/// `{{` and `}}` a literal brace (a plane family `{{111}}`); an error names a
+/// placeholder no label fills, or a brace left alone.
+fn label_parts(text: &str) -> Result<Vec<LabelPart>, String> {
+    let mut parts = Vec::new();
+    let mut literal = String::new();
+    let mut chars = text.char_indices().peekable();
+    while let Some((i, c)) = chars.next() {
+        match c {
+            '{' if chars.peek().is_some_and(|&(_, d)| d == '{') => {
+                chars.next();
+                literal.push('{');
+            }
+            '}' if chars.peek().is_some_and(|&(_, d)| d == '}') => {
+                chars.next();
+                literal.push('}');
+            }
+            '{' => {
+                let rest = &text[i + 1..];
+                let Some(close) = rest.find('}') else {
+                    return Err("a `{` opens no placeholder: write `{{` for a brace".into());
+                };
+                let name = &rest[..close];
+                let Some(&field) = LABEL_FIELDS.iter().find(|f| **f == name) else {
+                    return Err(format!(
+                        "{{{name}}} is no value a label fills in (it has {}; write {{{{{name}}}}} \
+                         for the braces themselves)",
+                        LABEL_FIELDS
+                            .iter()
+                            .map(|f| format!("{{{f}}}"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ));
+                };
+                if !literal.is_empty() {
+                    parts.push(LabelPart::Text(std::mem::take(&mut literal)));
+                }
+                parts.push(LabelPart::Field(field));
+                for _ in 0..name.chars().count() + 1 {
+                    chars.next();
+                }
+            }
+            '}' => return Err("a `}` closes no placeholder: write `}}` for a brace".into()),
+            c => literal.push(c),
+        }
+    }
+    if !literal.is_empty() {
+        parts.push(LabelPart::Text(literal));
+    }
+    Ok(parts)
 }
 
 /// Refuses a `--label` naming a placeholder it does not fill, or drawn where the legend
 /// is, before anything is drawn.
 fn check_label(args: &Args) -> Result<()> {
     for text in &args.label {
-        let mut rest = text.as_str();
-        while let Some(open) = rest.find('{') {
-            let after = &rest[open + 1..];
-            let Some(close) = after.find('}') else { break };
-            let name = &after[..close];
-            if !LABEL_FIELDS.contains(&name) {
-                anyhow::bail!(
-                    "--label {text:?}: {{{name}}} is no value a label fills in (it has {})",
-                    LABEL_FIELDS
-                        .iter()
-                        .map(|f| format!("{{{f}}}"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                );
-            }
-            rest = &after[close + 1..];
+        if let Err(why) = label_parts(text) {
+            anyhow::bail!("--label {text:?}: {why}");
         }
     }
     if !args.label.is_empty() {
@@ -328,9 +375,14 @@ fn check_label(args: &Args) -> Result<()> {
                 .label
                 .iter()
                 .map(|t| {
-                    LABEL_FIELDS
-                        .iter()
-                        .fold(t.clone(), |l, f| l.replace(&format!("{{{f}}}"), ""))
+                    label_parts(t)
+                        .unwrap_or_default()
+                        .into_iter()
+                        .filter_map(|p| match p {
+                            LabelPart::Text(t) => Some(t),
+                            LabelPart::Field(_) => None,
+                        })
+                        .collect()
                 })
                 .collect(),
         };
@@ -3163,6 +3215,44 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
 mod tests {
     use super::*;
     use clap::Args as _;
+
+    /// Labels read as format strings: placeholders filled once each where they stand,
+    /// doubled braces literal (a plane family, `{{111}}`), a value the frame lacks `?`
+    /// and named once, stray braces and unknown names refused.
+    #[test]
+    fn labels_fill_placeholders_and_keep_doubled_braces() {
+        let v = LabelValues {
+            timestep: Some(500),
+            time: None,
+            frame: 3,
+            particles: 2552,
+            file: "gb.mdlod".into(),
+        };
+        let fill = |t: &str| v.fill(t);
+        assert_eq!(
+            fill("step {timestep}, {particles} atoms"),
+            ("step 500, 2552 atoms".into(), vec![])
+        );
+        assert_eq!(
+            fill("Σ5 {{310}} boundaries, frame {frame}"),
+            ("Σ5 {310} boundaries, frame 3".into(), vec![])
+        );
+        assert_eq!(
+            fill("{{{timestep}}} {{timestep}}"),
+            ("{500} {timestep}".into(), vec![])
+        );
+        assert_eq!(fill("t={time} ({time})"), ("t=? (?)".into(), vec!["time"]));
+        for (bad, why) in [
+            ("{111} planes", "{111} is no value a label fills in"),
+            ("{111} planes", "write {{111}} for the braces themselves"),
+            ("open { brace", "a `{` opens no placeholder"),
+            ("close } brace", "a `}` closes no placeholder"),
+            ("{timestep", "a `{` opens no placeholder"),
+        ] {
+            let e = label_parts(bad).unwrap_err();
+            assert!(e.contains(why), "{bad}: {e}");
+        }
+    }
 
     /// `--look-along D` puts the eye towards `-D` from the target: the camera's `back`
     /// is `-D` normalised, straight down included.
