@@ -1888,6 +1888,8 @@ fn hiding_a_real_bicrystals_fcc_atoms_leaves_its_boundaries() {
             "1000000",
             "--hide-attribute",
             "0.5:1.5",
+            // (Every boundary atom counted, those behind others too.)
+            "--no-occlusion",
         ]);
         let drawn: u64 = {
             let at = out.find(" particles").unwrap();
@@ -1999,6 +2001,8 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
                 "1000000",
                 "--hide-species",
                 "FCC",
+                // (Every boundary atom counted, those behind others too.)
+                "--no-occlusion",
             ]);
             let drawn: u64 = {
                 let at = out.find(" particles").unwrap();

@@ -13,8 +13,8 @@
 //! species' colour to its styled one ([`PointStyle::cluster_recolour`]: exact for up to
 //! four species of affinely independent colours, a least-squares fit beyond). Hiding is exact at
 //! the particle level only: a cluster drawn in place of a hidden species' particles
-//! still shows them. Styles that change sizes or hide particles turn occlusion culling
-//! off (it assumes the file's radii).
+//! still shows them. Styles that change sizes turn occlusion culling off (it assumes the
+//! file's radii); hiding does not (the traversal occludes with what it draws only).
 
 use mdlod_format::reader::in_species_set;
 use serde::{Deserialize, Serialize};
@@ -250,12 +250,11 @@ impl Default for PointStyle {
 }
 
 impl PointStyle {
-    /// True when the style draws points at other sizes than the file's or hides some:
-    /// occlusion culling, which assumes the file's radii, must then be off.
+    /// True when the style draws points at other sizes than the file's: occlusion
+    /// culling, which assumes the file's radii, must then be off. (Hidden particles are
+    /// left out of the cut by the traversal, which occludes with what it draws only.)
     pub fn changes_geometry(&self) -> bool {
-        self.radius_scale != 1.0
-            || !self.hidden_values.is_empty()
-            || self.species.iter().any(|s| s.hidden || s.radius.is_some())
+        self.radius_scale != 1.0 || self.species.iter().any(|s| s.radius.is_some())
     }
 
     /// The particles this style leaves out of a file with metadata `meta`, as the
@@ -1126,6 +1125,17 @@ mod tests {
         assert!(err.contains("\"A\"") && err.contains("B, C"), "{err}");
         assert!(style.changes_geometry());
         assert!(!PointStyle::default().changes_geometry());
+        // Hiding changes no size.
+        let hiding = PointStyle {
+            species: vec![SpeciesStyle {
+                name: "B".into(),
+                hidden: true,
+                ..Default::default()
+            }],
+            hidden_values: vec![[0.5, 1.5]],
+            ..Default::default()
+        };
+        assert!(!hiding.changes_geometry());
         assert!(PointStyle {
             radius_scale: 0.0,
             ..Default::default()

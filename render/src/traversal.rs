@@ -66,12 +66,15 @@
 //! at once, because the residency answers in the order it is asked.
 //!
 //! Hidden species and values and clip planes ([`TraversalSettings::hidden`],
-//! [`TraversalSettings::clip`]) take the walk without occlusion: a cluster of hidden
-//! species only, or whose box (grown by the quantization error) lies wholly beyond a
-//! plane, is culled with its subtree; one holding both kinds, or across a plane, is
-//! opened whatever its size (after every larger node, so that a budget refines what is
-//! large on screen first), down to particles, each left out by its species, its
-//! attribute value or its decoded centre. The cut then draws exactly the particles kept and clusters of them only.
+//! [`TraversalSettings::clip`]): a cluster of hidden species only, or whose box (grown
+//! by the quantization error) lies wholly beyond a plane, is culled with its subtree; one
+//! holding both kinds, or across a plane, is opened whatever its size (without occlusion
+//! after every larger node, so that a budget refines what is large on screen first),
+//! down to particles, each left out by its species, its attribute value or its decoded
+//! centre. The cut then draws exactly the particles kept and clusters of them only. With
+//! occlusion, what is left out neither draws nor hides anything behind it: only the
+//! spheres drawn go into the occlusion buffer, so the bulk behind a cross-section's face
+//! or behind the atoms a figure keeps is culled as without hiding.
 //!
 //! Streaming plugs in through [`Residency`]: a node whose children's data are not on the
 //! GPU is not opened but stays drawn (so a missing subtree is drawn by its nearest
@@ -116,12 +119,12 @@ pub struct TraversalSettings {
     /// of attribute values in some ranges (`--hide-attribute`). A cluster of them only
     /// is culled, and one holding them and others is opened (its representative would
     /// draw them), down to particles where the budget allows
-    /// ([`MdlodFile::hidden_below`]). The cut is then chosen without occlusion culling.
+    /// ([`MdlodFile::hidden_below`]). With occlusion culling, only what is drawn hides
+    /// what is behind it.
     pub hidden: HiddenSet,
     /// Planes that cut the data away (OVITO's Slice): particles whose centres lie beyond
     /// any are left out, clusters wholly beyond are culled, and clusters across a plane
     /// are opened down to particles where the budget allows, as for hidden species.
-    /// The cut is then chosen without occlusion culling.
     pub clip: ClipPlanes,
 }
 
@@ -625,11 +628,7 @@ pub fn traverse_shared(
     settings: &TraversalSettings,
     residency: &dyn SharedResidency,
 ) -> (DrawList, Vec<(u32, f32)>) {
-    if settings.occlusion == OcclusionMode::Off
-        || settings.viewport.contains(&0)
-        || !settings.hidden.is_empty()
-        || !settings.clip.is_empty()
-    {
+    if settings.occlusion == OcclusionMode::Off || settings.viewport.contains(&0) {
         let mut tile = TileResidency {
             shared: residency,
             asked: Vec::new(),
@@ -660,17 +659,14 @@ pub fn traverse_with(
     settings: &TraversalSettings,
     residency: &mut dyn Residency,
 ) -> DrawList {
-    if settings.occlusion != OcclusionMode::Off
-        && settings.hidden.is_empty()
-        && settings.clip.is_empty()
-    {
+    if settings.occlusion != OcclusionMode::Off {
         let proj = Projector::with_support(
             camera,
             settings.viewport,
             settings.support_scale,
             file.max_particle_radius(),
         );
-        if !proj.visible(&file.nodes()[0]) {
+        if !proj.visible(&file.nodes()[0]) || all_left_out(file, settings) {
             return DrawList {
                 culled_nodes: 1,
                 ..Default::default()
@@ -693,7 +689,7 @@ pub fn traverse_with(
                 None,
             ) {
                 let deferred = d.deferred;
-                let mut list = cut_of(file, &proj, vec![d]);
+                let mut list = cut_of(file, &proj, settings, vec![d]);
                 list.deferred_nodes = deferred;
                 list.restarts = attempt;
                 list.budget_limited = attempt > 0;
@@ -708,7 +704,12 @@ pub fn traverse_with(
 
 /// The cut that occlusion passes (the whole image's, or its tiles') decided together:
 /// what any of them opened, drew, or kept of an opened node's particles.
-fn cut_of(file: &MdlodFile, proj: &Projector, passes: Vec<Decisions>) -> DrawList {
+fn cut_of(
+    file: &MdlodFile,
+    proj: &Projector,
+    settings: &TraversalSettings,
+    passes: Vec<Decisions>,
+) -> DrawList {
     let mut marks = Marks::new(file.nodes().len());
     let mut achieved = 0.0f32;
     for d in &passes {
@@ -725,12 +726,13 @@ fn cut_of(file: &MdlodFile, proj: &Projector, passes: Vec<Decisions>) -> DrawLis
         }
     }
     let masks = join_masks(passes.into_iter().flat_map(|d| d.particles).collect());
+    let hidden = Hidden::of(file, settings);
     emit(
         file,
         proj,
         marks,
         Some(&masks),
-        None,
+        hidden.as_ref(),
         achieved,
         DrawList::default(),
     )
@@ -783,7 +785,7 @@ fn traverse_tiled(
         settings.support_scale,
         file.max_particle_radius(),
     );
-    if !proj.visible(&file.nodes()[0]) {
+    if !proj.visible(&file.nodes()[0]) || all_left_out(file, settings) {
         let list = DrawList {
             culled_nodes: 1,
             ..Default::default()
@@ -831,7 +833,7 @@ fn traverse_tiled(
             let (passes, asked): (Vec<Decisions>, Vec<Vec<(u32, f32)>>) =
                 passes.into_iter().unzip();
             let asked = largest_first_once(asked.concat());
-            let mut list = cut_of(file, &proj, passes);
+            let mut list = cut_of(file, &proj, settings, passes);
             if list.points <= budget {
                 list.restarts = attempt;
                 list.budget_limited = attempt > 0;
@@ -894,22 +896,11 @@ fn largest_first(
     // With hidden species: clusters of them only are culled, and mixed ones opened also
     // when small enough (after every larger node: see [`Frontier`]); hidden particles
     // are left out. Every species hidden draws nothing.
-    let species_count = file.metadata().species.len();
-    let every =
-        species_count <= 64 && settings.hidden.species.count_ones() as usize == species_count;
-    if every {
+    if all_left_out(file, settings) {
         list.culled_nodes = 1;
         return list;
     }
-    let below = (!settings.hidden.is_empty()).then(|| file.hidden_below(&settings.hidden));
-    let hidden = (below.is_some() || !settings.clip.is_empty()).then(|| Hidden {
-        species: below
-            .as_deref()
-            .map(|kinds| (kinds, file.hidden_test(&settings.hidden))),
-        clip: settings.clip,
-        grow: quantization_reach(file),
-        file,
-    });
+    let hidden = Hidden::of(file, settings);
     let hidden_only = |id: usize| hidden.as_ref().is_some_and(|h| h.node(id));
     let hidden_particle = |i: usize, enc: usize| {
         hidden
@@ -917,10 +908,6 @@ fn largest_first(
             .is_some_and(|h| h.particle(i, enc).is_some())
     };
     let mixed = |id: usize| hidden.as_ref().is_some_and(|h| h.mixed(id));
-    if hidden_only(0) {
-        list.culled_nodes = 1;
-        return list;
-    }
 
     // With a residency whose answers do not depend on the order it is asked in, and a
     // budget no cut can reach (a cut draws at most one point per particle), which nodes
@@ -1050,11 +1037,32 @@ impl Frontier {
 /// hidden species or beyond a plane.
 struct Hidden<'a> {
     /// What lies below each node ([`MdlodFile::hidden_below`]) and the particles' test.
-    species: Option<(&'a [u8], HiddenTest)>,
+    species: Option<(std::sync::Arc<[u8]>, HiddenTest)>,
     clip: ClipPlanes,
     /// How far decoded centres stray from their nodes' boxes ([`quantization_reach`]).
     grow: f32,
     file: &'a MdlodFile,
+}
+
+impl<'a> Hidden<'a> {
+    /// What `settings` leave out of `file`: `None` when nothing.
+    fn of(file: &'a MdlodFile, settings: &TraversalSettings) -> Option<Hidden<'a>> {
+        let below = (!settings.hidden.is_empty()).then(|| file.hidden_below(&settings.hidden));
+        (below.is_some() || !settings.clip.is_empty()).then(|| Hidden {
+            species: below.map(|kinds| (kinds, file.hidden_test(&settings.hidden))),
+            clip: settings.clip,
+            grow: quantization_reach(file),
+            file,
+        })
+    }
+}
+
+/// Whether `settings` leave out everything of `file`: every species hidden, or the top
+/// node (all the particles) hidden or beyond a clip plane.
+fn all_left_out(file: &MdlodFile, settings: &TraversalSettings) -> bool {
+    let species_count = file.metadata().species.len();
+    (species_count <= 64 && settings.hidden.species.count_ones() as usize == species_count)
+        || Hidden::of(file, settings).is_some_and(|h| h.node(0))
 }
 
 /// The largest distance of a decoded centre from its input position (the file's recorded
@@ -1094,13 +1102,17 @@ impl Hidden<'_> {
     /// Node `id` holds hidden particles only, or lies wholly beyond a clip plane.
     fn node(&self, id: usize) -> bool {
         self.species
+            .as_ref()
             .is_some_and(|(kinds, _)| kinds.get(id) == Some(&BELOW_IN))
             || self.clip_side(id) == ClipSide::Beyond
     }
 
     /// Node `id` holds hidden particles and others, or lies across a clip plane.
     fn mixed(&self, id: usize) -> bool {
-        let kind = self.species.and_then(|(kinds, _)| kinds.get(id).copied());
+        let kind = self
+            .species
+            .as_ref()
+            .and_then(|(kinds, _)| kinds.get(id).copied());
         match self.clip_side(id) {
             ClipSide::Beyond => false,
             ClipSide::Across => kind != Some(BELOW_IN),
@@ -1113,7 +1125,8 @@ impl Hidden<'_> {
     fn particle(&self, i: usize, enc: usize) -> Option<LeftOut> {
         if self
             .species
-            .is_some_and(|(_, test)| self.file.hides_particle(&test, i))
+            .as_ref()
+            .is_some_and(|(_, test)| self.file.hides_particle(test, i))
         {
             return Some(LeftOut::Species);
         }
@@ -1210,6 +1223,11 @@ fn front_to_back(
     let r_min = if r_min.is_finite() { r_min } else { 0.0 };
     let quant = quantization_reach(file);
     let mut out = Decisions::default();
+    // Hidden species and values, clip planes: clusters left out wholly are culled, mixed
+    // ones opened whatever their size, particles left out neither drawn nor occluding.
+    let hidden = Hidden::of(file, settings);
+    let hidden_only = |id: usize| hidden.as_ref().is_some_and(|h| h.node(id));
+    let mixed = |id: usize| hidden.as_ref().is_some_and(|h| h.mixed(id));
 
     // The sphere a node is drawn as when it is not opened, exactly as the GPU decodes it.
     let representative = |id: u32| -> (Vec3, f32) {
@@ -1267,7 +1285,8 @@ fn front_to_back(
         let margin_of = |reach: f32| (reach - r_min).max(0.0) + quant;
         let size = proj.size_px(n);
         let child_level = usize::from(n.level) + 1;
-        let reads_children = size > error_px && child_level < last;
+        let opens = size > error_px || mixed(id as usize);
+        let reads_children = opens && child_level < last;
         if reads_children && buffer.box_hidden(bounds_min, bounds_max, margin_of(own)) {
             continue;
         }
@@ -1280,9 +1299,8 @@ fn front_to_back(
         // converged image, may miss where that larger sphere pokes out of a hidden box.
         // Corrupt records below: drawn as its representative, as a node the residency
         // refuses, the error kept for the caller (`MdlodFile::node_error`).
-        let corrupt =
-            size > error_px && child_level < last && file.check_children(id as usize).is_err();
-        let reach = if size <= error_px || corrupt {
+        let corrupt = reads_children && file.check_children(id as usize).is_err();
+        let reach = if !opens || corrupt {
             own
         } else if child_level == last {
             0.0
@@ -1292,7 +1310,7 @@ fn front_to_back(
             for c in children.clone() {
                 let cn = &nodes[first + c as usize];
                 let within = if inside { Some(true) } else { proj.frustum(cn) };
-                if let Some(within) = within {
+                if let Some(within) = within.filter(|_| !hidden_only(first + c as usize)) {
                     let r = representative_radius(cn);
                     reach = reach.max(r);
                     kids.push((c, proj.size_px(cn), r, within));
@@ -1305,7 +1323,7 @@ fn front_to_back(
         {
             continue;
         }
-        let commit = size <= error_px || corrupt || {
+        let commit = !opens || corrupt || {
             let refused = !residency.can_open(file, id, size);
             out.deferred += u64::from(refused);
             refused
@@ -1322,7 +1340,8 @@ fn front_to_back(
             continue;
         }
         out.opened.push(id);
-        let enc = &nodes[children_encoder(file, id as usize)];
+        let enc_id = children_encoder(file, id as usize);
+        let enc = &nodes[enc_id];
         let positions = file.positions(child_level);
         if child_level < last {
             // Children too large are queued by depth; the others are final, so each is
@@ -1333,7 +1352,7 @@ fn front_to_back(
             for &(c, csize, r, within) in &kids {
                 let cid = first + c as usize;
                 let cn = &nodes[cid];
-                if csize > error_px {
+                if csize > error_px || mixed(cid) {
                     heap.push(entry(proj.near_depth(cn), cid as u32, within));
                     continue;
                 }
@@ -1365,6 +1384,12 @@ fn front_to_back(
             let mut mask = 0u64;
             let mut drawn = 0u64;
             for (k, c) in children.enumerate() {
+                if hidden
+                    .as_ref()
+                    .is_some_and(|h| h.particle(c as usize, enc_id).is_some())
+                {
+                    continue;
+                }
                 let p = Vec3::from(quantize::decode3(
                     positions.get(c as usize),
                     enc.centroid,
@@ -1469,6 +1494,7 @@ fn count_mixed(hidden: Option<&Hidden<'_>>, id: usize, list: &mut DrawList) {
     if let Some(h) = hidden {
         list.mixed_drawn += u64::from(
             h.species
+                .as_ref()
                 .is_some_and(|(kinds, _)| kinds.get(id) == Some(&(BELOW_IN | BELOW_OUT))),
         );
         list.across_drawn += u64::from(h.clip_side(id) == ClipSide::Across);
@@ -1538,7 +1564,10 @@ fn emit_node(
             let cid = levels[child_level].node_first as u32 + c;
             match marks.get(cid) {
                 OPENED => false,
-                DRAWN => true,
+                DRAWN => {
+                    count_mixed(hidden, cid as usize, list);
+                    true
+                }
                 _ => {
                     let hidden_only = hidden.is_some_and(|h| h.node(cid as usize));
                     if !proj.visible(&nodes[cid as usize]) || hidden_only {

@@ -1181,6 +1181,67 @@ fn occlusion_culling_of_particles_of_their_own_sizes_changes_no_pixel() {
     check_culling_of_a_block(&f, 0.9, "own sizes, ");
 }
 
+/// Hidden species, hidden values and clip planes keep occlusion culling: what they leave
+/// out neither draws nor hides what is behind it, so the culled image is the unculled
+/// one, pixel for pixel, with most of the block left out, at no error and at 3 px.
+#[test]
+fn occlusion_culling_with_hidden_and_clipped_particles_changes_no_pixel() {
+    let mut frame = fcc_frame(14);
+    let n = frame.positions.len();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "c_cna".into(),
+        values: (0..n).map(|i| (i * 7 % 5) as f32 + 1.0).collect(),
+    });
+    let mid = frame.positions.iter().map(|p| p[0]).sum::<f32>() / n as f32;
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let hide_ag = mdlod_render::style::SpeciesStyle {
+        name: "Ag".into(),
+        hidden: true,
+        ..Default::default()
+    };
+    let styles = [
+        (
+            "Ag hidden",
+            mdlod_render::style::PointStyle {
+                species: vec![hide_ag],
+                ..Default::default()
+            },
+        ),
+        (
+            "values 1 to 2 hidden",
+            mdlod_render::style::PointStyle {
+                hidden_values: vec![[0.5, 2.5]],
+                ..Default::default()
+            },
+        ),
+        (
+            "a half cut away",
+            mdlod_render::style::PointStyle {
+                clip: vec![[1.0, 0.0, 0.0, mid]],
+                ..Default::default()
+            },
+        ),
+    ];
+    for (what, style) in styles {
+        for error_px in [0.0, 3.0] {
+            let mut o = opts(160, 120);
+            o.error_px = error_px;
+            o.view = ViewSpec::Orbit {
+                azimuth_deg: 25.0,
+                elevation_deg: 15.0,
+                zoom: 1.3,
+                projection: Projection::Perspective,
+            };
+            o.style = style.clone();
+            let r = check_culling_changes_no_pixel(&f, o, 0.8, &format!("{what}, {error_px} px"));
+            assert!(
+                r.particles_occluded + r.nodes_occluded > 0,
+                "{what}, {error_px} px: nothing culled"
+            );
+        }
+    }
+}
+
 #[test]
 fn occlusion_culling_changes_no_pixel_where_particles_are_about_a_pixel_wide() {
     // Small spheres take the sample-by-sample test (one ray per pixel centre against the
@@ -2424,7 +2485,7 @@ fn sndf_batches_add_up_to_one_sampling() {
 }
 
 /// Hiding a species draws exactly the picture of the data without it (every particle
-/// drawn, the same camera), and a colour map draws a different one.
+/// drawn, the same camera; occlusion culling on), and a colour map draws a different one.
 #[test]
 fn a_hidden_species_leaves_the_picture_of_the_data_without_it() {
     use mdlod_render::{PointStyle, SpeciesStyle};
@@ -2457,9 +2518,9 @@ fn a_hidden_species_leaves_the_picture_of_the_data_without_it() {
         ..Default::default()
     };
     let (hidden, report) = render_image(renderer(), &f, &o).unwrap();
-    assert_eq!(
-        report.nodes_occluded, 0,
-        "occlusion culling is off for hiding styles"
+    assert!(
+        report.nodes_occluded + report.particles_occluded > 0,
+        "occlusion culling stays on for hiding styles"
     );
     assert!(differing(&all, &without, w, h) > 0.01, "silver atoms show");
     assert!(differing(&hidden, &without, w, h) < 0.002);
@@ -2511,9 +2572,9 @@ fn hidden_values_leave_the_picture_of_the_data_without_them() {
         ..Default::default()
     };
     let (hidden, report) = render_image(renderer(), &f, &o).unwrap();
-    assert_eq!(
-        report.nodes_occluded, 0,
-        "occlusion culling is off for hiding styles"
+    assert!(
+        report.nodes_occluded + report.particles_occluded > 0,
+        "occlusion culling stays on for hiding styles"
     );
     assert!(report.particles_drawn > 0);
     assert!(

@@ -410,8 +410,7 @@ fn check_label(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// Says when `--hide-attribute`'s ranges all miss the attribute's values (which still
-/// turns occlusion culling off, at a cost).
+/// Says when `--hide-attribute`'s ranges all miss the attribute's values.
 fn hides_nothing_note(
     style: &StyleArgs,
     attribute: Option<&mdlod_format::meta::AttributeInfo>,
@@ -422,8 +421,7 @@ fn hides_nothing_note(
         return None;
     }
     Some(format!(
-        "  note: --hide-attribute hides no particle: {} lies from {} to {} here (and \
-         hiding turns occlusion culling off; leave it out to draw faster)",
+        "  note: --hide-attribute hides no particle: {} lies from {} to {} here",
         a.name,
         super::Num(a.min),
         super::Num(a.max)
