@@ -2030,21 +2030,29 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
             && out.contains("a continuous quantity goes in --attribute"),
         "{out}"
     );
-    // The element is no species now: the hint names the values.
-    let err = fails(&[
+    // A script naming every structure type, and a radius for the element, which is no
+    // species now: converted, each named value the frame lacks noted.
+    let out = ok(&[
         "convert",
         s(&input),
         "-o",
         s(&pe),
         "--species-column",
         "c_cna",
+        "--species-name",
+        "1=FCC",
+        "--species-name",
+        "2=HCP",
+        "--species-name",
+        "5=Other",
         "--radius",
         "Cu=1.3",
     ]);
     assert!(
-        err.contains("no species named \"Cu\"")
-            && err.contains("the species are the values of --species-column c_cna"),
-        "{err}"
+        out.contains("note: --species-name 2=HCP: no particle has the value 2 in --species-column c_cna here (the species here: FCC, Other)")
+            && out.contains("note: --radius Cu=1.3: no species Cu here")
+            && !out.contains("1=FCC:"),
+        "{out}"
     );
 }
 

@@ -2054,10 +2054,12 @@ pub fn batch(
     }
     last_save?;
     // A species may appear in some frames only, but a radius override that names none
-    // of any frame's is a misspelt name. (A shard sees only its own frames.)
+    // of any frame's is a misspelt name. (A shard sees only its own frames; a column of
+    // categories need not hold every value a script names, say all five structure
+    // types.)
     let seen = seen.into_inner().unwrap_or_else(|e| e.into_inner());
     let whole = opts.shard.is_none_or(|(_, n)| n == 1);
-    if whole && !seen.is_empty() {
+    if whole && !seen.is_empty() && opts.read.species_column.is_none() {
         if let Some((name, radius)) = opts.convert.radii.iter().find(|(n, _)| !seen.contains(n)) {
             return Err(BatchError::Convert(ConvertError::Species(Box::new(
                 crate::species::UnknownSpecies {

@@ -100,6 +100,22 @@ pub fn palette_colour(slot: usize) -> [u8; 3] {
     [r, g, b].map(|v| ((v + m) * 255.0).round().clamp(0.0, 255.0) as u8)
 }
 
+/// The colour (sRGB) of a category of `--species-column` by its value, the same in every
+/// frame: 1 to 4 as OVITO colours fcc, hcp, bcc and icosahedral atoms (the numbers of
+/// LAMMPS's `cna/atom` and `ptm/atom`), 0 and 5 (other, in `ptm/atom` and `cna/atom`)
+/// light grey, larger values the palette's; `None` below 0 (coloured by place).
+pub fn category_colour(value: i64) -> Option<[u8; 3]> {
+    Some(match value {
+        0 | 5 => [242, 242, 242],
+        1 => [102, 255, 102],
+        2 => [255, 102, 102],
+        3 => [102, 102, 255],
+        4 => [242, 204, 51],
+        v if v > 5 => palette_colour(usize::try_from(v).ok()?),
+        _ => return None,
+    })
+}
+
 /// Radius of a numeric type or unknown name, in the simulation's length unit.
 pub const DEFAULT_RADIUS: f32 = 0.5;
 
@@ -347,11 +363,8 @@ impl SpeciesNaming {
                      number: give the element symbol instead, {example}"
                 ))
             }
-            SpeciesNaming::Column { column, first } => Some(format!(
-                "the species are the values of --species-column {column}: give a value, e.g. \
-                 --radius {first}={radius}, or name it first: --species-name {first}={name} \
-                 --radius {name}={radius}"
-            )),
+            // (Any value may occur in a category column: a radius or rename for one a frame
+            // lacks is noted where it is converted.)
             _ => None,
         }
     }
@@ -367,10 +380,6 @@ impl SpeciesNaming {
             SpeciesNaming::ElementColumn { first, .. } if is_type_number(old) => Some(format!(
                 "the input names its species by its `element` column, not by type number: \
                  rename an element, e.g. --species-name {first}=NAME"
-            )),
-            SpeciesNaming::Column { column, first } => Some(format!(
-                "the species are the values of --species-column {column}: rename a value, \
-                 e.g. --species-name {first}=NAME"
             )),
             _ => None,
         }

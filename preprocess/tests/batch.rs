@@ -2259,6 +2259,22 @@ fn a_rerun_with_another_species_column_converts_again_and_shards_must_agree() {
     assert_eq!(run(Some("type")), (0, 5));
     assert_eq!(run(None), (5, 0));
     assert_eq!(species().1, None);
+    // Names and radii for the values, one of them in no frame (a script naming every
+    // structure type): converted, the absent one passed over.
+    let mut named = with(Some("type"), opts());
+    named.convert.species_names = vec![("1".into(), "FCC".into()), ("3".into(), "BCC".into())];
+    named.convert.radii = vec![("FCC".into(), 1.3), ("BCC".into(), 1.2), ("2".into(), 1.5)];
+    let r = batch(std::slice::from_ref(&src), &out, &named, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (5, 0));
+    let m = read_manifest(&out).unwrap();
+    let f = MdlodFile::open(out.join(&m.frames[0].file)).unwrap();
+    let radii: Vec<(String, f32)> = f
+        .metadata()
+        .species
+        .iter()
+        .map(|s| (s.name.clone(), s.radius))
+        .collect();
+    assert_eq!(radii, [("FCC".to_string(), 1.3), ("2".to_string(), 1.5)]);
     // A column no frame has is an error before any frame is converted.
     let e = batch(
         std::slice::from_ref(&src),

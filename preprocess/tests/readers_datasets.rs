@@ -297,6 +297,11 @@ fn a_species_column_makes_the_structure_types_species() {
         .as_ref()
         .expect("sizes from the element column");
     assert!(radii.iter().all(|&r| r == 1.28), "{:?}", &radii[..4]);
+    // Structure types in the colours OVITO gives them, by value: fcc green, other grey.
+    for frame in [&from_text, &from_binary] {
+        let colours: Vec<Option<[u8; 3]>> = frame.species.iter().map(|s| s.colour).collect();
+        assert_eq!(colours, [Some([102, 255, 102]), Some([242, 242, 242])]);
+    }
     assert!(from_text.species.iter().all(|s| s.radius == Some(1.28)));
     // A binary dump names no elements: its categories take their radii as types do.
     assert!(from_binary.radii.is_none());

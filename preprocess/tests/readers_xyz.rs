@@ -530,7 +530,7 @@ fn a_species_column_keeps_each_atoms_element_size() {
     assert_eq!(f.species_index, [0, 1, 0, 0]);
     assert_eq!(f.radii.as_deref(), Some(&[1.28, 1.28, 1.44, 1.28][..]));
     assert_eq!(f.species[0].radius_range, Some((1.28, 1.44)));
-    // --no-sizes: no sizes of their own, from elements either.
+    // --no-sizes: no sizes of their own; each category its atoms' mean.
     let off = ReadOptions {
         sizes: mdlod_preprocess::readers::SizeColumn::Off,
         ..opts.clone()
@@ -540,4 +540,8 @@ fn a_species_column_keeps_each_atoms_element_size() {
         .read_frame(0, &off, &NoProgress)
         .unwrap();
     assert!(f.radii.is_none());
+    let mean = (1.28f64 * 2.0 + 1.44) / 3.0;
+    assert!((f64::from(f.species[0].radius.unwrap()) - mean).abs() < 1e-6);
+    assert_eq!(f.species[0].radius_range, None);
+    assert_eq!(f.species[1].radius, Some(1.28));
 }

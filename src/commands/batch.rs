@@ -314,7 +314,7 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         if again.settings > 0 {
             why.push(format!(
                 "{} built with other settings (build options, --radius, --attribute, \
-                 --species-name, --columns or the size column)",
+                 --species-name, --columns, the size column or --species-column)",
                 again.settings
             ));
         }

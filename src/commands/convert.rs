@@ -83,9 +83,12 @@ pub struct BuildArgs {
     /// Column of a LAMMPS dump (or extended-XYZ property) to take each particle's species
     /// from instead of its `type` or `element`: a column of categories, such as a
     /// common-neighbour analysis's structure type (`c_cna`: 1 fcc, 2 hcp, 3 bcc, 4
-    /// icosahedral, 5 other). Each distinct value becomes a species, coloured, named
-    /// (`--species-name 1=FCC`), sized (`--radius 1=1.28`) and hidden as species are, and
-    /// averaged in clusters as species colours are (an attribute's values would be
+    /// icosahedral, 5 other; ptm/atom's 0 is other). Each distinct value, however printed
+    /// (1, 1.000000), becomes a species: named (`--species-name 1=FCC`; a value the frame
+    /// lacks is noted), sized (atoms keep their element's size where the dump names
+    /// elements; else `--radius 1=1.28`), hidden and keyed as species are, coloured by
+    /// value as OVITO colours these structures (1-4 green, red, blue, gold; 0 and 5 grey),
+    /// and averaged in clusters as species colours are (an attribute's values would be
     /// averaged, mixing categories).
     #[arg(long, value_name = "NAME")]
     pub species_column: Option<String>,
@@ -159,7 +162,9 @@ impl BuildArgs {
                 temp_dir: self.temp_dir.clone(),
                 ..ChunkOptions::default()
             },
-            radii_may_be_absent: false,
+            // A column of categories need not hold every value named in one frame (a
+            // script names all five structure types): noted after the conversion.
+            radii_may_be_absent: self.species_column.is_some(),
             species_names: self.species_names.clone(),
             attribute_log10: self.attribute_log10,
         };
@@ -215,11 +220,47 @@ pub fn run(args: Args) -> Result<()> {
     let report = with_threads(args.threads, || convert(&args))??;
     print_report(&args.output, &report);
     if let Some(column) = &args.build.species_column {
-        if let Some(note) = categories_note(&args.output, column) {
+        for note in categories_notes(&args.output, column, &args.build) {
             println!("  note: {note}");
         }
     }
     Ok(())
+}
+
+/// What a conversion with `--species-column` should tell: renames and radii naming a
+/// value the frame lacks, and more species than a column of categories would give.
+pub fn categories_notes(file: &std::path::Path, column: &str, build: &BuildArgs) -> Vec<String> {
+    let Ok(f) = mdlod_format::MdlodFile::open(file) else {
+        return Vec::new();
+    };
+    let names: Vec<&str> = f
+        .metadata()
+        .species
+        .iter()
+        .map(|s| s.name.as_str())
+        .collect();
+    let list = || names.join(", ");
+    let mut notes = Vec::new();
+    for (old, new) in &build.species_names {
+        if !names.contains(&new.as_str()) {
+            notes.push(format!(
+                "--species-name {old}={new}: no particle has the value {old} in --species-column \
+                 {column} here (the species here: {})",
+                list()
+            ));
+        }
+    }
+    for (name, radius) in &build.radii {
+        if !names.contains(&name.as_str()) {
+            notes.push(format!(
+                "--radius {name}={radius}: no species {name} here (the species are the values \
+                 of --species-column {column}, renamed: {})",
+                list()
+            ));
+        }
+    }
+    notes.extend(categories_note(file, column));
+    notes
 }
 
 /// More species than a column of categories would give: the column asked for by

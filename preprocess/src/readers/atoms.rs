@@ -21,6 +21,7 @@
 //! Errors carry the byte offset of the offending field or line; the line number is only
 //! computed (by counting newlines from the start of the file) when an error is reported.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::ops::Range;
 
@@ -56,8 +57,14 @@ pub(crate) struct AtomLayout {
     pub type_numbers: bool,
     /// A column of element symbols whose radii are the particles' sizes where no column
     /// gives sizes: the dump's `element` column when the species come from another
-    /// column (`--species-column`), so that each atom keeps its element's size.
-    pub element_sizes: Option<usize>,
+    /// column (`--species-column`), so that each atom keeps its element's size; with
+    /// `false`, each species takes its particles' mean (`--no-sizes`).
+    pub element_sizes: Option<(usize, bool)>,
+    /// The species column holds categories (`--species-column`): a value written as a
+    /// whole number in any notation (`1`, `1.0`, `1.000000e+00`) is that number, values
+    /// are sorted as numbers, and whole numbers from 0 take colours by value
+    /// ([`crate::species::category_colour`]), the same in every frame.
+    pub categories: bool,
 }
 
 /// Gives every species of particles with sizes its particles' mean radius and their
@@ -208,7 +215,7 @@ pub(crate) fn parse(
         if roles[c] == Role::Skip {
             roles[c] = Role::Size(factor);
         }
-    } else if let Some(c) = layout.element_sizes {
+    } else if let Some((c, _)) = layout.element_sizes {
         if roles[c] == Role::Skip {
             roles[c] = Role::ElementSize;
         }
@@ -266,15 +273,7 @@ pub(crate) fn parse(
 
     // 4. merge species
     let species = if layout.species.is_some() {
-        merge_species(
-            ctx,
-            start,
-            &local,
-            &counts,
-            layout.numeric_species,
-            layout.type_numbers,
-            &mut species_index,
-        )?
+        merge_species(ctx, start, &local, &counts, layout, &mut species_index)?
     } else if expected > 0 {
         vec![SpeciesName {
             name: DEFAULT_SPECIES.to_string(),
@@ -289,6 +288,16 @@ pub(crate) fn parse(
     if let Some(r) = &radii {
         sized_species(&mut species, &species_index, r);
     }
+    // Element sizes as each species' mean only (--no-sizes).
+    let radii = match layout.element_sizes {
+        Some((c, false)) if plan.roles.get(c) == Some(&Role::ElementSize) => {
+            for s in &mut species {
+                s.radius_range = None;
+            }
+            None
+        }
+        _ => radii,
+    };
     progress.finish_stage();
     Ok(Atoms {
         positions,
@@ -312,23 +321,42 @@ fn merge_species(
     block_start: usize,
     local: &[SpeciesTable<'_>],
     counts: &[usize],
-    numeric: bool,
-    type_numbers: bool,
+    layout: &AtomLayout,
     species_index: &mut [u16],
 ) -> Result<Vec<SpeciesName>, ReadError> {
-    let mut names: Vec<&[u8]> = Vec::new();
-    let mut ids: HashMap<&[u8], u16> = HashMap::new();
+    let (numeric, type_numbers, categories) = (
+        layout.numeric_species,
+        layout.type_numbers,
+        layout.categories,
+    );
+    let column = layout
+        .species
+        .and_then(|c| layout.columns.get(c))
+        .map_or("", String::as_str);
+    let mut names: Vec<Cow<'_, [u8]>> = Vec::new();
+    let mut ids: HashMap<Cow<'_, [u8]>, u16> = HashMap::new();
     let mut luts: Vec<Vec<u16>> = Vec::with_capacity(local.len());
     for table in local {
         let mut lut = Vec::with_capacity(table.names.len());
-        for &name in &table.names {
-            let id = match ids.get(name) {
+        for &token in &table.names {
+            let name = if categories {
+                category_name(token).map_err(|value| ReadError::Malformed {
+                    at: ctx.at(block_start),
+                    message: format!(
+                        "--species-column {column}: a value `{value}` in the frame is no \
+                         category (a structure type's number or name)"
+                    ),
+                })?
+            } else {
+                Cow::Borrowed(token)
+            };
+            let id = match ids.get(&name) {
                 Some(&id) => id,
                 None => {
                     let id = u16::try_from(names.len()).map_err(|_| ReadError::TooManySpecies {
                         at: ctx.at(block_start),
                     })?;
-                    names.push(name);
+                    names.push(name.clone());
                     ids.insert(name, id);
                     id
                 }
@@ -348,14 +376,23 @@ fn merge_species(
     let numeric_type = values.is_some();
     // LAMMPS types start at 1; a 0 or below is no type number to take a slot by.
     let slots = type_numbers && values.as_ref().is_some_and(|v| v.iter().all(|&n| n >= 1));
-    if let Some(values) = values {
+    // Categories that are all numbers, whole or not, are sorted as numbers too.
+    let order_by: Option<Vec<f64>> = match (&values, categories) {
+        (Some(v), _) => Some(v.iter().map(|&n| n as f64).collect()),
+        (None, true) => names
+            .iter()
+            .map(|n| std::str::from_utf8(n).ok()?.parse::<f64>().ok())
+            .collect(),
+        (None, false) => None,
+    };
+    if let Some(values) = order_by {
         let mut order: Vec<usize> = (0..names.len()).collect();
-        order.sort_by_key(|&i| values[i]);
+        order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
         let mut rank = vec![0u16; names.len()];
         for (new, &old) in order.iter().enumerate() {
             rank[old] = new as u16;
         }
-        names = order.iter().map(|&i| names[i]).collect();
+        names = order.iter().map(|&i| names[i].clone()).collect();
         for lut in &mut luts {
             for id in lut.iter_mut() {
                 *id = rank[*id as usize];
@@ -378,14 +415,46 @@ fn merge_species(
     });
     Ok(names
         .into_iter()
-        .map(|n| SpeciesName {
-            name: String::from_utf8_lossy(n).into_owned(),
-            numeric_type,
-            radius: None,
-            palette_slot: if slots { type_number_slot(n) } else { None },
-            ..Default::default()
+        .map(|n| {
+            let name = String::from_utf8_lossy(&n).into_owned();
+            SpeciesName {
+                numeric_type,
+                radius: None,
+                palette_slot: if slots { type_number_slot(&n) } else { None },
+                colour: if categories {
+                    name.parse::<i64>()
+                        .ok()
+                        .and_then(crate::species::category_colour)
+                } else {
+                    None
+                },
+                name,
+                ..Default::default()
+            }
         })
         .collect())
+}
+
+/// A category's name: a whole number in any notation as that number (`1.000000` is
+/// `1`, `-0` is `0`); other tokens as written. `Err` with the token for a number that is
+/// not finite (`nan`, `inf`).
+fn category_name(token: &[u8]) -> Result<Cow<'_, [u8]>, String> {
+    let Some(v) = std::str::from_utf8(token)
+        .ok()
+        .and_then(|t| t.parse::<f64>().ok())
+    else {
+        return Ok(Cow::Borrowed(token));
+    };
+    if !v.is_finite() {
+        return Err(String::from_utf8_lossy(token).into_owned());
+    }
+    if v.fract() == 0.0 && v.abs() < 1e15 {
+        let whole = (v as i64).to_string();
+        if whole.as_bytes() != token {
+            return Ok(Cow::Owned(whole.into_bytes()));
+        }
+    }
+    Ok(Cow::Borrowed(token))
 }
 
 /// Distinct species tokens of one chunk, in order of first appearance.
@@ -454,8 +523,10 @@ fn parse_chunk<'a>(
     let bytes: &'a [u8] = &ctx.data[..chunk.end];
     let roles = plan.roles.as_slice();
     let mut table = SpeciesTable::new();
-    // The last element symbol met and its radius (atoms of one element come in runs).
-    let mut element: (&[u8], f64) = (&[], 0.0);
+    // The element symbols met and their radii (a frame names a few elements; the last
+    // is tried first, as atoms of one element come in runs).
+    let mut elements: Vec<(&[u8], f64)> = Vec::new();
+    let mut last_element = 0usize;
     let mut i = chunk.start;
     for (a, (pos_out, sp_out)) in positions.iter_mut().zip(species.iter_mut()).enumerate() {
         let line_start = i;
@@ -497,14 +568,20 @@ fn parse_chunk<'a>(
                         i += 1;
                     }
                     let token = &bytes[t0..i];
-                    if token != element.0 {
-                        let radius = std::str::from_utf8(token)
-                            .ok()
-                            .and_then(crate::species::element)
-                            .map_or(crate::species::DEFAULT_RADIUS, |(r, _)| r);
-                        element = (token, f64::from(radius));
+                    if elements.get(last_element).is_none_or(|e| e.0 != token) {
+                        last_element = match elements.iter().position(|e| e.0 == token) {
+                            Some(k) => k,
+                            None => {
+                                let radius = std::str::from_utf8(token)
+                                    .ok()
+                                    .and_then(crate::species::element)
+                                    .map_or(crate::species::DEFAULT_RADIUS, |(r, _)| r);
+                                elements.push((token, f64::from(radius)));
+                                elements.len() - 1
+                            }
+                        };
                     }
-                    size = element.1;
+                    size = elements[last_element].1;
                 }
                 Role::Species | Role::SpeciesAttr => {
                     while i < bytes.len() && bytes[i] > b' ' {

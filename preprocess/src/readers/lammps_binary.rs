@@ -737,15 +737,27 @@ pub(crate) fn read_range(
             distinct.par_sort_unstable();
             distinct.dedup();
             if distinct.len() > 1 << 16 {
-                return Err(err(first_chunk, "more than 65536 distinct types".into()));
+                return Err(err(
+                    first_chunk,
+                    match &opts.species_column {
+                        Some(name) => format!(
+                            "more than 65536 distinct values in --species-column {name}: it \
+                             takes a column of categories (a structure type, a molecule \
+                             kind); a continuous quantity goes in --attribute"
+                        ),
+                        None => "more than 65536 distinct types".into(),
+                    },
+                ));
             }
             let index: Vec<u16> = types
                 .par_iter()
                 .map(|t| distinct.binary_search(t).unwrap_or(0) as u16)
                 .collect();
             // As the text reader: slots by type number only where every type is a
-            // LAMMPS type (1 or more).
-            let slots = distinct.first().is_some_and(|&t| t >= 1);
+            // LAMMPS type (1 or more); categories (`--species-column`) take colours by
+            // value instead.
+            let categories = opts.species_column.is_some();
+            let slots = !categories && distinct.first().is_some_and(|&t| t >= 1);
             let names = distinct
                 .iter()
                 .map(|t| SpeciesName {
@@ -754,6 +766,11 @@ pub(crate) fn read_range(
                     radius: None,
                     palette_slot: super::atoms::type_number_slot(t.to_string().as_bytes())
                         .filter(|_| slots),
+                    colour: if categories {
+                        crate::species::category_colour(*t)
+                    } else {
+                        None
+                    },
                     ..Default::default()
                 })
                 .collect();

@@ -407,6 +407,7 @@ impl Index {
             numeric_species: element.is_none(),
             type_numbers: element.is_none(),
             element_sizes: None,
+            categories: false,
         };
         info.columns = columns;
         Ok(Header {

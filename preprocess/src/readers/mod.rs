@@ -334,6 +334,11 @@ impl SizeColumn {
         species: Option<usize>,
     ) -> Result<Option<(usize, f64)>, String> {
         let size = self.resolve(columns)?;
+        // A `radius` or `diameter` column read as the species (`--species-column`) is
+        // no size column the default finds.
+        if *self == SizeColumn::Auto && size.is_some_and(|(c, _)| species == Some(c)) {
+            return Ok(None);
+        }
         if let Some((c, _)) = size {
             let role = if coords.contains(&c) {
                 Some("a coordinate")
@@ -1303,13 +1308,20 @@ fn species_layout(
         )));
     }
     // Each atom keeps its element's size where the dump names elements (a LAMMPS
-    // dump's `element` column, an XYZ file's species).
-    layout.element_sizes = header.layout.species.filter(|&e| {
-        matches!(columns[e].as_str(), "element" | "species") && opts.sizes != SizeColumn::Off
-    });
+    // dump's `element` column, an XYZ file's species); with --no-sizes each category
+    // takes its atoms' mean.
+    layout.element_sizes = header
+        .layout
+        .species
+        .filter(|&e| {
+            columns[e] == "element"
+                || (header.layout.type_numbers && columns[e].eq_ignore_ascii_case("species"))
+        })
+        .map(|e| (e, opts.sizes != SizeColumn::Off));
     layout.species = Some(c);
     layout.numeric_species = true;
-    layout.type_numbers = true;
+    layout.type_numbers = false;
+    layout.categories = true;
     Ok(layout)
 }
 

@@ -177,14 +177,22 @@ pub(crate) fn read_frame(
     }
     // Species: the union by name; numeric LAMMPS types sorted numerically, others in
     // order of first appearance.
+    // (Found by name through a map: a column of categories may give thousands.)
     let mut species: Vec<SpeciesName> = Vec::new();
+    let mut index: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
     for f in &frames {
         for i in crate::species::merge_order(&f.species, &f.species_index) {
             let s = &f.species[i];
-            match species.iter_mut().find(|g| g.name == s.name) {
-                Some(known) => crate::species::merge_sizes(known, s),
-                None => species.push(s.clone()),
+            match index.get(&s.name) {
+                Some(&k) => crate::species::merge_sizes(&mut species[k], s),
+                None => {
+                    index.insert(s.name.clone(), species.len());
+                    species.push(s.clone());
+                }
             }
+        }
+        if species.len() > 1 << 16 {
+            break;
         }
     }
     if species.iter().all(|s| s.numeric_type) {
@@ -201,6 +209,11 @@ pub(crate) fn read_frame(
             },
         });
     }
+    let index: std::collections::HashMap<&str, usize> = species
+        .iter()
+        .enumerate()
+        .map(|(k, s)| (s.name.as_str(), k))
+        .collect();
     let total: usize = frames.iter().map(Frame::len).sum();
     let mut out = Frame {
         positions: Vec::with_capacity(total),
@@ -217,7 +230,7 @@ pub(crate) fn read_frame(
         let remap: Vec<u16> = f
             .species
             .iter()
-            .map(|s| species.iter().position(|g| g.name == s.name).unwrap_or(0) as u16)
+            .map(|s| index.get(s.name.as_str()).copied().unwrap_or(0) as u16)
             .collect();
         out.positions.extend_from_slice(&f.positions);
         out.species_index

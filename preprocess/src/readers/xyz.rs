@@ -322,6 +322,7 @@ impl Index {
                     numeric_species: true,
                     type_numbers: true,
                     element_sizes: None,
+                    categories: false,
                 }
             }
         };
@@ -442,6 +443,7 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
         species: species.or(atomic_number),
         numeric_species: true,
         element_sizes: None,
+        categories: false,
     })
 }
 
