@@ -300,10 +300,12 @@ pub enum Legend {
         /// The labels under the bar's ends.
         ends: [String; 2],
     },
-    /// A key: a disc of each entry's colour (linear RGB) and its name, under the title.
+    /// A key: a disc of each entry's colour (linear RGB) and its name, under the title;
+    /// `more` entries left out are said on a last line.
     Key {
         title: Option<String>,
         entries: Vec<(String, [f32; 3])>,
+        more: usize,
     },
     /// Lines of text (a movie's timestep, a figure's caption), drawn into images only.
     Text { lines: Vec<String> },
@@ -392,12 +394,21 @@ impl Legend {
                 WIDTH.max(2.0 * BAR[0] + CHAR_WIDTH * title.chars().count() as f32),
                 BAR_HEIGHT,
             ),
-            Legend::Key { title, entries } => {
-                let height = key_row(title.is_some(), entries.len().max(1)) - KEY_ROW / 2.0 + 5.0;
+            Legend::Key {
+                title,
+                entries,
+                more,
+            } => {
+                let rows = entries.len() + usize::from(*more > 0);
+                let height = key_row(title.is_some(), rows.max(1)) - KEY_ROW / 2.0 + 5.0;
                 let width = 40.0
                     + entries
                         .iter()
                         .map(|(n, _)| n.chars().count() as f32 * 7.5)
+                        .chain(
+                            (*more > 0)
+                                .then(|| more_line(*more).chars().count() as f32 * 7.5 - 20.0),
+                        )
                         .chain(title.iter().map(|t| t.chars().count() as f32 * 7.5 - 30.0))
                         .fold(60.0, f32::max);
                 (width, height)
@@ -483,7 +494,11 @@ impl Legend {
                     }
                 }
             }
-            Legend::Key { title, entries } => {
+            Legend::Key {
+                title,
+                entries,
+                more,
+            } => {
                 if let Some(t) = title {
                     let _ = writeln!(svg, r#"<text x="7" y="16">{}</text>"#, escape(t));
                 }
@@ -499,6 +514,15 @@ impl Legend {
                         r#"<text x="28" y="{}">{}</text>"#,
                         y + 4.0,
                         escape(name)
+                    );
+                }
+                if *more > 0 {
+                    let y = key_row(title.is_some(), entries.len());
+                    let _ = writeln!(
+                        svg,
+                        r#"<text x="7" y="{}">{}</text>"#,
+                        y + 4.0,
+                        escape(&more_line(*more))
                     );
                 }
             }
@@ -547,7 +571,7 @@ impl Legend {
                 .chain(ends.iter().map(String::as_str))
                 .chain(ticks.iter().filter_map(|(_, l)| l.as_deref()))
                 .collect(),
-            Legend::Key { title, entries } => title
+            Legend::Key { title, entries, .. } => title
                 .iter()
                 .map(String::as_str)
                 .chain(entries.iter().map(|(n, _)| n.as_str()))
@@ -640,7 +664,11 @@ impl Legend {
                     }
                 }
             }
-            Legend::Key { title, entries } => {
+            Legend::Key {
+                title,
+                entries,
+                more,
+            } => {
                 if let Some(t) = title {
                     panel.text(7.0, 16.0, t, Anchor::Start);
                 }
@@ -649,6 +677,10 @@ impl Legend {
                     let srgb = srgb8(*colour);
                     panel.disc([14.0, y], 7.0, srgb);
                     panel.text(28.0, y + 4.0, name, Anchor::Start);
+                }
+                if *more > 0 {
+                    let y = key_row(title.is_some(), entries.len());
+                    panel.text(7.0, y + 4.0, &more_line(*more), Anchor::Start);
                 }
             }
             Legend::Text { lines } => {
@@ -859,17 +891,64 @@ pub fn density_bar(density_min: f32, density_max: f32, log: bool, title: Option<
 }
 
 /// A key of the species shown: a disc of each one's colour (linear RGB) and its name,
-/// under `title` when given.
+/// under `title` when given; past [`KEY_ENTRIES`] (a column of molecule ids as species),
+/// the first ones and a line saying how many more.
 pub fn species_key(entries: &[(String, [f32; 3])], title: Option<&str>) -> Legend {
+    let kept = if entries.len() > KEY_ENTRIES {
+        KEY_ENTRIES - 1
+    } else {
+        entries.len()
+    };
     Legend::Key {
         title: title.map(str::to_string),
-        entries: entries.to_vec(),
+        entries: entries[..kept].to_vec(),
+        more: entries.len() - kept,
     }
+}
+
+/// The most entries a key lists.
+pub const KEY_ENTRIES: usize = 24;
+
+/// The last line of a key that leaves `more` entries out.
+fn more_line(more: usize) -> String {
+    format!("... and {more} more")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A key of many species (a column of molecule ids) lists the first ones and says how
+    /// many more, in the SVG and in an image, at the height of a key of that many.
+    #[test]
+    fn a_key_of_many_species_says_how_many_more() {
+        let entries: Vec<(String, [f32; 3])> = (0..100)
+            .map(|i| (format!("{i}"), [0.5, 0.2, 0.1]))
+            .collect();
+        let key = species_key(&entries, Some("molecule"));
+        let Legend::Key {
+            entries: kept,
+            more,
+            ..
+        } = &key
+        else {
+            panic!("not a key");
+        };
+        assert_eq!(
+            (kept.len(), *more),
+            (KEY_ENTRIES - 1, 100 - KEY_ENTRIES + 1)
+        );
+        let svg = key.svg();
+        assert_eq!(svg.matches("<circle").count(), KEY_ENTRIES - 1);
+        assert!(
+            svg.contains(&format!("... and {} more", 100 - KEY_ENTRIES + 1)),
+            "{svg}"
+        );
+        let small = species_key(&entries[..KEY_ENTRIES], None);
+        let full = species_key(&entries[..KEY_ENTRIES], Some("molecule"));
+        assert!(matches!(small, Legend::Key { more: 0, .. }));
+        assert_eq!(key.room_needed(1).1, full.room_needed(1).1);
+    }
 
     #[test]
     fn ticks_fall_on_round_values_inside_the_range() {

@@ -228,7 +228,8 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 /// What a conversion with `--species-column` should tell: renames and radii naming a
-/// value the frame lacks, and more species than a column of categories would give.
+/// value the frame lacks, and many species of values that are not whole numbers (a
+/// continuous quantity, each of whose values became a species of its own).
 pub fn categories_notes(file: &std::path::Path, column: &str, build: &BuildArgs) -> Vec<String> {
     let Ok(f) = mdlod_format::MdlodFile::open(file) else {
         return Vec::new();
@@ -239,7 +240,11 @@ pub fn categories_notes(file: &std::path::Path, column: &str, build: &BuildArgs)
         .iter()
         .map(|s| s.name.as_str())
         .collect();
-    let list = || names.join(", ");
+    // (A column of molecule or cluster ids gives thousands.)
+    let list = || match names.len() {
+        0..=8 => names.join(", "),
+        n => format!("{}, ... ({n} in all)", names[..6].join(", ")),
+    };
     let mut notes = Vec::new();
     for (old, new) in &build.species_names {
         if !names.contains(&new.as_str()) {
@@ -259,24 +264,22 @@ pub fn categories_notes(file: &std::path::Path, column: &str, build: &BuildArgs)
             ));
         }
     }
-    notes.extend(categories_note(file, column));
+    // Thousands of whole numbers are ids (molecules, clusters); values that are not
+    // whole numbers among that many are a continuous quantity.
+    let renamed = |n: &str| build.species_names.iter().any(|(_, new)| new == n);
+    if names.len() > 64
+        && names
+            .iter()
+            .any(|n| n.parse::<i64>().is_err() && !renamed(n))
+    {
+        notes.push(format!(
+            "--species-column {column} gave {} species, one per distinct value: it takes a \
+             column of categories (a structure type, a molecule or cluster id); a continuous \
+             quantity goes in --attribute",
+            names.len()
+        ));
+    }
     notes
-}
-
-/// More species than a column of categories would give: the column asked for by
-/// `--species-column` is likely a continuous quantity, each of whose values became a
-/// species of its own.
-pub fn categories_note(file: &std::path::Path, column: &str) -> Option<String> {
-    const MANY: usize = 64;
-    let f = mdlod_format::MdlodFile::open(file).ok()?;
-    let n = f.metadata().species.len();
-    (n > MANY).then(|| {
-        format!(
-            "--species-column {column} gave {n} species, one per distinct value: it takes a \
-             column of categories (a structure type, a molecule kind); a continuous quantity \
-             goes in --attribute"
-        )
-    })
 }
 
 pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
