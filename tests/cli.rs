@@ -7767,3 +7767,41 @@ fn render_takes_a_light_and_its_reflectance() {
         assert!(e.contains(says), "{extra:?}: {e}");
     }
 }
+
+/// `batch --keep-going`: the bad frame said on stderr with its place, the others
+/// converted and counted, and an error status at the end saying what a rerun does.
+#[test]
+fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let at = good.match_indices("ITEM: ATOMS").nth(4).unwrap().0;
+    let line = at + good[at..].find('\n').unwrap() + 1;
+    let end = line + good[line..].find('\n').unwrap();
+    let mut fields: Vec<&str> = good[line..end].split(' ').collect();
+    fields[4] = "inf";
+    let src = dir.path().join("bad.dump");
+    std::fs::write(
+        &src,
+        format!("{}{}{}", &good[..line], fields.join(" "), &good[end..]),
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let run = mdlod(&["batch", s(&src), "-o", s(&out), "--keep-going"]);
+    assert!(!run.status.success());
+    let (stdout, stderr) = (
+        String::from_utf8(run.stdout).unwrap(),
+        String::from_utf8(run.stderr).unwrap(),
+    );
+    assert!(
+        stdout.contains("5 converted, 0 already done, 1 failed (said above; not in the manifest)"),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("bad.dump: frame 4 (timestep 400) not converted: ")
+            && stderr.contains("`inf` is not a finite number")
+            && stderr
+                .contains("1 frame could not be converted (--keep-going converted the others)"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"));
+}

@@ -246,6 +246,10 @@ pub struct BatchOptions {
     /// Least time between two rewrites of the manifest while frames are converted
     /// (default [`MANIFEST_INTERVAL`]).
     pub manifest_interval: Option<std::time::Duration>,
+    /// A frame that cannot be converted for what it holds (a NaN, a line cut short in an
+    /// older file, a bad box) is reported ([`BatchReport::failed`]) and the others are
+    /// converted: `make -k`. Errors of the output (a full disk) still stop the batch.
+    pub keep_going: bool,
 }
 
 /// The manifest of a running batch, for an interruption handler to write at once: the
@@ -360,6 +364,32 @@ pub struct BatchReport {
     /// converted by a rerun once complete. (An older input cut short is an error,
     /// [`BatchError::CutShortBeforeNewest`].)
     pub incomplete: Vec<IncompleteFrame>,
+    /// Frames that could not be converted for what they hold, with
+    /// [`BatchOptions::keep_going`]: not in the manifest, not expected of this run, tried
+    /// again by a rerun. (Without it, the first such frame is the batch's error.)
+    pub failed: Vec<FailedFrame>,
+}
+
+/// A frame a batch with [`BatchOptions::keep_going`] could not convert.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FailedFrame {
+    pub input: PathBuf,
+    /// The frame's index in the input.
+    pub frame: usize,
+    /// The input's own timestep of the frame, where it records one.
+    pub timestep: Option<u64>,
+    /// The error, which names the file and the place.
+    pub reason: String,
+}
+
+impl std::fmt::Display for FailedFrame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: frame {}", self.input.display(), self.frame)?;
+        if let Some(t) = self.timestep {
+            write!(f, " (timestep {t})")?;
+        }
+        write!(f, " not converted: {}", self.reason)
+    }
 }
 
 /// Frames of a rerun whose outputs existed and were converted again, by why.
@@ -506,6 +536,31 @@ impl BatchError {
         }
         match self {
             BatchError::Read(r) => r.cut_short(),
+            BatchError::Convert(c) => convert(c),
+            _ => false,
+        }
+    }
+
+    /// Whether the error is the frame's own (what its input holds), which
+    /// [`BatchOptions::keep_going`] passes over, rather than the output's or the run's
+    /// (a full disk, the memory limit), which would stop every frame after it.
+    fn frames_own(&self) -> bool {
+        fn convert(e: &ConvertError) -> bool {
+            match e {
+                ConvertError::Read(_)
+                | ConvertError::AttributeNotPositive { .. }
+                | ConvertError::BadBox { .. }
+                | ConvertError::NoAttributeToLog(_)
+                | ConvertError::LastFrameIncomplete { .. }
+                | ConvertError::Build { .. }
+                | ConvertError::EmptyFrame(_)
+                | ConvertError::UnusableRadius(_) => true,
+                ConvertError::Decompressed { source, .. } => convert(source),
+                _ => false,
+            }
+        }
+        match self {
+            BatchError::Read(_) | BatchError::CutShortBeforeNewest { .. } => true,
             BatchError::Convert(c) => convert(c),
             _ => false,
         }
@@ -1850,6 +1905,7 @@ pub fn batch(
     let failed = AtomicBool::new(false);
     let first_error: Mutex<Option<BatchError>> = Mutex::new(None);
     let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(ends_mid_line);
+    let failed_frames: Mutex<Vec<FailedFrame>> = Mutex::new(Vec::new());
     let converted = std::sync::atomic::AtomicUsize::new(0);
     // Whether any conversion has written its output (renamed into place).
     let wrote = AtomicBool::new(false);
@@ -2001,6 +2057,19 @@ pub fn batch(
                     } else {
                         e
                     };
+                    if opts.keep_going && e.frames_own() {
+                        failed_frames
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .push(FailedFrame {
+                                input: job.input.to_path_buf(),
+                                frame: job.frame,
+                                timestep: job.own_timestep,
+                                reason: e.to_string(),
+                            });
+                        progress.advance(job.particles);
+                        continue;
+                    }
                     failed.store(true, Ordering::Relaxed);
                     first_error
                         .lock()
@@ -2020,12 +2089,16 @@ pub fn batch(
     progress.finish_stage();
     let mut incomplete = incomplete.into_inner().unwrap_or_else(|e| e.into_inner());
     incomplete.sort_by(|a, b| (&a.input, a.frame).cmp(&(&b.input, b.frame)));
+    let mut failed_frames = failed_frames
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner());
+    failed_frames.sort_by(|a, b| (&a.input, a.frame).cmp(&(&b.input, b.frame)));
     // Every frame converted, also when another failed (and no new one started after);
     // frames cut short are not expected of this run.
     let last_save = {
         let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(e) = m.expected_frames.as_mut() {
-            *e = e.saturating_sub(incomplete.len() as u64);
+            *e = e.saturating_sub((incomplete.len() + failed_frames.len()) as u64);
         }
         save(&mut m)
     };
@@ -2100,6 +2173,7 @@ pub fn batch(
         strays,
         duplicates,
         incomplete,
+        failed: failed_frames,
         redone,
         kept_unchanged,
         frames_total,

@@ -2309,3 +2309,57 @@ fn a_rerun_with_another_species_column_converts_again_and_shards_must_agree() {
         "{e}"
     );
 }
+
+/// `keep_going`: a frame holding a NaN is reported with its place and left out of the
+/// manifest, which expects only the others, so shards merge; a rerun converts nothing
+/// again and reports it again. Without it, that frame is the batch's error.
+#[test]
+fn keep_going_converts_the_other_frames_and_reports_the_bad_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    // Frame 2's first atom gets a NaN coordinate.
+    let at = good.match_indices("ITEM: ATOMS").nth(2).unwrap().0;
+    let line = at + good[at..].find('\n').unwrap() + 1;
+    let end = line + good[line..].find('\n').unwrap();
+    let mut fields: Vec<&str> = good[line..end].split(' ').collect();
+    fields[3] = "nan";
+    let bad = format!("{}{}{}", &good[..line], fields.join(" "), &good[end..]);
+    let src = dir.path().join("bad.dump");
+    std::fs::write(&src, bad).unwrap();
+    let out = dir.path().join("out");
+    assert!(batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).is_err());
+    let keep = BatchOptions {
+        keep_going: true,
+        ..opts()
+    };
+    for rerun in [false, true] {
+        let r = batch(std::slice::from_ref(&src), &out, &keep, &NoProgress).unwrap();
+        assert_eq!(r.failed.len(), 1);
+        let f = &r.failed[0];
+        assert_eq!((f.frame, f.timestep), (2, Some(200)));
+        assert!(
+            f.to_string()
+                .contains("bad.dump: frame 2 (timestep 200) not converted")
+                && f.reason.contains("`nan` is not a finite number"),
+            "{f}"
+        );
+        let m = read_manifest(&out).unwrap();
+        assert_eq!(m.frames.len(), 5);
+        assert_eq!(m.expected_frames, Some(5));
+        assert!(m.frames.iter().all(|f| f.timestep != 200));
+        check_manifest(&out, &m);
+        if rerun {
+            assert_eq!((r.converted, r.skipped), (0, 5));
+        }
+    }
+    // Shards that each pass over their bad frames merge.
+    let sharded = dir.path().join("sharded");
+    for i in 0..2 {
+        let o = BatchOptions {
+            keep_going: true,
+            ..shard(i, 2)
+        };
+        batch(std::slice::from_ref(&src), &sharded, &o, &NoProgress).unwrap();
+    }
+    assert_eq!(merge(&sharded).unwrap().frames.len(), 5);
+}

@@ -47,6 +47,12 @@ pub struct Args {
     /// also leaves out the earlier frames past its timestep that it did not reach.
     #[arg(long, value_enum, default_value = "error")]
     pub duplicate_timesteps: DuplicatesArg,
+    /// A frame that cannot be converted for what it holds (a NaN, a bad box, a damaged
+    /// older file) is reported and the others are converted (as `make -k`); the command
+    /// still ends with an error status, and a rerun tries those frames again. Errors of
+    /// the output, such as a full disk, still stop the batch.
+    #[arg(long)]
+    pub keep_going: bool,
     #[command(flatten)]
     pub build: BuildArgs,
 }
@@ -242,6 +248,7 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         },
         handle: Some(handle),
         manifest_interval: None,
+        keep_going: args.keep_going,
     };
     let report = with_threads(args.threads, || batch(&inputs, out, &opts, &Bar::new()))??;
     if let Some(merged) = &report.removed_merged {
@@ -296,6 +303,9 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     for e in &report.incomplete {
         println!("note: {e}");
     }
+    for e in &report.failed {
+        eprintln!("error: {e}");
+    }
     match report.kept_unchanged {
         0 => {}
         n => println!(
@@ -333,6 +343,10 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         0 => empty,
         n => format!("{empty}, {n} cut short and left for a rerun"),
     };
+    let empty = match report.failed.len() {
+        0 => empty,
+        n => format!("{empty}, {n} failed (said above; not in the manifest)"),
+    };
     // Frames left out as duplicate timesteps are not among the frames to convert.
     let kept = match report.duplicates.len() {
         0 => String::new(),
@@ -348,6 +362,15 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         report.jobs,
         report.manifest.display()
     );
+    if !report.failed.is_empty() {
+        let n = report.failed.len();
+        bail!(
+            "{n} frame{} could not be converted (--keep-going converted the others); fix or \
+             replace {} and run the batch again: it converts only what is missing",
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "its input" } else { "their inputs" }
+        );
+    }
     Ok(())
 }
 
