@@ -1339,6 +1339,7 @@ pub fn frame_setup(
         budget_points: opts.budget.max(1),
         occlusion: if !opts.occlusion
             || opts.style.changes_geometry()
+            || opts.style.hides_past_the_mask(&file.metadata().species)
             || matches!(
                 opts.mode,
                 RenderMode::Splat { .. } | RenderMode::SplatOver { .. } | RenderMode::Density(_)

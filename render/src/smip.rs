@@ -926,7 +926,15 @@ impl Smip {
                                 * ((x1 - x0) * (y1 - y0)) as u64
                                 / (MAX_RECT_TILES * MAX_RECT_TILES) as u64)
                                 .max(1),
-                            occlusion: self.config.occlusion,
+                            // Culling assumes the file's radii, and occluders the
+                            // traversal can tell hidden.
+                            occlusion: if style.changes_geometry()
+                                || style.hides_past_the_mask(&file.metadata().species)
+                            {
+                                OcclusionMode::Off
+                            } else {
+                                self.config.occlusion
+                            },
                             support_scale: 0.0,
                             hidden: style.hidden_set(file.metadata()),
                             clip: style.clip_planes().map_err(RenderError::InvalidOptions)?,

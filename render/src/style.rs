@@ -347,6 +347,14 @@ impl PointStyle {
         mask
     }
 
+    /// True when the style hides a species the traversal cannot leave out (one of index
+    /// 64 or more: [`Self::hidden_mask`] is then 0 and the GPU hides its particles by
+    /// their radius): occlusion culling, which would take them for occluders, must then
+    /// be off.
+    pub fn hides_past_the_mask(&self, species: &[mdlod_format::meta::Species]) -> bool {
+        self.species.iter().any(|s| s.hidden) && self.hidden_mask(species) == 0
+    }
+
     /// The affine map that recolours clusters when species take other colours, `None`
     /// when none does (or a colour map colours the points): rows of `[a b c d]`, a colour
     /// `x` going to `a·x + d` per channel ([`recoloured`]).

@@ -1242,6 +1242,41 @@ fn occlusion_culling_with_hidden_and_clipped_particles_changes_no_pixel() {
     }
 }
 
+/// A hidden species past the traversal's 64-bit mask is hidden by the GPU alone, so the
+/// traversal would take its particles for occluders: culling is off then, and the image
+/// is the one without culling (it had holes where they stood).
+#[test]
+fn a_hidden_species_past_the_64th_keeps_every_pixel() {
+    let mut frame = fcc_frame(10);
+    let names: Vec<String> = (0..70).map(|k| format!("s{k}")).collect();
+    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    frame.species = species(&refs);
+    frame.species_index = (0..frame.positions.len())
+        .map(|i| (i * 7 % 70) as u16)
+        .collect();
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let mut o = opts(160, 120);
+    o.error_px = 0.0;
+    o.view = ViewSpec::Orbit {
+        azimuth_deg: 25.0,
+        elevation_deg: 15.0,
+        zoom: 1.3,
+        projection: Projection::Perspective,
+    };
+    o.style.species = vec![mdlod_render::style::SpeciesStyle {
+        name: "s66".into(),
+        hidden: true,
+        ..Default::default()
+    }];
+    o.occlusion = true;
+    let (culled, report) = render_image(renderer(), &f, &o).unwrap();
+    o.occlusion = false;
+    let (all, _) = render_image(renderer(), &f, &o).unwrap();
+    let (failing, _) = golden::compare(&all, &culled, 0);
+    assert_eq!(failing, 0, "{failing} pixels differ");
+    assert_eq!(report.nodes_occluded + report.particles_occluded, 0);
+}
+
 #[test]
 fn occlusion_culling_changes_no_pixel_where_particles_are_about_a_pixel_wide() {
     // Small spheres take the sample-by-sample test (one ray per pixel centre against the
