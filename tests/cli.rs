@@ -2748,7 +2748,7 @@ fn render_says_what_it_left_out_and_lights_a_constant_attribute() {
     args.extend(size);
     let out = ok(&args);
     assert!(
-        out.contains("10 particles left out as hidden or between pixel centres"),
+        out.contains("10 particles left out behind nearer spheres or between pixel centres"),
         "{out}"
     );
     // Nothing drawn: said as what it is, not as data out of view.
@@ -6205,7 +6205,7 @@ fn hidden_species_leave_the_splats_and_the_volume() {
         };
         let (out, hidden) = render(&all, "hidden", &["--hide-species", "1"]);
         assert!(
-            out.contains("of hidden species left out of the clusters drawn"),
+            out.contains("of hidden species left out of the clusters opened"),
             "{mode}: {out}"
         );
         // The volume's legend: the spheres' packing, not an attribute.

@@ -146,6 +146,23 @@ pub struct Manifest {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_frames: Option<InputFrames>,
     pub frames: Vec<FrameEntry>,
+    /// Frames a run with `--keep-going` could not convert, each with why: not among
+    /// `frames` nor expected, and what `verify` names as missing until a rerun converts
+    /// them. Absent when none failed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub failed: Vec<FailedEntry>,
+}
+
+/// A frame of [`Manifest::failed`].
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FailedEntry {
+    /// The frame's timestep, as the manifest would list it.
+    pub timestep: u64,
+    /// The input and the frame's index in it.
+    pub input: String,
+    pub frame: u64,
+    /// The error.
+    pub reason: String,
 }
 
 /// What identifies the list of input frames a batch split into shards
@@ -378,6 +395,8 @@ pub struct FailedFrame {
     pub frame: usize,
     /// The input's own timestep of the frame, where it records one.
     pub timestep: Option<u64>,
+    /// The timestep the manifest would list it at (its own, or its position).
+    pub listed_timestep: u64,
     /// The error, which names the file and the place.
     pub reason: String,
 }
@@ -1326,7 +1345,15 @@ pub fn batch(
                 continue;
             }
             let (particles, given) = if let (true, Some(info)) = (compressed, info) {
-                let info = info.map_err(|e| bounded.context(p, e.into()))?;
+                // (With --keep-going, a frame whose header cannot be read is converted
+                // like the others, and its conversion reports it.)
+                let info = match info {
+                    Err(_) if opts.keep_going => {
+                        frames.push((own, timestep, 0, None, None));
+                        continue;
+                    }
+                    info => info.map_err(|e| bounded.context(p, e.into()))?,
+                };
                 // What a rerun compares an existing output's radii with (the text is
                 // gone later).
                 let given = out_dir
@@ -1345,11 +1372,15 @@ pub fn batch(
                 // An empty frame is skipped, and its header may not name the column (a
                 // plain XYZ frame's extra columns come from its first atom line).
                 Err(_) if dump.frame_info(k).is_ok_and(|i| i.particles == 0) => None,
+                // With --keep-going, the frame's conversion says it, and the others go on.
+                Err(_) if opts.keep_going => None,
                 Err(e) => return Err(bounded.context(p, e.into()).into()),
             };
             // So is a size column a frame lacks.
             if let Err(e) = dump.check_size_column(k, &opts.read) {
-                return Err(bounded.context(p, e.into()).into());
+                if !opts.keep_going {
+                    return Err(bounded.context(p, e.into()).into());
+                }
             }
             frames.push((own, timestep, particles, attribute, given));
         }
@@ -1810,6 +1841,7 @@ pub fn batch(
         expected_frames: Some((frames_in_shard - empty.len()) as u64),
         input_frames: Some(input_frames),
         frames: done,
+        failed: Vec::new(),
     }));
     // Unset again when the batch returns, however it returns.
     struct Unset<'a>(Option<&'a ManifestHandle>);
@@ -2065,6 +2097,7 @@ pub fn batch(
                                 input: job.input.to_path_buf(),
                                 frame: job.frame,
                                 timestep: job.own_timestep,
+                                listed_timestep: job.timestep,
                                 reason: e.to_string(),
                             });
                         progress.advance(job.particles);
@@ -2100,6 +2133,15 @@ pub fn batch(
         if let Some(e) = m.expected_frames.as_mut() {
             *e = e.saturating_sub((incomplete.len() + failed_frames.len()) as u64);
         }
+        m.failed = failed_frames
+            .iter()
+            .map(|f| FailedEntry {
+                timestep: f.listed_timestep,
+                input: f.input.display().to_string(),
+                frame: f.frame as u64,
+                reason: f.reason.clone(),
+            })
+            .collect();
         save(&mut m)
     };
     // (An empty newest file has no frames to expect.)
@@ -2313,6 +2355,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         _ => None,
     };
     let mut frames = Vec::new();
+    let mut failed: Vec<FailedEntry> = Vec::new();
     let mut expected_total = Some(0u64);
     let mut settings = MergeSettings::default();
     for (path, m) in manifests {
@@ -2346,8 +2389,10 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
             .zip(m.expected_frames)
             .map(|(t, e)| t.saturating_add(e));
         frames.extend(m.frames);
+        failed.extend(m.failed);
     }
     frames.sort_by_key(|f| f.timestep);
+    failed.sort_by_key(|f| f.timestep);
     if let Some(w) = frames.windows(2).find(|w| w[0].timestep == w[1].timestep) {
         return Err(manifest_err(
             out_dir,
@@ -2360,6 +2405,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         expected_frames: expected_total,
         input_frames,
         frames,
+        failed,
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
     Ok(merged)
@@ -2740,6 +2786,13 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                     m.frames.len()
                 ));
             }
+        }
+        // Frames a run with --keep-going could not convert are missing.
+        for f in &m.failed {
+            check.problems.push(format!(
+                "timestep {} (frame {} of {}) could not be converted, in {name}: {}",
+                f.timestep, f.frame, f.input, f.reason
+            ));
         }
         lists.push((name.clone(), m.input_frames));
         for f in m.frames {

@@ -116,6 +116,17 @@ pub fn category_colour(value: i64) -> Option<[u8; 3]> {
     })
 }
 
+/// A name as a column of categories (`--species-column`) gives it: a whole number in any
+/// notation as that number (`1.0` and `1e0` are `1`), anything else as written. The
+/// readers name categories this way, so options naming values (`--species-name 1.0=FCC`)
+/// are taken the same way.
+pub fn category_name(name: &str) -> String {
+    match name.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v.fract() == 0.0 && v.abs() < 1e15 => (v as i64).to_string(),
+        _ => name.to_string(),
+    }
+}
+
 /// Radius of a numeric type or unknown name, in the simulation's length unit.
 pub const DEFAULT_RADIUS: f32 = 0.5;
 

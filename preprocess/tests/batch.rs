@@ -2346,6 +2346,18 @@ fn keep_going_converts_the_other_frames_and_reports_the_bad_one() {
         let m = read_manifest(&out).unwrap();
         assert_eq!(m.frames.len(), 5);
         assert_eq!(m.expected_frames, Some(5));
+        // Listed as failed, which verify names as missing.
+        assert_eq!(m.failed.len(), 1);
+        assert_eq!((m.failed[0].timestep, m.failed[0].frame), (200, 2));
+        let v = mdlod_preprocess::batch::verify_dir(&out, &NoProgress).unwrap();
+        assert_eq!(v.frames_ok, 5);
+        assert!(
+            v.problems.len() == 1
+                && v.problems[0].contains("timestep 200 (frame 2 of ")
+                && v.problems[0].contains("could not be converted"),
+            "{:?}",
+            v.problems
+        );
         assert!(m.frames.iter().all(|f| f.timestep != 200));
         check_manifest(&out, &m);
         if rerun {
@@ -2361,5 +2373,13 @@ fn keep_going_converts_the_other_frames_and_reports_the_bad_one() {
         };
         batch(std::slice::from_ref(&src), &sharded, &o, &NoProgress).unwrap();
     }
-    assert_eq!(merge(&sharded).unwrap().frames.len(), 5);
+    let merged = merge(&sharded).unwrap();
+    assert_eq!(merged.frames.len(), 5);
+    assert_eq!(merged.failed.len(), 1);
+    // The input mended: a rerun converts the frame, and nothing is failed any more.
+    std::fs::write(&src, &good).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &keep, &NoProgress).unwrap();
+    assert!(r.failed.is_empty() && r.converted >= 1, "{r:?}");
+    let m = read_manifest(&out).unwrap();
+    assert_eq!((m.frames.len(), m.failed.len()), (6, 0));
 }

@@ -531,7 +531,7 @@ fn categories_are_numbers_however_written() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("c.dump:10:") && e.contains("--species-column c_ptm: a value `nan`"),
+        e.contains("c.dump:16:") && e.contains("--species-column c_ptm: a value `nan`"),
         "{e}"
     );
     // A bidisperse run's diameters as the species: no sizes read from them by default.

@@ -167,6 +167,13 @@ pub fn run(args: Args) -> Result<()> {
             if m.frames.len() == 1 { "" } else { "s" },
             dir.join(mdlod_preprocess::batch::MANIFEST).display()
         );
+        for f in &m.failed {
+            println!(
+                "note: timestep {} (frame {} of {}) is missing: its shard could not convert \
+                 it ({})",
+                f.timestep, f.frame, f.input, f.reason
+            );
+        }
         return Ok(());
     }
     let Some(out) = &args.output else {

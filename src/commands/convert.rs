@@ -141,11 +141,40 @@ impl BuildArgs {
         if !(1..=8).contains(&self.delta_n) {
             bail!("--delta-n {} (must be 1 to 8)", self.delta_n);
         }
+        // One species renamed or sized twice: which was meant?
+        let (names, radii) = self.named();
+        for (k, (old, new)) in names.iter().enumerate() {
+            if let Some((_, other)) = names[..k].iter().find(|(o, _)| o == old) {
+                bail!("--species-name names {old} twice ({old}={other} and {old}={new}): give one");
+            }
+        }
+        for (k, (name, r)) in radii.iter().enumerate() {
+            if let Some((_, other)) = radii[..k].iter().find(|(n, _)| n == name) {
+                bail!("--radius names {name} twice ({name}={other} and {name}={r}): give one");
+            }
+        }
         Ok(())
+    }
+
+    /// The renames and radii as given, their names taken as a column of categories
+    /// names its values (`1.0` is `1`) where the species come from one.
+    fn named(&self) -> (Renames, Radii) {
+        let name = |n: &String| match self.species_column {
+            Some(_) => mdlod_preprocess::species::category_name(n),
+            None => n.clone(),
+        };
+        (
+            self.species_names
+                .iter()
+                .map(|(old, new)| (name(old), new.clone()))
+                .collect(),
+            self.radii.iter().map(|(n, r)| (name(n), *r)).collect(),
+        )
     }
 
     /// The library options these arguments ask for.
     pub fn options(&self) -> (ConvertOptions, ReadOptions) {
+        let (species_names, radii) = self.named();
         let convert = ConvertOptions {
             build: BuildParams {
                 max_cluster_size: self.cluster_size,
@@ -156,7 +185,7 @@ impl BuildArgs {
                     Precision::U16 => 16,
                 },
             },
-            radii: self.radii.clone(),
+            radii,
             chunks: ChunkOptions {
                 chunk_points: self.chunk_points,
                 temp_dir: self.temp_dir.clone(),
@@ -165,7 +194,7 @@ impl BuildArgs {
             // A column of categories need not hold every value named in one frame (a
             // script names all five structure types): noted after the conversion.
             radii_may_be_absent: self.species_column.is_some(),
-            species_names: self.species_names.clone(),
+            species_names,
             attribute_log10: self.attribute_log10,
         };
         let read = ReadOptions {
@@ -185,6 +214,11 @@ impl BuildArgs {
         (convert, read)
     }
 }
+
+/// `--species-name` renames, old name to new.
+type Renames = Vec<(String, String)>;
+/// `--radius` overrides, name to radius.
+type Radii = Vec<(String, f32)>;
 
 /// Refuses an output that exists and is not a `.mdlod` file (a PNG, a dump given as
 /// `-o` by mistake): the conversion would replace it without a word. An earlier
@@ -246,7 +280,8 @@ pub fn categories_notes(file: &std::path::Path, column: &str, build: &BuildArgs)
         n => format!("{}, ... ({n} in all)", names[..6].join(", ")),
     };
     let mut notes = Vec::new();
-    for (old, new) in &build.species_names {
+    let (species_names, radii) = build.named();
+    for (old, new) in &species_names {
         if !names.contains(&new.as_str()) {
             notes.push(format!(
                 "--species-name {old}={new}: no particle has the value {old} in --species-column \
@@ -255,7 +290,7 @@ pub fn categories_notes(file: &std::path::Path, column: &str, build: &BuildArgs)
             ));
         }
     }
-    for (name, radius) in &build.radii {
+    for (name, radius) in &radii {
         if !names.contains(&name.as_str()) {
             notes.push(format!(
                 "--radius {name}={radius}: no species {name} here (the species are the values \

@@ -38,8 +38,9 @@ pub struct Args {
     #[arg(long, default_value_t = 4_000_000, value_parser = parse_budget)]
     pub budget: u64,
     /// Draw clusters hidden behind nearer spheres too (occlusion culling is exact, so
-    /// the image is the same and this costs time; for comparisons, or a legend key
-    /// listing species wholly hidden behind others).
+    /// the image is the same and this costs time, unless --budget or --gpu-memory then
+    /// stops the larger cut coarser; for comparisons, or a legend key listing species
+    /// wholly hidden behind others).
     #[arg(long)]
     pub no_occlusion: bool,
     /// The light of the spheres and S-NDF modes: direction towards it in view space (x
@@ -1491,7 +1492,7 @@ pub fn run(args: Args) -> Result<()> {
     let limits = limits_text(&r, coarsest_points(&file), args.budget);
     let occluded = if r.nodes_occluded + r.particles_occluded > 0 {
         format!(
-            " ({} clusters and {} particles left out as hidden or between pixel centres)",
+            " ({} clusters and {} particles left out behind nearer spheres or between pixel centres)",
             r.nodes_occluded, r.particles_occluded
         )
     } else {
@@ -1603,16 +1604,31 @@ pub fn run(args: Args) -> Result<()> {
                 println!("{note}");
             }
         }
+        // What stopped the refinement: the point budget, or a full streaming pool.
+        let stopped = |pronoun: &str| match (r.budget_limited, r.pool_limited) {
+            (false, true) => format!(
+                "the GPU memory pool, full, stopped refining {pronoun}; a larger --gpu-memory \
+                 refines {pronoun}"
+            ),
+            (true, true) => format!(
+                "the point budget and the full GPU memory pool stopped refining {pronoun}; a \
+                 larger --budget and --gpu-memory refine {pronoun}"
+            ),
+            _ => format!(
+                "the point budget stopped refining {pronoun}; a larger --budget refines \
+                 {pronoun}"
+            ),
+        };
         if r.clusters_mixed > 0 {
             let (s, verb, pronoun) = match r.clusters_mixed {
                 1 => ("", "s", "it"),
                 _ => ("s", "", "them"),
             };
             println!(
-                "  note: {} {}{s} still hold{verb} hidden species or values: the point budget \
-                 stopped refining {pronoun}; a larger --budget refines {pronoun}",
+                "  note: {} {}{s} still hold{verb} hidden species or values: {}",
                 r.clusters_mixed,
-                point_noun(args.mode).trim_end_matches('s')
+                point_noun(args.mode).trim_end_matches('s'),
+                stopped(pronoun)
             );
         }
         if opts.style.species.iter().any(|s| s.hidden) && opts.style.hidden_mask(species) == 0 {
@@ -1627,10 +1643,10 @@ pub fn run(args: Args) -> Result<()> {
                 _ => ("s", "are", "them"),
             };
             println!(
-                "  note: {} {}{s} across a --clip plane {is} drawn whole: the point budget \
-                 stopped refining {pronoun}; a larger --budget refines {pronoun}",
+                "  note: {} {}{s} across a --clip plane {is} drawn whole: {}",
                 r.clusters_across,
                 point_noun(args.mode).trim_end_matches('s'),
+                stopped(pronoun)
             );
         }
     }
@@ -2357,15 +2373,15 @@ fn hidden_text(r: &mdlod_render::RenderReport, style: &StyleArgs) -> String {
             _ => "of hidden species or values",
         };
         parts.push(format!(
-            "{} {what} left out of the clusters drawn; clusters of them only are left out \
-             whole",
+            "{} {what} left out of the clusters opened; clusters of them only, and those \
+             behind nearer spheres, are left out whole",
             r.particles_hidden
         ));
     }
     if r.particles_clipped > 0 {
         parts.push(format!(
-            "{} cut away by --clip from the clusters across it; clusters beyond it are left \
-             out whole",
+            "{} cut away by --clip from the clusters opened across it; clusters beyond it, \
+             and those behind nearer spheres, are left out whole",
             r.particles_clipped
         ));
     }

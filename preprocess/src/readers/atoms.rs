@@ -341,7 +341,12 @@ fn merge_species(
         for &token in &table.names {
             let name = if categories {
                 category_name(token).map_err(|value| ReadError::Malformed {
-                    at: ctx.at(block_start),
+                    // The token is the chunk's first of its kind, where it lies in the
+                    // file (chunks are taken in order): its line.
+                    at: ctx.at((token.as_ptr() as usize)
+                        .checked_sub(ctx.data.as_ptr() as usize)
+                        .filter(|&o| o < ctx.data.len())
+                        .unwrap_or(block_start)),
                     message: format!(
                         "--species-column {column}: a value `{value}` in the frame is no \
                          category (a structure type's number or name)"
