@@ -2383,3 +2383,41 @@ fn keep_going_converts_the_other_frames_and_reports_the_bad_one() {
     let m = read_manifest(&out).unwrap();
     assert_eq!((m.frames.len(), m.failed.len()), (6, 0));
 }
+
+/// `keep_going` with a column asked for (`--attribute`): a frame whose header cannot be
+/// read (a box with its bounds reversed) is one failed frame too, not the end of the
+/// batch before anything is converted.
+#[test]
+fn keep_going_passes_over_a_bad_header_when_a_column_is_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    // Frame 3's x bounds reversed.
+    let at = good.match_indices("ITEM: BOX BOUNDS").nth(3).unwrap().0;
+    let line = at + good[at..].find('\n').unwrap() + 1;
+    let end = line + good[line..].find('\n').unwrap();
+    let (lo, hi) = good[line..end].split_once(' ').unwrap();
+    let bad = format!("{}{hi} {lo}{}", &good[..line], &good[end..]);
+    let src = dir.path().join("box.dump");
+    std::fs::write(&src, bad).unwrap();
+    let mut o = BatchOptions {
+        keep_going: true,
+        ..opts()
+    };
+    o.read.attribute = Some("c_pe".into());
+    let out = dir.path().join("out");
+    let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.failed.len()), (5, 1));
+    assert!(
+        r.failed[0].reason.contains("BOX BOUNDS") && r.failed[0].frame == 3,
+        "{:?}",
+        r.failed
+    );
+    o.keep_going = false;
+    assert!(batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("stop"),
+        &o,
+        &NoProgress
+    )
+    .is_err());
+}
