@@ -2209,6 +2209,27 @@ pub fn batch(
             ))));
         }
     }
+    // With a column of categories, names for values no frame holds are said, not refused.
+    let mut absent = Vec::new();
+    if whole && !seen.is_empty() && opts.read.species_column.is_some() {
+        let column = opts.read.species_column.as_deref().unwrap_or_default();
+        for (from, to) in &opts.convert.species_names {
+            if !seen.contains(to) {
+                absent.push(format!(
+                    "--species-name {from}={to}: no frame has the value {from} in \
+                     --species-column {column}"
+                ));
+            }
+        }
+        for (name, radius) in &opts.convert.radii {
+            if !seen.contains(name) {
+                absent.push(format!(
+                    "--radius {name}={radius}: no frame has a species {name} (the species are \
+                     the values of --species-column {column}, renamed)"
+                ));
+            }
+        }
+    }
     let converted_frames = converted.load(Ordering::Relaxed);
     Ok(BatchReport {
         removed_merged,
@@ -2251,6 +2272,7 @@ pub fn batch(
                     )
                 }
             })
+            .chain(absent)
             .collect(),
         jobs,
         manifest: manifest_path,

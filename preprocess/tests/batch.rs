@@ -2266,6 +2266,13 @@ fn a_rerun_with_another_species_column_converts_again_and_shards_must_agree() {
     named.convert.radii = vec![("FCC".into(), 1.3), ("BCC".into(), 1.2), ("2".into(), 1.5)];
     let r = batch(std::slice::from_ref(&src), &out, &named, &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (5, 0));
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n == "--species-name 3=BCC: no frame has the value 3 in --species-column type"),
+        "{:?}",
+        r.notes
+    );
     let m = read_manifest(&out).unwrap();
     let f = MdlodFile::open(out.join(&m.frames[0].file)).unwrap();
     let radii: Vec<(String, f32)> = f
