@@ -566,8 +566,8 @@ impl BatchError {
     fn frames_own(&self) -> bool {
         fn convert(e: &ConvertError) -> bool {
             match e {
-                ConvertError::Read(_)
-                | ConvertError::AttributeNotPositive { .. }
+                ConvertError::Read(r) => !matches!(r, ReadError::Io { .. }),
+                ConvertError::AttributeNotPositive { .. }
                 | ConvertError::BadBox { .. }
                 | ConvertError::NoAttributeToLog(_)
                 | ConvertError::LastFrameIncomplete { .. }
@@ -578,8 +578,12 @@ impl BatchError {
                 _ => false,
             }
         }
+        // (Reading or writing a file failing is no fault of the frame: a full disk
+        // under a decompressed working copy fails every frame after it.)
+        let read = |r: &ReadError| !matches!(r, ReadError::Io { .. });
         match self {
-            BatchError::Read(_) | BatchError::CutShortBeforeNewest { .. } => true,
+            BatchError::Read(r) => read(r),
+            BatchError::CutShortBeforeNewest { .. } => true,
             BatchError::Convert(c) => convert(c),
             _ => false,
         }
@@ -1348,8 +1352,10 @@ pub fn batch(
                 // (With --keep-going, a frame whose header cannot be read is converted
                 // like the others, and its conversion reports it.)
                 let info = match info {
+                    // (Its count unknown, as a cut-short last frame's: not taken for an
+                    // empty frame, so its conversion runs and reports it.)
                     Err(_) if opts.keep_going => {
-                        frames.push((own, timestep, 0, None, None));
+                        frames.push((own, timestep, u64::MAX, None, None));
                         continue;
                     }
                     info => info.map_err(|e| bounded.context(p, e.into()))?,

@@ -485,8 +485,8 @@ fn box_bounds_with_lo_above_hi_are_errors_naming_the_line() {
 }
 
 /// A column of categories (`--species-column`) written in any notation: a whole number
-/// is that number however printed (`1.000000`, `1e0`, `-0`), values sort as numbers
-/// (whole or not), whole numbers from 0 take colours by value (the same in every frame,
+/// is that number however printed (`1.000000`, `1e0`, `-0`), whole numbers sort as
+/// numbers, whole numbers from 0 take colours by value (the same in every frame,
 /// with a 0 or without), a value that is no number at all (`nan`) is refused, and a
 /// `diameter` column read as the species is no size column by default.
 #[test]
@@ -501,13 +501,13 @@ fn categories_are_numbers_however_written() {
         let path = write(dir.path(), "c.dump", text);
         DumpFile::open(&path).unwrap().read_frame(0, o, &NoProgress)
     };
-    let values = ["5.000000", "1.000000", "1", "1e0", "0", "-0", "2.5"];
+    let values = ["5.000000", "1.000000", "1", "1e0", "0", "-0", "2"];
     let mut text = format!("{head}ITEM: ATOMS id type x y z c_ptm\n");
     for (i, v) in values.iter().enumerate() {
         text += &format!("{} 1 {i} 1 1 {v}\n", i + 1);
     }
     let f = read_with(&text, &opts("c_ptm")).unwrap();
-    assert_eq!(names(&f), ["0", "1", "2.5", "5"]);
+    assert_eq!(names(&f), ["0", "1", "2", "5"]);
     assert_eq!(f.species_index, [3, 1, 1, 1, 0, 0, 2]);
     let colours: Vec<Option<[u8; 3]>> = f.species.iter().map(|s| s.colour).collect();
     assert_eq!(
@@ -515,19 +515,24 @@ fn categories_are_numbers_however_written() {
         [
             Some([242, 242, 242]),
             Some([102, 255, 102]),
-            None,
+            Some([255, 102, 102]),
             Some([242, 242, 242])
         ]
     );
+    // A value that is no whole number: every name as it first appears (as frames read
+    // in parts merge them), that one coloured by its place.
+    let h = read_with(&text.replace(" 2\n", " 2.5\n"), &opts("c_ptm")).unwrap();
+    assert_eq!(names(&h), ["5", "1", "0", "2.5"]);
+    assert_eq!(h.species[3].colour, None);
     // Without a 0 (and without 2.5), 1 keeps its colour.
     let text1 = text
         .replace(" 0\n", " 1\n")
         .replace(" -0\n", " 1\n")
-        .replace(" 2.5\n", " 1\n");
+        .replace(" 2\n", " 1\n");
     let g = read_with(&text1, &opts("c_ptm")).unwrap();
     assert_eq!(names(&g), ["1", "5"]);
     assert_eq!(g.species[0].colour, Some([102, 255, 102]));
-    let e = read_with(&text.replace(" 2.5\n", " nan\n"), &opts("c_ptm"))
+    let e = read_with(&text.replace(" 2\n", " nan\n"), &opts("c_ptm"))
         .unwrap_err()
         .to_string();
     assert!(

@@ -696,6 +696,11 @@ pub fn traverse_with(
                 return list;
             }
             residency.restart();
+            // Coarser than the whole data set on screen, only clusters that must be opened
+            // (mixed, across a plane) are: a coarser error changes nothing more.
+            if error_px > proj.size_px(&file.nodes()[0]) {
+                break;
+            }
             error_px = coarser(error_px);
         }
     }
@@ -843,6 +848,9 @@ fn traverse_tiled(
                     .count() as u64;
                 return (list, asked);
             }
+        }
+        if error_px > proj.size_px(&file.nodes()[0]) {
+            break;
         }
         error_px = coarser(error_px);
     }

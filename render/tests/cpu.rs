@@ -1784,6 +1784,21 @@ fn clip_planes_keep_exactly_the_particles_on_their_side() {
                     "budget: particle {i} covered {c}"
                 );
             }
+            // With culling too: a budget below what the clusters across a plane need,
+            // met by the largest-first cut once coarser errors cannot help.
+            for budget in [budget, 30] {
+                let culled = traverse(
+                    &cam,
+                    &f,
+                    &TraversalSettings {
+                        budget_points: budget,
+                        occlusion: OcclusionMode::PixelCentres,
+                        ..settings
+                    },
+                );
+                check_counts(&f, &culled);
+                assert!(culled.points <= budget, "{} > {budget}", culled.points);
+            }
         }
     }
     // Without planes nothing is cut away.

@@ -1631,10 +1631,11 @@ pub fn run(args: Args) -> Result<()> {
                 stopped(pronoun)
             );
         }
-        if opts.style.species.iter().any(|s| s.hidden) && opts.style.hidden_mask(species) == 0 {
+        if opts.style.hides_past_the_mask(species) {
             println!(
                 "  note: clusters still hold the hidden species (only the first 64 species \
-                 can be left out of clusters); --screen-error 0 draws particles only"
+                 can be left out of clusters, and occlusion culling is off for the others); \
+                 --screen-error 0 draws particles only"
             );
         }
         if r.clusters_across > 0 {

@@ -381,18 +381,9 @@ fn merge_species(
     let numeric_type = values.is_some();
     // LAMMPS types start at 1; a 0 or below is no type number to take a slot by.
     let slots = type_numbers && values.as_ref().is_some_and(|v| v.iter().all(|&n| n >= 1));
-    // Categories that are all numbers, whole or not, are sorted as numbers too.
-    let order_by: Option<Vec<f64>> = match (&values, categories) {
-        (Some(v), _) => Some(v.iter().map(|&n| n as f64).collect()),
-        (None, true) => names
-            .iter()
-            .map(|n| std::str::from_utf8(n).ok()?.parse::<f64>().ok())
-            .collect(),
-        (None, false) => None,
-    };
-    if let Some(values) = order_by {
+    if let Some(values) = values {
         let mut order: Vec<usize> = (0..names.len()).collect();
-        order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+        order.sort_by_key(|&i| values[i]);
         let mut rank = vec![0u16; names.len()];
         for (new, &old) in order.iter().enumerate() {
             rank[old] = new as u16;
@@ -573,20 +564,28 @@ fn parse_chunk<'a>(
                         i += 1;
                     }
                     let token = &bytes[t0..i];
+                    let radius_of = |token: &[u8]| {
+                        let radius = std::str::from_utf8(token)
+                            .ok()
+                            .and_then(crate::species::element)
+                            .map_or(crate::species::DEFAULT_RADIUS, |(r, _)| r);
+                        f64::from(radius)
+                    };
                     if elements.get(last_element).is_none_or(|e| e.0 != token) {
                         last_element = match elements.iter().position(|e| e.0 == token) {
                             Some(k) => k,
+                            // (Past the elements there are, tokens are not remembered:
+                            // a column of distinct junk would make the search quadratic.)
+                            None if elements.len() >= 128 => usize::MAX,
                             None => {
-                                let radius = std::str::from_utf8(token)
-                                    .ok()
-                                    .and_then(crate::species::element)
-                                    .map_or(crate::species::DEFAULT_RADIUS, |(r, _)| r);
-                                elements.push((token, f64::from(radius)));
+                                elements.push((token, radius_of(token)));
                                 elements.len() - 1
                             }
                         };
                     }
-                    size = elements[last_element].1;
+                    size = elements
+                        .get(last_element)
+                        .map_or_else(|| radius_of(token), |e| e.1);
                 }
                 Role::Species | Role::SpeciesAttr => {
                     while i < bytes.len() && bytes[i] > b' ' {
