@@ -2427,4 +2427,23 @@ fn keep_going_passes_over_a_bad_header_when_a_column_is_asked_for() {
         &NoProgress
     )
     .is_err());
+    // Compressed, the same frame is a failed one too, not an empty one skipped.
+    let gz = dir.path().join("box.dump.gz");
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    std::io::Write::write_all(&mut enc, &std::fs::read(&src).unwrap()).unwrap();
+    std::fs::write(&gz, enc.finish().unwrap()).unwrap();
+    o.keep_going = true;
+    let r = batch(
+        std::slice::from_ref(&gz),
+        &dir.path().join("gz"),
+        &o,
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!(
+        (r.converted, r.failed.len(), r.empty.len()),
+        (5, 1, 0),
+        "{r:?}"
+    );
+    assert_eq!(r.failed[0].frame, 3);
 }
