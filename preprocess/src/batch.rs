@@ -156,8 +156,10 @@ pub struct Manifest {
 /// A frame of [`Manifest::failed`].
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct FailedEntry {
-    /// The frame's timestep, as the manifest would list it.
-    pub timestep: u64,
+    /// The frame's timestep, as the manifest would list it; absent where its header
+    /// could not be read that far.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timestep: Option<u64>,
     /// The input and the frame's index in it.
     pub input: String,
     pub frame: u64,
@@ -387,6 +389,14 @@ pub struct BatchReport {
     pub failed: Vec<FailedFrame>,
 }
 
+/// `timestep T (frame K of INPUT)`, or `frame K of INPUT` without a timestep.
+pub fn failed_place(f: &FailedEntry) -> String {
+    match f.timestep {
+        Some(t) => format!("timestep {t} (frame {} of {})", f.frame, f.input),
+        None => format!("frame {} of {}", f.frame, f.input),
+    }
+}
+
 /// A frame a batch with [`BatchOptions::keep_going`] could not convert.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FailedFrame {
@@ -395,8 +405,9 @@ pub struct FailedFrame {
     pub frame: usize,
     /// The input's own timestep of the frame, where it records one.
     pub timestep: Option<u64>,
-    /// The timestep the manifest would list it at (its own, or its position).
-    pub listed_timestep: u64,
+    /// The timestep the manifest would list it at (its own, or its position); `None`
+    /// where its LAMMPS header could not be read as far as its timestep.
+    pub listed_timestep: Option<u64>,
     /// The error, which names the file and the place.
     pub reason: String,
 }
@@ -1259,13 +1270,15 @@ fn newest_inputs(listed: &[Vec<Listed>]) -> Vec<bool> {
 }
 
 /// A frame as it was listed while its input was open: (the input's own timestep, the
-/// batch's number, particles, attribute, given radii); see [`Job`].
+/// batch's number, particles, attribute, given radii, its index in the input); see
+/// [`Job`].
 type Listed = (
     Option<u64>,
     u64,
     u64,
     Option<String>,
     Option<Vec<(String, f32)>>,
+    usize,
 );
 
 /// Converts every frame of `inputs` (this shard's share) into `out_dir`.
@@ -1290,6 +1303,10 @@ pub fn batch(
     let mut gzip_cut: Vec<bool> = Vec::with_capacity(inputs.len());
     let mut formats: Vec<InputFormat> = Vec::with_capacity(inputs.len());
     let mut listed: Vec<Vec<Listed>> = Vec::with_capacity(inputs.len());
+    // Frames whose header cannot be read far enough to give their timestep (a LAMMPS
+    // frame always records one): with --keep-going, failed before they are listed, so
+    // that a number made up for them takes no real frame's place among the timesteps.
+    let mut unlisted_failures: Vec<FailedFrame> = Vec::new();
     // How the first frame of each input names its species (for the radius overrides).
     let mut namings: Vec<SpeciesNaming> = Vec::with_capacity(inputs.len());
     let mut position = 0u64;
@@ -1333,10 +1350,30 @@ pub fn batch(
         let compressed = bounded.text.is_some() || bounded.dump.is_compressed();
         let dump = &bounded.dump;
         let mut frames = Vec::with_capacity(dump.frame_count());
+        let lammps = matches!(
+            dump.format(),
+            InputFormat::LammpsText | InputFormat::LammpsBinary
+        );
         for k in 0..dump.frame_count() {
             let own = dump.frame_timestep(k);
             let timestep = own.unwrap_or(position);
             position += 1;
+            if own.is_none() && lammps && k + 1 < dump.frame_count() {
+                if let Err(e) = dump.frame_info(k) {
+                    let e = BatchError::Convert(bounded.context(p, e.into()));
+                    if !opts.keep_going {
+                        return Err(e);
+                    }
+                    unlisted_failures.push(FailedFrame {
+                        input: p.to_path_buf(),
+                        frame: k,
+                        timestep: None,
+                        listed_timestep: None,
+                        reason: e.to_string(),
+                    });
+                    continue;
+                }
+            }
             // A last frame cut short in its atoms (a run still writing the input) is left
             // out where it is read, with a note, as for an uncompressed input: its
             // description is not needed here.
@@ -1345,7 +1382,7 @@ pub fn batch(
             if k + 1 == dump.frame_count()
                 && matches!(info, Some(Err(crate::readers::ReadError::Truncated { .. })))
             {
-                frames.push((own, timestep, u64::MAX, None, None));
+                frames.push((own, timestep, u64::MAX, None, None, k));
                 continue;
             }
             let (particles, given) = if let (true, Some(info)) = (compressed, info) {
@@ -1355,7 +1392,7 @@ pub fn batch(
                     // (Its count unknown, as a cut-short last frame's: not taken for an
                     // empty frame, so its conversion runs and reports it.)
                     Err(_) if opts.keep_going => {
-                        frames.push((own, timestep, u64::MAX, None, None));
+                        frames.push((own, timestep, u64::MAX, None, None, k));
                         continue;
                     }
                     info => info.map_err(|e| bounded.context(p, e.into()))?,
@@ -1388,7 +1425,7 @@ pub fn batch(
                     return Err(bounded.context(p, e.into()).into());
                 }
             }
-            frames.push((own, timestep, particles, attribute, given));
+            frames.push((own, timestep, particles, attribute, given, k));
         }
         if (!opts.convert.radii.is_empty() || !opts.convert.species_names.is_empty())
             && dump.frame_count() > 0
@@ -1435,8 +1472,9 @@ pub fn batch(
         .zip(listed)
         .zip(newest)
     {
-        let count = frames.len();
-        for (k, (own, timestep, particles, attribute, given)) in frames.into_iter().enumerate() {
+        // (A frame failed before it was listed is never an input's last.)
+        let count = frames.last().map_or(0, |f| f.5 + 1);
+        for (own, timestep, particles, attribute, given, k) in frames {
             jobs.push(Job {
                 input,
                 dump: dump.as_ref(),
@@ -1943,7 +1981,9 @@ pub fn batch(
     let failed = AtomicBool::new(false);
     let first_error: Mutex<Option<BatchError>> = Mutex::new(None);
     let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(ends_mid_line);
-    let failed_frames: Mutex<Vec<FailedFrame>> = Mutex::new(Vec::new());
+    // (Each shard reports the frames no shard could list; a merge keeps one of each.)
+    let unlisted = unlisted_failures.len();
+    let failed_frames: Mutex<Vec<FailedFrame>> = Mutex::new(unlisted_failures);
     let converted = std::sync::atomic::AtomicUsize::new(0);
     // Whether any conversion has written its output (renamed into place).
     let wrote = AtomicBool::new(false);
@@ -2103,7 +2143,7 @@ pub fn batch(
                                 input: job.input.to_path_buf(),
                                 frame: job.frame,
                                 timestep: job.own_timestep,
-                                listed_timestep: job.timestep,
+                                listed_timestep: Some(job.timestep),
                                 reason: e.to_string(),
                             });
                         progress.advance(job.particles);
@@ -2137,7 +2177,8 @@ pub fn batch(
     let last_save = {
         let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(e) = m.expected_frames.as_mut() {
-            *e = e.saturating_sub((incomplete.len() + failed_frames.len()) as u64);
+            // (Frames failed before they were listed were never expected.)
+            *e = e.saturating_sub((incomplete.len() + failed_frames.len() - unlisted) as u64);
         }
         m.failed = failed_frames
             .iter()
@@ -2420,6 +2461,8 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         failed.extend(m.failed);
     }
     frames.sort_by_key(|f| f.timestep);
+    failed.sort_by(|a, b| (&a.input, a.frame, a.timestep).cmp(&(&b.input, b.frame, b.timestep)));
+    failed.dedup_by(|a, b| a.input == b.input && a.frame == b.frame);
     failed.sort_by_key(|f| f.timestep);
     if let Some(w) = frames.windows(2).find(|w| w[0].timestep == w[1].timestep) {
         return Err(manifest_err(
@@ -2818,8 +2861,9 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         // Frames a run with --keep-going could not convert are missing.
         for f in &m.failed {
             check.problems.push(format!(
-                "timestep {} (frame {} of {}) could not be converted, in {name}: {}",
-                f.timestep, f.frame, f.input, f.reason
+                "{} could not be converted, in {name}: {}",
+                failed_place(f),
+                f.reason
             ));
         }
         lists.push((name.clone(), m.input_frames));

@@ -2355,7 +2355,7 @@ fn keep_going_converts_the_other_frames_and_reports_the_bad_one() {
         assert_eq!(m.expected_frames, Some(5));
         // Listed as failed, which verify names as missing.
         assert_eq!(m.failed.len(), 1);
-        assert_eq!((m.failed[0].timestep, m.failed[0].frame), (200, 2));
+        assert_eq!((m.failed[0].timestep, m.failed[0].frame), (Some(200), 2));
         let v = mdlod_preprocess::batch::verify_dir(&out, &NoProgress).unwrap();
         assert_eq!(v.frames_ok, 5);
         assert!(
@@ -2446,4 +2446,36 @@ fn keep_going_passes_over_a_bad_header_when_a_column_is_asked_for() {
         "{r:?}"
     );
     assert_eq!(r.failed[0].frame, 3);
+}
+
+/// A frame whose TIMESTEP cannot be read is failed before the frames are numbered: no
+/// number made up for it (its position) takes a real frame's place, so no good frame is
+/// taken for its duplicate and left out.
+#[test]
+fn a_frame_whose_timestep_cannot_be_read_takes_no_other_frames_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let bad = good.replacen("ITEM: TIMESTEP\n200\n", "ITEM: TIMESTEP\n2x0\n", 1);
+    assert_ne!(bad, good);
+    let src = dir.path().join("ts.dump");
+    std::fs::write(&src, bad).unwrap();
+    let out = dir.path().join("out");
+    let e = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("malformed `ITEM: TIMESTEP` value `2x0`"), "{e}");
+    let keep = BatchOptions {
+        keep_going: true,
+        duplicates: mdlod_preprocess::batch::Duplicates::Last,
+        ..opts()
+    };
+    let r = batch(std::slice::from_ref(&src), &out, &keep, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.failed.len()), (5, 1));
+    assert!(r.duplicates.is_empty(), "{:?}", r.duplicates);
+    let m = read_manifest(&out).unwrap();
+    let steps: Vec<u64> = m.frames.iter().map(|f| f.timestep).collect();
+    assert_eq!(steps, [0, 100, 300, 400, 500]);
+    assert_eq!(m.expected_frames, Some(5));
+    assert_eq!((m.failed[0].timestep, m.failed[0].frame), (None, 2));
+    check_manifest(&out, &m);
 }

@@ -520,10 +520,13 @@ fn categories_are_numbers_however_written() {
         ]
     );
     // A value that is no whole number: every name as it first appears (as frames read
-    // in parts merge them), that one coloured by its place.
+    // in parts merge them), that one coloured by its place past the palette's first ten.
     let h = read_with(&text.replace(" 2\n", " 2.5\n"), &opts("c_ptm")).unwrap();
     assert_eq!(names(&h), ["5", "1", "0", "2.5"]);
-    assert_eq!(h.species[3].colour, None);
+    assert_eq!(
+        h.species[3].colour,
+        Some(mdlod_preprocess::species::palette_colour(13))
+    );
     // Without a 0 (and without 2.5), 1 keeps its colour.
     let text1 = text
         .replace(" 0\n", " 1\n")

@@ -561,3 +561,36 @@ fn a_negative_or_nan_size_is_an_error_naming_its_place() {
         "{e}"
     );
 }
+
+/// A binary dump's box with an axis's lower bound above its upper (or not a number) is
+/// refused at its bytes, as a text dump's BOX BOUNDS line is.
+#[test]
+fn reversed_or_nan_box_bounds_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(mdlod_datasets::lammps_sample_path("cu_melt.custom.bin")).unwrap();
+    // The first frame's x bounds: 0 and the cell's edge, one after the other.
+    let hi = 18.075000000000003f64.to_le_bytes();
+    let pair: Vec<u8> = 0f64.to_le_bytes().iter().chain(&hi).copied().collect();
+    let at = bytes
+        .windows(16)
+        .position(|w| w == pair.as_slice())
+        .expect("the x bounds");
+    for (lo, name) in [(30.0f64, "reversed"), (f64::NAN, "nan")] {
+        let mut b = bytes.clone();
+        b[at..at + 8].copy_from_slice(&lo.to_le_bytes());
+        let path = dir.path().join(format!("{name}.bin"));
+        std::fs::write(&path, &b).unwrap();
+        let e = DumpFile::open(&path)
+            .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
+            .unwrap_err()
+            .to_string();
+        let why = match name {
+            "nan" => "box bound is not a finite number",
+            _ => "box bounds of timestep 0: x from 30 to 18.075",
+        };
+        assert!(
+            e.contains(&format!("byte {at}:")) && e.contains(why),
+            "{name}: {e}"
+        );
+    }
+}

@@ -169,9 +169,9 @@ pub fn run(args: Args) -> Result<()> {
         );
         for f in &m.failed {
             println!(
-                "note: timestep {} (frame {} of {}) is missing: its shard could not convert \
-                 it ({})",
-                f.timestep, f.frame, f.input, f.reason
+                "note: {} is missing: its shard could not convert it ({})",
+                mdlod_preprocess::batch::failed_place(f),
+                f.reason
             );
         }
         return Ok(());
@@ -371,9 +371,14 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     );
     if !report.failed.is_empty() {
         let n = report.failed.len();
+        let others = if report.converted + report.skipped > 0 {
+            " (--keep-going converted the others)"
+        } else {
+            " (no frame was converted)"
+        };
         bail!(
-            "{n} frame{} could not be converted (--keep-going converted the others); fix or \
-             replace {} and run the batch again: it converts only what is missing",
+            "{n} frame{} could not be converted{others}; fix or replace {} and run the batch \
+             again: it converts only what is missing",
             if n == 1 { "" } else { "s" },
             if n == 1 { "its input" } else { "their inputs" }
         );

@@ -411,16 +411,20 @@ fn merge_species(
     });
     Ok(names
         .into_iter()
-        .map(|n| {
+        .enumerate()
+        .map(|(place, n)| {
             let name = String::from_utf8_lossy(&n).into_owned();
             SpeciesName {
                 numeric_type,
                 radius: None,
                 palette_slot: if slots { type_number_slot(&n) } else { None },
+                // Categories that are no whole number from 0 take colours by place from
+                // past the palette's first ten, none of which a structure type takes.
                 colour: if categories {
                     name.parse::<i64>()
                         .ok()
                         .and_then(crate::species::category_colour)
+                        .or_else(|| Some(crate::species::palette_colour(10 + place)))
                 } else {
                     None
                 },

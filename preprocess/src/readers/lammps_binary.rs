@@ -295,8 +295,22 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
         *b = r.i32("boundary flags")?;
     }
     let mut bounds = [0f64; 6];
+    let bounds_at = r.pos;
     for v in &mut bounds {
         *v = r.f64("box bound")?;
+    }
+    // As a text dump's: each axis's lower bound at most its upper (both numbers).
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        let (lo, hi) = (bounds[2 * k], bounds[2 * k + 1]);
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(r.err(
+                bounds_at + 16 * k,
+                format!(
+                    "box bounds of timestep {timestep}: {axis} from {lo} to {hi} (the lower \
+                     bound must be a number at most the upper)"
+                ),
+            ));
+        }
     }
     let mut simulation_box = if triclinic == 1 {
         let (xy, xz, yz) = (r.f64("tilt xy")?, r.f64("tilt xz")?, r.f64("tilt yz")?);
