@@ -517,8 +517,14 @@ pub enum BatchError {
     /// A frame failed (the first error); the frames converted before it, or beside it
     /// on other workers, are in the manifest (no new frame starts after a failure).
     #[error(
-        "{source}\n  ({converted} of the {todo} frames to convert were converted and are listed \
-         in the manifest; a rerun converts only what is missing)"
+        "{source}\n  ({})",
+        match converted {
+            0 => format!("none of the {todo} frames to convert was converted"),
+            _ => format!(
+                "{converted} of the {todo} frames to convert were converted and are listed in \
+                 the manifest; once the cause is mended, a rerun converts only what is missing"
+            ),
+        }
     )]
     Incomplete {
         converted: usize,
