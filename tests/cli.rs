@@ -1872,12 +1872,19 @@ fn hiding_a_real_bicrystals_fcc_atoms_leaves_its_boundaries() {
     let file = dir.path().join("gb.mdlod");
     ok(&["convert", s(&input), "-o", s(&file), "--attribute", "c_cna"]);
     let png = dir.path().join("gb.png");
+    draws_the_boundaries(&file, &png, &["--hide-attribute", "0.5:1.5"], other as u64);
+}
+
+/// Renders the bicrystal `file` with `hide` (its fcc atoms hidden) at 0, 4 and 16 px:
+/// exactly its `other` boundary atoms at 0 px (with those behind others), at most as
+/// many coarser (clusters of boundary atoms only stand in for some), none holding fcc.
+fn draws_the_boundaries(file: &Path, png: &Path, hide: &[&str], other: u64) {
     for error in ["0", "4", "16"] {
-        let out = ok(&[
+        let mut args = vec![
             "render",
-            s(&file),
+            s(file),
             "-o",
-            s(&png),
+            s(png),
             "--width",
             "96",
             "--height",
@@ -1886,21 +1893,18 @@ fn hiding_a_real_bicrystals_fcc_atoms_leaves_its_boundaries() {
             error,
             "--budget",
             "1000000",
-            "--hide-attribute",
-            "0.5:1.5",
-            // (Every boundary atom counted, those behind others too.)
             "--no-occlusion",
-        ]);
+        ];
+        args.extend_from_slice(hide);
+        let out = ok(&args);
         let drawn: u64 = {
             let at = out.find(" particles").unwrap();
             out[..at].rsplit(' ').next().unwrap().parse().unwrap()
         };
-        // At 0 px every boundary atom is a particle; coarser, clusters of boundary atoms
-        // only stand in for some, and none holds an fcc atom.
         if error == "0" {
-            assert_eq!(drawn, other as u64, "{out}");
+            assert_eq!(drawn, other, "{out}");
         } else {
-            assert!(drawn <= other as u64, "{out}");
+            assert!(drawn <= other, "{out}");
         }
         assert!(!out.contains("still hold"), "{out}");
     }
@@ -1985,35 +1989,7 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
     assert_eq!(species_of(&binary), expected);
     let png = dir.path().join("gb.png");
     for file in [&whole, &chunked] {
-        for error in ["0", "4", "16"] {
-            let out = ok(&[
-                "render",
-                s(file),
-                "-o",
-                s(&png),
-                "--width",
-                "96",
-                "--height",
-                "64",
-                "--screen-error",
-                error,
-                "--budget",
-                "1000000",
-                "--hide-species",
-                "FCC",
-                // (Every boundary atom counted, those behind others too.)
-                "--no-occlusion",
-            ]);
-            let drawn: u64 = {
-                let at = out.find(" particles").unwrap();
-                out[..at].rsplit(' ').next().unwrap().parse().unwrap()
-            };
-            if error == "0" {
-                assert_eq!(drawn, other, "{out}");
-            } else {
-                assert!(drawn <= other, "{out}");
-            }
-        }
+        draws_the_boundaries(file, &png, &["--hide-species", "FCC"], other);
     }
     // A continuous column: a species per value, and a note saying what the option takes.
     let pe = dir.path().join("pe.mdlod");
