@@ -2282,6 +2282,20 @@ pub fn batch(
                 ));
             }
         }
+        // Many values that are no whole numbers (nor names given): a continuous quantity.
+        let renamed = |n: &String| opts.convert.species_names.iter().any(|(_, to)| to == n);
+        if seen.len() > 64
+            && seen
+                .iter()
+                .any(|n| n.parse::<i64>().is_err() && !renamed(n))
+        {
+            absent.push(format!(
+                "--species-column {column} gave {} species over the frames, one per distinct \
+                 value: it takes a column of categories (a structure type, a molecule or \
+                 cluster id); a continuous quantity goes in --attribute",
+                seen.len()
+            ));
+        }
     }
     let converted_frames = converted.load(Ordering::Relaxed);
     Ok(BatchReport {

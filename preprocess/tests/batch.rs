@@ -2282,6 +2282,22 @@ fn a_rerun_with_another_species_column_converts_again_and_shards_must_agree() {
         .map(|s| (s.name.clone(), s.radius))
         .collect();
     assert_eq!(radii, [("FCC".to_string(), 1.3), ("2".to_string(), 1.5)]);
+    // A continuous column by mistake: a species per value, and a note.
+    let r = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("pe"),
+        &with(Some("c_pe"), opts()),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n.starts_with("--species-column c_pe gave ")
+                && n.contains("a continuous quantity goes in --attribute")),
+        "{:?}",
+        r.notes
+    );
     // A column no frame has is an error before any frame is converted.
     let e = batch(
         std::slice::from_ref(&src),
