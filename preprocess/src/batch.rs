@@ -366,6 +366,9 @@ pub struct BatchReport {
     pub manifest: PathBuf,
     /// The merged manifest a shard run removed, as the frames it converted outdate it.
     pub removed_merged: Option<PathBuf>,
+    /// Shard manifests of an earlier sharded run that this whole run's `dataset.json`
+    /// supersedes, removed: a later `--merge` of them would put the older frames back.
+    pub removed_shard_manifests: Vec<String>,
     /// Files named like frames in the batch directory that no frame of the inputs (in
     /// any shard) is written to: left by a run over other or longer inputs.
     pub strays: Vec<String>,
@@ -2221,6 +2224,25 @@ pub fn batch(
         });
     }
     last_save?;
+    // A whole run's manifest lists every frame: shard manifests of an earlier sharding
+    // are stale, and merging them would overwrite it with what they knew.
+    let mut removed_shard_manifests = Vec::new();
+    if opts.shard.is_none() {
+        let names = std::fs::read_dir(out_dir)
+            .map_err(io(out_dir))?
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| is_shard_manifest(n));
+        for name in names {
+            let path = out_dir.join(&name);
+            match std::fs::remove_file(&path) {
+                Ok(()) => removed_shard_manifests.push(name),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(io(&path)(e)),
+            }
+        }
+        removed_shard_manifests.sort();
+    }
     // A species may appear in some frames only, but a radius override that names none
     // of any frame's is a misspelt name. (A shard sees only its own frames; a column of
     // categories need not hold every value a script names, say all five structure
@@ -2300,6 +2322,7 @@ pub fn batch(
     let converted_frames = converted.load(Ordering::Relaxed);
     Ok(BatchReport {
         removed_merged,
+        removed_shard_manifests,
         strays,
         duplicates,
         incomplete,

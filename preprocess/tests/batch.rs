@@ -2495,3 +2495,27 @@ fn a_frame_whose_timestep_cannot_be_read_takes_no_other_frames_place() {
     assert_eq!((m.failed[0].timestep, m.failed[0].frame), (None, 2));
     check_manifest(&out, &m);
 }
+
+/// A whole run after a sharded one removes the shard manifests its `dataset.json`
+/// supersedes: a later `--merge` cannot put their older frames back over it.
+#[test]
+fn a_whole_run_removes_the_shard_manifests_it_supersedes() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    for i in 0..2 {
+        batch(std::slice::from_ref(&src), &out, &shard(i, 2), &NoProgress).unwrap();
+    }
+    assert_eq!(merge(&out).unwrap().frames.len(), 6);
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(
+        r.removed_shard_manifests,
+        ["dataset.shard-0-of-2.json", "dataset.shard-1-of-2.json"]
+    );
+    assert!(!out.join("dataset.shard-0-of-2.json").exists());
+    assert_eq!(read_manifest(&out).unwrap().frames.len(), 6);
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(e.contains("no shard manifests"), "{e}");
+    assert_eq!(read_manifest(&out).unwrap().frames.len(), 6);
+    check_manifest(&out, &read_manifest(&out).unwrap());
+}

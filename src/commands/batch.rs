@@ -266,6 +266,14 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             out.display()
         );
     }
+    if !report.removed_shard_manifests.is_empty() {
+        println!(
+            "removed {}, which {} supersedes (a later --merge of them would put their older \
+             frames back)",
+            report.removed_shard_manifests.join(", "),
+            report.manifest.display()
+        );
+    }
     if !report.duplicates.is_empty() {
         let n = report.duplicates.len();
         println!(
