@@ -151,6 +151,11 @@ pub struct Manifest {
     /// them. Absent when none failed.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub failed: Vec<FailedEntry>,
+    /// Which frame of a timestep given twice the run converted (`--duplicate-timesteps`:
+    /// `first` or `last`); absent for the default, which refuses them. Shards must agree:
+    /// merged, others would mix a restart's frames with the abandoned run's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duplicates: Option<String>,
 }
 
 /// A frame of [`Manifest::failed`].
@@ -1895,6 +1900,11 @@ pub fn batch(
         input_frames: Some(input_frames),
         frames: done,
         failed: Vec::new(),
+        duplicates: match opts.duplicates {
+            Duplicates::Error => None,
+            Duplicates::First => Some("first".into()),
+            Duplicates::Last => Some("last".into()),
+        },
     }));
     // Unset again when the batch returns, however it returns.
     struct Unset<'a>(Option<&'a ManifestHandle>);
@@ -2470,6 +2480,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     let mut failed: Vec<FailedEntry> = Vec::new();
     let mut expected_total = Some(0u64);
     let mut settings = MergeSettings::default();
+    let mut duplicates_of: Option<(PathBuf, Option<String>)> = None;
     for (path, m) in manifests {
         let path = path.as_path();
         for f in &m.frames {
@@ -2496,6 +2507,27 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
                 ));
             }
         }
+        // One choice among duplicate timesteps for all shards.
+        match &duplicates_of {
+            None => duplicates_of = Some((path.to_path_buf(), m.duplicates.clone())),
+            Some((first, d)) if *d != m.duplicates => {
+                let name =
+                    |d: &Option<String>| d.clone().unwrap_or_else(|| "error (the default)".into());
+                return Err(manifest_err(
+                    out_dir,
+                    format!(
+                        "the shards chose differently among frames of one timestep: {} with \
+                         --duplicate-timesteps {}, {} with {}; rerun the shards with one \
+                         choice, then merge",
+                        first.display(),
+                        name(d),
+                        path.display(),
+                        name(&m.duplicates)
+                    ),
+                ));
+            }
+            Some(_) => {}
+        }
         // Known only when every shard says (manifests of older runs do not).
         expected_total = expected_total
             .zip(m.expected_frames)
@@ -2503,6 +2535,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         frames.extend(m.frames);
         failed.extend(m.failed);
     }
+    let duplicates = duplicates_of.and_then(|(_, d)| d);
     frames.sort_by_key(|f| f.timestep);
     failed.sort_by(|a, b| (&a.input, a.frame, a.timestep).cmp(&(&b.input, b.frame, b.timestep)));
     failed.dedup_by(|a, b| a.input == b.input && a.frame == b.frame);
@@ -2520,6 +2553,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         input_frames,
         frames,
         failed,
+        duplicates,
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
     Ok(merged)

@@ -2519,3 +2519,28 @@ fn a_whole_run_removes_the_shard_manifests_it_supersedes() {
     assert_eq!(read_manifest(&out).unwrap().frames.len(), 6);
     check_manifest(&out, &read_manifest(&out).unwrap());
 }
+
+/// Shards that chose differently among frames of one timestep do not merge (merged, a
+/// restart's frames would mix with the abandoned run's); the same choice merges.
+#[test]
+fn shards_of_other_duplicate_choices_do_not_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    let last = |i| BatchOptions {
+        duplicates: mdlod_preprocess::batch::Duplicates::Last,
+        ..shard(i, 2)
+    };
+    batch(std::slice::from_ref(&src), &out, &last(0), &NoProgress).unwrap();
+    batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains("the shards chose differently among frames of one timestep")
+            && e.contains("--duplicate-timesteps last")
+            && e.contains("error (the default)"),
+        "{e}"
+    );
+    batch(std::slice::from_ref(&src), &out, &last(1), &NoProgress).unwrap();
+    let m = merge(&out).unwrap();
+    assert_eq!((m.frames.len(), m.duplicates.as_deref()), (6, Some("last")));
+}
