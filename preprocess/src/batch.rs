@@ -2918,6 +2918,7 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     let mut listed = std::collections::HashSet::new();
     let mut entries = Vec::new();
     let mut lists = Vec::new();
+    let mut choices: Vec<(String, Option<String>)> = Vec::new();
     for name in &manifests {
         let path = dir.join(name);
         let text = read_manifest_bytes(&path).map_err(io(&path))?;
@@ -2944,13 +2945,41 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
             ));
         }
         lists.push((name.clone(), m.input_frames));
+        if is_shard_manifest(name) {
+            choices.push((name.clone(), m.duplicates.clone()));
+        }
         for f in m.frames {
             listed.insert(f.file.clone());
             entries.push((name.clone(), f));
         }
     }
-    // Shards not merged yet: they must have split one list of frames (see [`merge`]).
+    // Shards not merged yet: they must have split one list of frames (see [`merge`]),
+    // made one choice among duplicate timesteps, and built their frames alike, or
+    // `--merge` refuses them.
     check.problems.extend(different_input_lists(&lists));
+    if let Some((first, d)) = choices.first() {
+        if let Some((other, e)) = choices.iter().find(|(_, e)| e != d) {
+            let name = |d: &Option<String>| d.clone().unwrap_or_else(|| "error".into());
+            check.problems.push(format!(
+                "the shards would not merge: {first} chose --duplicate-timesteps {}, {other} {}",
+                name(d),
+                name(e)
+            ));
+        }
+    }
+    let mut settings = MergeSettings::default();
+    for (manifest, f) in entries.iter().filter(|(m, _)| is_shard_manifest(m)) {
+        // (A missing or damaged file is reported below, by itself.)
+        if !dir.join(&f.file).is_file() {
+            continue;
+        }
+        if let Err(message) = settings.check(dir, &dir.join(manifest), f) {
+            check
+                .problems
+                .push(format!("the shards would not merge: {message}"));
+            break;
+        }
+    }
     progress.stage("verifying frames", Some(entries.len() as u64), "frames");
     for (manifest, f) in &entries {
         let place = format!("{} (timestep {}, in {manifest})", f.file, f.timestep);

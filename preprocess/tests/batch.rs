@@ -1064,6 +1064,14 @@ fn merge_refuses_shards_built_with_other_settings() {
         let mut o = shard(1, 2);
         change(&mut o);
         batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        let v = mdlod_preprocess::batch::verify_dir(&out, &NoProgress).unwrap();
+        assert!(
+            v.problems
+                .iter()
+                .any(|p| p.contains("the shards would not merge") && p.contains(setting)),
+            "{setting}: {:?}",
+            v.problems
+        );
         let e = merge(&out).unwrap_err().to_string();
         assert!(
             e.contains("different settings")
@@ -2533,6 +2541,15 @@ fn shards_of_other_duplicate_choices_do_not_merge() {
     };
     batch(std::slice::from_ref(&src), &out, &last(0), &NoProgress).unwrap();
     batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
+    // Verify says so before a merge is tried.
+    let v = mdlod_preprocess::batch::verify_dir(&out, &NoProgress).unwrap();
+    assert!(
+        v.problems
+            .iter()
+            .any(|p| p.contains("the shards would not merge") && p.contains("last")),
+        "{:?}",
+        v.problems
+    );
     let e = merge(&out).unwrap_err().to_string();
     assert!(
         e.contains("the shards chose differently among frames of one timestep")
