@@ -551,3 +551,33 @@ fn categories_are_numbers_however_written() {
     assert_eq!(names(&f), ["1", "2"]);
     assert!(f.radii.is_none());
 }
+
+/// A frame without `ITEM: BOX BOUNDS` (its item misspelt, so skipped as unknown) is
+/// noted: LAMMPS writes a box in every frame, and the file would have none.
+#[test]
+fn a_frame_without_a_box_is_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    let atoms = "ITEM: ATOMS id type x y z\n1 1 0 0 0\n2 1 1 1 1\n";
+    let boxed = format!("{ORTHO}{atoms}");
+    let misspelt = boxed.replace("ITEM: BOX BOUNDS", "ITEM: BOX BOUND");
+    for (text, noted) in [(boxed, false), (misspelt, true)] {
+        let text = text.replace("NUMBER OF ATOMS\n3", "NUMBER OF ATOMS\n2");
+        let path = write(dir.path(), "b.dump", &text);
+        let dump = DumpFile::open(&path).unwrap();
+        let notes = dump.frame_notes(0, &ReadOptions::default());
+        assert_eq!(
+            notes
+                .iter()
+                .any(|n| n.contains("frame 0 has no `ITEM: BOX BOUNDS`")),
+            noted,
+            "{notes:?}"
+        );
+        assert_eq!(
+            dump.read_frame(0, &ReadOptions::default(), &NoProgress)
+                .unwrap()
+                .simulation_box
+                .is_none(),
+            noted
+        );
+    }
+}

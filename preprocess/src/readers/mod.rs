@@ -743,6 +743,20 @@ impl DumpFile {
                 ));
             }
         }
+        // LAMMPS writes a box in every frame: one without was likely misspelt, and its
+        // item skipped as unknown.
+        if let (InputFormat::LammpsText, Index::Lammps(_)) = (self.format, &self.index) {
+            if let Ok(info) = self.frame_info(k) {
+                if info.simulation_box.is_none() && info.particles > 0 {
+                    notes.push(format!(
+                        "{}: frame {k} has no `ITEM: BOX BOUNDS` (LAMMPS writes one in every \
+                         frame; an item it does not know, such as a misspelt one, is skipped): \
+                         converted without a box, so --cell draws none",
+                        self.path.display()
+                    ));
+                }
+            }
+        }
         if let Index::Gsd(i) = &self.index {
             notes.extend(gsd::shape_note(&self.path, self.bytes(), i, k));
         }
