@@ -589,9 +589,14 @@ impl BatchError {
     /// [`BatchOptions::keep_going`] passes over, rather than the output's or the run's
     /// (a full disk, the memory limit), which would stop every frame after it.
     fn frames_own(&self) -> bool {
+        // (Reading or writing a file failing is no fault of the frame: a full disk
+        // under a decompressed working copy fails every frame after it.)
+        fn read(r: &ReadError) -> bool {
+            !matches!(r, ReadError::Io { .. })
+        }
         fn convert(e: &ConvertError) -> bool {
             match e {
-                ConvertError::Read(r) => !matches!(r, ReadError::Io { .. }),
+                ConvertError::Read(r) => read(r),
                 ConvertError::AttributeNotPositive { .. }
                 | ConvertError::BadBox { .. }
                 | ConvertError::NoAttributeToLog(_)
@@ -603,9 +608,6 @@ impl BatchError {
                 _ => false,
             }
         }
-        // (Reading or writing a file failing is no fault of the frame: a full disk
-        // under a decompressed working copy fails every frame after it.)
-        let read = |r: &ReadError| !matches!(r, ReadError::Io { .. });
         match self {
             BatchError::Read(r) => read(r),
             BatchError::CutShortBeforeNewest { .. } => true,
@@ -1434,7 +1436,7 @@ pub fn batch(
                 Err(e) => return Err(bounded.context(p, e.into()).into()),
             };
             // So is a size column a frame lacks.
-            if let Err(e) = dump.check_size_column(k, &opts.read) {
+            if let Err(e) = dump.check_named_columns(k, &opts.read) {
                 if !opts.keep_going {
                     return Err(bounded.context(p, e.into()).into());
                 }
@@ -2295,40 +2297,16 @@ pub fn batch(
         }
     }
     // With a column of categories, names for values no frame holds are said, not refused.
-    let mut absent = Vec::new();
-    if whole && !seen.is_empty() && opts.read.species_column.is_some() {
-        let column = opts.read.species_column.as_deref().unwrap_or_default();
-        for (from, to) in &opts.convert.species_names {
-            if !seen.contains(to) {
-                absent.push(format!(
-                    "--species-name {from}={to}: no frame has the value {from} in \
-                     --species-column {column}"
-                ));
-            }
-        }
-        for (name, radius) in &opts.convert.radii {
-            if !seen.contains(name) {
-                absent.push(format!(
-                    "--radius {name}={radius}: no frame has a species {name} (the species are \
-                     the values of --species-column {column}, renamed)"
-                ));
-            }
-        }
-        // Many values that are no whole numbers (nor names given): a continuous quantity.
-        let renamed = |n: &String| opts.convert.species_names.iter().any(|(_, to)| to == n);
-        if seen.len() > 64
-            && seen
-                .iter()
-                .any(|n| n.parse::<i64>().is_err() && !renamed(n))
-        {
-            absent.push(format!(
-                "--species-column {column} gave {} species over the frames, one per distinct \
-                 value: it takes a column of categories (a structure type, a molecule or \
-                 cluster id); a continuous quantity goes in --attribute",
-                seen.len()
-            ));
-        }
-    }
+    let absent = match (&opts.read.species_column, whole && !seen.is_empty()) {
+        (Some(column), true) => crate::species::category_notes(
+            column,
+            &opts.convert.species_names,
+            &opts.convert.radii,
+            &seen.iter().map(String::as_str).collect::<Vec<_>>(),
+            false,
+        ),
+        _ => Vec::new(),
+    };
     let converted_frames = converted.load(Ordering::Relaxed);
     Ok(BatchReport {
         removed_merged,
@@ -2480,7 +2458,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     let mut failed: Vec<FailedEntry> = Vec::new();
     let mut expected_total = Some(0u64);
     let mut settings = MergeSettings::default();
-    let mut duplicates_of: Option<(PathBuf, Option<String>)> = None;
+    let mut choices: Vec<(String, Option<String>)> = Vec::new();
     for (path, m) in manifests {
         let path = path.as_path();
         for f in &m.frames {
@@ -2507,26 +2485,12 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
                 ));
             }
         }
-        // One choice among duplicate timesteps for all shards.
-        match &duplicates_of {
-            None => duplicates_of = Some((path.to_path_buf(), m.duplicates.clone())),
-            Some((first, d)) if *d != m.duplicates => {
-                let name =
-                    |d: &Option<String>| d.clone().unwrap_or_else(|| "error (the default)".into());
-                return Err(manifest_err(
-                    out_dir,
-                    format!(
-                        "the shards chose differently among frames of one timestep: {} with \
-                         --duplicate-timesteps {}, {} with {}; rerun the shards with one \
-                         choice, then merge",
-                        first.display(),
-                        name(d),
-                        path.display(),
-                        name(&m.duplicates)
-                    ),
-                ));
-            }
-            Some(_) => {}
+        choices.push((path.display().to_string(), m.duplicates.clone()));
+        if let Some(message) = different_duplicate_choices(&choices) {
+            return Err(manifest_err(
+                out_dir,
+                format!("{message}; rerun the shards with one choice, then merge"),
+            ));
         }
         // Known only when every shard says (manifests of older runs do not).
         expected_total = expected_total
@@ -2535,7 +2499,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         frames.extend(m.frames);
         failed.extend(m.failed);
     }
-    let duplicates = duplicates_of.and_then(|(_, d)| d);
+    let duplicates = choices.into_iter().next().and_then(|(_, d)| d);
     frames.sort_by_key(|f| f.timestep);
     failed.sort_by(|a, b| (&a.input, a.frame, a.timestep).cmp(&(&b.input, b.frame, b.timestep)));
     failed.dedup_by(|a, b| a.input == b.input && a.frame == b.frame);
@@ -2557,6 +2521,21 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
     Ok(merged)
+}
+
+/// Where shard manifests `(name, --duplicate-timesteps choice)` chose differently among
+/// frames of one timestep (merged, a restart's frames would mix with the abandoned
+/// run's), the message naming two of them.
+fn different_duplicate_choices(choices: &[(String, Option<String>)]) -> Option<String> {
+    let (first, d) = choices.first()?;
+    let (other, e) = choices.iter().find(|(_, e)| e != d)?;
+    let name = |d: &Option<String>| d.clone().unwrap_or_else(|| "error (the default)".into());
+    Some(format!(
+        "the shards chose differently among frames of one timestep: {first} with \
+         --duplicate-timesteps {}, {other} with {}",
+        name(d),
+        name(e)
+    ))
 }
 
 /// Where shard manifests `(I, N, file name)` are of different shard counts N, the
@@ -2957,15 +2936,10 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
     // made one choice among duplicate timesteps, and built their frames alike, or
     // `--merge` refuses them.
     check.problems.extend(different_input_lists(&lists));
-    if let Some((first, d)) = choices.first() {
-        if let Some((other, e)) = choices.iter().find(|(_, e)| e != d) {
-            let name = |d: &Option<String>| d.clone().unwrap_or_else(|| "error".into());
-            check.problems.push(format!(
-                "the shards would not merge: {first} chose --duplicate-timesteps {}, {other} {}",
-                name(d),
-                name(e)
-            ));
-        }
+    if let Some(message) = different_duplicate_choices(&choices) {
+        check
+            .problems
+            .push(format!("the shards would not merge: {message}"));
     }
     let mut settings = MergeSettings::default();
     for (manifest, f) in entries.iter().filter(|(m, _)| is_shard_manifest(m)) {

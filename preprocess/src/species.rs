@@ -121,10 +121,78 @@ pub fn category_colour(value: i64) -> Option<[u8; 3]> {
 /// readers name categories this way, so options naming values (`--species-name 1.0=FCC`)
 /// are taken the same way.
 pub fn category_name(name: &str) -> String {
-    match name.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && v.fract() == 0.0 && v.abs() < 1e15 => (v as i64).to_string(),
-        _ => name.to_string(),
+    whole_number(name.trim()).map_or_else(|| name.to_string(), |v| v.to_string())
+}
+
+/// The whole number `text` writes in any notation (`1`, `1.0`, `1e0`, `-0`), below
+/// 10^15 in magnitude (where every whole number is a double).
+pub fn whole_number(text: &str) -> Option<i64> {
+    let v = text.parse::<f64>().ok()?;
+    (v.is_finite() && v.fract() == 0.0 && v.abs() < 1e15).then_some(v as i64)
+}
+
+/// What a conversion with `--species-column` tells of the species it gave (`species`, as
+/// renamed): each rename and radius naming a value none holds (noted, not refused: a
+/// script names every structure type), and many species of values that are no whole
+/// numbers nor names given (a continuous quantity, each value a species). `one_frame`:
+/// one conversion's notes, which list its species; else a batch's, over its frames.
+pub fn category_notes(
+    column: &str,
+    renames: &[(String, String)],
+    radii: &[(String, f32)],
+    species: &[&str],
+    one_frame: bool,
+) -> Vec<String> {
+    // (A column of molecule or cluster ids gives thousands.)
+    let list = match species.len() {
+        0..=8 => species.join(", "),
+        n => format!("{}, ... ({n} in all)", species[..6].join(", ")),
+    };
+    let mut notes = Vec::new();
+    for (old, new) in renames
+        .iter()
+        .filter(|(_, new)| !species.contains(&new.as_str()))
+    {
+        notes.push(match one_frame {
+            true => format!(
+                "--species-name {old}={new}: no particle has the value {old} in --species-column \
+                 {column} here (the species here: {list})"
+            ),
+            false => format!(
+                "--species-name {old}={new}: no frame has the value {old} in --species-column \
+                 {column}"
+            ),
+        });
     }
+    for (name, radius) in radii.iter().filter(|(n, _)| !species.contains(&n.as_str())) {
+        notes.push(match one_frame {
+            true => format!(
+                "--radius {name}={radius}: no species {name} here (the species are the values \
+                 of --species-column {column}, renamed: {list})"
+            ),
+            false => format!(
+                "--radius {name}={radius}: no frame has a species {name} (the species are the \
+                 values of --species-column {column}, renamed)"
+            ),
+        });
+    }
+    // Thousands of whole numbers are ids; values that are not, among that many, are a
+    // continuous quantity.
+    let named = |n: &str| renames.iter().any(|(_, new)| new == n);
+    if species.len() > 64
+        && species
+            .iter()
+            .any(|n| whole_number(n).is_none() && !named(n))
+    {
+        notes.push(format!(
+            "--species-column {column} gave {} species{}, one per distinct value: it takes a \
+             column of categories (a structure type, a molecule or cluster id); a continuous \
+             quantity goes in --attribute",
+            species.len(),
+            if one_frame { "" } else { " over the frames" }
+        ));
+    }
+    notes
 }
 
 /// Radius of a numeric type or unknown name, in the simulation's length unit.
@@ -338,9 +406,6 @@ pub enum SpeciesNaming {
         first: String,
         first_type: Option<String>,
     },
-    /// The values of the column `--species-column` names (a structure type): `first` is
-    /// the first atom's.
-    Column { column: String, first: String },
     /// Names as the input gives them (XYZ species, GSD types, raw sidecar names, MMPLD
     /// lists, LAMMPS type labels, the one species `atom`): any name may occur.
     Given,
@@ -374,8 +439,6 @@ impl SpeciesNaming {
                      number: give the element symbol instead, {example}"
                 ))
             }
-            // (Any value may occur in a category column: a radius or rename for one a frame
-            // lacks is noted where it is converted.)
             _ => None,
         }
     }

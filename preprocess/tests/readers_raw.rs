@@ -739,7 +739,7 @@ fn a_species_column_is_refused_for_raw_arrays() {
     for e in [
         dump.read_frame(0, &opts, &NoProgress).unwrap_err(),
         dump.read_part(0, &opts, 0..5, &NoProgress).unwrap_err(),
-        dump.check_size_column(0, &opts).unwrap_err(),
+        dump.check_named_columns(0, &opts).unwrap_err(),
     ] {
         let e = e.to_string();
         assert!(

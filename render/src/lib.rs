@@ -1338,8 +1338,7 @@ pub fn frame_setup(
         error_px: opts.error_px,
         budget_points: opts.budget.max(1),
         occlusion: if !opts.occlusion
-            || opts.style.changes_geometry()
-            || opts.style.hides_past_the_mask(&file.metadata().species)
+            || !opts.style.culls(&file.metadata().species)
             || matches!(
                 opts.mode,
                 RenderMode::Splat { .. } | RenderMode::SplatOver { .. } | RenderMode::Density(_)

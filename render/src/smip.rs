@@ -928,9 +928,7 @@ impl Smip {
                                 .max(1),
                             // Culling assumes the file's radii, and occluders the
                             // traversal can tell hidden.
-                            occlusion: if style.changes_geometry()
-                                || style.hides_past_the_mask(&file.metadata().species)
-                            {
+                            occlusion: if !style.culls(&file.metadata().species) {
                                 OcclusionMode::Off
                             } else {
                                 self.config.occlusion

@@ -355,6 +355,13 @@ impl PointStyle {
         self.species.iter().any(|s| s.hidden) && self.hidden_mask(species) == 0
     }
 
+    /// Whether occlusion culling may draw this style over a file of `species`: the
+    /// spheres it draws are the file's ([`Self::changes_geometry`]), and what it hides
+    /// the traversal leaves out ([`Self::hides_past_the_mask`]).
+    pub fn culls(&self, species: &[mdlod_format::meta::Species]) -> bool {
+        !self.changes_geometry() && !self.hides_past_the_mask(species)
+    }
+
     /// The affine map that recolours clusters when species take other colours, `None`
     /// when none does (or a colour map colours the points): rows of `[a b c d]`, a colour
     /// `x` going to `a·x + d` per channel ([`recoloured`]).

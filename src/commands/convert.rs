@@ -254,67 +254,21 @@ pub fn run(args: Args) -> Result<()> {
     let report = with_threads(args.threads, || convert(&args))??;
     print_report(&args.output, &report);
     if let Some(column) = &args.build.species_column {
-        for note in categories_notes(&args.output, column, &args.build) {
+        let file = mdlod_format::MdlodFile::open(&args.output)?;
+        let species: Vec<&str> = file
+            .metadata()
+            .species
+            .iter()
+            .map(|s| s.name.as_str())
+            .collect();
+        let (renames, radii) = args.build.named();
+        for note in
+            mdlod_preprocess::species::category_notes(column, &renames, &radii, &species, true)
+        {
             println!("  note: {note}");
         }
     }
     Ok(())
-}
-
-/// What a conversion with `--species-column` should tell: renames and radii naming a
-/// value the frame lacks, and many species of values that are not whole numbers (a
-/// continuous quantity, each of whose values became a species of its own).
-pub fn categories_notes(file: &std::path::Path, column: &str, build: &BuildArgs) -> Vec<String> {
-    let Ok(f) = mdlod_format::MdlodFile::open(file) else {
-        return Vec::new();
-    };
-    let names: Vec<&str> = f
-        .metadata()
-        .species
-        .iter()
-        .map(|s| s.name.as_str())
-        .collect();
-    // (A column of molecule or cluster ids gives thousands.)
-    let list = || match names.len() {
-        0..=8 => names.join(", "),
-        n => format!("{}, ... ({n} in all)", names[..6].join(", ")),
-    };
-    let mut notes = Vec::new();
-    let (species_names, radii) = build.named();
-    for (old, new) in &species_names {
-        if !names.contains(&new.as_str()) {
-            notes.push(format!(
-                "--species-name {old}={new}: no particle has the value {old} in --species-column \
-                 {column} here (the species here: {})",
-                list()
-            ));
-        }
-    }
-    for (name, radius) in &radii {
-        if !names.contains(&name.as_str()) {
-            notes.push(format!(
-                "--radius {name}={radius}: no species {name} here (the species are the values \
-                 of --species-column {column}, renamed: {})",
-                list()
-            ));
-        }
-    }
-    // Thousands of whole numbers are ids (molecules, clusters); values that are not
-    // whole numbers among that many are a continuous quantity.
-    let renamed = |n: &str| build.species_names.iter().any(|(_, new)| new == n);
-    if names.len() > 64
-        && names
-            .iter()
-            .any(|n| n.parse::<i64>().is_err() && !renamed(n))
-    {
-        notes.push(format!(
-            "--species-column {column} gave {} species, one per distinct value: it takes a \
-             column of categories (a structure type, a molecule or cluster id); a continuous \
-             quantity goes in --attribute",
-            names.len()
-        ));
-    }
-    notes
 }
 
 pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {

@@ -439,22 +439,16 @@ fn merge_species(
 /// `1`, `-0` is `0`); other tokens as written. `Err` with the token for a number that is
 /// not finite (`nan`, `inf`).
 fn category_name(token: &[u8]) -> Result<Cow<'_, [u8]>, String> {
-    let Some(v) = std::str::from_utf8(token)
-        .ok()
-        .and_then(|t| t.parse::<f64>().ok())
-    else {
+    let Ok(text) = std::str::from_utf8(token) else {
         return Ok(Cow::Borrowed(token));
     };
-    if !v.is_finite() {
-        return Err(String::from_utf8_lossy(token).into_owned());
+    if text.parse::<f64>().is_ok_and(|v| !v.is_finite()) {
+        return Err(text.to_string());
     }
-    if v.fract() == 0.0 && v.abs() < 1e15 {
-        let whole = (v as i64).to_string();
-        if whole.as_bytes() != token {
-            return Ok(Cow::Owned(whole.into_bytes()));
-        }
+    match crate::species::whole_number(text).map(|v| v.to_string()) {
+        Some(whole) if whole != text => Ok(Cow::Owned(whole.into_bytes())),
+        _ => Ok(Cow::Borrowed(token)),
     }
-    Ok(Cow::Borrowed(token))
 }
 
 /// Distinct species tokens of one chunk, in order of first appearance.

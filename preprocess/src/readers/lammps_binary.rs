@@ -552,22 +552,10 @@ pub(crate) fn read_range(
     }
     let species_col = match &opts.species_column {
         None => find("type"),
-        Some(name) => Some(find(name).ok_or_else(|| {
-            err(
-                first_chunk,
-                format!(
-                    "no column `{name}` for --species-column; the columns are {}",
-                    names.join(" ")
-                ),
-            )
-        })?),
+        Some(name) => Some(
+            super::species_column_problem(name, &names, coords).map_err(|m| err(first_chunk, m))?,
+        ),
     };
-    if let Some(c) = species_col.filter(|c| coords.contains(c)) {
-        return Err(err(
-            first_chunk,
-            format!("--species-column {0}: `{0}` holds the positions", names[c]),
-        ));
-    }
     let attribute_col = match &opts.attribute {
         None => None,
         Some(name) => Some(find(name).ok_or_else(|| {
@@ -753,14 +741,10 @@ pub(crate) fn read_range(
             if distinct.len() > 1 << 16 {
                 return Err(err(
                     first_chunk,
-                    match &opts.species_column {
-                        Some(name) => format!(
-                            "more than 65536 distinct values in --species-column {name}: it \
-                             takes a column of categories (a structure type, a molecule \
-                             kind); a continuous quantity goes in --attribute"
-                        ),
-                        None => "more than 65536 distinct types".into(),
-                    },
+                    opts.species_column.as_deref().map_or_else(
+                        || "more than 65536 distinct types".into(),
+                        super::too_many_categories,
+                    ),
                 ));
             }
             let index: Vec<u16> = types

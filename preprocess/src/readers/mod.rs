@@ -733,7 +733,15 @@ impl DumpFile {
                 self.format,
                 InputFormat::LammpsText | InputFormat::LammpsBinary | InputFormat::Xyz
             );
-        if let Some(info) = named.then(|| self.frame_info(k).ok()).flatten() {
+        // (Read once, where a note below needs it.)
+        let lammps_text = matches!(
+            (self.format, &self.index),
+            (InputFormat::LammpsText, Index::Lammps(_))
+        );
+        let info = (named || lammps_text)
+            .then(|| self.frame_info(k).ok())
+            .flatten();
+        if let Some(info) = info.as_ref().filter(|_| named) {
             let has = |n: &str| info.columns.iter().find(|c| c.eq_ignore_ascii_case(n));
             if let (Some(r), Some(d)) = (has("radius"), has("diameter")) {
                 notes.push(format!(
@@ -745,17 +753,16 @@ impl DumpFile {
         }
         // LAMMPS writes a box in every frame: one without was likely misspelt, and its
         // item skipped as unknown.
-        if let (InputFormat::LammpsText, Index::Lammps(_)) = (self.format, &self.index) {
-            if let Ok(info) = self.frame_info(k) {
-                if info.simulation_box.is_none() && info.particles > 0 {
-                    notes.push(format!(
-                        "{}: frame {k} has no `ITEM: BOX BOUNDS` (LAMMPS writes one in every \
-                         frame; an item it does not know, such as a misspelt one, is skipped): \
-                         converted without a box, so --cell draws none",
-                        self.path.display()
-                    ));
-                }
-            }
+        let boxless = info
+            .as_ref()
+            .filter(|i| i.simulation_box.is_none() && i.particles > 0);
+        if boxless.is_some() && lammps_text {
+            notes.push(format!(
+                "{}: frame {k} has no `ITEM: BOX BOUNDS` (LAMMPS writes one in every frame; an \
+                 item it does not know, such as a misspelt one, is skipped): converted without \
+                 a box, so --cell draws none",
+                self.path.display()
+            ));
         }
         if let Index::Gsd(i) = &self.index {
             notes.extend(gsd::shape_note(&self.path, self.bytes(), i, k));
@@ -911,12 +918,14 @@ impl DumpFile {
     ) -> Result<crate::species::SpeciesNaming, ReadError> {
         use crate::species::{is_type_number, SpeciesNaming};
         self.check_frame(k)?;
+        // A column of categories (`--species-column`) may hold any value.
+        if opts.species_column.is_some() {
+            return Ok(SpeciesNaming::Given);
+        }
         match &self.index {
-            Index::Xyz(_) if opts.species_column.is_none() => Ok(SpeciesNaming::Given),
-            Index::Lammps(_) | Index::Xyz(_) => {
+            Index::Lammps(_) => {
                 let header = self.header(k)?;
-                let layout = species_layout(&self.ctx(), &header, opts)?;
-                let (Some(col), true) = (layout.species, header.info.particles > 0) else {
+                let (Some(col), true) = (header.layout.species, header.info.particles > 0) else {
                     return Ok(SpeciesNaming::Given);
                 };
                 let first = Cursor::new(&self.bytes()[..header.atoms.end], header.atoms.start)
@@ -931,17 +940,12 @@ impl DumpFile {
                     return Ok(SpeciesNaming::Given);
                 };
                 let columns = &header.info.columns;
-                Ok(if let Some(column) = &opts.species_column {
-                    SpeciesNaming::Column {
-                        column: column.clone(),
-                        first: token,
-                    }
-                } else if columns[col] == "element" {
+                Ok(if columns[col] == "element" {
                     SpeciesNaming::ElementColumn {
                         first: token,
                         first_type: columns.iter().position(|c| c == "type").and_then(field),
                     }
-                } else if layout.numeric_species && is_type_number(&token) {
+                } else if header.layout.numeric_species && is_type_number(&token) {
                     SpeciesNaming::TypeNumbers { first: token }
                 } else {
                     SpeciesNaming::Given
@@ -949,22 +953,17 @@ impl DumpFile {
             }
             Index::LammpsBinary(i) => {
                 let info = lammps_binary::frame_info(&self.path, i.header(&self.path, k)?, opts);
-                let species = opts.species_column.as_deref().unwrap_or("type");
-                if !info.columns.iter().any(|c| c == species) || info.particles == 0 {
+                if !info.columns.iter().any(|c| c == "type") || info.particles == 0 {
                     return Ok(SpeciesNaming::Given);
                 }
                 let plain = ReadOptions {
                     attribute: None,
                     columns: opts.columns.clone(),
                     sizes: SizeColumn::Off,
-                    species_column: opts.species_column.clone(),
+                    species_column: None,
                 };
                 let part = self.read_part(k, &plain, 0..1, &NoProgress)?;
                 Ok(match part.species.first() {
-                    Some(s) if opts.species_column.is_some() => SpeciesNaming::Column {
-                        column: species.to_string(),
-                        first: s.name.clone(),
-                    },
                     Some(s) if s.numeric_type => SpeciesNaming::TypeNumbers {
                         first: s.name.clone(),
                     },
@@ -981,7 +980,9 @@ impl DumpFile {
                 }
                 Ok(SpeciesNaming::Given)
             }
-            Index::Gsd(_) | Index::Raw(_) | Index::Mmpld(_) => Ok(SpeciesNaming::Given),
+            Index::Xyz(_) | Index::Gsd(_) | Index::Raw(_) | Index::Mmpld(_) => {
+                Ok(SpeciesNaming::Given)
+            }
         }
     }
 
@@ -1075,7 +1076,7 @@ impl DumpFile {
     /// Whether frame `k` has the size and species columns `opts` names (a batch checks
     /// every frame before converting any, as it does the attribute): an error names a
     /// column the frame lacks, or an input that gives sizes or species by no column.
-    pub fn check_size_column(&self, k: usize, opts: &ReadOptions) -> Result<(), ReadError> {
+    pub fn check_named_columns(&self, k: usize, opts: &ReadOptions) -> Result<(), ReadError> {
         if opts.sizes.named_column().is_none() && opts.species_column.is_none() {
             return Ok(());
         }
@@ -1093,12 +1094,7 @@ impl DumpFile {
             message: format!("frame {k}: {message}"),
         };
         if let Some(name) = opts.species_column.as_ref() {
-            if !info.columns.contains(name) {
-                return Err(err(format!(
-                    "no column `{name}` for --species-column; the columns are {}",
-                    info.columns.join(" ")
-                )));
-            }
+            species_column_problem(name, &info.columns, [usize::MAX; 3]).map_err(err)?;
         }
         opts.sizes.resolve(&info.columns).map(|_| ()).map_err(err)
     }
@@ -1283,13 +1279,37 @@ fn categories_note(e: ReadError, opts: &ReadOptions) -> ReadError {
     match (e, &opts.species_column) {
         (ReadError::TooManySpecies { at }, Some(name)) => ReadError::Malformed {
             at,
-            message: format!(
-                "more than 65536 distinct values in --species-column {name}: it takes a \
-                 column of categories (a structure type, a molecule kind); a continuous \
-                 quantity goes in --attribute"
-            ),
+            message: too_many_categories(name),
         },
         (e, _) => e,
+    }
+}
+
+/// What every reader says of a `--species-column` of more values than species fit.
+pub(crate) fn too_many_categories(name: &str) -> String {
+    format!(
+        "more than 65536 distinct values in --species-column {name}: it takes a column of \
+         categories (a structure type, a molecule kind); a continuous quantity goes in \
+         --attribute"
+    )
+}
+
+/// The index of the column `--species-column` names among `columns`, or what every
+/// reader says of one the frame lacks or of a coordinate's.
+pub(crate) fn species_column_problem(
+    name: &str,
+    columns: &[String],
+    coords: [usize; 3],
+) -> Result<usize, String> {
+    match columns.iter().position(|c| c == name) {
+        None => Err(format!(
+            "no column `{name}` for --species-column; the columns are {}",
+            columns.join(" ")
+        )),
+        Some(c) if coords.contains(&c) => Err(format!(
+            "--species-column {name}: `{name}` holds the positions"
+        )),
+        Some(c) => Ok(c),
     }
 }
 
@@ -1306,21 +1326,13 @@ fn species_layout(
         return Ok(layout);
     };
     let columns = &header.info.columns;
-    let malformed = |message: String| ReadError::Malformed {
-        at: ctx.at(header.columns_at),
-        message,
-    };
-    let c = columns.iter().position(|c| c == name).ok_or_else(|| {
-        malformed(format!(
-            "no column `{name}` for --species-column; the columns are {}",
-            columns.join(" ")
-        ))
-    })?;
-    if layout.coords.is_some_and(|(xyz, _)| xyz.contains(&c)) {
-        return Err(malformed(format!(
-            "--species-column {name}: `{name}` holds the positions"
-        )));
-    }
+    // (Without coordinates the frame is refused where they are looked for.)
+    let coords = layout.coords.map_or([usize::MAX; 3], |(xyz, _)| xyz);
+    let c =
+        species_column_problem(name, columns, coords).map_err(|message| ReadError::Malformed {
+            at: ctx.at(header.columns_at),
+            message,
+        })?;
     // Each atom keeps its element's size where the dump names elements (a LAMMPS
     // dump's `element` column, an XYZ file's species); with --no-sizes each category
     // takes its atoms' mean.
