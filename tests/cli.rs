@@ -1850,24 +1850,12 @@ fn particles_are_hidden_by_their_values() {
 fn hiding_a_real_bicrystals_fcc_atoms_leaves_its_boundaries() {
     let dir = tempfile::tempdir().unwrap();
     let input = lammps_sample_path("cu_gb.cna.dump");
-    let text = std::fs::read_to_string(&input).unwrap();
-    let columns: Vec<&str> = text
-        .lines()
-        .find(|l| l.starts_with("ITEM: ATOMS"))
-        .unwrap()
-        .split_whitespace()
-        .skip(2)
-        .collect();
-    let cna = columns.iter().position(|c| *c == "c_cna").unwrap();
-    let atoms: Vec<&str> = text.lines().skip(9).collect();
-    let other = atoms
-        .iter()
-        .filter(|l| l.split_whitespace().nth(cna) != Some("1"))
-        .count();
+    let cna = mdlod_datasets::lammps_sample_column("cu_gb.cna.dump", "c_cna");
+    let other = cna.iter().filter(|v| *v != "1").count();
     assert!(
-        other > 100 && other < atoms.len() / 2,
+        other > 100 && other < cna.len() / 2,
         "{other} of {}",
-        atoms.len()
+        cna.len()
     );
     let file = dir.path().join("gb.mdlod");
     ok(&["convert", s(&input), "-o", s(&file), "--attribute", "c_cna"]);
@@ -1919,16 +1907,10 @@ fn draws_the_boundaries(file: &Path, png: &Path, hide: &[&str], other: u64) {
 fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
     let dir = tempfile::tempdir().unwrap();
     let input = lammps_sample_path("cu_gb.cna.dump");
-    let text = std::fs::read_to_string(&input).unwrap();
-    let other = text
-        .lines()
-        .skip(9)
-        .filter(|l| l.split_whitespace().nth(6) != Some("1"))
-        .count() as u64;
-    assert_eq!(
-        text.lines().nth(8).unwrap(),
-        "ITEM: ATOMS id type element x y z c_cna c_cs c_pe"
-    );
+    let cna = mdlod_datasets::lammps_sample_column("cu_gb.cna.dump", "c_cna");
+    let other = cna.iter().filter(|v| *v != "1").count() as u64;
+    // (The dump's atoms, every one with its analysis.)
+    assert_eq!(cna.len(), 2552);
     let names = ["--species-name", "1=FCC", "--species-name", "5=Other"];
     let species_of = |file: &Path| -> Vec<(String, f32, u64)> {
         let f = MdlodFile::open(file).unwrap();

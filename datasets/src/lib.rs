@@ -61,8 +61,8 @@ use std::str::FromStr;
 
 pub use kinds::{AG_LATTICE, CU_LATTICE};
 pub use samples::{
-    gsd_sample_path, lammps_sample, lammps_sample_path, lammps_samples_dir, to_old_revision,
-    LammpsSample, LAMMPS_SAMPLES,
+    gsd_sample_path, lammps_sample, lammps_sample_column, lammps_sample_path, lammps_samples_dir,
+    to_old_revision, LammpsSample, LAMMPS_SAMPLES,
 };
 /// Digits after the decimal point of every coordinate and scalar written.
 pub use sink::DECIMALS;

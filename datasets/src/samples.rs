@@ -144,6 +144,32 @@ pub fn lammps_sample_path(file: &str) -> PathBuf {
     lammps_samples_dir().join(file)
 }
 
+/// The values of `column`, atom by atom, in the first frame of the committed LAMMPS text
+/// sample `file` (as written: `1`, `-3.48859`), for tests to check readers against.
+pub fn lammps_sample_column(file: &str, column: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(lammps_sample_path(file)).expect("a committed sample");
+    let mut lines = text.lines();
+    let count: usize = lines
+        .by_ref()
+        .skip_while(|l| !l.starts_with("ITEM: NUMBER OF ATOMS"))
+        .nth(1)
+        .and_then(|l| l.trim().parse().ok())
+        .expect("an atom count");
+    let c = lines
+        .find(|l| l.starts_with("ITEM: ATOMS"))
+        .and_then(|l| l.split_whitespace().skip(2).position(|c| c == column))
+        .unwrap_or_else(|| panic!("{file} has no column {column}"));
+    lines
+        .take(count)
+        .map(|l| {
+            l.split_whitespace()
+                .nth(c)
+                .expect("a full line")
+                .to_string()
+        })
+        .collect()
+}
+
 /// Path of a committed GSD sample in `datasets/gsd/` (written by the `gsd` Python
 /// package; see `datasets/gsd/make-samples.py`).
 pub fn gsd_sample_path(file: &str) -> PathBuf {

@@ -254,20 +254,8 @@ fn species_naming_follows_the_species_column() {
 #[test]
 fn a_species_column_makes_the_structure_types_species() {
     let text_path = sample("cu_gb.cna.dump").unwrap();
-    let text = std::fs::read_to_string(&text_path).unwrap();
-    let header: Vec<&str> = text
-        .lines()
-        .find(|l| l.starts_with("ITEM: ATOMS"))
-        .unwrap()
-        .split_whitespace()
-        .skip(2)
-        .collect();
-    let cna = header.iter().position(|c| *c == "c_cna").unwrap();
-    let expected: Vec<&str> = text
-        .lines()
-        .skip(9)
-        .map(|l| l.split_whitespace().nth(cna).unwrap())
-        .collect();
+    let expected = mdlod_datasets::lammps_sample_column("cu_gb.cna.dump", "c_cna");
+    assert_eq!(expected.len(), 2552);
     let opts = ReadOptions {
         species_column: Some("c_cna".into()),
         ..Default::default()
