@@ -24,8 +24,15 @@ pub fn defer_to_interrupt() {
     }
 }
 
-/// Working directories, and outputs whose hidden partial files go with them.
-static TARGETS: Mutex<Vec<(PathBuf, Option<PathBuf>)>> = Mutex::new(Vec::new());
+/// Working directories, removed whole.
+static TARGETS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Names the process that wrote a temporary output file (`None`: not such a file).
+type TempOwner = Box<dyn Fn(&str) -> Option<u32> + Send>;
+
+/// Directories where this process writes outputs through temporary files, each with the
+/// test that names a temporary file's writer: this process's are removed.
+static PARTIALS: Mutex<Vec<(PathBuf, TempOwner)>> = Mutex::new(Vec::new());
 
 /// What the interrupted command adds to its last line (what was kept, how to go on).
 static SAYING: Mutex<Option<String>> = Mutex::new(None);
@@ -49,21 +56,30 @@ pub fn on_interrupt_say(text: impl Into<String>) {
     *SAYING.lock().unwrap_or_else(|e| e.into_inner()) = Some(text.into());
 }
 
-/// Removes `work_dir` (and the partial `.NAME.*.tmp` of `output`) if the program is
-/// interrupted.
-pub fn remove_on_interrupt(work_dir: &Path, output: Option<&Path>) {
+/// Removes `work_dir`, and this process's temporary outputs in `outputs_dir` (the files
+/// whose writer `temp_owner` names as this process: `.NAME.HOST-PID-XXXXXX.tmp`, see
+/// [`mdlod_format::writer::temp_file_owner`]), if the program is interrupted.
+pub fn remove_on_interrupt(
+    work_dir: &Path,
+    outputs_dir: &Path,
+    temp_owner: impl Fn(&str) -> Option<u32> + Send + 'static,
+) {
     static INSTALL: Once = Once::new();
     TARGETS
         .lock()
         .unwrap_or_else(|e| e.into_inner())
-        .push((work_dir.to_path_buf(), output.map(Path::to_path_buf)));
+        .push(work_dir.to_path_buf());
+    PARTIALS
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push((outputs_dir.to_path_buf(), Box::new(temp_owner)));
     INSTALL.call_once(|| {
         // Without a handler the default action still stops the program; only the
         // clean-up is lost, so a failure to install is not an error.
         let _ = ctrlc::set_handler(|| {
             INTERRUPTED.store(true, Ordering::SeqCst);
             let targets = TARGETS.lock().unwrap_or_else(|e| e.into_inner());
-            for (dir, output) in targets.iter() {
+            for dir in targets.iter() {
                 // Workers may still add a file while the directory is being removed.
                 for _ in 0..10 {
                     if std::fs::remove_dir_all(dir).is_ok() || !dir.exists() {
@@ -71,10 +87,10 @@ pub fn remove_on_interrupt(work_dir: &Path, output: Option<&Path>) {
                     }
                     std::thread::sleep(std::time::Duration::from_millis(20));
                 }
-                if let Some(out) = output {
-                    remove_partial(out);
-                }
             }
+            // No thread begins an output from here on; those begun are removed.
+            mdlod_format::writer::refuse_new_outputs();
+            remove_own_partials();
             for hook in HOOKS.lock().unwrap_or_else(|e| e.into_inner()).iter() {
                 hook();
             }
@@ -88,20 +104,16 @@ pub fn remove_on_interrupt(work_dir: &Path, output: Option<&Path>) {
     });
 }
 
-/// Removes the hidden `.NAME.*.tmp` files the writer of `output` makes beside it.
-fn remove_partial(output: &Path) {
-    let Some(name) = output.file_name().map(|n| n.to_string_lossy().into_owned()) else {
-        return;
-    };
-    let dir = match output.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let prefix = format!(".{name}.");
-    if let Ok(entries) = std::fs::read_dir(dir) {
+/// Removes this process's temporary outputs (see [`remove_on_interrupt`]).
+fn remove_own_partials() {
+    let me = std::process::id();
+    for (dir, owner) in PARTIALS.lock().unwrap_or_else(|e| e.into_inner()).iter() {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            continue;
+        };
         for e in entries.flatten() {
-            let n = e.file_name().to_string_lossy().into_owned();
-            if n.starts_with(&prefix) && n.ends_with(".tmp") {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if owner(&name) == Some(me) && e.file_type().is_ok_and(|t| t.is_file()) {
                 let _ = std::fs::remove_file(e.path());
             }
         }

@@ -593,6 +593,9 @@ fn killing_a_batch_at_any_moment_leaves_only_complete_frames_and_a_true_manifest
         ("INT", 500),
         ("TERM", 550),
         ("KILL", 600),
+        ("INT", 700),
+        ("INT", 900),
+        ("INT", 1100),
     ] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
             .args(["batch", s(&input), "-o", s(&work), "--threads", "2"])
@@ -606,6 +609,7 @@ fn killing_a_batch_at_any_moment_leaves_only_complete_frames_and_a_true_manifest
             .status()
             .unwrap();
         assert!(status.success() || child.try_wait().unwrap().is_some());
+        let ended_pid = child.id();
         let ended = child.wait_with_output().unwrap();
         // An interrupt the handler caught says how to go on.
         if ended.status.code() == Some(130) {
@@ -613,6 +617,19 @@ fn killing_a_batch_at_any_moment_leaves_only_complete_frames_and_a_true_manifest
             assert!(
                 err.contains("a rerun of the same command converts only the rest"),
                 "{err}"
+            );
+            // The handler removed the frames being written, not only the working
+            // directory (only a kill leaves a temporary frame for the next run).
+            let pid = ended_pid;
+            let partial: Vec<String> = std::fs::read_dir(&work)
+                .unwrap()
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.ends_with(".tmp") && n.contains(&format!("-{pid}-")))
+                .collect();
+            assert!(
+                partial.is_empty(),
+                "{signal} at {delay_ms} ms left {partial:?}"
             );
         }
         check_batch_dir(&work, &reference);

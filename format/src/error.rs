@@ -12,6 +12,10 @@ pub enum FormatError {
         source: std::io::Error,
     },
 
+    /// The program is being interrupted (see [`crate::writer::refuse_new_outputs`]).
+    #[error("no new output begins: the program is being interrupted")]
+    OutputsRefused,
+
     #[error(
         "{path}: not an .mdlod file (the first 8 bytes are not the mdlod signature); a \
          particle dump is converted to one with `mdlod convert`"

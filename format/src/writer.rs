@@ -81,11 +81,14 @@ impl Writer {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "out".into());
+        // The gate is held until the temporary file exists (see `refuse_new_outputs`).
+        let gate = outputs_gate()?;
         let tmp = output_file_builder()
             .prefix(&temp_prefix(&name))
             .suffix(".tmp")
             .tempfile_in(dir)
             .map_err(|e| FormatError::io(dir, e))?;
+        drop(gate);
         let mut out = open(tmp.path()).map_err(|e| FormatError::io(path, e))?;
         out.write_all(&[0u8; HEADER_SIZE])
             .map_err(|e| FormatError::io(path, e))?;
@@ -263,6 +266,28 @@ impl SectionWriter<'_> {
 /// A builder of the temporary file a finished output is renamed from: created with the
 /// permissions any new file gets (0666 less the user's umask: 0644 usually, 0600 under
 /// `umask 077`, 0664 for a group's shared space), not a temporary file's private 0600.
+/// Whether new `.mdlod` files may begin: `false` once [`refuse_new_outputs`] ran.
+static OUTPUTS_OPEN: std::sync::RwLock<bool> = std::sync::RwLock::new(true);
+
+/// Makes every later [`Writer::create`] fail (with [`FormatError::OutputsRefused`]), after
+/// waiting for those under way to have created their temporary files. A program being
+/// interrupted calls it before it removes its temporary outputs, so that none of its
+/// other threads begins one after them. For the life of the process: there is no undo.
+pub fn refuse_new_outputs() {
+    *OUTPUTS_OPEN.write().unwrap_or_else(|e| e.into_inner()) = false;
+}
+
+/// Held while a temporary output file is created: shared by writers, taken whole by
+/// [`refuse_new_outputs`].
+fn outputs_gate() -> Result<std::sync::RwLockReadGuard<'static, bool>, FormatError> {
+    let open = OUTPUTS_OPEN.read().unwrap_or_else(|e| e.into_inner());
+    if *open {
+        Ok(open)
+    } else {
+        Err(FormatError::OutputsRefused)
+    }
+}
+
 pub fn output_file_builder<'a, 'b>() -> tempfile::Builder<'a, 'b> {
     #[allow(unused_mut)]
     let mut builder = tempfile::Builder::new();

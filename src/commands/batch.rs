@@ -213,14 +213,16 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     // What runs killed outright left (no handler could remove it): working directories
     // in the batch directory and the working one, and temporary frames
     // (`.frame-<timestep>.mdlod.HOST-PID-XXXXXX.tmp`).
-    crate::interrupt::remove_and_report_leftovers(&[out, &temp_parent], &|file| {
+    let temp_owner = |file: &str| {
         let timestep = file.strip_prefix(".frame-")?.split_once(".mdlod.")?.0;
         timestep.parse::<u64>().ok()?;
         mdlod_format::writer::temp_file_owner(file, &format!("frame-{timestep}.mdlod"))
-    });
+    };
+    crate::interrupt::remove_and_report_leftovers(&[out, &temp_parent], &temp_owner);
     let work = crate::interrupt::work_dir(&temp_parent)
         .with_context(|| super::work_dir_context(&temp_parent, temp_given))?;
-    crate::interrupt::remove_on_interrupt(work.path(), None);
+    // The frames being written when the batch is interrupted go too.
+    crate::interrupt::remove_on_interrupt(work.path(), out, temp_owner);
     crate::interrupt::on_interrupt_say(
         "the frames finished are kept, and a rerun of the same command converts only the rest",
     );

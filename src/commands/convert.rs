@@ -315,12 +315,11 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    crate::interrupt::remove_and_report_leftovers(&[&output_dir, &temp_parent], &|file| {
-        mdlod_format::writer::temp_file_owner(file, &name)
-    });
+    let temp_owner = move |file: &str| mdlod_format::writer::temp_file_owner(file, &name);
+    crate::interrupt::remove_and_report_leftovers(&[&output_dir, &temp_parent], &temp_owner);
     let work = crate::interrupt::work_dir(&temp_parent)
         .with_context(|| super::work_dir_context(&temp_parent, temp_given))?;
-    crate::interrupt::remove_on_interrupt(work.path(), Some(&args.output));
+    crate::interrupt::remove_on_interrupt(work.path(), &output_dir, temp_owner);
     options.chunks.temp_dir = Some(work.path().to_path_buf());
     let frame = match args.frame {
         Some(k) if k < 0 => {
