@@ -1986,6 +1986,20 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
     args.extend_from_slice(&["--radius", "FCC=1.28", "--radius", "Other=1.28"]);
     ok(&args);
     assert_eq!(species_of(&binary), expected);
+    // Each file records where its species came from, and `info` says so.
+    for file in [&whole, &chunked, &binary] {
+        let f = MdlodFile::open(file).unwrap();
+        assert_eq!(f.metadata().species_column.as_deref(), Some("c_cna"));
+    }
+    let info = ok(&["info", s(&whole)]);
+    assert!(
+        info.contains("species are the values of the input's column c_cna"),
+        "{info}"
+    );
+    let plain = dir.path().join("plain.mdlod");
+    ok(&["convert", s(&input), "-o", s(&plain)]);
+    assert_eq!(MdlodFile::open(&plain).unwrap().metadata().species_column, None);
+    assert!(!ok(&["info", s(&plain)]).contains("column"));
     let png = dir.path().join("gb.png");
     for file in [&whole, &chunked] {
         draws_the_boundaries(file, &png, &["--hide-species", "FCC"], other);

@@ -218,6 +218,10 @@ pub struct Metadata {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub units: Option<String>,
     pub species: Vec<Species>,
+    /// The input column whose values are the species (a structure type such as
+    /// `c_cna`), where they do not come from the input's own types or elements.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub species_column: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attribute: Option<AttributeInfo>,
     /// The range of the per-particle radii (the RADIUS section), where the particles of
@@ -346,6 +350,7 @@ mod tests {
                 colour: [0.8, 0.5, 0.2],
                 radius_range: None,
             }],
+            species_column: None,
             attribute: None,
             radius: None,
             source: None,

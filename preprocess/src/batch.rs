@@ -1987,6 +1987,7 @@ pub fn batch(
     let mut convert = opts.convert.clone();
     // A species may appear in some frames of a trajectory only.
     convert.radii_may_be_absent = true;
+    convert.species_column = opts.read.species_column.clone();
     convert.chunks.memory_limit = opts.memory_limit / jobs as u64;
     let convert = &convert;
     progress.stage(

@@ -33,6 +33,10 @@ pub struct ConvertOptions {
     /// keep every decade of a quantity spanning many (SPH densities): values must be
     /// above 0 ([`log10_attribute`]).
     pub attribute_log10: bool,
+    /// The input column whose values are the species (`ReadOptions::species_column`),
+    /// recorded in the metadata: [`convert_dump`] and batches fill it in from their read
+    /// options; a caller of [`convert_frame`] sets it for a frame so read.
+    pub species_column: Option<String>,
 }
 
 /// What a conversion built.
@@ -695,6 +699,7 @@ pub fn base_metadata(
         time: frame.time,
         units: frame.units.clone(),
         species: species_table(&frame.species, &options.radii),
+        species_column: options.species_column.clone(),
         attribute: frame.attribute.as_ref().map(|a| AttributeInfo {
             name: attribute_name(&a.name, options),
             min: 0.0,
@@ -933,6 +938,17 @@ pub fn convert_dump(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
+    // The metadata records where the species came from.
+    let with_column;
+    let options = if options.species_column == read.species_column {
+        options
+    } else {
+        with_column = ConvertOptions {
+            species_column: read.species_column.clone(),
+            ..options.clone()
+        };
+        &with_column
+    };
     let count = dump.frame_count();
     let k = match frame {
         FrameSelect::Index(k) => k,

@@ -2252,6 +2252,8 @@ fn a_rerun_with_another_species_column_converts_again_and_shards_must_agree() {
             .iter()
             .map(|s| s.name.clone())
             .collect();
+        // The file records the column as its manifest entry does.
+        assert_eq!(f.metadata().species_column, m.frames[0].species_column);
         (names, m.frames[0].species_column.clone())
     };
     assert_eq!(run(None), (5, 0));

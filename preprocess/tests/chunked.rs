@@ -32,6 +32,7 @@ fn options(chunk_points: usize) -> ConvertOptions {
         radii_may_be_absent: true,
         species_names: Vec::new(),
         attribute_log10: false,
+        species_column: None,
     }
 }
 
@@ -72,6 +73,9 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
     let whole = dir.path().join("whole.mdlod");
     let mut tight = opts.clone();
     tight.chunks.memory_limit = mdlod_preprocess::chunked::chunk_memory(chunk_points);
+    // (`convert_file` records the species column of its read options; a frame read
+    // here is converted with it given.)
+    tight.species_column = read.species_column.clone();
     convert_frame(
         &frame,
         Some(source_info(input, k as u64)),

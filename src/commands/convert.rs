@@ -196,6 +196,7 @@ impl BuildArgs {
             radii_may_be_absent: self.species_column.is_some(),
             species_names,
             attribute_log10: self.attribute_log10,
+            species_column: self.species_column.clone(),
         };
         let read = ReadOptions {
             attribute: self.attribute.clone(),

@@ -209,6 +209,12 @@ pub fn run(args: Args) -> Result<()> {
             s.colour[2]
         );
     }
+    if let Some(column) = &m.species_column {
+        println!(
+            "  (species are the values of the input's column {}, not its types)",
+            shown(column)
+        );
+    }
     if counts.is_none() {
         println!(
             "  (species not counted above {COUNT_UP_TO} particles: --counts reads each \
