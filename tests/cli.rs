@@ -5764,8 +5764,9 @@ fn a_projection_takes_its_light_range() {
         assert!(!a.exists(), "refused before drawing");
         args.extend(["--colour-map", "grey"]);
         let out = ok(&args);
+        // (Energies below 0: the light is the value less the smallest, in eV.)
         assert!(
-            out.contains("the colour map over the projected c_pe"),
+            out.contains("the colour map over the projected (c_pe + 3.57615)"),
             "{out}"
         );
         std::fs::remove_file(&a).unwrap();
@@ -6258,7 +6259,7 @@ fn splats_colour_their_projection_through_a_map() {
     let (out, _) = render(&["--colour-map", "viridis", "--intensity", "attribute"]);
     assert!(
         out.contains("splat intensity: c_ke from")
-            && out.contains("the image's light (the projected attribute)"),
+            && out.contains("the image's light (the projected c_ke) from 0.0000e0"),
         "{out}"
     );
     let d = dir.path().join("c.d");

@@ -604,6 +604,44 @@ impl AttributeScale {
         self.constant
     }
 
+    /// The light of a splat lit by this attribute is the value it maps to ([0, 1]) times
+    /// this factor: on a linear scale the range's width, so that the light is `v − lo`
+    /// (clamped to the range) in the attribute's own units and an image's light is the
+    /// projection of `v − lo` (with the range from 0, of `v` itself); a constant
+    /// attribute's positive value (its points' light is that value); 1 otherwise (a log
+    /// scale's position, a constant at or below 0: the light is then the flux).
+    pub fn light_unit(&self) -> f32 {
+        if self.log_range().is_some() {
+            return 1.0;
+        }
+        let (lo, hi) = match self.shown {
+            Some([lo, hi]) => (lo, hi),
+            None if self.constant => return if self.min > 0.0 { self.min } else { 1.0 },
+            None => (self.min, self.max),
+        };
+        let span = hi - lo;
+        if span > 0.0 && span.is_finite() {
+            span
+        } else {
+            1.0
+        }
+    }
+
+    /// What the light of splats lit by this attribute projects ([`Self::light_unit`]):
+    /// `Some(lo)` where it is `v − lo` in the attribute's units (`lo` 0 for `v` itself),
+    /// `None` where it is no quantity in those units (a log scale, a constant attribute
+    /// at or below 0, a range of no width).
+    pub fn light_zero(&self) -> Option<f32> {
+        if self.log_range().is_some() {
+            return None;
+        }
+        match self.shown {
+            Some([lo, hi]) => (hi - lo > 0.0 && (hi - lo).is_finite()).then_some(lo),
+            None if self.constant => (self.min > 0.0).then_some(0.0),
+            None => Some(self.min),
+        }
+    }
+
     /// A value (a cluster's mean) in [0, 1].
     pub fn of_value(&self, v: f32) -> f32 {
         if let Some([lo, hi]) = self.log_range() {

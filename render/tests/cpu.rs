@@ -1189,8 +1189,8 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
 }
 
 /// A constant attribute (equal-mass SPH particles) maps to one value: every point of a
-/// fine and of a coarse cut packs intensity 1 for attribute-lit splats, and the colour
-/// map's last colour for spheres. The file quantizes its particles to 0 and keeps the
+/// fine and of a coarse cut packs the value as its light for attribute-lit splats (the
+/// image is the projected mass), and the colour map's last colour for spheres. The file quantizes its particles to 0 and keeps the
 /// clusters' means; a zero range made those 0 (black at full resolution) and 1 (lit
 /// clusters), so the cuts disagreed. A range no wider than rounding counts as constant
 /// too; a true range still maps linearly.
@@ -1241,14 +1241,15 @@ fn a_constant_attribute_packs_one_intensity_and_one_colour_at_every_level() {
             for i in 0..d.points as u32 {
                 assert_eq!(
                     splats.decode_point(i).2,
-                    [1.0; 3],
+                    [mass; 3],
                     "{what}, {error_px} px: {i}"
                 );
                 assert_eq!(spheres.decode_point(i).2, one, "{what}, {error_px} px: {i}");
             }
         }
     }
-    // A range wider than rounding maps linearly, particles by their quantized values.
+    // A range wider than rounding maps linearly, particles by their quantized values:
+    // the light is the value less the range's low end, in the attribute's units.
     let mut frame = cloud_frame(600, 5);
     frame.attribute = Some(mdlod_preprocess::Attribute {
         name: "m".into(),
@@ -1259,12 +1260,14 @@ fn a_constant_attribute_packs_one_intensity_and_one_colour_at_every_level() {
     let (_d, _p, f) = make_file(&frame, small_build(), &[]);
     let d = cut(&f, &fitted_camera(&f), 0.0, u64::MAX);
     let splats = pack_styled(&f, &d, PackStyle::FluxAttribute, &Default::default()).unwrap();
+    let info = f.metadata().attribute.clone().unwrap();
     let mut i = 0u32;
     for r in &d.ranges {
         assert_eq!(r.level as usize, f.level_count() - 1);
         for k in r.first..r.first + r.count {
             let q = f.attribute().unwrap()[k as usize];
-            assert_eq!(splats.decode_point(i).2, [f32::from(q) / 65535.0; 3]);
+            let light = f32::from(q) / 65535.0 * (info.max - info.min);
+            assert_eq!(splats.decode_point(i).2, [light; 3]);
             i += 1;
         }
     }

@@ -2915,18 +2915,40 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
         assert_eq!(report.budget, u64::MAX);
     }
 }
-/// A constant attribute (equal-mass SPH particles) lights every splat alike: intensity
-/// 1, so a fine and a coarse cut both carry the disks' whole flux as light (the
-/// particles were quantized to 0, black at full resolution, while the clusters' means
-/// lit up).
+/// A constant attribute (equal-mass SPH particles) lights every splat alike: its value,
+/// so a fine and a coarse cut both carry the disks' whole flux times the mass as light,
+/// the projected mass (the particles were quantized to 0, black at full resolution,
+/// while the clusters' means lit up). Two values, 1 and 4, light the splats by the
+/// value less the range's low end in the attribute's units: 0 and 3, so the light is
+/// the disks' area-weighted mean of 0 and 3 times the flux at every level (it was the
+/// value mapped to [0, 1]: a third of that).
 #[test]
 fn a_constant_attribute_lights_every_splat_alike_at_every_level() {
+    projected_light_is_the_value_times_the_flux(vec![2.5e-6f32; 2000]);
+    projected_light_is_the_value_times_the_flux(
+        (0..2000).map(|i| if i % 2 == 0 { 1.0 } else { 4.0 }).collect(),
+    );
+}
+
+fn projected_light_is_the_value_times_the_flux(values: Vec<f32>) {
     let mut frame = cloud_frame(2000, 3);
     frame.attribute = Some(mdlod_preprocess::Attribute {
         name: "mass".into(),
-        values: vec![2.5e-6; 2000],
+        values: values.clone(),
     });
     let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    // The light per unit of flux: a constant's value, else the area-weighted mean of the
+    // values less the smallest (the disks' flux is their area).
+    let species = &f.metadata().species;
+    let lo = values.iter().copied().fold(f32::INFINITY, f32::min);
+    let constant = values.iter().all(|&v| v == lo);
+    let (mut light, mut flux) = (0f64, 0f64);
+    for (v, &s) in values.iter().zip(&frame.species_index) {
+        let area = f64::from(species[usize::from(s)].radius).powi(2);
+        light += area * f64::from(if constant { *v } else { v - lo });
+        flux += area;
+    }
+    let per_flux = light / flux;
     let (w, h) = (64u32, 48u32);
     // Zoomed out a little: every splat of every level inside the image, whose flux would
     // otherwise fall past its edge.
@@ -2934,7 +2956,8 @@ fn a_constant_attribute_lights_every_splat_alike_at_every_level() {
         azimuth_deg: 30.0,
         elevation_deg: 20.0,
         zoom: 0.7,
-        projection: Projection::Perspective,
+        // Orthographic: every disk its area on screen, whatever its distance.
+        projection: Projection::Orthographic,
     };
     let camera = camera_for(&f, &view, w, h).unwrap();
     let blend = mdlod_render::SplatBlend::Additive {
@@ -2949,8 +2972,8 @@ fn a_constant_attribute_lights_every_splat_alike_at_every_level() {
             .unwrap();
         let t = s.total_flux();
         assert!(
-            t[3] > 0.0 && (t[0] - t[3]).abs() <= 1e-4 * t[3],
-            "{error_px} px ({} points): light {} of flux {}",
+            t[3] > 0.0 && (t[0] - per_flux * t[3]).abs() <= 1e-4 * per_flux * t[3],
+            "{error_px} px ({} points): light {} of flux {}, not {per_flux} times",
             draw.points,
             t[0],
             t[3]

@@ -1709,10 +1709,7 @@ pub fn run(args: Args) -> Result<()> {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)
     });
     if let (Some([lo, hi]), Some(m)) = (r.light_range, opts.style.colour_map) {
-        let light = match args.intensity {
-            Intensity::Attribute => "the projected attribute",
-            Intensity::Species => "the projected flux",
-        };
+        let light = format!("the {}", projected_light(&args, &opts, file.metadata().attribute.as_ref()));
         let (scale, from) = match (opts.style.log_scale, args.light_range.is_some()) {
             (true, false) => (
                 " on a log scale",
@@ -2006,6 +2003,29 @@ fn legend_windows(
     vec![below_or_above, beside]
 }
 
+/// What the light of splats is, in the units the legend and summary give it: the
+/// projected attribute (`projected rho`; `projected (vz + 3.5)` where its range starts
+/// elsewhere than 0: the light is the value less the range's low end), or the projected
+/// flux (species light, or an attribute whose light is no quantity in its units).
+fn projected_light(
+    args: &Args,
+    opts: &RenderOptions,
+    attribute: Option<&mdlod_format::meta::AttributeInfo>,
+) -> String {
+    let Some(a) = attribute.filter(|_| matches!(args.intensity, Intensity::Attribute)) else {
+        return "projected flux".to_string();
+    };
+    let (_, style) = mdlod_render::page_style(opts);
+    let scale = mdlod_render::style::AttributeScale::with_range(a, style.attribute_range)
+        .with_log(style.log_scale);
+    match scale.light_zero() {
+        Some(lo) if lo == 0.0 => format!("projected {}", a.name),
+        Some(lo) if lo < 0.0 => format!("projected ({} + {})", a.name, Num(-lo)),
+        Some(lo) => format!("projected ({} − {})", a.name, Num(lo)),
+        None => format!("projected flux ({} constant)", a.name),
+    }
+}
+
 /// The legend `--legend` and `--legend-in-image` show, and what it is (for the summary).
 fn build_legend(
     args: &Args,
@@ -2032,10 +2052,9 @@ fn build_legend(
             "the volume fraction's colours".to_string(),
         ),
         (Mode::Splat, Some(map), _) => {
-            let title = match (args.intensity, attribute, &args.legend_title) {
-                (_, _, Some(t)) => t.clone(),
-                (Intensity::Attribute, Some(a), None) => format!("projected {}", a.name),
-                _ => "projected flux".to_string(),
+            let title = match &args.legend_title {
+                Some(t) => t.clone(),
+                None => projected_light(args, opts, attribute),
             };
             let Some(range) = light_range else {
                 anyhow::bail!("{name}: the image has no light to map (nothing drawn)");

@@ -330,10 +330,10 @@ pub enum PackStyle {
     Spheres,
     /// Flux-preserving splats coloured by species: representatives at `sqrt(area_sum)`.
     FluxColour,
-    /// Flux-preserving splats whose intensity is the scalar attribute, mapped linearly
-    /// from its range to [0, 1] (an affine map keeps the area-weighted means of the
-    /// representatives exact; a constant attribute maps to 1, see
-    /// [`AttributeScale`]): every point is a [`KIND_INTENSITY`] record.
+    /// Flux-preserving splats whose intensity is the scalar attribute less its range's
+    /// low end, in the attribute's units (an affine map keeps the area-weighted means of
+    /// the representatives exact; see [`AttributeScale::light_unit`]): every point is a
+    /// [`KIND_INTENSITY`] record.
     FluxAttribute,
 }
 
@@ -557,7 +557,7 @@ impl AttrPacker {
                     let q = values.get(first + k).copied().unwrap_or(0);
                     let r = own_radius(k).unwrap_or(meta.species[usize::from(s)].radius);
                     attrs.push(r.to_bits());
-                    attrs.push(scale.of_quantized(q).to_bits());
+                    attrs.push((scale.of_quantized(q) * scale.light_unit()).to_bits());
                 }
             } else if let Some((map, scale)) = &self.mapped {
                 // Radius and mapped colour per point, as cluster records are.
@@ -587,7 +587,7 @@ impl AttrPacker {
             for n in &file.nodes()[nf..nf + count] {
                 attrs.push(self.radius(n).to_bits());
                 attrs.push(if let Some(scale) = &self.intensity {
-                    scale.of_value(n.attribute).to_bits()
+                    (scale.of_value(n.attribute) * scale.light_unit()).to_bits()
                 } else if let Some((map, scale)) = &self.mapped {
                     pack_colour(map.colour(scale.of_value(n.attribute)))
                 } else if let Some(t) = &self.recolour {
