@@ -166,8 +166,8 @@ pub struct SourceInfo {
     /// them: a file rewritten within the same second is still told apart.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub modified_nanos: Option<u32>,
-    /// Index of the frame within the source (0-based).
-    #[serde(default)]
+    /// Index of the frame within the source (0-based; absent or `null` is 0).
+    #[serde(default, deserialize_with = "null_is_zero")]
     pub frame: u64,
     /// Where the frame's bytes lie in the source and their checksum: recorded by batch
     /// conversions of uncompressed dumps whose frames are contiguous byte ranges (and of
@@ -176,6 +176,24 @@ pub struct SourceInfo {
     /// frames whose bytes are unchanged instead of converting them again.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bytes: Option<FrameBytes>,
+}
+
+/// An optional integer whose absence means 0: `null` is its absence too (section 7: an
+/// optional field may be absent or `null`).
+fn null_is_zero<'de, D: serde::Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+    Ok(Option::<u64>::deserialize(d)?.unwrap_or(0))
+}
+
+impl FrameBytes {
+    /// Whether the checksum is written as the format says: 16 lowercase hexadecimal
+    /// digits.
+    pub fn checksum_well_formed(&self) -> bool {
+        self.xxh3.len() == 16
+            && self
+                .xxh3
+                .bytes()
+                .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+    }
 }
 
 /// A frame's byte range in its source, `[start, end)`, and the XXH3-64 of those bytes.

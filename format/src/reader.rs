@@ -453,6 +453,17 @@ impl MdlodFile {
         if let Some(problem) = Self::not_an_object(&map[range(mi)]) {
             return Err(corrupt("METADATA", problem));
         }
+        if let Some(bytes) = metadata.source.as_ref().and_then(|s| s.bytes.as_ref()) {
+            if !bytes.checksum_well_formed() {
+                return Err(corrupt(
+                    "METADATA",
+                    format!(
+                        "source.bytes.xxh3 {:?} is not 16 lowercase hexadecimal digits",
+                        bytes.xxh3.chars().take(40).collect::<String>()
+                    ),
+                ));
+            }
+        }
 
         // Levels.
         let li = require(SectionKind::Levels, None)?;

@@ -1493,6 +1493,23 @@ fn hostile_metadata() {
         m["particles"] = (-1).into()
     });
     expect_refused(&p, &["METADATA section: invalid JSON"]);
+    // An optional field may be null: `source.frame` null is frame 0, as absent is.
+    let source = serde_json::json!({"path": "d.lammpstrj", "size": 10, "frame": null});
+    let p = with("frame-null.mdlod", &|m| m["source"] = source.clone());
+    assert_eq!(MdlodFile::open(&p).unwrap().metadata().source.as_ref().unwrap().frame, 0);
+    // A frame's checksum is 16 lowercase hexadecimal digits.
+    for (name, xxh3) in [
+        ("xxh3-upper.mdlod", "ABCDEF0123456789"),
+        ("xxh3-short.mdlod", "abc"),
+    ] {
+        let source = serde_json::json!({"path": "d.lammpstrj", "size": 10,
+            "bytes": {"start": 0, "end": 10, "xxh3": xxh3}});
+        let p = with(name, &|m| m["source"] = source.clone());
+        expect_refused(&p, &["METADATA", "not 16 lowercase hexadecimal digits", xxh3]);
+    }
+    let source = serde_json::json!({"path": "d.lammpstrj", "size": 10,
+        "bytes": {"start": 0, "end": 10, "xxh3": "0123456789abcdef"}});
+    expect_accepted(&with("xxh3-ok.mdlod", &|m| m["source"] = source.clone()));
 
     let raw = |name: &str, bytes: &[u8]| {
         let mut d = Doc::parse(&b);

@@ -25,16 +25,27 @@ pub struct Args {
 /// Files of at most this many particles have their species counted by default.
 const COUNT_UP_TO: u64 = 20_000_000;
 
-/// The particles of each species (indices past the table, which `verify` reports, are
-/// not counted).
-fn species_counts(f: &MdlodFile) -> Vec<u64> {
+/// The particles of each species; an index past the table is corruption, named (the
+/// counts would not add up to the particles).
+fn species_counts(f: &MdlodFile) -> Result<Vec<u64>, mdlod_format::FormatError> {
     let mut counts = vec![0u64; f.metadata().species.len()];
-    for &s in f.species() {
-        if let Some(c) = counts.get_mut(usize::from(s)) {
-            *c += 1;
+    for (k, &s) in f.species().iter().enumerate() {
+        match counts.get_mut(usize::from(s)) {
+            Some(c) => *c += 1,
+            None => {
+                return Err(mdlod_format::FormatError::Corrupt {
+                    path: f.path().to_path_buf(),
+                    place: format!("SPECIES, particle {k}"),
+                    problem: format!(
+                        "species index {s} but only {} species (`mdlod verify` checks the \
+                         whole file)",
+                        counts.len()
+                    ),
+                })
+            }
         }
     }
-    counts
+    Ok(counts)
 }
 
 /// A `.sndf` file's header.
@@ -117,7 +128,9 @@ pub fn run(args: Args) -> Result<()> {
     let m = f.metadata();
     let levels: Vec<u64> = f.levels().iter().map(|l| l.point_count).collect();
     let file_size = std::fs::metadata(&args.file).map(|m| m.len()).unwrap_or(0);
-    let counts = (args.counts || m.particles <= COUNT_UP_TO).then(|| species_counts(&f));
+    let counts = (args.counts || m.particles <= COUNT_UP_TO)
+        .then(|| species_counts(&f))
+        .transpose()?;
     // What the particles' spheres span: the top node's box.
     let extent = f.nodes().first().map(|n| (n.bounds_min, n.bounds_max));
     // Two-dimensional data (every centre in one plane), which views face square on.
