@@ -1998,7 +1998,10 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
     );
     let plain = dir.path().join("plain.mdlod");
     ok(&["convert", s(&input), "-o", s(&plain)]);
-    assert_eq!(MdlodFile::open(&plain).unwrap().metadata().species_column, None);
+    assert_eq!(
+        MdlodFile::open(&plain).unwrap().metadata().species_column,
+        None
+    );
     assert!(!ok(&["info", s(&plain)]).contains("column"));
     let png = dir.path().join("gb.png");
     for file in [&whole, &chunked] {
@@ -4952,6 +4955,22 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
     let fine = ok(&["convert", s(&offset), "-o", s(&out), "--radius", "A=1"]);
     assert!(!fine.contains("coordinates reach"), "{fine}");
     assert!(fine.contains("times the particles' mean spacing"), "{fine}");
+    // Particles of their own sizes (smoothing lengths): the smallest particle's radius
+    // counts, not the species' mean (one particle of 0.002 among 299 of 1).
+    let sized = dir.path().join("sized.xyz");
+    let mut text = String::from("300\nProperties=species:S:1:pos:R:3:radius:R:1\n");
+    for i in 0..300 {
+        let d = f64::from(i) * 1.7e-4;
+        let r = if i == 7 { 0.002 } else { 1.0 };
+        text += &format!("A {:.9} {:.9} {:.9} {r}\n", 1e5 + d, 1e5 - d, 1e5 + d / 2.0);
+    }
+    std::fs::write(&sized, text).unwrap();
+    let noted = ok(&["convert", s(&sized), "-o", s(&out)]);
+    assert!(
+        noted.contains("coordinates reach 1.000e5")
+            && noted.contains("the smallest radius (0.002)"),
+        "{noted}"
+    );
     // Data in centimetres around the origin with the default radius: no shift helps, the
     // radius is what is out of scale.
     let cgs = dir.path().join("cgs.xyz");

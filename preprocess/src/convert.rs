@@ -504,9 +504,10 @@ pub(crate) fn position_notes(
     let mut notes = Vec::new();
     notes.extend(oversized_note(lo, hi, count, species));
     let largest = lo.iter().chain(&hi).map(|v| v.abs()).fold(0.0f32, f32::max);
+    // (A species of particles of their own sizes: its smallest particle's, not its mean.)
     let smallest_radius = species
         .iter()
-        .map(|s| s.radius)
+        .map(|s| s.radius_range.map_or(s.radius, |[lo, _]| lo.min(s.radius)))
         .fold(f32::INFINITY, f32::min);
     // The spacing of single-precision numbers near the largest coordinate.
     // (The power of two at or below it, times the machine epsilon.)

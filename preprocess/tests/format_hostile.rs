@@ -1496,7 +1496,16 @@ fn hostile_metadata() {
     // An optional field may be null: `source.frame` null is frame 0, as absent is.
     let source = serde_json::json!({"path": "d.lammpstrj", "size": 10, "frame": null});
     let p = with("frame-null.mdlod", &|m| m["source"] = source.clone());
-    assert_eq!(MdlodFile::open(&p).unwrap().metadata().source.as_ref().unwrap().frame, 0);
+    assert_eq!(
+        MdlodFile::open(&p)
+            .unwrap()
+            .metadata()
+            .source
+            .as_ref()
+            .unwrap()
+            .frame,
+        0
+    );
     // A frame's checksum is 16 lowercase hexadecimal digits.
     for (name, xxh3) in [
         ("xxh3-upper.mdlod", "ABCDEF0123456789"),
@@ -1505,7 +1514,10 @@ fn hostile_metadata() {
         let source = serde_json::json!({"path": "d.lammpstrj", "size": 10,
             "bytes": {"start": 0, "end": 10, "xxh3": xxh3}});
         let p = with(name, &|m| m["source"] = source.clone());
-        expect_refused(&p, &["METADATA", "not 16 lowercase hexadecimal digits", xxh3]);
+        expect_refused(
+            &p,
+            &["METADATA", "not 16 lowercase hexadecimal digits", xxh3],
+        );
     }
     let source = serde_json::json!({"path": "d.lammpstrj", "size": 10,
         "bytes": {"start": 0, "end": 10, "xxh3": "0123456789abcdef"}});

@@ -2926,7 +2926,9 @@ fn a_cut_drawn_in_batches_draws_what_one_batch_draws() {
 fn a_constant_attribute_lights_every_splat_alike_at_every_level() {
     projected_light_is_the_value_times_the_flux(vec![2.5e-6f32; 2000]);
     projected_light_is_the_value_times_the_flux(
-        (0..2000).map(|i| if i % 2 == 0 { 1.0 } else { 4.0 }).collect(),
+        (0..2000)
+            .map(|i| if i % 2 == 0 { 1.0 } else { 4.0 })
+            .collect(),
     );
 }
 

@@ -1709,7 +1709,10 @@ pub fn run(args: Args) -> Result<()> {
         format!(", GPU {:.1} ms", t.as_secs_f64() * 1e3)
     });
     if let (Some([lo, hi]), Some(m)) = (r.light_range, opts.style.colour_map) {
-        let light = format!("the {}", projected_light(&args, &opts, file.metadata().attribute.as_ref()));
+        let light = format!(
+            "the {}",
+            projected_light(&args, &opts, file.metadata().attribute.as_ref())
+        );
         let (scale, from) = match (opts.style.log_scale, args.light_range.is_some()) {
             (true, false) => (
                 " on a log scale",

@@ -878,7 +878,9 @@ impl Index {
                     // that is now and then not finite: say so where the other order
                     // reads a plain number.
                     match p.ty.get(bytes, j, !p.big) {
-                        o if o.is_finite() && o.abs() < 1e12 => format!(
+                        // (A plain number: not a denormal, which is what a NaN's
+                        // bytes read the other way round make.)
+                        o if o == 0.0 || (1e-12..1e12).contains(&o.abs()) => format!(
                             "; read in the other byte order it is {o}: is `byte_order` {}?",
                             if p.big { "little" } else { "big" }
                         ),
