@@ -7812,4 +7812,28 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
         "{stderr}"
     );
     assert!(!stderr.contains("panicked"));
+    // A movie of the directory says which frame it lacks, as a jump in time would not.
+    let movie = dir.path().join("m-%d.png");
+    let mut args = vec!["render", s(&out), "-o", s(&movie)];
+    args.extend(["--width", "64", "--height", "48"]);
+    let rendered = ok(&args);
+    assert!(
+        rendered.contains(
+            "note: 1 frame the batch could not convert is missing from the images (timestep 400)"
+        ),
+        "{rendered}"
+    );
+    // So does one of a batch yet to finish (here: a manifest that expects one more).
+    let manifest = out.join("dataset.json");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    m.as_object_mut().unwrap().remove("failed");
+    m["expected_frames"] = 6.into();
+    std::fs::write(&manifest, m.to_string()).unwrap();
+    let rendered = ok(&args);
+    assert!(
+        rendered.contains("note: the batch lists 5 of the 6 frames its run is to convert")
+            && !rendered.contains("could not convert"),
+        "{rendered}"
+    );
 }

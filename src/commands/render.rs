@@ -2842,6 +2842,43 @@ fn render_turntable(
 /// the frames' boxes alone).
 const MOVIE_FRAMING_BOXES: usize = 1 << 18;
 
+/// Notes on the frames a movie of the batch directory `dir` lacks, which would jump in
+/// time without a sign: those the batch could not convert (`--keep-going`) and those an
+/// unfinished run has yet to write.
+fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<String> {
+    let mut notes = Vec::new();
+    if !manifest.failed.is_empty() {
+        let named: Vec<String> = manifest
+            .failed
+            .iter()
+            .take(6)
+            .map(|f| match f.timestep {
+                Some(t) => format!("timestep {t}"),
+                None => format!("frame {} of {}", f.frame, f.input),
+            })
+            .collect();
+        let more = match manifest.failed.len() {
+            k if k > 6 => format!(" and {} more", k - 6),
+            _ => String::new(),
+        };
+        notes.push(format!(
+            "  note: {} frame{} the batch could not convert {} missing from the images ({}{more}):              `mdlod verify {}` says why; a rerun of the batch converts them once their inputs              are mended",
+            manifest.failed.len(),
+            if manifest.failed.len() == 1 { "" } else { "s" },
+            if manifest.failed.len() == 1 { "is" } else { "are" },
+            named.join(", "),
+            dir.display()
+        ));
+    }
+    let listed = manifest.frames.len() as u64;
+    if let Some(expected) = manifest.expected_frames.filter(|&e| e > listed) {
+        notes.push(format!(
+            "  note: the batch lists {listed} of the {expected} frames its run is to convert              (still running, or stopped: rerun it to finish): the images have gaps in time"
+        ));
+    }
+    notes
+}
+
 /// Renders every frame of a batch directory (`args.file`) in its manifest's order, one
 /// image each, all with one camera (fitted to every frame's clusters, within the union of
 /// their bounds, so that nothing leaves the picture) and, for splats, the first frame's
@@ -3195,6 +3232,9 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         );
     }
     if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
+        println!("{note}");
+    }
+    for note in gaps_notes(&manifest, dir) {
         println!("{note}");
     }
     if let Some(note) = far_note(far.0, Some(far.1)).filter(|_| fitted) {
