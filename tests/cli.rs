@@ -3031,8 +3031,9 @@ fn edit_atoms(path: &Path, mut edit: impl FnMut(usize, &mut Vec<String>)) -> Str
 
 /// A movie colours every frame over one attribute range: two frames whose values differ
 /// tenfold render alike with each file's own range, and differently over `--attribute-range`
-/// (as colours and as splat intensities). The option needs something that reads the
-/// attribute.
+/// (as colours and as splat intensities). Splats lit by the attribute carry it in its own
+/// units: with each file's range (from its smallest value) the tenfold frame has ten
+/// times the light. The option needs something that reads the attribute.
 #[test]
 fn an_attribute_range_colours_every_frame_alike() {
     let dir = tempfile::tempdir().unwrap();
@@ -3084,9 +3085,31 @@ fn an_attribute_range_colours_every_frame_alike() {
             "0.5",
         ][..],
     ] {
-        // Alike to the rounding of the last bit (each file quantizes its own range).
-        let (a, b) = (render(&cold, mode), render(&hot_path, mode));
-        assert!(largest(&a, &b) <= 1, "{mode:?}: {}", largest(&a, &b));
+        if mode[0] == "--mode" {
+            let flux = |input: &Path| -> f64 {
+                let file = input.with_extension("mdlod");
+                let png = dir.path().join("out.png");
+                let mut args = vec!["render", s(&file), "-o", s(&png)];
+                args.extend(["--width", "64", "--height", "48"]);
+                args.extend(mode);
+                let out = ok(&args);
+                let at = out.find("total flux ").expect("a total flux") + "total flux ".len();
+                out[at..]
+                    .split_whitespace()
+                    .next()
+                    .unwrap()
+                    .parse()
+                    .unwrap()
+            };
+            render(&cold, mode);
+            render(&hot_path, mode);
+            let ratio = flux(&hot_path) / flux(&cold);
+            assert!((ratio - 10.0).abs() < 1e-3, "{ratio}");
+        } else {
+            // Alike to the rounding of the last bit (each file quantizes its own range).
+            let (a, b) = (render(&cold, mode), render(&hot_path, mode));
+            assert!(largest(&a, &b) <= 1, "{mode:?}: {}", largest(&a, &b));
+        }
         let ranged: Vec<&str> = mode
             .iter()
             .copied()
@@ -4968,7 +4991,8 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
     let noted = ok(&["convert", s(&sized), "-o", s(&out)]);
     assert!(
         noted.contains("coordinates reach 1.000e5")
-            && noted.contains("the smallest radius (0.002)"),
+            && noted.contains("the smallest radius (0.002)")
+            && noted.contains("the smallest particles are finer than single precision resolves"),
         "{noted}"
     );
     // Data in centimetres around the origin with the default radius: no shift helps, the
@@ -6708,11 +6732,17 @@ fn particle_sizes_edge_cases_are_refused_or_noted() {
     )
     .unwrap();
     let out = ok(&["convert", s(&d("dec.dump")), "-o", s(&d("dec.mdlod"))]);
+    // Kept on a log scale (format 1.2), each within 1.1e-4 of its size: no note.
+    let f = MdlodFile::open(d("dec.mdlod")).unwrap();
+    let info = f.metadata().radius.unwrap();
+    assert!(info.log && f.header().version_minor == 2, "{info:?}");
+    let mut sizes: Vec<f32> = (0..2).map(|i| f.particle_radius(i)).collect();
+    sizes.sort_by(f32::total_cmp);
     assert!(
-        out.contains("particle radii from 1e-3 to 1e2 are kept in 16-bit steps")
-            && out.contains("% off their size"),
-        "{out}"
+        (sizes[0] / 0.001 - 1.0).abs() < 1.1e-4 && (sizes[1] / 100.0 - 1.0).abs() < 1.1e-4,
+        "{sizes:?}"
     );
+    assert!(!out.contains("note:"), "{out}");
     // Both columns: `radius` read, `diameter` noted.
     std::fs::write(
         d("both.dump"),

@@ -282,7 +282,21 @@ fn python_reader_decodes_exactly_what_the_rust_reader_decodes() {
         s(&sized),
     ]);
     assert!(MdlodFile::open(&sized).unwrap().radii().is_some());
-    for file in [&sample, &u8_file, &u16_file, &sized] {
+    // Sizes spanning four decades (smoothing lengths): version 1.2's RADIUS_LOG.
+    let xyz = d("sph.xyz");
+    let mut text = String::from("512\nProperties=species:S:1:pos:R:3:radius:R:1\n");
+    for i in 0..512 {
+        let h = 1e-3 * 10f64.powf(4.0 * f64::from((i * 37) % 512) / 511.0);
+        let (x, y, z) = (i % 8, i / 8 % 8, i / 64);
+        text += &format!("gas {x} {y} {z} {h:.6e}\n");
+    }
+    std::fs::write(&xyz, text).unwrap();
+    let logged = d("sph.mdlod");
+    mdlod(&["convert", s(&xyz), "-o", s(&logged)]);
+    let f = MdlodFile::open(&logged).unwrap();
+    assert!(f.metadata().radius.is_some_and(|r| r.log));
+    assert_eq!(f.header().version_minor, 2);
+    for file in [&sample, &u8_file, &u16_file, &sized, &logged] {
         assert_same_decoding(file);
     }
     let bits = |f: &Path| MdlodFile::open(f).unwrap().position_bits();

@@ -102,7 +102,7 @@ SECTION = struct.Struct("<IIQQQ")
 SECTION_FIELDS = ("kind", "level", "offset", "length", "checksum")
 assert SECTION.size == 32
 
-METADATA, LEVELS, NODES, POSITIONS, SPECIES, ATTRIBUTE, RADIUS = 1, 2, 3, 4, 5, 6, 7
+METADATA, LEVELS, NODES, POSITIONS, SPECIES, ATTRIBUTE, RADIUS, RADIUS_LOG = range(1, 9)
 KIND_NAMES = {
     METADATA: "METADATA",
     LEVELS: "LEVELS",
@@ -111,8 +111,9 @@ KIND_NAMES = {
     SPECIES: "SPECIES",
     ATTRIBUTE: "ATTRIBUTE",
     RADIUS: "RADIUS",
+    RADIUS_LOG: "RADIUS_LOG",
 }
-PER_LEVEL_KINDS = (POSITIONS, SPECIES, ATTRIBUTE, RADIUS)
+PER_LEVEL_KINDS = (POSITIONS, SPECIES, ATTRIBUTE, RADIUS, RADIUS_LOG)
 METADATA_MAX = 16 << 20
 MAX_SECTIONS = 1 << 16
 
@@ -167,6 +168,8 @@ METADATA_FIELDS = {
     ),
     # Version 1.1: the range of the RADIUS section's radii.
     "radius": ({"min": ("f32", REQUIRED), "max": ("f32", REQUIRED)}, OPTIONAL),
+    # Version 1.2: the range of the RADIUS_LOG section's radii (a log scale).
+    "radius_log": ({"min": ("f32", REQUIRED), "max": ("f32", REQUIRED)}, OPTIONAL),
     "source": (
         {
             "path": ("string", REQUIRED),
@@ -520,14 +523,23 @@ class MdlodFile:
         self.attribute = None
         if meta.get("attribute") is not None:
             self.attribute = (f32(meta["attribute"]["min"]), f32(meta["attribute"]["max"]))
+        # Per-particle radii: linear steps (`radius`, RADIUS) or a log scale
+        # (`radius_log`, RADIUS_LOG), not both.
         self.radius_range = None
-        if meta.get("radius") is not None:
-            lo, hi = f32(meta["radius"]["min"]), f32(meta["radius"]["max"])
-            if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
+        self.radius_log = meta.get("radius_log") is not None
+        if self.radius_log and meta.get("radius") is not None:
+            raise FormatError(
+                place, "gives both `radius` and `radius_log` (the radii are quantized one way)"
+            )
+        field = "radius_log" if self.radius_log else "radius"
+        if meta.get(field) is not None:
+            lo, hi = f32(meta[field]["min"]), f32(meta[field]["max"])
+            least_ok = lo > 0 if self.radius_log else lo >= 0
+            if not (math.isfinite(lo) and math.isfinite(hi) and least_ok and lo <= hi):
                 raise FormatError(
                     place,
-                    f"radius range {lo} to {hi} (must be two finite numbers from 0 up, the "
-                    "smaller first)",
+                    f"{field} range {lo} to {hi} (must be two finite numbers "
+                    f"{'above 0' if self.radius_log else 'from 0 up'}, the smaller first)",
                 )
             self.radius_range = (lo, hi)
         build = meta["build"]
@@ -616,14 +628,23 @@ class MdlodFile:
             )
         if attribute is not None:
             expected.append((attribute, 2 * P))
-        radius = self.find(RADIUS, L - 1)
+        kind, other = (RADIUS_LOG, RADIUS) if self.radius_log else (RADIUS, RADIUS_LOG)
+        field = "radius_log" if self.radius_log else "radius"
+        radius = self.find(kind, L - 1)
         if (radius is None) != (self.radius_range is None):
             raise FormatError(
                 "section table",
-                "a RADIUS section is present but the metadata gives no radius range"
+                f"a {KIND_NAMES[kind]} section is present but the metadata gives no "
+                f"{field} range"
                 if radius is not None
-                else f"the metadata gives a radius range but there is no RADIUS section "
-                f"for level {L - 1}",
+                else f"the metadata gives a {field} range but there is no "
+                f"{KIND_NAMES[kind]} section for level {L - 1}",
+            )
+        if self.find(other, L - 1) is not None:
+            raise FormatError(
+                "METADATA",
+                f"a {KIND_NAMES[other]} section is present but the metadata gives no "
+                f"{'radius' if self.radius_log else 'radius_log'} range",
             )
         if radius is not None:
             expected.append((radius, 2 * P))
@@ -778,12 +799,13 @@ class MdlodFile:
             self.attribute_q = self.u16_array(self.used[(ATTRIBUTE, self.L - 1)])
         self.radius_q = None
         if self.radius_range is not None:
-            self.radius_q = self.u16_array(self.used[(RADIUS, self.L - 1)])
-            if self.header["version_minor"] < 1:
+            kind, since = (RADIUS_LOG, 2) if self.radius_log else (RADIUS, 1)
+            self.radius_q = self.u16_array(self.used[(kind, self.L - 1)])
+            if self.header["version_minor"] < since:
                 raise FormatError(
                     "header",
                     f"version {self.header['version_major']}.{self.header['version_minor']} "
-                    "holds a RADIUS section, which version 1.1 added",
+                    f"holds a {KIND_NAMES[kind]} section, which version 1.{since} added",
                 )
         # Every node's drawn range is exactly its descendants on point_level.
         for l in range(self.L - 1):
@@ -868,7 +890,11 @@ class MdlodFile:
                     if sp.get("radius_range") is not None
                     else (self.radii[self.species[i]],) * 2
                 )
-                step = (self.radius_range[1] - self.radius_range[0]) / 65535
+                lo_r, hi_r = self.radius_range
+                if self.radius_log:
+                    step = s_hi * ((hi_r / lo_r) ** (1 / 65535) - 1)
+                else:
+                    step = (hi_r - lo_r) / 65535
                 slack = step + 8 * 2.0**-23 * s_hi
                 if r < s_lo - slack or r > s_hi + slack:
                     raise FormatError(
@@ -905,8 +931,11 @@ class MdlodFile:
                 )
 
     def radius_values(self):
-        """Section 7: r = min + (max - min) * (q / 65535), in f32."""
+        """Section 7: r = min + (max - min) * (q / 65535), in f32; on a log scale
+        (RADIUS_LOG) r = min * (max / min) ** (q / 65535), in f64 rounded to f32."""
         lo, hi = self.radius_range
+        if self.radius_log:
+            return [f32(lo * (hi / lo) ** (q / 65535)) for q in self.radius_q]
         span = f32(hi - lo)
         return [f32(lo + f32(span * f32(q / 65535))) for q in self.radius_q]
 

@@ -15,6 +15,10 @@ pub const FORMAT_VERSION: (u16, u16) = (1, 0);
 /// version 1.0 open as well, drawing each particle at its species' radius.
 pub const FORMAT_VERSION_RADII: (u16, u16) = (1, 1);
 
+/// The version of files whose per-particle radii are quantized on a log scale (the
+/// RADIUS_LOG section).
+pub const FORMAT_VERSION_LOG_RADII: (u16, u16) = (1, 2);
+
 /// The major versions this crate reads: files whose major version lies in this range
 /// are accepted whatever their minor version (minor versions only add sections or JSON
 /// fields, which readers skip).
@@ -87,6 +91,9 @@ pub enum SectionKind {
     Attribute = 6,
     /// u16 quantized radius per particle of the finest level (version 1.1).
     Radius = 7,
+    /// u16 radius per particle of the finest level quantized on a log scale (version 1.2):
+    /// for radii spanning decades (smoothing lengths), which linear steps cannot keep.
+    RadiusLog = 8,
 }
 
 impl SectionKind {
@@ -99,6 +106,7 @@ impl SectionKind {
             5 => Self::Species,
             6 => Self::Attribute,
             7 => Self::Radius,
+            8 => Self::RadiusLog,
             _ => return None,
         })
     }
@@ -112,6 +120,7 @@ impl SectionKind {
             Self::Species => "SPECIES",
             Self::Attribute => "ATTRIBUTE",
             Self::Radius => "RADIUS",
+            Self::RadiusLog => "RADIUS_LOG",
         }
     }
 }

@@ -29,7 +29,8 @@ pub mod writer;
 
 pub use error::FormatError;
 pub use layout::{
-    LevelRecord, NodeRecord, SectionKind, FORMAT_VERSION, FORMAT_VERSION_RADII, MAGIC,
+    LevelRecord, NodeRecord, SectionKind, FORMAT_VERSION, FORMAT_VERSION_LOG_RADII,
+    FORMAT_VERSION_RADII, MAGIC,
 };
 pub use meta::Metadata;
 pub use progress::{NoProgress, Progress};

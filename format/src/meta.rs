@@ -74,31 +74,96 @@ pub struct Species {
     pub radius_range: Option<[f32; 2]>,
 }
 
-/// The range over which the per-particle radii are quantized.
+/// The range over which the per-particle radii are quantized, and how.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RadiusInfo {
     /// Radius of quantized 0.
     pub min: f32,
     /// Radius of quantized 65535.
     pub max: f32,
+    /// Quantized on a log scale (the RADIUS_LOG section, the metadata's `radius_log`)
+    /// rather than linearly (RADIUS, `radius`). Not a JSON field: the field's name says it.
+    #[serde(skip)]
+    pub log: bool,
 }
 
 impl RadiusInfo {
-    /// Decodes a quantized radius: `min + (max − min) · (q / 65535)` in `f32`.
+    /// Radii spanning more than this factor are quantized on a log scale: linear steps
+    /// over the range would be more than 0.1 % of the smallest radius (`(max − min) /
+    /// 131070`, half a step), while a log scale keeps every radius within
+    /// `(max/min)^(1/131070) − 1` of its own size (1.1·10⁻⁴ for radii spanning 10⁶).
+    pub const LOG_ABOVE: f32 = 132.0;
+
+    /// The range `min..=max`, on a log scale where it spans more than [`Self::LOG_ABOVE`].
+    pub fn for_range(min: f32, max: f32) -> RadiusInfo {
+        RadiusInfo {
+            min,
+            max,
+            log: min > 0.0 && max > Self::LOG_ABOVE * min,
+        }
+    }
+
+    /// Decodes a quantized radius: linearly `min + (max − min) · (q / 65535)` in `f32`; on
+    /// a log scale `min · (max / min)^(q / 65535)` in `f64`, rounded to `f32`.
     #[inline]
     pub fn decode(&self, q: u16) -> f32 {
-        self.min + (self.max - self.min) * (f32::from(q) / 65535.0)
+        if self.log {
+            let (lo, hi) = (f64::from(self.min), f64::from(self.max));
+            (lo * (hi / lo).powf(f64::from(q) / 65535.0)) as f32
+        } else {
+            self.min + (self.max - self.min) * (f32::from(q) / 65535.0)
+        }
     }
 
-    /// The nearest quantized value of `radius` (clamped to the range).
+    /// The nearest quantized value of `radius` (clamped to the range; on a log scale,
+    /// nearest in the logarithm).
     #[inline]
     pub fn encode(&self, radius: f32) -> u16 {
-        encode16(radius, self.min, self.max)
+        if self.log {
+            let (lo, hi) = (f64::from(self.min), f64::from(self.max));
+            let t = (f64::from(radius) / lo).ln() / (hi / lo).ln();
+            if t.is_nan() {
+                return 0;
+            }
+            (t * 65535.0).round().clamp(0.0, 65535.0) as u16
+        } else {
+            encode16(radius, self.min, self.max)
+        }
     }
 
-    /// Whether the range is one a reader accepts: finite, `0 ≤ min ≤ max`.
+    /// Whether the range is one a reader accepts: finite, `0 ≤ min ≤ max`, and on a log
+    /// scale `0 < min`.
     pub fn is_valid(&self) -> bool {
-        self.min.is_finite() && self.max.is_finite() && 0.0 <= self.min && self.min <= self.max
+        self.min.is_finite()
+            && self.max.is_finite()
+            && 0.0 <= self.min
+            && self.min <= self.max
+            && (!self.log || self.min > 0.0)
+    }
+
+    /// The width of a quantization step at radius `r`: the range over 65535 linearly, `r`
+    /// times the step's factor less 1 on a log scale.
+    pub fn step_at(&self, r: f64) -> f64 {
+        let (lo, hi) = (f64::from(self.min), f64::from(self.max));
+        if self.log {
+            r * ((hi / lo).powf(1.0 / 65535.0) - 1.0)
+        } else {
+            (hi - lo) / 65535.0
+        }
+    }
+
+    /// The largest difference between a radius in the range and its decoded value, over
+    /// that radius: half a step over the smallest radius linearly, half a step's factor
+    /// less 1 on a log scale (rounding aside).
+    pub fn worst_relative_error(&self) -> f64 {
+        let (lo, hi) = (f64::from(self.min), f64::from(self.max));
+        if self.log {
+            (hi / lo).powf(1.0 / 131_070.0) - 1.0
+        } else if lo > 0.0 {
+            (hi - lo) / 131_070.0 / lo
+        } else {
+            f64::INFINITY
+        }
     }
 }
 
@@ -242,10 +307,16 @@ pub struct Metadata {
     pub species_column: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attribute: Option<AttributeInfo>,
-    /// The range of the per-particle radii (the RADIUS section), where the particles of
-    /// a species differ in size.
+    /// The range of the per-particle radii (the RADIUS or RADIUS_LOG section), where the
+    /// particles of a species differ in size. Its JSON field is `radius` for linear
+    /// steps, `radius_log` for a log scale (see [`Metadata::to_json`]; the reader moves
+    /// `radius_log` here).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radius: Option<RadiusInfo>,
+    /// The JSON field of radii on a log scale (version 1.2); `None` in a metadata read or
+    /// to be written, whose `radius` says the scale.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius_log: Option<RadiusInfo>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub source: Option<SourceInfo>,
     pub build: BuildInfo,
@@ -290,6 +361,15 @@ impl Metadata {
         }
         if let Some((what, v)) = numbers.iter().find(|(_, v)| !v.is_finite()) {
             return Err(format!("the metadata's {what} is {v}, not a finite number"));
+        }
+        // Radii on a log scale go under `radius_log`: a reader of version 1.1, which
+        // knows `radius` as linear steps, ignores the field and skips the RADIUS_LOG
+        // section, drawing each particle at its species' radius.
+        if let Some(r) = self.radius.filter(|r| r.log) {
+            let mut m = self.clone();
+            m.radius = None;
+            m.radius_log = Some(r);
+            return serde_json::to_vec_pretty(&m).map_err(|e| e.to_string());
         }
         serde_json::to_vec_pretty(self).map_err(|e| e.to_string())
     }
@@ -371,6 +451,7 @@ mod tests {
             species_column: None,
             attribute: None,
             radius: None,
+            radius_log: None,
             source: None,
             build: BuildInfo {
                 max_cluster_size: 8,

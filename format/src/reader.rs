@@ -26,7 +26,7 @@ use crate::layout::{
     align_up, Header, LevelRecord, NodeRecord, SectionEntry, SectionKind, HEADER_SIZE, MAGIC,
     READABLE_MAJOR, SECTION_ALIGN,
 };
-use crate::meta::Metadata;
+use crate::meta::{Metadata, RadiusInfo};
 use crate::quantize;
 
 /// Largest metadata section accepted (JSON of a few species needs a few KiB).
@@ -443,11 +443,21 @@ impl MdlodFile {
                 format!("not UTF-8 text (byte {} of the section)", e.valid_up_to()),
             ));
         }
-        let metadata: Metadata =
+        let mut metadata: Metadata =
             serde_json::from_slice(&map[range(mi)]).map_err(|source| FormatError::Metadata {
                 path: path.clone(),
                 source,
             })?;
+        // Radii on a log scale (`radius_log`) are the metadata's `radius`, marked so.
+        if let Some(r) = metadata.radius_log.take() {
+            if metadata.radius.is_some() {
+                return Err(corrupt(
+                    "METADATA",
+                    "gives both `radius` and `radius_log` (the radii are quantized one way)".into(),
+                ));
+            }
+            metadata.radius = Some(RadiusInfo { log: true, ..r });
+        }
         // The objects of section 7 are objects: serde would also take a list of their
         // values in order (`"radius": [0.3, 0.9]`), which the spec does not allow.
         if let Some(problem) = Self::not_an_object(&map[range(mi)]) {
@@ -596,11 +606,19 @@ impl MdlodFile {
         if let Some(r) = metadata.radius.as_ref().filter(|r| !r.is_valid()) {
             return Err(corrupt(
                 "METADATA",
-                format!(
-                    "radius range {} to {} (must be two finite numbers from 0 up, the \
-                     smaller first)",
-                    r.min, r.max
-                ),
+                if r.log {
+                    format!(
+                        "radius_log range {} to {} (must be two finite numbers above 0, the \
+                         smaller first)",
+                        r.min, r.max
+                    )
+                } else {
+                    format!(
+                        "radius range {} to {} (must be two finite numbers from 0 up, the \
+                         smaller first)",
+                        r.min, r.max
+                    )
+                },
             ));
         }
         if let Some(s) = metadata.species.iter().find(|s| {
@@ -751,10 +769,38 @@ impl MdlodFile {
             "attribute",
             "values",
         )?;
+        // Radii linear (RADIUS, `radius`) or on a log scale (RADIUS_LOG, `radius_log`):
+        // the section of the other scale is refused as the metadata not giving it.
+        let log = metadata.radius.is_some_and(|r| r.log);
+        let (given, other) = if log {
+            (SectionKind::RadiusLog, SectionKind::Radius)
+        } else {
+            (SectionKind::Radius, SectionKind::RadiusLog)
+        };
         let radius_range = optional(
-            SectionKind::Radius,
-            metadata.radius.map(|_| "a radius range".to_string()),
-            "radius range",
+            given,
+            metadata.radius.map(|_| {
+                if log {
+                    "a radius_log range".to_string()
+                } else {
+                    "a radius range".to_string()
+                }
+            }),
+            if log {
+                "radius_log range"
+            } else {
+                "radius range"
+            },
+            "radii",
+        )?;
+        optional(
+            other,
+            None,
+            if log {
+                "radius range"
+            } else {
+                "radius_log range"
+            },
             "radii",
         )?;
 
@@ -1317,14 +1363,20 @@ impl MdlodFile {
             }
             covered = covered.max(end);
         }
-        // A RADIUS section is version 1.1's: a file of an earlier minor version holding
-        // one was not written by a writer of that version.
-        if self.radii().is_some() && self.header.version_minor < 1 {
+        // A RADIUS section is version 1.1's, RADIUS_LOG 1.2's: a file of an earlier minor
+        // version holding one was not written by a writer of that version.
+        let log = self.metadata.radius.is_some_and(|r| r.log);
+        let (section, since) = if log {
+            ("RADIUS_LOG", 2)
+        } else {
+            ("RADIUS", 1)
+        };
+        if self.radii().is_some() && self.header.version_minor < since {
             return Err(FormatError::corrupt(
                 &self.path,
                 "header",
                 format!(
-                    "version {}.{} holds a RADIUS section, which version 1.1 added",
+                    "version {}.{} holds a {section} section, which version 1.{since} added",
                     self.header.version_major, self.header.version_minor
                 ),
             ));
@@ -1438,8 +1490,7 @@ impl MdlodFile {
                             let s = self.species().get(i).copied().unwrap_or(0);
                             let [lo, hi] = self.species_radius_span(usize::from(s));
                             let (lo, hi) = (f64::from(lo), f64::from(hi));
-                            let slack = (f64::from(info.max) - f64::from(info.min)) / 65535.0
-                                + 8.0 * f64::from(f32::EPSILON) * hi;
+                            let slack = info.step_at(hi) + 8.0 * f64::from(f32::EPSILON) * hi;
                             if r < lo - slack || r > hi + slack {
                                 return Err(FormatError::corrupt(
                                     &self.path,

@@ -15,8 +15,8 @@ use xxhash_rust::xxh3::{xxh3_64, Xxh3};
 
 use crate::error::FormatError;
 use crate::layout::{
-    align_up, Header, SectionEntry, SectionKind, FORMAT_VERSION, FORMAT_VERSION_RADII, HEADER_SIZE,
-    MAGIC,
+    align_up, Header, SectionEntry, SectionKind, FORMAT_VERSION, FORMAT_VERSION_LOG_RADII,
+    FORMAT_VERSION_RADII, HEADER_SIZE, MAGIC,
 };
 
 /// Where a [`Writer`]'s bytes go: appended in order from the start of the file.
@@ -171,12 +171,12 @@ impl Writer {
             .write_all(table)
             .map_err(|e| FormatError::io(&tmp_path, e))?;
         let file_size = table_offset + table.len() as u64;
-        // A file with per-particle radii is version 1.1; any other is 1.0.
-        let radii = self
-            .sections
-            .iter()
-            .any(|s| s.kind == SectionKind::Radius as u32);
-        let version = if radii {
+        // A file with per-particle radii is version 1.1, with radii on a log scale 1.2;
+        // any other is 1.0.
+        let has = |kind: SectionKind| self.sections.iter().any(|s| s.kind == kind as u32);
+        let version = if has(SectionKind::RadiusLog) {
+            FORMAT_VERSION_LOG_RADII
+        } else if has(SectionKind::Radius) {
             FORMAT_VERSION_RADII
         } else {
             FORMAT_VERSION

@@ -1632,9 +1632,7 @@ pub fn convert_chunked(
         write_time,
         file_size,
         notes: {
-            let mut notes: Vec<String> = crate::convert::radius_span_note(metadata.radius.as_ref())
-                .into_iter()
-                .collect();
+            let mut notes: Vec<String> = Vec::new();
             if let Some(a) = &metadata.attribute {
                 notes.extend(crate::convert::attribute_span_note(
                     &a.name, a.min, a.max, options,
@@ -2027,7 +2025,11 @@ fn assemble(
     }
     let radii: Vec<&Kept<u16>> = chunks.iter().filter_map(|c| c.radius.as_ref()).collect();
     if !radii.is_empty() {
-        copy(&mut w, SectionKind::Radius, radii)?;
+        let kind = match metadata.radius {
+            Some(r) if r.log => SectionKind::RadiusLog,
+            _ => SectionKind::Radius,
+        };
+        copy(&mut w, kind, radii)?;
     }
     w.finish()?;
     progress.finish_stage();

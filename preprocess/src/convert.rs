@@ -355,7 +355,6 @@ pub fn convert_frame(
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         notes.extend(attribute_span_note(&a.name, *min, *max, options));
     }
-    notes.extend(radius_span_note(h.radius.as_ref().map(|(_, info)| info)));
     let (lo, hi, far) = survey_positions(&frame.positions, frame.simulation_box.as_ref());
     notes.extend(position_notes(
         lo,
@@ -525,6 +524,16 @@ pub(crate) fn position_notes(
             "these coordinates are those of particles far outside the box (below): leave \
              them out of the input, and the rest keep their digits"
                 .to_string()
+        } else if species
+            .iter()
+            .any(|s| s.radius_range.is_some_and(|[lo, _]| lo <= smallest_radius))
+        {
+            // Particles of their own sizes spanning decades (smoothing lengths): the
+            // smallest are what single precision cannot place, not a radius to give.
+            "the smallest particles are finer than single precision resolves this far from \
+             the origin (a dense core): shift the data so that the origin lies at them, or \
+             convert their region apart with coordinates relative to its centre"
+                .to_string()
         } else if span > 0.25 * largest {
             format!(
                 "the radius is tiny beside the data's extent ({span:.3e}): give --radius \
@@ -642,27 +651,6 @@ pub fn attribute_span_note(
     })
 }
 
-/// A note for per-particle radii whose 16-bit linear steps over the frame's range are
-/// more than 1 % of the smallest radius (radii spanning decades): those particles are
-/// drawn off their size by up to that share.
-pub fn radius_span_note(info: Option<&mdlod_format::meta::RadiusInfo>) -> Option<String> {
-    let info = info?;
-    let step = (f64::from(info.max) - f64::from(info.min)) / 65535.0;
-    let share = step / 2.0 / f64::from(info.min);
-    (info.min > 0.0 && share > 0.01).then(|| {
-        let off = if share > 1.0 {
-            "more than twice their size".to_string()
-        } else {
-            format!("up to {:.0} % off their size", 100.0 * share)
-        };
-        format!(
-            "particle radii from {:e} to {:e} are kept in 16-bit steps of {step:.2e} over \
-             that range: the smallest are drawn {off}",
-            info.min, info.max
-        )
-    })
-}
-
 /// The base-10 logarithms of attribute values (of particles from `first` on); a value
 /// not above 0 (or not finite) is an error naming the particle.
 pub fn log10_attribute(
@@ -707,6 +695,7 @@ pub fn base_metadata(
             max: 0.0,
         }),
         radius: None,
+        radius_log: None,
         source,
         build: BuildInfo {
             max_cluster_size: options.build.max_cluster_size,

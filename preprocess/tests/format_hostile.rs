@@ -1352,6 +1352,78 @@ fn a_radius_section_under_a_version_1_0_header_is_refused() {
     expect_refused(&p, &["header", "version 1.0 holds a RADIUS section"]);
 }
 
+/// Radii on a log scale (RADIUS_LOG, metadata `radius_log`, version 1.2) are checked as
+/// linear ones are: the section and the field go together, the range starts above 0, and
+/// a header of an earlier minor version holding them is refused.
+#[test]
+fn radii_on_a_log_scale_are_checked_as_linear_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut frame = test_frame(10);
+    // The cloud's Ag from 10^-3 to 10: four decades, a log scale.
+    let radii = frame.radii.as_mut().unwrap();
+    let k = radii.len() - 200;
+    for (i, r) in radii[k..].iter_mut().enumerate() {
+        *r = 1e-3 * 10f32.powf(4.0 * i as f32 / 199.0);
+    }
+    frame.species[1].radius_range = Some((1e-3, 10.0));
+    let path = dir.path().join("log.mdlod");
+    let opts = ConvertOptions {
+        build: params_u16_delta1(),
+        ..Default::default()
+    };
+    convert_frame(&frame, None, &path, &opts, &NoProgress).unwrap();
+    let b = std::fs::read(&path).unwrap();
+    expect_accepted(&path);
+    let h = header(&b);
+    assert_eq!((h.version_major, h.version_minor), (1, 2));
+    let f = MdlodFile::open(&path).unwrap();
+    assert!(f.metadata().radius.unwrap().log);
+    assert_eq!(f.radii().unwrap().len(), frame.positions.len());
+
+    let mut older = b.clone();
+    let mut h = header(&older);
+    h.version_minor = 1;
+    put_header(&mut older, &h);
+    seal_header(&mut older);
+    let p = write(dir.path(), "log-in-1-1.mdlod", &older);
+    expect_refused(
+        &p,
+        &[
+            "header",
+            "version 1.1 holds a RADIUS_LOG section, which version 1.2 added",
+        ],
+    );
+    let with = |name: &str, f: &dyn Fn(&mut Doc, &mut serde_json::Value)| {
+        let mut d = Doc::parse(&b);
+        let mut m = d.meta();
+        f(&mut d, &mut m);
+        d.set_meta(&m);
+        d.write(dir.path(), name)
+    };
+    let p = with("log-from-0.mdlod", &|_, m| {
+        m["radius_log"]["min"] = 0.0.into()
+    });
+    expect_refused(&p, &["METADATA", "radius_log range 0 to 10", "above 0"]);
+    let p = with("both-scales.mdlod", &|_, m| {
+        m["radius"] = m["radius_log"].clone()
+    });
+    expect_refused(&p, &["METADATA", "both `radius` and `radius_log`"]);
+    // The section of one scale under the field of the other.
+    let p = with("log-section-linear-field.mdlod", &|_, m| {
+        let r = m.as_object_mut().unwrap().remove("radius_log").unwrap();
+        m["radius"] = r;
+    });
+    expect_refused(&p, &["there is no RADIUS section"]);
+    let p = with("linear-section-log-field.mdlod", &|d, _| {
+        for s in &mut d.sections {
+            if s.0 == SectionKind::RadiusLog {
+                s.0 = SectionKind::Radius;
+            }
+        }
+    });
+    expect_refused(&p, &["there is no RADIUS_LOG section"]);
+}
+
 #[test]
 fn a_position_error_the_particles_exceed_is_refused() {
     // `verify` puts each decoded particle centre inside its cluster's bounds shrunk by

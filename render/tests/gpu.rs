@@ -1955,9 +1955,12 @@ fn splats_by_attribute_keep_the_attribute_flux_at_every_level() {
         h,
     )
     .unwrap();
-    // Expected: every particle's disk area on screen times its attribute mapped to [0, 1].
+    // Expected: every particle's disk area on screen times its attribute less the range's
+    // low end, in the attribute's units (its quantized step times the range's width).
     let ppw = camera.clip_from_view(w as f32 / h as f32).y_axis.y * 0.5 * h as f32;
     let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
+    let info = f.metadata().attribute.clone().unwrap();
+    let width = f64::from(info.max - info.min);
     let expected: f64 = f
         .attribute()
         .unwrap()
@@ -1965,7 +1968,7 @@ fn splats_by_attribute_keep_the_attribute_flux_at_every_level() {
         .zip(f.species())
         .map(|(&q, &s)| {
             let r = f64::from(radii[usize::from(s)] * ppw);
-            std::f64::consts::PI * r * r * f64::from(q) / 65535.0
+            std::f64::consts::PI * r * r * f64::from(q) / 65535.0 * width
         })
         .sum();
     let blend = mdlod_render::SplatBlend::Additive {

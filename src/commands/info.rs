@@ -146,7 +146,12 @@ pub fn run(args: Args) -> Result<()> {
             "nodes": f.nodes().len(),
             "species": m.species,
             "attribute": m.attribute,
-            "radius": m.radius,
+            "radius": m.radius.map(|r| json!({
+                "min": r.min,
+                "max": r.max,
+                "scale": if r.log { "log" } else { "linear" },
+            })),
+            "species_column": m.species_column,
             "box": m.simulation_box,
             "extent": extent.map(|(lo, hi)| json!({ "min": lo, "max": hi })),
             "flat_axis": flat.map(|k| ["x", "y", "z"][k]),
@@ -237,8 +242,11 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(r) = &m.radius {
         println!(
-            "  radii        each particle's own, {} (16 bits over that range)",
-            radius_range_text(r.min, r.max)
+            "  radii        each particle's own, {} (16 bits over that range{}: each within \
+             {:.1e} of its size)",
+            radius_range_text(r.min, r.max),
+            if r.log { " on a log scale" } else { "" },
+            r.worst_relative_error()
         );
     }
     if let Some(a) = &m.attribute {

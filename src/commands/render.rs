@@ -2022,7 +2022,7 @@ fn projected_light(
     let scale = mdlod_render::style::AttributeScale::with_range(a, style.attribute_range)
         .with_log(style.log_scale);
     match scale.light_zero() {
-        Some(lo) if lo == 0.0 => format!("projected {}", a.name),
+        Some(0.0) => format!("projected {}", a.name),
         Some(lo) if lo < 0.0 => format!("projected ({} + {})", a.name, Num(-lo)),
         Some(lo) => format!("projected ({} − {})", a.name, Num(lo)),
         None => format!("projected flux ({} constant)", a.name),

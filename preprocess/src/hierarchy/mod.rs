@@ -192,7 +192,7 @@ pub fn radius_range(species: &[Species], counts: &[u64]) -> Option<mdlod_format:
             (lo.min(a), hi.max(b))
         },
     );
-    (min <= max).then_some(mdlod_format::meta::RadiusInfo { min, max })
+    (min <= max).then(|| mdlod_format::meta::RadiusInfo::for_range(min, max))
 }
 
 /// A built hierarchy, in final order, ready to be written.
@@ -295,8 +295,13 @@ impl Hierarchy {
         if let Some((a, _, _)) = &self.attribute {
             w.write_pod_section(SectionKind::Attribute, last as u32, a)?;
         }
-        if let Some((r, _)) = &self.radius {
-            w.write_pod_section(SectionKind::Radius, last as u32, r)?;
+        if let Some((r, info)) = &self.radius {
+            let kind = if info.log {
+                SectionKind::RadiusLog
+            } else {
+                SectionKind::Radius
+            };
+            w.write_pod_section(kind, last as u32, r)?;
         }
         w.finish()
     }
@@ -327,7 +332,7 @@ pub fn build_with(
             let (min, max) = r.iter().fold((f32::INFINITY, 0.0f32), |(lo, hi), &v| {
                 (lo.min(v), hi.max(v))
             });
-            mdlod_format::meta::RadiusInfo { min, max }
+            mdlod_format::meta::RadiusInfo::for_range(min, max)
         })
     });
     let radius_q: Option<Vec<u16>> = particles
