@@ -448,6 +448,15 @@ impl MdlodFile {
                 path: path.clone(),
                 source,
             })?;
+        // A reader may rely on the bound (section 6): one that is none is refused here,
+        // not only by `verify`.
+        let error = metadata.max_position_error;
+        if !(error.is_finite() && error >= 0.0) {
+            return Err(corrupt(
+                "METADATA",
+                format!("maximum position error {error} is not a finite non-negative number"),
+            ));
+        }
         // Radii on a log scale (`radius_log`) are the metadata's `radius`, marked so.
         if let Some(r) = metadata.radius_log.take() {
             if metadata.radius.is_some() {
@@ -1436,13 +1445,6 @@ impl MdlodFile {
         // the recorded position error and the bounds' single-precision rounding.
         let bits = self.position_bits();
         let error = self.metadata.max_position_error;
-        if !(error.is_finite() && error >= 0.0) {
-            return Err(FormatError::corrupt(
-                &self.path,
-                "metadata",
-                format!("maximum position error {error} is not a finite non-negative number"),
-            ));
-        }
         for m in 1..=last {
             let positions = self.positions(m);
             let parents = self.level_nodes(m - 1);

@@ -377,8 +377,26 @@ impl SndfData {
         }
         let header: SndfHeader = serde_json::from_slice(&bytes[FIXED..FIXED + json_len])
             .map_err(|e| corrupt(path, "header", format!("invalid JSON: {e}")))?;
+        // S-MIP tiles are version 1.1's: a 1.0 file holding them was not written by a
+        // writer of that version. (Later minors add keys, which the header refuses.)
+        if minor == 0 && header.smip.is_some() {
+            return Err(corrupt(
+                path,
+                "header",
+                "version 1.0 holds `smip` (S-MIP tiles), which version 1.1 added",
+            ));
+        }
         let n = check_header(path, &header)?;
         let start = (FIXED + json_len).div_ceil(16) * 16;
+        // The padding up to the data: zero bytes (no checksum covers them).
+        let padding = bytes.get(FIXED + json_len..start).unwrap_or(&[]);
+        if let Some(k) = padding.iter().position(|&b| b != 0) {
+            return Err(corrupt(
+                path,
+                &format!("byte {}", FIXED + json_len + k),
+                "the padding after the header is not zero",
+            ));
+        }
         Ok((header, start, n, checksum))
     }
 
@@ -625,6 +643,18 @@ mod tests {
         let q = dir.path().join("i.sndf");
         sample().save(&q).unwrap();
         assert_eq!(&std::fs::read(&q).unwrap()[8..12], &[1, 0, 0, 0]);
+        // Tiles under a 1.0 header, and padding that is not zero: refused.
+        let mut relabelled = bytes.clone();
+        relabelled[10] = 0;
+        let e = SndfData::parse(&p, &relabelled).unwrap_err().to_string();
+        assert!(e.contains("version 1.0 holds `smip`"), "{e}");
+        let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let padding = FIXED + json_len..(FIXED + json_len).div_ceil(16) * 16;
+        assert!(!padding.is_empty(), "the test needs padding");
+        let mut padded = bytes.clone();
+        padded[padding.end - 1] = b' ';
+        let e = SndfData::parse(&p, &padded).unwrap_err().to_string();
+        assert!(e.contains("padding after the header is not zero"), "{e}");
         // A count above its own tile's rays (3), though below the other tile's (12).
         let mut over = t.hist[10];
         over[3] = 5.0;
