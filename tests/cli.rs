@@ -4919,6 +4919,58 @@ fn a_limit_below_a_chunk_names_the_chunk_size_that_fits() {
     assert_eq!(MdlodFile::open(&out).unwrap().particle_count(), 20000);
 }
 
+/// A shrink-wrapped cell stretched by a lost atom is drawn with `--cell` but not fitted:
+/// the view frames the material, as without the cell (it framed the cell, 100 times the
+/// material's height, and the material was a few pixels); a cell the data does not
+/// stretch (vacuum above a slab) is fitted whole.
+#[test]
+fn a_cell_stretched_by_a_lost_atom_is_drawn_but_not_fitted() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = |top: f64, lost: bool| {
+        let mut text = format!(
+            "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n500\nITEM: BOX BOUNDS pp pp ss\n0 30\n\
+             0 30\n0 {top}\nITEM: ATOMS id type x y z\n"
+        );
+        for i in 0..500 {
+            let z = if lost && i == 499 {
+                top
+            } else {
+                f64::from(i / 100 * 3)
+            };
+            text += &format!("{} 1 {} {} {z}\n", i + 1, (i % 10) * 3, (i / 10 % 10) * 3);
+        }
+        text
+    };
+    let distance = |text: String, cell: bool| -> f64 {
+        let input = dir.path().join("d.lammpstrj");
+        std::fs::write(&input, text).unwrap();
+        let file = dir.path().join("d.mdlod");
+        ok(&["convert", s(&input), "-o", s(&file), "--radius", "1=1.28"]);
+        let view = dir.path().join("v.json");
+        let png = dir.path().join("p.png");
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--save-view", s(&view)];
+        args.extend(["--width", "64", "--height", "48"]);
+        if cell {
+            args.push("--cell");
+        }
+        ok(&args);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&view).unwrap()).unwrap();
+        v["distance"].as_f64().unwrap()
+    };
+    let (with, without) = (
+        distance(dump(3000.0, true), true),
+        distance(dump(3000.0, true), false),
+    );
+    assert!(with < 1.2 * without, "{with} against {without}");
+    // Vacuum above a slab, no atom in it: the cell is framed whole.
+    let (with, without) = (
+        distance(dump(300.0, false), true),
+        distance(dump(300.0, false), false),
+    );
+    assert!(with > 3.0 * without, "{with} against {without}");
+}
+
 /// Positions that will not draw as the user expects are noted at conversion: an atom
 /// lost far outside the box (whole and chunked builds), and coordinates so far from the
 /// origin that single precision snaps them to a grid coarser than the particles.

@@ -708,9 +708,38 @@ pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
         fit.bounds
     };
     FitBounds {
-        bounds: with_drawn_cell(bounds, file, opts),
+        bounds: with_fitted_cell(bounds, file, opts, fit.far_particles > 0),
         ..fit
     }
+}
+
+/// `bounds` and, where `opts` draws the cell, the cell's box, less the faces that
+/// particles left out of the fit as far from the rest (`trimmed`) stretched: a
+/// shrink-wrapped cell follows a lost atom, and a view framing it made the material a
+/// dot in every frame of a movie. Such a face is one the data reaches (within 1 % of
+/// the cell's width) beyond the fitted bounds; it is still drawn.
+fn with_fitted_cell(
+    bounds: Bounds,
+    file: &MdlodFile,
+    opts: &RenderOptions,
+    trimmed: bool,
+) -> Bounds {
+    let with = with_drawn_cell(bounds, file, opts);
+    let (Some(_), Some(c), true) = (opts.cell, cell_bounds(file), trimmed) else {
+        return with;
+    };
+    let whole = data_bounds(file);
+    let (mut lo, mut hi) = (with.min, with.max);
+    for k in 0..3 {
+        let tol = 0.01 * (c.max[k] - c.min[k]);
+        if c.min[k] < bounds.min[k] && whole.min[k] <= c.min[k] + tol {
+            lo[k] = bounds.min[k];
+        }
+        if c.max[k] > bounds.max[k] && whole.max[k] >= c.max[k] - tol {
+            hi[k] = bounds.max[k];
+        }
+    }
+    Bounds::new(lo, hi)
 }
 
 /// The box around `file`'s simulation cell (its eight corners), where it has one.
