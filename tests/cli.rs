@@ -3531,10 +3531,30 @@ fn a_label_shows_each_frames_values_in_its_corner() {
     ]
     .concat());
     assert!(
-        out.contains("--label: the file records no time: {time} shows ?"),
+        out.contains("--label: the file records no time: {time} shows ?")
+            && out.contains("--dt DT gives it"),
         "{out}"
     );
+    let question = corner("nt.png");
+    // `--dt`: the time is the timestep (7) times it; drawn, not `?`.
+    let out = ok(&[
+        &["render", s(&d("nt.mdlod")), "-o", s(&d("nt.png"))][..],
+        &base,
+        &["--label", "t={time}", "--dt", "0.002"],
+    ]
+    .concat());
+    assert!(!out.contains("records no time"), "{out}");
+    assert_ne!(corner("nt.png"), question);
     for (extra, message) in [
+        (&["--dt", "0.002"][..], "--dt has no effect without --label"),
+        (
+            &["--label", "t={time}", "--dt", "0"][..],
+            "must be a finite number above 0",
+        ),
+        (
+            &["--label", "t={time:2}"][..],
+            "`:2` is no number of decimals",
+        ),
         (
             &["--label", "{step}"][..],
             "{step} is no value a label fills in",

@@ -134,6 +134,7 @@ pub fn run(args: Args) -> Result<()> {
         label: vec![],
         legend_category: vec![],
         label_corner: super::render::LegendCorner::TopLeft,
+        dt: None,
         cell: None,
         cell_width: None,
     })?;

@@ -191,10 +191,17 @@ pub struct Args {
     pub legend_title: Option<String>,
     /// A line of text drawn into the image on a light panel (OVITO's text label), with
     /// each frame's values put in for {timestep}, {time}, {frame} (the image's number),
-    /// {particles} and {file}: `--label "t = {time} ps"` on a movie; `{{` and `}}` are
-    /// braces themselves (`--label "{{111}} planes"`); repeatable, a line each
+    /// {particles} and {file}: `--label "t = {time} ps"` on a movie; `{time:.2}` gives
+    /// the time two decimals (a movie's times otherwise all take as many as the most
+    /// precise needs, so the text keeps its width); `{{` and `}}` are braces themselves
+    /// (`--label "{{111}} planes"`); repeatable, a line each
     #[arg(long, value_name = "TEXT")]
     pub label: Vec<String>,
+    /// The simulation's timestep size in its time unit (LAMMPS `timestep`): `{time}` in
+    /// --label is then each frame's timestep times DT, for dumps that record no time
+    /// (LAMMPS records it with `dump_modify time yes`); it replaces a recorded time
+    #[arg(long, value_name = "DT")]
+    pub dt: Option<f64>,
     /// A key of named values instead of the colour bar, for an attribute of categories
     /// (a CNA column's structure types): `--legend-category 1=FCC --legend-category
     /// 2=HCP ...`, each name beside a disc of the colour --colour-map gives its value;
@@ -273,18 +280,22 @@ impl LabelValues {
     }
 
     /// `text` with its placeholders filled in; a value the frame lacks (a dump without a
-    /// time) shows `?`, and its name is returned. (`text` passed [`label_parts`] in
-    /// [`check_label`].)
-    fn fill(&self, text: &str) -> (String, Vec<&'static str>) {
+    /// time) shows `?`, and its name is returned. A time takes its placeholder's
+    /// decimals, else `time_decimals` (those of a movie's most precise time), else its
+    /// shortest form. (`text` passed [`label_parts`] in [`check_label`].)
+    fn fill(&self, text: &str, time_decimals: Option<usize>) -> (String, Vec<&'static str>) {
         let mut out = String::new();
         let mut missing = Vec::new();
         for part in label_parts(text).unwrap_or_default() {
             match part {
                 LabelPart::Text(t) => out.push_str(&t),
-                LabelPart::Field(field) => {
+                LabelPart::Field(field, decimals) => {
                     let value = match field {
                         "timestep" => self.timestep.map(|t| t.to_string()),
-                        "time" => self.time.map(|t| super::Num(t as f32).to_string()),
+                        "time" => self.time.map(|t| match decimals.or(time_decimals) {
+                            Some(d) => format!("{t:.d$}"),
+                            None => super::Num(t as f32).to_string(),
+                        }),
                         "frame" => Some(self.frame.to_string()),
                         "particles" => Some(self.particles.to_string()),
                         _ => Some(self.file.clone()),
@@ -300,12 +311,16 @@ impl LabelValues {
     }
 }
 
-/// A piece of a `--label`: text as written, or a value to fill in.
+/// A piece of a `--label`: text as written, or a value to fill in (with the decimals
+/// its placeholder asks for: `{time:.2}`).
 #[derive(Clone, Debug, PartialEq)]
 enum LabelPart {
     Text(String),
-    Field(&'static str),
+    Field(&'static str, Option<usize>),
 }
+
+/// The most decimals `{time:.N}` takes.
+const LABEL_DECIMALS: usize = 12;
 
 /// A `--label` cut into text and placeholders, as format strings are: `{name}` a value,
 /// `{{` and `}}` a literal brace (a plane family `{{111}}`); an error names a
@@ -329,7 +344,30 @@ fn label_parts(text: &str) -> Result<Vec<LabelPart>, String> {
                 let Some(close) = rest.find('}') else {
                     return Err("a `{` opens no placeholder: write `{{` for a brace".into());
                 };
-                let name = &rest[..close];
+                let placeholder = &rest[..close];
+                // `{time:.2}`: the number of decimals.
+                let (name, decimals) = match placeholder.split_once(':') {
+                    Some((name, spec)) => {
+                        let decimals = spec
+                            .strip_prefix('.')
+                            .and_then(|d| d.parse::<usize>().ok())
+                            .filter(|&d| d <= LABEL_DECIMALS)
+                            .ok_or_else(|| {
+                                format!(
+                                    "{{{placeholder}}}: `:{spec}` is no number of decimals (write \
+                                     {{{name}:.2}} for two, at most {LABEL_DECIMALS})"
+                                )
+                            })?;
+                        if name != "time" {
+                            return Err(format!(
+                                "{{{placeholder}}}: only {{time}} takes a number of decimals \
+                                 ({{{name}}} is a whole number)"
+                            ));
+                        }
+                        (name, Some(decimals))
+                    }
+                    None => (placeholder, None),
+                };
                 let Some(&field) = LABEL_FIELDS.iter().find(|f| **f == name) else {
                     return Err(format!(
                         "{{{name}}} is no value a label fills in (it has {}; write {{{{{name}}}}} \
@@ -344,8 +382,8 @@ fn label_parts(text: &str) -> Result<Vec<LabelPart>, String> {
                 if !literal.is_empty() {
                     parts.push(LabelPart::Text(std::mem::take(&mut literal)));
                 }
-                parts.push(LabelPart::Field(field));
-                for _ in 0..name.chars().count() + 1 {
+                parts.push(LabelPart::Field(field, decimals));
+                for _ in 0..placeholder.chars().count() + 1 {
                     chars.next();
                 }
             }
@@ -362,6 +400,17 @@ fn label_parts(text: &str) -> Result<Vec<LabelPart>, String> {
 /// Refuses a `--label` naming a placeholder it does not fill, or drawn where the legend
 /// is, before anything is drawn.
 fn check_label(args: &Args) -> Result<()> {
+    if let Some(dt) = args.dt {
+        if !(dt.is_finite() && dt > 0.0) {
+            anyhow::bail!("--dt {dt}: the timestep size must be a finite number above 0");
+        }
+        if args.label.is_empty() {
+            anyhow::bail!(
+                "--dt has no effect without --label: it gives the time {{time}} shows \
+                 (--label \"t = {{time}} ps\")"
+            );
+        }
+    }
     for text in &args.label {
         if let Err(why) = label_parts(text) {
             anyhow::bail!("--label {text:?}: {why}");
@@ -381,7 +430,7 @@ fn check_label(args: &Args) -> Result<()> {
                         .into_iter()
                         .filter_map(|p| match p {
                             LabelPart::Text(t) => Some(t),
-                            LabelPart::Field(_) => None,
+                            LabelPart::Field(..) => None,
                         })
                         .collect()
                 })
@@ -454,6 +503,21 @@ fn draw_panel(
 }
 
 /// Draws `--label` into each image, with its own values.
+/// The decimals that show every one of a movie's `times` as its shortest form does, so
+/// that the label keeps one width (`0.80`, `1.00`, `1.20`, not `0.8`, `1`, `1.2`); `None`
+/// where one needs an exponent, or more than [`LABEL_DECIMALS`].
+fn time_decimals(times: impl Iterator<Item = f64>) -> Option<usize> {
+    let mut most = 0;
+    for t in times {
+        let shortest = super::Num(t as f32).to_string();
+        if shortest.contains(['e', 'E']) {
+            return None;
+        }
+        most = most.max(shortest.split_once('.').map_or(0, |(_, d)| d.len()));
+    }
+    (most <= LABEL_DECIMALS).then_some(most)
+}
+
 fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
     use mdlod_render::legend;
     if args.label.is_empty() {
@@ -461,12 +525,30 @@ fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
     }
     let mut missing = std::collections::BTreeSet::new();
     let mut glyphs = std::collections::BTreeSet::new();
+    // `--dt`: each frame's time is its timestep times it.
+    let images: Vec<(&PathBuf, LabelValues)> = images
+        .iter()
+        .map(|(image, values)| {
+            let time = match (args.dt, values.timestep) {
+                (Some(dt), Some(t)) => Some(t as f64 * dt),
+                _ => values.time,
+            };
+            (
+                image,
+                LabelValues {
+                    time,
+                    ..values.clone()
+                },
+            )
+        })
+        .collect();
+    let decimals = time_decimals(images.iter().filter_map(|(_, v)| v.time));
     for (image, values) in images {
         let lines: Vec<String> = args
             .label
             .iter()
             .map(|t| {
-                let (line, lacking) = values.fill(t);
+                let (line, lacking) = values.fill(t, decimals);
                 missing.extend(lacking);
                 line
             })
@@ -476,7 +558,11 @@ fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
         draw_panel(image, &label, args.label_corner, "--label")?;
     }
     for field in missing {
-        println!("  note: --label: the file records no {field}: {{{field}}} shows ?");
+        let hint = match field {
+            "time" => " (--dt DT gives it as the timestep times DT)",
+            _ => "",
+        };
+        println!("  note: --label: the file records no {field}: {{{field}}} shows ?{hint}");
     }
     if !glyphs.is_empty() {
         let list: Vec<String> = glyphs.iter().map(|c| format!("{c:?}")).collect();
@@ -3305,7 +3391,7 @@ mod tests {
             particles: 2552,
             file: "gb.mdlod".into(),
         };
-        let fill = |t: &str| v.fill(t);
+        let fill = |t: &str| v.fill(t, None);
         assert_eq!(
             fill("step {timestep}, {particles} atoms"),
             ("step 500, 2552 atoms".into(), vec![])
@@ -3319,7 +3405,25 @@ mod tests {
             ("{500} {timestep}".into(), vec![])
         );
         assert_eq!(fill("t={time} ({time})"), ("t=? (?)".into(), vec!["time"]));
+        // A time in its shortest form, to a movie's decimals, or to its placeholder's.
+        let timed = LabelValues {
+            time: Some(1.2),
+            ..v.clone()
+        };
+        assert_eq!(timed.fill("t = {time} ps", None).0, "t = 1.2 ps");
+        assert_eq!(timed.fill("t = {time} ps", Some(2)).0, "t = 1.20 ps");
+        assert_eq!(timed.fill("t = {time:.3} ps", Some(1)).0, "t = 1.200 ps");
+        assert_eq!(timed.fill("{time:.0}", None).0, "1");
+        // A movie's times take the decimals of the most precise: 0.80, 1.00, 1.20.
+        assert_eq!(time_decimals([0.8, 1.0, 1.2].into_iter()), Some(1));
+        assert_eq!(time_decimals([0.25, 1.0].into_iter()), Some(2));
+        assert_eq!(time_decimals([100.0, 200.0].into_iter()), Some(0));
+        assert_eq!(time_decimals([1e-9, 2e-9].into_iter()), None);
         for (bad, why) in [
+            ("{time:2}", "`:2` is no number of decimals"),
+            ("{time:.x}", "`:.x` is no number of decimals"),
+            ("{time:.13}", "at most 12"),
+            ("{timestep:.2}", "only {time} takes a number of decimals"),
             ("{111} planes", "{111} is no value a label fills in"),
             ("{111} planes", "write {{111}} for the braces themselves"),
             ("open { brace", "a `{` opens no placeholder"),
