@@ -2003,6 +2003,22 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
         None
     );
     assert!(!ok(&["info", s(&plain)]).contains("column"));
+    // A structure type this frame lacks (a script over every frame of a run hides HCP):
+    // noted, not refused; a species a file of elements lacks is still refused.
+    let png = dir.path().join("h.png");
+    let mut args = vec!["render", s(&whole), "-o", s(&png), "--hide-species", "HCP"];
+    args.extend(["--width", "32", "--height", "24"]);
+    let out = ok(&args);
+    assert!(
+        out.contains(
+            "note: no particle of this frame is HCP (its species are the values of c_cna: \
+             FCC, Other)"
+        ),
+        "{out}"
+    );
+    let mut args = vec!["render", s(&plain), "-o", s(&png), "--hide-species", "HCP"];
+    args.extend(["--width", "32", "--height", "24"]);
+    assert!(fails(&args).contains("no species named \"HCP\""));
     let png = dir.path().join("gb.png");
     for file in [&whole, &chunked] {
         draws_the_boundaries(file, &png, &["--hide-species", "FCC"], other);

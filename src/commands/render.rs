@@ -1550,6 +1550,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         return render_frames(&args, opts);
     }
+    drop_absent_categories(&args.file, &mut opts.style)?;
     // (A projection's log is the image's, not the points'.)
     let derived = derive_range(
         &mut opts.style,
@@ -2963,6 +2964,38 @@ fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<S
         ));
     }
     notes
+}
+
+/// A file whose species are the values of a column (structure types) holds only those
+/// of its frame: a style naming another (a figure script run over every frame, hiding
+/// HCP from a frame without any) does nothing there, and is dropped with a note instead
+/// of refusing the frame. Files of types or elements still refuse a name they lack (a
+/// misspelling).
+fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> Result<()> {
+    let file = mdlod_format::MdlodFile::open(path)?;
+    let m = file.metadata();
+    let Some(column) = &m.species_column else {
+        return Ok(());
+    };
+    let absent: std::collections::BTreeSet<String> = style
+        .species
+        .iter()
+        .filter(|st| !m.species.iter().any(|s| s.name == st.name))
+        .map(|st| st.name.clone())
+        .collect();
+    if absent.is_empty() {
+        return Ok(());
+    }
+    style.species.retain(|st| !absent.contains(&st.name));
+    let names: Vec<&str> = m.species.iter().map(|s| s.name.as_str()).collect();
+    println!(
+        "  note: no particle of this frame is {} (its species are the values of {column}: \
+         {}): the options naming {} do nothing here",
+        absent.iter().cloned().collect::<Vec<_>>().join(" or "),
+        names.join(", "),
+        if absent.len() == 1 { "it" } else { "them" }
+    );
+    Ok(())
 }
 
 /// Renders every frame of a batch directory (`args.file`) in its manifest's order, one
