@@ -4709,11 +4709,20 @@ fn verify_checks_a_batch_directory() {
         text.contains("ok: 6 frames verified against dataset.json"),
         "{text}"
     );
-    let err = fails(&["info", s(&out)]);
-    assert!(
-        err.contains("is a batch directory") && err.contains("mdlod verify"),
-        "{err}"
-    );
+    // `info` of the directory (or its manifest): the trajectory.
+    for what in [out.clone(), out.join("dataset.json")] {
+        let text = ok(&["info", s(&what)]);
+        assert!(
+            text.contains("frames       6 (timesteps 0 to 500, every 100)")
+                && text.contains("times        0 to 1")
+                && text.contains("particles    500 per frame")
+                && text.contains("species      1 (of any frame)"),
+            "{text}"
+        );
+    }
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&out), "--json"])).unwrap();
+    assert_eq!(json["frames"], 6);
+    assert_eq!(json["timesteps"], serde_json::json!([0, 500]));
     let m = mdlod_preprocess::batch::read_manifest(&out).unwrap();
     // A frame damaged on disk (one byte of its data flipped): verify finds it and says
     // how to have it converted again, as a rerun trusts a frame that opens.
@@ -7941,6 +7950,11 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
         ),
         "{rendered}"
     );
+    let info = ok(&["info", s(&out)]);
+    assert!(
+        info.contains("failed       1 frame the batch could not convert: timestep 400"),
+        "{info}"
+    );
     // So does one of a batch yet to finish (here: a manifest that expects one more).
     let manifest = out.join("dataset.json");
     let mut m: serde_json::Value =
@@ -7953,5 +7967,10 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
         rendered.contains("note: the batch lists 5 of the 6 frames its run is to convert")
             && !rendered.contains("could not convert"),
         "{rendered}"
+    );
+    let info = ok(&["info", s(&out)]);
+    assert!(
+        info.contains("missing      1 of the 6 frames the run is to convert"),
+        "{info}"
     );
 }

@@ -6,12 +6,13 @@ use anyhow::Result;
 use mdlod_format::MdlodFile;
 use serde_json::json;
 
-/// Show what a .mdlod file holds (particles, levels, species, box, build parameters), or
-/// a .sndf file (texels, bins, rays, the camera).
+/// Show what a .mdlod file holds (particles, levels, species, box, build parameters), a
+/// .sndf file (texels, bins, rays, the camera), or a batch directory (its trajectory:
+/// frames, timesteps, times, particles, species, attribute range, what is missing).
 #[derive(clap::Args)]
 #[command(after_help = "Example:\n  mdlod info frame.mdlod --json | jq .particles")]
 pub struct Args {
-    /// The .mdlod or .sndf file to describe.
+    /// The .mdlod or .sndf file to describe, or a batch directory (or its dataset.json).
     pub file: PathBuf,
     /// Print JSON instead of text.
     #[arg(long)]
@@ -46,6 +47,175 @@ fn species_counts(f: &MdlodFile) -> Result<Vec<u64>, mdlod_format::FormatError> 
         }
     }
     Ok(counts)
+}
+
+/// What a batch directory `dir` holds, from its manifest and its frames' metadata:
+/// frames, timesteps and times, particles, species, the attribute's range over every
+/// frame, the files' size, and what is missing or failed.
+fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
+    let m = mdlod_preprocess::batch::read_manifest(dir)?;
+    let frames = &m.frames;
+    let mut species: Vec<String> = Vec::new();
+    let mut attribute: Option<(String, f32, f32)> = None;
+    let mut attributes_differ = false;
+    let mut bytes = 0u64;
+    let mut unreadable = Vec::new();
+    for f in frames {
+        let path = dir.join(&f.file);
+        bytes += std::fs::metadata(&path).map_or(0, |m| m.len());
+        let file = match MdlodFile::open(&path) {
+            Ok(file) => file,
+            Err(e) => {
+                unreadable.push(format!("{}: {e}", f.file));
+                continue;
+            }
+        };
+        let meta = file.metadata();
+        for s in &meta.species {
+            if !species.contains(&s.name) {
+                species.push(s.name.clone());
+            }
+        }
+        match (&mut attribute, &meta.attribute) {
+            (None, Some(a)) if !attributes_differ => {
+                attribute = Some((a.name.clone(), a.min, a.max));
+            }
+            (Some((name, lo, hi)), Some(a)) if *name == a.name => {
+                *lo = lo.min(a.min);
+                *hi = hi.max(a.max);
+            }
+            (None, None) => {}
+            _ => {
+                attribute = None;
+                attributes_differ = true;
+            }
+        }
+    }
+    let first = frames.iter().map(|f| f.timestep).min();
+    let last = frames.iter().map(|f| f.timestep).max();
+    let times: Vec<f64> = frames.iter().filter_map(|f| f.time).collect();
+    let particles: Vec<u64> = frames.iter().map(|f| f.particles).collect();
+    let (fewest, most) = (
+        particles.iter().copied().min().unwrap_or(0),
+        particles.iter().copied().max().unwrap_or(0),
+    );
+    let missing = m
+        .expected_frames
+        .map_or(0, |e| e.saturating_sub(frames.len() as u64));
+    let column = frames.iter().find_map(|f| f.species_column.clone());
+    if args.json {
+        let v = json!({
+            "batch": dir.display().to_string(),
+            "frames": frames.len(),
+            "timesteps": first.zip(last).map(|(a, b)| [a, b]),
+            "times": (!times.is_empty()).then(|| [
+                times.iter().copied().fold(f64::INFINITY, f64::min),
+                times.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            ]),
+            "particles": [fewest, most],
+            "species": species,
+            "species_column": column,
+            "attribute": attribute.as_ref().map(|(n, lo, hi)| json!({
+                "name": n, "min": lo, "max": hi
+            })),
+            "bytes": bytes,
+            "expected_frames": m.expected_frames,
+            "failed": m.failed.iter().map(|f| json!({
+                "timestep": f.timestep, "input": f.input, "frame": f.frame, "reason": f.reason
+            })).collect::<Vec<_>>(),
+            "unreadable": unreadable,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("{} (batch directory)", dir.display());
+    match (first, last) {
+        (Some(a), Some(b)) => {
+            // A regular interval where the timesteps have one.
+            let mut steps: Vec<u64> = frames.iter().map(|f| f.timestep).collect();
+            steps.sort_unstable();
+            let gaps: std::collections::BTreeSet<u64> =
+                steps.windows(2).map(|w| w[1] - w[0]).collect();
+            let every = match gaps.len() {
+                1 => format!(", every {}", gaps.iter().next().copied().unwrap_or(0)),
+                _ => String::new(),
+            };
+            println!(
+                "  frames       {} (timesteps {a} to {b}{every})",
+                frames.len()
+            );
+        }
+        _ => println!("  frames       0"),
+    }
+    if !times.is_empty() {
+        let lo = times.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = times.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let of = if times.len() < frames.len() {
+            format!(" ({} of the frames record one)", times.len())
+        } else {
+            String::new()
+        };
+        println!(
+            "  times        {} to {}{of}",
+            super::Num(lo as f32),
+            super::Num(hi as f32)
+        );
+    }
+    if fewest == most {
+        println!("  particles    {most} per frame");
+    } else {
+        println!("  particles    {fewest} to {most} per frame");
+    }
+    let names: Vec<String> = species.iter().map(|s| shown(s)).collect();
+    println!("  species      {} (of any frame)", names.join(", "));
+    if let Some(c) = &column {
+        println!(
+            "  (species are the values of the input's column {}, not its types)",
+            shown(c)
+        );
+    }
+    match (&attribute, attributes_differ) {
+        (Some((n, lo, hi)), _) => println!(
+            "  attribute    {} in [{}, {}] over every frame",
+            shown(n),
+            super::Num(*lo),
+            super::Num(*hi)
+        ),
+        (None, true) => println!("  attribute    not the same in every frame"),
+        (None, false) => {}
+    }
+    println!("  size         {}", super::size_text(bytes));
+    if !m.failed.is_empty() {
+        let named: Vec<String> = m
+            .failed
+            .iter()
+            .take(6)
+            .map(|f| match f.timestep {
+                Some(t) => format!("timestep {t}"),
+                None => format!("frame {} of {}", f.frame, f.input),
+            })
+            .collect();
+        println!(
+            "  failed       {} frame{} the batch could not convert: {}{} (`mdlod verify {}` \
+             says why)",
+            m.failed.len(),
+            if m.failed.len() == 1 { "" } else { "s" },
+            named.join(", "),
+            if m.failed.len() > 6 { ", ..." } else { "" },
+            dir.display()
+        );
+    }
+    if missing > 0 {
+        println!(
+            "  missing      {missing} of the {} frames the run is to convert (still running, \
+             or stopped: rerun the batch)",
+            m.expected_frames.unwrap_or(0)
+        );
+    }
+    for u in &unreadable {
+        println!("  unreadable   {u}");
+    }
+    Ok(())
 }
 
 /// A `.sndf` file's header.
@@ -105,24 +275,24 @@ pub fn run(args: Args) -> Result<()> {
     if is_sndf {
         return sndf_info(&args);
     }
-    // A batch directory (merged, or shards' manifests only): say where its frames are.
-    let batch = args.file.is_dir()
-        && std::fs::read_dir(&args.file).is_ok_and(|entries| {
-            entries.flatten().any(|e| {
-                let name = e.file_name();
-                let name = name.to_string_lossy();
-                name == mdlod_preprocess::batch::MANIFEST
-                    || mdlod_preprocess::batch::is_shard_manifest(&name)
-            })
-        });
-    if batch {
-        anyhow::bail!(
-            "{} is a batch directory: its frames are {}/frame-<timestep>.mdlod (listed in \
-             its manifest), and `mdlod verify {}` checks them all",
-            args.file.display(),
-            args.file.display(),
-            args.file.display()
-        );
+    // A batch directory (or its manifest): the trajectory.
+    let manifest_named = args
+        .file
+        .file_name()
+        .is_some_and(|n| n == mdlod_preprocess::batch::MANIFEST)
+        && args.file.is_file();
+    if manifest_named {
+        let dir = match args.file.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        return batch_info(&dir, &args);
+    }
+    if args.file.is_dir() {
+        super::view::unmerged_batch(&args.file)?;
+        if args.file.join(mdlod_preprocess::batch::MANIFEST).is_file() {
+            return batch_info(&args.file, &args);
+        }
     }
     let f = MdlodFile::open(&args.file)?;
     let m = f.metadata();
