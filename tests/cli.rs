@@ -7974,3 +7974,93 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
         "{info}"
     );
 }
+
+/// `--attribute` repeated keeps several columns in one file (format 1.2): `info` lists
+/// them, render's `--attribute NAME` colours by any (as a file of that column alone
+/// draws it), an unknown name lists the file's, and a batch reconverts frames whose
+/// columns changed and keeps those whose did not.
+#[test]
+fn several_attributes_in_one_file_colour_by_any() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "3000", "--frames", "2"], &dump);
+    let both = dir.path().join("both.mdlod");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&both),
+        "--attribute",
+        "c_ke",
+        "--attribute",
+        "z",
+    ]);
+    let info = ok(&["info", s(&both)]);
+    assert!(
+        info.contains("format 1.2")
+            && info.contains("attribute    c_ke in")
+            && info.contains("attribute    z in [0, "),
+        "{info}"
+    );
+    let alone = dir.path().join("z.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&alone), "--attribute", "z"]);
+    let png = dir.path().join("p.png");
+    let render = |file: &Path, extra: &[&str]| {
+        let mut args = vec!["render", s(file), "-o", s(&png), "--colour-map", "viridis"];
+        args.extend(["--width", "96", "--height", "64"]);
+        args.extend(extra);
+        let out = ok(&args);
+        (out, read_png(&png).2)
+    };
+    let (_, by_ke) = render(&both, &[]);
+    let (out, by_z) = render(&both, &["--attribute", "z"]);
+    assert!(out.contains("colour map viridis: z from 0 to"), "{out}");
+    let (_, z_alone) = render(&alone, &[]);
+    assert_ne!(by_ke, by_z);
+    // Particles' values are quantized alike; clusters' means may round apart.
+    let worst = by_z
+        .iter()
+        .zip(&z_alone)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    assert!(worst <= 2, "{worst}");
+    let e = fails(&[
+        "render",
+        s(&both),
+        "-o",
+        s(&png),
+        "--colour-map",
+        "viridis",
+        "--attribute",
+        "y",
+    ]);
+    assert!(
+        e.contains("no attribute named \"y\" (the file keeps c_ke, z"),
+        "{e}"
+    );
+    let e = fails(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&both),
+        "--attribute",
+        "z",
+        "--attribute",
+        "z",
+    ]);
+    assert!(e.contains("--attribute z is given twice"), "{e}");
+    // A batch: kept while the columns are the same, converted again when they change.
+    let out = dir.path().join("d");
+    let batch = |extra: &[&str]| {
+        let mut args = vec!["batch", s(&dump), "-o", s(&out), "--attribute", "c_ke"];
+        args.extend(extra);
+        ok(&args)
+    };
+    batch(&["--attribute", "z"]);
+    assert!(batch(&["--attribute", "z"]).contains("0 converted, 2 already done"));
+    assert!(batch(&[]).contains("2 converted"));
+    let m = mdlod_preprocess::batch::read_manifest(&out).unwrap();
+    let f = MdlodFile::open(out.join(&m.frames[0].file)).unwrap();
+    assert_eq!(f.attribute_names(), ["c_ke"]);
+}

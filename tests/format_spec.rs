@@ -222,6 +222,36 @@ fn assert_same_decoding(file: &Path) {
         }
         None => assert!(particles["radius"].is_null(), "{name}: radii"),
     }
+    // Further attributes: names, quantized values, decoded values and node means.
+    let extras = particles["attributes"].as_array().unwrap();
+    assert_eq!(
+        extras.len(),
+        f.metadata().attributes.len(),
+        "{name}: attributes"
+    );
+    for (k, (pa, info)) in extras.iter().zip(&f.metadata().attributes).enumerate() {
+        assert_eq!(pa["name"].as_str(), Some(info.name.as_str()));
+        let q = f.extra_values(k).unwrap();
+        let pq: Vec<u16> = pa["q"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| u16::try_from(u64_of(v)).unwrap())
+            .collect();
+        assert_eq!(pq, q, "{name}: attribute {k}'s quantized values");
+        let rust: Vec<f32> = q.iter().map(|&q| info.decode(q)).collect();
+        assert_same_f32(
+            &f32s(&pa["values"]),
+            &rust,
+            &format!("{name}: attribute {k}"),
+        );
+        let means = f.extra_node_means(k).unwrap();
+        assert_same_f32(
+            &f32s(&pa["node_means"]),
+            means,
+            &format!("{name}: means {k}"),
+        );
+    }
 }
 
 /// Converts a real LAMMPS sample (two species, a `c_pe` column) and a generated data set
@@ -296,7 +326,25 @@ fn python_reader_decodes_exactly_what_the_rust_reader_decodes() {
     let f = MdlodFile::open(&logged).unwrap();
     assert!(f.metadata().radius.is_some_and(|r| r.log));
     assert_eq!(f.header().version_minor, 2);
-    for file in [&sample, &u8_file, &u16_file, &sized, &logged] {
+    // Several attributes (version 1.2's ATTRIBUTES and NODE_ATTRIBUTES).
+    let several = d("several.mdlod");
+    mdlod(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&several),
+        "--attribute",
+        "c_pe",
+        "--attribute",
+        "x",
+        "--attribute",
+        "z",
+    ]);
+    assert_eq!(
+        MdlodFile::open(&several).unwrap().attribute_names(),
+        ["c_pe", "x", "z"]
+    );
+    for file in [&sample, &u8_file, &u16_file, &sized, &logged, &several] {
         assert_same_decoding(file);
     }
     let bits = |f: &Path| MdlodFile::open(f).unwrap().position_bits();

@@ -102,7 +102,18 @@ SECTION = struct.Struct("<IIQQQ")
 SECTION_FIELDS = ("kind", "level", "offset", "length", "checksum")
 assert SECTION.size == 32
 
-METADATA, LEVELS, NODES, POSITIONS, SPECIES, ATTRIBUTE, RADIUS, RADIUS_LOG = range(1, 9)
+(
+    METADATA,
+    LEVELS,
+    NODES,
+    POSITIONS,
+    SPECIES,
+    ATTRIBUTE,
+    RADIUS,
+    RADIUS_LOG,
+    ATTRIBUTES,
+    NODE_ATTRIBUTES,
+) = range(1, 11)
 KIND_NAMES = {
     METADATA: "METADATA",
     LEVELS: "LEVELS",
@@ -112,8 +123,11 @@ KIND_NAMES = {
     ATTRIBUTE: "ATTRIBUTE",
     RADIUS: "RADIUS",
     RADIUS_LOG: "RADIUS_LOG",
+    ATTRIBUTES: "ATTRIBUTES",
+    NODE_ATTRIBUTES: "NODE_ATTRIBUTES",
 }
-PER_LEVEL_KINDS = (POSITIONS, SPECIES, ATTRIBUTE, RADIUS, RADIUS_LOG)
+PER_LEVEL_KINDS = (POSITIONS, SPECIES, ATTRIBUTE, RADIUS, RADIUS_LOG, ATTRIBUTES)
+MAX_EXTRA_ATTRIBUTES = 64
 METADATA_MAX = 16 << 20
 MAX_SECTIONS = 1 << 16
 
@@ -164,6 +178,14 @@ METADATA_FIELDS = {
     "species": ((SPECIES_FIELDS, "[]"), REQUIRED),
     "attribute": (
         {"name": ("string", REQUIRED), "min": ("f32", REQUIRED), "max": ("f32", REQUIRED)},
+        OPTIONAL,
+    ),
+    # Version 1.2: further attributes (ATTRIBUTES and NODE_ATTRIBUTES).
+    "attributes": (
+        (
+            {"name": ("string", REQUIRED), "min": ("f32", REQUIRED), "max": ("f32", REQUIRED)},
+            "[]",
+        ),
         OPTIONAL,
     ),
     # Version 1.1: the range of the RADIUS section's radii.
@@ -523,6 +545,31 @@ class MdlodFile:
         self.attribute = None
         if meta.get("attribute") is not None:
             self.attribute = (f32(meta["attribute"]["min"]), f32(meta["attribute"]["max"]))
+        # Further attributes: ranges, distinct names after a first one.
+        self.extras = meta.get("attributes") or []
+        names = [meta["attribute"]["name"]] if meta.get("attribute") is not None else []
+        for k, a in enumerate(self.extras):
+            lo, hi = f32(a["min"]), f32(a["max"])
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+                raise FormatError(
+                    place,
+                    f"attributes[{k}] {a['name']!r}: range {lo} to {hi} (must be two finite "
+                    "numbers, the smaller first)",
+                )
+            if not names:
+                raise FormatError(
+                    place,
+                    f"attributes[{k}] {a['name']!r}: an extra attribute without a first "
+                    "(`attribute`)",
+                )
+            if a["name"] in names:
+                raise FormatError(place, f"attributes[{k}] {a['name']!r}: a name given twice")
+            names.append(a["name"])
+        if len(self.extras) > MAX_EXTRA_ATTRIBUTES:
+            raise FormatError(
+                place,
+                f"{len(self.extras)} extra attributes (at most {MAX_EXTRA_ATTRIBUTES})",
+            )
         # Per-particle radii: linear steps (`radius`, RADIUS) or a log scale
         # (`radius_log`, RADIUS_LOG), not both.
         self.radius_range = None
@@ -648,6 +695,23 @@ class MdlodFile:
             )
         if radius is not None:
             expected.append((radius, 2 * P))
+        # Further attributes: a u16 per particle and an f32 per node for each.
+        k = len(self.extras)
+        for kind, level, per in ((ATTRIBUTES, L - 1, 2 * P), (NODE_ATTRIBUTES, 0, 4 * self.node_count)):
+            s = self.find(kind, level)
+            if s is not None and k == 0:
+                raise FormatError(
+                    "METADATA",
+                    f"{KIND_NAMES[kind]} is present but the metadata lists no `attributes`",
+                )
+            if s is None and k > 0:
+                raise FormatError(
+                    "section table",
+                    f"the metadata lists {k} `attributes` but there is no "
+                    f"{KIND_NAMES[kind]} section",
+                )
+            if s is not None:
+                expected.append((s, per * k))
         for s, length in expected:
             if s["length"] != length:
                 raise FormatError(
@@ -797,6 +861,28 @@ class MdlodFile:
         self.attribute_q = None
         if self.attribute is not None:
             self.attribute_q = self.u16_array(self.used[(ATTRIBUTE, self.L - 1)])
+        # Further attributes: values per particle, means per node (finite).
+        self.extra_q, self.extra_means = [], []
+        if self.extras:
+            if self.header["version_minor"] < 2:
+                raise FormatError(
+                    "header",
+                    f"version {self.header['version_major']}.{self.header['version_minor']} "
+                    "holds an ATTRIBUTES section, which version 1.2 added",
+                )
+            q = self.u16_array(self.used[(ATTRIBUTES, self.L - 1)])
+            raw = self.section_bytes(self.used[(NODE_ATTRIBUTES, 0)])
+            means = [v for (v,) in struct.iter_unpack("<f", raw)]
+            P, N = self.point_count(self.L - 1), self.node_count
+            for k, a in enumerate(self.extras):
+                self.extra_q.append(q[k * P : (k + 1) * P])
+                self.extra_means.append(means[k * N : (k + 1) * N])
+                for i, m in enumerate(self.extra_means[-1]):
+                    if not math.isfinite(m):
+                        raise FormatError(
+                            f"NODE_ATTRIBUTES, attribute {a['name']!r}, node {i}",
+                            "mean is not finite",
+                        )
         self.radius_q = None
         if self.radius_range is not None:
             kind, since = (RADIUS_LOG, 2) if self.radius_log else (RADIUS, 1)
@@ -976,6 +1062,18 @@ class MdlodFile:
                 "q": self.attribute_q,
                 "values": self.attribute_values(),
             }
+        particles["attributes"] = [
+            {
+                "name": a["name"],
+                "q": q,
+                "values": [
+                    f32(f32(a["min"]) + f32(f32(f32(a["max"]) - f32(a["min"])) * f32(v / 65535)))
+                    for v in q
+                ],
+                "node_means": means,
+            }
+            for a, q, means in zip(self.extras, self.extra_q, self.extra_means)
+        ]
         return {
             "file": self.path,
             "header": h,

@@ -12,6 +12,17 @@ pub enum FormatError {
         source: std::io::Error,
     },
 
+    /// An attribute the file does not keep (`names`: those it keeps).
+    #[error(
+        "{path}: no attribute named {name:?} (the file keeps {names}; `mdlod convert \
+         --attribute A --attribute B` keeps several)"
+    )]
+    NoSuchAttribute {
+        path: PathBuf,
+        name: String,
+        names: String,
+    },
+
     /// The program is being interrupted (see [`crate::writer::refuse_new_outputs`]).
     #[error("no new output begins: the program is being interrupted")]
     OutputsRefused,

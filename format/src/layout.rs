@@ -16,8 +16,11 @@ pub const FORMAT_VERSION: (u16, u16) = (1, 0);
 pub const FORMAT_VERSION_RADII: (u16, u16) = (1, 1);
 
 /// The version of files whose per-particle radii are quantized on a log scale (the
-/// RADIUS_LOG section).
+/// RADIUS_LOG section), or that keep more than one attribute (ATTRIBUTES).
 pub const FORMAT_VERSION_LOG_RADII: (u16, u16) = (1, 2);
+
+/// The most extra attributes a file keeps (the metadata's `attributes`).
+pub const MAX_EXTRA_ATTRIBUTES: usize = 64;
 
 /// The major versions this crate reads: files whose major version lies in this range
 /// are accepted whatever their minor version (minor versions only add sections or JSON
@@ -94,6 +97,14 @@ pub enum SectionKind {
     /// u16 radius per particle of the finest level quantized on a log scale (version 1.2):
     /// for radii spanning decades (smoothing lengths), which linear steps cannot keep.
     RadiusLog = 8,
+    /// The extra per-particle attributes (version 1.2): for each of the metadata's
+    /// `attributes` in turn, a u16 per particle of the finest level, quantized as
+    /// ATTRIBUTE's.
+    Attributes = 9,
+    /// The extra attributes' node means (version 1.2): for each of the metadata's
+    /// `attributes` in turn, an f32 per node (the area-weighted mean of its particles'
+    /// values), as [`NodeRecord::attribute`] holds the first attribute's.
+    NodeAttributes = 10,
 }
 
 impl SectionKind {
@@ -107,6 +118,8 @@ impl SectionKind {
             6 => Self::Attribute,
             7 => Self::Radius,
             8 => Self::RadiusLog,
+            9 => Self::Attributes,
+            10 => Self::NodeAttributes,
             _ => return None,
         })
     }
@@ -121,6 +134,8 @@ impl SectionKind {
             Self::Attribute => "ATTRIBUTE",
             Self::Radius => "RADIUS",
             Self::RadiusLog => "RADIUS_LOG",
+            Self::Attributes => "ATTRIBUTES",
+            Self::NodeAttributes => "NODE_ATTRIBUTES",
         }
     }
 }

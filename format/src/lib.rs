@@ -30,7 +30,7 @@ pub mod writer;
 pub use error::FormatError;
 pub use layout::{
     LevelRecord, NodeRecord, SectionKind, FORMAT_VERSION, FORMAT_VERSION_LOG_RADII,
-    FORMAT_VERSION_RADII, MAGIC,
+    FORMAT_VERSION_RADII, MAGIC, MAX_EXTRA_ATTRIBUTES,
 };
 pub use meta::Metadata;
 pub use progress::{NoProgress, Progress};

@@ -307,6 +307,11 @@ pub struct Metadata {
     pub species_column: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attribute: Option<AttributeInfo>,
+    /// Further per-particle attributes (version 1.2: the ATTRIBUTES and NODE_ATTRIBUTES
+    /// sections), each quantized over its own range as `attribute` is; a reader of
+    /// version 1.1 knows the first only.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub attributes: Vec<AttributeInfo>,
     /// The range of the per-particle radii (the RADIUS or RADIUS_LOG section), where the
     /// particles of a species differ in size. Its JSON field is `radius` for linear
     /// steps, `radius_log` for a log scale (see [`Metadata::to_json`]; the reader moves
@@ -450,6 +455,7 @@ mod tests {
             }],
             species_column: None,
             attribute: None,
+            attributes: Vec::new(),
             radius: None,
             radius_log: None,
             source: None,

@@ -87,6 +87,12 @@ pub struct MdlodFile {
     positions: Vec<Range<usize>>,
     species_range: Range<usize>,
     attribute_range: Option<Range<usize>>,
+    /// The ATTRIBUTES and NODE_ATTRIBUTES sections (the extra attributes), when the
+    /// metadata lists any.
+    extra_ranges: Option<(Range<usize>, Range<usize>)>,
+    /// The node records with another attribute's means in place of the first's
+    /// ([`Self::select_attribute`]); `None`: the file's own.
+    nodes_owned: Option<Vec<NodeRecord>>,
     radius_range: Option<Range<usize>>,
     /// Per node level: the index in `node_blocks` of its first block.
     block_first: Vec<usize>,
@@ -612,6 +618,41 @@ impl MdlodFile {
                 ),
             ));
         }
+        // Extra attributes: valid ranges, distinct names (the first's too), and only with
+        // a first attribute.
+        for (k, a) in metadata.attributes.iter().enumerate() {
+            let problem = if !(a.min.is_finite() && a.max.is_finite() && a.min <= a.max) {
+                Some(format!(
+                    "range {} to {} (must be two finite numbers, the smaller first)",
+                    a.min, a.max
+                ))
+            } else if metadata.attribute.as_ref().is_none_or(|p| p.name == a.name)
+                || metadata.attributes[..k].iter().any(|b| b.name == a.name)
+            {
+                Some(match &metadata.attribute {
+                    None => "an extra attribute without a first (`attribute`)".to_string(),
+                    Some(_) => "a name given twice".to_string(),
+                })
+            } else {
+                None
+            };
+            if let Some(problem) = problem {
+                return Err(corrupt(
+                    "METADATA",
+                    format!("attributes[{k}] {:?}: {problem}", a.name),
+                ));
+            }
+        }
+        if metadata.attributes.len() > crate::layout::MAX_EXTRA_ATTRIBUTES {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "{} extra attributes (at most {})",
+                    metadata.attributes.len(),
+                    crate::layout::MAX_EXTRA_ATTRIBUTES
+                ),
+            ));
+        }
         if let Some(r) = metadata.radius.as_ref().filter(|r| !r.is_valid()) {
             return Err(corrupt(
                 "METADATA",
@@ -813,6 +854,57 @@ impl MdlodFile {
             "radii",
         )?;
 
+        // The extra attributes: a u16 per particle and an f32 per node for each.
+        let extras = metadata.attributes.len() as u64;
+        let node_count = sections[ni].length / std::mem::size_of::<NodeRecord>() as u64;
+        let extra_ranges = {
+            let mut found = Vec::new();
+            for (kind, level, per) in [
+                (SectionKind::Attributes, last as u32, n * 2),
+                (SectionKind::NodeAttributes, 0, node_count * 4),
+            ] {
+                let name = kind.name();
+                match (find(kind, Some(level))?, extras) {
+                    (Some(i), 0) => {
+                        return Err(corrupt(
+                            "METADATA",
+                            format!(
+                                "{} ({}) is present but the metadata lists no `attributes`",
+                                name,
+                                place_of(i, &sections[i])
+                            ),
+                        ))
+                    }
+                    (None, 0) => {}
+                    (None, _) => {
+                        return Err(corrupt(
+                            "section table",
+                            format!(
+                                "the metadata lists {extras} `attributes` but there is no {name} \
+                                 section"
+                            ),
+                        ))
+                    }
+                    (Some(i), k) => {
+                        if Some(sections[i].length) != per.checked_mul(k) {
+                            return Err(corrupt(
+                                &place_of(i, &sections[i]),
+                                format!(
+                                    "{} bytes, expected {k} attributes of {per} bytes",
+                                    sections[i].length
+                                ),
+                            ));
+                        }
+                        found.push(range(i));
+                    }
+                }
+            }
+            match <[Range<usize>; 2]>::try_from(found) {
+                Ok([a, b]) => Some((a, b)),
+                Err(_) => None,
+            }
+        };
+
         let levels_range = range(li);
         let nodes_range = range(ni);
         let species_range = range(si);
@@ -827,6 +919,8 @@ impl MdlodFile {
             positions,
             species_range,
             attribute_range,
+            extra_ranges,
+            nodes_owned: None,
             radius_range,
             block_first,
             node_blocks,
@@ -883,7 +977,96 @@ impl MdlodFile {
     /// (Every access stays in bounds whatever they hold; only their values may be wrong.)
     #[inline]
     pub fn nodes(&self) -> &[NodeRecord] {
-        bytemuck::cast_slice(&self.map[self.nodes_range.clone()])
+        match &self.nodes_owned {
+            Some(nodes) => nodes,
+            None => bytemuck::cast_slice(&self.map[self.nodes_range.clone()]),
+        }
+    }
+
+    /// The names of the attributes the file keeps: the first (`attribute`), then the
+    /// extra ones (`attributes`); empty without any.
+    pub fn attribute_names(&self) -> Vec<&str> {
+        let m = &self.metadata;
+        m.attribute
+            .iter()
+            .chain(&m.attributes)
+            .map(|a| a.name.as_str())
+            .collect()
+    }
+
+    /// The means of extra attribute `k` per node (the NODE_ATTRIBUTES section's `k`-th
+    /// part), when the file has it.
+    pub fn extra_node_means(&self, k: usize) -> Option<&[f32]> {
+        let (_, nodes) = self.extra_ranges.as_ref()?;
+        let all: &[f32] = bytemuck::cast_slice(&self.map[nodes.clone()]);
+        let n = all.len() / self.metadata.attributes.len().max(1);
+        all.get(k * n..(k + 1) * n)
+    }
+
+    /// The quantized values of extra attribute `k` per particle (the ATTRIBUTES
+    /// section's `k`-th part), when the file has it.
+    pub fn extra_values(&self, k: usize) -> Option<&[u16]> {
+        let (values, _) = self.extra_ranges.as_ref()?;
+        let all: &[u16] = bytemuck::cast_slice(&self.map[values.clone()]);
+        let n = all.len() / self.metadata.attributes.len().max(1);
+        all.get(k * n..(k + 1) * n)
+    }
+
+    /// This file with the attribute named `name` in the first's place: its values,
+    /// range and node means are those every reader of the first attribute (colours,
+    /// splat light, hidden values) takes. The first attribute's name gives the file as
+    /// it is. The node records are copied (a file with extra attributes was built
+    /// whole, at most a chunk's particles); a mean that is not finite is refused, naming
+    /// the node. An unknown name is an error listing the file's attributes.
+    pub fn select_attribute(mut self, name: &str) -> Result<MdlodFile, FormatError> {
+        if self
+            .metadata
+            .attribute
+            .as_ref()
+            .is_some_and(|a| a.name == name)
+        {
+            return Ok(self);
+        }
+        let Some(k) = self.metadata.attributes.iter().position(|a| a.name == name) else {
+            let names = self.attribute_names();
+            return Err(FormatError::NoSuchAttribute {
+                path: self.path.clone(),
+                name: name.to_string(),
+                names: if names.is_empty() {
+                    "none".to_string()
+                } else {
+                    names.join(", ")
+                },
+            });
+        };
+        let (values, _) = self
+            .extra_ranges
+            .clone()
+            .ok_or_else(|| FormatError::corrupt(&self.path, "section table", "no ATTRIBUTES"))?;
+        let per = (values.end - values.start) / self.metadata.attributes.len();
+        let means = self.extra_node_means(k).unwrap_or_default();
+        let mut nodes = self.nodes().to_vec();
+        if means.len() != nodes.len() {
+            return Err(FormatError::corrupt(
+                &self.path,
+                "NODE_ATTRIBUTES",
+                format!("{} means for {} nodes", means.len(), nodes.len()),
+            ));
+        }
+        for (i, (n, &m)) in nodes.iter_mut().zip(means).enumerate() {
+            if !m.is_finite() {
+                return Err(FormatError::corrupt(
+                    &self.path,
+                    format!("NODE_ATTRIBUTES, attribute {name:?}, node {i}"),
+                    format!("mean {m} is not finite"),
+                ));
+            }
+            n.attribute = m;
+        }
+        self.nodes_owned = Some(nodes);
+        self.attribute_range = Some(values.start + k * per..values.start + (k + 1) * per);
+        self.metadata.attribute = Some(self.metadata.attributes[k].clone());
+        Ok(self)
     }
 
     /// For a set of species (`mask`: bit `s` for species index `s`; indices of 64 and
@@ -1380,6 +1563,29 @@ impl MdlodFile {
         } else {
             ("RADIUS", 1)
         };
+        if self.extra_ranges.is_some() && self.header.version_minor < 2 {
+            return Err(FormatError::corrupt(
+                &self.path,
+                "header",
+                format!(
+                    "version {}.{} holds an ATTRIBUTES section, which version 1.2 added",
+                    self.header.version_major, self.header.version_minor
+                ),
+            ));
+        }
+        // Every extra attribute's node means are finite, as the first's are.
+        for (k, a) in self.metadata.attributes.iter().enumerate() {
+            if let Some(i) = self
+                .extra_node_means(k)
+                .and_then(|m| m.iter().position(|v| !v.is_finite()))
+            {
+                return Err(FormatError::corrupt(
+                    &self.path,
+                    format!("NODE_ATTRIBUTES, attribute {:?}, node {i}", a.name),
+                    "mean is not finite",
+                ));
+            }
+        }
         if self.radii().is_some() && self.header.version_minor < since {
             return Err(FormatError::corrupt(
                 &self.path,

@@ -174,7 +174,7 @@ impl Writer {
         // A file with per-particle radii is version 1.1, with radii on a log scale 1.2;
         // any other is 1.0.
         let has = |kind: SectionKind| self.sections.iter().any(|s| s.kind == kind as u32);
-        let version = if has(SectionKind::RadiusLog) {
+        let version = if has(SectionKind::RadiusLog) || has(SectionKind::Attributes) {
             FORMAT_VERSION_LOG_RADII
         } else if has(SectionKind::Radius) {
             FORMAT_VERSION_RADII

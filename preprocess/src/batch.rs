@@ -62,7 +62,7 @@ use mdlod_format::meta::{BuildInfo, FrameBytes, SimulationBox, SourceInfo};
 use mdlod_format::MdlodFile;
 use serde::{Deserialize, Serialize};
 
-use crate::convert::{convert_frame, ConvertError, ConvertOptions};
+use crate::convert::{ConvertError, ConvertOptions};
 use crate::progress::Progress;
 use crate::readers::{DumpFile, InputFormat, ReadError, ReadOptions};
 use crate::species::SpeciesNaming;
@@ -1771,10 +1771,18 @@ pub fn batch(
                     }
                 }
             };
+            // The further attributes asked for, by name, in order.
+            let same_attributes = f
+                .metadata()
+                .attributes
+                .iter()
+                .map(|a| &a.name)
+                .eq(opts.read.extra_attributes.iter());
             let same = same_columns
                 && same_names
                 && same_sizes
                 && same_species_column
+                && same_attributes
                 && same_build(
                     &f,
                     &opts.convert,
@@ -2066,6 +2074,20 @@ pub fn batch(
                     keep_notes(job.timestep, dump.frame_notes(job.frame, &opts.read));
                     let streamed = if job.particles as usize > convert.chunks.chunk_points {
                         let info = dump.frame_info(job.frame)?;
+                        if !opts.read.extra_attributes.is_empty() {
+                            return Err(ConvertError::Attributes {
+                                place: crate::convert::FramePlace {
+                                    path: job.input.display().to_string(),
+                                    frame: Some(job.frame as u64),
+                                    timestep: job.own_timestep,
+                                },
+                                problem: crate::convert::chunked_attributes_problem(
+                                    job.particles,
+                                    convert.chunks.chunk_points,
+                                ),
+                            }
+                            .into());
+                        }
                         crate::convert::window_source(dump, job.frame, &opts.read, &info)
                             .map(|s| (s, info))
                     } else {
@@ -2098,7 +2120,16 @@ pub fn batch(
                             })?;
                         }
                         let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
-                        let report = convert_frame(&frame, Some(source), &out, convert, &quiet)?;
+                        let further =
+                            crate::convert::read_extra_attributes(dump, job.frame, &opts.read)?;
+                        let report = crate::convert::convert_frame_with(
+                            &frame,
+                            &further,
+                            Some(source),
+                            &out,
+                            convert,
+                            &quiet,
+                        )?;
                         wrote.store(true, Ordering::Relaxed);
                         keep_notes(job.timestep, report.notes);
                     }
@@ -2679,7 +2710,13 @@ impl MergeSettings {
                     .insert(src.path.clone(), (version, this.clone()));
             }
         }
-        let attribute = m.attribute.as_ref().map(|a| a.name.clone());
+        // The attribute with any further ones: shards must keep the same.
+        let attribute = m.attribute.as_ref().map(|a| {
+            std::iter::once(a.name.as_str())
+                .chain(m.attributes.iter().map(|x| x.name.as_str()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        });
         let Some((first, build, first_attribute, (first_sizes, first_species))) = &self.first
         else {
             self.first = Some((

@@ -64,6 +64,9 @@ pub struct ConvertReport {
 pub enum ConvertError {
     #[error(transparent)]
     Read(#[from] crate::readers::ReadError),
+    /// Extra attributes a conversion cannot keep ([`convert_frame_with`]).
+    #[error("{place}: {problem}")]
+    Attributes { place: FramePlace, problem: String },
     /// `--attribute-log10` and an attribute value that has no logarithm.
     #[error(
         "{place}: attribute {name}: particle {index} (counting from 0, in the input's order) \
@@ -270,6 +273,24 @@ pub fn convert_frame(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
+    convert_frame_with(frame, &[], source, output, options, progress)
+}
+
+/// [`convert_frame`], keeping `further` attributes too: per-particle columns beside the
+/// frame's attribute (format 1.2's ATTRIBUTES, [`hierarchy::extra`]), each one value
+/// per particle in the frame's order. They need the frame's attribute (the first) and
+/// a frame built whole (at most `options.chunks.chunk_points` particles).
+pub fn convert_frame_with(
+    frame: &Frame,
+    further: &[crate::frame::Attribute],
+    source: Option<SourceInfo>,
+    output: &Path,
+    options: &ConvertOptions,
+    progress: &dyn Progress,
+) -> Result<ConvertReport, ConvertError> {
+    if !further.is_empty() {
+        check_extras(frame, further, options, source.as_ref())?;
+    }
     if frame.is_empty() {
         return Err(ConvertError::EmptyFrame(FramePlace::of(
             source.as_ref(),
@@ -350,6 +371,19 @@ pub fn convert_frame(
             source: e,
         }
     })?;
+    let mut h = h;
+    for e in further {
+        let extra =
+            hierarchy::extra::extra_attribute(&h, &e.name, &e.values, &species).map_err(|err| {
+                ConvertError::Build {
+                    path: source
+                        .as_ref()
+                        .map_or_else(|| "input".to_string(), |s| s.path.clone()),
+                    source: err,
+                }
+            })?;
+        h.extra_attributes.push(extra);
+    }
     let build_time = t0.elapsed();
     let mut notes = Vec::new();
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
@@ -674,6 +708,62 @@ pub fn log10_attribute(
     Ok(values.par_iter().map(|v| v.log10()).collect())
 }
 
+/// Refuses extra attributes a conversion cannot keep: without the frame's first
+/// attribute, of another length than the frame, named twice (or as the first), more
+/// than the format holds, or of a frame built in chunks.
+fn check_extras(
+    frame: &Frame,
+    extras: &[crate::frame::Attribute],
+    options: &ConvertOptions,
+    source: Option<&SourceInfo>,
+) -> Result<(), ConvertError> {
+    let place = || FramePlace::of(source, frame.timestep);
+    let problem = if frame.attribute.is_none() {
+        Some("further attributes need a first (the first --attribute)".to_string())
+    } else if let Some(e) = extras.iter().find(|e| e.values.len() != frame.len()) {
+        Some(format!(
+            "attribute {} has {} values for {} particles",
+            e.name,
+            e.values.len(),
+            frame.len()
+        ))
+    } else if let Some((_, e)) = extras.iter().enumerate().find(|(k, e)| {
+        frame.attribute.as_ref().is_some_and(|a| a.name == e.name)
+            || extras[..*k].iter().any(|o| o.name == e.name)
+    }) {
+        Some(format!("attribute {} is given twice", e.name))
+    } else if extras.len() > mdlod_format::MAX_EXTRA_ATTRIBUTES {
+        Some(format!(
+            "{} attributes: a file keeps at most {}",
+            extras.len() + 1,
+            mdlod_format::MAX_EXTRA_ATTRIBUTES + 1
+        ))
+    } else if frame.len() > options.chunks.chunk_points {
+        Some(chunked_attributes_problem(
+            frame.len() as u64,
+            options.chunks.chunk_points,
+        ))
+    } else {
+        None
+    };
+    match problem {
+        Some(problem) => Err(ConvertError::Attributes {
+            place: place(),
+            problem,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Why a frame of `particles` above the chunk size keeps one attribute only.
+pub fn chunked_attributes_problem(particles: u64, chunk_points: usize) -> String {
+    format!(
+        "several attributes need a frame built whole, and its {particles} particles are above \
+         the chunk size ({chunk_points}: --chunk-points sets it, within the memory limit); \
+         keep one attribute per file for frames this large"
+    )
+}
+
 /// The metadata of `frame` before its hierarchy is built (species, attribute range and
 /// error bound are filled in by the build).
 pub fn base_metadata(
@@ -694,6 +784,7 @@ pub fn base_metadata(
             min: 0.0,
             max: 0.0,
         }),
+        attributes: Vec::new(),
         radius: None,
         radius_log: None,
         source,
@@ -999,6 +1090,17 @@ pub fn convert_dump(
         }
         e => e,
     };
+    if info.particles > options.chunks.chunk_points && !read.extra_attributes.is_empty() {
+        // Refused before the frame is read (`convert_frame_with` says why).
+        return Err(ConvertError::Attributes {
+            place: FramePlace {
+                path: named.display().to_string(),
+                frame: Some(k as u64),
+                timestep: info.timestep,
+            },
+            problem: chunked_attributes_problem(info.particles as u64, options.chunks.chunk_points),
+        });
+    }
     if info.particles > options.chunks.chunk_points {
         if let Some(source) = window_source(&dump, k, read, &info) {
             // Out of core: the frame is read a window at a time.
@@ -1022,12 +1124,14 @@ pub fn convert_dump(
     }
     let t0 = Instant::now();
     let frame = dump.read_frame(k, read, progress).map_err(cut_short)?;
+    let further = read_extra_attributes(&dump, k, read).map_err(cut_short)?;
     // The frame owns its data: release the mapped (or decompressed) dump before the
     // hierarchy's working memory is allocated.
     drop(dump);
     let read_time = t0.elapsed();
-    let mut report = convert_frame(
+    let mut report = convert_frame_with(
         &frame,
+        &further,
         Some(source_info(named, k as u64)),
         output,
         options,
@@ -1036,6 +1140,30 @@ pub fn convert_dump(
     .map_err(explain)?;
     report.read_time = read_time;
     Ok(which(report))
+}
+
+/// The further attributes `read` asks for (`extra_attributes`), each read from frame `k`
+/// of `dump` as its attribute, by a pass over the frame of its own, in the order asked.
+pub fn read_extra_attributes(
+    dump: &crate::readers::DumpFile,
+    k: usize,
+    read: &crate::readers::ReadOptions,
+) -> Result<Vec<crate::frame::Attribute>, crate::readers::ReadError> {
+    read.extra_attributes
+        .iter()
+        .map(|name| {
+            let one = crate::readers::ReadOptions {
+                attribute: Some(name.clone()),
+                extra_attributes: Vec::new(),
+                ..read.clone()
+            };
+            let frame = dump.read_frame(k, &one, &crate::progress::NoProgress)?;
+            Ok(frame.attribute.unwrap_or(crate::frame::Attribute {
+                name: name.clone(),
+                values: Vec::new(),
+            }))
+        })
+        .collect()
 }
 
 /// Describes a source file for the metadata.

@@ -1424,6 +1424,107 @@ fn radii_on_a_log_scale_are_checked_as_linear_ones() {
     expect_refused(&p, &["there is no RADIUS_LOG section"]);
 }
 
+/// Further attributes (ATTRIBUTES, NODE_ATTRIBUTES, metadata `attributes`, version
+/// 1.2): sections and field go together at the lengths they give, names are distinct and
+/// follow a first attribute, ranges are ranges, means are finite, and an earlier minor
+/// version holding them is refused.
+#[test]
+fn further_attributes_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = test_frame(10);
+    let copy = Attribute {
+        name: "c_ke".into(),
+        values: frame.positions.iter().map(|p| p[2]).collect(),
+    };
+    let path = dir.path().join("attrs.mdlod");
+    let opts = ConvertOptions {
+        build: params_u16_delta1(),
+        ..Default::default()
+    };
+    mdlod_preprocess::convert::convert_frame_with(&frame, &[copy], None, &path, &opts, &NoProgress)
+        .unwrap();
+    expect_accepted(&path);
+    let b = std::fs::read(&path).unwrap();
+    let f = MdlodFile::open(&path).unwrap();
+    assert_eq!(f.attribute_names(), ["c_pe", "c_ke"]);
+    let e = MdlodFile::open(&path)
+        .unwrap()
+        .select_attribute("c_kE")
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("no attribute named \"c_kE\" (the file keeps c_pe, c_ke"),
+        "{e}"
+    );
+
+    let mut older = b.clone();
+    let mut h = header(&older);
+    h.version_minor = 1;
+    put_header(&mut older, &h);
+    seal_header(&mut older);
+    let p = write(dir.path(), "attrs-in-1-1.mdlod", &older);
+    expect_refused(
+        &p,
+        &["version 1.1 holds an ATTRIBUTES section, which version 1.2 added"],
+    );
+    let with = |name: &str, f: &dyn Fn(&mut Doc, &mut serde_json::Value)| {
+        let mut d = Doc::parse(&b);
+        let mut m = d.meta();
+        f(&mut d, &mut m);
+        d.set_meta(&m);
+        d.write(dir.path(), name)
+    };
+    let p = with("no-field.mdlod", &|_, m| {
+        m.as_object_mut().unwrap().remove("attributes");
+    });
+    expect_refused(
+        &p,
+        &[
+            "METADATA",
+            "ATTRIBUTES",
+            "the metadata lists no `attributes`",
+        ],
+    );
+    let p = with("no-means.mdlod", &|d, _| {
+        d.remove(SectionKind::NodeAttributes, 0)
+    });
+    expect_refused(
+        &p,
+        &["lists 1 `attributes` but there is no NODE_ATTRIBUTES section"],
+    );
+    let last = f.level_count() as u32 - 1;
+    let p = with("short.mdlod", &|d, _| {
+        d.section(SectionKind::Attributes, last).truncate(2);
+    });
+    expect_refused(&p, &["ATTRIBUTES", "expected 1 attributes of"]);
+    let p = with("twice.mdlod", &|_, m| {
+        m["attributes"][0]["name"] = "c_pe".into()
+    });
+    expect_refused(&p, &["attributes[0] \"c_pe\": a name given twice"]);
+    let p = with("reversed.mdlod", &|_, m| {
+        m["attributes"][0]["min"] = 5.0.into();
+        m["attributes"][0]["max"] = 1.0.into();
+    });
+    expect_refused(&p, &["attributes[0] \"c_ke\": range 5 to 1"]);
+    let p = with("no-first.mdlod", &|d, m| {
+        m.as_object_mut().unwrap().remove("attribute");
+        d.remove(SectionKind::Attribute, last);
+    });
+    expect_refused(&p, &["an extra attribute without a first"]);
+    let p = with("nan-mean.mdlod", &|d, _| {
+        d.section(SectionKind::NodeAttributes, 0)[..4].copy_from_slice(&f32::NAN.to_le_bytes());
+    });
+    expect_refused(&p, &["NODE_ATTRIBUTES, attribute \"c_ke\", node 0"]);
+    let e = MdlodFile::open(&p)
+        .unwrap()
+        .select_attribute("c_ke")
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("node 0") && e.contains("not finite"), "{e}");
+}
+
 #[test]
 fn a_position_error_the_particles_exceed_is_refused() {
     // `verify` puts each decoded particle centre inside its cluster's bounds shrunk by

@@ -731,3 +731,184 @@ fn more_species_than_a_file_holds_are_refused() {
         assert!(!path.exists());
     }
 }
+
+/// Further attributes (format 1.2's ATTRIBUTES and NODE_ATTRIBUTES): a copy of the first
+/// kept as a second has its quantized values and, selected, node means equal to the
+/// first's (means to rounding: the first's are made level by level, the second's from
+/// the particles at once); a column of its own is quantized over its own range; the
+/// selected file colours and hides by it; radii of their own weigh the means as they
+/// weigh the first's; a frame built in chunks keeps one attribute only.
+#[test]
+fn further_attributes_round_trip_and_select_like_the_first() {
+    for (params, sized) in [
+        (BuildParams::default(), false),
+        (
+            BuildParams {
+                delta_n: 2,
+                max_root_points: 16,
+                ..Default::default()
+            },
+            true,
+        ),
+    ] {
+        let mut frame = test_frame(8);
+        if sized {
+            // Radii of their own, spanning a factor 4: area weights differ per particle.
+            frame.radii = Some(
+                (0..frame.len())
+                    .map(|i| 0.5 + (i % 7) as f32 * 0.25)
+                    .collect(),
+            );
+            frame.species[0].radius_range = Some((0.5, 2.0));
+            frame.species[1].radius_range = Some((0.5, 2.0));
+        }
+        let first = frame.attribute.clone().unwrap();
+        let own: Vec<f32> = frame.positions.iter().map(|p| p[0] - p[1]).collect();
+        let further = [
+            Attribute {
+                name: "copy".into(),
+                values: first.values.clone(),
+            },
+            Attribute {
+                name: "x_minus_y".into(),
+                values: own.clone(),
+            },
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.mdlod");
+        let opts = ConvertOptions {
+            build: params.clone(),
+            ..Default::default()
+        };
+        mdlod_preprocess::convert::convert_frame_with(
+            &frame,
+            &further,
+            None,
+            &path,
+            &opts,
+            &NoProgress,
+        )
+        .unwrap();
+        let f = MdlodFile::open(&path).unwrap();
+        f.verify().unwrap();
+        assert_eq!(f.header().version_minor, 2);
+        assert_eq!(f.attribute_names(), ["c_pe", "copy", "x_minus_y"]);
+        let base_values = f.attribute().unwrap().to_vec();
+        let base_nodes = f.nodes().to_vec();
+        let copy = MdlodFile::open(&path)
+            .unwrap()
+            .select_attribute("copy")
+            .unwrap();
+        assert_eq!(copy.attribute().unwrap(), &base_values[..]);
+        assert_eq!(copy.metadata().attribute.as_ref().unwrap().name, "copy");
+        for (i, (a, b)) in base_nodes.iter().zip(copy.nodes()).enumerate() {
+            let tol = 1e-5 * (1.0 + a.attribute.abs());
+            assert!(
+                (a.attribute - b.attribute).abs() <= tol,
+                "node {i}: {} against {}",
+                a.attribute,
+                b.attribute
+            );
+            // Everything but the attribute is the file's own.
+            assert_eq!(
+                (a.centroid, a.area_sum, a.colour),
+                (b.centroid, b.area_sum, b.colour)
+            );
+        }
+        // The own column: its range, the top node's mean (every particle's, by area),
+        // and its values, sorted, each within half a step of one of the input's.
+        let other = MdlodFile::open(&path)
+            .unwrap()
+            .select_attribute("x_minus_y")
+            .unwrap();
+        let info = other.metadata().attribute.clone().unwrap();
+        let (lo, hi) = own
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        assert_eq!((info.min, info.max), (lo, hi));
+        let species = &f.metadata().species;
+        let radius = |i: usize| -> f64 {
+            let r = match &frame.radii {
+                Some(r) => f64::from(r[i]),
+                None => f64::from(species[usize::from(frame.species_index[i])].radius),
+            };
+            r * r
+        };
+        let (w, a): (f64, f64) = (0..frame.len())
+            .map(|i| (radius(i) * f64::from(own[i]), radius(i)))
+            .fold((0.0, 0.0), |(x, y), (p, q)| (x + p, y + q));
+        let top = f64::from(other.nodes()[0].attribute);
+        // (Stored radii are quantized: a relative step of 1.5e-5 in the weights.)
+        assert!(
+            (top - w / a).abs() <= 1e-3 * (1.0 + (w / a).abs()),
+            "{top} against {}",
+            w / a
+        );
+        let mut sorted: Vec<f32> = other
+            .attribute()
+            .unwrap()
+            .iter()
+            .map(|&q| info.decode(q))
+            .collect();
+        let mut want = own.clone();
+        sorted.sort_by(f32::total_cmp);
+        want.sort_by(f32::total_cmp);
+        let step = (hi - lo) / 65535.0;
+        for (d, v) in sorted.iter().zip(&want) {
+            assert!((d - v).abs() <= 0.5 * step + 1e-4, "{d} against {v}");
+        }
+    }
+    // In chunks: refused, saying why.
+    let frame = test_frame(8);
+    let dir = tempfile::tempdir().unwrap();
+    let opts = chunked(BuildParams::default(), 300, 1 << 30);
+    let e = mdlod_preprocess::convert::convert_frame_with(
+        &frame,
+        &[Attribute {
+            name: "copy".into(),
+            values: frame.attribute.clone().unwrap().values,
+        }],
+        None,
+        &dir.path().join("c.mdlod"),
+        &opts,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("several attributes need a frame built whole"),
+        "{e}"
+    );
+    // Named as the first, or without a first: refused.
+    let mut plain = test_frame(4);
+    let again = Attribute {
+        name: "c_pe".into(),
+        values: plain.attribute.clone().unwrap().values,
+    };
+    let out = dir.path().join("d.mdlod");
+    let e = mdlod_preprocess::convert::convert_frame_with(
+        &plain,
+        std::slice::from_ref(&again),
+        None,
+        &out,
+        &ConvertOptions::default(),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("attribute c_pe is given twice"), "{e}");
+    plain.attribute = None;
+    let e = mdlod_preprocess::convert::convert_frame_with(
+        &plain,
+        &[again],
+        None,
+        &out,
+        &ConvertOptions::default(),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("further attributes need a first"), "{e}");
+}

@@ -545,3 +545,29 @@ fn a_species_column_keeps_each_atoms_element_size() {
     assert_eq!(f.species[0].radius_range, None);
     assert_eq!(f.species[1].radius, Some(1.28));
 }
+
+/// A smoothing-length column (an SPH run's `h`) is not read as sizes by default: a note
+/// names the option that reads it, and none is given once it is read.
+#[test]
+fn a_smoothing_length_column_is_pointed_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        dir.path(),
+        "sph.xyz",
+        "2\nProperties=species:S:1:pos:R:3:h:R:1:rho:R:1\ngas 0 0 0 0.1 1\ngas 1 0 0 0.2 2\n",
+    );
+    let dump = DumpFile::open(&path).unwrap();
+    let notes = dump.frame_notes(0, &ReadOptions::default());
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.contains("column `h` looks like a smoothing length")
+                && n.contains("--radius-column h")),
+        "{notes:?}"
+    );
+    let read = ReadOptions {
+        sizes: mdlod_preprocess::readers::SizeColumn::Radius("h".into()),
+        ..Default::default()
+    };
+    assert!(dump.frame_notes(0, &read).is_empty());
+}

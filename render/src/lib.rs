@@ -663,6 +663,20 @@ pub struct FitBounds {
 /// times its largest extent.
 pub const FIT_MARGIN: f32 = 1.0;
 
+/// Opens the `.mdlod` file at `path` with the attribute `style` reads in the first's
+/// place ([`PointStyle::attribute`], [`MdlodFile::select_attribute`]): every reader of
+/// the attribute (colours, splat light, hidden values, legends) then takes it.
+pub fn open_styled(
+    path: &Path,
+    style: &PointStyle,
+) -> Result<MdlodFile, mdlod_format::FormatError> {
+    let file = MdlodFile::open(path)?;
+    match &style.attribute {
+        Some(name) => file.select_attribute(name),
+        None => Ok(file),
+    }
+}
+
 /// The bounds a fitted view frames: the shown data's ([`shown_bounds`], or the whole
 /// file's), less particles far from the rest (lost atoms flying off a non-periodic box,
 /// a sparse vapour around a droplet), which would shrink the material to a dot. A
@@ -1885,7 +1899,7 @@ pub fn render_to_png_with(
     let t0 = Instant::now();
     // Before the GPU opens.
     check_numbers(opts)?;
-    let file = MdlodFile::open(file)?;
+    let file = open_styled(file, &opts.style)?;
     let mut renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     renderer.set_progress(progress);
     let mut report = render_file_to_png(&renderer, file, out, opts)?;
@@ -1944,7 +1958,7 @@ pub fn sample_tiles_to_file(
     };
     let (w, h) = (opts.width, opts.height);
     check_numbers(opts)?;
-    let mdlod = MdlodFile::open(file)?;
+    let mdlod = open_styled(file, &opts.style)?;
     let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     let camera = frame_setup(&mdlod, opts)?.0;
     if camera.projection != Projection::Orthographic {
@@ -2031,7 +2045,7 @@ pub fn sample_to_file_at(
     };
     let t0 = Instant::now();
     check_numbers(opts)?;
-    let mdlod = MdlodFile::open(file)?;
+    let mdlod = open_styled(file, &opts.style)?;
     let mut renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     renderer.set_progress(progress);
     let (camera, traversal, _) = frame_setup(&mdlod, opts)?;

@@ -212,6 +212,11 @@ pub struct PointStyle {
     pub radius_scale: f32,
     /// Colour by the scalar attribute instead of by species.
     pub colour_map: Option<ColourMap>,
+    /// Which of the file's attributes the colour map, splat intensities and hidden
+    /// values read (a file of format 1.2 keeps several); `None`: the first. See
+    /// [`crate::open_styled`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attribute: Option<String>,
     /// The attribute values that map to the colour map's ends (and to splat
     /// intensities 0 and 1), instead of the file's own range: the same in every frame of
     /// a trajectory, so that a colour means one value throughout a movie.
@@ -241,6 +246,7 @@ impl Default for PointStyle {
             species: vec![],
             radius_scale: 1.0,
             colour_map: None,
+            attribute: None,
             attribute_range: None,
             log_scale: false,
             clip: Vec::new(),
@@ -1159,6 +1165,7 @@ mod tests {
             ],
             radius_scale: 2.0,
             colour_map: None,
+            attribute: None,
             attribute_range: None,
             log_scale: false,
             clip: vec![],

@@ -979,6 +979,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             ],
             radius_scale: 1.5,
             colour_map: map,
+            attribute: None,
             attribute_range: None,
             log_scale: false,
             clip: vec![],

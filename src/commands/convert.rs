@@ -60,9 +60,11 @@ pub struct BuildArgs {
     /// new name); two species given one name become one (`1=O` with `3=O`); repeatable.
     #[arg(long = "species-name", value_name = "NAME=NEW", value_parser = parse_species_name)]
     pub species_names: Vec<(String, String)>,
-    /// Dump column to keep as the per-particle scalar attribute.
-    #[arg(long)]
-    pub attribute: Option<String>,
+    /// Dump column to keep as the per-particle scalar attribute; repeat it to keep
+    /// several (`--attribute c_pe --attribute c_ke`: render's `--attribute c_ke` then
+    /// colours by the second; format 1.2; frames built whole, within --chunk-points)
+    #[arg(long, value_name = "COLUMN")]
+    pub attribute: Vec<String>,
     /// Keep the attribute's base-10 logarithm instead (named log10(NAME); every value
     /// must be above 0): the file keeps 16 bits per value, evenly over its range, so a
     /// quantity spanning many decades (an SPH density) keeps only its top four or five
@@ -128,6 +130,14 @@ impl BuildArgs {
     /// Checks the build options before any input is read (a library check of the same
     /// rules comes only after an out-of-core frame's partition pass).
     pub fn check(&self) -> Result<()> {
+        if let Some((_, a)) = self
+            .attribute
+            .iter()
+            .enumerate()
+            .find(|(k, a)| self.attribute[..*k].contains(a))
+        {
+            bail!("--attribute {a} is given twice: each column is kept once");
+        }
         if self.cluster_size < 2 {
             bail!("--cluster-size {} (must be at least 2)", self.cluster_size);
         }
@@ -199,7 +209,8 @@ impl BuildArgs {
             species_column: self.species_column.clone(),
         };
         let read = ReadOptions {
-            attribute: self.attribute.clone(),
+            attribute: self.attribute.first().cloned(),
+            extra_attributes: self.attribute.iter().skip(1).cloned().collect(),
             columns: self
                 .columns
                 .as_ref()

@@ -45,7 +45,7 @@ pub fn run(args: Args) -> Result<()> {
             // The generator writes copper as LAMMPS type 1.
             radii: vec![("1".into(), 1.28)],
             species_names: Vec::new(),
-            attribute: Some(Kind::Crater.extra_column().to_string()),
+            attribute: vec![Kind::Crater.extra_column().to_string()],
             attribute_log10: false,
             columns: None,
             radius_column: None,
@@ -118,6 +118,7 @@ pub fn run(args: Args) -> Result<()> {
         light_range: None,
         style: super::render::StyleArgs {
             colour_map: None,
+            attribute: None,
             radius_scale: 1.0,
             species_colour: vec![],
             species_radius: vec![],

@@ -316,6 +316,7 @@ pub fn run(args: Args) -> Result<()> {
             "nodes": f.nodes().len(),
             "species": m.species,
             "attribute": m.attribute,
+            "attributes": m.attributes,
             "radius": m.radius.map(|r| json!({
                 "min": r.min,
                 "max": r.max,
@@ -420,6 +421,19 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     if let Some(a) = &m.attribute {
+        println!(
+            "  attribute    {} in [{}, {}]{}",
+            shown(&a.name),
+            super::Num(a.min),
+            super::Num(a.max),
+            if m.attributes.is_empty() {
+                ""
+            } else {
+                " (the first; render --attribute NAME colours by another)"
+            }
+        );
+    }
+    for a in &m.attributes {
         println!(
             "  attribute    {} in [{}, {}]",
             shown(&a.name),

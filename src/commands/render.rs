@@ -614,6 +614,12 @@ pub struct StyleArgs {
         value_parser = parse_open_range
     )]
     pub hide_attribute: Vec<[f32; 2]>,
+    /// Which of the file's attributes --colour-map, --hide-attribute and
+    /// --attribute-range read (and splats lit by the attribute), for a file that keeps
+    /// several (`convert --attribute c_pe --attribute c_ke`); default: the first.
+    /// `mdlod info` lists them
+    #[arg(long, value_name = "NAME")]
+    pub attribute: Option<String>,
     /// The attribute values at the ends of --colour-map (and of --intensity attribute),
     /// e.g. `0:2.5`, instead of the file's own range (a movie's default: the range over
     /// all its frames), so that images made apart compare.
@@ -779,6 +785,7 @@ impl StyleArgs {
         }
         Ok(mdlod_render::PointStyle {
             species,
+            attribute: self.attribute.clone(),
             radius_scale: self.radius_scale,
             attribute_range: self.attribute_range,
             log_scale: self.log_scale,
@@ -1572,7 +1579,7 @@ pub fn run(args: Args) -> Result<()> {
         Mode::Splat | Mode::SplatOver | Mode::Density | Mode::Iso => String::new(),
     };
     // The file again (a mapping, and its metadata) for what the summary explains.
-    let file = mdlod_format::MdlodFile::open(&args.file)?;
+    let file = mdlod_render::open_styled(&args.file, &opts.style)?;
     let species = &file.metadata().species;
     let points = point_noun(args.mode);
     let hidden = hidden_text(&r, &args.style);
@@ -2005,7 +2012,7 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_rend
     } else {
         args.file.clone()
     };
-    let Ok(file) = mdlod_format::MdlodFile::open(&path) else {
+    let Ok(file) = mdlod_render::open_styled(&path, &opts.style) else {
         return Ok(Vec::new());
     };
     let meta = file.metadata();
@@ -2266,7 +2273,7 @@ pub fn derive_range(
     if !mapped && !light {
         return Ok(None);
     }
-    let file = mdlod_format::MdlodFile::open(path)?;
+    let file = mdlod_render::open_styled(path, style)?;
     let Some(a) = &file.metadata().attribute else {
         return Ok(None);
     };
@@ -2763,7 +2770,7 @@ fn render_turntable(
     // target is the data's centre in every view (a still's fit moves it to centre the
     // picture in perspective, which would make the turn wobble).
     if view_fits(&args.camera.spec()) {
-        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let bounds = mdlod_render::fit_for(&file, &opts).bounds;
         let fitted_target = args.camera.target.is_none()
             && args
@@ -2838,7 +2845,7 @@ fn render_turntable(
         opts.view = view;
         let out = frame_output(&args.output, i as usize)?;
         written.push(out.clone());
-        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let coarsest = coarsest_points(&file);
         let species = file.metadata().species.clone();
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
@@ -2886,7 +2893,7 @@ fn render_turntable(
         println!("{note}");
     }
     if view_fits(&args.camera.spec()) {
-        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         if let Some(note) = far_note(mdlod_render::fit_for(&file, &opts).far_particles, None) {
             println!("{note}");
         }
@@ -2896,7 +2903,7 @@ fn render_turntable(
         println!("  the first view saved to {}", p.display());
     }
     if args.legend.is_some() || args.legend_in_image.is_some() {
-        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let meta = file.metadata();
         write_legend(
             args,
@@ -2909,7 +2916,7 @@ fn render_turntable(
         )?;
     }
     if !args.label.is_empty() {
-        let file = mdlod_format::MdlodFile::open(&args.file)?;
+        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let labelled: Vec<(PathBuf, LabelValues)> = written
             .iter()
             .enumerate()
@@ -2972,7 +2979,7 @@ fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<S
 /// of refusing the frame. Files of types or elements still refuse a name they lack (a
 /// misspelling).
 fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> Result<()> {
-    let file = mdlod_format::MdlodFile::open(path)?;
+    let file = mdlod_render::open_styled(path, style)?;
     let m = file.metadata();
     let Some(column) = &m.species_column else {
         return Ok(());
@@ -3049,7 +3056,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
                 dir.display()
             );
         }
-        let file = mdlod_format::MdlodFile::open(&path)?;
+        let file = mdlod_render::open_styled(&path, &opts.style)?;
         // A manifest edited or mixed with another run's frames labels the images wrongly.
         if let Some(t) = file.metadata().timestep.filter(|&t| t != f.timestep) {
             anyhow::bail!(
@@ -3248,7 +3255,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         let out = frame_output(&args.output, i)?;
         written.push(out.clone());
         let path = dir.join(&f.file);
-        let file = mdlod_format::MdlodFile::open(&path)?;
+        let file = mdlod_render::open_styled(&path, &opts.style)?;
         opts.style.species =
             mdlod_render::style::keep_looks(&file.metadata().species, &looks, &style.species);
         let changed: Vec<String> = opts

@@ -19,6 +19,7 @@
 //! ever splits independent clusters or maps over independent items, and each sum is
 //! accumulated in a fixed order.
 
+pub mod extra;
 pub mod pca_split;
 pub mod representative;
 
@@ -211,6 +212,8 @@ pub struct Hierarchy {
     pub attribute: Option<(Vec<u16>, f32, f32)>,
     /// Quantized radius per particle, final order, with its range.
     pub radius: Option<(Vec<u16>, mdlod_format::meta::RadiusInfo)>,
+    /// Further attributes ([`extra::extra_attribute`]), written after the first.
+    pub extra_attributes: Vec<extra::ExtraAttribute>,
     /// Largest distance between a decoded particle and its input position.
     pub max_position_error: f64,
     /// The top node's representative, at full precision.
@@ -271,6 +274,11 @@ impl Hierarchy {
             (None, _) => metadata.attribute = None,
         }
         metadata.radius = self.radius.as_ref().map(|(_, info)| *info);
+        metadata.attributes = self
+            .extra_attributes
+            .iter()
+            .map(|e| e.info.clone())
+            .collect();
         let json = metadata.to_json().map_err(|problem| FormatError::Write {
             path: path.to_path_buf(),
             problem,
@@ -302,6 +310,18 @@ impl Hierarchy {
                 SectionKind::Radius
             };
             w.write_pod_section(kind, last as u32, r)?;
+        }
+        if !self.extra_attributes.is_empty() {
+            let mut s = w.section(SectionKind::Attributes, last as u32)?;
+            for e in &self.extra_attributes {
+                s.write_pod(&e.values)?;
+            }
+            s.end()?;
+            let mut s = w.section(SectionKind::NodeAttributes, 0)?;
+            for e in &self.extra_attributes {
+                s.write_pod(&e.node_means)?;
+            }
+            s.end()?;
         }
         w.finish()
     }
@@ -626,6 +646,7 @@ pub fn build_with(
         species_index,
         attribute,
         radius,
+        extra_attributes: Vec::new(),
         max_position_error: max_err,
         root,
         top_positions,

@@ -265,6 +265,10 @@ pub struct ReadOptions {
     /// Name of a column to read as [`Frame::attribute`] (LAMMPS column name such as `c_pe`,
     /// or extended-XYZ property name, `name[i]` for component `i` of a vector property).
     pub attribute: Option<String>,
+    /// Further columns to keep beside `attribute` (a file of format 1.2 keeps several:
+    /// [`crate::convert::convert_frame_with`]); each is read as `attribute` is, by a pass
+    /// of its own over the frame ([`crate::convert::read_extra_attributes`]).
+    pub extra_attributes: Vec<String>,
     /// Column names for inputs that do not name their columns (old-revision LAMMPS
     /// binary dumps); when given, they replace the file's own names.
     pub columns: Option<Vec<String>>,
@@ -750,6 +754,18 @@ impl DumpFile {
                     self.path.display()
                 ));
             }
+            // An SPH run's smoothing length, which sizes are not read from by default.
+            let smoothing = ["h", "hsml", "smoothing_length", "smoothinglength"]
+                .iter()
+                .find_map(|n| has(n));
+            if let (Some(h), None, None) = (smoothing, has("radius"), has("diameter")) {
+                notes.push(format!(
+                    "{}: column `{h}` looks like a smoothing length, which is not read as the \
+                     particles' sizes by default: --radius-column {h} draws each particle at \
+                     its own",
+                    self.path.display()
+                ));
+            }
         }
         // LAMMPS writes a box in every frame: one without was likely misspelt, and its
         // item skipped as unknown.
@@ -958,6 +974,7 @@ impl DumpFile {
                 }
                 let plain = ReadOptions {
                     attribute: None,
+                    extra_attributes: Vec::new(),
                     columns: opts.columns.clone(),
                     sizes: SizeColumn::Off,
                     species_column: None,

@@ -1,0 +1,133 @@
+//! Extra attributes (format 1.2's ATTRIBUTES and NODE_ATTRIBUTES sections): further
+//! per-particle columns beside the first attribute, so that one file colours by any of
+//! them (a potential energy, a kinetic energy, an SPH run's density and temperature)
+//! without converting the frame again.
+//!
+//! How it works: the hierarchy is built as ever (with the first attribute, which its
+//! representatives average as they are made); each extra column is then laid out in the
+//! built file's particle order and quantized over its own range as the first is, and
+//! each node's mean is the area-weighted mean of the particles below it (the same
+//! definition as the first attribute's: area `r²`, the particle's own radius as stored
+//! or its species', a plain mean where the areas sum to 0), summed in `f64` once over
+//! the particles through prefix sums, since a node's particles are one contiguous run
+//! of the finest level.
+
+use std::ops::Range;
+
+use mdlod_format::layout::{LevelRecord, NodeRecord};
+use mdlod_format::meta::{AttributeInfo, Species};
+
+use super::{BuildError, Hierarchy};
+
+/// One extra attribute of a built hierarchy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExtraAttribute {
+    pub info: AttributeInfo,
+    /// Quantized value per particle, in the file's particle order.
+    pub values: Vec<u16>,
+    /// Area-weighted mean per node.
+    pub node_means: Vec<f32>,
+}
+
+/// For every node (indexed as the node table), the range of its particles: the run of
+/// the finest level below it, found bottom up through the children's ranges.
+pub fn particle_ranges(levels: &[LevelRecord], nodes: &[NodeRecord]) -> Vec<Range<u64>> {
+    let last = levels.len().saturating_sub(1);
+    let mut ranges = vec![0..0; nodes.len()];
+    for l in (0..last).rev() {
+        let first = levels[l].node_first as usize;
+        let count = levels[l].point_count as usize;
+        for i in first..(first + count).min(nodes.len()) {
+            let n = &nodes[i];
+            let children =
+                u64::from(n.child_first)..u64::from(n.child_first) + u64::from(n.child_count);
+            ranges[i] = if l + 1 == last || children.is_empty() {
+                children
+            } else {
+                let below = levels[l + 1].node_first;
+                let at = |c: u64| ranges.get((below + c) as usize).cloned().unwrap_or(0..0);
+                at(children.start).start..at(children.end - 1).end
+            };
+        }
+    }
+    ranges
+}
+
+/// Lays out `values` (one per particle, in the input's order) in `h`'s particle order,
+/// quantizes them over their range, and averages them over every node. `species` are
+/// the species the hierarchy was built with (their radii weigh the particles without
+/// radii of their own).
+pub fn extra_attribute(
+    h: &Hierarchy,
+    name: &str,
+    values: &[f32],
+    species: &[Species],
+) -> Result<ExtraAttribute, BuildError> {
+    if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+        return Err(BuildError::NonFiniteAttribute {
+            index,
+            value: values[index],
+        });
+    }
+    let (min, max) = values
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    let info = AttributeInfo {
+        name: name.to_string(),
+        min,
+        max,
+    };
+    let ordered: Vec<f32> = h
+        .particle_order
+        .iter()
+        .map(|&i| values[i as usize])
+        .collect();
+    let quantized = ordered.iter().map(|&v| info.encode(v)).collect();
+    // Each particle's area as the hierarchy's representatives weigh it.
+    let area = |k: usize| -> f64 {
+        let r = match &h.radius {
+            Some((q, r)) => r.decode(q[k]),
+            None => species
+                .get(usize::from(h.species_index[k]))
+                .map_or(0.0, |s| s.radius),
+        };
+        f64::from(r * r)
+    };
+    let mut areas = Vec::with_capacity(ordered.len() + 1);
+    let mut weighted = Vec::with_capacity(ordered.len() + 1);
+    let mut plain = Vec::with_capacity(ordered.len() + 1);
+    let (mut a, mut w, mut p) = (0f64, 0f64, 0f64);
+    for (k, &v) in ordered.iter().enumerate() {
+        areas.push(a);
+        weighted.push(w);
+        plain.push(p);
+        let ak = area(k);
+        a += ak;
+        w += ak * f64::from(v);
+        p += f64::from(v);
+    }
+    areas.push(a);
+    weighted.push(w);
+    plain.push(p);
+    let node_means = particle_ranges(&h.levels, &h.nodes)
+        .into_iter()
+        .map(|r| {
+            let (s, e) = (r.start as usize, r.end as usize);
+            let area = areas[e] - areas[s];
+            if area > 0.0 {
+                ((weighted[e] - weighted[s]) / area) as f32
+            } else if e > s {
+                ((plain[e] - plain[s]) / (e - s) as f64) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    Ok(ExtraAttribute {
+        info,
+        values: quantized,
+        node_means,
+    })
+}
