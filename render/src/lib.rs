@@ -1595,6 +1595,7 @@ pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
         RenderMode::Splat { by_attribute: true } => (
             PackStyle::FluxAttribute,
             PointStyle {
+                attribute: opts.style.attribute.clone(),
                 attribute_range: opts.style.attribute_range,
                 // With a colour map the log is the image's (a projection's), not each
                 // point's.

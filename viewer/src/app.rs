@@ -719,7 +719,23 @@ impl ViewerApp {
         {
             actions.push(Action::RadiusScale { scale });
         }
-        if let Some(attribute) = &self.state.attribute {
+        if let Some(first) = &self.state.attribute {
+            let attribute = s.style.attribute.as_ref().unwrap_or(first);
+            if self.state.attributes.len() > 1 {
+                let mut chosen = attribute.clone();
+                egui::ComboBox::from_id_salt("attribute")
+                    .selected_text(&chosen)
+                    .show_ui(ui, |ui| {
+                        for name in &self.state.attributes {
+                            ui.selectable_value(&mut chosen, name.clone(), name);
+                        }
+                    });
+                if &chosen != attribute {
+                    actions.push(Action::Attribute {
+                        name: (chosen != *first).then_some(chosen),
+                    });
+                }
+            }
             let mut by = s.style.colour_map.is_some();
             let mut map = s.style.colour_map.unwrap_or_default();
             let before = (by, map);

@@ -161,6 +161,11 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         .map(|s| (s.name.clone(), s.colour))
         .collect();
     state.attribute = meta.attribute.as_ref().map(|a| a.name.clone());
+    state.attributes = first
+        .attribute_names()
+        .iter()
+        .map(|n| n.to_string())
+        .collect();
     drop(first);
     // The render thread and its device start before the window opens, so that a
     // machine without a device gets the renderer's clear error. Its replies wake the

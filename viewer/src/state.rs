@@ -303,6 +303,10 @@ pub enum Action {
     ColourMap {
         map: Option<ColourMap>,
     },
+    /// Which of the data's attributes colours (and lights splats): `None` the first.
+    Attribute {
+        name: Option<String>,
+    },
     /// S-NDF mode: rays per texel to refine to.
     SndfIterations {
         n: u32,
@@ -381,6 +385,9 @@ pub struct ViewerState {
     /// The data's species (name, linear colour) and scalar attribute, for the panel.
     pub species: Vec<(String, [f32; 3])>,
     pub attribute: Option<String>,
+    /// Every attribute the data keeps (the first, then further ones), for the panel's
+    /// choice of which to colour by.
+    pub attributes: Vec<String>,
 }
 
 /// One timestep of a data set.
@@ -406,6 +413,7 @@ impl ViewerState {
             size,
             species: vec![],
             attribute: None,
+            attributes: vec![],
         }
     }
 
@@ -588,6 +596,10 @@ impl ViewerState {
             }
             Action::ColourMap { map } => {
                 s.style.colour_map = *map;
+                scene
+            }
+            Action::Attribute { name } => {
+                s.style.attribute = name.clone();
                 scene
             }
             Action::SndfIterations { n } => {

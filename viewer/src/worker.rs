@@ -282,7 +282,8 @@ struct Thread<'r> {
     renderer: &'r Renderer,
     gpu_memory: GpuMemory,
     stream: Option<Streaming<'r>>,
-    files: FileCache<Arc<MdlodFile>>,
+    /// Open files with the attribute each was opened for.
+    files: FileCache<(Option<String>, Arc<MdlodFile>)>,
     /// The file whose bounds the window was sent last.
     bounds_sent: Option<PathBuf>,
     progressive: Option<Progressive>,
@@ -304,12 +305,26 @@ impl<'r> Thread<'r> {
         (self.wake)();
     }
 
-    fn file(&mut self, path: &Path) -> Result<Arc<MdlodFile>, String> {
-        if let Some(f) = self.files.get(path) {
-            return Ok(f);
+    /// The file at `path` with `attribute` in the first's place (`None`: as it is), kept
+    /// open for the next request; another attribute opens it again.
+    fn file(&mut self, path: &Path, attribute: Option<&str>) -> Result<Arc<MdlodFile>, String> {
+        if let Some((a, f)) = self.files.get(path) {
+            if a.as_deref() == attribute {
+                return Ok(f);
+            }
         }
-        let f = Arc::new(MdlodFile::open(path).map_err(|e| format!("{}: {e}", path.display()))?);
-        self.files.insert(path.to_path_buf(), f.clone());
+        let style = mdlod_render::PointStyle {
+            attribute: attribute.map(str::to_string),
+            ..Default::default()
+        };
+        let f = Arc::new(
+            mdlod_render::open_styled(path, &style)
+                .map_err(|e| format!("{}: {e}", path.display()))?,
+        );
+        self.files.insert(
+            path.to_path_buf(),
+            (attribute.map(str::to_string), f.clone()),
+        );
         Ok(f)
     }
 
@@ -370,7 +385,7 @@ impl<'r> Thread<'r> {
                         },
                     ),
                     Request::Prefetch(path) => {
-                        let _ = self.file(&path);
+                        let _ = self.file(&path, None);
                     }
                     Request::Screenshot {
                         path,
@@ -432,7 +447,7 @@ impl<'r> Thread<'r> {
             id,
             message: format!("{}: {e}", path.display()),
         };
-        let file = match self.file(path) {
+        let file = match self.file(path, opts.style.attribute.as_deref()) {
             Ok(f) => f,
             Err(message) => return self.reply(Reply::Error { id, message }),
         };
@@ -938,7 +953,7 @@ impl<'r> Thread<'r> {
         shade: &ShadeLights,
         out: &Path,
     ) -> Result<(), String> {
-        let file = self.file(path)?;
+        let file = self.file(path, opts.style.attribute.as_deref())?;
         let image = match opts.mode {
             RenderMode::Sndf { iterations, .. } => {
                 let (sndf, _) = sample_progressively(self.renderer, &file, opts, iterations)?;

@@ -614,3 +614,60 @@ fn streamed_previews_are_previews_and_end_with_the_drag() {
     }
     quiet(&w);
 }
+
+/// A file keeping two attributes: the panel's choice of the second colours by it, the
+/// image the headless renderer gives with `--attribute` (and differs from the first's).
+#[test]
+fn the_viewer_colours_by_the_attribute_chosen() {
+    let dir = tempfile::tempdir().unwrap();
+    let positions = mdlod_datasets::fcc_block([4, 4, 4], 3.615);
+    let n = positions.len();
+    let frame = Frame {
+        species_index: vec![0; n],
+        species: vec![SpeciesName {
+            name: "Cu".into(),
+            ..Default::default()
+        }],
+        attribute: Some(mdlod_preprocess::Attribute {
+            name: "x".into(),
+            values: positions.iter().map(|p| p[0]).collect(),
+        }),
+        positions: positions.clone(),
+        ..Default::default()
+    };
+    let path = dir.path().join("two.mdlod");
+    mdlod_preprocess::convert::convert_frame_with(
+        &frame,
+        &[mdlod_preprocess::Attribute {
+            name: "z".into(),
+            values: positions.iter().map(|p| p[2]).collect(),
+        }],
+        None,
+        &path,
+        &ConvertOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    let mut s = state(&path, [64, 48]);
+    s.attribute = Some("x".into());
+    s.attributes = vec!["x".into(), "z".into()];
+    s.apply(&Action::ColourMap {
+        map: Some(mdlod_render::ColourMap::Viridis),
+    });
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    render(&w, &s, 1);
+    let (_, by_x, _, _) = next_image(&w);
+    s.apply(&Action::Attribute {
+        name: Some("z".into()),
+    });
+    render(&w, &s, 2);
+    let (id, by_z, _, _) = next_image(&w);
+    assert_eq!(id, 2);
+    assert_ne!(by_x.data, by_z.data);
+    let renderer = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    let opts = s.render_options([64, 48]);
+    assert_eq!(opts.style.attribute.as_deref(), Some("z"));
+    let f = mdlod_render::open_styled(&path, &opts.style).unwrap();
+    let (headless, _) = render_image(&renderer, &f, &opts).unwrap();
+    assert_eq!(by_z.data, headless.data);
+}
