@@ -101,6 +101,9 @@ pub struct MdlodFile {
     node_blocks: Vec<AtomicU8>,
     /// The first failed check of a block checked after open.
     node_error: OnceLock<(String, String)>,
+    /// Every radius a RADIUS_LOG value decodes to, by value (made on first use: a power
+    /// per particle is slow where renders decode millions).
+    radius_table: OnceLock<Vec<f32>>,
     /// The last [`Self::hidden_below`] computed, with its set.
     species_below: Mutex<Option<(HiddenSet, Arc<[u8]>)>>,
 }
@@ -921,6 +924,7 @@ impl MdlodFile {
             attribute_range,
             extra_ranges,
             nodes_owned: None,
+            radius_table: OnceLock::new(),
             radius_range,
             block_first,
             node_blocks,
@@ -1396,12 +1400,29 @@ impl MdlodFile {
             .map(|r| bytemuck::cast_slice(&self.map[r]))
     }
 
+    /// The radius a value `q` of the file's RADIUS or RADIUS_LOG section stands for
+    /// ([`RadiusInfo::decode`]; on a log scale through a table made once); 0 without
+    /// per-particle radii.
+    #[inline]
+    pub fn radius_of(&self, q: u16) -> f32 {
+        match self.metadata.radius {
+            Some(info) if info.log => self
+                .radius_table
+                .get_or_init(|| (0..=u16::MAX).map(|q| info.decode(q)).collect())
+                .get(usize::from(q))
+                .copied()
+                .unwrap_or(0.0),
+            Some(info) => info.decode(q),
+            None => 0.0,
+        }
+    }
+
     /// The radius of particle `i` (an index into the finest level) from its own size
     /// where the file keeps one, else its species' radius (0 for an index out of range).
     pub fn particle_radius(&self, i: usize) -> f32 {
         let meta = &self.metadata;
-        if let (Some(q), Some(info)) = (self.radii(), meta.radius.as_ref()) {
-            return q.get(i).map_or(0.0, |&q| info.decode(q));
+        if let Some(q) = self.radii() {
+            return q.get(i).map_or(0.0, |&q| self.radius_of(q));
         }
         self.species()
             .get(i)

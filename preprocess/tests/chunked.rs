@@ -221,6 +221,10 @@ fn smoothing_lengths_spanning_decades_keep_their_sizes_on_a_log_scale() {
         .fold(0.0, f64::max);
     assert!(worst <= 1.1e-4, "{worst}");
     assert!(info.worst_relative_error() < 1.1e-4);
+    // Renders decode through a table: the same radii.
+    for q in (0..=u16::MAX).step_by(97).chain([u16::MAX]) {
+        assert_eq!(f.radius_of(q), info.decode(q), "{q}");
+    }
     // The metadata's JSON names the scale by its field, which a reader of version 1.1
     // does not know (it skips the RADIUS_LOG section and draws the species' mean).
     let json = f.metadata().to_json().unwrap();

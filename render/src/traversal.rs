@@ -1408,7 +1408,7 @@ fn front_to_back(
                     .get(c as usize)
                     .map_or(0, |&s| usize::from(s).min(radii.len().saturating_sub(1)));
                 let r = match own_radii {
-                    Some((q, info)) => q.get(c as usize).map_or(0.0, |&q| info.decode(q)),
+                    Some((q, _)) => q.get(c as usize).map_or(0.0, |&q| file.radius_of(q)),
                     None => radii.get(s).copied().unwrap_or(0.0),
                 };
                 if masked {

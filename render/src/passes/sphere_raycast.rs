@@ -551,7 +551,7 @@ impl AttrPacker {
             }
             // Each particle's own radius where the file keeps them, as drawn (styled).
             let own = file.radii().zip(meta.radius.as_ref());
-            let own_radius = |k: usize| own.map(|(q, info)| info.decode(q[first + k]));
+            let own_radius = |k: usize| own.map(|(q, _)| file.radius_of(q[first + k]));
             if let Some(scale) = &self.intensity {
                 for (k, &s) in sp.iter().enumerate() {
                     let q = values.get(first + k).copied().unwrap_or(0);
