@@ -123,6 +123,10 @@ pub struct FrameEntry {
     /// versions).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub species_column: Option<String>,
+    /// Converted with the particles wrapped into the cell (`--wrap`); absent otherwise
+    /// (and in manifests of earlier versions).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub wrap: bool,
 }
 
 /// `dataset.json`: the frames of a batch directory, by timestep.
@@ -894,6 +898,7 @@ fn entry_of(
         species_names: (!options.species_names.is_empty()).then(|| options.species_names.clone()),
         sizes: read.sizes.record(),
         species_column: read.species_column.clone(),
+        wrap: read.wrap,
     }
 }
 
@@ -1007,6 +1012,7 @@ struct Recorded {
     species_names: Option<Vec<(String, String)>>,
     sizes: Option<String>,
     species_column: Option<String>,
+    wrap: bool,
 }
 
 /// The column names and radius overrides each listed frame was converted with, from
@@ -1038,6 +1044,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
                     species_names: f.species_names,
                     sizes: f.sizes,
                     species_column: f.species_column,
+                    wrap: f.wrap,
                 },
             );
         }
@@ -1750,7 +1757,8 @@ pub fn batch(
             let same_sizes = recorded.and_then(|r| r.sizes.clone()) == opts.read.sizes.record();
             // And another species column.
             let same_species_column = recorded.and_then(|r| r.species_column.as_ref())
-                == opts.read.species_column.as_ref();
+                == opts.read.species_column.as_ref()
+                && recorded.is_some_and(|r| r.wrap) == opts.read.wrap;
             let own = f.metadata().source.as_ref();
             // The source as the manifest lists it: a frame kept by its bytes is listed
             // with the input's size and time then, so the next rerun need not read it.
@@ -2656,7 +2664,7 @@ struct MergeSettings {
         String,
         BuildInfo,
         Option<String>,
-        (Option<String>, Option<String>),
+        (Option<String>, Option<String>, bool),
     )>,
     /// A frame with a chunked build: its name and chunk size.
     chunked: Option<(String, u64)>,
@@ -2717,16 +2725,27 @@ impl MergeSettings {
                 .collect::<Vec<_>>()
                 .join(", ")
         });
-        let Some((first, build, first_attribute, (first_sizes, first_species))) = &self.first
+        let Some((first, build, first_attribute, (first_sizes, first_species, first_wrap))) =
+            &self.first
         else {
             self.first = Some((
                 this.clone(),
                 m.build.clone(),
                 attribute,
-                (f.sizes.clone(), f.species_column.clone()),
+                (f.sizes.clone(), f.species_column.clone(), f.wrap),
             ));
             return self.check_renames_chunks_and_radii(m, f, this);
         };
+        if *first_wrap != f.wrap {
+            let name = |w: bool| if w { "--wrap" } else { "no --wrap" };
+            return Err(differ(
+                first,
+                &this,
+                "wrapping into the cell",
+                name(*first_wrap),
+                name(f.wrap),
+            ));
+        }
         if *first_sizes != f.sizes {
             let name = |s: &Option<String>| s.clone().unwrap_or_else(|| "the default".into());
             return Err(differ(

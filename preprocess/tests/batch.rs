@@ -2563,3 +2563,25 @@ fn shards_of_other_duplicate_choices_do_not_merge() {
     let m = merge(&out).unwrap();
     assert_eq!((m.frames.len(), m.duplicates.as_deref()), (6, Some("last")));
 }
+
+/// `wrap` is recorded per frame: a rerun with it keeps the frames, one without converts
+/// them again.
+#[test]
+fn a_rerun_with_another_wrapping_converts_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("alloy.dump");
+    std::fs::copy(lammps_sample_path("cuag_alloy.unwrapped.dump"), &src).unwrap();
+    let out = dir.path().join("out");
+    let run = |wrap: bool| {
+        let mut o = opts();
+        o.read.wrap = wrap;
+        let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        (r.converted, r.skipped)
+    };
+    assert_eq!(run(true), (5, 0));
+    let m = read_manifest(&out).unwrap();
+    assert!(m.frames.iter().all(|f| f.wrap));
+    assert_eq!(run(true), (0, 5));
+    assert_eq!(run(false), (5, 0));
+    assert!(read_manifest(&out).unwrap().frames.iter().all(|f| !f.wrap));
+}

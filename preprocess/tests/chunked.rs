@@ -1191,3 +1191,23 @@ fn a_bad_particle_out_of_core_is_named_in_the_input() {
     );
     assert!(!out.exists());
 }
+
+/// `wrap` reads the same wrapped particles a window at a time as whole: unwrapped
+/// coordinates of a melt streamed into the file a whole read builds.
+#[test]
+fn wrapped_unwrapped_coordinates_stream_into_the_same_file() {
+    let path = mdlod_datasets::lammps_sample_path("cuag_alloy.unwrapped.dump");
+    let read = ReadOptions {
+        wrap: true,
+        ..Default::default()
+    };
+    let f = streamed_equals_in_memory(&path, &read, 300);
+    let b = f.metadata().simulation_box.clone().unwrap();
+    let top = f.nodes()[0];
+    // The particles' spheres (radius below 1.5) inside the box grown by a radius.
+    for d in 0..3 {
+        let (lo, hi) = (b.origin[d], b.origin[d] + [b.a[0], b.b[1], b.c[2]][d]);
+        assert!(f64::from(top.bounds_min[d]) >= lo - 1.5, "{top:?}");
+        assert!(f64::from(top.bounds_max[d]) <= hi + 1.5, "{top:?}");
+    }
+}

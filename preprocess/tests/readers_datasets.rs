@@ -161,6 +161,53 @@ fn cuag_alloy_elements_and_unwrapped() {
         outside > 0,
         "every atom inside the box: coordinates wrapped?"
     );
+    // `wrap`: every atom back inside the periodic box, each moved by whole box lengths.
+    let opts = ReadOptions {
+        wrap: true,
+        ..Default::default()
+    };
+    let k = dump.frame_count() - 1;
+    let wrapped = dump.read_frame(k, &opts, &NoProgress).unwrap();
+    let b = wrapped.simulation_box.clone().unwrap();
+    let lo = b.origin;
+    let len = [b.a[0], b.b[1], b.c[2]];
+    for (p, q) in wrapped.positions.iter().zip(&last.positions) {
+        for d in 0..3 {
+            let (p, q) = (f64::from(p[d]), f64::from(q[d]));
+            assert!(
+                p >= lo[d] - 1e-4 && p <= lo[d] + len[d] + 1e-4,
+                "{p} outside"
+            );
+            let shifts = (q - p) / len[d];
+            assert!((shifts - shifts.round()).abs() < 1e-4, "{q} to {p}");
+        }
+    }
+}
+
+/// `wrap_positions`: fractional coordinates along the periodic axes of a triclinic cell
+/// taken modulo 1; a non-periodic axis is left alone.
+#[test]
+fn wrapping_into_a_triclinic_cell() {
+    let cell = mdlod_format::meta::SimulationBox {
+        origin: [1.0, 2.0, 3.0],
+        a: [10.0, 0.0, 0.0],
+        b: [3.0, 10.0, 0.0],
+        c: [1.0, 2.0, 10.0],
+        periodic: Some([true, true, false]),
+    };
+    let at = |f: [f64; 3]| -> [f32; 3] {
+        [0, 1, 2].map(|r| {
+            (cell.origin[r] + cell.a[r] * f[0] + cell.b[r] * f[1] + cell.c[r] * f[2]) as f32
+        })
+    };
+    let mut p = vec![at([1.5, -0.25, 1.5]), at([0.25, 0.5, 0.5])];
+    mdlod_preprocess::readers::wrap_positions(&mut p, &cell);
+    let want = [at([0.5, 0.75, 1.5]), at([0.25, 0.5, 0.5])];
+    for (got, want) in p.iter().zip(&want) {
+        for d in 0..3 {
+            assert!((got[d] - want[d]).abs() < 1e-4, "{got:?} against {want:?}");
+        }
+    }
 }
 
 #[test]

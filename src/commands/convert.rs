@@ -72,6 +72,13 @@ pub struct BuildArgs {
     /// keeps by itself (a raw sidecar's `attribute`).
     #[arg(long)]
     pub attribute_log10: bool,
+    /// Wrap the particles into the simulation cell along its periodic axes (OVITO's
+    /// "wrap at periodic boundaries"): unwrapped coordinates (`xu yu zu`) of atoms that
+    /// crossed the cell's faces come back inside it, so a liquid stays in its box
+    /// through a movie. Axes the input does not call periodic or not (LAMMPS `pp`, XYZ
+    /// `pbc=`) are all wrapped; frames without a cell are read as they are
+    #[arg(long)]
+    pub wrap: bool,
     /// Column names, space separated, for dumps that do not name them (old-revision
     /// LAMMPS binary dumps other than `dump atom`), e.g. "id type x y z c_pe".
     #[arg(long, value_name = "NAMES")]
@@ -222,6 +229,7 @@ impl BuildArgs {
                 _ => SizeColumn::Auto,
             },
             species_column: self.species_column.clone(),
+            wrap: self.wrap,
         };
         (convert, read)
     }

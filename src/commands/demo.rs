@@ -47,6 +47,7 @@ pub fn run(args: Args) -> Result<()> {
             species_names: Vec::new(),
             attribute: vec![Kind::Crater.extra_column().to_string()],
             attribute_log10: false,
+            wrap: false,
             columns: None,
             radius_column: None,
             species_column: None,

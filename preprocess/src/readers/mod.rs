@@ -255,6 +255,69 @@ impl fmt::Display for InputFormat {
     }
 }
 
+/// Wraps `frame`'s particles into its cell along the cell's periodic axes (all three where
+/// the input does not say; none without a cell): each position's fractional coordinate
+/// along such an axis taken modulo 1, in `f64`. A cell without volume is left alone.
+pub fn wrap_into_cell(frame: &mut Frame) {
+    let Some(cell) = &frame.simulation_box else {
+        return;
+    };
+    wrap_positions(&mut frame.positions, cell);
+}
+
+/// [`wrap_into_cell`] of `positions` in `cell`.
+pub fn wrap_positions(positions: &mut [[f32; 3]], cell: &mdlod_format::meta::SimulationBox) {
+    let periodic = cell.periodic.unwrap_or([true; 3]);
+    if !periodic.iter().any(|&p| p) {
+        return;
+    }
+    // Columns a, b, c; the inverse by the adjugate.
+    let m = [
+        [cell.a[0], cell.b[0], cell.c[0]],
+        [cell.a[1], cell.b[1], cell.c[1]],
+        [cell.a[2], cell.b[2], cell.c[2]],
+    ];
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    if !(det.is_finite() && det.abs() > 0.0) {
+        return;
+    }
+    let inv = [
+        [
+            (m[1][1] * m[2][2] - m[1][2] * m[2][1]) / det,
+            (m[0][2] * m[2][1] - m[0][1] * m[2][2]) / det,
+            (m[0][1] * m[1][2] - m[0][2] * m[1][1]) / det,
+        ],
+        [
+            (m[1][2] * m[2][0] - m[1][0] * m[2][2]) / det,
+            (m[0][0] * m[2][2] - m[0][2] * m[2][0]) / det,
+            (m[0][2] * m[1][0] - m[0][0] * m[1][2]) / det,
+        ],
+        [
+            (m[1][0] * m[2][1] - m[1][1] * m[2][0]) / det,
+            (m[0][1] * m[2][0] - m[0][0] * m[2][1]) / det,
+            (m[0][0] * m[1][1] - m[0][1] * m[1][0]) / det,
+        ],
+    ];
+    for p in positions.iter_mut() {
+        let d = [0, 1, 2].map(|k| f64::from(p[k]) - cell.origin[k]);
+        let mut f = [0, 1, 2].map(|r| inv[r][0] * d[0] + inv[r][1] * d[1] + inv[r][2] * d[2]);
+        let mut moved = false;
+        for k in 0..3 {
+            if periodic[k] && f[k].is_finite() && !(0.0..1.0).contains(&f[k]) {
+                f[k] -= f[k].floor();
+                moved = true;
+            }
+        }
+        if moved {
+            *p = [0, 1, 2].map(|r| {
+                (cell.origin[r] + m[r][0] * f[0] + m[r][1] * f[1] + m[r][2] * f[2]) as f32
+            });
+        }
+    }
+}
+
 /// What the note on a gzip dump cut short starts with: it is about the file, not the
 /// frames that carry it (the last two, as the cut may fall inside the last).
 pub const GZIP_CUT: &str = "compressed stream cut short";
@@ -280,6 +343,11 @@ pub struct ReadOptions {
     /// own, with its own colour, averaged in clusters as species colours are, hidden
     /// and named as species are. Each distinct value is one species.
     pub species_column: Option<String>,
+    /// Wrap every particle into the simulation cell along its periodic axes (all three
+    /// where the input does not say which are), as OVITO's "wrap at periodic
+    /// boundaries": unwrapped coordinates (`xu yu zu`) of atoms that crossed the cell's
+    /// faces come back inside it. Frames without a cell are read as they are.
+    pub wrap: bool,
 }
 
 /// Which column gives each particle's size ([`Frame::radii`]).
@@ -978,6 +1046,7 @@ impl DumpFile {
                     columns: opts.columns.clone(),
                     sizes: SizeColumn::Off,
                     species_column: None,
+                    wrap: false,
                 };
                 let part = self.read_part(k, &plain, 0..1, &NoProgress)?;
                 Ok(match part.species.first() {
@@ -1048,6 +1117,21 @@ impl DumpFile {
     /// dumps where [`DumpFile::reads_parts`] holds. Species are those the range uses, in
     /// the order the whole frame would list them.
     pub fn read_part(
+        &self,
+        k: usize,
+        opts: &ReadOptions,
+        range: Range<usize>,
+        progress: &dyn Progress,
+    ) -> Result<Frame, ReadError> {
+        let mut frame = self.read_part_as_stored(k, opts, range, progress)?;
+        if opts.wrap {
+            wrap_into_cell(&mut frame);
+        }
+        Ok(frame)
+    }
+
+    /// [`Self::read_part`] without the wrapping into the cell.
+    fn read_part_as_stored(
         &self,
         k: usize,
         opts: &ReadOptions,
@@ -1180,10 +1264,24 @@ impl DumpFile {
         opts: &ReadOptions,
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
+        let mut frame = self.read_frame_as_stored(k, opts, progress)?;
+        if opts.wrap {
+            wrap_into_cell(&mut frame);
+        }
+        Ok(frame)
+    }
+
+    /// [`Self::read_frame`] without the wrapping into the cell.
+    fn read_frame_as_stored(
+        &self,
+        k: usize,
+        opts: &ReadOptions,
+        progress: &dyn Progress,
+    ) -> Result<Frame, ReadError> {
         if let Index::Gsd(_) | Index::Mmpld(_) = &self.index {
             // The whole frame is its one part.
             let n = self.frame_info(k)?.particles;
-            return self.read_part(k, opts, 0..n, progress);
+            return self.read_part_as_stored(k, opts, 0..n, progress);
         }
         if let Index::Pieces(p) = &self.index {
             self.check_frame(k)?;
@@ -1484,20 +1582,21 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
             name: header.info.columns[attribute.unwrap_or_default()].clone(),
             values,
         });
-        f(
-            first,
-            Frame {
-                positions: atoms.positions,
-                species_index: atoms.species_index,
-                species: atoms.species,
-                attribute,
-                radii: atoms.radii,
-                simulation_box: header.info.simulation_box.clone(),
-                timestep: header.info.timestep,
-                time: header.info.time,
-                units: header.info.units.clone(),
-            },
-        )?;
+        let mut part = Frame {
+            positions: atoms.positions,
+            species_index: atoms.species_index,
+            species: atoms.species,
+            attribute,
+            radii: atoms.radii,
+            simulation_box: header.info.simulation_box.clone(),
+            timestep: header.info.timestep,
+            time: header.info.time,
+            units: header.info.units.clone(),
+        };
+        if opts.wrap {
+            wrap_into_cell(&mut part);
+        }
+        f(first, part)?;
         pos = end;
         first += want;
     }
