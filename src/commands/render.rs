@@ -191,7 +191,8 @@ pub struct Args {
     pub legend_title: Option<String>,
     /// A line of text drawn into the image on a light panel (OVITO's text label), with
     /// each frame's values put in for {timestep}, {time}, {frame} (the image's number),
-    /// {particles} and {file}: `--label "t = {time} ps"` on a movie; `{time:.2}` gives
+    /// {particles}, {file} (the .mdlod) and {source} (the dump it was converted from):
+    /// `--label "t = {time} ps"` on a movie; `{time:.2}` gives
     /// the time two decimals (a movie's times otherwise all take as many as the most
     /// precise needs, so the text keeps its width); `{{` and `}}` are braces themselves
     /// (`--label "{{111}} planes"`); repeatable, a line each
@@ -253,7 +254,7 @@ fn legend_categories(args: &Args) -> Result<Vec<(f32, String)>> {
 }
 
 /// The placeholders `--label` fills in.
-const LABEL_FIELDS: &[&str] = &["timestep", "time", "frame", "particles", "file"];
+const LABEL_FIELDS: &[&str] = &["timestep", "time", "frame", "particles", "file", "source"];
 
 /// One image's values for `--label`.
 #[derive(Clone, Debug, Default)]
@@ -263,6 +264,15 @@ struct LabelValues {
     frame: usize,
     particles: u64,
     file: String,
+    /// The name of the input the frame was converted from (the dump), where recorded.
+    source: Option<String>,
+}
+
+/// The file name of a recorded source path (`runs/melt.lammpstrj` → `melt.lammpstrj`).
+fn source_name(path: &str) -> String {
+    Path::new(path)
+        .file_name()
+        .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned())
 }
 
 impl LabelValues {
@@ -276,6 +286,7 @@ impl LabelValues {
             file: path
                 .file_name()
                 .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+            source: meta.source.as_ref().map(|s| source_name(&s.path)),
         }
     }
 
@@ -298,6 +309,7 @@ impl LabelValues {
                         }),
                         "frame" => Some(self.frame.to_string()),
                         "particles" => Some(self.particles.to_string()),
+                        "source" => self.source.clone(),
                         _ => Some(self.file.clone()),
                     };
                     if value.is_none() && !missing.contains(&field) {
@@ -3406,6 +3418,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
                 frame: i,
                 particles: f.particles,
                 file: f.file.clone(),
+                source: Some(source_name(&f.source.path)).filter(|s| !s.is_empty()),
             };
             (p.clone(), values)
         })
@@ -3430,6 +3443,7 @@ mod tests {
             frame: 3,
             particles: 2552,
             file: "gb.mdlod".into(),
+            source: Some("gb.dump".into()),
         };
         let fill = |t: &str| v.fill(t, None);
         assert_eq!(
@@ -3445,6 +3459,7 @@ mod tests {
             ("{500} {timestep}".into(), vec![])
         );
         assert_eq!(fill("t={time} ({time})"), ("t=? (?)".into(), vec!["time"]));
+        assert_eq!(fill("{file} of {source}").0, "gb.mdlod of gb.dump");
         // A time in its shortest form, to a movie's decimals, or to its placeholder's.
         let timed = LabelValues {
             time: Some(1.2),
