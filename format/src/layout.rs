@@ -17,7 +17,7 @@ pub const FORMAT_VERSION_RADII: (u16, u16) = (1, 1);
 
 /// The version of files whose per-particle radii are quantized on a log scale (the
 /// RADIUS_LOG section), or that keep more than one attribute (ATTRIBUTES).
-pub const FORMAT_VERSION_LOG_RADII: (u16, u16) = (1, 2);
+pub const FORMAT_VERSION_1_2: (u16, u16) = (1, 2);
 
 /// The most extra attributes a file keeps (the metadata's `attributes`).
 pub const MAX_EXTRA_ATTRIBUTES: usize = 64;

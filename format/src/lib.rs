@@ -29,8 +29,8 @@ pub mod writer;
 
 pub use error::FormatError;
 pub use layout::{
-    LevelRecord, NodeRecord, SectionKind, FORMAT_VERSION, FORMAT_VERSION_LOG_RADII,
-    FORMAT_VERSION_RADII, MAGIC, MAX_EXTRA_ATTRIBUTES,
+    LevelRecord, NodeRecord, SectionKind, FORMAT_VERSION, FORMAT_VERSION_1_2, FORMAT_VERSION_RADII,
+    MAGIC, MAX_EXTRA_ATTRIBUTES,
 };
 pub use meta::Metadata;
 pub use progress::{NoProgress, Progress};

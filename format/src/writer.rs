@@ -15,7 +15,7 @@ use xxhash_rust::xxh3::{xxh3_64, Xxh3};
 
 use crate::error::FormatError;
 use crate::layout::{
-    align_up, Header, SectionEntry, SectionKind, FORMAT_VERSION, FORMAT_VERSION_LOG_RADII,
+    align_up, Header, SectionEntry, SectionKind, FORMAT_VERSION, FORMAT_VERSION_1_2,
     FORMAT_VERSION_RADII, HEADER_SIZE, MAGIC,
 };
 
@@ -175,7 +175,7 @@ impl Writer {
         // any other is 1.0.
         let has = |kind: SectionKind| self.sections.iter().any(|s| s.kind == kind as u32);
         let version = if has(SectionKind::RadiusLog) || has(SectionKind::Attributes) {
-            FORMAT_VERSION_LOG_RADII
+            FORMAT_VERSION_1_2
         } else if has(SectionKind::Radius) {
             FORMAT_VERSION_RADII
         } else {

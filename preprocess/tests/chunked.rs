@@ -200,7 +200,7 @@ fn smoothing_lengths_spanning_decades_keep_their_sizes_on_a_log_scale() {
     let f = streamed_equals_in_memory(&sidecar, &ReadOptions::default(), 700);
     assert_eq!(
         (f.header().version_major, f.header().version_minor),
-        mdlod_format::FORMAT_VERSION_LOG_RADII
+        mdlod_format::FORMAT_VERSION_1_2
     );
     let info = f.metadata().radius.expect("per-particle radii");
     assert!(info.log, "{info:?}");
