@@ -7946,7 +7946,8 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
     let rendered = ok(&args);
     assert!(
         rendered.contains(
-            "note: 1 frame the batch could not convert is missing from the images (timestep 400)"
+            "note: 1 frame the batch could not convert is missing from the images (timestep 400): \
+             `mdlod verify"
         ),
         "{rendered}"
     );
@@ -7964,8 +7965,9 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
     std::fs::write(&manifest, m.to_string()).unwrap();
     let rendered = ok(&args);
     assert!(
-        rendered.contains("note: the batch lists 5 of the 6 frames its run is to convert")
-            && !rendered.contains("could not convert"),
+        rendered.contains(
+            "note: the batch lists 5 of the 6 frames its run is to convert (still running"
+        ) && !rendered.contains("could not convert"),
         "{rendered}"
     );
     let info = ok(&["info", s(&out)]);
@@ -8050,6 +8052,9 @@ fn several_attributes_in_one_file_colour_by_any() {
         "z",
     ]);
     assert!(e.contains("--attribute z is given twice"), "{e}");
+    let mut args = vec!["convert", s(&dump), "-o", s(&both), "--attribute-log10"];
+    args.extend(["--attribute", "c_ke", "--attribute", "z"]);
+    assert!(fails(&args).contains("--attribute-log10 with 2 --attribute columns"));
     // A batch: kept while the columns are the same, converted again when they change.
     let out = dir.path().join("d");
     let batch = |extra: &[&str]| {

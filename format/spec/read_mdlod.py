@@ -175,6 +175,7 @@ METADATA_FIELDS = {
     "timestep": ("u64", OPTIONAL),
     "time": ("number", OPTIONAL),
     "units": ("string", OPTIONAL),
+    "species_column": ("string", OPTIONAL),
     "species": ((SPECIES_FIELDS, "[]"), REQUIRED),
     "attribute": (
         {"name": ("string", REQUIRED), "min": ("f32", REQUIRED), "max": ("f32", REQUIRED)},
@@ -198,7 +199,15 @@ METADATA_FIELDS = {
             "size": ("u64", REQUIRED),
             "modified_unix": ("i64", OPTIONAL),
             "modified_nanos": ("u32", OPTIONAL),
-            "frame": ("u64", DEFAULT),
+            "frame": ("u64", OPTIONAL),
+            "bytes": (
+                {
+                    "start": ("u64", REQUIRED),
+                    "end": ("u64", REQUIRED),
+                    "xxh3": ("string", REQUIRED),
+                },
+                OPTIONAL,
+            ),
         },
         OPTIONAL,
     ),
@@ -545,8 +554,14 @@ class MdlodFile:
         self.attribute = None
         if meta.get("attribute") is not None:
             self.attribute = (f32(meta["attribute"]["min"]), f32(meta["attribute"]["max"]))
-        # Further attributes: ranges, distinct names after a first one.
+        # Further attributes: at most 64 (counted first), ranges, distinct names after
+        # a first one.
         self.extras = meta.get("attributes") or []
+        if len(self.extras) > MAX_EXTRA_ATTRIBUTES:
+            raise FormatError(
+                place,
+                f"{len(self.extras)} extra attributes (at most {MAX_EXTRA_ATTRIBUTES})",
+            )
         names = [meta["attribute"]["name"]] if meta.get("attribute") is not None else []
         for k, a in enumerate(self.extras):
             lo, hi = f32(a["min"]), f32(a["max"])
@@ -565,10 +580,15 @@ class MdlodFile:
             if a["name"] in names:
                 raise FormatError(place, f"attributes[{k}] {a['name']!r}: a name given twice")
             names.append(a["name"])
-        if len(self.extras) > MAX_EXTRA_ATTRIBUTES:
+        # A frame's checksum is 16 lowercase hexadecimal digits.
+        source = meta.get("source") or {}
+        xxh3 = (source.get("bytes") or {}).get("xxh3")
+        if xxh3 is not None and not (
+            len(xxh3) == 16 and all(c in "0123456789abcdef" for c in xxh3)
+        ):
             raise FormatError(
                 place,
-                f"{len(self.extras)} extra attributes (at most {MAX_EXTRA_ATTRIBUTES})",
+                f"source.bytes.xxh3 {xxh3[:40]!r} is not 16 lowercase hexadecimal digits",
             )
         # Per-particle radii: linear steps (`radius`, RADIUS) or a log scale
         # (`radius_log`, RADIUS_LOG), not both.

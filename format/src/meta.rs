@@ -243,6 +243,13 @@ pub struct SourceInfo {
     pub bytes: Option<FrameBytes>,
 }
 
+/// An optional list whose absence means none: `null` is its absence too.
+fn null_is_empty<'de, D: serde::Deserializer<'de>, T: Deserialize<'de>>(
+    d: D,
+) -> Result<Vec<T>, D::Error> {
+    Ok(Option::<Vec<T>>::deserialize(d)?.unwrap_or_default())
+}
+
 /// An optional integer whose absence means 0: `null` is its absence too (section 7: an
 /// optional field may be absent or `null`).
 fn null_is_zero<'de, D: serde::Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
@@ -310,7 +317,11 @@ pub struct Metadata {
     /// Further per-particle attributes (version 1.2: the ATTRIBUTES and NODE_ATTRIBUTES
     /// sections), each quantized over its own range as `attribute` is; a reader of
     /// version 1.1 knows the first only.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[serde(
+        default,
+        skip_serializing_if = "Vec::is_empty",
+        deserialize_with = "null_is_empty"
+    )]
     pub attributes: Vec<AttributeInfo>,
     /// The range of the per-particle radii (the RADIUS or RADIUS_LOG section), where the
     /// particles of a species differ in size. Its JSON field is `radius` for linear

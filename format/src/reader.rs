@@ -621,8 +621,19 @@ impl MdlodFile {
                 ),
             ));
         }
-        // Extra attributes: valid ranges, distinct names (the first's too), and only with
-        // a first attribute.
+        // Extra attributes: at most the format's number (counted before anything is
+        // compared), valid ranges, distinct names (the first's too), and only with a
+        // first attribute.
+        if metadata.attributes.len() > crate::layout::MAX_EXTRA_ATTRIBUTES {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "{} extra attributes (at most {})",
+                    metadata.attributes.len(),
+                    crate::layout::MAX_EXTRA_ATTRIBUTES
+                ),
+            ));
+        }
         for (k, a) in metadata.attributes.iter().enumerate() {
             let problem = if !(a.min.is_finite() && a.max.is_finite() && a.min <= a.max) {
                 Some(format!(
@@ -645,16 +656,6 @@ impl MdlodFile {
                     format!("attributes[{k}] {:?}: {problem}", a.name),
                 ));
             }
-        }
-        if metadata.attributes.len() > crate::layout::MAX_EXTRA_ATTRIBUTES {
-            return Err(corrupt(
-                "METADATA",
-                format!(
-                    "{} extra attributes (at most {})",
-                    metadata.attributes.len(),
-                    crate::layout::MAX_EXTRA_ATTRIBUTES
-                ),
-            ));
         }
         if let Some(r) = metadata.radius.as_ref().filter(|r| !r.is_valid()) {
             return Err(corrupt(
@@ -1018,8 +1019,8 @@ impl MdlodFile {
 
     /// This file with the attribute named `name` in the first's place: its values,
     /// range and node means are those every reader of the first attribute (colours,
-    /// splat light, hidden values) takes. The first attribute's name gives the file as
-    /// it is. The node records are copied (a file with extra attributes was built
+    /// splat light, hidden values) takes, and it is the file's only attribute (select
+    /// another from a fresh open). The first attribute's name gives the file as it is. The node records are copied (a file with extra attributes was built
     /// whole, at most a chunk's particles); a mean that is not finite is refused, naming
     /// the node. An unknown name is an error listing the file's attributes.
     pub fn select_attribute(mut self, name: &str) -> Result<MdlodFile, FormatError> {
@@ -1069,7 +1070,13 @@ impl MdlodFile {
         }
         self.nodes_owned = Some(nodes);
         self.attribute_range = Some(values.start + k * per..values.start + (k + 1) * per);
+        // The file is then one of that attribute alone (its metadata, its values and
+        // means; no further attributes): another is selected from a fresh open.
         self.metadata.attribute = Some(self.metadata.attributes[k].clone());
+        self.metadata.attributes.clear();
+        self.extra_ranges = None;
+        // Hidden values depend on the attribute: a set computed before is stale.
+        *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
         Ok(self)
     }
 
@@ -1792,7 +1799,14 @@ impl MdlodFile {
                 .filter(|f| !(f.is_object() || f.is_null()))
                 .map(|_| format!("`{name}` is not an object (section 7 of FORMAT.md)"))
         };
-        for key in ["box", "attribute", "radius", "source", "build"] {
+        for key in [
+            "box",
+            "attribute",
+            "radius",
+            "radius_log",
+            "source",
+            "build",
+        ] {
             if let Some(p) = field(&v, key, key) {
                 return Some(p);
             }
@@ -1802,6 +1816,15 @@ impl MdlodFile {
             .and_then(|s| field(s, "bytes", "source.bytes"))
         {
             return Some(p);
+        }
+        if let Some(i) = v
+            .get("attributes")
+            .and_then(|a| a.as_array())
+            .and_then(|a| a.iter().position(|e| !e.is_object()))
+        {
+            return Some(format!(
+                "attributes[{i}] is not an object (section 7 of FORMAT.md)"
+            ));
         }
         let species = v.get("species")?.as_array()?;
         species

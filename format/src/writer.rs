@@ -263,9 +263,6 @@ impl SectionWriter<'_> {
     }
 }
 
-/// A builder of the temporary file a finished output is renamed from: created with the
-/// permissions any new file gets (0666 less the user's umask: 0644 usually, 0600 under
-/// `umask 077`, 0664 for a group's shared space), not a temporary file's private 0600.
 /// Whether new `.mdlod` files may begin: `false` once [`refuse_new_outputs`] ran.
 static OUTPUTS_OPEN: std::sync::RwLock<bool> = std::sync::RwLock::new(true);
 
@@ -288,6 +285,9 @@ fn outputs_gate() -> Result<std::sync::RwLockReadGuard<'static, bool>, FormatErr
     }
 }
 
+/// A builder of the temporary file a finished output is renamed from: created with the
+/// permissions any new file gets (0666 less the user's umask: 0644 usually, 0600 under
+/// `umask 077`, 0664 for a group's shared space), not a temporary file's private 0600.
 pub fn output_file_builder<'a, 'b>() -> tempfile::Builder<'a, 'b> {
     #[allow(unused_mut)]
     let mut builder = tempfile::Builder::new();

@@ -607,6 +607,7 @@ impl BatchError {
                 | ConvertError::LastFrameIncomplete { .. }
                 | ConvertError::Build { .. }
                 | ConvertError::EmptyFrame(_)
+                | ConvertError::Attributes { .. }
                 | ConvertError::UnusableRadius(_) => true,
                 ConvertError::Decompressed { source, .. } => convert(source),
                 _ => false,

@@ -1400,6 +1400,10 @@ fn radii_on_a_log_scale_are_checked_as_linear_ones() {
         d.set_meta(&m);
         d.write(dir.path(), name)
     };
+    let p = with("log-listed.mdlod", &|_, m| {
+        m["radius_log"] = serde_json::json!([0.001, 10.0])
+    });
+    expect_refused(&p, &["`radius_log` is not an object"]);
     let p = with("log-from-0.mdlod", &|_, m| {
         m["radius_log"]["min"] = 0.0.into()
     });
@@ -1498,6 +1502,17 @@ fn further_attributes_are_checked() {
         d.section(SectionKind::Attributes, last).truncate(2);
     });
     expect_refused(&p, &["ATTRIBUTES", "expected 1 attributes of"]);
+    // Objects are objects: an entry as a list of its values is refused; null is none.
+    let p = with("listed.mdlod", &|_, m| {
+        m["attributes"][0] = serde_json::json!(["c_ke", 0.0, 1.0])
+    });
+    expect_refused(&p, &["attributes[0] is not an object"]);
+    let p = with("null.mdlod", &|d, m| {
+        m["attributes"] = serde_json::Value::Null;
+        d.remove(SectionKind::Attributes, last);
+        d.remove(SectionKind::NodeAttributes, 0);
+    });
+    expect_accepted(&p);
     let p = with("twice.mdlod", &|_, m| {
         m["attributes"][0]["name"] = "c_pe".into()
     });

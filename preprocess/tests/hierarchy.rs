@@ -860,6 +860,46 @@ fn further_attributes_round_trip_and_select_like_the_first() {
             assert!((d - v).abs() <= 0.5 * step + 1e-4, "{d} against {v}");
         }
     }
+    // Small values beside very large ones: each node's mean from its own particles,
+    // within the values' range (sums of a whole level's run left small means anywhere
+    // in ±10 beside a total of 10^17).
+    let frame = test_frame(8);
+    let split: Vec<f32> = frame
+        .positions
+        .iter()
+        .map(|p| if p[2] < 40.0 { 1e12 } else { 1.0 })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("split.mdlod");
+    mdlod_preprocess::convert::convert_frame_with(
+        &frame,
+        &[Attribute {
+            name: "split".into(),
+            values: split,
+        }],
+        None,
+        &path,
+        &ConvertOptions {
+            build: BuildParams {
+                max_root_points: 16,
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+        &NoProgress,
+    )
+    .unwrap();
+    let f = MdlodFile::open(&path).unwrap();
+    let means = f.extra_node_means(0).unwrap();
+    assert!(
+        means.iter().all(|&m| (1.0..=1e12).contains(&m)),
+        "{means:?}"
+    );
+    assert!(
+        means.contains(&1.0) && means.contains(&1e12),
+        "{:?}",
+        &means[..means.len().min(40)]
+    );
     // In chunks: refused, saying why.
     let frame = test_frame(8);
     let dir = tempfile::tempdir().unwrap();

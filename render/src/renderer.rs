@@ -80,6 +80,12 @@ pub trait CutSource {
             None => Ok(vec![self.bind(draw)?]),
         }
     }
+
+    /// What an intensity of 1 of the bound points stands for in their attribute's units
+    /// (splats lit by the attribute: [`crate::passes::sphere_raycast::AttrPacker::light_unit`]).
+    fn light_unit(&self) -> f32 {
+        1.0
+    }
 }
 
 /// The cut packed from the mapped file and uploaded whole.
@@ -93,6 +99,11 @@ pub struct PackedCut<'a> {
 impl CutSource for PackedCut<'_> {
     fn style(&self) -> PackStyle {
         self.style
+    }
+
+    fn light_unit(&self) -> f32 {
+        crate::passes::sphere_raycast::AttrPacker::new(self.file, self.style, self.look)
+            .map_or(1.0, |p| p.light_unit())
     }
 
     fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError> {
@@ -350,6 +361,9 @@ pub struct SplatFrame {
     /// `by_attribute`): r, g and b carry it (grey), a their disks' flux whatever their
     /// attribute.
     pub by_attribute: bool,
+    /// What a light of 1 in `hdr` stands for in the attribute's units, when the light is
+    /// the attribute's ([`Self::light`] multiplies by it); 1 otherwise.
+    pub light_unit: f32,
     pub gpu_time: Option<Duration>,
     pub points: u32,
     pub gpu_data_bytes: u64,
@@ -372,7 +386,9 @@ impl SplatFrame {
     /// is their attribute.
     pub fn light(&self, p: &[f32; 4]) -> f32 {
         if self.by_attribute {
-            p[0]
+            // (Held at single precision's largest: units past it give no infinities.)
+            (f64::from(p[0]) * f64::from(self.light_unit))
+                .clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
         } else {
             p[3]
         }
@@ -2284,11 +2300,17 @@ impl Renderer {
                 .collect();
             let gpu_time = self.gpu_time(timing.as_ref())?;
             self.count_samples(points, 1);
+            let by_attribute = splat_style(blend) == PackStyle::FluxAttribute;
             Ok(SplatFrame {
                 width,
                 height,
                 hdr,
-                by_attribute: splat_style(blend) == PackStyle::FluxAttribute,
+                by_attribute,
+                light_unit: if by_attribute {
+                    source.light_unit()
+                } else {
+                    1.0
+                },
                 gpu_time,
                 points,
                 gpu_data_bytes: stream.largest,
@@ -2898,6 +2920,7 @@ mod tests {
             height: 1,
             hdr: lights.iter().map(|&l| [l, l, l, l]).collect(),
             by_attribute: true,
+            light_unit: 1.0,
             gpu_time: None,
             points: 0,
             gpu_data_bytes: 0,

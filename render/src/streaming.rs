@@ -815,6 +815,10 @@ impl CutSource for StreamingRenderer<'_> {
         self.packer.style()
     }
 
+    fn light_unit(&self) -> f32 {
+        self.packer.light_unit()
+    }
+
     /// Batches within one storage binding each, counting the ranges after their split at
     /// page boundaries (`stream_batch_limits`).
     fn batch_lists(&self, draw: &DrawList) -> Option<Vec<DrawList>> {

@@ -644,7 +644,8 @@ impl AttributeScale {
         match self.shown {
             Some([lo, hi]) => (hi - lo > 0.0 && (hi - lo).is_finite()).then_some(lo),
             None if self.constant => (self.min > 0.0).then_some(0.0),
-            None => Some(self.min),
+            // (A width past single precision: the light is the flux, as `light_unit` says.)
+            None => (self.max - self.min).is_finite().then_some(self.min),
         }
     }
 

@@ -1190,8 +1190,9 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
 }
 
 /// A constant attribute (equal-mass SPH particles) maps to one value: every point of a
-/// fine and of a coarse cut packs the value as its light for attribute-lit splats (the
-/// image is the projected mass), and the colour map's last colour for spheres. The file quantizes its particles to 0 and keeps the
+/// fine and of a coarse cut packs intensity 1 for attribute-lit splats (whose light
+/// unit is then the value: the image is the projected mass), and the colour map's last
+/// colour for spheres. The file quantizes its particles to 0 and keeps the
 /// clusters' means; a zero range made those 0 (black at full resolution) and 1 (lit
 /// clusters), so the cuts disagreed. A range no wider than rounding counts as constant
 /// too; a true range still maps linearly.
@@ -1242,15 +1243,15 @@ fn a_constant_attribute_packs_one_intensity_and_one_colour_at_every_level() {
             for i in 0..d.points as u32 {
                 assert_eq!(
                     splats.decode_point(i).2,
-                    [mass; 3],
+                    [1.0; 3],
                     "{what}, {error_px} px: {i}"
                 );
                 assert_eq!(spheres.decode_point(i).2, one, "{what}, {error_px} px: {i}");
             }
         }
     }
-    // A range wider than rounding maps linearly, particles by their quantized values:
-    // the light is the value less the range's low end, in the attribute's units.
+    // A range wider than rounding maps linearly, particles by their quantized values
+    // (the light's unit, the range's width, is applied to the image).
     let mut frame = cloud_frame(600, 5);
     frame.attribute = Some(mdlod_preprocess::Attribute {
         name: "m".into(),
@@ -1261,14 +1262,12 @@ fn a_constant_attribute_packs_one_intensity_and_one_colour_at_every_level() {
     let (_d, _p, f) = make_file(&frame, small_build(), &[]);
     let d = cut(&f, &fitted_camera(&f), 0.0, u64::MAX);
     let splats = pack_styled(&f, &d, PackStyle::FluxAttribute, &Default::default()).unwrap();
-    let info = f.metadata().attribute.clone().unwrap();
     let mut i = 0u32;
     for r in &d.ranges {
         assert_eq!(r.level as usize, f.level_count() - 1);
         for k in r.first..r.first + r.count {
             let q = f.attribute().unwrap()[k as usize];
-            let light = f32::from(q) / 65535.0 * (info.max - info.min);
-            assert_eq!(splats.decode_point(i).2, [light; 3]);
+            assert_eq!(splats.decode_point(i).2, [f32::from(q) / 65535.0; 3]);
             i += 1;
         }
     }
@@ -1297,6 +1296,7 @@ fn the_automatic_exposure_of_attribute_light_is_chosen_from_that_light() {
             })
             .collect(),
         by_attribute,
+        light_unit: 1.0,
         gpu_time: None,
         points: 0,
         gpu_data_bytes: 0,

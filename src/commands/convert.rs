@@ -145,6 +145,14 @@ impl BuildArgs {
         {
             bail!("--attribute {a} is given twice: each column is kept once");
         }
+        if self.attribute_log10 && self.attribute.len() > 1 {
+            bail!(
+                "--attribute-log10 with {} --attribute columns: it keeps one column's \
+                 logarithm, and further columns are kept as they are; convert the column to \
+                 keep as a logarithm alone, or without --attribute-log10",
+                self.attribute.len()
+            );
+        }
         if self.cluster_size < 2 {
             bail!("--cluster-size {} (must be at least 2)", self.cluster_size);
         }

@@ -514,7 +514,6 @@ fn draw_panel(
     Ok(())
 }
 
-/// Draws `--label` into each image, with its own values.
 /// The decimals that show every one of a movie's `times` as its shortest form does, so
 /// that the label keeps one width (`0.80`, `1.00`, `1.20`, not `0.8`, `1`, `1.2`); `None`
 /// where one needs an exponent, or more than [`LABEL_DECIMALS`].
@@ -530,6 +529,7 @@ fn time_decimals(times: impl Iterator<Item = f64>) -> Option<usize> {
     (most <= LABEL_DECIMALS).then_some(most)
 }
 
+/// Draws `--label` into each image, with its own values.
 fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
     use mdlod_render::legend;
     if args.label.is_empty() {
@@ -2968,7 +2968,9 @@ fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<S
             _ => String::new(),
         };
         notes.push(format!(
-            "  note: {} frame{} the batch could not convert {} missing from the images ({}{more}):              `mdlod verify {}` says why; a rerun of the batch converts them once their inputs              are mended",
+            "  note: {} frame{} the batch could not convert {} missing from the images ({}{more}): \
+             `mdlod verify {}` says why; a rerun of the batch converts them once their inputs \
+             are mended",
             manifest.failed.len(),
             if manifest.failed.len() == 1 { "" } else { "s" },
             if manifest.failed.len() == 1 { "is" } else { "are" },
@@ -2979,7 +2981,8 @@ fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<S
     let listed = manifest.frames.len() as u64;
     if let Some(expected) = manifest.expected_frames.filter(|&e| e > listed) {
         notes.push(format!(
-            "  note: the batch lists {listed} of the {expected} frames its run is to convert              (still running, or stopped: rerun it to finish): the images have gaps in time"
+            "  note: the batch lists {listed} of the {expected} frames its run is to convert \
+             (still running, or stopped: rerun it to finish): the images have gaps in time"
         ));
     }
     notes

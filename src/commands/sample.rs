@@ -168,7 +168,7 @@ pub fn run(args: Args) -> Result<()> {
         return Ok(());
     }
     let scale = mdlod_render::level0_scale(
-        &mdlod_format::MdlodFile::open(&args.file)?,
+        &mdlod_render::open_styled(&args.file, &opts.style)?,
         &opts,
         args.iterations,
         args.min_samples,

@@ -199,6 +199,7 @@ impl Worker {
                     gpu_memory,
                     stream: None,
                     files: FileCache::new(FILES_KEPT),
+                    attribute: None,
                     bounds_sent: None,
                     progressive: None,
                     smip: None,
@@ -284,6 +285,8 @@ struct Thread<'r> {
     stream: Option<Streaming<'r>>,
     /// Open files with the attribute each was opened for.
     files: FileCache<(Option<String>, Arc<MdlodFile>)>,
+    /// The attribute the last render coloured by: a prefetch opens the next frame so.
+    attribute: Option<String>,
     /// The file whose bounds the window was sent last.
     bounds_sent: Option<PathBuf>,
     progressive: Option<Progressive>,
@@ -385,7 +388,8 @@ impl<'r> Thread<'r> {
                         },
                     ),
                     Request::Prefetch(path) => {
-                        let _ = self.file(&path, None);
+                        let attribute = self.attribute.clone();
+                        let _ = self.file(&path, attribute.as_deref());
                     }
                     Request::Screenshot {
                         path,
@@ -447,6 +451,7 @@ impl<'r> Thread<'r> {
             id,
             message: format!("{}: {e}", path.display()),
         };
+        self.attribute = opts.style.attribute.clone();
         let file = match self.file(path, opts.style.attribute.as_deref()) {
             Ok(f) => f,
             Err(message) => return self.reply(Reply::Error { id, message }),

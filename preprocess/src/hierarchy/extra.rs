@@ -8,14 +8,15 @@
 //! built file's particle order and quantized over its own range as the first is, and
 //! each node's mean is the area-weighted mean of the particles below it (the same
 //! definition as the first attribute's: area `r²`, the particle's own radius as stored
-//! or its species', a plain mean where the areas sum to 0), summed in `f64` once over
-//! the particles through prefix sums, since a node's particles are one contiguous run
-//! of the finest level.
+//! or its species', a plain mean where the areas sum to 0), summed in `f64` over the
+//! node's own particles, one contiguous run of the finest level (every level's nodes
+//! together sum each particle once: the levels' count of passes in all).
 
 use std::ops::Range;
 
 use mdlod_format::layout::{LevelRecord, NodeRecord};
 use mdlod_format::meta::{AttributeInfo, Species};
+use rayon::prelude::*;
 
 use super::{BuildError, Hierarchy};
 
@@ -95,31 +96,24 @@ pub fn extra_attribute(
         };
         f64::from(r * r)
     };
-    let mut areas = Vec::with_capacity(ordered.len() + 1);
-    let mut weighted = Vec::with_capacity(ordered.len() + 1);
-    let mut plain = Vec::with_capacity(ordered.len() + 1);
-    let (mut a, mut w, mut p) = (0f64, 0f64, 0f64);
-    for (k, &v) in ordered.iter().enumerate() {
-        areas.push(a);
-        weighted.push(w);
-        plain.push(p);
-        let ak = area(k);
-        a += ak;
-        w += ak * f64::from(v);
-        p += f64::from(v);
-    }
-    areas.push(a);
-    weighted.push(w);
-    plain.push(p);
+    let areas: Vec<f64> = (0..ordered.len()).map(area).collect();
+    // Each node's sums over its own particles (sums of a whole level's run would lose the
+    // small values beside a large total), every level's nodes in parallel.
     let node_means = particle_ranges(&h.levels, &h.nodes)
-        .into_iter()
+        .into_par_iter()
         .map(|r| {
-            let (s, e) = (r.start as usize, r.end as usize);
-            let area = areas[e] - areas[s];
+            let run = r.start as usize..(r.end as usize).min(ordered.len());
+            let (mut area, mut weighted, mut plain) = (0f64, 0f64, 0f64);
+            for k in run.clone() {
+                let v = f64::from(ordered[k]);
+                area += areas[k];
+                weighted += areas[k] * v;
+                plain += v;
+            }
             if area > 0.0 {
-                ((weighted[e] - weighted[s]) / area) as f32
-            } else if e > s {
-                ((plain[e] - plain[s]) / (e - s) as f64) as f32
+                (weighted / area) as f32
+            } else if !run.is_empty() {
+                (plain / run.len() as f64) as f32
             } else {
                 0.0
             }

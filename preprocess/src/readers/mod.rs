@@ -307,6 +307,10 @@ pub fn wrap_positions(positions: &mut [[f32; 3]], cell: &mdlod_format::meta::Sim
         for k in 0..3 {
             if periodic[k] && f[k].is_finite() && !(0.0..1.0).contains(&f[k]) {
                 f[k] -= f[k].floor();
+                // (A tiny negative one rounds to 1: the lower face is the same place.)
+                if f[k] >= 1.0 {
+                    f[k] = 0.0;
+                }
                 moved = true;
             }
         }

@@ -330,10 +330,12 @@ pub enum PackStyle {
     Spheres,
     /// Flux-preserving splats coloured by species: representatives at `sqrt(area_sum)`.
     FluxColour,
-    /// Flux-preserving splats whose intensity is the scalar attribute less its range's
-    /// low end, in the attribute's units (an affine map keeps the area-weighted means of
-    /// the representatives exact; see [`AttributeScale::light_unit`]): every point is a
-    /// [`KIND_INTENSITY`] record.
+    /// Flux-preserving splats whose intensity is the scalar attribute mapped from its
+    /// range to [0, 1] (an affine map keeps the area-weighted means of the
+    /// representatives exact; a constant attribute maps to 1): every point is a
+    /// [`KIND_INTENSITY`] record. The image's light is then brought to the attribute's
+    /// own units by one factor ([`AttrPacker::light_unit`]), after the accumulation in
+    /// 32-bit floats, which values in any units (masses in grams) would overflow.
     FluxAttribute,
 }
 
@@ -498,6 +500,14 @@ impl AttrPacker {
         self.style
     }
 
+    /// What an intensity of 1 stands for in the attribute's units
+    /// ([`AttributeScale::light_unit`]); 1 when the intensities are not the attribute's.
+    pub fn light_unit(&self) -> f32 {
+        self.intensity
+            .as_ref()
+            .map_or(1.0, AttributeScale::light_unit)
+    }
+
     /// The range kind of points on `level` (`last`: the file's finest level).
     pub fn kind(&self, level: usize, last: usize) -> u32 {
         if self.intensity.is_some() {
@@ -557,7 +567,7 @@ impl AttrPacker {
                     let q = values.get(first + k).copied().unwrap_or(0);
                     let r = own_radius(k).unwrap_or(meta.species[usize::from(s)].radius);
                     attrs.push(r.to_bits());
-                    attrs.push((scale.of_quantized(q) * scale.light_unit()).to_bits());
+                    attrs.push(scale.of_quantized(q).to_bits());
                 }
             } else if let Some((map, scale)) = &self.mapped {
                 // Radius and mapped colour per point, as cluster records are.
@@ -587,7 +597,7 @@ impl AttrPacker {
             for n in &file.nodes()[nf..nf + count] {
                 attrs.push(self.radius(n).to_bits());
                 attrs.push(if let Some(scale) = &self.intensity {
-                    (scale.of_value(n.attribute) * scale.light_unit()).to_bits()
+                    scale.of_value(n.attribute).to_bits()
                 } else if let Some((map, scale)) = &self.mapped {
                     pack_colour(map.colour(scale.of_value(n.attribute)))
                 } else if let Some(t) = &self.recolour {
