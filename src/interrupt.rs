@@ -94,6 +94,10 @@ pub fn remove_on_interrupt(
             for hook in HOOKS.lock().unwrap_or_else(|e| e.into_inner()).iter() {
                 hook();
             }
+            // A worker may have been writing a manifest (its temporary file, which the
+            // gate does not hold back: the hooks write one too); one begun after this
+            // is a killed run's, which the next run removes.
+            remove_own_partials();
             let saying = SAYING.lock().unwrap_or_else(|e| e.into_inner());
             match saying.as_deref() {
                 Some(text) => eprintln!("interrupted: working files removed; {text}"),

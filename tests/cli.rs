@@ -2914,6 +2914,8 @@ fn leftovers_of_killed_runs_on_this_host_are_removed_and_named_by_the_next_run()
             10,
         ),
         file(&out, format!(".frame-900.mdlod.{host}-{dead}-abc123.tmp")),
+        // A manifest being written when its run was killed.
+        file(&out, format!(".dataset.{host}-{dead}-abc123.tmp")),
     ];
     let kept = [
         work_dir(&out, format!(".mdlod-convert-{host}-{live_pid}-liv123"), 10),
@@ -2925,6 +2927,7 @@ fn leftovers_of_killed_runs_on_this_host_are_removed_and_named_by_the_next_run()
         ),
         file(&out, ".frame-900.mdlod.abc123.tmp".into()),
         file(&out, format!(".frame-900.mdlod.x{host}-{dead}-abc123.tmp")),
+        file(&out, format!(".dataset.{host}-{live_pid}-abc123.tmp")),
     ];
     let said = ok(&["batch", s(&input), "-o", s(&out)]);
     assert!(
@@ -3564,6 +3567,10 @@ fn a_label_shows_each_frames_values_in_its_corner() {
     for (extra, message) in [
         (&["--dt", "0.002"][..], "--dt has no effect without --label"),
         (
+            &["--label", "step {timestep}", "--dt", "0.002"][..],
+            "--dt has no effect without {time} in a --label",
+        ),
+        (
             &["--label", "t={time}", "--dt", "0"][..],
             "must be a finite number above 0",
         ),
@@ -3578,6 +3585,11 @@ fn a_label_shows_each_frames_values_in_its_corner() {
         (
             &["--label", "a label far too long for an image of 160 pixels"][..],
             "--label: a 160×120 image cannot hold the label",
+        ),
+        // Values that widen it past the image: refused before anything is drawn.
+        (
+            &["--label", "{source} {source} {source} {source}"][..],
+            "cannot hold the label with the file's values",
         ),
         (
             &["--label", "x", "--legend-in-image=top-left"][..],
@@ -4123,7 +4135,7 @@ fn a_legend_says_what_the_colours_mean() {
         args.extend_from_slice(extra);
         let out = ok(&args);
         assert!(
-            out.contains("constant in this file (-3.54): every splat is lit at intensity 1 (its light its disk's area)"),
+            out.contains("constant in this file (-3.54): every splat is lit alike (its light its disk's area)"),
             "{extra:?}: {out}"
         );
     }
@@ -8041,6 +8053,11 @@ fn several_attributes_in_one_file_colour_by_any() {
         e.contains("no attribute named \"y\" (the file keeps c_ke, z"),
         "{e}"
     );
+    let e = fails(&["render", s(&both), "-o", s(&png), "--attribute", "z"]);
+    assert!(
+        e.contains("--attribute has no effect without --colour-map"),
+        "{e}"
+    );
     let e = fails(&[
         "convert",
         s(&dump),
@@ -8063,9 +8080,36 @@ fn several_attributes_in_one_file_colour_by_any() {
         ok(&args)
     };
     batch(&["--attribute", "z"]);
+    let info = ok(&["info", s(&out)]);
+    assert!(info.contains("attribute    z in [0, "), "{info}");
     assert!(batch(&["--attribute", "z"]).contains("0 converted, 2 already done"));
     assert!(batch(&[]).contains("2 converted"));
     let m = mdlod_preprocess::batch::read_manifest(&out).unwrap();
     let f = MdlodFile::open(out.join(&m.frames[0].file)).unwrap();
     assert_eq!(f.attribute_names(), ["c_ke"]);
+    // A GSD input's chunks keep their paths as names; the last part names them too.
+    let gsd = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/gsd/hoomd_mixture.gsd");
+    let g = dir.path().join("g.mdlod");
+    let mut args = vec!["convert", s(&gsd), "-o", s(&g)];
+    args.extend(["--attribute", "charge", "--attribute", "mass"]);
+    ok(&args);
+    assert_eq!(
+        MdlodFile::open(&g).unwrap().attribute_names(),
+        ["particles/charge", "particles/mass"]
+    );
+    let out = ok(&[
+        "render",
+        s(&g),
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--colour-map",
+        "viridis",
+        "--attribute",
+        "mass",
+    ]);
+    assert!(out.contains("colour map viridis: particles/mass"), "{out}");
 }

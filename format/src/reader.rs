@@ -1024,6 +1024,25 @@ impl MdlodFile {
     /// whole, at most a chunk's particles); a mean that is not finite is refused, naming
     /// the node. An unknown name is an error listing the file's attributes.
     pub fn select_attribute(mut self, name: &str) -> Result<MdlodFile, FormatError> {
+        // A name as stored, or its last part where that is one attribute's only
+        // (`mass` for a GSD input's `particles/mass`).
+        let last_part = |stored: &str| {
+            stored
+                .rsplit_once('/')
+                .is_some_and(|(_, last)| last == name)
+        };
+        let by_part: Vec<String> = self
+            .attribute_names()
+            .into_iter()
+            .filter(|n| last_part(n))
+            .map(str::to_string)
+            .collect();
+        let exact = self.attribute_names().contains(&name);
+        let chosen = match (exact, by_part.as_slice()) {
+            (false, [one]) => one.clone(),
+            _ => name.to_string(),
+        };
+        let name = chosen.as_str();
         if self
             .metadata
             .attribute

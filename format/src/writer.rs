@@ -320,7 +320,7 @@ pub fn host_name() -> &'static str {
 /// The start of the temporary file's name for an output named `name`:
 /// `.NAME.HOST-PID-`, followed by six random letters or digits and `.tmp`. The host and
 /// process let a later run tell the file of a killed process from a live one's.
-fn temp_prefix(name: &str) -> String {
+pub fn temp_prefix(name: &str) -> String {
     format!(".{name}.{}-{}-", host_name(), std::process::id())
 }
 

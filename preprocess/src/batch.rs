@@ -841,8 +841,10 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
 fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
     let dir = path.parent().unwrap_or(Path::new("."));
     mdlod_format::files::check_replaceable(path).map_err(io(path))?;
+    // `.dataset.HOST-PID-XXXXXX.tmp`: an interrupted run removes its own, a later run
+    // those of processes that are gone.
     let mut tmp = mdlod_format::writer::output_file_builder()
-        .prefix(".dataset.")
+        .prefix(&mdlod_format::writer::temp_prefix("dataset"))
         .suffix(".tmp")
         .tempfile_in(dir)
         .map_err(io(dir))?;

@@ -389,6 +389,17 @@ pub fn convert_frame_with(
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         notes.extend(attribute_span_note(&a.name, *min, *max, options));
     }
+    // Further attributes spanning decades lose them as the first would; their remedy is
+    // a file of their own with the logarithm (--attribute-log10 takes one column).
+    for e in &h.extra_attributes {
+        notes.extend(span_note(
+            &e.info.name,
+            e.info.min,
+            e.info.max,
+            "converted alone with --attribute-log10, a file keeps its logarithm, every \
+             decade alike",
+        ));
+    }
     let (lo, hi, far) = survey_positions(&frame.positions, frame.simulation_box.as_ref());
     notes.extend(position_notes(
         lo,
@@ -673,12 +684,24 @@ pub fn attribute_span_note(
     max: f32,
     options: &ConvertOptions,
 ) -> Option<String> {
+    if options.attribute_log10 {
+        return None;
+    }
+    span_note(
+        name,
+        min,
+        max,
+        "--attribute-log10 keeps its logarithm, every decade alike",
+    )
+}
+
+/// [`attribute_span_note`] of a column kept linearly, with `remedy` said last.
+fn span_note(name: &str, min: f32, max: f32, remedy: &str) -> Option<String> {
     let decades = (f64::from(max) / f64::from(min)).log10();
-    (!options.attribute_log10 && min > 0.0 && decades > 4.0).then(|| {
+    (min > 0.0 && decades > 4.0).then(|| {
         format!(
             "attribute {name} spans {decades:.1} decades ({min:e} to {max:e}), kept in 16-bit \
-             steps of {:.2e}: the values below about {:.0e} lose their digits; \
-             --attribute-log10 keeps its logarithm, every decade alike",
+             steps of {:.2e}: the values below about {:.0e} lose their digits; {remedy}",
             (f64::from(max) - f64::from(min)) / 65535.0,
             (f64::from(max) - f64::from(min)) / 65535.0 * 100.0
         )

@@ -871,7 +871,7 @@ fn further_attributes_round_trip_and_select_like_the_first() {
         .collect();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("split.mdlod");
-    mdlod_preprocess::convert::convert_frame_with(
+    let report = mdlod_preprocess::convert::convert_frame_with(
         &frame,
         &[Attribute {
             name: "split".into(),
@@ -889,6 +889,16 @@ fn further_attributes_round_trip_and_select_like_the_first() {
         &NoProgress,
     )
     .unwrap();
+    // Twelve decades kept linearly: said, with the remedy a further column has.
+    assert!(
+        report
+            .notes
+            .iter()
+            .any(|n| n.contains("attribute split spans 12.0 decades")
+                && n.contains("converted alone with --attribute-log10")),
+        "{:?}",
+        report.notes
+    );
     let f = MdlodFile::open(&path).unwrap();
     let means = f.extra_node_means(0).unwrap();
     assert!(

@@ -213,7 +213,12 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     // What runs killed outright left (no handler could remove it): working directories
     // in the batch directory and the working one, and temporary frames
     // (`.frame-<timestep>.mdlod.HOST-PID-XXXXXX.tmp`).
+    // (`.frame-<timestep>.mdlod.HOST-PID-XXXXXX.tmp`, and a manifest's
+    // `.dataset.HOST-PID-XXXXXX.tmp`.)
     let temp_owner = |file: &str| {
+        if file.starts_with(".dataset.") {
+            return mdlod_format::writer::temp_file_owner(file, "dataset");
+        }
         let timestep = file.strip_prefix(".frame-")?.split_once(".mdlod.")?.0;
         timestep.parse::<u64>().ok()?;
         mdlod_format::writer::temp_file_owner(file, &format!("frame-{timestep}.mdlod"))
@@ -341,7 +346,7 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         if again.settings > 0 {
             why.push(format!(
                 "{} built with other settings (build options, --radius, --attribute, \
-                 --species-name, --columns, the size column or --species-column)",
+                 --species-name, --columns, the size column, --species-column or --wrap)",
                 again.settings
             ));
         }

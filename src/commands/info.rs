@@ -58,6 +58,8 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     let mut species: Vec<String> = Vec::new();
     let mut attribute: Option<(String, f32, f32)> = None;
     let mut attributes_differ = false;
+    // Further attributes, each with its range over the frames that keep it.
+    let mut extras: Vec<(String, f32, f32)> = Vec::new();
     let mut bytes = 0u64;
     let mut unreadable = Vec::new();
     for f in frames {
@@ -74,6 +76,15 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
         for s in &meta.species {
             if !species.contains(&s.name) {
                 species.push(s.name.clone());
+            }
+        }
+        for a in &meta.attributes {
+            match extras.iter_mut().find(|(n, _, _)| *n == a.name) {
+                Some((_, lo, hi)) => {
+                    *lo = lo.min(a.min);
+                    *hi = hi.max(a.max);
+                }
+                None => extras.push((a.name.clone(), a.min, a.max)),
             }
         }
         match (&mut attribute, &meta.attribute) {
@@ -118,6 +129,9 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
             "attribute": attribute.as_ref().map(|(n, lo, hi)| json!({
                 "name": n, "min": lo, "max": hi
             })),
+            "attributes": extras.iter().map(|(n, lo, hi)| json!({
+                "name": n, "min": lo, "max": hi
+            })).collect::<Vec<_>>(),
             "bytes": bytes,
             "expected_frames": m.expected_frames,
             "failed": m.failed.iter().map(|f| json!({
@@ -183,6 +197,14 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
         ),
         (None, true) => println!("  attribute    not the same in every frame"),
         (None, false) => {}
+    }
+    for (n, lo, hi) in &extras {
+        println!(
+            "  attribute    {} in [{}, {}] over the frames keeping it",
+            shown(n),
+            super::Num(*lo),
+            super::Num(*hi)
+        );
     }
     println!("  size         {}", super::size_text(bytes));
     if !m.failed.is_empty() {

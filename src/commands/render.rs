@@ -514,60 +514,98 @@ fn draw_panel(
     Ok(())
 }
 
-/// The decimals that show every one of a movie's `times` as its shortest form does, so
-/// that the label keeps one width (`0.80`, `1.00`, `1.20`, not `0.8`, `1`, `1.2`); `None`
-/// where one needs an exponent, or more than [`LABEL_DECIMALS`].
+/// The decimals that show every one of a movie's `times` as its shortest decimal form
+/// does, so that the label keeps one width (`0.80`, `1.00`, `1.20`, not `0.8`, `1`, `1.2`;
+/// `0.00000` to `0.00015`); `None` where one needs more than [`LABEL_DECIMALS`].
 fn time_decimals(times: impl Iterator<Item = f64>) -> Option<usize> {
     let mut most = 0;
     for t in times {
-        let shortest = super::Num(t as f32).to_string();
-        if shortest.contains(['e', 'E']) {
-            return None;
-        }
+        // The decimals of the shortest decimal form (`3e-5` is `0.00003`: five).
+        let shortest = format!("{}", t as f32);
         most = most.max(shortest.split_once('.').map_or(0, |(_, d)| d.len()));
     }
     (most <= LABEL_DECIMALS).then_some(most)
 }
 
-/// Draws `--label` into each image, with its own values.
-fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
-    use mdlod_render::legend;
+/// The `--label` panel of each image with its values (each frame's time the timestep
+/// times `--dt` where given; a movie's times with one number of decimals), and the
+/// values some frame lacks.
+fn label_panels(
+    args: &Args,
+    values: &[&LabelValues],
+) -> (
+    Vec<mdlod_render::legend::Legend>,
+    std::collections::BTreeSet<&'static str>,
+) {
+    let values: Vec<LabelValues> = values
+        .iter()
+        .map(|v| LabelValues {
+            time: match (args.dt, v.timestep) {
+                (Some(dt), Some(t)) => Some(t as f64 * dt),
+                _ => v.time,
+            },
+            ..(*v).clone()
+        })
+        .collect();
+    let decimals = time_decimals(values.iter().filter_map(|v| v.time));
+    let mut missing = std::collections::BTreeSet::new();
+    let panels = values
+        .iter()
+        .map(|v| mdlod_render::legend::Legend::Text {
+            lines: args
+                .label
+                .iter()
+                .map(|t| {
+                    let (line, lacking) = v.fill(t, decimals);
+                    missing.extend(lacking);
+                    line
+                })
+                .collect(),
+        })
+        .collect();
+    (panels, missing)
+}
+
+/// Refuses, before anything is drawn, a `--label` that the values of some image (`values`)
+/// widen past what the image holds (a placeholder's text is known only with the file).
+fn check_label_room(args: &Args, values: &[&LabelValues]) -> Result<()> {
     if args.label.is_empty() {
         return Ok(());
     }
-    let mut missing = std::collections::BTreeSet::new();
+    let (panels, _) = label_panels(args, values);
+    for (i, panel) in panels.iter().enumerate() {
+        if panel
+            .scale_for(args.camera.width, args.camera.height)
+            .is_none()
+        {
+            let (w, h) = panel.room_needed(1);
+            anyhow::bail!(
+                "--label: a {}×{} image cannot hold the label with {}'s values (at least \
+                 {w}×{h} pixels with its margin); draw a larger image, or a shorter label",
+                args.camera.width,
+                args.camera.height,
+                if values.len() == 1 {
+                    "the file".to_string()
+                } else {
+                    format!("frame {i}")
+                }
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Draws `--label` into each image, with its own values.
+fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
+    if args.label.is_empty() {
+        return Ok(());
+    }
     let mut glyphs = std::collections::BTreeSet::new();
-    // `--dt`: each frame's time is its timestep times it.
-    let images: Vec<(&PathBuf, LabelValues)> = images
-        .iter()
-        .map(|(image, values)| {
-            let time = match (args.dt, values.timestep) {
-                (Some(dt), Some(t)) => Some(t as f64 * dt),
-                _ => values.time,
-            };
-            (
-                image,
-                LabelValues {
-                    time,
-                    ..values.clone()
-                },
-            )
-        })
-        .collect();
-    let decimals = time_decimals(images.iter().filter_map(|(_, v)| v.time));
-    for (image, values) in images {
-        let lines: Vec<String> = args
-            .label
-            .iter()
-            .map(|t| {
-                let (line, lacking) = values.fill(t, decimals);
-                missing.extend(lacking);
-                line
-            })
-            .collect();
-        let label = legend::Legend::Text { lines };
+    let values: Vec<&LabelValues> = images.iter().map(|(_, v)| v).collect();
+    let (panels, missing) = label_panels(args, &values);
+    for ((image, _), label) in images.iter().zip(&panels) {
         glyphs.extend(label.missing_glyphs());
-        draw_panel(image, &label, args.label_corner, "--label")?;
+        draw_panel(image, label, args.label_corner, "--label")?;
     }
     for field in missing {
         let hint = match field {
@@ -1228,6 +1266,27 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
             );
         }
     }
+    // --attribute chooses what those read, and --hide-attribute reads it too.
+    if args.style.attribute.is_some() && !by_attribute(args) && args.style.hide_attribute.is_empty()
+    {
+        anyhow::bail!(
+            "--attribute has no effect without --colour-map (spheres, sndf, splat), \
+             --intensity attribute (splat) or --hide-attribute: it chooses which attribute \
+             they read"
+        );
+    }
+    // --dt gives the time {time} shows.
+    let shows_time = args.label.iter().any(|l| {
+        label_parts(l)
+            .unwrap_or_default()
+            .iter()
+            .any(|p| matches!(p, LabelPart::Field("time", _)))
+    });
+    if args.dt.is_some() && !args.label.is_empty() && !shows_time {
+        anyhow::bail!(
+            "--dt has no effect without {{time}} in a --label: it gives the time {{time}} shows"
+        );
+    }
     for (id, modes) in MODE_OPTIONS {
         let given = matches!(
             matches.value_source(id),
@@ -1577,6 +1636,15 @@ pub fn run(args: Args) -> Result<()> {
         by_attribute(&args) && !projected(&args),
         lit_linearly(&args),
     )?;
+    {
+        // (A turntable's images share the file's values but the frame number.)
+        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
+        let images = args.turntable.unwrap_or(1).max(1) as usize;
+        let values: Vec<LabelValues> = (0..images)
+            .map(|i| LabelValues::of_file(&args.file, file.metadata(), i))
+            .collect();
+        check_label_room(&args, &values.iter().collect::<Vec<_>>())?;
+    }
     if let Some(n) = args.turntable {
         return render_turntable(&args, opts, n, derived);
     }
@@ -1645,7 +1713,10 @@ pub fn run(args: Args) -> Result<()> {
                 // Splats lit by a constant all give the same light; a colour map over the
                 // particles gives them its last colour.
                 let fate = match args.mode {
-                    Mode::Splat => "every splat is lit at intensity 1 (its light its disk's area)",
+                    Mode::Splat if lo > 0.0 => {
+                        "every splat is lit alike (its light the value times its disk's area)"
+                    }
+                    Mode::Splat => "every splat is lit alike (its light its disk's area)",
                     _ => {
                         "every particle takes the map's last colour, which means nothing on its own"
                     }
@@ -3216,7 +3287,10 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             } else {
                 // As a still says it: the map places no value of a constant attribute.
                 let fate = match args.mode {
-                    Mode::Splat => "every splat is lit at intensity 1 (its light its disk's area)",
+                    Mode::Splat if a.min > 0.0 => {
+                        "every splat is lit alike (its light the value times its disk's area)"
+                    }
+                    Mode::Splat => "every splat is lit alike (its light its disk's area)",
                     _ => "every particle takes the map's last colour",
                 };
                 range_note = format!(
@@ -3257,6 +3331,20 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("cannot create {}", parent.display()))?;
     }
+    let frame_values: Vec<LabelValues> = manifest
+        .frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| LabelValues {
+            timestep: Some(f.timestep),
+            time: f.time,
+            frame: i,
+            particles: f.particles,
+            file: f.file.clone(),
+            source: Some(source_name(&f.source.path)).filter(|s| !s.is_empty()),
+        })
+        .collect();
+    check_label_room(args, &frame_values.iter().collect::<Vec<_>>())?;
     let t0 = std::time::Instant::now();
     let mut limited_frames = 0usize;
     // The species any frame shows, for the legend's key.
@@ -3410,22 +3498,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         &drawn,
         &written,
     )?;
-    let labelled: Vec<(PathBuf, LabelValues)> = written
-        .iter()
-        .zip(&manifest.frames)
-        .enumerate()
-        .map(|(i, (p, f))| {
-            let values = LabelValues {
-                timestep: Some(f.timestep),
-                time: f.time,
-                frame: i,
-                particles: f.particles,
-                file: f.file.clone(),
-                source: Some(source_name(&f.source.path)).filter(|s| !s.is_empty()),
-            };
-            (p.clone(), values)
-        })
-        .collect();
+    let labelled: Vec<(PathBuf, LabelValues)> = written.iter().cloned().zip(frame_values).collect();
     write_labels(args, &labelled)?;
     Ok(())
 }
@@ -3476,7 +3549,9 @@ mod tests {
         assert_eq!(time_decimals([0.8, 1.0, 1.2].into_iter()), Some(1));
         assert_eq!(time_decimals([0.25, 1.0].into_iter()), Some(2));
         assert_eq!(time_decimals([100.0, 200.0].into_iter()), Some(0));
-        assert_eq!(time_decimals([1e-9, 2e-9].into_iter()), None);
+        assert_eq!(time_decimals([1e-9, 2e-9].into_iter()), Some(9));
+        assert_eq!(time_decimals([1e-15, 2e-15].into_iter()), None);
+        assert_eq!(time_decimals([0.0, 3e-5, 1.5e-4].into_iter()), Some(5));
         for (bad, why) in [
             ("{time:2}", "`:2` is no number of decimals"),
             ("{time:.x}", "`:.x` is no number of decimals"),

@@ -320,10 +320,8 @@ impl<'r> Thread<'r> {
             attribute: attribute.map(str::to_string),
             ..Default::default()
         };
-        let f = Arc::new(
-            mdlod_render::open_styled(path, &style)
-                .map_err(|e| format!("{}: {e}", path.display()))?,
-        );
+        // (The reader's errors name the file.)
+        let f = Arc::new(mdlod_render::open_styled(path, &style).map_err(|e| e.to_string())?);
         self.files.insert(
             path.to_path_buf(),
             (attribute.map(str::to_string), f.clone()),
