@@ -2019,6 +2019,11 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
     let mut args = vec!["render", s(&plain), "-o", s(&png), "--hide-species", "HCP"];
     args.extend(["--width", "32", "--height", "24"]);
     assert!(fails(&args).contains("no species named \"HCP\""));
+    // A type of the frame spelt otherwise is a misspelling: refused, naming it.
+    let mut args = vec!["render", s(&whole), "-o", s(&png), "--hide-species", "Fcc"];
+    args.extend(["--width", "32", "--height", "24"]);
+    let e = fails(&args);
+    assert!(e.contains("did you mean \"FCC\""), "{e}");
     let png = dir.path().join("gb.png");
     for file in [&whole, &chunked] {
         draws_the_boundaries(file, &png, &["--hide-species", "FCC"], other);

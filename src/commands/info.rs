@@ -476,11 +476,14 @@ pub fn run(args: Args) -> Result<()> {
         // Six significant digits: the corners are sums in single precision (5.7200003).
         let n = |x: f32| number(format!("{x:.5e}").parse().unwrap_or(f64::from(x)));
         let v = |p: [f32; 3]| format!("[{}, {}, {}]", n(p[0]), n(p[1]), n(p[2]));
-        println!(
-            "  extent       {} to {} (the particles' spheres)",
-            v(lo),
-            v(hi)
-        );
+        // With radii of their own, the box also holds each particle's species' sphere
+        // (what a reader of format 1.0 draws), so it may reach past the spheres drawn.
+        let what = if m.radius.is_some() {
+            "the particles' spheres, and their species' mean spheres"
+        } else {
+            "the particles' spheres"
+        };
+        println!("  extent       {} to {} ({what})", v(lo), v(hi));
     }
     if let Some(k) = flat {
         println!(

@@ -2260,8 +2260,9 @@ fn build_legend(
                 }
             }
             let what = format!(
-                "{} categories of {} in the colour map's colours",
+                "{} categor{} of {} in the colour map's colours",
                 entries.len(),
+                if entries.len() == 1 { "y" } else { "ies" },
                 a.name
             );
             let title = args.legend_title.as_deref().unwrap_or(&a.name);
@@ -3078,6 +3079,16 @@ fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> 
         .collect();
     if absent.is_empty() {
         return Ok(());
+    }
+    // A name one of the frame's spells otherwise is a misspelling, not an absent type.
+    for name in &absent {
+        if let Some(s) = m.species.iter().find(|s| s.name.eq_ignore_ascii_case(name)) {
+            anyhow::bail!(
+                "{}: no species named {name:?}; did you mean {:?}? (names are matched exactly)",
+                path.display(),
+                s.name
+            );
+        }
     }
     style.species.retain(|st| !absent.contains(&st.name));
     let names: Vec<&str> = m.species.iter().map(|s| s.name.as_str()).collect();
