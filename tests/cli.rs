@@ -8118,3 +8118,98 @@ fn several_attributes_in_one_file_colour_by_any() {
     ]);
     assert!(out.contains("colour map viridis: particles/mass"), "{out}");
 }
+
+/// `--scale-bar`: a bar of the length given (or a round one) as long in pixels as that
+/// length of the world in an orthographic view, in a still and in every frame of a
+/// movie; refused in perspective and where another panel takes its corner.
+#[test]
+fn a_scale_bar_is_as_long_as_its_length_of_the_world() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "3000", "--frames", "2"], &dump);
+    let file = dir.path().join("c.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file)]);
+    let png = dir.path().join("s.png");
+    let view = dir.path().join("v.json");
+    // The longest run of black pixels in a row of the image's bottom band.
+    let longest_black = |png: &Path| {
+        let (w, h, px) = read_png(png);
+        (h - 40..h)
+            .map(|y| {
+                let (mut best, mut run) = (0u32, 0u32);
+                for x in 0..w {
+                    let i = 4 * (y * w + x) as usize;
+                    if px[i..i + 3] == [0, 0, 0] {
+                        run += 1;
+                        best = best.max(run);
+                    } else {
+                        run = 0;
+                    }
+                }
+                best
+            })
+            .max()
+            .unwrap()
+    };
+    let per_px = |view: &Path, height: f64| {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(view).unwrap()).unwrap();
+        let d = v["distance"].as_f64().unwrap();
+        let fov = v["fov_y_deg"].as_f64().unwrap().to_radians();
+        let zoom = v["zoom"].as_f64().unwrap();
+        2.0 * d * (fov / 2.0).tan() / zoom / height
+    };
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--ortho", "--scale-bar"];
+    args.extend(["--width", "320", "--height", "200", "--background", "white"]);
+    args.extend(["--scale-bar-length", "20", "--save-view", s(&view)]);
+    ok(&args);
+    let want = 20.0 / per_px(&view, 200.0);
+    let got = f64::from(longest_black(&png));
+    assert!((got - want).abs() <= 1.5, "{got} px against {want:.1}");
+    // A movie: every frame its bar.
+    let d = dir.path().join("d");
+    ok(&["batch", s(&dump), "-o", s(&d)]);
+    let movie = dir.path().join("m-%d.png");
+    let mut args = vec!["render", s(&d), "-o", s(&movie), "--ortho", "--scale-bar"];
+    args.extend(["--width", "320", "--height", "200", "--background", "white"]);
+    args.extend(["--scale-bar-length", "20", "--save-view", s(&view)]);
+    ok(&args);
+    let want = 20.0 / per_px(&view, 200.0);
+    for k in 0..2 {
+        let got = f64::from(longest_black(&dir.path().join(format!("m-{k}.png"))));
+        assert!(
+            (got - want).abs() <= 1.5,
+            "frame {k}: {got} px against {want:.1}"
+        );
+    }
+    for (extra, says) in [
+        (&["--scale-bar"][..], "needs an orthographic view"),
+        (
+            &["--ortho", "--scale-bar-length", "5"][..],
+            "no effect without --scale-bar",
+        ),
+        (
+            &[
+                "--ortho",
+                "--scale-bar",
+                "--label",
+                "x",
+                "--label-corner",
+                "bottom-left",
+            ][..],
+            "--scale-bar and --label both draw at the bottom-left corner",
+        ),
+        (
+            &["--ortho", "--scale-bar", "--scale-bar-length", "1e6"][..],
+            "pixels in a 320-pixel image",
+        ),
+    ] {
+        let out = dir.path().join("no.png");
+        let mut args = vec!["render", s(&file), "-o", s(&out), "--width", "320"];
+        args.extend(["--height", "200"]);
+        args.extend(extra);
+        let e = fails(&args);
+        assert!(e.contains(says), "{extra:?}: {e}");
+        assert!(!out.exists(), "{extra:?}: drawn before refused");
+    }
+}

@@ -309,6 +309,9 @@ pub enum Legend {
     },
     /// Lines of text (a movie's timestep, a figure's caption), drawn into images only.
     Text { lines: Vec<String> },
+    /// A scale bar `length` legend pixels long (at the scale it is drawn at, the length
+    /// in the world `label` names), under its label; drawn into images only.
+    Scale { length: f32, label: String },
 }
 
 /// The least room between two labels under a bar, px.
@@ -420,6 +423,10 @@ impl Legend {
                     6.0 + TEXT_ROW * lines.len().max(1) as f32,
                 )
             }
+            Legend::Scale { length, label } => (
+                14.0 + length.max(CHAR_WIDTH * label.chars().count() as f32),
+                SCALE_BAR[1] + 6.0,
+            ),
         }
     }
 
@@ -536,6 +543,20 @@ impl Legend {
                     );
                 }
             }
+            Legend::Scale { length, label } => {
+                let _ = writeln!(
+                    svg,
+                    r#"<text x="7" y="{}">{}</text>"#,
+                    text_row(0),
+                    escape(label)
+                );
+                let _ = writeln!(
+                    svg,
+                    r#"<rect x="7" y="{}" width="{length}" height="{}" fill="black"/>"#,
+                    SCALE_BAR[0],
+                    SCALE_BAR[1] - SCALE_BAR[0]
+                );
+            }
         }
         svg.push_str("</svg>\n");
         svg
@@ -577,6 +598,7 @@ impl Legend {
                 .chain(entries.iter().map(|(n, _)| n.as_str()))
                 .collect(),
             Legend::Text { lines } => lines.iter().map(String::as_str).collect(),
+            Legend::Scale { label, .. } => vec![label.as_str()],
         };
         let mut missing: Vec<char> = texts
             .iter()
@@ -606,6 +628,7 @@ impl Legend {
                 image.height,
                 match self {
                     Legend::Text { .. } => "label",
+                    Legend::Scale { .. } => "scale bar",
                     _ => "legend",
                 }
             ));
@@ -688,10 +711,22 @@ impl Legend {
                     panel.text(7.0, text_row(k), line, Anchor::Start);
                 }
             }
+            Legend::Scale { length, label } => {
+                panel.text(7.0, text_row(0), label, Anchor::Start);
+                panel.fill(
+                    [7.0, SCALE_BAR[0]],
+                    [7.0 + length, SCALE_BAR[1]],
+                    black,
+                    1.0,
+                );
+            }
         }
         Ok(())
     }
 }
+
+/// The top and bottom of a scale bar, legend px.
+const SCALE_BAR: [f32; 2] = [22.0, 26.0];
 
 /// The baseline of [`Legend::Text`]'s line `k`, px.
 fn text_row(k: usize) -> f32 {

@@ -137,6 +137,9 @@ pub fn run(args: Args) -> Result<()> {
         legend_category: vec![],
         label_corner: super::render::LegendCorner::TopLeft,
         dt: None,
+        scale_bar: false,
+        scale_bar_length: None,
+        scale_bar_corner: super::render::LegendCorner::BottomLeft,
         cell: None,
         cell_width: None,
     })?;

@@ -217,6 +217,102 @@ pub struct Args {
         ignore_case = true
     )]
     pub label_corner: LegendCorner,
+    /// Draw a scale bar into the image: a round length of the world (about a fifth of
+    /// the image's width, or --scale-bar-length) under its size in the file's units
+    /// (`metal`, `real`: Å). Orthographic views only (in perspective, sizes depend on
+    /// depth); stills and movies
+    #[arg(long)]
+    pub scale_bar: bool,
+    /// The scale bar's length, in the data's units [default: a round length, about a
+    /// fifth of the image's width]
+    #[arg(long, value_name = "LENGTH")]
+    pub scale_bar_length: Option<f32>,
+    /// Where --scale-bar draws its panel
+    #[arg(
+        long,
+        value_name = "CORNER",
+        default_value = "bottom-left",
+        ignore_case = true
+    )]
+    pub scale_bar_corner: LegendCorner,
+}
+
+/// The length unit of a unit style (LAMMPS `units`), as a scale bar names it, in the
+/// image font's glyphs (`A` where it has no `Å`); empty where unknown.
+fn length_unit(units: Option<&str>) -> &'static str {
+    let has = |c: char| mdlod_render::font::has_glyph(c);
+    match units.map(str::to_ascii_lowercase).as_deref() {
+        Some("metal" | "real") if has('Å') => "Å",
+        Some("metal" | "real") => "A",
+        Some("lj") if has('σ') => "σ",
+        Some("lj") => "sigma",
+        Some("si") => "m",
+        Some("cgs") => "cm",
+        Some("nano") => "nm",
+        Some("micro") if has('µ') => "µm",
+        Some("micro") => "um",
+        Some("electron") => "bohr",
+        _ => "",
+    }
+}
+
+/// The scale bar of an orthographic `camera` in an image `width` × `height`: a length of
+/// `length` world units, else the largest of 1, 2 and 5 times a power of 10 within a
+/// fifth of the width, drawn at the legend scale the image takes. An error for a
+/// perspective camera, a length that does not fit, or one below a pixel.
+fn scale_bar(
+    camera: &mdlod_render::Camera,
+    width: u32,
+    height: u32,
+    length: Option<f32>,
+    units: Option<&str>,
+) -> Result<mdlod_render::legend::Legend> {
+    if camera.projection != mdlod_render::Projection::Orthographic {
+        anyhow::bail!(
+            "--scale-bar needs an orthographic view (--ortho, or a view file's \
+             \"projection\": \"orthographic\"): in perspective, sizes depend on depth"
+        );
+    }
+    let per_px = f64::from(camera.view_height_at_target()) / f64::from(height.max(1));
+    let world = match length {
+        Some(l) if l.is_finite() && l > 0.0 => f64::from(l),
+        Some(l) => {
+            anyhow::bail!("--scale-bar-length {l}: a length must be a finite number above 0")
+        }
+        None => {
+            let most = per_px * f64::from(width) / 5.0;
+            let decade = 10f64.powf(most.log10().floor());
+            [5.0, 2.0, 1.0]
+                .into_iter()
+                .map(|m| m * decade)
+                .find(|&l| l <= most)
+                .unwrap_or(decade)
+        }
+    };
+    let unit = length_unit(units);
+    let label = format!(
+        "{}{}{unit}",
+        super::Num(world as f32),
+        if unit.is_empty() { "" } else { " " }
+    );
+    // The legend's scale for this image, then the bar's length in legend pixels.
+    let probe = mdlod_render::legend::Legend::Scale {
+        length: 1.0,
+        label: label.clone(),
+    };
+    let s = f64::from(probe.scale_for(width, height).unwrap_or(1));
+    let pixels = world / per_px;
+    if pixels < 1.0 || pixels > f64::from(width) - 16.0 * s - 14.0 * s {
+        anyhow::bail!(
+            "--scale-bar-length {}: {pixels:.1} pixels in a {width}-pixel image (at \
+             {per_px:.3e} per pixel)",
+            super::Num(world as f32)
+        );
+    }
+    Ok(mdlod_render::legend::Legend::Scale {
+        length: (pixels / s) as f32,
+        label,
+    })
 }
 
 /// `--legend-category VALUE=NAME` entries, in the order given.
@@ -1275,6 +1371,30 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
              they read"
         );
     }
+    if args.scale_bar_length.is_some() && !args.scale_bar {
+        anyhow::bail!("--scale-bar-length has no effect without --scale-bar");
+    }
+    if args.scale_bar {
+        if args.turntable.is_some() {
+            anyhow::bail!("--scale-bar draws into stills and movies, not turntables");
+        }
+        let taken = [
+            (!args.label.is_empty()).then_some((args.label_corner, "--label")),
+            args.legend_in_image.map(|c| (c, "--legend-in-image")),
+        ];
+        if let Some((_, other)) = taken
+            .into_iter()
+            .flatten()
+            .find(|(c, _)| *c == args.scale_bar_corner)
+        {
+            anyhow::bail!(
+                "--scale-bar and {other} both draw at the {} corner: give \
+                 --scale-bar-corner another",
+                clap::ValueEnum::to_possible_value(&args.scale_bar_corner)
+                    .map_or_else(String::new, |v| v.get_name().to_string())
+            );
+        }
+    }
     // --dt gives the time {time} shows.
     let shows_time = args.label.iter().any(|l| {
         label_parts(l)
@@ -1636,7 +1756,7 @@ pub fn run(args: Args) -> Result<()> {
         by_attribute(&args) && !projected(&args),
         lit_linearly(&args),
     )?;
-    {
+    let bar = {
         // (A turntable's images share the file's values but the frame number.)
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let images = args.turntable.unwrap_or(1).max(1) as usize;
@@ -1644,7 +1764,18 @@ pub fn run(args: Args) -> Result<()> {
             .map(|i| LabelValues::of_file(&args.file, file.metadata(), i))
             .collect();
         check_label_room(&args, &values.iter().collect::<Vec<_>>())?;
-    }
+        // The scale bar of the view drawn, refused before drawing where it cannot be.
+        match args.scale_bar {
+            true => Some(scale_bar(
+                &mdlod_render::frame_setup(&file, &opts)?.0,
+                opts.width,
+                opts.height,
+                args.scale_bar_length,
+                file.metadata().units.as_deref(),
+            )?),
+            false => None,
+        }
+    };
     if let Some(n) = args.turntable {
         return render_turntable(&args, opts, n, derived);
     }
@@ -2004,6 +2135,9 @@ pub fn run(args: Args) -> Result<()> {
             LabelValues::of_file(&args.file, file.metadata(), 0),
         )],
     )?;
+    if let Some(bar) = &bar {
+        draw_panel(&args.output, bar, args.scale_bar_corner, "--scale-bar")?;
+    }
     Ok(())
 }
 
@@ -3356,6 +3490,20 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         })
         .collect();
     check_label_room(args, &frame_values.iter().collect::<Vec<_>>())?;
+    // One camera for every frame: one scale bar, in the first frame's units.
+    let bar = match args.scale_bar {
+        true => {
+            let first = mdlod_format::MdlodFile::open(dir.join(&manifest.frames[0].file))?;
+            Some(scale_bar(
+                &camera,
+                opts.width,
+                opts.height,
+                args.scale_bar_length,
+                first.metadata().units.as_deref(),
+            )?)
+        }
+        false => None,
+    };
     let t0 = std::time::Instant::now();
     let mut limited_frames = 0usize;
     // The species any frame shows, for the legend's key.
@@ -3511,6 +3659,11 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     )?;
     let labelled: Vec<(PathBuf, LabelValues)> = written.iter().cloned().zip(frame_values).collect();
     write_labels(args, &labelled)?;
+    if let Some(bar) = &bar {
+        for image in &written {
+            draw_panel(image, bar, args.scale_bar_corner, "--scale-bar")?;
+        }
+    }
     Ok(())
 }
 
