@@ -162,6 +162,27 @@ pub struct Manifest {
     pub duplicates: Option<String>,
 }
 
+impl Manifest {
+    /// The frames the run could not convert, named (`timestep 400`, `frame 3 of
+    /// run.dump` where the timestep could not be read), at most six, with how many more
+    /// (`and 4 more`).
+    pub fn failed_names(&self) -> String {
+        let named: Vec<String> = self
+            .failed
+            .iter()
+            .take(6)
+            .map(|f| match f.timestep {
+                Some(t) => format!("timestep {t}"),
+                None => format!("frame {} of {}", f.frame, f.input),
+            })
+            .collect();
+        match self.failed.len() {
+            k if k > 6 => format!("{} and {} more", named.join(", "), k - 6),
+            _ => named.join(", "),
+        }
+    }
+}
+
 /// A frame of [`Manifest::failed`].
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct FailedEntry {

@@ -208,22 +208,12 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     }
     println!("  size         {}", super::size_text(bytes));
     if !m.failed.is_empty() {
-        let named: Vec<String> = m
-            .failed
-            .iter()
-            .take(6)
-            .map(|f| match f.timestep {
-                Some(t) => format!("timestep {t}"),
-                None => format!("frame {} of {}", f.frame, f.input),
-            })
-            .collect();
         println!(
-            "  failed       {} frame{} the batch could not convert: {}{} (`mdlod verify {}` \
+            "  failed       {} frame{} the batch could not convert: {} (`mdlod verify {}` \
              says why)",
             m.failed.len(),
             if m.failed.len() == 1 { "" } else { "s" },
-            named.join(", "),
-            if m.failed.len() > 6 { ", ..." } else { "" },
+            m.failed_names(),
             dir.display()
         );
     }

@@ -3160,28 +3160,28 @@ const MOVIE_FRAMING_BOXES: usize = 1 << 18;
 fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<String> {
     let mut notes = Vec::new();
     if !manifest.failed.is_empty() {
-        let named: Vec<String> = manifest
-            .failed
-            .iter()
-            .take(6)
-            .map(|f| match f.timestep {
-                Some(t) => format!("timestep {t}"),
-                None => format!("frame {} of {}", f.frame, f.input),
-            })
-            .collect();
-        let more = match manifest.failed.len() {
-            k if k > 6 => format!(" and {} more", k - 6),
-            _ => String::new(),
-        };
         notes.push(format!(
-            "  note: {} frame{} the batch could not convert {} missing from the images ({}{more}): \
-             `mdlod verify {}` says why; a rerun of the batch converts them once their inputs \
-             are mended",
+            "  note: {} frame{} the batch could not convert {} missing from the images ({}): \
+             `mdlod verify {}` says why; a rerun of the batch converts {} once {} mended",
             manifest.failed.len(),
             if manifest.failed.len() == 1 { "" } else { "s" },
-            if manifest.failed.len() == 1 { "is" } else { "are" },
-            named.join(", "),
-            dir.display()
+            if manifest.failed.len() == 1 {
+                "is"
+            } else {
+                "are"
+            },
+            manifest.failed_names(),
+            dir.display(),
+            if manifest.failed.len() == 1 {
+                "it"
+            } else {
+                "them"
+            },
+            if manifest.failed.len() == 1 {
+                "its input is"
+            } else {
+                "their inputs are"
+            },
         ));
     }
     let listed = manifest.frames.len() as u64;
