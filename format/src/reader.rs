@@ -1020,9 +1020,10 @@ impl MdlodFile {
     /// This file with the attribute named `name` in the first's place: its values,
     /// range and node means are those every reader of the first attribute (colours,
     /// splat light, hidden values) takes, and it is the file's only attribute (select
-    /// another from a fresh open). The first attribute's name gives the file as it is. The node records are copied (a file with extra attributes was built
-    /// whole, at most a chunk's particles); a mean that is not finite is refused, naming
-    /// the node. An unknown name is an error listing the file's attributes.
+    /// another from a fresh open). The first attribute's name gives the file as it is.
+    /// The node records are copied (a file with extra attributes was built whole, at most
+    /// a chunk's particles); a mean that is not finite is refused, naming the node. An
+    /// unknown name is an error listing the file's attributes.
     pub fn select_attribute(mut self, name: &str) -> Result<MdlodFile, FormatError> {
         // A name as stored, or its last part where that is one attribute's only
         // (`mass` for a GSD input's `particles/mass`).
@@ -1031,13 +1032,13 @@ impl MdlodFile {
                 .rsplit_once('/')
                 .is_some_and(|(_, last)| last == name)
         };
-        let by_part: Vec<String> = self
-            .attribute_names()
-            .into_iter()
+        let names = self.attribute_names();
+        let by_part: Vec<String> = names
+            .iter()
             .filter(|n| last_part(n))
-            .map(str::to_string)
+            .map(|n| n.to_string())
             .collect();
-        let exact = self.attribute_names().contains(&name);
+        let exact = names.contains(&name);
         let chosen = match (exact, by_part.as_slice()) {
             (false, [one]) => one.clone(),
             _ => name.to_string(),

@@ -171,8 +171,8 @@ impl Writer {
             .write_all(table)
             .map_err(|e| FormatError::io(&tmp_path, e))?;
         let file_size = table_offset + table.len() as u64;
-        // A file with per-particle radii is version 1.1, with radii on a log scale 1.2;
-        // any other is 1.0.
+        // A file with per-particle radii is version 1.1; with radii on a log scale or
+        // further attributes 1.2; any other 1.0.
         let has = |kind: SectionKind| self.sections.iter().any(|s| s.kind == kind as u32);
         let version = if has(SectionKind::RadiusLog) || has(SectionKind::Attributes) {
             FORMAT_VERSION_1_2

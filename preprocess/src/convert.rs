@@ -372,18 +372,19 @@ pub fn convert_frame_with(
         }
     })?;
     let mut h = h;
-    for e in further {
-        let extra =
-            hierarchy::extra::extra_attribute(&h, &e.name, &e.values, &species).map_err(|err| {
-                ConvertError::Build {
-                    path: source
-                        .as_ref()
-                        .map_or_else(|| "input".to_string(), |s| s.path.clone()),
-                    source: err,
-                }
-            })?;
-        h.extra_attributes.push(extra);
-    }
+    let columns: Vec<(&str, &[f32])> = further
+        .iter()
+        .map(|e| (e.name.as_str(), e.values.as_slice()))
+        .collect();
+    h.extra_attributes =
+        hierarchy::extra::extra_attributes(&h, &columns, &species).map_err(|err| {
+            ConvertError::Build {
+                path: source
+                    .as_ref()
+                    .map_or_else(|| "input".to_string(), |s| s.path.clone()),
+                source: err,
+            }
+        })?;
     let build_time = t0.elapsed();
     let mut notes = Vec::new();
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {

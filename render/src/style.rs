@@ -617,20 +617,7 @@ impl AttributeScale {
     /// attribute's positive value (its points' light is that value); 1 otherwise (a log
     /// scale's position, a constant at or below 0: the light is then the flux).
     pub fn light_unit(&self) -> f32 {
-        if self.log_range().is_some() {
-            return 1.0;
-        }
-        let (lo, hi) = match self.shown {
-            Some([lo, hi]) => (lo, hi),
-            None if self.constant => return if self.min > 0.0 { self.min } else { 1.0 },
-            None => (self.min, self.max),
-        };
-        let span = hi - lo;
-        if span > 0.0 && span.is_finite() {
-            span
-        } else {
-            1.0
-        }
+        self.light_in_units().map_or(1.0, |(_, unit)| unit)
     }
 
     /// What the light of splats lit by this attribute projects ([`Self::light_unit`]):
@@ -638,15 +625,23 @@ impl AttributeScale {
     /// `None` where it is no quantity in those units (a log scale, a constant attribute
     /// at or below 0, a range of no width).
     pub fn light_zero(&self) -> Option<f32> {
+        self.light_in_units().map(|(zero, _)| zero)
+    }
+
+    /// Where the light is a quantity in the attribute's units: the value its 0 stands
+    /// for and the factor of its 1 ([`Self::light_unit`], [`Self::light_zero`]).
+    fn light_in_units(&self) -> Option<(f32, f32)> {
         if self.log_range().is_some() {
             return None;
         }
-        match self.shown {
-            Some([lo, hi]) => (hi - lo > 0.0 && (hi - lo).is_finite()).then_some(lo),
-            None if self.constant => (self.min > 0.0).then_some(0.0),
-            // (A width past single precision: the light is the flux, as `light_unit` says.)
-            None => (self.max - self.min).is_finite().then_some(self.min),
-        }
+        let (lo, hi) = match self.shown {
+            Some([lo, hi]) => (lo, hi),
+            None if self.constant => return (self.min > 0.0).then_some((0.0, self.min)),
+            None => (self.min, self.max),
+        };
+        // (A width past single precision: the light is the flux.)
+        let span = hi - lo;
+        (span > 0.0 && span.is_finite()).then_some((lo, span))
     }
 
     /// A value (a cluster's mean) in [0, 1].

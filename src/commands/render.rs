@@ -1756,7 +1756,9 @@ pub fn run(args: Args) -> Result<()> {
         by_attribute(&args) && !projected(&args),
         lit_linearly(&args),
     )?;
-    let bar = {
+    let bar = if args.label.is_empty() && !args.scale_bar {
+        None
+    } else {
         // (A turntable's images share the file's values but the frame number.)
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let images = args.turntable.unwrap_or(1).max(1) as usize;
@@ -3200,7 +3202,8 @@ fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<S
 /// of refusing the frame. Files of types or elements still refuse a name they lack (a
 /// misspelling).
 fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> Result<()> {
-    let file = mdlod_render::open_styled(path, style)?;
+    // (The species only: the file as it is, whichever attribute the style reads.)
+    let file = mdlod_format::MdlodFile::open(path)?;
     let m = file.metadata();
     let Some(column) = &m.species_column else {
         return Ok(());

@@ -719,7 +719,7 @@ impl ViewerApp {
         {
             actions.push(Action::RadiusScale { scale });
         }
-        if let Some(first) = &self.state.attribute {
+        if let Some(first) = self.state.attributes.first() {
             let attribute = s.style.attribute.as_ref().unwrap_or(first);
             if self.state.attributes.len() > 1 {
                 let mut chosen = attribute.clone();

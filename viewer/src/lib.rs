@@ -160,7 +160,6 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         .iter()
         .map(|s| (s.name.clone(), s.colour))
         .collect();
-    state.attribute = meta.attribute.as_ref().map(|a| a.name.clone());
     state.attributes = first
         .attribute_names()
         .iter()

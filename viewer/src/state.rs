@@ -382,11 +382,10 @@ pub struct ViewerState {
     pub frame_bounds: Vec<Option<Bounds>>,
     /// The window's image size (pixels).
     pub size: [u32; 2],
-    /// The data's species (name, linear colour) and scalar attribute, for the panel.
+    /// The data's species (name, linear colour), for the panel.
     pub species: Vec<(String, [f32; 3])>,
-    pub attribute: Option<String>,
     /// Every attribute the data keeps (the first, then further ones), for the panel's
-    /// choice of which to colour by.
+    /// colouring by the attribute and its choice of which.
     pub attributes: Vec<String>,
 }
 
@@ -412,7 +411,6 @@ impl ViewerState {
             frame_bounds,
             size,
             species: vec![],
-            attribute: None,
             attributes: vec![],
         }
     }

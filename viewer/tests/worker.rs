@@ -649,7 +649,6 @@ fn the_viewer_colours_by_the_attribute_chosen() {
     )
     .unwrap();
     let mut s = state(&path, [64, 48]);
-    s.attribute = Some("x".into());
     s.attributes = vec!["x".into(), "z".into()];
     s.apply(&Action::ColourMap {
         map: Some(mdlod_render::ColourMap::Viridis),

@@ -54,15 +54,46 @@ pub fn particle_ranges(levels: &[LevelRecord], nodes: &[NodeRecord]) -> Vec<Rang
     ranges
 }
 
-/// Lays out `values` (one per particle, in the input's order) in `h`'s particle order,
-/// quantizes them over their range, and averages them over every node. `species` are
-/// the species the hierarchy was built with (their radii weigh the particles without
-/// radii of their own).
-pub fn extra_attribute(
+/// Lays out each of `columns` (a name and one value per particle, in the input's order)
+/// in `h`'s particle order, quantizes it over its range, and averages it over every
+/// node. `species` are the species the hierarchy was built with (their radii weigh the
+/// particles without radii of their own). The nodes' particle runs and the particles'
+/// areas are found once for all the columns.
+pub fn extra_attributes(
+    h: &Hierarchy,
+    columns: &[(&str, &[f32])],
+    species: &[Species],
+) -> Result<Vec<ExtraAttribute>, BuildError> {
+    if columns.is_empty() {
+        return Ok(Vec::new());
+    }
+    // Each particle's area as the hierarchy's representatives weigh it.
+    let areas: Vec<f64> = (0..h.particle_order.len())
+        .map(|k| {
+            let r = match &h.radius {
+                Some((q, r)) => r.decode(q[k]),
+                None => species
+                    .get(usize::from(h.species_index[k]))
+                    .map_or(0.0, |s| s.radius),
+            };
+            f64::from(r * r)
+        })
+        .collect();
+    let runs = particle_ranges(&h.levels, &h.nodes);
+    columns
+        .iter()
+        .map(|(name, values)| extra_attribute(h, name, values, &areas, &runs))
+        .collect()
+}
+
+/// One column of [`extra_attributes`], with the particles' `areas` (in the file's
+/// order) and the nodes' particle `runs`.
+fn extra_attribute(
     h: &Hierarchy,
     name: &str,
     values: &[f32],
-    species: &[Species],
+    areas: &[f64],
+    runs: &[Range<u64>],
 ) -> Result<ExtraAttribute, BuildError> {
     if let Some(index) = values.iter().position(|v| !v.is_finite()) {
         return Err(BuildError::NonFiniteAttribute {
@@ -86,21 +117,10 @@ pub fn extra_attribute(
         .map(|&i| values[i as usize])
         .collect();
     let quantized = ordered.iter().map(|&v| info.encode(v)).collect();
-    // Each particle's area as the hierarchy's representatives weigh it.
-    let area = |k: usize| -> f64 {
-        let r = match &h.radius {
-            Some((q, r)) => r.decode(q[k]),
-            None => species
-                .get(usize::from(h.species_index[k]))
-                .map_or(0.0, |s| s.radius),
-        };
-        f64::from(r * r)
-    };
-    let areas: Vec<f64> = (0..ordered.len()).map(area).collect();
     // Each node's sums over its own particles (sums of a whole level's run would lose the
     // small values beside a large total), every level's nodes in parallel.
-    let node_means = particle_ranges(&h.levels, &h.nodes)
-        .into_par_iter()
+    let node_means = runs
+        .par_iter()
         .map(|r| {
             let run = r.start as usize..(r.end as usize).min(ordered.len());
             let (mut area, mut weighted, mut plain) = (0f64, 0f64, 0f64);

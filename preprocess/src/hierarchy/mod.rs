@@ -212,7 +212,7 @@ pub struct Hierarchy {
     pub attribute: Option<(Vec<u16>, f32, f32)>,
     /// Quantized radius per particle, final order, with its range.
     pub radius: Option<(Vec<u16>, mdlod_format::meta::RadiusInfo)>,
-    /// Further attributes ([`extra::extra_attribute`]), written after the first.
+    /// Further attributes ([`extra::extra_attributes`]), written after the first.
     pub extra_attributes: Vec<extra::ExtraAttribute>,
     /// Largest distance between a decoded particle and its input position.
     pub max_position_error: f64,

@@ -1289,7 +1289,12 @@ impl DumpFile {
         }
         if let Index::Pieces(p) = &self.index {
             self.check_frame(k)?;
-            return pieces::read_frame(p, k, opts, progress);
+            // (Wrapped once, whole, by `read_frame`: not piece by piece too.)
+            let stored = ReadOptions {
+                wrap: false,
+                ..opts.clone()
+            };
+            return pieces::read_frame(p, k, &stored, progress);
         }
         if let Index::Raw(r) = &self.index {
             self.check_frame(k)?;
