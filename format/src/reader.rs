@@ -1025,24 +1025,9 @@ impl MdlodFile {
     /// a chunk's particles); a mean that is not finite is refused, naming the node. An
     /// unknown name is an error listing the file's attributes.
     pub fn select_attribute(mut self, name: &str) -> Result<MdlodFile, FormatError> {
-        // A name as stored, or its last part where that is one attribute's only
-        // (`mass` for a GSD input's `particles/mass`).
-        let last_part = |stored: &str| {
-            stored
-                .rsplit_once('/')
-                .is_some_and(|(_, last)| last == name)
-        };
-        let names = self.attribute_names();
-        let by_part: Vec<String> = names
-            .iter()
-            .filter(|n| last_part(n))
-            .map(|n| n.to_string())
-            .collect();
-        let exact = names.contains(&name);
-        let chosen = match (exact, by_part.as_slice()) {
-            (false, [one]) => one.clone(),
-            _ => name.to_string(),
-        };
+        let chosen = attribute_named(&self.attribute_names(), name)
+            .unwrap_or(name)
+            .to_string();
         let name = chosen.as_str();
         if self
             .metadata
@@ -2122,6 +2107,24 @@ fn check_node(
         return Err(bad(id, format!("species {} of {species_count}", n.species)));
     }
     Ok(())
+}
+
+/// The attribute of `names` (a file's [`MdlodFile::attribute_names`]) that `name` asks
+/// for: the name as stored, or its last part where that is one attribute's only (`mass`
+/// for a GSD input's `particles/mass`); `None` when no attribute answers to it.
+pub fn attribute_named<'a>(names: &[&'a str], name: &str) -> Option<&'a str> {
+    if let Some(exact) = names.iter().find(|n| **n == name) {
+        return Some(exact);
+    }
+    let mut by_part = names.iter().filter(|stored| {
+        stored
+            .rsplit_once('/')
+            .is_some_and(|(_, last)| last == name)
+    });
+    match (by_part.next(), by_part.next()) {
+        (Some(one), None) => Some(one),
+        _ => None,
+    }
 }
 
 #[cfg(test)]

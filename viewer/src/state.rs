@@ -657,6 +657,25 @@ impl ViewerState {
             }
             Action::Spp { n: 0 } => refuse("0 samples per pixel".into()),
             Action::SndfIterations { n: 0 } => refuse("0 S-NDF iterations".into()),
+            // Known before any frame is drawn: the first frame's attributes (a later
+            // frame without it fails when it is shown).
+            Action::Attribute { name: Some(name) }
+                if !self.attributes.is_empty()
+                    && mdlod_format::reader::attribute_named(
+                        &self
+                            .attributes
+                            .iter()
+                            .map(String::as_str)
+                            .collect::<Vec<_>>(),
+                        name,
+                    )
+                    .is_none() =>
+            {
+                refuse(format!(
+                    "no attribute {name:?}; the data has {}",
+                    self.attributes.join(", ")
+                ))
+            }
             Action::Frame { index: i } if *i >= self.frames.len() => refuse(format!(
                 "frame {i}, but the data has {} frame(s)",
                 self.frames.len()
@@ -983,7 +1002,9 @@ mod tests {
 
     #[test]
     fn scripts_refuse_what_render_refuses() {
-        let s = state();
+        let mut s = state();
+        s.attributes = vec!["c_pe".into(), "particles/mass".into()];
+        let s = s;
         let refused = |a: Action, want: &str| {
             let e = s.check_script_action(3, &a).unwrap_err();
             assert!(e.starts_with("script action 3 ("), "{e}");
@@ -996,6 +1017,18 @@ mod tests {
             },
             "light index 9",
         );
+        refused(
+            Action::Attribute {
+                name: Some("c_ke".into()),
+            },
+            "(attribute): no attribute \"c_ke\"; the data has c_pe, particles/mass",
+        );
+        for known in ["c_pe", "mass", "particles/mass"] {
+            let a = Action::Attribute {
+                name: Some(known.into()),
+            };
+            assert_eq!(s.check_script_action(1, &a), Ok(()), "{known}");
+        }
         refused(
             Action::LightColour {
                 index: 4,
