@@ -2849,9 +2849,7 @@ fn batch_skips_an_empty_frame_saying_which_and_convert_names_it() {
     let out = ok(&["batch", s(&input), "-o", s(&d)]);
     assert!(out.starts_with(&skipped), "{out}");
     assert!(
-        out.contains(
-            "3 frames in the inputs, 3 here: 2 converted, 0 already done, 1 empty frame skipped;"
-        ),
+        out.contains("3 frames in the inputs: 2 converted, 0 already done, 1 empty frame skipped;"),
         "{out}"
     );
     assert_eq!(batch_frames(&d), ["frame-0.mdlod", "frame-200.mdlod"]);
@@ -3571,6 +3569,10 @@ fn a_label_shows_each_frames_values_in_its_corner() {
     assert_ne!(corner("nt.png"), question);
     for (extra, message) in [
         (&["--dt", "0.002"][..], "--dt has no effect without --label"),
+        (
+            &["--label-corner", "bottom-left"][..],
+            "--label-corner has no effect without --label",
+        ),
         (
             &["--label", "step {timestep}", "--dt", "0.002"][..],
             "--dt has no effect without {time} in a --label",
@@ -4721,11 +4723,21 @@ fn verify_checks_a_batch_directory() {
         "-o",
         s(&out),
     ]);
-    let text = ok(&["verify", s(&out)]);
-    assert!(
-        text.contains("ok: 6 frames verified against dataset.json"),
-        "{text}"
-    );
+    // The directory or its manifest, as `info` takes them.
+    for what in [out.clone(), out.join("dataset.json")] {
+        let text = ok(&["verify", s(&what)]);
+        assert!(
+            text.contains("ok: 6 frames verified against dataset.json"),
+            "{text}"
+        );
+    }
+    // A movie of the manifest is the directory's: every frame, numbered.
+    let movie = dir.path().join("m-%d.png");
+    let manifest = out.join("dataset.json");
+    let mut args = vec!["render", s(&manifest), "-o", s(&movie)];
+    args.extend(["--width", "64", "--height", "48"]);
+    ok(&args);
+    assert!((0..6).all(|k| dir.path().join(format!("m-{k}.png")).is_file()));
     // `info` of the directory (or its manifest): the trajectory.
     for what in [out.clone(), out.join("dataset.json")] {
         let text = ok(&["info", s(&what)]);
@@ -7352,7 +7364,7 @@ fn a_batch_summary_counts_duplicate_timesteps_apart() {
         "last",
     ]);
     assert!(
-        out.contains("3 frames in the inputs (1 more left out as duplicate timesteps), 3 here"),
+        out.contains("3 frames in the inputs (1 more left out as duplicate timesteps): "),
         "{out}"
     );
 }
@@ -8187,6 +8199,10 @@ fn a_scale_bar_is_as_long_as_its_length_of_the_world() {
         (
             &["--ortho", "--scale-bar-length", "5"][..],
             "no effect without --scale-bar",
+        ),
+        (
+            &["--ortho", "--scale-bar-corner", "top-right"][..],
+            "--scale-bar-corner has no effect without --scale-bar",
         ),
         (
             &[

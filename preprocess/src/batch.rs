@@ -721,18 +721,37 @@ pub fn range_checksum(
     ranges_checksum(path, std::slice::from_ref(&range), progress)
 }
 
-/// The XXH3-64 of `ranges` of the file at `path`, one after another (a GSD frame's
-/// chunks: [`DumpFile::frame_ranges`]).
+/// The XXH3-64 of `ranges` of the file at `path`, one after another.
 pub fn ranges_checksum(
     path: &Path,
     ranges: &[std::ops::Range<u64>],
     progress: &dyn Progress,
 ) -> std::io::Result<String> {
-    let mut file = std::fs::File::open(path)?;
+    let files: Vec<(PathBuf, std::ops::Range<u64>)> = ranges
+        .iter()
+        .map(|r| (path.to_path_buf(), r.clone()))
+        .collect();
+    files_checksum(&files, progress)
+}
+
+/// The XXH3-64 of byte ranges of files, one after another (a GSD frame's chunks, a `%`
+/// piece set's pieces' frames: [`DumpFile::frame_ranges`]); a file named twice in a row
+/// is opened once.
+pub fn files_checksum(
+    ranges: &[(PathBuf, std::ops::Range<u64>)],
+    progress: &dyn Progress,
+) -> std::io::Result<String> {
+    let mut open: Option<(&Path, std::fs::File)> = None;
     let mut hasher = xxhash_rust::xxh3::Xxh3::new();
     let mut buffer = vec![0u8; 1 << 20];
-    for range in ranges {
-        hash_range(&mut file, range.clone(), &mut hasher, &mut buffer, progress)?;
+    for (path, range) in ranges {
+        let file = match open.take() {
+            Some((p, f)) if p == path.as_path() => (p, f),
+            _ => (path.as_path(), std::fs::File::open(path)?),
+        };
+        let (p, mut f) = file;
+        hash_range(&mut f, range.clone(), &mut hasher, &mut buffer, progress)?;
+        open = Some((p, f));
     }
     Ok(format!("{:016x}", hasher.digest()))
 }
@@ -771,7 +790,8 @@ fn hash_range(
 }
 
 /// The checksum [`FrameBytes::xxh3`] records of frame `frame` of `input` (whose bytes
-/// span `range`): of the range, or of a GSD frame's chunks ([`DumpFile::frame_ranges`]).
+/// span `range`): of the range, or of a GSD frame's chunks or a `%` piece set's pieces'
+/// frames ([`DumpFile::frame_ranges`]).
 fn frame_checksum(
     input: &Path,
     dump: Option<&DumpFile>,
@@ -780,7 +800,7 @@ fn frame_checksum(
     progress: &dyn Progress,
 ) -> std::io::Result<String> {
     match dump.and_then(|d| d.frame_ranges(frame)) {
-        Some(ranges) => ranges_checksum(input, &ranges, progress),
+        Some(ranges) => files_checksum(&ranges, progress),
         None => range_checksum(input, range, progress),
     }
 }

@@ -2585,3 +2585,77 @@ fn a_rerun_with_another_wrapping_converts_again() {
     assert_eq!(run(false), (5, 0));
     assert!(read_manifest(&out).unwrap().frames.iter().all(|f| !f.wrap));
 }
+
+/// A `%` piece set a run is still writing (each piece appended to): a rerun keeps the
+/// frames whose bytes in every piece are unchanged, as for one file, and converts the
+/// new ones; a frame changed in one piece converts again. Binary pieces rewritten with
+/// the same bytes keep every frame.
+#[test]
+fn piece_sets_appended_to_keep_their_unchanged_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    // Each text piece cut after its second frame, as a run writing it leaves it.
+    let whole: Vec<Vec<u8>> = (0..2)
+        .map(|k| std::fs::read(lammps_sample_path(&format!("cu_melt_mpi.{k}.dump"))).unwrap())
+        .collect();
+    let frame_starts = |text: &[u8]| -> Vec<usize> {
+        let item = b"ITEM: TIMESTEP";
+        (0..text.len())
+            .filter(|&i| text[i..].starts_with(item))
+            .collect()
+    };
+    let piece = |k: usize| dir.path().join(format!("melt.{k}.dump"));
+    for (k, text) in whole.iter().enumerate() {
+        let starts = frame_starts(text);
+        assert_eq!(starts.len(), 3);
+        std::fs::write(piece(k), &text[..starts[2]]).unwrap();
+    }
+    let set = dir.path().join("melt.%.dump");
+    let out = dir.path().join("out");
+    let r = batch(std::slice::from_ref(&set), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (2, 0));
+    let before = read_manifest(&out).unwrap();
+    // The run writes its third frame into both pieces.
+    for (k, text) in whole.iter().enumerate() {
+        std::fs::write(piece(k), text).unwrap();
+    }
+    let r = batch(std::slice::from_ref(&set), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(
+        (r.converted, r.skipped, r.kept_unchanged, r.redone.source),
+        (1, 2, 2, 0)
+    );
+    let after = read_manifest(&out).unwrap();
+    check_manifest(&out, &after);
+    for (a, b) in before.frames.iter().zip(&after.frames) {
+        assert_eq!(a.checksum, b.checksum, "timestep {}", a.timestep);
+    }
+    // Nothing changed since: the next rerun reads nothing and keeps all.
+    let r = batch(std::slice::from_ref(&set), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped, r.kept_unchanged), (0, 3, 0));
+    // One atom of the first frame moved in the second piece: that frame alone again.
+    let mut text = whole[1].clone();
+    let second = frame_starts(&text)[1];
+    let digit = (second - 40..second)
+        .find(|&i| text[i].is_ascii_digit() && text[i] != b'9')
+        .unwrap();
+    text[digit] += 1;
+    std::fs::write(piece(1), &text).unwrap();
+    let r = batch(std::slice::from_ref(&set), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.kept_unchanged, r.redone.source), (1, 2, 1));
+    // Binary pieces rewritten with the same bytes (a copy, a touch): every frame kept.
+    for k in 0..2 {
+        let from = lammps_sample_path(&format!("cu_melt_mpi.{k}.bin"));
+        std::fs::copy(from, dir.path().join(format!("melt.{k}.bin"))).unwrap();
+    }
+    let bins = dir.path().join("melt.%.bin");
+    let out = dir.path().join("bin");
+    let r = batch(std::slice::from_ref(&bins), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 3);
+    for k in 0..2 {
+        let p = dir.path().join(format!("melt.{k}.bin"));
+        let bytes = std::fs::read(&p).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        std::fs::write(&p, bytes).unwrap();
+    }
+    let r = batch(std::slice::from_ref(&bins), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.kept_unchanged), (0, 3));
+}

@@ -313,9 +313,6 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             }
         );
     }
-    let shard = opts
-        .shard
-        .map_or(String::new(), |(i, n)| format!(" (shard {i} of {n})"));
     for e in &report.empty {
         println!("{e}");
     }
@@ -374,11 +371,14 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         0 => String::new(),
         d => format!(" ({d} more left out as duplicate timesteps)"),
     };
+    // A shard's share of the frames; without shards every frame is this run's.
+    let share = opts.shard.map_or(String::new(), |(i, n)| {
+        format!(", {} in shard {i} of {n}", report.frames_in_shard)
+    });
     println!(
-        "{} frame{} in the inputs{kept}, {} here{shard}: {} converted, {} already done{empty}; {} at a time; manifest {}",
+        "{} frame{} in the inputs{kept}{share}: {} converted, {} already done{empty}; {} at a time; manifest {}",
         report.frames_total,
         if report.frames_total == 1 { "" } else { "s" },
-        report.frames_in_shard,
         report.converted,
         report.skipped,
         report.jobs,

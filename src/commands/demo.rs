@@ -135,11 +135,11 @@ pub fn run(args: Args) -> Result<()> {
         legend_title: None,
         label: vec![],
         legend_category: vec![],
-        label_corner: super::render::LegendCorner::TopLeft,
+        label_corner: None,
         dt: None,
         scale_bar: false,
         scale_bar_length: None,
-        scale_bar_corner: super::render::LegendCorner::BottomLeft,
+        scale_bar_corner: None,
         cell: None,
         cell_width: None,
     })?;

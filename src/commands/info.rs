@@ -288,16 +288,8 @@ pub fn run(args: Args) -> Result<()> {
         return sndf_info(&args);
     }
     // A batch directory (or its manifest): the trajectory.
-    let manifest_named = args
-        .file
-        .file_name()
-        .is_some_and(|n| n == mdlod_preprocess::batch::MANIFEST)
-        && args.file.is_file();
-    if manifest_named {
-        let dir = match args.file.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
+    let dir = super::batch_dir_of(args.file.clone());
+    if dir != args.file {
         return batch_info(&dir, &args);
     }
     if args.file.is_dir() {

@@ -15,6 +15,22 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 
+/// A batch's manifest (`DIR/dataset.json`) where its directory is meant: the directory
+/// (`.` for a bare `dataset.json`); any other path as it is.
+pub fn batch_dir_of(path: PathBuf) -> PathBuf {
+    let manifest = path
+        .file_name()
+        .is_some_and(|n| n == mdlod_preprocess::batch::MANIFEST)
+        && path.is_file();
+    if !manifest {
+        return path;
+    }
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
 /// Refuses an image name whose extension says another format than the PNG written
 /// (`x.jpg` would hold PNG data under a JPEG name); a name without an extension is
 /// taken as it is.

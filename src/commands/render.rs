@@ -20,8 +20,8 @@ use crate::progress::Bar;
     after_help = "Examples:\n  mdlod render frame.mdlod -o frame.png --azimuth 30 --elevation 20 --spp 4\n  mdlod render frame.mdlod -o close.png --view close.json --screen-error 0.5\n  mdlod render frame.mdlod -o big.png --gpu-memory 512M --save-view view.json\n  mdlod render traj.d -o movie/frame-%05d.png --colour-map viridis --attribute-range 0:2"
 )]
 pub struct Args {
-    /// The .mdlod file to render, or a batch directory (every frame of its dataset.json,
-    /// one image each: -o must number them, e.g. movie/frame-%05d.png).
+    /// The .mdlod file to render, or a batch directory or its dataset.json (every frame
+    /// it lists, one image each: -o must number them, e.g. movie/frame-%05d.png).
     pub file: PathBuf,
     /// The PNG to write.
     #[arg(short, long)]
@@ -209,14 +209,9 @@ pub struct Args {
     /// repeatable. Values --hide-attribute hides are left out of the key
     #[arg(long, value_name = "VALUE=NAME", allow_hyphen_values = true)]
     pub legend_category: Vec<String>,
-    /// Where --label draws its panel
-    #[arg(
-        long,
-        value_name = "CORNER",
-        default_value = "top-left",
-        ignore_case = true
-    )]
-    pub label_corner: LegendCorner,
+    /// Where --label draws its panel [default: top-left]
+    #[arg(long, value_name = "CORNER", ignore_case = true)]
+    pub label_corner: Option<LegendCorner>,
     /// Draw a scale bar into the image: a round length of the world (about a fifth of
     /// the image's width, or --scale-bar-length) under its size in the file's units
     /// (`metal`, `real`: Å). Orthographic views only (in perspective, sizes depend on
@@ -227,14 +222,21 @@ pub struct Args {
     /// fifth of the image's width]
     #[arg(long, value_name = "LENGTH")]
     pub scale_bar_length: Option<f32>,
-    /// Where --scale-bar draws its panel
-    #[arg(
-        long,
-        value_name = "CORNER",
-        default_value = "bottom-left",
-        ignore_case = true
-    )]
-    pub scale_bar_corner: LegendCorner,
+    /// Where --scale-bar draws its panel [default: bottom-left]
+    #[arg(long, value_name = "CORNER", ignore_case = true)]
+    pub scale_bar_corner: Option<LegendCorner>,
+}
+
+impl Args {
+    /// Where --label draws.
+    fn label_corner(&self) -> LegendCorner {
+        self.label_corner.unwrap_or(LegendCorner::TopLeft)
+    }
+
+    /// Where --scale-bar draws.
+    fn scale_bar_corner(&self) -> LegendCorner {
+        self.scale_bar_corner.unwrap_or(LegendCorner::BottomLeft)
+    }
 }
 
 /// The length unit of a unit style (LAMMPS `units`), as a scale bar names it, in the
@@ -557,11 +559,11 @@ fn check_label(args: &Args) -> Result<()> {
             );
         }
     }
-    if !args.label.is_empty() && args.legend_in_image == Some(args.label_corner) {
+    if !args.label.is_empty() && args.legend_in_image == Some(args.label_corner()) {
         anyhow::bail!(
             "--label and --legend-in-image both draw at the {} corner: give --label-corner \
              another",
-            clap::ValueEnum::to_possible_value(&args.label_corner)
+            clap::ValueEnum::to_possible_value(&args.label_corner())
                 .map_or_else(String::new, |v| v.get_name().to_string())
         );
     }
@@ -701,7 +703,7 @@ fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
     let (panels, missing) = label_panels(args, &values);
     for ((image, _), label) in images.iter().zip(&panels) {
         glyphs.extend(label.missing_glyphs());
-        draw_panel(image, label, args.label_corner, "--label")?;
+        draw_panel(image, label, args.label_corner(), "--label")?;
     }
     for field in missing {
         let hint = match field {
@@ -1374,23 +1376,29 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     if args.scale_bar_length.is_some() && !args.scale_bar {
         anyhow::bail!("--scale-bar-length has no effect without --scale-bar");
     }
+    if args.scale_bar_corner.is_some() && !args.scale_bar {
+        anyhow::bail!("--scale-bar-corner has no effect without --scale-bar");
+    }
+    if args.label_corner.is_some() && args.label.is_empty() {
+        anyhow::bail!("--label-corner has no effect without --label");
+    }
     if args.scale_bar {
         if args.turntable.is_some() {
             anyhow::bail!("--scale-bar draws into stills and movies, not turntables");
         }
         let taken = [
-            (!args.label.is_empty()).then_some((args.label_corner, "--label")),
+            (!args.label.is_empty()).then_some((args.label_corner(), "--label")),
             args.legend_in_image.map(|c| (c, "--legend-in-image")),
         ];
         if let Some((_, other)) = taken
             .into_iter()
             .flatten()
-            .find(|(c, _)| *c == args.scale_bar_corner)
+            .find(|(c, _)| *c == args.scale_bar_corner())
         {
             anyhow::bail!(
                 "--scale-bar and {other} both draw at the {} corner: give \
                  --scale-bar-corner another",
-                clap::ValueEnum::to_possible_value(&args.scale_bar_corner)
+                clap::ValueEnum::to_possible_value(&args.scale_bar_corner())
                     .map_or_else(String::new, |v| v.get_name().to_string())
             );
         }
@@ -1516,7 +1524,9 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
     Ok(bytes)
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(mut args: Args) -> Result<()> {
+    // A batch's dataset.json renders as its directory.
+    args.file = super::batch_dir_of(args.file);
     // `--cell red frame.mdlod`: the colour takes `=`, so `red` was read as the file.
     let named = args.file.to_string_lossy();
     if args.cell.as_deref() == Some("auto") && !args.file.exists() && parse_colour(&named).is_ok() {
@@ -2138,7 +2148,7 @@ pub fn run(args: Args) -> Result<()> {
         )],
     )?;
     if let Some(bar) = &bar {
-        draw_panel(&args.output, bar, args.scale_bar_corner, "--scale-bar")?;
+        draw_panel(&args.output, bar, args.scale_bar_corner(), "--scale-bar")?;
     }
     Ok(())
 }
@@ -3664,7 +3674,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     write_labels(args, &labelled)?;
     if let Some(bar) = &bar {
         for image in &written {
-            draw_panel(image, bar, args.scale_bar_corner, "--scale-bar")?;
+            draw_panel(image, bar, args.scale_bar_corner(), "--scale-bar")?;
         }
     }
     Ok(())

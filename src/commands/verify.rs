@@ -11,7 +11,8 @@ use mdlod_format::MdlodFile;
 #[derive(clap::Args)]
 #[command(after_help = "Examples:\n  mdlod verify frame.mdlod\n  mdlod verify traj.d")]
 pub struct Args {
-    /// A .mdlod file, or a batch directory (with dataset.json, or shard manifests).
+    /// A .mdlod file, or a batch directory (with dataset.json, or shard manifests) or
+    /// its dataset.json.
     pub file: PathBuf,
 }
 
@@ -65,7 +66,9 @@ fn run_dir(args: &Args) -> Result<()> {
     Ok(())
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(mut args: Args) -> Result<()> {
+    // A batch's dataset.json verifies as its directory.
+    args.file = super::batch_dir_of(args.file);
     if args.file.is_dir() {
         return run_dir(&args);
     }

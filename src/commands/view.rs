@@ -16,7 +16,7 @@ use mdlod_viewer::{Mode, ViewerOptions};
     after_help = "Examples:\n  mdlod view frame.mdlod\n  mdlod view runs/ --mode sndf\n  mdlod view frame.mdlod --script session.json   # play actions, write screenshots, close"
 )]
 pub struct Args {
-    /// A .mdlod file or a directory written by `mdlod batch`.
+    /// A .mdlod file or a directory written by `mdlod batch` (or its dataset.json).
     pub path: PathBuf,
     /// Size of the image area of the window (logical pixels).
     #[arg(long, default_value_t = 1280)]
@@ -57,7 +57,9 @@ pub enum ModeArg {
     Iso,
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(mut args: Args) -> Result<()> {
+    // A batch's dataset.json opens as its directory.
+    args.path = super::batch_dir_of(args.path);
     unmerged_batch(&args.path)?;
     let mode = match args.mode {
         ModeArg::Standard => Mode::Standard,

@@ -907,7 +907,17 @@ impl DumpFile {
     /// Frame `k`'s byte range in the file, for uncompressed single files whose frames
     /// are contiguous ranges (LAMMPS text and binary dumps, XYZ files); `None` for
     /// others and for a `k` out of range.
+    /// For a `%` piece set, the sums of its pieces' frame `k` starts and ends (the
+    /// pieces' frames hashed one after another: [`DumpFile::frame_ranges`]).
     pub fn frame_bytes(&self, k: usize) -> Option<std::ops::Range<u64>> {
+        if let Index::Pieces(p) = &self.index {
+            let mut sum = 0..0u64;
+            for piece in p {
+                let r = piece.frame_bytes(k)?;
+                sum = sum.start.checked_add(r.start)?..sum.end.checked_add(r.end)?;
+            }
+            return Some(sum);
+        }
         if self.compressed {
             return None;
         }
@@ -926,18 +936,29 @@ impl DumpFile {
         Some(r.start as u64..r.end as u64)
     }
 
-    /// The byte ranges frame `k` is read from, in order, where they are not just
-    /// [`DumpFile::frame_bytes`]: a GSD frame's own chunks, then the chunks of frame 0 it
-    /// may take (the types, say, which a HOOMD run writes once). `None` for the other
-    /// formats.
-    pub fn frame_ranges(&self, k: usize) -> Option<Vec<std::ops::Range<u64>>> {
+    /// The byte ranges frame `k` is read from, in order, with the files they lie in,
+    /// where they are not just [`DumpFile::frame_bytes`] of this file: a GSD frame's own
+    /// chunks, then the chunks of frame 0 it may take (the types, say, which a HOOMD run
+    /// writes once); a `%` piece set's pieces' frames in processor order. `None` for the
+    /// other formats.
+    pub fn frame_ranges(&self, k: usize) -> Option<Vec<(PathBuf, std::ops::Range<u64>)>> {
         match &self.index {
             Index::Gsd(i) if !self.compressed && k < i.len() => Some(
                 i.frame_ranges(k)
                     .into_iter()
-                    .map(|r| r.start as u64..r.end as u64)
+                    .map(|r| (self.path.clone(), r.start as u64..r.end as u64))
                     .collect(),
             ),
+            Index::Pieces(p) => {
+                let mut all = Vec::new();
+                for piece in p {
+                    match piece.frame_ranges(k) {
+                        Some(r) => all.extend(r),
+                        None => all.push((piece.path().to_path_buf(), piece.frame_bytes(k)?)),
+                    }
+                }
+                Some(all)
+            }
             _ => None,
         }
     }
