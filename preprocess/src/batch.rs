@@ -518,11 +518,13 @@ pub enum BatchError {
         #[source]
         source: std::io::Error,
     },
-    #[error("timestep {timestep} appears twice: {first} and {second} (a run restarted into the same dump? --duplicate-timesteps last keeps the later frame of each, first the earlier)")]
+    #[error("timestep {timestep} appears twice: {first} and {second} ({why})")]
     DuplicateTimestep {
         timestep: u64,
         first: String,
         second: String,
+        /// What may have caused it, and the way out.
+        why: String,
     },
     #[error("{}: {message}", path.display())]
     Manifest { path: PathBuf, message: String },
@@ -828,6 +830,43 @@ fn frame_bytes(
         end: range.end,
         xxh3,
     }))
+}
+
+/// The `%` piece set two files' names say they belong to: the same directory and name
+/// but for one number (`dump.0.bin`, `dump.1.bin`: `dump.%.bin`); `None` otherwise.
+fn piece_pattern(a: &Path, b: &Path) -> Option<PathBuf> {
+    if a.parent() != b.parent() {
+        return None;
+    }
+    let (na, nb) = (a.file_name()?.to_str()?, b.file_name()?.to_str()?);
+    let prefix = na
+        .bytes()
+        .zip(nb.bytes())
+        .take_while(|(x, y)| x == y)
+        .count();
+    let suffix = na[prefix..]
+        .bytes()
+        .rev()
+        .zip(nb[prefix..].bytes().rev())
+        .take_while(|(x, y)| x == y)
+        .count();
+    // Digits shared at the edges belong to the number (`dump.10.bin` and `dump.11.bin`,
+    // `dump.0.bin` and `dump.10.bin`).
+    let prefix = na[..prefix]
+        .trim_end_matches(|c: char| c.is_ascii_digit())
+        .len();
+    let suffix = na[na.len() - suffix..]
+        .trim_start_matches(|c: char| c.is_ascii_digit())
+        .len();
+    let digits = |n: &str| {
+        let middle = &n[prefix..n.len() - suffix];
+        !middle.is_empty() && middle.bytes().all(|c| c.is_ascii_digit())
+    };
+    if !(digits(na) && digits(nb)) {
+        return None;
+    }
+    let name = format!("{}%{}", &na[..prefix], &na[na.len() - suffix..]);
+    Some(a.with_file_name(name))
 }
 
 /// The output file name of a timestep.
@@ -1183,28 +1222,40 @@ pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
         };
+        if name.matches('%').count() > 1 {
+            return Err(err(
+                "a file name holds one `%` (the processor number of a piece set)".into(),
+            ));
+        }
         let entries = std::fs::read_dir(&dir)
             .map_err(|e| err(format!("cannot list {}: {e}", dir.display())))?;
         // The batch directory's own files, where the pattern's directory is it.
         let in_out_dir = out_dir.is_some() && std::fs::canonicalize(&dir).ok() == out_dir;
         let mut found: Vec<PathBuf> = entries
             .flatten()
-            .filter(|e| {
-                let Some(n) = e.file_name().to_str().map(str::to_owned) else {
-                    return false;
+            .filter_map(|e| {
+                let n = e.file_name().to_str()?.to_owned();
+                // With a `%` (`dump.*.%.bin`, LAMMPS's per-processor pieces of each
+                // timestep's file), the piece set a piece belongs to: its name with a
+                // run of digits written `%`.
+                let n = if name.contains('%') {
+                    piece_set_of(name, &n)?
+                } else {
+                    n
                 };
-                wildcard(name, &n)
+                let keep = wildcard(name, &n)
                     && (name.starts_with('.') || !n.starts_with('.'))
                     && !(in_out_dir && written_by_batch(&n))
                     // (Following links: a link to a file is one.)
-                    && e.path().is_file()
+                    && (name.contains('%') || e.path().is_file());
+                keep.then(|| input.with_file_name(n))
             })
-            .map(|e| input.with_file_name(e.file_name()))
             .collect();
         if found.is_empty() {
             return Err(err("no file matches the pattern".into()));
         }
         found.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
+        found.dedup();
         out.extend(found);
     }
     Ok(out)
@@ -1216,6 +1267,30 @@ pub fn written_by_batch(name: &str) -> bool {
     (name.starts_with("frame-") && name.ends_with(".mdlod"))
         || (name.starts_with("dataset") && name.ends_with(".json"))
         || name.ends_with(".tmp")
+}
+
+/// The name of the `%` piece set of `pattern` (which holds one `%`) that the file `name`
+/// is a piece of: `name` with its last run of digits for which the pattern then matches
+/// written `%` (`dump.100.3.bin` of `dump.*.%.bin` is a piece of `dump.100.%.bin`).
+fn piece_set_of(pattern: &str, name: &str) -> Option<String> {
+    let bytes = name.as_bytes();
+    let mut end = bytes.len();
+    while end > 0 {
+        if !bytes[end - 1].is_ascii_digit() {
+            end -= 1;
+            continue;
+        }
+        let start = bytes[..end]
+            .iter()
+            .rposition(|b| !b.is_ascii_digit())
+            .map_or(0, |i| i + 1);
+        let set = format!("{}%{}", &name[..start], &name[end..]);
+        if wildcard(pattern, &set) {
+            return Some(set);
+        }
+        end = start;
+    }
+    None
 }
 
 /// Whether `name` matches `pattern`, where `*` stands for any run of characters and `?`
@@ -1631,10 +1706,33 @@ pub fn batch(
     jobs.sort_by_key(|j| j.timestep);
     if opts.duplicates == Duplicates::Error {
         if let Some(w) = jobs.windows(2).find(|w| w[0].timestep == w[1].timestep) {
+            // Two files of the same timesteps, named alike but for a number: the pieces
+            // each processor of one run wrote (`dump.*.bin` matching `dump.0.bin` and
+            // `dump.1.bin`), which keeping either file's frames would halve.
+            let steps = |input: &Path| -> Vec<u64> {
+                jobs.iter()
+                    .filter(|j| j.input == input)
+                    .map(|j| j.timestep)
+                    .collect()
+            };
+            let pieces = (w[0].input != w[1].input && steps(w[0].input) == steps(w[1].input))
+                .then(|| piece_pattern(w[0].input, w[1].input))
+                .flatten();
+            let why = match pieces {
+                Some(set) => format!(
+                    "the two files hold the same timesteps: pieces of one run written \
+                     per processor? Give the pieces as one set, quoted: '{}'",
+                    set.display()
+                ),
+                None => "a run restarted into the same dump? --duplicate-timesteps last \
+                         keeps the later frame of each, first the earlier"
+                    .into(),
+            };
             return Err(BatchError::DuplicateTimestep {
                 timestep: w[0].timestep,
                 first: place(&w[0]),
                 second: place(&w[1]),
+                why,
             });
         }
     } else {
@@ -3176,6 +3274,58 @@ const MANIFEST_VERSION: u32 = 1;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn patterns_with_a_percent_name_piece_sets() {
+        let set = |p: &str, n: &str| piece_set_of(p, n);
+        assert_eq!(
+            set("dump.*.%.bin", "dump.100.3.bin").as_deref(),
+            Some("dump.100.%.bin")
+        );
+        assert_eq!(set("dump.*.%.bin", "dump.100.bin"), None);
+        assert_eq!(
+            set("dump.%.*", "dump.3.lammpstrj").as_deref(),
+            Some("dump.%.lammpstrj")
+        );
+        assert_eq!(set("d*.%.bin", "d7.12.bin").as_deref(), Some("d7.%.bin"));
+        assert_eq!(set("dump.*.%.bin", "dump.1.2.txt"), None);
+        let dir = tempfile::tempdir().unwrap();
+        for n in [
+            "d.0.0.bin",
+            "d.0.1.bin",
+            "d.50.0.bin",
+            "d.50.1.bin",
+            "d.7.bin",
+            "x.0.0.bin",
+        ] {
+            std::fs::write(dir.path().join(n), b"x").unwrap();
+        }
+        let got = expand_patterns(&[dir.path().join("d.*.%.bin")], &dir.path().join("o")).unwrap();
+        assert_eq!(
+            got,
+            [dir.path().join("d.0.%.bin"), dir.path().join("d.50.%.bin")]
+        );
+        assert!(expand_patterns(&[dir.path().join("d.*.%.%.bin")], dir.path()).is_err());
+        assert!(expand_patterns(&[dir.path().join("q.*.%.bin")], dir.path()).is_err());
+    }
+
+    #[test]
+    fn files_named_alike_but_for_a_number_are_a_piece_set() {
+        let p = |a: &str, b: &str| {
+            piece_pattern(Path::new(a), Path::new(b)).map(|p| p.display().to_string())
+        };
+        assert_eq!(
+            p("bin/dump.0.bin", "bin/dump.1.bin").as_deref(),
+            Some("bin/dump.%.bin")
+        );
+        assert_eq!(p("d.10.bin", "d.11.bin").as_deref(), Some("d.%.bin"));
+        assert_eq!(p("d.0.bin", "d.10.bin").as_deref(), Some("d.%.bin"));
+        assert_eq!(p("run.3", "run.12").as_deref(), Some("run.%"));
+        assert_eq!(p("a/d.0.bin", "b/d.1.bin"), None);
+        assert_eq!(p("melt.dump", "cu_melt.step.0.bin"), None);
+        assert_eq!(p("d.0a.bin", "d.1b.bin"), None);
+        assert_eq!(p("d.0.bin", "d.0.bin"), None);
+    }
 
     #[test]
     fn quoted_patterns_match_file_names() {

@@ -2659,3 +2659,84 @@ fn piece_sets_appended_to_keep_their_unchanged_frames() {
     let r = batch(std::slice::from_ref(&bins), &out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.converted, r.kept_unchanged), (0, 3));
 }
+
+/// Per-processor pieces matched by a `*` (`melt.*.dump` matching `melt.0.dump` and
+/// `melt.1.dump`) hold the same timesteps: the error names the `%` set to give instead
+/// of the way out of a restart, which would keep half the atoms.
+#[test]
+fn pieces_given_as_files_are_named_as_a_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let pieces: Vec<PathBuf> = (0..2)
+        .map(|k| {
+            let p = dir.path().join(format!("melt.{k}.dump"));
+            std::fs::copy(lammps_sample_path(&format!("cu_melt_mpi.{k}.dump")), &p).unwrap();
+            p
+        })
+        .collect();
+    let e = batch(&pieces, &dir.path().join("o"), &opts(), &NoProgress).unwrap_err();
+    let text = e.to_string();
+    let set = dir.path().join("melt.%.dump");
+    assert!(
+        text.contains("pieces of one run written per processor")
+            && text.contains(&format!("'{}'", set.display()))
+            && !text.contains("--duplicate-timesteps"),
+        "{text}"
+    );
+    // As named, the set converts every atom of each frame.
+    let r = batch(&[set], &dir.path().join("o"), &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 3);
+    let m = read_manifest(&dir.path().join("o")).unwrap();
+    assert!(m.frames.iter().all(|f| f.particles == 500), "{m:?}");
+}
+
+/// LAMMPS's `dump.*.%.bin` (a file per timestep, each in pieces per processor): a quoted
+/// pattern with both expands to one `%` set per timestep, every atom of each frame.
+#[test]
+fn a_pattern_with_a_star_and_a_percent_takes_a_piece_set_per_timestep() {
+    let dir = tempfile::tempdir().unwrap();
+    for k in 0..2 {
+        let text =
+            std::fs::read_to_string(lammps_sample_path(&format!("cu_melt_mpi.{k}.dump"))).unwrap();
+        let frames: Vec<&str> = text
+            .split("ITEM: TIMESTEP\n")
+            .filter(|f| !f.is_empty())
+            .collect();
+        assert_eq!(frames.len(), 3);
+        for f in frames {
+            let step: u64 = f.lines().next().unwrap().trim().parse().unwrap();
+            let name = dir.path().join(format!("melt.{step}.{k}.dump"));
+            std::fs::write(name, format!("ITEM: TIMESTEP\n{f}")).unwrap();
+        }
+    }
+    let out = dir.path().join("o");
+    let inputs =
+        mdlod_preprocess::batch::expand_patterns(&[dir.path().join("melt.*.%.dump")], &out)
+            .unwrap();
+    assert_eq!(inputs.len(), 3);
+    let r = batch(&inputs, &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 3);
+    let m = read_manifest(&out).unwrap();
+    check_manifest(&out, &m);
+    assert!(m.frames.iter().all(|f| f.particles == 500), "{m:?}");
+    // The same frames as the `%` set of whole pieces.
+    let whole = dir.path().join("whole");
+    batch(
+        &[lammps_sample_path("cu_melt_mpi.%.dump")],
+        &whole,
+        &opts(),
+        &NoProgress,
+    )
+    .unwrap();
+    let w = read_manifest(&whole).unwrap();
+    let steps = |m: &Manifest| m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>();
+    assert_eq!(steps(&m), steps(&w));
+    for (a, b) in m.frames.iter().zip(&w.frames) {
+        let (fa, fb) = (
+            MdlodFile::open(out.join(&a.file)).unwrap(),
+            MdlodFile::open(whole.join(&b.file)).unwrap(),
+        );
+        assert_eq!(fa.nodes().len(), fb.nodes().len());
+        assert_eq!(fa.metadata().simulation_box, fb.metadata().simulation_box);
+        assert_eq!(format!("{:?}", fa.nodes()), format!("{:?}", fb.nodes()));
+    }
+}
