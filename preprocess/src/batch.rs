@@ -549,6 +549,19 @@ pub enum BatchError {
     Pattern { pattern: PathBuf, message: String },
     #[error("shard {0}/{1}: the shard index must be below the shard count")]
     BadShard(u32, u32),
+    /// Another process is running this batch (this shard of it) into the directory.
+    #[error(
+        "{}: another mdlod batch{shard} is writing this directory ({holder}): wait for it \
+         to end, or stop it first (a resubmitted job of the same shard?)",
+        dir.display()
+    )]
+    Busy {
+        dir: PathBuf,
+        /// " (shard i of n)" or empty.
+        shard: String,
+        /// What the lock file says of its holder (`pid P on HOST`).
+        holder: String,
+    },
     /// A frame failed (the first error); the frames converted before it, or beside it
     /// on other workers, are in the manifest (no new frame starts after a failure).
     #[error(
@@ -830,6 +843,65 @@ fn frame_bytes(
         end: range.end,
         xxh3,
     }))
+}
+
+/// The lock file of a batch directory's run (of one shard of it), hidden: two runs of
+/// one shard into one directory (a job resubmitted while the first still runs) would
+/// each take the other's temporary frames for a dead run's and remove them.
+pub fn lock_file_name(shard: Option<(u32, u32)>) -> String {
+    match shard {
+        Some((i, n)) => format!(".batch.shard-{i}-of-{n}.lock"),
+        None => ".batch.lock".into(),
+    }
+}
+
+/// Takes the batch directory's lock for this run (an advisory `flock`, which the system
+/// lets go when the process ends however it ends); a file system without locks runs
+/// unlocked. The file is left in place (removing it would let a third run lock a new
+/// file while a second still holds the old one).
+fn lock_batch(
+    out_dir: &Path,
+    shard: Option<(u32, u32)>,
+) -> Result<Option<std::fs::File>, BatchError> {
+    use std::io::{Read, Seek, Write};
+    let path = out_dir.join(lock_file_name(shard));
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(io(&path))?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let mut holder = String::new();
+            let _ = file.read_to_string(&mut holder);
+            let holder = holder.trim();
+            return Err(BatchError::Busy {
+                dir: out_dir.to_path_buf(),
+                shard: shard.map_or(String::new(), |(i, n)| format!(" (shard {i} of {n})")),
+                holder: if holder.is_empty() {
+                    "it has not said which".into()
+                } else {
+                    holder.to_string()
+                },
+            });
+        }
+        // No locks here (some network file systems): as before locks.
+        Err(std::fs::TryLockError::Error(_)) => return Ok(None),
+    }
+    let holder = format!(
+        "pid {} on {}",
+        std::process::id(),
+        mdlod_format::writer::host_name()
+    );
+    let written = file
+        .set_len(0)
+        .and_then(|()| file.rewind())
+        .and_then(|()| file.write_all(holder.as_bytes()));
+    written.map_err(io(&path))?;
+    Ok(Some(file))
 }
 
 /// The `%` piece set two files' names say they belong to: the same directory and name
@@ -1436,6 +1508,7 @@ pub fn batch(
         }
     }
     std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
+    let _lock = lock_batch(out_dir, opts.shard)?;
 
     // Inputs are indexed one at a time. Mapped files stay open; the text of a gzip input
     // is dropped after indexing (with its frames' particle counts noted), so a batch of

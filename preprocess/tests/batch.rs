@@ -2740,3 +2740,49 @@ fn a_pattern_with_a_star_and_a_percent_takes_a_piece_set_per_timestep() {
         assert_eq!(format!("{:?}", fa.nodes()), format!("{:?}", fb.nodes()));
     }
 }
+
+/// A second run of one batch (of one shard of it) into a directory while the first
+/// holds it is refused, naming the holder; other shards run beside it, and once the
+/// holder ends (its lock goes with it, however it ends) the run goes ahead.
+#[test]
+fn a_second_run_of_the_same_shard_is_refused_while_the_first_runs() {
+    use mdlod_preprocess::batch::lock_file_name;
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    // Another process's lock, as a running batch holds it.
+    let held = |shard: Option<(u32, u32)>| {
+        let path = out.join(lock_file_name(shard));
+        std::fs::write(&path, "pid 4242 on node17").unwrap();
+        let f = std::fs::File::open(&path).unwrap();
+        f.lock().unwrap();
+        f
+    };
+    let first = held(None);
+    let e = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap_err();
+    assert!(matches!(e, BatchError::Busy { .. }), "{e}");
+    let text = e.to_string();
+    assert!(
+        text.contains("another mdlod batch is writing this directory (pid 4242 on node17)"),
+        "{text}"
+    );
+    assert!(!out.join("dataset.json").exists());
+    drop(first);
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 6);
+    // Shards: the holder of shard 0 blocks shard 0 only.
+    let out2 = dir.path().join("sharded");
+    std::fs::create_dir(&out2).unwrap();
+    let path = out2.join(lock_file_name(Some((0, 2))));
+    std::fs::write(&path, "pid 7 on node3").unwrap();
+    let f = std::fs::File::open(&path).unwrap();
+    f.lock().unwrap();
+    let e = batch(std::slice::from_ref(&src), &out2, &shard(0, 2), &NoProgress).unwrap_err();
+    assert!(
+        e.to_string().contains("batch (shard 0 of 2) is writing"),
+        "{e}"
+    );
+    let r = batch(std::slice::from_ref(&src), &out2, &shard(1, 2), &NoProgress).unwrap();
+    assert_eq!(r.converted, 3);
+}

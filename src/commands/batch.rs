@@ -188,7 +188,13 @@ pub fn run(args: Args) -> Result<()> {
     let created = !out.exists() && shard.is_none();
     let result = run_batch(&args, out, shard);
     if result.is_err() && created {
-        // Fails, leaving it, unless it is empty.
+        // Fails, leaving it, unless it is empty (but for this run's lock file).
+        let lock = out.join(mdlod_preprocess::batch::lock_file_name(None));
+        let only_lock =
+            std::fs::read_dir(out).is_ok_and(|entries| entries.flatten().all(|e| e.path() == lock));
+        if only_lock {
+            let _ = std::fs::remove_file(&lock);
+        }
         let _ = std::fs::remove_dir(out);
     }
     result
