@@ -181,6 +181,13 @@ fn info_json_has_the_promised_fields() {
     );
     let text = ok(&["info", s(&out)]);
     assert!(text.contains("particles    864"), "{text}");
+    // The dump's `pp pp pp`, as text too.
+    assert!(text.contains(", periodic along a, b, c\n"), "{text}");
+    let slab = dir.path().join("slab.mdlod");
+    let shrink = lammps_sample_path("cu_slab.shrinkwrap.dump");
+    ok(&["convert", s(&shrink), "-o", s(&slab), "--last"]);
+    let text = ok(&["info", s(&slab)]);
+    assert!(text.contains(", periodic along a, b\n"), "{text}");
     let text = ok(&["verify", s(&out)]);
     assert!(text.contains(": ok:"), "{text}");
 }
@@ -667,7 +674,7 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
             String::from_utf8_lossy(&run.stderr)
         );
         assert!(
-            text.contains(&format!("(shard {} of 3)", (id - 1) / 2)),
+            text.contains(&format!("in shard {} of 3", (id - 1) / 2)),
             "{text}"
         );
     }
@@ -6795,7 +6802,9 @@ fn particle_sizes_edge_cases_are_refused_or_noted() {
     let e = fails(&["convert", s(&d("z.dump")), "-o", s(&d("z.mdlod"))]);
     assert!(
         e.contains("z.dump: frame 0 (timestep 0), species 1: the file gives a particle of size 0")
-            && e.contains("--radius 1=R"),
+            && e.contains(
+                "--radius 1=R (every particle of it then takes R, those of sizes above 0 too"
+            ),
         "{e}"
     );
     // A type whose particles all have size 0 beside one with sizes (an SPH dump's stars
@@ -8227,5 +8236,109 @@ fn a_scale_bar_is_as_long_as_its_length_of_the_world() {
         let e = fails(&args);
         assert!(e.contains(says), "{extra:?}: {e}");
         assert!(!out.exists(), "{extra:?}: drawn before refused");
+    }
+}
+
+/// `--save-map` writes the splats' light as floats: for a uniform slab of particles of
+/// mass 1 lit by m/(π r²), the column density (4 per unit area in its middle) and in
+/// all the mass (the map's sum times a pixel's world area), read from the .npy as
+/// NumPy would; refused where the pixels hold no amounts.
+#[test]
+fn a_saved_light_map_holds_the_column_density() {
+    let dir = tempfile::tempdir().unwrap();
+    // 40 × 40 columns, four particles deep, one unit apart, radius 0.5.
+    let r = 0.5f64;
+    let sigma = 1.0 / (std::f64::consts::PI * r * r);
+    let mut xyz = String::new();
+    xyz.push_str("6400\n");
+    xyz.push_str(
+        "Lattice=\"40 0 0 0 40 0 0 0 4\" Properties=species:S:1:pos:R:3:radius:R:1:sigma:R:1\n",
+    );
+    for k in 0..4 {
+        for j in 0..40 {
+            for i in 0..40 {
+                xyz.push_str(&format!("A {}.5 {}.5 {}.5 {r} {sigma}\n", i, j, k));
+            }
+        }
+    }
+    let input = dir.path().join("slab.xyz");
+    std::fs::write(&input, xyz).unwrap();
+    let file = dir.path().join("slab.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file), "--attribute", "sigma"]);
+    let (png, map, view) = (
+        dir.path().join("m.png"),
+        dir.path().join("m.npy"),
+        dir.path().join("v.json"),
+    );
+    let (w, h) = (200usize, 180usize);
+    let (ws, hs) = (w.to_string(), h.to_string());
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--mode", "splat"];
+    args.extend([
+        "--intensity",
+        "attribute",
+        "--ortho",
+        "--look-along",
+        "0,0,-1",
+    ]);
+    args.extend(["--kernel-scale", "4", "--screen-error", "0", "--width", &ws]);
+    args.extend([
+        "--height",
+        &hs,
+        "--save-map",
+        s(&map),
+        "--save-view",
+        s(&view),
+    ]);
+    let out = ok(&args);
+    assert!(out.contains("light map (200×180 floats) saved to"), "{out}");
+    let bytes = std::fs::read(&map).unwrap();
+    assert_eq!(&bytes[..8], b"\x93NUMPY\x01\x00");
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    assert_eq!((10 + header_len) % 64, 0);
+    let header = std::str::from_utf8(&bytes[10..10 + header_len]).unwrap();
+    assert!(
+        header.contains("'descr': '<f4'") && header.contains("'shape': (180, 200)"),
+        "{header}"
+    );
+    let values: Vec<f32> = bytes[10 + header_len..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    assert_eq!(values.len(), w * h);
+    // The middle: 4 per unit area (the kernels of a lattice overlap smoothly).
+    let middle: Vec<f32> = (h / 2 - 5..h / 2 + 5)
+        .flat_map(|y| (w / 2 - 5..w / 2 + 5).map(move |x| (x, y)))
+        .map(|(x, y)| values[y * w + x])
+        .collect();
+    for v in &middle {
+        assert!((v - 4.0).abs() < 0.04, "column density {v} against 4");
+    }
+    // Everything: the map's sum times a pixel's area is the slab's mass, 6400.
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&view).unwrap()).unwrap();
+    let (d, fov, zoom) = (
+        v["distance"].as_f64().unwrap(),
+        v["fov_y_deg"].as_f64().unwrap().to_radians(),
+        v["zoom"].as_f64().unwrap(),
+    );
+    let per_px = 2.0 * d * (fov / 2.0).tan() / zoom / h as f64;
+    let mass: f64 = values.iter().map(|&v| f64::from(v)).sum::<f64>() * per_px * per_px;
+    assert!(
+        (mass / 6400.0 - 1.0).abs() < 2e-3,
+        "mass {mass} against 6400"
+    );
+    // Refused: a mode whose pixels are colours, a movie's name, another extension.
+    for (extra, says) in [
+        (vec!["--save-map", s(&map)], "give --mode splat"),
+        (
+            vec!["--mode", "splat", "--save-map", "m.png"],
+            "the map is a NumPy array: name it .npy",
+        ),
+    ] {
+        let mut args = vec!["render", s(&file), "-o", s(&png)];
+        args.extend(extra);
+        let o = mdlod(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{err}");
     }
 }

@@ -1661,6 +1661,7 @@ pub fn convert_chunked(
                 n as u64,
                 &metadata.species,
                 far,
+                metadata.simulation_box.as_ref(),
             ));
             notes
         },

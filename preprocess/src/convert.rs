@@ -250,10 +250,19 @@ impl std::fmt::Display for UnusableRadius {
         } else {
             ": "
         };
+        // A size column of 0 for some particles: --radius replaces every particle's own
+        // size, which a file whose other sizes matter (smoothing lengths) must not lose.
+        let own = if r == 0.0 && !matches!(self.format, Some(InputFormat::Mmpld | InputFormat::Gsd))
+        {
+            " (every particle of it then takes R, those of sizes above 0 too: where \
+             their sizes matter, mend the sizes of 0 in the input instead)"
+        } else {
+            ""
+        };
         write!(
             f,
             "{place}{sep}{what} {name}: the file gives {size}, and a radius must be a positive \
-             number; give the {what} its radius with --radius {name}=R"
+             number; give the {what} its radius with --radius {name}=R{own}"
         )
     }
 }
@@ -389,6 +398,9 @@ pub fn convert_frame_with(
     let mut notes = Vec::new();
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         notes.extend(attribute_span_note(&a.name, *min, *max, options));
+        if !options.attribute_log10 {
+            notes.extend(below_step_note(&a.name, &a.values, *min, *max));
+        }
     }
     // Further attributes spanning decades lose them as the first would; their remedy is
     // a file of their own with the logarithm (--attribute-log10 takes one column).
@@ -408,6 +420,7 @@ pub fn convert_frame_with(
         frame.positions.len() as u64,
         &species,
         far,
+        frame.simulation_box.as_ref(),
     ));
     let mut metadata = base_metadata(frame, source, options);
     metadata.species = species;
@@ -487,6 +500,37 @@ pub(crate) fn survey_positions(
     (lo, hi, far)
 }
 
+/// A note on particles reaching well outside a periodic box (more than a tenth of its
+/// edge along a periodic axis): unwrapped coordinates, which `--wrap` puts back into the
+/// cell (a forgotten wrap frames a box several times the cell's size).
+fn outside_periodic_note(
+    lo: [f32; 3],
+    hi: [f32; 3],
+    b: &mdlod_format::meta::SimulationBox,
+) -> Option<String> {
+    let periodic = b.periodic?;
+    let (blo, bhi) = crate::chunked::box_bounds(b);
+    let mut reach: Option<(usize, f32)> = None;
+    for k in (0..3).filter(|&k| periodic[k]) {
+        let edge = bhi[k] - blo[k];
+        if !(edge > 0.0 && edge.is_finite()) {
+            continue;
+        }
+        let out = (blo[k] - lo[k]).max(hi[k] - bhi[k]) / edge;
+        if out > 0.1 && reach.is_none_or(|(_, r)| out > r) {
+            reach = Some((k, out));
+        }
+    }
+    let (k, out) = reach?;
+    let axis = ["x", "y", "z"][k];
+    Some(format!(
+        "the particles reach {out:.2} box lengths outside the periodic box along {axis} \
+         ({} to {} against the box's {} to {}): unwrapped coordinates? --wrap wraps them \
+         into the cell",
+        lo[k], hi[k], blo[k], bhi[k]
+    ))
+}
+
 /// How many mean spacings a radius may span before [`oversized_note`] speaks.
 const OVERSIZED_SPACINGS: f64 = 20.0;
 
@@ -545,9 +589,13 @@ pub(crate) fn position_notes(
     count: u64,
     species: &[mdlod_format::meta::Species],
     far: Option<FarOutside>,
+    simulation_box: Option<&mdlod_format::meta::SimulationBox>,
 ) -> Vec<String> {
     let mut notes = Vec::new();
     notes.extend(oversized_note(lo, hi, count, species));
+    if far.is_none() {
+        notes.extend(simulation_box.and_then(|b| outside_periodic_note(lo, hi, b)));
+    }
     let largest = lo.iter().chain(&hi).map(|v| v.abs()).fold(0.0f32, f32::max);
     // (A species of particles of their own sizes: its smallest particle's, not its mean.)
     let smallest_radius = species
@@ -694,6 +742,34 @@ pub fn attribute_span_note(
         max,
         "--attribute-log10 keeps its logarithm, every decade alike",
     )
+}
+
+/// A note for a column from 0 (or below) whose values above 0 reach far below one 16-bit
+/// step of its range: a kinetic energy with walls at rest, where most grains' values
+/// read as 0 or one step, which [`attribute_span_note`] (values above 0 only) misses.
+/// `None` where fewer than 1 % of the values above 0 are below a step.
+pub fn below_step_note(name: &str, values: &[f32], min: f32, max: f32) -> Option<String> {
+    if min > 0.0 || max.is_nan() || max <= 0.0 {
+        return None;
+    }
+    let step = (f64::from(max) - f64::from(min)) / 65535.0;
+    let (mut above, mut below, mut smallest) = (0u64, 0u64, f32::INFINITY);
+    for &v in values.iter().filter(|v| **v > 0.0) {
+        above += 1;
+        if f64::from(v) < step {
+            below += 1;
+        }
+        smallest = smallest.min(v);
+    }
+    (below > 0 && below * 100 >= above).then(|| {
+        format!(
+            "attribute {name}: {below} of the {above} values above 0 lie below one 16-bit \
+             step ({step:.2e}) of its range {min} to {max} and read as 0 or one step (the \
+             smallest is {smallest:e}); --attribute-log10 keeps every decade of a column \
+             whose values are all above 0 (leave out those at 0, or colour those particles \
+             by species)"
+        )
+    })
 }
 
 /// [`attribute_span_note`] of a column kept linearly, with `remedy` said last.
@@ -1209,6 +1285,54 @@ pub fn source_info(path: &Path, frame: u64) -> SourceInfo {
 
 #[cfg(test)]
 mod tests {
+    /// Unwrapped coordinates reaching a fifth of a box length past a periodic face are
+    /// noted with --wrap; along a fixed axis, or within a tenth, not.
+    #[test]
+    fn particles_far_outside_a_periodic_box_are_noted() {
+        use mdlod_format::meta::SimulationBox;
+        let b = |periodic| SimulationBox {
+            origin: [0.0; 3],
+            a: [10.0, 0.0, 0.0],
+            b: [0.0, 10.0, 0.0],
+            c: [0.0, 0.0, 10.0],
+            periodic,
+        };
+        let (lo, hi) = ([-2.0, 0.5, 0.5], [9.5, 9.5, 10.5]);
+        let note = super::outside_periodic_note(lo, hi, &b(Some([true; 3]))).expect("a note");
+        assert!(
+            note.starts_with("the particles reach 0.20 box lengths outside the periodic box along x (-2 to 9.5 against the box's 0 to 10)")
+                && note.ends_with("--wrap wraps them into the cell"),
+            "{note}"
+        );
+        assert_eq!(
+            super::outside_periodic_note(lo, hi, &b(Some([false, true, true]))),
+            None
+        );
+        assert_eq!(super::outside_periodic_note(lo, hi, &b(None)), None);
+    }
+
+    /// A kinetic energy with walls at rest: most grains' values far below a step are
+    /// said; a column whose small values are few, or all above 0, is not.
+    #[test]
+    fn values_below_a_step_of_a_range_from_zero_are_noted() {
+        let mut ke = vec![0.0f32; 100];
+        ke.extend((0..100).map(|i| 10f32.powi(-(i % 30)) * 4.46));
+        let note = super::below_step_note("c_ke", &ke, 0.0, 4.46).expect("a note");
+        assert!(
+            note.starts_with("attribute c_ke: 80 of the 100 values above 0 lie below one 16-bit step (6.81e-5) of its range 0 to 4.46")
+                && note.contains("the smallest is 4.46e-29"),
+            "{note}"
+        );
+        let few: Vec<f32> = (0..1000)
+            .map(|i| if i == 0 { 1e-9 } else { i as f32 })
+            .collect();
+        assert_eq!(super::below_step_note("v", &few, 0.0, 999.0), None);
+        assert_eq!(
+            super::below_step_note("v", &ke[100..], 4.46e-29, 4.46),
+            None
+        );
+    }
+
     use super::*;
 
     /// Radii many spacings wide are named (nanometre data in metres with angström

@@ -189,11 +189,11 @@ fn frames_above_the_chunk_size_are_built_out_of_core_and_match_convert() {
     assert!(r.converted >= 2);
     let m = read_manifest(&out).unwrap();
     check_manifest(&out, &m);
-    // Working files are gone: only frames and the manifest remain.
+    // Working files are gone: only frames and the manifest remain (and the run's lock).
     for e in std::fs::read_dir(&out).unwrap() {
         let name = e.unwrap().file_name().to_string_lossy().into_owned();
         assert!(
-            name.starts_with("frame-") || name == "dataset.json",
+            name.starts_with("frame-") || name == "dataset.json" || name == ".batch.lock",
             "left behind: {name}"
         );
     }

@@ -533,6 +533,26 @@ fn a_file_of_the_other_float_types_size_is_said_to_be_of_that_type() {
     assert_eq!(read(&path).unwrap().len(), 10);
 }
 
+/// Double-precision positions declared `f32` with the count given: a coordinate that
+/// reads as NaN is refused saying the array holds twice the bytes, and the type.
+#[test]
+fn double_positions_declared_single_suggest_the_type() {
+    let c = Case::new();
+    // Read as two f32, 10.0000… (0x40240000_7fc00000) gives a NaN.
+    let mut values = [1.0f64; 30];
+    values[4] = f64::from_bits(0x4024_0000_7fc0_0000);
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    c.file("pos.f64", &bytes);
+    let json = r#"{ "mdlod_raw": 1, "particles": 10,
+                    "positions": { "file": "pos.f64", "type": "f32" } }"#;
+    let e = read(&c.sidecar(json)).unwrap_err();
+    assert!(
+        e.contains("a coordinate is not finite")
+            && e.contains("the array holds 240 bytes, twice what 10 particles of `f32` x y z take: is its `type` f64?"),
+        "{e}"
+    );
+}
+
 /// Big-endian positions declared little-endian: a coordinate that reads as NaN is
 /// refused, naming the particle and saying the other byte order reads a number.
 #[test]

@@ -374,6 +374,8 @@ pub struct RenderOptions {
     /// ([`Camera::fit_boxes_in`]), so that a legend drawn into a corner covers none of
     /// it. Empty: the whole image.
     pub fit_windows: Vec<FitWindow>,
+    /// Additive splats: keep each pixel's light ([`RenderReport::light_map`]).
+    pub keep_light_map: bool,
 }
 
 /// How the simulation cell's edges are drawn.
@@ -438,6 +440,7 @@ impl Default for RenderOptions {
             cell: None,
             species_drawn: false,
             fit_windows: Vec::new(),
+            keep_light_map: false,
         }
     }
 }
@@ -516,6 +519,10 @@ pub struct RenderReport {
     pub density_readbacks: Option<u32>,
     /// Density mode: host work before the GPU passes (decoding, sorting, packing).
     pub density_host_time: Option<Duration>,
+    /// Additive splats with [`RenderOptions::keep_light_map`]: each pixel's light
+    /// ([`SplatFrame::light`]: the projected flux, or the projected attribute in its
+    /// units), row by row from the image's top left.
+    pub light_map: Option<Vec<f32>>,
 }
 
 /// Colours by name (sRGB, as `#rrggbb`).
@@ -1518,6 +1525,7 @@ impl RenderReport {
             density_stacks: None,
             density_readbacks: None,
             density_host_time: None,
+            light_map: None,
         }
     }
 }
@@ -1724,6 +1732,9 @@ fn draw_cut(
             report.exposure = exposure.and_then(|t| t.ok());
             report.light_range = exposure.and_then(|t| t.err());
             report.total_flux = exposure.map(|_| splats.total_light());
+            if opts.keep_light_map && exposure.is_some() {
+                report.light_map = Some(splats.hdr.iter().map(|p| splats.light(p)).collect());
+            }
             let mut image = frame.image;
             draw_cell(file, opts, camera, &mut image, None);
             Ok((image, report))

@@ -140,6 +140,7 @@ pub fn run(args: Args) -> Result<()> {
         scale_bar: false,
         scale_bar_length: None,
         scale_bar_corner: None,
+        save_map: None,
         cell: None,
         cell_width: None,
     })?;

@@ -446,8 +446,21 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     if let Some(b) = &m.simulation_box {
+        // Which of a, b, c wrap, where the input says.
+        let periodic = match b.periodic {
+            Some([false, false, false]) => ", not periodic".to_string(),
+            Some(p) => {
+                let axes: Vec<&str> = ["a", "b", "c"]
+                    .into_iter()
+                    .zip(p)
+                    .filter_map(|(n, w)| w.then_some(n))
+                    .collect();
+                format!(", periodic along {}", axes.join(", "))
+            }
+            None => String::new(),
+        };
         println!(
-            "  box          origin {} a {} b {} c {}",
+            "  box          origin {} a {} b {} c {}{periodic}",
             vector(b.origin),
             vector(b.a),
             vector(b.b),

@@ -168,6 +168,12 @@ pub struct Args {
     /// Write the camera used as a view file.
     #[arg(long)]
     pub save_view: Option<PathBuf>,
+    /// --mode splat: write each pixel's light as 32-bit floats, a NumPy array of shape
+    /// (height, width), row 0 at the image's top: the projected flux, or with
+    /// --intensity attribute the projected attribute in its units (with m/(pi r^2) as
+    /// the attribute, the column density). Stills only
+    #[arg(long, value_name = "FILE.npy")]
+    pub save_map: Option<PathBuf>,
     /// Write what the image's colours mean as an SVG, for a figure: the colour map's bar
     /// (its range, round ticks, log scale), the density volume's transfer function, or a
     /// key of the species shown in their colours. A movie or turntable writes one.
@@ -240,10 +246,11 @@ impl Args {
 }
 
 /// The length unit of a unit style (LAMMPS `units`), as a scale bar names it, in the
-/// image font's glyphs (`A` where it has no `Å`); empty where unknown.
-fn length_unit(units: Option<&str>) -> &'static str {
+/// image font's glyphs (`A` where it has no `Å`); any other name (a raw sidecar's
+/// `Mpc/h`) as it is where short and drawable; empty for none.
+fn length_unit(units: Option<&str>) -> String {
     let has = |c: char| mdlod_render::font::has_glyph(c);
-    match units.map(str::to_ascii_lowercase).as_deref() {
+    let style = match units.map(str::to_ascii_lowercase).as_deref() {
         Some("metal" | "real") if has('Å') => "Å",
         Some("metal" | "real") => "A",
         Some("lj") if has('σ') => "σ",
@@ -254,8 +261,19 @@ fn length_unit(units: Option<&str>) -> &'static str {
         Some("micro") if has('µ') => "µm",
         Some("micro") => "um",
         Some("electron") => "bohr",
-        _ => "",
-    }
+        // Not a LAMMPS unit style: a length unit of its own (a raw sidecar's `Mpc/h`),
+        // as written where it is short and drawable.
+        Some(_) => {
+            let own = units.unwrap_or_default().trim();
+            return if own.chars().count() <= 12 && own.chars().all(|c| c != ' ' && has(c)) {
+                own.to_string()
+            } else {
+                String::new()
+            };
+        }
+        None => "",
+    };
+    style.to_string()
 }
 
 /// The scale bar of an orthographic `camera` in an image `width` × `height`: a length of
@@ -1263,6 +1281,34 @@ fn by_attribute(args: &Args) -> bool {
 
 /// Writes `--save-view`'s file. A movie's or turntable's view may go into a directory
 /// that does not exist yet, as its images do (a still's was checked up front).
+/// Writes `values` (row by row) as a NumPy `.npy` array of little-endian 32-bit floats
+/// of shape (`rows`, `columns`) (format version 1.0: the magic, a header dictionary
+/// padded to a multiple of 64 bytes, the data).
+fn write_npy(p: &Path, rows: u32, columns: u32, values: &[f32]) -> Result<()> {
+    anyhow::ensure!(
+        values.len() as u64 == u64::from(rows) * u64::from(columns),
+        "{} values for {rows}×{columns}",
+        values.len()
+    );
+    let dict =
+        format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({rows}, {columns}), }}");
+    // Magic (6), version (2), header length (2), then the header ending in a line end.
+    let unpadded = 10 + dict.len() + 1;
+    let header = format!(
+        "{dict}{}\n",
+        " ".repeat(unpadded.next_multiple_of(64) - unpadded)
+    );
+    let mut bytes = Vec::with_capacity(10 + header.len() + 4 * values.len());
+    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(p, bytes)?;
+    Ok(())
+}
+
 fn save_view(p: &Path, camera: &Camera) -> Result<()> {
     if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -1548,6 +1594,42 @@ pub fn run(mut args: Args) -> Result<()> {
             args.file.display()
         );
     }
+    if let Some(p) = &args.save_map {
+        if !matches!(args.mode, Mode::Splat) {
+            anyhow::bail!(
+                "--save-map writes the light of additive splats: give --mode splat (the \
+                 other modes' pixels are colours, not amounts)"
+            );
+        }
+        if !single {
+            anyhow::bail!(
+                "--save-map writes one still's map, not a movie's or a turntable's: render \
+                 the frame wanted alone"
+            );
+        }
+        super::check_output("--save-map", p, &inputs)?;
+        if p == &args.output || super::same_file(p, &args.output) {
+            anyhow::bail!(
+                "--save-map {} is the -o output too: give the map another name",
+                p.display()
+            );
+        }
+        if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("npy")) {
+            anyhow::bail!(
+                "--save-map {}: the map is a NumPy array: name it .npy",
+                p.display()
+            );
+        }
+        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if !dir.is_dir() {
+                anyhow::bail!(
+                    "--save-map {}: the directory {} does not exist",
+                    p.display(),
+                    dir.display()
+                );
+            }
+        }
+    }
     if let Some(p) = &args.save_view {
         super::check_output("--save-view", p, &inputs)?;
         if p == &args.output || super::same_file(p, &args.output) {
@@ -1719,6 +1801,7 @@ pub fn run(mut args: Args) -> Result<()> {
         fit_all: args.fit_all,
         // The legend's key lists the species the picture shows.
         species_drawn: args.legend.is_some() || args.legend_in_image.is_some(),
+        keep_light_map: args.save_map.is_some(),
         ..Default::default()
     };
     if let Some(colour) = &args.cell {
@@ -2130,6 +2213,16 @@ pub fn run(mut args: Args) -> Result<()> {
     if let Some(p) = &args.save_view {
         save_view(p, &r.camera)?;
         println!("  view saved to {}", p.display());
+    }
+    if let (Some(p), Some(map)) = (&args.save_map, &r.light_map) {
+        write_npy(p, r.height, r.width, map)
+            .with_context(|| format!("--save-map {}", p.display()))?;
+        println!(
+            "  light map ({}×{} floats) saved to {}",
+            r.width,
+            r.height,
+            p.display()
+        );
     }
     write_legend(
         &args,
@@ -3684,6 +3777,19 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
 mod tests {
     use super::*;
     use clap::Args as _;
+
+    /// A scale bar names LAMMPS unit styles by their length, and a unit of another name
+    /// (a raw sidecar's) as written, where the image font can draw it.
+    #[test]
+    fn scale_bars_name_their_units() {
+        assert_eq!(length_unit(Some("metal")), "Å");
+        assert_eq!(length_unit(Some("LJ")), "σ");
+        assert_eq!(length_unit(Some("nano")), "nm");
+        assert_eq!(length_unit(Some("Mpc/h")), "Mpc/h");
+        assert_eq!(length_unit(Some("kpc")), "kpc");
+        assert_eq!(length_unit(Some("a unit far too long")), "");
+        assert_eq!(length_unit(None), "");
+    }
 
     /// Labels read as format strings: placeholders filled once each where they stand,
     /// doubled braces literal (a plane family, `{{111}}`), a value the frame lacks `?`

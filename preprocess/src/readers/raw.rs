@@ -871,9 +871,21 @@ impl Index {
                 &p.path,
                 (p.offset + j * size) as u64,
                 format!(
-                    "particle {}: a coordinate is not finite{}{}",
+                    "particle {}: a coordinate is not finite{}{}{}",
                     if planar { j % total } else { j / 3 },
                     super::single_precision_note(v),
+                    // Double-precision data declared single holds twice the bytes
+                    // its count needs (a sidecar giving `particles`): the type is the
+                    // likelier mistake than the byte order.
+                    if p.ty == Ty::F32 && bytes.len() as u64 == 2 * 12 * total as u64 {
+                        format!(
+                            "; the array holds {} bytes, twice what {total} particles of \
+                             `f32` x y z take: is its `type` f64?",
+                            bytes.len()
+                        )
+                    } else {
+                        String::new()
+                    },
                     // Big-endian data read as little (or the reverse) is mostly garbage
                     // that is now and then not finite: say so where the other order
                     // reads a plain number.
