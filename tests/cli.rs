@@ -1509,6 +1509,35 @@ fn render_styles_points_by_attribute_and_species() {
             .count()
     };
     assert!(greenish(&recoloured) > 10 * greenish(&plain).max(1));
+    // Under a colour map (magma: no green), a species given its colour keeps it: its
+    // atoms green among the others' map colours (a DEM figure's walls beside grains).
+    let magma = png("magma.png", &["--colour-map", "magma"]);
+    let kept = png(
+        "kept.png",
+        &["--colour-map", "magma", "--species-colour", "2=#00ff00"],
+    );
+    assert_eq!(greenish(&magma), 0);
+    assert!(greenish(&kept) > 20, "{}", greenish(&kept));
+    // The others keep the map's dark colours (the alloy's copper sits near its low end).
+    let dark = |img: &[u8]| img.chunks_exact(4).filter(|p| p[1] < 60).count();
+    assert!(dark(&kept) > 500, "{}", dark(&kept));
+    // A projection colours the pixels' light, not the particles.
+    let err = fails(&[
+        "render",
+        s(&with),
+        "-o",
+        s(&d.join("x.png")),
+        "--mode",
+        "splat",
+        "--colour-map",
+        "magma",
+        "--species-colour",
+        "2=#00ff00",
+    ]);
+    assert!(
+        err.contains("--species-colour has no effect on a projection"),
+        "{err}"
+    );
     let err = fails(&[
         "render",
         s(&with),

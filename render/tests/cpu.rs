@@ -924,8 +924,10 @@ fn new_mixture(f: &MdlodFile, level: usize, i: usize, colours: &[[f32; 3]]) -> [
 
 /// Styled packing: every particle takes its species' overridden colour and radius times
 /// the scale (0 when hidden), or with a colour map the map's colour of its own attribute
-/// value; clusters their coverage radius times the scale and the map's colour of their
-/// mean attribute, or without a map the mean of their particles' new species colours.
+/// value (its species' colour where the style sets one); clusters their coverage radius
+/// times the scale and the map's colour of their mean attribute (a cluster of a species
+/// whose colour is set, alone, that colour), or without a map the mean of their
+/// particles' new species colours.
 /// Positions never change. A colour map needs an attribute.
 #[test]
 fn styles_recolour_resize_and_hide_points_when_packed() {
@@ -998,6 +1000,8 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
                     .fold(0.0, f32::max)
             });
         let mut recoloured = 0;
+        let mut fixed_clusters = 0;
+        let cu_below = f.species_below_uncached(1);
         let mut i = 0u32;
         for r in &d.ranges {
             let level = r.level as usize;
@@ -1014,6 +1018,8 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
                     };
                     assert!((radius - want_r).abs() < 1e-6, "species {s}: {radius}");
                     let want_c = match (map, s) {
+                        // Under the map, the species whose colour is set keeps it.
+                        (Some(_), 0) => unpack([0.9, 0.1, 0.2]),
                         (Some(m), _) => {
                             let q = f.attribute().unwrap()[k as usize];
                             unpack(m.colour(f32::from(q) / 65535.0))
@@ -1024,12 +1030,21 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
                     assert_eq!(albedo, want_c);
                 } else {
                     assert!((radius - radius0 * 1.5).abs() <= 1e-5 * radius0.max(1.0));
-                    let n = &f.nodes()[node_of(&f, level, k as usize)];
+                    let id = node_of(&f, level, k as usize);
+                    let n = &f.nodes()[id];
                     match map {
-                        Some(m) => assert_eq!(
-                            albedo,
-                            unpack(m.colour((n.attribute - info.min) / (info.max - info.min)))
-                        ),
+                        // A cluster of Cu alone keeps Cu's colour; others the map's.
+                        Some(m) => {
+                            let cu_only = cu_below[id] == mdlod_format::reader::BELOW_IN;
+                            fixed_clusters += usize::from(cu_only);
+                            let want = match cu_only {
+                                true => unpack([0.9, 0.1, 0.2]),
+                                false => unpack(
+                                    m.colour((n.attribute - info.min) / (info.max - info.min)),
+                                ),
+                            };
+                            assert_eq!(albedo, want);
+                        }
                         None => {
                             // The mean of the new species colours over the cluster's
                             // particles, weighted by their area, as the file's mixture
@@ -1050,8 +1065,10 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
                 i += 1;
             }
         }
-        // Clusters took the new colours (not only the stored mixture).
+        // Clusters took the new colours (not only the stored mixture); under the map,
+        // some clusters of Cu alone kept Cu's.
         assert!(map.is_some() || recoloured > 0);
+        assert!(map.is_none() || fixed_clusters > 0);
     }
     let err = pack_styled(
         &plain,

@@ -752,12 +752,10 @@ pub struct StyleArgs {
     pub radius_scale: f32,
     /// A species' colour, e.g. `Cu=#c87533`; repeatable. Exact for particles, and for
     /// clusters where the file has at most four species of affinely independent colours
-    /// (else a least-squares fit of their mixtures).
-    #[arg(
-        long = "species-colour",
-        value_name = "NAME=COLOUR",
-        conflicts_with = "colour_map"
-    )]
+    /// (else a least-squares fit of their mixtures). With --colour-map, the species named
+    /// keep their colour and the others take the map's (walls grey beside grains
+    /// coloured by speed; clusters mixing both take the map's colour of their mean)
+    #[arg(long = "species-colour", value_name = "NAME=COLOUR")]
     pub species_colour: Vec<String>,
     /// A species' radius, e.g. `Ag=1.6`; repeatable. Particles of their own sizes keep
     /// their proportions (the species' mean becomes R).
@@ -1342,8 +1340,13 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
              edges, which --cell draws"
         );
     }
-    // (With --colour-map, which colours by the attribute or the light, the parser refuses
-    // --species-colour.)
+    // A projection colours the image's light, which holds no species colour.
+    if projected(args) && !args.style.species_colour.is_empty() {
+        anyhow::bail!(
+            "--species-colour has no effect on a projection (--mode splat with \
+             --colour-map colours each pixel's light, not the particles)"
+        );
+    }
     if lit_by_value(args) && !args.style.species_colour.is_empty() {
         anyhow::bail!(
             "--species-colour has no effect on splats lit by the attribute: their light has \

@@ -414,6 +414,12 @@ pub struct AttrPacker {
     size_factor: Vec<f32>,
     /// The file keeps per-particle radii.
     sized: bool,
+    /// Colouring by the attribute: species whose colour the style sets keep it (walls
+    /// grey beside grains coloured by speed), by species index; and per such species,
+    /// per node, which subtrees hold it alone ([`MdlodFile::species_below`]'s kinds), so
+    /// that its clusters keep the colour too.
+    fixed: Vec<Option<[f32; 3]>>,
+    fixed_nodes: Vec<(u16, std::sync::Arc<[u8]>)>,
 }
 
 impl AttrPacker {
@@ -482,7 +488,23 @@ impl AttrPacker {
             .zip(&meta.species)
             .map(|(t, s)| if s.radius > 0.0 { t[3] / s.radius } else { 0.0 })
             .collect();
+        // Under a colour map, the species whose colour the style names keep it.
+        let mut fixed = vec![None; meta.species.len()];
+        if mapped.is_some() {
+            for (i, s) in meta.species.iter().enumerate() {
+                let styled = look.species.iter().find(|t| t.name == s.name && !t.hidden);
+                fixed[i] = styled.and_then(|t| t.colour);
+            }
+        }
+        let fixed_nodes = fixed
+            .iter()
+            .enumerate()
+            .filter(|(i, c)| c.is_some() && *i < 64)
+            .map(|(i, _)| (i as u16, file.species_below_uncached(1u64 << i).into()))
+            .collect();
         Ok(AttrPacker {
+            fixed,
+            fixed_nodes,
             size_factor,
             sized: file.radii().is_some(),
             style,
@@ -578,7 +600,10 @@ impl AttrPacker {
                         None => self.species[usize::from(s)][3],
                     };
                     attrs.push(r.to_bits());
-                    attrs.push(pack_colour(map.colour(scale.of_quantized(q))));
+                    attrs.push(match self.fixed[usize::from(s)] {
+                        Some(c) => pack_colour(c),
+                        None => pack_colour(map.colour(scale.of_quantized(q))),
+                    });
                 }
             } else if own.is_some() {
                 for (k, &s) in sp.iter().enumerate() {
@@ -594,10 +619,19 @@ impl AttrPacker {
             // been checked yet.
             file.check_nodes(level, first..first + count)?;
             let nf = node_first();
-            for n in &file.nodes()[nf..nf + count] {
+            for (id, n) in (nf..).zip(&file.nodes()[nf..nf + count]) {
                 attrs.push(self.radius(n).to_bits());
+                // A cluster of one species the colour map leaves its colour: that
+                // colour (a mixed one takes the map's colour of its mean).
+                let fixed = self
+                    .fixed_nodes
+                    .iter()
+                    .find(|(_, below)| below.get(id) == Some(&mdlod_format::reader::BELOW_IN))
+                    .and_then(|(s, _)| self.fixed[usize::from(*s)]);
                 attrs.push(if let Some(scale) = &self.intensity {
                     scale.of_value(n.attribute).to_bits()
+                } else if let Some(c) = fixed {
+                    pack_colour(c)
                 } else if let Some((map, scale)) = &self.mapped {
                     pack_colour(map.colour(scale.of_value(n.attribute)))
                 } else if let Some(t) = &self.recolour {
