@@ -159,6 +159,26 @@ pub fn end_labels(lo: f64, hi: f64) -> [String; 2] {
     labels
 }
 
+/// The labels of a log bar's ends: each in its own notation, as the decade ticks
+/// between them are (`6.81e-5` … `4.46`, not `0.000068` … `4.463`, whose shared
+/// decimals widen the lower end past the first ticks' labels).
+pub fn log_end_labels(lo: f64, hi: f64) -> [String; 2] {
+    [lo, hi].map(|v| {
+        if v == 0.0 || !v.is_finite() {
+            return format!("{v}");
+        }
+        if needs_scientific(v.abs()) {
+            return scientific(v);
+        }
+        let d = (2 - v.abs().log10().floor() as i32).clamp(0, 12) as usize;
+        let text = format!("{v:.d$}");
+        match text.contains('.') {
+            true => text.trim_end_matches('0').trim_end_matches('.').to_string(),
+            false => text,
+        }
+    })
+}
+
 /// Round values from `lo` to `hi` (inclusive) about `count` steps apart: steps of 1, 2
 /// or 5 times a power of ten. Returns the ticks and the step.
 pub fn linear_ticks(lo: f64, hi: f64, count: usize) -> (Vec<f64>, f64) {
@@ -314,8 +334,9 @@ pub enum Legend {
     Scale { length: f32, label: String },
 }
 
-/// The least room between two labels under a bar, px.
-const LABEL_GAP: f32 = 6.0;
+/// The least room between two labels under a bar, px: wider than a space, so that
+/// neighbours never read as one number (`5 6.57`).
+const LABEL_GAP: f32 = 10.0;
 
 /// Baseline step of [`Legend::Text`]'s lines, px.
 const TEXT_ROW: f32 = 16.0;
@@ -844,7 +865,7 @@ pub fn colour_bar(
             let ticks = log_labels(log_ticks(lo, hi));
             // A range from 0 or below starts the scale decades below its top: values at
             // or below that take its colour.
-            let [low, high] = end_labels(lo, hi);
+            let [low, high] = log_end_labels(lo, hi);
             let [low, high] = beyond_marks([low, high], [lo, hi], data);
             let low = match range[0] <= 0.0 && !low.starts_with('≤') {
                 true => format!("≤ {low}"),
@@ -901,7 +922,7 @@ pub fn density_bar(density_min: f32, density_max: f32, log: bool, title: Option<
     let (min, max) = (f64::from(density_min), f64::from(density_max));
     let colour = |t: f32| crate::density::transfer_colour(t).to_array();
     if log && min > 0.0 && max > min {
-        let [low, high] = end_labels(min, max);
+        let [low, high] = log_end_labels(min, max);
         let ticks = log_labels(log_ticks(min, max));
         let span = (max / min).ln();
         // (Below the bottom the volume is clear, not the bottom's colour: no `≤`.)
@@ -1190,6 +1211,10 @@ mod tests {
         assert_eq!(end_labels(-3.5972, -1.5666), ["-3.6", "-1.57"]);
         assert_eq!(end_labels(1.36e-5, 1.56e-4), ["1.36e-5", "1.56e-4"]);
         assert_eq!(end_labels(0.0, 2.5), ["0", "2.5"]);
+        // A log bar's ends, each in its own notation.
+        assert_eq!(log_end_labels(6.809446e-5, 4.46257), ["6.81e-5", "4.46"]);
+        assert_eq!(log_end_labels(0.0348, 120.0), ["0.0348", "120"]);
+        assert_eq!(log_end_labels(1e-9, 3e6), ["1e-9", "3e6"]);
         assert_eq!(end_labels(12345.0, 250000.0), ["1.23e4", "2.5e5"]);
         // No end past four significant digits; a narrow range keeps its ends apart.
         assert_eq!(end_labels(0.00148, 14.806337), ["0.00148", "14.81"]);
