@@ -8371,3 +8371,57 @@ fn a_saved_light_map_holds_the_column_density() {
         assert!(!o.status.success() && err.contains(says), "{err}");
     }
 }
+
+/// A fitted view leaves the scale bar's panel free, as it does the legend's: a slab
+/// filling the image reaches under the panel's corner without the bar and stays clear
+/// of it with the bar (the view the bar's fit chose, drawn without the bar, has only
+/// background there).
+#[test]
+fn a_fitted_view_keeps_the_data_from_under_the_scale_bar() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut xyz = String::from("2560\nProperties=species:S:1:pos:R:3\n");
+    for j in 0..40 {
+        for i in 0..64 {
+            xyz.push_str(&format!("A {i} {j} 0\n"));
+        }
+    }
+    let input = dir.path().join("sheet.xyz");
+    std::fs::write(&input, xyz).unwrap();
+    let file = dir.path().join("sheet.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file), "--radius", "A=0.5"]);
+    let (w, h) = (320usize, 200usize);
+    let base = [
+        "--width",
+        "320",
+        "--height",
+        "200",
+        "--background",
+        "white",
+        "--ortho",
+        "--look-along",
+        "0,0,-1",
+    ];
+    // Data pixels in the panel's corner (bottom left: a fifth of the width, 30 rows).
+    let covered = |png: &Path| {
+        let (_, _, px) = read_png(png);
+        (h - 30..h)
+            .flat_map(|y| (0..w / 5).map(move |x| (x, y)))
+            .filter(|&(x, y)| px[4 * (y * w + x)..4 * (y * w + x) + 3] != [255, 255, 255])
+            .count()
+    };
+    let plain = dir.path().join("plain.png");
+    let mut args = vec!["render", s(&file), "-o", s(&plain)];
+    args.extend(base);
+    ok(&args);
+    assert!(covered(&plain) > 100, "{}", covered(&plain));
+    let (barred, view) = (dir.path().join("bar.png"), dir.path().join("v.json"));
+    let mut args = vec!["render", s(&file), "-o", s(&barred), "--scale-bar"];
+    args.extend(base);
+    args.extend(["--save-view", s(&view)]);
+    ok(&args);
+    let clear = dir.path().join("clear.png");
+    let mut args = vec!["render", s(&file), "-o", s(&clear), "--view", s(&view)];
+    args.extend(["--width", "320", "--height", "200", "--background", "white"]);
+    ok(&args);
+    assert_eq!(covered(&clear), 0);
+}

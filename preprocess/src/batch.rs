@@ -566,17 +566,24 @@ pub enum BatchError {
     /// on other workers, are in the manifest (no new frame starts after a failure).
     #[error(
         "{source}\n  ({})",
-        match converted {
-            0 => format!("none of the {todo} frames to convert was converted"),
-            _ => format!(
+        match (converted, manifest_unsaved) {
+            (0, _) => format!("none of the {todo} frames to convert was converted"),
+            (_, None) => format!(
                 "{converted} of the {todo} frames to convert were converted and are listed in \
                  the manifest; once the cause is mended, a rerun converts only what is missing"
+            ),
+            (_, Some(why)) => format!(
+                "{converted} of the {todo} frames to convert were converted, but the manifest \
+                 listing them could not be saved ({why}); once the cause is mended, a rerun \
+                 finds them complete, lists them and converts only what is missing"
             ),
         }
     )]
     Incomplete {
         converted: usize,
         todo: usize,
+        /// Why the manifest could not be saved after the failure, if it could not.
+        manifest_unsaved: Option<String>,
         #[source]
         source: Box<BatchError>,
     },
@@ -1960,12 +1967,17 @@ pub fn batch(
             ));
             let same_columns = job.format != InputFormat::LammpsBinary
                 || recorded.is_some_and(|r| r.columns == columns);
-            // Renames change the file: a frame converted with others (or, without a
-            // record of them, when renames are asked for now) is converted again.
+            // Renames change the file: a frame converted with others is converted again.
+            // Without a record of them (a frame the manifest does not list: a run over
+            // other inputs rewrote it), the file's own species tell: a frame converted
+            // without the renames asked for now still holds a species of an old name.
             let renames = &opts.convert.species_names;
             let same_names = match recorded.and_then(|r| r.species_names.as_ref()) {
                 Some(names) => names == renames,
-                None => renames.is_empty(),
+                None => renames.iter().all(|(old, new)| {
+                    let species = &f.metadata().species;
+                    species.iter().all(|s| &s.name != old) && species.iter().any(|s| &s.name == new)
+                }),
             };
             // So does another choice of size column (a frame listed by no manifest was
             // converted with the default).
@@ -2487,6 +2499,7 @@ pub fn batch(
         return Err(BatchError::Incomplete {
             converted: converted.load(Ordering::Relaxed),
             todo: todo.len(),
+            manifest_unsaved: last_save.err().map(|e| e.to_string()),
             source: Box::new(e),
         });
     }
@@ -3347,6 +3360,28 @@ const MANIFEST_VERSION: u32 = 1;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A failed batch whose manifest could not be saved after the failure (the disk
+    /// that stopped a frame full for it too) does not claim the frames are listed.
+    #[test]
+    fn an_unsaved_manifest_is_not_said_to_list_the_frames() {
+        let e = |unsaved: Option<&str>| {
+            BatchError::Incomplete {
+                converted: 3,
+                todo: 5,
+                manifest_unsaved: unsaved.map(str::to_owned),
+                source: Box::new(BatchError::BadShard(2, 1)),
+            }
+            .to_string()
+        };
+        assert!(e(None).contains("3 of the 5 frames to convert were converted and are listed"));
+        let text = e(Some("No space left on device (os error 28)"));
+        assert!(
+            text.contains("but the manifest listing them could not be saved (No space left")
+                && !text.contains("are listed"),
+            "{text}"
+        );
+    }
 
     #[test]
     fn patterns_with_a_percent_name_piece_sets() {

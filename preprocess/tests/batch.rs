@@ -952,6 +952,17 @@ fn differing_radii_are_kept_per_particle_in_every_frame_of_a_trajectory() {
             ("particles/position", 9, 4, 3, positions.clone()),
             ("particles/diameter", 9, 4, 1, diameters),
             ("configuration/step", 4, 1, 1, step.to_le_bytes().to_vec()),
+            // (A box holding them: the schema's default box of 1 would not.)
+            (
+                "configuration/box",
+                9,
+                6,
+                1,
+                [20.0f32, 20.0, 20.0, 0.0, 0.0, 0.0]
+                    .iter()
+                    .flat_map(|v| v.to_le_bytes())
+                    .collect(),
+            ),
         ]
     };
     let src = dir.path().join("grow.gsd");
@@ -2785,4 +2796,33 @@ fn a_second_run_of_the_same_shard_is_refused_while_the_first_runs() {
     );
     let r = batch(std::slice::from_ref(&src), &out2, &shard(1, 2), &NoProgress).unwrap();
     assert_eq!(r.converted, 3);
+}
+
+/// Frames on disk that the manifest does not list (a run over other inputs rewrote it)
+/// were built with renames the manifest no longer records: their species tell. Renamed
+/// as now, they are kept; built without the rename, or with another, converted again.
+#[test]
+fn unlisted_frames_keep_their_renames_where_their_species_show_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    let mut renamed = opts();
+    renamed.convert.species_names = vec![("1".into(), "Cu".into())];
+    let r = batch(std::slice::from_ref(&src), &out, &renamed, &NoProgress).unwrap();
+    assert_eq!(r.converted, 6);
+    std::fs::remove_file(out.join("dataset.json")).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &renamed, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped, r.redone.settings), (0, 6, 0));
+    // Another rename: every frame again.
+    std::fs::remove_file(out.join("dataset.json")).unwrap();
+    let mut other = opts();
+    other.convert.species_names = vec![("1".into(), "Ni".into())];
+    let r = batch(std::slice::from_ref(&src), &out, &other, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.redone.settings), (6, 6));
+    // Frames built without renames, unlisted, asked with one: again.
+    let plain = dir.path().join("plain");
+    batch(std::slice::from_ref(&src), &plain, &opts(), &NoProgress).unwrap();
+    std::fs::remove_file(plain.join("dataset.json")).unwrap();
+    let r = batch(std::slice::from_ref(&src), &plain, &renamed, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.redone.settings), (6, 6));
 }

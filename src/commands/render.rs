@@ -1832,7 +1832,8 @@ pub fn run(mut args: Args) -> Result<()> {
             },
         });
     }
-    opts.fit_windows = check_legend_room(&args, &opts)?;
+    let legend_room = check_legend_room(&args, &opts)?;
+    opts.fit_windows = scale_bar_room(&args, &opts, legend_room);
     if args.file.is_dir() {
         if args.turntable.is_some() {
             anyhow::bail!(
@@ -2389,6 +2390,85 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_rend
         );
     }
     Ok(windows)
+}
+
+/// Where a fitted view places the data so that the scale bar's panel covers none of it
+/// either (a still's or a movie's first frame's fit): `windows` (the legend's, or the
+/// whole image) each intersected with the two the panel leaves free, as the legend's
+/// are; `windows` as they are without a scale bar, or where that leaves the data too
+/// little room. The panel is taken at its widest: a fifth of the image, or the length
+/// asked for at the scale of the fit without it (the fit with it frames the data
+/// smaller, and the bar with it).
+fn scale_bar_room(
+    args: &Args,
+    opts: &RenderOptions,
+    windows: Vec<mdlod_render::FitWindow>,
+) -> Vec<mdlod_render::FitWindow> {
+    if !args.scale_bar {
+        return windows;
+    }
+    let (w, h) = (opts.width, opts.height);
+    let pixels = match args.scale_bar_length {
+        None => f64::from(w) / 5.0,
+        Some(length) => {
+            let path = match args.file.is_dir() {
+                true => match mdlod_preprocess::batch::read_manifest(&args.file) {
+                    Ok(m) if !m.frames.is_empty() => args.file.join(&m.frames[0].file),
+                    _ => return windows,
+                },
+                false => args.file.clone(),
+            };
+            let camera = mdlod_render::open_styled(&path, &opts.style)
+                .ok()
+                .and_then(|f| {
+                    let o = RenderOptions {
+                        fit_windows: windows.clone(),
+                        ..opts.clone()
+                    };
+                    mdlod_render::frame_setup(&f, &o).ok()
+                });
+            match camera {
+                Some((c, _, _)) => {
+                    f64::from(length) * f64::from(h) / f64::from(c.view_height_at_target())
+                }
+                None => return windows,
+            }
+        }
+    };
+    // The label's width: a number and a unit of a few characters.
+    let probe = mdlod_render::legend::Legend::Scale {
+        length: 1.0,
+        label: "00000 Mpc/h".into(),
+    };
+    let Some(s) = probe.scale_for(w, h) else {
+        return windows;
+    };
+    let panel = mdlod_render::legend::Legend::Scale {
+        length: (pixels / f64::from(s)) as f32,
+        label: "00000 Mpc/h".into(),
+    };
+    let (pw, ph) = panel.room_needed(s);
+    let free = legend_windows(args.scale_bar_corner(), [pw, ph], [w, h]);
+    let whole = [mdlod_render::FitWindow::WHOLE];
+    let given: &[mdlod_render::FitWindow] = if windows.is_empty() { &whole } else { &windows };
+    let size = [f64::from(w), f64::from(h)];
+    let both: Vec<mdlod_render::FitWindow> = given
+        .iter()
+        .flat_map(|a| {
+            free.iter().map(move |b| mdlod_render::FitWindow {
+                min: [0, 1].map(|k| a.min[k].max(b.min[k])),
+                max: [0, 1].map(|k| a.max[k].min(b.max[k])),
+            })
+        })
+        .filter(|win| {
+            (0..2).all(|k| (win.max[k] - win.min[k]) * 0.5 * size[k] >= f64::from(MIN_DATA_ROOM))
+        })
+        .collect();
+    if both.is_empty() {
+        windows
+    } else {
+        both
+    }
 }
 
 /// The fewest pixels, across and down, of the part of the image an in-image legend
