@@ -8425,3 +8425,72 @@ fn a_fitted_view_keeps_the_data_from_under_the_scale_bar() {
     ok(&args);
     assert_eq!(covered(&clear), 0);
 }
+
+/// `--hide-by` reads `--hide-attribute` against another attribute than the colour's
+/// (OVITO's select by structure type, delete, colour by energy): of the real bicrystal's
+/// 2552 atoms the 2047 its CNA calls fcc (1) are left out, every other one drawn, in the
+/// energy's colours; the option alone, or naming no attribute of the file, is refused.
+#[test]
+fn hidden_values_can_be_read_from_another_attribute_than_the_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("gb.mdlod");
+    let dump = lammps_sample_path("cu_gb.cna.dump");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--attribute",
+        "c_cna",
+        "--attribute",
+        "c_pe",
+    ]);
+    let png = |name: &str| dir.path().join(name);
+    let (pe_png, cna_png, x_png) = (png("pe.png"), png("cna.png"), png("x.png"));
+    let drawn = |out: &str| -> u64 {
+        let at = out.find(" particles").unwrap();
+        out[..at].rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    let base = [
+        "--width",
+        "96",
+        "--height",
+        "64",
+        "--screen-error",
+        "0",
+        "--no-occlusion",
+    ];
+    let mut args = vec!["render", s(&file), "-o", s(&pe_png)];
+    args.extend(base);
+    args.extend(["--attribute", "c_pe", "--colour-map", "viridis"]);
+    args.extend(["--hide-by", "c_cna", "--hide-attribute", "0.5:1.5"]);
+    let out = ok(&args);
+    assert_eq!(drawn(&out), 2552 - 2047, "{out}");
+    // The same atoms as hiding by the colour attribute itself, in other colours.
+    let mut args = vec!["render", s(&file), "-o", s(&cna_png)];
+    args.extend(base);
+    args.extend(["--attribute", "c_cna", "--colour-map", "viridis"]);
+    args.extend(["--hide-attribute", "0.5:1.5"]);
+    let out = ok(&args);
+    assert_eq!(drawn(&out), 2552 - 2047, "{out}");
+    assert_ne!(read_png(&pe_png).2, read_png(&cna_png).2);
+    for (extra, says) in [
+        (
+            vec!["--hide-by", "c_cna"],
+            "--hide-by has no effect without --hide-attribute",
+        ),
+        (
+            vec!["--hide-by", "c_ke", "--hide-attribute", "0.5:1.5"],
+            "c_ke",
+        ),
+    ] {
+        let mut args = vec!["render", s(&file), "-o", s(&x_png)];
+        args.extend(extra);
+        let o = mdlod(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{err}");
+        if says == "c_ke" {
+            assert!(err.contains("c_cna, c_pe"), "{err}");
+        }
+    }
+}

@@ -26,7 +26,7 @@ use crate::layout::{
     align_up, Header, LevelRecord, NodeRecord, SectionEntry, SectionKind, HEADER_SIZE, MAGIC,
     READABLE_MAJOR, SECTION_ALIGN,
 };
-use crate::meta::{Metadata, RadiusInfo};
+use crate::meta::{AttributeInfo, Metadata, RadiusInfo};
 use crate::quantize;
 
 /// Largest metadata section accepted (JSON of a few species needs a few KiB).
@@ -93,6 +93,9 @@ pub struct MdlodFile {
     /// The node records with another attribute's means in place of the first's
     /// ([`Self::select_attribute`]); `None`: the file's own.
     nodes_owned: Option<Vec<NodeRecord>>,
+    /// The attribute hidden value ranges read where it is not the one selected
+    /// ([`Self::hide_by_attribute`]): its range and its values' bytes.
+    hider: Option<(AttributeInfo, Range<usize>)>,
     radius_range: Option<Range<usize>>,
     /// Per node level: the index in `node_blocks` of its first block.
     block_first: Vec<usize>,
@@ -925,6 +928,7 @@ impl MdlodFile {
             attribute_range,
             extra_ranges,
             nodes_owned: None,
+            hider: None,
             radius_table: OnceLock::new(),
             radius_range,
             block_first,
@@ -1085,6 +1089,67 @@ impl MdlodFile {
         Ok(self)
     }
 
+    /// This file with hidden value ranges ([`HiddenSet::with_ranges`]) read against the
+    /// attribute named `name` (as [`Self::select_attribute`] names them) instead of the
+    /// selected one: an OVITO user's selection by one column (a CNA's structure types)
+    /// while colouring by another. Kept through a later [`Self::select_attribute`]. An
+    /// unknown name is an error listing the file's attributes.
+    pub fn hide_by_attribute(mut self, name: &str) -> Result<MdlodFile, FormatError> {
+        let names = self.attribute_names();
+        let chosen = attribute_named(&names, name).map(str::to_owned);
+        let Some(chosen) = chosen else {
+            return Err(FormatError::NoSuchAttribute {
+                path: self.path.clone(),
+                name: name.to_string(),
+                names: if names.is_empty() {
+                    "none".to_string()
+                } else {
+                    names.join(", ")
+                },
+            });
+        };
+        let first = self.metadata.attribute.as_ref();
+        self.hider = if first.is_some_and(|a| a.name == chosen) {
+            first.cloned().zip(self.attribute_range.clone())
+        } else {
+            let Some(k) = self
+                .metadata
+                .attributes
+                .iter()
+                .position(|a| a.name == chosen)
+            else {
+                return Ok(self);
+            };
+            let (values, _) = self.extra_ranges.clone().ok_or_else(|| {
+                FormatError::corrupt(&self.path, "section table", "no ATTRIBUTES")
+            })?;
+            let per = (values.end - values.start) / self.metadata.attributes.len();
+            Some((
+                self.metadata.attributes[k].clone(),
+                values.start + k * per..values.start + (k + 1) * per,
+            ))
+        };
+        *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        Ok(self)
+    }
+
+    /// The attribute hidden value ranges are read against: the one
+    /// [`Self::hide_by_attribute`] chose, else the selected (first) one.
+    pub fn hiding_attribute(&self) -> Option<&AttributeInfo> {
+        match &self.hider {
+            Some((info, _)) => Some(info),
+            None => self.metadata.attribute.as_ref(),
+        }
+    }
+
+    /// The quantized values of [`Self::hiding_attribute`] per particle.
+    pub fn hiding_values(&self) -> Option<&[u16]> {
+        match &self.hider {
+            Some((_, r)) => Some(bytemuck::cast_slice(&self.map[r.clone()])),
+            None => self.attribute(),
+        }
+    }
+
     /// For a set of species (`mask`: bit `s` for species index `s`; indices of 64 and
     /// more are never in it), per node (indexed as [`Self::nodes`]) which particles its
     /// subtree holds: [`BELOW_IN`] when some are of the set, [`BELOW_OUT`] when some are
@@ -1132,7 +1197,7 @@ impl MdlodFile {
             codes: [(0, 0); MAX_HIDDEN_RANGES],
             count: 0,
         };
-        if let Some(info) = &self.metadata().attribute {
+        if let Some(info) = self.hiding_attribute() {
             for c in set.ranges().iter().filter_map(|&r| info.codes(r)) {
                 test.codes[test.count] = c;
                 test.count += 1;
@@ -1148,7 +1213,7 @@ impl MdlodFile {
             return false;
         };
         let q = match test.by_value() {
-            true => self.attribute().and_then(|a| a.get(i).copied()),
+            true => self.hiding_values().and_then(|a| a.get(i).copied()),
             false => None,
         };
         test.hides(s, q)
@@ -1161,7 +1226,7 @@ impl MdlodFile {
             return kinds;
         };
         let test = self.hidden_test(set);
-        let values = self.attribute().filter(|_| test.by_value());
+        let values = self.hiding_values().filter(|_| test.by_value());
         let of = |i: usize, s: u16| {
             if test.hides(s, values.and_then(|v| v.get(i).copied())) {
                 BELOW_IN

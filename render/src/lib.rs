@@ -677,7 +677,16 @@ pub fn open_styled(
     path: &Path,
     style: &PointStyle,
 ) -> Result<MdlodFile, mdlod_format::FormatError> {
-    let file = MdlodFile::open(path)?;
+    let mut file = MdlodFile::open(path)?;
+    // Hidden values of another attribute than the colour's are chosen first: selecting
+    // the colour's leaves the file that one alone.
+    if let Some(name) = style
+        .hide_by
+        .as_deref()
+        .filter(|_| !style.hidden_values.is_empty())
+    {
+        file = file.hide_by_attribute(name)?;
+    }
     match &style.attribute {
         Some(name) => file.select_attribute(name),
         None => Ok(file),
@@ -1344,7 +1353,7 @@ pub fn frame_setup(
     // Every mode's style, checked whole here (the packers check the styles they draw
     // with, which in the splat and volume modes are not the user's).
     opts.style.validate().map_err(RenderError::InvalidOptions)?;
-    if !opts.style.hidden_values.is_empty() && file.metadata().attribute.is_none() {
+    if !opts.style.hidden_values.is_empty() && file.hiding_attribute().is_none() {
         return Err(RenderError::InvalidOptions(
             "the file has no per-particle attribute to hide particles by (a file keeps the \
              one dump column `mdlod convert --attribute COLUMN` names, e.g. --attribute c_cna)"

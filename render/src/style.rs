@@ -238,6 +238,10 @@ pub struct PointStyle {
     /// atoms). At most [`mdlod_format::reader::MAX_HIDDEN_RANGES`].
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub hidden_values: Vec<[f32; 2]>,
+    /// The attribute `hidden_values` are read against, where not [`Self::attribute`]
+    /// (see [`crate::open_styled`]); `None`: the same one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hide_by: Option<String>,
 }
 
 impl Default for PointStyle {
@@ -251,6 +255,7 @@ impl Default for PointStyle {
             log_scale: false,
             clip: Vec::new(),
             hidden_values: Vec::new(),
+            hide_by: None,
         }
     }
 }
@@ -1166,6 +1171,7 @@ mod tests {
             log_scale: false,
             clip: vec![],
             hidden_values: vec![],
+            hide_by: None,
         };
         let file = [sp("A", 1.0), sp("B", 1.5), sp("C", 0.5)];
         let t = style.species_table(&file).unwrap();

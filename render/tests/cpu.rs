@@ -986,6 +986,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             log_scale: false,
             clip: vec![],
             hidden_values: vec![],
+            hide_by: None,
         };
         let packed = pack_styled(&f, &d, PackStyle::Spheres, &style).unwrap();
         assert_eq!(packed.points(), base.points());

@@ -125,6 +125,7 @@ pub fn run(args: Args) -> Result<()> {
             species_radius: vec![],
             hide_species: vec![],
             hide_attribute: vec![],
+            hide_by: None,
             attribute_range: None,
             log_scale: false,
             clip: vec![],

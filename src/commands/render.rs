@@ -778,6 +778,12 @@ pub struct StyleArgs {
         value_parser = parse_open_range
     )]
     pub hide_attribute: Vec<[f32; 2]>,
+    /// The attribute --hide-attribute reads, where it is not the one --attribute
+    /// colours by (a file of several): `--hide-by c_cna --hide-attribute 0.5:1.5
+    /// --attribute c_pe --colour-map viridis` leaves out the fcc atoms and colours the
+    /// rest by their energy [default: --attribute's, else the first]
+    #[arg(long, value_name = "NAME")]
+    pub hide_by: Option<String>,
     /// Which of the file's attributes --colour-map, --hide-attribute and
     /// --attribute-range read (and splats lit by the attribute), for a file that keeps
     /// several (`convert --attribute c_pe --attribute c_ke`); default: the first.
@@ -955,6 +961,7 @@ impl StyleArgs {
             log_scale: self.log_scale,
             clip: self.clip.clone(),
             hidden_values: self.hide_attribute.clone(),
+            hide_by: self.hide_by.clone(),
             colour_map: self.colour_map.map(|m| match m {
                 ColourMapArg::Viridis => ColourMap::Viridis,
                 ColourMapArg::Magma => ColourMap::Magma,
@@ -1424,6 +1431,9 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     }
     if args.scale_bar_length.is_some() && !args.scale_bar {
         anyhow::bail!("--scale-bar-length has no effect without --scale-bar");
+    }
+    if args.style.hide_by.is_some() && args.style.hide_attribute.is_empty() {
+        anyhow::bail!("--hide-by has no effect without --hide-attribute: it names what that reads");
     }
     if args.scale_bar_corner.is_some() && !args.scale_bar {
         anyhow::bail!("--scale-bar-corner has no effect without --scale-bar");
@@ -1996,7 +2006,7 @@ pub fn run(mut args: Args) -> Result<()> {
     if every_species_hidden {
         println!("  note: every species is hidden: the image shows the background only");
     }
-    if let Some(note) = hides_nothing_note(&args.style, file.metadata().attribute.as_ref()) {
+    if let Some(note) = hides_nothing_note(&args.style, file.hiding_attribute()) {
         println!("{note}");
     }
     if view_fits(&opts.view) {
@@ -2571,12 +2581,19 @@ fn build_legend(
                 mdlod_render::style::AttributeScale::with_range(a, opts.style.attribute_range)
                     .with_log(opts.style.log_scale);
             let mut entries = Vec::new();
+            // Hidden values of this attribute (not of another --hide-by names).
+            let same = opts
+                .style
+                .hide_by
+                .as_deref()
+                .is_none_or(|h| mdlod_format::reader::attribute_named(&[&a.name], h).is_some());
             for (value, label) in legend_categories(args)? {
-                let hidden = opts
-                    .style
-                    .hidden_values
-                    .iter()
-                    .any(|&[lo, hi]| lo <= value && value <= hi);
+                let hidden = same
+                    && opts
+                        .style
+                        .hidden_values
+                        .iter()
+                        .any(|&[lo, hi]| lo <= value && value <= hi);
                 if !hidden {
                     entries.push((label, map.colour(scale.of_value(value))));
                 }
