@@ -8494,3 +8494,54 @@ fn hidden_values_can_be_read_from_another_attribute_than_the_colours() {
         }
     }
 }
+
+/// `--frames` draws part of a movie with the whole movie's camera, colours and image
+/// numbers, so pieces rendered apart join up: frames 2 to 4 come out as the whole
+/// movie's images 2 to 4, byte for byte; `::2` every other one; bad selections refused.
+#[test]
+fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("d");
+    ok(&["batch", s(&lammps_sample_path("cu_melt.custom.dump")), "-o", s(&d), "--attribute", "c_pe"]);
+    let render = |pattern: &Path, extra: &[&str]| {
+        let mut args = vec!["render", s(&d), "-o", s(pattern), "--width", "64", "--height", "48"];
+        args.extend(["--colour-map", "viridis"]);
+        args.extend(extra);
+        ok(&args)
+    };
+    let whole = dir.path().join("whole-%d.png");
+    render(&whole, &[]);
+    let part = dir.path().join("part-%d.png");
+    let out = render(&part, &["--frames", "2:5"]);
+    assert!(out.contains("rendered 3 of the 6 frames (--frames)"), "{out}");
+    for k in 0..6 {
+        let p = dir.path().join(format!("part-{k}.png"));
+        assert_eq!(p.exists(), (2..5).contains(&k), "image {k}");
+        if p.exists() {
+            let w = dir.path().join(format!("whole-{k}.png"));
+            assert_eq!(std::fs::read(&p).unwrap(), std::fs::read(&w).unwrap(), "image {k}");
+        }
+    }
+    let every = dir.path().join("every-%d.png");
+    render(&every, &["--frames", "::2"]);
+    let made: Vec<usize> = (0..6)
+        .filter(|k| dir.path().join(format!("every-{k}.png")).exists())
+        .collect();
+    assert_eq!(made, [0, 2, 4]);
+    for (sel, says) in [
+        ("5:2", "END (2) must be above START (5)"),
+        ("::0", "STEP must be 1 or more"),
+        ("10:", "--frames selects none of the 6 frames"),
+        ("a:b", "is no frame position"),
+    ] {
+        let x = dir.path().join("x-%d.png");
+        let o = mdlod(&["render", s(&d), "-o", s(&x), "--frames", sel]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{sel}: {err}");
+    }
+    let m = mdlod_preprocess::batch::read_manifest(&d).unwrap();
+    let one = d.join(&m.frames[0].file);
+    let o = mdlod(&["render", s(&one), "-o", s(&dir.path().join("y.png")), "--frames", "0:1"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--frames picks frames of a batch directory"), "{err}");
+}

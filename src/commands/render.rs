@@ -76,6 +76,13 @@ pub struct Args {
     /// azimuth, for a talk's turntable: -o must number them (e.g. spin/view-%03d.png).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..=100_000))]
     pub turntable: Option<u32>,
+    /// Of a batch directory, draw only frames START to END (0-based positions in its
+    /// dataset.json, END not included; either may be left out), every STEP-th: `::10`
+    /// previews every tenth, `0:250` and `250:500` split a movie between two jobs. The
+    /// camera, colour range and image numbers are those of the whole movie, so pieces
+    /// rendered apart join up
+    #[arg(long, value_name = "START:END[:STEP]", value_parser = parse_frames)]
+    pub frames: Option<FrameSelection>,
     /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G).
     #[arg(long, value_parser = parse_bytes)]
     pub gpu_memory: Option<u64>,
@@ -847,6 +854,52 @@ pub fn parse_open_range(s: &str) -> Result<[f32; 2], String> {
 }
 
 /// Parses `MIN:MAX` (finite, MAX above MIN).
+/// `--frames START:END[:STEP]`: positions in a batch's frame list.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameSelection {
+    pub start: Option<usize>,
+    pub end: Option<usize>,
+    pub step: usize,
+}
+
+impl FrameSelection {
+    /// Whether the frame at position `i` is drawn.
+    fn takes(&self, i: usize) -> bool {
+        let start = self.start.unwrap_or(0);
+        i >= start && self.end.is_none_or(|e| i < e) && (i - start) % self.step == 0
+    }
+}
+
+fn parse_frames(s: &str) -> Result<FrameSelection, String> {
+    let parts: Vec<&str> = s.split(':').collect();
+    if !(2..=3).contains(&parts.len()) {
+        return Err(format!("{s:?}: give START:END or START:END:STEP (e.g. 0:100, ::10)"));
+    }
+    let number = |p: &str, what: &str| -> Result<Option<usize>, String> {
+        match p.trim() {
+            "" => Ok(None),
+            t => t
+                .parse::<usize>()
+                .map(Some)
+                .map_err(|_| format!("{s:?}: {what} {t:?} is no frame position (0, 1, ...)")),
+        }
+    };
+    let (start, end) = (number(parts[0], "START")?, number(parts[1], "END")?);
+    let step = match parts.get(2) {
+        Some(p) => number(p, "STEP")?.unwrap_or(1),
+        None => 1,
+    };
+    if step == 0 {
+        return Err(format!("{s:?}: STEP must be 1 or more"));
+    }
+    if let (Some(a), Some(b)) = (start, end) {
+        if b <= a {
+            return Err(format!("{s:?}: END ({b}) must be above START ({a}); END is not drawn"));
+        }
+    }
+    Ok(FrameSelection { start, end, step })
+}
+
 pub fn parse_range(s: &str) -> Result<[f32; 2], String> {
     let (lo, hi) = s
         .split_once(':')
@@ -1598,6 +1651,12 @@ pub fn run(mut args: Args) -> Result<()> {
     super::check_output("-o", &args.output, &inputs)?;
     super::check_png_name("-o", &args.output)?;
     let single = !args.file.is_dir() && args.turntable.is_none();
+    if args.frames.is_some() && !args.file.is_dir() {
+        anyhow::bail!(
+            "--frames picks frames of a batch directory; {} is one file",
+            args.file.display()
+        );
+    }
     if single && frame_output(&args.output, 0).is_ok() {
         anyhow::bail!(
             "-o {}: a name numbered for a series, but {} is one file and renders one image: \
@@ -3719,7 +3778,20 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let mut written = Vec::new();
     // The timesteps of the frames that drew nothing.
     let mut empty_frames = Vec::new();
+    let selected: Vec<usize> = (0..n)
+        .filter(|&i| args.frames.is_none_or(|sel| sel.takes(i)))
+        .collect();
+    if selected.is_empty() {
+        anyhow::bail!(
+            "--frames selects none of the {n} frames of {} (positions 0 to {})",
+            dir.display(),
+            n - 1
+        );
+    }
     for (i, f) in manifest.frames.iter().enumerate() {
+        if args.frames.is_some_and(|sel| !sel.takes(i)) {
+            continue;
+        }
         let out = frame_output(&args.output, i)?;
         written.push(out.clone());
         let path = dir.join(&f.file);
@@ -3802,13 +3874,29 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         0 => String::new(),
         k => format!("; {k} coarsened by the point budget or the GPU memory pool"),
     };
+    let count = match selected.len() {
+        k if k == n => format!("{n} frame{}", if n == 1 { "" } else { "s" }),
+        k => format!("{k} of the {n} frames (--frames)"),
+    };
     println!(
-        "rendered {n} frame{} in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{radii_note}{limited}",
-        if n == 1 { "" } else { "s" },
+        "rendered {count} in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{radii_note}{limited}",
         t0.elapsed().as_secs_f64()
     );
-    if let Some(note) = stale_images_note(&args.output, n) {
+    // (A piece of a movie leaves the others' images alone.)
+    if let Some(note) = stale_images_note(&args.output, n).filter(|_| args.frames.is_none()) {
         println!("{note}");
+    }
+    // Splats: the first frame drawn chose the exposure (a projection's range), which
+    // another piece's first frame would choose otherwise.
+    let chosen_here = (args.exposure.is_none() && args.mode == Mode::Splat && !projected(args))
+        || (projected(args) && args.light_range.is_none());
+    if args.frames.is_some() && selected[0] != 0 && chosen_here {
+        println!(
+            "  note: this piece's first frame chose the splats' {}: pieces rendered apart \
+             match when each is given the same (the first piece's: {})",
+            if projected(args) { "light range" } else { "exposure" },
+            if projected(args) { "--light-range MIN:MAX" } else { "--exposure E" }
+        );
     }
     if names.iter().all(|n| args.style.hide_species.contains(n)) {
         println!("  note: every species is hidden: the images show the background only");
