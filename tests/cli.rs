@@ -8502,9 +8502,25 @@ fn hidden_values_can_be_read_from_another_attribute_than_the_colours() {
 fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path().join("d");
-    ok(&["batch", s(&lammps_sample_path("cu_melt.custom.dump")), "-o", s(&d), "--attribute", "c_pe"]);
+    ok(&[
+        "batch",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        s(&d),
+        "--attribute",
+        "c_pe",
+    ]);
     let render = |pattern: &Path, extra: &[&str]| {
-        let mut args = vec!["render", s(&d), "-o", s(pattern), "--width", "64", "--height", "48"];
+        let mut args = vec![
+            "render",
+            s(&d),
+            "-o",
+            s(pattern),
+            "--width",
+            "64",
+            "--height",
+            "48",
+        ];
         args.extend(["--colour-map", "viridis"]);
         args.extend(extra);
         ok(&args)
@@ -8513,13 +8529,20 @@ fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
     render(&whole, &[]);
     let part = dir.path().join("part-%d.png");
     let out = render(&part, &["--frames", "2:5"]);
-    assert!(out.contains("rendered 3 of the 6 frames (--frames)"), "{out}");
+    assert!(
+        out.contains("rendered 3 of the 6 frames (--frames)"),
+        "{out}"
+    );
     for k in 0..6 {
         let p = dir.path().join(format!("part-{k}.png"));
         assert_eq!(p.exists(), (2..5).contains(&k), "image {k}");
         if p.exists() {
             let w = dir.path().join(format!("whole-{k}.png"));
-            assert_eq!(std::fs::read(&p).unwrap(), std::fs::read(&w).unwrap(), "image {k}");
+            assert_eq!(
+                std::fs::read(&p).unwrap(),
+                std::fs::read(&w).unwrap(),
+                "image {k}"
+            );
         }
     }
     let every = dir.path().join("every-%d.png");
@@ -8541,7 +8564,17 @@ fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
     }
     let m = mdlod_preprocess::batch::read_manifest(&d).unwrap();
     let one = d.join(&m.frames[0].file);
-    let o = mdlod(&["render", s(&one), "-o", s(&dir.path().join("y.png")), "--frames", "0:1"]);
+    let o = mdlod(&[
+        "render",
+        s(&one),
+        "-o",
+        s(&dir.path().join("y.png")),
+        "--frames",
+        "0:1",
+    ]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("--frames picks frames of a batch directory"), "{err}");
+    assert!(
+        err.contains("--frames picks frames of a batch directory"),
+        "{err}"
+    );
 }

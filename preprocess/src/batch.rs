@@ -862,16 +862,33 @@ pub fn lock_file_name(shard: Option<(u32, u32)>) -> String {
     }
 }
 
-/// Takes the batch directory's lock for this run (an advisory `flock`, which the system
-/// lets go when the process ends however it ends); a file system without locks runs
-/// unlocked. The file is left in place (removing it would let a third run lock a new
-/// file while a second still holds the old one).
-fn lock_batch(
+/// Takes the batch directory's locks for this run (advisory `flock`s, which the system
+/// lets go when the process ends however it ends): a whole run holds `.batch.lock`
+/// alone; a shard holds it shared with the other shards, and its own shard's lock
+/// alone, so that a whole run and a shard, or two runs of one shard, never write the
+/// directory together. A file system without locks runs unlocked. The files are left
+/// in place (removing one would let a third run lock a new file while a second still
+/// holds the old one).
+fn lock_batch(out_dir: &Path, shard: Option<(u32, u32)>) -> Result<Vec<std::fs::File>, BatchError> {
+    let mut held = Vec::new();
+    let whole = lock_file(out_dir, &lock_file_name(None), shard.is_some(), shard)?;
+    held.extend(whole);
+    if shard.is_some() {
+        held.extend(lock_file(out_dir, &lock_file_name(shard), false, shard)?);
+    }
+    Ok(held)
+}
+
+/// One lock of [`lock_batch`]: `shared` or alone; `Busy` naming the holder when
+/// another process holds it so that this one cannot.
+fn lock_file(
     out_dir: &Path,
+    name: &str,
+    shared: bool,
     shard: Option<(u32, u32)>,
 ) -> Result<Option<std::fs::File>, BatchError> {
     use std::io::{Read, Seek, Write};
-    let path = out_dir.join(lock_file_name(shard));
+    let path = out_dir.join(name);
     let mut file = std::fs::OpenOptions::new()
         .read(true)
         .write(true)
@@ -879,7 +896,11 @@ fn lock_batch(
         .truncate(false)
         .open(&path)
         .map_err(io(&path))?;
-    match file.try_lock() {
+    let locked = match shared {
+        true => file.try_lock_shared(),
+        false => file.try_lock(),
+    };
+    match locked {
         Ok(()) => {}
         Err(std::fs::TryLockError::WouldBlock) => {
             let mut holder = String::new();
@@ -888,21 +909,27 @@ fn lock_batch(
             return Err(BatchError::Busy {
                 dir: out_dir.to_path_buf(),
                 shard: shard.map_or(String::new(), |(i, n)| format!(" (shard {i} of {n})")),
-                holder: if holder.is_empty() {
-                    "it has not said which".into()
-                } else {
-                    holder.to_string()
+                holder: match holder.is_empty() {
+                    // (Shards hold the whole run's lock together, and empty it.)
+                    true if shard.is_none() => "shards of it".into(),
+                    true => "it has not said which".into(),
+                    false => holder.to_string(),
                 },
             });
         }
         // No locks here (some network file systems): as before locks.
         Err(std::fs::TryLockError::Error(_)) => return Ok(None),
     }
-    let holder = format!(
-        "pid {} on {}",
-        std::process::id(),
-        mdlod_format::writer::host_name()
-    );
+    // The holder of a lock alone says who it is; shared holders (several) leave it
+    // empty, so that a whole run they keep out does not name an earlier one.
+    let holder = match shared {
+        false => format!(
+            "pid {} on {}",
+            std::process::id(),
+            mdlod_format::writer::host_name()
+        ),
+        true => String::new(),
+    };
     let written = file
         .set_len(0)
         .and_then(|()| file.rewind())
@@ -918,17 +945,20 @@ fn piece_pattern(a: &Path, b: &Path) -> Option<PathBuf> {
         return None;
     }
     let (na, nb) = (a.file_name()?.to_str()?, b.file_name()?.to_str()?);
-    let prefix = na
-        .bytes()
-        .zip(nb.bytes())
+    // Shared characters (not bytes: names of other scripts share leading bytes).
+    let prefix: usize = na
+        .chars()
+        .zip(nb.chars())
         .take_while(|(x, y)| x == y)
-        .count();
-    let suffix = na[prefix..]
-        .bytes()
+        .map(|(x, _)| x.len_utf8())
+        .sum();
+    let suffix: usize = na[prefix..]
+        .chars()
         .rev()
-        .zip(nb[prefix..].bytes().rev())
+        .zip(nb[prefix..].chars().rev())
         .take_while(|(x, y)| x == y)
-        .count();
+        .map(|(x, _)| x.len_utf8())
+        .sum();
     // Digits shared at the edges belong to the number (`dump.10.bin` and `dump.11.bin`,
     // `dump.0.bin` and `dump.10.bin`).
     let prefix = na[..prefix]
@@ -1795,18 +1825,23 @@ pub fn batch(
                     .map(|j| j.timestep)
                     .collect()
             };
+            // (A set numbered from 0, as LAMMPS numbers its processors: replicas of an
+            // ensemble numbered from 1 are no pieces.)
             let pieces = (w[0].input != w[1].input && steps(w[0].input) == steps(w[1].input))
                 .then(|| piece_pattern(w[0].input, w[1].input))
-                .flatten();
+                .flatten()
+                .filter(|set| crate::readers::piece_paths(set).is_ok());
+            let restart = "--duplicate-timesteps last keeps the later frame of each, first \
+                           the earlier";
             let why = match pieces {
                 Some(set) => format!(
-                    "the two files hold the same timesteps: pieces of one run written \
-                     per processor? Give the pieces as one set, quoted: '{}'",
+                    "the two files hold the same timesteps: pieces of one run written per \
+                     processor? Give the pieces as one set, quoted: '{}'; separate runs \
+                     (replicas) go into batches of their own; for a run restarted into \
+                     them, {restart}",
                     set.display()
                 ),
-                None => "a run restarted into the same dump? --duplicate-timesteps last \
-                         keeps the later frame of each, first the earlier"
-                    .into(),
+                None => format!("a run restarted into the same dump? {restart}"),
             };
             return Err(BatchError::DuplicateTimestep {
                 timestep: w[0].timestep,
@@ -3433,6 +3468,10 @@ mod tests {
         assert_eq!(p("melt.dump", "cu_melt.step.0.bin"), None);
         assert_eq!(p("d.0a.bin", "d.1b.bin"), None);
         assert_eq!(p("d.0.bin", "d.0.bin"), None);
+        // Names of other scripts: characters, not bytes (α and β share a first byte).
+        assert_eq!(p("run_α.dump", "run_β.dump"), None);
+        assert_eq!(p("xé.1", "xĩ.1"), None);
+        assert_eq!(p("α.0.bin", "α.1.bin").as_deref(), Some("α.%.bin"));
     }
 
     #[test]

@@ -2672,8 +2672,8 @@ fn piece_sets_appended_to_keep_their_unchanged_frames() {
 }
 
 /// Per-processor pieces matched by a `*` (`melt.*.dump` matching `melt.0.dump` and
-/// `melt.1.dump`) hold the same timesteps: the error names the `%` set to give instead
-/// of the way out of a restart, which would keep half the atoms.
+/// `melt.1.dump`) hold the same timesteps: the error names the `%` set to give first
+/// (the way out of a restart, alone, kept half the atoms).
 #[test]
 fn pieces_given_as_files_are_named_as_a_set() {
     let dir = tempfile::tempdir().unwrap();
@@ -2690,7 +2690,7 @@ fn pieces_given_as_files_are_named_as_a_set() {
     assert!(
         text.contains("pieces of one run written per processor")
             && text.contains(&format!("'{}'", set.display()))
-            && !text.contains("--duplicate-timesteps"),
+            && text.contains("separate runs (replicas) go into batches of their own"),
         "{text}"
     );
     // As named, the set converts every atom of each frame.
@@ -2796,6 +2796,21 @@ fn a_second_run_of_the_same_shard_is_refused_while_the_first_runs() {
     );
     let r = batch(std::slice::from_ref(&src), &out2, &shard(1, 2), &NoProgress).unwrap();
     assert_eq!(r.converted, 3);
+    // A whole run beside a running shard (shards hold the whole run's lock together) is
+    // refused, and a shard beside a running whole run.
+    let whole = std::fs::File::open(out2.join(lock_file_name(None))).unwrap();
+    whole.lock_shared().unwrap();
+    let e = batch(std::slice::from_ref(&src), &out2, &opts(), &NoProgress).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("is writing this directory (shards of it)"),
+        "{e}"
+    );
+    drop(whole);
+    let first = held(None);
+    let e = batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap_err();
+    assert!(e.to_string().contains("(pid 4242 on node17)"), "{e}");
+    drop(first);
 }
 
 /// Frames on disk that the manifest does not list (a run over other inputs rewrote it)

@@ -866,14 +866,16 @@ impl FrameSelection {
     /// Whether the frame at position `i` is drawn.
     fn takes(&self, i: usize) -> bool {
         let start = self.start.unwrap_or(0);
-        i >= start && self.end.is_none_or(|e| i < e) && (i - start) % self.step == 0
+        i >= start && self.end.is_none_or(|e| i < e) && (i - start).is_multiple_of(self.step)
     }
 }
 
 fn parse_frames(s: &str) -> Result<FrameSelection, String> {
     let parts: Vec<&str> = s.split(':').collect();
     if !(2..=3).contains(&parts.len()) {
-        return Err(format!("{s:?}: give START:END or START:END:STEP (e.g. 0:100, ::10)"));
+        return Err(format!(
+            "{s:?}: give START:END or START:END:STEP (e.g. 0:100, ::10)"
+        ));
     }
     let number = |p: &str, what: &str| -> Result<Option<usize>, String> {
         match p.trim() {
@@ -894,7 +896,9 @@ fn parse_frames(s: &str) -> Result<FrameSelection, String> {
     }
     if let (Some(a), Some(b)) = (start, end) {
         if b <= a {
-            return Err(format!("{s:?}: END ({b}) must be above START ({a}); END is not drawn"));
+            return Err(format!(
+                "{s:?}: END ({b}) must be above START ({a}); END is not drawn"
+            ));
         }
     }
     Ok(FrameSelection { start, end, step })
@@ -989,6 +993,11 @@ impl StyleArgs {
             radii.push((entry(&name), v));
         }
         let hidden: Vec<usize> = self.hide_species.iter().map(|n| entry(n)).collect();
+        if self.hide_by.is_some() && self.hide_attribute.is_empty() {
+            anyhow::bail!(
+                "--hide-by has no effect without --hide-attribute: it names what that reads"
+            );
+        }
         if self.hide_attribute.len() > mdlod_format::reader::MAX_HIDDEN_RANGES {
             anyhow::bail!(
                 "--hide-attribute given {} times: at most {} ranges (join neighbouring ones, \
@@ -1474,7 +1483,10 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
         }
     }
     // --attribute chooses what those read, and --hide-attribute reads it too.
-    if args.style.attribute.is_some() && !by_attribute(args) && args.style.hide_attribute.is_empty()
+    // (--hide-by takes --hide-attribute's reading from it.)
+    if args.style.attribute.is_some()
+        && !by_attribute(args)
+        && (args.style.hide_attribute.is_empty() || args.style.hide_by.is_some())
     {
         anyhow::bail!(
             "--attribute has no effect without --colour-map (spheres, sndf, splat), \
@@ -1484,9 +1496,6 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     }
     if args.scale_bar_length.is_some() && !args.scale_bar {
         anyhow::bail!("--scale-bar-length has no effect without --scale-bar");
-    }
-    if args.style.hide_by.is_some() && args.style.hide_attribute.is_empty() {
-        anyhow::bail!("--hide-by has no effect without --hide-attribute: it names what that reads");
     }
     if args.scale_bar_corner.is_some() && !args.scale_bar {
         anyhow::bail!("--scale-bar-corner has no effect without --scale-bar");
@@ -2477,44 +2486,44 @@ fn scale_bar_room(
         return windows;
     }
     let (w, h) = (opts.width, opts.height);
+    // (A file that cannot be read fails where it is rendered, saying why.)
+    let path = match args.file.is_dir() {
+        true => match mdlod_preprocess::batch::read_manifest(&args.file) {
+            Ok(m) if !m.frames.is_empty() => args.file.join(&m.frames[0].file),
+            _ => return windows,
+        },
+        false => args.file.clone(),
+    };
+    let Ok(file) = mdlod_render::open_styled(&path, &opts.style) else {
+        return windows;
+    };
     let pixels = match args.scale_bar_length {
         None => f64::from(w) / 5.0,
         Some(length) => {
-            let path = match args.file.is_dir() {
-                true => match mdlod_preprocess::batch::read_manifest(&args.file) {
-                    Ok(m) if !m.frames.is_empty() => args.file.join(&m.frames[0].file),
-                    _ => return windows,
-                },
-                false => args.file.clone(),
+            let o = RenderOptions {
+                fit_windows: windows.clone(),
+                ..opts.clone()
             };
-            let camera = mdlod_render::open_styled(&path, &opts.style)
-                .ok()
-                .and_then(|f| {
-                    let o = RenderOptions {
-                        fit_windows: windows.clone(),
-                        ..opts.clone()
-                    };
-                    mdlod_render::frame_setup(&f, &o).ok()
-                });
-            match camera {
-                Some((c, _, _)) => {
+            match mdlod_render::frame_setup(&file, &o) {
+                Ok((c, _, _)) => {
                     f64::from(length) * f64::from(h) / f64::from(c.view_height_at_target())
                 }
-                None => return windows,
+                Err(_) => return windows,
             }
         }
     };
-    // The label's width: a number and a unit of a few characters.
+    // The label's widest: a number of up to seven characters (`1.25e-5`) and the unit.
+    let label = format!("0000000 {}", length_unit(file.metadata().units.as_deref()));
     let probe = mdlod_render::legend::Legend::Scale {
         length: 1.0,
-        label: "00000 Mpc/h".into(),
+        label: label.clone(),
     };
     let Some(s) = probe.scale_for(w, h) else {
         return windows;
     };
     let panel = mdlod_render::legend::Legend::Scale {
         length: (pixels / f64::from(s)) as f32,
-        label: "00000 Mpc/h".into(),
+        label,
     };
     let (pw, ph) = panel.room_needed(s);
     let free = legend_windows(args.scale_bar_corner(), [pw, ph], [w, h]);
@@ -3798,6 +3807,20 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         let file = mdlod_render::open_styled(&path, &opts.style)?;
         opts.style.species =
             mdlod_render::style::keep_looks(&file.metadata().species, &looks, &style.species);
+        // Under a colour map only the colours the user named are kept (a species' colour
+        // there pins it out of the map): the looks' colours would pin the species whose
+        // palette colour moved in this frame.
+        if opts.style.colour_map.is_some() {
+            for st in &mut opts.style.species {
+                let named = style
+                    .species
+                    .iter()
+                    .any(|u| u.name == st.name && u.colour.is_some());
+                if !named {
+                    st.colour = None;
+                }
+            }
+        }
         let changed: Vec<String> = opts
             .style
             .species
@@ -3894,8 +3917,16 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         println!(
             "  note: this piece's first frame chose the splats' {}: pieces rendered apart \
              match when each is given the same (the first piece's: {})",
-            if projected(args) { "light range" } else { "exposure" },
-            if projected(args) { "--light-range MIN:MAX" } else { "--exposure E" }
+            if projected(args) {
+                "light range"
+            } else {
+                "exposure"
+            },
+            if projected(args) {
+                "--light-range MIN:MAX"
+            } else {
+                "--exposure E"
+            }
         );
     }
     if names.iter().all(|n| args.style.hide_species.contains(n)) {

@@ -102,7 +102,8 @@ pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError
         };
         if p.frame_count() != first.frame_count() {
             return Err(mismatch(format!(
-                "{} frames, but {} has {}",
+                "{} frames, but {} has {} (a run still writing its pieces, each in turn? \
+                 rerun once every piece holds the frame being written)",
                 p.frame_count(),
                 first.path().display(),
                 first.frame_count()
