@@ -3609,6 +3609,7 @@ fn a_label_shows_each_frames_values_in_its_corner() {
             &["--label-corner", "bottom-left"][..],
             "--label-corner has no effect without --label",
         ),
+        (&["--label", " "][..], "an empty label draws an empty panel"),
         (
             &["--label", "step {timestep}", "--dt", "0.002"][..],
             "--dt has no effect without {time} in a --label",
@@ -8517,11 +8518,12 @@ fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
             "-o",
             s(pattern),
             "--width",
-            "64",
+            "128",
             "--height",
-            "48",
+            "64",
         ];
-        args.extend(["--colour-map", "viridis"]);
+        // (Each image's label its own frame's values.)
+        args.extend(["--colour-map", "viridis", "--label", "{timestep} {frame}"]);
         args.extend(extra);
         ok(&args)
     };

@@ -551,8 +551,8 @@ pub enum BatchError {
     BadShard(u32, u32),
     /// Another process is running this batch (this shard of it) into the directory.
     #[error(
-        "{}: another mdlod batch{shard} is writing this directory ({holder}): wait for it \
-         to end, or stop it first (a resubmitted job of the same shard?)",
+        "{}: another mdlod batch is writing this directory ({holder}), beside which this \
+         run{shard} must not: wait for it to end, or stop it first (a resubmitted job?)",
         dir.display()
     )]
     Busy {
@@ -911,7 +911,9 @@ fn lock_file(
                 shard: shard.map_or(String::new(), |(i, n)| format!(" (shard {i} of {n})")),
                 holder: match holder.is_empty() {
                     // (Shards hold the whole run's lock together, and empty it.)
-                    true if shard.is_none() => "shards of it".into(),
+                    true if shard.is_none() => "shards of it, which `mdlod verify DIR` \
+                                                 lists"
+                        .into(),
                     true => "it has not said which".into(),
                     false => holder.to_string(),
                 },
@@ -976,6 +978,42 @@ fn piece_pattern(a: &Path, b: &Path) -> Option<PathBuf> {
     }
     let name = format!("{}%{}", &na[..prefix], &na[na.len() - suffix..]);
     Some(a.with_file_name(name))
+}
+
+/// A `%` set's name with its other runs of digits written `*` (`dump.0.%.bin`:
+/// `dump.*.%.bin`), where other inputs are pieces of other sets of that pattern (a
+/// file per timestep, each in pieces); `None` where `set` is the only one.
+fn every_timesteps_set(set: &Path, inputs: &[&Path]) -> Option<PathBuf> {
+    let name = set.file_name()?.to_str()?;
+    let (before, after) = name.split_once('%')?;
+    let star = |part: &str| {
+        let mut out = String::new();
+        let mut digits = false;
+        for c in part.chars() {
+            if c.is_ascii_digit() {
+                if !digits {
+                    out.push('*');
+                }
+                digits = true;
+            } else {
+                out.push(c);
+                digits = false;
+            }
+        }
+        out
+    };
+    let pattern = format!("{}%{}", star(before), star(after));
+    if pattern == name {
+        return None;
+    }
+    let other = inputs.iter().any(|p| {
+        p.parent() == set.parent()
+            && p.file_name()
+                .and_then(|n| n.to_str())
+                .and_then(|n| piece_set_of(&pattern, n))
+                .is_some_and(|s| s != name)
+    });
+    other.then(|| set.with_file_name(pattern))
 }
 
 /// The output file name of a timestep.
@@ -1365,6 +1403,27 @@ pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf
         }
         found.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
         found.dedup();
+        // Every timestep's set in as many pieces (one deleted or not yet written would
+        // give its frame part of the atoms, unnoticed).
+        if name.contains('%') {
+            let counts: Vec<(usize, &PathBuf)> = found
+                .iter()
+                .map(|set| {
+                    crate::readers::piece_paths(set)
+                        .map(|p| (p.len(), set))
+                        .map_err(|e| err(e.to_string()))
+                })
+                .collect::<Result<_, _>>()?;
+            let most = counts.iter().map(|(c, _)| *c).max().unwrap_or(0);
+            if let Some((c, set)) = counts.iter().find(|(c, _)| *c < most) {
+                return Err(err(format!(
+                    "{} is in {c} piece{}, where another timestep's set is in {most}: a \
+                     piece missing (deleted, or not written yet)",
+                    set.display(),
+                    if *c == 1 { "" } else { "s" }
+                )));
+            }
+        }
         out.extend(found);
     }
     Ok(out)
@@ -1833,6 +1892,12 @@ pub fn batch(
                 .filter(|set| crate::readers::piece_paths(set).is_ok());
             let restart = "--duplicate-timesteps last keeps the later frame of each, first \
                            the earlier";
+            // A file per timestep in pieces (`dump.0.0.bin`, `dump.0.1.bin`,
+            // `dump.50.0.bin`, ...): the pattern of every timestep's set.
+            let pieces = pieces.map(|set| {
+                let inputs: Vec<&Path> = jobs.iter().map(|j| j.input).collect();
+                every_timesteps_set(&set, &inputs).unwrap_or(set)
+            });
             let why = match pieces {
                 Some(set) => format!(
                     "the two files hold the same timesteps: pieces of one run written per \
@@ -3449,7 +3514,29 @@ mod tests {
             [dir.path().join("d.0.%.bin"), dir.path().join("d.50.%.bin")]
         );
         assert!(expand_patterns(&[dir.path().join("d.*.%.%.bin")], dir.path()).is_err());
+        // A timestep missing a piece: refused, naming its set.
+        std::fs::remove_file(dir.path().join("d.50.1.bin")).unwrap();
+        let e = expand_patterns(&[dir.path().join("d.*.%.bin")], &dir.path().join("o"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("d.50.%.bin is in 1 piece, where another timestep's set is in 2"),
+            "{e}"
+        );
         assert!(expand_patterns(&[dir.path().join("q.*.%.bin")], dir.path()).is_err());
+    }
+
+    #[test]
+    fn pieces_of_files_per_timestep_are_named_by_their_pattern() {
+        let set = Path::new("bin/dump.0.%.bin");
+        let inputs = ["bin/dump.0.0.bin", "bin/dump.0.1.bin", "bin/dump.50.0.bin"].map(Path::new);
+        assert_eq!(
+            every_timesteps_set(set, &inputs).as_deref(),
+            Some(Path::new("bin/dump.*.%.bin"))
+        );
+        // One timestep's pieces alone: its own set.
+        assert_eq!(every_timesteps_set(set, &inputs[..2]), None);
+        assert_eq!(every_timesteps_set(Path::new("d.%.bin"), &inputs), None);
     }
 
     #[test]

@@ -510,25 +510,31 @@ fn outside_periodic_note(
 ) -> Option<String> {
     let periodic = b.periodic?;
     let (blo, bhi) = crate::chunked::box_bounds(b);
-    let mut reach: Option<(usize, f32)> = None;
+    let mut reach = Vec::new();
     for k in (0..3).filter(|&k| periodic[k]) {
         let edge = bhi[k] - blo[k];
         if !(edge > 0.0 && edge.is_finite()) {
             continue;
         }
         let out = (blo[k] - lo[k]).max(hi[k] - bhi[k]) / edge;
-        if out > 0.1 && reach.is_none_or(|(_, r)| out > r) {
-            reach = Some((k, out));
+        if out > 0.1 {
+            reach.push(format!(
+                "{out:.2} box lengths along {} ({} to {} against the box's {} to {})",
+                ["x", "y", "z"][k],
+                lo[k],
+                hi[k],
+                blo[k],
+                bhi[k]
+            ));
         }
     }
-    let (k, out) = reach?;
-    let axis = ["x", "y", "z"][k];
-    Some(format!(
-        "the particles reach {out:.2} box lengths outside the periodic box along {axis} \
-         ({} to {} against the box's {} to {}): unwrapped coordinates? --wrap wraps them \
-         into the cell",
-        lo[k], hi[k], blo[k], bhi[k]
-    ))
+    (!reach.is_empty()).then(|| {
+        format!(
+            "the particles reach outside the periodic box: {}: unwrapped coordinates? \
+             --wrap wraps them into the cell",
+            reach.join(", ")
+        )
+    })
 }
 
 /// How many mean spacings a radius may span before [`oversized_note`] speaks.
@@ -1300,8 +1306,7 @@ mod tests {
         let (lo, hi) = ([-2.0, 0.5, 0.5], [9.5, 9.5, 10.5]);
         let note = super::outside_periodic_note(lo, hi, &b(Some([true; 3]))).expect("a note");
         assert!(
-            note.starts_with("the particles reach 0.20 box lengths outside the periodic box along x (-2 to 9.5 against the box's 0 to 10)")
-                && note.ends_with("--wrap wraps them into the cell"),
+            note == "the particles reach outside the periodic box: 0.20 box lengths along x (-2 to 9.5 against the box's 0 to 10): unwrapped coordinates? --wrap wraps them into the cell",
             "{note}"
         );
         assert_eq!(

@@ -2791,7 +2791,8 @@ fn a_second_run_of_the_same_shard_is_refused_while_the_first_runs() {
     f.lock().unwrap();
     let e = batch(std::slice::from_ref(&src), &out2, &shard(0, 2), &NoProgress).unwrap_err();
     assert!(
-        e.to_string().contains("batch (shard 0 of 2) is writing"),
+        e.to_string()
+            .contains("beside which this run (shard 0 of 2) must not"),
         "{e}"
     );
     let r = batch(std::slice::from_ref(&src), &out2, &shard(1, 2), &NoProgress).unwrap();
@@ -2803,7 +2804,7 @@ fn a_second_run_of_the_same_shard_is_refused_while_the_first_runs() {
     let e = batch(std::slice::from_ref(&src), &out2, &opts(), &NoProgress).unwrap_err();
     assert!(
         e.to_string()
-            .contains("is writing this directory (shards of it)"),
+            .contains("is writing this directory (shards of it, which"),
         "{e}"
     );
     drop(whole);

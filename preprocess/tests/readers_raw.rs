@@ -551,6 +551,21 @@ fn double_positions_declared_single_suggest_the_type() {
             && e.contains("the array holds 240 bytes, twice what 10 particles of `f32` x y z take: is its `type` f64?"),
         "{e}"
     );
+    // Values that read as numbers either way: converted, with the note saying so.
+    let values: Vec<u8> = (0..30).flat_map(|i| (i as f64).to_le_bytes()).collect();
+    c.file("grid.f64", &values);
+    let json = r#"{ "mdlod_raw": 1, "particles": 10,
+                    "positions": { "file": "grid.f64", "type": "f32" } }"#;
+    let path = c.sidecar(json);
+    assert_eq!(read(&path).unwrap().len(), 10);
+    let notes = DumpFile::open(&path)
+        .unwrap()
+        .frame_notes(0, &ReadOptions::default());
+    assert!(
+        notes.len() == 1
+            && notes[0].ends_with("(exactly twice the bytes of `f32` values: is its `type` f64?)"),
+        "{notes:?}"
+    );
 }
 
 /// Big-endian positions declared little-endian: a coordinate that reads as NaN is

@@ -18,10 +18,15 @@ use anyhow::{bail, Result};
 /// A batch's manifest (`DIR/dataset.json`) where its directory is meant: the directory
 /// (`.` for a bare `dataset.json`); any other path as it is.
 pub fn batch_dir_of(path: PathBuf) -> PathBuf {
+    // (Not there yet in a sharded directory before its merge, which the directory's
+    // commands then name.)
+    let parent_is_dir = path
+        .parent()
+        .is_none_or(|d| d.as_os_str().is_empty() || d.is_dir());
     let manifest = path
         .file_name()
         .is_some_and(|n| n == mdlod_preprocess::batch::MANIFEST)
-        && path.is_file();
+        && (path.is_file() || (!path.exists() && parent_is_dir));
     if !manifest {
         return path;
     }

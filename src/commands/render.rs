@@ -272,7 +272,7 @@ fn length_unit(units: Option<&str>) -> String {
         // as written where it is short and drawable.
         Some(_) => {
             let own = units.unwrap_or_default().trim();
-            return if own.chars().count() <= 12 && own.chars().all(|c| c != ' ' && has(c)) {
+            return if own.chars().count() <= 12 && own.chars().all(|c| c == ' ' || has(c)) {
                 own.to_string()
             } else {
                 String::new()
@@ -1499,6 +1499,9 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     }
     if args.scale_bar_corner.is_some() && !args.scale_bar {
         anyhow::bail!("--scale-bar-corner has no effect without --scale-bar");
+    }
+    if args.label.iter().any(|l| l.trim().is_empty()) {
+        anyhow::bail!("--label \"\": an empty label draws an empty panel; give its text");
     }
     if args.label_corner.is_some() && args.label.is_empty() {
         anyhow::bail!("--label-corner has no effect without --label");
@@ -3973,6 +3976,21 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     // The movie's range (every frame's, or the one given) and its names' looks.
     // The user's styles over the names' looks (each frame's own styles were for it).
     opts.style.species = style.species;
+    // A piece of the movie keys every species of the movie's frames but those hidden
+    // (it drew only its own frames; another piece would key others).
+    if args.frames.is_some_and(|_| selected.len() < n) {
+        drawn = names
+            .iter()
+            .filter(|name| {
+                !opts
+                    .style
+                    .species
+                    .iter()
+                    .any(|st| &st.name == *name && st.hidden)
+            })
+            .cloned()
+            .collect();
+    }
     write_legend(
         args,
         &opts,
@@ -3982,7 +4000,13 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         &drawn,
         &written,
     )?;
-    let labelled: Vec<(PathBuf, LabelValues)> = written.iter().cloned().zip(frame_values).collect();
+    // (Each image its own frame's values, also of a piece of the movie.)
+    let drawn_values = frame_values
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| args.frames.is_none_or(|sel| sel.takes(*i)))
+        .map(|(_, v)| v);
+    let labelled: Vec<(PathBuf, LabelValues)> = written.iter().cloned().zip(drawn_values).collect();
     write_labels(args, &labelled)?;
     if let Some(bar) = &bar {
         for image in &written {
@@ -4006,6 +4030,7 @@ mod tests {
         assert_eq!(length_unit(Some("nano")), "nm");
         assert_eq!(length_unit(Some("Mpc/h")), "Mpc/h");
         assert_eq!(length_unit(Some("kpc")), "kpc");
+        assert_eq!(length_unit(Some("Mpc h^-1")), "Mpc h^-1");
         assert_eq!(length_unit(Some("a unit far too long")), "");
         assert_eq!(length_unit(None), "");
     }

@@ -690,11 +690,19 @@ impl Index {
                 let read = particles.saturating_mul(per).saturating_mul(m.ty.size());
                 let more = m.bytes().len().saturating_sub(read) / m.ty.size() / per;
                 if more > 0 {
+                    // Exactly twice the bytes of single-precision values: double ones
+                    // declared single, read as garbage (`more` is the count then).
+                    let doubled = m.ty == Ty::F32 && m.bytes().len() == 2 * read;
                     notes.push(format!(
                         "{}: {what}: the array holds {more} particles' values past the \
-                         {particles} that `particles` in {} names, which alone are read",
+                         {particles} that `particles` in {} names, which alone are read{}",
                         m.path.display(),
-                        path.display()
+                        path.display(),
+                        if doubled {
+                            " (exactly twice the bytes of `f32` values: is its `type` f64?)"
+                        } else {
+                            ""
+                        }
                     ));
                 }
             }
