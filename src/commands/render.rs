@@ -595,6 +595,25 @@ fn check_label(args: &Args) -> Result<()> {
     Ok(())
 }
 
+/// Says, for splats lit by an attribute spanning more than four decades in the file's
+/// 16-bit linear steps, that its small values' light is off (an SPH column of m/(π h²)
+/// over a halo: most particles of the background at one step), which the conversion
+/// noted only.
+fn decades_light_note(a: &mdlod_format::meta::AttributeInfo) -> Option<String> {
+    let decades = (f64::from(a.max) / f64::from(a.min)).log10();
+    (a.min > 0.0 && decades > 4.0).then(|| {
+        let step = (f64::from(a.max) - f64::from(a.min)) / 65535.0;
+        format!(
+            "  note: {} spans {decades:.1} decades, kept in 16-bit steps of {step:.2e}: \
+             particles of values below about {:.0e} are lit by the nearest step, so the \
+             light where they dominate is off (by up to half a step each); a column of \
+             fewer decades (the mass alone, with equal radii) keeps it",
+            a.name,
+            100.0 * step
+        )
+    })
+}
+
 /// Says when `--hide-attribute`'s ranges all miss the attribute's values.
 fn hides_nothing_note(
     style: &StyleArgs,
@@ -2078,6 +2097,15 @@ pub fn run(mut args: Args) -> Result<()> {
         println!("  note: every species is hidden: the image shows the background only");
     }
     if let Some(note) = hides_nothing_note(&args.style, file.hiding_attribute()) {
+        println!("{note}");
+    }
+    if let Some(note) = file
+        .metadata()
+        .attribute
+        .as_ref()
+        .filter(|_| lit_by_value(&args))
+        .and_then(decades_light_note)
+    {
         println!("{note}");
     }
     if view_fits(&opts.view) {
@@ -4033,6 +4061,20 @@ mod tests {
         assert_eq!(length_unit(Some("Mpc h^-1")), "Mpc h^-1");
         assert_eq!(length_unit(Some("a unit far too long")), "");
         assert_eq!(length_unit(None), "");
+    }
+
+    /// Splats lit by a column spanning decades say its small values' light is off.
+    #[test]
+    fn splats_of_a_column_of_many_decades_are_noted() {
+        let a = |min: f32, max: f32| mdlod_format::meta::AttributeInfo {
+            name: "sigma".into(),
+            min,
+            max,
+        };
+        let note = decades_light_note(&a(0.117, 7.3e5)).expect("a note");
+        assert!(note.contains("sigma spans 6.8 decades"), "{note}");
+        assert_eq!(decades_light_note(&a(1.0, 9000.0)), None);
+        assert_eq!(decades_light_note(&a(0.0, 1e9)), None);
     }
 
     /// Labels read as format strings: placeholders filled once each where they stand,
