@@ -8580,3 +8580,34 @@ fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
         "{err}"
     );
 }
+
+/// `info DIR` of a sharded batch not merged yet says how far each shard is: the
+/// frames each lists against those it owns, the shards with no manifest yet, and the
+/// merge once every one is complete.
+#[test]
+fn info_of_an_unmerged_sharded_batch_shows_each_shards_progress() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("d");
+    let dump = lammps_sample_path("cu_melt.custom.dump");
+    ok(&["batch", s(&dump), "-o", s(&d), "--shard", "0/2"]);
+    let text = ok(&["info", s(&d)]);
+    assert!(
+        text.contains("a sharded batch, not merged yet (1 shard manifest)")
+            && text.contains("shard 0 of 2  3 frames (complete)")
+            && text.contains("no manifest yet: shard 1 of 2")
+            && text.contains("once every shard is complete"),
+        "{text}"
+    );
+    ok(&["batch", s(&dump), "-o", s(&d), "--shard", "1/2"]);
+    let text = ok(&["info", s(&d)]);
+    assert!(
+        text.contains("every shard is complete: `mdlod batch --merge"),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&d), "--json"])).unwrap();
+    assert_eq!(json["merged"], false);
+    assert_eq!(json["shards"][1]["frames"], 3);
+    ok(&["batch", "--merge", s(&d)]);
+    let text = ok(&["info", s(&d)]);
+    assert!(text.contains("frames       6"), "{text}");
+}

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use mdlod_format::MdlodFile;
 use serde_json::json;
 
@@ -52,6 +52,107 @@ fn species_counts(f: &MdlodFile) -> Result<Vec<u64>, mdlod_format::FormatError> 
 /// What a batch directory `dir` holds, from its manifest and its frames' metadata:
 /// frames, timesteps and times, particles, species, the attribute's range over every
 /// frame, the files' size, and what is missing or failed.
+/// The progress of a sharded batch whose shards are not merged yet (a Slurm array
+/// still running): each shard manifest's frames against those its shard owns, and the
+/// shards with none yet; false where the directory has no shard manifest.
+fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
+    use mdlod_preprocess::batch::{is_shard_manifest, parse_manifest};
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| is_shard_manifest(n))
+        .collect();
+    if names.is_empty() {
+        return Ok(false);
+    }
+    names.sort_by(|a, b| mdlod_preprocess::batch::natural_cmp(a, b));
+    let mut rows = Vec::new();
+    let mut counts = std::collections::BTreeSet::new();
+    for name in &names {
+        let path = dir.join(name);
+        let text = mdlod_format::files::read_capped(&path, mdlod_format::files::MANIFEST_BYTES)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let m = parse_manifest(&path, &text, "shard")?;
+        let Some([i, n]) = m.shard else { continue };
+        counts.insert(n);
+        let listed = m.frames.len() as u64;
+        rows.push((i, n, listed, m.expected_frames, m.failed.len()));
+    }
+    if args.json {
+        let shards: Vec<serde_json::Value> = rows
+            .iter()
+            .map(|(i, n, listed, expected, failed)| {
+                json!({ "shard": [i, n], "frames": listed, "expected_frames": expected,
+                        "failed": failed })
+            })
+            .collect();
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({ "merged": false, "shards": shards }))?
+        );
+        return Ok(true);
+    }
+    println!(
+        "{}: a sharded batch, not merged yet ({} shard manifest{})",
+        dir.display(),
+        rows.len(),
+        if rows.len() == 1 { "" } else { "s" }
+    );
+    let mut complete = true;
+    for (i, n, listed, expected, failed) in &rows {
+        let state = match expected {
+            Some(e) if listed >= e && *failed == 0 => "complete".to_string(),
+            Some(e) => {
+                complete = false;
+                format!("{} of {e}: still running, failed or killed", listed)
+            }
+            None => {
+                complete = false;
+                "its count unknown".to_string()
+            }
+        };
+        let failed = match failed {
+            0 => String::new(),
+            k => format!(", {k} failed"),
+        };
+        println!("  shard {i} of {n}  {listed} frames{failed} ({state})");
+    }
+    // Shards with no manifest yet (not started, or started elsewhere still indexing).
+    if let [n] = counts.iter().copied().collect::<Vec<u32>>()[..] {
+        let missing: Vec<String> = (0..n)
+            .filter(|k| !rows.iter().any(|(i, ..)| i == k))
+            .map(|k| k.to_string())
+            .collect();
+        if !missing.is_empty() {
+            complete = false;
+            println!("  no manifest yet: shard {} of {n}", missing.join(", "));
+        }
+    } else {
+        complete = false;
+        println!(
+            "  note: the manifests are of different shard counts ({}): a merge refuses them",
+            counts
+                .iter()
+                .map(u32::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    if complete {
+        println!(
+            "  every shard is complete: `mdlod batch --merge {}` joins them",
+            dir.display()
+        );
+    } else {
+        println!(
+            "  once every shard is complete, `mdlod batch --merge {}` joins them",
+            dir.display()
+        );
+    }
+    Ok(true)
+}
+
 fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     let m = mdlod_preprocess::batch::read_manifest(dir)?;
     let frames = &m.frames;
@@ -291,6 +392,12 @@ pub fn run(args: Args) -> Result<()> {
     let dir = super::batch_dir_of(args.file.clone());
     if dir != args.file {
         return batch_info(&dir, &args);
+    }
+    if args.file.is_dir() && !args.file.join(mdlod_preprocess::batch::MANIFEST).exists() {
+        // A sharded batch not merged yet: how far each shard is.
+        if shards_info(&args.file, &args)? {
+            return Ok(());
+        }
     }
     if args.file.is_dir() {
         super::view::unmerged_batch(&args.file)?;
