@@ -1042,22 +1042,9 @@ impl MdlodFile {
             return Ok(self);
         }
         let Some(k) = self.metadata.attributes.iter().position(|a| a.name == name) else {
-            let names = self.attribute_names();
-            return Err(FormatError::NoSuchAttribute {
-                path: self.path.clone(),
-                name: name.to_string(),
-                names: if names.is_empty() {
-                    "none".to_string()
-                } else {
-                    names.join(", ")
-                },
-            });
+            return Err(self.no_such_attribute(name));
         };
-        let (values, _) = self
-            .extra_ranges
-            .clone()
-            .ok_or_else(|| FormatError::corrupt(&self.path, "section table", "no ATTRIBUTES"))?;
-        let per = (values.end - values.start) / self.metadata.attributes.len();
+        let values = self.extra_values_range(k)?;
         let means = self.extra_node_means(k).unwrap_or_default();
         let mut nodes = self.nodes().to_vec();
         if means.len() != nodes.len() {
@@ -1078,7 +1065,7 @@ impl MdlodFile {
             n.attribute = m;
         }
         self.nodes_owned = Some(nodes);
-        self.attribute_range = Some(values.start + k * per..values.start + (k + 1) * per);
+        self.attribute_range = Some(values);
         // The file is then one of that attribute alone (its metadata, its values and
         // means; no further attributes): another is selected from a fresh open.
         self.metadata.attribute = Some(self.metadata.attributes[k].clone());
@@ -1087,6 +1074,30 @@ impl MdlodFile {
         // Hidden values depend on the attribute: a set computed before is stale.
         *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
         Ok(self)
+    }
+
+    /// The error for an attribute name the file does not keep, listing those it does.
+    fn no_such_attribute(&self, name: &str) -> FormatError {
+        let names = self.attribute_names();
+        FormatError::NoSuchAttribute {
+            path: self.path.clone(),
+            name: name.to_string(),
+            names: if names.is_empty() {
+                "none".to_string()
+            } else {
+                names.join(", ")
+            },
+        }
+    }
+
+    /// The bytes of extra attribute `k`'s values (the ATTRIBUTES section's `k`-th part).
+    fn extra_values_range(&self, k: usize) -> Result<Range<usize>, FormatError> {
+        let (values, _) = self
+            .extra_ranges
+            .clone()
+            .ok_or_else(|| FormatError::corrupt(&self.path, "section table", "no ATTRIBUTES"))?;
+        let per = (values.end - values.start) / self.metadata.attributes.len().max(1);
+        Ok(values.start + k * per..values.start + (k + 1) * per)
     }
 
     /// This file with hidden value ranges ([`HiddenSet::with_ranges`]) read against the
@@ -1098,15 +1109,7 @@ impl MdlodFile {
         let names = self.attribute_names();
         let chosen = attribute_named(&names, name).map(str::to_owned);
         let Some(chosen) = chosen else {
-            return Err(FormatError::NoSuchAttribute {
-                path: self.path.clone(),
-                name: name.to_string(),
-                names: if names.is_empty() {
-                    "none".to_string()
-                } else {
-                    names.join(", ")
-                },
-            });
+            return Err(self.no_such_attribute(name));
         };
         let first = self.metadata.attribute.as_ref();
         self.hider = if first.is_some_and(|a| a.name == chosen) {
@@ -1120,13 +1123,9 @@ impl MdlodFile {
             else {
                 return Ok(self);
             };
-            let (values, _) = self.extra_ranges.clone().ok_or_else(|| {
-                FormatError::corrupt(&self.path, "section table", "no ATTRIBUTES")
-            })?;
-            let per = (values.end - values.start) / self.metadata.attributes.len();
             Some((
                 self.metadata.attributes[k].clone(),
-                values.start + k * per..values.start + (k + 1) * per,
+                self.extra_values_range(k)?,
             ))
         };
         *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
