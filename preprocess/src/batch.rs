@@ -1612,6 +1612,8 @@ pub fn batch(
     let mut dumps: Vec<Option<DumpFile>> = Vec::with_capacity(inputs.len());
     // Which inputs are gzip files whose compressed stream ends early.
     let mut gzip_cut: Vec<bool> = Vec::with_capacity(inputs.len());
+    // Notes on inputs as a whole (a `%` set's pieces written unevenly), said once.
+    let mut input_notes: Vec<String> = Vec::new();
     let mut formats: Vec<InputFormat> = Vec::with_capacity(inputs.len());
     let mut listed: Vec<Vec<Listed>> = Vec::with_capacity(inputs.len());
     // Frames whose header cannot be read far enough to give their timestep (a LAMMPS
@@ -1747,6 +1749,7 @@ pub fn batch(
                     .unwrap_or(SpeciesNaming::Given),
             );
         }
+        input_notes.extend(dump.input_notes());
         listed.push(frames);
         formats.push(dump.format());
         gzip_cut.push(dump.gzip_cut().is_some());
@@ -2719,6 +2722,7 @@ pub fn batch(
                 }
             })
             .chain(absent)
+            .chain(input_notes)
             .collect(),
         jobs,
         manifest: manifest_path,

@@ -1153,7 +1153,8 @@ pub fn convert_dump(
         },
     };
     // What the input holds that the conversion does not read.
-    let notes = dump.frame_notes(k, read);
+    let mut notes = dump.frame_notes(k, read);
+    notes.extend(dump.input_notes());
     let which = |mut r: ConvertReport| {
         r.frame = Some((k, count));
         r.notes.extend(notes.iter().cloned());

@@ -2625,6 +2625,17 @@ fn piece_sets_appended_to_keep_their_unchanged_frames() {
     let r = batch(std::slice::from_ref(&set), &out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (2, 0));
     let before = read_manifest(&out).unwrap();
+    // The run has written its third frame into the first piece only: left out, said.
+    std::fs::write(piece(0), &whole[0]).unwrap();
+    let r = batch(std::slice::from_ref(&set), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 2));
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n.contains("1 frame past the last that every piece holds")),
+        "{:?}",
+        r.notes
+    );
     // The run writes its third frame into both pieces.
     for (k, text) in whole.iter().enumerate() {
         std::fs::write(piece(k), text).unwrap();

@@ -86,7 +86,28 @@ fn missing_or_disagreeing_pieces_are_clear_errors() {
     let e = DumpFile::open(&dir.path().join("run.%.dump"))
         .unwrap_err()
         .to_string();
-    assert!(e.contains("run.1.dump") && e.contains("frames"), "{e}");
+    assert!(
+        e.contains("run.1.dump: frame 1 is timestep 250") && e.contains("timestep 100"),
+        "{e}"
+    );
+    // The same frames, one piece a frame ahead (a run writing them in turn): the frames
+    // both hold, the other said.
+    copy("cu_melt_mpi.0.dump", "run.0.dump");
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt_mpi.1.dump")).unwrap();
+    let last = text.rfind("ITEM: TIMESTEP").unwrap();
+    std::fs::write(dir.path().join("run.1.dump"), &text[..last]).unwrap();
+    let set = DumpFile::open(&dir.path().join("run.%.dump")).unwrap();
+    assert_eq!(set.frame_count(), 2);
+    let notes = set.input_notes();
+    assert!(
+        notes.len() == 1
+            && notes[0].ends_with(
+                "1 frame past the last that every piece holds (a run still writing its \
+                 pieces?) left out until every piece has it"
+            ),
+        "{notes:?}"
+    );
+    assert_eq!(read(&dir.path().join("run.%.dump"), 1).positions.len(), 500);
     // The same frames at another timestep: named as timesteps, of the whole piece (no
     // line of it).
     copy("cu_melt_mpi.0.dump", "run.0.dump");

@@ -733,7 +733,7 @@ impl DumpFile {
             Index::Xyz(i) => i.len(),
             Index::LammpsBinary(i) => i.len(),
             Index::Gsd(i) => i.len(),
-            Index::Pieces(p) => p[0].frame_count(),
+            Index::Pieces(p) => pieces::frame_count(p),
             Index::Raw(_) => 1,
             Index::Mmpld(i) => i.len(),
         }
@@ -804,6 +804,7 @@ impl DumpFile {
         if let Index::Raw(r) = &self.index {
             notes.extend(r.notes().iter().cloned());
         }
+
         let named = read.sizes == SizeColumn::Auto
             && matches!(
                 self.format,
@@ -970,6 +971,15 @@ impl DumpFile {
             self.index,
             Index::Raw(_) | Index::LammpsBinary(_) | Index::Gsd(_) | Index::Mmpld(_)
         )
+    }
+
+    /// Notes on the input as a whole, said once whichever of its frames are read: a `%`
+    /// set's frames that some pieces hold and others not yet (left out).
+    pub fn input_notes(&self) -> Vec<String> {
+        match &self.index {
+            Index::Pieces(p) => pieces::ahead_note(&self.path, p).into_iter().collect(),
+            _ => Vec::new(),
+        }
     }
 
     /// The piece files of a `%` piece set, in processor order (`None` for one file).

@@ -100,18 +100,11 @@ pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError
             path: p.path().to_path_buf(),
             message,
         };
-        if p.frame_count() != first.frame_count() {
-            return Err(mismatch(format!(
-                "{} frames, but {} has {} (a run still writing its pieces, each in turn? \
-                 rerun once every piece holds the frame being written)",
-                p.frame_count(),
-                first.path().display(),
-                first.frame_count()
-            )));
-        }
-        if let Some(k) =
-            (0..first.frame_count()).find(|&k| p.frame_timestep(k) != first.frame_timestep(k))
-        {
+        // Pieces a run is still writing, each in turn, may hold a frame more than others:
+        // the set's frames are those every piece holds ([`frame_count`]), the same
+        // timesteps in each.
+        let common = p.frame_count().min(first.frame_count());
+        if let Some(k) = (0..common).find(|&k| p.frame_timestep(k) != first.frame_timestep(k)) {
             let timestep =
                 |t: Option<u64>| t.map_or("without a timestep".into(), |t| format!("timestep {t}"));
             return Err(mismatch(format!(
@@ -123,6 +116,28 @@ pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError
         }
     }
     Ok(())
+}
+
+/// The frames of a set: those every piece holds.
+pub(crate) fn frame_count(pieces: &[DumpFile]) -> usize {
+    pieces.iter().map(DumpFile::frame_count).min().unwrap_or(0)
+}
+
+/// A note on frames some pieces hold and others not yet (a run writing its pieces in
+/// turn), said with the set's last frame: they are left out until every piece has them.
+pub(crate) fn ahead_note(pattern: &Path, pieces: &[DumpFile]) -> Option<String> {
+    let common = frame_count(pieces);
+    let most = pieces.iter().map(DumpFile::frame_count).max()?;
+    (most > common).then(|| {
+        format!(
+            "{}: {} frame{} past the last that every piece holds (a run still writing its \
+             pieces?) left out until every piece has {}",
+            pattern.display(),
+            most - common,
+            if most - common == 1 { "" } else { "s" },
+            if most - common == 1 { "it" } else { "them" }
+        )
+    })
 }
 
 pub(crate) fn frame_info(pieces: &[DumpFile], k: usize) -> Result<FrameInfo, ReadError> {
