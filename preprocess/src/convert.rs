@@ -537,8 +537,16 @@ fn outside_periodic_note(
     })
 }
 
-/// How many mean spacings a radius may span before [`oversized_note`] speaks.
-const OVERSIZED_SPACINGS: f64 = 20.0;
+/// More species than a figure tells apart: [`position_notes`] asks whether they are ids.
+const MANY_SPECIES: usize = 1000;
+
+/// How many mean spacings a radius may span before [`oversized_note`] speaks: a
+/// species of one radius (an element's, or one given), whose atoms never reach past a
+/// spacing or two (a dense liquid's oxygen is a third of one; the same data in nm,
+/// 3.4 of them); a species of particles of their own sizes (an SPH run's smoothing
+/// lengths reach several spacings of the whole box where it is sparse), 20.
+const OVERSIZED_SPACINGS: f64 = 2.5;
+const OVERSIZED_SPACINGS_OWN_SIZES: f64 = 20.0;
 
 /// A note on radii far larger than the particles' mean spacing (the volume, area or
 /// length their centres' box spans, per particle, to the power of its dimension): the
@@ -564,7 +572,13 @@ fn oversized_note(
     let spacing = (spread.iter().product::<f64>() / count as f64).powf(1.0 / spread.len() as f64);
     let over: Vec<String> = species
         .iter()
-        .filter(|s| f64::from(s.radius) > OVERSIZED_SPACINGS * spacing)
+        .filter(|s| {
+            let limit = match s.radius_range {
+                Some(_) => OVERSIZED_SPACINGS_OWN_SIZES,
+                None => OVERSIZED_SPACINGS,
+            };
+            f64::from(s.radius) > limit * spacing
+        })
         .take(3)
         .map(|s| format!("{} ({})", s.name, s.radius))
         .collect();
@@ -599,6 +613,21 @@ pub(crate) fn position_notes(
 ) -> Vec<String> {
     let mut notes = Vec::new();
     notes.extend(oversized_note(lo, hi, count, species));
+    notes.extend(crate::species::atom_name_notes(
+        species.iter().map(|s| s.name.as_str()),
+    ));
+    // Thousands of species: ids (of molecules, residues, clusters) read as species.
+    if species.len() > MANY_SPECIES {
+        notes.push(format!(
+            "{} species ({}, {}, ...): a molecule, residue or cluster id read as the species \
+             (an XYZ file's first column, or --species-column)? Each takes a colour of the \
+             palette; ids are better kept as an attribute (--attribute), which colours and \
+             hides by ranges (--hide-by)",
+            species.len(),
+            species[0].name,
+            species[1].name
+        ));
+    }
     if far.is_none() {
         notes.extend(simulation_box.and_then(|b| outside_periodic_note(lo, hi, b)));
     }
@@ -1317,6 +1346,37 @@ mod tests {
         assert_eq!(super::outside_periodic_note(lo, hi, &b(None)), None);
     }
 
+    /// Thousands of species are asked about as ids; a protein's `CA` is noted.
+    #[test]
+    fn ids_read_as_species_and_atom_names_read_as_elements_are_noted() {
+        let species = |names: Vec<String>| -> Vec<mdlod_format::meta::Species> {
+            names
+                .into_iter()
+                .map(|name| mdlod_format::meta::Species {
+                    name,
+                    radius: 0.5,
+                    colour: [0.5; 3],
+                    radius_range: None,
+                })
+                .collect()
+        };
+        let ids = species((1..=1200).map(|i| i.to_string()).collect());
+        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &ids, None, None);
+        assert!(
+            notes
+                .iter()
+                .any(|n| n
+                    .starts_with("1200 species (1, 2, ...): a molecule, residue or cluster id")),
+            "{notes:?}"
+        );
+        let protein = species(vec!["N".into(), "CA".into(), "C".into(), "O".into()]);
+        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &protein, None, None);
+        assert!(
+            notes.len() == 1 && notes[0].contains("--species-name CA=C"),
+            "{notes:?}"
+        );
+    }
+
     /// A kinetic energy with walls at rest: most grains' values far below a step are
     /// said; a column whose small values are few, or all above 0, is not.
     #[test]
@@ -1361,6 +1421,14 @@ mod tests {
         assert!(
             note.contains("the radius of S0 (1.92) is 3.8e9 times the particles' mean spacing"),
             "{note}"
+        );
+        // Water in nm (spacing 0.22 nm) with oxygen's 0.74 Å: 3.4 spacings; in Å, none.
+        let water = 0.22 * 1000f32.cbrt();
+        let note = oversized_note([0.0; 3], [water; 3], 1000, &species(&[0.74])).unwrap();
+        assert!(note.contains("(0.74) is 3.4e0 times"), "{note}");
+        assert_eq!(
+            oversized_note([0.0; 3], [10.0 * water; 3], 1000, &species(&[0.74])),
+            None
         );
         // A copper crystal (spacing 2.28 Å) at 1.28; a 2D layer at 0.5 and spacing 1.1.
         let cube = 2.28 * 1000f32.cbrt();

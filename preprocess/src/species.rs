@@ -52,6 +52,35 @@ const ELEMENTS: &[(&str, f32, [u8; 3])] = &[
     ("Au", 1.44, [255, 209, 35]),
     ("Pb", 1.75, [87, 89, 97]),
     ("U", 1.56, [0, 143, 255]),
+    // Further elements of salts, semiconductors and biomolecules (colours as Jmol's;
+    // metallic radii for metals, covalent ones otherwise, as above).
+    ("Sc", 1.64, [230, 230, 230]),
+    ("As", 1.21, [189, 128, 227]),
+    ("Se", 1.16, [255, 161, 0]),
+    ("Br", 1.14, [166, 41, 41]),
+    ("Rb", 2.48, [112, 46, 176]),
+    ("Sr", 2.15, [0, 255, 0]),
+    ("Y", 1.80, [148, 255, 255]),
+    ("Ru", 1.34, [36, 143, 143]),
+    ("Rh", 1.34, [10, 125, 140]),
+    ("Cd", 1.51, [255, 217, 143]),
+    ("In", 1.67, [166, 117, 115]),
+    ("Sb", 1.45, [158, 99, 181]),
+    ("Te", 1.40, [212, 122, 0]),
+    ("I", 1.33, [148, 0, 148]),
+    ("Cs", 2.67, [87, 23, 143]),
+    ("Ba", 2.22, [0, 201, 0]),
+    ("La", 1.87, [112, 212, 255]),
+    ("Ce", 1.83, [255, 255, 199]),
+    ("Nd", 1.82, [199, 255, 199]),
+    ("Gd", 1.80, [69, 255, 199]),
+    ("Hf", 1.59, [77, 194, 255]),
+    ("Re", 1.37, [38, 125, 171]),
+    ("Os", 1.35, [38, 102, 150]),
+    ("Ir", 1.36, [23, 84, 135]),
+    ("Hg", 1.51, [184, 184, 208]),
+    ("Tl", 1.70, [166, 84, 77]),
+    ("Bi", 1.55, [158, 79, 181]),
 ];
 
 /// Palette for numeric types (sRGB): its first colours; further slots take
@@ -257,6 +286,33 @@ pub(crate) fn merge_sizes(known: &mut SpeciesName, part: &SpeciesName) {
     } else {
         (known.sized_sum / known.sized_count as f64) as f32
     });
+}
+
+/// Protein atom names that read as element symbols (PDB and GROMACS names, upper case):
+/// the name, the element it reads as, what it names in a protein, and that atom's element.
+const ATOM_NAMES_READ_AS_ELEMENTS: [(&str, &str, &str, &str); 6] = [
+    ("CA", "calcium", "the alpha carbon", "C"),
+    ("CD", "cadmium", "a delta carbon", "C"),
+    ("CE", "cerium", "an epsilon carbon", "C"),
+    ("NE", "neon", "an epsilon nitrogen", "N"),
+    ("HE", "helium", "an epsilon hydrogen", "H"),
+    ("HG", "mercury", "a gamma hydrogen", "H"),
+];
+
+/// Notes on species whose names are protein atom names that read as elements (`CA` as
+/// calcium, drawn large and green), each with the rename that draws the atom it names.
+pub fn atom_name_notes<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<String> {
+    names
+        .into_iter()
+        .filter_map(|n| {
+            let (_, element, atom, symbol) =
+                ATOM_NAMES_READ_AS_ELEMENTS.iter().find(|(a, ..)| *a == n)?;
+            Some(format!(
+                "species {n}: read as {element}; in a protein's atom names {n} is {atom}: \
+                 --species-name {n}={symbol} draws it as one"
+            ))
+        })
+        .collect()
 }
 
 /// Whether a frame's single-letter species names are labels rather than element symbols:
@@ -707,6 +763,19 @@ pub fn parse_radius_override(s: &str) -> Result<(String, f32), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn protein_atom_names_read_as_elements_are_noted() {
+        let notes = super::atom_name_notes(["CA", "Ca", "CB", "HG", "N"]);
+        assert_eq!(notes.len(), 2, "{notes:?}");
+        assert!(
+            notes[0].starts_with("species CA: read as calcium; in a protein's atom names CA is the alpha carbon: --species-name CA=C"),
+            "{notes:?}"
+        );
+        assert!(notes[1].contains("--species-name HG=H"), "{notes:?}");
+        // Elements of the new rows.
+        assert!(super::element("Br").is_some() && super::element("I").is_some());
+    }
 
     #[test]
     fn elements_numeric_types_and_overrides() {
