@@ -680,14 +680,34 @@ impl ViewerState {
                 "frame {i}, but the data has {} frame(s)",
                 self.frames.len()
             )),
+            // Screenshots are PNG images, named so (as render's -o).
+            Action::Screenshot { path, .. }
+                if path
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| !e.eq_ignore_ascii_case("png")) =>
+            {
+                refuse(format!(
+                    "{}: screenshots are PNG images: name it .png",
+                    path.display()
+                ))
+            }
             Action::Screenshot { width, height, .. } => match (width, height) {
                 (None, None) => Ok(()),
                 (Some(w), Some(h)) if *w > 0 && *h > 0 => Ok(()),
                 (Some(w), Some(h)) => refuse(format!("a {w}x{h} screenshot")),
-                _ => refuse(format!(
-                    "width {width:?} and height {height:?}: give both or neither"
-                )),
+                _ => {
+                    let given = |v: &Option<u32>| v.map_or("none".to_string(), |v| v.to_string());
+                    refuse(format!(
+                        "width {} and height {}: give both or neither",
+                        given(width),
+                        given(height)
+                    ))
+                }
             },
+            Action::Pause { seconds } if !(seconds.is_finite() && *seconds >= 0.0) => {
+                refuse(format!("pause of {seconds} seconds (must be 0 or more)"))
+            }
             _ => Ok(()),
         }
     }
@@ -1054,8 +1074,20 @@ mod tests {
             height,
         };
         refused(shot(Some(0), Some(50)), "0x50");
-        refused(shot(Some(64), None), "both or neither");
+        refused(
+            shot(Some(64), None),
+            "width 64 and height none: give both or neither",
+        );
         refused(shot(None, Some(64)), "both or neither");
+        refused(
+            Action::Screenshot {
+                path: "a.jpg".into(),
+                width: None,
+                height: None,
+            },
+            "a.jpg: screenshots are PNG images",
+        );
+        refused(Action::Pause { seconds: -1.0 }, "pause of -1 seconds");
         for ok in [
             shot(None, None),
             shot(Some(64), Some(48)),

@@ -1148,14 +1148,15 @@ pub fn fitting_bins(renderer: &Renderer, width: u32, height: u32, bins: u32) -> 
     b
 }
 
-/// The most bins per axis, at most `bins`, halving, at which a pool of `tiles` S-MIP
-/// tiles fits one buffer of the adapter, and the pool's size in tiles (fewer when even
-/// one bin does not fit them all).
+/// The most bins per axis, at most `bins`, halving, but not below 2×2 (one bin holds no
+/// normals to re-light: a large window's S-MIP was one flat colour), at which a pool of
+/// `tiles` S-MIP tiles fits one buffer of the adapter, and the pool's size in tiles
+/// (fewer when even 2×2 bins do not fit them all).
 pub fn fitting_pool(renderer: &Renderer, tiles: u32, bins: u32) -> (u32, u32) {
     let max = renderer.binding_bytes();
     let tile = mdlod_render::sndf::tile_bytes;
     let mut b = bins.max(1);
-    while b > 1 && u64::from(tiles) * tile(b) > max {
+    while b > 2 && u64::from(tiles) * tile(b) > max {
         b /= 2;
     }
     let fit = u32::try_from(max / tile(b)).unwrap_or(u32::MAX);

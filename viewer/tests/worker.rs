@@ -199,6 +199,13 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
     }
     render(&w, &s, 5);
     assert_eq!(next_image(&w).0, 5);
+    // An S-MIP pool keeps 2×2 bins at least (one bin is no normal distribution): a pool
+    // too large for them holds fewer tiles.
+    use mdlod_viewer::worker::fitting_pool;
+    let (b, tiles) = fitting_pool(&renderer, 1 << 20, 8);
+    assert_eq!(b, 2);
+    assert!((1..1 << 20).contains(&tiles), "{tiles}");
+    assert_eq!(fitting_pool(&renderer, 4, 8), (8, 4));
     // S-NDF bins shrink to what one buffer of the adapter holds.
     use mdlod_viewer::worker::fitting_bins;
     assert_eq!(fitting_bins(&renderer, 16, 16, 8), 8);
