@@ -1367,6 +1367,36 @@ fn by_attribute(args: &Args) -> bool {
 
 /// Writes `--save-view`'s file. A movie's or turntable's view may go into a directory
 /// that does not exist yet, as its images do (a still's was checked up front).
+/// Refuses, before drawing, a file written beside the image (`option`'s, `what` it
+/// holds) that cannot be: an input or a directory, the `-o` image itself, or, for a
+/// still (`single`), one in a directory that does not exist (as for -o and --legend).
+fn check_side_output(
+    option: &str,
+    what: &str,
+    p: &Path,
+    output: &Path,
+    inputs: &[(&str, &Path)],
+    single: bool,
+) -> Result<()> {
+    super::check_output(option, p, inputs)?;
+    if p == output || super::same_file(p, output) {
+        anyhow::bail!(
+            "{option} {} is the -o output too: give {what} another name",
+            p.display()
+        );
+    }
+    if let Some(dir) = p.parent().filter(|d| single && !d.as_os_str().is_empty()) {
+        if !dir.is_dir() {
+            anyhow::bail!(
+                "{option} {}: the directory {} does not exist",
+                p.display(),
+                dir.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Writes `values` (row by row) as a NumPy `.npy` array of little-endian 32-bit floats
 /// of shape (`rows`, `columns`) (format version 1.0: the magic, a header dictionary
 /// padded to a multiple of 64 bytes, the data).
@@ -1710,48 +1740,23 @@ pub fn run(mut args: Args) -> Result<()> {
                  the frame wanted alone"
             );
         }
-        super::check_output("--save-map", p, &inputs)?;
-        if p == &args.output || super::same_file(p, &args.output) {
-            anyhow::bail!(
-                "--save-map {} is the -o output too: give the map another name",
-                p.display()
-            );
-        }
+        check_side_output("--save-map", "the map", p, &args.output, &inputs, single)?;
         if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("npy")) {
             anyhow::bail!(
                 "--save-map {}: the map is a NumPy array: name it .npy",
                 p.display()
             );
         }
-        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-            if !dir.is_dir() {
-                anyhow::bail!(
-                    "--save-map {}: the directory {} does not exist",
-                    p.display(),
-                    dir.display()
-                );
-            }
-        }
     }
     if let Some(p) = &args.save_view {
-        super::check_output("--save-view", p, &inputs)?;
-        if p == &args.output || super::same_file(p, &args.output) {
-            anyhow::bail!(
-                "--save-view {} is the -o output too: give the view file another name",
-                p.display()
-            );
-        }
-        // As for -o and --legend: a still's view goes into a directory that exists
-        // (checked now, not after the image is drawn).
-        if let Some(dir) = p.parent().filter(|d| single && !d.as_os_str().is_empty()) {
-            if !dir.is_dir() {
-                anyhow::bail!(
-                    "--save-view {}: the directory {} does not exist",
-                    p.display(),
-                    dir.display()
-                );
-            }
-        }
+        check_side_output(
+            "--save-view",
+            "the view file",
+            p,
+            &args.output,
+            &inputs,
+            single,
+        )?;
     }
     check_label(&args)?;
     legend_categories(&args)?;
@@ -2436,16 +2441,8 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_rend
         return Ok(Vec::new());
     };
     // (A file or directory that cannot be read fails where it is rendered, saying why.)
-    let path = if args.file.is_dir() {
-        let Ok(manifest) = mdlod_preprocess::batch::read_manifest(&args.file) else {
-            return Ok(Vec::new());
-        };
-        match manifest.frames.first() {
-            Some(f) => args.file.join(&f.file),
-            None => return Ok(Vec::new()),
-        }
-    } else {
-        args.file.clone()
+    let Some(path) = first_file(&args.file) else {
+        return Ok(Vec::new());
     };
     let Ok(file) = mdlod_render::open_styled(&path, &opts.style) else {
         return Ok(Vec::new());
@@ -2501,6 +2498,17 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_rend
     Ok(windows)
 }
 
+/// The file a still renders, or a batch directory's first frame (what panels are
+/// checked against before drawing); `None` for a directory whose manifest cannot be
+/// read or lists no frame.
+fn first_file(file: &Path) -> Option<PathBuf> {
+    if !file.is_dir() {
+        return Some(file.to_path_buf());
+    }
+    let manifest = mdlod_preprocess::batch::read_manifest(file).ok()?;
+    manifest.frames.first().map(|f| file.join(&f.file))
+}
+
 /// Where a fitted view places the data so that the scale bar's panel covers none of it
 /// either (a still's or a movie's first frame's fit): `windows` (the legend's, or the
 /// whole image) each intersected with the two the panel leaves free, as the legend's
@@ -2518,12 +2526,8 @@ fn scale_bar_room(
     }
     let (w, h) = (opts.width, opts.height);
     // (A file that cannot be read fails where it is rendered, saying why.)
-    let path = match args.file.is_dir() {
-        true => match mdlod_preprocess::batch::read_manifest(&args.file) {
-            Ok(m) if !m.frames.is_empty() => args.file.join(&m.frames[0].file),
-            _ => return windows,
-        },
-        false => args.file.clone(),
+    let Some(path) = first_file(&args.file) else {
+        return windows;
     };
     let Ok(file) = mdlod_render::open_styled(&path, &opts.style) else {
         return windows;
