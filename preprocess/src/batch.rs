@@ -40,6 +40,12 @@
 //!    temporary files of killed runs are removed first: only this shard's own frames' (a
 //!    shard running beside it never writes those) and temporary manifests older than
 //!    [`STALE_TEMP`].
+//!    Frame files no frame of the inputs is written to are named and left alone, except
+//!    those converted from dumps that are gone since (users delete dumps once converted
+//!    and add new ones): a manifest's record of one, with the file's checksum and this
+//!    run's settings, is listed again ([`BatchReport::kept_gone`]; in a sharded run by
+//!    every shard, and [`merge`] lists each once), so the data set keeps every frame it
+//!    has.
 //! 4. Frames are converted by a few workers at once, as many as the memory limit allows
 //!    (about [`BYTES_PER_PARTICLE`] per particle each, or one chunk's build for a frame
 //!    above the chunk size, at most one per thread); each
@@ -402,6 +408,13 @@ pub struct BatchReport {
     /// Files named like frames in the batch directory that no frame of the inputs (in
     /// any shard) is written to: left by a run over other or longer inputs.
     pub strays: Vec<String>,
+    /// Timesteps of frames this run lists although no input holds them: converted by an
+    /// earlier run from dumps that are gone since (deleted once converted), with this
+    /// run's settings. (Not counted in `skipped`.)
+    pub kept_gone: Vec<u64>,
+    /// Frame files converted from dumps that are gone, which this run cannot list: built
+    /// with other settings than this run's, or listed by no manifest (not in `strays`).
+    pub gone_other: Vec<String>,
     /// The frames left out as duplicates of a timestep ([`BatchOptions::duplicates`]),
     /// each with the one converted instead.
     pub duplicates: Vec<String>,
@@ -1282,6 +1295,100 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
     known
 }
 
+/// Whether a recorded source is gone: no file at its path (as the run that converted it
+/// was given it), nor, for a `%` set, any piece. An empty path (a file recording none)
+/// is not taken for gone.
+fn source_gone(source: &SourceInfo) -> bool {
+    if source.path.is_empty() {
+        return false;
+    }
+    let path = Path::new(&source.path);
+    let pieces = || {
+        source.path.contains('%') && crate::readers::piece_paths(path).is_ok_and(|p| !p.is_empty())
+    };
+    !path.exists() && !pieces()
+}
+
+/// The frame files among `strays` (frame files no frame of this run's inputs is written
+/// to) whose dumps are gone ([`source_gone`]), by what a rerun does with them: those a
+/// manifest of `out_dir` lists with the file's checksum and with the settings of this run
+/// (`attribute`: the attribute's name as this run's frames give it), listed again, and
+/// the others (built with other settings, or listed by no manifest), named. Users delete
+/// dumps once converted ("convert once") and add new ones: the frames of the deleted
+/// dumps are still the data set's.
+fn gone_source_frames(
+    out_dir: &Path,
+    strays: &[String],
+    opts: &BatchOptions,
+    attribute: Option<&str>,
+) -> (Vec<FrameEntry>, Vec<String>) {
+    let mut listed: std::collections::HashMap<(String, String), FrameEntry> =
+        std::collections::HashMap::new();
+    if let Ok(dir) = std::fs::read_dir(out_dir) {
+        for e in dir.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if !(name == MANIFEST || is_shard_manifest(&name)) {
+                continue;
+            }
+            let Some(m) = read_manifest_bytes(&e.path())
+                .ok()
+                .and_then(|t| parse_manifest(&e.path(), &t, "dataset").ok())
+            else {
+                continue;
+            };
+            for f in m.frames {
+                listed.insert((f.file.clone(), f.checksum.clone()), f);
+            }
+        }
+    }
+    let (mut kept, mut other) = (Vec::new(), Vec::new());
+    for name in strays {
+        let path = out_dir.join(name);
+        let Ok(file) = MdlodFile::open(&path) else {
+            continue;
+        };
+        let Some(own) = file.metadata().source.clone() else {
+            continue;
+        };
+        if !source_gone(&own) {
+            continue;
+        }
+        let checksum = format!("{:016x}", file.header().section_table_checksum);
+        let entry = listed.get(&(name.clone(), checksum));
+        let same = entry.is_some_and(|r| {
+            let renames = &opts.convert.species_names;
+            let same_names = match &r.species_names {
+                Some(names) => names == renames,
+                None => renames.is_empty(),
+            };
+            let same_columns = r.columns.is_none() || r.columns == opts.read.columns;
+            let same_attributes = file
+                .metadata()
+                .attributes
+                .iter()
+                .map(|a| &a.name)
+                .eq(opts.read.extra_attributes.iter());
+            same_names
+                && same_columns
+                && same_attributes
+                && r.sizes == opts.read.sizes.record()
+                && r.species_column == opts.read.species_column
+                && r.wrap == opts.read.wrap
+                // (Without a record of the overrides, the radii the dump gave cannot be
+                // learnt: not the same.)
+                && r.radii.is_some()
+                && same_build(&file, &opts.convert, attribute, r.radii.as_deref(), || None)
+                && frame_file_number(name) == Some(r.timestep)
+        });
+        match entry {
+            Some(e) if same => kept.push(e.clone()),
+            _ => other.push(name.clone()),
+        }
+    }
+    kept.sort_by_key(|e| e.timestep);
+    (kept, other)
+}
+
 /// The inputs of a batch as an error names them: the one, or the first and how many more.
 fn describe_inputs(inputs: &[PathBuf]) -> String {
     match inputs {
@@ -1958,6 +2065,13 @@ pub fn batch(
         })
         .collect();
     strays.sort_by_key(|n| frame_file_number(n));
+    // Frames of dumps deleted since they were converted stay listed: by every shard of a
+    // sharded run, so that each shard's manifest keeps their records whichever runs
+    // first (a shard that converts removes the merged manifest), and the merge lists
+    // each once.
+    let attribute = jobs.first().and_then(|j| j.attribute.clone());
+    let (gone, gone_other) = gone_source_frames(out_dir, &strays, opts, attribute.as_deref());
+    strays.retain(|n| !gone.iter().any(|e| &e.file == n) && !gone_other.contains(n));
     let mut mine: Vec<Job<'_>> = match opts.shard {
         None => jobs,
         Some((i, n)) => jobs
@@ -2241,10 +2355,17 @@ pub fn batch(
         })
         .collect();
     let skipped = done.len();
+    let kept_gone: Vec<u64> = gone.iter().map(|e| e.timestep).collect();
+    for e in &gone {
+        if let Ok(f) = MdlodFile::open(out_dir.join(&e.file)) {
+            note_species(&f);
+        }
+    }
+    done.extend(gone);
     let manifest = std::sync::Arc::new(Mutex::new(Manifest {
         mdlod_dataset: MANIFEST_VERSION,
         shard: opts.shard.map(|(i, n)| [i, n]),
-        expected_frames: Some((frames_in_shard - empty.len()) as u64),
+        expected_frames: Some((frames_in_shard - empty.len() + kept_gone.len()) as u64),
         input_frames: Some(input_frames),
         frames: done,
         failed: Vec::new(),
@@ -2683,6 +2804,8 @@ pub fn batch(
         removed_merged,
         removed_shard_manifests,
         strays,
+        kept_gone,
+        gone_other,
         duplicates,
         incomplete,
         failed: failed_frames,
@@ -2873,6 +2996,13 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     }
     let duplicates = choices.into_iter().next().and_then(|(_, d)| d);
     frames.sort_by_key(|f| f.timestep);
+    // The frames of deleted dumps every shard lists ([`BatchReport::kept_gone`]): one
+    // file, listed once, and expected once.
+    let listed = frames.len();
+    frames
+        .dedup_by(|a, b| a.timestep == b.timestep && a.file == b.file && a.checksum == b.checksum);
+    let shared = (listed - frames.len()) as u64;
+    expected_total = expected_total.map(|t| t.saturating_sub(shared));
     failed.sort_by(|a, b| (&a.input, a.frame, a.timestep).cmp(&(&b.input, b.frame, b.timestep)));
     failed.dedup_by(|a, b| a.input == b.input && a.frame == b.frame);
     failed.sort_by_key(|f| f.timestep);

@@ -4,7 +4,9 @@ use std::path::{Path, PathBuf};
 
 use mdlod_datasets::lammps_sample_path;
 use mdlod_format::MdlodFile;
-use mdlod_preprocess::batch::{batch, merge, read_manifest, BatchError, BatchOptions, Manifest};
+use mdlod_preprocess::batch::{
+    batch, merge, read_manifest, verify_dir, BatchError, BatchOptions, Manifest,
+};
 use mdlod_preprocess::NoProgress;
 
 fn opts() -> BatchOptions {
@@ -2852,4 +2854,99 @@ fn unlisted_frames_keep_their_renames_where_their_species_show_them() {
     std::fs::remove_file(plain.join("dataset.json")).unwrap();
     let r = batch(std::slice::from_ref(&src), &plain, &renamed, &NoProgress).unwrap();
     assert_eq!((r.converted, r.redone.settings), (6, 6));
+}
+
+/// The sample trajectory as one file per timestep (`melt.<timestep>.dump`), as LAMMPS
+/// writes a `dump.*.lammpstrj` set.
+fn file_per_timestep(dir: &Path) -> Vec<PathBuf> {
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    // Each frame starts with its time; the first file's units head every file.
+    let (units, frames) = text.split_once("ITEM: TIME\n").unwrap();
+    std::iter::once(frames)
+        .chain(text.split("ITEM: TIME\n").skip(2))
+        .map(|frame| frame.split("ITEM: TIME\n").next().unwrap())
+        .map(|frame| {
+            let (_, rest) = frame.split_once("ITEM: TIMESTEP\n").unwrap();
+            let timestep: u64 = rest.lines().next().unwrap().trim().parse().unwrap();
+            let p = dir.join(format!("melt.{timestep}.dump"));
+            std::fs::write(&p, format!("{units}ITEM: TIME\n{frame}")).unwrap();
+            p
+        })
+        .collect()
+}
+
+fn listed(out: &Path) -> Vec<u64> {
+    read_manifest(out)
+        .unwrap()
+        .frames
+        .iter()
+        .map(|f| f.timestep)
+        .collect()
+}
+
+/// Users delete dumps once converted and add new ones: a rerun over the dumps left keeps
+/// listing the frames of the deleted ones (their files are all that is left of them),
+/// unless it asks for other settings, which it cannot convert them with.
+#[test]
+fn frames_of_deleted_dumps_stay_listed_when_built_with_this_runs_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = file_per_timestep(dir.path());
+    let out = dir.path().join("out");
+    let r = batch(&files[..4], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 4);
+    for f in &files[..2] {
+        std::fs::remove_file(f).unwrap();
+    }
+    // The dumps left and two new ones.
+    let r = batch(&files[2..], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (2, 2));
+    assert_eq!(r.kept_gone, [0, 100]);
+    assert!(r.strays.is_empty() && r.gone_other.is_empty());
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(listed(&out), [0, 100, 200, 300, 400, 500]);
+    assert_eq!(m.expected_frames, Some(6));
+    check_manifest(&out, &m);
+    assert_eq!(
+        verify_dir(&out, &NoProgress).unwrap().unlisted,
+        Vec::<String>::new()
+    );
+    // A file whose dump still exists but is not given is another run's: named, not listed.
+    let r = batch(&files[3..], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.kept_gone, [0, 100]);
+    assert_eq!(r.strays, ["frame-200.mdlod"]);
+    assert_eq!(listed(&out), [0, 100, 300, 400, 500]);
+    // Other radii: the dumps left convert again, the deleted ones' frames cannot.
+    let mut other = opts();
+    other.convert.radii = vec![("1".into(), 1.5)];
+    let r = batch(&files[2..], &out, &other, &NoProgress).unwrap();
+    assert!(r.kept_gone.is_empty());
+    assert_eq!(r.gone_other, ["frame-0.mdlod", "frame-100.mdlod"]);
+    assert_eq!(listed(&out), [200, 300, 400, 500]);
+    assert!(out.join("frame-0.mdlod").exists());
+}
+
+/// In a sharded run every shard lists the deleted dumps' frames (the first to convert
+/// removes the merged manifest, whose records the others would need), and the merge lists
+/// each once.
+#[test]
+fn shards_list_the_frames_of_deleted_dumps_once_between_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = file_per_timestep(dir.path());
+    let out = dir.path().join("out");
+    batch(&files[..3], &out, &opts(), &NoProgress).unwrap();
+    for f in &files[..3] {
+        std::fs::remove_file(f).unwrap();
+    }
+    let a = batch(&files[3..], &out, &shard(0, 2), &NoProgress).unwrap();
+    let b = batch(&files[3..], &out, &shard(1, 2), &NoProgress).unwrap();
+    assert_eq!(a.kept_gone, [0, 100, 200]);
+    assert_eq!(b.kept_gone, [0, 100, 200]);
+    assert!(!out.join("dataset.json").exists());
+    let m = merge(&out).unwrap();
+    assert_eq!(
+        m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>(),
+        [0, 100, 200, 300, 400, 500]
+    );
+    assert_eq!(m.expected_frames, Some(6));
+    check_manifest(&out, &m);
 }

@@ -319,6 +319,52 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             }
         );
     }
+    if !report.kept_gone.is_empty() {
+        let n = report.kept_gone.len();
+        let shown: Vec<String> = report
+            .kept_gone
+            .iter()
+            .take(5)
+            .map(u64::to_string)
+            .collect();
+        println!(
+            "note: {n} frame{} converted from dumps that are gone since stay{} listed \
+             (timestep{} {}{})",
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "s" } else { "" },
+            if n == 1 { "" } else { "s" },
+            shown.join(", "),
+            if n > 5 {
+                format!(" and {} more", n - 5)
+            } else {
+                String::new()
+            }
+        );
+    }
+    if !report.gone_other.is_empty() {
+        let n = report.gone_other.len();
+        let shown: Vec<&str> = report
+            .gone_other
+            .iter()
+            .take(5)
+            .map(String::as_str)
+            .collect();
+        println!(
+            "note: {n} frame file{} in {} {} converted from dumps that are gone since, with \
+             other settings than this run's (or listed by no manifest): left alone, not in \
+             the manifest, as no rerun can convert {} again: {}{}",
+            if n == 1 { "" } else { "s" },
+            out.display(),
+            if n == 1 { "was" } else { "were" },
+            if n == 1 { "it" } else { "them" },
+            shown.join(", "),
+            if n > 5 {
+                format!(" and {} more", n - 5)
+            } else {
+                String::new()
+            }
+        );
+    }
     for e in &report.empty {
         println!("{e}");
     }
