@@ -134,8 +134,7 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
             let text =
                 mdlod_format::files::read_capped_string(p, mdlod_format::files::MANIFEST_BYTES)
                     .map_err(|e| err(e.to_string()))?;
-            let actions: Vec<Action> =
-                serde_json::from_str(&text).map_err(|e| err(e.to_string()))?;
+            let actions = state::parse_script(&text).map_err(err)?;
             Some(app::Script::new(actions, opts.script_timeout))
         }
         None => None,

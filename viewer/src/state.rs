@@ -193,6 +193,60 @@ impl Settings {
     }
 }
 
+/// A script's actions from its text, a JSON array of [`Action`]s. An action that does not
+/// parse is named by its place in the list, its name and the line it starts on (serde's
+/// own place is where the object ends, which reads as the line after it).
+pub fn parse_script(text: &str) -> Result<Vec<Action>, String> {
+    let values: Vec<serde_json::Value> = serde_json::from_str(text).map_err(|e| {
+        if e.is_data() {
+            format!("a script is a list of actions, [{{\"action\": ...}}, ...]: {e}")
+        } else {
+            e.to_string()
+        }
+    })?;
+    // Where each element of the top-level array starts: its opening brace at depth 1.
+    let mut starts = Vec::with_capacity(values.len());
+    let (mut depth, mut in_string, mut escaped, mut line) = (0usize, false, false, 1usize);
+    for c in text.chars() {
+        match c {
+            '\n' => line += 1,
+            _ if in_string => {}
+            '{' | '[' => {
+                if depth == 1 {
+                    starts.push(line);
+                }
+                depth += 1;
+            }
+            '}' | ']' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+        if in_string {
+            match (escaped, c) {
+                (true, _) => escaped = false,
+                (false, '\\') => escaped = true,
+                (false, '"') => in_string = false,
+                _ => {}
+            }
+        } else if c == '"' {
+            in_string = true;
+        }
+    }
+    values
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let name = v
+                .get("action")
+                .and_then(|a| a.as_str())
+                .map_or("no \"action\"".to_string(), str::to_owned);
+            let at = starts
+                .get(i)
+                .map_or(String::new(), |l| format!(", line {l}"));
+            serde_json::from_value::<Action>(v).map_err(|e| format!("action {i} ({name}{at}): {e}"))
+        })
+        .collect()
+}
+
 /// One input, whatever its source (mouse, keys, panel, script). Scripts are JSON arrays
 /// of these, e.g. `{"action": "orbit", "dx": 120, "dy": 0}`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -387,6 +441,11 @@ pub struct ViewerState {
     /// Every attribute the data keeps (the first, then further ones), for the panel's
     /// colouring by the attribute and its choice of which.
     pub attributes: Vec<String>,
+    /// The target and distance of the last fit (the first view's included): a switch of
+    /// projection before any pan fits again for the new one, at the same zoom, as a
+    /// perspective fit's target lies off the data's centre (so that the projected box is
+    /// centred), which would crop an orthographic view.
+    fitted: Option<(Vec3, f32)>,
 }
 
 /// One timestep of a data set.
@@ -403,6 +462,7 @@ impl ViewerState {
             *b = Some(bounds);
         }
         ViewerState {
+            fitted: Some((camera.target, camera.distance)),
             camera,
             settings: Settings::default(),
             frames,
@@ -461,14 +521,26 @@ impl ViewerState {
             Action::Fit => {
                 let aspect = self.aspect();
                 self.camera.fit(&self.bounds, aspect);
+                self.fitted = Some((self.camera.target, self.camera.distance));
                 scene
             }
             Action::Projection { orthographic } => {
+                let unpanned = self.fitted.filter(|(t, _)| *t == self.camera.target);
                 self.camera.projection = if *orthographic {
                     Projection::Orthographic
                 } else {
                     Projection::Perspective
                 };
+                if let Some((_, distance)) = unpanned {
+                    let zoom = self.camera.distance / distance;
+                    let aspect = self.aspect();
+                    self.camera.fit(&self.bounds, aspect);
+                    self.fitted = Some((self.camera.target, self.camera.distance));
+                    let d = self.camera.distance * zoom;
+                    if d.is_finite() && d > 0.0 {
+                        self.camera.distance = d;
+                    }
+                }
                 scene
             }
             Action::Mode { mode } => {
@@ -676,6 +748,22 @@ impl ViewerState {
                     self.attributes.join(", ")
                 ))
             }
+            // A species no frame holds, where the one frame tells (a trajectory's later
+            // frames may bring species the first lacks: a deposition).
+            Action::SpeciesColour { name, .. } | Action::SpeciesVisible { name, .. }
+                if self.frames.len() == 1
+                    && !self.species.is_empty()
+                    && !self.species.iter().any(|(s, _)| s == name) =>
+            {
+                refuse(format!(
+                    "no species {name:?}; the data has {}",
+                    self.species
+                        .iter()
+                        .map(|(s, _)| s.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            }
             Action::Frame { index: i } if *i >= self.frames.len() => refuse(format!(
                 "frame {i}, but the data has {} frame(s)",
                 self.frames.len()
@@ -712,8 +800,10 @@ impl ViewerState {
         }
     }
 
+    /// A camera of the user's (a view file loaded): kept as it is by projection switches.
     pub fn set_camera(&mut self, camera: Camera) {
         self.camera = camera;
+        self.fitted = None;
     }
 
     /// Shows frame `index`, with its bounds when known (else the last frame's stand in
@@ -1104,6 +1194,63 @@ mod tests {
     }
 
     #[test]
+    fn scripts_refuse_a_species_the_one_frame_lacks() {
+        let mut s = state();
+        s.species = vec![("Cu".into(), [1.0, 0.5, 0.2]), ("Ag".into(), [0.8; 3])];
+        let colour = |name: &str| Action::SpeciesColour {
+            name: name.into(),
+            colour: [0.0, 1.0, 0.0],
+        };
+        // A trajectory's later frames may bring it: allowed.
+        assert_eq!(s.check_script_action(0, &colour("Au")), Ok(()));
+        s.frames.truncate(1);
+        let e = s.check_script_action(2, &colour("Au")).unwrap_err();
+        assert_eq!(
+            e,
+            "script action 2 (species_colour): no species \"Au\"; the data has Cu, Ag"
+        );
+        let hide = Action::SpeciesVisible {
+            name: "1".into(),
+            visible: false,
+        };
+        assert!(s
+            .check_script_action(0, &hide)
+            .unwrap_err()
+            .contains("(species_visible): no species \"1\""));
+        assert_eq!(s.check_script_action(0, &colour("Ag")), Ok(()));
+    }
+
+    /// A perspective fit's target lies off the data's centre; switched to orthographic
+    /// before any pan, the view is fitted again (centred) at the same zoom; after a pan,
+    /// the user's target stays.
+    #[test]
+    fn a_projection_switch_before_any_pan_fits_the_new_projection() {
+        let mut s = state();
+        s.apply(&Action::Fit);
+        let perspective = s.camera.clone();
+        s.apply(&Action::Zoom { factor: 2.0 });
+        s.apply(&Action::Projection { orthographic: true });
+        let mut want = perspective.clone();
+        want.projection = Projection::Orthographic;
+        want.fit(&s.bounds, s.aspect());
+        assert_eq!(s.camera.target, want.target);
+        assert!((s.camera.distance - want.distance / 2.0).abs() < 1e-3 * want.distance);
+        // And back: the perspective fit at the same zoom.
+        s.apply(&Action::Projection {
+            orthographic: false,
+        });
+        assert_eq!(s.camera.target, perspective.target);
+        assert!(
+            (s.camera.distance - perspective.distance / 2.0).abs() < 1e-3 * perspective.distance
+        );
+        s.apply(&Action::Pan { dx: 30.0, dy: 0.0 });
+        let panned = s.camera.target;
+        s.apply(&Action::Projection { orthographic: true });
+        assert_eq!(s.camera.target, panned);
+        assert_eq!(s.camera.projection, Projection::Orthographic);
+    }
+
+    #[test]
     fn camera_actions_move_the_camera_and_fit_restores_it() {
         let mut s = state();
         let fitted = s.camera.clone();
@@ -1473,6 +1620,31 @@ mod tests {
         let d = r.send(false);
         assert!(r.image(d, true));
         assert_eq!(r.message(), None);
+    }
+
+    #[test]
+    fn script_errors_name_the_action_and_its_line() {
+        let script = "[\n  {\"action\": \"orbit\", \"dx\": 1, \"dy\": 0},\n  {\"action\": \"screenshot\",\n   \"width\": 64, \"height\": 48}\n]";
+        assert_eq!(
+            parse_script(script).unwrap_err(),
+            "action 1 (screenshot, line 3): missing field `path`"
+        );
+        let e = parse_script("[{\"action\": \"zoom\", \"factr\": 2}]").unwrap_err();
+        assert!(
+            e.starts_with("action 0 (zoom, line 1): unknown field `factr`"),
+            "{e}"
+        );
+        let e = parse_script("[{\"action\": \"fly\"}]").unwrap_err();
+        assert!(
+            e.starts_with("action 0 (fly, line 1): unknown variant `fly`"),
+            "{e}"
+        );
+        // Not JSON at all: serde's own place.
+        assert!(parse_script("[{").unwrap_err().contains("line 1"));
+        assert!(parse_script("{}")
+            .unwrap_err()
+            .contains("a list of actions"));
+        assert_eq!(parse_script("[]").unwrap(), vec![]);
     }
 
     #[test]
