@@ -81,6 +81,53 @@ const ELEMENTS: &[(&str, f32, [u8; 3])] = &[
     ("Hg", 1.51, [184, 184, 208]),
     ("Tl", 1.70, [166, 84, 77]),
     ("Bi", 1.55, [158, 79, 181]),
+    // Metallic radii (coordination 12) where measured; the heaviest, estimated.
+    ("Tc", 1.36, [59, 158, 158]),
+    ("Pr", 1.82, [217, 255, 199]),
+    ("Pm", 1.83, [163, 255, 199]),
+    ("Sm", 1.80, [143, 255, 199]),
+    ("Eu", 2.04, [97, 255, 199]),
+    ("Tb", 1.78, [48, 255, 199]),
+    ("Dy", 1.77, [31, 255, 199]),
+    ("Ho", 1.76, [0, 255, 156]),
+    ("Er", 1.75, [0, 230, 117]),
+    ("Tm", 1.74, [0, 212, 82]),
+    ("Yb", 1.94, [0, 191, 56]),
+    ("Lu", 1.73, [0, 171, 36]),
+    ("Po", 1.68, [171, 92, 0]),
+    ("At", 1.50, [117, 79, 69]),
+    ("Rn", 2.20, [66, 130, 150]),
+    ("Fr", 2.70, [66, 0, 102]),
+    ("Ra", 2.23, [0, 125, 0]),
+    ("Ac", 1.88, [112, 171, 250]),
+    ("Th", 1.80, [0, 186, 255]),
+    ("Pa", 1.63, [0, 161, 255]),
+    ("Np", 1.55, [0, 128, 255]),
+    ("Pu", 1.59, [0, 107, 255]),
+    ("Am", 1.73, [84, 92, 242]),
+    ("Cm", 1.74, [120, 92, 227]),
+    ("Bk", 1.70, [138, 79, 227]),
+    ("Cf", 1.86, [161, 54, 212]),
+    ("Es", 1.86, [179, 31, 212]),
+    ("Fm", 1.80, [179, 31, 186]),
+    ("Md", 1.80, [179, 13, 166]),
+    ("No", 1.80, [189, 13, 135]),
+    ("Lr", 1.80, [199, 0, 102]),
+    ("Rf", 1.50, [204, 0, 89]),
+    ("Db", 1.50, [209, 0, 79]),
+    ("Sg", 1.50, [217, 0, 69]),
+    ("Bh", 1.50, [224, 0, 56]),
+    ("Hs", 1.50, [230, 0, 46]),
+    ("Mt", 1.50, [235, 0, 38]),
+    ("Ds", 1.50, [235, 0, 38]),
+    ("Rg", 1.50, [235, 0, 38]),
+    ("Cn", 1.50, [235, 0, 38]),
+    ("Nh", 1.50, [235, 0, 38]),
+    ("Fl", 1.50, [235, 0, 38]),
+    ("Mc", 1.50, [235, 0, 38]),
+    ("Lv", 1.50, [235, 0, 38]),
+    ("Ts", 1.50, [235, 0, 38]),
+    ("Og", 1.50, [235, 0, 38]),
 ];
 
 /// Palette for numeric types (sRGB): its first colours; further slots take
@@ -317,12 +364,16 @@ pub fn atom_name_notes<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<Stri
 
 /// Whether a frame's single-letter species names are labels rather than element symbols:
 /// some single capital letter among them is no element (HOOMD-blue's `A`, `B`, `C`, a
-/// lattice's `X`), so `B` and `C` beside `A` are no boron and carbon. Names of two or more
-/// letters are unaffected, and so are frames whose single letters are all elements (`C`,
-/// `H`, `O`).
+/// lattice's `A`, `B`), so `B` and `C` beside `A` are no boron and carbon. Names of two or
+/// more letters are unaffected, and so are frames whose single letters are all elements
+/// (`C`, `H`, `O`). `X` alone does not tell: ASE writes it for its dummy atom (element 0)
+/// beside real elements, whose looks one ghost atom must not take away.
 pub fn letters_are_labels<'a>(names: impl IntoIterator<Item = &'a str>) -> bool {
     names.into_iter().any(|n| {
-        n.len() == 1 && n.as_bytes()[0].is_ascii_uppercase() && !SINGLE_LETTER_ELEMENTS.contains(&n)
+        n.len() == 1
+            && n.as_bytes()[0].is_ascii_uppercase()
+            && n != "X"
+            && !SINGLE_LETTER_ELEMENTS.contains(&n)
     })
 }
 
@@ -852,6 +903,17 @@ mod tests {
         // Iodine and yttrium are elements too (MAPbI3: Pb I C N H).
         assert!(!letters_are_labels(["Pb", "I", "C", "N", "H"]));
         assert!(!letters_are_labels(["Y", "O"]));
+        // ASE's dummy atom beside methanol's elements: still elements; with `A`, labels.
+        assert!(!letters_are_labels(["C", "O", "H", "X"]));
+        assert!(letters_are_labels(["A", "B", "X"]));
+        // Every element of the periodic table has its looks (ASE writes any of them).
+        for symbol in [
+            "Tc", "Pr", "Pm", "Sm", "Eu", "Tb", "Dy", "Ho", "Er", "Tm", "Yb", "Lu", "Po", "At",
+            "Rn", "Fr", "Ra", "Ac", "Th", "Pa", "Np", "Pu", "Am", "Cm", "Og",
+        ] {
+            assert!(element(symbol).is_some(), "{symbol}");
+        }
+        assert_eq!(ELEMENTS.len(), 118);
         assert_eq!(radius_without_override("B", None, true), DEFAULT_RADIUS);
         assert_eq!(
             radius_without_override("B", None, false),
