@@ -2186,7 +2186,18 @@ pub fn attribute_named<'a>(names: &[&'a str], name: &str) -> Option<&'a str> {
     if let Some(exact) = names.iter().find(|n| **n == name) {
         return Some(exact);
     }
+    // A magnitude (`|particles/velocity|`) by its last part too (`|velocity|`).
+    let bars = |s: &'_ str| -> Option<String> {
+        s.strip_prefix('|')
+            .and_then(|s| s.strip_suffix('|'))
+            .map(str::to_owned)
+    };
     let mut by_part = names.iter().filter(|stored| {
+        let (stored, name) = match (bars(stored), bars(name)) {
+            (Some(s), Some(n)) => (s, n),
+            (None, None) => (stored.to_string(), name.to_string()),
+            _ => return false,
+        };
         stored
             .rsplit_once('/')
             .is_some_and(|(_, last)| last == name)
@@ -2200,6 +2211,20 @@ pub fn attribute_named<'a>(names: &[&'a str], name: &str) -> Option<&'a str> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn attributes_are_found_by_name_or_last_part_and_magnitudes_alike() {
+        let names = ["particles/mass", "|particles/velocity|", "c_pe", "|v|"];
+        assert_eq!(attribute_named(&names, "mass"), Some("particles/mass"));
+        assert_eq!(attribute_named(&names, "c_pe"), Some("c_pe"));
+        assert_eq!(
+            attribute_named(&names, "|velocity|"),
+            Some("|particles/velocity|")
+        );
+        assert_eq!(attribute_named(&names, "|v|"), Some("|v|"));
+        assert_eq!(attribute_named(&names, "velocity"), None);
+        assert_eq!(attribute_named(&names, "|mass|"), None);
+    }
 
     /// A valid three-level hierarchy: a top node over `n` nodes, each over 2 particles.
     fn hierarchy(n: usize) -> (Vec<NodeRecord>, Vec<LevelRecord>) {

@@ -2533,17 +2533,27 @@ pub fn batch(
                     keep_notes(job.timestep, dump.frame_notes(job.frame, &opts.read));
                     let streamed = if job.particles as usize > convert.chunks.chunk_points {
                         let info = dump.frame_info(job.frame)?;
-                        if !opts.read.extra_attributes.is_empty() {
+                        let problem = if !opts.read.extra_attributes.is_empty() {
+                            Some(crate::convert::chunked_attributes_problem(
+                                job.particles,
+                                convert.chunks.chunk_points,
+                            ))
+                        } else {
+                            crate::convert::chunked_magnitude_problem(
+                                dump,
+                                &opts.read,
+                                job.particles,
+                                convert.chunks.chunk_points,
+                            )
+                        };
+                        if let Some(problem) = problem {
                             return Err(ConvertError::Attributes {
                                 place: crate::convert::FramePlace {
                                     path: job.input.display().to_string(),
                                     frame: Some(job.frame as u64),
                                     timestep: job.own_timestep,
                                 },
-                                problem: crate::convert::chunked_attributes_problem(
-                                    job.particles,
-                                    convert.chunks.chunk_points,
-                                ),
+                                problem,
                             }
                             .into());
                         }

@@ -890,6 +890,31 @@ fn check_extras(
     }
 }
 
+/// Why a frame of `particles` above the chunk size cannot take the magnitude `read` asks
+/// for (`--attribute '|v|'`) from `dump`: a LAMMPS or XYZ frame's magnitude is read a
+/// column at a time from the whole frame, while a frame this large is read in windows
+/// (a GSD chunk's rows are taken in any part). `None` where it can.
+pub fn chunked_magnitude_problem(
+    dump: &crate::readers::DumpFile,
+    read: &crate::readers::ReadOptions,
+    particles: u64,
+    chunk_points: usize,
+) -> Option<String> {
+    let inner = read
+        .attribute
+        .as_deref()
+        .and_then(crate::readers::magnitude_of)?;
+    (dump.format() != crate::readers::InputFormat::Gsd).then(|| {
+        format!(
+            "the magnitude |{inner}| is taken over whole frames, and this frame's {particles} \
+             particles are above the chunk size ({chunk_points}: --chunk-points sets it, \
+             within the memory limit); for frames this large, write the magnitude into the \
+             dump as a column of its own (LAMMPS: `variable speed atom \
+             sqrt(vx*vx+vy*vy+vz*vz)` and `v_speed` in the dump's columns)"
+        )
+    })
+}
+
 /// Why a frame of `particles` above the chunk size keeps one attribute only.
 pub fn chunked_attributes_problem(particles: u64, chunk_points: usize) -> String {
     format!(
@@ -1226,16 +1251,31 @@ pub fn convert_dump(
         }
         e => e,
     };
-    if info.particles > options.chunks.chunk_points && !read.extra_attributes.is_empty() {
+    if info.particles > options.chunks.chunk_points {
         // Refused before the frame is read (`convert_frame_with` says why).
-        return Err(ConvertError::Attributes {
-            place: FramePlace {
-                path: named.display().to_string(),
-                frame: Some(k as u64),
-                timestep: info.timestep,
-            },
-            problem: chunked_attributes_problem(info.particles as u64, options.chunks.chunk_points),
-        });
+        let problem = if !read.extra_attributes.is_empty() {
+            Some(chunked_attributes_problem(
+                info.particles as u64,
+                options.chunks.chunk_points,
+            ))
+        } else {
+            chunked_magnitude_problem(
+                &dump,
+                read,
+                info.particles as u64,
+                options.chunks.chunk_points,
+            )
+        };
+        if let Some(problem) = problem {
+            return Err(ConvertError::Attributes {
+                place: FramePlace {
+                    path: named.display().to_string(),
+                    frame: Some(k as u64),
+                    timestep: info.timestep,
+                },
+                problem,
+            });
+        }
     }
     if info.particles > options.chunks.chunk_points {
         if let Some(source) = window_source(&dump, k, read, &info) {

@@ -761,8 +761,9 @@ fn an_attribute_of_several_components_is_named_as_such() {
     assert!(
         e.ends_with(
             "frame 0: `particles/velocity` has 3 components per particle; --attribute takes \
-             a chunk of one number per particle: particles/body particles/charge \
-             particles/diameter particles/mass"
+             a chunk of one number per particle (particles/body particles/charge \
+             particles/diameter particles/mass), or the length of a row: --attribute \
+             '|particles/velocity|'"
         ),
         "{e}"
     );
@@ -1088,5 +1089,57 @@ fn a_type_shapes_chunk_that_is_not_text_is_noted() {
             && notes[0].contains("particles/type_shapes is not text")
             && notes[0].contains("radius 0.5"),
         "{notes:?}"
+    );
+}
+
+/// `--attribute '|velocity|'`: each particle's speed, the length of its row of
+/// `particles/velocity`, whole and in parts; the chunk named bare is refused with the
+/// magnitude suggested.
+#[test]
+fn a_magnitude_is_the_length_of_each_particles_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let velocity: Vec<u8> = [3.0f32, 4.0, 0.0, 1.0, 2.0, 2.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let bytes = two_particles(&[("particles/velocity", 9, 3, velocity)]);
+    let speed = ReadOptions {
+        attribute: Some("|velocity|".into()),
+        ..Default::default()
+    };
+    let (path, f) = read_frame_0(dir.path(), &bytes, &speed);
+    let a = f.unwrap().attribute.unwrap();
+    assert_eq!(a.name, "|particles/velocity|");
+    assert_eq!(a.values, [5.0, 3.0]);
+    let dump = DumpFile::open(&path).unwrap();
+    let part = dump.read_part(0, &speed, 1..2, &NoProgress).unwrap();
+    assert_eq!(part.attribute.unwrap().values, [3.0]);
+    assert_eq!(
+        dump.attribute_name(0, &speed).unwrap().as_deref(),
+        Some("|particles/velocity|")
+    );
+    let bare = ReadOptions {
+        attribute: Some("velocity".into()),
+        ..Default::default()
+    };
+    let e = dump
+        .read_frame(0, &bare, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("3 components per particle") && e.contains("--attribute '|particles/velocity|'"),
+        "{e}"
+    );
+    let none = ReadOptions {
+        attribute: Some("|omega|".into()),
+        ..Default::default()
+    };
+    let e = dump
+        .read_frame(0, &none, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no per-particle chunk `particles/omega` for the magnitude"),
+        "{e}"
     );
 }

@@ -60,9 +60,12 @@ pub struct BuildArgs {
     /// new name); two species given one name become one (`1=O` with `3=O`); repeatable.
     #[arg(long = "species-name", value_name = "NAME=NEW", value_parser = parse_species_name)]
     pub species_names: Vec<(String, String)>,
-    /// Dump column to keep as the per-particle scalar attribute; repeat it to keep
-    /// several (`--attribute c_pe --attribute c_ke`: render's `--attribute c_ke` then
-    /// colours by the second; format 1.2; frames built whole, within --chunk-points)
+    /// Dump column to keep as the per-particle scalar attribute, or the length of a
+    /// vector between bars (`'|v|'` over vx vy vz, `'|forces|'` over an XYZ file's
+    /// forces[0..2], `'|velocity|'` over a GSD row, `'|vx,vy|'` over the columns
+    /// named); repeat it to keep several (`--attribute c_pe --attribute c_ke`: render's
+    /// `--attribute c_ke` then colours by the second; format 1.2; frames built whole,
+    /// within --chunk-points)
     #[arg(long, value_name = "COLUMN")]
     pub attribute: Vec<String>,
     /// Keep the attribute's base-10 logarithm instead (named log10(NAME); every value

@@ -939,59 +939,106 @@ pub(crate) fn read_range(
         Some(_) if n == 0 => None,
         None => None,
         Some(name) => {
-            let full = if name.contains('/') {
-                name.clone()
+            let magnitude = crate::readers::magnitude_of(name).map(str::trim);
+            let base = magnitude.unwrap_or(name);
+            let full = if base.contains('/') {
+                base.to_string()
             } else {
-                format!("particles/{name}")
+                format!("particles/{base}")
             };
-            if let Some(e) = index.chunk(k, &full).filter(|e| e.n == n && e.m != 1) {
+            if let Some(e) = index
+                .chunk(k, &full)
+                .filter(|e| e.n == n && e.m != 1 && magnitude.is_none())
+            {
                 let available = attribute_chunks(index, k, n).join(" ");
                 return Err(err(
                     path,
                     e.at,
                     format!(
                         "frame {k}: `{full}` has {} components per particle; --attribute \
-                         takes a chunk of one number per particle: {available}",
+                         takes a chunk of one number per particle ({available}), or the \
+                         length of a row: --attribute '|{full}|'",
                         e.m
                     ),
                 ));
             }
-            let values = match f.chunk(&full, 1, false)? {
-                // Writers leave out a chunk that holds only its schema default (HOOMD's
-                // charge of 0 in frame 0, a mass of 1): the default is every value.
-                None => match schema_default(&full) {
-                    Some(default) => vec![default; range.len()],
-                    None => {
-                        let available = attribute_chunks(index, k, n).join(" ");
-                        return Err(err(
-                            path,
-                            0,
-                            format!(
-                                "frame {k}: no per-particle chunk `{full}` for the attribute; \
+            if magnitude.is_none() {
+                let values = match f.chunk(&full, 1, false)? {
+                    // Writers leave out a chunk that holds only its schema default (HOOMD's
+                    // charge of 0 in frame 0, a mass of 1): the default is every value.
+                    None => match schema_default(&full) {
+                        Some(default) => vec![default; range.len()],
+                        None => {
+                            let available = attribute_chunks(index, k, n).join(" ");
+                            return Err(err(
+                                path,
+                                0,
+                                format!(
+                                    "frame {k}: no per-particle chunk `{full}` for the attribute; \
                                  available: {available}"
-                            ),
-                        ));
+                                ),
+                            ));
+                        }
+                    },
+                    Some(e) => {
+                        if e.ty == Ty::Char {
+                            return Err(err(path, e.at, format!("`{full}` is text, not numbers")));
+                        }
+                        let bytes = &data[e.location..e.location + n * e.ty.size()];
+                        let values: Vec<f32> =
+                            range.clone().map(|i| e.ty.get(bytes, i) as f32).collect();
+                        if let Some(j) = values.iter().position(|v| !v.is_finite()) {
+                            let i = first + j;
+                            return Err(err(
+                                path,
+                                e.location + i * e.ty.size(),
+                                format!("frame {k}: `{full}` of particle {i} is not finite"),
+                            ));
+                        }
+                        values
                     }
-                },
-                Some(e) => {
-                    if e.ty == Ty::Char {
-                        return Err(err(path, e.at, format!("`{full}` is text, not numbers")));
-                    }
-                    let bytes = &data[e.location..e.location + n * e.ty.size()];
-                    let values: Vec<f32> =
-                        range.clone().map(|i| e.ty.get(bytes, i) as f32).collect();
-                    if let Some(j) = values.iter().position(|v| !v.is_finite()) {
-                        let i = first + j;
+                };
+                Some(Attribute { name: full, values })
+            } else {
+                // The length of each particle's row (a velocity's speed).
+                let m = index.chunk(k, &full).map_or(1, |e| e.m.max(1));
+                let Some(e) = f.chunk(&full, m, false)? else {
+                    let available = particle_chunks(index, k, n, false).join(" ");
+                    return Err(err(
+                        path,
+                        0,
+                        format!(
+                            "frame {k}: no per-particle chunk `{full}` for the magnitude; \
+                             available: {available}"
+                        ),
+                    ));
+                };
+                if e.ty == Ty::Char {
+                    return Err(err(path, e.at, format!("`{full}` is text, not numbers")));
+                }
+                let bytes = &data[e.location..e.location + n * m * e.ty.size()];
+                let mut values = Vec::with_capacity(range.len());
+                for i in range.clone() {
+                    let sum: f64 = (0..m)
+                        .map(|j| {
+                            let v = e.ty.get(bytes, i * m + j);
+                            v * v
+                        })
+                        .sum();
+                    if !sum.is_finite() {
                         return Err(err(
                             path,
-                            e.location + i * e.ty.size(),
+                            e.location + i * m * e.ty.size(),
                             format!("frame {k}: `{full}` of particle {i} is not finite"),
                         ));
                     }
-                    values
+                    values.push(sum.sqrt() as f32);
                 }
-            };
-            Some(Attribute { name: full, values })
+                Some(Attribute {
+                    name: format!("|{full}|"),
+                    values,
+                })
+            }
         }
     };
     progress.finish_stage();

@@ -463,6 +463,16 @@ fn check_assumed_scaled(
     }
 }
 
+/// The column names of frame `k` as it is read with `opts`.
+pub(crate) fn column_names(
+    path: &Path,
+    index: &Index,
+    k: usize,
+    opts: &ReadOptions,
+) -> Result<Vec<String>, ReadError> {
+    columns(path, index.header(path, k)?, opts)
+}
+
 /// The column names of a frame: its own, the caller's, or `dump atom`'s defaults.
 fn columns(path: &Path, h: &BinHeader, opts: &ReadOptions) -> Result<Vec<String>, ReadError> {
     let err = |message: String| ReadError::Binary {

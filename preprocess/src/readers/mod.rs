@@ -326,6 +326,58 @@ pub fn wrap_positions(positions: &mut [[f32; 3]], cell: &mdlod_format::meta::Sim
 /// frames that carry it (the last two, as the cut may fall inside the last).
 pub const GZIP_CUT: &str = "compressed stream cut short";
 
+/// The inside of an attribute asked for as a magnitude, `|NAME|` (`|forces|`, `|v|`,
+/// `|vx,vy,vz|`): the length of a vector per particle, which no column holds.
+pub fn magnitude_of(name: &str) -> Option<&str> {
+    name.strip_prefix('|')?
+        .strip_suffix('|')
+        .filter(|s| !s.trim().is_empty())
+}
+
+/// The columns of a magnitude `|inner|` among `columns`: the list given (`vx,vy,vz`), or
+/// the components of a vector: `inner[0..2]` (extended XYZ), `inner[1..3]` (a LAMMPS
+/// compute's), `inner` + `x`, `y`, `z` (LAMMPS `vx vy vz`, `fx fy fz`, `mux muy muz`).
+/// The error lists what there is.
+pub fn magnitude_columns(inner: &str, columns: &[String]) -> Result<Vec<String>, String> {
+    let has = |n: &str| columns.iter().any(|c| c == n);
+    let listed: Vec<String> = inner.split(',').map(|c| c.trim().to_string()).collect();
+    if listed.len() > 1 {
+        if listed.len() > 4 {
+            return Err(format!(
+                "|{inner}| names {} columns (at most 4)",
+                listed.len()
+            ));
+        }
+        return match listed.iter().find(|c| !has(c)) {
+            Some(c) => Err(format!(
+                "no column `{c}` for the magnitude |{inner}|; the columns are {}",
+                columns.join(" ")
+            )),
+            None => Ok(listed),
+        };
+    }
+    let name = listed[0].as_str();
+    let candidates = [
+        (0..3).map(|i| format!("{name}[{i}]")).collect::<Vec<_>>(),
+        (1..4).map(|i| format!("{name}[{i}]")).collect(),
+        ["x", "y", "z"]
+            .iter()
+            .map(|a| format!("{name}{a}"))
+            .collect(),
+    ];
+    candidates
+        .into_iter()
+        .find(|c| c.iter().all(|n| has(n)))
+        .ok_or_else(|| {
+            format!(
+                "no vector `{name}` for the magnitude |{name}| ({name}[0] {name}[1] {name}[2], \
+                 {name}[1] {name}[2] {name}[3] or {name}x {name}y {name}z); name its columns, \
+                 as |vx,vy,vz|; the columns are {}",
+                columns.join(" ")
+            )
+        })
+}
+
 /// Choices for [`DumpFile::read_frame`].
 #[derive(Clone, Debug, Default)]
 pub struct ReadOptions {
@@ -1116,6 +1168,9 @@ impl DumpFile {
         opts: &ReadOptions,
     ) -> Result<Option<String>, ReadError> {
         self.check_frame(k)?;
+        if let Some((inner, _)) = self.magnitude_parts(k, opts)? {
+            return Ok(Some(format!("|{inner}|")));
+        }
         match &self.index {
             // A raw sidecar's attribute is read also when none is asked for.
             Index::Raw(_) => {}
@@ -1299,10 +1354,99 @@ impl DumpFile {
         opts: &ReadOptions,
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
-        let mut frame = self.read_frame_as_stored(k, opts, progress)?;
+        let mut frame = match self.magnitude_parts(k, opts)? {
+            Some((inner, columns)) => self.read_magnitude(k, opts, &inner, &columns, progress)?,
+            None => self.read_frame_as_stored(k, opts, progress)?,
+        };
         if opts.wrap {
             wrap_into_cell(&mut frame);
         }
+        Ok(frame)
+    }
+
+    /// For an attribute asked for as a magnitude (`|forces|`) of a LAMMPS or XYZ frame,
+    /// its inside and the columns it is taken over; `None` for any other attribute and for
+    /// GSD, whose reader takes a chunk's rows itself (and `%` sets, whose pieces each do).
+    /// Raw arrays and MMPLD lists have no vectors: an error.
+    fn magnitude_parts(
+        &self,
+        k: usize,
+        opts: &ReadOptions,
+    ) -> Result<Option<(String, Vec<String>)>, ReadError> {
+        let Some(inner) = opts.attribute.as_deref().and_then(magnitude_of) else {
+            return Ok(None);
+        };
+        let (columns, at) = match &self.index {
+            Index::Gsd(_) | Index::Pieces(_) => return Ok(None),
+            Index::Lammps(_) | Index::Xyz(_) => {
+                let header = self.header(k)?;
+                let at = self.ctx().at(header.columns_at);
+                (header.info.columns, at)
+            }
+            Index::LammpsBinary(i) => (
+                lammps_binary::column_names(&self.path, i, k, opts)?,
+                Location {
+                    path: self.path.clone(),
+                    line: 0,
+                },
+            ),
+            Index::Raw(_) | Index::Mmpld(_) => {
+                return Err(ReadError::Unsupported {
+                    at: Location {
+                        path: self.path.clone(),
+                        line: 0,
+                    },
+                    message: format!(
+                        "a magnitude (--attribute |{inner}|) is taken over the columns of \
+                         LAMMPS, XYZ and GSD inputs; this input has no vectors"
+                    ),
+                })
+            }
+        };
+        let columns = magnitude_columns(inner, &columns)
+            .map_err(|message| ReadError::Malformed { at, message })?;
+        Ok(Some((inner.to_string(), columns)))
+    }
+
+    /// Frame `k` with the magnitude over `columns` as its attribute, named `|inner|`: the
+    /// frame read with the first column, then each further column by a pass of its own.
+    fn read_magnitude(
+        &self,
+        k: usize,
+        opts: &ReadOptions,
+        inner: &str,
+        columns: &[String],
+        progress: &dyn Progress,
+    ) -> Result<Frame, ReadError> {
+        let with = |c: &String| ReadOptions {
+            attribute: Some(c.clone()),
+            extra_attributes: Vec::new(),
+            wrap: false,
+            ..opts.clone()
+        };
+        let mut frame = self.read_frame_as_stored(k, &with(&columns[0]), progress)?;
+        let mut sums: Vec<f64> = frame
+            .attribute
+            .as_ref()
+            .map(|a| {
+                a.values
+                    .iter()
+                    .map(|&v| f64::from(v) * f64::from(v))
+                    .collect()
+            })
+            .unwrap_or_default();
+        for c in &columns[1..] {
+            let other = self.read_frame_as_stored(k, &with(c), &NoProgress)?;
+            if let Some(a) = other.attribute {
+                for (s, v) in sums.iter_mut().zip(a.values) {
+                    *s += f64::from(v) * f64::from(v);
+                }
+            }
+        }
+        frame.attribute = frame.attribute.map(|_| Attribute {
+            name: format!("|{inner}|"),
+            values: sums.iter().map(|s| s.sqrt() as f32).collect(),
+        });
         Ok(frame)
     }
 
