@@ -582,13 +582,16 @@ pub enum BatchError {
         match (converted, manifest_unsaved) {
             (0, _) => format!("none of the {todo} frames to convert was converted"),
             (_, None) => format!(
-                "{converted} of the {todo} frames to convert were converted and are listed in \
-                 the manifest; once the cause is mended, a rerun converts only what is missing"
+                "{converted} of the {todo} frames to convert {} converted and {} listed in \
+                 the manifest; once the cause is mended, a rerun converts only what is missing",
+                if *converted == 1 { "was" } else { "were" },
+                if *converted == 1 { "is" } else { "are" }
             ),
             (_, Some(why)) => format!(
-                "{converted} of the {todo} frames to convert were converted, but the manifest \
+                "{converted} of the {todo} frames to convert {} converted, but the manifest \
                  listing them could not be saved ({why}); once the cause is mended, a rerun \
-                 finds them complete, lists them and converts only what is missing"
+                 finds them complete, lists them and converts only what is missing",
+                if *converted == 1 { "was" } else { "were" }
             ),
         }
     )]

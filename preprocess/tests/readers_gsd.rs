@@ -1143,3 +1143,47 @@ fn a_magnitude_is_the_length_of_each_particles_row() {
         "{e}"
     );
 }
+
+/// A file cut inside frame 1's data: frame 0 reads, frame 1 is the error, and the frames
+/// the index lists after it are named as lost with it (not dropped unsaid).
+#[test]
+fn frames_listed_after_a_cut_are_named_as_lost() {
+    let good = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let cut = chunk_data(&good, "particles/position", 1) + 4;
+    assert!(cut < chunk_data(&good, "particles/position", 2));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cut.gsd");
+    std::fs::write(&path, &good[..cut]).unwrap();
+    let d = DumpFile::open(&path).unwrap();
+    assert_eq!(d.frame_count(), 2);
+    assert!(d
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .is_ok());
+    let e = d
+        .read_frame(1, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("outside the file")
+            && e.contains("the index lists 3 frames, and frame 2 after it is lost with it"),
+        "{e}"
+    );
+}
+
+/// Something else named `.gsd` is no GSD file, however short: not a GSD file cut short.
+#[test]
+fn a_short_file_of_something_else_is_not_called_a_cut_gsd_file() {
+    let dir = tempfile::tempdir().unwrap();
+    for (bytes, want) in [
+        (
+            b"ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n".to_vec(),
+            "byte 0: not a GSD file (bad magic number)",
+        ),
+        (b"abc\n".to_vec(), "not a GSD file: 4 bytes"),
+    ] {
+        let path = dir.path().join("text.gsd");
+        std::fs::write(&path, &bytes).unwrap();
+        let e = DumpFile::open(&path).err().unwrap().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}

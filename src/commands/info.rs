@@ -161,6 +161,9 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     let mut attributes_differ = false;
     // Further attributes, each with its range over the frames that keep it.
     let mut extras: Vec<(String, f32, f32)> = Vec::new();
+    // How many frames keep each of `extras`, and how many frames opened.
+    let mut extras_kept: Vec<usize> = Vec::new();
+    let mut opened = 0usize;
     let mut bytes = 0u64;
     let mut unreadable = Vec::new();
     for f in frames {
@@ -174,18 +177,24 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
             }
         };
         let meta = file.metadata();
+        opened += 1;
         for s in &meta.species {
             if !species.contains(&s.name) {
                 species.push(s.name.clone());
             }
         }
         for a in &meta.attributes {
-            match extras.iter_mut().find(|(n, _, _)| *n == a.name) {
-                Some((_, lo, hi)) => {
+            match extras.iter().position(|(n, _, _)| *n == a.name) {
+                Some(i) => {
+                    let (_, lo, hi) = &mut extras[i];
                     *lo = lo.min(a.min);
                     *hi = hi.max(a.max);
+                    extras_kept[i] += 1;
                 }
-                None => extras.push((a.name.clone(), a.min, a.max)),
+                None => {
+                    extras.push((a.name.clone(), a.min, a.max));
+                    extras_kept.push(1);
+                }
             }
         }
         match (&mut attribute, &meta.attribute) {
@@ -299,9 +308,17 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
         (None, true) => println!("  attribute    not the same in every frame"),
         (None, false) => {}
     }
-    for (n, lo, hi) in &extras {
+    for ((n, lo, hi), kept) in extras.iter().zip(&extras_kept) {
+        let over = if *kept == opened {
+            "every frame".to_string()
+        } else {
+            format!(
+                "the {kept} frame{} keeping it",
+                if *kept == 1 { "" } else { "s" }
+            )
+        };
         println!(
-            "  attribute    {} in [{}, {}] over the frames keeping it",
+            "  attribute    {} in [{}, {}] over {over}",
             shown(n),
             super::Num(*lo),
             super::Num(*hi)

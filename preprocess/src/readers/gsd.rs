@@ -156,6 +156,20 @@ fn u64_at(data: &[u8], at: usize) -> u64 {
 
 impl Index {
     pub fn build(path: &Path, data: &[u8]) -> Result<Index, ReadError> {
+        // The magic number first: a short file of something else is no GSD file cut short.
+        if data.len() >= 8 && u64_at(data, 0) != MAGIC {
+            return Err(err(path, 0, "not a GSD file (bad magic number)"));
+        }
+        if data.len() < 8 {
+            return Err(err(
+                path,
+                0,
+                format!(
+                    "not a GSD file: {} bytes, and a GSD file starts with a {HEADER}-byte header",
+                    data.len()
+                ),
+            ));
+        }
         if data.len() < HEADER {
             return Err(err(
                 path,
@@ -231,6 +245,8 @@ impl Index {
         let slots = index_range.len() / ENTRY;
         let mut entries = Vec::new();
         let mut damaged: Option<(usize, usize, String)> = None;
+        // The last frame the index lists, whether or not its chunks are in the file.
+        let mut last_listed = 0u64;
         for (k, e) in data[index_range.clone()].chunks_exact(ENTRY).enumerate() {
             let at = index_range.start + k * ENTRY;
             let location = u64_at(e, 16);
@@ -263,6 +279,7 @@ impl Index {
                     ),
                 ));
             }
+            last_listed = last_listed.max(frame);
             let fits = usize::try_from(n).ok().and_then(|n| {
                 let bytes = n.checked_mul(m as usize)?.checked_mul(ty.size())?;
                 let l = usize::try_from(location).ok()?;
@@ -294,8 +311,21 @@ impl Index {
             });
         }
         entries.sort_by_key(|e| (e.frame, e.name));
-        if let Some((f, ..)) = &damaged {
+        if let Some((f, _, message)) = &mut damaged {
             entries.retain(|e| e.frame <= *f as u64);
+            // Frames the index lists after it are lost with it: said, not dropped unsaid.
+            let after = last_listed.saturating_sub(*f as u64);
+            if after > 0 {
+                let frames = match after {
+                    1 => format!("frame {}", last_listed),
+                    _ => format!("frames {} to {last_listed}", *f + 1),
+                };
+                message.push_str(&format!(
+                    "; the index lists {} frames, and {frames} after it {} lost with it",
+                    last_listed + 1,
+                    if after == 1 { "is" } else { "are" }
+                ));
+            }
         }
         // (Each frame number was checked to be below `slots`, itself below `usize::MAX`.)
         let frames = entries
