@@ -6191,6 +6191,60 @@ fn a_ball_of_atoms_fills_the_image() {
     );
 }
 
+/// A small ball of atoms (a nanoparticle of a few hundred, with no level of clusters
+/// between its atoms and the top node) fills and centres the image as a large one: the
+/// fit frames its atoms' spheres, not its box (which left it at two thirds of the height,
+/// and a perspective view off-centre).
+#[test]
+fn a_small_ball_of_atoms_fills_and_centres_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("ball.xyz");
+    let mut atoms = Vec::new();
+    for i in -4i32..=4 {
+        for j in -4i32..=4 {
+            for k in -4i32..=4 {
+                if i * i + j * j + k * k <= 16 {
+                    atoms.push(format!("Ar {} {} {}", i, j, k));
+                }
+            }
+        }
+    }
+    std::fs::write(
+        &xyz,
+        format!("{}\nball\n{}\n", atoms.len(), atoms.join("\n")),
+    )
+    .unwrap();
+    let file = dir.path().join("ball.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Ar=0.5"]);
+    let png = dir.path().join("ball.png");
+    let (w, h) = (96u32, 72u32);
+    for extra in [
+        &[][..],
+        &["--ortho"],
+        &["--elevation", "60", "--azimuth", "200"],
+    ] {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "96"];
+        args.extend(["--height", "72", "--background", "#000000"]);
+        args.extend_from_slice(extra);
+        ok(&args);
+        let px = read_png(&png).2;
+        let on = |x: u32, y: u32| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 8);
+        let rows: Vec<u32> = (0..h).filter(|&y| (0..w).any(|x| on(x, y))).collect();
+        let cols: Vec<u32> = (0..w).filter(|&x| (0..h).any(|y| on(x, y))).collect();
+        let (top, bottom) = (rows[0], rows[rows.len() - 1]);
+        let (left, right) = (cols[0], cols[cols.len() - 1]);
+        assert!(
+            bottom - top + 1 >= h * 4 / 5,
+            "{extra:?}: rows {top} to {bottom} of {h}"
+        );
+        assert!(
+            (top as i32 - (h - 1 - bottom) as i32).abs() <= 3
+                && (left as i32 - (w - 1 - right) as i32).abs() <= 3,
+            "{extra:?}: rows {top} to {bottom}, columns {left} to {right}"
+        );
+    }
+}
+
 /// A fitted view frames the particles as they are drawn: spheres enlarged by the style,
 /// a splat's Gaussian, a density kernel's support; never cropped, never tiny.
 #[test]

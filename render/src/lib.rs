@@ -828,14 +828,15 @@ fn styled_reach(file: &MdlodFile, opts: &RenderOptions, footprint: f32) -> f32 {
 /// leaves out stay out), with the cell where it is drawn. A sphere of atoms, a droplet or
 /// a disc seen obliquely then fills the image, where its box's empty corners made it
 /// small. Clusters holding both shown and hidden species are opened, down to the level
-/// above the particles and up to [`FRAMING_OPEN`] nodes. Empty where the file has too few
-/// clusters.
+/// above the particles and up to [`FRAMING_OPEN`] nodes. A file with too few clusters (a
+/// molecule, a nanoparticle of a few hundred atoms: the particles and the top node) is
+/// framed by its particles' own spheres, up to [`FRAMING_OPEN`] of them; empty beyond.
 pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
     use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
     let levels = file.levels();
     let last = levels.len().saturating_sub(1);
     let Some(level) = (0..last).find(|&l| levels[l].point_count >= FRAMING_NODES) else {
-        return Vec::new();
+        return particle_boxes(file, opts, fitted);
     };
     let Ok(count) = usize::try_from(levels[level].point_count) else {
         return Vec::new();
@@ -882,6 +883,37 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
             boxes.push(b);
         }
     }
+    if let (Some(_), Some(c), false) = (opts.cell, cell_bounds(file), boxes.is_empty()) {
+        boxes.push(c);
+    }
+    boxes
+}
+
+/// [`framing_boxes`] of a file without a level of [`FRAMING_NODES`] clusters: each shown
+/// particle's sphere as drawn, clipped to `fitted`, with the cell where it is drawn.
+fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
+    let last = file.levels().len().saturating_sub(1);
+    let count = file.levels().last().map_or(0, |l| l.point_count);
+    if last == 0 || count == 0 || count > FRAMING_OPEN as u64 {
+        return Vec::new();
+    }
+    let Ok(points) = file.decode_level(last) else {
+        return Vec::new();
+    };
+    let test = file.hidden_test(&opts.style.hidden_set(file.metadata()));
+    let reach = drawn_reach(file, opts).max(0.0);
+    let mut boxes: Vec<Bounds> = points
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !file.hides_particle(&test, *i))
+        .filter_map(|(i, p)| {
+            let r = glam::Vec3::splat(file.particle_radius(i) + reach);
+            let p = glam::Vec3::from(*p);
+            let lo = (p - r).max(fitted.min);
+            let hi = (p + r).min(fitted.max);
+            lo.cmple(hi).all().then(|| Bounds::new(lo, hi))
+        })
+        .collect();
     if let (Some(_), Some(c), false) = (opts.cell, cell_bounds(file), boxes.is_empty()) {
         boxes.push(c);
     }
