@@ -571,3 +571,29 @@ fn a_smoothing_length_column_is_pointed_out() {
     };
     assert!(dump.frame_notes(0, &read).is_empty());
 }
+
+/// A frame with an atom line missing: the next frame's count is taken for its last atom
+/// and its comment line for the next count; the error names the frame short of lines.
+#[test]
+fn a_frame_short_of_atom_lines_is_named_at_the_next_frames_comment() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("short.xyz");
+    let comment = "Lattice=\"10 0 0 0 10 0 0 0 10\" Properties=species:S:1:pos:R:3";
+    std::fs::write(
+        &path,
+        format!("3\n{comment}\nCu 0 0 0\nCu 1 1 1\n3\n{comment}\nCu 0 0 0\nCu 1 1 1\nCu 2 2 2\n"),
+    )
+    .unwrap();
+    let e = mdlod_preprocess::readers::DumpFile::open(&path)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("short.xyz:6: expected the atom count of frame 1")
+            && e.contains(
+                "this reads as a frame's comment line: frame 0 (its count at line 1) may hold \
+                 fewer than the 3 atom lines it announces"
+            ),
+        "{e}"
+    );
+}

@@ -108,6 +108,9 @@ impl Index {
         let data = ctx.data;
         let mut frames = Vec::new();
         let mut cursor = Cursor::new(data, 0);
+        // The last frame's atom count and where it stands, for a frame that holds fewer
+        // atom lines than it announces.
+        let mut announced: Option<(usize, usize)> = None;
         while let Some((at, line)) =
             std::iter::from_fn(|| cursor.next_line()).find(|(_, l)| !trim(l).is_empty())
         {
@@ -125,14 +128,30 @@ impl Index {
                             shorten(line)
                         )
                     } else {
+                        // A frame's comment line where a count should be: the frame before
+                        // holds fewer atom lines than it announces, and the line above this
+                        // one, taken for its last atom, is this frame's count.
+                        let comment = [&b"Properties="[..], b"Lattice=", b"pbc="]
+                            .iter()
+                            .any(|k| line.windows(k.len()).any(|w| w == *k));
+                        let short = match announced {
+                            Some((count_at, n)) if comment => format!(
+                                "; this reads as a frame's comment line: frame {} (its count at \
+                                 line {}) may hold fewer than the {n} atom lines it announces",
+                                frames.len() - 1,
+                                ctx.at(count_at).line
+                            ),
+                            _ => String::new(),
+                        };
                         format!(
-                            "expected the atom count of frame {} (an integer), found `{}`",
+                            "expected the atom count of frame {} (an integer), found `{}`{short}",
                             frames.len(),
                             shorten(line)
                         )
                     },
                 )
             })?;
+            announced = Some((at, n));
             let timestep = cursor.next_line().and_then(|(_, c)| comment_timestep(c));
             let (end, left) = match file {
                 Some(file) if data.len() > segment => {
