@@ -1860,6 +1860,14 @@ pub fn batch(
             );
         }
         input_notes.extend(dump.input_notes());
+        // (Said of the first input: one processor's pieces of every timestep read alike.)
+        if i == 0 && dump.piece_paths().is_none() {
+            input_notes.extend(crate::readers::one_piece_note(
+                p,
+                dump.frame_timestep(0),
+                inputs,
+            ));
+        }
         listed.push(frames);
         formats.push(dump.format());
         gzip_cut.push(dump.gzip_cut().is_some());

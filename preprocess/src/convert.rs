@@ -1159,10 +1159,16 @@ pub fn convert_file(
     // Opening indexes the frames (a pass over a text dump): part of reading the input,
     // which the throughput printed from the report must include.
     let opened = t0.elapsed();
+    // One processor's piece of a `%` set given alone reads that piece's particles only.
+    let piece = match dump.piece_paths() {
+        None => crate::readers::one_piece_note(input, dump.frame_timestep(0), &[]),
+        Some(_) => None,
+    };
     // The working file (if any) lives until the conversion is done.
     convert_dump(dump, input, output, frame, read, options, progress)
         .map(|mut report| {
             report.read_time += opened;
+            report.notes.extend(piece);
             report
         })
         .map_err(|e| decompressed(input, text.as_deref(), e))

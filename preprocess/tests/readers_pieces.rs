@@ -190,3 +190,48 @@ fn pieces_of_numbers_and_labels_list_species_as_the_whole_dump() {
     assert_eq!(names(&merged), names(&whole));
     assert_eq!(atoms(&merged), atoms(&whole));
 }
+
+/// One processor's piece converted alone reads that piece's atoms only: the conversion
+/// says which set to give. A series of timesteps named alike is no set of pieces.
+#[test]
+fn one_piece_given_alone_names_its_set() {
+    use mdlod_preprocess::convert::{convert_file, ConvertOptions, FrameSelect};
+    let dir = tempfile::tempdir().unwrap();
+    for n in ["cu_melt_mpi.0.dump", "cu_melt_mpi.1.dump"] {
+        std::fs::copy(lammps_sample_path(n), dir.path().join(n)).unwrap();
+    }
+    let convert = |input: &Path| {
+        convert_file(
+            input,
+            &dir.path().join("out.mdlod"),
+            FrameSelect::Last,
+            &ReadOptions::default(),
+            &ConvertOptions::default(),
+            &NoProgress,
+        )
+        .unwrap()
+        .notes
+    };
+    let notes = convert(&dir.path().join("cu_melt_mpi.0.dump"));
+    let want = format!(
+        "cu_melt_mpi.0.dump may be one processor's piece of a `%` set: cu_melt_mpi.1.dump \
+         starts at timestep 0 too (2 files named like it); if it is, only this piece's \
+         particles were read: give '{}' (quoted)",
+        dir.path().join("cu_melt_mpi.%.dump").display()
+    );
+    assert!(notes.iter().any(|n| n.starts_with(&want)), "{notes:?}");
+    // The set itself: no such note.
+    let notes = convert(&dir.path().join("cu_melt_mpi.%.dump"));
+    assert!(!notes.iter().any(|n| n.contains("piece")), "{notes:?}");
+    // Files of other timesteps named alike.
+    let series = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let second = text
+        .find("ITEM: TIME\n")
+        .and_then(|i| text[i + 1..].find("ITEM: TIME\n").map(|j| i + 1 + j))
+        .unwrap();
+    std::fs::write(series.path().join("melt.0.dump"), &text[..second]).unwrap();
+    std::fs::write(series.path().join("melt.100.dump"), &text[second..]).unwrap();
+    let notes = convert(&series.path().join("melt.0.dump"));
+    assert!(!notes.iter().any(|n| n.contains("piece")), "{notes:?}");
+}

@@ -61,7 +61,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 pub use float::parse_f64;
-pub use pieces::piece_paths;
+pub use pieces::{one_piece_note, piece_paths};
 
 use crate::frame::{Attribute, Frame, SimulationBox};
 use crate::progress::{NoProgress, Progress};

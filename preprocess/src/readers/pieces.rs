@@ -268,3 +268,62 @@ pub(crate) fn read_frame(
     }
     Ok(out)
 }
+
+/// Where `path`, one file, looks like one processor's piece of a `%` set: files named as
+/// it is with another number in place of its last run of digits, one of which starts at
+/// its first timestep `timestep` (a run's pieces share their timesteps; a series of
+/// timesteps does not). The note naming the set to give; replicas started alike read the
+/// same, so it says both. `given` are the other inputs of the run (a sibling among them
+/// is the batch's own business). At most three siblings are opened.
+pub fn one_piece_note(path: &Path, timestep: Option<u64>, given: &[PathBuf]) -> Option<String> {
+    let timestep = timestep?;
+    let name = path.file_name()?.to_str()?;
+    let bytes = name.as_bytes();
+    let end = bytes.iter().rposition(u8::is_ascii_digit)? + 1;
+    let start = bytes[..end]
+        .iter()
+        .rposition(|b| !b.is_ascii_digit())
+        .map_or(0, |i| i + 1);
+    let (prefix, suffix) = (&name[..start], &name[end..]);
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut siblings: Vec<(u64, PathBuf)> = std::fs::read_dir(&dir)
+        .ok()?
+        .filter_map(|e| {
+            let n = e.ok()?.file_name().into_string().ok()?;
+            let digits = n.strip_prefix(prefix)?.strip_suffix(suffix)?;
+            let number = (!digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
+                .then(|| digits.parse::<u64>().ok())??;
+            (n != name).then(|| (number, dir.join(&n)))
+        })
+        .collect();
+    if siblings.is_empty() || {
+        let given: Vec<PathBuf> = given
+            .iter()
+            .filter_map(|g| std::fs::canonicalize(g).ok())
+            .collect();
+        siblings
+            .iter()
+            .any(|(_, p)| std::fs::canonicalize(p).is_ok_and(|p| given.contains(&p)))
+    } {
+        return None;
+    }
+    siblings.sort();
+    let same = siblings.iter().take(3).find(|(_, p)| {
+        DumpFile::open(p)
+            .ok()
+            .and_then(|d| d.frame_timestep(0))
+            .is_some_and(|t| t == timestep)
+    })?;
+    let set = dir.join(format!("{prefix}%{suffix}"));
+    Some(format!(
+        "{name} may be one processor's piece of a `%` set: {} starts at timestep {timestep} \
+         too ({} files named like it); if it is, only this piece's particles were read: \
+         give '{}' (quoted) for every processor's (replicas started alike read the same)",
+        same.1.file_name()?.to_string_lossy(),
+        siblings.len() + 1,
+        set.display()
+    ))
+}
