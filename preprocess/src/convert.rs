@@ -229,6 +229,9 @@ pub struct UnusableRadius {
     /// The input's format, where known: it says what the species is (an MMPLD list, a
     /// GSD type) and where its size comes from.
     pub format: Option<crate::readers::InputFormat>,
+    /// The first particle (its index in the frame's order) whose own size is unusable,
+    /// where the frame gives particles their own sizes.
+    pub particle: Option<usize>,
 }
 
 impl std::fmt::Display for UnusableRadius {
@@ -245,6 +248,10 @@ impl std::fmt::Display for UnusableRadius {
             _ if r == 0.0 => ("species", "a particle of size 0".to_string()),
             _ => ("species", format!("radius {r}")),
         };
+        let size = match self.particle {
+            Some(i) => format!("{size} (particle {i} in the frame's order is the first)"),
+            None => size,
+        };
         let sep = if place.frame.is_some() || place.timestep.is_some() {
             ", "
         } else {
@@ -252,10 +259,17 @@ impl std::fmt::Display for UnusableRadius {
         };
         // A size column of 0 for some particles: --radius replaces every particle's own
         // size, which a file whose other sizes matter (smoothing lengths) must not lose.
-        let own = if r == 0.0 && !matches!(self.format, Some(InputFormat::Mmpld | InputFormat::Gsd))
+        let own = if (r == 0.0
+            && !matches!(self.format, Some(InputFormat::Mmpld | InputFormat::Gsd)))
+            || self.particle.is_some()
         {
-            " (every particle of it then takes R, those of sizes above 0 too: where \
-             their sizes matter, mend the sizes of 0 in the input instead)"
+            if r == 0.0 {
+                " (every particle of it then takes R, those of sizes above 0 too: where \
+                 their sizes matter, mend the sizes of 0 in the input instead)"
+            } else {
+                " (every particle of it then takes R, those of usable sizes too: where \
+                 their sizes matter, mend the unusable ones in the input instead)"
+            }
         } else {
             ""
         };
@@ -322,7 +336,8 @@ pub fn convert_frame_with(
     if !options.radii_may_be_absent {
         crate::species::check_overrides(&names, &options.radii)?;
     }
-    check_radii(&names, options, source.as_ref(), frame.timestep)?;
+    check_radii(&names, options, source.as_ref(), frame.timestep)
+        .map_err(|e| with_particle(e, frame, options))?;
     if frame.len() > options.chunks.chunk_points {
         let metadata = base_metadata(frame, source, options);
         return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
@@ -716,7 +731,27 @@ pub fn check_radii(
         species: name.to_string(),
         radius,
         format: source.and_then(|s| crate::readers::format_of_file(Path::new(&s.path))),
+        particle: None,
     })))
+}
+
+/// [`UnusableRadius`] with the first particle of its species whose own size is unusable,
+/// where `frame` gives particles their own sizes (a GSD frame's diameters).
+fn with_particle(e: ConvertError, frame: &Frame, options: &ConvertOptions) -> ConvertError {
+    let ConvertError::UnusableRadius(mut u) = e else {
+        return e;
+    };
+    if let Some(radii) = &frame.radii {
+        let of_species: Vec<bool> = frame
+            .species
+            .iter()
+            .map(|s| crate::species::renamed(&options.species_names, &s.name) == u.species)
+            .collect();
+        u.particle = frame.species_index.iter().zip(radii).position(|(&s, &r)| {
+            of_species.get(usize::from(s)) == Some(&true) && !(r.is_finite() && r > 0.0)
+        });
+    }
+    ConvertError::UnusableRadius(u)
 }
 
 /// Refuses a box with a coordinate that is not finite (`-1e308 1e308` bounds overflow

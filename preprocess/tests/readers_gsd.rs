@@ -630,12 +630,21 @@ fn a_diameter_not_finite_is_refused_unless_the_type_is_given_a_radius() {
         let out = dir.path().join("nan.mdlod");
         for chunk_points in [1 << 22, 100] {
             let e = convert_frame_1(&path, &out, vec![], chunk_points).unwrap_err();
+            // Built whole, the frame names the particle (a chunked build reads none whole).
+            let (which, own) = match chunk_points {
+                100 => (String::new(), ""),
+                _ => (
+                    format!(" (particle {i} in the frame's order is the first)"),
+                    " (every particle of it then takes R, those of usable sizes too: where \
+                     their sizes matter, mend the unusable ones in the input instead)",
+                ),
+            };
             assert_eq!(
                 e,
                 format!(
                     "{}: frame 1 (timestep 100), type B: the file gives a particle diameter of \
-                     {bad}, and a radius must be a positive number; give the type its radius \
-                     with --radius B=R",
+                     {bad}{which}, and a radius must be a positive number; give the type its \
+                     radius with --radius B=R{own}",
                     path.display()
                 )
             );
