@@ -188,6 +188,21 @@ fn info_json_has_the_promised_fields() {
     ok(&["convert", s(&shrink), "-o", s(&slab), "--last"]);
     let text = ok(&["info", s(&slab)]);
     assert!(text.contains(", periodic along a, b\n"), "{text}");
+    // A two-dimensional box (GSD's Lz = 0): c wraps nothing, and is said to be flat.
+    let flat = dir.path().join("flat.xyz");
+    std::fs::write(
+        &flat,
+        "2\nLattice=\"10 0 0 0 10 0 0 0 0\" pbc=\"T T T\" Properties=species:S:1:pos:R:3\n\
+         Ar 1 1 0\nAr 2 2 0\n",
+    )
+    .unwrap();
+    let flat_out = dir.path().join("flat.mdlod");
+    ok(&["convert", s(&flat), "-o", s(&flat_out)]);
+    let text = ok(&["info", s(&flat_out)]);
+    assert!(
+        text.contains(", periodic along a, b; c has length 0 (a two-dimensional box)\n"),
+        "{text}"
+    );
     let text = ok(&["verify", s(&out)]);
     assert!(text.contains(": ok:"), "{text}");
 }

@@ -570,18 +570,32 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     if let Some(b) = &m.simulation_box {
-        // Which of a, b, c wrap, where the input says.
+        // Edges of length 0 (a two-dimensional system's c, as GSD writes Lz = 0).
+        let flat: Vec<&str> = ["a", "b", "c"]
+            .into_iter()
+            .zip([b.a, b.b, b.c])
+            .filter_map(|(n, v)| (v == [0.0; 3]).then_some(n))
+            .collect();
+        // Which of a, b, c wrap, where the input says (an edge of length 0 wraps nothing).
         let periodic = match b.periodic {
-            Some([false, false, false]) => ", not periodic".to_string(),
             Some(p) => {
                 let axes: Vec<&str> = ["a", "b", "c"]
                     .into_iter()
                     .zip(p)
-                    .filter_map(|(n, w)| w.then_some(n))
+                    .filter_map(|(n, w)| (w && !flat.contains(&n)).then_some(n))
                     .collect();
-                format!(", periodic along {}", axes.join(", "))
+                if axes.is_empty() {
+                    ", not periodic".to_string()
+                } else {
+                    format!(", periodic along {}", axes.join(", "))
+                }
             }
             None => String::new(),
+        };
+        let periodic = match flat.as_slice() {
+            [] => periodic,
+            [one] => format!("{periodic}; {one} has length 0 (a two-dimensional box)"),
+            many => format!("{periodic}; {} have length 0", many.join(" and ")),
         };
         println!(
             "  box          origin {} a {} b {} c {}{periodic}",
