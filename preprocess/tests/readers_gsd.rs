@@ -483,14 +483,27 @@ fn a_diameter_of_zero_or_below_is_refused_unless_the_type_is_given_a_radius() {
             .map_err(|e| e.to_string())
     };
     // In one piece and in chunks of 100 (the frame has 300 particles).
+    // The frame built whole names the fourth B particle, the first of diameter 0.
+    let fourth_b = (0..300)
+        .filter(|&i| bytes[types + 4 * i..types + 4 * i + 4] == [1, 0, 0, 0])
+        .nth(3)
+        .unwrap();
     for chunk_points in [1 << 22, 100] {
         let e = convert(vec![], chunk_points).unwrap_err();
+        let (which, own) = match chunk_points {
+            100 => (String::new(), ""),
+            _ => (
+                format!(" (particle {fourth_b} in the frame's order is the first)"),
+                " (every particle of it then takes R, those of sizes above 0 too: where their \
+                 sizes matter, mend the sizes of 0 in the input instead)",
+            ),
+        };
         assert_eq!(
             e,
             format!(
-                "{}: frame 1 (timestep 100), type B: the file gives a particle diameter of 0, \
-                 and a radius must be a positive number; give the type its radius with \
-                 --radius B=R",
+                "{}: frame 1 (timestep 100), type B: the file gives a particle diameter of \
+                 0{which}, and a radius must be a positive number; give the type its radius \
+                 with --radius B=R{own}",
                 path.display()
             )
         );
@@ -1173,10 +1186,20 @@ fn frames_listed_after_a_cut_are_named_as_lost() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("outside the file")
-            && e.contains("the index lists 3 frames, and frame 2 after it is lost with it"),
+        e.contains("outside the file: the file is damaged (a copy cut short?): the index \
+                    lists 3 frames, and frame 2 after it is lost with it"),
         "{e}"
     );
+    // Damage, not a frame a run is still writing: a batch fails on it.
+    let batch_dir = dir.path().join("out");
+    let opts = mdlod_preprocess::batch::BatchOptions {
+        memory_limit: 1 << 30,
+        ..Default::default()
+    };
+    let e = mdlod_preprocess::batch::batch(&[path.clone()], &batch_dir, &opts, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("the file is damaged"), "{e}");
 }
 
 /// Something else named `.gsd` is no GSD file, however short: not a GSD file cut short.

@@ -320,8 +320,13 @@ impl Index {
                     1 => format!("frame {}", last_listed),
                     _ => format!("frames {} to {last_listed}", *f + 1),
                 };
+                // Not a frame a run is writing (a writer adds a frame's index entries
+                // after its data): a damaged file, an error rather than a frame to wait
+                // for.
+                *message = message.replace(" (truncated?)", "");
                 message.push_str(&format!(
-                    "; the index lists {} frames, and {frames} after it {} lost with it",
+                    ": the file is damaged (a copy cut short?): the index lists {} frames, \
+                     and {frames} after it {} lost with it",
                     last_listed + 1,
                     if after == 1 { "is" } else { "are" }
                 ));
