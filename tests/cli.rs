@@ -6260,6 +6260,54 @@ fn a_small_ball_of_atoms_fills_and_centres_the_image() {
     }
 }
 
+/// A slanted cell drawn with `--cell` is framed by its corners, not by its bounding box
+/// (whose corners lie outside it: an fcc primitive cell filled 64 % of the height).
+#[test]
+fn a_slanted_cell_is_framed_by_its_corners() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("prim.xyz");
+    let (a, b, c) = ([0.0, 7.2, 7.2], [7.2, 0.0, 7.2], [7.2, 7.2, 0.0]);
+    let mut atoms = Vec::new();
+    for i in 0..4 {
+        for j in 0..4 {
+            for k in 0..4 {
+                let f = [i, j, k].map(|n| n as f64 / 4.0);
+                let p: Vec<String> = (0..3)
+                    .map(|x| (f[0] * a[x] + f[1] * b[x] + f[2] * c[x]).to_string())
+                    .collect();
+                atoms.push(format!("Cu {}", p.join(" ")));
+            }
+        }
+    }
+    std::fs::write(
+        &xyz,
+        format!(
+            "{}\nLattice=\"0 7.2 7.2 7.2 0 7.2 7.2 7.2 0\" Properties=species:S:1:pos:R:3\n{}\n",
+            atoms.len(),
+            atoms.join("\n")
+        ),
+    )
+    .unwrap();
+    let file = dir.path().join("prim.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file)]);
+    let png = dir.path().join("prim.png");
+    let (w, h) = (160u32, 90u32);
+    for extra in [&[][..], &["--ortho"]] {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "160"];
+        args.extend(["--height", "90", "--background", "#000000", "--cell"]);
+        args.extend_from_slice(extra);
+        ok(&args);
+        let px = read_png(&png).2;
+        let on = |x: u32, y: u32| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 8);
+        let rows: Vec<u32> = (0..h).filter(|&y| (0..w).any(|x| on(x, y))).collect();
+        let (top, bottom) = (rows[0], rows[rows.len() - 1]);
+        assert!(
+            bottom - top + 1 >= h * 4 / 5,
+            "{extra:?}: rows {top} to {bottom} of {h}"
+        );
+    }
+}
+
 /// A fitted view frames the particles as they are drawn: spheres enlarged by the style,
 /// a splat's Gaussian, a density kernel's support; never cropped, never tiny.
 #[test]

@@ -1186,8 +1186,10 @@ fn frames_listed_after_a_cut_are_named_as_lost() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("outside the file: the file is damaged (a copy cut short?): the index \
-                    lists 3 frames, and frame 2 after it is lost with it"),
+        e.contains(
+            "outside the file: the file is damaged (a copy cut short?): the index \
+                    lists 3 frames, and frame 2 after it is lost with it"
+        ),
         "{e}"
     );
     // Damage, not a frame a run is still writing: a batch fails on it.

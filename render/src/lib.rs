@@ -773,6 +773,30 @@ fn with_fitted_cell(
 }
 
 /// The box around `file`'s simulation cell (its eight corners), where it has one.
+/// The corners of the cell as boxes of no extent: what a fit frames for the cell drawn
+/// (its bounding box's corners lie outside a slanted cell, which then framed it small).
+fn cell_corner_boxes(file: &MdlodFile) -> Vec<Bounds> {
+    let Some(cell) = file.metadata().simulation_box.as_ref() else {
+        return Vec::new();
+    };
+    let mut corners: Vec<glam::Vec3> = overlay::cell_edges(cell)
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
+    corners.sort_by(|a, b| {
+        a.to_array()
+            .partial_cmp(&b.to_array())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    corners.dedup();
+    corners
+        .into_iter()
+        .filter(|p| p.is_finite())
+        .map(|p| Bounds::new(p, p))
+        .collect()
+}
+
 pub fn cell_bounds(file: &MdlodFile) -> Option<Bounds> {
     let cell = file.metadata().simulation_box.as_ref()?;
     let (lo, hi) = overlay::cell_edges(cell).iter().flatten().fold(
@@ -883,8 +907,8 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
             boxes.push(b);
         }
     }
-    if let (Some(_), Some(c), false) = (opts.cell, cell_bounds(file), boxes.is_empty()) {
-        boxes.push(c);
+    if opts.cell.is_some() && !boxes.is_empty() {
+        boxes.extend(cell_corner_boxes(file));
     }
     boxes
 }
@@ -914,8 +938,8 @@ fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Ve
             lo.cmple(hi).all().then(|| Bounds::new(lo, hi))
         })
         .collect();
-    if let (Some(_), Some(c), false) = (opts.cell, cell_bounds(file), boxes.is_empty()) {
-        boxes.push(c);
+    if opts.cell.is_some() && !boxes.is_empty() {
+        boxes.extend(cell_corner_boxes(file));
     }
     boxes
 }
