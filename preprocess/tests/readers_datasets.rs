@@ -210,6 +210,44 @@ fn wrapping_into_a_triclinic_cell() {
     }
 }
 
+/// A two-dimensional cell (HOOMD's Lz = 0, tilted in plane) wraps its in-plane axes and
+/// leaves z alone: its c of length 0 made the cell's matrix singular, and nothing wrapped.
+#[test]
+fn wrapping_into_a_flat_cell() {
+    let cell = mdlod_format::meta::SimulationBox {
+        origin: [-25.0, -25.0, 0.0],
+        a: [50.0, 0.0, 0.0],
+        b: [15.0, 50.0, 0.0],
+        c: [0.0, 0.0, 0.0],
+        periodic: Some([true, true, true]),
+    };
+    let at = |f: [f64; 2], z: f64| -> [f32; 3] {
+        [0, 1]
+            .map(|r| (cell.origin[r] + cell.a[r] * f[0] + cell.b[r] * f[1]) as f32)
+            .into_iter()
+            .chain([z as f32])
+            .collect::<Vec<_>>()
+            .try_into()
+            .unwrap()
+    };
+    let mut p = vec![
+        at([1.75, -0.5], 0.0),
+        at([0.25, 0.5], 0.0),
+        at([-1.25, 2.25], 0.0),
+    ];
+    mdlod_preprocess::readers::wrap_positions(&mut p, &cell);
+    let want = [
+        at([0.75, 0.5], 0.0),
+        at([0.25, 0.5], 0.0),
+        at([0.75, 0.25], 0.0),
+    ];
+    for (got, want) in p.iter().zip(&want) {
+        for d in 0..3 {
+            assert!((got[d] - want[d]).abs() < 1e-3, "{got:?} against {want:?}");
+        }
+    }
+}
+
 #[test]
 fn cu_slab_shrink_wrapped_boundary() {
     let Some(path) = sample("cu_slab.shrinkwrap.dump") else {

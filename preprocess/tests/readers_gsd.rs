@@ -1198,9 +1198,10 @@ fn frames_listed_after_a_cut_are_named_as_lost() {
         memory_limit: 1 << 30,
         ..Default::default()
     };
-    let e = mdlod_preprocess::batch::batch(&[path.clone()], &batch_dir, &opts, &NoProgress)
-        .unwrap_err()
-        .to_string();
+    let e =
+        mdlod_preprocess::batch::batch(std::slice::from_ref(&path), &batch_dir, &opts, &NoProgress)
+            .unwrap_err()
+            .to_string();
     assert!(e.contains("the file is damaged"), "{e}");
 }
 

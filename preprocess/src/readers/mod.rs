@@ -267,16 +267,31 @@ pub fn wrap_into_cell(frame: &mut Frame) {
 
 /// [`wrap_into_cell`] of `positions` in `cell`.
 pub fn wrap_positions(positions: &mut [[f32; 3]], cell: &mdlod_format::meta::SimulationBox) {
-    let periodic = cell.periodic.unwrap_or([true; 3]);
+    let mut periodic = cell.periodic.unwrap_or([true; 3]);
+    // An edge of length 0 (a two-dimensional system's c, as HOOMD writes Lz = 0) wraps
+    // nothing; the unit normal of the other two stands in for it, so that the in-plane
+    // axes still wrap.
+    let mut edges = [cell.a, cell.b, cell.c];
+    let flat: Vec<usize> = (0..3).filter(|&k| edges[k] == [0.0; 3]).collect();
+    if let [k] = flat[..] {
+        let (u, v) = (edges[(k + 1) % 3], edges[(k + 2) % 3]);
+        let n = [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ];
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if len.is_finite() && len > 0.0 {
+            edges[k] = n.map(|x| x / len);
+        }
+        periodic[k] = false;
+    }
     if !periodic.iter().any(|&p| p) {
         return;
     }
+    let [a, b, c] = edges;
     // Columns a, b, c; the inverse by the adjugate.
-    let m = [
-        [cell.a[0], cell.b[0], cell.c[0]],
-        [cell.a[1], cell.b[1], cell.c[1]],
-        [cell.a[2], cell.b[2], cell.c[2]],
-    ];
+    let m = [[a[0], b[0], c[0]], [a[1], b[1], c[1]], [a[2], b[2], c[2]]];
     let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
         - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
