@@ -2186,21 +2186,25 @@ pub fn attribute_named<'a>(names: &[&'a str], name: &str) -> Option<&'a str> {
     if let Some(exact) = names.iter().find(|n| **n == name) {
         return Some(exact);
     }
-    // A magnitude (`|particles/velocity|`) by its last part too (`|velocity|`).
-    let bars = |s: &'_ str| -> Option<String> {
-        s.strip_prefix('|')
-            .and_then(|s| s.strip_suffix('|'))
-            .map(str::to_owned)
-    };
-    let mut by_part = names.iter().filter(|stored| {
-        let (stored, name) = match (bars(stored), bars(name)) {
-            (Some(s), Some(n)) => (s, n),
-            (None, None) => (stored.to_string(), name.to_string()),
-            _ => return false,
+    // A magnitude (`|particles/velocity|`) and a logarithm (`log10(particles/mass)`) by
+    // the last part of what they wrap too (`|velocity|`, `log10(mass)`).
+    fn unwrapped(s: &str) -> (bool, bool, &str) {
+        let (log, s) = match s.strip_prefix("log10(").and_then(|s| s.strip_suffix(')')) {
+            Some(inner) => (true, inner),
+            None => (false, s),
         };
-        stored
-            .rsplit_once('/')
-            .is_some_and(|(_, last)| last == name)
+        match s.strip_prefix('|').and_then(|s| s.strip_suffix('|')) {
+            Some(inner) => (log, true, inner),
+            None => (log, false, s),
+        }
+    }
+    let asked = unwrapped(name);
+    let mut by_part = names.iter().filter(|stored| {
+        let (log, bars, inner) = unwrapped(stored);
+        (log, bars) == (asked.0, asked.1)
+            && inner
+                .rsplit_once('/')
+                .is_some_and(|(_, last)| last == asked.2)
     });
     match (by_part.next(), by_part.next()) {
         (Some(one), None) => Some(one),
@@ -2224,6 +2228,16 @@ mod tests {
         assert_eq!(attribute_named(&names, "|v|"), Some("|v|"));
         assert_eq!(attribute_named(&names, "velocity"), None);
         assert_eq!(attribute_named(&names, "|mass|"), None);
+        let logs = ["log10(|particles/velocity|)", "log10(particles/mass)"];
+        assert_eq!(
+            attribute_named(&logs, "log10(|velocity|)"),
+            Some("log10(|particles/velocity|)")
+        );
+        assert_eq!(
+            attribute_named(&logs, "log10(mass)"),
+            Some("log10(particles/mass)")
+        );
+        assert_eq!(attribute_named(&logs, "|velocity|"), None);
     }
 
     /// A valid three-level hierarchy: a top node over `n` nodes, each over 2 particles.
