@@ -601,15 +601,24 @@ fn oversized_note(
         return None;
     }
     let largest = species.iter().map(|s| s.radius).fold(0.0f32, f32::max);
+    // Plain numbers where they read so (4.3, 1.157), powers of ten beyond.
+    let readable = |x: f64, digits: usize| {
+        if (1e-3..1e5).contains(&x.abs()) {
+            format!("{x:.digits$}")
+        } else {
+            format!("{x:.digits$e}")
+        }
+    };
     Some(format!(
-        "the radi{} {} {} {:.1e} times the particles' mean spacing ({spacing:.3e}, from the \
-         box around them): the spheres overlap into one blob. If the data is in other units \
-         than the radii (nanometre data in metres), give --radius NAME=R in the data's own \
-         units (about half the spacing)",
+        "the radi{} {} {} {} times the particles' mean spacing ({}, from the box around \
+         them): the spheres overlap into one blob. If the data is in other units than the \
+         radii (data in nanometres, radii in ångströms), give --radius NAME=R in the data's \
+         own units (about half the spacing)",
         if over.len() == 1 { "us of" } else { "i of" },
         over.join(", "),
         if over.len() == 1 { "is" } else { "are up to" },
-        f64::from(largest) / spacing
+        readable(f64::from(largest) / spacing, 1),
+        readable(spacing, 4)
     ))
 }
 
@@ -1506,7 +1515,10 @@ mod tests {
         // Water in nm (spacing 0.22 nm) with oxygen's 0.74 Å: 3.4 spacings; in Å, none.
         let water = 0.22 * 1000f32.cbrt();
         let note = oversized_note([0.0; 3], [water; 3], 1000, &species(&[0.74])).unwrap();
-        assert!(note.contains("(0.74) is 3.4e0 times"), "{note}");
+        assert!(
+            note.contains("(0.74) is 3.4 times the particles' mean spacing (0.2200,"),
+            "{note}"
+        );
         assert_eq!(
             oversized_note([0.0; 3], [10.0 * water; 3], 1000, &species(&[0.74])),
             None

@@ -234,4 +234,10 @@ fn one_piece_given_alone_names_its_set() {
     std::fs::write(series.path().join("melt.100.dump"), &text[second..]).unwrap();
     let notes = convert(&series.path().join("melt.0.dump"));
     assert!(!notes.iter().any(|n| n.contains("piece")), "{notes:?}");
+    // Two variants of one frame (the same atoms, another column) start alike: no pieces.
+    let variants = tempfile::tempdir().unwrap();
+    std::fs::write(variants.path().join("const1.dump"), &text[..second]).unwrap();
+    std::fs::write(variants.path().join("const5.dump"), &text[..second]).unwrap();
+    let notes = convert(&variants.path().join("const5.dump"));
+    assert!(!notes.iter().any(|n| n.contains("piece")), "{notes:?}");
 }

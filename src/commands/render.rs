@@ -136,7 +136,8 @@ pub struct Args {
     /// Splat mode: each point's light is its species colour, or its scalar attribute
     /// (the file's per-particle column: from 0, so that light is proportional to the
     /// value, where no value is below 0, else over the file's range; --attribute-range
-    /// sets another; a constant column gives every point 1).
+    /// sets another; a constant column, equal-mass SPH particles say, gives every point
+    /// its value).
     #[arg(long, value_enum, default_value = "species")]
     pub intensity: Intensity,
     /// Splat mode: light added per unit of flux (default: chosen from the image's light,

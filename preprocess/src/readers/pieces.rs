@@ -317,6 +317,29 @@ pub fn one_piece_note(path: &Path, timestep: Option<u64>, given: &[PathBuf]) -> 
             .and_then(|d| d.frame_timestep(0))
             .is_some_and(|t| t == timestep)
     })?;
+    // Pieces hold different atoms; variants of one run (another column, a replica) the
+    // same: where both files are small enough to read here and name atoms by `id`, a
+    // sibling sharing most of this file's ids is no piece of a set with it.
+    const ID_CHECK_BYTES: u64 = 64 << 20;
+    let small = |p: &Path| std::fs::metadata(p).is_ok_and(|m| m.len() <= ID_CHECK_BYTES);
+    if small(path) && small(&same.1) {
+        let ids = |p: &Path| -> Option<std::collections::HashSet<u32>> {
+            let opts = ReadOptions {
+                attribute: Some("id".into()),
+                ..Default::default()
+            };
+            let f = DumpFile::open(p)
+                .ok()?
+                .read_frame(0, &opts, &crate::progress::NoProgress)
+                .ok()?;
+            Some(f.attribute?.values.iter().map(|v| v.to_bits()).collect())
+        };
+        if let (Some(mine), Some(theirs)) = (ids(path), ids(&same.1)) {
+            if mine.intersection(&theirs).count() * 2 > mine.len().min(theirs.len()) {
+                return None;
+            }
+        }
+    }
     let set = dir.join(format!("{prefix}%{suffix}"));
     Some(format!(
         "{name} may be one processor's piece of a `%` set: {} starts at timestep {timestep} \
