@@ -91,6 +91,10 @@ pub const STALE_TEMP: std::time::Duration = std::time::Duration::from_secs(600);
 /// The manifest's file name in a batch directory.
 pub const MANIFEST: &str = "dataset.json";
 
+/// Where a shard that converts moves the merged manifest it outdates: no manifest any
+/// more, but a record of how its frames were converted (see [`BatchReport::kept_gone`]).
+pub const PREVIOUS_MANIFEST: &str = ".dataset.previous.json";
+
 /// One converted frame in a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FrameEntry {
@@ -156,6 +160,16 @@ pub struct Manifest {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_frames: Option<InputFrames>,
     pub frames: Vec<FrameEntry>,
+    /// In a shard's manifest, the frames converted from dumps that are gone since, which
+    /// every shard keeps ([`BatchReport::kept_gone`]) and the merge lists once; empty in
+    /// a whole one, whose `frames` list them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub gone: Vec<FrameEntry>,
+    /// Frames converted from dumps that are gone since, with other settings than the last
+    /// run's: on disk, not listed, recorded so that a later run with their settings lists
+    /// them again.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unlisted: Vec<FrameEntry>,
     /// Frames a run with `--keep-going` could not convert, each with why: not among
     /// `frames` nor expected, and what `verify` names as missing until a rerun converts
     /// them. Absent when none failed.
@@ -415,6 +429,9 @@ pub struct BatchReport {
     /// Frame files converted from dumps that are gone, which this run cannot list: built
     /// with other settings than this run's, or listed by no manifest (not in `strays`).
     pub gone_other: Vec<String>,
+    /// Timesteps an earlier run listed whose frame files are gone as well as their
+    /// dumps (deleted): no longer listed.
+    pub vanished: Vec<u64>,
     /// The frames left out as duplicates of a timestep ([`BatchOptions::duplicates`]),
     /// each with the one converted instead.
     pub duplicates: Vec<String>,
@@ -1322,15 +1339,16 @@ fn source_gone(source: &SourceInfo) -> bool {
 fn gone_source_frames(
     out_dir: &Path,
     strays: &[String],
+    numbers: &std::collections::HashSet<u64>,
     opts: &BatchOptions,
     attribute: Option<&str>,
-) -> (Vec<FrameEntry>, Vec<String>) {
+) -> GoneFrames {
     let mut listed: std::collections::HashMap<(String, String), FrameEntry> =
         std::collections::HashMap::new();
     if let Ok(dir) = std::fs::read_dir(out_dir) {
         for e in dir.flatten() {
             let name = e.file_name().to_string_lossy().into_owned();
-            if !(name == MANIFEST || is_shard_manifest(&name)) {
+            if !(name == MANIFEST || name == PREVIOUS_MANIFEST || is_shard_manifest(&name)) {
                 continue;
             }
             let Some(m) = read_manifest_bytes(&e.path())
@@ -1339,12 +1357,21 @@ fn gone_source_frames(
             else {
                 continue;
             };
-            for f in m.frames {
+            // Listed, kept by a shard, or kept unlisted: every record of a frame file.
+            for f in m.frames.into_iter().chain(m.gone).chain(m.unlisted) {
                 listed.insert((f.file.clone(), f.checksum.clone()), f);
             }
         }
     }
-    let (mut kept, mut other) = (Vec::new(), Vec::new());
+    // Frames recorded whose files are gone too, of no frame of this run.
+    let mut vanished: Vec<u64> = listed
+        .values()
+        .filter(|f| !numbers.contains(&f.timestep) && !out_dir.join(&f.file).exists())
+        .map(|f| f.timestep)
+        .collect();
+    vanished.sort_unstable();
+    vanished.dedup();
+    let (mut kept, mut other, mut records) = (Vec::new(), Vec::new(), Vec::new());
     for name in strays {
         let path = out_dir.join(name);
         let Ok(file) = MdlodFile::open(&path) else {
@@ -1385,11 +1412,34 @@ fn gone_source_frames(
         });
         match entry {
             Some(e) if same => kept.push(e.clone()),
-            _ => other.push(name.clone()),
+            Some(e) => {
+                other.push(name.clone());
+                records.push(e.clone());
+            }
+            None => other.push(name.clone()),
         }
     }
     kept.sort_by_key(|e| e.timestep);
-    (kept, other)
+    records.sort_by_key(|e| e.timestep);
+    GoneFrames {
+        kept,
+        other,
+        records,
+        vanished,
+    }
+}
+
+/// What [`gone_source_frames`] found of frames whose dumps are gone.
+struct GoneFrames {
+    /// Listed again (their records).
+    kept: Vec<FrameEntry>,
+    /// Named, not listed: built with other settings, or recorded nowhere.
+    other: Vec<String>,
+    /// The records of `other` that have one, kept in the manifest
+    /// ([`Manifest::unlisted`]) for a later run with their settings.
+    records: Vec<FrameEntry>,
+    /// Timesteps recorded whose frame files are gone too.
+    vanished: Vec<u64>,
 }
 
 /// The inputs of a batch as an error names them: the one, or the first and how many more.
@@ -2081,7 +2131,12 @@ pub fn batch(
     // first (a shard that converts removes the merged manifest), and the merge lists
     // each once.
     let attribute = jobs.first().and_then(|j| j.attribute.clone());
-    let (gone, gone_other) = gone_source_frames(out_dir, &strays, opts, attribute.as_deref());
+    let GoneFrames {
+        kept: gone,
+        other: gone_other,
+        records: unlisted,
+        vanished,
+    } = gone_source_frames(out_dir, &strays, &numbers, opts, attribute.as_deref());
     strays.retain(|n| !gone.iter().any(|e| &e.file == n) && !gone_other.contains(n));
     let mut mine: Vec<Job<'_>> = match opts.shard {
         None => jobs,
@@ -2372,13 +2427,22 @@ pub fn batch(
             note_species(&f);
         }
     }
-    done.extend(gone);
+    // A whole run lists them; a shard keeps them apart, for the merge to list once.
+    let (gone, listed_gone) = match opts.shard {
+        None => {
+            done.extend(gone);
+            (Vec::new(), kept_gone.len())
+        }
+        Some(_) => (gone, 0),
+    };
     let manifest = std::sync::Arc::new(Mutex::new(Manifest {
         mdlod_dataset: MANIFEST_VERSION,
         shard: opts.shard.map(|(i, n)| [i, n]),
-        expected_frames: Some((frames_in_shard - empty.len() + kept_gone.len()) as u64),
+        expected_frames: Some((frames_in_shard - empty.len() + listed_gone) as u64),
         input_frames: Some(input_frames),
         frames: done,
+        gone,
+        unlisted,
         failed: Vec::new(),
         duplicates: match opts.duplicates {
             Duplicates::Error => None,
@@ -2412,13 +2476,15 @@ pub fn batch(
     let previous = read_manifest_bytes(&manifest_path).map_err(|e| e.kind());
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
     // A shard that converts anything outdates the merged manifest of an earlier merge
-    // (its checksums, its frames' sources): removed before the first frame changes, so
-    // that no `dataset.json` lists what is not there; `--merge` writes it again.
+    // (its checksums, its frames' sources): moved aside before the first frame changes,
+    // so that no `dataset.json` lists what is not there; `--merge` writes it again. Its
+    // records stay readable there ([`PREVIOUS_MANIFEST`]) for frames whose dumps are
+    // deleted before another shard runs.
     let mut removed_merged = None;
     if opts.shard.is_some() && !todo.is_empty() {
         let merged = out_dir.join(MANIFEST);
         // Shards starting together race for it: gone already is as good.
-        match std::fs::remove_file(&merged) {
+        match std::fs::rename(&merged, out_dir.join(PREVIOUS_MANIFEST)) {
             Ok(()) => removed_merged = Some(merged),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
             Err(e) => return Err(io(&merged)(e)),
@@ -2827,6 +2893,7 @@ pub fn batch(
         strays,
         kept_gone,
         gone_other,
+        vanished,
         duplicates,
         incomplete,
         failed: failed_frames,
@@ -2975,6 +3042,10 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     let mut expected_total = Some(0u64);
     let mut settings = MergeSettings::default();
     let mut choices: Vec<(String, Option<String>)> = Vec::new();
+    // The frames of deleted dumps every shard keeps, and the records of those kept
+    // unlisted.
+    let (mut gone, mut unlisted): (Vec<(PathBuf, FrameEntry)>, Vec<FrameEntry>) =
+        (Vec::new(), Vec::new());
     for (path, m) in manifests {
         let path = path.as_path();
         for f in &m.frames {
@@ -3014,16 +3085,32 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
             .map(|(t, e)| t.saturating_add(e));
         frames.extend(m.frames);
         failed.extend(m.failed);
+        gone.extend(m.gone.into_iter().map(|f| (path.to_path_buf(), f)));
+        unlisted.extend(m.unlisted);
     }
     let duplicates = choices.into_iter().next().and_then(|(_, d)| d);
+    // The frames of deleted dumps ([`Manifest::gone`]): listed once, and expected, where
+    // no shard lists the timestep and the file is still there.
+    let own: std::collections::HashSet<u64> = frames.iter().map(|f| f.timestep).collect();
+    gone.sort_by(|a, b| (a.1.timestep, &a.1.file).cmp(&(b.1.timestep, &b.1.file)));
+    gone.dedup_by(|a, b| a.1.timestep == b.1.timestep && a.1.checksum == b.1.checksum);
+    let mut extra = 0u64;
+    for (path, f) in gone {
+        if own.contains(&f.timestep) || !out_dir.join(&f.file).is_file() {
+            continue;
+        }
+        settings
+            .check(out_dir, &path, &f)
+            .map_err(|message| manifest_err(out_dir, message))?;
+        frames.push(f);
+        extra += 1;
+    }
+    expected_total = expected_total.map(|t| t.saturating_add(extra));
     frames.sort_by_key(|f| f.timestep);
-    // The frames of deleted dumps every shard lists ([`BatchReport::kept_gone`]): one
-    // file, listed once, and expected once.
-    let listed = frames.len();
-    frames
-        .dedup_by(|a, b| a.timestep == b.timestep && a.file == b.file && a.checksum == b.checksum);
-    let shared = (listed - frames.len()) as u64;
-    expected_total = expected_total.map(|t| t.saturating_sub(shared));
+    let listed: std::collections::HashSet<u64> = frames.iter().map(|f| f.timestep).collect();
+    unlisted.retain(|f| !listed.contains(&f.timestep));
+    unlisted.sort_by(|a, b| (a.timestep, &a.checksum).cmp(&(b.timestep, &b.checksum)));
+    unlisted.dedup_by(|a, b| a.timestep == b.timestep && a.checksum == b.checksum);
     failed.sort_by(|a, b| (&a.input, a.frame, a.timestep).cmp(&(&b.input, b.frame, b.timestep)));
     failed.dedup_by(|a, b| a.input == b.input && a.frame == b.frame);
     failed.sort_by_key(|f| f.timestep);
@@ -3039,6 +3126,8 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         expected_frames: expected_total,
         input_frames,
         frames,
+        gone: Vec::new(),
+        unlisted,
         failed,
         duplicates,
     };

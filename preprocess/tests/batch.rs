@@ -2856,6 +2856,11 @@ fn unlisted_frames_keep_their_renames_where_their_species_show_them() {
     assert_eq!((r.converted, r.redone.settings), (6, 6));
 }
 
+fn read_manifest_at(path: &Path) -> Manifest {
+    let text = std::fs::read(path).unwrap();
+    mdlod_preprocess::batch::parse_manifest(path, &text, "shard").unwrap()
+}
+
 /// The sample trajectory as one file per timestep (`melt.<timestep>.dump`), as LAMMPS
 /// writes a `dump.*.lammpstrj` set.
 fn file_per_timestep(dir: &Path) -> Vec<PathBuf> {
@@ -2923,6 +2928,21 @@ fn frames_of_deleted_dumps_stay_listed_when_built_with_this_runs_settings() {
     assert_eq!(r.gone_other, ["frame-0.mdlod", "frame-100.mdlod"]);
     assert_eq!(listed(&out), [200, 300, 400, 500]);
     assert!(out.join("frame-0.mdlod").exists());
+    // Their records stay: back to the settings they were converted with, they are listed
+    // again.
+    let r = batch(&files[2..], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.kept_gone, [0, 100]);
+    assert_eq!(listed(&out), [0, 100, 200, 300, 400, 500]);
+    // A frame file deleted with its dump: said once, and no longer listed.
+    std::fs::remove_file(out.join("frame-0.mdlod")).unwrap();
+    let r = batch(&files[2..], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(
+        (r.vanished.clone(), r.kept_gone.clone()),
+        (vec![0], vec![100])
+    );
+    assert_eq!(listed(&out), [100, 200, 300, 400, 500]);
+    let r = batch(&files[2..], &out, &opts(), &NoProgress).unwrap();
+    assert!(r.vanished.is_empty());
 }
 
 /// In a sharded run every shard lists the deleted dumps' frames (the first to convert
@@ -2942,11 +2962,46 @@ fn shards_list_the_frames_of_deleted_dumps_once_between_them() {
     assert_eq!(a.kept_gone, [0, 100, 200]);
     assert_eq!(b.kept_gone, [0, 100, 200]);
     assert!(!out.join("dataset.json").exists());
+    // Kept apart from each shard's own frames, which it expects.
+    let s0 = read_manifest_at(&out.join("dataset.shard-0-of-2.json"));
+    assert_eq!(s0.frames.len(), 2);
+    assert_eq!(s0.expected_frames, Some(2));
+    assert_eq!(s0.gone.len(), 3);
     let m = merge(&out).unwrap();
     assert_eq!(
         m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>(),
         [0, 100, 200, 300, 400, 500]
     );
     assert_eq!(m.expected_frames, Some(6));
+    check_manifest(&out, &m);
+}
+
+/// A dump deleted between two shards' runs: the shard that converts first moves the
+/// merged manifest aside, and the other still finds the record of the deleted dump's
+/// frame there, so the merge lists every frame.
+#[test]
+fn a_dump_deleted_between_shard_runs_keeps_its_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = file_per_timestep(dir.path());
+    let out = dir.path().join("out");
+    batch(&files[..4], &out, &opts(), &NoProgress).unwrap();
+    let r0 = batch(&files[..5], &out, &shard(0, 2), &NoProgress).unwrap();
+    assert_eq!(r0.removed_merged, Some(out.join("dataset.json")));
+    // Timestep 100 is shard 1's (the second of the list) and recorded only in the merged
+    // manifest shard 0 moved aside.
+    std::fs::remove_file(&files[1]).unwrap();
+    let mut left = files[..5].to_vec();
+    left.remove(1);
+    let r1 = batch(&left, &out, &shard(1, 2), &NoProgress).unwrap();
+    assert_eq!(r1.kept_gone, [100]);
+    assert!(r1.gone_other.is_empty());
+    // The shards saw different lists: shard 0 runs again over the inputs left.
+    batch(&left, &out, &shard(0, 2), &NoProgress).unwrap();
+    let m = merge(&out).unwrap();
+    assert_eq!(
+        m.frames.iter().map(|f| f.timestep).collect::<Vec<_>>(),
+        [0, 100, 200, 300, 400]
+    );
+    assert_eq!(m.expected_frames, Some(5));
     check_manifest(&out, &m);
 }

@@ -341,6 +341,26 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             }
         );
     }
+    if !report.vanished.is_empty() {
+        let n = report.vanished.len();
+        let shown: Vec<String> = report.vanished.iter().take(5).map(u64::to_string).collect();
+        println!(
+            "note: {n} frame{} listed before {} gone with {} dump{} (frame file{} deleted): \
+             no longer listed (timestep{} {}{})",
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "is" } else { "are" },
+            if n == 1 { "its" } else { "their" },
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "" } else { "s" },
+            shown.join(", "),
+            if n > 5 {
+                format!(" and {} more", n - 5)
+            } else {
+                String::new()
+            }
+        );
+    }
     if !report.gone_other.is_empty() {
         let n = report.gone_other.len();
         let shown: Vec<&str> = report
@@ -351,10 +371,14 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             .collect();
         println!(
             "note: {n} frame file{} in {} {} converted from dumps that are gone since, with \
-             other settings than this run's (or listed by no manifest): left alone, not in \
-             the manifest, as no rerun can convert {} again: {}{}",
+             other settings than this run's (or listed by no manifest): left alone and not \
+             listed, as no rerun can convert {} again (a rerun with the settings {} {} \
+             converted with lists {} again): {}{}",
             if n == 1 { "" } else { "s" },
             out.display(),
+            if n == 1 { "was" } else { "were" },
+            if n == 1 { "it" } else { "them" },
+            if n == 1 { "it" } else { "they" },
             if n == 1 { "was" } else { "were" },
             if n == 1 { "it" } else { "them" },
             shown.join(", "),
