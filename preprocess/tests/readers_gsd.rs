@@ -1222,3 +1222,37 @@ fn a_short_file_of_something_else_is_not_called_a_cut_gsd_file() {
         assert!(e.contains(want), "{e}");
     }
 }
+
+/// A velocity written in frame 0 only (HOOMD's default `dynamic` list) colours a later
+/// frame by frame 0's values: said, not left silent.
+#[test]
+fn an_attribute_a_later_frame_takes_from_frame_0_is_noted() {
+    let names: Vec<String> = ["particles/N", "particles/position", "particles/charge"]
+        .map(String::from)
+        .to_vec();
+    let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    let positions = f32s(&[0.0, 0.0, 0.0, 1.0, 2.0, 3.0]);
+    let bytes = gsd_frames(
+        &names,
+        &[
+            (0, (0, 3, 1, 1, 2u32.to_le_bytes().to_vec())),
+            (0, (1, 9, 2, 3, positions.clone())),
+            (0, (2, 9, 2, 1, f32s(&[0.5, -0.5]))),
+            (1, (1, 9, 2, 3, positions)),
+        ],
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("static.gsd");
+    std::fs::write(&path, &bytes).unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    assert_eq!(dump.frame_count(), 2);
+    let notes = |k| dump.frame_notes(k, &charge());
+    assert!(notes(0).is_empty(), "{:?}", notes(0));
+    assert!(
+        notes(1)
+            .iter()
+            .any(|n| n.contains("`particles/charge` is written in frame 0 only")),
+        "{:?}",
+        notes(1)
+    );
+}

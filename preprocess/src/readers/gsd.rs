@@ -360,6 +360,18 @@ impl Index {
         self.frames
     }
 
+    /// Whether frame `k` (past 0), holding positions of its own, takes chunk `name` from
+    /// frame 0 (the schema's rule for a chunk a frame leaves out): HOOMD writes
+    /// quantities outside its `dynamic` list in frame 0 only, so a velocity read for a
+    /// later frame is frame 0's.
+    pub(crate) fn takes_from_frame_0(&self, k: usize, name: &str) -> bool {
+        k > 0
+            && self.chunk(k, name).is_some_and(|e| e.frame == 0)
+            && self
+                .chunk(k, "particles/position")
+                .is_some_and(|e| e.frame == k as u64)
+    }
+
     /// The chunk `name` of frame `k`, else of frame 0 (the schema's rule).
     fn chunk(&self, k: usize, name: &str) -> Option<&Entry> {
         let id = u16::try_from(self.names.iter().position(|n| n == name)?).ok()?;

@@ -871,6 +871,23 @@ impl DumpFile {
         if let Index::Raw(r) = &self.index {
             notes.extend(r.notes().iter().cloned());
         }
+        // A GSD attribute a later frame takes from frame 0: the colours are frame 0's.
+        if let (Index::Gsd(i), Some(name)) = (&self.index, &read.attribute) {
+            let base = magnitude_of(name).map_or(name.as_str(), str::trim);
+            let full = if base.contains('/') {
+                base.to_string()
+            } else {
+                format!("particles/{base}")
+            };
+            if i.takes_from_frame_0(k, &full) {
+                notes.push(format!(
+                    "{}: `{full}` is written in frame 0 only (HOOMD writes quantities \
+                     outside its `dynamic` list once), and later frames take frame 0's values \
+                     for their attribute",
+                    self.path.display()
+                ));
+            }
+        }
 
         let named = read.sizes == SizeColumn::Auto
             && matches!(
