@@ -55,6 +55,10 @@ fn lammps_velocities_give_speeds_by_prefix_or_by_list() {
             && e.contains("the columns are id type x y z vx vy vz"),
         "{e}"
     );
+    // One column: its absolute value.
+    assert_eq!(values(&path, "|c_f[2]|").unwrap().1, [0.0, 2.0, 0.0]);
+    let e = values(&path, "|vx,vx|").unwrap_err();
+    assert!(e.contains("|vx,vx| names `vx` twice"), "{e}");
     let e = values(&path, "|vx,speed|").unwrap_err();
     assert!(
         e.contains("no column `speed` for the magnitude |vx,speed|"),

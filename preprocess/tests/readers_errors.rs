@@ -466,3 +466,36 @@ fn a_count_the_frame_cannot_hold_is_a_truncated_frame_before_reading() {
         );
     }
 }
+
+/// Files of formats mdlod does not read are named as what they are, with how to write
+/// them as one it reads; binary bytes of an unknown first line are shown as dots.
+#[test]
+fn foreign_formats_are_named_with_the_way_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let open = |name: &str, bytes: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        mdlod_preprocess::readers::DumpFile::open(&path)
+            .err()
+            .unwrap()
+            .to_string()
+    };
+    let e = open(
+        "md.traj",
+        b"- of UlmASE-Trajectory  \x00\x01\x8f\xfe rest\n",
+    );
+    assert!(
+        e.contains("an ASE trajectory (.traj), which mdlod does not read")
+            && e.contains("`ase convert md.traj out.xyz`"),
+        "{e}"
+    );
+    let e = open("cu.cif", b"data_Cu\n_cell_length_a 3.61\n");
+    assert!(
+        e.contains("a CIF crystal file, which mdlod does not read"),
+        "{e}"
+    );
+    let e = open("POSCAR", b"Cu fcc\n1.0\n3.6 0 0\n");
+    assert!(e.contains("a VASP structure file"), "{e}");
+    let e = open("blob.dat", b"\x00\x01\x02abc\xff\xfe\n");
+    assert!(e.contains("first line `...abc..`"), "{e}");
+}

@@ -264,10 +264,14 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
                 1 => format!(", every {}", gaps.iter().next().copied().unwrap_or(0)),
                 _ => String::new(),
             };
-            println!(
-                "  frames       {} (timesteps {a} to {b}{every})",
-                frames.len()
-            );
+            if frames.len() == 1 {
+                println!("  frames       1 (timestep {a})");
+            } else {
+                println!(
+                    "  frames       {} (timesteps {a} to {b}{every})",
+                    frames.len()
+                );
+            }
         }
         _ => println!("  frames       0"),
     }

@@ -363,6 +363,13 @@ pub fn magnitude_columns(inner: &str, columns: &[String]) -> Result<Vec<String>,
                 listed.len()
             ));
         }
+        if let Some((_, c)) = listed
+            .iter()
+            .enumerate()
+            .find(|(i, c)| listed[..*i].contains(c))
+        {
+            return Err(format!("|{inner}| names `{c}` twice"));
+        }
         return match listed.iter().find(|c| !has(c)) {
             Some(c) => Err(format!(
                 "no column `{c}` for the magnitude |{inner}|; the columns are {}",
@@ -383,6 +390,8 @@ pub fn magnitude_columns(inner: &str, columns: &[String]) -> Result<Vec<String>,
     candidates
         .into_iter()
         .find(|c| c.iter().all(|n| has(n)))
+        // One column: its absolute value (`|vz|`).
+        .or_else(|| has(name).then(|| vec![name.to_string()]))
         .ok_or_else(|| {
             format!(
                 "no vector `{name}` for the magnitude |{name}| ({name}[0] {name}[1] {name}[2], \
@@ -717,12 +726,20 @@ impl DumpFile {
                     .map(|(_, l)| trim(l))
                     .find(|l| !l.is_empty())
                     .unwrap_or_default();
-                ReadError::Unsupported {
-                    at: first_line(),
-                    message: format!(
+                let message = match foreign_format(path, data) {
+                    Some(kind) => format!(
+                        "{kind}, which mdlod does not read: write it as extended XYZ (ASE: \
+                         `ase convert {} out.xyz`; or from OVITO or VMD), a LAMMPS dump or GSD",
+                        path.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned())
+                    ),
+                    None => format!(
                         "cannot tell the format from the name or the first line `{}`; expected a LAMMPS text dump (`ITEM: ...`), an XYZ file (atom count) or a raw sidecar (a JSON object with `\"mdlod_raw\": 1`)",
                         shorten(line)
                     ),
+                };
+                ReadError::Unsupported {
+                    at: first_line(),
+                    message,
                 }
             })?;
         let ctx = Ctx { path, data };
@@ -1996,12 +2013,49 @@ pub(crate) fn parse_int<T: std::str::FromStr>(s: &[u8]) -> Option<T> {
 }
 
 /// A line for an error message: lossy UTF-8, trimmed, at most 60 characters.
+/// What a file of a format mdlod does not read is, told from its name or first bytes
+/// (an ASE trajectory, a CIF, a POSCAR, ...): `None` for anything else.
+fn foreign_format(path: &Path, data: &[u8]) -> Option<&'static str> {
+    let head = &data[..data.len().min(256)];
+    let has = |needle: &[u8]| head.windows(needle.len()).any(|w| w == needle);
+    if has(b"UlmASE-Trajectory") {
+        return Some("an ASE trajectory (.traj)");
+    }
+    let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+    let ext = name.rsplit_once('.').map_or("", |(_, e)| e);
+    Some(match ext {
+        "cif" => "a CIF crystal file",
+        "pdb" | "ent" => "a PDB file",
+        "gro" => "a GROMACS .gro file",
+        "xtc" | "trr" => "a GROMACS trajectory",
+        "dcd" => "a DCD trajectory",
+        "xsf" | "axsf" => "an XCrySDen .xsf file",
+        "h5" | "h5md" | "hdf5" => "an HDF5 file (H5MD?)",
+        "nc" | "netcdf" => "a NetCDF file (AMBER or LAMMPS netcdf dump?)",
+        "vasp" => "a VASP structure file",
+        _ if name.starts_with("poscar") || name.starts_with("contcar") || name == "xdatcar" => {
+            "a VASP structure file"
+        }
+        _ => return None,
+    })
+}
+
 pub(crate) fn shorten(line: &[u8]) -> String {
-    let s = String::from_utf8_lossy(trim(line));
+    // Control bytes and bytes that are no UTF-8 (a binary file's) as dots.
+    let s: String = String::from_utf8_lossy(trim(line))
+        .chars()
+        .map(|c| {
+            if (c.is_control() && c != '\t') || c == char::REPLACEMENT_CHARACTER {
+                '.'
+            } else {
+                c
+            }
+        })
+        .collect();
     if s.chars().count() > 60 {
         format!("{}...", s.chars().take(60).collect::<String>())
     } else {
-        s.into_owned()
+        s
     }
 }
 
