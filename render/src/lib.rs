@@ -251,8 +251,22 @@ impl ViewSpec {
 ///
 /// Files of up to [`FLAT_TEST_POINTS`] particles are tested on their particles; larger
 /// ones on the representatives of their finest level of at most that many points (each a
-/// weighted mean of particles, so in their plane when they are flat).
+/// weighted mean of particles, so in their plane when they are flat). A plane's
+/// thickness up to [`FLAT_SLACK`] of the smallest species radius counts as flat: a relaxed
+/// sheet's atoms stand 10⁻⁴ to 10⁻³ Å off its plane.
 pub fn flat_axis(file: &MdlodFile) -> Option<usize> {
+    let slack = file
+        .metadata()
+        .species
+        .iter()
+        .map(|s| s.radius)
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .fold(f32::INFINITY, f32::min);
+    let slack = if slack.is_finite() {
+        FLAT_SLACK * slack
+    } else {
+        0.0
+    };
     let levels = file.levels();
     let last = file.level_count().checked_sub(1)?;
     if levels[last].point_count <= FLAT_TEST_POINTS as u64 {
@@ -269,17 +283,22 @@ pub fn flat_axis(file: &MdlodFile) -> Option<usize> {
                 ))
             })
         });
-        return flat_axis_of(points);
+        return flat_axis_within(points, slack);
     }
     let level = (0..last)
         .rev()
         .find(|&l| levels[l].point_count <= FLAT_TEST_POINTS as u64)?;
-    flat_axis_of(
+    flat_axis_within(
         file.level_nodes(level)
             .iter()
             .map(|n| glam::Vec3::from(n.centroid)),
+        slack,
     )
 }
+
+/// The share of the smallest species radius a flat set of particles may stand off its
+/// plane ([`flat_axis`]).
+pub const FLAT_SLACK: f32 = 0.05;
 
 /// The most points [`flat_axis`] looks at (a millisecond's work).
 pub const FLAT_TEST_POINTS: usize = 1 << 16;
@@ -287,6 +306,12 @@ pub const FLAT_TEST_POINTS: usize = 1 << 16;
 /// [`flat_axis`] of particles centred at `points`: an axis along which their centres
 /// spread no more than 10⁻⁵ of their widest spread (and single precision's rounding).
 pub fn flat_axis_of(points: impl IntoIterator<Item = glam::Vec3>) -> Option<usize> {
+    flat_axis_within(points, 0.0)
+}
+
+/// [`flat_axis_of`], also where the centres spread no more than `slack` (world units)
+/// along the axis, while spreading more than a hundred times that along another.
+pub fn flat_axis_within(points: impl IntoIterator<Item = glam::Vec3>, slack: f32) -> Option<usize> {
     let (mut lo, mut hi) = (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY);
     for p in points {
         lo = lo.min(p);
@@ -297,7 +322,9 @@ pub fn flat_axis_of(points: impl IntoIterator<Item = glam::Vec3>) -> Option<usiz
         return None;
     }
     let far = lo.abs().max(hi.abs()).max_element();
-    let tolerance = 1e-5 * extent.max_element() + 8.0 * f32::EPSILON * far;
+    let widest = extent.max_element();
+    let slack = if widest > 100.0 * slack { slack } else { 0.0 };
+    let tolerance = (1e-5 * widest).max(slack) + 8.0 * f32::EPSILON * far;
     let flat: Vec<usize> = (0..3).filter(|&k| extent[k] <= tolerance).collect();
     match flat[..] {
         [k] => Some(k),

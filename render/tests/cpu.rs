@@ -2009,6 +2009,16 @@ fn the_default_view_faces_flat_data_square_on_and_orbits_three_dimensional_data(
         let (_d, _p, f) = make_file(&spheres_frame(&line), small_build(), &[("X", 0.5)]);
         assert_eq!(mdlod_render::flat_axis(&f), Some(seen_along), "{line_axis}");
     }
+    // A relaxed sheet: atoms up to 10⁻³ of their spacing off the plane (a BFGS
+    // relaxation's leftovers) are flat; a buckled one, 0.2 radii off it, is not.
+    for (off, flat) in [(1e-3f32, Some(2)), (1e-4, Some(2)), (0.1, None)] {
+        let mut sheet = layer(2, 30, 20, 0.0);
+        for (i, p) in sheet.iter_mut().enumerate() {
+            p[2] += if i % 2 == 0 { off } else { -off };
+        }
+        let (_d, _p, f) = make_file(&spheres_frame(&sheet), small_build(), &[("X", 0.5)]);
+        assert_eq!(mdlod_render::flat_axis(&f), flat, "{off}");
+    }
     // A large file is tested on its representatives.
     let big = layer(1, 300, 250, -40.0);
     assert!(big.len() > mdlod_render::FLAT_TEST_POINTS);
