@@ -756,9 +756,20 @@ fn with_particle(e: ConvertError, frame: &Frame, options: &ConvertOptions) -> Co
             .iter()
             .map(|s| crate::species::renamed(&options.species_names, &s.name) == u.species)
             .collect();
-        u.particle = frame.species_index.iter().zip(radii).position(|(&s, &r)| {
-            of_species.get(usize::from(s)) == Some(&true) && !(r.is_finite() && r > 0.0)
-        });
+        let usable = |r: f32| r.is_finite() && r > 0.0;
+        let theirs = || {
+            frame
+                .species_index
+                .iter()
+                .zip(radii)
+                .enumerate()
+                .filter(|(_, (&s, _))| of_species.get(usize::from(s)) == Some(&true))
+        };
+        // Named where the species' particles have sizes of their own, some usable (a
+        // list of one size, 0, has no particle to name).
+        if theirs().any(|(_, (_, &r))| usable(r)) {
+            u.particle = theirs().find(|(_, (_, &r))| !usable(r)).map(|(i, _)| i);
+        }
     }
     ConvertError::UnusableRadius(u)
 }

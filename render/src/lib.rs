@@ -800,9 +800,10 @@ fn with_fitted_cell(
 }
 
 /// The box around `file`'s simulation cell (its eight corners), where it has one.
-/// The corners of the cell as boxes of no extent: what a fit frames for the cell drawn
-/// (its bounding box's corners lie outside a slanted cell, which then framed it small).
-fn cell_corner_boxes(file: &MdlodFile) -> Vec<Bounds> {
+/// The corners of the cell as boxes of no extent, within `fitted` (which leaves out faces
+/// a lost atom stretched, [`fit_for`]): what a fit frames for the cell drawn (its bounding
+/// box's corners lie outside a slanted cell, which then framed it small).
+fn cell_corner_boxes(file: &MdlodFile, fitted: &Bounds) -> Vec<Bounds> {
     let Some(cell) = file.metadata().simulation_box.as_ref() else {
         return Vec::new();
     };
@@ -820,7 +821,10 @@ fn cell_corner_boxes(file: &MdlodFile) -> Vec<Bounds> {
     corners
         .into_iter()
         .filter(|p| p.is_finite())
-        .map(|p| Bounds::new(p, p))
+        .map(|p| {
+            let p = p.clamp(fitted.min, fitted.max);
+            Bounds::new(p, p)
+        })
         .collect()
 }
 
@@ -935,7 +939,7 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
         }
     }
     if opts.cell.is_some() && !boxes.is_empty() {
-        boxes.extend(cell_corner_boxes(file));
+        boxes.extend(cell_corner_boxes(file, fitted));
     }
     boxes
 }
@@ -966,7 +970,7 @@ fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Ve
         })
         .collect();
     if opts.cell.is_some() && !boxes.is_empty() {
-        boxes.extend(cell_corner_boxes(file));
+        boxes.extend(cell_corner_boxes(file, fitted));
     }
     boxes
 }

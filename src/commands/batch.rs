@@ -460,6 +460,19 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         report.jobs,
         report.manifest.display()
     );
+    // Nothing listed, every frame left for a rerun: said plainly (a file cut short that
+    // no run is writing any more converts nothing, however often it is run).
+    if report.converted + report.skipped + report.kept_gone.len() == 0
+        && !report.incomplete.is_empty()
+        && report.failed.is_empty()
+    {
+        println!(
+            "note: {} lists no frame yet: every frame of the inputs is cut short or empty, \
+             left for a rerun once the run writing them has written more (if no run is \
+             writing them, they are damaged: `mdlod convert` of one says where)",
+            report.manifest.display()
+        );
+    }
     if !report.failed.is_empty() {
         let n = report.failed.len();
         let others = if report.converted + report.skipped > 0 {

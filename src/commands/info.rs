@@ -646,8 +646,11 @@ pub fn run(args: Args) -> Result<()> {
             s.size
         );
     }
+    let chunks = m.build.chunk_points.map_or(String::new(), |c| {
+        format!(", built in chunks of {c} particles")
+    });
     println!(
-        "  build        cluster size {}, root points {}, delta_n {}, {}-bit positions",
+        "  build        cluster size {}, root points {}, delta_n {}, {}-bit positions{chunks}",
         m.build.max_cluster_size, m.build.max_root_points, m.build.delta_n, m.build.position_bits
     );
     println!("  max position error {:.4e}", m.max_position_error);

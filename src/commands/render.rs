@@ -2009,7 +2009,7 @@ pub fn run(mut args: Args) -> Result<()> {
         String::new()
     };
     println!(
-        "wrote {} ({}x{}{samples}) on {} ({}): {} particles{hidden} and {} {points} in {} ranges{occluded}, error {:.2} px{limits}",
+        "wrote {} ({}x{}{samples}) on {} ({}): {} particles{hidden} and {} {points} in {} draw ranges{occluded}, error {:.2} px{limits}",
         args.output.display(),
         r.width,
         r.height,
