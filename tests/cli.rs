@@ -6142,24 +6142,8 @@ fn a_volume_clipped_to_nothing_says_so() {
 #[test]
 fn a_ball_of_atoms_fills_the_image() {
     let dir = tempfile::tempdir().unwrap();
+    let file = argon_ball(dir.path(), 12);
     let xyz = dir.path().join("ball.xyz");
-    let mut atoms = Vec::new();
-    for i in -12i32..=12 {
-        for j in -12i32..=12 {
-            for k in -12i32..=12 {
-                if i * i + j * j + k * k <= 144 {
-                    atoms.push(format!("Ar {} {} {}", i, j, k));
-                }
-            }
-        }
-    }
-    std::fs::write(
-        &xyz,
-        format!("{}\nball\n{}\n", atoms.len(), atoms.join("\n")),
-    )
-    .unwrap();
-    let file = dir.path().join("ball.mdlod");
-    ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Ar=0.5"]);
     let png = dir.path().join("ball.png");
     let (w, h) = (96u32, 72u32);
     for extra in [
@@ -6213,26 +6197,8 @@ fn a_ball_of_atoms_fills_the_image() {
 #[test]
 fn a_small_ball_of_atoms_fills_and_centres_the_image() {
     let dir = tempfile::tempdir().unwrap();
-    let xyz = dir.path().join("ball.xyz");
-    let mut atoms = Vec::new();
-    for i in -4i32..=4 {
-        for j in -4i32..=4 {
-            for k in -4i32..=4 {
-                if i * i + j * j + k * k <= 16 {
-                    atoms.push(format!("Ar {} {} {}", i, j, k));
-                }
-            }
-        }
-    }
-    std::fs::write(
-        &xyz,
-        format!("{}\nball\n{}\n", atoms.len(), atoms.join("\n")),
-    )
-    .unwrap();
-    let file = dir.path().join("ball.mdlod");
-    ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Ar=0.5"]);
+    let file = argon_ball(dir.path(), 4);
     let png = dir.path().join("ball.png");
-    let (w, h) = (96u32, 72u32);
     for extra in [
         &[][..],
         &["--ortho"],
@@ -6242,12 +6208,8 @@ fn a_small_ball_of_atoms_fills_and_centres_the_image() {
         args.extend(["--height", "72", "--background", "#000000"]);
         args.extend_from_slice(extra);
         ok(&args);
-        let px = read_png(&png).2;
-        let on = |x: u32, y: u32| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 8);
-        let rows: Vec<u32> = (0..h).filter(|&y| (0..w).any(|x| on(x, y))).collect();
-        let cols: Vec<u32> = (0..w).filter(|&x| (0..h).any(|y| on(x, y))).collect();
-        let (top, bottom) = (rows[0], rows[rows.len() - 1]);
-        let (left, right) = (cols[0], cols[cols.len() - 1]);
+        let ([top, bottom], [left, right]) = lit_extent(&png);
+        let (w, h) = (96u32, 72u32);
         assert!(
             bottom - top + 1 >= h * 4 / 5,
             "{extra:?}: rows {top} to {bottom} of {h}"
@@ -6258,6 +6220,41 @@ fn a_small_ball_of_atoms_fills_and_centres_the_image() {
             "{extra:?}: rows {top} to {bottom}, columns {left} to {right}"
         );
     }
+}
+
+/// A ball of argon atoms on a unit lattice within `radius`, converted with radius 0.5.
+fn argon_ball(dir: &Path, radius: i32) -> PathBuf {
+    let xyz = dir.join("ball.xyz");
+    let mut atoms = Vec::new();
+    for i in -radius..=radius {
+        for j in -radius..=radius {
+            for k in -radius..=radius {
+                if i * i + j * j + k * k <= radius * radius {
+                    atoms.push(format!("Ar {} {} {}", i, j, k));
+                }
+            }
+        }
+    }
+    std::fs::write(
+        &xyz,
+        format!("{}\nball\n{}\n", atoms.len(), atoms.join("\n")),
+    )
+    .unwrap();
+    let file = dir.join("ball.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file), "--radius", "Ar=0.5"]);
+    file
+}
+
+/// The first and last rows, and columns, of a PNG holding a pixel brighter than black.
+fn lit_extent(png: &Path) -> ([u32; 2], [u32; 2]) {
+    let (w, h, px) = read_png(png);
+    let on = |x: u32, y: u32| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 8);
+    let rows: Vec<u32> = (0..h).filter(|&y| (0..w).any(|x| on(x, y))).collect();
+    let cols: Vec<u32> = (0..w).filter(|&x| (0..h).any(|y| on(x, y))).collect();
+    (
+        [rows[0], rows[rows.len() - 1]],
+        [cols[0], cols[cols.len() - 1]],
+    )
 }
 
 /// A slanted cell drawn with `--cell` is framed by its corners, not by its bounding box
@@ -6291,16 +6288,13 @@ fn a_slanted_cell_is_framed_by_its_corners() {
     let file = dir.path().join("prim.mdlod");
     ok(&["convert", s(&xyz), "-o", s(&file)]);
     let png = dir.path().join("prim.png");
-    let (w, h) = (160u32, 90u32);
+    let h = 90u32;
     for extra in [&[][..], &["--ortho"]] {
         let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "160"];
         args.extend(["--height", "90", "--background", "#000000", "--cell"]);
         args.extend_from_slice(extra);
         ok(&args);
-        let px = read_png(&png).2;
-        let on = |x: u32, y: u32| px[4 * (y * w + x) as usize..][..3].iter().any(|&v| v > 8);
-        let rows: Vec<u32> = (0..h).filter(|&y| (0..w).any(|x| on(x, y))).collect();
-        let (top, bottom) = (rows[0], rows[rows.len() - 1]);
+        let ([top, bottom], _) = lit_extent(&png);
         assert!(
             bottom - top + 1 >= h * 4 / 5,
             "{extra:?}: rows {top} to {bottom} of {h}"

@@ -1278,17 +1278,18 @@ struct Recorded {
     wrap: bool,
 }
 
-/// The column names and radius overrides each listed frame was converted with, from
-/// every manifest of `out_dir` (whole and shards', of this run's earlier attempts or of
-/// other shardings), by file name and checksum. Unreadable manifests are passed over.
-fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String), Recorded> {
+/// Every record of a frame file in the manifests of `out_dir` (whole, shards', of this
+/// run's earlier attempts or of other shardings, and the merged one a shard moved aside;
+/// listed, kept by a shard or kept unlisted), by file name and checksum. Unreadable
+/// manifests are passed over.
+fn recorded_frames(out_dir: &Path) -> std::collections::HashMap<(String, String), FrameEntry> {
     let mut known = std::collections::HashMap::new();
     let Ok(dir) = std::fs::read_dir(out_dir) else {
         return known;
     };
     for e in dir.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        if !(name == MANIFEST || is_shard_manifest(&name)) {
+        if !(name == MANIFEST || name == PREVIOUS_MANIFEST || is_shard_manifest(&name)) {
             continue;
         }
         let Some(m) = read_manifest_bytes(&e.path())
@@ -1297,22 +1298,31 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
         else {
             continue;
         };
-        for f in m.frames {
-            known.insert(
-                (f.file, f.checksum),
-                Recorded {
-                    source: f.source,
-                    columns: f.columns,
-                    radii: f.radii,
-                    species_names: f.species_names,
-                    sizes: f.sizes,
-                    species_column: f.species_column,
-                    wrap: f.wrap,
-                },
-            );
+        for f in m.frames.into_iter().chain(m.gone).chain(m.unlisted) {
+            known.insert((f.file.clone(), f.checksum.clone()), f);
         }
     }
     known
+}
+
+/// The column names and radius overrides each recorded frame was converted with
+/// ([`recorded_frames`]), by file name and checksum.
+fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String), Recorded> {
+    recorded_frames(out_dir)
+        .into_iter()
+        .map(|(key, f)| {
+            let r = Recorded {
+                source: f.source,
+                columns: f.columns,
+                radii: f.radii,
+                species_names: f.species_names,
+                sizes: f.sizes,
+                species_column: f.species_column,
+                wrap: f.wrap,
+            };
+            (key, r)
+        })
+        .collect()
 }
 
 /// Whether a recorded source is gone: no file at its path (as the run that converted it
@@ -1343,26 +1353,7 @@ fn gone_source_frames(
     opts: &BatchOptions,
     attribute: Option<&str>,
 ) -> GoneFrames {
-    let mut listed: std::collections::HashMap<(String, String), FrameEntry> =
-        std::collections::HashMap::new();
-    if let Ok(dir) = std::fs::read_dir(out_dir) {
-        for e in dir.flatten() {
-            let name = e.file_name().to_string_lossy().into_owned();
-            if !(name == MANIFEST || name == PREVIOUS_MANIFEST || is_shard_manifest(&name)) {
-                continue;
-            }
-            let Some(m) = read_manifest_bytes(&e.path())
-                .ok()
-                .and_then(|t| parse_manifest(&e.path(), &t, "dataset").ok())
-            else {
-                continue;
-            };
-            // Listed, kept by a shard, or kept unlisted: every record of a frame file.
-            for f in m.frames.into_iter().chain(m.gone).chain(m.unlisted) {
-                listed.insert((f.file.clone(), f.checksum.clone()), f);
-            }
-        }
-    }
+    let listed = recorded_frames(out_dir);
     // Frames recorded whose files are gone too, of no frame of this run.
     let mut vanished: Vec<u64> = listed
         .values()

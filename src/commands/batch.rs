@@ -301,92 +301,64 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         );
     }
     if !report.strays.is_empty() {
-        let shown: Vec<&str> = report.strays.iter().take(5).map(String::as_str).collect();
-        let more = report.strays.len() - shown.len();
         let files = match report.strays.len() {
             1 => "1 frame file".to_string(),
             n => format!("{n} frame files"),
         };
         println!(
             "note: {files} in {} belong to no frame of these inputs (a run over other or \
-             longer inputs wrote them; left alone, not in the manifest): {}{}",
+             longer inputs wrote them; left alone, not in the manifest): {}",
             out.display(),
-            shown.join(", "),
-            if more > 0 {
-                format!(" and {more} more")
-            } else {
-                String::new()
-            }
+            first_five(&report.strays)
         );
     }
+    let one = |n: usize, single: &'static str, plural: &'static str| {
+        if n == 1 {
+            single
+        } else {
+            plural
+        }
+    };
     if !report.kept_gone.is_empty() {
         let n = report.kept_gone.len();
-        let shown: Vec<String> = report
-            .kept_gone
-            .iter()
-            .take(5)
-            .map(u64::to_string)
-            .collect();
         println!(
             "note: {n} frame{} converted from dumps that are gone since stay{} listed \
-             (timestep{} {}{})",
-            if n == 1 { "" } else { "s" },
-            if n == 1 { "s" } else { "" },
-            if n == 1 { "" } else { "s" },
-            shown.join(", "),
-            if n > 5 {
-                format!(" and {} more", n - 5)
-            } else {
-                String::new()
-            }
+             (timestep{} {})",
+            one(n, "", "s"),
+            one(n, "s", ""),
+            one(n, "", "s"),
+            first_five(&report.kept_gone)
         );
     }
     if !report.vanished.is_empty() {
         let n = report.vanished.len();
-        let shown: Vec<String> = report.vanished.iter().take(5).map(u64::to_string).collect();
         println!(
             "note: {n} frame{} listed before {} gone with {} dump{} (frame file{} deleted): \
-             no longer listed (timestep{} {}{})",
-            if n == 1 { "" } else { "s" },
-            if n == 1 { "is" } else { "are" },
-            if n == 1 { "its" } else { "their" },
-            if n == 1 { "" } else { "s" },
-            if n == 1 { "" } else { "s" },
-            if n == 1 { "" } else { "s" },
-            shown.join(", "),
-            if n > 5 {
-                format!(" and {} more", n - 5)
-            } else {
-                String::new()
-            }
+             no longer listed (timestep{} {})",
+            one(n, "", "s"),
+            one(n, "is", "are"),
+            one(n, "its", "their"),
+            one(n, "", "s"),
+            one(n, "", "s"),
+            one(n, "", "s"),
+            first_five(&report.vanished)
         );
     }
     if !report.gone_other.is_empty() {
         let n = report.gone_other.len();
-        let shown: Vec<&str> = report
-            .gone_other
-            .iter()
-            .take(5)
-            .map(String::as_str)
-            .collect();
         println!(
             "note: {n} frame file{} in {} {} converted from dumps that are gone since, with \
              other settings than this run's (or listed by no manifest): left alone and not \
              listed, as no rerun can convert {} again (a rerun with the settings {} {} \
-             converted with lists {} again): {}{}",
-            if n == 1 { "" } else { "s" },
+             converted with lists {} again): {}",
+            one(n, "", "s"),
             out.display(),
-            if n == 1 { "was" } else { "were" },
-            if n == 1 { "it" } else { "them" },
-            if n == 1 { "it" } else { "they" },
-            if n == 1 { "was" } else { "were" },
-            if n == 1 { "it" } else { "them" },
-            shown.join(", "),
-            if n > 5 {
-                format!(" and {} more", n - 5)
-            } else {
-                String::new()
-            }
+            one(n, "was", "were"),
+            one(n, "it", "them"),
+            one(n, "it", "they"),
+            one(n, "was", "were"),
+            one(n, "it", "them"),
+            first_five(&report.gone_other)
         );
     }
     for e in &report.empty {
@@ -488,6 +460,15 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         );
     }
     Ok(())
+}
+
+/// The first five of `items`, comma-separated, with how many more (`a, b and 3 more`).
+fn first_five<T: std::fmt::Display>(items: &[T]) -> String {
+    let shown: Vec<String> = items.iter().take(5).map(T::to_string).collect();
+    match items.len().saturating_sub(5) {
+        0 => shown.join(", "),
+        more => format!("{} and {more} more", shown.join(", ")),
+    }
 }
 
 #[cfg(test)]
