@@ -8722,3 +8722,35 @@ fn info_of_an_unmerged_sharded_batch_shows_each_shards_progress() {
     let text = ok(&["info", s(&d)]);
     assert!(text.contains("frames       6"), "{text}");
 }
+
+/// Convert once, then delete the dumps: a rerun over the dumps left says which frames of
+/// deleted dumps stay listed, and movies and verify keep them.
+#[test]
+fn a_rerun_after_deleting_dumps_keeps_their_frames_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let (units, _) = text.split_once("ITEM: TIME\n").unwrap();
+    let mut files = Vec::new();
+    for frame in text.split("ITEM: TIME\n").skip(1) {
+        let (_, rest) = frame.split_once("ITEM: TIMESTEP\n").unwrap();
+        let timestep: u64 = rest.lines().next().unwrap().trim().parse().unwrap();
+        let p = dir.path().join(format!("melt.{timestep}.dump"));
+        std::fs::write(&p, format!("{units}ITEM: TIME\n{frame}")).unwrap();
+        files.push(p);
+    }
+    let out = dir.path().join("out");
+    let pattern = dir.path().join("melt.*.dump");
+    ok(&["batch", s(&pattern), "-o", s(&out)]);
+    std::fs::remove_file(&files[0]).unwrap();
+    std::fs::remove_file(&files[1]).unwrap();
+    let text = ok(&["batch", s(&pattern), "-o", s(&out)]);
+    assert!(
+        text.contains(
+            "note: 2 frames converted from dumps that are gone since stay listed (timesteps \
+             0, 100)"
+        ),
+        "{text}"
+    );
+    let text = ok(&["verify", s(&out)]);
+    assert!(text.contains("ok: 6 frames"), "{text}");
+}
