@@ -8753,4 +8753,38 @@ fn a_rerun_after_deleting_dumps_keeps_their_frames_and_says_so() {
     );
     let text = ok(&["verify", s(&out)]);
     assert!(text.contains("ok: 6 frames"), "{text}");
+    // Run from elsewhere, over dumps named by other paths: the recorded relative paths
+    // are found beside the inputs, so a dump left out is no dump gone.
+    let run = |cwd: &Path, args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+            .args(args)
+            .current_dir(cwd)
+            .env("WGPU_BACKEND", "vulkan")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let rel = dir.path().join("rel");
+    std::fs::create_dir(&rel).unwrap();
+    let dumps = rel.join("dumps");
+    std::fs::create_dir(&dumps).unwrap();
+    for f in &files[2..] {
+        std::fs::copy(f, dumps.join(f.file_name().unwrap())).unwrap();
+    }
+    run(&rel, &["batch", "dumps/melt.*.dump", "-o", "out"]);
+    let text = run(
+        Path::new("/"),
+        &[
+            "batch",
+            s(&dumps.join("melt.300.dump")),
+            "-o",
+            s(&rel.join("out")),
+        ],
+    );
+    assert!(!text.contains("are gone since"), "{text}");
+    assert!(
+        text.contains("belong to no frame of these inputs"),
+        "{text}"
+    );
 }

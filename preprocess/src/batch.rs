@@ -1325,18 +1325,53 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
         .collect()
 }
 
-/// Whether a recorded source is gone: no file at its path (as the run that converted it
-/// was given it), nor, for a `%` set, any piece. An empty path (a file recording none)
-/// is not taken for gone.
-fn source_gone(source: &SourceInfo) -> bool {
+/// Whether a recorded source of a frame no input of this run holds is gone: no file at
+/// its path (as the run that converted it was given it, from wherever it started: a
+/// relative path is also looked for beside this run's inputs), nor, for a `%` set, any
+/// piece; or a file there that is one of this run's inputs, which holds other frames now
+/// (a restart writing into the same file name). An empty path (a file recording none) is
+/// not taken for gone.
+fn source_gone(source: &SourceInfo, inputs: &[(PathBuf, std::ffi::OsString)]) -> bool {
     if source.path.is_empty() {
         return false;
     }
-    let path = Path::new(&source.path);
-    let pieces = || {
-        source.path.contains('%') && crate::readers::piece_paths(path).is_ok_and(|p| !p.is_empty())
+    let present = |path: &Path| {
+        path.exists()
+            || (source.path.contains('%')
+                && crate::readers::piece_paths(path).is_ok_and(|p| !p.is_empty()))
     };
-    !path.exists() && !pieces()
+    let path = Path::new(&source.path);
+    let found = if present(path) {
+        Some(path.to_path_buf())
+    } else if path.is_relative() {
+        path.file_name().and_then(|name| {
+            inputs
+                .iter()
+                .map(|(dir, _)| dir.join(name))
+                .find(|p| present(p))
+        })
+    } else {
+        None
+    };
+    match found {
+        None => true,
+        Some(p) => inputs.contains(&input_key(&p)),
+    }
+}
+
+/// An input as [`source_gone`] compares it: its directory, resolved, and its name (a `%`
+/// set's pattern names no file to resolve).
+fn input_key(path: &Path) -> (PathBuf, std::ffi::OsString) {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    (
+        std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()),
+        path.file_name()
+            .map(|n| n.to_os_string())
+            .unwrap_or_default(),
+    )
 }
 
 /// The frame files among `strays` (frame files no frame of this run's inputs is written
@@ -1349,14 +1384,25 @@ fn source_gone(source: &SourceInfo) -> bool {
 fn gone_source_frames(
     out_dir: &Path,
     strays: &[String],
+    inputs: &[PathBuf],
     numbers: &std::collections::HashSet<u64>,
     opts: &BatchOptions,
     attribute: Option<&str>,
 ) -> GoneFrames {
+    let inputs: Vec<(PathBuf, std::ffi::OsString)> = inputs.iter().map(|p| input_key(p)).collect();
     let listed = recorded_frames(out_dir);
-    // Frames recorded whose files are gone too, of no frame of this run.
-    let mut vanished: Vec<u64> = listed
-        .values()
+    // Frames listed now (by this run's own manifest, or the merged one) whose files are
+    // gone too, of no frame of this run: said by the run that stops listing them, once
+    // (not from the records a shard moved aside, which no run rewrites).
+    let own = [MANIFEST.to_string(), manifest_name(opts.shard)];
+    let mut vanished: Vec<u64> = own
+        .iter()
+        .filter_map(|name| {
+            let path = out_dir.join(name);
+            let text = read_manifest_bytes(&path).ok()?;
+            parse_manifest(&path, &text, "dataset").ok()
+        })
+        .flat_map(|m| m.frames.into_iter().chain(m.gone))
         .filter(|f| !numbers.contains(&f.timestep) && !out_dir.join(&f.file).exists())
         .map(|f| f.timestep)
         .collect();
@@ -1371,7 +1417,7 @@ fn gone_source_frames(
         let Some(own) = file.metadata().source.clone() else {
             continue;
         };
-        if !source_gone(&own) {
+        if !source_gone(&own, &inputs) {
             continue;
         }
         let checksum = format!("{:016x}", file.header().section_table_checksum);
@@ -2127,7 +2173,14 @@ pub fn batch(
         other: gone_other,
         records: unlisted,
         vanished,
-    } = gone_source_frames(out_dir, &strays, &numbers, opts, attribute.as_deref());
+    } = gone_source_frames(
+        out_dir,
+        &strays,
+        inputs,
+        &numbers,
+        opts,
+        attribute.as_deref(),
+    );
     strays.retain(|n| !gone.iter().any(|e| &e.file == n) && !gone_other.contains(n));
     let mut mine: Vec<Job<'_>> = match opts.shard {
         None => jobs,
@@ -2824,6 +2877,13 @@ pub fn batch(
             }
         }
         removed_shard_manifests.sort();
+        // And the merged manifest a shard moved aside: this one supersedes its records.
+        match std::fs::remove_file(out_dir.join(PREVIOUS_MANIFEST)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(io(&out_dir.join(PREVIOUS_MANIFEST))(e))
+            }
+            _ => {}
+        }
     }
     // A species may appear in some frames only, but a radius override that names none
     // of any frame's is a misspelt name. (A shard sees only its own frames; a column of
@@ -3123,6 +3183,12 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         duplicates,
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
+    // The merged manifest a shard moved aside is superseded (its records too).
+    let previous = out_dir.join(PREVIOUS_MANIFEST);
+    match std::fs::remove_file(&previous) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(&previous)(e)),
+        _ => {}
+    }
     Ok(merged)
 }
 
@@ -3254,6 +3320,17 @@ impl MergeSettings {
             .file_name()
             .map_or(String::new(), |n| n.to_string_lossy().into_owned());
         let this = format!("{} (in {shard})", f.file);
+        // The file the shard wrote, not one converted again since (by a whole run, or a
+        // run of another sharding, killed before it removed the shard manifests).
+        let holds = format!("{:016x}", file.header().section_table_checksum);
+        if holds != f.checksum {
+            return Err(format!(
+                "{shard} lists {} with checksum {}, but the file holds {holds}: it was converted \
+                 again since the shard ran (by a whole run or another sharding); rerun the \
+                 shards, which convert only what changed, then merge",
+                f.file, f.checksum
+            ));
+        }
         // Shards run before and after an input changed convert two versions of it.
         let src = &f.source;
         let version = (src.size, src.modified_unix, src.modified_nanos);
@@ -3448,6 +3525,9 @@ pub struct DirCheck {
     pub problems: Vec<String>,
     /// Frame files no manifest lists (left alone by batches: a run over other inputs).
     pub unlisted: Vec<String>,
+    /// Frame files of deleted dumps a manifest keeps unlisted ([`Manifest::unlisted`]:
+    /// converted with other settings than the last run's).
+    pub kept_unlisted: Vec<String>,
 }
 
 /// Checks a batch directory: every frame a manifest lists is there, verifies completely
@@ -3515,6 +3595,7 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         }
     }
     let mut listed = std::collections::HashSet::new();
+    let mut kept_unlisted = std::collections::BTreeSet::new();
     let mut entries = Vec::new();
     let mut lists = Vec::new();
     let mut choices: Vec<(String, Option<String>)> = Vec::new();
@@ -3522,6 +3603,10 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         let path = dir.join(name);
         let text = read_manifest_bytes(&path).map_err(io(&path))?;
         let m = parse_manifest(&path, &text, "dataset")?;
+        // A shard's frames of deleted dumps are the data set's (the merge lists them);
+        // those kept unlisted are named apart.
+        listed.extend(m.gone.iter().map(|f| f.file.clone()));
+        kept_unlisted.extend(m.unlisted.iter().map(|f| f.file.clone()));
         let named = shard_of(name).map(|(i, n)| [i, n]);
         if let Some(problem) = shard_field_problem(named, m.shard) {
             check.problems.push(format!("{name}: {problem}"));
@@ -3619,10 +3704,12 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         progress.advance(1);
     }
     progress.finish_stage();
-    check.unlisted = names
+    let (kept, unlisted): (Vec<String>, Vec<String>) = names
         .into_iter()
         .filter(|n| frame_file_number(n).is_some() && !listed.contains(n))
-        .collect();
+        .partition(|n| kept_unlisted.contains(n));
+    check.unlisted = unlisted;
+    check.kept_unlisted = kept;
     Ok(check)
 }
 

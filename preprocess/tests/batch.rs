@@ -600,16 +600,21 @@ fn a_rerun_with_another_chunk_size_converts_the_frames_it_changes() {
     assert_eq!(run(300), (3, 0), "chunks again");
 }
 
-/// Column names given for a LAMMPS binary dump decide what its values are, and the file
-/// does not record them: the manifest does, and a rerun with other names (or none)
-/// converts the frames again.
+/// Column names given for an old-revision LAMMPS binary dump (which names none) decide
+/// what its values are, and the file does not record them: the manifest does, and a
+/// rerun with other names converts the frames again.
 #[test]
 fn a_rerun_with_other_column_names_for_a_binary_dump_converts_again() {
     use mdlod_preprocess::readers::DumpFile;
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path().join("melt.bin");
-    std::fs::copy(lammps_sample_path("cu_melt.custom.bin"), &src).unwrap();
-    let own = DumpFile::open(&src).unwrap().frame_info(0).unwrap().columns;
+    let new = lammps_sample_path("cu_melt.custom.bin");
+    let own = DumpFile::open(&new).unwrap().frame_info(0).unwrap().columns;
+    std::fs::write(
+        &src,
+        mdlod_datasets::to_old_revision(&std::fs::read(&new).unwrap()),
+    )
+    .unwrap();
     let swapped: Vec<String> = own
         .iter()
         .map(|c| match c.as_str() {
@@ -627,9 +632,9 @@ fn a_rerun_with_other_column_names_for_a_binary_dump_converts_again() {
         (r.converted, r.skipped)
     };
     let first_checksum = || read_manifest(&out).unwrap().frames[0].checksum.clone();
-    assert_eq!(run(None), (3, 0));
+    assert_eq!(run(Some(&own)), (3, 0));
     let plain = first_checksum();
-    assert_eq!(run(None), (0, 3));
+    assert_eq!(run(Some(&own)), (0, 3));
     assert_eq!(run(Some(&swapped)), (3, 0), "x and y swapped");
     assert_ne!(first_checksum(), plain);
     assert_eq!(
@@ -637,16 +642,8 @@ fn a_rerun_with_other_column_names_for_a_binary_dump_converts_again() {
         Some(&swapped)
     );
     assert_eq!(run(Some(&swapped)), (0, 3));
-    assert_eq!(run(None), (3, 0), "the file's own names again");
+    assert_eq!(run(Some(&own)), (3, 0), "the right names again");
     assert_eq!(first_checksum(), plain);
-    // Names for a text dump change nothing (only binary dumps take them).
-    let text = input(dir.path());
-    let t = dir.path().join("text");
-    batch(std::slice::from_ref(&text), &t, &opts(), &NoProgress).unwrap();
-    let mut o = opts();
-    o.read.columns = Some(swapped.clone());
-    let r = batch(std::slice::from_ref(&text), &t, &o, &NoProgress).unwrap();
-    assert_eq!((r.converted, r.skipped), (0, 6));
 }
 
 /// An MMPLD file (version 1.2) of `frames`, each a list of particle lists (vertex type 1,
@@ -2928,6 +2925,9 @@ fn frames_of_deleted_dumps_stay_listed_when_built_with_this_runs_settings() {
     assert_eq!(r.gone_other, ["frame-0.mdlod", "frame-100.mdlod"]);
     assert_eq!(listed(&out), [200, 300, 400, 500]);
     assert!(out.join("frame-0.mdlod").exists());
+    let check = verify_dir(&out, &NoProgress).unwrap();
+    assert_eq!(check.kept_unlisted, ["frame-0.mdlod", "frame-100.mdlod"]);
+    assert!(check.unlisted.is_empty(), "{:?}", check.unlisted);
     // Their records stay: back to the settings they were converted with, they are listed
     // again.
     let r = batch(&files[2..], &out, &opts(), &NoProgress).unwrap();
@@ -3004,4 +3004,49 @@ fn a_dump_deleted_between_shard_runs_keeps_its_frame() {
     );
     assert_eq!(m.expected_frames, Some(5));
     check_manifest(&out, &m);
+}
+
+/// A frame converted again after the shards ran (a whole run with other settings killed
+/// before it removed the shard manifests) is refused by the merge, which compares every
+/// listed file's checksum, rather than listed with the shard's stale checksum.
+#[test]
+fn merge_refuses_a_frame_converted_again_since_its_shard_ran() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&src), &out, &shard(0, 2), &NoProgress).unwrap();
+    batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap();
+    merge(&out).unwrap();
+    let mut other = opts();
+    other.convert.radii = vec![("1".into(), 1.5)];
+    mdlod_preprocess::convert::convert_file(
+        &src,
+        &out.join("frame-200.mdlod"),
+        mdlod_preprocess::convert::FrameSelect::Index(2),
+        &other.read,
+        &other.convert,
+        &NoProgress,
+    )
+    .unwrap();
+    let e = merge(&out).unwrap_err().to_string();
+    assert!(
+        e.contains("dataset.shard-0-of-2.json lists frame-200.mdlod with checksum")
+            && e.contains("it was converted again since the shard ran"),
+        "{e}"
+    );
+}
+
+/// A dump written over under the same name (a restart into the same file) holds other
+/// frames now: the frames converted from it before are those of a dump that is gone.
+#[test]
+fn frames_of_a_dump_written_over_stay_listed() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = file_per_timestep(dir.path());
+    let out = dir.path().join("out");
+    batch(&files[..2], &out, &opts(), &NoProgress).unwrap();
+    // melt.0.dump now holds timestep 500's frame.
+    std::fs::copy(&files[5], &files[0]).unwrap();
+    let r = batch(&files[..2], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.kept_gone, [0]);
+    assert_eq!(listed(&out), [0, 100, 500]);
 }

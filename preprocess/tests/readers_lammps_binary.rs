@@ -304,7 +304,8 @@ fn wrong_attribute_and_no_coordinates_are_clear_errors() {
         .read_frame(0, &opts, &NoProgress)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("no coordinate columns"), "{e}");
+    // (This dump names its own columns: other names are refused before any is looked for.)
+    assert!(e.contains("this dump names its own columns"), "{e}");
 }
 
 /// Byte offset of the first atom of frame 0 of a current-revision binary dump.
@@ -593,4 +594,49 @@ fn reversed_or_nan_box_bounds_are_refused() {
             "{name}: {e}"
         );
     }
+}
+
+/// `--columns` names the columns of old-revision dumps, which name none: a dump that
+/// names its own refuses other names (its `mol` column was read as the types), and a
+/// text dump any; a name given twice is refused.
+#[test]
+fn column_names_given_for_a_dump_that_names_its_own_are_refused() {
+    let read = |path: &std::path::Path, names: &[&str]| {
+        DumpFile::open(path)
+            .unwrap()
+            .read_frame(
+                0,
+                &ReadOptions {
+                    columns: Some(names.iter().map(|n| n.to_string()).collect()),
+                    ..Default::default()
+                },
+                &NoProgress,
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
+    let bin = lammps_sample_path("cu_melt.custom.bin");
+    let own: Vec<String> = DumpFile::open(&bin).unwrap().frame_info(0).unwrap().columns;
+    let own: Vec<&str> = own.iter().map(String::as_str).collect();
+    assert_eq!(read(&bin, &own), Ok(()));
+    let mut swapped = own.clone();
+    swapped.swap(0, 1);
+    let e = read(&bin, &swapped).unwrap_err();
+    assert!(
+        e.contains("this dump names its own columns") && e.contains("leave it out"),
+        "{e}"
+    );
+    let mut twice = own.clone();
+    twice[1] = twice[0];
+    let e = read(&bin, &twice).unwrap_err();
+    assert!(
+        e.contains(&format!("--columns names `{}` twice", own[0])),
+        "{e}"
+    );
+    let text = lammps_sample_path("cu_melt.custom.dump");
+    let e = read(&text, &["id", "type", "x", "y", "z", "c_pe"]).unwrap_err();
+    assert!(
+        e.contains("a text dump names its own columns (id type x y z c_pe)"),
+        "{e}"
+    );
 }

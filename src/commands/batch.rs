@@ -305,9 +305,13 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             1 => "1 frame file".to_string(),
             n => format!("{n} frame files"),
         };
+        let (belong, them) = match report.strays.len() {
+            1 => ("belongs", "it"),
+            _ => ("belong", "them"),
+        };
         println!(
-            "note: {files} in {} belong to no frame of these inputs (a run over other or \
-             longer inputs wrote them; left alone, not in the manifest): {}",
+            "note: {files} in {} {belong} to no frame of these inputs (a run over other or \
+             longer inputs wrote {them}; left alone, not in the manifest): {}",
             out.display(),
             first_five(&report.strays)
         );

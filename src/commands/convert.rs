@@ -83,7 +83,8 @@ pub struct BuildArgs {
     #[arg(long)]
     pub wrap: bool,
     /// Column names, space separated, for dumps that do not name them (old-revision
-    /// LAMMPS binary dumps other than `dump atom`), e.g. "id type x y z c_pe".
+    /// LAMMPS binary dumps other than `dump atom`), e.g. "id type x y z c_pe"; a dump
+    /// that names its own refuses other names.
     #[arg(long, value_name = "NAMES")]
     pub columns: Option<String>,
     /// Column of a LAMMPS dump (or extended-XYZ property) holding each particle's radius:

@@ -69,6 +69,9 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
     names.sort_by(|a, b| mdlod_preprocess::batch::natural_cmp(a, b));
     let mut rows = Vec::new();
     let mut counts = std::collections::BTreeSet::new();
+    // The lists of input frames the shards split (a merge refuses shards that saw
+    // different ones).
+    let mut lists = std::collections::BTreeSet::new();
     for name in &names {
         let path = dir.join(name);
         let text = mdlod_format::files::read_capped(&path, mdlod_format::files::MANIFEST_BYTES)
@@ -76,6 +79,9 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
         let m = parse_manifest(&path, &text, "shard")?;
         let Some([i, n]) = m.shard else { continue };
         counts.insert(n);
+        if let Some(l) = &m.input_frames {
+            lists.insert((l.count, l.xxh3.clone()));
+        }
         let listed = m.frames.len() as u64;
         rows.push((i, n, listed, m.expected_frames, m.failed.len()));
     }
@@ -139,7 +145,13 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
                 .join(", ")
         );
     }
-    if complete {
+    if lists.len() > 1 {
+        println!(
+            "  note: the shards split different lists of input frames (inputs added or \
+             deleted between their runs): a merge refuses them; rerun the shards over the \
+             same inputs"
+        );
+    } else if complete {
         println!(
             "  every shard is complete: `mdlod batch --merge {}` joins them",
             dir.display()

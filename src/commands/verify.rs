@@ -34,6 +34,23 @@ fn run_dir(args: &Args) -> Result<()> {
             if c.unlisted.len() > 5 { ", ..." } else { "" }
         );
     }
+    if !c.kept_unlisted.is_empty() {
+        let n = c.kept_unlisted.len();
+        println!(
+            "{}: note: {n} frame file{} of deleted dumps, converted with other settings than \
+             the last run's, {} kept unlisted (a batch with their settings lists {} again): {}",
+            dir.display(),
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "is" } else { "are" },
+            if n == 1 { "it" } else { "them" },
+            c.kept_unlisted
+                .iter()
+                .take(5)
+                .map(String::as_str)
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let merged = if c.manifests.len() == 1 && c.manifests[0] == mdlod_preprocess::batch::MANIFEST {
         String::new()
     } else {

@@ -488,6 +488,22 @@ fn columns(path: &Path, h: &BinHeader, opts: &ReadOptions) -> Result<Vec<String>
                 h.values_per_atom
             )));
         }
+        if let Some((_, c)) = given
+            .iter()
+            .enumerate()
+            .find(|(i, c)| given[..*i].contains(c))
+        {
+            return Err(err(format!("--columns names `{c}` twice")));
+        }
+        // A dump of the new revision names its own: other names would read its values
+        // as what they are not (a `mol` column as the types).
+        if let Some(own) = h.columns.as_ref().filter(|own| *own != given) {
+            return Err(err(format!(
+                "this dump names its own columns ({}); --columns is for old-revision dumps \
+                 that name none: leave it out",
+                own.join(" ")
+            )));
+        }
         return Ok(given.clone());
     }
     if let Some(c) = &h.columns {

@@ -413,7 +413,7 @@ pub struct ReadOptions {
     /// of its own over the frame ([`crate::convert::read_extra_attributes`]).
     pub extra_attributes: Vec<String>,
     /// Column names for inputs that do not name their columns (old-revision LAMMPS
-    /// binary dumps); when given, they replace the file's own names.
+    /// binary dumps); a dump that names its own refuses other names, a text dump any.
     pub columns: Option<Vec<String>>,
     /// Which column of a LAMMPS or XYZ dump gives each particle's size.
     pub sizes: SizeColumn,
@@ -1582,6 +1582,17 @@ fn text_columns<'h>(
 ) -> Result<TextColumns<'h>, ReadError> {
     {
         let columns = &header.info.columns;
+        // (Said rather than passed over: the names would change nothing.)
+        if opts.columns.is_some() {
+            return Err(ReadError::Malformed {
+                at: ctx.at(header.columns_at),
+                message: format!(
+                    "a text dump names its own columns ({}); --columns is for old-revision \
+                     binary dumps that name none: leave it out",
+                    columns.join(" ")
+                ),
+            });
+        }
         let (coords, scaled) = header
             .layout
             .coords
