@@ -8788,3 +8788,47 @@ fn a_rerun_after_deleting_dumps_keeps_their_frames_and_says_so() {
         "{text}"
     );
 }
+
+/// An in-image key asks room for the species a hidden value range leaves any particle
+/// of, not for every species of the file (30 species, 2 shown, fit a small image).
+#[test]
+fn an_in_image_key_asks_room_for_the_species_left_shown() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("many.xyz");
+    let lines: Vec<String> = (0..600)
+        .map(|i| {
+            let s = i % 30;
+            let p = |k: u32| ((i * 7 + k * 13) % 200) as f32 / 10.0;
+            format!("S{s} {} {} {} {s}", p(0), p(1), p(2))
+        })
+        .collect();
+    std::fs::write(
+        &xyz,
+        format!(
+            "{}\nProperties=species:S:1:pos:R:3:q:R:1\n{}\n",
+            lines.len(),
+            lines.join("\n")
+        ),
+    )
+    .unwrap();
+    let file = dir.path().join("many.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&file), "--attribute", "q"]);
+    let png = dir.path().join("many.png");
+    let base = [
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "320",
+        "--height",
+        "240",
+    ];
+    let e = fails(&[&base[..], &["--legend-in-image"]].concat());
+    assert!(e.contains("cannot hold the legend"), "{e}");
+    let text = ok(&[&base[..], &["--hide-attribute", "2:", "--legend-in-image"]].concat());
+    assert!(
+        text.contains("legend drawn into") && text.contains("2 species"),
+        "{text}"
+    );
+}

@@ -2430,6 +2430,10 @@ fn write_legend(
     Ok(())
 }
 
+/// The most particles [`check_legend_room`] looks at one by one for species a hidden
+/// value range leaves without any (a few milliseconds).
+const KEY_SCAN_PARTICLES: u64 = 1 << 22;
+
 /// Refuses `--legend-in-image` before anything is drawn where the image cannot hold the
 /// legend: a colour bar's, or a key of every species the file (a batch's first frame)
 /// shows unhidden, which holds at least the species the picture will show.
@@ -2449,7 +2453,29 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_rend
         return Ok(Vec::new());
     };
     let meta = file.metadata();
-    let all = meta.species.iter().map(|s| s.name.clone()).collect();
+    // Species whose every particle a hidden value range leaves out show in no key: where
+    // a look at each particle is cheap, they are left out of the room asked for too.
+    let test = file.hidden_test(&opts.style.hidden_set(meta));
+    let shown: Option<Vec<bool>> = (!opts.style.hidden_values.is_empty()
+        && file.particle_count() <= KEY_SCAN_PARTICLES)
+        .then(|| {
+            let mut shown = vec![false; meta.species.len()];
+            for (i, &s) in file.species().iter().enumerate() {
+                if !file.hides_particle(&test, i) {
+                    if let Some(x) = shown.get_mut(usize::from(s)) {
+                        *x = true;
+                    }
+                }
+            }
+            shown
+        });
+    let all = meta
+        .species
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| shown.as_ref().is_none_or(|v| v[*k]))
+        .map(|(_, s)| s.name.clone())
+        .collect();
     let (legend, _) = build_legend(
         args,
         opts,
