@@ -176,11 +176,16 @@ pub fn palette_colour(slot: usize) -> [u8; 3] {
     [r, g, b].map(|v| ((v + m) * 255.0).round().clamp(0.0, 255.0) as u8)
 }
 
-/// The colour (sRGB) of a category of `--species-column` by its value, the same in every
-/// frame: 1 to 4 as OVITO colours fcc, hcp, bcc and icosahedral atoms (the numbers of
-/// LAMMPS's `cna/atom` and `ptm/atom`), 0 and 5 (other, in `ptm/atom` and `cna/atom`)
-/// light grey, larger values the palette's; `None` below 0 (coloured by place).
-pub fn category_colour(value: i64) -> Option<[u8; 3]> {
+/// The colour (sRGB) of a category of `--species-column` `column` by its value, the same
+/// in every frame. In a column of structure types ([`is_structure_column`]): 1 to 4 as
+/// OVITO colours fcc, hcp, bcc and icosahedral atoms (the numbers of LAMMPS's `cna/atom`
+/// and `ptm/atom`), 0 and 5 (other, in `ptm/atom` and `cna/atom`) light grey, larger
+/// values the palette's; in any other (a molecule id) the palette's by value, as light
+/// grey on white would hide a molecule. `None` below 0 (coloured by place).
+pub fn category_colour(column: &str, value: i64) -> Option<[u8; 3]> {
+    if !is_structure_column(column) {
+        return usize::try_from(value).ok().map(palette_colour);
+    }
     Some(match value {
         0 | 5 => [242, 242, 242],
         1 => [102, 255, 102],
@@ -190,6 +195,16 @@ pub fn category_colour(value: i64) -> Option<[u8; 3]> {
         v if v > 5 => palette_colour(usize::try_from(v).ok()?),
         _ => return None,
     })
+}
+
+/// Whether a column of categories holds structure types, by its name: LAMMPS's
+/// `cna/atom`, `ptm/atom`, `ackland/atom` and `chill/atom` outputs, and names that say so
+/// (`structure`, `c_struct`).
+pub fn is_structure_column(column: &str) -> bool {
+    let c = column.to_ascii_lowercase();
+    ["cna", "ptm", "struct", "ackland", "chill", "polyhedral"]
+        .iter()
+        .any(|k| c.contains(k))
 }
 
 /// A name as a column of categories (`--species-column`) gives it: a whole number in any

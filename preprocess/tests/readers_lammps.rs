@@ -581,3 +581,31 @@ fn a_frame_without_a_box_is_noted() {
         );
     }
 }
+
+/// Molecule ids as species take the palette by value, not the structure types' colours
+/// (molecule 0 and 5 drew light grey, hidden on a white background).
+#[test]
+fn categories_of_other_columns_take_the_palette_by_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n3\nITEM: BOX BOUNDS pp pp pp\n\
+                0 10\n0 10\n0 10\n";
+    let text =
+        format!("{head}ITEM: ATOMS id type mol x y z\n1 1 0 1 1 1\n2 1 5 2 2 2\n3 1 1 3 3 3\n");
+    let path = write(dir.path(), "mol.dump", &text);
+    let f = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(
+            0,
+            &ReadOptions {
+                species_column: Some("mol".into()),
+                ..Default::default()
+            },
+            &NoProgress,
+        )
+        .unwrap();
+    let colours: Vec<Option<[u8; 3]>> = f.species.iter().map(|s| s.colour).collect();
+    let by_value = |v: usize| Some(mdlod_preprocess::species::palette_colour(v));
+    assert_eq!(colours, [by_value(0), by_value(1), by_value(5)]);
+    assert!(!mdlod_preprocess::species::is_structure_column("mol"));
+    assert!(mdlod_preprocess::species::is_structure_column("c_cna"));
+}

@@ -423,7 +423,7 @@ fn merge_species(
                 colour: if categories {
                     name.parse::<i64>()
                         .ok()
-                        .and_then(crate::species::category_colour)
+                        .and_then(|v| crate::species::category_colour(column, v))
                         .or_else(|| Some(crate::species::palette_colour(10 + place)))
                 } else {
                     None

@@ -791,7 +791,10 @@ pub(crate) fn read_range(
                     palette_slot: super::atoms::type_number_slot(t.to_string().as_bytes())
                         .filter(|_| slots),
                     colour: if categories {
-                        crate::species::category_colour(*t)
+                        crate::species::category_colour(
+                            opts.species_column.as_deref().unwrap_or_default(),
+                            *t,
+                        )
                     } else {
                         None
                     },
