@@ -241,3 +241,33 @@ fn one_piece_given_alone_names_its_set() {
     let notes = convert(&variants.path().join("const5.dump"));
     assert!(!notes.iter().any(|n| n.contains("piece")), "{notes:?}");
 }
+
+/// In a batch over one processor's piece of every timestep (`'dump.*.0.dump'`), the note
+/// names the pattern of every timestep's set, not one timestep's.
+#[test]
+fn a_batch_of_one_piece_per_timestep_is_pointed_to_every_timesteps_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n);
+    std::fs::copy(
+        lammps_sample_path("cu_melt_mpi.0.dump"),
+        p("melt.100.0.dump"),
+    )
+    .unwrap();
+    std::fs::copy(
+        lammps_sample_path("cu_melt_mpi.1.dump"),
+        p("melt.100.1.dump"),
+    )
+    .unwrap();
+    std::fs::copy(
+        lammps_sample_path("cu_melt_mpi.0.dump"),
+        p("melt.200.0.dump"),
+    )
+    .unwrap();
+    let given = [p("melt.100.0.dump"), p("melt.200.0.dump")];
+    let note =
+        mdlod_preprocess::readers::one_piece_note(&given[0], Some(0), &given).unwrap_or_default();
+    assert!(
+        note.contains(&format!("give '{}'", p("melt.*.%.dump").display())),
+        "{note}"
+    );
+}

@@ -340,7 +340,45 @@ pub fn one_piece_note(path: &Path, timestep: Option<u64>, given: &[PathBuf]) -> 
             }
         }
     }
-    let set = dir.join(format!("{prefix}%{suffix}"));
+    // A batch over a file per timestep: the digits that differ between its inputs' names
+    // (the timestep's) become `*`, so that the pattern names every timestep's set.
+    let series = given
+        .iter()
+        .filter_map(|g| g.file_name()?.to_str())
+        .find(|g| *g != name)
+        .map(|other| {
+            let runs = |s: &str| -> Vec<(usize, usize)> {
+                let b = s.as_bytes();
+                let mut out = Vec::new();
+                let mut i = 0;
+                while i < b.len() {
+                    if b[i].is_ascii_digit() {
+                        let j = (i..b.len())
+                            .find(|&j| !b[j].is_ascii_digit())
+                            .unwrap_or(b.len());
+                        out.push((i, j));
+                        i = j;
+                    } else {
+                        i += 1;
+                    }
+                }
+                out
+            };
+            let (mine, theirs) = (runs(prefix), runs(other));
+            let mut pattern = prefix.to_string();
+            // Right to left, so that earlier positions stay put.
+            for (k, &(a, b)) in mine.iter().enumerate().rev() {
+                if theirs
+                    .get(k)
+                    .is_some_and(|&(c, d)| other[c..d] != prefix[a..b])
+                {
+                    pattern.replace_range(a..b, "*");
+                }
+            }
+            pattern
+        })
+        .unwrap_or_else(|| prefix.to_string());
+    let set = dir.join(format!("{series}%{suffix}"));
     Some(format!(
         "{name} may be one processor's piece of a `%` set: {} starts at timestep {timestep} \
          too ({} files named like it); if it is, only this piece's particles were read: \
