@@ -137,6 +137,12 @@ pub struct FrameEntry {
     /// (and in manifests of earlier versions).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub wrap: bool,
+    /// The source's absolute path when the frame was converted or last kept (the
+    /// directory resolved; a `%` set's pattern as named there): whether its dump is gone
+    /// is told by it, whatever directory a rerun starts in (absent in manifests of
+    /// earlier versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source_abs: Option<String>,
 }
 
 /// `dataset.json`: the frames of a batch directory, by timestep.
@@ -1122,6 +1128,7 @@ fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
 /// frame's position in the whole list for an input without timesteps), read with
 /// `columns` given.
 fn entry_of(
+    input: &Path,
     path: &Path,
     file: &MdlodFile,
     timestep: u64,
@@ -1162,7 +1169,14 @@ fn entry_of(
         sizes: read.sizes.record(),
         species_column: read.species_column.clone(),
         wrap: read.wrap,
+        source_abs: Some(absolute_source(input).display().to_string()),
     }
+}
+
+/// `input` with its directory resolved ([`FrameEntry::source_abs`]).
+fn absolute_source(input: &Path) -> PathBuf {
+    let (dir, name) = input_key(input);
+    dir.join(name)
 }
 
 /// Whether `file` was built with the settings a conversion with `options` would use: the
@@ -1331,7 +1345,11 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
 /// piece; or a file there that is one of this run's inputs, which holds other frames now
 /// (a restart writing into the same file name). An empty path (a file recording none) is
 /// not taken for gone.
-fn source_gone(source: &SourceInfo, inputs: &[(PathBuf, std::ffi::OsString)]) -> bool {
+fn source_gone(
+    source: &SourceInfo,
+    absolute: Option<&str>,
+    inputs: &[(PathBuf, std::ffi::OsString)],
+) -> bool {
     if source.path.is_empty() {
         return false;
     }
@@ -1341,6 +1359,11 @@ fn source_gone(source: &SourceInfo, inputs: &[(PathBuf, std::ffi::OsString)]) ->
                 && crate::readers::piece_paths(path).is_ok_and(|p| !p.is_empty()))
     };
     let path = Path::new(&source.path);
+    // The path as resolved when the frame was converted tells, where recorded.
+    if let Some(abs) = absolute {
+        let abs = Path::new(abs);
+        return !present(abs) || inputs.contains(&input_key(abs));
+    }
     let found = if present(path) {
         Some(path.to_path_buf())
     } else if path.is_relative() {
@@ -1394,7 +1417,8 @@ fn gone_source_frames(
     // Frames listed now (by this run's own manifest, or the merged one) whose files are
     // gone too, of no frame of this run: said by the run that stops listing them, once
     // (not from the records a shard moved aside, which no run rewrites).
-    let own = [MANIFEST.to_string(), manifest_name(opts.shard)];
+    // (A shard's own: every shard reads the merged one.)
+    let own = [manifest_name(opts.shard)];
     let mut vanished: Vec<u64> = own
         .iter()
         .filter_map(|name| {
@@ -1417,11 +1441,12 @@ fn gone_source_frames(
         let Some(own) = file.metadata().source.clone() else {
             continue;
         };
-        if !source_gone(&own, &inputs) {
-            continue;
-        }
         let checksum = format!("{:016x}", file.header().section_table_checksum);
         let entry = listed.get(&(name.clone(), checksum));
+        let absolute = entry.and_then(|e| e.source_abs.as_deref());
+        if !source_gone(&own, absolute, &inputs) {
+            continue;
+        }
         let same = entry.is_some_and(|r| {
             let renames = &opts.convert.species_names;
             let same_names = match &r.species_names {
@@ -2365,8 +2390,15 @@ pub fn batch(
         match verdict {
             Some(Verdict::Keep(f, listed)) => {
                 note_species(&f);
-                let mut entry =
-                    entry_of(&out, &f, job.timestep, columns, &opts.convert, &opts.read);
+                let mut entry = entry_of(
+                    job.input,
+                    &out,
+                    &f,
+                    job.timestep,
+                    columns,
+                    &opts.convert,
+                    &opts.read,
+                );
                 if let Some(l) = listed {
                     entry.source = l;
                 }
@@ -2411,6 +2443,7 @@ pub fn batch(
                 kept_unchanged += 1;
                 note_species(&f);
                 let mut entry = entry_of(
+                    job.input,
                     &out_dir.join(frame_file_name(job.timestep)),
                     &f,
                     job.timestep,
@@ -2726,6 +2759,7 @@ pub fn batch(
                     let f = MdlodFile::open(&out).map_err(ConvertError::from)?;
                     note_species(&f);
                     Ok(entry_of(
+                        job.input,
                         &out,
                         &f,
                         job.timestep,
@@ -3603,9 +3637,7 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         let path = dir.join(name);
         let text = read_manifest_bytes(&path).map_err(io(&path))?;
         let m = parse_manifest(&path, &text, "dataset")?;
-        // A shard's frames of deleted dumps are the data set's (the merge lists them);
-        // those kept unlisted are named apart.
-        listed.extend(m.gone.iter().map(|f| f.file.clone()));
+        // Those kept unlisted are named apart.
         kept_unlisted.extend(m.unlisted.iter().map(|f| f.file.clone()));
         let named = shard_of(name).map(|(i, n)| [i, n]);
         if let Some(problem) = shard_field_problem(named, m.shard) {
@@ -3635,6 +3667,13 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         for f in m.frames {
             listed.insert(f.file.clone());
             entries.push((name.clone(), f));
+        }
+        // A shard's frames of deleted dumps are the data set's (the merge lists them):
+        // checked once, whichever shard keeps them.
+        for f in m.gone {
+            if listed.insert(f.file.clone()) {
+                entries.push((name.clone(), f));
+            }
         }
     }
     // Shards not merged yet: they must have split one list of frames (see [`merge`]),

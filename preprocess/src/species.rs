@@ -177,34 +177,68 @@ pub fn palette_colour(slot: usize) -> [u8; 3] {
 }
 
 /// The colour (sRGB) of a category of `--species-column` `column` by its value, the same
-/// in every frame. In a column of structure types ([`is_structure_column`]): 1 to 4 as
-/// OVITO colours fcc, hcp, bcc and icosahedral atoms (the numbers of LAMMPS's `cna/atom`
-/// and `ptm/atom`), 0 and 5 (other, in `ptm/atom` and `cna/atom`) light grey, larger
-/// values the palette's; in any other (a molecule id) the palette's by value, as light
-/// grey on white would hide a molecule. `None` below 0 (coloured by place).
+/// in every frame. Structure types take the colours OVITO gives fcc (green), hcp (red),
+/// bcc (blue) and icosahedral (gold) atoms, and unknown or other ones light grey, by the
+/// numbers of the LAMMPS compute the column's name names ([`structure_kind`]):
+/// `cna/atom` 1 fcc, 2 hcp, 3 bcc, 4 ico, 0 and 5 other; `ptm/atom` the same with 0
+/// other and 5 on (simple cubic, diamond, ...) the palette's; `ackland/atom` 1 bcc, 2 fcc,
+/// 3 hcp, 4 ico, 0 unknown. Any other column (a molecule id) takes the palette's by value,
+/// as light grey on white would hide a molecule. `None` below 0 (coloured by place).
 pub fn category_colour(column: &str, value: i64) -> Option<[u8; 3]> {
-    if !is_structure_column(column) {
-        return usize::try_from(value).ok().map(palette_colour);
-    }
-    Some(match value {
-        0 | 5 => [242, 242, 242],
-        1 => [102, 255, 102],
-        2 => [255, 102, 102],
-        3 => [102, 102, 255],
-        4 => [242, 204, 51],
-        v if v > 5 => palette_colour(usize::try_from(v).ok()?),
-        _ => return None,
+    const GREY: [u8; 3] = [242, 242, 242];
+    const FCC: [u8; 3] = [102, 255, 102];
+    const HCP: [u8; 3] = [255, 102, 102];
+    const BCC: [u8; 3] = [102, 102, 255];
+    const ICO: [u8; 3] = [242, 204, 51];
+    let palette = |v: i64| usize::try_from(v).ok().map(palette_colour);
+    let Some(kind) = structure_kind(column) else {
+        return palette(value);
+    };
+    Some(match (kind, value) {
+        (_, v) if v < 0 => return None,
+        (Structure::Ackland, 0) => GREY,
+        (Structure::Ackland, 1) => BCC,
+        (Structure::Ackland, 2) => FCC,
+        (Structure::Ackland, 3) => HCP,
+        (Structure::Ackland, 4) => ICO,
+        (Structure::Cna, 0 | 5) | (Structure::Ptm, 0) => GREY,
+        (Structure::Cna | Structure::Ptm, 1) => FCC,
+        (Structure::Cna | Structure::Ptm, 2) => HCP,
+        (Structure::Cna | Structure::Ptm, 3) => BCC,
+        (Structure::Cna | Structure::Ptm, 4) => ICO,
+        (_, v) => return palette(v),
     })
 }
 
-/// Whether a column of categories holds structure types, by its name: LAMMPS's
-/// `cna/atom`, `ptm/atom`, `ackland/atom` and `chill/atom` outputs, and names that say so
-/// (`structure`, `c_struct`).
-pub fn is_structure_column(column: &str) -> bool {
+/// Which numbering of structure types a column of categories holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Structure {
+    /// LAMMPS `cna/atom` (and columns named as structure types: `structure`, `c_struct`).
+    Cna,
+    /// LAMMPS `ptm/atom`.
+    Ptm,
+    /// LAMMPS `ackland/atom`.
+    Ackland,
+}
+
+/// The structure types a column of categories holds, by its name; `None` for any other
+/// (a molecule or cluster id).
+pub fn structure_kind(column: &str) -> Option<Structure> {
     let c = column.to_ascii_lowercase();
-    ["cna", "ptm", "struct", "ackland", "chill", "polyhedral"]
-        .iter()
-        .any(|k| c.contains(k))
+    if c.contains("ackland") {
+        Some(Structure::Ackland)
+    } else if c.contains("ptm") {
+        Some(Structure::Ptm)
+    } else if c.contains("cna") || c.contains("struct") {
+        Some(Structure::Cna)
+    } else {
+        None
+    }
+}
+
+/// Whether a column of categories holds structure types ([`structure_kind`]).
+pub fn is_structure_column(column: &str) -> bool {
+    structure_kind(column).is_some()
 }
 
 /// A name as a column of categories (`--species-column`) gives it: a whole number in any

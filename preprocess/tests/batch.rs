@@ -3050,3 +3050,27 @@ fn frames_of_a_dump_written_over_stay_listed() {
     assert_eq!(r.kept_gone, [0]);
     assert_eq!(listed(&out), [0, 100, 500]);
 }
+
+/// Two runs' dumps of one name in two directories: a rerun over one of them takes the
+/// other's frames for another run's (its dump is there, by the path recorded whole), not
+/// for frames of a dump gone.
+#[test]
+fn a_dump_of_the_same_name_elsewhere_is_not_taken_for_gone() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let cut = text.match_indices("ITEM: TIME\n").nth(3).unwrap().0;
+    let (run1, run2) = (dir.path().join("run1"), dir.path().join("run2"));
+    std::fs::create_dir(&run1).unwrap();
+    std::fs::create_dir(&run2).unwrap();
+    let (a, b) = (run1.join("traj.dump"), run2.join("traj.dump"));
+    std::fs::write(&a, &text[..cut]).unwrap();
+    let units = &text[..text.find("ITEM: TIME\n").unwrap()];
+    std::fs::write(&b, format!("{units}{}", &text[cut..])).unwrap();
+    let out = dir.path().join("out");
+    batch(&[a.clone(), b.clone()], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(listed(&out), [0, 100, 200, 300, 400, 500]);
+    let r = batch(std::slice::from_ref(&b), &out, &opts(), &NoProgress).unwrap();
+    assert!(r.kept_gone.is_empty(), "{:?}", r.kept_gone);
+    assert_eq!(r.strays.len(), 3);
+    assert_eq!(listed(&out), [300, 400, 500]);
+}

@@ -510,13 +510,14 @@ fn categories_are_numbers_however_written() {
     assert_eq!(names(&f), ["0", "1", "2", "5"]);
     assert_eq!(f.species_index, [3, 1, 1, 1, 0, 0, 2]);
     let colours: Vec<Option<[u8; 3]>> = f.species.iter().map(|s| s.colour).collect();
+    // ptm/atom: 0 other, 1 fcc, 2 hcp; 5 is simple cubic, the palette's.
     assert_eq!(
         colours,
         [
             Some([242, 242, 242]),
             Some([102, 255, 102]),
             Some([255, 102, 102]),
-            Some([242, 242, 242])
+            Some(mdlod_preprocess::species::palette_colour(5))
         ]
     );
     // A value that is no whole number: every name as it first appears (as frames read
@@ -608,4 +609,12 @@ fn categories_of_other_columns_take_the_palette_by_value() {
     assert_eq!(colours, [by_value(0), by_value(1), by_value(5)]);
     assert!(!mdlod_preprocess::species::is_structure_column("mol"));
     assert!(mdlod_preprocess::species::is_structure_column("c_cna"));
+    // Each compute's own numbers: ackland/atom's 1 is bcc, cna/atom's fcc.
+    use mdlod_preprocess::species::category_colour;
+    let (fcc, bcc) = (Some([102, 255, 102]), Some([102, 102, 255]));
+    assert_eq!(category_colour("c_ackland", 1), bcc);
+    assert_eq!(category_colour("c_ackland", 2), fcc);
+    assert_eq!(category_colour("c_cna", 1), fcc);
+    assert_eq!(category_colour("c_cna", 3), bcc);
+    assert_eq!(category_colour("c_cna", 5), Some([242, 242, 242]));
 }

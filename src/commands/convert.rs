@@ -100,9 +100,10 @@ pub struct BuildArgs {
     /// (1, 1.000000), becomes a species: named (`--species-name 1=FCC`; a value the frame
     /// lacks is noted), sized (atoms keep their element's size where the dump names
     /// elements; else `--radius 1=1.28`), hidden and keyed as species are, coloured by
-    /// value as OVITO colours these structures (1-4 green, red, blue, gold; 0 and 5 grey),
-    /// and averaged in clusters as species colours are (an attribute's values would be
-    /// averaged, mixing categories).
+    /// value (structure types as OVITO colours them, fcc green, hcp red, bcc blue, ico
+    /// gold, by the numbers of the cna, ptm or ackland compute the name names; other
+    /// columns, molecule ids, the palette's), and averaged in clusters as species colours
+    /// are (an attribute's values would be averaged, mixing categories).
     #[arg(long, value_name = "NAME")]
     pub species_column: Option<String>,
     /// Column of a LAMMPS dump (or extended-XYZ property) holding each particle's
