@@ -8634,7 +8634,12 @@ fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
             "64",
         ];
         // (Each image's label its own frame's values.)
-        args.extend(["--colour-map", "viridis", "--label", "{timestep} {frame}"]);
+        args.extend([
+            "--colour-map",
+            "viridis",
+            "--label",
+            "{timestep} {frame} {time}",
+        ]);
         args.extend(extra);
         ok(&args)
     };
@@ -8658,6 +8663,13 @@ fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
             );
         }
     }
+    // The last frame alone (time 1, written 1.0 as the whole movie's 0.2 steps are).
+    let last = dir.path().join("last-%d.png");
+    render(&last, &["--frames", "5:"]);
+    assert_eq!(
+        std::fs::read(dir.path().join("last-5.png")).unwrap(),
+        std::fs::read(dir.path().join("whole-5.png")).unwrap()
+    );
     let every = dir.path().join("every-%d.png");
     render(&every, &["--frames", "::2"]);
     let made: Vec<usize> = (0..6)

@@ -671,26 +671,26 @@ fn time_decimals(times: impl Iterator<Item = f64>) -> Option<usize> {
 }
 
 /// The `--label` panel of each image with its values (each frame's time the timestep
-/// times `--dt` where given; a movie's times with one number of decimals), and the
-/// values some frame lacks.
+/// times `--dt` where given; a movie's times with one number of decimals, those of every
+/// frame of `movie`, so that a piece of it, `--frames`, writes its times as the whole
+/// run does), and the values some frame lacks.
 fn label_panels(
     args: &Args,
     values: &[&LabelValues],
+    movie: &[&LabelValues],
 ) -> (
     Vec<mdlod_render::legend::Legend>,
     std::collections::BTreeSet<&'static str>,
 ) {
-    let values: Vec<LabelValues> = values
-        .iter()
-        .map(|v| LabelValues {
-            time: match (args.dt, v.timestep) {
-                (Some(dt), Some(t)) => Some(t as f64 * dt),
-                _ => v.time,
-            },
-            ..(*v).clone()
-        })
-        .collect();
-    let decimals = time_decimals(values.iter().filter_map(|v| v.time));
+    let timed = |v: &LabelValues| LabelValues {
+        time: match (args.dt, v.timestep) {
+            (Some(dt), Some(t)) => Some(t as f64 * dt),
+            _ => v.time,
+        },
+        ..v.clone()
+    };
+    let values: Vec<LabelValues> = values.iter().map(|v| timed(v)).collect();
+    let decimals = time_decimals(movie.iter().filter_map(|v| timed(v).time));
     let mut missing = std::collections::BTreeSet::new();
     let panels = values
         .iter()
@@ -715,7 +715,7 @@ fn check_label_room(args: &Args, values: &[&LabelValues]) -> Result<()> {
     if args.label.is_empty() {
         return Ok(());
     }
-    let (panels, _) = label_panels(args, values);
+    let (panels, _) = label_panels(args, values, values);
     for (i, panel) in panels.iter().enumerate() {
         if panel
             .scale_for(args.camera.width, args.camera.height)
@@ -739,13 +739,21 @@ fn check_label_room(args: &Args, values: &[&LabelValues]) -> Result<()> {
 }
 
 /// Draws `--label` into each image, with its own values.
-fn write_labels(args: &Args, images: &[(PathBuf, LabelValues)]) -> Result<()> {
+fn write_labels(
+    args: &Args,
+    images: &[(PathBuf, LabelValues)],
+    movie: Option<&[LabelValues]>,
+) -> Result<()> {
     if args.label.is_empty() {
         return Ok(());
     }
     let mut glyphs = std::collections::BTreeSet::new();
     let values: Vec<&LabelValues> = images.iter().map(|(_, v)| v).collect();
-    let (panels, missing) = label_panels(args, &values);
+    let movie: Vec<&LabelValues> = match movie {
+        Some(all) => all.iter().collect(),
+        None => values.clone(),
+    };
+    let (panels, missing) = label_panels(args, &values, &movie);
     for ((image, _), label) in images.iter().zip(&panels) {
         glyphs.extend(label.missing_glyphs());
         draw_panel(image, label, args.label_corner(), "--label")?;
@@ -2358,6 +2366,7 @@ pub fn run(mut args: Args) -> Result<()> {
             args.output.clone(),
             LabelValues::of_file(&args.file, file.metadata(), 0),
         )],
+        None,
     )?;
     if let Some(bar) = &bar {
         draw_panel(&args.output, bar, args.scale_bar_corner(), "--scale-bar")?;
@@ -3480,7 +3489,7 @@ fn render_turntable(
                 )
             })
             .collect();
-        write_labels(args, &labelled)?;
+        write_labels(args, &labelled, None)?;
     }
     Ok(())
 }
@@ -4061,12 +4070,12 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     )?;
     // (Each image its own frame's values, also of a piece of the movie.)
     let drawn_values = frame_values
-        .into_iter()
+        .iter()
         .enumerate()
         .filter(|(i, _)| args.frames.is_none_or(|sel| sel.takes(*i)))
-        .map(|(_, v)| v);
+        .map(|(_, v)| v.clone());
     let labelled: Vec<(PathBuf, LabelValues)> = written.iter().cloned().zip(drawn_values).collect();
-    write_labels(args, &labelled)?;
+    write_labels(args, &labelled, Some(&frame_values))?;
     if let Some(bar) = &bar {
         for image in &written {
             draw_panel(image, bar, args.scale_bar_corner(), "--scale-bar")?;
