@@ -593,10 +593,15 @@ impl Legend {
     }
 
     /// The scale to draw the legend at in a `width` × `height` image: whole steps of one
-    /// image pixel per legend pixel for each 1280 × 720 of the image (rounded down), less
-    /// where the image cannot hold it; `None` where it cannot hold it at 1.
+    /// image pixel per legend pixel for each 1280 × 720 of the image (rounded to the
+    /// nearest, so that a 1920 × 1080 slide's text is drawn twice as large, readable on a
+    /// projector), less where the image cannot hold it; `None` where it cannot hold it at
+    /// 1.
     pub fn scale_for(&self, width: u32, height: u32) -> Option<u32> {
-        let steps = (width / 1280).min(height / 720).max(1);
+        let steps = (f64::from(width) / 1280.0)
+            .min(f64::from(height) / 720.0)
+            .round()
+            .max(1.0) as u32;
         (1..=steps).rev().find(|&s| {
             let (w, h) = self.room_needed(s);
             w <= width && h <= height
@@ -1313,10 +1318,12 @@ mod tests {
         let mut small = RgbaImage::new(300, 200);
         let e = legend.draw(&mut small, Corner::TopLeft, 1).unwrap_err();
         assert!(e.contains("at least 376×82"), "{e}");
-        // Whole steps per 1280 × 720, rounded down; less where the image is narrow.
+        // Whole steps per 1280 × 720, rounded to the nearest; less where the image is
+        // narrow.
         for ((w, h), want) in [
             ((1280, 720), Some(1)),
-            ((1920, 1080), Some(1)),
+            ((1600, 900), Some(1)),
+            ((1920, 1080), Some(2)),
             ((2560, 1440), Some(2)),
             ((3840, 2160), Some(3)),
             ((600, 1200), Some(1)),
