@@ -8765,6 +8765,15 @@ fn a_rerun_after_deleting_dumps_keeps_their_frames_and_says_so() {
     );
     let text = ok(&["verify", s(&out)]);
     assert!(text.contains("ok: 6 frames"), "{text}");
+    // Other settings: the deleted dumps' frames are kept on disk, unlisted, and said so.
+    ok(&["batch", s(&pattern), "-o", s(&out), "--radius", "1=1.5"]);
+    let text = ok(&["info", s(&out)]);
+    assert!(
+        text.contains("unlisted     2 frames of deleted dumps"),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&out), "--json"])).unwrap();
+    assert_eq!(json["unlisted"].as_array().map(Vec::len), Some(2));
     // Run from elsewhere, over dumps named by other paths: the recorded relative paths
     // are found beside the inputs, so a dump left out is no dump gone.
     let run = |cwd: &Path, args: &[&str]| {

@@ -260,6 +260,10 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
                 "timestep": f.timestep, "input": f.input, "frame": f.frame, "reason": f.reason
             })).collect::<Vec<_>>(),
             "unreadable": unreadable,
+            // Frames of deleted dumps converted with other settings: on disk, not listed.
+            "unlisted": m.unlisted.iter().map(|f| json!({
+                "timestep": f.timestep, "file": f.file
+            })).collect::<Vec<_>>(),
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
@@ -349,6 +353,15 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
             if m.failed.len() == 1 { "" } else { "s" },
             m.failed_names(),
             dir.display()
+        );
+    }
+    if !m.unlisted.is_empty() {
+        let n = m.unlisted.len();
+        println!(
+            "  unlisted     {n} frame{} of deleted dumps, converted with other settings than \
+             the last run's, kept on disk (a batch with their settings lists {} again)",
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "it" } else { "them" }
         );
     }
     if missing > 0 {
