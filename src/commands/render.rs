@@ -2164,8 +2164,10 @@ pub fn run(mut args: Args) -> Result<()> {
         if opts.style.hides_past_the_mask(species) {
             println!(
                 "  note: clusters still hold the hidden species (only the first 64 species \
-                 can be left out of clusters, and occlusion culling is off for the others); \
-                 --screen-error 0 draws particles only"
+                 can be left out of clusters, and occlusion culling is off for the others), \
+                 and their particles, drawn at radius 0, count among those drawn; \
+                 --screen-error 0 draws particles only, and --hide-attribute over a column \
+                 of their ids leaves them out as the first 64 are"
             );
         }
         if r.clusters_across > 0 {
