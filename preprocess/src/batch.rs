@@ -1972,13 +1972,14 @@ pub fn batch(
             );
         }
         input_notes.extend(dump.input_notes());
-        // (Said of the first input: one processor's pieces of every timestep read alike.)
+        // (Said of the first input: one processor's pieces of every timestep read alike;
+        // the set to give is every timestep's where the inputs are a file per timestep.)
         if i == 0 && dump.piece_paths().is_none() {
-            input_notes.extend(crate::readers::one_piece_note(
-                p,
-                dump.frame_timestep(0),
-                inputs,
-            ));
+            if let Some(lone) = crate::readers::lone_piece(p, dump.frame_timestep(0), inputs) {
+                let others: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+                let give = every_timesteps_set(&lone.set, &others).unwrap_or(lone.set.clone());
+                input_notes.push(lone.note(&give));
+            }
         }
         listed.push(frames);
         formats.push(dump.format());

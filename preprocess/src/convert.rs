@@ -1216,7 +1216,9 @@ pub fn convert_file(
     let opened = t0.elapsed();
     // One processor's piece of a `%` set given alone reads that piece's particles only.
     let piece = match dump.piece_paths() {
-        None => crate::readers::one_piece_note(input, dump.frame_timestep(0), &[]),
+        None => {
+            crate::readers::lone_piece(input, dump.frame_timestep(0), &[]).map(|p| p.note(&p.set))
+        }
         Some(_) => None,
     };
     // The working file (if any) lives until the conversion is done.

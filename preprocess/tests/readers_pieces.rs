@@ -215,7 +215,7 @@ fn one_piece_given_alone_names_its_set() {
     let notes = convert(&dir.path().join("cu_melt_mpi.0.dump"));
     let want = format!(
         "cu_melt_mpi.0.dump may be one processor's piece of a `%` set: cu_melt_mpi.1.dump \
-         starts at timestep 0 too (2 files named like it); if it is, only this piece's \
+         starts at timestep 0 too (2 pieces); if it is, only this piece's \
          particles were read: give '{}' (quoted)",
         dir.path().join("cu_melt_mpi.%.dump").display()
     );
@@ -242,32 +242,37 @@ fn one_piece_given_alone_names_its_set() {
     assert!(!notes.iter().any(|n| n.contains("piece")), "{notes:?}");
 }
 
-/// In a batch over one processor's piece of every timestep (`'dump.*.0.dump'`), the note
+/// In a batch over one processor's piece of every timestep (`'melt.*.0.dump'`), the note
 /// names the pattern of every timestep's set, not one timestep's.
 #[test]
 fn a_batch_of_one_piece_per_timestep_is_pointed_to_every_timesteps_set() {
     let dir = tempfile::tempdir().unwrap();
-    let p = |n: &str| dir.path().join(n);
-    std::fs::copy(
-        lammps_sample_path("cu_melt_mpi.0.dump"),
-        p("melt.100.0.dump"),
-    )
-    .unwrap();
-    std::fs::copy(
-        lammps_sample_path("cu_melt_mpi.1.dump"),
-        p("melt.100.1.dump"),
-    )
-    .unwrap();
-    std::fs::copy(
-        lammps_sample_path("cu_melt_mpi.0.dump"),
-        p("melt.200.0.dump"),
-    )
-    .unwrap();
-    let given = [p("melt.100.0.dump"), p("melt.200.0.dump")];
-    let note =
-        mdlod_preprocess::readers::one_piece_note(&given[0], Some(0), &given).unwrap_or_default();
-    assert!(
-        note.contains(&format!("give '{}'", p("melt.*.%.dump").display())),
-        "{note}"
-    );
+    // The real pieces' frames, a file per timestep and processor.
+    for piece in 0..2 {
+        let text =
+            std::fs::read_to_string(lammps_sample_path(&format!("cu_melt_mpi.{piece}.dump")))
+                .unwrap();
+        for frame in text.split("ITEM: TIMESTEP\n").skip(1) {
+            let timestep: u64 = frame.lines().next().unwrap().trim().parse().unwrap();
+            std::fs::write(
+                dir.path().join(format!("melt.{timestep}.{piece}.dump")),
+                format!("ITEM: TIMESTEP\n{frame}"),
+            )
+            .unwrap();
+        }
+    }
+    let mut inputs: Vec<std::path::PathBuf> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().ends_with(".0.dump"))
+        .collect();
+    inputs.sort();
+    let opts = mdlod_preprocess::batch::BatchOptions {
+        memory_limit: 1 << 30,
+        ..Default::default()
+    };
+    let r = mdlod_preprocess::batch::batch(&inputs, &dir.path().join("out"), &opts, &NoProgress)
+        .unwrap();
+    let give = format!("give '{}'", dir.path().join("melt.*.%.dump").display());
+    assert!(r.notes.iter().any(|n| n.contains(&give)), "{:?}", r.notes);
 }

@@ -61,7 +61,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 pub use float::parse_f64;
-pub use pieces::{one_piece_note, piece_paths};
+pub use pieces::{lone_piece, piece_paths, LonePiece};
 
 use crate::frame::{Attribute, Frame, SimulationBox};
 use crate::progress::{NoProgress, Progress};

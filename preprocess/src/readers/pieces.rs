@@ -269,13 +269,44 @@ pub(crate) fn read_frame(
     Ok(out)
 }
 
-/// Where `path`, one file, looks like one processor's piece of a `%` set: files named as
-/// it is with another number in place of its last run of digits, one of which starts at
-/// its first timestep `timestep` (a run's pieces share their timesteps; a series of
-/// timesteps does not). The note naming the set to give; replicas started alike read the
-/// same, so it says both. `given` are the other inputs of the run (a sibling among them
-/// is the batch's own business). At most three siblings are opened.
-pub fn one_piece_note(path: &Path, timestep: Option<u64>, given: &[PathBuf]) -> Option<String> {
+/// One processor's piece of a `%` set given alone ([`lone_piece`]): only its particles
+/// are read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LonePiece {
+    /// The set it is a piece of (`dump.100.%.bin`).
+    pub set: PathBuf,
+    name: String,
+    /// A piece of the set that starts at the same timestep.
+    sibling: String,
+    pieces: usize,
+    timestep: u64,
+}
+
+impl LonePiece {
+    /// The note naming `give` (the set, or the pattern of every timestep's sets a batch
+    /// over a file per timestep needs) as what to give instead.
+    pub fn note(&self, give: &Path) -> String {
+        format!(
+            "{} may be one processor's piece of a `%` set: {} starts at timestep {} too ({} \
+             pieces); if it is, only this piece's particles were read: give '{}' (quoted) \
+             for every processor's (replicas started alike read the same)",
+            self.name,
+            self.sibling,
+            self.timestep,
+            self.pieces,
+            give.display()
+        )
+    }
+}
+
+/// Whether `path`, one file whose first frame is at `timestep`, looks like one
+/// processor's piece of a `%` set: with another number in place of its last run of
+/// digits it names a set ([`piece_paths`]: numbered from 0), one of whose other pieces
+/// starts at the same timestep (a series of timesteps does not), holding other atoms
+/// where both are small enough to compare their ids (variants of one run, another
+/// column or a replica, hold the same). `given` are the run's inputs: a sibling among
+/// them is the batch's own business. At most three siblings are opened.
+pub fn lone_piece(path: &Path, timestep: Option<u64>, given: &[PathBuf]) -> Option<LonePiece> {
     let timestep = timestep?;
     let name = path.file_name()?.to_str()?;
     let bytes = name.as_bytes();
@@ -284,107 +315,49 @@ pub fn one_piece_note(path: &Path, timestep: Option<u64>, given: &[PathBuf]) -> 
         .iter()
         .rposition(|b| !b.is_ascii_digit())
         .map_or(0, |i| i + 1);
-    let (prefix, suffix) = (&name[..start], &name[end..]);
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let mut siblings: Vec<(u64, PathBuf)> = std::fs::read_dir(&dir)
-        .ok()?
-        .filter_map(|e| {
-            let n = e.ok()?.file_name().into_string().ok()?;
-            let digits = n.strip_prefix(prefix)?.strip_suffix(suffix)?;
-            let number = (!digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
-                .then(|| digits.parse::<u64>().ok())??;
-            (n != name).then(|| (number, dir.join(&n)))
-        })
+    let set = path.with_file_name(format!("{}%{}", &name[..start], &name[end..]));
+    let pieces = piece_paths(&set).ok()?;
+    let siblings: Vec<&PathBuf> = pieces
+        .iter()
+        .filter(|p| p.file_name() != path.file_name())
         .collect();
-    if siblings.is_empty() || {
-        let given: Vec<PathBuf> = given
+    let canonical = |p: &Path| std::fs::canonicalize(p).ok();
+    let given: Vec<PathBuf> = given.iter().filter_map(|g| canonical(g)).collect();
+    if siblings.is_empty()
+        || siblings
             .iter()
-            .filter_map(|g| std::fs::canonicalize(g).ok())
-            .collect();
-        siblings
-            .iter()
-            .any(|(_, p)| std::fs::canonicalize(p).is_ok_and(|p| given.contains(&p)))
-    } {
+            .any(|p| canonical(p).is_some_and(|p| given.contains(&p)))
+    {
         return None;
     }
-    siblings.sort();
-    let same = siblings.iter().take(3).find(|(_, p)| {
-        DumpFile::open(p)
-            .ok()
-            .and_then(|d| d.frame_timestep(0))
-            .is_some_and(|t| t == timestep)
+    let (sibling, dump) = siblings.iter().take(3).find_map(|p| {
+        let d = DumpFile::open(p).ok()?;
+        (d.frame_timestep(0) == Some(timestep)).then_some((*p, d))
     })?;
-    // Pieces hold different atoms; variants of one run (another column, a replica) the
-    // same: where both files are small enough to read here and name atoms by `id`, a
-    // sibling sharing most of this file's ids is no piece of a set with it.
+    // Pieces hold different atoms, variants of one run the same.
     const ID_CHECK_BYTES: u64 = 64 << 20;
     let small = |p: &Path| std::fs::metadata(p).is_ok_and(|m| m.len() <= ID_CHECK_BYTES);
-    if small(path) && small(&same.1) {
-        let ids = |p: &Path| -> Option<std::collections::HashSet<u32>> {
+    if small(path) && small(sibling) {
+        let ids = |d: &DumpFile| -> Option<std::collections::HashSet<u32>> {
             let opts = ReadOptions {
                 attribute: Some("id".into()),
                 ..Default::default()
             };
-            let f = DumpFile::open(p)
-                .ok()?
-                .read_frame(0, &opts, &crate::progress::NoProgress)
-                .ok()?;
+            let f = d.read_frame(0, &opts, &crate::progress::NoProgress).ok()?;
             Some(f.attribute?.values.iter().map(|v| v.to_bits()).collect())
         };
-        if let (Some(mine), Some(theirs)) = (ids(path), ids(&same.1)) {
+        let mine = DumpFile::open(path).ok().and_then(|d| ids(&d));
+        if let (Some(mine), Some(theirs)) = (mine, ids(&dump)) {
             if mine.intersection(&theirs).count() * 2 > mine.len().min(theirs.len()) {
                 return None;
             }
         }
     }
-    // A batch over a file per timestep: the digits that differ between its inputs' names
-    // (the timestep's) become `*`, so that the pattern names every timestep's set.
-    let series = given
-        .iter()
-        .filter_map(|g| g.file_name()?.to_str())
-        .find(|g| *g != name)
-        .map(|other| {
-            let runs = |s: &str| -> Vec<(usize, usize)> {
-                let b = s.as_bytes();
-                let mut out = Vec::new();
-                let mut i = 0;
-                while i < b.len() {
-                    if b[i].is_ascii_digit() {
-                        let j = (i..b.len())
-                            .find(|&j| !b[j].is_ascii_digit())
-                            .unwrap_or(b.len());
-                        out.push((i, j));
-                        i = j;
-                    } else {
-                        i += 1;
-                    }
-                }
-                out
-            };
-            let (mine, theirs) = (runs(prefix), runs(other));
-            let mut pattern = prefix.to_string();
-            // Right to left, so that earlier positions stay put.
-            for (k, &(a, b)) in mine.iter().enumerate().rev() {
-                if theirs
-                    .get(k)
-                    .is_some_and(|&(c, d)| other[c..d] != prefix[a..b])
-                {
-                    pattern.replace_range(a..b, "*");
-                }
-            }
-            pattern
-        })
-        .unwrap_or_else(|| prefix.to_string());
-    let set = dir.join(format!("{series}%{suffix}"));
-    Some(format!(
-        "{name} may be one processor's piece of a `%` set: {} starts at timestep {timestep} \
-         too ({} files named like it); if it is, only this piece's particles were read: \
-         give '{}' (quoted) for every processor's (replicas started alike read the same)",
-        same.1.file_name()?.to_string_lossy(),
-        siblings.len() + 1,
-        set.display()
-    ))
+    Some(LonePiece {
+        set,
+        name: name.to_string(),
+        sibling: sibling.file_name()?.to_string_lossy().into_owned(),
+        pieces: pieces.len(),
+        timestep,
+    })
 }
