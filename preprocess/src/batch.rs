@@ -1414,18 +1414,14 @@ fn gone_source_frames(
 ) -> GoneFrames {
     let inputs: Vec<(PathBuf, std::ffi::OsString)> = inputs.iter().map(|p| input_key(p)).collect();
     let listed = recorded_frames(out_dir);
-    // Frames listed now (by this run's own manifest, or the merged one) whose files are
-    // gone too, of no frame of this run: said by the run that stops listing them, once
-    // (not from the records a shard moved aside, which no run rewrites).
-    // (A shard's own: every shard reads the merged one.)
-    let own = [manifest_name(opts.shard)];
-    let mut vanished: Vec<u64> = own
-        .iter()
-        .filter_map(|name| {
-            let path = out_dir.join(name);
-            let text = read_manifest_bytes(&path).ok()?;
-            parse_manifest(&path, &text, "dataset").ok()
-        })
+    // Frames this run's own manifest lists whose files are gone too, of no frame of this
+    // run: said by the run that stops listing them, once (not from the merged manifest,
+    // which every shard reads, nor the records a shard moved aside).
+    let own = out_dir.join(manifest_name(opts.shard));
+    let mut vanished: Vec<u64> = read_manifest_bytes(&own)
+        .ok()
+        .and_then(|text| parse_manifest(&own, &text, "dataset").ok())
+        .into_iter()
         .flat_map(|m| m.frames.into_iter().chain(m.gone))
         .filter(|f| !numbers.contains(&f.timestep) && !out_dir.join(&f.file).exists())
         .map(|f| f.timestep)
@@ -1433,6 +1429,7 @@ fn gone_source_frames(
     vanished.sort_unstable();
     vanished.dedup();
     let (mut kept, mut other, mut records) = (Vec::new(), Vec::new(), Vec::new());
+    let mut species = std::collections::BTreeSet::new();
     for name in strays {
         let path = out_dir.join(name);
         let Ok(file) = MdlodFile::open(&path) else {
@@ -1473,7 +1470,10 @@ fn gone_source_frames(
                 && frame_file_number(name) == Some(r.timestep)
         });
         match entry {
-            Some(e) if same => kept.push(e.clone()),
+            Some(e) if same => {
+                species.extend(file.metadata().species.iter().map(|s| s.name.clone()));
+                kept.push(e.clone());
+            }
             Some(e) => {
                 other.push(name.clone());
                 records.push(e.clone());
@@ -1488,6 +1488,7 @@ fn gone_source_frames(
         other,
         records,
         vanished,
+        species,
     }
 }
 
@@ -1502,6 +1503,8 @@ struct GoneFrames {
     records: Vec<FrameEntry>,
     /// Timesteps recorded whose frame files are gone too.
     vanished: Vec<u64>,
+    /// The species of the frames of `kept`.
+    species: std::collections::BTreeSet<String>,
 }
 
 /// The inputs of a batch as an error names them: the one, or the first and how many more.
@@ -2190,15 +2193,15 @@ pub fn batch(
         .collect();
     strays.sort_by_key(|n| frame_file_number(n));
     // Frames of dumps deleted since they were converted stay listed: by every shard of a
-    // sharded run, so that each shard's manifest keeps their records whichever runs
-    // first (a shard that converts removes the merged manifest), and the merge lists
-    // each once.
+    // sharded run, apart from its own ([`Manifest::gone`]), so that each shard's
+    // manifest keeps their records whichever runs first, and the merge lists each once.
     let attribute = jobs.first().and_then(|j| j.attribute.clone());
     let GoneFrames {
         kept: gone,
         other: gone_other,
         records: unlisted,
         vanished,
+        species: gone_species,
     } = gone_source_frames(
         out_dir,
         &strays,
@@ -2207,7 +2210,12 @@ pub fn batch(
         opts,
         attribute.as_deref(),
     );
-    strays.retain(|n| !gone.iter().any(|e| &e.file == n) && !gone_other.contains(n));
+    let not_strays: std::collections::HashSet<&String> = gone
+        .iter()
+        .map(|e| &e.file)
+        .chain(&gone_other)
+        .collect();
+    strays.retain(|n| !not_strays.contains(n));
     let mut mine: Vec<Job<'_>> = match opts.shard {
         None => jobs,
         Some((i, n)) => jobs
@@ -2500,11 +2508,9 @@ pub fn batch(
         .collect();
     let skipped = done.len();
     let kept_gone: Vec<u64> = gone.iter().map(|e| e.timestep).collect();
-    for e in &gone {
-        if let Ok(f) = MdlodFile::open(out_dir.join(&e.file)) {
-            note_species(&f);
-        }
-    }
+    seen.lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .extend(gone_species);
     // A whole run lists them; a shard keeps them apart, for the merge to list once.
     let (gone, listed_gone) = match opts.shard {
         None => {

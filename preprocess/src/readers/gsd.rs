@@ -137,6 +137,18 @@ pub(crate) struct Index {
     damaged: Option<(usize, usize, String)>,
 }
 
+/// The chunk an attribute asked for by `name` is read from: `name` itself where it names
+/// a group (`log/particles/speed`), else of `particles/` (`charge`); a magnitude's
+/// (`|velocity|`) the chunk inside its bars.
+pub(crate) fn chunk_name(name: &str) -> String {
+    let base = crate::readers::magnitude_of(name).map_or(name, str::trim);
+    if base.contains('/') {
+        base.to_string()
+    } else {
+        format!("particles/{base}")
+    }
+}
+
 /// True when `data` starts with the GSD magic number.
 pub(crate) fn sniff(data: &[u8]) -> bool {
     data.len() >= 8 && u64::from_le_bytes(data[..8].try_into().unwrap_or([0; 8])) == MAGIC
@@ -986,13 +998,8 @@ pub(crate) fn read_range(
         Some(_) if n == 0 => None,
         None => None,
         Some(name) => {
-            let magnitude = crate::readers::magnitude_of(name).map(str::trim);
-            let base = magnitude.unwrap_or(name);
-            let full = if base.contains('/') {
-                base.to_string()
-            } else {
-                format!("particles/{base}")
-            };
+            let magnitude = crate::readers::magnitude_of(name);
+            let full = chunk_name(name);
             if let Some(e) = index
                 .chunk(k, &full)
                 .filter(|e| e.n == n && e.m != 1 && magnitude.is_none())

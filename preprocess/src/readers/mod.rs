@@ -890,12 +890,7 @@ impl DumpFile {
         }
         // A GSD attribute a later frame takes from frame 0: the colours are frame 0's.
         if let (Index::Gsd(i), Some(name)) = (&self.index, &read.attribute) {
-            let base = magnitude_of(name).map_or(name.as_str(), str::trim);
-            let full = if base.contains('/') {
-                base.to_string()
-            } else {
-                format!("particles/{base}")
-            };
+            let full = gsd::chunk_name(name);
             if i.takes_from_frame_0(k, &full) {
                 notes.push(format!(
                     "{}: `{full}` is written in frame 0 only (HOOMD writes quantities \
