@@ -2210,11 +2210,8 @@ pub fn batch(
         opts,
         attribute.as_deref(),
     );
-    let not_strays: std::collections::HashSet<&String> = gone
-        .iter()
-        .map(|e| &e.file)
-        .chain(&gone_other)
-        .collect();
+    let not_strays: std::collections::HashSet<&String> =
+        gone.iter().map(|e| &e.file).chain(&gone_other).collect();
     strays.retain(|n| !not_strays.contains(n));
     let mut mine: Vec<Job<'_>> = match opts.shard {
         None => jobs,

@@ -304,14 +304,10 @@ pub const FLAT_SLACK: f32 = 0.05;
 pub const FLAT_TEST_POINTS: usize = 1 << 16;
 
 /// [`flat_axis`] of particles centred at `points`: an axis along which their centres
-/// spread no more than 10⁻⁵ of their widest spread (and single precision's rounding).
-pub fn flat_axis_of(points: impl IntoIterator<Item = glam::Vec3>) -> Option<usize> {
-    flat_axis_within(points, 0.0)
-}
-
-/// [`flat_axis_of`], also where the centres spread no more than `slack` (world units)
-/// along the axis, while spreading more than a hundred times that along another.
-pub fn flat_axis_within(points: impl IntoIterator<Item = glam::Vec3>, slack: f32) -> Option<usize> {
+/// spread no more than 10⁻⁵ of their widest spread (and single precision's rounding), or
+/// no more than `slack` (world units) while spreading more than a hundred times that
+/// along another.
+fn flat_axis_within(points: impl IntoIterator<Item = glam::Vec3>, slack: f32) -> Option<usize> {
     let (mut lo, mut hi) = (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY);
     for p in points {
         lo = lo.min(p);
@@ -800,6 +796,20 @@ fn with_fitted_cell(
 }
 
 /// The box around `file`'s simulation cell (its eight corners), where it has one.
+/// `boxes` and, where `opts` draws the cell and there are boxes, its corners
+/// ([`cell_corner_boxes`]).
+fn with_cell_corners(
+    mut boxes: Vec<Bounds>,
+    file: &MdlodFile,
+    opts: &RenderOptions,
+    fitted: &Bounds,
+) -> Vec<Bounds> {
+    if opts.cell.is_some() && !boxes.is_empty() {
+        boxes.extend(cell_corner_boxes(file, fitted));
+    }
+    boxes
+}
+
 /// The corners of the cell as boxes of no extent, within `fitted` (which leaves out faces
 /// a lost atom stretched, [`fit_for`]): what a fit frames for the cell drawn (its bounding
 /// box's corners lie outside a slanted cell, which then framed it small).
@@ -938,10 +948,7 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
             boxes.push(b);
         }
     }
-    if opts.cell.is_some() && !boxes.is_empty() {
-        boxes.extend(cell_corner_boxes(file, fitted));
-    }
-    boxes
+    with_cell_corners(boxes, file, opts, fitted)
 }
 
 /// [`framing_boxes`] of a file without a level of [`FRAMING_NODES`] clusters: each shown
@@ -957,7 +964,7 @@ fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Ve
     };
     let test = file.hidden_test(&opts.style.hidden_set(file.metadata()));
     let reach = drawn_reach(file, opts).max(0.0);
-    let mut boxes: Vec<Bounds> = points
+    let boxes: Vec<Bounds> = points
         .iter()
         .enumerate()
         .filter(|(i, _)| !file.hides_particle(&test, *i))
@@ -969,10 +976,7 @@ fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Ve
             lo.cmple(hi).all().then(|| Bounds::new(lo, hi))
         })
         .collect();
-    if opts.cell.is_some() && !boxes.is_empty() {
-        boxes.extend(cell_corner_boxes(file, fitted));
-    }
-    boxes
+    with_cell_corners(boxes, file, opts, fitted)
 }
 
 /// The nodes a fit frames come from the first level with at least this many.
