@@ -236,11 +236,6 @@ pub fn structure_kind(column: &str) -> Option<Structure> {
     }
 }
 
-/// Whether a column of categories holds structure types ([`structure_kind`]).
-pub fn is_structure_column(column: &str) -> bool {
-    structure_kind(column).is_some()
-}
-
 /// A name as a column of categories (`--species-column`) gives it: a whole number in any
 /// notation as that number (`1.0` and `1e0` are `1`), anything else as written. The
 /// readers name categories this way, so options naming values (`--species-name 1.0=FCC`)

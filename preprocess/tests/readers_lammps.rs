@@ -607,8 +607,9 @@ fn categories_of_other_columns_take_the_palette_by_value() {
     let colours: Vec<Option<[u8; 3]>> = f.species.iter().map(|s| s.colour).collect();
     let by_value = |v: usize| Some(mdlod_preprocess::species::palette_colour(v));
     assert_eq!(colours, [by_value(0), by_value(1), by_value(5)]);
-    assert!(!mdlod_preprocess::species::is_structure_column("mol"));
-    assert!(mdlod_preprocess::species::is_structure_column("c_cna"));
+    use mdlod_preprocess::species::{structure_kind, Structure};
+    assert_eq!(structure_kind("mol"), None);
+    assert_eq!(structure_kind("c_cna"), Some(Structure::Cna));
     // Each compute's own numbers: ackland/atom's 1 is bcc, cna/atom's fcc.
     use mdlod_preprocess::species::category_colour;
     let (fcc, bcc) = (Some([102, 255, 102]), Some([102, 102, 255]));
