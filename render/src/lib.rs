@@ -36,6 +36,7 @@ pub mod density;
 pub mod error;
 pub mod font;
 pub mod image;
+pub mod label;
 pub mod legend;
 pub mod occlusion;
 pub mod overlay;

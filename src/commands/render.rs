@@ -8,6 +8,8 @@ use mdlod_render::{
     ViewSpec,
 };
 
+use mdlod_render::label;
+
 use super::Num;
 use crate::progress::Bar;
 
@@ -377,162 +379,6 @@ fn legend_categories(args: &Args) -> Result<Vec<(f32, String)>> {
         })
 }
 
-/// The placeholders `--label` fills in.
-const LABEL_FIELDS: &[&str] = &["timestep", "time", "frame", "particles", "file", "source"];
-
-/// One image's values for `--label`.
-#[derive(Clone, Debug, Default)]
-struct LabelValues {
-    timestep: Option<u64>,
-    time: Option<f64>,
-    frame: usize,
-    particles: u64,
-    file: String,
-    /// The name of the input the frame was converted from (the dump), where recorded.
-    source: Option<String>,
-}
-
-/// The file name of a recorded source path (`runs/melt.lammpstrj` → `melt.lammpstrj`).
-fn source_name(path: &str) -> String {
-    Path::new(path)
-        .file_name()
-        .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned())
-}
-
-impl LabelValues {
-    /// The values of `file` (an .mdlod), shown as image `frame`.
-    fn of_file(path: &Path, meta: &mdlod_format::meta::Metadata, frame: usize) -> LabelValues {
-        LabelValues {
-            timestep: meta.timestep,
-            time: meta.time,
-            frame,
-            particles: meta.particles,
-            file: path
-                .file_name()
-                .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
-            source: meta.source.as_ref().map(|s| source_name(&s.path)),
-        }
-    }
-
-    /// `text` with its placeholders filled in; a value the frame lacks (a dump without a
-    /// time) shows `?`, and its name is returned. A time takes its placeholder's
-    /// decimals, else `time_decimals` (those of a movie's most precise time), else its
-    /// shortest form. (`text` passed [`label_parts`] in [`check_label`].)
-    fn fill(&self, text: &str, time_decimals: Option<usize>) -> (String, Vec<&'static str>) {
-        let mut out = String::new();
-        let mut missing = Vec::new();
-        for part in label_parts(text).unwrap_or_default() {
-            match part {
-                LabelPart::Text(t) => out.push_str(&t),
-                LabelPart::Field(field, decimals) => {
-                    let value = match field {
-                        "timestep" => self.timestep.map(|t| t.to_string()),
-                        "time" => self.time.map(|t| match decimals.or(time_decimals) {
-                            Some(d) => format!("{t:.d$}"),
-                            None => super::Num(t as f32).to_string(),
-                        }),
-                        "frame" => Some(self.frame.to_string()),
-                        "particles" => Some(self.particles.to_string()),
-                        "source" => self.source.clone(),
-                        _ => Some(self.file.clone()),
-                    };
-                    if value.is_none() && !missing.contains(&field) {
-                        missing.push(field);
-                    }
-                    out.push_str(value.as_deref().unwrap_or("?"));
-                }
-            }
-        }
-        (out, missing)
-    }
-}
-
-/// A piece of a `--label`: text as written, or a value to fill in (with the decimals
-/// its placeholder asks for: `{time:.2}`).
-#[derive(Clone, Debug, PartialEq)]
-enum LabelPart {
-    Text(String),
-    Field(&'static str, Option<usize>),
-}
-
-/// The most decimals `{time:.N}` takes.
-const LABEL_DECIMALS: usize = 12;
-
-/// A `--label` cut into text and placeholders, as format strings are: `{name}` a value,
-/// `{{` and `}}` a literal brace (a plane family `{{111}}`); an error names a
-/// placeholder no label fills, or a brace left alone.
-fn label_parts(text: &str) -> Result<Vec<LabelPart>, String> {
-    let mut parts = Vec::new();
-    let mut literal = String::new();
-    let mut chars = text.char_indices().peekable();
-    while let Some((i, c)) = chars.next() {
-        match c {
-            '{' if chars.peek().is_some_and(|&(_, d)| d == '{') => {
-                chars.next();
-                literal.push('{');
-            }
-            '}' if chars.peek().is_some_and(|&(_, d)| d == '}') => {
-                chars.next();
-                literal.push('}');
-            }
-            '{' => {
-                let rest = &text[i + 1..];
-                let Some(close) = rest.find('}') else {
-                    return Err("a `{` opens no placeholder: write `{{` for a brace".into());
-                };
-                let placeholder = &rest[..close];
-                // `{time:.2}`: the number of decimals.
-                let (name, decimals) = match placeholder.split_once(':') {
-                    Some((name, spec)) => {
-                        let decimals = spec
-                            .strip_prefix('.')
-                            .and_then(|d| d.parse::<usize>().ok())
-                            .filter(|&d| d <= LABEL_DECIMALS)
-                            .ok_or_else(|| {
-                                format!(
-                                    "{{{placeholder}}}: `:{spec}` is no number of decimals (write \
-                                     {{{name}:.2}} for two, at most {LABEL_DECIMALS})"
-                                )
-                            })?;
-                        if name != "time" {
-                            return Err(format!(
-                                "{{{placeholder}}}: only {{time}} takes a number of decimals \
-                                 ({{{name}}} is a whole number)"
-                            ));
-                        }
-                        (name, Some(decimals))
-                    }
-                    None => (placeholder, None),
-                };
-                let Some(&field) = LABEL_FIELDS.iter().find(|f| **f == name) else {
-                    return Err(format!(
-                        "{{{name}}} is no value a label fills in (it has {}; write {{{{{name}}}}} \
-                         for the braces themselves)",
-                        LABEL_FIELDS
-                            .iter()
-                            .map(|f| format!("{{{f}}}"))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ));
-                };
-                if !literal.is_empty() {
-                    parts.push(LabelPart::Text(std::mem::take(&mut literal)));
-                }
-                parts.push(LabelPart::Field(field, decimals));
-                for _ in 0..placeholder.chars().count() + 1 {
-                    chars.next();
-                }
-            }
-            '}' => return Err("a `}` closes no placeholder: write `}}` for a brace".into()),
-            c => literal.push(c),
-        }
-    }
-    if !literal.is_empty() {
-        parts.push(LabelPart::Text(literal));
-    }
-    Ok(parts)
-}
-
 /// Refuses a `--label` naming a placeholder it does not fill, or drawn where the legend
 /// is, before anything is drawn.
 fn check_label(args: &Args) -> Result<()> {
@@ -548,7 +394,7 @@ fn check_label(args: &Args) -> Result<()> {
         }
     }
     for text in &args.label {
-        if let Err(why) = label_parts(text) {
+        if let Err(why) = label::parts(text) {
             anyhow::bail!("--label {text:?}: {why}");
         }
     }
@@ -557,20 +403,7 @@ fn check_label(args: &Args) -> Result<()> {
         // values filled in only widen it; a panel they make too wide is refused where
         // it is drawn).
         let panel = mdlod_render::legend::Legend::Text {
-            lines: args
-                .label
-                .iter()
-                .map(|t| {
-                    label_parts(t)
-                        .unwrap_or_default()
-                        .into_iter()
-                        .filter_map(|p| match p {
-                            LabelPart::Text(t) => Some(t),
-                            LabelPart::Field(..) => None,
-                        })
-                        .collect()
-                })
-                .collect(),
+            lines: args.label.iter().map(|t| label::fixed_text(t)).collect(),
         };
         if panel
             .scale_for(args.camera.width, args.camera.height)
@@ -657,40 +490,27 @@ fn draw_panel(
     Ok(())
 }
 
-/// The decimals that show every one of a movie's `times` as its shortest decimal form
-/// does, so that the label keeps one width (`0.80`, `1.00`, `1.20`, not `0.8`, `1`, `1.2`;
-/// `0.00000` to `0.00015`); `None` where one needs more than [`LABEL_DECIMALS`].
-fn time_decimals(times: impl Iterator<Item = f64>) -> Option<usize> {
-    let mut most = 0;
-    for t in times {
-        // The decimals of the shortest decimal form (`3e-5` is `0.00003`: five).
-        let shortest = format!("{}", t as f32);
-        most = most.max(shortest.split_once('.').map_or(0, |(_, d)| d.len()));
-    }
-    (most <= LABEL_DECIMALS).then_some(most)
-}
-
 /// The `--label` panel of each image with its values (each frame's time the timestep
 /// times `--dt` where given; a movie's times with one number of decimals, those of every
 /// frame of `movie`, so that a piece of it, `--frames`, writes its times as the whole
 /// run does), and the values some frame lacks.
 fn label_panels(
     args: &Args,
-    values: &[&LabelValues],
-    movie: &[&LabelValues],
+    values: &[&label::Values],
+    movie: &[&label::Values],
 ) -> (
     Vec<mdlod_render::legend::Legend>,
     std::collections::BTreeSet<&'static str>,
 ) {
-    let timed = |v: &LabelValues| LabelValues {
+    let timed = |v: &label::Values| label::Values {
         time: match (args.dt, v.timestep) {
             (Some(dt), Some(t)) => Some(t as f64 * dt),
             _ => v.time,
         },
         ..v.clone()
     };
-    let values: Vec<LabelValues> = values.iter().map(|v| timed(v)).collect();
-    let decimals = time_decimals(movie.iter().filter_map(|v| timed(v).time));
+    let values: Vec<label::Values> = values.iter().map(|v| timed(v)).collect();
+    let decimals = label::time_decimals(movie.iter().filter_map(|v| timed(v).time));
     let mut missing = std::collections::BTreeSet::new();
     let panels = values
         .iter()
@@ -711,7 +531,7 @@ fn label_panels(
 
 /// Refuses, before anything is drawn, a `--label` that the values of some image (`values`)
 /// widen past what the image holds (a placeholder's text is known only with the file).
-fn check_label_room(args: &Args, values: &[&LabelValues]) -> Result<()> {
+fn check_label_room(args: &Args, values: &[&label::Values]) -> Result<()> {
     if args.label.is_empty() {
         return Ok(());
     }
@@ -741,15 +561,15 @@ fn check_label_room(args: &Args, values: &[&LabelValues]) -> Result<()> {
 /// Draws `--label` into each image, with its own values.
 fn write_labels(
     args: &Args,
-    images: &[(PathBuf, LabelValues)],
-    movie: Option<&[LabelValues]>,
+    images: &[(PathBuf, label::Values)],
+    movie: Option<&[label::Values]>,
 ) -> Result<()> {
     if args.label.is_empty() {
         return Ok(());
     }
     let mut glyphs = std::collections::BTreeSet::new();
-    let values: Vec<&LabelValues> = images.iter().map(|(_, v)| v).collect();
-    let movie: Vec<&LabelValues> = match movie {
+    let values: Vec<&label::Values> = images.iter().map(|(_, v)| v).collect();
+    let movie: Vec<&label::Values> = match movie {
         Some(all) => all.iter().collect(),
         None => values.clone(),
     };
@@ -1587,10 +1407,10 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     }
     // --dt gives the time {time} shows.
     let shows_time = args.label.iter().any(|l| {
-        label_parts(l)
+        label::parts(l)
             .unwrap_or_default()
             .iter()
-            .any(|p| matches!(p, LabelPart::Field("time", _)))
+            .any(|p| matches!(p, label::Part::Field("time", _)))
     });
     if args.dt.is_some() && !args.label.is_empty() && !shows_time {
         anyhow::bail!(
@@ -1973,8 +1793,8 @@ pub fn run(mut args: Args) -> Result<()> {
         // (A turntable's images share the file's values but the frame number.)
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let images = args.turntable.unwrap_or(1).max(1) as usize;
-        let values: Vec<LabelValues> = (0..images)
-            .map(|i| LabelValues::of_file(&args.file, file.metadata(), i))
+        let values: Vec<label::Values> = (0..images)
+            .map(|i| label::Values::of_file(&args.file, file.metadata(), i))
             .collect();
         check_label_room(&args, &values.iter().collect::<Vec<_>>())?;
         // The scale bar of the view drawn, refused before drawing where it cannot be.
@@ -2366,7 +2186,7 @@ pub fn run(mut args: Args) -> Result<()> {
         &args,
         &[(
             args.output.clone(),
-            LabelValues::of_file(&args.file, file.metadata(), 0),
+            label::Values::of_file(&args.file, file.metadata(), 0),
         )],
         None,
     )?;
@@ -3481,13 +3301,13 @@ fn render_turntable(
     }
     if !args.label.is_empty() {
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
-        let labelled: Vec<(PathBuf, LabelValues)> = written
+        let labelled: Vec<(PathBuf, label::Values)> = written
             .iter()
             .enumerate()
             .map(|(i, p)| {
                 (
                     p.clone(),
-                    LabelValues::of_file(&args.file, file.metadata(), i),
+                    label::Values::of_file(&args.file, file.metadata(), i),
                 )
             })
             .collect();
@@ -3823,17 +3643,17 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("cannot create {}", parent.display()))?;
     }
-    let frame_values: Vec<LabelValues> = manifest
+    let frame_values: Vec<label::Values> = manifest
         .frames
         .iter()
         .enumerate()
-        .map(|(i, f)| LabelValues {
+        .map(|(i, f)| label::Values {
             timestep: Some(f.timestep),
             time: f.time,
             frame: i,
             particles: f.particles,
             file: f.file.clone(),
-            source: Some(source_name(&f.source.path)).filter(|s| !s.is_empty()),
+            source: Some(label::source_name(&f.source.path)).filter(|s| !s.is_empty()),
         })
         .collect();
     check_label_room(args, &frame_values.iter().collect::<Vec<_>>())?;
@@ -4076,7 +3896,8 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         .enumerate()
         .filter(|(i, _)| args.frames.is_none_or(|sel| sel.takes(*i)))
         .map(|(_, v)| v.clone());
-    let labelled: Vec<(PathBuf, LabelValues)> = written.iter().cloned().zip(drawn_values).collect();
+    let labelled: Vec<(PathBuf, label::Values)> =
+        written.iter().cloned().zip(drawn_values).collect();
     write_labels(args, &labelled, Some(&frame_values))?;
     if let Some(bar) = &bar {
         for image in &written {
@@ -4117,66 +3938,6 @@ mod tests {
         assert!(note.contains("sigma spans 6.8 decades"), "{note}");
         assert_eq!(decades_light_note(&a(1.0, 9000.0)), None);
         assert_eq!(decades_light_note(&a(0.0, 1e9)), None);
-    }
-
-    /// Labels read as format strings: placeholders filled once each where they stand,
-    /// doubled braces literal (a plane family, `{{111}}`), a value the frame lacks `?`
-    /// and named once, stray braces and unknown names refused.
-    #[test]
-    fn labels_fill_placeholders_and_keep_doubled_braces() {
-        let v = LabelValues {
-            timestep: Some(500),
-            time: None,
-            frame: 3,
-            particles: 2552,
-            file: "gb.mdlod".into(),
-            source: Some("gb.dump".into()),
-        };
-        let fill = |t: &str| v.fill(t, None);
-        assert_eq!(
-            fill("step {timestep}, {particles} atoms"),
-            ("step 500, 2552 atoms".into(), vec![])
-        );
-        assert_eq!(
-            fill("Σ5 {{310}} boundaries, frame {frame}"),
-            ("Σ5 {310} boundaries, frame 3".into(), vec![])
-        );
-        assert_eq!(
-            fill("{{{timestep}}} {{timestep}}"),
-            ("{500} {timestep}".into(), vec![])
-        );
-        assert_eq!(fill("t={time} ({time})"), ("t=? (?)".into(), vec!["time"]));
-        assert_eq!(fill("{file} of {source}").0, "gb.mdlod of gb.dump");
-        // A time in its shortest form, to a movie's decimals, or to its placeholder's.
-        let timed = LabelValues {
-            time: Some(1.2),
-            ..v.clone()
-        };
-        assert_eq!(timed.fill("t = {time} ps", None).0, "t = 1.2 ps");
-        assert_eq!(timed.fill("t = {time} ps", Some(2)).0, "t = 1.20 ps");
-        assert_eq!(timed.fill("t = {time:.3} ps", Some(1)).0, "t = 1.200 ps");
-        assert_eq!(timed.fill("{time:.0}", None).0, "1");
-        // A movie's times take the decimals of the most precise: 0.80, 1.00, 1.20.
-        assert_eq!(time_decimals([0.8, 1.0, 1.2].into_iter()), Some(1));
-        assert_eq!(time_decimals([0.25, 1.0].into_iter()), Some(2));
-        assert_eq!(time_decimals([100.0, 200.0].into_iter()), Some(0));
-        assert_eq!(time_decimals([1e-9, 2e-9].into_iter()), Some(9));
-        assert_eq!(time_decimals([1e-15, 2e-15].into_iter()), None);
-        assert_eq!(time_decimals([0.0, 3e-5, 1.5e-4].into_iter()), Some(5));
-        for (bad, why) in [
-            ("{time:2}", "`:2` is no number of decimals"),
-            ("{time:.x}", "`:.x` is no number of decimals"),
-            ("{time:.13}", "at most 12"),
-            ("{timestep:.2}", "only {time} takes a number of decimals"),
-            ("{111} planes", "{111} is no value a label fills in"),
-            ("{111} planes", "write {{111}} for the braces themselves"),
-            ("open { brace", "a `{` opens no placeholder"),
-            ("close } brace", "a `}` closes no placeholder"),
-            ("{timestep", "a `{` opens no placeholder"),
-        ] {
-            let e = label_parts(bad).unwrap_err();
-            assert!(e.contains(why), "{bad}: {e}");
-        }
     }
 
     /// `--look-along D` puts the eye towards `-D` from the target: the camera's `back`
