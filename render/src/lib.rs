@@ -38,6 +38,7 @@ pub mod font;
 pub mod image;
 pub mod label;
 pub mod legend;
+pub mod movie;
 pub mod occlusion;
 pub mod overlay;
 pub mod passes;

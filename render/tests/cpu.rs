@@ -2043,3 +2043,74 @@ fn the_default_view_faces_flat_data_square_on_and_orbits_three_dimensional_data(
         );
     }
 }
+
+/// A movie's survey: the attribute's range over every frame (none once a frame names
+/// another), the species of every frame, the bounds of the frames that show particles
+/// (a frame whose every particle is hidden frames only when none shows any), and the
+/// axis every frame is flat across.
+#[test]
+fn a_movie_survey_unites_the_frames_that_show_particles() {
+    let flat = |x0: f32, n: usize, name: &str, values: [f32; 2]| {
+        let positions: Vec<[f32; 3]> = (0..n)
+            .map(|i| [x0 + (i % 10) as f32 * 2.0, (i / 10) as f32 * 2.0, 0.0])
+            .collect();
+        let k = positions.len();
+        mdlod_preprocess::Frame {
+            species_index: vec![0; k],
+            species: species(&[name]),
+            attribute: Some(mdlod_preprocess::frame::Attribute {
+                name: "c_pe".into(),
+                values: (0..k)
+                    .map(|i| values[0] + (values[1] - values[0]) * i as f32 / (k - 1) as f32)
+                    .collect(),
+            }),
+            positions,
+            ..Default::default()
+        }
+    };
+    let a = flat(0.0, 100, "Cu", [-3.0, -1.0]);
+    let b = flat(100.0, 100, "Ni", [-5.0, -2.0]);
+    let (_da, _, fa) = make_file(&a, small_build(), &[]);
+    let (_db, _, fb) = make_file(&b, small_build(), &[]);
+    let mut opts = mdlod_render::RenderOptions::default();
+    let mut survey = mdlod_render::movie::Survey::new();
+    survey.add(&fa, &opts);
+    survey.add(&fb, &opts);
+    assert_eq!(survey.frames(), 2);
+    let attr = survey.attribute().expect("both frames have c_pe");
+    assert_eq!((attr.min, attr.max), (-5.0, -1.0));
+    assert_eq!(
+        survey.names().iter().cloned().collect::<Vec<_>>(),
+        ["Cu", "Ni"]
+    );
+    assert_eq!(survey.species().len(), 2);
+    assert_eq!(survey.flat_axis(), Some(2));
+    let both = survey.bounds().unwrap();
+    assert!(both.min.x < 1.0 && both.max.x > 118.0, "{both:?}");
+    assert!(!survey.boxes().is_empty());
+    // With Ni hidden, the second frame shows nothing: the first alone is framed.
+    opts.style.species = vec![mdlod_render::style::SpeciesStyle {
+        name: "Ni".into(),
+        hidden: true,
+        ..Default::default()
+    }];
+    let mut hiding = mdlod_render::movie::Survey::new();
+    hiding.add(&fa, &opts);
+    hiding.add(&fb, &opts);
+    let shown = hiding.bounds().unwrap();
+    assert!(shown.max.x < 50.0, "{shown:?}");
+    // Hidden in every frame: the hidden frames' bounds stand in.
+    let mut only_hidden = mdlod_render::movie::Survey::new();
+    only_hidden.add(&fb, &opts);
+    assert!(only_hidden.bounds().unwrap().min.x > 99.0);
+    // A frame with another attribute, or a three-dimensional one, ends the union.
+    let mut c = flat(0.0, 100, "Cu", [0.0, 1.0]);
+    c.attribute.as_mut().unwrap().name = "c_ke".into();
+    c.positions[7][2] = 5.0;
+    let (_dc, _, fc) = make_file(&c, small_build(), &[]);
+    let mut mixed = mdlod_render::movie::Survey::new();
+    mixed.add(&fa, &mdlod_render::RenderOptions::default());
+    mixed.add(&fc, &mdlod_render::RenderOptions::default());
+    assert!(mixed.attribute().is_none());
+    assert_eq!(mixed.flat_axis(), None);
+}

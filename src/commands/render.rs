@@ -2973,35 +2973,6 @@ pub(super) fn limits_text(
     }
 }
 
-/// The image of frame `index` of a movie: `pattern` with its `%d` or `%0Nd` (as
-/// ffmpeg reads them) replaced by the index.
-/// How far the corners of `bounds` reach from the image's centre (normalised device
-/// coordinates, x and y) over the views of a turn, each seen from `distance`.
-fn turn_reach(
-    cameras: &[Camera],
-    distance: f32,
-    bounds: &mdlod_render::Bounds,
-    aspect: f32,
-) -> [f64; 2] {
-    let mut reach = [0.0f64; 2];
-    for c in cameras {
-        let c = Camera {
-            distance,
-            ..c.clone()
-        };
-        let m = c.clip_from_view(aspect) * c.view_from_world();
-        for p in mdlod_render::camera::corners(bounds) {
-            let clip = m * p.as_vec3().extend(1.0);
-            if clip.w > 0.0 {
-                for k in 0..2 {
-                    reach[k] = reach[k].max(f64::from((clip[k] / clip.w).abs()));
-                }
-            }
-        }
-    }
-    reach
-}
-
 /// A note naming the images numbered past the last of the `n` just written to `pattern`
 /// that an earlier run left (a longer movie or turntable into the same names): a player
 /// or `ffmpeg -i` reading the numbered series would take them as more frames.
@@ -3043,6 +3014,8 @@ fn check_numbered_outputs(pattern: &Path, n: usize) -> Result<()> {
     Ok(())
 }
 
+/// The image of frame `index` of a movie: `pattern` with its `%d` or `%0Nd` (as
+/// ffmpeg reads them) replaced by the index.
 fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
     let name = pattern
         .file_name()
@@ -3162,66 +3135,17 @@ fn render_turntable(
                 .view
                 .as_ref()
                 .is_none_or(|p| ViewFile::load(p).map_or(true, |v| v.target.is_none()));
-        let aspect = opts.width.max(1) as f32 / opts.height.max(1) as f32;
-        let cameras = views
-            .iter()
-            .map(|v| {
-                let mut c = mdlod_render::camera_for_bounds(&bounds, v, opts.width, opts.height)?;
-                if fitted_target {
-                    // The zoom asked for: the fitted distance over the one given.
-                    let mut fitted = c.clone();
-                    fitted.fit(&bounds, aspect);
-                    let zoom = fitted.distance / c.distance;
-                    c.fit_about_centre(&bounds, aspect);
-                    c.distance /= zoom;
-                }
-                Ok(c)
-            })
-            .collect::<Result<Vec<_>, mdlod_render::RenderError>>()?;
-        let farthest = cameras.iter().map(|c| c.distance).fold(0.0f32, f32::max);
-        // An in-image legend's corner is kept free as a still's fit keeps it: the turn
-        // is fitted into the part of the image the legend leaves (the one that shows the
-        // data larger), a distance as much farther as that part is smaller, and every
-        // view panned so that the data's centre lies at the part's centre.
-        // (The windows a still's fit takes: see `FitWindow::centre_and_half`.) The data's
-        // reach across the image, over the turn at the farthest distance, says how much
-        // farther each part needs it: a part as wide as the image but short shrinks a
-        // cube that a narrow, full-height part beside the legend holds whole.
-        let reach = turn_reach(&cameras, farthest, &bounds, aspect);
-        let window = opts
-            .fit_windows
-            .iter()
-            .filter_map(|w| w.centre_and_half())
-            .map(|(centre, half)| {
-                let shrink = (0..2)
-                    .map(|k| half[k] * mdlod_render::camera::FIT_FILL / reach[k].max(1e-9))
-                    .fold(1.0f64, f64::min);
-                (centre, shrink)
-            })
-            .max_by(|a, b| a.1.total_cmp(&b.1));
-        let farthest = match window {
-            Some((_, shrink)) => farthest / shrink as f32,
-            None => farthest,
-        };
-        views = cameras
-            .into_iter()
-            .map(|c| {
-                let mut c = Camera {
-                    distance: farthest,
-                    ..c
-                };
-                // The data's centre dragged to the window's centre, in pixels (y down).
-                if let Some((centre, _)) = window {
-                    let (w, h) = (f64::from(opts.width), f64::from(opts.height));
-                    c.pan_px(
-                        (centre[0] * 0.5 * w) as f32,
-                        (-centre[1] * 0.5 * h) as f32,
-                        opts.height,
-                    );
-                }
-                ViewSpec::Camera(c)
-            })
-            .collect();
+        views = mdlod_render::movie::turntable_cameras(
+            &bounds,
+            &views,
+            opts.width,
+            opts.height,
+            fitted_target,
+            &opts.fit_windows,
+        )?
+        .into_iter()
+        .map(ViewSpec::Camera)
+        .collect();
     }
     let mut written = Vec::new();
     for (i, view) in (0..n).zip(views) {
@@ -3315,10 +3239,6 @@ fn render_turntable(
     }
     Ok(())
 }
-
-/// The most cluster boxes a movie's fit frames (every frame's; past this, the union of
-/// the frames' boxes alone).
-const MOVIE_FRAMING_BOXES: usize = 1 << 18;
 
 /// Notes on the frames a movie of the batch directory `dir` lacks, which would jump in
 /// time without a sign: those the batch could not convert (`--keep-going`) and those an
@@ -3422,24 +3342,11 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     frame_output(&args.output, 0)?;
     check_numbered_outputs(&args.output, n)?;
-    let mut boxes: Option<Vec<mdlod_render::Bounds>> = Some(Vec::new());
-    let mut bounds: Option<mdlod_render::Bounds> = None;
-    let mut hidden_bounds: Option<mdlod_render::Bounds> = None;
-    // Particles left out of the fit as far from the rest, and in how many frames.
-    let mut far = (0u64, 0usize);
-    // With a log scale: the smallest value above 0 of any frame.
-    let mut floor: Option<f32> = None;
     let fitted = view_fits(&opts.view);
-    // Species may come and go in a trajectory (a deposition, an evaporation): a style
-    // names any species of some frame, and applies in the frames that hold it.
-    let mut names = std::collections::BTreeSet::new();
-    // The attribute's range over every frame (None once a frame lacks it or names
-    // another): colours and splat intensities then mean the same values throughout.
-    let mut attribute: Option<Option<mdlod_format::meta::AttributeInfo>> = None;
-    let mut frame_species = Vec::with_capacity(n);
-    // The axis every frame is flat across, for the default view (None: some frame is
-    // three-dimensional, or flat across another axis).
-    let mut flat: Option<Option<usize>> = None;
+    // One camera and one colour range for every frame. Species may come and go in a
+    // trajectory (a deposition, an evaporation): a style names any species of some
+    // frame, and applies in the frames that hold it.
+    let mut survey = mdlod_render::movie::Survey::new();
     for f in &manifest.frames {
         let path = dir.join(&f.file);
         // (Something else in its place, a directory say, the reader names.)
@@ -3466,64 +3373,20 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
                 dir.display()
             );
         }
-        let own_flat = mdlod_render::flat_axis(&file);
-        flat = Some(match flat {
-            None => own_flat,
-            Some(a) => a.filter(|_| a == own_flat),
-        });
-        names.extend(file.metadata().species.iter().map(|s| s.name.clone()));
-        frame_species.push(file.metadata().species.clone());
-        let own = file.metadata().attribute.clone();
-        if let Some(a) = own.as_ref().filter(|_| by_attribute(args)) {
+        if let Some(a) = file
+            .metadata()
+            .attribute
+            .as_ref()
+            .filter(|_| by_attribute(args))
+        {
             let lit = args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute);
             check_not_logged(&opts.style, a, &path, lit)?;
         }
-        attribute = Some(match (attribute, own) {
-            (None, own) => own,
-            (Some(Some(a)), Some(b)) if a.name == b.name => {
-                Some(mdlod_format::meta::AttributeInfo {
-                    min: a.min.min(b.min),
-                    max: a.max.max(b.max),
-                    ..a
-                })
-            }
-            _ => None,
-        });
-        if opts.style.log_scale {
-            if let Some(f) = mdlod_render::log_floor(&file) {
-                floor = Some(floor.map_or(f, |g: f32| g.min(f)));
-            }
-        }
-        let fit = mdlod_render::fit_for(&file, &opts);
-        if fit.far_particles > 0 {
-            far.0 += fit.far_particles;
-            far.1 += 1;
-        }
-        // A frame whose every particle is hidden shows nothing to fit (its whole box
-        // stands in only when no frame shows anything).
-        let slot = if fit.shows_any {
-            &mut bounds
-        } else {
-            &mut hidden_bounds
-        };
-        let b = fit.bounds;
-        *slot = Some(match *slot {
-            None => b,
-            Some(a) => mdlod_render::Bounds::new(a.min.min(b.min), a.max.max(b.max)),
-        });
-        // Every frame's clusters frame the movie (a still frames its own), up to a cap
-        // past which the frames' boxes alone do.
-        if fit.shows_any {
-            if let Some(all) = &mut boxes {
-                all.extend(mdlod_render::framing_boxes(&file, &opts, &b));
-                if all.len() > MOVIE_FRAMING_BOXES {
-                    boxes = None;
-                }
-            }
-        }
+        survey.add(&file, &opts);
     }
-    let bounds = bounds.or(hidden_bounds).expect("at least one frame");
-    let boxes = boxes.unwrap_or_default();
+    let bounds = survey.bounds().expect("at least one frame");
+    let names = survey.names();
+    let attribute = survey.attribute();
     if let Some(s) = opts.style.species.iter().find(|s| !names.contains(&s.name)) {
         anyhow::bail!(
             "no frame of {} has a species named {:?} (its frames have {})",
@@ -3533,7 +3396,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         );
     }
     let mut range_note = String::new();
-    if let Some((a, range)) = attribute.clone().flatten().and_then(|a| {
+    if let Some((a, range)) = attribute.cloned().and_then(|a| {
         let range = light_range_from_zero([a.min, a.max], lit_linearly(args))?;
         Some((a, range))
     }) {
@@ -3552,7 +3415,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     if by_attribute(args) && opts.style.attribute_range.is_none() {
         // Where the frames' union is no range (a constant attribute), each frame keeps
         // its own constant look.
-        let centred = attribute.clone().flatten().and_then(|a| {
+        let centred = attribute.cloned().and_then(|a| {
             if opts.style.log_scale {
                 return None;
             }
@@ -3560,10 +3423,11 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             Some((a, range))
         });
         let floored = attribute
-            .clone()
-            .flatten()
+            .cloned()
             .filter(|_| opts.style.log_scale)
-            .and_then(|a| log_start([a.min, a.max], floor).map(|(r, why)| (a, r, why)));
+            .and_then(|a| {
+                log_start([a.min, a.max], survey.log_floor()).map(|(r, why)| (a, r, why))
+            });
         if let Some((a, range, why)) = floored {
             opts.style.attribute_range = Some(range);
             range_note = format!(
@@ -3587,7 +3451,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
                 Num(a.min),
                 Num(a.max)
             );
-        } else if let Some(Some(a)) = attribute.clone().filter(|_| n > 1) {
+        } else if let Some(a) = attribute.filter(|_| n > 1) {
             if a.max > a.min {
                 opts.style.attribute_range = Some([a.min, a.max]);
                 range_note = format!(
@@ -3614,7 +3478,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             }
         }
     }
-    if let Some(Some(a)) = &attribute {
+    if let Some(a) = attribute {
         if by_attribute(args) {
             range_note.push_str(&log_text(a, &opts.style, args));
             range_note.push_str(&white_text(&opts.style));
@@ -3622,17 +3486,21 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     }
     // Each frame's file fixed its species' looks alone: a name keeps one look throughout.
     let looks = mdlod_render::style::trajectory_looks(
-        &frame_species.iter().map(Vec::as_slice).collect::<Vec<_>>(),
+        &survey
+            .species()
+            .iter()
+            .map(Vec::as_slice)
+            .collect::<Vec<_>>(),
     );
     let (mut restyled, mut restyled_names) = (0usize, std::collections::BTreeSet::new());
     // Each name's smallest and largest radius as drawn: a frame's own radii are data.
     let mut radii: std::collections::BTreeMap<String, [f32; 2]> = Default::default();
     let mut worst_miss: Option<(f32, usize)> = None;
     let style = opts.style.clone();
-    opts.view = opts.view.with_flat_axis(flat.flatten());
+    opts.view = opts.view.with_flat_axis(survey.flat_axis());
     let camera = mdlod_render::camera_for_framing_in(
         &bounds,
-        &boxes,
+        survey.boxes(),
         &opts.view,
         opts.width,
         opts.height,
@@ -3843,10 +3711,10 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     for note in gaps_notes(&manifest, dir) {
         println!("{note}");
     }
-    if let Some(note) = far_note(far.0, Some(far.1)).filter(|_| fitted) {
+    if let Some(note) = far_note(survey.far().0, Some(survey.far().1)).filter(|_| fitted) {
         println!("{note}");
     }
-    if let (Some([lo, hi]), Some(Some(a))) = (args.style.attribute_range, &attribute) {
+    if let (Some([lo, hi]), Some(a)) = (args.style.attribute_range, attribute) {
         if by_attribute(args) && (hi < a.min || lo > a.max) {
             println!(
                 "  note: the range {} to {} misses every frame's values ({} from {} to {}): \
@@ -3884,7 +3752,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     write_legend(
         args,
         &opts,
-        attribute.flatten().as_ref(),
+        attribute,
         &looks,
         opts.light_range,
         &drawn,
