@@ -3975,6 +3975,92 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     }
 }
 
+/// A movie's in-image key names the species of every frame: its room is kept for all of
+/// them, also where the first frame has fewer (ions that come later), so the panel
+/// covers no particle of any frame.
+#[test]
+fn a_movies_legend_keeps_room_for_species_that_come_later() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("ions.lammpstrj");
+    let mut text = String::new();
+    for (t, kinds) in [(0, 2), (100, 6)] {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{t}\nITEM: NUMBER OF ATOMS\n1000\nITEM: BOX BOUNDS pp pp pp\n\
+             0 40\n0 20\n0 20\nITEM: ATOMS id type x y z\n"
+        ));
+        for i in 0..1000 {
+            let (x, y, z) = (i % 20, (i / 20) % 10, i / 200);
+            let kind = 1 + i % kinds;
+            text.push_str(&format!(
+                "{} {kind} {} {} {}\n",
+                i + 1,
+                2 * x + 1,
+                2 * y + 1,
+                4 * z + 1
+            ));
+        }
+    }
+    std::fs::write(&dump, text).unwrap();
+    let d = dir.path().join("ions.d");
+    ok(&["batch", s(&dump), "-o", s(&d)]);
+    let (with, plain) = (
+        dir.path().join("with-%d.png"),
+        dir.path().join("plain-%d.png"),
+    );
+    let view = dir.path().join("v.json");
+    // Seen side on, the slab fills the image's width above a short key.
+    let base = [
+        "--width",
+        "480",
+        "--height",
+        "320",
+        "--background",
+        "#000000",
+        "--look-along",
+        "0,1,0",
+        "--ortho",
+    ];
+    let out = ok(&[
+        &["render", s(&d), "-o", s(&with)][..],
+        &base,
+        &["--legend-in-image", "--save-view", s(&view)],
+    ]
+    .concat());
+    assert!(out.contains("(6 species in their colours)"), "{out}");
+    ok(&[
+        &["render", s(&d), "-o", s(&plain)][..],
+        &base,
+        &["--view", s(&view)],
+    ]
+    .concat());
+    for i in 0..2 {
+        let (w, h, a) = read_png(&dir.path().join(format!("with-{i}.png")));
+        let (_, _, b) = read_png(&dir.path().join(format!("plain-{i}.png")));
+        // The panel: the box around the pixels the legend changed.
+        let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
+        for y in 0..h {
+            for x in 0..w {
+                let k = 4 * (y * w + x) as usize;
+                if a[k..k + 4] != b[k..k + 4] {
+                    (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+                }
+            }
+        }
+        assert!(
+            x1 > x0 && y1 - y0 > 100,
+            "frame {i}: panel {x0},{y0} to {x1},{y1}"
+        );
+        let under = (y0..=y1)
+            .flat_map(|y| (x0..=x1).map(move |x| (x, y)))
+            .filter(|&(x, y)| b[4 * (y * w + x) as usize..][..3] != [0, 0, 0])
+            .count();
+        assert_eq!(
+            under, 0,
+            "frame {i}: the legend covers {under} pixels of particles"
+        );
+    }
+}
+
 /// `--legend` writes what the colours mean as SVG: the colour map's bar over the range
 /// shown (a movie's: every frame's), the species shown in their colours, the density's
 /// transfer function; a name that is no SVG is refused before anything is drawn.

@@ -2300,18 +2300,27 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_rend
             }
             shown
         });
-    let all = meta
+    let mut all: std::collections::BTreeSet<String> = meta
         .species
         .iter()
         .enumerate()
         .filter(|(k, _)| shown.as_ref().is_none_or(|v| v[*k]))
         .map(|(_, s)| s.name.clone())
         .collect();
+    // A movie's key names the species of every frame (ions that come later, say): the
+    // room is kept for all of them, with the looks the movie gives them.
+    let mut species = meta.species.clone();
+    if let Some(frames) = movie_species(&args.file) {
+        species = mdlod_render::style::trajectory_looks(
+            &frames.iter().map(Vec::as_slice).collect::<Vec<_>>(),
+        );
+        all.extend(frames.iter().flatten().map(|s| s.name.clone()));
+    }
     let (legend, _) = build_legend(
         args,
         opts,
         meta.attribute.as_ref(),
-        &meta.species,
+        &species,
         Some([1.0, 2.0]),
         &all,
     )?;
@@ -2365,6 +2374,27 @@ fn first_file(file: &Path) -> Option<PathBuf> {
     }
     let manifest = mdlod_preprocess::batch::read_manifest(file).ok()?;
     manifest.frames.first().map(|f| file.join(&f.file))
+}
+
+/// Each frame's species, for a batch directory of more than one frame (`None` for a
+/// file, or a directory whose frames cannot all be read: those fail where they are
+/// rendered).
+fn movie_species(dir: &Path) -> Option<Vec<Vec<mdlod_format::meta::Species>>> {
+    if !dir.is_dir() {
+        return None;
+    }
+    let manifest = mdlod_preprocess::batch::read_manifest(dir).ok()?;
+    if manifest.frames.len() < 2 {
+        return None;
+    }
+    manifest
+        .frames
+        .iter()
+        .map(|f| {
+            let file = mdlod_format::MdlodFile::open(dir.join(&f.file)).ok()?;
+            Some(file.metadata().species.clone())
+        })
+        .collect()
 }
 
 /// Where a fitted view places the data so that the scale bar's panel covers none of it
