@@ -4061,6 +4061,133 @@ fn a_movies_legend_keeps_room_for_species_that_come_later() {
     }
 }
 
+/// Hiding a species a frame lacks hides nothing there: a still or a movie says so and
+/// draws (a script run over every frame, ions that come later), while a name that
+/// differs from one of the frame's in case only is refused as a misspelling. Names come
+/// one per flag or as a list; a type-number file's hint names its types.
+#[test]
+fn hiding_a_species_a_frame_lacks_is_said_not_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("three.lammpstrj");
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n27\nITEM: BOX BOUNDS pp pp pp\n\
+         0 6\n0 6\n0 6\nITEM: ATOMS id type x y z\n",
+    );
+    for i in 0..27 {
+        let (x, y, z) = (i % 3, (i / 3) % 3, i / 9);
+        text.push_str(&format!(
+            "{} {} {} {} {}\n",
+            i + 1,
+            1 + i % 3,
+            2 * x + 1,
+            2 * y + 1,
+            2 * z + 1
+        ));
+    }
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("three.mdlod");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--species-name",
+        "1=C1A",
+        "--species-name",
+        "2=PO4",
+        "--species-name",
+        "3=W",
+    ]);
+    let png = dir.path().join("x.png");
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-species",
+        "NA",
+        "--hide-species",
+        "W",
+    ]);
+    assert!(
+        out.contains("note: --hide-species NA: no particle of this frame is NA (its species are C1A, PO4, W): nothing of it to hide here"),
+        "{out}"
+    );
+    assert!(out.contains("18 particles"), "{out}");
+    // A list hides the same.
+    let list = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-species",
+        "NA,W,CL",
+    ]);
+    assert!(list.contains("--hide-species CL,NA: no particle"), "{list}");
+    assert!(list.contains("18 particles"), "{list}");
+    // A name the frame spells in another case is a misspelling.
+    let e = fails(&["render", s(&file), "-o", s(&png), "--hide-species", "w"]);
+    assert!(
+        e.contains("no species named \"w\"; did you mean \"W\"?"),
+        "{e}"
+    );
+    // A colour for a species the frame lacks is still refused.
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--species-colour",
+        "NA=red",
+    ]);
+    assert!(e.contains("no species named \"NA\""), "{e}");
+    // A movie: the same note, once.
+    let d = dir.path().join("three.d");
+    ok(&["batch", s(&dump), "-o", s(&d)]);
+    let frames = dir.path().join("f-%d.png");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&frames),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-species",
+        "7",
+    ]);
+    assert!(
+        out.contains("note: --hide-species 7: no frame has 7 (the frames have 1, 2, 3)"),
+        "{out}"
+    );
+    // Type numbers: the hint lists them, and names no one type for the user's name.
+    let numbered = dir.path().join("numbered.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&numbered)]);
+    let e = fails(&[
+        "render",
+        s(&numbered),
+        "-o",
+        s(&png),
+        "--species-colour",
+        "water=blue",
+    ]);
+    assert!(
+        e.contains(
+            "name the type here (one of 1, 2, 3), or convert with --species-name TYPE=water"
+        ),
+        "{e}"
+    );
+}
+
 /// `--legend` writes what the colours mean as SVG: the colour map's bar over the range
 /// shown (a movie's: every frame's), the species shown in their colours, the density's
 /// transfer function; a name that is no SVG is refused before anything is drawn.

@@ -297,11 +297,18 @@ impl PointStyle {
             // A file of LAMMPS type numbers, styled by an element's name.
             let numbered =
                 names.iter().all(|n| n.parse::<u32>().is_ok()) && st.name.parse::<u32>().is_err();
-            let hint = if numbered {
+            let hint = if numbered && names.len() == 1 {
                 format!(
                     "; its species are type numbers: name the type here ({}), or convert \
                      with --species-name {}={} to call it so",
                     names[0], names[0], st.name
+                )
+            } else if numbered {
+                format!(
+                    "; its species are type numbers: name the type here (one of {}), or \
+                     convert with --species-name TYPE={} (the type's number) to call it so",
+                    names.join(", "),
+                    st.name
                 )
             } else {
                 String::new()

@@ -617,8 +617,9 @@ pub struct StyleArgs {
     #[arg(long = "species-radius", value_name = "NAME=R")]
     pub species_radius: Vec<String>,
     /// Leave out the particles of a species, and the clusters of them (a cluster holding
-    /// them and others is refined until it holds none); repeatable.
-    #[arg(long = "hide-species", value_name = "NAME")]
+    /// them and others is refined until it holds none); repeatable, or a list
+    /// (`--hide-species W,NA,CL`).
+    #[arg(long = "hide-species", value_name = "NAME", value_delimiter = ',')]
     pub hide_species: Vec<String>,
     /// Leave out the particles whose attribute value lies from MIN to MAX (inclusive;
     /// an end left empty is open: `:0.2`, `2.5:`), as OVITO's expression selection and
@@ -3313,19 +3314,19 @@ fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<S
 /// A file whose species are the values of a column (structure types) holds only those
 /// of its frame: a style naming another (a figure script run over every frame, hiding
 /// HCP from a frame without any) does nothing there, and is dropped with a note instead
-/// of refusing the frame. Files of types or elements still refuse a name they lack (a
-/// misspelling).
+/// of refusing the frame. Files of types or elements likewise drop a species that is
+/// only hidden (ions that come later in the run: hiding them where there are none hides
+/// nothing), and still refuse another style of a name they lack (a misspelling).
 fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> Result<()> {
     // (The species only: the file as it is, whichever attribute the style reads.)
     let file = mdlod_format::MdlodFile::open(path)?;
     let m = file.metadata();
-    let Some(column) = &m.species_column else {
-        return Ok(());
-    };
+    let column = m.species_column.as_ref();
     let absent: std::collections::BTreeSet<String> = style
         .species
         .iter()
         .filter(|st| !m.species.iter().any(|s| s.name == st.name))
+        .filter(|st| column.is_some() || (st.hidden && st.colour.is_none() && st.radius.is_none()))
         .map(|st| st.name.clone())
         .collect();
     if absent.is_empty() {
@@ -3343,13 +3344,24 @@ fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> 
     }
     style.species.retain(|st| !absent.contains(&st.name));
     let names: Vec<&str> = m.species.iter().map(|s| s.name.as_str()).collect();
-    println!(
-        "  note: no particle of this frame is {} (its species are the values of {column}: \
-         {}): the options naming {} do nothing here",
-        absent.iter().cloned().collect::<Vec<_>>().join(" or "),
-        names.join(", "),
-        if absent.len() == 1 { "it" } else { "them" }
-    );
+    let absent: Vec<String> = absent.into_iter().collect();
+    match column {
+        Some(column) => println!(
+            "  note: no particle of this frame is {} (its species are the values of \
+             {column}: {}): the options naming {} do nothing here",
+            absent.join(" or "),
+            names.join(", "),
+            if absent.len() == 1 { "it" } else { "them" }
+        ),
+        None => println!(
+            "  note: --hide-species {}: no particle of this frame is {} (its species are {}): \
+             nothing of {} to hide here",
+            absent.join(","),
+            absent.join(" or "),
+            names.join(", "),
+            if absent.len() == 1 { "it" } else { "them" }
+        ),
+    }
     Ok(())
 }
 
@@ -3417,13 +3429,58 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
     let bounds = survey.bounds().expect("at least one frame");
     let names = survey.names();
     let attribute = survey.attribute();
-    if let Some(s) = opts.style.species.iter().find(|s| !names.contains(&s.name)) {
+    // Hiding a species no frame has hides nothing: said, not refused (a figure script
+    // run over several runs); other styles of such a name are a misspelling.
+    let hidden_absent: Vec<String> = opts
+        .style
+        .species
+        .iter()
+        .filter(|s| {
+            !names.contains(&s.name) && s.hidden && s.colour.is_none() && s.radius.is_none()
+        })
+        .map(|s| s.name.clone())
+        .collect();
+    if let Some(s) = opts
+        .style
+        .species
+        .iter()
+        .find(|s| !names.contains(&s.name) && !hidden_absent.contains(&s.name))
+    {
         anyhow::bail!(
             "no frame of {} has a species named {:?} (its frames have {})",
             dir.display(),
             s.name,
             names.iter().cloned().collect::<Vec<_>>().join(", ")
         );
+    }
+    if !hidden_absent.is_empty() {
+        if let Some((name, s)) = hidden_absent.iter().find_map(|h| {
+            names
+                .iter()
+                .find(|n| n.eq_ignore_ascii_case(h))
+                .map(|n| (h, n))
+        }) {
+            anyhow::bail!(
+                "no frame of {} has a species named {name:?}; did you mean {s:?}? (names are \
+                 matched exactly)",
+                dir.display()
+            );
+        }
+        println!(
+            "  note: --hide-species {}: no frame has {} (the frames have {}): nothing of {} \
+             to hide",
+            hidden_absent.join(","),
+            hidden_absent.join(" or "),
+            names.iter().cloned().collect::<Vec<_>>().join(", "),
+            if hidden_absent.len() == 1 {
+                "it"
+            } else {
+                "them"
+            }
+        );
+        opts.style
+            .species
+            .retain(|st| !hidden_absent.contains(&st.name));
     }
     let mut range_note = String::new();
     if let Some((a, range)) = attribute.cloned().and_then(|a| {
