@@ -8697,6 +8697,121 @@ fn a_saved_light_map_holds_the_column_density() {
     }
 }
 
+/// Panels drawn into an image are refused before anything is drawn where they would
+/// cover one another (a long scale bar reaching under the legend, in a still or a
+/// movie) or where the image cannot hold the scale bar at all: no image is left.
+#[test]
+fn panels_that_would_cover_one_another_are_refused_before_drawing() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let file = dir.path().join("m.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file), "--attribute", "c_pe"]);
+    let png = dir.path().join("p.png");
+    let base = [
+        "--ortho",
+        "--scale-bar",
+        "--legend-in-image",
+        "--colour-map",
+        "viridis",
+    ];
+    let e = fails(
+        &[
+            &["render", s(&file), "-o", s(&png)][..],
+            &base,
+            &[
+                "--width",
+                "800",
+                "--height",
+                "600",
+                "--scale-bar-length",
+                "30",
+            ],
+        ]
+        .concat(),
+    );
+    assert!(
+        e.contains("--legend-in-image and --scale-bar would cover one another in a 800×600 image")
+            && e.contains("a shorter bar (--scale-bar-length)"),
+        "{e}"
+    );
+    assert!(!png.exists());
+    // The bar's own length, short enough: drawn, beside the legend.
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&png)][..],
+        &base,
+        &[
+            "--width",
+            "800",
+            "--height",
+            "600",
+            "--scale-bar-length",
+            "5",
+        ],
+    ]
+    .concat());
+    assert!(out.contains("legend drawn into"), "{out}");
+    // The label in a corner the legend spans: the legend and the label at the bottom.
+    std::fs::remove_file(&png).unwrap();
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "420",
+        "--height",
+        "300",
+        "--legend-in-image",
+        "--colour-map",
+        "viridis",
+        "--label",
+        "a rather long label of the frame, timestep {timestep}",
+        "--label-corner",
+        "bottom-left",
+    ]);
+    assert!(
+        e.contains("--legend-in-image and --label would cover one another"),
+        "{e}"
+    );
+    assert!(!png.exists());
+    // An image too small for the bar: refused before the image is written.
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--ortho",
+        "--scale-bar",
+        "--width",
+        "40",
+        "--height",
+        "30",
+    ]);
+    assert!(e.contains("a 40×30 image cannot hold the scale bar"), "{e}");
+    assert!(!png.exists());
+    // A movie: refused before its first frame.
+    let d = dir.path().join("m.d");
+    ok(&["batch", s(&input), "-o", s(&d), "--attribute", "c_pe"]);
+    let frames = dir.path().join("f-%d.png");
+    let e = fails(
+        &[
+            &["render", s(&d), "-o", s(&frames)][..],
+            &base,
+            &[
+                "--width",
+                "800",
+                "--height",
+                "600",
+                "--scale-bar-length",
+                "30",
+            ],
+        ]
+        .concat(),
+    );
+    assert!(e.contains("would cover one another"), "{e}");
+    assert!(!dir.path().join("f-0.png").exists());
+}
+
 /// A fitted view leaves the scale bar's panel free, as it does the legend's: a slab
 /// filling the image reaches under the panel's corner without the bar and stays clear
 /// of it with the bar (the view the bar's fit chose, drawn without the bar, has only

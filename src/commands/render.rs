@@ -339,10 +339,91 @@ fn scale_bar(
             super::Num(world as f32)
         );
     }
-    Ok(mdlod_render::legend::Legend::Scale {
+    let bar = mdlod_render::legend::Legend::Scale {
         length: (pixels / s) as f32,
         label,
-    })
+    };
+    if bar.scale_for(width, height).is_none() {
+        let (w, h) = bar.room_needed(1);
+        anyhow::bail!(
+            "--scale-bar: a {width}×{height} image cannot hold the scale bar (at least {w}×{h} \
+             pixels with its margin); draw a larger image"
+        );
+    }
+    Ok(bar)
+}
+
+/// The name a corner is given on the command line.
+fn corner_name(corner: LegendCorner) -> String {
+    clap::ValueEnum::to_possible_value(&corner).map_or_else(String::new, |v| v.get_name().into())
+}
+
+/// Refuses, before anything is drawn, panels drawn into the image (the in-image legend
+/// of `legend` pixels, the label of `label`, the scale bar) that would cover one
+/// another: each lies in its corner, over the room it needs with its margin. (Two in
+/// one corner are refused where they are named.)
+fn check_panels_apart(
+    args: &Args,
+    legend: Option<[u32; 2]>,
+    label: Option<[u32; 2]>,
+    bar: Option<&mdlod_render::legend::Legend>,
+) -> Result<()> {
+    let (w, h) = (args.camera.width, args.camera.height);
+    let mut panels: Vec<(&str, LegendCorner, [u32; 2])> = Vec::new();
+    if let (Some(corner), Some(size)) = (args.legend_in_image, legend) {
+        panels.push(("--legend-in-image", corner, size));
+    }
+    if let Some(size) = label {
+        panels.push(("--label", args.label_corner(), size));
+    }
+    if let Some((bar, scale)) = bar.and_then(|b| Some((b, b.scale_for(w, h)?))) {
+        let (bw, bh) = bar.room_needed(scale);
+        panels.push(("--scale-bar", args.scale_bar_corner(), [bw, bh]));
+    }
+    // The pixels a panel covers, as half-open ranges across and down.
+    let span = |corner: LegendCorner, [pw, ph]: [u32; 2]| {
+        let left = matches!(corner, LegendCorner::TopLeft | LegendCorner::BottomLeft);
+        let top = matches!(corner, LegendCorner::TopLeft | LegendCorner::TopRight);
+        let x = if left {
+            [0, pw]
+        } else {
+            [w.saturating_sub(pw), w]
+        };
+        let y = if top {
+            [0, ph]
+        } else {
+            [h.saturating_sub(ph), h]
+        };
+        (x, y)
+    };
+    for (i, a) in panels.iter().enumerate() {
+        for b in &panels[i + 1..] {
+            if a.1 == b.1 {
+                continue;
+            }
+            let ((ax, ay), (bx, by)) = (span(a.1, a.2), span(b.1, b.2));
+            if ax[0] < bx[1] && bx[0] < ax[1] && ay[0] < by[1] && by[0] < ay[1] {
+                let shorter = match (a.0, b.0) {
+                    ("--scale-bar", _) | (_, "--scale-bar") => {
+                        ", or a shorter bar (--scale-bar-length)"
+                    }
+                    _ => "",
+                };
+                anyhow::bail!(
+                    "{} and {} would cover one another in a {w}×{h} image: {} pixels at the \
+                     {} corner and {} at the {} (each with its margin); draw a larger image, \
+                     put one in another corner{shorter}",
+                    a.0,
+                    b.0,
+                    format!("{}×{}", a.2[0], a.2[1]),
+                    corner_name(a.1),
+                    format!("{}×{}", b.2[0], b.2[1]),
+                    corner_name(b.1),
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 /// `--legend-category VALUE=NAME` entries, in the order given.
@@ -531,16 +612,17 @@ fn label_panels(
 
 /// Refuses, before anything is drawn, a `--label` that the values of some image (`values`)
 /// widen past what the image holds (a placeholder's text is known only with the file).
-fn check_label_room(args: &Args, values: &[&label::Values]) -> Result<()> {
+fn check_label_room(args: &Args, values: &[&label::Values]) -> Result<Option<[u32; 2]>> {
     if args.label.is_empty() {
-        return Ok(());
+        return Ok(None);
     }
     let (panels, _) = label_panels(args, values, values);
+    let mut room = [0u32; 2];
     for (i, panel) in panels.iter().enumerate() {
-        if panel
-            .scale_for(args.camera.width, args.camera.height)
-            .is_none()
-        {
+        if let Some(scale) = panel.scale_for(args.camera.width, args.camera.height) {
+            let (w, h) = panel.room_needed(scale);
+            room = [room[0].max(w), room[1].max(h)];
+        } else {
             let (w, h) = panel.room_needed(1);
             anyhow::bail!(
                 "--label: a {}×{} image cannot hold the label with {}'s values (at least \
@@ -555,7 +637,7 @@ fn check_label_room(args: &Args, values: &[&label::Values]) -> Result<()> {
             );
         }
     }
-    Ok(())
+    Ok(Some(room))
 }
 
 /// Draws `--label` into each image, with its own values.
@@ -1767,7 +1849,7 @@ pub fn run(mut args: Args) -> Result<()> {
             },
         });
     }
-    let legend_room = check_legend_room(&args, &opts)?;
+    let (legend_room, legend_size) = check_legend_room(&args, &opts)?;
     opts.fit_windows = scale_bar_room(&args, &opts, legend_room);
     if args.file.is_dir() {
         if args.turntable.is_some() {
@@ -1778,7 +1860,7 @@ pub fn run(mut args: Args) -> Result<()> {
                 args.file.join("frame-0.mdlod").display()
             );
         }
-        return render_frames(&args, opts);
+        return render_frames(&args, opts, legend_size);
     }
     drop_absent_categories(&args.file, &mut opts.style)?;
     // (A projection's log is the image's, not the points'.)
@@ -1788,6 +1870,7 @@ pub fn run(mut args: Args) -> Result<()> {
         by_attribute(&args) && !projected(&args),
         lit_linearly(&args),
     )?;
+    let mut label_size = None;
     let bar = if args.label.is_empty() && !args.scale_bar {
         None
     } else {
@@ -1797,7 +1880,7 @@ pub fn run(mut args: Args) -> Result<()> {
         let values: Vec<label::Values> = (0..images)
             .map(|i| label::Values::of_file(&args.file, file.metadata(), i))
             .collect();
-        check_label_room(&args, &values.iter().collect::<Vec<_>>())?;
+        label_size = check_label_room(&args, &values.iter().collect::<Vec<_>>())?;
         // The scale bar of the view drawn, refused before drawing where it cannot be.
         match args.scale_bar {
             true => Some(scale_bar(
@@ -1810,6 +1893,7 @@ pub fn run(mut args: Args) -> Result<()> {
             false => None,
         }
     };
+    check_panels_apart(&args, legend_size, label_size, bar.as_ref())?;
     if let Some(n) = args.turntable {
         return render_turntable(&args, opts, n, derived);
     }
@@ -2273,16 +2357,19 @@ const KEY_SCAN_PARTICLES: u64 = 1 << 22;
 /// Returns where a fitted view places the data so that the legend covers none of it: the
 /// image less a band along the legend's side, above or below it, or beside it, whichever
 /// frames the data larger ([`RenderOptions::fit_windows`]); none without a legend.
-fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_render::FitWindow>> {
+fn check_legend_room(
+    args: &Args,
+    opts: &RenderOptions,
+) -> Result<(Vec<mdlod_render::FitWindow>, Option<[u32; 2]>)> {
     let Some(corner) = args.legend_in_image else {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), None));
     };
     // (A file or directory that cannot be read fails where it is rendered, saying why.)
     let Some(path) = first_file(&args.file) else {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), None));
     };
     let Ok(file) = mdlod_render::open_styled(&path, &opts.style) else {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), None));
     };
     let meta = file.metadata();
     // Species whose every particle a hidden value range leaves out show in no key: where
@@ -2363,7 +2450,7 @@ fn check_legend_room(args: &Args, opts: &RenderOptions) -> Result<Vec<mdlod_rend
             }
         );
     }
-    Ok(windows)
+    Ok((windows, Some([w, h])))
 }
 
 /// The file a still renders, or a batch directory's first frame (what panels are
@@ -3369,7 +3456,11 @@ fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> 
 /// image each, all with one camera (fitted to every frame's clusters, within the union of
 /// their bounds, so that nothing leaves the picture) and, for splats, the first frame's
 /// exposure: a movie.
-fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
+fn render_frames(
+    args: &Args,
+    mut opts: RenderOptions,
+    legend_size: Option<[u32; 2]>,
+) -> Result<()> {
     let dir = &args.file;
     super::view::unmerged_batch(dir)?;
     let manifest = mdlod_preprocess::batch::read_manifest(dir).with_context(|| {
@@ -3611,7 +3702,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
             source: Some(label::source_name(&f.source.path)).filter(|s| !s.is_empty()),
         })
         .collect();
-    check_label_room(args, &frame_values.iter().collect::<Vec<_>>())?;
+    let label_size = check_label_room(args, &frame_values.iter().collect::<Vec<_>>())?;
     // One camera for every frame: one scale bar, in the first frame's units.
     let bar = match args.scale_bar {
         true => {
@@ -3626,6 +3717,7 @@ fn render_frames(args: &Args, mut opts: RenderOptions) -> Result<()> {
         }
         false => None,
     };
+    check_panels_apart(args, legend_size, label_size, bar.as_ref())?;
     let t0 = std::time::Instant::now();
     let mut limited_frames = 0usize;
     // The species any frame shows, for the legend's key.
