@@ -8,6 +8,9 @@ import pcf_font  # noqa: E402
 
 FONT = "/usr/share/fonts/X11/misc/7x13.pcf.gz"
 EXTRA = "¡¢£¤¥¦§¨©ª«¬®¯°±²³´µ¶·¸¹º»¼½¾¿ÀÁÂÃÄÅÆÇÈÉÊËÌÍÎÏÐÑÒÓÔÕÖ×ØÙÚÛÜÝÞßàáâãäåæçèéêëìíîïðñòóôõö÷øùúûüýþÿ–—‘’‚“”„…‰′″†‡•⁰ⁱ⁴⁵⁶⁷⁸⁹⁺⁻⁼⁽⁾ⁿ₀₁₂₃₄₅₆₇₈₉₊₋₌₍₎−∓∆∇∂∑∏∫√∞≈≠≡≤≥≪≫∈∉∝∼⟨⟩→←↑↓↔⇒℃ΩΑΒΓΔΕΖΗΘΙΚΛΜΝΞΟΠΡΣΤΥΦΧΨαβγδεζηθικλμνξοπρςστυφχψωϑϕϵ"
+# The font's full stop is a 3×3 cross, which reads as a plus sign once a panel is drawn
+# at twice its size or more ("0+2"): a 2×2 square on the baseline instead.
+OVERRIDES = {".": [0, 0, 0, 0, 0, 0, 0, 0, 0, 0x18, 0x18, 0, 0]}
 OUT = os.path.join(os.path.dirname(__file__), "..", "render", "src", "font.rs")
 
 TEMPLATE = '''//! A bitmap font for labels drawn into images (a colour bar's values and title): the X11
@@ -45,6 +48,6 @@ pub fn glyph(c: char) -> &'static [u8; %d] {
 '''
 
 if __name__ == "__main__":
-    rows, table = pcf_font.rust_table(FONT, EXTRA)
+    rows, table = pcf_font.rust_table(FONT, EXTRA, OVERRIDES)
     with open(OUT, "w") as f:
         f.write(TEMPLATE % (rows, rows, table, rows))

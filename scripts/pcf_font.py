@@ -77,8 +77,10 @@ if __name__ == '__main__':
         for r in rows: print(''.join('#' if b else '.' for b in r))
 
 
-def rust_table(path, extra):
-    """The Rust source of render/src/font.rs from the PCF font `path`."""
+def rust_table(path, extra, overrides=None):
+    """The Rust source of render/src/font.rs from the PCF font `path`; `overrides` maps
+    a character to the rows (one int each, bit 6 the leftmost column) that replace its
+    glyph's."""
     fasc, fdesc, glyph = load(path)
     chars = [chr(c) for c in range(32, 127)] + list(extra)
     rows = fasc + fdesc
@@ -94,6 +96,9 @@ def rust_table(path, extra):
             for x, b in enumerate(r):
                 v |= b << (6 - x)
             values.append('0x%02x' % v)
+        if overrides and ch in overrides:
+            assert len(overrides[ch]) == len(values), ch
+            values = ['0x%02x' % v for v in overrides[ch]]
         literal = {"'": "\\'", "\\": "\\\\"}.get(ch, ch)
         lines.append("    ('%s', [%s])," % (literal, ", ".join(values)))
     return rows, '\n'.join(lines)
