@@ -573,18 +573,7 @@ fn oversized_note(
     count: u64,
     species: &[mdlod_format::meta::Species],
 ) -> Option<String> {
-    if count < 2 {
-        return None;
-    }
-    let extent: Vec<f64> = (0..3)
-        .map(|k| f64::from(hi[k]) - f64::from(lo[k]))
-        .collect();
-    let widest = extent.iter().copied().fold(0.0f64, f64::max);
-    if !(widest.is_finite() && widest > 0.0) {
-        return None;
-    }
-    let spread: Vec<f64> = extent.into_iter().filter(|&e| e > 1e-6 * widest).collect();
-    let spacing = (spread.iter().product::<f64>() / count as f64).powf(1.0 / spread.len() as f64);
+    let spacing = mean_spacing(lo, hi, count)?;
     let over: Vec<String> = species
         .iter()
         .filter(|s| {
@@ -622,6 +611,69 @@ fn oversized_note(
     ))
 }
 
+/// Species drawn at the default radius smaller than this share of the particles' mean
+/// spacing draw as scattered dots: coarse-grained beads (a Martini bilayer's are about
+/// five ångströms apart, a tenth of it at 0.5), where atoms of type numbers in metal
+/// units (a spacing of two or three ångströms) stay above it.
+const UNDERSIZED_SPACING: f64 = 0.15;
+
+/// The particles' mean spacing: the volume, area or length their centres' box `lo..hi`
+/// spans, per particle, to the power of its dimension; `None` for fewer than two or no
+/// extent.
+fn mean_spacing(lo: [f32; 3], hi: [f32; 3], count: u64) -> Option<f64> {
+    if count < 2 {
+        return None;
+    }
+    let extent: Vec<f64> = (0..3)
+        .map(|k| f64::from(hi[k]) - f64::from(lo[k]))
+        .collect();
+    let widest = extent.iter().copied().fold(0.0f64, f64::max);
+    if !(widest.is_finite() && widest > 0.0) {
+        return None;
+    }
+    let spread: Vec<f64> = extent.into_iter().filter(|&e| e > 1e-6 * widest).collect();
+    Some((spread.iter().product::<f64>() / count as f64).powf(1.0 / spread.len() as f64))
+}
+
+/// A note on species that took the default radius (named by type numbers or labels, no
+/// `--radius`) far below the particles' mean spacing: the picture shows scattered dots
+/// where the user expects a material.
+fn undersized_note(
+    lo: [f32; 3],
+    hi: [f32; 3],
+    count: u64,
+    species: &[mdlod_format::meta::Species],
+) -> Option<String> {
+    let spacing = mean_spacing(lo, hi, count)?;
+    let default = crate::species::DEFAULT_RADIUS;
+    let small: Vec<&str> = species
+        .iter()
+        .filter(|s| {
+            s.radius == default
+                && s.radius_range.is_none()
+                && crate::species::element(&s.name).is_none()
+        })
+        .map(|s| s.name.as_str())
+        .collect();
+    if small.is_empty() || f64::from(default) >= UNDERSIZED_SPACING * spacing {
+        return None;
+    }
+    let shown: Vec<&str> = small.iter().take(4).copied().collect();
+    let more = if small.len() > 4 { ", ..." } else { "" };
+    let half = 0.5 * spacing;
+    let digits = if half >= 10.0 { 0 } else { 1 };
+    Some(format!(
+        "species {}{more} {} drawn at the default radius {default}, {:.2} of the \
+         particles' mean spacing ({spacing:.3}, from the box around them): the picture \
+         shows scattered dots. Give each its size, --radius {}={half:.digits$} (about half \
+         the spacing; coarse-grained beads, or a radius in the data's units)",
+        shown.join(", "),
+        if small.len() == 1 { "is" } else { "are" },
+        f64::from(default) / spacing,
+        shown[0],
+    ))
+}
+
 /// Notes on positions that will not draw as the user expects, from the particles'
 /// bounds `lo..hi`: coordinates so large that single precision (in which positions are
 /// read and stored) snaps them to a grid coarse against the particles' size (a galaxy
@@ -637,6 +689,7 @@ pub(crate) fn position_notes(
 ) -> Vec<String> {
     let mut notes = Vec::new();
     notes.extend(oversized_note(lo, hi, count, species));
+    notes.extend(undersized_note(lo, hi, count, species));
     notes.extend(crate::species::atom_name_notes(
         species.iter().map(|s| s.name.as_str()),
     ));
@@ -1478,6 +1531,59 @@ mod tests {
             notes.len() == 1 && notes[0].contains("--species-name CA=C"),
             "{notes:?}"
         );
+    }
+
+    /// Type numbers left at the default radius in coarse-grained data (beads five apart)
+    /// are noted as dots, with a radius of half the spacing; atoms two or three apart,
+    /// elements, and species given a radius are not.
+    #[test]
+    fn default_radii_far_below_the_spacing_are_noted() {
+        let species = |names: &[&str], radius: f32| -> Vec<mdlod_format::meta::Species> {
+            names
+                .iter()
+                .map(|n| mdlod_format::meta::Species {
+                    name: n.to_string(),
+                    radius,
+                    colour: [0.5; 3],
+                    radius_range: None,
+                })
+                .collect()
+        };
+        let default = crate::species::DEFAULT_RADIUS;
+        // 8000 beads in a 100³ box: 5 apart.
+        let beads = species(&["1", "2", "PO4"], default);
+        let note = super::undersized_note([0.0; 3], [100.0; 3], 8000, &beads).expect("a note");
+        assert!(
+            note.starts_with(
+                "species 1, 2, PO4 are drawn at the default radius 0.5, 0.10 of the \
+                 particles' mean spacing (5.000"
+            ) && note.contains("--radius 1=2.5"),
+            "{note}"
+        );
+        assert!(
+            super::position_notes([0.0; 3], [100.0; 3], 8000, &beads, None, None)
+                .iter()
+                .any(|n| n == &note)
+        );
+        // 2.5 apart, as atoms in metal units: drawn as they are.
+        assert_eq!(
+            super::undersized_note([0.0; 3], [100.0; 3], 64_000, &beads),
+            None
+        );
+        // Elements keep their radii; a radius given is the user's.
+        let elements = species(&["Na", "Cl"], default);
+        assert_eq!(
+            super::undersized_note([0.0; 3], [100.0; 3], 8000, &elements),
+            None
+        );
+        let given = species(&["1"], 0.6);
+        assert_eq!(
+            super::undersized_note([0.0; 3], [100.0; 3], 8000, &given),
+            None
+        );
+        // A flat sheet: its spacing over the area it spans.
+        let sheet = super::undersized_note([0.0; 3], [100.0, 100.0, 0.0], 400, &beads);
+        assert!(sheet.is_some_and(|n| n.contains("spacing (5.000")));
     }
 
     /// A kinetic energy with walls at rest: most grains' values far below a step are

@@ -410,14 +410,16 @@ fn check_panels_apart(
                     _ => "",
                 };
                 anyhow::bail!(
-                    "{} and {} would cover one another in a {w}×{h} image: {} pixels at the \
-                     {} corner and {} at the {} (each with its margin); draw a larger image, \
-                     put one in another corner{shorter}",
+                    "{} and {} would cover one another in a {w}×{h} image: {}×{} pixels at \
+                     the {} corner and {}×{} at the {} (each with its margin); draw a larger \
+                     image, put one in another corner{shorter}",
                     a.0,
                     b.0,
-                    format!("{}×{}", a.2[0], a.2[1]),
+                    a.2[0],
+                    a.2[1],
                     corner_name(a.1),
-                    format!("{}×{}", b.2[0], b.2[1]),
+                    b.2[0],
+                    b.2[1],
                     corner_name(b.1),
                 );
             }
