@@ -693,6 +693,9 @@ pub(crate) fn position_notes(
     notes.extend(crate::species::atom_name_notes(
         species.iter().map(|s| s.name.as_str()),
     ));
+    notes.extend(crate::species::bead_name_note(
+        species.iter().map(|s| s.name.as_str()),
+    ));
     // Thousands of species: ids (of molecules, residues, clusters) read as species.
     if species.len() > MANY_SPECIES {
         notes.push(format!(

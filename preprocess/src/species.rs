@@ -406,6 +406,46 @@ pub fn atom_name_notes<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<Stri
         .collect()
 }
 
+/// A note on species names read as elements beside a majority of names that are none
+/// (a Martini system's `W`, `NA` and `CL` beside `NC3`, `PO4`, `GL1`: water and ion
+/// beads drawn as tungsten, sodium and chlorine atoms), with the options that make them
+/// labels or give them a size. Type numbers count as neither.
+pub fn bead_name_note<'a>(names: impl IntoIterator<Item = &'a str>) -> Option<String> {
+    let names: Vec<&str> = names
+        .into_iter()
+        .filter(|n| n.parse::<u64>().is_err())
+        .collect();
+    let labels = letters_are_labels(names.iter().copied());
+    let (elements, others): (Vec<&str>, Vec<&str>) =
+        names.iter().partition(|n| element_of(n, labels).is_some());
+    if elements.is_empty() || others.len() < 2 || others.len() < elements.len() {
+        return None;
+    }
+    let symbols: Vec<String> = elements
+        .iter()
+        .take(4)
+        .map(|n| {
+            let symbol = ELEMENTS
+                .iter()
+                .find(|(s, _, _)| s.eq_ignore_ascii_case(n))
+                .map_or(*n, |(s, _, _)| *s);
+            format!("{n} as {symbol}")
+        })
+        .collect();
+    let more = if elements.len() > 4 { ", ..." } else { "" };
+    let shown: Vec<&str> = others.iter().take(4).copied().collect();
+    let others_more = if others.len() > 4 { ", ..." } else { "" };
+    Some(format!(
+        "species {}{more}: read as elements ({}{more}) beside names that are none ({}{others_more}): \
+         if they are bead or force-field names (Martini's water W, ions NA and CL), \
+         --species-name to a name that is no element's makes one a label (a palette \
+         colour), and --radius NAME=R gives its size",
+        elements.iter().take(4).copied().collect::<Vec<_>>().join(", "),
+        symbols.join(", "),
+        shown.join(", "),
+    ))
+}
+
 /// Whether a frame's single-letter species names are labels rather than element symbols:
 /// some single capital letter among them is no element (HOOMD-blue's `A`, `B`, `C`, a
 /// lattice's `A`, `B`), so `B` and `C` beside `A` are no boron and carbon. Names of two or
@@ -902,6 +942,26 @@ mod tests {
         assert!(parse_radius_override("Cu=1.3").is_ok());
         assert!(parse_radius_override("Cu").is_err());
         assert!(parse_radius_override("Cu=-1").is_err());
+    }
+
+    /// Element symbols among mostly other names (a Martini bilayer's W, NA and CL
+    /// beside NC3, PO4, GL1, C1A) are noted; frames of elements, of type numbers, or of
+    /// elements with a site name or two (water models' Ow, Hw) are not.
+    #[test]
+    fn element_names_among_bead_names_are_noted() {
+        let note = bead_name_note(["NC3", "PO4", "GL1", "C1A", "W", "NA", "CL"]).expect("a note");
+        assert!(
+            note.starts_with(
+                "species W, NA, CL: read as elements (W as W, NA as Na, CL as Cl) beside names \
+                 that are none (NC3, PO4, GL1, C1A)"
+            ),
+            "{note}"
+        );
+        assert_eq!(bead_name_note(["Cu", "Ag", "Ni"]), None);
+        assert_eq!(bead_name_note(["1", "2", "3"]), None);
+        assert_eq!(bead_name_note(["C", "H", "O", "Ow", "Hw"]), None);
+        assert_eq!(bead_name_note(["Cu", "vacancy"]), None);
+        assert_eq!(bead_name_note(["A", "B"]), None);
     }
 
     /// HOOMD-blue names types `A`, `B`, `C`: beside `A` (no element), `B` and `C` are
