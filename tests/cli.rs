@@ -4188,6 +4188,70 @@ fn hiding_a_species_a_frame_lacks_is_said_not_refused() {
     );
 }
 
+/// Ids kept as an attribute past what 16 bits tell apart are said to be so when
+/// converted (not given the logarithm's remedy, which keeps no id apart either), and a
+/// hidden range narrower than a step says which values it hides.
+#[test]
+fn ids_past_sixteen_bits_are_said_to_share_steps() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("mol.lammpstrj");
+    let n = 70_000;
+    let mut text = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 140\n0 100\n\
+         0 10\nITEM: ATOMS id mol type x y z\n"
+    );
+    for i in 0..n {
+        let (x, y, z) = (i % 70, (i / 70) % 50, i / 3500);
+        text.push_str(&format!(
+            "{} {} 1 {} {} {}\n",
+            i + 1,
+            i + 1,
+            2 * x,
+            2 * y,
+            z / 2
+        ));
+    }
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("mol.mdlod");
+    let out = ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "mol"]);
+    assert!(
+        out.contains("attribute mol holds whole numbers from 1 to 70000 (ids?)")
+            && !out.contains("--attribute-log10 keeps its logarithm"),
+        "{out}"
+    );
+    let png = dir.path().join("m.png");
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-attribute",
+        "5:5",
+    ]);
+    assert!(
+        out.contains("--hide-attribute 5:5 is narrower than one 16-bit step of mol in this file"),
+        "{out}"
+    );
+    // A range wider than a step: nothing to say.
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-attribute",
+        "5:500",
+    ]);
+    assert!(!out.contains("narrower than one 16-bit step"), "{out}");
+}
+
 /// `--legend` writes what the colours mean as SVG: the colour map's bar over the range
 /// shown (a movie's: every frame's), the species shown in their colours, the density's
 /// transfer function; a name that is no SVG is refused before anything is drawn.

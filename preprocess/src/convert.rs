@@ -412,9 +412,16 @@ pub fn convert_frame_with(
     let build_time = t0.elapsed();
     let mut notes = Vec::new();
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
-        notes.extend(attribute_span_note(&a.name, *min, *max, options));
-        if !options.attribute_log10 {
-            notes.extend(below_step_note(&a.name, &a.values, *min, *max));
+        // Ids (of molecules, clusters) are told by their whole numbers, which no
+        // logarithm keeps apart either.
+        let ids = whole_numbers_note(&a.name, &a.values, *min, *max);
+        if ids.is_some() && !options.attribute_log10 {
+            notes.extend(ids);
+        } else {
+            notes.extend(attribute_span_note(&a.name, *min, *max, options));
+            if !options.attribute_log10 {
+                notes.extend(below_step_note(&a.name, &a.values, *min, *max));
+            }
         }
     }
     // Further attributes spanning decades lose them as the first would; their remedy is
@@ -916,6 +923,25 @@ pub fn below_step_note(name: &str, values: &[f32], min: f32, max: f32) -> Option
              by species)"
         )
     })
+}
+
+/// A note for a column of whole numbers spanning more than 16-bit steps tell apart
+/// (molecule or cluster ids): neighbouring values share a step, so no colour or hidden
+/// range picks out one value; `None` for other columns, or whole numbers within 65 536
+/// of one another (each its own step).
+pub fn whole_numbers_note(name: &str, values: &[f32], min: f32, max: f32) -> Option<String> {
+    let span = f64::from(max) - f64::from(min);
+    if span.is_nan() || span <= 65535.0 || values.iter().any(|v| v.fract() != 0.0) {
+        return None;
+    }
+    Some(format!(
+        "attribute {name} holds whole numbers from {min} to {max} (ids?), more than 16 bits \
+         tell apart (a step is {:.2}): neighbouring values share a colour and \
+         --hide-attribute cannot pick out one value; a column of at most 65 536 distinct \
+         values is kept exactly as species (--species-column), a molecule's type say rather \
+         than its id",
+        span / 65535.0
+    ))
 }
 
 /// [`attribute_span_note`] of a column kept linearly, with `remedy` said last.
@@ -1587,6 +1613,29 @@ mod tests {
         // A flat sheet: its spacing over the area it spans.
         let sheet = super::undersized_note([0.0; 3], [100.0, 100.0, 0.0], 400, &beads);
         assert!(sheet.is_some_and(|n| n.contains("spacing (5.000")));
+    }
+
+    /// Ids past 65 536 apart are noted as ids that 16 bits cannot tell apart; whole
+    /// numbers closer together, or values with fractions, are not.
+    #[test]
+    fn whole_numbers_too_many_for_16_bits_are_noted() {
+        let ids: Vec<f32> = (1..=200_000).map(|i| i as f32).collect();
+        let note = super::whole_numbers_note("mol", &ids, 1.0, 200_000.0).expect("a note");
+        assert!(
+            note.starts_with("attribute mol holds whole numbers from 1 to 200000 (ids?)")
+                && note.contains("(a step is 3.05)"),
+            "{note}"
+        );
+        assert_eq!(
+            super::whole_numbers_note("mol", &ids[..60_000], 1.0, 60_000.0),
+            None
+        );
+        let mut fractions = ids.clone();
+        fractions[7] = 7.5;
+        assert_eq!(
+            super::whole_numbers_note("x", &fractions, 1.0, 200_000.0),
+            None
+        );
     }
 
     /// A kinetic energy with walls at rest: most grains' values far below a step are

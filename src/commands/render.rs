@@ -549,6 +549,41 @@ fn hides_nothing_note(
     ))
 }
 
+/// Says when a `--hide-attribute` range is narrower than one of the file's 16-bit steps
+/// of the attribute (a molecule id of a column of 200 000, stored 3.16 apart): it hides
+/// every particle of the steps it touches, the values those steps hold being named.
+fn coarse_range_notes(
+    style: &StyleArgs,
+    attribute: Option<&mdlod_format::meta::AttributeInfo>,
+) -> Vec<String> {
+    let Some(a) = attribute else {
+        return Vec::new();
+    };
+    let step = (f64::from(a.max) - f64::from(a.min)) / 65535.0;
+    style
+        .hide_attribute
+        .iter()
+        .filter(|[lo, hi]| lo.is_finite() && hi.is_finite() && f64::from(hi - lo) < step)
+        .filter_map(|&range| {
+            let (first, last) = a.codes(range)?;
+            let value = |code: u16, side: f64| {
+                (f64::from(a.min) + (f64::from(code) + side) * step)
+                    .clamp(f64::from(a.min), f64::from(a.max))
+            };
+            Some(format!(
+                "  note: --hide-attribute {}:{} is narrower than one 16-bit step of {} in this \
+                 file ({step:.3}): it hides every particle of the steps it touches, values \
+                 from {:.3} to {:.3}",
+                Num(range[0]),
+                Num(range[1]),
+                a.name,
+                value(first, -0.5),
+                value(last, 0.5)
+            ))
+        })
+        .collect()
+}
+
 /// Draws a legend or label panel into the PNG `image` at `corner`, enlarged as the
 /// image's size asks; `option` names what asked for it in an error.
 fn draw_panel(
@@ -2018,6 +2053,9 @@ pub fn run(mut args: Args) -> Result<()> {
         println!("  note: every species is hidden: the image shows the background only");
     }
     if let Some(note) = hides_nothing_note(&args.style, file.hiding_attribute()) {
+        println!("{note}");
+    }
+    for note in coarse_range_notes(&args.style, file.hiding_attribute()) {
         println!("{note}");
     }
     if let Some(note) = file
