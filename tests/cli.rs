@@ -449,6 +449,45 @@ fn render_writes_a_picture_and_views_round_trip() {
         out.status.success() && err.contains("field \"azimuth\" is not one this mdlod reads"),
         "{err}"
     );
+    // The view records the image it was saved from; drawn narrower, the render says the
+    // sides may be cut, and at the same shape (any size) nothing.
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&view).unwrap()).unwrap();
+    assert_eq!(saved["image"], serde_json::json!([160, 120]));
+    let narrow = mdlod(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&d),
+        "--view",
+        s(&view),
+        "--width",
+        "60",
+        "--height",
+        "120",
+    ]);
+    let err = String::from_utf8_lossy(&narrow.stderr);
+    assert!(
+        narrow.status.success()
+            && err.contains(
+                "the view was saved from a 160×120 image; drawn 60×120, the image is narrower: \
+                 data at the sides may be cut"
+            ),
+        "{err}"
+    );
+    let same = mdlod(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&d),
+        "--view",
+        s(&view),
+        "--width",
+        "320",
+        "--height",
+        "240",
+    ]);
+    assert!(!String::from_utf8_lossy(&same.stderr).contains("saved from"));
 }
 
 /// The LAMMPS sample `name` converted to `dir/a.mdlod`.

@@ -59,6 +59,11 @@ pub struct ViewFile {
     pub zoom: f32,
     #[serde(default = "default_fov")]
     pub fov_y_deg: f32,
+    /// The size in pixels of the image the view was saved from, where known: the same
+    /// view drawn at another aspect shows another part of the data (a narrower image,
+    /// less of its width), which a render notes. Read for that note only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image: Option<[u32; 2]>,
 }
 
 impl Default for ViewFile {
@@ -72,6 +77,7 @@ impl Default for ViewFile {
             distance: None,
             zoom: 1.0,
             fov_y_deg: default_fov(),
+            image: None,
         }
     }
 }
@@ -105,7 +111,7 @@ impl ViewFile {
     }
 
     /// The fields this version reads.
-    pub const FIELDS: [&'static str; 8] = [
+    pub const FIELDS: [&'static str; 9] = [
         "version",
         "projection",
         "azimuth_deg",
@@ -114,6 +120,7 @@ impl ViewFile {
         "distance",
         "zoom",
         "fov_y_deg",
+        "image",
     ];
 
     /// The fields of view-file JSON that this version does not read (ignored: a later
@@ -214,7 +221,42 @@ impl ViewFile {
             distance: Some(c.distance),
             zoom: 1.0,
             fov_y_deg: c.fov_y_deg,
+            image: None,
         }
+    }
+
+    /// This view, recorded as seen in an image of `width` × `height` pixels.
+    pub fn seen_in(self, width: u32, height: u32) -> ViewFile {
+        ViewFile {
+            image: Some([width, height]),
+            ..self
+        }
+    }
+
+    /// A note where this view, saved from an image of another shape, is drawn in one of
+    /// `width` × `height` pixels: it shows another part of the data (`None` within 1 %,
+    /// or where the view does not record its image).
+    pub fn aspect_note(&self, width: u32, height: u32) -> Option<String> {
+        let [w, h] = self.image?;
+        if w == 0 || h == 0 || width == 0 || height == 0 {
+            return None;
+        }
+        let (saved, now) = (
+            f64::from(w) / f64::from(h),
+            f64::from(width) / f64::from(height),
+        );
+        if (now / saved - 1.0).abs() <= 0.01 {
+            return None;
+        }
+        Some(format!(
+            "the view was saved from a {w}×{h} image; drawn {width}×{height}, {} (the height \
+             seen stays the view's)",
+            if now < saved {
+                "the image is narrower: data at the sides may be cut"
+            } else {
+                "the image is wider: more shows at the sides"
+            }
+        ))
     }
 
     /// The camera for data within `bounds` and an image of `aspect` (width / height),

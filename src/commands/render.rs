@@ -1129,6 +1129,12 @@ impl ViewArgs {
                 ViewFile::FIELDS.join(", ")
             );
         }
+        let note = ViewFile::load(path)
+            .ok()
+            .and_then(|v| v.aspect_note(self.width, self.height));
+        if let Some(note) = note {
+            eprintln!("note: {}: {note}", path.display());
+        }
     }
 
     pub fn spec(&self) -> ViewSpec {
@@ -1374,11 +1380,12 @@ fn write_npy(p: &Path, rows: u32, columns: u32, values: &[f32]) -> Result<()> {
     Ok(())
 }
 
-fn save_view(p: &Path, camera: &Camera) -> Result<()> {
+fn save_view(p: &Path, camera: &Camera, [width, height]: [u32; 2]) -> Result<()> {
     if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
     ViewFile::from_camera(camera)
+        .seen_in(width, height)
         .save(p)
         .with_context(|| format!("cannot write {}", p.display()))
 }
@@ -2285,7 +2292,7 @@ pub fn run(mut args: Args) -> Result<()> {
         r.traversal_time.as_secs_f64() * 1e3
     );
     if let Some(p) = &args.save_view {
-        save_view(p, &r.camera)?;
+        save_view(p, &r.camera, [args.camera.width, args.camera.height])?;
         println!("  view saved to {}", p.display());
     }
     if let (Some(p), Some(map)) = (&args.save_map, &r.light_map) {
@@ -3365,7 +3372,7 @@ fn render_turntable(
         }
     }
     if let (Some(p), Some(camera)) = (&args.save_view, first_camera) {
-        save_view(p, &camera)?;
+        save_view(p, &camera, [args.camera.width, args.camera.height])?;
         println!("  the first view saved to {}", p.display());
     }
     if args.legend.is_some() || args.legend_in_image.is_some() {
@@ -3947,7 +3954,7 @@ fn render_frames(
         }
     }
     if let Some(p) = &args.save_view {
-        save_view(p, &camera)?;
+        save_view(p, &camera, [args.camera.width, args.camera.height])?;
         println!("  view saved to {}", p.display());
     }
     // The movie's range (every frame's, or the one given) and its names' looks.

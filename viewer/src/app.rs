@@ -144,7 +144,11 @@ impl ViewerApp {
     fn act(&mut self, action: Action, user: bool) {
         match &action {
             Action::SaveView { path } => {
-                if let Err(e) = ViewFile::from_camera(&self.state.camera).save(path) {
+                let [w, h] = self.state.size;
+                if let Err(e) = ViewFile::from_camera(&self.state.camera)
+                    .seen_in(w, h)
+                    .save(path)
+                {
                     self.fail(e.to_string());
                 }
                 return;
