@@ -3817,6 +3817,12 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
     ]
     .concat());
     assert!(out.contains("legend drawn into"), "{out}");
+    // The saved view was fitted without the panel: the data under it is said.
+    assert!(
+        out.contains("note: --legend-in-image covers drawn particles in the image")
+            && out.contains("is not fitted around the panel"),
+        "{out}"
+    );
     let ((w, h, a), (_, _, b)) = (read_png(&plain), read_png(&with));
     // The panel: 360 × 66 pixels, 8 from the bottom right corner.
     let panel = |x: u32, y: u32| x >= w - 8 - 360 && x < w - 8 && y >= h - 8 - 66 && y < h - 8;
@@ -3856,13 +3862,14 @@ fn a_legend_drawn_into_the_image_changes_only_its_corner() {
         !clear(&plain),
         "the plain fit already leaves the corner free"
     );
-    ok(&[
+    let out = ok(&[
         &["render", s(&file), "-o", s(&with)][..],
         &base,
         &["--legend-in-image", "--legend-title", "E_pot (eV)"],
     ]
     .concat());
     assert!(clear(&with), "the fitted data reaches under the legend");
+    assert!(!out.contains("covers drawn particles"), "{out}");
     // A turntable keeps the corner free in every view too.
     let turn = dir.path().join("turn-%d.png");
     ok(&[

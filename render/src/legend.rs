@@ -636,6 +636,67 @@ impl Legend {
         missing
     }
 
+    /// The rectangle (left, top, width, height, in pixels) the legend's panel covers in
+    /// an image of `width` × `height` at `corner` and `scale`, margin excluded; `None`
+    /// where the image cannot hold it.
+    pub fn panel_rect(
+        &self,
+        width: u32,
+        height: u32,
+        corner: Corner,
+        scale: u32,
+    ) -> Option<[u32; 4]> {
+        let s = scale.max(1);
+        let (w, h) = self.size();
+        let (pw, ph) = ((w * s as f32).ceil() as u32, (h * s as f32).ceil() as u32);
+        let margin = 8 * s;
+        let (need_w, need_h) = self.room_needed(s);
+        if need_w > width || need_h > height {
+            return None;
+        }
+        let x0 = match corner {
+            Corner::TopLeft | Corner::BottomLeft => margin,
+            Corner::TopRight | Corner::BottomRight => width - margin - pw,
+        };
+        let y0 = match corner {
+            Corner::TopLeft | Corner::TopRight => margin,
+            Corner::BottomLeft | Corner::BottomRight => height - margin - ph,
+        };
+        Some([x0, y0, pw, ph])
+    }
+
+    /// How many pixels of `image` under the panel [`Self::draw`] would draw show
+    /// something other than the background: `background` (sRGB, 8 bits, within 2
+    /// levels), or no pixel
+    /// with any opacity where it is `None` (a transparent background). Those are data
+    /// the panel would cover.
+    pub fn covers(
+        &self,
+        image: &RgbaImage,
+        corner: Corner,
+        scale: u32,
+        background: Option<[u8; 3]>,
+    ) -> u64 {
+        let Some([x0, y0, pw, ph]) = self.panel_rect(image.width, image.height, corner, scale)
+        else {
+            return 0;
+        };
+        let mut n = 0;
+        for y in y0..y0 + ph {
+            for x in x0..x0 + pw {
+                let i = 4 * (y as usize * image.width as usize + x as usize);
+                let px = &image.data[i..i + 4];
+                let data = match background {
+                    // (Within 2 levels: another rounding of the same colour.)
+                    Some(b) => px[..3].iter().zip(b).any(|(p, q)| p.abs_diff(q) > 2),
+                    None => px[3] != 0,
+                };
+                n += u64::from(data);
+            }
+        }
+        n
+    }
+
     /// Draws the legend into `image` at `corner`, `scale` image pixels to one of its own
     /// (text in the 7×13 bitmap font of [`crate::font`]), on a white panel at 85 %
     /// opacity so that it reads over any picture. Refuses an image too small to hold it
@@ -643,10 +704,10 @@ impl Legend {
     pub fn draw(&self, image: &mut RgbaImage, corner: Corner, scale: u32) -> Result<(), String> {
         let s = scale.max(1);
         let (w, h) = self.size();
-        let (pw, ph) = ((w * s as f32).ceil() as u32, (h * s as f32).ceil() as u32);
-        let margin = 8 * s;
-        let (need_w, need_h) = self.room_needed(s);
-        if need_w > image.width || need_h > image.height {
+        let Some([x0, y0, pw, ph]) = self.panel_rect(image.width, image.height, corner, s) else {
+            let margin = 8 * s;
+            let (pw, ph) = ((w * s as f32).ceil() as u32, (h * s as f32).ceil() as u32);
+            let (need_w, need_h) = self.room_needed(s);
             return Err(format!(
                 "a {}×{} image cannot hold the {} ({pw}×{ph} pixels and a margin of \
                  {margin}: at least {need_w}×{need_h})",
@@ -658,14 +719,6 @@ impl Legend {
                     _ => "legend",
                 }
             ));
-        }
-        let x0 = match corner {
-            Corner::TopLeft | Corner::BottomLeft => margin,
-            Corner::TopRight | Corner::BottomRight => image.width - margin - pw,
-        };
-        let y0 = match corner {
-            Corner::TopLeft | Corner::TopRight => margin,
-            Corner::BottomLeft | Corner::BottomRight => image.height - margin - ph,
         };
         let mut panel = Painter {
             image,
@@ -978,6 +1031,40 @@ fn more_line(more: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What a panel covers: the pixels under its rectangle that are not the background
+    /// (within 2 levels), or that have any opacity on a transparent one; none past it.
+    #[test]
+    fn a_panel_counts_the_data_it_would_cover() {
+        let key = Legend::Text {
+            lines: vec!["t = 5 ps".into()],
+        };
+        let mut image = RgbaImage::new(200, 100);
+        for px in image.data.chunks_mut(4) {
+            px.copy_from_slice(&[255, 255, 255, 255]);
+        }
+        let [x0, y0, pw, ph] = key.panel_rect(200, 100, Corner::BottomRight, 1).unwrap();
+        assert_eq!((x0 + pw + 8, y0 + ph + 8), (200, 100));
+        let white = Some([255u8; 3]);
+        assert_eq!(key.covers(&image, Corner::BottomRight, 1, white), 0);
+        // A 3×2 particle under the panel, one just outside it, and one level off white.
+        let mut paint = |x: u32, y: u32, c: [u8; 4]| {
+            let i = 4 * (y * 200 + x) as usize;
+            image.data[i..i + 4].copy_from_slice(&c);
+        };
+        for (dx, dy) in [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1), (2, 1)] {
+            paint(x0 + 2 + dx, y0 + 1 + dy, [200, 30, 30, 255]);
+        }
+        paint(x0 - 1, y0, [0, 0, 0, 255]);
+        paint(x0 + 10, y0 + 2, [254, 254, 253, 255]);
+        assert_eq!(key.covers(&image, Corner::BottomRight, 1, white), 6);
+        assert_eq!(key.covers(&image, Corner::TopLeft, 1, white), 0);
+        // Transparent: opacity is data.
+        let mut clear = RgbaImage::new(200, 100);
+        let i = 4 * ((y0 + 3) * 200 + x0 + 3) as usize;
+        clear.data[i + 3] = 40;
+        assert_eq!(key.covers(&clear, Corner::BottomRight, 1, None), 1);
+    }
 
     /// A key of many species (a column of molecule ids) lists the first ones and says how
     /// many more, in the SVG and in an image, at the height of a key of that many.

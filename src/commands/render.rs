@@ -549,6 +549,67 @@ fn hides_nothing_note(
     ))
 }
 
+/// The background's colour as `--background` gives it, or the mode's default.
+fn background_text(args: &Args) -> &str {
+    args.background
+        .as_deref()
+        .filter(|b| !transparent(Some(b)))
+        .unwrap_or(match args.mode {
+            Mode::Spheres | Mode::Sndf | Mode::Iso => "#ffffff",
+            Mode::Splat | Mode::SplatOver | Mode::Density => "#000000",
+        })
+}
+
+/// The background as the images hold it (sRGB, 8 bits), or `None` for a transparent
+/// one: what [`draw_panel`] tells data from.
+fn backdrop(args: &Args) -> Option<[u8; 3]> {
+    if transparent(args.background.as_deref()) {
+        return None;
+    }
+    let c = parse_colour(background_text(args)).ok()?;
+    Some(c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8))
+}
+
+/// The images in which a panel covered drawn pixels, for one note.
+#[derive(Default)]
+struct Covered {
+    images: usize,
+    most: u64,
+}
+
+impl Covered {
+    fn add(&mut self, pixels: u64) {
+        if pixels > 0 {
+            self.images += 1;
+            self.most = self.most.max(pixels);
+        }
+    }
+
+    /// The note on `option`'s panel drawn into `of` images.
+    fn note(&self, option: &str, of: usize, args: &Args) -> Option<String> {
+        (self.images > 0).then(|| {
+            let which = match of {
+                1 => "the image".to_string(),
+                _ => format!("{} of the {of} images", self.images),
+            };
+            let why = match &args.camera.view {
+                Some(v) => format!(
+                    ": the view {} gives is not fitted around the panel (without --view, or \
+                     with the file's target and distance left out, the fit keeps the data \
+                     clear of it)",
+                    v.display()
+                ),
+                None => String::new(),
+            };
+            format!(
+                "  note: {option} covers drawn particles in {which} (up to {} pixels under \
+                 its panel){why}",
+                self.most
+            )
+        })
+    }
+}
+
 /// Says when a `--hide-attribute` range is narrower than one of the file's 16-bit steps
 /// of the attribute (a molecule id of a column of 200 000, stored 3.16 apart): it hides
 /// every particle of the steps it touches, the values those steps hold being named.
@@ -585,13 +646,16 @@ fn coarse_range_notes(
 }
 
 /// Draws a legend or label panel into the PNG `image` at `corner`, enlarged as the
-/// image's size asks; `option` names what asked for it in an error.
+/// image's size asks; `option` names what asked for it in an error. Returns how many
+/// pixels it covered that showed something other than `background` (sRGB; `None`:
+/// transparent), which is data under the panel.
 fn draw_panel(
     image: &Path,
     panel: &mdlod_render::legend::Legend,
     corner: LegendCorner,
     option: &str,
-) -> Result<()> {
+    background: Option<[u8; 3]>,
+) -> Result<u64> {
     use mdlod_render::legend::Corner;
     let corner = match corner {
         LegendCorner::TopLeft => Corner::TopLeft,
@@ -601,11 +665,12 @@ fn draw_panel(
     };
     let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
     let scale = panel.scale_for(png.width, png.height).unwrap_or(1);
+    let covered = panel.covers(&png, corner, scale, background);
     panel
         .draw(&mut png, corner, scale)
         .map_err(|e| anyhow::anyhow!("{option}: {}: {e}", image.display()))?;
     png.save_png(image)?;
-    Ok(())
+    Ok(covered)
 }
 
 /// The `--label` panel of each image with its values (each frame's time the timestep
@@ -693,9 +758,19 @@ fn write_labels(
         None => values.clone(),
     };
     let (panels, missing) = label_panels(args, &values, &movie);
+    let mut covered = Covered::default();
     for ((image, _), label) in images.iter().zip(&panels) {
         glyphs.extend(label.missing_glyphs());
-        draw_panel(image, label, args.label_corner(), "--label")?;
+        covered.add(draw_panel(
+            image,
+            label,
+            args.label_corner(),
+            "--label",
+            backdrop(args),
+        )?);
+    }
+    if let Some(note) = covered.note("--label", images.len(), args) {
+        println!("{note}");
     }
     for field in missing {
         let hint = match field {
@@ -1795,16 +1870,7 @@ pub fn run(mut args: Args) -> Result<()> {
         budget: args.budget,
         lighting: lighting(&args)?,
         transparent: transparent(args.background.as_deref()),
-        background: parse_colour(
-            args.background
-                .as_deref()
-                .filter(|b| !transparent(Some(b)))
-                .unwrap_or(match args.mode {
-                    Mode::Spheres | Mode::Sndf | Mode::Iso => "#ffffff",
-                    Mode::Splat | Mode::SplatOver | Mode::Density => "#000000",
-                }),
-        )
-        .context("--background")?,
+        background: parse_colour(background_text(&args)).context("--background")?,
         mode: match args.mode {
             Mode::Spheres => RenderMode::Spheres,
             Mode::Splat => RenderMode::Splat {
@@ -2323,7 +2389,17 @@ pub fn run(mut args: Args) -> Result<()> {
         None,
     )?;
     if let Some(bar) = &bar {
-        draw_panel(&args.output, bar, args.scale_bar_corner(), "--scale-bar")?;
+        let mut covered = Covered::default();
+        covered.add(draw_panel(
+            &args.output,
+            bar,
+            args.scale_bar_corner(),
+            "--scale-bar",
+            backdrop(&args),
+        )?);
+        if let Some(note) = covered.note("--scale-bar", 1, &args) {
+            println!("{note}");
+        }
     }
     Ok(())
 }
@@ -2369,8 +2445,15 @@ fn write_legend(
         println!("  legend written to {} ({what})", path.display());
     }
     if let Some(corner) = args.legend_in_image {
+        let mut covered = Covered::default();
         for image in images {
-            draw_panel(image, &drawn_legend, corner, "--legend-in-image")?;
+            covered.add(draw_panel(
+                image,
+                &drawn_legend,
+                corner,
+                "--legend-in-image",
+                backdrop(args),
+            )?);
         }
         println!(
             "  legend drawn into {} ({what})",
@@ -2379,6 +2462,9 @@ fn write_legend(
                 _ => format!("each of the {} images", images.len()),
             }
         );
+        if let Some(note) = covered.note("--legend-in-image", images.len(), args) {
+            println!("{note}");
+        }
         let missing = drawn_legend.missing_glyphs();
         if !missing.is_empty() {
             let list: Vec<String> = missing.iter().map(|c| format!("{c:?}")).collect();
@@ -3994,8 +4080,18 @@ fn render_frames(
         written.iter().cloned().zip(drawn_values).collect();
     write_labels(args, &labelled, Some(&frame_values))?;
     if let Some(bar) = &bar {
+        let mut covered = Covered::default();
         for image in &written {
-            draw_panel(image, bar, args.scale_bar_corner(), "--scale-bar")?;
+            covered.add(draw_panel(
+                image,
+                bar,
+                args.scale_bar_corner(),
+                "--scale-bar",
+                backdrop(args),
+            )?);
+        }
+        if let Some(note) = covered.note("--scale-bar", written.len(), args) {
+            println!("{note}");
         }
     }
     Ok(())
