@@ -1597,8 +1597,8 @@ fn render_styles_points_by_attribute_and_species() {
         s(&with),
         "-o",
         s(&d.join("x.png")),
-        "--hide-species",
-        "Xx",
+        "--species-radius",
+        "Xx=2",
     ]);
     assert!(err.contains("\"Xx\"") && err.contains("1, 2"), "{err}");
     let err = fails(&[
@@ -2094,7 +2094,8 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
     );
     assert!(!ok(&["info", s(&plain)]).contains("column"));
     // A structure type this frame lacks (a script over every frame of a run hides HCP):
-    // noted, not refused; a species a file of elements lacks is still refused.
+    // noted, not refused; so is hiding a species a file of elements lacks, while
+    // colouring one is refused.
     let png = dir.path().join("h.png");
     let mut args = vec!["render", s(&whole), "-o", s(&png), "--hide-species", "HCP"];
     args.extend(["--width", "32", "--height", "24"]);
@@ -2107,6 +2108,16 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
         "{out}"
     );
     let mut args = vec!["render", s(&plain), "-o", s(&png), "--hide-species", "HCP"];
+    args.extend(["--width", "32", "--height", "24"]);
+    assert!(ok(&args).contains("--hide-species HCP: no particle of this frame is HCP"));
+    let mut args = vec![
+        "render",
+        s(&plain),
+        "-o",
+        s(&png),
+        "--species-colour",
+        "HCP=red",
+    ];
     args.extend(["--width", "32", "--height", "24"]);
     assert!(fails(&args).contains("no species named \"HCP\""));
     // A type of the frame spelt otherwise is a misspelling: refused, naming it.
