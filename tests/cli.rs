@@ -8933,6 +8933,86 @@ fn panels_that_would_cover_one_another_are_refused_before_drawing() {
     assert!(!dir.path().join("f-0.png").exists());
 }
 
+/// `--text-scale N` draws the in-image panels N times their size (print figures whose
+/// default panels read small), and the fit keeps the larger panel's room; a scale the
+/// image cannot hold is refused before drawing.
+#[test]
+fn text_scale_enlarges_the_panels_drawn_into_an_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let file = dir.path().join("m.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file), "--attribute", "c_pe"]);
+    let base = [
+        "--width",
+        "800",
+        "--height",
+        "600",
+        "--background",
+        "#000000",
+    ];
+    let panel_box = |png: &Path| {
+        // The panel is 85 % white over black: the box of the bright pixels at the bottom
+        // right, where the fit leaves no particle.
+        let (w, h, px) = read_png(png);
+        let (mut x0, mut y0) = (w, h);
+        for y in h / 2..h {
+            for x in 0..w {
+                let i = 4 * (y * w + x) as usize;
+                if px[i..i + 3].iter().all(|&c| c > 200) {
+                    (x0, y0) = (x0.min(x), y0.min(y));
+                }
+            }
+        }
+        (w - x0, h - y0)
+    };
+    let one = dir.path().join("one.png");
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&one)][..],
+        &base,
+        &["--colour-map", "viridis", "--legend-in-image"],
+    ]
+    .concat());
+    assert!(!out.contains("covers drawn particles"), "{out}");
+    let three = dir.path().join("three.png");
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&three)][..],
+        &base,
+        &[
+            "--colour-map",
+            "viridis",
+            "--legend-in-image",
+            "--text-scale",
+            "2",
+        ],
+    ]
+    .concat());
+    assert!(!out.contains("covers drawn particles"), "{out}");
+    let ((w1, h1), (w2, h2)) = (panel_box(&one), panel_box(&three));
+    // Each with its margin of 8 pixels times the scale.
+    assert_eq!(
+        (w2 - 16, h2 - 16),
+        (2 * (w1 - 8), 2 * (h1 - 8)),
+        "{w1}×{h1} against {w2}×{h2}"
+    );
+    let e = fails(
+        &[
+            &["render", s(&file), "-o", s(&three)][..],
+            &base,
+            &[
+                "--colour-map",
+                "viridis",
+                "--legend-in-image",
+                "--text-scale",
+                "3",
+            ],
+        ]
+        .concat(),
+    );
+    assert!(e.contains("cannot hold the legend (at least"), "{e}");
+    let e = fails(&["render", s(&file), "-o", s(&three), "--text-scale", "9"]);
+    assert!(e.contains("--text-scale"), "{e}");
+}
+
 /// A fitted view leaves the scale bar's panel free, as it does the legend's: a slab
 /// filling the image reaches under the panel's corner without the bar and stays clear
 /// of it with the bar (the view the bar's fit chose, drawn without the bar, has only

@@ -141,6 +141,7 @@ pub fn run(args: Args) -> Result<()> {
         scale_bar: false,
         scale_bar_length: None,
         scale_bar_corner: None,
+        text_scale: None,
         save_map: None,
         frames: None,
         cell: None,

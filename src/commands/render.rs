@@ -241,6 +241,11 @@ pub struct Args {
     /// Where --scale-bar draws its panel [default: bottom-left]
     #[arg(long, value_name = "CORNER", ignore_case = true)]
     pub scale_bar_corner: Option<LegendCorner>,
+    /// Draw the in-image legend, the label and the scale bar N times their size (their
+    /// text is a 7×13-pixel font), 1 to 8: for print, where a figure's panels read small
+    /// [default: by the image's size, 1 below 1920×1080, 2 from it]
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=8))]
+    pub text_scale: Option<u32>,
 }
 
 impl Args {
@@ -296,6 +301,7 @@ fn scale_bar(
     height: u32,
     length: Option<f32>,
     units: Option<&str>,
+    text_scale: Option<u32>,
 ) -> Result<mdlod_render::legend::Legend> {
     if camera.projection != mdlod_render::Projection::Orthographic {
         anyhow::bail!(
@@ -330,7 +336,7 @@ fn scale_bar(
         length: 1.0,
         label: label.clone(),
     };
-    let s = f64::from(probe.scale_for(width, height).unwrap_or(1));
+    let s = f64::from(panel_scale(&probe, width, height, text_scale).unwrap_or(1));
     let pixels = world / per_px;
     if pixels < 1.0 || pixels > f64::from(width) - 16.0 * s - 14.0 * s {
         anyhow::bail!(
@@ -343,14 +349,32 @@ fn scale_bar(
         length: (pixels / s) as f32,
         label,
     };
-    if bar.scale_for(width, height).is_none() {
-        let (w, h) = bar.room_needed(1);
+    if panel_scale(&bar, width, height, text_scale).is_none() {
+        let (w, h) = bar.room_needed(text_scale.unwrap_or(1));
         anyhow::bail!(
             "--scale-bar: a {width}×{height} image cannot hold the scale bar (at least {w}×{h} \
              pixels with its margin); draw a larger image"
         );
     }
     Ok(bar)
+}
+
+/// The scale a panel is drawn at in a `w` × `h` image: `fixed` (`--text-scale`) where
+/// the image holds it at that scale, else the largest the image's size gives
+/// ([`mdlod_render::legend::Legend::scale_for`]); `None` where it holds none.
+fn panel_scale(
+    panel: &mdlod_render::legend::Legend,
+    w: u32,
+    h: u32,
+    fixed: Option<u32>,
+) -> Option<u32> {
+    match fixed {
+        Some(s) => {
+            let (rw, rh) = panel.room_needed(s);
+            (rw <= w && rh <= h).then_some(s)
+        }
+        None => panel.scale_for(w, h),
+    }
 }
 
 /// The name a corner is given on the command line.
@@ -376,7 +400,8 @@ fn check_panels_apart(
     if let Some(size) = label {
         panels.push(("--label", args.label_corner(), size));
     }
-    if let Some((bar, scale)) = bar.and_then(|b| Some((b, b.scale_for(w, h)?))) {
+    if let Some((bar, scale)) = bar.and_then(|b| Some((b, panel_scale(b, w, h, args.text_scale)?)))
+    {
         let (bw, bh) = bar.room_needed(scale);
         panels.push(("--scale-bar", args.scale_bar_corner(), [bw, bh]));
     }
@@ -488,11 +513,15 @@ fn check_label(args: &Args) -> Result<()> {
         let panel = mdlod_render::legend::Legend::Text {
             lines: args.label.iter().map(|t| label::fixed_text(t)).collect(),
         };
-        if panel
-            .scale_for(args.camera.width, args.camera.height)
-            .is_none()
+        if panel_scale(
+            &panel,
+            args.camera.width,
+            args.camera.height,
+            args.text_scale,
+        )
+        .is_none()
         {
-            let (w, h) = panel.room_needed(1);
+            let (w, h) = panel.room_needed(args.text_scale.unwrap_or(1));
             anyhow::bail!(
                 "--label: a {}×{} image cannot hold the label (at least {w}×{h} pixels with \
                  its margin); draw a larger image, or a shorter label",
@@ -655,6 +684,7 @@ fn draw_panel(
     corner: LegendCorner,
     option: &str,
     background: Option<[u8; 3]>,
+    text_scale: Option<u32>,
 ) -> Result<u64> {
     use mdlod_render::legend::Corner;
     let corner = match corner {
@@ -664,7 +694,7 @@ fn draw_panel(
         LegendCorner::BottomRight => Corner::BottomRight,
     };
     let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
-    let scale = panel.scale_for(png.width, png.height).unwrap_or(1);
+    let scale = panel_scale(panel, png.width, png.height, text_scale).unwrap_or(1);
     let covered = panel.covers(&png, corner, scale, background);
     panel
         .draw(&mut png, corner, scale)
@@ -721,11 +751,17 @@ fn check_label_room(args: &Args, values: &[&label::Values]) -> Result<Option<[u3
     let (panels, _) = label_panels(args, values, values);
     let mut room = [0u32; 2];
     for (i, panel) in panels.iter().enumerate() {
-        if let Some(scale) = panel.scale_for(args.camera.width, args.camera.height) {
+        let scale = panel_scale(
+            panel,
+            args.camera.width,
+            args.camera.height,
+            args.text_scale,
+        );
+        if let Some(scale) = scale {
             let (w, h) = panel.room_needed(scale);
             room = [room[0].max(w), room[1].max(h)];
         } else {
-            let (w, h) = panel.room_needed(1);
+            let (w, h) = panel.room_needed(args.text_scale.unwrap_or(1));
             anyhow::bail!(
                 "--label: a {}×{} image cannot hold the label with {}'s values (at least \
                  {w}×{h} pixels with its margin); draw a larger image, or a shorter label",
@@ -767,6 +803,7 @@ fn write_labels(
             args.label_corner(),
             "--label",
             backdrop(args),
+            args.text_scale,
         )?);
     }
     if let Some(note) = covered.note("--label", images.len(), args) {
@@ -1999,6 +2036,7 @@ pub fn run(mut args: Args) -> Result<()> {
                 opts.height,
                 args.scale_bar_length,
                 file.metadata().units.as_deref(),
+                args.text_scale,
             )?),
             false => None,
         }
@@ -2396,6 +2434,7 @@ pub fn run(mut args: Args) -> Result<()> {
             args.scale_bar_corner(),
             "--scale-bar",
             backdrop(&args),
+            args.text_scale,
         )?);
         if let Some(note) = covered.note("--scale-bar", 1, &args) {
             println!("{note}");
@@ -2453,6 +2492,7 @@ fn write_legend(
                 corner,
                 "--legend-in-image",
                 backdrop(args),
+                args.text_scale,
             )?);
         }
         println!(
@@ -2545,8 +2585,8 @@ fn check_legend_room(
         Some([1.0, 2.0]),
         &all,
     )?;
-    let Some(scale) = legend.scale_for(opts.width, opts.height) else {
-        let (w, h) = legend.room_needed(1);
+    let Some(scale) = panel_scale(&legend, opts.width, opts.height, args.text_scale) else {
+        let (w, h) = legend.room_needed(args.text_scale.unwrap_or(1));
         anyhow::bail!(
             "--legend-in-image: a {}×{} image cannot hold the legend (at least {w}×{h} \
              pixels with its margin); draw a larger image, or write the legend beside it \
@@ -2662,7 +2702,7 @@ fn scale_bar_room(
         length: 1.0,
         label: label.clone(),
     };
-    let Some(s) = probe.scale_for(w, h) else {
+    let Some(s) = panel_scale(&probe, w, h, args.text_scale) else {
         return windows;
     };
     let panel = mdlod_render::legend::Legend::Scale {
@@ -3846,6 +3886,7 @@ fn render_frames(
                 opts.height,
                 args.scale_bar_length,
                 first.metadata().units.as_deref(),
+                args.text_scale,
             )?)
         }
         false => None,
@@ -4088,6 +4129,7 @@ fn render_frames(
                 args.scale_bar_corner(),
                 "--scale-bar",
                 backdrop(args),
+                args.text_scale,
             )?);
         }
         if let Some(note) = covered.note("--scale-bar", written.len(), args) {
