@@ -2187,6 +2187,13 @@ fn first_mistakes_are_named_before_any_work() {
     );
     let err = fails(&["render", "--legend-in-image", "top-left", f, "-o", p]);
     assert!(err.contains("--legend-in-image=top-left"), "{err}");
+    // No thread at all: said in words, not as a range of 64-bit numbers.
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let out = dir.path().join("t.mdlod");
+    for command in ["convert", "batch"] {
+        let err = fails(&[command, s(&input), "-o", s(&out), "--threads", "0"]);
+        assert!(err.contains("at least 1 thread"), "{err}");
+    }
     // Not where another argument is at fault (`--cell FILE` is right as it stands).
     let err = fails(&["render", "--cell", f, "-o", p, "--widht", "10"]);
     assert!(

@@ -39,7 +39,7 @@ pub struct Args {
     #[arg(long, value_parser = parse_bytes, allow_hyphen_values = true)]
     pub memory_limit: Option<u64>,
     /// Worker threads (default: all cores).
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
     /// Frames with the same timestep (a run restarted into the same dump, or inputs
     /// that overlap): an error, or convert the first or the last of each (in the order

@@ -33,7 +33,7 @@ pub struct Args {
     #[arg(long)]
     pub last: bool,
     /// Worker threads (default: all cores).
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
     /// Memory the conversion may use (e.g. 4G; default: half of the memory this process may
     /// have: the machine's, or a Slurm job's or container's allocation).

@@ -180,6 +180,15 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// `--threads N`: a count of worker threads, at least 1.
+pub fn parse_threads(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(0) => Err("at least 1 thread (leave --threads out for one per core)".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("{s:?} is no whole number of threads")),
+    }
+}
+
 /// A value of the data as a summary prints it: its shortest decimal form where that is
 /// short (10^-4 to 10^7), else in scientific notation (a mass of 1.989e33 g, a density of
 /// 5.2e-31 g/cm³, not 34 digits).
