@@ -302,6 +302,45 @@ pub enum Corner {
     BottomRight,
 }
 
+/// The first two of `panels` (each at its corner, over the room it needs with its margin,
+/// as [`Legend::room_needed`] gives it) that would cover one another in a `width` ×
+/// `height` image, by their places in the list. Two at one corner are not compared (a
+/// caller refuses those by name).
+pub fn overlapping(
+    panels: &[(Corner, [u32; 2])],
+    width: u32,
+    height: u32,
+) -> Option<(usize, usize)> {
+    // The pixels a panel covers, as half-open ranges across and down.
+    let span = |corner: Corner, [pw, ph]: [u32; 2]| {
+        let left = matches!(corner, Corner::TopLeft | Corner::BottomLeft);
+        let top = matches!(corner, Corner::TopLeft | Corner::TopRight);
+        let x = if left {
+            [0, pw]
+        } else {
+            [width.saturating_sub(pw), width]
+        };
+        let y = if top {
+            [0, ph]
+        } else {
+            [height.saturating_sub(ph), height]
+        };
+        (x, y)
+    };
+    for (i, a) in panels.iter().enumerate() {
+        for (j, b) in panels.iter().enumerate().skip(i + 1) {
+            if a.0 == b.0 {
+                continue;
+            }
+            let ((ax, ay), (bx, by)) = (span(a.0, a.1), span(b.0, b.1));
+            if ax[0] < bx[1] && bx[0] < ax[1] && ay[0] < by[1] && by[0] < ay[1] {
+                return Some((i, j));
+            }
+        }
+    }
+    None
+}
+
 /// A legend: what an image's colours mean, written as SVG ([`Legend::svg`]) or drawn
 /// into the image ([`Legend::draw`]) from one layout, so the two cannot disagree. Lengths
 /// are in the SVG's pixels; text is 12 px high, its width taken as 7 px a character,
@@ -1031,6 +1070,51 @@ fn more_line(more: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Panels at two corners overlap where their rooms meet across the image: side by
+    /// side when their widths add past it, diagonally only when both sums do; rooms that
+    /// just touch do not.
+    #[test]
+    fn panels_at_two_corners_overlap_where_their_rooms_cross() {
+        use Corner::*;
+        let (w, h) = (800, 600);
+        assert_eq!(
+            overlapping(&[(BottomRight, [376, 82]), (BottomLeft, [626, 48])], w, h),
+            Some((0, 1))
+        );
+        assert_eq!(
+            overlapping(&[(BottomRight, [376, 82]), (BottomLeft, [424, 48])], w, h),
+            None
+        );
+        assert_eq!(
+            overlapping(&[(BottomRight, [500, 82]), (TopLeft, [400, 48])], w, h),
+            None
+        );
+        assert_eq!(
+            overlapping(&[(BottomRight, [500, 400]), (TopLeft, [400, 300])], w, h),
+            Some((0, 1))
+        );
+        assert_eq!(
+            overlapping(&[(TopLeft, [100, 400]), (BottomLeft, [100, 201])], w, h),
+            Some((0, 1))
+        );
+        assert_eq!(
+            overlapping(&[(TopLeft, [100, 400]), (TopLeft, [700, 500])], w, h),
+            None
+        );
+        assert_eq!(
+            overlapping(
+                &[
+                    (TopLeft, [10, 10]),
+                    (BottomLeft, [10, 10]),
+                    (BottomRight, [791, 9])
+                ],
+                w,
+                h
+            ),
+            Some((1, 2))
+        );
+    }
 
     /// What a panel covers: the pixels under its rectangle that are not the background
     /// (within 2 levels), or that have any opacity on a transparent one; none past it.

@@ -377,6 +377,17 @@ fn panel_scale(
     }
 }
 
+/// The library's corner of a command-line corner.
+fn legend_corner(corner: LegendCorner) -> mdlod_render::legend::Corner {
+    use mdlod_render::legend::Corner;
+    match corner {
+        LegendCorner::TopLeft => Corner::TopLeft,
+        LegendCorner::TopRight => Corner::TopRight,
+        LegendCorner::BottomLeft => Corner::BottomLeft,
+        LegendCorner::BottomRight => Corner::BottomRight,
+    }
+}
+
 /// The name a corner is given on the command line.
 fn corner_name(corner: LegendCorner) -> String {
     clap::ValueEnum::to_possible_value(&corner).map_or_else(String::new, |v| v.get_name().into())
@@ -405,50 +416,26 @@ fn check_panels_apart(
         let (bw, bh) = bar.room_needed(scale);
         panels.push(("--scale-bar", args.scale_bar_corner(), [bw, bh]));
     }
-    // The pixels a panel covers, as half-open ranges across and down.
-    let span = |corner: LegendCorner, [pw, ph]: [u32; 2]| {
-        let left = matches!(corner, LegendCorner::TopLeft | LegendCorner::BottomLeft);
-        let top = matches!(corner, LegendCorner::TopLeft | LegendCorner::TopRight);
-        let x = if left {
-            [0, pw]
-        } else {
-            [w.saturating_sub(pw), w]
+    let corners: Vec<_> = panels.iter().map(|p| (legend_corner(p.1), p.2)).collect();
+    if let Some((i, j)) = mdlod_render::legend::overlapping(&corners, w, h) {
+        let (a, b) = (&panels[i], &panels[j]);
+        let shorter = match (a.0, b.0) {
+            ("--scale-bar", _) | (_, "--scale-bar") => ", or a shorter bar (--scale-bar-length)",
+            _ => "",
         };
-        let y = if top {
-            [0, ph]
-        } else {
-            [h.saturating_sub(ph), h]
-        };
-        (x, y)
-    };
-    for (i, a) in panels.iter().enumerate() {
-        for b in &panels[i + 1..] {
-            if a.1 == b.1 {
-                continue;
-            }
-            let ((ax, ay), (bx, by)) = (span(a.1, a.2), span(b.1, b.2));
-            if ax[0] < bx[1] && bx[0] < ax[1] && ay[0] < by[1] && by[0] < ay[1] {
-                let shorter = match (a.0, b.0) {
-                    ("--scale-bar", _) | (_, "--scale-bar") => {
-                        ", or a shorter bar (--scale-bar-length)"
-                    }
-                    _ => "",
-                };
-                anyhow::bail!(
-                    "{} and {} would cover one another in a {w}×{h} image: {}×{} pixels at \
-                     the {} corner and {}×{} at the {} (each with its margin); draw a larger \
-                     image, put one in another corner{shorter}",
-                    a.0,
-                    b.0,
-                    a.2[0],
-                    a.2[1],
-                    corner_name(a.1),
-                    b.2[0],
-                    b.2[1],
-                    corner_name(b.1),
-                );
-            }
-        }
+        anyhow::bail!(
+            "{} and {} would cover one another in a {w}×{h} image: {}×{} pixels at \
+             the {} corner and {}×{} at the {} (each with its margin); draw a larger \
+             image, put one in another corner{shorter}",
+            a.0,
+            b.0,
+            a.2[0],
+            a.2[1],
+            corner_name(a.1),
+            b.2[0],
+            b.2[1],
+            corner_name(b.1),
+        );
     }
     Ok(())
 }
@@ -686,13 +673,7 @@ fn draw_panel(
     background: Option<[u8; 3]>,
     text_scale: Option<u32>,
 ) -> Result<u64> {
-    use mdlod_render::legend::Corner;
-    let corner = match corner {
-        LegendCorner::TopLeft => Corner::TopLeft,
-        LegendCorner::TopRight => Corner::TopRight,
-        LegendCorner::BottomLeft => Corner::BottomLeft,
-        LegendCorner::BottomRight => Corner::BottomRight,
-    };
+    let corner = legend_corner(corner);
     let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
     let scale = panel_scale(panel, png.width, png.height, text_scale).unwrap_or(1);
     let covered = panel.covers(&png, corner, scale, background);
