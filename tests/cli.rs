@@ -4269,7 +4269,7 @@ fn ids_past_sixteen_bits_are_said_to_share_steps() {
         text.push_str(&format!(
             "{} {} 1 {} {} {}\n",
             i + 1,
-            i + 1,
+            3 * i + 1,
             2 * x,
             2 * y,
             z / 2
@@ -4279,7 +4279,7 @@ fn ids_past_sixteen_bits_are_said_to_share_steps() {
     let file = dir.path().join("mol.mdlod");
     let out = ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "mol"]);
     assert!(
-        out.contains("attribute mol holds whole numbers from 1 to 70000 (ids?)")
+        out.contains("attribute mol holds whole numbers from 1 to 209998 (ids?)")
             && !out.contains("--attribute-log10 keeps its logarithm"),
         "{out}"
     );
@@ -4294,10 +4294,10 @@ fn ids_past_sixteen_bits_are_said_to_share_steps() {
         "--height",
         "48",
         "--hide-attribute",
-        "5:5",
+        "4:4",
     ]);
     assert!(
-        out.contains("--hide-attribute 5:5 is narrower than one 16-bit step of mol in this file"),
+        out.contains("--hide-attribute 4:4 is narrower than one 16-bit step of mol in this file"),
         "{out}"
     );
     // A range wider than a step: nothing to say.
@@ -4312,6 +4312,36 @@ fn ids_past_sixteen_bits_are_said_to_share_steps() {
         "48",
         "--hide-attribute",
         "5:500",
+    ]);
+    assert!(!out.contains("narrower than one 16-bit step"), "{out}");
+    // Ids within 65 536 of one another keep a step each: no note at either end, although
+    // they span decades.
+    let few = dir.path().join("few.lammpstrj");
+    let text = std::fs::read_to_string(&dump).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let mut short = String::new();
+    for (i, line) in lines.iter().enumerate().take(9 + 20_000) {
+        short.push_str(if i == 3 { "20000" } else { line });
+        short.push('\n');
+    }
+    std::fs::write(&few, short).unwrap();
+    let file = dir.path().join("few.mdlod");
+    let out = ok(&["convert", s(&few), "-o", s(&file), "--attribute", "mol"]);
+    assert!(
+        !out.contains("--attribute-log10") && !out.contains("whole numbers"),
+        "{out}"
+    );
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-attribute",
+        "300:300",
     ]);
     assert!(!out.contains("narrower than one 16-bit step"), "{out}");
 }

@@ -414,9 +414,10 @@ pub fn convert_frame_with(
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         // Ids (of molecules, clusters) are told by their whole numbers, which no
         // logarithm keeps apart either.
-        let ids = whole_numbers_note(&a.name, &a.values, *min, *max);
-        if ids.is_some() && !options.attribute_log10 {
-            notes.extend(ids);
+        // (Whole numbers within 65 536 of one another keep a step each: nothing to say.)
+        let whole = a.values.iter().all(|v| v.fract() == 0.0);
+        if whole && !options.attribute_log10 {
+            notes.extend(whole_numbers_note(&a.name, &a.values, *min, *max));
         } else {
             notes.extend(attribute_span_note(&a.name, *min, *max, options));
             if !options.attribute_log10 {
@@ -670,12 +671,12 @@ fn undersized_note(
     let half = 0.5 * spacing;
     let digits = if half >= 10.0 { 0 } else { 1 };
     Some(format!(
-        "species {}{more} {} drawn at the default radius {default}, {:.2} of the \
-         particles' mean spacing ({spacing:.3}, from the box around them): the picture \
-         shows scattered dots. Give each its size, --radius {}={half:.digits$} (about half \
-         the spacing; coarse-grained beads, or a radius in the data's units)",
+        "species {}{more}: drawn at the default radius {default}, {:.2} of the particles' \
+         mean spacing ({spacing:.3}, from the box around them), as scattered dots. If they \
+         are larger (coarse-grained beads in ångströms, a radius in other units), give each \
+         its size: --radius {}=R, about half the spacing ({half:.digits$}) for a dense \
+         material; a dilute gas is drawn as it is",
         shown.join(", "),
-        if small.len() == 1 { "is" } else { "are" },
         f64::from(default) / spacing,
         shown[0],
     ))
@@ -701,7 +702,7 @@ pub(crate) fn position_notes(
         species.iter().map(|s| s.name.as_str()),
     ));
     notes.extend(crate::species::bead_name_note(
-        species.iter().map(|s| s.name.as_str()),
+        species.iter().map(|s| (s.name.as_str(), s.radius)),
     ));
     // Thousands of species: ids (of molecules, residues, clusters) read as species.
     if species.len() > MANY_SPECIES {
@@ -1584,9 +1585,9 @@ mod tests {
         let note = super::undersized_note([0.0; 3], [100.0; 3], 8000, &beads).expect("a note");
         assert!(
             note.starts_with(
-                "species 1, 2, PO4 are drawn at the default radius 0.5, 0.10 of the \
-                 particles' mean spacing (5.000"
-            ) && note.contains("--radius 1=2.5"),
+                "species 1, 2, PO4: drawn at the default radius 0.5, 0.10 of the particles' \
+                 mean spacing (5.000"
+            ) && note.contains("--radius 1=R, about half the spacing (2.5)"),
             "{note}"
         );
         assert!(

@@ -409,40 +409,54 @@ pub fn atom_name_notes<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<Stri
 /// A note on species names read as elements beside a majority of names that are none
 /// (a Martini system's `W`, `NA` and `CL` beside `NC3`, `PO4`, `GL1`: water and ion
 /// beads drawn as tungsten, sodium and chlorine atoms), with the options that make them
-/// labels or give them a size. Type numbers count as neither.
-pub fn bead_name_note<'a>(names: impl IntoIterator<Item = &'a str>) -> Option<String> {
-    let names: Vec<&str> = names
+/// labels or give them a size. Only names that read so doubtfully are named: symbols
+/// written otherwise than the element's case (`NA`, `CL`) and Martini's water `W`;
+/// carbon, nitrogen or phosphorus among an all-atom force field's names (`C`, `N`, `P`
+/// beside `C13`, `OH2`) are what they say. A species given its own radius (`--radius`)
+/// is left out: the user has seen to it. Type numbers count as neither.
+pub fn bead_name_note<'a>(species: impl IntoIterator<Item = (&'a str, f32)>) -> Option<String> {
+    let species: Vec<(&str, f32)> = species
         .into_iter()
-        .filter(|n| n.parse::<u64>().is_err())
+        .filter(|(n, _)| n.parse::<u64>().is_err())
         .collect();
-    let labels = letters_are_labels(names.iter().copied());
-    let (elements, others): (Vec<&str>, Vec<&str>) =
-        names.iter().partition(|n| element_of(n, labels).is_some());
+    let labels = letters_are_labels(species.iter().map(|(n, _)| *n));
+    let (elements, others): (Vec<_>, Vec<_>) = species
+        .iter()
+        .copied()
+        .partition(|(n, _)| element_of(n, labels).is_some());
     if elements.is_empty() || others.len() < 2 || others.len() < elements.len() {
         return None;
     }
-    let symbols: Vec<String> = elements
+    let doubtful: Vec<(&str, &str)> = elements
         .iter()
-        .take(4)
-        .map(|n| {
-            let symbol = ELEMENTS
+        .filter_map(|&(n, radius)| {
+            let (symbol, r, _) = ELEMENTS
                 .iter()
-                .find(|(s, _, _)| s.eq_ignore_ascii_case(n))
-                .map_or(*n, |(s, _, _)| *s);
-            format!("{n} as {symbol}")
+                .find(|(s, _, _)| s.eq_ignore_ascii_case(n))?;
+            let own_radius = (radius - r).abs() > 1e-6 * r.max(1.0);
+            (!own_radius && (n != *symbol || n == "W")).then_some((n, *symbol))
         })
         .collect();
-    let more = if elements.len() > 4 { ", ..." } else { "" };
-    let shown: Vec<&str> = others.iter().take(4).copied().collect();
+    if doubtful.is_empty() {
+        return None;
+    }
+    let shown: Vec<&str> = doubtful.iter().take(4).map(|(n, _)| *n).collect();
+    let symbols: Vec<String> = doubtful
+        .iter()
+        .take(4)
+        .map(|(n, symbol)| format!("{n} as {symbol}"))
+        .collect();
+    let more = if doubtful.len() > 4 { ", ..." } else { "" };
+    let names: Vec<&str> = others.iter().take(4).map(|(n, _)| *n).collect();
     let others_more = if others.len() > 4 { ", ..." } else { "" };
     Some(format!(
-        "species {}{more}: read as elements ({}{more}) beside names that are none ({}{others_more}): \
-         if they are bead or force-field names (Martini's water W, ions NA and CL), \
-         --species-name to a name that is no element's makes one a label (a palette \
-         colour), and --radius NAME=R gives its size",
-        elements.iter().take(4).copied().collect::<Vec<_>>().join(", "),
-        symbols.join(", "),
+        "species {}{more}: read as elements ({}{more}) beside names that are none \
+         ({}{others_more}): if they are bead or force-field names (Martini's water W, ions \
+         NA and CL), --species-name to a name that is no element's makes one a label (a \
+         palette colour), and --radius NAME=R gives its size",
         shown.join(", "),
+        symbols.join(", "),
+        names.join(", "),
     ))
 }
 
@@ -949,7 +963,14 @@ mod tests {
     /// elements with a site name or two (water models' Ow, Hw) are not.
     #[test]
     fn element_names_among_bead_names_are_noted() {
-        let note = bead_name_note(["NC3", "PO4", "GL1", "C1A", "W", "NA", "CL"]).expect("a note");
+        let at = |names: &[&'static str]| -> Vec<(&'static str, f32)> {
+            names
+                .iter()
+                .map(|n| (*n, element(n).map_or(DEFAULT_RADIUS, |(r, _)| r)))
+                .collect()
+        };
+        let martini = at(&["NC3", "PO4", "GL1", "C1A", "W", "NA", "CL"]);
+        let note = bead_name_note(martini.clone()).expect("a note");
         assert!(
             note.starts_with(
                 "species W, NA, CL: read as elements (W as W, NA as Na, CL as Cl) beside names \
@@ -957,11 +978,24 @@ mod tests {
             ),
             "{note}"
         );
-        assert_eq!(bead_name_note(["Cu", "Ag", "Ni"]), None);
-        assert_eq!(bead_name_note(["1", "2", "3"]), None);
-        assert_eq!(bead_name_note(["C", "H", "O", "Ow", "Hw"]), None);
-        assert_eq!(bead_name_note(["Cu", "vacancy"]), None);
-        assert_eq!(bead_name_note(["A", "B"]), None);
+        // Given their own radii: seen to.
+        let sized: Vec<(&str, f32)> = martini
+            .iter()
+            .map(|&(n, r)| (n, if element(n).is_some() { 2.35 } else { r }))
+            .collect();
+        assert_eq!(bead_name_note(sized), None);
+        // An all-atom force field's C, N, P are what they say; its NA is named.
+        assert_eq!(
+            bead_name_note(at(&["N", "C", "P", "C13", "OH2", "C12"])),
+            None
+        );
+        let charmm = bead_name_note(at(&["N", "C", "P", "NA", "C13", "OH2", "C12", "HA"]));
+        assert!(charmm.is_some_and(|n| n.starts_with("species NA: read as elements (NA as Na)")));
+        assert_eq!(bead_name_note(at(&["Cu", "Ag", "Ni"])), None);
+        assert_eq!(bead_name_note(at(&["1", "2", "3"])), None);
+        assert_eq!(bead_name_note(at(&["C", "H", "O", "Ow", "Hw"])), None);
+        assert_eq!(bead_name_note(at(&["Cu", "vacancy"])), None);
+        assert_eq!(bead_name_note(at(&["A", "B"])), None);
     }
 
     /// HOOMD-blue names types `A`, `B`, `C`: beside `A` (no element), `B` and `C` are

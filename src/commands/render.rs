@@ -627,8 +627,9 @@ impl Covered {
 }
 
 /// Says when a `--hide-attribute` range is narrower than one of the file's 16-bit steps
-/// of the attribute (a molecule id of a column of 200 000, stored 3.16 apart): it hides
-/// every particle of the steps it touches, the values those steps hold being named.
+/// of the attribute (a molecule id of a column of 200 000, stored 3.16 apart) and those
+/// steps reach whole numbers past it (other ids): it hides every particle of the steps
+/// it touches, the values those steps hold being named.
 fn coarse_range_notes(
     style: &StyleArgs,
     attribute: Option<&mdlod_format::meta::AttributeInfo>,
@@ -647,6 +648,13 @@ fn coarse_range_notes(
                 (f64::from(a.min) + (f64::from(code) + side) * step)
                     .clamp(f64::from(a.min), f64::from(a.max))
             };
+            let (from, to) = (value(first, -0.5), value(last, 0.5));
+            // Said where the steps reach a whole number past the range (ids, types): a
+            // range of values closer than a step apart hides what it names.
+            let (lo, hi) = (f64::from(range[0]), f64::from(range[1]));
+            if from.ceil() >= lo.ceil() && to.floor() <= hi.floor() {
+                return None;
+            }
             Some(format!(
                 "  note: --hide-attribute {}:{} is narrower than one 16-bit step of {} in this \
                  file ({step:.3}): it hides every particle of the steps it touches, values \
@@ -654,8 +662,8 @@ fn coarse_range_notes(
                 Num(range[0]),
                 Num(range[1]),
                 a.name,
-                value(first, -0.5),
-                value(last, 0.5)
+                from,
+                to
             ))
         })
         .collect()
