@@ -4125,10 +4125,12 @@ fn a_movies_legend_keeps_room_for_species_that_come_later() {
     }
 }
 
-/// Hiding a species a frame lacks hides nothing there: a still or a movie says so and
-/// draws (a script run over every frame, ions that come later), while a name that
-/// differs from one of the frame's in case only is refused as a misspelling. Names come
-/// one per flag or as a list; a type-number file's hint names its types.
+/// Hiding a species a still's frame lacks hides nothing there: said, and drawn (a
+/// script run over every frame, ions that come later), where the name is of the frame's
+/// kind (a name among names, a type among types); a name that differs from one of the
+/// frame's in case only is a misspelling, and a movie, which knows every frame, refuses
+/// a name none has. Names come one per flag or as a list; a type-number file's hint
+/// names its types.
 #[test]
 fn hiding_a_species_a_frame_lacks_is_said_not_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -4193,7 +4195,7 @@ fn hiding_a_species_a_frame_lacks_is_said_not_refused() {
         "--height",
         "48",
         "--hide-species",
-        "NA,W,CL",
+        "NA, W,CL",
     ]);
     assert!(list.contains("--hide-species CL,NA: no particle"), "{list}");
     assert!(list.contains("18 particles"), "{list}");
@@ -4213,11 +4215,19 @@ fn hiding_a_species_a_frame_lacks_is_said_not_refused() {
         "NA=red",
     ]);
     assert!(e.contains("no species named \"NA\""), "{e}");
-    // A movie: the same note, once.
+    // Stray commas and names of several words are refused.
+    for bad in ["W,", "W NA"] {
+        let e = fails(&["render", s(&file), "-o", s(&png), "--hide-species", bad]);
+        assert!(
+            e.contains("an empty name") || e.contains("holds no spaces"),
+            "{e}"
+        );
+    }
+    // A movie knows every frame's species: a name none has is refused.
     let d = dir.path().join("three.d");
     ok(&["batch", s(&dump), "-o", s(&d)]);
     let frames = dir.path().join("f-%d.png");
-    let out = ok(&[
+    let out = fails(&[
         "render",
         s(&d),
         "-o",
@@ -4230,12 +4240,32 @@ fn hiding_a_species_a_frame_lacks_is_said_not_refused() {
         "7",
     ]);
     assert!(
-        out.contains("note: --hide-species 7: no frame has 7 (the frames have 1, 2, 3)"),
+        out.contains("has a species named \"7\" (its frames have 1, 2, 3)"),
         "{out}"
     );
-    // Type numbers: the hint lists them, and names no one type for the user's name.
+    // Type numbers: the hint lists them, and names no one type for the user's name; a
+    // name that is no type number is refused for hiding too (it cannot be a type of
+    // another frame).
     let numbered = dir.path().join("numbered.mdlod");
     ok(&["convert", s(&dump), "-o", s(&numbered)]);
+    let e = fails(&["render", s(&numbered), "-o", s(&png), "--hide-species", "W"]);
+    assert!(e.contains("no species named \"W\""), "{e}");
+    let out = ok(&[
+        "render",
+        s(&numbered),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-species",
+        "3,6",
+    ]);
+    assert!(
+        out.contains("--hide-species 6: no particle of this frame is 6"),
+        "{out}"
+    );
     let e = fails(&[
         "render",
         s(&numbered),

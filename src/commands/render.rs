@@ -815,6 +815,21 @@ fn write_labels(
     Ok(())
 }
 
+/// A species name of a list (`--hide-species W, NA`): trimmed; an empty one is a stray
+/// comma, and one of several words no input writes.
+fn species_name(s: &str) -> Result<String, String> {
+    let name = s.trim();
+    if name.is_empty() {
+        return Err("an empty name (a stray comma?): list names as W,NA,CL".into());
+    }
+    if name.contains(char::is_whitespace) {
+        return Err(format!(
+            "{s:?}: a species name holds no spaces; list several with commas (W,NA,CL)"
+        ));
+    }
+    Ok(name.to_string())
+}
+
 /// The points' look, shared by `render` and `sample` (sphere and S-NDF modes).
 #[derive(clap::Args, Clone, Debug)]
 pub struct StyleArgs {
@@ -839,7 +854,12 @@ pub struct StyleArgs {
     /// Leave out the particles of a species, and the clusters of them (a cluster holding
     /// them and others is refined until it holds none); repeatable, or a list
     /// (`--hide-species W,NA,CL`).
-    #[arg(long = "hide-species", value_name = "NAME", value_delimiter = ',')]
+    #[arg(
+        long = "hide-species",
+        value_name = "NAME",
+        value_delimiter = ',',
+        value_parser = species_name
+    )]
     pub hide_species: Vec<String>,
     /// Leave out the particles whose attribute value lies from MIN to MAX (inclusive;
     /// an end left empty is open: `:0.2`, `2.5:`), as OVITO's expression selection and
@@ -3575,7 +3595,22 @@ fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> 
         .species
         .iter()
         .filter(|st| !m.species.iter().any(|s| s.name == st.name))
-        .filter(|st| column.is_some() || (st.hidden && st.colour.is_none() && st.radius.is_none()))
+        .filter(|st| {
+            // Only hidden, and named as the frame's species are (a type number among
+            // type numbers, a name among names): a species of another frame of the run.
+            let numbered = |n: &str| n.parse::<i64>().is_ok();
+            let kind = m
+                .species
+                .iter()
+                .all(|s| numbered(&s.name) == numbered(&st.name))
+                || m.species
+                    .iter()
+                    .any(|s| numbered(&s.name) == numbered(&st.name))
+                    && m.species
+                        .iter()
+                        .any(|s| numbered(&s.name) != numbered(&st.name));
+            column.is_some() || (st.hidden && st.colour.is_none() && st.radius.is_none() && kind)
+        })
         .map(|st| st.name.clone())
         .collect();
     if absent.is_empty() {
@@ -3682,58 +3717,17 @@ fn render_frames(
     let bounds = survey.bounds().expect("at least one frame");
     let names = survey.names();
     let attribute = survey.attribute();
-    // Hiding a species no frame has hides nothing: said, not refused (a figure script
-    // run over several runs); other styles of such a name are a misspelling.
-    let hidden_absent: Vec<String> = opts
-        .style
-        .species
-        .iter()
-        .filter(|s| {
-            !names.contains(&s.name) && s.hidden && s.colour.is_none() && s.radius.is_none()
-        })
-        .map(|s| s.name.clone())
-        .collect();
-    if let Some(s) = opts
-        .style
-        .species
-        .iter()
-        .find(|s| !names.contains(&s.name) && !hidden_absent.contains(&s.name))
-    {
+    // A name no frame has is a misspelling (the movie knows every frame's species; a
+    // still hides a species its frame lacks with a note, for a script over a run).
+    if let Some(st) = opts.style.species.iter().find(|s| !names.contains(&s.name)) {
+        let near = names.iter().find(|n| n.eq_ignore_ascii_case(&st.name));
         anyhow::bail!(
-            "no frame of {} has a species named {:?} (its frames have {})",
+            "no frame of {} has a species named {:?}{} (its frames have {})",
             dir.display(),
-            s.name,
+            st.name,
+            near.map_or_else(String::new, |n| format!("; did you mean {n:?}?")),
             names.iter().cloned().collect::<Vec<_>>().join(", ")
         );
-    }
-    if !hidden_absent.is_empty() {
-        if let Some((name, s)) = hidden_absent.iter().find_map(|h| {
-            names
-                .iter()
-                .find(|n| n.eq_ignore_ascii_case(h))
-                .map(|n| (h, n))
-        }) {
-            anyhow::bail!(
-                "no frame of {} has a species named {name:?}; did you mean {s:?}? (names are \
-                 matched exactly)",
-                dir.display()
-            );
-        }
-        println!(
-            "  note: --hide-species {}: no frame has {} (the frames have {}): nothing of {} \
-             to hide",
-            hidden_absent.join(","),
-            hidden_absent.join(" or "),
-            names.iter().cloned().collect::<Vec<_>>().join(", "),
-            if hidden_absent.len() == 1 {
-                "it"
-            } else {
-                "them"
-            }
-        );
-        opts.style
-            .species
-            .retain(|st| !hidden_absent.contains(&st.name));
     }
     let mut range_note = String::new();
     if let Some((a, range)) = attribute.cloned().and_then(|a| {
