@@ -2187,6 +2187,13 @@ fn first_mistakes_are_named_before_any_work() {
     );
     let err = fails(&["render", "--legend-in-image", "top-left", f, "-o", p]);
     assert!(err.contains("--legend-in-image=top-left"), "{err}");
+    // A panel's size with no panel to size.
+    let err = fails(&["render", f, "-o", p, "--text-scale", "2"]);
+    assert!(
+        err.contains("--text-scale sizes the panels drawn into the image"),
+        "{err}"
+    );
+    assert!(!png.exists());
     // No thread at all: said in words, not as a range of 64-bit numbers.
     let input = lammps_sample_path("cu_melt.custom.dump");
     let out = dir.path().join("t.mdlod");
@@ -8768,7 +8775,7 @@ fn a_scale_bar_is_as_long_as_its_length_of_the_world() {
         ),
         (
             &["--ortho", "--scale-bar", "--scale-bar-length", "1e6"][..],
-            "pixels in a 320-pixel image",
+            "too long for a 320-pixel image",
         ),
     ] {
         let out = dir.path().join("no.png");

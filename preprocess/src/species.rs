@@ -629,8 +629,8 @@ impl SpeciesNaming {
             SpeciesNaming::TypeNumbers { first } if !is_type_number(name) => Some(format!(
                 "the input names its species by LAMMPS type number (its `type` column; it has \
                  no `element` column): give the type number instead, e.g. --radius \
-                 {first}={radius} for type {first}, or name the type first: \
-                 --species-name {first}={name} --radius {name}={radius}"
+                 {first}={radius} for type {first}, or name the type first, e.g. if {name} is \
+                 type {first}: --species-name {first}={name} --radius {name}={radius}"
             )),
             SpeciesNaming::ElementColumn { first, first_type } if is_type_number(name) => {
                 let example = match first_type {
@@ -1106,7 +1106,8 @@ mod tests {
             "a.dump: --radius Cu=1.28: no species named \"Cu\" (the input's species are named \
              1, 2); the input names its species by LAMMPS type number (its `type` column; it \
              has no `element` column): give the type number instead, e.g. --radius 1=1.28 for \
-             type 1, or name the type first: --species-name 1=Cu --radius Cu=1.28"
+             type 1, or name the type first, e.g. if Cu is type 1: --species-name 1=Cu \
+             --radius Cu=1.28"
         );
         let element = SpeciesNaming::ElementColumn {
             first: "Cu".into(),

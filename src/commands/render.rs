@@ -338,11 +338,29 @@ fn scale_bar(
     };
     let s = f64::from(panel_scale(&probe, width, height, text_scale).unwrap_or(1));
     let pixels = world / per_px;
-    if pixels < 1.0 || pixels > f64::from(width) - 16.0 * s - 14.0 * s {
+    let widest = f64::from(width) - 16.0 * s - 14.0 * s;
+    // Four significant digits.
+    let short = |v: f64| match v.abs() {
+        a if (1e-3..1e5).contains(&a) => {
+            let digits = (3 - a.log10().floor() as i32).max(0) as usize;
+            format!("{v:.digits$}")
+        }
+        _ => format!("{v:.3e}"),
+    };
+    let unit_words = match unit.as_str() {
+        "" => String::new(),
+        u => format!("{u} "),
+    };
+    if pixels < 1.0 || pixels > widest {
         anyhow::bail!(
-            "--scale-bar-length {}: {pixels:.1} pixels in a {width}-pixel image (at \
-             {per_px:.3e} per pixel)",
-            super::Num(world as f32)
+            "--scale-bar-length {}: too {} for a {width}-pixel image: {pixels:.1} pixels at \
+             {} {unit_words}per pixel; from {} to {} fit{}",
+            super::Num(world as f32),
+            if pixels < 1.0 { "short" } else { "long" },
+            short(per_px),
+            short(per_px),
+            short(widest.max(1.0) * per_px),
+            " (leave the length out for a round one)"
         );
     }
     let bar = mdlod_render::legend::Legend::Scale {
@@ -759,7 +777,7 @@ fn check_label_room(args: &Args, values: &[&label::Values]) -> Result<Option<[u3
                 if values.len() == 1 {
                     "the file".to_string()
                 } else {
-                    format!("frame {i}")
+                    format!("frame {} of {}", i + 1, values.len())
                 }
             );
         }
@@ -1864,6 +1882,16 @@ pub fn run(mut args: Args) -> Result<()> {
     if args.legend_title.is_some() && args.legend.is_none() && args.legend_in_image.is_none() {
         anyhow::bail!(
             "--legend-title titles a legend: give --legend FILE.svg or --legend-in-image"
+        );
+    }
+    if args.text_scale.is_some()
+        && args.legend_in_image.is_none()
+        && args.label.is_empty()
+        && !args.scale_bar
+    {
+        anyhow::bail!(
+            "--text-scale sizes the panels drawn into the image: give --legend-in-image, \
+             --label or --scale-bar"
         );
     }
     if let Some(p) = &args.legend {
