@@ -136,10 +136,13 @@ fn main() -> std::process::ExitCode {
         Command::Batch(a) => commands::batch::run(a),
         Command::Info(a) => commands::info::run(a),
         Command::Verify(a) => commands::verify::run(a),
-        Command::Render(a) => matches
-            .subcommand_matches("render")
-            .map_or(Ok(()), |m| commands::render::check_mode_options(&a, m))
-            .and_then(|()| commands::render::run(*a)),
+        Command::Render(mut a) => match matches.subcommand_matches("render") {
+            Some(m) => commands::render::check_mode_options(&a, m).and_then(|()| {
+                commands::render::size_from_view(&mut a, m);
+                commands::render::run(*a)
+            }),
+            None => commands::render::run(*a),
+        },
         Command::Sample(a) => commands::sample::run(a),
         Command::Shade(a) => matches
             .subcommand_matches("shade")

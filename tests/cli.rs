@@ -475,6 +475,22 @@ fn render_writes_a_picture_and_views_round_trip() {
             ),
         "{err}"
     );
+    // Without --width and --height, the view draws at the size it was saved from.
+    let sized = dir.path().join("sized.png");
+    ok(&["render", s(&file), "-o", s(&sized), "--view", s(&view)]);
+    assert_eq!(read_png(&sized).0, 160);
+    assert_eq!(read_png(&sized).1, 120);
+    let wide = mdlod(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&sized),
+        "--view",
+        s(&view),
+        "--width",
+        "320",
+    ]);
+    assert!(String::from_utf8_lossy(&wide.stderr).contains("drawn 320×720"));
     let same = mdlod(&[
         "render",
         s(&file),

@@ -1546,6 +1546,26 @@ fn projected(args: &Args) -> bool {
     args.mode == Mode::Splat && args.style.colour_map.is_some()
 }
 
+/// A view file's recorded image size, where `--width` and `--height` are both left to
+/// their defaults: the saved view then draws the picture it was saved from. (A view file
+/// that cannot be read fails where it is rendered.)
+pub fn size_from_view(args: &mut Args, matches: &clap::ArgMatches) {
+    let defaulted =
+        |id: &str| matches.value_source(id) == Some(clap::parser::ValueSource::DefaultValue);
+    if !(defaulted("width") && defaulted("height")) {
+        return;
+    }
+    let saved = args
+        .camera
+        .view
+        .as_deref()
+        .and_then(|p| ViewFile::load(p).ok());
+    if let Some([w, h]) = saved.and_then(|v| v.image).filter(|&[w, h]| w > 0 && h > 0) {
+        args.camera.width = w;
+        args.camera.height = h;
+    }
+}
+
 pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()> {
     if args.cell_width.is_some() && args.cell.is_none() {
         anyhow::bail!(
