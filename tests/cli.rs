@@ -9103,6 +9103,74 @@ fn text_scale_enlarges_the_panels_drawn_into_an_image() {
     assert!(e.contains("--text-scale"), "{e}");
 }
 
+/// `--scale-bar-unit` names the bar's unit where the file records none (generated data,
+/// dumps without `units`): the bar's label changes and nothing else; it needs a bar and
+/// a unit the image's font draws.
+#[test]
+fn a_scale_bar_takes_the_unit_it_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let file = dir.path().join("m.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file)]);
+    let (plain, named) = (dir.path().join("plain.png"), dir.path().join("named.png"));
+    let view = dir.path().join("v.json");
+    let base = [
+        "--ortho",
+        "--scale-bar",
+        "--width",
+        "400",
+        "--height",
+        "300",
+    ];
+    ok(&[
+        &["render", s(&file), "-o", s(&plain), "--save-view", s(&view)][..],
+        &base,
+    ]
+    .concat());
+    ok(&[
+        &["render", s(&file), "-o", s(&named), "--view", s(&view)][..],
+        &base,
+        &["--scale-bar-unit", "nm"],
+    ]
+    .concat());
+    let ((w, h, a), (_, _, b)) = (read_png(&plain), read_png(&named));
+    let changed: Vec<(u32, u32)> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let i = 4 * (y * w + x) as usize;
+            a[i..i + 4] != b[i..i + 4]
+        })
+        .collect();
+    assert!(!changed.is_empty());
+    // Only the label, in the bottom-left panel.
+    assert!(
+        changed.iter().all(|&(x, y)| x < w / 2 && y > h - 60),
+        "{:?}",
+        changed[0]
+    );
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&named),
+        "--scale-bar-unit",
+        "nm",
+    ]);
+    assert!(e.contains("give --scale-bar"), "{e}");
+    let e = fails(
+        &[
+            &["render", s(&file), "-o", s(&named)][..],
+            &base,
+            &["--scale-bar-unit", "日"],
+        ]
+        .concat(),
+    );
+    assert!(
+        e.contains("a unit of at most 12 characters the image's font"),
+        "{e}"
+    );
+}
+
 /// A fitted view leaves the scale bar's panel free, as it does the legend's: a slab
 /// filling the image reaches under the panel's corner without the bar and stays clear
 /// of it with the bar (the view the bar's fit chose, drawn without the bar, has only

@@ -142,6 +142,7 @@ pub fn run(args: Args) -> Result<()> {
         scale_bar_length: None,
         scale_bar_corner: None,
         text_scale: None,
+        scale_bar_unit: None,
         save_map: None,
         frames: None,
         cell: None,

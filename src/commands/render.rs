@@ -241,6 +241,11 @@ pub struct Args {
     /// Where --scale-bar draws its panel [default: bottom-left]
     #[arg(long, value_name = "CORNER", ignore_case = true)]
     pub scale_bar_corner: Option<LegendCorner>,
+    /// The scale bar's unit, where the file records none or another name is wanted
+    /// (`nm`, `Å`, `σ`; a LAMMPS unit style such as `real` gives its length unit)
+    /// [default: the file's unit style's length unit]
+    #[arg(long, value_name = "UNIT")]
+    pub scale_bar_unit: Option<String>,
     /// Draw the in-image legend, the label and the scale bar N times their size (their
     /// text is a 7×13-pixel font), 1 to 8: for print, where a figure's panels read small
     /// [default: by the image's size, 1 below 1920×1080, 2 from it]
@@ -1904,6 +1909,17 @@ pub fn run(mut args: Args) -> Result<()> {
             "--legend-title titles a legend: give --legend FILE.svg or --legend-in-image"
         );
     }
+    if let Some(unit) = &args.scale_bar_unit {
+        if !args.scale_bar {
+            anyhow::bail!("--scale-bar-unit names the scale bar's unit: give --scale-bar");
+        }
+        if length_unit(Some(unit)).is_empty() {
+            anyhow::bail!(
+                "--scale-bar-unit {unit:?}: a unit of at most 12 characters the image's font \
+                 draws (Å, nm, σ, µm, Mpc/h)"
+            );
+        }
+    }
     if args.text_scale.is_some()
         && args.legend_in_image.is_none()
         && args.label.is_empty()
@@ -2092,7 +2108,9 @@ pub fn run(mut args: Args) -> Result<()> {
                 opts.width,
                 opts.height,
                 args.scale_bar_length,
-                file.metadata().units.as_deref(),
+                args.scale_bar_unit
+                    .as_deref()
+                    .or(file.metadata().units.as_deref()),
                 args.text_scale,
             )?),
             false => None,
@@ -2754,7 +2772,14 @@ fn scale_bar_room(
         }
     };
     // The label's widest: a number of up to seven characters (`1.25e-5`) and the unit.
-    let label = format!("0000000 {}", length_unit(file.metadata().units.as_deref()));
+    let label = format!(
+        "0000000 {}",
+        length_unit(
+            args.scale_bar_unit
+                .as_deref()
+                .or(file.metadata().units.as_deref())
+        )
+    );
     let probe = mdlod_render::legend::Legend::Scale {
         length: 1.0,
         label: label.clone(),
@@ -3916,7 +3941,9 @@ fn render_frames(
                 opts.width,
                 opts.height,
                 args.scale_bar_length,
-                first.metadata().units.as_deref(),
+                args.scale_bar_unit
+                    .as_deref()
+                    .or(first.metadata().units.as_deref()),
                 args.text_scale,
             )?)
         }
