@@ -3591,6 +3591,36 @@ fn clip_planes_cut_the_particles_away() {
     }
 }
 
+/// A fitted view frames the data clear of the label's panel, as of the legend's: a
+/// long label over a block seen from above covered its top rows.
+#[test]
+fn a_fitted_view_keeps_the_data_from_under_the_label() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    let file = dir.path().join("m.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file)]);
+    let png = dir.path().join("l.png");
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "600",
+        "--height",
+        "400",
+        "--label",
+        "copper melt, timestep {timestep}",
+        "--text-scale",
+        "2",
+        "--look-along",
+        "0,0,-1",
+        "--ortho",
+    ]);
+    assert!(out.contains("wrote"), "{out}");
+    assert!(!out.contains("covers drawn particles"), "{out}");
+}
+
 /// `--legend-in-image` draws the legend into the picture: from a given view only the
 /// panel in the corner asked for changes, a fitted view frames the data clear of it,
 /// every image of a movie gets it, and an image too small is refused.

@@ -2070,7 +2070,8 @@ pub fn run(mut args: Args) -> Result<()> {
         });
     }
     let (legend_room, legend_size) = check_legend_room(&args, &opts)?;
-    opts.fit_windows = scale_bar_room(&args, &opts, legend_room);
+    let windows = scale_bar_room(&args, &opts, legend_room);
+    opts.fit_windows = label_room(&args, &opts, windows);
     if args.file.is_dir() {
         if args.turntable.is_some() {
             anyhow::bail!(
@@ -2792,10 +2793,22 @@ fn scale_bar_room(
         label,
     };
     let (pw, ph) = panel.room_needed(s);
-    let free = legend_windows(args.scale_bar_corner(), [pw, ph], [w, h]);
+    keep_clear(windows, args.scale_bar_corner(), [pw, ph], [w, h])
+}
+
+/// `windows` (none: the whole image) each intersected with the two parts of a `size`
+/// image that a panel of `room` pixels in `corner` leaves free; `windows` as they are
+/// where that leaves the data too little room.
+fn keep_clear(
+    windows: Vec<mdlod_render::FitWindow>,
+    corner: LegendCorner,
+    room: [u32; 2],
+    size: [u32; 2],
+) -> Vec<mdlod_render::FitWindow> {
+    let free = legend_windows(corner, room, size);
     let whole = [mdlod_render::FitWindow::WHOLE];
     let given: &[mdlod_render::FitWindow] = if windows.is_empty() { &whole } else { &windows };
-    let size = [f64::from(w), f64::from(h)];
+    let size = size.map(f64::from);
     let both: Vec<mdlod_render::FitWindow> = given
         .iter()
         .flat_map(|a| {
@@ -2813,6 +2826,37 @@ fn scale_bar_room(
     } else {
         both
     }
+}
+
+/// Where a fitted view places the data so that the label's panel covers none of it
+/// either: [`keep_clear`] of the panel with the values of the file (a movie's first
+/// frame), at its widest line.
+fn label_room(
+    args: &Args,
+    opts: &RenderOptions,
+    windows: Vec<mdlod_render::FitWindow>,
+) -> Vec<mdlod_render::FitWindow> {
+    if args.label.is_empty() {
+        return windows;
+    }
+    // (A file that cannot be read fails where it is rendered, saying why.)
+    let Some(path) = first_file(&args.file) else {
+        return windows;
+    };
+    let Ok(file) = mdlod_format::MdlodFile::open(&path) else {
+        return windows;
+    };
+    let values = label::Values::of_file(&path, file.metadata(), 0);
+    let (panels, _) = label_panels(args, &[&values], &[&values]);
+    let (w, h) = (opts.width, opts.height);
+    let Some((panel, s)) = panels
+        .first()
+        .and_then(|p| Some((p, panel_scale(p, w, h, args.text_scale)?)))
+    else {
+        return windows;
+    };
+    let (pw, ph) = panel.room_needed(s);
+    keep_clear(windows, args.label_corner(), [pw, ph], [w, h])
 }
 
 /// The fewest pixels, across and down, of the part of the image an in-image legend
