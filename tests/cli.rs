@@ -205,6 +205,36 @@ fn info_json_has_the_promised_fields() {
     );
     let text = ok(&["verify", s(&out)]);
     assert!(text.contains(": ok:"), "{text}");
+    // One number, one form: a batch's ranges and a file's further attributes are written
+    // as the file's own attribute is (the f32's shortest form), so `==` holds in a script.
+    let d = dir.path().join("b.d");
+    ok(&[
+        "batch",
+        s(&input),
+        "-o",
+        s(&d),
+        "--attribute",
+        "c_pe",
+        "--attribute",
+        "xu",
+    ]);
+    let batch: serde_json::Value = serde_json::from_str(&ok(&["info", s(&d), "--json"])).unwrap();
+    let frames = std::fs::read_dir(&d)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "mdlod"))
+        .collect::<Vec<_>>();
+    let mut lowest = f64::INFINITY;
+    for f in &frames {
+        let one: serde_json::Value = serde_json::from_str(&ok(&["info", s(f), "--json"])).unwrap();
+        let extra = &one["attributes"][0]["min"];
+        let shortest: f64 = format!("{}", extra.as_f64().unwrap() as f32)
+            .parse()
+            .unwrap();
+        assert_eq!(extra.as_f64().unwrap(), shortest, "{extra}");
+        lowest = lowest.min(one["attribute"]["min"].as_f64().unwrap());
+    }
+    assert_eq!(batch["attribute"]["min"].as_f64().unwrap(), lowest);
 }
 
 #[test]

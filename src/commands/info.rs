@@ -265,6 +265,10 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
                 "timestep": f.timestep, "file": f.file
             })).collect::<Vec<_>>(),
         });
+        // The ranges are the frames' f32s: written as a file's own `info` writes them.
+        let mut v = v;
+        shortest_f32(&mut v["attribute"]);
+        shortest_f32(&mut v["attributes"]);
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
@@ -495,6 +499,7 @@ pub fn run(args: Args) -> Result<()> {
         // their f64 widening (1.28, not 1.2799999713897705).
         shortest_f32(&mut v["species"]);
         shortest_f32(&mut v["attribute"]);
+        shortest_f32(&mut v["attributes"]);
         shortest_f32(&mut v["radius"]);
         shortest_f32(&mut v["extent"]);
         if let (Some(counts), Some(list)) = (&counts, v["species"].as_array_mut()) {
