@@ -473,18 +473,17 @@ fn render_writes_a_picture_and_views_round_trip() {
     // A field this version does not read (a misspelt one) is named, not silently lost.
     let typo = dir.path().join("typo.json");
     std::fs::write(&typo, r#"{"version": 1, "azimuth": 90}"#).unwrap();
-    let out = mdlod(&["render", s(&file), "-o", s(&d), "--view", s(&typo)]);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let out = ok(&["render", s(&file), "-o", s(&d), "--view", s(&typo)]);
     assert!(
-        out.status.success() && err.contains("field \"azimuth\" is not one this mdlod reads"),
-        "{err}"
+        out.contains("field \"azimuth\" is not one this mdlod reads"),
+        "{out}"
     );
     // The view records the image it was saved from; drawn narrower, the render says the
     // sides may be cut, and at the same shape (any size) nothing.
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&view).unwrap()).unwrap();
     assert_eq!(saved["image"], serde_json::json!([160, 120]));
-    let narrow = mdlod(&[
+    let narrow = ok(&[
         "render",
         s(&file),
         "-o",
@@ -496,21 +495,19 @@ fn render_writes_a_picture_and_views_round_trip() {
         "--height",
         "120",
     ]);
-    let err = String::from_utf8_lossy(&narrow.stderr);
     assert!(
-        narrow.status.success()
-            && err.contains(
-                "the view was saved from a 160×120 image; drawn 60×120, the image is narrower: \
-                 data at the sides may be cut"
-            ),
-        "{err}"
+        narrow.contains(
+            "the view was saved from a 160×120 image; drawn 60×120, the image is narrower: data \
+             at the sides may be cut"
+        ),
+        "{narrow}"
     );
     // Without --width and --height, the view draws at the size it was saved from.
     let sized = dir.path().join("sized.png");
     ok(&["render", s(&file), "-o", s(&sized), "--view", s(&view)]);
     assert_eq!(read_png(&sized).0, 160);
     assert_eq!(read_png(&sized).1, 120);
-    let wide = mdlod(&[
+    let wide = ok(&[
         "render",
         s(&file),
         "-o",
@@ -520,8 +517,8 @@ fn render_writes_a_picture_and_views_round_trip() {
         "--width",
         "320",
     ]);
-    assert!(String::from_utf8_lossy(&wide.stderr).contains("drawn 320×720"));
-    let same = mdlod(&[
+    assert!(wide.contains("drawn 320×720"), "{wide}");
+    let same = ok(&[
         "render",
         s(&file),
         "-o",
@@ -533,7 +530,7 @@ fn render_writes_a_picture_and_views_round_trip() {
         "--height",
         "240",
     ]);
-    assert!(!String::from_utf8_lossy(&same.stderr).contains("saved from"));
+    assert!(!same.contains("saved from"), "{same}");
 }
 
 /// The LAMMPS sample `name` converted to `dir/a.mdlod`.
@@ -5102,10 +5099,10 @@ fn a_dump_cut_in_its_last_frame_names_what_converts() {
     );
     assert!(run.status.success(), "{note}");
     assert!(
-        note.contains(
+        out.contains(
             "the last frame (2) is incomplete (a run still writing it?): converting frame 1"
         ),
-        "{note}"
+        "{out}"
     );
     assert!(out.contains("(frame 1 of 3, counted from 0)"), "{out}");
     assert_eq!(

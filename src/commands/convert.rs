@@ -377,7 +377,7 @@ fn convert(args: &Args) -> Result<ConvertReport> {
         Err(mdlod_preprocess::convert::ConvertError::LastFrameIncomplete { frame: k, source })
             if args.frame.is_none() && !args.last =>
         {
-            eprintln!(
+            println!(
                 "note: the last frame ({k}) is incomplete (a run still writing it?): converting \
                  frame {}, the last complete one ({source})",
                 k - 1

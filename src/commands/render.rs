@@ -1266,7 +1266,7 @@ impl ViewArgs {
             return; // (The render says why it cannot read it.)
         };
         for field in ViewFile::unknown_fields(&text) {
-            eprintln!(
+            println!(
                 "note: {}: field {field:?} is not one this mdlod reads, ignored (a view file \
                  has {})",
                 path.display(),
@@ -1277,7 +1277,7 @@ impl ViewArgs {
             .ok()
             .and_then(|v| v.aspect_note(self.width, self.height));
         if let Some(note) = note {
-            eprintln!("note: {}: {note}", path.display());
+            println!("note: {}: {note}", path.display());
         }
     }
 
