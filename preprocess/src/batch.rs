@@ -3826,6 +3826,71 @@ const MANIFEST_VERSION: u32 = 1;
 mod tests {
     use super::*;
 
+    /// FORMAT.md's section 11 names every field a manifest and its frames write (the
+    /// struct literals list every field, so a field added here must be added there).
+    #[test]
+    fn format_md_names_every_manifest_field() {
+        let source = SourceInfo {
+            path: "run.dump".into(),
+            size: 1,
+            modified_unix: None,
+            modified_nanos: None,
+            frame: 0,
+            bytes: None,
+        };
+        let frame = FrameEntry {
+            timestep: 0,
+            time: Some(0.5),
+            particles: 1,
+            simulation_box: None,
+            file: "frame-0.mdlod".into(),
+            checksum: "0".repeat(16),
+            source,
+            columns: Some(vec!["id".into()]),
+            radii: Some(vec![("Cu".into(), 1.28)]),
+            species_names: Some(vec![("1".into(), "Cu".into())]),
+            sizes: Some("none".into()),
+            species_column: Some("c_cna".into()),
+            wrap: true,
+            source_abs: Some("/runs/run.dump".into()),
+        };
+        let manifest = Manifest {
+            mdlod_dataset: 1,
+            shard: Some([0, 2]),
+            expected_frames: Some(1),
+            input_frames: Some(InputFrames {
+                count: 1,
+                xxh3: "0".repeat(16),
+            }),
+            frames: vec![frame.clone()],
+            gone: vec![frame.clone()],
+            unlisted: vec![frame],
+            failed: vec![FailedEntry {
+                timestep: Some(1),
+                input: "run.dump".into(),
+                frame: 1,
+                reason: "cut".into(),
+            }],
+            duplicates: Some("last".into()),
+        };
+        let json = serde_json::to_value(&manifest).unwrap();
+        let spec = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../FORMAT.md"),
+        )
+        .unwrap();
+        let section = &spec[spec.find("## 11. Batch manifests").expect("section 11")..];
+        let mut keys: Vec<String> = json.as_object().unwrap().keys().cloned().collect();
+        keys.extend(json["frames"][0].as_object().unwrap().keys().cloned());
+        // The box is optional and `None` above; it is named too.
+        keys.push("box".into());
+        for key in keys {
+            assert!(
+                section.contains(&format!("| `{key}` |")),
+                "FORMAT.md lacks `{key}`"
+            );
+        }
+    }
+
     /// A failed batch whose manifest could not be saved after the failure (the disk
     /// that stopped a frame full for it too) does not claim the frames are listed.
     #[test]
