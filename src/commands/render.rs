@@ -1520,7 +1520,8 @@ fn write_npy(p: &Path, rows: u32, columns: u32, values: &[f32]) -> Result<()> {
     for v in values {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
-    std::fs::write(p, bytes)?;
+    // (Renamed into place: an interrupted write leaves no partial array.)
+    mdlod_render::image::write_atomic(p, &bytes)?;
     Ok(())
 }
 
@@ -2555,7 +2556,7 @@ fn write_legend(
             std::fs::create_dir_all(parent)
                 .with_context(|| format!("cannot create {}", parent.display()))?;
         }
-        std::fs::write(path, drawn_legend.svg())
+        mdlod_render::image::write_atomic(path, drawn_legend.svg().as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;
         println!("  legend written to {} ({what})", path.display());
     }
