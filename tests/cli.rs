@@ -2230,6 +2230,12 @@ fn first_mistakes_are_named_before_any_work() {
     );
     let err = fails(&["render", "--legend-in-image", "top-left", f, "-o", p]);
     assert!(err.contains("--legend-in-image=top-left"), "{err}");
+    // Standard output is no file to write.
+    let err = fails(&["render", f, "-o", "-"]);
+    assert!(
+        err.contains("mdlod writes a file, not standard output"),
+        "{err}"
+    );
     // A panel's size with no panel to size.
     let err = fails(&["render", f, "-o", p, "--text-scale", "2"]);
     assert!(

@@ -56,6 +56,12 @@ pub fn check_png_name(option: &str, output: &Path) -> Result<()> {
 /// output on the command line (`-o`, `--save-view`); `inputs` are (option, path) pairs,
 /// the option empty for a positional input. A `%` piece set stands for its pieces.
 pub fn check_output(option: &str, output: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
+    if output.as_os_str() == "-" {
+        bail!(
+            "{option} -: mdlod writes a file, not standard output; give its name (./- for a \
+             file named -)"
+        );
+    }
     if output.is_dir() {
         bail!(
             "{option} {}: is a directory; give the name of the file to write",
