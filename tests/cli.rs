@@ -581,10 +581,23 @@ fn render_without_an_adapter_says_how_to_get_one() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("mesa-vulkan-drivers") && !err.contains("panicked"),
+        err.contains("mesa-vulkan-drivers")
+            && err.contains("backends tried: dx12")
+            && !err.contains("panicked"),
         "{err}"
     );
     assert!(!dir.path().join("x.png").exists());
+    // A name wgpu does not know is said to be one.
+    let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args(["render", s(&file), "-o", s(&dir.path().join("x.png"))])
+        .env("WGPU_BACKEND", "vulcan")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("WGPU_BACKEND=vulcan names no graphics backend"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -27,6 +27,26 @@ pub enum BackendChoice {
     Only(wgpu::Backends),
 }
 
+/// The backends of `mask` by the names `WGPU_BACKEND` takes (`vulkan, gl`), or `none`.
+fn backend_names(mask: wgpu::Backends) -> String {
+    let names: Vec<&str> = [
+        (wgpu::Backends::VULKAN, "vulkan"),
+        (wgpu::Backends::GL, "gl"),
+        (wgpu::Backends::METAL, "metal"),
+        (wgpu::Backends::DX12, "dx12"),
+        (wgpu::Backends::BROWSER_WEBGPU, "webgpu"),
+    ]
+    .into_iter()
+    .filter(|(b, _)| mask.contains(*b))
+    .map(|(_, n)| n)
+    .collect();
+    if names.is_empty() {
+        "none".to_string()
+    } else {
+        names.join(", ")
+    }
+}
+
 /// An open device on the chosen adapter.
 pub struct GpuContext {
     pub instance: wgpu::Instance,
@@ -91,14 +111,16 @@ impl GpuContext {
         };
         let backends = desc.backends;
         let no_adapter = || RenderError::NoAdapter {
-            backends: if backends.is_empty() {
-                "none".to_string()
-            } else {
-                format!("{backends:?}")
-            },
+            backends: backend_names(backends),
             env: env_note.clone(),
         };
         if backends.is_empty() {
+            if let (BackendChoice::FromEnv, Some(v)) = (choice, &env_value) {
+                return Err(RenderError::InvalidOptions(format!(
+                    "WGPU_BACKEND={v} names no graphics backend: give vulkan, gl, metal or \
+                     dx12 (several with commas), or leave it unset to try every one"
+                )));
+            }
             return Err(no_adapter());
         }
         let instance = wgpu::Instance::new(desc);
