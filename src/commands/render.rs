@@ -638,7 +638,15 @@ impl Covered {
                      clear of it)",
                     v.display()
                 ),
-                None => String::new(),
+                None if args.camera.zoom.is_some_and(|z| z > 1.0)
+                    || args.camera.target.is_some() =>
+                {
+                    ": --zoom or --target frame the data past the fit".to_string()
+                }
+                None => ": the image leaves the data too little room beside the panel (a larger \
+                         image, a smaller --text-scale or another corner keeps it clear), or \
+                         particles far from the rest lie under it"
+                    .to_string(),
             };
             format!(
                 "  note: {option} covers drawn particles in {which} (up to {} pixels under \
