@@ -29,6 +29,63 @@ pub struct SpeciesStyle {
     pub hidden: bool,
 }
 
+/// Why [`default_range`] maps an attribute over another range than its values' own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RangeChoice {
+    /// Splats lit by their values: from 0, so that each splat's light is its value
+    /// times its disk's area.
+    FromZero,
+    /// A log scale over values reaching 0 or below: from the smallest value above 0.
+    LogFloor,
+    /// A diverging map over values of both signs: centred on 0, the map's white.
+    Centred,
+}
+
+impl RangeChoice {
+    /// Why, in words for a summary.
+    pub fn why(self) -> &'static str {
+        match self {
+            RangeChoice::FromZero => {
+                "from 0, so that each splat's light is its value times its disk's area (a \
+                 particle at the smallest value still shines)"
+            }
+            RangeChoice::LogFloor => {
+                "from the smallest value above 0: values at or below it take the scale's \
+                 start"
+            }
+            RangeChoice::Centred => "centred on 0, the map's white",
+        }
+    }
+}
+
+/// The range an attribute whose values span `[min, max]` is mapped over where none is
+/// given and its own would mislead, with why; `None` where its own serves. Splats lit
+/// by the values (`light`) start at 0, so that light is proportional to value (their own
+/// range would give the smallest value no light, and a mass of 2 against one of 6 a third
+/// of the light it carries); then, for colours by the attribute (`mapped`), a
+/// log scale (`log`) starts at the smallest value above 0 (`floor`, at least 10⁻⁸ of the
+/// top), and a diverging `map` is centred on 0.
+pub fn default_range(
+    [min, max]: [f32; 2],
+    light: bool,
+    mapped: bool,
+    log: bool,
+    map: Option<ColourMap>,
+    floor: Option<f32>,
+) -> Option<([f32; 2], RangeChoice)> {
+    if light && min > 0.0 && max > min {
+        return Some(([0.0, max], RangeChoice::FromZero));
+    }
+    if !mapped {
+        return None;
+    }
+    if log {
+        let floor = floor?.max(max * 1e-8);
+        return (min <= 0.0 && max > floor).then_some(([floor, max], RangeChoice::LogFloor));
+    }
+    Some((map?.centred_range([min, max])?, RangeChoice::Centred))
+}
+
 /// The look (colour, radius) each species name keeps throughout a trajectory whose
 /// frames were converted apart. A frame's file fixes its species' looks from that frame
 /// alone: palette colours by place in its list (GSD type lists in another order, a type
@@ -757,6 +814,58 @@ pub fn pack_colour(c: [f32; 3]) -> u32 {
 
 #[cfg(test)]
 mod tests {
+    /// The ranges chosen where none is given: splats lit from 0, a log scale from the
+    /// smallest value above 0, a diverging map centred on 0; the values' own elsewhere.
+    #[test]
+    fn default_ranges_start_at_zero_the_floor_or_the_centre() {
+        use super::{default_range, ColourMap, RangeChoice::*};
+        let warm = Some(ColourMap::CoolWarm);
+        assert_eq!(
+            default_range([2.0, 8.0], true, false, false, None, None),
+            Some(([0.0, 8.0], FromZero))
+        );
+        assert_eq!(
+            default_range([-2.0, 8.0], true, false, false, None, None),
+            None
+        );
+        assert_eq!(
+            default_range([0.0, 100.0], false, true, true, None, Some(1e-3)),
+            Some(([1e-3, 100.0], LogFloor))
+        );
+        // A floor below 10⁻⁸ of the top is raised to it.
+        assert_eq!(
+            default_range([0.0, 100.0], false, true, true, None, Some(1e-12)),
+            Some(([1e-6, 100.0], LogFloor))
+        );
+        assert_eq!(
+            default_range([1.0, 100.0], false, true, true, None, Some(1.0)),
+            None
+        );
+        assert_eq!(
+            default_range([-2.0, 8.0], false, true, false, warm, None),
+            Some(([-8.0, 8.0], Centred))
+        );
+        assert_eq!(
+            default_range([-2.0, 8.0], false, false, false, warm, None),
+            None
+        );
+        assert_eq!(
+            default_range([2.0, 8.0], false, true, false, warm, None),
+            None
+        );
+        assert_eq!(
+            default_range(
+                [-2.0, 8.0],
+                false,
+                true,
+                false,
+                Some(ColourMap::Viridis),
+                None
+            ),
+            None
+        );
+    }
+
     fn look(name: &str, colour: [f32; 3], radius: f32) -> mdlod_format::meta::Species {
         mdlod_format::meta::Species {
             name: name.into(),

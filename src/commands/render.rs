@@ -3091,35 +3091,25 @@ pub fn derive_range(
     if style.attribute_range.is_some() {
         return Ok(None);
     }
-    let (range, why) = if let Some(range) = light_range_from_zero([a.min, a.max], light) {
-        (range, LIGHT_FROM_ZERO.to_string())
-    } else if !mapped {
+    let floor = || mdlod_render::log_floor(&file);
+    let Some((range, why)) = mdlod_render::style::default_range(
+        [a.min, a.max],
+        light,
+        mapped,
+        style.log_scale,
+        style.colour_map,
+        if style.log_scale { floor() } else { None },
+    ) else {
         return Ok(None);
-    } else if style.log_scale {
-        match log_start([a.min, a.max], mdlod_render::log_floor(&file)) {
-            Some(r) => r,
-            None => return Ok(None),
-        }
-    } else {
-        match style
-            .colour_map
-            .and_then(|m| m.centred_range([a.min, a.max]))
-        {
-            Some(range) => (range, "centred on 0, the map's white".to_string()),
-            None => return Ok(None),
-        }
     };
     style.attribute_range = Some(range);
     Ok(Some(format!(
-        "{why}; the file's range is {} to {}",
+        "{}; the file's range is {} to {}",
+        why.why(),
         Num(a.min),
         Num(a.max)
     )))
 }
-
-/// Why splats lit by their values start their range at 0.
-const LIGHT_FROM_ZERO: &str = "from 0, so that each splat's light is its value times its \
-     disk's area (a particle at the smallest value still shines)";
 
 /// Whether the splats are lit by the attribute's value (`--intensity attribute`, through
 /// a projection's colour map or not).
@@ -3131,14 +3121,6 @@ fn lit_by_value(args: &Args) -> bool {
 /// image's log, not each splat's).
 fn lit_linearly(args: &Args) -> bool {
     lit_by_value(args) && (!args.style.log_scale || projected(args))
-}
-
-/// The range of splats lit by values of `range` (none of them negative) on a linear
-/// scale: from 0, so that light is proportional to value. The file's range would give the
-/// smallest value no light, and a mass of 2 against one of 6 a third of the light it
-/// carries.
-fn light_range_from_zero([lo, hi]: [f32; 2], light: bool) -> Option<[f32; 2]> {
-    (light && lo > 0.0 && hi > lo).then_some([0.0, hi])
 }
 
 /// `--log-scale` of an attribute stored as its logarithm (`--attribute-log10`) would take
@@ -3170,21 +3152,6 @@ fn check_not_logged(
         );
     }
     Ok(())
-}
-
-/// A log scale's range for values `[min, max]` reaching 0 or below: from `floor`, the
-/// smallest positive value (no lower than 10^-8 of the top), and why; `None` where the
-/// values are all above 0 or none is.
-fn log_start([min, max]: [f32; 2], floor: Option<f32>) -> Option<([f32; 2], String)> {
-    let floor = floor?.max(max * 1e-8);
-    (min <= 0.0 && max > floor).then(|| {
-        (
-            [floor, max],
-            "from the smallest value above 0: values at or below it take the scale's \
-             start"
-                .to_string(),
-        )
-    })
 }
 
 /// How a log scale (`--log-scale`) maps the attribute, after the legend's range: the ends
@@ -3856,62 +3823,35 @@ fn render_frames(
         );
     }
     let mut range_note = String::new();
-    if let Some((a, range)) = attribute.cloned().and_then(|a| {
-        let range = light_range_from_zero([a.min, a.max], lit_linearly(args))?;
-        Some((a, range))
-    }) {
-        if opts.style.attribute_range.is_none() {
-            opts.style.attribute_range = Some(range);
-            range_note = format!(
-                ", {} from 0 to {} ({LIGHT_FROM_ZERO}; every frame's range is {} to {}; \
-                 --attribute-range sets another)",
-                a.name,
-                Num(range[1]),
-                Num(a.min),
-                Num(a.max)
-            );
-        }
+    let chosen = attribute.and_then(|a| {
+        mdlod_render::style::default_range(
+            [a.min, a.max],
+            lit_linearly(args),
+            by_attribute(args),
+            opts.style.log_scale,
+            opts.style.colour_map,
+            survey.log_floor(),
+        )
+        .map(|(range, why)| (a, range, why))
+    });
+    if let Some((a, range, why)) = chosen.filter(|_| opts.style.attribute_range.is_none()) {
+        // (Centred: a diverging map over signed values, white 0 in every frame.)
+        opts.style.attribute_range = Some(range);
+        range_note = format!(
+            ", {} from {} to {} ({}; every frame's range is {} to {}; --attribute-range sets \
+             another)",
+            a.name,
+            Num(range[0]),
+            Num(range[1]),
+            why.why(),
+            Num(a.min),
+            Num(a.max)
+        );
     }
     if by_attribute(args) && opts.style.attribute_range.is_none() {
         // Where the frames' union is no range (a constant attribute), each frame keeps
         // its own constant look.
-        let centred = attribute.cloned().and_then(|a| {
-            if opts.style.log_scale {
-                return None;
-            }
-            let range = opts.style.colour_map?.centred_range([a.min, a.max])?;
-            Some((a, range))
-        });
-        let floored = attribute
-            .cloned()
-            .filter(|_| opts.style.log_scale)
-            .and_then(|a| {
-                log_start([a.min, a.max], survey.log_floor()).map(|(r, why)| (a, r, why))
-            });
-        if let Some((a, range, why)) = floored {
-            opts.style.attribute_range = Some(range);
-            range_note = format!(
-                ", {} from {} to {} ({why}; every frame's range is {} to {}; \
-                 --attribute-range sets another)",
-                a.name,
-                Num(range[0]),
-                Num(range[1]),
-                Num(a.min),
-                Num(a.max)
-            );
-        } else if let Some((a, range)) = centred {
-            // A diverging map over signed values: white is 0 in every frame.
-            opts.style.attribute_range = Some(range);
-            range_note = format!(
-                ", {} from {} to {} (centred on 0, the map's white; every frame's range is \
-                 {} to {}; --attribute-range sets another)",
-                a.name,
-                Num(range[0]),
-                Num(range[1]),
-                Num(a.min),
-                Num(a.max)
-            );
-        } else if let Some(a) = attribute.filter(|_| n > 1) {
+        if let Some(a) = attribute.filter(|_| n > 1) {
             if a.max > a.min {
                 opts.style.attribute_range = Some([a.min, a.max]);
                 range_note = format!(
