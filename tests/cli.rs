@@ -5087,6 +5087,39 @@ fn hidden_species_leave_the_clusters_and_inexact_recolouring_is_reported() {
     assert!(!out.contains("approximately"), "{out}");
 }
 
+/// A last frame with two atom lines run together (a line of twice the columns, the file
+/// ending whole) is damage, not a run still writing: `convert` and `batch` name the line
+/// and fail, instead of leaving the frame out as one to convert later.
+#[test]
+fn a_last_frame_with_lines_run_together_is_an_error_not_a_frame_cut_short() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("t.lammpstrj");
+    generate(&["droplets", "-n", "2000", "--frames", "3"], &dump);
+    let mut text = std::fs::read(&dump).unwrap();
+    // The newline before the last atom line becomes a space.
+    let last = text[..text.len() - 1]
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .unwrap();
+    text[last] = b' ';
+    std::fs::write(&dump, &text).unwrap();
+    let lines = text.iter().filter(|&&b| b == b'\n').count();
+    let out_file = dir.path().join("t.mdlod");
+    let err = fails(&["convert", s(&dump), "-o", s(&out_file)]);
+    assert!(
+        err.contains(&format!("t.lammpstrj:{lines}: expected")) && err.contains("columns, found"),
+        "{err}"
+    );
+    assert!(!out_file.exists());
+    let d = dir.path().join("t.d");
+    let run = mdlod(&["batch", s(&dump), "-o", s(&d)]);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && err.contains("columns, found"),
+        "{err}"
+    );
+}
+
 /// A dump whose last frame is cut short (a run still writing): `convert` converts the
 /// frame before it with a note (`--last` refuses, saying which frame converts); `batch`
 /// converts the others, leaves the cut frame out of the

@@ -189,6 +189,28 @@ pub(crate) fn parse(
         .collect();
     let found: usize = counts.iter().sum();
     if found < expected {
+        // A file a run is still writing ends with complete lines and perhaps a part of
+        // one; a line of another column count before the last is damage (two lines run
+        // together), which no rerun mends: said as such, not as a frame cut short.
+        let columns = layout.columns.len();
+        let mut line_start = start;
+        while line_start < end {
+            let line_end =
+                memchr::memchr(b'\n', &data[line_start..end]).map_or(end, |p| line_start + p);
+            let tokens = data[line_start..line_end]
+                .split(|b| b.is_ascii_whitespace())
+                .filter(|t| !t.is_empty())
+                .count();
+            let last = line_end == end;
+            if tokens > columns || (!last && tokens != columns) {
+                return Err(ReadError::ColumnCount {
+                    at: ctx.at(line_start),
+                    expected: columns,
+                    found: tokens,
+                });
+            }
+            line_start = line_end + 1;
+        }
         return Err(ReadError::Truncated {
             at: ctx.at(end),
             expected,
