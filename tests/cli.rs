@@ -5087,6 +5087,30 @@ fn hidden_species_leave_the_clusters_and_inexact_recolouring_is_reported() {
     assert!(!out.contains("approximately"), "{out}");
 }
 
+/// An XYZ timestep written as a float is read (`Timestep=1e2`); one that is no whole
+/// number is said, the frame numbered by its position.
+#[test]
+fn xyz_timesteps_that_are_no_whole_numbers_are_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("ts.xyz");
+    let mut text = String::new();
+    for t in ["0", "x", "1e2"] {
+        text.push_str(&format!(
+            "2\nProperties=species:S:1:pos:R:3 Timestep={t}\nCu 0 0 0\nCu 3 0 0\n"
+        ));
+    }
+    std::fs::write(&xyz, text).unwrap();
+    let d = dir.path().join("ts.d");
+    let out = ok(&["batch", s(&xyz), "-o", s(&d)]);
+    assert!(
+        out.contains("frame 1's comment line gives `Timestep=x`, no whole number: the frame is numbered by its position, 1"),
+        "{out}"
+    );
+    for name in ["frame-0.mdlod", "frame-1.mdlod", "frame-100.mdlod"] {
+        assert!(d.join(name).exists(), "{name}");
+    }
+}
+
 /// A last frame with two atom lines run together (a line of twice the columns, the file
 /// ending whole) is damage, not a run still writing: `convert` and `batch` name the line
 /// and fail, instead of leaving the frame out as one to convert later.

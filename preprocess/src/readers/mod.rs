@@ -888,6 +888,17 @@ impl DumpFile {
         if let Index::Raw(r) = &self.index {
             notes.extend(r.notes().iter().cloned());
         }
+        // A timestep that is no whole number, which the frame's position stands in for.
+        if let Some(v) = match &self.index {
+            Index::Xyz(x) => x.unread_timestep(k),
+            _ => None,
+        } {
+            notes.push(format!(
+                "{}: frame {k}'s comment line gives `{v}`, no whole number: the frame is \
+                 numbered by its position, {k}",
+                self.path.display()
+            ));
+        }
         // A GSD attribute a later frame takes from frame 0: the colours are frame 0's.
         if let (Index::Gsd(i), Some(name)) = (&self.index, &read.attribute) {
             let full = gsd::chunk_name(name);

@@ -87,6 +87,9 @@ struct Span {
     start: usize,
     end: usize,
     timestep: Option<u64>,
+    /// A timestep key whose value is no whole number (`Timestep=x`), as written: the
+    /// frame is numbered by its position, which a note says.
+    unread_timestep: Option<String>,
 }
 
 /// The frames of an XYZ file.
@@ -152,7 +155,10 @@ impl Index {
                 )
             })?;
             announced = Some((at, n));
-            let timestep = cursor.next_line().and_then(|(_, c)| comment_timestep(c));
+            let (timestep, unread_timestep) = match cursor.next_line() {
+                Some((_, c)) => comment_timestep(c),
+                None => (None, None),
+            };
             let (end, left) = match file {
                 Some(file) if data.len() > segment => {
                     super::skip_lines_mapped(ctx, file, cursor.pos, n, segment, reached)?
@@ -183,6 +189,7 @@ impl Index {
                 start: at,
                 end,
                 timestep,
+                unread_timestep,
             });
         }
         if frames.is_empty() {
@@ -197,6 +204,11 @@ impl Index {
 
     pub fn timestep(&self, k: usize) -> Option<u64> {
         self.frames.get(k)?.timestep
+    }
+
+    /// Frame `k`'s timestep key whose value is no whole number, as written.
+    pub fn unread_timestep(&self, k: usize) -> Option<&str> {
+        self.frames.get(k)?.unread_timestep.as_deref()
     }
 
     /// The byte range of frame `k`, up to the next frame's first byte (the last frame's:
@@ -467,18 +479,22 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
 }
 
 /// The timestep recorded in a comment line: `Timestep=N` or `step=N` (any case), or the
-/// `Timestep: N` LAMMPS `dump xyz` writes.
-fn comment_timestep(comment: &[u8]) -> Option<u64> {
+/// `Timestep: N` LAMMPS `dump xyz` writes; a whole number written as a float (`1e2`,
+/// `7.0`) counts. Else the value of such a key that is no whole number (`x`, `-5`,
+/// `2.5`), as written.
+fn comment_timestep(comment: &[u8]) -> (Option<u64>, Option<String>) {
     // (A comment line too long to be a header is refused where the frame is read.)
     if comment.len() > MAX_COMMENT {
-        return None;
+        return (None, None);
     }
     let text = String::from_utf8_lossy(comment);
+    let mut unread = None;
     if text.contains('=') {
         for (k, v) in key_values(&text) {
             if k.eq_ignore_ascii_case("timestep") || k.eq_ignore_ascii_case("step") {
-                if let Ok(t) = comment_value(&v).parse() {
-                    return Some(t);
+                match whole_number(comment_value(&v)) {
+                    Some(t) => return (Some(t), None),
+                    None => unread = unread.or_else(|| Some(format!("{k}={v}"))),
                 }
             }
         }
@@ -486,10 +502,23 @@ fn comment_timestep(comment: &[u8]) -> Option<u64> {
     let mut words = text.split_whitespace();
     while let Some(w) = words.next() {
         if w.eq_ignore_ascii_case("timestep:") {
-            return words.next()?.parse().ok();
+            let v = words.next().unwrap_or_default();
+            return match whole_number(v) {
+                Some(t) => (Some(t), None),
+                None => (None, Some(format!("{w} {v}"))),
+            };
         }
     }
-    None
+    (None, unread)
+}
+
+/// A timestep: a whole number from 0, also written as a float (`1e2`, `7.0`).
+fn whole_number(v: &str) -> Option<u64> {
+    if let Ok(t) = v.parse() {
+        return Some(t);
+    }
+    let f: f64 = v.parse().ok()?;
+    (f.is_finite() && f >= 0.0 && f.fract() == 0.0 && f < 9.0e15).then_some(f as u64)
 }
 
 /// A comment-line value as a number is written: trimmed, less the comma that ends it in
@@ -576,6 +605,25 @@ pub(crate) fn key_values(line: &str) -> Vec<(String, String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Timesteps in a comment line: whole numbers, also written as floats; a key whose
+    /// value is none is kept as written, for the note that numbers the frame by position.
+    #[test]
+    fn timesteps_are_whole_numbers_and_others_are_kept_for_a_note() {
+        let t = |c: &str| comment_timestep(c.as_bytes());
+        assert_eq!(t("Properties=pos:R:3 Timestep=100"), (Some(100), None));
+        assert_eq!(t("Properties=pos:R:3 Timestep=1e2"), (Some(100), None));
+        assert_eq!(t("step = 7.0, E = -1"), (Some(7), None));
+        assert_eq!(t("Timestep: 12"), (Some(12), None));
+        assert_eq!(
+            t("Properties=pos:R:3 Timestep=x"),
+            (None, Some("Timestep=x".into()))
+        );
+        assert_eq!(t("Timestep=-5"), (None, Some("Timestep=-5".into())));
+        assert_eq!(t("Timestep=2.5"), (None, Some("Timestep=2.5".into())));
+        assert_eq!(t("Timestep: soon"), (None, Some("Timestep: soon".into())));
+        assert_eq!(t("no timestep here"), (None, None));
+    }
 
     #[test]
     fn an_index_skipping_lines_in_segments_equals_one_built_whole() {
