@@ -13,9 +13,9 @@
 //!   given, as the extended-XYZ convention says), `Time=` the time, and `Timestep=` or
 //!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes) the timestep. Spaces
 //!   around `=` and a comma ending a number are allowed, as CP2K writes them
-//!   (`i = 0, time = 0.000, E = -17.16`). A timestep that is no number is none; so is a
-//!   time without `Properties`, where the line is free text (`MD step 5 time=1.5fs`); with
-//!   it, a `Time` that is no number is an error.
+//!   (`i = 0, time = 0.000, E = -17.16`). A timestep that is no whole number (`1e2` is
+//!   one) is none, with a note; so is a time without `Properties`, where the line is free
+//!   text (`MD step 5 time=1.5fs`); with it, a `Time` that is no number is an error.
 //!   `Properties=name:type:count:...` names the columns in order; types `S`, `R`, `I`, `L`.
 //!   Without `Properties` the columns are `species:S:1:pos:R:3` followed by whatever extra
 //!   columns the first atom line has, named `col5`, `col6`, ... (1-based position).
