@@ -179,6 +179,9 @@ pub fn run(args: Args) -> Result<()> {
     let Some(out) = &args.output else {
         bail!("give the batch directory with -o DIR");
     };
+    if out.as_os_str() == "-" {
+        bail!("-o -: a batch writes a directory, not standard output; give its name (./- for a directory named -)");
+    }
     // Before anything is created: a Slurm environment that names no shard fails here.
     let shard = shard(&args)?;
     // A batch directory this run creates and leaves empty (it failed before converting

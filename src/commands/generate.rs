@@ -46,6 +46,7 @@ pub enum OutputFormat {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    super::check_output("-o", &args.output, &[])?;
     // Before the output is created: a rejected count must not empty an existing file.
     if args.particles == 0 {
         anyhow::bail!("--particles 0 (must be at least 1)");
