@@ -2249,6 +2249,22 @@ fn first_mistakes_are_named_before_any_work() {
         err.contains("mdlod writes a file, not standard output"),
         "{err}"
     );
+    let err = fails(&["generate", "crater", "-n", "10", "-o", "-"]);
+    assert!(
+        err.contains("mdlod writes a file, not standard output"),
+        "{err}"
+    );
+    let err = fails(&[
+        "batch",
+        s(&lammps_sample_path("cu_melt.custom.dump")),
+        "-o",
+        "-",
+    ]);
+    assert!(
+        err.contains("a batch writes a directory, not standard output"),
+        "{err}"
+    );
+    assert!(!Path::new("-").exists());
     // A panel's size with no panel to size.
     let err = fails(&["render", f, "-o", p, "--text-scale", "2"]);
     assert!(
