@@ -1561,22 +1561,29 @@ fn projected(args: &Args) -> bool {
 }
 
 /// A view file's recorded image size, where `--width` and `--height` are both left to
-/// their defaults: the saved view then draws the picture it was saved from. (A view file
-/// that cannot be read fails where it is rendered.)
+/// their defaults: the saved view then draws the picture it was saved from; where one of
+/// them is given, the other keeps the saved shape. (A view file that cannot be read fails
+/// where it is rendered.)
 pub fn size_from_view(args: &mut Args, matches: &clap::ArgMatches) {
     let defaulted =
         |id: &str| matches.value_source(id) == Some(clap::parser::ValueSource::DefaultValue);
-    if !(defaulted("width") && defaulted("height")) {
-        return;
-    }
     let saved = args
         .camera
         .view
         .as_deref()
         .and_then(|p| ViewFile::load(p).ok());
-    if let Some([w, h]) = saved.and_then(|v| v.image).filter(|&[w, h]| w > 0 && h > 0) {
-        args.camera.width = w;
-        args.camera.height = h;
+    let Some([w, h]) = saved.and_then(|v| v.image).filter(|&[w, h]| w > 0 && h > 0) else {
+        return;
+    };
+    // One of them given: the other keeps the saved shape.
+    let scaled = |given: u32, of: u32, other: u32| {
+        ((f64::from(given) * f64::from(other) / f64::from(of)).round() as u32).max(1)
+    };
+    match (defaulted("width"), defaulted("height")) {
+        (true, true) => (args.camera.width, args.camera.height) = (w, h),
+        (false, true) => args.camera.height = scaled(args.camera.width, w, h),
+        (true, false) => args.camera.width = scaled(args.camera.height, h, w),
+        (false, false) => {}
     }
 }
 
