@@ -9076,21 +9076,16 @@ fn panels_that_would_cover_one_another_are_refused_before_drawing() {
         "--colour-map",
         "viridis",
     ];
-    let e = fails(
-        &[
-            &["render", s(&file), "-o", s(&png)][..],
-            &base,
-            &[
-                "--width",
-                "800",
-                "--height",
-                "600",
-                "--scale-bar-length",
-                "30",
-            ],
-        ]
-        .concat(),
-    );
+    // A bar of 30 Å in 800 pixels reaches under the legend.
+    let long_bar = [
+        "--width",
+        "800",
+        "--height",
+        "600",
+        "--scale-bar-length",
+        "30",
+    ];
+    let e = fails(&[&["render", s(&file), "-o", s(&png)][..], &base, &long_bar].concat());
     assert!(
         e.contains("--legend-in-image and --scale-bar would cover one another in a 800×600 image")
             && e.contains("a shorter bar (--scale-bar-length)"),
@@ -9155,21 +9150,7 @@ fn panels_that_would_cover_one_another_are_refused_before_drawing() {
     let d = dir.path().join("m.d");
     ok(&["batch", s(&input), "-o", s(&d), "--attribute", "c_pe"]);
     let frames = dir.path().join("f-%d.png");
-    let e = fails(
-        &[
-            &["render", s(&d), "-o", s(&frames)][..],
-            &base,
-            &[
-                "--width",
-                "800",
-                "--height",
-                "600",
-                "--scale-bar-length",
-                "30",
-            ],
-        ]
-        .concat(),
-    );
+    let e = fails(&[&["render", s(&d), "-o", s(&frames)][..], &base, &long_bar].concat());
     assert!(e.contains("would cover one another"), "{e}");
     assert!(!dir.path().join("f-0.png").exists());
 }
