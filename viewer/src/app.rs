@@ -942,6 +942,13 @@ fn paint_disk(
 }
 
 impl eframe::App for ViewerApp {
+    /// The window is closing: the render thread is left to end with the process, not
+    /// waited for (a density frame on a software driver takes many seconds, which the
+    /// close would wait out).
+    fn on_exit(&mut self) {
+        self.worker.abandon();
+    }
+
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
         self.receive(&ctx);

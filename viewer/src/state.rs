@@ -64,6 +64,7 @@ impl Mode {
 /// A directional light: the direction towards it in view space (x right, y up, z towards
 /// the viewer) and its linear RGB colour.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Light {
     pub direction: [f32; 3],
     #[serde(default = "white")]
@@ -1634,6 +1635,12 @@ mod tests {
             e.starts_with("action 0 (zoom, line 1): unknown field `factr`"),
             "{e}"
         );
+        // A light's own fields are checked too (`color` for `colour` was a white light).
+        let e = parse_script(
+            "[{\"action\": \"add_light\", \"light\": {\"direction\": [0, 0, 1], \"color\": [1, 0, 0]}}]",
+        )
+        .unwrap_err();
+        assert!(e.contains("unknown field `color`"), "{e}");
         let e = parse_script("[{\"action\": \"fly\"}]").unwrap_err();
         assert!(
             e.starts_with("action 0 (fly, line 1): unknown variant `fly`"),
