@@ -414,10 +414,11 @@ pub fn convert_frame_with(
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         // Ids (of molecules, clusters) are told by their whole numbers, which no
         // logarithm keeps apart either.
-        // (Whole numbers within 65 536 of one another keep a step each: nothing to say.)
-        let whole = a.values.iter().all(|v| v.fract() == 0.0);
-        if whole && !options.attribute_log10 {
-            notes.extend(whole_numbers_note(&a.name, &a.values, *min, *max));
+        let ids = (!options.attribute_log10)
+            .then(|| whole_numbers_note(&a.name, &a.values, *min, *max))
+            .flatten();
+        if let Some(ids) = ids {
+            notes.extend(ids);
         } else {
             notes.extend(attribute_span_note(&a.name, *min, *max, options));
             if !options.attribute_log10 {
@@ -926,23 +927,32 @@ pub fn below_step_note(name: &str, values: &[f32], min: f32, max: f32) -> Option
     })
 }
 
-/// A note for a column of whole numbers spanning more than 16-bit steps tell apart
-/// (molecule or cluster ids): neighbouring values share a step, so no colour or hidden
-/// range picks out one value; `None` for other columns, or whole numbers within 65 536
-/// of one another (each its own step).
-pub fn whole_numbers_note(name: &str, values: &[f32], min: f32, max: f32) -> Option<String> {
-    let span = f64::from(max) - f64::from(min);
-    if span.is_nan() || span <= 65535.0 || values.iter().any(|v| v.fract() != 0.0) {
+/// For a column of whole numbers (ids of molecules, clusters), its note, in one pass over
+/// `values`: where they span more than 16-bit steps tell apart, neighbouring values share
+/// a step, so no colour or hidden range picks out one value; whole numbers within 65 536
+/// of one another keep a step each, with nothing to say (`Some(None)`). `None` for a
+/// column with fractions, whose span notes apply instead.
+pub fn whole_numbers_note(
+    name: &str,
+    values: &[f32],
+    min: f32,
+    max: f32,
+) -> Option<Option<String>> {
+    if values.iter().any(|v| v.fract() != 0.0) {
         return None;
     }
-    Some(format!(
+    let span = f64::from(max) - f64::from(min);
+    if span.is_nan() || span <= 65535.0 {
+        return Some(None);
+    }
+    Some(Some(format!(
         "attribute {name} holds whole numbers from {min} to {max} (ids?), more than 16 bits \
          tell apart (a step is {:.2}): neighbouring values share a colour and \
          --hide-attribute cannot pick out one value; a column of at most 65 536 distinct \
          values is kept exactly as species (--species-column), a molecule's type say rather \
          than its id",
         span / 65535.0
-    ))
+    )))
 }
 
 /// [`attribute_span_note`] of a column kept linearly, with `remedy` said last.
@@ -1621,7 +1631,9 @@ mod tests {
     #[test]
     fn whole_numbers_too_many_for_16_bits_are_noted() {
         let ids: Vec<f32> = (1..=200_000).map(|i| i as f32).collect();
-        let note = super::whole_numbers_note("mol", &ids, 1.0, 200_000.0).expect("a note");
+        let note = super::whole_numbers_note("mol", &ids, 1.0, 200_000.0)
+            .flatten()
+            .expect("a note");
         assert!(
             note.starts_with("attribute mol holds whole numbers from 1 to 200000 (ids?)")
                 && note.contains("(a step is 3.05)"),
@@ -1629,7 +1641,7 @@ mod tests {
         );
         assert_eq!(
             super::whole_numbers_note("mol", &ids[..60_000], 1.0, 60_000.0),
-            None
+            Some(None)
         );
         let mut fractions = ids.clone();
         fractions[7] = 7.5;

@@ -417,7 +417,7 @@ pub fn atom_name_notes<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<Stri
 pub fn bead_name_note<'a>(species: impl IntoIterator<Item = (&'a str, f32)>) -> Option<String> {
     let species: Vec<(&str, f32)> = species
         .into_iter()
-        .filter(|(n, _)| n.parse::<u64>().is_err())
+        .filter(|(n, _)| !is_type_number(n))
         .collect();
     let labels = letters_are_labels(species.iter().map(|(n, _)| *n));
     let (elements, others): (Vec<_>, Vec<_>) = species

@@ -631,6 +631,18 @@ impl Legend {
         (pw + 16 * s, ph + 16 * s)
     }
 
+    /// [`Self::scale_for`], or `fixed` where given (a figure's panels enlarged for
+    /// print) and the image holds the legend at it; `None` where it does not.
+    pub fn scale_in(&self, width: u32, height: u32, fixed: Option<u32>) -> Option<u32> {
+        match fixed {
+            Some(s) => {
+                let (w, h) = self.room_needed(s);
+                (w <= width && h <= height).then_some(s)
+            }
+            None => self.scale_for(width, height),
+        }
+    }
+
     /// The scale to draw the legend at in a `width` × `height` image: whole steps of one
     /// image pixel per legend pixel for each 1280 × 720 of the image (rounded to the
     /// nearest, so that a 1920 × 1080 slide's text is drawn twice as large, readable on a

@@ -26,7 +26,6 @@ pub const FRAMING_BOXES: usize = 1 << 18;
 /// The frames' common facts, gathered one file at a time.
 #[derive(Debug, Default)]
 pub struct Survey {
-    frames: usize,
     shown: Option<Bounds>,
     hidden: Option<Bounds>,
     /// `None` once past [`FRAMING_BOXES`].
@@ -60,7 +59,6 @@ impl Survey {
 
     /// Folds in one frame, as `opts` would draw it.
     pub fn add(&mut self, file: &MdlodFile, opts: &RenderOptions) {
-        self.frames += 1;
         let own_flat = crate::flat_axis(file);
         self.flat = Some(match self.flat {
             None => own_flat,
@@ -106,7 +104,7 @@ impl Survey {
 
     /// The frames folded in.
     pub fn frames(&self) -> usize {
-        self.frames
+        self.species.len()
     }
 
     /// The bounds the movie's fit frames: the union of the frames that show particles,

@@ -341,7 +341,7 @@ fn scale_bar(
         length: 1.0,
         label: label.clone(),
     };
-    let s = f64::from(panel_scale(&probe, width, height, text_scale).unwrap_or(1));
+    let s = f64::from(probe.scale_in(width, height, text_scale).unwrap_or(1));
     let pixels = world / per_px;
     let widest = f64::from(width) - 16.0 * s - 14.0 * s;
     // Four significant digits.
@@ -372,7 +372,7 @@ fn scale_bar(
         length: (pixels / s) as f32,
         label,
     };
-    if panel_scale(&bar, width, height, text_scale).is_none() {
+    if bar.scale_in(width, height, text_scale).is_none() {
         let (w, h) = bar.room_needed(text_scale.unwrap_or(1));
         anyhow::bail!(
             "--scale-bar: a {width}×{height} image cannot hold the scale bar (at least {w}×{h} \
@@ -380,24 +380,6 @@ fn scale_bar(
         );
     }
     Ok(bar)
-}
-
-/// The scale a panel is drawn at in a `w` × `h` image: `fixed` (`--text-scale`) where
-/// the image holds it at that scale, else the largest the image's size gives
-/// ([`mdlod_render::legend::Legend::scale_for`]); `None` where it holds none.
-fn panel_scale(
-    panel: &mdlod_render::legend::Legend,
-    w: u32,
-    h: u32,
-    fixed: Option<u32>,
-) -> Option<u32> {
-    match fixed {
-        Some(s) => {
-            let (rw, rh) = panel.room_needed(s);
-            (rw <= w && rh <= h).then_some(s)
-        }
-        None => panel.scale_for(w, h),
-    }
 }
 
 /// The library's corner of a command-line corner.
@@ -434,8 +416,7 @@ fn check_panels_apart(
     if let Some(size) = label {
         panels.push(("--label", args.label_corner(), size));
     }
-    if let Some((bar, scale)) = bar.and_then(|b| Some((b, panel_scale(b, w, h, args.text_scale)?)))
-    {
+    if let Some((bar, scale)) = bar.and_then(|b| Some((b, b.scale_in(w, h, args.text_scale)?))) {
         let (bw, bh) = bar.room_needed(scale);
         panels.push(("--scale-bar", args.scale_bar_corner(), [bw, bh]));
     }
@@ -523,13 +504,9 @@ fn check_label(args: &Args) -> Result<()> {
         let panel = mdlod_render::legend::Legend::Text {
             lines: args.label.iter().map(|t| label::fixed_text(t)).collect(),
         };
-        if panel_scale(
-            &panel,
-            args.camera.width,
-            args.camera.height,
-            args.text_scale,
-        )
-        .is_none()
+        if panel
+            .scale_in(args.camera.width, args.camera.height, args.text_scale)
+            .is_none()
         {
             let (w, h) = panel.room_needed(args.text_scale.unwrap_or(1));
             anyhow::bail!(
@@ -714,7 +691,9 @@ fn draw_panel(
 ) -> Result<u64> {
     let corner = legend_corner(corner);
     let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
-    let scale = panel_scale(panel, png.width, png.height, text_scale).unwrap_or(1);
+    let scale = panel
+        .scale_in(png.width, png.height, text_scale)
+        .unwrap_or(1);
     let covered = panel.covers(&png, corner, scale, background);
     panel
         .draw(&mut png, corner, scale)
@@ -771,12 +750,7 @@ fn check_label_room(args: &Args, values: &[&label::Values]) -> Result<Option<[u3
     let (panels, _) = label_panels(args, values, values);
     let mut room = [0u32; 2];
     for (i, panel) in panels.iter().enumerate() {
-        let scale = panel_scale(
-            panel,
-            args.camera.width,
-            args.camera.height,
-            args.text_scale,
-        );
+        let scale = panel.scale_in(args.camera.width, args.camera.height, args.text_scale);
         if let Some(scale) = scale {
             let (w, h) = panel.room_needed(scale);
             room = [room[0].max(w), room[1].max(h)];
@@ -1281,7 +1255,8 @@ impl ViewArgs {
                 ViewFile::FIELDS.join(", ")
             );
         }
-        let note = ViewFile::load(path)
+        // (From the text read: the same checks as a load's.)
+        let note = ViewFile::parse(&text)
             .ok()
             .and_then(|v| v.aspect_note(self.width, self.height));
         if let Some(note) = note {
@@ -2677,7 +2652,7 @@ fn check_legend_room(
         Some([1.0, 2.0]),
         &all,
     )?;
-    let Some(scale) = panel_scale(&legend, opts.width, opts.height, args.text_scale) else {
+    let Some(scale) = legend.scale_in(opts.width, opts.height, args.text_scale) else {
         let (w, h) = legend.room_needed(args.text_scale.unwrap_or(1));
         anyhow::bail!(
             "--legend-in-image: a {}×{} image cannot hold the legend (at least {w}×{h} \
@@ -2744,7 +2719,8 @@ fn movie_species(dir: &Path) -> Option<Vec<Vec<mdlod_format::meta::Species>>> {
         .frames
         .iter()
         .map(|f| {
-            let file = mdlod_format::MdlodFile::open(dir.join(&f.file)).ok()?;
+            // (The species only: the top node's record checked, not every level's.)
+            let file = mdlod_format::MdlodFile::open_with_eager_nodes(dir.join(&f.file), 1).ok()?;
             Some(file.metadata().species.clone())
         })
         .collect()
@@ -2801,7 +2777,7 @@ fn scale_bar_room(
         length: 1.0,
         label: label.clone(),
     };
-    let Some(s) = panel_scale(&probe, w, h, args.text_scale) else {
+    let Some(s) = probe.scale_in(w, h, args.text_scale) else {
         return windows;
     };
     let panel = mdlod_render::legend::Legend::Scale {
@@ -2859,7 +2835,8 @@ fn label_room(
     let Some(path) = first_file(&args.file) else {
         return windows;
     };
-    let Ok(file) = mdlod_format::MdlodFile::open(&path) else {
+    // (The metadata only: the top node's record checked, not every level's.)
+    let Ok(file) = mdlod_format::MdlodFile::open_with_eager_nodes(&path, 1) else {
         return windows;
     };
     let values = label::Values::of_file(&path, file.metadata(), 0);
@@ -2867,7 +2844,7 @@ fn label_room(
     let (w, h) = (opts.width, opts.height);
     let Some((panel, s)) = panels
         .first()
-        .and_then(|p| Some((p, panel_scale(p, w, h, args.text_scale)?)))
+        .and_then(|p| Some((p, p.scale_in(w, h, args.text_scale)?)))
     else {
         return windows;
     };
@@ -4122,7 +4099,8 @@ fn render_frames(
     for note in gaps_notes(&manifest, dir) {
         println!("{note}");
     }
-    if let Some(note) = far_note(survey.far().0, Some(survey.far().1)).filter(|_| fitted) {
+    let (far, far_frames) = survey.far();
+    if let Some(note) = far_note(far, Some(far_frames)).filter(|_| fitted) {
         println!("{note}");
     }
     if let (Some([lo, hi]), Some(a)) = (args.style.attribute_range, attribute) {

@@ -514,11 +514,9 @@ fn comment_timestep(comment: &[u8]) -> (Option<u64>, Option<String>) {
 
 /// A timestep: a whole number from 0, also written as a float (`1e2`, `7.0`).
 fn whole_number(v: &str) -> Option<u64> {
-    if let Ok(t) = v.parse() {
-        return Some(t);
-    }
-    let f: f64 = v.parse().ok()?;
-    (f.is_finite() && f >= 0.0 && f.fract() == 0.0 && f < 9.0e15).then_some(f as u64)
+    v.parse()
+        .ok()
+        .or_else(|| u64::try_from(crate::species::whole_number(v)?).ok())
 }
 
 /// A comment-line value as a number is written: trimmed, less the comma that ends it in
