@@ -16,7 +16,8 @@ use eframe::egui;
 use mdlod_render::{RgbaImage, ViewFile};
 
 use crate::state::{
-    adapt_error, smip_preview_cap, Action, Changed, Mode, Requests, ViewerState, SMIP_MAX_COARSEN,
+    adapt_error, adapt_preview_error, smip_preview_cap, Action, Changed, Mode, Requests,
+    ViewerState, SMIP_MAX_COARSEN,
 };
 use crate::worker::{FrameStats, Reply, Request, Worker};
 
@@ -270,34 +271,40 @@ impl ViewerApp {
                     if !self.requests.image(id, refined) {
                         continue;
                     }
+                    // How many times smaller than the window the image was drawn (a
+                    // coarse preview's; see `interactive_options`).
+                    let divisor = drawn_smaller(self.state.size, &image);
                     if interactive {
                         let finest = self.state.settings.error_px.max(1.0);
-                        let adapted = adapt_error(
-                            self.moving_error,
-                            stats.frame_ms,
-                            self.state.settings.target_frame_ms,
-                            finest,
-                        );
+                        let target = self.state.settings.target_frame_ms;
                         // S-MIP previews (they have bins) coarsen by a few levels at most.
                         self.moving_error = if stats.bins.is_some() {
-                            adapted.min(smip_preview_cap(finest))
+                            adapt_error(self.moving_error, stats.frame_ms, target, finest)
+                                .min(smip_preview_cap(finest))
                         } else {
-                            adapted
+                            adapt_preview_error(
+                                self.moving_error,
+                                stats.frame_ms,
+                                target,
+                                finest,
+                                divisor,
+                            )
                         };
                     }
                     let colour = egui::ColorImage::from_rgba_unmultiplied(
                         [image.width as usize, image.height as usize],
                         &image.data,
                     );
+                    // A smaller preview is stretched smoothly; the window's own size is
+                    // shown pixel for pixel.
+                    let filter = if divisor > 1 {
+                        egui::TextureOptions::LINEAR
+                    } else {
+                        egui::TextureOptions::NEAREST
+                    };
                     match &mut self.texture {
-                        Some(t) => t.set(colour, egui::TextureOptions::NEAREST),
-                        None => {
-                            self.texture = Some(ctx.load_texture(
-                                "view",
-                                colour,
-                                egui::TextureOptions::NEAREST,
-                            ))
-                        }
+                        Some(t) => t.set(colour, filter),
+                        None => self.texture = Some(ctx.load_texture("view", colour, filter)),
                     }
                     self.shown = Some(Shown {
                         image,
@@ -786,21 +793,30 @@ impl ViewerApp {
         match &self.shown {
             Some(s) => {
                 let t = &s.stats;
+                let divisor = drawn_smaller(self.state.size, &s.image);
                 ui.label(format!(
-                    "frame {:.0} ms{}{}",
+                    "frame {:.0} ms{}{}{}",
                     t.frame_ms,
                     t.gpu_ms
                         .map_or(String::new(), |g| format!(" (GPU {g:.1} ms)")),
-                    if s.interactive { ", moving" } else { "" }
+                    if s.interactive { ", moving" } else { "" },
+                    if divisor > 1 {
+                        format!(", drawn at 1/{divisor} size")
+                    } else {
+                        String::new()
+                    }
                 ));
                 ui.label(format!(
                     "{} spp{}",
                     t.spp,
                     if s.refined { "" } else { ", refining" }
                 ));
+                // The error in the window's pixels, whatever size the image was drawn.
                 ui.label(format!(
                     "{} particles + {} clusters, error {:.2} px",
-                    t.particles, t.representatives, t.error_px
+                    t.particles,
+                    t.representatives,
+                    t.error_px * divisor as f32
                 ));
                 ui.label(format!("GPU {:.0} MiB ({})", mib(t.gpu_bytes), t.adapter));
                 if let Some(b) = t.bins {
@@ -1019,6 +1035,15 @@ impl eframe::App for ViewerApp {
             ctx.request_repaint_after(Duration::from_millis(16));
         }
     }
+}
+
+/// How many times smaller on each side than the window (`size`) `image` was drawn, to
+/// the nearest whole number: a coarse preview's divisor (see
+/// [`crate::state::preview_divisor`]), 1 for an image of the window's size or of a size
+/// the window had a moment ago.
+fn drawn_smaller(size: [u32; 2], image: &RgbaImage) -> u32 {
+    let w = image.width.max(1);
+    ((size[0] + w / 2) / w).max(1)
 }
 
 /// S-MIP levels to coarsen an orthographic S-NDF view by while dragging: one per

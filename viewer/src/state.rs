@@ -882,11 +882,21 @@ impl ViewerState {
     }
 
     /// The options of a quick frame while the view moves: one sample per pixel and the
-    /// cut coarsened to `error_px`; S-NDF and supersampled modes show plain spheres.
+    /// cut coarsened to `error_px` (in the window's pixels); S-NDF and supersampled modes
+    /// show plain spheres. A coarse preview is drawn [`preview_divisor`] times smaller on
+    /// each side, with the same cut (its error in the smaller image's pixels), and shown
+    /// stretched over the window: it draws no detail finer than its error anyway, and
+    /// costs a software driver a quarter or a sixteenth of the pixels. The S-MIP's
+    /// previews (orthographic S-NDF views) keep the window's size, which its cached tiles
+    /// are sampled at.
     pub fn interactive_options(&self, size: [u32; 2], error_px: f32) -> RenderOptions {
-        let mut o = self.render_options(size);
+        let error_px = error_px.max(self.settings.error_px);
+        let smip = matches!(self.settings.mode, Mode::Sndf)
+            && self.camera.projection == mdlod_render::Projection::Orthographic;
+        let divisor = if smip { 1 } else { preview_divisor(error_px) };
+        let mut o = self.render_options(size.map(|n| n.div_ceil(divisor)));
         o.spp = 1;
-        o.error_px = error_px.max(self.settings.error_px);
+        o.error_px = error_px / divisor as f32;
         // Orthographic S-NDF views pan and zoom over the S-MIP's cached tiles (the render
         // thread falls back to spheres for an orbit); perspective ones preview spheres.
         // The S-MIP keeps the settled screen error (a new one would start a new cache);
@@ -909,6 +919,44 @@ impl ViewerState {
     pub fn sphere_preview_error(&self, error_px: f32) -> f32 {
         error_px.max(self.settings.error_px)
     }
+}
+
+/// How many times smaller on each side a preview at screen error `error_px` (in the
+/// window's pixels) is drawn: 1 below 4 px, 2 below 8 px, 4 from 8 px on, so that the
+/// error always spans at least 2 of the smaller image's pixels.
+pub fn preview_divisor(error_px: f32) -> u32 {
+    if error_px >= 8.0 {
+        4
+    } else if error_px >= 4.0 {
+        2
+    } else {
+        1
+    }
+}
+
+/// The next preview error (in the window's pixels) after a preview drawn `divisor` times
+/// smaller took `last_frame_ms`: [`adapt_error`], except that a finer error that would
+/// draw at a smaller divisor (up to 16 times the pixels) is taken only where the frame
+/// leaves room for that many more pixels; otherwise the error stays at the smallest
+/// drawn at `divisor`. Without that, a preview whose finer divisor is too slow and whose
+/// coarser one is fast would switch between the two every frame.
+pub fn adapt_preview_error(
+    current_px: f32,
+    last_frame_ms: f32,
+    target_ms: f32,
+    finest_px: f32,
+    divisor: u32,
+) -> f32 {
+    let next = adapt_error(current_px, last_frame_ms, target_ms, finest_px);
+    let then = preview_divisor(next);
+    if divisor > 1 && then < divisor {
+        let pixels = ((divisor / then) as f32).powi(2);
+        if last_frame_ms * pixels > target_ms {
+            // The smallest error drawn at `divisor` (see `preview_divisor`).
+            return next.max(2.0 * divisor as f32);
+        }
+    }
+    next
 }
 
 /// The most the preview error adapts to while the previews are S-MIP views: the error at
@@ -1407,7 +1455,13 @@ mod tests {
         });
         assert_eq!(s.render_options([10, 10]).spp, 8);
         assert_eq!(s.interactive_options([10, 10], 4.0).spp, 1);
-        assert_eq!(s.interactive_options([10, 10], 4.0).error_px, 4.0);
+        // At 4 px the preview is drawn at half size with the same cut: 2 of its pixels.
+        let o = s.interactive_options([10, 10], 4.0);
+        assert_eq!((o.width, o.height, o.error_px), (5, 5, 2.0));
+        let o = s.interactive_options([101, 60], 2.0);
+        assert_eq!((o.width, o.height, o.error_px), (101, 60, 2.0));
+        let o = s.interactive_options([101, 60], 12.0);
+        assert_eq!((o.width, o.height, o.error_px), (26, 15, 3.0));
         s.apply(&Action::Mode { mode: Mode::Sndf });
         assert!(matches!(
             s.render_options([10, 10]).mode,
@@ -1556,6 +1610,43 @@ mod tests {
     }
 
     #[test]
+    fn coarse_previews_are_drawn_smaller_and_settle_at_one_size() {
+        assert_eq!(
+            [1.0, 3.9, 4.0, 7.9, 8.0, 256.0].map(preview_divisor),
+            [1, 1, 2, 2, 4, 4]
+        );
+        // Perspective S-NDF views preview spheres, drawn smaller like any sphere preview.
+        let mut s = state();
+        s.apply(&Action::Mode { mode: Mode::Sndf });
+        let o = s.interactive_options([40, 20], 16.0);
+        assert_eq!((o.width, o.height, o.error_px), (10, 5, 4.0));
+        assert_eq!(o.mode, RenderMode::Spheres);
+        // A frame at half size with room to spare, but not for four times the pixels,
+        // keeps the half size; with room for them it goes on to the full size.
+        assert_eq!(adapt_preview_error(4.0, 12.0, 33.0, 1.0, 2), 4.0);
+        assert!(adapt_preview_error(4.0, 5.0, 33.0, 1.0, 2) < 4.0);
+        assert_eq!(adapt_preview_error(8.0, 10.0, 33.0, 1.0, 4), 8.0);
+        assert!(adapt_preview_error(8.0, 1.0, 33.0, 1.0, 4) < 8.0);
+        // Full size, too slow: coarser at once, whatever the divisor it reaches.
+        assert!(adapt_preview_error(3.5, 100.0, 33.0, 1.0, 1) >= 4.0);
+        // A viewer whose full-size previews are too slow and quarter-size ones fast
+        // settles rather than switching sizes each frame: a cost model of a fixed part
+        // plus one per pixel, 40 ms at full size.
+        let cost = |e: f32| 4.0 + 36.0 / (preview_divisor(e) as f32).powi(2) + 8.0 / e;
+        let mut e = 1.0;
+        let mut divisors = vec![];
+        for _ in 0..40 {
+            e = adapt_preview_error(e, cost(e), 33.0, 1.0, preview_divisor(e));
+            divisors.push(preview_divisor(e));
+        }
+        assert!(
+            divisors[20..].windows(2).all(|w| w[0] == w[1]),
+            "{divisors:?}"
+        );
+        assert!(cost(e) <= 33.0, "{e}: {} ms", cost(e));
+    }
+
+    #[test]
     fn orbiting_orthographic_sndf_previews_use_the_adapted_error() {
         let mut s = state();
         s.apply(&Action::Mode { mode: Mode::Sndf });
@@ -1563,7 +1654,8 @@ mod tests {
         // The S-MIP keeps the settled error; its sphere fallback takes the preview's.
         let o = s.interactive_options([10, 10], 6.0);
         assert!(matches!(o.mode, RenderMode::Sndf { .. }));
-        assert_eq!(o.error_px, 1.0);
+        // The S-MIP's tiles are sampled at the window's size: no smaller preview.
+        assert_eq!((o.width, o.height, o.error_px), (10, 10, 1.0));
         assert_eq!(s.sphere_preview_error(6.0), 6.0);
         assert_eq!(s.sphere_preview_error(0.5), 1.0);
         // Slow S-MIP previews stop adapting where the S-MIP stops coarsening.

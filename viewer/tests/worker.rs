@@ -677,3 +677,63 @@ fn the_viewer_colours_by_the_attribute_chosen() {
     let (headless, _) = render_image(&renderer, &f, &opts).unwrap();
     assert_eq!(by_z.data, headless.data);
 }
+
+/// `image`'s colour channels averaged over `k`×`k` blocks.
+fn shrink(image: &RgbaImage, k: u32) -> Vec<f64> {
+    let (w, h) = (image.width / k, image.height / k);
+    let mut out = vec![0.0; (w * h * 3) as usize];
+    for y in 0..h * k {
+        for x in 0..w * k {
+            for c in 0..3 {
+                let i = ((y * image.width + x) * 4 + c) as usize;
+                out[(((y / k) * w + x / k) * 3 + c) as usize] +=
+                    f64::from(image.data[i]) / f64::from(k * k);
+            }
+        }
+    }
+    out
+}
+
+/// Mean absolute difference per channel (0-255).
+fn difference(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64
+}
+
+/// A preview coarsened to 8 px or more is drawn a quarter of the window's size on each
+/// side, and shows what a frame of the window's size at that error shows, shrunk.
+#[test]
+fn coarse_previews_are_drawn_smaller_and_show_the_full_size_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_block(dir.path(), 8);
+    let s = state(&path, [160, 128]);
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let preview = |s: &ViewerState, id| {
+        w.send(Request::Render {
+            id,
+            path: path.clone(),
+            opts: s.interactive_options(s.size, 8.0),
+            shade: s.settings.shade_lights(),
+            interactive: true,
+            coarsen: 0,
+            sphere_error_px: 8.0,
+        });
+        next_image(&w).1
+    };
+    let image = preview(&s, 1);
+    assert_eq!((image.width, image.height), (40, 32));
+    let renderer = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    let f = mdlod_format::MdlodFile::open(&path).unwrap();
+    let mut full = s.render_options(s.size);
+    full.error_px = 8.0;
+    let (big, _) = render_image(&renderer, &f, &full).unwrap();
+    // Compared in blocks of 16×16 of the window's pixels, where the preview's sampling of
+    // spheres a pixel wide averages out.
+    let big = shrink(&big, 16);
+    let same = difference(&shrink(&image, 4), &big);
+    // The metric tells views apart: the preview of an orbited view against it.
+    let mut turned = s.clone();
+    turned.apply(&Action::Orbit { dx: 60.0, dy: 30.0 });
+    let other = difference(&shrink(&preview(&turned, 2), 4), &big);
+    assert!(same < 6.0 && other > 3.0 * same, "{same} against {other}");
+}
