@@ -11,9 +11,9 @@ use common::*;
 use glam::{Mat4, Vec3, Vec4};
 use mdlod_format::MdlodFile;
 use mdlod_render::{
-    camera_for, render_image, render_to_png, traverse, BackendChoice, Camera, FrameSettings,
-    GpuContext, OcclusionMode, Projection, RenderError, RenderOptions, RenderedFrame, Renderer,
-    RgbaImage, TraversalSettings, ViewFile, ViewSpec,
+    camera_for, render_image, render_image_keeping, render_to_png, traverse, BackendChoice, Camera,
+    FrameSettings, GpuContext, OcclusionMode, Projection, RenderError, RenderOptions,
+    RenderedFrame, Renderer, RgbaImage, TraversalSettings, ViewFile, ViewSpec,
 };
 
 /// The backends the tests use: `WGPU_BACKEND` when set, else Vulkan only (so that a
@@ -538,6 +538,60 @@ fn data_in_metres_or_light_years_renders_as_in_angstroms() {
             differing * 100 <= covered,
             "scale {scale}: {differing} of {covered} pixels differ"
         );
+    }
+}
+
+#[test]
+fn a_kept_cut_is_drawn_again_under_other_lights_and_chosen_anew_for_another_view() {
+    // A cloud with occlusion culling and a coarse error, so that the cut is a real choice.
+    let (_d, _p, f) = make_file(&cloud_frame(3000, 7), small_build(), &[]);
+    let mut o = opts(64, 48);
+    o.error_px = 4.0;
+    o.background = [0.1, 0.2, 0.3];
+    let mut kept = mdlod_render::KeptCut::default();
+    let first = render_image_keeping(renderer(), &f, &o, &mut kept).unwrap();
+    assert_eq!(kept.chosen(), 1);
+    assert_eq!(
+        first.0.data,
+        render_image(renderer(), &f, &o).unwrap().0.data
+    );
+    // Other lights and background: the same cut, drawn as a fresh render draws it,
+    // pixel for pixel.
+    o.lighting.direction_view = Vec3::new(0.6, -0.3, 1.0).normalize();
+    o.background = [1.0, 1.0, 1.0];
+    let relit = render_image_keeping(renderer(), &f, &o, &mut kept).unwrap();
+    assert_eq!(kept.chosen(), 1);
+    assert_eq!(
+        relit.0.data,
+        render_image(renderer(), &f, &o).unwrap().0.data
+    );
+    assert_ne!(relit.0.data, first.0.data);
+    assert_eq!(
+        (relit.1.particles_drawn, relit.1.nodes_drawn),
+        (first.1.particles_drawn, first.1.nodes_drawn)
+    );
+    // Another view, a finer error, a smaller image, or several samples per pixel (whose
+    // occlusion culling counts only pixels every sample covers): a new cut.
+    for change in 0..4 {
+        let mut p = o.clone();
+        match change {
+            0 => {
+                p.view = ViewSpec::Orbit {
+                    azimuth_deg: 75.0,
+                    elevation_deg: 10.0,
+                    zoom: 1.0,
+                    projection: Projection::Perspective,
+                }
+            }
+            1 => p.error_px = 1.0,
+            2 => p.width = 32,
+            _ => p.spp = 4,
+        }
+        let (image, report) = render_image_keeping(renderer(), &f, &p, &mut kept).unwrap();
+        assert_eq!(kept.chosen(), 2 + change);
+        let (fresh, fresh_report) = render_image(renderer(), &f, &p).unwrap();
+        assert_eq!(image.data, fresh.data, "change {change}");
+        assert_eq!(report.particles_drawn, fresh_report.particles_drawn);
     }
 }
 

@@ -33,8 +33,8 @@ use mdlod_render::renderer::ResidentSndf;
 use mdlod_render::smip::{Smip, SmipConfig, SmipFrame};
 use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
 use mdlod_render::{
-    render_image, traverse, BackendChoice, GpuContext, RenderError, RenderMode, RenderOptions,
-    Renderer, RgbaImage, ViewFile,
+    render_image, render_image_keeping, traverse, BackendChoice, GpuContext, KeptCut, RenderError,
+    RenderMode, RenderOptions, Renderer, RgbaImage, ViewFile,
 };
 
 /// Iterations in each progressive S-NDF batch.
@@ -201,6 +201,7 @@ impl Worker {
                     files: FileCache::new(FILES_KEPT),
                     attribute: None,
                     bounds_sent: None,
+                    cut: None,
                     progressive: None,
                     smip: None,
                     tiled: None,
@@ -289,6 +290,9 @@ struct Thread<'r> {
     attribute: Option<String>,
     /// The file whose bounds the window was sent last.
     bounds_sent: Option<PathBuf>,
+    /// The last direct frame's cut, and the file it is of: a frame of the same view under
+    /// other lights or colours draws it again without a traversal.
+    cut: Option<(Arc<MdlodFile>, KeptCut)>,
     progressive: Option<Progressive>,
     /// The S-MIP cache of orthographic S-NDF views, and the view it shows.
     smip: Option<Smip>,
@@ -542,7 +546,14 @@ impl<'r> Thread<'r> {
             }
         }
         self.stream = None;
-        match render_image(self.renderer, &file, &opts) {
+        let (cut_of, kept) = self
+            .cut
+            .get_or_insert_with(|| (file.clone(), KeptCut::default()));
+        if !Arc::ptr_eq(cut_of, &file) {
+            *cut_of = file.clone();
+            kept.clear();
+        }
+        match render_image_keeping(self.renderer, &file, &opts, kept) {
             Ok((image, report)) => {
                 let stats = FrameStats {
                     frame_ms: t0.elapsed().as_secs_f32() * 1e3,
