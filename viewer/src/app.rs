@@ -24,6 +24,9 @@ use crate::worker::{FrameStats, Reply, Request, Worker};
 /// Width of the control panel left of the image (logical pixels).
 pub(crate) const PANEL_WIDTH: f32 = 270.0;
 
+/// How long a closing window waits for the render thread to end.
+const EXIT_WAIT: Duration = Duration::from_secs(2);
+
 /// Input this recent makes a frame a quick preview.
 const MOVING: Duration = Duration::from_millis(150);
 
@@ -958,11 +961,12 @@ fn paint_disk(
 }
 
 impl eframe::App for ViewerApp {
-    /// The window is closing: the render thread is left to end with the process, not
-    /// waited for (a density frame on a software driver takes many seconds, which the
-    /// close would wait out).
+    /// The window is closing: the render thread is given a moment to end (and drop its
+    /// device before the process exits), then left to end with the process, not waited
+    /// for (a density frame on a software driver takes many seconds, which the close
+    /// would wait out).
     fn on_exit(&mut self) {
-        self.worker.abandon();
+        self.worker.finish_within(EXIT_WAIT);
     }
 
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {

@@ -737,3 +737,37 @@ fn coarse_previews_are_drawn_smaller_and_show_the_full_size_picture() {
     let other = difference(&shrink(&preview(&turned, 2), 4), &big);
     assert!(same < 6.0 && other > 3.0 * same, "{same} against {other}");
 }
+
+/// A closing window's render thread ends once its frame is drawn (and its device is
+/// dropped before the process exits), within the wait it is given; a frame that takes
+/// longer is not waited for.
+#[test]
+fn a_closing_window_waits_for_an_idle_render_thread_but_not_a_long_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let s = state(&path, [64, 48]);
+    let mut w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    render(&w, &s, 1);
+    assert!(w.finish_within(Duration::from_secs(60)));
+    let t0 = std::time::Instant::now();
+    drop(w);
+    assert!(t0.elapsed() < Duration::from_millis(100));
+    // A long frame in progress: the wait ends at its limit.
+    let mut s = state(&path, [64, 48]);
+    s.apply(&Action::Mode { mode: Mode::Sndf });
+    s.settings.sndf_iterations = 64;
+    let mut w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let out = dir.path().join("slow.png");
+    w.send(Request::Screenshot {
+        path: path.clone(),
+        opts: s.render_options([1024, 768]),
+        shade: s.settings.shade_lights(),
+        out: out.clone(),
+    });
+    std::thread::sleep(Duration::from_millis(50));
+    let t0 = std::time::Instant::now();
+    assert!(!w.finish_within(Duration::from_millis(200)));
+    drop(w);
+    assert!(t0.elapsed() < Duration::from_millis(700));
+    assert!(!out.exists(), "the close waited for the frame");
+}
