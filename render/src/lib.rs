@@ -630,6 +630,36 @@ pub fn log_floor(file: &MdlodFile) -> Option<f32> {
         .min_by(f32::total_cmp)
 }
 
+/// The range `file`'s attribute is shown over where `style` gives none and the file's
+/// own would mislead, and why ([`style::default_range`]): splats lit by the values
+/// (`light`) from 0; where the values are drawn as colours or attribute splats
+/// (`mapped`), a log scale from [`log_floor`] and a diverging colour map centred on 0.
+/// `None` where the style gives a range, the file has no attribute, or its own range
+/// serves. `mdlod render` and the viewer show a file's values over the same range.
+pub fn default_range_of(
+    file: &MdlodFile,
+    style: &PointStyle,
+    mapped: bool,
+    light: bool,
+) -> Option<([f32; 2], style::RangeChoice)> {
+    if style.attribute_range.is_some() {
+        return None;
+    }
+    let a = file.metadata().attribute.as_ref()?;
+    style::default_range(
+        [a.min, a.max],
+        light,
+        mapped,
+        style.log_scale,
+        style.colour_map,
+        if style.log_scale {
+            log_floor(file)
+        } else {
+            None
+        },
+    )
+}
+
 /// The bounds of everything in the file (the top node's box).
 pub fn data_bounds(file: &MdlodFile) -> Bounds {
     let top = &file.nodes()[0];

@@ -3072,18 +3072,7 @@ pub fn derive_range(
         return Ok(None);
     };
     check_not_logged(style, a, path, light)?;
-    if style.attribute_range.is_some() {
-        return Ok(None);
-    }
-    let floor = || mdlod_render::log_floor(&file);
-    let Some((range, why)) = mdlod_render::style::default_range(
-        [a.min, a.max],
-        light,
-        mapped,
-        style.log_scale,
-        style.colour_map,
-        if style.log_scale { floor() } else { None },
-    ) else {
+    let Some((range, why)) = mdlod_render::default_range_of(&file, style, mapped, light) else {
         return Ok(None);
     };
     style.attribute_range = Some(range);

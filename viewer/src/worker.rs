@@ -488,6 +488,7 @@ impl<'r> Thread<'r> {
             });
         }
         let mut opts = opts;
+        with_default_range(&mut opts, &file);
         if let RenderMode::Sndf { .. } = opts.mode {
             let camera = match mdlod_render::camera_for(&file, &opts.view, opts.width, opts.height)
             {
@@ -989,6 +990,9 @@ impl<'r> Thread<'r> {
         out: &Path,
     ) -> Result<(), String> {
         let file = self.file(path, opts.style.attribute.as_deref())?;
+        let mut opts = opts.clone();
+        with_default_range(&mut opts, &file);
+        let opts = &opts;
         let image = match opts.mode {
             RenderMode::Sndf { iterations, .. } => {
                 let (sndf, _) = sample_progressively(self.renderer, &file, opts, iterations)?;
@@ -1016,6 +1020,18 @@ struct Preview {
 
 /// An orthographic S-NDF preview the S-MIP cannot show (an orbit) becomes a sphere
 /// preview at the preview's screen error.
+/// Colours by the attribute over the range `mdlod render` shows a file's values over
+/// where none is set ([`mdlod_render::default_range_of`]): a diverging map centred on 0,
+/// a log scale from the smallest positive value. A frame's own range otherwise, as
+/// before: a signed charge took cool-warm's white at the middle of its range, not at 0.
+fn with_default_range(opts: &mut RenderOptions, file: &MdlodFile) {
+    if opts.style.colour_map.is_some() {
+        if let Some((range, _)) = mdlod_render::default_range_of(file, &opts.style, true, false) {
+            opts.style.attribute_range = Some(range);
+        }
+    }
+}
+
 fn sphere_fallback(opts: &mut RenderOptions, sphere_error_px: f32) {
     opts.mode = RenderMode::Spheres;
     if sphere_error_px.is_finite() {

@@ -771,3 +771,46 @@ fn a_closing_window_waits_for_an_idle_render_thread_but_not_a_long_frame() {
     assert!(t0.elapsed() < Duration::from_millis(700));
     assert!(!out.exists(), "the close waited for the frame");
 }
+
+/// A signed attribute under a diverging map is shown over the range a still of the frame
+/// shows, centred on 0, not over the frame's own range.
+#[test]
+fn a_diverging_map_is_centred_on_zero_as_a_still_centres_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let positions = mdlod_datasets::fcc_block([4, 4, 4], 3.615);
+    let n = positions.len();
+    // Charges from -0.95 to +0.45: the frame's own range puts the map's middle at -0.25.
+    let values = (0..n)
+        .map(|i| -0.95 + 1.4 * i as f32 / (n - 1) as f32)
+        .collect();
+    let frame = Frame {
+        positions,
+        species_index: vec![0; n],
+        species: vec![SpeciesName {
+            name: "C".into(),
+            ..Default::default()
+        }],
+        attribute: Some(mdlod_preprocess::frame::Attribute {
+            name: "q".into(),
+            values,
+        }),
+        ..Default::default()
+    };
+    let path = dir.path().join("q.mdlod");
+    convert_frame(&frame, None, &path, &ConvertOptions::default(), &NoProgress).unwrap();
+    let mut s = state(&path, [64, 48]);
+    s.apply(&Action::ColourMap {
+        map: Some(mdlod_render::ColourMap::CoolWarm),
+    });
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    render(&w, &s, 1);
+    let (_, image, _, _) = next_image(&w);
+    let renderer = Renderer::new(GpuContext::with_backends(backends()).unwrap());
+    let f = mdlod_format::MdlodFile::open(&path).unwrap();
+    let mut centred = s.render_options(s.size);
+    centred.style.attribute_range = Some([-0.95, 0.95]);
+    let (still, _) = render_image(&renderer, &f, &centred).unwrap();
+    assert_eq!(image.data, still.data);
+    let (own_range, _) = render_image(&renderer, &f, &s.render_options(s.size)).unwrap();
+    assert_ne!(image.data, own_range.data);
+}
