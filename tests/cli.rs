@@ -2152,8 +2152,7 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
     );
     assert!(!ok(&["info", s(&plain)]).contains("column"));
     // A structure type this frame lacks (a script over every frame of a run hides HCP):
-    // noted, not refused; so is hiding a species a file of elements lacks, while
-    // colouring one is refused.
+    // noted, not refused; so is hiding or colouring a species a file of elements lacks.
     let png = dir.path().join("h.png");
     let mut args = vec!["render", s(&whole), "-o", s(&png), "--hide-species", "HCP"];
     args.extend(["--width", "32", "--height", "24"]);
@@ -2177,7 +2176,7 @@ fn a_real_bicrystal_coloured_and_hidden_by_its_structure_types() {
         "HCP=red",
     ];
     args.extend(["--width", "32", "--height", "24"]);
-    assert!(fails(&args).contains("no species named \"HCP\""));
+    assert!(ok(&args).contains("note: no particle of this frame is HCP"));
     // A type of the frame spelt otherwise is a misspelling: refused, naming it.
     let mut args = vec!["render", s(&whole), "-o", s(&png), "--hide-species", "Fcc"];
     args.extend(["--width", "32", "--height", "24"]);
@@ -4322,16 +4321,38 @@ fn hiding_a_species_a_frame_lacks_is_said_not_refused() {
         e.contains("no species named \"w\"; did you mean \"W\"?"),
         "{e}"
     );
-    // A colour for a species the frame lacks is still refused.
+    // So is a colour or radius for it (one figure script over every frame of the run);
+    // a name the frame spells in another case is still a misspelling.
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--species-colour",
+        "NA=red",
+        "--species-radius",
+        "NA=1.2",
+    ]);
+    assert!(
+        out.contains("note: no particle of this frame is NA (its species are C1A, PO4, W): the options naming it do nothing here"),
+        "{out}"
+    );
     let e = fails(&[
         "render",
         s(&file),
         "-o",
         s(&png),
         "--species-colour",
-        "NA=red",
+        "w=red",
     ]);
-    assert!(e.contains("no species named \"NA\""), "{e}");
+    assert!(
+        e.contains("no species named \"w\"; did you mean \"W\"?"),
+        "{e}"
+    );
     // Stray commas and names of several words are refused.
     for bad in ["W,", "W NA"] {
         let e = fails(&["render", s(&file), "-o", s(&png), "--hide-species", bad]);

@@ -3649,9 +3649,11 @@ fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<S
 /// A file whose species are the values of a column (structure types) holds only those
 /// of its frame: a style naming another (a figure script run over every frame, hiding
 /// HCP from a frame without any) does nothing there, and is dropped with a note instead
-/// of refusing the frame. Files of types or elements likewise drop a species that is
-/// only hidden (ions that come later in the run: hiding them where there are none hides
-/// nothing), and still refuse another style of a name they lack (a misspelling).
+/// of refusing the frame. Files of types or elements likewise drop a style of a species
+/// named as theirs are (a type number among type numbers, a name among names) that they
+/// lack: ions that come later in the run, hidden or coloured by one script over every
+/// frame. A name one of the frame's species spells in another case is refused as a
+/// misspelling, and so is an element's name among type numbers (with a hint).
 fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> Result<()> {
     // (The species only: the file as it is, whichever attribute the style reads.)
     let file = mdlod_format::MdlodFile::open(path)?;
@@ -3675,7 +3677,7 @@ fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> 
                     && m.species
                         .iter()
                         .any(|s| numbered(&s.name) != numbered(&st.name));
-            column.is_some() || (st.hidden && st.colour.is_none() && st.radius.is_none() && kind)
+            column.is_some() || kind
         })
         .map(|st| st.name.clone())
         .collect();
@@ -3692,10 +3694,22 @@ fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> 
             );
         }
     }
+    let only_hidden = style
+        .species
+        .iter()
+        .filter(|st| absent.contains(&st.name))
+        .all(|st| st.hidden && st.colour.is_none() && st.radius.is_none());
     style.species.retain(|st| !absent.contains(&st.name));
     let names: Vec<&str> = m.species.iter().map(|s| s.name.as_str()).collect();
     let absent: Vec<String> = absent.into_iter().collect();
     match column {
+        None if !only_hidden => println!(
+            "  note: no particle of this frame is {} (its species are {}): the options \
+             naming {} do nothing here",
+            absent.join(" or "),
+            names.join(", "),
+            if absent.len() == 1 { "it" } else { "them" }
+        ),
         Some(column) => println!(
             "  note: no particle of this frame is {} (its species are the values of \
              {column}: {}): the options naming {} do nothing here",
