@@ -237,12 +237,44 @@ impl ColourMap {
                 [0.995, 0.812, 0.573],
                 [0.987, 0.991, 0.750],
             ],
+            // Moreland's smooth cool-warm map (interpolated in his Msh space between
+            // sRGB (59, 76, 192) and (180, 4, 38) through (221, 221, 221)), sampled at
+            // 33 points: what matplotlib's `coolwarm` draws, to a level or two. Five
+            // stops drew kinks at the quarters, up to 18 levels off between them.
             ColourMap::CoolWarm => &[
-                [0.230, 0.299, 0.754],
-                [0.552, 0.690, 0.996],
+                [0.231, 0.298, 0.753],
+                [0.268, 0.352, 0.801],
+                [0.305, 0.406, 0.844],
+                [0.344, 0.458, 0.883],
+                [0.384, 0.509, 0.917],
+                [0.425, 0.558, 0.945],
+                [0.467, 0.604, 0.968],
+                [0.510, 0.648, 0.985],
+                [0.553, 0.689, 0.995],
+                [0.597, 0.726, 1.000],
+                [0.639, 0.759, 0.998],
+                [0.682, 0.789, 0.990],
+                [0.722, 0.814, 0.976],
+                [0.762, 0.834, 0.957],
+                [0.799, 0.850, 0.932],
+                [0.833, 0.860, 0.901],
                 [0.865, 0.865, 0.865],
-                [0.958, 0.604, 0.483],
-                [0.706, 0.016, 0.150],
+                [0.898, 0.849, 0.821],
+                [0.924, 0.827, 0.775],
+                [0.945, 0.801, 0.727],
+                [0.959, 0.770, 0.678],
+                [0.968, 0.734, 0.629],
+                [0.970, 0.695, 0.579],
+                [0.967, 0.651, 0.530],
+                [0.958, 0.603, 0.482],
+                [0.944, 0.552, 0.434],
+                [0.924, 0.498, 0.388],
+                [0.899, 0.440, 0.343],
+                [0.870, 0.379, 0.300],
+                [0.835, 0.313, 0.259],
+                [0.796, 0.242, 0.220],
+                [0.753, 0.157, 0.183],
+                [0.706, 0.016, 0.149],
             ],
             ColourMap::Grey => &[[0.1, 0.1, 0.1], [0.95, 0.95, 0.95]],
         }
@@ -1256,6 +1288,35 @@ mod tests {
         let wide = scale(-f32::MAX, f32::MAX);
         assert!(!wide.is_constant());
         assert_eq!(wide.of_value(0.0), 0.5);
+    }
+
+    #[test]
+    fn cool_warm_follows_morelands_map_without_kinks() {
+        // Moreland's smooth diverging map (as matplotlib's coolwarm draws it), in 8-bit
+        // sRGB, at every eighth of the way: within a level of each. (The five stops
+        // drawn before were up to 18 levels off between the quarters.)
+        let srgb = |t: f32| {
+            ColourMap::CoolWarm
+                .colour(t)
+                .map(|c| (crate::renderer::linear_to_srgb(c) * 255.0).round() as i32)
+        };
+        for (t, want) in [
+            (0.0, [59, 76, 192]),
+            (0.125, [98, 130, 234]),
+            (0.25, [141, 176, 254]),
+            (0.375, [184, 208, 249]),
+            (0.5, [221, 221, 221]),
+            (0.625, [245, 196, 173]),
+            (0.75, [244, 154, 123]),
+            (0.875, [222, 97, 76]),
+            (1.0, [180, 4, 38]),
+        ] {
+            let got = srgb(t);
+            assert!(
+                (0..3).all(|k| (got[k] - want[k]).abs() <= 1),
+                "{t}: {got:?} against {want:?}"
+            );
+        }
     }
 
     #[test]
