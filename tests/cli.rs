@@ -3837,6 +3837,45 @@ fn a_label_shows_each_frames_values_in_its_corner() {
 
 /// `--legend-category`: a key of named values in the colour map's colours instead of
 /// the bar, without the values hidden; refused without a colour map or a legend.
+/// A species key lists the species in one order whatever order the dump's atoms came
+/// in: two frames of one run, their elements first seen in other orders, key alike.
+#[test]
+fn a_species_key_lists_names_in_one_order_for_every_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n);
+    let mut dump = String::new();
+    for (t, order) in [(0, ["O", "H", "C"]), (100, ["H", "C", "O"])] {
+        dump.push_str(&format!(
+            "ITEM: TIMESTEP\n{t}\nITEM: NUMBER OF ATOMS\n6\nITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n0 10\nITEM: ATOMS id element x y z\n"
+        ));
+        for (i, e) in order.iter().chain(order.iter()).enumerate() {
+            dump.push_str(&format!("{} {e} {} {} 5\n", i + 1, 1 + i, 2 + i % 3));
+        }
+    }
+    std::fs::write(d("run.lammpstrj"), dump).unwrap();
+    ok(&["batch", s(&d("run.lammpstrj")), "-o", s(&d("run.d"))]);
+    for t in [0, 100] {
+        let frame = d(&format!("run.d/frame-{t}.mdlod"));
+        let svg = d(&format!("k{t}.svg"));
+        let png = d(&format!("k{t}.png"));
+        ok(&[
+            "render",
+            s(&frame),
+            "-o",
+            s(&png),
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--legend",
+            s(&svg),
+        ]);
+        let key = std::fs::read_to_string(&svg).unwrap();
+        let at = |e: &str| key.find(&format!(">{e}</text>")).unwrap();
+        assert!(at("C") < at("H") && at("H") < at("O"), "frame {t}: {key}");
+    }
+}
+
 #[test]
 fn a_legend_can_name_the_values_of_categories() {
     let dir = tempfile::tempdir().unwrap();

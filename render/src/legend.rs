@@ -1055,6 +1055,19 @@ pub fn density_bar(density_min: f32, density_max: f32, log: bool, title: Option<
     )
 }
 
+/// The order a key of species lists their names in, the same for every frame of a run
+/// whatever order its particles came in (a file's species table follows the order in
+/// which they first appear in the dump): type numbers by value, before names, and
+/// names alphabetically, case aside, then exactly.
+pub fn key_order(a: &str, b: &str) -> std::cmp::Ordering {
+    match (a.parse::<i64>(), b.parse::<i64>()) {
+        (Ok(x), Ok(y)) => x.cmp(&y),
+        (Ok(_), Err(_)) => std::cmp::Ordering::Less,
+        (Err(_), Ok(_)) => std::cmp::Ordering::Greater,
+        _ => a.to_lowercase().cmp(&b.to_lowercase()).then(a.cmp(b)),
+    }
+}
+
 /// A key of the species shown: a disc of each one's colour (linear RGB) and its name,
 /// under `title` when given; past [`KEY_ENTRIES`] (a column of molecule ids as species),
 /// the first ones and a line saying how many more.
@@ -1086,6 +1099,13 @@ mod tests {
     /// Panels at two corners overlap where their rooms meet across the image: side by
     /// side when their widths add past it, diagonally only when both sums do; rooms that
     /// just touch do not.
+    #[test]
+    fn species_keys_list_types_by_number_and_names_alphabetically() {
+        let mut names = vec!["O", "10", "Li", "h", "2", "C", "H"];
+        names.sort_by(|a, b| key_order(a, b));
+        assert_eq!(names, ["2", "10", "C", "H", "h", "Li", "O"]);
+    }
+
     #[test]
     fn panels_at_two_corners_overlap_where_their_rooms_cross() {
         use Corner::*;

@@ -2997,7 +2997,7 @@ fn build_legend(
                 Mode::Spheres | Mode::Sndf | Mode::Splat | Mode::SplatOver
             );
             let table = opts.style.species_table(species).ok();
-            let shown: Vec<(String, [f32; 3])> = species
+            let mut shown: Vec<(String, [f32; 3])> = species
                 .iter()
                 .enumerate()
                 .filter(|(_, s)| {
@@ -3016,6 +3016,8 @@ fn build_legend(
                     (s.name.clone(), colour)
                 })
                 .collect();
+            // One order for every frame of a run, stills and movies alike.
+            shown.sort_by(|a, b| legend::key_order(&a.0, &b.0));
             let what = match shown.len() {
                 // (Every species hidden, or none in view.)
                 0 => "an empty key: no species is shown".to_string(),
