@@ -189,11 +189,24 @@ fn every_version_and_type_reads_positions_species_and_radii() {
                 .iter()
                 .enumerate()
                 .all(|(i, r)| i == 1 || r.is_none()));
-            // The one list with a global colour (colour type 0) gives its species that
-            // colour, as MegaMol draws it; the others take the palette's.
+            // The list with a global colour (colour type 0) gives its species that colour,
+            // as MegaMol draws it; lists whose particles carry colours give the mean of
+            // theirs, averaged as light (one colour each here: exactly it); intensity
+            // lists none (the palette's).
             let colours: Vec<Option<[u8; 3]>> = f.species.iter().map(|s| s.colour).collect();
-            assert_eq!(colours[0], Some([200, 100, 50]));
-            assert!(colours[1..].iter().all(Option::is_none));
+            assert_eq!(
+                colours,
+                [
+                    Some([200, 100, 50]),
+                    None,
+                    Some([1, 2, 3]),
+                    Some([128; 3]),
+                    Some([1, 2, 3]),
+                    Some([128; 3]),
+                    Some([0; 3]),
+                    None
+                ]
+            );
             let table = mdlod_preprocess::species::species_table(&f.species, &[]);
             let linear = [200u8, 100, 50].map(|c| {
                 let v = f32::from(c) / 255.0;
@@ -344,7 +357,10 @@ fn damaged_files_are_errors_naming_the_byte() {
     };
     assert!(patch(6, &104u16.to_le_bytes()).contains("MMPLD version 1.4"));
     assert!(patch(8, &u32::MAX.to_le_bytes()).contains("too short for their seek table"));
-    assert!(patch(60, &u64::MAX.to_le_bytes()).contains("frame 0 starts outside the file"));
+    assert!(patch(60, &u64::MAX.to_le_bytes())
+        .contains("frame 0 starts at byte 18446744073709551615, past the file's end"));
+    assert!(patch(60, &8u64.to_le_bytes()).contains("inside the header or the seek table"));
+    assert!(patch(60, &0u64.to_le_bytes()).contains("seek-table entry is 0"));
     let frame0 = u64::from_le_bytes(good[60..68].try_into().unwrap()) as usize;
     let m = patch(frame0, &(-3i32).to_le_bytes());
     assert!(
@@ -750,4 +766,67 @@ fn a_list_count_too_low_or_too_high_is_an_error_naming_the_frame() {
         )),
         "{m}"
     );
+}
+
+/// A file a writer stopped inside its last frame, or before writing the last frames:
+/// the complete frames read, the first missing one counts as a frame cut short (so that
+/// converting the last frame says so, and a batch leaves it out), the later ones not.
+#[test]
+fn a_last_frame_cut_short_leaves_the_frames_before_it_readable() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames: Vec<Vec<List>> = (0..3)
+        .map(|k| vec![list(1, 0, 0.5, 20 + k, k as f64)])
+        .collect();
+    let good = write(102, &frames);
+    let start = |k: usize| u64::from_le_bytes(good[60 + 8 * k..68 + 8 * k].try_into().unwrap());
+    // Cut inside frame 2's particles.
+    let inside = save(dir.path(), "inside.mmpld", &good[..start(2) as usize + 30]);
+    // The seek table's entries for frames 1 and 2 still 0, the file ending after frame 0.
+    let mut unwritten = good[..start(1) as usize].to_vec();
+    unwritten[68..84].fill(0);
+    let unwritten = save(dir.path(), "unwritten.mmpld", &unwritten);
+    for (path, complete) in [(&inside, 2), (&unwritten, 1)] {
+        let d = DumpFile::open(path).unwrap();
+        assert_eq!(d.frame_count(), complete + 1, "{}", path.display());
+        for k in 0..complete {
+            let f = d
+                .read_frame(k, &ReadOptions::default(), &NoProgress)
+                .unwrap();
+            assert_eq!(f.positions.len(), 20 + k);
+        }
+        let e = d
+            .read_frame(complete, &ReadOptions::default(), &NoProgress)
+            .unwrap_err();
+        assert!(e.cut_short(), "{e}");
+        assert!(
+            e.to_string().starts_with(&path.display().to_string()),
+            "{e}"
+        );
+        // Converting the last frame says it is incomplete; the one before converts.
+        let out = dir.path().join("out.mdlod");
+        let convert = |frame| {
+            convert_file(
+                path,
+                &out,
+                frame,
+                &ReadOptions::default(),
+                &ConvertOptions::default(),
+                &NoProgress,
+            )
+        };
+        let last = convert(FrameSelect::Last);
+        assert!(
+            last.unwrap_err().to_string().contains("incomplete"),
+            "{}",
+            path.display()
+        );
+        convert(FrameSelect::Index(complete - 1)).unwrap();
+        assert_eq!(
+            MdlodFile::open(&out).unwrap().metadata().particles,
+            20 + complete as u64 - 1
+        );
+    }
+    // A file whose first frame is cut has nothing to read: an error.
+    let first = save(dir.path(), "first.mmpld", &good[..start(0) as usize + 30]);
+    assert!(DumpFile::open(&first).is_err());
 }

@@ -92,6 +92,52 @@ impl List {
         f32::from_le_bytes(le(data, self.data + i * self.stride + 12))
     }
 
+    /// Particle `i`'s own colour (colour types 1, 2, 4, 5 and 6), its sRGB channels in
+    /// [0, 1] (alpha left out, floats clamped, NaN as 0); `None` for other types.
+    fn particle_colour(&self, data: &[u8], i: usize) -> Option<[f32; 3]> {
+        let at = self.data + i * self.stride + vertex_size(self.vertex);
+        let f = |k: usize| f32::from_le_bytes(le(data, at + 4 * k));
+        let c = match self.colour {
+            1 | 2 => [0, 1, 2].map(|k| f32::from(data[at + k]) / 255.0),
+            4 | 5 => [f(0), f(1), f(2)],
+            6 => [0, 1, 2].map(|k| f32::from(u16::from_le_bytes(le(data, at + 2 * k))) / 65535.0),
+            _ => return None,
+        };
+        Some(c.map(|v| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }))
+    }
+
+    /// The mean colour of particles `lo..hi` of a list whose particles carry colours,
+    /// averaged as light (in linear RGB), as sRGB bytes: the one colour its species is
+    /// drawn in, exact where the list is of one colour.
+    fn mean_colour(&self, data: &[u8], lo: usize, hi: usize) -> Option<[u8; 3]> {
+        let to_linear = |v: f32| {
+            if v <= 0.04045 {
+                v / 12.92
+            } else {
+                ((v + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        let mut sum = [0f64; 3];
+        for i in lo..hi {
+            let c = self.particle_colour(data, i)?;
+            for k in 0..3 {
+                sum[k] += f64::from(to_linear(c[k]));
+            }
+        }
+        if hi <= lo {
+            return None;
+        }
+        Some(sum.map(|v| {
+            let v = (v / (hi - lo) as f64) as f32;
+            let s = if v <= 0.003_130_8 {
+                12.92 * v
+            } else {
+                1.055 * v.powf(1.0 / 2.4) - 0.055
+            };
+            (s * 255.0).round().clamp(0.0, 255.0) as u8
+        }))
+    }
+
     fn intensity(&self, data: &[u8], i: usize) -> f64 {
         let at = self.data + i * self.stride + vertex_size(self.vertex);
         if self.colour == 7 {
@@ -143,6 +189,13 @@ struct FrameIndex {
 pub(crate) struct Index {
     bounding_box: [f32; 6],
     frames: Vec<FrameIndex>,
+    /// A frame after complete ones that the file does not hold whole (a writer that
+    /// stopped inside it, or before it: a seek-table entry past the end or still 0):
+    /// counted as a frame, whose every read is a "truncated file?" error
+    /// ([`ReadError::cut_short`]), so that a conversion of the last frame says so and a
+    /// batch leaves it out with a note and converts the frames before it. Later frames
+    /// of the table, not written either, are not counted.
+    cut: Option<(usize, String)>,
 }
 
 /// A little-endian reader over the file that turns running off its end into an error.
@@ -166,6 +219,12 @@ impl<'a> Cursor<'a> {
             )),
         }
     }
+}
+
+/// Whether an error's `message` is a read past the end of the file (a header, a list's particles or its
+/// cluster information).
+fn runs_past_end(message: &str) -> bool {
+    message.contains("run past the end of the file") || message.contains("file truncated in")
 }
 
 /// "the header of frame K, list L", written only into an error.
@@ -197,6 +256,13 @@ impl Index {
             ));
         }
         let frames = u32::from_le_bytes(c.take("the header")?) as usize;
+        if frames == 0 {
+            return Err(err(
+                path,
+                8,
+                "the header counts no frames: the file holds none",
+            ));
+        }
         let mut bounding_box = [0f32; 6];
         for v in &mut bounding_box {
             *v = f32::from_le_bytes(c.take("the header")?);
@@ -215,15 +281,40 @@ impl Index {
                 )
             })?;
         let mut offsets = Vec::with_capacity(frames);
+        // A frame the file does not hold whole, after complete ones: see `Index::cut`.
+        let mut cut = None;
         for k in 0..frames {
             let at = c.at;
-            let o = u64::from_le_bytes(c.take("the seek table")?);
-            let o = usize::try_from(o)
+            let entry = u64::from_le_bytes(c.take("the seek table")?);
+            let o = usize::try_from(entry)
                 .ok()
                 .filter(|&o| o >= table_end && o < data.len());
             match o {
                 Some(o) => offsets.push(o),
-                None => return Err(err(path, at, format!("frame {k} starts outside the file"))),
+                None => {
+                    let why = if entry == 0 {
+                        format!(
+                            "frame {k}'s seek-table entry is 0: the writer stopped before \
+                             writing it?"
+                        )
+                    } else if entry >= data.len() as u64 {
+                        format!(
+                            "frame {k} starts at byte {entry}, past the file's end (byte {}): \
+                             the file is cut short?",
+                            data.len()
+                        )
+                    } else {
+                        format!(
+                            "frame {k} starts at byte {entry}, inside the header or the seek \
+                             table (which end at byte {table_end})"
+                        )
+                    };
+                    if k == 0 || entry != 0 && entry < data.len() as u64 {
+                        return Err(err(path, at, why));
+                    }
+                    cut = Some((at, why));
+                    break;
+                }
             }
         }
         let mut out = Vec::with_capacity(frames);
@@ -232,6 +323,53 @@ impl Index {
         // a small file stand for billions of lists.)
         let mut previous_end = table_end;
         for (k, &start) in offsets.iter().enumerate() {
+            // The last frame the file holds, or the frame before a cut one: a read past
+            // the file's end inside it is a frame cut short, after complete ones.
+            let last = k + 1 == offsets.len();
+            let frame = Self::frame_at(
+                path,
+                data,
+                version,
+                &offsets,
+                table_end,
+                k,
+                start,
+                previous_end,
+            );
+            let (frame, end) = match frame {
+                Ok(f) => f,
+                Err(ReadError::Binary {
+                    offset, message, ..
+                }) if last && k > 0 && cut.is_none() && runs_past_end(&message) => {
+                    cut = Some((offset as usize, message));
+                    break;
+                }
+                Err(e) => return Err(e),
+            };
+            previous_end = end;
+            out.push(frame);
+        }
+        Ok(Index {
+            bounding_box,
+            frames: out,
+            cut,
+        })
+    }
+
+    /// Frame `k`, starting at byte `start` (the previous frame ends at `previous_end`),
+    /// and where its lists end.
+    #[allow(clippy::too_many_arguments)]
+    fn frame_at(
+        path: &Path,
+        data: &[u8],
+        version: u16,
+        offsets: &[usize],
+        table_end: usize,
+        k: usize,
+        start: usize,
+        previous_end: usize,
+    ) -> Result<(FrameIndex, usize), ReadError> {
+        {
             if start < previous_end {
                 return Err(err(
                     path,
@@ -395,21 +533,32 @@ impl Index {
                     ),
                 ));
             }
-            previous_end = c.at;
-            out.push(FrameIndex { timestamp, lists });
+            Ok((FrameIndex { timestamp, lists }, c.at))
         }
-        Ok(Index {
-            bounding_box,
-            frames: out,
-        })
     }
 
+    /// The frames, the one cut short included ([`Index::cut`]).
     pub fn len(&self) -> usize {
-        self.frames.len()
+        self.frames.len() + usize::from(self.cut.is_some())
     }
 
-    fn particles(&self, k: usize) -> usize {
-        self.frames[k].lists.iter().map(|l| l.particles).sum()
+    /// Frame `k`; for the frame cut short, the error saying so.
+    fn frame(&self, path: &Path, k: usize) -> Result<&FrameIndex, ReadError> {
+        match (self.frames.get(k), &self.cut) {
+            (Some(f), _) => Ok(f),
+            (None, Some((at, why))) if k == self.frames.len() => {
+                Err(err(path, *at, format!("{why} (truncated file?)")))
+            }
+            _ => Err(ReadError::NoSuchFrame {
+                path: path.to_path_buf(),
+                frame: k,
+                count: self.len(),
+            }),
+        }
+    }
+
+    fn particles(f: &FrameIndex) -> usize {
+        f.lists.iter().map(|l| l.particles).sum()
     }
 
     fn simulation_box(&self) -> SimulationBox {
@@ -418,8 +567,8 @@ impl Index {
     }
 }
 
-pub(crate) fn frame_info(index: &Index, k: usize) -> FrameInfo {
-    let f = &index.frames[k];
+pub(crate) fn frame_info(path: &Path, index: &Index, k: usize) -> Result<FrameInfo, ReadError> {
+    let f = index.frame(path, k)?;
     let mut columns: Vec<String> = ["x", "y", "z"].map(String::from).to_vec();
     if f.lists.iter().any(List::has_radius) {
         columns.push("radius".into());
@@ -427,14 +576,14 @@ pub(crate) fn frame_info(index: &Index, k: usize) -> FrameInfo {
     if f.lists.iter().any(List::has_intensity) {
         columns.push("intensity".into());
     }
-    FrameInfo {
-        particles: index.particles(k),
+    Ok(FrameInfo {
+        particles: Index::particles(f),
         timestep: None,
         time: f.timestamp.map(f64::from),
         units: None,
         simulation_box: Some(index.simulation_box()),
         columns,
-    }
+    })
 }
 
 /// The species of particles `range` of frame `k`: one per list, with its global radius,
@@ -448,7 +597,8 @@ fn species_of(
     range: Range<usize>,
 ) -> Result<Vec<SpeciesName>, ReadError> {
     let mut first = 0usize;
-    index.frames[k]
+    index
+        .frame(path, k)?
         .lists
         .iter()
         .enumerate()
@@ -493,7 +643,9 @@ fn species_of(
                 // reason to refuse the frame (the default stands in).
                 radius: (list.particles > 0 || radius > 0.0).then_some(radius),
                 radius_range: spread,
-                colour: list.global_colour,
+                colour: list
+                    .global_colour
+                    .or_else(|| list.mean_colour(data, lo, hi)),
                 palette_slot: None,
                 sized_count: 0,
                 sized_sum: 0.0,
@@ -511,7 +663,8 @@ pub(crate) fn frame_species(
     index: &Index,
     k: usize,
 ) -> Result<Vec<SpeciesName>, ReadError> {
-    species_of(path, data, index, k, 0..index.particles(k))
+    let particles = Index::particles(index.frame(path, k)?);
+    species_of(path, data, index, k, 0..particles)
 }
 
 /// The attribute `opts` asks for: `intensity`, `radius` or none; another name is an error.
@@ -530,7 +683,7 @@ fn wanted(
             0,
             format!(
                 "no per-particle `{other}` in MMPLD; available: {}",
-                frame_info(index, k).columns.join(" ")
+                frame_info(path, index, k)?.columns.join(" ")
             ),
         )),
     }
@@ -581,7 +734,7 @@ pub(crate) fn attribute_name(
 ) -> Result<Option<String>, ReadError> {
     let want = wanted(path, index, k, opts)?;
     if let Some(a) = want {
-        for (l, list) in index.frames[k].lists.iter().enumerate() {
+        for (l, list) in index.frame(path, k)?.lists.iter().enumerate() {
             if list.particles > 0 && !carries(list, a) {
                 return Err(lacks(path, k, l, list, a));
             }
@@ -603,7 +756,7 @@ pub(crate) fn read_range(
     range: Range<usize>,
     progress: &dyn Progress,
 ) -> Result<Frame, ReadError> {
-    let f = &index.frames[k];
+    let f = index.frame(path, k)?;
     let want = wanted(path, index, k, opts)?;
     if f.lists.len() > 1 << 16 {
         return Err(err(
@@ -712,4 +865,34 @@ pub(crate) fn read_range(
         time: f.timestamp.map(f64::from),
         units: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_list_of_two_colours_is_drawn_in_their_mean_as_light() {
+        // Two particles of vertex type 1 (three f32) and colour type 1 (RGB bytes): red
+        // and blue. Their mean as light is half of each, (188, 0, 188) in sRGB, not the
+        // (128, 0, 128) of the bytes' mean.
+        let mut data = vec![0u8; 2 * 15];
+        data[12..15].copy_from_slice(&[255, 0, 0]);
+        data[27..30].copy_from_slice(&[0, 0, 255]);
+        let list = List {
+            at: 0,
+            data: 0,
+            particles: 2,
+            stride: 15,
+            vertex: 1,
+            colour: 1,
+            radius: Some(1.0),
+            global_colour: None,
+        };
+        assert_eq!(list.mean_colour(&data, 0, 2), Some([188, 0, 188]));
+        assert_eq!(list.mean_colour(&data, 1, 2), Some([0, 0, 255]));
+        assert_eq!(list.mean_colour(&data, 1, 1), None);
+        let intensity = List { colour: 3, ..list };
+        assert_eq!(intensity.mean_colour(&data, 0, 2), None);
+    }
 }

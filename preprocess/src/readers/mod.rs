@@ -854,7 +854,7 @@ impl DumpFile {
         }
         if let Index::Mmpld(i) = &self.index {
             self.check_frame(k)?;
-            return Ok(mmpld::frame_info(i, k));
+            return mmpld::frame_info(&self.path, i, k);
         }
         if let Index::LammpsBinary(i) = &self.index {
             self.check_frame(k)?;
@@ -969,8 +969,9 @@ impl DumpFile {
                 let names: Vec<String> = lists.iter().map(|l| l.to_string()).collect();
                 notes.push(format!(
                     "{}: the particles of list{} {} carry colours of their own, which are not \
-                     kept: each list is a species, drawn in one colour (a palette's; render's \
-                     --species-colour {}=COLOUR sets it)",
+                     kept: each list is a species, drawn in one colour, their mean (exact \
+                     where a list is of one colour; render's --species-colour {}=COLOUR sets \
+                     another)",
                     self.path.display(),
                     if lists.len() == 1 { "" } else { "s" },
                     names.join(", "),
