@@ -138,12 +138,17 @@ fn main() -> std::process::ExitCode {
         Command::Verify(a) => commands::verify::run(a),
         Command::Render(mut a) => match matches.subcommand_matches("render") {
             Some(m) => commands::render::check_mode_options(&a, m).and_then(|()| {
-                commands::render::size_from_view(&mut a, m);
+                commands::render::size_from_view(&mut a.camera, m);
                 commands::render::run(*a)
             }),
             None => commands::render::run(*a),
         },
-        Command::Sample(a) => commands::sample::run(a),
+        Command::Sample(mut a) => {
+            if let Some(m) = matches.subcommand_matches("sample") {
+                commands::render::size_from_view(&mut a.camera, m);
+            }
+            commands::sample::run(a)
+        }
         Command::Shade(a) => matches
             .subcommand_matches("shade")
             .map_or(Ok(()), commands::shade::check_options)

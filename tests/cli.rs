@@ -533,6 +533,22 @@ fn render_writes_a_picture_and_views_round_trip() {
         "240",
     ]);
     assert!(!same.contains("saved from"), "{same}");
+    // `sample` takes the saved size too (it sampled 1280×720 before: a .sndf 50 times
+    // as large), and its shading draws that image.
+    let sndf = dir.path().join("v.sndf");
+    ok(&[
+        "sample",
+        s(&file),
+        "-o",
+        s(&sndf),
+        "--view",
+        s(&view),
+        "--iterations",
+        "1",
+    ]);
+    let lit = dir.path().join("lit.png");
+    ok(&["shade", s(&sndf), "-o", s(&lit)]);
+    assert_eq!((read_png(&lit).0, read_png(&lit).1), (160, 120));
 }
 
 /// The LAMMPS sample `name` converted to `dir/a.mdlod`.

@@ -1539,14 +1539,10 @@ fn projected(args: &Args) -> bool {
 /// their defaults: the saved view then draws the picture it was saved from; where one of
 /// them is given, the other keeps the saved shape. (A view file that cannot be read fails
 /// where it is rendered.)
-pub fn size_from_view(args: &mut Args, matches: &clap::ArgMatches) {
+pub fn size_from_view(camera: &mut ViewArgs, matches: &clap::ArgMatches) {
     let defaulted =
         |id: &str| matches.value_source(id) == Some(clap::parser::ValueSource::DefaultValue);
-    let saved = args
-        .camera
-        .view
-        .as_deref()
-        .and_then(|p| ViewFile::load(p).ok());
+    let saved = camera.view.as_deref().and_then(|p| ViewFile::load(p).ok());
     let Some([w, h]) = saved.and_then(|v| v.image).filter(|&[w, h]| w > 0 && h > 0) else {
         return;
     };
@@ -1555,9 +1551,9 @@ pub fn size_from_view(args: &mut Args, matches: &clap::ArgMatches) {
         ((f64::from(given) * f64::from(other) / f64::from(of)).round() as u32).max(1)
     };
     match (defaulted("width"), defaulted("height")) {
-        (true, true) => (args.camera.width, args.camera.height) = (w, h),
-        (false, true) => args.camera.height = scaled(args.camera.width, w, h),
-        (true, false) => args.camera.width = scaled(args.camera.height, h, w),
+        (true, true) => (camera.width, camera.height) = (w, h),
+        (false, true) => camera.height = scaled(camera.width, w, h),
+        (true, false) => camera.width = scaled(camera.height, h, w),
         (false, false) => {}
     }
 }
