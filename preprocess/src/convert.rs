@@ -777,12 +777,21 @@ pub(crate) fn position_notes(
             .farthest
             .map(|p| format!(", the farthest at ({}, {}, {})", p[0], p[1], p[2]))
             .unwrap_or_default();
+        // Most of the particles outside: the box is what is wrong (a header's stale box).
+        let cause = if f
+            .count
+            .is_some_and(|n| (n as u64).saturating_mul(2) > count)
+        {
+            "most of the frame: is the box the file records not the data's (written before \
+             the data)?"
+        } else {
+            "lost atoms of a run that blew up?"
+        };
         notes.push(format!(
             "{many} more than {FAR_OUTSIDE_BOXES} box lengths outside the box (up to {:.3e} \
-             beyond it{at}): lost atoms of a run that blew up? The hierarchy includes them: the \
-             clusters spanning them quantize their members' positions more coarsely (the \
-             summary's position error grows); a fitted view leaves them out, `render \
-             --fit-all` includes them",
+             beyond it{at}): {cause} The hierarchy includes them: the clusters spanning them quantize their members' positions more \
+             coarsely (the summary's position error grows); a fitted view leaves them out, \
+             `render --fit-all` includes them",
             f.beyond
         ));
     }
@@ -1543,6 +1552,34 @@ mod tests {
     }
 
     /// Thousands of species are asked about as ids; a protein's `CA` is noted.
+    #[test]
+    fn most_of_a_frame_outside_its_box_blames_the_box_not_the_run() {
+        let species = vec![mdlod_format::meta::Species {
+            name: "0".into(),
+            radius: 0.5,
+            colour: [0.5; 3],
+            radius_range: None,
+        }];
+        let note = |outside: usize| {
+            let far = super::FarOutside {
+                count: Some(outside),
+                beyond: 99.0,
+                farthest: None,
+            };
+            super::position_notes([0.0; 3], [100.0; 3], 1000, &species, Some(far), None)
+                .into_iter()
+                .find(|n| n.contains("box lengths outside"))
+                .unwrap()
+        };
+        assert!(note(3).contains("lost atoms of a run that blew up?"));
+        let most = note(900);
+        assert!(
+            most.contains("is the box the file records not the data's")
+                && !most.contains("blew up"),
+            "{most}"
+        );
+    }
+
     #[test]
     fn ids_read_as_species_and_atom_names_read_as_elements_are_noted() {
         let species = |names: Vec<String>| -> Vec<mdlod_format::meta::Species> {
