@@ -830,3 +830,14 @@ fn a_last_frame_cut_short_leaves_the_frames_before_it_readable() {
     let first = save(dir.path(), "first.mmpld", &good[..start(0) as usize + 30]);
     assert!(DumpFile::open(&first).is_err());
 }
+
+/// A file that starts with MMPLD's signature is read as MMPLD whatever its name says (a
+/// `.bin` was read as a LAMMPS binary dump: "negative atom count").
+#[test]
+fn the_signature_decides_over_the_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = save(dir.path(), "frames.bin", &write(102, &mixed()));
+    let d = DumpFile::open(&path).unwrap();
+    assert_eq!(d.format(), InputFormat::Mmpld);
+    assert_eq!(d.frame_count(), 2);
+}

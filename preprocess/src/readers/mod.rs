@@ -706,11 +706,15 @@ impl DumpFile {
         // A name that says one text format over a first line that says the other (LAMMPS
         // `dump xyz` output named `dump.water`, a LAMMPS dump named `.xyz`; a text dump
         // named `.bin`): the content decides, as no file starts both ways.
+        // Likewise a file that starts with a signature (GSD's, MMPLD's) whatever its name
+        // says (an MMPLD file named `.bin`).
         let by_name = InputFormat::from_path(path).map(|f| match (f, InputFormat::sniff(data)) {
             (InputFormat::LammpsText, Some(InputFormat::Xyz)) => InputFormat::Xyz,
             (InputFormat::Xyz | InputFormat::LammpsBinary, Some(InputFormat::LammpsText)) => {
                 InputFormat::LammpsText
             }
+            _ if mmpld::sniff(data) => InputFormat::Mmpld,
+            _ if gsd::sniff(data) => InputFormat::Gsd,
             _ => f,
         });
         let format = format
