@@ -1173,7 +1173,7 @@ fn sndfs_sampled_once_shade_without_the_particles() {
         );
     }
     let direct = dir.path().join("direct.png");
-    ok(&[
+    let rendered = ok(&[
         &[
             "render",
             s(&mdlod),
@@ -1189,6 +1189,29 @@ fn sndfs_sampled_once_shade_without_the_particles() {
         &size,
     ]
     .concat());
+    assert!(!rendered.contains("cluster spheres up to"), "{rendered}");
+    // A coarse cut's S-NDFs are its cluster spheres': said.
+    let coarse = dir.path().join("coarse.png");
+    let out = ok(&[
+        &[
+            "render",
+            s(&mdlod),
+            "-o",
+            s(&coarse),
+            "--mode",
+            "sndf",
+            "--iterations",
+            "1",
+            "--screen-error",
+            "500",
+        ][..],
+        &size,
+    ]
+    .concat());
+    assert!(
+        out.contains("note: the S-NDFs sample") && out.contains("whose normals are the spheres'"),
+        "{out}"
+    );
     // Without the particle data: the same picture from the S-NDFs, then re-lit.
     std::fs::remove_file(&mdlod).unwrap();
     let shaded = dir.path().join("shaded.png");

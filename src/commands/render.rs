@@ -2144,6 +2144,9 @@ pub fn run(mut args: Args) -> Result<()> {
         r.ranges,
         r.error_px,
     );
+    if let Some(n) = sndf_of_clusters_note(args.mode, &r) {
+        println!("{n}");
+    }
     // What the colours (or splat intensities) mean: a picture's legend.
     if by_attribute(&args) {
         if let Some(a) = &file.metadata().attribute {
@@ -3222,6 +3225,21 @@ fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
          fit (they would shrink the material to a fraction of the image): --fit-all fits \
          every particle, --zoom below 1 widens the view"
     ))
+}
+
+/// A note where S-NDFs were sampled from cluster spheres wider than a pixel or two: their
+/// normals are the spheres', not the particles' (the paper chooses the cut against the
+/// texels of the S-MIP level sampled, so that S-NDFs hold the data's normals).
+fn sndf_of_clusters_note(mode: Mode, r: &mdlod_render::RenderReport) -> Option<String> {
+    (mode == Mode::Sndf && r.nodes_drawn > 0 && r.error_px > 2.0).then(|| {
+        format!(
+            "  note: the S-NDFs sample {} cluster spheres up to {:.1} px wide, whose normals \
+             are the spheres', not their particles': shaded, the image is a coarse sphere \
+             image's; --screen-error 1 samples the data's own normals (`mdlod sample` at full \
+             detail, then `shade --level`, shades coarser S-MIP levels of them)",
+            r.nodes_drawn, r.error_px
+        )
+    })
 }
 
 /// After the particle count: how many particles of hidden species, or cut away by the
