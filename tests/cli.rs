@@ -9771,3 +9771,28 @@ fn an_in_image_key_asks_room_for_the_species_left_shown() {
         "{text}"
     );
 }
+
+/// A box past single precision's range (a damaged header's 1e39) converts with a note,
+/// draws without its cell, and `--cell` is refused naming the file and the box (it
+/// panicked in the sort framing the cell's corners).
+#[test]
+fn a_box_past_single_precision_is_noted_and_not_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("huge.dump");
+    std::fs::write(
+        &dump,
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS pp pp pp\n0 1e39\n0 10\n0 10\nITEM: ATOMS id type x y z\n1 1 1 1 1\n2 1 2 2 2\n",
+    )
+    .unwrap();
+    let file = dir.path().join("huge.mdlod");
+    let out = ok(&["convert", s(&dump), "-o", s(&file)]);
+    assert!(out.contains("note: the box reaches 1.000e39"), "{out}");
+    let png = dir.path().join("h.png");
+    let size = ["--width", "32", "--height", "24"];
+    ok(&[&["render", s(&file), "-o", s(&png)][..], &size].concat());
+    let e = fails(&[&["render", s(&file), "-o", s(&png), "--cell"][..], &size].concat());
+    assert!(
+        e.contains("--cell: ") && e.contains("huge.mdlod: the file's box") && e.contains("1e39"),
+        "{e}"
+    );
+}

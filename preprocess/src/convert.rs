@@ -720,6 +720,28 @@ pub(crate) fn position_notes(
     if far.is_none() {
         notes.extend(simulation_box.and_then(|b| outside_periodic_note(lo, hi, b)));
     }
+    // A box single precision cannot hold (a damaged header's 1e39): kept, but no cell
+    // drawn from it.
+    if let Some(b) = simulation_box {
+        let reach = [b.origin, b.a, b.b, b.c]
+            .iter()
+            .flatten()
+            .fold(0f64, |m, v| {
+                if v.is_nan() {
+                    f64::INFINITY
+                } else {
+                    m.max(v.abs())
+                }
+            });
+        if reach > f64::from(crate::hierarchy::MAX_COORDINATE) {
+            notes.push(format!(
+                "the box reaches {reach:.3e}, past ±{:e}, where single precision cannot hold \
+                 its extent (a damaged header?): the file keeps it, but `render --cell` cannot \
+                 draw it",
+                crate::hierarchy::MAX_COORDINATE
+            ));
+        }
+    }
     let largest = lo.iter().chain(&hi).map(|v| v.abs()).fold(0.0f32, f32::max);
     // (A species of particles of their own sizes: its smallest particle's, not its mean.)
     let smallest_radius = species
@@ -1572,6 +1594,21 @@ mod tests {
                 .unwrap()
         };
         assert!(note(3).contains("lost atoms of a run that blew up?"));
+        // A box past single precision's range is noted.
+        let huge = mdlod_format::meta::SimulationBox::orthogonal([0.0; 3], [1e39, 10.0, 10.0]);
+        let notes = super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&huge));
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.starts_with("the box reaches 1.000e39")),
+            "{notes:?}"
+        );
+        let fine = mdlod_format::meta::SimulationBox::orthogonal([0.0; 3], [10.0; 3]);
+        let notes = super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&fine));
+        assert!(
+            !notes.iter().any(|n| n.contains("the box reaches")),
+            "{notes:?}"
+        );
         let most = note(900);
         assert!(
             most.contains("is the box the file records not the data's")

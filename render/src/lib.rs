@@ -849,25 +849,66 @@ fn cell_corner_boxes(file: &MdlodFile, fitted: &Bounds) -> Vec<Bounds> {
     let Some(cell) = file.metadata().simulation_box.as_ref() else {
         return Vec::new();
     };
+    // (Corners past single precision's range, of a box of 1e39, are not framed; the
+    // others sort in a total order.)
     let mut corners: Vec<glam::Vec3> = overlay::cell_edges(cell)
         .iter()
         .flatten()
         .copied()
+        .filter(|p| p.is_finite())
         .collect();
     corners.sort_by(|a, b| {
-        a.to_array()
-            .partial_cmp(&b.to_array())
+        (0..3)
+            .map(|k| a[k].total_cmp(&b[k]))
+            .find(|o| o.is_ne())
             .unwrap_or(std::cmp::Ordering::Equal)
     });
     corners.dedup();
     corners
         .into_iter()
-        .filter(|p| p.is_finite())
         .map(|p| {
             let p = p.clamp(fitted.min, fitted.max);
             Bounds::new(p, p)
         })
         .collect()
+}
+
+/// The largest coordinate of a cell corner `--cell` draws: past it, differences of
+/// single-precision coordinates (the cell's extent, the camera's distance) overflow.
+pub const MAX_CELL_COORDINATE: f64 = 1e37;
+
+/// Refuses to draw a cell (`opts.cell`) whose corners lie past
+/// [`MAX_CELL_COORDINATE`] or are not numbers (a box of 1e39 a dump or a damaged file
+/// gives), naming the box: a fit to it failed far from the data, and its corners broke
+/// the sort that framed them.
+fn check_cell(file: &MdlodFile, opts: &RenderOptions) -> Result<(), RenderError> {
+    let (Some(_), Some(b)) = (opts.cell, file.metadata().simulation_box.as_ref()) else {
+        return Ok(());
+    };
+    let corner = |i: f64, j: f64, k: f64| {
+        [0, 1, 2].map(|d| b.origin[d] + i * b.a[d] + j * b.b[d] + k * b.c[d])
+    };
+    let far = (0..8)
+        .flat_map(|n| {
+            corner(
+                f64::from(n & 1),
+                f64::from((n >> 1) & 1),
+                f64::from((n >> 2) & 1),
+            )
+        })
+        .any(|v| v.is_nan() || v.abs() > MAX_CELL_COORDINATE);
+    if far {
+        return Err(RenderError::InvalidOptions(format!(
+            "--cell: {}: the file's box (origin {:?}, a {:?}, b {:?}, c {:?}) reaches past \
+             ±{MAX_CELL_COORDINATE:e}, where single precision cannot draw it: leave --cell out",
+            file.path().display(),
+            b.origin,
+            b.a,
+            b.b,
+            b.c
+        )));
+    }
+    Ok(())
 }
 
 pub fn cell_bounds(file: &MdlodFile) -> Option<Bounds> {
@@ -1430,6 +1471,7 @@ pub fn frame_setup(
     opts: &RenderOptions,
 ) -> Result<(Camera, TraversalSettings, FrameSettings), RenderError> {
     check_numbers(opts)?;
+    check_cell(file, opts)?;
     // The default view (and a view file giving no angle) faces flat data square on.
     let resolved;
     let opts = if opts.view.depends_on_data() {
