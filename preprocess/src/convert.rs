@@ -1301,7 +1301,7 @@ fn open_piece_bounded(
     let dump = crate::readers::DumpFile::open(&text)
         .map_err(|e| decompressed(input, Some(&text), e.into()))?;
     let dump = if cut { dump.with_gzip_cut(input) } else { dump };
-    Ok((dump, Some(text)))
+    Ok((dump.named_as(input), Some(text)))
 }
 
 impl BoundedDump {

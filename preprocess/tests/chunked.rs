@@ -579,6 +579,40 @@ fn a_large_gzip_dump_is_decompressed_into_a_working_file_and_read_in_windows() {
         0,
         "working files left"
     );
+
+    // Notes about the text name the input, not its working copy: a last line without a
+    // line end.
+    let mut text = Vec::new();
+    std::io::Read::read_to_end(
+        &mut flate2::read::MultiGzDecoder::new(std::fs::File::open(&gz).unwrap()),
+        &mut text,
+    )
+    .unwrap();
+    while text.last() == Some(&b'\n') {
+        text.pop();
+    }
+    let open = dir.path().join("open.dump.gz");
+    let mut enc = flate2::write::GzEncoder::new(
+        std::fs::File::create(&open).unwrap(),
+        flate2::Compression::fast(),
+    );
+    std::io::Write::write_all(&mut enc, &text).unwrap();
+    enc.finish().unwrap();
+    let r = convert_file(
+        &open,
+        &dir.path().join("d.mdlod"),
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    let note = r
+        .notes
+        .iter()
+        .find(|n| n.contains("its last line has no line end"))
+        .expect("the note on the last line");
+    assert!(note.starts_with(&open.display().to_string()), "{note}");
 }
 
 /// The first frame of the sample text dump (500 atoms) as lines, and the index of its

@@ -577,6 +577,9 @@ pub struct DumpFile {
     /// The gzip file whose compressed stream ended early (a run still writing it, a copy
     /// cut short): the text decompressed before the cut is what is read.
     gzip_cut: Option<PathBuf>,
+    /// The file the user named, where this dump reads a working copy of it (a large
+    /// gzip file decompressed to disk): what notes name.
+    named: Option<PathBuf>,
     format: InputFormat,
     index: Index,
 }
@@ -640,6 +643,7 @@ impl DumpFile {
             bytes: Box::new(Vec::new()),
             compressed: pieces.iter().any(DumpFile::is_compressed),
             gzip_cut: pieces.iter().find_map(|p| p.gzip_cut.clone()),
+            named: None,
             format: first.format,
             index: Index::Pieces(pieces),
         })
@@ -777,6 +781,7 @@ impl DumpFile {
             bytes,
             compressed,
             gzip_cut,
+            named: None,
             format,
             index,
         }))
@@ -793,6 +798,27 @@ impl DumpFile {
     pub fn with_gzip_cut(mut self, input: &Path) -> DumpFile {
         self.gzip_cut = Some(input.to_path_buf());
         self
+    }
+
+    /// This dump reads a working copy of `input` (a gzip file decompressed to disk): its
+    /// notes name `input`, not the copy.
+    pub fn named_as(mut self, input: &Path) -> DumpFile {
+        self.named = Some(input.to_path_buf());
+        self
+    }
+
+    /// `notes` with the working copy's path replaced by the file the user named.
+    fn as_named(&self, notes: Vec<String>) -> Vec<String> {
+        match &self.named {
+            Some(named) => {
+                let (copy, named) = (self.path.display().to_string(), named.display().to_string());
+                notes
+                    .into_iter()
+                    .map(|n| n.replace(&copy, &named))
+                    .collect()
+            }
+            None => notes,
+        }
     }
 
     pub fn path(&self) -> &Path {
@@ -1006,7 +1032,7 @@ impl DumpFile {
                 self.path.display()
             ));
         }
-        notes
+        self.as_named(notes)
     }
 
     /// True for a text dump (LAMMPS text, XYZ) whose last line has no line end: a run
@@ -1089,7 +1115,9 @@ impl DumpFile {
     /// set's frames that some pieces hold and others not yet (left out).
     pub fn input_notes(&self) -> Vec<String> {
         match &self.index {
-            Index::Pieces(p) => pieces::ahead_note(&self.path, p).into_iter().collect(),
+            Index::Pieces(p) => {
+                self.as_named(pieces::ahead_note(&self.path, p).into_iter().collect())
+            }
             _ => Vec::new(),
         }
     }
