@@ -9796,3 +9796,42 @@ fn a_box_past_single_precision_is_noted_and_not_drawn() {
         "{e}"
     );
 }
+
+/// A small file damaged on disk (one byte of its positions flipped) is refused when it is
+/// drawn, naming the section, not drawn from the damaged bytes (opening checks no
+/// per-particle data; a file this small is checked whole).
+#[test]
+fn a_small_file_damaged_on_disk_is_refused_when_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = converted(dir.path(), "cu_melt.custom.dump");
+    let positions = MdlodFile::open(&file)
+        .unwrap()
+        .sections()
+        .iter()
+        .rfind(|s| {
+            mdlod_format::layout::SectionKind::from_code(s.kind)
+                .is_some_and(|k| k.name() == "POSITIONS")
+        })
+        .map(|s| s.offset as usize + 7)
+        .unwrap();
+    let mut bytes = std::fs::read(&file).unwrap();
+    bytes[positions] ^= 0x10;
+    std::fs::write(&file, bytes).unwrap();
+    ok(&["info", s(&file)]);
+    let png = dir.path().join("x.png");
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+    assert!(
+        e.contains("(POSITIONS, level") && e.contains("checksum mismatch") && e.contains("a.mdlod"),
+        "{e}"
+    );
+    assert!(!png.exists());
+}

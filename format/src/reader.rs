@@ -1607,12 +1607,18 @@ impl MdlodFile {
         Ok(out)
     }
 
-    /// Checks every section checksum, that the padding between sections is zero, every
-    /// node's point range, every species index and every decoded point (finite, inside
-    /// its parent's bounds up to the quantization step; a particle, inside them shrunk by
-    /// its radius up to the recorded position error).
-    pub fn verify(&self) -> Result<VerifyReport, FormatError> {
-        let mut report = VerifyReport::default();
+    /// Checks every section's checksum where the sections hold at most `max_bytes` in
+    /// all (a small file: hashing it costs little beside drawing it), and returns whether
+    /// it did. A file damaged on disk (a flipped byte in its positions) is then refused on
+    /// open instead of drawn; a larger one is left to [`Self::verify`].
+    pub fn check_checksums_up_to(&self, max_bytes: u64) -> Result<bool, FormatError> {
+        let total = self
+            .sections
+            .iter()
+            .fold(0u64, |t, s| t.saturating_add(s.length));
+        if total > max_bytes {
+            return Ok(false);
+        }
         for (i, s) in self.sections.iter().enumerate() {
             let bytes = &self.map[s.offset as usize..(s.offset + s.length) as usize];
             let computed = xxh3_64(bytes);
@@ -1628,6 +1634,18 @@ impl MdlodFile {
                     computed,
                 });
             }
+        }
+        Ok(true)
+    }
+
+    /// Checks every section checksum, that the padding between sections is zero, every
+    /// node's point range, every species index and every decoded point (finite, inside
+    /// its parent's bounds up to the quantization step; a particle, inside them shrunk by
+    /// its radius up to the recorded position error).
+    pub fn verify(&self) -> Result<VerifyReport, FormatError> {
+        let mut report = VerifyReport::default();
+        self.check_checksums_up_to(u64::MAX)?;
+        for s in &self.sections {
             report.sections += 1;
             report.bytes_hashed += s.length;
         }
