@@ -376,7 +376,13 @@ impl SndfData {
             ));
         }
         let header: SndfHeader = serde_json::from_slice(&bytes[FIXED..FIXED + json_len])
-            .map_err(|e| corrupt(path, "header", format!("invalid JSON: {e}")))?;
+            .map_err(|e| {
+                corrupt(
+                    path,
+                    "S-NDF header (the file starts with the S-NDF signature)",
+                    format!("invalid JSON: {e}"),
+                )
+            })?;
         // S-MIP tiles are version 1.1's: a 1.0 file holding them was not written by a
         // writer of that version. (Later minors add keys, which the header refuses.)
         if minor == 0 && header.smip.is_some() {
