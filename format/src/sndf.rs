@@ -375,8 +375,8 @@ impl SndfData {
                 format!("header length {json_len} does not fit the file ({file_len} bytes)"),
             ));
         }
-        let header: SndfHeader = serde_json::from_slice(&bytes[FIXED..FIXED + json_len])
-            .map_err(|e| {
+        let header: SndfHeader =
+            serde_json::from_slice(&bytes[FIXED..FIXED + json_len]).map_err(|e| {
                 corrupt(
                     path,
                     "S-NDF header (the file starts with the S-NDF signature)",

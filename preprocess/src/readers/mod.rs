@@ -2402,6 +2402,11 @@ pub fn gunzip_to_file(
     Ok((written, cut))
 }
 
+/// The first 4 bytes of `b` (at least 4 long).
+fn le4(b: &[u8]) -> [u8; 4] {
+    [b[0], b[1], b[2], b[3]]
+}
+
 /// A compressed stream that ends before its end (no more input inside a block, or no
 /// trailer): what was decompressed before it is sound.
 fn ends_early(e: &std::io::Error) -> bool {
@@ -2454,10 +2459,19 @@ fn gunzip(
         progress,
     };
     let take = limit.map_or(u64::MAX, |l| l.saturating_add(1));
+    // The gzip trailer's last 4 bytes give the (last member's) text length modulo 2^32:
+    // exact for the usual single-member file under 4 GiB, whose text then fills one
+    // buffer of its size instead of doubling into one of up to twice it (a 1 GiB text
+    // peaked at 2.1 GB).
+    let trailer = compressed
+        .len()
+        .checked_sub(4)
+        .map_or(0, |at| u32::from_le_bytes(le4(&compressed[at..])) as usize);
     let mut out = Vec::with_capacity(
         compressed
             .len()
             .saturating_mul(4)
+            .max(trailer)
             .min(usize::try_from(take).unwrap_or(usize::MAX)),
     );
     // (On an error, `read_to_end` keeps what it read before it.)
@@ -2475,4 +2489,35 @@ fn gunzip(
         return Ok(None);
     }
     Ok(Some((out, cut)))
+}
+
+#[cfg(test)]
+mod gunzip_tests {
+    /// A text of a high ratio fills a buffer of its own length (the trailer's), not one
+    /// doubled past it, and a multi-member file (whose trailer gives its last member's
+    /// length only) still reads whole.
+    #[test]
+    fn gzip_text_is_read_into_a_buffer_of_its_length() {
+        let gz = |text: &[u8]| {
+            let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+            std::io::Write::write_all(&mut e, text).unwrap();
+            e.finish().unwrap()
+        };
+        let text = vec![b' '; 1_000_003];
+        let one = gz(&text);
+        let path = std::path::Path::new("t.gz");
+        let (out, cut) = super::gunzip(path, &one, None, &crate::NoProgress)
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            (out.len(), out.capacity(), cut),
+            (text.len(), text.len(), false)
+        );
+        let mut two = one.clone();
+        two.extend_from_slice(&gz(b"tail\n"));
+        let (out, _) = super::gunzip(path, &two, None, &crate::NoProgress)
+            .unwrap()
+            .unwrap();
+        assert_eq!(out.len(), text.len() + 5);
+    }
 }
