@@ -1256,3 +1256,25 @@ fn an_attribute_a_later_frame_takes_from_frame_0_is_noted() {
         notes(1)
     );
 }
+
+/// A box length below 0 (a damaged file's Lx = -10) is refused naming the frame and the
+/// axis; 0 (a two-dimensional box's Lz) is read.
+#[test]
+fn a_negative_box_length_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let boxed = |lz: f32| {
+        let v: Vec<u8> = [10.0f32, 10.0, lz, 0.0, 0.0, 0.0]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        two_particles(&[("configuration/box", 9, 3, v)])
+    };
+    let (_, f) = read_frame_0(dir.path(), &boxed(-10.0), &ReadOptions::default());
+    let e = f.unwrap_err();
+    assert!(
+        e.contains("frame 0: the box's Lz is -10: a box length is 0 or more"),
+        "{e}"
+    );
+    let (_, f) = read_frame_0(dir.path(), &boxed(0.0), &ReadOptions::default());
+    assert_eq!(f.unwrap().simulation_box.unwrap().c, [0.0; 3]);
+}

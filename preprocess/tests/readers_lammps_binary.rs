@@ -278,6 +278,11 @@ fn truncated_and_corrupt_binary_dumps_are_errors_naming_the_byte() {
         e.contains("byte 132: time is not a finite number (NaN)"),
         "{e}"
     );
+    // A boundary flag LAMMPS does not write (0 to 3): a header read wrong.
+    let mut bad = good.clone();
+    bad[46..50].copy_from_slice(&7i32.to_le_bytes());
+    let e = open_err(&bad);
+    assert!(e.contains("byte 46: boundary flag 7"), "{e}");
     // Not a number of values per atom.
     let mut bad = good;
     bad[0x76..0x7a].copy_from_slice(&(-6i32).to_le_bytes());

@@ -511,6 +511,17 @@ impl Index {
             ));
         }
         let (lx, ly, lz, xy, xz, yz) = (v[0], v[1], v[2], v[3], v[4], v[5]);
+        if let Some((axis, l)) = [("Lx", lx), ("Ly", ly), ("Lz", lz)]
+            .into_iter()
+            .find(|&(_, l)| l < 0.0)
+        {
+            let at = self.chunk(k, "configuration/box").map_or(0, |e| e.at);
+            return Err(err(
+                path,
+                at,
+                format!("frame {k}: the box's {axis} is {l}: a box length is 0 or more"),
+            ));
+        }
         // The box is single precision: vectors and origin derived from it are rounded to
         // it too, so that a tilt of 0.1 gives 1.1, not the 1.10000001639 of its f32.
         let single = |x: f64| f64::from(x as f32);

@@ -292,7 +292,15 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
     }
     let mut boundary = [0i32; 6];
     for b in &mut boundary {
+        let at = r.pos;
         *b = r.i32("boundary flags")?;
+        // LAMMPS writes 0 (p), 1 (f), 2 (s) or 3 (m): another is a header read wrong.
+        if !(0..=3).contains(b) {
+            return Err(r.err(
+                at,
+                format!("boundary flag {b} (LAMMPS writes 0 to 3: p, f, s, m)"),
+            ));
+        }
     }
     let mut bounds = [0f64; 6];
     let bounds_at = r.pos;
