@@ -454,23 +454,29 @@ fn zooming_in_past_the_smip_level_0_samples_a_finer_level() {
     );
 }
 
-#[test]
-fn an_abandoned_render_thread_is_not_waited_for() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = make_file(dir.path());
-    let mut s = state(&path, [64, 48]);
+/// A render thread drawing a long frame (an S-NDF screenshot of many seconds on a
+/// software device) of `path` into `dir/slow.png`, and that file's path.
+fn drawing_a_long_frame(dir: &Path, path: &Path) -> (Worker, PathBuf) {
+    let mut s = state(path, [64, 48]);
     s.apply(&Action::Mode { mode: Mode::Sndf });
     s.settings.sndf_iterations = 64;
-    let mut w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
-    // A long frame (many seconds on a software device) in progress.
-    let out = dir.path().join("slow.png");
+    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let out = dir.join("slow.png");
     w.send(Request::Screenshot {
-        path: path.clone(),
+        path: path.to_path_buf(),
         opts: s.render_options([1024, 768]),
         shade: s.settings.shade_lights(),
         out: out.clone(),
     });
     std::thread::sleep(Duration::from_millis(50));
+    (w, out)
+}
+
+#[test]
+fn an_abandoned_render_thread_is_not_waited_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let (mut w, out) = drawing_a_long_frame(dir.path(), &path);
     // A script timed out: the window closes without waiting for it.
     w.abandon();
     let t0 = std::time::Instant::now();
@@ -753,18 +759,7 @@ fn a_closing_window_waits_for_an_idle_render_thread_but_not_a_long_frame() {
     drop(w);
     assert!(t0.elapsed() < Duration::from_millis(100));
     // A long frame in progress: the wait ends at its limit.
-    let mut s = state(&path, [64, 48]);
-    s.apply(&Action::Mode { mode: Mode::Sndf });
-    s.settings.sndf_iterations = 64;
-    let mut w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
-    let out = dir.path().join("slow.png");
-    w.send(Request::Screenshot {
-        path: path.clone(),
-        opts: s.render_options([1024, 768]),
-        shade: s.settings.shade_lights(),
-        out: out.clone(),
-    });
-    std::thread::sleep(Duration::from_millis(50));
+    let (mut w, out) = drawing_a_long_frame(dir.path(), &path);
     let t0 = std::time::Instant::now();
     assert!(!w.finish_within(Duration::from_millis(200)));
     drop(w);
