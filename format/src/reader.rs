@@ -1821,9 +1821,10 @@ impl MdlodFile {
                             let (lo, hi) = (f64::from(lo), f64::from(hi));
                             let slack = info.step_at(hi) + 8.0 * f64::from(f32::EPSILON) * hi;
                             if r < lo - slack || r > hi + slack {
+                                let section = if info.log { "RADIUS_LOG" } else { "RADIUS" };
                                 return Err(FormatError::corrupt(
                                     &self.path,
-                                    format!("RADIUS, particle {i}"),
+                                    format!("{section}, particle {i}"),
                                     format!(
                                         "radius {} lies outside its species' sizes {} to {}",
                                         r as f32, lo as f32, hi as f32

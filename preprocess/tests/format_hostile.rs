@@ -1426,6 +1426,18 @@ fn radii_on_a_log_scale_are_checked_as_linear_ones() {
         }
     });
     expect_refused(&p, &["there is no RADIUS_LOG section"]);
+    // A radius outside its species' sizes is named in the section that holds it.
+    let last = Doc::parse(&b).levels().len() as u32 - 1;
+    let p = with("log-radius-outside.mdlod", &|d, _| {
+        let species = d.section(SectionKind::Species, last).clone();
+        let r = d.section(SectionKind::RadiusLog, last);
+        for (q, s) in r.chunks_exact_mut(2).zip(species.chunks_exact(2)) {
+            if s == [0, 0] {
+                q.copy_from_slice(&[0xff, 0xff]);
+            }
+        }
+    });
+    expect_refused(&p, &["RADIUS_LOG, particle", "outside its species' sizes"]);
 }
 
 /// Further attributes (ATTRIBUTES, NODE_ATTRIBUTES, metadata `attributes`, version
