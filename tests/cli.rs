@@ -9835,3 +9835,52 @@ fn a_small_file_damaged_on_disk_is_refused_when_drawn() {
     );
     assert!(!png.exists());
 }
+
+/// On a still of elements, an element's symbol in another case (`li`) is a misspelling,
+/// refused with the symbol, even where the frame lacks that element; the symbol itself
+/// is noted as absent (ions that come later).
+#[test]
+fn an_elements_symbol_in_another_case_is_refused_where_the_frame_lacks_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("cho.dump");
+    std::fs::write(
+        &dump,
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n3\nITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n0 10\nITEM: ATOMS id element x y z\n1 C 1 1 1\n2 H 2 2 2\n3 O 3 3 3\n",
+    )
+    .unwrap();
+    let file = dir.path().join("cho.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file)]);
+    let png = dir.path().join("x.png");
+    let size = ["--width", "32", "--height", "24"];
+    let e = fails(
+        &[
+            &[
+                "render",
+                s(&file),
+                "-o",
+                s(&png),
+                "--species-colour",
+                "li=red",
+            ][..],
+            &size,
+        ]
+        .concat(),
+    );
+    assert!(
+        e.contains("no species named \"li\"; did you mean \"Li\"?"),
+        "{e}"
+    );
+    let out = ok(&[
+        &[
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--species-colour",
+            "Li=red",
+        ][..],
+        &size,
+    ]
+    .concat());
+    assert!(out.contains("no particle of this frame is Li"), "{out}");
+}

@@ -561,6 +561,29 @@ fn outside_periodic_note(
     })
 }
 
+/// A note where the box has no width along an axis the particles spread along (a
+/// header's `5 5` for data spanning 23 Å): the box, not the data, is two-dimensional,
+/// and every particle lies outside it.
+fn flat_box_note(
+    lo: [f32; 3],
+    hi: [f32; 3],
+    b: &mdlod_format::meta::SimulationBox,
+) -> Option<String> {
+    let (blo, bhi) = crate::chunked::box_bounds(b);
+    let spans: Vec<String> = (0..3)
+        .filter(|&k| bhi[k] - blo[k] == 0.0 && hi[k] > lo[k])
+        .map(|k| format!("{} from {} to {}", ["x", "y", "z"][k], lo[k], hi[k]))
+        .collect();
+    (!spans.is_empty()).then(|| {
+        format!(
+            "the box has no width along {} the particles spread along ({}): a box read \
+             wrong? The particles lie outside it (the file keeps the box as given)",
+            if spans.len() == 1 { "an axis" } else { "axes" },
+            spans.join(", ")
+        )
+    })
+}
+
 /// More species than a figure tells apart: [`position_notes`] asks whether they are ids.
 const MANY_SPECIES: usize = 1000;
 
@@ -720,6 +743,7 @@ pub(crate) fn position_notes(
     if far.is_none() {
         notes.extend(simulation_box.and_then(|b| outside_periodic_note(lo, hi, b)));
     }
+    notes.extend(simulation_box.and_then(|b| flat_box_note(lo, hi, b)));
     // A box single precision cannot hold (a damaged header's 1e39): kept, but no cell
     // drawn from it.
     if let Some(b) = simulation_box {
@@ -1594,6 +1618,24 @@ mod tests {
                 .unwrap()
         };
         assert!(note(3).contains("lost atoms of a run that blew up?"));
+        // A box of no width along an axis the particles spread along is noted; one they
+        // lie flat in (a two-dimensional run) is not.
+        let flat =
+            mdlod_format::meta::SimulationBox::orthogonal([5.0, 0.0, 0.0], [5.0, 10.0, 10.0]);
+        let spread = |lo: f32, hi: f32| {
+            super::position_notes(
+                [lo, 0.0, 0.0],
+                [hi, 10.0, 10.0],
+                1000,
+                &species,
+                None,
+                Some(&flat),
+            )
+            .into_iter()
+            .find(|n| n.contains("no width"))
+        };
+        assert!(spread(0.0, 23.0).is_some_and(|n| n.contains("x from 0 to 23")));
+        assert!(spread(5.0, 5.0).is_none());
         // A box past single precision's range is noted.
         let huge = mdlod_format::meta::SimulationBox::orthogonal([0.0; 3], [1e39, 10.0, 10.0]);
         let notes = super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&huge));

@@ -329,6 +329,14 @@ fn srgb_to_linear(c: [u8; 3]) -> [f32; 3] {
     })
 }
 
+/// The element symbol `name` spells, case aside (`li`: `Li`), where it is one.
+pub fn element_symbol(name: &str) -> Option<&'static str> {
+    ELEMENTS
+        .iter()
+        .find(|(s, _, _)| s.eq_ignore_ascii_case(name))
+        .map(|(s, _, _)| *s)
+}
+
 /// The standard radius and colour of an element symbol (case-insensitive), if known.
 pub fn element(symbol: &str) -> Option<(f32, [f32; 3])> {
     ELEMENTS

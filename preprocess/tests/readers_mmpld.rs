@@ -781,11 +781,13 @@ fn a_last_frame_cut_short_leaves_the_frames_before_it_readable() {
     let start = |k: usize| u64::from_le_bytes(good[60 + 8 * k..68 + 8 * k].try_into().unwrap());
     // Cut inside frame 2's particles.
     let inside = save(dir.path(), "inside.mmpld", &good[..start(2) as usize + 30]);
+    // Cut inside frame 1: frame 2's seek-table entry lies past the end too.
+    let earlier = save(dir.path(), "earlier.mmpld", &good[..start(1) as usize + 30]);
     // The seek table's entries for frames 1 and 2 still 0, the file ending after frame 0.
     let mut unwritten = good[..start(1) as usize].to_vec();
     unwritten[68..84].fill(0);
     let unwritten = save(dir.path(), "unwritten.mmpld", &unwritten);
-    for (path, complete) in [(&inside, 2), (&unwritten, 1)] {
+    for (path, complete) in [(&inside, 2), (&unwritten, 1), (&earlier, 1)] {
         let d = DumpFile::open(path).unwrap();
         assert_eq!(d.frame_count(), complete + 1, "{}", path.display());
         for k in 0..complete {

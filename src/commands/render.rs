@@ -3700,13 +3700,26 @@ fn drop_absent_categories(path: &Path, style: &mut mdlod_render::PointStyle) -> 
     if absent.is_empty() {
         return Ok(());
     }
-    // A name one of the frame's spells otherwise is a misspelling, not an absent type.
+    // A name one of the frame's spells otherwise is a misspelling, not an absent type;
+    // so is an element's symbol in another case (`li`), where every species of the frame
+    // is an element (not among Martini beads, whose `NA` is no sodium).
+    let elements = m
+        .species
+        .iter()
+        .all(|s| mdlod_preprocess::species::element_symbol(&s.name) == Some(s.name.as_str()));
     for name in &absent {
-        if let Some(s) = m.species.iter().find(|s| s.name.eq_ignore_ascii_case(name)) {
+        let near = m
+            .species
+            .iter()
+            .find(|s| s.name.eq_ignore_ascii_case(name))
+            .map(|s| s.name.as_str())
+            .or_else(|| {
+                mdlod_preprocess::species::element_symbol(name).filter(|&e| elements && e != name)
+            });
+        if let Some(near) = near {
             anyhow::bail!(
-                "{}: no species named {name:?}; did you mean {:?}? (names are matched exactly)",
+                "{}: no species named {name:?}; did you mean {near:?}? (names are matched exactly)",
                 path.display(),
-                s.name
             );
         }
     }

@@ -340,7 +340,9 @@ impl Index {
                 Ok(f) => f,
                 Err(ReadError::Binary {
                     offset, message, ..
-                }) if last && k > 0 && cut.is_none() && runs_past_end(&message) => {
+                }) if last && k > 0 && runs_past_end(&message) => {
+                    // (Frames the seek table names after it, not written at all, are not
+                    // counted: the first frame not whole is the one cut short.)
                     cut = Some((offset as usize, message));
                     break;
                 }
