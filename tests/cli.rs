@@ -9884,3 +9884,59 @@ fn an_elements_symbol_in_another_case_is_refused_where_the_frame_lacks_it() {
     .concat());
     assert!(out.contains("no particle of this frame is Li"), "{out}");
 }
+
+/// A small file damaged so that every checksum still holds (a crafted file: a particle's
+/// quantized position moved far outside its cluster, all checksums recomputed) is
+/// refused when drawn, as `verify` refuses it, not drawn from the damaged data.
+#[test]
+fn a_small_crafted_file_with_right_checksums_is_refused_when_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = converted(dir.path(), "cu_melt.custom.dump");
+    let u64_at = |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().unwrap());
+    let mut b = std::fs::read(&file).unwrap();
+    let (count, table) = (
+        u32::from_le_bytes(b[16..20].try_into().unwrap()) as usize,
+        u64_at(&b, 24) as usize,
+    );
+    let entry = (0..count)
+        .map(|i| table + 32 * i)
+        .rfind(|&e| {
+            mdlod_format::layout::SectionKind::from_code(u32::from_le_bytes(
+                b[e..e + 4].try_into().unwrap(),
+            ))
+            .is_some_and(|k| k.name() == "POSITIONS")
+        })
+        .unwrap();
+    let (offset, length) = (
+        u64_at(&b, entry + 8) as usize,
+        u64_at(&b, entry + 16) as usize,
+    );
+    // The first particle's x moved to the far end of its cluster's quantization range,
+    // and back along it: outside the cluster's bounds.
+    b[offset..offset + 2].copy_from_slice(&[0xff, 0xff]);
+    b[offset + 2..offset + 4].copy_from_slice(&[0x00, 0x00]);
+    let sum = xxhash_rust::xxh3::xxh3_64(&b[offset..offset + length]);
+    b[entry + 24..entry + 32].copy_from_slice(&sum.to_le_bytes());
+    let table_sum = xxhash_rust::xxh3::xxh3_64(&b[table..table + 32 * count]);
+    b[40..48].copy_from_slice(&table_sum.to_le_bytes());
+    let header_sum = xxhash_rust::xxh3::xxh3_64(&b[..56]);
+    b[56..64].copy_from_slice(&header_sum.to_le_bytes());
+    std::fs::write(&file, &b).unwrap();
+    let said = fails(&["verify", s(&file)]);
+    let png = dir.path().join("x.png");
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+    assert!(
+        e.contains("a.mdlod: level 1, particle 0: decodes") && said.contains("particle 0: decodes"),
+        "{e} (verify: {said})"
+    );
+    assert!(!png.exists());
+}
