@@ -103,7 +103,8 @@ impl List {
             6 => [0, 1, 2].map(|k| f32::from(u16::from_le_bytes(le(data, at + 2 * k))) / 65535.0),
             _ => return None,
         };
-        Some(c.map(|v| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }))
+        // (NaN stays NaN: such a particle has no colour to count.)
+        Some(c.map(|v| if v.is_nan() { v } else { v.clamp(0.0, 1.0) }))
     }
 
     /// The mean colour of particles `lo..hi` of a list whose particles carry colours,
@@ -118,17 +119,22 @@ impl List {
             }
         };
         let mut sum = [0f64; 3];
+        let mut counted = 0usize;
         for i in lo..hi {
             let c = self.particle_colour(data, i)?;
+            if c.iter().any(|v| v.is_nan()) {
+                continue;
+            }
             for k in 0..3 {
                 sum[k] += f64::from(to_linear(c[k]));
             }
+            counted += 1;
         }
-        if hi <= lo {
+        if counted == 0 {
             return None;
         }
         Some(sum.map(|v| {
-            let v = (v / (hi - lo) as f64) as f32;
+            let v = (v / counted as f64) as f32;
             let s = if v <= 0.003_130_8 {
                 12.92 * v
             } else {
@@ -894,6 +900,20 @@ mod tests {
         assert_eq!(list.mean_colour(&data, 0, 2), Some([188, 0, 188]));
         assert_eq!(list.mean_colour(&data, 1, 2), Some([0, 0, 255]));
         assert_eq!(list.mean_colour(&data, 1, 1), None);
+        // Colours that are no numbers are left out of the mean; a list of none has none
+        // (a palette colour stands in).
+        let mut floats = vec![0u8; 2 * 24];
+        for (k, v) in [f32::NAN, 0.0, 0.0, 0.0, 0.0, 1.0].iter().enumerate() {
+            let at = 12 * (k / 3 + 1) + 4 * (k % 3) + 12 * (k / 3);
+            floats[at..at + 4].copy_from_slice(&v.to_le_bytes());
+        }
+        let rgb = List {
+            stride: 24,
+            colour: 4,
+            ..list.clone()
+        };
+        assert_eq!(rgb.mean_colour(&floats, 0, 2), Some([0, 0, 255]));
+        assert_eq!(rgb.mean_colour(&floats, 0, 1), None);
         let intensity = List { colour: 3, ..list };
         assert_eq!(intensity.mean_colour(&data, 0, 2), None);
     }
