@@ -2423,6 +2423,12 @@ fn gzip_error(path: &Path, e: std::io::Error) -> ReadError {
              `zcat {} > part` keeps the text before the cut, whose complete frames convert",
             path.display()
         )
+    } else if e.to_string().contains("checksum") {
+        // (flate2 says "checksum" for a trailer whose CRC or length does not match.)
+        format!(
+            "gzip decompression failed: {e}: the trailer's CRC-32 or length (ISIZE) does not \
+             match the text decompressed (a damaged or altered file)"
+        )
     } else {
         format!("gzip decompression failed: {e}")
     };
@@ -2513,6 +2519,12 @@ mod gunzip_tests {
             (out.len(), out.capacity(), cut),
             (text.len(), text.len(), false)
         );
+        // A trailer whose length lies is an error that says what the trailer holds.
+        let mut lying = one.clone();
+        let n = lying.len();
+        lying[n - 4..].copy_from_slice(&7u32.to_le_bytes());
+        let e = super::gunzip(path, &lying, None, &crate::NoProgress).unwrap_err();
+        assert!(e.to_string().contains("CRC-32 or length (ISIZE)"), "{e}");
         let mut two = one.clone();
         two.extend_from_slice(&gz(b"tail\n"));
         let (out, _) = super::gunzip(path, &two, None, &crate::NoProgress)
