@@ -843,3 +843,26 @@ fn the_signature_decides_over_the_name() {
     assert_eq!(d.format(), InputFormat::Mmpld);
     assert_eq!(d.frame_count(), 2);
 }
+
+/// The seek table's end entry before where the last frame's lists end is an error naming
+/// the table; an end entry of 0 (a writer that leaves it out) is not.
+#[test]
+fn an_end_entry_before_the_last_frames_end_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(102, &mixed());
+    let table_end = 60 + 8 * 2;
+    let patched = |v: u64| {
+        let mut b = good.clone();
+        b[table_end..table_end + 8].copy_from_slice(&v.to_le_bytes());
+        save(dir.path(), "end.mmpld", &b)
+    };
+    let e = DumpFile::open(&patched(1300)).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!(
+            "byte {table_end}: the seek table's end entry says frame 1 ends at byte 1300"
+        )),
+        "{e}"
+    );
+    let d = DumpFile::open(&patched(0)).unwrap();
+    assert_eq!(d.frame_count(), 2);
+}

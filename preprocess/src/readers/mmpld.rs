@@ -529,6 +529,22 @@ impl Index {
                 }
                 None => None,
             };
+            // The end entry (last frame) before where the lists end: a list count too
+            // high, or a table written wrong. (0: a writer that leaves it out.)
+            if let Some(end) =
+                seek_end.filter(|&e| offsets.get(k + 1).is_none() && e != 0 && e < c.at)
+            {
+                return Err(err(
+                    path,
+                    table_end,
+                    format!(
+                        "the seek table's end entry says frame {k} ends at byte {end}, but its \
+                         lists ({count}, as the frame header counts them) end at byte {} \
+                         (a damaged table, or a wrong list count?)",
+                        c.at
+                    ),
+                ));
+            }
             if let Some(seek_end) = seek_end.filter(|&e| c.at < e) {
                 return Err(err(
                     path,
