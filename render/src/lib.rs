@@ -733,15 +733,6 @@ pub fn open_styled(
     style: &PointStyle,
 ) -> Result<MdlodFile, mdlod_format::FormatError> {
     let mut file = MdlodFile::open(path)?;
-    // A small file is checked whole: a byte flipped on disk is an error, not a picture.
-    // A smaller one is verified whole too (every node and point), as `mdlod verify`
-    // does: damage that keeps the checksums right (a crafted file) is refused as well.
-    let len = std::fs::metadata(path).map_or(u64::MAX, |m| m.len());
-    if len <= VERIFIED_ON_OPEN {
-        file.verify()?;
-    } else {
-        file.check_checksums_up_to(CHECKED_ON_OPEN)?;
-    }
     // Hidden values of another attribute than the colour's are chosen first: selecting
     // the colour's leaves the file that one alone.
     if let Some(name) = style
@@ -757,15 +748,30 @@ pub fn open_styled(
     }
 }
 
-/// Files whose sections hold at most this many bytes have every checksum checked when a
-/// renderer opens them ([`open_styled`]): about 10 ms of hashing, against the 0.1-0.3 s
-/// of drawing them.
+/// Files whose sections hold at most this many bytes have every checksum checked before
+/// they are drawn ([`check_before_drawing`]): about 10 ms of hashing, against the
+/// 0.1-0.3 s of drawing them.
 pub const CHECKED_ON_OPEN: u64 = 64 << 20;
 
-/// Files of at most this many bytes are verified whole when a renderer opens them
+/// Files of at most this many bytes are verified whole before they are drawn
 /// ([`MdlodFile::verify`]: every checksum, node and decoded point; about 10 ms, against
 /// the 0.1-0.3 s of drawing them).
 pub const VERIFIED_ON_OPEN: u64 = 16 << 20;
+
+/// Checks a file about to be drawn, once per file (a caller that opens it again for its
+/// metadata does not check it again): a small file whole, as `mdlod verify` does, so that
+/// damage keeping the checksums right (a crafted file) is refused; a larger one's
+/// checksums, so that a byte flipped on disk is an error, not a picture. Opening checks
+/// no per-particle data (FORMAT.md, section 8).
+pub fn check_before_drawing(file: &MdlodFile) -> Result<(), mdlod_format::FormatError> {
+    let len = std::fs::metadata(file.path()).map_or(u64::MAX, |m| m.len());
+    if len <= VERIFIED_ON_OPEN {
+        file.verify()?;
+    } else {
+        file.check_checksums_up_to(CHECKED_ON_OPEN)?;
+    }
+    Ok(())
+}
 
 /// The bounds a fitted view frames: the shown data's ([`shown_bounds`], or the whole
 /// file's), less particles far from the rest (lost atoms flying off a non-periodic box,
@@ -2167,6 +2173,7 @@ pub fn render_file_to_png(
 ) -> Result<RenderReport, RenderError> {
     let t0 = Instant::now();
     check_numbers(opts)?;
+    check_before_drawing(&file)?;
     let (image, mut report) = match opts.gpu_memory {
         None => render_image(renderer, &file, opts)?,
         Some(pool) => render_streaming(renderer, std::sync::Arc::new(file), opts, pool)?,
@@ -2210,6 +2217,7 @@ pub fn sample_tiles_to_file(
     let (w, h) = (opts.width, opts.height);
     check_numbers(opts)?;
     let mdlod = open_styled(file, &opts.style)?;
+    check_before_drawing(&mdlod)?;
     let renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     let camera = frame_setup(&mdlod, opts)?.0;
     if camera.projection != Projection::Orthographic {
@@ -2297,6 +2305,7 @@ pub fn sample_to_file_at(
     let t0 = Instant::now();
     check_numbers(opts)?;
     let mdlod = open_styled(file, &opts.style)?;
+    check_before_drawing(&mdlod)?;
     let mut renderer = Renderer::new(GpuContext::with_backends(opts.backends)?);
     renderer.set_progress(progress);
     let (camera, traversal, _) = frame_setup(&mdlod, opts)?;

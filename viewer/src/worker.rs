@@ -346,7 +346,10 @@ impl<'r> Thread<'r> {
             ..Default::default()
         };
         // (The reader's errors name the file.)
-        let f = Arc::new(mdlod_render::open_styled(path, &style).map_err(|e| e.to_string())?);
+        let f = mdlod_render::open_styled(path, &style).map_err(|e| e.to_string())?;
+        // (Once per file: the cache keeps it open for the next frame.)
+        mdlod_render::check_before_drawing(&f).map_err(|e| e.to_string())?;
+        let f = Arc::new(f);
         self.files.insert(
             path.to_path_buf(),
             (attribute.map(str::to_string), f.clone()),
