@@ -319,14 +319,25 @@ pub fn category_notes(
 pub const DEFAULT_RADIUS: f32 = 0.5;
 
 fn srgb_to_linear(c: [u8; 3]) -> [f32; 3] {
-    c.map(|v| {
-        let v = f32::from(v) / 255.0;
-        if v <= 0.04045 {
-            v / 12.92
-        } else {
-            ((v + 0.055) / 1.055).powf(2.4)
-        }
-    })
+    c.map(|v| srgb_channel_to_linear(f32::from(v) / 255.0))
+}
+
+/// One sRGB channel in [0, 1] as linear light.
+pub(crate) fn srgb_channel_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// One linear channel in [0, 1] as sRGB.
+pub(crate) fn linear_channel_to_srgb(v: f32) -> f32 {
+    if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
 }
 
 /// The element symbol `name` spells, case aside (`li`: `Li`), where it is one.

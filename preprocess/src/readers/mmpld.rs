@@ -93,7 +93,7 @@ impl List {
     }
 
     /// Particle `i`'s own colour (colour types 1, 2, 4, 5 and 6), its sRGB channels in
-    /// [0, 1] (alpha left out, floats clamped, NaN as 0); `None` for other types.
+    /// [0, 1] (alpha left out, floats clamped, NaN kept); `None` for other types.
     fn particle_colour(&self, data: &[u8], i: usize) -> Option<[f32; 3]> {
         let at = self.data + i * self.stride + vertex_size(self.vertex);
         let f = |k: usize| f32::from_le_bytes(le(data, at + 4 * k));
@@ -111,13 +111,7 @@ impl List {
     /// averaged as light (in linear RGB), as sRGB bytes: the one colour its species is
     /// drawn in, exact where the list is of one colour.
     fn mean_colour(&self, data: &[u8], lo: usize, hi: usize) -> Option<[u8; 3]> {
-        let to_linear = |v: f32| {
-            if v <= 0.04045 {
-                v / 12.92
-            } else {
-                ((v + 0.055) / 1.055).powf(2.4)
-            }
-        };
+        use crate::species::{linear_channel_to_srgb, srgb_channel_to_linear};
         let mut sum = [0f64; 3];
         let mut counted = 0usize;
         for i in lo..hi {
@@ -126,7 +120,7 @@ impl List {
                 continue;
             }
             for k in 0..3 {
-                sum[k] += f64::from(to_linear(c[k]));
+                sum[k] += f64::from(srgb_channel_to_linear(c[k]));
             }
             counted += 1;
         }
@@ -134,12 +128,7 @@ impl List {
             return None;
         }
         Some(sum.map(|v| {
-            let v = (v / counted as f64) as f32;
-            let s = if v <= 0.003_130_8 {
-                12.92 * v
-            } else {
-                1.055 * v.powf(1.0 / 2.4) - 0.055
-            };
+            let s = linear_channel_to_srgb((v / counted as f64) as f32);
             (s * 255.0).round().clamp(0.0, 255.0) as u8
         }))
     }
@@ -227,8 +216,8 @@ impl<'a> Cursor<'a> {
     }
 }
 
-/// Whether an error's `message` is a read past the end of the file (a header, a list's particles or its
-/// cluster information).
+/// Whether an error's `message` is a read past the end of the file (a header, a list's
+/// particles or its cluster information).
 fn runs_past_end(message: &str) -> bool {
     message.contains("run past the end of the file") || message.contains("file truncated in")
 }
