@@ -33,8 +33,8 @@ use mdlod_render::renderer::ResidentSndf;
 use mdlod_render::smip::{Smip, SmipConfig, SmipFrame};
 use mdlod_render::sndf::{ShadeLights, Sndf, SndfSettings};
 use mdlod_render::{
-    render_image, render_image_keeping, traverse, BackendChoice, GpuContext, KeptCut, RenderError,
-    RenderMode, RenderOptions, Renderer, RgbaImage, ViewFile,
+    render_image, render_image_keeping, traverse, BackendChoice, ColourMap, GpuContext, KeptCut,
+    RenderError, RenderMode, RenderOptions, Renderer, RgbaImage, ViewFile,
 };
 
 /// Iterations in each progressive S-NDF batch.
@@ -202,6 +202,7 @@ impl Worker {
                     attribute: None,
                     bounds_sent: None,
                     cut: None,
+                    range: None,
                     progressive: None,
                     smip: None,
                     tiled: None,
@@ -301,6 +302,9 @@ struct Streaming<'r> {
     pending: Option<(u64, RenderOptions, bool)>,
 }
 
+/// A file, a look (log scale, colour map) and the colour range chosen for them.
+type KeptRange = (Arc<MdlodFile>, (bool, ColourMap), Option<[f32; 2]>);
+
 struct Thread<'r> {
     renderer: &'r Renderer,
     gpu_memory: GpuMemory,
@@ -314,6 +318,9 @@ struct Thread<'r> {
     /// The last direct frame's cut, and the file it is of: a frame of the same view under
     /// other lights or colours draws it again without a traversal.
     cut: Option<(Arc<MdlodFile>, KeptCut)>,
+    /// The colour range chosen for a file and a look (log scale, map): see
+    /// `with_default_range`.
+    range: Option<KeptRange>,
     progressive: Option<Progressive>,
     /// The S-MIP cache of orthographic S-NDF views, and the view it shows.
     smip: Option<Smip>,
@@ -355,6 +362,31 @@ impl<'r> Thread<'r> {
             (attribute.map(str::to_string), f.clone()),
         );
         Ok(f)
+    }
+
+    /// Colours by the attribute over the range `mdlod render` shows a file's values over
+    /// where none is set ([`mdlod_render::default_range_of`]): a diverging map centred on
+    /// 0, a log scale from the smallest positive value (a signed charge took cool-warm's
+    /// white at the middle of its range, not at 0). Kept per file and look: a log
+    /// scale's floor reads up to 2^20 values, which every preview frame would repeat.
+    fn with_default_range(&mut self, opts: &mut RenderOptions, file: &Arc<MdlodFile>) {
+        let Some(map) = opts.style.colour_map else {
+            return;
+        };
+        if opts.style.attribute_range.is_some() {
+            return;
+        }
+        let look = (opts.style.log_scale, map);
+        let range = match &self.range {
+            Some((f, l, r)) if Arc::ptr_eq(f, file) && *l == look => *r,
+            _ => {
+                let r =
+                    mdlod_render::default_range_of(file, &opts.style, true, false).map(|(r, _)| r);
+                self.range = Some((file.clone(), look, r));
+                r
+            }
+        };
+        opts.style.attribute_range = range;
     }
 
     fn run(&mut self, requests: Receiver<Request>) {
@@ -491,7 +523,7 @@ impl<'r> Thread<'r> {
             });
         }
         let mut opts = opts;
-        with_default_range(&mut opts, &file);
+        self.with_default_range(&mut opts, &file);
         if let RenderMode::Sndf { .. } = opts.mode {
             let camera = match mdlod_render::camera_for(&file, &opts.view, opts.width, opts.height)
             {
@@ -994,7 +1026,7 @@ impl<'r> Thread<'r> {
     ) -> Result<(), String> {
         let file = self.file(path, opts.style.attribute.as_deref())?;
         let mut opts = opts.clone();
-        with_default_range(&mut opts, &file);
+        self.with_default_range(&mut opts, &file);
         let opts = &opts;
         let image = match opts.mode {
             RenderMode::Sndf { iterations, .. } => {
@@ -1023,18 +1055,6 @@ struct Preview {
 
 /// An orthographic S-NDF preview the S-MIP cannot show (an orbit) becomes a sphere
 /// preview at the preview's screen error.
-/// Colours by the attribute over the range `mdlod render` shows a file's values over
-/// where none is set ([`mdlod_render::default_range_of`]): a diverging map centred on 0,
-/// a log scale from the smallest positive value. A frame's own range otherwise, as
-/// before: a signed charge took cool-warm's white at the middle of its range, not at 0.
-fn with_default_range(opts: &mut RenderOptions, file: &MdlodFile) {
-    if opts.style.colour_map.is_some() {
-        if let Some((range, _)) = mdlod_render::default_range_of(file, &opts.style, true, false) {
-            opts.style.attribute_range = Some(range);
-        }
-    }
-}
-
 fn sphere_fallback(opts: &mut RenderOptions, sphere_error_px: f32) {
     opts.mode = RenderMode::Spheres;
     if sphere_error_px.is_finite() {
