@@ -6094,6 +6094,115 @@ fn atoms_far_from_the_rest_are_left_out_of_the_fit_with_a_note() {
     );
 }
 
+/// A colour map's dark end keeps its levels in the image: per-particle colours go to the
+/// GPU as sRGB bytes, so a flat-lit particle shows its map colour within a level. They
+/// went as linear bytes, which have 9 levels where sRGB bytes have 51 (below sRGB 0.2):
+/// magma's darkest colours came out up to 5 levels off ((0, 0, 0) for (0, 0, 4), (13,
+/// 13, 34) for (10, 8, 34)).
+#[test]
+fn a_colour_maps_dark_end_keeps_its_levels_in_the_image() {
+    use mdlod_render::style::ColourMap;
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("m.lammpstrj");
+    // 17 big particles in a row, their values 0 to 16: the map at t = 0, 1/16, ... 1.
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n17\nITEM: BOX BOUNDS ff ff ff\n\
+         -1 1\n-1 33\n-1 1\nITEM: ATOMS id type x y z c_t\n",
+    );
+    // Along y, which runs left to right seen from above at azimuth 0.
+    for i in 0..17 {
+        text.push_str(&format!("{} 1 0 {} 0 {i}\n", i + 1, 2 * i));
+    }
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("m.mdlod");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--attribute",
+        "c_t",
+        "--radius",
+        "1=0.9",
+    ]);
+    let png = dir.path().join("m.png");
+    let (w, h) = (340u32, 40u32);
+    ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        &w.to_string(),
+        "--height",
+        &h.to_string(),
+        "--ortho",
+        "--elevation",
+        "90",
+        "--azimuth",
+        "0",
+        "--colour-map",
+        "magma",
+        "--attribute-range",
+        "0:16",
+        "--ambient",
+        "1",
+        "--diffuse",
+        "0",
+        "--specular",
+        "0",
+    ]);
+    let (pw, ph, px) = read_png(&png);
+    assert_eq!((pw, ph), (w, h));
+    let srgb = |v: f32| {
+        let v = f64::from(v);
+        255.0
+            * if v <= 0.003_130_8 {
+                12.92 * v
+            } else {
+                1.055 * v.powf(1.0 / 2.4) - 0.055
+            }
+    };
+    // Each particle's centre: the middle of each run of other than background pixels
+    // along the image's middle row.
+    let row = (h / 2) as usize;
+    let pixel = |x: usize| &px[(row * w as usize + x) * 4..][..3];
+    let background = pixel(0).to_vec();
+    let mut runs = vec![];
+    let mut start = None;
+    for x in 0..w as usize {
+        match (pixel(x) != background.as_slice(), start) {
+            (true, None) => start = Some(x),
+            (false, Some(a)) => {
+                runs.push((a + x - 1) / 2);
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(a) = start {
+        runs.push((a + w as usize - 1) / 2);
+    }
+    assert_eq!(
+        runs.len(),
+        17,
+        "particles found along the middle row: {runs:?}"
+    );
+    let mut worst = 0.0f64;
+    for (i, &x) in runs.iter().enumerate() {
+        let want = ColourMap::Magma.colour(i as f32 / 16.0).map(srgb);
+        let got = pixel(x);
+        for c in 0..3 {
+            worst = worst.max((f64::from(got[c]) - want[c]).abs());
+        }
+        assert!(
+            (0..3).all(|c| (f64::from(got[c]) - want[c]).abs() <= 1.5),
+            "t = {i}/16 at x = {x}: drawn {got:?}, magma {want:?}"
+        );
+    }
+    eprintln!("largest difference from the map: {worst:.2} levels");
+}
+
 /// The diverging map puts its white at 0 for values of both signs (a velocity, a
 /// stress), in one file and throughout a movie, and says so; a range given stays.
 #[test]

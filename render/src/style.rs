@@ -879,15 +879,90 @@ pub fn recoloured(t: &[[f32; 4]; 3], c: [f32; 3]) -> [f32; 3] {
     t.map(|row| row[0] * c[0] + row[1] * c[1] + row[2] * c[2] + row[3])
 }
 
-/// The linear colour of a packed RGBA8 colour ([`pack_colour`]).
+/// The linear colour of a colour packed for the GPU ([`pack_colour`]).
 pub fn unpack_colour(c: u32) -> [f32; 3] {
-    [0, 8, 16].map(|shift| ((c >> shift) & 0xff) as f32 / 255.0)
+    let t = &srgb_tables().to_linear;
+    [0, 8, 16].map(|shift| t[((c >> shift) & 0xff) as usize])
 }
 
-/// Packs a linear RGB colour as the file's node colours are: RGBA8, R in the low byte.
+/// Packs a linear RGB colour for the GPU as an 8-bit image stores colour: RGBA8, R in
+/// the low byte, each channel sRGB-encoded (the shaders decode it, `points.wgsl`).
+///
+/// Why sRGB: linear bytes keep a step of 1/255 of light everywhere, which is far finer
+/// than the eye needs in bright colours and far coarser in dark ones: a dark colour
+/// map end (magma's, viridis') landed up to 7 levels off once shaded and written as
+/// sRGB. sRGB bytes step as the eye does, so a colour comes back within half a level
+/// of its sRGB value. Rounded to the nearest sRGB level, exactly; NaN packs as 0.
 pub fn pack_colour(c: [f32; 3]) -> u32 {
-    let b = c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32);
+    let b = c.map(linear_to_srgb_byte);
     b[0] | (b[1] << 8) | (b[2] << 16) | (255 << 24)
+}
+
+/// A node colour as the file stores it (linear RGBA8, `FORMAT.md`) packed for the GPU
+/// ([`pack_colour`]): each byte through a table.
+pub fn pack_file_colour(c: u32) -> u32 {
+    let t = &srgb_tables().file_to_srgb;
+    let b = [0, 8, 16].map(|shift| u32::from(t[((c >> shift) & 0xff) as usize]));
+    b[0] | (b[1] << 8) | (b[2] << 16) | (255 << 24)
+}
+
+/// Buckets of the linear range the encoder's first guess comes from.
+const SRGB_BUCKETS: usize = 4096;
+
+struct SrgbTables {
+    /// Linear light of each sRGB byte.
+    to_linear: [f32; 256],
+    /// `bounds[k]`: the linear light where sRGB byte `k + 1` becomes the nearest
+    /// (the sRGB value `(k + 0.5) / 255` as light); `bounds[255]` is infinite.
+    bounds: [f32; 256],
+    /// The nearest sRGB byte at each bucket's lower end.
+    first: [u8; SRGB_BUCKETS],
+    /// The sRGB byte nearest each linear byte of the file's node colours.
+    file_to_srgb: [u8; 256],
+}
+
+fn srgb_tables() -> &'static SrgbTables {
+    static TABLES: std::sync::OnceLock<SrgbTables> = std::sync::OnceLock::new();
+    TABLES.get_or_init(|| {
+        let to_linear = |s: f64| {
+            if s <= 0.04045 {
+                s / 12.92
+            } else {
+                ((s + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        let mut t = SrgbTables {
+            to_linear: [0.0; 256],
+            bounds: [f32::INFINITY; 256],
+            first: [0; SRGB_BUCKETS],
+            file_to_srgb: [0; 256],
+        };
+        for k in 0..256 {
+            t.to_linear[k] = to_linear(k as f64 / 255.0) as f32;
+            if k < 255 {
+                t.bounds[k] = to_linear((k as f64 + 0.5) / 255.0) as f32;
+            }
+        }
+        let nearest = |v: f32, bounds: &[f32; 256]| bounds.partition_point(|&b| b <= v) as u8;
+        for (i, f) in t.first.iter_mut().enumerate() {
+            *f = nearest(i as f32 / SRGB_BUCKETS as f32, &t.bounds);
+        }
+        for (k, f) in t.file_to_srgb.iter_mut().enumerate() {
+            *f = nearest(k as f32 / 255.0, &t.bounds);
+        }
+        t
+    })
+}
+
+/// The nearest sRGB byte of one linear channel, clamped to [0, 1] (NaN: 0).
+fn linear_to_srgb_byte(v: f32) -> u32 {
+    let t = srgb_tables();
+    let v = if v > 0.0 { v.min(1.0) } else { 0.0 };
+    let mut k = t.first[((v * SRGB_BUCKETS as f32) as usize).min(SRGB_BUCKETS - 1)] as usize;
+    while t.bounds[k] <= v {
+        k += 1;
+    }
+    k as u32
 }
 
 #[cfg(test)]
@@ -1219,10 +1294,6 @@ mod tests {
             style.cluster_recolour(&file, &style.species_table(&file).unwrap()),
             None
         );
-        assert_eq!(
-            unpack_colour(pack_colour([1.0, 0.5, 0.0])),
-            [1.0, 128.0 / 255.0, 0.0]
-        );
     }
 
     #[test]
@@ -1463,6 +1534,67 @@ mod tests {
         }
         .validate()
         .is_err());
-        assert_eq!(pack_colour([1.0, 0.0, 0.5]), 0xff80_00ff);
+    }
+
+    /// sRGB in f64, the reference the packing's tables must agree with.
+    fn srgb(v: f64) -> f64 {
+        if v <= 0.003_130_8 {
+            12.92 * v
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        }
+    }
+
+    /// Colours go to the GPU as the nearest sRGB byte of each channel (R in the low
+    /// byte, alpha 255), clamped, NaN as 0; they come back as that byte's light, so a
+    /// round trip stays within half an sRGB level everywhere, dark colours included.
+    #[test]
+    fn colours_are_packed_as_the_nearest_srgb_byte_and_unpacked_as_its_light() {
+        // Byte 128 is linear 0.2159 (linear packing gave it byte 55).
+        assert_eq!(pack_colour([1.0, 0.0, 0.2159]), 0xff80_00ff);
+        assert_eq!(pack_colour([2.0, -1.0, f32::NAN]), 0xff00_00ff);
+        let mut v = 0.0f32;
+        while v <= 1.0 {
+            let want = srgb(f64::from(v)) * 255.0;
+            let got = pack_colour([v, v, v]);
+            let b = f64::from(got & 0xff);
+            // Ties within rounding either way.
+            assert!((b - want).abs() <= 0.5 + 1e-4, "{v}: byte {b}, sRGB {want}");
+            assert_eq!(got, (b as u32 * 0x0001_0101) | 0xff00_0000);
+            let back = unpack_colour(got)[0];
+            assert!(
+                (srgb(f64::from(back)) * 255.0 - want).abs() <= 0.5 + 1e-4,
+                "{v}: back {back}"
+            );
+            v += 1.0 / 65536.0 + v * 1e-3;
+        }
+        // Every byte's light packs back to that byte.
+        for k in 0..=255u32 {
+            let c = k | (k << 8) | (k << 16) | 0xff00_0000;
+            assert_eq!(pack_colour(unpack_colour(c)), c, "byte {k}");
+        }
+        // magma's dark end: sRGB (0, 0, 4) and (0, 0, 4 + ...) keep their levels.
+        let dark = ColourMap::Magma.colour(0.0);
+        let p = pack_colour(dark).to_le_bytes();
+        for c in 0..3 {
+            let want = srgb(f64::from(dark[c])) * 255.0;
+            assert!(
+                (f64::from(p[c]) - want).abs() <= 0.5 + 1e-4,
+                "{dark:?} {p:?}"
+            );
+        }
+    }
+
+    /// The file's node colours (linear bytes) go to the GPU as the nearest sRGB byte of
+    /// their light: what packing their linear colour gives.
+    #[test]
+    fn file_colours_are_repacked_as_srgb() {
+        for k in 0..=255u32 {
+            let c = k | ((255 - k) << 8) | ((k / 3) << 16) | 0xff00_0000;
+            let light = [k, 255 - k, k / 3].map(|b| b as f32 / 255.0);
+            assert_eq!(pack_file_colour(c), pack_colour(light), "byte {k}");
+        }
+        // Alpha is always opaque, as the file's.
+        assert_eq!(pack_file_colour(0) >> 24, 255);
     }
 }

@@ -329,8 +329,14 @@ fn delta_n_2_and_8_bit_positions_cover_once_and_pack_to_the_files_positions() {
                     } else {
                         let n = &f.nodes()[node_of(&f, level, k as usize)];
                         assert_eq!(radius, mdlod_render::traversal::representative_radius(n));
-                        let c = n.colour_rgb();
+                        // The file's colour as the GPU is given it: the nearest
+                        // sRGB byte of its light.
+                        let c = mdlod_render::style::unpack_colour(
+                            mdlod_render::style::pack_file_colour(n.colour),
+                        );
                         assert_eq!(albedo, c);
+                        let stored = n.colour_rgb();
+                        assert!((0..3).all(|k| (albedo[k] - stored[k]).abs() <= 1.2 / 255.0));
                     }
                     i += 1;
                 }
@@ -932,7 +938,7 @@ fn new_mixture(f: &MdlodFile, level: usize, i: usize, colours: &[[f32; 3]]) -> [
 #[test]
 fn styles_recolour_resize_and_hide_points_when_packed() {
     use mdlod_render::passes::sphere_raycast::{pack_styled, PackStyle};
-    use mdlod_render::style::{pack_colour, ColourMap, PointStyle, SpeciesStyle};
+    use mdlod_render::style::{pack_colour, unpack_colour, ColourMap, PointStyle, SpeciesStyle};
     let mut frame = cloud_frame(1500, 4);
     let values: Vec<f32> = frame.positions.iter().map(|p| p[1] - 30.0).collect();
     frame.attribute = Some(mdlod_preprocess::Attribute {
@@ -960,10 +966,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
     assert!(d.ranges.iter().any(|r| (r.level as usize) < last));
     let base = pack(&f, &d).unwrap();
     let info = f.metadata().attribute.clone().unwrap();
-    let unpack = |c: [f32; 3]| {
-        let p = pack_colour(c).to_le_bytes();
-        [p[0], p[1], p[2]].map(|v| f32::from(v) / 255.0)
-    };
+    let unpack = |c: [f32; 3]| unpack_colour(pack_colour(c));
     for map in [None, Some(ColourMap::Viridis)] {
         let style = PointStyle {
             species: vec![
@@ -1051,9 +1054,10 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
                             // particles, weighted by their area, as the file's mixture
                             // is of the old ones: up to the stored colour's rounding
                             // (half a step of 1/255) through the map, and the packed
-                            // colour's own.
+                            // colour's own (half an sRGB step: at most 1.2 / 255 of
+                            // light, at the bright end).
                             let want = new_mixture(&f, level, k as usize, &new_colours);
-                            let tol = (norm + 1.0) * 0.5 / 255.0 + 1e-5;
+                            let tol = (norm * 0.5 + 1.2) / 255.0 + 1e-5;
                             assert!(
                                 (0..3).all(|c| (albedo[c] - want[c]).abs() <= tol),
                                 "level {level} point {k}: {albedo:?}, want {want:?} (stored \
@@ -1217,11 +1221,8 @@ fn traversal_checks_the_records_it_reaches_and_reports_a_corrupt_one() {
 #[test]
 fn a_constant_attribute_packs_one_intensity_and_one_colour_at_every_level() {
     use mdlod_render::passes::sphere_raycast::{pack_styled, PackStyle};
-    use mdlod_render::style::{pack_colour, ColourMap, PointStyle};
-    let unpack = |c: [f32; 3]| {
-        let p = pack_colour(c).to_le_bytes();
-        [p[0], p[1], p[2]].map(|v| f32::from(v) / 255.0)
-    };
+    use mdlod_render::style::{pack_colour, unpack_colour, ColourMap, PointStyle};
+    let unpack = |c: [f32; 3]| unpack_colour(pack_colour(c));
     let mass = 2.5e-6f32;
     let next = f32::from_bits(mass.to_bits() + 1);
     for (what, values) in [

@@ -10,6 +10,7 @@ use common::golden::{self, Tolerance};
 use common::*;
 use glam::{Mat4, Vec3, Vec4};
 use mdlod_format::MdlodFile;
+use mdlod_render::style::{pack_file_colour, unpack_colour};
 use mdlod_render::{
     camera_for, render_image, render_image_keeping, render_to_png, traverse, BackendChoice, Camera,
     FrameSettings, GpuContext, OcclusionMode, Projection, RenderError, RenderOptions,
@@ -1485,7 +1486,9 @@ fn splat_reference_reaching(
         let colour = if usize::from(level) == last {
             meta.species[usize::from(f.species()[i as usize])].colour
         } else {
-            f.nodes()[f.levels()[usize::from(level)].node_first as usize + i as usize].colour_rgb()
+            // The file's colour as the GPU is given it (the nearest sRGB byte).
+            let n = &f.nodes()[f.levels()[usize::from(level)].node_first as usize + i as usize];
+            unpack_colour(pack_file_colour(n.colour))
         };
         let clip = clip_from_world * c.extend(1.0);
         let ppw = clip_from_view.y_axis.y * 0.5 * h as f32 / clip.w;
@@ -1912,8 +1915,8 @@ fn sorted_over_blending_matches_a_cpu_compositor() {
             let colour = if usize::from(level) == last {
                 meta.species[usize::from(f.species()[i as usize])].colour
             } else {
-                f.nodes()[f.levels()[usize::from(level)].node_first as usize + i as usize]
-                    .colour_rgb()
+                let n = &f.nodes()[f.levels()[usize::from(level)].node_first as usize + i as usize];
+                unpack_colour(pack_file_colour(n.colour))
             };
             let clip = clip_from_world * c.extend(1.0);
             let r_px = r * clip_from_view.y_axis.y * 0.5 * h as f32 / clip.w;

@@ -103,7 +103,14 @@ fn load_point(ii: u32) -> Point {
         p.albedo = vec3<f32>(bitcast<f32>(attrs[r.attr_offset + 2u * j + 1u]));
     } else {
         p.radius = bitcast<f32>(attrs[r.attr_offset + 2u * j]);
-        p.albedo = unpack4x8unorm(attrs[r.attr_offset + 2u * j + 1u]).xyz;
+        p.albedo = srgb_to_linear(unpack4x8unorm(attrs[r.attr_offset + 2u * j + 1u]).xyz);
     }
     return p;
+}
+
+// A colour packed as sRGB bytes (`style::pack_colour`) as linear light.
+fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
+    let dark = c / 12.92;
+    let bright = pow((c + vec3<f32>(0.055)) / 1.055, vec3<f32>(2.4));
+    return select(bright, dark, c <= vec3<f32>(0.04045));
 }

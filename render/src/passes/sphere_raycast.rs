@@ -143,6 +143,8 @@ pub struct RangeGpu {
 }
 
 pub const KIND_PARTICLE: u32 = 0;
+/// Per point a radius (f32) and a colour as sRGB bytes (`style::pack_colour`): clusters,
+/// and particles coloured by a map.
 pub const KIND_NODE: u32 = 1;
 /// Per point a radius and a grey intensity, both f32 (splats by attribute).
 pub const KIND_INTENSITY: u32 = 2;
@@ -293,11 +295,10 @@ impl PackedDraw {
             )
         } else {
             let a = (r.attr_offset + 2 * j) as usize;
-            let c = self.attrs[a + 1].to_le_bytes();
             (
                 pos,
                 f32::from_bits(self.attrs[a]),
-                [c[0], c[1], c[2]].map(|v| f32::from(v) / 255.0),
+                crate::style::unpack_colour(self.attrs[a + 1]),
             )
         }
     }
@@ -635,12 +636,9 @@ impl AttrPacker {
                 } else if let Some((map, scale)) = &self.mapped {
                     pack_colour(map.colour(scale.of_value(n.attribute)))
                 } else if let Some(t) = &self.recolour {
-                    pack_colour(crate::style::recoloured(
-                        t,
-                        crate::style::unpack_colour(n.colour),
-                    ))
+                    pack_colour(crate::style::recoloured(t, n.colour_rgb()))
                 } else {
-                    n.colour
+                    crate::style::pack_file_colour(n.colour)
                 });
             }
         }
