@@ -101,6 +101,26 @@ fn equals_tip(args: impl Iterator<Item = String>, unexpected: &str) -> Option<St
     })
 }
 
+/// A tip for a file to write given as a second input (`mdlod convert run.dump
+/// run.mdlod`): the commands that write files take them after `-o`.
+fn output_tip(mut args: impl Iterator<Item = String>, unexpected: &str) -> Option<String> {
+    const WRITERS: &[&str] = &["convert", "render", "sample", "shade", "generate"];
+    let command = args.next()?;
+    let ext = std::path::Path::new(unexpected)
+        .extension()?
+        .to_string_lossy()
+        .to_ascii_lowercase();
+    (WRITERS.contains(&command.as_str())
+        && !unexpected.starts_with('-')
+        && ["mdlod", "png", "sndf", "json", "svg"].contains(&ext.as_str()))
+    .then(|| {
+        format!(
+            "the file to write goes after -o: mdlod {command} ... -o {unexpected} (a second \
+             file name alone is read as a second input)"
+        )
+    })
+}
+
 fn main() -> std::process::ExitCode {
     quiet_headless_gpu_probe();
     let matches = match <Cli as clap::CommandFactory>::command().try_get_matches() {
@@ -113,12 +133,12 @@ fn main() -> std::process::ExitCode {
             let tip = unexpected
                 .filter(|_| e.kind() == clap::error::ErrorKind::UnknownArgument)
                 .and_then(|a| {
-                    equals_tip(
+                    let args = || {
                         std::env::args_os()
                             .skip(1)
-                            .map(|a| a.to_string_lossy().into_owned()),
-                        &a,
-                    )
+                            .map(|a| a.to_string_lossy().into_owned())
+                    };
+                    equals_tip(args(), &a).or_else(|| output_tip(args(), &a))
                 });
             let _ = e.print();
             if let Some(tip) = tip {

@@ -5645,7 +5645,8 @@ fn species_names_give_numbered_types_their_elements() {
     let redone = batch(&[]);
     assert!(
         redone.contains(
-            "note: 2 frames already converted were converted again: 2 built with other settings"
+            "note: 2 frames already converted were converted again: 2 built with other \
+             settings (--species-name)"
         ),
         "{redone}"
     );
@@ -5665,12 +5666,21 @@ fn species_names_give_numbered_types_their_elements() {
 fn convert_refuses_streams_and_replacing_other_files() {
     let dir = tempfile::tempdir().unwrap();
     let input = lammps_sample_path("cu_melt.custom.dump");
-    // A PNG (or any file that is no .mdlod file) named as the output stays as it was.
+    // A file that is no .mdlod file named as the output stays as it was; an image's
+    // name is refused whether it exists or not.
+    let notes = dir.path().join("notes.txt");
+    std::fs::write(&notes, b"keep me").unwrap();
+    let err = fails(&["convert", s(&input), "-o", s(&notes)]);
+    assert!(
+        err.contains("notes.txt: exists and is no .mdlod file"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&notes).unwrap(), b"keep me");
     let png = dir.path().join("picture.png");
     std::fs::write(&png, b"\x89PNG\r\n\x1a\n not really").unwrap();
     let err = fails(&["convert", s(&input), "-o", s(&png)]);
     assert!(
-        err.contains("picture.png: exists and is no .mdlod file"),
+        err.contains("picture.png: convert writes a .mdlod file, not an image"),
         "{err}"
     );
     assert_eq!(
@@ -10048,4 +10058,134 @@ fn a_small_crafted_file_with_right_checksums_is_refused_when_drawn() {
         "{e} (verify: {said})"
     );
     assert!(!png.exists());
+}
+
+/// A granular run's dump (own diameters, a kinetic energy spanning decades) through the
+/// mistakes and choices a newcomer makes:
+/// - `--radius` for a type of own sizes is noted (it replaces them; some read it as a
+///   default or a scale), and not for a type whose radius it does not change;
+/// - a further `--attribute` gets the first's note of values below a step;
+/// - a batch says a note that differs from frame to frame in its figures once;
+/// - a rerun names the settings that changed;
+/// - an image's name for `convert -o`, and a second file name without `-o`, are refused
+///   with what to type instead.
+#[test]
+fn a_granular_newcomers_choices_and_mistakes_are_answered() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("pour.dump");
+    let mut text = String::new();
+    for frame in 0..3u32 {
+        text.push_str(&format!(
+            "ITEM: TIMESTEP\n{}\nITEM: NUMBER OF ATOMS\n60\nITEM: BOX BOUNDS pp pp ff\n\
+             0 10\n0 10\n0 20\nITEM: ATOMS id type diameter x y z c_ke\n",
+            frame * 500
+        ));
+        for i in 0..60u32 {
+            let d = if i % 2 == 0 {
+                0.6 + 0.005 * i as f32
+            } else {
+                1.1
+            };
+            // Grains at rest (0) and energies over 9 + frame decades.
+            let ke = if i < 10 {
+                0.0
+            } else {
+                10f64.powf(1.0 - (i as f64 / 60.0) * (9.0 + frame as f64))
+            };
+            text.push_str(&format!(
+                "{} {} {d} {} {} {} {ke:e}\n",
+                i + 1,
+                1 + i % 2,
+                (i % 10) as f32,
+                (i / 10) as f32,
+                1.0 + frame as f32
+            ));
+        }
+    }
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("pour.mdlod");
+    let out = ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--radius",
+        "1=0.4",
+        "--radius",
+        "2=0.55",
+        "--attribute",
+        "x",
+        "--attribute",
+        "c_ke",
+    ]);
+    assert!(
+        out.contains(
+            "note: species 1: --radius 1=0.4 draws every particle of it at radius 0.4, in place \
+             of the sizes the input gives its particles (radii 0.3 to 0.445)"
+        ),
+        "{out}"
+    );
+    // Type 2's grains are all of radius 0.55: nothing replaced.
+    assert!(!out.contains("species 2:"), "{out}");
+    assert!(
+        out.contains("note: attribute c_ke: ") && out.contains("lie below one 16-bit step"),
+        "{out}"
+    );
+
+    // A batch: the energy's note once, with the frames that have it.
+    let d = dir.path().join("pour.d");
+    let out = ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "c_ke"]);
+    let lines: Vec<&str> = out
+        .lines()
+        .filter(|l| l.contains("attribute c_ke"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{out}");
+    assert!(
+        lines[0].contains("(the figures are timestep 0's; 3 frames have this note"),
+        "{out}"
+    );
+    // Reruns name what changed.
+    let out = ok(&["batch", s(&dump), "-o", s(&d)]);
+    assert!(
+        out.contains("3 built with other settings (--attribute)"),
+        "{out}"
+    );
+    let out = ok(&["batch", s(&dump), "-o", s(&d), "--radius", "2=0.7"]);
+    assert!(
+        out.contains("3 built with other settings (--radius)"),
+        "{out}"
+    );
+    let out = ok(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&d),
+        "--attribute",
+        "c_ke",
+        "--radius",
+        "2=0.8",
+    ]);
+    assert!(
+        out.contains("3 built with other settings (--radius, --attribute)"),
+        "{out}"
+    );
+
+    // An image's name for the file convert writes.
+    let png = dir.path().join("pour.png");
+    let err = fails(&["convert", s(&dump), "-o", s(&png)]);
+    assert!(
+        err.contains("convert writes a .mdlod file, not an image")
+            && err.contains(&format!("`mdlod render {} -o {}`", s(&file), s(&png))),
+        "{err}"
+    );
+    assert!(!png.exists());
+    // The output without -o.
+    let err = fails(&["convert", s(&dump), s(&file)]);
+    assert!(
+        err.contains(&format!(
+            "tip: the file to write goes after -o: mdlod convert ... -o {}",
+            s(&file)
+        )),
+        "{err}"
+    );
 }

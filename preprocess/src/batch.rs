@@ -501,6 +501,59 @@ pub struct Redone {
     /// The settings changed (a build option, a radius, the attribute, renames, the
     /// columns).
     pub settings: usize,
+    /// Which settings differed, over those frames.
+    pub changed: SettingsChanged,
+}
+
+/// Which of a rerun's settings differ from those a frame was converted with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SettingsChanged {
+    /// `--max-cluster-size`, `--delta-n`, `--precision` or the chunk size.
+    pub build: bool,
+    pub radius: bool,
+    /// The first `--attribute` (or `--attribute-log10`).
+    pub attribute: bool,
+    /// The further `--attribute` columns.
+    pub further_attributes: bool,
+    pub species_name: bool,
+    pub columns: bool,
+    pub size_column: bool,
+    pub species_column: bool,
+    pub wrap: bool,
+}
+
+impl std::ops::BitOrAssign for SettingsChanged {
+    fn bitor_assign(&mut self, o: Self) {
+        self.build |= o.build;
+        self.radius |= o.radius;
+        self.attribute |= o.attribute;
+        self.further_attributes |= o.further_attributes;
+        self.species_name |= o.species_name;
+        self.columns |= o.columns;
+        self.size_column |= o.size_column;
+        self.species_column |= o.species_column;
+        self.wrap |= o.wrap;
+    }
+}
+
+impl SettingsChanged {
+    /// The options that differ, as the command line names them.
+    pub fn names(&self) -> Vec<&'static str> {
+        [
+            (self.build, "build options"),
+            (self.radius, "--radius"),
+            (self.attribute, "--attribute"),
+            (self.further_attributes, "the further --attribute columns"),
+            (self.species_name, "--species-name"),
+            (self.columns, "--columns"),
+            (self.size_column, "the size column"),
+            (self.species_column, "--species-column"),
+            (self.wrap, "--wrap"),
+        ]
+        .into_iter()
+        .filter_map(|(changed, name)| changed.then_some(name))
+        .collect()
+    }
 }
 
 /// The last frame of an input, cut short, which a batch leaves out (see
@@ -1196,6 +1249,17 @@ fn same_build(
     recorded_radii: Option<&[(String, f32)]>,
     given: impl FnOnce() -> Option<Vec<(String, f32)>>,
 ) -> bool {
+    build_difference(file, options, attribute, recorded_radii, given).is_none()
+}
+
+/// What [`same_build`] found different: `None` where nothing is.
+fn build_difference(
+    file: &MdlodFile,
+    options: &ConvertOptions,
+    attribute: Option<&str>,
+    recorded_radii: Option<&[(String, f32)]>,
+    given: impl FnOnce() -> Option<Vec<(String, f32)>>,
+) -> Option<SettingsChanged> {
     let (m, b) = (file.metadata(), &options.build);
     let chunk = options.chunks.chunk_points as u64;
     let chunked = (m.particles > chunk).then_some(chunk);
@@ -1212,13 +1276,24 @@ fn same_build(
         b.delta_n.min(last),
         b.position_bits,
     );
-    if !(params
-        && m.build.chunk_points == chunked
-        && m.attribute.as_ref().map(|a| a.name.clone())
-            == attribute.map(|a| crate::convert::attribute_name(a, options)))
-    {
-        return false;
-    }
+    let changed = SettingsChanged {
+        build: !(params && m.build.chunk_points == chunked),
+        attribute: m.attribute.as_ref().map(|a| a.name.clone())
+            != attribute.map(|a| crate::convert::attribute_name(a, options)),
+        radius: !same_radii(file, options, recorded_radii, given),
+        ..Default::default()
+    };
+    (changed != SettingsChanged::default()).then_some(changed)
+}
+
+/// Whether `file`'s species have the radii `options` give them now ([`same_build`]).
+fn same_radii(
+    file: &MdlodFile,
+    options: &ConvertOptions,
+    recorded_radii: Option<&[(String, f32)]>,
+    given: impl FnOnce() -> Option<Vec<(String, f32)>>,
+) -> bool {
+    let m = file.metadata();
     // (An override naming none of the frame's species changes nothing in it: a species
     // may appear in some frames of a trajectory only.)
     if let Some(recorded) = recorded_radii {
@@ -2245,7 +2320,7 @@ pub fn batch(
     let keep_notes = |timestep: u64, n: Vec<String>| {
         let mut notes = notes.lock().unwrap_or_else(|e| e.into_inner());
         for text in n {
-            let about = text.split(": ").next().unwrap_or_default().to_string();
+            let about = note_kind(text.split(": ").next().unwrap_or_default());
             notes
                 .entry(about)
                 .or_default()
@@ -2342,8 +2417,8 @@ pub fn batch(
             let same_sizes = recorded.and_then(|r| r.sizes.clone()) == opts.read.sizes.record();
             // And another species column.
             let same_species_column = recorded.and_then(|r| r.species_column.as_ref())
-                == opts.read.species_column.as_ref()
-                && recorded.is_some_and(|r| r.wrap) == opts.read.wrap;
+                == opts.read.species_column.as_ref();
+            let same_wrap = recorded.is_some_and(|r| r.wrap) == opts.read.wrap;
             let own = f.metadata().source.as_ref();
             // The source as the manifest lists it: a frame kept by its bytes is listed
             // with the input's size and time then, so the next rerun need not read it.
@@ -2371,20 +2446,27 @@ pub fn batch(
                 .iter()
                 .map(|a| &a.name)
                 .eq(opts.read.extra_attributes.iter());
-            let same = same_columns
-                && same_names
-                && same_sizes
-                && same_species_column
-                && same_attributes
-                && same_build(
-                    &f,
-                    &opts.convert,
-                    job.attribute.as_deref(),
-                    recorded.and_then(|r| r.radii.as_deref()),
-                    given,
-                );
-            if !same {
+            let mut changed = SettingsChanged {
+                columns: !same_columns,
+                species_name: !same_names,
+                size_column: !same_sizes,
+                species_column: !same_species_column,
+                wrap: !same_wrap,
+                further_attributes: !same_attributes,
+                ..Default::default()
+            };
+            if let Some(c) = build_difference(
+                &f,
+                &opts.convert,
+                job.attribute.as_deref(),
+                recorded.and_then(|r| r.radii.as_deref()),
+                given,
+            ) {
+                changed |= c;
+            }
+            if changed != SettingsChanged::default() {
                 redone.settings += 1;
+                redone.changed |= changed;
                 return Verdict::Redo;
             }
             match source {
@@ -2996,9 +3078,15 @@ pub fn batch(
         notes: notes
             .into_inner()
             .unwrap_or_else(|e| e.into_inner())
-            .into_iter()
-            .map(|(about, texts)| {
-                let first = texts.keys().next().cloned().unwrap_or_default();
+            .into_values()
+            .map(|texts| {
+                // The text of the earliest frame.
+                let (first, first_steps) = texts
+                    .iter()
+                    .min_by_key(|(_, steps)| steps.first().copied())
+                    .map(|(t, steps)| (t.clone(), steps.clone()))
+                    .unwrap_or_default();
+                let about = first.split(": ").next().unwrap_or_default();
                 let steps: std::collections::BTreeSet<u64> =
                     texts.values().flatten().copied().collect();
                 // Which frames, when not every one converted (and the note is about
@@ -3009,16 +3097,15 @@ pub fn batch(
                 } else {
                     format!(" ({})", timesteps_text(&steps))
                 };
-                if texts.len() == 1 {
-                    format!("{first}{which}")
-                } else {
+                match (texts.len(), first_steps.first()) {
+                    (1, _) | (_, None) => format!("{first}{which}"),
                     // Frames of a trajectory differ in their numbers: one line, not one
                     // per frame.
-                    format!(
-                        "{about}: in {} frames{which}, e.g. {}",
-                        texts.len(),
-                        first.strip_prefix(&format!("{about}: ")).unwrap_or(&first)
-                    )
+                    (_, Some(t)) => format!(
+                        "{first} (the figures are timestep {t}'s; {} frames{which} have this \
+                         note, with their own)",
+                        steps.len()
+                    ),
                 }
             })
             .chain(absent)
@@ -3030,6 +3117,30 @@ pub fn batch(
 }
 
 /// `timestep 5` or `timesteps 0, 100, 200 and 7 more`.
+/// What a note is about, its figures aside: the text before its first `": "` with each
+/// number (`12`, `-3.5`, `2.5e-4`) as `#`, so that one frame's note and another's, which
+/// differ in their figures alone, are said once.
+fn note_kind(about: &str) -> String {
+    let mut out = String::with_capacity(about.len());
+    let mut chars = about.chars().peekable();
+    while let Some(c) = chars.next() {
+        let starts_number = c.is_ascii_digit()
+            || (matches!(c, '-' | '+' | '.') && chars.peek().is_some_and(char::is_ascii_digit));
+        if !starts_number {
+            out.push(c);
+            continue;
+        }
+        while chars
+            .peek()
+            .is_some_and(|&d| d.is_ascii_digit() || matches!(d, '.' | 'e' | 'E' | '-' | '+'))
+        {
+            chars.next();
+        }
+        out.push('#');
+    }
+    out
+}
+
 fn timesteps_text(steps: &std::collections::BTreeSet<u64>) -> String {
     let shown: Vec<String> = steps.iter().take(3).map(u64::to_string).collect();
     match steps.len() {
@@ -3825,6 +3936,22 @@ const MANIFEST_VERSION: u32 = 1;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Notes that differ in their figures alone are one kind; other words, another.
+    #[test]
+    fn a_notes_kind_leaves_out_its_figures() {
+        let a = "attribute c_ke spans 5.2 decades (1e-9 to 16), kept in 16-bit steps of 2.44e-4";
+        let b = "attribute c_ke spans 12.0 decades (2.5e-12 to 1.6e1), kept in 16-bit steps \
+                 of 7e-5";
+        assert_eq!(note_kind(a), note_kind(b));
+        assert_eq!(
+            note_kind(a),
+            "attribute c_ke spans # decades (# to #), kept in #bit steps of #"
+        );
+        assert_eq!(note_kind("box -3.5 to +7"), "box # to #");
+        assert_ne!(note_kind(a), note_kind("attribute v_speed spans 5 decades"));
+        assert_ne!(note_kind("species Cu2"), note_kind("species Cu"));
+    }
 
     /// FORMAT.md's section 11 names every field a manifest and its frames write (the
     /// struct literals list every field, so a field added here must be added there).

@@ -7,7 +7,7 @@ use mdlod_format::meta::{AttributeInfo, BuildInfo, Metadata, SourceInfo};
 use mdlod_format::FormatError;
 
 use crate::chunked::{convert_chunked, ChunkOptions, DumpSource, FrameSource};
-use crate::frame::Frame;
+use crate::frame::{Frame, SpeciesName};
 use crate::hierarchy::{self, BuildError, BuildParams, Particles};
 use crate::progress::Progress;
 use crate::species::species_table;
@@ -338,9 +338,15 @@ pub fn convert_frame_with(
     }
     check_radii(&names, options, source.as_ref(), frame.timestep)
         .map_err(|e| with_particle(e, frame, options))?;
+    let override_notes = radius_override_notes(&names, &options.radii);
     if frame.len() > options.chunks.chunk_points {
         let metadata = base_metadata(frame, source, options);
-        return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
+        return convert_chunked(&FrameSource(frame), metadata, output, options, progress).map(
+            |mut r| {
+                r.notes.splice(0..0, override_notes);
+                r
+            },
+        );
     }
     check_in_memory(frame.len(), options, || {
         FramePlace::of(source.as_ref(), frame.timestep)
@@ -410,7 +416,7 @@ pub fn convert_frame_with(
             }
         })?;
     let build_time = t0.elapsed();
-    let mut notes = Vec::new();
+    let mut notes = override_notes;
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         // Ids (of molecules, clusters) are told by their whole numbers, which no
         // logarithm keeps apart either.
@@ -436,6 +442,15 @@ pub fn convert_frame_with(
             "converted alone with --attribute-log10, a file keeps its logarithm, every \
              decade alike",
         ));
+        // A column from 0 whose values above 0 fall below a step, as for the first.
+        if let Some(column) = further.iter().find(|c| c.name == e.info.name) {
+            notes.extend(below_step_note(
+                &e.info.name,
+                &column.values,
+                e.info.min,
+                e.info.max,
+            ));
+        }
     }
     let (lo, hi, far) = survey_positions(&frame.positions, frame.simulation_box.as_ref());
     notes.extend(position_notes(
@@ -933,6 +948,33 @@ pub fn attribute_name(name: &str, options: &ConvertOptions) -> String {
     } else {
         name.to_string()
     }
+}
+
+/// Notes for each `--radius` that replaces sizes the input gives a species: its
+/// particles' own sizes (a dump's `radius` or `diameter` column, GSD diameters) or the
+/// species' one size (an MMPLD list's radius). `--radius` reads as a default or a scale
+/// to some; it replaces.
+pub fn radius_override_notes(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<String> {
+    names
+        .iter()
+        .filter_map(|s| {
+            let r = crate::species::radius_override(overrides, &s.name)?;
+            let given = match (s.radius_range, s.radius) {
+                (Some((lo, hi)), _) if lo != hi => {
+                    format!("the sizes the input gives its particles (radii {lo} to {hi})")
+                }
+                (Some((own, _)), _) | (None, Some(own)) if own != r => {
+                    format!("the radius the input gives it ({own})")
+                }
+                _ => return None,
+            };
+            Some(format!(
+                "species {}: --radius {}={r} draws every particle of it at radius {r}, in \
+                 place of {given}; leave --radius {} out to keep the input's",
+                s.name, s.name, s.name
+            ))
+        })
+        .collect()
 }
 
 /// A note for an attribute whose 16-bit linear steps erase its lowest decades: values

@@ -397,9 +397,9 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         }
         if again.settings > 0 {
             why.push(format!(
-                "{} built with other settings (build options, --radius, --attribute, \
-                 --species-name, --columns, the size column, --species-column or --wrap)",
-                again.settings
+                "{} built with other settings ({})",
+                again.settings,
+                again.changed.names().join(", ")
             ));
         }
         let (s, verb) = if n == 1 { ("", "was") } else { ("s", "were") };

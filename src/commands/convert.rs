@@ -317,7 +317,34 @@ pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Sen
     }
 }
 
+/// Refuses an image's name for the output: a `.mdlod` file named `a.png` is a mistake,
+/// and the picture comes from `mdlod render`.
+fn check_not_an_image(output: &std::path::Path) -> Result<()> {
+    const IMAGES: &[&str] = &[
+        "png", "jpg", "jpeg", "svg", "tif", "tiff", "gif", "webp", "bmp", "ppm", "pdf",
+    ];
+    let Some(ext) = output
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+    else {
+        return Ok(());
+    };
+    if IMAGES.contains(&ext.as_str()) {
+        let file = output.with_extension("mdlod");
+        bail!(
+            "-o {}: convert writes a .mdlod file, not an image; write {} and draw it with \
+             `mdlod render {} -o {}`",
+            output.display(),
+            file.display(),
+            file.display(),
+            output.display()
+        );
+    }
+    Ok(())
+}
+
 fn convert(args: &Args) -> Result<ConvertReport> {
+    check_not_an_image(&args.output)?;
     super::check_output("-o", &args.output, &[("", &args.input)])?;
     check_replaces_only_mdlod(&args.output)?;
     super::check_input_file(&args.input)?;
