@@ -5815,9 +5815,17 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
         chunked.contains("note: particles lie more than 10 box lengths outside the box"),
         "{chunked}"
     );
-    // Inside the box (the sample's atoms): no note.
+    // Inside the box (the sample's atoms): no note of positions (only that of its types'
+    // default radius).
     let sample = lammps_sample_path("cu_melt.custom.dump");
-    assert!(!ok(&["convert", s(&sample), "-o", s(&out)]).contains("note:"));
+    let out_text = ok(&["convert", s(&sample), "-o", s(&out)]);
+    assert!(
+        out_text
+            .lines()
+            .filter(|l| l.contains("note:"))
+            .all(|l| l.contains("drawn at radius 0.5, the default")),
+        "{out_text}"
+    );
 
     // A blob of width 0.05 around 10^5, particles of radius 0.002: f32 keeps steps of
     // 2^-7 there.

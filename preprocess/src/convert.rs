@@ -338,7 +338,8 @@ pub fn convert_frame_with(
     }
     check_radii(&names, options, source.as_ref(), frame.timestep)
         .map_err(|e| with_particle(e, frame, options))?;
-    let override_notes = radius_override_notes(&names, &options.radii);
+    let mut override_notes = radius_override_notes(&names, &options.radii);
+    override_notes.extend(default_radius_note(&names, &options.radii));
     if frame.len() > options.chunks.chunk_points {
         let metadata = base_metadata(frame, source, options);
         return convert_chunked(&FrameSource(frame), metadata, output, options, progress).map(
@@ -975,6 +976,20 @@ pub fn radius_override_notes(names: &[SpeciesName], overrides: &[(String, f32)])
             ))
         })
         .collect()
+}
+
+/// A note for species drawn at the default radius because nothing gives them a size
+/// (`species::default_radius_species`): a granular dump without its `diameter` column
+/// looks right at a glance, every grain of one size.
+pub fn default_radius_note(names: &[SpeciesName], overrides: &[(String, f32)]) -> Option<String> {
+    let plain = crate::species::default_radius_species(names, overrides);
+    let first = plain.first()?;
+    Some(format!(
+        "species {}: drawn at radius {}, the default, as the input gives no sizes (a \
+         `radius` or `diameter` column, or --radius {first}=R, sets them)",
+        plain.join(", "),
+        crate::species::DEFAULT_RADIUS
+    ))
 }
 
 /// A note for an attribute whose 16-bit linear steps erase its lowest decades: values

@@ -601,6 +601,26 @@ pub fn radius_without_override(name: &str, given: Option<f32>, letters_are_label
     }
 }
 
+/// The species that take [`DEFAULT_RADIUS`] for want of any size: the input gives them
+/// none, no element symbol names them and no override sets one (LAMMPS types with no
+/// size column and no `--radius`).
+pub fn default_radius_species<'a>(
+    names: &'a [SpeciesName],
+    overrides: &[(String, f32)],
+) -> Vec<&'a str> {
+    let labels = letters_are_labels(names.iter().map(|s| s.name.as_str()));
+    names
+        .iter()
+        .filter(|s| {
+            s.radius.is_none()
+                && s.radius_range.is_none()
+                && radius_override(overrides, &s.name).is_none()
+                && element_of(&s.name, labels).is_none()
+        })
+        .map(|s| s.name.as_str())
+        .collect()
+}
+
 /// The first species whose radius from the input is zero, below or not a number and
 /// that `overrides` do not give one: such a size cannot be drawn, and must not quietly
 /// become the default.
