@@ -487,6 +487,28 @@ mod tests {
         let m = metadata();
         let json = m.to_json().unwrap();
         assert_eq!(serde_json::from_slice::<Metadata>(&json).unwrap(), m);
+        // Numbers read as the nearest double (FORMAT.md section 7): this one was read an
+        // ulp off by a parser that is not correctly rounded. Every f64 reads back.
+        let text = String::from_utf8(json).unwrap();
+        let exact = 9.025591881400017e-5f64;
+        assert_eq!(exact.to_bits(), 0x3f17_a8f8_e0d8_ada0);
+        let with = text.replace("0.000015,", "0.00009025591881400017,");
+        assert_ne!(with, text);
+        let read = serde_json::from_str::<Metadata>(&with).unwrap();
+        assert_eq!(read.max_position_error.to_bits(), exact.to_bits());
+        let mut x = 1.234_567_890_123_456_7e-5f64;
+        for _ in 0..2000 {
+            let m = Metadata {
+                max_position_error: x,
+                ..metadata()
+            };
+            let back: Metadata = serde_json::from_slice(&m.to_json().unwrap()).unwrap();
+            assert_eq!(back.max_position_error.to_bits(), x.to_bits(), "{x:e}");
+            x = x * 1.618_033_988_749_895 + 1e-7;
+            if x > 1e6 {
+                x *= 1e-11;
+            }
+        }
         for bad in [
             Metadata {
                 max_position_error: f64::INFINITY,
