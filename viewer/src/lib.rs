@@ -122,6 +122,29 @@ pub fn frames_of(path: &Path) -> Result<Vec<FrameInfo>, ViewerError> {
     Ok(out)
 }
 
+/// What the first view frames: the material, less atoms lost far from it
+/// ([`mdlod_render::fit_bounds`]), as `mdlod render` fits it, of the first frame and, in
+/// a trajectory, of the last too, so that what settles or spreads (a pour, a sediment, a
+/// blast) stays in view as the frames are stepped through. (`mdlod render DIR` frames
+/// every frame; opening every one of thousands would hold up the window.) A last frame
+/// that does not open is left out here and says so when it is shown.
+pub fn first_view_bounds(first: &MdlodFile, frames: &[FrameInfo]) -> mdlod_render::Bounds {
+    let fit = |f: &MdlodFile| {
+        mdlod_render::fit_bounds(f, mdlod_render::HiddenSet::default(), false).bounds
+    };
+    let bounds = fit(first);
+    match frames.last().filter(|_| frames.len() > 1) {
+        Some(last) => match MdlodFile::open(&last.path) {
+            Ok(f) => {
+                let b = fit(&f);
+                mdlod_render::Bounds::new(bounds.min.min(b.min), bounds.max.max(b.max))
+            }
+            Err(_) => bounds,
+        },
+        None => bounds,
+    }
+}
+
 /// Opens the window and runs until it closes (or the script ends).
 pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     let script = match &opts.script {
@@ -147,9 +170,7 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         // Square on to flat (two-dimensional) data.
         None => ViewSpec::default().resolved(&first),
     };
-    // The material, less atoms lost far from it ([`mdlod_render::fit_bounds`]), as
-    // `mdlod render` fits it.
-    let bounds = mdlod_render::fit_bounds(&first, mdlod_render::HiddenSet::default(), false).bounds;
+    let bounds = first_view_bounds(&first, &frames);
     let camera = mdlod_render::camera_for_bounds(&bounds, &view, w, h)?;
     let mut state = ViewerState::new(frames, camera, bounds, [w, h]);
     state.settings.mode = opts.mode;

@@ -809,3 +809,52 @@ fn a_diverging_map_is_centred_on_zero_as_a_still_centres_it() {
     let (own_range, _) = render_image(&renderer, &f, &s.render_options(s.size)).unwrap();
     assert_ne!(image.data, own_range.data);
 }
+
+/// A trajectory's first view frames its first and its last frame together: a pour's
+/// grains fall from the top of the box to a pile at its bottom, and a view of the first
+/// frame alone cut the pile off (a single frame is framed alone).
+#[test]
+fn the_first_view_frames_a_trajectorys_first_and_last_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame_at = |z: f32, name: &str| {
+        let positions: Vec<[f32; 3]> = (0..200)
+            .map(|i| {
+                [
+                    (i % 10) as f32,
+                    ((i / 10) % 10) as f32,
+                    z + (i / 100) as f32,
+                ]
+            })
+            .collect();
+        let frame = Frame {
+            species_index: vec![0; positions.len()],
+            positions,
+            species: vec![SpeciesName {
+                name: "1".into(),
+                numeric_type: true,
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        let path = dir.path().join(name);
+        convert_frame(&frame, None, &path, &ConvertOptions::default(), &NoProgress).unwrap();
+        FrameInfo {
+            path,
+            timestep: None,
+        }
+    };
+    let frames = vec![
+        frame_at(40.0, "a.mdlod"),
+        frame_at(20.0, "b.mdlod"),
+        frame_at(0.0, "c.mdlod"),
+    ];
+    let first = mdlod_format::MdlodFile::open(&frames[0].path).unwrap();
+    let alone = mdlod_viewer::first_view_bounds(&first, &frames[..1]);
+    assert!(alone.min.z > 39.0 && alone.max.z < 42.0, "{alone:?}");
+    let both = mdlod_viewer::first_view_bounds(&first, &frames);
+    assert!(both.min.z < 0.0 && both.max.z > 41.0, "{both:?}");
+    assert_eq!((both.min.x, both.max.x), (alone.min.x, alone.max.x));
+    // A last frame that does not open is left out.
+    std::fs::write(&frames[2].path, b"not a file").unwrap();
+    assert_eq!(mdlod_viewer::first_view_bounds(&first, &frames), alone);
+}
