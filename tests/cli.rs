@@ -10187,6 +10187,17 @@ fn a_granular_newcomers_choices_and_mistakes_are_answered() {
         "{err}"
     );
     assert!(!png.exists());
+    // A still from a batch directory, and a directory without a manifest.
+    let err = fails(&["render", s(&d), "-o", s(&png)]);
+    assert!(
+        err.contains("rendered from its file in the directory, frame-<timestep>.mdlod"),
+        "{err}"
+    );
+    let err = fails(&["info", s(dir.path())]);
+    assert!(
+        err.contains("a directory is described as the frames of a batch, listed in its dataset.json; there is none here"),
+        "{err}"
+    );
     // The output without -o.
     let err = fails(&["convert", s(&dump), s(&file)]);
     assert!(

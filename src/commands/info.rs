@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use mdlod_format::MdlodFile;
 use serde_json::json;
 
@@ -454,6 +454,13 @@ pub fn run(args: Args) -> Result<()> {
         if args.file.join(mdlod_preprocess::batch::MANIFEST).is_file() {
             return batch_info(&args.file, &args);
         }
+        // (Said as `render` and `view` say it.)
+        bail!(
+            "{}: a directory is described as the frames of a batch, listed in its {}; there \
+             is none here (`mdlod batch` writes one; a dump is converted first)",
+            args.file.display(),
+            mdlod_preprocess::batch::MANIFEST
+        );
     }
     let f = MdlodFile::open(&args.file)?;
     let m = f.metadata();

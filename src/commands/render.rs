@@ -3406,7 +3406,8 @@ fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
     let bad = || {
         anyhow::anyhow!(
             "-o {}: a batch directory renders one image per frame: give a name with one %d \
-             or %05d for the frame's number, e.g. movie/frame-%05d.png",
+             or %05d for the frame's number, e.g. movie/frame-%05d.png (a still of one \
+             frame is rendered from its file in the directory, frame-<timestep>.mdlod)",
             pattern.display()
         )
     };
