@@ -332,13 +332,13 @@ fn bad_inputs_give_clear_errors_naming_the_file() {
     // A directory where a file belongs, and an output in a directory that does not exist.
     let sub = dir.path().join("sub");
     std::fs::create_dir(&sub).unwrap();
-    for args in [
-        vec!["convert", s(&sub), "-o", s(&out)],
-        vec!["info", s(&sub)],
-    ] {
-        let err = fails(&args);
-        assert!(err.contains("sub: is a directory"), "{err}");
-    }
+    let err = fails(&["convert", s(&sub), "-o", s(&out)]);
+    assert!(err.contains("sub: is a directory"), "{err}");
+    let err = fails(&["info", s(&sub)]);
+    assert!(
+        err.contains("sub: a directory is described as the frames of a batch"),
+        "{err}"
+    );
     let sample = lammps_sample_path("cu_melt.custom.dump");
     let nowhere = dir.path().join("nowhere");
     let err = fails(&["convert", s(&sample), "-o", s(&nowhere.join("a.mdlod"))]);
@@ -6219,6 +6219,57 @@ fn a_colour_maps_dark_end_keeps_its_levels_in_the_image() {
         );
     }
     eprintln!("largest difference from the map: {worst:.2} levels");
+
+    // A near-black species colour on cluster spheres of a one-species file: exactly the
+    // colour asked for. It went through the file's 8-bit linear mixture of the old
+    // colour and a recolouring that scaled its rounding up: (17, 17, 11) for #101010.
+    let grid = dir.path().join("grid.lammpstrj");
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n3200\nITEM: BOX BOUNDS pp pp pp\n\
+         0 80\n0 40\n-1 1\nITEM: ATOMS id type x y z\n",
+    );
+    for i in 0..3200 {
+        text.push_str(&format!("{} 1 {} {} 0\n", i + 1, i % 80, i / 80));
+    }
+    std::fs::write(&grid, text).unwrap();
+    let file = dir.path().join("grid.mdlod");
+    ok(&["convert", s(&grid), "-o", s(&file), "--root-points", "16"]);
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "160",
+        "--height",
+        "80",
+        "--ortho",
+        "--elevation",
+        "90",
+        "--ambient",
+        "1",
+        "--diffuse",
+        "0",
+        "--brdf",
+        "lambert",
+        "--screen-error",
+        "16",
+        "--species-colour",
+        "1=#101010",
+    ]);
+    assert!(out.contains(" 0 particles and "), "{out}");
+    let (_, _, px) = read_png(&png);
+    let drawn: Vec<&[u8]> = px
+        .chunks(4)
+        .map(|p| &p[..3])
+        .filter(|p| *p != [255, 255, 255])
+        .collect();
+    assert!(drawn.len() > 500, "{}", drawn.len());
+    assert!(
+        drawn.iter().all(|p| *p == [16, 16, 16]),
+        "{:?}",
+        drawn.iter().find(|p| **p != [16, 16, 16])
+    );
 }
 
 /// The diverging map puts its white at 0 for values of both signs (a velocity, a
@@ -10177,6 +10228,25 @@ fn a_granular_newcomers_choices_and_mistakes_are_answered() {
         out.contains("3 built with other settings (--radius, --attribute)"),
         "{out}"
     );
+
+    // A radius given by the name a rename takes away: refused before any frame is
+    // converted (it was refused at the end, every frame rebuilt without it).
+    let renamed = dir.path().join("renamed.d");
+    let err = fails(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&renamed),
+        "--radius",
+        "2=0.7",
+        "--species-name",
+        "2=big",
+    ]);
+    assert!(
+        err.contains("--radius takes the new name: --radius big=0.7"),
+        "{err}"
+    );
+    assert!(!renamed.exists());
 
     // An image's name for the file convert writes.
     let png = dir.path().join("pour.png");

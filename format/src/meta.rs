@@ -65,12 +65,18 @@ impl SimulationBox {
 pub struct Species {
     pub name: String,
     /// Sphere radius in the simulation's length unit.
+    #[serde(deserialize_with = "wide::f32")]
     pub radius: f32,
     /// Linear-light RGB albedo in [0, 1].
+    #[serde(deserialize_with = "wide::f32x3")]
     pub colour: [f32; 3],
     /// The smallest and largest radius of the species' particles in the input, where they
     /// differ (polydisperse data, drawn at `radius`, their mean); absent otherwise.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "wide::f32x2"
+    )]
     pub radius_range: Option<[f32; 2]>,
 }
 
@@ -78,8 +84,10 @@ pub struct Species {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RadiusInfo {
     /// Radius of quantized 0.
+    #[serde(deserialize_with = "wide::f32")]
     pub min: f32,
     /// Radius of quantized 65535.
+    #[serde(deserialize_with = "wide::f32")]
     pub max: f32,
     /// Quantized on a log scale (the RADIUS_LOG section, the metadata's `radius_log`)
     /// rather than linearly (RADIUS, `radius`). Not a JSON field: the field's name says it.
@@ -184,9 +192,31 @@ fn encode16(value: f32, min: f32, max: f32) -> u16 {
 pub struct AttributeInfo {
     pub name: String,
     /// Value of quantized 0.
+    #[serde(deserialize_with = "wide::f32")]
     pub min: f32,
     /// Value of quantized 65535.
+    #[serde(deserialize_with = "wide::f32")]
     pub max: f32,
+}
+
+/// Single-precision fields read as the nearest double, then rounded to single precision
+/// (FORMAT.md section 7): a number past single precision becomes infinite, which the
+/// metadata's checks refuse naming the field, where the JSON reader's own refusal would
+/// name a line and column only.
+mod wide {
+    use serde::{Deserialize, Deserializer};
+
+    pub fn f32<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
+        f64::deserialize(d).map(|v| v as f32)
+    }
+
+    pub fn f32x3<'de, D: Deserializer<'de>>(d: D) -> Result<[f32; 3], D::Error> {
+        <[f64; 3]>::deserialize(d).map(|a| a.map(|v| v as f32))
+    }
+
+    pub fn f32x2<'de, D: Deserializer<'de>>(d: D) -> Result<Option<[f32; 2]>, D::Error> {
+        Option::<[f64; 2]>::deserialize(d).map(|o| o.map(|a| a.map(|v| v as f32)))
+    }
 }
 
 impl AttributeInfo {

@@ -508,8 +508,13 @@ pub struct Redone {
 /// Which of a rerun's settings differ from those a frame was converted with.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SettingsChanged {
-    /// `--max-cluster-size`, `--delta-n`, `--precision` or the chunk size.
-    pub build: bool,
+    /// The build options, each: `--cluster-size`, `--root-points`, `--delta-n`,
+    /// `--precision`, `--chunk-points`.
+    pub cluster_size: bool,
+    pub root_points: bool,
+    pub delta_n: bool,
+    pub precision: bool,
+    pub chunk_points: bool,
     pub radius: bool,
     /// The first `--attribute` (or `--attribute-log10`).
     pub attribute: bool,
@@ -524,7 +529,11 @@ pub struct SettingsChanged {
 
 impl std::ops::BitOrAssign for SettingsChanged {
     fn bitor_assign(&mut self, o: Self) {
-        self.build |= o.build;
+        self.cluster_size |= o.cluster_size;
+        self.root_points |= o.root_points;
+        self.delta_n |= o.delta_n;
+        self.precision |= o.precision;
+        self.chunk_points |= o.chunk_points;
         self.radius |= o.radius;
         self.attribute |= o.attribute;
         self.further_attributes |= o.further_attributes;
@@ -540,7 +549,11 @@ impl SettingsChanged {
     /// The options that differ, as the command line names them.
     pub fn names(&self) -> Vec<&'static str> {
         [
-            (self.build, "build options"),
+            (self.cluster_size, "--cluster-size"),
+            (self.root_points, "--root-points"),
+            (self.delta_n, "--delta-n"),
+            (self.precision, "--precision"),
+            (self.chunk_points, "--chunk-points"),
             (self.radius, "--radius"),
             (self.attribute, "--attribute"),
             (self.further_attributes, "the further --attribute columns"),
@@ -1265,19 +1278,12 @@ fn build_difference(
     let chunked = (m.particles > chunk).then_some(chunk);
     // The file records the δn in effect: at most its levels below the top.
     let last = u32::try_from(file.level_count().saturating_sub(1)).unwrap_or(u32::MAX);
-    let params = (
-        m.build.max_cluster_size,
-        m.build.max_root_points,
-        m.build.delta_n,
-        m.build.position_bits,
-    ) == (
-        b.max_cluster_size,
-        b.max_root_points,
-        b.delta_n.min(last),
-        b.position_bits,
-    );
     let changed = SettingsChanged {
-        build: !(params && m.build.chunk_points == chunked),
+        cluster_size: m.build.max_cluster_size != b.max_cluster_size,
+        root_points: m.build.max_root_points != b.max_root_points,
+        delta_n: m.build.delta_n != b.delta_n.min(last),
+        precision: m.build.position_bits != b.position_bits,
+        chunk_points: m.build.chunk_points != chunked,
         attribute: m.attribute.as_ref().map(|a| a.name.clone())
             != attribute.map(|a| crate::convert::attribute_name(a, options)),
         radius: !same_radii(file, options, recorded_radii, given),
@@ -1902,6 +1908,20 @@ pub fn batch(
         if n == 0 || i >= n {
             return Err(BatchError::BadShard(i, n));
         }
+    }
+    // A radius given to a species by the name a rename takes from it would leave every
+    // frame converted without that radius before the check at the end refused the run:
+    // refused before any frame is touched.
+    if let Some(e) = crate::species::radius_of_a_renamed_species(
+        &opts.convert.radii,
+        &opts.convert.species_names,
+    ) {
+        return Err(BatchError::Convert(ConvertError::Species(Box::new(
+            crate::species::UnknownSpecies {
+                input: Some(describe_inputs(inputs)),
+                ..e
+            },
+        ))));
     }
     std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
     let _lock = lock_batch(out_dir, opts.shard)?;

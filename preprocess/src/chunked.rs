@@ -1462,6 +1462,8 @@ pub fn convert_chunked(
         crate::species::check_overrides(&names, &options.radii)?;
     }
     crate::convert::check_radii(&names, options, metadata.source.as_ref(), metadata.timestep)?;
+    let mut radius_notes = crate::convert::radius_override_notes(&names, &options.radii);
+    radius_notes.extend(crate::convert::default_radius_note(&names, &options.radii));
     let species = species_table(&names, &options.radii);
     // Each chunk checks its own particles' radii; the top node sums over all of them.
     check_species(n, &species).map_err(|source| ConvertError::Build {
@@ -1632,7 +1634,7 @@ pub fn convert_chunked(
         write_time,
         file_size,
         notes: {
-            let mut notes: Vec<String> = Vec::new();
+            let mut notes: Vec<String> = radius_notes;
             if let Some(a) = &metadata.attribute {
                 notes.extend(crate::convert::attribute_span_note(
                     &a.name, a.min, a.max, options,
@@ -1662,6 +1664,7 @@ pub fn convert_chunked(
                 &metadata.species,
                 far,
                 metadata.simulation_box.as_ref(),
+                Some(&counts),
             ));
             notes
         },

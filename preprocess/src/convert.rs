@@ -249,7 +249,9 @@ impl std::fmt::Display for UnusableRadius {
             _ => ("species", format!("radius {r}")),
         };
         let size = match self.particle {
-            Some(i) => format!("{size} (particle {i} in the frame's order is the first)"),
+            Some(i) => {
+                format!("{size} (particle {i} in the frame's order, counting from 0, is the first)")
+            }
             None => size,
         };
         let sep = if place.frame.is_some() || place.timestep.is_some() {
@@ -338,17 +340,13 @@ pub fn convert_frame_with(
     }
     check_radii(&names, options, source.as_ref(), frame.timestep)
         .map_err(|e| with_particle(e, frame, options))?;
+    if frame.len() > options.chunks.chunk_points {
+        // (Its notes, those of the radii included, are the chunked build's.)
+        let metadata = base_metadata(frame, source, options);
+        return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
+    }
     let mut override_notes = radius_override_notes(&names, &options.radii);
     override_notes.extend(default_radius_note(&names, &options.radii));
-    if frame.len() > options.chunks.chunk_points {
-        let metadata = base_metadata(frame, source, options);
-        return convert_chunked(&FrameSource(frame), metadata, output, options, progress).map(
-            |mut r| {
-                r.notes.splice(0..0, override_notes);
-                r
-            },
-        );
-    }
     check_in_memory(frame.len(), options, || {
         FramePlace::of(source.as_ref(), frame.timestep)
     })?;
@@ -461,6 +459,7 @@ pub fn convert_frame_with(
         &species,
         far,
         frame.simulation_box.as_ref(),
+        Some(&crate::species::counts(species.len(), species_index)),
     ));
     let mut metadata = base_metadata(frame, source, options);
     metadata.species = species;
@@ -620,24 +619,38 @@ fn oversized_note(
     hi: [f32; 3],
     count: u64,
     species: &[mdlod_format::meta::Species],
+    species_counts: Option<&[u64]>,
 ) -> Option<String> {
     let spacing = mean_spacing(lo, hi, count)?;
-    let over: Vec<String> = species
+    // Where each species' count is known, its spheres are measured against the spacing
+    // of its own particles: a few large grains among many small ones (an intruder in a
+    // granular bed, a colloid among solvent) overlap nothing.
+    let own_spacing = |i: usize| match species_counts {
+        Some(c) => mean_spacing(lo, hi, c.get(i).copied().unwrap_or(0)),
+        None => Some(spacing),
+    };
+    let over: Vec<(String, f64)> = species
         .iter()
-        .filter(|s| {
+        .enumerate()
+        .filter_map(|(i, s)| {
             let limit = match s.radius_range {
                 Some(_) => OVERSIZED_SPACINGS_OWN_SIZES,
                 None => OVERSIZED_SPACINGS,
             };
-            f64::from(s.radius) > limit * spacing
+            let own = own_spacing(i)?;
+            (f64::from(s.radius) > limit * own).then(|| {
+                (
+                    format!("{} ({})", s.name, s.radius),
+                    f64::from(s.radius) / own,
+                )
+            })
         })
-        .take(3)
-        .map(|s| format!("{} ({})", s.name, s.radius))
         .collect();
     if over.is_empty() {
         return None;
     }
-    let largest = species.iter().map(|s| s.radius).fold(0.0f32, f32::max);
+    let ratio = over.iter().map(|(_, r)| *r).fold(0.0, f64::max);
+    let over: Vec<String> = over.into_iter().take(3).map(|(s, _)| s).collect();
     // Plain numbers where they read so (4.3, 1.157), powers of ten beyond.
     let readable = |x: f64, digits: usize| {
         if (1e-3..1e5).contains(&x.abs()) {
@@ -654,7 +667,7 @@ fn oversized_note(
         if over.len() == 1 { "us of" } else { "i of" },
         over.join(", "),
         if over.len() == 1 { "is" } else { "are up to" },
-        readable(f64::from(largest) / spacing, 1),
+        readable(ratio, 1),
         readable(spacing, 4)
     ))
 }
@@ -734,9 +747,10 @@ pub(crate) fn position_notes(
     species: &[mdlod_format::meta::Species],
     far: Option<FarOutside>,
     simulation_box: Option<&mdlod_format::meta::SimulationBox>,
+    species_counts: Option<&[u64]>,
 ) -> Vec<String> {
     let mut notes = Vec::new();
-    notes.extend(oversized_note(lo, hi, count, species));
+    notes.extend(oversized_note(lo, hi, count, species, species_counts));
     notes.extend(undersized_note(lo, hi, count, species));
     notes.extend(crate::species::atom_name_notes(
         species.iter().map(|s| s.name.as_str()),
@@ -985,8 +999,8 @@ pub fn default_radius_note(names: &[SpeciesName], overrides: &[(String, f32)]) -
     let plain = crate::species::default_radius_species(names, overrides);
     let first = plain.first()?;
     Some(format!(
-        "species {}: drawn at radius {}, the default, as the input gives no sizes (a \
-         `radius` or `diameter` column, or --radius {first}=R, sets them)",
+        "species {}: drawn at radius {}, the default: no size was read for them (a \
+         `radius` or `diameter` column, or --radius {first}=R, gives them theirs)",
         plain.join(", "),
         crate::species::DEFAULT_RADIUS
     ))
@@ -1032,9 +1046,10 @@ pub fn below_step_note(name: &str, values: &[f32], min: f32, max: f32) -> Option
         format!(
             "attribute {name}: {below} of the {above} values above 0 lie below one 16-bit \
              step ({step:.2e}) of its range {min} to {max} and read as 0 or one step (the \
-             smallest is {smallest:e}); --attribute-log10 keeps every decade of a column \
-             whose values are all above 0 (leave out those at 0, or colour those particles \
-             by species)"
+             smallest is {smallest:e}); --attribute-log10 keeps every decade, but only of a \
+             column whose values are all above 0, which this one's are not (a quantity \
+             offset to stay above 0 in the simulation, such as ke + 1e-12 written by a \
+             variable, can take it)"
         )
     })
 }
@@ -1669,7 +1684,7 @@ mod tests {
                 beyond: 99.0,
                 farthest: None,
             };
-            super::position_notes([0.0; 3], [100.0; 3], 1000, &species, Some(far), None)
+            super::position_notes([0.0; 3], [100.0; 3], 1000, &species, Some(far), None, None)
                 .into_iter()
                 .find(|n| n.contains("box lengths outside"))
                 .unwrap()
@@ -1687,6 +1702,7 @@ mod tests {
                 &species,
                 None,
                 Some(&flat),
+                None,
             )
             .into_iter()
             .find(|n| n.contains("no width"))
@@ -1695,7 +1711,8 @@ mod tests {
         assert!(spread(5.0, 5.0).is_none());
         // A box past single precision's range is noted.
         let huge = mdlod_format::meta::SimulationBox::orthogonal([0.0; 3], [1e39, 10.0, 10.0]);
-        let notes = super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&huge));
+        let notes =
+            super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&huge), None);
         assert!(
             notes
                 .iter()
@@ -1703,7 +1720,8 @@ mod tests {
             "{notes:?}"
         );
         let fine = mdlod_format::meta::SimulationBox::orthogonal([0.0; 3], [10.0; 3]);
-        let notes = super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&fine));
+        let notes =
+            super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&fine), None);
         assert!(
             !notes.iter().any(|n| n.contains("the box reaches")),
             "{notes:?}"
@@ -1730,7 +1748,7 @@ mod tests {
                 .collect()
         };
         let ids = species((1..=1200).map(|i| i.to_string()).collect());
-        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &ids, None, None);
+        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &ids, None, None, None);
         assert!(
             notes
                 .iter()
@@ -1739,7 +1757,7 @@ mod tests {
             "{notes:?}"
         );
         let protein = species(vec!["N".into(), "CA".into(), "C".into(), "O".into()]);
-        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &protein, None, None);
+        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &protein, None, None, None);
         assert!(
             notes.len() == 1 && notes[0].contains("--species-name CA=C"),
             "{notes:?}"
@@ -1774,7 +1792,7 @@ mod tests {
             "{note}"
         );
         assert!(
-            super::position_notes([0.0; 3], [100.0; 3], 8000, &beads, None, None)
+            super::position_notes([0.0; 3], [100.0; 3], 8000, &beads, None, None, None)
                 .iter()
                 .any(|n| n == &note)
         );
@@ -1864,51 +1882,65 @@ mod tests {
                 .collect()
         };
         // 1000 particles in a 5 nm cube (spacing 0.5 nm), argon's 1.92.
-        let note = oversized_note([0.0; 3], [5e-9; 3], 1000, &species(&[1.92])).unwrap();
+        let note = oversized_note([0.0; 3], [5e-9; 3], 1000, &species(&[1.92]), None).unwrap();
         assert!(
             note.contains("the radius of S0 (1.92) is 3.8e9 times the particles' mean spacing"),
             "{note}"
         );
         // Water in nm (spacing 0.22 nm) with oxygen's 0.74 Å: 3.4 spacings; in Å, none.
         let water = 0.22 * 1000f32.cbrt();
-        let note = oversized_note([0.0; 3], [water; 3], 1000, &species(&[0.74])).unwrap();
+        let note = oversized_note([0.0; 3], [water; 3], 1000, &species(&[0.74]), None).unwrap();
         assert!(
             note.contains("(0.74) is 3.4 times the particles' mean spacing (0.2200,"),
             "{note}"
         );
         assert_eq!(
-            oversized_note([0.0; 3], [10.0 * water; 3], 1000, &species(&[0.74])),
+            oversized_note([0.0; 3], [10.0 * water; 3], 1000, &species(&[0.74]), None),
             None
         );
         // A copper crystal (spacing 2.28 Å) at 1.28; a 2D layer at 0.5 and spacing 1.1.
         let cube = 2.28 * 1000f32.cbrt();
         assert_eq!(
-            oversized_note([0.0; 3], [cube; 3], 1000, &species(&[1.28])),
+            oversized_note([0.0; 3], [cube; 3], 1000, &species(&[1.28]), None),
             None
         );
         let (lo, hi) = ([0.0, 0.0, 0.0], [44.0, 27.5, 0.0]);
-        assert_eq!(oversized_note(lo, hi, 1000, &species(&[0.5, 0.5])), None);
+        assert_eq!(
+            oversized_note(lo, hi, 1000, &species(&[0.5, 0.5]), None),
+            None
+        );
         // The same layer in metres: its second species named too.
         let (lo, hi) = ([0.0, 0.0, 0.0], [44e-9, 27.5e-9, 0.0]);
-        let note = oversized_note(lo, hi, 1000, &species(&[0.5, 0.7])).unwrap();
+        let note = oversized_note(lo, hi, 1000, &species(&[0.5, 0.7]), None).unwrap();
         assert!(
             note.contains("the radii of S0 (0.5), S1 (0.7) are up to"),
             "{note}"
         );
         // Two particles 1 Å apart: one blob at 1.9 only when the data is in metres.
         let (lo, hi) = ([0.0; 3], [1e-10, 0.0, 0.0]);
-        assert!(oversized_note(lo, hi, 2, &species(&[1.9])).is_some());
+        assert!(oversized_note(lo, hi, 2, &species(&[1.9]), None).is_some());
         let (lo, hi) = ([0.0; 3], [3.0, 0.0, 0.0]);
-        assert_eq!(oversized_note(lo, hi, 2, &species(&[1.9])), None);
+        assert_eq!(oversized_note(lo, hi, 2, &species(&[1.9]), None), None);
         // One particle, or all in one place: no spacing to compare with.
         assert_eq!(
-            oversized_note([1.0; 3], [1.0; 3], 1, &species(&[1.9])),
+            oversized_note([1.0; 3], [1.0; 3], 1, &species(&[1.9]), None),
             None
         );
         assert_eq!(
-            oversized_note([1.0; 3], [1.0; 3], 50, &species(&[1.9])),
+            oversized_note([1.0; 3], [1.0; 3], 50, &species(&[1.9]), None),
             None
         );
+        // A granular bed of spacing 1 with one intruder of radius 5: it overlaps nothing
+        // (its own particles' spacing is the whole box). A thousand of them would.
+        let side = 6400f32.cbrt();
+        let bed = species(&[0.5, 5.0]);
+        assert!(oversized_note([0.0; 3], [side; 3], 6401, &bed, None).is_some());
+        assert_eq!(
+            oversized_note([0.0; 3], [side; 3], 6401, &bed, Some(&[6400, 1])),
+            None
+        );
+        let note = oversized_note([0.0; 3], [side; 3], 7400, &bed, Some(&[6400, 1000])).unwrap();
+        assert!(note.contains("the radius of S1 (5) is"), "{note}");
     }
 
     /// The hint names chunks that fit the limit (after the chunk's fixed working memory),

@@ -704,6 +704,27 @@ impl SpeciesNaming {
     }
 }
 
+/// A radius override given to a species by the name a rename (`--species-name
+/// FROM=TO`) takes from it, where no rename gives that name to another: it can name no
+/// species of any frame. The error says to give the new name.
+pub fn radius_of_a_renamed_species(
+    overrides: &[(String, f32)],
+    renames: &[(String, String)],
+) -> Option<UnknownSpecies> {
+    overrides.iter().find_map(|(name, radius)| {
+        let taken = renames.iter().any(|(from, to)| from == name && to != name);
+        let given = renames.iter().any(|(_, to)| to == name);
+        (taken && !given).then(|| UnknownSpecies {
+            name: name.clone(),
+            radius: *radius,
+            known: Vec::new(),
+            input: None,
+            naming: None,
+            renamed: renames.to_vec(),
+        })
+    })
+}
+
 /// A radius override naming none of the input's species.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub struct UnknownSpecies {

@@ -493,7 +493,9 @@ fn a_diameter_of_zero_or_below_is_refused_unless_the_type_is_given_a_radius() {
         let (which, own) = match chunk_points {
             100 => (String::new(), ""),
             _ => (
-                format!(" (particle {fourth_b} in the frame's order is the first)"),
+                format!(
+                    " (particle {fourth_b} in the frame's order, counting from 0, is the first)"
+                ),
                 " (every particle of it then takes R, those of sizes above 0 too: where their \
                  sizes matter, mend the sizes of 0 in the input instead)",
             ),
@@ -655,7 +657,7 @@ fn a_diameter_not_finite_is_refused_unless_the_type_is_given_a_radius() {
             let (which, own) = match chunk_points {
                 100 => (String::new(), ""),
                 _ => (
-                    format!(" (particle {i} in the frame's order is the first)"),
+                    format!(" (particle {i} in the frame's order, counting from 0, is the first)"),
                     " (every particle of it then takes R, those of usable sizes too: where \
                      their sizes matter, mend the unusable ones in the input instead)",
                 ),

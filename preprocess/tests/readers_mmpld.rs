@@ -692,7 +692,7 @@ fn a_radius_of_zero_or_below_is_refused_unless_the_list_is_given_one() {
             500 => refused(2, "-1"),
             _ => format!(
                 "{}: frame 0, list 2: the file gives radius -1 (particle 605 in the frame's \
-                 order is the first), and a radius must be a positive number; give the list \
+                 order, counting from 0, is the first), and a radius must be a positive number; give the list \
                  its radius with --radius 2=R (every particle of it then takes R, those of \
                  usable sizes too: where their sizes matter, mend the unusable ones in the \
                  input instead)",

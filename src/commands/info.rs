@@ -583,7 +583,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(r) = &m.radius {
         println!(
             "  radii        each particle's own, {} (16 bits over that range{}: each within \
-             {:.1e} of its size)",
+             {:.1e} × its size of it)",
             radius_range_text(r.min, r.max),
             if r.log { " on a log scale" } else { "" },
             r.worst_relative_error()

@@ -421,6 +421,11 @@ pub struct AttrPacker {
     /// that its clusters keep the colour too.
     fixed: Vec<Option<[f32; 3]>>,
     fixed_nodes: Vec<(u16, std::sync::Arc<[u8]>)>,
+    /// A file of one species: its (styled) colour, which every cluster takes exactly
+    /// rather than through the file's 8-bit linear mixture (and, recoloured, through
+    /// [`Self::recolour`], which scales that rounding up: a near-black override came out
+    /// up to 5 levels off, tinted).
+    only_colour: Option<[f32; 3]>,
 }
 
 impl AttrPacker {
@@ -503,9 +508,12 @@ impl AttrPacker {
             .filter(|(i, c)| c.is_some() && *i < 64)
             .map(|(i, _)| (i as u16, file.species_below_uncached(1u64 << i).into()))
             .collect();
+        let only_colour =
+            (species.len() == 1).then(|| [species[0][0], species[0][1], species[0][2]]);
         Ok(AttrPacker {
             fixed,
             fixed_nodes,
+            only_colour,
             size_factor,
             sized: file.radii().is_some(),
             style,
@@ -635,6 +643,8 @@ impl AttrPacker {
                     pack_colour(c)
                 } else if let Some((map, scale)) = &self.mapped {
                     pack_colour(map.colour(scale.of_value(n.attribute)))
+                } else if let Some(c) = self.only_colour {
+                    pack_colour(c)
                 } else if let Some(t) = &self.recolour {
                     pack_colour(crate::style::recoloured(t, n.colour_rgb()))
                 } else {
