@@ -10257,6 +10257,10 @@ fn a_granular_newcomers_choices_and_mistakes_are_answered() {
         "{err}"
     );
     assert!(!png.exists());
+    let xyz = dir.path().join("pour.xyz");
+    let err = fails(&["convert", s(&dump), "-o", s(&xyz)]);
+    assert!(err.contains("this is a dump's name; write"), "{err}");
+    assert!(!xyz.exists());
     // A still from a batch directory, and a directory without a manifest.
     let err = fails(&["render", s(&d), "-o", s(&png)]);
     assert!(

@@ -317,8 +317,8 @@ pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Sen
     }
 }
 
-/// Refuses an image's name for the output: a `.mdlod` file named `a.png` is a mistake,
-/// and the picture comes from `mdlod render`.
+/// Refuses an image's or a dump's name for the output: a `.mdlod` file named `a.png` or
+/// `a.xyz` is a mistake (the picture comes from `mdlod render`).
 fn check_not_an_image(output: &std::path::Path) -> Result<()> {
     const IMAGES: &[&str] = &[
         "png", "jpg", "jpeg", "svg", "tif", "tiff", "gif", "webp", "bmp", "ppm", "pdf",
@@ -329,6 +329,15 @@ fn check_not_an_image(output: &std::path::Path) -> Result<()> {
     else {
         return Ok(());
     };
+    // A dump's name: the output named as the input format's (`-o frame.xyz`).
+    const DUMPS: &[&str] = &["xyz", "extxyz", "lammpstrj", "dump", "gsd", "mmpld", "gz"];
+    if DUMPS.contains(&ext.as_str()) {
+        bail!(
+            "-o {}: convert writes a .mdlod file, and this is a dump's name; write {}",
+            output.display(),
+            output.with_extension("mdlod").display()
+        );
+    }
     if IMAGES.contains(&ext.as_str()) {
         let file = output.with_extension("mdlod");
         bail!(
