@@ -353,8 +353,8 @@ fn check_not_an_image(output: &std::path::Path) -> Result<()> {
 }
 
 fn convert(args: &Args) -> Result<ConvertReport> {
-    check_not_an_image(&args.output)?;
     super::check_output("-o", &args.output, &[("", &args.input)])?;
+    check_not_an_image(&args.output)?;
     check_replaces_only_mdlod(&args.output)?;
     super::check_input_file(&args.input)?;
     args.build.check()?;
