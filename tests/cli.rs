@@ -10282,3 +10282,56 @@ fn a_granular_newcomers_choices_and_mistakes_are_answered() {
         "{err}"
     );
 }
+
+/// A single-frame file of a set whose timestep cannot be read fails alone with
+/// --keep-going: numbered by its place in the set (3), it took the timestep of a real
+/// frame (3) and the whole batch stopped on a duplicate. Without --keep-going it is the
+/// batch's error, naming it.
+#[test]
+fn an_unreadable_timestep_in_a_set_fails_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("set");
+    std::fs::create_dir(&set).unwrap();
+    for (name, step) in [
+        ("a.0.dump", "0"),
+        ("a.100.dump", "100"),
+        ("a.200.dump", "200"),
+        ("a.300.dump", "abc"),
+        ("a.500.dump", "3"),
+    ] {
+        let mut text = format!(
+            "ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n8\nITEM: BOX BOUNDS pp pp pp\n\
+             0 4\n0 4\n0 4\nITEM: ATOMS id type x y z\n"
+        );
+        for i in 0..8 {
+            text.push_str(&format!("{} 1 {} {} {}\n", i + 1, i % 2, i / 2 % 2, i / 4));
+        }
+        std::fs::write(set.join(name), text).unwrap();
+    }
+    let pattern = set.join("a.*.dump");
+    let out = dir.path().join("b");
+    let err = fails(&["batch", s(&pattern), "-o", s(&out), "--keep-going"]);
+    assert!(
+        err.contains("a.300.dump:2: malformed `ITEM: TIMESTEP` value `abc`")
+            && !err.contains("appears twice"),
+        "{err}"
+    );
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("dataset.json")).unwrap()).unwrap();
+    let steps: Vec<u64> = manifest["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["timestep"].as_u64().unwrap())
+        .collect();
+    assert_eq!(steps, [0, 3, 100, 200]);
+    let failed = manifest["failed"].as_array().unwrap();
+    assert_eq!(failed.len(), 1);
+    assert!(failed[0].get("timestep").is_none(), "{failed:?}");
+    let out2 = dir.path().join("b2");
+    let err = fails(&["batch", s(&pattern), "-o", s(&out2)]);
+    assert!(
+        err.contains("malformed `ITEM: TIMESTEP` value `abc`"),
+        "{err}"
+    );
+}

@@ -1991,20 +1991,27 @@ pub fn batch(
             let own = dump.frame_timestep(k);
             let timestep = own.unwrap_or(position);
             position += 1;
-            if own.is_none() && lammps && k + 1 < dump.frame_count() {
-                if let Err(e) = dump.frame_info(k) {
-                    let e = BatchError::Convert(bounded.context(p, e.into()));
-                    if !opts.keep_going {
-                        return Err(e);
+            // (An input's last frame cut short, a run still writing it, is left for a
+            // rerun below; one whose header is damaged otherwise fails here, as any
+            // other: numbered by its place, it could take a real frame's timestep.)
+            let last = k + 1 == dump.frame_count();
+            if own.is_none() && lammps {
+                match dump.frame_info(k) {
+                    Err(e) if !(last && e.cut_short()) => {
+                        let e = BatchError::Convert(bounded.context(p, e.into()));
+                        if !opts.keep_going {
+                            return Err(e);
+                        }
+                        unlisted_failures.push(FailedFrame {
+                            input: p.to_path_buf(),
+                            frame: k,
+                            timestep: None,
+                            listed_timestep: None,
+                            reason: e.to_string(),
+                        });
+                        continue;
                     }
-                    unlisted_failures.push(FailedFrame {
-                        input: p.to_path_buf(),
-                        frame: k,
-                        timestep: None,
-                        listed_timestep: None,
-                        reason: e.to_string(),
-                    });
-                    continue;
+                    _ => {}
                 }
             }
             // A last frame cut short in its atoms (a run still writing the input) is left
