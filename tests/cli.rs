@@ -10203,6 +10203,11 @@ fn a_granular_newcomers_choices_and_mistakes_are_answered() {
         lines[0].contains("(the figures are timestep 0's; 3 frames have this note"),
         "{out}"
     );
+    // Every info JSON says what it describes.
+    for (path, kind) in [(&file, "mdlod"), (&d, "batch")] {
+        let v: serde_json::Value = serde_json::from_str(&ok(&["info", s(path), "--json"])).unwrap();
+        assert_eq!(v["kind"], kind, "{v}");
+    }
     // Reruns name what changed.
     let out = ok(&["batch", s(&dump), "-o", s(&d)]);
     assert!(

@@ -225,6 +225,16 @@ pub(crate) fn chunk_points_within(limit: u64, root_points: u32) -> Option<u64> {
 }
 
 /// A size for a message: bytes below a MiB (a limit of `1K` is not "0 MiB"), else MiB.
+/// [`size_text`] of a need, rounded up to a whole MiB (from 1 MiB on), so that a limit
+/// below it never reads as equal to it (64 MiB "below the 64.0 MiB" needed).
+pub(crate) fn need_text(bytes: u64) -> String {
+    if bytes < 1 << 20 {
+        size_text(bytes)
+    } else {
+        size_text(bytes.next_multiple_of(1 << 20))
+    }
+}
+
 pub(crate) fn size_text(bytes: u64) -> String {
     if bytes < 1 << 20 {
         format!("{bytes} bytes")
@@ -1202,11 +1212,11 @@ pub fn convert_chunked(
              particles in at most {} chunks, the root points, make chunks of at least {} \
              particles); raise --memory-limit to at least {}",
             size_text(chunk.memory_limit),
-            size_text(least),
+            need_text(least),
             size_text(chunk_memory(0)),
             params.max_root_points,
             n.div_ceil(params.max_root_points as usize),
-            size_text(least),
+            need_text(least),
         )));
     }
     if chunk.chunk_points < params.max_root_points as usize {
@@ -1483,9 +1493,9 @@ pub fn convert_chunked(
              needs ({} of working buffers and about {BUILD_BYTES_PER_PARTICLE} bytes per \
              particle): raise --memory-limit to at least {}{}",
             size_text(chunk.memory_limit),
-            size_text(need),
+            need_text(need),
             size_text(chunk_memory(0)),
-            size_text(need),
+            need_text(need),
             match chunk_points_within(chunk.memory_limit, params.max_root_points) {
                 Some(points) => format!(
                     ", or lower --chunk-points to {points} or less (chunks within the limit)"
@@ -2189,6 +2199,16 @@ mod tests {
         assert_eq!(cell_of([0.0, 0.0, 1.0], [0.0; 3], [1.0; 3], 1), 0b100);
         // x in column 3 (0b11), y in 0, z in 2 (0b10): bits 0 and 3 from x, 5 from z.
         assert_eq!(cell_of([0.9, 0.1, 0.6], [0.0; 3], [1.0; 3], 2), 0b101_001);
+    }
+
+    /// A need is said rounded up to a whole MiB: a limit of 64 MiB is never "below
+    /// the 64.0 MiB" a chunk needs.
+    #[test]
+    fn needs_are_said_rounded_up() {
+        assert_eq!(need_text((64 << 20) + 1000), "65 MiB");
+        assert_eq!(need_text(64 << 20), "64 MiB");
+        assert_eq!(need_text(1000), "1000 bytes");
+        assert_eq!(size_text((64 << 20) + 1000), "64.0 MiB");
     }
 
     #[test]

@@ -95,7 +95,9 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
             .collect();
         println!(
             "{}",
-            serde_json::to_string_pretty(&json!({ "merged": false, "shards": shards }))?
+            serde_json::to_string_pretty(
+                &json!({ "kind": "shards", "merged": false, "shards": shards })
+            )?
         );
         return Ok(true);
     }
@@ -238,6 +240,7 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     let column = frames.iter().find_map(|f| f.species_column.clone());
     if args.json {
         let v = json!({
+            "kind": "batch",
             "batch": dir.display().to_string(),
             "frames": frames.len(),
             "timesteps": first.zip(last).map(|(a, b)| [a, b]),
@@ -475,6 +478,7 @@ pub fn run(args: Args) -> Result<()> {
     let flat = mdlod_render::flat_axis(&f);
     if args.json {
         let mut v = json!({
+            "kind": "mdlod",
             "file": args.file.display().to_string(),
             "file_size": file_size,
             "format_version": format!("{}.{}", f.header().version_major, f.header().version_minor),
