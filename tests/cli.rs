@@ -1469,7 +1469,7 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
     assert!(
         err.contains("alloy.raw.json")
             && err.contains("120000 particles are built in memory")
-            && err.contains("need about 16.0 MiB, above the memory limit of 12 MiB")
+            && err.contains("need about 17 MiB, above the memory limit of 12 MiB")
             && err.trim_end().ends_with("raise --memory-limit"),
         "{err}"
     );

@@ -1949,7 +1949,16 @@ pub fn batch(
     // The newest input of a set, as empty files are told (see [`newest_inputs`]).
     let last_input = inputs.len().checked_sub(1);
     let mut empty_inputs = Vec::new();
+    // Each input's size and modification time as it was indexed, taken before it is
+    // opened: what its frames are converted from (a mapped input keeps those bytes even
+    // where the file is replaced by another under its name, as rsync does) and what
+    // their files record, so that a rerun finds such frames stale. Taken again when
+    // they are converted, a replaced input's new size and time were recorded beside
+    // the old data, and reruns and `verify` kept the stale frames.
+    let mut indexed: std::collections::HashMap<&Path, SourceInfo> =
+        std::collections::HashMap::new();
     for (i, p) in inputs.iter().enumerate() {
+        indexed.insert(p.as_path(), fingerprint(p, 0));
         // An empty newest file of a set is one LAMMPS has just opened: left out with a
         // note, as a frame cut short is. (Elsewhere, or alone, it is the reader's error.)
         let newest_of_set = inputs.len() > 1 && Some(i) == last_input;
@@ -2332,9 +2341,8 @@ pub fn batch(
     let mut done = Vec::new();
     let mut todo = Vec::new();
     let mut empty = Vec::new();
-    // Each input's fingerprint, taken once for all its frames (a raw sidecar's is read).
-    let mut fingerprints: std::collections::HashMap<&Path, SourceInfo> =
-        std::collections::HashMap::new();
+    // Each input's fingerprint, as indexed (a raw sidecar's is read).
+    let fingerprints = &indexed;
     // The species names the frames hold, for the radius overrides' check at the end.
     let seen = Mutex::new(std::collections::BTreeSet::<String>::new());
     // Notes by what they are about (the text before the first `: `, e.g. `species A`),
@@ -2411,9 +2419,9 @@ pub fn batch(
         let want = SourceInfo {
             frame: job.frame as u64,
             ..fingerprints
-                .entry(job.input)
-                .or_insert_with(|| fingerprint(job.input, 0))
-                .clone()
+                .get(job.input)
+                .cloned()
+                .unwrap_or_else(|| fingerprint(job.input, 0))
         };
         let columns = columns_for(&job);
         let verdict = MdlodFile::open(&out).ok().map(|f| {
@@ -2765,7 +2773,11 @@ pub fn batch(
                 let bytes = frame_bytes(job.input, job.dump, job.frame)?;
                 let source = SourceInfo {
                     bytes,
-                    ..fingerprint(job.input, job.frame as u64)
+                    frame: job.frame as u64,
+                    ..fingerprints
+                        .get(job.input)
+                        .cloned()
+                        .unwrap_or_else(|| fingerprint(job.input, 0))
                 };
                 let (dump, bounded) = match job.dump {
                     Some(d) => (d, None),

@@ -121,7 +121,7 @@ pub enum ConvertError {
     #[error("chunked conversion: {0}")]
     Chunked(String),
     /// A frame built in memory (within the chunk size) that needs more than the limit.
-    #[error("{place}: {particles} particles are built in memory (within --chunk-points {chunk_points}) and need about {}, above the memory limit of {}: raise --memory-limit{}", crate::chunked::size_text(*need), crate::chunked::size_text(*limit), chunk_hint(*particles, *limit, *root_points))]
+    #[error("{place}: {particles} particles are built in memory (within --chunk-points {chunk_points}) and need about {}, above the memory limit of {}: raise --memory-limit{}", crate::chunked::need_text(*need), crate::chunked::size_text(*limit), chunk_hint(*particles, *limit, *root_points))]
     MemoryLimit {
         place: FramePlace,
         particles: usize,
@@ -1980,7 +1980,7 @@ mod tests {
         assert_eq!(
             e,
             "input: timestep 7: 1000000 particles are built in memory (within --chunk-points \
-             4194304) and need about 133.5 MiB, above the memory limit of 100 MiB: raise \
+             4194304) and need about 134 MiB, above the memory limit of 100 MiB: raise \
              --memory-limit, or build it out of core in smaller chunks (--chunk-points 340000)"
         );
     }

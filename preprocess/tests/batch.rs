@@ -3074,3 +3074,77 @@ fn a_dump_of_the_same_name_elsewhere_is_not_taken_for_gone() {
     assert_eq!(r.strays.len(), 3);
     assert_eq!(listed(&out), [300, 400, 500]);
 }
+
+/// A reporter that replaces the input by another file under its name (as rsync does:
+/// written beside it, renamed over it) once the conversions have begun.
+struct ReplaceOnce {
+    input: PathBuf,
+    other: Vec<u8>,
+    done: std::sync::atomic::AtomicBool,
+}
+
+impl mdlod_preprocess::Progress for ReplaceOnce {
+    fn stage(&self, _name: &str, _total: Option<u64>, _unit: &'static str) {}
+    fn advance(&self, _amount: u64) {
+        if !self.done.swap(true, std::sync::atomic::Ordering::SeqCst) {
+            let tmp = self.input.with_extension("new");
+            std::fs::write(&tmp, &self.other).unwrap();
+            std::fs::rename(&tmp, &self.input).unwrap();
+        }
+    }
+}
+
+/// An input replaced by another file under its name while a batch runs: the batch
+/// converts the file it indexed (its mapping keeps those bytes) and records that file's
+/// size and time, so a rerun finds every frame stale and converts the new file's. The
+/// frames converted after the swap recorded the new file's size and time beside the old
+/// data, and reruns (and `verify`) kept them.
+#[test]
+fn an_input_replaced_during_a_batch_leaves_no_frame_a_rerun_keeps() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let old = std::fs::read(&src).unwrap();
+    // Another run's dump of the same timesteps: every x coordinate moved, a longer file.
+    let text = String::from_utf8(old.clone()).unwrap();
+    let other: String = text
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            if f.len() > 4 && !l.starts_with("ITEM") && f[2].parse::<f64>().is_ok() {
+                let x: f64 = f[2].parse().unwrap();
+                let mut f: Vec<String> = f.iter().map(|s| s.to_string()).collect();
+                f[2] = format!("{:.6}", x + 0.25);
+                f.join(" ") + "\n"
+            } else {
+                l.to_string() + "\n"
+            }
+        })
+        .collect();
+    assert_ne!(other.len(), old.len());
+    let out = dir.path().join("out");
+    let swap = ReplaceOnce {
+        input: src.clone(),
+        other: other.clone().into_bytes(),
+        done: false.into(),
+    };
+    batch(std::slice::from_ref(&src), &out, &opts(), &swap).unwrap();
+    assert!(swap.done.load(std::sync::atomic::Ordering::SeqCst));
+    let m = read_manifest(&out).unwrap();
+    assert!(
+        m.frames.iter().all(|f| f.source.size == old.len() as u64),
+        "{m:?}"
+    );
+    // The rerun converts the new file's every frame, as a fresh batch does.
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 6);
+    let fresh = dir.path().join("fresh");
+    batch(std::slice::from_ref(&src), &fresh, &opts(), &NoProgress).unwrap();
+    let (a, b) = (read_manifest(&out).unwrap(), read_manifest(&fresh).unwrap());
+    let sums = |m: &Manifest| {
+        m.frames
+            .iter()
+            .map(|f| f.checksum.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(sums(&a), sums(&b));
+}
