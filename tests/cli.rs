@@ -10339,4 +10339,30 @@ fn an_unreadable_timestep_in_a_set_fails_alone() {
         err.contains("malformed `ITEM: TIMESTEP` value `abc`"),
         "{err}"
     );
+    // A frame with no timestep of its own numbered onto a real one: said so, not taken
+    // for a restart (whose way out would drop one of them).
+    let xyz = dir.path().join("w.xyz");
+    std::fs::write(
+        &xyz,
+        "2\nProperties=species:S:1:pos:R:3\nCu 0 0 0\nCu 1 1 1\n",
+    )
+    .unwrap();
+    // (Its place is 2, after c.dump's and a.0.dump's frames: c.dump's timestep.)
+    let c = dir.path().join("c.dump");
+    let text = std::fs::read_to_string(set.join("a.0.dump")).unwrap();
+    std::fs::write(&c, text.replacen("TIMESTEP\n0\n", "TIMESTEP\n2\n", 1)).unwrap();
+    let out3 = dir.path().join("b3");
+    let err = fails(&[
+        "batch",
+        s(&c),
+        s(&set.join("a.0.dump")),
+        s(&xyz),
+        "-o",
+        s(&out3),
+    ]);
+    assert!(
+        err.contains("w.xyz frame 0 records no timestep and is numbered by its place")
+            && !err.contains("--duplicate-timesteps"),
+        "{err}"
+    );
 }

@@ -2246,15 +2246,27 @@ pub fn batch(
                 let inputs: Vec<&Path> = jobs.iter().map(|j| j.input).collect();
                 every_timesteps_set(&set, &inputs).unwrap_or(set)
             });
-            let why = match pieces {
-                Some(set) => format!(
+            // A frame that records no timestep (an XYZ frame without `Timestep=`, an
+            // MMPLD frame) is numbered by its place among the inputs' frames, which can
+            // be a real frame's timestep: no restart, and keeping either loses data.
+            let numbered = w
+                .iter()
+                .find(|j| j.own_timestep.is_none())
+                .map(&place);
+            let why = match (pieces, numbered) {
+                (_, Some(p)) if w.iter().any(|j| j.own_timestep.is_some()) => format!(
+                    "{p} records no timestep and is numbered by its place among the inputs' \
+                     frames, which another frame's own timestep is: frames with and without \
+                     timesteps go into batches of their own"
+                ),
+                (Some(set), _) => format!(
                     "the two files hold the same timesteps: pieces of one run written per \
                      processor? Give the pieces as one set, quoted: '{}'; separate runs \
                      (replicas) go into batches of their own; for a run restarted into \
                      them, {restart}",
                     set.display()
                 ),
-                None => format!("a run restarted into the same dump? {restart}"),
+                (None, _) => format!("a run restarted into the same dump? {restart}"),
             };
             return Err(BatchError::DuplicateTimestep {
                 timestep: w[0].timestep,
