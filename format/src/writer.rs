@@ -321,8 +321,27 @@ pub fn host_name() -> &'static str {
 /// `.NAME.HOST-PID-`, followed by six random letters or digits and `.tmp`. The host and
 /// process let a later run tell the file of a killed process from a live one's.
 pub fn temp_prefix(name: &str) -> String {
-    format!(".{name}.{}-{}-", host_name(), std::process::id())
+    format!(
+        ".{}.{}-{}-",
+        temp_name(name),
+        host_name(),
+        std::process::id()
+    )
 }
+
+/// The output's name as its temporary file's name holds it: at most [`TEMP_NAME_BYTES`]
+/// bytes of it (cut at a character's boundary), so that a name near the file system's
+/// 255-byte limit still leaves room for the host, process and random letters.
+fn temp_name(name: &str) -> &str {
+    let mut end = name.len().min(TEMP_NAME_BYTES);
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    &name[..end]
+}
+
+/// See [`temp_name`].
+const TEMP_NAME_BYTES: usize = 120;
 
 /// The process that wrote the temporary file `file_name` for the output named `name`,
 /// where the name is `.NAME.HOST-PID-XXXXXX.tmp` with this host's name ([`host_name`]);
@@ -330,7 +349,7 @@ pub fn temp_prefix(name: &str) -> String {
 pub fn temp_file_owner(file_name: &str, name: &str) -> Option<u32> {
     let rest = file_name
         .strip_prefix('.')?
-        .strip_prefix(name)?
+        .strip_prefix(temp_name(name))?
         .strip_prefix('.')?
         .strip_prefix(host_name())?
         .strip_prefix('-')?
@@ -355,6 +374,29 @@ pub fn pid_and_random(rest: &str) -> Option<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An output named near the file system's 255-byte limit is written: its temporary
+    /// file holds the first 120 bytes of the name (it failed, "File name too long", from
+    /// about 235 bytes on), and is still told as this process's.
+    #[test]
+    fn a_long_output_name_leaves_room_for_the_temporary_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let name = format!("{}é.mdlod", "x".repeat(119));
+        assert!(!name.is_char_boundary(120));
+        let long = format!("{}.mdlod", "y".repeat(244));
+        for name in [name, long] {
+            let path = dir.path().join(&name);
+            let w = Writer::create(&path, 16).unwrap();
+            let temp: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .filter(|n| n.ends_with(".tmp"))
+                .collect();
+            assert_eq!(temp.len(), 1, "{temp:?}");
+            assert_eq!(temp_file_owner(&temp[0], &name), Some(std::process::id()));
+            drop(w);
+        }
+    }
 
     #[test]
     fn temporary_files_are_named_after_host_and_process() {

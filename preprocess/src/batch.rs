@@ -2249,10 +2249,7 @@ pub fn batch(
             // A frame that records no timestep (an XYZ frame without `Timestep=`, an
             // MMPLD frame) is numbered by its place among the inputs' frames, which can
             // be a real frame's timestep: no restart, and keeping either loses data.
-            let numbered = w
-                .iter()
-                .find(|j| j.own_timestep.is_none())
-                .map(&place);
+            let numbered = w.iter().find(|j| j.own_timestep.is_none()).map(&place);
             let why = match (pieces, numbered) {
                 (_, Some(p)) if w.iter().any(|j| j.own_timestep.is_some()) => format!(
                     "{p} records no timestep and is numbered by its place among the inputs' \
