@@ -1210,13 +1210,23 @@ pub fn convert_chunked(
             "{place}: the memory limit of {} is below the {} the smallest chunks need ({} of \
              working buffers and about {BUILD_BYTES_PER_PARTICLE} bytes per particle: {n} \
              particles in at most {} chunks, the root points, make chunks of at least {} \
-             particles); raise --memory-limit to at least {}",
+             particles); raise --memory-limit to at least {}{}",
             size_text(chunk.memory_limit),
             need_text(least),
             size_text(chunk_memory(0)),
             params.max_root_points,
             n.div_ceil(params.max_root_points as usize),
             need_text(least),
+            // Chunks as large as --chunk-points allows need more: what this run would.
+            match chunk_memory(n.min(chunk.chunk_points)) {
+                most if most > least => format!(
+                    ", and to {} for chunks of up to {} particles (--chunk-points), or lower \
+                     --chunk-points",
+                    need_text(most),
+                    n.min(chunk.chunk_points)
+                ),
+                _ => String::new(),
+            }
         )));
     }
     if chunk.chunk_points < params.max_root_points as usize {
