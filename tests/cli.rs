@@ -6270,6 +6270,82 @@ fn a_colour_maps_dark_end_keeps_its_levels_in_the_image() {
         "{:?}",
         drawn.iter().find(|p| **p != [16, 16, 16])
     );
+
+    // Five species in bands: every cluster of one species in exactly its new colour
+    // (the recolouring map fits no five colours: the blue band came out #bb24ff), and
+    // with a species hidden the others' clusters too (#101010 came out (17, 17, 11)).
+    let bands = dir.path().join("bands.lammpstrj");
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n3200\nITEM: BOX BOUNDS pp pp pp\n\
+         0 80\n0 40\n-1 1\nITEM: ATOMS id type x y z\n",
+    );
+    for i in 0..3200 {
+        text.push_str(&format!(
+            "{} {} {} {} 0\n",
+            i + 1,
+            1 + (i % 80) / 16,
+            i % 80,
+            i / 80
+        ));
+    }
+    std::fs::write(&bands, text).unwrap();
+    ok(&["convert", s(&bands), "-o", s(&file), "--root-points", "16"]);
+    let colours = [
+        ("1", [16u8, 16, 16]),
+        ("2", [255, 255, 255]),
+        ("3", [255, 0, 0]),
+        ("4", [0, 0, 255]),
+        ("5", [0, 255, 0]),
+    ];
+    for hide in [None, Some("2")] {
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "160",
+            "--height",
+            "80",
+            "--ortho",
+            "--elevation",
+            "90",
+            "--ambient",
+            "1",
+            "--diffuse",
+            "0",
+            "--brdf",
+            "lambert",
+            "--screen-error",
+            "16",
+            "--background",
+            "#808080",
+        ];
+        let given: Vec<String> = colours
+            .iter()
+            .map(|(n, c)| format!("{n}=#{:02x}{:02x}{:02x}", c[0], c[1], c[2]))
+            .collect();
+        for g in &given {
+            args.extend(["--species-colour", g.as_str()]);
+        }
+        if let Some(h) = hide {
+            args.extend(["--hide-species", h]);
+        }
+        let out = ok(&args);
+        assert!(hide.is_some() || out.contains(" 0 particles and "), "{out}");
+        let (_, _, px) = read_png(&png);
+        // Each shown band's clusters in its colour exactly (mixed clusters at the
+        // bands' borders take mixtures; with a species hidden, those beside it are
+        // opened into particles).
+        for (name, want) in &colours {
+            let exact = px.chunks(4).filter(|p| p[..3] == want[..]).count();
+            let shown = Some(*name) != hide;
+            assert!(
+                (exact > 50) == shown,
+                "species {name} (hidden {hide:?}): {exact} pixels of {want:?}"
+            );
+        }
+    }
 }
 
 /// The diverging map puts its white at 0 for values of both signs (a velocity, a

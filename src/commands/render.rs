@@ -3046,10 +3046,11 @@ fn point_noun(mode: Mode) -> &'static str {
 fn recolour_note(miss: Option<f32>, species: usize) -> Option<String> {
     let miss = miss.filter(|&m| m > 0.02)?;
     Some(format!(
-        "  note: clusters took the new species colours approximately (off by up to {:.0}% \
-         in a channel): the {species} species' colours allow no exact mixture map (exact \
-         for up to four shown species of affinely independent colours); a lower \
-         --screen-error draws more particles in their own colours",
+        "  note: clusters of several species took the new species colours approximately \
+         (off by up to {:.0}% in a channel; clusters of one species take theirs exactly): \
+         the {species} species' colours allow no exact mixture map (exact for up to four \
+         shown species of affinely independent colours); a lower --screen-error draws more \
+         particles in their own colours",
         miss * 100.0
     ))
 }

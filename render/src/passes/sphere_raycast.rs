@@ -416,16 +416,14 @@ pub struct AttrPacker {
     /// The file keeps per-particle radii.
     sized: bool,
     /// Colouring by the attribute: species whose colour the style sets keep it (walls
-    /// grey beside grains coloured by speed), by species index; and per such species,
-    /// per node, which subtrees hold it alone ([`MdlodFile::species_below`]'s kinds), so
-    /// that its clusters keep the colour too.
+    /// grey beside grains coloured by speed), by species index.
     fixed: Vec<Option<[f32; 3]>>,
-    fixed_nodes: Vec<(u16, std::sync::Arc<[u8]>)>,
-    /// A file of one species: its (styled) colour, which every cluster takes exactly
-    /// rather than through the file's 8-bit linear mixture (and, recoloured, through
-    /// [`Self::recolour`], which scales that rounding up: a near-black override came out
-    /// up to 5 levels off, tinted).
-    only_colour: Option<[f32; 3]>,
+    /// Per node, the one species below it ([`MdlodFile::pure_species`]), where the
+    /// style changes colours (a colour set, a species hidden, walls kept under a map):
+    /// such a cluster takes its species' colour exactly. Through the file's 8-bit linear
+    /// mixture and the recolouring map it came out up to 6 levels off at the dark end
+    /// with two species, and up to 187 with five (whose colours no affine map fits).
+    pure: Option<std::sync::Arc<[u16]>>,
 }
 
 impl AttrPacker {
@@ -502,25 +500,21 @@ impl AttrPacker {
                 fixed[i] = styled.and_then(|t| t.colour);
             }
         }
-        let fixed_nodes = fixed
-            .iter()
-            .enumerate()
-            .filter(|(i, c)| c.is_some() && *i < 64)
-            .map(|(i, _)| (i as u16, file.species_below_uncached(1u64 << i).into()))
-            .collect();
-        let only_colour =
-            (species.len() == 1).then(|| [species[0][0], species[0][1], species[0][2]]);
+        let recolour = look.cluster_recolour(&meta.species, &species);
+        let hides = look.species.iter().any(|t| t.hidden);
+        let pure = (meta.species.len() > 1
+            && (recolour.is_some() || hides || fixed.iter().any(Option::is_some)))
+        .then(|| file.pure_species());
         Ok(AttrPacker {
             fixed,
-            fixed_nodes,
-            only_colour,
+            pure,
             size_factor,
             sized: file.radii().is_some(),
             style,
             radius_scale: look.radius_scale,
             mapped,
             intensity,
-            recolour: look.cluster_recolour(&meta.species, &species),
+            recolour,
             species,
             species_count: meta.species.len(),
         })
@@ -630,21 +624,29 @@ impl AttrPacker {
             let nf = node_first();
             for (id, n) in (nf..).zip(&file.nodes()[nf..nf + count]) {
                 attrs.push(self.radius(n).to_bits());
-                // A cluster of one species the colour map leaves its colour: that
-                // colour (a mixed one takes the map's colour of its mean).
-                let fixed = self
-                    .fixed_nodes
-                    .iter()
-                    .find(|(_, below)| below.get(id) == Some(&mdlod_format::reader::BELOW_IN))
-                    .and_then(|(s, _)| self.fixed[usize::from(*s)]);
+                // The one species of a cluster of one (a file of one species: every
+                // cluster's), where known.
+                let pure = match self.species_count {
+                    1 => Some(0),
+                    _ => self
+                        .pure
+                        .as_ref()
+                        .and_then(|p| p.get(id).copied())
+                        .map(usize::from)
+                        .filter(|&s| s < self.species.len()),
+                };
                 attrs.push(if let Some(scale) = &self.intensity {
                     scale.of_value(n.attribute).to_bits()
-                } else if let Some(c) = fixed {
-                    pack_colour(c)
                 } else if let Some((map, scale)) = &self.mapped {
-                    pack_colour(map.colour(scale.of_value(n.attribute)))
-                } else if let Some(c) = self.only_colour {
-                    pack_colour(c)
+                    // A cluster of one species the colour map leaves its colour: that
+                    // colour (a mixed one takes the map's colour of its mean).
+                    match pure.and_then(|s| self.fixed.get(s).copied().flatten()) {
+                        Some(c) => pack_colour(c),
+                        None => pack_colour(map.colour(scale.of_value(n.attribute))),
+                    }
+                } else if let Some(s) = pure {
+                    let c = self.species[s];
+                    pack_colour([c[0], c[1], c[2]])
                 } else if let Some(t) = &self.recolour {
                     pack_colour(crate::style::recoloured(t, n.colour_rgb()))
                 } else {
