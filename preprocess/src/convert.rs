@@ -425,10 +425,35 @@ pub fn convert_frame_with(
         if let Some(ids) = ids {
             notes.extend(ids);
         } else {
-            notes.extend(attribute_span_note(&a.name, *min, *max, options));
+            let mut said = Vec::new();
+            said.extend(attribute_span_note(&a.name, *min, *max, options));
             if !options.attribute_log10 {
-                notes.extend(below_step_note(&a.name, &a.values, *min, *max));
+                said.extend(below_step_note(&a.name, &a.values, *min, *max));
+                // How much of the area-weighted total (what splats by the attribute add
+                // up: a column density's mass) the 16-bit steps lose at particles'
+                // resolution, where clusters keep their exact means.
+                let area = |i: usize| -> f64 {
+                    let r = match &radii {
+                        Some(r) => r[i],
+                        None => species[usize::from(species_index[i])].radius,
+                    };
+                    f64::from(r) * f64::from(r)
+                };
+                if let (false, Some(lost)) = (
+                    said.is_empty(),
+                    quantized_total_loss(&a.values, area, *min, *max),
+                ) {
+                    said.push(format!(
+                        "attribute {name}: at particles' resolution its 16-bit steps change \
+                         the area-weighted total that splats by the attribute add up (a \
+                         column density's mass) by {pct:.1}%, while clusters keep their \
+                         exact means: such an image's total depends on --screen-error",
+                        name = a.name,
+                        pct = lost * 100.0
+                    ));
+                }
             }
+            notes.extend(said);
         }
     }
     // Further attributes spanning decades lose them as the first would; their remedy is
@@ -1023,6 +1048,33 @@ pub fn attribute_span_note(
         max,
         "--attribute-log10 keeps its logarithm, every decade alike",
     )
+}
+
+/// The relative change 16-bit quantization over `[min, max]` makes to `Σ area(i) · v_i`
+/// (`Some` from 1 % on): SPH column densities `m / (π h²)` spanning ten decades lost 44 %
+/// of their mass at particles' resolution, silently.
+pub fn quantized_total_loss(
+    values: &[f32],
+    area: impl Fn(usize) -> f64 + Sync,
+    min: f32,
+    max: f32,
+) -> Option<f64> {
+    use rayon::prelude::*;
+    let info = mdlod_format::meta::AttributeInfo {
+        name: String::new(),
+        min,
+        max,
+    };
+    let (exact, stored) = values
+        .par_iter()
+        .enumerate()
+        .map(|(i, &v)| {
+            let a = area(i);
+            (a * f64::from(v), a * f64::from(info.decode(info.encode(v))))
+        })
+        .reduce(|| (0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1));
+    let lost = ((stored - exact) / exact).abs();
+    (exact != 0.0 && lost.is_finite() && lost >= 0.01).then_some(lost)
 }
 
 /// A note for a column from 0 (or below) whose values above 0 reach far below one 16-bit
@@ -1868,6 +1920,28 @@ mod tests {
 
     /// Radii many spacings wide are named (nanometre data in metres with angström
     /// radii), in 3D, 2D and on a line; radii about the spacing are not.
+    /// Column densities spanning ten decades, each particle's area its h² (mass = Σ
+    /// σ·h²): the 16-bit steps lose most of the mass held by the many faint particles;
+    /// a narrow range loses nothing worth saying.
+    #[test]
+    fn the_attribute_total_lost_to_16_bit_steps_is_measured() {
+        // h from 10 down to 1e-4 (log-spaced), σ = m / h² with equal masses.
+        let n = 10_000;
+        let h: Vec<f64> = (0..n)
+            .map(|i| 10f64.powf(1.0 - 5.0 * i as f64 / n as f64))
+            .collect();
+        let sigma: Vec<f32> = h.iter().map(|h| (1.0 / (h * h)) as f32).collect();
+        let (min, max) = (sigma[0], sigma[n - 1]);
+        let lost = super::quantized_total_loss(&sigma, |i| h[i] * h[i], min, max).unwrap();
+        assert!(lost > 0.3, "{lost}");
+        // The same values within one decade: kept to within rounding.
+        let narrow: Vec<f32> = (0..n).map(|i| 1.0 + 9.0 * i as f32 / n as f32).collect();
+        assert_eq!(
+            super::quantized_total_loss(&narrow, |_| 1.0, 1.0, 10.0),
+            None
+        );
+    }
+
     #[test]
     fn radii_far_wider_than_the_spacing_are_noted() {
         let species = |r: &[f32]| -> Vec<mdlod_format::meta::Species> {
