@@ -10441,4 +10441,11 @@ fn an_unreadable_timestep_in_a_set_fails_alone() {
             && !err.contains("--duplicate-timesteps"),
         "{err}"
     );
+    // A quoted pattern over directories: said so (it was "No such file or directory").
+    let across = dir.path().join("s*").join("a.0.dump");
+    let err = fails(&["batch", s(&across), "-o", s(&out3)]);
+    assert!(
+        err.contains("matches file names in one directory, not directory names"),
+        "{err}"
+    );
 }

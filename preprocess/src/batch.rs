@@ -1656,6 +1656,21 @@ pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf
     let mut out = Vec::with_capacity(inputs.len());
     for input in inputs {
         let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        // A wildcard in a directory's name (`runs/f*/sig.raw.json`): patterns match file
+        // names in one directory.
+        let wild_dir = input
+            .parent()
+            .and_then(|d| d.to_str())
+            .is_some_and(|d| d.contains(['*', '?', '[']));
+        if wild_dir && !input.exists() {
+            return Err(BatchError::Pattern {
+                pattern: input.clone(),
+                message: "a quoted pattern matches file names in one directory, not \
+                          directory names (leave it unquoted for the shell to expand, or \
+                          list the files)"
+                    .into(),
+            });
+        }
         if input.exists() || !name.contains(['*', '?', '[']) {
             out.push(input.clone());
             continue;

@@ -152,9 +152,10 @@ impl BuildArgs {
         }
         if self.attribute_log10 && self.attribute.len() > 1 {
             bail!(
-                "--attribute-log10 with {} --attribute columns: it keeps one column's \
-                 logarithm, and further columns are kept as they are; convert the column to \
-                 keep as a logarithm alone, or without --attribute-log10",
+                "--attribute-log10 with {} --attribute columns: it is refused with more \
+                 than one column (a file keeps one logarithm only, its first attribute's); \
+                 convert the column to keep as a logarithm into a file of its own, or leave \
+                 out --attribute-log10",
                 self.attribute.len()
             );
         }
