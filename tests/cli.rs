@@ -6234,29 +6234,30 @@ fn a_colour_maps_dark_end_keeps_its_levels_in_the_image() {
     std::fs::write(&grid, text).unwrap();
     let file = dir.path().join("grid.mdlod");
     ok(&["convert", s(&grid), "-o", s(&file), "--root-points", "16"]);
-    let out = ok(&[
-        "render",
-        s(&file),
-        "-o",
-        s(&png),
-        "--width",
-        "160",
-        "--height",
-        "80",
-        "--ortho",
-        "--elevation",
-        "90",
-        "--ambient",
-        "1",
-        "--diffuse",
-        "0",
-        "--brdf",
-        "lambert",
-        "--screen-error",
-        "16",
-        "--species-colour",
-        "1=#101010",
-    ]);
+    // Flat-lit from above, 2 pixels a unit, at a screen error that draws clusters.
+    let flat_render = |extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "160"];
+        args.extend([
+            "--height",
+            "80",
+            "--ortho",
+            "--elevation",
+            "90",
+            "--ambient",
+            "1",
+        ]);
+        args.extend([
+            "--diffuse",
+            "0",
+            "--brdf",
+            "lambert",
+            "--screen-error",
+            "16",
+        ]);
+        args.extend(extra);
+        ok(&args)
+    };
+    let out = flat_render(&["--species-colour", "1=#101010"]);
     assert!(out.contains(" 0 particles and "), "{out}");
     let (_, _, px) = read_png(&png);
     let drawn: Vec<&[u8]> = px
@@ -6298,29 +6299,7 @@ fn a_colour_maps_dark_end_keeps_its_levels_in_the_image() {
         ("5", [0, 255, 0]),
     ];
     for hide in [None, Some("2")] {
-        let mut args = vec![
-            "render",
-            s(&file),
-            "-o",
-            s(&png),
-            "--width",
-            "160",
-            "--height",
-            "80",
-            "--ortho",
-            "--elevation",
-            "90",
-            "--ambient",
-            "1",
-            "--diffuse",
-            "0",
-            "--brdf",
-            "lambert",
-            "--screen-error",
-            "16",
-            "--background",
-            "#808080",
-        ];
+        let mut args = vec!["--background", "#808080"];
         let given: Vec<String> = colours
             .iter()
             .map(|(n, c)| format!("{n}=#{:02x}{:02x}{:02x}", c[0], c[1], c[2]))
@@ -6331,7 +6310,7 @@ fn a_colour_maps_dark_end_keeps_its_levels_in_the_image() {
         if let Some(h) = hide {
             args.extend(["--hide-species", h]);
         }
-        let out = ok(&args);
+        let out = flat_render(&args);
         assert!(hide.is_some() || out.contains(" 0 particles and "), "{out}");
         let (_, _, px) = read_png(&png);
         // Each shown band's clusters in its colour exactly (mixed clusters at the

@@ -1185,14 +1185,36 @@ impl MdlodFile {
     }
 
     fn compute_pure_species(&self) -> Vec<u16> {
-        let (nodes, levels, species) = (self.nodes(), self.levels(), self.species());
-        let mut pure = vec![MIXED_SPECIES; nodes.len()];
-        let Some(last) = levels.len().checked_sub(1) else {
-            return pure;
+        let one = |c: &[u16]| {
+            let (&first, rest) = c.split_first()?;
+            rest.iter().all(|&s| s == first).then_some(first)
         };
-        let one = |mut it: std::slice::Iter<'_, u16>| {
-            let first = *it.next()?;
-            it.all(|&s| s == first).then_some(first)
+        self.fold_below(
+            MIXED_SPECIES,
+            |particles, species| {
+                species
+                    .get(particles)
+                    .and_then(one)
+                    .unwrap_or(MIXED_SPECIES)
+            },
+            |children| one(children).unwrap_or(MIXED_SPECIES),
+        )
+    }
+
+    /// A value per node (in the node table's order) made bottom up: from the range of
+    /// its particle children (with the SPECIES section) on the level above the
+    /// particles, from its children's values above that; `unknown` where a record's
+    /// children lie outside their level.
+    fn fold_below<T: Copy>(
+        &self,
+        unknown: T,
+        particles: impl Fn(Range<usize>, &[u16]) -> T,
+        children: impl Fn(&[T]) -> T,
+    ) -> Vec<T> {
+        let (nodes, levels, species) = (self.nodes(), self.levels(), self.species());
+        let mut out = vec![unknown; nodes.len()];
+        let Some(last) = levels.len().checked_sub(1) else {
+            return out;
         };
         for l in (0..last).rev() {
             let first = levels[l].node_first as usize;
@@ -1201,20 +1223,19 @@ impl MdlodFile {
                 let Some(n) = nodes.get(id) else { break };
                 let a = n.child_first as usize;
                 let b = a.saturating_add(n.child_count as usize);
-                let below = if l + 1 == last {
-                    species.get(a..b).and_then(|c| one(c.iter()))
+                let value = if l + 1 == last {
+                    particles(a..b, species)
                 } else if b as u64 <= levels[l + 1].point_count {
                     let f = levels[l + 1].node_first as usize;
-                    pure.get(f.saturating_add(a)..f.saturating_add(b))
-                        .and_then(|c| one(c.iter()))
-                        .filter(|&s| s != MIXED_SPECIES)
+                    out.get(f.saturating_add(a)..f.saturating_add(b))
+                        .map_or(unknown, &children)
                 } else {
-                    None
+                    unknown
                 };
-                pure[id] = below.unwrap_or(MIXED_SPECIES);
+                out[id] = value;
             }
         }
-        pure
+        out
     }
 
     /// [`Self::species_below`] computed afresh, leaving the one kept for the traversal's
@@ -1269,11 +1290,6 @@ impl MdlodFile {
     }
 
     fn compute_hidden_below(&self, set: &HiddenSet) -> Vec<u8> {
-        let (nodes, levels, species) = (self.nodes(), self.levels(), self.species());
-        let mut kinds = vec![0u8; nodes.len()];
-        let Some(last) = levels.len().checked_sub(1) else {
-            return kinds;
-        };
         let test = self.hidden_test(set);
         let values = self.hiding_values().filter(|_| test.by_value());
         let of = |i: usize, s: u16| {
@@ -1283,29 +1299,16 @@ impl MdlodFile {
                 BELOW_OUT
             }
         };
-        for l in (0..last).rev() {
-            let first = levels[l].node_first as usize;
-            for i in 0..levels[l].point_count as usize {
-                let id = first.saturating_add(i);
-                let Some(n) = nodes.get(id) else { break };
-                let a = n.child_first as usize;
-                let b = a.saturating_add(n.child_count as usize);
-                let kind = if l + 1 == last {
-                    species.get(a..b).map_or(BELOW_IN | BELOW_OUT, |c| {
-                        c.iter().zip(a..).fold(0, |k, (&s, i)| k | of(i, s))
-                    })
-                } else if b as u64 <= levels[l + 1].point_count {
-                    let f = levels[l + 1].node_first as usize;
-                    kinds
-                        .get(f.saturating_add(a)..f.saturating_add(b))
-                        .map_or(BELOW_IN | BELOW_OUT, |c| c.iter().fold(0, |k, &c| k | c))
-                } else {
-                    BELOW_IN | BELOW_OUT
-                };
-                kinds[id] = kind;
-            }
-        }
-        kinds
+        self.fold_below(
+            BELOW_IN | BELOW_OUT,
+            |particles, species| {
+                let start = particles.start;
+                species.get(particles).map_or(BELOW_IN | BELOW_OUT, |c| {
+                    c.iter().zip(start..).fold(0, |k, (&s, i)| k | of(i, s))
+                })
+            },
+            |children| children.iter().fold(0, |k, &c| k | c),
+        )
     }
 
     /// Checks the records of nodes `range` of level `l` (indices on the level; the
