@@ -104,16 +104,20 @@ fn equals_tip(args: impl Iterator<Item = String>, unexpected: &str) -> Option<St
 /// A tip for a file to write given as a second input (`mdlod convert run.dump
 /// run.mdlod`): the commands that write files take them after `-o`.
 fn output_tip(mut args: impl Iterator<Item = String>, unexpected: &str) -> Option<String> {
-    const WRITERS: &[&str] = &["convert", "render", "sample", "shade", "generate"];
+    // What each command writes.
+    const WRITES: &[(&str, &[&str])] = &[
+        ("convert", &["mdlod"]),
+        ("render", &["png", "svg"]),
+        ("sample", &["sndf"]),
+        ("shade", &["png"]),
+    ];
     let command = args.next()?;
     let ext = std::path::Path::new(unexpected)
         .extension()?
         .to_string_lossy()
         .to_ascii_lowercase();
-    (WRITERS.contains(&command.as_str())
-        && !unexpected.starts_with('-')
-        && ["mdlod", "png", "sndf", "json", "svg"].contains(&ext.as_str()))
-    .then(|| {
+    let writes = WRITES.iter().find(|(c, _)| *c == command)?.1;
+    (!unexpected.starts_with('-') && writes.contains(&ext.as_str())).then(|| {
         format!(
             "the file to write goes after -o: mdlod {command} ... -o {unexpected} (a second \
              file name alone is read as a second input)"

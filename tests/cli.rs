@@ -5847,7 +5847,10 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
     // one blob of the 300, which is noted apart).
     let fine = ok(&["convert", s(&offset), "-o", s(&out), "--radius", "A=1"]);
     assert!(!fine.contains("coordinates reach"), "{fine}");
-    assert!(fine.contains("times the particles' mean spacing"), "{fine}");
+    assert!(
+        fine.contains("times the mean spacing of those particles"),
+        "{fine}"
+    );
     // Particles of their own sizes (smoothing lengths): the smallest particle's radius
     // counts, not the species' mean (one particle of 0.002 among 299 of 1).
     let sized = dir.path().join("sized.xyz");
@@ -10270,6 +10273,24 @@ fn a_granular_newcomers_choices_and_mistakes_are_answered() {
         "{out}"
     );
     let out = ok(&["batch", s(&dump), "-o", s(&d), "--radius", "2=0.7"]);
+    // Notes about two numbered species are both said (not merged as one note whose
+    // figures differ).
+    let both = dir.path().join("both.d");
+    let notes = ok(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&both),
+        "--radius",
+        "1=0.4",
+        "--radius",
+        "2=0.7",
+    ]);
+    assert!(
+        notes.contains("note: species 1: --radius 1=0.4")
+            && notes.contains("note: species 2: --radius 2=0.7"),
+        "{notes}"
+    );
     assert!(
         out.contains("3 built with other settings (--radius)"),
         "{out}"

@@ -1658,11 +1658,12 @@ pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf
         let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
         // A wildcard in a directory's name (`runs/f*/sig.raw.json`): patterns match file
         // names in one directory.
-        let wild_dir = input
-            .parent()
-            .and_then(|d| d.to_str())
-            .is_some_and(|d| d.contains(['*', '?', '[']));
-        if wild_dir && !input.exists() {
+        let wild_dir = input.parent().is_some_and(|d| {
+            !d.as_os_str().is_empty()
+                && !d.is_dir()
+                && d.to_str().is_some_and(|d| d.contains(['*', '?', '[']))
+        });
+        if wild_dir {
             return Err(BatchError::Pattern {
                 pattern: input.clone(),
                 message: "a quoted pattern matches file names in one directory, not \
@@ -2379,7 +2380,7 @@ pub fn batch(
     let keep_notes = |timestep: u64, n: Vec<String>| {
         let mut notes = notes.lock().unwrap_or_else(|e| e.into_inner());
         for text in n {
-            let about = note_kind(text.split(": ").next().unwrap_or_default());
+            let about = note_key(&text);
             notes
                 .entry(about)
                 .or_default()
@@ -2449,7 +2450,7 @@ pub fn batch(
         };
         let columns = columns_for(&job);
         let verdict = MdlodFile::open(&out).ok().map(|f| {
-            let given = || match job.dump {
+            let mut given = || match job.dump {
                 Some(d) => d.given_radii(job.frame).ok(),
                 None => job.given_radii.take(),
             };
@@ -2514,12 +2515,16 @@ pub fn batch(
                 further_attributes: !same_attributes,
                 ..Default::default()
             };
+            // (Once another setting redoes the frame, its radii are not read from the
+            // input again to learn whether they changed too: a species whose override
+            // was left out counts as changed.)
+            let other = changed != SettingsChanged::default();
             if let Some(c) = build_difference(
                 &f,
                 &opts.convert,
                 job.attribute.as_deref(),
                 recorded.and_then(|r| r.radii.as_deref()),
-                given,
+                move || if other { None } else { given() },
             ) {
                 changed |= c;
             }
@@ -3165,9 +3170,10 @@ pub fn batch(
                     // Frames of a trajectory differ in their numbers: one line, not one
                     // per frame.
                     (_, Some(t)) => format!(
-                        "{first} (the figures are timestep {t}'s; {} frames{which} have this \
+                        "{first} (the figures are timestep {t}'s; {} frame{}{which} have this \
                          note, with their own)",
-                        steps.len()
+                        steps.len(),
+                        if steps.len() == 1 { "" } else { "s" }
                     ),
                 }
             })
@@ -3179,10 +3185,16 @@ pub fn batch(
     })
 }
 
-/// `timestep 5` or `timesteps 0, 100, 200 and 7 more`.
-/// What a note is about, its figures aside: the text before its first `": "` with each
-/// number (`12`, `-3.5`, `2.5e-4`) as `#`, so that one frame's note and another's, which
-/// differ in their figures alone, are said once.
+/// What a note says, its figures aside, to say a note once where frames differ in its
+/// figures alone: its first two words as they are (`species 1`, `attribute c_ke`: the
+/// subject, which may be a number), then the whole text with each number (`12`, `-3.5`,
+/// `2.5e-4`) as `#` ([`note_kind`]).
+fn note_key(text: &str) -> String {
+    let subject: Vec<&str> = text.split_whitespace().take(2).collect();
+    format!("{}\u{0}{}", subject.join(" "), note_kind(text))
+}
+
+/// `text` with each number as `#` (see [`note_key`]).
 fn note_kind(about: &str) -> String {
     let mut out = String::with_capacity(about.len());
     let mut chars = about.chars().peekable();
@@ -3204,6 +3216,7 @@ fn note_kind(about: &str) -> String {
     out
 }
 
+/// `timestep 5` or `timesteps 0, 100, 200 and 7 more`.
 fn timesteps_text(steps: &std::collections::BTreeSet<u64>) -> String {
     let shown: Vec<String> = steps.iter().take(3).map(u64::to_string).collect();
     match steps.len() {
@@ -4014,6 +4027,17 @@ mod tests {
         assert_eq!(note_kind("box -3.5 to +7"), "box # to #");
         assert_ne!(note_kind(a), note_kind("attribute v_speed spans 5 decades"));
         assert_ne!(note_kind("species Cu2"), note_kind("species Cu"));
+        // Notes about numbered species, or two notes about one attribute, stay apart.
+        let radius = |s: &str| format!("species {s}: --radius {s}=0.4 draws every particle");
+        assert_ne!(note_key(&radius("1")), note_key(&radius("2")));
+        assert_ne!(
+            note_key("attribute c_ke: 23 of the 50 values above 0 lie below one step"),
+            note_key("attribute c_ke: at particles' resolution its steps change the total")
+        );
+        assert_eq!(
+            note_key("attribute c_ke spans 5.2 decades (1e-9 to 16): the values"),
+            note_key("attribute c_ke spans 12.0 decades (2.5e-12 to 1.6e1): the values")
+        );
     }
 
     /// FORMAT.md's section 11 names every field a manifest and its frames write (the

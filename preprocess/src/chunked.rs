@@ -224,7 +224,6 @@ pub(crate) fn chunk_points_within(limit: u64, root_points: u32) -> Option<u64> {
     })
 }
 
-/// A size for a message: bytes below a MiB (a limit of `1K` is not "0 MiB"), else MiB.
 /// [`size_text`] of a need, rounded up to a whole MiB (from 1 MiB on), so that a limit
 /// below it never reads as equal to it (64 MiB "below the 64.0 MiB" needed).
 pub(crate) fn need_text(bytes: u64) -> String {
@@ -235,6 +234,7 @@ pub(crate) fn need_text(bytes: u64) -> String {
     }
 }
 
+/// A size for a message: bytes below a MiB (a limit of `1K` is not "0 MiB"), else MiB.
 pub(crate) fn size_text(bytes: u64) -> String {
     if bytes < 1 << 20 {
         format!("{bytes} bytes")
@@ -1686,6 +1686,7 @@ pub fn convert_chunked(
                 metadata.simulation_box.as_ref(),
                 Some(&counts),
             ));
+            crate::convert::drop_default_radius_note_said_twice(&mut notes);
             notes
         },
         frame: None,

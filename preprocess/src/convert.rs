@@ -439,10 +439,10 @@ pub fn convert_frame_with(
                     };
                     f64::from(r) * f64::from(r)
                 };
-                if let (false, Some(lost)) = (
-                    said.is_empty(),
-                    quantized_total_loss(&a.values, area, *min, *max),
-                ) {
+                let lost = (!said.is_empty())
+                    .then(|| quantized_total_loss(&a.values, area, *min, *max))
+                    .flatten();
+                if let Some(lost) = lost {
                     said.push(format!(
                         "attribute {name}: at particles' resolution its 16-bit steps change \
                          the area-weighted total that splats by the attribute add up (a \
@@ -486,6 +486,7 @@ pub fn convert_frame_with(
         frame.simulation_box.as_ref(),
         Some(&crate::species::counts(species.len(), species_index)),
     ));
+    drop_default_radius_note_said_twice(&mut notes);
     let mut metadata = base_metadata(frame, source, options);
     metadata.species = species;
     metadata.max_position_error = h.max_position_error;
@@ -654,7 +655,7 @@ fn oversized_note(
         Some(c) => mean_spacing(lo, hi, c.get(i).copied().unwrap_or(0)),
         None => Some(spacing),
     };
-    let over: Vec<(String, f64)> = species
+    let over: Vec<(String, f64, f64)> = species
         .iter()
         .enumerate()
         .filter_map(|(i, s)| {
@@ -667,15 +668,14 @@ fn oversized_note(
                 (
                     format!("{} ({})", s.name, s.radius),
                     f64::from(s.radius) / own,
+                    own,
                 )
             })
         })
         .collect();
-    if over.is_empty() {
-        return None;
-    }
-    let ratio = over.iter().map(|(_, r)| *r).fold(0.0, f64::max);
-    let over: Vec<String> = over.into_iter().take(3).map(|(s, _)| s).collect();
+    // The figures of the species most over its own spacing.
+    let (_, ratio, spacing) = *over.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    let over: Vec<String> = over.into_iter().take(3).map(|(s, _, _)| s).collect();
     // Plain numbers where they read so (4.3, 1.157), powers of ten beyond.
     let readable = |x: f64, digits: usize| {
         if (1e-3..1e5).contains(&x.abs()) {
@@ -685,8 +685,8 @@ fn oversized_note(
         }
     };
     Some(format!(
-        "the radi{} {} {} {} times the particles' mean spacing ({}, from the box around \
-         them): the spheres overlap into one blob. If the data is in other units than the \
+        "the radi{} {} {} {} times the mean spacing of those particles ({}, from the box \
+         around all of them): the spheres overlap into one blob. If the data is in other units than the \
          radii (data in nanometres, radii in ångströms), give --radius NAME=R in the data's \
          own units (about half the spacing)",
         if over.len() == 1 { "us of" } else { "i of" },
@@ -1017,6 +1017,17 @@ pub fn radius_override_notes(names: &[SpeciesName], overrides: &[(String, f32)])
         .collect()
 }
 
+/// Drops [`default_radius_note`] where the note on species drawn at the default radius
+/// far below the spacing (`undersized_note`) says it too, with more.
+pub(crate) fn drop_default_radius_note_said_twice(notes: &mut Vec<String>) {
+    if notes
+        .iter()
+        .any(|n| n.contains(": drawn at the default radius "))
+    {
+        notes.retain(|n| !n.contains(", the default: no size was read for them"));
+    }
+}
+
 /// A note for species drawn at the default radius because nothing gives them a size
 /// (`species::default_radius_species`): a granular dump without its `diameter` column
 /// looks right at a glance, every grain of one size.
@@ -1065,16 +1076,18 @@ pub fn quantized_total_loss(
         min,
         max,
     };
-    let (exact, stored) = values
+    // (Measured against Σ area · |v|: a column of signed values may sum to about 0.)
+    let (size, change) = values
         .par_iter()
         .enumerate()
         .map(|(i, &v)| {
             let a = area(i);
-            (a * f64::from(v), a * f64::from(info.decode(info.encode(v))))
+            let stored = f64::from(info.decode(info.encode(v)));
+            (a * f64::from(v).abs(), a * (stored - f64::from(v)))
         })
         .reduce(|| (0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1));
-    let lost = ((stored - exact) / exact).abs();
-    (exact != 0.0 && lost.is_finite() && lost >= 0.01).then_some(lost)
+    let lost = (change / size).abs();
+    (size > 0.0 && lost.is_finite() && lost >= 0.01).then_some(lost)
 }
 
 /// A note for a column from 0 (or below) whose values above 0 reach far below one 16-bit
@@ -1918,8 +1931,6 @@ mod tests {
 
     use super::*;
 
-    /// Radii many spacings wide are named (nanometre data in metres with angström
-    /// radii), in 3D, 2D and on a line; radii about the spacing are not.
     /// Column densities spanning ten decades, each particle's area its h² (mass = Σ
     /// σ·h²): the 16-bit steps lose most of the mass held by the many faint particles;
     /// a narrow range loses nothing worth saying.
@@ -1942,6 +1953,8 @@ mod tests {
         );
     }
 
+    /// Radii many spacings wide are named (nanometre data in metres with angström
+    /// radii), in 3D, 2D and on a line; radii about the spacing are not.
     #[test]
     fn radii_far_wider_than_the_spacing_are_noted() {
         let species = |r: &[f32]| -> Vec<mdlod_format::meta::Species> {
@@ -1958,14 +1971,16 @@ mod tests {
         // 1000 particles in a 5 nm cube (spacing 0.5 nm), argon's 1.92.
         let note = oversized_note([0.0; 3], [5e-9; 3], 1000, &species(&[1.92]), None).unwrap();
         assert!(
-            note.contains("the radius of S0 (1.92) is 3.8e9 times the particles' mean spacing"),
+            note.contains(
+                "the radius of S0 (1.92) is 3.8e9 times the mean spacing of those particles"
+            ),
             "{note}"
         );
         // Water in nm (spacing 0.22 nm) with oxygen's 0.74 Å: 3.4 spacings; in Å, none.
         let water = 0.22 * 1000f32.cbrt();
         let note = oversized_note([0.0; 3], [water; 3], 1000, &species(&[0.74]), None).unwrap();
         assert!(
-            note.contains("(0.74) is 3.4 times the particles' mean spacing (0.2200,"),
+            note.contains("(0.74) is 3.4 times the mean spacing of those particles (0.2200,"),
             "{note}"
         );
         assert_eq!(

@@ -551,24 +551,23 @@ fn the_attribute_error_lists_only_chunks_of_one_number_per_particle() {
 fn differing_diameters_of_a_type_are_kept_per_particle() {
     let sample = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let convert =
-        |bytes: &[u8], radii: Vec<(String, f32)>, chunk_points: usize, name: &str| {
-            let path = dir.path().join("poly.gsd");
-            std::fs::write(&path, bytes).unwrap();
-            let out = dir.path().join(name);
-            let overridden = !radii.is_empty();
-            let report = convert_frame_1(&path, &out, radii, chunk_points).unwrap();
-            // Only `--radius` replacing the type's own sizes is noted, where it does.
-            assert!(
-                report.notes.iter().all(|n| overridden
-                    && n.contains("in place of the sizes the input gives its particles")),
-                "{:?}",
-                report.notes
-            );
-            let f = mdlod_format::MdlodFile::open(&out).unwrap();
-            f.verify().unwrap();
-            f
-        };
+    let convert = |bytes: &[u8], radii: Vec<(String, f32)>, chunk_points: usize, name: &str| {
+        let path = dir.path().join("poly.gsd");
+        std::fs::write(&path, bytes).unwrap();
+        let out = dir.path().join(name);
+        let overridden = !radii.is_empty();
+        let report = convert_frame_1(&path, &out, radii, chunk_points).unwrap();
+        // Only `--radius` replacing the type's own sizes is noted, where it does.
+        let replaced = |n: &String| n.contains("in place of the sizes the input gives its");
+        assert!(
+            report.notes.iter().all(replaced) && report.notes.iter().any(replaced) == overridden,
+            "{:?}",
+            report.notes
+        );
+        let f = mdlod_format::MdlodFile::open(&out).unwrap();
+        f.verify().unwrap();
+        f
+    };
     for chunk_points in [1 << 22, 100] {
         let f = convert(&sample, vec![], chunk_points, "mono.mdlod");
         assert!(f.radii().is_none() && f.metadata().radius.is_none());
