@@ -9830,6 +9830,17 @@ fn part_of_a_movie_is_the_same_as_in_the_whole_movie() {
         .filter(|k| dir.path().join(format!("every-{k}.png")).exists())
         .collect();
     assert_eq!(made, [0, 2, 4]);
+    // A projection's light range, which the first frame chose, is said, with how to
+    // give one; given, it is not repeated.
+    let proj = dir.path().join("proj-%d.png");
+    let out = render(&proj, &["--mode", "splat"]);
+    assert!(
+        out.contains("light range ")
+            && out.contains("(the first frame's; --light-range MIN:MAX gives one)"),
+        "{out}"
+    );
+    let out = render(&proj, &["--mode", "splat", "--light-range", "0:5"]);
+    assert!(!out.contains("(the first frame's;"), "{out}");
     for (sel, says) in [
         ("5:2", "END (2) must be above START (5)"),
         ("::0", "STEP must be 1 or more"),

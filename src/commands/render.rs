@@ -4048,6 +4048,17 @@ fn render_frames(
     let exposure = opts
         .exposure
         .map_or(String::new(), |e| format!(", splat exposure {e:.4e}"));
+    // A projection's light range, where the first frame chose it: said, so that a
+    // collapse whose later frames saturate is set right with it.
+    let exposure = match (opts.light_range, args.light_range) {
+        (Some([lo, hi]), None) if projected(args) => format!(
+            "{exposure}, light range {}:{} (the first frame's; --light-range MIN:MAX gives \
+             one)",
+            super::Num(lo),
+            super::Num(hi)
+        ),
+        _ => exposure,
+    };
     let framing = match &args.camera.view {
         Some(v) => format!("{}", v.display()),
         None if args.fit_all => "fitted to every frame's particles".to_string(),
