@@ -1238,12 +1238,6 @@ impl MdlodFile {
         out
     }
 
-    /// [`Self::species_below`] computed afresh, leaving the one kept for the traversal's
-    /// hidden set alone (a second set: the species a colour map leaves their colour).
-    pub fn species_below_uncached(&self, mask: u64) -> Vec<u8> {
-        self.compute_hidden_below(&HiddenSet::of_species(mask))
-    }
-
     /// [`Self::species_below`] for any [`HiddenSet`]: per node, [`BELOW_IN`] when some
     /// particle below is hidden, [`BELOW_OUT`] when some is not. With value ranges, the
     /// pass decodes the attribute section too.

@@ -2366,8 +2366,14 @@ pub fn batch(
     let mut done = Vec::new();
     let mut todo = Vec::new();
     let mut empty = Vec::new();
-    // Each input's fingerprint, as indexed (a raw sidecar's is read).
-    let fingerprints = &indexed;
+    // Frame `frame` of `input` as its input was indexed (a raw sidecar's is read).
+    let indexed_source = |input: &Path, frame: usize| SourceInfo {
+        frame: frame as u64,
+        ..indexed
+            .get(input)
+            .cloned()
+            .unwrap_or_else(|| fingerprint(input, 0))
+    };
     // The species names the frames hold, for the radius overrides' check at the end.
     let seen = Mutex::new(std::collections::BTreeSet::<String>::new());
     // Notes by what they are about (the text before the first `: `, e.g. `species A`),
@@ -2441,13 +2447,7 @@ pub fn batch(
         // A link, pipe or device in a frame file's place is refused before any frame is
         // converted (it would be replaced, not written through).
         mdlod_format::files::check_replaceable(&out).map_err(io(&out))?;
-        let want = SourceInfo {
-            frame: job.frame as u64,
-            ..fingerprints
-                .get(job.input)
-                .cloned()
-                .unwrap_or_else(|| fingerprint(job.input, 0))
-        };
+        let want = indexed_source(job.input, job.frame);
         let columns = columns_for(&job);
         let verdict = MdlodFile::open(&out).ok().map(|f| {
             let mut given = || match job.dump {
@@ -2802,11 +2802,7 @@ pub fn batch(
                 let bytes = frame_bytes(job.input, job.dump, job.frame)?;
                 let source = SourceInfo {
                     bytes,
-                    frame: job.frame as u64,
-                    ..fingerprints
-                        .get(job.input)
-                        .cloned()
-                        .unwrap_or_else(|| fingerprint(job.input, 0))
+                    ..indexed_source(job.input, job.frame)
                 };
                 let (dump, bounded) = match job.dump {
                     Some(d) => (d, None),

@@ -1482,8 +1482,7 @@ pub fn convert_chunked(
         crate::species::check_overrides(&names, &options.radii)?;
     }
     crate::convert::check_radii(&names, options, metadata.source.as_ref(), metadata.timestep)?;
-    let mut radius_notes = crate::convert::radius_override_notes(&names, &options.radii);
-    radius_notes.extend(crate::convert::default_radius_note(&names, &options.radii));
+    let radius_notes = crate::convert::radius_notes(&names, &options.radii);
     let species = species_table(&names, &options.radii);
     // Each chunk checks its own particles' radii; the top node sums over all of them.
     check_species(n, &species).map_err(|source| ConvertError::Build {

@@ -345,8 +345,7 @@ pub fn convert_frame_with(
         let metadata = base_metadata(frame, source, options);
         return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
     }
-    let mut override_notes = radius_override_notes(&names, &options.radii);
-    override_notes.extend(default_radius_note(&names, &options.radii));
+    let override_notes = radius_notes(&names, &options.radii);
     check_in_memory(frame.len(), options, || {
         FramePlace::of(source.as_ref(), frame.timestep)
     })?;
@@ -988,6 +987,14 @@ pub fn attribute_name(name: &str, options: &ConvertOptions) -> String {
     } else {
         name.to_string()
     }
+}
+
+/// The notes on where the species' radii come from: [`radius_override_notes`] and
+/// [`default_radius_note`], for a build whole or in chunks.
+pub(crate) fn radius_notes(names: &[SpeciesName], overrides: &[(String, f32)]) -> Vec<String> {
+    let mut notes = radius_override_notes(names, overrides);
+    notes.extend(default_radius_note(names, overrides));
+    notes
 }
 
 /// Notes for each `--radius` that replaces sizes the input gives a species: its

@@ -894,7 +894,11 @@ pub fn unpack_colour(c: u32) -> [f32; 3] {
 /// sRGB. sRGB bytes step as the eye does, so a colour comes back within half a level
 /// of its sRGB value. Rounded to the nearest sRGB level, exactly; NaN packs as 0.
 pub fn pack_colour(c: [f32; 3]) -> u32 {
-    let b = c.map(linear_to_srgb_byte);
+    rgba(c.map(linear_to_srgb_byte))
+}
+
+/// Three channel bytes as RGBA8, R in the low byte, A 255.
+fn rgba(b: [u32; 3]) -> u32 {
     b[0] | (b[1] << 8) | (b[2] << 16) | (255 << 24)
 }
 
@@ -902,8 +906,7 @@ pub fn pack_colour(c: [f32; 3]) -> u32 {
 /// ([`pack_colour`]): each byte through a table.
 pub fn pack_file_colour(c: u32) -> u32 {
     let t = &srgb_tables().file_to_srgb;
-    let b = [0, 8, 16].map(|shift| u32::from(t[((c >> shift) & 0xff) as usize]));
-    b[0] | (b[1] << 8) | (b[2] << 16) | (255 << 24)
+    rgba([0, 8, 16].map(|shift| u32::from(t[((c >> shift) & 0xff) as usize])))
 }
 
 /// Buckets of the linear range the encoder's first guess comes from.
@@ -924,13 +927,7 @@ struct SrgbTables {
 fn srgb_tables() -> &'static SrgbTables {
     static TABLES: std::sync::OnceLock<SrgbTables> = std::sync::OnceLock::new();
     TABLES.get_or_init(|| {
-        let to_linear = |s: f64| {
-            if s <= 0.04045 {
-                s / 12.92
-            } else {
-                ((s + 0.055) / 1.055).powf(2.4)
-            }
-        };
+        let to_linear = crate::renderer::srgb_to_linear;
         let mut t = SrgbTables {
             to_linear: [0.0; 256],
             bounds: [f32::INFINITY; 256],
@@ -938,9 +935,9 @@ fn srgb_tables() -> &'static SrgbTables {
             file_to_srgb: [0; 256],
         };
         for k in 0..256 {
-            t.to_linear[k] = to_linear(k as f64 / 255.0) as f32;
+            t.to_linear[k] = to_linear(k as f32 / 255.0);
             if k < 255 {
-                t.bounds[k] = to_linear((k as f64 + 0.5) / 255.0) as f32;
+                t.bounds[k] = to_linear((k as f32 + 0.5) / 255.0);
             }
         }
         let nearest = |v: f32, bounds: &[f32; 256]| bounds.partition_point(|&b| b <= v) as u8;

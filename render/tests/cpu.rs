@@ -1005,7 +1005,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             });
         let mut recoloured = 0;
         let mut fixed_clusters = 0;
-        let cu_below = f.species_below_uncached(1);
+        let cu_below = f.species_below(1);
         let mut i = 0u32;
         for r in &d.ranges {
             let level = r.level as usize;
