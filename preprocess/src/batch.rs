@@ -2735,7 +2735,10 @@ pub fn batch(
             .saturating_mul(BYTES_PER_PARTICLE);
         if particles > chunk_points {
             let chunk = usize::try_from(chunk_points).unwrap_or(usize::MAX);
-            in_memory.max(crate::chunked::chunk_memory(chunk))
+            in_memory.max(crate::chunked::chunk_memory_with(
+                chunk,
+                opts.read.extra_attributes.len(),
+            ))
         } else {
             in_memory
         }
@@ -2837,19 +2840,12 @@ pub fn batch(
                     keep_notes(job.timestep, dump.frame_notes(job.frame, &opts.read));
                     let streamed = if job.particles as usize > convert.chunks.chunk_points {
                         let info = dump.frame_info(job.frame)?;
-                        let problem = if !opts.read.extra_attributes.is_empty() {
-                            Some(crate::convert::chunked_attributes_problem(
-                                job.particles,
-                                convert.chunks.chunk_points,
-                            ))
-                        } else {
-                            crate::convert::chunked_magnitude_problem(
-                                dump,
-                                &opts.read,
-                                job.particles,
-                                convert.chunks.chunk_points,
-                            )
-                        };
+                        let problem = crate::convert::chunked_magnitude_problem(
+                            dump,
+                            &opts.read,
+                            job.particles,
+                            convert.chunks.chunk_points,
+                        );
                         if let Some(problem) = problem {
                             return Err(ConvertError::Attributes {
                                 place: crate::convert::FramePlace {

@@ -6,7 +6,9 @@
 //!    particle goes to one cell of an 8×8×8 grid over the box (finer for frames of more
 //!    than 64 chunks: [`first_bits`]; the dump's box, or the particles' bounds when it
 //!    has none; particles outside it go to the nearest cell) and is appended to that
-//!    cell's working file: position, species and attribute. A thread of its own sorts
+//!    cell's working file: position, species, attribute, radius and further
+//!    attributes (each read by a pass of its own on a thread of its own, in step with
+//!    the particles' windows). A thread of its own sorts
 //!    each window by cell and writes it while the next window is read. A cell that ends
 //!    with more than `chunk_points` particles is split the same way over its own bounds,
 //!    by a grid only as fine as its count needs ([`refine_bits`]; by file order when all
@@ -17,7 +19,9 @@
 //!    in-memory builder ([`crate::hierarchy::build_with`]), as many chunks at a time as
 //!    the memory limit allows. Its node table, quantized positions and per-particle data
 //!    stay in memory while the limit has room beside the builds at work, and go to
-//!    working files otherwise; its cell files are removed.
+//!    working files otherwise; its cell files are removed. Further attributes are laid
+//!    out and averaged per chunk ([`crate::hierarchy::extra`]) over the frame's ranges,
+//!    and their roots' sums kept for the top node.
 //! 3. **Assembly.** The chunk roots become the children of one top node, in chunk order.
 //!    Chunks whose hierarchy is shallower than the deepest are padded under the top with
 //!    single-child copies of their root, so that every particle lies on the last level.
@@ -42,7 +46,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use mdlod_format::layout::{LevelRecord, NodeRecord, SectionKind};
-use mdlod_format::meta::{Metadata, SimulationBox};
+use mdlod_format::meta::{AttributeInfo, Metadata, SimulationBox};
 use mdlod_format::{quantize, Writer};
 use rayon::prelude::*;
 
@@ -209,14 +213,30 @@ fn cgroup_memory_limit(groups: &str, read: &dyn Fn(&str) -> Option<String>) -> O
 
 /// The working memory one chunk of `points` particles needs, in bytes.
 pub fn chunk_memory(points: usize) -> u64 {
-    points as u64 * BUILD_BYTES_PER_PARTICLE + (64 << 20)
+    chunk_memory_with(points, 0)
+}
+
+/// [`chunk_memory`] of a chunk keeping `extras` further attributes.
+pub fn chunk_memory_with(points: usize, extras: usize) -> u64 {
+    points as u64 * build_bytes_per_particle(extras) + (64 << 20)
+}
+
+/// Working memory of the in-memory builder per particle, with `extras` further
+/// attributes: each adds its column as read and in the file's order (f32 each), its
+/// quantized values and its nodes' means (about 12 bytes a particle), and all of them
+/// the particles' areas (f64) and the nodes' runs (about 16 bytes a particle).
+pub fn build_bytes_per_particle(extras: usize) -> u64 {
+    match extras {
+        0 => BUILD_BYTES_PER_PARTICLE,
+        k => BUILD_BYTES_PER_PARTICLE + 16 + 12 * k as u64,
+    }
 }
 
 /// A chunk size within `limit` (see [`chunk_memory`]) to suggest: the most particles a
 /// chunk may hold, rounded down to two significant digits but never below the build's
 /// `root_points`; `None` where not even chunks of the root points fit.
-pub(crate) fn chunk_points_within(limit: u64, root_points: u32) -> Option<u64> {
-    let points = limit.saturating_sub(chunk_memory(0)) / BUILD_BYTES_PER_PARTICLE;
+pub(crate) fn chunk_points_within(limit: u64, root_points: u32, extras: usize) -> Option<u64> {
+    let points = limit.saturating_sub(chunk_memory(0)) / build_bytes_per_particle(extras);
     let least = u64::from(root_points);
     (points >= least).then(|| {
         let unit = 10u64.pow(points.max(1).ilog10().saturating_sub(1));
@@ -258,7 +278,30 @@ pub trait ParticleSource: Sync {
     /// index of the window's first particle, and its particles as a frame of their own
     /// (with its own species list).
     fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError>;
+    /// The further attributes kept beside the first (`--attribute` given more than
+    /// once), in order.
+    fn extra_attributes(&self) -> Vec<String> {
+        Vec::new()
+    }
+    /// Calls `f` for the windows [`Self::windows`] gives, with further attribute `k`'s
+    /// values instead of the particles (a pass of its own over the input, as a frame
+    /// built whole reads each further attribute).
+    fn extra_windows(
+        &self,
+        k: usize,
+        window: usize,
+        f: &mut ExtraWindowFn<'_>,
+    ) -> Result<(), ConvertError> {
+        let _ = (window, f);
+        Err(ConvertError::Chunked(format!(
+            "this input has no further attribute {k}"
+        )))
+    }
 }
+
+/// The callback of [`ParticleSource::extra_windows`].
+pub type ExtraWindowFn<'a> =
+    dyn FnMut(usize, crate::frame::Attribute) -> Result<(), ConvertError> + 'a;
 
 /// The callback of [`ParticleSource::windows`].
 pub type WindowFn<'a> = dyn FnMut(usize, Frame) -> Result<(), ConvertError> + 'a;
@@ -276,8 +319,8 @@ fn windows_by_range(
     Ok(())
 }
 
-/// A frame already in memory.
-pub struct FrameSource<'a>(pub &'a Frame);
+/// A frame already in memory, with the further attributes read beside it.
+pub struct FrameSource<'a>(pub &'a Frame, pub &'a [crate::frame::Attribute]);
 
 impl ParticleSource for FrameSource<'_> {
     fn len(&self) -> usize {
@@ -290,6 +333,40 @@ impl ParticleSource for FrameSource<'_> {
 
     fn windows(&self, window: usize, f: &mut WindowFn<'_>) -> Result<(), ConvertError> {
         windows_by_range(self.len(), window, f, |r| Ok(self.read(r)))
+    }
+
+    fn extra_attributes(&self) -> Vec<String> {
+        self.1.iter().map(|a| a.name.clone()).collect()
+    }
+
+    fn extra_windows(
+        &self,
+        k: usize,
+        window: usize,
+        f: &mut ExtraWindowFn<'_>,
+    ) -> Result<(), ConvertError> {
+        let a = self.1.get(k).ok_or_else(|| {
+            ConvertError::Chunked(format!("this frame has no further attribute {k}"))
+        })?;
+        for start in (0..self.len()).step_by(window.max(1)) {
+            let end = (start + window).min(self.len());
+            let values = a.values.get(start..end).ok_or_else(|| {
+                ConvertError::Chunked(format!(
+                    "attribute {} has {} values for {} particles",
+                    a.name,
+                    a.values.len(),
+                    self.len()
+                ))
+            })?;
+            f(
+                start,
+                crate::frame::Attribute {
+                    name: a.name.clone(),
+                    values: values.to_vec(),
+                },
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -346,6 +423,52 @@ pub enum Windows {
 impl ParticleSource for DumpSource {
     fn len(&self) -> usize {
         self.particles
+    }
+
+    fn extra_attributes(&self) -> Vec<String> {
+        self.options.extra_attributes.clone()
+    }
+
+    fn extra_windows(
+        &self,
+        k: usize,
+        window: usize,
+        f: &mut ExtraWindowFn<'_>,
+    ) -> Result<(), ConvertError> {
+        let name = self.options.extra_attributes.get(k).ok_or_else(|| {
+            ConvertError::Chunked(format!("this input has no further attribute {k}"))
+        })?;
+        // The same windows, read with the further attribute as the attribute.
+        let one = DumpSource {
+            path: self.path.clone(),
+            frame: self.frame,
+            options: crate::readers::ReadOptions {
+                attribute: Some(name.clone()),
+                extra_attributes: Vec::new(),
+                ..self.options.clone()
+            },
+            particles: self.particles,
+            simulation_box: self.simulation_box.clone(),
+            windows: self.windows,
+            text_header: self.text_header.clone(),
+            pieces: self.pieces.clone(),
+        };
+        one.windows(window, &mut |start, mut part| {
+            let n = part.len();
+            let a = part.attribute.take().unwrap_or(crate::frame::Attribute {
+                name: name.clone(),
+                values: Vec::new(),
+            });
+            // Only the values wait for the partition, not the window's particles.
+            drop(part);
+            if a.values.len() != n {
+                return Err(ConvertError::Chunked(format!(
+                    "particles {start}..: attribute {name} gave {} values for {n} particles",
+                    a.values.len()
+                )));
+            }
+            f(start, a)
+        })
     }
 
     fn simulation_box(&self) -> Option<&SimulationBox> {
@@ -507,21 +630,28 @@ impl SpeciesMerge {
 }
 
 /// Working records: position (3 × f32), species (u16), attribute (f32, when present),
-/// the particle's own radius as the input gives it (f32, when present).
+/// the particle's own radius as the input gives it (f32, when present), then the
+/// further attributes (f32 each).
 #[derive(Clone, Copy)]
 struct RecordLayout {
     attribute: bool,
     radius: bool,
+    extras: usize,
 }
 
 impl RecordLayout {
     fn size(self) -> usize {
-        14 + 4 * usize::from(self.attribute) + 4 * usize::from(self.radius)
+        self.extras_at() + 4 * self.extras
     }
 
     /// Where the radius lies in a record.
     fn radius_at(self) -> usize {
         14 + 4 * usize::from(self.attribute)
+    }
+
+    /// Where the further attributes begin in a record.
+    fn extras_at(self) -> usize {
+        self.radius_at() + 4 * usize::from(self.radius)
     }
 
     #[inline(always)]
@@ -936,6 +1066,16 @@ struct ChunkResult {
     species: Kept<u16>,
     attribute: Option<Kept<u16>>,
     radius: Option<Kept<u16>>,
+    extras: Vec<ChunkExtra>,
+}
+
+/// A further attribute of a chunk: its values in the chunk's particle order, quantized
+/// over the frame's range, its nodes' means (in the chunk's node order), and the sums
+/// of its root's mean, which the top node's combines.
+struct ChunkExtra {
+    values: Kept<u16>,
+    means: Kept<f32>,
+    sums: crate::hierarchy::extra::MeanSums,
 }
 
 /// One of a chunk's results waiting for the assembly: kept in memory while the memory
@@ -1038,6 +1178,8 @@ struct ChunkInput<'a> {
     species_map: &'a [u16],
     options: &'a ConvertOptions,
     extras: &'a BuildExtras,
+    /// The further attributes, with the frame's ranges.
+    extra_infos: &'a [AttributeInfo],
     dir: &'a Path,
     /// Bytes of chunk results the memory limit leaves room for, and those kept so far.
     keep_budget: u64,
@@ -1084,7 +1226,10 @@ fn build_chunk(
     let mut species_index = Vec::with_capacity(n);
     let mut attribute = layout.attribute.then(|| Vec::with_capacity(n));
     let mut radii = layout.radius.then(|| Vec::with_capacity(n));
+    let mut extra_columns: Vec<Vec<f32>> =
+        (0..layout.extras).map(|_| Vec::with_capacity(n)).collect();
     let at = layout.radius_at();
+    let extras_at = layout.extras_at();
     for (cell, buf) in cells.iter().zip(&loaded) {
         let bytes = &buf[..cell.count * size];
         for r in bytes.chunks_exact(size) {
@@ -1096,6 +1241,10 @@ fn build_chunk(
             }
             if let Some(a) = radii.as_mut() {
                 a.push(f32::from_le_bytes([r[at], r[at + 1], r[at + 2], r[at + 3]]));
+            }
+            for (k, column) in extra_columns.iter_mut().enumerate() {
+                let e = extras_at + 4 * k;
+                column.push(f32::from_le_bytes([r[e], r[e + 1], r[e + 2], r[e + 3]]));
             }
         }
     }
@@ -1117,6 +1266,19 @@ fn build_chunk(
             }
         })?;
     drop((positions, attribute, radii));
+    let columns: Vec<(&AttributeInfo, &[f32])> = input
+        .extra_infos
+        .iter()
+        .zip(&extra_columns)
+        .map(|(info, v)| (info, v.as_slice()))
+        .collect();
+    let extras = crate::hierarchy::extra::extra_attributes_over(&h, &columns, input.species)
+        .map_err(|e| ConvertError::Build {
+            path: format!("chunk {c}"),
+            source: e,
+        })?;
+    drop(columns);
+    drop(extra_columns);
     let stem = |ext: &str| input.dir.join(format!("chunk-{c:05}.{ext}"));
     let positions: Vec<[u16; 3]> = h.quantized.iter().skip(1).flatten().copied().collect();
     drop(h.quantized);
@@ -1130,7 +1292,14 @@ fn build_chunk(
             .map_or(0, |a| std::mem::size_of_val(a.as_slice()))
         + radius
             .as_ref()
-            .map_or(0, |a| std::mem::size_of_val(a.as_slice()));
+            .map_or(0, |a| std::mem::size_of_val(a.as_slice()))
+        + extras
+            .iter()
+            .map(|(e, _)| {
+                std::mem::size_of_val(e.values.as_slice())
+                    + std::mem::size_of_val(e.node_means.as_slice())
+            })
+            .sum::<usize>();
     let bytes = bytes as u64;
     // Kept in memory if the room left under the limit holds it (which chunks fit
     // depends on timing; the file does not).
@@ -1152,6 +1321,17 @@ fn build_chunk(
     let radius = radius
         .map(|a| Kept::store(a, stem("radius"), in_memory))
         .transpose()?;
+    let extras = extras
+        .into_iter()
+        .enumerate()
+        .map(|(k, (e, sums))| {
+            Ok(ChunkExtra {
+                values: Kept::store(e.values, stem(&format!("extra-{k}")), in_memory)?,
+                means: Kept::store(e.node_means, stem(&format!("means-{k}")), in_memory)?,
+                sums,
+            })
+        })
+        .collect::<Result<Vec<_>, ConvertError>>()?;
     for cell in cells {
         fs::remove_file(&cell.path).map_err(|e| temp_err(&cell.path, e))?;
     }
@@ -1166,6 +1346,7 @@ fn build_chunk(
         species,
         attribute,
         radius,
+        extras,
     })
 }
 
@@ -1201,6 +1382,14 @@ pub fn convert_chunked(
     // Where a particle's error is: the input's frame, not the file being written.
     let place =
         crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep).to_string();
+    let extra_names = source.extra_attributes();
+    let extra_count = extra_names.len();
+    // Each further attribute's pass holds a window of its own in the partition: smaller
+    // windows keep the partition's memory that of one pass (the file does not depend
+    // on the window).
+    let window = (window / (1 + extra_count)).max(1);
+    let per_particle = build_bytes_per_particle(extra_count);
+    let chunk_memory = |points: usize| chunk_memory_with(points, extra_count);
     // At most `max_root_points` chunks share the particles: the largest holds at least
     // that share.
     let least = chunk_memory(n.div_ceil(params.max_root_points as usize));
@@ -1208,7 +1397,7 @@ pub fn convert_chunked(
         let place = crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep);
         return Err(ConvertError::Chunked(format!(
             "{place}: the memory limit of {} is below the {} the smallest chunks need ({} of \
-             working buffers and about {BUILD_BYTES_PER_PARTICLE} bytes per particle: {n} \
+             working buffers and about {per_particle} bytes per particle: {n} \
              particles in at most {} chunks, the root points, make chunks of at least {} \
              particles); raise --memory-limit to at least {}{}",
             size_text(chunk.memory_limit),
@@ -1270,21 +1459,92 @@ pub fn convert_chunked(
     let mut layout = None;
     let mut attribute_name = None;
     let mut range = (f32::INFINITY, f32::NEG_INFINITY);
+    // The further attributes: name (as their reader gives it) and range.
+    let mut extra_infos: Vec<AttributeInfo> = extra_names
+        .iter()
+        .map(|name| AttributeInfo {
+            name: name.clone(),
+            min: f32::INFINITY,
+            max: f32::NEG_INFINITY,
+        })
+        .collect();
     let mut seen = 0usize;
     // The records are sorted into cells and written on a thread of their own while the
     // next window is read.
     let cells = std::thread::scope(|scope| {
         let mut writer: Option<CellWriter<'_>> = None;
+        // Each further attribute is read by a pass of its own, on a thread of its own, in
+        // step with the particles' windows: a channel of one slot each.
+        let mut extra_rx = Vec::with_capacity(extra_names.len());
+        let mut extra_readers = Vec::with_capacity(extra_names.len());
+        for k in 0..extra_names.len() {
+            let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, crate::frame::Attribute)>(1);
+            extra_rx.push(rx);
+            extra_readers.push(scope.spawn(move || {
+                let mut stopped = false;
+                let read = source.extra_windows(k, window, &mut |start, a| {
+                    if tx.send((start, a)).is_err() {
+                        // The partition stopped, on an error of its own.
+                        stopped = true;
+                        return Err(ConvertError::Chunked("stopped".into()));
+                    }
+                    Ok(())
+                });
+                if stopped {
+                    Ok(())
+                } else {
+                    read
+                }
+            }));
+        }
         let read = source.windows(window, &mut |start, f| {
             seen += f.len();
+            let mut extras = Vec::with_capacity(extra_rx.len());
+            for (k, rx) in extra_rx.iter().enumerate() {
+                match rx.recv() {
+                    Ok((at, a)) if at == start && a.values.len() == f.len() => extras.push(a),
+                    Ok((at, a)) => {
+                        return Err(ConvertError::Chunked(format!(
+                            "particles {start}..: attribute {} was read as {} values from \
+                             particle {at}, while the window holds {}",
+                            extra_names[k],
+                            a.values.len(),
+                            f.len()
+                        )))
+                    }
+                    // Its reader stopped; its error is said below.
+                    Err(_) => {
+                        return Err(ConvertError::Chunked(format!(
+                            "particles {start}..: the reading of attribute {} ended before \
+                             them",
+                            extra_names[k]
+                        )))
+                    }
+                }
+            }
             if options.attribute_log10 && f.attribute.is_none() {
                 return Err(ConvertError::NoAttributeToLog(
                     crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep),
                 ));
             }
+            if layout.is_none() && !extras.is_empty() {
+                // Named as their readers name them (as a frame built whole checks them).
+                let names: Vec<&str> = extras.iter().map(|a| a.name.as_str()).collect();
+                let first = f.attribute.as_ref().map(|a| a.name.as_str());
+                if let Some(problem) = crate::convert::extra_names_problem(first, &names) {
+                    return Err(ConvertError::Attributes {
+                        place: crate::convert::FramePlace::of(
+                            metadata.source.as_ref(),
+                            metadata.timestep,
+                        ),
+                        problem,
+                    });
+                }
+            }
             let lay = *layout.get_or_insert(RecordLayout {
                 attribute: f.attribute.is_some(),
                 radius: f.radii.is_some(),
+                extras: extra_rx.len(),
             });
             if lay.radius != f.radii.is_some() {
                 return Err(ConvertError::Chunked(format!(
@@ -1385,6 +1645,34 @@ pub fn convert_chunked(
                     );
                 range = (range.0.min(lo), range.1.max(hi));
             }
+            for (info, a) in extra_infos.iter_mut().zip(&extras) {
+                if info.min > info.max {
+                    // The name its reader gives (a magnitude's, say).
+                    info.name.clone_from(&a.name);
+                }
+                let values = &a.values;
+                if let Some(index) = first_bad(&|i| !values[i].is_finite()) {
+                    return Err(ConvertError::Build {
+                        path: format!("{place}: attribute {}", info.name),
+                        source: BuildError::NonFiniteAttribute {
+                            index: start + index,
+                            value: values[index],
+                        },
+                    });
+                }
+                let (lo, hi) = values
+                    .par_iter()
+                    .fold(
+                        || (f32::INFINITY, f32::NEG_INFINITY),
+                        |(lo, hi), &v| (lo.min(v), hi.max(v)),
+                    )
+                    .reduce(
+                        || (f32::INFINITY, f32::NEG_INFINITY),
+                        |a, b| (a.0.min(b.0), a.1.max(b.1)),
+                    );
+                info.min = info.min.min(lo);
+                info.max = info.max.max(hi);
+            }
             let size = lay.size();
             let mut bytes = w.buffer();
             bytes.resize(f.len() * size, 0);
@@ -1404,6 +1692,10 @@ pub fn convert_chunked(
                         let at = lay.radius_at();
                         r[at..at + 4].copy_from_slice(&radii[i].to_le_bytes());
                     }
+                    for (k, a) in extras.iter().enumerate() {
+                        let at = lay.extras_at() + 4 * k;
+                        r[at..at + 4].copy_from_slice(&a.values[i].to_le_bytes());
+                    }
                 });
             if let Some(a) = &f.attribute {
                 attribute_name
@@ -1417,6 +1709,23 @@ pub fn convert_chunked(
             Ok(())
         });
         let written = writer.map(CellWriter::finish);
+        // The readers of further attributes end once their channels close; an error of
+        // theirs (a missing column, a short file) is the one to say.
+        drop(extra_rx);
+        let mut extra_error = None;
+        for r in extra_readers {
+            let r = r.join().unwrap_or_else(|_| {
+                Err(ConvertError::Chunked(
+                    "the reader of a further attribute stopped".into(),
+                ))
+            });
+            if let Err(e) = r {
+                extra_error.get_or_insert(e);
+            }
+        }
+        if let Some(e) = extra_error {
+            return Err(e);
+        }
         match (read, written) {
             (_, Some(Err(e))) | (Err(e), _) => Err(e),
             (Ok(()), Some(Ok(cells))) => Ok(cells),
@@ -1499,13 +1808,13 @@ pub fn convert_chunked(
         let place = crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep);
         return Err(ConvertError::Chunked(format!(
             "{place}: the memory limit of {} is below the {} one chunk of {largest} particles \
-             needs ({} of working buffers and about {BUILD_BYTES_PER_PARTICLE} bytes per \
+             needs ({} of working buffers and about {per_particle} bytes per \
              particle): raise --memory-limit to at least {}{}",
             size_text(chunk.memory_limit),
             need_text(need),
             size_text(chunk_memory(0)),
             need_text(need),
-            match chunk_points_within(chunk.memory_limit, params.max_root_points) {
+            match chunk_points_within(chunk.memory_limit, params.max_root_points, extra_count) {
                 Some(points) => format!(
                     ", or lower --chunk-points to {points} or less (chunks within the limit)"
                 ),
@@ -1541,6 +1850,7 @@ pub fn convert_chunked(
         species_map: &species_map,
         options,
         extras: &extras,
+        extra_infos: &extra_infos,
         dir,
         keep_budget: chunk
             .memory_limit
@@ -1621,6 +1931,7 @@ pub fn convert_chunked(
         .then(|| crate::hierarchy::radius_range(&species, &counts))
         .flatten();
     metadata.species = species;
+    metadata.attributes = extra_infos.clone();
     if let Some(info) = metadata.attribute.as_mut() {
         info.min = range.0;
         info.max = range.1;
@@ -1658,6 +1969,9 @@ pub fn convert_chunked(
                 notes.extend(crate::convert::attribute_span_note(
                     &a.name, a.min, a.max, options,
                 ));
+            }
+            for e in &metadata.attributes {
+                notes.extend(crate::convert::extra_span_note(&e.name, e.min, e.max));
             }
             // The particles' bounds are the cells'; how many lie outside the box is not
             // counted (the corners of the bounds stand for them).
@@ -1867,6 +2181,10 @@ fn assemble(
                 + c.species.len_bytes()
                 + c.attribute.as_ref().map_or(0, Kept::len_bytes)
                 + c.radius.as_ref().map_or(0, Kept::len_bytes)
+                + c.extras
+                    .iter()
+                    .map(|e| e.values.len_bytes() + e.means.len_bytes())
+                    .sum::<u64>()
         })
         .sum();
     progress.stage("writing", Some(total_bytes), "bytes");
@@ -2055,6 +2373,56 @@ fn assemble(
         };
         copy(&mut w, kind, radii)?;
     }
+    let extras = metadata.attributes.len();
+    if extras > 0 {
+        if chunks.iter().any(|c| c.extras.len() != extras) {
+            return Err(ConvertError::Chunked(format!(
+                "a chunk holds another count of further attributes than the {extras} of the \
+                 frame"
+            )));
+        }
+        // Each attribute's values, chunk after chunk.
+        copy(
+            &mut w,
+            SectionKind::Attributes,
+            (0..extras)
+                .flat_map(|e| chunks.iter().map(move |c| &c.extras[e].values))
+                .collect(),
+        )?;
+        // Each attribute's node means, in the node table's order: the top node's from
+        // the chunk roots' sums, a padding copy's its root's, then the chunks' own.
+        let mut s = w.section(SectionKind::NodeAttributes, 0)?;
+        let mut buf: Vec<f32> = Vec::new();
+        for e in 0..extras {
+            let top_sums = chunks
+                .iter()
+                .fold(crate::hierarchy::extra::MeanSums::default(), |a, c| {
+                    a.and(c.extras[e].sums)
+                });
+            s.write_pod(&[top_sums.mean()])?;
+            for g in 1..last {
+                for (c, ch) in chunks.iter().enumerate() {
+                    let means = ch.extras[e].means.bytes()?;
+                    let pad = lay.pad[c];
+                    let (first, count) = if g <= pad {
+                        (0, 1)
+                    } else {
+                        let j = g - 1 - pad;
+                        (ch.levels[j].node_first, ch.levels[j].point_count)
+                    };
+                    buf.resize(count as usize, 0.0);
+                    bytemuck::cast_slice_mut(&mut buf)
+                        .copy_from_slice(means.range(first * 4, count as usize * 4)?);
+                    s.write_pod(&buf)?;
+                    progress.advance(count * 4);
+                }
+            }
+            for ch in chunks {
+                ch.extras[e].means.remove()?;
+            }
+        }
+        s.end()?;
+    }
     w.finish()?;
     progress.finish_stage();
     Ok((last + 1, node_count, metadata.max_position_error))
@@ -2136,6 +2504,7 @@ mod tests {
         let layout = RecordLayout {
             attribute: false,
             radius: false,
+            extras: 0,
         };
         let records: Vec<u8> = (0..5000u32)
             .flat_map(|i| {

@@ -177,7 +177,7 @@ pub(crate) fn check_in_memory(
 /// How to build a frame of `particles` out of core within `limit`, if chunks of at least
 /// the build's `root_points` fit in it.
 fn chunk_hint(particles: usize, limit: u64, root_points: u32) -> String {
-    match crate::chunked::chunk_points_within(limit, root_points) {
+    match crate::chunked::chunk_points_within(limit, root_points, 0) {
         Some(points) if points < particles as u64 => {
             format!(", or build it out of core in smaller chunks (--chunk-points {points})")
         }
@@ -303,8 +303,7 @@ pub fn convert_frame(
 
 /// [`convert_frame`], keeping `further` attributes too: per-particle columns beside the
 /// frame's attribute (format 1.2's ATTRIBUTES, [`hierarchy::extra`]), each one value
-/// per particle in the frame's order. They need the frame's attribute (the first) and
-/// a frame built whole (at most `options.chunks.chunk_points` particles).
+/// per particle in the frame's order. They need the frame's attribute (the first).
 pub fn convert_frame_with(
     frame: &Frame,
     further: &[crate::frame::Attribute],
@@ -314,7 +313,7 @@ pub fn convert_frame_with(
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
     if !further.is_empty() {
-        check_extras(frame, further, options, source.as_ref())?;
+        check_extras(frame, further, source.as_ref())?;
     }
     if frame.is_empty() {
         return Err(ConvertError::EmptyFrame(FramePlace::of(
@@ -343,7 +342,13 @@ pub fn convert_frame_with(
     if frame.len() > options.chunks.chunk_points {
         // (Its notes, those of the radii included, are the chunked build's.)
         let metadata = base_metadata(frame, source, options);
-        return convert_chunked(&FrameSource(frame), metadata, output, options, progress);
+        return convert_chunked(
+            &FrameSource(frame, further),
+            metadata,
+            output,
+            options,
+            progress,
+        );
     }
     let override_notes = radius_notes(&names, &options.radii);
     check_in_memory(frame.len(), options, || {
@@ -458,13 +463,7 @@ pub fn convert_frame_with(
     // Further attributes spanning decades lose them as the first would; their remedy is
     // a file of their own with the logarithm (--attribute-log10 takes one column).
     for e in &h.extra_attributes {
-        notes.extend(span_note(
-            &e.info.name,
-            e.info.min,
-            e.info.max,
-            "converted alone with --attribute-log10, a file keeps its logarithm, every \
-             decade alike",
-        ));
+        notes.extend(extra_span_note(&e.info.name, e.info.min, e.info.max));
         // A column from 0 whose values above 0 fall below a step, as for the first.
         if let Some(column) = further.iter().find(|c| c.name == e.info.name) {
             notes.extend(below_step_note(
@@ -1154,6 +1153,17 @@ pub fn whole_numbers_note(
     )))
 }
 
+/// [`attribute_span_note`] of a further attribute (kept linearly).
+pub fn extra_span_note(name: &str, min: f32, max: f32) -> Option<String> {
+    span_note(
+        name,
+        min,
+        max,
+        "converted alone with --attribute-log10, a file keeps its logarithm, every decade \
+         alike",
+    )
+}
+
 /// [`attribute_span_note`] of a column kept linearly, with `remedy` said last.
 fn span_note(name: &str, min: f32, max: f32, remedy: &str) -> Option<String> {
     let decades = (f64::from(max) / f64::from(min)).log10();
@@ -1190,43 +1200,47 @@ pub fn log10_attribute(
     Ok(values.par_iter().map(|v| v.log10()).collect())
 }
 
-/// Refuses extra attributes a conversion cannot keep: without the frame's first
-/// attribute, of another length than the frame, named twice (or as the first), more
-/// than the format holds, or of a frame built in chunks.
-fn check_extras(
-    frame: &Frame,
-    extras: &[crate::frame::Attribute],
-    options: &ConvertOptions,
-    source: Option<&SourceInfo>,
-) -> Result<(), ConvertError> {
-    let place = || FramePlace::of(source, frame.timestep);
-    let problem = if frame.attribute.is_none() {
+/// Why further attributes of these names cannot be kept beside the `first`: without
+/// one, named twice (or as the first), or more than the format holds. `None` where
+/// they can.
+pub(crate) fn extra_names_problem(first: Option<&str>, extras: &[&str]) -> Option<String> {
+    if first.is_none() && !extras.is_empty() {
         Some("further attributes need a first (the first --attribute)".to_string())
-    } else if let Some(e) = extras.iter().find(|e| e.values.len() != frame.len()) {
-        Some(format!(
-            "attribute {} has {} values for {} particles",
-            e.name,
-            e.values.len(),
-            frame.len()
-        ))
-    } else if let Some((_, e)) = extras.iter().enumerate().find(|(k, e)| {
-        frame.attribute.as_ref().is_some_and(|a| a.name == e.name)
-            || extras[..*k].iter().any(|o| o.name == e.name)
-    }) {
-        Some(format!("attribute {} is given twice", e.name))
+    } else if let Some((_, e)) = extras
+        .iter()
+        .enumerate()
+        .find(|(k, e)| first == Some(**e) || extras[..*k].contains(e))
+    {
+        Some(format!("attribute {e} is given twice"))
     } else if extras.len() > mdlod_format::MAX_EXTRA_ATTRIBUTES {
         Some(format!(
             "{} attributes: a file keeps at most {}",
             extras.len() + 1,
             mdlod_format::MAX_EXTRA_ATTRIBUTES + 1
         ))
-    } else if frame.len() > options.chunks.chunk_points {
-        Some(chunked_attributes_problem(
-            frame.len() as u64,
-            options.chunks.chunk_points,
-        ))
     } else {
         None
+    }
+}
+
+/// Refuses extra attributes a conversion cannot keep: of another length than the frame,
+/// or as [`extra_names_problem`] says.
+fn check_extras(
+    frame: &Frame,
+    extras: &[crate::frame::Attribute],
+    source: Option<&SourceInfo>,
+) -> Result<(), ConvertError> {
+    let place = || FramePlace::of(source, frame.timestep);
+    let names: Vec<&str> = extras.iter().map(|e| e.name.as_str()).collect();
+    let problem = if let Some(e) = extras.iter().find(|e| e.values.len() != frame.len()) {
+        Some(format!(
+            "attribute {} has {} values for {} particles",
+            e.name,
+            e.values.len(),
+            frame.len()
+        ))
+    } else {
+        extra_names_problem(frame.attribute.as_ref().map(|a| a.name.as_str()), &names)
     };
     match problem {
         Some(problem) => Err(ConvertError::Attributes {
@@ -1249,8 +1263,9 @@ pub fn chunked_magnitude_problem(
 ) -> Option<String> {
     let inner = read
         .attribute
-        .as_deref()
-        .and_then(crate::readers::magnitude_of)?;
+        .iter()
+        .chain(&read.extra_attributes)
+        .find_map(|a| crate::readers::magnitude_of(a))?;
     (dump.format() != crate::readers::InputFormat::Gsd).then(|| {
         format!(
             "the magnitude |{inner}| is taken over whole frames, and this frame's {particles} \
@@ -1260,15 +1275,6 @@ pub fn chunked_magnitude_problem(
              sqrt(vx*vx+vy*vy+vz*vz)` and `v_speed` in the dump's columns)"
         )
     })
-}
-
-/// Why a frame of `particles` above the chunk size keeps one attribute only.
-pub fn chunked_attributes_problem(particles: u64, chunk_points: usize) -> String {
-    format!(
-        "several attributes need a frame built whole, and its {particles} particles are above \
-         the chunk size ({chunk_points}: --chunk-points sets it, within the memory limit); \
-         keep one attribute per file for frames this large"
-    )
 }
 
 /// The metadata of `frame` before its hierarchy is built (species, attribute range and
@@ -1608,19 +1614,12 @@ pub fn convert_dump(
     };
     if info.particles > options.chunks.chunk_points {
         // Refused before the frame is read (`convert_frame_with` says why).
-        let problem = if !read.extra_attributes.is_empty() {
-            Some(chunked_attributes_problem(
-                info.particles as u64,
-                options.chunks.chunk_points,
-            ))
-        } else {
-            chunked_magnitude_problem(
-                &dump,
-                read,
-                info.particles as u64,
-                options.chunks.chunk_points,
-            )
-        };
+        let problem = chunked_magnitude_problem(
+            &dump,
+            read,
+            info.particles as u64,
+            options.chunks.chunk_points,
+        );
         if let Some(problem) = problem {
             return Err(ConvertError::Attributes {
                 place: FramePlace {

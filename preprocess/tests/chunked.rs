@@ -57,6 +57,7 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
         "{n} particles do not need chunks of {chunk_points}"
     );
     let frame = dump.read_frame(k, read, &NoProgress).unwrap();
+    let further = mdlod_preprocess::convert::read_extra_attributes(&dump, k, read).unwrap();
     // The radius override of LAMMPS type 1, for the inputs that have it (an override
     // naming no species is an error).
     opts.radii
@@ -72,12 +73,14 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
     .unwrap();
     let whole = dir.path().join("whole.mdlod");
     let mut tight = opts.clone();
-    tight.chunks.memory_limit = mdlod_preprocess::chunked::chunk_memory(chunk_points);
+    tight.chunks.memory_limit =
+        mdlod_preprocess::chunked::chunk_memory_with(chunk_points, further.len());
     // (`convert_file` records the species column of its read options; a frame read
     // here is converted with it given.)
     tight.species_column = read.species_column.clone();
-    convert_frame(
+    mdlod_preprocess::convert::convert_frame_with(
         &frame,
+        &further,
         Some(source_info(input, k as u64)),
         &whole,
         &tight,
@@ -243,6 +246,158 @@ fn lammps_text_dump_streams_into_the_same_file() {
         ..Default::default()
     };
     streamed_equals_in_memory(&path, &read, 300);
+}
+
+/// A binary dump's further attributes (format 1.2's ATTRIBUTES) stream in chunks as the
+/// first does: each read by a pass of its own, in step with the particles' windows.
+#[test]
+fn lammps_binary_dump_streams_further_attributes_into_the_same_file() {
+    let path = mdlod_datasets::lammps_sample_path("cu_melt.custom.bin");
+    let read = ReadOptions {
+        attribute: Some("c_pe".into()),
+        extra_attributes: vec!["id".into(), "x".into()],
+        ..Default::default()
+    };
+    let f = streamed_equals_in_memory(&path, &read, 300);
+    assert_eq!(f.attribute_names(), ["c_pe", "id", "x"]);
+    assert_eq!(f.header().version_minor, 2);
+    let ids = f.metadata().attributes[0].clone();
+    assert_eq!((ids.min, ids.max), (1.0, 500.0));
+}
+
+/// `n` particles of a LAMMPS text dump with columns `c_pe`, `c_ke` and `copy` (the
+/// `c_pe` column again), in a box of 40.
+fn dump_with_columns(n: usize) -> String {
+    let mut text = format!(
+        "ITEM: TIMESTEP\n7\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 40\n0 40\n\
+         0 40\nITEM: ATOMS id type x y z c_pe c_ke copy\n"
+    );
+    let pos = raw_positions(n, 0x5DEECE66D);
+    let at = |i: usize| f32::from_le_bytes(pos[4 * i..4 * i + 4].try_into().unwrap()) / 4.3;
+    for i in 0..n {
+        let (x, y, z) = (at(3 * i), at(3 * i + 1), at(3 * i + 2));
+        let pe = -3.5 + (0.3 * x).sin() + 0.01 * z;
+        let ke = (i % 97) as f32 * 0.01 + 0.001 * y;
+        text += &format!("{} {} {x} {y} {z} {pe} {ke} {pe}\n", i + 1, 1 + i % 2);
+    }
+    text
+}
+
+/// Further attributes of a frame built in chunks: the same file streamed from a text dump
+/// and from the frame in memory; a copy of the first keeps its values and, node by node
+/// (the top node and the padding copies of chunk roots among them), its means to
+/// rounding; a column of its own has the range, the values and the top node's mean of
+/// the same frame built whole.
+#[test]
+fn further_attributes_stream_in_chunks_as_a_frame_built_whole_keeps_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("columns.lammpstrj");
+    std::fs::write(&input, dump_with_columns(5000)).unwrap();
+    let read = ReadOptions {
+        attribute: Some("c_pe".into()),
+        extra_attributes: vec!["c_ke".into(), "copy".into()],
+        ..Default::default()
+    };
+    streamed_equals_in_memory(&input, &read, 700);
+    // (The helper's files are gone with its directory: the streamed file again, here.)
+    let chunked = dir.path().join("chunked.mdlod");
+    convert_file(
+        &input,
+        &chunked,
+        FrameSelect::Last,
+        &read,
+        &options(700),
+        &NoProgress,
+    )
+    .unwrap();
+    let f = MdlodFile::open(&chunked).unwrap();
+    assert_eq!(f.metadata().build.chunk_points, Some(700));
+    assert_eq!(f.attribute_names(), ["c_pe", "c_ke", "copy"]);
+    let first = f.attribute().unwrap().to_vec();
+    let nodes = f.nodes().to_vec();
+    let copy = MdlodFile::open(&chunked)
+        .unwrap()
+        .select_attribute("copy")
+        .unwrap();
+    assert_eq!(copy.attribute().unwrap(), &first[..]);
+    assert_eq!(copy.nodes().len(), nodes.len());
+    for (i, (a, b)) in nodes.iter().zip(copy.nodes()).enumerate() {
+        let tol = 1e-5 * (1.0 + a.attribute.abs());
+        assert!(
+            (a.attribute - b.attribute).abs() <= tol,
+            "node {i} (level {}): {} against {}",
+            a.level,
+            a.attribute,
+            b.attribute
+        );
+    }
+    // The same frame built whole.
+    let whole = dir.path().join("whole.mdlod");
+    convert_file(
+        &input,
+        &whole,
+        FrameSelect::Last,
+        &read,
+        &options(1 << 20),
+        &NoProgress,
+    )
+    .unwrap();
+    let w = MdlodFile::open(&whole).unwrap();
+    assert_eq!(w.metadata().build.chunk_points, None);
+    assert_eq!(w.metadata().attributes, f.metadata().attributes);
+    let (wk, fk) = (
+        w.select_attribute("c_ke").unwrap(),
+        MdlodFile::open(&chunked)
+            .unwrap()
+            .select_attribute("c_ke")
+            .unwrap(),
+    );
+    let sorted = |m: &MdlodFile| {
+        let mut v = m.attribute().unwrap().to_vec();
+        v.sort_unstable();
+        v
+    };
+    assert_eq!(sorted(&wk), sorted(&fk));
+    let (a, b) = (wk.nodes()[0].attribute, fk.nodes()[0].attribute);
+    assert!(
+        (a - b).abs() <= 1e-6 * a.abs(),
+        "top node: {a} whole, {b} in chunks"
+    );
+}
+
+/// A further attribute the dump lacks, read in windows beside the particles: the
+/// reader's error naming it, not a wait on a pass that stopped; one named as the
+/// first: refused.
+#[test]
+fn a_missing_further_attribute_read_in_chunks_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("columns.lammpstrj");
+    std::fs::write(&input, dump_with_columns(3000)).unwrap();
+    let out = dir.path().join("out.mdlod");
+    for (extras, want) in [
+        (vec!["c_ke", "v_missing"], "v_missing"),
+        (vec!["c_pe"], "attribute c_pe is given twice"),
+    ] {
+        let read = ReadOptions {
+            attribute: Some("c_pe".into()),
+            extra_attributes: extras.iter().map(|s| s.to_string()).collect(),
+            ..Default::default()
+        };
+        let e = convert_file(
+            &input,
+            &out,
+            FrameSelect::Last,
+            &read,
+            &options(700),
+            &NoProgress,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains(want), "{e}");
+        assert!(!out.exists());
+    }
+    // Only the input remains: the working files are gone.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
 
 #[test]

@@ -512,7 +512,7 @@ fn chunked_conversion_checks_its_options_before_reading_the_particles() {
     ];
     for (params, limit, message) in bad {
         let source = Counted {
-            inner: mdlod_preprocess::chunked::FrameSource(&frame),
+            inner: mdlod_preprocess::chunked::FrameSource(&frame, &[]),
             windows: 0.into(),
         };
         let err = mdlod_preprocess::chunked::convert_chunked(
@@ -737,7 +737,7 @@ fn more_species_than_a_file_holds_are_refused() {
 /// first's (means to rounding: the first's are made level by level, the second's from
 /// the particles at once); a column of its own is quantized over its own range; the
 /// selected file colours and hides by it; radii of their own weigh the means as they
-/// weigh the first's; a frame built in chunks keeps one attribute only.
+/// weigh the first's. (Frames built in chunks: tests/chunked.rs.)
 #[test]
 fn further_attributes_round_trip_and_select_like_the_first() {
     for (params, sized) in [
@@ -909,27 +909,6 @@ fn further_attributes_round_trip_and_select_like_the_first() {
         means.contains(&1.0) && means.contains(&1e12),
         "{:?}",
         &means[..means.len().min(40)]
-    );
-    // In chunks: refused, saying why.
-    let frame = test_frame(8);
-    let dir = tempfile::tempdir().unwrap();
-    let opts = chunked(BuildParams::default(), 300, 1 << 30);
-    let e = mdlod_preprocess::convert::convert_frame_with(
-        &frame,
-        &[Attribute {
-            name: "copy".into(),
-            values: frame.attribute.clone().unwrap().values,
-        }],
-        None,
-        &dir.path().join("c.mdlod"),
-        &opts,
-        &NoProgress,
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(
-        e.contains("several attributes need a frame built whole"),
-        "{e}"
     );
     // Named as the first, or without a first: refused.
     let mut plain = test_frame(4);

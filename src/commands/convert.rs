@@ -64,8 +64,8 @@ pub struct BuildArgs {
     /// vector between bars (`'|v|'` over vx vy vz, `'|forces|'` over an XYZ file's
     /// forces[0..2], `'|velocity|'` over a GSD row, `'|vx,vy|'` over the columns
     /// named); repeat it to keep several (`--attribute c_pe --attribute c_ke`: render's
-    /// `--attribute c_ke` then colours by the second; format 1.2; frames built whole,
-    /// within --chunk-points)
+    /// `--attribute c_ke` then colours by the second; format 1.2; each further column is
+    /// a pass over the frame of its own)
     #[arg(long, value_name = "COLUMN")]
     pub attribute: Vec<String>,
     /// Keep the attribute's base-10 logarithm instead (named log10(NAME); every value

@@ -64,6 +64,76 @@ pub fn extra_attributes(
     columns: &[(&str, &[f32])],
     species: &[Species],
 ) -> Result<Vec<ExtraAttribute>, BuildError> {
+    let mut infos = Vec::with_capacity(columns.len());
+    for (name, values) in columns {
+        check_finite(values)?;
+        let (min, max) = values
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        infos.push(AttributeInfo {
+            name: name.to_string(),
+            min,
+            max,
+        });
+    }
+    let over: Vec<(&AttributeInfo, &[f32])> = infos
+        .iter()
+        .zip(columns)
+        .map(|(i, (_, v))| (i, *v))
+        .collect();
+    Ok(extra_attributes_over(h, &over, species)?
+        .into_iter()
+        .map(|(e, _)| e)
+        .collect())
+}
+
+/// The sums a node's mean is made of, over its particles: what the means of several
+/// hierarchies' roots combine from (a chunked build's top node).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MeanSums {
+    /// Sum of the particles' areas `r²`.
+    pub area: f64,
+    /// Sum of area × value.
+    pub weighted: f64,
+    /// Sum of the values (the plain mean's, where the areas sum to 0).
+    pub plain: f64,
+    pub count: u64,
+}
+
+impl MeanSums {
+    /// The area-weighted mean (a plain mean where the areas sum to 0; 0 with no
+    /// particles).
+    pub fn mean(&self) -> f32 {
+        if self.area > 0.0 {
+            (self.weighted / self.area) as f32
+        } else if self.count > 0 {
+            (self.plain / self.count as f64) as f32
+        } else {
+            0.0
+        }
+    }
+
+    /// These sums and `other`'s, in this order.
+    pub fn and(self, other: MeanSums) -> MeanSums {
+        MeanSums {
+            area: self.area + other.area,
+            weighted: self.weighted + other.weighted,
+            plain: self.plain + other.plain,
+            count: self.count + other.count,
+        }
+    }
+}
+
+/// As [`extra_attributes`], each column quantized over the range its entry gives
+/// (a chunked build quantizes every chunk over the frame's range), with the sums of
+/// the root's mean.
+pub fn extra_attributes_over(
+    h: &Hierarchy,
+    columns: &[(&AttributeInfo, &[f32])],
+    species: &[Species],
+) -> Result<Vec<(ExtraAttribute, MeanSums)>, BuildError> {
     if columns.is_empty() {
         return Ok(Vec::new());
     }
@@ -82,66 +152,61 @@ pub fn extra_attributes(
     let runs = particle_ranges(&h.levels, &h.nodes);
     columns
         .iter()
-        .map(|(name, values)| extra_attribute(h, name, values, &areas, &runs))
+        .map(|(info, values)| extra_attribute(h, info, values, &areas, &runs))
         .collect()
 }
 
-/// One column of [`extra_attributes`], with the particles' `areas` (in the file's
+/// The first non-finite value, as an error.
+fn check_finite(values: &[f32]) -> Result<(), BuildError> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(index) => Err(BuildError::NonFiniteAttribute {
+            index,
+            value: values[index],
+        }),
+        None => Ok(()),
+    }
+}
+
+/// One column of [`extra_attributes_over`], with the particles' `areas` (in the file's
 /// order) and the nodes' particle `runs`.
 fn extra_attribute(
     h: &Hierarchy,
-    name: &str,
+    info: &AttributeInfo,
     values: &[f32],
     areas: &[f64],
     runs: &[Range<u64>],
-) -> Result<ExtraAttribute, BuildError> {
-    if let Some(index) = values.iter().position(|v| !v.is_finite()) {
-        return Err(BuildError::NonFiniteAttribute {
-            index,
-            value: values[index],
-        });
-    }
-    let (min, max) = values
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
-            (lo.min(v), hi.max(v))
-        });
-    let info = AttributeInfo {
-        name: name.to_string(),
-        min,
-        max,
-    };
+) -> Result<(ExtraAttribute, MeanSums), BuildError> {
+    check_finite(values)?;
     let ordered: Vec<f32> = h
         .particle_order
         .iter()
         .map(|&i| values[i as usize])
         .collect();
     let quantized = ordered.iter().map(|&v| info.encode(v)).collect();
+    let sums_of = |r: &Range<u64>| {
+        let run = r.start as usize..(r.end as usize).min(ordered.len());
+        let mut s = MeanSums {
+            count: run.len() as u64,
+            ..MeanSums::default()
+        };
+        for k in run {
+            let v = f64::from(ordered[k]);
+            s.area += areas[k];
+            s.weighted += areas[k] * v;
+            s.plain += v;
+        }
+        s
+    };
     // Each node's sums over its own particles (sums of a whole level's run would lose the
     // small values beside a large total), every level's nodes in parallel.
-    let node_means = runs
-        .par_iter()
-        .map(|r| {
-            let run = r.start as usize..(r.end as usize).min(ordered.len());
-            let (mut area, mut weighted, mut plain) = (0f64, 0f64, 0f64);
-            for k in run.clone() {
-                let v = f64::from(ordered[k]);
-                area += areas[k];
-                weighted += areas[k] * v;
-                plain += v;
-            }
-            if area > 0.0 {
-                (weighted / area) as f32
-            } else if !run.is_empty() {
-                (plain / run.len() as f64) as f32
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    Ok(ExtraAttribute {
-        info,
-        values: quantized,
-        node_means,
-    })
+    let node_means = runs.par_iter().map(|r| sums_of(r).mean()).collect();
+    let root = sums_of(&(0..ordered.len() as u64));
+    Ok((
+        ExtraAttribute {
+            info: info.clone(),
+            values: quantized,
+            node_means,
+        },
+        root,
+    ))
 }
