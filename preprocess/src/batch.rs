@@ -2004,7 +2004,31 @@ pub fn batch(
         // A large gzip input is decompressed into a working file (removed again below),
         // not into memory.
         let bounded =
-            crate::convert::open_bounded(p, &index_chunks, &out_dir.join(MANIFEST), progress)?;
+            match crate::convert::open_bounded(p, &index_chunks, &out_dir.join(MANIFEST), progress)
+            {
+                Ok(b) => b,
+                Err(e) => {
+                    // With --keep-going, an input that holds no dump it can read (a log
+                    // file a pattern matched, a damaged header) fails alone; a file that
+                    // cannot be read at all (a wrong path, a full disk) stops the batch.
+                    let e = BatchError::from(e);
+                    if !(opts.keep_going && e.frames_own()) {
+                        return Err(e);
+                    }
+                    unlisted_failures.push(FailedFrame {
+                        input: p.to_path_buf(),
+                        frame: 0,
+                        timestep: None,
+                        listed_timestep: None,
+                        reason: e.to_string(),
+                    });
+                    listed.push(Vec::new());
+                    formats.push(InputFormat::LammpsText);
+                    dumps.push(None);
+                    gzip_cut.push(false);
+                    continue;
+                }
+            };
         let compressed = bounded.text.is_some() || bounded.dump.is_compressed();
         let dump = &bounded.dump;
         let mut frames = Vec::with_capacity(dump.frame_count());

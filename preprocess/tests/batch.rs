@@ -2427,6 +2427,42 @@ fn keep_going_converts_the_other_frames_and_reports_the_bad_one() {
     assert_eq!((m.frames.len(), m.failed.len()), (6, 0));
 }
 
+/// `keep_going` over inputs a pattern matched beside the dumps (a run's log): the input
+/// that holds no dump fails alone, named, and the dumps convert; without it, the batch
+/// stops on it. A path that does not exist stops the batch either way.
+#[test]
+fn keep_going_passes_over_an_input_that_holds_no_dump() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log.lammps");
+    std::fs::write(
+        &log,
+        "LAMMPS (29 Aug 2024)\nunits metal\nLoop time of 1.2 on 2 procs for 500 steps\n",
+    )
+    .unwrap();
+    let inputs = [log.clone(), input(dir.path())];
+    let out = dir.path().join("out");
+    let e = batch(&inputs, &out, &opts(), &NoProgress).unwrap_err();
+    assert!(e.to_string().contains("log.lammps"), "{e}");
+    let keep = BatchOptions {
+        keep_going: true,
+        ..opts()
+    };
+    let r = batch(&inputs, &out, &keep, &NoProgress).unwrap();
+    assert_eq!(r.failed.len(), 1, "{:?}", r.failed);
+    assert_eq!(r.failed[0].input, log);
+    assert!(
+        r.failed[0].to_string().contains("log.lammps"),
+        "{}",
+        r.failed[0]
+    );
+    assert_eq!(r.converted, 6);
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(m.frames.len(), 6);
+    check_manifest(&out, &m);
+    let missing = dir.path().join("no-such.dump");
+    assert!(batch(&[missing, inputs[1].clone()], &out, &keep, &NoProgress).is_err());
+}
+
 /// `keep_going` with a column asked for (`--attribute`): a frame whose header cannot be
 /// read (a box with its bounds reversed) is one failed frame too, not the end of the
 /// batch before anything is converted.

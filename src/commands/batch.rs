@@ -48,7 +48,8 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "error")]
     pub duplicate_timesteps: DuplicatesArg,
     /// A frame that cannot be converted for what it holds (a NaN, a bad box, a damaged
-    /// older file) is reported and the others are converted (as `make -k`); the command
+    /// older file, an input that holds no dump) is reported and the others are
+    /// converted (as `make -k`); the command
     /// still ends with an error status, and a rerun tries those frames again. Errors of
     /// the output, such as a full disk, still stop the batch.
     #[arg(long)]
