@@ -1387,7 +1387,7 @@ pub fn convert_chunked(
     // Each further attribute's pass holds a window of its own in the partition: smaller
     // windows keep the partition's memory that of one pass (the file does not depend
     // on the window).
-    let window = (window / (1 + extra_count)).max(1);
+    let part_window = (window / (1 + extra_count)).max(1);
     let per_particle = build_bytes_per_particle(extra_count);
     let chunk_memory = |points: usize| chunk_memory_with(points, extra_count);
     // At most `max_root_points` chunks share the particles: the largest holds at least
@@ -1468,6 +1468,8 @@ pub fn convert_chunked(
             max: f32::NEG_INFINITY,
         })
         .collect();
+    // Whether each further attribute holds whole numbers only (ids).
+    let mut extra_whole = vec![true; extra_names.len()];
     let mut seen = 0usize;
     // The records are sorted into cells and written on a thread of their own while the
     // next window is read.
@@ -1482,7 +1484,7 @@ pub fn convert_chunked(
             extra_rx.push(rx);
             extra_readers.push(scope.spawn(move || {
                 let mut stopped = false;
-                let read = source.extra_windows(k, window, &mut |start, a| {
+                let read = source.extra_windows(k, part_window, &mut |start, a| {
                     if tx.send((start, a)).is_err() {
                         // The partition stopped, on an error of its own.
                         stopped = true;
@@ -1497,7 +1499,9 @@ pub fn convert_chunked(
                 }
             }));
         }
-        let read = source.windows(window, &mut |start, f| {
+        // Set where a further attribute's reader ended first: its error is the one to say.
+        let mut extra_ended = false;
+        let read = source.windows(part_window, &mut |start, f| {
             seen += f.len();
             let mut extras = Vec::with_capacity(extra_rx.len());
             for (k, rx) in extra_rx.iter().enumerate() {
@@ -1514,11 +1518,12 @@ pub fn convert_chunked(
                     }
                     // Its reader stopped; its error is said below.
                     Err(_) => {
+                        extra_ended = true;
                         return Err(ConvertError::Chunked(format!(
                             "particles {start}..: the reading of attribute {} ended before \
                              them",
                             extra_names[k]
-                        )))
+                        )));
                     }
                 }
             }
@@ -1673,6 +1678,9 @@ pub fn convert_chunked(
                 info.min = info.min.min(lo);
                 info.max = info.max.max(hi);
             }
+            for (whole, a) in extra_whole.iter_mut().zip(&extras) {
+                *whole = *whole && a.values.par_iter().all(|v| v.fract() == 0.0);
+            }
             let size = lay.size();
             let mut bytes = w.buffer();
             bytes.resize(f.len() * size, 0);
@@ -1709,8 +1717,20 @@ pub fn convert_chunked(
             Ok(())
         });
         let written = writer.map(CellWriter::finish);
-        // The readers of further attributes end once their channels close; an error of
-        // theirs (a missing column, a short file) is the one to say.
+        // Every further attribute's pass ends with the particles' (none holds more).
+        let mut extra_more = None;
+        if read.is_ok() {
+            for (k, rx) in extra_rx.iter().enumerate() {
+                if let Ok((at, _)) = rx.try_recv() {
+                    extra_more.get_or_insert(ConvertError::Chunked(format!(
+                        "attribute {} was read for particles from {at} on, past the frame's \
+                         {seen}",
+                        extra_names[k]
+                    )));
+                }
+            }
+        }
+        // The readers of further attributes end once their channels close.
         drop(extra_rx);
         let mut extra_error = None;
         for r in extra_readers {
@@ -1723,7 +1743,12 @@ pub fn convert_chunked(
                 extra_error.get_or_insert(e);
             }
         }
-        if let Some(e) = extra_error {
+        // A reader's error (a missing column, a short file) is the one to say where the
+        // particles' pass stopped for it; else the pass's own, and the cell writer's.
+        if let (Some(e), true) = (extra_error, extra_ended || read.is_ok()) {
+            return Err(e);
+        }
+        if let Some(e) = extra_more {
             return Err(e);
         }
         match (read, written) {
@@ -1970,9 +1995,26 @@ pub fn convert_chunked(
                     &a.name, a.min, a.max, options,
                 ));
             }
-            for e in &metadata.attributes {
-                notes.extend(crate::convert::extra_span_note(&e.name, e.min, e.max));
+            for (e, whole) in metadata.attributes.iter().zip(&extra_whole) {
+                // Ids (of molecules) are told by their whole numbers, as for the first.
+                let ids = whole
+                    .then(|| {
+                        crate::convert::whole_numbers_note(&e.name, &[], e.min, e.max).flatten()
+                    })
+                    .flatten();
+                match (whole, ids) {
+                    (_, Some(ids)) => notes.push(ids),
+                    (true, None) => {}
+                    (false, None) => {
+                        notes.extend(crate::convert::extra_span_note(&e.name, e.min, e.max))
+                    }
+                }
             }
+            notes.extend(crate::convert::lj_elements_note(
+                metadata.units.as_deref(),
+                &metadata.species,
+                &options.radii,
+            ));
             // The particles' bounds are the cells'; how many lie outside the box is not
             // counted (the corners of the bounds stand for them).
             let mut lo = [f32::INFINITY; 3];
@@ -2187,6 +2229,15 @@ fn assemble(
                     .sum::<u64>()
         })
         .sum();
+    if chunks
+        .iter()
+        .any(|c| c.extras.len() != metadata.attributes.len())
+    {
+        return Err(ConvertError::Chunked(format!(
+            "a chunk holds another count of further attributes than the {} of the frame",
+            metadata.attributes.len()
+        )));
+    }
     progress.stage("writing", Some(total_bytes), "bytes");
     // Gigabytes: written from a thread of its own, past the page cache.
     let mut w = Writer::create_with(output, bits, crate::direct::open)?;
@@ -2375,12 +2426,6 @@ fn assemble(
     }
     let extras = metadata.attributes.len();
     if extras > 0 {
-        if chunks.iter().any(|c| c.extras.len() != extras) {
-            return Err(ConvertError::Chunked(format!(
-                "a chunk holds another count of further attributes than the {extras} of the \
-                 frame"
-            )));
-        }
         // Each attribute's values, chunk after chunk.
         copy(
             &mut w,

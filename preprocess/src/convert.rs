@@ -463,17 +463,33 @@ pub fn convert_frame_with(
     // Further attributes spanning decades lose them as the first would; their remedy is
     // a file of their own with the logarithm (--attribute-log10 takes one column).
     for e in &h.extra_attributes {
-        notes.extend(extra_span_note(&e.info.name, e.info.min, e.info.max));
-        // A column from 0 whose values above 0 fall below a step, as for the first.
-        if let Some(column) = further.iter().find(|c| c.name == e.info.name) {
-            notes.extend(below_step_note(
-                &e.info.name,
-                &column.values,
-                e.info.min,
-                e.info.max,
-            ));
+        let column = further.iter().find(|c| c.name == e.info.name);
+        // Ids (of molecules) are told by their whole numbers, as for the first: no
+        // logarithm to suggest.
+        match column
+            .and_then(|c| whole_numbers_note(&e.info.name, &c.values, e.info.min, e.info.max))
+        {
+            Some(ids) => notes.extend(ids),
+            None => {
+                notes.extend(extra_span_note(&e.info.name, e.info.min, e.info.max));
+                // A column from 0 whose values above 0 fall below a step, as for the
+                // first.
+                if let Some(column) = column {
+                    notes.extend(below_step_note(
+                        &e.info.name,
+                        &column.values,
+                        e.info.min,
+                        e.info.max,
+                    ));
+                }
+            }
         }
     }
+    notes.extend(lj_elements_note(
+        frame.units.as_deref(),
+        &species,
+        &options.radii,
+    ));
     let (lo, hi, far) = survey_positions(&frame.positions, frame.simulation_box.as_ref());
     notes.extend(position_notes(
         lo,
@@ -1023,6 +1039,43 @@ pub fn radius_override_notes(names: &[SpeciesName], overrides: &[(String, f32)])
         .collect()
 }
 
+/// A note for species read as chemical elements, with radii in ångströms, in a dump
+/// whose lengths are Lennard-Jones' σ (`units lj`): bead names that happen to be element
+/// symbols (P, H, S, C) draw at an element's size, blobs of beads σ apart.
+pub(crate) fn lj_elements_note(
+    units: Option<&str>,
+    species: &[mdlod_format::meta::Species],
+    overrides: &[(String, f32)],
+) -> Option<String> {
+    if !units.is_some_and(|u| u.trim().eq_ignore_ascii_case("lj")) {
+        return None;
+    }
+    let read: Vec<String> = species
+        .iter()
+        .filter(|s| {
+            s.radius_range.is_none()
+                && !overrides.iter().any(|(n, _)| n == &s.name)
+                && crate::species::element(&s.name).is_some_and(|(r, _)| r == s.radius)
+        })
+        .map(|s| format!("{} ({})", s.name, s.radius))
+        .collect();
+    let first = species.iter().find(|s| {
+        read.first()
+            .is_some_and(|r| r.starts_with(&format!("{} (", s.name)))
+    })?;
+    let shown = match read.len() {
+        0..=6 => read.join(", "),
+        n => format!("{}, ... ({n} in all)", read[..5].join(", ")),
+    };
+    Some(format!(
+        "species {shown}: read as chemical elements, with their radii in ångströms, while \
+         the dump's units are lj (lengths in σ): if they are bead names, --radius {}=R gives \
+         each its size (0.5 for beads of diameter σ), or --species-name to a name that is \
+         no element's makes it a label, drawn at the default 0.5",
+        first.name
+    ))
+}
+
 /// Drops [`default_radius_note`] where the note on species drawn at the default radius
 /// far below the spacing (`undersized_note`) says it too, with more.
 pub(crate) fn drop_default_radius_note_said_twice(notes: &mut Vec<String>) {
@@ -1040,10 +1093,14 @@ pub(crate) fn drop_default_radius_note_said_twice(notes: &mut Vec<String>) {
 pub fn default_radius_note(names: &[SpeciesName], overrides: &[(String, f32)]) -> Option<String> {
     let plain = crate::species::default_radius_species(names, overrides);
     let first = plain.first()?;
+    // (A species column of molecule ids gives thousands.)
+    let list = match plain.len() {
+        0..=8 => plain.join(", "),
+        n => format!("{}, ... ({n} in all)", plain[..6].join(", ")),
+    };
     Some(format!(
-        "species {}: drawn at radius {}, the default: no size was read for them (a \
+        "species {list}: drawn at radius {}, the default: no size was read for them (a \
          `radius` or `diameter` column, or --radius {first}=R, gives them theirs)",
-        plain.join(", "),
         crate::species::DEFAULT_RADIUS
     ))
 }
@@ -1136,12 +1193,26 @@ pub fn whole_numbers_note(
     min: f32,
     max: f32,
 ) -> Option<Option<String>> {
-    if values.iter().any(|v| v.fract() != 0.0) {
+    // (Past 2^24 every single-precision number is whole: a quantity spanning decades,
+    // not ids.)
+    const WHOLE: f32 = 16_777_216.0;
+    if !(min >= -WHOLE && max <= WHOLE) || values.iter().any(|v| v.fract() != 0.0) {
         return None;
     }
     let span = f64::from(max) - f64::from(min);
-    if span.is_nan() || span <= 65535.0 {
+    if span.is_nan() || span <= 32767.5 {
         return Some(None);
+    }
+    if span <= 65535.0 {
+        // Each value keeps a step of its own, but a step above a half puts an end
+        // halfway between two values in the same step as one of them.
+        return Some(Some(format!(
+            "attribute {name} holds whole numbers from {min} to {max} (ids?), each in a 16-bit \
+             step of its own (a step is {:.2}): --hide-attribute ends halfway between them \
+             (299.5:300.5) may take in a neighbour or leave out the value they surround; \
+             give whole-number ends (300:300)",
+            span / 65535.0
+        )));
     }
     Some(Some(format!(
         "attribute {name} holds whole numbers from {min} to {max} (ids?), more than 16 bits \
@@ -1888,8 +1959,9 @@ mod tests {
         assert!(sheet.is_some_and(|n| n.contains("spacing (5.000")));
     }
 
-    /// Ids past 65 536 apart are noted as ids that 16 bits cannot tell apart; whole
-    /// numbers closer together, or values with fractions, are not.
+    /// Ids past 65 536 apart are noted as ids that 16 bits cannot tell apart, ids past
+    /// 32 768 apart as ids whose halfway ends are unsafe; whole numbers closer together,
+    /// or values with fractions, are not.
     #[test]
     fn whole_numbers_too_many_for_16_bits_are_noted() {
         let ids: Vec<f32> = (1..=200_000).map(|i| i as f32).collect();
@@ -1902,8 +1974,30 @@ mod tests {
             "{note}"
         );
         assert_eq!(
-            super::whole_numbers_note("mol", &ids[..60_000], 1.0, 60_000.0),
+            super::whole_numbers_note("mol", &ids[..30_000], 1.0, 30_000.0),
             Some(None)
+        );
+        // Steps above a half: ends halfway between ids are said to be unsafe. With a
+        // step of 0.92, 300 and 300.5 share a step (its end's code holds the 300s).
+        let note = super::whole_numbers_note("mol", &ids[..60_000], 1.0, 60_000.0)
+            .flatten()
+            .expect("a note");
+        assert!(
+            note.contains("each in a 16-bit step of its own (a step is 0.92)")
+                && note.contains("give whole-number ends (300:300)"),
+            "{note}"
+        );
+        let info = mdlod_format::meta::AttributeInfo {
+            name: "mol".into(),
+            min: 1.0,
+            max: 60_000.0,
+        };
+        let (_, below) = info.codes([f32::NEG_INFINITY, 299.5]).unwrap();
+        let (above, _) = info.codes([300.5, f32::INFINITY]).unwrap();
+        let q = info.encode(300.0);
+        assert!(
+            q <= below || q >= above,
+            "300 ({q}) kept by {below}..{above}"
         );
         let mut fractions = ids.clone();
         fractions[7] = 7.5;

@@ -365,6 +365,99 @@ fn further_attributes_stream_in_chunks_as_a_frame_built_whole_keeps_them() {
     );
 }
 
+/// A bead-spring dump in LJ units: molecule ids kept as a further attribute get no
+/// advice to take their logarithm (ids within 16 bits are kept exactly), built whole
+/// or in chunks; bead types renamed to names that are element symbols are noted as read
+/// with ångström radii, unless --radius gives their size; the note of species drawn at
+/// the default radius lists a few of thousands.
+#[test]
+fn bead_names_and_molecule_ids_in_lj_units_are_noted_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("melt.lammpstrj");
+    let n = 3000;
+    let mut text = format!(
+        "ITEM: UNITS\nlj\nITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp \
+         pp\n0 20\n0 20\n0 20\nITEM: ATOMS id mol type x y z c_pe\n"
+    );
+    for i in 0..n {
+        // Molecules of 50 beads, the last one numbered far up (ids need not be dense).
+        let mol = if i >= n - 50 { 40_000 } else { 1 + i / 50 };
+        text += &format!(
+            "{} {mol} {} {} {} {} {}\n",
+            i + 1,
+            1 + i % 3,
+            (i % 20) as f32 + 0.5,
+            ((i / 20) % 20) as f32 + 0.5,
+            (i / 400) as f32 * 2.5 + 0.5,
+            -4.0 + (i % 7) as f32 * 0.1
+        );
+    }
+    std::fs::write(&input, text).unwrap();
+    let read = ReadOptions {
+        attribute: Some("c_pe".into()),
+        extra_attributes: vec!["mol".into()],
+        ..Default::default()
+    };
+    let mut opts = options(1 << 20);
+    opts.radii.clear();
+    opts.species_names = vec![("1".into(), "P".into()), ("2".into(), "H".into())];
+    for chunk_points in [1 << 20, 700] {
+        opts.chunks.chunk_points = chunk_points;
+        let out = dir.path().join(format!("melt-{chunk_points}.mdlod"));
+        let r = convert_file(&input, &out, FrameSelect::Last, &read, &opts, &NoProgress).unwrap();
+        let said = r.notes.join("\n");
+        assert!(
+            !said.contains("attribute mol spans"),
+            "{chunk_points}: {said}"
+        );
+        assert!(
+            said.contains("species P (1.1), H (0.46): read as chemical elements")
+                && said.contains("units are lj"),
+            "{chunk_points}: {said}"
+        );
+    }
+    // Sized by --radius: nothing to say.
+    opts.radii = vec![("P".into(), 0.5), ("H".into(), 0.5)];
+    let r = convert_file(
+        &input,
+        &dir.path().join("sized.mdlod"),
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        !r.notes
+            .iter()
+            .any(|n| n.contains("read as chemical elements")),
+        "{:?}",
+        r.notes
+    );
+    // Molecules as species: thousands drawn at the default radius, a few named.
+    let by_mol = ReadOptions {
+        species_column: Some("mol".into()),
+        ..Default::default()
+    };
+    let mut opts = options(1 << 20);
+    opts.radii.clear();
+    let r = convert_file(
+        &input,
+        &dir.path().join("mol.mdlod"),
+        FrameSelect::Last,
+        &by_mol,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    let note = r
+        .notes
+        .iter()
+        .find(|n| n.contains("the default: no size was read"))
+        .expect("a default radius note");
+    assert!(note.contains("(60 in all)") && note.len() < 400, "{note}");
+}
+
 /// A further attribute the dump lacks, read in windows beside the particles: the
 /// reader's error naming it, not a wait on a pass that stopped; one named as the
 /// first: refused.
