@@ -1939,6 +1939,7 @@ pub fn batch(
             },
         ))));
     }
+    crate::convert::check_attribute_count(&opts.read, &describe_inputs(inputs))?;
     std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
     let _lock = lock_batch(out_dir, opts.shard)?;
 
@@ -2108,6 +2109,20 @@ pub fn batch(
                 Err(_) if opts.keep_going => None,
                 Err(e) => return Err(bounded.context(p, e.into()).into()),
             };
+            // So is a further attribute's.
+            for extra in &opts.read.extra_attributes {
+                let one = crate::readers::ReadOptions {
+                    attribute: Some(extra.clone()),
+                    extra_attributes: Vec::new(),
+                    ..opts.read.clone()
+                };
+                match dump.attribute_name(k, &one) {
+                    Ok(_) => {}
+                    Err(_) if dump.frame_info(k).is_ok_and(|i| i.particles == 0) => {}
+                    Err(_) if opts.keep_going => {}
+                    Err(e) => return Err(bounded.context(p, e.into()).into()),
+                }
+            }
             // So is a size column a frame lacks.
             if let Err(e) = dump.check_named_columns(k, &opts.read) {
                 if !opts.keep_going {
@@ -2904,13 +2919,16 @@ pub fn batch(
                     } else {
                         // Refused before the frame is read, not after.
                         if let Ok(particles) = usize::try_from(job.particles) {
-                            crate::convert::check_in_memory(particles, convert, || {
-                                crate::convert::FramePlace {
+                            crate::convert::check_in_memory(
+                                particles,
+                                opts.read.extra_attributes.len(),
+                                convert,
+                                || crate::convert::FramePlace {
                                     path: job.input.display().to_string(),
                                     frame: Some(job.frame as u64),
                                     timestep: job.own_timestep,
-                                }
-                            })?;
+                                },
+                            )?;
                         }
                         let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
                         let further =

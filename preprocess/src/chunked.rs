@@ -1384,10 +1384,26 @@ pub fn convert_chunked(
         crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep).to_string();
     let extra_names = source.extra_attributes();
     let extra_count = extra_names.len();
-    // Each further attribute's pass holds a window of its own in the partition: smaller
-    // windows keep the partition's memory that of one pass (the file does not depend
-    // on the window).
-    let part_window = (window / (1 + extra_count)).max(1);
+    if extra_count > mdlod_format::MAX_EXTRA_ATTRIBUTES {
+        return Err(ConvertError::Attributes {
+            place: crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep),
+            problem: format!(
+                "{} attributes: a file keeps at most {}",
+                extra_count + 1,
+                mdlod_format::MAX_EXTRA_ATTRIBUTES + 1
+            ),
+        });
+    }
+    // Each further attribute's pass holds a window of its own (its input mapped, its
+    // values parsed) on top of the particles' one: smaller windows, within about a
+    // thousandth of the limit per pass, keep the partition's memory about that of one
+    // pass, at small limits too.
+    let part_window = match extra_count {
+        0 => window,
+        k => (window / (1 + k))
+            .min(((chunk.memory_limit / 1024 / (1 + k as u64)) as usize).max(1 << 16))
+            .max(1),
+    };
     let per_particle = build_bytes_per_particle(extra_count);
     let chunk_memory = |points: usize| chunk_memory_with(points, extra_count);
     // At most `max_root_points` chunks share the particles: the largest holds at least

@@ -121,7 +121,7 @@ pub enum ConvertError {
     #[error("chunked conversion: {0}")]
     Chunked(String),
     /// A frame built in memory (within the chunk size) that needs more than the limit.
-    #[error("{place}: {particles} particles are built in memory (within --chunk-points {chunk_points}) and need about {}, above the memory limit of {}: raise --memory-limit{}", crate::chunked::need_text(*need), crate::chunked::size_text(*limit), chunk_hint(*particles, *limit, *root_points))]
+    #[error("{place}: {particles} particles are built in memory (within --chunk-points {chunk_points}) and need about {}, above the memory limit of {}: raise --memory-limit{}", crate::chunked::need_text(*need), crate::chunked::size_text(*limit), chunk_hint(*particles, *limit, *root_points, *extras))]
     MemoryLimit {
         place: FramePlace,
         particles: usize,
@@ -130,6 +130,8 @@ pub enum ConvertError {
         limit: u64,
         /// The root points of the build: chunks hold at least as many.
         root_points: u32,
+        /// Further attributes kept beside the first.
+        extras: usize,
     },
     /// A frame without particles: a `.mdlod` file needs at least one.
     #[error("{0}: no particles, and a .mdlod file needs at least one")]
@@ -153,13 +155,19 @@ pub fn in_memory_need(particles: usize) -> u64 {
     (particles as u64).saturating_mul(crate::batch::BYTES_PER_PARTICLE)
 }
 
-/// Refuses to build a frame of `particles` in memory when that needs more than the limit.
+/// Refuses to build a frame of `particles` in memory, with `extras` further attributes,
+/// when that needs more than the limit.
 pub(crate) fn check_in_memory(
     particles: usize,
+    extras: usize,
     options: &ConvertOptions,
     place: impl FnOnce() -> FramePlace,
 ) -> Result<(), ConvertError> {
-    let need = in_memory_need(particles);
+    // Each further attribute adds what it adds to a chunk's build.
+    let per_extra =
+        crate::chunked::build_bytes_per_particle(extras) - crate::chunked::BUILD_BYTES_PER_PARTICLE;
+    let need =
+        in_memory_need(particles).saturating_add((particles as u64).saturating_mul(per_extra));
     let limit = options.chunks.memory_limit;
     if need <= limit {
         return Ok(());
@@ -171,13 +179,14 @@ pub(crate) fn check_in_memory(
         need,
         limit,
         root_points: options.build.max_root_points,
+        extras,
     })
 }
 
-/// How to build a frame of `particles` out of core within `limit`, if chunks of at least
-/// the build's `root_points` fit in it.
-fn chunk_hint(particles: usize, limit: u64, root_points: u32) -> String {
-    match crate::chunked::chunk_points_within(limit, root_points, 0) {
+/// How to build a frame of `particles` (with `extras` further attributes) out of core
+/// within `limit`, if chunks of at least the build's `root_points` fit in it.
+fn chunk_hint(particles: usize, limit: u64, root_points: u32, extras: usize) -> String {
+    match crate::chunked::chunk_points_within(limit, root_points, extras) {
         Some(points) if points < particles as u64 => {
             format!(", or build it out of core in smaller chunks (--chunk-points {points})")
         }
@@ -351,7 +360,7 @@ pub fn convert_frame_with(
         );
     }
     let override_notes = radius_notes(&names, &options.radii);
-    check_in_memory(frame.len(), options, || {
+    check_in_memory(frame.len(), further.len(), options, || {
         FramePlace::of(source.as_ref(), frame.timestep)
     })?;
     let species = species_table(&names, &options.radii);
@@ -1271,6 +1280,30 @@ pub fn log10_attribute(
     Ok(values.par_iter().map(|v| v.log10()).collect())
 }
 
+/// Refuses more attributes than a file keeps before any input is read (`input` names
+/// the inputs).
+pub fn check_attribute_count(
+    read: &crate::readers::ReadOptions,
+    input: &str,
+) -> Result<(), ConvertError> {
+    let extras = read.extra_attributes.len();
+    if extras <= mdlod_format::MAX_EXTRA_ATTRIBUTES {
+        return Ok(());
+    }
+    Err(ConvertError::Attributes {
+        place: FramePlace {
+            path: input.to_string(),
+            frame: None,
+            timestep: None,
+        },
+        problem: format!(
+            "{} attributes (--attribute): a file keeps at most {}",
+            extras + 1,
+            mdlod_format::MAX_EXTRA_ATTRIBUTES + 1
+        ),
+    })
+}
+
 /// Why further attributes of these names cannot be kept beside the `first`: without
 /// one, named twice (or as the first), or more than the format holds. `None` where
 /// they can.
@@ -1578,6 +1611,7 @@ pub fn convert_file(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
+    check_attribute_count(read, &input.display().to_string())?;
     let t0 = Instant::now();
     let BoundedDump { dump, text, _work } = open_bounded(input, &options.chunks, output, progress)?;
     // Opening indexes the frames (a pass over a text dump): part of reading the input,
@@ -1717,10 +1751,12 @@ pub fn convert_dump(
         }
     }
     if info.particles <= options.chunks.chunk_points {
-        check_in_memory(info.particles, options, || FramePlace {
-            path: named.display().to_string(),
-            frame: Some(k as u64),
-            timestep: info.timestep,
+        check_in_memory(info.particles, read.extra_attributes.len(), options, || {
+            FramePlace {
+                path: named.display().to_string(),
+                frame: Some(k as u64),
+                timestep: info.timestep,
+            }
         })?;
     }
     let t0 = Instant::now();
@@ -2138,7 +2174,7 @@ mod tests {
     #[test]
     fn the_memory_hint_names_chunks_that_fit_the_limit() {
         let limit = 100u64 << 20;
-        let hint = chunk_hint(1_000_000, limit, 4096);
+        let hint = chunk_hint(1_000_000, limit, 4096, 0);
         let fits =
             (limit - crate::chunked::chunk_memory(0)) / crate::chunked::BUILD_BYTES_PER_PARTICLE;
         assert_eq!(fits, 343_170);
@@ -2148,12 +2184,12 @@ mod tests {
         );
         assert!(crate::chunked::chunk_memory(340_000) <= limit);
         // Room for fewer than the root points, or for the whole frame: no hint.
-        assert_eq!(chunk_hint(1_000_000, 64 << 20, 4096), "");
-        assert_eq!(chunk_hint(100_000, limit, 4096), "");
+        assert_eq!(chunk_hint(1_000_000, 64 << 20, 4096, 0), "");
+        assert_eq!(chunk_hint(100_000, limit, 4096, 0), "");
         // The build's own root points: no chunk below them is suggested.
-        assert_eq!(chunk_hint(1_000_000, limit, 500_000), "");
+        assert_eq!(chunk_hint(1_000_000, limit, 500_000, 0), "");
         let just = crate::chunked::chunk_memory(4099);
-        assert!(chunk_hint(1_000_000, just, 4096).ends_with("(--chunk-points 4096)"));
+        assert!(chunk_hint(1_000_000, just, 4096, 0).ends_with("(--chunk-points 4096)"));
         let options = ConvertOptions {
             chunks: crate::chunked::ChunkOptions {
                 memory_limit: limit,
@@ -2162,8 +2198,8 @@ mod tests {
             ..Default::default()
         };
         let place = || FramePlace::of(None, Some(7));
-        check_in_memory(700_000, &options, place).unwrap();
-        let e = check_in_memory(1_000_000, &options, place)
+        check_in_memory(700_000, 0, &options, place).unwrap();
+        let e = check_in_memory(1_000_000, 0, &options, place)
             .unwrap_err()
             .to_string();
         assert_eq!(
@@ -2172,5 +2208,17 @@ mod tests {
              4194304) and need about 134 MiB, above the memory limit of 100 MiB: raise \
              --memory-limit, or build it out of core in smaller chunks (--chunk-points 340000)"
         );
+        // Further attributes need more, built whole or in chunks: the chunks suggested
+        // fit the limit with them.
+        let e = check_in_memory(700_000, 3, &options, place)
+            .unwrap_err()
+            .to_string();
+        let points: usize = e
+            .rsplit("--chunk-points ")
+            .next()
+            .and_then(|t| t.trim_end_matches(')').parse().ok())
+            .unwrap_or_else(|| panic!("{e}"));
+        assert!(points < 340_000, "{e}");
+        assert!(crate::chunked::chunk_memory_with(points, 3) <= limit, "{e}");
     }
 }

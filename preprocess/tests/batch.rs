@@ -2427,6 +2427,71 @@ fn keep_going_converts_the_other_frames_and_reports_the_bad_one() {
     assert_eq!((m.frames.len(), m.failed.len()), (6, 0));
 }
 
+/// A further attribute's column that a later frame lacks is refused before any frame is
+/// converted, as the first attribute's is; so are more attributes than a file keeps.
+#[test]
+fn a_further_attribute_missing_from_a_later_frame_is_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    // Frame 2 lacks c_pe (its column renamed).
+    let at = good.match_indices("ITEM: ATOMS").nth(2).unwrap().0;
+    let bad = format!(
+        "{}{}",
+        &good[..at],
+        good[at..].replacen(
+            "ITEM: ATOMS id type x y z c_pe",
+            "ITEM: ATOMS id type x y z c_xx",
+            1
+        )
+    );
+    assert_ne!(bad, good);
+    let src = dir.path().join("miss.dump");
+    std::fs::write(&src, bad).unwrap();
+    let out = dir.path().join("out");
+    let o = BatchOptions {
+        read: mdlod_preprocess::readers::ReadOptions {
+            attribute: Some("x".into()),
+            extra_attributes: vec!["c_pe".into()],
+            ..Default::default()
+        },
+        ..opts()
+    };
+    let e = batch(std::slice::from_ref(&src), &out, &o, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("c_pe"), "{e}");
+    let converted = std::fs::read_dir(&out)
+        .map(|d| {
+            d.filter(|e| {
+                e.as_ref()
+                    .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "mdlod"))
+            })
+            .count()
+        })
+        .unwrap_or(0);
+    assert_eq!(converted, 0, "{e}");
+    let many = BatchOptions {
+        read: mdlod_preprocess::readers::ReadOptions {
+            attribute: Some("x".into()),
+            extra_attributes: (0..65).map(|k| format!("c_{k}")).collect(),
+            ..Default::default()
+        },
+        ..opts()
+    };
+    let e = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("many"),
+        &many,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("66 attributes (--attribute): a file keeps at most 65"),
+        "{e}"
+    );
+}
+
 /// `keep_going` over inputs a pattern matched beside the dumps (a run's log): the input
 /// that holds no dump fails alone, named, and the dumps convert; without it, the batch
 /// stops on it. A path that does not exist stops the batch either way.

@@ -169,6 +169,15 @@ fn nan_or_inf_coordinate() {
         None,
         "12: position (1e300, 0.0, 0.0) is outside the single-precision range",
     );
+    // An attribute past single precision: its column named, as a NaN's is.
+    let text = HEAD.replace("id type x y z", "id type x y z c_big")
+        + "1 1 0 0 0 1\n2 1 0 0 0 -1e39\n3 1 0 0 0 2\n";
+    assert_error(
+        "range.lammpstrj",
+        &text,
+        Some("c_big"),
+        "11: column c_big: attribute value -1e39 is outside the single-precision range",
+    );
 }
 
 #[test]

@@ -646,11 +646,28 @@ fn parse_chunk<'a>(
         if let Some(out) = attribute.as_deref_mut() {
             let v = attr as f32;
             if !v.is_finite() {
+                // (The column named, as a NaN's message names it.)
+                let column = plan
+                    .roles
+                    .iter()
+                    .position(|r| {
+                        matches!(
+                            r,
+                            Role::Attr | Role::CoordAttr(_) | Role::SpeciesAttr | Role::SizeAttr(_)
+                        )
+                    })
+                    .and_then(|c| plan.columns.get(c));
                 return Err(ReadError::Malformed {
                     at: ctx.at(line_start),
-                    message: format!(
-                        "attribute value {attr:?} is outside the single-precision range"
-                    ),
+                    message: match column {
+                        Some(c) => format!(
+                            "column {c}: attribute value {attr:?} is outside the \
+                             single-precision range"
+                        ),
+                        None => format!(
+                            "attribute value {attr:?} is outside the single-precision range"
+                        ),
+                    },
                 });
             }
             out[a] = v;
