@@ -9191,6 +9191,96 @@ fn several_attributes_in_one_file_colour_by_any() {
     assert!(out.contains("colour map viridis: particles/mass"), "{out}");
 }
 
+/// `--axes`: a tripod of the data's axes in its corner, as the view sees them (looking
+/// down z: x, red, to the right, y, green, up), in a still and in a movie's frames;
+/// refused where another panel takes its corner, in a turntable, and its corner alone.
+#[test]
+fn axes_show_which_way_the_data_axes_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "3000", "--frames", "2"], &dump);
+    let file = dir.path().join("c.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file)]);
+    // The mean place of the pixels of a colour in the image's bottom-right 90 × 90.
+    let mean_of = |png: &Path, want: fn(&[u8]) -> bool| {
+        let (w, h, px) = read_png(png);
+        let (mut sx, mut sy, mut n) = (0f64, 0f64, 0f64);
+        for y in h - 90..h {
+            for x in w - 90..w {
+                let i = 4 * (y * w + x) as usize;
+                if want(&px[i..i + 3]) {
+                    sx += f64::from(x);
+                    sy += f64::from(y);
+                    n += 1.0;
+                }
+            }
+        }
+        assert!(n >= 20.0, "{}: {n} pixels of the colour", png.display());
+        (sx / n, sy / n)
+    };
+    let red = |p: &[u8]| p[0] > 150 && p[1] < 110 && p[2] < 110;
+    let green = |p: &[u8]| p[1] > 120 && p[0] < 110 && p[2] < 110;
+    let check = |png: &Path| {
+        let (rx, ry) = mean_of(png, red);
+        let (gx, gy) = mean_of(png, green);
+        // x to the right of y's line, y above x's.
+        assert!(
+            rx > gx + 8.0,
+            "{}: red at {rx:.1}, green at {gx:.1}",
+            png.display()
+        );
+        assert!(
+            gy < ry - 8.0,
+            "{}: green at {gy:.1}, red at {ry:.1}",
+            png.display()
+        );
+    };
+    let png = dir.path().join("a.png");
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--axes"];
+    args.extend(["--width", "320", "--height", "200", "--background", "white"]);
+    args.extend(["--look-along", "0,0,-1"]);
+    ok(&args);
+    check(&png);
+    let d = dir.path().join("d");
+    ok(&["batch", s(&dump), "-o", s(&d)]);
+    let movie = dir.path().join("m-%d.png");
+    let mut args = vec!["render", s(&d), "-o", s(&movie), "--axes"];
+    args.extend(["--width", "320", "--height", "200", "--background", "white"]);
+    args.extend(["--look-along", "0,0,-1"]);
+    ok(&args);
+    for k in 0..2 {
+        check(&dir.path().join(format!("m-{k}.png")));
+    }
+    for (extra, says) in [
+        (
+            &["--axes-corner", "top-right"][..],
+            "--axes-corner has no effect without --axes",
+        ),
+        (
+            &[
+                "--axes",
+                "--ortho",
+                "--scale-bar",
+                "--scale-bar-corner",
+                "bottom-right",
+            ][..],
+            "--axes and --scale-bar both draw at the bottom-right corner",
+        ),
+        (
+            &["--axes", "--turntable", "4"][..],
+            "--axes draws into stills and movies, not turntables",
+        ),
+    ] {
+        let out = dir.path().join("no.png");
+        let mut args = vec!["render", s(&file), "-o", s(&out), "--width", "320"];
+        args.extend(["--height", "200"]);
+        args.extend(extra);
+        let e = fails(&args);
+        assert!(e.contains(says), "{extra:?}: {e}");
+        assert!(!out.exists(), "{extra:?}: drawn before refused");
+    }
+}
+
 /// `--scale-bar`: a bar of the length given (or a round one) as long in pixels as that
 /// length of the world in an orthographic view, in a still and in every frame of a
 /// movie; refused in perspective and where another panel takes its corner.

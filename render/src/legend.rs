@@ -371,6 +371,54 @@ pub enum Legend {
     /// A scale bar `length` legend pixels long (at the scale it is drawn at, the length
     /// in the world `label` names), under its label; drawn into images only.
     Scale { length: f32, label: String },
+    /// The directions of the data's x, y and z axes as the view shows them (a tripod, as
+    /// OVITO draws one): for each axis, its image direction (right, down) and how far it
+    /// points towards the viewer, unit length in all; from [`axes_tripod`].
+    Axes { dirs: [[f32; 3]; 3] },
+}
+
+/// The side of [`Legend::Axes`]' square panel, px.
+const AXES_SIZE: f32 = 72.0;
+/// An axis' length when it lies in the image's plane, px.
+const AXIS_LENGTH: f32 = 24.0;
+/// The axes' colours (sRGB): x red, y green, z blue, as OVITO and VMD draw them.
+const AXIS_COLOURS: [[u8; 3]; 3] = [[214, 39, 40], [44, 160, 44], [31, 119, 180]];
+
+/// The tripod of the data's axes as a view with image directions `right` and `up`
+/// (world unit vectors; the third, towards the viewer, is `back`) shows them.
+pub fn axes_tripod(right: [f32; 3], up: [f32; 3], back: [f32; 3]) -> Legend {
+    let dirs = [0, 1, 2].map(|k| [right[k], -up[k], back[k]]);
+    Legend::Axes { dirs }
+}
+
+impl Legend {
+    /// [`Legend::Axes`]' axes in the order they are drawn (farthest first, so that the
+    /// nearest lies on top), each with its end and its label's place (legend px) and its
+    /// colour.
+    fn axes_drawn(dirs: &[[f32; 3]; 3]) -> Vec<(usize, [f32; 2], [f32; 2])> {
+        let c = AXES_SIZE / 2.0;
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&a, &b| dirs[a][2].total_cmp(&dirs[b][2]));
+        order
+            .iter()
+            .map(|&k| {
+                let [x, y, _] = dirs[k];
+                let end = [c + AXIS_LENGTH * x, c + AXIS_LENGTH * y];
+                // The label beyond the end, or beside the centre for an axis that
+                // points at the viewer (or away).
+                let len = x.hypot(y);
+                let label = if len > 0.2 {
+                    [
+                        c + (AXIS_LENGTH * len + 8.0) * x / len,
+                        c + (AXIS_LENGTH * len + 8.0) * y / len,
+                    ]
+                } else {
+                    [c + 9.0 + 9.0 * k as f32, c - 9.0]
+                };
+                (k, end, label)
+            })
+            .collect()
+    }
 }
 
 /// The least room between two labels under a bar, px: wider than a space, so that
@@ -487,6 +535,7 @@ impl Legend {
                 14.0 + length.max(CHAR_WIDTH * label.chars().count() as f32),
                 SCALE_BAR[1] + 6.0,
             ),
+            Legend::Axes { .. } => (AXES_SIZE, AXES_SIZE),
         }
     }
 
@@ -617,6 +666,24 @@ impl Legend {
                     SCALE_BAR[1] - SCALE_BAR[0]
                 );
             }
+            Legend::Axes { dirs } => {
+                let c = AXES_SIZE / 2.0;
+                for (k, end, label) in Legend::axes_drawn(dirs) {
+                    let [r, g, b] = AXIS_COLOURS[k];
+                    let _ = writeln!(
+                        svg,
+                        r##"<line x1="{c}" y1="{c}" x2="{}" y2="{}" stroke="#{r:02x}{g:02x}{b:02x}" stroke-width="2.5" stroke-linecap="round"/>"##,
+                        end[0], end[1]
+                    );
+                    let _ = writeln!(
+                        svg,
+                        r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#,
+                        label[0],
+                        label[1] + 4.0,
+                        ["x", "y", "z"][k]
+                    );
+                }
+            }
         }
         svg.push_str("</svg>\n");
         svg
@@ -676,6 +743,7 @@ impl Legend {
                 .collect(),
             Legend::Text { lines } => lines.iter().map(String::as_str).collect(),
             Legend::Scale { label, .. } => vec![label.as_str()],
+            Legend::Axes { .. } => vec!["xyz"],
         };
         let mut missing: Vec<char> = texts
             .iter()
@@ -767,6 +835,7 @@ impl Legend {
                 match self {
                     Legend::Text { .. } => "label",
                     Legend::Scale { .. } => "scale bar",
+                    Legend::Axes { .. } => "axes",
                     _ => "legend",
                 }
             ));
@@ -850,6 +919,13 @@ impl Legend {
                     1.0,
                 );
             }
+            Legend::Axes { dirs } => {
+                let c = AXES_SIZE / 2.0;
+                for (k, end, label) in Legend::axes_drawn(dirs) {
+                    panel.line([c, c], end, 2.5, AXIS_COLOURS[k]);
+                    panel.text(label[0], label[1] + 4.0, ["x", "y", "z"][k], Anchor::Middle);
+                }
+            }
         }
         Ok(())
     }
@@ -888,6 +964,36 @@ impl Painter<'_> {
         for y in range(lo[1], hi[1], self.size.1) {
             for x in range(lo[0], hi[0], self.size.0) {
                 self.image.blend_over(self.x0 + x, self.y0 + y, colour, a);
+            }
+        }
+    }
+
+    /// A line of `colour` and `width` (legend px) with round ends from `a` to `b`,
+    /// anti-aliased by each pixel centre's distance to it.
+    fn line(&mut self, a: [f32; 2], b: [f32; 2], width: f32, colour: [u8; 3]) {
+        let s = self.s as f32;
+        let r = width / 2.0;
+        let lo = [a[0].min(b[0]) - r - 1.0, a[1].min(b[1]) - r - 1.0];
+        let hi = [a[0].max(b[0]) + r + 1.0, a[1].max(b[1]) + r + 1.0];
+        let (d, len2) = (
+            [b[0] - a[0], b[1] - a[1]],
+            (b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2),
+        );
+        let first = |v: f32| (v * s).floor().max(0.0) as u32;
+        for y in first(lo[1])..((hi[1] * s).ceil().max(0.0) as u32).min(self.size.1) {
+            for x in first(lo[0])..((hi[0] * s).ceil().max(0.0) as u32).min(self.size.0) {
+                let p = [(x as f32 + 0.5) / s, (y as f32 + 0.5) / s];
+                let t = if len2 > 0.0 {
+                    (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let dist = (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1]);
+                let cover = ((r - dist) * s + 0.5).clamp(0.0, 1.0);
+                if cover > 0.0 {
+                    self.image
+                        .blend_over(self.x0 + x, self.y0 + y, colour, cover);
+                }
             }
         }
     }
@@ -1099,6 +1205,36 @@ mod tests {
     /// Panels at two corners overlap where their rooms meet across the image: side by
     /// side when their widths add past it, diagonally only when both sums do; rooms that
     /// just touch do not.
+    /// The axes of a view down z: x to the right, y up, z at the centre (towards the
+    /// viewer, drawn last, on top), in the SVG as in the image.
+    #[test]
+    fn axes_point_where_the_view_shows_the_data_axes() {
+        let tripod = axes_tripod([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+        let svg = tripod.svg();
+        let lines: Vec<&str> = svg.lines().filter(|l| l.starts_with("<line")).collect();
+        assert_eq!(lines.len(), 3, "{svg}");
+        let c = AXES_SIZE / 2.0;
+        assert!(
+            lines[0].contains(&format!(r#"x2="{}" y2="{c}""#, c + AXIS_LENGTH)),
+            "{svg}"
+        );
+        assert!(
+            lines[1].contains(&format!(r#"x2="{c}" y2="{}""#, c - AXIS_LENGTH)),
+            "{svg}"
+        );
+        assert!(lines[2].contains(&format!(r#"x2="{c}" y2="{c}""#)), "{svg}");
+        let mut image = RgbaImage::new(200, 200);
+        tripod.draw(&mut image, Corner::TopLeft, 1).unwrap();
+        let [x0, y0, _, _] = tripod.panel_rect(200, 200, Corner::TopLeft, 1).unwrap();
+        let at = |dx: f32, dy: f32| {
+            let (x, y) = (x0 + (c + dx) as u32, y0 + (c + dy) as u32);
+            let i = 4 * (y * 200 + x) as usize;
+            [image.data[i], image.data[i + 1], image.data[i + 2]]
+        };
+        assert_eq!(at(AXIS_LENGTH / 2.0, 0.0), AXIS_COLOURS[0]);
+        assert_eq!(at(0.0, -AXIS_LENGTH / 2.0), AXIS_COLOURS[1]);
+    }
+
     #[test]
     fn species_keys_list_types_by_number_and_names_alphabetically() {
         let mut names = vec!["O", "10", "Li", "h", "2", "C", "H"];

@@ -143,6 +143,8 @@ pub fn run(args: Args) -> Result<()> {
         scale_bar_corner: None,
         text_scale: None,
         scale_bar_unit: None,
+        axes: false,
+        axes_corner: None,
         save_map: None,
         frames: None,
         cell: None,

@@ -246,6 +246,14 @@ pub struct Args {
     /// [default: the file's unit style's length unit]
     #[arg(long, value_name = "UNIT")]
     pub scale_bar_unit: Option<String>,
+    /// Draw the directions of the data's x, y and z axes into the image, as the view
+    /// sees them (red, green and blue, as OVITO and VMD draw them): which way y points in
+    /// a slab or a view along an axis; stills and movies
+    #[arg(long)]
+    pub axes: bool,
+    /// Where --axes draws its panel [default: bottom-right]
+    #[arg(long, value_name = "CORNER", ignore_case = true)]
+    pub axes_corner: Option<LegendCorner>,
     /// Draw the in-image legend, the label and the scale bar N times their size (their
     /// text is a 7×13-pixel font), 1 to 8: for print, where a figure's panels read small
     /// [default: by the image's size, 1 below 1920×1080, 2 from it]
@@ -262,6 +270,11 @@ impl Args {
     /// Where --scale-bar draws.
     fn scale_bar_corner(&self) -> LegendCorner {
         self.scale_bar_corner.unwrap_or(LegendCorner::BottomLeft)
+    }
+
+    /// Where --axes draws.
+    fn axes_corner(&self) -> LegendCorner {
+        self.axes_corner.unwrap_or(LegendCorner::BottomRight)
     }
 }
 
@@ -382,6 +395,15 @@ fn scale_bar(
     Ok(bar)
 }
 
+/// The `--axes` panel of a view from `camera`.
+fn axes_panel(camera: &mdlod_render::Camera) -> mdlod_render::legend::Legend {
+    mdlod_render::legend::axes_tripod(
+        camera.right().to_array(),
+        camera.up().to_array(),
+        camera.back().to_array(),
+    )
+}
+
 /// The library's corner of a command-line corner.
 fn legend_corner(corner: LegendCorner) -> mdlod_render::legend::Corner {
     use mdlod_render::legend::Corner;
@@ -407,6 +429,7 @@ fn check_panels_apart(
     legend: Option<[u32; 2]>,
     label: Option<[u32; 2]>,
     bar: Option<&mdlod_render::legend::Legend>,
+    axes: Option<&mdlod_render::legend::Legend>,
 ) -> Result<()> {
     let (w, h) = (args.camera.width, args.camera.height);
     let mut panels: Vec<(&str, LegendCorner, [u32; 2])> = Vec::new();
@@ -419,6 +442,10 @@ fn check_panels_apart(
     if let Some((bar, scale)) = bar.and_then(|b| Some((b, b.scale_in(w, h, args.text_scale)?))) {
         let (bw, bh) = bar.room_needed(scale);
         panels.push(("--scale-bar", args.scale_bar_corner(), [bw, bh]));
+    }
+    if let Some((a, scale)) = axes.and_then(|a| Some((a, a.scale_in(w, h, args.text_scale)?))) {
+        let (aw, ah) = a.room_needed(scale);
+        panels.push(("--axes", args.axes_corner(), [aw, ah]));
     }
     let corners: Vec<_> = panels.iter().map(|p| (legend_corner(p.1), p.2)).collect();
     if let Some((i, j)) = mdlod_render::legend::overlapping(&corners, w, h) {
@@ -1656,6 +1683,30 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     if args.scale_bar_corner.is_some() && !args.scale_bar {
         anyhow::bail!("--scale-bar-corner has no effect without --scale-bar");
     }
+    if args.axes_corner.is_some() && !args.axes {
+        anyhow::bail!("--axes-corner has no effect without --axes");
+    }
+    if args.axes {
+        if args.turntable.is_some() {
+            anyhow::bail!("--axes draws into stills and movies, not turntables");
+        }
+        let taken = [
+            (!args.label.is_empty()).then_some((args.label_corner(), "--label")),
+            args.legend_in_image.map(|c| (c, "--legend-in-image")),
+            args.scale_bar
+                .then_some((args.scale_bar_corner(), "--scale-bar")),
+        ];
+        if let Some((_, other)) = taken
+            .into_iter()
+            .flatten()
+            .find(|(c, _)| *c == args.axes_corner())
+        {
+            anyhow::bail!(
+                "--axes and {other} both draw at the {} corner: give --axes-corner another",
+                corner_name(args.axes_corner())
+            );
+        }
+    }
     if args.label.iter().any(|l| l.trim().is_empty()) {
         anyhow::bail!("--label \"\": an empty label draws an empty panel; give its text");
     }
@@ -2058,6 +2109,7 @@ pub fn run(mut args: Args) -> Result<()> {
     }
     let (legend_room, legend_size) = check_legend_room(&args, &opts)?;
     let windows = scale_bar_room(&args, &opts, legend_room);
+    let windows = axes_room(&args, &opts, windows);
     opts.fit_windows = label_room(&args, &opts, windows);
     if args.file.is_dir() {
         if args.turntable.is_some() {
@@ -2079,8 +2131,8 @@ pub fn run(mut args: Args) -> Result<()> {
         lit_linearly(&args),
     )?;
     let mut label_size = None;
-    let bar = if args.label.is_empty() && !args.scale_bar {
-        None
+    let (bar, axes) = if args.label.is_empty() && !args.scale_bar && !args.axes {
+        (None, None)
     } else {
         // (A turntable's images share the file's values but the frame number.)
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
@@ -2089,10 +2141,15 @@ pub fn run(mut args: Args) -> Result<()> {
             .map(|i| label::Values::of_file(&args.file, file.metadata(), i))
             .collect();
         label_size = check_label_room(&args, &values.iter().collect::<Vec<_>>())?;
-        // The scale bar of the view drawn, refused before drawing where it cannot be.
-        match args.scale_bar {
-            true => Some(scale_bar(
-                &mdlod_render::frame_setup(&file, &opts)?.0,
+        // The scale bar and axes of the view drawn, refused before drawing where they
+        // cannot be.
+        let camera = match args.scale_bar || args.axes {
+            true => Some(mdlod_render::frame_setup(&file, &opts)?.0),
+            false => None,
+        };
+        let bar = match (args.scale_bar, &camera) {
+            (true, Some(camera)) => Some(scale_bar(
+                camera,
                 opts.width,
                 opts.height,
                 args.scale_bar_length,
@@ -2101,10 +2158,11 @@ pub fn run(mut args: Args) -> Result<()> {
                     .or(file.metadata().units.as_deref()),
                 args.text_scale,
             )?),
-            false => None,
-        }
+            _ => None,
+        };
+        (bar, camera.filter(|_| args.axes).as_ref().map(axes_panel))
     };
-    check_panels_apart(&args, legend_size, label_size, bar.as_ref())?;
+    check_panels_apart(&args, legend_size, label_size, bar.as_ref(), axes.as_ref())?;
     if let Some(n) = args.turntable {
         return render_turntable(&args, opts, n, derived);
     }
@@ -2506,6 +2564,20 @@ pub fn run(mut args: Args) -> Result<()> {
             println!("{note}");
         }
     }
+    if let Some(axes) = &axes {
+        let mut covered = Covered::default();
+        covered.add(draw_panel(
+            &args.output,
+            axes,
+            args.axes_corner(),
+            "--axes",
+            backdrop(&args),
+            args.text_scale,
+        )?);
+        if let Some(note) = covered.note("--axes", 1, &args) {
+            println!("{note}");
+        }
+    }
     Ok(())
 }
 
@@ -2785,6 +2857,30 @@ fn scale_bar_room(
     };
     let (pw, ph) = panel.room_needed(s);
     keep_clear(windows, args.scale_bar_corner(), [pw, ph], [w, h])
+}
+
+/// `windows` kept clear of the `--axes` panel, as [`scale_bar_room`] keeps them of the
+/// scale bar's.
+fn axes_room(
+    args: &Args,
+    opts: &RenderOptions,
+    windows: Vec<mdlod_render::FitWindow>,
+) -> Vec<mdlod_render::FitWindow> {
+    if !args.axes {
+        return windows;
+    }
+    let (w, h) = (opts.width, opts.height);
+    let panel =
+        mdlod_render::legend::axes_tripod([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+    let Some(s) = panel.scale_in(w, h, args.text_scale) else {
+        return windows;
+    };
+    keep_clear(
+        windows,
+        args.axes_corner(),
+        panel.room_needed(s).into(),
+        [w, h],
+    )
 }
 
 /// `windows` (none: the whole image) each intersected with the two parts of a `size`
@@ -3960,7 +4056,8 @@ fn render_frames(
         }
         false => None,
     };
-    check_panels_apart(args, legend_size, label_size, bar.as_ref())?;
+    let axes = args.axes.then(|| axes_panel(&camera));
+    check_panels_apart(args, legend_size, label_size, bar.as_ref(), axes.as_ref())?;
     let t0 = std::time::Instant::now();
     let mut limited_frames = 0usize;
     // The species any frame shows, for the legend's key.
@@ -4214,6 +4311,22 @@ fn render_frames(
             )?);
         }
         if let Some(note) = covered.note("--scale-bar", written.len(), args) {
+            println!("{note}");
+        }
+    }
+    if let Some(axes) = &axes {
+        let mut covered = Covered::default();
+        for image in &written {
+            covered.add(draw_panel(
+                image,
+                axes,
+                args.axes_corner(),
+                "--axes",
+                backdrop(args),
+                args.text_scale,
+            )?);
+        }
+        if let Some(note) = covered.note("--axes", written.len(), args) {
             println!("{note}");
         }
     }
