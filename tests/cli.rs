@@ -4560,8 +4560,8 @@ fn ids_past_sixteen_bits_are_said_to_share_steps() {
         "5:500",
     ]);
     assert!(!out.contains("narrower than one 16-bit step"), "{out}");
-    // Ids within 65 536 of one another keep a step each: no note at either end, although
-    // they span decades.
+    // Ids within 65 536 of one another keep a step each: no note of sharing steps or of
+    // decades, but, their steps above a half, that ends halfway between them are unsafe.
     let few = dir.path().join("few.lammpstrj");
     let text = std::fs::read_to_string(&dump).unwrap();
     let lines: Vec<&str> = text.lines().collect();
@@ -4574,7 +4574,9 @@ fn ids_past_sixteen_bits_are_said_to_share_steps() {
     let file = dir.path().join("few.mdlod");
     let out = ok(&["convert", s(&few), "-o", s(&file), "--attribute", "mol"]);
     assert!(
-        !out.contains("--attribute-log10") && !out.contains("whole numbers"),
+        !out.contains("--attribute-log10")
+            && !out.contains("more than 16 bits tell apart")
+            && out.contains("each in a 16-bit step of its own (a step is 0.92)"),
         "{out}"
     );
     let out = ok(&[
@@ -9189,6 +9191,87 @@ fn several_attributes_in_one_file_colour_by_any() {
         "mass",
     ]);
     assert!(out.contains("colour map viridis: particles/mass"), "{out}");
+}
+
+/// A colour map over a file some of whose particles are hidden (a micelle's solvent,
+/// whose value is 0) spans the shown particles' values by default, in a still and in a
+/// movie, and its legend's ends are theirs; `--attribute-range` still sets another.
+#[test]
+fn a_colour_map_spans_the_values_of_the_particles_shown() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut frames = String::new();
+    for t in 0..2 {
+        let n = 2000;
+        frames += &format!(
+            "ITEM: TIMESTEP\n{t}\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 20\n\
+             0 20\n0 10\nITEM: ATOMS id type x y z c_rg\n"
+        );
+        for i in 0..n {
+            // Type 1 from 1.5 to 3.6 (the frames apart), the solvent (type 3) at 0.
+            let (ty, rg) = match i % 2 {
+                0 => (
+                    1,
+                    1.5 + 2.1 * (i as f32 / n as f32) * (0.9 + 0.1 * t as f32),
+                ),
+                _ => (3, 0.0),
+            };
+            frames += &format!(
+                "{} {ty} {} {} {} {rg}\n",
+                i + 1,
+                i % 20,
+                (i / 20) % 20,
+                i / 400
+            );
+        }
+    }
+    let dump = dir.path().join("mic.lammpstrj");
+    std::fs::write(&dump, frames).unwrap();
+    let file = dir.path().join("mic.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "c_rg"]);
+    let png = dir.path().join("m.png");
+    let legend = dir.path().join("m.svg");
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--width", "96"];
+    args.extend([
+        "--height",
+        "64",
+        "--colour-map",
+        "viridis",
+        "--hide-species",
+        "3",
+    ]);
+    args.extend(["--legend", s(&legend)]);
+    let out = ok(&args);
+    assert!(
+        out.contains("c_rg from 1.49")
+            && out.contains("the shown particles' values")
+            && out.contains("the file's range is 0 to 3.59"),
+        "{out}"
+    );
+    let svg = std::fs::read_to_string(&legend).unwrap();
+    assert!(svg.contains(">1.5<") && !svg.contains(">0<"), "{svg}");
+    // Given a range, it is the one drawn.
+    let mut given = args.clone();
+    given.extend(["--attribute-range", "0:4"]);
+    let out = ok(&given);
+    assert!(
+        !out.contains("over the values of the particles shown"),
+        "{out}"
+    );
+    // A movie: the frames' shown values.
+    let d = dir.path().join("d");
+    ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "c_rg"]);
+    let movie = dir.path().join("f-%d.png");
+    let mut args = vec!["render", s(&d), "-o", s(&movie), "--width", "96"];
+    args.extend([
+        "--height",
+        "64",
+        "--colour-map",
+        "viridis",
+        "--hide-species",
+        "3",
+    ]);
+    let out = ok(&args);
+    assert!(out.contains("c_rg from 1.49"), "{out}");
 }
 
 /// `--axes`: a tripod of the data's axes in its corner, as the view sees them (looking

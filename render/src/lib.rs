@@ -646,8 +646,11 @@ pub fn default_range_of(
         return None;
     }
     let a = file.metadata().attribute.as_ref()?;
-    style::default_range(
-        [a.min, a.max],
+    // Hidden particles (a solvent, a gas's stars) take no part of the map.
+    let shown = shown_attribute_range(file, style);
+    let own = shown.unwrap_or([a.min, a.max]);
+    let chosen = style::default_range(
+        own,
         light,
         mapped,
         style.log_scale,
@@ -657,7 +660,35 @@ pub fn default_range_of(
         } else {
             None
         },
-    )
+    );
+    match (chosen, shown) {
+        (Some(c), _) => Some(c),
+        (None, Some(range)) if mapped && range != [a.min, a.max] => {
+            Some((range, style::RangeChoice::Shown))
+        }
+        _ => None,
+    }
+}
+
+/// The smallest and largest attribute value of the particles `style` shows, where it
+/// hides some (species, values): what a colour map spans by default, so that hidden
+/// particles' values (a solvent's zero) do not stretch it. `None` where nothing is hidden,
+/// the file has no attribute, or every particle is hidden. One pass over the particles'
+/// species and values.
+pub fn shown_attribute_range(file: &MdlodFile, style: &PointStyle) -> Option<[f32; 2]> {
+    let a = file.metadata().attribute.as_ref()?;
+    let hidden = style.hidden_set(file.metadata());
+    if hidden.is_empty() {
+        return None;
+    }
+    let values = file.attribute()?;
+    let test = file.hidden_test(&hidden);
+    let (lo, hi) = (0..values.len())
+        .filter(|&i| !file.hides_particle(&test, i))
+        .fold((u16::MAX, 0u16), |(lo, hi), i| {
+            (lo.min(values[i]), hi.max(values[i]))
+        });
+    (lo <= hi).then(|| [a.decode(lo), a.decode(hi)])
 }
 
 /// The bounds of everything in the file (the top node's box).

@@ -68,7 +68,16 @@ impl Survey {
         self.names
             .extend(meta.species.iter().map(|s| s.name.clone()));
         self.species.push(meta.species.clone());
-        self.attribute = Some(match (self.attribute.take(), meta.attribute.clone()) {
+        // (Over the particles shown, where some are hidden: a solvent's values stretch no
+        // frame's map.)
+        let own =
+            meta.attribute
+                .clone()
+                .map(|a| match crate::shown_attribute_range(file, &opts.style) {
+                    Some([min, max]) => AttributeInfo { min, max, ..a },
+                    None => a,
+                });
+        self.attribute = Some(match (self.attribute.take(), own) {
             (None, own) => own,
             (Some(Some(a)), Some(b)) if a.name == b.name => Some(AttributeInfo {
                 min: a.min.min(b.min),

@@ -39,6 +39,8 @@ pub enum RangeChoice {
     LogFloor,
     /// A diverging map over values of both signs: centred on 0, the map's white.
     Centred,
+    /// Some particles hidden: the shown particles' values only.
+    Shown,
 }
 
 impl RangeChoice {
@@ -54,6 +56,7 @@ impl RangeChoice {
                  start"
             }
             RangeChoice::Centred => "centred on 0, the map's white",
+            RangeChoice::Shown => "over the shown particles' values, the hidden ones' left out",
         }
     }
 }

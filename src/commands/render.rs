@@ -2533,10 +2533,17 @@ pub fn run(mut args: Args) -> Result<()> {
             p.display()
         );
     }
+    // The values drawn: hidden particles' lie beyond no end of the bar.
+    let shown_attribute = file.metadata().attribute.clone().map(|a| {
+        match mdlod_render::shown_attribute_range(&file, &opts.style) {
+            Some([min, max]) => mdlod_format::meta::AttributeInfo { min, max, ..a },
+            None => a,
+        }
+    });
     write_legend(
         &args,
         &opts,
-        file.metadata().attribute.as_ref(),
+        shown_attribute.as_ref(),
         species,
         r.light_range,
         &drawn_names(&r, species, Default::default()),
@@ -3693,10 +3700,16 @@ fn render_turntable(
     if args.legend.is_some() || args.legend_in_image.is_some() {
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let meta = file.metadata();
+        let shown_attribute = meta.attribute.clone().map(|a| {
+            match mdlod_render::shown_attribute_range(&file, &opts.style) {
+                Some([min, max]) => mdlod_format::meta::AttributeInfo { min, max, ..a },
+                None => a,
+            }
+        });
         write_legend(
             args,
             &opts,
-            meta.attribute.as_ref(),
+            shown_attribute.as_ref(),
             &meta.species,
             opts.light_range,
             &drawn,
