@@ -1718,6 +1718,17 @@ pub fn convert_dump(
         e => e,
     };
     if info.particles > options.chunks.chunk_points {
+        // A column or vector the frame lacks is said as such first (what a frame built
+        // whole says), not as a magnitude too large to take.
+        dump.attribute_name(k, read).map_err(cut_short)?;
+        for extra in &read.extra_attributes {
+            let one = crate::readers::ReadOptions {
+                attribute: Some(extra.clone()),
+                extra_attributes: Vec::new(),
+                ..read.clone()
+            };
+            dump.attribute_name(k, &one).map_err(cut_short)?;
+        }
         // Refused before the frame is read (`convert_frame_with` says why).
         let problem = chunked_magnitude_problem(
             &dump,

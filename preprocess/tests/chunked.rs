@@ -458,18 +458,30 @@ fn bead_names_and_molecule_ids_in_lj_units_are_noted_as_such() {
     assert!(note.contains("(60 in all)") && note.len() < 400, "{note}");
 }
 
-/// A further attribute the dump lacks, read in windows beside the particles: the
-/// reader's error naming it, not a wait on a pass that stopped; one named as the
-/// first: refused.
+/// A further attribute the dump lacks, or a vector for a magnitude, named before anything
+/// is read; one named as the first: refused; a damaged value that only a further
+/// attribute's pass reads, windows in: that pass's error, naming the line, not a wait
+/// on a pass that stopped.
 #[test]
 fn a_missing_further_attribute_read_in_chunks_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("columns.lammpstrj");
-    std::fs::write(&input, dump_with_columns(3000)).unwrap();
+    let text = dump_with_columns(3000);
+    std::fs::write(&input, &text).unwrap();
+    // The same with a damaged c_ke value far into the atoms (line 9 + 2500): only the
+    // pass that reads c_ke meets it, windows after the particles' pass began.
+    let damaged = dir.path().join("damaged.lammpstrj");
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let mut fields: Vec<String> = lines[9 + 2500].split(' ').map(str::to_string).collect();
+    fields[6] = "0.3x".into();
+    lines[9 + 2500] = fields.join(" ");
+    std::fs::write(&damaged, lines.join("\n") + "\n").unwrap();
     let out = dir.path().join("out.mdlod");
-    for (extras, want) in [
-        (vec!["c_ke", "v_missing"], "v_missing"),
-        (vec!["c_pe"], "attribute c_pe is given twice"),
+    for (input, extras, want) in [
+        (&input, vec!["c_ke", "v_missing"], "v_missing"),
+        (&input, vec!["c_pe"], "attribute c_pe is given twice"),
+        (&input, vec!["|fx|"], "no vector `fx`"),
+        (&damaged, vec!["copy", "c_ke"], "damaged.lammpstrj:2510"),
     ] {
         let read = ReadOptions {
             attribute: Some("c_pe".into()),
@@ -477,7 +489,7 @@ fn a_missing_further_attribute_read_in_chunks_is_named() {
             ..Default::default()
         };
         let e = convert_file(
-            &input,
+            input,
             &out,
             FrameSelect::Last,
             &read,
@@ -486,11 +498,11 @@ fn a_missing_further_attribute_read_in_chunks_is_named() {
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains(want), "{e}");
+        assert!(e.contains(want), "{extras:?}: {e}");
         assert!(!out.exists());
     }
-    // Only the input remains: the working files are gone.
-    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    // Only the inputs remain: the working files are gone.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
 }
 
 #[test]
