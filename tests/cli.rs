@@ -9194,8 +9194,9 @@ fn several_attributes_in_one_file_colour_by_any() {
 }
 
 /// A colour map over a file some of whose particles are hidden (a micelle's solvent,
-/// whose value is 0) spans the shown particles' values by default, in a still and in a
-/// movie, and its legend's ends are theirs; `--attribute-range` still sets another.
+/// whose value is 0) spans the values of the particles drawn by default, those a plane
+/// cuts away left out too, in a still and in a movie, and its legend's ends are theirs;
+/// `--attribute-range` still sets another.
 #[test]
 fn a_colour_map_spans_the_values_of_the_particles_shown() {
     let dir = tempfile::tempdir().unwrap();
@@ -9243,20 +9244,25 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     let out = ok(&args);
     assert!(
         out.contains("c_rg from 1.49")
-            && out.contains("the shown particles' values")
+            && out.contains("the particles drawn")
             && out.contains("the file's range is 0 to 3.59"),
         "{out}"
     );
     let svg = std::fs::read_to_string(&legend).unwrap();
     assert!(svg.contains(">1.5<") && !svg.contains(">0<"), "{svg}");
+    // Cut by a plane too (z ≤ 1.5 keeps the first 800 atoms): the values left.
+    let mut cut = args.clone();
+    cut.extend(["--clip", "0,0,1,1.5"]);
+    let out = ok(&cut);
+    assert!(
+        out.contains("c_rg from 1.49") && out.contains(" to 2.33"),
+        "{out}"
+    );
     // Given a range, it is the one drawn.
     let mut given = args.clone();
     given.extend(["--attribute-range", "0:4"]);
     let out = ok(&given);
-    assert!(
-        !out.contains("over the values of the particles shown"),
-        "{out}"
-    );
+    assert!(!out.contains("the particles drawn"), "{out}");
     // A movie: the frames' shown values.
     let d = dir.path().join("d");
     ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "c_rg"]);
@@ -9334,6 +9340,23 @@ fn axes_show_which_way_the_data_axes_point() {
     for k in 0..2 {
         check(&dir.path().join(format!("m-{k}.png")));
     }
+    // Its corner taken by the legend, it takes the next free one (top-right).
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--axes"];
+    args.extend(["--width", "320", "--height", "200", "--background", "white"]);
+    args.extend(["--look-along", "0,0,-1", "--legend-in-image"]);
+    ok(&args);
+    let (w, _, px) = read_png(&png);
+    let red_top_right = (0..90u32)
+        .flat_map(|y| (w - 90..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let i = 4 * (y * w + x) as usize;
+            px[i] > 150 && px[i + 1] < 110 && px[i + 2] < 110
+        })
+        .count();
+    assert!(
+        red_top_right >= 20,
+        "{red_top_right} red pixels at the top right"
+    );
     for (extra, says) in [
         (
             &["--axes-corner", "top-right"][..],
@@ -9342,6 +9365,8 @@ fn axes_show_which_way_the_data_axes_point() {
         (
             &[
                 "--axes",
+                "--axes-corner",
+                "bottom-right",
                 "--ortho",
                 "--scale-bar",
                 "--scale-bar-corner",

@@ -378,7 +378,7 @@ pub enum Legend {
 }
 
 /// The side of [`Legend::Axes`]' square panel, px.
-const AXES_SIZE: f32 = 72.0;
+const AXES_SIZE: f32 = 84.0;
 /// An axis' length when it lies in the image's plane, px.
 const AXIS_LENGTH: f32 = 24.0;
 /// The axes' colours (sRGB): x red, y green, z blue, as OVITO and VMD draw them.
@@ -391,31 +391,62 @@ pub fn axes_tripod(right: [f32; 3], up: [f32; 3], back: [f32; 3]) -> Legend {
     Legend::Axes { dirs }
 }
 
+/// An axis of [`Legend::Axes`] as drawn.
+struct AxisDrawn {
+    /// 0, 1, 2: x, y, z.
+    k: usize,
+    /// Its end (legend px); the centre for an axis along the view.
+    end: [f32; 2],
+    /// Its label's centre.
+    label: [f32; 2],
+    /// Along the view (less than a fifth of its length shows): drawn as a ring round
+    /// the centre with a dot (towards the viewer, ⊙) or a cross (away, ⊗), as
+    /// engineering drawings mark an axis out of or into the page.
+    along: Option<bool>,
+}
+
+/// The radius of the ring that marks an axis along the view, px.
+const ALONG_RING: f32 = 5.5;
+
 impl Legend {
     /// [`Legend::Axes`]' axes in the order they are drawn (farthest first, so that the
-    /// nearest lies on top), each with its end and its label's place (legend px) and its
-    /// colour.
-    fn axes_drawn(dirs: &[[f32; 3]; 3]) -> Vec<(usize, [f32; 2], [f32; 2])> {
+    /// nearest lies on top).
+    fn axes_drawn(dirs: &[[f32; 3]; 3]) -> Vec<AxisDrawn> {
         let c = AXES_SIZE / 2.0;
         let mut order = [0usize, 1, 2];
         order.sort_by(|&a, &b| dirs[a][2].total_cmp(&dirs[b][2]));
         order
             .iter()
             .map(|&k| {
-                let [x, y, _] = dirs[k];
-                let end = [c + AXIS_LENGTH * x, c + AXIS_LENGTH * y];
-                // The label beyond the end, or beside the centre for an axis that
-                // points at the viewer (or away).
+                let [x, y, z] = dirs[k];
                 let len = x.hypot(y);
-                let label = if len > 0.2 {
-                    [
-                        c + (AXIS_LENGTH * len + 8.0) * x / len,
-                        c + (AXIS_LENGTH * len + 8.0) * y / len,
-                    ]
+                if len > 0.2 {
+                    let reach = AXIS_LENGTH * len + 8.0;
+                    return AxisDrawn {
+                        k,
+                        end: [c + AXIS_LENGTH * x, c + AXIS_LENGTH * y],
+                        label: [c + reach * x / len, c + reach * y / len],
+                        along: None,
+                    };
+                }
+                // Its letter where the other two leave room: opposite their sum.
+                let (a, b) = ((k + 1) % 3, (k + 2) % 3);
+                let away = [-(dirs[a][0] + dirs[b][0]), -(dirs[a][1] + dirs[b][1])];
+                let n = away[0].hypot(away[1]);
+                let unit = if n > 1e-3 {
+                    [away[0] / n, away[1] / n]
                 } else {
-                    [c + 9.0 + 9.0 * k as f32, c - 9.0]
+                    [
+                        -std::f32::consts::FRAC_1_SQRT_2,
+                        std::f32::consts::FRAC_1_SQRT_2,
+                    ]
                 };
-                (k, end, label)
+                AxisDrawn {
+                    k,
+                    end: [c, c],
+                    label: [c + 15.0 * unit[0], c + 15.0 * unit[1]],
+                    along: Some(z > 0.0),
+                }
             })
             .collect()
     }
@@ -668,19 +699,46 @@ impl Legend {
             }
             Legend::Axes { dirs } => {
                 let c = AXES_SIZE / 2.0;
-                for (k, end, label) in Legend::axes_drawn(dirs) {
-                    let [r, g, b] = AXIS_COLOURS[k];
-                    let _ = writeln!(
-                        svg,
-                        r##"<line x1="{c}" y1="{c}" x2="{}" y2="{}" stroke="#{r:02x}{g:02x}{b:02x}" stroke-width="2.5" stroke-linecap="round"/>"##,
-                        end[0], end[1]
-                    );
+                for a in Legend::axes_drawn(dirs) {
+                    let [r, g, b] = AXIS_COLOURS[a.k];
+                    let colour = format!("#{r:02x}{g:02x}{b:02x}");
+                    match a.along {
+                        None => {
+                            let _ = writeln!(
+                                svg,
+                                r#"<line x1="{c}" y1="{c}" x2="{}" y2="{}" stroke="{colour}" stroke-width="2.5" stroke-linecap="round"/>"#,
+                                a.end[0], a.end[1]
+                            );
+                        }
+                        Some(towards) => {
+                            let _ = writeln!(
+                                svg,
+                                r#"<circle cx="{c}" cy="{c}" r="{ALONG_RING}" fill="none" stroke="{colour}" stroke-width="1.5"/>"#
+                            );
+                            if towards {
+                                let _ = writeln!(
+                                    svg,
+                                    r#"<circle cx="{c}" cy="{c}" r="1.8" fill="{colour}"/>"#
+                                );
+                            } else {
+                                let d = ALONG_RING * std::f32::consts::FRAC_1_SQRT_2;
+                                for (x1, y1, x2, y2) in
+                                    [(c - d, c - d, c + d, c + d), (c - d, c + d, c + d, c - d)]
+                                {
+                                    let _ = writeln!(
+                                        svg,
+                                        r#"<line x1="{x1}" y1="{y1}" x2="{x2}" y2="{y2}" stroke="{colour}" stroke-width="1.5"/>"#
+                                    );
+                                }
+                            }
+                        }
+                    }
                     let _ = writeln!(
                         svg,
                         r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#,
-                        label[0],
-                        label[1] + 4.0,
-                        ["x", "y", "z"][k]
+                        a.label[0],
+                        a.label[1] + 4.0,
+                        ["x", "y", "z"][a.k]
                     );
                 }
             }
@@ -921,9 +979,27 @@ impl Legend {
             }
             Legend::Axes { dirs } => {
                 let c = AXES_SIZE / 2.0;
-                for (k, end, label) in Legend::axes_drawn(dirs) {
-                    panel.line([c, c], end, 2.5, AXIS_COLOURS[k]);
-                    panel.text(label[0], label[1] + 4.0, ["x", "y", "z"][k], Anchor::Middle);
+                for a in Legend::axes_drawn(dirs) {
+                    let colour = AXIS_COLOURS[a.k];
+                    match a.along {
+                        None => panel.line([c, c], a.end, 2.5, colour),
+                        Some(towards) => {
+                            panel.ring([c, c], ALONG_RING, 1.5, colour);
+                            if towards {
+                                panel.ring([c, c], 0.0, 3.6, colour);
+                            } else {
+                                let d = ALONG_RING * std::f32::consts::FRAC_1_SQRT_2;
+                                panel.line([c - d, c - d], [c + d, c + d], 1.5, colour);
+                                panel.line([c - d, c + d], [c + d, c - d], 1.5, colour);
+                            }
+                        }
+                    }
+                    panel.text(
+                        a.label[0],
+                        a.label[1] + 4.0,
+                        ["x", "y", "z"][a.k],
+                        Anchor::Middle,
+                    );
                 }
             }
         }
@@ -990,6 +1066,25 @@ impl Painter<'_> {
                 };
                 let dist = (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1]);
                 let cover = ((r - dist) * s + 0.5).clamp(0.0, 1.0);
+                if cover > 0.0 {
+                    self.image
+                        .blend_over(self.x0 + x, self.y0 + y, colour, cover);
+                }
+            }
+        }
+    }
+
+    /// A ring of `colour`, radius `r` and `width` round `c` (radius 0: a dot of diameter
+    /// `width`), anti-aliased as [`Self::line`].
+    fn ring(&mut self, c: [f32; 2], r: f32, width: f32, colour: [u8; 3]) {
+        let s = self.s as f32;
+        let reach = r + width / 2.0 + 1.0;
+        let first = |v: f32| (v * s).floor().max(0.0) as u32;
+        let last = |v: f32, size: u32| ((v * s).ceil().max(0.0) as u32).min(size);
+        for y in first(c[1] - reach)..last(c[1] + reach, self.size.1) {
+            for x in first(c[0] - reach)..last(c[0] + reach, self.size.0) {
+                let d = ((x as f32 + 0.5) / s - c[0]).hypot((y as f32 + 0.5) / s - c[1]);
+                let cover = ((width / 2.0 - (d - r).abs()) * s + 0.5).clamp(0.0, 1.0);
                 if cover > 0.0 {
                     self.image
                         .blend_over(self.x0 + x, self.y0 + y, colour, cover);
@@ -1212,7 +1307,7 @@ mod tests {
         let tripod = axes_tripod([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
         let svg = tripod.svg();
         let lines: Vec<&str> = svg.lines().filter(|l| l.starts_with("<line")).collect();
-        assert_eq!(lines.len(), 3, "{svg}");
+        assert_eq!(lines.len(), 2, "{svg}");
         let c = AXES_SIZE / 2.0;
         assert!(
             lines[0].contains(&format!(r#"x2="{}" y2="{c}""#, c + AXIS_LENGTH)),
@@ -1222,7 +1317,24 @@ mod tests {
             lines[1].contains(&format!(r#"x2="{c}" y2="{}""#, c - AXIS_LENGTH)),
             "{svg}"
         );
-        assert!(lines[2].contains(&format!(r#"x2="{c}" y2="{c}""#)), "{svg}");
+        // z at the viewer: a ring with a dot, its letter down and left of the centre,
+        // away from x and y.
+        assert!(
+            svg.contains(&format!(r#"<circle cx="{c}" cy="{c}" r="{ALONG_RING}""#)),
+            "{svg}"
+        );
+        assert!(svg.contains(r#"r="1.8""#), "{svg}");
+        let z = svg.lines().find(|l| l.ends_with(">z</text>")).expect("z");
+        let x: f32 = z.split('"').nth(1).unwrap().parse().unwrap();
+        assert!(x < c - 5.0, "{z}");
+        // Seen from below (z away): a ring with a cross, not a dot.
+        let below = axes_tripod([1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]).svg();
+        assert!(!below.contains(r#"r="1.8""#), "{below}");
+        assert_eq!(
+            below.lines().filter(|l| l.starts_with("<line")).count(),
+            4,
+            "{below}"
+        );
         let mut image = RgbaImage::new(200, 200);
         tripod.draw(&mut image, Corner::TopLeft, 1).unwrap();
         let [x0, y0, _, _] = tripod.panel_rect(200, 200, Corner::TopLeft, 1).unwrap();

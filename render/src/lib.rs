@@ -670,24 +670,53 @@ pub fn default_range_of(
     }
 }
 
-/// The smallest and largest attribute value of the particles `style` shows, where it
-/// hides some (species, values): what a colour map spans by default, so that hidden
-/// particles' values (a solvent's zero) do not stretch it. `None` where nothing is hidden,
-/// the file has no attribute, or every particle is hidden. One pass over the particles'
-/// species and values.
+/// The smallest and largest attribute value of the particles `style` draws, where it
+/// hides some (species, values) or cuts some away (`clip`): what a colour map spans by
+/// default, so that hidden particles' values (a solvent's zero, the bulk beside a slab's
+/// defects) do not stretch it. `None` where nothing is hidden or cut, the file has no
+/// attribute, or no particle is left. One pass over the particles' species and values,
+/// and over their positions where planes cut.
 pub fn shown_attribute_range(file: &MdlodFile, style: &PointStyle) -> Option<[f32; 2]> {
     let a = file.metadata().attribute.as_ref()?;
     let hidden = style.hidden_set(file.metadata());
-    if hidden.is_empty() {
+    if hidden.is_empty() && style.clip.is_empty() {
         return None;
     }
     let values = file.attribute()?;
     let test = file.hidden_test(&hidden);
-    let (lo, hi) = (0..values.len())
-        .filter(|&i| !file.hides_particle(&test, i))
-        .fold((u16::MAX, 0u16), |(lo, hi), i| {
-            (lo.min(values[i]), hi.max(values[i]))
-        });
+    let (mut lo, mut hi) = (u16::MAX, 0u16);
+    let mut take = |i: usize| {
+        if let Some(&q) = values.get(i) {
+            lo = lo.min(q);
+            hi = hi.max(q);
+        }
+    };
+    if style.clip.is_empty() {
+        (0..values.len())
+            .filter(|&i| !file.hides_particle(&test, i))
+            .for_each(&mut take);
+    } else {
+        // Each particle's centre against the planes, as the traversal cuts them.
+        let last = file.level_count().checked_sub(1)?;
+        let (pos, nodes, bits) = (file.positions(last), file.nodes(), file.position_bits());
+        for (node, run) in file.encoding_ranges(last).ok()? {
+            let n = nodes.get(node)?;
+            for i in run {
+                if i >= pos.len() || file.hides_particle(&test, i) {
+                    continue;
+                }
+                let p =
+                    mdlod_format::quantize::decode3(pos.get(i), n.centroid, n.quant_scale, bits);
+                let kept = style
+                    .clip
+                    .iter()
+                    .all(|&[nx, ny, nz, d]| nx * p[0] + ny * p[1] + nz * p[2] <= d);
+                if kept {
+                    take(i);
+                }
+            }
+        }
+    }
     (lo <= hi).then(|| [a.decode(lo), a.decode(hi)])
 }
 

@@ -56,7 +56,9 @@ impl RangeChoice {
                  start"
             }
             RangeChoice::Centred => "centred on 0, the map's white",
-            RangeChoice::Shown => "over the shown particles' values, the hidden ones' left out",
+            RangeChoice::Shown => {
+                "over the values of the particles drawn, those hidden or cut away left out"
+            }
         }
     }
 }

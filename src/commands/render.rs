@@ -251,7 +251,8 @@ pub struct Args {
     /// a slab or a view along an axis; stills and movies
     #[arg(long)]
     pub axes: bool,
-    /// Where --axes draws its panel [default: bottom-right]
+    /// Where --axes draws its panel [default: bottom-right, or the first corner of top-right,
+    /// bottom-left and top-left that no other panel takes]
     #[arg(long, value_name = "CORNER", ignore_case = true)]
     pub axes_corner: Option<LegendCorner>,
     /// Draw the in-image legend, the label and the scale bar N times their size (their
@@ -272,9 +273,25 @@ impl Args {
         self.scale_bar_corner.unwrap_or(LegendCorner::BottomLeft)
     }
 
-    /// Where --axes draws.
+    /// Where --axes draws: its corner, else the first of bottom-right, top-right,
+    /// bottom-left and top-left no other panel takes.
     fn axes_corner(&self) -> LegendCorner {
-        self.axes_corner.unwrap_or(LegendCorner::BottomRight)
+        let taken = [
+            (!self.label.is_empty()).then(|| self.label_corner()),
+            self.legend_in_image,
+            self.scale_bar.then(|| self.scale_bar_corner()),
+        ];
+        self.axes_corner.unwrap_or_else(|| {
+            [
+                LegendCorner::BottomRight,
+                LegendCorner::TopRight,
+                LegendCorner::BottomLeft,
+                LegendCorner::TopLeft,
+            ]
+            .into_iter()
+            .find(|c| !taken.contains(&Some(*c)))
+            .unwrap_or(LegendCorner::BottomRight)
+        })
     }
 }
 
@@ -344,6 +361,13 @@ fn scale_bar(
         }
     };
     let unit = length_unit(units);
+    if unit.is_empty() {
+        // A dump without `units` (LAMMPS writes them with `dump_modify ... units yes`).
+        println!(
+            "  note: the scale bar's length has no unit: the file records none; \
+             --scale-bar-unit names it (Å for LAMMPS metal or real units, σ for lj)"
+        );
+    }
     let label = format!(
         "{}{}{unit}",
         super::Num(world as f32),
@@ -1962,10 +1986,11 @@ pub fn run(mut args: Args) -> Result<()> {
         && args.legend_in_image.is_none()
         && args.label.is_empty()
         && !args.scale_bar
+        && !args.axes
     {
         anyhow::bail!(
             "--text-scale sizes the panels drawn into the image: give --legend-in-image, \
-             --label or --scale-bar"
+             --label, --scale-bar or --axes"
         );
     }
     if let Some(p) = &args.legend {
@@ -3981,8 +4006,16 @@ fn render_frames(
         if let Some(a) = attribute.filter(|_| n > 1) {
             if a.max > a.min {
                 opts.style.attribute_range = Some([a.min, a.max]);
+                // (Over the particles drawn where some are hidden or cut away.)
+                let whose = match opts.style.clip.is_empty()
+                    && opts.style.hidden_values.is_empty()
+                    && !opts.style.species.iter().any(|st| st.hidden)
+                {
+                    true => "every frame's range",
+                    false => "every frame's particles drawn, those hidden or cut away left out",
+                };
                 range_note = format!(
-                    ", {} from {} to {} (every frame's range; --attribute-range sets another)",
+                    ", {} from {} to {} ({whose}; --attribute-range sets another)",
                     a.name,
                     Num(a.min),
                     Num(a.max)
