@@ -9243,7 +9243,7 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     args.extend(["--legend", s(&legend)]);
     let out = ok(&args);
     assert!(
-        out.contains("c_rg from 1.49")
+        out.contains("c_rg from 1.5 to")
             && out.contains("the particles drawn")
             && out.contains("the file's range is 0 to 3.59"),
         "{out}"
@@ -9255,7 +9255,7 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     cut.extend(["--clip", "0,0,1,1.5"]);
     let out = ok(&cut);
     assert!(
-        out.contains("c_rg from 1.49") && out.contains(" to 2.33"),
+        out.contains("c_rg from 1.5 to") && out.contains(" to 2.33"),
         "{out}"
     );
     // Given a range, it is the one drawn.
@@ -9277,7 +9277,7 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
         "3",
     ]);
     let out = ok(&args);
-    assert!(out.contains("c_rg from 1.49"), "{out}");
+    assert!(out.contains("c_rg from 1.5 to"), "{out}");
 }
 
 /// `--axes`: a tripod of the data's axes in its corner, as the view sees them (looking

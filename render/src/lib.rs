@@ -717,7 +717,26 @@ pub fn shown_attribute_range(file: &MdlodFile, style: &PointStyle) -> Option<[f3
             }
         }
     }
-    (lo <= hi).then(|| [a.decode(lo), a.decode(hi)])
+    // Each end as the shortest decimal its 16-bit step holds (1.5, not 1.4999896).
+    let step = (a.max - a.min) / 65535.0;
+    (lo <= hi).then(|| {
+        [
+            shortest_within(a.decode(lo), step / 2.0),
+            shortest_within(a.decode(hi), step / 2.0),
+        ]
+    })
+}
+
+/// The number with the fewest decimals within `tolerance` of `v` (`v` itself where none
+/// with up to 7 is).
+fn shortest_within(v: f32, tolerance: f32) -> f32 {
+    (0..=7)
+        .map(|d| {
+            let scale = 10f64.powi(d);
+            ((f64::from(v) * scale).round() / scale) as f32
+        })
+        .find(|r| (r - v).abs() <= tolerance)
+        .unwrap_or(v)
 }
 
 /// The bounds of everything in the file (the top node's box).
@@ -2579,6 +2598,17 @@ fn shade_tiles_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Ends of a shown range read as the decimals their step holds: 1.4999896 with a
+    /// step of 5.5e-5 is 1.5; a value no short decimal is within the step of stays.
+    #[test]
+    fn shown_range_ends_are_the_shortest_decimals_their_step_holds() {
+        assert_eq!(super::shortest_within(1.4999896, 2.75e-5), 1.5);
+        assert_eq!(super::shortest_within(-3.399_996, 4.6e-6), -3.4);
+        assert_eq!(super::shortest_within(-3.399_958, 4.6e-6), -3.39996);
+        assert_eq!(super::shortest_within(2.0000153, 3.8e-5), 2.0);
+        assert_eq!(super::shortest_within(0.123_456_7, 1e-9), 0.123_456_7);
+    }
 
     /// A header's display level past the level of one texel (4 for 3x2 texels, whose
     /// coarsest is 2) is refused, as `--level` there is; the coarsest itself shades.
