@@ -140,8 +140,9 @@ pub enum ConvertError {
     #[error(transparent)]
     UnusableRadius(Box<UnusableRadius>),
     /// An error in the text a large gzip input was decompressed into (the place is a
-    /// line of that text).
-    #[error("{} (decompressed into {}): {source}", input.display(), text.display())]
+    /// line of that text, said as the input's: the working file is gone by the time the
+    /// message is read).
+    #[error("{}", decompressed_message(input, text, source))]
     Decompressed {
         input: std::path::PathBuf,
         text: std::path::PathBuf,
@@ -1586,6 +1587,31 @@ impl BoundedDump {
     /// Names the input in an error met while reading a decompressed working file.
     pub fn context(&self, input: &Path, e: ConvertError) -> ConvertError {
         decompressed(input, self.text.as_deref(), e)
+    }
+}
+
+/// [`ConvertError::Decompressed`]'s message: `source`'s with the working file `text`
+/// named as the line of `input`'s decompressed text it was.
+fn decompressed_message(input: &Path, text: &Path, source: &ConvertError) -> String {
+    let inner = source.to_string();
+    let working = text.display().to_string();
+    let line = inner
+        .strip_prefix(&working)
+        .and_then(|rest| rest.strip_prefix(':'))
+        .and_then(|rest| {
+            let digits = rest.len() - rest.trim_start_matches(|c: char| c.is_ascii_digit()).len();
+            (digits > 0).then(|| (&rest[..digits], &rest[digits..]))
+        });
+    match line {
+        Some((line, rest)) => format!(
+            "{}: line {line} of its decompressed text{rest}",
+            input.display()
+        ),
+        None => format!(
+            "{} (decompressed): {}",
+            input.display(),
+            inner.replace(&working, "its decompressed text")
+        ),
     }
 }
 
