@@ -674,7 +674,7 @@ pub fn default_range_of(
 /// hides some (species, values) or cuts some away (`clip`): what a colour map spans by
 /// default, so that hidden particles' values (a solvent's zero, the bulk beside a slab's
 /// defects) do not stretch it. `None` where nothing is hidden or cut, the file has no
-/// attribute, or no particle is left. One pass over the particles' species and values,
+/// attribute, or the particles left hold one value or none. One pass over the particles' species and values,
 /// and over their positions where planes cut.
 pub fn shown_attribute_range(file: &MdlodFile, style: &PointStyle) -> Option<[f32; 2]> {
     let a = file.metadata().attribute.as_ref()?;
@@ -716,6 +716,11 @@ pub fn shown_attribute_range(file: &MdlodFile, style: &PointStyle) -> Option<[f3
                 }
             }
         }
+    }
+    // One value shown (a CNA column's "other" atoms only): no range of its own to map,
+    // the file's places it.
+    if lo >= hi {
+        return None;
     }
     // Each end as the shortest decimal its 16-bit step holds (1.5, not 1.4999896).
     let step = (a.max - a.min) / 65535.0;
