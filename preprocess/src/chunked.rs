@@ -442,9 +442,11 @@ impl ParticleSource for DumpSource {
         let one = DumpSource {
             path: self.path.clone(),
             frame: self.frame,
+            // (A text dump's pass parses that column alone.)
             options: crate::readers::ReadOptions {
                 attribute: Some(name.clone()),
                 extra_attributes: Vec::new(),
+                values_only: true,
                 ..self.options.clone()
             },
             particles: self.particles,

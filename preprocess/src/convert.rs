@@ -1826,9 +1826,11 @@ pub fn read_extra_attributes(
     read.extra_attributes
         .iter()
         .map(|name| {
+            // (A text dump's pass parses that column alone.)
             let one = crate::readers::ReadOptions {
                 attribute: Some(name.clone()),
                 extra_attributes: Vec::new(),
+                values_only: true,
                 ..read.clone()
             };
             let frame = dump.read_frame(k, &one, &crate::progress::NoProgress)?;

@@ -459,3 +459,50 @@ fn a_species_column_of_continuous_values_is_refused_at_its_line() {
         "{e}"
     );
 }
+
+/// A pass for one attribute's values only (`values_only`, what further attributes are
+/// read by) gives the values a full read gives, of a column of its own or of a
+/// coordinate, in LAMMPS text (whole and in windows) and in other formats, which read as
+/// ever.
+#[test]
+fn a_values_only_pass_reads_the_values_a_full_read_does() {
+    for (name, column) in [
+        ("cu_melt.custom.dump", "c_pe"),
+        ("cu_melt.custom.dump", "z"),
+        ("cu_melt.custom.dump", "type"),
+        ("cu_melt.custom.bin", "c_pe"),
+    ] {
+        let path = sample(name).unwrap();
+        let dump = DumpFile::open(&path).unwrap();
+        let k = dump.frame_count() - 1;
+        let full = read(&dump, k, Some(column));
+        let only = ReadOptions {
+            attribute: Some(column.into()),
+            values_only: true,
+            ..Default::default()
+        };
+        let fast = dump.read_frame(k, &only, &NoProgress).unwrap();
+        assert_eq!(
+            fast.attribute.as_ref().unwrap().values,
+            full.attribute.as_ref().unwrap().values,
+            "{name} {column}"
+        );
+        assert_eq!(fast.len(), full.len());
+        if name.ends_with(".dump") {
+            // (Text: the positions are not parsed.)
+            assert!(fast.positions.iter().all(|p| *p == [0.0; 3]), "{name}");
+            let info = dump.frame_info(k).unwrap();
+            let source = mdlod_preprocess::convert::window_source(&dump, k, &only, &info).unwrap();
+            let mut windows = Vec::new();
+            source
+                .windows(128, &mut |_, f| {
+                    windows.extend(f.attribute.unwrap().values);
+                    Ok(())
+                })
+                .unwrap();
+            assert_eq!(windows, full.attribute.as_ref().unwrap().values, "{name}");
+        } else {
+            assert_eq!(fast.positions, full.positions, "{name}");
+        }
+    }
+}

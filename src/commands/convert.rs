@@ -244,6 +244,7 @@ impl BuildArgs {
             },
             species_column: self.species_column.clone(),
             wrap: self.wrap,
+            values_only: false,
         };
         (convert, read)
     }

@@ -149,6 +149,7 @@ pub(crate) fn parse(
     fractional: Option<&SimulationBox>,
     attribute: Option<usize>,
     size: Option<(usize, f64)>,
+    values_only: bool,
     label: &str,
     progress: &dyn Progress,
 ) -> Result<Atoms, ReadError> {
@@ -225,22 +226,28 @@ pub(crate) fn parse(
         });
     }
 
-    // 3. parse into disjoint output slices
+    // 3. parse into disjoint output slices (with `values_only`, the attribute's column
+    // alone: its number parsed, the others' tokens counted)
     let mut roles = vec![Role::Skip; layout.columns.len()];
-    if let Some(s) = layout.species {
+    if let (Some(s), false) = (layout.species, values_only) {
         roles[s] = Role::Species;
     }
-    for (k, &c) in coords.iter().enumerate() {
+    for (k, &c) in coords.iter().enumerate().filter(|_| !values_only) {
         roles[c] = Role::Coord(k);
     }
-    if let Some((c, factor)) = size {
-        if roles[c] == Role::Skip {
-            roles[c] = Role::Size(factor);
+    match (size, layout.element_sizes) {
+        _ if values_only => {}
+        (Some((c, factor)), _) => {
+            if roles[c] == Role::Skip {
+                roles[c] = Role::Size(factor);
+            }
         }
-    } else if let Some((c, _)) = layout.element_sizes {
-        if roles[c] == Role::Skip {
-            roles[c] = Role::ElementSize;
+        (None, Some((c, _))) => {
+            if roles[c] == Role::Skip {
+                roles[c] = Role::ElementSize;
+            }
         }
+        (None, None) => {}
     }
     if let Some(a) = attribute {
         roles[a] = match roles[a] {
@@ -294,7 +301,7 @@ pub(crate) fn parse(
     }
 
     // 4. merge species
-    let species = if layout.species.is_some() {
+    let species = if layout.species.is_some() && !values_only {
         merge_species(ctx, start, &local, &counts, layout, &mut species_index)?
     } else if expected > 0 {
         vec![SpeciesName {

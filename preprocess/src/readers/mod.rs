@@ -428,6 +428,11 @@ pub struct ReadOptions {
     /// boundaries": unwrapped coordinates (`xu yu zu`) of atoms that crossed the cell's
     /// faces come back inside it. Frames without a cell are read as they are.
     pub wrap: bool,
+    /// Read the attribute's values only: text dumps (LAMMPS, XYZ) parse that one column
+    /// and leave the frame's positions at 0 and its particles of one species, for the
+    /// passes that read further attributes ([`crate::convert::read_extra_attributes`],
+    /// chunked builds), which keep only the values; other formats read as ever.
+    pub values_only: bool,
 }
 
 /// Which column gives each particle's size ([`Frame::radii`]).
@@ -1222,6 +1227,7 @@ impl DumpFile {
                     sizes: SizeColumn::Off,
                     species_column: None,
                     wrap: false,
+                    values_only: false,
                 };
                 let part = self.read_part(k, &plain, 0..1, &NoProgress)?;
                 Ok(match part.species.first() {
@@ -1588,6 +1594,7 @@ impl DumpFile {
             fractional,
             attribute,
             size,
+            opts.values_only,
             &format!("reading frame {k}"),
             progress,
         )
@@ -1845,6 +1852,7 @@ pub(crate) fn read_text_windows<E: From<ReadError>>(
             fractional,
             attribute,
             size,
+            opts.values_only,
             &format!("reading frame {k}"),
             &NoProgress,
         )
