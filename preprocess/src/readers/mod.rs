@@ -1530,7 +1530,12 @@ impl DumpFile {
             })
             .unwrap_or_default();
         for c in &columns[1..] {
-            let other = self.read_frame_as_stored(k, &with(c), &NoProgress)?;
+            // (Its values only: a text dump's pass parses that one column.)
+            let values = ReadOptions {
+                values_only: true,
+                ..with(c)
+            };
+            let other = self.read_frame_as_stored(k, &values, &NoProgress)?;
             if let Some(a) = other.attribute {
                 for (s, v) in sums.iter_mut().zip(a.values) {
                     *s += f64::from(v) * f64::from(v);
