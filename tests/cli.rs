@@ -9281,8 +9281,9 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
 }
 
 /// `--axes`: a tripod of the data's axes in its corner, as the view sees them (looking
-/// down z: x, red, to the right, y, green, up), in a still and in a movie's frames;
-/// refused where another panel takes its corner, in a turntable, and its corner alone.
+/// down z: x, red, to the right, y, green, up), in a still, a movie's frames and a
+/// turntable's views (turning); refused where another panel takes its corner, and its
+/// corner alone.
 #[test]
 fn axes_show_which_way_the_data_axes_point() {
     let dir = tempfile::tempdir().unwrap();
@@ -9290,12 +9291,13 @@ fn axes_show_which_way_the_data_axes_point() {
     generate(&["crater", "-n", "3000", "--frames", "2"], &dump);
     let file = dir.path().join("c.mdlod");
     ok(&["convert", s(&dump), "-o", s(&file)]);
-    // The mean place of the pixels of a colour in the image's bottom-right 90 × 90.
+    // The mean place of the pixels of a colour in the bottom-right panel (84 × 84 inside
+    // a margin of 8; data under it is drawn pale).
     let mean_of = |png: &Path, want: fn(&[u8]) -> bool| {
         let (w, h, px) = read_png(png);
         let (mut sx, mut sy, mut n) = (0f64, 0f64, 0f64);
-        for y in h - 90..h {
-            for x in w - 90..w {
+        for y in h - 92..h - 8 {
+            for x in w - 92..w - 8 {
                 let i = 4 * (y * w + x) as usize;
                 if want(&px[i..i + 3]) {
                     sx += f64::from(x);
@@ -9340,6 +9342,35 @@ fn axes_show_which_way_the_data_axes_point() {
     for k in 0..2 {
         check(&dir.path().join(format!("m-{k}.png")));
     }
+    // A turntable: each view its own tripod, turning with the data (from azimuth 0 along
+    // x, y on one side of the upright z, on the other half a turn on).
+    let spin = dir.path().join("t-%d.png");
+    let mut args = vec![
+        "render",
+        s(&file),
+        "-o",
+        s(&spin),
+        "--axes",
+        "--turntable",
+        "2",
+    ];
+    args.extend(["--width", "320", "--height", "200", "--background", "white"]);
+    args.extend(["--azimuth", "0", "--elevation", "0"]);
+    ok(&args);
+    let x_of = |k: usize| {
+        let png = dir.path().join(format!("t-{k}.png"));
+        let blue = |p: &[u8]| p[2] > 140 && p[0] < 110 && p[1] < 150;
+        (mean_of(&png, green).0, mean_of(&png, blue).0)
+    };
+    let ((r0, c0), (r1, c1)) = (x_of(0), x_of(1));
+    assert!(
+        (r0 - c0).abs() > 8.0 && (r1 - c1).abs() > 8.0 && (r0 - c0).signum() != (r1 - c1).signum(),
+        "y at {r0:.1} then {r1:.1}, z at {c0:.1} then {c1:.1}"
+    );
+    assert!(
+        r0 > c0 + 8.0 && r1 < c1 - 8.0,
+        "y at {r0:.1} then {r1:.1}, z at {c0:.1} then {c1:.1}"
+    );
     // Its corner taken by the legend, it takes the next free one (top-right).
     let mut args = vec!["render", s(&file), "-o", s(&png), "--axes"];
     args.extend(["--width", "320", "--height", "200", "--background", "white"]);
@@ -9373,10 +9404,6 @@ fn axes_show_which_way_the_data_axes_point() {
                 "bottom-right",
             ][..],
             "--axes and --scale-bar both draw at the bottom-right corner",
-        ),
-        (
-            &["--axes", "--turntable", "4"][..],
-            "--axes draws into stills and movies, not turntables",
         ),
     ] {
         let out = dir.path().join("no.png");

@@ -248,7 +248,8 @@ pub struct Args {
     pub scale_bar_unit: Option<String>,
     /// Draw the directions of the data's x, y and z axes into the image, as the view
     /// sees them (red, green and blue, as OVITO and VMD draw them): which way y points in
-    /// a slab or a view along an axis; stills and movies
+    /// a slab or a view along an axis; stills, movies and turntables (turning with the
+    /// data)
     #[arg(long)]
     pub axes: bool,
     /// Where --axes draws its panel [default: bottom-right, or the first corner of top-right,
@@ -1711,9 +1712,6 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
         anyhow::bail!("--axes-corner has no effect without --axes");
     }
     if args.axes {
-        if args.turntable.is_some() {
-            anyhow::bail!("--axes draws into stills and movies, not turntables");
-        }
         let taken = [
             (!args.label.is_empty()).then_some((args.label_corner(), "--label")),
             args.legend_in_image.map(|c| (c, "--legend-in-image")),
@@ -3660,6 +3658,8 @@ fn render_turntable(
         .collect();
     }
     let mut written = Vec::new();
+    // Each view's camera, for its axes.
+    let mut cameras = Vec::new();
     for (i, view) in (0..n).zip(views) {
         let azimuth = azimuth(i);
         opts.view = view;
@@ -3673,6 +3673,7 @@ fn render_turntable(
         if i == 0 {
             first_camera = Some(r.camera.clone());
         }
+        cameras.push(r.camera.clone());
         // Splats: one exposure (a projection's map: one range) for every view, or the
         // brightness flickers: the first view that shows anything sets it.
         if r.particles_drawn + r.nodes_drawn > 0 {
@@ -3754,6 +3755,23 @@ fn render_turntable(
             })
             .collect();
         write_labels(args, &labelled, None)?;
+    }
+    if args.axes {
+        // Each view its own tripod, turning with the data.
+        let mut covered = Covered::default();
+        for (image, camera) in written.iter().zip(&cameras) {
+            covered.add(draw_panel(
+                image,
+                &axes_panel(camera),
+                args.axes_corner(),
+                "--axes",
+                backdrop(args),
+                args.text_scale,
+            )?);
+        }
+        if let Some(note) = covered.note("--axes", written.len(), args) {
+            println!("{note}");
+        }
     }
     Ok(())
 }
