@@ -9263,6 +9263,21 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     given.extend(["--attribute-range", "0:4"]);
     let out = ok(&given);
     assert!(!out.contains("the particles drawn"), "{out}");
+    // A diverging map keeps its white on 0: from minus to plus the largest drawn.
+    let mut diverging = vec!["render", s(&file), "-o", s(&png), "--width", "96"];
+    diverging.extend([
+        "--height",
+        "64",
+        "--colour-map",
+        "cool-warm",
+        "--hide-species",
+        "3",
+    ]);
+    let out = ok(&diverging);
+    assert!(
+        out.contains("c_rg from -3.5979 to 3.5979 (centred on 0"),
+        "{out}"
+    );
     // A movie: the frames' shown values.
     let d = dir.path().join("d");
     ok(&["batch", s(&dump), "-o", s(&d), "--attribute", "c_rg"]);
@@ -9278,6 +9293,21 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     ]);
     let out = ok(&args);
     assert!(out.contains("c_rg from 1.5 to"), "{out}");
+    // A frame that draws nothing adds no values (frame 0's largest is 3.39).
+    let mut args = vec!["render", s(&d), "-o", s(&movie), "--width", "96"];
+    args.extend([
+        "--height",
+        "64",
+        "--colour-map",
+        "viridis",
+        "--hide-attribute",
+        ":3.5",
+    ]);
+    let out = ok(&args);
+    assert!(
+        out.contains("c_rg from 3.501") && out.contains("1 of the 2 frames draw nothing"),
+        "{out}"
+    );
 }
 
 /// `--axes`: a tripod of the data's axes in its corner, as the view sees them (looking
@@ -9371,23 +9401,46 @@ fn axes_show_which_way_the_data_axes_point() {
         r0 > c0 + 8.0 && r1 < c1 - 8.0,
         "y at {r0:.1} then {r1:.1}, z at {c0:.1} then {c1:.1}"
     );
-    // Its corner taken by the legend, it takes the next free one (top-right).
+    // Its corner taken by the legend, it takes the next free one (bottom-left).
     let mut args = vec!["render", s(&file), "-o", s(&png), "--axes"];
     args.extend(["--width", "320", "--height", "200", "--background", "white"]);
     args.extend(["--look-along", "0,0,-1", "--legend-in-image"]);
     ok(&args);
-    let (w, _, px) = read_png(&png);
-    let red_top_right = (0..90u32)
-        .flat_map(|y| (w - 90..w).map(move |x| (x, y)))
+    let (w, h, px) = read_png(&png);
+    let red_in_panel = (h - 92..h - 8)
+        .flat_map(|y| (8..92u32).map(move |x| (x, y)))
         .filter(|&(x, y)| {
             let i = 4 * (y * w + x) as usize;
             px[i] > 150 && px[i + 1] < 110 && px[i + 2] < 110
         })
         .count();
     assert!(
-        red_top_right >= 20,
-        "{red_top_right} red pixels at the top right"
+        red_in_panel >= 20,
+        "{red_in_panel} red pixels in the bottom-left panel"
     );
+    // An image too small for them: refused before anything is drawn, at the scale given.
+    for (size, scale, says) in [
+        (
+            "90",
+            None,
+            "a 90×90 image cannot hold the axes (at least 100×100",
+        ),
+        (
+            "150",
+            Some("2"),
+            "at --text-scale 2): draw a larger image, or a smaller --text-scale",
+        ),
+    ] {
+        let out = dir.path().join("small.png");
+        let mut args = vec!["render", s(&file), "-o", s(&out), "--axes"];
+        args.extend(["--width", size, "--height", size]);
+        if let Some(k) = scale {
+            args.extend(["--text-scale", k]);
+        }
+        let e = fails(&args);
+        assert!(e.contains(says), "{e}");
+        assert!(!out.exists(), "drawn before refused");
+    }
     for (extra, says) in [
         (
             &["--axes-corner", "top-right"][..],

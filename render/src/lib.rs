@@ -663,11 +663,57 @@ pub fn default_range_of(
     );
     match (chosen, shown) {
         (Some(c), _) => Some(c),
-        (None, Some(range)) if mapped && range != [a.min, a.max] => {
+        // A diverging map keeps its white on 0 whatever is drawn (a slab of one sign
+        // reaches to its largest magnitude on either side).
+        (None, Some([lo, hi])) if mapped && style.colour_map.is_some_and(|m| m.is_diverging()) => {
+            let m = lo.abs().max(hi.abs());
+            (m > 0.0 && m.is_finite()).then_some(([-m, m], style::RangeChoice::Centred))
+        }
+        (None, Some(range)) if (mapped || light) && range != [a.min, a.max] => {
             Some((range, style::RangeChoice::Shown))
         }
         _ => None,
     }
+}
+
+/// Whether the particles `style` draws of `file` are its every particle ([`None`]: no
+/// species or values hidden, no plane cutting), some (`Some(true)`), or none
+/// (`Some(false)`). One pass, as [`shown_attribute_range`].
+pub fn draws_any(file: &MdlodFile, style: &PointStyle) -> Option<bool> {
+    let hidden = style.hidden_set(file.metadata());
+    if hidden.is_empty() && style.clip.is_empty() {
+        return None;
+    }
+    let test = file.hidden_test(&hidden);
+    let n = file.particle_count() as usize;
+    if style.clip.is_empty() {
+        return Some((0..n).any(|i| !file.hides_particle(&test, i)));
+    }
+    let Some(last) = file.level_count().checked_sub(1) else {
+        return Some(false);
+    };
+    let (pos, nodes, bits) = (file.positions(last), file.nodes(), file.position_bits());
+    let Ok(runs) = file.encoding_ranges(last) else {
+        return Some(true);
+    };
+    Some(runs.into_iter().any(|(node, run)| {
+        nodes.get(node).is_some_and(|nd| {
+            run.into_iter().any(|i| {
+                i < pos.len() && !file.hides_particle(&test, i) && {
+                    let p = mdlod_format::quantize::decode3(
+                        pos.get(i),
+                        nd.centroid,
+                        nd.quant_scale,
+                        bits,
+                    );
+                    style
+                        .clip
+                        .iter()
+                        .all(|&[nx, ny, nz, d]| nx * p[0] + ny * p[1] + nz * p[2] <= d)
+                }
+            })
+        })
+    }))
 }
 
 /// The smallest and largest attribute value of the particles `style` draws, where it

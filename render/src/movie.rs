@@ -68,24 +68,28 @@ impl Survey {
         self.names
             .extend(meta.species.iter().map(|s| s.name.clone()));
         self.species.push(meta.species.clone());
-        // (Over the particles shown, where some are hidden: a solvent's values stretch no
-        // frame's map.)
-        let own =
+        // (Over the particles drawn, where some are hidden or cut away: a solvent's values
+        // stretch no frame's map, and a frame that draws nothing adds none.)
+        let drawn =
             meta.attribute
                 .clone()
                 .map(|a| match crate::shown_attribute_range(file, &opts.style) {
-                    Some([min, max]) => AttributeInfo { min, max, ..a },
-                    None => a,
+                    Some([min, max]) => Some(AttributeInfo { min, max, ..a }),
+                    None if crate::draws_any(file, &opts.style) == Some(false) => None,
+                    None => Some(a),
                 });
-        self.attribute = Some(match (self.attribute.take(), own) {
-            (None, own) => own,
-            (Some(Some(a)), Some(b)) if a.name == b.name => Some(AttributeInfo {
-                min: a.min.min(b.min),
-                max: a.max.max(b.max),
-                ..a
-            }),
-            _ => None,
-        });
+        if drawn != Some(None) {
+            let own = drawn.flatten();
+            self.attribute = Some(match (self.attribute.take(), own) {
+                (None, own) => own,
+                (Some(Some(a)), Some(b)) if a.name == b.name => Some(AttributeInfo {
+                    min: a.min.min(b.min),
+                    max: a.max.max(b.max),
+                    ..a
+                }),
+                _ => None,
+            });
+        }
         if opts.style.log_scale {
             if let Some(f) = crate::log_floor(file) {
                 self.log_floor = Some(self.log_floor.map_or(f, |g| g.min(f)));

@@ -252,8 +252,8 @@ pub struct Args {
     /// data)
     #[arg(long)]
     pub axes: bool,
-    /// Where --axes draws its panel [default: bottom-right, or the first corner of top-right,
-    /// bottom-left and top-left that no other panel takes]
+    /// Where --axes draws its panel [default: bottom-right, or the first corner of
+    /// bottom-left, top-right and top-left that no other panel takes]
     #[arg(long, value_name = "CORNER", ignore_case = true)]
     pub axes_corner: Option<LegendCorner>,
     /// Draw the in-image legend, the label and the scale bar N times their size (their
@@ -274,8 +274,9 @@ impl Args {
         self.scale_bar_corner.unwrap_or(LegendCorner::BottomLeft)
     }
 
-    /// Where --axes draws: its corner, else the first of bottom-right, top-right,
-    /// bottom-left and top-left no other panel takes.
+    /// Where --axes draws: its corner, else the first of bottom-right, bottom-left,
+    /// top-right and top-left no other panel takes (a label, often wide, lies along the
+    /// top).
     fn axes_corner(&self) -> LegendCorner {
         let taken = [
             (!self.label.is_empty()).then(|| self.label_corner()),
@@ -285,8 +286,8 @@ impl Args {
         self.axes_corner.unwrap_or_else(|| {
             [
                 LegendCorner::BottomRight,
-                LegendCorner::TopRight,
                 LegendCorner::BottomLeft,
+                LegendCorner::TopRight,
                 LegendCorner::TopLeft,
             ]
             .into_iter()
@@ -457,6 +458,24 @@ fn check_panels_apart(
     axes: Option<&mdlod_render::legend::Legend>,
 ) -> Result<()> {
     let (w, h) = (args.camera.width, args.camera.height);
+    // The axes refused before anything is drawn where the image cannot hold them (at
+    // the --text-scale given, which is never dropped for a smaller one).
+    if let Some(a) = axes.filter(|a| a.scale_in(w, h, args.text_scale).is_none()) {
+        let scale = args.text_scale.unwrap_or(1);
+        let (nw, nh) = a.room_needed(scale);
+        anyhow::bail!(
+            "--axes: a {w}×{h} image cannot hold the axes (at least {nw}×{nh} pixels with \
+             their margin{}): draw a larger image{}",
+            match args.text_scale {
+                Some(s) => format!(", at --text-scale {s}"),
+                None => String::new(),
+            },
+            match args.text_scale {
+                Some(s) if s > 1 => ", or a smaller --text-scale",
+                _ => "",
+            }
+        );
+    }
     let mut panels: Vec<(&str, LegendCorner, [u32; 2])> = Vec::new();
     if let (Some(corner), Some(size)) = (args.legend_in_image, legend) {
         panels.push(("--legend-in-image", corner, size));
@@ -2558,7 +2577,12 @@ pub fn run(mut args: Args) -> Result<()> {
     }
     // The values drawn: hidden particles' lie beyond no end of the bar.
     let shown_attribute = file.metadata().attribute.clone().map(|a| {
-        match mdlod_render::shown_attribute_range(&file, &opts.style) {
+        // (Where the image maps a range of its own; else the file's, as drawn.)
+        match opts
+            .style
+            .attribute_range
+            .and(mdlod_render::shown_attribute_range(&file, &opts.style))
+        {
             Some([min, max]) => mdlod_format::meta::AttributeInfo { min, max, ..a },
             None => a,
         }
@@ -3727,7 +3751,12 @@ fn render_turntable(
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let meta = file.metadata();
         let shown_attribute = meta.attribute.clone().map(|a| {
-            match mdlod_render::shown_attribute_range(&file, &opts.style) {
+            // (Where the image maps a range of its own; else the file's, as drawn.)
+            match opts
+                .style
+                .attribute_range
+                .and(mdlod_render::shown_attribute_range(&file, &opts.style))
+            {
                 Some([min, max]) => mdlod_format::meta::AttributeInfo { min, max, ..a },
                 None => a,
             }
