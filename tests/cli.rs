@@ -9030,6 +9030,16 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
         "{stderr}"
     );
     assert!(!stderr.contains("panicked"));
+    // An input that holds no dump fails too, and the counts add up (6 frames and it).
+    let log = dir.path().join("log.lammps");
+    std::fs::write(&log, "LAMMPS (29 Aug 2024)\nunits metal\n").unwrap();
+    let other = dir.path().join("other");
+    let run = mdlod(&["batch", s(&src), s(&log), "-o", s(&other), "--keep-going"]);
+    let stdout = String::from_utf8(run.stdout).unwrap();
+    assert!(
+        stdout.contains("7 frames in the inputs: 5 converted, 0 already done, 2 failed"),
+        "{stdout}"
+    );
     // A movie of the directory says which frame it lacks, as a jump in time would not.
     let movie = dir.path().join("m-%d.png");
     let mut args = vec!["render", s(&out), "-o", s(&movie)];

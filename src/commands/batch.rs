@@ -431,10 +431,18 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     let share = opts.shard.map_or(String::new(), |(i, n)| {
         format!(", {} in shard {i} of {n}", report.frames_in_shard)
     });
+    // Failed before they could be listed (an input that holds no dump, a header read
+    // short of its timestep): frames of the inputs too, so that the counts add up.
+    let total = report.frames_total
+        + report
+            .failed
+            .iter()
+            .filter(|f| f.listed_timestep.is_none())
+            .count();
     println!(
         "{} frame{} in the inputs{kept}{share}: {} converted, {} already done{empty}; {} at a time; manifest {}",
-        report.frames_total,
-        if report.frames_total == 1 { "" } else { "s" },
+        total,
+        if total == 1 { "" } else { "s" },
         report.converted,
         report.skipped,
         report.jobs,
