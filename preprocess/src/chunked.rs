@@ -1647,25 +1647,7 @@ pub fn convert_chunked(
                 .as_deref()
                 .or(f.attribute.as_ref().map(|a| a.values.as_slice()));
             if let Some(values) = values {
-                if let Some(index) = first_bad(&|i| !values[i].is_finite()) {
-                    return Err(ConvertError::Build {
-                        path: place.clone(),
-                        source: BuildError::NonFiniteAttribute {
-                            index: start + index,
-                            value: values[index],
-                        },
-                    });
-                }
-                let (lo, hi) = values
-                    .par_iter()
-                    .fold(
-                        || (f32::INFINITY, f32::NEG_INFINITY),
-                        |(lo, hi), &v| (lo.min(v), hi.max(v)),
-                    )
-                    .reduce(
-                        || (f32::INFINITY, f32::NEG_INFINITY),
-                        |a, b| (a.0.min(b.0), a.1.max(b.1)),
-                    );
+                let (lo, hi) = finite_range(values, start, || place.clone())?;
                 range = (range.0.min(lo), range.1.max(hi));
             }
             for (info, a) in extra_infos.iter_mut().zip(&extras) {
@@ -1673,26 +1655,9 @@ pub fn convert_chunked(
                     // The name its reader gives (a magnitude's, say).
                     info.name.clone_from(&a.name);
                 }
-                let values = &a.values;
-                if let Some(index) = first_bad(&|i| !values[i].is_finite()) {
-                    return Err(ConvertError::Build {
-                        path: format!("{place}: attribute {}", info.name),
-                        source: BuildError::NonFiniteAttribute {
-                            index: start + index,
-                            value: values[index],
-                        },
-                    });
-                }
-                let (lo, hi) = values
-                    .par_iter()
-                    .fold(
-                        || (f32::INFINITY, f32::NEG_INFINITY),
-                        |(lo, hi), &v| (lo.min(v), hi.max(v)),
-                    )
-                    .reduce(
-                        || (f32::INFINITY, f32::NEG_INFINITY),
-                        |a, b| (a.0.min(b.0), a.1.max(b.1)),
-                    );
+                let (lo, hi) = finite_range(&a.values, start, || {
+                    format!("{place}: attribute {}", info.name)
+                })?;
                 info.min = info.min.min(lo);
                 info.max = info.max.max(hi);
             }
@@ -2064,6 +2029,36 @@ pub fn convert_chunked(
         },
         frame: None,
     })
+}
+
+/// The smallest and largest of a window's attribute `values` (of particles from `start`
+/// on); the first that is not finite is an error of the place `path` names.
+fn finite_range(
+    values: &[f32],
+    start: usize,
+    path: impl FnOnce() -> String,
+) -> Result<(f32, f32), ConvertError> {
+    if let Some(index) =
+        crate::readers::first_index(values.len(), |i: usize| !values[i].is_finite())
+    {
+        return Err(ConvertError::Build {
+            path: path(),
+            source: BuildError::NonFiniteAttribute {
+                index: start + index,
+                value: values[index],
+            },
+        });
+    }
+    Ok(values
+        .par_iter()
+        .fold(
+            || (f32::INFINITY, f32::NEG_INFINITY),
+            |(lo, hi), &v| (lo.min(v), hi.max(v)),
+        )
+        .reduce(
+            || (f32::INFINITY, f32::NEG_INFINITY),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        ))
 }
 
 /// The axis-aligned bounds of a (possibly triclinic) box.

@@ -2605,32 +2605,40 @@ pub fn run(mut args: Args) -> Result<()> {
         None,
     )?;
     if let Some(bar) = &bar {
-        let mut covered = Covered::default();
-        covered.add(draw_panel(
-            &args.output,
-            bar,
+        draw_panels(
+            &args,
+            &[(&args.output, bar)],
             args.scale_bar_corner(),
             "--scale-bar",
-            backdrop(&args),
-            args.text_scale,
-        )?);
-        if let Some(note) = covered.note("--scale-bar", 1, &args) {
-            println!("{note}");
-        }
+        )?;
     }
     if let Some(axes) = &axes {
-        let mut covered = Covered::default();
+        draw_panels(&args, &[(&args.output, axes)], args.axes_corner(), "--axes")?;
+    }
+    Ok(())
+}
+
+/// Draws each image's panel (`--scale-bar`, `--axes`: `option`) at `corner`, and says
+/// how much data they covered.
+fn draw_panels(
+    args: &Args,
+    images: &[(&Path, &mdlod_render::legend::Legend)],
+    corner: LegendCorner,
+    option: &str,
+) -> Result<()> {
+    let mut covered = Covered::default();
+    for (image, panel) in images {
         covered.add(draw_panel(
-            &args.output,
-            axes,
-            args.axes_corner(),
-            "--axes",
-            backdrop(&args),
+            image,
+            panel,
+            corner,
+            option,
+            backdrop(args),
             args.text_scale,
         )?);
-        if let Some(note) = covered.note("--axes", 1, &args) {
-            println!("{note}");
-        }
+    }
+    if let Some(note) = covered.note(option, images.len(), args) {
+        println!("{note}");
     }
     Ok(())
 }
@@ -3787,20 +3795,10 @@ fn render_turntable(
     }
     if args.axes {
         // Each view its own tripod, turning with the data.
-        let mut covered = Covered::default();
-        for (image, camera) in written.iter().zip(&cameras) {
-            covered.add(draw_panel(
-                image,
-                &axes_panel(camera),
-                args.axes_corner(),
-                "--axes",
-                backdrop(args),
-                args.text_scale,
-            )?);
-        }
-        if let Some(note) = covered.note("--axes", written.len(), args) {
-            println!("{note}");
-        }
+        let panels: Vec<_> = cameras.iter().map(axes_panel).collect();
+        let images: Vec<(&Path, &mdlod_render::legend::Legend)> =
+            written.iter().map(PathBuf::as_path).zip(&panels).collect();
+        draw_panels(args, &images, args.axes_corner(), "--axes")?;
     }
     Ok(())
 }
@@ -4391,36 +4389,14 @@ fn render_frames(
     let labelled: Vec<(PathBuf, label::Values)> =
         written.iter().cloned().zip(drawn_values).collect();
     write_labels(args, &labelled, Some(&frame_values))?;
-    if let Some(bar) = &bar {
-        let mut covered = Covered::default();
-        for image in &written {
-            covered.add(draw_panel(
-                image,
-                bar,
-                args.scale_bar_corner(),
-                "--scale-bar",
-                backdrop(args),
-                args.text_scale,
-            )?);
-        }
-        if let Some(note) = covered.note("--scale-bar", written.len(), args) {
-            println!("{note}");
-        }
-    }
-    if let Some(axes) = &axes {
-        let mut covered = Covered::default();
-        for image in &written {
-            covered.add(draw_panel(
-                image,
-                axes,
-                args.axes_corner(),
-                "--axes",
-                backdrop(args),
-                args.text_scale,
-            )?);
-        }
-        if let Some(note) = covered.note("--axes", written.len(), args) {
-            println!("{note}");
+    for (panel, corner, option) in [
+        (&bar, args.scale_bar_corner(), "--scale-bar"),
+        (&axes, args.axes_corner(), "--axes"),
+    ] {
+        if let Some(panel) = panel {
+            let images: Vec<(&Path, &mdlod_render::legend::Legend)> =
+                written.iter().map(|i| (i.as_path(), panel)).collect();
+            draw_panels(args, &images, corner, option)?;
         }
     }
     Ok(())
