@@ -202,7 +202,8 @@ pub struct Num(pub f32);
 
 impl std::fmt::Display for Num {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let v = self.0;
+        // (A negative zero, a range's end decoded as -0, reads as 0.)
+        let v = if self.0 == 0.0 { 0.0 } else { self.0 };
         if v == 0.0 || !v.is_finite() || (1e-4..1e7).contains(&v.abs()) {
             write!(f, "{v}")
         } else {
@@ -253,6 +254,14 @@ pub fn work_dir_context(parent: &std::path::Path, given: bool) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A range's end decoded as a negative zero reads as 0; other numbers as ever.
+    #[test]
+    fn a_negative_zero_reads_as_zero() {
+        assert_eq!(super::Num(-0.0).to_string(), "0");
+        assert_eq!(super::Num(-1.5).to_string(), "-1.5");
+        assert_eq!(super::Num(2.5e-6).to_string(), "2.5e-6");
+    }
 
     #[test]
     fn an_output_onto_an_input_or_a_directory_is_refused() {

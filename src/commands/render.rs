@@ -256,7 +256,7 @@ pub struct Args {
     /// bottom-left, top-right and top-left that no other panel takes]
     #[arg(long, value_name = "CORNER", ignore_case = true)]
     pub axes_corner: Option<LegendCorner>,
-    /// Draw the in-image legend, the label and the scale bar N times their size (their
+    /// Draw the in-image legend, the label, the scale bar and the axes N times their size (their
     /// text is a 7×13-pixel font), 1 to 8: for print, where a figure's panels read small
     /// [default: by the image's size, 1 below 1920×1080, 2 from it]
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=8))]
