@@ -2111,12 +2111,7 @@ pub fn batch(
             };
             // So is a further attribute's.
             for extra in &opts.read.extra_attributes {
-                let one = crate::readers::ReadOptions {
-                    attribute: Some(extra.clone()),
-                    extra_attributes: Vec::new(),
-                    ..opts.read.clone()
-                };
-                match dump.attribute_name(k, &one) {
+                match dump.attribute_name(k, &opts.read.reading(extra)) {
                     Ok(_) => {}
                     Err(_) if dump.frame_info(k).is_ok_and(|i| i.particles == 0) => {}
                     Err(_) if opts.keep_going => {}

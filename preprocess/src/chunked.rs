@@ -444,10 +444,8 @@ impl ParticleSource for DumpSource {
             frame: self.frame,
             // (A text dump's pass parses that column alone.)
             options: crate::readers::ReadOptions {
-                attribute: Some(name.clone()),
-                extra_attributes: Vec::new(),
                 values_only: true,
-                ..self.options.clone()
+                ..self.options.reading(name)
             },
             particles: self.particles,
             simulation_box: self.simulation_box.clone(),
@@ -1386,14 +1384,10 @@ pub fn convert_chunked(
         crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep).to_string();
     let extra_names = source.extra_attributes();
     let extra_count = extra_names.len();
-    if extra_count > mdlod_format::MAX_EXTRA_ATTRIBUTES {
+    if let Some(problem) = crate::convert::too_many_attributes(extra_count) {
         return Err(ConvertError::Attributes {
             place: crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep),
-            problem: format!(
-                "{} attributes: a file keeps at most {}",
-                extra_count + 1,
-                mdlod_format::MAX_EXTRA_ATTRIBUTES + 1
-            ),
+            problem,
         });
     }
     // Each further attribute's pass holds a window of its own (its input mapped, its
@@ -1978,20 +1972,9 @@ pub fn convert_chunked(
                     &a.name, a.min, a.max, options,
                 ));
             }
-            for (e, whole) in metadata.attributes.iter().zip(&extra_whole) {
+            for (e, &whole) in metadata.attributes.iter().zip(&extra_whole) {
                 // Ids (of molecules) are told by their whole numbers, as for the first.
-                let ids = whole
-                    .then(|| {
-                        crate::convert::whole_numbers_note(&e.name, &[], e.min, e.max).flatten()
-                    })
-                    .flatten();
-                match (whole, ids) {
-                    (_, Some(ids)) => notes.push(ids),
-                    (true, None) => {}
-                    (false, None) => {
-                        notes.extend(crate::convert::extra_span_note(&e.name, e.min, e.max))
-                    }
-                }
+                notes.extend(crate::convert::extra_range_note(&e.name, e.min, e.max, whole).0);
             }
             notes.extend(crate::convert::lj_elements_note(
                 metadata.units.as_deref(),

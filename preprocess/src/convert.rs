@@ -476,23 +476,17 @@ pub fn convert_frame_with(
         let column = further.iter().find(|c| c.name == e.info.name);
         // Ids (of molecules) are told by their whole numbers, as for the first: no
         // logarithm to suggest.
-        match column
-            .and_then(|c| whole_numbers_note(&e.info.name, &c.values, e.info.min, e.info.max))
-        {
-            Some(ids) => notes.extend(ids),
-            None => {
-                notes.extend(extra_span_note(&e.info.name, e.info.min, e.info.max));
-                // A column from 0 whose values above 0 fall below a step, as for the
-                // first.
-                if let Some(column) = column {
-                    notes.extend(below_step_note(
-                        &e.info.name,
-                        &column.values,
-                        e.info.min,
-                        e.info.max,
-                    ));
-                }
-            }
+        let whole = column.is_some_and(|c| c.values.iter().all(|v| v.fract() == 0.0));
+        let (note, ids) = extra_range_note(&e.info.name, e.info.min, e.info.max, whole);
+        notes.extend(note);
+        // A column from 0 whose values above 0 fall below a step, as for the first.
+        if let (Some(column), false) = (column, ids) {
+            notes.extend(below_step_note(
+                &e.info.name,
+                &column.values,
+                e.info.min,
+                e.info.max,
+            ));
         }
     }
     notes.extend(lj_elements_note(
@@ -1060,19 +1054,19 @@ pub(crate) fn lj_elements_note(
     if !units.is_some_and(|u| u.trim().eq_ignore_ascii_case("lj")) {
         return None;
     }
-    let read: Vec<String> = species
+    let read: Vec<&mdlod_format::meta::Species> = species
         .iter()
         .filter(|s| {
             s.radius_range.is_none()
                 && !overrides.iter().any(|(n, _)| n == &s.name)
                 && crate::species::element(&s.name).is_some_and(|(r, _)| r == s.radius)
         })
+        .collect();
+    let first = read.first()?;
+    let read: Vec<String> = read
+        .iter()
         .map(|s| format!("{} ({})", s.name, s.radius))
         .collect();
-    let first = species.iter().find(|s| {
-        read.first()
-            .is_some_and(|r| r.starts_with(&format!("{} (", s.name)))
-    })?;
     let shown = match read.len() {
         0..=6 => read.join(", "),
         n => format!("{}, ... ({n} in all)", read[..5].join(", ")),
@@ -1234,6 +1228,24 @@ pub fn whole_numbers_note(
     )))
 }
 
+/// The note on a further attribute's range `min..max`: the ids note where its values are
+/// all whole numbers (`whole`) that read as ids ([`whole_numbers_note`]), else its span's
+/// ([`extra_span_note`]); and whether they read as ids.
+pub(crate) fn extra_range_note(
+    name: &str,
+    min: f32,
+    max: f32,
+    whole: bool,
+) -> (Option<String>, bool) {
+    match whole
+        .then(|| whole_numbers_note(name, &[], min, max))
+        .flatten()
+    {
+        Some(ids) => (ids, true),
+        None => (extra_span_note(name, min, max), false),
+    }
+}
+
 /// [`attribute_span_note`] of a further attribute (kept linearly).
 pub fn extra_span_note(name: &str, min: f32, max: f32) -> Option<String> {
     span_note(
@@ -1287,21 +1299,27 @@ pub fn check_attribute_count(
     read: &crate::readers::ReadOptions,
     input: &str,
 ) -> Result<(), ConvertError> {
-    let extras = read.extra_attributes.len();
-    if extras <= mdlod_format::MAX_EXTRA_ATTRIBUTES {
-        return Ok(());
+    match too_many_attributes(read.extra_attributes.len()) {
+        None => Ok(()),
+        Some(problem) => Err(ConvertError::Attributes {
+            place: FramePlace {
+                path: input.to_string(),
+                frame: None,
+                timestep: None,
+            },
+            problem,
+        }),
     }
-    Err(ConvertError::Attributes {
-        place: FramePlace {
-            path: input.to_string(),
-            frame: None,
-            timestep: None,
-        },
-        problem: format!(
+}
+
+/// Why `extras` further attributes are more than a file keeps; `None` where they are not.
+pub(crate) fn too_many_attributes(extras: usize) -> Option<String> {
+    (extras > mdlod_format::MAX_EXTRA_ATTRIBUTES).then(|| {
+        format!(
             "{} attributes (--attribute): a file keeps at most {}",
             extras + 1,
             mdlod_format::MAX_EXTRA_ATTRIBUTES + 1
-        ),
+        )
     })
 }
 
@@ -1317,14 +1335,8 @@ pub(crate) fn extra_names_problem(first: Option<&str>, extras: &[&str]) -> Optio
         .find(|(k, e)| first == Some(**e) || extras[..*k].contains(e))
     {
         Some(format!("attribute {e} is given twice"))
-    } else if extras.len() > mdlod_format::MAX_EXTRA_ATTRIBUTES {
-        Some(format!(
-            "{} attributes: a file keeps at most {}",
-            extras.len() + 1,
-            mdlod_format::MAX_EXTRA_ATTRIBUTES + 1
-        ))
     } else {
-        None
+        too_many_attributes(extras.len())
     }
 }
 
@@ -1748,12 +1760,8 @@ pub fn convert_dump(
         // whole says), not as a magnitude too large to take.
         dump.attribute_name(k, read).map_err(cut_short)?;
         for extra in &read.extra_attributes {
-            let one = crate::readers::ReadOptions {
-                attribute: Some(extra.clone()),
-                extra_attributes: Vec::new(),
-                ..read.clone()
-            };
-            dump.attribute_name(k, &one).map_err(cut_short)?;
+            dump.attribute_name(k, &read.reading(extra))
+                .map_err(cut_short)?;
         }
         // Refused before the frame is read (`convert_frame_with` says why).
         let problem = chunked_magnitude_problem(
@@ -1828,10 +1836,8 @@ pub fn read_extra_attributes(
         .map(|name| {
             // (A text dump's pass parses that column alone.)
             let one = crate::readers::ReadOptions {
-                attribute: Some(name.clone()),
-                extra_attributes: Vec::new(),
                 values_only: true,
-                ..read.clone()
+                ..read.reading(name)
             };
             let frame = dump.read_frame(k, &one, &crate::progress::NoProgress)?;
             Ok(frame.attribute.unwrap_or(crate::frame::Attribute {

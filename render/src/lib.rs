@@ -676,59 +676,36 @@ pub fn default_range_of(
     }
 }
 
-/// Whether the particles `style` draws of `file` are its every particle ([`None`]: no
-/// species or values hidden, no plane cutting), some (`Some(true)`), or none
-/// (`Some(false)`). One pass, as [`shown_attribute_range`].
-pub fn draws_any(file: &MdlodFile, style: &PointStyle) -> Option<bool> {
-    let hidden = style.hidden_set(file.metadata());
-    if hidden.is_empty() && style.clip.is_empty() {
-        return None;
-    }
-    let test = file.hidden_test(&hidden);
-    let n = file.particle_count() as usize;
-    if style.clip.is_empty() {
-        return Some((0..n).any(|i| !file.hides_particle(&test, i)));
-    }
-    let Some(last) = file.level_count().checked_sub(1) else {
-        return Some(false);
-    };
-    let (pos, nodes, bits) = (file.positions(last), file.nodes(), file.position_bits());
-    let Ok(runs) = file.encoding_ranges(last) else {
-        return Some(true);
-    };
-    Some(runs.into_iter().any(|(node, run)| {
-        nodes.get(node).is_some_and(|nd| {
-            run.into_iter().any(|i| {
-                i < pos.len() && !file.hides_particle(&test, i) && {
-                    let p = mdlod_format::quantize::decode3(
-                        pos.get(i),
-                        nd.centroid,
-                        nd.quant_scale,
-                        bits,
-                    );
-                    style
-                        .clip
-                        .iter()
-                        .all(|&[nx, ny, nz, d]| nx * p[0] + ny * p[1] + nz * p[2] <= d)
-                }
-            })
-        })
-    }))
+/// What a style draws of a file's attribute values ([`drawn_attribute`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DrawnValues {
+    /// Every particle: nothing hidden or cut away (or the file has no attribute).
+    All,
+    /// No particle.
+    Nothing,
+    /// Particles of one value only.
+    One,
+    /// Particles of values from the first to the second.
+    Range([f32; 2]),
 }
 
-/// The smallest and largest attribute value of the particles `style` draws, where it
-/// hides some (species, values) or cuts some away (`clip`): what a colour map spans by
-/// default, so that hidden particles' values (a solvent's zero, the bulk beside a slab's
-/// defects) do not stretch it. `None` where nothing is hidden or cut, the file has no
-/// attribute, or the particles left hold one value or none. One pass over the particles' species and values,
-/// and over their positions where planes cut.
-pub fn shown_attribute_range(file: &MdlodFile, style: &PointStyle) -> Option<[f32; 2]> {
-    let a = file.metadata().attribute.as_ref()?;
+/// The attribute values of the particles `style` draws, where it hides some (species,
+/// values) or cuts some away (`clip`, each particle's centre as the traversal cuts
+/// it): what a colour map spans by default, so that hidden particles' values (a
+/// solvent's zero, the bulk beside a slab's defects) do not stretch it. One pass over
+/// the particles' species and values, and their positions where planes cut.
+pub fn drawn_attribute(file: &MdlodFile, style: &PointStyle) -> DrawnValues {
     let hidden = style.hidden_set(file.metadata());
-    if hidden.is_empty() && style.clip.is_empty() {
-        return None;
+    let (Some(a), Some(values), Ok(clip)) = (
+        file.metadata().attribute.as_ref(),
+        file.attribute(),
+        style.clip_planes(),
+    ) else {
+        return DrawnValues::All;
+    };
+    if hidden.is_empty() && clip.is_empty() {
+        return DrawnValues::All;
     }
-    let values = file.attribute()?;
     let test = file.hidden_test(&hidden);
     let (mut lo, mut hi) = (u16::MAX, 0u16);
     let mut take = |i: usize| {
@@ -737,45 +714,50 @@ pub fn shown_attribute_range(file: &MdlodFile, style: &PointStyle) -> Option<[f3
             hi = hi.max(q);
         }
     };
-    if style.clip.is_empty() {
-        (0..values.len())
-            .filter(|&i| !file.hides_particle(&test, i))
-            .for_each(&mut take);
-    } else {
-        // Each particle's centre against the planes, as the traversal cuts them.
-        let last = file.level_count().checked_sub(1)?;
-        let (pos, nodes, bits) = (file.positions(last), file.nodes(), file.position_bits());
-        for (node, run) in file.encoding_ranges(last).ok()? {
-            let n = nodes.get(node)?;
-            for i in run {
-                if i >= pos.len() || file.hides_particle(&test, i) {
-                    continue;
-                }
-                let p =
-                    mdlod_format::quantize::decode3(pos.get(i), n.centroid, n.quant_scale, bits);
-                let kept = style
-                    .clip
-                    .iter()
-                    .all(|&[nx, ny, nz, d]| nx * p[0] + ny * p[1] + nz * p[2] <= d);
-                if kept {
-                    take(i);
+    let last = file.level_count().saturating_sub(1);
+    match file.encoding_ranges(last) {
+        Ok(runs) if !clip.is_empty() => {
+            let (pos, nodes, bits) = (file.positions(last), file.nodes(), file.position_bits());
+            for (node, run) in runs {
+                let Some(n) = nodes.get(node) else { continue };
+                for i in run.filter(|&i| i < pos.len() && !file.hides_particle(&test, i)) {
+                    let p = mdlod_format::quantize::decode3(
+                        pos.get(i),
+                        n.centroid,
+                        n.quant_scale,
+                        bits,
+                    );
+                    if clip.keeps(glam::Vec3::from(p)) {
+                        take(i);
+                    }
                 }
             }
         }
+        _ => (0..values.len())
+            .filter(|&i| !file.hides_particle(&test, i))
+            .for_each(&mut take),
     }
-    // One value shown (a CNA column's "other" atoms only): no range of its own to map,
-    // the file's places it.
-    if lo >= hi {
-        return None;
+    match (lo, hi) {
+        (lo, hi) if lo > hi => DrawnValues::Nothing,
+        (lo, hi) if lo == hi => DrawnValues::One,
+        // Each end as the shortest decimal its 16-bit step holds (1.5, not 1.4999896).
+        (lo, hi) => {
+            let half = (a.max - a.min) / 65535.0 / 2.0;
+            DrawnValues::Range([
+                shortest_within(a.decode(lo), half),
+                shortest_within(a.decode(hi), half),
+            ])
+        }
     }
-    // Each end as the shortest decimal its 16-bit step holds (1.5, not 1.4999896).
-    let step = (a.max - a.min) / 65535.0;
-    (lo <= hi).then(|| {
-        [
-            shortest_within(a.decode(lo), step / 2.0),
-            shortest_within(a.decode(hi), step / 2.0),
-        ]
-    })
+}
+
+/// The range of [`drawn_attribute`], where the particles drawn span one (where they hold
+/// one value, the file's range places it).
+pub fn shown_attribute_range(file: &MdlodFile, style: &PointStyle) -> Option<[f32; 2]> {
+    match drawn_attribute(file, style) {
+        DrawnValues::Range(r) => Some(r),
+        _ => None,
+    }
 }
 
 /// The number with the fewest decimals within `tolerance` of `v` (`v` itself where none

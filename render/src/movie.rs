@@ -73,10 +73,10 @@ impl Survey {
         let drawn =
             meta.attribute
                 .clone()
-                .map(|a| match crate::shown_attribute_range(file, &opts.style) {
-                    Some([min, max]) => Some(AttributeInfo { min, max, ..a }),
-                    None if crate::draws_any(file, &opts.style) == Some(false) => None,
-                    None => Some(a),
+                .map(|a| match crate::drawn_attribute(file, &opts.style) {
+                    crate::DrawnValues::Range([min, max]) => Some(AttributeInfo { min, max, ..a }),
+                    crate::DrawnValues::Nothing => None,
+                    crate::DrawnValues::All | crate::DrawnValues::One => Some(a),
                 });
         if drawn != Some(None) {
             let own = drawn.flatten();

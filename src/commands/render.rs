@@ -2575,18 +2575,7 @@ pub fn run(mut args: Args) -> Result<()> {
             p.display()
         );
     }
-    // The values drawn: hidden particles' lie beyond no end of the bar.
-    let shown_attribute = file.metadata().attribute.clone().map(|a| {
-        // (Where the image maps a range of its own; else the file's, as drawn.)
-        match opts
-            .style
-            .attribute_range
-            .and(mdlod_render::shown_attribute_range(&file, &opts.style))
-        {
-            Some([min, max]) => mdlod_format::meta::AttributeInfo { min, max, ..a },
-            None => a,
-        }
-    });
+    let shown_attribute = legend_attribute(&file, &opts);
     write_legend(
         &args,
         &opts,
@@ -2641,6 +2630,26 @@ fn draw_panels(
         println!("{note}");
     }
     Ok(())
+}
+
+/// The file's attribute as a legend shows it: where the image maps a range of its own,
+/// with the range of the values drawn (hidden particles' lie beyond no end of the bar);
+/// else the file's, as the image maps it.
+fn legend_attribute(
+    file: &mdlod_format::MdlodFile,
+    opts: &RenderOptions,
+) -> Option<mdlod_format::meta::AttributeInfo> {
+    let a = file.metadata().attribute.clone()?;
+    Some(
+        match opts
+            .style
+            .attribute_range
+            .and_then(|_| mdlod_render::shown_attribute_range(file, &opts.style))
+        {
+            Some([min, max]) => mdlod_format::meta::AttributeInfo { min, max, ..a },
+            None => a,
+        },
+    )
 }
 
 /// `drawn` with the names of the species the render `r` of a file of `species` showed.
@@ -3758,17 +3767,7 @@ fn render_turntable(
     if args.legend.is_some() || args.legend_in_image.is_some() {
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let meta = file.metadata();
-        let shown_attribute = meta.attribute.clone().map(|a| {
-            // (Where the image maps a range of its own; else the file's, as drawn.)
-            match opts
-                .style
-                .attribute_range
-                .and(mdlod_render::shown_attribute_range(&file, &opts.style))
-            {
-                Some([min, max]) => mdlod_format::meta::AttributeInfo { min, max, ..a },
-                None => a,
-            }
-        });
+        let shown_attribute = legend_attribute(&file, &opts);
         write_legend(
             args,
             &opts,

@@ -128,7 +128,8 @@ impl MeanSums {
 
 /// As [`extra_attributes`], each column quantized over the range its entry gives
 /// (a chunked build quantizes every chunk over the frame's range), with the sums of
-/// the root's mean.
+/// the root's mean. The values are finite: [`extra_attributes`] and a chunked build's
+/// partition check them first.
 pub fn extra_attributes_over(
     h: &Hierarchy,
     columns: &[(&AttributeInfo, &[f32])],
@@ -176,7 +177,6 @@ fn extra_attribute(
     areas: &[f64],
     runs: &[Range<u64>],
 ) -> Result<(ExtraAttribute, MeanSums), BuildError> {
-    check_finite(values)?;
     let ordered: Vec<f32> = h
         .particle_order
         .iter()
@@ -198,9 +198,19 @@ fn extra_attribute(
         s
     };
     // Each node's sums over its own particles (sums of a whole level's run would lose the
-    // small values beside a large total), every level's nodes in parallel.
-    let node_means = runs.par_iter().map(|r| sums_of(r).mean()).collect();
-    let root = sums_of(&(0..ordered.len() as u64));
+    // small values beside a large total), every level's nodes in parallel; the root's
+    // (node 0, every particle) kept for a chunked build's top node.
+    let root = runs.first().map(sums_of).unwrap_or_default();
+    let node_means = std::iter::once(root.mean())
+        .chain(
+            runs.get(1..)
+                .unwrap_or_default()
+                .par_iter()
+                .map(|r| sums_of(r).mean())
+                .collect::<Vec<f32>>(),
+        )
+        .take(runs.len())
+        .collect();
     Ok((
         ExtraAttribute {
             info: info.clone(),

@@ -435,6 +435,19 @@ pub struct ReadOptions {
     pub values_only: bool,
 }
 
+impl ReadOptions {
+    /// These options reading the column `name` as the attribute, alone (no further
+    /// attributes): how each further attribute, and each component of a magnitude, is
+    /// read by a pass of its own.
+    pub fn reading(&self, name: &str) -> ReadOptions {
+        ReadOptions {
+            attribute: Some(name.to_string()),
+            extra_attributes: Vec::new(),
+            ..self.clone()
+        }
+    }
+}
+
 /// Which column gives each particle's size ([`Frame::radii`]).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub enum SizeColumn {
@@ -1513,10 +1526,8 @@ impl DumpFile {
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
         let with = |c: &String| ReadOptions {
-            attribute: Some(c.clone()),
-            extra_attributes: Vec::new(),
             wrap: false,
-            ..opts.clone()
+            ..opts.reading(c)
         };
         let mut frame = self.read_frame_as_stored(k, &with(&columns[0]), progress)?;
         let mut sums: Vec<f64> = frame
