@@ -1883,17 +1883,17 @@ impl Job<'_> {
 }
 
 /// Which inputs are the newest, given their frames as listed: those holding the greatest
-/// timestep of the inputs, and the last input, as inputs are given in their order (the
-/// CLI sorts them by their numbers): a file cut in its first frame's header records no
+/// timestep of the inputs, and `last`, the last input as inputs are given in their order
+/// (the CLI sorts them by their numbers) that is not plainly something other than a dump
+/// ([`crate::readers::plainly_no_dump`]): a file cut in its first frame's header records no
 /// timestep, or a part of one (`50` of `500`, the line cut short), and formats without
 /// timesteps have none.
-fn newest_inputs(listed: &[Vec<Listed>]) -> Vec<bool> {
+fn newest_inputs(listed: &[Vec<Listed>], last: Option<usize>) -> Vec<bool> {
     let latest: Vec<Option<u64>> = listed
         .iter()
         .map(|frames| frames.iter().filter_map(|f| f.0).max())
         .collect();
     let greatest = latest.iter().flatten().max().copied();
-    let last = latest.len().checked_sub(1);
     latest
         .iter()
         .enumerate()
@@ -1964,7 +1964,12 @@ pub fn batch(
     let mut index_chunks = opts.convert.chunks.clone();
     index_chunks.memory_limit = opts.memory_limit;
     // The newest input of a set, as empty files are told (see [`newest_inputs`]).
-    let last_input = inputs.len().checked_sub(1);
+    // (A run's log a pattern matched, sorted after the dumps, is not it: the last input
+    // that is not plainly something else is.)
+    let last_input = inputs
+        .iter()
+        .rposition(|p| !crate::readers::plainly_no_dump(p))
+        .or(inputs.len().checked_sub(1));
     let mut empty_inputs = Vec::new();
     // Each input's size and modification time as it was indexed, taken before it is
     // opened: what its frames are converted from (a mapped input keeps those bytes even
@@ -2150,7 +2155,7 @@ pub fn batch(
         gzip_cut.push(dump.gzip_cut().is_some());
         dumps.push((!compressed).then_some(bounded.dump));
     }
-    let newest = newest_inputs(&listed);
+    let newest = newest_inputs(&listed, last_input);
     // The newest input, as an error about an older one cut short names it (the last of
     // them in order, where the one holding the latest timestep is not the last).
     let newest_text = inputs

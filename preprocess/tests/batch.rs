@@ -2528,6 +2528,41 @@ fn keep_going_passes_over_an_input_that_holds_no_dump() {
     assert!(batch(&[missing, inputs[1].clone()], &out, &keep, &NoProgress).is_err());
 }
 
+/// A run's log sorted after a set's files (`dump.*` and `log.lammps` matched by one
+/// pattern) does not take the newest dump's place: an empty newest dump is still left out
+/// as one a run has just opened, not failed, and the log fails alone.
+#[test]
+fn a_log_sorted_after_the_dumps_leaves_the_empty_newest_dump_for_a_rerun() {
+    let dir = tempfile::tempdir().unwrap();
+    let all = file_set(&dir.path().join("src"));
+    let newest = all.last().unwrap().clone();
+    std::fs::write(&newest, b"").unwrap();
+    let log = dir.path().join("src").join("zz.log.lammps");
+    std::fs::write(&log, "LAMMPS (29 Aug 2024)\nunits metal\n").unwrap();
+    let mut inputs = all.clone();
+    inputs.push(log.clone());
+    let out = dir.path().join("out");
+    let keep = BatchOptions {
+        keep_going: true,
+        ..opts()
+    };
+    let r = batch(&inputs, &out, &keep, &NoProgress).unwrap();
+    assert_eq!(r.converted, all.len() - 1);
+    assert_eq!(r.failed.len(), 1, "{:?}", r.failed);
+    assert_eq!(r.failed[0].input, log);
+    assert_eq!(r.incomplete.len(), 1, "{:?}", r.incomplete);
+    assert!(
+        r.incomplete[0]
+            .to_string()
+            .contains("the newest input, is empty"),
+        "{}",
+        r.incomplete[0]
+    );
+    assert!(!mdlod_preprocess::readers::plainly_no_dump(&all[0]));
+    assert!(!mdlod_preprocess::readers::plainly_no_dump(&newest));
+    assert!(mdlod_preprocess::readers::plainly_no_dump(&log));
+}
+
 /// `keep_going` with a column asked for (`--attribute`): a frame whose header cannot be
 /// read (a box with its bounds reversed) is one failed frame too, not the end of the
 /// batch before anything is converted.

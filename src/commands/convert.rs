@@ -306,9 +306,20 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
+/// Runs `f` with `threads` worker threads. The process's global pool takes the count, so
+/// that work started from threads of the conversion's own (the readers of further
+/// attributes, the cell writer) keeps to it too; a pool of its own where the global one
+/// is already running.
 pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
     match threads {
         Some(n) => {
+            if rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build_global()
+                .is_ok()
+            {
+                return Ok(f());
+            }
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
                 .build()

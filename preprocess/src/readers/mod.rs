@@ -2345,6 +2345,31 @@ pub fn is_gzip(path: &Path) -> Result<bool, ReadError> {
 
 /// True for a gzip file whose compressed stream ends before any text (a run has just
 /// opened it and written the gzip header, or a few bytes more): as good as empty.
+/// Whether `path` plainly holds no dump: a file of text whose first line is neither a
+/// LAMMPS `ITEM:` nor an XYZ count (a run's log, notes) and of no binary format. A file
+/// that cannot be read, is empty, compressed or binary is not plainly so. The newest
+/// input of a set is told among the others.
+pub fn plainly_no_dump(path: &Path) -> bool {
+    let Ok(file) = mdlod_format::files::open(path) else {
+        return false;
+    };
+    let mut head = Vec::with_capacity(4096);
+    if file.take(4096).read_to_end(&mut head).is_err() || head.is_empty() {
+        return false;
+    }
+    let compressed = head.starts_with(&[0x1f, 0x8b])
+        || head.starts_with(b"BZh")
+        || head.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]);
+    let binary = head.contains(&0)
+        || gsd::sniff(&head)
+        || mmpld::sniff(&head)
+        || lammps_binary::sniff(&head)
+        || raw::sniff(&head)
+        || InputFormat::from_path(path) == Some(InputFormat::Raw)
+        || head.trim_ascii_start().starts_with(b"{");
+    !compressed && !binary && head.contains(&b'\n') && InputFormat::sniff(&head).is_none()
+}
+
 pub fn gzip_without_text(path: &Path) -> bool {
     if !is_gzip(path).unwrap_or(false) {
         return false;
