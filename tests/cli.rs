@@ -10049,6 +10049,138 @@ fn hidden_values_can_be_read_from_another_attribute_than_the_colours() {
     }
 }
 
+/// `--hide-attribute NAME=MIN:MAX` reads the attribute it names, so one image hides by
+/// two columns at once: the fcc atoms of a CNA column and the low energies of another
+/// leave the atoms neither hides (counted from the dump itself), a named range alone
+/// draws what `--hide-by` does, a range that misses its column's values is noted with
+/// the column, and bad names and too many ranges are refused.
+#[test]
+fn hidden_values_can_be_read_from_several_attributes_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("gb.mdlod");
+    let dump = lammps_sample_path("cu_gb.cna.dump");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--attribute",
+        "c_cna",
+        "--attribute",
+        "c_pe",
+    ]);
+    // (c_cna, c_pe) per atom, from the dump's text.
+    let text = std::fs::read_to_string(&dump).unwrap();
+    let atoms: Vec<(f64, f64)> = text
+        .lines()
+        .skip(9)
+        .map(|l| {
+            let f: Vec<f64> = l
+                .split_whitespace()
+                .skip(3)
+                .map(|v| v.parse().unwrap())
+                .collect();
+            (f[3], f[5])
+        })
+        .collect();
+    assert_eq!(atoms.len(), 2552);
+    let png = dir.path().join("x.png");
+    let drawn = |out: &str| -> u64 {
+        let at = out.find(" particles").unwrap();
+        out[..at].rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", s(&file), "-o", s(&png)];
+        args.extend([
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--screen-error",
+            "0",
+            "--no-occlusion",
+        ]);
+        args.extend(extra);
+        ok(&args)
+    };
+    let out = render(&["--hide-attribute", "c_cna=0.5:1.5"]);
+    assert_eq!(drawn(&out), 2552 - 2047, "{out}");
+    let cut = -3.45;
+    let out = render(&[
+        "--hide-attribute",
+        "c_cna=0.5:1.5",
+        "--hide-attribute",
+        "c_pe=:-3.45",
+        "--attribute",
+        "c_pe",
+        "--colour-map",
+        "viridis",
+    ]);
+    // A value within two 16-bit steps of the end may be stored on either side of it.
+    let (lo, hi) = atoms.iter().fold((f64::MAX, f64::MIN), |(a, b), &(_, pe)| {
+        (a.min(pe), b.max(pe))
+    });
+    let step = 2.0 * (hi - lo) / 65535.0;
+    let shown = |margin: f64| {
+        atoms
+            .iter()
+            .filter(|&&(cna, pe)| !(0.5..=1.5).contains(&cna) && pe > cut + margin)
+            .count() as u64
+    };
+    let n = drawn(&out);
+    assert!(
+        (shown(step)..=shown(-step)).contains(&n) && n < 2552 - 2047,
+        "{n} drawn, expected {}..={}: {out}",
+        shown(step),
+        shown(-step)
+    );
+    // A named range that misses every value says so, naming its column.
+    let out = render(&[
+        "--hide-attribute",
+        "c_cna=0.5:1.5",
+        "--hide-attribute",
+        "c_pe=5:6",
+    ]);
+    assert!(
+        out.contains("--hide-attribute (of c_pe) hides no particle"),
+        "{out}"
+    );
+    assert_eq!(drawn(&out), 2552 - 2047, "{out}");
+    for (extra, says) in [
+        (vec!["--hide-attribute", "c_ke=1:2"], "c_cna, c_pe"),
+        (
+            vec!["--hide-attribute", "=1:2"],
+            "the attribute's name before `=`",
+        ),
+        (vec!["--hide-attribute", "c_pe=1"], "expected MIN:MAX"),
+        (
+            vec!["--hide-by", "c_cna", "--hide-attribute", "c_pe=1:2"],
+            "--hide-by has no effect without --hide-attribute MIN:MAX",
+        ),
+        (
+            vec![
+                "--hide-attribute",
+                "c_pe=1:2",
+                "--hide-attribute",
+                "c_pe=3:4",
+                "--hide-attribute",
+                "c_cna=1:2",
+                "--hide-attribute",
+                "3:4",
+                "--hide-attribute",
+                "5:6",
+            ],
+            "at most 4 ranges",
+        ),
+    ] {
+        let mut args = vec!["render", s(&file), "-o", s(&png)];
+        args.extend(extra);
+        let o = mdlod(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{says}: {err}");
+    }
+}
+
 /// `--frames` draws part of a movie with the whole movie's camera, colours and image
 /// numbers, so pieces rendered apart join up: frames 2 to 4 come out as the whole
 /// movie's images 2 to 4, byte for byte; `::2` every other one; bad selections refused.

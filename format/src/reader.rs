@@ -96,6 +96,8 @@ pub struct MdlodFile {
     /// The attribute hidden value ranges read where it is not the one selected
     /// ([`Self::hide_by_attribute`]): its range and its values' bytes.
     hider: Option<(AttributeInfo, Range<usize>)>,
+    /// The attributes of slots 1 and up of a [`HiddenSet`] ([`Self::hide_by_attributes`]).
+    slot_hiders: Vec<(AttributeInfo, Range<usize>)>,
     radius_range: Option<Range<usize>>,
     /// Per node level: the index in `node_blocks` of its first block.
     block_first: Vec<usize>,
@@ -128,11 +130,14 @@ pub const MAX_HIDDEN_RANGES: usize = 4;
 /// Particles a view leaves out: those of the species of `species` (bit `s` for species
 /// index `s`, as [`in_species_set`]) and those whose attribute value, decoded as
 /// [`crate::meta::AttributeInfo::decode`] gives it, lies in one of `ranges` (inclusive at
-/// both ends; a file without an attribute hides none by value).
+/// both ends; a file without an attribute hides none by value). Each range reads the
+/// attribute of its slot: 0 the file's hiding attribute ([`MdlodFile::hiding_attribute`]),
+/// `k ≥ 1` the `k`-th [`MdlodFile::hide_by_attributes`] names.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct HiddenSet {
     pub species: u64,
     ranges: [[f32; 2]; MAX_HIDDEN_RANGES],
+    slots: [u8; MAX_HIDDEN_RANGES],
     count: usize,
 }
 
@@ -149,22 +154,37 @@ impl HiddenSet {
     /// an infinite end leaves that side open); `None` past [`MAX_HIDDEN_RANGES`] or
     /// for a range that is not one.
     pub fn with_ranges(self, ranges: &[[f32; 2]]) -> Option<HiddenSet> {
+        let slotted: Vec<(u8, [f32; 2])> = ranges.iter().map(|&r| (0, r)).collect();
+        self.with_slotted_ranges(&slotted)
+    }
+
+    /// This set and the values in `ranges`, each read against the attribute of its slot
+    /// (see [`HiddenSet`]); `None` as [`Self::with_ranges`].
+    pub fn with_slotted_ranges(self, ranges: &[(u8, [f32; 2])]) -> Option<HiddenSet> {
         if ranges.len() > MAX_HIDDEN_RANGES
             || ranges
                 .iter()
-                .any(|[lo, hi]| lo.is_nan() || hi.is_nan() || lo > hi)
+                .any(|(_, [lo, hi])| lo.is_nan() || hi.is_nan() || lo > hi)
         {
             return None;
         }
         let mut set = self;
         set.count = ranges.len();
-        set.ranges[..ranges.len()].copy_from_slice(ranges);
+        for (k, &(slot, range)) in ranges.iter().enumerate() {
+            set.ranges[k] = range;
+            set.slots[k] = slot;
+        }
         Some(set)
     }
 
     /// The value ranges hidden.
     pub fn ranges(&self) -> &[[f32; 2]] {
         &self.ranges[..self.count]
+    }
+
+    /// The slot of each of [`Self::ranges`].
+    pub fn slots(&self) -> &[u8] {
+        &self.slots[..self.count]
     }
 
     /// Nothing is hidden.
@@ -181,19 +201,19 @@ impl HiddenSet {
 pub struct HiddenTest {
     species: u64,
     codes: [(u16, u16); MAX_HIDDEN_RANGES],
+    slots: [u8; MAX_HIDDEN_RANGES],
     count: usize,
 }
 
 impl HiddenTest {
-    /// Whether a particle of species index `s` and quantized attribute value `q` (none
-    /// without an attribute) is hidden.
-    pub fn hides(&self, s: u16, q: Option<u16>) -> bool {
+    /// Whether a particle of species index `s` is hidden, `q` giving its quantized value
+    /// of the attribute of a slot (none without one).
+    pub fn hides(&self, s: u16, q: impl Fn(u8) -> Option<u16>) -> bool {
         in_species_set(self.species, usize::from(s))
-            || q.is_some_and(|q| {
-                self.codes[..self.count]
-                    .iter()
-                    .any(|&(a, b)| a <= q && q <= b)
-            })
+            || self.codes[..self.count]
+                .iter()
+                .zip(&self.slots)
+                .any(|(&(a, b), &slot)| q(slot).is_some_and(|q| a <= q && q <= b))
     }
 
     /// Some range meets the attribute's values (a particle's value must be read).
@@ -934,6 +954,7 @@ impl MdlodFile {
             extra_ranges,
             nodes_owned: None,
             hider: None,
+            slot_hiders: Vec::new(),
             radius_table: OnceLock::new(),
             radius_range,
             block_first,
@@ -1112,30 +1133,69 @@ impl MdlodFile {
     /// while colouring by another. Kept through a later [`Self::select_attribute`]. An
     /// unknown name is an error listing the file's attributes.
     pub fn hide_by_attribute(mut self, name: &str) -> Result<MdlodFile, FormatError> {
+        self.hider = self.attribute_values_named(name)?;
+        *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        Ok(self)
+    }
+
+    /// This file with the attributes of a [`HiddenSet`]'s slots 1 and up: `names[k − 1]`
+    /// for slot `k` (as [`Self::select_attribute`] names them), so that one view hides by
+    /// several columns at once (a CNA's fcc atoms and the low energies). Kept through a
+    /// later [`Self::select_attribute`]. An unknown name is an error listing the file's
+    /// attributes.
+    pub fn hide_by_attributes(mut self, names: &[&str]) -> Result<MdlodFile, FormatError> {
+        let mut hiders = Vec::with_capacity(names.len());
+        for name in names {
+            if let Some(h) = self.attribute_values_named(name)? {
+                hiders.push(h);
+            }
+        }
+        self.slot_hiders = hiders;
+        *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        Ok(self)
+    }
+
+    /// The attribute named `name` and the bytes of its values, as the file holds them now.
+    fn attribute_values_named(
+        &self,
+        name: &str,
+    ) -> Result<Option<(AttributeInfo, Range<usize>)>, FormatError> {
         let names = self.attribute_names();
-        let chosen = attribute_named(&names, name).map(str::to_owned);
-        let Some(chosen) = chosen else {
+        let Some(chosen) = attribute_named(&names, name).map(str::to_owned) else {
             return Err(self.no_such_attribute(name));
         };
         let first = self.metadata.attribute.as_ref();
-        self.hider = if first.is_some_and(|a| a.name == chosen) {
-            first.cloned().zip(self.attribute_range.clone())
-        } else {
-            let Some(k) = self
-                .metadata
-                .attributes
-                .iter()
-                .position(|a| a.name == chosen)
-            else {
-                return Ok(self);
-            };
-            Some((
-                self.metadata.attributes[k].clone(),
-                self.extra_values_range(k)?,
-            ))
+        if first.is_some_and(|a| a.name == chosen) {
+            return Ok(first.cloned().zip(self.attribute_range.clone()));
+        }
+        let Some(k) = self
+            .metadata
+            .attributes
+            .iter()
+            .position(|a| a.name == chosen)
+        else {
+            return Ok(None);
         };
-        *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
-        Ok(self)
+        Ok(Some((
+            self.metadata.attributes[k].clone(),
+            self.extra_values_range(k)?,
+        )))
+    }
+
+    /// The attribute a [`HiddenSet`]'s slot reads (slot 0: [`Self::hiding_attribute`]).
+    pub fn hidden_slot_attribute(&self, slot: u8) -> Option<&AttributeInfo> {
+        self.slot_attribute(slot).map(|(info, _)| info)
+    }
+
+    /// The attribute of a [`HiddenSet`]'s slot and its quantized values per particle.
+    fn slot_attribute(&self, slot: u8) -> Option<(&AttributeInfo, Option<&[u16]>)> {
+        match slot {
+            0 => Some((self.hiding_attribute()?, self.hiding_values())),
+            k => {
+                let (info, r) = self.slot_hiders.get(usize::from(k) - 1)?;
+                Some((info, Some(bytemuck::cast_slice(&self.map[r.clone()]))))
+            }
+        }
     }
 
     /// The attribute hidden value ranges are read against: the one
@@ -1259,35 +1319,56 @@ impl MdlodFile {
         let mut test = HiddenTest {
             species: set.species,
             codes: [(0, 0); MAX_HIDDEN_RANGES],
+            slots: [0; MAX_HIDDEN_RANGES],
             count: 0,
         };
-        if let Some(info) = self.hiding_attribute() {
-            for c in set.ranges().iter().filter_map(|&r| info.codes(r)) {
+        for (&r, &slot) in set.ranges().iter().zip(set.slots()) {
+            if let Some(c) = self
+                .slot_attribute(slot)
+                .and_then(|(info, _)| info.codes(r))
+            {
                 test.codes[test.count] = c;
+                test.slots[test.count] = slot;
                 test.count += 1;
             }
         }
         test
     }
 
-    /// Whether `test` hides particle `i` (its species and attribute value as stored;
+    /// Whether `test` hides particle `i` (its species and attribute values as stored;
     /// an index past the particles is not hidden).
     pub fn hides_particle(&self, test: &HiddenTest, i: usize) -> bool {
         let Some(&s) = self.species().get(i) else {
             return false;
         };
-        let q = match test.by_value() {
-            true => self.hiding_values().and_then(|a| a.get(i).copied()),
-            false => None,
-        };
-        test.hides(s, q)
+        if !test.by_value() {
+            return test.hides(s, |_| None);
+        }
+        test.hides(s, |slot| {
+            self.slot_attribute(slot)
+                .and_then(|(_, v)| v?.get(i).copied())
+        })
     }
 
     fn compute_hidden_below(&self, set: &HiddenSet) -> Vec<u8> {
         let test = self.hidden_test(set);
-        let values = self.hiding_values().filter(|_| test.by_value());
+        // Each slot's values, looked up once.
+        let values: Vec<Option<&[u16]>> = (0..=self.slot_hiders.len())
+            .map(|slot| {
+                self.slot_attribute(slot as u8)
+                    .and_then(|(_, v)| v)
+                    .filter(|_| test.by_value())
+            })
+            .collect();
         let of = |i: usize, s: u16| {
-            if test.hides(s, values.and_then(|v| v.get(i).copied())) {
+            let q = |slot: u8| {
+                values
+                    .get(usize::from(slot))
+                    .copied()
+                    .flatten()
+                    .and_then(|v| v.get(i).copied())
+            };
+            if test.hides(s, q) {
                 BELOW_IN
             } else {
                 BELOW_OUT

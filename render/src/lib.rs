@@ -854,6 +854,9 @@ pub fn open_styled(
     {
         file = file.hide_by_attribute(name)?;
     }
+    if !style.hidden_named.is_empty() {
+        file = file.hide_by_attributes(&style.hide_names())?;
+    }
     match &style.attribute {
         Some(name) => file.select_attribute(name),
         None => Ok(file),

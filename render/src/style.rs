@@ -382,6 +382,13 @@ pub struct PointStyle {
     /// (see [`crate::open_styled`]); `None`: the same one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hide_by: Option<String>,
+    /// Further hidden value ranges, each read against the attribute it names
+    /// (`--hide-attribute c_pe=:-3.5`): a particle any range of either list holds is
+    /// left out, so that one view hides by several columns (a CNA's fcc atoms and the
+    /// low energies). With `hidden_values`, at most
+    /// [`mdlod_format::reader::MAX_HIDDEN_RANGES`] in all.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hidden_named: Vec<(String, [f32; 2])>,
 }
 
 impl Default for PointStyle {
@@ -396,6 +403,7 @@ impl Default for PointStyle {
             clip: Vec::new(),
             hidden_values: Vec::new(),
             hide_by: None,
+            hidden_named: Vec::new(),
         }
     }
 }
@@ -415,10 +423,36 @@ impl PointStyle {
     /// one, which [`Self::validate`] refuses).
     pub fn hidden_set(&self, meta: &mdlod_format::meta::Metadata) -> crate::HiddenSet {
         let species = crate::HiddenSet::of_species(self.hidden_mask(&meta.species));
-        match meta.attribute {
-            Some(_) => species.with_ranges(&self.hidden_values).unwrap_or(species),
-            None => species,
+        let names = self.hide_names();
+        let plain = self
+            .hidden_values
+            .iter()
+            .filter(|_| meta.attribute.is_some())
+            .map(|&r| (0u8, r));
+        let named = self.hidden_named.iter().map(|(name, r)| {
+            let slot = names.iter().position(|n| n == name).unwrap_or_default() + 1;
+            (slot as u8, *r)
+        });
+        let ranges: Vec<(u8, [f32; 2])> = plain.chain(named).collect();
+        species.with_slotted_ranges(&ranges).unwrap_or(species)
+    }
+
+    /// The attributes [`Self::hidden_named`] reads, each once, in the order of their
+    /// first range: slot `k + 1` of [`Self::hidden_set`] reads the `k`-th, as
+    /// [`mdlod_format::MdlodFile::hide_by_attributes`] takes them.
+    pub fn hide_names(&self) -> Vec<&str> {
+        let mut names: Vec<&str> = Vec::new();
+        for (name, _) in &self.hidden_named {
+            if !names.contains(&name.as_str()) {
+                names.push(name);
+            }
         }
+        names
+    }
+
+    /// Some particles are hidden by their values (either list of ranges).
+    pub fn hides_values(&self) -> bool {
+        !self.hidden_values.is_empty() || !self.hidden_named.is_empty()
     }
 
     /// The species table (linear colour, radius) after styling; hidden species get
@@ -651,16 +685,17 @@ impl PointStyle {
                 ));
             }
         }
-        if self.hidden_values.len() > mdlod_format::reader::MAX_HIDDEN_RANGES {
+        let ranges = self.hidden_values.len() + self.hidden_named.len();
+        if ranges > mdlod_format::reader::MAX_HIDDEN_RANGES {
             return Err(format!(
-                "{} hidden value ranges (at most {})",
-                self.hidden_values.len(),
+                "{ranges} hidden value ranges (at most {})",
                 mdlod_format::reader::MAX_HIDDEN_RANGES
             ));
         }
         if let Some([lo, hi]) = self
             .hidden_values
             .iter()
+            .chain(self.hidden_named.iter().map(|(_, r)| r))
             .find(|[lo, hi]| lo.is_nan() || hi.is_nan() || lo > hi)
         {
             return Err(format!(
@@ -1504,6 +1539,7 @@ mod tests {
             clip: vec![],
             hidden_values: vec![],
             hide_by: None,
+            hidden_named: vec![],
         };
         let file = [sp("A", 1.0), sp("B", 1.5), sp("C", 0.5)];
         let t = style.species_table(&file).unwrap();

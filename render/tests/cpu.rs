@@ -990,6 +990,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             clip: vec![],
             hidden_values: vec![],
             hide_by: None,
+            hidden_named: vec![],
         };
         let packed = pack_styled(&f, &d, PackStyle::Spheres, &style).unwrap();
         assert_eq!(packed.points(), base.points());
@@ -1591,6 +1592,117 @@ fn hidden_values_leave_no_cluster_holding_them() {
     assert!(mdlod_render::HiddenSet::default()
         .with_ranges(&[[2.0, 1.0]])
         .is_none());
+}
+
+/// Hidden values read from several attributes at once (`--hide-attribute NAME=MIN:MAX`):
+/// a range of slot 0 reads the file's first attribute, one of slot 1 the attribute
+/// `hide_by_attributes` names; a particle either range holds is hidden, in the nodes'
+/// marks and in every cut, with and without occlusion culling; and the slot's attribute
+/// stays through a later selection of another.
+#[test]
+fn hidden_values_of_several_attributes_hide_their_union() {
+    let mut frame = cloud_frame(4000, 2);
+    let n = frame.positions.len();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "c_cna".into(),
+        values: (0..n)
+            .map(|i| [1.0f32, 1.0, 2.0, 5.0][(i * 7) % 4])
+            .collect(),
+    });
+    let pe = mdlod_preprocess::Attribute {
+        name: "c_pe".into(),
+        values: (0..n).map(|i| -4.0 + (i % 13) as f32 * 0.1).collect(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.mdlod");
+    let opts = mdlod_preprocess::convert::ConvertOptions {
+        build: small_build(),
+        ..Default::default()
+    };
+    mdlod_preprocess::convert::convert_frame_with(
+        &frame,
+        std::slice::from_ref(&pe),
+        None,
+        &path,
+        &opts,
+        &mdlod_preprocess::NoProgress,
+    )
+    .unwrap();
+    let f = MdlodFile::open(&path)
+        .unwrap()
+        .hide_by_attributes(&["c_pe"])
+        .unwrap();
+    let last = f.level_count() - 1;
+    let cna_info = f.metadata().attribute.clone().unwrap();
+    let pe_info = f.hidden_slot_attribute(1).unwrap().clone();
+    assert_eq!(pe_info.name, "c_pe");
+    let (cna, pe_q) = (
+        f.attribute().unwrap().to_vec(),
+        f.extra_values(1).map(<[u16]>::to_vec),
+    );
+    // (The ATTRIBUTES section lists the first attribute too where it keeps it.)
+    let pe_q = pe_q
+        .or_else(|| f.extra_values(0).map(<[u16]>::to_vec))
+        .unwrap();
+    let set = mdlod_render::HiddenSet::default()
+        .with_slotted_ranges(&[(0, [0.5, 1.5]), (1, [f32::NEG_INFINITY, -3.55])])
+        .unwrap();
+    let hidden = |i: usize| {
+        let c = cna_info.decode(cna[i]);
+        let e = pe_info.decode(pe_q[i]);
+        (0.5..=1.5).contains(&c) || e <= -3.55
+    };
+    let some_hidden_by_each = (0..n).any(|i| {
+        let c = cna_info.decode(cna[i]);
+        !(0.5..=1.5).contains(&c) && hidden(i)
+    }) && (0..n).any(|i| !hidden(i));
+    assert!(some_hidden_by_each);
+    let kinds = f.hidden_below(&set);
+    for level in 0..last {
+        for i in 0..f.levels()[level].point_count as usize {
+            let (a, b) = particles_below(&f, level, i, 1);
+            let want = u8::from((a..b).any(hidden)) | (2 * u8::from((a..b).any(|p| !hidden(p))));
+            assert_eq!(kinds[node_of(&f, level, i)], want, "level {level} node {i}");
+        }
+    }
+    let cam = fitted_camera(&f);
+    for occlusion in [OcclusionMode::Off, OcclusionMode::PixelCentres] {
+        for error in [0.0f32, 12.0] {
+            let settings = TraversalSettings {
+                viewport: VIEWPORT,
+                error_px: error,
+                budget_points: u64::MAX,
+                occlusion,
+                hidden: set,
+                ..Default::default()
+            };
+            let d = traverse(&cam, &f, &settings);
+            check_counts(&f, &d);
+            for (i, &c) in coverage(&f, &d).iter().enumerate() {
+                let want = match (hidden(i), occlusion) {
+                    (true, _) => 0..=0,
+                    (false, OcclusionMode::Off) => 1..=1,
+                    (false, _) => 0..=1,
+                };
+                assert!(
+                    want.contains(&c),
+                    "error {error}: particle {i} covered {c} times"
+                );
+            }
+        }
+    }
+    // Colouring by c_pe keeps slot 1's values (and slot 0 then reads c_pe).
+    let g = f.select_attribute("c_pe").unwrap();
+    assert_eq!(g.hidden_slot_attribute(1).unwrap().name, "c_pe");
+    let test = g.hidden_test(
+        &mdlod_render::HiddenSet::default()
+            .with_slotted_ranges(&[(1, [f32::NEG_INFINITY, -3.55])])
+            .unwrap(),
+    );
+    for i in 0..n {
+        let e = pe_info.decode(pe_q[i]);
+        assert_eq!(g.hides_particle(&test, i), e <= -3.55, "particle {i}");
+    }
 }
 
 /// The species a cut shows are exactly those of the particles it covers (drawn, or below

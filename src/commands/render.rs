@@ -618,22 +618,53 @@ fn decades_light_note(a: &mdlod_format::meta::AttributeInfo) -> Option<String> {
     })
 }
 
-/// Says when `--hide-attribute`'s ranges all miss the attribute's values.
-fn hides_nothing_note(
+/// `--hide-attribute`'s ranges with the attribute each reads in `file` (opened with the
+/// style, [`mdlod_render::open_styled`]): a plain range the hiding attribute, a named one
+/// its own; ranges of an attribute the file lacks are left out.
+fn hidden_ranges<'f>(
     style: &StyleArgs,
-    attribute: Option<&mdlod_format::meta::AttributeInfo>,
-) -> Option<String> {
-    let a = attribute?;
-    if style.hide_attribute.is_empty() || style.hide_attribute.iter().any(|&r| a.codes(r).is_some())
-    {
-        return None;
+    file: &'f mdlod_format::reader::MdlodFile,
+) -> Vec<(&'f mdlod_format::meta::AttributeInfo, [f32; 2])> {
+    let names = style.hide_names();
+    style
+        .hide_attribute
+        .iter()
+        .filter_map(|h| {
+            let slot = match &h.by {
+                None => 0,
+                Some(n) => names.iter().position(|x| x == n)? + 1,
+            };
+            Some((file.hidden_slot_attribute(slot as u8)?, h.range))
+        })
+        .collect()
+}
+
+/// Says of each attribute `--hide-attribute` reads when its ranges all miss its values.
+fn hides_nothing_notes(style: &StyleArgs, file: &mdlod_format::reader::MdlodFile) -> Vec<String> {
+    let ranges = hidden_ranges(style, file);
+    let mut notes = Vec::new();
+    let mut seen: Vec<&str> = Vec::new();
+    for (a, _) in &ranges {
+        if seen.contains(&a.name.as_str()) {
+            continue;
+        }
+        seen.push(&a.name);
+        let mut own = ranges.iter().filter(|(b, _)| b.name == a.name);
+        if own.any(|(_, r)| a.codes(*r).is_some()) {
+            continue;
+        }
+        let which = match seen.len() == 1 && ranges.iter().all(|(b, _)| b.name == a.name) {
+            true => String::new(),
+            false => format!(" (of {})", a.name),
+        };
+        notes.push(format!(
+            "  note: --hide-attribute{which} hides no particle: {} lies from {} to {} here",
+            a.name,
+            super::Num(a.min),
+            super::Num(a.max)
+        ));
     }
-    Some(format!(
-        "  note: --hide-attribute hides no particle: {} lies from {} to {} here",
-        a.name,
-        super::Num(a.min),
-        super::Num(a.max)
-    ))
+    notes
 }
 
 /// The background's colour as `--background` gives it, or the mode's default.
@@ -709,19 +740,15 @@ impl Covered {
 /// of the attribute (a molecule id of a column of 200 000, stored 3.16 apart) and those
 /// steps reach whole numbers past it (other ids): it hides every particle of the steps
 /// it touches, the values those steps hold being named.
-fn coarse_range_notes(
-    style: &StyleArgs,
-    attribute: Option<&mdlod_format::meta::AttributeInfo>,
-) -> Vec<String> {
-    let Some(a) = attribute else {
-        return Vec::new();
-    };
-    let step = (f64::from(a.max) - f64::from(a.min)) / 65535.0;
-    style
-        .hide_attribute
-        .iter()
-        .filter(|[lo, hi]| lo.is_finite() && hi.is_finite() && f64::from(hi - lo) < step)
-        .filter_map(|&range| {
+fn coarse_range_notes(style: &StyleArgs, file: &mdlod_format::reader::MdlodFile) -> Vec<String> {
+    hidden_ranges(style, file)
+        .into_iter()
+        .filter_map(|(a, range)| {
+            let step = (f64::from(a.max) - f64::from(a.min)) / 65535.0;
+            let [lo, hi] = range;
+            if !(lo.is_finite() && hi.is_finite() && f64::from(hi - lo) < step) {
+                return None;
+            }
             let (first, last) = a.codes(range)?;
             let value = |code: u16, side: f64| {
                 (f64::from(a.min) + (f64::from(code) + side) * step)
@@ -942,14 +969,17 @@ pub struct StyleArgs {
     /// delete: `--hide-attribute 0.5:1.5` leaves out the atoms a common-neighbour
     /// analysis column calls fcc (1), showing the defects and surfaces; clusters holding
     /// them and others are refined until they hold none; repeatable (up to 4). The file
-    /// must keep an attribute (convert with --attribute)
+    /// must keep an attribute (convert with --attribute). NAME=MIN:MAX reads the
+    /// attribute NAME, so that one image hides by several: `--hide-attribute
+    /// c_cna=0.5:1.5 --hide-attribute c_pe=:-3.5` leaves out the fcc atoms and the low
+    /// energies
     #[arg(
         long = "hide-attribute",
-        value_name = "MIN:MAX",
+        value_name = "[NAME=]MIN:MAX",
         allow_hyphen_values = true,
-        value_parser = parse_open_range
+        value_parser = parse_hide_range
     )]
-    pub hide_attribute: Vec<[f32; 2]>,
+    pub hide_attribute: Vec<HideRange>,
     /// The attribute --hide-attribute reads, where it is not the one --attribute
     /// colours by (a file of several): `--hide-by c_cna --hide-attribute 0.5:1.5
     /// --attribute c_pe --colour-map viridis` leaves out the fcc atoms and colours the
@@ -987,6 +1017,36 @@ pub struct StyleArgs {
 }
 
 /// `MIN:MAX` where either end may be left empty (open: infinite), `MIN ≤ MAX`.
+/// One `--hide-attribute`: a range of values, and the attribute it reads where named.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HideRange {
+    pub by: Option<String>,
+    pub range: [f32; 2],
+}
+
+/// `--hide-attribute [NAME=]MIN:MAX`.
+pub fn parse_hide_range(s: &str) -> Result<HideRange, String> {
+    match s.split_once('=') {
+        Some((name, range)) => {
+            let name = name.trim();
+            if name.is_empty() {
+                return Err(format!(
+                    "{s:?}: expected NAME=MIN:MAX with the attribute's name before `=`"
+                ));
+            }
+            Ok(HideRange {
+                by: Some(name.to_string()),
+                range: parse_open_range(range)
+                    .map_err(|e| format!("{s:?}: {}", e.split_once(": ").map_or(&*e, |p| p.1)))?,
+            })
+        }
+        None => Ok(HideRange {
+            by: None,
+            range: parse_open_range(s)?,
+        }),
+    }
+}
+
 pub fn parse_open_range(s: &str) -> Result<[f32; 2], String> {
     let (lo, hi) = s
         .split_once(':')
@@ -1096,6 +1156,18 @@ pub enum ColourMapArg {
 }
 
 impl StyleArgs {
+    /// The attributes named ranges of `--hide-attribute` read, each once, in order (as
+    /// [`mdlod_render::PointStyle::hide_names`] gives them).
+    fn hide_names(&self) -> Vec<&str> {
+        let mut names: Vec<&str> = Vec::new();
+        for n in self.hide_attribute.iter().filter_map(|h| h.by.as_deref()) {
+            if !names.contains(&n) {
+                names.push(n);
+            }
+        }
+        names
+    }
+
     pub fn style(&self) -> Result<mdlod_render::PointStyle> {
         use mdlod_render::{ColourMap, SpeciesStyle};
         let mut species: Vec<SpeciesStyle> = vec![];
@@ -1158,9 +1230,10 @@ impl StyleArgs {
             radii.push((entry(&name), v));
         }
         let hidden: Vec<usize> = self.hide_species.iter().map(|n| entry(n)).collect();
-        if self.hide_by.is_some() && self.hide_attribute.is_empty() {
+        if self.hide_by.is_some() && !self.hide_attribute.iter().any(|h| h.by.is_none()) {
             anyhow::bail!(
-                "--hide-by has no effect without --hide-attribute: it names what that reads"
+                "--hide-by has no effect without --hide-attribute MIN:MAX: it names what that \
+                 reads (a range of its own, NAME=MIN:MAX, reads NAME)"
             );
         }
         if self.hide_attribute.len() > mdlod_format::reader::MAX_HIDDEN_RANGES {
@@ -1187,8 +1260,18 @@ impl StyleArgs {
             attribute_range: self.attribute_range,
             log_scale: self.log_scale,
             clip: self.clip.clone(),
-            hidden_values: self.hide_attribute.clone(),
+            hidden_values: self
+                .hide_attribute
+                .iter()
+                .filter(|h| h.by.is_none())
+                .map(|h| h.range)
+                .collect(),
             hide_by: self.hide_by.clone(),
+            hidden_named: self
+                .hide_attribute
+                .iter()
+                .filter_map(|h| Some((h.by.clone()?, h.range)))
+                .collect(),
             colour_map: self.colour_map.map(|m| match m {
                 ColourMapArg::Viridis => ColourMap::Viridis,
                 ColourMapArg::Magma => ColourMap::Magma,
@@ -1713,7 +1796,8 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     // (--hide-by takes --hide-attribute's reading from it.)
     if args.style.attribute.is_some()
         && !by_attribute(args)
-        && (args.style.hide_attribute.is_empty() || args.style.hide_by.is_some())
+        && (!args.style.hide_attribute.iter().any(|h| h.by.is_none())
+            || args.style.hide_by.is_some())
     {
         anyhow::bail!(
             "--attribute has no effect without --colour-map (spheres, sndf, splat), \
@@ -2329,10 +2413,10 @@ pub fn run(mut args: Args) -> Result<()> {
     if every_species_hidden {
         println!("  note: every species is hidden: the image shows the background only");
     }
-    if let Some(note) = hides_nothing_note(&args.style, file.hiding_attribute()) {
+    for note in hides_nothing_notes(&args.style, &file) {
         println!("{note}");
     }
-    for note in coarse_range_notes(&args.style, file.hiding_attribute()) {
+    for note in coarse_range_notes(&args.style, &file) {
         println!("{note}");
     }
     if let Some(note) = file
@@ -2757,9 +2841,8 @@ fn check_legend_room(
     // Species whose every particle a hidden value range leaves out show in no key: where
     // a look at each particle is cheap, they are left out of the room asked for too.
     let test = file.hidden_test(&opts.style.hidden_set(meta));
-    let shown: Option<Vec<bool>> = (!opts.style.hidden_values.is_empty()
-        && file.particle_count() <= KEY_SCAN_PARTICLES)
-        .then(|| {
+    let shown: Option<Vec<bool>> =
+        (opts.style.hides_values() && file.particle_count() <= KEY_SCAN_PARTICLES).then(|| {
             let mut shown = vec![false; meta.species.len()];
             for (i, &s) in file.species().iter().enumerate() {
                 if !file.hides_particle(&test, i) {
@@ -3124,13 +3207,21 @@ fn build_legend(
                 .hide_by
                 .as_deref()
                 .is_none_or(|h| mdlod_format::reader::attribute_named(&[&a.name], h).is_some());
+            // (And the ranges naming it.)
+            let named =
+                opts.style.hidden_named.iter().filter(|(n, _)| {
+                    mdlod_format::reader::attribute_named(&[&a.name], n).is_some()
+                });
+            let ranges: Vec<[f32; 2]> = opts
+                .style
+                .hidden_values
+                .iter()
+                .filter(|_| same)
+                .copied()
+                .chain(named.map(|(_, r)| *r))
+                .collect();
             for (value, label) in legend_categories(args)? {
-                let hidden = same
-                    && opts
-                        .style
-                        .hidden_values
-                        .iter()
-                        .any(|&[lo, hi]| lo <= value && value <= hi);
+                let hidden = ranges.iter().any(|&[lo, hi]| lo <= value && value <= hi);
                 if !hidden {
                     entries.push((label, map.colour(scale.of_value(value))));
                 }
@@ -4052,7 +4143,7 @@ fn render_frames(
                 opts.style.attribute_range = Some([a.min, a.max]);
                 // (Over the particles drawn where some are hidden or cut away.)
                 let whose = match opts.style.clip.is_empty()
-                    && opts.style.hidden_values.is_empty()
+                    && !opts.style.hides_values()
                     && !opts.style.species.iter().any(|st| st.hidden)
                 {
                     true => "every frame's range",
