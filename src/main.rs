@@ -14,6 +14,7 @@ macro_rules! println {
     };
 }
 
+mod bus_error;
 mod commands;
 mod interrupt;
 mod progress;
@@ -127,6 +128,7 @@ fn output_tip(mut args: impl Iterator<Item = String>, unexpected: &str) -> Optio
 
 fn main() -> std::process::ExitCode {
     quiet_headless_gpu_probe();
+    bus_error::install();
     let matches = match <Cli as clap::CommandFactory>::command().try_get_matches() {
         Ok(m) => m,
         Err(e) => {
@@ -143,7 +145,8 @@ fn main() -> std::process::ExitCode {
                             .map(|a| a.to_string_lossy().into_owned())
                     };
                     equals_tip(args(), &a).or_else(|| output_tip(args(), &a))
-                });
+                })
+                .or_else(|| decimal_comma_tip(&e));
             let _ = e.print();
             if let Some(tip) = tip {
                 eprintln!("\n  tip: {tip}");
@@ -199,9 +202,43 @@ fn main() -> std::process::ExitCode {
                 }
             }
             eprintln!("error: {message}");
-            std::process::ExitCode::FAILURE
+            // Another batch holds the directory: 75 (EX_TEMPFAIL), so that a script can
+            // tell "try again later" from a failure.
+            let busy = e.chain().any(|c| {
+                matches!(
+                    c.downcast_ref::<mdlod_preprocess::batch::BatchError>(),
+                    Some(mdlod_preprocess::batch::BatchError::Busy { .. })
+                )
+            });
+            match busy {
+                true => std::process::ExitCode::from(75),
+                false => std::process::ExitCode::FAILURE,
+            }
         }
     }
+}
+
+/// A number written with a decimal comma (`--zoom 1,5`, as a German or French locale
+/// writes it), which the parser refuses as "invalid float literal": the tip gives it with
+/// a point.
+fn decimal_comma_tip(e: &clap::Error) -> Option<String> {
+    if e.kind() != clap::error::ErrorKind::ValueValidation {
+        return None;
+    }
+    let value = match e.get(clap::error::ContextKind::InvalidValue)? {
+        clap::error::ContextValue::String(v) => v.clone(),
+        _ => return None,
+    };
+    let pointed = value.replace(',', ".");
+    (value.contains(',') && pointed.parse::<f64>().is_ok()).then(|| {
+        let option = match e.get(clap::error::ContextKind::InvalidArg) {
+            Some(clap::error::ContextValue::String(a)) => {
+                a.split_whitespace().next().unwrap_or("").to_string()
+            }
+            _ => String::new(),
+        };
+        format!("numbers take a decimal point, not a comma: {option} {pointed}")
+    })
 }
 
 /// Without a desktop session (`XDG_RUNTIME_DIR` unset: a batch job on a cluster node, an

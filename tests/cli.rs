@@ -10049,6 +10049,79 @@ fn hidden_values_can_be_read_from_another_attribute_than_the_colours() {
     }
 }
 
+/// A number with a decimal comma gets a tip with the point, whichever option takes it.
+#[test]
+fn a_decimal_comma_gets_a_tip() {
+    for (option, value, tip) in [
+        ("--zoom", "1,5", "--zoom 1.5"),
+        ("--radius-scale", "0,8", "--radius-scale 0.8"),
+    ] {
+        let o = mdlod(&["render", "x.mdlod", "-o", "x.png", option, value]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains(&format!(
+                "tip: numbers take a decimal point, not a comma: {tip}"
+            )),
+            "{err}"
+        );
+    }
+}
+
+/// A batch whose directory another batch holds exits with 75 (try again later), not
+/// the 1 of a failure, and says who holds it.
+#[test]
+fn a_batch_held_by_another_exits_with_75() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    let lock = out.join(mdlod_preprocess::batch::lock_file_name(None));
+    std::fs::write(&lock, "pid 4242 on node17").unwrap();
+    let held = std::fs::File::open(&lock).unwrap();
+    held.lock().unwrap();
+    let dump = lammps_sample_path("cu_gb.cna.dump");
+    let o = mdlod(&["batch", s(&dump), "-o", s(&out)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(75), "{err}");
+    assert!(err.contains("(pid 4242 on node17)"), "{err}");
+    drop(held);
+    ok(&["batch", s(&dump), "-o", s(&out)]);
+}
+
+/// A bus error (what the kernel sends where a mapped file is cut short while it is
+/// read) ends the command with a message naming the files it was given and status 1,
+/// not a silent death by the signal.
+#[test]
+fn a_bus_error_is_said_with_the_files_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("big.raw.json");
+    let child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args([
+            "generate", "crater", "-n", "50000000", "--format", "raw", "-o",
+        ])
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(400));
+    let killed = Command::new("kill")
+        .args(["-BUS", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "a file in {} was cut short while mdlod read it",
+            dir.path().display()
+        )) || err.contains("a file this command reads was cut short"),
+        "{err}"
+    );
+}
+
 /// `--hide-attribute NAME=MIN:MAX` reads the attribute it names, so one image hides by
 /// two columns at once: the fcc atoms of a CNA column and the low energies of another
 /// leave the atoms neither hides (counted from the dump itself), a named range alone
@@ -10773,6 +10846,13 @@ fn a_granular_newcomers_choices_and_mistakes_are_answered() {
     let err = fails(&["convert", s(&dump), "-o", s(&xyz)]);
     assert!(err.contains("this is a dump's name; write"), "{err}");
     assert!(!xyz.exists());
+    let txt = dir.path().join("pour.txt");
+    let err = fails(&["convert", s(&dump), "-o", s(&txt)]);
+    assert!(
+        err.contains("convert writes a binary .mdlod file, and this names a file of another kind"),
+        "{err}"
+    );
+    assert!(!txt.exists());
     // A still from a batch directory, and a directory without a manifest.
     let err = fails(&["render", s(&d), "-o", s(&png)]);
     assert!(

@@ -16,9 +16,10 @@ pub fn map_file(file: &File) -> std::io::Result<memmap2::Mmap> {
     // SAFETY: the mapping is read-only and every byte read from it is treated as untrusted
     // (lengths and offsets are validated before use, slices are produced with bytemuck's
     // checked casts). The remaining hazard of any file mapping — another process truncating
-    // the file while it is mapped — would raise SIGBUS rather than give undefined values;
-    // mdlod only maps files it does not write, and writers always replace files by rename,
-    // which leaves existing mappings of the old inode intact.
+    // the file while it is mapped — raises SIGBUS rather than give undefined values (the
+    // `mdlod` binary's handler says so and exits); mdlod only maps files it does not
+    // write, and its writers always replace files by rename, which leaves existing
+    // mappings of the old inode intact.
     let map = unsafe { memmap2::Mmap::map(file)? };
     Ok(map)
 }

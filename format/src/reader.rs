@@ -96,6 +96,8 @@ pub struct MdlodFile {
     /// The attribute hidden value ranges read where it is not the one selected
     /// ([`Self::hide_by_attribute`]): its range and its values' bytes.
     hider: Option<(AttributeInfo, Range<usize>)>,
+    /// The file's size and modification time when it was opened ([`Self::changed_on_disk`]).
+    opened_as: Option<(std::fs::File, Stamp)>,
     /// The attributes of slots 1 and up of a [`HiddenSet`] ([`Self::hide_by_attributes`]).
     slot_hiders: Vec<(AttributeInfo, Range<usize>)>,
     radius_range: Option<Range<usize>>,
@@ -122,6 +124,15 @@ pub const MIXED_SPECIES: u16 = u16::MAX;
 /// `s`; indices of 64 and more never are).
 pub fn in_species_set(mask: u64, s: usize) -> bool {
     s < 64 && (mask >> s) & 1 == 1
+}
+
+/// A file's size and modification time.
+type Stamp = (u64, Option<std::time::SystemTime>);
+
+/// The [`Stamp`] of an open file, `None` where it cannot be read.
+fn stamp(file: &std::fs::File) -> Option<Stamp> {
+    let m = file.metadata().ok()?;
+    Some((m.len(), m.modified().ok()))
 }
 
 /// The most value ranges a [`HiddenSet`] holds.
@@ -275,7 +286,21 @@ impl MdlodFile {
         let path = path.as_ref().to_path_buf();
         let file = crate::files::open(&path).map_err(|e| FormatError::io(&path, e))?;
         let map = crate::mmap::map_file(&file).map_err(|e| FormatError::io(&path, e))?;
-        Self::from_map(path, map, eager_nodes)
+        let stamp = stamp(&file);
+        let mut f = Self::from_map(path, map, eager_nodes)?;
+        f.opened_as = stamp.map(|s| (file, s));
+        Ok(f)
+    }
+
+    /// Whether the file opened (its inode, whatever its name now names) has another size
+    /// or modification time than when it was opened: rewritten in place while it was read
+    /// (`cp` over it), part of what was read came from its new bytes, which callers say
+    /// rather than present the result as the file's. A file replaced by rename is not
+    /// changed: the old one stays mapped whole.
+    pub fn changed_on_disk(&self) -> bool {
+        self.opened_as
+            .as_ref()
+            .is_some_and(|(file, was)| stamp(file).as_ref() != Some(was))
     }
 
     fn from_map(
@@ -954,6 +979,7 @@ impl MdlodFile {
             extra_ranges,
             nodes_owned: None,
             hider: None,
+            opened_as: None,
             slot_hiders: Vec::new(),
             radius_table: OnceLock::new(),
             radius_range,

@@ -984,6 +984,25 @@ fn lock_batch(out_dir: &Path, shard: Option<(u32, u32)>) -> Result<Vec<std::fs::
     Ok(held)
 }
 
+/// Who is running a whole batch into `out_dir` now (what its lock says: `pid P on
+/// HOST`), where one is; `None` where none is or the locks cannot tell. For messages
+/// about a directory met while a batch rewrites it.
+pub fn batch_running(out_dir: &Path) -> Option<String> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(out_dir.join(lock_file_name(None))).ok()?;
+    match file.try_lock_shared() {
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let mut holder = String::new();
+            let _ = file.read_to_string(&mut holder);
+            Some(match holder.trim() {
+                "" => "a batch".to_string(),
+                h => h.to_string(),
+            })
+        }
+        _ => None,
+    }
+}
+
 /// One lock of [`lock_batch`]: `shared` or alone; `Busy` naming the holder when
 /// another process holds it so that this one cannot.
 fn lock_file(
@@ -1172,6 +1191,11 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), BatchError> {
 /// manifests are.
 fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
     let dir = path.parent().unwrap_or(Path::new("."));
+    // The same bytes already there (a rerun with nothing to do) are left as they are: a
+    // directory of finished frames that is read-only (an archive) checks as current.
+    if std::fs::read(path).is_ok_and(|old| old == text) {
+        return Ok(());
+    }
     mdlod_format::files::check_replaceable(path).map_err(io(path))?;
     // `.dataset.HOST-PID-XXXXXX.tmp`: an interrupted run removes its own, a later run
     // those of processes that are gone.
@@ -2739,6 +2763,25 @@ pub fn batch(
     // dump) would otherwise leave a manifest without the frames it is to convert again,
     // and the corrected rerun, finding no record of how they were read, would convert
     // every one again for "other settings".
+    // Frames to write into a directory that takes none (an archive made read-only) are
+    // refused before any is built.
+    if !todo.is_empty() {
+        mdlod_format::writer::output_file_builder()
+            .prefix(&mdlod_format::writer::temp_prefix("dataset"))
+            .suffix(".tmp")
+            .tempfile_in(out_dir)
+            .map_err(|e| BatchError::Io {
+                path: out_dir.to_path_buf(),
+                source: std::io::Error::new(
+                    e.kind(),
+                    format!(
+                        "{e}: {} frame{} to convert cannot be written there",
+                        todo.len(),
+                        if todo.len() == 1 { "" } else { "s" }
+                    ),
+                ),
+            })?;
+    }
     let previous = read_manifest_bytes(&manifest_path).map_err(|e| e.kind());
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
     // A shard that converts anything outdates the merged manifest of an earlier merge

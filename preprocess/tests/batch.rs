@@ -2528,6 +2528,45 @@ fn keep_going_passes_over_an_input_that_holds_no_dump() {
     assert!(batch(&[missing, inputs[1].clone()], &out, &keep, &NoProgress).is_err());
 }
 
+/// A batch running into a directory is told by its lock (for a render that meets the
+/// directory half rewritten), and none once it ends.
+#[test]
+fn a_running_batch_is_told_by_its_lock() {
+    use mdlod_preprocess::batch::{batch_running, lock_file_name};
+    let dir = tempfile::tempdir().unwrap();
+    assert_eq!(batch_running(dir.path()), None);
+    let path = dir.path().join(lock_file_name(None));
+    std::fs::write(&path, "pid 4242 on node17").unwrap();
+    assert_eq!(batch_running(dir.path()), None);
+    let f = std::fs::File::open(&path).unwrap();
+    f.lock().unwrap();
+    assert_eq!(
+        batch_running(dir.path()).as_deref(),
+        Some("pid 4242 on node17")
+    );
+    drop(f);
+    assert_eq!(batch_running(dir.path()), None);
+}
+
+/// A rerun with nothing to do writes nothing: the manifest is the same file (inode and
+/// all), so a read-only directory of finished frames checks as current.
+#[test]
+fn a_rerun_with_nothing_to_do_leaves_the_manifest_untouched() {
+    use std::os::unix::fs::MetadataExt;
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    let before = std::fs::metadata(out.join("dataset.json")).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 0);
+    let after = std::fs::metadata(out.join("dataset.json")).unwrap();
+    assert_eq!(
+        (before.ino(), before.mtime(), before.mtime_nsec()),
+        (after.ino(), after.mtime(), after.mtime_nsec())
+    );
+}
+
 /// A run's log sorted after a set's files (`dump.*` and `log.lammps` matched by one
 /// pattern) does not take the newest dump's place: an empty newest dump is still left out
 /// as one a run has just opened, not failed, and the log fails alone.

@@ -35,6 +35,10 @@ pub enum RenderError {
     /// An `.sndf` file whose header the shading cannot use (its camera, its size).
     #[error("{path}: {message}")]
     Sndf { path: PathBuf, message: String },
+    /// The file was rewritten in place while it was drawn
+    /// ([`mdlod_format::MdlodFile::changed_on_disk`]).
+    #[error("{path}: the file changed while it was read (another program rewrote it in place): the image would mix its old and new data, so none is written; render again once it is written whole")]
+    Changed { path: PathBuf },
     /// Options that cannot be rendered (zero size, zero samples, ...).
     #[error("invalid options: {0}")]
     InvalidOptions(String),

@@ -2289,10 +2289,16 @@ pub fn render_file_to_png(
     let t0 = Instant::now();
     check_numbers(opts)?;
     check_before_drawing(&file)?;
+    let file = std::sync::Arc::new(file);
     let (image, mut report) = match opts.gpu_memory {
         None => render_image(renderer, &file, opts)?,
-        Some(pool) => render_streaming(renderer, std::sync::Arc::new(file), opts, pool)?,
+        Some(pool) => render_streaming(renderer, file.clone(), opts, pool)?,
     };
+    if file.changed_on_disk() {
+        return Err(RenderError::Changed {
+            path: file.path().to_path_buf(),
+        });
+    }
     image.save_png(out)?;
     report.total_time = t0.elapsed();
     Ok(report)

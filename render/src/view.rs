@@ -38,6 +38,120 @@ fn default_zoom() -> f32 {
     1.0
 }
 
+/// The JSON type each key of a view file takes, said as a user reads it.
+fn check_type(key: &str, v: &serde_json::Value) -> Result<(), String> {
+    use serde_json::Value;
+    let shown = |v: &Value| {
+        let t = v.to_string();
+        match t.chars().count() > 40 {
+            true => format!("{}…", t.chars().take(40).collect::<String>()),
+            false => t,
+        }
+    };
+    let number = |v: &Value| v.is_number();
+    let quoted = |v: &Value| v.as_str().is_some_and(|s| s.trim().parse::<f64>().is_ok());
+    let expect = |what: &str| {
+        let hint = if quoted(v) {
+            " (a number is written without quotes)"
+        } else {
+            ""
+        };
+        Err(format!("{key} {}: expected {what}{hint}", shown(v)))
+    };
+    match key {
+        "version" => match v.as_u64() {
+            Some(_) => Ok(()),
+            None => expect("the whole number 1"),
+        },
+        "projection" => match v.as_str() {
+            Some("perspective" | "orthographic") => Ok(()),
+            _ => expect("\"perspective\" or \"orthographic\""),
+        },
+        "azimuth_deg" | "elevation_deg" | "zoom" | "fov_y_deg" | "distance" => match number(v) {
+            true => Ok(()),
+            false => expect("a number"),
+        },
+        "target" => match v.as_array() {
+            Some(a) if a.len() == 3 && a.iter().all(number) => Ok(()),
+            _ => expect("three numbers, [x, y, z]"),
+        },
+        "image" => match v.as_array() {
+            Some(a)
+                if a.len() == 2
+                    && a.iter()
+                        .all(|x| x.as_u64().is_some_and(|n| n <= u64::from(u32::MAX))) =>
+            {
+                Ok(())
+            }
+            _ => expect("two whole numbers of pixels, [width, height]"),
+        },
+        _ => Ok(()),
+    }
+}
+
+/// A JSON syntax error said with its place, and where it is a NaN or an infinity (which
+/// JSON has no words for, though Python's `json.dump` writes them), the key it stands at.
+fn json_error(text: &str, e: &serde_json::Error) -> String {
+    let line = text.lines().nth(e.line().saturating_sub(1)).unwrap_or("");
+    let before: String = line.chars().take(e.column().saturating_sub(1)).collect();
+    let at: String = line
+        .chars()
+        .skip(e.column().saturating_sub(1))
+        .take(9)
+        .collect();
+    let word = ["NaN", "-NaN", "Infinity", "-Infinity", "nan", "inf", "-inf"]
+        .into_iter()
+        .find(|w| at.starts_with(w) || before.trim_end().ends_with(w));
+    match word {
+        Some(w) => {
+            let key = before
+                .rsplit_once("\":")
+                .and_then(|(k, _)| k.rsplit_once('"'))
+                .map_or(String::new(), |(_, k)| format!(" for {k}"));
+            format!(
+                "{w}{key} at line {} column {}: JSON has no NaN or infinity (Python's \
+                 json.dump writes them; give a finite number, or leave the key out)",
+                e.line(),
+                e.column()
+            )
+        }
+        None => e.to_string(),
+    }
+}
+
+/// The first key a view file's top-level object gives twice, if any (a JSON reader keeps
+/// the last quietly).
+fn duplicate_key(text: &str) -> Option<String> {
+    struct Keys(Option<String>);
+    impl<'de> serde::Deserialize<'de> for Keys {
+        fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Keys, D::Error> {
+            struct V;
+            impl<'de> serde::de::Visitor<'de> for V {
+                type Value = Keys;
+                fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                    f.write_str("an object")
+                }
+                fn visit_map<A: serde::de::MapAccess<'de>>(
+                    self,
+                    mut map: A,
+                ) -> Result<Keys, A::Error> {
+                    let mut seen = std::collections::HashSet::new();
+                    let mut twice = None;
+                    while let Some(k) = map.next_key::<String>()? {
+                        map.next_value::<serde::de::IgnoredAny>()?;
+                        if !seen.insert(k.clone()) && twice.is_none() {
+                            twice = Some(k);
+                        }
+                    }
+                    Ok(Keys(twice))
+                }
+            }
+            d.deserialize_map(V)
+        }
+    }
+    serde_json::from_str::<Keys>(text).ok()?.0
+}
+
 /// A camera as stored in a view file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ViewFile {
@@ -145,9 +259,20 @@ impl ViewFile {
     /// [`Self::parse`], with the JSON object it was read from.
     fn parse_with_json(text: &str) -> Result<(ViewFile, serde_json::Value), String> {
         // An object, not a list (serde reads a struct from a list of its fields in order).
-        let value: serde_json::Value = serde_json::from_str(text).map_err(|e| e.to_string())?;
-        if !value.is_object() {
+        let mut value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| json_error(text, &e))?;
+        let Some(map) = value.as_object_mut() else {
             return Err("a view file is a JSON object (`{\"version\": 1, ...}`)".into());
+        };
+        if let Some(key) = duplicate_key(text) {
+            return Err(format!(
+                "{key} is given twice (which one is meant?): keep one"
+            ));
+        }
+        // `null` is the key left out, for every key but the version.
+        map.retain(|k, v| !(v.is_null() && k != "version"));
+        for (key, v) in map.iter() {
+            check_type(key, v)?;
         }
         let v = ViewFile::deserialize(&value).map_err(|e| e.to_string())?;
         v.check()?;
@@ -197,6 +322,12 @@ impl ViewFile {
         }
         if self.zoom <= 0.0 {
             return Err(format!("zoom {} (must be positive)", self.zoom));
+        }
+        if let Some([w, h]) = self.image.filter(|&[w, h]| w == 0 || h == 0) {
+            return Err(format!(
+                "image [{w}, {h}] (the width and height of the image the view was saved \
+                 from, each at least 1 pixel; leave the key out where unknown)"
+            ));
         }
         Ok(())
     }
@@ -303,6 +434,61 @@ impl ViewFile {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A view file a script edited wrongly is refused naming the key and what it takes:
+    /// a number in quotes, a target of two, a fractional version, a NaN (with its key and
+    /// place), a key given twice, an image of no pixels; `null` is the key left out.
+    #[test]
+    fn wrong_types_name_the_key_and_what_it_takes() {
+        for (text, says) in [
+            (
+                r#"{"version":1,"target":[0,0,"x"]}"#,
+                "target [0,0,\"x\"]: expected three numbers",
+            ),
+            (
+                r#"{"version":1,"target":[0,0]}"#,
+                "expected three numbers, [x, y, z]",
+            ),
+            (
+                r#"{"version":1,"azimuth_deg":"120"}"#,
+                "azimuth_deg \"120\": expected a number (a number is written without quotes)",
+            ),
+            (
+                r#"{"version":1.0}"#,
+                "version 1.0: expected the whole number 1",
+            ),
+            (
+                r#"{"version":null}"#,
+                "version null: expected the whole number 1",
+            ),
+            (
+                r#"{"version":1,"projection":"ortho"}"#,
+                "expected \"perspective\" or",
+            ),
+            (
+                "{\"version\": 1,\n \"zoom\": NaN}",
+                "NaN for zoom at line 2 column 10: JSON has no NaN",
+            ),
+            (
+                r#"{"version":1,"azimuth_deg":10,"azimuth_deg":200}"#,
+                "azimuth_deg is given twice",
+            ),
+            (
+                r#"{"version":1,"image":[0,0]}"#,
+                "image [0, 0] (the width and height",
+            ),
+            (
+                r#"{"version":1,"image":[640.5,480]}"#,
+                "expected two whole numbers of pixels",
+            ),
+        ] {
+            let e = ViewFile::parse(text).unwrap_err();
+            assert!(e.contains(says), "{text}: {e}");
+        }
+        let v = ViewFile::parse(r#"{"version":1,"zoom":null,"azimuth_deg":null,"target":null}"#)
+            .unwrap();
+        assert_eq!(v, ViewFile::default());
+    }
 
     #[test]
     fn round_trip_through_a_file() {

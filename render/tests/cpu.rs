@@ -1705,6 +1705,26 @@ fn hidden_values_of_several_attributes_hide_their_union() {
     }
 }
 
+/// A file rewritten in place while it is open (a `cp` over it) is told changed; one
+/// replaced by rename is not (the old one stays mapped whole), nor one left alone.
+#[test]
+fn a_file_rewritten_in_place_is_told_changed() {
+    let (dir, path, f) = make_file(&cloud_frame(500, 1), small_build(), &[]);
+    assert!(!f.changed_on_disk());
+    let copy = dir.path().join("copy.mdlod");
+    std::fs::copy(&path, &copy).unwrap();
+    std::fs::rename(&copy, &path).unwrap();
+    assert!(!f.changed_on_disk());
+    let g = MdlodFile::open(&path).unwrap();
+    let mut w = std::fs::OpenOptions::new()
+        .append(true)
+        .open(&path)
+        .unwrap();
+    std::io::Write::write_all(&mut w, b"more").unwrap();
+    assert!(g.changed_on_disk());
+    assert!(!f.changed_on_disk());
+}
+
 /// The species a cut shows are exactly those of the particles it covers (drawn, or below
 /// a drawn cluster), at any error, with species hidden or cut away.
 #[test]

@@ -234,8 +234,22 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         mdlod_format::writer::temp_file_owner(file, &format!("frame-{timestep}.mdlod"))
     };
     crate::interrupt::remove_and_report_leftovers(&[out, &temp_parent], &temp_owner);
-    let work = crate::interrupt::work_dir(&temp_parent)
-        .with_context(|| super::work_dir_context(&temp_parent, temp_given))?;
+    // A directory of finished frames made read-only (an archive) still checks as current:
+    // the working directory goes to the system's then (a frame that needs converting is
+    // refused before it is built).
+    let work = match crate::interrupt::work_dir(&temp_parent) {
+        Err(e)
+            if !temp_given
+                && matches!(
+                    e.kind(),
+                    std::io::ErrorKind::PermissionDenied | std::io::ErrorKind::ReadOnlyFilesystem
+                ) =>
+        {
+            crate::interrupt::work_dir(&std::env::temp_dir())
+        }
+        made => made,
+    }
+    .with_context(|| super::work_dir_context(&temp_parent, temp_given))?;
     // The frames being written when the batch is interrupted go too.
     crate::interrupt::remove_on_interrupt(work.path(), out, temp_owner);
     crate::interrupt::on_interrupt_say(

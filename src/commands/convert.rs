@@ -351,6 +351,16 @@ fn check_not_an_image(output: &std::path::Path) -> Result<()> {
             output.with_extension("mdlod").display()
         );
     }
+    // Text and other files' names (`-o frame.txt` where a listing was meant).
+    const OTHERS: &[&str] = &["txt", "csv", "json", "dat", "log", "sndf", "md"];
+    if OTHERS.contains(&ext.as_str()) {
+        bail!(
+            "-o {}: convert writes a binary .mdlod file, and this names a file of another \
+             kind; write {} (`mdlod info` lists what it holds)",
+            output.display(),
+            output.with_extension("mdlod").display()
+        );
+    }
     if IMAGES.contains(&ext.as_str()) {
         let file = output.with_extension("mdlod");
         bail!(

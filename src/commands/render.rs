@@ -4040,15 +4040,27 @@ fn render_frames(
 ) -> Result<()> {
     let dir = &args.file;
     super::view::unmerged_batch(dir)?;
+    // (A batch rewriting the directory now lists only the frames it has finished.)
+    let running = || {
+        mdlod_preprocess::batch::batch_running(dir).map_or(String::new(), |who| {
+            format!(" (a batch is writing it now, {who}: render once it ends)")
+        })
+    };
     let manifest = mdlod_preprocess::batch::read_manifest(dir).with_context(|| {
         format!(
-            "{}: a directory renders as the frames of a batch, listed in its dataset.json",
-            dir.display()
+            "{}: a directory renders as the frames of a batch, listed in its \
+             dataset.json{}",
+            dir.display(),
+            running()
         )
     })?;
     let n = manifest.frames.len();
     if n == 0 {
-        anyhow::bail!("{}: dataset.json lists no frames", dir.display());
+        anyhow::bail!(
+            "{}: dataset.json lists no frames{}",
+            dir.display(),
+            running()
+        );
     }
     frame_output(&args.output, 0)?;
     check_numbered_outputs(&args.output, n)?;

@@ -92,6 +92,13 @@ pub fn run(mut args: Args) -> Result<()> {
     let t = std::time::Instant::now();
     let f = MdlodFile::open(&args.file)?;
     let r = f.verify()?;
+    if f.changed_on_disk() {
+        anyhow::bail!(
+            "{}: the file changed while it was verified (another program rewrote it in \
+             place): verify it again once it is written whole",
+            args.file.display()
+        );
+    }
     println!(
         "{}: ok: {} sections ({}) checksummed, {} points decoded, {} nodes checked in {:.2} s",
         args.file.display(),
