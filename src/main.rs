@@ -25,10 +25,50 @@ static OUTPUT_GONE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBoo
 /// then ends with a failure once its work is done.
 static OUTPUT_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
+/// Set by a command's `--json`: standard output holds the one JSON object the command
+/// ends with ([`print_json`]); its lines of text go to standard error, and its notes into
+/// that object too.
+static JSON_OUTPUT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// The notes said in JSON mode, for the object's `notes`.
+static NOTES: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+/// Turns on JSON mode (see [`JSON_OUTPUT`]).
+fn json_output() {
+    JSON_OUTPUT.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Writes `value` (an object) to standard output as one line of JSON, with the notes
+/// said since the last as its `notes`.
+fn print_json(mut value: serde_json::Value) {
+    use std::io::Write;
+    if let serde_json::Value::Object(map) = &mut value {
+        let notes = std::mem::take(&mut *NOTES.lock().unwrap_or_else(|e| e.into_inner()));
+        map.insert("notes".into(), notes.into());
+    }
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = writeln!(out, "{value}") {
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            eprintln!("error: writing to standard output: {e}");
+            OUTPUT_FAILED.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+}
+
 /// Writes a line of output (see `println!` above).
 fn print_line(line: std::fmt::Arguments) {
     use std::io::Write;
     use std::sync::atomic::Ordering;
+    if JSON_OUTPUT.load(Ordering::Relaxed) {
+        let text = line.to_string();
+        if let Some((_, note)) = text.split_once("note: ") {
+            NOTES
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(note.to_string());
+        }
+        eprintln!("{text}");
+        return;
+    }
     if OUTPUT_GONE.load(Ordering::Relaxed) {
         return;
     }

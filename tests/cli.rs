@@ -10049,6 +10049,108 @@ fn hidden_values_can_be_read_from_another_attribute_than_the_colours() {
     }
 }
 
+/// `--json` leaves one line of JSON per result on standard output and the text on
+/// standard error: convert, verify (a file and a batch directory), batch, a still (its
+/// notes in it) and a turntable (a line per image), each parsed and checked against what
+/// was done.
+#[test]
+fn json_output_gives_one_object_per_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = lammps_sample_path("cu_gb.cna.dump");
+    let file = dir.path().join("gb.mdlod");
+    let json = |args: &[&str]| -> Vec<serde_json::Value> {
+        let o = mdlod(args);
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8(o.stdout)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{l}: {e}")))
+            .collect()
+    };
+    let c = json(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--attribute",
+        "c_pe",
+        "--json",
+    ]);
+    assert_eq!(c.len(), 1);
+    assert_eq!(c[0]["particles"], 2552);
+    assert_eq!(c[0]["output"], s(&file));
+    assert_eq!(
+        c[0]["bytes"].as_u64(),
+        Some(std::fs::metadata(&file).unwrap().len())
+    );
+    let v = json(&["verify", s(&file), "--json"]);
+    assert_eq!(
+        (v[0]["ok"].as_bool(), v[0]["points_decoded"].as_u64()),
+        (Some(true), Some(2552))
+    );
+    let png = dir.path().join("a.png");
+    let r = json(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-attribute",
+        "5:6",
+        "--json",
+    ]);
+    assert_eq!(r.len(), 1);
+    assert_eq!(
+        (r[0]["width"].as_u64(), r[0]["height"].as_u64()),
+        (Some(64), Some(48))
+    );
+    assert!(r[0]["particles_drawn"].as_u64().unwrap() > 0);
+    assert_eq!(r[0]["camera"]["azimuth_deg"].as_f64(), Some(30.0));
+    let notes = r[0]["notes"].as_array().unwrap();
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.as_str().unwrap().contains("hides no particle")),
+        "{notes:?}"
+    );
+    let spin = dir.path().join("spin-%d.png");
+    let t = json(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&spin),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--turntable",
+        "3",
+        "--json",
+    ]);
+    assert_eq!(t.len(), 3);
+    assert_eq!(t[2]["output"], s(&dir.path().join("spin-2.png")));
+    let b = dir.path().join("b.d");
+    let j = json(&["batch", s(&dump), "-o", s(&b), "--json"]);
+    assert_eq!(
+        (j[0]["frames"].as_u64(), j[0]["converted"].as_u64()),
+        (Some(1), Some(1))
+    );
+    let j = json(&["batch", s(&dump), "-o", s(&b), "--json"]);
+    assert_eq!(j[0]["already_done"].as_u64(), Some(1));
+    let v = json(&["verify", s(&b), "--json"]);
+    assert_eq!(
+        (v[0]["ok"].as_bool(), v[0]["frames_ok"].as_u64()),
+        (Some(true), Some(1))
+    );
+}
+
 /// A number with a decimal comma gets a tip with the point, whichever option takes it.
 #[test]
 fn a_decimal_comma_gets_a_tip() {

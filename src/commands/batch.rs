@@ -54,6 +54,11 @@ pub struct Args {
     /// the output, such as a full disk, still stop the batch.
     #[arg(long)]
     pub keep_going: bool,
+    /// Print the run's counts as one line of JSON on standard output (frames in the
+    /// inputs, converted, already done, left for a rerun, failed with their places, the
+    /// manifest, and the notes), the text lines going to standard error: for scripts
+    #[arg(long)]
+    pub json: bool,
     #[command(flatten)]
     pub build: BuildArgs,
 }
@@ -160,6 +165,9 @@ fn slurm_shard(var: impl Fn(&str) -> Option<String>) -> Result<Option<(u32, u32)
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if args.json {
+        crate::json_output();
+    }
     if let Some(dir) = &args.merge {
         let m = merge(dir)?;
         println!(
@@ -174,6 +182,13 @@ pub fn run(args: Args) -> Result<()> {
                 mdlod_preprocess::batch::failed_place(f),
                 f.reason
             );
+        }
+        if args.json {
+            crate::print_json(serde_json::json!({
+                "manifest": dir.join(mdlod_preprocess::batch::MANIFEST).display().to_string(),
+                "merged": m.frames.len(),
+                "missing": m.failed.len(),
+            }));
         }
         return Ok(());
     }
@@ -474,6 +489,22 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
              writing them, they are damaged: `mdlod convert` of one says where)",
             report.manifest.display()
         );
+    }
+    if args.json {
+        crate::print_json(serde_json::json!({
+            "output": out.display().to_string(),
+            "manifest": report.manifest.display().to_string(),
+            "frames": total,
+            "frames_in_shard": report.frames_in_shard,
+            "shard": opts.shard.map(|(i, n)| [i, n]),
+            "converted": report.converted,
+            "already_done": report.skipped,
+            "empty": report.empty.len(),
+            "left_for_rerun": report.incomplete.iter().map(ToString::to_string).collect::<Vec<_>>(),
+            "failed": report.failed.iter().map(ToString::to_string).collect::<Vec<_>>(),
+            "duplicates": report.duplicates.len(),
+            "at_a_time": report.jobs,
+        }));
     }
     if !report.failed.is_empty() {
         let n = report.failed.len();

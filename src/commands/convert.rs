@@ -35,6 +35,11 @@ pub struct Args {
     /// Worker threads (default: all cores).
     #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
+    /// Print what was written as one line of JSON on standard output (the file, its
+    /// counts, error bound and times, and the notes), the text lines going to standard
+    /// error: for scripts
+    #[arg(long)]
+    pub json: bool,
     /// Memory the conversion may use (e.g. 4G; default: half of the memory this process may
     /// have: the machine's, or a Slurm job's or container's allocation).
     /// Frames above the chunk size are built out of core, as many chunks at a time as
@@ -286,6 +291,9 @@ pub enum Precision {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if args.json {
+        crate::json_output();
+    }
     let report = with_threads(args.threads, || convert(&args))??;
     print_report(&args.output, &report);
     if let Some(column) = &args.build.species_column {
@@ -303,7 +311,30 @@ pub fn run(args: Args) -> Result<()> {
             println!("  note: {note}");
         }
     }
+    if args.json {
+        crate::print_json(report_json(&args.output, &report));
+    }
     Ok(())
+}
+
+/// The `--json` object of a conversion.
+pub fn report_json(output: &std::path::Path, r: &ConvertReport) -> serde_json::Value {
+    serde_json::json!({
+        "output": output.display().to_string(),
+        "frame": r.frame.map(|(k, _)| k),
+        "frames_in_input": r.frame.map(|(_, n)| n),
+        "particles": r.particles,
+        "levels": r.levels,
+        "nodes": r.nodes,
+        "bytes": r.file_size,
+        "max_position_error": r.max_position_error,
+        "seconds": {
+            "read": r.read_time.as_secs_f64(),
+            "hierarchy": r.build_time.as_secs_f64(),
+            "write": r.write_time.as_secs_f64(),
+        },
+        "peak_memory_mib": peak_memory_mib(),
+    })
 }
 
 /// Runs `f` with `threads` worker threads. The process's global pool takes the count, so

@@ -40,6 +40,7 @@ pub fn run(args: Args) -> Result<()> {
         frame: None,
         last: true,
         threads: None,
+        json: false,
         memory_limit: None,
         build: super::convert::BuildArgs {
             // The generator writes copper as LAMMPS type 1.
@@ -100,6 +101,7 @@ pub fn run(args: Args) -> Result<()> {
         exponent: None,
         fit_all: false,
         turntable: None,
+        json: false,
         gpu_memory: None,
         background: None,
         mode: super::render::Mode::Spheres,

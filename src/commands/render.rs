@@ -78,6 +78,13 @@ pub struct Args {
     /// azimuth, for a talk's turntable: -o must number them (e.g. spin/view-%03d.png).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..=100_000))]
     pub turntable: Option<u32>,
+    /// Print what each image drew as a line of JSON on standard output (the image, its
+    /// size and samples, the particles and clusters drawn and hidden, the error reached,
+    /// the camera, the times, the adapter, and the notes since the last), the text lines
+    /// going to standard error: for scripts and regression pictures. A movie or turntable
+    /// prints one line per image
+    #[arg(long)]
+    pub json: bool,
     /// Of a batch directory, draw only frames START to END (0-based positions in its
     /// dataset.json, END not included; either may be left out), every STEP-th: `::10`
     /// previews every tenth, `0:250` and `250:500` split a movie between two jobs. The
@@ -1981,6 +1988,9 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 }
 
 pub fn run(mut args: Args) -> Result<()> {
+    if args.json {
+        crate::json_output();
+    }
     // A batch's dataset.json renders as its directory.
     args.file = super::batch_dir_of(args.file);
     // `--cell red frame.mdlod`: the colour takes `=`, so `red` was read as the file.
@@ -2687,6 +2697,9 @@ pub fn run(mut args: Args) -> Result<()> {
     }
     if let Some(axes) = &axes {
         draw_panels(&args, &[(&args.output, axes)], args.axes_corner(), "--axes")?;
+    }
+    if args.json {
+        crate::print_json(report_json(&args.output, &r, &args));
     }
     Ok(())
 }
@@ -3695,6 +3708,49 @@ fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
 }
 
 /// The line for one image of a movie or a turntable (`which` names it): what it drew.
+/// The `--json` object of one image.
+fn report_json(out: &Path, r: &mdlod_render::RenderReport, args: &Args) -> serde_json::Value {
+    use clap::ValueEnum;
+    let c = &r.camera;
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    serde_json::json!({
+        "output": out.display().to_string(),
+        "file": args.file.display().to_string(),
+        "mode": args.mode.to_possible_value().map(|v| v.get_name().to_string()),
+        "width": r.width,
+        "height": r.height,
+        "spp": r.spp,
+        "particles_drawn": r.particles_drawn,
+        "particles_hidden": r.particles_hidden,
+        "particles_clipped": r.particles_clipped,
+        "clusters_drawn": r.nodes_drawn,
+        "draw_ranges": r.ranges,
+        "clusters_occluded": r.nodes_occluded,
+        "particles_occluded": r.particles_occluded,
+        "error_px": r.error_px,
+        "budget": r.budget,
+        "budget_limited": r.budget_limited,
+        "camera": {
+            "projection": match c.projection {
+                mdlod_render::camera::Projection::Perspective => "perspective",
+                mdlod_render::camera::Projection::Orthographic => "orthographic",
+            },
+            "azimuth_deg": c.azimuth_deg,
+            "elevation_deg": c.elevation_deg,
+            "target": c.target.to_array(),
+            "distance": c.distance,
+            "fov_y_deg": c.fov_y_deg,
+        },
+        "milliseconds": {
+            "total": ms(r.total_time),
+            "traversal": ms(r.traversal_time),
+            "gpu": r.gpu_time.map(ms),
+        },
+        "adapter": r.adapter,
+        "backend": r.backend,
+    })
+}
+
 fn image_line(
     out: &Path,
     which: &str,
@@ -3819,6 +3875,9 @@ fn render_turntable(
             azimuth.rem_euclid(360.0)
         );
         println!("{}", image_line(&out, &which, &r, args, coarsest));
+        if args.json {
+            crate::print_json(report_json(&out, &r, args));
+        }
     }
     let exposure = opts
         .exposure
@@ -4334,6 +4393,9 @@ fn render_frames(
         limited_frames += usize::from(r.budget_limited || r.pool_limited);
         let which = format!("frame {}/{n}, timestep {}", i + 1, f.timestep);
         println!("{}", image_line(&out, &which, &r, args, coarsest));
+        if args.json {
+            crate::print_json(report_json(&out, &r, args));
+        }
     }
     let exposure = opts
         .exposure

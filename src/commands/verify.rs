@@ -14,6 +14,10 @@ pub struct Args {
     /// A .mdlod file, or a batch directory (with dataset.json, or shard manifests) or
     /// its dataset.json.
     pub file: PathBuf,
+    /// Print the result as one line of JSON on standard output (`ok`, what was checked,
+    /// and a directory's problems), the text lines going to standard error: for scripts
+    #[arg(long)]
+    pub json: bool,
 }
 
 fn run_dir(args: &Args) -> Result<()> {
@@ -62,6 +66,17 @@ fn run_dir(args: &Args) -> Result<()> {
             dir.display()
         )
     };
+    if args.json {
+        crate::print_json(serde_json::json!({
+            "file": dir.display().to_string(),
+            "ok": c.problems.is_empty(),
+            "frames_ok": c.frames_ok,
+            "problems": c.problems.iter().map(ToString::to_string).collect::<Vec<_>>(),
+            "unlisted": c.unlisted,
+            "manifests": c.manifests,
+            "seconds": t.elapsed().as_secs_f64(),
+        }));
+    }
     if !c.problems.is_empty() {
         anyhow::bail!(
             "{}: {} problem{} ({} frame{} verified){merged}",
@@ -84,6 +99,9 @@ fn run_dir(args: &Args) -> Result<()> {
 }
 
 pub fn run(mut args: Args) -> Result<()> {
+    if args.json {
+        crate::json_output();
+    }
     // A batch's dataset.json verifies as its directory.
     args.file = super::batch_dir_of(args.file);
     if args.file.is_dir() {
@@ -113,5 +131,18 @@ pub fn run(mut args: Args) -> Result<()> {
         r.max_particle_error_seen,
         f.metadata().max_position_error
     );
+    if args.json {
+        crate::print_json(serde_json::json!({
+            "file": args.file.display().to_string(),
+            "ok": true,
+            "sections": r.sections,
+            "bytes_hashed": r.bytes_hashed,
+            "points_decoded": r.points_decoded,
+            "nodes_checked": f.nodes().len(),
+            "max_particle_error_seen": r.max_particle_error_seen,
+            "max_position_error": f.metadata().max_position_error,
+            "seconds": t.elapsed().as_secs_f64(),
+        }));
+    }
     Ok(())
 }
