@@ -70,7 +70,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let f = dir.path().join("frame.mdlod");
         std::fs::write(&f, b"x").unwrap();
-        let args = ["render".into(), f.clone().into_os_string(), "-o".into()];
+        let args = [
+            "-o".into(),
+            f.clone().into_os_string(),
+            "no-such-file".into(),
+        ];
         let m = super::message(args.into_iter());
         assert!(
             m.starts_with(&format!("error: {} was cut short", f.display())),

@@ -384,7 +384,8 @@ fn check_not_an_image(output: &std::path::Path) -> Result<()> {
     }
     // Text and other files' names (`-o frame.txt` where a listing was meant).
     const OTHERS: &[&str] = &["txt", "csv", "json", "dat", "log", "sndf", "md"];
-    if OTHERS.contains(&ext.as_str()) {
+    // (An existing such file is refused as no .mdlod file, which keeps it, below.)
+    if OTHERS.contains(&ext.as_str()) && !output.exists() {
         bail!(
             "-o {}: convert writes a binary .mdlod file, and this names a file of another \
              kind; write {} (`mdlod info` lists what it holds)",
