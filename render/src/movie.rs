@@ -195,11 +195,28 @@ pub fn turntable_cameras(
         })
         .collect::<Result<Vec<_>, crate::RenderError>>()?;
     let farthest = cameras.iter().map(|c| c.distance).fold(0.0f32, f32::max);
+    // The zoom asked for (`--zoom`, the same in every view): the part a legend leaves is
+    // fitted as without it, and the zoom then taken from there, as a still does; 1 for
+    // views whose zoom is not at hand (a view file's).
+    let zoom = views
+        .iter()
+        .zip(&cameras)
+        .filter_map(|(v, c)| {
+            let whole = crate::camera_for_bounds(bounds, &unzoomed(v)?, width, height).ok()?;
+            let mut whole = whole;
+            if fitted_target {
+                whole.fit_about_centre(bounds, aspect);
+            }
+            Some(whole.distance / c.distance.max(f32::MIN_POSITIVE))
+        })
+        .fold(None, |z: Option<f32>, k| Some(z.map_or(k, |z| z.min(k))))
+        .filter(|z| z.is_finite() && *z > 0.0)
+        .unwrap_or(1.0);
     // The part a legend leaves is as much farther as it is smaller. The data's reach
     // across the image, over the turn at the farthest distance, says how much farther
     // each part needs it: a part as wide as the image but short shrinks a cube that a
     // narrow, full-height part beside the legend holds whole.
-    let reach = turn_reach(&cameras, farthest, bounds, aspect);
+    let reach = turn_reach(&cameras, farthest * zoom, bounds, aspect);
     let window = fit_windows
         .iter()
         .filter_map(|w| w.centre_and_half())
@@ -221,8 +238,9 @@ pub fn turntable_cameras(
                 distance: farthest,
                 ..c
             };
-            // The data's centre dragged to the window's centre, in pixels (y down).
-            if let Some((centre, _)) = window {
+            // The data's centre dragged to the window's centre, in pixels (y down); a
+            // target given stays where it is, as in a still.
+            if let Some((centre, _)) = window.filter(|_| fitted_target) {
                 let (w, h) = (f64::from(width), f64::from(height));
                 c.pan_px(
                     (centre[0] * 0.5 * w) as f32,
@@ -235,13 +253,42 @@ pub fn turntable_cameras(
         .collect())
 }
 
+/// `view` at zoom 1, where its zoom is at hand (not a view file's).
+fn unzoomed(view: &crate::ViewSpec) -> Option<crate::ViewSpec> {
+    use crate::ViewSpec;
+    Some(match view.clone() {
+        ViewSpec::Orbit {
+            azimuth_deg,
+            elevation_deg,
+            projection,
+            ..
+        } => ViewSpec::Orbit {
+            azimuth_deg,
+            elevation_deg,
+            zoom: 1.0,
+            projection,
+        },
+        ViewSpec::Default {
+            projection, target, ..
+        } => ViewSpec::Default {
+            zoom: 1.0,
+            projection,
+            target,
+        },
+        ViewSpec::View(v) => ViewSpec::View(crate::ViewFile { zoom: 1.0, ..v }),
+        _ => return None,
+    })
+}
+
 /// How far the corners of `bounds` reach from the image's centre (normalised device
-/// coordinates, x and y) over the views of a turn, each seen from `distance`.
+/// coordinates, x and y) over the views of a turn, each seen from `distance` looking at
+/// the data's centre (a target given is put in place after the fit, as in a still).
 fn turn_reach(cameras: &[Camera], distance: f32, bounds: &Bounds, aspect: f32) -> [f64; 2] {
     let mut reach = [0.0f64; 2];
     for c in cameras {
         let c = Camera {
             distance,
+            target: bounds.center(),
             ..c.clone()
         };
         let m = c.clip_from_view(aspect) * c.view_from_world();
@@ -335,6 +382,31 @@ mod tests {
                 (centre[0] - 1.0 / 3.0).abs() < 1e-3 && centre[1].abs() < 1e-3,
                 "{centre:?}"
             );
+        }
+        // Zoomed into a window: the window's fit, then the zoom (not the whole data
+        // fitted into the window again from the zoomed distance), the centre in it.
+        let zoomed = turntable_cameras(&b, &turn(12, 4.0), w, h, true, &[window]).unwrap();
+        let ratio = left[0].distance / zoomed[0].distance;
+        assert!((ratio - 4.0).abs() < 1e-3, "{ratio}");
+        // A target given stays the target, at the window's fit over the zoom.
+        let target = Vec3::new(10.0, 5.0, 2.0);
+        let aimed: Vec<ViewSpec> = (0..12)
+            .map(|i| {
+                ViewSpec::View(crate::ViewFile {
+                    azimuth_deg: 30.0 + 30.0 * i as f32,
+                    elevation_deg: 20.0,
+                    zoom: 4.0,
+                    target: Some(target.to_array()),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let plain = turntable_cameras(&b, &aimed, w, h, false, &[]).unwrap();
+        let aimed = turntable_cameras(&b, &aimed, w, h, false, &[window]).unwrap();
+        for (a, p) in aimed.iter().zip(&plain) {
+            assert!((a.target - target).length() < 1e-4, "{:?}", a.target);
+            let ratio = a.distance / p.distance;
+            assert!((1.0..2.0).contains(&ratio), "{ratio}");
         }
     }
 }
