@@ -1213,15 +1213,26 @@ fn beyond_marks([low, high]: [String; 2], [lo, hi]: [f64; 2], data: [f32; 2]) ->
 }
 
 /// The bar of a projected image's colour map: `title` (what the light is) over
-/// `[lo, hi]`, on a log scale when `log` (as `SplatFrame::colour_mapped` maps it).
-pub fn light_bar(map: ColourMap, title: &str, [lo, hi]: [f32; 2], log: bool) -> Legend {
+/// `[lo, hi]`, on a log scale when `log` (as `SplatFrame::colour_mapped` maps it);
+/// `lit` is the light of the faintest and brightest lit pixels, an end that cuts them
+/// marked `≤` or `≥` (a cusp's core brighter than the map's top takes the top colour).
+pub fn light_bar(
+    map: ColourMap,
+    title: &str,
+    [lo, hi]: [f32; 2],
+    log: bool,
+    lit: [f32; 2],
+) -> Legend {
     let info = mdlod_format::meta::AttributeInfo {
         name: String::new(),
         min: lo,
         max: hi,
     };
     let scale = AttributeScale::new(&info).with_log(log && lo > 0.0);
-    colour_bar(map, &scale, title, [lo, hi], [lo, hi])
+    // (Unlit pixels show the background, not the bottom colour: a linear map from 0
+    // cuts nothing below.)
+    let lit = [if log { lit[0] } else { lit[0].max(lo) }, lit[1]];
+    colour_bar(map, &scale, title, [lo, hi], lit)
 }
 
 /// The density volume's transfer function: volume fraction φ from `density_min` (clear
@@ -1825,10 +1836,28 @@ mod tests {
         assert_eq!(font::glyph('\u{1F600}'), font::glyph('?'));
     }
 
+    /// A projection's bar marks an end `≥` (`≤`, on a log scale) where the image's lit
+    /// pixels reach past it, and neither where they lie within (a linear map from 0
+    /// cuts nothing below: unlit pixels show the background).
+    #[test]
+    fn a_light_bar_marks_the_ends_its_pixels_pass() {
+        let text = |range, log, lit| {
+            light_bar(ColourMap::Viridis, "flux", range, log, lit)
+                .svg()
+                .replace("&lt;", "<")
+        };
+        let cut = text([1e-3, 10.0], true, [1e-6, 40.0]);
+        assert!(cut.contains("≥ 10") && cut.contains("≤ 0.001"), "{cut}");
+        let within = text([1e-3, 10.0], true, [1e-3, 10.0]);
+        assert!(!within.contains('≥') && !within.contains('≤'), "{within}");
+        let linear = text([0.0, 10.0], false, [1e-6, 12.0]);
+        assert!(linear.contains("≥ 10") && !linear.contains('≤'), "{linear}");
+    }
+
     #[test]
     fn a_bar_writes_its_numbers_in_one_notation() {
         let labels = |lo: f32, hi: f32| {
-            let svg = light_bar(ColourMap::Viridis, "x", [lo, hi], false).svg();
+            let svg = light_bar(ColourMap::Viridis, "x", [lo, hi], false, [lo, hi]).svg();
             let ends: Vec<String> = svg
                 .lines()
                 .filter(|l| {

@@ -537,6 +537,9 @@ pub struct RenderReport {
     pub total_flux: Option<f64>,
     /// Splat mode with a colour map: the image's light at the map's ends.
     pub light_range: Option<[f32; 2]>,
+    /// Splat mode with a colour map: the light of its faintest and brightest lit pixels
+    /// (past `light_range`'s ends, they take the end's colour).
+    pub light_extent: Option<[f32; 2]>,
     /// Density mode: slice stacks run before every ray was done, of those the volume spans.
     pub density_stacks: Option<(u32, u32)>,
     /// Density: read-backs of the active rays (one per batch of stacks; one when the
@@ -1836,6 +1839,7 @@ impl RenderReport {
             exposure: None,
             total_flux: None,
             light_range: None,
+            light_extent: None,
             density_stacks: None,
             density_readbacks: None,
             density_host_time: None,
@@ -2023,6 +2027,7 @@ fn draw_cut(
             Ok((image, report))
         }
         RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => {
+            let mut light_extent = None;
             let (splats, image, exposure) = match opts.mode {
                 RenderMode::SplatOver { opacity, order } => {
                     if !(opacity.is_finite() && opacity > 0.0 && opacity <= 1.0) {
@@ -2063,12 +2068,13 @@ fn draw_cut(
                     let (image, tone) = match opts.style.colour_map {
                         // A projection: the image's light through the map.
                         Some(map) => {
-                            let (image, range) = splats.colour_mapped(
+                            let (image, range, extent) = splats.colour_mapped(
                                 map,
                                 opts.style.log_scale,
                                 opts.light_range,
                                 opts.background,
                             );
+                            light_extent = extent;
                             (image, Err(range))
                         }
                         None => {
@@ -2091,6 +2097,7 @@ fn draw_cut(
             let mut report = report(&frame);
             report.exposure = exposure.and_then(|t| t.ok());
             report.light_range = exposure.and_then(|t| t.err());
+            report.light_extent = light_extent;
             report.total_flux = exposure.map(|_| splats.total_light());
             if opts.keep_light_map && exposure.is_some() {
                 report.light_map = Some(splats.hdr.iter().map(|p| splats.light(p)).collect());

@@ -450,7 +450,17 @@ impl SplatFrame {
         log: bool,
         range: Option<[f32; 2]>,
         background_srgb: [f32; 3],
-    ) -> (RgbaImage, [f32; 2]) {
+    ) -> (RgbaImage, [f32; 2], Option<[f32; 2]>) {
+        // The faintest and brightest lit pixels: where the range cuts them, the legend
+        // marks its ends `≤` and `≥`.
+        let extent = self
+            .hdr
+            .iter()
+            .map(|p| self.light(p))
+            .filter(|v| *v > 0.0 && v.is_finite())
+            .fold(None, |e: Option<[f32; 2]>, v| {
+                Some(e.map_or([v, v], |[a, b]| [a.min(v), b.max(v)]))
+            });
         let range = range.unwrap_or_else(|| {
             let mut lit: Vec<f32> = self
                 .hdr
@@ -490,7 +500,7 @@ impl SplatFrame {
             };
             image.data[4 * i..4 * i + 4].copy_from_slice(&px);
         }
-        (image, range)
+        (image, range, extent)
     }
 
     /// An over-blended frame (premultiplied colour and coverage) over `background_srgb`,
@@ -2930,7 +2940,8 @@ mod tests {
             map.colour(t)
                 .map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8)
         };
-        let (image, range) = frame.colour_mapped(map, true, Some([1.0, 1000.0]), [0.2, 0.4, 0.6]);
+        let (image, range, _) =
+            frame.colour_mapped(map, true, Some([1.0, 1000.0]), [0.2, 0.4, 0.6]);
         assert_eq!(range, [1.0, 1000.0]);
         let px = |i: usize| {
             [
@@ -2951,7 +2962,7 @@ mod tests {
         }
         // Linear, from the image: 0 to the lit pixels' 99.5th percentile (the brightest
         // of these five).
-        let (image, range) = frame.colour_mapped(map, false, None, [0.0; 3]);
+        let (image, range, _) = frame.colour_mapped(map, false, None, [0.0; 3]);
         assert_eq!(range, [0.0, 5000.0]);
         let got = [image.data[8], image.data[9], image.data[10]];
         assert_eq!(got, encode(10.0 / 5000.0));

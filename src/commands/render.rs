@@ -2578,6 +2578,31 @@ pub fn run(mut args: Args) -> Result<()> {
              ({from}; unlit pixels show the background)",
             m.name(),
         );
+        // A cusp's core past the top (the percentile's cut), or a faint halo below a
+        // log map's bottom, takes the end's colour: said, as the legend marks it.
+        if let Some([faint, bright]) = r.light_extent {
+            let slack = 1e-6 * hi.abs().max(lo.abs());
+            let mut cut = Vec::new();
+            if bright > hi + slack {
+                cut.push(format!(
+                    "the brightest pixels, up to {bright:.4e}, take the top colour"
+                ));
+            }
+            if opts.style.log_scale && faint < lo - slack {
+                cut.push(format!(
+                    "the faintest lit ones, down to {faint:.4e}, the bottom colour"
+                ));
+            }
+            if !cut.is_empty() {
+                println!(
+                    "  note: {} (a legend marks its ends ≥ and ≤; --light-range {}:{} shows \
+                     them all)",
+                    cut.join(", and "),
+                    Num(if opts.style.log_scale { faint } else { lo }),
+                    Num(bright.max(hi))
+                );
+            }
+        }
     }
     if let (Some(e), Some(f)) = (r.exposure, r.total_flux) {
         println!(
@@ -2675,7 +2700,8 @@ pub fn run(mut args: Args) -> Result<()> {
         &opts,
         shown_attribute.as_ref(),
         species,
-        r.light_range,
+        r.light_range
+            .map(|range| (range, r.light_extent.unwrap_or(range))),
         &drawn_names(&r, species, Default::default()),
         std::slice::from_ref(&args.output),
     )?;
@@ -2763,23 +2789,35 @@ fn drawn_names(
     drawn
 }
 
+/// A projection's light as its legend shows it: the map's range, and the light of the
+/// faintest and brightest lit pixels of the images it maps.
+type Light = ([f32; 2], [f32; 2]);
+
+/// The light of the faintest and brightest lit pixels of two sets of images.
+fn lit_union(a: Option<[f32; 2]>, b: Option<[f32; 2]>) -> Option<[f32; 2]> {
+    match (a, b) {
+        (Some([a0, a1]), Some([b0, b1])) => Some([a0.min(b0), a1.max(b1)]),
+        (a, b) => a.or(b),
+    }
+}
+
 /// Writes `--legend` and draws `--legend-in-image` into the PNGs `images`: the bar of
 /// the colour map over the attribute (`attribute`, as `opts` shows it) or over a
-/// projection's light (`light_range`), the density volume's transfer function, or a key
+/// projection's light (`light`), the density volume's transfer function, or a key
 /// of the species shown (`drawn`, of `species`) in the colours drawn ([`build_legend`]).
 fn write_legend(
     args: &Args,
     opts: &RenderOptions,
     attribute: Option<&mdlod_format::meta::AttributeInfo>,
     species: &[mdlod_format::meta::Species],
-    light_range: Option<[f32; 2]>,
+    light: Option<Light>,
     drawn: &std::collections::BTreeSet<String>,
     images: &[PathBuf],
 ) -> Result<()> {
     if args.legend.is_none() && args.legend_in_image.is_none() {
         return Ok(());
     }
-    let (drawn_legend, what) = build_legend(args, opts, attribute, species, light_range, drawn)?;
+    let (drawn_legend, what) = build_legend(args, opts, attribute, species, light, drawn)?;
     if let Some(path) = &args.legend {
         if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
             std::fs::create_dir_all(parent)
@@ -2887,7 +2925,8 @@ fn check_legend_room(
         opts,
         meta.attribute.as_ref(),
         &species,
-        Some([1.0, 2.0]),
+        // (Marked ends, `≤` and `≥`, as wide as a legend's can be.)
+        Some(([1.0, 2.0], [0.5, 3.0])),
         &all,
     )?;
     let Some(scale) = legend.scale_in(opts.width, opts.height, args.text_scale) else {
@@ -3177,7 +3216,7 @@ fn build_legend(
     opts: &RenderOptions,
     attribute: Option<&mdlod_format::meta::AttributeInfo>,
     species: &[mdlod_format::meta::Species],
-    light_range: Option<[f32; 2]>,
+    light: Option<Light>,
     drawn: &std::collections::BTreeSet<String>,
 ) -> Result<(mdlod_render::legend::Legend, String)> {
     use mdlod_render::legend;
@@ -3201,11 +3240,11 @@ fn build_legend(
                 Some(t) => t.clone(),
                 None => projected_light(args, opts, attribute),
             };
-            let Some(range) = light_range else {
+            let Some((range, lit)) = light else {
                 anyhow::bail!("{name}: the image has no light to map (nothing drawn)");
             };
             (
-                legend::light_bar(map, &title, range, opts.style.log_scale),
+                legend::light_bar(map, &title, range, opts.style.log_scale, lit),
                 format!("the colour map over the {title}"),
             )
         }
@@ -3806,6 +3845,8 @@ fn render_turntable(
     let renderer =
         mdlod_render::Renderer::new(mdlod_render::GpuContext::with_backends(opts.backends)?);
     let (mut limited, mut first_camera) = (0usize, None);
+    // The faintest and brightest lit pixels over the views, for the legend's ends.
+    let mut lit = None;
     // The species any view shows, for the legend's key.
     let mut drawn = std::collections::BTreeSet::new();
     let azimuth = |i: u32| start + 360.0 * i as f32 / n as f32;
@@ -3867,6 +3908,7 @@ fn render_turntable(
         if r.particles_drawn + r.nodes_drawn > 0 {
             opts.exposure = opts.exposure.or(r.exposure);
             opts.light_range = opts.light_range.or(r.light_range);
+            lit = lit_union(lit, r.light_extent);
         }
         limited += usize::from(r.budget_limited || r.pool_limited);
         let which = format!(
@@ -3923,7 +3965,7 @@ fn render_turntable(
             &opts,
             shown_attribute.as_ref(),
             &meta.species,
-            opts.light_range,
+            opts.light_range.map(|range| (range, lit.unwrap_or(range))),
             &drawn,
             &written,
         )?;
@@ -4312,6 +4354,8 @@ fn render_frames(
     check_panels_apart(args, legend_size, label_size, bar.as_ref(), axes.as_ref())?;
     let t0 = std::time::Instant::now();
     let mut limited_frames = 0usize;
+    // The faintest and brightest lit pixels over the frames, for the legend's ends.
+    let mut lit = None;
     // The species any frame shows, for the legend's key.
     let mut drawn = std::collections::BTreeSet::new();
     let renderer =
@@ -4387,6 +4431,7 @@ fn render_frames(
         if r.particles_drawn + r.nodes_drawn > 0 {
             opts.exposure = opts.exposure.or(r.exposure);
             opts.light_range = opts.light_range.or(r.light_range);
+            lit = lit_union(lit, r.light_extent);
         } else {
             empty_frames.push(f.timestep);
         }
@@ -4540,7 +4585,7 @@ fn render_frames(
         &opts,
         attribute,
         &looks,
-        opts.light_range,
+        opts.light_range.map(|range| (range, lit.unwrap_or(range))),
         &drawn,
         &written,
     )?;
