@@ -247,6 +247,94 @@ fn a_sidecar_not_named_raw_json_is_recognised_by_its_content() {
     );
 }
 
+/// A list of attributes (`attributes`): the first is read without `--attribute`, any
+/// other by its name, and further ones beside it (`extra_attributes`); an entry without
+/// a name, a name listed twice, or `attribute` beside the list are errors, and a name
+/// the list lacks is told with the list.
+#[test]
+fn a_list_of_attributes_is_read_by_name() {
+    let c = Case::new();
+    let n = 12usize;
+    let pos: Vec<u8> = positions(n)
+        .iter()
+        .flatten()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    c.file("p.f32", &pos);
+    let rho: Vec<f32> = (0..n).map(|i| 1e-3 * (i + 1) as f32).collect();
+    let temp: Vec<f64> = (0..n).map(|i| 1e4 + 100.0 * i as f64).collect();
+    c.file(
+        "rho.f32",
+        &rho.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<_>>(),
+    );
+    c.file(
+        "t.f64",
+        &temp
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect::<Vec<_>>(),
+    );
+    let path = c.sidecar(
+        r#"{ "mdlod_raw": 1,
+  "positions": { "file": "p.f32", "type": "f32" },
+  "attributes": [
+    { "file": "rho.f32", "type": "f32", "name": "rho" },
+    { "file": "t.f64", "type": "f64", "name": "T" } ] }"#,
+    );
+    let dump = DumpFile::open(&path).unwrap();
+    let with = |a: Option<&str>, extra: &[&str]| ReadOptions {
+        attribute: a.map(str::to_string),
+        extra_attributes: extra.iter().map(|s| s.to_string()).collect(),
+        ..Default::default()
+    };
+    let first = dump.read_frame(0, &with(None, &[]), &NoProgress).unwrap();
+    assert_eq!(first.attribute.unwrap().values, rho);
+    let t = dump
+        .read_frame(0, &with(Some("T"), &[]), &NoProgress)
+        .unwrap();
+    let t = t.attribute.unwrap();
+    assert_eq!(t.name, "T");
+    assert_eq!(t.values, temp.iter().map(|&v| v as f32).collect::<Vec<_>>());
+    let both = with(Some("T"), &["rho"]);
+    let further = mdlod_preprocess::convert::read_extra_attributes(&dump, 0, &both).unwrap();
+    assert_eq!(
+        (further[0].name.as_str(), &further[0].values),
+        ("rho", &rho)
+    );
+    let e = dump
+        .read_frame(0, &with(Some("h"), &[]), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(
+            ":3: --attribute h: no attribute `h` in the sidecar (its attributes are `rho`, `T`)"
+        ),
+        "{e}"
+    );
+    for (json, says) in [
+        (
+            r#"{ "mdlod_raw": 1, "positions": { "file": "p.f32", "type": "f32" },
+  "attributes": [ { "file": "rho.f32", "type": "f32" } ] }"#,
+            "entry 0 (rho.f32) has no `name`",
+        ),
+        (
+            r#"{ "mdlod_raw": 1, "positions": { "file": "p.f32", "type": "f32" },
+  "attributes": [ { "file": "rho.f32", "type": "f32", "name": "a" },
+                  { "file": "rho.f32", "type": "f32", "name": "a" } ] }"#,
+            "`a` is listed twice",
+        ),
+        (
+            r#"{ "mdlod_raw": 1, "positions": { "file": "p.f32", "type": "f32" },
+  "attribute": { "file": "rho.f32", "type": "f32" },
+  "attributes": [ { "file": "t.f64", "type": "f64", "name": "T" } ] }"#,
+            "given beside `attribute`",
+        ),
+    ] {
+        let e = read(&c.sidecar(json)).unwrap_err();
+        assert!(e.contains(says), "{e}");
+    }
+}
+
 /// An attribute the sidecar lacks is an error naming the sidecar, the line of its
 /// `attribute` entry and the attribute asked for (it named the positions file).
 #[test]

@@ -27,7 +27,10 @@
 //! - `species` (optional): one integer per particle (`u8`, `u16`, `u32` or `i32`), an
 //!   index into `names` (default names are the numbers); `radii` optionally gives each
 //!   species' radius (one per name, or one without `species`).
-//! - `attribute` (optional): one `f32` or `f64` per particle.
+//! - `attribute` (optional): one `f32` or `f64` per particle; or `attributes`, a list of
+//!   such arrays, each with its own `name` (an SPH run's density, temperature and mass),
+//!   of which `--attribute NAME` picks one and takes more given again (the first without
+//!   it).
 //! - `radius` or `diameter` (optional, not both): each particle's size, one `f32` or
 //!   `f64` per particle (an SPH code's smoothing length `h` as `radius`; `name` says what
 //!   it is). Its particles are drawn at their own sizes, as a dump's size column's; a
@@ -68,6 +71,7 @@ pub(crate) fn data_files(path: &Path) -> Option<Vec<PathBuf>> {
         arrays
             .into_iter()
             .flatten()
+            .chain(sidecar.attributes.iter().flatten())
             .map(|a| dir.join(&a.file))
             .collect(),
     )
@@ -86,6 +90,8 @@ struct Sidecar {
     radii: Option<Vec<f32>>,
     #[serde(default)]
     attribute: Option<Array>,
+    #[serde(default)]
+    attributes: Option<Vec<Array>>,
     #[serde(default)]
     radius: Option<Array>,
     #[serde(default)]
@@ -250,7 +256,8 @@ fn other_type_fits(m: &Mapped, per: usize, count: usize) -> Option<Ty> {
 
 /// An opened sidecar and its arrays.
 pub(crate) struct Index {
-    /// The sidecar, and the line of its `attribute` key (1 without one), for errors.
+    /// The sidecar, and the line of its `attribute` (or `attributes`) key (1 without
+    /// one), for errors.
     sidecar: PathBuf,
     attribute_line: u64,
     particles: usize,
@@ -258,7 +265,8 @@ pub(crate) struct Index {
     planar: bool,
     species: Option<(Mapped, Vec<String>)>,
     radii: Option<Vec<f32>>,
-    attribute: Option<(Mapped, String)>,
+    /// The attributes, each with its name (the first is read unless another is asked for).
+    attributes: Vec<(Mapped, String)>,
     /// Each particle's size: the array, its name, and the factor to a radius (1 for a
     /// `radius` array, 0.5 for a `diameter` one).
     sizes: Option<(Mapped, String, f64)>,
@@ -598,14 +606,49 @@ impl Index {
                 Some((m, names))
             }
         };
-        let attribute = match &sidecar.attribute {
-            None => None,
-            Some(a) => {
-                let m = map(a, "attribute", &["f32", "f64"])?;
-                need(&m, 1, "attribute")?;
-                Some((m, a.name.clone().unwrap_or_else(|| "attribute".into())))
+        let listed = match (&sidecar.attribute, &sidecar.attributes) {
+            (Some(_), Some(_)) => {
+                return Err(malformed_in(
+                    path,
+                    text,
+                    "attributes: given beside `attribute`; list every attribute in \
+                     `attributes`",
+                ))
             }
+            (Some(a), None) => vec![(a, "attribute".to_string())],
+            (None, Some(list)) => {
+                let mut named = Vec::with_capacity(list.len());
+                for (k, a) in list.iter().enumerate() {
+                    let Some(name) = a.name.clone() else {
+                        return Err(malformed_in(
+                            path,
+                            text,
+                            format!(
+                                "attributes: entry {k} ({}) has no `name`: each attribute of \
+                                 the list needs one, for --attribute to pick it",
+                                a.file.display()
+                            ),
+                        ));
+                    };
+                    if named.iter().any(|(_, n): &(&Array, String)| *n == name) {
+                        return Err(malformed_in(
+                            path,
+                            text,
+                            format!("attributes: `{name}` is listed twice"),
+                        ));
+                    }
+                    named.push((a, name));
+                }
+                named
+            }
+            (None, None) => Vec::new(),
         };
+        let mut attributes = Vec::with_capacity(listed.len());
+        for (a, default_name) in listed {
+            let m = map(a, "attribute", &["f32", "f64"])?;
+            need(&m, 1, "attribute")?;
+            attributes.push((m, a.name.clone().unwrap_or(default_name)));
+        }
         let sizes = match (&sidecar.radius, &sidecar.diameter) {
             (Some(_), Some(_)) => {
                 return Err(malformed_in(
@@ -675,7 +718,9 @@ impl Index {
                 })
             }
         };
-        let attribute_line = key_line(text, "attribute").unwrap_or(1);
+        let attribute_line = key_line(text, "attribute")
+            .or_else(|| key_line(text, "attributes"))
+            .unwrap_or(1);
         // With `particles` given, longer arrays are read for their first values (a file of
         // several frames' values, one at a time): said, as a count mistyped reads too few.
         let mut notes = Vec::new();
@@ -683,7 +728,7 @@ impl Index {
             let arrays = [(Some(&positions), 3, "positions")]
                 .into_iter()
                 .chain([(species.as_ref().map(|s| &s.0), 1, "species")])
-                .chain([(attribute.as_ref().map(|a| &a.0), 1, "attribute")])
+                .chain(attributes.iter().map(|a| (Some(&a.0), 1, "attribute")))
                 .chain([(sizes.as_ref().map(|a| &a.0), 1, "sizes")]);
             for (m, per, what) in arrays {
                 let Some(m) = m else { continue };
@@ -716,7 +761,7 @@ impl Index {
             planar,
             species,
             radii: sidecar.radii,
-            attribute,
+            attributes,
             sizes,
             simulation_box,
             timestep: sidecar.timestep,
@@ -779,7 +824,7 @@ impl Index {
         if self.species.is_some() {
             columns.push("species".into());
         }
-        if let Some((_, name)) = &self.attribute {
+        for (_, name) in &self.attributes {
             columns.push(name.clone());
         }
         if let Some((_, name, _)) = &self.sizes {
@@ -801,6 +846,14 @@ impl Index {
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
         self.read_range(opts, 0..self.particles, progress)
+    }
+
+    /// The attribute array `opts` reads: the one it names, else the first.
+    fn attribute_read(&self, opts: &ReadOptions) -> Option<&(Mapped, String)> {
+        match &opts.attribute {
+            Some(w) => self.attributes.iter().find(|(_, n)| n == w),
+            None => self.attributes.first(),
+        }
     }
 
     /// Particles `range` (within `0..particles`) as a frame of their own. Without species
@@ -828,7 +881,7 @@ impl Index {
         if let Some((m, _)) = &self.species {
             m.read_ahead(ahead.clone(), 1);
         }
-        if let Some((m, _)) = &self.attribute {
+        if let Some((m, _)) = self.attribute_read(opts) {
             m.read_ahead(ahead.clone(), 1);
         }
         if let Some((m, _, _)) = self
@@ -998,15 +1051,18 @@ impl Index {
                 Some(radii)
             }
         };
-        let attribute = match (&self.attribute, &opts.attribute) {
-            (Some((m, name)), wanted) if wanted.as_deref().is_none_or(|w| w == name) => {
+        let attribute = match (self.attribute_read(opts), &opts.attribute) {
+            (Some((m, name)), _) => {
                 let values = self.floats(m, first, n);
                 if let Some(i) = values.iter().position(|v| !v.is_finite()) {
                     let i = first + i;
                     return Err(err(
                         &m.path,
                         (m.offset + i * m.ty.size()) as u64,
-                        format!("particle {i}: `{name}` is not finite"),
+                        format!(
+                            "particle {i}: `{name}` is not finite in single precision (NaN, \
+                             infinite, or beyond ±3.4e38: give it in other units)"
+                        ),
                     ));
                 }
                 Some(Attribute {
@@ -1014,7 +1070,7 @@ impl Index {
                     values,
                 })
             }
-            (_, Some(wanted)) => {
+            (None, Some(wanted)) => {
                 return Err(ReadError::Malformed {
                     at: super::Location {
                         path: self.sidecar.clone(),
@@ -1022,14 +1078,22 @@ impl Index {
                     },
                     message: format!(
                         "--attribute {wanted}: no attribute `{wanted}` in the sidecar ({})",
-                        self.attribute.as_ref().map_or(
-                            "it names none: add an `attribute` entry".to_string(),
-                            |(m, n)| format!("its attribute is `{n}`, from {}", m.path.display())
-                        )
+                        match self.attributes.as_slice() {
+                            [] => "it names none: add an `attribute` entry".to_string(),
+                            [(m, n)] =>
+                                format!("its attribute is `{n}`, from {}", m.path.display()),
+                            more => format!(
+                                "its attributes are {}",
+                                more.iter()
+                                    .map(|(_, n)| format!("`{n}`"))
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ),
+                        }
                     ),
                 })
             }
-            (_, None) => None,
+            (None, None) => None,
         };
         progress.finish_stage();
         Ok(Frame {
