@@ -9542,6 +9542,34 @@ fn a_scale_bar_is_as_long_as_its_length_of_the_world() {
             "frame {k}: {got} px against {want:.1}"
         );
     }
+    // A turntable: one distance, so one bar in every view; a perspective one is refused
+    // before any view is drawn.
+    let spin = dir.path().join("spin-%d.png");
+    let mut args = vec!["render", s(&file), "-o", s(&spin), "--ortho", "--scale-bar"];
+    args.extend(["--width", "320", "--height", "200", "--background", "white"]);
+    args.extend(["--scale-bar-length", "20", "--turntable", "3"]);
+    args.extend(["--save-view", s(&view)]);
+    ok(&args);
+    let want = 20.0 / per_px(&view, 200.0);
+    for k in 0..3 {
+        let got = f64::from(longest_black(&dir.path().join(format!("spin-{k}.png"))));
+        assert!(
+            (got - want).abs() <= 1.5,
+            "view {k}: {got} px against {want:.1}"
+        );
+    }
+    let flat = dir.path().join("flat-%d.png");
+    let e = fails(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&flat),
+        "--scale-bar",
+        "--turntable",
+        "3",
+    ]);
+    assert!(e.contains("needs an orthographic view"), "{e}");
+    assert!(!dir.path().join("flat-0.png").exists());
     for (extra, says) in [
         (&["--scale-bar"][..], "needs an orthographic view"),
         (

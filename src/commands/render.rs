@@ -1846,9 +1846,6 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
         anyhow::bail!("--label-corner has no effect without --label");
     }
     if args.scale_bar {
-        if args.turntable.is_some() {
-            anyhow::bail!("--scale-bar draws into stills and movies, not turntables");
-        }
         let taken = [
             (!args.label.is_empty()).then_some((args.label_corner(), "--label")),
             args.legend_in_image.map(|c| (c, "--legend-in-image")),
@@ -3886,6 +3883,25 @@ fn render_turntable(
         .map(ViewSpec::Camera)
         .collect();
     }
+    // Every view is seen from one distance: one scale bar for all (an orthographic
+    // view's; a perspective one is refused here, before any view is drawn).
+    let bar = match (&views[..], args.scale_bar) {
+        ([ViewSpec::Camera(c), ..], true) => {
+            let units = mdlod_render::open_styled(&args.file, &opts.style)?
+                .metadata()
+                .units
+                .clone();
+            Some(scale_bar(
+                c,
+                opts.width,
+                opts.height,
+                args.scale_bar_length,
+                args.scale_bar_unit.as_deref().or(units.as_deref()),
+                args.text_scale,
+            )?)
+        }
+        _ => None,
+    };
     let mut written = Vec::new();
     // Each view's camera, for its axes.
     let mut cameras = Vec::new();
@@ -3983,6 +3999,29 @@ fn render_turntable(
             })
             .collect();
         write_labels(args, &labelled, None)?;
+    }
+    // (A view not fitted, a view file's distance, is measured on the first view drawn.)
+    let bar = match (bar, cameras.first()) {
+        (None, Some(c)) if args.scale_bar => {
+            let units = mdlod_render::open_styled(&args.file, &opts.style)?
+                .metadata()
+                .units
+                .clone();
+            Some(scale_bar(
+                c,
+                opts.width,
+                opts.height,
+                args.scale_bar_length,
+                args.scale_bar_unit.as_deref().or(units.as_deref()),
+                args.text_scale,
+            )?)
+        }
+        (bar, _) => bar,
+    };
+    if let Some(bar) = &bar {
+        let images: Vec<(&Path, &mdlod_render::legend::Legend)> =
+            written.iter().map(|i| (i.as_path(), bar)).collect();
+        draw_panels(args, &images, args.scale_bar_corner(), "--scale-bar")?;
     }
     if args.axes {
         // Each view its own tripod, turning with the data.
