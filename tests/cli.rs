@@ -10179,6 +10179,54 @@ fn json_output_gives_one_object_per_result() {
     );
 }
 
+/// Spheres of sizes spanning two decades and more (an SPH run's smoothing lengths) are
+/// noted with the modes that suit them; sizes within one decade are not.
+#[test]
+fn sizes_spanning_decades_suggest_a_projection() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, largest: f64| {
+        let mut xyz = String::from("200\nProperties=species:S:1:pos:R:3:radius:R:1\n");
+        for i in 0..200 {
+            let r = 0.01 * (largest / 0.01f64).powf(i as f64 / 199.0);
+            xyz.push_str(&format!("A {} {} {} {r}\n", i % 7, (i / 7) % 5, i / 35));
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, xyz).unwrap();
+        let out = dir.path().join(format!("{name}.mdlod"));
+        ok(&["convert", s(&path), "-o", s(&out)]);
+        out
+    };
+    let png = dir.path().join("x.png");
+    let wide = write("wide.xyz", 3.0);
+    let out = ok(&[
+        "render",
+        s(&wide),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ]);
+    assert!(
+        out.contains("note: the particles' own sizes span 0.0100 to 3.00 (300×)")
+            && out.contains("--mode splat"),
+        "{out}"
+    );
+    let narrow = write("narrow.xyz", 0.05);
+    let out = ok(&[
+        "render",
+        s(&narrow),
+        "-o",
+        s(&png),
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ]);
+    assert!(!out.contains("own sizes span"), "{out}");
+}
+
 /// A number with a decimal comma gets a tip with the point, whichever option takes it.
 #[test]
 fn a_decimal_comma_gets_a_tip() {

@@ -625,6 +625,14 @@ fn decades_light_note(a: &mdlod_format::meta::AttributeInfo) -> Option<String> {
     })
 }
 
+/// `v` to three significant digits, in plain decimals (0.0200, 2.95, 450).
+fn three_digits(v: f32) -> String {
+    // (Nudged up, so that 0.01 stored as 0.0099999998 counts as 0.01.)
+    let magnitude = (f64::from(v.abs()) * (1.0 + 1e-6)).log10().floor();
+    let decimals = (2 - magnitude as i32).clamp(0, 12) as usize;
+    format!("{:.*}", decimals, v)
+}
+
 /// `--hide-attribute`'s ranges with the attribute each reads in `file` (opened with the
 /// style, [`mdlod_render::open_styled`]): a plain range the hiding attribute, a named one
 /// its own; ranges of an attribute the file lacks are left out.
@@ -2422,6 +2430,20 @@ pub fn run(mut args: Args) -> Result<()> {
     }
     for note in hides_nothing_notes(&args.style, &file) {
         println!("{note}");
+    }
+    // Spheres of sizes spanning decades (an SPH run's smoothing lengths): the largest
+    // cover the rest, which a projection or the density shows.
+    if let (Mode::Spheres | Mode::Sndf, Some(rad)) = (args.mode, &file.metadata().radius) {
+        if rad.min > 0.0 && rad.max / rad.min >= 100.0 {
+            println!(
+                "  note: the particles' own sizes span {} to {} ({:.0}×): as spheres, the \
+                 largest cover the rest; smoothing lengths (SPH) are better projected, \
+                 --mode splat, or drawn as a density, --mode density",
+                three_digits(rad.min),
+                three_digits(rad.max),
+                rad.max / rad.min
+            );
+        }
     }
     for note in coarse_range_notes(&args.style, &file) {
         println!("{note}");
