@@ -344,6 +344,13 @@ pub struct Metadata {
     pub species_column: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attribute: Option<AttributeInfo>,
+    /// The attribute is the base-10 logarithm of a column's values (`log10(NAME)`), and
+    /// each node's mean is the logarithm of the area-weighted mean of the values below
+    /// it, not the mean of their logarithms: so that `10^mean` times a cluster's area is
+    /// the light of its particles (splats lit by the attribute). Files that store a
+    /// logarithm without this flag hold means of logarithms.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub attribute_log10: bool,
     /// Further per-particle attributes (version 1.2: the ATTRIBUTES and NODE_ATTRIBUTES
     /// sections), each quantized over its own range as `attribute` is; a reader of
     /// version 1.1 knows the first only.
@@ -496,6 +503,7 @@ mod tests {
             }],
             species_column: None,
             attribute: None,
+            attribute_log10: false,
             attributes: Vec::new(),
             radius: None,
             radius_log: None,

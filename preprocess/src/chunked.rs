@@ -1627,7 +1627,8 @@ pub fn convert_chunked(
                     },
                 });
             }
-            // The attribute as stored: its logarithm with `attribute_log10`.
+            // The attribute's range as stored: of its logarithm with `attribute_log10`
+            // (the cells keep the values themselves, which the clusters average).
             let logged = match (&f.attribute, options.attribute_log10) {
                 (Some(a), true) => Some(crate::convert::log10_attribute(
                     &a.values,
@@ -1637,11 +1638,9 @@ pub fn convert_chunked(
                 )?),
                 _ => None,
             };
-            let values = logged
-                .as_deref()
-                .or(f.attribute.as_ref().map(|a| a.values.as_slice()));
-            if let Some(values) = values {
-                let (lo, hi) = finite_range(values, start, || place.clone())?;
+            let values = f.attribute.as_ref().map(|a| a.values.as_slice());
+            if let Some(stored) = logged.as_deref().or(values) {
+                let (lo, hi) = finite_range(stored, start, || place.clone())?;
                 range = (range.0.min(lo), range.1.max(hi));
             }
             for (info, a) in extra_infos.iter_mut().zip(&extras) {
@@ -1839,6 +1838,7 @@ pub fn convert_chunked(
     let options = &chunk_options;
     let extras = BuildExtras {
         attribute_range: layout.attribute.then_some(range),
+        attribute_log10: options.attribute_log10 && layout.attribute,
         keep_levels: params.delta_n as usize,
         // One range for every chunk, from the whole frame's species.
         radius_range: crate::hierarchy::radius_range(&species, &counts),
@@ -1934,6 +1934,7 @@ pub fn convert_chunked(
         .flatten();
     metadata.species = species;
     metadata.attributes = extra_infos.clone();
+    metadata.attribute_log10 = options.attribute_log10 && layout.attribute;
     if let Some(info) = metadata.attribute.as_mut() {
         info.min = range.0;
         info.max = range.1;
@@ -2245,6 +2246,10 @@ fn assemble(
     {
         let mut s = w.section(SectionKind::Nodes, 0)?;
         let mut top_node = top.node(0);
+        // (The chunks' roots keep their mean values; the file, their logarithm.)
+        if metadata.attribute_log10 {
+            top_node.attribute = top_node.attribute.log10();
+        }
         top_node.quant_scale = top_scale;
         top_node.child_count = k as u32;
         top_node.point_level = top_pl as u8;
@@ -2264,6 +2269,9 @@ fn assemble(
                         rms_radius: 0.0,
                         ..ch.root.node(g)
                     };
+                    if metadata.attribute_log10 {
+                        n.attribute = n.attribute.log10();
+                    }
                     n.quant_scale = ch.root_scale;
                     n.child_first = lay.offset[g + 1][c] as u32;
                     n.point_first = lay.offset[pl][c] as u32;

@@ -385,13 +385,13 @@ pub fn convert_frame_with(
     };
     let species_index = merged_index.as_deref().unwrap_or(&frame.species_index);
     let radii = hierarchy::particle_radii(&species, species_index, frame.radii.as_deref());
+    // (A logarithm is stored from the values themselves, which clusters average: see
+    // `BuildExtras::attribute_log10`.)
     let particles = Particles {
         positions: &frame.positions,
         species_index,
         species: &species,
-        attribute: logged
-            .as_deref()
-            .or(frame.attribute.as_ref().map(|a| a.values.as_slice())),
+        attribute: frame.attribute.as_ref().map(|a| a.values.as_slice()),
         radii: radii.as_deref(),
     };
     let t0 = Instant::now();
@@ -405,6 +405,13 @@ pub fn convert_frame_with(
                 &species,
                 &crate::species::counts(species.len(), species_index),
             )
+        }),
+        attribute_log10: logged.is_some(),
+        attribute_range: logged.as_deref().map(|l| {
+            l.iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                    (lo.min(v), hi.max(v))
+                })
         }),
         ..Default::default()
     };
@@ -1414,6 +1421,7 @@ pub fn base_metadata(
             min: 0.0,
             max: 0.0,
         }),
+        attribute_log10: options.attribute_log10 && frame.attribute.is_some(),
         attributes: Vec::new(),
         radius: None,
         radius_log: None,

@@ -1254,6 +1254,27 @@ fn an_attribute_spanning_decades_keeps_its_logarithm() {
     for (i, v) in seen.iter().enumerate() {
         assert!((v - rho(i).log10()).abs() <= step, "particle {i}: {v}");
     }
+    // Every node holds the logarithm of its particles' area-weighted mean value, not the
+    // mean of their logarithms: each level's clusters, their areas times 10^mean, add up
+    // to the particles' total (what splats lit by the attribute draw), the top node's
+    // whole (built in chunks here: the top from the chunks' roots).
+    assert!(f.metadata().attribute_log10);
+    let r2 = f64::from(f.metadata().species[0].radius).powi(2);
+    let total: f64 = (0..n).map(|i| r2 * rho(i)).sum();
+    let last = f.level_count() - 1;
+    for l in 0..last {
+        let level = &f.levels()[l];
+        let first = level.node_first as usize;
+        let nodes = &f.nodes()[first..first + level.point_count as usize];
+        let sum: f64 = nodes
+            .iter()
+            .map(|n| f64::from(n.area_sum) * 10f64.powf(f64::from(n.attribute)))
+            .sum();
+        assert!(
+            (sum / total - 1.0).abs() < 1e-4,
+            "level {l}: {sum} against {total}"
+        );
+    }
 
     // Stored as they are: a note, in memory and streamed.
     opts.attribute_log10 = false;

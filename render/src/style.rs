@@ -730,9 +730,29 @@ pub struct AttributeScale {
     shown: Option<[f32; 2]>,
     /// Logarithmic: `ln v` mapped from `ln lo` to `ln hi` ([`Self::with_log`]).
     log: bool,
+    /// The attribute holds base-10 logarithms and the light is the quantity itself
+    /// ([`Self::lighting_by_quantity`]).
+    exp10: bool,
 }
 
 impl AttributeScale {
+    /// For splats lit by an attribute stored as its logarithm (a file's
+    /// `attribute_log10`, whose clusters hold the logarithm of their mean value): a
+    /// value `v` maps to `10^(v − hi)` and the light unit is `10^hi` (`hi` the range's
+    /// top), so that the light is the quantity `10^v` itself and sums over clusters as
+    /// over their particles.
+    pub fn lighting_by_quantity(self) -> Self {
+        AttributeScale {
+            exp10: true,
+            log: false,
+            ..self
+        }
+    }
+
+    /// The top of the range a quantity's logarithm is lit up to ([`Self::exp10`]).
+    fn exp10_top(&self) -> f64 {
+        f64::from(self.shown.map_or(self.max, |[_, hi]| hi))
+    }
     /// Ranges at most this many units in the last place of their values wide are
     /// rounding, not data.
     const ROUNDING_ULPS: f64 = 8.0;
@@ -747,6 +767,7 @@ impl AttributeScale {
             constant: !(max - min > rounding && (max - min).is_finite()),
             shown: None,
             log: false,
+            exp10: false,
         }
     }
 
@@ -818,6 +839,10 @@ impl AttributeScale {
     /// Where the light is a quantity in the attribute's units: the value its 0 stands
     /// for and the factor of its 1 ([`Self::light_unit`], [`Self::light_zero`]).
     fn light_in_units(&self) -> Option<(f32, f32)> {
+        if self.exp10 {
+            let unit = 10f64.powf(self.exp10_top()) as f32;
+            return (unit > 0.0 && unit.is_finite()).then_some((0.0, unit));
+        }
         if self.log_range().is_some() {
             return None;
         }
@@ -833,6 +858,14 @@ impl AttributeScale {
 
     /// A value (a cluster's mean) in [0, 1].
     pub fn of_value(&self, v: f32) -> f32 {
+        if self.exp10 {
+            let t = 10f64.powf(f64::from(v) - self.exp10_top());
+            return if t.is_nan() {
+                0.0
+            } else {
+                t.clamp(0.0, 1.0) as f32
+            };
+        }
         if let Some([lo, hi]) = self.log_range() {
             let v = f64::from(v);
             if v.is_nan() || v <= lo {
@@ -862,7 +895,7 @@ impl AttributeScale {
     /// A particle's quantized value `q` (FORMAT.md: `min + (max − min) · q / 65535`) in
     /// [0, 1].
     pub fn of_quantized(&self, q: u16) -> f32 {
-        if self.shown.is_some() || self.log_range().is_some() {
+        if self.shown.is_some() || self.log_range().is_some() || self.exp10 {
             let (min, max) = (f64::from(self.min), f64::from(self.max));
             let value = if self.constant {
                 min

@@ -2057,6 +2057,83 @@ fn splats_by_attribute_keep_the_attribute_flux_at_every_level() {
     assert!(e.contains("no per-particle attribute"), "{e}");
 }
 
+/// Splats lit by an attribute stored as its logarithm (`--attribute-log10`: eight
+/// decades, as an SPH run's densities) light by the quantity itself: every level's
+/// clusters keep the light of their particles, `10^v` times their area, to 1e-3 (a mean
+/// of logarithms would lose most of it), and the faintest decades are not lost to 16-bit
+/// steps as a linear column's would be.
+#[test]
+fn splats_by_a_logarithm_light_by_the_quantity_at_every_level() {
+    let mut frame = cloud_frame(3000, 13);
+    let n = frame.positions.len();
+    let values: Vec<f32> = (0..n)
+        .map(|i| 10f32.powf(-6.0 + 8.0 * ((i * 7919) % n) as f32 / n as f32))
+        .collect();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "rho".into(),
+        values,
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("log.mdlod");
+    let opts = mdlod_preprocess::convert::ConvertOptions {
+        build: small_build(),
+        attribute_log10: true,
+        ..Default::default()
+    };
+    mdlod_preprocess::convert::convert_frame(
+        &frame,
+        None,
+        &path,
+        &opts,
+        &mdlod_preprocess::NoProgress,
+    )
+    .unwrap();
+    let f = MdlodFile::open(&path).unwrap();
+    assert!(f.metadata().attribute_log10);
+    let (w, h) = (96u32, 72u32);
+    let camera = camera_for(
+        &f,
+        &ViewSpec::Orbit {
+            azimuth_deg: 20.0,
+            elevation_deg: 10.0,
+            zoom: 0.8,
+            projection: Projection::Orthographic,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    let ppw = camera.clip_from_view(w as f32 / h as f32).y_axis.y * 0.5 * h as f32;
+    let radii: Vec<f32> = f.metadata().species.iter().map(|s| s.radius).collect();
+    let info = f.metadata().attribute.clone().unwrap();
+    let expected: f64 = f
+        .attribute()
+        .unwrap()
+        .iter()
+        .zip(f.species())
+        .map(|(&q, &s)| {
+            let r = f64::from(radii[usize::from(s)] * ppw);
+            std::f64::consts::PI * r * r * 10f64.powf(f64::from(info.decode(q)))
+        })
+        .sum();
+    let blend = mdlod_render::SplatBlend::Additive {
+        intensity: 1.0,
+        by_attribute: true,
+    };
+    for error_px in [0.0, 6.0, 24.0] {
+        let draw = cut(&f, &camera, [w, h], error_px, OcclusionMode::Off);
+        let s = renderer()
+            .render_splats(&f, &camera, &draw, w, h, blend)
+            .unwrap();
+        let rel = (s.total_light() - expected).abs() / expected;
+        assert!(
+            rel < 1e-3,
+            "{error_px} px ({} points): light off by {rel:.2e}",
+            draw.points
+        );
+    }
+}
+
 /// Area of the part of the cell `[x0, x0 + c] × [y0, y0 + c]` inside the unit disk.
 fn cell_in_disk(x0: f64, y0: f64, c: f64) -> f64 {
     const N: usize = 200;

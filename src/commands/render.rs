@@ -3218,6 +3218,14 @@ fn projected_light(
     let Some(a) = attribute.filter(|_| matches!(args.intensity, Intensity::Attribute)) else {
         return "projected flux".to_string();
     };
+    // A logarithm lights by its quantity (`log10(rho)`: the projected rho).
+    if let Some(inner) = a
+        .name
+        .strip_prefix("log10(")
+        .and_then(|s| s.strip_suffix(')'))
+    {
+        return format!("projected {inner}");
+    }
     let (_, style) = mdlod_render::page_style(opts);
     let scale = mdlod_render::style::AttributeScale::with_range(a, style.attribute_range)
         .with_log(style.log_scale);
@@ -3402,7 +3410,7 @@ pub fn derive_range(
     let Some(a) = &file.metadata().attribute else {
         return Ok(None);
     };
-    check_not_logged(style, a, path, light)?;
+    check_not_logged(style, a, path, light, file.metadata().attribute_log10)?;
     let Some((range, why)) = mdlod_render::default_range_of(&file, style, mapped, light) else {
         return Ok(None);
     };
@@ -3428,25 +3436,30 @@ fn lit_linearly(args: &Args) -> bool {
 }
 
 /// `--log-scale` of an attribute stored as its logarithm (`--attribute-log10`) would take
-/// the log of the log, and splats lit by it (`lit`) would add logarithms: refused, naming
-/// what to do instead.
+/// the log of the log; splats lit by it (`lit`) light by the quantity itself where the
+/// file's clusters hold the logarithms of their mean values (`log10_means`, the metadata's
+/// `attribute_log10`), and are refused in a file of an older mdlod, whose clusters hold
+/// means of logarithms, naming what to do instead.
 fn check_not_logged(
     style: &mdlod_render::PointStyle,
     a: &mdlod_format::meta::AttributeInfo,
     path: &Path,
     lit: bool,
+    log10_means: bool,
 ) -> Result<()> {
-    if lit && a.name.starts_with("log10(") {
+    if lit && a.name.starts_with("log10(") && !log10_means {
         anyhow::bail!(
-            "--intensity attribute: {} holds {}, a logarithm (converted with \
-             --attribute-log10): splats add their light, and a sum of logarithms is no \
-             projection of the values; convert without --attribute-log10 to project them \
-             (--colour-map with --log-scale then maps the projection's decades)",
+            "--intensity attribute: {} holds {}, a logarithm, whose clusters hold the means \
+             of their particles' logarithms (a file of an earlier mdlod): no sum of them is \
+             the projection of the values; convert it again with this mdlod (its clusters \
+             then keep the logarithm of their mean value, and splats light by the value)",
             path.display(),
             a.name
         );
     }
-    if style.log_scale && a.name.starts_with("log10(") {
+    // (Splats lit by the quantity map their image's light on the log scale, not the
+    // logarithms.)
+    if style.log_scale && a.name.starts_with("log10(") && !(lit && log10_means) {
         anyhow::bail!(
             "--log-scale: {} holds {}, already a logarithm (converted with \
              --attribute-log10): without --log-scale the map spreads its decades evenly \
@@ -4264,7 +4277,7 @@ fn render_frames(
             .filter(|_| by_attribute(args))
         {
             let lit = args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute);
-            check_not_logged(&opts.style, a, &path, lit)?;
+            check_not_logged(&opts.style, a, &path, lit, file.metadata().attribute_log10)?;
         }
         survey.add(&file, &opts);
     }
@@ -4676,6 +4689,38 @@ fn render_frames(
 mod tests {
     use super::*;
     use clap::Args as _;
+
+    /// Splats lit by a logarithm: a file whose clusters keep the logarithm of their mean
+    /// value lights by the quantity; one of an earlier mdlod (means of logarithms) is
+    /// refused, saying to convert it again; a log scale of the logarithm itself is
+    /// refused where no splat lights by it.
+    #[test]
+    fn splats_by_a_logarithm_need_its_clusters_mean_values() {
+        let a = mdlod_format::meta::AttributeInfo {
+            name: "log10(rho)".into(),
+            min: -6.0,
+            max: 2.0,
+        };
+        let style = mdlod_render::PointStyle::default();
+        let path = std::path::Path::new("sph.mdlod");
+        assert!(check_not_logged(&style, &a, path, true, true).is_ok());
+        let e = check_not_logged(&style, &a, path, true, false)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sph.mdlod holds log10(rho)") && e.contains("convert it again"),
+            "{e}"
+        );
+        let logged = mdlod_render::PointStyle {
+            log_scale: true,
+            ..Default::default()
+        };
+        assert!(check_not_logged(&logged, &a, path, true, true).is_ok());
+        let e = check_not_logged(&logged, &a, path, false, true)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("already a logarithm"), "{e}");
+    }
 
     /// A scale bar names LAMMPS unit styles by their length, and a unit of another name
     /// (a raw sidecar's) as written, where the image font can draw it.

@@ -232,6 +232,11 @@ pub struct BuildExtras {
     pub keep_levels: usize,
     /// Quantize the per-particle radii over this range instead of their own.
     pub radius_range: Option<mdlod_format::meta::RadiusInfo>,
+    /// The attribute (positive values, given as they are) is stored as its base-10
+    /// logarithm: each particle's, and each node's as the logarithm of its area-weighted
+    /// mean value (the metadata's `attribute_log10`); `attribute_range` is then of the
+    /// logarithms.
+    pub attribute_log10: bool,
 }
 
 impl Hierarchy {
@@ -271,7 +276,10 @@ impl Hierarchy {
                     max: *max,
                 })
             }
-            (None, _) => metadata.attribute = None,
+            (None, _) => {
+                metadata.attribute = None;
+                metadata.attribute_log10 = false;
+            }
         }
         metadata.radius = self.radius.as_ref().map(|(_, info)| *info);
         metadata.attributes = self
@@ -511,6 +519,12 @@ pub fn build_with(
             }
         }));
     }
+    // A logarithm stored: each node's, of its mean value.
+    if extras.attribute_log10 && particles.attribute.is_some() {
+        nodes
+            .par_iter_mut()
+            .for_each(|n| n.attribute = n.attribute.log10());
+    }
     // Encoding node = ancestor on level max(0, point_level - delta_n).
     for id in 0..nodes.len() {
         let n = nodes[id];
@@ -610,10 +624,11 @@ pub fn build_with(
         .map(|&i| particles.species_index[i as usize])
         .collect();
     let attribute = particles.attribute.map(|a| {
+        let stored = |v: f32| if extras.attribute_log10 { v.log10() } else { v };
         let (min, max) = extras.attribute_range.unwrap_or_else(|| {
             a.iter()
                 .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
-                    (lo.min(v), hi.max(v))
+                    (lo.min(stored(v)), hi.max(stored(v)))
                 })
         });
         let span = max - min;
@@ -621,7 +636,7 @@ pub fn build_with(
             .par_iter()
             .map(|&i| {
                 if span > 0.0 {
-                    ((a[i as usize] - min) / span * 65535.0)
+                    ((stored(a[i as usize]) - min) / span * 65535.0)
                         .round()
                         .clamp(0.0, 65535.0) as u16
                 } else {

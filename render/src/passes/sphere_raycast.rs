@@ -480,7 +480,11 @@ impl AttrPacker {
             Some(map) => Some((map, attribute("colour by")?)),
             None => None,
         };
+        // (A logarithm stored with its clusters' mean values lights by the quantity.)
         let intensity = match style {
+            PackStyle::FluxAttribute if meta.attribute_log10 => {
+                Some(attribute("take intensities from")?.lighting_by_quantity())
+            }
             PackStyle::FluxAttribute => Some(attribute("take intensities from")?),
             _ => None,
         };
