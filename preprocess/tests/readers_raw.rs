@@ -247,6 +247,31 @@ fn a_sidecar_not_named_raw_json_is_recognised_by_its_content() {
     );
 }
 
+/// A key of the wrong kind is said in the sidecar's own words (a file name in quotes, an
+/// array's object, a number), with its line, not in the JSON reader's type names.
+#[test]
+fn a_key_of_the_wrong_kind_is_said_plainly() {
+    let c = Case::new();
+    c.file("p.f32", &[0u8; 24]);
+    for (json, says) in [
+        (
+            "{ \"mdlod_raw\": 1,\n \"positions\": { \"file\": { \"x\": 1 }, \"type\": \"f32\" } }",
+            ":2: raw sidecar: invalid type: an object {...}, expected a file name in quotes",
+        ),
+        (
+            "{ \"mdlod_raw\": 1,\n \"positions\": [\"p.f32\"] }",
+            "expected an array's object, { \"file\": ..., \"type\": \"f32\" }",
+        ),
+        (
+            "{ \"mdlod_raw\": 1, \"particles\": \"2\",\n \"positions\": { \"file\": \"p.f32\", \"type\": \"f32\" } }",
+            "expected a whole number from 0",
+        ),
+    ] {
+        let e = read(&c.sidecar(json)).unwrap_err();
+        assert!(e.contains(says), "{json}: {e}");
+    }
+}
+
 /// A list of attributes (`attributes`): the first is read without `--attribute`, any
 /// other by its name, and further ones beside it (`extra_attributes`); an entry without
 /// a name, a name listed twice, or `attribute` beside the list are errors, and a name

@@ -353,6 +353,39 @@ fn malformed_in(path: &Path, text: &[u8], message: impl Into<String>) -> ReadErr
     }
 }
 
+/// A JSON reader's message about a sidecar in the sidecar's own words: what a key takes
+/// (a file name in quotes, an array's object, a number), not the reader's type names.
+fn plain_json_error(message: &str) -> String {
+    const WORDS: [(&str, &str); 8] = [
+        ("expected path string", "expected a file name in quotes"),
+        (
+            "expected struct Array with 7 elements",
+            "expected an array's object, { \"file\": ..., \"type\": \"f32\" }",
+        ),
+        (
+            "expected struct Array",
+            "expected an array's object, { \"file\": ..., \"type\": \"f32\" }",
+        ),
+        (
+            "expected struct BoxSpec",
+            "expected the box's object, { \"origin\": [...], \"a\": [...], ... }",
+        ),
+        ("expected f32", "expected a number"),
+        ("expected f64", "expected a number"),
+        ("expected u64", "expected a whole number from 0"),
+        ("expected u32", "expected a whole number from 0"),
+    ];
+    let mut out = message.to_string();
+    for (from, to) in WORDS {
+        if out.contains(from) {
+            out = out.replacen(from, to, 1);
+            break;
+        }
+    }
+    out.replace("a sequence", "a list [...]")
+        .replace("invalid type: map", "invalid type: an object {...}")
+}
+
 impl Index {
     pub fn build(path: &Path, text: &[u8]) -> Result<Index, ReadError> {
         let sidecar: Sidecar = serde_json::from_slice(text).map_err(|e| ReadError::Malformed {
@@ -360,7 +393,7 @@ impl Index {
                 path: path.to_path_buf(),
                 line: e.line() as u64,
             },
-            message: format!("raw sidecar: {e}"),
+            message: format!("raw sidecar: {}", plain_json_error(&e.to_string())),
         })?;
         if sidecar.mdlod_raw != 1 {
             return Err(malformed_in(
