@@ -7358,7 +7358,15 @@ fn a_turntable_renders_a_full_turn_of_views() {
     let d = dir.path().join("a.d");
     ok(&["batch", s(&dump), "-o", s(&d)]);
     let e = fails(&["render", s(&d), "-o", s(&pattern), "--turntable", "4"]);
-    assert!(e.contains("--turntable spins one file"), "{e}");
+    // (Its first frame file named, as the batch wrote it.)
+    let first = mdlod_preprocess::batch::read_manifest(&d).unwrap().frames[0]
+        .file
+        .clone();
+    assert!(
+        e.contains("--turntable spins one file")
+            && e.contains(&format!("e.g. {}", s(&d.join(first)))),
+        "{e}"
+    );
 }
 
 /// A text dump whose last line has no line end converts (a hand-written file may lack
@@ -10165,21 +10173,81 @@ fn json_output_gives_one_object_per_result() {
         "3",
         "--json",
     ]);
-    assert_eq!(t.len(), 3);
+    // A line per view, and one for the turn with the notes said after its images.
+    assert_eq!(t.len(), 4);
     assert_eq!(t[2]["output"], s(&dir.path().join("spin-2.png")));
+    assert_eq!(
+        (t[2]["view"].as_u64(), t[2]["views"].as_u64()),
+        (Some(2), Some(3))
+    );
+    assert_eq!(t[3]["series"], s(&spin));
     let b = dir.path().join("b.d");
-    let j = json(&["batch", s(&dump), "-o", s(&b), "--json"]);
+    let j = json(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&b),
+        "--attribute",
+        "c_pe",
+        "--json",
+    ]);
     assert_eq!(
         (j[0]["frames"].as_u64(), j[0]["converted"].as_u64()),
         (Some(1), Some(1))
     );
-    let j = json(&["batch", s(&dump), "-o", s(&b), "--json"]);
+    let j = json(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&b),
+        "--attribute",
+        "c_pe",
+        "--json",
+    ]);
     assert_eq!(j[0]["already_done"].as_u64(), Some(1));
     let v = json(&["verify", s(&b), "--json"]);
     assert_eq!(
         (v[0]["ok"].as_bool(), v[0]["frames_ok"].as_u64()),
         (Some(true), Some(1))
     );
+    // A movie: each frame's line names its frame, timestep and file, and the colours'
+    // attribute and range.
+    let movie = dir.path().join("m-%d.png");
+    let m = json(&[
+        "render",
+        s(&b),
+        "-o",
+        s(&movie),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--colour-map",
+        "viridis",
+        "--json",
+    ]);
+    assert_eq!(m.len(), 2);
+    assert_eq!(
+        (m[0]["frame"].as_u64(), m[0]["timestep"].as_u64()),
+        (Some(0), Some(100))
+    );
+    assert!(m[0]["frame_file"]
+        .as_str()
+        .unwrap()
+        .ends_with("frame-100.mdlod"));
+    assert_eq!(m[0]["attribute"], "c_pe");
+    assert_eq!(m[0]["attribute_range"].as_array().map(Vec::len), Some(2));
+    // A damaged file: `ok` false with the error, and the failure's status.
+    let bad = dir.path().join("bad.mdlod");
+    let mut bytes = std::fs::read(&file).unwrap();
+    let at = bytes.len() / 2;
+    bytes[at] ^= 0xff;
+    std::fs::write(&bad, bytes).unwrap();
+    let o = mdlod(&["verify", s(&bad), "--json"]);
+    assert_eq!(o.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["ok"].as_bool(), Some(false));
+    assert!(v["error"].as_str().unwrap().contains("bad.mdlod"), "{v}");
 }
 
 /// Spheres of sizes spanning two decades and more (an SPH run's smoothing lengths) are
@@ -10216,6 +10284,14 @@ fn sizes_spanning_decades_suggest_a_projection() {
             && out.contains("--mode splat"),
         "{out}"
     );
+    let mut args = vec!["render", s(&wide), "-o", s(&png), "--mode", "splat"];
+    args.extend(["--width", "64", "--height", "48"]);
+    let out = ok(&args);
+    assert!(
+        out.contains("splats lit by their disks' area (π r²) let the largest outshine")
+            && out.contains("--intensity attribute with a column of m / (π h²)"),
+        "{out}"
+    );
     let narrow = write("narrow.xyz", 0.05);
     let out = ok(&[
         "render",
@@ -10228,6 +10304,56 @@ fn sizes_spanning_decades_suggest_a_projection() {
         "48",
     ]);
     assert!(!out.contains("own sizes span"), "{out}");
+}
+
+/// `--attribute-log10` with several columns keeps the first's logarithm and the others
+/// as they are: splats light by the first's quantity, and colouring by another reads its
+/// own values (not taken for a logarithm).
+#[test]
+fn a_logarithm_first_and_further_columns_as_they_are() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut xyz = String::from("300\nProperties=species:S:1:pos:R:3:rho:R:1:T:R:1\n");
+    for i in 0..300 {
+        let rho = 10f64.powf(-8.0 + 10.0 * i as f64 / 299.0);
+        xyz.push_str(&format!(
+            "H {} {} {} {rho:e} {}\n",
+            i % 7,
+            (i / 7) % 6,
+            i / 42,
+            100 + i
+        ));
+    }
+    let path = dir.path().join("sph.xyz");
+    std::fs::write(&path, xyz).unwrap();
+    let file = dir.path().join("sph.mdlod");
+    ok(&[
+        "convert",
+        s(&path),
+        "-o",
+        s(&file),
+        "--attribute",
+        "rho",
+        "--attribute",
+        "T",
+        "--attribute-log10",
+    ]);
+    let info = ok(&["info", s(&file)]);
+    assert!(
+        info.contains("log10(rho) in [-8, 2]") && info.contains("T in [100, 399]"),
+        "{info}"
+    );
+    let png = dir.path().join("x.png");
+    let base = ["--width", "48", "--height", "36"];
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--mode", "splat"];
+    args.extend(["--intensity", "attribute", "--colour-map", "viridis"]);
+    args.extend(base);
+    let out = ok(&args);
+    assert!(out.contains("the projected rho"), "{out}");
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--attribute", "T"];
+    args.extend(["--colour-map", "viridis", "--log-scale"]);
+    args.extend(base);
+    let out = ok(&args);
+    assert!(out.contains("T from 100 to 399"), "{out}");
 }
 
 /// A number with a decimal comma gets a tip with the point, whichever option takes it.
@@ -10400,6 +10526,57 @@ fn hidden_values_can_be_read_from_several_attributes_at_once() {
         "{out}"
     );
     assert_eq!(drawn(&out), 2552 - 2047, "{out}");
+    // Turntables and movies say so too (a movie of the ranges over every frame).
+    let spin = dir.path().join("spin-%d.png");
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&spin),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--turntable",
+        "2",
+        "--hide-attribute",
+        "c_pe=5:6",
+    ]);
+    assert!(
+        out.contains("--hide-attribute hides no particle: c_pe lies from"),
+        "{out}"
+    );
+    let d = dir.path().join("gb.d");
+    ok(&[
+        "batch",
+        s(&dump),
+        "-o",
+        s(&d),
+        "--attribute",
+        "c_cna",
+        "--attribute",
+        "c_pe",
+    ]);
+    let movie = dir.path().join("m-%d.png");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&movie),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--hide-attribute",
+        "c_cna=0.5:1.5",
+        "--hide-attribute",
+        "c_pe=5:6",
+    ]);
+    assert!(
+        out.contains("--hide-attribute (of c_pe) hides no particle: c_pe lies from")
+            && out.contains("in any frame"),
+        "{out}"
+    );
     for (extra, says) in [
         (vec!["--hide-attribute", "c_ke=1:2"], "c_cna, c_pe"),
         (

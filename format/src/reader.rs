@@ -1123,6 +1123,8 @@ impl MdlodFile {
         // means; no further attributes): another is selected from a fresh open.
         self.metadata.attribute = Some(self.metadata.attributes[k].clone());
         self.metadata.attributes.clear();
+        // (Only the first attribute is ever stored as a logarithm.)
+        self.metadata.attribute_log10 = false;
         self.extra_ranges = None;
         // Hidden values depend on the attribute: a set computed before is stale.
         *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;

@@ -1259,8 +1259,8 @@ pub fn extra_span_note(name: &str, min: f32, max: f32) -> Option<String> {
         name,
         min,
         max,
-        "converted alone with --attribute-log10, a file keeps its logarithm, every decade \
-         alike",
+        "given first with --attribute-log10 (which takes the first column's logarithm), \
+         a file keeps its logarithm, every decade alike",
     )
 }
 

@@ -76,8 +76,8 @@ pub struct BuildArgs {
     /// Keep the attribute's base-10 logarithm instead (named log10(NAME); every value
     /// must be above 0): the file keeps 16 bits per value, evenly over its range, so a
     /// quantity spanning many decades (an SPH density) keeps only its top four or five
-    /// otherwise. Applies to the column --attribute names, or to the attribute an input
-    /// keeps by itself (a raw sidecar's `attribute`).
+    /// otherwise. Applies to the first column --attribute names (further ones are kept as
+    /// they are), or to the attribute an input keeps by itself (a raw sidecar's first).
     #[arg(long)]
     pub attribute_log10: bool,
     /// Wrap the particles into the simulation cell along its periodic axes (OVITO's
@@ -154,15 +154,6 @@ impl BuildArgs {
             .find(|(k, a)| self.attribute[..*k].contains(a))
         {
             bail!("--attribute {a} is given twice: each column is kept once");
-        }
-        if self.attribute_log10 && self.attribute.len() > 1 {
-            bail!(
-                "--attribute-log10 with {} --attribute columns: it is refused with more \
-                 than one column (a file keeps one logarithm only, its first attribute's); \
-                 convert the column to keep as a logarithm into a file of its own, or leave \
-                 out --attribute-log10",
-                self.attribute.len()
-            );
         }
         if self.cluster_size < 2 {
             bail!("--cluster-size {} (must be at least 2)", self.cluster_size);

@@ -656,30 +656,69 @@ fn hidden_ranges<'f>(
 
 /// Says of each attribute `--hide-attribute` reads when its ranges all miss its values.
 fn hides_nothing_notes(style: &StyleArgs, file: &mdlod_format::reader::MdlodFile) -> Vec<String> {
-    let ranges = hidden_ranges(style, file);
-    let mut notes = Vec::new();
-    let mut seen: Vec<&str> = Vec::new();
-    for (a, _) in &ranges {
-        if seen.contains(&a.name.as_str()) {
-            continue;
+    hides_nothing_text(&hidden_range_hits(style, file), "here")
+}
+
+/// Each attribute `--hide-attribute` reads in `file`, whether some range of it meets its
+/// values, and its range.
+fn hidden_range_hits(style: &StyleArgs, file: &mdlod_format::reader::MdlodFile) -> Vec<RangeHits> {
+    let mut hits: Vec<RangeHits> = Vec::new();
+    for (a, r) in hidden_ranges(style, file) {
+        let hit = a.codes(r).is_some();
+        match hits.iter_mut().find(|h| h.name == a.name) {
+            Some(h) => h.hit |= hit,
+            None => hits.push(RangeHits {
+                name: a.name.clone(),
+                hit,
+                min: a.min,
+                max: a.max,
+            }),
         }
-        seen.push(&a.name);
-        let mut own = ranges.iter().filter(|(b, _)| b.name == a.name);
-        if own.any(|(_, r)| a.codes(*r).is_some()) {
-            continue;
-        }
-        let which = match seen.len() == 1 && ranges.iter().all(|(b, _)| b.name == a.name) {
-            true => String::new(),
-            false => format!(" (of {})", a.name),
-        };
-        notes.push(format!(
-            "  note: --hide-attribute{which} hides no particle: {} lies from {} to {} here",
-            a.name,
-            super::Num(a.min),
-            super::Num(a.max)
-        ));
     }
-    notes
+    hits
+}
+
+/// Whether an attribute's hidden ranges meet its values, over one file or several.
+struct RangeHits {
+    name: String,
+    hit: bool,
+    min: f32,
+    max: f32,
+}
+
+/// `more`'s attributes joined into `all` (a movie's frames): met where met in any frame,
+/// over the frames' joint range.
+fn join_range_hits(all: &mut Vec<RangeHits>, more: Vec<RangeHits>) {
+    for m in more {
+        match all.iter_mut().find(|h| h.name == m.name) {
+            Some(h) => {
+                h.hit |= m.hit;
+                h.min = h.min.min(m.min);
+                h.max = h.max.max(m.max);
+            }
+            None => all.push(m),
+        }
+    }
+}
+
+/// The notes on attributes whose hidden ranges meet none of their values (`where`: "here",
+/// "in any frame").
+fn hides_nothing_text(hits: &[RangeHits], place: &str) -> Vec<String> {
+    hits.iter()
+        .filter(|h| !h.hit)
+        .map(|h| {
+            let which = match hits.len() {
+                1 => String::new(),
+                _ => format!(" (of {})", h.name),
+            };
+            format!(
+                "  note: --hide-attribute{which} hides no particle: {} lies from {} to {} {place}",
+                h.name,
+                super::Num(h.min),
+                super::Num(h.max)
+            )
+        })
+        .collect()
 }
 
 /// The background's colour as `--background` gives it, or the mode's default.
@@ -1816,8 +1855,8 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     {
         anyhow::bail!(
             "--attribute has no effect without --colour-map (spheres, sndf, splat), \
-             --intensity attribute (splat) or --hide-attribute: it chooses which attribute \
-             they read"
+             --intensity attribute (splat) or --hide-attribute MIN:MAX: it chooses which \
+             attribute they read (a range NAME=MIN:MAX reads NAME itself)"
         );
     }
     if args.scale_bar_length.is_some() && !args.scale_bar {
@@ -2258,10 +2297,16 @@ pub fn run(mut args: Args) -> Result<()> {
                 "--turntable spins one file; {} is a batch directory (render one of its \
                  frame files, e.g. {})",
                 args.file.display(),
-                args.file.join("frame-0.mdlod").display()
+                mdlod_preprocess::batch::read_manifest(&args.file)
+                    .ok()
+                    .and_then(|m| m.frames.first().map(|f| args.file.join(&f.file)))
+                    .unwrap_or_else(|| args.file.join("frame-<timestep>.mdlod"))
+                    .display()
             );
         }
-        return render_frames(&args, opts, legend_size);
+        render_frames(&args, opts, legend_size)?;
+        series_json(&args);
+        return Ok(());
     }
     drop_absent_categories(&args.file, &mut opts.style)?;
     // (A projection's log is the image's, not the points'.)
@@ -2305,7 +2350,9 @@ pub fn run(mut args: Args) -> Result<()> {
     };
     check_panels_apart(&args, legend_size, label_size, bar.as_ref(), axes.as_ref())?;
     if let Some(n) = args.turntable {
-        return render_turntable(&args, opts, n, derived);
+        render_turntable(&args, opts, n, derived)?;
+        series_json(&args);
+        return Ok(());
     }
     // A bar for the choice of the cut and for cuts drawn in several batches or samples
     // (every particle of 10^8 is nine batches).
@@ -2433,16 +2480,34 @@ pub fn run(mut args: Args) -> Result<()> {
     }
     // Spheres of sizes spanning decades (an SPH run's smoothing lengths): the largest
     // cover the rest, which a projection or the density shows.
-    if let (Mode::Spheres | Mode::Sndf, Some(rad)) = (args.mode, &file.metadata().radius) {
-        if rad.min > 0.0 && rad.max / rad.min >= 100.0 {
-            println!(
-                "  note: the particles' own sizes span {} to {} ({:.0}×): as spheres, the \
-                 largest cover the rest; smoothing lengths (SPH) are better projected, \
-                 --mode splat, or drawn as a density, --mode density",
-                three_digits(rad.min),
-                three_digits(rad.max),
-                rad.max / rad.min
-            );
+    let lit_by_area = matches!(args.mode, Mode::Splat | Mode::SplatOver)
+        && !matches!(args.intensity, Intensity::Attribute);
+    if let Some(rad) = file
+        .metadata()
+        .radius
+        .filter(|r| r.min > 0.0 && r.max / r.min >= 100.0)
+    {
+        let span = format!(
+            "the particles' own sizes span {} to {} ({:.0}×)",
+            three_digits(rad.min),
+            three_digits(rad.max),
+            rad.max / rad.min
+        );
+        // (A projection of mass: each splat's light m, spread over its disk.)
+        let projection = "--mode splat --intensity attribute with a column of m / (π h²) \
+                          (the column density)";
+        match args.mode {
+            Mode::Spheres | Mode::Sndf => println!(
+                "  note: {span}: as spheres, the largest cover the rest; smoothing lengths \
+                 (SPH) are better projected, {projection}, or drawn as a density, --mode \
+                 density"
+            ),
+            _ if lit_by_area => println!(
+                "  note: {span}: splats lit by their disks' area (π r²) let the largest \
+                 outshine the rest by as much squared; smoothing lengths (SPH) project their \
+                 mass with {projection}"
+            ),
+            _ => {}
         }
     }
     for note in coarse_range_notes(&args.style, &file) {
@@ -2744,7 +2809,13 @@ pub fn run(mut args: Args) -> Result<()> {
         draw_panels(&args, &[(&args.output, axes)], args.axes_corner(), "--axes")?;
     }
     if args.json {
-        crate::print_json(report_json(&args.output, &r, &args));
+        crate::print_json(report_json(
+            &args.output,
+            &r,
+            &args,
+            &opts,
+            shown_json(&args, &opts, &file),
+        ));
     }
     Ok(())
 }
@@ -3779,12 +3850,48 @@ fn frame_output(pattern: &Path, index: usize) -> Result<PathBuf> {
 }
 
 /// The line for one image of a movie or a turntable (`which` names it): what it drew.
-/// The `--json` object of one image.
-fn report_json(out: &Path, r: &mdlod_render::RenderReport, args: &Args) -> serde_json::Value {
+/// The attribute the colours or splat light of `file` show, by name, and the range they
+/// span (the style's, else the file's), where they show one: `--json`'s keys.
+fn shown_json(
+    args: &Args,
+    opts: &RenderOptions,
+    file: &mdlod_format::reader::MdlodFile,
+) -> serde_json::Value {
+    let a = file
+        .metadata()
+        .attribute
+        .as_ref()
+        .filter(|_| by_attribute(args));
+    serde_json::json!({
+        "attribute": a.map(|a| a.name.clone()),
+        "attribute_range": a.map(|a| opts.style.attribute_range.unwrap_or([a.min, a.max])),
+    })
+}
+
+/// With `--json`, the last line of a movie or turntable: what it wrote, with the notes
+/// said after its images (on the whole series).
+fn series_json(args: &Args) {
+    if args.json {
+        crate::print_json(serde_json::json!({
+            "series": args.output.display().to_string(),
+            "file": args.file.display().to_string(),
+        }));
+    }
+}
+
+/// The `--json` object of one image, with `more` (an object: a frame's or view's place)
+/// added.
+fn report_json(
+    out: &Path,
+    r: &mdlod_render::RenderReport,
+    args: &Args,
+    opts: &RenderOptions,
+    more: serde_json::Value,
+) -> serde_json::Value {
     use clap::ValueEnum;
     let c = &r.camera;
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-    serde_json::json!({
+    let mut value = serde_json::json!({
         "output": out.display().to_string(),
         "file": args.file.display().to_string(),
         "mode": args.mode.to_possible_value().map(|v| v.get_name().to_string()),
@@ -3819,7 +3926,17 @@ fn report_json(out: &Path, r: &mdlod_render::RenderReport, args: &Args) -> serde
         },
         "adapter": r.adapter,
         "backend": r.backend,
-    })
+        // What the colours show: the attribute and the range its map spans (a figure's
+        // to reproduce), a projection's light range, and where a legend went.
+        "attribute": by_attribute(args).then(|| opts.style.attribute.clone()).flatten(),
+        "attribute_range": opts.style.attribute_range.filter(|_| by_attribute(args)),
+        "light_range": r.light_range,
+        "legend": args.legend.as_ref().map(|p| p.display().to_string()),
+    });
+    if let (serde_json::Value::Object(v), serde_json::Value::Object(m)) = (&mut value, more) {
+        v.extend(m);
+    }
+    value
 }
 
 fn image_line(
@@ -3969,7 +4086,13 @@ fn render_turntable(
         );
         println!("{}", image_line(&out, &which, &r, args, coarsest));
         if args.json {
-            crate::print_json(report_json(&out, &r, args));
+            crate::print_json(report_json(&out, &r, args, &opts, {
+                let file = mdlod_render::open_styled(&args.file, &opts.style)?;
+                let mut more = shown_json(args, &opts, &file);
+                more["view"] = i.into();
+                more["views"] = n.into();
+                more
+            }));
         }
     }
     let exposure = opts
@@ -3996,6 +4119,12 @@ fn render_turntable(
     );
     if let Some(note) = stale_images_note(&args.output, n as usize) {
         println!("{note}");
+    }
+    {
+        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
+        for note in hides_nothing_notes(&args.style, &file) {
+            println!("{note}");
+        }
     }
     if view_fits(&args.camera.spec()) {
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
@@ -4244,6 +4373,8 @@ fn render_frames(
     // trajectory (a deposition, an evaporation): a style names any species of some
     // frame, and applies in the frames that hold it.
     let mut survey = mdlod_render::movie::Survey::new();
+    // Whether each attribute's hidden ranges meet its values in some frame.
+    let mut range_hits = Vec::new();
     for f in &manifest.frames {
         let path = dir.join(&f.file);
         // (Something else in its place, a directory say, the reader names.)
@@ -4279,7 +4410,11 @@ fn render_frames(
             let lit = args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute);
             check_not_logged(&opts.style, a, &path, lit, file.metadata().attribute_log10)?;
         }
+        join_range_hits(&mut range_hits, hidden_range_hits(&args.style, &file));
         survey.add(&file, &opts);
+    }
+    for note in hides_nothing_text(&range_hits, "in any frame") {
+        println!("{note}");
     }
     let bounds = survey.bounds().expect("at least one frame");
     let names = survey.names();
@@ -4498,6 +4633,7 @@ fn render_frames(
         }
         let coarsest = coarsest_points(&file);
         let species = file.metadata().species.clone();
+        let shown = shown_json(args, &opts, &file);
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         drawn = drawn_names(&r, &species, drawn);
         // Splats: one exposure (a projection's map: one range) for every frame, or the
@@ -4513,7 +4649,15 @@ fn render_frames(
         let which = format!("frame {}/{n}, timestep {}", i + 1, f.timestep);
         println!("{}", image_line(&out, &which, &r, args, coarsest));
         if args.json {
-            crate::print_json(report_json(&out, &r, args));
+            crate::print_json(report_json(&out, &r, args, &opts, {
+                let mut more = shown;
+                more["frame"] = i.into();
+                more["frames"] = n.into();
+                more["timestep"] = f.timestep.into();
+                more["time"] = f.time.into();
+                more["frame_file"] = dir.join(&f.file).display().to_string().into();
+                more
+            }));
         }
     }
     let exposure = opts
