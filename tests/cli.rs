@@ -10292,6 +10292,20 @@ fn sizes_spanning_decades_suggest_a_projection() {
             && out.contains("--intensity attribute with a column of m / (π h²)"),
         "{out}"
     );
+    // Splats are framed as the spheres are, their kernels' wings past the spheres
+    // counting up to a twentieth of the data's size (they framed the whole reach of the
+    // largest, 1.6× as far here).
+    let distance = |mode: &str| {
+        let view = dir.path().join(format!("{mode}.json"));
+        let mut args = vec!["render", s(&wide), "-o", s(&png), "--mode", mode, "--ortho"];
+        args.extend(["--width", "64", "--height", "48", "--save-view", s(&view)]);
+        ok(&args);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&view).unwrap()).unwrap();
+        v["distance"].as_f64().unwrap()
+    };
+    let ratio = distance("splat") / distance("spheres");
+    assert!((1.0..1.4).contains(&ratio), "{ratio}");
     let narrow = write("narrow.xyz", 0.05);
     let out = ok(&[
         "render",

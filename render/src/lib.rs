@@ -927,8 +927,23 @@ pub fn fit_bounds(file: &MdlodFile, hidden: HiddenSet, all: bool) -> FitBounds {
 pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
     let hidden = opts.style.hidden_set(file.metadata());
     let fit = fit_bounds(file, hidden, opts.fit_all);
-    // The spheres, splats or kernels as drawn, not the file's spheres.
-    let reach = glam::Vec3::splat(drawn_reach(file, opts));
+    // The spheres, splats or kernels as drawn, not the file's spheres. A splat's or
+    // kernel's reach past its sphere counts up to a twentieth of the data's size: the
+    // largest of sizes spanning decades (an SPH halo's smoothing lengths, 10^4 of a
+    // galaxy's) would frame their faint wings and leave the data a dot.
+    let extent = (fit.bounds.max - fit.bounds.min).max_element();
+    let styled = drawn_reach(file, opts);
+    let sphere = match opts.mode {
+        RenderMode::Spheres | RenderMode::Sndf { .. } => styled,
+        _ => styled_reach(file, opts, 1.0),
+    };
+    let wings = (styled - sphere).max(0.0);
+    let wings = if extent.is_finite() && extent > 0.0 {
+        wings.min(0.05 * extent)
+    } else {
+        wings
+    };
+    let reach = glam::Vec3::splat(sphere + wings);
     let drawn = Bounds::new(fit.bounds.min - reach, fit.bounds.max + reach);
     let bounds = if drawn.min.cmple(drawn.max).all() {
         drawn
