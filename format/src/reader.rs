@@ -1134,13 +1134,20 @@ impl MdlodFile {
     /// The error for an attribute name the file does not keep, listing those it does.
     fn no_such_attribute(&self, name: &str) -> FormatError {
         let names = self.attribute_names();
+        // A name that differs in case only (`C_CNA`): the one meant, said first.
+        let near = names.iter().find(|n| n.eq_ignore_ascii_case(name));
         FormatError::NoSuchAttribute {
             path: self.path.clone(),
             name: name.to_string(),
-            names: if names.is_empty() {
-                "none".to_string()
-            } else {
-                names.join(", ")
+            names: match (names.is_empty(), near) {
+                (true, _) => "none".to_string(),
+                (false, Some(n)) => {
+                    format!(
+                        "{}; names match in case: did you mean {n}?",
+                        names.join(", ")
+                    )
+                }
+                (false, None) => names.join(", "),
             },
         }
     }

@@ -2678,9 +2678,13 @@ pub fn run(mut args: Args) -> Result<()> {
                 ));
             }
             if !cut.is_empty() {
+                let marks = match (bright > hi + slack, cut.len()) {
+                    (true, 2) => "its ends ≥ and ≤",
+                    (true, _) => "its top ≥",
+                    (false, _) => "its bottom ≤",
+                };
                 println!(
-                    "  note: {} (a legend marks its ends ≥ and ≤; --light-range {}:{} shows \
-                     them all)",
+                    "  note: {} (a legend marks {marks}; --light-range {}:{} shows them all)",
                     cut.join(", and "),
                     Num(if opts.style.log_scale { faint } else { lo }),
                     Num(bright.max(hi))
