@@ -507,10 +507,15 @@ fn bar(
     let width_of = |text: &str| CHAR_WIDTH * text.chars().count() as f32;
     let mut free_from = BAR[0] + width_of(&ends[0]) + LABEL_GAP;
     let free_to = BAR[1] - width_of(&ends[1]) - LABEL_GAP;
+    // (A tick under an end's label, unlabelled, would read as that end: left out, but
+    // for one at the end itself, which the label names.)
+    let (under_low, under_high) = (free_from - LABEL_GAP, free_to + LABEL_GAP);
+    let at_end = |x: f32| x <= BAR[0] + 0.5 || x >= BAR[1] - 0.5;
     let ticks = ticks
         .iter()
-        .map(|(v, label)| {
-            let x = x_of(position(*v));
+        .map(|(v, label)| (x_of(position(*v)), label))
+        .filter(|&(x, _)| at_end(x) || (x >= under_low && x <= under_high))
+        .map(|(x, label)| {
             let half = width_of(label) / 2.0;
             let fits = x - half >= free_from && x + half <= free_to;
             if fits {
@@ -1834,6 +1839,37 @@ mod tests {
             assert!(font::GLYPHS.iter().any(|(g, _)| *g == c), "{c:?}");
         }
         assert_eq!(font::glyph('\u{1F600}'), font::glyph('?'));
+    }
+
+    /// No unlabelled tick stands under an end's label (where it would read as the end's
+    /// value, 2-5× off): a log bar of wide marked ends keeps only the ticks clear of them
+    /// and those at the ends themselves.
+    #[test]
+    fn no_tick_hides_under_an_end_label() {
+        let legend = light_bar(
+            ColourMap::Viridis,
+            "flux",
+            [4.96e-10, 4.87e-5],
+            true,
+            [1e-12, 1e-2],
+        );
+        let Legend::Bar { ticks, ends, .. } = &legend else {
+            panic!("a bar")
+        };
+        assert!(
+            ends[0].starts_with('≤') && ends[1].starts_with('≥'),
+            "{ends:?}"
+        );
+        let width = |t: &str| CHAR_WIDTH * t.chars().count() as f32;
+        let (low, high) = (BAR[0] + width(&ends[0]), BAR[1] - width(&ends[1]));
+        assert!(!ticks.is_empty());
+        for (x, label) in ticks {
+            let end = *x <= BAR[0] + 0.5 || *x >= BAR[1] - 0.5;
+            assert!(
+                end || (*x > low && *x < high),
+                "tick at {x} ({label:?}) under {ends:?}"
+            );
+        }
     }
 
     /// A projection's bar marks an end `≥` (`≤`, on a log scale) where the image's lit
