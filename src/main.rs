@@ -60,7 +60,12 @@ fn print_line(line: std::fmt::Arguments) {
     use std::sync::atomic::Ordering;
     if JSON_OUTPUT.load(Ordering::Relaxed) {
         let text = line.to_string();
-        if let Some((_, note)) = text.split_once("note: ") {
+        // (A note's line starts with it, after its indent or the path it is about.)
+        let note = text
+            .trim_start()
+            .strip_prefix("note: ")
+            .or_else(|| text.split_once(": note: ").map(|(_, n)| n));
+        if let Some(note) = note {
             NOTES
                 .lock()
                 .unwrap_or_else(|e| e.into_inner())

@@ -10595,7 +10595,7 @@ fn hidden_values_can_be_read_from_several_attributes_at_once() {
         (vec!["--hide-attribute", "c_ke=1:2"], "c_cna, c_pe"),
         (
             vec!["--hide-attribute", "C_CNA=1:2"],
-            "names match in case: did you mean c_cna?",
+            "a name differs only in case: did you mean c_cna?",
         ),
         (
             vec!["--hide-attribute", "=1:2"],

@@ -99,7 +99,7 @@ pub struct MdlodFile {
     /// The file's size and modification time when it was opened ([`Self::changed_on_disk`]).
     opened_as: Option<(std::fs::File, Stamp)>,
     /// The attributes of slots 1 and up of a [`HiddenSet`] ([`Self::hide_by_attributes`]).
-    slot_hiders: Vec<(AttributeInfo, Range<usize>)>,
+    slot_hiders: Vec<Option<(AttributeInfo, Range<usize>)>>,
     radius_range: Option<Range<usize>>,
     /// Per node level: the index in `node_blocks` of its first block.
     block_first: Vec<usize>,
@@ -285,8 +285,8 @@ impl MdlodFile {
     ) -> Result<MdlodFile, FormatError> {
         let path = path.as_ref().to_path_buf();
         let file = crate::files::open(&path).map_err(|e| FormatError::io(&path, e))?;
-        let map = crate::mmap::map_file(&file).map_err(|e| FormatError::io(&path, e))?;
         let stamp = stamp(&file);
+        let map = crate::mmap::map_file(&file).map_err(|e| FormatError::io(&path, e))?;
         let mut f = Self::from_map(path, map, eager_nodes)?;
         f.opened_as = stamp.map(|s| (file, s));
         Ok(f)
@@ -1143,7 +1143,7 @@ impl MdlodFile {
                 (true, _) => "none".to_string(),
                 (false, Some(n)) => {
                     format!(
-                        "{}; names match in case: did you mean {n}?",
+                        "{}; a name differs only in case: did you mean {n}?",
                         names.join(", ")
                     )
                 }
@@ -1179,11 +1179,10 @@ impl MdlodFile {
     /// later [`Self::select_attribute`]. An unknown name is an error listing the file's
     /// attributes.
     pub fn hide_by_attributes(mut self, names: &[&str]) -> Result<MdlodFile, FormatError> {
+        // (Each name keeps its slot, one the file cannot read included.)
         let mut hiders = Vec::with_capacity(names.len());
         for name in names {
-            if let Some(h) = self.attribute_values_named(name)? {
-                hiders.push(h);
-            }
+            hiders.push(self.attribute_values_named(name)?);
         }
         self.slot_hiders = hiders;
         *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
@@ -1227,7 +1226,7 @@ impl MdlodFile {
         match slot {
             0 => Some((self.hiding_attribute()?, self.hiding_values())),
             k => {
-                let (info, r) = self.slot_hiders.get(usize::from(k) - 1)?;
+                let (info, r) = self.slot_hiders.get(usize::from(k) - 1)?.as_ref()?;
                 Some((info, Some(bytemuck::cast_slice(&self.map[r.clone()]))))
             }
         }

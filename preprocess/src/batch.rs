@@ -1308,8 +1308,11 @@ fn build_difference(
         delta_n: m.build.delta_n != b.delta_n.min(last),
         precision: m.build.position_bits != b.position_bits,
         chunk_points: m.build.chunk_points != chunked,
+        // (A logarithm written before its clusters kept the logarithm of their mean
+        // value, `attribute_log10` unset, is converted again: splats refuse it.)
         attribute: m.attribute.as_ref().map(|a| a.name.clone())
-            != attribute.map(|a| crate::convert::attribute_name(a, options)),
+            != attribute.map(|a| crate::convert::attribute_name(a, options))
+            || (options.attribute_log10 && m.attribute.is_some() && !m.attribute_log10),
         radius: !same_radii(file, options, recorded_radii, given),
         ..Default::default()
     };

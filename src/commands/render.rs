@@ -4411,8 +4411,13 @@ fn render_frames(
             .as_ref()
             .filter(|_| by_attribute(args))
         {
-            let lit = args.mode == Mode::Splat && matches!(args.intensity, Intensity::Attribute);
-            check_not_logged(&opts.style, a, &path, lit, file.metadata().attribute_log10)?;
+            check_not_logged(
+                &opts.style,
+                a,
+                &path,
+                lit_linearly(args),
+                file.metadata().attribute_log10,
+            )?;
         }
         join_range_hits(&mut range_hits, hidden_range_hits(&args.style, &file));
         survey.add(&file, &opts);

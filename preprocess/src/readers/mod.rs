@@ -2343,8 +2343,6 @@ pub fn is_gzip(path: &Path) -> Result<bool, ReadError> {
     Ok(n == 2 && magic == [0x1f, 0x8b])
 }
 
-/// True for a gzip file whose compressed stream ends before any text (a run has just
-/// opened it and written the gzip header, or a few bytes more): as good as empty.
 /// Whether `path` plainly holds no dump: a file of text whose first line is neither a
 /// LAMMPS `ITEM:` nor an XYZ count (a run's log, notes) and of no binary format. A file
 /// that cannot be read, is empty, compressed or binary is not plainly so. The newest
@@ -2370,6 +2368,8 @@ pub fn plainly_no_dump(path: &Path) -> bool {
     !compressed && !binary && head.contains(&b'\n') && InputFormat::sniff(&head).is_none()
 }
 
+/// True for a gzip file whose compressed stream ends before any text (a run has just
+/// opened it and written the gzip header, or a few bytes more): as good as empty.
 pub fn gzip_without_text(path: &Path) -> bool {
     if !is_gzip(path).unwrap_or(false) {
         return false;
