@@ -10370,6 +10370,25 @@ fn a_logarithm_first_and_further_columns_as_they_are() {
     assert!(out.contains("T from 100 to 399"), "{out}");
 }
 
+/// A conversion that keeps no attribute names the dump's columns it leaves behind, and
+/// how to keep one (an OVITO user expects every column); keeping one says nothing.
+#[test]
+fn columns_left_behind_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("gb.mdlod");
+    let dump = lammps_sample_path("cu_gb.cna.dump");
+    let said = ok(&["convert", s(&dump), "-o", s(&out)]);
+    assert!(
+        said.contains(
+            "note: the input's columns c_cna, c_cs, c_pe are not kept: --attribute c_cna keeps \
+             one to colour, light or hide by (repeat it for more)"
+        ),
+        "{said}"
+    );
+    let said = ok(&["convert", s(&dump), "-o", s(&out), "--attribute", "c_pe"]);
+    assert!(!said.contains("not kept"), "{said}");
+}
+
 /// A number with a decimal comma gets a tip with the point, whichever option takes it.
 #[test]
 fn a_decimal_comma_gets_a_tip() {

@@ -1721,6 +1721,9 @@ pub fn convert_dump(
     // What the input holds that the conversion does not read.
     let mut notes = dump.frame_notes(k, read);
     notes.extend(dump.input_notes());
+    if let Ok(info) = dump.frame_info(k) {
+        notes.extend(unkept_columns_note(&info.columns, read));
+    }
     let which = |mut r: ConvertReport| {
         r.frame = Some((k, count));
         r.notes.extend(notes.iter().cloned());
@@ -1854,6 +1857,49 @@ pub fn read_extra_attributes(
             }))
         })
         .collect()
+}
+
+/// Says which of a dump's per-atom columns a conversion that keeps no attribute leaves
+/// behind (`c_pe`, `vx`, a CNA's `c_cna`): an OVITO user expects every column, and
+/// learns only at render time that none was kept. `None` where an attribute is kept or
+/// nothing is left.
+pub fn unkept_columns_note(
+    columns: &[String],
+    read: &crate::readers::ReadOptions,
+) -> Option<String> {
+    if read.attribute.is_some() || !read.extra_attributes.is_empty() {
+        return None;
+    }
+    // What every conversion reads or what carries no per-atom quantity to show.
+    const READ: &[&str] = &[
+        "id", "type", "element", "mol", "x", "y", "z", "xs", "ys", "zs", "xu", "yu", "zu", "xsu",
+        "ysu", "zsu", "ix", "iy", "iz", "radius", "diameter", "species", "pos", "proc", "procp1",
+    ];
+    let left: Vec<&str> = columns
+        .iter()
+        .map(String::as_str)
+        .filter(|c| {
+            !READ.contains(&c.to_ascii_lowercase().as_str())
+                && read.species_column.as_deref() != Some(*c)
+        })
+        .collect();
+    if left.is_empty() {
+        return None;
+    }
+    let shown: Vec<&str> = left.iter().take(8).copied().collect();
+    Some(format!(
+        "the input's column{} {}{} {} not kept: --attribute {} keeps one to colour, light or \
+         hide by (repeat it for more)",
+        if left.len() == 1 { "" } else { "s" },
+        shown.join(", "),
+        if left.len() > 8 {
+            format!(" and {} more", left.len() - 8)
+        } else {
+            String::new()
+        },
+        if left.len() == 1 { "is" } else { "are" },
+        left[0]
+    ))
 }
 
 /// Describes a source file for the metadata.

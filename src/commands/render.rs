@@ -4084,8 +4084,8 @@ fn render_turntable(
         }
         limited += usize::from(r.budget_limited || r.pool_limited);
         let which = format!(
-            "view {}/{n}, azimuth {:.1}°",
-            i + 1,
+            "view {i} of 0-{}, azimuth {:.1}°",
+            n - 1,
             azimuth.rem_euclid(360.0)
         );
         println!("{}", image_line(&out, &which, &r, args, coarsest));
@@ -4655,7 +4655,8 @@ fn render_frames(
             empty_frames.push(f.timestep);
         }
         limited_frames += usize::from(r.budget_limited || r.pool_limited);
-        let which = format!("frame {}/{n}, timestep {}", i + 1, f.timestep);
+        // (Counted from 0, as the images' numbers and --frames count them.)
+        let which = format!("frame {i} of 0-{}, timestep {}", n - 1, f.timestep);
         println!("{}", image_line(&out, &which, &r, args, coarsest));
         if args.json {
             crate::print_json(report_json(&out, &r, args, &opts, {
