@@ -9169,9 +9169,6 @@ fn several_attributes_in_one_file_colour_by_any() {
         "z",
     ]);
     assert!(e.contains("--attribute z is given twice"), "{e}");
-    let mut args = vec!["convert", s(&dump), "-o", s(&both), "--attribute-log10"];
-    args.extend(["--attribute", "c_ke", "--attribute", "z"]);
-    assert!(fails(&args).contains("--attribute-log10 with 2 --attribute columns"));
     // A batch: kept while the columns are the same, converted again when they change.
     let out = dir.path().join("d");
     let batch = |extra: &[&str]| {
@@ -9284,7 +9281,8 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     given.extend(["--attribute-range", "0:4"]);
     let out = ok(&given);
     assert!(!out.contains("the particles drawn"), "{out}");
-    // A diverging map keeps its white on 0: from minus to plus the largest drawn.
+    // A diverging map over a column of one sign (from 0 up) spreads the values drawn, as
+    // the file's own range would, its white where their middle falls.
     let mut diverging = vec!["render", s(&file), "-o", s(&png), "--width", "96"];
     diverging.extend([
         "--height",
@@ -9296,7 +9294,8 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     ]);
     let out = ok(&diverging);
     assert!(
-        out.contains("c_rg from -3.5979 to 3.5979 (centred on 0"),
+        out.contains("c_rg from 1.5 to 3.5979 (over the values of the particles drawn")
+            && out.contains("the map's white at 2.54895"),
         "{out}"
     );
     // A movie: the frames' shown values.
@@ -10387,6 +10386,57 @@ fn columns_left_behind_are_named() {
     );
     let said = ok(&["convert", s(&dump), "-o", s(&out), "--attribute", "c_pe"]);
     assert!(!said.contains("not kept"), "{said}");
+}
+
+/// A diverging map over values of one sign spreads them over the whole map where hidden
+/// values make the range the drawn ones' (it was centred on 0, every atom one blue), and
+/// a range centred on 0 over such values is noted as using half the map.
+#[test]
+fn a_diverging_map_over_values_of_one_sign() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("gb.mdlod");
+    let dump = lammps_sample_path("cu_gb.cna.dump");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--attribute",
+        "c_cna",
+        "--attribute",
+        "c_pe",
+    ]);
+    let png = dir.path().join("x.png");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "48",
+            "--height",
+            "32",
+        ];
+        args.extend(["--attribute", "c_pe", "--colour-map", "cool-warm"]);
+        args.extend(extra);
+        ok(&args)
+    };
+    let out = run(&[
+        "--hide-attribute",
+        "c_cna=0.5:1.5",
+        "--hide-attribute",
+        "c_pe=:-3.5",
+    ]);
+    assert!(
+        !out.contains("centred on 0") && !out.contains("diverging map"),
+        "{out}"
+    );
+    let out = run(&["--attribute-range", "-4:4"]);
+    assert!(
+        out.contains("note: cool-warm is a diverging map, centred on 0, and c_pe is at or below 0"),
+        "{out}"
+    );
 }
 
 /// A number with a decimal comma gets a tip with the point, whichever option takes it.

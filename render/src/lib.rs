@@ -666,9 +666,16 @@ pub fn default_range_of(
     );
     match (chosen, shown) {
         (Some(c), _) => Some(c),
-        // A diverging map keeps its white on 0 whatever is drawn (a slab of one sign
-        // reaches to its largest magnitude on either side).
-        (None, Some([lo, hi])) if mapped && style.colour_map.is_some_and(|m| m.is_diverging()) => {
+        // A diverging map over values of both signs keeps its white on 0 whatever is
+        // drawn (a slab of one sign reaches to its largest magnitude on either side); over
+        // a file of one sign (a potential energy) it spreads the values drawn, as the
+        // file's own range would.
+        (None, Some([lo, hi]))
+            if mapped
+                && style.colour_map.is_some_and(|m| m.is_diverging())
+                && a.min < 0.0
+                && a.max > 0.0 =>
+        {
             let m = lo.abs().max(hi.abs());
             (m > 0.0 && m.is_finite()).then_some(([-m, m], style::RangeChoice::Centred))
         }
@@ -927,11 +934,19 @@ pub fn fit_bounds(file: &MdlodFile, hidden: HiddenSet, all: bool) -> FitBounds {
 pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
     let hidden = opts.style.hidden_set(file.metadata());
     let fit = fit_bounds(file, hidden, opts.fit_all);
-    // The spheres, splats or kernels as drawn, not the file's spheres. A splat's or
-    // kernel's reach past its sphere counts up to a twentieth of the data's size: the
-    // largest of sizes spanning decades (an SPH halo's smoothing lengths, 10^4 of a
-    // galaxy's) would frame their faint wings and leave the data a dot.
-    let extent = (fit.bounds.max - fit.bounds.min).max_element();
+    // The spheres, splats or kernels as drawn, not the file's spheres. Where the
+    // particles' own sizes span a decade and more, a splat's or kernel's reach past its
+    // sphere counts up to a twentieth of the data's size: the largest of them (an SPH
+    // halo's smoothing lengths, 10^4 of a galaxy's) would frame their faint wings and
+    // leave the data a dot.
+    let spread = file
+        .metadata()
+        .radius
+        .is_some_and(|r| r.min > 0.0 && r.max >= 10.0 * r.min);
+    let extent = match spread {
+        true => (fit.bounds.max - fit.bounds.min).max_element(),
+        false => f32::INFINITY,
+    };
     let styled = drawn_reach(file, opts);
     let sphere = match opts.mode {
         RenderMode::Spheres | RenderMode::Sndf { .. } => styled,
@@ -939,6 +954,7 @@ pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
     };
     let wings = (styled - sphere).max(0.0);
     let wings = if extent.is_finite() && extent > 0.0 {
+        // (Only where sizes spread: `extent` is infinite otherwise.)
         wings.min(0.05 * extent)
     } else {
         wings

@@ -2418,6 +2418,26 @@ pub fn run(mut args: Args) -> Result<()> {
                 Num(hi),
                 log_text(a, &opts.style, &args) + &white_text(&opts.style)
             );
+            // A diverging map centred on 0 over values of one sign uses half of itself.
+            let drawn = [a.min, a.max];
+            if matches!(args.style.colour_map, Some(ColourMapArg::CoolWarm))
+                && args.mode != Mode::Splat
+                && lo < 0.0
+                && hi > 0.0
+                && (drawn[1] <= 0.0 || drawn[0] >= 0.0)
+            {
+                println!(
+                    "  note: cool-warm is a diverging map, centred on 0, and {} is {} \
+                     everywhere: its values take one half of the map; viridis or magma \
+                     spread them over a whole one",
+                    a.name,
+                    if drawn[1] <= 0.0 {
+                        "at or below 0"
+                    } else {
+                        "at or above 0"
+                    }
+                );
+            }
             if lo >= hi {
                 // Splats lit by a constant all give the same light; a colour map over the
                 // particles gives them its last colour.
