@@ -10476,6 +10476,38 @@ fn a_batch_held_by_another_exits_with_75() {
     assert!(err.contains("(pid 4242 on node17)"), "{err}");
     drop(held);
     ok(&["batch", s(&dump), "-o", s(&out)]);
+    // A movie of the directory while a batch (or a shard of one) rewrites it would mix
+    // old and new frames: refused with 75 too.
+    let held = std::fs::File::open(&lock).unwrap();
+    held.lock_shared().unwrap();
+    let movie = dir.path().join("m-%d.png");
+    let o = mdlod(&[
+        "render",
+        s(&out),
+        "-o",
+        s(&movie),
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(75), "{err}");
+    assert!(
+        err.contains("another mdlod batch is writing this directory"),
+        "{err}"
+    );
+    drop(held);
+    ok(&[
+        "render",
+        s(&out),
+        "-o",
+        s(&movie),
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
 }
 
 /// A bus error (what the kernel sends where a mapped file is cut short while it is

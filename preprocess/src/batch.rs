@@ -984,18 +984,19 @@ fn lock_batch(out_dir: &Path, shard: Option<(u32, u32)>) -> Result<Vec<std::fs::
     Ok(held)
 }
 
-/// Who is running a whole batch into `out_dir` now (what its lock says: `pid P on
-/// HOST`), where one is; `None` where none is or the locks cannot tell. For messages
-/// about a directory met while a batch rewrites it.
+/// Who is running a batch, whole or a shard of it, into `out_dir` now (what its lock
+/// says: `pid P on HOST`; shards hold it together and say nothing), where one is; `None`
+/// where none is or the locks cannot tell. For a render that would read the directory
+/// while a batch rewrites it.
 pub fn batch_running(out_dir: &Path) -> Option<String> {
     use std::io::Read;
     let mut file = std::fs::File::open(out_dir.join(lock_file_name(None))).ok()?;
-    match file.try_lock_shared() {
+    match file.try_lock() {
         Err(std::fs::TryLockError::WouldBlock) => {
             let mut holder = String::new();
             let _ = file.read_to_string(&mut holder);
             Some(match holder.trim() {
-                "" => "a batch".to_string(),
+                "" => "shards of a batch".to_string(),
                 h => h.to_string(),
             })
         }
@@ -2862,7 +2863,12 @@ pub fn batch(
     let failed = AtomicBool::new(false);
     let first_error: Mutex<Option<BatchError>> = Mutex::new(None);
     let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(ends_mid_line);
-    // (Each shard reports the frames no shard could list; a merge keeps one of each.)
+    // (The frames no shard could list, an input holding no dump, are shard 0's to
+    // report: each shard failing on them double-counted them, and failed every task of
+    // an array, so that a merge run `afterok` never ran.)
+    if opts.shard.is_some_and(|(i, _)| i != 0) {
+        unlisted_failures.clear();
+    }
     let unlisted = unlisted_failures.len();
     let failed_frames: Mutex<Vec<FailedFrame>> = Mutex::new(unlisted_failures);
     let converted = std::sync::atomic::AtomicUsize::new(0);

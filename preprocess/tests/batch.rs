@@ -2526,6 +2526,16 @@ fn keep_going_passes_over_an_input_that_holds_no_dump() {
     check_manifest(&out, &m);
     let missing = dir.path().join("no-such.dump");
     assert!(batch(&[missing, inputs[1].clone()], &out, &keep, &NoProgress).is_err());
+    // Sharded, the input no shard can list is shard 0's alone to report.
+    let sharded = dir.path().join("sharded");
+    for (i, fails) in [(0, 1), (1, 0)] {
+        let keep = BatchOptions {
+            keep_going: true,
+            ..shard(i, 2)
+        };
+        let r = batch(&inputs, &sharded, &keep, &NoProgress).unwrap();
+        assert_eq!(r.failed.len(), fails, "shard {i}: {:?}", r.failed);
+    }
 }
 
 /// A batch running into a directory is told by its lock (for a render that meets the

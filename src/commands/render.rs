@@ -4368,6 +4368,16 @@ fn render_frames(
 ) -> Result<()> {
     let dir = &args.file;
     super::view::unmerged_batch(dir)?;
+    // A batch rewriting the frames would mix old and new ones into the movie: refused
+    // (status 75, as a batch refused beside another: try again once it ends).
+    if let Some(holder) = mdlod_preprocess::batch::batch_running(dir) {
+        return Err(mdlod_preprocess::batch::BatchError::Busy {
+            dir: dir.clone(),
+            shard: String::new(),
+            holder,
+        }
+        .into());
+    }
     // (A batch rewriting the directory now lists only the frames it has finished.)
     let running = || {
         mdlod_preprocess::batch::batch_running(dir).map_or(String::new(), |who| {
