@@ -1721,7 +1721,14 @@ pub fn convert_dump(
     // What the input holds that the conversion does not read.
     let mut notes = dump.frame_notes(k, read);
     notes.extend(dump.input_notes());
-    if let Ok(info) = dump.frame_info(k) {
+    // (Of the dump formats that name their per-atom columns: LAMMPS and XYZ.)
+    let columned = matches!(
+        dump.format(),
+        crate::readers::InputFormat::LammpsText
+            | crate::readers::InputFormat::LammpsBinary
+            | crate::readers::InputFormat::Xyz
+    );
+    if let Some(info) = dump.frame_info(k).ok().filter(|_| columned) {
         notes.extend(unkept_columns_note(&info.columns, read));
     }
     let which = |mut r: ConvertReport| {
