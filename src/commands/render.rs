@@ -4059,23 +4059,25 @@ fn render_turntable(
         .map(ViewSpec::Camera)
         .collect();
     }
-    // Every view is seen from one distance: one scale bar for all (an orthographic
-    // view's; a perspective one is refused here, before any view is drawn).
+    // Every view is seen from one distance: one scale bar for all, an orthographic
+    // view's, measured on a camera of the turn.
+    let turn_bar = |c: &mdlod_render::Camera| -> Result<mdlod_render::legend::Legend> {
+        let units = mdlod_render::open_styled(&args.file, &opts.style)?
+            .metadata()
+            .units
+            .clone();
+        scale_bar(
+            c,
+            opts.width,
+            opts.height,
+            args.scale_bar_length,
+            args.scale_bar_unit.as_deref().or(units.as_deref()),
+            args.text_scale,
+        )
+    };
+    // (A fitted turn's: a perspective one is refused here, before any view is drawn.)
     let bar = match (&views[..], args.scale_bar) {
-        ([ViewSpec::Camera(c), ..], true) => {
-            let units = mdlod_render::open_styled(&args.file, &opts.style)?
-                .metadata()
-                .units
-                .clone();
-            Some(scale_bar(
-                c,
-                opts.width,
-                opts.height,
-                args.scale_bar_length,
-                args.scale_bar_unit.as_deref().or(units.as_deref()),
-                args.text_scale,
-            )?)
-        }
+        ([ViewSpec::Camera(c), ..], true) => Some(turn_bar(c)?),
         _ => None,
     };
     let mut written = Vec::new();
@@ -4190,20 +4192,7 @@ fn render_turntable(
     }
     // (A view not fitted, a view file's distance, is measured on the first view drawn.)
     let bar = match (bar, cameras.first()) {
-        (None, Some(c)) if args.scale_bar => {
-            let units = mdlod_render::open_styled(&args.file, &opts.style)?
-                .metadata()
-                .units
-                .clone();
-            Some(scale_bar(
-                c,
-                opts.width,
-                opts.height,
-                args.scale_bar_length,
-                args.scale_bar_unit.as_deref().or(units.as_deref()),
-                args.text_scale,
-            )?)
-        }
+        (None, Some(c)) if args.scale_bar => Some(turn_bar(c)?),
         (bar, _) => bar,
     };
     if let Some(bar) = &bar {
