@@ -29,6 +29,14 @@ static OUTPUT_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicB
 /// ends with ([`print_json`]); its lines of text go to standard error, and its notes into
 /// that object too.
 static JSON_OUTPUT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// Set once a JSON object has been written ([`print_json`]).
+static JSON_PRINTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether this run has written a JSON object yet.
+fn json_printed() -> bool {
+    JSON_PRINTED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// The notes said in JSON mode, for the object's `notes`.
 static NOTES: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
 
@@ -45,6 +53,7 @@ fn print_json(mut value: serde_json::Value) {
         let notes = std::mem::take(&mut *NOTES.lock().unwrap_or_else(|e| e.into_inner()));
         map.insert("notes".into(), notes.into());
     }
+    JSON_PRINTED.store(true, std::sync::atomic::Ordering::Relaxed);
     let mut out = std::io::stdout().lock();
     if let Err(e) = writeln!(out, "{value}") {
         if e.kind() != std::io::ErrorKind::BrokenPipe {

@@ -10219,14 +10219,24 @@ fn json_output_gives_one_object_per_result() {
         "-o",
         s(&movie),
         "--width",
-        "32",
+        "96",
         "--height",
-        "24",
+        "64",
         "--colour-map",
         "viridis",
+        "--dt",
+        "0.002",
+        "--label",
+        "{time}",
         "--json",
     ]);
     assert_eq!(m.len(), 2);
+    // (`--dt` gives each frame's time, as the label's.)
+    assert!(
+        (m[0]["time"].as_f64().unwrap() - 0.2).abs() < 1e-9,
+        "{}",
+        m[0]
+    );
     assert_eq!(
         (m[0]["frame"].as_u64(), m[0]["timestep"].as_u64()),
         (Some(0), Some(100))
@@ -10471,10 +10481,17 @@ fn a_batch_held_by_another_exits_with_75() {
     let held = std::fs::File::open(&lock).unwrap();
     held.lock().unwrap();
     let dump = lammps_sample_path("cu_gb.cna.dump");
-    let o = mdlod(&["batch", s(&dump), "-o", s(&out)]);
+    let o = mdlod(&["batch", s(&dump), "-o", s(&out), "--json"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(75), "{err}");
     assert!(err.contains("(pid 4242 on node17)"), "{err}");
+    // With --json, the refusal is a result too.
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["ok"].as_bool(), Some(false));
+    assert!(
+        v["error"].as_str().unwrap().contains("pid 4242 on node17"),
+        "{v}"
+    );
     drop(held);
     ok(&["batch", s(&dump), "-o", s(&out)]);
     // A movie of the directory while a batch (or a shard of one) rewrites it would mix

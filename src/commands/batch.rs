@@ -216,6 +216,15 @@ pub fn run(args: Args) -> Result<()> {
         }
         let _ = std::fs::remove_dir(out);
     }
+    // A run that fails before its counts (a held lock, a bad input, a full disk) is a
+    // result too: `ok` false, with what failed.
+    if let (true, Err(e), false) = (args.json, &result, crate::json_printed()) {
+        crate::print_json(serde_json::json!({
+            "output": out.display().to_string(),
+            "ok": false,
+            "error": format!("{e:#}"),
+        }));
+    }
     result
 }
 
@@ -420,7 +429,8 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     }
     let again = report.redone;
     let n = again.source + again.settings;
-    if n > 0 {
+    // (Frames found outdated and then cut short are left for a rerun, not converted.)
+    if n > 0 && report.converted > 0 {
         let mut why = Vec::new();
         if again.source > 0 {
             why.push(format!("{} whose source changed", again.source));
@@ -493,6 +503,7 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     if args.json {
         crate::print_json(serde_json::json!({
             "output": out.display().to_string(),
+            "ok": report.failed.is_empty(),
             "manifest": report.manifest.display().to_string(),
             "frames": total,
             "frames_in_shard": report.frames_in_shard,

@@ -4683,7 +4683,8 @@ fn render_frames(
                 more["frame"] = i.into();
                 more["frames"] = n.into();
                 more["timestep"] = f.timestep.into();
-                more["time"] = f.time.into();
+                // (`--dt` replaces a recorded time, as in the label.)
+                more["time"] = args.dt.map(|dt| f.timestep as f64 * dt).or(f.time).into();
                 more["frame_file"] = dir.join(&f.file).display().to_string().into();
                 more
             }));
