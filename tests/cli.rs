@@ -10316,6 +10316,17 @@ fn sizes_spanning_decades_suggest_a_projection() {
     };
     let ratio = distance("splat") / distance("spheres");
     assert!((1.0..1.4).contains(&ratio), "{ratio}");
+    // The density volume says how its fraction reads such sizes.
+    let mut args = vec!["render", s(&wide), "-o", s(&png), "--mode", "density"];
+    args.extend(["--width", "48", "--height", "32"]);
+    let out = ok(&args);
+    assert!(
+        out.contains(
+            "the volume fraction φ is each particle's sphere against spheres of the \
+                      largest radius"
+        ),
+        "{out}"
+    );
     let narrow = write("narrow.xyz", 0.05);
     let out = ok(&[
         "render",

@@ -2527,6 +2527,14 @@ pub fn run(mut args: Args) -> Result<()> {
                  outshine the rest by as much squared; smoothing lengths (SPH) project their \
                  mass with {projection}"
             ),
+            // The volume fraction counts each particle's volume against the largest's.
+            Mode::Density | Mode::Iso => println!(
+                "  note: {span}: the volume fraction φ is each particle's sphere against \
+                 spheres of the largest radius, so crowds of small ones reach far above \
+                 --density-max (one colour) and the large ones' sparse space far below its \
+                 bottom (clear); with --log-scale, a --density-min and --density-max decades \
+                 apart show both, and a projection, {projection}, shows a column density"
+            ),
             _ => {}
         }
     }
