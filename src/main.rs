@@ -256,6 +256,11 @@ fn main() -> std::process::ExitCode {
                 }
             }
             eprintln!("error: {message}");
+            // With --json, a command that fails before its result (a damaged file, a held
+            // lock, a bad input) gives one too: `ok` false, with the error.
+            if JSON_OUTPUT.load(std::sync::atomic::Ordering::Relaxed) && !json_printed() {
+                print_json(serde_json::json!({ "ok": false, "error": message }));
+            }
             // Another batch holds the directory: 75 (EX_TEMPFAIL), so that a script can
             // tell "try again later" from a failure.
             let busy = e.chain().any(|c| {

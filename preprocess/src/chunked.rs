@@ -1629,18 +1629,18 @@ pub fn convert_chunked(
             }
             // The attribute's range as stored: of its logarithm with `attribute_log10`
             // (the cells keep the values themselves, which the clusters average).
-            let logged = match (&f.attribute, options.attribute_log10) {
-                (Some(a), true) => Some(crate::convert::log10_attribute(
+            let values = f.attribute.as_ref().map(|a| a.values.as_slice());
+            let stored = match (&f.attribute, options.attribute_log10) {
+                (Some(a), true) => Some(crate::convert::log10_range(
                     &a.values,
                     start,
                     &a.name,
                     metadata.source.as_ref(),
                 )?),
-                _ => None,
+                (Some(a), false) => Some(finite_range(&a.values, start, || place.clone())?),
+                (None, _) => None,
             };
-            let values = f.attribute.as_ref().map(|a| a.values.as_slice());
-            if let Some(stored) = logged.as_deref().or(values) {
-                let (lo, hi) = finite_range(stored, start, || place.clone())?;
+            if let Some((lo, hi)) = stored {
                 range = (range.0.min(lo), range.1.max(hi));
             }
             for (info, a) in extra_infos.iter_mut().zip(&extras) {

@@ -373,8 +373,9 @@ pub fn convert_frame_with(
             .map(|&i| map.get(usize::from(i)).copied().unwrap_or(i))
             .collect()
     });
+    // The range of the logarithm stored, where one is.
     let logged = match (&frame.attribute, options.attribute_log10) {
-        (Some(a), true) => Some(log10_attribute(&a.values, 0, &a.name, source.as_ref())?),
+        (Some(a), true) => Some(log10_range(&a.values, 0, &a.name, source.as_ref())?),
         (None, true) => {
             return Err(ConvertError::NoAttributeToLog(FramePlace::of(
                 source.as_ref(),
@@ -407,12 +408,7 @@ pub fn convert_frame_with(
             )
         }),
         attribute_log10: logged.is_some(),
-        attribute_range: logged.as_deref().map(|l| {
-            l.iter()
-                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
-                    (lo.min(v), hi.max(v))
-                })
-        }),
+        attribute_range: logged,
         ..Default::default()
     };
     let h = hierarchy::build_with(particles, &options.build, &extras, progress).map_err(|e| {
@@ -1277,14 +1273,16 @@ fn span_note(name: &str, min: f32, max: f32, remedy: &str) -> Option<String> {
     })
 }
 
-/// The base-10 logarithms of attribute values (of particles from `first` on); a value
-/// not above 0 (or not finite) is an error naming the particle.
-pub fn log10_attribute(
+/// The range of the base-10 logarithms of attribute values (of particles from `first`
+/// on), as a file stores them with `attribute_log10`: the logarithms of the values'
+/// smallest and largest (`log10` is monotonic, so no value's logarithm is taken here); a
+/// value not above 0 (or not finite) is an error naming the particle.
+pub fn log10_range(
     values: &[f32],
     first: usize,
     name: &str,
     source: Option<&SourceInfo>,
-) -> Result<Vec<f32>, ConvertError> {
+) -> Result<(f32, f32), ConvertError> {
     use rayon::prelude::*;
     let bad = crate::readers::first_index(values.len(), |i: usize| {
         !(values[i] > 0.0 && values[i].is_finite())
@@ -1297,7 +1295,17 @@ pub fn log10_attribute(
             value: values[i],
         });
     }
-    Ok(values.par_iter().map(|v| v.log10()).collect())
+    let (lo, hi) = values
+        .par_iter()
+        .fold(
+            || (f32::INFINITY, f32::NEG_INFINITY),
+            |(lo, hi), &v| (lo.min(v), hi.max(v)),
+        )
+        .reduce(
+            || (f32::INFINITY, f32::NEG_INFINITY),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        );
+    Ok((lo.log10(), hi.log10()))
 }
 
 /// Refuses more attributes than a file keeps before any input is read (`input` names

@@ -939,26 +939,20 @@ pub fn fit_for(file: &MdlodFile, opts: &RenderOptions) -> FitBounds {
     // sphere counts up to a twentieth of the data's size: the largest of them (an SPH
     // halo's smoothing lengths, 10^4 of a galaxy's) would frame their faint wings and
     // leave the data a dot.
-    let spread = file
-        .metadata()
-        .radius
-        .is_some_and(|r| r.min > 0.0 && r.max >= 10.0 * r.min);
-    let extent = match spread {
-        true => (fit.bounds.max - fit.bounds.min).max_element(),
-        false => f32::INFINITY,
-    };
     let styled = drawn_reach(file, opts);
     let sphere = match opts.mode {
         RenderMode::Spheres | RenderMode::Sndf { .. } => styled,
         _ => styled_reach(file, opts, 1.0),
     };
-    let wings = (styled - sphere).max(0.0);
-    let wings = if extent.is_finite() && extent > 0.0 {
-        // (Only where sizes spread: `extent` is infinite otherwise.)
-        wings.min(0.05 * extent)
-    } else {
-        wings
-    };
+    let mut wings = (styled - sphere).max(0.0);
+    let spread = file
+        .metadata()
+        .radius
+        .is_some_and(|r| r.min > 0.0 && r.max >= 10.0 * r.min);
+    let extent = (fit.bounds.max - fit.bounds.min).max_element();
+    if spread && extent.is_finite() && extent > 0.0 {
+        wings = wings.min(0.05 * extent);
+    }
     let reach = glam::Vec3::splat(sphere + wings);
     let drawn = Bounds::new(fit.bounds.min - reach, fit.bounds.max + reach);
     let bounds = if drawn.min.cmple(drawn.max).all() {

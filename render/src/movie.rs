@@ -202,8 +202,7 @@ pub fn turntable_cameras(
         .iter()
         .zip(&cameras)
         .filter_map(|(v, c)| {
-            let whole = crate::camera_for_bounds(bounds, &unzoomed(v)?, width, height).ok()?;
-            let mut whole = whole;
+            let mut whole = crate::camera_for_bounds(bounds, &unzoomed(v)?, width, height).ok()?;
             if fitted_target {
                 whole.fit_about_centre(bounds, aspect);
             }

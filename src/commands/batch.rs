@@ -216,15 +216,6 @@ pub fn run(args: Args) -> Result<()> {
         }
         let _ = std::fs::remove_dir(out);
     }
-    // A run that fails before its counts (a held lock, a bad input, a full disk) is a
-    // result too: `ok` false, with what failed.
-    if let (true, Err(e), false) = (args.json, &result, crate::json_printed()) {
-        crate::print_json(serde_json::json!({
-            "output": out.display().to_string(),
-            "ok": false,
-            "error": format!("{e:#}"),
-        }));
-    }
     result
 }
 

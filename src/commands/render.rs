@@ -634,34 +634,35 @@ fn three_digits(v: f32) -> String {
 }
 
 /// `--hide-attribute`'s ranges with the attribute each reads in `file` (opened with the
-/// style, [`mdlod_render::open_styled`]): a plain range the hiding attribute, a named one
-/// its own; ranges of an attribute the file lacks are left out.
+/// style, [`mdlod_render::open_styled`]), as the style's hidden set gives their slots: a
+/// plain range the hiding attribute, a named one its own; ranges of an attribute the
+/// file lacks are left out.
 fn hidden_ranges<'f>(
-    style: &StyleArgs,
+    style: &mdlod_render::PointStyle,
     file: &'f mdlod_format::reader::MdlodFile,
 ) -> Vec<(&'f mdlod_format::meta::AttributeInfo, [f32; 2])> {
-    let names = style.hide_names();
-    style
-        .hide_attribute
+    let set = style.hidden_set(file.metadata());
+    set.ranges()
         .iter()
-        .filter_map(|h| {
-            let slot = match &h.by {
-                None => 0,
-                Some(n) => names.iter().position(|x| x == n)? + 1,
-            };
-            Some((file.hidden_slot_attribute(slot as u8)?, h.range))
-        })
+        .zip(set.slots())
+        .filter_map(|(&r, &slot)| Some((file.hidden_slot_attribute(slot)?, r)))
         .collect()
 }
 
 /// Says of each attribute `--hide-attribute` reads when its ranges all miss its values.
-fn hides_nothing_notes(style: &StyleArgs, file: &mdlod_format::reader::MdlodFile) -> Vec<String> {
+fn hides_nothing_notes(
+    style: &mdlod_render::PointStyle,
+    file: &mdlod_format::reader::MdlodFile,
+) -> Vec<String> {
     hides_nothing_text(&hidden_range_hits(style, file), "here")
 }
 
 /// Each attribute `--hide-attribute` reads in `file`, whether some range of it meets its
 /// values, and its range.
-fn hidden_range_hits(style: &StyleArgs, file: &mdlod_format::reader::MdlodFile) -> Vec<RangeHits> {
+fn hidden_range_hits(
+    style: &mdlod_render::PointStyle,
+    file: &mdlod_format::reader::MdlodFile,
+) -> Vec<RangeHits> {
     let mut hits: Vec<RangeHits> = Vec::new();
     for (a, r) in hidden_ranges(style, file) {
         let hit = a.codes(r).is_some();
@@ -794,7 +795,10 @@ impl Covered {
 /// of the attribute (a molecule id of a column of 200 000, stored 3.16 apart) and those
 /// steps reach whole numbers past it (other ids): it hides every particle of the steps
 /// it touches, the values those steps hold being named.
-fn coarse_range_notes(style: &StyleArgs, file: &mdlod_format::reader::MdlodFile) -> Vec<String> {
+fn coarse_range_notes(
+    style: &mdlod_render::PointStyle,
+    file: &mdlod_format::reader::MdlodFile,
+) -> Vec<String> {
     hidden_ranges(style, file)
         .into_iter()
         .filter_map(|(a, range)| {
@@ -1210,18 +1214,6 @@ pub enum ColourMapArg {
 }
 
 impl StyleArgs {
-    /// The attributes named ranges of `--hide-attribute` read, each once, in order (as
-    /// [`mdlod_render::PointStyle::hide_names`] gives them).
-    fn hide_names(&self) -> Vec<&str> {
-        let mut names: Vec<&str> = Vec::new();
-        for n in self.hide_attribute.iter().filter_map(|h| h.by.as_deref()) {
-            if !names.contains(&n) {
-                names.push(n);
-            }
-        }
-        names
-    }
-
     pub fn style(&self) -> Result<mdlod_render::PointStyle> {
         use mdlod_render::{ColourMap, SpeciesStyle};
         let mut species: Vec<SpeciesStyle> = vec![];
@@ -2495,7 +2487,7 @@ pub fn run(mut args: Args) -> Result<()> {
     if every_species_hidden {
         println!("  note: every species is hidden: the image shows the background only");
     }
-    for note in hides_nothing_notes(&args.style, &file) {
+    for note in hides_nothing_notes(&opts.style, &file) {
         println!("{note}");
     }
     // Spheres of sizes spanning decades (an SPH run's smoothing lengths): the largest
@@ -2538,7 +2530,7 @@ pub fn run(mut args: Args) -> Result<()> {
             _ => {}
         }
     }
-    for note in coarse_range_notes(&args.style, &file) {
+    for note in coarse_range_notes(&opts.style, &file) {
         println!("{note}");
     }
     if let Some(note) = file
@@ -4099,6 +4091,7 @@ fn render_turntable(
         let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         let coarsest = coarsest_points(&file);
         let species = file.metadata().species.clone();
+        let shown = shown_json(args, &opts, &file);
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         drawn = drawn_names(&r, &species, drawn);
         if i == 0 {
@@ -4121,8 +4114,7 @@ fn render_turntable(
         println!("{}", image_line(&out, &which, &r, args, coarsest));
         if args.json {
             crate::print_json(report_json(&out, &r, args, &opts, {
-                let file = mdlod_render::open_styled(&args.file, &opts.style)?;
-                let mut more = shown_json(args, &opts, &file);
+                let mut more = shown;
                 more["view"] = i.into();
                 more["views"] = n.into();
                 more
@@ -4154,14 +4146,11 @@ fn render_turntable(
     if let Some(note) = stale_images_note(&args.output, n as usize) {
         println!("{note}");
     }
-    {
-        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
-        for note in hides_nothing_notes(&args.style, &file) {
-            println!("{note}");
-        }
+    let file = mdlod_render::open_styled(&args.file, &opts.style)?;
+    for note in hides_nothing_notes(&opts.style, &file) {
+        println!("{note}");
     }
     if view_fits(&args.camera.spec()) {
-        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
         if let Some(note) = far_note(mdlod_render::fit_for(&file, &opts).far_particles, None) {
             println!("{note}");
         }
@@ -4375,27 +4364,15 @@ fn render_frames(
         }
         .into());
     }
-    // (A batch rewriting the directory now lists only the frames it has finished.)
-    let running = || {
-        mdlod_preprocess::batch::batch_running(dir).map_or(String::new(), |who| {
-            format!(" (a batch is writing it now, {who}: render once it ends)")
-        })
-    };
     let manifest = mdlod_preprocess::batch::read_manifest(dir).with_context(|| {
         format!(
-            "{}: a directory renders as the frames of a batch, listed in its \
-             dataset.json{}",
-            dir.display(),
-            running()
+            "{}: a directory renders as the frames of a batch, listed in its dataset.json",
+            dir.display()
         )
     })?;
     let n = manifest.frames.len();
     if n == 0 {
-        anyhow::bail!(
-            "{}: dataset.json lists no frames{}",
-            dir.display(),
-            running()
-        );
+        anyhow::bail!("{}: dataset.json lists no frames", dir.display());
     }
     frame_output(&args.output, 0)?;
     check_numbered_outputs(&args.output, n)?;
@@ -4446,7 +4423,7 @@ fn render_frames(
                 file.metadata().attribute_log10,
             )?;
         }
-        join_range_hits(&mut range_hits, hidden_range_hits(&args.style, &file));
+        join_range_hits(&mut range_hits, hidden_range_hits(&opts.style, &file));
         survey.add(&file, &opts);
     }
     for note in hides_nothing_text(&range_hits, "in any frame") {

@@ -107,16 +107,7 @@ pub fn run(mut args: Args) -> Result<()> {
     if args.file.is_dir() {
         return run_dir(&args);
     }
-    let result = run_file(&args);
-    // A file that fails is a result too: `ok` false, with what failed.
-    if let (true, Err(e)) = (args.json, &result) {
-        crate::print_json(serde_json::json!({
-            "file": args.file.display().to_string(),
-            "ok": false,
-            "error": format!("{e:#}"),
-        }));
-    }
-    result
+    run_file(&args)
 }
 
 fn run_file(args: &Args) -> Result<()> {
