@@ -2,6 +2,7 @@
 # Whole trajectories: `mdlod batch` of generated multi-frame LAMMPS text dumps as
 # separate processes under /usr/bin/time: every frame from a cold page cache (dropped
 # where this user may), the same on one thread, a rerun with nothing to do, a rerun
+# and the same from a cold page cache with and without the frame index kept, a rerun
 # after a quarter of the frames were deleted, a rerun after the dump grew (half its
 # frames converted first, the rest appended) and after it was touched, the two shards of `--shard I/2` one after
 # the other and their `--merge`; then many small frames (what a frame costs beyond its
@@ -68,6 +69,13 @@ run "every frame (cold page cache: $can_drop)" "$N" "$dump" -o "$out" "${radius[
 rm -rf "$out"
 run "every frame, \`--threads 1\`" "$N" "$dump" -o "$out" "${radius[@]}" --threads 1
 run "rerun, nothing changed" "$N" "$dump" -o "$out" "${radius[@]}"
+# The same from a cold page cache, with the frame index the runs keep in the directory
+# (`.dataset.index.json`) and without it (the dump's every byte read to find its frames).
+drop
+run "rerun, nothing changed, cold page cache" "$N" "$dump" -o "$out" "${radius[@]}"
+rm -f "$out/.dataset.index.json"
+drop
+run "rerun, nothing changed, cold page cache, no frame index kept" "$N" "$dump" -o "$out" "${radius[@]}"
 for f in $(ls "$out"/frame-*.mdlod | sort -V | awk -v q=$((FRAMES / 4)) 'NR % 4 == 0 && n++ < q'); do
   rm "$f"
 done
@@ -92,6 +100,17 @@ run "\`--shard 1/2\`" "$N" "$dump" -o "$out" "${radius[@]}" --shard 1/2
 /usr/bin/time -f "%e" -o "$DIR/time.log" "$BIN" batch --merge "$out" > /dev/null
 merge=$(cat "$DIR/time.log")
 merged=$(listed)
+# A job array's tasks from a cold page cache: each lists the dump's frames by reading
+# all of it, unless `--index-only` kept the index first.
+rm -rf "$out"
+drop
+run "\`--shard 0/2\`, cold page cache" "$N" "$dump" -o "$out" "${radius[@]}" --shard 0/2
+rm -rf "$out"
+drop
+/usr/bin/time -f "%e" -o "$DIR/time.log" "$BIN" batch --index-only "$dump" -o "$out" > /dev/null
+index_only=$(cat "$DIR/time.log")
+drop
+run "\`--shard 0/2\`, cold page cache, after \`--index-only\`" "$N" "$dump" -o "$out" "${radius[@]}" --shard 0/2
 rm -rf "$out"
 run "small frames" "$MANY_PARTICLES" "$many" -o "$out" "${radius[@]}"
 run "small frames, rerun" "$MANY_PARTICLES" "$many" -o "$out" "${radius[@]}"
@@ -103,6 +122,6 @@ table="Machine: $cores cores ($cpu). Inputs: LAMMPS text dumps of $FRAMES frames
 | run | particles a frame | frames converted | frames skipped | wall s | CPU s | frames/s | M particles/s | per core | peak RSS MiB |
 |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|$rows
 
-\`mdlod batch --merge\` of the two shards: $merge s, $merged frames in the joined manifest. The small frames' manifest lists $many_listed."
+\`mdlod batch --merge\` of the two shards: $merge s, $merged frames in the joined manifest. \`mdlod batch --index-only\` of the dump from a cold page cache: $index_only s. The small frames' manifest lists $many_listed."
 echo "$table"
 python3 benches/write_section.py batch "bash benches/batch.sh" "## Timestep batches" "$table"

@@ -11466,3 +11466,45 @@ fn an_unreadable_timestep_in_a_set_fails_alone() {
         "{err}"
     );
 }
+
+/// `batch --index-only`: lists the frames and keeps the text dumps' index, converting
+/// nothing; the run after it scans no dump (its JSON says so), and `--shard` with it is
+/// refused.
+#[test]
+fn batch_index_only_keeps_the_frame_index_for_the_runs_after_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("melt.dump");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.dump"), &input).unwrap();
+    let out = dir.path().join("run.d");
+    let said = ok(&["batch", s(&input), "-o", s(&out), "--index-only"]);
+    assert!(
+        said.contains("6 frames in 1 input; the frame index of 1 text dump kept in")
+            && said.contains("(1 scanned, 0 unchanged since they were)"),
+        "{said}"
+    );
+    assert!(out.join(".dataset.index.json").is_file());
+    assert!(!out.join("dataset.json").exists());
+    let said = ok(&[
+        "batch",
+        s(&input),
+        "-o",
+        s(&out),
+        "--json",
+        "--threads",
+        "1",
+    ]);
+    let json: serde_json::Value = serde_json::from_str(said.lines().last().unwrap()).unwrap();
+    assert_eq!(json["converted"], 6, "{json}");
+    assert_eq!(json["index"]["from_cache"], 1, "{json}");
+    assert_eq!(json["index"]["scanned"], 0, "{json}");
+    let err = fails(&[
+        "batch",
+        s(&input),
+        "-o",
+        s(&out),
+        "--index-only",
+        "--shard",
+        "0/2",
+    ]);
+    assert!(err.contains("--shard"), "{err}");
+}

@@ -95,6 +95,10 @@ pub const MANIFEST: &str = "dataset.json";
 /// more, but a record of how its frames were converted (see [`BatchReport::kept_gone`]).
 pub const PREVIOUS_MANIFEST: &str = ".dataset.previous.json";
 
+/// The frame indexes of the inputs' text dumps, kept between runs and shared by shards
+/// ([`crate::readers::index_cache`]): a text input unchanged since is not scanned again.
+pub const INDEX_CACHE: &str = ".dataset.index.json";
+
 /// One converted frame in a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FrameEntry {
@@ -325,6 +329,9 @@ pub struct BatchOptions {
     /// older file, a bad box) is reported ([`BatchReport::failed`]) and the others are
     /// converted: `make -k`. Errors of the output (a full disk) still stop the batch.
     pub keep_going: bool,
+    /// Index the inputs into [`INDEX_CACHE`] and convert nothing: run once before the
+    /// shards of a job array, so that none of them scans the text dumps.
+    pub index_only: bool,
 }
 
 /// The manifest of a running batch, for an interruption handler to write at once: the
@@ -456,6 +463,21 @@ pub struct BatchReport {
     /// [`BatchOptions::keep_going`]: not in the manifest, not expected of this run, tried
     /// again by a rerun. (Without it, the first such frame is the batch's error.)
     pub failed: Vec<FailedFrame>,
+    /// How the inputs' frames were listed.
+    pub index: IndexUse,
+}
+
+/// How a batch listed its inputs' frames ([`INDEX_CACHE`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct IndexUse {
+    /// The cache file.
+    pub file: PathBuf,
+    /// Text inputs whose frames the cache gave (unchanged since they were scanned).
+    pub from_cache: usize,
+    /// Text inputs scanned, line by line.
+    pub scanned: usize,
+    /// Why the cache could not be written, where it could not (a read-only directory).
+    pub unsaved: Option<String>,
 }
 
 /// `timestep T (frame K of INPUT)`, or `frame K of INPUT` without a timestep.
@@ -1785,6 +1807,7 @@ pub fn written_by_batch(name: &str) -> bool {
     (name.starts_with("frame-") && name.ends_with(".mdlod"))
         || (name.starts_with("dataset") && name.ends_with(".json"))
         || name.ends_with(".tmp")
+        || name == INDEX_CACHE
 }
 
 /// The name of the `%` piece set of `pattern` (which holds one `%`) that the file `name`
@@ -1969,7 +1992,17 @@ pub fn batch(
     }
     crate::convert::check_attribute_count(&opts.read, &describe_inputs(inputs))?;
     std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
-    let _lock = lock_batch(out_dir, opts.shard)?;
+    // (Indexing alone writes only the cache, by rename: it runs beside anything.)
+    let _lock = match opts.index_only {
+        true => Vec::new(),
+        false => lock_batch(out_dir, opts.shard)?,
+    };
+    // Text inputs unchanged since a run (or a shard beside this one) scanned them are
+    // listed from the cache.
+    let index_cache = std::sync::Arc::new(crate::readers::index_cache::IndexCache::load(
+        &out_dir.join(INDEX_CACHE),
+    ));
+    let index_scope = index_cache.scope();
 
     // Inputs are indexed one at a time. Mapped files stay open; the text of a gzip input
     // is dropped after indexing (with its frames' particle counts noted), so a batch of
@@ -2182,6 +2215,43 @@ pub fn batch(
         formats.push(dump.format());
         gzip_cut.push(dump.gzip_cut().is_some());
         dumps.push((!compressed).then_some(bounded.dump));
+    }
+    drop(index_scope);
+    let index = IndexUse {
+        file: index_cache.path().to_path_buf(),
+        from_cache: index_cache.hits(),
+        scanned: index_cache.scanned(),
+        unsaved: match index_cache.save() {
+            Ok(()) => None,
+            // (Only a cache: a read-only archive of finished frames still checks.)
+            Err(e) if !opts.index_only => Some(e.to_string()),
+            Err(e) => return Err(io(index_cache.path())(e)),
+        },
+    };
+    if opts.index_only {
+        let frames_total = listed.iter().map(Vec::len).sum::<usize>();
+        return Ok(BatchReport {
+            frames_total,
+            frames_in_shard: 0,
+            converted: 0,
+            skipped: 0,
+            empty: Vec::new(),
+            notes: input_notes,
+            jobs: 0,
+            manifest: out_dir.join(MANIFEST),
+            removed_merged: None,
+            removed_shard_manifests: Vec::new(),
+            strays: Vec::new(),
+            kept_gone: Vec::new(),
+            gone_other: Vec::new(),
+            vanished: Vec::new(),
+            duplicates: Vec::new(),
+            redone: Redone::default(),
+            kept_unchanged: 0,
+            incomplete: empty_inputs,
+            failed: unlisted_failures,
+            index,
+        });
     }
     let newest = newest_inputs(&listed, last_input);
     // The newest input, as an error about an older one cut short names it (the last of
@@ -3213,6 +3283,7 @@ pub fn batch(
     };
     let converted_frames = converted.load(Ordering::Relaxed);
     Ok(BatchReport {
+        index,
         removed_merged,
         removed_shard_manifests,
         strays,

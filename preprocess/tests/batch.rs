@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use mdlod_datasets::lammps_sample_path;
 use mdlod_format::MdlodFile;
 use mdlod_preprocess::batch::{
-    batch, merge, read_manifest, verify_dir, BatchError, BatchOptions, Manifest,
+    batch, merge, read_manifest, verify_dir, BatchError, BatchOptions, Manifest, INDEX_CACHE,
 };
 use mdlod_preprocess::NoProgress;
 
@@ -3332,4 +3332,83 @@ fn an_input_replaced_during_a_batch_leaves_no_frame_a_rerun_keeps() {
             .collect::<Vec<_>>()
     };
     assert_eq!(sums(&a), sums(&b));
+}
+
+/// The frame index is kept in the batch directory: a rerun lists text dumps unchanged
+/// since from it (one changed is scanned again), `index_only` writes it and converts
+/// nothing, and the shards of an array started after it scan no dump; every run lists
+/// the same frames either way.
+#[test]
+fn text_dumps_are_scanned_once_across_reruns_and_shards() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = file_set(&dir.path().join("src"));
+    let out = dir.path().join("out");
+    let index_only = BatchOptions {
+        index_only: true,
+        ..opts()
+    };
+    let r = batch(&set, &out, &index_only, &NoProgress).unwrap();
+    assert_eq!(r.frames_total, set.len());
+    assert_eq!(
+        (r.converted, r.index.scanned, r.index.from_cache),
+        (0, set.len(), 0)
+    );
+    assert!(out.join(INDEX_CACHE).is_file());
+    assert!(
+        !out.join("dataset.json").exists(),
+        "nothing converted, no manifest"
+    );
+    assert_eq!(
+        std::fs::read_dir(&out).unwrap().count(),
+        1,
+        "only the index is written"
+    );
+    // Indexed again: nothing to scan, nothing rewritten.
+    let before = std::fs::metadata(out.join(INDEX_CACHE))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let r = batch(&set, &out, &index_only, &NoProgress).unwrap();
+    assert_eq!((r.index.scanned, r.index.from_cache), (0, set.len()));
+    let after = std::fs::metadata(out.join(INDEX_CACHE))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(before, after);
+
+    let mut converted = 0;
+    for i in 0..2 {
+        let r = batch(&set, &out, &shard(i, 2), &NoProgress).unwrap();
+        assert_eq!(
+            (r.index.scanned, r.index.from_cache),
+            (0, set.len()),
+            "shard {i}"
+        );
+        converted += r.converted;
+    }
+    assert_eq!(converted, set.len());
+    let merged = merge(&out).unwrap();
+    assert_eq!(merged.frames.len(), set.len());
+
+    // A dump rewritten since (its last frame's timestep changed): scanned again, and
+    // its frame converted under its new timestep.
+    let last = set.last().unwrap();
+    let text = std::fs::read_to_string(last).unwrap();
+    let step = text
+        .split("ITEM: TIMESTEP\n")
+        .nth(1)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap();
+    let changed = text.replacen(
+        &format!("ITEM: TIMESTEP\n{step}\n"),
+        "ITEM: TIMESTEP\n777777\n",
+        1,
+    );
+    std::fs::write(last, changed).unwrap();
+    let r = batch(&set, &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.index.scanned, r.index.from_cache), (1, set.len() - 1));
+    assert_eq!(r.converted, 1, "{r:#?}");
+    assert!(out.join("frame-777777.mdlod").is_file());
 }

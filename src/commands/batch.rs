@@ -59,6 +59,12 @@ pub struct Args {
     /// manifest, and the notes), the text lines going to standard error: for scripts
     #[arg(long)]
     pub json: bool,
+    /// List the inputs' frames and keep the text dumps' frame indexes in
+    /// DIR/.dataset.index.json, converting nothing: run it once before a job array, so
+    /// that no task reads every dump to find its frames (each reads its own). Every
+    /// batch keeps the indexes too, so that a rerun scans only dumps that changed
+    #[arg(long, conflicts_with_all = ["merge", "shard"])]
+    pub index_only: bool,
     #[command(flatten)]
     pub build: BuildArgs,
 }
@@ -302,8 +308,19 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         handle: Some(handle),
         manifest_interval: None,
         keep_going: args.keep_going,
+        index_only: args.index_only,
     };
     let report = with_threads(args.threads, || batch(&inputs, out, &opts, &Bar::new()))??;
+    if args.index_only {
+        return report_index_only(args, out, &inputs, &report);
+    }
+    if let (Some(e), true) = (&report.index.unsaved, report.index.scanned > 0) {
+        println!(
+            "note: the frame index could not be kept in {} ({e}): a rerun scans the text \
+             dumps again",
+            report.index.file.display()
+        );
+    }
     if let Some(merged) = &report.removed_merged {
         println!(
             "removed {}, which the frames converted now outdate: run `mdlod batch --merge {}` \
@@ -506,6 +523,7 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             "failed": report.failed.iter().map(ToString::to_string).collect::<Vec<_>>(),
             "duplicates": report.duplicates.len(),
             "at_a_time": report.jobs,
+            "index": index_json(&report.index),
         }));
     }
     if !report.failed.is_empty() {
@@ -520,6 +538,76 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
              again: it converts only what is missing",
             if n == 1 { "" } else { "s" },
             if n == 1 { "its input" } else { "their inputs" }
+        );
+    }
+    Ok(())
+}
+
+/// The JSON of how a batch listed its inputs.
+fn index_json(index: &mdlod_preprocess::batch::IndexUse) -> serde_json::Value {
+    serde_json::json!({
+        "file": index.file.display().to_string(),
+        "from_cache": index.from_cache,
+        "scanned": index.scanned,
+        "unsaved": index.unsaved,
+    })
+}
+
+/// What `--index-only` says: the frames found, the cache written, and the inputs that
+/// could not be listed.
+fn report_index_only(
+    args: &Args,
+    out: &std::path::Path,
+    inputs: &[PathBuf],
+    report: &mdlod_preprocess::batch::BatchReport,
+) -> Result<()> {
+    for n in &report.notes {
+        println!("note: {n}");
+    }
+    for e in &report.incomplete {
+        println!("note: {e}");
+    }
+    for e in &report.failed {
+        println!("{e}");
+    }
+    let index = &report.index;
+    let text = index.from_cache + index.scanned;
+    let plural = |n: usize| if n == 1 { "" } else { "s" };
+    println!(
+        "{} frame{} in {} input{}; the frame index of {text} text dump{} kept in {} ({} \
+         scanned, {} unchanged since they were): the shards of a batch into {} list them \
+         from it{}",
+        report.frames_total,
+        plural(report.frames_total),
+        inputs.len(),
+        plural(inputs.len()),
+        plural(text),
+        index.file.display(),
+        index.scanned,
+        index.from_cache,
+        out.display(),
+        if text < inputs.len() {
+            " (binary and compressed inputs are listed from their headers by each run)"
+        } else {
+            ""
+        }
+    );
+    if args.json {
+        crate::print_json(serde_json::json!({
+            "output": out.display().to_string(),
+            "ok": report.failed.is_empty(),
+            "frames": report.frames_total,
+            "inputs": inputs.len(),
+            "left_for_rerun": report.incomplete.iter().map(ToString::to_string).collect::<Vec<_>>(),
+            "failed": report.failed.iter().map(ToString::to_string).collect::<Vec<_>>(),
+            "index": index_json(index),
+        }));
+    }
+    if !report.failed.is_empty() {
+        bail!(
+            "{} input{} could not be listed; fix or replace them and index again",
+            report.failed.len(),
+            plural(report.failed.len())
         );
     }
     Ok(())

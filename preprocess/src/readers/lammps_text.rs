@@ -270,6 +270,56 @@ impl Index {
         Ok(Index { frames, units })
     }
 
+    /// The index as a cache keeps it ([`super::index_cache`]).
+    pub fn to_cached(&self) -> super::index_cache::CachedFrames {
+        super::index_cache::CachedFrames {
+            format: "lammps".into(),
+            ranges: self
+                .frames
+                .iter()
+                .map(|s| [s.start as u64, s.end as u64])
+                .collect(),
+            timesteps: self.frames.iter().map(|s| s.timestep).collect(),
+            units: self.units.clone(),
+            unread_timesteps: Vec::new(),
+        }
+    }
+
+    /// The index a cache kept for the dump `data`, when it fits: frames that follow each
+    /// other from the dump's first line (only blank lines before) to its end, each
+    /// starting with an `ITEM:` line (the last may be such a line cut short).
+    pub fn from_cached(data: &[u8], cached: &super::index_cache::CachedFrames) -> Option<Index> {
+        if cached.format != "lammps" || !cached.unread_timesteps.is_empty() {
+            return None;
+        }
+        let ranges = cached.checked_ranges(data)?;
+        let first = ranges.first()?.start;
+        if !data[..first].iter().all(u8::is_ascii_whitespace) || ranges.last()?.end != data.len() {
+            return None;
+        }
+        const ITEM: &[u8] = b"ITEM: ";
+        let mut frames = Vec::with_capacity(ranges.len());
+        for (k, (r, &timestep)) in ranges.iter().zip(&cached.timesteps).enumerate() {
+            let last = k + 1 == ranges.len();
+            if !last && r.end != ranges[k + 1].start {
+                return None;
+            }
+            let head = &data[r.start..r.end.min(r.start + ITEM.len())];
+            if !(head == ITEM || (last && ITEM.starts_with(head))) {
+                return None;
+            }
+            frames.push(Span {
+                start: r.start,
+                end: r.end,
+                timestep,
+            });
+        }
+        Some(Index {
+            frames,
+            units: cached.units.clone(),
+        })
+    }
+
     pub fn len(&self) -> usize {
         self.frames.len()
     }

@@ -47,6 +47,7 @@
 mod atoms;
 mod float;
 mod gsd;
+pub mod index_cache;
 mod lammps_binary;
 mod lammps_text;
 mod mmpld;
@@ -772,26 +773,70 @@ impl DumpFile {
         progress.stage("indexing frames", Some(data.len() as u64), "bytes");
         // Text is scanned a segment at a time: the bar moves with each.
         let reached = Reached::new(progress);
-        let index = match format {
-            InputFormat::LammpsText => Index::Lammps(lammps_text::Index::build(
-                &ctx,
-                (!compressed).then_some(&file),
-                SCAN_SEGMENT,
-                &reached,
-            )?),
-            InputFormat::Xyz => Index::Xyz(xyz::Index::build(
-                &ctx,
-                (!compressed).then_some(&file),
-                SCAN_SEGMENT,
-                &reached,
-            )?),
-            InputFormat::LammpsBinary => {
-                Index::LammpsBinary(lammps_binary::Index::build(path, data)?)
-            }
-            InputFormat::Gsd => Index::Gsd(gsd::Index::build(path, data)?),
-            InputFormat::Raw => Index::Raw(Box::new(raw::Index::build(path, data)?)),
-            InputFormat::Mmpld => Index::Mmpld(mmpld::Index::build(path, data)?),
+        // An uncompressed text dump's frames, as a batch's cache kept them where the file
+        // is the one they were taken from (the metadata of the file mapped).
+        let cache = index_cache::current()
+            .filter(|_| !compressed)
+            .filter(|_| matches!(format, InputFormat::LammpsText | InputFormat::Xyz));
+        let meta = match &cache {
+            Some(_) => Some(file.metadata().map_err(io)?),
+            None => None,
         };
+        let kept = match (&cache, &meta) {
+            (Some(c), Some(m)) => {
+                let name = if format == InputFormat::Xyz {
+                    "xyz"
+                } else {
+                    "lammps"
+                };
+                c.lookup(path, m, name).and_then(|cached| {
+                    let index = match format {
+                        InputFormat::Xyz => xyz::Index::from_cached(data, &cached).map(Index::Xyz),
+                        _ => lammps_text::Index::from_cached(data, &cached).map(Index::Lammps),
+                    };
+                    if index.is_none() {
+                        c.rejected(path);
+                    }
+                    index
+                })
+            }
+            _ => None,
+        };
+        let from_cache = kept.is_some();
+        let index = if let Some(index) = kept {
+            index
+        } else {
+            match format {
+                InputFormat::LammpsText => Index::Lammps(lammps_text::Index::build(
+                    &ctx,
+                    (!compressed).then_some(&file),
+                    SCAN_SEGMENT,
+                    &reached,
+                )?),
+                InputFormat::Xyz => Index::Xyz(xyz::Index::build(
+                    &ctx,
+                    (!compressed).then_some(&file),
+                    SCAN_SEGMENT,
+                    &reached,
+                )?),
+                InputFormat::LammpsBinary => {
+                    Index::LammpsBinary(lammps_binary::Index::build(path, data)?)
+                }
+                InputFormat::Gsd => Index::Gsd(gsd::Index::build(path, data)?),
+                InputFormat::Raw => Index::Raw(Box::new(raw::Index::build(path, data)?)),
+                InputFormat::Mmpld => Index::Mmpld(mmpld::Index::build(path, data)?),
+            }
+        };
+        // (Kept only when the file is as long as the bytes scanned: one a running
+        // simulation appended to meanwhile must be scanned again next time.)
+        if let (Some(c), Some(m)) = (&cache, &meta) {
+            match &index {
+                _ if m.len() != data.len() as u64 => {}
+                Index::Lammps(i) if !from_cache => c.insert(path, m, i.to_cached()),
+                Index::Xyz(i) if !from_cache => c.insert(path, m, i.to_cached()),
+                _ => {}
+            }
+        }
         reached.at(data.len());
         progress.finish_stage();
         Ok(Some(DumpFile {

@@ -198,6 +198,50 @@ impl Index {
         Ok(Index { frames })
     }
 
+    /// The index as a cache keeps it ([`super::index_cache`]).
+    pub fn to_cached(&self) -> super::index_cache::CachedFrames {
+        super::index_cache::CachedFrames {
+            format: "xyz".into(),
+            ranges: self
+                .frames
+                .iter()
+                .map(|s| [s.start as u64, s.end as u64])
+                .collect(),
+            timesteps: self.frames.iter().map(|s| s.timestep).collect(),
+            units: None,
+            unread_timesteps: self
+                .frames
+                .iter()
+                .enumerate()
+                .filter_map(|(k, s)| s.unread_timestep.clone().map(|t| (k, t)))
+                .collect(),
+        }
+    }
+
+    /// The index a cache kept for the file `data`, when it fits: frames in order inside
+    /// the file, each starting with a line holding one whole number (its atom count).
+    pub fn from_cached(data: &[u8], cached: &super::index_cache::CachedFrames) -> Option<Index> {
+        if cached.format != "xyz" || cached.units.is_some() {
+            return None;
+        }
+        let ranges = cached.checked_ranges(data)?;
+        let mut frames = Vec::with_capacity(ranges.len());
+        for (r, &timestep) in ranges.iter().zip(&cached.timesteps) {
+            let (_, line) = Cursor::new(&data[..r.end], r.start).next_line()?;
+            parse_int::<usize>(line)?;
+            frames.push(Span {
+                start: r.start,
+                end: r.end,
+                timestep,
+                unread_timestep: None,
+            });
+        }
+        for (k, text) in &cached.unread_timesteps {
+            frames[*k].unread_timestep = Some(text.clone());
+        }
+        Some(Index { frames })
+    }
+
     pub fn len(&self) -> usize {
         self.frames.len()
     }

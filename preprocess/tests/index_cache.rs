@@ -1,0 +1,206 @@
+//! Frame indexes kept between runs (`readers::index_cache`): a text dump unchanged since it
+//! was scanned is listed from the cache exactly as a scan lists it; a changed file, a
+//! damaged or hostile cache, are scanned again.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use mdlod_datasets::lammps_sample_path;
+use mdlod_preprocess::readers::index_cache::IndexCache;
+use mdlod_preprocess::readers::{DumpFile, ReadOptions};
+use mdlod_preprocess::NoProgress;
+
+/// One frame as listed: timestep, byte range, header, particles read.
+type Listed = (Option<u64>, Option<std::ops::Range<u64>>, String, usize);
+
+/// Everything a listing gives of each frame: timestep, byte range, header, and the
+/// particles read.
+fn listing(path: &Path) -> Vec<Listed> {
+    let dump = DumpFile::open(path).unwrap();
+    (0..dump.frame_count())
+        .map(|k| {
+            let frame = dump
+                .read_frame(k, &ReadOptions::default(), &NoProgress)
+                .unwrap();
+            (
+                dump.frame_timestep(k),
+                dump.frame_bytes(k),
+                format!("{:?}", dump.frame_info(k).unwrap()),
+                frame.positions.len(),
+            )
+        })
+        .collect()
+}
+
+/// [`listing`] of `path` with `cache` in scope.
+fn listing_with(cache: &Arc<IndexCache>, path: &Path) -> Vec<Listed> {
+    let _scope = cache.scope();
+    listing(path)
+}
+
+fn copy(dir: &Path, sample: &str) -> PathBuf {
+    let p = dir.join(sample);
+    std::fs::copy(lammps_sample_path(sample), &p).unwrap();
+    p
+}
+
+#[test]
+fn unchanged_text_dumps_are_listed_from_the_cache_as_a_scan_lists_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("index.json");
+    for sample in ["cu_melt.custom.dump", "cu_melt.xyz"] {
+        let input = copy(dir.path(), sample);
+        let scanned = listing(&input);
+        assert!(scanned.len() > 1, "{sample}: {} frames", scanned.len());
+
+        let first = Arc::new(IndexCache::load(&file));
+        assert_eq!(listing_with(&first, &input), scanned, "{sample}");
+        assert_eq!((first.hits(), first.scanned()), (0, 1), "{sample}");
+        first.save().unwrap();
+
+        let second = Arc::new(IndexCache::load(&file));
+        assert_eq!(listing_with(&second, &input), scanned, "{sample}");
+        assert_eq!((second.hits(), second.scanned()), (1, 0), "{sample}");
+        assert!(!second.changed(), "{sample}: nothing new to write");
+    }
+}
+
+#[test]
+fn a_changed_file_is_scanned_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("index.json");
+    let input = copy(dir.path(), "cu_melt.custom.dump");
+    let cache = Arc::new(IndexCache::load(&file));
+    listing_with(&cache, &input);
+    cache.save().unwrap();
+
+    // A simulation appends a frame: the new one is listed.
+    let text = std::fs::read_to_string(&input).unwrap();
+    let last = text.rfind("ITEM: TIMESTEP").unwrap();
+    let appended = text[last..].replacen(
+        &format!("ITEM: TIMESTEP\n{}", text[last..].lines().nth(1).unwrap()),
+        "ITEM: TIMESTEP\n999999",
+        1,
+    );
+    let mut f = std::fs::OpenOptions::new()
+        .append(true)
+        .open(&input)
+        .unwrap();
+    std::io::Write::write_all(&mut f, appended.as_bytes()).unwrap();
+    drop(f);
+    let cache = Arc::new(IndexCache::load(&file));
+    let listed = listing_with(&cache, &input);
+    assert_eq!((cache.hits(), cache.scanned()), (0, 1));
+    assert_eq!(listed, listing(&input));
+    assert_eq!(listed.last().unwrap().0, Some(999_999));
+
+    // Touched only (same bytes, another time): scanned again too.
+    cache.save().unwrap();
+    let f = std::fs::File::options().write(true).open(&input).unwrap();
+    f.set_modified(std::time::SystemTime::UNIX_EPOCH + std::time::Duration::from_secs(86_400))
+        .unwrap();
+    drop(f);
+    let cache = Arc::new(IndexCache::load(&file));
+    listing_with(&cache, &input);
+    assert_eq!((cache.hits(), cache.scanned()), (0, 1));
+}
+
+/// A cache file that is not one, or whose ranges do not fit the file they name, is
+/// passed over: the input is scanned and listed as without a cache, never misread.
+#[test]
+fn damaged_or_hostile_caches_are_passed_over() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("index.json");
+    for sample in ["cu_melt.custom.dump", "cu_melt.xyz"] {
+        let input = copy(dir.path(), sample);
+        let truth = listing(&input);
+        let cache = Arc::new(IndexCache::load(&file));
+        listing_with(&cache, &input);
+        cache.save().unwrap();
+        let good: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        let key = good["inputs"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .find(|k| k.ends_with(sample))
+            .unwrap()
+            .clone();
+
+        let mut hostile: Vec<(&str, Vec<u8>)> = vec![
+            (
+                "not JSON",
+                b"{\"mdlod_frame_index\": 1, \"inputs\": {".to_vec(),
+            ),
+            ("another version", {
+                let mut v = good.clone();
+                v["mdlod_frame_index"] = 99.into();
+                serde_json::to_vec(&v).unwrap()
+            }),
+        ];
+        let mut edit = |what: &'static str, f: &dyn Fn(&mut serde_json::Value)| {
+            let mut v = good.clone();
+            f(&mut v["inputs"][&key]["frames"]);
+            hostile.push((what, serde_json::to_vec(&v).unwrap()));
+        };
+        edit("a range starting mid-line", &|f| {
+            f["ranges"][1][0] = (f["ranges"][1][0].as_u64().unwrap() + 3).into();
+        });
+        edit("a range past the end", &|f| {
+            let n = f["ranges"].as_array().unwrap().len();
+            f["ranges"][n - 1][1] = u64::MAX.into();
+        });
+        edit("ranges out of order", &|f| {
+            f["ranges"].as_array_mut().unwrap().swap(0, 1);
+        });
+        edit("fewer timesteps than ranges", &|f| {
+            f["timesteps"].as_array_mut().unwrap().pop();
+        });
+        edit("no frames", &|f| {
+            f["ranges"] = serde_json::json!([]);
+            f["timesteps"] = serde_json::json!([]);
+        });
+        edit("another format", &|f| {
+            f["format"] = if sample.ends_with(".xyz") {
+                "lammps"
+            } else {
+                "xyz"
+            }
+            .into();
+        });
+        edit("an unread timestep of no frame", &|f| {
+            f["unread_timesteps"] = serde_json::json!([[1000, "x"]]);
+        });
+        for (what, bytes) in hostile {
+            std::fs::write(&file, bytes).unwrap();
+            let cache = Arc::new(IndexCache::load(&file));
+            assert_eq!(listing_with(&cache, &input), truth, "{sample}: {what}");
+            assert_eq!((cache.hits(), cache.scanned()), (0, 1), "{sample}: {what}");
+            // Saved again, the cache holds the scan's index.
+            cache.save().unwrap();
+            let again = Arc::new(IndexCache::load(&file));
+            listing_with(&again, &input);
+            assert_eq!(again.hits(), 1, "{sample}: {what}");
+        }
+        std::fs::remove_file(&file).unwrap();
+    }
+}
+
+/// Compressed inputs are not kept (their text is decompressed to be read anyway), and
+/// the cache is consulted only inside its scope.
+#[test]
+fn compressed_inputs_and_readers_outside_the_scope_leave_the_cache_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("index.json");
+    let gz = copy(dir.path(), "cu_melt.custom.dump.gz");
+    let cache = Arc::new(IndexCache::load(&file));
+    listing_with(&cache, &gz);
+    assert_eq!((cache.hits(), cache.scanned()), (0, 0));
+    let plain = copy(dir.path(), "cu_melt.custom.dump");
+    {
+        let _scope = cache.scope();
+    }
+    listing(&plain);
+    assert_eq!((cache.hits(), cache.scanned()), (0, 0));
+    assert!(!cache.changed());
+}
