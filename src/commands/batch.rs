@@ -210,15 +210,22 @@ pub fn run(args: Args) -> Result<()> {
     // a frame: a missing input, a bad option) is removed again; not by a shard, whose
     // siblings may be using it (with their working files elsewhere, it stays empty
     // while they index their inputs).
-    let created = !out.exists() && shard.is_none();
+    // (Nor by `--index-only`, whose index of the inputs it could list is kept.)
+    let created = !out.exists() && shard.is_none() && !args.index_only;
     let result = run_batch(&args, out, shard);
     if result.is_err() && created {
-        // Fails, leaving it, unless it is empty (but for this run's lock file).
-        let lock = out.join(mdlod_preprocess::batch::lock_file_name(None));
-        let only_lock =
-            std::fs::read_dir(out).is_ok_and(|entries| entries.flatten().all(|e| e.path() == lock));
-        if only_lock {
-            let _ = std::fs::remove_file(&lock);
+        // Fails, leaving it, unless it is empty (but for this run's lock file and the
+        // frame index it kept).
+        let ours = [
+            out.join(mdlod_preprocess::batch::lock_file_name(None)),
+            out.join(mdlod_preprocess::batch::INDEX_CACHE),
+        ];
+        let only_ours = std::fs::read_dir(out)
+            .is_ok_and(|entries| entries.flatten().all(|e| ours.contains(&e.path())));
+        if only_ours {
+            for f in &ours {
+                let _ = std::fs::remove_file(f);
+            }
         }
         let _ = std::fs::remove_dir(out);
     }
