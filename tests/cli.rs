@@ -11475,10 +11475,17 @@ fn batch_index_only_keeps_the_frame_index_for_the_runs_after_it() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("melt.dump");
     std::fs::copy(lammps_sample_path("cu_melt.custom.dump"), &input).unwrap();
+    // (Dated back: a dump modified within seconds of its scan is not kept.)
+    std::fs::File::options()
+        .write(true)
+        .open(&input)
+        .unwrap()
+        .set_modified(std::time::SystemTime::now() - std::time::Duration::from_secs(3600))
+        .unwrap();
     let out = dir.path().join("run.d");
     let said = ok(&["batch", s(&input), "-o", s(&out), "--index-only"]);
     assert!(
-        said.contains("6 frames in 1 input; the frame index of 1 text dump kept in")
+        said.contains("6 frames in 1 input; the frame index of 1 text file kept in")
             && said.contains("(1 scanned, 0 unchanged since they were)"),
         "{said}"
     );

@@ -472,10 +472,14 @@ pub struct BatchReport {
 pub struct IndexUse {
     /// The cache file.
     pub file: PathBuf,
-    /// Text inputs whose frames the cache gave (unchanged since they were scanned).
+    /// Text files whose frames the cache gave (unchanged since they were scanned; each
+    /// piece of a `%` set counts).
     pub from_cache: usize,
-    /// Text inputs scanned, line by line.
+    /// Text files scanned, line by line.
     pub scanned: usize,
+    /// Inputs whose frames no cache keeps: binary dumps, GSD, MMPLD and raw arrays (their
+    /// frames come from their headers) and gzip files (decompressed by every run).
+    pub not_kept: usize,
     /// Why the cache could not be written, where it could not (a read-only directory).
     pub unsaved: Option<String>,
 }
@@ -2003,6 +2007,7 @@ pub fn batch(
         &out_dir.join(INDEX_CACHE),
     ));
     let index_scope = index_cache.scope();
+    let mut not_kept = 0;
 
     // Inputs are indexed one at a time. Mapped files stay open; the text of a gzip input
     // is dropped after indexing (with its frames' particle counts noted), so a batch of
@@ -2098,6 +2103,9 @@ pub fn batch(
             };
         let compressed = bounded.text.is_some() || bounded.dump.is_compressed();
         let dump = &bounded.dump;
+        not_kept += usize::from(
+            compressed || !matches!(dump.format(), InputFormat::LammpsText | InputFormat::Xyz),
+        );
         let mut frames = Vec::with_capacity(dump.frame_count());
         let lammps = matches!(
             dump.format(),
@@ -2192,6 +2200,8 @@ pub fn batch(
             }
             frames.push((own, timestep, particles, attribute, given, k));
         }
+        // (Its frames' headers are read: what is read next is read as a whole.)
+        dump.read_normally();
         if (!opts.convert.radii.is_empty() || !opts.convert.species_names.is_empty())
             && dump.frame_count() > 0
         {
@@ -2221,6 +2231,7 @@ pub fn batch(
         file: index_cache.path().to_path_buf(),
         from_cache: index_cache.hits(),
         scanned: index_cache.scanned(),
+        not_kept,
         unsaved: match index_cache.save() {
             Ok(()) => None,
             // (Only a cache: a read-only archive of finished frames still checks.)
@@ -2228,31 +2239,6 @@ pub fn batch(
             Err(e) => return Err(io(index_cache.path())(e)),
         },
     };
-    if opts.index_only {
-        let frames_total = listed.iter().map(Vec::len).sum::<usize>();
-        return Ok(BatchReport {
-            frames_total,
-            frames_in_shard: 0,
-            converted: 0,
-            skipped: 0,
-            empty: Vec::new(),
-            notes: input_notes,
-            jobs: 0,
-            manifest: out_dir.join(MANIFEST),
-            removed_merged: None,
-            removed_shard_manifests: Vec::new(),
-            strays: Vec::new(),
-            kept_gone: Vec::new(),
-            gone_other: Vec::new(),
-            vanished: Vec::new(),
-            duplicates: Vec::new(),
-            redone: Redone::default(),
-            kept_unchanged: 0,
-            incomplete: empty_inputs,
-            failed: unlisted_failures,
-            index,
-        });
-    }
     let newest = newest_inputs(&listed, last_input);
     // The newest input, as an error about an older one cut short names it (the last of
     // them in order, where the one holding the latest timestep is not the last).
@@ -2450,6 +2436,31 @@ pub fn batch(
         jobs = kept;
     }
     let frames_total = jobs.len();
+    // Indexing alone ends here, its inputs checked as a shard's run would check them.
+    if opts.index_only {
+        return Ok(BatchReport {
+            frames_total,
+            frames_in_shard: 0,
+            converted: 0,
+            skipped: 0,
+            empty: Vec::new(),
+            notes: input_notes,
+            jobs: 0,
+            manifest: out_dir.join(MANIFEST),
+            removed_merged: None,
+            removed_shard_manifests: Vec::new(),
+            strays: Vec::new(),
+            kept_gone: Vec::new(),
+            gone_other: Vec::new(),
+            vanished: Vec::new(),
+            duplicates,
+            redone: Redone::default(),
+            kept_unchanged: 0,
+            incomplete: empty_inputs,
+            failed: unlisted_failures,
+            index,
+        });
+    }
     // The list the shards split: the same in every shard only when the inputs were.
     let input_frames = InputFrames::of(jobs.iter().map(|j| (j.input, j.timestep)));
     // Frame files no frame of these inputs is written to (a run over other or longer

@@ -403,6 +403,10 @@ pub struct DumpSource {
     /// (working files where [`crate::convert::open_bounded`] decompressed them); `None`:
     /// the pieces `path` names.
     pub(crate) pieces: Option<Vec<PathBuf>>,
+    /// For [`Windows::Pieces`]: each piece's header of the frame where the piece is
+    /// uncompressed text, from the dump already opened (so that no pass over the frame
+    /// indexes a piece again).
+    pub(crate) piece_headers: Option<Vec<Option<crate::readers::Header>>>,
 }
 
 /// How a [`DumpSource`] reads its windows.
@@ -452,6 +456,7 @@ impl ParticleSource for DumpSource {
             windows: self.windows,
             text_header: self.text_header.clone(),
             pieces: self.pieces.clone(),
+            piece_headers: self.piece_headers.clone(),
         };
         one.windows(window, &mut |start, mut part| {
             let n = part.len();
@@ -506,7 +511,33 @@ impl ParticleSource for DumpSource {
                     None => crate::readers::piece_paths(&self.path)?,
                 };
                 let mut offset = 0usize;
-                for piece in pieces {
+                for (j, piece) in pieces.into_iter().enumerate() {
+                    let header = self
+                        .piece_headers
+                        .as_ref()
+                        .and_then(|h| h.get(j).cloned().flatten());
+                    if let Some(header) = header {
+                        // Uncompressed text whose header the opened dump gave: read by
+                        // lines without indexing it again.
+                        let n = header.info.particles;
+                        let mut shifted = |start: usize, part: Frame| f(offset + start, part);
+                        crate::readers::read_text_windows(
+                            &piece,
+                            self.frame,
+                            Some(header),
+                            &self.options,
+                            window,
+                            &mut shifted,
+                        )?;
+                        offset = offset.checked_add(n).ok_or_else(|| {
+                            ConvertError::Chunked(format!(
+                                "{}: frame {}: the pieces hold more atoms than can be counted",
+                                piece.display(),
+                                self.frame
+                            ))
+                        })?;
+                        continue;
+                    }
                     let dump = crate::readers::DumpFile::open(&piece)?;
                     let n = dump.frame_info(self.frame)?.particles;
                     let mut shifted = |start: usize, part: Frame| f(offset + start, part);
@@ -522,11 +553,14 @@ impl ParticleSource for DumpSource {
                             Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
                         })?;
                     } else if dump.reads_text_windows() {
+                        // (The header taken here: opened again, the piece would be
+                        // scanned again, a whole pass over it.)
+                        let header = dump.header(self.frame)?;
                         drop(dump);
                         crate::readers::read_text_windows(
                             &piece,
                             self.frame,
-                            None,
+                            Some(header),
                             &self.options,
                             window,
                             &mut shifted,

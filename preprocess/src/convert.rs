@@ -1485,6 +1485,9 @@ pub fn window_source(
             .then(|| dump.header(k).ok())
             .flatten(),
         pieces: dump.piece_paths(),
+        piece_headers: (windows == crate::chunked::Windows::Pieces)
+            .then(|| dump.piece_headers(k))
+            .flatten(),
         windows,
     }))
 }
@@ -1605,6 +1608,8 @@ fn open_piece_bounded(
             .map_or_else(|| format!("{name}.txt"), String::from),
     );
     let (_, cut) = crate::readers::gunzip_to_file(input, &text, progress)?;
+    // (A working file: its index is of no use to a later run.)
+    let _uncached = crate::readers::index_cache::IndexCache::suspend();
     let dump = crate::readers::DumpFile::open(&text)
         .map_err(|e| decompressed(input, Some(&text), e.into()))?;
     let dump = if cut { dump.with_gzip_cut(input) } else { dump };

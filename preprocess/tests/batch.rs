@@ -3342,7 +3342,31 @@ fn an_input_replaced_during_a_batch_leaves_no_frame_a_rerun_keeps() {
 fn text_dumps_are_scanned_once_across_reruns_and_shards() {
     let dir = tempfile::tempdir().unwrap();
     let set = file_set(&dir.path().join("src"));
+    // (Dated back: a dump modified within seconds of its scan is not kept.)
+    let settle = |p: &Path| {
+        let f = std::fs::File::options().write(true).open(p).unwrap();
+        f.set_modified(std::time::SystemTime::now() - std::time::Duration::from_secs(3600))
+            .unwrap();
+    };
+    set.iter().for_each(|p| settle(p));
     let out = dir.path().join("out");
+    // Written a moment ago, a dump is scanned by every run until it settles.
+    let fresh = BatchOptions {
+        index_only: true,
+        ..opts()
+    };
+    let just_written = dir.path().join("fresh.dump");
+    std::fs::copy(&set[0], &just_written).unwrap();
+    for _ in 0..2 {
+        let r = batch(
+            std::slice::from_ref(&just_written),
+            &dir.path().join("fresh.d"),
+            &fresh,
+            &NoProgress,
+        )
+        .unwrap();
+        assert_eq!((r.index.scanned, r.index.from_cache), (1, 0));
+    }
     let index_only = BatchOptions {
         index_only: true,
         ..opts()
@@ -3407,6 +3431,7 @@ fn text_dumps_are_scanned_once_across_reruns_and_shards() {
         1,
     );
     std::fs::write(last, changed).unwrap();
+    settle(last);
     let r = batch(&set, &out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.index.scanned, r.index.from_cache), (1, set.len() - 1));
     assert_eq!(r.converted, 1, "{r:#?}");

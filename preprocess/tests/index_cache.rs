@@ -10,8 +10,8 @@ use mdlod_preprocess::readers::index_cache::IndexCache;
 use mdlod_preprocess::readers::{DumpFile, ReadOptions};
 use mdlod_preprocess::NoProgress;
 
-/// One frame as listed: timestep, byte range, header, particles read.
-type Listed = (Option<u64>, Option<std::ops::Range<u64>>, String, usize);
+/// One frame as listed: timestep, byte range, header, particles read (or the errors).
+type Listed = (Option<u64>, Option<std::ops::Range<u64>>, String, String);
 
 /// Everything a listing gives of each frame: timestep, byte range, header, and the
 /// particles read.
@@ -19,14 +19,15 @@ fn listing(path: &Path) -> Vec<Listed> {
     let dump = DumpFile::open(path).unwrap();
     (0..dump.frame_count())
         .map(|k| {
-            let frame = dump
-                .read_frame(k, &ReadOptions::default(), &NoProgress)
-                .unwrap();
+            let frame = dump.read_frame(k, &ReadOptions::default(), &NoProgress);
             (
                 dump.frame_timestep(k),
                 dump.frame_bytes(k),
-                format!("{:?}", dump.frame_info(k).unwrap()),
-                frame.positions.len(),
+                format!("{:?}", dump.frame_info(k)),
+                match frame {
+                    Ok(f) => f.positions.len().to_string(),
+                    Err(e) => e.to_string(),
+                },
             )
         })
         .collect()
@@ -38,9 +39,17 @@ fn listing_with(cache: &Arc<IndexCache>, path: &Path) -> Vec<Listed> {
     listing(path)
 }
 
+/// Dates `path` an hour back: a file modified within seconds of its scan is not kept.
+fn settle(path: &Path) {
+    let f = std::fs::File::options().write(true).open(path).unwrap();
+    f.set_modified(std::time::SystemTime::now() - std::time::Duration::from_secs(3600))
+        .unwrap();
+}
+
 fn copy(dir: &Path, sample: &str) -> PathBuf {
     let p = dir.join(sample);
     std::fs::copy(lammps_sample_path(sample), &p).unwrap();
+    settle(&p);
     p
 }
 
@@ -48,8 +57,18 @@ fn copy(dir: &Path, sample: &str) -> PathBuf {
 fn unchanged_text_dumps_are_listed_from_the_cache_as_a_scan_lists_them() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("index.json");
-    for sample in ["cu_melt.custom.dump", "cu_melt.xyz"] {
-        let input = copy(dir.path(), sample);
+    // A dump that ends in the first lines of a frame's header (a run writing it) lists
+    // that frame too, cut short.
+    let cut = dir.path().join("cut.dump");
+    let mut text = std::fs::read(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    text.extend_from_slice(b"ITEM: TIME\n1.5\nITEM: TIMES");
+    std::fs::write(&cut, text).unwrap();
+    settle(&cut);
+    for sample in ["cu_melt.custom.dump", "cu_melt.xyz", "cut.dump"] {
+        let input = match sample {
+            "cut.dump" => cut.clone(),
+            _ => copy(dir.path(), sample),
+        };
         let scanned = listing(&input);
         assert!(scanned.len() > 1, "{sample}: {} frames", scanned.len());
 
@@ -93,6 +112,11 @@ fn a_changed_file_is_scanned_again() {
     assert_eq!((cache.hits(), cache.scanned()), (0, 1));
     assert_eq!(listed, listing(&input));
     assert_eq!(listed.last().unwrap().0, Some(999_999));
+    // Modified a moment ago (a run may still be writing it in place): scanned, not kept.
+    cache.save().unwrap();
+    let cache = Arc::new(IndexCache::load(&file));
+    listing_with(&cache, &input);
+    assert_eq!((cache.hits(), cache.scanned()), (0, 1));
 
     // Touched only (same bytes, another time): scanned again too.
     cache.save().unwrap();
@@ -168,6 +192,38 @@ fn damaged_or_hostile_caches_are_passed_over() {
             }
             .into();
         });
+        edit("a timestep the frame does not hold", &|f| {
+            f["timesteps"][1] = 123_456_789u64.into();
+        });
+        edit("two timesteps swapped", &|f| {
+            f["timesteps"].as_array_mut().unwrap().swap(0, 1);
+        });
+        edit("no timestep for a frame that has one", &|f| {
+            f["timesteps"][1] = serde_json::Value::Null;
+        });
+        edit("a range starting at another header line", &|f| {
+            // The frame's second line onwards: an `ITEM:` line of the LAMMPS header, or
+            // an XYZ frame's comment line.
+            let start = f["ranges"][1][0].as_u64().unwrap() as usize;
+            let text = std::fs::read(lammps_sample_path(sample)).unwrap();
+            let next = start + text[start..].iter().position(|&b| b == b'\n').unwrap() + 1;
+            f["ranges"][1][0] = (next as u64).into();
+            f["ranges"][0][1] = (next as u64).into();
+        });
+        if !sample.ends_with(".xyz") {
+            edit("a range starting past its frame's TIME lines", &|f| {
+                let start = f["ranges"][1][0].as_u64().unwrap() as usize;
+                let text = std::fs::read(lammps_sample_path(sample)).unwrap();
+                let at = start
+                    + text[start..]
+                        .windows(14)
+                        .position(|w| w == b"ITEM: TIMESTEP")
+                        .unwrap();
+                assert!(at > start, "frame 1 starts with its TIME lines");
+                f["ranges"][1][0] = (at as u64).into();
+                f["ranges"][0][1] = (at as u64).into();
+            });
+        }
         edit("an unread timestep of no frame", &|f| {
             f["unread_timesteps"] = serde_json::json!([[1000, "x"]]);
         });

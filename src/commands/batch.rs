@@ -210,8 +210,7 @@ pub fn run(args: Args) -> Result<()> {
     // a frame: a missing input, a bad option) is removed again; not by a shard, whose
     // siblings may be using it (with their working files elsewhere, it stays empty
     // while they index their inputs).
-    // (Nor by `--index-only`, whose index of the inputs it could list is kept.)
-    let created = !out.exists() && shard.is_none() && !args.index_only;
+    let created = !out.exists() && shard.is_none();
     let result = run_batch(&args, out, shard);
     if result.is_err() && created {
         // Fails, leaving it, unless it is empty (but for this run's lock file and the
@@ -222,7 +221,8 @@ pub fn run(args: Args) -> Result<()> {
         ];
         let only_ours = std::fs::read_dir(out)
             .is_ok_and(|entries| entries.flatten().all(|e| ours.contains(&e.path())));
-        if only_ours {
+        // (`--index-only` keeps the index of what it could list.)
+        if only_ours && !args.index_only {
             for f in &ours {
                 let _ = std::fs::remove_file(f);
             }
@@ -556,6 +556,7 @@ fn index_json(index: &mdlod_preprocess::batch::IndexUse) -> serde_json::Value {
         "file": index.file.display().to_string(),
         "from_cache": index.from_cache,
         "scanned": index.scanned,
+        "not_indexed": index.not_kept,
         "unsaved": index.unsaved,
     })
 }
@@ -577,34 +578,59 @@ fn report_index_only(
     for e in &report.failed {
         println!("{e}");
     }
+    if !report.duplicates.is_empty() {
+        let n = report.duplicates.len();
+        println!(
+            "note: {n} frame{} left out as duplicates of a timestep ({}): the runs into this \
+             directory leave them out the same way with the same --duplicate-timesteps",
+            if n == 1 { "" } else { "s" },
+            first_five(&report.duplicates)
+        );
+    }
     let index = &report.index;
     let text = index.from_cache + index.scanned;
     let plural = |n: usize| if n == 1 { "" } else { "s" };
-    println!(
-        "{} frame{} in {} input{}; the frame index of {text} text dump{} kept in {} ({} \
-         scanned, {} unchanged since they were): the shards of a batch into {} list them \
-         from it{}",
+    let frames = format!(
+        "{} frame{} in {} input{}",
         report.frames_total,
         plural(report.frames_total),
         inputs.len(),
         plural(inputs.len()),
-        plural(text),
-        index.file.display(),
-        index.scanned,
-        index.from_cache,
-        out.display(),
-        if text < inputs.len() {
-            " (binary and compressed inputs are listed from their headers by each run)"
-        } else {
-            ""
-        }
     );
+    // Binary dumps give their frames from their headers; gzip files are decompressed
+    // by every run.
+    let others = match index.not_kept {
+        0 => String::new(),
+        n => format!(
+            "; {n} input{} not indexed (binary dumps, GSD, MMPLD and raw arrays give their \
+             frames from their headers, gzip files are decompressed by every run)",
+            plural(n)
+        ),
+    };
+    if text == 0 {
+        println!("{frames}; no text dump to index{others}");
+    } else {
+        println!(
+            "{frames}; the frame index of {text} text file{} kept in {} ({} scanned, {} \
+             unchanged since they were){others}: runs and shards of a batch into {} list \
+             them from it",
+            plural(text),
+            index.file.display(),
+            index.scanned,
+            index.from_cache,
+            out.display(),
+        );
+    }
+    if let Some(e) = &index.unsaved {
+        println!("note: {e}");
+    }
     if args.json {
         crate::print_json(serde_json::json!({
             "output": out.display().to_string(),
             "ok": report.failed.is_empty(),
             "frames": report.frames_total,
             "inputs": inputs.len(),
+            "duplicates": report.duplicates.len(),
             "left_for_rerun": report.incomplete.iter().map(ToString::to_string).collect::<Vec<_>>(),
             "failed": report.failed.iter().map(ToString::to_string).collect::<Vec<_>>(),
             "index": index_json(index),

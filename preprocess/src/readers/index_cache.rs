@@ -8,16 +8,20 @@
 //!
 //! An [`IndexCache`] keeps, per uncompressed text input (by its absolute path), the byte
 //! range and timestep of each frame, with the identity of the file it was taken from:
-//! its size, its modification time to the nanosecond, its device and inode. An input
-//! whose identity is unchanged is not scanned again; any change (a dump a running
-//! simulation appended to, a file replaced) scans it afresh. Binary formats, whose frames
+//! its size, its modification and change times to the nanosecond and its inode. An
+//! input whose identity is unchanged is not scanned again; any change (a dump a running
+//! simulation appended to, a file replaced or touched) scans it afresh. A file modified
+//! within [`SETTLED`] of its scan is not kept (a write later in the same tick of the
+//! file system's clock would not change its identity). Binary formats, whose frames
 //! come from their headers, and gzip files, whose text is decompressed anyway, are not
 //! kept.
 //!
 //! The cache is a JSON file (`{"mdlod_frame_index": 1, "inputs": {...}}`), read with a
 //! size cap and taken as untrusted: an entry is used only when its ranges lie in order
-//! inside the file and each starts where a frame can start (`ITEM:` for LAMMPS, a count
-//! line for XYZ), else the input is scanned as if there were none; an unreadable or
+//! inside the file and each starts with the frame header it claims (an `ITEM: TIMESTEP`
+//! line with the timestep kept; an XYZ count line and a comment line giving the timestep
+//! kept, only blank lines between frames), else the input is scanned as if there were
+//! none; an unreadable or
 //! foreign file is an empty cache. It is written by temporary file and rename, so
 //! processes writing it at once (the shards of an array) each leave a whole file.
 //!
@@ -36,15 +40,24 @@ use serde::{Deserialize, Serialize};
 const VERSION: u32 = 1;
 
 /// A cache file larger than this is not read (a hostile or foreign file).
-const MAX_FILE_BYTES: u64 = 1 << 30;
+const MAX_FILE_BYTES: u64 = 256 << 20;
 
-/// What a file is, for telling whether it changed since it was indexed.
+/// A file modified less than this long before it is scanned is not kept: a write in the
+/// same tick of the file system's clock after the scan (a dump written in place, its
+/// size set first, as LAMMPS's MPI-IO dumps do) would leave its identity unchanged.
+const SETTLED: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// What a file is, for telling whether it changed since it was indexed. (Not its device
+/// number: a network file system's differs between the machines that mount it, such as
+/// a cluster's login node and compute nodes.)
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 struct Identity {
     len: u64,
     modified_s: i64,
     modified_ns: u32,
-    device: u64,
+    /// The inode's change time, which any write sets and `touch -d` cannot put back.
+    changed_s: i64,
+    changed_ns: u32,
     inode: u64,
 }
 
@@ -55,7 +68,8 @@ impl Identity {
             len: meta.len(),
             modified_s: meta.mtime(),
             modified_ns: u32::try_from(meta.mtime_nsec()).unwrap_or(u32::MAX),
-            device: meta.dev(),
+            changed_s: meta.ctime(),
+            changed_ns: u32::try_from(meta.ctime_nsec()).unwrap_or(u32::MAX),
             inode: meta.ino(),
         }
     }
@@ -169,10 +183,9 @@ impl IndexCache {
     /// The cache kept in `path`: empty when there is none, or it cannot be read, is too
     /// large, is not JSON of this version.
     pub fn load(path: &Path) -> IndexCache {
-        let read = std::fs::File::open(path)
+        let read = mdlod_format::files::read_capped(path, MAX_FILE_BYTES)
             .ok()
-            .filter(|f| f.metadata().is_ok_and(|m| m.len() <= MAX_FILE_BYTES))
-            .and_then(|f| serde_json::from_reader::<_, CacheFile>(std::io::BufReader::new(f)).ok())
+            .and_then(|bytes| serde_json::from_slice::<CacheFile>(&bytes).ok())
             .filter(|c| c.mdlod_frame_index == VERSION)
             .map(|c| c.inputs)
             .unwrap_or_default();
@@ -188,6 +201,15 @@ impl IndexCache {
     /// The file this cache is read from and written to.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// No cache for readers opened on this thread until the scope is dropped (a working
+    /// file decompressed from a gzip input, which no later run reads).
+    pub fn suspend() -> IndexScope {
+        IndexScope {
+            previous: CURRENT.with(|c| c.borrow_mut().take()),
+            _thread: std::marker::PhantomData,
+        }
     }
 
     /// Makes this the cache readers opened on this thread consult, until the scope is
@@ -252,9 +274,18 @@ impl IndexCache {
             .remove(&key_of(path));
     }
 
-    /// Keeps the frames just indexed for `path`, whose metadata `meta` was taken before.
+    /// Keeps the frames just indexed for `path`, whose metadata `meta` was taken before
+    /// (not a file modified within [`SETTLED`] of now, nor one dated in the future).
     pub(crate) fn insert(&self, path: &Path, meta: &std::fs::Metadata, frames: CachedFrames) {
         self.scanned.fetch_add(1, Ordering::Relaxed);
+        let settled = meta
+            .modified()
+            .ok()
+            .and_then(|m| m.elapsed().ok())
+            .is_some_and(|age| age >= SETTLED);
+        if !settled {
+            return;
+        }
         self.kept.lock().unwrap_or_else(|e| e.into_inner()).insert(
             key_of(path),
             Entry {

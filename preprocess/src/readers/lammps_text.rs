@@ -285,39 +285,63 @@ impl Index {
         }
     }
 
-    /// The index a cache kept for the dump `data`, when it fits: frames that follow each
-    /// other from the dump's first line (only blank lines before) to its end, each
-    /// starting with an `ITEM:` line (the last may be such a line cut short).
+    /// The index a cache kept for the dump `data`, when it is the one a scan would make
+    /// from the frame starts it names: each range holds an `ITEM: TIMESTEP` line in its
+    /// first five lines (after at most two two-line `UNITS`/`TIME` blocks), and taking
+    /// those lines as the scan's finds gives exactly the ranges, timesteps and units kept
+    /// (the last range may be a header cut short, as a scan ends). Only `ITEM: TIMESTEP`
+    /// lines inside a frame's atom lines, which no dump LAMMPS writes holds, go unseen.
     pub fn from_cached(data: &[u8], cached: &super::index_cache::CachedFrames) -> Option<Index> {
         if cached.format != "lammps" || !cached.unread_timesteps.is_empty() {
             return None;
         }
         let ranges = cached.checked_ranges(data)?;
-        let first = ranges.first()?.start;
-        if !data[..first].iter().all(u8::is_ascii_whitespace) || ranges.last()?.end != data.len() {
+        if !data[..ranges.first()?.start]
+            .iter()
+            .all(u8::is_ascii_whitespace)
+        {
             return None;
         }
-        const ITEM: &[u8] = b"ITEM: ";
-        let mut frames = Vec::with_capacity(ranges.len());
-        for (k, (r, &timestep)) in ranges.iter().zip(&cached.timesteps).enumerate() {
-            let last = k + 1 == ranges.len();
-            if !last && r.end != ranges[k + 1].start {
-                return None;
+        let mut frames: Vec<Span> = Vec::with_capacity(ranges.len());
+        let mut units = None;
+        for (k, r) in ranges.iter().enumerate() {
+            let mut cursor = Cursor::new(&data[..r.end], r.start);
+            let mut at = None;
+            for _ in 0..5 {
+                match cursor.next_line() {
+                    Some((p, line)) if trim(line) == TIMESTEP => {
+                        at = Some(p);
+                        break;
+                    }
+                    Some(_) => {}
+                    None => break,
+                }
             }
-            let head = &data[r.start..r.end.min(r.start + ITEM.len())];
-            if !(head == ITEM || (last && ITEM.starts_with(head))) {
-                return None;
+            match at {
+                Some(p) => Index::visit(data, p, &mut frames, &mut units),
+                // A header cut short ends the dump: as the scan's end finds it, below.
+                None if k + 1 == ranges.len() => {}
+                None => return None,
             }
-            frames.push(Span {
-                start: r.start,
-                end: r.end,
-                timestep,
-            });
         }
-        Some(Index {
-            frames,
-            units: cached.units.clone(),
-        })
+        if let Some(last) = frames.last_mut() {
+            if let Some(start) = cut_header_start(data, last.start) {
+                last.end = start;
+                frames.push(Span {
+                    start,
+                    end: data.len(),
+                    timestep: None,
+                });
+            }
+        }
+        let same = frames.len() == ranges.len()
+            && units == cached.units
+            && frames
+                .iter()
+                .zip(&ranges)
+                .zip(&cached.timesteps)
+                .all(|((f, r), t)| f.start == r.start && f.end == r.end && f.timestep == *t);
+        same.then_some(Index { frames, units })
     }
 
     pub fn len(&self) -> usize {

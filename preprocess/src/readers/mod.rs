@@ -574,7 +574,21 @@ pub(crate) struct Header {
 }
 
 /// The bytes of an opened dump: a memory map or a decompressed buffer.
-type Bytes = Box<dyn AsRef<[u8]> + Send + Sync>;
+enum Bytes {
+    /// The file, mapped.
+    Map(mdlod_format::mmap::Mmap),
+    /// Decompressed text (or nothing, for a piece set).
+    Text(Vec<u8>),
+}
+
+impl AsRef<[u8]> for Bytes {
+    fn as_ref(&self) -> &[u8] {
+        match self {
+            Bytes::Map(m) => m,
+            Bytes::Text(t) => t,
+        }
+    }
+}
 
 enum Index {
     Lammps(lammps_text::Index),
@@ -659,7 +673,7 @@ impl DumpFile {
         };
         Ok(DumpFile {
             path: pattern.to_path_buf(),
-            bytes: Box::new(Vec::new()),
+            bytes: Bytes::Text(Vec::new()),
             compressed: pieces.iter().any(DumpFile::is_compressed),
             gzip_cut: pieces.iter().find_map(|p| p.gzip_cut.clone()),
             named: None,
@@ -710,7 +724,7 @@ impl DumpFile {
             match gunzip(path, &map, text_limit, progress)? {
                 Some((text, cut)) => {
                     gzip_cut = cut.then(|| path.to_path_buf());
-                    Box::new(text)
+                    Bytes::Text(text)
                 }
                 None => return Ok(None),
             }
@@ -720,9 +734,9 @@ impl DumpFile {
                 message: "zstd and bzip2 compressed dumps are not supported; decompress the file or recompress it with gzip".into(),
             });
         } else {
-            Box::new(map)
+            Bytes::Map(map)
         };
-        let data = bytes.as_ref().as_ref();
+        let data = bytes.as_ref();
         if data.iter().all(|b| b.is_ascii_whitespace()) {
             return Err(ReadError::Empty { at: first_line() });
         }
@@ -827,6 +841,11 @@ impl DumpFile {
                 InputFormat::Mmpld => Index::Mmpld(mmpld::Index::build(path, data)?),
             }
         };
+        // Listed from the index: the frames' first lines are all a listing reads, without
+        // the read-ahead around each (`read_normally` asks for it again).
+        if let (true, Bytes::Map(m)) = (from_cache, &bytes) {
+            let _ = m.advise(mdlod_format::mmap::Advice::Random);
+        }
         // (Kept only when the file is as long as the bytes scanned: one a running
         // simulation appended to meanwhile must be scanned again next time.)
         if let (Some(c), Some(m)) = (&cache, &meta) {
@@ -900,7 +919,22 @@ impl DumpFile {
 
     /// The dump's bytes (decompressed when the file is gzip-compressed).
     fn bytes(&self) -> &[u8] {
-        self.bytes.as_ref().as_ref()
+        self.bytes.as_ref()
+    }
+
+    /// Lets the kernel read ahead in the mapped file again after a listing from a frame
+    /// index ([`index_cache`]), which reads only the first lines of each frame and so
+    /// asks for no read-ahead: a page of each frame touched would read megabytes around
+    /// it, of frames another shard converts. Call it once the frames' headers are read.
+    pub fn read_normally(&self) {
+        match (&self.bytes, &self.index) {
+            (_, Index::Pieces(p)) => p.iter().for_each(DumpFile::read_normally),
+            (Bytes::Map(m), _) => {
+                // (Advice only: a kernel that refuses it reads as it would.)
+                let _ = m.advise(mdlod_format::mmap::Advice::Normal);
+            }
+            (Bytes::Text(_), _) => {}
+        }
     }
 
     /// Number of frames in the file.
@@ -1186,6 +1220,20 @@ impl DumpFile {
     }
 
     /// The piece files of a `%` piece set, in processor order (`None` for one file).
+    /// For a `%` piece set, each piece's header of frame `k` where the piece is
+    /// uncompressed text read by lines (`None` for the others, and where it cannot be
+    /// read: that piece is opened again and reports it); `None` for other dumps.
+    pub(crate) fn piece_headers(&self, k: usize) -> Option<Vec<Option<Header>>> {
+        match &self.index {
+            Index::Pieces(p) => Some(
+                p.iter()
+                    .map(|d| d.reads_text_windows().then(|| d.header(k).ok()).flatten())
+                    .collect(),
+            ),
+            _ => None,
+        }
+    }
+
     pub fn piece_paths(&self) -> Option<Vec<PathBuf>> {
         match &self.index {
             Index::Pieces(p) => Some(p.iter().map(|d| d.path().to_path_buf()).collect()),

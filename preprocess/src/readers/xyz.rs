@@ -226,18 +226,38 @@ impl Index {
         }
         let ranges = cached.checked_ranges(data)?;
         let mut frames = Vec::with_capacity(ranges.len());
-        for (r, &timestep) in ranges.iter().zip(&cached.timesteps) {
-            let (_, line) = Cursor::new(&data[..r.end], r.start).next_line()?;
+        let unread_of: std::collections::HashMap<usize, &String> = cached
+            .unread_timesteps
+            .iter()
+            .map(|(k, t)| (*k, t))
+            .collect();
+        let mut gap_from = 0;
+        for (k, (r, &timestep)) in ranges.iter().zip(&cached.timesteps).enumerate() {
+            // Only blank lines between frames, as a scan passes over.
+            if !data[gap_from..r.start].iter().all(u8::is_ascii_whitespace) {
+                return None;
+            }
+            gap_from = r.end;
+            // Its count line, and its comment line's timestep as kept.
+            let mut cursor = Cursor::new(&data[..r.end], r.start);
+            let (_, line) = cursor.next_line()?;
             parse_int::<usize>(line)?;
+            let (own, unread) = match cursor.next_line() {
+                Some((_, c)) => comment_timestep(c),
+                None => (None, None),
+            };
+            if own != timestep || unread.as_ref() != unread_of.get(&k).copied() {
+                return None;
+            }
             frames.push(Span {
                 start: r.start,
                 end: r.end,
                 timestep,
-                unread_timestep: None,
+                unread_timestep: unread,
             });
         }
-        for (k, text) in &cached.unread_timesteps {
-            frames[*k].unread_timestep = Some(text.clone());
+        if !data[gap_from..].iter().all(u8::is_ascii_whitespace) {
+            return None;
         }
         Some(Index { frames })
     }
