@@ -804,12 +804,21 @@ impl DumpFile {
                     "lammps"
                 };
                 c.lookup(path, m, name).and_then(|cached| {
+                    // The frames' first lines are all that checking and listing them
+                    // reads, without the read-ahead of megabytes around each
+                    // (`read_normally` asks for it again; so does a scan, below).
+                    if let Bytes::Map(m) = &bytes {
+                        let _ = m.advise(mdlod_format::mmap::Advice::Random);
+                    }
                     let index = match format {
                         InputFormat::Xyz => xyz::Index::from_cached(data, &cached).map(Index::Xyz),
                         _ => lammps_text::Index::from_cached(data, &cached).map(Index::Lammps),
                     };
                     if index.is_none() {
                         c.rejected(path);
+                        if let Bytes::Map(m) = &bytes {
+                            let _ = m.advise(mdlod_format::mmap::Advice::Normal);
+                        }
                     }
                     index
                 })
@@ -841,11 +850,6 @@ impl DumpFile {
                 InputFormat::Mmpld => Index::Mmpld(mmpld::Index::build(path, data)?),
             }
         };
-        // Listed from the index: the frames' first lines are all a listing reads, without
-        // the read-ahead around each (`read_normally` asks for it again).
-        if let (true, Bytes::Map(m)) = (from_cache, &bytes) {
-            let _ = m.advise(mdlod_format::mmap::Advice::Random);
-        }
         // (Kept only when the file is as long as the bytes scanned: one a running
         // simulation appended to meanwhile must be scanned again next time.)
         if let (Some(c), Some(m)) = (&cache, &meta) {
