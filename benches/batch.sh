@@ -43,17 +43,17 @@ rows=""
 run() {
   local name=$1 n=$2
   shift 2
-  /usr/bin/time -f "%e %U %S %M" -o "$DIR/time.log" "$BIN" batch "$@" > "$DIR/stdout.log" 2> "$DIR/stderr.log" || {
+  /usr/bin/time -f "%e %U %S %M %I" -o "$DIR/time.log" "$BIN" batch "$@" > "$DIR/stdout.log" 2> "$DIR/stderr.log" || {
     cat "$DIR/stderr.log" >&2
     exit 1
   }
-  local summary converted skipped wall user sys rss
+  local summary converted skipped wall user sys rss blocks
   summary=$(grep -h "converted" "$DIR/stdout.log" "$DIR/stderr.log" | tail -1)
   converted=$(sed -E 's/.* ([0-9]+) converted.*/\1/' <<< "$summary")
   skipped=$(sed -E 's/.* ([0-9]+) already done.*/\1/' <<< "$summary")
-  read -r wall user sys rss < "$DIR/time.log"
+  read -r wall user sys rss blocks < "$DIR/time.log"
   rows="$rows
-$(python3 benches/batch_row.py "$name" "$n" "$converted" "$skipped" "$wall" "$user" "$sys" "$rss" "$cores")"
+$(python3 benches/batch_row.py "$name" "$n" "$converted" "$skipped" "$wall" "$user" "$sys" "$rss" "$cores" "$blocks")"
 }
 listed() {
   python3 -c "import json, sys; print(len(json.load(open(sys.argv[1]))['frames']))" "$out/dataset.json"
@@ -119,8 +119,8 @@ rm -rf "$out"
 cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')
 table="Machine: $cores cores ($cpu). Inputs: LAMMPS text dumps of $FRAMES frames of $PARTICLES crater particles ($(gb "$dump") GB) and of $MANY_FRAMES small frames of $MANY_PARTICLES ($(gb "$many") GB), from \`mdlod generate crater --frames\`, converted with \`mdlod batch --radius 1=1.28\` and the default memory limit; CPU is user + system time; throughput counts converted frames only.
 
-| run | particles a frame | frames converted | frames skipped | wall s | CPU s | frames/s | M particles/s | per core | peak RSS MiB |
-|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|$rows
+| run | particles a frame | frames converted | frames skipped | wall s | CPU s | frames/s | M particles/s | per core | peak RSS MiB | MB read from disk |
+|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|$rows
 
 \`mdlod batch --merge\` of the two shards: $merge s, $merged frames in the joined manifest. \`mdlod batch --index-only\` of the dump from a cold page cache: $index_only s. The small frames' manifest lists $many_listed."
 echo "$table"
