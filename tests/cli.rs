@@ -11475,14 +11475,15 @@ fn batch_index_only_keeps_the_frame_index_for_the_runs_after_it() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("melt.dump");
     std::fs::copy(lammps_sample_path("cu_melt.custom.dump"), &input).unwrap();
-    // (Dated back: a dump modified within seconds of its scan is not kept.)
-    std::fs::File::options()
-        .write(true)
-        .open(&input)
-        .unwrap()
-        .set_modified(std::time::SystemTime::now() - std::time::Duration::from_secs(3600))
-        .unwrap();
     let out = dir.path().join("run.d");
+    // A dump modified moments ago is scanned and not kept, and said so.
+    let said = ok(&["batch", s(&input), "-o", s(&out), "--index-only"]);
+    assert!(
+        said.contains("6 frames in 1 input; no frame index kept")
+            && said.contains("note: 1 file scanned but not kept in the index"),
+        "{said}"
+    );
+    std::thread::sleep(std::time::Duration::from_millis(2100));
     let said = ok(&["batch", s(&input), "-o", s(&out), "--index-only"]);
     assert!(
         said.contains("6 frames in 1 input; the frame index of 1 text file kept in")

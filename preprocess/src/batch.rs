@@ -477,6 +477,9 @@ pub struct IndexUse {
     pub from_cache: usize,
     /// Text files scanned, line by line.
     pub scanned: usize,
+    /// Of those, files not kept: modified moments ago (a run may still write them) or
+    /// dated ahead of this machine's clock; the next run scans them again.
+    pub unsettled: usize,
     /// Inputs whose frames no cache keeps: binary dumps, GSD, MMPLD and raw arrays (their
     /// frames come from their headers) and gzip files (decompressed by every run).
     pub not_kept: usize,
@@ -2200,8 +2203,6 @@ pub fn batch(
             }
             frames.push((own, timestep, particles, attribute, given, k));
         }
-        // (Its frames' headers are read: what is read next is read as a whole.)
-        dump.read_normally();
         if (!opts.convert.radii.is_empty() || !opts.convert.species_names.is_empty())
             && dump.frame_count() > 0
         {
@@ -2215,6 +2216,8 @@ pub fn batch(
         // (Said of the first input: one processor's pieces of every timestep read alike;
         // the set to give is every timestep's where the inputs are a file per timestep.)
         if i == 0 && dump.piece_paths().is_none() {
+            // (Other files, not this run's inputs: no index of theirs is kept.)
+            let _uncached = crate::readers::index_cache::IndexCache::suspend();
             if let Some(lone) = crate::readers::lone_piece(p, dump.frame_timestep(0), inputs) {
                 let others: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
                 let give = every_timesteps_set(&lone.set, &others).unwrap_or(lone.set.clone());
@@ -2231,6 +2234,7 @@ pub fn batch(
         file: index_cache.path().to_path_buf(),
         from_cache: index_cache.hits(),
         scanned: index_cache.scanned(),
+        unsettled: index_cache.unsettled(),
         not_kept,
         unsaved: match index_cache.save() {
             Ok(()) => None,
@@ -2943,6 +2947,9 @@ pub fn batch(
     let queue = Mutex::new(todo.iter());
     let failed = AtomicBool::new(false);
     let first_error: Mutex<Option<BatchError>> = Mutex::new(None);
+    // Dumps listed from the frame index whose frames could not be read: dropped from it,
+    // so that the next run scans them (an index at fault, however unlikely, mends).
+    let unindexed: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
     let incomplete: Mutex<Vec<IncompleteFrame>> = Mutex::new(ends_mid_line);
     // (The frames no shard could list, an input holding no dump, are shard 0's to
     // report: each shard failing on them double-counted them, and failed every task of
@@ -3123,6 +3130,14 @@ pub fn batch(
                     progress.advance(job.particles);
                 }
                 Err(e) => {
+                    if e.frames_own() {
+                        if let Some(d) = job.dump.filter(|d| d.listed_from_index()) {
+                            unindexed
+                                .lock()
+                                .unwrap_or_else(|e| e.into_inner())
+                                .extend(d.indexed_files());
+                        }
+                    }
                     // An older file of a set cut short: damaged, not being written.
                     let e = if job.last_of_input && e.cut_short() {
                         BatchError::CutShortBeforeNewest {
@@ -3164,6 +3179,12 @@ pub fn batch(
         worker();
     });
     progress.finish_stage();
+    let unindexed = unindexed.into_inner().unwrap_or_else(|e| e.into_inner());
+    if !unindexed.is_empty() {
+        unindexed.iter().for_each(|p| index_cache.forget(p));
+        // (Only a cache: the error said is the frame's.)
+        let _ = index_cache.save();
+    }
     let mut incomplete = incomplete.into_inner().unwrap_or_else(|e| e.into_inner());
     incomplete.sort_by(|a, b| (&a.input, a.frame).cmp(&(&b.input, b.frame)));
     let mut failed_frames = failed_frames

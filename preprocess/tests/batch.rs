@@ -3342,13 +3342,8 @@ fn an_input_replaced_during_a_batch_leaves_no_frame_a_rerun_keeps() {
 fn text_dumps_are_scanned_once_across_reruns_and_shards() {
     let dir = tempfile::tempdir().unwrap();
     let set = file_set(&dir.path().join("src"));
-    // (Dated back: a dump modified within seconds of its scan is not kept.)
-    let settle = |p: &Path| {
-        let f = std::fs::File::options().write(true).open(p).unwrap();
-        f.set_modified(std::time::SystemTime::now() - std::time::Duration::from_secs(3600))
-            .unwrap();
-    };
-    set.iter().for_each(|p| settle(p));
+    // (A dump modified or changed within two seconds of its scan is not kept.)
+    let settle = || std::thread::sleep(std::time::Duration::from_millis(2100));
     let out = dir.path().join("out");
     // Written a moment ago, a dump is scanned by every run until it settles.
     let fresh = BatchOptions {
@@ -3365,8 +3360,12 @@ fn text_dumps_are_scanned_once_across_reruns_and_shards() {
             &NoProgress,
         )
         .unwrap();
-        assert_eq!((r.index.scanned, r.index.from_cache), (1, 0));
+        assert_eq!(
+            (r.index.scanned, r.index.unsettled, r.index.from_cache),
+            (1, 1, 0)
+        );
     }
+    settle();
     let index_only = BatchOptions {
         index_only: true,
         ..opts()
@@ -3431,9 +3430,69 @@ fn text_dumps_are_scanned_once_across_reruns_and_shards() {
         1,
     );
     std::fs::write(last, changed).unwrap();
-    settle(last);
+    settle();
     let r = batch(&set, &out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.index.scanned, r.index.from_cache), (1, set.len() - 1));
     assert_eq!(r.converted, 1, "{r:#?}");
     assert!(out.join("frame-777777.mdlod").is_file());
+}
+
+/// A dump listed from the index whose frame cannot be read is dropped from the index,
+/// so that the next run scans it: an index at fault (two frames made one, which no check
+/// short of a scan tells) costs one failed run, not every run after it. A large gzip
+/// input, decompressed into a working file, keeps no index.
+#[test]
+fn a_frame_unread_from_an_indexed_dump_drops_the_dump_from_the_index() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    std::thread::sleep(std::time::Duration::from_millis(2100));
+    let out = dir.path().join("out");
+    let index_only = BatchOptions {
+        index_only: true,
+        ..opts()
+    };
+    batch(std::slice::from_ref(&src), &out, &index_only, &NoProgress).unwrap();
+    let path = out.join(INDEX_CACHE);
+    let mut index: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let entry = index["inputs"]
+        .as_object_mut()
+        .unwrap()
+        .values_mut()
+        .next()
+        .unwrap();
+    let frames = &mut entry["frames"];
+    // Frames 0 and 1 as one.
+    frames["ranges"][0][1] = frames["ranges"][1][1].clone();
+    frames["ranges"].as_array_mut().unwrap().remove(1);
+    frames["timesteps"].as_array_mut().unwrap().remove(1);
+    std::fs::write(&path, serde_json::to_vec(&index).unwrap()).unwrap();
+
+    let keep = BatchOptions {
+        keep_going: true,
+        ..opts()
+    };
+    let r = batch(std::slice::from_ref(&src), &out, &keep, &NoProgress).unwrap();
+    assert_eq!(r.index.from_cache, 1, "the altered entry passes the checks");
+    assert_eq!(r.failed.len(), 1, "{:?}", r.failed);
+    let index: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    assert!(index["inputs"].as_object().unwrap().is_empty(), "{index}");
+    let r = batch(std::slice::from_ref(&src), &out, &keep, &NoProgress).unwrap();
+    assert_eq!((r.index.scanned, r.index.from_cache), (1, 0));
+    assert!(r.failed.is_empty(), "{:?}", r.failed);
+    assert_eq!(read_manifest(&out).unwrap().frames.len(), 6);
+
+    // A gzip input decompressed into a working file: nothing kept.
+    let gz = dir.path().join("melt.dump.gz");
+    std::fs::copy(lammps_sample_path("cu_melt.custom.dump.gz"), &gz).unwrap();
+    let mut spool = index_only.clone();
+    spool.convert.chunks.gzip_in_memory = Some(0);
+    let gz_out = dir.path().join("gz");
+    let r = batch(std::slice::from_ref(&gz), &gz_out, &spool, &NoProgress).unwrap();
+    assert_eq!(r.frames_total, 6);
+    assert_eq!(
+        (r.index.scanned, r.index.from_cache, r.index.not_kept),
+        (0, 0, 1)
+    );
+    assert!(!gz_out.join(INDEX_CACHE).exists());
 }

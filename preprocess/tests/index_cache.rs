@@ -39,17 +39,25 @@ fn listing_with(cache: &Arc<IndexCache>, path: &Path) -> Vec<Listed> {
     listing(path)
 }
 
-/// Dates `path` an hour back: a file modified within seconds of its scan is not kept.
-fn settle(path: &Path) {
+/// Waits until the files written before have settled: a file modified or changed
+/// within two seconds of its scan is not kept (its change time cannot be set back).
+fn settle() {
+    std::thread::sleep(std::time::Duration::from_millis(2100));
+}
+
+/// Sets `path`'s modification time `offset` seconds from now (its change time becomes
+/// now).
+fn touch(path: &Path, offset: i64) {
+    let now = std::time::SystemTime::now();
+    let d = std::time::Duration::from_secs(offset.unsigned_abs());
+    let t = if offset < 0 { now - d } else { now + d };
     let f = std::fs::File::options().write(true).open(path).unwrap();
-    f.set_modified(std::time::SystemTime::now() - std::time::Duration::from_secs(3600))
-        .unwrap();
+    f.set_modified(t).unwrap();
 }
 
 fn copy(dir: &Path, sample: &str) -> PathBuf {
     let p = dir.join(sample);
     std::fs::copy(lammps_sample_path(sample), &p).unwrap();
-    settle(&p);
     p
 }
 
@@ -63,12 +71,11 @@ fn unchanged_text_dumps_are_listed_from_the_cache_as_a_scan_lists_them() {
     let mut text = std::fs::read(lammps_sample_path("cu_melt.custom.dump")).unwrap();
     text.extend_from_slice(b"ITEM: TIME\n1.5\nITEM: TIMES");
     std::fs::write(&cut, text).unwrap();
-    settle(&cut);
+    copy(dir.path(), "cu_melt.custom.dump");
+    copy(dir.path(), "cu_melt.xyz");
+    settle();
     for sample in ["cu_melt.custom.dump", "cu_melt.xyz", "cut.dump"] {
-        let input = match sample {
-            "cut.dump" => cut.clone(),
-            _ => copy(dir.path(), sample),
-        };
+        let input = dir.path().join(sample);
         let scanned = listing(&input);
         assert!(scanned.len() > 1, "{sample}: {} frames", scanned.len());
 
@@ -89,9 +96,22 @@ fn a_changed_file_is_scanned_again() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("index.json");
     let input = copy(dir.path(), "cu_melt.custom.dump");
-    let cache = Arc::new(IndexCache::load(&file));
-    listing_with(&cache, &input);
-    cache.save().unwrap();
+    let run = |expect: (usize, usize, usize), what: &str| {
+        let cache = Arc::new(IndexCache::load(&file));
+        let listed = listing_with(&cache, &input);
+        assert_eq!(listed, listing(&input), "{what}");
+        assert_eq!(
+            (cache.hits(), cache.scanned(), cache.unsettled()),
+            expect,
+            "{what}: (from the cache, scanned, scanned and not kept)"
+        );
+        cache.save().unwrap();
+        listed
+    };
+    run((0, 1, 1), "written a moment ago: scanned, not kept");
+    settle();
+    run((0, 1, 0), "settled: scanned and kept");
+    run((1, 0, 0), "unchanged: from the cache");
 
     // A simulation appends a frame: the new one is listed.
     let text = std::fs::read_to_string(&input).unwrap();
@@ -107,26 +127,30 @@ fn a_changed_file_is_scanned_again() {
         .unwrap();
     std::io::Write::write_all(&mut f, appended.as_bytes()).unwrap();
     drop(f);
-    let cache = Arc::new(IndexCache::load(&file));
-    let listed = listing_with(&cache, &input);
-    assert_eq!((cache.hits(), cache.scanned()), (0, 1));
-    assert_eq!(listed, listing(&input));
+    settle();
+    let listed = run((0, 1, 0), "appended");
     assert_eq!(listed.last().unwrap().0, Some(999_999));
-    // Modified a moment ago (a run may still be writing it in place): scanned, not kept.
-    cache.save().unwrap();
-    let cache = Arc::new(IndexCache::load(&file));
-    listing_with(&cache, &input);
-    assert_eq!((cache.hits(), cache.scanned()), (0, 1));
+    run((1, 0, 0), "unchanged since");
 
-    // Touched only (same bytes, another time): scanned again too.
-    cache.save().unwrap();
-    let f = std::fs::File::options().write(true).open(&input).unwrap();
-    f.set_modified(std::time::SystemTime::UNIX_EPOCH + std::time::Duration::from_secs(86_400))
-        .unwrap();
-    drop(f);
-    let cache = Arc::new(IndexCache::load(&file));
-    listing_with(&cache, &input);
-    assert_eq!((cache.hits(), cache.scanned()), (0, 1));
+    // Touched (same bytes, an older time; its change time now): scanned again, and not
+    // kept until the change has settled.
+    touch(&input, -86_400);
+    run((0, 1, 1), "touched");
+    settle();
+    run((0, 1, 0), "touched, settled");
+    run((1, 0, 0), "unchanged since");
+
+    // Its permissions changed (the change time alone): scanned again.
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&input, std::fs::Permissions::from_mode(0o640)).unwrap();
+    settle();
+    run((0, 1, 0), "status changed");
+
+    // Dated ahead of this machine's clock (a file server's clock ahead): never kept.
+    touch(&input, 3600);
+    settle();
+    run((0, 1, 1), "dated ahead");
+    run((0, 1, 1), "dated ahead, again");
 }
 
 /// A cache file that is not one, or whose ranges do not fit the file they name, is
@@ -135,8 +159,11 @@ fn a_changed_file_is_scanned_again() {
 fn damaged_or_hostile_caches_are_passed_over() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("index.json");
+    copy(dir.path(), "cu_melt.custom.dump");
+    copy(dir.path(), "cu_melt.xyz");
+    settle();
     for sample in ["cu_melt.custom.dump", "cu_melt.xyz"] {
-        let input = copy(dir.path(), sample);
+        let input = dir.path().join(sample);
         let truth = listing(&input);
         let cache = Arc::new(IndexCache::load(&file));
         listing_with(&cache, &input);

@@ -556,6 +556,7 @@ fn index_json(index: &mdlod_preprocess::batch::IndexUse) -> serde_json::Value {
         "file": index.file.display().to_string(),
         "from_cache": index.from_cache,
         "scanned": index.scanned,
+        "not_kept_unsettled": index.unsettled,
         "not_indexed": index.not_kept,
         "unsaved": index.unsaved,
     })
@@ -609,11 +610,17 @@ fn report_index_only(
     };
     if text == 0 {
         println!("{frames}; no text dump to index{others}");
+    } else if index.unsettled >= text {
+        println!("{frames}; no frame index kept{others}");
     } else {
         println!(
-            "{frames}; the frame index of {text} text file{} kept in {} ({} scanned, {} \
+            "{frames}; the frame index of {}{text} text file{} kept in {} ({} scanned, {} \
              unchanged since they were){others}: runs and shards of a batch into {} list \
              them from it",
+            match text - index.unsettled.min(text) {
+                kept if kept < text => format!("{kept} of "),
+                _ => String::new(),
+            },
             plural(text),
             index.file.display(),
             index.scanned,
@@ -623,6 +630,17 @@ fn report_index_only(
     }
     if let Some(e) = &index.unsaved {
         println!("note: {e}");
+    }
+    if index.unsettled > 0 {
+        let n = index.unsettled;
+        println!(
+            "note: {n} file{} scanned but not kept in the index: modified in the last \
+             seconds (a run may still be writing {}) or dated ahead of this machine's clock; \
+             index again once {} settled",
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "it" } else { "them" },
+            if n == 1 { "it has" } else { "they have" },
+        );
     }
     if args.json {
         crate::print_json(serde_json::json!({

@@ -11,8 +11,9 @@
 //! its size, its modification and change times to the nanosecond and its inode. An
 //! input whose identity is unchanged is not scanned again; any change (a dump a running
 //! simulation appended to, a file replaced or touched) scans it afresh. A file modified
-//! within [`SETTLED`] of its scan is not kept (a write later in the same tick of the
-//! file system's clock would not change its identity). Binary formats, whose frames
+//! or changed within [`SETTLED`] of its scan, or dated ahead of the clock, is not kept
+//! (a write later in the same tick of the file system's clock would not change its
+//! identity). Binary formats, whose frames
 //! come from their headers, and gzip files, whose text is decompressed anyway, are not
 //! kept.
 //!
@@ -146,6 +147,8 @@ pub struct IndexCache {
     /// Inputs whose index came from the cache, and those scanned.
     hits: AtomicUsize,
     scanned: AtomicUsize,
+    /// Inputs scanned but not kept: modified or changed moments ago, or dated ahead.
+    unsettled: AtomicUsize,
 }
 
 thread_local! {
@@ -195,6 +198,7 @@ impl IndexCache {
             kept: Mutex::new(BTreeMap::new()),
             hits: AtomicUsize::new(0),
             scanned: AtomicUsize::new(0),
+            unsettled: AtomicUsize::new(0),
         }
     }
 
@@ -227,9 +231,16 @@ impl IndexCache {
         self.hits.load(Ordering::Relaxed)
     }
 
-    /// Inputs scanned (and kept) so far.
+    /// Inputs scanned so far (kept, or [`IndexCache::unsettled`]).
     pub fn scanned(&self) -> usize {
         self.scanned.load(Ordering::Relaxed)
+    }
+
+    /// Inputs scanned but not kept: modified or changed less than [`SETTLED`] before
+    /// (a run may still be writing them), or dated ahead of this machine's clock (a
+    /// network file system's server ahead of it). The next run scans them again.
+    pub fn unsettled(&self) -> usize {
+        self.unsettled.load(Ordering::Relaxed)
     }
 
     /// Whether saving would change the file: an input scanned, or one it holds unused.
@@ -274,16 +285,35 @@ impl IndexCache {
             .remove(&key_of(path));
     }
 
+    /// Drops the entry of `path` (a dump listed from it whose frame could not be read):
+    /// saved again, the cache makes the next run scan the dump.
+    pub fn forget(&self, path: &Path) {
+        self.kept
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(&key_of(path));
+    }
+
     /// Keeps the frames just indexed for `path`, whose metadata `meta` was taken before
-    /// (not a file modified within [`SETTLED`] of now, nor one dated in the future).
+    /// (not a file modified or changed within [`SETTLED`] of now, nor one dated ahead:
+    /// the change time counts too, as a copy keeping its modification time, `cp -p`,
+    /// sets it).
     pub(crate) fn insert(&self, path: &Path, meta: &std::fs::Metadata, frames: CachedFrames) {
+        use std::os::unix::fs::MetadataExt;
         self.scanned.fetch_add(1, Ordering::Relaxed);
-        let settled = meta
-            .modified()
-            .ok()
-            .and_then(|m| m.elapsed().ok())
+        let changed = u64::try_from(meta.ctime()).ok().map(|s| {
+            std::time::UNIX_EPOCH
+                + std::time::Duration::new(s, u32::try_from(meta.ctime_nsec()).unwrap_or(0))
+        });
+        let latest = match (meta.modified().ok(), changed) {
+            (Some(m), Some(c)) => Some(m.max(c)),
+            (m, c) => m.or(c),
+        };
+        let settled = latest
+            .and_then(|t| t.elapsed().ok())
             .is_some_and(|age| age >= SETTLED);
         if !settled {
+            self.unsettled.fetch_add(1, Ordering::Relaxed);
             return;
         }
         self.kept.lock().unwrap_or_else(|e| e.into_inner()).insert(

@@ -189,7 +189,8 @@ impl Index {
     /// Records the frame whose `ITEM: TIMESTEP` may start at `p`.
     fn visit(data: &[u8], p: usize, frames: &mut Vec<Span>, units: &mut Option<String>) {
         {
-            if p > 0 && data[p - 1] != b'\n' {
+            // (A line that is `ITEM: TIMESTEP` from its first byte, as the scan finds them.)
+            if (p > 0 && data[p - 1] != b'\n') || !data[p..].starts_with(TIMESTEP) {
                 return;
             }
             let mut cursor = Cursor::new(data, p);

@@ -615,6 +615,8 @@ pub struct DumpFile {
     named: Option<PathBuf>,
     format: InputFormat,
     index: Index,
+    /// Its frames were listed from a frame index ([`index_cache`]), not by a scan.
+    from_index: bool,
 }
 
 impl fmt::Debug for DumpFile {
@@ -678,6 +680,7 @@ impl DumpFile {
             gzip_cut: pieces.iter().find_map(|p| p.gzip_cut.clone()),
             named: None,
             format: first.format,
+            from_index: pieces.iter().any(|p| p.from_index),
             index: Index::Pieces(pieces),
         })
     }
@@ -805,8 +808,9 @@ impl DumpFile {
                 };
                 c.lookup(path, m, name).and_then(|cached| {
                     // The frames' first lines are all that checking and listing them
-                    // reads, without the read-ahead of megabytes around each
-                    // (`read_normally` asks for it again; so does a scan, below).
+                    // reads, without the read-ahead of megabytes around each (a frame
+                    // read whole is asked for at once, `will_need`; a scan, below, reads
+                    // ahead again).
                     if let Bytes::Map(m) = &bytes {
                         let _ = m.advise(mdlod_format::mmap::Advice::Random);
                     }
@@ -870,6 +874,7 @@ impl DumpFile {
             named: None,
             format,
             index,
+            from_index: from_cache,
         }))
     }
 
@@ -926,18 +931,33 @@ impl DumpFile {
         self.bytes.as_ref()
     }
 
-    /// Lets the kernel read ahead in the mapped file again after a listing from a frame
-    /// index ([`index_cache`]), which reads only the first lines of each frame and so
-    /// asks for no read-ahead: a page of each frame touched would read megabytes around
-    /// it, of frames another shard converts. Call it once the frames' headers are read.
-    pub fn read_normally(&self) {
+    /// Whether its frames (a piece's, of a `%` set) were listed from a frame index rather
+    /// than by a scan.
+    pub fn listed_from_index(&self) -> bool {
+        self.from_index
+    }
+
+    /// The files a frame index keeps for this dump: its pieces', or its own.
+    pub fn indexed_files(&self) -> Vec<PathBuf> {
+        self.piece_paths()
+            .unwrap_or_else(|| vec![self.path.clone()])
+    }
+
+    /// Asks the kernel to read frame `k`'s bytes ahead, all at once, before they are read
+    /// whole: a dump listed from a frame index ([`index_cache`]) is mapped without
+    /// read-ahead (each frame's first lines are all a listing reads, and a page touched
+    /// would read megabytes around it, of frames another shard converts).
+    fn will_need(&self, k: usize) {
         match (&self.bytes, &self.index) {
-            (_, Index::Pieces(p)) => p.iter().for_each(DumpFile::read_normally),
-            (Bytes::Map(m), _) => {
-                // (Advice only: a kernel that refuses it reads as it would.)
-                let _ = m.advise(mdlod_format::mmap::Advice::Normal);
+            (_, Index::Pieces(p)) => p.iter().for_each(|d| d.will_need(k)),
+            (Bytes::Map(m), Index::Lammps(_) | Index::Xyz(_)) => {
+                if let Some(r) = self.frame_bytes(k) {
+                    // (Advice only: a kernel that refuses it reads as it would.)
+                    let (start, len) = (r.start as usize, (r.end - r.start) as usize);
+                    let _ = m.advise_range(mdlod_format::mmap::Advice::WillNeed, start, len);
+                }
             }
-            (Bytes::Text(_), _) => {}
+            _ => {}
         }
     }
 
@@ -1558,6 +1578,7 @@ impl DumpFile {
         opts: &ReadOptions,
         progress: &dyn Progress,
     ) -> Result<Frame, ReadError> {
+        self.will_need(k);
         let mut frame = match self.magnitude_parts(k, opts)? {
             Some((inner, columns)) => self.read_magnitude(k, opts, &inner, &columns, progress)?,
             None => self.read_frame_as_stored(k, opts, progress)?,

@@ -233,8 +233,11 @@ impl Index {
             .collect();
         let mut gap_from = 0;
         for (k, (r, &timestep)) in ranges.iter().zip(&cached.timesteps).enumerate() {
-            // Only blank lines between frames, as a scan passes over.
-            if !data[gap_from..r.start].iter().all(u8::is_ascii_whitespace) {
+            // Only blank lines between frames, as a scan passes over; each frame ends a
+            // line (or the file).
+            if !data[gap_from..r.start].iter().all(u8::is_ascii_whitespace)
+                || (r.end < data.len() && data[r.end - 1] != b'\n')
+            {
                 return None;
             }
             gap_from = r.end;
