@@ -721,7 +721,23 @@ impl DumpFile {
             return Err(ReadError::Empty { at: first_line() });
         }
         let map = mdlod_format::mmap::map_file(&file).map_err(io)?;
+        // With a frame index at hand, the file is mapped without read-ahead until its
+        // frames are listed: a listing from the index reads the first lines of each
+        // frame (and this, its first bytes), and a page touched would read megabytes
+        // around it, of frames another shard converts. Any other listing reads ahead
+        // again (below).
+        let indexing = index_cache::current().is_some();
+        let read_ahead = |map: &mdlod_format::mmap::Mmap| {
+            // (Advice only: a kernel that refuses it reads as it would.)
+            let _ = map.advise(mdlod_format::mmap::Advice::Normal);
+        };
+        if indexing {
+            let _ = map.advise(mdlod_format::mmap::Advice::Random);
+        }
         let compressed = map.starts_with(&[0x1f, 0x8b]);
+        if indexing && compressed {
+            read_ahead(&map);
+        }
         let mut gzip_cut = None;
         let bytes: Bytes = if compressed {
             match gunzip(path, &map, text_limit, progress)? {
@@ -807,22 +823,12 @@ impl DumpFile {
                     "lammps"
                 };
                 c.lookup(path, m, name).and_then(|cached| {
-                    // The frames' first lines are all that checking and listing them
-                    // reads, without the read-ahead of megabytes around each (a frame
-                    // read whole is asked for at once, `will_need`; a scan, below, reads
-                    // ahead again).
-                    if let Bytes::Map(m) = &bytes {
-                        let _ = m.advise(mdlod_format::mmap::Advice::Random);
-                    }
                     let index = match format {
                         InputFormat::Xyz => xyz::Index::from_cached(data, &cached).map(Index::Xyz),
                         _ => lammps_text::Index::from_cached(data, &cached).map(Index::Lammps),
                     };
                     if index.is_none() {
                         c.rejected(path);
-                        if let Bytes::Map(m) = &bytes {
-                            let _ = m.advise(mdlod_format::mmap::Advice::Normal);
-                        }
                     }
                     index
                 })
@@ -830,6 +836,12 @@ impl DumpFile {
             _ => None,
         };
         let from_cache = kept.is_some();
+        // Listed from the index: a frame read whole asks for its bytes at once
+        // (`will_need`). Scanned, or a format whose frames come from its headers: read
+        // ahead as usual.
+        if let (true, false, Bytes::Map(m)) = (indexing, from_cache, &bytes) {
+            read_ahead(m);
+        }
         let index = if let Some(index) = kept {
             index
         } else {
