@@ -292,6 +292,25 @@ impl MdlodFile {
         Ok(f)
     }
 
+    /// [`Self::open`] for reading its header, metadata and tables only (a batch telling
+    /// whether a frame file is complete and how it was made; a merge comparing
+    /// settings): the top level's records are checked on open, the others before their
+    /// first use, and the file is mapped without the kernel's read-ahead, so that opening
+    /// a file of gigabytes reads a few pages of it rather than megabytes around each
+    /// (a cluster file system may read ahead tens of megabytes). [`Self::verify`] still
+    /// checks everything.
+    pub fn open_sparse(path: impl AsRef<Path>) -> Result<MdlodFile, FormatError> {
+        let path = path.as_ref().to_path_buf();
+        let file = crate::files::open(&path).map_err(|e| FormatError::io(&path, e))?;
+        let stamp = stamp(&file);
+        let map = crate::mmap::map_file(&file).map_err(|e| FormatError::io(&path, e))?;
+        // (Advice only: a kernel that refuses it reads as it would.)
+        let _ = map.advise(crate::mmap::Advice::Random);
+        let mut f = Self::from_map(path, map, 1)?;
+        f.opened_as = stamp.map(|s| (file, s));
+        Ok(f)
+    }
+
     /// Whether the file opened (its inode, whatever its name now names) has another size
     /// or modification time than when it was opened: rewritten in place while it was read
     /// (`cp` over it), part of what was read came from its new bytes, which callers say

@@ -1570,7 +1570,7 @@ fn gone_source_frames(
     let mut species = std::collections::BTreeSet::new();
     for name in strays {
         let path = out_dir.join(name);
-        let Ok(file) = MdlodFile::open(&path) else {
+        let Ok(file) = MdlodFile::open_sparse(&path) else {
             continue;
         };
         let Some(own) = file.metadata().source.clone() else {
@@ -2601,7 +2601,7 @@ pub fn batch(
         mdlod_format::files::check_replaceable(&out).map_err(io(&out))?;
         let want = indexed_source(job.input, job.frame);
         let columns = columns_for(&job);
-        let verdict = MdlodFile::open(&out).ok().map(|f| {
+        let verdict = MdlodFile::open_sparse(&out).ok().map(|f| {
             let mut given = || match job.dump {
                 Some(d) => d.given_radii(job.frame).ok(),
                 None => job.given_radii.take(),
@@ -3728,7 +3728,7 @@ impl MergeSettings {
     /// Compares the frame `f` of the shard manifest `manifest` with the frames before;
     /// the error names the two frames and the setting they differ in.
     fn check(&mut self, out_dir: &Path, manifest: &Path, f: &FrameEntry) -> Result<(), String> {
-        let file = MdlodFile::open(out_dir.join(&f.file)).map_err(|e| e.to_string())?;
+        let file = MdlodFile::open_sparse(out_dir.join(&f.file)).map_err(|e| e.to_string())?;
         let m = file.metadata();
         let shard = manifest
             .file_name()

@@ -3496,3 +3496,38 @@ fn a_frame_unread_from_an_indexed_dump_drops_the_dump_from_the_index() {
     );
     assert!(!gz_out.join(INDEX_CACHE).exists());
 }
+
+/// A frame file cut short (a copy that stopped, a disk that filled) or whose top level's
+/// node records are damaged does not open as complete: a rerun converts it again, and
+/// leaves the others as they were.
+#[test]
+fn a_rerun_converts_again_a_frame_file_cut_short_or_damaged() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    let manifest = read_manifest(&out).unwrap();
+    let (cut, damaged) = (&manifest.frames[1].file, &manifest.frames[3].file);
+    let len = std::fs::metadata(out.join(cut)).unwrap().len();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(out.join(cut))
+        .unwrap()
+        .set_len(len / 2)
+        .unwrap();
+    // The top node's record: its bounds made NaN.
+    let f = MdlodFile::open(out.join(damaged)).unwrap();
+    let at = f.sections().iter().find(|e| e.kind == 3).unwrap().offset;
+    drop(f);
+    let mut bytes = std::fs::read(out.join(damaged)).unwrap();
+    bytes[at as usize..at as usize + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(out.join(damaged), bytes).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (2, 4), "{r:?}");
+    for f in &read_manifest(&out).unwrap().frames {
+        MdlodFile::open(out.join(&f.file))
+            .unwrap()
+            .verify()
+            .unwrap();
+    }
+}
