@@ -183,7 +183,8 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     for f in frames {
         let path = dir.join(&f.file);
         bytes += std::fs::metadata(&path).map_or(0, |m| m.len());
-        let file = match MdlodFile::open(&path) {
+        // (Its metadata only: a few pages of each frame, not megabytes around each.)
+        let file = match MdlodFile::open_sparse(&path) {
             Ok(file) => file,
             Err(e) => {
                 unreadable.push(format!("{}: {e}", f.file));

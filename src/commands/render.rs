@@ -3111,7 +3111,7 @@ fn movie_species(dir: &Path) -> Option<Vec<Vec<mdlod_format::meta::Species>>> {
         .iter()
         .map(|f| {
             // (The species only: the top node's record checked, not every level's.)
-            let file = mdlod_format::MdlodFile::open_with_eager_nodes(dir.join(&f.file), 1).ok()?;
+            let file = mdlod_format::MdlodFile::open_sparse(dir.join(&f.file)).ok()?;
             Some(file.metadata().species.clone())
         })
         .collect()
