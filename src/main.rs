@@ -259,7 +259,30 @@ fn main() -> std::process::ExitCode {
             // With --json, a command that fails before its result (a damaged file, a held
             // lock, a bad input) gives one too: `ok` false, with the error.
             if JSON_OUTPUT.load(std::sync::atomic::Ordering::Relaxed) && !json_printed() {
-                print_json(serde_json::json!({ "ok": false, "error": message }));
+                let mut value = serde_json::json!({ "ok": false, "error": message });
+                // A batch that converted frames before it failed says how many.
+                use mdlod_preprocess::batch::BatchError;
+                let counts = e
+                    .chain()
+                    .find_map(|c| match c.downcast_ref::<BatchError>()? {
+                        BatchError::NamesUnused {
+                            converted, skipped, ..
+                        } => {
+                            Some(serde_json::json!({ "converted": converted, "skipped": skipped }))
+                        }
+                        BatchError::Incomplete {
+                            converted, todo, ..
+                        } => {
+                            Some(serde_json::json!({ "converted": converted, "to_convert": todo }))
+                        }
+                        _ => None,
+                    });
+                if let (Some(serde_json::Value::Object(counts)), Some(map)) =
+                    (counts, value.as_object_mut())
+                {
+                    map.extend(counts);
+                }
+                print_json(value);
             }
             // Another batch holds the directory: 75 (EX_TEMPFAIL), so that a script can
             // tell "try again later" from a failure.

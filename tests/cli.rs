@@ -2743,13 +2743,26 @@ fn batch_refuses_a_radius_no_frame_can_hold_before_converting_anything() {
         assert_eq!(batch_frames(&d), Vec::<String>::new(), "{shard:?}");
     }
     // A number that names no frame's species may belong to a later frame: checked at
-    // the end, listing the species.
+    // the end, listing the species, and saying that the frames converted stay; with
+    // --json, how many.
     let err = fails(&["batch", s(&input), "-o", s(&d), "--radius", "3=1"]);
     assert!(
         err.contains("no species named \"3\"")
             && err.contains("the input's species are named 1, 2")
-            && !err.contains("the input has"),
+            && !err.contains("the input has")
+            && err.contains(
+                "the frames are complete and listed in the manifest (3 converted, 0 already done)"
+            ),
         "{err}"
+    );
+    assert_eq!(batch_frames(&d).len(), 3);
+    let out = mdlod(&["batch", s(&input), "-o", s(&d), "--radius", "3=1", "--json"]);
+    assert!(!out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (&v["ok"], &v["converted"], &v["skipped"]),
+        (&false.into(), &0.into(), &3.into()),
+        "{v}"
     );
     ok(&[
         "batch",
@@ -11515,4 +11528,31 @@ fn batch_index_only_keeps_the_frame_index_for_the_runs_after_it() {
         "0/2",
     ]);
     assert!(err.contains("--shard"), "{err}");
+}
+
+/// A file set whose newest file a running simulation has just opened, still empty: it
+/// is left for a rerun, counted apart from the frames, so that the summary's counts add
+/// up and nothing is called cut short.
+#[test]
+fn batch_of_a_set_whose_newest_file_is_empty_counts_it_apart_from_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let all = dir.path().join("all.lammpstrj");
+    generate(&["crater", "-n", "500", "--frames", "2"], &all);
+    let text = std::fs::read_to_string(&all).unwrap();
+    let second = text.match_indices("ITEM: TIMESTEP").nth(1).unwrap().0;
+    let set = dir.path().join("set");
+    std::fs::create_dir(&set).unwrap();
+    std::fs::write(set.join("dump.0.lammpstrj"), &text[..second]).unwrap();
+    std::fs::write(set.join("dump.100.lammpstrj"), &text[second..]).unwrap();
+    std::fs::write(set.join("dump.200.lammpstrj"), "").unwrap();
+    let d = dir.path().join("d");
+    let out = ok(&["batch", s(&set.join("dump.*.lammpstrj")), "-o", s(&d)]);
+    assert!(
+        out.contains(
+            "2 frames in the inputs (and an input still empty, left for a rerun): 2 \
+             converted, 0 already done;"
+        ) && out.contains("dump.200.lammpstrj, the newest input, is empty")
+            && !out.contains("cut short"),
+        "{out}"
+    );
 }

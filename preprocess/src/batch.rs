@@ -721,6 +721,19 @@ pub enum BatchError {
         #[source]
         source: Box<BatchError>,
     },
+    /// Every frame was converted, but an option names a species no frame holds (a
+    /// misspelt name): the frames converted are complete and listed in the manifest.
+    #[error(
+        "{source}; the frames are complete and listed in the manifest ({converted} \
+         converted, {skipped} already done): with the option mended, a rerun converts \
+         again only the frames it changes"
+    )]
+    NamesUnused {
+        converted: usize,
+        skipped: usize,
+        #[source]
+        source: Box<BatchError>,
+    },
     /// A radius override names a species no frame of the inputs can hold (they name
     /// their species another way): refused before any frame is converted.
     #[error(
@@ -3267,10 +3280,15 @@ pub fn batch(
     // types.)
     let seen = seen.into_inner().unwrap_or_else(|e| e.into_inner());
     let whole = opts.shard.is_none_or(|(_, n)| n == 1);
+    let unused = |e| BatchError::NamesUnused {
+        converted: converted.load(Ordering::Relaxed),
+        skipped,
+        source: Box::new(e),
+    };
     if whole && !seen.is_empty() && opts.read.species_column.is_none() {
         if let Some((name, radius)) = opts.convert.radii.iter().find(|(n, _)| !seen.contains(n)) {
-            return Err(BatchError::Convert(ConvertError::Species(Box::new(
-                crate::species::UnknownSpecies {
+            return Err(unused(BatchError::Convert(ConvertError::Species(
+                Box::new(crate::species::UnknownSpecies {
                     name: name.clone(),
                     radius: *radius,
                     known: seen.into_iter().collect(),
@@ -3281,7 +3299,7 @@ pub fn batch(
                         .filter(|n| namings.iter().all(|m| m == *n))
                         .cloned(),
                     renamed: opts.convert.species_names.clone(),
-                },
+                }),
             ))));
         }
         // The same for a rename: its new name is in no file (unless another species
@@ -3292,13 +3310,13 @@ pub fn batch(
             .iter()
             .find(|(_, to)| !seen.contains(to))
         {
-            return Err(BatchError::Convert(ConvertError::UnknownRename(Box::new(
-                crate::species::UnknownRename {
+            return Err(unused(BatchError::Convert(ConvertError::UnknownRename(
+                Box::new(crate::species::UnknownRename {
                     from: from.clone(),
                     to: to.clone(),
                     known: seen.into_iter().collect(),
                     input: Some(describe_inputs(inputs)),
-                },
+                }),
             ))));
         }
     }

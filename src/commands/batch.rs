@@ -468,7 +468,9 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         1 => ", 1 empty frame skipped".to_string(),
         n => format!(", {n} empty frames skipped"),
     };
-    let empty = match report.incomplete.len() {
+    // A newest input still empty holds no frame yet: not among the frames counted.
+    let empty_inputs = report.incomplete.iter().filter(|i| i.empty_file).count();
+    let empty = match report.incomplete.len() - empty_inputs {
         0 => empty,
         n => format!("{empty}, {n} cut short and left for a rerun"),
     };
@@ -477,9 +479,16 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         n => format!("{empty}, {n} failed (said above; not in the manifest)"),
     };
     // Frames left out as duplicate timesteps are not among the frames to convert.
-    let kept = match report.duplicates.len() {
-        0 => String::new(),
-        d => format!(" ({d} more left out as duplicate timesteps)"),
+    let kept = match (report.duplicates.len(), empty_inputs) {
+        (0, 0) => String::new(),
+        (d, 0) => format!(" ({d} more left out as duplicate timesteps)"),
+        (0, 1) => " (and an input still empty, left for a rerun)".to_string(),
+        (0, e) => format!(" (and {e} inputs still empty, left for a rerun)"),
+        (d, e) => format!(
+            " ({d} more left out as duplicate timesteps, and {e} input{} still empty, left \
+             for a rerun)",
+            if e == 1 { "" } else { "s" }
+        ),
     };
     // A shard's share of the frames; without shards every frame is this run's.
     let share = opts.shard.map_or(String::new(), |(i, n)| {
