@@ -8710,7 +8710,8 @@ fn an_iso_value_no_ray_meets_is_named() {
 }
 
 /// A movie of a batch directory whose frame file was deleted names the manifest, the
-/// frame and the remedy, instead of the system's bare "No such file".
+/// frame and the remedy, instead of the system's bare "No such file"; one whose frame
+/// file was damaged names the frame and the remedy too.
 #[test]
 fn a_movie_missing_a_frame_file_says_which_and_how_to_get_it_back() {
     let dir = tempfile::tempdir().unwrap();
@@ -8737,7 +8738,7 @@ fn a_movie_missing_a_frame_file_says_which_and_how_to_get_it_back() {
     );
     // As it says: the rerun converts it again, and the movie renders.
     ok(&["batch", s(&input), "-o", s(&d)]);
-    ok(&[
+    let render = [
         "render",
         s(&d),
         "-o",
@@ -8746,7 +8747,28 @@ fn a_movie_missing_a_frame_file_says_which_and_how_to_get_it_back() {
         "32",
         "--height",
         "24",
-    ]);
+    ];
+    ok(&render);
+    // A frame file damaged since (bytes of its particles' positions changed): the
+    // error names the frame and says what mends it, which mends it.
+    let frame = d.join("frame-200.mdlod");
+    let f = mdlod_format::MdlodFile::open(&frame).unwrap();
+    let positions = *f.sections().iter().rfind(|e| e.kind == 4).unwrap();
+    drop(f);
+    let mut bytes = std::fs::read(&frame).unwrap();
+    let at = (positions.offset + positions.length / 2) as usize;
+    bytes[at..at + 64].iter_mut().for_each(|b| *b ^= 0x5a);
+    std::fs::write(&frame, bytes).unwrap();
+    let e = fails(&render);
+    assert!(
+        e.contains("frame 2 of 0-2 (timestep 200) is damaged: delete")
+            && e.contains("and rerun `mdlod batch` with the same inputs")
+            && e.contains("checksum mismatch"),
+        "{e}"
+    );
+    std::fs::remove_file(&frame).unwrap();
+    ok(&["batch", s(&input), "-o", s(&d)]);
+    ok(&render);
 }
 
 /// Messages a newcomer meets: a style naming an element in a file of type numbers says

@@ -4383,7 +4383,7 @@ fn render_frames(
     let mut survey = mdlod_render::movie::Survey::new();
     // Whether each attribute's hidden ranges meet its values in some frame.
     let mut range_hits = Vec::new();
-    for f in &manifest.frames {
+    for (i, f) in manifest.frames.iter().enumerate() {
         let path = dir.join(&f.file);
         // (Something else in its place, a directory say, the reader names.)
         if std::fs::symlink_metadata(&path).is_err() {
@@ -4397,7 +4397,8 @@ fn render_frames(
                 dir.display()
             );
         }
-        let file = mdlod_render::open_styled(&path, &opts.style)?;
+        let file = mdlod_render::open_styled(&path, &opts.style)
+            .map_err(|e| damaged_frame(e.into(), dir, (i, n), f.timestep, &path))?;
         // A manifest edited or mixed with another run's frames labels the images wrongly.
         if let Some(t) = file.metadata().timestep.filter(|&t| t != f.timestep) {
             anyhow::bail!(
@@ -4602,7 +4603,8 @@ fn render_frames(
         let out = frame_output(&args.output, i)?;
         written.push(out.clone());
         let path = dir.join(&f.file);
-        let file = mdlod_render::open_styled(&path, &opts.style)?;
+        let damaged = |e| damaged_frame(e, dir, (i, n), f.timestep, &path);
+        let file = mdlod_render::open_styled(&path, &opts.style).map_err(|e| damaged(e.into()))?;
         opts.style.species =
             mdlod_render::style::keep_looks(&file.metadata().species, &looks, &style.species);
         // Under a colour map only the colours the user named are kept (a species' colour
@@ -4647,7 +4649,8 @@ fn render_frames(
         let coarsest = coarsest_points(&file);
         let species = file.metadata().species.clone();
         let shown = shown_json(args, &opts, &file);
-        let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
+        let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)
+            .map_err(|e| damaged(e.into()))?;
         drawn = drawn_names(&r, &species, drawn);
         // Splats: one exposure (a projection's map: one range) for every frame, or the
         // brightness drifts: the first frame that shows anything sets it.
@@ -4842,6 +4845,49 @@ fn render_frames(
         }
     }
     Ok(())
+}
+
+/// `e`, from frame `i` of `n` of the batch directory `dir` (its file `path`), with what
+/// mends it when it says the file is damaged.
+fn damaged_frame(
+    e: anyhow::Error,
+    dir: &Path,
+    (i, n): (usize, usize),
+    timestep: u64,
+    path: &Path,
+) -> anyhow::Error {
+    if !is_damage(&e) {
+        return e;
+    }
+    e.context(format!(
+        "frame {i} of 0-{} (timestep {timestep}) is damaged: delete {} and rerun `mdlod \
+         batch` with the same inputs, which converts it again (`mdlod verify {}` checks \
+         every frame)",
+        n - 1,
+        path.display(),
+        dir.display()
+    ))
+}
+
+/// Whether `e` says a file's bytes are damaged (a checksum that does not match, a value
+/// out of its place, metadata that is no JSON), not that it could not be read.
+fn is_damage(e: &anyhow::Error) -> bool {
+    use mdlod_format::FormatError;
+    let damage = |f: &FormatError| {
+        matches!(
+            f,
+            FormatError::Checksum { .. }
+                | FormatError::Corrupt { .. }
+                | FormatError::Metadata { .. }
+        )
+    };
+    e.chain().any(|c| {
+        c.downcast_ref::<FormatError>().is_some_and(damage)
+            || matches!(
+                c.downcast_ref::<mdlod_render::RenderError>(),
+                Some(mdlod_render::RenderError::Format(f)) if damage(f)
+            )
+    })
 }
 
 #[cfg(test)]
