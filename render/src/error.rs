@@ -39,6 +39,9 @@ pub enum RenderError {
     /// ([`mdlod_format::MdlodFile::changed_on_disk`]).
     #[error("{path}: the file changed while it was read (another program rewrote it in place): the image would mix its old and new data, so none is written; render again once it is written whole")]
     Changed { path: PathBuf },
+    /// Data no view can draw (bounds past what single precision holds).
+    #[error("{path}: {message}")]
+    Data { path: PathBuf, message: String },
     /// Options that cannot be rendered (zero size, zero samples, ...).
     #[error("invalid options: {0}")]
     InvalidOptions(String),

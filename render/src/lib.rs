@@ -1464,6 +1464,28 @@ fn check_built_camera(c: &Camera) -> Result<(), String> {
     c.check()
 }
 
+/// `e`, from building the camera that fits `view` to `file`'s data within `fitted`,
+/// said of the file when the data spans more than single precision can draw (a camera
+/// would stand at an infinite distance): no option given can mend that.
+fn undrawable(file: &MdlodFile, fitted: &Bounds, view: &ViewSpec, e: RenderError) -> RenderError {
+    let RenderError::InvalidOptions(message) = &e else {
+        return e;
+    };
+    let (min, max) = (fitted.min, fitted.max);
+    let huge = !(max - min).length().is_finite() || min.abs().max(max.abs()).max_element() > 1e30;
+    if matches!(view, ViewSpec::Camera(_)) || !huge {
+        return e;
+    }
+    RenderError::Data {
+        path: file.path().to_path_buf(),
+        message: format!(
+            "the data's bounds, [{:e}, {:e}, {:e}] to [{:e}, {:e}, {:e}], span more than \
+             single precision can draw: {message}",
+            min.x, min.y, min.z, max.x, max.y, max.z
+        ),
+    }
+}
+
 /// The camera `view` gives for `file` and an image of `width` × `height`.
 pub fn camera_for(
     file: &MdlodFile,
@@ -1711,7 +1733,8 @@ pub fn frame_setup(
         opts.width,
         opts.height,
         &opts.fit_windows,
-    )?;
+    )
+    .map_err(|e| undrawable(file, &fitted, &opts.view, e))?;
     // The depth range holds all the data, and the cell where it is drawn.
     let depth = with_drawn_cell(data_bounds(file), file, opts);
     if fitted != depth {
@@ -2672,6 +2695,51 @@ fn shade_tiles_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Data spanning more than single precision can draw (bounds at ±3·10^38, which
+    /// only a damaged or hostile file holds: the converter refuses coordinates past
+    /// ±10^37) is said of the file and its bounds, not blamed on options the user never
+    /// gave; an error of a fitted view of ordinary data, or of a camera given whole,
+    /// stays as it is.
+    #[test]
+    fn data_too_large_to_frame_is_said_of_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mdlod");
+        let frame = mdlod_preprocess::Frame {
+            positions: vec![[0.0; 3], [1.0; 3], [2.0, 0.0, 1.0]],
+            species_index: vec![0; 3],
+            species: vec![mdlod_preprocess::SpeciesName {
+                name: "X".into(),
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        mdlod_preprocess::convert::convert_frame(
+            &frame,
+            None,
+            &path,
+            &Default::default(),
+            &mdlod_preprocess::progress::NoProgress,
+        )
+        .unwrap();
+        let file = MdlodFile::open(&path).unwrap();
+        let error = || RenderError::InvalidOptions("zoom 1e0: the camera, inf from ...".into());
+        let huge = Bounds::new(glam::Vec3::splat(-3e38), glam::Vec3::splat(3e38));
+        let e = undrawable(&file, &huge, &ViewSpec::default(), error()).to_string();
+        assert!(
+            e.starts_with(&format!("{}: the data's bounds, [-3e38", path.display()))
+                && e.contains("span more than single precision can draw: zoom 1e0"),
+            "{e}"
+        );
+        let ordinary = Bounds::new(glam::Vec3::ZERO, glam::Vec3::ONE);
+        for (bounds, view) in [
+            (&ordinary, ViewSpec::default()),
+            (&huge, ViewSpec::Camera(Camera::default())),
+        ] {
+            let e = undrawable(&file, bounds, &view, error());
+            assert!(matches!(e, RenderError::InvalidOptions(_)), "{e}");
+        }
+    }
 
     /// Ends of a shown range read as the decimals their step holds: 1.4999896 with a
     /// step of 5.5e-5 is 1.5; a value no short decimal is within the step of stays.
