@@ -2351,7 +2351,7 @@ fn check_node(
         finite &= v.is_finite();
     }
     if !finite || n.radius < 0.0 || n.quant_scale.iter().any(|s| *s < 0.0) || n.area_sum < 0.0 {
-        return Err(bad(id, "non-finite or negative geometry".into()));
+        return Err(bad(id, geometry_problem(n)));
     }
     if (0..3).any(|k| n.bounds_min[k] > n.bounds_max[k]) {
         return Err(bad(id, "bounds_min exceeds bounds_max".into()));
@@ -2377,6 +2377,45 @@ fn check_node(
         return Err(bad(id, format!("species {} of {species_count}", n.species)));
     }
     Ok(())
+}
+
+/// Which of node record `n`'s numbers is non-finite or negative where it must not be
+/// (the first found), for [`check_node`]'s error.
+fn geometry_problem(n: &NodeRecord) -> String {
+    let one = std::slice::from_ref;
+    let fields: [(&str, &[f32]); 8] = [
+        ("centroid", &n.centroid),
+        ("quant_scale", &n.quant_scale),
+        ("bounds_min", &n.bounds_min),
+        ("bounds_max", &n.bounds_max),
+        ("radius", one(&n.radius)),
+        ("area_sum", one(&n.area_sum)),
+        ("attribute", one(&n.attribute)),
+        ("rms_radius", one(&n.rms_radius)),
+    ];
+    let named = |name: &str, values: &[f32], k: usize| match values.len() {
+        1 => name.to_string(),
+        _ => format!("{name}.{}", ["x", "y", "z"][k.min(2)]),
+    };
+    for (name, values) in fields {
+        if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+            return format!(
+                "{} is {} (must be finite)",
+                named(name, values, k),
+                values[k]
+            );
+        }
+    }
+    for (name, values) in [fields[1], fields[4], fields[5]] {
+        if let Some(k) = values.iter().position(|v| *v < 0.0) {
+            return format!(
+                "{} is {:e} (must not be negative)",
+                named(name, values, k),
+                values[k]
+            );
+        }
+    }
+    "non-finite or negative geometry".into()
 }
 
 /// The attribute of `names` (a file's [`MdlodFile::attribute_names`]) that `name` asks

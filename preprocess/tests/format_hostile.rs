@@ -1112,22 +1112,25 @@ fn hostile_nodes() {
         (
             "nan-centroid",
             Box::new(move |n| n[l1_second].centroid[1] = f32::NAN),
-            vec![id(l1_second), "non-finite".into()],
+            vec![id(l1_second), "centroid.y is NaN (must be finite)".into()],
         ),
         (
             "infinite-radius",
             Box::new(move |n| n[l2_first].radius = f32::INFINITY),
-            vec![id(l2_first), "non-finite".into()],
+            vec![id(l2_first), "radius is inf (must be finite)".into()],
         ),
         (
             "negative-quant-scale",
             Box::new(move |n| n[l2_first].quant_scale[2] = -1.0),
-            vec![id(l2_first), "negative".into()],
+            vec![
+                id(l2_first),
+                "quant_scale.z is -1e0 (must not be negative)".into(),
+            ],
         ),
         (
             "nan-bounds",
             Box::new(move |n| n[0].bounds_max[0] = f32::NAN),
-            vec![id(0), "non-finite".into()],
+            vec![id(0), "bounds_max.x is NaN (must be finite)".into()],
         ),
         (
             "inverted-bounds",
