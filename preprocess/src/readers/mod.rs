@@ -2617,6 +2617,27 @@ fn gzip_error(path: &Path, e: std::io::Error) -> ReadError {
     }
 }
 
+/// The most a deflate stream expands: 1032 bytes of text per compressed byte (258
+/// bytes per match of a bit or two).
+const MAX_DEFLATE_RATIO: usize = 1032;
+
+/// The buffer to reserve for the text of `compressed` gzip bytes whose trailer gives
+/// the length `trailer`, of which at most `take` bytes are kept: the trailer's length
+/// when deflate can expand that much (a trailer that claims more is none: a file cut
+/// short ends in compressed bytes, which read as up to 4 GiB), else four times the
+/// compressed size.
+fn text_capacity(compressed: usize, trailer: usize, take: u64) -> usize {
+    let trailer = if trailer / MAX_DEFLATE_RATIO <= compressed {
+        trailer
+    } else {
+        0
+    };
+    compressed
+        .saturating_mul(4)
+        .max(trailer)
+        .min(usize::try_from(take).unwrap_or(usize::MAX))
+}
+
 /// Decompresses the gzip bytes `compressed` of `path` (single or multi-member) into
 /// memory, with whether the stream ended early (what precedes the cut is kept); `None`
 /// when the text is larger than `limit` bytes (of which at most one byte more is
@@ -2652,13 +2673,11 @@ fn gunzip(
         .len()
         .checked_sub(4)
         .map_or(0, |at| u32::from_le_bytes(le4(&compressed[at..])) as usize);
-    let mut out = Vec::with_capacity(
-        compressed
-            .len()
-            .saturating_mul(4)
-            .max(trailer)
-            .min(usize::try_from(take).unwrap_or(usize::MAX)),
-    );
+    let hint = text_capacity(compressed.len(), trailer, take);
+    // Reserved if it can be (a refusal is no error: the buffer grows as the text comes,
+    // and `read_to_end` reports running out of memory as an error, not an abort).
+    let mut out = Vec::new();
+    let _ = out.try_reserve_exact(hint);
     // (On an error, `read_to_end` keeps what it read before it.)
     let cut =
         match flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(1 << 20, reader))
@@ -2710,5 +2729,20 @@ mod gunzip_tests {
             .unwrap()
             .unwrap();
         assert_eq!(out.len(), text.len() + 5);
+    }
+
+    /// The text's buffer takes the trailer's length only where deflate can expand that
+    /// much: the last 4 bytes of a file cut short (compressed bytes) or altered claim up
+    /// to 4 GiB, which reserved at once aborted a process under an address-space limit.
+    #[test]
+    fn a_trailer_claiming_more_than_deflate_expands_to_is_not_reserved() {
+        assert_eq!(super::text_capacity(100, 3_858_415_415, u64::MAX), 400);
+        assert_eq!(
+            super::text_capacity(83_858, u32::MAX as usize, u64::MAX),
+            335_432
+        );
+        assert_eq!(super::text_capacity(4_000, 1_000_003, u64::MAX), 1_000_003);
+        assert_eq!(super::text_capacity(4_000, 1_000_003, 500_001), 500_001);
+        assert_eq!(super::text_capacity(10, 0, u64::MAX), 40);
     }
 }
