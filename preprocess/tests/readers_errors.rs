@@ -477,7 +477,7 @@ fn a_count_the_frame_cannot_hold_is_a_truncated_frame_before_reading() {
 }
 
 /// Files of formats mdlod does not read are named as what they are, with how to write
-/// them as one it reads; binary bytes of an unknown first line are shown as dots.
+/// them as one it reads; binary bytes of an unknown first line are shown as `\xNN`.
 #[test]
 fn foreign_formats_are_named_with_the_way_out() {
     let dir = tempfile::tempdir().unwrap();
@@ -506,5 +506,36 @@ fn foreign_formats_are_named_with_the_way_out() {
     let e = open("POSCAR", b"Cu fcc\n1.0\n3.6 0 0\n");
     assert!(e.contains("a VASP structure file"), "{e}");
     let e = open("blob.dat", b"\x00\x01\x02abc\xff\xfe\n");
-    assert!(e.contains("first line `...abc..`"), "{e}");
+    assert!(e.contains(r"first line `\x00\x01\x02abc\xFF\xFE`"), "{e}");
+}
+
+/// A damaged byte inside a number is shown as `\xNN`, not as a character that makes
+/// the number read right, and a long value is shortened rather than echoed whole.
+#[test]
+fn damaged_bytes_and_long_values_are_shown_plainly() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = HEAD.replace("0.0 10.0\nITEM: ATOMS", "0\u{1}0 10.0\nITEM: ATOMS");
+    bytes.push_str("1 1 0 0 0\n2 1 1 1 1\n3 1 2 2 2\n");
+    let mut bytes = bytes.into_bytes();
+    let at = bytes.iter().position(|&b| b == 1).unwrap();
+    bytes[at] = 0xFB;
+    let path = write(dir.path(), "d.lammpstrj", &bytes);
+    let e = DumpFile::open(&path)
+        .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains(r"malformed BOX BOUNDS: `0\xFB0` is not a finite number"),
+        "{e}"
+    );
+    let lattice = vec!["1"; 50_000].join(" ");
+    let text = format!("1\nLattice=\"{lattice}\" Properties=species:S:1:pos:R:3\nCu 0 0 0\n");
+    let (_, e) = error_k("l.xyz", &text, 0, None);
+    assert!(
+        e.contains("`Lattice` must be 9 numbers, found `1 1 1") && e.len() < 300,
+        "{} bytes: {}",
+        e.len(),
+        &e[..e.len().min(300)]
+    );
 }

@@ -2245,22 +2245,34 @@ fn foreign_format(path: &Path, data: &[u8]) -> Option<&'static str> {
 }
 
 pub(crate) fn shorten(line: &[u8]) -> String {
-    // Control bytes and bytes that are no UTF-8 (a binary file's) as dots.
-    let s: String = String::from_utf8_lossy(trim(line))
-        .chars()
-        .map(|c| {
-            if (c.is_control() && c != '\t') || c == char::REPLACEMENT_CHARACTER {
-                '.'
-            } else {
-                c
+    // Control bytes and bytes that are no UTF-8 (a binary file's, a damaged byte in a
+    // number) as `\xNN`, so that a token that reads wrong does not look right.
+    let mut s = String::new();
+    let mut shown = 0usize;
+    let mut push = |s: &mut String, piece: &str| {
+        if shown < 60 {
+            s.push_str(piece);
+        }
+        shown += 1;
+    };
+    for chunk in trim(line).utf8_chunks() {
+        for c in chunk.valid().chars() {
+            match c {
+                '\t' => push(&mut s, "\t"),
+                c if c.is_control() && (c as u32) < 0x100 => {
+                    push(&mut s, &format!("\\x{:02X}", c as u32))
+                }
+                c => push(&mut s, c.encode_utf8(&mut [0; 4])),
             }
-        })
-        .collect();
-    if s.chars().count() > 60 {
-        format!("{}...", s.chars().take(60).collect::<String>())
-    } else {
-        s
+        }
+        for b in chunk.invalid() {
+            push(&mut s, &format!("\\x{b:02X}"));
+        }
     }
+    if shown > 60 {
+        s.push_str("...");
+    }
+    s
 }
 
 /// The offset just after the `n`-th newline from `pos`, or `data.len()` when there are fewer.

@@ -347,7 +347,10 @@ impl Index {
                 .collect();
             match values {
                 Some(values) if values.len() == n => Ok(Some(values)),
-                _ => Err(bad(format!("`{key}` must be {n} numbers, found `{v}`"))),
+                _ => Err(bad(format!(
+                    "`{key}` must be {n} numbers, found `{}`",
+                    shorten(v.as_bytes())
+                ))),
             }
         };
         let simulation_box = match numbers("Lattice", 9)? {
@@ -360,7 +363,12 @@ impl Index {
                         let flags: Option<Vec<bool>> = v.split_whitespace().map(logical).collect();
                         match flags {
                             Some(f) if f.len() == 3 => [f[0], f[1], f[2]],
-                            _ => return Err(bad(format!("`pbc` must be 3 logicals, found `{v}`"))),
+                            _ => {
+                                return Err(bad(format!(
+                                    "`pbc` must be 3 logicals, found `{}`",
+                                    shorten(v.as_bytes())
+                                )))
+                            }
                         }
                     }
                 };
@@ -382,7 +390,12 @@ impl Index {
                 // time=1.5fs`): a `time` in it that is no number is no time, and must not
                 // stop a conversion. Extended XYZ promises `key=value` pairs.
                 _ if properties.is_none() => None,
-                _ => return Err(bad(format!("`{key}` is not a number: `{v}`"))),
+                _ => {
+                    return Err(bad(format!(
+                        "`{key}` is not a number: `{}`",
+                        shorten(v.as_bytes())
+                    )))
+                }
             },
         };
 
@@ -458,7 +471,8 @@ fn properties_layout(value: &str) -> Result<AtomLayout, String> {
     let parts: Vec<&str> = value.split(':').collect();
     if parts.is_empty() || !parts.chunks_exact(3).remainder().is_empty() {
         return Err(format!(
-            "malformed `Properties` `{value}`: expected name:type:count triples"
+            "malformed `Properties` `{}`: expected name:type:count triples",
+            shorten(value.as_bytes())
         ));
     }
     let mut columns = Vec::new();
