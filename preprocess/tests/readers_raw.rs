@@ -183,6 +183,16 @@ fn bad_sidecars_and_arrays_are_errors_naming_the_file() {
             "pos.f32",
             "offset 999 is past the end",
         ),
+        (
+            pos("pos.f32", r#", "species": { "file": "type.u8", "type": "u8", "names": ["a", " ", "c"] }"#),
+            "frame.raw.json",
+            "species: name 1 is empty",
+        ),
+        (
+            pos("pos.f32", r#", "species": { "file": "type.u8", "type": "u8", "names": ["a", "b", "a "] }"#),
+            "frame.raw.json",
+            "species: names 0 and 2 are both \"a\"",
+        ),
         (pos("pos.f32", r#", "particles": 18446744073709551615"#), "frame.raw.json", ""),
         (r#"{ "mdlod_raw": 2 }"#.into(), "frame.raw.json", ""),
         ("{ not json".into(), "frame.raw.json", "raw sidecar"),
@@ -467,6 +477,17 @@ fn arrays_of_different_lengths_and_radii_per_name_are_checked() {
     assert!(
         e.starts_with(&format!(
             "{}:2: species: `file` \"typo.u8\": cannot open",
+            path.display()
+        )),
+        "{e}"
+    );
+    // A file that opens but does not map (a device): the sidecar's key, and why.
+    let path = c.sidecar(&sidecar("/proc/self/mem", ""));
+    let e = read(&path).unwrap_err();
+    assert!(
+        e.starts_with(&format!(
+            "{}:2: species: `file` \"/proc/self/mem\": cannot map /proc/self/mem (a regular \
+             file is needed)",
             path.display()
         )),
         "{e}"

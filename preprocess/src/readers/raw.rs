@@ -25,7 +25,8 @@
 //!   With it, longer arrays are read for their first values, except planar positions:
 //!   their y follow every particle's x, so a shorter count would read y from x values.
 //! - `species` (optional): one integer per particle (`u8`, `u16`, `u32` or `i32`), an
-//!   index into `names` (default names are the numbers); `radii` optionally gives each
+//!   index into `names` (distinct, not empty; default names are the numbers); `radii`
+//!   optionally gives each
 //!   species' radius (one per name, or one without `species`).
 //! - `attribute` (optional): one `f32` or `f64` per particle; or `attributes`, a list of
 //!   such arrays, each with its own `name` (an SPH run's density, temperature and mass),
@@ -464,9 +465,17 @@ impl Index {
                     ),
                 )
             })?;
-            let map = mdlod_format::mmap::map_file(&file).map_err(|e| ReadError::Io {
-                path: file_path.clone(),
-                source: e,
+            let map = mdlod_format::mmap::map_file(&file).map_err(|e| {
+                // (A device or a pipe opens but does not map.)
+                malformed_in(
+                    path,
+                    text,
+                    format!(
+                        "{what}: `file` \"{}\": cannot map {} (a regular file is needed): {e}",
+                        super::shorten(a.file.as_os_str().as_encoded_bytes()),
+                        super::shorten(file_path.as_os_str().as_encoded_bytes())
+                    ),
+                )
             })?;
             let offset = usize::try_from(a.offset)
                 .ok()
@@ -635,6 +644,29 @@ impl Index {
                 let names = a.names.clone().unwrap_or_default();
                 if names.len() > 1 << 16 {
                     return Err(malformed_in(path, text, "species: more than 65536 names"));
+                }
+                // The species are told apart, and named in styles, by their names.
+                let trimmed = |n: &String| n.trim().to_string();
+                if let Some(k) = names.iter().position(|n| trimmed(n).is_empty()) {
+                    return Err(malformed_in(
+                        path,
+                        text,
+                        format!("species: name {k} is empty (each species needs a name)"),
+                    ));
+                }
+                let mut seen = std::collections::HashMap::new();
+                for (k, n) in names.iter().enumerate() {
+                    if let Some(j) = seen.insert(trimmed(n), k) {
+                        return Err(malformed_in(
+                            path,
+                            text,
+                            format!(
+                                "species: names {j} and {k} are both \"{}\" (each species needs \
+                                 a name of its own)",
+                                super::shorten(n.trim().as_bytes())
+                            ),
+                        ));
+                    }
                 }
                 Some((m, names))
             }
