@@ -1989,7 +1989,15 @@ impl MdlodFile {
                         return Err(FormatError::corrupt(
                             &self.path,
                             format!("level {m}, point {i}"),
-                            format!("decodes {outside} outside the bounds of its parent node"),
+                            format!(
+                                "decodes to [{}, {}, {}], {outside:.3e} outside the bounds of its \
+                                 parent node {} on level {}",
+                                shown(p[0]),
+                                shown(p[1]),
+                                shown(p[2]),
+                                self.levels()[m - 1].node_first as usize + pi,
+                                m - 1
+                            ),
                         ));
                     }
                     if m == last {
@@ -2008,7 +2016,9 @@ impl MdlodFile {
                                     format!("{section}, particle {i}"),
                                     format!(
                                         "radius {} lies outside its species' sizes {} to {}",
-                                        r as f32, lo as f32, hi as f32
+                                        shown(r as f32),
+                                        shown(lo as f32),
+                                        shown(hi as f32)
                                     ),
                                 ));
                             }
@@ -2041,7 +2051,7 @@ impl MdlodFile {
                                 format!(
                                     "its sphere (radius {}) is {wider:.3e} wider than its \
                                      parent node's bounds on an axis",
-                                    r as f32
+                                    shown(r as f32)
                                 ),
                             ));
                         }
@@ -2377,6 +2387,16 @@ fn check_node(
         return Err(bad(id, format!("species {} of {species_count}", n.species)));
     }
     Ok(())
+}
+
+/// `v` as a message shows it: in full where that is short, else in exponent form (a
+/// damaged file's 3·10^38 is not 39 digits).
+fn shown(v: f32) -> String {
+    if v == 0.0 || (1e-4..1e7).contains(&v.abs()) || !v.is_finite() {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
 }
 
 /// Which of node record `n`'s numbers is non-finite or negative where it must not be

@@ -1153,7 +1153,12 @@ fn hostile_nodes() {
         (
             "centroid-moved-away",
             Box::new(move |n| n[l1_second].centroid[0] += 1000.0),
-            vec!["level 2, point".into(), "outside the bounds".into()],
+            vec![
+                "level 2, point".into(),
+                "decodes to [".into(),
+                "outside the bounds of its parent node".into(),
+                "on level 1".into(),
+            ],
         ),
     ];
     for (name, patch, wants) in cases {
