@@ -2751,7 +2751,8 @@ fn batch_refuses_a_radius_no_frame_can_hold_before_converting_anything() {
             && err.contains("the input's species are named 1, 2")
             && !err.contains("the input has")
             && err.contains(
-                "the frames are complete and listed in the manifest (3 converted, 0 already done)"
+                "the frames converted (3) and already done (0) are complete and listed in \
+                 the manifest"
             ),
         "{err}"
     );
@@ -8761,7 +8762,8 @@ fn a_movie_missing_a_frame_file_says_which_and_how_to_get_it_back() {
     std::fs::write(&frame, bytes).unwrap();
     let e = fails(&render);
     assert!(
-        e.contains("frame 2 of 0-2 (timestep 200) is damaged: delete")
+        e.contains("frame 2 of 0-2 (timestep 200) is damaged: while its dump")
+            && e.contains("d.lammpstrj is at hand, delete")
             && e.contains("and rerun `mdlod batch` with the same inputs")
             && e.contains("checksum mismatch"),
         "{e}"

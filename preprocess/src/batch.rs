@@ -724,8 +724,8 @@ pub enum BatchError {
     /// Every frame was converted, but an option names a species no frame holds (a
     /// misspelt name): the frames converted are complete and listed in the manifest.
     #[error(
-        "{source}; the frames are complete and listed in the manifest ({converted} \
-         converted, {skipped} already done): with the option mended, a rerun converts \
+        "{source}; the frames converted ({converted}) and already done ({skipped}) are \
+         complete and listed in the manifest: with the option mended, a rerun converts \
          again only the frames it changes"
     )]
     NamesUnused {

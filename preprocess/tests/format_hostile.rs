@@ -1156,8 +1156,7 @@ fn hostile_nodes() {
             vec![
                 "level 2, point".into(),
                 "decodes to [".into(),
-                "outside the bounds of its parent node".into(),
-                "on level 1".into(),
+                format!("outside the bounds of its parent node {l1_second} on level 1"),
             ],
         ),
     ];

@@ -4398,7 +4398,7 @@ fn render_frames(
             );
         }
         let file = mdlod_render::open_styled(&path, &opts.style)
-            .map_err(|e| damaged_frame(e.into(), dir, (i, n), f.timestep, &path))?;
+            .map_err(|e| damaged_frame(e.into(), dir, (i, n), f, &path))?;
         // A manifest edited or mixed with another run's frames labels the images wrongly.
         if let Some(t) = file.metadata().timestep.filter(|&t| t != f.timestep) {
             anyhow::bail!(
@@ -4603,7 +4603,7 @@ fn render_frames(
         let out = frame_output(&args.output, i)?;
         written.push(out.clone());
         let path = dir.join(&f.file);
-        let damaged = |e| damaged_frame(e, dir, (i, n), f.timestep, &path);
+        let damaged = |e| damaged_frame(e, dir, (i, n), f, &path);
         let file = mdlod_render::open_styled(&path, &opts.style).map_err(|e| damaged(e.into()))?;
         opts.style.species =
             mdlod_render::style::keep_looks(&file.metadata().species, &looks, &style.species);
@@ -4853,17 +4853,20 @@ fn damaged_frame(
     e: anyhow::Error,
     dir: &Path,
     (i, n): (usize, usize),
-    timestep: u64,
+    frame: &mdlod_preprocess::batch::FrameEntry,
     path: &Path,
 ) -> anyhow::Error {
     if !is_damage(&e) {
         return e;
     }
+    // (A frame whose dump is gone cannot be converted again: deleting its file loses it.)
     e.context(format!(
-        "frame {i} of 0-{} (timestep {timestep}) is damaged: delete {} and rerun `mdlod \
-         batch` with the same inputs, which converts it again (`mdlod verify {}` checks \
-         every frame)",
+        "frame {i} of 0-{} (timestep {}) is damaged: while its dump {} is at hand, delete \
+         {} and rerun `mdlod batch` with the same inputs, which converts it again (`mdlod \
+         verify {}` checks every frame)",
         n - 1,
+        frame.timestep,
+        frame.source.path,
         path.display(),
         dir.display()
     ))

@@ -2245,32 +2245,32 @@ fn foreign_format(path: &Path, data: &[u8]) -> Option<&'static str> {
 }
 
 pub(crate) fn shorten(line: &[u8]) -> String {
-    // Control bytes and bytes that are no UTF-8 (a binary file's, a damaged byte in a
-    // number) as `\xNN`, so that a token that reads wrong does not look right.
+    // Control characters and bytes that are no UTF-8 (a binary file's, a damaged byte
+    // in a number) as `\xNN`, a byte each, so that a token that reads wrong does not
+    // look right. At most 60 characters or escapes are shown (a binary file's first
+    // "line" may be the whole file).
+    const SHOWN: usize = 60;
     let mut s = String::new();
     let mut shown = 0usize;
-    let mut push = |s: &mut String, piece: &str| {
-        if shown < 60 {
-            s.push_str(piece);
-        }
-        shown += 1;
-    };
-    for chunk in trim(line).utf8_chunks() {
-        for c in chunk.valid().chars() {
+    'chunks: for chunk in trim(line).utf8_chunks() {
+        let valid = chunk.valid().chars().map(Ok);
+        let invalid = chunk.invalid().iter().map(|&b| Err(b));
+        for c in valid.chain(invalid) {
+            if shown == SHOWN {
+                s.push_str("...");
+                break 'chunks;
+            }
+            shown += 1;
             match c {
-                '\t' => push(&mut s, "\t"),
-                c if c.is_control() && (c as u32) < 0x100 => {
-                    push(&mut s, &format!("\\x{:02X}", c as u32))
+                Ok(c) if c.is_control() && c != '\t' => {
+                    for b in c.encode_utf8(&mut [0; 4]).bytes() {
+                        s.push_str(&format!("\\x{b:02X}"));
+                    }
                 }
-                c => push(&mut s, c.encode_utf8(&mut [0; 4])),
+                Ok(c) => s.push(c),
+                Err(b) => s.push_str(&format!("\\x{b:02X}")),
             }
         }
-        for b in chunk.invalid() {
-            push(&mut s, &format!("\\x{b:02X}"));
-        }
-    }
-    if shown > 60 {
-        s.push_str("...");
     }
     s
 }
@@ -2636,8 +2636,9 @@ const MAX_DEFLATE_RATIO: usize = 1032;
 /// The buffer to reserve for the text of `compressed` gzip bytes whose trailer gives
 /// the length `trailer`, of which at most `take` bytes are kept: the trailer's length
 /// when deflate can expand that much (a trailer that claims more is none: a file cut
-/// short ends in compressed bytes, which read as up to 4 GiB), else four times the
-/// compressed size.
+/// short ends in compressed bytes, which read as up to 4 GiB; a file over 4 MB may still
+/// claim that much, which is reserved if the system grants it and given back once the
+/// text is read), else four times the compressed size.
 fn text_capacity(compressed: usize, trailer: usize, take: u64) -> usize {
     let trailer = if trailer / MAX_DEFLATE_RATIO <= compressed {
         trailer
@@ -2704,6 +2705,11 @@ fn gunzip(
     if limit.is_some_and(|l| out.len() as u64 > l) {
         return Ok(None);
     }
+    // A trailer that claimed more than the text (a file cut short or altered): the
+    // reserve beyond it given back.
+    if out.capacity() - out.len() > out.len() / 8 {
+        out.shrink_to_fit();
+    }
     Ok(Some((out, cut)))
 }
 
@@ -2741,6 +2747,23 @@ mod gunzip_tests {
             .unwrap()
             .unwrap();
         assert_eq!(out.len(), text.len() + 5);
+    }
+
+    /// Control characters and bytes that are no UTF-8 are shown a byte each as `\xNN`
+    /// (a two-byte control character as its two bytes), tabs as they are, and at most 60
+    /// characters or escapes.
+    #[test]
+    fn shortened_lines_escape_what_does_not_print() {
+        assert_eq!(super::shorten(b"  1.0\t2\xFB3\x00  "), r"1.0	2\xFB3\x00");
+        assert_eq!(super::shorten("a\u{85}b".as_bytes()), r"a\xC2\x85b");
+        assert_eq!(super::shorten("é".as_bytes()), "é");
+        let long = [b'7'; 61];
+        assert_eq!(super::shorten(&long), format!("{}...", "7".repeat(60)));
+        assert_eq!(super::shorten(&long[..60]), "7".repeat(60));
+        assert_eq!(
+            super::shorten(&[0xFF; 100]),
+            format!("{}...", r"\xFF".repeat(60))
+        );
     }
 
     /// The text's buffer takes the trailer's length only where deflate can expand that

@@ -26,8 +26,7 @@
 //!   their y follow every particle's x, so a shorter count would read y from x values.
 //! - `species` (optional): one integer per particle (`u8`, `u16`, `u32` or `i32`), an
 //!   index into `names` (distinct, not empty; default names are the numbers); `radii`
-//!   optionally gives each
-//!   species' radius (one per name, or one without `species`).
+//!   optionally gives each species' radius (one per name, or one without `species`).
 //! - `attribute` (optional): one `f32` or `f64` per particle; or `attributes`, a list of
 //!   such arrays, each with its own `name` (an SPH run's density, temperature and mass),
 //!   of which `--attribute NAME` picks one and takes more given again (the first without
@@ -51,6 +50,9 @@ use serde::Deserialize;
 use super::{FrameInfo, ReadError, ReadOptions};
 use crate::frame::{Attribute, Frame, SimulationBox, SpeciesName};
 use crate::progress::Progress;
+
+/// `ENODEV`, what mapping a file that only the kernel holds (`/proc/...`) fails with.
+const NO_SUCH_DEVICE: i32 = 19;
 
 /// The array files a raw sidecar at `path` names (resolved next to it), when `path` is
 /// such a sidecar (a small JSON object with `mdlod_raw`); `None` otherwise. The arrays
@@ -466,16 +468,25 @@ impl Index {
                 )
             })?;
             let map = mdlod_format::mmap::map_file(&file).map_err(|e| {
-                // (A device or a pipe opens but does not map.)
-                malformed_in(
-                    path,
-                    text,
-                    format!(
-                        "{what}: `file` \"{}\": cannot map {} (a regular file is needed): {e}",
-                        super::shorten(a.file.as_os_str().as_encoded_bytes()),
-                        super::shorten(file_path.as_os_str().as_encoded_bytes())
-                    ),
-                )
+                // A file the kernel makes up (`/proc`) is regular but does not map: the
+                // sidecar's key names the wrong file. Another failure (memory) is the
+                // system's.
+                if e.raw_os_error() == Some(NO_SUCH_DEVICE) {
+                    malformed_in(
+                        path,
+                        text,
+                        format!(
+                            "{what}: `file` \"{}\": {} does not map (not a file on a disk): {e}",
+                            super::shorten(a.file.as_os_str().as_encoded_bytes()),
+                            super::shorten(file_path.as_os_str().as_encoded_bytes())
+                        ),
+                    )
+                } else {
+                    ReadError::Io {
+                        path: file_path.clone(),
+                        source: e,
+                    }
+                }
             })?;
             let offset = usize::try_from(a.offset)
                 .ok()
@@ -646,8 +657,7 @@ impl Index {
                     return Err(malformed_in(path, text, "species: more than 65536 names"));
                 }
                 // The species are told apart, and named in styles, by their names.
-                let trimmed = |n: &String| n.trim().to_string();
-                if let Some(k) = names.iter().position(|n| trimmed(n).is_empty()) {
+                if let Some(k) = names.iter().position(|n| n.trim().is_empty()) {
                     return Err(malformed_in(
                         path,
                         text,
@@ -656,14 +666,14 @@ impl Index {
                 }
                 let mut seen = std::collections::HashMap::new();
                 for (k, n) in names.iter().enumerate() {
-                    if let Some(j) = seen.insert(trimmed(n), k) {
+                    if let Some(j) = seen.insert(n.as_str(), k) {
                         return Err(malformed_in(
                             path,
                             text,
                             format!(
                                 "species: names {j} and {k} are both \"{}\" (each species needs \
                                  a name of its own)",
-                                super::shorten(n.trim().as_bytes())
+                                super::shorten(n.as_bytes())
                             ),
                         ));
                     }
