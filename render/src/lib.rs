@@ -1464,6 +1464,15 @@ fn check_built_camera(c: &Camera) -> Result<(), String> {
     c.check()
 }
 
+/// Whether data within `bounds` can be framed in single precision: its extent finite
+/// and its coordinates within ±10^30 (the converter refuses coordinates past ±10^37;
+/// only a damaged or hostile file holds more).
+pub fn drawable_bounds(bounds: &Bounds) -> bool {
+    let (min, max) = (bounds.min, bounds.max);
+    (max - min).as_dvec3().length() < f64::from(f32::MAX)
+        && min.abs().max(max.abs()).max_element() <= 1e30
+}
+
 /// `e`, from building the camera that fits `view` to `file`'s data within `fitted`,
 /// said of the file when the data spans more than single precision can draw (a camera
 /// would stand at an infinite distance): no option given can mend that.
@@ -1472,8 +1481,7 @@ fn undrawable(file: &MdlodFile, fitted: &Bounds, view: &ViewSpec, e: RenderError
         return e;
     };
     let (min, max) = (fitted.min, fitted.max);
-    let huge = !(max - min).length().is_finite() || min.abs().max(max.abs()).max_element() > 1e30;
-    if matches!(view, ViewSpec::Camera(_)) || !huge {
+    if matches!(view, ViewSpec::Camera(_)) || drawable_bounds(fitted) {
         return e;
     }
     RenderError::Data {
@@ -2732,6 +2740,9 @@ mod tests {
             "{e}"
         );
         let ordinary = Bounds::new(glam::Vec3::ZERO, glam::Vec3::ONE);
+        assert!(drawable_bounds(&ordinary) && !drawable_bounds(&huge));
+        let stars = Bounds::new(glam::Vec3::splat(-1e25), glam::Vec3::splat(1e25));
+        assert!(drawable_bounds(&stars));
         for (bounds, view) in [
             (&ordinary, ViewSpec::default()),
             (&huge, ViewSpec::Camera(Camera::default())),

@@ -4536,7 +4536,27 @@ fn render_frames(
         opts.width,
         opts.height,
         &opts.fit_windows,
-    )?;
+    )
+    .map_err(|e| match e {
+        // Frames whose data spans more than single precision draws: said of the directory
+        // (only a damaged frame file holds such bounds), not of options never given.
+        mdlod_render::RenderError::InvalidOptions(m) if !mdlod_render::drawable_bounds(&bounds) => {
+            anyhow::anyhow!(
+                "{}: the frames' data spans [{:e}, {:e}, {:e}] to [{:e}, {:e}, {:e}], more \
+                 than single precision can draw (a damaged frame file? `mdlod verify {}` \
+                 checks every frame): {m}",
+                dir.display(),
+                bounds.min.x,
+                bounds.min.y,
+                bounds.min.z,
+                bounds.max.x,
+                bounds.max.y,
+                bounds.max.z,
+                dir.display()
+            )
+        }
+        e => e.into(),
+    })?;
     opts.view = ViewSpec::Camera(camera.clone());
     if let Some(parent) = args.output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
