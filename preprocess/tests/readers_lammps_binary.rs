@@ -265,6 +265,22 @@ fn truncated_and_corrupt_binary_dumps_are_errors_naming_the_byte() {
         let e = open_err(&bad);
         assert!(e.contains(&format!("bad magic string length {len}")), "{e}");
     }
+    // A length one off takes a byte of the endian flag into the magic, or leaves one
+    // behind: said as the length, or as a damaged header (not as the other byte order).
+    let mut bad = good.clone();
+    bad[..8].copy_from_slice(&(-11i64).to_le_bytes());
+    let e = open_err(&bad);
+    assert!(
+        e.contains(r"byte 0: magic string length 11 gives `DUMPCUSTOM\x01`, not a LAMMPS magic"),
+        "{e}"
+    );
+    let mut bad = good.clone();
+    bad[..8].copy_from_slice(&(-9i64).to_le_bytes());
+    let e = open_err(&bad);
+    assert!(
+        e.contains("byte 17: endian flag 0x14d is 1 in neither byte order: the header is damaged (read after the magic string `DUMPCUSTO` of length 9)"),
+        "{e}"
+    );
     // An atom count the chunks do not hold.
     let mut bad = good.clone();
     bad[0x22..0x2a].copy_from_slice(&501i64.to_le_bytes());

@@ -251,16 +251,40 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
                 at,
                 format!(
                     "not a LAMMPS binary dump (magic `{}`)",
-                    String::from_utf8_lossy(magic)
+                    super::shorten(magic)
+                ),
+            ));
+        }
+        // LAMMPS writes capital letters (`DUMPATOM`, `DUMPCUSTOM`): another byte is a
+        // length read wrong, which took a byte of the next field or left one behind.
+        if !magic.iter().all(u8::is_ascii_uppercase) {
+            return Err(r.err(
+                start,
+                format!(
+                    "magic string length {len} gives `{}`, not a LAMMPS magic such as \
+                     DUMPCUSTOM (a damaged header?)",
+                    super::shorten(magic)
                 ),
             ));
         }
         let at = r.pos;
         let endian = r.i32("endian flag")?;
-        if endian != 1 {
+        if endian == 1i32.swap_bytes() {
             return Err(r.err(
                 at,
                 format!("written on a machine of the other byte order (endian flag {endian:#x}); convert it there with LAMMPS' binary2txt"),
+            ));
+        }
+        if endian != 1 {
+            // Neither byte order's 1: the header is read wrong here, as by a magic
+            // string's length one short.
+            return Err(r.err(
+                at,
+                format!(
+                    "endian flag {endian:#x} is 1 in neither byte order: the header is damaged \
+                     (read after the magic string `{}` of length {len})",
+                    super::shorten(magic)
+                ),
             ));
         }
         let at = r.pos;
