@@ -123,6 +123,20 @@ fn missing_or_disagreeing_pieces_are_clear_errors() {
             && e.ends_with("run.0.dump it is timestep 250"),
         "{e}"
     );
+    // A binary piece cut short inside its first header (a copy that stopped): said as
+    // a piece whose timestep cannot be read, with where to look.
+    copy("cu_melt_mpi.0.bin", "run.0.bin");
+    let bytes = std::fs::read(lammps_sample_path("cu_melt_mpi.1.bin")).unwrap();
+    std::fs::write(dir.path().join("run.1.bin"), &bytes[..10]).unwrap();
+    let e = DumpFile::open(&dir.path().join("run.%.bin"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(
+            "run.1.bin: frame 0 is without a timestep that can be read (cut short or damaged?"
+        ) && e.contains("run.0.bin it is timestep 0"),
+        "{e}"
+    );
     // Nothing at all.
     let e = DumpFile::open(&dir.path().join("none.%.dump"))
         .unwrap_err()

@@ -107,9 +107,18 @@ pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError
         if let Some(k) = (0..common).find(|&k| p.frame_timestep(k) != first.frame_timestep(k)) {
             let timestep =
                 |t: Option<u64>| t.map_or("without a timestep".into(), |t| format!("timestep {t}"));
+            // A piece cut short or damaged in its header reads as one without a
+            // timestep: said so, with where to look.
+            let this = match (p.frame_timestep(k), first.frame_timestep(k)) {
+                (None, Some(_)) => format!(
+                    "without a timestep that can be read (cut short or damaged? `mdlod convert \
+                     {}` of the piece alone says where)",
+                    p.path().display()
+                ),
+                (t, _) => timestep(t),
+            };
             return Err(mismatch(format!(
-                "frame {k} is {}, but in {} it is {}",
-                timestep(p.frame_timestep(k)),
+                "frame {k} is {this}, but in {} it is {}",
                 first.path().display(),
                 timestep(first.frame_timestep(k))
             )));
