@@ -524,6 +524,14 @@ impl MdlodFile {
                 format!("not UTF-8 text (byte {} of the section)", e.valid_up_to()),
             ));
         }
+        // One object (FORMAT.md §7): serde would also take an array of its fields in
+        // their order.
+        if map[range(mi)].iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'[') {
+            return Err(corrupt(
+                "METADATA",
+                "a JSON array where the format has one JSON object".into(),
+            ));
+        }
         let mut metadata: Metadata =
             serde_json::from_slice(&map[range(mi)]).map_err(|source| FormatError::Metadata {
                 path: path.clone(),

@@ -1739,12 +1739,21 @@ fn hostile_metadata() {
     expect_refused(&p, &["METADATA section: invalid JSON"]);
     let p = raw("empty-json.mdlod", b"");
     expect_refused(&p, &["METADATA section: invalid JSON"]);
-    let p = raw("json-array.mdlod", b"[1, 2, 3]");
-    expect_refused(&p, &["METADATA section: invalid JSON"]);
+    let p = raw("json-array.mdlod", b" [1, 2, 3]");
+    expect_refused(
+        &p,
+        &[
+            "METADATA",
+            "a JSON array where the format has one JSON object",
+        ],
+    );
     let p = raw("not-utf8.mdlod", b"{\"writer\": \"\xff\xfe\"}");
     expect_refused(&p, &["METADATA", "not UTF-8 text (byte 12 of the section)"]);
     let deep = format!("{}{}", "[".repeat(100_000), "]".repeat(100_000));
     let p = raw("deep-json.mdlod", deep.as_bytes());
+    expect_refused(&p, &["METADATA", "a JSON array"]);
+    let deep = format!("{}{}", "{\"a\":".repeat(100_000), "}".repeat(100_000));
+    let p = raw("deep-object.mdlod", deep.as_bytes());
     expect_refused(&p, &["METADATA section: invalid JSON"]);
 
     let mut d = Doc::parse(&b);
