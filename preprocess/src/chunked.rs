@@ -512,14 +512,50 @@ impl ParticleSource for DumpSource {
                 };
                 let mut offset = 0usize;
                 for (j, piece) in pieces.into_iter().enumerate() {
-                    let header = self
+                    let known = self
                         .piece_headers
                         .as_ref()
                         .and_then(|h| h.get(j).cloned().flatten());
-                    if let Some(header) = header {
-                        // Uncompressed text whose header the opened dump gave: read by
-                        // lines without indexing it again.
-                        let n = header.info.particles;
+                    // Uncompressed text is read by lines, with its header: the one the
+                    // opened dump gave, else the one taken here (opened again, the piece
+                    // would be scanned again, a whole pass over it).
+                    let (n, text_header) = match known {
+                        Some(header) => (header.info.particles, Some(header)),
+                        None => {
+                            let dump = crate::readers::DumpFile::open(&piece)?;
+                            let n = dump.frame_info(self.frame)?.particles;
+                            let mut shifted = |start: usize, part: Frame| f(offset + start, part);
+                            if dump.is_compressed() {
+                                // A small gzip piece, decompressed: read whole.
+                                let part =
+                                    dump.read_frame(self.frame, &self.options, &NoProgress)?;
+                                drop(dump);
+                                shifted(0, part)?;
+                                (n, None)
+                            } else if dump.reads_parts() {
+                                drop(dump);
+                                windows_by_range(n, window, &mut shifted, |range| {
+                                    let dump = crate::readers::DumpFile::open(&piece)?;
+                                    Ok(dump.read_part(
+                                        self.frame,
+                                        &self.options,
+                                        range,
+                                        &NoProgress,
+                                    )?)
+                                })?;
+                                (n, None)
+                            } else if dump.reads_text_windows() {
+                                (n, Some(dump.header(self.frame)?))
+                            } else {
+                                let part =
+                                    dump.read_frame(self.frame, &self.options, &NoProgress)?;
+                                drop(dump);
+                                shifted(0, part)?;
+                                (n, None)
+                            }
+                        }
+                    };
+                    if let Some(header) = text_header {
                         let mut shifted = |start: usize, part: Frame| f(offset + start, part);
                         crate::readers::read_text_windows(
                             &piece,
@@ -529,46 +565,6 @@ impl ParticleSource for DumpSource {
                             window,
                             &mut shifted,
                         )?;
-                        offset = offset.checked_add(n).ok_or_else(|| {
-                            ConvertError::Chunked(format!(
-                                "{}: frame {}: the pieces hold more atoms than can be counted",
-                                piece.display(),
-                                self.frame
-                            ))
-                        })?;
-                        continue;
-                    }
-                    let dump = crate::readers::DumpFile::open(&piece)?;
-                    let n = dump.frame_info(self.frame)?.particles;
-                    let mut shifted = |start: usize, part: Frame| f(offset + start, part);
-                    if dump.is_compressed() {
-                        // A small gzip piece, decompressed: read whole.
-                        let part = dump.read_frame(self.frame, &self.options, &NoProgress)?;
-                        drop(dump);
-                        shifted(0, part)?;
-                    } else if dump.reads_parts() {
-                        drop(dump);
-                        windows_by_range(n, window, &mut shifted, |range| {
-                            let dump = crate::readers::DumpFile::open(&piece)?;
-                            Ok(dump.read_part(self.frame, &self.options, range, &NoProgress)?)
-                        })?;
-                    } else if dump.reads_text_windows() {
-                        // (The header taken here: opened again, the piece would be
-                        // scanned again, a whole pass over it.)
-                        let header = dump.header(self.frame)?;
-                        drop(dump);
-                        crate::readers::read_text_windows(
-                            &piece,
-                            self.frame,
-                            Some(header),
-                            &self.options,
-                            window,
-                            &mut shifted,
-                        )?;
-                    } else {
-                        let part = dump.read_frame(self.frame, &self.options, &NoProgress)?;
-                        drop(dump);
-                        shifted(0, part)?;
                     }
                     offset = offset.checked_add(n).ok_or_else(|| {
                         ConvertError::Chunked(format!(
@@ -2067,16 +2063,7 @@ fn finite_range(
             },
         });
     }
-    Ok(values
-        .par_iter()
-        .fold(
-            || (f32::INFINITY, f32::NEG_INFINITY),
-            |(lo, hi), &v| (lo.min(v), hi.max(v)),
-        )
-        .reduce(
-            || (f32::INFINITY, f32::NEG_INFINITY),
-            |a, b| (a.0.min(b.0), a.1.max(b.1)),
-        ))
+    Ok(crate::convert::par_min_max(values))
 }
 
 /// The axis-aligned bounds of a (possibly triclinic) box.

@@ -1283,7 +1283,6 @@ pub fn log10_range(
     name: &str,
     source: Option<&SourceInfo>,
 ) -> Result<(f32, f32), ConvertError> {
-    use rayon::prelude::*;
     let bad = crate::readers::first_index(values.len(), |i: usize| {
         !(values[i] > 0.0 && values[i].is_finite())
     });
@@ -1295,7 +1294,15 @@ pub fn log10_range(
             value: values[i],
         });
     }
-    let (lo, hi) = values
+    let (lo, hi) = par_min_max(values);
+    Ok((lo.log10(), hi.log10()))
+}
+
+/// The smallest and largest of `values` (infinite and negative infinite when there are
+/// none), over every core.
+pub(crate) fn par_min_max(values: &[f32]) -> (f32, f32) {
+    use rayon::prelude::*;
+    values
         .par_iter()
         .fold(
             || (f32::INFINITY, f32::NEG_INFINITY),
@@ -1304,8 +1311,7 @@ pub fn log10_range(
         .reduce(
             || (f32::INFINITY, f32::NEG_INFINITY),
             |a, b| (a.0.min(b.0), a.1.max(b.1)),
-        );
-    Ok((lo.log10(), hi.log10()))
+        )
 }
 
 /// Refuses more attributes than a file keeps before any input is read (`input` names

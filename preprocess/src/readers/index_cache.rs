@@ -94,6 +94,21 @@ pub(crate) struct CachedFrames {
 }
 
 impl CachedFrames {
+    /// The frames of a `format` input, each its byte range and timestep, with no units
+    /// and no unread timesteps (which the caller sets where its format has them).
+    pub fn of(format: &str, frames: impl Iterator<Item = (usize, usize, Option<u64>)>) -> Self {
+        let (ranges, timesteps) = frames
+            .map(|(start, end, t)| ([start as u64, end as u64], t))
+            .unzip();
+        CachedFrames {
+            format: format.into(),
+            ranges,
+            timesteps,
+            units: None,
+            unread_timesteps: Vec::new(),
+        }
+    }
+
     /// The ranges as offsets into `data`, when they lie in order inside it (each at least
     /// one byte, none overlapping the next) and each starts a line.
     pub fn checked_ranges(&self, data: &[u8]) -> Option<Vec<std::ops::Range<usize>>> {

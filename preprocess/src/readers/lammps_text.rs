@@ -64,6 +64,22 @@ const COORDINATE_STYLES: [([&str; 3], bool); 4] = [
     (["xsu", "ysu", "zsu"], true),
 ];
 
+/// A dump that ends in the first lines of a frame not yet written whole (`ITEM:
+/// TIMES`): those lines made a frame of their own in `frames`, cut short, not more atom
+/// lines of the frame before.
+fn split_cut_header(data: &[u8], frames: &mut Vec<Span>) {
+    if let Some(last) = frames.last_mut() {
+        if let Some(start) = cut_header_start(data, last.start) {
+            last.end = start;
+            frames.push(Span {
+                start,
+                end: data.len(),
+                timestep: None,
+            });
+        }
+    }
+}
+
 /// Where the dump's last lines begin a frame header that the file ends inside without
 /// reaching its `ITEM: TIMESTEP` line whole: optional `ITEM: UNITS` and `ITEM: TIME`
 /// lines (each with its value, or the value cut or missing), then possibly the start of
@@ -239,19 +255,7 @@ impl Index {
         units: Option<String>,
     ) -> Result<Index, ReadError> {
         let data = ctx.data;
-        // A dump that ends in the first lines of a frame not yet written whole (`ITEM:
-        // TIMES`): those lines are a frame of their own, cut short, not more atom lines
-        // of the frame before.
-        if let Some(last) = frames.last_mut() {
-            if let Some(start) = cut_header_start(data, last.start) {
-                last.end = start;
-                frames.push(Span {
-                    start,
-                    end: data.len(),
-                    timestep: None,
-                });
-            }
-        }
+        split_cut_header(data, &mut frames);
         let Some(first) = frames.first() else {
             return Err(ctx.malformed(0, "no `ITEM: TIMESTEP` line found: not a LAMMPS text dump"));
         };
@@ -274,15 +278,11 @@ impl Index {
     /// The index as a cache keeps it ([`super::index_cache`]).
     pub fn to_cached(&self) -> super::index_cache::CachedFrames {
         super::index_cache::CachedFrames {
-            format: "lammps".into(),
-            ranges: self
-                .frames
-                .iter()
-                .map(|s| [s.start as u64, s.end as u64])
-                .collect(),
-            timesteps: self.frames.iter().map(|s| s.timestep).collect(),
             units: self.units.clone(),
-            unread_timesteps: Vec::new(),
+            ..super::index_cache::CachedFrames::of(
+                "lammps",
+                self.frames.iter().map(|s| (s.start, s.end, s.timestep)),
+            )
         }
     }
 
@@ -325,16 +325,7 @@ impl Index {
                 None => return None,
             }
         }
-        if let Some(last) = frames.last_mut() {
-            if let Some(start) = cut_header_start(data, last.start) {
-                last.end = start;
-                frames.push(Span {
-                    start,
-                    end: data.len(),
-                    timestep: None,
-                });
-            }
-        }
+        split_cut_header(data, &mut frames);
         let same = frames.len() == ranges.len()
             && units == cached.units
             && frames

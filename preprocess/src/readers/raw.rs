@@ -455,32 +455,28 @@ impl Index {
                 }
             };
             let file_path = dir.join(&a.file);
-            let file = mdlod_format::files::open(&file_path).map_err(|e| {
-                // The sidecar and its key name the file: say which asked for it.
+            // The sidecar and its key name the file: said with which asked for it.
+            let named = |problem: std::fmt::Arguments| {
                 malformed_in(
                     path,
                     text,
                     format!(
-                        "{what}: `file` \"{}\": cannot open {}: {e}",
-                        super::shorten(a.file.as_os_str().as_encoded_bytes()),
-                        super::shorten(file_path.as_os_str().as_encoded_bytes())
+                        "{what}: `file` \"{}\": {problem}",
+                        super::shorten(a.file.as_os_str().as_encoded_bytes())
                     ),
                 )
-            })?;
+            };
+            let shown = super::shorten(file_path.as_os_str().as_encoded_bytes());
+            let file = mdlod_format::files::open(&file_path)
+                .map_err(|e| named(format_args!("cannot open {shown}: {e}")))?;
             let map = mdlod_format::mmap::map_file(&file).map_err(|e| {
                 // A file the kernel makes up (`/proc`) is regular but does not map: the
                 // sidecar's key names the wrong file. Another failure (memory) is the
                 // system's.
                 if e.raw_os_error() == Some(NO_SUCH_DEVICE) {
-                    malformed_in(
-                        path,
-                        text,
-                        format!(
-                            "{what}: `file` \"{}\": {} does not map (not a file on a disk): {e}",
-                            super::shorten(a.file.as_os_str().as_encoded_bytes()),
-                            super::shorten(file_path.as_os_str().as_encoded_bytes())
-                        ),
-                    )
+                    named(format_args!(
+                        "{shown} does not map (not a file on a disk): {e}"
+                    ))
                 } else {
                     ReadError::Io {
                         path: file_path.clone(),

@@ -201,20 +201,16 @@ impl Index {
     /// The index as a cache keeps it ([`super::index_cache`]).
     pub fn to_cached(&self) -> super::index_cache::CachedFrames {
         super::index_cache::CachedFrames {
-            format: "xyz".into(),
-            ranges: self
-                .frames
-                .iter()
-                .map(|s| [s.start as u64, s.end as u64])
-                .collect(),
-            timesteps: self.frames.iter().map(|s| s.timestep).collect(),
-            units: None,
             unread_timesteps: self
                 .frames
                 .iter()
                 .enumerate()
                 .filter_map(|(k, s)| s.unread_timestep.clone().map(|t| (k, t)))
                 .collect(),
+            ..super::index_cache::CachedFrames::of(
+                "xyz",
+                self.frames.iter().map(|s| (s.start, s.end, s.timestep)),
+            )
         }
     }
 
