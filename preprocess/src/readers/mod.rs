@@ -1255,7 +1255,6 @@ impl DumpFile {
         }
     }
 
-    /// The piece files of a `%` piece set, in processor order (`None` for one file).
     /// For a `%` piece set, each piece's header of frame `k` where the piece is
     /// uncompressed text read by lines (`None` for the others, and where it cannot be
     /// read: that piece is opened again and reports it); `None` for other dumps.
@@ -1270,6 +1269,7 @@ impl DumpFile {
         }
     }
 
+    /// The piece files of a `%` piece set, in processor order (`None` for one file).
     pub fn piece_paths(&self) -> Option<Vec<PathBuf>> {
         match &self.index {
             Index::Pieces(p) => Some(p.iter().map(|d| d.path().to_path_buf()).collect()),
