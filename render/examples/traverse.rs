@@ -31,8 +31,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for _ in 0..repeats {
         let t = Instant::now();
         let d = traverse(&camera, &file, &settings);
+        // FNV-1a over the ranges: one number that tells whether two builds of the
+        // traversal made the same cut.
+        let digest = d.ranges.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, r| {
+            [u32::from(r.level), r.first, r.count, r.quant_node]
+                .iter()
+                .fold(h, |h, &v| (h ^ u64::from(v)).wrapping_mul(0x100_0000_01b3))
+        });
         println!(
-            "traverse {:.1} ms: {} points ({} particles), {} ranges, {} opened, {} hidden nodes, {} hidden particles, error {:.2} px, {} restarts",
+            "traverse {:.1} ms: {} points ({} particles), {} ranges, {} opened, {} hidden nodes, {} hidden particles, error {:.2} px, {} restarts, cut {digest:016x}",
             t.elapsed().as_secs_f64() * 1e3,
             d.points,
             d.particles,

@@ -123,6 +123,12 @@ pub struct OcclusionBuffer {
     /// Sine and cosine bounds of the angle between any view ray and the view axis.
     sin_max: f32,
     cos_min: f32,
+    /// The view-space rays through the window's pixel centres, by column and by row: x
+    /// and y of the direction (perspective; the origin is the eye) or of the origin
+    /// (orthographic; the direction is −z). Worked out once, as `samples_hidden` did
+    /// for every sample.
+    ray_x: Vec<f32>,
+    ray_y: Vec<f32>,
     /// Pixels written so far (statistics).
     pub pixels_written: u64,
 }
@@ -174,6 +180,29 @@ impl OcclusionBuffer {
             .iter()
             .map(|&(w, h)| vec![f32::INFINITY; w as usize * h as usize])
             .collect();
+        let p = camera.jittered_clip_from_view(viewport, glam::Vec2::ZERO);
+        let (sx, sy) = (p.x_axis.x, p.y_axis.y);
+        let perspective = camera.projection == Projection::Perspective;
+        let ray_x = (0..width)
+            .map(|i| {
+                let ndc_x = (i as f32 + origin[0] as f32 + 0.5) / viewport[0] as f32 * 2.0 - 1.0;
+                if perspective {
+                    (ndc_x + p.z_axis.x) / sx
+                } else {
+                    (ndc_x - p.w_axis.x) / sx
+                }
+            })
+            .collect();
+        let ray_y = (0..height)
+            .map(|j| {
+                let ndc_y = 1.0 - (j as f32 + origin[1] as f32 + 0.5) / viewport[1] as f32 * 2.0;
+                if perspective {
+                    (ndc_y + p.z_axis.y) / sy
+                } else {
+                    (ndc_y - p.w_axis.y) / sy
+                }
+            })
+            .collect();
         Some(OcclusionBuffer {
             mode,
             width,
@@ -191,6 +220,8 @@ impl OcclusionBuffer {
             camera: camera.clone(),
             sin_max,
             cos_min,
+            ray_x,
+            ray_y,
             pixels_written: 0,
         })
     }
@@ -475,30 +506,21 @@ impl OcclusionBuffer {
         let py0 = ceil_px(y0 - RECT_GROW_PX - 0.5).max(0.0);
         let px1 = floor_px(x1 + RECT_GROW_PX - 0.5).min(w - 1.0);
         let py1 = floor_px(y1 + RECT_GROW_PX - 0.5).min(h - 1.0);
-        let p = &self.clip_from_view;
-        let (sx, sy) = (p.x_axis.x, p.y_axis.y);
+        if px0 > px1 || py0 > py1 {
+            return true;
+        }
+        // (Whole numbers inside the window now.)
+        let (px0, px1, py0, py1) = (px0 as usize, px1 as usize, py0 as usize, py1 as usize);
         let perspective = self.camera.projection == Projection::Perspective;
         let surely_behind = nearer(nearest);
-        let mut j = py0;
-        while j <= py1 {
-            let ndc_y = 1.0 - (j + self.origin[1] as f32 + 0.5) / self.image[1] as f32 * 2.0;
-            let row = (j as u32 * self.width) as usize;
-            let mut i = px0;
-            while i <= px1 {
-                let bound = self.levels[0][row + i as usize];
+        for (j, &ray_y) in self.ray_y[py0..=py1].iter().enumerate() {
+            let row = &self.levels[0][(py0 + j) * self.width as usize..][px0..=px1];
+            for (&bound, &ray_x) in row.iter().zip(&self.ray_x[px0..=px1]) {
                 if bound >= surely_behind || bound.is_nan() {
-                    let ndc_x =
-                        (i + self.origin[0] as f32 + 0.5) / self.image[0] as f32 * 2.0 - 1.0;
                     let (origin, dir) = if perspective {
-                        (
-                            Vec3::ZERO,
-                            Vec3::new((ndc_x + p.z_axis.x) / sx, (ndc_y + p.z_axis.y) / sy, -1.0),
-                        )
+                        (Vec3::ZERO, Vec3::new(ray_x, ray_y, -1.0))
                     } else {
-                        (
-                            Vec3::new((ndc_x - p.w_axis.x) / sx, (ndc_y - p.w_axis.y) / sy, 0.0),
-                            Vec3::new(0.0, 0.0, -1.0),
-                        )
+                        (Vec3::new(ray_x, ray_y, 0.0), Vec3::new(0.0, 0.0, -1.0))
                     };
                     if let Some(t) = entry(origin, dir) {
                         if bound.partial_cmp(&nearer(t)) != Some(std::cmp::Ordering::Less) {
@@ -506,9 +528,7 @@ impl OcclusionBuffer {
                         }
                     }
                 }
-                i += 1.0;
             }
-            j += 1.0;
         }
         true
     }
@@ -535,8 +555,20 @@ impl OcclusionBuffer {
         let ((nx0, nx1), (ny0, ny1)) = match self.camera.projection {
             Projection::Perspective => {
                 let (near_t, far_t) = (nearest, -v.z + radius);
-                let lo = |a: f32| (a / near_t).min(a / far_t);
-                let hi = |a: f32| (a / near_t).max(a / far_t);
+                // With 0 < near_t ≤ far_t the smaller quotient of a non-negative `a` is
+                // by the larger depth, of a negative one by the smaller (division rounds
+                // monotonically, so one division gives the number `min` of both would).
+                let ordered = near_t > 0.0 && far_t >= near_t;
+                let lo = |a: f32| match (ordered, a >= 0.0) {
+                    (true, true) => a / far_t,
+                    (true, false) if a < 0.0 => a / near_t,
+                    _ => (a / near_t).min(a / far_t),
+                };
+                let hi = |a: f32| match (ordered, a >= 0.0) {
+                    (true, true) => a / near_t,
+                    (true, false) if a < 0.0 => a / far_t,
+                    _ => (a / near_t).max(a / far_t),
+                };
                 (
                     (
                         sx * lo(v.x - radius) - p.z_axis.x,

@@ -413,6 +413,24 @@ impl Projector {
         }
     }
 
+    /// [`Self::size_px`] and [`Self::near_depth`] together, from one transform of the
+    /// box's centre (the same values, bit for bit).
+    pub fn size_and_near(&self, n: &NodeRecord) -> (f32, f32) {
+        let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
+        let r = half_diagonal(max - min);
+        let depth = -self
+            .view_from_world
+            .transform_point3(min * 0.5 + max * 0.5)
+            .z;
+        let nearest = depth - r;
+        let size = match self.projection {
+            Projection::Orthographic => 2.0 * r * self.scale,
+            Projection::Perspective if nearest <= self.near.max(0.0) => f32::INFINITY,
+            Projection::Perspective => 2.0 * r * self.scale / nearest,
+        };
+        (size, nearest)
+    }
+
     /// Distance along the view direction to the near side of the sphere around the
     /// node's bounding box: the order in which the occlusion traversal visits nodes.
     pub fn near_depth(&self, n: &NodeRecord) -> f32 {
@@ -1193,6 +1211,37 @@ fn depth_key(depth: f32, id: u32) -> u64 {
     (u64::from(ordered) << 32) | u64::from(id)
 }
 
+/// A node in the occlusion traversal's queue: its [`depth_key`] (with the flag of a box
+/// wholly inside the frustum) and its projected size and representative radius, worked
+/// out when it was queued. Ordered so that the smallest key is popped first (keys are
+/// unique: the id is part of them).
+#[derive(Clone, Copy, Debug)]
+struct Queued {
+    key: u64,
+    size: f32,
+    own: f32,
+}
+
+impl PartialEq for Queued {
+    fn eq(&self, other: &Self) -> bool {
+        self.key == other.key
+    }
+}
+
+impl Eq for Queued {}
+
+impl PartialOrd for Queued {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Queued {
+    fn cmp(&self, other: &Self) -> Ordering {
+        other.key.cmp(&self.key)
+    }
+}
+
 /// The cut with occlusion culling: nodes are visited nearest first; a node hidden by the
 /// spheres committed so far is dropped with its subtree, one small enough (or not
 /// resident) is committed as its representative, and the others are opened, committing
@@ -1257,23 +1306,28 @@ fn front_to_back(
     // the key's bit above the id when ids leave it free (files of fewer than 2^31 nodes;
     // larger ones test every node against the frustum).
     let inside_bit: u64 = if nodes.len() <= 1 << 31 { 1 << 31 } else { 0 };
-    let entry = |depth: f32, id: u32, inside: bool| {
-        Reverse(depth_key(depth, id) | if inside { inside_bit } else { 0 })
+    let entry = |depth: f32, id: u32, inside: bool, size: f32, own: f32| Queued {
+        key: depth_key(depth, id) | if inside { inside_bit } else { 0 },
+        size,
+        own,
     };
-    let mut heap: BinaryHeap<Reverse<u64>> = BinaryHeap::new();
+    let mut heap: BinaryHeap<Queued> = BinaryHeap::new();
+    let (top_size, top_near) = proj.size_and_near(&nodes[0]);
     heap.push(entry(
-        proj.near_depth(&nodes[0]),
+        top_near,
         0,
         proj.frustum(&nodes[0]) == Some(true),
+        top_size,
+        representative_radius(&nodes[0]),
     ));
     // The visible children of the node being considered: (index on their level,
-    // projected size, representative radius, wholly inside the frustum), computed once
-    // for the node's own test and for committing or queueing them.
-    let mut kids: Vec<(u32, f32, f32, bool)> = Vec::new();
+    // projected size, representative radius, wholly inside the frustum, near depth),
+    // computed once for the node's own test and for committing or queueing them.
+    let mut kids: Vec<(u32, f32, f32, bool, f32)> = Vec::new();
     let mut committed: u64 = 0;
     let mut reported: u64 = 0;
     let mut achieved = 0.0f32;
-    while let Some(Reverse(key)) = heap.pop() {
+    while let Some(Queued { key, size, own }) = heap.pop() {
         let inside = key & inside_bit != 0;
         let id = (key & !inside_bit) as u32;
         if let Some(shared) = shared {
@@ -1289,9 +1343,7 @@ fn front_to_back(
         // First with the node's own representative radius, which bounds every sphere
         // drawn for its subtree (radii only grow up the hierarchy): hidden with that
         // margin is hidden with the tighter one below, whose children need not be read.
-        let own = representative_radius(n);
         let margin_of = |reach: f32| (reach - r_min).max(0.0) + quant;
-        let size = proj.size_px(n);
         let child_level = usize::from(n.level) + 1;
         let opens = size > error_px || mixed(id as usize);
         let reads_children = opens && child_level < last;
@@ -1321,7 +1373,8 @@ fn front_to_back(
                 if let Some(within) = within.filter(|_| !hidden_only(first + c as usize)) {
                     let r = representative_radius(cn);
                     reach = reach.max(r);
-                    kids.push((c, proj.size_px(cn), r, within));
+                    let (size, near) = proj.size_and_near(cn);
+                    kids.push((c, size, r, within, near));
                 }
             }
             reach
@@ -1357,11 +1410,10 @@ fn front_to_back(
             // (what is nearer than their parent is committed already; the queue would
             // only add what lies between the two depths).
             let first = levels[child_level].node_first as usize;
-            for &(c, csize, r, within) in &kids {
+            for &(c, csize, r, within, near) in &kids {
                 let cid = first + c as usize;
-                let cn = &nodes[cid];
                 if csize > error_px || mixed(cid) {
-                    heap.push(entry(proj.near_depth(cn), cid as u32, within));
+                    heap.push(entry(near, cid as u32, within, csize, r));
                     continue;
                 }
                 // The one sphere drawn for it, as the GPU decodes it (grown by the
@@ -1873,6 +1925,39 @@ mod tests {
         let empty = DrawList::default().batches(10, 10);
         assert_eq!(empty.len(), 1);
         assert!(empty[0].ranges.is_empty());
+    }
+
+    /// The walk takes a node's projected size and near depth from one transform: the
+    /// same bits as the two separate measures, for boxes in front of, around and behind
+    /// the eye, in both projections.
+    #[test]
+    fn size_and_near_depth_together_are_the_separate_measures() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for projection in [Projection::Perspective, Projection::Orthographic] {
+            let camera = Camera {
+                projection,
+                ..Default::default()
+            };
+            let proj = Projector::new(&camera, [640, 360]);
+            for _ in 0..10_000 {
+                let centre = [0; 3].map(|_| (next() - 0.5) * 40.0);
+                let half = [0; 3].map(|_| next() * next() * 6.0);
+                let node = NodeRecord {
+                    bounds_min: [0, 1, 2].map(|k| centre[k] - half[k]),
+                    bounds_max: [0, 1, 2].map(|k| centre[k] + half[k]),
+                    ..bytemuck::Zeroable::zeroed()
+                };
+                let (size, near) = proj.size_and_near(&node);
+                assert_eq!(size.to_bits(), proj.size_px(&node).to_bits(), "{node:?}");
+                assert_eq!(near.to_bits(), proj.near_depth(&node).to_bits(), "{node:?}");
+            }
+        }
     }
 
     /// The heap key orders by depth exactly as `f32::total_cmp`, then by id.
