@@ -2483,6 +2483,24 @@ pub fn attribute_named<'a>(names: &[&'a str], name: &str) -> Option<&'a str> {
 mod tests {
     use super::*;
 
+    /// The checksum's test vectors that FORMAT.md gives implementers (inputs short,
+    /// mid-length and past 240 bytes take different paths through XXH3).
+    #[test]
+    fn checksum_matches_the_test_vectors_the_spec_gives() {
+        let long: Vec<u8> = (0..1024).map(|i| i as u8).collect();
+        assert_eq!(xxh3_64(b""), 0x2d06_8005_38d3_94c2);
+        assert_eq!(xxh3_64(b"abc"), 0x78af_5f94_892f_3950);
+        assert_eq!(xxh3_64(&long), 0xa870_f929_8439_8d22);
+        let spec = include_str!("../../FORMAT.md");
+        for v in [
+            "0x2d06800538d394c2",
+            "0x78af5f94892f3950",
+            "0xa870f92984398d22",
+        ] {
+            assert!(spec.contains(v), "FORMAT.md lacks {v}");
+        }
+    }
+
     #[test]
     fn attributes_are_found_by_name_or_last_part_and_magnitudes_alike() {
         let names = ["particles/mass", "|particles/velocity|", "c_pe", "|v|"];

@@ -2039,6 +2039,7 @@ pub fn convert_chunked(
                 Some(&counts),
             ));
             crate::convert::drop_default_radius_note_said_twice(&mut notes);
+            notes.extend(crate::convert::delta_n_note(params.delta_n, levels));
             notes
         },
         frame: None,

@@ -508,6 +508,7 @@ pub fn convert_frame_with(
         Some(&crate::species::counts(species.len(), species_index)),
     ));
     drop_default_radius_note_said_twice(&mut notes);
+    notes.extend(delta_n_note(h.params.delta_n, h.level_count()));
     let mut metadata = base_metadata(frame, source, options);
     metadata.species = species;
     metadata.max_position_error = h.max_position_error;
@@ -779,6 +780,18 @@ fn undersized_note(
         f64::from(default) / spacing,
         shown[0],
     ))
+}
+
+/// A δn asked for past the levels below the top node: every node then encodes (and is
+/// drawn with) the particles themselves, and the file records the δn in effect.
+pub(crate) fn delta_n_note(asked: u32, levels: usize) -> Option<String> {
+    let below_top = levels.saturating_sub(1);
+    (asked as usize > below_top && below_top > 0).then(|| {
+        format!(
+            "--delta-n {asked}: the hierarchy has {below_top} level{} below its top node, so every node encodes the particles' level and the file records --delta-n {below_top}",
+            if below_top == 1 { "" } else { "s" }
+        )
+    })
 }
 
 /// Notes on positions that will not draw as the user expects, from the particles'

@@ -688,12 +688,41 @@ fn a_delta_n_deeper_than_the_hierarchy_is_recorded_as_the_delta_n_in_effect() {
         ),
         (test_frame(6), chunked(deep, 300, 1 << 30)),
     ] {
-        let (_d, f) = convert_with(&frame, &opts);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mdlod");
+        let report = convert_frame(&frame, None, &path, &opts, &NoProgress).unwrap();
+        let f = MdlodFile::open(&path).unwrap();
         f.verify().unwrap();
         let last = f.level_count() as u32 - 1;
         assert!(last < 8, "{last} levels below the top");
         assert_eq!(f.metadata().build.delta_n, last);
         assert_eq!(f.particle_count() as usize, frame.len());
+        // The user is told that the δn asked for is not the one in effect.
+        let said: Vec<_> = report
+            .notes
+            .iter()
+            .filter(|n| n.starts_with("--delta-n 8:"))
+            .collect();
+        assert_eq!(said.len(), 1, "{:?}", report.notes);
+        assert!(
+            said[0].ends_with(&format!("records --delta-n {last}")),
+            "{}",
+            said[0]
+        );
+        // One that fits is not remarked on.
+        let fits = ConvertOptions {
+            build: BuildParams {
+                delta_n: last,
+                ..opts.build.clone()
+            },
+            ..opts
+        };
+        let report = convert_frame(&frame, None, &path, &fits, &NoProgress).unwrap();
+        assert!(
+            report.notes.iter().all(|n| !n.contains("--delta-n")),
+            "{:?}",
+            report.notes
+        );
     }
 }
 
