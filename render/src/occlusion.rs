@@ -410,33 +410,35 @@ impl OcclusionBuffer {
         let (w, h) = (self.image[0] as f32, self.image[1] as f32);
         let (ox, oy) = (self.origin[0] as f32, self.origin[1] as f32);
         let perspective = self.camera.projection == Projection::Perspective;
-        let mut nearest = f32::INFINITY;
-        let (mut x0, mut y0) = (f32::INFINITY, f32::INFINITY);
-        let (mut x1, mut y1) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        // The corners' depths and clip coordinates first, then their divisions as one
+        // loop over the eight (which the compiler can do four or eight at a time).
+        let (mut d, mut qx, mut qy, mut qw) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
         for k in 0..8 {
             let (a, b, c) = (
                 (k & 1) as f32, // 0 or 1
                 ((k >> 1) & 1) as f32,
                 ((k >> 2) & 1) as f32,
             );
-            let d = d0 + a * dx + b * dy + c * dz;
-            nearest = nearest.min(d);
-            if perspective && d <= self.camera.near {
-                return false;
-            }
+            d[k] = d0 + a * dx + b * dy + c * dz;
             let q = c0 + cx * a + cy * b + cz * c;
-            if q.w.is_nan() || q.w <= 0.0 {
-                return false;
-            }
-            let (x, y) = (
-                (q.x / q.w + 1.0) * 0.5 * w - ox,
-                (1.0 - q.y / q.w) * 0.5 * h - oy,
-            );
-            x0 = x0.min(x);
-            y0 = y0.min(y);
-            x1 = x1.max(x);
-            y1 = y1.max(y);
+            (qx[k], qy[k], qw[k]) = (q.x, q.y, q.w);
         }
+        let near = self.camera.near;
+        if (perspective && d.iter().any(|&d| d <= near))
+            || qw.iter().any(|&q| q.is_nan() || q <= 0.0)
+        {
+            return false;
+        }
+        let (mut xs, mut ys) = ([0.0f32; 8], [0.0f32; 8]);
+        for k in 0..8 {
+            xs[k] = (qx[k] / qw[k] + 1.0) * 0.5 * w - ox;
+            ys[k] = (1.0 - qy[k] / qw[k]) * 0.5 * h - oy;
+        }
+        let nearest = d.iter().fold(f32::INFINITY, |m, &v| m.min(v));
+        let x0 = xs.iter().fold(f32::INFINITY, |m, &v| m.min(v));
+        let y0 = ys.iter().fold(f32::INFINITY, |m, &v| m.min(v));
+        let x1 = xs.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+        let y1 = ys.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
         if self.mode == OcclusionMode::PixelCentres
             && x1 - x0 <= EXACT_BOX_PX
             && y1 - y0 <= EXACT_BOX_PX
