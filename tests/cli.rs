@@ -1044,6 +1044,30 @@ fn smip_tiles_sampled_once_shade_without_the_particles() {
         out.contains(&format!("({mib:.1} MiB: ")) && out.contains("S-MIP tiles"),
         "{out}"
     );
+    // `info` says which level of the tiles its view is shown at: level 0 for tiles
+    // sampled at the view's pixels, level 3 for the same tiles' texels an eighth the
+    // size (as --min-samples samples them), whatever the header's display bias.
+    let text = ok(&["info", s(&sndf)]);
+    assert!(
+        text.contains("shown at     level 0 of its S-MIP tiles"),
+        "{text}"
+    );
+    let finer = dir.path().join("finer.sndf");
+    let mut data = mdlod_format::sndf::SndfData::load(&sndf).unwrap();
+    data.header.smip.as_mut().unwrap().texel0 /= 8.0;
+    data.save(&finer).unwrap();
+    let text = ok(&["info", s(&finer)]);
+    assert!(
+        text.contains("shown at     level 3 of its S-MIP tiles"),
+        "{text}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(&["info", s(&finer), "--json"])).unwrap();
+    assert_eq!(json["display_level"], 0);
+    assert_eq!(
+        json["shown_at_levels"],
+        serde_json::json!([{"level": 3, "weight": 1.0}])
+    );
     let direct = dir.path().join("direct.png");
     ok(&[
         &["render", s(&mdlod), "-o", s(&direct), "--mode", "sndf"][..],

@@ -192,6 +192,24 @@ fn valid_bin(r: &[f32; 4], rays: f32) -> bool {
         && r[..3].iter().all(|&v| v <= r[3] * (1.0 + 1e-5) + 1e-6)
 }
 
+/// The first texel of `hist` (records texel-major, `bins²` per texel) whose bins' counts
+/// add up to more than its rays (each ray lands in one bin at most): its index, the sum
+/// and the rays.
+fn texel_over_rays(h: &SndfHeader, hist: &[[f32; 4]]) -> Option<(usize, f64, u32)> {
+    let per_texel = (h.bins as usize).saturating_mul(h.bins as usize).max(1);
+    let rays = record_rays(h)
+        .into_iter()
+        .flat_map(|(len, rays)| std::iter::repeat_n(rays, len / per_texel));
+    hist.chunks(per_texel)
+        .zip(rays)
+        .enumerate()
+        .find_map(|(t, (bins, rays))| {
+            let sum: f64 = bins.iter().map(|r| f64::from(r[3])).sum();
+            // (Relative slack for the counts a coarser S-MIP texel scales up.)
+            (sum > f64::from(rays) * (1.0 + 1e-5)).then_some((t, sum, rays))
+        })
+}
+
 fn check_header(path: &Path, h: &SndfHeader) -> Result<usize, FormatError> {
     if h.width == 0 || h.height == 0 || h.width > MAX_SIDE || h.height > MAX_SIDE {
         return Err(corrupt(
@@ -255,6 +273,12 @@ impl SndfData {
             return Err(FormatError::Write {
                 path: path.to_path_buf(),
                 problem: format!("record {i} {r:?} is not a bin (finite, count at most the rays, colour sums at most the count)"),
+            });
+        }
+        if let Some((t, sum, rays)) = texel_over_rays(&self.header, &self.hist) {
+            return Err(FormatError::Write {
+                path: path.to_path_buf(),
+                problem: format!("texel {t}'s counts add up to {sum}, more than its {rays} rays"),
             });
         }
         let json = serde_json::to_vec(&self.header).map_err(|e| FormatError::Write {
@@ -368,7 +392,17 @@ impl SndfData {
         }
         let json_len = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
         let checksum = u64::from_le_bytes(bytes[16..24].try_into().unwrap_or([0; 8]));
-        if json_len > MAX_HEADER || FIXED + json_len > bytes.len() {
+        if json_len > MAX_HEADER {
+            return Err(corrupt(
+                path,
+                "header",
+                format!(
+                    "header length {json_len} bytes, past the {MAX_HEADER} bytes (1 MiB) an \
+                     .sndf header may have"
+                ),
+            ));
+        }
+        if FIXED + json_len > bytes.len() {
             return Err(corrupt(
                 path,
                 "header",
@@ -456,6 +490,18 @@ impl SndfData {
             }
             hist.push(r);
         }
+        if let Some((t, sum, rays)) = texel_over_rays(&header, &hist) {
+            let per_texel = (header.bins * header.bins) as usize;
+            return Err(corrupt(
+                path,
+                &format!(
+                    "records {}..{} (texel {t})",
+                    t * per_texel,
+                    (t + 1) * per_texel
+                ),
+                format!("the texel's counts add up to {sum}, more than its {rays} rays (a ray lands in one bin at most)"),
+            ));
+        }
         Ok(SndfData { header, hist })
     }
 }
@@ -498,10 +544,11 @@ mod tests {
             display_level: Some(1),
             smip: None,
         };
+        // Each texel's four bins hold 0, 1, 2 and 1 of its 4 rays.
         let hist = (0..24)
             .map(|i| {
-                let c = (i % 5) as f32;
-                [0.5 * c, 0.25 * c, 0.0, c.min(4.0)]
+                let c = [0.0, 1.0, 2.0, 1.0][i % 4];
+                [0.5 * c, 0.25 * c, 0.0, c]
             })
             .collect();
         SndfData { header, hist }
@@ -570,6 +617,45 @@ mod tests {
             e.contains("record 5") && e.contains("count at most 4"),
             "{e}"
         );
+        // Bins each within the rays whose texel adds up to more: texel 1 (records 4 to
+        // 7) gets 0 + 1 + 4 + 1 of its 4 rays.
+        std::fs::write(&q, patched(&good, 6, [0.0, 0.0, 0.0, 4.0])).unwrap();
+        let e = SndfData::load(&q).unwrap_err().to_string();
+        assert!(
+            e.contains("records 4..8 (texel 1)") && e.contains("add up to 6, more than its 4 rays"),
+            "{e}"
+        );
+        let mut over = s.clone();
+        over.hist[6][3] = 4.0;
+        let e = over.save(&q).unwrap_err().to_string();
+        assert!(e.contains("texel 1's counts add up to 6"), "{e}");
+    }
+
+    /// A header past the cap is refused as such, even where the file would hold it.
+    #[test]
+    fn a_header_past_the_cap_is_named_as_too_long() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("big.sndf");
+        let len = MAX_HEADER + 300;
+        let mut bytes = SNDF_MAGIC.to_vec();
+        bytes.extend_from_slice(&1u16.to_le_bytes());
+        bytes.extend_from_slice(&0u16.to_le_bytes());
+        bytes.extend_from_slice(&(len as u32).to_le_bytes());
+        bytes.extend_from_slice(&[0; 8]);
+        bytes.resize(FIXED + len + 4096, b' ');
+        std::fs::write(&p, &bytes).unwrap();
+        for e in [
+            SndfData::load_header(&p).unwrap_err(),
+            SndfData::parse(&p, &bytes).unwrap_err(),
+        ] {
+            let e = e.to_string();
+            assert!(
+                e.contains(&format!(
+                    "header length {len} bytes, past the {MAX_HEADER} bytes (1 MiB)"
+                )),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -2559,6 +2559,30 @@ pub fn level0_scale(
     Ok(scale)
 }
 
+/// The S-MIP levels [`shade_file`] shades a tiled `.sndf` file's own view from at
+/// [`ShadeLevel::Display`] (one level, or two blended, with their weights); `None` for a
+/// file of one image, shown at its header's `display_level`.
+pub fn sndf_display_levels(
+    input: &Path,
+    header: &mdlod_format::sndf::SndfHeader,
+) -> Result<Option<Vec<(u32, f64)>>, RenderError> {
+    if header.smip.is_none() {
+        return Ok(None);
+    }
+    let view = sndf_camera(input, &header.view)?;
+    let target = glam::Vec3::from(view.target.unwrap_or([0.0; 3]));
+    let camera = view.to_camera(
+        &Bounds::new(target - 1.0, target + 1.0),
+        header.width as f32 / header.height as f32,
+    );
+    smip::SmipTiles::view_levels(header, &camera, header.width, header.height).map_err(|e| {
+        RenderError::Sndf {
+            path: input.to_path_buf(),
+            message: format!("its view against its S-MIP tiles: {e}"),
+        }
+    })
+}
+
 /// Which S-MIP level [`shade_file`] shades.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ShadeLevel {

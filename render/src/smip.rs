@@ -1108,6 +1108,32 @@ impl SmipTiles {
         }
     }
 
+    /// The levels a view of `width`×`height` pixels through `camera` is shaded from, with
+    /// their weights (one level, or two blended), for the tiles a header `h` describes
+    /// (its display level as the bias); `None` for a file of one image.
+    pub fn view_levels(
+        h: &mdlod_format::sndf::SndfHeader,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<Option<Vec<(u32, f64)>>, RenderError> {
+        let Some(t) = h.smip.as_ref() else {
+            return Ok(None);
+        };
+        let frame = SmipFrame {
+            azimuth_deg: camera.azimuth_deg,
+            elevation_deg: camera.elevation_deg,
+            fov_y_deg: camera.fov_y_deg,
+            texel0: t.texel0,
+            origin: t.origin,
+            bins: h.bins,
+            binning: Binning::from_name(&h.binning).unwrap_or_default(),
+            content: h.source.clone().unwrap_or_default(),
+        };
+        let plans = plan_view(&frame, h.display_level.unwrap_or(0), camera, width, height)?;
+        Ok(Some(plans.iter().map(|p| (p.level, p.weight)).collect()))
+    }
+
     /// From the file form (which the reader has checked) and the camera of its view;
     /// `None` for a file of one image.
     pub fn from_data(d: &SndfData, camera: &Camera) -> Option<SmipTiles> {

@@ -391,6 +391,18 @@ fn sndf_info(args: &Args) -> Result<()> {
     let h = &header;
     // A camera shade could not use is refused here as there.
     mdlod_render::sndf_camera(&args.file, &h.view)?;
+    // A tiled file's display level is a bias over the level of its view's pixels: the
+    // level shown is worked out from the view as `shade` does.
+    let levels_shown = mdlod_render::sndf_display_levels(&args.file, h)?;
+    let shown_text = |levels: &[(u32, f64)]| match levels {
+        [(l, _)] => format!("level {l}"),
+        [(a, wa), (b, wb)] => format!(
+            "levels {a} and {b} blended ({:.0} % and {:.0} %)",
+            wa * 100.0,
+            wb * 100.0
+        ),
+        _ => "level 0".to_string(),
+    };
     // The camera's numbers are f32s: their shortest form (63.43495, not 63.4349479675293).
     let mut view = h.view.clone();
     shortest_f32(&mut view);
@@ -404,6 +416,12 @@ fn sndf_info(args: &Args) -> Result<()> {
             "binning": h.binning,
             "rays": h.rays,
             "display_level": h.display_level.unwrap_or(0),
+            "shown_at_levels": levels_shown.as_ref().map(|levels| {
+                levels
+                    .iter()
+                    .map(|&(l, w)| json!({"level": l, "weight": w}))
+                    .collect::<Vec<_>>()
+            }),
             "source": h.source,
             "view": view,
             "data_bytes": bytes,
@@ -422,7 +440,10 @@ fn sndf_info(args: &Args) -> Result<()> {
         h.rays,
         bytes as f64 / (1 << 20) as f64
     );
-    println!("  shown at     level {}", h.display_level.unwrap_or(0));
+    match &levels_shown {
+        Some(levels) => println!("  shown at     {} of its S-MIP tiles", shown_text(levels)),
+        None => println!("  shown at     level {}", h.display_level.unwrap_or(0)),
+    }
     if let Some(s) = &h.source {
         println!("  sampled from {}", shown(s));
     }
