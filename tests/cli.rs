@@ -1068,6 +1068,23 @@ fn smip_tiles_sampled_once_shade_without_the_particles() {
         json["shown_at_levels"],
         serde_json::json!([{"level": 3, "weight": 1.0}])
     );
+    // A tile file's view without the distance that scales it is refused, not fitted
+    // to a box of its own making.
+    let unscaled = dir.path().join("unscaled.sndf");
+    data.header.view.as_object_mut().unwrap().remove("distance");
+    data.save(&unscaled).unwrap();
+    let png = dir.path().join("unscaled.png");
+    for args in [
+        vec!["shade", s(&unscaled), "-o", s(&png)],
+        vec!["info", s(&unscaled)],
+    ] {
+        let e = fails(&args);
+        assert!(
+            e.contains("unscaled.sndf") && e.contains("no `target` or no `distance`"),
+            "{args:?}: {e}"
+        );
+    }
+    assert!(!png.exists());
     let direct = dir.path().join("direct.png");
     ok(&[
         &["render", s(&mdlod), "-o", s(&direct), "--mode", "sndf"][..],

@@ -2569,18 +2569,36 @@ pub fn sndf_display_levels(
     if header.smip.is_none() {
         return Ok(None);
     }
-    let view = sndf_camera(input, &header.view)?;
-    let target = glam::Vec3::from(view.target.unwrap_or([0.0; 3]));
-    let camera = view.to_camera(
-        &Bounds::new(target - 1.0, target + 1.0),
-        header.width as f32 / header.height as f32,
-    );
+    let camera = tile_camera(input, header)?;
     smip::SmipTiles::view_levels(header, &camera, header.width, header.height).map_err(|e| {
         RenderError::Sndf {
             path: input.to_path_buf(),
             message: format!("its view against its S-MIP tiles: {e}"),
         }
     })
+}
+
+/// The camera of a tile file's own view. Its `target` and `distance` place and scale the
+/// view against the tiles (FORMAT.md, section 10): a view without them, which no data can
+/// be fitted to here, is refused.
+fn tile_camera(
+    input: &Path,
+    header: &mdlod_format::sndf::SndfHeader,
+) -> Result<Camera, RenderError> {
+    let view = sndf_camera(input, &header.view)?;
+    let (Some(target), Some(_)) = (view.target, view.distance) else {
+        return Err(RenderError::Sndf {
+            path: input.to_path_buf(),
+            message: "its view has no `target` or no `distance`, which place and scale a \
+                      view of S-MIP tiles (mdlod sample and the viewer write both)"
+                .into(),
+        });
+    };
+    let target = glam::Vec3::from(target);
+    Ok(view.to_camera(
+        &Bounds::new(target - 1.0, target + 1.0),
+        header.width as f32 / header.height as f32,
+    ))
 }
 
 /// Which S-MIP level [`shade_file`] shades.
@@ -2616,7 +2634,8 @@ pub fn shade_file(
 ) -> Result<(u32, u32), RenderError> {
     lights.check().map_err(RenderError::InvalidOptions)?;
     let data = mdlod_format::sndf::SndfData::load(input)?;
-    let view = sndf_camera(input, &data.header.view)?;
+    // A camera shading could not use is refused before anything is shaded.
+    sndf_camera(input, &data.header.view)?;
     // Past the level of one texel, every level is that texel.
     let (w, h) = (data.header.width, data.header.height);
     let coarsest = sndf::coarsest_level(w, h);
@@ -2645,7 +2664,7 @@ pub fn shade_file(
         });
     }
     if data.header.smip.is_some() {
-        let image = shade_tiles_file(input, &data, &view, lights, background_srgb, level)?;
+        let image = shade_tiles_file(input, &data, lights, background_srgb, level)?;
         image.save_png(out)?;
         return Ok((image.width, image.height));
     }
@@ -2685,7 +2704,6 @@ pub fn sndf_camera(path: &Path, view: &serde_json::Value) -> Result<ViewFile, Re
 fn shade_tiles_file(
     input: &Path,
     data: &mdlod_format::sndf::SndfData,
-    view: &ViewFile,
     lights: &sndf::ShadeLights,
     background_srgb: [f32; 3],
     level: ShadeLevel,
@@ -2701,11 +2719,7 @@ fn shade_tiles_file(
             "a view of {w}x{h} pixels (at most 2^27 pixels are shaded from tiles)"
         )));
     }
-    let target = glam::Vec3::from(view.target.unwrap_or([0.0; 3]));
-    let camera = view.to_camera(
-        &Bounds::new(target - 1.0, target + 1.0),
-        w as f32 / h as f32,
-    );
+    let camera = tile_camera(input, &data.header)?;
     let mut tiles =
         smip::SmipTiles::from_data(data, &camera).ok_or_else(|| bad("no S-MIP tiles".into()))?;
     let factor = match level {
