@@ -4050,6 +4050,22 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                 ));
             }
         }
+        // The frames by timestep, each once (FORMAT.md, section 11): what readers that
+        // step through a data set rely on, and what batches write.
+        if let Some(w) = m.frames.windows(2).find(|w| w[0].timestep >= w[1].timestep) {
+            check.problems.push(if w[0].timestep == w[1].timestep {
+                format!(
+                    "{name} lists timestep {} twice ({} and {})",
+                    w[0].timestep, w[0].file, w[1].file
+                )
+            } else {
+                format!(
+                    "{name} does not list its frames by timestep: {} (timestep {}) follows \
+                     {} (timestep {})",
+                    w[1].file, w[1].timestep, w[0].file, w[0].timestep
+                )
+            });
+        }
         // Frames a run with --keep-going could not convert are missing.
         for f in &m.failed {
             check.problems.push(format!(

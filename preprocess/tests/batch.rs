@@ -1320,6 +1320,39 @@ fn a_batch_directory_verifies_against_its_manifest() {
         m.frames[0].particles + 1
     );
     assert!(c.problems.iter().any(|p| p.ends_with(&want)), "{c:?}");
+    // Frames listed out of timestep order, or a timestep twice: named.
+    let mut reversed = read_manifest(&out).unwrap();
+    // (The particle count put right again, so that only the order is wrong.)
+    reversed.frames[0].particles -= 1;
+    reversed.frames.reverse();
+    std::fs::write(
+        out.join("dataset.json"),
+        serde_json::to_vec(&reversed).unwrap(),
+    )
+    .unwrap();
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    let (first, second) = (&reversed.frames[0], &reversed.frames[1]);
+    let want = format!(
+        "dataset.json does not list its frames by timestep: {} (timestep {}) follows {} \
+         (timestep {})",
+        second.file, second.timestep, first.file, first.timestep
+    );
+    assert!(c.problems.contains(&want), "{c:?}");
+    let mut twice = read_manifest(&out).unwrap();
+    twice.frames.reverse();
+    twice.frames[1] = twice.frames[0].clone();
+    std::fs::write(
+        out.join("dataset.json"),
+        serde_json::to_vec(&twice).unwrap(),
+    )
+    .unwrap();
+    let c = verify_dir(&out, &NoProgress).unwrap();
+    let f = &twice.frames[0];
+    let want = format!(
+        "dataset.json lists timestep {} twice ({} and {})",
+        f.timestep, f.file, f.file
+    );
+    assert!(c.problems.contains(&want), "{c:?}");
     // Shards, not merged: checked through their manifests.
     let sharded = dir.path().join("sharded");
     for i in 0..2 {
