@@ -331,8 +331,9 @@ fn main() {
     // bit 0 reseals mutated ones).
     let sndfs = Path::new("corpus/sndf_file");
     std::fs::create_dir_all(sndfs).unwrap();
+    // Up to a quarter of the rays per bin: a texel's four bins add up to at most its rays.
     let bin = |i: usize, rays: f32| {
-        let count = (i % 5) as f32 / 4.0 * rays;
+        let count = (i % 5) as f32 / 16.0 * rays;
         [0.5 * count, 0.25 * count, 0.125 * count, count]
     };
     let image = SndfData {
