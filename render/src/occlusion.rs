@@ -180,7 +180,8 @@ impl OcclusionBuffer {
             .iter()
             .map(|&(w, h)| vec![f32::INFINITY; w as usize * h as usize])
             .collect();
-        let p = camera.jittered_clip_from_view(viewport, glam::Vec2::ZERO);
+        let clip_from_view = camera.jittered_clip_from_view(viewport, glam::Vec2::ZERO);
+        let p = &clip_from_view;
         let (sx, sy) = (p.x_axis.x, p.y_axis.y);
         let perspective = camera.projection == Projection::Perspective;
         let ray_x = (0..width)
@@ -212,7 +213,7 @@ impl OcclusionBuffer {
             levels,
             dims,
             clip_from_world: camera.clip_from_world(viewport, glam::Vec2::ZERO),
-            clip_from_view: camera.jittered_clip_from_view(viewport, glam::Vec2::ZERO),
+            clip_from_view,
             view_from_world: camera.view_from_world(),
             eye: camera.eye(),
             axes: [camera.right(), camera.up(), camera.back()],

@@ -144,6 +144,20 @@ pub struct SmipFrame {
 }
 
 impl SmipFrame {
+    /// The frame of a file's tiles `t` (header `h`), seen through `camera` (its view).
+    fn of_file(h: &SndfHeader, t: &SndfTiles, camera: &Camera) -> SmipFrame {
+        SmipFrame {
+            azimuth_deg: camera.azimuth_deg,
+            elevation_deg: camera.elevation_deg,
+            fov_y_deg: camera.fov_y_deg,
+            texel0: t.texel0,
+            origin: t.origin,
+            bins: h.bins,
+            binning: Binning::from_name(&h.binning).unwrap_or_default(),
+            content: h.source.clone().unwrap_or_default(),
+        }
+    }
+
     /// The frame of an orthographic view of `width × height` pixels: level 0 aligned with
     /// its pixels, `2^-k` of their size for the smallest `k` at which a sphere of
     /// `min_radius` covers at least `samples_per_sphere` texels.
@@ -1112,7 +1126,7 @@ impl SmipTiles {
     /// their weights (one level, or two blended), for the tiles a header `h` describes
     /// (its display level as the bias); `None` for a file of one image.
     pub fn view_levels(
-        h: &mdlod_format::sndf::SndfHeader,
+        h: &SndfHeader,
         camera: &Camera,
         width: u32,
         height: u32,
@@ -1120,16 +1134,7 @@ impl SmipTiles {
         let Some(t) = h.smip.as_ref() else {
             return Ok(None);
         };
-        let frame = SmipFrame {
-            azimuth_deg: camera.azimuth_deg,
-            elevation_deg: camera.elevation_deg,
-            fov_y_deg: camera.fov_y_deg,
-            texel0: t.texel0,
-            origin: t.origin,
-            bins: h.bins,
-            binning: Binning::from_name(&h.binning).unwrap_or_default(),
-            content: h.source.clone().unwrap_or_default(),
-        };
+        let frame = SmipFrame::of_file(h, t, camera);
         let plans = plan_view(&frame, h.display_level.unwrap_or(0), camera, width, height)?;
         Ok(Some(plans.iter().map(|p| (p.level, p.weight)).collect()))
     }
@@ -1158,16 +1163,7 @@ impl SmipTiles {
             })
             .collect();
         Some(SmipTiles {
-            frame: SmipFrame {
-                azimuth_deg: camera.azimuth_deg,
-                elevation_deg: camera.elevation_deg,
-                fov_y_deg: camera.fov_y_deg,
-                texel0: t.texel0,
-                origin: t.origin,
-                bins: d.header.bins,
-                binning: Binning::from_name(&d.header.binning).unwrap_or_default(),
-                content: d.header.source.clone().unwrap_or_default(),
-            },
+            frame: SmipFrame::of_file(&d.header, t, camera),
             level_bias: d.header.display_level.unwrap_or(0),
             tiles,
         })

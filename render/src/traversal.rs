@@ -394,27 +394,11 @@ impl Projector {
 
     /// Diameter in pixels of the sphere around the node's bounding box.
     pub fn size_px(&self, n: &NodeRecord) -> f32 {
-        let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
-        let r = half_diagonal(max - min);
-        match self.projection {
-            Projection::Orthographic => 2.0 * r * self.scale,
-            Projection::Perspective => {
-                let depth = -self
-                    .view_from_world
-                    .transform_point3(min * 0.5 + max * 0.5)
-                    .z;
-                let nearest = depth - r;
-                if nearest <= self.near.max(0.0) {
-                    f32::INFINITY
-                } else {
-                    2.0 * r * self.scale / nearest
-                }
-            }
-        }
+        self.size_and_near(n).0
     }
 
     /// [`Self::size_px`] and [`Self::near_depth`] together, from one transform of the
-    /// box's centre (the same values, bit for bit).
+    /// box's centre.
     pub fn size_and_near(&self, n: &NodeRecord) -> (f32, f32) {
         let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
         let r = half_diagonal(max - min);
@@ -434,13 +418,7 @@ impl Projector {
     /// Distance along the view direction to the near side of the sphere around the
     /// node's bounding box: the order in which the occlusion traversal visits nodes.
     pub fn near_depth(&self, n: &NodeRecord) -> f32 {
-        let (min, max) = (Vec3::from(n.bounds_min), Vec3::from(n.bounds_max));
-        let r = half_diagonal(max - min);
-        -self
-            .view_from_world
-            .transform_point3(min * 0.5 + max * 0.5)
-            .z
-            - r
+        self.size_and_near(n).1
     }
 
     /// True when the node's bounding box may intersect the view frustum.
@@ -1925,39 +1903,6 @@ mod tests {
         let empty = DrawList::default().batches(10, 10);
         assert_eq!(empty.len(), 1);
         assert!(empty[0].ranges.is_empty());
-    }
-
-    /// The walk takes a node's projected size and near depth from one transform: the
-    /// same bits as the two separate measures, for boxes in front of, around and behind
-    /// the eye, in both projections.
-    #[test]
-    fn size_and_near_depth_together_are_the_separate_measures() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
-        for projection in [Projection::Perspective, Projection::Orthographic] {
-            let camera = Camera {
-                projection,
-                ..Default::default()
-            };
-            let proj = Projector::new(&camera, [640, 360]);
-            for _ in 0..10_000 {
-                let centre = [0; 3].map(|_| (next() - 0.5) * 40.0);
-                let half = [0; 3].map(|_| next() * next() * 6.0);
-                let node = NodeRecord {
-                    bounds_min: [0, 1, 2].map(|k| centre[k] - half[k]),
-                    bounds_max: [0, 1, 2].map(|k| centre[k] + half[k]),
-                    ..bytemuck::Zeroable::zeroed()
-                };
-                let (size, near) = proj.size_and_near(&node);
-                assert_eq!(size.to_bits(), proj.size_px(&node).to_bits(), "{node:?}");
-                assert_eq!(near.to_bits(), proj.near_depth(&node).to_bits(), "{node:?}");
-            }
-        }
     }
 
     /// The heap key orders by depth exactly as `f32::total_cmp`, then by id.
