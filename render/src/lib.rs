@@ -1480,18 +1480,25 @@ fn undrawable(file: &MdlodFile, fitted: &Bounds, view: &ViewSpec, e: RenderError
     let RenderError::InvalidOptions(message) = &e else {
         return e;
     };
-    let (min, max) = (fitted.min, fitted.max);
     if matches!(view, ViewSpec::Camera(_)) || drawable_bounds(fitted) {
         return e;
     }
     RenderError::Data {
         path: file.path().to_path_buf(),
         message: format!(
-            "the data's bounds, [{:e}, {:e}, {:e}] to [{:e}, {:e}, {:e}], span more than \
-             single precision can draw: {message}",
-            min.x, min.y, min.z, max.x, max.y, max.z
+            "the data's bounds, {}, span more than single precision can draw: {message}",
+            bounds_text(fitted)
         ),
     }
+}
+
+/// Bounds as messages give them: `[x, y, z] to [x, y, z]`, in exponent form.
+pub fn bounds_text(b: &Bounds) -> String {
+    let (min, max) = (b.min, b.max);
+    format!(
+        "[{:e}, {:e}, {:e}] to [{:e}, {:e}, {:e}]",
+        min.x, min.y, min.z, max.x, max.y, max.z
+    )
 }
 
 /// The camera `view` gives for `file` and an image of `width` × `height`.

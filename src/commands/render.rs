@@ -4542,16 +4542,10 @@ fn render_frames(
         // (only a damaged frame file holds such bounds), not of options never given.
         mdlod_render::RenderError::InvalidOptions(m) if !mdlod_render::drawable_bounds(&bounds) => {
             anyhow::anyhow!(
-                "{}: the frames' data spans [{:e}, {:e}, {:e}] to [{:e}, {:e}, {:e}], more \
-                 than single precision can draw (a damaged frame file? `mdlod verify {}` \
-                 checks every frame): {m}",
+                "{}: the frames' data spans {}, more than single precision can draw (a \
+                 damaged frame file? `mdlod verify {}` checks every frame): {m}",
                 dir.display(),
-                bounds.min.x,
-                bounds.min.y,
-                bounds.min.z,
-                bounds.max.x,
-                bounds.max.y,
-                bounds.max.z,
+                mdlod_render::bounds_text(&bounds),
                 dir.display()
             )
         }
