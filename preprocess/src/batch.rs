@@ -530,6 +530,10 @@ pub struct Redone {
     /// The settings changed (a build option, a radius, the attribute, renames, the
     /// columns).
     pub settings: usize,
+    /// No manifest records how the frame file was built (a run killed within a second
+    /// of finishing it, before it was listed): converted again, as the file alone cannot
+    /// say which renames, wrapping or columns it was read with.
+    pub unrecorded: usize,
     /// Which settings differed, over those frames.
     pub changed: SettingsChanged,
 }
@@ -1211,6 +1215,60 @@ pub fn is_shard_manifest(name: &str) -> bool {
     name.starts_with("dataset.shard-") && name.ends_with(".json")
 }
 
+/// Where a run keeps the records of frame files its manifest does not list (frames it
+/// is about to convert again, frame files of other inputs), so that a rerun still knows
+/// how they were built if this run stops before it replaces them: hidden, one per
+/// manifest (`.dataset.records.json`, `.dataset.shard-I-of-N.records.json`).
+fn side_records_name(shard: Option<(u32, u32)>) -> String {
+    format!(
+        ".{}",
+        manifest_name(shard).replace(".json", ".records.json")
+    )
+}
+
+/// Writes the records of `known` that `manifest` (about to replace this run's manifest)
+/// does not list, of frame files in `out_dir` as they are now (file name and checksum),
+/// to [`side_records_name`]: a frame about to be converted again keeps its record until
+/// it is, and a frame file of inputs this run was not given keeps its record for a run
+/// over them. Without them a rerun converts such frames again ([`Redone::unrecorded`]).
+fn keep_side_records(
+    out_dir: &Path,
+    shard: Option<(u32, u32)>,
+    known: &std::collections::HashMap<(String, String), FrameEntry>,
+    manifest: &Manifest,
+) -> Result<(), BatchError> {
+    let listed: std::collections::HashSet<(&String, &String)> = manifest
+        .frames
+        .iter()
+        .chain(&manifest.gone)
+        .chain(&manifest.unlisted)
+        .map(|f| (&f.file, &f.checksum))
+        .collect();
+    let mut keep: Vec<&FrameEntry> = known
+        .values()
+        .filter(|f| !listed.contains(&(&f.file, &f.checksum)))
+        .filter(|f| frame_file_number(&f.file).is_some())
+        .filter(|f| {
+            MdlodFile::open_sparse(out_dir.join(&f.file))
+                .is_ok_and(|m| format!("{:016x}", m.header().section_table_checksum) == f.checksum)
+        })
+        .collect();
+    keep.sort_by(|a, b| (a.timestep, &a.checksum).cmp(&(b.timestep, &b.checksum)));
+    let path = out_dir.join(side_records_name(shard));
+    if keep.is_empty() {
+        return match std::fs::remove_file(&path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(io(&path)(e)),
+            _ => Ok(()),
+        };
+    }
+    write_json(&path, &keep)
+}
+
+/// Whether `name` is a file of [`side_records_name`].
+fn is_side_records(name: &str) -> bool {
+    name.starts_with(".dataset") && name.ends_with(".records.json")
+}
+
 /// `(I, N)` of a shard manifest's name (`dataset.shard-I-of-N.json`).
 fn shard_of(name: &str) -> Option<(u32, u32)> {
     let rest = name.strip_prefix("dataset.shard-")?.strip_suffix(".json")?;
@@ -1454,6 +1512,17 @@ fn recorded_frames(out_dir: &Path) -> std::collections::HashMap<(String, String)
     };
     for e in dir.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
+        if is_side_records(&name) {
+            let records = read_manifest_bytes(&e.path())
+                .ok()
+                .and_then(|t| serde_json::from_slice::<Vec<FrameEntry>>(&t).ok());
+            for f in records.into_iter().flatten() {
+                known
+                    .entry((f.file.clone(), f.checksum.clone()))
+                    .or_insert(f);
+            }
+            continue;
+        }
         if !(name == MANIFEST || name == PREVIOUS_MANIFEST || is_shard_manifest(&name)) {
             continue;
         }
@@ -1472,10 +1541,13 @@ fn recorded_frames(out_dir: &Path) -> std::collections::HashMap<(String, String)
 
 /// The column names and radius overrides each recorded frame was converted with
 /// ([`recorded_frames`]), by file name and checksum.
-fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String), Recorded> {
-    recorded_frames(out_dir)
-        .into_iter()
+fn recorded_entries(
+    frames: &std::collections::HashMap<(String, String), FrameEntry>,
+) -> std::collections::HashMap<(String, String), Recorded> {
+    frames
+        .iter()
         .map(|(key, f)| {
+            let f = f.clone();
             let r = Recorded {
                 source: f.source,
                 columns: f.columns,
@@ -1485,7 +1557,7 @@ fn recorded_entries(out_dir: &Path) -> std::collections::HashMap<(String, String
                 species_column: f.species_column,
                 wrap: f.wrap,
             };
-            (key, r)
+            (key.clone(), r)
         })
         .collect()
 }
@@ -2587,7 +2659,8 @@ pub fn batch(
             .then(|| opts.read.columns.clone())
             .flatten()
     };
-    let known = recorded_entries(out_dir);
+    let known_frames = recorded_frames(out_dir);
+    let known = recorded_entries(&known_frames);
     let mut redone = Redone::default();
     // Outputs whose input changed, to be compared by their frames' bytes.
     let mut unsure = Vec::new();
@@ -2623,32 +2696,37 @@ pub fn batch(
                 frame_file_name(job.timestep),
                 format!("{:016x}", f.header().section_table_checksum),
             ));
-            let same_columns = job.format != InputFormat::LammpsBinary
-                || recorded.is_some_and(|r| r.columns == columns);
+            // A frame file no manifest records (a run killed within a second of
+            // finishing it, before it listed it) is converted again: the file alone
+            // cannot say which renames, wrapping or columns it was read with.
+            let Some(recorded) = recorded else {
+                redone.unrecorded += 1;
+                return Verdict::Redo;
+            };
+            let same_columns =
+                job.format != InputFormat::LammpsBinary || recorded.columns == columns;
             // Renames change the file: a frame converted with others is converted again.
-            // Without a record of them (a frame the manifest does not list: a run over
-            // other inputs rewrote it), the file's own species tell: a frame converted
+            // A record without them (converted without renames, or listed by a version
+            // that recorded none): the file's own species tell, as a frame converted
             // without the renames asked for now still holds a species of an old name.
             let renames = &opts.convert.species_names;
-            let same_names = match recorded.and_then(|r| r.species_names.as_ref()) {
+            let same_names = match recorded.species_names.as_ref() {
                 Some(names) => names == renames,
                 None => renames.iter().all(|(old, new)| {
                     let species = &f.metadata().species;
                     species.iter().all(|s| &s.name != old) && species.iter().any(|s| &s.name == new)
                 }),
             };
-            // So does another choice of size column (a frame listed by no manifest was
-            // converted with the default).
-            let same_sizes = recorded.and_then(|r| r.sizes.clone()) == opts.read.sizes.record();
+            // So does another choice of size column.
+            let same_sizes = recorded.sizes == opts.read.sizes.record();
             // And another species column.
-            let same_species_column = recorded.and_then(|r| r.species_column.as_ref())
-                == opts.read.species_column.as_ref();
-            let same_wrap = recorded.is_some_and(|r| r.wrap) == opts.read.wrap;
+            let same_species_column =
+                recorded.species_column.as_ref() == opts.read.species_column.as_ref();
+            let same_wrap = recorded.wrap == opts.read.wrap;
             let own = f.metadata().source.as_ref();
             // The source as the manifest lists it: a frame kept by its bytes is listed
             // with the input's size and time then, so the next rerun need not read it.
-            let listed = recorded
-                .map(|r| &r.source)
+            let listed = Some(&recorded.source)
                 .filter(|l| l.bytes.is_some() && own.is_some_and(|o| o.bytes == l.bytes));
             let source = if own.is_some_and(|s| same_source(s, &want)) {
                 None
@@ -2688,7 +2766,7 @@ pub fn batch(
                 &f,
                 &opts.convert,
                 job.attribute.as_deref(),
-                recorded.and_then(|r| r.radii.as_deref()),
+                recorded.radii.as_deref(),
                 move || if other { None } else { given() },
             ) {
                 changed |= c;
@@ -2885,6 +2963,12 @@ pub fn batch(
             })?;
     }
     let previous = read_manifest_bytes(&manifest_path).map_err(|e| e.kind());
+    keep_side_records(
+        out_dir,
+        opts.shard,
+        &known_frames,
+        &manifest.lock().unwrap_or_else(|e| e.into_inner()),
+    )?;
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
     // A shard that converts anything outdates the merged manifest of an earlier merge
     // (its checksums, its frames' sources): moved aside before the first frame changes,

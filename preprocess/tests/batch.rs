@@ -325,10 +325,11 @@ fn merge_refuses_a_shard_that_has_not_finished() {
         e.contains("dataset.shard-1-of-2.json") && e.contains("lists 2 of the shard's 3 frames"),
         "{e}"
     );
-    // Rerunning the shard completes it, and the merge goes through.
+    // Rerunning the shard completes it (the frame no manifest records converted
+    // again), and the merge goes through.
     let o = shard(1, 2);
     let r = batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
-    assert_eq!((r.converted, r.skipped), (0, 3));
+    assert_eq!((r.converted, r.skipped, r.redone.unrecorded), (1, 2, 1));
     let merged = merge(&out).unwrap();
     assert_eq!((merged.frames.len(), merged.expected_frames), (6, Some(6)));
 }
@@ -2188,6 +2189,70 @@ fn merge_refuses_shards_with_different_renames() {
     );
 }
 
+/// A frame file no manifest records (a run killed within a second of finishing it,
+/// before it listed it) is converted again: the file alone cannot say which renames or
+/// wrapping it was read with, and a rerun without the killed run's renames kept frames
+/// holding them, which `verify` passed.
+#[test]
+fn frames_no_manifest_records_are_converted_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    let listed = std::fs::read(out.join("dataset.json")).unwrap();
+    let mut renamed = opts();
+    renamed.convert.species_names = vec![("1".into(), "Cu".into())];
+    let r = batch(std::slice::from_ref(&src), &out, &renamed, &NoProgress).unwrap();
+    assert_eq!((r.converted, r.redone.settings), (6, 6));
+    // As if killed before it listed a frame: the manifest is the first run's, whose
+    // records are of files since replaced.
+    std::fs::write(out.join("dataset.json"), &listed).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!(
+        (
+            r.converted,
+            r.skipped,
+            r.redone.unrecorded,
+            r.redone.settings
+        ),
+        (6, 0, 6, 0)
+    );
+    let m = read_manifest(&out).unwrap();
+    check_manifest(&out, &m);
+    for f in &m.frames {
+        let file = MdlodFile::open(out.join(&f.file)).unwrap();
+        let names: Vec<&str> = file
+            .metadata()
+            .species
+            .iter()
+            .map(|s| s.name.as_str())
+            .collect();
+        assert_eq!(names, ["1"], "{}", f.file);
+    }
+    // Listed now: the next run keeps them all.
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 6));
+}
+
+/// Frame files of inputs a run was not given keep their records beside its manifest
+/// (`.dataset.records.json`), which lists only its own: a run over the whole set again
+/// keeps them, where it converted them again for want of a record.
+#[test]
+fn frames_of_inputs_left_out_of_a_run_keep_their_records() {
+    let dir = tempfile::tempdir().unwrap();
+    let all = file_set(&dir.path().join("src"));
+    let out = dir.path().join("out");
+    batch(&all, &out, &opts(), &NoProgress).unwrap();
+    let r = batch(&all[..3], &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped, r.strays.len()), (0, 3, 3));
+    assert_eq!(read_manifest(&out).unwrap().frames.len(), 3);
+    assert!(out.join(".dataset.records.json").exists());
+    let r = batch(&all, &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped, r.redone.unrecorded), (0, 6, 0));
+    // Nothing left unlisted: no records beside the manifest.
+    assert!(!out.join(".dataset.records.json").exists());
+}
+
 /// A rename of a species no frame can hold (a type number where the input names
 /// elements, an element where it names type numbers) is refused before any frame is
 /// converted, as a radius for one is; it did nothing, or failed after every frame.
@@ -3040,35 +3105,6 @@ fn a_second_run_of_the_same_shard_is_refused_while_the_first_runs() {
     let e = batch(std::slice::from_ref(&src), &out, &shard(1, 2), &NoProgress).unwrap_err();
     assert!(e.to_string().contains("(pid 4242 on node17)"), "{e}");
     drop(first);
-}
-
-/// Frames on disk that the manifest does not list (a run over other inputs rewrote it)
-/// were built with renames the manifest no longer records: their species tell. Renamed
-/// as now, they are kept; built without the rename, or with another, converted again.
-#[test]
-fn unlisted_frames_keep_their_renames_where_their_species_show_them() {
-    let dir = tempfile::tempdir().unwrap();
-    let src = input(dir.path());
-    let out = dir.path().join("out");
-    let mut renamed = opts();
-    renamed.convert.species_names = vec![("1".into(), "Cu".into())];
-    let r = batch(std::slice::from_ref(&src), &out, &renamed, &NoProgress).unwrap();
-    assert_eq!(r.converted, 6);
-    std::fs::remove_file(out.join("dataset.json")).unwrap();
-    let r = batch(std::slice::from_ref(&src), &out, &renamed, &NoProgress).unwrap();
-    assert_eq!((r.converted, r.skipped, r.redone.settings), (0, 6, 0));
-    // Another rename: every frame again.
-    std::fs::remove_file(out.join("dataset.json")).unwrap();
-    let mut other = opts();
-    other.convert.species_names = vec![("1".into(), "Ni".into())];
-    let r = batch(std::slice::from_ref(&src), &out, &other, &NoProgress).unwrap();
-    assert_eq!((r.converted, r.redone.settings), (6, 6));
-    // Frames built without renames, unlisted, asked with one: again.
-    let plain = dir.path().join("plain");
-    batch(std::slice::from_ref(&src), &plain, &opts(), &NoProgress).unwrap();
-    std::fs::remove_file(plain.join("dataset.json")).unwrap();
-    let r = batch(std::slice::from_ref(&src), &plain, &renamed, &NoProgress).unwrap();
-    assert_eq!((r.converted, r.redone.settings), (6, 6));
 }
 
 fn read_manifest_at(path: &Path) -> Manifest {

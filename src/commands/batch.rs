@@ -443,7 +443,7 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         ),
     }
     let again = report.redone;
-    let n = again.source + again.settings;
+    let n = again.source + again.settings + again.unrecorded;
     // (Frames found outdated and then cut short are left for a rerun, not converted.)
     if n > 0 && report.converted > 0 {
         let mut why = Vec::new();
@@ -455,6 +455,13 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
                 "{} built with other settings ({})",
                 again.settings,
                 again.changed.names().join(", ")
+            ));
+        }
+        if again.unrecorded > 0 {
+            why.push(format!(
+                "{} that no manifest records (a run stopped before it listed {})",
+                again.unrecorded,
+                if again.unrecorded == 1 { "it" } else { "them" }
             ));
         }
         let (s, verb) = if n == 1 { ("", "was") } else { ("s", "were") };
