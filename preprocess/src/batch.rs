@@ -661,6 +661,8 @@ pub enum BatchError {
         /// What may have caused it, and the way out.
         why: String,
     },
+    #[error("the frames of two runs would interleave: {what}: a run restarted from an earlier timestep than its last frame's? --duplicate-timesteps last keeps the restart's frames (from timestep {restart} on, leaving out the earlier run's from there), first keeps every frame in timestep order")]
+    Interleaved { what: String, restart: u64 },
     #[error("{}: {message}", path.display())]
     Manifest { path: PathBuf, message: String },
     /// An input cut short that is not the newest ([`newest_inputs`]): a run writes one
@@ -1786,6 +1788,74 @@ fn remove_leftovers(
     Ok(())
 }
 
+/// The first sign, in `jobs` (in the order of the inputs and their frames), of two runs
+/// whose frames would interleave by timestep with none in common: a frame of an input
+/// at a timestep below the one before it (a run restarted into the same dump), or two
+/// inputs whose timesteps overlap without meeting (a restart written to a file of its
+/// own, from a timestep between two the first run wrote). Inputs that merely follow one
+/// another, in whatever order their names give, frames numbered by their place (no
+/// timestep of their own) and a last frame cut short are no sign.
+fn interleaved_runs(jobs: &[Job<'_>], place: &dyn Fn(&Job<'_>) -> String) -> Option<BatchError> {
+    // (Not a dump's last frame cut inside a line, whose timestep may be cut short too:
+    // it is left for a rerun.)
+    let timed: Vec<&Job<'_>> = jobs
+        .iter()
+        .filter(|j| j.own_timestep.is_some())
+        .filter(|j| !(j.last_of_input && j.dump.is_some_and(DumpFile::ends_mid_line)))
+        .collect();
+    for w in timed.windows(2) {
+        if w[0].input == w[1].input && w[1].timestep < w[0].timestep {
+            return Some(BatchError::Interleaved {
+                what: format!(
+                    "{} at timestep {} follows {} at timestep {}",
+                    place(w[1]),
+                    w[1].timestep,
+                    place(w[0]),
+                    w[0].timestep
+                ),
+                restart: w[1].timestep,
+            });
+        }
+    }
+    // Each input's first and last frame by timestep, in the order of the inputs.
+    let mut spans: Vec<(&Job<'_>, &Job<'_>)> = Vec::new();
+    for j in timed {
+        match spans.last_mut() {
+            Some((lo, hi)) if lo.input == j.input => {
+                if j.timestep < lo.timestep {
+                    *lo = j;
+                }
+                if j.timestep > hi.timestep {
+                    *hi = j;
+                }
+            }
+            _ => spans.push((j, j)),
+        }
+    }
+    // By first timestep: a span starting before the latest end so far overlaps it (a
+    // start equal to another's is a timestep twice, said before this).
+    spans.sort_by_key(|(lo, _)| lo.timestep);
+    let mut latest: Option<&Job<'_>> = None;
+    for (lo, hi) in spans {
+        if let Some(end) = latest.filter(|e| lo.timestep < e.timestep) {
+            return Some(BatchError::Interleaved {
+                what: format!(
+                    "{} at timestep {} falls before {} at timestep {}",
+                    place(lo),
+                    lo.timestep,
+                    place(end),
+                    end.timestep
+                ),
+                restart: lo.timestep,
+            });
+        }
+        if latest.is_none_or(|e| hi.timestep > e.timestep) {
+            latest = Some(hi);
+        }
+    }
+    None
+}
+
 /// The inputs with file-name patterns (`dump.*.bin`) expanded where the shell left
 /// them (quoted in a job script): `*` and `?` in the last component, matching files of
 /// its directory, in natural order (see [`natural_cmp`]). A path that exists is taken as
@@ -2447,6 +2517,11 @@ pub fn batch(
         }
         jobs = kept;
     }
+    // Two runs' frames that would interleave with no timestep in common (a restart from
+    // a timestep between two the first run wrote): refused as twins are, unless asked.
+    let interleaved = (opts.duplicates == Duplicates::Error)
+        .then(|| interleaved_runs(&jobs, &place))
+        .flatten();
     // Stable: frames of one timestep stay in the order of the inputs and their frames.
     jobs.sort_by_key(|j| j.timestep);
     if opts.duplicates == Duplicates::Error {
@@ -2499,6 +2574,9 @@ pub fn batch(
                 second: place(&w[1]),
                 why,
             });
+        }
+        if let Some(e) = interleaved {
+            return Err(e);
         }
     } else {
         let mut kept: Vec<Job<'_>> = Vec::with_capacity(jobs.len());

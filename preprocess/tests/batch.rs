@@ -1275,6 +1275,84 @@ fn duplicate_timesteps_are_refused_or_resolved_as_asked() {
     );
 }
 
+/// A restart from a timestep between two the first run wrote shares no timestep with
+/// it, so no frame appears twice, yet the two runs' frames would interleave (800, 850,
+/// 900, 950, ... flipping between runs): refused by default, in one dump and across two,
+/// naming the frames; `last` keeps the restart's frames from its first timestep on,
+/// `first` every frame. Inputs that merely follow one another are no restart, in
+/// whatever order their names give.
+#[test]
+fn runs_whose_frames_would_interleave_are_refused_by_default() {
+    use mdlod_preprocess::batch::Duplicates;
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let start = text.find("ITEM: TIMESTEP").unwrap();
+    let end = start + text[start..].find("ITEM: TIME\n").unwrap();
+    let first_frame = &text[start..end];
+    let step_line = first_frame.lines().nth(1).unwrap();
+    let dump = |name: &str, steps: &[u64]| {
+        let mut d = String::new();
+        for t in steps {
+            d.push_str(&first_frame.replacen(
+                &format!("ITEM: TIMESTEP\n{step_line}\n"),
+                &format!("ITEM: TIMESTEP\n{t}\n"),
+                1,
+            ));
+        }
+        let p = dir.path().join(name);
+        std::fs::write(&p, d).unwrap();
+        p
+    };
+    let first = dump("run.1.dump", &[0, 100, 200, 300]);
+    let restart = dump("run.2.dump", &[150, 250, 350]);
+    let one = dump("one.dump", &[0, 100, 200, 300, 150, 250, 350]);
+    let refused = |inputs: &[PathBuf], says: &str| {
+        let e = batch(inputs, &dir.path().join("e"), &opts(), &NoProgress)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("the frames of two runs would interleave")
+                && e.contains(says)
+                && e.contains(
+                    "--duplicate-timesteps last keeps the restart's frames (from timestep 150 on"
+                ),
+            "{e}"
+        );
+    };
+    refused(
+        &[first.clone(), restart.clone()],
+        "run.2.dump frame 0 at timestep 150 falls before ",
+    );
+    refused(
+        std::slice::from_ref(&one),
+        "one.dump frame 4 at timestep 150 follows ",
+    );
+    for (policy, kept) in [
+        (Duplicates::Last, vec![0, 100, 150, 250, 350]),
+        (Duplicates::First, vec![0, 100, 150, 200, 250, 300, 350]),
+    ] {
+        let o = BatchOptions {
+            duplicates: policy,
+            ..opts()
+        };
+        let out = dir.path().join(format!("{policy:?}"));
+        batch(&[first.clone(), restart.clone()], &out, &o, &NoProgress).unwrap();
+        let m = read_manifest(&out).unwrap();
+        let steps: Vec<u64> = m.frames.iter().map(|f| f.timestep).collect();
+        assert_eq!(steps, kept, "{policy:?}");
+    }
+    // Runs that follow one another, named against their order: converted.
+    let later = dump("a.dump", &[400, 500]);
+    let r = batch(
+        &[later, first],
+        &dir.path().join("ok"),
+        &opts(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!(r.converted, 6);
+}
+
 /// A batch directory is verified against its manifest: every listed frame there, whole
 /// and the one described; what is missing, replaced or unlisted is named; shards not
 /// yet merged are checked through their own manifests.
