@@ -2037,6 +2037,7 @@ pub fn convert_chunked(
                 far,
                 metadata.simulation_box.as_ref(),
                 Some(&counts),
+                &options.radii,
             ));
             crate::convert::drop_default_radius_note_said_twice(&mut notes);
             notes.extend(crate::convert::delta_n_note(params.delta_n, levels));

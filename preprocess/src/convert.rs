@@ -506,6 +506,7 @@ pub fn convert_frame_with(
         far,
         frame.simulation_box.as_ref(),
         Some(&crate::species::counts(species.len(), species_index)),
+        &options.radii,
     ));
     drop_default_radius_note_said_twice(&mut notes);
     notes.extend(delta_n_note(h.params.delta_n, h.level_count()));
@@ -727,20 +728,35 @@ const UNDERSIZED_SPACING: f64 = 0.15;
 
 /// The particles' mean spacing: the volume, area or length their centres' box `lo..hi`
 /// spans, per particle, to the power of its dimension; `None` for fewer than two or no
-/// extent.
+/// extent. The dimension is the most axes whose extents each reach the spacing they
+/// give: a sheet relaxed a thousandth of an ångström off its plane spans an area, not a
+/// volume (over its volume its spacing came out 0.22 where its atoms stand 2.5 apart).
 fn mean_spacing(lo: [f32; 3], hi: [f32; 3], count: u64) -> Option<f64> {
     if count < 2 {
         return None;
     }
-    let extent: Vec<f64> = (0..3)
+    let mut extent: Vec<f64> = (0..3)
         .map(|k| f64::from(hi[k]) - f64::from(lo[k]))
         .collect();
-    let widest = extent.iter().copied().fold(0.0f64, f64::max);
+    extent.sort_by(|a, b| b.total_cmp(a));
+    let widest = extent[0];
     if !(widest.is_finite() && widest > 0.0) {
         return None;
     }
-    let spread: Vec<f64> = extent.into_iter().filter(|&e| e > 1e-6 * widest).collect();
-    Some((spread.iter().product::<f64>() / count as f64).powf(1.0 / spread.len() as f64))
+    (1..=3)
+        .rev()
+        .map(|d| {
+            let spread = &extent[..d];
+            (
+                spread,
+                (spread.iter().product::<f64>() / count as f64).powf(1.0 / d as f64),
+            )
+        })
+        .find(|(spread, spacing)| {
+            let narrowest = spread[spread.len() - 1];
+            spread.len() == 1 || (narrowest > 0.0 && narrowest >= *spacing)
+        })
+        .map(|(_, spacing)| spacing)
 }
 
 /// A note on species that took the default radius (named by type numbers or labels, no
@@ -751,15 +767,18 @@ fn undersized_note(
     hi: [f32; 3],
     count: u64,
     species: &[mdlod_format::meta::Species],
+    given_radii: &[(String, f32)],
 ) -> Option<String> {
     let spacing = mean_spacing(lo, hi, count)?;
     let default = crate::species::DEFAULT_RADIUS;
+    // (A radius given as --radius is the user's, even where it equals the default.)
     let small: Vec<&str> = species
         .iter()
         .filter(|s| {
             s.radius == default
                 && s.radius_range.is_none()
                 && crate::species::element(&s.name).is_none()
+                && !given_radii.iter().any(|(name, _)| name == &s.name)
         })
         .map(|s| s.name.as_str())
         .collect();
@@ -799,6 +818,9 @@ pub(crate) fn delta_n_note(asked: u32, levels: usize) -> Option<String> {
 /// read and stored) snaps them to a grid coarse against the particles' size (a galaxy
 /// zoom in comoving coordinates far from the origin), and particles far outside the box
 /// (lost atoms of a run that blew up), which the view's fit includes.
+// (Each argument is a fact of the frame the notes weigh; a struct would only name them
+// twice.)
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn position_notes(
     lo: [f32; 3],
     hi: [f32; 3],
@@ -807,10 +829,11 @@ pub(crate) fn position_notes(
     far: Option<FarOutside>,
     simulation_box: Option<&mdlod_format::meta::SimulationBox>,
     species_counts: Option<&[u64]>,
+    given_radii: &[(String, f32)],
 ) -> Vec<String> {
     let mut notes = Vec::new();
     notes.extend(oversized_note(lo, hi, count, species, species_counts));
-    notes.extend(undersized_note(lo, hi, count, species));
+    notes.extend(undersized_note(lo, hi, count, species, given_radii));
     notes.extend(crate::species::atom_name_notes(
         species.iter().map(|s| s.name.as_str()),
     ));
@@ -1918,7 +1941,9 @@ pub fn unkept_columns_note(
         .iter()
         .map(String::as_str)
         .filter(|c| {
-            !READ.contains(&c.to_ascii_lowercase().as_str())
+            // (An extended XYZ property of several columns names each `pos[0]`, ...)
+            let base = c.split_once('[').map_or(*c, |(b, _)| b);
+            !READ.contains(&base.to_ascii_lowercase().as_str())
                 && read.species_column.as_deref() != Some(*c)
         })
         .collect();
@@ -1960,6 +1985,27 @@ pub fn source_info(path: &Path, frame: u64) -> SourceInfo {
 
 #[cfg(test)]
 mod tests {
+    /// An extended XYZ file's positions (`pos[0]` to `pos[2]`) and sizes are read, so
+    /// only its other columns are named as not kept; none, none.
+    #[test]
+    fn columns_of_several_values_read_are_not_named_unkept() {
+        let read = crate::readers::ReadOptions::default();
+        let cols = |c: &[&str]| c.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let note = super::unkept_columns_note(
+            &cols(&["species", "pos[0]", "pos[1]", "pos[2]", "c_ke", "radius"]),
+            &read,
+        )
+        .unwrap();
+        assert!(
+            note.starts_with("the input's column c_ke is not kept"),
+            "{note}"
+        );
+        assert_eq!(
+            super::unkept_columns_note(&cols(&["species", "pos[0]", "pos[1]", "pos[2]"]), &read),
+            None
+        );
+    }
+
     /// Unwrapped coordinates reaching a fifth of a box length past a periodic face are
     /// noted with --wrap; along a fixed axis, or within a tenth, not.
     #[test]
@@ -2000,10 +2046,19 @@ mod tests {
                 beyond: 99.0,
                 farthest: None,
             };
-            super::position_notes([0.0; 3], [100.0; 3], 1000, &species, Some(far), None, None)
-                .into_iter()
-                .find(|n| n.contains("box lengths outside"))
-                .unwrap()
+            super::position_notes(
+                [0.0; 3],
+                [100.0; 3],
+                1000,
+                &species,
+                Some(far),
+                None,
+                None,
+                &[],
+            )
+            .into_iter()
+            .find(|n| n.contains("box lengths outside"))
+            .unwrap()
         };
         assert!(note(3).contains("lost atoms of a run that blew up?"));
         // A box of no width along an axis the particles spread along is noted; one they
@@ -2019,6 +2074,7 @@ mod tests {
                 None,
                 Some(&flat),
                 None,
+                &[],
             )
             .into_iter()
             .find(|n| n.contains("no width"))
@@ -2027,8 +2083,16 @@ mod tests {
         assert!(spread(5.0, 5.0).is_none());
         // A box past single precision's range is noted.
         let huge = mdlod_format::meta::SimulationBox::orthogonal([0.0; 3], [1e39, 10.0, 10.0]);
-        let notes =
-            super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&huge), None);
+        let notes = super::position_notes(
+            [0.0; 3],
+            [10.0; 3],
+            1000,
+            &species,
+            None,
+            Some(&huge),
+            None,
+            &[],
+        );
         assert!(
             notes
                 .iter()
@@ -2036,8 +2100,16 @@ mod tests {
             "{notes:?}"
         );
         let fine = mdlod_format::meta::SimulationBox::orthogonal([0.0; 3], [10.0; 3]);
-        let notes =
-            super::position_notes([0.0; 3], [10.0; 3], 1000, &species, None, Some(&fine), None);
+        let notes = super::position_notes(
+            [0.0; 3],
+            [10.0; 3],
+            1000,
+            &species,
+            None,
+            Some(&fine),
+            None,
+            &[],
+        );
         assert!(
             !notes.iter().any(|n| n.contains("the box reaches")),
             "{notes:?}"
@@ -2064,7 +2136,7 @@ mod tests {
                 .collect()
         };
         let ids = species((1..=1200).map(|i| i.to_string()).collect());
-        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &ids, None, None, None);
+        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &ids, None, None, None, &[]);
         assert!(
             notes
                 .iter()
@@ -2073,7 +2145,8 @@ mod tests {
             "{notes:?}"
         );
         let protein = species(vec!["N".into(), "CA".into(), "C".into(), "O".into()]);
-        let notes = super::position_notes([0.0; 3], [100.0; 3], 5000, &protein, None, None, None);
+        let notes =
+            super::position_notes([0.0; 3], [100.0; 3], 5000, &protein, None, None, None, &[]);
         assert!(
             notes.len() == 1 && notes[0].contains("--species-name CA=C"),
             "{notes:?}"
@@ -2099,7 +2172,7 @@ mod tests {
         let default = crate::species::DEFAULT_RADIUS;
         // 8000 beads in a 100³ box: 5 apart.
         let beads = species(&["1", "2", "PO4"], default);
-        let note = super::undersized_note([0.0; 3], [100.0; 3], 8000, &beads).expect("a note");
+        let note = super::undersized_note([0.0; 3], [100.0; 3], 8000, &beads, &[]).expect("a note");
         assert!(
             note.starts_with(
                 "species 1, 2, PO4: drawn at the default radius 0.5, 0.10 of the particles' \
@@ -2108,29 +2181,55 @@ mod tests {
             "{note}"
         );
         assert!(
-            super::position_notes([0.0; 3], [100.0; 3], 8000, &beads, None, None, None)
+            super::position_notes([0.0; 3], [100.0; 3], 8000, &beads, None, None, None, &[])
                 .iter()
                 .any(|n| n == &note)
         );
         // 2.5 apart, as atoms in metal units: drawn as they are.
         assert_eq!(
-            super::undersized_note([0.0; 3], [100.0; 3], 64_000, &beads),
+            super::undersized_note([0.0; 3], [100.0; 3], 64_000, &beads, &[]),
             None
         );
         // Elements keep their radii; a radius given is the user's.
         let elements = species(&["Na", "Cl"], default);
         assert_eq!(
-            super::undersized_note([0.0; 3], [100.0; 3], 8000, &elements),
+            super::undersized_note([0.0; 3], [100.0; 3], 8000, &elements, &[]),
             None
         );
         let given = species(&["1"], 0.6);
         assert_eq!(
-            super::undersized_note([0.0; 3], [100.0; 3], 8000, &given),
+            super::undersized_note([0.0; 3], [100.0; 3], 8000, &given, &[]),
             None
         );
-        // A flat sheet: its spacing over the area it spans.
-        let sheet = super::undersized_note([0.0; 3], [100.0, 100.0, 0.0], 400, &beads);
+        // Given, even at the default's value (`--radius 1=0.5`).
+        assert_eq!(
+            super::undersized_note(
+                [0.0; 3],
+                [100.0; 3],
+                8000,
+                &beads,
+                &[("1".into(), 0.5), ("2".into(), 0.5), ("PO4".into(), 0.5)]
+            ),
+            None
+        );
+        // A flat sheet: its spacing over the area it spans; so for a sheet relaxed a
+        // little off its plane (±0.001 over 100 units), which spanned 0.12 over its
+        // volume.
+        let sheet = super::undersized_note([0.0; 3], [100.0, 100.0, 0.0], 400, &beads, &[]);
         assert!(sheet.is_some_and(|n| n.contains("spacing (5.000")));
+        let relaxed =
+            super::undersized_note([0.0, 0.0, -0.001], [100.0, 100.0, 0.001], 400, &beads, &[]);
+        assert!(relaxed.is_some_and(|n| n.contains("spacing (5.000")));
+        // A slab thicker than its spacing is three-dimensional.
+        assert_eq!(
+            super::mean_spacing([0.0; 3], [100.0, 100.0, 10.0], 800_000),
+            Some(0.5)
+        );
+        // A line of beads in a thin tube: its length per bead.
+        assert_eq!(
+            super::mean_spacing([0.0; 3], [100.0, 0.01, 0.01], 100),
+            Some(1.0)
+        );
     }
 
     /// Ids past 65 536 apart are noted as ids that 16 bits cannot tell apart, ids past

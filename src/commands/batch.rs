@@ -32,8 +32,9 @@ pub struct Args {
     #[arg(long, value_name = "DIR", conflicts_with_all = ["inputs", "output", "shard"])]
     pub merge: Option<PathBuf>,
     /// Convert only shard I of N (0-based), e.g. 3/16.
-    #[arg(long, value_name = "I/N", allow_hyphen_values = true)]
-    pub shard: Option<String>,
+    #[arg(long, value_name = "I/N", allow_hyphen_values = true,
+          value_parser = |s: &str| parse_shard(s).map_err(|e| format!("{e:#}")))]
+    pub shard: Option<(u32, u32)>,
     /// Memory all concurrent conversions may use together (e.g. 4G; default: half of
     /// the memory this process may have: the machine's, or the Slurm job's allocation).
     #[arg(long, value_parser = parse_bytes, allow_hyphen_values = true)]
@@ -104,8 +105,8 @@ fn check_shard(i: u32, n: u32) -> Result<(u32, u32)> {
 
 /// The shard from the command line, else from a Slurm job array's environment.
 fn shard(args: &Args) -> Result<Option<(u32, u32)>> {
-    if let Some(s) = &args.shard {
-        return parse_shard(s).map(Some);
+    if let Some(s) = args.shard {
+        return Ok(Some(s));
     }
     slurm_shard(|name| std::env::var(name).ok())
 }

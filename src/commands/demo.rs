@@ -14,7 +14,8 @@ use mdlod_format::MdlodFile;
 )]
 pub struct Args {
     /// Number of particles to generate.
-    #[arg(long, short = 'n', default_value_t = 1_000_000)]
+    #[arg(long, short = 'n', default_value_t = 1_000_000,
+          value_parser = clap::value_parser!(u64).range(1..))]
     pub particles: u64,
     /// Where to put the generated dump and the .mdlod file.
     #[arg(long, default_value = "data/demo")]
@@ -22,6 +23,13 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if args.dir.exists() && !args.dir.is_dir() {
+        anyhow::bail!(
+            "--dir {}: exists and is not a directory (the demo writes its dump, .mdlod \
+             file and picture into a directory)",
+            args.dir.display()
+        );
+    }
     let dump = args.dir.join("crater.lammpstrj");
     let out = args.dir.join("crater.mdlod");
     let t = std::time::Instant::now();

@@ -2,7 +2,7 @@
 //! or raw arrays.
 
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mdlod_datasets::{write_lammps_dump, write_xyz, GenerateOptions, Kind};
@@ -38,6 +38,32 @@ pub struct Args {
     pub format: OutputFormat,
 }
 
+/// Refuses an output that is a file mdlod made from data (a `.mdlod` or `.sndf` file, a
+/// PNG given as `-o` by mistake, say after a copied command): the generated dump would
+/// replace it without a word, as `convert` and `sample` refuse to. A dump is replaced.
+fn refuse_replacing_made_files(output: &Path) -> Result<()> {
+    use std::io::Read;
+    let Ok(mut f) = mdlod_format::files::open(output) else {
+        return Ok(());
+    };
+    let mut head = Vec::with_capacity(8);
+    let _ = f.by_ref().take(8).read_to_end(&mut head);
+    let kind = if head[..] == mdlod_format::MAGIC[..] {
+        ".mdlod"
+    } else if head[..] == mdlod_format::sndf::SNDF_MAGIC[..] {
+        ".sndf"
+    } else if head[..] == b"\x89PNG\r\n\x1a\n"[..] {
+        "PNG"
+    } else {
+        return Ok(());
+    };
+    anyhow::bail!(
+        "-o {}: exists and is a {kind} file, which the generated dump would replace: give \
+         another name, or remove it first",
+        output.display()
+    )
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum OutputFormat {
     Lammps,
@@ -47,6 +73,7 @@ pub enum OutputFormat {
 
 pub fn run(args: Args) -> Result<()> {
     super::check_output("-o", &args.output, &[])?;
+    refuse_replacing_made_files(&args.output)?;
     // Before the output is created: a rejected count must not empty an existing file.
     if args.particles == 0 {
         anyhow::bail!("--particles 0 (must be at least 1)");

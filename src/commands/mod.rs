@@ -187,9 +187,16 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 }
 
 /// `--threads N`: a count of worker threads, at least 1.
+/// The most threads `--threads` starts: each takes a stack and a share of the memory
+/// limit, and 10^5 of them took minutes to start before any work.
+pub const MAX_THREADS: usize = 1024;
+
 pub fn parse_threads(s: &str) -> Result<usize, String> {
     match s.trim().parse::<usize>() {
         Ok(0) => Err("at least 1 thread (leave --threads out for one per core)".into()),
+        Ok(n) if n > MAX_THREADS => Err(format!(
+            "at most {MAX_THREADS} threads (leave --threads out for one per core)"
+        )),
         Ok(n) => Ok(n),
         Err(_) => Err(format!("{s:?} is no whole number of threads")),
     }

@@ -1393,13 +1393,19 @@ fn parse_numbers<T: std::str::FromStr, const N: usize>(
     <[T; N]>::try_from(v).map_err(|_| expected())
 }
 
-/// Parses a direction `X,Y,Z` (finite, not zero).
+/// Parses a direction `X,Y,Z` (finite, not zero). One of a length whose square single
+/// precision cannot hold (`1e20,0,0`, `1e-30,0,0`) is scaled to a largest component of
+/// 1, the same direction: its square overflowed or vanished, and the light with it.
 fn parse_direction(s: &str) -> Result<[f32; 3], String> {
     let d = parse_numbers::<f32, 3>(s, "X,Y,Z")?;
     if d.iter().any(|c| !c.is_finite()) || d.iter().all(|&c| c == 0.0) {
         return Err(format!(
             "{s:?}: a direction needs finite numbers, not all 0"
         ));
+    }
+    let largest = d.iter().fold(0.0f32, |m, c| m.max(c.abs()));
+    if !(1e-15..=1e15).contains(&largest) {
+        return Ok(d.map(|c| (f64::from(c) / f64::from(largest)) as f32));
     }
     Ok(d)
 }
@@ -2016,7 +2022,12 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         "T" | "TB" | "TIB" => 1 << 40,
         _ => return Err(format!("unknown unit in {s:?} (use K, M, G or T)")),
     };
-    let bytes = (v * mult as f64) as u64;
+    let exact = v * mult as f64;
+    // (A float's cast saturates: 2^64 and beyond would read as 16 EiB.)
+    if exact.is_nan() || exact >= u64::MAX as f64 {
+        return Err(format!("{s:?} is beyond any memory (at most 16 EiB)"));
+    }
+    let bytes = exact as u64;
     if bytes == 0 {
         return Err(format!("{s:?} leaves no room: give a size such as 512M"));
     }

@@ -115,7 +115,12 @@ pub(super) fn parse_light(s: &str) -> Result<(Vec3, [f32; 3])> {
             .map(mdlod_render::renderer::srgb_to_linear),
         None => [1.0; 3],
     };
-    Ok((Vec3::new(v[0], v[1], v[2]).normalize(), colour))
+    // Normalised in double precision: a direction such as 1e20,0,0 or 1e-30,0,0, whose
+    // square single precision cannot hold, is still the direction it says.
+    let unit = mdlod_render::glam::DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))
+        .normalize()
+        .as_vec3();
+    Ok((unit, colour))
 }
 
 /// Refuses options given on the command line that change nothing in the image the others
