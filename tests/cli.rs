@@ -11621,3 +11621,47 @@ fn batch_of_a_set_whose_newest_file_is_empty_counts_it_apart_from_the_frames() {
         "{out}"
     );
 }
+
+/// Values an audit of the command line found accepted wrongly: a demo refusing its
+/// particle count after it had emptied the last dump, `generate` replacing a converted
+/// file given as `-o`, a malformed `--shard` exiting as a failure rather than a command
+/// line that cannot be parsed (2), thread counts and sizes beyond any machine.
+#[test]
+fn values_no_command_can_use_are_refused_before_anything_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = dir.path().join("demo");
+    std::fs::create_dir_all(&demo).unwrap();
+    let dump = demo.join("crater.lammpstrj");
+    std::fs::write(&dump, "kept").unwrap();
+    let out = mdlod(&["demo", "--particles", "0", "--dir", s(&demo)]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--particles"));
+    assert_eq!(std::fs::read(&dump).unwrap(), b"kept");
+    let e = fails(&["demo", "--dir", s(&dump)]);
+    assert!(e.contains("exists and is not a directory"), "{e}");
+
+    let src = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "300"], &src);
+    let converted = dir.path().join("c.mdlod");
+    ok(&["convert", s(&src), "-o", s(&converted)]);
+    let before = std::fs::read(&converted).unwrap();
+    let e = fails(&["generate", "crater", "-n", "10", "-o", s(&converted)]);
+    assert!(e.contains("exists and is a .mdlod file"), "{e}");
+    assert_eq!(std::fs::read(&converted).unwrap(), before);
+
+    for args in [
+        vec!["batch", s(&src), "-o", "d", "--shard", "a/b"],
+        vec!["convert", s(&src), "-o", "t.mdlod", "--threads", "100000"],
+        vec![
+            "convert",
+            s(&src),
+            "-o",
+            "t.mdlod",
+            "--memory-limit",
+            "18446744073709551616",
+        ],
+    ] {
+        let out = mdlod(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+    }
+}
