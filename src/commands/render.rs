@@ -2034,6 +2034,17 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
     Ok(bytes)
 }
 
+/// [`parse_bytes`] that takes `0` too (the viewer's `--gpu-memory 0`: no pool, each
+/// frame's cut uploaded).
+pub fn parse_bytes_or_zero(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let digits = t.trim_end_matches(|c: char| c.is_ascii_alphabetic()).trim();
+    if !digits.is_empty() && digits.parse::<f64>().is_ok_and(|v| v == 0.0) {
+        return Ok(0);
+    }
+    parse_bytes(s)
+}
+
 pub fn run(mut args: Args) -> Result<()> {
     if args.json {
         crate::json_output();
@@ -4922,6 +4933,24 @@ fn is_damage(e: &anyhow::Error) -> bool {
 mod tests {
     use super::*;
     use clap::Args as _;
+
+    /// Sizes: units, 0 refused where a pool or limit cannot be empty (and taken where
+    /// it means "no pool"), 2^64 bytes and beyond refused rather than saturated.
+    #[test]
+    fn sizes_parse_with_units_and_stay_within_64_bits() {
+        assert_eq!(parse_bytes("512M"), Ok(512 << 20));
+        assert_eq!(parse_bytes("1.5G"), Ok(3 << 29));
+        assert_eq!(parse_bytes("64KiB"), Ok(64 << 10));
+        assert!(parse_bytes("0").unwrap_err().contains("leaves no room"));
+        assert!(parse_bytes("18446744073709551616")
+            .unwrap_err()
+            .contains("beyond any memory"));
+        assert!(parse_bytes("16777216T").is_err());
+        assert_eq!(parse_bytes_or_zero("0"), Ok(0));
+        assert_eq!(parse_bytes_or_zero("0M"), Ok(0));
+        assert_eq!(parse_bytes_or_zero("2G"), Ok(2 << 30));
+        assert!(parse_bytes_or_zero("x").is_err());
+    }
 
     /// Splats lit by a logarithm: a file whose clusters keep the logarithm of their mean
     /// value lights by the quantity; one of an earlier mdlod (means of logarithms) is

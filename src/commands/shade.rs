@@ -57,11 +57,11 @@ pub struct Args {
     /// up).
     #[arg(long, value_name = "PNG", conflicts_with = "explorer")]
     pub transfer: Option<PathBuf>,
-    /// Explorer: the central disk's angular radius, degrees.
-    #[arg(long, default_value_t = 20.0)]
+    /// Explorer: the central disk's angular radius, degrees (above 0, at most 90).
+    #[arg(long, default_value_t = 20.0, value_parser = explorer_disk)]
     pub explorer_disk: f32,
-    /// Explorer: the dark border width between slices, degrees.
-    #[arg(long, default_value_t = 3.0)]
+    /// Explorer: the dark border width between slices, degrees (0 up to 45).
+    #[arg(long, default_value_t = 3.0, value_parser = explorer_tolerance)]
     pub explorer_tolerance: f32,
     /// S-MIP levels coarser than sampled: each halves the image (2×2 averages of S-NDFs).
     /// Default: the level the file was sampled for (0 unless `sample --min-samples`
@@ -182,6 +182,23 @@ pub fn check_options(matches: &clap::ArgMatches) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `--explorer-disk`: an angle on the hemisphere of normals, above 0 and at most 90°.
+fn explorer_disk(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v > 0.0 && v <= 90.0 => Ok(v),
+        _ => Err(format!("{s:?}: degrees above 0, at most 90")),
+    }
+}
+
+/// `--explorer-tolerance`: a border between slices, from 0 to 45° (half a slice of the
+/// fewest).
+fn explorer_tolerance(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (0.0..=45.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: degrees from 0 to 45")),
+    }
 }
 
 /// The command-line spelling of argument `id`.

@@ -39,7 +39,7 @@ pub struct Args {
     /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G); `0`
     /// uploads each frame's cut instead. Default: a 512 MiB pool for files larger than
     /// that, direct otherwise.
-    #[arg(long, value_parser = super::render::parse_bytes)]
+    #[arg(long, value_parser = super::render::parse_bytes_or_zero)]
     pub gpu_memory: Option<u64>,
     /// Longest a script may run, seconds.
     #[arg(long, default_value_t = 600)]
