@@ -113,8 +113,8 @@ pub struct Args {
     /// splat modes: 1.75, a Gaussian of sigma r/2 cut at 3.5 sigma]. For an SPH run
     /// converted with --radius-column h, the code's kernel convention: 1 where h is the
     /// kernel's full support (Gadget), 2 where the support is 2h (Phantom); a splat's
-    /// light stays its disk's area
-    #[arg(long)]
+    /// light stays its disk's area. Above 0, at most 100
+    #[arg(long, value_parser = parse_kernel_scale)]
     pub kernel_scale: Option<f32>,
     /// density mode: the volume fraction at the top of the transfer function.
     #[arg(long, default_value_t = 0.8)]
@@ -2032,6 +2032,21 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         return Err(format!("{s:?} leaves no room: give a size such as 512M"));
     }
     Ok(bytes)
+}
+
+/// The most radii `--kernel-scale` reaches: SPH codes' conventions take 1 or 2, and a
+/// kernel 10^10 radii wide drew every particle over the whole image for minutes, black.
+pub const MAX_KERNEL_SCALE: f32 = 100.0;
+
+/// `--kernel-scale`: a finite number of radii above 0, at most [`MAX_KERNEL_SCALE`].
+fn parse_kernel_scale(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v > 0.0 && v <= MAX_KERNEL_SCALE => Ok(v),
+        _ => Err(format!(
+            "{s:?}: radii above 0, at most {MAX_KERNEL_SCALE} (an SPH kernel's support is 1 \
+             or 2 smoothing lengths)"
+        )),
+    }
 }
 
 /// [`parse_bytes`] that takes `0` too (the viewer's `--gpu-memory 0`: no pool, each
