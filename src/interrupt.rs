@@ -99,9 +99,14 @@ pub fn remove_on_interrupt(
             // is a killed run's, which the next run removes.
             remove_own_partials();
             let saying = SAYING.lock().unwrap_or_else(|e| e.into_inner());
-            match saying.as_deref() {
-                Some(text) => eprintln!("interrupted: working files removed; {text}"),
-                None => eprintln!("interrupted: working files removed"),
+            let message = match saying.as_deref() {
+                Some(text) => format!("interrupted: working files removed; {text}"),
+                None => "interrupted: working files removed".to_string(),
+            };
+            eprintln!("{message}");
+            // A script reading `--json` gets its one object, as for any failure.
+            if crate::json_failures() && !crate::json_printed() {
+                crate::print_json(serde_json::json!({ "ok": false, "error": message }));
             }
             std::process::exit(130);
         });

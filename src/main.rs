@@ -29,6 +29,21 @@ static OUTPUT_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicB
 /// ends with ([`print_json`]); its lines of text go to standard error, and its notes into
 /// that object too.
 static JSON_OUTPUT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// Set by `info --json`, which prints its JSON itself: a failure still ends with the
+/// one object `{"ok": false, "error"}` on standard output, as with [`JSON_OUTPUT`].
+static JSON_ERRORS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Turns on JSON errors alone (see [`JSON_ERRORS`]).
+fn json_errors() {
+    JSON_ERRORS.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Whether a failure is reported as a JSON object on standard output too.
+fn json_failures() -> bool {
+    use std::sync::atomic::Ordering::Relaxed;
+    JSON_OUTPUT.load(Relaxed) || JSON_ERRORS.load(Relaxed)
+}
+
 /// Set once a JSON object has been written ([`print_json`]).
 static JSON_PRINTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
@@ -258,7 +273,7 @@ fn main() -> std::process::ExitCode {
             eprintln!("error: {message}");
             // With --json, a command that fails before its result (a damaged file, a held
             // lock, a bad input) gives one too: `ok` false, with the error.
-            if JSON_OUTPUT.load(std::sync::atomic::Ordering::Relaxed) && !json_printed() {
+            if json_failures() && !json_printed() {
                 let mut value = serde_json::json!({ "ok": false, "error": message });
                 // A batch that converted frames before it failed says how many.
                 use mdlod_preprocess::batch::BatchError;

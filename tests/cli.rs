@@ -11665,3 +11665,19 @@ fn values_no_command_can_use_are_refused_before_anything_is_written() {
         assert_eq!(out.status.code(), Some(2), "{args:?}");
     }
 }
+
+/// `info --json` that fails ends with the one JSON object every `--json` command gives
+/// on failure, `ok` false with the error: it printed nothing on standard output.
+#[test]
+fn info_json_that_fails_says_so_in_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.mdlod");
+    let out = mdlod(&["info", s(&missing), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["ok"], false);
+    assert!(
+        v["error"].as_str().unwrap().contains("missing.mdlod"),
+        "{v}"
+    );
+}

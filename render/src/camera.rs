@@ -71,6 +71,46 @@ impl Bounds {
     }
 }
 
+/// What a fitted view frames: a box, seen by its eight corners (a cluster, the cell), or
+/// a ball, seen by its outline (a particle's sphere as drawn: framed by its box's
+/// corners, a lone sphere filled 54-65 % of the image instead of [`FIT_FILL`], off
+/// centre).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Framed {
+    Box(Bounds),
+    Ball { centre: Vec3, radius: f32 },
+}
+
+impl From<Bounds> for Framed {
+    fn from(b: Bounds) -> Self {
+        Framed::Box(b)
+    }
+}
+
+impl Framed {
+    /// The box around it.
+    pub fn hull(&self) -> Bounds {
+        match *self {
+            Framed::Box(b) => b,
+            Framed::Ball { centre, radius } => {
+                Bounds::new(centre - Vec3::splat(radius), centre + Vec3::splat(radius))
+            }
+        }
+    }
+
+    /// Its points as the fit sees them, in double precision: a box's corners (radius 0),
+    /// or a ball's centre with its radius.
+    fn points(&self) -> impl Iterator<Item = (glam::DVec3, f64)> {
+        let (corners, ball) = match *self {
+            Framed::Box(b) => (Some(corners(&b)), None),
+            Framed::Ball { centre, radius } => {
+                (None, Some((centre.as_dvec3(), f64::from(radius.max(0.0)))))
+            }
+        };
+        corners.into_iter().flatten().map(|c| (c, 0.0)).chain(ball)
+    }
+}
+
 /// The eight corners of a box, in double precision.
 pub fn corners(b: &Bounds) -> [glam::DVec3; 8] {
     std::array::from_fn(|i| {
@@ -380,7 +420,7 @@ impl Camera {
     /// box's centre, across the view, until the projected box is centred
     /// ([`Self::fit_about_centre`] keeps it there, for orbits).
     pub fn fit(&mut self, bounds: &Bounds, aspect: f32) {
-        self.fit_boxes(bounds, std::slice::from_ref(bounds), aspect);
+        self.fit_boxes(bounds, &[Framed::Box(*bounds)], aspect);
     }
 
     /// [`Self::fit`] of what lies in `boxes` (the data's clusters, say, inside its
@@ -388,7 +428,7 @@ impl Camera {
     /// centred and filling [`FIT_FILL`], so that data which does not fill its bounding
     /// box (a sphere of atoms, a disc seen from above) is framed as it looks. The depth
     /// range holds `bounds`. No boxes frame `bounds`.
-    pub fn fit_boxes(&mut self, bounds: &Bounds, boxes: &[Bounds], aspect: f32) {
+    pub fn fit_boxes(&mut self, bounds: &Bounds, boxes: &[Framed], aspect: f32) {
         self.fit_boxes_in(bounds, boxes, aspect, &[FitWindow::WHOLE]);
     }
 
@@ -400,7 +440,7 @@ impl Camera {
     pub fn fit_boxes_in(
         &mut self,
         bounds: &Bounds,
-        boxes: &[Bounds],
+        boxes: &[Framed],
         aspect: f32,
         windows: &[FitWindow],
     ) -> [f64; 2] {
@@ -442,7 +482,7 @@ impl Camera {
     }
 
     /// [`Self::fit_boxes_in`] of one window.
-    fn fit_window(&mut self, bounds: &Bounds, boxes: &[Bounds], aspect: f32, window: &FitWindow) {
+    fn fit_window(&mut self, bounds: &Bounds, boxes: &[Framed], aspect: f32, window: &FitWindow) {
         let Some((centre, half)) = window.centre_and_half() else {
             return;
         };
@@ -450,12 +490,10 @@ impl Camera {
             self.fit_off_axis(bounds, boxes, aspect, centre, half);
             return;
         }
-        let boxes = if boxes.is_empty() {
-            std::slice::from_ref(bounds)
-        } else {
-            boxes
-        };
-        let hull = boxes.iter().skip(1).fold(boxes[0], |u, b| {
+        let whole = [Framed::Box(*bounds)];
+        let boxes = if boxes.is_empty() { &whole[..] } else { boxes };
+        let hull = boxes.iter().skip(1).fold(boxes[0].hull(), |u, b| {
+            let b = b.hull();
             Bounds::new(u.min.min(b.min), u.max.max(b.max))
         });
         self.target = hull.center();
@@ -507,7 +545,7 @@ impl Camera {
     fn fit_off_axis(
         &mut self,
         bounds: &Bounds,
-        boxes: &[Bounds],
+        boxes: &[Framed],
         aspect: f32,
         centre: [f64; 2],
         half: [f64; 2],
@@ -517,11 +555,8 @@ impl Camera {
             max: half,
         };
         self.fit_window(bounds, boxes, aspect, &centred);
-        let boxes = if boxes.is_empty() {
-            std::slice::from_ref(bounds)
-        } else {
-            boxes
-        };
+        let whole = [Framed::Box(*bounds)];
+        let boxes = if boxes.is_empty() { &whole[..] } else { boxes };
         let before = (self.target, self.distance);
         let tan_y = (f64::from(self.fov_y_deg).to_radians() * 0.5).tan();
         let tan_x = tan_y * f64::from(aspect);
@@ -551,17 +586,17 @@ impl Camera {
         self.fit_depth_range(bounds);
     }
 
-    fn projected_centre(&self, boxes: &[Bounds], tan_x: f64, tan_y: f64) -> Option<[f64; 2]> {
+    fn projected_centre(&self, boxes: &[Framed], tan_x: f64, tan_y: f64) -> Option<[f64; 2]> {
         let (lo, hi) = self.projected_extent(boxes, tan_x, tan_y)?;
         let c = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
         c.iter().all(|v| v.is_finite()).then_some(c)
     }
 
-    /// The corners of `boxes` projected: lowest and highest normalised device
-    /// coordinates; `None` when one lies at or behind the eye.
+    /// The corners of `boxes` (and the outlines of balls) projected: lowest and highest
+    /// normalised device coordinates; `None` when one reaches the eye or behind it.
     fn projected_extent(
         &self,
-        boxes: &[Bounds],
+        boxes: &[Framed],
         tan_x: f64,
         tan_y: f64,
     ) -> Option<([f64; 2], [f64; 2])> {
@@ -573,23 +608,50 @@ impl Camera {
         let d = f64::from(self.distance);
         let eye = self.target.as_dvec3() + b * d;
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for corner in boxes.iter().flat_map(corners) {
-            let q = corner - eye;
-            let depth = match self.projection {
-                Projection::Perspective => -q.dot(b),
+        for (point, radius) in boxes.iter().flat_map(Framed::points) {
+            let q = point - eye;
+            let across = [q.dot(r), q.dot(u)];
+            let tans = [tan_x, tan_y];
+            match self.projection {
+                Projection::Perspective => {
+                    let depth = -q.dot(b);
+                    if depth.is_nan() || depth <= 0.0 {
+                        return None;
+                    }
+                    for k in 0..2 {
+                        // A ball's outline along one axis: its disk in the plane of that
+                        // axis and the view's, seen from the eye, spans the angles
+                        // θ ± asin(R / its distance).
+                        let (a_lo, a_hi) = if radius > 0.0 {
+                            let theta = across[k].atan2(depth);
+                            let dist = across[k].hypot(depth);
+                            if dist <= radius {
+                                return None;
+                            }
+                            let alpha = (radius / dist).asin();
+                            let right = std::f64::consts::FRAC_PI_2;
+                            if theta + alpha >= right || theta - alpha <= -right {
+                                return None;
+                            }
+                            ((theta - alpha).tan(), (theta + alpha).tan())
+                        } else {
+                            let t = across[k] / depth;
+                            (t, t)
+                        };
+                        lo[k] = lo[k].min(a_lo / tans[k]);
+                        hi[k] = hi[k].max(a_hi / tans[k]);
+                    }
+                }
                 // The view's size does not change with depth.
-                Projection::Orthographic => d,
-            };
-            if depth.is_nan() || depth <= 0.0 {
-                return None;
-            }
-            let ndc = [q.dot(r) / (depth * tan_x), q.dot(u) / (depth * tan_y)];
-            for k in 0..2 {
-                lo[k] = lo[k].min(ndc[k]);
-                hi[k] = hi[k].max(ndc[k]);
+                Projection::Orthographic => {
+                    for k in 0..2 {
+                        lo[k] = lo[k].min((across[k] - radius) / (d * tans[k]));
+                        hi[k] = hi[k].max((across[k] + radius) / (d * tans[k]));
+                    }
+                }
             }
         }
-        Some((lo, hi))
+        (lo.iter().chain(&hi).all(|v| v.is_finite())).then_some((lo, hi))
     }
 
     /// The eye's distance from the target at which every corner of `bounds` lies inside
@@ -599,11 +661,11 @@ impl Camera {
     /// (data may span 10^-10 or 10^36); a box of no extent is fitted as a sphere of
     /// [`Bounds::fit_radius`].
     pub fn fitted_distance(&self, bounds: &Bounds, aspect: f32) -> f32 {
-        self.distance_for(std::slice::from_ref(bounds), bounds, aspect)
+        self.distance_for(&[Framed::Box(*bounds)], bounds, aspect)
     }
 
     /// [`Self::fitted_distance`] of every corner of `boxes`, whose union is `hull`.
-    fn distance_for(&self, boxes: &[Bounds], hull: &Bounds, aspect: f32) -> f32 {
+    fn distance_for(&self, boxes: &[Framed], hull: &Bounds, aspect: f32) -> f32 {
         self.distance_in(boxes, hull, aspect, &FitWindow::WHOLE)
     }
 
@@ -613,7 +675,7 @@ impl Camera {
     /// ends `a_lo` and `a_hi` (one below 0, one above): `z ≥ o·r / (a_hi·tan_x)` for
     /// `o·r > 0`, `z ≥ o·r / (a_lo·tan_x)` for `o·r < 0`; the same upwards. For the
     /// whole image that is `|o·r| / (FIT_FILL·tan_x)`.
-    fn distance_in(&self, boxes: &[Bounds], hull: &Bounds, aspect: f32, window: &FitWindow) -> f32 {
+    fn distance_in(&self, boxes: &[Framed], hull: &Bounds, aspect: f32, window: &FitWindow) -> f32 {
         let (centre, half) = window.centre_and_half().unwrap_or(([0.0; 2], [1.0; 2]));
         let ends = [0, 1].map(|k| {
             [
@@ -642,14 +704,35 @@ impl Camera {
         );
         let target = self.target.as_dvec3();
         let mut need = 0.0f64;
-        for corner in boxes.iter().flat_map(corners) {
+        // The depth a ball of `radius` (0: a corner) at `v` across the view needs to lie
+        // inside `[lo, hi]` of tangent `tan`: the planes through the eye and the view's
+        // edges keep its disk inside where its centre lies `radius` within each, which
+        // in perspective moves the centre across by `radius · √(1 + slope²)` at the
+        // edge's slope.
+        let ball_needs = |v: f64, radius: f64, [lo, hi]: [f64; 2], tan: f64| {
+            let slant = |end: f64| match self.projection {
+                Projection::Perspective => radius * (1.0 + (end * tan).powi(2)).sqrt(),
+                Projection::Orthographic => radius,
+            };
+            let high = (v + slant(hi)).max(0.0);
+            let low = (v - slant(lo)).min(0.0);
+            needs(high, [lo, hi], tan).max(needs(low, [lo, hi], tan))
+        };
+        for (point, radius) in boxes.iter().flat_map(Framed::points) {
             // The corner from the target (not the box's centre in a centred fit).
-            let o = corner - target;
-            let across = needs(o.dot(r), ends[0], tan_x).max(needs(o.dot(u), ends[1], tan_y));
+            let o = point - target;
+            let across = ball_needs(o.dot(r), radius, ends[0], tan_x).max(ball_needs(
+                o.dot(u),
+                radius,
+                ends[1],
+                tan_y,
+            ));
             need = need.max(match self.projection {
                 // The corner's depth from the eye is the distance less its offset
-                // towards the eye.
-                Projection::Perspective => o.dot(b) + across.max(half.length() * 1e-3),
+                // towards the eye (a ball's centre beyond its radius).
+                Projection::Perspective => {
+                    o.dot(b) + across.max(half.length() * 1e-3).max(radius * 1.001)
+                }
                 Projection::Orthographic => across,
             });
         }
@@ -1055,7 +1138,8 @@ mod tests {
                 };
                 c.fit(&b, 1.5);
                 let whole = c.distance;
-                c.fit_boxes(&b, &boxes, 1.5);
+                let framed: Vec<Framed> = boxes.iter().copied().map(Framed::Box).collect();
+                c.fit_boxes(&b, &framed, 1.5);
                 // Never farther; closer seen obliquely (straight down an axis, the
                 // face boxes reach the bounds' outline).
                 let closer = if elevation_deg == 90.0 { 1.0001 } else { 0.95 };
@@ -1079,6 +1163,74 @@ mod tests {
                     ((lo + hi) * 0.5).abs().max_element() < 2e-3,
                     "{p:?}: {lo} {hi}"
                 );
+            }
+        }
+    }
+
+    /// Balls (a few particles' spheres) are framed by their outlines: points all over
+    /// each sphere, projected, reach FIT_FILL of the tighter dimension and are centred,
+    /// in perspective and orthographic views from several directions, for a lone sphere
+    /// off the origin and for three of different sizes. Framed by their boxes' corners,
+    /// a lone sphere filled 54-65 % of the image, off centre.
+    #[test]
+    fn balls_are_framed_by_their_outlines() {
+        // Points on the unit sphere, evenly spread (a Fibonacci lattice).
+        let n = 20_000;
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let unit: Vec<glam::DVec3> = (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let t = golden * i as f64;
+                glam::DVec3::new(r * t.cos(), r * t.sin(), z)
+            })
+            .collect();
+        let scenes: [Vec<(Vec3, f32)>; 2] = [
+            vec![(Vec3::new(3.0, -2.0, 5.0), 1.92)],
+            vec![
+                (Vec3::new(4.0, 0.0, 0.0), 0.5),
+                (Vec3::new(0.0, 4.0, 0.0), 1.0),
+                (Vec3::new(0.0, 0.0, 4.0), 2.0),
+            ],
+        ];
+        for balls in scenes {
+            let framed: Vec<Framed> = balls
+                .iter()
+                .map(|&(centre, radius)| Framed::Ball { centre, radius })
+                .collect();
+            let hull = framed.iter().skip(1).fold(framed[0].hull(), |u, f| {
+                let h = f.hull();
+                Bounds::new(u.min.min(h.min), u.max.max(h.max))
+            });
+            for p in [Projection::Perspective, Projection::Orthographic] {
+                for (azimuth_deg, elevation_deg) in [(30.0, 20.0), (0.0, 90.0), (200.0, -40.0)] {
+                    for aspect in [16.0 / 9.0, 0.5] {
+                        let mut c = Camera {
+                            projection: p,
+                            azimuth_deg,
+                            elevation_deg,
+                            ..Default::default()
+                        };
+                        c.fit_boxes(&hull, &framed, aspect);
+                        let m = c.clip_from_view(aspect) * c.view_from_world();
+                        let (mut lo, mut hi) =
+                            (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+                        for &(centre, radius) in &balls {
+                            for u in &unit {
+                                let q = centre.as_dvec3() + *u * f64::from(radius);
+                                let clip = m * q.as_vec3().extend(1.0);
+                                let ndc = clip.truncate().truncate() / clip.w;
+                                lo = lo.min(ndc);
+                                hi = hi.max(ndc);
+                            }
+                        }
+                        let what =
+                            format!("{p:?} {azimuth_deg}/{elevation_deg} {aspect}: {lo} {hi}");
+                        let widest = lo.abs().max(hi.abs()).max_element();
+                        assert!((widest - FIT_FILL as f32).abs() < 2e-3, "{what}");
+                        assert!(((lo + hi) * 0.5).abs().max_element() < 2e-3, "{what}");
+                    }
+                }
             }
         }
     }

@@ -57,7 +57,7 @@ pub use mdlod_format::reader::HiddenSet;
 use mdlod_format::MdlodFile;
 pub use mdlod_format::{NoProgress, Progress};
 
-pub use camera::{Bounds, Camera, FitWindow, Projection};
+pub use camera::{Bounds, Camera, FitWindow, Framed, Projection};
 pub use context::{BackendChoice, GpuContext};
 pub use error::RenderError;
 pub use glam;
@@ -999,13 +999,13 @@ fn with_fitted_cell(
 /// `boxes` and, where `opts` draws the cell and there are boxes, its corners
 /// ([`cell_corner_boxes`]).
 fn with_cell_corners(
-    mut boxes: Vec<Bounds>,
+    mut boxes: Vec<Framed>,
     file: &MdlodFile,
     opts: &RenderOptions,
     fitted: &Bounds,
-) -> Vec<Bounds> {
+) -> Vec<Framed> {
     if opts.cell.is_some() && !boxes.is_empty() {
-        boxes.extend(cell_corner_boxes(file, fitted));
+        boxes.extend(cell_corner_boxes(file, fitted).into_iter().map(Framed::Box));
     }
     boxes
 }
@@ -1137,7 +1137,7 @@ fn styled_reach(file: &MdlodFile, opts: &RenderOptions, footprint: f32) -> f32 {
 /// above the particles and up to [`FRAMING_OPEN`] nodes. A file with too few clusters (a
 /// molecule, a nanoparticle of a few hundred atoms: the particles and the top node) is
 /// framed by its particles' own spheres, up to [`FRAMING_OPEN`] of them; empty beyond.
-pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
+pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Framed> {
     use mdlod_format::reader::{BELOW_IN, BELOW_OUT};
     let levels = file.levels();
     let last = levels.len().saturating_sub(1);
@@ -1186,15 +1186,17 @@ pub fn framing_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) ->
             opened += cc;
             work.extend((cf..cf + cc).map(|c| (l + 1, c)));
         } else if let Some(b) = clipped(n) {
-            boxes.push(b);
+            boxes.push(Framed::Box(b));
         }
     }
     with_cell_corners(boxes, file, opts, fitted)
 }
 
 /// [`framing_boxes`] of a file without a level of [`FRAMING_NODES`] clusters: each shown
-/// particle's sphere as drawn, clipped to `fitted`, with the cell where it is drawn.
-fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Bounds> {
+/// particle's sphere as drawn (a ball: its outline, not its box's corners, fills the
+/// image), those centred within `fitted` (so that atoms the fit leaves out stay out),
+/// each no larger than `fitted` holds, with the cell where it is drawn.
+fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Vec<Framed> {
     let last = file.levels().len().saturating_sub(1);
     let count = file.levels().last().map_or(0, |l| l.point_count);
     if last == 0 || count == 0 || count > FRAMING_OPEN as u64 {
@@ -1204,17 +1206,22 @@ fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Ve
         return Vec::new();
     };
     let test = file.hidden_test(&opts.style.hidden_set(file.metadata()));
-    let reach = drawn_reach(file, opts).max(0.0);
-    let boxes: Vec<Bounds> = points
+    // (Negative where the style draws the spheres smaller than the file's.)
+    let reach = drawn_reach(file, opts);
+    let boxes: Vec<Framed> = points
         .iter()
         .enumerate()
         .filter(|(i, _)| !file.hides_particle(&test, *i))
         .filter_map(|(i, p)| {
-            let r = glam::Vec3::splat(file.particle_radius(i) + reach);
-            let p = glam::Vec3::from(*p);
-            let lo = (p - r).max(fitted.min);
-            let hi = (p + r).min(fitted.max);
-            lo.cmple(hi).all().then(|| Bounds::new(lo, hi))
+            let centre = glam::Vec3::from(*p);
+            let inside = centre.cmpge(fitted.min).all() && centre.cmple(fitted.max).all();
+            // Within `fitted`, as the boxes were clipped to it: it caps the reach of
+            // kernels' wings ([`fit_for`]).
+            let room = (centre - fitted.min).min(fitted.max - centre).min_element();
+            inside.then(|| Framed::Ball {
+                centre,
+                radius: (file.particle_radius(i) + reach).min(room).max(0.0),
+            })
         })
         .collect();
     with_cell_corners(boxes, file, opts, fitted)
@@ -1545,7 +1552,7 @@ fn camera_in(
 /// trajectory's frames'.
 pub fn camera_for_framing(
     bounds: &Bounds,
-    boxes: &[Bounds],
+    boxes: &[Framed],
     view: &ViewSpec,
     width: u32,
     height: u32,
@@ -1557,7 +1564,7 @@ pub fn camera_for_framing(
 /// whole image; [`RenderOptions::fit_windows`]).
 pub fn camera_for_framing_in(
     bounds: &Bounds,
-    boxes: &[Bounds],
+    boxes: &[Framed],
     view: &ViewSpec,
     width: u32,
     height: u32,

@@ -29,7 +29,7 @@ pub struct Survey {
     shown: Option<Bounds>,
     hidden: Option<Bounds>,
     /// `None` once past [`FRAMING_BOXES`].
-    boxes: Option<Vec<Bounds>>,
+    boxes: Option<Vec<crate::camera::Framed>>,
     far_particles: u64,
     far_frames: usize,
     log_floor: Option<f32>,
@@ -127,7 +127,7 @@ impl Survey {
     }
 
     /// Every shown frame's cluster boxes, or none where they were too many.
-    pub fn boxes(&self) -> &[Bounds] {
+    pub fn boxes(&self) -> &[crate::camera::Framed] {
         self.boxes.as_deref().unwrap_or_default()
     }
 

@@ -19,7 +19,7 @@ use std::path::Path;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{Bounds, Camera, FitWindow, Projection};
+use crate::camera::{Bounds, Camera, FitWindow, Framed, Projection};
 use crate::error::RenderError;
 
 /// The view file version this crate writes and reads.
@@ -398,7 +398,7 @@ impl ViewFile {
 
     /// [`Self::to_camera`] framing `boxes` inside `bounds` where the view is fitted
     /// ([`Camera::fit_boxes`]; none: `bounds`).
-    pub fn to_camera_framing(&self, bounds: &Bounds, boxes: &[Bounds], aspect: f32) -> Camera {
+    pub fn to_camera_framing(&self, bounds: &Bounds, boxes: &[Framed], aspect: f32) -> Camera {
         self.to_camera_framing_in(bounds, boxes, aspect, &[FitWindow::WHOLE])
     }
 
@@ -407,7 +407,7 @@ impl ViewFile {
     pub fn to_camera_framing_in(
         &self,
         bounds: &Bounds,
-        boxes: &[Bounds],
+        boxes: &[Framed],
         aspect: f32,
         windows: &[FitWindow],
     ) -> Camera {

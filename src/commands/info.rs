@@ -111,6 +111,9 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
     for (i, n, listed, expected, failed) in &rows {
         let state = match expected {
             Some(e) if listed >= e && *failed == 0 => "complete".to_string(),
+            // As the merge counts it: every frame it could convert is listed; those that
+            // failed (`--keep-going`) are reported, and a rerun tries them again.
+            Some(e) if listed >= e => "finished; its failed frames a rerun tries again".to_string(),
             Some(e) => {
                 complete = false;
                 format!("{} of {e}: still running, failed or killed", listed)
@@ -452,6 +455,9 @@ fn sndf_info(args: &Args) -> Result<()> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if args.json {
+        crate::json_errors();
+    }
     // The first 8 bytes tell an S-NDF file from a .mdlod one.
     let is_sndf = mdlod_format::files::open(&args.file)
         .ok()
