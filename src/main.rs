@@ -229,7 +229,10 @@ fn main() -> std::process::ExitCode {
     };
     let result = match cli.command {
         Command::Convert(a) => commands::convert::run(a),
-        Command::Batch(a) => commands::batch::run(a),
+        Command::Batch(a) => matches
+            .subcommand_matches("batch")
+            .map_or(Ok(()), commands::batch::check_merge_options)
+            .and_then(|()| commands::batch::run(a)),
         Command::Info(a) => commands::info::run(a),
         Command::Verify(a) => commands::verify::run(a),
         Command::Render(mut a) => match matches.subcommand_matches("render") {

@@ -11649,6 +11649,9 @@ fn values_no_command_can_use_are_refused_before_anything_is_written() {
     assert!(e.contains("exists and is a .mdlod file"), "{e}");
     assert_eq!(std::fs::read(&converted).unwrap(), before);
 
+    // Conversion settings given to a merge, which converts nothing.
+    let e = fails(&["batch", "--merge", s(dir.path()), "--radius", "1=9"]);
+    assert!(e.contains("--radius given with --merge"), "{e}");
     for args in [
         vec!["batch", s(&src), "-o", "d", "--shard", "a/b"],
         vec!["convert", s(&src), "-o", "t.mdlod", "--threads", "100000"],

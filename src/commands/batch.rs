@@ -171,6 +171,47 @@ fn slurm_shard(var: impl Fn(&str) -> Option<String>) -> Result<Option<(u32, u32)
         .map(Some)
 }
 
+/// Refuses options given with `--merge` other than `--json`: the merge joins the shards'
+/// manifests as they are, so conversion settings (`--radius`, `--precision`, ...) would
+/// be ignored without a word.
+pub fn check_merge_options(matches: &clap::ArgMatches) -> Result<()> {
+    if matches.get_one::<PathBuf>("merge").is_none() {
+        return Ok(());
+    }
+    // The options as spelt on the command line (argument groups are no options).
+    let command = <Args as clap::Args>::augment_args(clap::Command::new("batch"));
+    let long = |id: &str| {
+        command
+            .get_arguments()
+            .find(|a| a.get_id() == id)
+            .map(|a| match a.get_long() {
+                Some(l) => format!("--{l}"),
+                None => a.get_id().to_string(),
+            })
+    };
+    let given: Vec<String> = matches
+        .ids()
+        .map(|id| id.as_str())
+        .filter(|id| !matches!(*id, "merge" | "json"))
+        .filter(|id| {
+            matches!(
+                matches.value_source(id),
+                Some(clap::parser::ValueSource::CommandLine)
+            )
+        })
+        .filter_map(long)
+        .collect();
+    if !given.is_empty() {
+        bail!(
+            "{} given with --merge, which joins the shards' manifests as they are and converts \
+             nothing: give {} to the shards' runs",
+            given.join(", "),
+            if given.len() == 1 { "it" } else { "them" }
+        );
+    }
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<()> {
     if args.json {
         crate::json_output();

@@ -55,6 +55,27 @@ pub fn check_png_name(option: &str, output: &Path) -> Result<()> {
 /// file and renamed over the path, which would replace the input). `option` names the
 /// output on the command line (`-o`, `--save-view`); `inputs` are (option, path) pairs,
 /// the option empty for a positional input. A `%` piece set stands for its pieces.
+/// Refuses, before any work, a file to write beside the main output into a directory
+/// that takes no file (read-only, full of inodes, not ours): the picture was drawn and
+/// written first, and then the command failed with it left behind. A directory that does
+/// not exist yet is the caller's to judge.
+pub fn check_writable_beside(option: &str, output: &Path) -> Result<()> {
+    let dir = match output.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Ok(());
+    }
+    if let Err(e) = tempfile::Builder::new()
+        .prefix(".mdlod-probe-")
+        .tempfile_in(dir)
+    {
+        bail!("{option} {}: cannot write there: {e}", output.display());
+    }
+    Ok(())
+}
+
 pub fn check_output(option: &str, output: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
     if output.as_os_str() == "-" {
         bail!(

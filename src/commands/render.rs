@@ -1667,6 +1667,7 @@ fn check_side_output(
     single: bool,
 ) -> Result<()> {
     super::check_output(option, p, inputs)?;
+    super::check_writable_beside(option, p)?;
     if p == output || super::same_file(p, output) {
         anyhow::bail!(
             "{option} {} is the -o output too: give {what} another name",
@@ -2179,6 +2180,7 @@ pub fn run(mut args: Args) -> Result<()> {
     }
     if let Some(p) = &args.legend {
         super::check_output("--legend", p, &inputs)?;
+        super::check_writable_beside("--legend", p)?;
         // One legend for a movie's or turntable's images, not one per image.
         if p.file_name()
             .is_some_and(|n| n.to_string_lossy().contains('%'))
