@@ -5600,7 +5600,7 @@ fn generate_refuses_data_the_disk_cannot_hold() {
         s(&out),
     ]);
     assert!(
-        err.contains("need about") && err.contains("GB free"),
+        err.contains("need about 3.600e7 GB") && err.contains(" free in "),
         "{err}"
     );
     assert!(!out.exists());

@@ -959,6 +959,11 @@ pub fn parse_radius_override(s: &str) -> Result<(String, f32), String> {
     let (name, r) = s
         .split_once('=')
         .ok_or_else(|| format!("expected NAME=RADIUS, got {s:?}"))?;
+    if name.trim().is_empty() {
+        return Err(format!(
+            "{s:?}: expected NAME=RADIUS, a species' name before `=`"
+        ));
+    }
     let r: f32 = r
         .trim()
         .parse()

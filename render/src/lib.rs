@@ -2550,15 +2550,16 @@ pub fn sample_to_file_at(
 /// The S-MIP level-0 scale for sampling `file` as `opts` asks: the smallest power of two
 /// `s ≤ 16` such that sampling at `s` times the image size with `iterations` rays per
 /// texel gives every particle sphere at least `min_samples` samples (taking the smallest
-/// species radius at the data's far side). 1 when `min_samples` is 0.
+/// species radius at the data's far side), with the samples the smallest sphere gets
+/// there (fewer than asked where 16 is not enough). 1 when `min_samples` is 0.
 pub fn level0_scale(
     file: &MdlodFile,
     opts: &RenderOptions,
     iterations: u32,
     min_samples: u32,
-) -> Result<u32, RenderError> {
+) -> Result<(u32, f32), RenderError> {
     if min_samples == 0 {
-        return Ok(1);
+        return Ok((1, f32::INFINITY));
     }
     let camera = frame_setup(file, opts)?.0;
     let bounds = data_bounds(file);
@@ -2570,7 +2571,7 @@ pub fn level0_scale(
     while scale < 16 && per_sphere * ((scale * scale) as f32) < min_samples as f32 {
         scale *= 2;
     }
-    Ok(scale)
+    Ok((scale, per_sphere * (scale * scale) as f32))
 }
 
 /// The S-MIP levels [`shade_file`] shades a tiled `.sndf` file's own view from at

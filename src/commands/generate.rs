@@ -116,10 +116,9 @@ fn bytes_per_particle(format: OutputFormat) -> u64 {
 /// Refuses, before writing, data that cannot fit on the output's file system (a count
 /// mistyped by a few digits filled the disk with a 48 GB file before failing).
 fn check_room(args: &Args) -> Result<()> {
-    let need = args
-        .particles
-        .saturating_mul(u64::from(args.frames))
-        .saturating_mul(bytes_per_particle(args.format));
+    // In floating point: a count past 64 bits of bytes saturated to 18.4 EB.
+    let need =
+        args.particles as f64 * f64::from(args.frames) * bytes_per_particle(args.format) as f64;
     let dir = match args.output.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
@@ -131,14 +130,19 @@ fn check_room(args: &Args) -> Result<()> {
     let free = fs.f_bavail.saturating_mul(fs.f_frsize);
     // The output replaces an existing file, whose space comes back.
     let replaced = std::fs::metadata(&args.output).map_or(0, |m| m.len());
-    if need > free.saturating_add(replaced) {
+    if need > free.saturating_add(replaced) as f64 {
+        // Sizes in the unit that reads (a small disk's free space is no "0.0 GB").
+        let size = |b: f64| match b {
+            b if b >= 1e12 => format!("{:.3e} GB", b / 1e9),
+            b if b >= 1e9 => format!("{:.1} GB", b / 1e9),
+            b => format!("{:.1} MB", b / 1e6),
+        };
         anyhow::bail!(
-            "{} frame(s) of {} particles need about {:.1} GB, more than the {:.1} GB free \
-             in {}",
+            "{} frame(s) of {} particles need about {}, more than the {} free in {}",
             args.frames,
             args.particles,
-            need as f64 / 1e9,
-            free as f64 / 1e9,
+            size(need),
+            size(free as f64),
             dir.display()
         );
     }

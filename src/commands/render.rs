@@ -1230,9 +1230,14 @@ impl StyleArgs {
             }
         };
         let split = |s: &str, what: &str| -> Result<(String, String)> {
-            s.split_once('=')
+            let (name, value) = s
+                .split_once('=')
                 .map(|(a, b)| (a.trim().to_string(), b.trim().to_string()))
-                .with_context(|| format!("{s:?}: expected NAME={what}"))
+                .with_context(|| format!("{s:?}: expected NAME={what}"))?;
+            if name.is_empty() {
+                anyhow::bail!("{s:?}: expected NAME={what}, a species' name before `=`");
+            }
+            Ok((name, value))
         };
         // A species styled twice by one option would take the last silently.
         let once = |option: &str, given: &[String]| -> Result<()> {

@@ -51,8 +51,8 @@ pub struct Args {
     /// Jittered rays per pixel.
     #[arg(long, default_value_t = 64)]
     pub iterations: u32,
-    /// Bins per axis of the normal parametrisation.
-    #[arg(long, default_value_t = 8)]
+    /// Bins per axis of the normal parametrisation (1 to 32).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=32))]
     pub bins: u32,
     /// How normals are binned.
     #[arg(long, value_enum, default_value = "projected")]
@@ -167,7 +167,7 @@ pub fn run(args: Args) -> Result<()> {
         );
         return Ok(());
     }
-    let scale = mdlod_render::level0_scale(
+    let (scale, samples) = mdlod_render::level0_scale(
         &mdlod_render::open_styled(&args.file, &opts.style)?,
         &opts,
         args.iterations,
@@ -211,7 +211,15 @@ pub fn run(args: Args) -> Result<()> {
         (scale > 1).then(|| scale.trailing_zeros()),
         Bar::for_renderer(),
     )?;
-    if scale > 1 {
+    if scale > 1 && samples < args.min_samples as f32 {
+        println!(
+            "  sampled at {scale}x the image size, the finest --min-samples takes: the \
+             smallest spheres get about {samples:.0} samples, not {}; shown at level {} (a \
+             closer view, or more --iterations, gives them more)",
+            args.min_samples,
+            scale.trailing_zeros()
+        );
+    } else if scale > 1 {
         println!(
             "  sampled at {scale}x the image size so that every sphere gets at least {} samples; shown at level {}",
             args.min_samples,
