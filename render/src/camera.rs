@@ -253,7 +253,26 @@ impl Camera {
             .iter()
             .all(|v| v.is_finite());
         if !finite {
-            return Err(format!("camera has a non-finite value: {self:?}"));
+            // The values at fault by name (the whole struct's debug print read as a dump).
+            let named = [
+                ("azimuth", self.azimuth_deg),
+                ("elevation", self.elevation_deg),
+                ("distance", self.distance),
+                ("field of view", self.fov_y_deg),
+                ("target x", self.target.x),
+                ("target y", self.target.y),
+                ("target z", self.target.z),
+            ];
+            let bad: Vec<String> = named
+                .iter()
+                .filter(|(_, v)| !v.is_finite())
+                .map(|(n, v)| format!("{n} {v}"))
+                .collect();
+            return Err(format!(
+                "the camera's {} not a finite number (moved past the range of single \
+                 precision?)",
+                bad.join(", ") + if bad.len() == 1 { " is" } else { " are" }
+            ));
         }
         if self.distance <= 0.0 {
             return Err(format!(

@@ -233,6 +233,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         if args.json {
             crate::print_json(serde_json::json!({
+                "ok": true,
                 "manifest": dir.join(mdlod_preprocess::batch::MANIFEST).display().to_string(),
                 "merged": m.frames.len(),
                 "missing": m.failed.len(),

@@ -311,6 +311,7 @@ pub fn run(args: Args) -> Result<()> {
 /// The `--json` object of a conversion.
 pub fn report_json(output: &std::path::Path, r: &ConvertReport) -> serde_json::Value {
     serde_json::json!({
+        "ok": true,
         "output": output.display().to_string(),
         "frame": r.frame.map(|(k, _)| k),
         "frames_in_input": r.frame.map(|(_, n)| n),

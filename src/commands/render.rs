@@ -2026,6 +2026,18 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         "M" | "MB" | "MIB" => 1 << 20,
         "G" | "GB" | "GIB" => 1 << 30,
         "T" | "TB" | "TIB" => 1 << 40,
+        // `4e9`: an exponent, not a unit.
+        u if u.starts_with('E')
+            && u.len() > 1
+            && u[1..]
+                .trim_start_matches(['+', '-'])
+                .chars()
+                .all(|c| c.is_ascii_digit()) =>
+        {
+            return Err(format!(
+                "{s:?}: give a size with a unit (K, M, G or T: 4G), not an exponent"
+            ))
+        }
         _ => return Err(format!("unknown unit in {s:?} (use K, M, G or T)")),
     };
     let exact = v * mult as f64;
@@ -3941,6 +3953,7 @@ fn shown_json(
 fn series_json(args: &Args) {
     if args.json {
         crate::print_json(serde_json::json!({
+            "ok": true,
             "series": args.output.display().to_string(),
             "file": args.file.display().to_string(),
         }));
@@ -3960,6 +3973,7 @@ fn report_json(
     let c = &r.camera;
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let mut value = serde_json::json!({
+        "ok": true,
         "output": out.display().to_string(),
         "file": args.file.display().to_string(),
         "mode": args.mode.to_possible_value().map(|v| v.get_name().to_string()),
@@ -4968,6 +4982,7 @@ mod tests {
             .unwrap_err()
             .contains("beyond any memory"));
         assert!(parse_bytes("16777216T").is_err());
+        assert!(parse_bytes("1e30").unwrap_err().contains("not an exponent"));
         assert_eq!(parse_bytes_or_zero("0"), Ok(0));
         assert_eq!(parse_bytes_or_zero("0M"), Ok(0));
         assert_eq!(parse_bytes_or_zero("2G"), Ok(2 << 30));

@@ -513,6 +513,15 @@ fn columns(path: &Path, h: &BinHeader, opts: &ReadOptions) -> Result<Vec<String>
         message,
     };
     if let Some(given) = &opts.columns {
+        // A dump of the new revision names its own: other names would read its values as
+        // what they are not (a `mol` column as the types). Said first, whatever was given.
+        if let Some(own) = h.columns.as_ref().filter(|own| *own != given) {
+            return Err(err(format!(
+                "this dump names its own columns ({}); --columns is for old-revision dumps \
+                 that name none: leave it out",
+                own.join(" ")
+            )));
+        }
         if given.len() != h.values_per_atom {
             return Err(err(format!(
                 "{} column names given for {} values per atom",
@@ -526,15 +535,6 @@ fn columns(path: &Path, h: &BinHeader, opts: &ReadOptions) -> Result<Vec<String>
             .find(|(i, c)| given[..*i].contains(c))
         {
             return Err(err(format!("--columns names `{c}` twice")));
-        }
-        // A dump of the new revision names its own: other names would read its values
-        // as what they are not (a `mol` column as the types).
-        if let Some(own) = h.columns.as_ref().filter(|own| *own != given) {
-            return Err(err(format!(
-                "this dump names its own columns ({}); --columns is for old-revision dumps \
-                 that name none: leave it out",
-                own.join(" ")
-            )));
         }
         return Ok(given.clone());
     }
