@@ -647,11 +647,18 @@ fn column_names_given_for_a_dump_that_names_its_own_are_refused() {
         e.contains("this dump names its own columns") && e.contains("leave it out"),
         "{e}"
     );
-    let mut twice = own.clone();
-    twice[1] = twice[0];
-    let e = read(&bin, &twice).unwrap_err();
+    // Names of another count: the dump's own are named first, not the count.
+    let e = read(&bin, &own[..3]).unwrap_err();
+    assert!(e.contains("this dump names its own columns"), "{e}");
+    // A name given twice, for an old-revision dump (which names none).
+    let dir = tempfile::tempdir().unwrap();
+    let old = dir.path().join("old.bin");
+    std::fs::write(&old, old_revision_dump(4, |i| [i as f64, 1.0, 2.0])).unwrap();
+    let e = read(&old, &["id", "id", "x", "y", "z"]).unwrap_err();
+    assert!(e.contains("--columns names `id` twice"), "{e}");
+    let e = read(&old, &["id", "type", "x"]).unwrap_err();
     assert!(
-        e.contains(&format!("--columns names `{}` twice", own[0])),
+        e.contains("3 column names given for 5 values per atom"),
         "{e}"
     );
     let text = lammps_sample_path("cu_melt.custom.dump");
