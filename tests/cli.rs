@@ -650,7 +650,8 @@ fn binary_lammps_dumps_convert_like_their_text_twins() {
     assert_eq!(b.metadata().time, t.metadata().time);
     assert_eq!(b.metadata().units.as_deref(), Some("metal"));
     assert_eq!(b.particle_count(), t.particle_count());
-    // An old-style column list that does not fit is refused, naming the file.
+    // A column list for a dump that names its own is refused, naming the file and
+    // what it names.
     let err = fails(&[
         "convert",
         s(&lammps_sample_path("cu_melt.atom.bin")),
@@ -660,7 +661,8 @@ fn binary_lammps_dumps_convert_like_their_text_twins() {
         "id type x y",
     ]);
     assert!(
-        err.contains("cu_melt.atom.bin") && err.contains("4 column names"),
+        err.contains("cu_melt.atom.bin")
+            && err.contains("this dump names its own columns (id type xs ys zs)"),
         "{err}"
     );
 }

@@ -2804,8 +2804,15 @@ pub fn batch(
             let own = f.metadata().source.as_ref();
             // The source as the manifest lists it: a frame kept by its bytes is listed
             // with the input's size and time then, so the next rerun need not read it.
+            // (The same bytes: their checksum and length, wherever they lie now.)
+            let same_bytes = |a: &Option<FrameBytes>, b: &Option<FrameBytes>| match (a, b) {
+                (Some(a), Some(b)) => {
+                    a.xxh3 == b.xxh3 && a.end.checked_sub(a.start) == b.end.checked_sub(b.start)
+                }
+                _ => false,
+            };
             let listed = Some(&recorded.source)
-                .filter(|l| l.bytes.is_some() && own.is_some_and(|o| o.bytes == l.bytes));
+                .filter(|l| own.is_some_and(|o| same_bytes(&o.bytes, &l.bytes)));
             let source = if own.is_some_and(|s| same_source(s, &want)) {
                 None
             } else if let Some(l) = listed.filter(|l| same_source(l, &want)) {
@@ -2891,7 +2898,10 @@ pub fn batch(
     // converted: read again and compared by checksum.
     let mut kept_unchanged = 0;
     if !unsure.is_empty() {
-        let total = unsure.iter().map(|u| u.2.end - u.2.start).sum();
+        let total = unsure
+            .iter()
+            .map(|u| u.2.end.saturating_sub(u.2.start))
+            .sum();
         progress.stage(
             &format!(
                 "checking {} frame{} of changed inputs",
@@ -2902,16 +2912,33 @@ pub fn batch(
             "bytes",
         );
         for (mut job, f, bytes, want) in unsure {
-            let range = bytes.start..bytes.end;
             let dump = job.dump;
-            let unchanged = want.size >= bytes.end
-                && dump.and_then(|d| d.frame_bytes(job.frame)) == Some(range.clone())
-                // A text dump's unit style is written in its first frame only.
-                && dump.and_then(|d| d.frame_info(job.frame).ok()).map(|i| i.units)
-                    == Some(f.metadata().units.clone())
-                && frame_checksum(job.input, dump, job.frame, range, progress)
-                    .map_err(io(job.input))?
-                    == bytes.xxh3;
+            // Where the frame lies now: the same bytes moved (a line inserted in an
+            // earlier frame) are the same frame.
+            let now = dump.and_then(|d| d.frame_bytes(job.frame)).filter(|r| {
+                r.end.checked_sub(r.start) == bytes.end.checked_sub(bytes.start)
+                    && want.size >= r.end
+            });
+            let unchanged = match now.clone() {
+                Some(range) => {
+                    // A text dump's unit style is written in its first frame only.
+                    dump.and_then(|d| d.frame_info(job.frame).ok())
+                        .map(|i| i.units)
+                        == Some(f.metadata().units.clone())
+                        && frame_checksum(job.input, dump, job.frame, range, progress)
+                            .map_err(io(job.input))?
+                            == bytes.xxh3
+                }
+                None => false,
+            };
+            let bytes = match now {
+                Some(r) => FrameBytes {
+                    start: r.start,
+                    end: r.end,
+                    ..bytes
+                },
+                None => bytes,
+            };
             if unchanged {
                 kept_unchanged += 1;
                 note_species(&f);

@@ -1187,6 +1187,39 @@ fn the_same_input_by_another_path_is_not_converted_again() {
     assert_eq!((r.converted, r.kept_unchanged, r.redone.source), (1, 5, 1));
 }
 
+/// A frame changed in place (a digit more in one atom's line) moves every later frame's
+/// bytes: those are the same bytes elsewhere, kept as README says ("kept when its own
+/// bytes are unchanged"), and listed at their new place so that the next run keeps them
+/// without reading them; they were all converted again.
+#[test]
+fn frames_whose_bytes_only_moved_are_kept() {
+    use mdlod_preprocess::readers::DumpFile;
+    let dir = tempfile::tempdir().unwrap();
+    let src = input(dir.path());
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    let mut text = std::fs::read(&src).unwrap();
+    let second = DumpFile::open(&src).unwrap().frame_bytes(1).unwrap();
+    // A coordinate of frame 1 written with one more digit: `... 1.5 ...` as `1.50`.
+    let last_line = text[..second.end as usize - 1]
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .unwrap();
+    let end_of_line = second.end as usize - 1;
+    assert!(end_of_line > last_line + 1);
+    text.insert(end_of_line, b'0');
+    std::fs::write(&src, &text).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.kept_unchanged, r.redone.source), (1, 5, 1));
+    let m = read_manifest(&out).unwrap();
+    check_manifest(&out, &m);
+    let moved = DumpFile::open(&src).unwrap().frame_bytes(4).unwrap();
+    let listed = m.frames[4].source.bytes.clone().unwrap();
+    assert_eq!((listed.start, listed.end), (moved.start, moved.end));
+    let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped, r.kept_unchanged), (0, 6, 0));
+}
+
 /// A run restarted into the same dump repeats timesteps: refused by default with the
 /// way out named; with `Last` the later frame of each converts (its source frame is
 /// recorded), with `First` the earlier; the others are reported.
