@@ -265,7 +265,8 @@ pub struct Args {
     pub axes_corner: Option<LegendCorner>,
     /// Draw the in-image legend, the label, the scale bar and the axes N times their size (their
     /// text is a 7×13-pixel font), 1 to 8: for print, where a figure's panels read small
-    /// [default: by the image's size, 1 below 1920×1080, 2 from it]
+    /// [default: by the image's size, one step per 1280×720 rounded: 1 below 1920×1080,
+    /// 2 from it, 3 from 3200×1800]
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=8))]
     pub text_scale: Option<u32>,
 }
