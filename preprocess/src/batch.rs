@@ -1230,25 +1230,48 @@ fn side_records_name(shard: Option<(u32, u32)>) -> String {
 
 /// Writes the records of `known` that `manifest` (about to replace this run's manifest)
 /// does not list, of frame files in `out_dir` as they are now (file name and checksum),
-/// to [`side_records_name`]: a frame about to be converted again keeps its record until
-/// it is, and a frame file of inputs this run was not given keeps its record for a run
-/// over them. Without them a rerun converts such frames again ([`Redone::unrecorded`]).
+/// nor any other manifest in `out_dir` does (another shard's), to [`side_records_name`]:
+/// a frame about to be converted again keeps its record until it is, and a frame file of
+/// inputs this run was not given keeps its record for a run over them. Without them a
+/// rerun converts such frames again ([`Redone::unrecorded`]).
 fn keep_side_records(
     out_dir: &Path,
     shard: Option<(u32, u32)>,
     known: &std::collections::HashMap<(String, String), FrameEntry>,
     manifest: &Manifest,
 ) -> Result<(), BatchError> {
-    let listed: std::collections::HashSet<(&String, &String)> = manifest
+    let mut listed: std::collections::HashSet<(String, String)> = manifest
         .frames
         .iter()
         .chain(&manifest.gone)
         .chain(&manifest.unlisted)
-        .map(|f| (&f.file, &f.checksum))
+        .map(|f| (f.file.clone(), f.checksum.clone()))
         .collect();
+    // Records the other manifests keep (the other shards' frames) are theirs to keep.
+    let own = manifest_name(shard);
+    for e in std::fs::read_dir(out_dir).map_err(io(out_dir))?.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let other = name == MANIFEST || name == PREVIOUS_MANIFEST || is_shard_manifest(&name);
+        if !other || name == own {
+            continue;
+        }
+        let Some(m) = read_manifest_bytes(&e.path())
+            .ok()
+            .and_then(|t| parse_manifest(&e.path(), &t, "dataset").ok())
+        else {
+            continue;
+        };
+        listed.extend(
+            m.frames
+                .into_iter()
+                .chain(m.gone)
+                .chain(m.unlisted)
+                .map(|f| (f.file, f.checksum)),
+        );
+    }
     let mut keep: Vec<&FrameEntry> = known
         .values()
-        .filter(|f| !listed.contains(&(&f.file, &f.checksum)))
+        .filter(|f| !listed.contains(&(f.file.clone(), f.checksum.clone())))
         .filter(|f| frame_file_number(&f.file).is_some())
         .filter(|f| {
             MdlodFile::open_sparse(out_dir.join(&f.file))

@@ -2362,6 +2362,20 @@ fn frames_of_inputs_left_out_of_a_run_keep_their_records() {
     assert_eq!((r.converted, r.skipped, r.redone.unrecorded), (0, 6, 0));
     // Nothing left unlisted: no records beside the manifest.
     assert!(!out.join(".dataset.records.json").exists());
+    // Shards keep none of each other's records: each lists its own frames.
+    let sharded = dir.path().join("sharded");
+    for i in 0..2 {
+        batch(&all, &sharded, &shard(i, 2), &NoProgress).unwrap();
+    }
+    let r = batch(&all, &sharded, &shard(0, 2), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 3));
+    let side: Vec<String> = std::fs::read_dir(&sharded)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".records.json"))
+        .collect();
+    assert!(side.is_empty(), "{side:?}");
 }
 
 /// A rename of a species no frame can hold (a type number where the input names
