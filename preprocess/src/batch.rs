@@ -661,8 +661,8 @@ pub enum BatchError {
         /// What may have caused it, and the way out.
         why: String,
     },
-    #[error("the frames of two runs would interleave: {what}: a run restarted from an earlier timestep than its last frame's? --duplicate-timesteps last keeps the restart's frames (from timestep {restart} on, leaving out the earlier run's from there), first keeps every frame in timestep order")]
-    Interleaved { what: String, restart: u64 },
+    #[error("the frames of two runs would interleave: {what}: a run restarted from an earlier timestep than its last frame's? --duplicate-timesteps last keeps {last_keeps}; first keeps every frame in timestep order")]
+    Interleaved { what: String, last_keeps: String },
     #[error("{}: {message}", path.display())]
     Manifest { path: PathBuf, message: String },
     /// An input cut short that is not the newest ([`newest_inputs`]): a run writes one
@@ -1531,6 +1531,14 @@ struct Recorded {
 /// listed, kept by a shard or kept unlisted), by file name and checksum. Unreadable
 /// manifests are passed over.
 fn recorded_frames(out_dir: &Path) -> std::collections::HashMap<(String, String), FrameEntry> {
+    recorded_frames_with(out_dir, true)
+}
+
+/// [`recorded_frames`], with the side records ([`side_records_name`]) or without.
+fn recorded_frames_with(
+    out_dir: &Path,
+    side_records: bool,
+) -> std::collections::HashMap<(String, String), FrameEntry> {
     let mut known = std::collections::HashMap::new();
     let Ok(dir) = std::fs::read_dir(out_dir) else {
         return known;
@@ -1538,6 +1546,9 @@ fn recorded_frames(out_dir: &Path) -> std::collections::HashMap<(String, String)
     for e in dir.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
         if is_side_records(&name) {
+            if !side_records {
+                continue;
+            }
             let records = read_manifest_bytes(&e.path())
                 .ok()
                 .and_then(|t| serde_json::from_slice::<Vec<FrameEntry>>(&t).ok());
@@ -1661,7 +1672,9 @@ fn gone_source_frames(
     attribute: Option<&str>,
 ) -> GoneFrames {
     let inputs: Vec<(PathBuf, std::ffi::OsString)> = inputs.iter().map(|p| input_key(p)).collect();
-    let listed = recorded_frames(out_dir);
+    // (The manifests' records only: the side records keep frames of other inputs, which
+    // a run over these never lists as its own, their dumps gone or not.)
+    let listed = recorded_frames_with(out_dir, false);
     // Frames this run's own manifest lists whose files are gone too, of no frame of this
     // run: said by the run that stops listing them, once (not from the merged manifest,
     // which every shard reads, nor the records a shard moved aside).
@@ -1819,61 +1832,91 @@ fn remove_leftovers(
 /// another, in whatever order their names give, frames numbered by their place (no
 /// timestep of their own) and a last frame cut short are no sign.
 fn interleaved_runs(jobs: &[Job<'_>], place: &dyn Fn(&Job<'_>) -> String) -> Option<BatchError> {
-    // (Not a dump's last frame cut inside a line, whose timestep may be cut short too:
-    // it is left for a rerun.)
-    let timed: Vec<&Job<'_>> = jobs
+    // (Not a dump's last frame cut inside a line, or a compressed dump's last frame, which
+    // may be cut so too: their timesteps may be cut short, and they are left for a rerun.)
+    let timed: Vec<(usize, &Job<'_>)> = jobs
         .iter()
-        .filter(|j| j.own_timestep.is_some())
-        .filter(|j| !(j.last_of_input && j.dump.is_some_and(DumpFile::ends_mid_line)))
+        .enumerate()
+        .filter(|(_, j)| j.own_timestep.is_some())
+        .filter(|(_, j)| !(j.last_of_input && j.dump.is_none_or(DumpFile::ends_mid_line)))
         .collect();
     for w in timed.windows(2) {
-        if w[0].input == w[1].input && w[1].timestep < w[0].timestep {
+        let ((_, a), (_, b)) = (w[0], w[1]);
+        if a.input == b.input && b.timestep < a.timestep {
             return Some(BatchError::Interleaved {
                 what: format!(
                     "{} at timestep {} follows {} at timestep {}",
-                    place(w[1]),
-                    w[1].timestep,
-                    place(w[0]),
-                    w[0].timestep
+                    place(b),
+                    b.timestep,
+                    place(a),
+                    a.timestep
                 ),
-                restart: w[1].timestep,
+                last_keeps: format!(
+                    "the restart's frames (from timestep {} on, leaving out the earlier \
+                     run's from there)",
+                    b.timestep
+                ),
             });
         }
     }
-    // Each input's first and last frame by timestep, in the order of the inputs.
-    let mut spans: Vec<(&Job<'_>, &Job<'_>)> = Vec::new();
-    for j in timed {
+    // Each input's first and last frame by timestep, with its place in the order of the
+    // inputs.
+    struct Span<'j, 'a> {
+        order: usize,
+        lo: &'j Job<'a>,
+        hi: &'j Job<'a>,
+    }
+    let mut spans: Vec<Span<'_, '_>> = Vec::new();
+    for (order, j) in timed {
         match spans.last_mut() {
-            Some((lo, hi)) if lo.input == j.input => {
-                if j.timestep < lo.timestep {
-                    *lo = j;
+            Some(s) if s.lo.input == j.input => {
+                if j.timestep < s.lo.timestep {
+                    s.lo = j;
                 }
-                if j.timestep > hi.timestep {
-                    *hi = j;
+                if j.timestep > s.hi.timestep {
+                    s.hi = j;
                 }
             }
-            _ => spans.push((j, j)),
+            _ => spans.push(Span {
+                order,
+                lo: j,
+                hi: j,
+            }),
         }
     }
     // By first timestep: a span starting before the latest end so far overlaps it (a
     // start equal to another's is a timestep twice, said before this).
-    spans.sort_by_key(|(lo, _)| lo.timestep);
-    let mut latest: Option<&Job<'_>> = None;
-    for (lo, hi) in spans {
-        if let Some(end) = latest.filter(|e| lo.timestep < e.timestep) {
+    spans.sort_by_key(|s| s.lo.timestep);
+    let mut latest: Option<&Span<'_, '_>> = None;
+    for s in &spans {
+        if let Some(end) = latest.filter(|e| s.lo.timestep < e.hi.timestep) {
+            // `last` takes the inputs in their order: the later one's frames supersede
+            // the earlier one's from its first timestep on, whichever is the restart.
+            let (later, earlier) = if s.order > end.order {
+                (s, end)
+            } else {
+                (end, s)
+            };
             return Some(BatchError::Interleaved {
                 what: format!(
                     "{} at timestep {} falls before {} at timestep {}",
-                    place(lo),
-                    lo.timestep,
-                    place(end),
-                    end.timestep
+                    place(s.lo),
+                    s.lo.timestep,
+                    place(end.hi),
+                    end.hi.timestep
                 ),
-                restart: lo.timestep,
+                last_keeps: format!(
+                    "the frames of {}, the later input in their order (their paths' natural \
+                     order), from its first timestep {} on, leaving out those of {} from \
+                     there",
+                    later.lo.input.display(),
+                    later.lo.timestep,
+                    earlier.lo.input.display()
+                ),
             });
         }
-        if latest.is_none_or(|e| hi.timestep > e.timestep) {
-            latest = Some(hi);
+        if latest.is_none_or(|e| s.hi.timestep > e.hi.timestep) {
+            latest = Some(s);
         }
     }
     None
@@ -2921,10 +2964,9 @@ pub fn batch(
     // converted: read again and compared by checksum.
     let mut kept_unchanged = 0;
     if !unsure.is_empty() {
-        let total = unsure
-            .iter()
-            .map(|u| u.2.end.saturating_sub(u.2.start))
-            .sum();
+        let total = unsure.iter().fold(0u64, |t, u| {
+            t.saturating_add(u.2.end.saturating_sub(u.2.start))
+        });
         progress.stage(
             &format!(
                 "checking {} frame{} of changed inputs",
@@ -3091,12 +3133,14 @@ pub fn batch(
             })?;
     }
     let previous = read_manifest_bytes(&manifest_path).map_err(|e| e.kind());
-    keep_side_records(
+    // (Best effort: without them a later run converts such frames again; a directory
+    // that takes no file fails the manifest's own write, which says so.)
+    let _ = keep_side_records(
         out_dir,
         opts.shard,
         &known_frames,
         &manifest.lock().unwrap_or_else(|e| e.into_inner()),
-    )?;
+    );
     save(&mut manifest.lock().unwrap_or_else(|e| e.into_inner()))?;
     // A shard that converts anything outdates the merged manifest of an earlier merge
     // (its checksums, its frames' sources): moved aside before the first frame changes,

@@ -1339,26 +1339,33 @@ fn runs_whose_frames_would_interleave_are_refused_by_default() {
     let first = dump("run.1.dump", &[0, 100, 200, 300]);
     let restart = dump("run.2.dump", &[150, 250, 350]);
     let one = dump("one.dump", &[0, 100, 200, 300, 150, 250, 350]);
-    let refused = |inputs: &[PathBuf], says: &str| {
+    let refused = |inputs: &[PathBuf], says: &str, last: &str| {
         let e = batch(inputs, &dir.path().join("e"), &opts(), &NoProgress)
             .unwrap_err()
             .to_string();
         assert!(
             e.contains("the frames of two runs would interleave")
                 && e.contains(says)
-                && e.contains(
-                    "--duplicate-timesteps last keeps the restart's frames (from timestep 150 on"
-                ),
+                && e.contains(&format!("--duplicate-timesteps last keeps {last}")),
             "{e}"
         );
     };
+    // (`last` takes the inputs in their order: the later one's frames win.)
     refused(
         &[first.clone(), restart.clone()],
         "run.2.dump frame 0 at timestep 150 falls before ",
+        "the frames of ",
+    );
+    refused(
+        &[first.clone(), restart.clone()],
+        "run.2.dump, the later input in their order (their paths' natural order), from its \
+         first timestep 150 on, leaving out those of ",
+        "",
     );
     refused(
         std::slice::from_ref(&one),
         "one.dump frame 4 at timestep 150 follows ",
+        "the restart's frames (from timestep 150 on",
     );
     for (policy, kept) in [
         (Duplicates::Last, vec![0, 100, 150, 250, 350]),

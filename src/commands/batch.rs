@@ -178,6 +178,10 @@ pub fn check_merge_options(matches: &clap::ArgMatches) -> Result<()> {
     if matches.get_one::<PathBuf>("merge").is_none() {
         return Ok(());
     }
+    // (Refused in JSON too where asked: `run` has not turned it on yet.)
+    if matches.get_flag("json") {
+        crate::json_output();
+    }
     // The options as spelt on the command line (argument groups are no options).
     let command = <Args as clap::Args>::augment_args(clap::Command::new("batch"));
     let long = |id: &str| {

@@ -96,7 +96,7 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
         println!(
             "{}",
             serde_json::to_string_pretty(
-                &json!({ "kind": "shards", "merged": false, "shards": shards })
+                &json!({ "ok": true, "kind": "shards", "merged": false, "shards": shards })
             )?
         );
         return Ok(true);
@@ -244,6 +244,7 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     let column = frames.iter().find_map(|f| f.species_column.clone());
     if args.json {
         let v = json!({
+            "ok": true,
             "kind": "batch",
             "batch": dir.display().to_string(),
             "frames": frames.len(),
@@ -411,6 +412,7 @@ fn sndf_info(args: &Args) -> Result<()> {
     shortest_f32(&mut view);
     if args.json {
         let v = json!({
+            "ok": true,
             "file": args.file.display().to_string(),
             "kind": "sndf",
             "width": h.width,
@@ -506,6 +508,7 @@ pub fn run(args: Args) -> Result<()> {
     let flat = mdlod_render::flat_axis(&f);
     if args.json {
         let mut v = json!({
+            "ok": true,
             "kind": "mdlod",
             "file": args.file.display().to_string(),
             "file_size": file_size,

@@ -2072,8 +2072,12 @@ fn parse_kernel_scale(s: &str) -> Result<f32, String> {
 /// frame's cut uploaded).
 pub fn parse_bytes_or_zero(s: &str) -> Result<u64, String> {
     let t = s.trim();
-    let digits = t.trim_end_matches(|c: char| c.is_ascii_alphabetic()).trim();
-    if !digits.is_empty() && digits.parse::<f64>().is_ok_and(|v| v == 0.0) {
+    let unit_at = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (digits, unit) = t.split_at(unit_at);
+    // (Zero of a unit the sizes know: `0`, `0M`; not `0Q`.)
+    if digits.parse::<f64>().is_ok_and(|v| v == 0.0) && parse_bytes(&format!("1{unit}")).is_ok() {
         return Ok(0);
     }
     parse_bytes(s)
@@ -4988,6 +4992,7 @@ mod tests {
         assert_eq!(parse_bytes_or_zero("0M"), Ok(0));
         assert_eq!(parse_bytes_or_zero("2G"), Ok(2 << 30));
         assert!(parse_bytes_or_zero("x").is_err());
+        assert!(parse_bytes_or_zero("0Q").is_err());
     }
 
     /// Splats lit by a logarithm: a file whose clusters keep the logarithm of their mean
