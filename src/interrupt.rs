@@ -51,6 +51,18 @@ pub fn on_interrupt_run(hook: impl Fn() + Send + 'static) {
         .push(Box::new(hook));
 }
 
+/// What an interrupted command adds to its `--json` object (a batch's counts).
+type JsonFields = Box<dyn Fn() -> serde_json::Map<String, serde_json::Value> + Send>;
+static JSON_FIELDS: Mutex<Option<JsonFields>> = Mutex::new(None);
+
+/// Sets the fields an interrupted command's `--json` object carries beside `ok` and
+/// `error`.
+pub fn on_interrupt_json(
+    fields: impl Fn() -> serde_json::Map<String, serde_json::Value> + Send + 'static,
+) {
+    *JSON_FIELDS.lock().unwrap_or_else(|e| e.into_inner()) = Some(Box::new(fields));
+}
+
 /// Sets what the message of an interrupted run adds (see [`remove_on_interrupt`]).
 pub fn on_interrupt_say(text: impl Into<String>) {
     *SAYING.lock().unwrap_or_else(|e| e.into_inner()) = Some(text.into());
@@ -106,7 +118,12 @@ pub fn remove_on_interrupt(
             eprintln!("{message}");
             // A script reading `--json` gets its one object, as for any failure.
             if crate::json_failures() && !crate::json_printed() {
-                crate::print_json(serde_json::json!({ "ok": false, "error": message }));
+                let mut value = serde_json::json!({ "ok": false, "error": message });
+                let extra = JSON_FIELDS.lock().unwrap_or_else(|e| e.into_inner());
+                if let (Some(fields), Some(map)) = (extra.as_ref(), value.as_object_mut()) {
+                    map.extend(fields());
+                }
+                crate::print_json(value);
             }
             std::process::exit(130);
         });

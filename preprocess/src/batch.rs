@@ -340,8 +340,9 @@ pub struct BatchOptions {
 #[derive(Clone, Default)]
 pub struct ManifestHandle(std::sync::Arc<ManifestSlot>);
 
-/// Where the running batch keeps its manifest, and the manifest's path.
-type ManifestSlot = Mutex<Option<(PathBuf, std::sync::Arc<Mutex<Manifest>>)>>;
+/// Where the running batch keeps its manifest, the manifest's path, and how many frames
+/// it listed as the batch began converting (those already done).
+type ManifestSlot = Mutex<Option<(PathBuf, std::sync::Arc<Mutex<Manifest>>, usize)>>;
 
 impl std::fmt::Debug for ManifestHandle {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -354,7 +355,7 @@ impl ManifestHandle {
     /// when no batch is running with this handle.
     pub fn save_now(&self) -> Result<bool, BatchError> {
         let slot = self.0.lock().unwrap_or_else(|e| e.into_inner());
-        let Some((path, manifest)) = slot.as_ref() else {
+        let Some((path, manifest, _)) = slot.as_ref() else {
             return Ok(false);
         };
         let mut m = manifest.lock().unwrap_or_else(|e| e.into_inner());
@@ -363,8 +364,24 @@ impl ManifestHandle {
         Ok(true)
     }
 
-    fn set(&self, value: Option<(PathBuf, std::sync::Arc<Mutex<Manifest>>)>) {
+    fn set(&self, value: Option<(PathBuf, std::sync::Arc<Mutex<Manifest>>, usize)>) {
         *self.0.lock().unwrap_or_else(|e| e.into_inner()) = value;
+    }
+
+    /// The running batch's counts as they are now: frames converted by this run, frames
+    /// it found done, and frames still to convert (of those its manifest expects);
+    /// `None` when no batch is running with this handle.
+    pub fn counts(&self) -> Option<(usize, usize, u64)> {
+        let slot = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let (_, manifest, at_start) = slot.as_ref()?;
+        let m = manifest.lock().unwrap_or_else(|e| e.into_inner());
+        let listed = m.frames.len();
+        let expected = m.expected_frames.unwrap_or(listed as u64);
+        Some((
+            listed.saturating_sub(*at_start),
+            *at_start,
+            expected.saturating_sub(listed as u64),
+        ))
     }
 }
 
@@ -1598,7 +1615,20 @@ fn recorded_entries(
         .collect()
 }
 
-/// Whether a recorded source of a frame no input of this run holds is gone: no file at
+/// What became of the recorded source of a frame no input of this run holds
+/// ([`source_gone`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+enum Source {
+    /// Still there, and no input of this run: another trajectory's dump.
+    There,
+    /// No file at its path.
+    Missing,
+    /// A file there that is one of this run's inputs (this key), which holds other
+    /// frames now: a restart writing into the same file name, or a dump written again.
+    Rewritten((PathBuf, std::ffi::OsString)),
+}
+
+/// What became of a recorded source of a frame no input of this run holds: no file at
 /// its path (as the run that converted it was given it, from wherever it started: a
 /// relative path is also looked for beside this run's inputs), nor, for a `%` set, any
 /// piece; or a file there that is one of this run's inputs, which holds other frames now
@@ -1608,10 +1638,18 @@ fn source_gone(
     source: &SourceInfo,
     absolute: Option<&str>,
     inputs: &[(PathBuf, std::ffi::OsString)],
-) -> bool {
+) -> Source {
     if source.path.is_empty() {
-        return false;
+        return Source::There;
     }
+    let of = |p: &Path| {
+        let key = input_key(p);
+        if inputs.contains(&key) {
+            Source::Rewritten(key)
+        } else {
+            Source::There
+        }
+    };
     let present = |path: &Path| {
         path.exists()
             || (source.path.contains('%')
@@ -1621,7 +1659,11 @@ fn source_gone(
     // The path as resolved when the frame was converted tells, where recorded.
     if let Some(abs) = absolute {
         let abs = Path::new(abs);
-        return !present(abs) || inputs.contains(&input_key(abs));
+        return if present(abs) {
+            of(abs)
+        } else {
+            Source::Missing
+        };
     }
     let found = if present(path) {
         Some(path.to_path_buf())
@@ -1636,8 +1678,8 @@ fn source_gone(
         None
     };
     match found {
-        None => true,
-        Some(p) => inputs.contains(&input_key(&p)),
+        None => Source::Missing,
+        Some(p) => of(&p),
     }
 }
 
@@ -1663,11 +1705,14 @@ fn input_key(path: &Path) -> (PathBuf, std::ffi::OsString) {
 /// the others (built with other settings, or listed by no manifest), named. Users delete
 /// dumps once converted ("convert once") and add new ones: the frames of the deleted
 /// dumps are still the data set's.
+#[allow(clippy::too_many_arguments)]
 fn gone_source_frames(
     out_dir: &Path,
     strays: &[String],
     inputs: &[PathBuf],
     numbers: &std::collections::HashSet<u64>,
+    first_timesteps: &std::collections::HashMap<(PathBuf, std::ffi::OsString), u64>,
+    superseded: &std::collections::HashSet<u64>,
     opts: &BatchOptions,
     attribute: Option<&str>,
 ) -> GoneFrames {
@@ -1702,8 +1747,24 @@ fn gone_source_frames(
         let checksum = format!("{:016x}", file.header().section_table_checksum);
         let entry = listed.get(&(name.clone(), checksum));
         let absolute = entry.and_then(|e| e.source_abs.as_deref());
-        if !source_gone(&own, absolute, &inputs) {
+        let timestep = frame_file_number(name);
+        // A timestep a restart of these inputs supersedes (`--duplicate-timesteps
+        // last`) is no data of its own, whatever became of its dump.
+        if timestep.is_some_and(|t| superseded.contains(&t)) {
             continue;
+        }
+        match source_gone(&own, absolute, &inputs) {
+            Source::There => continue,
+            Source::Missing => {}
+            // Written again: only the frames before the first it holds now are the
+            // earlier run's alone (a restart from 500 into the same file name keeps
+            // 0 to 400); those from it on were superseded, or are of another run.
+            Source::Rewritten(key) => {
+                let first = first_timesteps.get(&key).copied();
+                if timestep.is_none_or(|t| first.is_none_or(|f| t >= f)) {
+                    continue;
+                }
+            }
         }
         let same = entry.is_some_and(|r| {
             let renames = &opts.convert.species_names;
@@ -2552,6 +2613,9 @@ pub fn batch(
     }
     let place = |j: &Job<'_>| format!("{} frame {}", j.input.display(), j.frame);
     let mut duplicates = Vec::new();
+    // Timesteps a restart supersedes (`--duplicate-timesteps last`): their frame files
+    // from an earlier run are not listed as frames of gone dumps.
+    let mut superseded = std::collections::HashSet::new();
     // A restart (a frame, in the order of the inputs and their frames, at a timestep no
     // later than one before it) supersedes every earlier frame from its timestep on,
     // with a later twin or not: the abandoned run's frames past the restart's newest
@@ -2566,6 +2630,7 @@ pub fn batch(
                 for k in &new {
                     // (Twins of one timestep are said below, as before.)
                     if k.timestep != j.timestep {
+                        superseded.insert(k.timestep);
                         duplicates.push(format!(
                             "timestep {}: {} left out, superseded by the restart at timestep \
                              {} ({})",
@@ -2713,6 +2778,14 @@ pub fn batch(
     // sharded run, apart from its own ([`Manifest::gone`]), so that each shard's
     // manifest keeps their records whichever runs first, and the merge lists each once.
     let attribute = jobs.first().and_then(|j| j.attribute.clone());
+    // The first timestep each input holds now.
+    let mut first_timesteps = std::collections::HashMap::new();
+    for j in &jobs {
+        first_timesteps
+            .entry(input_key(j.input))
+            .and_modify(|t: &mut u64| *t = (*t).min(j.timestep))
+            .or_insert(j.timestep);
+    }
     let GoneFrames {
         kept: gone,
         other: gone_other,
@@ -2724,6 +2797,8 @@ pub fn batch(
         &strays,
         inputs,
         &numbers,
+        &first_timesteps,
+        &superseded,
         opts,
         attribute.as_deref(),
     );
@@ -3101,7 +3176,12 @@ pub fn batch(
     }
     let _unset = Unset(opts.handle.as_ref());
     if let Some(h) = &opts.handle {
-        h.set(Some((manifest_path.clone(), manifest.clone())));
+        let at_start = manifest
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .frames
+            .len();
+        h.set(Some((manifest_path.clone(), manifest.clone(), at_start)));
     }
     let save = |m: &mut Manifest| -> Result<(), BatchError> {
         m.frames.sort_by_key(|f| f.timestep);

@@ -1393,6 +1393,80 @@ fn runs_whose_frames_would_interleave_are_refused_by_default() {
     assert_eq!(r.converted, 6);
 }
 
+/// A dump written again under its name keeps listed only the frames of the earlier run
+/// before the first timestep it holds now (a restart from 300 into the same file name
+/// keeps 0 to 200); its frames from there on, and a restart's superseded frames
+/// (`--duplicate-timesteps last`), are named as frame files of no input, not listed as
+/// frames of a gone dump (which `verify` then passed, and a movie showed after the
+/// restart's).
+#[test]
+fn frames_a_rewritten_or_restarted_dump_no_longer_holds_are_not_listed() {
+    use mdlod_preprocess::batch::Duplicates;
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    let start = text.find("ITEM: TIMESTEP").unwrap();
+    let end = start + text[start..].find("ITEM: TIME\n").unwrap();
+    let first_frame = &text[start..end];
+    let step_line = first_frame.lines().nth(1).unwrap();
+    let frames = |steps: &[u64]| {
+        let mut d = String::new();
+        for t in steps {
+            d.push_str(&first_frame.replacen(
+                &format!("ITEM: TIMESTEP\n{step_line}\n"),
+                &format!("ITEM: TIMESTEP\n{t}\n"),
+                1,
+            ));
+        }
+        d
+    };
+    let listed = |out: &Path| -> Vec<u64> {
+        read_manifest(out)
+            .unwrap()
+            .frames
+            .iter()
+            .map(|f| f.timestep)
+            .collect()
+    };
+    let src = dir.path().join("run.dump");
+    for (case, again, policy, want) in [
+        // Written again, shorter: 400 and 500 are the old run's, not this one's.
+        (
+            "shorter",
+            frames(&[0, 100, 200, 300]),
+            Duplicates::Error,
+            vec![0, 100, 200, 300],
+        ),
+        // A restart from 300 into the same name: 0 to 200 are the earlier run's alone.
+        (
+            "restart",
+            frames(&[300, 400]),
+            Duplicates::Error,
+            vec![0, 100, 200, 300, 400],
+        ),
+        // A restart from 200 appended: 400 and 500 superseded.
+        (
+            "appended",
+            frames(&[0, 100, 200, 300, 400, 500, 200, 300]),
+            Duplicates::Last,
+            vec![0, 100, 200, 300],
+        ),
+    ] {
+        let out = dir.path().join(case);
+        std::fs::write(&src, frames(&[0, 100, 200, 300, 400, 500])).unwrap();
+        batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
+        // (Another modification time than the first version's.)
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        std::fs::write(&src, again).unwrap();
+        let o = BatchOptions {
+            duplicates: policy,
+            ..opts()
+        };
+        batch(std::slice::from_ref(&src), &out, &o, &NoProgress).unwrap();
+        assert_eq!(listed(&out), want, "{case}");
+        check_manifest(&out, &read_manifest(&out).unwrap());
+    }
+}
+
 /// A batch directory is verified against its manifest: every listed frame there, whole
 /// and the one described; what is missing, replaced or unlisted is named; shards not
 /// yet merged are checked through their own manifests.

@@ -1094,22 +1094,33 @@ pub fn cell_bounds(file: &MdlodFile) -> Option<Bounds> {
 /// over the species (negative where every species is drawn smaller than the file's
 /// spheres).
 fn drawn_reach(file: &MdlodFile, opts: &RenderOptions) -> f32 {
-    let footprint = match &opts.mode {
+    styled_reach(file, opts, footprint(opts))
+}
+
+/// How far the mode's footprint reaches, in radii: a sphere's 1, a splat's truncated
+/// Gaussian, a density kernel's support.
+fn footprint(opts: &RenderOptions) -> f32 {
+    match &opts.mode {
         RenderMode::Spheres | RenderMode::Sndf { .. } => 1.0,
         RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => opts.splat_support,
         RenderMode::Density(d) => d.kernel_scale.max(1.0),
-    };
-    styled_reach(file, opts, footprint)
+    }
+}
+
+/// The radius each species is drawn at under `opts`'s style (its own where the style
+/// cannot be applied).
+fn drawn_species_radii(file: &MdlodFile, opts: &RenderOptions) -> Vec<f32> {
+    let species = &file.metadata().species;
+    match opts.style.species_table(species) {
+        Ok(table) => table.iter().map(|t| t[3]).collect(),
+        Err(_) => species.iter().map(|s| s.radius).collect(),
+    }
 }
 
 /// How far past the file's spheres the style's radii reach, each times `footprint`: the
 /// largest over the species, 0 where the style cannot be applied.
 fn styled_reach(file: &MdlodFile, opts: &RenderOptions, footprint: f32) -> f32 {
-    let species = &file.metadata().species;
-    let drawn: Vec<f32> = match opts.style.species_table(species) {
-        Ok(table) => table.iter().map(|t| t[3]).collect(),
-        Err(_) => species.iter().map(|s| s.radius).collect(),
-    };
+    let drawn = drawn_species_radii(file, opts);
     // Particles of their own sizes are drawn scaled as their species: the reach past
     // their spheres is largest at one end of the species' sizes.
     let reach = drawn
@@ -1206,8 +1217,23 @@ fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Ve
         return Vec::new();
     };
     let test = file.hidden_test(&opts.style.hidden_set(file.metadata()));
-    // (Negative where the style draws the spheres smaller than the file's.)
-    let reach = drawn_reach(file, opts);
+    // Each particle as drawn: its radius scaled as its species' is by the style, times
+    // the mode's footprint (species scaled differently were framed by the largest
+    // scale's reach, off centre).
+    let drawn = drawn_species_radii(file, opts);
+    let species = &file.metadata().species;
+    let reach_of = footprint(opts);
+    let drawn_radius = |i: usize| {
+        let s = file.species().get(i).map(|&s| usize::from(s));
+        let own = s.and_then(|s| species.get(s)).map_or(0.0, |sp| sp.radius);
+        let styled = s.and_then(|s| drawn.get(s)).copied().unwrap_or(own);
+        let r = if own > 0.0 {
+            file.particle_radius(i) * (styled / own)
+        } else {
+            styled
+        };
+        r * reach_of
+    };
     let boxes: Vec<Framed> = points
         .iter()
         .enumerate()
@@ -1220,7 +1246,7 @@ fn particle_boxes(file: &MdlodFile, opts: &RenderOptions, fitted: &Bounds) -> Ve
             let room = (centre - fitted.min).min(fitted.max - centre).min_element();
             inside.then(|| Framed::Ball {
                 centre,
-                radius: (file.particle_radius(i) + reach).min(room).max(0.0),
+                radius: drawn_radius(i).min(room).max(0.0),
             })
         })
         .collect();

@@ -342,6 +342,19 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             }
         }
     });
+    // `--json`: the counts so far, as a batch that fails gives them.
+    crate::interrupt::on_interrupt_json({
+        let handle = handle.clone();
+        move || {
+            let mut map = serde_json::Map::new();
+            if let Some((converted, skipped, to_convert)) = handle.counts() {
+                map.insert("converted".into(), converted.into());
+                map.insert("skipped".into(), skipped.into());
+                map.insert("to_convert".into(), to_convert.into());
+            }
+            map
+        }
+    });
     let opts = BatchOptions {
         convert,
         read,
