@@ -1266,18 +1266,10 @@ fn keep_side_records(
         .collect();
     // Records the other manifests keep (the other shards' frames) are theirs to keep.
     let own = manifest_name(shard);
-    for e in std::fs::read_dir(out_dir).map_err(io(out_dir))?.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        let other = name == MANIFEST || name == PREVIOUS_MANIFEST || is_shard_manifest(&name);
-        if !other || name == own {
+    for (name, m) in manifests_in(out_dir) {
+        if name == own {
             continue;
         }
-        let Some(m) = read_manifest_bytes(&e.path())
-            .ok()
-            .and_then(|t| parse_manifest(&e.path(), &t, "dataset").ok())
-        else {
-            continue;
-        };
         listed.extend(
             m.frames
                 .into_iter()
@@ -1551,6 +1543,32 @@ fn recorded_frames(out_dir: &Path) -> std::collections::HashMap<(String, String)
     recorded_frames_with(out_dir, true)
 }
 
+/// The manifests of `out_dir` (whole, shards', and the merged one a shard moved aside),
+/// by file name; unreadable ones are passed over.
+fn manifests_in(out_dir: &Path) -> Vec<(String, Manifest)> {
+    let Ok(dir) = std::fs::read_dir(out_dir) else {
+        return Vec::new();
+    };
+    dir.flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let m = manifest_of(out_dir, &name)?;
+            Some((name, m))
+        })
+        .collect()
+}
+
+/// The manifest `name` in `out_dir`, where it is one ([`manifests_in`]) and reads.
+fn manifest_of(out_dir: &Path, name: &str) -> Option<Manifest> {
+    if !(name == MANIFEST || name == PREVIOUS_MANIFEST || is_shard_manifest(name)) {
+        return None;
+    }
+    let path = out_dir.join(name);
+    read_manifest_bytes(&path)
+        .ok()
+        .and_then(|t| parse_manifest(&path, &t, "dataset").ok())
+}
+
 /// [`recorded_frames`], with the side records ([`side_records_name`]) or without.
 fn recorded_frames_with(
     out_dir: &Path,
@@ -1576,17 +1594,10 @@ fn recorded_frames_with(
             }
             continue;
         }
-        if !(name == MANIFEST || name == PREVIOUS_MANIFEST || is_shard_manifest(&name)) {
-            continue;
-        }
-        let Some(m) = read_manifest_bytes(&e.path())
-            .ok()
-            .and_then(|t| parse_manifest(&e.path(), &t, "dataset").ok())
-        else {
-            continue;
-        };
-        for f in m.frames.into_iter().chain(m.gone).chain(m.unlisted) {
-            known.insert((f.file.clone(), f.checksum.clone()), f);
+        if let Some(m) = manifest_of(out_dir, &name) {
+            for f in m.frames.into_iter().chain(m.gone).chain(m.unlisted) {
+                known.insert((f.file.clone(), f.checksum.clone()), f);
+            }
         }
     }
     known

@@ -1220,6 +1220,26 @@ fn frames_whose_bytes_only_moved_are_kept() {
     assert_eq!((r.converted, r.skipped, r.kept_unchanged), (0, 6, 0));
 }
 
+/// The real dump's first frame once for each of `steps`, as that timestep: a text dump
+/// of the timesteps a test needs (restarts, twins).
+fn first_frame_at(steps: &[u64]) -> String {
+    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
+    // Its frames begin `ITEM: TIME`, then `ITEM: TIMESTEP`.
+    let start = text.find("ITEM: TIMESTEP").unwrap();
+    let end = start + text[start..].find("ITEM: TIME\n").unwrap();
+    let first_frame = &text[start..end];
+    let step_line = first_frame.lines().nth(1).unwrap();
+    let mut dump = String::new();
+    for t in steps {
+        dump.push_str(&first_frame.replacen(
+            &format!("ITEM: TIMESTEP\n{step_line}\n"),
+            &format!("ITEM: TIMESTEP\n{t}\n"),
+            1,
+        ));
+    }
+    dump
+}
+
 /// A run restarted into the same dump repeats timesteps: refused by default with the
 /// way out named; with `Last` the later frame of each converts (its source frame is
 /// recorded), with `First` the earlier; the others are reported.
@@ -1228,22 +1248,8 @@ fn duplicate_timesteps_are_refused_or_resolved_as_asked() {
     use mdlod_preprocess::batch::Duplicates;
     let dir = tempfile::tempdir().unwrap();
     // The real dump's first frame four times, as timesteps 0, 100, 100, 200.
-    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
-    // Its frames begin `ITEM: TIME`, then `ITEM: TIMESTEP`.
-    let start = text.find("ITEM: TIMESTEP").unwrap();
-    let end = start + text[start..].find("ITEM: TIME\n").unwrap();
-    let first_frame = &text[start..end];
-    let step_line = first_frame.lines().nth(1).unwrap();
-    let mut dump = String::new();
-    for t in [0, 100, 100, 200] {
-        dump.push_str(&first_frame.replacen(
-            &format!("ITEM: TIMESTEP\n{step_line}\n"),
-            &format!("ITEM: TIMESTEP\n{t}\n"),
-            1,
-        ));
-    }
     let src = dir.path().join("restarted.dump");
-    std::fs::write(&src, dump).unwrap();
+    std::fs::write(&src, first_frame_at(&[0, 100, 100, 200])).unwrap();
     let e = batch(
         std::slice::from_ref(&src),
         &dir.path().join("e"),
@@ -1276,16 +1282,8 @@ fn duplicate_timesteps_are_refused_or_resolved_as_asked() {
     }
     // A restart supersedes every earlier frame from its timestep on, twin or not: the
     // abandoned run's 300 and 400 are left out after a restart at 200 that reached 250.
-    let mut dump = String::new();
-    for t in [0, 100, 200, 300, 400, 200, 250] {
-        dump.push_str(&first_frame.replacen(
-            &format!("ITEM: TIMESTEP\n{step_line}\n"),
-            &format!("ITEM: TIMESTEP\n{t}\n"),
-            1,
-        ));
-    }
     let src = dir.path().join("restarted-short.dump");
-    std::fs::write(&src, dump).unwrap();
+    std::fs::write(&src, first_frame_at(&[0, 100, 200, 300, 400, 200, 250])).unwrap();
     let out = dir.path().join("restart");
     let o = BatchOptions {
         duplicates: Duplicates::Last,
@@ -1318,22 +1316,9 @@ fn duplicate_timesteps_are_refused_or_resolved_as_asked() {
 fn runs_whose_frames_would_interleave_are_refused_by_default() {
     use mdlod_preprocess::batch::Duplicates;
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
-    let start = text.find("ITEM: TIMESTEP").unwrap();
-    let end = start + text[start..].find("ITEM: TIME\n").unwrap();
-    let first_frame = &text[start..end];
-    let step_line = first_frame.lines().nth(1).unwrap();
     let dump = |name: &str, steps: &[u64]| {
-        let mut d = String::new();
-        for t in steps {
-            d.push_str(&first_frame.replacen(
-                &format!("ITEM: TIMESTEP\n{step_line}\n"),
-                &format!("ITEM: TIMESTEP\n{t}\n"),
-                1,
-            ));
-        }
         let p = dir.path().join(name);
-        std::fs::write(&p, d).unwrap();
+        std::fs::write(&p, first_frame_at(steps)).unwrap();
         p
     };
     let first = dump("run.1.dump", &[0, 100, 200, 300]);
@@ -1403,22 +1388,7 @@ fn runs_whose_frames_would_interleave_are_refused_by_default() {
 fn frames_a_rewritten_or_restarted_dump_no_longer_holds_are_not_listed() {
     use mdlod_preprocess::batch::Duplicates;
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(lammps_sample_path("cu_melt.custom.dump")).unwrap();
-    let start = text.find("ITEM: TIMESTEP").unwrap();
-    let end = start + text[start..].find("ITEM: TIME\n").unwrap();
-    let first_frame = &text[start..end];
-    let step_line = first_frame.lines().nth(1).unwrap();
-    let frames = |steps: &[u64]| {
-        let mut d = String::new();
-        for t in steps {
-            d.push_str(&first_frame.replacen(
-                &format!("ITEM: TIMESTEP\n{step_line}\n"),
-                &format!("ITEM: TIMESTEP\n{t}\n"),
-                1,
-            ));
-        }
-        d
-    };
+    let frames = first_frame_at;
     let listed = |out: &Path| -> Vec<u64> {
         read_manifest(out)
             .unwrap()
