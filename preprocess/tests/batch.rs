@@ -1389,14 +1389,6 @@ fn frames_a_rewritten_or_restarted_dump_no_longer_holds_are_not_listed() {
     use mdlod_preprocess::batch::Duplicates;
     let dir = tempfile::tempdir().unwrap();
     let frames = first_frame_at;
-    let listed = |out: &Path| -> Vec<u64> {
-        read_manifest(out)
-            .unwrap()
-            .frames
-            .iter()
-            .map(|f| f.timestep)
-            .collect()
-    };
     let src = dir.path().join("run.dump");
     for (case, again, policy, want) in [
         // Written again, shorter: 400 and 500 are the old run's, not this one's.
