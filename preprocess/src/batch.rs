@@ -1769,11 +1769,15 @@ fn gone_source_frames(
             Source::Missing => {}
             // Written again: only the frames before the first it holds now are the
             // earlier run's alone (a restart from 500 into the same file name keeps
-            // 0 to 400); those from it on were superseded, or are of another run.
+            // 0 to 400); those from it on were superseded, or are of another run. (One
+            // that holds no frame yet, a restart that has only just begun it, keeps
+            // them all.)
             Source::Rewritten(key) => {
                 let first = first_timesteps.get(&key).copied();
-                if timestep.is_none_or(|t| first.is_none_or(|f| t >= f)) {
-                    continue;
+                if let (Some(t), Some(f)) = (timestep, first) {
+                    if t >= f {
+                        continue;
+                    }
                 }
             }
         }
