@@ -4975,6 +4975,24 @@ mod tests {
     use super::*;
     use clap::Args as _;
 
+    /// `--kernel-scale` within (0, 100]; light and view directions finite, not zero,
+    /// and scaled where their squares would leave single precision.
+    #[test]
+    fn kernel_scales_and_directions_parse_within_their_ranges() {
+        assert_eq!(parse_kernel_scale("2.5"), Ok(2.5));
+        assert_eq!(parse_kernel_scale("100"), Ok(100.0));
+        for bad in ["0", "-1", "1e10", "NaN", "inf", "x"] {
+            assert!(parse_kernel_scale(bad).is_err(), "{bad}");
+        }
+        // A direction too long or too short for single precision's squares keeps its
+        // direction, its largest component 1; an ordinary one is kept as given.
+        assert_eq!(parse_direction("1e20,0,0"), Ok([1.0, 0.0, 0.0]));
+        assert_eq!(parse_direction("0,-1e-30,0"), Ok([0.0, -1.0, 0.0]));
+        assert_eq!(parse_direction("-0.35,0.45,1"), Ok([-0.35, 0.45, 1.0]));
+        assert!(parse_direction("0,0,0").is_err());
+        assert!(parse_direction("1,NaN,0").is_err());
+    }
+
     /// Sizes: units, 0 refused where a pool or limit cannot be empty (and taken where
     /// it means "no pool"), 2^64 bytes and beyond refused rather than saturated.
     #[test]

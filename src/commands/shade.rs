@@ -307,3 +307,31 @@ pub fn run(args: Args) -> Result<()> {
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    /// The explorer's angles within the hemisphere of normals; a light's direction, however
+    /// long or short, normalised to the direction it names.
+    #[test]
+    fn explorer_angles_and_light_directions_parse_as_they_read() {
+        assert_eq!(super::explorer_disk("20"), Ok(20.0));
+        assert_eq!(super::explorer_tolerance("0"), Ok(0.0));
+        for bad in ["0", "90.5", "NaN", "1e30", "-3"] {
+            assert!(super::explorer_disk(bad).is_err(), "{bad}");
+        }
+        for bad in ["-1", "46", "NaN"] {
+            assert!(super::explorer_tolerance(bad).is_err(), "{bad}");
+        }
+        for (given, want) in [
+            ("1e20,0,0", [1.0, 0.0, 0.0]),
+            ("0,0,1e-30", [0.0, 0.0, 1.0]),
+        ] {
+            let (d, _) = super::parse_light(given).unwrap();
+            assert!(
+                (d - mdlod_render::glam::Vec3::from(want)).length() < 1e-6,
+                "{given}: {d}"
+            );
+        }
+        assert!(super::parse_light("0,0,0").is_err());
+    }
+}
