@@ -1254,7 +1254,7 @@ fn side_records_name(shard: Option<(u32, u32)>) -> String {
 fn keep_side_records(
     out_dir: &Path,
     shard: Option<(u32, u32)>,
-    known: &std::collections::HashMap<(String, String), FrameEntry>,
+    known: &RecordMap,
     manifest: &Manifest,
 ) -> Result<(), BatchError> {
     let mut listed: std::collections::HashSet<(String, String)> = manifest
@@ -1535,12 +1535,52 @@ struct Recorded {
     wrap: bool,
 }
 
-/// Every record of a frame file in the manifests of `out_dir` (whole, shards', of this
-/// run's earlier attempts or of other shardings, and the merged one a shard moved aside;
-/// listed, kept by a shard or kept unlisted), by file name and checksum. Unreadable
-/// manifests are passed over.
-fn recorded_frames(out_dir: &Path) -> std::collections::HashMap<(String, String), FrameEntry> {
-    recorded_frames_with(out_dir, true)
+/// Records of frame files by file name and checksum.
+type RecordMap = std::collections::HashMap<(String, String), FrameEntry>;
+
+/// Every record of a frame file in `out_dir`, by file name and checksum, read once a run:
+/// `listed`, those of the manifests (whole, shards', of this run's earlier attempts or of
+/// other shardings, and the merged one a shard moved aside; listed, kept by a shard or
+/// kept unlisted), and `side`, those of the side records ([`side_records_name`]).
+/// Unreadable files are passed over.
+struct Records {
+    listed: RecordMap,
+    side: RecordMap,
+}
+
+impl Records {
+    fn read(out_dir: &Path) -> Records {
+        let mut r = Records {
+            listed: RecordMap::new(),
+            side: RecordMap::new(),
+        };
+        let Ok(dir) = std::fs::read_dir(out_dir) else {
+            return r;
+        };
+        for e in dir.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if is_side_records(&name) {
+                let records = read_manifest_bytes(&e.path())
+                    .ok()
+                    .and_then(|t| serde_json::from_slice::<Vec<FrameEntry>>(&t).ok());
+                for f in records.into_iter().flatten() {
+                    r.side.insert((f.file.clone(), f.checksum.clone()), f);
+                }
+            } else if let Some(m) = manifest_of(out_dir, &name) {
+                for f in m.frames.into_iter().chain(m.gone).chain(m.unlisted) {
+                    r.listed.insert((f.file.clone(), f.checksum.clone()), f);
+                }
+            }
+        }
+        r
+    }
+
+    /// Every record, a manifest's before a side record of the same file.
+    fn all(&self) -> RecordMap {
+        let mut all = self.side.clone();
+        all.extend(self.listed.iter().map(|(k, f)| (k.clone(), f.clone())));
+        all
+    }
 }
 
 /// The manifests of `out_dir` (whole, shards', and the merged one a shard moved aside),
@@ -1569,45 +1609,9 @@ fn manifest_of(out_dir: &Path, name: &str) -> Option<Manifest> {
         .and_then(|t| parse_manifest(&path, &t, "dataset").ok())
 }
 
-/// [`recorded_frames`], with the side records ([`side_records_name`]) or without.
-fn recorded_frames_with(
-    out_dir: &Path,
-    side_records: bool,
-) -> std::collections::HashMap<(String, String), FrameEntry> {
-    let mut known = std::collections::HashMap::new();
-    let Ok(dir) = std::fs::read_dir(out_dir) else {
-        return known;
-    };
-    for e in dir.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        if is_side_records(&name) {
-            if !side_records {
-                continue;
-            }
-            let records = read_manifest_bytes(&e.path())
-                .ok()
-                .and_then(|t| serde_json::from_slice::<Vec<FrameEntry>>(&t).ok());
-            for f in records.into_iter().flatten() {
-                known
-                    .entry((f.file.clone(), f.checksum.clone()))
-                    .or_insert(f);
-            }
-            continue;
-        }
-        if let Some(m) = manifest_of(out_dir, &name) {
-            for f in m.frames.into_iter().chain(m.gone).chain(m.unlisted) {
-                known.insert((f.file.clone(), f.checksum.clone()), f);
-            }
-        }
-    }
-    known
-}
-
 /// The column names and radius overrides each recorded frame was converted with
-/// ([`recorded_frames`]), by file name and checksum.
-fn recorded_entries(
-    frames: &std::collections::HashMap<(String, String), FrameEntry>,
-) -> std::collections::HashMap<(String, String), Recorded> {
+/// ([`Records`]), by file name and checksum.
+fn recorded_entries(frames: &RecordMap) -> std::collections::HashMap<(String, String), Recorded> {
     frames
         .iter()
         .map(|(key, f)| {
@@ -1719,6 +1723,7 @@ fn input_key(path: &Path) -> (PathBuf, std::ffi::OsString) {
 #[allow(clippy::too_many_arguments)]
 fn gone_source_frames(
     out_dir: &Path,
+    listed: &RecordMap,
     strays: &[String],
     inputs: &[PathBuf],
     numbers: &std::collections::HashSet<u64>,
@@ -1728,9 +1733,6 @@ fn gone_source_frames(
     attribute: Option<&str>,
 ) -> GoneFrames {
     let inputs: Vec<(PathBuf, std::ffi::OsString)> = inputs.iter().map(|p| input_key(p)).collect();
-    // (The manifests' records only: the side records keep frames of other inputs, which
-    // a run over these never lists as its own, their dumps gone or not.)
-    let listed = recorded_frames_with(out_dir, false);
     // Frames this run's own manifest lists whose files are gone too, of no frame of this
     // run: said by the run that stops listing them, once (not from the merged manifest,
     // which every shard reads, nor the records a shard moved aside).
@@ -2793,6 +2795,7 @@ pub fn batch(
     // sharded run, apart from its own ([`Manifest::gone`]), so that each shard's
     // manifest keeps their records whichever runs first, and the merge lists each once.
     let attribute = jobs.first().and_then(|j| j.attribute.clone());
+    let records = Records::read(out_dir);
     // The first timestep each input holds now.
     let mut first_timesteps = std::collections::HashMap::new();
     for j in &jobs {
@@ -2809,6 +2812,9 @@ pub fn batch(
         species: gone_species,
     } = gone_source_frames(
         out_dir,
+        // (The manifests' records only: the side records keep frames of other inputs,
+        // which a run over these never lists as its own, their dumps gone or not.)
+        &records.listed,
         &strays,
         inputs,
         &numbers,
@@ -2893,7 +2899,7 @@ pub fn batch(
             .then(|| opts.read.columns.clone())
             .flatten()
     };
-    let known_frames = recorded_frames(out_dir);
+    let known_frames = records.all();
     let known = recorded_entries(&known_frames);
     let mut redone = Redone::default();
     // Outputs whose input changed, to be compared by their frames' bytes.

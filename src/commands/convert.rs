@@ -255,16 +255,11 @@ type Radii = Vec<(String, f32)>;
 /// `-o` by mistake): the conversion would replace it without a word. An earlier
 /// `.mdlod` file, whole or cut short, is replaced as the option says.
 fn check_replaces_only_mdlod(output: &std::path::Path) -> Result<()> {
-    use std::io::Read;
-    // (A FIFO in its place is not opened here: that would wait for a writer.)
-    let Ok(mut f) = mdlod_format::files::open(output) else {
-        return Ok(()); // (None there, unreadable or no file: the write says why.)
-    };
-    if !f.metadata().is_ok_and(|m| m.is_file() && m.len() > 0) {
+    // (A FIFO in its place is not opened here: that would wait for a writer. None
+    // there, unreadable or no file: the write says why; an empty file is replaced.)
+    let Some(head) = super::file_head(output).filter(|h| !h.is_empty()) else {
         return Ok(());
-    }
-    let mut head = Vec::with_capacity(8);
-    let _ = f.by_ref().take(8).read_to_end(&mut head);
+    };
     if head[..] != mdlod_format::MAGIC[..] {
         bail!(
             "-o {}: exists and is no .mdlod file; converting would replace it: remove it \

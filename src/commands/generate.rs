@@ -42,12 +42,9 @@ pub struct Args {
 /// PNG given as `-o` by mistake, say after a copied command): the generated dump would
 /// replace it without a word, as `convert` and `sample` refuse to. A dump is replaced.
 fn refuse_replacing_made_files(output: &Path) -> Result<()> {
-    use std::io::Read;
-    let Ok(mut f) = mdlod_format::files::open(output) else {
+    let Some(head) = super::file_head(output) else {
         return Ok(());
     };
-    let mut head = Vec::with_capacity(8);
-    let _ = f.by_ref().take(8).read_to_end(&mut head);
     let kind = if head[..] == mdlod_format::MAGIC[..] {
         ".mdlod"
     } else if head[..] == mdlod_format::sndf::SNDF_MAGIC[..] {

@@ -461,13 +461,8 @@ pub fn run(args: Args) -> Result<()> {
         crate::json_errors();
     }
     // The first 8 bytes tell an S-NDF file from a .mdlod one.
-    let is_sndf = mdlod_format::files::open(&args.file)
-        .ok()
-        .is_some_and(|mut f| {
-            let mut magic = [0u8; 8];
-            std::io::Read::read_exact(&mut f, &mut magic).is_ok()
-                && magic == mdlod_format::sndf::SNDF_MAGIC
-        });
+    let is_sndf =
+        super::file_head(&args.file).is_some_and(|h| h[..] == mdlod_format::sndf::SNDF_MAGIC[..]);
     if is_sndf {
         return sndf_info(&args);
     }

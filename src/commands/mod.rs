@@ -55,6 +55,16 @@ pub fn check_png_name(option: &str, output: &Path) -> Result<()> {
 /// file and renamed over the path, which would replace the input). `option` names the
 /// output on the command line (`-o`, `--save-view`); `inputs` are (option, path) pairs,
 /// the option empty for a positional input. A `%` piece set stands for its pieces.
+/// The first bytes (up to 8, a magic number's) of the regular file at `path`; `None`
+/// where there is none to open (no file, a directory, unreadable).
+pub fn file_head(path: &Path) -> Option<Vec<u8>> {
+    use std::io::Read;
+    let f = mdlod_format::files::open(path).ok()?;
+    let mut head = Vec::with_capacity(8);
+    f.take(8).read_to_end(&mut head).ok()?;
+    Some(head)
+}
+
 /// Refuses, before any work, a file to write beside the main output into a directory
 /// that takes no file (read-only, full of inodes, not ours): the picture was drawn and
 /// written first, and then the command failed with it left behind. A directory that does

@@ -2013,6 +2013,16 @@ pub enum Intensity {
 /// Parses `512M`, `2G`, `1048576`, `64KiB`; a size below one byte (0) is refused: no
 /// memory limit or pool can be empty.
 pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let bytes = size_in_bytes(s)? as u64;
+    if bytes == 0 {
+        return Err(format!("{s:?} leaves no room: give a size such as 512M"));
+    }
+    Ok(bytes)
+}
+
+/// The bytes a size such as `512M` names, exactly (before rounding down to whole
+/// bytes), below 2^64.
+fn size_in_bytes(s: &str) -> Result<f64, String> {
     let t = s.trim();
     let split = t
         .find(|c: char| !(c.is_ascii_digit() || c == '.'))
@@ -2046,11 +2056,7 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
     if exact.is_nan() || exact >= u64::MAX as f64 {
         return Err(format!("{s:?} is beyond any memory (at most 16 EiB)"));
     }
-    let bytes = exact as u64;
-    if bytes == 0 {
-        return Err(format!("{s:?} leaves no room: give a size such as 512M"));
-    }
-    Ok(bytes)
+    Ok(exact)
 }
 
 /// The most radii `--kernel-scale` reaches: SPH codes' conventions take 1 or 2, and a
@@ -2071,13 +2077,7 @@ fn parse_kernel_scale(s: &str) -> Result<f32, String> {
 /// [`parse_bytes`] that takes `0` too (the viewer's `--gpu-memory 0`: no pool, each
 /// frame's cut uploaded).
 pub fn parse_bytes_or_zero(s: &str) -> Result<u64, String> {
-    let t = s.trim();
-    let unit_at = t
-        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .unwrap_or(t.len());
-    let (digits, unit) = t.split_at(unit_at);
-    // (Zero of a unit the sizes know: `0`, `0M`; not `0Q`.)
-    if digits.parse::<f64>().is_ok_and(|v| v == 0.0) && parse_bytes(&format!("1{unit}")).is_ok() {
+    if size_in_bytes(s)? == 0.0 {
         return Ok(0);
     }
     parse_bytes(s)

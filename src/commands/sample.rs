@@ -80,7 +80,6 @@ pub struct Args {
 /// exists and is no S-NDF file (a `.mdlod` or an image given as `-o` by mistake, which
 /// the file would replace without a word).
 fn check_replaces_only_sndf(output: &std::path::Path) -> Result<()> {
-    use std::io::Read;
     if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         if !dir.is_dir() {
             anyhow::bail!(
@@ -91,12 +90,10 @@ fn check_replaces_only_sndf(output: &std::path::Path) -> Result<()> {
         }
     }
     // (A FIFO in its place was refused by check_output; this opens regular files only.)
-    let Ok(mut f) = mdlod_format::files::open(output) else {
+    let Some(head) = super::file_head(output) else {
         return Ok(());
     };
-    let mut magic = [0u8; 8];
-    let is_sndf = f.read_exact(&mut magic).is_ok() && magic == mdlod_format::sndf::SNDF_MAGIC;
-    if !is_sndf {
+    if head[..] != mdlod_format::sndf::SNDF_MAGIC[..] {
         anyhow::bail!(
             "-o {} exists and is no .sndf file: give another name, or remove it first",
             output.display()
