@@ -116,7 +116,11 @@ pub fn remove_on_interrupt(
                 None => "interrupted: working files removed".to_string(),
             };
             eprintln!("{message}");
-            // A script reading `--json` gets its one object, as for any failure.
+            // A script reading `--json` gets its one object, as for any failure. The lock
+            // of standard output is held from the test to the exit, so that a result
+            // being printed as the signal came is either printed whole before (and this
+            // prints nothing) or not at all.
+            let _stdout = std::io::stdout().lock();
             if crate::json_failures() && !crate::json_printed() {
                 let mut value = serde_json::json!({ "ok": false, "error": message });
                 let extra = JSON_FIELDS.lock().unwrap_or_else(|e| e.into_inner());

@@ -68,8 +68,11 @@ fn print_json(mut value: serde_json::Value) {
         let notes = std::mem::take(&mut *NOTES.lock().unwrap_or_else(|e| e.into_inner()));
         map.insert("notes".into(), notes.into());
     }
-    JSON_PRINTED.store(true, std::sync::atomic::Ordering::Relaxed);
+    // The flag is set under the lock of standard output, which the Ctrl-C handler
+    // holds while it decides whether to print an object of its own: a run interrupted
+    // as it prints its result gives one object, not two.
     let mut out = std::io::stdout().lock();
+    JSON_PRINTED.store(true, std::sync::atomic::Ordering::Relaxed);
     if let Err(e) = writeln!(out, "{value}") {
         if e.kind() != std::io::ErrorKind::BrokenPipe {
             eprintln!("error: writing to standard output: {e}");
