@@ -533,6 +533,11 @@ fn render_writes_a_picture_and_views_round_trip() {
         "240",
     ]);
     assert!(!same.contains("saved from"), "{same}");
+    // Without a view, one side alone keeps the default 16:9 shape.
+    ok(&["render", s(&file), "-o", s(&sized), "--width", "64"]);
+    assert_eq!((read_png(&sized).0, read_png(&sized).1), (64, 36));
+    ok(&["render", s(&file), "-o", s(&sized), "--height", "27"]);
+    assert_eq!((read_png(&sized).0, read_png(&sized).1), (48, 27));
     // `sample` takes the saved size too (it sampled 1280×720 before: a .sndf 50 times
     // as large), and its shading draws that image.
     let sndf = dir.path().join("v.sndf");
@@ -2085,6 +2090,17 @@ fn particles_are_hidden_by_their_values() {
     let (n, out) = drawn_of(&["--screen-error", "0", "--hide-attribute", "6:9"]);
     assert!(
         n == 125 && out.contains("--hide-attribute hides no particle: c_cna lies from 1 to 5"),
+        "{out}"
+    );
+    // A range within the attribute's range but between its values hides nothing either,
+    // and says so.
+    let (n, out) = drawn_of(&["--screen-error", "0", "--hide-attribute", "2.2:2.8"]);
+    assert!(
+        n == 125
+            && out.contains(
+                "--hide-attribute hides no particle: c_cna lies from 1 to 5 here, and none of \
+                 its values lies in the range"
+            ),
         "{out}"
     );
 }
@@ -10172,6 +10188,59 @@ fn hidden_values_can_be_read_from_another_attribute_than_the_colours() {
 /// standard error: convert, verify (a file and a batch directory), batch, a still (its
 /// notes in it) and a turntable (a line per image), each parsed and checked against what
 /// was done.
+/// Under a colour map, species given colours of their own take no part of the map's
+/// range: a granular run's large grains drawn grey leave the map to the small grains'
+/// radii, whose colours would otherwise share a third of it.
+#[test]
+fn species_in_colours_of_their_own_leave_the_map_its_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("g.mdlod");
+    ok(&[
+        "convert",
+        s(&lammps_sample_path("granular.dump")),
+        "-o",
+        s(&file),
+        "--attribute",
+        "radius",
+    ]);
+    let png = dir.path().join("g.png");
+    let range = |extra: &[&str]| -> [f64; 2] {
+        let mut args = vec![
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "48",
+            "--height",
+            "32",
+            "--colour-map",
+            "viridis",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let o = mdlod(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let r = v["attribute_range"].as_array().cloned().unwrap_or_default();
+        match r.as_slice() {
+            [lo, hi] => [lo.as_f64().unwrap(), hi.as_f64().unwrap()],
+            _ => panic!("{v}"),
+        }
+    };
+    // The file's radii, then the small grains' (type 1) alone: the large ones' (type
+    // 2) are grey.
+    let all = range(&[]);
+    let small = range(&["--species-colour", "2=grey"]);
+    assert!(all[1] > 0.8, "{all:?}");
+    assert!(
+        (small[0] - all[0]).abs() < 1e-4 && small[1] < 0.6,
+        "{small:?} against {all:?}"
+    );
+    // Hiding the large grains gives the same range.
+    assert_eq!(range(&["--hide-species", "2"]), small);
+}
+
 #[test]
 fn json_output_gives_one_object_per_result() {
     let dir = tempfile::tempdir().unwrap();
@@ -10311,6 +10380,27 @@ fn json_output_gives_one_object_per_result() {
         "--json",
     ]);
     assert_eq!(m.len(), 2);
+    // A key drawn into the image is named (a script can tell the PNG has one).
+    let keyed = json(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&dir.path().join("k.png")),
+        "--width",
+        "480",
+        "--height",
+        "200",
+        "--legend-in-image=bottom-right",
+        "--json",
+    ]);
+    assert_eq!(
+        (
+            keyed[0]["legend_in_image"].as_str(),
+            keyed[0]["legend"].as_str()
+        ),
+        (Some("bottom-right"), None)
+    );
+    assert_eq!(m[0]["legend_in_image"], serde_json::Value::Null);
     // (`--dt` gives each frame's time, as the label's.)
     assert!(
         (m[0]["time"].as_f64().unwrap() - 0.2).abs() < 1e-9,

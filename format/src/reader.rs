@@ -1248,6 +1248,17 @@ impl MdlodFile {
         self.slot_attribute(slot).map(|(info, _)| info)
     }
 
+    /// Whether some particle's stored value of the attribute of a [`HiddenSet`]'s slot
+    /// lies in `codes` (quantized values, inclusive; see
+    /// [`crate::meta::AttributeInfo::codes`]): a scan of that attribute's section, which
+    /// stops at the first. `false` for a slot without an attribute.
+    pub fn slot_values_meet(&self, slot: u8, codes: (u16, u16)) -> bool {
+        let (lo, hi) = codes;
+        self.slot_attribute(slot)
+            .and_then(|(_, v)| v)
+            .is_some_and(|v| v.iter().any(|&q| lo <= q && q <= hi))
+    }
+
     /// The attribute of a [`HiddenSet`]'s slot and its quantized values per particle.
     fn slot_attribute(&self, slot: u8) -> Option<(&AttributeInfo, Option<&[u16]>)> {
         match slot {

@@ -248,6 +248,33 @@ fn wrapping_into_a_flat_cell() {
     }
 }
 
+/// `--wrap` of a frame without a cell (a plain XYZ file) says it has nothing to wrap
+/// into; of a frame with one, nothing is said.
+#[test]
+fn wrapping_without_a_cell_is_noted() {
+    let wrap = ReadOptions {
+        wrap: true,
+        ..Default::default()
+    };
+    let xyz = DumpFile::open(&sample("cu_melt.xyz").unwrap()).unwrap();
+    let notes = xyz.frame_notes(0, &wrap);
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.contains("has no simulation cell") && n.contains("--wrap")),
+        "{notes:?}"
+    );
+    assert!(!xyz
+        .frame_notes(0, &ReadOptions::default())
+        .iter()
+        .any(|n| n.contains("--wrap")));
+    let dump = DumpFile::open(&sample("cu_melt.custom.dump").unwrap()).unwrap();
+    assert!(!dump
+        .frame_notes(0, &wrap)
+        .iter()
+        .any(|n| n.contains("--wrap")));
+}
+
 #[test]
 fn cu_slab_shrink_wrapped_boundary() {
     let Some(path) = sample("cu_slab.shrinkwrap.dump") else {

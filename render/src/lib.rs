@@ -699,13 +699,16 @@ pub enum DrawnValues {
     Range([f32; 2]),
 }
 
-/// The attribute values of the particles `style` draws, where it hides some (species,
-/// values) or cuts some away (`clip`, each particle's centre as the traversal cuts
-/// it): what a colour map spans by default, so that hidden particles' values (a
-/// solvent's zero, the bulk beside a slab's defects) do not stretch it. One pass over
-/// the particles' species and values, and their positions where planes cut.
+/// The attribute values of the particles `style` draws in the colour map's colours,
+/// where it hides some (species, values), cuts some away (`clip`, each particle's
+/// centre as the traversal cuts it) or gives species colours of their own under a
+/// colour map ([`PointStyle::unmapped_mask`]): what a colour map spans by default, so
+/// that hidden particles' values (a solvent's zero, the bulk beside a slab's defects)
+/// and grey walls' (a granular run's resting wall atoms) do not stretch it. One pass
+/// over the particles' species and values, and their positions where planes cut.
 pub fn drawn_attribute(file: &MdlodFile, style: &PointStyle) -> DrawnValues {
-    let hidden = style.hidden_set(file.metadata());
+    let mut hidden = style.hidden_set(file.metadata());
+    hidden.species |= style.unmapped_mask(&file.metadata().species);
     let (Some(a), Some(values), Ok(clip)) = (
         file.metadata().attribute.as_ref(),
         file.attribute(),

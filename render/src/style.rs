@@ -539,6 +539,28 @@ impl PointStyle {
         mask
     }
 
+    /// Of `species`, those a colour map leaves in colours of their own (bit `s` for
+    /// species index `s`, among the first 64): the species given a colour, not hidden,
+    /// where the style has a colour map (`--colour-map viridis --species-colour
+    /// wall=grey`). Their values take no part of the map's range.
+    pub fn unmapped_mask(&self, species: &[mdlod_format::meta::Species]) -> u64 {
+        if self.colour_map.is_none() {
+            return 0;
+        }
+        let mut mask = 0u64;
+        for (i, s) in species.iter().enumerate().take(64) {
+            let own = self
+                .species
+                .iter()
+                .rfind(|st| st.name == s.name)
+                .is_some_and(|st| st.colour.is_some() && !st.hidden);
+            if own {
+                mask |= 1 << i;
+            }
+        }
+        mask
+    }
+
     /// True when the style hides a species the traversal cannot leave out (one of index
     /// 64 or more: [`Self::hidden_mask`] is then 0 and the GPU hides its particles by
     /// their radius): occlusion culling, which would take them for occluders, must then

@@ -641,12 +641,12 @@ fn three_digits(v: f32) -> String {
 fn hidden_ranges<'f>(
     style: &mdlod_render::PointStyle,
     file: &'f mdlod_format::reader::MdlodFile,
-) -> Vec<(&'f mdlod_format::meta::AttributeInfo, [f32; 2])> {
+) -> Vec<(&'f mdlod_format::meta::AttributeInfo, [f32; 2], u8)> {
     let set = style.hidden_set(file.metadata());
     set.ranges()
         .iter()
         .zip(set.slots())
-        .filter_map(|(&r, &slot)| Some((file.hidden_slot_attribute(slot)?, r)))
+        .filter_map(|(&r, &slot)| Some((file.hidden_slot_attribute(slot)?, r, slot)))
         .collect()
 }
 
@@ -665,13 +665,21 @@ fn hidden_range_hits(
     file: &mdlod_format::reader::MdlodFile,
 ) -> Vec<RangeHits> {
     let mut hits: Vec<RangeHits> = Vec::new();
-    for (a, r) in hidden_ranges(style, file) {
-        let hit = a.codes(r).is_some();
+    for (a, r, slot) in hidden_ranges(style, file) {
+        // Within the attribute's range a range may still fall between its values (2:4
+        // of a structure type holding only 1 and 5): the values are looked at.
+        let codes = a.codes(r);
+        let within = codes.is_some();
+        let hit = codes.is_some_and(|codes| file.slot_values_meet(slot, codes));
         match hits.iter_mut().find(|h| h.name == a.name) {
-            Some(h) => h.hit |= hit,
+            Some(h) => {
+                h.hit |= hit;
+                h.within |= within;
+            }
             None => hits.push(RangeHits {
                 name: a.name.clone(),
                 hit,
+                within,
                 min: a.min,
                 max: a.max,
             }),
@@ -684,6 +692,8 @@ fn hidden_range_hits(
 struct RangeHits {
     name: String,
     hit: bool,
+    /// Some range lies within the attribute's range (its values may still all miss it).
+    within: bool,
     min: f32,
     max: f32,
 }
@@ -695,6 +705,7 @@ fn join_range_hits(all: &mut Vec<RangeHits>, more: Vec<RangeHits>) {
         match all.iter_mut().find(|h| h.name == m.name) {
             Some(h) => {
                 h.hit |= m.hit;
+                h.within |= m.within;
                 h.min = h.min.min(m.min);
                 h.max = h.max.max(m.max);
             }
@@ -713,8 +724,14 @@ fn hides_nothing_text(hits: &[RangeHits], place: &str) -> Vec<String> {
                 1 => String::new(),
                 _ => format!(" (of {})", h.name),
             };
+            let between = if h.within {
+                ", and none of its values lies in the range"
+            } else {
+                ""
+            };
             format!(
-                "  note: --hide-attribute{which} hides no particle: {} lies from {} to {} {place}",
+                "  note: --hide-attribute{which} hides no particle: {} lies from {} to {} \
+                 {place}{between}",
                 h.name,
                 super::Num(h.min),
                 super::Num(h.max)
@@ -802,7 +819,7 @@ fn coarse_range_notes(
 ) -> Vec<String> {
     hidden_ranges(style, file)
         .into_iter()
-        .filter_map(|(a, range)| {
+        .filter_map(|(a, range, _)| {
             let step = (f64::from(a.max) - f64::from(a.min)) / 65535.0;
             let [lo, hi] = range;
             if !(lo.is_finite() && hi.is_finite() && f64::from(hi - lo) < step) {
@@ -1334,14 +1351,20 @@ impl StyleArgs {
     }
 }
 
+/// The image size when neither `--width` nor `--height` is given (nor a view file's).
+const DEFAULT_WIDTH: u32 = 1280;
+const DEFAULT_HEIGHT: u32 = 720;
+
 /// The image size and the camera, shared by `render` and `sample`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct ViewArgs {
-    /// Image width, pixels.
-    #[arg(long, default_value_t = 1280)]
+    /// Image width, pixels (given alone, the height keeps the default shape, or a
+    /// --view file's).
+    #[arg(long, default_value_t = DEFAULT_WIDTH)]
     pub width: u32,
-    /// Image height, pixels.
-    #[arg(long, default_value_t = 720)]
+    /// Image height, pixels (given alone, the width keeps the default shape, or a
+    /// --view file's).
+    #[arg(long, default_value_t = DEFAULT_HEIGHT)]
     pub height: u32,
     /// A JSON view file (as written by --save-view); --azimuth, --elevation, --zoom and
     /// --ortho given with it change the saved view.
@@ -1750,16 +1773,18 @@ fn projected(args: &Args) -> bool {
 
 /// A view file's recorded image size, where `--width` and `--height` are both left to
 /// their defaults: the saved view then draws the picture it was saved from; where one of
-/// them is given, the other keeps the saved shape. (A view file that cannot be read fails
-/// where it is rendered.)
+/// them is given, the other keeps the saved shape, or without a saved size the default
+/// one (16:9: `--width 640` alone draws 640×360, not 640×720). (A view file that cannot
+/// be read fails where it is rendered.)
 pub fn size_from_view(camera: &mut ViewArgs, matches: &clap::ArgMatches) {
     let defaulted =
         |id: &str| matches.value_source(id) == Some(clap::parser::ValueSource::DefaultValue);
     let saved = camera.view.as_deref().and_then(|p| ViewFile::load(p).ok());
-    let Some([w, h]) = saved.and_then(|v| v.image).filter(|&[w, h]| w > 0 && h > 0) else {
-        return;
-    };
-    // One of them given: the other keeps the saved shape.
+    let [w, h] = saved
+        .and_then(|v| v.image)
+        .filter(|&[w, h]| w > 0 && h > 0)
+        .unwrap_or([DEFAULT_WIDTH, DEFAULT_HEIGHT]);
+    // One of them given: the other keeps the saved (or default) shape.
     let scaled = |given: u32, of: u32, other: u32| {
         ((f64::from(given) * f64::from(other) / f64::from(of)).round() as u32).max(1)
     };
@@ -4019,6 +4044,10 @@ fn report_json(
         "attribute_range": opts.style.attribute_range.filter(|_| by_attribute(args)),
         "light_range": r.light_range,
         "legend": args.legend.as_ref().map(|p| p.display().to_string()),
+        "legend_in_image": args.legend_in_image.map(|c| {
+            use clap::ValueEnum;
+            c.to_possible_value().map(|v| v.get_name().to_string())
+        }),
     });
     if let (serde_json::Value::Object(v), serde_json::Value::Object(m)) = (&mut value, more) {
         v.extend(m);

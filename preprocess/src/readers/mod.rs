@@ -1085,9 +1085,20 @@ impl DumpFile {
             (self.format, &self.index),
             (InputFormat::LammpsText, Index::Lammps(_))
         );
-        let info = (named || lammps_text)
+        let info = (named || lammps_text || read.wrap)
             .then(|| self.frame_info(k).ok())
             .flatten();
+        // `--wrap` of a frame without a cell (a plain XYZ file): nothing to wrap into.
+        if read.wrap
+            && info
+                .as_ref()
+                .is_some_and(|i| i.simulation_box.is_none() && i.particles > 0)
+        {
+            notes.push(format!(
+                "{}: frame {k} has no simulation cell (an extended XYZ file gives one as                  `Lattice=`), so --wrap has nothing to wrap the particles into: they are kept                  where they are",
+                self.path.display()
+            ));
+        }
         if let Some(info) = info.as_ref().filter(|_| named) {
             let has = |n: &str| info.columns.iter().find(|c| c.eq_ignore_ascii_case(n));
             if let (Some(r), Some(d)) = (has("radius"), has("diameter")) {
