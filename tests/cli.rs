@@ -1021,6 +1021,39 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
 /// into the picture `render --mode sndf` gives (sampled whole, one cut: equal up to the
 /// rectangles' cut borders), and into a coarser level made from them. A perspective view
 /// is refused.
+/// S-NDFs of a wide-angle perspective view are noted as approximate towards the edges
+/// (normals facing away from the axis binned with their mirror images); at the default
+/// field of view, and in orthographic views, nothing is said.
+#[test]
+fn wide_angle_sndfs_are_noted_as_approximate() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = converted(dir.path(), "cu_melt.xyz");
+    let wide = dir.path().join("wide.json");
+    std::fs::write(&wide, r#"{"version": 1, "fov_y_deg": 70}"#).unwrap();
+    let png = dir.path().join("w.png");
+    let sndf = dir.path().join("w.sndf");
+    let size = ["--width", "32", "--height", "24", "--iterations", "1"];
+    let note = "perspective view are approximate towards the image's edges";
+    let render = |extra: &[&str]| {
+        ok(&[
+            &["render", s(&file), "-o", s(&png), "--mode", "sndf"][..],
+            &size,
+            extra,
+        ]
+        .concat())
+    };
+    let out = render(&["--view", s(&wide)]);
+    assert!(out.contains(note) && out.contains("70°"), "{out}");
+    let out = ok(&[
+        &["sample", s(&file), "-o", s(&sndf), "--view", s(&wide)][..],
+        &size,
+    ]
+    .concat());
+    assert!(out.contains(note), "{out}");
+    assert!(!render(&[]).contains(note));
+    assert!(!render(&["--view", s(&wide), "--ortho"]).contains(note));
+}
+
 #[test]
 fn smip_tiles_sampled_once_shade_without_the_particles() {
     let dir = tempfile::tempdir().unwrap();
@@ -1112,6 +1145,42 @@ fn smip_tiles_sampled_once_shade_without_the_particles() {
     ]);
     assert!(perspective.contains("orthographic"), "{perspective}");
     assert!(!other.exists());
+    // --min-samples samples the tiles finer than the view's pixels, as it samples one
+    // image, and the view's level is shaded from them: closer to many rays at the
+    // image's size than the tiles sampled at it (it used to only relabel them).
+    let small = ["--width", "48", "--height", "32", "--ortho", "--bins", "2"];
+    let sampled = |name: &str, extra: &[&str]| {
+        let path = dir.path().join(name);
+        let out = ok(&[&["sample", s(&mdlod), "-o", s(&path)][..], &small, extra].concat());
+        let png = path.with_extension("png");
+        ok(&["shade", s(&path), "-o", s(&png)]);
+        (out, read_png(&png).2, path)
+    };
+    let (_, reference, _) = sampled("ref.sndf", &["--iterations", "64"]);
+    let (_, plain, _) = sampled("plain.sndf", &["--tiles", "--iterations", "4"]);
+    let (out, fine, fine_file) = sampled(
+        "fine.sndf",
+        &["--tiles", "--iterations", "4", "--min-samples", "64"],
+    );
+    assert!(
+        out.contains("sampled at") && out.contains("image size"),
+        "{out}"
+    );
+    let text = ok(&["info", s(&fine_file)]);
+    assert!(!text.contains("shown at     level 0 "), "{text}");
+    let off = |img: &[u8]| {
+        img.iter()
+            .zip(&reference)
+            .map(|(a, b)| f64::from(a.abs_diff(*b)))
+            .sum::<f64>()
+            / img.len() as f64
+    };
+    assert!(
+        off(&fine) * 3.0 < off(&plain),
+        "{} against {}",
+        off(&fine),
+        off(&plain)
+    );
     std::fs::remove_file(&mdlod).unwrap();
     let shaded = dir.path().join("shaded.png");
     let out = ok(&["shade", s(&sndf), "-o", s(&shaded)]);
@@ -8740,33 +8809,43 @@ fn an_iso_value_no_ray_meets_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let frame = converted(dir.path(), "cu_melt.custom.dump");
     let png = dir.path().join("iso.png");
-    let iso = |value: &str| {
+    let iso = |value: &str, extra: &[&str]| {
         ok(&[
-            "render",
-            s(&frame),
-            "-o",
-            s(&png),
-            "--width",
-            "64",
-            "--height",
-            "48",
-            "--mode",
-            "iso",
-            "--iso-value",
-            value,
-        ])
+            &[
+                "render",
+                s(&frame),
+                "-o",
+                s(&png),
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--mode",
+                "iso",
+                "--iso-value",
+                value,
+            ][..],
+            extra,
+        ]
+        .concat())
     };
-    let none = iso("5");
+    let none = iso("5", &[]);
     assert!(
         none.contains("note: no ray meets a volume fraction of 5"),
         "{none}"
     );
     let (_, _, px) = read_png(&png);
     assert!(px.chunks(4).all(|p| p == &px[..4]));
-    let some = iso("0.3");
+    let some = iso("0.3", &[]);
     assert!(!some.contains("no ray meets"), "{some}");
     let (_, _, px) = read_png(&png);
     assert!(px.chunks(4).any(|p| p != &px[..4]));
+    // From inside the surface every pixel is the surface's one colour, not the
+    // background: nothing is said.
+    let inside = iso("0.3", &["--ortho", "--zoom", "1e7"]);
+    let (_, _, px) = read_png(&png);
+    assert!(px.chunks(4).all(|p| p == &px[..4]) && px[..3] != [255, 255, 255]);
+    assert!(!inside.contains("no ray meets"), "{inside}");
 }
 
 /// A movie of a batch directory whose frame file was deleted names the manifest, the
@@ -10401,6 +10480,27 @@ fn json_output_gives_one_object_per_result() {
         (Some("bottom-right"), None)
     );
     assert_eq!(m[0]["legend_in_image"], serde_json::Value::Null);
+    // Splats give the exposure they chose (which the pieces of a movie must share) and
+    // their light.
+    let splat = json(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&dir.path().join("s.png")),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--mode",
+        "splat",
+        "--json",
+    ]);
+    assert!(
+        splat[0]["exposure"].as_f64().is_some_and(|e| e > 0.0)
+            && splat[0]["total_flux"].as_f64().is_some_and(|f| f > 0.0),
+        "{}",
+        splat[0]
+    );
     // (`--dt` gives each frame's time, as the label's.)
     assert!(
         (m[0]["time"].as_f64().unwrap() - 0.2).abs() < 1e-9,

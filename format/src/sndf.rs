@@ -170,7 +170,10 @@ fn check_tiles(path: &Path, h: &SndfHeader, t: &SndfTiles) -> Result<(), FormatE
             ));
         }
         if !seen.insert((tile.level, tile.x, tile.y)) {
-            return bad(format!("tile {i} {tile:?} appears twice"));
+            return bad(format!(
+                "tile {i} (level {}, x {}, y {}) appears twice",
+                tile.level, tile.x, tile.y
+            ));
         }
     }
     let fewest = t.tiles.iter().map(|t| t.rays).min().unwrap_or(0);

@@ -2420,17 +2420,23 @@ pub fn sample_to_file(
     sample_to_file_at(file, out, opts, None, None)
 }
 
+/// The most levels [`sample_tiles_to_file`] samples tiles finer than the view's pixels
+/// (16 times the image's size), as `mdlod sample --min-samples` samples one image.
+pub const MAX_FINER_LEVELS: u32 = 4;
+
 /// Samples the S-MIP tiles an orthographic view of `file` shows (`opts` in the sndf
 /// mode: iterations per texel, bins, binning; the screen error and budget apply per
 /// sampled rectangle) and writes them to `out` as a `.sndf` file of tiles (version 1.1),
-/// with level 0 fine enough that a sphere covers `samples_per_sphere` texels. Returns
-/// what the sampling did and the tiles written.
+/// with level 0 fine enough that a sphere covers `samples_per_sphere` texels. The tiles
+/// are sampled there (at most [`MAX_FINER_LEVELS`] levels finer than the view's pixels)
+/// and the view's own level is shaded from them. Returns what the sampling did, the
+/// tiles written, and how many levels finer than the view's pixels they were sampled.
 pub fn sample_tiles_to_file(
     file: &Path,
     out: &Path,
     opts: &RenderOptions,
     samples_per_sphere: f32,
-) -> Result<(smip::SmipStats, usize), RenderError> {
+) -> Result<(smip::SmipStats, usize, u32), RenderError> {
     let RenderMode::Sndf {
         iterations,
         bins,
@@ -2462,10 +2468,28 @@ pub fn sample_tiles_to_file(
         binning,
         file.display().to_string(),
     )?;
-    let tiles = (w.div_ceil(sndf::TILE) + 1)
-        .checked_mul(h.div_ceil(sndf::TILE) + 1)
+    // The level the view shows is `shown` levels above level 0 where `samples_per_sphere`
+    // moved level 0 finer than the pixels: the tiles are sampled that much finer (as a
+    // one-image file is sampled at a multiple of the image size), up to 16 times the
+    // image's size, and the coarser levels shaded from them.
+    let pixel = f64::from(camera.view_height_at_target()) / f64::from(h);
+    let shown = (pixel / frame.texel0).log2().round().max(0.0) as u32;
+    let finer = shown.min(MAX_FINER_LEVELS);
+    let (Some(sw), Some(sh)) = (
+        w.checked_shl(finer)
+            .filter(|&s| s >> finer == w && s <= MAX_IMAGE_SIDE),
+        h.checked_shl(finer)
+            .filter(|&s| s >> finer == h && s <= MAX_IMAGE_SIDE),
+    ) else {
+        return Err(RenderError::InvalidOptions(format!(
+            "sampling the tiles {}x finer than a {w}x{h} view, as the samples per sphere ask,              passes the largest image of {MAX_IMAGE_SIDE} pixels per side: give a smaller              --width and --height or fewer --min-samples",
+            1u32 << finer
+        )));
+    };
+    let tiles = (sw.div_ceil(sndf::TILE) + 1)
+        .checked_mul(sh.div_ceil(sndf::TILE) + 1)
         .ok_or_else(|| {
-            RenderError::InvalidOptions(format!("a view of {w}x{h} pixels has too many tiles"))
+            RenderError::InvalidOptions(format!("a view of {sw}x{sh} texels has too many tiles"))
         })?;
     let mut cache = smip::Smip::new(
         &renderer,
@@ -2481,12 +2505,24 @@ pub fn sample_tiles_to_file(
     // holds fewer tiles of this many bins: say which options to change.
     let capacity = cache.capacity();
     if capacity < tiles {
+        let finer_text = match finer {
+            0 => String::new(),
+            _ => format!(
+                " (sampled {}x finer than its pixels for the samples per sphere asked)",
+                1u32 << finer
+            ),
+        };
         return Err(RenderError::InvalidOptions(format!(
-            "a {w}x{h} view needs up to {tiles} S-MIP tiles of 64x64 texels, more than the \
-             {capacity} tiles of {bins}x{bins} bins ({} MiB each) that one buffer of this GPU \
-             holds: give fewer --bins (a tile grows with their square) or a smaller --width \
-             and --height",
+            "a {w}x{h} view{finer_text} needs up to {tiles} S-MIP tiles of 64x64 texels, more \
+             than the {capacity} tiles of {bins}x{bins} bins ({} MiB each) that one buffer of \
+             this GPU holds: give fewer --bins (a tile grows with their square){} or a smaller \
+             --width and --height",
             sndf::tile_bytes(bins) as f64 / f64::from(1 << 20),
+            if finer > 0 {
+                ", fewer --min-samples"
+            } else {
+                ""
+            },
         )));
     }
     let stats = cache.prepare(
@@ -2494,18 +2530,18 @@ pub fn sample_tiles_to_file(
         &mdlod,
         &frame,
         &camera,
-        w,
-        h,
+        sw,
+        sh,
         iterations,
         &opts.style,
     )?;
-    let exported = cache.export(&renderer, &camera, w, h)?;
+    let exported = cache.export(&renderer, &camera, sw, sh)?;
     let view = serde_json::to_value(ViewFile::from_camera(&camera))
         .map_err(|e| RenderError::InvalidOptions(e.to_string()))?;
     exported
         .to_data(w, h, view, Some(file.display().to_string()))
         .save(out)?;
-    Ok((stats, exported.tiles.len()))
+    Ok((stats, exported.tiles.len(), finer))
 }
 
 /// [`sample_to_file`] recording `display_level`: the S-MIP level that shows the intended

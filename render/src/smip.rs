@@ -1186,12 +1186,14 @@ pub fn shade_tiles(
     let plans = plan_view(&tiles.frame, tiles.level_bias, camera, width, height)?;
     let bg = background_srgb.map(srgb_to_linear);
     let mut shaded: HashMap<TileKey, Vec<[f32; 3]>> = HashMap::new();
+    let top = plans.iter().map(|p| p.level).max().unwrap_or(0);
+    let above = stored_below(&tiles.tiles, top);
     for key in plans.iter().flat_map(|p| p.keys()) {
         let derived;
         let tile = match tiles.tiles.get(&key) {
             Some(t) => Some(t),
             None => {
-                derived = derive_tile(&tiles.tiles, key, tiles.frame.bins, 4);
+                derived = derive_tile(&tiles.tiles, &above, key, tiles.frame.bins);
                 derived.as_ref()
             }
         };
@@ -1255,34 +1257,65 @@ pub fn shade_tiles(
     Ok(image)
 }
 
-/// A tile made on the host from tiles of finer levels (up to `depth` levels down): the
+/// The tiles up to level `top` that have stored tiles below them (of finer levels):
+/// those [`derive_tile`] can make. At most one per stored tile and level.
+pub fn stored_below(tiles: &BTreeMap<TileKey, TileData>, top: u32) -> HashSet<TileKey> {
+    let mut above = HashSet::new();
+    for k in tiles.keys() {
+        let mut a = *k;
+        while a.level < top {
+            // The parent: halved coordinates, rounded down (children are 2x and 2x + 1).
+            a = TileKey {
+                level: a.level + 1,
+                x: a.x >> 1,
+                y: a.y >> 1,
+            };
+            if !above.insert(a) {
+                break;
+            }
+        }
+    }
+    above
+}
+
+/// A tile made on the host from tiles of finer levels, however many levels down: the
 /// 2×2 sums of its children's texels, as the GPU down-samples. A child that is missing
 /// counts as texels whose rays hit nothing; children with fewer rays than the most are
-/// scaled up to it (the same expected S-NDF). `None` when no descendant is there.
+/// scaled up to it (the same expected S-NDF). `None` when no descendant is stored
+/// (`above`, from [`stored_below`] for a level at least `key`'s, names the tiles that
+/// have some: only those are visited, so zooming far out of a few stored tiles costs a
+/// tile per level, not 4 per level below).
 pub fn derive_tile(
     tiles: &BTreeMap<TileKey, TileData>,
+    above: &HashSet<TileKey>,
     key: TileKey,
     bins: u32,
-    depth: u32,
 ) -> Option<TileData> {
     if let Some(t) = tiles.get(&key) {
         return Some(t.clone());
     }
-    if depth == 0 {
+    if !above.contains(&key) {
         return None;
     }
     let children: Vec<Option<TileData>> = key
         .children()?
         .iter()
-        .map(|c| derive_tile(tiles, *c, bins, depth - 1))
+        .map(|c| derive_tile(tiles, above, *c, bins))
         .collect();
     let rays = children.iter().flatten().map(|c| c.rays).max()?;
     let b2 = (bins * bins) as usize;
     let half = TILE / 2;
     let mut hist = vec![[0f32; 4]; (TILE * TILE) as usize * b2];
+    // Past u32 (4^16 rays: 16 levels above one ray per texel) the sums are kept as
+    // means of the children (a quarter of the sums, over as many rays as theirs): the
+    // same S-NDFs.
+    let (sum_rays, norm) = match rays.checked_mul(4) {
+        Some(r) => (r, 1.0),
+        None => (rays, 0.25),
+    };
     for (q, child) in children.iter().enumerate() {
         let Some(child) = child else { continue };
-        let scale = rays as f32 / child.rays.max(1) as f32;
+        let scale = norm * rays as f32 / child.rays.max(1) as f32;
         let (ox, oy) = ((q as u32 % 2) * half, (q as u32 / 2) * half);
         for y in 0..TILE {
             for x in 0..TILE {
@@ -1298,8 +1331,7 @@ pub fn derive_tile(
     }
     Some(TileData {
         hist,
-        // Past u32 (4^16 rays: 16 levels above one ray per texel) it is not derived.
-        rays: rays.checked_mul(4)?,
+        rays: sum_rays,
     })
 }
 
@@ -1541,6 +1573,46 @@ mod tests {
         assert!(rects
             .iter()
             .all(|r| r[1] - r[0] <= MAX_RECT_TILES && r[3] - r[2] <= MAX_RECT_TILES));
+    }
+
+    /// A tile far above the stored ones (a view zoomed 256× out of two tiles) is made
+    /// from them: their rays and counts summed, none lost; a tile with nothing stored
+    /// below it is not made.
+    #[test]
+    fn tiles_are_made_from_stored_tiles_any_number_of_levels_down() {
+        let bins = 2u32;
+        let texels = (TILE * TILE) as usize;
+        let stored = |count: f32| TileData {
+            hist: vec![[0.5, 0.25, 0.125, count]; texels * (bins * bins) as usize],
+            rays: 4,
+        };
+        let at = |level, x, y| TileKey { level, x, y };
+        let mut tiles = BTreeMap::new();
+        tiles.insert(at(0, 0, 0), stored(1.0));
+        tiles.insert(at(0, 1, 1), stored(2.0));
+        tiles.insert(at(0, -1, 0), stored(1.0));
+        let above = stored_below(&tiles, 8);
+        // One tile per level and stored tile, shared where their ancestors meet.
+        assert!(above.len() <= 3 * 8, "{}", above.len());
+        let top = derive_tile(&tiles, &above, at(8, 0, 0), bins).unwrap();
+        assert_eq!(top.rays, 4 * 4u32.pow(8));
+        let total = |t: &TileData| t.hist.iter().map(|r| f64::from(r[3])).sum::<f64>();
+        let per_tile = (texels * 4) as f64;
+        assert_eq!(total(&top), per_tile * 3.0, "the counts of (0,0) and (1,1)");
+        // (-1, 0) lies under the tile to the left on every level.
+        let left = derive_tile(&tiles, &above, at(8, -1, 0), bins).unwrap();
+        assert_eq!(total(&left), per_tile);
+        assert!(derive_tile(&tiles, &above, at(8, 3, 0), bins).is_none());
+        // 16 levels up, the rays would pass u32: the texels keep the same share of
+        // counts to rays. The top texel covers 2^16 × 2^16 texels of level 0, of which
+        // the two stored tiles' hold counts of 4 and 8 per texel.
+        let above = stored_below(&tiles, 16);
+        let far = derive_tile(&tiles, &above, at(16, 0, 0), bins).unwrap();
+        let hit = far.hist[..4].iter().map(|r| f64::from(r[3])).sum::<f64>();
+        let share = hit / f64::from(far.rays);
+        let want = (texels as f64 * 12.0) / (4.0 * 4f64.powi(16));
+        assert!((share / want - 1.0).abs() < 1e-4, "{share} against {want}");
+        assert!(derive_tile(&tiles, &above, at(3, 0, 5), bins).is_none());
     }
 
     #[test]

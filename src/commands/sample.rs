@@ -144,11 +144,12 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     if args.tiles {
-        let (stats, tiles) = mdlod_render::sample_tiles_to_file(
+        // Samples per sphere: texels times rays, as a one-image file counts them.
+        let (stats, tiles, finer) = mdlod_render::sample_tiles_to_file(
             &args.file,
             &args.output,
             &opts,
-            args.min_samples as f32,
+            args.min_samples as f32 / args.iterations.max(1) as f32,
         )?;
         let size = std::fs::metadata(&args.output).map_or(0, |m| m.len());
         println!(
@@ -162,6 +163,15 @@ pub fn run(args: Args) -> Result<()> {
             stats.rects,
             stats.points,
         );
+        if finer > 0 {
+            println!(
+                "  sampled at {}x the image size so that every sphere gets at least {} \
+                 samples; shown at level {}",
+                1u32 << finer,
+                args.min_samples,
+                stats.level + finer
+            );
+        }
         return Ok(());
     }
     let (scale, samples) = mdlod_render::level0_scale(
@@ -250,6 +260,16 @@ pub fn run(args: Args) -> Result<()> {
         r.error_px,
         r.total_time.as_secs_f64() * 1e3
     );
+    if args.bins == 1 {
+        println!(
+            "  note: one bin per texel keeps no normals: `shade` lights every texel as its \
+             mean over the hemisphere, whatever the lights' directions; --bins 2 or more \
+             re-light"
+        );
+    }
+    if let Some(n) = super::render::sndf_wide_angle_note(&r.camera) {
+        println!("{n}");
+    }
     let every_species_hidden = mdlod_format::MdlodFile::open(&args.file).is_ok_and(|f| {
         f.metadata()
             .species

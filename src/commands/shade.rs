@@ -268,7 +268,9 @@ pub fn run(args: Args) -> Result<()> {
         },
     };
     let level = match args.zoom_out {
-        Some(z) if !(z.is_finite() && z >= 1.0) => bail!("--zoom-out {z} (must be 1 or more)"),
+        Some(z) if !(z.is_finite() && z >= 1.0) => {
+            bail!("--zoom-out {z} (must be a finite number, 1 or more)")
+        }
         Some(z) => mdlod_render::ShadeLevel::ZoomOut(z),
         None => match args.level {
             Some(l) => mdlod_render::ShadeLevel::Level(l),
