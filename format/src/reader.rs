@@ -1839,9 +1839,10 @@ impl MdlodFile {
     }
 
     /// Checks every section checksum, that the padding between sections is zero, every
-    /// node's point range, every species index and every decoded point (finite, inside
-    /// its parent's bounds up to the quantization step; a particle, inside them shrunk by
-    /// its radius up to the recorded position error).
+    /// node's point range, every node's bounds (inside its parent's), every species index
+    /// and every decoded point (finite, inside its parent's bounds up to the quantization
+    /// step; a particle, inside them shrunk by its radius up to the recorded position
+    /// error).
     pub fn verify(&self) -> Result<VerifyReport, FormatError> {
         let mut report = VerifyReport::default();
         self.check_checksums_up_to(u64::MAX)?;
@@ -1985,6 +1986,41 @@ impl MdlodFile {
                     .iter()
                     .map(|s| f64::from(*s))
                     .fold(0.0, f64::max);
+                // A node's box lies inside its parent's: the parent's bounds hold every
+                // particle sphere below it, so the child's, which hold some of them, do
+                // (up to single-precision rounding). A traversal culls a subtree by its
+                // top's box, so a parent's box narrower than its children's would drop
+                // particles from the picture without any other check failing.
+                if m < last {
+                    let children = self.level_nodes(m);
+                    for i in r.clone() {
+                        let Some(c) = children.get(i) else { continue };
+                        let mut past = 0.0f64;
+                        let mut size = 0.0f64;
+                        for k in 0..3 {
+                            let (lo, hi) = (
+                                f64::from(parent.bounds_min[k]),
+                                f64::from(parent.bounds_max[k]),
+                            );
+                            let (clo, chi) =
+                                (f64::from(c.bounds_min[k]), f64::from(c.bounds_max[k]));
+                            past = past.max(lo - clo).max(chi - hi);
+                            size = size.max(lo.abs()).max(hi.abs());
+                        }
+                        if past > 8.0 * f64::from(f32::EPSILON) * size.max(1.0) {
+                            return Err(FormatError::corrupt(
+                                &self.path,
+                                format!("node {}", self.levels()[m].node_first as usize + i),
+                                format!(
+                                    "its bounds reach {past:.3e} past those of its parent node {} on \
+                                     level {}, which must hold every particle sphere below it",
+                                    self.levels()[m - 1].node_first as usize + pi,
+                                    m - 1
+                                ),
+                            ));
+                        }
+                    }
+                }
                 for i in r {
                     let p =
                         quantize::decode3(positions.get(i), enc.centroid, enc.quant_scale, bits);

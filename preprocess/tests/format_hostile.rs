@@ -1151,6 +1151,23 @@ fn hostile_nodes() {
             ],
         ),
         (
+            // A box narrower than its children's (each within the file's other rules):
+            // a renderer would cull particles by it, so `verify` refuses it.
+            "bounds-narrower-than-children",
+            Box::new(move |n| {
+                let c = n[l1_second].centroid;
+                for k in 0..3 {
+                    let (lo, hi) = (n[l1_second].bounds_min[k], n[l1_second].bounds_max[k]);
+                    n[l1_second].bounds_min[k] = c[k] - 0.6 * (c[k] - lo);
+                    n[l1_second].bounds_max[k] = c[k] + 0.6 * (hi - c[k]);
+                }
+            }),
+            vec![
+                "its bounds reach".into(),
+                format!("past those of its parent node {l1_second} on level 1"),
+            ],
+        ),
+        (
             "centroid-moved-away",
             Box::new(move |n| n[l1_second].centroid[0] += 1000.0),
             vec![

@@ -2482,7 +2482,9 @@ pub fn sample_tiles_to_file(
             .filter(|&s| s >> finer == h && s <= MAX_IMAGE_SIDE),
     ) else {
         return Err(RenderError::InvalidOptions(format!(
-            "sampling the tiles {}x finer than a {w}x{h} view, as the samples per sphere ask,              passes the largest image of {MAX_IMAGE_SIDE} pixels per side: give a smaller              --width and --height or fewer --min-samples",
+            "sampling the tiles {}x finer than a {w}x{h} view, as the samples per sphere ask, \
+             passes the largest image of {MAX_IMAGE_SIDE} pixels per side: give a smaller \
+             --width and --height or fewer --min-samples",
             1u32 << finer
         )));
     };

@@ -1095,7 +1095,9 @@ impl DumpFile {
                 .is_some_and(|i| i.simulation_box.is_none() && i.particles > 0)
         {
             notes.push(format!(
-                "{}: frame {k} has no simulation cell (an extended XYZ file gives one as                  `Lattice=`), so --wrap has nothing to wrap the particles into: they are kept                  where they are",
+                "{}: frame {k} has no simulation cell (an extended XYZ file gives one as \
+                 `Lattice=`), so --wrap has nothing to wrap the particles into: they are kept \
+                 where they are",
                 self.path.display()
             ));
         }
