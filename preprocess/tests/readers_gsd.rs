@@ -416,6 +416,38 @@ fn chunk_data(bytes: &[u8], name: &str, frame: u64) -> usize {
         .unwrap()
 }
 
+/// A frame-0 chunk sized for other particles than frame 0's `particles/N` is an error
+/// in the frames that take it, as in frame 0: it used to be passed over for the schema's
+/// default in later frames (every particle of type A, the sizes still of both types).
+#[test]
+fn a_frame_0_chunk_of_the_wrong_length_is_an_error_in_frames_taking_it() {
+    let mut bytes = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let u64_at = |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().unwrap());
+    let data = chunk_data(&bytes, "particles/typeid", 0) as u64;
+    // The index entry whose data that is: its N, one short.
+    let at = (0..128)
+        .map(|i| u64_at(&bytes, 8) as usize + 32 * i)
+        .find(|&at| u64_at(&bytes, at + 16) == data)
+        .unwrap();
+    let n = u64_at(&bytes, at + 8);
+    bytes[at + 8..at + 16].copy_from_slice(&(n - 1).to_le_bytes());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("short-typeid.gsd");
+    std::fs::write(&path, &bytes).unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    for k in [0, dump.frame_count() - 1] {
+        let e = dump
+            .read_frame(k, &ReadOptions::default(), &NoProgress)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("short-typeid.gsd")
+                && e.contains(&format!("`particles/typeid` is {} × 1", n - 1)),
+            "frame {k}: {e}"
+        );
+    }
+}
+
 /// Converts frame 1 of `path` (taking frame 0's chunks) with `radii` overridden, in
 /// chunks of `chunk_points` when the frame is larger, root levels of at most 64 points.
 fn convert_frame_1(

@@ -634,11 +634,14 @@ impl<'a> FrameData<'a> {
         // Frame 0's chunk stands in for a missing one only where frame 0 has as many
         // particles (as HOOMD's `gsd.hoomd` reads it: a frame of another N that leaves a
         // chunk out has the schema's default, as its particles are not frame 0's); an
-        // empty frame takes nothing of frame 0's particles.
+        // empty frame takes nothing of frame 0's particles. Frame 0's count is its
+        // `particles/N`, not the chunk's own length: a chunk of frame 0 sized for other
+        // particles is an error, as it is when frame 0 itself is read.
+        let frame0_n = || self.index.particles(path, self.data, 0).ok();
         let entry = self
             .index
             .chunk(k, name)
-            .filter(|e| e.frame == k as u64 || (n > 0 && e.n == n));
+            .filter(|e| e.frame == k as u64 || (n > 0 && frame0_n() == Some(n)));
         match entry {
             None if required && n > 0 => Err(err(
                 path,
