@@ -137,6 +137,15 @@ fn wrong_column_count() {
         None,
         "12: expected 5 columns, found 6",
     );
+    // A header naming twice the columns every line holds: every line is there, so it
+    // is a column count, not a frame cut short (which a rerun would wait for).
+    let wide = HEAD.replace("x y z", "x y z a b c d e");
+    assert_error(
+        "c10.lammpstrj",
+        &format!("{wide}1 1 0 0 0\n2 1 0 0 0\n3 1 0 0 0\n"),
+        None,
+        "10: expected 10 columns, found 5",
+    );
 }
 
 #[test]

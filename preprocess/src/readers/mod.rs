@@ -2085,6 +2085,26 @@ impl DumpFile {
         if header.info.particles > room {
             let lines = memchr::memchr_iter(b'\n', atoms).count()
                 + usize::from(atoms.last().is_some_and(|&b| b != b'\n'));
+            // Every line there, but shorter than the columns the header names: lines of
+            // fewer columns (damage no rerun mends), not a frame cut short.
+            if lines >= header.info.particles {
+                let columns = header.layout.columns.len();
+                let mut at = header.atoms.start;
+                for line in atoms.split(|&b| b == b'\n').take(lines) {
+                    let tokens = line
+                        .split(|b| b.is_ascii_whitespace())
+                        .filter(|t| !t.is_empty())
+                        .count();
+                    if tokens != columns {
+                        return Err(ReadError::ColumnCount {
+                            at: ctx.at(at),
+                            expected: columns,
+                            found: tokens,
+                        });
+                    }
+                    at += line.len() + 1;
+                }
+            }
             // At the last atom line, as the reading's own check says.
             let last = header.atoms.end.saturating_sub(1).max(header.atoms.start);
             return Err(ReadError::Truncated {
