@@ -137,6 +137,17 @@ fn wrong_column_count() {
         None,
         "12: expected 5 columns, found 6",
     );
+    // Scaled coordinates in a box of no length along x: refused, not all put at 0.
+    let flat = HEAD
+        .replacen("0.0 10.0", "0 0", 1)
+        .replace("x y z", "xs ys zs");
+    assert_error(
+        "flat.lammpstrj",
+        &format!("{flat}1 1 0.1 0.2 0.3\n2 1 0.5 0.5 0.5\n3 1 0.9 0.1 0.2\n"),
+        None,
+        "9: scaled coordinates, but the box has no length along its edge a (x): they cannot \
+         be unscaled (is ITEM: BOX BOUNDS right?)",
+    );
     // A header naming twice the columns every line holds: every line is there, so it
     // is a column count, not a frame cut short (which a rerun would wait for).
     let wide = HEAD.replace("x y z", "x y z a b c d e");

@@ -227,6 +227,30 @@ fn every_version_and_type_reads_positions_species_and_radii() {
     }
 }
 
+/// A header bounding box whose lower corner lies above its upper one (or not finite)
+/// gives the frames no box, rather than a cell of negative size.
+#[test]
+fn an_inverted_bounding_box_gives_no_box() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = vec![vec![list(1, 3, 1.0, 12, 0.0)]];
+    let mut bytes = write(103, &frames);
+    // The box's lower x (after the magic, version and frame count), past its upper.
+    bytes[12..16].copy_from_slice(&1e6f32.to_le_bytes());
+    let path = save(dir.path(), "inverted.mmpld", &bytes);
+    let dump = DumpFile::open(&path).unwrap();
+    let f = dump
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert!(f.simulation_box.is_none());
+    assert!(dump.frame_info(0).unwrap().simulation_box.is_none());
+    let good = save(dir.path(), "good.mmpld", &write(103, &frames));
+    let f = DumpFile::open(&good)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert!(f.simulation_box.is_some());
+}
+
 #[test]
 fn intensity_and_radius_attributes_come_from_the_lists_that_carry_them() {
     let dir = tempfile::tempdir().unwrap();

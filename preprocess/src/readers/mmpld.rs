@@ -22,7 +22,7 @@
 //! `xyzr` list) is refused by the conversion unless `--radius` names the list. A list's
 //! global colour (colour type 0) becomes its species' colour, as MegaMol draws it;
 //! per-particle colours are not kept (a species has one colour). The attribute can be
-//! `intensity` (intensity lists) or `radius` (`xyzr` lists). The frame's time is the timestamp, its box the file's bounding box; MMPLD
+//! `intensity` (intensity lists) or `radius` (`xyzr` lists). The frame's time is the timestamp, its box the file's bounding box (none where that is inverted or not finite); MMPLD
 //! records no timestep (a batch numbers the frames by their position among its inputs).
 //! Opening walks every frame's list headers with checked arithmetic, so counts and
 //! offsets that point past the file are errors naming the byte before any particle is
@@ -574,9 +574,13 @@ impl Index {
         f.lists.iter().map(|l| l.particles).sum()
     }
 
-    fn simulation_box(&self) -> SimulationBox {
+    /// The header's bounding box as the frames' box; none where it is not one (a
+    /// corner not finite, or the lower above the upper: a writer's "unset" box, or
+    /// damage), so that no cell is drawn inverted.
+    fn simulation_box(&self) -> Option<SimulationBox> {
         let b = self.bounding_box.map(f64::from);
-        SimulationBox::orthogonal([b[0], b[1], b[2]], [b[3], b[4], b[5]])
+        let valid = b.iter().all(|v| v.is_finite()) && (0..3).all(|k| b[k] <= b[k + 3]);
+        valid.then(|| SimulationBox::orthogonal([b[0], b[1], b[2]], [b[3], b[4], b[5]]))
     }
 }
 
@@ -594,7 +598,7 @@ pub(crate) fn frame_info(path: &Path, index: &Index, k: usize) -> Result<FrameIn
         timestep: None,
         time: f.timestamp.map(f64::from),
         units: None,
-        simulation_box: Some(index.simulation_box()),
+        simulation_box: index.simulation_box(),
         columns,
     })
 }
@@ -873,7 +877,7 @@ pub(crate) fn read_range(
             values,
         }),
         radii: sized.then_some(radii),
-        simulation_box: Some(index.simulation_box()),
+        simulation_box: index.simulation_box(),
         timestep: None,
         time: f.timestamp.map(f64::from),
         units: None,

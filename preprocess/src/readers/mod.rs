@@ -1807,6 +1807,18 @@ fn text_columns<'h>(
             })?;
         let fractional = match (scaled, &header.info.simulation_box) {
             (false, _) => None,
+            // A cell of no length along an edge puts every scaled coordinate on one plane
+            // (a box written as `0 0`): nothing a picture could show, so refused.
+            (true, Some(b)) if zero_edge(b).is_some() => {
+                let axis = ["a (x)", "b (y)", "c (z)"][zero_edge(b).unwrap_or(0)];
+                return Err(ReadError::Malformed {
+                    at: ctx.at(header.columns_at),
+                    message: format!(
+                        "scaled coordinates, but the box has no length along its edge {axis}: \
+                         they cannot be unscaled (is ITEM: BOX BOUNDS right?)"
+                    ),
+                });
+            }
             (true, Some(b)) => Some(b),
             (true, None) => {
                 return Err(ReadError::Malformed {
@@ -1835,6 +1847,14 @@ fn text_columns<'h>(
             })?;
         Ok((coords, fractional, attribute, size, layout))
     }
+}
+
+/// The first edge of `cell` of no length (or not a number), if any: 0 for `a`, 1 for
+/// `b`, 2 for `c`.
+pub(crate) fn zero_edge(cell: &SimulationBox) -> Option<usize> {
+    [cell.a, cell.b, cell.c]
+        .iter()
+        .position(|v| !(v.iter().map(|x| x * x).sum::<f64>() > 0.0))
 }
 
 /// A species column of more distinct values than a file holds species is no column of
