@@ -1852,9 +1852,10 @@ fn text_columns<'h>(
 /// The first edge of `cell` of no length (or not a number), if any: 0 for `a`, 1 for
 /// `b`, 2 for `c`.
 pub(crate) fn zero_edge(cell: &SimulationBox) -> Option<usize> {
-    [cell.a, cell.b, cell.c]
-        .iter()
-        .position(|v| !(v.iter().map(|x| x * x).sum::<f64>() > 0.0))
+    [cell.a, cell.b, cell.c].iter().position(|v| {
+        let length2: f64 = v.iter().map(|x| x * x).sum();
+        length2.is_nan() || length2 <= 0.0
+    })
 }
 
 /// A species column of more distinct values than a file holds species is no column of
