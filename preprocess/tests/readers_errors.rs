@@ -148,6 +148,15 @@ fn wrong_column_count() {
         "9: scaled coordinates, but the box has no length along its edge a (x): they cannot \
          be unscaled (is ITEM: BOX BOUNDS right?)",
     );
+    // A position column named twice: refused (the first used to be taken silently).
+    let twice = HEAD.replace("x y z", "x y z x");
+    assert_error(
+        "twice.lammpstrj",
+        &format!("{twice}1 1 0 0 0 5\n2 1 0 0 0 5\n3 1 0 0 0 5\n"),
+        None,
+        "9: column `x` is named 2 times (columns 3 and 6): which one holds the data cannot be \
+         told",
+    );
     // A header naming twice the columns every line holds: every line is there, so it
     // is a column count, not a frame cut short (which a rerun would wait for).
     let wide = HEAD.replace("x y z", "x y z a b c d e");

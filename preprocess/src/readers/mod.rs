@@ -1845,6 +1845,32 @@ fn text_columns<'h>(
                 at: ctx.at(header.columns_at),
                 message,
             })?;
+        // A column read by name that the header names twice (`x y z x`): which of the
+        // two holds the data cannot be told, so neither is taken.
+        let read = coords
+            .iter()
+            .copied()
+            .chain(layout.species)
+            .chain(attribute)
+            .chain(size.map(|(c, _)| c));
+        for c in read {
+            let name = &columns[c];
+            let at: Vec<String> = (0..columns.len())
+                .filter(|&i| columns[i] == *name)
+                .map(|i| (i + 1).to_string())
+                .collect();
+            if at.len() > 1 {
+                return Err(ReadError::Malformed {
+                    at: ctx.at(header.columns_at),
+                    message: format!(
+                        "column `{name}` is named {} times (columns {}): which one holds the \
+                         data cannot be told",
+                        at.len(),
+                        at.join(" and ")
+                    ),
+                });
+            }
+        }
         Ok((coords, fractional, attribute, size, layout))
     }
 }
