@@ -120,7 +120,9 @@ pub fn remove_on_interrupt(
             // of standard output is held from the test to the exit, so that a result
             // being printed as the signal came is either printed whole before (and this
             // prints nothing) or not at all.
-            let _stdout = std::io::stdout().lock();
+            // (Only in JSON mode: a text run blocked writing to a paused pipe must still
+            // exit.)
+            let _stdout = crate::json_failures().then(|| std::io::stdout().lock());
             if crate::json_failures() && !crate::json_printed() {
                 let mut value = serde_json::json!({ "ok": false, "error": message });
                 let extra = JSON_FIELDS.lock().unwrap_or_else(|e| e.into_inner());

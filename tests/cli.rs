@@ -1017,10 +1017,6 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
     assert!(!batch_dir.join("dataset.json").exists());
 }
 
-/// `sample --tiles` stores the S-MIP tiles of an orthographic view; `shade` lights them
-/// into the picture `render --mode sndf` gives (sampled whole, one cut: equal up to the
-/// rectangles' cut borders), and into a coarser level made from them. A perspective view
-/// is refused.
 /// S-NDFs of a wide-angle perspective view are noted as approximate towards the edges
 /// (normals facing away from the axis binned with their mirror images); at the default
 /// field of view, and in orthographic views, nothing is said.
@@ -1054,6 +1050,10 @@ fn wide_angle_sndfs_are_noted_as_approximate() {
     assert!(!render(&["--view", s(&wide), "--ortho"]).contains(note));
 }
 
+/// `sample --tiles` stores the S-MIP tiles of an orthographic view; `shade` lights them
+/// into the picture `render --mode sndf` gives (sampled whole, one cut: equal up to the
+/// rectangles' cut borders), and into a coarser level made from them. A perspective view
+/// is refused.
 #[test]
 fn smip_tiles_sampled_once_shade_without_the_particles() {
     let dir = tempfile::tempdir().unwrap();
@@ -10263,10 +10263,6 @@ fn hidden_values_can_be_read_from_another_attribute_than_the_colours() {
     }
 }
 
-/// `--json` leaves one line of JSON per result on standard output and the text on
-/// standard error: convert, verify (a file and a batch directory), batch, a still (its
-/// notes in it) and a turntable (a line per image), each parsed and checked against what
-/// was done.
 /// Under a colour map, species given colours of their own take no part of the map's
 /// range: a granular run's large grains drawn grey leave the map to the small grains'
 /// radii, whose colours would otherwise share a third of it.
@@ -10320,6 +10316,10 @@ fn species_in_colours_of_their_own_leave_the_map_its_range() {
     assert_eq!(range(&["--hide-species", "2"]), small);
 }
 
+/// `--json` leaves one line of JSON per result on standard output and the text on
+/// standard error: convert, verify (a file and a batch directory), batch, a still (its
+/// notes in it) and a turntable (a line per image), each parsed and checked against what
+/// was done.
 #[test]
 fn json_output_gives_one_object_per_result() {
     let dir = tempfile::tempdir().unwrap();

@@ -137,17 +137,33 @@ fn wrong_column_count() {
         None,
         "12: expected 5 columns, found 6",
     );
-    // Scaled coordinates in a box of no length along x: refused, not all put at 0.
+    // Scaled coordinates in a box of no length along x and y: refused, not all put on
+    // one line.
     let flat = HEAD
-        .replacen("0.0 10.0", "0 0", 1)
+        .replacen("0.0 10.0", "0 0", 2)
         .replace("x y z", "xs ys zs");
     assert_error(
         "flat.lammpstrj",
         &format!("{flat}1 1 0.1 0.2 0.3\n2 1 0.5 0.5 0.5\n3 1 0.9 0.1 0.2\n"),
         None,
-        "9: scaled coordinates, but the box has no length along its edge a (x): they cannot \
-         be unscaled (is ITEM: BOX BOUNDS right?)",
+        "9: scaled coordinates, but the box has no length along its edges a (x) and b (y): \
+         they cannot be unscaled (is ITEM: BOX BOUNDS right?)",
     );
+    // One such edge is a flat system's (a 2-D run's Lz of 0): read, on the plane z = 0.
+    let plane = HEAD
+        .replace("0.0 10.0\nITEM: ATOMS", "0 0\nITEM: ATOMS")
+        .replace("x y z", "xs ys zs");
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        dir.path(),
+        "plane.lammpstrj",
+        format!("{plane}1 1 0.1 0.2 0.3\n2 1 0.5 0.5 0.5\n3 1 0.9 0.1 0.2\n").as_bytes(),
+    );
+    let f = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap();
+    assert_eq!(f.positions[2], [9.0, 1.0, 0.0]);
     // A position column named twice: refused (the first used to be taken silently).
     let twice = HEAD.replace("x y z", "x y z x");
     assert_error(

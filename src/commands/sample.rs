@@ -163,12 +163,23 @@ pub fn run(args: Args) -> Result<()> {
             stats.rects,
             stats.points,
         );
+        // (Levels of the tiles, 0 the finest; `shade --level` counts from the view's.)
         if finer > 0 {
+            let reach = if stats.level > 0 {
+                format!(
+                    "the finest --min-samples takes (the smallest spheres get fewer than {})",
+                    args.min_samples
+                )
+            } else {
+                format!(
+                    "so that every sphere gets at least {} samples",
+                    args.min_samples
+                )
+            };
             println!(
-                "  sampled at {}x the image size so that every sphere gets at least {} \
-                 samples; shown at level {}",
+                "  sampled at {}x the image size, {reach}; `shade` draws the view's size from \
+                 them (level {} of the tiles, its --level 0)",
                 1u32 << finer,
-                args.min_samples,
                 stats.level + finer
             );
         }

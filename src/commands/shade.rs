@@ -65,7 +65,8 @@ pub struct Args {
     pub explorer_tolerance: f32,
     /// S-MIP levels coarser than sampled: each halves the image (2×2 averages of S-NDFs).
     /// Default: the level the file was sampled for (0 unless `sample --min-samples`
-    /// sampled finer).
+    /// sampled finer). A file of S-MIP tiles (`sample --tiles`) counts from its view's
+    /// size: level 0 draws the view, finer tiles stored or not.
     #[arg(long, conflicts_with = "zoom_out")]
     pub level: Option<u32>,
     /// Zoom out by this factor (≥ 1, any value) from the sampled resolution (level 0,

@@ -1807,15 +1807,18 @@ fn text_columns<'h>(
             })?;
         let fractional = match (scaled, &header.info.simulation_box) {
             (false, _) => None,
-            // A cell of no length along an edge puts every scaled coordinate on one plane
-            // (a box written as `0 0`): nothing a picture could show, so refused.
-            (true, Some(b)) if zero_edge(b).is_some() => {
-                let axis = ["a (x)", "b (y)", "c (z)"][zero_edge(b).unwrap_or(0)];
+            // A cell of no length along two edges puts every scaled coordinate on one line
+            // (a box written as `0 0`): nothing a picture could show, so refused. One such
+            // edge is a flat system's (a 2-D run's Lz of 0), drawn flat.
+            (true, Some(b)) if zero_edges(b).len() >= 2 => {
+                let names = ["a (x)", "b (y)", "c (z)"];
+                let axes: Vec<&str> = zero_edges(b).iter().map(|&k| names[k]).collect();
                 return Err(ReadError::Malformed {
                     at: ctx.at(header.columns_at),
                     message: format!(
-                        "scaled coordinates, but the box has no length along its edge {axis}: \
-                         they cannot be unscaled (is ITEM: BOX BOUNDS right?)"
+                        "scaled coordinates, but the box has no length along its edges {}: \
+                         they cannot be unscaled (is ITEM: BOX BOUNDS right?)",
+                        axes.join(" and ")
                     ),
                 });
             }
@@ -1875,13 +1878,17 @@ fn text_columns<'h>(
     }
 }
 
-/// The first edge of `cell` of no length (or not a number), if any: 0 for `a`, 1 for
-/// `b`, 2 for `c`.
-pub(crate) fn zero_edge(cell: &SimulationBox) -> Option<usize> {
-    [cell.a, cell.b, cell.c].iter().position(|v| {
-        let length2: f64 = v.iter().map(|x| x * x).sum();
-        length2.is_nan() || length2 <= 0.0
-    })
+/// The edges of `cell` of no length (or not a number): 0 for `a`, 1 for `b`, 2 for `c`.
+pub(crate) fn zero_edges(cell: &SimulationBox) -> Vec<usize> {
+    [cell.a, cell.b, cell.c]
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| {
+            let length2: f64 = v.iter().map(|x| x * x).sum();
+            length2.is_nan() || length2 <= 0.0
+        })
+        .map(|(k, _)| k)
+        .collect()
 }
 
 /// A species column of more distinct values than a file holds species is no column of
@@ -2137,7 +2144,7 @@ impl DumpFile {
             if lines >= header.info.particles {
                 let columns = header.layout.columns.len();
                 let mut at = header.atoms.start;
-                for line in atoms.split(|&b| b == b'\n').take(lines) {
+                for line in atoms.split(|&b| b == b'\n').take(header.info.particles) {
                     let tokens = line
                         .split(|b| b.is_ascii_whitespace())
                         .filter(|t| !t.is_empty())
