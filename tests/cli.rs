@@ -5622,6 +5622,19 @@ fn verify_checks_a_batch_directory() {
     let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&out), "--json"])).unwrap();
     assert_eq!(json["frames"], 6);
     assert_eq!(json["timesteps"], serde_json::json!([0, 500]));
+    // A manifest listing a timestep twice (edited by hand): said, not read as an
+    // interval of 0.
+    let manifest_text = std::fs::read_to_string(&manifest).unwrap();
+    let mut edited: serde_json::Value = serde_json::from_str(&manifest_text).unwrap();
+    let first = edited["frames"][0].clone();
+    edited["frames"].as_array_mut().unwrap().push(first);
+    std::fs::write(&manifest, edited.to_string()).unwrap();
+    let text = ok(&["info", s(&out)]);
+    assert!(
+        text.contains("1 frame repeats a timestep listed before") && !text.contains("every 0"),
+        "{text}"
+    );
+    std::fs::write(&manifest, manifest_text).unwrap();
     let m = mdlod_preprocess::batch::read_manifest(&out).unwrap();
     // A frame damaged on disk (one byte of its data flipped): verify finds it and says
     // how to have it converted again, as a rerun trusts a frame that opens.
@@ -10349,6 +10362,16 @@ fn json_output_gives_one_object_per_result() {
     ]);
     assert_eq!(c.len(), 1);
     assert_eq!(c[0]["particles"], 2552);
+    // The frame's timestep (as the dump gives it), beside its index.
+    let step: u64 = std::fs::read_to_string(&dump)
+        .unwrap()
+        .lines()
+        .nth(1)
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    assert_eq!(c[0]["timestep"].as_u64(), Some(step), "{}", c[0]);
     assert_eq!(c[0]["output"], s(&file));
     assert_eq!(
         c[0]["bytes"].as_u64(),

@@ -305,10 +305,16 @@ pub fn run(args: Args) -> Result<()> {
 
 /// The `--json` object of a conversion.
 pub fn report_json(output: &std::path::Path, r: &ConvertReport) -> serde_json::Value {
+    // The frame's timestep and time, as the file written records them.
+    let (timestep, time) = mdlod_format::MdlodFile::open(output)
+        .map(|f| (f.metadata().timestep, f.metadata().time))
+        .unwrap_or_default();
     serde_json::json!({
         "ok": true,
         "output": output.display().to_string(),
         "frame": r.frame.map(|(k, _)| k),
+        "timestep": timestep,
+        "time": time,
         "frames_in_input": r.frame.map(|(_, n)| n),
         "particles": r.particles,
         "levels": r.levels,

@@ -288,7 +288,16 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
             steps.sort_unstable();
             let gaps: std::collections::BTreeSet<u64> =
                 steps.windows(2).map(|w| w[1] - w[0]).collect();
+            // A timestep listed twice (a manifest edited or damaged: `verify` refuses
+            // it) is said, not read as an interval of 0.
+            let repeated = steps.windows(2).filter(|w| w[0] == w[1]).count();
             let every = match gaps.len() {
+                _ if repeated > 0 => format!(
+                    "; {repeated} frame{} repeat{} a timestep listed before: `mdlod verify` \
+                     names them",
+                    if repeated == 1 { "" } else { "s" },
+                    if repeated == 1 { "s" } else { "" }
+                ),
                 1 => format!(", every {}", gaps.iter().next().copied().unwrap_or(0)),
                 _ => String::new(),
             };
