@@ -458,6 +458,20 @@ fn xyz_errors() {
         None,
         "2: `Lattice` must be 9 numbers, found `1 2 3`",
     );
+    // A key given twice: neither is taken (a plain comment's repeated words are fine).
+    assert_error(
+        "lat2.xyz",
+        "1\nLattice=\"1 0 0 0 1 0 0 0 1\" lattice = \"2 0 0 0 2 0 0 0 2\"\nC 0 0 0\n",
+        None,
+        "2: `Lattice` is given 2 times in the comment line: which one holds the frame's value \
+         cannot be told",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let plain = write(dir.path(), "plain.xyz", b"1\ntime 5 time again\nC 0 0 0\n");
+    assert!(DumpFile::open(&plain)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .is_ok());
     assert_error(
         "prop.xyz",
         "1\nProperties=species:S:1:pos:R\nC 0 0 0\n",

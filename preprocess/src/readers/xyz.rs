@@ -322,6 +322,29 @@ impl Index {
                 .map(|(_, v)| v.as_str())
         };
         let bad = |message: String| ctx.malformed(comment_at, message);
+        // A key read here given twice (`Lattice=` twice): which one the writer meant
+        // cannot be told (ASE keeps the last, a first-match reader the first), so neither
+        // is taken.
+        // (Counted as `key=` in the text: a plain XYZ comment's free words, which the
+        // pairs hold as flags, may repeat.)
+        let lower = comment_text.to_ascii_lowercase();
+        for key in ["Lattice", "Origin", "pbc", "Properties", "Time"] {
+            let k = key.to_ascii_lowercase();
+            let n = lower
+                .match_indices(&k)
+                .filter(|&(at, _)| {
+                    let before = lower[..at].chars().next_back();
+                    let after = lower[at + k.len()..].trim_start();
+                    before.is_none_or(char::is_whitespace) && after.starts_with('=')
+                })
+                .count();
+            if n > 1 {
+                return Err(bad(format!(
+                    "`{key}` is given {n} times in the comment line: which one holds the frame's \
+                     value cannot be told"
+                )));
+            }
+        }
 
         // A bare word (`no lattice`, a free-text comment of plain XYZ) is a flag, `T`;
         // a cell needs its numbers given, `Lattice="..."`.
