@@ -44,7 +44,8 @@ fn json_failures() -> bool {
     JSON_OUTPUT.load(Relaxed) || JSON_ERRORS.load(Relaxed)
 }
 
-/// Set once a JSON object has been written ([`print_json`]).
+/// Set once a command's JSON result has been written ([`print_json`]; not by the parts
+/// [`print_json_part`] writes).
 static JSON_PRINTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
 /// Whether this run has written a JSON object yet.
@@ -61,8 +62,19 @@ fn json_output() {
 }
 
 /// Writes `value` (an object) to standard output as one line of JSON, with the notes
-/// said since the last as its `notes`.
-fn print_json(mut value: serde_json::Value) {
+/// said since the last as its `notes`: the command's result, after which a failure
+/// prints no object of its own.
+fn print_json(value: serde_json::Value) {
+    write_json(value, true);
+}
+
+/// [`print_json`] of one part of a result (an image of a movie or a turntable): a
+/// failure after it still ends with its `{"ok": false, "error"}` object.
+fn print_json_part(value: serde_json::Value) {
+    write_json(value, false);
+}
+
+fn write_json(mut value: serde_json::Value, result: bool) {
     use std::io::Write;
     if let serde_json::Value::Object(map) = &mut value {
         let notes = std::mem::take(&mut *NOTES.lock().unwrap_or_else(|e| e.into_inner()));
@@ -72,7 +84,9 @@ fn print_json(mut value: serde_json::Value) {
     // holds while it decides whether to print an object of its own: a run interrupted
     // as it prints its result gives one object, not two.
     let mut out = std::io::stdout().lock();
-    JSON_PRINTED.store(true, std::sync::atomic::Ordering::Relaxed);
+    if result {
+        JSON_PRINTED.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
     if let Err(e) = writeln!(out, "{value}") {
         if e.kind() != std::io::ErrorKind::BrokenPipe {
             eprintln!("error: writing to standard output: {e}");
@@ -238,13 +252,19 @@ fn main() -> std::process::ExitCode {
             .and_then(|()| commands::batch::run(a)),
         Command::Info(a) => commands::info::run(a),
         Command::Verify(a) => commands::verify::run(a),
-        Command::Render(mut a) => match matches.subcommand_matches("render") {
-            Some(m) => commands::render::check_mode_options(&a, m).and_then(|()| {
-                commands::render::size_from_view(&mut a.camera, m);
-                commands::render::run(*a)
-            }),
-            None => commands::render::run(*a),
-        },
+        Command::Render(mut a) => {
+            // (JSON mode first, so that the options refused here give their object too.)
+            if a.json {
+                json_output();
+            }
+            match matches.subcommand_matches("render") {
+                Some(m) => commands::render::check_mode_options(&a, m).and_then(|()| {
+                    commands::render::size_from_view(&mut a.camera, m);
+                    commands::render::run(*a)
+                }),
+                None => commands::render::run(*a),
+            }
+        }
         Command::Sample(mut a) => {
             if let Some(m) = matches.subcommand_matches("sample") {
                 commands::render::size_from_view(&mut a.camera, m);

@@ -10540,6 +10540,61 @@ fn json_output_gives_one_object_per_result() {
         .ends_with("frame-100.mdlod"));
     assert_eq!(m[0]["attribute"], "c_pe");
     assert_eq!(m[0]["attribute_range"].as_array().map(Vec::len), Some(2));
+    assert_eq!(m[0]["pool_limited"].as_bool(), Some(false));
+    // A movie whose second frame is damaged: the first image's line, then the
+    // failure's, `ok` false with the error (a script reading standard output used to see
+    // one image and no failure).
+    let melt = dir.path().join("melt.d");
+    let dump6 = lammps_sample_path("cu_melt.custom.dump");
+    json(&["batch", s(&dump6), "-o", s(&melt), "--json"]);
+    let listed = mdlod_preprocess::batch::read_manifest(&melt).unwrap();
+    let second = melt.join(&listed.frames[1].file);
+    let kept = std::fs::read(&second).unwrap();
+    let mut flipped = kept.clone();
+    let at = flipped.len() / 2;
+    flipped[at] ^= 0xff;
+    std::fs::write(&second, &flipped).unwrap();
+    let o = mdlod(&[
+        "render",
+        s(&melt),
+        "-o",
+        s(&movie),
+        "--frames",
+        "0:2",
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--json",
+    ]);
+    let lines: Vec<serde_json::Value> = String::from_utf8(o.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(!o.status.success());
+    assert_eq!(lines.len(), 2, "{lines:?}");
+    assert_eq!(
+        (lines[0]["ok"].as_bool(), lines[1]["ok"].as_bool()),
+        (Some(true), Some(false))
+    );
+    assert!(lines[1]["error"].as_str().is_some_and(|e| !e.is_empty()));
+    std::fs::write(&second, kept).unwrap();
+    // An option the mode does not read, refused before rendering: its object too.
+    let o = mdlod(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&dir.path().join("o.png")),
+        "--iterations",
+        "4",
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(
+        v["ok"] == false && v["error"].as_str().unwrap().contains("--iterations"),
+        "{v}"
+    );
     // A damaged file: `ok` false with the error, and the failure's status.
     let bad = dir.path().join("bad.mdlod");
     let mut bytes = std::fs::read(&file).unwrap();

@@ -4055,6 +4055,9 @@ fn report_json(
         "error_px": r.error_px,
         "budget": r.budget,
         "budget_limited": r.budget_limited,
+        // The GPU memory pool filled before the view was complete (`--gpu-memory`): the
+        // image is coarser than the error asked.
+        "pool_limited": r.pool_limited,
         "camera": {
             "projection": match c.projection {
                 mdlod_render::camera::Projection::Perspective => "perspective",
@@ -4243,7 +4246,7 @@ fn render_turntable(
         );
         println!("{}", image_line(&out, &which, &r, args, coarsest));
         if args.json {
-            crate::print_json(report_json(&out, &r, args, &opts, {
+            crate::print_json_part(report_json(&out, &r, args, &opts, {
                 let mut more = shown;
                 more["view"] = i.into();
                 more["views"] = n.into();
@@ -4810,7 +4813,7 @@ fn render_frames(
         let which = format!("frame {i} of 0-{}, timestep {}", n - 1, f.timestep);
         println!("{}", image_line(&out, &which, &r, args, coarsest));
         if args.json {
-            crate::print_json(report_json(&out, &r, args, &opts, {
+            crate::print_json_part(report_json(&out, &r, args, &opts, {
                 let mut more = shown;
                 more["frame"] = i.into();
                 more["frames"] = n.into();
