@@ -152,6 +152,9 @@ fn duplicate_key(text: &str) -> Option<String> {
     serde_json::from_str::<Keys>(text).ok()?.0
 }
 
+/// The widest vertical field of view a view file may ask for, degrees.
+pub const MAX_FOV_Y_DEG: f32 = 120.0;
+
 /// A camera as stored in a view file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ViewFile {
@@ -311,9 +314,10 @@ impl ViewFile {
                 self.elevation_deg
             ));
         }
-        if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
+        if !(self.fov_y_deg > 0.0 && self.fov_y_deg <= MAX_FOV_Y_DEG) {
             return Err(format!(
-                "fov_y_deg {} (must be above 0 and below 180)",
+                "fov_y_deg {} (must be above 0 and at most {MAX_FOV_Y_DEG}: wider views \
+                 stretch the data towards the edges past what a fit can frame)",
                 self.fov_y_deg
             ));
         }
@@ -480,6 +484,11 @@ mod tests {
             (
                 r#"{"version":1,"image":[640.5,480]}"#,
                 "expected two whole numbers of pixels",
+            ),
+            // A field of view past what a fit frames (179°: the data off screen).
+            (
+                r#"{"version":1,"fov_y_deg":179}"#,
+                "fov_y_deg 179 (must be above 0 and at most 120",
             ),
         ] {
             let e = ViewFile::parse(text).unwrap_err();
