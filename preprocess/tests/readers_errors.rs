@@ -147,7 +147,7 @@ fn wrong_column_count() {
         &format!("{flat}1 1 0.1 0.2 0.3\n2 1 0.5 0.5 0.5\n3 1 0.9 0.1 0.2\n"),
         None,
         "9: scaled coordinates, but the box has no length along its edges a (x) and b (y): \
-         they cannot be unscaled (is ITEM: BOX BOUNDS right?)",
+         they cannot be unscaled (is the box right?)",
     );
     // One such edge is a flat system's (a 2-D run's Lz of 0): read, on the plane z = 0.
     let plane = HEAD

@@ -668,3 +668,49 @@ fn column_names_given_for_a_dump_that_names_its_own_are_refused() {
         "{e}"
     );
 }
+
+/// As in text dumps: a column read by name that the header names twice is refused (the
+/// first, here the atom ids, used to be read as x), and so are scaled coordinates in a
+/// box of no length along two edges (every atom used to land on one line).
+#[test]
+fn a_column_named_twice_and_a_box_of_no_extent_are_refused() {
+    // Every occurrence of `from` in `bytes` (of `to`'s length) replaced.
+    let replaced = |bytes: &[u8], from: &[u8], to: &[u8]| {
+        let mut out = bytes.to_vec();
+        let (mut at, mut n) = (0, 0);
+        while let Some(p) = out[at..].windows(from.len()).position(|w| w == from) {
+            out[at + p..at + p + to.len()].copy_from_slice(to);
+            at += p + to.len();
+            n += 1;
+        }
+        assert!(n > 0, "nothing to replace");
+        out
+    };
+    let read_error = |name: &str, bytes: &[u8]| {
+        let (_d, path) = temp_copy(name, bytes);
+        DumpFile::open(&path)
+            .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
+            .unwrap_err()
+            .to_string()
+    };
+    let custom = std::fs::read(lammps_sample_path("cu_melt.custom.bin")).unwrap();
+    let twice = replaced(&custom, b"id type x y z c_pe", b"x  type x y z c_pe");
+    let e = read_error("twice.bin", &twice);
+    assert!(
+        e.contains("twice.bin") && e.contains("column `x` is named 2 times (columns 1 and 3)"),
+        "{e}"
+    );
+    let atom = std::fs::read(lammps_sample_path("cu_melt.atom.bin")).unwrap();
+    let side = 18.075000000000003f64;
+    let pack = |b: [f64; 6]| b.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>();
+    let flat = replaced(
+        &atom,
+        &pack([0.0, side, 0.0, side, 0.0, side]),
+        &pack([0.0, side, 0.0, 0.0, 0.0, 0.0]),
+    );
+    let e = read_error("flat.bin", &flat);
+    assert!(
+        e.contains("flat.bin") && e.contains("no length along its edges b (y) and c (z)"),
+        "{e}"
+    );
+}

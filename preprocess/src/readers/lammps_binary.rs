@@ -641,6 +641,21 @@ pub(crate) fn read_range(
         .sizes
         .resolve_beside(&names, coords, species_col)
         .map_err(|m| err(first_chunk, m))?;
+    let read = coords
+        .iter()
+        .copied()
+        .chain(species_col)
+        .chain(attribute_col)
+        .chain(size_col.map(|(c, _)| c));
+    if let Some(m) = super::named_twice(&names, read) {
+        return Err(err(first_chunk, m));
+    }
+    if let Some(m) = scaled
+        .then(|| super::unscalable(&h.simulation_box))
+        .flatten()
+    {
+        return Err(err(first_chunk, m));
+    }
     let mut radii = size_col.map(|_| vec![0f32; n]);
     let value = |atom: &[u8], c: usize| {
         f64::from_le_bytes(atom[8 * c..8 * c + 8].try_into().unwrap_or([0; 8]))

@@ -1810,16 +1810,10 @@ fn text_columns<'h>(
             // A cell of no length along two edges puts every scaled coordinate on one line
             // (a box written as `0 0`): nothing a picture could show, so refused. One such
             // edge is a flat system's (a 2-D run's Lz of 0), drawn flat.
-            (true, Some(b)) if zero_edges(b).len() >= 2 => {
-                let names = ["a (x)", "b (y)", "c (z)"];
-                let axes: Vec<&str> = zero_edges(b).iter().map(|&k| names[k]).collect();
+            (true, Some(b)) if unscalable(b).is_some() => {
                 return Err(ReadError::Malformed {
                     at: ctx.at(header.columns_at),
-                    message: format!(
-                        "scaled coordinates, but the box has no length along its edges {}: \
-                         they cannot be unscaled (is ITEM: BOX BOUNDS right?)",
-                        axes.join(" and ")
-                    ),
+                    message: unscalable(b).unwrap_or_default(),
                 });
             }
             (true, Some(b)) => Some(b),
@@ -1848,34 +1842,59 @@ fn text_columns<'h>(
                 at: ctx.at(header.columns_at),
                 message,
             })?;
-        // A column read by name that the header names twice (`x y z x`): which of the
-        // two holds the data cannot be told, so neither is taken.
         let read = coords
             .iter()
             .copied()
             .chain(layout.species)
             .chain(attribute)
             .chain(size.map(|(c, _)| c));
-        for c in read {
-            let name = &columns[c];
-            let at: Vec<String> = (0..columns.len())
-                .filter(|&i| columns[i] == *name)
-                .map(|i| (i + 1).to_string())
-                .collect();
-            if at.len() > 1 {
-                return Err(ReadError::Malformed {
-                    at: ctx.at(header.columns_at),
-                    message: format!(
-                        "column `{name}` is named {} times (columns {}): which one holds the \
-                         data cannot be told",
-                        at.len(),
-                        at.join(" and ")
-                    ),
-                });
-            }
+        if let Some(message) = named_twice(columns, read) {
+            return Err(ReadError::Malformed {
+                at: ctx.at(header.columns_at),
+                message,
+            });
         }
         Ok((coords, fractional, attribute, size, layout))
     }
+}
+
+/// Of the columns `read` (indices into `columns`), the first that `columns` names more
+/// than once (`x y z x`), said: which of them holds the data cannot be told, so neither
+/// is taken (LAMMPS text and binary dumps alike).
+pub(crate) fn named_twice(
+    columns: &[String],
+    read: impl IntoIterator<Item = usize>,
+) -> Option<String> {
+    read.into_iter().find_map(|c| {
+        let name = columns.get(c)?;
+        let at: Vec<String> = (0..columns.len())
+            .filter(|&i| columns[i] == *name)
+            .map(|i| (i + 1).to_string())
+            .collect();
+        (at.len() > 1).then(|| {
+            format!(
+                "column `{name}` is named {} times (columns {}): which one holds the data \
+                 cannot be told",
+                at.len(),
+                at.join(" and ")
+            )
+        })
+    })
+}
+
+/// Refuses scaled coordinates in `cell` where two or more of its edges have no length
+/// (every particle on one line; one such edge is a flat system's, drawn flat).
+pub(crate) fn unscalable(cell: &SimulationBox) -> Option<String> {
+    let zero = zero_edges(cell);
+    (zero.len() >= 2).then(|| {
+        let names = ["a (x)", "b (y)", "c (z)"];
+        let axes: Vec<&str> = zero.iter().map(|&k| names[k]).collect();
+        format!(
+            "scaled coordinates, but the box has no length along its edges {}: they cannot be \
+             unscaled (is the box right?)",
+            axes.join(" and ")
+        )
+    })
 }
 
 /// The edges of `cell` of no length (or not a number): 0 for `a`, 1 for `b`, 2 for `c`.
