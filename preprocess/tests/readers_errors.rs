@@ -466,6 +466,13 @@ fn xyz_errors() {
         "2: `Lattice` is given 2 times in the comment line: which one holds the frame's value \
          cannot be told",
     );
+    assert_error(
+        "step2.xyz",
+        "1\nTimestep=5 step=6\nC 0 0 0\n",
+        None,
+        "2: `Timestep`/`step` is given 2 times in the comment line: which one holds the \
+         frame's value cannot be told",
+    );
     let dir = tempfile::tempdir().unwrap();
     let plain = write(dir.path(), "plain.xyz", b"1\ntime 5 time again\nC 0 0 0\n");
     assert!(DumpFile::open(&plain)

@@ -244,11 +244,23 @@ fn an_inverted_bounding_box_gives_no_box() {
     assert!(f.simulation_box.is_none());
     assert!(dump.frame_info(0).unwrap().simulation_box.is_none());
     let good = save(dir.path(), "good.mmpld", &write(103, &frames));
-    let f = DumpFile::open(&good)
-        .unwrap()
+    let dump = DumpFile::open(&good).unwrap();
+    let f = dump
         .read_frame(0, &ReadOptions::default(), &NoProgress)
         .unwrap();
     assert!(f.simulation_box.is_some());
+    // The box bounds the data, it is no periodic cell: --wrap moves nothing, and says so.
+    let wrap = ReadOptions {
+        wrap: true,
+        ..Default::default()
+    };
+    let wrapped = dump.read_frame(0, &wrap, &NoProgress).unwrap();
+    assert_eq!(wrapped.positions, f.positions);
+    let notes = dump.frame_notes(0, &wrap);
+    assert!(
+        notes.iter().any(|n| n.contains("periodic along no axis")),
+        "{notes:?}"
+    );
 }
 
 #[test]

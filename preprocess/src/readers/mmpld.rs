@@ -580,7 +580,11 @@ impl Index {
     fn simulation_box(&self) -> Option<SimulationBox> {
         let b = self.bounding_box.map(f64::from);
         let valid = b.iter().all(|v| v.is_finite()) && (0..3).all(|k| b[k] <= b[k + 3]);
-        valid.then(|| SimulationBox::orthogonal([b[0], b[1], b[2]], [b[3], b[4], b[5]]))
+        // It bounds the data rather than being a periodic cell: `--wrap` leaves it alone.
+        valid.then(|| SimulationBox {
+            periodic: Some([false; 3]),
+            ..SimulationBox::orthogonal([b[0], b[1], b[2]], [b[3], b[4], b[5]])
+        })
     }
 }
 

@@ -1089,17 +1089,25 @@ impl DumpFile {
             .then(|| self.frame_info(k).ok())
             .flatten();
         // `--wrap` of a frame without a cell (a plain XYZ file): nothing to wrap into.
-        if read.wrap
-            && info
-                .as_ref()
-                .is_some_and(|i| i.simulation_box.is_none() && i.particles > 0)
-        {
-            notes.push(format!(
-                "{}: frame {k} has no simulation cell (an extended XYZ file gives one as \
-                 `Lattice=`), so --wrap has nothing to wrap the particles into: they are kept \
-                 where they are",
-                self.path.display()
-            ));
+        if let Some(i) = info.as_ref().filter(|i| read.wrap && i.particles > 0) {
+            let why = match &i.simulation_box {
+                None if self.format == InputFormat::Xyz => {
+                    Some("has no simulation cell (an extended XYZ file gives one as `Lattice=`)")
+                }
+                None => Some("has no simulation cell"),
+                Some(b) if b.periodic == Some([false; 3]) => Some(
+                    "has a box periodic along no axis (an MMPLD file's bounds its data, a \
+                     LAMMPS dump's `ff ff ff` or `ss ss ss`)",
+                ),
+                Some(_) => None,
+            };
+            if let Some(why) = why {
+                notes.push(format!(
+                    "{}: frame {k} {why}, so --wrap has nothing to wrap the particles into: \
+                     they are kept where they are",
+                    self.path.display()
+                ));
+            }
         }
         if let Some(info) = info.as_ref().filter(|_| named) {
             let has = |n: &str| info.columns.iter().find(|c| c.eq_ignore_ascii_case(n));

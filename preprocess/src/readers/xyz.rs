@@ -328,16 +328,28 @@ impl Index {
         // (Counted as `key=` in the text: a plain XYZ comment's free words, which the
         // pairs hold as flags, may repeat.)
         let lower = comment_text.to_ascii_lowercase();
-        for key in ["Lattice", "Origin", "pbc", "Properties", "Time"] {
-            let k = key.to_ascii_lowercase();
-            let n = lower
+        // (`Timestep=` and `step=` both give the timestep: one of them, once.)
+        let given_times = |k: &str| {
+            let k = k.to_ascii_lowercase();
+            lower
                 .match_indices(&k)
                 .filter(|&(at, _)| {
                     let before = lower[..at].chars().next_back();
                     let after = lower[at + k.len()..].trim_start();
                     before.is_none_or(char::is_whitespace) && after.starts_with('=')
                 })
-                .count();
+                .count()
+        };
+        for keys in [
+            &["Lattice"][..],
+            &["Origin"],
+            &["pbc"],
+            &["Properties"],
+            &["Time"],
+            &["Timestep", "step"],
+        ] {
+            let n: usize = keys.iter().map(|k| given_times(k)).sum();
+            let key = keys.join("`/`");
             if n > 1 {
                 return Err(bad(format!(
                     "`{key}` is given {n} times in the comment line: which one holds the frame's \
