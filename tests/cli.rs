@@ -1048,6 +1048,15 @@ fn wide_angle_sndfs_are_noted_as_approximate() {
     assert!(out.contains(note), "{out}");
     assert!(!render(&[]).contains(note));
     assert!(!render(&["--view", s(&wide), "--ortho"]).contains(note));
+    // A turntable says it once.
+    let spin = dir.path().join("spin-%d.png");
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&spin), "--mode", "sndf"][..],
+        &size,
+        &["--view", s(&wide), "--turntable", "2"],
+    ]
+    .concat());
+    assert_eq!(out.matches(note).count(), 1, "{out}");
 }
 
 /// `sample --tiles` stores the S-MIP tiles of an orthographic view; `shade` lights them

@@ -4245,6 +4245,12 @@ fn render_turntable(
             azimuth.rem_euclid(360.0)
         );
         println!("{}", image_line(&out, &which, &r, args, coarsest));
+        // (Once: every view has the first one's field of view.)
+        if i == 0 && args.mode == Mode::Sndf {
+            if let Some(n) = sndf_wide_angle_note(&r.camera) {
+                println!("{n}");
+            }
+        }
         if args.json {
             crate::print_json_part(report_json(&out, &r, args, &opts, {
                 let mut more = shown;
@@ -4724,6 +4730,7 @@ fn render_frames(
     check_panels_apart(args, legend_size, label_size, bar.as_ref(), axes.as_ref())?;
     let t0 = std::time::Instant::now();
     let mut limited_frames = 0usize;
+    let mut wide_noted = false;
     // The faintest and brightest lit pixels over the frames, for the legend's ends.
     let mut lit = None;
     // The species any frame shows, for the legend's key.
@@ -4812,6 +4819,13 @@ fn render_frames(
         // (Counted from 0, as the images' numbers and --frames count them.)
         let which = format!("frame {i} of 0-{}, timestep {}", n - 1, f.timestep);
         println!("{}", image_line(&out, &which, &r, args, coarsest));
+        // (Once: every frame has the movie's camera.)
+        if !wide_noted && args.mode == Mode::Sndf {
+            wide_noted = true;
+            if let Some(n) = sndf_wide_angle_note(&r.camera) {
+                println!("{n}");
+            }
+        }
         if args.json {
             crate::print_json_part(report_json(&out, &r, args, &opts, {
                 let mut more = shown;
