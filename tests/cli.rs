@@ -2172,6 +2172,23 @@ fn particles_are_hidden_by_their_values() {
     );
     // A range within the attribute's range but between its values hides nothing either,
     // and says so.
+    // Beside a range that hides some, one that hides none is named.
+    let (n, out) = drawn_of(&[
+        "--screen-error",
+        "0",
+        "--hide-attribute",
+        "2.2:2.8",
+        "--hide-attribute",
+        "1:1",
+    ]);
+    assert!(
+        n == 100
+            && out.contains(
+                "--hide-attribute range 2.2:2.8 hides no particle: no value of c_cna lies in it \
+                 here"
+            ),
+        "{out}"
+    );
     let (n, out) = drawn_of(&["--screen-error", "0", "--hide-attribute", "2.2:2.8"]);
     assert!(
         n == 125

@@ -671,15 +671,18 @@ fn hidden_range_hits(
         let codes = a.codes(r);
         let within = codes.is_some();
         let hit = codes.is_some_and(|codes| file.slot_values_meet(slot, codes));
+        let missed: Vec<String> = (!hit).then(|| range_text(r)).into_iter().collect();
         match hits.iter_mut().find(|h| h.name == a.name) {
             Some(h) => {
                 h.hit |= hit;
                 h.within |= within;
+                h.missed.extend(missed);
             }
             None => hits.push(RangeHits {
                 name: a.name.clone(),
                 hit,
                 within,
+                missed,
                 min: a.min,
                 max: a.max,
             }),
@@ -688,12 +691,26 @@ fn hidden_range_hits(
     hits
 }
 
+/// A hidden range as `--hide-attribute` takes it (`2:4`, `:0.2`, `2.5:`).
+fn range_text([lo, hi]: [f32; 2]) -> String {
+    let end = |v: f32| {
+        if v.is_finite() {
+            super::Num(v).to_string()
+        } else {
+            String::new()
+        }
+    };
+    format!("{}:{}", end(lo), end(hi))
+}
+
 /// Whether an attribute's hidden ranges meet its values, over one file or several.
 struct RangeHits {
     name: String,
     hit: bool,
     /// Some range lies within the attribute's range (its values may still all miss it).
     within: bool,
+    /// The ranges that meet none of its values, as given.
+    missed: Vec<String>,
     min: f32,
     max: f32,
 }
@@ -706,6 +723,8 @@ fn join_range_hits(all: &mut Vec<RangeHits>, more: Vec<RangeHits>) {
             Some(h) => {
                 h.hit |= m.hit;
                 h.within |= m.within;
+                // Missed in every frame.
+                h.missed.retain(|r| m.missed.contains(r));
                 h.min = h.min.min(m.min);
                 h.max = h.max.max(m.max);
             }
@@ -717,27 +736,42 @@ fn join_range_hits(all: &mut Vec<RangeHits>, more: Vec<RangeHits>) {
 /// The notes on attributes whose hidden ranges meet none of their values (`where`: "here",
 /// "in any frame").
 fn hides_nothing_text(hits: &[RangeHits], place: &str) -> Vec<String> {
-    hits.iter()
-        .filter(|h| !h.hit)
+    // Ranges that miss beside others of their attribute that hide some.
+    let some_missed = hits
+        .iter()
+        .filter(|h| h.hit && !h.missed.is_empty())
         .map(|h| {
-            let which = match hits.len() {
-                1 => String::new(),
-                _ => format!(" (of {})", h.name),
-            };
-            let between = if h.within {
-                ", and none of its values lies in the range"
-            } else {
-                ""
+            let (s, lies) = match h.missed.len() {
+                1 => ("", "it"),
+                _ => ("s", "any of them"),
             };
             format!(
-                "  note: --hide-attribute{which} hides no particle: {} lies from {} to {} \
-                 {place}{between}",
-                h.name,
-                super::Num(h.min),
-                super::Num(h.max)
+                "  note: --hide-attribute range{s} {} hide{} no particle: no value of {} lies in \
+             {lies} {place}",
+                h.missed.join(", "),
+                if h.missed.len() == 1 { "s" } else { "" },
+                h.name
             )
-        })
-        .collect()
+        });
+    let all_missed = hits.iter().filter(|h| !h.hit).map(|h| {
+        let which = match hits.len() {
+            1 => String::new(),
+            _ => format!(" (of {})", h.name),
+        };
+        let between = if h.within {
+            ", and none of its values lies in the range"
+        } else {
+            ""
+        };
+        format!(
+            "  note: --hide-attribute{which} hides no particle: {} lies from {} to {} \
+                 {place}{between}",
+            h.name,
+            super::Num(h.min),
+            super::Num(h.max)
+        )
+    });
+    all_missed.chain(some_missed).collect()
 }
 
 /// The background's colour as `--background` gives it, or the mode's default.
