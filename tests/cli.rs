@@ -9509,7 +9509,7 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     ]);
     let out = ok(&diverging);
     assert!(
-        out.contains("c_rg from 1.5 to 3.5979 (over the values of the particles drawn")
+        out.contains("c_rg from 1.5 to 3.5979 (over the values of the particles the map colours")
             && out.contains("the map's white at 2.54895"),
         "{out}"
     );

@@ -57,7 +57,8 @@ impl RangeChoice {
             }
             RangeChoice::Centred => "centred on 0, the map's white",
             RangeChoice::Shown => {
-                "over the values of the particles drawn, those hidden or cut away left out"
+                "over the values of the particles the map colours, those hidden, cut away or \
+                 in colours of their own left out"
             }
         }
     }
