@@ -9477,7 +9477,7 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     let out = ok(&args);
     assert!(
         out.contains("c_rg from 1.5 to")
-            && out.contains("the particles drawn")
+            && out.contains("the particles the map colours")
             && out.contains("the file's range is 0 to 3.59"),
         "{out}"
     );
@@ -9495,7 +9495,7 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     let mut given = args.clone();
     given.extend(["--attribute-range", "0:4"]);
     let out = ok(&given);
-    assert!(!out.contains("the particles drawn"), "{out}");
+    assert!(!out.contains("the particles the map colours"), "{out}");
     // A diverging map over a column of one sign (from 0 up) spreads the values drawn, as
     // the file's own range would, its white where their middle falls.
     let mut diverging = vec!["render", s(&file), "-o", s(&png), "--width", "96"];
