@@ -1319,3 +1319,29 @@ fn a_negative_box_length_is_refused() {
     let (_, f) = read_frame_0(dir.path(), &boxed(0.0), &ReadOptions::default());
     assert_eq!(f.unwrap().simulation_box.unwrap().c, [0.0; 3]);
 }
+
+/// A chunk written twice in one frame (two `particles/position`): which one holds the
+/// positions cannot be told, so the file is refused (a lookup used to take either).
+#[test]
+fn a_chunk_written_twice_in_a_frame_is_an_error() {
+    let names = vec!["particles/N".to_string(), "particles/position".to_string()];
+    let at = |v: f32| -> Vec<u8> {
+        [v, 0.0, 0.0, v, 1.0, 1.0]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect()
+    };
+    let bytes = gsd_file(
+        &names,
+        &[
+            (0, 3, 1, 1, 2u32.to_le_bytes().to_vec()),
+            (1, 9, 2, 3, at(0.0)),
+            (1, 9, 2, 3, at(5.0)),
+        ],
+    );
+    let m = damaged(&bytes);
+    assert!(
+        m.contains("chunk `particles/position` is written twice in frame 0"),
+        "{m}"
+    );
+}

@@ -323,6 +323,25 @@ impl Index {
             });
         }
         entries.sort_by_key(|e| (e.frame, e.name));
+        // A frame writes each chunk once: a name twice in one frame leaves which one holds
+        // the data untold (a lookup would take either), so the file is refused.
+        if let Some(w) = entries
+            .windows(2)
+            .find(|w| (w[0].frame, w[0].name) == (w[1].frame, w[1].name))
+        {
+            return Err(err(
+                path,
+                w[0].at.max(w[1].at),
+                format!(
+                    "chunk `{}` is written twice in frame {} (index entries at bytes {} and {}): \
+                     which one holds the data cannot be told",
+                    names[usize::from(w[0].name)],
+                    w[0].frame,
+                    w[0].at.min(w[1].at),
+                    w[0].at.max(w[1].at)
+                ),
+            ));
+        }
         if let Some((f, _, message)) = &mut damaged {
             entries.retain(|e| e.frame <= *f as u64);
             // Frames the index lists after it are lost with it: said, not dropped unsaid.
