@@ -497,12 +497,7 @@ impl PointStyle {
         Ok(species
             .iter()
             .map(|s| {
-                let st = self
-                    .species
-                    .iter()
-                    .rfind(|st| st.name == s.name)
-                    .cloned()
-                    .unwrap_or_default();
+                let st = self.style_of(&s.name).cloned().unwrap_or_default();
                 let c = st.colour.unwrap_or(s.colour);
                 let r = if st.hidden {
                     0.0
@@ -519,17 +514,19 @@ impl PointStyle {
         crate::ClipPlanes::new(&self.clip)
     }
 
+    /// The style given the species `name` (the last given, as the command line's later
+    /// options override earlier ones), if any.
+    fn style_of(&self, name: &str) -> Option<&SpeciesStyle> {
+        self.species.iter().rfind(|st| st.name == name)
+    }
+
     /// The species this style hides, as a mask of species indices for
     /// [`crate::TraversalSettings::hidden_species`]; 0 when none is hidden, or when one
     /// of index 64 or more is (clusters then still hold hidden species' particles).
     pub fn hidden_mask(&self, species: &[mdlod_format::meta::Species]) -> u64 {
         let mut mask = 0u64;
         for (i, s) in species.iter().enumerate() {
-            let hidden = self
-                .species
-                .iter()
-                .rfind(|st| st.name == s.name)
-                .is_some_and(|st| st.hidden);
+            let hidden = self.style_of(&s.name).is_some_and(|st| st.hidden);
             if hidden {
                 if i >= 64 {
                     return 0;
@@ -551,9 +548,7 @@ impl PointStyle {
         let mut mask = 0u64;
         for (i, s) in species.iter().enumerate().take(64) {
             let own = self
-                .species
-                .iter()
-                .rfind(|st| st.name == s.name)
+                .style_of(&s.name)
                 .is_some_and(|st| st.colour.is_some() && !st.hidden);
             if own {
                 mask |= 1 << i;

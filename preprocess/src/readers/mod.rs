@@ -1818,13 +1818,15 @@ fn text_columns<'h>(
             // A cell of no length along two edges puts every scaled coordinate on one line
             // (a box written as `0 0`): nothing a picture could show, so refused. One such
             // edge is a flat system's (a 2-D run's Lz of 0), drawn flat.
-            (true, Some(b)) if unscalable(b).is_some() => {
-                return Err(ReadError::Malformed {
-                    at: ctx.at(header.columns_at),
-                    message: unscalable(b).unwrap_or_default(),
-                });
-            }
-            (true, Some(b)) => Some(b),
+            (true, Some(b)) => match unscalable(b) {
+                Some(message) => {
+                    return Err(ReadError::Malformed {
+                        at: ctx.at(header.columns_at),
+                        message,
+                    })
+                }
+                None => Some(b),
+            },
             (true, None) => {
                 return Err(ReadError::Malformed {
                     at: ctx.at(header.columns_at),

@@ -349,11 +349,11 @@ impl Index {
             &["Timestep", "step"],
         ] {
             let n: usize = keys.iter().map(|k| given_times(k)).sum();
-            let key = keys.join("`/`");
             if n > 1 {
                 return Err(bad(format!(
-                    "`{key}` is given {n} times in the comment line: which one holds the frame's \
-                     value cannot be told"
+                    "`{}` is given {n} times in the comment line: which one holds the frame's \
+                     value cannot be told",
+                    keys.join("`/`")
                 )));
             }
         }
