@@ -162,7 +162,12 @@ fn main() {
     }
     if std::env::var("MDLOD_RENDER_ONLY").is_ok_and(|v| v == "sndf") {
         sndf_table(&renderer, &adapter, sizes[0]);
+        sndf_wide_table(&renderer, &adapter, sizes[0]);
         smip_table(&renderer, &adapter, sizes[0]);
+        return;
+    }
+    if std::env::var("MDLOD_RENDER_ONLY").is_ok_and(|v| v == "sndf-wide") {
+        sndf_wide_table(&renderer, &adapter, sizes[0]);
         return;
     }
     if std::env::var("MDLOD_RENDER_ONLY").is_ok_and(|v| v == "smip") {
@@ -677,6 +682,124 @@ fn viewer_table(renderer: &Renderer, adapter: &str, sizes: &[u64]) {
 /// one plain ray-casting sample, re-lighting
 /// against re-sampling at 256 spp, and the S-NDF memory, at 1280×720 (halved until the
 /// histograms fit one buffer of the adapter). Writes the `<section>-sndf` section.
+/// S-NDFs of wide perspective views against the ray caster: at 30°, 60° and 90° fields of
+/// view, the crater seen closely enough that it fills the image, re-lit S-NDFs (16
+/// iterations, 8×8 bins, shaded on the host) against 16-spp ray casting under the same
+/// light: the mean level of the image's outer band (a sixth of each side) and of its
+/// middle, and the mean absolute difference. Writes the `<section>-sndf-wide` section.
+fn sndf_wide_table(renderer: &Renderer, adapter: &str, n: u64) {
+    use mdlod_render::sndf::{ShadeLights, SndfSettings};
+    let file = MdlodFile::open(dataset(n)).unwrap();
+    let (w, h, k) = (320u32, 180u32, 16u32);
+    let fitted = mdlod_render::camera_for(
+        &file,
+        &ViewSpec::Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 60.0,
+            zoom: 1.0,
+            projection: Projection::Perspective,
+        },
+        w,
+        h,
+    )
+    .unwrap();
+    let band = |img: &mdlod_render::RgbaImage, outer: bool| {
+        let (mut sum, mut count) = (0u64, 0u64);
+        for y in 0..h {
+            for x in 0..w {
+                let edge = x < w / 6 || x >= w - w / 6 || y < h / 6 || y >= h - h / 6;
+                if edge == outer {
+                    let i = ((y * w + x) * 4) as usize;
+                    sum += img.data[i..i + 3]
+                        .iter()
+                        .map(|&c| u64::from(c))
+                        .sum::<u64>();
+                    count += 3;
+                }
+            }
+        }
+        sum as f64 / count.max(1) as f64
+    };
+    let lights = [
+        ("headlight", mdlod_render::glam::Vec3::Z),
+        (
+            "upper left (default)",
+            mdlod_render::Lighting::default().direction_view,
+        ),
+    ];
+    let mut rows = String::new();
+    for fov in [30f32, 60.0, 90.0] {
+        let mut camera = fitted.clone();
+        // As close as the fit at 30°, then 0.4 of that: the slab fills the image.
+        camera.distance *= 15f32.to_radians().tan() / (fov / 2.0).to_radians().tan() * 0.4;
+        camera.fov_y_deg = fov;
+        // Fitted again: the clip planes follow the new distance.
+        let camera = mdlod_render::camera_for(&file, &ViewSpec::Camera(camera), w, h).unwrap();
+        let draw = mdlod_render::traverse(
+            &camera,
+            &file,
+            &mdlod_render::TraversalSettings {
+                viewport: [w, h],
+                error_px: 1.0,
+                budget_points: 4_000_000,
+                occlusion: mdlod_render::OcclusionMode::WholePixels,
+                ..Default::default()
+            },
+        );
+        let sndf = renderer
+            .sample_sndf(
+                &file,
+                &camera,
+                &draw,
+                &SndfSettings {
+                    width: w,
+                    height: h,
+                    iterations: k,
+                    bins: 8,
+                    binning: Default::default(),
+                },
+            )
+            .unwrap();
+        for (name, direction) in lights {
+            let lighting = mdlod_render::Lighting {
+                direction_view: direction,
+                ..Default::default()
+            };
+            let background = [0.0; 3];
+            let relit = sndf.shade_with(&ShadeLights::from(&lighting), background);
+            let opts = RenderOptions {
+                width: w,
+                height: h,
+                view: ViewSpec::Camera(camera.clone()),
+                spp: k,
+                lighting,
+                background,
+                ..Default::default()
+            };
+            let (reference, _) = render_image(renderer, &file, &opts).unwrap();
+            let ratio = |outer| (band(&relit, outer) / band(&reference, outer) - 1.0) * 100.0;
+            let mad = relit
+                .data
+                .iter()
+                .zip(&reference.data)
+                .map(|(a, b)| f64::from(a.abs_diff(*b)))
+                .sum::<f64>()
+                / relit.data.len() as f64;
+            rows += &format!(
+                "| {fov:.0}° | {name} | {:.1} | {:+.1} % | {:+.1} % | {mad:.2} |\n",
+                band(&reference, true),
+                ratio(true),
+                ratio(false)
+            );
+        }
+    }
+    let (begin, end) = markers("-sndf-wide");
+    let table = format!(
+        "{begin} (generated by `MDLOD_RENDER_ONLY=sndf-wide cargo bench --bench render`; do not edit) -->\nAdapter: **{adapter}**. {n} crater particles, {w}×{h}, perspective views filled by the slab; 8×8 projected-normal bins binned along each texel's ray, {k} iterations, re-lit on the host, against {k}-spp ray casting under the same light (Blinn-Phong, the default material).\n\n| field of view | light | ray-cast level of the outer band (of 255) | S-NDFs against it, outer band | middle | mean absolute difference (of 255) |\n|---|---|---:|---:|---:|---:|\n{rows}{end}"
+    );
+    write_section(&begin, &end, &table, "## S-NDFs: sampling and re-lighting");
+}
+
 fn sndf_table(renderer: &Renderer, adapter: &str, n: u64) {
     use mdlod_render::sndf::{ShadeLights, SndfSettings};
     let file = MdlodFile::open(dataset(n)).unwrap();

@@ -10,7 +10,8 @@
 //!
 //! A file may instead hold S-MIP tiles (version 1.1, [`SndfTiles`]): 64×64-texel tiles
 //! of a screen-space mipmap at any levels, each with its own rays, in the order the
-//! header lists them.
+//! header lists them. One image of a perspective view whose normals were binned in the
+//! frame of each texel's own ray says so in `normal_frame` (version 1.2).
 //!
 //! A reader checks, before it trusts anything: the magic and version, the JSON header
 //! against size caps, every size with checked arithmetic against the file length, the
@@ -31,6 +32,11 @@ pub const SNDF_MAGIC: [u8; 8] = *b"\x89MDSNDF\n";
 pub const SNDF_VERSION: (u16, u16) = (1, 0);
 /// The version written for S-MIP tiles (the header's `smip`).
 pub const SNDF_TILES_VERSION: (u16, u16) = (1, 1);
+/// The version written for one image whose normals are binned along each texel's ray
+/// (the header's `normal_frame`).
+pub const SNDF_RAY_FRAME_VERSION: (u16, u16) = (1, 2);
+/// The `normal_frame` of S-NDFs binned along each texel's own ray (FORMAT.md, section 10).
+pub const RAY_FRAME: &str = "ray";
 /// Texels per side of an S-MIP tile.
 pub const SNDF_TILE: u32 = 64;
 /// Most tiles a file holds.
@@ -72,6 +78,11 @@ pub struct SndfHeader {
     /// of the view they were shown in, and `rays` the fewest rays of any tile.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub smip: Option<SndfTiles>,
+    /// `"ray"` (version 1.2): each texel's normals are binned in the frame of its own
+    /// ray, which turns the direction towards the eye onto the view axis (absent: the
+    /// camera's frame).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub normal_frame: Option<String>,
 }
 
 /// The S-MIP a file's tiles belong to, and the tiles (FORMAT.md, section 10).
@@ -242,6 +253,23 @@ fn check_header(path: &Path, h: &SndfHeader) -> Result<usize, FormatError> {
     if h.rays == 0 {
         return Err(corrupt(path, "header", "zero rays per texel"));
     }
+    if let Some(frame) = &h.normal_frame {
+        if frame != RAY_FRAME {
+            return Err(corrupt(
+                path,
+                "header",
+                format!("normal frame `{frame}` (this reader knows `{RAY_FRAME}`)"),
+            ));
+        }
+        if h.smip.is_some() {
+            return Err(corrupt(
+                path,
+                "header",
+                "S-MIP tiles with normals binned along each texel's ray (tiles belong to an \
+                 orthographic view, whose rays are its axis)",
+            ));
+        }
+    }
     if h.display_level.is_some_and(|l| l > 16) {
         return Err(corrupt(path, "header", "display level above 16"));
     }
@@ -290,8 +318,11 @@ impl SndfData {
         })?;
         let data: &[u8] = bytemuck::cast_slice(&self.hist);
         let mut out = Vec::with_capacity(FIXED + json.len() + 16 + data.len());
-        // Files of one image stay 1.0, readable by every 1.x reader.
-        let version = if self.header.smip.is_some() {
+        // Files of one image binned in the camera's frame stay 1.0, readable by every
+        // 1.x reader.
+        let version = if self.header.normal_frame.is_some() {
+            SNDF_RAY_FRAME_VERSION
+        } else if self.header.smip.is_some() {
             SNDF_TILES_VERSION
         } else {
             SNDF_VERSION
@@ -429,6 +460,13 @@ impl SndfData {
                 "version 1.0 holds `smip` (S-MIP tiles), which version 1.1 added",
             ));
         }
+        if minor < 2 && header.normal_frame.is_some() {
+            return Err(corrupt(
+                path,
+                "header",
+                format!("version 1.{minor} holds `normal_frame`, which version 1.2 added"),
+            ));
+        }
         let n = check_header(path, &header)?;
         let start = (FIXED + json_len).div_ceil(16) * 16;
         // The padding up to the data: zero bytes (no checksum covers them).
@@ -545,6 +583,7 @@ mod tests {
             view: serde_json::json!({"azimuth_deg": 30.0}),
             source: Some("x.mdlod".into()),
             display_level: Some(1),
+            normal_frame: None,
             smip: None,
         };
         // Each texel's four bins hold 0, 1, 2 and 1 of its 4 rays.
@@ -714,6 +753,7 @@ mod tests {
                 view: serde_json::json!({"projection": "orthographic"}),
                 source: None,
                 display_level: None,
+                normal_frame: None,
                 smip: Some(SndfTiles {
                     texel0: 0.25,
                     origin: [-3.0, 7.5],
@@ -723,6 +763,37 @@ mod tests {
             },
             hist,
         }
+    }
+
+    /// Normals binned along each texel's ray are version 1.2's `normal_frame`: written
+    /// as 1.2, refused under an earlier minor, with a frame a reader does not know, and
+    /// beside S-MIP tiles (whose views are orthographic).
+    #[test]
+    fn a_ray_frame_is_version_1_2_and_refused_where_it_cannot_be() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("r.sndf");
+        let mut ray = sample();
+        ray.header.normal_frame = Some(RAY_FRAME.into());
+        ray.save(&p).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        assert_eq!(&bytes[8..12], &[1, 0, 2, 0], "version 1.2");
+        assert_eq!(SndfData::load(&p).unwrap(), ray);
+        let mut relabelled = bytes.clone();
+        relabelled[10] = 1;
+        let e = SndfData::parse(&p, &relabelled).unwrap_err().to_string();
+        assert!(e.contains("version 1.1 holds `normal_frame`"), "{e}");
+        let at = bytes
+            .windows(5)
+            .position(|w| w == b"\"ray\"")
+            .expect("the frame in the header");
+        let mut unknown = bytes.clone();
+        unknown[at + 3] = b'z';
+        let e = SndfData::parse(&p, &unknown).unwrap_err().to_string();
+        assert!(e.contains("normal frame `raz`"), "{e}");
+        let mut tiles = tiled();
+        tiles.header.normal_frame = Some(RAY_FRAME.into());
+        let e = tiles.save(&p).unwrap_err().to_string();
+        assert!(e.contains("S-MIP tiles with normals binned along"), "{e}");
     }
 
     #[test]

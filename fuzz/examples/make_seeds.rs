@@ -346,6 +346,7 @@ fn main() {
             view: serde_json::json!({"version": 1, "azimuth_deg": 30.0}),
             source: Some("crater.mdlod".into()),
             display_level: None,
+            normal_frame: None,
             smip: None,
         },
         hist: (0..6 * 4 * 4).map(|i| bin(i, 4.0)).collect(),
@@ -365,6 +366,7 @@ fn main() {
             }),
             source: None,
             display_level: Some(0),
+            normal_frame: None,
             smip: Some(SndfTiles {
                 texel0: 0.05,
                 origin: [-2.4, 1.6],

@@ -2901,6 +2901,7 @@ mod tests {
                     view: serde_json::json!({"version": 1}),
                     source: None,
                     display_level: Some(display_level),
+                    normal_frame: None,
                     smip: None,
                 },
                 hist: vec![[0.0; 4]; 24],

@@ -1873,7 +1873,7 @@ impl Renderer {
             binning: binning.code(),
             layers,
             tiles_x,
-            pad: [0; 2],
+            tan_half: crate::sndf::TexelView::of(camera, width, height).ray_frame_tan_half(),
         };
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("sndf params"),
@@ -2094,7 +2094,7 @@ impl Renderer {
                 tiled: u32::from(tiles_x.is_some()),
                 tiles_x: tiles_x.unwrap_or(0),
                 grid,
-                pad: 0,
+                ray_frame: u32::from(view.binned_along_rays()),
             }),
             wgpu::BufferUsages::STORAGE,
         );

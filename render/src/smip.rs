@@ -1107,6 +1107,7 @@ impl SmipTiles {
                 view,
                 source,
                 display_level: (self.level_bias > 0).then_some(self.level_bias),
+                normal_frame: None,
                 smip: Some(SndfTiles {
                     texel0: self.frame.texel0,
                     origin: self.frame.origin,

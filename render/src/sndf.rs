@@ -29,12 +29,17 @@
 //!
 //! The paper's screen space sees every texel along the view axis (+z), which is exact in
 //! orthographic views (the S-MIP takes no other). In a perspective view each texel sees
-//! along its own ray ([`TexelView`]): the normals are binned in the camera's frame, so
-//! ambient, diffuse and environment light, which do not depend on the eye, are exact;
-//! the highlights are tabulated at [`VIEW_GRID`]² view directions across the image and
-//! interpolated per texel. What stays approximate: a normal facing away from the axis
-//! (the silhouette of a sphere seen off the axis) is binned with its mirror image across
-//! the image plane.
+//! along its own ray ([`TexelView`]), and its normals are binned in the frame of that ray:
+//! the rotation (the shortest arc) that turns the direction towards the eye onto +z, so
+//! that the hemisphere of normals the ray can see is the hemisphere a binning covers. (In
+//! the camera's frame a normal facing away from the axis but towards its texel, the
+//! silhouette of a sphere seen off the axis, was binned with its mirror image across the
+//! image plane: a third too bright near the edges of a 90° view.) Shading turns each
+//! bin's normals back into the camera's frame; its per-bin table then depends on the
+//! texel, so it is tabulated at [`VIEW_GRID`]² view directions across the image and
+//! interpolated per texel. Files written before binning along rays
+//! ([`TexelView::Perspective`] without `ray_frame`) shade as they were sampled: in the
+//! camera's frame, with only the highlights tabulated per view direction.
 //!
 //! Shading also takes an environment map and the normal-disk explorer
 //! ([`ShadeLights`]), and any zoom-out factor, trilinear between levels
@@ -68,9 +73,10 @@ pub struct ShadeParams {
     pub tiled: u32,
     /// Tiles per row when tiled.
     pub tiles_x: u32,
-    /// View directions per axis of the highlight grid ([`shade_table`]); 1: one table.
+    /// View directions per axis of the grid ([`shade_table`]); 1: one table.
     pub grid: u32,
-    pub pad: u32,
+    /// 1: binned along each texel's ray (the grid holds albedo factors and highlights).
+    pub ray_frame: u32,
 }
 
 /// The GPU shading pipeline.
@@ -124,9 +130,11 @@ impl SndfShadePass {
 
 /// The per-bin table the shading pass reads, and its grid of view directions per axis:
 /// two rgba entries per bin (albedo factor, highlight) for the view axis; then, when the
-/// highlights depend on the texel ([`TexelView::Perspective`] with a highlight), the
-/// highlights at `grid × grid` view directions (row-major from the image's top left
-/// corner, `bins²` entries each), which the texels interpolate bilinearly.
+/// lighting depends on the texel, a `grid × grid` grid of view directions (row-major from
+/// the image's top left corner), which the texels interpolate bilinearly. Binned along
+/// each texel's ray ([`TexelView::binned_along_rays`]), each grid point holds both
+/// entries of every bin (`2 · bins²`, bin-major); binned in the camera's frame, only the
+/// highlights (`bins²`), and only when there is a highlight.
 pub fn shade_table(
     bins: u32,
     binning: Binning,
@@ -138,10 +146,14 @@ pub fn shade_table(
         .iter()
         .flat_map(|(a, s)| [rgb(a), rgb(s)])
         .collect();
-    let grid = highlight_grid(bins, binning, lights, view);
+    let grid = view_grid(bins, binning, lights, view);
     let g = grid.as_ref().map_or(1, |(g, _)| *g);
-    if let Some((_, highlights)) = grid {
-        table.extend(highlights.iter().map(rgb));
+    if let Some((_, entries)) = grid {
+        if view.binned_along_rays() {
+            table.extend(entries.iter().flat_map(|(a, s)| [rgb(a), rgb(s)]));
+        } else {
+            table.extend(entries.iter().map(|(_, s)| rgb(s)));
+        }
     }
     (table, g)
 }
@@ -154,8 +166,10 @@ pub enum TexelView {
     #[default]
     Axis,
     /// The ray through each texel's centre of a perspective view; `tan_half` holds the
-    /// tangents of half the field of view, horizontally and vertically.
-    Perspective { tan_half: [f32; 2] },
+    /// tangents of half the field of view, horizontally and vertically. With `ray_frame`
+    /// each texel's normals are binned in the frame of its ray (as mdlod samples them
+    /// now); without, in the camera's (files written before; `.sndf` version 1.0).
+    Perspective { tan_half: [f32; 2], ray_frame: bool },
 }
 
 impl TexelView {
@@ -167,7 +181,10 @@ impl TexelView {
                 let y = (camera.fov_y_deg.to_radians() * 0.5).tan();
                 let x = y * width as f32 / height.max(1) as f32;
                 if x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 {
-                    TexelView::Perspective { tan_half: [x, y] }
+                    TexelView::Perspective {
+                        tan_half: [x, y],
+                        ray_frame: true,
+                    }
                 } else {
                     TexelView::Axis
                 }
@@ -175,10 +192,16 @@ impl TexelView {
         }
     }
 
-    /// The texels of the view a `.sndf` header stores (a view file's JSON); the axis
-    /// when it holds none.
-    pub fn of_view_file(view: &serde_json::Value, width: u32, height: u32) -> TexelView {
-        match serde_json::from_value::<crate::view::ViewFile>(view.clone()) {
+    /// The texels of the view a `.sndf` header stores (a view file's JSON), binned along
+    /// each texel's ray or not (the header's `normal_frame`); the axis when it holds no
+    /// perspective view.
+    pub fn of_view_file(
+        view: &serde_json::Value,
+        width: u32,
+        height: u32,
+        ray_frame: bool,
+    ) -> TexelView {
+        let texels = match serde_json::from_value::<crate::view::ViewFile>(view.clone()) {
             Ok(v) if v.projection == crate::camera::Projection::Perspective => TexelView::of(
                 &crate::camera::Camera {
                     fov_y_deg: v.fov_y_deg,
@@ -189,6 +212,36 @@ impl TexelView {
                 height,
             ),
             _ => TexelView::Axis,
+        };
+        match texels {
+            TexelView::Perspective { tan_half, .. } => TexelView::Perspective {
+                tan_half,
+                ray_frame,
+            },
+            axis => axis,
+        }
+    }
+
+    /// Whether each texel's normals are binned in the frame of its own ray.
+    pub fn binned_along_rays(self) -> bool {
+        matches!(
+            self,
+            TexelView::Perspective {
+                ray_frame: true,
+                ..
+            }
+        )
+    }
+
+    /// What the accumulation pass takes to bin along each texel's ray: the tangents of
+    /// half the field of view, or zeros to bin in the camera's frame.
+    pub fn ray_frame_tan_half(self) -> [f32; 2] {
+        match self {
+            TexelView::Perspective {
+                tan_half,
+                ray_frame: true,
+            } => tan_half,
+            _ => [0.0; 2],
         }
     }
 
@@ -197,11 +250,37 @@ impl TexelView {
     pub fn towards_eye(self, u: f32, v: f32) -> Vec3 {
         match self {
             TexelView::Axis => Vec3::Z,
-            TexelView::Perspective { tan_half } => {
+            TexelView::Perspective { tan_half, .. } => {
                 Vec3::new(-u * tan_half[0], -v * tan_half[1], 1.0).normalize_or(Vec3::Z)
             }
         }
     }
+
+    /// The rotation that turns a view-space normal seen at image point `(u, v)` into the
+    /// frame its bin is in: the shortest arc from the direction towards the eye there to
+    /// +z when binned along rays (the WGSL's `to_ray_frame`), else none.
+    pub fn bin_frame(self, u: f32, v: f32) -> glam::Quat {
+        if self.binned_along_rays() {
+            glam::Quat::from_rotation_arc(self.towards_eye(u, v), Vec3::Z)
+        } else {
+            glam::Quat::IDENTITY
+        }
+    }
+
+    /// [`Self::bin_frame`] at the centre of texel `(x, y)` of a `width × height` image.
+    pub fn bin_frame_at(self, x: u32, y: u32, width: u32, height: u32) -> glam::Quat {
+        let (u, v) = texel_point(x, y, width, height);
+        self.bin_frame(u, v)
+    }
+}
+
+/// The image point `(u, v)` in `[−1, 1]²` (u to the right, v up) of texel `(x, y)`'s
+/// centre.
+pub fn texel_point(x: u32, y: u32, width: u32, height: u32) -> (f32, f32) {
+    (
+        (x as f32 + 0.5) / width.max(1) as f32 * 2.0 - 1.0,
+        1.0 - (y as f32 + 0.5) / height.max(1) as f32 * 2.0,
+    )
 }
 
 /// View directions per axis at which a perspective view's highlights are tabulated:
@@ -216,22 +295,27 @@ fn view_dependent(lights: &ShadeLights) -> bool {
         && !lights.lights.is_empty()
 }
 
-/// The highlights of every bin at [`VIEW_GRID`]² view directions across the image
-/// (row-major from the top left corner), when they differ from texel to texel.
-fn highlight_grid(
+/// The lighting of every bin at [`VIEW_GRID`]² view directions across the image
+/// (row-major from the top left corner, `bins²` entries each), when it differs from
+/// texel to texel. Binned along rays, all of it: each grid point's bins are turned back
+/// into the camera's frame ([`TexelView::bin_frame`]). Binned in the camera's frame, only
+/// the highlights (the albedo factors of the entries are zero), and only when there is a
+/// highlight.
+fn view_grid(
     bins: u32,
     binning: Binning,
     lights: &ShadeLights,
     view: TexelView,
-) -> Option<(u32, Vec<[f32; 3]>)> {
-    if view == TexelView::Axis || !view_dependent(lights) {
+) -> Option<(u32, Vec<BinLight>)> {
+    let along_rays = view.binned_along_rays();
+    if view == TexelView::Axis || !(along_rays || view_dependent(lights)) {
         return None;
     }
     use rayon::prelude::*;
     let g = VIEW_GRID;
     let at = |k: u32| -1.0 + 2.0 * k as f32 / (g - 1) as f32;
-    // The highlights alone: the rest (ambient, diffuse, and the environment's 512
-    // samples per normal) does not depend on the eye and is not wanted here.
+    // In the camera's frame the highlights alone: the rest (ambient, diffuse, and the
+    // environment's 512 samples per normal) does not depend on the eye there.
     let highlights_only = ShadeLights {
         ambient: 0.0,
         lights: lights.lights.clone(),
@@ -242,16 +326,18 @@ fn highlight_grid(
         explorer: None,
         transfer: None,
     };
-    let highlights = (0..g * g)
+    let used = if along_rays { lights } else { &highlights_only };
+    let irradiance = used.environment.as_ref().map(EnvironmentMap::irradiance);
+    let entries = (0..g * g)
         .into_par_iter()
         .flat_map_iter(|i| {
-            let eye = view.towards_eye(at(i % g), -at(i / g));
-            bin_lighting_towards(bins, binning, &highlights_only, eye)
-                .into_iter()
-                .map(|(_, s)| s)
+            let (u, v) = (at(i % g), -at(i / g));
+            let eye = view.towards_eye(u, v);
+            let to_view = view.bin_frame(u, v).inverse();
+            bin_lighting_with(bins, binning, used, irradiance.as_ref(), eye, to_view)
         })
         .collect();
-    Some((g, highlights))
+    Some((g, entries))
 }
 
 /// The four grid points around texel `(x, y)` of a `width × height` image and their
@@ -286,7 +372,8 @@ pub struct AccumulateParams {
     pub layers: u32,
     /// The rectangle's width in tiles (the page table's row length).
     pub tiles_x: u32,
-    pub pad: [u32; 2],
+    /// [`TexelView::ray_frame_tan_half`]: zeros bin in the camera's frame.
+    pub tan_half: [f32; 2],
 }
 
 /// Iterations drawn into G-buffer layers before one accumulation pass adds them.
@@ -648,6 +735,29 @@ impl EnvironmentMap {
         }
     }
 
+    /// The Lambert irradiance over π of every normal (the mean radiance the hemisphere
+    /// around it sends), tabulated on [`Irradiance`]'s grid from [`Self::samples`].
+    pub fn irradiance(&self) -> Irradiance {
+        let samples = self.samples();
+        let (w, h) = (Irradiance::WIDTH, Irradiance::HEIGHT);
+        use rayon::prelude::*;
+        let values = (0..w * h)
+            .into_par_iter()
+            .map(|t| {
+                let n = Irradiance::direction(t % w, t / w);
+                let mut e = [0f32; 3];
+                for (d, omega, r) in &samples {
+                    let c = n.dot(*d).max(0.0) * omega / std::f32::consts::PI;
+                    for k in 0..3 {
+                        e[k] += c * r[k];
+                    }
+                }
+                e
+            })
+            .collect();
+        Irradiance { values }
+    }
+
     /// Directions and solid angles of the texels of a copy at most 32×16.
     fn samples(&self) -> Vec<(Vec3, f32, [f32; 3])> {
         let (w, h) = (self.width.clamp(1, 32), self.height.clamp(1, 16));
@@ -690,6 +800,62 @@ impl EnvironmentMap {
             }
         }
         out
+    }
+}
+
+/// An environment's irradiance over π per normal direction, on an equirectangular grid
+/// of normals ([`EnvironmentMap`]'s parametrisation, at the centres of `WIDTH × HEIGHT`
+/// cells), interpolated bilinearly: irradiance is the environment convolved with a
+/// cosine lobe, smooth enough that a 2.8° grid holds it to half a per cent of the
+/// brightest normal's, and a bin's 256 sub-samples at 81 view directions then cost a
+/// lookup each instead of a sum over 512 environment samples.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Irradiance {
+    values: Vec<[f32; 3]>,
+}
+
+impl Irradiance {
+    const WIDTH: u32 = 128;
+    const HEIGHT: u32 = 64;
+
+    /// The unit direction at the centre of cell `(i, j)`.
+    fn direction(i: u32, j: u32) -> Vec3 {
+        let (azimuth, elevation) = Self::angles(i as f32 + 0.5, j as f32 + 0.5);
+        Vec3::new(
+            elevation.cos() * azimuth.sin(),
+            elevation.sin(),
+            elevation.cos() * azimuth.cos(),
+        )
+    }
+
+    /// Azimuth and elevation at grid coordinates `(x, y)` (cells `[i, i + 1)`).
+    fn angles(x: f32, y: f32) -> (f32, f32) {
+        (
+            x / Self::WIDTH as f32 * std::f32::consts::TAU - std::f32::consts::PI,
+            std::f32::consts::FRAC_PI_2 - y / Self::HEIGHT as f32 * std::f32::consts::PI,
+        )
+    }
+
+    /// The irradiance over π towards unit normal `n`: bilinear between the four cell
+    /// centres around it, the azimuth wrapping around, the elevation clamped at the
+    /// first and last rows' centres.
+    pub fn at(&self, n: Vec3) -> [f32; 3] {
+        let (w, h) = (Self::WIDTH, Self::HEIGHT);
+        let azimuth = n.x.atan2(n.z);
+        let elevation = n.y.clamp(-1.0, 1.0).asin();
+        let x = (azimuth + std::f32::consts::PI) / std::f32::consts::TAU * w as f32 - 0.5;
+        let y = ((std::f32::consts::FRAC_PI_2 - elevation) / std::f32::consts::PI * h as f32 - 0.5)
+            .clamp(0.0, (h - 1) as f32);
+        let (xf, yf) = (x.floor(), y.floor().min((h - 2) as f32));
+        let (tx, ty) = (x - xf, y - yf);
+        let i0 = (xf as i64).rem_euclid(i64::from(w)) as u32;
+        let i1 = (i0 + 1) % w;
+        let j0 = yf as u32;
+        let at = |i: u32, j: u32| self.values[(j * w + i) as usize];
+        let (a, b, c, d) = (at(i0, j0), at(i1, j0), at(i0, j0 + 1), at(i1, j0 + 1));
+        [0, 1, 2].map(|k| {
+            (a[k] * (1.0 - tx) + b[k] * tx) * (1.0 - ty) + (c[k] * (1.0 - tx) + d[k] * tx) * ty
+        })
     }
 }
 
@@ -782,6 +948,9 @@ pub fn bin_lighting(
     bin_lighting_towards(bins, binning, lights, Vec3::Z)
 }
 
+/// A bin's albedo factor and highlight (linear RGB each).
+pub type BinLight = ([f32; 3], [f32; 3]);
+
 /// [`bin_lighting`] with the eye in direction `eye` (a unit vector in view space): the
 /// highlights move with it, the rest does not.
 pub fn bin_lighting_towards(
@@ -789,6 +958,34 @@ pub fn bin_lighting_towards(
     binning: Binning,
     lights: &ShadeLights,
     eye: Vec3,
+) -> Vec<([f32; 3], [f32; 3])> {
+    bin_lighting_in(bins, binning, lights, eye, glam::Quat::IDENTITY)
+}
+
+/// [`bin_lighting_towards`] for bins whose normals `to_view` turns into view space (the
+/// inverse of [`TexelView::bin_frame`]): each of a bin's normals is lit as that view-space
+/// normal. The weights of projected solid angle stay the bin frame's, where the eye is
+/// on the axis.
+pub fn bin_lighting_in(
+    bins: u32,
+    binning: Binning,
+    lights: &ShadeLights,
+    eye: Vec3,
+    to_view: glam::Quat,
+) -> Vec<([f32; 3], [f32; 3])> {
+    let irradiance = lights.environment.as_ref().map(EnvironmentMap::irradiance);
+    bin_lighting_with(bins, binning, lights, irradiance.as_ref(), eye, to_view)
+}
+
+/// [`bin_lighting_in`] with the environment's irradiance tabulated beforehand (a grid of
+/// view directions shares one table).
+fn bin_lighting_with(
+    bins: u32,
+    binning: Binning,
+    lights: &ShadeLights,
+    irradiance: Option<&Irradiance>,
+    eye: Vec3,
+    to_view: glam::Quat,
 ) -> Vec<([f32; 3], [f32; 3])> {
     const SUB: u32 = 16;
     let dirs: Vec<(Vec3, Vec3, [f32; 3])> = lights
@@ -799,7 +996,6 @@ pub fn bin_lighting_towards(
             (l, (l + eye).normalize_or(eye), c)
         })
         .collect();
-    let environment = lights.environment.as_ref().map(EnvironmentMap::samples);
     let shade = |n: Vec3| {
         if let Some(t) = &lights.transfer {
             // The painted colour per sample, whatever the particle's albedo.
@@ -811,13 +1007,9 @@ pub fn bin_lighting_towards(
         }
         let mut a = [lights.ambient; 3];
         let mut s = [0.0f32; 3];
-        if let Some(env) = &environment {
-            // Lambert irradiance over π: the mean radiance the hemisphere around n sends.
-            for (d, omega, r) in env {
-                let c = n.dot(*d).max(0.0) * omega / std::f32::consts::PI;
-                for k in 0..3 {
-                    a[k] += lights.diffuse * c * r[k];
-                }
+        if let Some(e) = irradiance.map(|t| t.at(n)) {
+            for k in 0..3 {
+                a[k] += lights.diffuse * e[k];
             }
         }
         for (l, h, c) in &dirs {
@@ -849,7 +1041,7 @@ pub fn bin_lighting_towards(
                     .normal(0.5 + du / len * 0.4999, 0.5 + dv / len * 0.4999)
                     .or_else(|| binning.normal(0.5, 0.5))
                     .unwrap_or(Vec3::Z);
-                shade(edge)
+                shade(to_view * edge)
             };
             for j in 0..SUB {
                 for i in 0..SUB {
@@ -857,7 +1049,7 @@ pub fn bin_lighting_towards(
                     let v = cell * (by as f32 + (j as f32 + 0.5) / SUB as f32);
                     if let Some(normal) = binning.normal(u, v) {
                         let w = binning.projected_density(normal);
-                        let val = shade(normal);
+                        let val = shade(to_view * normal);
                         for k in 0..3 {
                             a[k] += w * val.0[k];
                             s[k] += w * val.1[k];
@@ -916,7 +1108,8 @@ impl Sndf {
     /// texel, rows top to bottom.
     pub fn shade_linear(&self, lights: &ShadeLights, background_srgb: [f32; 3]) -> Vec<[f32; 3]> {
         let table = bin_lighting(self.bins, self.binning, lights);
-        let grid = highlight_grid(self.bins, self.binning, lights, self.view);
+        let grid = view_grid(self.bins, self.binning, lights, self.view);
+        let along_rays = self.view.binned_along_rays();
         let bg = background_srgb.map(srgb_to_linear);
         let rays = self.rays.max(1) as f32;
         let b2 = (self.bins * self.bins) as usize;
@@ -933,11 +1126,18 @@ impl Sndf {
                     grid_weights(x, y, self.width, self.height, *g)
                 });
                 for (i, (bin, (a, s))) in texel.iter().zip(&table).enumerate() {
-                    let s = match (&grid, corners) {
-                        (Some((_, h)), Some(w)) => w.iter().fold([0f32; 3], |acc, &(p, f)| {
-                            [0, 1, 2].map(|k| acc[k] + f * h[p * b2 + i][k])
-                        }),
-                        _ => *s,
+                    let (a, s) = match (&grid, corners) {
+                        (Some((_, e)), Some(w)) => {
+                            let (ga, gs) = w.iter().fold(([0f32; 3], [0f32; 3]), |acc, &(p, f)| {
+                                let (ea, es) = e[p * b2 + i];
+                                (
+                                    [0, 1, 2].map(|k| acc.0[k] + f * ea[k]),
+                                    [0, 1, 2].map(|k| acc.1[k] + f * es[k]),
+                                )
+                            });
+                            (if along_rays { ga } else { *a }, gs)
+                        }
+                        _ => (*a, *s),
                     };
                     for k in 0..3 {
                         c[k] += bin[k] * a[k] + bin[3] * s[k];
@@ -1102,6 +1302,10 @@ impl Sndf {
                 view,
                 source,
                 display_level: None,
+                normal_frame: self
+                    .view
+                    .binned_along_rays()
+                    .then(|| mdlod_format::sndf::RAY_FRAME.into()),
                 smip: None,
             },
             hist: self.hist.clone(),
@@ -1118,7 +1322,12 @@ impl Sndf {
             rays: d.header.rays,
             hist: d.hist.clone(),
             gpu_time: None,
-            view: TexelView::of_view_file(&d.header.view, d.header.width, d.header.height),
+            view: TexelView::of_view_file(
+                &d.header.view,
+                d.header.width,
+                d.header.height,
+                d.header.normal_frame.is_some(),
+            ),
         }
     }
 }
@@ -1291,17 +1500,130 @@ mod tests {
             explorer: None,
             transfer: None,
         };
+        // Binned in the camera's frame (files written before binning along rays): the
+        // highlights only, towards each grid point's eye.
         let view = TexelView::Perspective {
             tan_half: [0.5, 0.3],
+            ray_frame: false,
         };
-        let (g, grid) = highlight_grid(4, Binning::ProjectedNormals, &lights, view).unwrap();
+        let (g, grid) = view_grid(4, Binning::ProjectedNormals, &lights, view).unwrap();
         for (k, corner) in [(0u32, (-1.0, 1.0)), (g * g - 1, (1.0, -1.0))] {
             let eye = view.towards_eye(corner.0, corner.1);
             let full = bin_lighting_towards(4, Binning::ProjectedNormals, &lights, eye);
             for (i, (_, s)) in full.iter().enumerate() {
-                assert_eq!(grid[k as usize * 16 + i], *s, "grid point {k}, bin {i}");
+                assert_eq!(grid[k as usize * 16 + i].1, *s, "grid point {k}, bin {i}");
             }
         }
+        // Binned along rays: all of the lighting, of each bin's normals turned back into
+        // the camera's frame. The grid's middle looks along the axis, unturned.
+        let view = TexelView::Perspective {
+            tan_half: [0.5, 0.3],
+            ray_frame: true,
+        };
+        let (g, grid) = view_grid(4, Binning::ProjectedNormals, &lights, view).unwrap();
+        let middle = (g * g / 2) as usize;
+        let axis = bin_lighting(4, Binning::ProjectedNormals, &lights);
+        assert_eq!(&grid[middle * 16..middle * 16 + 16], &axis[..]);
+        let eye = view.towards_eye(-1.0, 1.0);
+        let turned = bin_lighting_in(
+            4,
+            Binning::ProjectedNormals,
+            &lights,
+            eye,
+            glam::Quat::from_rotation_arc(Vec3::Z, eye),
+        );
+        assert_eq!(&grid[..16], &turned[..]);
+        assert_ne!(turned, axis);
+    }
+
+    /// Rays through a texel near the corner of a 90° view hit a sphere across the disk
+    /// it shows them, so the normals they see are spread by projected solid angle about
+    /// the direction towards the eye, a quarter of them facing away from the view axis.
+    /// Binned along the texel's ray, the shaded texel is their mean lighting (the table
+    /// averages each bin as its hits are spread); binned in the camera's frame, the
+    /// normals facing away are lit as their mirror images.
+    #[test]
+    fn a_texel_off_the_axis_of_a_wide_view_shades_a_sphere_as_its_rays_see_it() {
+        let lights = ShadeLights {
+            ambient: 0.0,
+            lights: vec![(Vec3::Z, [1.0; 3])],
+            diffuse: 1.0,
+            specular: 0.3,
+            shininess: 12.0,
+            environment: None,
+            explorer: None,
+            transfer: None,
+        };
+        // 4×4 texels of a 90° view: texel (0, 0)'s centre, (−0.75, 0.75), is a point of
+        // the 9×9 grid, so no interpolation between view directions enters.
+        let (w, h, bins) = (4u32, 4u32, 8u32);
+        let along = TexelView::Perspective {
+            tan_half: [1.0, 1.0],
+            ray_frame: true,
+        };
+        let (u, v) = texel_point(0, 0, w, h);
+        assert_eq!((u, v), (-0.75, 0.75));
+        let eye = along.towards_eye(u, v);
+        let (t1, t2) = eye.any_orthonormal_pair();
+        let mut state = 5u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let hits: Vec<Vec3> = std::iter::from_fn(|| Some((next(), next())))
+            .filter(|(x, y)| x * x + y * y < 1.0)
+            .take(200_000)
+            .map(|(x, y)| x * t1 + y * t2 + (1.0 - x * x - y * y).sqrt() * eye)
+            .collect();
+        let away = hits.iter().filter(|n| n.z < 0.0).count() as f64 / hits.len() as f64;
+        assert!(away > 0.05, "{away}");
+        // Blinn-Phong's half vector of the headlight and this texel's eye.
+        let half = (Vec3::Z + eye).normalize();
+        let truth = hits
+            .iter()
+            .map(|n| {
+                let ndl = n.z.max(0.0);
+                let spec = if ndl > 0.0 {
+                    0.3 * n.dot(half).max(0.0).powf(12.0)
+                } else {
+                    0.0
+                };
+                f64::from(ndl + spec)
+            })
+            .sum::<f64>()
+            / hits.len() as f64;
+        let shaded = |view: TexelView| {
+            let mut hist = vec![[0f32; 4]; (w * h * bins * bins) as usize];
+            for &n in &hits {
+                let (bx, by) = bin_of(view.bin_frame_at(0, 0, w, h) * n, bins, Binning::default());
+                let b = &mut hist[(by * bins + bx) as usize];
+                *b = [b[0] + 1.0, b[1] + 1.0, b[2] + 1.0, b[3] + 1.0];
+            }
+            let sndf = Sndf {
+                width: w,
+                height: h,
+                bins,
+                binning: Binning::default(),
+                rays: hits.len() as u32,
+                hist,
+                gpu_time: None,
+                view,
+            };
+            f64::from(sndf.shade_linear(&lights, [0.0; 3])[0][0])
+        };
+        let camera_frame = TexelView::Perspective {
+            tan_half: [1.0, 1.0],
+            ray_frame: false,
+        };
+        let (new, old) = (shaded(along), shaded(camera_frame));
+        assert!(
+            (new - truth).abs() < 0.004 && (old - truth).abs() > 5.0 * (new - truth).abs(),
+            "mean lighting {truth:.4}: binned along the ray {new:.4}, in the camera's frame \
+             {old:.4} ({:.0} % of the normals face away from the axis)",
+            away * 100.0
+        );
     }
 
     #[test]
@@ -1514,6 +1836,67 @@ mod tests {
             }
         }
         assert_eq!(seen.len(), 4);
+    }
+
+    /// The tabulated irradiance is the sum over the environment's samples it stands for,
+    /// to a fraction of a per cent, for normals anywhere (the poles and the azimuth's
+    /// seam included), under an environment with a small bright lamp and a gradient.
+    #[test]
+    fn tabulated_irradiance_matches_the_sum_over_the_environment() {
+        let mut image = RgbaImage::new(32, 16);
+        for y in 0..16 {
+            for x in 0..32 {
+                let lamp = (5..8).contains(&x) && (3..5).contains(&y);
+                let g = (x * 8) as u8;
+                image.set_pixel(
+                    x,
+                    y,
+                    if lamp {
+                        [255; 4]
+                    } else {
+                        [g, 40, 255 - g, 255]
+                    },
+                );
+            }
+        }
+        let env = EnvironmentMap::from_image(&image);
+        let (samples, table) = (env.samples(), env.irradiance());
+        let direct = |n: Vec3| {
+            samples.iter().fold([0f32; 3], |acc, (d, omega, r)| {
+                let c = n.dot(*d).max(0.0) * omega / std::f32::consts::PI;
+                [0, 1, 2].map(|k| acc[k] + c * r[k])
+            })
+        };
+        let mut state = 3u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let normals = [
+            Vec3::Y,
+            -Vec3::Y,
+            -Vec3::Z,
+            Vec3::new(-1e-3, 0.2, -1.0).normalize(),
+        ]
+        .into_iter()
+        .chain(std::iter::from_fn(|| {
+            Some(Vec3::new(next(), next(), next()).normalize_or(Vec3::X))
+        }))
+        .take(3000);
+        let (mut worst, mut brightest) = (0f32, 0f32);
+        for n in normals {
+            let (want, got) = (direct(n), table.at(n));
+            for k in 0..3 {
+                worst = worst.max((want[k] - got[k]).abs());
+                brightest = brightest.max(want[k]);
+            }
+        }
+        assert!(
+            worst < 0.005 * brightest,
+            "largest difference {worst} against irradiance up to {brightest}"
+        );
     }
 
     #[test]

@@ -2334,6 +2334,80 @@ fn relit_sndfs_of_a_wide_perspective_view_place_highlights_along_each_texels_ray
     );
 }
 
+/// In a 90° view the rays near the image's edges see normals facing away from the view
+/// axis (a sphere's silhouette towards the centre of the image). Binned along each
+/// texel's ray, re-lit S-NDFs keep the ray caster's brightness out to the edges; binned
+/// in the camera's frame those normals were lit as their mirror images, a third too
+/// bright near the edges under a headlight.
+#[test]
+fn sndfs_of_a_ninety_degree_view_keep_the_ray_casters_brightness_out_to_the_edges() {
+    let (_d, _p, f) = make_file(&fcc_frame(6), small_build(), &[]);
+    let (w, h) = (96u32, 64u32);
+    let mut camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
+    // Closer, so that the block fills the image's edges too.
+    camera.distance *= (15f32.to_radians().tan() / 45f32.to_radians().tan()) * 0.8;
+    camera.fov_y_deg = 90.0;
+    let mut o = opts(w, h);
+    o.spp = 16;
+    o.background = [0.0, 0.0, 0.0];
+    o.view = ViewSpec::Camera(camera.clone());
+    o.lighting = mdlod_render::Lighting {
+        direction_view: Vec3::Z,
+        specular: 0.0,
+        ..Default::default()
+    };
+    let camera = camera_for(&f, &o.view, w, h).unwrap();
+    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
+    let sndf = renderer()
+        .sample_sndf(
+            &f,
+            &camera,
+            &draw,
+            &mdlod_render::sndf::SndfSettings {
+                width: w,
+                height: h,
+                iterations: 16,
+                bins: 8,
+                binning: Default::default(),
+            },
+        )
+        .unwrap();
+    assert!(sndf.view.binned_along_rays());
+    let lights = mdlod_render::sndf::ShadeLights::from(&o.lighting);
+    let relit = shaded_on_both(renderer(), &sndf, &lights, o.background);
+    let (reference, _) = render_image(renderer(), &f, &o).unwrap();
+    // Mean brightness of the outer band (a sixth of each side) and of the middle.
+    let band = |img: &RgbaImage, outer: bool| {
+        let (mut sum, mut n) = (0u64, 0u64);
+        for y in 0..h {
+            for x in 0..w {
+                let edge = x < w / 6 || x >= w - w / 6 || y < h / 6 || y >= h - h / 6;
+                if edge == outer {
+                    let i = ((y * w + x) * 4) as usize;
+                    sum += img.data[i..i + 3]
+                        .iter()
+                        .map(|&c| u64::from(c))
+                        .sum::<u64>();
+                    n += 3;
+                }
+            }
+        }
+        sum as f64 / n as f64
+    };
+    let (edge, edge_ref) = (band(&relit, true), band(&reference, true));
+    let (middle, middle_ref) = (band(&relit, false), band(&reference, false));
+    assert!(
+        edge_ref > 40.0,
+        "the block must fill the edges: {edge_ref:.1}"
+    );
+    assert!(
+        (edge - edge_ref).abs() < 0.03 * edge_ref
+            && (middle - middle_ref).abs() < 0.03 * middle_ref,
+        "mean level of the S-NDFs against ray casting: edges {edge:.1} / {edge_ref:.1}, \
+         middle {middle:.1} / {middle_ref:.1}"
+    );
+}
+
 /// `sndf` shaded on the host, after checking that the GPU's shading pass gives the same
 /// picture (to 1/255).
 fn shaded_on_both(

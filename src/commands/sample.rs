@@ -278,9 +278,6 @@ pub fn run(args: Args) -> Result<()> {
              re-light"
         );
     }
-    if let Some(n) = super::render::sndf_wide_angle_note(&r.camera) {
-        println!("{n}");
-    }
     let every_species_hidden = mdlod_format::MdlodFile::open(&args.file).is_ok_and(|f| {
         f.metadata()
             .species

@@ -210,6 +210,35 @@ fn option_name(id: &str) -> String {
     }
 }
 
+/// The field of view above which S-NDFs binned in the camera's frame are noted as
+/// approximate towards the image's edges.
+const CAMERA_FRAME_WIDE_FOV_DEG: f32 = 45.0;
+
+/// A note for S-NDFs of a wide perspective view that an earlier mdlod sampled, binning
+/// the normals in the camera's frame (no `normal_frame` in the header): a normal facing
+/// away from the view axis but towards its texel was binned with its mirror image, so
+/// shading is approximate towards the edges (measured under a headlight against the
+/// ray-cast spheres: 3 % brighter at 60°, up to a third at 90°). Sampling again bins
+/// along each texel's ray, which is exact.
+pub fn camera_frame_note(header: &mdlod_format::sndf::SndfHeader) -> Option<String> {
+    if header.normal_frame.is_some() || header.smip.is_some() {
+        return None;
+    }
+    let view: mdlod_render::view::ViewFile = serde_json::from_value(header.view.clone()).ok()?;
+    (view.projection == mdlod_render::camera::Projection::Perspective
+        && view.fov_y_deg > CAMERA_FRAME_WIDE_FOV_DEG)
+        .then(|| {
+            format!(
+                "  note: an earlier mdlod sampled these S-NDFs binning the normals in the \
+                 camera's frame: in their {:.0}° perspective view, normals facing away from \
+                 the view axis are lit as their mirror images (a few per cent too bright \
+                 towards the edges at 60°, up to a third at 90°); `mdlod sample` bins them \
+                 along each texel's ray",
+                view.fov_y_deg
+            )
+        })
+}
+
 pub fn run(args: Args) -> Result<()> {
     let inputs = [("", args.input.as_path())]
         .into_iter()
@@ -308,6 +337,12 @@ pub fn run(args: Args) -> Result<()> {
         args.output.display(),
         args.input.display(),
     );
+    if let Some(n) = mdlod_format::sndf::SndfData::load_header(&args.input)
+        .ok()
+        .and_then(|(h, _)| camera_frame_note(&h))
+    {
+        println!("{n}");
+    }
     Ok(())
 }
 

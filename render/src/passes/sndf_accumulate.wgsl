@@ -16,6 +16,12 @@
 // stay within 64 KiB at 8x8 bins: texel (lx, ly) of a tile is number
 // ((ly / 8) * 8 + lx / 8) * 64 + (ly % 8) * 8 + lx % 8.
 //
+// In a perspective view each texel's normals are binned in the frame of its own ray
+// (tan_half, the tangents of half the field of view, not zero): the shortest rotation
+// that turns the direction towards the eye at the texel's centre onto +z, so that the
+// hemisphere of normals its ray can see is the one the binning covers (sndf.rs,
+// TexelView::bin_frame). Zeros bin in the camera's frame (orthographic views, S-MIP tiles).
+//
 // Several iterations per pass: the G-buffer is an array of `layers` layers, one
 // iteration each, and a texel adds all of them to its histogram at once, so a texel's
 // bins are read and written once per `layers` iterations.
@@ -32,8 +38,7 @@ struct Params {
     binning: u32,
     layers: u32,
     tiles_x: u32,
-    pad0: u32,
-    pad1: u32,
+    tan_half: vec2<f32>,
 };
 
 @group(0) @binding(0) var<storage, read> params: Params;
@@ -54,6 +59,19 @@ fn bin_coords(n: vec3<f32>) -> vec2<f32> {
         return (n.xy * k + 1.0) * 0.5;
     }
     return (n.xy + 1.0) * 0.5;
+}
+
+// `n` turned into the frame its texel's bins are in.
+fn to_ray_frame(n: vec3<f32>, texel: vec2<u32>) -> vec3<f32> {
+    if params.tan_half.x <= 0.0 {
+        return n;
+    }
+    let uv = (vec2<f32>(texel) + 0.5) / vec2<f32>(f32(params.width), f32(params.height)) * 2.0 - 1.0;
+    // Towards the eye: u to the right, v up (texel rows go down).
+    let e = normalize(vec3<f32>(-uv.x * params.tan_half.x, uv.y * params.tan_half.y, 1.0));
+    // Rodrigues' rotation of e onto +z about k = e x z (|k| = sin, e.z = cos > 0).
+    let k = vec3<f32>(e.y, -e.x, 0.0);
+    return n * e.z + cross(k, n) + k * (dot(k, n) / (1.0 + e.z));
 }
 
 @compute @workgroup_size(8, 8)
@@ -77,7 +95,7 @@ fn accumulate(@builtin(global_invocation_id) id: vec3<u32>) {
             continue;
         }
         let a = textureLoad(albedos, vec2<i32>(id.xy), i32(l), 0);
-        let c = clamp(bin_coords(n.xyz), vec2<f32>(0.0), vec2<f32>(1.0));
+        let c = clamp(bin_coords(to_ray_frame(n.xyz, id.xy)), vec2<f32>(0.0), vec2<f32>(1.0));
         let bx = min(u32(c.x * fb), b - 1u);
         let by = min(u32(c.y * fb), b - 1u);
         let i = base + by * b + bx;

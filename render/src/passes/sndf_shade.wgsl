@@ -1,7 +1,9 @@
 // Deferred shading of S-NDFs on the GPU (the same sums as Sndf::shade_linear on the
 // host): per texel, the bins' albedo sums times the per-bin albedo factors plus their
 // counts times the per-bin highlights, over the rays, plus the background's share of the
-// rays that hit nothing; then sRGB-encoded into RGBA8.
+// rays that hit nothing; then sRGB-encoded into RGBA8. With a grid of view directions the
+// texel interpolates its highlights, and, binned along each texel's ray, its albedo
+// factors too, between the four grid points around it.
 //
 // The Rust twin of ShadeParams is in sndf.rs.
 
@@ -16,15 +18,17 @@ struct ShadeParams {
     // (as sndf_accumulate.wgsl stores them).
     tiled: u32,
     tiles_x: u32,
-    // View directions per axis of the highlight grid; 1: the view axis for every texel.
+    // View directions per axis of the grid; 1: the view axis for every texel.
     grid: u32,
-    pad1: u32,
+    // 1: binned along each texel's ray; the grid holds both entries of every bin.
+    ray_frame: u32,
 };
 
 @group(0) @binding(0) var<storage, read> params: ShadeParams;
 // Two per bin: the albedo factor (rgb) and the highlight (rgb) towards the view axis;
-// then, with a grid, the highlights at grid x grid view directions (rows from the
-// image's top left corner, bins^2 each), interpolated bilinearly per texel.
+// then, with a grid, grid x grid view directions (rows from the image's top left
+// corner), interpolated bilinearly per texel: each the highlights (bins^2 entries) or,
+// binned along rays, the albedo factor and highlight of each bin (2 bins^2).
 @group(0) @binding(1) var<storage, read> table: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> hist: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read_write> pixels: array<u32>;
@@ -69,7 +73,9 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
         let k = min(vec2<u32>(floor(f)), vec2<u32>(g - 2u));
         let t = f - vec2<f32>(k);
         let base = 2u * b2;
-        at = base + b2 * vec4<u32>(
+        // Entries per grid point.
+        let per = select(b2, 2u * b2, params.ray_frame == 1u);
+        at = base + per * vec4<u32>(
             k.y * g + k.x,
             k.y * g + k.x + 1u,
             (k.y + 1u) * g + k.x,
@@ -81,12 +87,19 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     var hits = 0.0;
     for (var i = 0u; i < b2; i++) {
         let h = hist[texel * b2 + i];
+        var a = table[2u * i].xyz;
         var s = table[2u * i + 1u].xyz;
-        if g > 1u {
+        if g > 1u && params.ray_frame == 1u {
+            let j = 2u * i;
+            a = w.x * table[at.x + j].xyz + w.y * table[at.y + j].xyz
+                + w.z * table[at.z + j].xyz + w.w * table[at.w + j].xyz;
+            s = w.x * table[at.x + j + 1u].xyz + w.y * table[at.y + j + 1u].xyz
+                + w.z * table[at.z + j + 1u].xyz + w.w * table[at.w + j + 1u].xyz;
+        } else if g > 1u {
             s = w.x * table[at.x + i].xyz + w.y * table[at.y + i].xyz
                 + w.z * table[at.z + i].xyz + w.w * table[at.w + i].xyz;
         }
-        c += h.xyz * table[2u * i].xyz + h.w * s;
+        c += h.xyz * a + h.w * s;
         hits += h.w;
     }
     let miss = max(1.0 - hits / params.rays, 0.0);
