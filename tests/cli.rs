@@ -1017,11 +1017,12 @@ fn a_full_disk_gives_a_clear_error_and_no_partial_output() {
     assert!(!batch_dir.join("dataset.json").exists());
 }
 
-/// S-NDFs of a wide-angle perspective view are noted as approximate towards the edges
-/// (normals facing away from the axis binned with their mirror images); at the default
-/// field of view, and in orthographic views, nothing is said.
+/// S-NDFs of a perspective view are binned along each texel's ray (`.sndf` version 1.2,
+/// `normal_frame`), which `info` says, and nothing is noted about wide views. A file an
+/// earlier mdlod sampled in the camera's frame still shades, with a note at wide fields
+/// of view from `shade` and `info`; at 30° nothing is said.
 #[test]
-fn wide_angle_sndfs_are_noted_as_approximate() {
+fn perspective_sndfs_are_binned_along_rays_and_earlier_files_are_noted() {
     let dir = tempfile::tempdir().unwrap();
     let file = converted(dir.path(), "cu_melt.xyz");
     let wide = dir.path().join("wide.json");
@@ -1029,34 +1030,40 @@ fn wide_angle_sndfs_are_noted_as_approximate() {
     let png = dir.path().join("w.png");
     let sndf = dir.path().join("w.sndf");
     let size = ["--width", "32", "--height", "24", "--iterations", "1"];
-    let note = "perspective view are approximate towards the image's edges";
-    let render = |extra: &[&str]| {
-        ok(&[
-            &["render", s(&file), "-o", s(&png), "--mode", "sndf"][..],
-            &size,
-            extra,
-        ]
-        .concat())
-    };
-    let out = render(&["--view", s(&wide)]);
-    assert!(out.contains(note) && out.contains("70°"), "{out}");
+    let out = ok(&[
+        &["render", s(&file), "-o", s(&png), "--mode", "sndf"][..],
+        &size,
+        &["--view", s(&wide)],
+    ]
+    .concat());
+    assert!(!out.contains("note:"), "{out}");
     let out = ok(&[
         &["sample", s(&file), "-o", s(&sndf), "--view", s(&wide)][..],
         &size,
     ]
     .concat());
-    assert!(out.contains(note), "{out}");
-    assert!(!render(&[]).contains(note));
-    assert!(!render(&["--view", s(&wide), "--ortho"]).contains(note));
-    // A turntable says it once.
-    let spin = dir.path().join("spin-%d.png");
-    let out = ok(&[
-        &["render", s(&file), "-o", s(&spin), "--mode", "sndf"][..],
-        &size,
-        &["--view", s(&wide), "--turntable", "2"],
-    ]
-    .concat());
-    assert_eq!(out.matches(note).count(), 1, "{out}");
+    assert!(!out.contains("note:"), "{out}");
+    assert_eq!(&std::fs::read(&sndf).unwrap()[8..12], &[1, 0, 2, 0]);
+    let out = ok(&["info", s(&sndf)]);
+    assert!(out.contains("binned along each texel's ray"), "{out}");
+    let out = ok(&["info", s(&sndf), "--json"]);
+    assert!(out.contains(r#""normal_frame": "ray""#), "{out}");
+    // As an earlier mdlod wrote it: no normal frame, version 1.0.
+    let earlier = dir.path().join("earlier.sndf");
+    let mut data = mdlod_format::sndf::SndfData::load(&sndf).unwrap();
+    data.header.normal_frame = None;
+    data.save(&earlier).unwrap();
+    assert_eq!(&std::fs::read(&earlier).unwrap()[8..12], &[1, 0, 0, 0]);
+    let note = "an earlier mdlod sampled these S-NDFs binning the normals in the camera's frame";
+    let out = ok(&["shade", s(&earlier), "-o", s(&png)]);
+    assert!(out.contains(note) && out.contains("70°"), "{out}");
+    assert!(ok(&["info", s(&earlier)]).contains(note));
+    let out = ok(&["info", s(&earlier), "--json"]);
+    assert!(out.contains(r#""normal_frame": "camera""#), "{out}");
+    data.header.view = serde_json::json!({"version": 1, "fov_y_deg": 30, "distance": 50});
+    data.save(&earlier).unwrap();
+    let out = ok(&["shade", s(&earlier), "-o", s(&png)]);
+    assert!(!out.contains("note:"), "{out}");
 }
 
 /// `sample --tiles` stores the S-MIP tiles of an orthographic view; `shade` lights them
@@ -6027,6 +6034,16 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
             && noted.contains("subtract its centre"),
         "{noted}"
     );
+    // `info` says so too: the error it shows is measured after the rounding.
+    let info = ok(&["info", s(&out)]);
+    assert!(
+        info.contains("this far from the origin are 7.812e-3 apart")
+            && info.contains("rounded by up to 3.906e-3"),
+        "{info}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&out), "--json"])).unwrap();
+    assert_eq!(json["single_precision_spacing"], 0.0078125);
+    assert!(!ok(&["info", s(&converted(dir.path(), "cu_melt.xyz"))]).contains("note:"));
     // Particles as large as the steps: no note of them (radii this size overlap into
     // one blob of the 300, which is noted apart).
     let fine = ok(&["convert", s(&offset), "-o", s(&out), "--radius", "A=1"]);
@@ -7150,6 +7167,13 @@ fn summaries_print_large_and_small_values_in_scientific_notation() {
         ]);
         assert_eq!(
             out.contains("convert with --attribute-log10 to keep them"),
+            says,
+            "{out}"
+        );
+        // Steps of 0.0153 from 1e-6: the 4 decades below the step hold no value of
+        // their own (they all read as the start, the map's first colour).
+        assert_eq!(
+            out.contains("so 4 of the scale's 9 decades show no step of their own"),
             says,
             "{out}"
         );

@@ -429,6 +429,7 @@ fn sndf_info(args: &Args) -> Result<()> {
             "bins": h.bins,
             "binning": h.binning,
             "rays": h.rays,
+            "normal_frame": h.normal_frame.as_deref().unwrap_or("camera"),
             "display_level": h.display_level.unwrap_or(0),
             "shown_at_levels": levels_shown.as_ref().map(|levels| {
                 levels
@@ -462,6 +463,11 @@ fn sndf_info(args: &Args) -> Result<()> {
         println!("  sampled from {}", shown(s));
     }
     println!("  view         {view}");
+    if h.normal_frame.is_some() {
+        println!("  normals      binned along each texel's ray");
+    } else if let Some(n) = super::shade::camera_frame_note(h) {
+        println!("{n}");
+    }
     Ok(())
 }
 
@@ -508,6 +514,10 @@ pub fn run(args: Args) -> Result<()> {
         .transpose()?;
     // What the particles' spheres span: the top node's box.
     let extent = f.nodes().first().map(|n| (n.bounds_min, n.bounds_max));
+    // Positions are single precision: far from the origin their own spacing, not the
+    // quantization, bounds how far they may lie from an input of more digits.
+    let spacing = extent.map_or(0.0, |(lo, hi)| single_precision_spacing(lo, hi));
+    let rounded_first = f64::from(spacing) / 2.0 > m.max_position_error;
     // Two-dimensional data (every centre in one plane), which views face square on.
     let flat = mdlod_render::flat_axis(&f);
     if args.json {
@@ -539,6 +549,7 @@ pub fn run(args: Args) -> Result<()> {
             "source": m.source,
             "build": m.build,
             "max_position_error": m.max_position_error,
+            "single_precision_spacing": spacing,
             "writer": m.writer,
         });
         // Radii, colours and the attribute's range are f32s: their shortest form, not
@@ -730,7 +741,28 @@ pub fn run(args: Args) -> Result<()> {
         m.build.max_cluster_size, m.build.max_root_points, m.build.delta_n, m.build.position_bits
     );
     println!("  max position error {:.4e}", m.max_position_error);
+    if rounded_first {
+        println!(
+            "  note: the error is measured from the positions in single precision, which \
+             this far from the origin are {spacing:.3e} apart: an input of more digits (f64) \
+             was first rounded by up to {:.3e}",
+            spacing / 2.0
+        );
+    }
     Ok(())
+}
+
+/// The spacing of single-precision numbers at the largest coordinate of `lo..hi` (the
+/// power of two at or below it times the machine epsilon): how far apart positions can
+/// be there, whatever their quantization.
+fn single_precision_spacing(lo: [f32; 3], hi: [f32; 3]) -> f32 {
+    let largest = lo
+        .iter()
+        .chain(&hi)
+        .map(|v| v.abs())
+        .filter(|v| v.is_finite())
+        .fold(0.0f32, f32::max);
+    f32::from_bits(largest.to_bits() & 0x7f80_0000) * f32::EPSILON
 }
 
 /// A species radius: three decimals where that shows it (`1.280`), else its shortest

@@ -626,6 +626,40 @@ fn decades_light_note(a: &mdlod_format::meta::AttributeInfo) -> Option<String> {
     })
 }
 
+/// Says, for the modes that spread each particle over a kernel (splats, the density
+/// volume and its iso-surface), that a periodic cell's faces do not wrap the kernels: a
+/// cosmological box's projection reads low within a kernel's reach of its faces, and a
+/// halo across a face shows in two pieces, where a projection that wraps (yt's) does not.
+/// `periodic`: the cell's periodic axes, where the file has a cell that says.
+fn periodic_kernels_note(mode: Mode, periodic: Option<[bool; 3]>) -> Option<String> {
+    if !matches!(
+        mode,
+        Mode::Splat | Mode::SplatOver | Mode::Density | Mode::Iso
+    ) {
+        return None;
+    }
+    let periodic = periodic?;
+    let axes: Vec<&str> = ["x", "y", "z"]
+        .into_iter()
+        .zip(periodic)
+        .filter_map(|(name, p)| p.then_some(name))
+        .collect();
+    let axes = match axes[..] {
+        [] => return None,
+        [one] => one.to_string(),
+        [ref first @ .., last] => format!("{} and {last}", first.join(", ")),
+    };
+    let what = match mode {
+        Mode::Density | Mode::Iso => "the density",
+        _ => "the splats' light",
+    };
+    Some(format!(
+        "  note: the cell is periodic along {axes}, but kernels are not wrapped across its \
+         faces: within a kernel's reach of a face {what} reads low (only the particles on \
+         this side add to it), and a structure across a face shows in pieces"
+    ))
+}
+
 /// `v` to three significant digits, in plain decimals (0.0200, 2.95, 450).
 fn three_digits(v: f32) -> String {
     // (Nudged up, so that 0.01 stored as 0.0099999998 counts as 0.01.)
@@ -2505,12 +2539,6 @@ pub fn run(mut args: Args) -> Result<()> {
     if let Some(n) = sndf_of_clusters_note(args.mode, &r) {
         println!("{n}");
     }
-    if let Some(n) = (args.mode == Mode::Sndf)
-        .then(|| sndf_wide_angle_note(&r.camera))
-        .flatten()
-    {
-        println!("{n}");
-    }
     // What the colours (or splat intensities) mean: a picture's legend.
     if by_attribute(&args) {
         if let Some(a) = &file.metadata().attribute {
@@ -2666,6 +2694,14 @@ pub fn run(mut args: Args) -> Result<()> {
         .filter(|_| lit_by_value(&args))
         .and_then(decades_light_note)
     {
+        println!("{note}");
+    }
+    let periodic = file
+        .metadata()
+        .simulation_box
+        .as_ref()
+        .and_then(|b| b.periodic);
+    if let Some(note) = periodic_kernels_note(args.mode, periodic) {
         println!("{note}");
     }
     if view_fits(&opts.view) {
@@ -3721,12 +3757,19 @@ fn log_text(
     // The file keeps 16-bit steps of the linear range: the scale's lowest decades may hold
     // only a few of them.
     let step = (f64::from(a.max) - f64::from(a.min)) / 65535.0;
-    let coarse = |lo: f64| {
+    // Values within half a step of the range's start are stored as the start: the
+    // decades below the step hold no value of their own.
+    let coarse = |[lo, hi]: [f64; 2]| {
         if !a.name.starts_with("log10(") && step > 10.0 * lo {
+            let (empty, all) = ((step / lo).log10(), (hi / lo).log10());
             format!(
-                "; the file stores the values linearly in steps of {}, so the decades below \
-                 {} show a few steps each (convert with --attribute-log10 to keep them)",
+                "; the file stores the values linearly in steps of {}: values below about \
+                 {} are all stored as {} and {fate}, so {empty:.0} of the scale's {all:.0} \
+                 decades show no step of their own and those up to {} a few each (convert \
+                 with --attribute-log10 to keep them)",
                 Num(step as f32),
+                Num((f64::from(a.min) + step / 2.0) as f32),
+                Num(a.min),
                 Num((step * 1000.0) as f32)
             )
         } else {
@@ -3734,14 +3777,14 @@ fn log_text(
         }
     };
     match scale.log_range() {
-        Some([lo, _]) if f64::from(low) > 0.0 => format!(", on a log scale{}", coarse(lo)),
+        Some(r) if f64::from(low) > 0.0 => format!(", on a log scale{}", coarse(r)),
         Some([lo, hi]) => format!(
             ", on a log scale from {:.4e} ({} decades below {}): values at or below it \
              {fate}{}",
             lo as f32,
             mdlod_render::style::AttributeScale::LOG_DECADES,
             hi as f32,
-            coarse(lo),
+            coarse([lo, hi]),
         ),
         None if style.attribute_range.is_none() && a.min >= a.max => {
             ", linear (--log-scale left unused: the attribute is constant)".to_string()
@@ -3810,29 +3853,6 @@ fn sndf_of_clusters_note(mode: Mode, r: &mdlod_render::RenderReport) -> Option<S
             r.nodes_drawn, r.error_px
         )
     })
-}
-
-/// The field of view above which S-NDFs in perspective are noted as approximate near
-/// the image's edges ([`sndf_wide_angle_note`]).
-const SNDF_WIDE_FOV_DEG: f32 = 45.0;
-
-/// A note where S-NDFs were sampled in a wide-angle perspective view: a normal facing
-/// away from the view axis but towards its pixel (a sphere's rim seen off the axis) is
-/// binned with its mirror image across the image plane, so shading is approximate near
-/// the edges (measured under a headlight: within 1 % of the ray-cast spheres at 30°,
-/// 3 % brighter at 60°, a third at 90°).
-pub fn sndf_wide_angle_note(camera: &mdlod_render::camera::Camera) -> Option<String> {
-    (camera.projection == mdlod_render::camera::Projection::Perspective
-        && camera.fov_y_deg > SNDF_WIDE_FOV_DEG)
-        .then(|| {
-            format!(
-                "  note: S-NDFs of a {:.0}° perspective view are approximate towards the \
-                 image's edges: normals facing away from the view axis are binned with their \
-                 mirror images (a few per cent brighter under a headlight at 60°, up to a \
-                 third at 90°); --ortho, a narrower field of view, or --mode spheres are exact",
-                camera.fov_y_deg
-            )
-        })
 }
 
 /// After the particle count: how many particles of hidden species, or cut away by the
@@ -4279,12 +4299,6 @@ fn render_turntable(
             azimuth.rem_euclid(360.0)
         );
         println!("{}", image_line(&out, &which, &r, args, coarsest));
-        // (Once: every view has the first one's field of view.)
-        if i == 0 && args.mode == Mode::Sndf {
-            if let Some(n) = sndf_wide_angle_note(&r.camera) {
-                println!("{n}");
-            }
-        }
         if args.json {
             crate::print_json_part(report_json(&out, &r, args, &opts, {
                 let mut more = shown;
@@ -4764,7 +4778,6 @@ fn render_frames(
     check_panels_apart(args, legend_size, label_size, bar.as_ref(), axes.as_ref())?;
     let t0 = std::time::Instant::now();
     let mut limited_frames = 0usize;
-    let mut wide_noted = false;
     // The faintest and brightest lit pixels over the frames, for the legend's ends.
     let mut lit = None;
     // The species any frame shows, for the legend's key.
@@ -4853,13 +4866,6 @@ fn render_frames(
         // (Counted from 0, as the images' numbers and --frames count them.)
         let which = format!("frame {i} of 0-{}, timestep {}", n - 1, f.timestep);
         println!("{}", image_line(&out, &which, &r, args, coarsest));
-        // (Once: every frame has the movie's camera.)
-        if !wide_noted && args.mode == Mode::Sndf {
-            wide_noted = true;
-            if let Some(n) = sndf_wide_angle_note(&r.camera) {
-                println!("{n}");
-            }
-        }
         if args.json {
             crate::print_json_part(report_json(&out, &r, args, &opts, {
                 let mut more = shown;
@@ -5175,6 +5181,20 @@ mod tests {
         assert_eq!(length_unit(Some("Mpc h^-1")), "Mpc h^-1");
         assert_eq!(length_unit(Some("a unit far too long")), "");
         assert_eq!(length_unit(None), "");
+    }
+
+    /// The kernel modes say that a periodic cell's faces do not wrap their kernels,
+    /// naming the periodic axes; spheres, and cells of no periodic axis, say nothing.
+    #[test]
+    fn kernels_of_a_periodic_cell_are_noted_as_not_wrapped() {
+        let note = periodic_kernels_note(Mode::Splat, Some([true, true, false])).unwrap();
+        assert!(note.contains("periodic along x and y, but kernels are not wrapped"));
+        assert!(note.contains("the splats' light reads low"), "{note}");
+        let note = periodic_kernels_note(Mode::Density, Some([true; 3])).unwrap();
+        assert!(note.contains("along x, y and z") && note.contains("the density reads low"));
+        assert_eq!(periodic_kernels_note(Mode::Spheres, Some([true; 3])), None);
+        assert_eq!(periodic_kernels_note(Mode::Splat, Some([false; 3])), None);
+        assert_eq!(periodic_kernels_note(Mode::Iso, None), None);
     }
 
     /// Splats lit by a column spanning decades say its small values' light is off.
