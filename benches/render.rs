@@ -677,11 +677,6 @@ fn viewer_table(renderer: &Renderer, adapter: &str, sizes: &[u64]) {
     write_section(&begin, &end, &t, "## Viewer: frame times");
 }
 
-/// S-NDFs (`MDLOD_SNDF_BINS` bins per axis, default 8; `MDLOD_SNDF_SIZE=W,H`, default
-/// 1280,720): one sampling iteration against
-/// one plain ray-casting sample, re-lighting
-/// against re-sampling at 256 spp, and the S-NDF memory, at 1280×720 (halved until the
-/// histograms fit one buffer of the adapter). Writes the `<section>-sndf` section.
 /// S-NDFs of wide perspective views against the ray caster: at 30°, 60° and 90° fields of
 /// view, the crater seen closely enough that it fills the image, re-lit S-NDFs (16
 /// iterations, 8×8 bins, shaded on the host) against 16-spp ray casting under the same
@@ -800,6 +795,11 @@ fn sndf_wide_table(renderer: &Renderer, adapter: &str, n: u64) {
     write_section(&begin, &end, &table, "## S-NDFs: sampling and re-lighting");
 }
 
+/// S-NDFs (`MDLOD_SNDF_BINS` bins per axis, default 8; `MDLOD_SNDF_SIZE=W,H`, default
+/// 1280,720): one sampling iteration against
+/// one plain ray-casting sample, re-lighting
+/// against re-sampling at 256 spp, and the S-NDF memory, at 1280×720 (halved until the
+/// histograms fit one buffer of the adapter). Writes the `<section>-sndf` section.
 fn sndf_table(renderer: &Renderer, adapter: &str, n: u64) {
     use mdlod_render::sndf::{ShadeLights, SndfSettings};
     let file = MdlodFile::open(dataset(n)).unwrap();

@@ -6038,7 +6038,7 @@ fn lost_atoms_and_coordinates_beyond_single_precision_are_noted() {
     let info = ok(&["info", s(&out)]);
     assert!(
         info.contains("this far from the origin are 7.812e-3 apart")
-            && info.contains("rounded by up to 3.906e-3"),
+            && info.contains("rounded to them, by up to 3.906e-3"),
         "{info}"
     );
     let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&out), "--json"])).unwrap();

@@ -142,11 +142,8 @@ pub fn shade_table(
     view: TexelView,
 ) -> (Vec<[f32; 4]>, u32) {
     let rgb = |c: &[f32; 3]| [c[0], c[1], c[2], 0.0];
-    let mut table: Vec<[f32; 4]> = bin_lighting(bins, binning, lights)
-        .iter()
-        .flat_map(|(a, s)| [rgb(a), rgb(s)])
-        .collect();
-    let grid = view_grid(bins, binning, lights, view);
+    let (axis, grid) = axis_and_grid(bins, binning, lights, view);
+    let mut table: Vec<[f32; 4]> = axis.iter().flat_map(|(a, s)| [rgb(a), rgb(s)]).collect();
     let g = grid.as_ref().map_or(1, |(g, _)| *g);
     if let Some((_, entries)) = grid {
         if view.binned_along_rays() {
@@ -156,6 +153,28 @@ pub fn shade_table(
         }
     }
     (table, g)
+}
+
+/// The lighting of every bin seen along the view axis ([`bin_lighting`]), and the grid of
+/// view directions when the lighting differs from texel to texel ([`view_grid`]). Binned
+/// along rays, the axis's entries are the grid's middle point (whose bins are not
+/// turned), so the lighting, the environment's irradiance included, is worked out once.
+fn axis_and_grid(
+    bins: u32,
+    binning: Binning,
+    lights: &ShadeLights,
+    view: TexelView,
+) -> (Vec<BinLight>, Option<(u32, Vec<BinLight>)>) {
+    let grid = view_grid(bins, binning, lights, view);
+    let b2 = (bins * bins) as usize;
+    let axis = match &grid {
+        Some((g, entries)) if view.binned_along_rays() => {
+            let middle = (g * g / 2) as usize;
+            entries[middle * b2..(middle + 1) * b2].to_vec()
+        }
+        _ => bin_lighting(bins, binning, lights),
+    };
+    (axis, grid)
 }
 
 /// The direction towards the eye at each texel of a view's S-NDFs, which places the
@@ -611,7 +630,8 @@ pub struct Sndf {
     pub hist: Vec<[f32; 4]>,
     /// GPU time of the sampling (all iterations), when measured.
     pub gpu_time: Option<std::time::Duration>,
-    /// Where the eye is seen from each texel (the highlights follow it).
+    /// Where the eye is seen from each texel (the highlights follow it), and whether each
+    /// texel's normals are binned in the frame of its ray.
     pub view: TexelView,
 }
 
@@ -940,11 +960,7 @@ impl From<&Lighting> for ShadeLights {
 /// the bin's normals are seen in proportion to σ⊥), per colour channel, as (albedo factor: ambient + Σ diffuse ·
 /// max(n·l, 0) · colour; highlight: Σ specular · Blinn-Phong · colour), for the view
 /// direction +z. Bins outside the disk get the values at the nearest disk edge.
-pub fn bin_lighting(
-    bins: u32,
-    binning: Binning,
-    lights: &ShadeLights,
-) -> Vec<([f32; 3], [f32; 3])> {
+pub fn bin_lighting(bins: u32, binning: Binning, lights: &ShadeLights) -> Vec<BinLight> {
     bin_lighting_towards(bins, binning, lights, Vec3::Z)
 }
 
@@ -958,7 +974,7 @@ pub fn bin_lighting_towards(
     binning: Binning,
     lights: &ShadeLights,
     eye: Vec3,
-) -> Vec<([f32; 3], [f32; 3])> {
+) -> Vec<BinLight> {
     bin_lighting_in(bins, binning, lights, eye, glam::Quat::IDENTITY)
 }
 
@@ -972,7 +988,7 @@ pub fn bin_lighting_in(
     lights: &ShadeLights,
     eye: Vec3,
     to_view: glam::Quat,
-) -> Vec<([f32; 3], [f32; 3])> {
+) -> Vec<BinLight> {
     let irradiance = lights.environment.as_ref().map(EnvironmentMap::irradiance);
     bin_lighting_with(bins, binning, lights, irradiance.as_ref(), eye, to_view)
 }
@@ -986,7 +1002,7 @@ fn bin_lighting_with(
     irradiance: Option<&Irradiance>,
     eye: Vec3,
     to_view: glam::Quat,
-) -> Vec<([f32; 3], [f32; 3])> {
+) -> Vec<BinLight> {
     const SUB: u32 = 16;
     let dirs: Vec<(Vec3, Vec3, [f32; 3])> = lights
         .lights
@@ -1107,8 +1123,7 @@ impl Sndf {
     /// Shades every texel over `background_srgb`, from the S-NDFs alone: linear RGB per
     /// texel, rows top to bottom.
     pub fn shade_linear(&self, lights: &ShadeLights, background_srgb: [f32; 3]) -> Vec<[f32; 3]> {
-        let table = bin_lighting(self.bins, self.binning, lights);
-        let grid = view_grid(self.bins, self.binning, lights, self.view);
+        let (table, grid) = axis_and_grid(self.bins, self.binning, lights, self.view);
         let along_rays = self.view.binned_along_rays();
         let bg = background_srgb.map(srgb_to_linear);
         let rays = self.rays.max(1) as f32;
@@ -1120,7 +1135,8 @@ impl Sndf {
             .map(|(t, texel)| {
                 let mut c = [0f32; 3];
                 let mut hits = 0.0;
-                // The texel's highlights: bilinear between the grid's view directions.
+                // The texel's highlights (and, binned along rays, albedo factors):
+                // bilinear between the grid's view directions.
                 let corners = grid.as_ref().map(|(g, _)| {
                     let (x, y) = (t as u32 % self.width, t as u32 / self.width);
                     grid_weights(x, y, self.width, self.height, *g)

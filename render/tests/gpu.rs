@@ -2408,6 +2408,70 @@ fn sndfs_of_a_ninety_degree_view_keep_the_ray_casters_brightness_out_to_the_edge
     );
 }
 
+/// The accumulation pass bins each texel's normal in the frame of its own ray exactly as
+/// the CPU's [`TexelView::bin_frame`] says: one sphere filling a 90° view, one centred
+/// ray per texel, and each texel's hit normal found by intersecting that ray with the
+/// sphere on the CPU. Binned in the camera's frame instead, most texels' bins differ.
+#[test]
+fn the_accumulation_bins_each_normal_in_its_texels_ray_frame_as_the_cpu_does() {
+    use mdlod_render::sndf::{bin_of, texel_point, Binning};
+    let (_d, _p, f) = make_file(&spheres_frame(&[[0.0, 0.0, 0.0]]), small_build(), &[]);
+    let r = f.metadata().species[0].radius;
+    let (w, h, bins) = (48u32, 32u32, 8u32);
+    let mut camera = camera_for(&f, &opts(w, h).view, w, h).unwrap();
+    camera.target = Vec3::ZERO;
+    camera.distance = 1.5 * r;
+    camera.fov_y_deg = 90.0;
+    let camera = camera_for(&f, &ViewSpec::Camera(camera), w, h).unwrap();
+    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
+    let sndf = renderer()
+        .sample_sndf(
+            &f,
+            &camera,
+            &draw,
+            &mdlod_render::sndf::SndfSettings {
+                width: w,
+                height: h,
+                iterations: 1,
+                bins,
+                binning: Binning::ProjectedNormals,
+            },
+        )
+        .unwrap();
+    let centre = (camera.view_from_world() * Vec4::new(0.0, 0.0, 0.0, 1.0)).truncate();
+    let (mut hits, mut along_rays, mut in_camera_frame) = (0, 0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let (u, v) = texel_point(x, y, w, h);
+            // The ray from the eye (the origin of view space) away from `towards_eye`.
+            let d = -sndf.view.towards_eye(u, v);
+            let b = d.dot(centre);
+            let disc = b * b - (centre.length_squared() - r * r);
+            let counted = sndf.texel(x, y).iter().position(|c| c[3] > 0.5);
+            // Rays near the rim graze it: their hit normal is too sensitive to compare.
+            if disc < 0.02 * r * r {
+                continue;
+            }
+            let Some(bin) = counted else {
+                panic!("texel ({x}, {y}) hits the sphere on the CPU but has no count");
+            };
+            let normal = ((b - disc.sqrt()) * d - centre) / r;
+            let index = |(bx, by): (u32, u32)| (by * bins + bx) as usize;
+            let frame = sndf.view.bin_frame_at(x, y, w, h);
+            hits += 1;
+            along_rays +=
+                usize::from(index(bin_of(frame * normal, bins, Binning::default())) == bin);
+            in_camera_frame += usize::from(index(bin_of(normal, bins, Binning::default())) == bin);
+        }
+    }
+    assert!(hits > 500, "{hits} texels see the sphere");
+    assert!(
+        along_rays as f64 >= 0.97 * hits as f64 && (in_camera_frame as f64) < 0.8 * hits as f64,
+        "of {hits} texels, {along_rays} binned as the CPU's ray frame says, \
+         {in_camera_frame} as the camera's frame would"
+    );
+}
+
 /// `sndf` shaded on the host, after checking that the GPU's shading pass gives the same
 /// picture (to 1/255).
 fn shaded_on_both(

@@ -515,8 +515,25 @@ pub fn run(args: Args) -> Result<()> {
     // What the particles' spheres span: the top node's box.
     let extent = f.nodes().first().map(|n| (n.bounds_min, n.bounds_max));
     // Positions are single precision: far from the origin their own spacing, not the
-    // quantization, bounds how far they may lie from an input of more digits.
-    let spacing = extent.map_or(0.0, |(lo, hi)| single_precision_spacing(lo, hi));
+    // quantization, bounds how far they may lie from an input of more digits. (The
+    // extent holds the spheres: every centre lies at least the smallest radius inside.)
+    let smallest_radius = m
+        .species
+        .iter()
+        .map(|s| s.radius_range.map_or(s.radius, |[lo, _]| lo.min(s.radius)))
+        .fold(f32::INFINITY, f32::min);
+    let spacing = extent.map_or(0.0, |(lo, hi)| {
+        let r = if smallest_radius.is_finite() {
+            smallest_radius.max(0.0)
+        } else {
+            0.0
+        };
+        if (0..3).all(|k| lo[k] + r <= hi[k] - r) {
+            single_precision_spacing(lo.map(|v| v + r), hi.map(|v| v - r))
+        } else {
+            single_precision_spacing(lo, hi)
+        }
+    });
     let rounded_first = f64::from(spacing) / 2.0 > m.max_position_error;
     // Two-dimensional data (every centre in one plane), which views face square on.
     let flat = mdlod_render::flat_axis(&f);
@@ -745,7 +762,7 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "  note: the error is measured from the positions in single precision, which \
              this far from the origin are {spacing:.3e} apart: an input of more digits (f64) \
-             was first rounded by up to {:.3e}",
+             was first rounded to them, by up to {:.3e}",
             spacing / 2.0
         );
     }

@@ -630,19 +630,25 @@ fn decades_light_note(a: &mdlod_format::meta::AttributeInfo) -> Option<String> {
 /// volume and its iso-surface), that a periodic cell's faces do not wrap the kernels: a
 /// cosmological box's projection reads low within a kernel's reach of its faces, and a
 /// halo across a face shows in two pieces, where a projection that wraps (yt's) does not.
-/// `periodic`: the cell's periodic axes, where the file has a cell that says.
-fn periodic_kernels_note(mode: Mode, periodic: Option<[bool; 3]>) -> Option<String> {
+/// Axes the cell says are periodic count, less an edge of no length (a two-dimensional
+/// run's).
+fn periodic_kernels_note(
+    mode: Mode,
+    cell: Option<&mdlod_format::meta::SimulationBox>,
+) -> Option<String> {
     if !matches!(
         mode,
         Mode::Splat | Mode::SplatOver | Mode::Density | Mode::Iso
     ) {
         return None;
     }
-    let periodic = periodic?;
+    let cell = cell?;
+    let periodic = cell.periodic?;
     let axes: Vec<&str> = ["x", "y", "z"]
         .into_iter()
         .zip(periodic)
-        .filter_map(|(name, p)| p.then_some(name))
+        .zip([cell.a, cell.b, cell.c])
+        .filter_map(|((name, p), edge)| (p && edge != [0.0; 3]).then_some(name))
         .collect();
     let axes = match axes[..] {
         [] => return None,
@@ -2696,12 +2702,7 @@ pub fn run(mut args: Args) -> Result<()> {
     {
         println!("{note}");
     }
-    let periodic = file
-        .metadata()
-        .simulation_box
-        .as_ref()
-        .and_then(|b| b.periodic);
-    if let Some(note) = periodic_kernels_note(args.mode, periodic) {
+    if let Some(note) = periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref()) {
         println!("{note}");
     }
     if view_fits(&opts.view) {
@@ -3757,23 +3758,34 @@ fn log_text(
     // The file keeps 16-bit steps of the linear range: the scale's lowest decades may hold
     // only a few of them.
     let step = (f64::from(a.max) - f64::from(a.min)) / 65535.0;
-    // Values within half a step of the range's start are stored as the start: the
-    // decades below the step hold no value of their own.
+    // Values within half a step of the file's lowest are stored as it: the scale's
+    // decades below one step hold no value of their own.
     let coarse = |[lo, hi]: [f64; 2]| {
-        if !a.name.starts_with("log10(") && step > 10.0 * lo {
-            let (empty, all) = ((step / lo).log10(), (hi / lo).log10());
+        if a.name.starts_with("log10(") || step <= 10.0 * lo {
+            return String::new();
+        }
+        let all = (hi / lo).log10();
+        let empty = (step.min(hi) / lo).log10().clamp(0.0, all);
+        let few = format!(
+            "{empty:.0} of the scale's {all:.0} decades show no step of their own and those \
+             up to {} a few each (convert with --attribute-log10 to keep them)",
+            Num((step * 1000.0) as f32)
+        );
+        // Where the file's lowest is the scale's start or below it, what is stored as it
+        // takes the start's colour.
+        if a.min >= 0.0 && f64::from(a.min) <= lo {
             format!(
-                "; the file stores the values linearly in steps of {}: values below about \
-                 {} are all stored as {} and {fate}, so {empty:.0} of the scale's {all:.0} \
-                 decades show no step of their own and those up to {} a few each (convert \
-                 with --attribute-log10 to keep them)",
+                "; the file stores the values linearly in steps of {}: values below about {} \
+                 are all stored as {} and {fate}, so {few}",
                 Num(step as f32),
                 Num((f64::from(a.min) + step / 2.0) as f32),
                 Num(a.min),
-                Num((step * 1000.0) as f32)
             )
         } else {
-            String::new()
+            format!(
+                "; the file stores the values linearly in steps of {}, so {few}",
+                Num(step as f32)
+            )
         }
     };
     match scale.log_range() {
@@ -4279,6 +4291,10 @@ fn render_turntable(
         let coarsest = coarsest_points(&file);
         let species = file.metadata().species.clone();
         let shown = shown_json(args, &opts, &file);
+        // (Once: every view is of the one file.)
+        let periodic_note = (i == 0)
+            .then(|| periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref()))
+            .flatten();
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         drawn = drawn_names(&r, &species, drawn);
         if i == 0 {
@@ -4299,6 +4315,9 @@ fn render_turntable(
             azimuth.rem_euclid(360.0)
         );
         println!("{}", image_line(&out, &which, &r, args, coarsest));
+        if let Some(note) = periodic_note {
+            println!("{note}");
+        }
         if args.json {
             crate::print_json_part(report_json(&out, &r, args, &opts, {
                 let mut more = shown;
@@ -4850,6 +4869,10 @@ fn render_frames(
         let coarsest = coarsest_points(&file);
         let species = file.metadata().species.clone();
         let shown = shown_json(args, &opts, &file);
+        // (Once, of the first frame's cell.)
+        let periodic_note = (i == 0)
+            .then(|| periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref()))
+            .flatten();
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)
             .map_err(|e| damaged(e.into()))?;
         drawn = drawn_names(&r, &species, drawn);
@@ -4866,6 +4889,9 @@ fn render_frames(
         // (Counted from 0, as the images' numbers and --frames count them.)
         let which = format!("frame {i} of 0-{}, timestep {}", n - 1, f.timestep);
         println!("{}", image_line(&out, &which, &r, args, coarsest));
+        if let Some(note) = periodic_note {
+            println!("{note}");
+        }
         if args.json {
             crate::print_json_part(report_json(&out, &r, args, &opts, {
                 let mut more = shown;
@@ -5187,13 +5213,31 @@ mod tests {
     /// naming the periodic axes; spheres, and cells of no periodic axis, say nothing.
     #[test]
     fn kernels_of_a_periodic_cell_are_noted_as_not_wrapped() {
-        let note = periodic_kernels_note(Mode::Splat, Some([true, true, false])).unwrap();
+        let cell = |periodic, c| mdlod_format::meta::SimulationBox {
+            origin: [0.0; 3],
+            a: [10.0, 0.0, 0.0],
+            b: [0.0, 10.0, 0.0],
+            c,
+            periodic,
+        };
+        let cube = |p| cell(p, [0.0, 0.0, 10.0]);
+        let note = periodic_kernels_note(Mode::Splat, Some(&cube(Some([true, true, false]))));
+        let note = note.unwrap();
         assert!(note.contains("periodic along x and y, but kernels are not wrapped"));
         assert!(note.contains("the splats' light reads low"), "{note}");
-        let note = periodic_kernels_note(Mode::Density, Some([true; 3])).unwrap();
+        let note = periodic_kernels_note(Mode::Density, Some(&cube(Some([true; 3])))).unwrap();
         assert!(note.contains("along x, y and z") && note.contains("the density reads low"));
-        assert_eq!(periodic_kernels_note(Mode::Spheres, Some([true; 3])), None);
-        assert_eq!(periodic_kernels_note(Mode::Splat, Some([false; 3])), None);
+        // A two-dimensional run's cell: no edge along z, periodic in the plane only.
+        let flat = cell(Some([true; 3]), [0.0; 3]);
+        let note = periodic_kernels_note(Mode::Splat, Some(&flat)).unwrap();
+        assert!(note.contains("along x and y,"), "{note}");
+        let spheres = periodic_kernels_note(Mode::Spheres, Some(&cube(Some([true; 3]))));
+        assert_eq!(spheres, None);
+        assert_eq!(
+            periodic_kernels_note(Mode::Splat, Some(&cube(Some([false; 3])))),
+            None
+        );
+        assert_eq!(periodic_kernels_note(Mode::Iso, Some(&cube(None))), None);
         assert_eq!(periodic_kernels_note(Mode::Iso, None), None);
     }
 

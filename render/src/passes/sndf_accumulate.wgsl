@@ -61,15 +61,20 @@ fn bin_coords(n: vec3<f32>) -> vec2<f32> {
     return (n.xy + 1.0) * 0.5;
 }
 
-// `n` turned into the frame its texel's bins are in.
-fn to_ray_frame(n: vec3<f32>, texel: vec2<u32>) -> vec3<f32> {
+// The unit direction towards the eye through the centre of `texel`; +z when binning in
+// the camera's frame.
+fn towards_eye(texel: vec2<u32>) -> vec3<f32> {
     if params.tan_half.x <= 0.0 {
-        return n;
+        return vec3<f32>(0.0, 0.0, 1.0);
     }
     let uv = (vec2<f32>(texel) + 0.5) / vec2<f32>(f32(params.width), f32(params.height)) * 2.0 - 1.0;
-    // Towards the eye: u to the right, v up (texel rows go down).
-    let e = normalize(vec3<f32>(-uv.x * params.tan_half.x, uv.y * params.tan_half.y, 1.0));
-    // Rodrigues' rotation of e onto +z about k = e x z (|k| = sin, e.z = cos > 0).
+    // u to the right, v up (texel rows go down).
+    return normalize(vec3<f32>(-uv.x * params.tan_half.x, uv.y * params.tan_half.y, 1.0));
+}
+
+// `n` turned into the frame of the ray towards the eye `e`: Rodrigues' rotation of e onto
+// +z about k = e x z (|k| = sin, e.z = cos > 0); the identity for e = +z.
+fn to_ray_frame(n: vec3<f32>, e: vec3<f32>) -> vec3<f32> {
     let k = vec3<f32>(e.y, -e.x, 0.0);
     return n * e.z + cross(k, n) + k * (dot(k, n) / (1.0 + e.z));
 }
@@ -89,13 +94,14 @@ fn accumulate(@builtin(global_invocation_id) id: vec3<u32>) {
     let b = params.bins;
     let fb = f32(b);
     let base = (slot * TILE * TILE + local) * b * b;
+    let eye = towards_eye(id.xy);
     for (var l = 0u; l < params.layers; l++) {
         let n = textureLoad(normals, vec2<i32>(id.xy), i32(l), 0);
         if n.w < 0.5 {
             continue;
         }
         let a = textureLoad(albedos, vec2<i32>(id.xy), i32(l), 0);
-        let c = clamp(bin_coords(to_ray_frame(n.xyz, id.xy)), vec2<f32>(0.0), vec2<f32>(1.0));
+        let c = clamp(bin_coords(to_ray_frame(n.xyz, eye)), vec2<f32>(0.0), vec2<f32>(1.0));
         let bx = min(u32(c.x * fb), b - 1u);
         let by = min(u32(c.y * fb), b - 1u);
         let i = base + by * b + bx;
