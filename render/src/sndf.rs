@@ -1409,14 +1409,31 @@ mod tests {
         }
     }
 
-    fn random_sndf(w: u32, h: u32, bins: u32, rays: u32) -> Sndf {
-        let mut state = 7u64;
-        let mut next = move || {
+    /// Numbers uniform in `[0, 1)`, the same for the same seed.
+    fn uniform(seed: u64) -> impl FnMut() -> f32 {
+        let mut state = seed;
+        move || {
             state = state
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        }
+    }
+
+    /// The normals `n` rays along `−eye` see on a sphere: its projected disk hit
+    /// uniformly, so spread by projected solid angle about `eye`.
+    fn sphere_hits(seed: u64, n: usize, eye: Vec3) -> Vec<Vec3> {
+        let mut next = uniform(seed);
+        let (t1, t2) = eye.any_orthonormal_pair();
+        std::iter::from_fn(|| Some((next() * 2.0 - 1.0, next() * 2.0 - 1.0)))
+            .filter(|(x, y)| x * x + y * y < 1.0)
+            .take(n)
+            .map(|(x, y)| x * t1 + y * t2 + (1.0 - x * x - y * y).sqrt() * eye)
+            .collect()
+    }
+
+    fn random_sndf(w: u32, h: u32, bins: u32, rays: u32) -> Sndf {
+        let mut next = uniform(7);
         let hist = (0..w * h * bins * bins)
             .map(|_| {
                 let n = (next() * 3.0).floor();
@@ -1456,18 +1473,7 @@ mod tests {
             transfer: None,
         };
         let bins = 4u32;
-        let mut state = 11u64;
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
-        let hits: Vec<Vec3> = std::iter::from_fn(|| Some((next(), next())))
-            .filter(|(x, y)| x * x + y * y < 1.0)
-            .take(400_000)
-            .map(|(x, y)| Vec3::new(x, y, (1.0 - x * x - y * y).sqrt()))
-            .collect();
+        let hits = sphere_hits(11, 400_000, Vec3::Z);
         for binning in [
             Binning::ProjectedNormals,
             Binning::Spherical,
@@ -1580,19 +1586,7 @@ mod tests {
         let (u, v) = texel_point(0, 0, w, h);
         assert_eq!((u, v), (-0.75, 0.75));
         let eye = along.towards_eye(u, v);
-        let (t1, t2) = eye.any_orthonormal_pair();
-        let mut state = 5u64;
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
-        let hits: Vec<Vec3> = std::iter::from_fn(|| Some((next(), next())))
-            .filter(|(x, y)| x * x + y * y < 1.0)
-            .take(200_000)
-            .map(|(x, y)| x * t1 + y * t2 + (1.0 - x * x - y * y).sqrt() * eye)
-            .collect();
+        let hits = sphere_hits(5, 200_000, eye);
         let away = hits.iter().filter(|n| n.z < 0.0).count() as f64 / hits.len() as f64;
         assert!(away > 0.05, "{away}");
         // Blinn-Phong's half vector of the headlight and this texel's eye.
@@ -1883,13 +1877,8 @@ mod tests {
                 [0, 1, 2].map(|k| acc[k] + c * r[k])
             })
         };
-        let mut state = 3u64;
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut unit = uniform(3);
+        let mut next = move || unit() * 2.0 - 1.0;
         let normals = [
             Vec3::Y,
             -Vec3::Y,

@@ -2294,21 +2294,7 @@ fn relit_sndfs_of_a_wide_perspective_view_place_highlights_along_each_texels_ray
     o.background = [0.1, 0.1, 0.1];
     o.view = ViewSpec::Camera(camera.clone());
     let camera = camera_for(&f, &o.view, w, h).unwrap();
-    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
-    let sndf = renderer()
-        .sample_sndf(
-            &f,
-            &camera,
-            &draw,
-            &mdlod_render::sndf::SndfSettings {
-                width: w,
-                height: h,
-                iterations: 16,
-                bins: 8,
-                binning: Default::default(),
-            },
-        )
-        .unwrap();
+    let sndf = sampled(&f, &camera, [w, h], 16, 8);
     assert!(matches!(
         sndf.view,
         mdlod_render::sndf::TexelView::Perspective { .. }
@@ -2357,21 +2343,7 @@ fn sndfs_of_a_ninety_degree_view_keep_the_ray_casters_brightness_out_to_the_edge
         ..Default::default()
     };
     let camera = camera_for(&f, &o.view, w, h).unwrap();
-    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
-    let sndf = renderer()
-        .sample_sndf(
-            &f,
-            &camera,
-            &draw,
-            &mdlod_render::sndf::SndfSettings {
-                width: w,
-                height: h,
-                iterations: 16,
-                bins: 8,
-                binning: Default::default(),
-            },
-        )
-        .unwrap();
+    let sndf = sampled(&f, &camera, [w, h], 16, 8);
     assert!(sndf.view.binned_along_rays());
     let lights = mdlod_render::sndf::ShadeLights::from(&o.lighting);
     let relit = shaded_on_both(renderer(), &sndf, &lights, o.background);
@@ -2423,21 +2395,7 @@ fn the_accumulation_bins_each_normal_in_its_texels_ray_frame_as_the_cpu_does() {
     camera.distance = 1.5 * r;
     camera.fov_y_deg = 90.0;
     let camera = camera_for(&f, &ViewSpec::Camera(camera), w, h).unwrap();
-    let draw = cut(&f, &camera, [w, h], 0.0, OcclusionMode::WholePixels);
-    let sndf = renderer()
-        .sample_sndf(
-            &f,
-            &camera,
-            &draw,
-            &mdlod_render::sndf::SndfSettings {
-                width: w,
-                height: h,
-                iterations: 1,
-                bins,
-                binning: Binning::ProjectedNormals,
-            },
-        )
-        .unwrap();
+    let sndf = sampled(&f, &camera, [w, h], 1, bins);
     let centre = (camera.view_from_world() * Vec4::new(0.0, 0.0, 0.0, 1.0)).truncate();
     let (mut hits, mut along_rays, mut in_camera_frame) = (0, 0, 0);
     for y in 0..h {
@@ -2470,6 +2428,26 @@ fn the_accumulation_bins_each_normal_in_its_texels_ray_frame_as_the_cpu_does() {
         "of {hits} texels, {along_rays} binned as the CPU's ray frame says, \
          {in_camera_frame} as the camera's frame would"
     );
+}
+
+/// S-NDFs of `f` seen by `camera` (the cut of whole-pixel occlusion, as the sndf mode
+/// takes), `iterations` rays per texel, `bins` projected-normal bins per axis.
+fn sampled(
+    f: &MdlodFile,
+    camera: &Camera,
+    [w, h]: [u32; 2],
+    iterations: u32,
+    bins: u32,
+) -> mdlod_render::sndf::Sndf {
+    let draw = cut(f, camera, [w, h], 0.0, OcclusionMode::WholePixels);
+    let settings = mdlod_render::sndf::SndfSettings {
+        width: w,
+        height: h,
+        iterations,
+        bins,
+        binning: Default::default(),
+    };
+    renderer().sample_sndf(f, camera, &draw, &settings).unwrap()
 }
 
 /// `sndf` shaded on the host, after checking that the GPU's shading pass gives the same
