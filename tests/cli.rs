@@ -1064,6 +1064,31 @@ fn perspective_sndfs_are_binned_along_rays_and_earlier_files_are_noted() {
     data.save(&earlier).unwrap();
     let out = ok(&["shade", s(&earlier), "-o", s(&png)]);
     assert!(!out.contains("note:"), "{out}");
+    // A wide strip at 30°: its corners are 65° off the axis.
+    let narrow = dir.path().join("narrow.json");
+    std::fs::write(&narrow, r#"{"version": 1, "fov_y_deg": 30}"#).unwrap();
+    ok(&[
+        "sample",
+        s(&file),
+        "-o",
+        s(&sndf),
+        "--view",
+        s(&narrow),
+        "--width",
+        "64",
+        "--height",
+        "8",
+        "--iterations",
+        "1",
+    ]);
+    let mut strip = mdlod_format::sndf::SndfData::load(&sndf).unwrap();
+    strip.header.normal_frame = None;
+    strip.save(&earlier).unwrap();
+    let out = ok(&["shade", s(&earlier), "-o", s(&png)]);
+    assert!(
+        out.contains(note) && out.contains("(65° off the axis at the corners)"),
+        "{out}"
+    );
 }
 
 /// `sample --tiles` stores the S-MIP tiles of an orthographic view; `shade` lights them

@@ -80,9 +80,19 @@ pub struct SndfHeader {
     pub smip: Option<SndfTiles>,
     /// `"ray"` (version 1.2): each texel's normals are binned in the frame of its own
     /// ray, which turns the direction towards the eye onto the view axis (absent: the
-    /// camera's frame).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// camera's frame). A string when given: `null` is refused, not read as absent.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "present_string"
+    )]
     pub normal_frame: Option<String>,
+}
+
+/// A key that, when present, must be a string (serde reads `null` as an absent
+/// `Option` otherwise).
+fn present_string<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<String>, D::Error> {
+    String::deserialize(d).map(Some)
 }
 
 /// The S-MIP a file's tiles belong to, and the tiles (FORMAT.md, section 10).
@@ -790,6 +800,11 @@ mod tests {
         unknown[at + 3] = b'z';
         let e = SndfData::parse(&p, &unknown).unwrap_err().to_string();
         assert!(e.contains("normal frame `raz`"), "{e}");
+        // `null` is not a frame (it is not the key's absence either).
+        let mut null = bytes.clone();
+        null[at..at + 5].copy_from_slice(b" null");
+        let e = SndfData::parse(&p, &null).unwrap_err().to_string();
+        assert!(e.contains("invalid type: null, expected a string"), "{e}");
         let mut tiles = tiled();
         tiles.header.normal_frame = Some(RAY_FRAME.into());
         let e = tiles.save(&p).unwrap_err().to_string();

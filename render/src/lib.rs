@@ -1091,6 +1091,18 @@ pub fn cell_bounds(file: &MdlodFile) -> Option<Bounds> {
     (lo.is_finite() && hi.is_finite()).then(|| Bounds::new(lo, hi))
 }
 
+/// The box `opts` draws `file`'s particles in: the top node's bounds (their spheres)
+/// grown by how far the mode's footprint reaches past them ([`drawn_reach`]: a splat's
+/// Gaussian, a density kernel's support).
+pub fn drawn_bounds(file: &MdlodFile, opts: &RenderOptions) -> Option<Bounds> {
+    let top = file.nodes().first()?;
+    let reach = drawn_reach(file, opts).max(0.0);
+    Some(Bounds::new(
+        glam::Vec3::from(top.bounds_min) - reach,
+        glam::Vec3::from(top.bounds_max) + reach,
+    ))
+}
+
 /// How far past a particle's own sphere `opts` draws it: the style's radii (`--radius-scale`,
 /// a species' radius) times what the mode's footprint reaches in radii (a splat's
 /// truncated Gaussian, a density kernel's support), less the file's radius; the largest

@@ -631,10 +631,13 @@ fn decades_light_note(a: &mdlod_format::meta::AttributeInfo) -> Option<String> {
 /// cosmological box's projection reads low within a kernel's reach of its faces, and a
 /// halo across a face shows in two pieces, where a projection that wraps (yt's) does not.
 /// Axes the cell says are periodic count, less an edge of no length (a two-dimensional
-/// run's).
+/// run's), and only where `drawn` (the box the kernels reach,
+/// [`mdlod_render::drawn_bounds`]) crosses the cell's faces across that axis (of its
+/// axis-aligned box, for a triclinic cell).
 fn periodic_kernels_note(
     mode: Mode,
     cell: Option<&mdlod_format::meta::SimulationBox>,
+    drawn: Option<mdlod_render::Bounds>,
 ) -> Option<String> {
     if !matches!(
         mode,
@@ -642,13 +645,29 @@ fn periodic_kernels_note(
     ) {
         return None;
     }
-    let cell = cell?;
+    let (cell, drawn) = (cell?, drawn?);
     let periodic = cell.periodic?;
+    // The cell's corners, in f32 as the particles are.
+    let corner = |i: usize| {
+        [0, 1, 2].map(|k| {
+            let pick = |bit: usize, e: [f64; 3]| if i >> bit & 1 == 1 { e[k] } else { 0.0 };
+            (cell.origin[k] + pick(0, cell.a) + pick(1, cell.b) + pick(2, cell.c)) as f32
+        })
+    };
+    let crosses = |k: usize| {
+        let (lo, hi) = (0..8)
+            .map(corner)
+            .fold((f32::MAX, f32::MIN), |(lo, hi), c| {
+                (lo.min(c[k]), hi.max(c[k]))
+            });
+        drawn.min[k] < lo || drawn.max[k] > hi
+    };
     let axes: Vec<&str> = ["x", "y", "z"]
         .into_iter()
         .zip(periodic)
         .zip([cell.a, cell.b, cell.c])
-        .filter_map(|((name, p), edge)| (p && edge != [0.0; 3]).then_some(name))
+        .enumerate()
+        .filter_map(|(k, ((name, p), edge))| (p && edge != [0.0; 3] && crosses(k)).then_some(name))
         .collect();
     let axes = match axes[..] {
         [] => return None,
@@ -2702,7 +2721,10 @@ pub fn run(mut args: Args) -> Result<()> {
     {
         println!("{note}");
     }
-    if let Some(note) = periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref()) {
+    let drawn = mdlod_render::drawn_bounds(&file, &opts);
+    if let Some(note) =
+        periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref(), drawn)
+    {
         println!("{note}");
     }
     if view_fits(&opts.view) {
@@ -4293,7 +4315,10 @@ fn render_turntable(
         let shown = shown_json(args, &opts, &file);
         // (Once: every view is of the one file.)
         let periodic_note = (i == 0)
-            .then(|| periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref()))
+            .then(|| {
+                let drawn = mdlod_render::drawn_bounds(&file, &opts);
+                periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref(), drawn)
+            })
             .flatten();
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)?;
         drawn = drawn_names(&r, &species, drawn);
@@ -4871,7 +4896,10 @@ fn render_frames(
         let shown = shown_json(args, &opts, &file);
         // (Once, of the first frame's cell.)
         let periodic_note = (i == 0)
-            .then(|| periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref()))
+            .then(|| {
+                let drawn = mdlod_render::drawn_bounds(&file, &opts);
+                periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref(), drawn)
+            })
             .flatten();
         let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)
             .map_err(|e| damaged(e.into()))?;
@@ -5221,24 +5249,34 @@ mod tests {
             periodic,
         };
         let cube = |p| cell(p, [0.0, 0.0, 10.0]);
-        let note = periodic_kernels_note(Mode::Splat, Some(&cube(Some([true, true, false]))));
-        let note = note.unwrap();
-        assert!(note.contains("periodic along x and y, but kernels are not wrapped"));
-        assert!(note.contains("the splats' light reads low"), "{note}");
-        let note = periodic_kernels_note(Mode::Density, Some(&cube(Some([true; 3])))).unwrap();
-        assert!(note.contains("along x, y and z") && note.contains("the density reads low"));
-        // A two-dimensional run's cell: no edge along z, periodic in the plane only.
-        let flat = cell(Some([true; 3]), [0.0; 3]);
-        let note = periodic_kernels_note(Mode::Splat, Some(&flat)).unwrap();
-        assert!(note.contains("along x and y,"), "{note}");
-        let spheres = periodic_kernels_note(Mode::Spheres, Some(&cube(Some([true; 3]))));
-        assert_eq!(spheres, None);
+        // Kernels reaching past every face, and kernels inside the cell but past x = 0.
+        let everywhere = Some(mdlod_render::Bounds::new([-1.0; 3], [11.0; 3]));
+        let at_x = Some(mdlod_render::Bounds::new([-0.5, 4.0, 4.0], [6.0; 3]));
+        let note = |mode, cell: &mdlod_format::meta::SimulationBox, drawn| {
+            periodic_kernels_note(mode, Some(cell), drawn)
+        };
+        let said = note(Mode::Splat, &cube(Some([true, true, false])), everywhere).unwrap();
+        assert!(said.contains("periodic along x and y, but kernels are not wrapped"));
+        assert!(said.contains("the splats' light reads low"), "{said}");
+        let said = note(Mode::Density, &cube(Some([true; 3])), everywhere).unwrap();
+        assert!(said.contains("along x, y and z") && said.contains("the density reads low"));
+        // Only the axes whose faces the kernels cross.
+        let said = note(Mode::Splat, &cube(Some([true; 3])), at_x).unwrap();
+        assert!(said.contains("periodic along x, but"), "{said}");
         assert_eq!(
-            periodic_kernels_note(Mode::Splat, Some(&cube(Some([false; 3])))),
+            note(Mode::Splat, &cube(Some([false, true, true])), at_x),
             None
         );
-        assert_eq!(periodic_kernels_note(Mode::Iso, Some(&cube(None))), None);
-        assert_eq!(periodic_kernels_note(Mode::Iso, None), None);
+        // A two-dimensional run's cell: no edge along z, periodic in the plane only.
+        let said = note(Mode::Splat, &cell(Some([true; 3]), [0.0; 3]), everywhere).unwrap();
+        assert!(said.contains("along x and y,"), "{said}");
+        assert_eq!(
+            note(Mode::Spheres, &cube(Some([true; 3])), everywhere),
+            None
+        );
+        assert_eq!(note(Mode::Splat, &cube(Some([false; 3])), everywhere), None);
+        assert_eq!(note(Mode::Iso, &cube(None), everywhere), None);
+        assert_eq!(periodic_kernels_note(Mode::Iso, None, everywhere), None);
     }
 
     /// Splats lit by a column spanning decades say its small values' light is off.

@@ -210,9 +210,10 @@ fn option_name(id: &str) -> String {
     }
 }
 
-/// The field of view above which S-NDFs binned in the camera's frame are noted as
-/// approximate towards the image's edges.
-const CAMERA_FRAME_WIDE_FOV_DEG: f32 = 45.0;
+/// The angle between the view axis and the image's corners above which S-NDFs binned in
+/// the camera's frame are noted as approximate towards the image's edges (a 16:9 image
+/// at a vertical field of view of 45°; the default 30° reaches 29°).
+const CAMERA_FRAME_WIDE_CORNER_DEG: f32 = 40.0;
 
 /// A note for S-NDFs of a wide perspective view that an earlier mdlod sampled, binning
 /// the normals in the camera's frame (no `normal_frame` in the header): a normal facing
@@ -225,15 +226,20 @@ pub fn camera_frame_note(header: &mdlod_format::sndf::SndfHeader) -> Option<Stri
         return None;
     }
     let view: mdlod_render::view::ViewFile = serde_json::from_value(header.view.clone()).ok()?;
+    // The widest angle any texel looks off the axis: at the corners, so a wide image at a
+    // modest vertical field of view counts as much as a square one at a wide one.
+    let ty = (view.fov_y_deg.to_radians() / 2.0).tan();
+    let tx = ty * header.width as f32 / header.height.max(1) as f32;
+    let corner = tx.hypot(ty).atan().to_degrees();
     (view.projection == mdlod_render::camera::Projection::Perspective
-        && view.fov_y_deg > CAMERA_FRAME_WIDE_FOV_DEG)
+        && corner > CAMERA_FRAME_WIDE_CORNER_DEG)
         .then(|| {
             format!(
                 "  note: an earlier mdlod sampled these S-NDFs binning the normals in the \
-                 camera's frame: in their {:.0}° perspective view, normals facing away from \
-                 the view axis are lit as their mirror images (a few per cent too bright \
-                 towards the edges at 60°, up to a third at 90°); `mdlod sample` bins them \
-                 along each texel's ray",
+                 camera's frame: in their {:.0}° perspective view ({corner:.0}° off the axis \
+                 at the corners), normals facing away from the view axis are lit as their \
+                 mirror images (a few per cent too bright towards the edges at 60°, up to a \
+                 third at 90°); `mdlod sample` bins them along each texel's ray",
                 view.fov_y_deg
             )
         })
