@@ -677,6 +677,27 @@ fn viewer_table(renderer: &Renderer, adapter: &str, sizes: &[u64]) {
     write_section(&begin, &end, &t, "## Viewer: frame times");
 }
 
+/// The cut S-NDF sampling draws (whole-pixel occlusion, as the sndf mode takes), at a
+/// screen error of 1 px and at most `budget` points.
+fn sndf_cut(
+    file: &MdlodFile,
+    camera: &mdlod_render::Camera,
+    viewport: [u32; 2],
+    budget: u64,
+) -> mdlod_render::DrawList {
+    mdlod_render::traverse(
+        camera,
+        file,
+        &mdlod_render::TraversalSettings {
+            viewport,
+            error_px: 1.0,
+            budget_points: budget,
+            occlusion: mdlod_render::OcclusionMode::WholePixels,
+            ..Default::default()
+        },
+    )
+}
+
 /// S-NDFs of wide perspective views against the ray caster: at 30°, 60° and 90° fields of
 /// view, the crater seen closely enough that it fills the image, re-lit S-NDFs (16
 /// iterations, 8×8 bins, shaded on the host) against 16-spp ray casting under the same
@@ -698,23 +719,6 @@ fn sndf_wide_table(renderer: &Renderer, adapter: &str, n: u64) {
         h,
     )
     .unwrap();
-    let band = |img: &mdlod_render::RgbaImage, outer: bool| {
-        let (mut sum, mut count) = (0u64, 0u64);
-        for y in 0..h {
-            for x in 0..w {
-                let edge = x < w / 6 || x >= w - w / 6 || y < h / 6 || y >= h - h / 6;
-                if edge == outer {
-                    let i = ((y * w + x) * 4) as usize;
-                    sum += img.data[i..i + 3]
-                        .iter()
-                        .map(|&c| u64::from(c))
-                        .sum::<u64>();
-                    count += 3;
-                }
-            }
-        }
-        sum as f64 / count.max(1) as f64
-    };
     let lights = [
         ("headlight", mdlod_render::glam::Vec3::Z),
         (
@@ -730,17 +734,7 @@ fn sndf_wide_table(renderer: &Renderer, adapter: &str, n: u64) {
         camera.fov_y_deg = fov;
         // Fitted again: the clip planes follow the new distance.
         let camera = mdlod_render::camera_for(&file, &ViewSpec::Camera(camera), w, h).unwrap();
-        let draw = mdlod_render::traverse(
-            &camera,
-            &file,
-            &mdlod_render::TraversalSettings {
-                viewport: [w, h],
-                error_px: 1.0,
-                budget_points: 4_000_000,
-                occlusion: mdlod_render::OcclusionMode::WholePixels,
-                ..Default::default()
-            },
-        );
+        let draw = sndf_cut(&file, &camera, [w, h], 4_000_000);
         let sndf = renderer
             .sample_sndf(
                 &file,
@@ -772,7 +766,11 @@ fn sndf_wide_table(renderer: &Renderer, adapter: &str, n: u64) {
                 ..Default::default()
             };
             let (reference, _) = render_image(renderer, &file, &opts).unwrap();
-            let ratio = |outer| (band(&relit, outer) / band(&reference, outer) - 1.0) * 100.0;
+            let (levels, reference_levels) = (
+                relit.band_and_middle_levels(6),
+                reference.band_and_middle_levels(6),
+            );
+            let ratio = |k: usize| (levels[k] / reference_levels[k] - 1.0) * 100.0;
             let mad = relit
                 .data
                 .iter()
@@ -782,9 +780,9 @@ fn sndf_wide_table(renderer: &Renderer, adapter: &str, n: u64) {
                 / relit.data.len() as f64;
             rows += &format!(
                 "| {fov:.0}° | {name} | {:.1} | {:+.1} % | {:+.1} % | {mad:.2} |\n",
-                band(&reference, true),
-                ratio(true),
-                ratio(false)
+                reference_levels[0],
+                ratio(0),
+                ratio(1)
             );
         }
     }
@@ -837,17 +835,7 @@ fn sndf_table(renderer: &Renderer, adapter: &str, n: u64) {
     let resample = time(&render_image(renderer, &file, &opts(256)).unwrap().1);
     // S-NDF sampling with the same cut (whole-pixel occlusion, as the sndf mode uses).
     let camera = mdlod_render::camera_for(&file, &view, w, h).unwrap();
-    let draw = mdlod_render::traverse(
-        &camera,
-        &file,
-        &mdlod_render::TraversalSettings {
-            viewport: [w, h],
-            error_px: 1.0,
-            budget_points: 4_000_000,
-            occlusion: mdlod_render::OcclusionMode::WholePixels,
-            ..Default::default()
-        },
-    );
+    let draw = sndf_cut(&file, &camera, [w, h], 4_000_000);
     let settings = SndfSettings {
         width: w,
         height: h,
@@ -1079,17 +1067,7 @@ fn smip_table(renderer: &Renderer, adapter: &str, n: u64) {
     let (resident_batch, host_batch) = {
         use mdlod_render::sndf::SndfSettings;
         let persp = mdlod_render::camera_for(&file, &ViewSpec::default(), w, h).unwrap();
-        let draw = mdlod_render::traverse(
-            &persp,
-            &file,
-            &mdlod_render::TraversalSettings {
-                viewport: [w, h],
-                error_px: 1.0,
-                budget_points: budget,
-                occlusion: mdlod_render::OcclusionMode::WholePixels,
-                ..Default::default()
-            },
-        );
+        let draw = sndf_cut(&file, &persp, [w, h], budget);
         let settings = SndfSettings {
             width: w,
             height: h,

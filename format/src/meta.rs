@@ -80,6 +80,15 @@ pub struct Species {
     pub radius_range: Option<[f32; 2]>,
 }
 
+impl Species {
+    /// The radius of the species' smallest particle (its drawn radius where all are
+    /// one size).
+    pub fn smallest_radius(&self) -> f32 {
+        self.radius_range
+            .map_or(self.radius, |[lo, _]| lo.min(self.radius))
+    }
+}
+
 /// The range over which the per-particle radii are quantized, and how.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RadiusInfo {

@@ -882,7 +882,7 @@ pub(crate) fn position_notes(
     // (A species of particles of their own sizes: its smallest particle's, not its mean.)
     let smallest_radius = species
         .iter()
-        .map(|s| s.radius_range.map_or(s.radius, |[lo, _]| lo.min(s.radius)))
+        .map(mdlod_format::meta::Species::smallest_radius)
         .fold(f32::INFINITY, f32::min);
     // The spacing of single-precision numbers near the largest coordinate.
     // (The power of two at or below it, times the machine epsilon.)

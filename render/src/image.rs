@@ -58,6 +58,24 @@ impl RgbaImage {
         self.data[i..i + 4].copy_from_slice(&p);
     }
 
+    /// The mean sRGB level (0-255, over r, g and b) of the image's outer band, `1/share`
+    /// of each side wide, and of the rest inside it: how a picture's edges and middle
+    /// compare with a reference's. A part with no pixel gives 0.
+    pub fn band_and_middle_levels(&self, share: u32) -> [f64; 2] {
+        let (w, h, k) = (self.width, self.height, share.max(1));
+        let mut sums = [(0u64, 0u64); 2];
+        for y in 0..h {
+            for x in 0..w {
+                let edge = x < w / k || x >= w - w / k || y < h / k || y >= h - h / k;
+                let p = self.pixel(x, y);
+                let s = &mut sums[usize::from(!edge)];
+                s.0 += p[..3].iter().map(|&c| u64::from(c)).sum::<u64>();
+                s.1 += 3;
+            }
+        }
+        sums.map(|(sum, n)| sum as f64 / n.max(1) as f64)
+    }
+
     /// Lays `colour` (sRGB) with coverage `a` in [0, 1] over the pixel at column `x`, row
     /// `y`, whose alpha is straight (not premultiplied), as the PNG stores it; pixels
     /// outside the image are left alone.
@@ -190,6 +208,32 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
 
 #[cfg(test)]
 mod tests {
+    /// The outer band a sixth of each side wide of a 12×6 image, and its middle.
+    #[test]
+    fn band_and_middle_levels_split_the_image_by_its_border() {
+        let mut img = super::RgbaImage::new(12, 6);
+        for y in 0..6 {
+            for x in 0..12 {
+                let middle = (2..10).contains(&x) && (1..5).contains(&y);
+                img.set_pixel(
+                    x,
+                    y,
+                    if middle {
+                        [90, 90, 90, 255]
+                    } else {
+                        [30, 60, 0, 255]
+                    },
+                );
+            }
+        }
+        assert_eq!(img.band_and_middle_levels(6), [30.0, 90.0]);
+        // One part only: the other gives 0.
+        assert_eq!(
+            super::RgbaImage::new(1, 1).band_and_middle_levels(6)[0],
+            0.0
+        );
+    }
+
     use super::*;
 
     #[test]

@@ -197,17 +197,23 @@ impl TexelView {
         match camera.projection {
             crate::camera::Projection::Orthographic => TexelView::Axis,
             crate::camera::Projection::Perspective => {
-                let y = (camera.fov_y_deg.to_radians() * 0.5).tan();
-                let x = y * width as f32 / height.max(1) as f32;
-                if x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 {
-                    TexelView::Perspective {
-                        tan_half: [x, y],
-                        ray_frame: true,
-                    }
-                } else {
-                    TexelView::Axis
-                }
+                TexelView::perspective(camera.fov_y_deg, width, height, true)
             }
+        }
+    }
+
+    /// A perspective view of vertical field of view `fov_y_deg` at `width × height`
+    /// (the axis where its tangents are not finite and positive).
+    fn perspective(fov_y_deg: f32, width: u32, height: u32, ray_frame: bool) -> TexelView {
+        let y = (fov_y_deg.to_radians() * 0.5).tan();
+        let x = y * width as f32 / height.max(1) as f32;
+        if x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 {
+            TexelView::Perspective {
+                tan_half: [x, y],
+                ray_frame,
+            }
+        } else {
+            TexelView::Axis
         }
     }
 
@@ -220,24 +226,11 @@ impl TexelView {
         height: u32,
         ray_frame: bool,
     ) -> TexelView {
-        let texels = match serde_json::from_value::<crate::view::ViewFile>(view.clone()) {
-            Ok(v) if v.projection == crate::camera::Projection::Perspective => TexelView::of(
-                &crate::camera::Camera {
-                    fov_y_deg: v.fov_y_deg,
-                    projection: v.projection,
-                    ..Default::default()
-                },
-                width,
-                height,
-            ),
+        match serde_json::from_value::<crate::view::ViewFile>(view.clone()) {
+            Ok(v) if v.projection == crate::camera::Projection::Perspective => {
+                TexelView::perspective(v.fov_y_deg, width, height, ray_frame)
+            }
             _ => TexelView::Axis,
-        };
-        match texels {
-            TexelView::Perspective { tan_half, .. } => TexelView::Perspective {
-                tan_half,
-                ray_frame,
-            },
-            axis => axis,
         }
     }
 

@@ -2349,25 +2349,8 @@ fn sndfs_of_a_ninety_degree_view_keep_the_ray_casters_brightness_out_to_the_edge
     let relit = shaded_on_both(renderer(), &sndf, &lights, o.background);
     let (reference, _) = render_image(renderer(), &f, &o).unwrap();
     // Mean brightness of the outer band (a sixth of each side) and of the middle.
-    let band = |img: &RgbaImage, outer: bool| {
-        let (mut sum, mut n) = (0u64, 0u64);
-        for y in 0..h {
-            for x in 0..w {
-                let edge = x < w / 6 || x >= w - w / 6 || y < h / 6 || y >= h - h / 6;
-                if edge == outer {
-                    let i = ((y * w + x) * 4) as usize;
-                    sum += img.data[i..i + 3]
-                        .iter()
-                        .map(|&c| u64::from(c))
-                        .sum::<u64>();
-                    n += 3;
-                }
-            }
-        }
-        sum as f64 / n as f64
-    };
-    let (edge, edge_ref) = (band(&relit, true), band(&reference, true));
-    let (middle, middle_ref) = (band(&relit, false), band(&reference, false));
+    let [edge, middle] = relit.band_and_middle_levels(6);
+    let [edge_ref, middle_ref] = reference.band_and_middle_levels(6);
     assert!(
         edge_ref > 40.0,
         "the block must fill the edges: {edge_ref:.1}"

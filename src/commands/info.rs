@@ -520,7 +520,7 @@ pub fn run(args: Args) -> Result<()> {
     let smallest_radius = m
         .species
         .iter()
-        .map(|s| s.radius_range.map_or(s.radius, |[lo, _]| lo.min(s.radius)))
+        .map(mdlod_format::meta::Species::smallest_radius)
         .fold(f32::INFINITY, f32::min);
     let spacing = extent.map_or(0.0, |(lo, hi)| {
         let r = if smallest_radius.is_finite() {
