@@ -2017,7 +2017,7 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
         ),
         (
             vec!["--mode", "iso", "--log-scale"],
-            "--log-scale has no effect without --colour-map (spheres, sndf, splat) or \
+            "--log-scale has no effect without --colour-map (spheres, sndf, splat, iso) or \
              --intensity attribute (splat), or with --mode density",
         ),
         (
@@ -7691,6 +7691,79 @@ fn hidden_species_leave_the_splats_and_the_volume() {
             "{mode}"
         );
     }
+}
+
+/// `--mode iso --colour-map`: the surface takes the map's colour of the attribute's
+/// kernel-weighted mean, the legend is the map's colour bar, and `--log-scale` is the
+/// attribute's; the volume (`--mode density`) keeps its own colours.
+#[test]
+fn an_iso_surface_is_coloured_by_the_attribute_through_a_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n);
+    let file = d("a.mdlod");
+    let input = lammps_sample_path("cu_melt.custom.dump");
+    ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&file),
+        "--last",
+        "--attribute",
+        "c_pe",
+    ]);
+    let (png, svg, plain) = (d("m.png"), d("m.svg"), d("p.png"));
+    let base = [
+        "render",
+        s(&file),
+        "--mode",
+        "iso",
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ];
+    let out = ok(&[
+        &base[..],
+        &["-o", s(&png), "--colour-map", "magma", "--legend", s(&svg)],
+    ]
+    .concat());
+    assert!(out.contains("colour map magma: c_pe from"), "{out}");
+    assert!(
+        out.contains("coloured by the mean of the attribute around it"),
+        "{out}"
+    );
+    let key = std::fs::read_to_string(&svg).unwrap();
+    assert!(key.contains(">c_pe</text>"), "{key}");
+    ok(&[&base[..], &["-o", s(&plain)]].concat());
+    let (mapped, species) = (read_png(&png).2, read_png(&plain).2);
+    // Copper's one colour against the map's many: more distinct hues on the surface.
+    let hues = |px: &[u8]| {
+        px.chunks_exact(4)
+            .filter(|p| p[3] == 255 && p[..3] != [255, 255, 255])
+            .map(|p| {
+                let m = f32::from(p[0].max(p[1]).max(p[2]).max(1));
+                [p[0], p[1], p[2]].map(|c| (f32::from(c) / m * 8.0).round() as u8)
+            })
+            .collect::<std::collections::BTreeSet<_>>()
+            .len()
+    };
+    assert!(
+        hues(&mapped) > 3 * hues(&species),
+        "{} against {}",
+        hues(&mapped),
+        hues(&species)
+    );
+    // The attribute's log scale, not the volume fraction's (c_pe, all below 0, has no
+    // log scale to show).
+    let log = ok(&[
+        &base[..],
+        &["-o", s(&png), "--colour-map", "magma", "--log-scale"],
+    ]
+    .concat());
+    assert!(
+        log.contains("--log-scale left unused: no value of the range is above 0"),
+        "{log}"
+    );
 }
 
 /// `--mode splat --colour-map`: the image's light (projected flux or attribute) through

@@ -66,6 +66,12 @@ pub struct DensitySettings {
     pub opacity: f32,
     /// Keep samples with `n · p ≤ d` (`[n.x, n.y, n.z, d]`, world units).
     pub clip: Option<[f32; 4]>,
+    /// The iso-surface coloured by the attribute through this map instead of by
+    /// species: the points are packed as [`PackStyle::FluxValue`] and each hit takes the
+    /// map's colour of their kernel-weighted mean place on the scale ([`surface_albedo`]).
+    ///
+    /// [`PackStyle::FluxValue`]: crate::passes::sphere_raycast::PackStyle::FluxValue
+    pub colour_map: Option<crate::style::ColourMap>,
 }
 
 impl Default for DensitySettings {
@@ -79,6 +85,7 @@ impl Default for DensitySettings {
             log: false,
             opacity: 0.5,
             clip: None,
+            colour_map: None,
         }
     }
 }
@@ -121,6 +128,13 @@ impl DensitySettings {
         positive(self.opacity, "--absorption")?;
         if let Some(v) = self.iso {
             positive(v, "iso-value")?;
+        }
+        if self.colour_map.is_some() && self.iso.is_none() {
+            return Err(
+                "a colour map colours the iso-surface only (the volume's colours are its \
+                 density's)"
+                    .into(),
+            );
         }
         if let Some(c) = self.clip {
             let n = Vec3::new(c[0], c[1], c[2]);
@@ -199,7 +213,9 @@ pub fn sample_alpha(phi: f32, s: &DensitySettings, step_over_ref: f32) -> f32 {
 pub struct DensityPoint {
     pub position: Vec3,
     pub radius: f32,
-    /// Linear RGB: a particle's species colour, a representative's mixture.
+    /// Linear RGB: a particle's species colour, a representative's mixture; coloured
+    /// by the attribute ([`DensitySettings::colour_map`]), its place on the attribute's
+    /// scale in every channel (a representative's, of its particles' mean).
     pub albedo: Vec3,
     /// A representative of several particles (its support spreads their volume).
     pub cluster: bool,
@@ -385,6 +401,20 @@ pub fn colour_at(
     (weight > 0.0).then(|| sum / weight)
 }
 
+/// The albedo of an iso-surface hit from the kernel-weighted mean of the points'
+/// albedos there (`None` where no support reaches it): that mean itself, or, coloured by
+/// the attribute, the colour map's colour of the mean place on the scale (its first
+/// channel). `fallback` stands in where no support reaches: the first species' colour,
+/// or the map's lowest.
+pub fn surface_albedo(mean: Option<Vec3>, s: &DensitySettings, fallback: Vec3) -> Vec3 {
+    match (s.colour_map, mean) {
+        (Some(map), Some(m)) => Vec3::from(map.colour(m.x)),
+        (Some(map), None) => Vec3::from(map.colour(0.0)),
+        (None, Some(m)) => m,
+        (None, None) => fallback,
+    }
+}
+
 /// Whether `p` is kept by the clip plane.
 pub fn kept(clip: Option<[f32; 4]>, p: Vec3) -> bool {
     clip.is_none_or(|c| Vec3::new(c[0], c[1], c[2]).dot(p) <= c[3])
@@ -438,15 +468,19 @@ pub fn reference(
                             if p0 < iso && phi >= iso {
                                 let t = (iso - p0) / (phi - p0);
                                 hit[i] = lambda - slicing.step + t * slicing.step;
-                                let albedo = colour_at(points, o + v * hit[i], s, slicing.r_ref)
-                                    .unwrap_or(albedo);
+                                let albedo = surface_albedo(
+                                    colour_at(points, o + v * hit[i], s, slicing.r_ref),
+                                    s,
+                                    albedo,
+                                );
                                 c = iso_shade(albedo, g0.lerp(g, t), v);
                                 a = 1.0;
                                 break;
                             }
                         } else if phi >= iso {
                             hit[i] = lambda;
-                            let albedo = colour_at(points, p, s, slicing.r_ref).unwrap_or(albedo);
+                            let albedo =
+                                surface_albedo(colour_at(points, p, s, slicing.r_ref), s, albedo);
                             c = iso_shade(albedo, g, v);
                             a = 1.0;
                             break;
@@ -463,20 +497,26 @@ pub fn reference(
 
 /// The points of `draw` in order, as the density pass packs them: a particle at its own
 /// radius where the file keeps one, else its species', a representative at `sqrt(area_sum)` (it carries its particles' mass).
+/// With `values` (the attribute's scale, coloured by the attribute), each point's albedo
+/// is its place on that scale, as [`PackStyle::FluxValue`] packs it.
+///
+/// [`PackStyle::FluxValue`]: crate::passes::sphere_raycast::PackStyle::FluxValue
 pub fn density_points(
     file: &mdlod_format::MdlodFile,
     draw: &crate::traversal::DrawList,
+    values: Option<&crate::style::AttributeScale>,
 ) -> Vec<DensityPoint> {
     let positions = crate::traversal::point_positions(file, draw);
     let last = file.level_count() - 1;
     let species = file.species();
     let table = &file.metadata().species;
+    let attribute = file.attribute().unwrap_or_default();
     let mut out = Vec::with_capacity(positions.len());
     let mut p = positions.iter();
     for r in &draw.ranges {
         let level = usize::from(r.level);
         for i in r.first..r.first + r.count {
-            let (radius, albedo) = if level == last {
+            let (radius, mut albedo) = if level == last {
                 let s = species.get(i as usize).copied().unwrap_or(0);
                 table.get(usize::from(s)).map_or((0.0, Vec3::ZERO), |sp| {
                     (file.particle_radius(i as usize), Vec3::from(sp.colour))
@@ -489,6 +529,13 @@ pub fn density_points(
                     Vec3::new(c[0].into(), c[1].into(), c[2].into()) / 255.0,
                 )
             };
+            if let Some(scale) = values {
+                albedo = Vec3::splat(if level == last {
+                    scale.of_quantized(attribute.get(i as usize).copied().unwrap_or(0))
+                } else {
+                    scale.of_value(file.level_nodes(level)[i as usize].attribute)
+                });
+            }
             if let Some(&position) = p.next() {
                 out.push(DensityPoint {
                     position,
@@ -507,6 +554,50 @@ mod tests {
     use super::*;
     use crate::camera::{Bounds, Camera, Projection};
     use glam::DVec3;
+
+    #[test]
+    fn an_iso_surface_by_attribute_takes_the_map_colour_of_the_mean_value() {
+        // Two equal particles, one at the scale's bottom, one at its top: midway between
+        // them the mean place is one half, and the colour the map's there (not the mean
+        // of its two ends' colours); nearer the first, below the half.
+        let point = |x: f32, t: f32| DensityPoint {
+            position: Vec3::new(x, 0.0, 0.0),
+            radius: 1.0,
+            albedo: Vec3::splat(t),
+            cluster: false,
+        };
+        let points = [point(-1.0, 0.0), point(1.0, 1.0)];
+        let map = crate::style::ColourMap::Viridis;
+        let s = DensitySettings {
+            iso: Some(0.3),
+            colour_map: Some(map),
+            ..Default::default()
+        };
+        let fallback = Vec3::ONE;
+        let mid = surface_albedo(colour_at(&points, Vec3::ZERO, &s, 1.0), &s, fallback);
+        assert!((mid - Vec3::from(map.colour(0.5))).abs().max_element() < 1e-6);
+        let ends = (Vec3::from(map.colour(0.0)) + Vec3::from(map.colour(1.0))) / 2.0;
+        assert!((mid - ends).abs().max_element() > 0.05, "{mid} {ends}");
+        let near = colour_at(&points, Vec3::new(-0.5, 0.0, 0.0), &s, 1.0).unwrap();
+        assert!(near.x > 0.0 && near.x < 0.5, "{near}");
+        // Out of every support: the map's bottom; by species, the fallback.
+        let far = Vec3::new(10.0, 0.0, 0.0);
+        let none = colour_at(&points, far, &s, 1.0);
+        assert_eq!(none, None);
+        assert_eq!(
+            surface_albedo(none, &s, fallback),
+            Vec3::from(map.colour(0.0))
+        );
+        let by_species = DensitySettings {
+            colour_map: None,
+            ..s
+        };
+        assert_eq!(surface_albedo(none, &by_species, fallback), fallback);
+        // The volume's colours are its density's: a map is refused there.
+        let volume = DensitySettings { iso: None, ..s };
+        assert!(volume.validate().unwrap_err().contains("iso-surface only"));
+        assert!(s.validate().is_ok());
+    }
 
     #[test]
     fn the_transfer_function_places_densities_linearly_or_by_decade() {

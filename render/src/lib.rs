@@ -2091,6 +2091,16 @@ pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
         RenderMode::Splat { .. } | RenderMode::SplatOver { .. } => {
             (PackStyle::FluxColour, opts.style.clone())
         }
+        // Coloured by the attribute: its place on the scale the colour map spans.
+        RenderMode::Density(d) if d.colour_map.is_some() => (
+            PackStyle::FluxValue,
+            PointStyle {
+                attribute: opts.style.attribute.clone(),
+                attribute_range: opts.style.attribute_range,
+                log_scale: opts.style.log_scale,
+                ..Default::default()
+            },
+        ),
         RenderMode::Density(_) => (PackStyle::FluxColour, PointStyle::default()),
     }
 }

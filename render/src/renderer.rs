@@ -86,6 +86,12 @@ pub trait CutSource {
     fn light_unit(&self) -> f32 {
         1.0
     }
+
+    /// The attribute's scale the bound points' grey values come from, where they are
+    /// the attribute's ([`PackStyle::FluxAttribute`], [`PackStyle::FluxValue`]).
+    fn value_scale(&self) -> Option<crate::style::AttributeScale> {
+        None
+    }
 }
 
 /// The cut packed from the mapped file and uploaded whole.
@@ -104,6 +110,12 @@ impl CutSource for PackedCut<'_> {
     fn light_unit(&self) -> f32 {
         crate::passes::sphere_raycast::AttrPacker::new(self.file, self.style, self.look)
             .map_or(1.0, |p| p.light_unit())
+    }
+
+    fn value_scale(&self) -> Option<crate::style::AttributeScale> {
+        crate::passes::sphere_raycast::AttrPacker::new(self.file, self.style, self.look)
+            .ok()
+            .and_then(|p| p.value_scale().copied())
     }
 
     fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError> {
@@ -267,6 +279,15 @@ pub fn splat_style(blend: SplatBlend) -> PackStyle {
             by_attribute: true, ..
         } => PackStyle::FluxAttribute,
         _ => PackStyle::FluxColour,
+    }
+}
+
+/// How the density volume's points are packed: by species colour, or by the attribute's
+/// place on its scale where the iso-surface is coloured by it.
+pub fn density_style(settings: &crate::density::DensitySettings) -> PackStyle {
+    match settings.colour_map {
+        Some(_) => PackStyle::FluxValue,
+        None => PackStyle::FluxColour,
     }
 }
 
@@ -2350,14 +2371,14 @@ impl Renderer {
         let source = PackedCut {
             renderer: self,
             file,
-            style: PackStyle::FluxColour,
+            style: density_style(settings),
             look: &Default::default(),
         };
         self.render_density_from(&source, file, camera, draw, width, height, settings)
     }
 
     /// [`Self::render_density`] of the points `source` binds (packed as
-    /// [`PackStyle::FluxColour`]); `file` gives the host its positions for the slicing.
+    /// [`density_style`] says); `file` gives the host its positions for the slicing.
     #[allow(clippy::too_many_arguments)]
     pub fn render_density_from(
         &self,
@@ -2369,7 +2390,7 @@ impl Renderer {
         height: u32,
         settings: &crate::density::DensitySettings,
     ) -> Result<DensityFrame, RenderError> {
-        check_source(source, PackStyle::FluxColour, "the density volume")?;
+        check_source(source, density_style(settings), "the density volume")?;
         let t0 = std::time::Instant::now();
         use crate::density::{DensityPoint, Slicing};
         use crate::passes::density::{
@@ -2403,7 +2424,15 @@ impl Renderer {
         // after which every range ends before the stack (a running maximum of the ends),
         // to the last range that starts before the stack's end (each widened by the
         // largest support).
-        let points = crate::density::density_points(file, draw);
+        let values = match settings.colour_map {
+            Some(_) => Some(source.value_scale().ok_or_else(|| {
+                RenderError::InvalidOptions(
+                    "the iso-surface coloured by the attribute needs the attribute's scale".into(),
+                )
+            })?),
+            None => None,
+        };
+        let points = crate::density::density_points(file, draw, values.as_ref());
         let mut spans: Vec<(f32, usize, std::ops::Range<usize>, f32)> =
             Vec::with_capacity(draw.ranges.len());
         let mut at = 0usize;
@@ -2474,11 +2503,12 @@ impl Renderer {
         let stacks = slicing.slices.div_ceil(per_stack);
         // The iso-surface is lit in white here and coloured by its own pass afterwards
         // (the first species' colour where no support reaches a hit).
-        let fallback_albedo = file
-            .metadata()
-            .species
-            .first()
-            .map_or([0.8; 3], |s| s.colour);
+        let fallback_albedo = glam::Vec3::from(
+            file.metadata()
+                .species
+                .first()
+                .map_or([0.8; 3], |s| s.colour),
+        );
         let albedo = [1.0f32; 3];
         self.ctx.scoped(|| {
             let device = &self.ctx.device;
@@ -2812,11 +2842,9 @@ impl Renderer {
                 let sums = unpad_rows(&bytes, colour_row, width as usize * 16, height);
                 for (ray, sum) in rays.iter_mut().zip(sums.chunks_exact(16)) {
                     let sum: [f32; 4] = bytemuck::pod_read_unaligned(sum);
-                    let albedo = if sum[3] > 0.0 {
-                        [sum[0] / sum[3], sum[1] / sum[3], sum[2] / sum[3]]
-                    } else {
-                        fallback_albedo
-                    };
+                    let mean =
+                        (sum[3] > 0.0).then(|| glam::Vec3::new(sum[0], sum[1], sum[2]) / sum[3]);
+                    let albedo = crate::density::surface_albedo(mean, settings, fallback_albedo);
                     for k in 0..3 {
                         ray.colour[k] *= albedo[k];
                     }

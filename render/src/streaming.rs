@@ -819,6 +819,10 @@ impl CutSource for StreamingRenderer<'_> {
         self.packer.light_unit()
     }
 
+    fn value_scale(&self) -> Option<crate::style::AttributeScale> {
+        self.packer.value_scale().copied()
+    }
+
     /// Batches within one storage binding each, counting the ranges after their split at
     /// page boundaries (`stream_batch_limits`).
     fn batch_lists(&self, draw: &DrawList) -> Option<Vec<DrawList>> {

@@ -267,7 +267,7 @@ fn kernels_reaching_into_the_view_from_outside_it_add_their_density() {
     };
     let everything = cut_of(&camera_zoom(&f, Projection::Perspective, w, h, 0.5), 0.0);
     assert_eq!(everything.particles, f.particle_count());
-    let every_point = mdlod_render::density::density_points(&f, &everything);
+    let every_point = mdlod_render::density::density_points(&f, &everything, None);
     for projection in [Projection::Perspective, Projection::Orthographic] {
         let cam = camera_zoom(&f, projection, w, h, 6.0);
         let albedo = Vec3::from(f.metadata().species[0].colour);
@@ -486,6 +486,82 @@ fn the_iso_surface_takes_each_species_colour_where_it_lies() {
     assert!(
         worst_hue < 0.01,
         "a pure species' surface is off its colour by {worst_hue}"
+    );
+}
+
+#[test]
+fn an_iso_surface_coloured_by_the_attribute_shows_its_value_where_it_lies() {
+    // A block whose attribute is each atom's x: the GPU's colour pass equals the CPU's
+    // weighted places on the scale, and away from the block's x faces each hit's colour
+    // is the map's at the hit's own x (a linear field's kernel mean where the kernel
+    // sees both sides), to within the slice spacing and the lattice's steps.
+    let mut frame = fcc_frame(4);
+    let xs: Vec<f32> = frame.positions.iter().map(|p| p[0]).collect();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "x".into(),
+        values: xs.clone(),
+    });
+    let (lo, hi) = xs
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &x| {
+            (l.min(x), h.max(x))
+        });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let (w, h) = (48u32, 36u32);
+    let cam = camera_zoom(&f, Projection::Perspective, w, h, 1.1);
+    let map = mdlod_render::ColourMap::Viridis;
+    let s = DensitySettings {
+        iso: Some(0.3),
+        slices: 128,
+        colour_map: Some(map),
+        ..Default::default()
+    };
+    let (gpu, cpu, gh, ch, _) = both(&f, &cam, w, h, &s, None);
+    // The map's places, finely, by direction (the shading scales a colour).
+    let table: Vec<(f32, Vec3)> = (0..=1000)
+        .map(|k| {
+            let t = k as f32 / 1000.0;
+            (t, Vec3::from(map.colour(t)).normalize())
+        })
+        .collect();
+    let place = |c: Vec3| {
+        let c = c.normalize();
+        table
+            .iter()
+            .min_by(|a, b| (a.1 - c).length().total_cmp(&(b.1 - c).length()))
+            .map(|e| e.0)
+            .unwrap()
+    };
+    let reach = s.kernel_scale * f.metadata().species[0].radius;
+    let (mut inner, mut worst, mut worst_place) = (0usize, 0.0f32, 0.0f32);
+    for i in 0..(w * h) as usize {
+        if !(gh[i].is_finite() && ch[i].is_finite()) {
+            continue;
+        }
+        let diff = (0..3)
+            .map(|k| (gpu[i][k] - cpu[i][k]).abs())
+            .fold(0.0, f32::max);
+        worst = worst.max(diff);
+        let (o, v) = mdlod_render::density::pixel_ray(
+            &cam,
+            (i as u32 % w) as f32 + 0.5,
+            (i as u32 / w) as f32 + 0.5,
+            w,
+            h,
+        );
+        let x = (o + v * gh[i]).x;
+        if x < lo + reach || x > hi - reach {
+            continue;
+        }
+        inner += 1;
+        let c = Vec3::new(gpu[i][0], gpu[i][1], gpu[i][2]);
+        worst_place = worst_place.max((place(c) - (x - lo) / (hi - lo)).abs());
+    }
+    assert!(inner > 40, "{inner} surface pixels away from the x faces");
+    assert!(worst < 0.02, "GPU and CPU colours differ by {worst}");
+    assert!(
+        worst_place < 0.08,
+        "a hit's colour is off its x's place on the scale by {worst_place}"
     );
 }
 
@@ -732,7 +808,7 @@ fn coarse_cuts_keep_the_volume_fraction_of_their_particles() {
         })
         .collect();
     let mean = |draw: &mdlod_render::DrawList, at: &[Vec3]| {
-        let points = density_points(&f, draw);
+        let points = density_points(&f, draw, None);
         at.iter()
             .map(|&p| density_at(&points, p, &s, r_ref).0)
             .sum::<f32>()
@@ -814,7 +890,10 @@ fn culling_keeps_every_cluster_whose_kernel_reaches_the_view() {
     let (culled, whole) = (cut(s.kernel_scale), cut(1e6));
     assert!(culled.points < whole.points, "nothing was culled");
     assert!(culled.representatives > 0);
-    let (a, b) = (density_points(&f, &culled), density_points(&f, &whole));
+    let (a, b) = (
+        density_points(&f, &culled, None),
+        density_points(&f, &whole, None),
+    );
     let clip = cam.clip_from_world([w, h], glam::Vec2::ZERO);
     let side = 8.0 * 3.615;
     let mut seen = 0;

@@ -1324,9 +1324,21 @@ pub enum ColourMapArg {
     Grey,
 }
 
+impl ColourMapArg {
+    pub fn map(self) -> mdlod_render::ColourMap {
+        use mdlod_render::ColourMap;
+        match self {
+            ColourMapArg::Viridis => ColourMap::Viridis,
+            ColourMapArg::Magma => ColourMap::Magma,
+            ColourMapArg::CoolWarm => ColourMap::CoolWarm,
+            ColourMapArg::Grey => ColourMap::Grey,
+        }
+    }
+}
+
 impl StyleArgs {
     pub fn style(&self) -> Result<mdlod_render::PointStyle> {
-        use mdlod_render::{ColourMap, SpeciesStyle};
+        use mdlod_render::SpeciesStyle;
         let mut species: Vec<SpeciesStyle> = vec![];
         let mut entry = |name: &str| -> usize {
             match species.iter().position(|s| s.name == name) {
@@ -1434,12 +1446,7 @@ impl StyleArgs {
                 .iter()
                 .filter_map(|h| Some((h.by.clone()?, h.range)))
                 .collect(),
-            colour_map: self.colour_map.map(|m| match m {
-                ColourMapArg::Viridis => ColourMap::Viridis,
-                ColourMapArg::Magma => ColourMap::Magma,
-                ColourMapArg::CoolWarm => ColourMap::CoolWarm,
-                ColourMapArg::Grey => ColourMap::Grey,
-            }),
+            colour_map: self.colour_map.map(ColourMapArg::map),
         })
     }
 }
@@ -1682,12 +1689,12 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("intensity", &[Splat]),
         ("exposure", &[Splat]),
         ("light_range", &[Splat]),
-        ("colour_map", &[Spheres, Sndf, Splat]),
+        ("colour_map", &[Spheres, Sndf, Splat, Iso]),
         ("radius_scale", STYLED),
         ("species_colour", &[Spheres, Sndf, Splat, SplatOver]),
         ("species_radius", STYLED),
         ("attribute_range", &[Spheres, Sndf, Splat]),
-        ("log_scale", &[Spheres, Sndf, Splat, Density]),
+        ("log_scale", &[Spheres, Sndf, Splat, Density, Iso]),
         ("cell", &[Spheres, Splat, SplatOver, Density, Iso]),
         ("light", STYLED),
         ("ambient", STYLED),
@@ -1964,7 +1971,7 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
                 _ => "",
             };
             anyhow::bail!(
-                "{name} has no effect without --colour-map (spheres, sndf, splat) or \
+                "{name} has no effect without --colour-map (spheres, sndf, splat, iso) or \
                  --intensity attribute (splat){density}"
             );
         }
@@ -1977,7 +1984,7 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
             || args.style.hide_by.is_some())
     {
         anyhow::bail!(
-            "--attribute has no effect without --colour-map (spheres, sndf, splat), \
+            "--attribute has no effect without --colour-map (spheres, sndf, splat, iso), \
              --intensity attribute (splat) or --hide-attribute MIN:MAX: it chooses which \
              attribute they read (a range NAME=MIN:MAX reads NAME itself)"
         );
@@ -2394,8 +2401,14 @@ pub fn run(mut args: Args) -> Result<()> {
                     kernel_scale: args.kernel_scale.unwrap_or(2.5),
                     density_max: args.density_max,
                     density_min: density_min(&args),
-                    log: args.style.log_scale,
+                    // (In iso mode --log-scale is the colour map's.)
+                    log: args.style.log_scale && matches!(args.mode, Mode::Density),
                     opacity: args.absorption,
+                    colour_map: args
+                        .style
+                        .colour_map
+                        .filter(|_| matches!(args.mode, Mode::Iso))
+                        .map(ColourMapArg::map),
                     clip: match args.style.clip[..] {
                         [] => None,
                         [plane] => Some(plane),
@@ -2420,9 +2433,12 @@ pub fn run(mut args: Args) -> Result<()> {
         style: {
             let mut style = args.style.style()?;
             // The volume modes clip their samples (DensitySettings::clip), not the points,
-            // and density mode's log scale is its transfer function's, not an attribute's.
+            // and density mode's log scale is its transfer function's, not an attribute's
+            // (the iso-surface's is its colour map's).
             if matches!(args.mode, Mode::Density | Mode::Iso) {
                 style.clip.clear();
+            }
+            if args.mode == Mode::Density {
                 style.log_scale = false;
             }
             style
@@ -2920,10 +2936,13 @@ pub fn run(mut args: Args) -> Result<()> {
         // What the colours mean: the particles' own packing, not an attribute.
         match args.mode {
             Mode::Iso => {
+                let colours = match args.style.colour_map {
+                    Some(_) => "the mean of the attribute around it (the colour map line)",
+                    None => "the particles around it",
+                };
                 println!(
                     "  iso-surface where the particles' spheres fill a volume fraction of {} \
-                     (0.74: close-packed spheres of the largest species), coloured by the \
-                     particles around it",
+                     (0.74: close-packed spheres of the largest species), coloured by {colours}",
                     args.iso_value
                 );
                 // No ray met the surface: a value the packing never reaches, or below
@@ -3600,7 +3619,7 @@ fn build_legend(
             let title = args.legend_title.as_deref().unwrap_or(&a.name);
             (legend::species_key(&entries, Some(title)), what)
         }
-        (Mode::Spheres | Mode::Sndf, Some(map), Some(a)) => {
+        (Mode::Spheres | Mode::Sndf | Mode::Iso, Some(map), Some(a)) => {
             let scale =
                 mdlod_render::style::AttributeScale::with_range(a, opts.style.attribute_range)
                     .with_log(opts.style.log_scale);

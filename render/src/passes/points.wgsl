@@ -34,6 +34,7 @@ struct Range {
 const KIND_PARTICLE: u32 = 0u;
 const KIND_INTENSITY: u32 = 2u;
 const KIND_SIZED: u32 = 3u;
+const KIND_PARTICLE_INTENSITY: u32 = 4u;
 
 @group(0) @binding(0) var<storage, read> frame: Frame;
 @group(0) @binding(1) var<storage, read> positions: array<u32>;
@@ -86,7 +87,8 @@ fn load_point(ii: u32) -> Point {
     let q = quantized(r, j);
     var p: Point;
     p.world = r.base + r.scale * (q - vec3<f32>(frame.params.y));
-    p.cluster = r.kind != KIND_PARTICLE && r.kind != KIND_SIZED;
+    p.cluster = r.kind != KIND_PARTICLE && r.kind != KIND_SIZED
+        && r.kind != KIND_PARTICLE_INTENSITY;
     if r.kind == KIND_PARTICLE {
         let h = r.attr_offset * 2u + j;
         let s = min((attrs[h >> 1u] >> ((h & 1u) * 16u)) & 0xffffu, frame.counts.y - 1u);
@@ -98,7 +100,7 @@ fn load_point(ii: u32) -> Point {
         let s = min(attrs[r.attr_offset + 2u * j], frame.counts.y - 1u);
         p.radius = bitcast<f32>(attrs[r.attr_offset + 2u * j + 1u]);
         p.albedo = species[s].xyz;
-    } else if r.kind == KIND_INTENSITY {
+    } else if r.kind == KIND_INTENSITY || r.kind == KIND_PARTICLE_INTENSITY {
         p.radius = bitcast<f32>(attrs[r.attr_offset + 2u * j]);
         p.albedo = vec3<f32>(bitcast<f32>(attrs[r.attr_offset + 2u * j + 1u]));
     } else {

@@ -146,11 +146,14 @@ pub const KIND_PARTICLE: u32 = 0;
 /// Per point a radius (f32) and a colour as sRGB bytes (`style::pack_colour`): clusters,
 /// and particles coloured by a map.
 pub const KIND_NODE: u32 = 1;
-/// Per point a radius and a grey intensity, both f32 (splats by attribute).
+/// Per point a radius and a grey intensity, both f32 (splats by attribute): clusters.
 pub const KIND_INTENSITY: u32 = 2;
 /// A particle of a file with per-particle radii: its species index (u32) and its drawn
 /// radius (f32).
 pub const KIND_SIZED: u32 = 3;
+/// A particle's [`KIND_INTENSITY`] record: the density weighs it as a particle, not as a
+/// representative.
+pub const KIND_PARTICLE_INTENSITY: u32 = 4;
 
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 208);
 const _: () = assert!(std::mem::size_of::<RangeGpu>() == 48);
@@ -280,7 +283,7 @@ impl PackedDraw {
             let s = ((self.attrs[(hw >> 1) as usize] >> ((hw & 1) * 16)) & 0xffff) as usize;
             let sp = self.species[s.min(self.species.len() - 1)];
             (pos, sp[3], [sp[0], sp[1], sp[2]])
-        } else if r.kind == KIND_INTENSITY {
+        } else if r.kind == KIND_INTENSITY || r.kind == KIND_PARTICLE_INTENSITY {
             let a = (r.attr_offset + 2 * j) as usize;
             let v = f32::from_bits(self.attrs[a + 1]);
             (pos, f32::from_bits(self.attrs[a]), [v; 3])
@@ -338,6 +341,12 @@ pub enum PackStyle {
     /// own units by one factor ([`AttrPacker::light_unit`]), after the accumulation in
     /// 32-bit floats, which values in any units (masses in grams) would overflow.
     FluxAttribute,
+    /// Flux-preserving points whose grey value is the attribute's place on its colour
+    /// scale, in [0, 1] (its range, or the one asked for, and its logarithm where asked):
+    /// the iso-surface coloured by the attribute averages these with the density's
+    /// weights and looks the mean up in the colour map, so that every colour on the
+    /// surface is one on the colour bar. Records as [`PackStyle::FluxAttribute`]'s.
+    FluxValue,
 }
 
 /// Flattens `draw` for the GPU with the points packed as `style` says and their look
@@ -452,7 +461,7 @@ impl AttrPacker {
                 };
                 &colours_only
             }
-            PackStyle::FluxAttribute => &default_look,
+            PackStyle::FluxAttribute | PackStyle::FluxValue => &default_look,
         };
         look.validate().map_err(RenderError::InvalidOptions)?;
         PointStyle {
@@ -486,6 +495,7 @@ impl AttrPacker {
                 Some(attribute("take intensities from")?.lighting_by_quantity())
             }
             PackStyle::FluxAttribute => Some(attribute("take intensities from")?),
+            PackStyle::FluxValue => Some(attribute("colour by")?),
             _ => None,
         };
         let species = look
@@ -532,14 +542,25 @@ impl AttrPacker {
     /// What an intensity of 1 stands for in the attribute's units
     /// ([`AttributeScale::light_unit`]); 1 when the intensities are not the attribute's.
     pub fn light_unit(&self) -> f32 {
+        if self.style == PackStyle::FluxValue {
+            return 1.0;
+        }
         self.intensity
             .as_ref()
             .map_or(1.0, AttributeScale::light_unit)
     }
 
+    /// The attribute's scale the grey values come from ([`PackStyle::FluxAttribute`],
+    /// [`PackStyle::FluxValue`]).
+    pub fn value_scale(&self) -> Option<&AttributeScale> {
+        self.intensity.as_ref()
+    }
+
     /// The range kind of points on `level` (`last`: the file's finest level).
     pub fn kind(&self, level: usize, last: usize) -> u32 {
-        if self.intensity.is_some() {
+        if self.intensity.is_some() && level == last {
+            KIND_PARTICLE_INTENSITY
+        } else if self.intensity.is_some() {
             KIND_INTENSITY
         } else if self.mapped.is_some() || level != last {
             KIND_NODE
