@@ -234,8 +234,23 @@ fn main() -> std::process::ExitCode {
                 })
                 .or_else(|| decimal_comma_tip(&e));
             let _ = e.print();
-            if let Some(tip) = tip {
+            if let Some(tip) = &tip {
                 eprintln!("\n  tip: {tip}");
+            }
+            // With --json, a command line that does not parse gives its object too (a
+            // script reads standard output): `ok` false, with clap's error.
+            let json = std::env::args_os()
+                .skip(1)
+                .take_while(|a| a != "--")
+                .any(|a| a == "--json");
+            if json && e.use_stderr() {
+                let rendered = e.render().to_string();
+                let first = rendered.lines().next().unwrap_or_default();
+                let mut message = first.strip_prefix("error: ").unwrap_or(first).to_string();
+                if let Some(tip) = tip {
+                    message.push_str(&format!(" (tip: {tip})"));
+                }
+                print_json(serde_json::json!({ "ok": false, "error": message }));
             }
             std::process::exit(e.exit_code());
         }

@@ -235,6 +235,20 @@ fn info_json_has_the_promised_fields() {
         lowest = lowest.min(one["attribute"]["min"].as_f64().unwrap());
     }
     assert_eq!(batch["attribute"]["min"].as_f64().unwrap(), lowest);
+    let text = ok(&["info", s(&d)]);
+    assert!(text.contains("] over every frame"), "{text}");
+    // A frame gone: the ranges are over the frames read, and say so.
+    std::fs::remove_file(&frames[0]).unwrap();
+    let text = ok(&["info", s(&d)]);
+    let read = format!(
+        "] over the {} frames read (not the 1 unreadable)",
+        frames.len() - 1
+    );
+    assert!(
+        text.contains("attribute    c_pe in [") && text.contains(&read),
+        "{text}"
+    );
+    assert!(!text.contains("over every frame"), "{text}");
 }
 
 #[test]
@@ -2124,7 +2138,7 @@ fn particles_are_hidden_by_their_values() {
     assert!(some > 0 && some < all, "{some} of {all}: {out}");
     assert!(
         out.contains(&format!(
-            "{} of hidden values (--hide-attribute) left out",
+            "{} with hidden values (--hide-attribute) left out",
             all - some
         )),
         "{out}"
@@ -4052,6 +4066,11 @@ fn a_label_shows_each_frames_values_in_its_corner() {
         (
             &["--label", "{step}"][..],
             "{step} is no value a label fills in",
+        ),
+        // A misspelt placeholder beside {time} is the fault named, not --dt.
+        (
+            &["--label", "t={time} {bogus}", "--dt", "0.002"][..],
+            "{bogus} is no value a label fills in",
         ),
         (
             &["--label", "a label far too long for an image of 160 pixels"][..],
@@ -10743,6 +10762,28 @@ fn json_output_gives_one_object_per_result() {
         v["ok"] == false && v["error"].as_str().unwrap().contains("--iterations"),
         "{v}"
     );
+    // A command line that does not parse: its object too, with clap's status (2).
+    let o = mdlod(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&dir.path().join("o.png")),
+        "--clip",
+        "0,0,0,1",
+        "--json",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(
+        v["ok"] == false && v["error"].as_str().unwrap().contains("--clip"),
+        "{v}"
+    );
+    let o = mdlod(&["verify", s(&file), "--json", "--no-such-option"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(
+        v["ok"] == false && v["error"].as_str().unwrap().contains("--no-such-option"),
+        "{v}"
+    );
     // A damaged file: `ok` false with the error, and the failure's status.
     let bad = dir.path().join("bad.mdlod");
     let mut bytes = std::fs::read(&file).unwrap();
@@ -12001,6 +12042,20 @@ fn batch_index_only_keeps_the_frame_index_for_the_runs_after_it() {
     assert_eq!(json["converted"], 6, "{json}");
     assert_eq!(json["index"]["from_cache"], 1, "{json}");
     assert_eq!(json["index"]["scanned"], 0, "{json}");
+    assert!(
+        json["index"]["file"]
+            .as_str()
+            .is_some_and(|f| f.ends_with(".dataset.index.json")),
+        "{json}"
+    );
+    // No text dump to index: no index file named, as none is written.
+    let gsd_out = dir.path().join("gsd.d");
+    let gsd = mdlod_datasets::gsd_sample_path("hoomd_mixture.gsd");
+    let said = ok(&["batch", s(&gsd), "-o", s(&gsd_out), "--json"]);
+    let json: serde_json::Value = serde_json::from_str(said.lines().last().unwrap()).unwrap();
+    assert!(json["index"]["file"].is_null(), "{json}");
+    assert_eq!(json["index"]["not_indexed"], 1, "{json}");
+    assert!(!gsd_out.join(".dataset.index.json").exists());
     let err = fails(&[
         "batch",
         s(&input),

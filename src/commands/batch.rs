@@ -626,10 +626,13 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     Ok(())
 }
 
-/// The JSON of how a batch listed its inputs.
+/// The JSON of how a batch listed its inputs: `file` is null where no index was kept
+/// (no text dump to index, every one still being written, or the file not writable).
 fn index_json(index: &mdlod_preprocess::batch::IndexUse) -> serde_json::Value {
+    let text = index.from_cache + index.scanned;
+    let kept = text > index.unsettled && index.unsaved.is_none();
     serde_json::json!({
-        "file": index.file.display().to_string(),
+        "file": kept.then(|| index.file.display().to_string()),
         "from_cache": index.from_cache,
         "scanned": index.scanned,
         "not_kept_unsettled": index.unsettled,

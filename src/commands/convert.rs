@@ -480,12 +480,13 @@ pub fn print_report(output: &std::path::Path, r: &ConvertReport) {
         Some((k, n)) if n > 1 => format!(" (frame {k} of {n}, counted from 0)"),
         _ => String::new(),
     };
+    let count = |n: u64, noun: &str| format!("{n} {noun}{}", if n == 1 { "" } else { "s" });
     println!(
-        "wrote {}{which}: {} particles, {} levels, {} nodes, {}, max position error {:.3e}",
+        "wrote {}{which}: {}, {}, {}, {}, max position error {:.3e}",
         output.display(),
-        r.particles,
-        r.levels,
-        r.nodes,
+        count(r.particles, "particle"),
+        count(r.levels as u64, "level"),
+        count(r.nodes as u64, "node"),
         super::size_text(r.file_size),
         r.max_position_error
     );

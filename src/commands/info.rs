@@ -339,9 +339,18 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
             shown(c)
         );
     }
+    // (Frames that could not be read add nothing to a range: it is over those read.)
+    let every = match unreadable.len() {
+        0 => "every frame".to_string(),
+        _ => format!(
+            "the {opened} frame{} read (not the {} unreadable)",
+            if opened == 1 { "" } else { "s" },
+            unreadable.len()
+        ),
+    };
     match (&attribute, attributes_differ) {
         (Some((n, lo, hi)), _) => println!(
-            "  attribute    {} in [{}, {}] over every frame",
+            "  attribute    {} in [{}, {}] over {every}",
             shown(n),
             super::Num(*lo),
             super::Num(*hi)
@@ -351,7 +360,7 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     }
     for ((n, lo, hi), kept) in extras.iter().zip(&extras_kept) {
         let over = if *kept == opened {
-            "every frame".to_string()
+            every.clone()
         } else {
             format!(
                 "the {kept} frame{} keeping it",

@@ -1460,11 +1460,11 @@ const DEFAULT_HEIGHT: u32 = 720;
 pub struct ViewArgs {
     /// Image width, pixels (given alone, the height keeps the default shape, or a
     /// --view file's).
-    #[arg(long, default_value_t = DEFAULT_WIDTH)]
+    #[arg(long, default_value_t = DEFAULT_WIDTH, value_parser = clap::value_parser!(u32).range(1..))]
     pub width: u32,
     /// Image height, pixels (given alone, the width keeps the default shape, or a
     /// --view file's).
-    #[arg(long, default_value_t = DEFAULT_HEIGHT)]
+    #[arg(long, default_value_t = DEFAULT_HEIGHT, value_parser = clap::value_parser!(u32).range(1..))]
     pub height: u32,
     /// A JSON view file (as written by --save-view); --azimuth, --elevation, --zoom and
     /// --ortho given with it change the saved view.
@@ -2047,7 +2047,9 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
             .iter()
             .any(|p| matches!(p, label::Part::Field("time", _)))
     });
-    if args.dt.is_some() && !args.label.is_empty() && !shows_time {
+    // (A label that does not parse is refused as such, naming its fault, further on.)
+    let parsed = args.label.iter().all(|l| label::parts(l).is_ok());
+    if args.dt.is_some() && !args.label.is_empty() && !shows_time && parsed {
         anyhow::bail!(
             "--dt has no effect without {{time}} in a --label: it gives the time {{time}} shows"
         );
@@ -2566,7 +2568,7 @@ pub fn run(mut args: Args) -> Result<()> {
         String::new()
     };
     println!(
-        "wrote {} ({}x{}{samples}) on {} ({}): {} particles{hidden} and {} {points} in {} draw ranges{occluded}, error {:.2} px{limits}",
+        "wrote {} ({}x{}{samples}) on {} ({}): {} particles{hidden} and {} {points} in {} draw range{}{occluded}, error {:.2} px{limits}",
         args.output.display(),
         r.width,
         r.height,
@@ -2575,6 +2577,7 @@ pub fn run(mut args: Args) -> Result<()> {
         r.particles_drawn,
         r.nodes_drawn,
         r.ranges,
+        if r.ranges == 1 { "" } else { "s" },
         r.error_px,
     );
     if let Some(n) = sndf_of_clusters_note(args.mode, &r) {
@@ -3918,8 +3921,8 @@ fn hidden_text(r: &mdlod_render::RenderReport, style: &StyleArgs) -> String {
             style.hide_attribute.is_empty(),
         ) {
             (false, true) => "of hidden species",
-            (true, false) => "of hidden values (--hide-attribute)",
-            _ => "of hidden species or values",
+            (true, false) => "with hidden values (--hide-attribute)",
+            _ => "of hidden species or with hidden values",
         };
         parts.push(format!(
             "{} {what} left out of the clusters opened; clusters of them only, and those \
