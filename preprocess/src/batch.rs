@@ -3148,14 +3148,23 @@ pub fn batch(
     }
     let ends_mid_line: Vec<IncompleteFrame> = cut
         .into_iter()
-        .map(|job| IncompleteFrame {
-            input: job.input.to_path_buf(),
-            frame: job.frame,
-            timestep: job.own_timestep,
-            reason: "its last line has no line end: the run writing it may have stopped \
+        .map(|job| {
+            // (Of a `%` set, the piece that ends so.)
+            let file = job
+                .dump
+                .and_then(DumpFile::mid_line_file)
+                .filter(|f| *f != job.input)
+                .map_or("its".into(), |f| format!("{}'s", f.display()));
+            IncompleteFrame {
+                input: job.input.to_path_buf(),
+                frame: job.frame,
+                timestep: job.own_timestep,
+                reason: format!(
+                    "{file} last line has no line end: the run writing it may have stopped \
                      inside a number (if the file is complete, add a line end to it)"
-                .into(),
-            empty_file: false,
+                ),
+                empty_file: false,
+            }
         })
         .collect();
     let skipped = done.len();

@@ -1713,6 +1713,70 @@ fn a_dump_cut_anywhere_in_its_last_frame_converts_the_frames_before() {
     }
 }
 
+/// The same for a `%` set whose last frame one piece holds only in part, binary or text,
+/// wherever the cut falls (the magic string, the timestep, the box, the chunk data; a
+/// text header's lines, the atoms): the frames every piece holds whole convert, the cut
+/// one is left for the rerun with a note naming the piece, which converts it once
+/// complete.
+#[test]
+fn a_piece_set_cut_anywhere_in_its_last_frame_converts_the_frames_before() {
+    use mdlod_preprocess::readers::DumpFile;
+    // Bytes from frame 2's start: binary, the magic string's length and text, the
+    // timestep (at 26), the box (at 70), the chunk data (from 153); text, `ITEM:`, the
+    // timestep's line cut, whole, and the next, the box, the atoms.
+    let binary_cuts: &[usize] = &[4, 12, 29, 75, 160, 6000];
+    let text_cuts: &[usize] = &[5, 15, 17, 19, 30, 120, 400];
+    for (ext, cuts) in [("bin", binary_cuts), ("dump", text_cuts)] {
+        let whole: Vec<Vec<u8>> = (0..2)
+            .map(|k| std::fs::read(lammps_sample_path(&format!("cu_melt_mpi.{k}.{ext}"))).unwrap())
+            .collect();
+        for cut_piece in 0..2 {
+            let source = lammps_sample_path(&format!("cu_melt_mpi.{cut_piece}.{ext}"));
+            let third = DumpFile::open(&source).unwrap().frame_bytes(2).unwrap();
+            for &cut in cuts {
+                let case =
+                    format!("piece {cut_piece} of the .{ext} set cut {cut} bytes into frame 2");
+                let dir = tempfile::tempdir().unwrap();
+                let write = |cut: Option<usize>| {
+                    for (k, bytes) in whole.iter().enumerate() {
+                        let bytes = match cut {
+                            Some(c) if k == cut_piece => &bytes[..third.start as usize + c],
+                            _ => &bytes[..],
+                        };
+                        std::fs::write(dir.path().join(format!("run.{k}.{ext}")), bytes).unwrap();
+                    }
+                };
+                write(Some(cut));
+                let set = dir.path().join(format!("run.%.{ext}"));
+                let out = dir.path().join("out");
+                let r = batch(std::slice::from_ref(&set), &out, &opts(), &NoProgress)
+                    .unwrap_or_else(|e| panic!("{case}: {e}"));
+                assert_eq!((r.converted, r.incomplete.len()), (2, 1), "{case}");
+                let piece = dir.path().join(format!("run.{cut_piece}.{ext}"));
+                let note = r.incomplete[0].to_string();
+                assert!(
+                    note.contains(&piece.display().to_string()),
+                    "{case}: {note}"
+                );
+                let m = read_manifest(&out).unwrap();
+                assert_eq!((m.frames.len(), m.expected_frames), (2, Some(2)), "{case}");
+                assert!(m.frames.iter().all(|f| f.particles == 500), "{case}");
+                check_manifest(&out, &m);
+                // The run writes the rest: the rerun converts the third frame alone.
+                write(None);
+                let r = batch(std::slice::from_ref(&set), &out, &opts(), &NoProgress)
+                    .unwrap_or_else(|e| panic!("{case}, complete: {e}"));
+                assert_eq!(
+                    (r.converted, r.skipped, r.kept_unchanged, r.incomplete.len()),
+                    (1, 2, 2, 0),
+                    "{case}, complete"
+                );
+                check_manifest(&out, &read_manifest(&out).unwrap());
+            }
+        }
+    }
+}
+
 /// A rerun with `attribute_log10` as before keeps the frames (the atom ids, all above 0,
 /// stand for a positive quantity); turning it on or off
 /// converts them again (the file holds `log10(NAME)` or `NAME`).

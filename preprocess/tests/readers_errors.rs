@@ -571,6 +571,15 @@ fn foreign_formats_are_named_with_the_way_out() {
     );
     let e = open("POSCAR", b"Cu fcc\n1.0\n3.6 0 0\n");
     assert!(e.contains("a VASP structure file"), "{e}");
+    // Its own output given back to convert: said so, with what reads it.
+    let mut mdlod = b"\x89MDLOD\r\n".to_vec();
+    mdlod.extend([0u8; 56]);
+    let e = open("frame.mdlod", &mdlod);
+    assert!(
+        e.contains("an .mdlod file already, mdlod's own output: `mdlod render")
+            && e.contains("frame.mdlod` draws it"),
+        "{e}"
+    );
     let e = open("blob.dat", b"\x00\x01\x02abc\xff\xfe\n");
     assert!(e.contains(r"first line `\x00\x01\x02abc\xFF\xFE`"), "{e}");
 }

@@ -144,6 +144,119 @@ fn missing_or_disagreeing_pieces_are_clear_errors() {
     assert!(e.contains("no files match `none.%.dump`"), "{e}");
 }
 
+/// A set a run is still writing, its last frame cut short in one piece wherever the cut
+/// falls (binary: in the magic string's length or text, the timestep, the box, the column
+/// names, the chunk data; text: in or after `ITEM: TIMESTEP` and its value, the box, the
+/// atoms): the frames before it read, the cut frame is a "cut short" error naming the
+/// piece, so the default conversion takes the last complete frame, as for one dump. A
+/// complete frame at another timestep is still an error naming the piece and the frame.
+#[test]
+fn pieces_cut_short_in_their_last_frame_keep_the_frames_before() {
+    use mdlod_preprocess::convert::{convert_file, ConvertError, ConvertOptions, FrameSelect};
+    let dir = tempfile::tempdir().unwrap();
+    // Bytes from frame 2's start: binary, after the magic string's length (8 bytes),
+    // `DUMPCUSTOM`, the endian flag and revision, the timestep is at 26, the box at 70
+    // and the chunk data at 153.
+    let binary_cuts: &[usize] = &[4, 12, 29, 75, 130, 160, 6000];
+    // Text: `ITEM:`, `ITEM: TIMESTEP\n`, `ITEM: TIMESTEP\n50` (a part of `500`), its
+    // whole line, inside the box bounds, inside the atoms.
+    let text_cuts: &[usize] = &[5, 15, 17, 19, 120, 400];
+    for (ext, cuts) in [("bin", binary_cuts), ("dump", text_cuts)] {
+        let whole: Vec<Vec<u8>> = (0..2)
+            .map(|k| std::fs::read(lammps_sample_path(&format!("cu_melt_mpi.{k}.{ext}"))).unwrap())
+            .collect();
+        for cut_piece in 0..2 {
+            let source = lammps_sample_path(&format!("cu_melt_mpi.{cut_piece}.{ext}"));
+            let third = DumpFile::open(&source).unwrap().frame_bytes(2).unwrap();
+            let (start, end) = (third.start as usize, third.end as usize);
+            if ext == "bin" {
+                let timestep = &whole[cut_piece][start + 26..start + 34];
+                assert_eq!(i64::from_le_bytes(timestep.try_into().unwrap()), 500);
+            }
+            for &cut in cuts {
+                let at = start + cut;
+                assert!(at < end);
+                let case =
+                    format!("piece {cut_piece} of the .{ext} set cut {cut} bytes into frame 2");
+                for (k, bytes) in whole.iter().enumerate() {
+                    let bytes = if k == cut_piece {
+                        &bytes[..at]
+                    } else {
+                        &bytes[..]
+                    };
+                    std::fs::write(dir.path().join(format!("run.{k}.{ext}")), bytes).unwrap();
+                }
+                let set = dir.path().join(format!("run.%.{ext}"));
+                let d = DumpFile::open(&set).unwrap_or_else(|e| panic!("{case}: {e}"));
+                assert_eq!(d.frame_count(), 3, "{case}");
+                assert_eq!(
+                    (d.frame_timestep(0), d.frame_timestep(1)),
+                    (Some(0), Some(250))
+                );
+                assert!(d.input_notes().is_empty(), "{case}: {:?}", d.input_notes());
+                for k in 0..2 {
+                    assert_eq!(read(&set, k).len(), 500, "{case}");
+                }
+                let e = d
+                    .read_frame(2, &ReadOptions::default(), &NoProgress)
+                    .unwrap_err();
+                let piece = dir.path().join(format!("run.{cut_piece}.{ext}"));
+                assert!(
+                    e.cut_short() && e.to_string().starts_with(&piece.display().to_string()),
+                    "{case}: {e}"
+                );
+                let convert = |frame| {
+                    convert_file(
+                        &set,
+                        &dir.path().join("out.mdlod"),
+                        frame,
+                        &ReadOptions::default(),
+                        &ConvertOptions::default(),
+                        &NoProgress,
+                    )
+                };
+                match convert(FrameSelect::Last) {
+                    Err(ConvertError::LastFrameIncomplete { frame: 2, .. }) => {}
+                    r => panic!("{case}: {:?}", r.map(|r| r.frame)),
+                }
+                for k in 0..2 {
+                    let r =
+                        convert(FrameSelect::Index(k)).unwrap_or_else(|e| panic!("{case}: {e}"));
+                    assert_eq!((r.particles, r.frame), (500, Some((k, 3))), "{case}");
+                }
+            }
+        }
+    }
+    // A complete frame at another timestep before the cut one: still an error, naming
+    // the piece and the frame.
+    let mut changed = std::fs::read(lammps_sample_path("cu_melt_mpi.1.bin")).unwrap();
+    let second = DumpFile::open(&lammps_sample_path("cu_melt_mpi.1.bin"))
+        .unwrap()
+        .frame_bytes(1)
+        .unwrap();
+    let at = second.start as usize + 26;
+    changed[at..at + 8].copy_from_slice(&260i64.to_le_bytes());
+    std::fs::write(
+        dir.path().join("run.1.bin"),
+        &changed[..second.end as usize + 100],
+    )
+    .unwrap();
+    std::fs::copy(
+        lammps_sample_path("cu_melt_mpi.0.bin"),
+        dir.path().join("run.0.bin"),
+    )
+    .unwrap();
+    let e = DumpFile::open(&dir.path().join("run.%.bin"))
+        .unwrap_err()
+        .to_string();
+    let piece = dir.path().join("run.1.bin").display().to_string();
+    assert!(
+        e.starts_with(&format!("{piece}: frame 1 is timestep 260, but in "))
+            && e.ends_with("run.0.bin it is timestep 250"),
+        "{e}"
+    );
+}
+
 #[test]
 fn piece_counts_that_add_up_past_any_count_are_an_error() {
     let dir = tempfile::tempdir().unwrap();

@@ -787,6 +787,11 @@ impl DumpFile {
                     .find(|l| !l.is_empty())
                     .unwrap_or_default();
                 let message = match foreign_format(path, data) {
+                    _ if data.starts_with(&mdlod_format::layout::MAGIC) => format!(
+                        "an .mdlod file already, mdlod's own output: `mdlod render {0}` draws \
+                         it and `mdlod info {0}` describes it; convert reads particle dumps",
+                        path.display()
+                    ),
                     Some(kind) => format!(
                         "{kind}, which mdlod does not read: write it as extended XYZ (ASE: \
                          `ase convert {} out.xyz`; or from OVITO or VMD), a LAMMPS dump or GSD",
@@ -1179,11 +1184,11 @@ impl DumpFile {
                 gz.display()
             ));
         }
-        if self.ends_mid_line() && k + 1 == self.frame_count() {
+        if let Some(path) = self.mid_line_file().filter(|_| k + 1 == self.frame_count()) {
             notes.push(format!(
                 "{}: its last line has no line end: if a run is still writing it, the last \
                  atom's values may be cut inside a number (`0.41` of `0.4156`)",
-                self.path.display()
+                path.display()
             ));
         }
         self.as_named(notes)
@@ -1191,10 +1196,27 @@ impl DumpFile {
 
     /// True for a text dump (LAMMPS text, XYZ) whose last line has no line end: a run
     /// still writing it may have stopped inside a number (`0.41` of `0.4156`), which
-    /// reads as a whole value.
+    /// reads as a whole value. For a `%` set, one of the pieces whose last frame is the
+    /// set's last (a number of its header, its timestep `50` of `500`, may be cut too).
     pub fn ends_mid_line(&self) -> bool {
-        matches!(self.index, Index::Lammps(_) | Index::Xyz(_))
-            && self.bytes().last().is_some_and(|&b| b != b'\n')
+        self.mid_line_file().is_some()
+    }
+
+    /// The file [`DumpFile::ends_mid_line`] is true for, as the user named it: this one,
+    /// or the piece of a set.
+    pub fn mid_line_file(&self) -> Option<&Path> {
+        match &self.index {
+            Index::Lammps(_) | Index::Xyz(_) => self
+                .bytes()
+                .last()
+                .is_some_and(|&b| b != b'\n')
+                .then(|| self.named.as_deref().unwrap_or(&self.path)),
+            Index::Pieces(p) => p
+                .iter()
+                .filter(|d| d.frame_count() == pieces::frame_count(p))
+                .find_map(DumpFile::mid_line_file),
+            _ => None,
+        }
     }
 
     /// Frame `k`'s byte range in the file, for uncompressed single files whose frames

@@ -102,9 +102,15 @@ pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError
         };
         // Pieces a run is still writing, each in turn, may hold a frame more than others:
         // the set's frames are those every piece holds ([`frame_count`]), the same
-        // timesteps in each.
+        // timesteps in each. A piece's last frame whose header is cut short (the run is
+        // writing it) has no timestep to compare, or a part of one (`50` of `500`): the
+        // set's frame is then cut short, left out as a single dump's is when it is not
+        // the first.
         let common = p.frame_count().min(first.frame_count());
-        if let Some(k) = (0..common).find(|&k| p.frame_timestep(k) != first.frame_timestep(k)) {
+        if let Some(k) = (0..common).find(|&k| {
+            p.frame_timestep(k) != first.frame_timestep(k)
+                && !(k > 0 && (header_cut(p, k) || header_cut(first, k)))
+        }) {
             let timestep =
                 |t: Option<u64>| t.map_or("without a timestep".into(), |t| format!("timestep {t}"));
             // A piece cut short or damaged in its header reads as one without a
@@ -125,6 +131,13 @@ pub(crate) fn check(pattern: &Path, pieces: &[DumpFile]) -> Result<(), ReadError
         }
     }
     Ok(())
+}
+
+/// Whether frame `k` is the last of `piece` and cut short in its header or, for a binary
+/// piece, anywhere (a run still writing it): reading its header says so
+/// ([`ReadError::cut_short`]).
+fn header_cut(piece: &DumpFile, k: usize) -> bool {
+    k + 1 == piece.frame_count() && piece.frame_info(k).is_err_and(|e| e.cut_short())
 }
 
 /// The frames of a set: those every piece holds.
