@@ -233,6 +233,19 @@ fn truncated_and_corrupt_binary_dumps_are_errors_naming_the_byte() {
     let e = open_err(&bad);
     assert!(e.contains("not a multiple of 6"), "{e}");
 
+    // A damaged chunk count reads the next frame as chunks: the count's byte is named
+    // with the chunk's.
+    let mut bad = good.clone();
+    let count_at = chunk_len_at - 4;
+    bad[count_at..count_at + 4].copy_from_slice(&(1i32 << 30).to_le_bytes());
+    let e = open_err(&bad);
+    assert!(
+        e.contains(&format!(
+            "(of the 1073741824 the chunk count at byte {count_at} announces)"
+        )),
+        "{e}"
+    );
+
     // A NaN coordinate: the atom, the column and the byte are named.
     let mut bad = good.clone();
     let first_atom = chunk_len_at + 4;

@@ -398,6 +398,7 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
         }
         columns = Some(names);
     }
+    let count_at = r.pos;
     let nchunk = r.count("chunk count", i32::MAX as usize)?;
     let expected = atoms
         .checked_mul(values_per_atom)
@@ -406,7 +407,11 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
     let mut total = 0usize;
     for c in 0..nchunk {
         let at = r.pos;
-        let n = r.count("chunk length", i32::MAX as usize)?;
+        // (A damaged count reads the next frame as chunks: both places are named.)
+        let n = r.count(
+            &format!("length of chunk {c} (of the {nchunk} the chunk count at byte {count_at} announces)"),
+            i32::MAX as usize,
+        )?;
         if n % values_per_atom != 0 {
             return Err(r.err(
                 at,
@@ -427,7 +432,7 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
         return Err(r.err(
             start,
             format!(
-                "timestep {timestep}: the header announces {atoms} atoms but its chunks hold {} ",
+                "timestep {timestep}: the header announces {atoms} atoms but its chunks hold {}",
                 total / values_per_atom
             ),
         ));
