@@ -9686,6 +9686,46 @@ fn a_colour_map_spans_the_values_of_the_particles_shown() {
     );
 }
 
+/// `mdlod sample --colour-map` says what the colours mean as `mdlod render` does: the
+/// attribute, its range and whose it is, and the scale.
+#[test]
+fn sample_names_its_colour_map_range_and_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("c.lammpstrj");
+    generate(&["crater", "-n", "3000"], &dump);
+    let file = dir.path().join("c.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "c_ke"]);
+    let sndf = dir.path().join("c.sndf");
+    let base = [
+        "sample",
+        s(&file),
+        "-o",
+        s(&sndf),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--iterations",
+        "2",
+        "--colour-map",
+        "magma",
+    ];
+    let out = ok(&base);
+    assert!(
+        out.contains("colour map magma: c_ke from ") && out.contains("(the file's range)"),
+        "{out}"
+    );
+    let out = ok(&[&base[..], &["--log-scale"]].concat());
+    assert!(out.contains("(the file's range), on a log scale"), "{out}");
+    let out = ok(&[&base[..], &["--attribute-range", "0.1:0.5"]].concat());
+    assert!(
+        out.contains("colour map magma: c_ke from 0.1 to 0.5 (--attribute-range)"),
+        "{out}"
+    );
+    let out = ok(&[&base[..], &["--attribute-range=-1:-0.5", "--log-scale"]].concat());
+    assert!(out.contains("--log-scale left unused"), "{out}");
+}
+
 /// `--axes`: a tripod of the data's axes in its corner, as the view sees them (looking
 /// down z: x, red, to the right, y, green, up), in a still, a movie's frames and a
 /// turntable's views (turning); refused where another panel takes its corner, and its

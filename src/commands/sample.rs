@@ -134,14 +134,36 @@ pub fn run(args: Args) -> Result<()> {
     };
     mdlod_render::check_image_size(opts.width, opts.height)?;
     let mapped = opts.style.colour_map.is_some();
-    if let Some(why) = super::render::derive_range(&mut opts.style, &args.file, mapped, false)? {
-        let [lo, hi] = opts.style.attribute_range.unwrap_or_default();
-        let map = opts.style.colour_map.map_or("", |m| m.name());
-        println!(
-            "colour map {map}: from {} to {} ({why}; --attribute-range sets another)",
-            super::Num(lo),
-            super::Num(hi)
-        );
+    let given = opts.style.attribute_range;
+    let derived = super::render::derive_range(&mut opts.style, &args.file, mapped, false)?;
+    // What the colours mean, as `mdlod render` says it: the attribute, its range and
+    // whose it is, and the scale.
+    if let Some(map) = opts.style.colour_map {
+        let file = mdlod_render::open_styled(&args.file, &opts.style)?;
+        if let Some(a) = &file.metadata().attribute {
+            let ([lo, hi], whose) = match (opts.style.attribute_range, derived) {
+                (Some(r), Some(why)) if given.is_none() => {
+                    (r, format!("{why}; --attribute-range sets another"))
+                }
+                (Some(r), _) => (r, "--attribute-range".to_string()),
+                (None, _) => ([a.min, a.max], "the file's range".to_string()),
+            };
+            let log = match opts.style.log_scale {
+                false => "",
+                true if hi > 0.0 => ", on a log scale",
+                true => {
+                    ", linear (--log-scale left unused: no value of the range is above 0, and \
+                     a log scale shows only those)"
+                }
+            };
+            println!(
+                "colour map {}: {} from {} to {} ({whose}){log}",
+                map.name(),
+                a.name,
+                super::Num(lo),
+                super::Num(hi)
+            );
+        }
     }
     if args.tiles {
         // Samples per sphere: texels times rays, as a one-image file counts them.
