@@ -2026,8 +2026,8 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
             "--kernel-scale has no effect with --mode spheres: it applies to --mode density or iso or splat or splat-over",
         ),
         (
-            vec!["--mode", "density", "--colour-map", "magma"],
-            "--colour-map has no effect with --mode density",
+            vec!["--mode", "splat-over", "--colour-map", "magma"],
+            "--colour-map has no effect with --mode splat-over",
         ),
         (
             vec!["--mode", "iso", "--log-scale"],
@@ -7714,9 +7714,10 @@ fn hidden_species_leave_the_splats_and_the_volume() {
 
 /// `--mode iso --colour-map`: the surface takes the map's colour of the attribute's
 /// kernel-weighted mean, the legend is the map's colour bar, and `--log-scale` is the
-/// attribute's; the volume (`--mode density`) keeps its own colours.
+/// attribute's; the volume (`--mode density --colour-map`) takes the map's colours with
+/// the density's opacity.
 #[test]
-fn an_iso_surface_is_coloured_by_the_attribute_through_a_map() {
+fn iso_surfaces_and_volumes_are_coloured_by_the_attribute_through_a_map() {
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n);
     let file = d("a.mdlod");
@@ -7772,6 +7773,38 @@ fn an_iso_surface_is_coloured_by_the_attribute_through_a_map() {
         hues(&mapped),
         hues(&species)
     );
+    // The volume coloured by it: the map's colours, the density's opacity.
+    let volume = d("v.png");
+    let out = ok(&[
+        &[
+            "render",
+            s(&file),
+            "--mode",
+            "density",
+            "--width",
+            "64",
+            "--height",
+            "48",
+        ][..],
+        &[
+            "-o",
+            s(&volume),
+            "--colour-map",
+            "magma",
+            "--legend",
+            s(&svg),
+        ],
+    ]
+    .concat());
+    assert!(
+        out.contains("colour map magma: c_pe from")
+            && out.contains("colours: the attribute's mean at each sample"),
+        "{out}"
+    );
+    assert!(std::fs::read_to_string(&svg)
+        .unwrap()
+        .contains(">c_pe</text>"));
+    assert!(hues(&read_png(&volume).2) > 3, "{out}");
     // The attribute's log scale, not the volume fraction's (c_pe, all below 0, has no
     // log scale to show).
     let log = ok(&[

@@ -66,9 +66,12 @@ pub struct DensitySettings {
     pub opacity: f32,
     /// Keep samples with `n · p ≤ d` (`[n.x, n.y, n.z, d]`, world units).
     pub clip: Option<[f32; 4]>,
-    /// The iso-surface coloured by the attribute through this map instead of by
-    /// species: the points are packed as [`PackStyle::FluxValue`] and each hit takes the
-    /// map's colour of their kernel-weighted mean place on the scale ([`surface_albedo`]).
+    /// Colour by the attribute through this map: the points are packed as
+    /// [`PackStyle::FluxValue`]; an iso-surface's hit takes the map's colour of their
+    /// kernel-weighted mean place on the scale ([`surface_albedo`]) instead of their
+    /// species' colours, and a volume's sample the map's colour of its density-weighted
+    /// mean place (`Σ φ_j t_j / Σ φ_j`, [`value_at`]) instead of the transfer function's,
+    /// its opacity still the density's.
     ///
     /// [`PackStyle::FluxValue`]: crate::passes::sphere_raycast::PackStyle::FluxValue
     pub colour_map: Option<crate::style::ColourMap>,
@@ -128,13 +131,6 @@ impl DensitySettings {
         positive(self.opacity, "--absorption")?;
         if let Some(v) = self.iso {
             positive(v, "iso-value")?;
-        }
-        if self.colour_map.is_some() && self.iso.is_none() {
-            return Err(
-                "a colour map colours the iso-surface only (the volume's colours are its \
-                 density's)"
-                    .into(),
-            );
         }
         if let Some(c) = self.clip {
             let n = Vec3::new(c[0], c[1], c[2]);
@@ -374,6 +370,24 @@ pub fn density_at(
     (phi, grad)
 }
 
+/// `Σ φ_j t_j` at `p`: each point's volume fraction there times its place on the
+/// attribute's scale (its albedo's first channel); over [`density_at`]'s `φ`, the
+/// density-weighted mean place a volume coloured by the attribute shows.
+pub fn value_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings, r_ref: f32) -> f32 {
+    points
+        .iter()
+        .map(|q| {
+            let (f, _) = fraction(
+                p - q.position,
+                q.support(r_ref),
+                q.spread(r_ref),
+                s.kernel_scale,
+            );
+            f * q.albedo.x
+        })
+        .sum()
+}
+
 /// The colour of the iso-surface at `p`: the points' albedos weighted by their mass
 /// times kernel, `Σ m_j W_j c_j / Σ m_j W_j` (the density's own weights, so the colour
 /// blends where species meet and a representative's colour stands for its particles);
@@ -457,7 +471,14 @@ pub fn reference(
                 match s.iso {
                     None => {
                         let alpha = sample_alpha(phi, s, slicing.step / slicing.r_ref);
-                        c += (1.0 - a) * alpha * transfer_colour(transfer_t(phi, s));
+                        let colour = match s.colour_map {
+                            Some(map) if phi > 0.0 => {
+                                Vec3::from(map.colour(value_at(points, p, s, slicing.r_ref) / phi))
+                            }
+                            Some(map) => Vec3::from(map.colour(0.0)),
+                            None => transfer_colour(transfer_t(phi, s)),
+                        };
+                        c += (1.0 - a) * alpha * colour;
                         a += (1.0 - a) * alpha;
                         if a >= OPAQUE {
                             break;
@@ -593,10 +614,9 @@ mod tests {
             ..s
         };
         assert_eq!(surface_albedo(none, &by_species, fallback), fallback);
-        // The volume's colours are its density's: a map is refused there.
+        // A volume takes a map too (its samples' colours).
         let volume = DensitySettings { iso: None, ..s };
-        assert!(volume.validate().unwrap_err().contains("iso-surface only"));
-        assert!(s.validate().is_ok());
+        assert!(volume.validate().is_ok() && s.validate().is_ok());
     }
 
     #[test]

@@ -2394,7 +2394,7 @@ impl Renderer {
         let t0 = std::time::Instant::now();
         use crate::density::{DensityPoint, Slicing};
         use crate::passes::density::{
-            DensityGpu, RayGpu, SLICES_GRADIENT, SLICES_PLAIN, SLICE_FORMAT,
+            DensityGpu, RayGpu, SLICES_GRADIENT, SLICES_PLAIN, SLICES_VALUED, SLICE_FORMAT,
         };
         let Some(pass) = &self.density else {
             return Err(RenderError::InvalidOptions(format!(
@@ -2495,8 +2495,12 @@ impl Renderer {
         } else {
             (glam::Vec3::ZERO, glam::Vec3::ZERO)
         };
+        // A volume (not an iso-surface) coloured by the attribute.
+        let valued = settings.iso.is_none() && settings.colour_map.is_some();
         let per_stack = if settings.iso.is_some() {
             SLICES_GRADIENT
+        } else if valued {
+            SLICES_VALUED
         } else {
             SLICES_PLAIN
         };
@@ -2572,7 +2576,7 @@ impl Renderer {
                         u32::from(settings.clip.is_some()),
                         st,
                         u32::from(settings.log),
-                        0,
+                        u32::from(valued),
                     ],
                     albedo: [albedo[0], albedo[1], albedo[2], settings.opacity],
                     pad: [
@@ -2655,6 +2659,13 @@ impl Renderer {
                     resource: wgpu::BindingResource::Buffer(record.clone()),
                 }],
             });
+            let table = crate::passes::sphere_raycast::storage_buffer(
+                device,
+                "density colour table",
+                bytemuck::cast_slice(&crate::passes::density::colour_table(
+                    settings.colour_map.filter(|_| valued),
+                )),
+            );
             let composite_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("density composite"),
                 layout: &pass.composite_layout,
@@ -2678,6 +2689,10 @@ impl Renderer {
                     wgpu::BindGroupEntry {
                         binding: 4,
                         resource: active.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: table.as_entire_binding(),
                     },
                 ],
             });

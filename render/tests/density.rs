@@ -566,6 +566,68 @@ fn an_iso_surface_coloured_by_the_attribute_shows_its_value_where_it_lies() {
 }
 
 #[test]
+fn a_volume_coloured_by_the_attribute_matches_the_cpu_ray_marcher_and_its_values() {
+    // Two blobs apart, the attribute 0 in one and 1 in the other: the GPU's volume equals
+    // the CPU's, and each blob's pixels take the map's colour at its end of the scale
+    // (their opacity the density's, so the colour's direction is the map's).
+    let mut frame = cloud_frame(300, 3);
+    let mid = frame.positions.iter().map(|p| p[0]).sum::<f32>() / 300.0;
+    for p in frame.positions.iter_mut() {
+        p[0] += if p[0] < mid { -60.0 } else { 60.0 };
+    }
+    let values: Vec<f32> = frame
+        .positions
+        .iter()
+        .map(|p| f32::from(u8::from(p[0] > mid)))
+        .collect();
+    frame.attribute = Some(mdlod_preprocess::Attribute {
+        name: "side".into(),
+        values,
+    });
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let (w, h) = (48u32, 24u32);
+    let cam = camera(&f, Projection::Orthographic, w, h);
+    let map = mdlod_render::ColourMap::Viridis;
+    let s = DensitySettings {
+        slices: 96,
+        colour_map: Some(map),
+        ..Default::default()
+    };
+    let (gpu, cpu, _, _, _) = both(&f, &cam, w, h, &s, None);
+    let worst = max_diff(&gpu, &cpu);
+    assert!(worst < 0.01, "GPU and CPU volumes differ by {worst}");
+    let ends = [0.0f32, 1.0].map(|t| Vec3::from(map.colour(t)).normalize());
+    // Per end of the scale: the pixels that take its colour, and their columns.
+    let (mut seen, mut columns, mut opaque) = ([0usize; 2], [Vec::new(), Vec::new()], 0);
+    for (i, px) in gpu.iter().enumerate() {
+        if px[3] < 0.2 {
+            continue;
+        }
+        let c = Vec3::new(px[0], px[1], px[2]).normalize();
+        let d = ends.map(|e| (c - e).length());
+        let end = usize::from(d[1] < d[0]);
+        opaque += 1;
+        // (A ray through both blobs mixes their colours.)
+        if d[end] < 0.02 {
+            seen[end] += 1;
+            columns[end].push(i as u32 % w);
+        }
+    }
+    assert!(
+        (seen[0] + seen[1]) * 10 >= opaque * 8,
+        "{seen:?} of {opaque} opaque pixels take one end's colour"
+    );
+    // The two colours are the two blobs: apart, each on its own side.
+    let (a, b) = (&columns[0], &columns[1]);
+    let apart = a.iter().max() < b.iter().min() || b.iter().max() < a.iter().min();
+    assert!(apart, "the colours' columns overlap: {a:?} {b:?}");
+    assert!(
+        seen[0] > 10 && seen[1] > 10,
+        "opaque pixels per blob: {seen:?}"
+    );
+}
+
+#[test]
 fn a_single_particle_makes_an_iso_sphere_of_the_kernel_radius() {
     // φ(r) = V m 315/(64 π h³) (1 − r²/h²)³ with m = 1, V = 4/3 π r_ref³, r = 1, h = 2.5:
     // the iso-value 0.2 lies at r_iso = h sqrt(1 − (0.2 / φ(0))^(1/3)).

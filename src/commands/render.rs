@@ -1689,7 +1689,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("intensity", &[Splat]),
         ("exposure", &[Splat]),
         ("light_range", &[Splat]),
-        ("colour_map", &[Spheres, Sndf, Splat, Iso]),
+        ("colour_map", &[Spheres, Sndf, Splat, Density, Iso]),
         ("radius_scale", STYLED),
         ("species_colour", &[Spheres, Sndf, Splat, SplatOver]),
         ("species_radius", STYLED),
@@ -2406,11 +2406,7 @@ pub fn run(mut args: Args) -> Result<()> {
                     // (In iso mode --log-scale is the colour map's.)
                     log: args.style.log_scale && matches!(args.mode, Mode::Density),
                     opacity: args.absorption,
-                    colour_map: args
-                        .style
-                        .colour_map
-                        .filter(|_| matches!(args.mode, Mode::Iso))
-                        .map(ColourMapArg::map),
+                    colour_map: args.style.colour_map.map(ColourMapArg::map),
                     clip: match args.style.clip[..] {
                         [] => None,
                         [plane] => Some(plane),
@@ -2973,6 +2969,20 @@ pub fn run(mut args: Args) -> Result<()> {
                     );
                 }
             }
+            _ if args.style.colour_map.is_some() => println!(
+                "  colours: the attribute's mean at each sample, weighted by the particles' \
+                 densities there, through the colour map (the colour map line); opacity: the \
+                 volume fraction the particles' spheres fill, from {} (clear) to {} \
+                 (--density-max){}, absorption {} per radius",
+                super::Num(density_min(&args)),
+                super::Num(args.density_max),
+                if args.style.log_scale {
+                    " on a log scale"
+                } else {
+                    ""
+                },
+                args.absorption
+            ),
             _ => println!(
                 "  colours: the volume fraction the particles' spheres fill (not an attribute), \
                  from {} (clear) through dark blue and red to yellow at {} (--density-max; \
@@ -3561,7 +3571,7 @@ fn build_legend(
     };
     let map = opts.style.colour_map;
     let (drawn_legend, what) = match (args.mode, map, attribute) {
-        (Mode::Density, _, _) => (
+        (Mode::Density, None, _) => (
             legend::density_bar(
                 density_min(args),
                 args.density_max,
@@ -3622,7 +3632,7 @@ fn build_legend(
             let title = args.legend_title.as_deref().unwrap_or(&a.name);
             (legend::species_key(&entries, Some(title)), what)
         }
-        (Mode::Spheres | Mode::Sndf | Mode::Iso, Some(map), Some(a)) => {
+        (Mode::Spheres | Mode::Sndf | Mode::Density | Mode::Iso, Some(map), Some(a)) => {
             let scale =
                 mdlod_render::style::AttributeScale::with_range(a, opts.style.attribute_range)
                     .with_log(opts.style.log_scale);

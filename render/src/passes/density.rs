@@ -24,9 +24,27 @@ pub const COMPOSITE_SHADER: &str = concat!(
 /// The slice targets: additive blending of f32 needs `FLOAT32_BLENDABLE`.
 pub const SLICE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
-/// Slices per stack: 8 densities, or 2 densities with gradients (iso-surfaces).
+/// Slices per stack: 8 densities, 2 densities with gradients (iso-surfaces), or 4
+/// densities with their sums of the attribute's place (a volume coloured by it).
 pub const SLICES_PLAIN: u32 = 8;
 pub const SLICES_GRADIENT: u32 = 2;
+pub const SLICES_VALUED: u32 = 4;
+
+/// Entries of the colour map's table the volume coloured by the attribute looks its
+/// colours up in (linear RGB, interpolated between entries).
+pub const COLOUR_TABLE: usize = 256;
+
+/// The colour map's table for the composite pass (`lut` in `density_composite.wgsl`):
+/// `COLOUR_TABLE` linear colours evenly over [0, 1]; black without a map.
+pub fn colour_table(map: Option<crate::style::ColourMap>) -> Vec<[f32; 4]> {
+    (0..COLOUR_TABLE)
+        .map(|i| {
+            let t = i as f32 / (COLOUR_TABLE - 1) as f32;
+            let c = map.map_or([0.0; 3], |m| m.colour(t));
+            [c[0], c[1], c[2], 1.0]
+        })
+        .collect()
+}
 
 /// `Density` in `density_common.wgsl`: one stack's slicing (256 bytes, a dynamic-offset
 /// stride).
@@ -172,11 +190,11 @@ impl DensityPass {
             },
             count: None,
         };
-        let storage = |binding| wgpu::BindGroupLayoutEntry {
+        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
             ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: false },
+                ty: wgpu::BufferBindingType::Storage { read_only },
                 has_dynamic_offset: false,
                 min_binding_size: None,
             },
@@ -188,8 +206,9 @@ impl DensityPass {
                 uniform(0, wgpu::ShaderStages::COMPUTE, true),
                 texture(1),
                 texture(2),
-                storage(3),
-                storage(4),
+                storage(3, false),
+                storage(4, false),
+                storage(5, true),
             ],
         });
         let cmodule = device.create_shader_module(wgpu::ShaderModuleDescriptor {

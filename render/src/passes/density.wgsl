@@ -102,14 +102,23 @@ fn fs_splat(in: SplatOut) -> SliceOut {
             }
         }
     } else {
+        // Eight slices of rho, or four of (rho, rho times the point's place on the
+        // attribute's scale).
         var rho = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let valued = dens.flags.w == 1u;
         for (var k = 0u; k < n; k++) {
             let p = ray[0] + ray[1] * (dens.slicing.x + f32(k) * dens.slicing.y);
             let d = p - in.center;
             let r2 = dot(d, d);
             if r2 < h2 {
                 let t = 1.0 - r2 / h2;
-                rho[k] = norm * t * t * t;
+                let f = norm * t * t * t;
+                if valued {
+                    rho[2u * k] = f;
+                    rho[2u * k + 1u] = f * in.albedo.x;
+                } else {
+                    rho[k] = f;
+                }
             }
         }
         out.a = vec4<f32>(rho[0], rho[1], rho[2], rho[3]);

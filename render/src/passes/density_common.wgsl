@@ -18,7 +18,9 @@ struct Density {
     // xyz: clip plane normal, w: its offset (samples with n.p > w are left out).
     clip: vec4<f32>,
     // x: 1 when the clip plane is on; y: the stack's index; z: 1 for a transfer
-    // function over the density's logarithm.
+    // function over the density's logarithm; w: 1 for a volume coloured by the
+    // attribute (4 slices of rho and the sum of rho times each point's place on the
+    // attribute's scale, its albedo's first channel).
     flags: vec4<u32>,
     // xyz: iso-surface albedo; w: absorption (opacity per r_ref at the top density).
     albedo: vec4<f32>,

@@ -10,6 +10,8 @@
 @group(0) @binding(2) var slice_b: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> rays: array<Ray>;
 @group(0) @binding(4) var<storage, read_write> active_rays: atomic<u32>;
+// The colour map's table, linear RGB evenly over [0, 1] (density.rs's `colour_table`).
+@group(0) @binding(5) var<storage, read> lut: array<vec4<f32>>;
 
 const OPAQUE: f32 = 0.99;
 
@@ -22,6 +24,14 @@ fn transfer_colour(t: f32) -> vec3<f32> {
         return mix(s0, s1, u * 2.0);
     }
     return mix(s1, s2, u * 2.0 - 1.0);
+}
+
+// The colour map at place v on the attribute's scale, between the table's entries.
+fn map_colour(v: f32) -> vec3<f32> {
+    let last = arrayLength(&lut) - 1u;
+    let x = clamp(v, 0.0, 1.0) * f32(last);
+    let i = min(u32(floor(x)), last - 1u);
+    return mix(lut[i].xyz, lut[i + 1u].xyz, x - f32(i));
 }
 
 fn shade(gradient: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
@@ -63,16 +73,29 @@ fn cs_composite(@builtin(global_invocation_id) id: vec3<u32>) {
     let a = textureLoad(slice_a, vec2<i32>(id.xy), 0);
     let b = textureLoad(slice_b, vec2<i32>(id.xy), 0);
     let gradients = dens.mode.y > 0.5;
+    let valued = dens.flags.w == 1u;
     let n = u32(dens.mode.x);
     for (var k = 0u; k < n; k++) {
         let lambda = dens.slicing.x + f32(k) * dens.slicing.y;
         let p = origin + dir * lambda;
         var s = vec4<f32>(0.0);
+        // The mean place on the attribute's scale here (a volume coloured by it).
+        var value = 0.0;
         if gradients {
             if k == 0u {
                 s = a;
             } else {
                 s = b;
+            }
+        } else if valued {
+            var pair = a;
+            if k >= 2u {
+                pair = b;
+            }
+            let j = (k & 1u) * 2u;
+            s = vec4<f32>(0.0, 0.0, 0.0, pair[j]);
+            if pair[j] > 0.0 {
+                value = pair[j + 1u] / pair[j];
             }
         } else {
             var v = a[k & 3u];
@@ -88,7 +111,7 @@ fn cs_composite(@builtin(global_invocation_id) id: vec3<u32>) {
             // Direct volume rendering.
             let t = transfer_t(s.w);
             let alpha = 1.0 - exp(-dens.albedo.w * t * dens.slicing.y * dens.slicing.w);
-            let c = transfer_colour(t);
+            let c = select(transfer_colour(t), map_colour(value), valued);
             ray.colour = vec4<f32>(
                 ray.colour.xyz + (1.0 - ray.colour.w) * alpha * c,
                 ray.colour.w + (1.0 - ray.colour.w) * alpha,
