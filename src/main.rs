@@ -326,11 +326,13 @@ fn main() -> std::process::ExitCode {
                         } => {
                             Some(serde_json::json!({ "converted": converted, "skipped": skipped }))
                         }
+                        // (Still missing, as an interrupted batch counts them.)
                         BatchError::Incomplete {
                             converted, todo, ..
-                        } => {
-                            Some(serde_json::json!({ "converted": converted, "to_convert": todo }))
-                        }
+                        } => Some(serde_json::json!({
+                            "converted": converted,
+                            "to_convert": todo.saturating_sub(*converted),
+                        })),
                         _ => None,
                     });
                 if let (Some(serde_json::Value::Object(counts)), Some(map)) =

@@ -7805,6 +7805,22 @@ fn iso_surfaces_and_volumes_are_coloured_by_the_attribute_through_a_map() {
         .unwrap()
         .contains(">c_pe</text>"));
     assert!(hues(&read_png(&volume).2) > 3, "{out}");
+    // A range of one's own, as for spheres: the same scale in every panel or frame.
+    let out = ok(&[
+        &base[..],
+        &[
+            "-o",
+            s(&png),
+            "--colour-map",
+            "magma",
+            "--attribute-range=-4:-2",
+        ],
+    ]
+    .concat());
+    assert!(
+        out.contains("colour map magma: c_pe from -4 to -2 (--attribute-range)"),
+        "{out}"
+    );
     // The attribute's log scale, not the volume fraction's (c_pe, all below 0, has no
     // log scale to show).
     let log = ok(&[
@@ -9430,6 +9446,25 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
         "{stderr}"
     );
     assert!(!stderr.contains("panicked"));
+    // Without --keep-going, one thread: the frames before the bad one converted, and
+    // `to_convert` the frames still missing, as an interrupted batch counts them.
+    let stopped = dir.path().join("stopped");
+    let run = mdlod(&[
+        "batch",
+        s(&src),
+        "-o",
+        s(&stopped),
+        "--threads",
+        "1",
+        "--json",
+    ]);
+    assert!(!run.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(
+        (&v["ok"], &v["converted"], &v["to_convert"]),
+        (&false.into(), &4.into(), &2.into()),
+        "{v}"
+    );
     // An input that holds no dump fails too, and the counts add up (6 frames and it).
     let log = dir.path().join("log.lammps");
     std::fs::write(&log, "LAMMPS (29 Aug 2024)\nunits metal\n").unwrap();

@@ -731,7 +731,8 @@ pub enum BatchError {
             (_, Some(why)) => format!(
                 "{converted} of the {todo} frames to convert {} converted, but the manifest \
                  listing them could not be saved ({why}); once the cause is mended, a rerun \
-                 finds them complete, lists them and converts only what is missing",
+                 keeps the frames the last manifest saved lists and converts the others \
+                 again (a frame file alone does not record the settings it was read with)",
                 if *converted == 1 { "was" } else { "were" }
             ),
         }
@@ -2008,6 +2009,17 @@ fn interleaved_runs(jobs: &[Job<'_>], place: &dyn Fn(&Job<'_>) -> String) -> Opt
 /// with a dot (as the shell's), and not what a batch writes in `out_dir` (frames,
 /// manifests, temporary files), which a rerun would otherwise take for inputs.
 pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf>, BatchError> {
+    expand_patterns_noting(inputs, out_dir, &mut Vec::new())
+}
+
+/// [`expand_patterns`], with a note in `notes` for each newest timestep of a `%` piece
+/// set left out: one a run is still writing (a piece not there yet, or still empty),
+/// which a rerun converts once complete. An older timestep short of a piece is refused.
+pub fn expand_patterns_noting(
+    inputs: &[PathBuf],
+    out_dir: &Path,
+    notes: &mut Vec<String>,
+) -> Result<Vec<PathBuf>, BatchError> {
     let out_dir = std::fs::canonicalize(out_dir).ok();
     let mut out = Vec::with_capacity(inputs.len());
     for input in inputs {
@@ -2093,13 +2105,47 @@ pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf
                 })
                 .collect::<Result<_, _>>()?;
             let most = counts.iter().map(|(c, _)| *c).max().unwrap_or(0);
-            if let Some((c, set)) = counts.iter().find(|(c, _)| *c < most) {
-                return Err(err(format!(
-                    "{} is in {c} piece{}, where another timestep's set is in {most}: a \
-                     piece missing (deleted, or not written yet)",
-                    set.display(),
-                    if *c == 1 { "" } else { "s" }
-                )));
+            let plural = |c: usize| if c == 1 { "" } else { "s" };
+            // The newest timestep's set (the last in order), as a running simulation
+            // leaves it: a piece not written yet, or one still empty.
+            let newest = counts.len().saturating_sub(1);
+            let empty_piece = |set: &PathBuf| {
+                crate::readers::piece_paths(set).is_ok_and(|pieces| {
+                    pieces
+                        .iter()
+                        .any(|p| std::fs::metadata(p).is_ok_and(|m| m.len() == 0))
+                })
+            };
+            let mut writing = None;
+            for (k, (c, set)) in counts.iter().enumerate() {
+                let short = *c < most;
+                if counts.len() > 1 && k == newest && (short || empty_piece(set)) {
+                    writing = Some(match short {
+                        true => format!(
+                            "{}, the newest timestep, is in {c} piece{} where the others are in {most}",
+                            set.display(),
+                            plural(*c)
+                        ),
+                        false => format!(
+                            "{}, the newest timestep, has an empty piece",
+                            set.display()
+                        ),
+                    });
+                } else if short {
+                    return Err(err(format!(
+                        "{} is in {c} piece{}, where another timestep's set is in {most}: a \
+                         piece missing (deleted, or not written yet)",
+                        set.display(),
+                        plural(*c)
+                    )));
+                }
+            }
+            if let Some(why) = writing {
+                notes.push(format!(
+                    "{why} (a run still writing it?): left out; a rerun converts it once \
+                     every piece is written"
+                ));
+                found.truncate(newest);
             }
         }
         out.extend(found);
@@ -4711,6 +4757,7 @@ mod tests {
         let text = e(Some("No space left on device (os error 28)"));
         assert!(
             text.contains("but the manifest listing them could not be saved (No space left")
+                && text.contains("converts the others again")
                 && !text.contains("are listed"),
             "{text}"
         );
@@ -4747,13 +4794,43 @@ mod tests {
             [dir.path().join("d.0.%.bin"), dir.path().join("d.50.%.bin")]
         );
         assert!(expand_patterns(&[dir.path().join("d.*.%.%.bin")], dir.path()).is_err());
-        // A timestep missing a piece: refused, naming its set.
+        // The newest timestep missing a piece, or with one still empty (a run writing
+        // it): left out, with a note.
         std::fs::remove_file(dir.path().join("d.50.1.bin")).unwrap();
+        let mut notes = Vec::new();
+        let got = expand_patterns_noting(
+            &[dir.path().join("d.*.%.bin")],
+            &dir.path().join("o"),
+            &mut notes,
+        )
+        .unwrap();
+        assert_eq!(got, [dir.path().join("d.0.%.bin")]);
+        assert!(
+            notes.len() == 1
+                && notes[0].contains(
+                    "d.50.%.bin, the newest timestep, is in 1 piece where the others are in 2"
+                )
+                && notes[0].contains("left out"),
+            "{notes:?}"
+        );
+        std::fs::write(dir.path().join("d.50.1.bin"), b"").unwrap();
+        let mut notes = Vec::new();
+        let got = expand_patterns_noting(
+            &[dir.path().join("d.*.%.bin")],
+            &dir.path().join("o"),
+            &mut notes,
+        )
+        .unwrap();
+        assert_eq!(got, [dir.path().join("d.0.%.bin")]);
+        assert!(notes[0].contains("has an empty piece"), "{notes:?}");
+        // An older timestep missing a piece: refused, naming its set.
+        std::fs::write(dir.path().join("d.50.1.bin"), b"x").unwrap();
+        std::fs::remove_file(dir.path().join("d.0.1.bin")).unwrap();
         let e = expand_patterns(&[dir.path().join("d.*.%.bin")], &dir.path().join("o"))
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("d.50.%.bin is in 1 piece, where another timestep's set is in 2"),
+            e.contains("d.0.%.bin is in 1 piece, where another timestep's set is in 2"),
             "{e}"
         );
         assert!(expand_patterns(&[dir.path().join("q.*.%.bin")], dir.path()).is_err());

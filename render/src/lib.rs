@@ -730,6 +730,7 @@ pub fn drawn_attribute(file: &MdlodFile, style: &PointStyle) -> DrawnValues {
     let last = file.level_count().saturating_sub(1);
     match file.encoding_ranges(last) {
         Ok(runs) if !clip.is_empty() => {
+            let clip = clip.for_file(file);
             let (pos, nodes, bits) = (file.positions(last), file.nodes(), file.position_bits());
             for (node, run) in runs {
                 let Some(n) = nodes.get(node) else { continue };

@@ -137,6 +137,9 @@ pub const MAX_CLIP_PLANES: usize = 6;
 pub struct ClipPlanes {
     planes: [[f32; 4]; MAX_CLIP_PLANES],
     count: usize,
+    /// How far beyond a plane (in units of its normal's length) a decoded centre is
+    /// still kept ([`ClipPlanes::for_file`]).
+    slack: f32,
 }
 
 /// Where a box lies against clip planes.
@@ -177,6 +180,28 @@ impl ClipPlanes {
         &self.planes[..self.count]
     }
 
+    /// The planes as they cut `file`'s particles: a centre within the file's largest
+    /// position error (its quantization's, recorded when it was built) beyond a plane
+    /// is kept, so that atoms of a lattice plane a clip plane lies on (`--clip 1,0,0,30`
+    /// through a crystal's x = 30 layer) are all kept, as their exact positions are,
+    /// not about half of them as their decoded ones fall either side.
+    pub fn for_file(self, file: &MdlodFile) -> ClipPlanes {
+        let e = file.metadata().max_position_error;
+        ClipPlanes {
+            slack: if e.is_finite() && e > 0.0 {
+                e as f32
+            } else {
+                0.0
+            },
+            ..self
+        }
+    }
+
+    /// `n·p ≤ d` of plane `c`, with the slack.
+    fn limit(&self, c: &[f32; 4]) -> f32 {
+        c[3] + self.slack * Vec3::new(c[0], c[1], c[2]).length()
+    }
+
     pub fn is_empty(&self) -> bool {
         self.count == 0
     }
@@ -185,7 +210,7 @@ impl ClipPlanes {
     pub fn keeps(&self, p: Vec3) -> bool {
         self.planes()
             .iter()
-            .all(|c| Vec3::new(c[0], c[1], c[2]).dot(p) <= c[3])
+            .all(|c| Vec3::new(c[0], c[1], c[2]).dot(p) <= self.limit(c))
     }
 
     /// Where the box `min..max`, grown by `grow` on every side, lies.
@@ -197,10 +222,10 @@ impl ClipPlanes {
             let lo = n.min(Vec3::ZERO).dot(max) + n.max(Vec3::ZERO).dot(min);
             let hi = n.max(Vec3::ZERO).dot(max) + n.min(Vec3::ZERO).dot(min);
             let g = n.length() * grow;
-            if lo - g > c[3] {
+            if lo - g > self.limit(c) {
                 return ClipSide::Beyond;
             }
-            if hi + g > c[3] {
+            if hi + g > self.limit(c) {
                 side = ClipSide::Across;
             }
         }
@@ -1054,7 +1079,7 @@ impl<'a> Hidden<'a> {
         let below = (!settings.hidden.is_empty()).then(|| file.hidden_below(&settings.hidden));
         (below.is_some() || !settings.clip.is_empty()).then(|| Hidden {
             species: below.map(|kinds| (kinds, file.hidden_test(&settings.hidden))),
-            clip: settings.clip,
+            clip: settings.clip.for_file(file),
             grow: quantization_reach(file),
             file,
         })

@@ -1830,6 +1830,48 @@ fn clip_planes_classify_boxes_and_refuse_bad_planes() {
 /// beyond a plane, at any error and whether occlusion culling was asked for; a budget
 /// that stops the refinement counts the clusters it left across a plane.
 #[test]
+fn a_clip_plane_on_a_lattice_plane_keeps_every_atom_of_it() {
+    // A simple cubic block, spacing 2.1: the plane x = 5 × 2.1 holds 8 × 8 atoms, whose
+    // decoded x stray either side of it by the quantization's error. Each is kept, as
+    // its exact position is (OVITO's Slice keeps n·p ≤ d too), and the next layer is not.
+    use mdlod_render::ClipPlanes;
+    let a = 2.1f32;
+    let mut frame = fcc_frame(1);
+    frame.positions = (0..8 * 8 * 8)
+        .map(|i| {
+            [
+                (i % 8) as f32 * a,
+                (i / 8 % 8) as f32 * a,
+                (i / 64) as f32 * a,
+            ]
+        })
+        .collect();
+    frame.species_index = vec![0; frame.positions.len()];
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let cam = fitted_camera(&f);
+    // Decoded, some of the layer lies beyond the plane: what the slack is for.
+    let every = cut(&f, &cam, 0.0, u64::MAX);
+    let beyond = drawn_spheres(&f, &every)
+        .iter()
+        .filter(|(_, c, _)| c.x > 5.0 * a && c.x < 5.5 * a)
+        .count();
+    assert!(beyond > 0, "no atom of the layer decodes beyond it");
+    for (d, want) in [(5.0 * a, 6 * 64), (4.5 * a, 5 * 64), (-0.5, 0)] {
+        let clip = ClipPlanes::new(&[[1.0, 0.0, 0.0, d]]).unwrap();
+        let settings = TraversalSettings {
+            viewport: VIEWPORT,
+            error_px: 0.0,
+            budget_points: u64::MAX,
+            occlusion: OcclusionMode::Off,
+            clip,
+            ..Default::default()
+        };
+        let drawn = traverse(&cam, &f, &settings);
+        assert_eq!(drawn.particles, want as u64, "x <= {d}");
+    }
+}
+
+#[test]
 fn clip_planes_keep_exactly_the_particles_on_their_side() {
     use mdlod_render::{ClipPlanes, ClipSide};
     let (_d, _p, f) = make_file(&cloud_frame(4000, 5), small_build(), &[]);
@@ -1872,7 +1914,8 @@ fn clip_planes_keep_exactly_the_particles_on_their_side() {
     };
     for planes in &planes {
         let clip = ClipPlanes::new(planes).unwrap();
-        let kept: Vec<bool> = centre.iter().map(|&c| clip.keeps(c)).collect();
+        // (As the traversal cuts this file: within its position error of a plane, kept.)
+        let kept: Vec<bool> = centre.iter().map(|&c| clip.for_file(&f).keeps(c)).collect();
         let n_kept = kept.iter().filter(|&&k| k).count();
         assert!(n_kept > 200 && n_kept < 3800, "{planes:?}: {n_kept} kept");
         for (error, occlusion) in [

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use mdlod_preprocess::batch::{batch, expand_patterns, merge, natural_cmp, BatchOptions};
+use mdlod_preprocess::batch::{batch, expand_patterns_noting, merge, natural_cmp, BatchOptions};
 
 use super::convert::{with_threads, BuildArgs};
 use super::render::parse_bytes;
@@ -280,7 +280,11 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> Result<()> {
-    let mut inputs = expand_patterns(&args.inputs, out)?;
+    let mut pattern_notes = Vec::new();
+    let mut inputs = expand_patterns_noting(&args.inputs, out, &mut pattern_notes)?;
+    for n in &pattern_notes {
+        println!("note: {n}");
+    }
     // Frames without timesteps are numbered by their input's place in the list: a file
     // set the shell expanded (`water.1 water.10 water.2`) goes in its numbers' order.
     inputs.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));

@@ -1693,7 +1693,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("radius_scale", STYLED),
         ("species_colour", &[Spheres, Sndf, Splat, SplatOver]),
         ("species_radius", STYLED),
-        ("attribute_range", &[Spheres, Sndf, Splat]),
+        ("attribute_range", &[Spheres, Sndf, Splat, Density, Iso]),
         ("log_scale", &[Spheres, Sndf, Splat, Density, Iso]),
         ("cell", &[Spheres, Splat, SplatOver, Density, Iso]),
         ("light", STYLED),
