@@ -249,6 +249,19 @@ fn info_json_has_the_promised_fields() {
         "{text}"
     );
     assert!(!text.contains("over every frame"), "{text}");
+    // A batch that lists no frame yet: no particle count or species to describe.
+    let manifest = d.join("dataset.json");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    m["frames"] = serde_json::json!([]);
+    std::fs::write(&manifest, m.to_string()).unwrap();
+    let text = ok(&["info", s(&d)]);
+    assert!(
+        text.contains("frames       0")
+            && !text.contains("particles    0")
+            && !text.contains("species      "),
+        "{text}"
+    );
 }
 
 #[test]

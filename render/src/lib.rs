@@ -553,8 +553,9 @@ pub struct RenderReport {
     pub light_map: Option<Vec<f32>>,
 }
 
-/// Colours by name (sRGB, as `#rrggbb`).
-const NAMED_COLOURS: [(&str, &str); 12] = [
+/// Colours by name (sRGB, as `#rrggbb`): the basic ones, and the CSS names a figure's
+/// colours are often given by (`lime`, `navy`, `gold`, ...), with CSS's values.
+const NAMED_COLOURS: [(&str, &str); 27] = [
     ("black", "000000"),
     ("white", "ffffff"),
     ("grey", "808080"),
@@ -567,6 +568,21 @@ const NAMED_COLOURS: [(&str, &str); 12] = [
     ("magenta", "ff00ff"),
     ("orange", "ff8000"),
     ("purple", "800080"),
+    ("lime", "00ff00"),
+    ("navy", "000080"),
+    ("teal", "008080"),
+    ("olive", "808000"),
+    ("maroon", "800000"),
+    ("silver", "c0c0c0"),
+    ("gold", "ffd700"),
+    ("pink", "ffc0cb"),
+    ("brown", "a52a2a"),
+    ("lightgrey", "d3d3d3"),
+    ("lightgray", "d3d3d3"),
+    ("darkgrey", "a9a9a9"),
+    ("darkgray", "a9a9a9"),
+    ("violet", "ee82ee"),
+    ("indigo", "4b0082"),
 ];
 
 /// Parses a colour as `#rrggbb`, `rrggbb`, three numbers in [0, 1] separated by commas,
@@ -3019,6 +3035,8 @@ mod tests {
         assert_eq!(parse_colour("000000").unwrap(), [0.0; 3]);
         assert_eq!(parse_colour("0.5, 1, 0").unwrap(), [0.5, 1.0, 0.0]);
         assert_eq!(parse_colour("Red").unwrap(), [1.0, 0.0, 0.0]);
+        assert_eq!(parse_colour("lime").unwrap(), [0.0, 1.0, 0.0]);
+        assert_eq!(parse_colour("Navy").unwrap(), [0.0, 0.0, 128.0 / 255.0]);
         assert_eq!(
             parse_colour("grey").unwrap(),
             parse_colour("#808080").unwrap()

@@ -326,13 +326,16 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
             super::Num(hi as f32)
         );
     }
-    if fewest == most {
-        println!("  particles    {most} per frame");
-    } else {
-        println!("  particles    {fewest} to {most} per frame");
+    // (A batch that lists no frame yet has no particles or species to describe.)
+    match opened {
+        0 => {}
+        _ if fewest == most => println!("  particles    {most} per frame"),
+        _ => println!("  particles    {fewest} to {most} per frame"),
     }
     let names: Vec<String> = species.iter().map(|s| shown(s)).collect();
-    println!("  species      {} (of any frame)", names.join(", "));
+    if !names.is_empty() {
+        println!("  species      {} (of any frame)", names.join(", "));
+    }
     if let Some(c) = &column {
         println!(
             "  (species are the values of the input's column {}, not its types)",
