@@ -12150,6 +12150,14 @@ fn batch_index_only_keeps_the_frame_index_for_the_runs_after_it() {
     );
     assert!(out.join(".dataset.index.json").is_file());
     assert!(!out.join("dataset.json").exists());
+    // info of it says what it holds: an index, no frame yet.
+    let err = fails(&["info", s(&out)]);
+    assert!(
+        err.contains(
+            "whose inputs are indexed (.dataset.index.json) but of which no frame is converted yet"
+        ),
+        "{err}"
+    );
     let said = ok(&[
         "batch",
         s(&input),

@@ -4092,11 +4092,17 @@ fn different_shardings(shards: &[(u32, u32, String)]) -> Option<String> {
         ),
         more => format!("rerun the {} missing tasks with --shard I/{n}", more.len()),
     };
+    // A stray sharding of one task is most likely a failed task resubmitted alone.
+    let why = if by_count.contains_key(&1) {
+        "A failed task resubmitted alone (sbatch --array=2) runs as shard 0 of 1, as \
+         SLURM_ARRAY_TASK_COUNT is 1 then: "
+    } else {
+        "Runs of another array size wrote the others: "
+    };
     Some(format!(
-        "shard manifests of different shardings: {} {} of {n} shards, but {} {} of {}. A \
-         failed task resubmitted alone (sbatch --array=2) runs as shard 0 of 1, as \
-         SLURM_ARRAY_TASK_COUNT is 1 then: {rerun} (or resubmit it with the array's whole \
-         range; it converts only what is missing), then delete {} and merge",
+        "shard manifests of different shardings: {} {} of {n} shards, but {} {} of {}. \
+         {why}{rerun} (or resubmit it with the array's whole range; it converts only what \
+         is missing), then delete {} and merge",
         listed(&main_names),
         if main.len() > SHOWN {
             format!("(and {} more) are", main.len() - SHOWN)
@@ -4761,6 +4767,30 @@ mod tests {
                 && !text.contains("are listed"),
             "{text}"
         );
+    }
+
+    /// The advice for a stray sharding: a task resubmitted alone where a stray is of one
+    /// task, not where it is of another array size.
+    #[test]
+    fn stray_shardings_get_advice_that_fits_them() {
+        let named = |v: &[(u32, u32)]| -> Vec<(u32, u32, String)> {
+            v.iter()
+                .map(|&(i, n)| (i, n, format!("dataset.shard-{i}-of-{n}.json")))
+                .collect()
+        };
+        let alone = different_shardings(&named(&[(0, 3), (1, 3), (0, 1)])).unwrap();
+        assert!(
+            alone.contains("resubmitted alone") && alone.contains("--shard 2/3"),
+            "{alone}"
+        );
+        let other = different_shardings(&named(&[(0, 3), (2, 3), (1, 5)])).unwrap();
+        assert!(
+            !other.contains("resubmitted alone")
+                && other.contains("Runs of another array size wrote the others")
+                && other.contains("--shard 1/3"),
+            "{other}"
+        );
+        assert_eq!(different_shardings(&named(&[(0, 3), (1, 3)])), None);
     }
 
     #[test]

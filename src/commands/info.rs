@@ -509,6 +509,21 @@ pub fn run(args: Args) -> Result<()> {
         if args.file.join(mdlod_preprocess::batch::MANIFEST).is_file() {
             return batch_info(&args.file, &args);
         }
+        // A directory a `batch --index-only` has indexed: no frame converted yet.
+        if args
+            .file
+            .join(mdlod_preprocess::batch::INDEX_CACHE)
+            .is_file()
+        {
+            bail!(
+                "{}: a batch directory whose inputs are indexed ({}) but of which no frame \
+                 is converted yet: `mdlod batch` with the same inputs converts them and \
+                 writes its {}",
+                args.file.display(),
+                mdlod_preprocess::batch::INDEX_CACHE,
+                mdlod_preprocess::batch::MANIFEST
+            );
+        }
         // (Said as `render` and `view` say it.)
         bail!(
             "{}: a directory is described as the frames of a batch, listed in its {}; there \

@@ -4504,7 +4504,8 @@ fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<S
     if let Some(expected) = manifest.expected_frames.filter(|&e| e > listed) {
         notes.push(format!(
             "  note: the batch lists {listed} of the {expected} frames its run is to convert \
-             (still running, or stopped: rerun it to finish): the images have gaps in time"
+             (still running, or stopped: rerun it to finish): the images show only those, \
+             with gaps in time or ending early"
         ));
     }
     notes
