@@ -853,6 +853,8 @@ impl ViewerState {
                 iso: (s.mode == Mode::Iso).then_some(s.iso_value),
                 density_max: s.density_max,
                 opacity: s.absorption,
+                // "colour by" the attribute: the surface's or the volume's colours.
+                colour_map: s.style.colour_map,
                 ..Default::default()
             }),
         };
@@ -1473,7 +1475,15 @@ mod tests {
         );
         s.apply(&Action::Mode { mode: Mode::Iso });
         match s.render_options([10, 10]).mode {
-            RenderMode::Density(d) => assert_eq!(d.iso, Some(0.3)),
+            RenderMode::Density(d) => assert_eq!((d.iso, d.colour_map), (Some(0.3), None)),
+            m => panic!("{m:?}"),
+        }
+        // Coloured by the attribute: the iso-surface too.
+        s.apply(&Action::ColourMap {
+            map: Some(ColourMap::Magma),
+        });
+        match s.render_options([10, 10]).mode {
+            RenderMode::Density(d) => assert_eq!(d.colour_map, Some(ColourMap::Magma)),
             m => panic!("{m:?}"),
         }
     }
