@@ -2044,7 +2044,7 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
         ),
         (
             vec!["--mode", "iso", "--log-scale"],
-            "--log-scale has no effect without --colour-map (spheres, sndf, splat, iso) or \
+            "--log-scale has no effect without --colour-map (spheres, sndf, splat, density, iso) or \
              --intensity attribute (splat), or with --mode density",
         ),
         (
@@ -7818,6 +7818,26 @@ fn iso_surfaces_and_volumes_are_coloured_by_the_attribute_through_a_map() {
         .unwrap()
         .contains(">c_pe</text>"));
     assert!(hues(&read_png(&volume).2) > 3, "{out}");
+    // A file that keeps no attribute: said so, with how to keep one, in either mode.
+    let bare = d("bare.mdlod");
+    ok(&["convert", s(&input), "-o", s(&bare), "--last"]);
+    for mode in ["density", "iso"] {
+        let err = fails(&[
+            "render",
+            s(&bare),
+            "-o",
+            s(&png),
+            "--mode",
+            mode,
+            "--colour-map",
+            "magma",
+        ]);
+        assert!(
+            err.contains("has no per-particle attribute to colour by")
+                && err.contains("--attribute COLUMN"),
+            "{mode}: {err}"
+        );
+    }
     // A range of one's own, as for spheres: the same scale in every panel or frame.
     let out = ok(&[
         &base[..],

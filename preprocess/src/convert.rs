@@ -1943,8 +1943,16 @@ pub fn unkept_columns_note(
         .filter(|c| {
             // (An extended XYZ property of several columns names each `pos[0]`, ...)
             let base = c.split_once('[').map_or(*c, |(b, _)| b);
+            // (The size column named, `--radius-column h`, is read as every radius.)
+            let sized = match &read.sizes {
+                crate::readers::SizeColumn::Radius(n) | crate::readers::SizeColumn::Diameter(n) => {
+                    n == c
+                }
+                _ => false,
+            };
             !READ.contains(&base.to_ascii_lowercase().as_str())
                 && read.species_column.as_deref() != Some(*c)
+                && !sized
         })
         .collect();
     if left.is_empty() {
@@ -2002,6 +2010,18 @@ mod tests {
         );
         assert_eq!(
             super::unkept_columns_note(&cols(&["species", "pos[0]", "pos[1]", "pos[2]"]), &read),
+            None
+        );
+        // A size column named (an SPH run's smoothing length) is read, not left behind.
+        let sized = crate::readers::ReadOptions {
+            sizes: crate::readers::SizeColumn::Radius("h".into()),
+            ..Default::default()
+        };
+        assert_eq!(
+            super::unkept_columns_note(
+                &cols(&["species", "pos[0]", "pos[1]", "pos[2]", "h"]),
+                &sized
+            ),
             None
         );
     }

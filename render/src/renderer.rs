@@ -2425,11 +2425,21 @@ impl Renderer {
         // to the last range that starts before the stack's end (each widened by the
         // largest support).
         let values = match settings.colour_map {
-            Some(_) => Some(source.value_scale().ok_or_else(|| {
-                RenderError::InvalidOptions(
-                    "the iso-surface coloured by the attribute needs the attribute's scale".into(),
-                )
-            })?),
+            Some(_) => {
+                // (A file without an attribute: the packer's own error, naming it.)
+                crate::passes::sphere_raycast::AttrPacker::new(
+                    file,
+                    PackStyle::FluxValue,
+                    &Default::default(),
+                )?;
+                Some(source.value_scale().ok_or_else(|| {
+                    RenderError::InvalidOptions(
+                        "colouring the density volume by the attribute needs points packed \
+                         with the attribute's places on its scale"
+                            .into(),
+                    )
+                })?)
+            }
             None => None,
         };
         let points = crate::density::density_points(file, draw, values.as_ref());

@@ -1971,7 +1971,7 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
                 _ => "",
             };
             anyhow::bail!(
-                "{name} has no effect without --colour-map (spheres, sndf, splat, iso) or \
+                "{name} has no effect without --colour-map (spheres, sndf, splat, density, iso) or \
                  --intensity attribute (splat){density}"
             );
         }
@@ -1984,7 +1984,7 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
             || args.style.hide_by.is_some())
     {
         anyhow::bail!(
-            "--attribute has no effect without --colour-map (spheres, sndf, splat, iso), \
+            "--attribute has no effect without --colour-map (spheres, sndf, splat, density, iso), \
              --intensity attribute (splat) or --hide-attribute MIN:MAX: it chooses which \
              attribute they read (a range NAME=MIN:MAX reads NAME itself)"
         );
