@@ -4827,13 +4827,17 @@ mod tests {
         // The newest timestep missing a piece, or with one still empty (a run writing
         // it): left out, with a note.
         std::fs::remove_file(dir.path().join("d.50.1.bin")).unwrap();
-        let mut notes = Vec::new();
-        let got = expand_patterns_noting(
-            &[dir.path().join("d.*.%.bin")],
-            &dir.path().join("o"),
-            &mut notes,
-        )
-        .unwrap();
+        let noted = || {
+            let mut notes = Vec::new();
+            let got = expand_patterns_noting(
+                &[dir.path().join("d.*.%.bin")],
+                &dir.path().join("o"),
+                &mut notes,
+            )
+            .unwrap();
+            (got, notes)
+        };
+        let (got, notes) = noted();
         assert_eq!(got, [dir.path().join("d.0.%.bin")]);
         assert!(
             notes.len() == 1
@@ -4844,13 +4848,7 @@ mod tests {
             "{notes:?}"
         );
         std::fs::write(dir.path().join("d.50.1.bin"), b"").unwrap();
-        let mut notes = Vec::new();
-        let got = expand_patterns_noting(
-            &[dir.path().join("d.*.%.bin")],
-            &dir.path().join("o"),
-            &mut notes,
-        )
-        .unwrap();
+        let (got, notes) = noted();
         assert_eq!(got, [dir.path().join("d.0.%.bin")]);
         assert!(notes[0].contains("has an empty piece"), "{notes:?}");
         // An older timestep missing a piece: refused, naming its set.

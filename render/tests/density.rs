@@ -370,6 +370,36 @@ fn the_volume_does_not_depend_on_the_length_unit() {
     }
 }
 
+/// The pixels where both sides hit the iso-surface, each with the GPU's hit point in
+/// world space, and the largest difference of their colours between GPU and CPU.
+fn surface_hits(
+    cam: &Camera,
+    (w, h): (u32, u32),
+    (gpu, cpu): (&[[f32; 4]], &[[f32; 4]]),
+    (gh, ch): (&[f32], &[f32]),
+) -> (Vec<(usize, Vec3)>, f32) {
+    let mut worst = 0.0f32;
+    let mut hits = Vec::new();
+    for i in 0..(w * h) as usize {
+        if !(gh[i].is_finite() && ch[i].is_finite()) {
+            continue;
+        }
+        let diff = (0..3)
+            .map(|k| (gpu[i][k] - cpu[i][k]).abs())
+            .fold(0.0, f32::max);
+        worst = worst.max(diff);
+        let (o, v) = mdlod_render::density::pixel_ray(
+            cam,
+            (i as u32 % w) as f32 + 0.5,
+            (i as u32 / w) as f32 + 0.5,
+            w,
+            h,
+        );
+        hits.push((i, o + v * gh[i]));
+    }
+    (hits, worst)
+}
+
 #[test]
 fn iso_surface_matches_the_cpu_ray_marcher() {
     let (_d, _p, f) = make_file(&cloud_frame(300, 3), small_build(), &[]);
@@ -449,24 +479,11 @@ fn the_iso_surface_takes_each_species_colour_where_it_lies() {
         (albedo[0].normalize() - albedo[1].normalize()).length() > 0.05,
         "the species need different colours: {albedo:?}"
     );
-    let (mut seen, mut worst, mut worst_hue) = ([0usize; 2], 0.0f32, 0.0f32);
+    let (mut seen, mut worst_hue) = ([0usize; 2], 0.0f32);
     let support = s.kernel_scale * f.metadata().species[1].radius;
-    for i in 0..(w * h) as usize {
-        if !(gh[i].is_finite() && ch[i].is_finite()) {
-            continue;
-        }
-        let diff = (0..3)
-            .map(|k| (gpu[i][k] - cpu[i][k]).abs())
-            .fold(0.0, f32::max);
-        worst = worst.max(diff);
-        let (o, v) = mdlod_render::density::pixel_ray(
-            &cam,
-            (i as u32 % w) as f32 + 0.5,
-            (i as u32 / w) as f32 + 0.5,
-            w,
-            h,
-        );
-        let x = (o + v * gh[i]).x;
+    let (hits, worst) = surface_hits(&cam, (w, h), (&gpu, &cpu), (&gh, &ch));
+    for (i, p) in hits {
+        let x = p.x;
         let side = if x < mid - support {
             0
         } else if x > mid + support {
@@ -533,23 +550,10 @@ fn an_iso_surface_coloured_by_the_attribute_shows_its_value_where_it_lies() {
             .unwrap()
     };
     let reach = s.kernel_scale * f.metadata().species[0].radius;
-    let (mut inner, mut worst, mut worst_place) = (0usize, 0.0f32, 0.0f32);
-    for i in 0..(w * h) as usize {
-        if !(gh[i].is_finite() && ch[i].is_finite()) {
-            continue;
-        }
-        let diff = (0..3)
-            .map(|k| (gpu[i][k] - cpu[i][k]).abs())
-            .fold(0.0, f32::max);
-        worst = worst.max(diff);
-        let (o, v) = mdlod_render::density::pixel_ray(
-            &cam,
-            (i as u32 % w) as f32 + 0.5,
-            (i as u32 / w) as f32 + 0.5,
-            w,
-            h,
-        );
-        let x = (o + v * gh[i]).x;
+    let (mut inner, mut worst_place) = (0usize, 0.0f32);
+    let (hits, worst) = surface_hits(&cam, (w, h), (&gpu, &cpu), (&gh, &ch));
+    for (i, p) in hits {
+        let x = p.x;
         if x < lo + reach || x > hi - reach {
             continue;
         }

@@ -2969,33 +2969,29 @@ pub fn run(mut args: Args) -> Result<()> {
                     );
                 }
             }
-            _ if args.style.colour_map.is_some() => println!(
-                "  colours: the attribute's mean at each sample, weighted by the particles' \
-                 densities there, through the colour map (the colour map line); opacity: the \
-                 volume fraction the particles' spheres fill, from {} (clear) to {} \
-                 (--density-max){}, absorption {} per radius",
-                super::Num(density_min(&args)),
-                super::Num(args.density_max),
-                if args.style.log_scale {
+            _ => {
+                let log = if args.style.log_scale {
                     " on a log scale"
                 } else {
                     ""
-                },
-                args.absorption
-            ),
-            _ => println!(
-                "  colours: the volume fraction the particles' spheres fill (not an attribute), \
-                 from {} (clear) through dark blue and red to yellow at {} (--density-max; \
-                 0.74: close-packed spheres of the largest species){}, absorption {} per radius",
-                super::Num(density_min(&args)),
-                super::Num(args.density_max),
-                if args.style.log_scale {
-                    " on a log scale"
-                } else {
-                    ""
-                },
-                args.absorption
-            ),
+                };
+                let (lo, hi) = (super::Num(density_min(&args)), super::Num(args.density_max));
+                let k = args.absorption;
+                match args.style.colour_map {
+                    Some(_) => println!(
+                        "  colours: the attribute's mean at each sample, weighted by the \
+                         particles' densities there, through the colour map (the colour map \
+                         line); opacity: the volume fraction the particles' spheres fill, from \
+                         {lo} (clear) to {hi} (--density-max){log}, absorption {k} per radius"
+                    ),
+                    None => println!(
+                        "  colours: the volume fraction the particles' spheres fill (not an \
+                         attribute), from {lo} (clear) through dark blue and red to yellow at \
+                         {hi} (--density-max; 0.74: close-packed spheres of the largest \
+                         species){log}, absorption {k} per radius"
+                    ),
+                }
+            }
         }
     }
     let stream = match r.first_frame_time {
