@@ -2007,7 +2007,9 @@ fn interleaved_runs(jobs: &[Job<'_>], place: &dyn Fn(&Job<'_>) -> String) -> Opt
 /// it is. A pattern matches files only, as the inputs must be: not directories (the
 /// batch directory itself, for `'run/*' -o run/out`), not hidden files unless it starts
 /// with a dot (as the shell's), and not what a batch writes in `out_dir` (frames,
-/// manifests, temporary files), which a rerun would otherwise take for inputs.
+/// manifests, temporary files), which a rerun would otherwise take for inputs. The
+/// newest timestep of a `%` piece set short of a piece, or with an empty one, is left
+/// out ([`expand_patterns_noting`] says so).
 pub fn expand_patterns(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<PathBuf>, BatchError> {
     expand_patterns_noting(inputs, out_dir, &mut Vec::new())
 }
@@ -4093,7 +4095,7 @@ fn different_shardings(shards: &[(u32, u32, String)]) -> Option<String> {
         more => format!("rerun the {} missing tasks with --shard I/{n}", more.len()),
     };
     // A stray sharding of one task is most likely a failed task resubmitted alone.
-    let why = if by_count.contains_key(&1) {
+    let why = if by_count.keys().any(|&m| m == 1 && m != n) {
         "A failed task resubmitted alone (sbatch --array=2) runs as shard 0 of 1, as \
          SLURM_ARRAY_TASK_COUNT is 1 then: "
     } else {

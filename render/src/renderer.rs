@@ -88,9 +88,10 @@ pub trait CutSource {
     }
 
     /// The attribute's scale the bound points' grey values come from, where they are
-    /// the attribute's ([`PackStyle::FluxAttribute`], [`PackStyle::FluxValue`]).
-    fn value_scale(&self) -> Option<crate::style::AttributeScale> {
-        None
+    /// the attribute's ([`PackStyle::FluxAttribute`], [`PackStyle::FluxValue`]); an
+    /// error where the packing cannot be made (a file without the attribute).
+    fn value_scale(&self) -> Result<Option<crate::style::AttributeScale>, RenderError> {
+        Ok(None)
     }
 }
 
@@ -112,10 +113,10 @@ impl CutSource for PackedCut<'_> {
             .map_or(1.0, |p| p.light_unit())
     }
 
-    fn value_scale(&self) -> Option<crate::style::AttributeScale> {
-        crate::passes::sphere_raycast::AttrPacker::new(self.file, self.style, self.look)
-            .ok()
-            .and_then(|p| p.value_scale().copied())
+    fn value_scale(&self) -> Result<Option<crate::style::AttributeScale>, RenderError> {
+        let packer =
+            crate::passes::sphere_raycast::AttrPacker::new(self.file, self.style, self.look)?;
+        Ok(packer.value_scale().copied())
     }
 
     fn bind(&self, draw: &DrawList) -> Result<BoundCut, RenderError> {
@@ -283,7 +284,7 @@ pub fn splat_style(blend: SplatBlend) -> PackStyle {
 }
 
 /// How the density volume's points are packed: by species colour, or by the attribute's
-/// place on its scale where the iso-surface is coloured by it.
+/// place on its scale where the volume or the iso-surface is coloured by it.
 pub fn density_style(settings: &crate::density::DensitySettings) -> PackStyle {
     match settings.colour_map {
         Some(_) => PackStyle::FluxValue,
@@ -2358,7 +2359,9 @@ impl Renderer {
     }
 
     /// Renders the density volume of `draw` (see [`crate::density`]): slices splatted a
-    /// stack at a time and ray cast after each stack, until every ray is done.
+    /// stack at a time and ray cast after each stack, until every ray is done. Coloured
+    /// by the attribute, its scale is the file's range, linear; [`Self::render_density_from`]
+    /// with a source packed with a look of its own takes another.
     pub fn render_density(
         &self,
         file: &MdlodFile,
@@ -2424,22 +2427,15 @@ impl Renderer {
         // after which every range ends before the stack (a running maximum of the ends),
         // to the last range that starts before the stack's end (each widened by the
         // largest support).
+        // (A file without an attribute: the packer's own error, naming it.)
         let values = match settings.colour_map {
-            Some(_) => {
-                // (A file without an attribute: the packer's own error, naming it.)
-                crate::passes::sphere_raycast::AttrPacker::new(
-                    file,
-                    PackStyle::FluxValue,
-                    &Default::default(),
-                )?;
-                Some(source.value_scale().ok_or_else(|| {
-                    RenderError::InvalidOptions(
-                        "colouring the density volume by the attribute needs points packed \
-                         with the attribute's places on its scale"
-                            .into(),
-                    )
-                })?)
-            }
+            Some(_) => Some(source.value_scale()?.ok_or_else(|| {
+                RenderError::InvalidOptions(
+                    "colouring the density volume by the attribute needs points packed with \
+                     the attribute's places on its scale"
+                        .into(),
+                )
+            })?),
             None => None,
         };
         let points = crate::density::density_points(file, draw, values.as_ref());
@@ -2516,7 +2512,8 @@ impl Renderer {
         };
         let stacks = slicing.slices.div_ceil(per_stack);
         // The iso-surface is lit in white here and coloured by its own pass afterwards
-        // (the first species' colour where no support reaches a hit).
+        // (where no support reaches a hit: the first species' colour, or the colour
+        // map's lowest).
         let fallback_albedo = glam::Vec3::from(
             file.metadata()
                 .species

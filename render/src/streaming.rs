@@ -819,8 +819,8 @@ impl CutSource for StreamingRenderer<'_> {
         self.packer.light_unit()
     }
 
-    fn value_scale(&self) -> Option<crate::style::AttributeScale> {
-        self.packer.value_scale().copied()
+    fn value_scale(&self) -> Result<Option<crate::style::AttributeScale>, RenderError> {
+        Ok(self.packer.value_scale().copied())
     }
 
     /// Batches within one storage binding each, counting the ranges after their split at

@@ -1825,10 +1825,7 @@ fn clip_planes_classify_boxes_and_refuse_bad_planes() {
     assert!(ClipPlanes::new(&many).unwrap_err().contains("at most 6"));
 }
 
-/// Clip planes cut the data away as OVITO's Slice does: the cut draws exactly the
-/// particles whose decoded centres every plane keeps (each once), no cluster across or
-/// beyond a plane, at any error and whether occlusion culling was asked for; a budget
-/// that stops the refinement counts the clusters it left across a plane.
+/// A clip plane through a lattice layer keeps the whole layer.
 #[test]
 fn a_clip_plane_on_a_lattice_plane_keeps_every_atom_of_it() {
     // A simple cubic block, spacing 2.1: the plane x = 5 × 2.1 holds 8 × 8 atoms, whose
@@ -1871,6 +1868,10 @@ fn a_clip_plane_on_a_lattice_plane_keeps_every_atom_of_it() {
     }
 }
 
+/// Clip planes cut the data away as OVITO's Slice does: the cut draws exactly the
+/// particles whose decoded centres every plane keeps (each once), no cluster across or
+/// beyond a plane, at any error and whether occlusion culling was asked for; a budget
+/// that stops the refinement counts the clusters it left across a plane.
 #[test]
 fn clip_planes_keep_exactly_the_particles_on_their_side() {
     use mdlod_render::{ClipPlanes, ClipSide};

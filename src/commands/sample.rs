@@ -148,12 +148,16 @@ pub fn run(args: Args) -> Result<()> {
                 (Some(r), _) => (r, "--attribute-range".to_string()),
                 (None, _) => ([a.min, a.max], "the file's range".to_string()),
             };
-            let log = match opts.style.log_scale {
-                false => "",
-                true if hi > 0.0 => ", on a log scale",
-                true => {
-                    ", linear (--log-scale left unused: no value of the range is above 0, and \
-                     a log scale shows only those)"
+            // (As the scale colours them: no log scale where none fits the range, a
+            // constant attribute's or one with no value above 0.)
+            let scale = mdlod_render::style::AttributeScale::with_range(a, Some([lo, hi]))
+                .with_log(opts.style.log_scale);
+            let log = match (opts.style.log_scale, scale.log_range()) {
+                (false, _) => "",
+                (true, Some(_)) => ", on a log scale",
+                (true, None) => {
+                    ", linear (--log-scale left unused: no log scale fits the range, which \
+                     has no value above 0 or is one value)"
                 }
             };
             println!(

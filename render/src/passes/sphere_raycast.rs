@@ -133,7 +133,8 @@ pub struct RangeGpu {
     pub attr_offset: u32,
     /// Instance index of the range's first point.
     pub first_point: u32,
-    /// [`KIND_PARTICLE`], [`KIND_NODE`], [`KIND_INTENSITY`] or [`KIND_SIZED`].
+    /// [`KIND_PARTICLE`], [`KIND_NODE`], [`KIND_INTENSITY`], [`KIND_SIZED`] or
+    /// [`KIND_PARTICLE_INTENSITY`].
     pub kind: u32,
     /// Index of the range's first point within its block of words: point `j` of the
     /// range is point `j + point_offset` of the block starting at `word_offset` /
@@ -345,7 +346,8 @@ pub enum PackStyle {
     /// scale, in [0, 1] (its range, or the one asked for, and its logarithm where asked):
     /// the iso-surface coloured by the attribute averages these with the density's
     /// weights and looks the mean up in the colour map, so that every colour on the
-    /// surface is one on the colour bar. Records as [`PackStyle::FluxAttribute`]'s.
+    /// surface is one on the colour bar; the volume coloured by it weighs the places by
+    /// the points' densities at each sample. Records as [`PackStyle::FluxAttribute`]'s.
     FluxValue,
 }
 
