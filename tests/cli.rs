@@ -11572,6 +11572,31 @@ fn info_of_an_unmerged_sharded_batch_shows_each_shards_progress() {
     let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&d), "--json"])).unwrap();
     assert_eq!(json["merged"], false);
     assert_eq!(json["shards"][1]["frames"], 3);
+    assert_eq!(
+        (&json["shard_counts"], &json["notes"]),
+        (&serde_json::json!([2]), &serde_json::json!([]))
+    );
+    // A stray manifest of another sharding: the text's warning is in the JSON too.
+    let stray = d.join("dataset.shard-0-of-3.json");
+    std::fs::copy(d.join("dataset.shard-0-of-2.json"), &stray).unwrap();
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stray).unwrap()).unwrap();
+    m["shard"] = serde_json::json!([0, 3]);
+    std::fs::write(&stray, m.to_string()).unwrap();
+    let text = ok(&["info", s(&d)]);
+    assert!(
+        text.contains("note: the manifests are of different shard counts (2, 3)"),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&d), "--json"])).unwrap();
+    assert_eq!(json["shard_counts"], serde_json::json!([2, 3]));
+    assert!(
+        json["notes"][0]
+            .as_str()
+            .is_some_and(|n| n.contains("different shard counts (2, 3): a merge refuses them")),
+        "{json}"
+    );
+    std::fs::remove_file(&stray).unwrap();
     ok(&["batch", "--merge", s(&d)]);
     let text = ok(&["info", s(&d)]);
     assert!(text.contains("frames       6"), "{text}");

@@ -85,6 +85,17 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
         let listed = m.frames.len() as u64;
         rows.push((i, n, listed, m.expected_frames, m.failed.len()));
     }
+    // Shards of different array sizes (a task resubmitted alone runs as shard 0 of 1).
+    let mixed = (counts.len() > 1).then(|| {
+        format!(
+            "the manifests are of different shard counts ({}): a merge refuses them",
+            counts
+                .iter()
+                .map(u32::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    });
     if args.json {
         let shards: Vec<serde_json::Value> = rows
             .iter()
@@ -95,9 +106,14 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
             .collect();
         println!(
             "{}",
-            serde_json::to_string_pretty(
-                &json!({ "ok": true, "kind": "shards", "merged": false, "shards": shards })
-            )?
+            serde_json::to_string_pretty(&json!({
+                "ok": true,
+                "kind": "shards",
+                "merged": false,
+                "shards": shards,
+                "shard_counts": counts,
+                "notes": mixed.iter().collect::<Vec<_>>(),
+            }))?
         );
         return Ok(true);
     }
@@ -141,14 +157,9 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
         }
     } else {
         complete = false;
-        println!(
-            "  note: the manifests are of different shard counts ({}): a merge refuses them",
-            counts
-                .iter()
-                .map(u32::to_string)
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
+        if let Some(note) = &mixed {
+            println!("  note: {note}");
+        }
     }
     if lists.len() > 1 {
         println!(
