@@ -11602,6 +11602,24 @@ fn info_of_an_unmerged_sharded_batch_shows_each_shards_progress() {
     assert!(text.contains("frames       6"), "{text}");
 }
 
+/// A shard run beside shard manifests of another array size says at its start that
+/// `--merge` will refuse the two (a failed task resubmitted alone runs as shard 0 of 1).
+#[test]
+fn a_shard_of_another_sharding_is_noted_before_it_converts() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("d");
+    let dump = lammps_sample_path("cu_melt.custom.dump");
+    ok(&["batch", s(&dump), "-o", s(&d), "--shard", "0/2"]);
+    let out = ok(&["batch", s(&dump), "-o", s(&d), "--shard", "1/2"]);
+    assert!(!out.contains("holds shard manifests of"), "{out}");
+    let out = ok(&["batch", s(&dump), "-o", s(&d), "--shard", "0/1"]);
+    assert!(
+        out.contains("holds shard manifests of 2 shards; this run is shard 0 of 1")
+            && out.contains("give it its place in the whole array with --shard K/N"),
+        "{out}"
+    );
+}
+
 /// Convert once, then delete the dumps: a rerun over the dumps left says which frames of
 /// deleted dumps stay listed, and movies and verify keep them.
 #[test]

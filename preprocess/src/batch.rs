@@ -1304,6 +1304,23 @@ fn is_side_records(name: &str) -> bool {
     name.starts_with(".dataset") && name.ends_with(".records.json")
 }
 
+/// The shard counts of the shard manifests in `out_dir` other than `n`, in order: the
+/// shardings a run of `n` shards would not merge with (a failed task resubmitted alone
+/// runs as shard 0 of 1 beside its array's).
+pub fn other_shardings(out_dir: &Path, n: u32) -> Vec<u32> {
+    let mut counts: Vec<u32> = std::fs::read_dir(out_dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| shard_of(e.file_name().to_str()?))
+        .map(|(_, m)| m)
+        .filter(|&m| m != n)
+        .collect();
+    counts.sort_unstable();
+    counts.dedup();
+    counts
+}
+
 /// `(I, N)` of a shard manifest's name (`dataset.shard-I-of-N.json`).
 fn shard_of(name: &str) -> Option<(u32, u32)> {
     let rest = name.strip_prefix("dataset.shard-")?.strip_suffix(".json")?;

@@ -253,6 +253,25 @@ pub fn run(args: Args) -> Result<()> {
     }
     // Before anything is created: a Slurm environment that names no shard fails here.
     let shard = shard(&args)?;
+    // Said before the work, not only at --merge: shards of another array size beside.
+    if let Some((i, n)) = shard {
+        let others = mdlod_preprocess::batch::other_shardings(out, n);
+        if !others.is_empty() {
+            let sizes: Vec<String> = others.iter().map(u32::to_string).collect();
+            let alone = if n == 1 {
+                " (a task resubmitted alone, sbatch --array=K, runs as shard 0 of 1: give \
+                 it its place in the whole array with --shard K/N)"
+            } else {
+                ""
+            };
+            println!(
+                "note: {} holds shard manifests of {} shards; this run is shard {i} of {n}, \
+                 another sharding, which `mdlod batch --merge` refuses to join with them{alone}",
+                out.display(),
+                sizes.join(" and ")
+            );
+        }
+    }
     // A batch directory this run creates and leaves empty (it failed before converting
     // a frame: a missing input, a bad option) is removed again; not by a shard, whose
     // siblings may be using it (with their working files elsewhere, it stays empty
