@@ -355,8 +355,22 @@ pub fn density_at(
     s: &DensitySettings,
     r_ref: f32,
 ) -> (f32, Vec3) {
+    let (phi, grad, _) = sums_at(points, p, s, r_ref);
+    (phi, grad)
+}
+
+/// `Σ φ_j t_j` at `p`: each point's volume fraction there times its place on the
+/// attribute's scale (its albedo's first channel); over [`density_at`]'s `φ`, the
+/// density-weighted mean place a volume coloured by the attribute shows.
+pub fn value_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings, r_ref: f32) -> f32 {
+    sums_at(points, p, s, r_ref).2
+}
+
+/// [`density_at`]'s `φ` and gradient and [`value_at`]'s sum, in one pass.
+fn sums_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings, r_ref: f32) -> (f32, Vec3, f32) {
     let mut phi = 0.0;
     let mut grad = Vec3::ZERO;
+    let mut valued = 0.0;
     for q in points {
         let (f, g) = fraction(
             p - q.position,
@@ -366,26 +380,9 @@ pub fn density_at(
         );
         phi += f;
         grad += g;
+        valued += f * q.albedo.x;
     }
-    (phi, grad)
-}
-
-/// `Σ φ_j t_j` at `p`: each point's volume fraction there times its place on the
-/// attribute's scale (its albedo's first channel); over [`density_at`]'s `φ`, the
-/// density-weighted mean place a volume coloured by the attribute shows.
-pub fn value_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings, r_ref: f32) -> f32 {
-    points
-        .iter()
-        .map(|q| {
-            let (f, _) = fraction(
-                p - q.position,
-                q.support(r_ref),
-                q.spread(r_ref),
-                s.kernel_scale,
-            );
-            f * q.albedo.x
-        })
-        .sum()
+    (phi, grad, valued)
 }
 
 /// The colour of the iso-surface at `p`: the points' albedos weighted by their mass
@@ -463,18 +460,16 @@ pub fn reference(
             for k in 0..slicing.slices {
                 let lambda = slicing.lambda_min + k as f32 * slicing.step;
                 let p = o + v * lambda;
-                let (phi, g) = if kept(s.clip, p) {
-                    density_at(points, p, s, slicing.r_ref)
+                let (phi, g, valued) = if kept(s.clip, p) {
+                    sums_at(points, p, s, slicing.r_ref)
                 } else {
-                    (0.0, Vec3::ZERO)
+                    (0.0, Vec3::ZERO, 0.0)
                 };
                 match s.iso {
                     None => {
                         let alpha = sample_alpha(phi, s, slicing.step / slicing.r_ref);
                         let colour = match s.colour_map {
-                            Some(map) if phi > 0.0 => {
-                                Vec3::from(map.colour(value_at(points, p, s, slicing.r_ref) / phi))
-                            }
+                            Some(map) if phi > 0.0 => Vec3::from(map.colour(valued / phi)),
                             Some(map) => Vec3::from(map.colour(0.0)),
                             None => transfer_colour(transfer_t(phi, s)),
                         };
