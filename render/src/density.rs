@@ -70,7 +70,7 @@ pub struct DensitySettings {
     /// [`PackStyle::FluxValue`]; an iso-surface's hit takes the map's colour of their
     /// kernel-weighted mean place on the scale ([`surface_albedo`]) instead of their
     /// species' colours, and a volume's sample the map's colour of its density-weighted
-    /// mean place (`Σ φ_j t_j / Σ φ_j`, [`value_at`]) instead of the transfer function's,
+    /// mean place (`Σ φ_j t_j / Σ φ_j`) instead of the transfer function's,
     /// its opacity still the density's.
     ///
     /// [`PackStyle::FluxValue`]: crate::passes::sphere_raycast::PackStyle::FluxValue
@@ -359,14 +359,10 @@ pub fn density_at(
     (phi, grad)
 }
 
-/// `Σ φ_j t_j` at `p`: each point's volume fraction there times its place on the
-/// attribute's scale (its albedo's first channel); over [`density_at`]'s `φ`, the
-/// density-weighted mean place a volume coloured by the attribute shows.
-pub fn value_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings, r_ref: f32) -> f32 {
-    sums_at(points, p, s, r_ref).2
-}
-
-/// [`density_at`]'s `φ` and gradient and [`value_at`]'s sum, in one pass.
+/// [`density_at`]'s `φ` and gradient, and `Σ φ_j t_j`: each point's volume fraction at
+/// `p` times its place on the attribute's scale (its albedo's first channel), which over
+/// `φ` is the density-weighted mean place a volume coloured by the attribute shows; in
+/// one pass.
 fn sums_at(points: &[DensityPoint], p: Vec3, s: &DensitySettings, r_ref: f32) -> (f32, Vec3, f32) {
     let mut phi = 0.0;
     let mut grad = Vec3::ZERO;
