@@ -4549,48 +4549,64 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
             break;
         }
     }
-    progress.stage("verifying frames", Some(entries.len() as u64), "frames");
+    // A file listed by more than one manifest (shards of two shardings side by side)
+    // is read and counted once, and checked against each of its entries.
+    let mut files: Vec<(String, Vec<(&String, &FrameEntry)>)> = Vec::new();
+    let mut index = std::collections::HashMap::new();
     for (manifest, f) in &entries {
-        let place = format!("{} (timestep {}, in {manifest})", f.file, f.timestep);
-        let path = dir.join(&f.file);
-        let problem = match MdlodFile::open(&path).and_then(|file| file.verify().map(|_| file)) {
-            Err(e) if !path.exists() => Some(format!("{place}: listed but missing ({e})")),
-            // (A rerun trusts a frame that opens, without reading all its data.)
-            Err(e) => Some(format!(
-                "{place}: {e}; delete it and rerun the batch, which converts it again"
-            )),
-            Ok(file) => {
-                let checksum = format!("{:016x}", file.header().section_table_checksum);
-                let m = file.metadata();
-                if checksum != f.checksum {
-                    Some(format!(
-                        "{place}: checksum {checksum}, the manifest says {} (the file was \
+        let i = *index.entry(f.file.clone()).or_insert_with(|| {
+            files.push((f.file.clone(), Vec::new()));
+            files.len() - 1
+        });
+        files[i].1.push((manifest, f));
+    }
+    progress.stage("verifying frames", Some(files.len() as u64), "frames");
+    for (name, listings) in &files {
+        let path = dir.join(name);
+        let opened = MdlodFile::open(&path).and_then(|file| file.verify().map(|_| file));
+        let mut problems = Vec::new();
+        for (manifest, f) in listings {
+            let place = format!("{} (timestep {}, in {manifest})", f.file, f.timestep);
+            let problem = match &opened {
+                Err(e) if !path.exists() => Some(format!("{place}: listed but missing ({e})")),
+                // (A rerun trusts a frame that opens, without reading all its data.)
+                Err(e) => Some(format!(
+                    "{place}: {e}; delete it and rerun the batch, which converts it again"
+                )),
+                Ok(file) => {
+                    let checksum = format!("{:016x}", file.header().section_table_checksum);
+                    let m = file.metadata();
+                    if checksum != f.checksum {
+                        Some(format!(
+                            "{place}: checksum {checksum}, the manifest says {} (the file was \
                          replaced after the manifest was written)",
-                        f.checksum
-                    ))
-                } else if m.timestep.is_some_and(|t| t != f.timestep)
-                    || file.particle_count() != f.particles
-                {
-                    // (A frame of an input without timesteps holds none: the manifest
-                    // numbers it by its position.)
-                    Some(format!(
-                        "{place}: the file holds {} and {} particles, the manifest says \
+                            f.checksum
+                        ))
+                    } else if m.timestep.is_some_and(|t| t != f.timestep)
+                        || file.particle_count() != f.particles
+                    {
+                        // (A frame of an input without timesteps holds none: the manifest
+                        // numbers it by its position.)
+                        Some(format!(
+                            "{place}: the file holds {} and {} particles, the manifest says \
                          timestep {} and {} particles",
-                        m.timestep
-                            .map_or("no timestep".into(), |t| format!("timestep {t}")),
-                        file.particle_count(),
-                        f.timestep,
-                        f.particles
-                    ))
-                } else {
-                    None
+                            m.timestep
+                                .map_or("no timestep".into(), |t| format!("timestep {t}")),
+                            file.particle_count(),
+                            f.timestep,
+                            f.particles
+                        ))
+                    } else {
+                        None
+                    }
                 }
-            }
-        };
-        match problem {
-            Some(p) => check.problems.push(p),
-            None => check.frames_ok += 1,
+            };
+            problems.extend(problem);
         }
+        if problems.is_empty() {
+            check.frames_ok += 1;
+        }
+        check.problems.extend(problems);
         progress.advance(1);
     }
     progress.finish_stage();

@@ -1530,6 +1530,37 @@ fn a_batch_directory_verifies_against_its_manifest() {
         c.problems.len() == 1 && c.problems[0].contains("shard 1 of 2 wrote no manifest"),
         "{c:?}"
     );
+    // Two shardings side by side (a task resubmitted alone as shard 0 of 1 beside the
+    // two shards): each frame file is verified and counted once, not once per manifest
+    // listing it.
+    let two = dir.path().join("two-shardings");
+    for (i, n) in [(0, 2), (1, 2), (0, 1)] {
+        batch(std::slice::from_ref(&src), &two, &shard(i, n), &NoProgress).unwrap();
+    }
+    let c = verify_dir(&two, &NoProgress).unwrap();
+    assert_eq!((c.frames_ok, c.manifests.len()), (6, 3), "{c:?}");
+    assert!(
+        c.problems.len() == 1 && c.problems[0].contains("of 1") && c.problems[0].contains("of 2"),
+        "{c:?}"
+    );
+    // A frame replaced after one manifest was written is named against each listing.
+    let mut v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(two.join("dataset.shard-0-of-1.json")).unwrap())
+            .unwrap();
+    let first = v["frames"][0]["file"].as_str().unwrap().to_string();
+    v["frames"][0]["checksum"] = "0000000000000000".into();
+    std::fs::write(
+        two.join("dataset.shard-0-of-1.json"),
+        serde_json::to_vec(&v).unwrap(),
+    )
+    .unwrap();
+    let c = verify_dir(&two, &NoProgress).unwrap();
+    assert_eq!(c.frames_ok, 5, "{c:?}");
+    let named: Vec<&String> = c.problems.iter().filter(|p| p.starts_with(&first)).collect();
+    assert!(
+        named.len() == 1 && named[0].contains("in dataset.shard-0-of-1.json"),
+        "{c:?}"
+    );
     assert!(verify_dir(&dir.path().join("nothing-here"), &NoProgress).is_err());
 }
 
