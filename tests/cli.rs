@@ -3802,7 +3802,7 @@ fn a_movie_draws_each_frame_with_its_own_radii() {
     ]);
     assert!(
         out.contains(
-            "radii change over the frames (atom 0.500 to 1.000): each frame is drawn with its own"
+            "species' radii change over the frames (atom: 0.500 to 1.000): each frame is drawn with its own"
         ),
         "{out}"
     );
@@ -5491,6 +5491,62 @@ fn a_last_frame_with_lines_run_together_is_an_error_not_a_frame_cut_short() {
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(
         !run.status.success() && err.contains("columns, found"),
+        "{err}"
+    );
+}
+
+/// A dump whose last frames hold no particles (a hopper discharged, a pour not started):
+/// `convert` converts the last frame with particles with a note; `--last` and
+/// `--frame -1` refuse, naming it; an input with no particles at all says so.
+#[test]
+fn a_dump_ending_in_empty_frames_converts_its_last_frame_with_particles() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = |t: u64, n: usize| {
+        let mut s = format!(
+            "ITEM: TIMESTEP\n{t}\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp ff\n\
+             0 10\n0 10\n0 10\nITEM: ATOMS id type x y z\n"
+        );
+        for i in 0..n {
+            s += &format!("{} 1 {}.5 {}.5 0.5\n", i + 1, i % 10, i / 10);
+        }
+        s
+    };
+    let dump = dir.path().join("hopper.lammpstrj");
+    std::fs::write(
+        &dump,
+        frame(0, 50) + &frame(100, 20) + &frame(200, 0) + &frame(300, 0),
+    )
+    .unwrap();
+    let out_file = dir.path().join("h.mdlod");
+    let out = ok(&["convert", s(&dump), "-o", s(&out_file)]);
+    assert!(
+        out.contains(
+            "note: the last 2 frames (from frame 2) hold no particles: converting frame 1 \
+             (timestep 100), the last with particles"
+        ) && out.contains("(frame 1 of 4, counted from 0)"),
+        "{out}"
+    );
+    let file = MdlodFile::open(&out_file).unwrap();
+    assert_eq!(
+        (file.particle_count(), file.metadata().timestep),
+        (20, Some(100))
+    );
+    for last in [&["--last"][..], &["--frame", "-1"]] {
+        let err = fails(&[&["convert", s(&dump), "-o", s(&out_file)], last].concat());
+        assert!(
+            err.contains(
+                "frame 3 (timestep 300): no particles, and a .mdlod file needs at least one; \
+                 the last frame with particles is frame 1 (timestep 100): --frame 1 converts it"
+            ),
+            "{err}"
+        );
+    }
+    let empty = dir.path().join("empty.lammpstrj");
+    std::fs::write(&empty, frame(0, 0) + &frame(100, 0)).unwrap();
+    let err = fails(&["convert", s(&empty), "-o", s(&out_file)]);
+    assert!(
+        err.contains("frame 1 (timestep 100): no particles")
+            && err.contains("no frame of the input holds particles"),
         "{err}"
     );
 }

@@ -821,6 +821,7 @@ impl BatchError {
                 | ConvertError::LastFrameIncomplete { .. }
                 | ConvertError::Build { .. }
                 | ConvertError::EmptyFrame(_)
+                | ConvertError::LastFrameEmpty { .. }
                 | ConvertError::Attributes { .. }
                 | ConvertError::UnusableRadius(_) => true,
                 ConvertError::Decompressed { source, .. } => convert(source),

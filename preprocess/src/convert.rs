@@ -98,6 +98,26 @@ pub enum ConvertError {
         #[source]
         source: crate::readers::ReadError,
     },
+    /// The last frame, asked for by default, holds no particles (a discharge that
+    /// empties the box, a pour that starts empty): which frame holds some.
+    #[error(
+        "{place}: no particles, and a .mdlod file needs at least one; {}",
+        match with_particles {
+            Some((j, Some(t))) => format!(
+                "the last frame with particles is frame {j} (timestep {t}): --frame {j} \
+                 converts it"
+            ),
+            Some((j, None)) => {
+                format!("the last frame with particles is frame {j}: --frame {j} converts it")
+            }
+            None => "no frame of the input holds particles".to_string(),
+        }
+    )]
+    LastFrameEmpty {
+        place: FramePlace,
+        /// The last frame (index, timestep) that holds particles, if any does.
+        with_particles: Option<(usize, Option<u64>)>,
+    },
     #[error("{path}: {source}")]
     Build {
         path: String,
@@ -1803,6 +1823,24 @@ pub fn convert_dump(
         }
     };
     let info = dump.frame_info(k).map_err(cut_short)?;
+    // The last frame asked for and empty: which frame before it holds particles (their
+    // headers say, without reading the atoms).
+    if info.particles == 0 && matches!(frame, FrameSelect::Last | FrameSelect::FromEnd(1)) {
+        let with_particles = (0..k).rev().find_map(|j| {
+            dump.frame_info(j)
+                .ok()
+                .filter(|i| i.particles > 0)
+                .map(|i| (j, i.timestep))
+        });
+        return Err(ConvertError::LastFrameEmpty {
+            place: FramePlace {
+                path: named.display().to_string(),
+                frame: Some(k as u64),
+                timestep: info.timestep,
+            },
+            with_particles,
+        });
+    }
     // An override naming none of the species says how this input names them (a name
     // that cannot occur in it: what to write instead).
     // (Renamed species are named as the user chose, not as the input names them.)

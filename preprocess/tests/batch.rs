@@ -1556,7 +1556,11 @@ fn a_batch_directory_verifies_against_its_manifest() {
     .unwrap();
     let c = verify_dir(&two, &NoProgress).unwrap();
     assert_eq!(c.frames_ok, 5, "{c:?}");
-    let named: Vec<&String> = c.problems.iter().filter(|p| p.starts_with(&first)).collect();
+    let named: Vec<&String> = c
+        .problems
+        .iter()
+        .filter(|p| p.starts_with(&first))
+        .collect();
     assert!(
         named.len() == 1 && named[0].contains("in dataset.shard-0-of-1.json"),
         "{c:?}"

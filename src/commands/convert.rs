@@ -468,6 +468,27 @@ fn convert(args: &Args) -> Result<ConvertReport> {
             );
             Ok(run(FrameSelect::Index(k - 1))?)
         }
+        // The default, the last frame, holds no particles (the box emptied): the last
+        // frame that holds some, said.
+        Err(mdlod_preprocess::convert::ConvertError::LastFrameEmpty {
+            place,
+            with_particles: Some((j, timestep)),
+        }) if args.frame.is_none() && !args.last => {
+            let at = |t: Option<u64>| t.map_or(String::new(), |t| format!(" (timestep {t})"));
+            let empty = place.frame.map_or(1, |k| k as usize - j);
+            println!(
+                "note: the last {} hold{} no particles: converting frame {j}{}, the last with \
+                 particles",
+                if empty == 1 {
+                    format!("frame{}", at(place.timestep))
+                } else {
+                    format!("{empty} frames (from frame {})", j + 1)
+                },
+                if empty == 1 { "s" } else { "" },
+                at(timestep)
+            );
+            Ok(run(FrameSelect::Index(j))?)
+        }
         r => Ok(r?),
     }
 }

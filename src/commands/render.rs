@@ -4995,12 +4995,12 @@ fn render_frames(
     let changing: Vec<String> = radii
         .iter()
         .filter(|(_, [lo, hi])| hi > &(lo * 1.01))
-        .map(|(name, [lo, hi])| format!("{name} {}", super::info::radius_range_text(*lo, *hi)))
+        .map(|(name, [lo, hi])| format!("{name}: {}", super::info::radius_range_text(*lo, *hi)))
         .collect();
     let radii_note = match changing.is_empty() {
         true => String::new(),
         false => format!(
-            "; radii change over the frames ({}): each frame is drawn with its own",
+            "; species' radii change over the frames ({}): each frame is drawn with its own",
             changing.join(", ")
         ),
     };
