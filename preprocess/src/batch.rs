@@ -682,6 +682,20 @@ pub enum BatchError {
     Interleaved { what: String, last_keeps: String },
     #[error("{}: {message}", path.display())]
     Manifest { path: PathBuf, message: String },
+    /// An input some of whose frames give a timestep and some none: numbered by their
+    /// position, the frames without one would fall among the others out of order.
+    #[error(
+        "{}: {with} give a timestep, but {without} give none: a batch orders frames by \
+         timestep and numbers those without one by their position, which would put them \
+         out of order; give every frame of the input a timestep (`Timestep=` or `step=` \
+         in an XYZ comment line), or none",
+        path.display()
+    )]
+    MixedTimesteps {
+        path: PathBuf,
+        with: String,
+        without: String,
+    },
     /// An input cut short that is not the newest ([`newest_inputs`]): a run writes one
     /// file of a set at a time, so an older one is damaged (a copy that stopped), not
     /// being written, and leaving its frame out would lose it unnoticed.
@@ -1414,6 +1428,18 @@ fn entry_of(
         species_column: read.species_column.clone(),
         wrap: read.wrap,
         source_abs: Some(absolute_source(input).display().to_string()),
+    }
+}
+
+/// Frames named by their indices: `frame 3`, `frames 0 and 3`, `frames 0, 1, 2, 5 and 7
+/// more`.
+fn frames_text(frames: &[usize]) -> String {
+    const NAMED: usize = 4;
+    let named: Vec<String> = frames.iter().take(NAMED).map(|k| k.to_string()).collect();
+    match frames.len() {
+        1 => format!("frame {}", named[0]),
+        n if n <= NAMED => format!("frames {} and {}", named[..n - 1].join(", "), named[n - 1]),
+        n => format!("frames {} and {} more", named.join(", "), n - NAMED),
     }
 }
 
@@ -2479,6 +2505,22 @@ pub fn batch(
             dump.format(),
             InputFormat::LammpsText | InputFormat::LammpsBinary
         );
+        // Frames with and without a timestep in one input (a last frame cut short before
+        // its comment line aside) cannot be put in order.
+        let count = dump.frame_count();
+        let (with, without): (Vec<usize>, Vec<usize>) =
+            (0..count).partition(|&k| dump.frame_timestep(k).is_some());
+        let without: Vec<usize> = without
+            .into_iter()
+            .filter(|&k| !(k + 1 == count && dump.frame_info(k).is_err_and(|e| e.cut_short())))
+            .collect();
+        if !lammps && !with.is_empty() && !without.is_empty() {
+            return Err(BatchError::MixedTimesteps {
+                path: p.to_path_buf(),
+                with: frames_text(&with),
+                without: frames_text(&without),
+            });
+        }
         for k in 0..dump.frame_count() {
             let own = dump.frame_timestep(k);
             let timestep = own.unwrap_or(position);

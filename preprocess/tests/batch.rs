@@ -278,6 +278,47 @@ fn xyz_trajectory(dir: &Path) -> PathBuf {
     p
 }
 
+/// An XYZ trajectory whose frames give a timestep in some comment lines and none in
+/// others is refused, naming both (numbered by position, the frames without one would
+/// play out of order); a last frame cut short before its comment line is not counted.
+#[test]
+fn frames_with_and_without_timesteps_in_one_input_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = |comment: &str| format!("2\n{comment}\nAr 0 0 0\nAr 1 1 1\n");
+    let src = dir.path().join("mixed.xyz");
+    let text = [
+        frame("Time=0.0"),
+        frame("Time=1.0 step=100"),
+        frame("Time=2.0 step=200"),
+        frame("Time=3.0"),
+    ]
+    .concat();
+    std::fs::write(&src, &text).unwrap();
+    let e = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("out"),
+        &opts(),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("mixed.xyz: frames 1 and 2 give a timestep, but frames 0 and 3 give none"),
+        "{e}"
+    );
+    // Stepped frames and a last one a run is still writing (cut before its comment).
+    let text = [frame("step=0"), frame("step=100"), "2\n".to_string()].concat();
+    std::fs::write(&src, text).unwrap();
+    let r = batch(
+        std::slice::from_ref(&src),
+        &dir.path().join("out2"),
+        &opts(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!(r.converted, 2, "{r:?}");
+}
+
 #[test]
 fn frames_without_timesteps_are_listed_by_position_and_shards_merge() {
     let dir = tempfile::tempdir().unwrap();

@@ -453,6 +453,14 @@ fn xyz_errors() {
         "4: expected the atom count of frame 1 (an integer), found `abc`",
     );
     assert_error(
+        "short.xyz",
+        "1\nstep=0\nC 0 0 0\n3\nstep=1\nC 0 0 0\nC 1 1 1\n1\nstep=2\nC 0 0 0\n",
+        None,
+        "9: expected the atom count of frame 2 (an integer), found `step=2`; this reads as a \
+         frame's comment line: frame 1 (its count at line 4) may hold fewer than the 3 atom \
+         lines it announces",
+    );
+    assert_error(
         "lat.xyz",
         "1\nLattice=\"1 2 3\"\nC 0 0 0\n",
         None,
@@ -479,6 +487,40 @@ fn xyz_errors() {
         .unwrap()
         .read_frame(0, &ReadOptions::default(), &NoProgress)
         .is_ok());
+    // A key written inside a quoted value is that value's text, not a second key; a time
+    // with its unit after it is its number.
+    for (name, comment, timestep, time) in [
+        (
+            "q1.xyz",
+            r#"step=10 info="restarted from step=5""#,
+            Some(10),
+            None,
+        ),
+        (
+            "q2.xyz",
+            r#"Time=1.5 comment="restart Time=99, \"step=3\"""#,
+            None,
+            Some(1.5),
+        ),
+        ("q3.xyz", "Timestep=7 Time=0.25fs", Some(7), Some(0.25)),
+        (
+            "q4.xyz",
+            "Properties=species:S:1:pos:R:3 Time=\"1.5 ps\"",
+            None,
+            Some(1.5),
+        ),
+    ] {
+        let path = write(
+            dir.path(),
+            name,
+            format!("1\n{comment}\nC 0 0 0\n").as_bytes(),
+        );
+        let dump = DumpFile::open(&path).unwrap();
+        let frame = dump
+            .read_frame(0, &ReadOptions::default(), &NoProgress)
+            .unwrap_or_else(|e| panic!("{comment}: {e}"));
+        assert_eq!((frame.timestep, frame.time), (timestep, time), "{comment}");
+    }
     assert_error(
         "prop.xyz",
         "1\nProperties=species:S:1:pos:R\nC 0 0 0\n",

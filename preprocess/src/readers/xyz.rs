@@ -134,9 +134,8 @@ impl Index {
                         // A frame's comment line where a count should be: the frame before
                         // holds fewer atom lines than it announces, and the line above this
                         // one, taken for its last atom, is this frame's count.
-                        let comment = [&b"Properties="[..], b"Lattice=", b"pbc="]
-                            .iter()
-                            .any(|k| line.windows(k.len()).any(|w| w == *k));
+                        // (Any `key=value` line: `step=2` as much as `Properties=`.)
+                        let comment = line.contains(&b'=');
                         let short = match announced {
                             Some((count_at, n)) if comment => format!(
                                 "; this reads as a frame's comment line: frame {} (its count at \
@@ -327,7 +326,8 @@ impl Index {
         // is taken.
         // (Counted as `key=` in the text: a plain XYZ comment's free words, which the
         // pairs hold as flags, may repeat.)
-        let lower = comment_text.to_ascii_lowercase();
+        // (Keys inside a quoted value, `info="restarted from step=5"`, are its text.)
+        let lower = unquoted(&comment_text.to_ascii_lowercase());
         // (`Timestep=` and `step=` both give the timestep: one of them, once.)
         let given_times = |k: &str| {
             let k = k.to_ascii_lowercase();
@@ -415,7 +415,7 @@ impl Index {
         let properties = get("Properties");
         let time = match pairs.iter().find(|(k, _)| k.eq_ignore_ascii_case("Time")) {
             None => None,
-            Some((key, v)) => match comment_value(v).parse::<f64>() {
+            Some((key, v)) => match time_value(comment_value(v)) {
                 Ok(t) if t.is_finite() => Some(t),
                 // Without `Properties` the comment line is free text (`MD step 5
                 // time=1.5fs`): a `time` in it that is no number is no time, and must not
@@ -633,6 +633,46 @@ fn whole_number(v: &str) -> Option<u64> {
 
 /// A comment-line value as a number is written: trimmed, less the comma that ends it in
 /// CP2K's `i = 0, time = 0.000, E = -17.16`.
+/// A `Time` value: a number, also with a unit written after it (`0.25fs`, `1.5 ps`),
+/// which is left out.
+fn time_value(v: &str) -> Result<f64, std::num::ParseFloatError> {
+    let unit_at = v
+        .char_indices()
+        .rev()
+        .take_while(|(_, c)| c.is_ascii_alphabetic())
+        .last()
+        .map(|(i, _)| i);
+    match unit_at {
+        // (Not `1e5` nor `inf`: a unit follows a number that parses alone.)
+        Some(i) if i > 0 && v[..i].trim_end().parse::<f64>().is_ok() => v[..i].trim_end().parse(),
+        _ => v.parse(),
+    }
+}
+
+/// `text` with what double quotes enclose (a backslash escapes the next character)
+/// blanked out, quotes included, so that words inside a quoted value are not read as
+/// keys.
+fn unquoted(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let (mut inside, mut escaped) = (false, false);
+    for c in text.chars() {
+        let blank = inside || c == '"';
+        if inside && !escaped && c == '"' {
+            inside = false;
+        } else if !inside && c == '"' {
+            inside = true;
+        }
+        escaped = inside && !escaped && c == '\\';
+        // One byte per byte, so that positions in the text stay positions here.
+        if blank {
+            out.extend(std::iter::repeat_n(' ', c.len_utf8()));
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
 fn comment_value(v: &str) -> &str {
     let v = v.trim();
     v.strip_suffix(',').unwrap_or(v)
