@@ -76,11 +76,20 @@ pub fn remove_on_interrupt(
     outputs_dir: &Path,
     temp_owner: impl Fn(&str) -> Option<u32> + Send + 'static,
 ) {
-    static INSTALL: Once = Once::new();
     TARGETS
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .push(work_dir.to_path_buf());
+    remove_partials_on_interrupt(outputs_dir, temp_owner);
+}
+
+/// Removes this process's temporary outputs in `outputs_dir` if the program is
+/// interrupted, as [`remove_on_interrupt`] does, for a command with no working directory.
+pub fn remove_partials_on_interrupt(
+    outputs_dir: &Path,
+    temp_owner: impl Fn(&str) -> Option<u32> + Send + 'static,
+) {
+    static INSTALL: Once = Once::new();
     PARTIALS
         .lock()
         .unwrap_or_else(|e| e.into_inner())

@@ -1583,6 +1583,55 @@ fn sndfs_sampled_once_shade_without_the_particles() {
 }
 
 /// Names in `dir` that an out-of-core conversion leaves only while it runs.
+/// `generate` writes its dump under a temporary name and renames it when complete:
+/// stopped half way (Ctrl-C), it leaves nothing, not a partial dump under the output's
+/// name that a batch would read as a run still writing it.
+#[test]
+fn an_interrupted_generate_leaves_no_partial_dump() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("big.lammpstrj");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+        .args(["generate", "crater", "-n", "100000000", "-o", s(&out)])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Interrupted once its temporary file holds some text.
+    let started = std::time::Instant::now();
+    let written = || {
+        std::fs::read_dir(dir.path())
+            .unwrap()
+            .flatten()
+            .any(|e| e.metadata().is_ok_and(|m| m.len() > 0))
+    };
+    while !written() {
+        assert!(started.elapsed().as_secs() < 60, "generate wrote nothing");
+        assert!(child.try_wait().unwrap().is_none(), "generate ended early");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    assert!(
+        !out.exists(),
+        "the dump is written under its name as it is generated"
+    );
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let done = child.wait_with_output().unwrap();
+    assert_eq!(done.status.code(), Some(130));
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().flatten().collect();
+    assert!(left.is_empty(), "{left:?}");
+    // Complete, it is there under its name alone.
+    generate(&["crater", "-n", "2000"], &out);
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["big.lammpstrj"]);
+}
+
 fn working_entries(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
         .unwrap()

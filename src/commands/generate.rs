@@ -215,13 +215,33 @@ fn generate_text(
             b.set_position(n);
         }
     };
-    let mut file = std::fs::File::create(output)
+    // Written to a temporary file beside the output and renamed into place when
+    // complete: a generation stopped half way leaves no dump under the output's name
+    // (which a batch would take for a run still writing it), and Ctrl-C removes it.
+    let dir = match output.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let owner_name = name.clone();
+    crate::interrupt::remove_partials_on_interrupt(&dir, move |file| {
+        mdlod_format::writer::temp_file_owner(file, &owner_name)
+    });
+    let mut file = mdlod_format::writer::output_file_builder()
+        .prefix(&mdlod_format::writer::temp_prefix(&name))
+        .suffix(".tmp")
+        .tempfile_in(&dir)
         .with_context(|| format!("cannot create {}", output.display()))?;
     let summary = match format {
-        OutputFormat::Xyz => write_xyz(opts, &mut file, progress),
-        _ => write_lammps_dump(opts, &mut file, progress),
+        OutputFormat::Xyz => write_xyz(opts, file.as_file_mut(), progress),
+        _ => write_lammps_dump(opts, file.as_file_mut(), progress),
     }
     .with_context(|| format!("cannot write {}", output.display()))?;
+    file.persist(output)
+        .with_context(|| format!("cannot write {}", output.display()))?;
     if let Some(b) = bar {
         b.finish_and_clear();
     }
