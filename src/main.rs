@@ -244,9 +244,16 @@ fn main() -> std::process::ExitCode {
                 .take_while(|a| a != "--")
                 .any(|a| a == "--json");
             if json && e.use_stderr() {
+                // The message up to the usage, on one line (the missing arguments are
+                // listed below its first line).
                 let rendered = e.render().to_string();
-                let first = rendered.lines().next().unwrap_or_default();
-                let mut message = first.strip_prefix("error: ").unwrap_or(first).to_string();
+                let message: Vec<&str> = rendered
+                    .lines()
+                    .take_while(|l| !l.trim().is_empty())
+                    .map(str::trim)
+                    .collect();
+                let first = message.join(" ");
+                let mut message = first.strip_prefix("error: ").unwrap_or(&first).to_string();
                 if let Some(tip) = tip {
                     message.push_str(&format!(" (tip: {tip})"));
                 }

@@ -11030,6 +11030,21 @@ fn json_output_gives_one_object_per_result() {
         v["ok"] == false && v["error"].as_str().unwrap().contains("--no-such-option"),
         "{v}"
     );
+    // A missing argument is named in the object, as the lines under clap's first say.
+    for (args, named) in [
+        (&["verify", "--json"][..], "<FILE>"),
+        (&["batch", s(&file), "--json"], "--output"),
+    ] {
+        let o = mdlod(args);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let e = v["error"].as_str().unwrap();
+        assert!(
+            e.starts_with("the following required arguments were not provided:")
+                && e.contains(named)
+                && !e.contains("Usage"),
+            "{v}"
+        );
+    }
     // A damaged file: `ok` false with the error, and the failure's status.
     let bad = dir.path().join("bad.mdlod");
     let mut bytes = std::fs::read(&file).unwrap();
