@@ -4076,7 +4076,23 @@ fn a_label_shows_each_frames_values_in_its_corner() {
             .collect::<Vec<u8>>()
     };
     assert_ne!(corner("f-0.png"), corner("f-1.png"));
-    assert!(!out.contains("records no time"), "{out}");
+    assert!(
+        !out.contains("records no time") && !out.contains("replaces"),
+        "{out}"
+    );
+    // `--dt` over recorded times (a run of variable timestep records the true ones):
+    // said, naming them.
+    let out = ok(&[
+        &["render", s(&movie), "-o", s(&d("g-%d.png"))][..],
+        &base,
+        &["--label", "t={time}", "--dt", "1"],
+    ]
+    .concat());
+    assert!(
+        out.contains("--label: --dt 1 replaces the recorded times, ")
+            && out.contains("(leave out --dt to show the recorded time)"),
+        "{out}"
+    );
     // A dump without a time: said, and `?` drawn.
     std::fs::write(
         d("nt.dump"),

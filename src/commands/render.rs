@@ -1077,6 +1077,18 @@ fn write_labels(
         };
         println!("  note: --label: the file records no {field}: {{{field}}} shows ?{hint}");
     }
+    // A recorded time replaced (a run of variable timestep records the true one).
+    let recorded: Vec<f64> = movie.iter().filter_map(|v| v.time).collect();
+    if let (Some(dt), Some(first), Some(last)) = (args.dt, recorded.first(), recorded.last()) {
+        let times = match recorded.len() {
+            1 => format!("time {first}"),
+            _ => format!("times, {first} to {last}"),
+        };
+        println!(
+            "  note: --label: --dt {dt} replaces the recorded {times}: {{time}} shows the \
+             timestep times {dt} (leave out --dt to show the recorded time)"
+        );
+    }
     if !glyphs.is_empty() {
         let list: Vec<String> = glyphs.iter().map(|c| format!("{c:?}")).collect();
         println!(
