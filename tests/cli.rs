@@ -836,7 +836,11 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
             String::from_utf8_lossy(&run.stderr)
         );
         assert!(
-            text.contains(&format!("in shard {} of 3", (id - 1) / 2)),
+            text.contains(&format!(
+                "in shard {} of 3 (from the Slurm job array's variables; --shard 0/1 converts \
+                 every frame)",
+                (id - 1) / 2
+            )),
             "{text}"
         );
     }
@@ -849,6 +853,22 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
     );
     let merged = ok(&["batch", "--merge", s(&out)]);
     assert!(merged.contains("merged 6 frames"), "{merged}");
+    // A whole run's directory: nothing to merge, which is no failure (a pipeline's merge
+    // step after any batch).
+    let whole = dir.path().join("whole");
+    ok(&["batch", s(&input), "-o", s(&whole)]);
+    let again = ok(&["batch", "--merge", s(&whole), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&again).unwrap();
+    assert!(
+        v["ok"] == true && v["merged"] == 0 && v["frames"] == 6,
+        "{again}"
+    );
+    let again = ok(&["batch", "--merge", s(&whole)]);
+    assert!(
+        again.contains("nothing to merge: no shard manifests beside")
+            && again.contains("which lists 6 frames"),
+        "{again}"
+    );
     // A directory that is not there is named as such, with what --merge takes.
     let err = fails(&["batch", "--merge", s(&dir.path().join("elsewhere"))]);
     assert!(

@@ -3926,6 +3926,12 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
             shards.push((i, n, e.path()));
         }
     }
+    // Not while shards (or a whole run) still write the directory: they hold its lock,
+    // and a merge now would join manifests not yet complete ([`BatchError::Busy`]).
+    let _locks = match shards.is_empty() {
+        true => Vec::new(),
+        false => lock_batch(out_dir, None)?,
+    };
     let manifest_err = |path: &Path, message: String| BatchError::Manifest {
         path: path.to_path_buf(),
         message,
@@ -4506,6 +4512,7 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
             }
         }
     }
+    let running = batch_running(dir);
     let mut listed = std::collections::HashSet::new();
     let mut kept_unlisted = std::collections::BTreeSet::new();
     let mut entries = Vec::new();
@@ -4523,9 +4530,18 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
         }
         if let Some(expected) = m.expected_frames {
             if (m.frames.len() as u64) < expected {
+                // (A batch still writing the directory says who it is.)
+                let why = match &running {
+                    Some(who) => format!(
+                        "a batch is writing the directory now ({who}): verify it once that \
+                         ends"
+                    ),
+                    None => "that run has not finished (rerun it: it converts only what is \
+                             missing)"
+                        .to_string(),
+                };
                 check.problems.push(format!(
-                    "{name} lists {} of the {expected} frames its run expects: that run has \
-                     not finished (rerun it: it converts only what is missing)",
+                    "{name} lists {} of the {expected} frames its run expects: {why}",
                     m.frames.len()
                 ));
             }

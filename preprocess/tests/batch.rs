@@ -1571,6 +1571,37 @@ fn a_batch_directory_verifies_against_its_manifest() {
         c.problems.len() == 1 && c.problems[0].contains("shard 1 of 2 wrote no manifest"),
         "{c:?}"
     );
+    // No merge while a shard still writes the directory (it holds the batch lock
+    // shared): busy, as a whole run beside it is.
+    {
+        let lock = std::fs::File::open(sharded.join(".batch.lock")).unwrap();
+        lock.try_lock_shared().unwrap();
+        let e = merge(&sharded).unwrap_err();
+        assert!(matches!(e, BatchError::Busy { .. }), "{e}");
+        // A shard's manifest short of its frames while it runs: said as running, not
+        // as a run to rerun.
+        let zero = sharded.join("dataset.shard-0-of-2.json");
+        let mut v: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&zero).unwrap()).unwrap();
+        v["expected_frames"] = 4.into();
+        std::fs::write(&zero, serde_json::to_vec(&v).unwrap()).unwrap();
+        let c = verify_dir(&sharded, &NoProgress).unwrap();
+        assert!(
+            c.problems.iter().any(|p| p.contains(
+                "lists 3 of the 4 frames its run expects: a batch is writing the directory now \
+                 (shards of a batch)"
+            )),
+            "{c:?}"
+        );
+        drop(lock);
+        let c = verify_dir(&sharded, &NoProgress).unwrap();
+        assert!(
+            c.problems
+                .iter()
+                .any(|p| p.contains("4 frames its run expects: that run has not finished")),
+            "{c:?}"
+        );
+    }
     // Two shardings side by side (a task resubmitted alone as shard 0 of 1 beside the
     // two shards): each frame file is verified and counted once, not once per manifest
     // listing it.

@@ -221,6 +221,34 @@ pub fn run(args: Args) -> Result<()> {
         crate::json_output();
     }
     if let Some(dir) = &args.merge {
+        // A directory of a whole run (or merged, its shard manifests since removed):
+        // nothing to merge, which a pipeline's merge step run after any batch must not
+        // take for a failure.
+        let manifest = dir.join(mdlod_preprocess::batch::MANIFEST);
+        let sharded = std::fs::read_dir(dir).is_ok_and(|entries| {
+            entries.flatten().any(|e| {
+                mdlod_preprocess::batch::is_shard_manifest(&e.file_name().to_string_lossy())
+            })
+        });
+        if !sharded && manifest.is_file() {
+            let m = mdlod_preprocess::batch::read_manifest(dir)?;
+            println!(
+                "nothing to merge: no shard manifests beside {}, which lists {} frame{}",
+                manifest.display(),
+                m.frames.len(),
+                if m.frames.len() == 1 { "" } else { "s" },
+            );
+            if args.json {
+                crate::print_json(serde_json::json!({
+                    "ok": true,
+                    "manifest": manifest.display().to_string(),
+                    "merged": 0,
+                    "frames": m.frames.len(),
+                    "missing": m.failed.len(),
+                }));
+            }
+            return Ok(());
+        }
         let m = merge(dir)?;
         println!(
             "merged {} frame{} into {}",
@@ -240,6 +268,7 @@ pub fn run(args: Args) -> Result<()> {
                 "ok": true,
                 "manifest": dir.join(mdlod_preprocess::batch::MANIFEST).display().to_string(),
                 "merged": m.frames.len(),
+                "frames": m.frames.len(),
                 "missing": m.failed.len(),
             }));
         }
@@ -581,8 +610,14 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
         ),
     };
     // A shard's share of the frames; without shards every frame is this run's.
+    // (Named where it came from when a Slurm job array gave it: a rule that hands each
+    // task a whole trajectory of its own converts only a share of it.)
     let share = opts.shard.map_or(String::new(), |(i, n)| {
-        format!(", {} in shard {i} of {n}", report.frames_in_shard)
+        let from = match args.shard {
+            None => " (from the Slurm job array's variables; --shard 0/1 converts every frame)",
+            Some(_) => "",
+        };
+        format!(", {} in shard {i} of {n}{from}", report.frames_in_shard)
     });
     // Failed before they could be listed (an input that holds no dump, a header read
     // short of its timestep): frames of the inputs too, so that the counts add up.
