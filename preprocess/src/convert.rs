@@ -860,6 +860,9 @@ pub(crate) fn position_notes(
     notes.extend(crate::species::bead_name_note(
         species.iter().map(|s| (s.name.as_str(), s.radius)),
     ));
+    notes.extend(crate::species::lower_case_type_note(
+        species.iter().map(|s| (s.name.as_str(), s.radius)),
+    ));
     // Thousands of species: ids (of molecules, residues, clusters) read as species.
     if species.len() > MANY_SPECIES {
         notes.push(format!(

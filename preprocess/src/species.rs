@@ -453,7 +453,9 @@ pub fn bead_name_note<'a>(species: impl IntoIterator<Item = (&'a str, f32)>) -> 
                 .iter()
                 .find(|(s, _, _)| s.eq_ignore_ascii_case(n))?;
             let own_radius = (radius - r).abs() > 1e-6 * r.max(1.0);
-            (!own_radius && (n != *symbol || n == "W")).then_some((n, *symbol))
+            // (Lower-case names have a note of their own, [`lower_case_type_note`].)
+            (!own_radius && !lower_case_type(n) && (n != *symbol || n == "W"))
+                .then_some((n, *symbol))
         })
         .collect();
     if doubtful.is_empty() {
@@ -476,6 +478,52 @@ pub fn bead_name_note<'a>(species: impl IntoIterator<Item = (&'a str, f32)>) -> 
         shown.join(", "),
         symbols.join(", "),
         names.join(", "),
+    ))
+}
+
+/// Whether `name` is written as force fields write atom types and no element symbol is:
+/// two letters or more, all lower case (GAFF's `ca`, `os`, `ho`).
+fn lower_case_type(name: &str) -> bool {
+    name.len() >= 2 && name.bytes().all(|b| b.is_ascii_lowercase())
+}
+
+/// A note on species names of two letters or more written all in lower case that read
+/// as elements (`ca` as calcium, `os` as osmium, `ho` as holmium): element symbols are
+/// never written so, AMBER and GAFF atom types are (`ca` an aromatic carbon, `os` an
+/// ether oxygen, `ho` a hydroxyl hydrogen). A species given its own radius is left out.
+pub fn lower_case_type_note<'a>(
+    species: impl IntoIterator<Item = (&'a str, f32)>,
+) -> Option<String> {
+    let doubtful: Vec<(&str, &str)> = species
+        .into_iter()
+        .filter(|(n, _)| lower_case_type(n))
+        .filter_map(|(n, radius)| {
+            let (symbol, r, _) = ELEMENTS
+                .iter()
+                .find(|(s, _, _)| s.eq_ignore_ascii_case(n))?;
+            let own_radius = (radius - r).abs() > 1e-6 * r.max(1.0);
+            (!own_radius).then_some((n, *symbol))
+        })
+        .collect();
+    let (first, _) = doubtful.first()?;
+    let shown: Vec<String> = doubtful
+        .iter()
+        .take(4)
+        .map(|(n, symbol)| format!("{n} as {symbol}"))
+        .collect();
+    let more = if doubtful.len() > 4 { ", ..." } else { "" };
+    Some(format!(
+        "species {}{more}: read as elements ({}{more}), though element symbols are not \
+         written in lower case and force-field atom types are (GAFF's ca is an aromatic \
+         carbon, os an ether oxygen, ho a hydroxyl hydrogen): --species-name {first}=C draws \
+         one as the element it is, and --radius NAME=R gives its size",
+        doubtful
+            .iter()
+            .take(4)
+            .map(|(n, _)| *n)
+            .collect::<Vec<_>>()
+            .join(", "),
+        shown.join(", "),
     ))
 }
 
@@ -1061,6 +1109,24 @@ mod tests {
         assert_eq!(bead_name_note(at(&["C", "H", "O", "Ow", "Hw"])), None);
         assert_eq!(bead_name_note(at(&["Cu", "vacancy"])), None);
         assert_eq!(bead_name_note(at(&["A", "B"])), None);
+        // GAFF's lower-case atom types that read as elements are noted, all of them,
+        // whatever the others; element symbols and lower-case names of no element are not.
+        let gaff = at(&[
+            "c3", "hc", "ca", "ha", "o", "n", "h", "c", "os", "oh", "ho", "cl",
+        ]);
+        let note = lower_case_type_note(gaff.clone()).expect("a note");
+        assert!(
+            note.starts_with(
+                "species ca, os, ho, cl: read as elements (ca as Ca, os as Os, ho as Ho, cl as \
+                 Cl)"
+            ) && note.contains("--species-name ca=C"),
+            "{note}"
+        );
+        assert_eq!(bead_name_note(gaff), None);
+        assert_eq!(
+            lower_case_type_note(at(&["Ca", "Os", "CA", "c3", "h"])),
+            None
+        );
     }
 
     /// HOOMD-blue names types `A`, `B`, `C`: beside `A` (no element), `B` and `C` are
