@@ -3372,7 +3372,7 @@ fn batch_skips_an_empty_frame_saying_which_and_convert_names_it() {
     let d = dir.path().join("d");
     let skipped = format!(
         "{}: frame 1 (timestep 100) has no particles: skipped, as a .mdlod file needs at \
-         least one (not written, not in the manifest)\n",
+         least one (not written; listed as empty in the manifest)\n",
         s(&input)
     );
     let out = ok(&["batch", s(&input), "-o", s(&d)]);
@@ -3382,6 +3382,17 @@ fn batch_skips_an_empty_frame_saying_which_and_convert_names_it() {
         "{out}"
     );
     assert_eq!(batch_frames(&d), ["frame-0.mdlod", "frame-200.mdlod"]);
+    // `info` of the directory names it, in text and JSON.
+    let info = ok(&["info", s(&d)]);
+    assert!(
+        info.contains(
+            "empty        1 frame without particles, not converted (a .mdlod file needs one): \
+             timestep 100"
+        ),
+        "{info}"
+    );
+    let v: serde_json::Value = serde_json::from_str(&ok(&["info", s(&d), "--json"])).unwrap();
+    assert_eq!(v["empty"][0]["timestep"], 100, "{v}");
     let again = ok(&["batch", s(&input), "-o", s(&d)]);
     assert!(again.starts_with(&skipped), "{again}");
     assert!(

@@ -185,6 +185,12 @@ pub struct Manifest {
     /// them. Absent when none failed.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub failed: Vec<FailedEntry>,
+    /// Frames without particles the run left out (a `.mdlod` file needs one): a box
+    /// emptied by the end of a run, a pour not started. Not among `frames` nor
+    /// expected; listed so that the trajectory's whole length is known. Absent when none
+    /// (and in manifests of earlier versions).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub empty: Vec<EmptyEntry>,
     /// Which frame of a timestep given twice the run converted (`--duplicate-timesteps`:
     /// `first` or `last`); absent for the default, which refuses them. Shards must agree:
     /// merged, others would mix a restart's frames with the abandoned run's.
@@ -209,6 +215,26 @@ impl Manifest {
         match self.failed.len() {
             k if k > 6 => format!("{} and {} more", named.join(", "), k - 6),
             _ => named.join(", "),
+        }
+    }
+}
+
+/// A frame of [`Manifest::empty`].
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EmptyEntry {
+    /// The frame's number in the batch: its timestep, else its position in the inputs.
+    pub timestep: u64,
+    /// The input and the frame's index in it.
+    pub input: String,
+    pub frame: u64,
+}
+
+impl From<&EmptyFrame> for EmptyEntry {
+    fn from(e: &EmptyFrame) -> EmptyEntry {
+        EmptyEntry {
+            timestep: e.number,
+            input: e.input.display().to_string(),
+            frame: e.frame as u64,
         }
     }
 }
@@ -422,7 +448,7 @@ impl std::fmt::Display for EmptyFrame {
         write!(
             f,
             " has no particles: skipped, as a .mdlod file needs at least one \
-             (not written, not in the manifest)"
+             (not written; listed as empty in the manifest)"
         )
     }
 }
@@ -3297,6 +3323,7 @@ pub fn batch(
         gone,
         unlisted,
         failed: Vec::new(),
+        empty: empty.iter().map(EmptyEntry::from).collect(),
         duplicates: match opts.duplicates {
             Duplicates::Error => None,
             Duplicates::First => Some("first".into()),
@@ -4002,6 +4029,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
     };
     let mut frames = Vec::new();
     let mut failed: Vec<FailedEntry> = Vec::new();
+    let mut empty: Vec<EmptyEntry> = Vec::new();
     let mut expected_total = Some(0u64);
     let mut settings = MergeSettings::default();
     let mut choices: Vec<(String, Option<String>)> = Vec::new();
@@ -4048,6 +4076,7 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
             .map(|(t, e)| t.saturating_add(e));
         frames.extend(m.frames);
         failed.extend(m.failed);
+        empty.extend(m.empty);
         gone.extend(m.gone.into_iter().map(|f| (path.to_path_buf(), f)));
         unlisted.extend(m.unlisted);
     }
@@ -4092,6 +4121,11 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         gone: Vec::new(),
         unlisted,
         failed,
+        empty: {
+            empty.sort_by_key(|e| e.timestep);
+            empty.dedup();
+            empty
+        },
         duplicates,
     };
     write_json(&out_dir.join(MANIFEST), &merged)?;
@@ -4819,6 +4853,11 @@ mod tests {
                 input: "run.dump".into(),
                 frame: 1,
                 reason: "cut".into(),
+            }],
+            empty: vec![EmptyEntry {
+                timestep: 2,
+                input: "run.dump".into(),
+                frame: 2,
             }],
             duplicates: Some("last".into()),
         };

@@ -766,7 +766,7 @@ fn an_empty_frame_is_skipped_reported_and_left_out_of_the_manifest() {
         empty[0].to_string(),
         format!(
             "{}: frame 1 (timestep 100) has no particles: skipped, as a .mdlod file needs at \
-             least one (not written, not in the manifest)",
+             least one (not written; listed as empty in the manifest)",
             src.display()
         )
     );
@@ -776,6 +776,13 @@ fn an_empty_frame_is_skipped_reported_and_left_out_of_the_manifest() {
         [0, 200]
     );
     assert_eq!(m.expected_frames, Some(2));
+    // Listed apart, so that the trajectory's length is known.
+    let listed_empty = vec![mdlod_preprocess::batch::EmptyEntry {
+        timestep: 100,
+        input: src.display().to_string(),
+        frame: 1,
+    }];
+    assert_eq!(m.empty, listed_empty);
     check_manifest(&out, &m);
     assert!(!out.join("frame-100.mdlod").exists());
     let r = batch(std::slice::from_ref(&src), &out, &opts(), &NoProgress).unwrap();
@@ -793,7 +800,10 @@ fn an_empty_frame_is_skipped_reported_and_left_out_of_the_manifest() {
         .unwrap();
     }
     let merged = merge(&sharded).unwrap();
-    assert_eq!((merged.frames, merged.expected_frames), (m.frames, Some(2)));
+    assert_eq!(
+        (merged.frames, merged.expected_frames, merged.empty),
+        (m.frames, Some(2), listed_empty)
+    );
 
     // An MMPLD frame with no lists: numbered by its position (MMPLD has no timesteps).
     let zl = dir.path().join("zerolists.mmpld");

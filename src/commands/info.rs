@@ -279,6 +279,10 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
                 "timestep": f.timestep, "input": f.input, "frame": f.frame, "reason": f.reason
             })).collect::<Vec<_>>(),
             "unreadable": unreadable,
+            // Frames without particles, left out.
+            "empty": m.empty.iter().map(|e| json!({
+                "timestep": e.timestep, "input": e.input, "frame": e.frame
+            })).collect::<Vec<_>>(),
             // Frames of deleted dumps converted with other settings: on disk, not listed.
             "unlisted": m.unlisted.iter().map(|f| json!({
                 "timestep": f.timestep, "file": f.file
@@ -397,6 +401,27 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
             if m.failed.len() == 1 { "" } else { "s" },
             m.failed_names(),
             dir.display()
+        );
+    }
+    if !m.empty.is_empty() {
+        let n = m.empty.len();
+        let steps: Vec<String> = m
+            .empty
+            .iter()
+            .take(6)
+            .map(|e| e.timestep.to_string())
+            .collect();
+        let more = if n > 6 {
+            format!(" and {} more", n - 6)
+        } else {
+            String::new()
+        };
+        println!(
+            "  empty        {n} frame{} without particles, not converted (a .mdlod file needs \
+             one): timestep{} {}{more}",
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "" } else { "s" },
+            steps.join(", ")
         );
     }
     if !m.unlisted.is_empty() {
