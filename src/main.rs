@@ -330,9 +330,9 @@ fn main() -> std::process::ExitCode {
                     .find_map(|c| match c.downcast_ref::<BatchError>()? {
                         BatchError::NamesUnused {
                             converted, skipped, ..
-                        } => {
-                            Some(serde_json::json!({ "converted": converted, "skipped": skipped }))
-                        }
+                        } => Some(
+                            serde_json::json!({ "converted": converted, "already_done": skipped }),
+                        ),
                         // (Still missing, as an interrupted batch counts them.)
                         BatchError::Incomplete {
                             converted, todo, ..

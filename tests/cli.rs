@@ -3043,7 +3043,7 @@ fn batch_refuses_a_radius_no_frame_can_hold_before_converting_anything() {
     assert!(!out.status.success());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(
-        (&v["ok"], &v["converted"], &v["skipped"]),
+        (&v["ok"], &v["converted"], &v["already_done"]),
         (&false.into(), &0.into(), &3.into()),
         "{v}"
     );
@@ -10915,7 +10915,10 @@ fn json_output_gives_one_object_per_result() {
         "c_pe",
         "--json",
     ]);
-    assert_eq!(j[0]["already_done"].as_u64(), Some(1));
+    assert_eq!(
+        (j[0]["already_done"].as_u64(), j[0]["to_convert"].as_u64()),
+        (Some(1), Some(0))
+    );
     let v = json(&["verify", s(&b), "--json"]);
     assert_eq!(
         (v[0]["ok"].as_bool(), v[0]["frames_ok"].as_u64()),

@@ -401,7 +401,7 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             let mut map = serde_json::Map::new();
             if let Some((converted, skipped, to_convert)) = handle.counts() {
                 map.insert("converted".into(), converted.into());
-                map.insert("skipped".into(), skipped.into());
+                map.insert("already_done".into(), skipped.into());
                 map.insert("to_convert".into(), to_convert.into());
             }
             map
@@ -662,6 +662,8 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             "empty": report.empty.len(),
             "left_for_rerun": report.incomplete.iter().map(ToString::to_string).collect::<Vec<_>>(),
             "failed": report.failed.iter().map(ToString::to_string).collect::<Vec<_>>(),
+            // Still missing, as a failed or interrupted batch counts them.
+            "to_convert": report.failed.len() + report.incomplete.len(),
             "duplicates": report.duplicates.len(),
             "at_a_time": report.jobs,
             "index": index_json(&report.index),
