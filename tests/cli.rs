@@ -155,7 +155,11 @@ fn info_json_has_the_promised_fields() {
         "Cu=1.3",
     ]);
     assert!(text.contains("max position error"), "{text}");
-    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&out), "--json"])).unwrap();
+    let line = ok(&["info", s(&out), "--json"]);
+    // One line, as every command's `--json` result.
+    assert_eq!(line.trim_end().lines().count(), 1, "{line}");
+    let json: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(json["ok"], true);
     for key in [
         "particles",
         "levels",

@@ -106,7 +106,7 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
             .collect();
         println!(
             "{}",
-            serde_json::to_string_pretty(&json!({
+            serde_json::to_string(&json!({
                 "ok": true,
                 "kind": "shards",
                 "merged": false,
@@ -292,7 +292,8 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
         let mut v = v;
         shortest_f32(&mut v["attribute"]);
         shortest_f32(&mut v["attributes"]);
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        v["ok"] = true.into();
+        println!("{}", serde_json::to_string(&v)?);
         return Ok(());
     }
     println!("{} (batch directory)", dir.display());
@@ -489,7 +490,9 @@ fn sndf_info(args: &Args) -> Result<()> {
             "view": view,
             "data_bytes": bytes,
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        let mut v = v;
+        v["ok"] = true.into();
+        println!("{}", serde_json::to_string(&v)?);
         return Ok(());
     }
     println!("{}", args.file.display());
@@ -644,7 +647,8 @@ pub fn run(args: Args) -> Result<()> {
                 s["count"] = json!(c);
             }
         }
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        v["ok"] = true.into();
+        println!("{}", serde_json::to_string(&v)?);
         return Ok(());
     }
     println!("{}", args.file.display());
