@@ -284,7 +284,8 @@ pub fn work_dir_context(parent: &std::path::Path, given: bool) -> String {
         if given {
             "the --temp-dir given"
         } else {
-            "the output's directory; --temp-dir names another"
+            "the output's directory, where the output is written too; --temp-dir moves the \
+             working files elsewhere, not the output"
         }
     )
 }
