@@ -11311,6 +11311,15 @@ fn a_diverging_map_over_values_of_one_sign() {
         out.contains("note: cool-warm is a diverging map, centred on 0, and c_pe is at or below 0"),
         "{out}"
     );
+    // On a log scale it has no 0 to centre on: said.
+    let out = run(&["--attribute-range", "-4:4", "--log-scale"]);
+    assert!(
+        out.contains(
+            "note: cool-warm is a diverging map, centred on 0, but --log-scale has no 0 nor \
+             negative values: c_pe's values at or below 0 all take its first colour"
+        ),
+        "{out}"
+    );
 }
 
 /// A number with a decimal comma gets a tip with the point, whichever option takes it.

@@ -2616,6 +2616,20 @@ pub fn run(mut args: Args) -> Result<()> {
                 Num(hi),
                 log_text(a, &opts.style, &args) + &white_text(&opts.style)
             );
+            // A diverging map on a log scale has no 0 to centre on: the values of both
+            // signs it is meant for lose their negative half to its first colour.
+            if matches!(args.style.colour_map, Some(ColourMapArg::CoolWarm))
+                && opts.style.log_scale
+                && a.min < 0.0
+                && log_applies(a, &opts.style)
+            {
+                println!(
+                    "  note: cool-warm is a diverging map, centred on 0, but --log-scale has no \
+                     0 nor negative values: {}'s values at or below 0 all take its first colour \
+                     (leave out --log-scale for a scale about 0)",
+                    a.name
+                );
+            }
             // A diverging map centred on 0 over values of one sign uses half of itself.
             let drawn = [a.min, a.max];
             if matches!(args.style.colour_map, Some(ColourMapArg::CoolWarm))
