@@ -1637,12 +1637,7 @@ fn an_interrupted_generate_leaves_no_partial_dump() {
         !out.exists(),
         "the dump is written under its name as it is generated"
     );
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let done = child.wait_with_output().unwrap();
+    let done = ctrl_c(child);
     assert_eq!(done.status.code(), Some(130));
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().flatten().collect();
     assert!(left.is_empty(), "{left:?}");
@@ -1654,6 +1649,16 @@ fn an_interrupted_generate_leaves_no_partial_dump() {
         .map(|e| e.file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(names, ["big.lammpstrj"]);
+}
+
+/// Sends `child` Ctrl-C (SIGINT) and waits for it to end.
+fn ctrl_c(child: std::process::Child) -> Output {
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    child.wait_with_output().unwrap()
 }
 
 fn working_entries(dir: &Path) -> Vec<String> {
@@ -1740,12 +1745,7 @@ fn out_of_core_conversion_ignores_the_memory_limit_and_cleans_up_on_ctrl_c() {
     // output.
     let out = dir.path().join("interrupted.mdlod");
     let child = convert_until_chunks_are_built(dir.path(), &input, &out);
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let done = child.wait_with_output().unwrap();
+    let done = ctrl_c(child);
     assert_eq!(
         done.status.code(),
         Some(130),

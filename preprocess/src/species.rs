@@ -448,37 +448,46 @@ pub fn bead_name_note<'a>(species: impl IntoIterator<Item = (&'a str, f32)>) -> 
     }
     let doubtful: Vec<(&str, &str)> = elements
         .iter()
-        .filter_map(|&(n, radius)| {
-            let (symbol, r, _) = ELEMENTS
-                .iter()
-                .find(|(s, _, _)| s.eq_ignore_ascii_case(n))?;
-            let own_radius = (radius - r).abs() > 1e-6 * r.max(1.0);
-            // (Lower-case names have a note of their own, [`lower_case_type_note`].)
-            (!own_radius && !lower_case_type(n) && (n != *symbol || n == "W"))
-                .then_some((n, *symbol))
-        })
+        .filter_map(|&(n, radius)| unsized_element(n, radius).map(|symbol| (n, symbol)))
+        // (Lower-case names have a note of their own, [`lower_case_type_note`].)
+        .filter(|&(n, symbol)| !lower_case_type(n) && (n != symbol || n == "W"))
         .collect();
+    let (shown, symbols, more) = read_as(&doubtful)?;
+    let names: Vec<&str> = others.iter().take(4).map(|(n, _)| *n).collect();
+    let others_more = if others.len() > 4 { ", ..." } else { "" };
+    Some(format!(
+        "species {shown}{more}: read as elements ({symbols}{more}) beside names that are \
+         none ({}{others_more}): if they are bead or force-field names (Martini's water W, \
+         ions NA and CL), --species-name to a name that is no element's makes one a label \
+         (a palette colour), and --radius NAME=R gives its size",
+        names.join(", "),
+    ))
+}
+
+/// The element symbol `name` reads as, where its species is drawn at that element's
+/// radius (not one of its own: `radius` differs where the user or the input gave one).
+fn unsized_element(name: &str, radius: f32) -> Option<&'static str> {
+    let (symbol, r, _) = ELEMENTS
+        .iter()
+        .find(|(s, _, _)| s.eq_ignore_ascii_case(name))?;
+    let own_radius = (radius - r).abs() > 1e-6 * r.max(1.0);
+    (!own_radius).then_some(*symbol)
+}
+
+/// The first four names of `doubtful` (name, element symbol) and what they read as
+/// (`ca as Ca, os as Os`), with `, ...` where there are more; `None` for none.
+fn read_as(doubtful: &[(&str, &str)]) -> Option<(String, String, &'static str)> {
     if doubtful.is_empty() {
         return None;
     }
-    let shown: Vec<&str> = doubtful.iter().take(4).map(|(n, _)| *n).collect();
+    let names: Vec<&str> = doubtful.iter().take(4).map(|(n, _)| *n).collect();
     let symbols: Vec<String> = doubtful
         .iter()
         .take(4)
         .map(|(n, symbol)| format!("{n} as {symbol}"))
         .collect();
     let more = if doubtful.len() > 4 { ", ..." } else { "" };
-    let names: Vec<&str> = others.iter().take(4).map(|(n, _)| *n).collect();
-    let others_more = if others.len() > 4 { ", ..." } else { "" };
-    Some(format!(
-        "species {}{more}: read as elements ({}{more}) beside names that are none \
-         ({}{others_more}): if they are bead or force-field names (Martini's water W, ions \
-         NA and CL), --species-name to a name that is no element's makes one a label (a \
-         palette colour), and --radius NAME=R gives its size",
-        shown.join(", "),
-        symbols.join(", "),
-        names.join(", "),
-    ))
+    Some((names.join(", "), symbols.join(", "), more))
 }
 
 /// Whether `name` is written as force fields write atom types and no element symbol is:
@@ -497,33 +506,15 @@ pub fn lower_case_type_note<'a>(
     let doubtful: Vec<(&str, &str)> = species
         .into_iter()
         .filter(|(n, _)| lower_case_type(n))
-        .filter_map(|(n, radius)| {
-            let (symbol, r, _) = ELEMENTS
-                .iter()
-                .find(|(s, _, _)| s.eq_ignore_ascii_case(n))?;
-            let own_radius = (radius - r).abs() > 1e-6 * r.max(1.0);
-            (!own_radius).then_some((n, *symbol))
-        })
+        .filter_map(|(n, radius)| unsized_element(n, radius).map(|symbol| (n, symbol)))
         .collect();
-    let (first, _) = doubtful.first()?;
-    let shown: Vec<String> = doubtful
-        .iter()
-        .take(4)
-        .map(|(n, symbol)| format!("{n} as {symbol}"))
-        .collect();
-    let more = if doubtful.len() > 4 { ", ..." } else { "" };
+    let (shown, symbols, more) = read_as(&doubtful)?;
+    let first = doubtful[0].0;
     Some(format!(
-        "species {}{more}: read as elements ({}{more}), though element symbols are not \
-         written in lower case and force-field atom types are (GAFF's ca is an aromatic \
-         carbon, os an ether oxygen, ho a hydroxyl hydrogen): --species-name {first}=C draws \
-         one as the element it is, and --radius NAME=R gives its size",
-        doubtful
-            .iter()
-            .take(4)
-            .map(|(n, _)| *n)
-            .collect::<Vec<_>>()
-            .join(", "),
-        shown.join(", "),
+        "species {shown}{more}: read as elements ({symbols}{more}), though element symbols \
+         are not written in lower case and force-field atom types are (GAFF's ca is an \
+         aromatic carbon, os an ether oxygen, ho a hydroxyl hydrogen): --species-name \
+         {first}=C draws one as the element it is, and --radius NAME=R gives its size",
     ))
 }
 
