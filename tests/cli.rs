@@ -7053,6 +7053,24 @@ fn a_transparent_background_is_a_png_with_alpha() {
         e.contains("a transparent background is drawn in the spheres, splat-over, density"),
         "{e}"
     );
+    // Nor white, where light added shows nothing; a colour map colours it over white.
+    let white = ["--mode", "splat", "--background", "white"];
+    let e = fails(&[&["render", s(&file), "-o", s(&png)][..], &white].concat());
+    assert!(
+        e.contains("--mode splat adds the splats' light to the background, and on white"),
+        "{e}"
+    );
+    ok(&[
+        &["render", s(&file), "-o", s(&png)][..],
+        &white,
+        &["--colour-map", "viridis"],
+    ]
+    .concat());
+    let (_, _, px) = read_png(&png);
+    assert!(
+        px.chunks(4).any(|p| p[..3] != [255, 255, 255]),
+        "splats show"
+    );
     // The iso-surface and the volume: alpha their opacity.
     for mode in ["iso", "density", "splat-over"] {
         ok(&[

@@ -2081,6 +2081,16 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
             );
         }
     }
+    // Additive splats add their light to the background: on white (a print figure's)
+    // every pixel is white already, and the image would be blank.
+    let white = parse_colour(background_text(args)).is_ok_and(|c| c.iter().all(|&v| v >= 0.999));
+    if args.mode == Mode::Splat && args.style.colour_map.is_none() && white {
+        anyhow::bail!(
+            "--mode splat adds the splats' light to the background, and on white nothing \
+             can show: give a dark --background, --colour-map (which colours the light over \
+             any background), or --mode splat-over (splats blended over it)"
+        );
+    }
     Ok(())
 }
 
