@@ -287,9 +287,20 @@ pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
         return decades;
     }
     let (a, b) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
-    (a..=b)
+    let within = |v: f64| v >= lo * (1.0 - 1e-9) && v <= hi * (1.0 + 1e-9);
+    let steps: Vec<f64> = (a..=b)
         .flat_map(|k| [1.0, 2.0, 5.0].map(|m| m * 10f64.powi(k)))
-        .filter(|&v| v >= lo * (1.0 - 1e-9) && v <= hi * (1.0 + 1e-9))
+        .filter(|&v| within(v))
+        .collect();
+    if steps.len() >= 2 {
+        return steps;
+    }
+    // A range within a factor of about two (0.3 to 0.5): round numbers evenly spaced,
+    // as a linear bar's, placed on the log axis.
+    let (linear, _) = linear_ticks(lo, hi, 4);
+    linear
+        .into_iter()
+        .filter(|&v| v > 0.0 && within(v))
         .collect()
 }
 
@@ -454,7 +465,7 @@ impl Legend {
 
 /// The least room between two labels under a bar, px: wider than a space, so that
 /// neighbours never read as one number (`5 6.57`).
-const LABEL_GAP: f32 = 10.0;
+const LABEL_GAP: f32 = 7.0;
 
 /// Baseline step of [`Legend::Text`]'s lines, px.
 const TEXT_ROW: f32 = 16.0;
@@ -1491,6 +1502,12 @@ mod tests {
         assert_eq!(t.len(), 3);
         assert_eq!(log_ticks(1e-3, 1e3).len(), 7);
         assert_eq!(log_ticks(2.0, 60.0), vec![2.0, 5.0, 10.0, 20.0, 50.0]);
+        // Within a factor of two, round numbers between the ends.
+        let narrow = log_ticks(0.3, 0.5);
+        assert!(
+            narrow.len() >= 3 && narrow.iter().all(|&v| (0.3..=0.5).contains(&v)),
+            "{narrow:?}"
+        );
         assert!(log_ticks(0.0, 1.0).is_empty());
     }
 
@@ -1547,6 +1564,17 @@ mod tests {
         }
         assert_eq!(labels, ["0.5", "1.0", "1.5", "2.0"]);
         assert!(svg.contains(">c_ke</text>") && svg.contains(">2.5</text>"));
+        // A tick a label's width and a gap past the end's label is labelled (500 beside
+        // 280, a gap of 8.7 px).
+        let info = mdlod_format::meta::AttributeInfo {
+            name: "v_temp".into(),
+            min: 280.1653,
+            max: 2029.0062,
+        };
+        let scale = AttributeScale::with_range(&info, None);
+        let range = [info.min, info.max];
+        let svg = colour_bar(ColourMap::Viridis, &scale, "v_temp", range, range).svg();
+        assert_eq!(ticks_of(&svg).1, ["500", "1000", "1500"]);
 
         // Log: decades, the middle one at the middle of the bar.
         let info = mdlod_format::meta::AttributeInfo {
