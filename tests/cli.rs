@@ -1098,7 +1098,7 @@ fn perspective_sndfs_are_binned_along_rays_and_earlier_files_are_noted() {
     let out = ok(&["info", s(&sndf)]);
     assert!(out.contains("binned along each texel's ray"), "{out}");
     let out = ok(&["info", s(&sndf), "--json"]);
-    assert!(out.contains(r#""normal_frame": "ray""#), "{out}");
+    assert!(out.contains(r#""normal_frame":"ray""#), "{out}");
     // As an earlier mdlod wrote it: no normal frame, version 1.0.
     let earlier = dir.path().join("earlier.sndf");
     let mut data = mdlod_format::sndf::SndfData::load(&sndf).unwrap();
@@ -1110,7 +1110,7 @@ fn perspective_sndfs_are_binned_along_rays_and_earlier_files_are_noted() {
     assert!(out.contains(note) && out.contains("70°"), "{out}");
     assert!(ok(&["info", s(&earlier)]).contains(note));
     let out = ok(&["info", s(&earlier), "--json"]);
-    assert!(out.contains(r#""normal_frame": "camera""#), "{out}");
+    assert!(out.contains(r#""normal_frame":"camera""#), "{out}");
     data.header.view = serde_json::json!({"version": 1, "fov_y_deg": 30, "distance": 50});
     data.save(&earlier).unwrap();
     let out = ok(&["shade", s(&earlier), "-o", s(&png)]);

@@ -711,7 +711,7 @@ pub enum BatchError {
     /// An input some of whose frames give a timestep and some none: numbered by their
     /// position, the frames without one would fall among the others out of order.
     #[error(
-        "{}: {with} give a timestep, but {without} give none: a batch orders frames by \
+        "{}: {with} a timestep, but {without} none: a batch orders frames by \
          timestep and numbers those without one by their position, which would put them \
          out of order; give every frame of the input a timestep (`Timestep=` or `step=` \
          in an XYZ comment line), or none",
@@ -1457,15 +1457,19 @@ fn entry_of(
     }
 }
 
-/// Frames named by their indices: `frame 3`, `frames 0 and 3`, `frames 0, 1, 2, 5 and 7
-/// more`.
+/// Frames named by their indices, with the verb "give": `frame 3 gives`, `frames 0 and 3
+/// give`, `frames 0, 1, 2, 5 and 7 more give`.
 fn frames_text(frames: &[usize]) -> String {
     const NAMED: usize = 4;
     let named: Vec<String> = frames.iter().take(NAMED).map(|k| k.to_string()).collect();
     match frames.len() {
-        1 => format!("frame {}", named[0]),
-        n if n <= NAMED => format!("frames {} and {}", named[..n - 1].join(", "), named[n - 1]),
-        n => format!("frames {} and {} more", named.join(", "), n - NAMED),
+        1 => format!("frame {} gives", named[0]),
+        n if n <= NAMED => format!(
+            "frames {} and {} give",
+            named[..n - 1].join(", "),
+            named[n - 1]
+        ),
+        n => format!("frames {} and {} more give", named.join(", "), n - NAMED),
     }
 }
 
@@ -2536,8 +2540,11 @@ pub fn batch(
         let count = dump.frame_count();
         let (with, without): (Vec<usize>, Vec<usize>) =
             (0..count).partition(|&k| dump.frame_timestep(k).is_some());
+        // (A frame whose timestep is no whole number, `Timestep=x`, is numbered by its
+        // position with a note of its own.)
         let without: Vec<usize> = without
             .into_iter()
+            .filter(|&k| dump.unread_timestep(k).is_none())
             .filter(|&k| !(k + 1 == count && dump.frame_info(k).is_err_and(|e| e.cut_short())))
             .collect();
         if !lammps && !with.is_empty() && !without.is_empty() {

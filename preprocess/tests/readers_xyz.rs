@@ -358,8 +358,8 @@ fn properties_without_positions_say_what_names_them() {
 }
 
 /// A plain XYZ comment line is free text: CP2K's `i = 0, time = 0.000, E = ...` gives
-/// time 0 (its comma ends the value), and another tool's `time=1.5fs` or `step 5` is no
-/// time or timestep, not an error.
+/// time 0 (its comma ends the value), another tool's `time=1.5fs` the time 1.5 (its unit
+/// left out), and `step 5` no timestep, not an error.
 #[test]
 fn free_text_comment_lines_do_not_stop_a_conversion() {
     let dir = tempfile::tempdir().unwrap();
@@ -379,9 +379,9 @@ fn free_text_comment_lines_do_not_stop_a_conversion() {
     assert_eq!(dump.frame_timestep(0), None);
     assert_eq!(dump.frame_timestep(1), Some(6));
     let f = read_k(&path, 0, None);
-    assert_eq!((f.time, f.timestep, f.len()), (None, None, 1));
+    assert_eq!((f.time, f.timestep, f.len()), (Some(1.5), None, 1));
     let f = read_k(&path, 1, None);
-    assert_eq!((f.time, f.timestep), (None, Some(6)));
+    assert_eq!((f.time, f.timestep), (Some(2.0), Some(6)));
 
     // The words of a cell's keys in free text give no cell.
     let words = "1\nCu slab, no lattice or origin given, pbc off\nCu 0 0 0\n";
@@ -391,19 +391,20 @@ fn free_text_comment_lines_do_not_stop_a_conversion() {
 }
 
 /// In extended XYZ (`Properties=`) the comment line is `key=value` pairs: a `Time` that is
-/// no number is an error naming the key as the file spells it.
+/// no number (nor a number with its unit after it, `1.5fs`) is an error naming the key as
+/// the file spells it.
 #[test]
 fn extended_xyz_refuses_a_time_that_is_no_number_naming_its_key() {
     let dir = tempfile::tempdir().unwrap();
     for key in ["time", "Time", "TIME"] {
-        let text = format!("1\nProperties=species:S:1:pos:R:3 {key}=1.5fs\nAr 0 0 0\n");
+        let text = format!("1\nProperties=species:S:1:pos:R:3 {key}=fs1.5\nAr 0 0 0\n");
         let path = write(dir.path(), "ext.xyz", &text);
         let e = DumpFile::open(&path)
             .and_then(|d| d.read_frame(0, &ReadOptions::default(), &NoProgress))
             .expect_err("a non-numeric time read")
             .to_string();
         assert!(
-            e.contains("ext.xyz:2:") && e.contains(&format!("`{key}` is not a number: `1.5fs`")),
+            e.contains("ext.xyz:2:") && e.contains(&format!("`{key}` is not a number: `fs1.5`")),
             "{e}"
         );
     }

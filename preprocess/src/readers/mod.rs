@@ -1051,16 +1051,22 @@ impl DumpFile {
     /// its `particles`; a dump's `diameter` column beside the `radius` column read as the
     /// particles' sizes; the last frame of a text dump whose last line has no line end
     /// ([`DumpFile::ends_mid_line`]).
+    /// Frame `k`'s timestep key whose value is no whole number, as written
+    /// (`Timestep=x` in an XYZ comment line): the frame is numbered by its position.
+    pub fn unread_timestep(&self, k: usize) -> Option<&str> {
+        match &self.index {
+            Index::Xyz(x) => x.unread_timestep(k),
+            _ => None,
+        }
+    }
+
     pub fn frame_notes(&self, k: usize, read: &ReadOptions) -> Vec<String> {
         let mut notes = Vec::new();
         if let Index::Raw(r) = &self.index {
             notes.extend(r.notes().iter().cloned());
         }
         // A timestep that is no whole number, which the frame's position stands in for.
-        if let Some(v) = match &self.index {
-            Index::Xyz(x) => x.unread_timestep(k),
-            _ => None,
-        } {
+        if let Some(v) = self.unread_timestep(k) {
             notes.push(format!(
                 "{}: frame {k}'s comment line gives `{v}`, no whole number: the frame is \
                  numbered by its position, {k}",

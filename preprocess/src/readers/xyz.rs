@@ -13,9 +13,11 @@
 //!   given, as the extended-XYZ convention says), `Time=` the time, and `Timestep=` or
 //!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes) the timestep. Spaces
 //!   around `=` and a comma ending a number are allowed, as CP2K writes them
-//!   (`i = 0, time = 0.000, E = -17.16`). A timestep that is no whole number (`1e2` is
-//!   one) is none, with a note; so is a time without `Properties`, where the line is free
-//!   text (`MD step 5 time=1.5fs`); with it, a `Time` that is no number is an error.
+//!   (`i = 0, time = 0.000, E = -17.16`), and a unit written after a time's number
+//!   (`Time=1.5fs`) is left out. A timestep that is no whole number (`1e2` is one) is
+//!   none, with a note; so is a time that is no number without `Properties`, where the
+//!   line is free text; with it, a `Time` that is no number is an error. Keys inside a
+//!   quoted value (`info="restarted from step=5"`) are that value's text.
 //!   `Properties=name:type:count:...` names the columns in order; types `S`, `R`, `I`, `L`.
 //!   Without `Properties` the columns are `species:S:1:pos:R:3` followed by whatever extra
 //!   columns the first atom line has, named `col5`, `col6`, ... (1-based position).
@@ -418,7 +420,7 @@ impl Index {
             Some((key, v)) => match time_value(comment_value(v)) {
                 Ok(t) if t.is_finite() => Some(t),
                 // Without `Properties` the comment line is free text (`MD step 5
-                // time=1.5fs`): a `time` in it that is no number is no time, and must not
+                // time=later`): a `time` in it that is no number is no time, and must not
                 // stop a conversion. Extended XYZ promises `key=value` pairs.
                 _ if properties.is_none() => None,
                 _ => {
