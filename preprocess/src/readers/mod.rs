@@ -2795,6 +2795,13 @@ fn text_capacity(compressed: usize, trailer: usize, take: u64) -> usize {
         .min(usize::try_from(take).unwrap_or(usize::MAX))
 }
 
+/// The capacity a text buffer of `capacity` bytes grows to when it must hold `needed`:
+/// twice its capacity (at least 1 MiB), but never past `cap` (the most the reader lets
+/// through), nor less than `needed`.
+fn text_growth(capacity: usize, needed: usize, cap: usize) -> usize {
+    capacity.saturating_mul(2).max(1 << 20).min(cap).max(needed)
+}
+
 /// Decompresses the gzip bytes `compressed` of `path` (single or multi-member) into
 /// memory, with whether the stream ended early (what precedes the cut is kept); `None`
 /// when the text is larger than `limit` bytes (of which at most one byte more is
@@ -2831,20 +2838,45 @@ fn gunzip(
         .checked_sub(4)
         .map_or(0, |at| u32::from_le_bytes(le4(&compressed[at..])) as usize);
     let hint = text_capacity(compressed.len(), trailer, take);
-    // Reserved if it can be (a refusal is no error: the buffer grows as the text comes,
-    // and `read_to_end` reports running out of memory as an error, not an abort).
+    // Reserved if it can be (a refusal is no error: the buffer grows as the text comes).
     let mut out = Vec::new();
     let _ = out.try_reserve_exact(hint);
-    // (On an error, `read_to_end` keeps what it read before it.)
-    let cut =
-        match flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(1 << 20, reader))
-            .take(take)
-            .read_to_end(&mut out)
-        {
-            Ok(_) => false,
-            Err(e) if ends_early(&e) && !out.is_empty() => true,
+    let mut decoder =
+        flate2::read::MultiGzDecoder::new(std::io::BufReader::with_capacity(1 << 20, reader))
+            .take(take);
+    // The buffer grows by doubling, but never past the bytes `take` lets through: a text
+    // of a high ratio (a gzip bomb) stops at the limit itself, not at a doubling of it
+    // (a 2 GiB limit reached for 4 GiB and aborted where less was free), and memory that
+    // runs out is an error naming the file.
+    let mut chunk = vec![0u8; 1 << 20];
+    let cap = usize::try_from(take).unwrap_or(usize::MAX);
+    let cut = loop {
+        let n = match decoder.read(&mut chunk) {
+            Ok(0) => break false,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            // (What was read before the cut is kept.)
+            Err(e) if ends_early(&e) && !out.is_empty() => break true,
             Err(e) => return Err(gzip_error(path, e)),
         };
+        if out.capacity() - out.len() < n {
+            let grow = text_growth(out.capacity(), out.len() + n, cap) - out.len();
+            out.try_reserve_exact(grow).map_err(|_| {
+                gzip_error(
+                    path,
+                    std::io::Error::new(
+                        std::io::ErrorKind::OutOfMemory,
+                        format!(
+                            "out of memory holding {} MiB of decompressed text; a smaller \
+                             --memory-limit decompresses large texts into a working file",
+                            out.len() >> 20
+                        ),
+                    ),
+                )
+            })?;
+        }
+        out.extend_from_slice(&chunk[..n]);
+    };
     progress.finish_stage();
     if limit.is_some_and(|l| out.len() as u64 > l) {
         return Ok(None);
@@ -2891,6 +2923,21 @@ mod gunzip_tests {
             .unwrap()
             .unwrap();
         assert_eq!(out.len(), text.len() + 5);
+    }
+
+    /// The text buffer doubles, but never past the most the reader lets through (the
+    /// limit and one byte): a gzip bomb under a 2 GiB limit stops near 2 GiB, not at a
+    /// doubling to 4 GiB.
+    #[test]
+    fn a_text_buffer_grows_no_further_than_its_limit() {
+        use super::text_growth;
+        assert_eq!(text_growth(0, 10, usize::MAX), 1 << 20);
+        assert_eq!(text_growth(4 << 20, (4 << 20) + 1, usize::MAX), 8 << 20);
+        let cap = (2usize << 30) + 1;
+        assert_eq!(text_growth(3 << 29, (3 << 29) + 7, cap), cap);
+        assert_eq!(text_growth(cap - 5, cap, cap), cap);
+        // What must be held is held, whatever the cap.
+        assert_eq!(text_growth(100, 5 << 20, 1000), 5 << 20);
     }
 
     /// Control characters and bytes that are no UTF-8 are shown a byte each as `\xNN`
