@@ -299,6 +299,14 @@ fn truncated_and_corrupt_binary_dumps_are_errors_naming_the_byte() {
     bad[0x22..0x2a].copy_from_slice(&501i64.to_le_bytes());
     let e = open_err(&bad);
     assert!(e.contains("announces 501 atoms"), "{e}");
+    // One whose values overflow: named at its own byte (34), not the frame's start.
+    let mut bad = good.clone();
+    bad[0x22..0x2a].copy_from_slice(&(1i64 << 62).to_le_bytes());
+    let e = open_err(&bad);
+    assert!(
+        e.contains("byte 34: atom count 4611686018427387904 overflows at"),
+        "{e}"
+    );
     // A time that is not a number (the time of frame 0 follows the unit style `metal`).
     let mut bad = good.clone();
     bad[132..140].copy_from_slice(&f64::NAN.to_le_bytes());

@@ -302,10 +302,10 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
     };
     let timestep = u64::try_from(timestep)
         .map_err(|_| r.err(start, format!("negative timestep {timestep}")))?;
-    let at = r.pos;
+    let atoms_at = r.pos;
     let atoms = r.i64("atom count")?;
-    let atoms =
-        usize::try_from(atoms).map_err(|_| r.err(at, format!("negative atom count {atoms}")))?;
+    let atoms = usize::try_from(atoms)
+        .map_err(|_| r.err(atoms_at, format!("negative atom count {atoms}")))?;
     let at = r.pos;
     let triclinic = r.i32("triclinic flag")?;
     if !(0..=1).contains(&triclinic) {
@@ -400,9 +400,12 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
     }
     let count_at = r.pos;
     let nchunk = r.count("chunk count", i32::MAX as usize)?;
-    let expected = atoms
-        .checked_mul(values_per_atom)
-        .ok_or_else(|| r.err(start, "atom count overflows"))?;
+    let expected = atoms.checked_mul(values_per_atom).ok_or_else(|| {
+        r.err(
+            atoms_at,
+            format!("atom count {atoms} overflows at {values_per_atom} values per atom"),
+        )
+    })?;
     let mut chunks = Vec::with_capacity(nchunk.min(1 << 16));
     let mut total = 0usize;
     for c in 0..nchunk {
