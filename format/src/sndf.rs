@@ -187,7 +187,9 @@ fn check_tiles(path: &Path, h: &SndfHeader, t: &SndfTiles) -> Result<(), FormatE
             || tile.rays == 0
         {
             return bad(format!(
-                "tile {i} {tile:?} (level at most {MAX_LEVEL}, coordinates within ±{MAX_TILE_COORD}, at least one ray)"
+                "tile {i} (level {}, x {}, y {}, {} rays): the level must be at most \
+                 {MAX_LEVEL}, the coordinates within ±{MAX_TILE_COORD}, the rays at least one",
+                tile.level, tile.x, tile.y, tile.rays
             ));
         }
         if !seen.insert((tile.level, tile.x, tile.y)) {
@@ -850,7 +852,10 @@ mod tests {
             ("appears twice", Box::new(|s, _| s.tiles[1] = s.tiles[0])),
             ("tiles of 32", Box::new(|s, _| s.tile = 32)),
             ("texel size", Box::new(|s, _| s.texel0 = -1.0)),
-            ("level at most", Box::new(|s, _| s.tiles[0].level = 99)),
+            (
+                "(level 99, x 0, y 0, 3 rays): the level must be at most",
+                Box::new(|s, _| s.tiles[0].level = 99),
+            ),
             ("fewest of the tiles", Box::new(|_, h| h.rays = 12)),
             ("0 tiles", Box::new(|s, _| s.tiles.clear())),
         ];

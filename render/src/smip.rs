@@ -1399,9 +1399,14 @@ fn plan_view(
             .iter()
             .any(|c| !c.is_finite() || c.abs() > limit)
         {
-            return Err(RenderError::InvalidOptions(
-                "the view is too far from the S-MIP's origin".into(),
-            ));
+            return Err(RenderError::InvalidOptions(format!(
+                "the view is too far from the S-MIP's origin ({}, {} in its plane, texels of \
+                 {} at level 0) to address its tiles: a view of other data, or a damaged \
+                 S-MIP file",
+                frame.origin[0],
+                frame.origin[1],
+                frame.texel(0)
+            )));
         }
         // A level's texels are at most twice as fine as the pixels, so a view needs at
         // most about four times its own area in tiles, unless the frame's texels are
