@@ -853,7 +853,7 @@ mod tests {
             ("tiles of 32", Box::new(|s, _| s.tile = 32)),
             ("texel size", Box::new(|s, _| s.texel0 = -1.0)),
             (
-                "(level 99, x 0, y 0, 3 rays): the level must be at most",
+                "tile 0 (level 99, x -1, y 2, 3 rays): the level must be at most 30",
                 Box::new(|s, _| s.tiles[0].level = 99),
             ),
             ("fewest of the tiles", Box::new(|_, h| h.rays = 12)),
