@@ -1826,6 +1826,12 @@ pub fn convert_dump(
         }
     };
     let info = dump.frame_info(k).map_err(cut_short)?;
+    // Where an error before the frame is read points.
+    let frame_place = || FramePlace {
+        path: named.display().to_string(),
+        frame: Some(k as u64),
+        timestep: info.timestep,
+    };
     // The last frame asked for and empty: which frame before it holds particles (their
     // headers say, without reading the atoms).
     if info.particles == 0 && matches!(frame, FrameSelect::Last | FrameSelect::FromEnd(1)) {
@@ -1836,11 +1842,7 @@ pub fn convert_dump(
                 .map(|i| (j, i.timestep))
         });
         return Err(ConvertError::LastFrameEmpty {
-            place: FramePlace {
-                path: named.display().to_string(),
-                frame: Some(k as u64),
-                timestep: info.timestep,
-            },
+            place: frame_place(),
             with_particles,
         });
     }
@@ -1886,11 +1888,7 @@ pub fn convert_dump(
         );
         if let Some(problem) = problem {
             return Err(ConvertError::Attributes {
-                place: FramePlace {
-                    path: named.display().to_string(),
-                    frame: Some(k as u64),
-                    timestep: info.timestep,
-                },
+                place: frame_place(),
                 problem,
             });
         }
@@ -1910,13 +1908,12 @@ pub fn convert_dump(
         }
     }
     if info.particles <= options.chunks.chunk_points {
-        check_in_memory(info.particles, read.extra_attributes.len(), options, || {
-            FramePlace {
-                path: named.display().to_string(),
-                frame: Some(k as u64),
-                timestep: info.timestep,
-            }
-        })?;
+        check_in_memory(
+            info.particles,
+            read.extra_attributes.len(),
+            options,
+            frame_place,
+        )?;
     }
     let t0 = Instant::now();
     let frame = dump.read_frame(k, read, progress).map_err(cut_short)?;
