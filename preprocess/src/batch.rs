@@ -832,7 +832,8 @@ impl BatchError {
             match e {
                 ConvertError::Read(r) => r.cut_short(),
                 ConvertError::LastFrameIncomplete { .. } => true,
-                ConvertError::Decompressed { source, .. } => convert(source),
+                ConvertError::Decompressed { source, .. }
+                | ConvertError::GzipCut { source, .. } => convert(source),
                 _ => false,
             }
         }
@@ -864,7 +865,8 @@ impl BatchError {
                 | ConvertError::LastFrameEmpty { .. }
                 | ConvertError::Attributes { .. }
                 | ConvertError::UnusableRadius(_) => true,
-                ConvertError::Decompressed { source, .. } => convert(source),
+                ConvertError::Decompressed { source, .. }
+                | ConvertError::GzipCut { source, .. } => convert(source),
                 _ => false,
             }
         }

@@ -162,6 +162,18 @@ pub enum ConvertError {
     /// An error in the text a large gzip input was decompressed into (the place is a
     /// line of that text, said as the input's: the working file is gone by the time the
     /// message is read).
+    /// A frame cut short, or past the end, of a gzip input whose compressed stream ends
+    /// early: the cut is named with it (the frames before it convert).
+    #[error(
+        "{source}; {}'s compressed stream ends early (a run still writing it, or a copy cut \
+         short): the frames before the cut convert",
+        input.display()
+    )]
+    GzipCut {
+        input: std::path::PathBuf,
+        #[source]
+        source: Box<ConvertError>,
+    },
     #[error("{}", decompressed_message(input, text, source))]
     Decompressed {
         input: std::path::PathBuf,
@@ -1748,6 +1760,7 @@ pub fn convert_file(
         }
         Some(_) => None,
     };
+    let gzip_cut = dump.gzip_cut().is_some();
     // The working file (if any) lives until the conversion is done.
     convert_dump(dump, input, output, frame, read, options, progress)
         .map(|mut report| {
@@ -1756,6 +1769,28 @@ pub fn convert_file(
             report
         })
         .map_err(|e| decompressed(input, text.as_deref(), e))
+        .map_err(|e| match e {
+            // (A cut last frame of several says which frame converts instead.)
+            e if gzip_cut && e.gzip_cut_shows() => ConvertError::GzipCut {
+                input: input.to_path_buf(),
+                source: Box::new(e),
+            },
+            e => e,
+        })
+}
+
+impl ConvertError {
+    /// Whether a gzip input's early end explains the error: a frame cut short, or asked
+    /// for past the frames before the cut.
+    fn gzip_cut_shows(&self) -> bool {
+        match self {
+            ConvertError::Read(r) => {
+                r.cut_short() || matches!(r, crate::readers::ReadError::NoSuchFrame { .. })
+            }
+            ConvertError::Decompressed { source, .. } => source.gzip_cut_shows(),
+            _ => false,
+        }
+    }
 }
 
 /// Converts one frame of an opened dump, with `named` (the file the user named) recorded

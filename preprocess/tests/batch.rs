@@ -2674,6 +2674,25 @@ fn a_gzip_dump_cut_inside_its_last_frame_converts_the_frames_before() {
         "{:?}",
         r.notes
     );
+    // Converting the cut frame, or one past it, by its index: the error says the
+    // compressed stream ends early (it said only "truncated frame" or "does not exist").
+    let o = opts();
+    for (k, says) in [(5, "truncated frame"), (6, "frame 6 does not exist")] {
+        let e = mdlod_preprocess::convert::convert_file(
+            &src,
+            &dir.path().join("one.mdlod"),
+            mdlod_preprocess::convert::FrameSelect::Index(k),
+            &o.read,
+            &o.convert,
+            &NoProgress,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains(says) && e.contains("live.dump.gz's compressed stream ends early"),
+            "{e}"
+        );
+    }
 }
 
 /// The species column is recorded per frame: a rerun with another converts every frame
