@@ -153,6 +153,12 @@ fn bad_sidecars_and_arrays_are_errors_naming_the_file() {
     nan[4 * 7..4 * 8].copy_from_slice(&f32::NAN.to_le_bytes());
     c.file("nan.f32", &nan);
     c.file("type.u8", &[0, 1, 2, 0, 1, 2, 0, 1, 2, 9]);
+    // Indices up to 65535 without names: one more species than a file holds.
+    let wide: Vec<u8> = [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 65535]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    c.file("type.u16", &wide);
     let pos = |file: &str, extra: &str| {
         format!(
             r#"{{ "mdlod_raw": 1, "positions": {{ "file": "{file}", "type": "f32" }}{extra} }}"#
@@ -167,6 +173,12 @@ fn bad_sidecars_and_arrays_are_errors_naming_the_file() {
             pos("pos.f32", r#", "species": { "file": "type.u8", "type": "u8", "names": ["a", "b", "c"] }"#),
             "type.u8",
             "byte 9: particle 9: species 9 but there are 3 species",
+        ),
+        (
+            pos("pos.f32", r#", "species": { "file": "type.u16", "type": "u16" }"#),
+            "type.u16",
+            "byte 18: particle 9: species 65535 but there are 65535 species (a file holds at \
+             most 65535: indices 0 to 65534)",
         ),
         (
             r#"{ "mdlod_raw": 1, "positions": { "file": "pos.f32", "type": "u8" } }"#.into(),

@@ -1055,7 +1055,10 @@ impl Index {
                         .collect(),
                 };
                 let count = if names.is_empty() {
-                    raw.iter().fold(0.0f64, |a, &v| a.max(v + 1.0)).min(65536.0) as usize
+                    // (At most as many as a file holds: an index from 0 to one less.)
+                    raw.iter()
+                        .fold(0.0f64, |a, &v| a.max(v + 1.0))
+                        .min(crate::hierarchy::MAX_SPECIES as f64) as usize
                 } else {
                     names.len()
                 };
@@ -1068,7 +1071,7 @@ impl Index {
                             first + i,
                             raw[i],
                             if names.is_empty() {
-                                " (at most 65536)"
+                                " (a file holds at most 65535: indices 0 to 65534)"
                             } else {
                                 " names"
                             }
