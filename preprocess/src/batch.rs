@@ -3934,7 +3934,7 @@ fn note_kind(about: &str) -> String {
 }
 
 /// `timestep 5` or `timesteps 0, 100, 200 and 7 more`.
-fn timesteps_text(steps: &std::collections::BTreeSet<u64>) -> String {
+pub fn timesteps_text(steps: &std::collections::BTreeSet<u64>) -> String {
     let shown: Vec<String> = steps.iter().take(3).map(u64::to_string).collect();
     match steps.len() {
         1 => format!("timestep {}", shown[0]),

@@ -406,23 +406,12 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     }
     if !m.empty.is_empty() {
         let n = m.empty.len();
-        let steps: Vec<String> = m
-            .empty
-            .iter()
-            .take(6)
-            .map(|e| e.timestep.to_string())
-            .collect();
-        let more = if n > 6 {
-            format!(" and {} more", n - 6)
-        } else {
-            String::new()
-        };
+        let steps = m.empty.iter().map(|e| e.timestep).collect();
         println!(
             "  empty        {n} frame{} without particles, not converted (a .mdlod file needs \
-             one): timestep{} {}{more}",
+             one): {}",
             if n == 1 { "" } else { "s" },
-            if n == 1 { "" } else { "s" },
-            steps.join(", ")
+            mdlod_preprocess::batch::timesteps_text(&steps)
         );
     }
     if !m.unlisted.is_empty() {

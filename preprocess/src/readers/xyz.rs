@@ -315,31 +315,25 @@ impl Index {
             ));
         }
         let comment_text = String::from_utf8_lossy(comment);
-        let pairs = key_values(&comment_text);
+        let marked = marked_key_values(&comment_text);
         let get = |key: &str| {
-            pairs
+            marked
                 .iter()
-                .find(|(k, _)| k.eq_ignore_ascii_case(key))
-                .map(|(_, v)| v.as_str())
+                .find(|(k, _, _)| k.eq_ignore_ascii_case(key))
+                .map(|(_, v, _)| v.as_str())
         };
         let bad = |message: String| ctx.malformed(comment_at, message);
         // A key read here given twice (`Lattice=` twice): which one the writer meant
         // cannot be told (ASE keeps the last, a first-match reader the first), so neither
         // is taken.
-        // (Counted as `key=` in the text: a plain XYZ comment's free words, which the
-        // pairs hold as flags, may repeat.)
-        // (Keys inside a quoted value, `info="restarted from step=5"`, are its text.)
-        let lower = unquoted(&comment_text.to_ascii_lowercase());
+        // (Counted where given with `=`: a plain XYZ comment's free words, which the
+        // pairs hold as flags, may repeat; keys inside a quoted value, `info="restarted
+        // from step=5"`, are its text.)
         // (`Timestep=` and `step=` both give the timestep: one of them, once.)
-        let given_times = |k: &str| {
-            let k = k.to_ascii_lowercase();
-            lower
-                .match_indices(&k)
-                .filter(|&(at, _)| {
-                    let before = lower[..at].chars().next_back();
-                    let after = lower[at + k.len()..].trim_start();
-                    before.is_none_or(char::is_whitespace) && after.starts_with('=')
-                })
+        let given_times = |key: &str| {
+            marked
+                .iter()
+                .filter(|(k, _, with_value)| *with_value && k.eq_ignore_ascii_case(key))
                 .count()
         };
         for keys in [
@@ -363,14 +357,11 @@ impl Index {
         // A bare word (`no lattice`, a free-text comment of plain XYZ) is a flag, `T`;
         // a cell needs its numbers given, `Lattice="..."`.
         let given = |key: &str| {
-            pairs
+            marked
                 .iter()
-                .find(|(k, _)| k.eq_ignore_ascii_case(key))
-                .filter(|(k, _)| {
-                    comment_text.contains(&format!("{k}="))
-                        || comment_text.contains(&format!("{k} ="))
-                })
-                .map(|(_, v)| v.as_str())
+                .find(|(k, _, _)| k.eq_ignore_ascii_case(key))
+                .filter(|(_, _, with_value)| *with_value)
+                .map(|(_, v, _)| v.as_str())
         };
         let numbers = |key: &str, n: usize| -> Result<Option<Vec<f64>>, ReadError> {
             let Some(v) = given(key) else { return Ok(None) };
@@ -415,9 +406,12 @@ impl Index {
             }
         };
         let properties = get("Properties");
-        let time = match pairs.iter().find(|(k, _)| k.eq_ignore_ascii_case("Time")) {
+        let time = match marked
+            .iter()
+            .find(|(k, _, _)| k.eq_ignore_ascii_case("Time"))
+        {
             None => None,
-            Some((key, v)) => match time_value(comment_value(v)) {
+            Some((key, v, _)) => match time_value(comment_value(v)) {
                 Ok(t) if t.is_finite() => Some(t),
                 // Without `Properties` the comment line is free text (`MD step 5
                 // time=later`): a `time` in it that is no number is no time, and must not
@@ -651,30 +645,6 @@ fn time_value(v: &str) -> Result<f64, std::num::ParseFloatError> {
     }
 }
 
-/// `text` with what double quotes enclose (a backslash escapes the next character)
-/// blanked out, quotes included, so that words inside a quoted value are not read as
-/// keys.
-fn unquoted(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    let (mut inside, mut escaped) = (false, false);
-    for c in text.chars() {
-        let blank = inside || c == '"';
-        if inside && !escaped && c == '"' {
-            inside = false;
-        } else if !inside && c == '"' {
-            inside = true;
-        }
-        escaped = inside && !escaped && c == '\\';
-        // One byte per byte, so that positions in the text stay positions here.
-        if blank {
-            out.extend(std::iter::repeat_n(' ', c.len_utf8()));
-        } else {
-            out.push(c);
-        }
-    }
-    out
-}
-
 fn comment_value(v: &str) -> &str {
     let v = v.trim();
     v.strip_suffix(',').unwrap_or(v)
@@ -684,6 +654,15 @@ fn comment_value(v: &str) -> &str {
 /// `T`. Values (and keys) may be quoted with `"..."` (backslash escapes the next character)
 /// or `{...}`; an unterminated quote runs to the end of the line.
 pub(crate) fn key_values(line: &str) -> Vec<(String, String)> {
+    marked_key_values(line)
+        .into_iter()
+        .map(|(k, v, _)| (k, v))
+        .collect()
+}
+
+/// [`key_values`], each pair marked whether its key was given a value (`key=value`, not
+/// a bare `key`).
+fn marked_key_values(line: &str) -> Vec<(String, String, bool)> {
     let chars: Vec<char> = line.chars().collect();
     let mut i = 0;
     let mut out = Vec::new();
@@ -740,7 +719,8 @@ pub(crate) fn key_values(line: &str) -> Vec<(String, String)> {
         while chars.get(j).is_some_and(|c| c.is_whitespace()) {
             j += 1;
         }
-        let value = if chars.get(j) == Some(&'=') {
+        let with_value = chars.get(j) == Some(&'=');
+        let value = if with_value {
             i = j + 1;
             while chars.get(i).is_some_and(|c| c.is_whitespace()) {
                 i += 1;
@@ -749,7 +729,7 @@ pub(crate) fn key_values(line: &str) -> Vec<(String, String)> {
         } else {
             "T".to_string()
         };
-        out.push((key, value));
+        out.push((key, value, with_value));
     }
     out
 }
