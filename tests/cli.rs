@@ -11261,6 +11261,83 @@ fn a_logarithm_first_and_further_columns_as_they_are() {
     assert!(out.contains("T from 100 to 399"), "{out}");
 }
 
+/// `--attribute-log10=rho,sigma` keeps the logarithms of the columns named, the first and
+/// a further one, and the others as they are: `info` lists them; colouring by the
+/// further one by its own name reads its logarithms, and splats lit by it light by its
+/// quantity; a name that is no --attribute column is refused, listing them, and a name
+/// after a space, which `batch` would take for an input, is said to need the equals
+/// sign.
+#[test]
+fn logarithms_of_named_columns_first_and_further() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut xyz = String::from("300\nProperties=species:S:1:pos:R:3:rho:R:1:T:R:1:sigma:R:1\n");
+    for i in 0..300 {
+        let rho = 10f64.powf(-8.0 + 10.0 * i as f64 / 299.0);
+        let sigma = 10f64.powf(-2.0 + 8.0 * ((i * 37) % 300) as f64 / 299.0);
+        xyz.push_str(&format!(
+            "H {} {} {} {rho:e} {} {sigma:e}\n",
+            i % 7,
+            (i / 7) % 6,
+            i / 42,
+            100 + i
+        ));
+    }
+    let path = dir.path().join("sph.xyz");
+    std::fs::write(&path, xyz).unwrap();
+    let file = dir.path().join("sph.mdlod");
+    let columns = [
+        "--attribute",
+        "rho",
+        "--attribute",
+        "T",
+        "--attribute",
+        "sigma",
+    ];
+    let mut args = vec!["convert", s(&path), "-o", s(&file)];
+    args.extend(columns);
+    args.push("--attribute-log10=rho,sigma");
+    let out = ok(&args);
+    assert!(!out.contains("decades"), "{out}");
+    let info = ok(&["info", s(&file)]);
+    assert!(
+        info.contains("log10(rho) in [-8, 2]")
+            && info.contains("T in [100, 399]")
+            && info.contains("log10(sigma) in [-2, 6]"),
+        "{info}"
+    );
+    let png = dir.path().join("x.png");
+    let base = ["--width", "48", "--height", "36"];
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--attribute", "sigma"];
+    args.extend(["--colour-map", "viridis"]);
+    args.extend(base);
+    let out = ok(&args);
+    assert!(out.contains("log10(sigma) from -2 to 6"), "{out}");
+    let mut args = vec!["render", s(&file), "-o", s(&png), "--mode", "splat"];
+    args.extend(["--intensity", "attribute", "--attribute", "sigma"]);
+    args.extend(["--colour-map", "viridis"]);
+    args.extend(base);
+    let out = ok(&args);
+    assert!(out.contains("the projected sigma"), "{out}");
+
+    let mut args = vec!["convert", s(&path), "-o", s(&file)];
+    args.extend(columns);
+    args.push("--attribute-log10=sigma,nope");
+    let e = fails(&args);
+    assert!(
+        e.contains("--attribute-log10=nope: nope is not a column --attribute names (those are rho, T, sigma)"),
+        "{e}"
+    );
+    let out_dir = dir.path().join("frames");
+    let mut args = vec!["batch", s(&path), "-o", s(&out_dir)];
+    args.extend(columns);
+    args.extend(["--attribute-log10", "sigma"]);
+    let e = fails(&args);
+    assert!(
+        e.contains("sigma is taken as an input") && e.contains("(--attribute-log10=sigma)"),
+        "{e}"
+    );
+}
+
 /// A conversion that keeps no attribute names the dump's columns it leaves behind, and
 /// how to keep one (an OVITO user expects every column); keeping one says nothing.
 #[test]

@@ -206,6 +206,13 @@ pub struct AttributeInfo {
     /// Value of quantized 65535.
     #[serde(deserialize_with = "wide::f32")]
     pub max: f32,
+    /// The values are base-10 logarithms of a column's positive values (named
+    /// `log10(NAME)`), and each node's mean is the logarithm of the area-weighted mean
+    /// of the values below it, as the metadata's `attribute_log10` says of the first
+    /// attribute. Set in a further attribute's entry (`attributes`) only: the first's is
+    /// `attribute_log10`, and a file setting it in `attribute` is refused.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub log10: bool,
 }
 
 /// Single-precision fields read as the nearest double, then rounded to single precision
@@ -450,6 +457,7 @@ mod tests {
             name: "c_cna".into(),
             min: 1.0,
             max: 5.0,
+            log10: false,
         };
         for v in [1.0f32, 2.0, 3.0, 4.0, 5.0] {
             let q = info.encode(v);
@@ -475,6 +483,7 @@ mod tests {
             name: "c_ke".into(),
             min: 0.0,
             max: 0.7087,
+            log10: false,
         };
         let (a, b) = ke.codes([0.1, 0.3]).unwrap();
         assert!(a <= ke.encode(0.3) && ke.encode(0.3) <= b && a <= ke.encode(0.1));
@@ -492,6 +501,7 @@ mod tests {
             name: "m".into(),
             min: 2.0,
             max: 2.0,
+            log10: false,
         };
         assert_eq!(flat.codes([1.0, 3.0]), Some((0, u16::MAX)));
         assert_eq!(flat.codes([3.0, 4.0]), None);

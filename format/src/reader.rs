@@ -701,6 +701,18 @@ impl MdlodFile {
                 ),
             ));
         }
+        // The first attribute's logarithm is said by `attribute_log10` alone.
+        if let Some(a) = metadata.attribute.as_ref().filter(|a| a.log10) {
+            return Err(corrupt(
+                "METADATA",
+                format!(
+                    "attribute {:?}: `log10` is set in `attribute` (the first attribute's \
+                     logarithm is said by `attribute_log10`; `log10` belongs to the entries \
+                     of `attributes`)",
+                    a.name
+                ),
+            ));
+        }
         // Extra attributes: at most the format's number (counted before anything is
         // compared), valid ranges, distinct names (the first's too), and only with a
         // first attribute.
@@ -1148,10 +1160,11 @@ impl MdlodFile {
         self.attribute_range = Some(values);
         // The file is then one of that attribute alone (its metadata, its values and
         // means; no further attributes): another is selected from a fresh open.
-        self.metadata.attribute = Some(self.metadata.attributes[k].clone());
+        // (An entry's `log10` becomes the first's `attribute_log10`.)
+        let mut chosen = self.metadata.attributes[k].clone();
+        self.metadata.attribute_log10 = std::mem::take(&mut chosen.log10);
+        self.metadata.attribute = Some(chosen);
         self.metadata.attributes.clear();
-        // (Only the first attribute is ever stored as a logarithm.)
-        self.metadata.attribute_log10 = false;
         self.extra_ranges = None;
         // Hidden values depend on the attribute: a set computed before is stale.
         *self.species_below.lock().unwrap_or_else(|e| e.into_inner()) = None;
@@ -2500,6 +2513,15 @@ pub fn attribute_named<'a>(names: &[&'a str], name: &str) -> Option<&'a str> {
     if let Some(exact) = names.iter().find(|n| **n == name) {
         return Some(exact);
     }
+    // A column kept as its logarithm by the column's own name (`sigma` for
+    // `log10(sigma)`), as the conversion was asked for it.
+    if let Some(logged) = names.iter().find(|n| {
+        n.strip_prefix("log10(")
+            .and_then(|s| s.strip_suffix(')'))
+            .is_some_and(|inner| inner == name)
+    }) {
+        return Some(logged);
+    }
     // A magnitude (`|particles/velocity|`) and a logarithm (`log10(particles/mass)`) by
     // the last part of what they wrap too (`|velocity|`, `log10(mass)`).
     fn unwrapped(s: &str) -> (bool, bool, &str) {
@@ -2570,6 +2592,12 @@ mod tests {
             Some("log10(particles/mass)")
         );
         assert_eq!(attribute_named(&logs, "|velocity|"), None);
+        // A column kept as its logarithm, by the column's own name; a column kept as it
+        // is first.
+        let kept = ["c_pe", "log10(sigma)", "log10(rho)", "rho"];
+        assert_eq!(attribute_named(&kept, "sigma"), Some("log10(sigma)"));
+        assert_eq!(attribute_named(&kept, "rho"), Some("rho"));
+        assert_eq!(attribute_named(&kept, "sig"), None);
     }
 
     /// A valid three-level hierarchy: a top node over `n` nodes, each over 2 particles.

@@ -1867,12 +1867,7 @@ fn gone_source_frames(
                 None => renames.is_empty(),
             };
             let same_columns = r.columns.is_none() || r.columns == opts.read.columns;
-            let same_attributes = file
-                .metadata()
-                .attributes
-                .iter()
-                .map(|a| &a.name)
-                .eq(opts.read.extra_attributes.iter());
+            let same_attributes = same_further(&file.metadata().attributes, opts);
             same_names
                 && same_columns
                 && same_attributes
@@ -3133,12 +3128,7 @@ pub fn batch(
                 }
             };
             // The further attributes asked for, by name, in order.
-            let same_attributes = f
-                .metadata()
-                .attributes
-                .iter()
-                .map(|a| &a.name)
-                .eq(opts.read.extra_attributes.iter());
+            let same_attributes = same_further(&f.metadata().attributes, opts);
             let mut changed = SettingsChanged {
                 columns: !same_columns,
                 species_name: !same_names,
@@ -4786,6 +4776,17 @@ fn shard_field_problem(named: Option<[u32; 2]>, field: Option<[u32; 2]>) -> Opti
 
 /// The manifest version this mdlod writes and reads.
 const MANIFEST_VERSION: u32 = 1;
+
+/// Whether a file's further attributes are those `opts` asks for: by name as the file
+/// gives them (`log10(NAME)` for a logarithm), in order.
+fn same_further(kept: &[mdlod_format::meta::AttributeInfo], opts: &BatchOptions) -> bool {
+    kept.iter().map(|a| a.name.clone()).eq(opts
+        .read
+        .extra_attributes
+        .iter()
+        .enumerate()
+        .map(|(k, name)| crate::convert::extra_attribute_name(name, k, &opts.convert)))
+}
 
 #[cfg(test)]
 mod tests {

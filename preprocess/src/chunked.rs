@@ -1502,14 +1502,23 @@ pub fn convert_chunked(
     let mut attribute_name = None;
     let mut range = (f32::INFINITY, f32::NEG_INFINITY);
     // The further attributes: name (as their reader gives it) and range.
+    // (A further attribute kept as its logarithm has the logarithms' range.)
     let mut extra_infos: Vec<AttributeInfo> = extra_names
         .iter()
-        .map(|name| AttributeInfo {
+        .enumerate()
+        .map(|(k, name)| AttributeInfo {
             name: name.clone(),
             min: f32::INFINITY,
             max: f32::NEG_INFINITY,
+            log10: options.extra_logged(k),
         })
         .collect();
+    if let Some(problem) = crate::convert::extra_log10_problem(extra_names.len(), options) {
+        return Err(ConvertError::Attributes {
+            place: crate::convert::FramePlace::of(metadata.source.as_ref(), metadata.timestep),
+            problem,
+        });
+    }
     // Whether each further attribute holds whole numbers only (ids).
     let mut extra_whole = vec![true; extra_names.len()];
     let mut seen = 0usize;
@@ -1676,11 +1685,23 @@ pub fn convert_chunked(
             for (info, a) in extra_infos.iter_mut().zip(&extras) {
                 if info.min > info.max {
                     // The name its reader gives (a magnitude's, say).
-                    info.name.clone_from(&a.name);
+                    info.name = match info.log10 {
+                        true => format!("log10({})", a.name),
+                        false => a.name.clone(),
+                    };
                 }
-                let (lo, hi) = finite_range(&a.values, start, || {
-                    format!("{place}: attribute {}", info.name)
-                })?;
+                let (lo, hi) = if info.log10 {
+                    crate::convert::log10_range(
+                        &a.values,
+                        start,
+                        &a.name,
+                        metadata.source.as_ref(),
+                    )?
+                } else {
+                    finite_range(&a.values, start, || {
+                        format!("{place}: attribute {}", info.name)
+                    })?
+                };
                 info.min = info.min.min(lo);
                 info.max = info.max.max(hi);
             }
@@ -1973,6 +1994,7 @@ pub fn convert_chunked(
             name: attribute_name.unwrap_or_else(|| "attribute".into()),
             min: range.0,
             max: range.1,
+            log10: false,
         });
     }
     metadata.build = mdlod_format::meta::BuildInfo {
@@ -2003,7 +2025,12 @@ pub fn convert_chunked(
                     &a.name, a.min, a.max, options,
                 ));
             }
-            for (e, &whole) in metadata.attributes.iter().zip(&extra_whole) {
+            for (e, &whole) in metadata
+                .attributes
+                .iter()
+                .zip(&extra_whole)
+                .filter(|(e, _)| !e.log10)
+            {
                 // Ids (of molecules) are told by their whole numbers, as for the first.
                 notes.extend(crate::convert::extra_range_note(&e.name, e.min, e.max, whole).0);
             }
@@ -2471,7 +2498,10 @@ fn assemble(
                 .fold(crate::hierarchy::extra::MeanSums::default(), |a, c| {
                     a.and(c.extras[e].sums)
                 });
-            s.write_pod(&[top_sums.mean()])?;
+            // (A logarithm's mean is the logarithm of the linear mean.)
+            let mean = top_sums.mean();
+            let log10 = metadata.attributes.get(e).is_some_and(|a| a.log10);
+            s.write_pod(&[if log10 { mean.log10() } else { mean }])?;
             for g in 1..last {
                 for (c, ch) in chunks.iter().enumerate() {
                     let means = ch.extras[e].means.bytes()?;

@@ -33,6 +33,12 @@ pub struct ConvertOptions {
     /// keep every decade of a quantity spanning many (SPH densities): values must be
     /// above 0 ([`log10_attribute`]).
     pub attribute_log10: bool,
+    /// For each further attribute in turn (`convert_frame_with`'s `further`, a reader's
+    /// `extra_attributes`), whether the file keeps its base-10 logarithm
+    /// (`AttributeInfo::log10`, named `log10(NAME)`), as `attribute_log10` for the first:
+    /// its values must then be above 0. Missing entries are `false`; one set beyond the
+    /// further attributes is an error.
+    pub extra_log10: Vec<bool>,
     /// The input column whose values are the species (`ReadOptions::species_column`),
     /// recorded in the metadata: [`convert_dump`] and batches fill it in from their read
     /// options; a caller of [`convert_frame`] sets it for a frame so read.
@@ -354,8 +360,8 @@ pub fn convert_frame_with(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<ConvertReport, ConvertError> {
-    if !further.is_empty() {
-        check_extras(frame, further, source.as_ref())?;
+    if !further.is_empty() || !options.extra_log10.is_empty() {
+        check_extras(frame, further, source.as_ref(), options)?;
     }
     if frame.is_empty() {
         return Err(ConvertError::EmptyFrame(FramePlace::of(
@@ -416,6 +422,15 @@ pub fn convert_frame_with(
         }
         _ => None,
     };
+    // Further columns kept as logarithms: above 0, said naming the particle before the
+    // build.
+    for (_, e) in further
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| options.extra_logged(*k))
+    {
+        log10_range(&e.values, 0, &e.name, source.as_ref())?;
+    }
     let species_index = merged_index.as_deref().unwrap_or(&frame.species_index);
     let radii = hierarchy::particle_radii(&species, species_index, frame.radii.as_deref());
     // (A logarithm is stored from the values themselves, which clusters average: see
@@ -450,9 +465,20 @@ pub fn convert_frame_with(
         }
     })?;
     let mut h = h;
-    let columns: Vec<(&str, &[f32])> = further
+    let names: Vec<String> = further
         .iter()
-        .map(|e| (e.name.as_str(), e.values.as_slice()))
+        .enumerate()
+        .map(|(k, e)| extra_attribute_name(&e.name, k, options))
+        .collect();
+    let columns: Vec<hierarchy::extra::ExtraColumn> = further
+        .iter()
+        .zip(&names)
+        .enumerate()
+        .map(|(k, (e, name))| hierarchy::extra::ExtraColumn {
+            name,
+            values: &e.values,
+            log10: options.extra_logged(k),
+        })
         .collect();
     h.extra_attributes =
         hierarchy::extra::extra_attributes(&h, &columns, &species).map_err(|err| {
@@ -505,10 +531,13 @@ pub fn convert_frame_with(
             notes.extend(said);
         }
     }
-    // Further attributes spanning decades lose them as the first would; their remedy is
-    // a file of their own with the logarithm (--attribute-log10 takes one column).
-    for e in &h.extra_attributes {
-        let column = further.iter().find(|c| c.name == e.info.name);
+    // Further attributes spanning decades lose them as the first would, unless kept as
+    // their logarithms.
+    for (e, column) in h.extra_attributes.iter().zip(further) {
+        if e.info.log10 {
+            continue;
+        }
+        let column = Some(column);
         // Ids (of molecules) are told by their whole numbers, as for the first: no
         // logarithm to suggest.
         let whole = column.is_some_and(|c| c.values.iter().all(|v| v.fract() == 0.0));
@@ -1216,6 +1245,7 @@ pub fn quantized_total_loss(
         name: String::new(),
         min,
         max,
+        log10: false,
     };
     // (Measured against Σ area · |v|: a column of signed values may sum to about 0.)
     let (size, change) = values
@@ -1326,8 +1356,7 @@ pub fn extra_span_note(name: &str, min: f32, max: f32) -> Option<String> {
         name,
         min,
         max,
-        "given first with --attribute-log10 (which takes the first column's logarithm), \
-         a file keeps its logarithm, every decade alike",
+        &format!("--attribute-log10={name} keeps its logarithm, every decade alike"),
     )
 }
 
@@ -1438,10 +1467,13 @@ fn check_extras(
     frame: &Frame,
     extras: &[crate::frame::Attribute],
     source: Option<&SourceInfo>,
+    options: &ConvertOptions,
 ) -> Result<(), ConvertError> {
     let place = || FramePlace::of(source, frame.timestep);
     let names: Vec<&str> = extras.iter().map(|e| e.name.as_str()).collect();
-    let problem = if let Some(e) = extras.iter().find(|e| e.values.len() != frame.len()) {
+    let problem = if let Some(problem) = extra_log10_problem(names.len(), options) {
+        Some(problem)
+    } else if let Some(e) = extras.iter().find(|e| e.values.len() != frame.len()) {
         Some(format!(
             "attribute {} has {} values for {} particles",
             e.name,
@@ -1457,6 +1489,36 @@ fn check_extras(
             problem,
         }),
         None => Ok(()),
+    }
+}
+
+/// Why `options.extra_log10` cannot be taken with `further` further attributes: it asks
+/// for the logarithm of one past them. `None` where it can.
+pub fn extra_log10_problem(further: usize, options: &ConvertOptions) -> Option<String> {
+    let k = options.extra_log10.iter().rposition(|&l| l)?;
+    (k >= further).then(|| {
+        format!(
+            "the logarithm of further attribute {} is asked for, but {further} further \
+             attributes are kept",
+            k + 1
+        )
+    })
+}
+
+impl ConvertOptions {
+    /// Whether further attribute `k` is kept as its logarithm ([`Self::extra_log10`]).
+    pub fn extra_logged(&self, k: usize) -> bool {
+        self.extra_log10.get(k).copied().unwrap_or(false)
+    }
+}
+
+/// The name a file gives further attribute `k`, which the input calls `name`:
+/// `log10(name)` where its logarithm is kept ([`ConvertOptions::extra_log10`]).
+pub fn extra_attribute_name(name: &str, k: usize, options: &ConvertOptions) -> String {
+    if options.extra_logged(k) {
+        format!("log10({name})")
+    } else {
+        name.to_string()
     }
 }
 
@@ -1505,6 +1567,7 @@ pub fn base_metadata(
             name: attribute_name(&a.name, options),
             min: 0.0,
             max: 0.0,
+            log10: false,
         }),
         attribute_log10: options.attribute_log10 && frame.attribute.is_some(),
         attributes: Vec::new(),
@@ -2357,6 +2420,7 @@ mod tests {
             name: "mol".into(),
             min: 1.0,
             max: 60_000.0,
+            log10: false,
         };
         let (_, below) = info.codes([f32::NEG_INFINITY, 299.5]).unwrap();
         let (above, _) = info.codes([300.5, f32::INFINITY]).unwrap();

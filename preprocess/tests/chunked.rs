@@ -32,6 +32,7 @@ fn options(chunk_points: usize) -> ConvertOptions {
         radii_may_be_absent: true,
         species_names: Vec::new(),
         attribute_log10: false,
+        extra_log10: Vec::new(),
         species_column: None,
     }
 }
@@ -1530,4 +1531,244 @@ fn wrapped_unwrapped_coordinates_stream_into_the_same_file() {
         assert!(f64::from(top.bounds_min[d]) >= lo - 1.5, "{top:?}");
         assert!(f64::from(top.bounds_max[d]) <= hi + 1.5, "{top:?}");
     }
+}
+
+/// A further attribute kept as its logarithm (`extra_log10`): named `log10(NAME)`, its
+/// values the logarithms to a 16-bit step, each node's mean the logarithm of its
+/// particles' area-weighted mean (the clusters' light adds up to the particles' at every
+/// level, the top node's made from the chunks' roots), the same streamed out of core as
+/// from the frame in memory, and built whole alike; selected, it is the first attribute
+/// with `attribute_log10`, as a copy of the first so kept holds the first's values and
+/// means; no note of decades lost; a value not above 0 is an error naming the column and
+/// the particle, streamed or whole; a logarithm asked past the further attributes is
+/// refused.
+#[test]
+fn a_further_attribute_spanning_decades_keeps_its_logarithm() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1000;
+    let mut text = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n\
+         0 10\nITEM: ATOMS id type x y z rho t sigma copy\n"
+    );
+    // A density over nine decades; a column density over eight, in another order.
+    let rho = |i: usize| 10f64.powf(-6.0 + 9.0 * i as f64 / (n - 1) as f64);
+    let sigma = |i: usize| 10f64.powf(-2.0 + 8.0 * ((i * 37) % n) as f64 / (n - 1) as f64);
+    for i in 0..n {
+        let (x, y, z) = (i % 10, (i / 10) % 10, i / 100);
+        text.push_str(&format!(
+            "{} {} {x}.25 {y}.5 {z}.75 {:e} {} {:e} {:e}\n",
+            i + 1,
+            1 + i % 2,
+            rho(i),
+            i as f32 * 0.5,
+            sigma(i),
+            rho(i)
+        ));
+    }
+    let path = dir.path().join("sph.lammpstrj");
+    std::fs::write(&path, &text).unwrap();
+    let read = ReadOptions {
+        attribute: Some("rho".into()),
+        extra_attributes: vec!["t".into(), "sigma".into(), "copy".into()],
+        ..Default::default()
+    };
+    let mut opts = options(300);
+    opts.radii = vec![("1".into(), 1.28), ("2".into(), 0.7)];
+    opts.attribute_log10 = true;
+    opts.extra_log10 = vec![false, true, true];
+    let dump = DumpFile::open(&path).unwrap();
+    let frame = dump.read_frame(0, &read, &NoProgress).unwrap();
+    let further = mdlod_preprocess::convert::read_extra_attributes(&dump, 0, &read).unwrap();
+    let (streamed, in_memory, whole) = (
+        dir.path().join("s.mdlod"),
+        dir.path().join("m.mdlod"),
+        dir.path().join("w.mdlod"),
+    );
+    let r = convert_file(
+        &path,
+        &streamed,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        !r.notes.iter().any(|n| n.contains("decades")),
+        "{:?}",
+        r.notes
+    );
+    let convert_whole =
+        |frame: &mdlod_preprocess::frame::Frame, out: &Path, opts: &ConvertOptions| {
+            mdlod_preprocess::convert::convert_frame_with(
+                frame,
+                &further,
+                Some(source_info(&path, 0)),
+                out,
+                opts,
+                &NoProgress,
+            )
+        };
+    convert_whole(&frame, &in_memory, &opts).unwrap();
+    assert_eq!(
+        std::fs::read(&streamed).unwrap(),
+        std::fs::read(&in_memory).unwrap()
+    );
+    let mut one = opts.clone();
+    one.chunks.chunk_points = 1 << 20;
+    let r = convert_whole(&frame, &whole, &one).unwrap();
+    assert!(
+        !r.notes.iter().any(|n| n.contains("decades")),
+        "{:?}",
+        r.notes
+    );
+
+    for path in [&streamed, &whole] {
+        let f = MdlodFile::open(path).unwrap();
+        f.verify().unwrap();
+        let kept = &f.metadata().attributes;
+        let named: Vec<(&str, bool)> = kept.iter().map(|a| (a.name.as_str(), a.log10)).collect();
+        assert_eq!(
+            named,
+            [("t", false), ("log10(sigma)", true), ("log10(copy)", true)]
+        );
+        assert!(
+            (kept[1].min + 2.0).abs() < 1e-5 && (kept[1].max - 6.0).abs() < 1e-5,
+            "{:?}",
+            kept[1]
+        );
+        let radius = |name: &str| {
+            let s = f.metadata().species.iter().find(|s| s.name == name);
+            f64::from(s.unwrap().radius)
+        };
+        let (r1, r2) = (radius("1"), radius("2"));
+        let first: Vec<u16> = f.attribute().unwrap().to_vec();
+        let first_nodes: Vec<f32> = f.nodes().iter().map(|n| n.attribute).collect();
+
+        // Selected by the column's own name.
+        let s = MdlodFile::open(path)
+            .unwrap()
+            .select_attribute("sigma")
+            .unwrap();
+        let info = s.metadata().attribute.clone().unwrap();
+        assert_eq!(info.name, "log10(sigma)");
+        assert!(s.metadata().attribute_log10 && !info.log10);
+        let step = 8.0 / 65535.0;
+        let mut seen: Vec<f64> = s
+            .attribute()
+            .unwrap()
+            .iter()
+            .map(|&q| f64::from(info.decode(q)))
+            .collect();
+        seen.sort_by(f64::total_cmp);
+        let mut want: Vec<f64> = (0..n).map(|i| sigma(i).log10()).collect();
+        want.sort_by(f64::total_cmp);
+        for (i, (v, w)) in seen.iter().zip(&want).enumerate() {
+            assert!(
+                (v - w).abs() <= step,
+                "{}: value {i}: {v} against {w}",
+                path.display()
+            );
+        }
+        let total: f64 = (0..n)
+            .map(|i| if i % 2 == 0 { r1 * r1 } else { r2 * r2 } * sigma(i))
+            .sum();
+        let last = s.level_count() - 1;
+        for l in 0..last {
+            let level = &s.levels()[l];
+            let from = level.node_first as usize;
+            let sum: f64 = s.nodes()[from..from + level.point_count as usize]
+                .iter()
+                .map(|n| f64::from(n.area_sum) * 10f64.powf(f64::from(n.attribute)))
+                .sum();
+            assert!(
+                (sum / total - 1.0).abs() < 1e-4,
+                "{}: level {l}: {sum} against {total}",
+                path.display()
+            );
+        }
+
+        // A copy of the first, kept alike, holds its values and, node by node, its means.
+        let copy = MdlodFile::open(path)
+            .unwrap()
+            .select_attribute("copy")
+            .unwrap();
+        assert_eq!(copy.attribute().unwrap(), &first[..]);
+        for (i, (a, b)) in first_nodes.iter().zip(copy.nodes()).enumerate() {
+            assert!(
+                (a - b.attribute).abs() <= 1e-5,
+                "{}: node {i}: {a} against {}",
+                path.display(),
+                b.attribute
+            );
+        }
+    }
+
+    // Kept as it is: the note says how to keep its decades.
+    let mut linear = opts.clone();
+    linear.extra_log10 = vec![false, false, true];
+    let r = convert_whole(&frame, &whole, &linear).unwrap();
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n.contains("attribute sigma spans 8.0 decades")
+                && n.contains("--attribute-log10=sigma keeps its logarithm")),
+        "{:?}",
+        r.notes
+    );
+
+    // A column density of 0 has no logarithm: streamed and whole, the column and the
+    // particle named.
+    let zero = text.replacen(&format!(" {:e} ", sigma(5)), " 0 ", 1);
+    assert_ne!(zero, text);
+    std::fs::write(&path, &zero).unwrap();
+    let frame = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &read, &NoProgress)
+        .unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    let zeroed = mdlod_preprocess::convert::read_extra_attributes(&dump, 0, &read).unwrap();
+    let e = convert_file(
+        &path,
+        &streamed,
+        FrameSelect::Last,
+        &read,
+        &opts,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("attribute sigma: particle 5 ") && e.contains("needs values above 0"),
+        "{e}"
+    );
+    let e = mdlod_preprocess::convert::convert_frame_with(
+        &frame,
+        &zeroed,
+        None,
+        &whole,
+        &one,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("attribute sigma: particle 5 ") && e.contains("needs values above 0"),
+        "{e}"
+    );
+
+    // A logarithm asked for past the further attributes.
+    let mut past = one.clone();
+    past.extra_log10 = vec![false, false, false, true];
+    let e = mdlod_preprocess::convert::convert_frame_with(
+        &frame,
+        &zeroed,
+        None,
+        &whole,
+        &past,
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("further attribute 4"), "{e}");
 }

@@ -1563,6 +1563,22 @@ fn further_attributes_are_checked() {
         d.remove(SectionKind::Attribute, last);
     });
     expect_refused(&p, &["an extra attribute without a first"]);
+    // `log10` belongs to the further attributes' entries: the first's is said by
+    // `attribute_log10`. A further one's is taken, and moves there when selected.
+    let p = with("first-log10.mdlod", &|_, m| {
+        m["attribute"]["log10"] = true.into()
+    });
+    expect_refused(&p, &["attribute \"c_pe\": `log10` is set in `attribute`"]);
+    let p = with("extra-log10.mdlod", &|_, m| {
+        m["attributes"][0]["log10"] = true.into()
+    });
+    expect_accepted(&p);
+    let picked = MdlodFile::open(&p)
+        .unwrap()
+        .select_attribute("c_ke")
+        .unwrap();
+    assert!(picked.metadata().attribute_log10);
+    assert!(!picked.metadata().attribute.as_ref().unwrap().log10);
     let p = with("nan-mean.mdlod", &|d, _| {
         d.section(SectionKind::NodeAttributes, 0)[..4].copy_from_slice(&f32::NAN.to_le_bytes());
     });

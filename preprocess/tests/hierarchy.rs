@@ -924,7 +924,7 @@ fn further_attributes_round_trip_and_select_like_the_first() {
             .notes
             .iter()
             .any(|n| n.contains("attribute split spans 12.0 decades")
-                && n.contains("given first with --attribute-log10")),
+                && n.contains("--attribute-log10=split keeps its logarithm")),
         "{:?}",
         report.notes
     );

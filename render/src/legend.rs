@@ -1243,6 +1243,7 @@ pub fn light_bar(
         name: String::new(),
         min: lo,
         max: hi,
+        log10: false,
     };
     let scale = AttributeScale::new(&info).with_log(log && lo > 0.0);
     // (Unlit pixels show the background, not the bottom colour: a linear map from 0
@@ -1547,6 +1548,7 @@ mod tests {
             name: "c_ke".into(),
             min: 0.0,
             max: 2.5,
+            log10: false,
         };
         let scale = AttributeScale::with_range(&info, None);
         let svg = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5], [0.0, 2.5]).svg();
@@ -1570,6 +1572,7 @@ mod tests {
             name: "v_temp".into(),
             min: 280.1653,
             max: 2029.0062,
+            log10: false,
         };
         let scale = AttributeScale::with_range(&info, None);
         let range = [info.min, info.max];
@@ -1581,6 +1584,7 @@ mod tests {
             name: "rho".into(),
             min: 1e-3,
             max: 10.0,
+            log10: false,
         };
         let scale = AttributeScale::with_range(&info, None).with_log(true);
         let svg = colour_bar(ColourMap::Magma, &scale, "rho", [1e-3, 10.0], [1e-3, 10.0]).svg();
@@ -1620,6 +1624,7 @@ mod tests {
             name: "vx".into(),
             min: -1.0,
             max: 1.0,
+            log10: false,
         };
         let narrow = AttributeScale::with_range(&info, Some([-0.5, 0.5]));
         let svg = colour_bar(ColourMap::CoolWarm, &narrow, "vx", [-0.5, 0.5], [-1.0, 1.0]).svg();
@@ -1733,6 +1738,7 @@ mod tests {
             name: "c_pe".into(),
             min: -3.54,
             max: -3.54,
+            log10: false,
         };
         let scale = AttributeScale::with_range(&info, None);
         let svg = colour_bar(
@@ -1761,6 +1767,7 @@ mod tests {
             name: "c_ke".into(),
             min: 0.0,
             max: 2.5,
+            log10: false,
         };
         let scale = AttributeScale::with_range(&info, None);
         let legend = colour_bar(ColourMap::Viridis, &scale, "c_ke", [0.0, 2.5], [0.0, 2.5]);

@@ -1187,6 +1187,7 @@ mod tests {
             name: "rho".into(),
             min,
             max,
+            log10: false,
         };
         let log = AttributeScale::new(&info(1.0, 1000.0)).with_log(true);
         assert_eq!(log.log_range(), Some([1.0, 1000.0]));
@@ -1413,6 +1414,7 @@ mod tests {
             name: "c_ke".into(),
             min,
             max,
+            log10: false,
         };
         let range = Some([0.0, 8.0]);
         let cold = AttributeScale::with_range(&info(0.0367, 0.7203), range);
@@ -1466,6 +1468,7 @@ mod tests {
                 name: "a".into(),
                 min,
                 max,
+                log10: false,
             })
         };
         let s = scale(-2.0, 2.0);

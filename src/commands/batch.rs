@@ -328,6 +328,7 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> Result<()> {
+    args.build.check_log10_inputs(&args.inputs)?;
     let mut pattern_notes = Vec::new();
     let mut inputs = expand_patterns_noting(&args.inputs, out, &mut pattern_notes)?;
     for n in &pattern_notes {

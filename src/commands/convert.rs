@@ -76,10 +76,19 @@ pub struct BuildArgs {
     /// Keep the attribute's base-10 logarithm instead (named log10(NAME); every value
     /// must be above 0): the file keeps 16 bits per value, evenly over its range, so a
     /// quantity spanning many decades (an SPH density) keeps only its top four or five
-    /// otherwise. Applies to the first column --attribute names (further ones are kept as
-    /// they are), or to the attribute an input keeps by itself (a raw sidecar's first).
-    #[arg(long)]
-    pub attribute_log10: bool,
+    /// otherwise. Alone, it applies to the first column --attribute names, or to the
+    /// attribute an input keeps by itself (a raw sidecar's first); with names
+    /// (`--attribute-log10=rho,sigma`, the equals sign needed), to each --attribute column
+    /// named, the first or further ones
+    #[arg(
+        long,
+        value_name = "COLUMNS",
+        num_args = 0..=1,
+        require_equals = true,
+        value_delimiter = ',',
+        action = clap::ArgAction::Append
+    )]
+    pub attribute_log10: Option<Vec<String>>,
     /// Wrap the particles into the simulation cell along its periodic axes (OVITO's
     /// "wrap at periodic boundaries"): unwrapped coordinates (`xu yu zu`) of atoms that
     /// crossed the cell's faces come back inside it, so a liquid stays in its box
@@ -155,6 +164,7 @@ impl BuildArgs {
         {
             bail!("--attribute {a} is given twice: each column is kept once");
         }
+        self.logarithms()?;
         if self.cluster_size < 2 {
             bail!("--cluster-size {} (must be at least 2)", self.cluster_size);
         }
@@ -183,6 +193,54 @@ impl BuildArgs {
         Ok(())
     }
 
+    /// A name meant for --attribute-log10 given after a space (`--attribute-log10 sigma`),
+    /// which the command line reads as an input: an error saying to join them, where no
+    /// such file is there.
+    pub fn check_log10_inputs(&self, inputs: &[std::path::PathBuf]) -> Result<()> {
+        if self.attribute_log10.as_ref().is_some_and(|n| n.is_empty()) {
+            if let Some(input) = inputs
+                .iter()
+                .find(|i| !i.exists() && self.attribute.iter().any(|a| i.as_os_str() == a.as_str()))
+            {
+                let name = input.display();
+                bail!(
+                    "{name} is taken as an input, and there is no such file: \
+                     --attribute-log10 takes its column names after an equals sign \
+                     (--attribute-log10={name})"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Which attributes --attribute-log10 keeps as logarithms: the first, and each further
+    /// one in turn. A name that is no --attribute column is an error listing them.
+    fn logarithms(&self) -> Result<(bool, Vec<bool>)> {
+        let Some(names) = &self.attribute_log10 else {
+            return Ok((false, Vec::new()));
+        };
+        // Alone (no names): the first.
+        let mut first = names.is_empty();
+        let mut further = vec![false; self.attribute.len().saturating_sub(1)];
+        for name in names {
+            match self.attribute.iter().position(|a| a == name) {
+                Some(0) => first = true,
+                Some(k) => further[k - 1] = true,
+                None if self.attribute.is_empty() => bail!(
+                    "--attribute-log10={name}: no column is kept by --attribute; name it with \
+                     --attribute {name}, or give --attribute-log10 alone for the attribute the \
+                     input keeps by itself"
+                ),
+                None => bail!(
+                    "--attribute-log10={name}: {name} is not a column --attribute names (those \
+                     are {}); each name must be one of them",
+                    self.attribute.join(", ")
+                ),
+            }
+        }
+        Ok((first, further))
+    }
+
     /// The renames and radii as given, their names taken as a column of categories
     /// names its values (`1.0` is `1`) where the species come from one.
     fn named(&self) -> (Renames, Radii) {
@@ -202,6 +260,8 @@ impl BuildArgs {
     /// The library options these arguments ask for.
     pub fn options(&self) -> (ConvertOptions, ReadOptions) {
         let (species_names, radii) = self.named();
+        // (Checked by `check` first.)
+        let (attribute_log10, extra_log10) = self.logarithms().unwrap_or_default();
         let convert = ConvertOptions {
             build: BuildParams {
                 max_cluster_size: self.cluster_size,
@@ -222,7 +282,8 @@ impl BuildArgs {
             // script names all five structure types): noted after the conversion.
             radii_may_be_absent: self.species_column.is_some(),
             species_names,
-            attribute_log10: self.attribute_log10,
+            attribute_log10,
+            extra_log10,
             species_column: self.species_column.clone(),
         };
         let read = ReadOptions {

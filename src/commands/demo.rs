@@ -55,7 +55,7 @@ pub fn run(args: Args) -> Result<()> {
             radii: vec![("1".into(), 1.28)],
             species_names: Vec::new(),
             attribute: vec![Kind::Crater.extra_column().to_string()],
-            attribute_log10: false,
+            attribute_log10: None,
             wrap: false,
             columns: None,
             radius_column: None,

@@ -5266,6 +5266,7 @@ mod tests {
             name: "log10(rho)".into(),
             min: -6.0,
             max: 2.0,
+            log10: false,
         };
         let style = mdlod_render::PointStyle::default();
         let path = std::path::Path::new("sph.mdlod");
@@ -5351,6 +5352,7 @@ mod tests {
             name: "sigma".into(),
             min,
             max,
+            log10: false,
         };
         let note = decades_light_note(&a(0.117, 7.3e5)).expect("a note");
         assert!(note.contains("sigma spans 6.8 decades"), "{note}");

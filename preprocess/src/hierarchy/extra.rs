@@ -10,7 +10,11 @@
 //! definition as the first attribute's: area `r²`, the particle's own radius as stored
 //! or its species', a plain mean where the areas sum to 0), summed in `f64` over the
 //! node's own particles, one contiguous run of the finest level (every level's nodes
-//! together sum each particle once: the levels' count of passes in all).
+//! together sum each particle once: the levels' count of passes in all). A column kept
+//! as its logarithm (an SPH column density spanning decades) stores each value's
+//! `log10` over the logarithms' range, and each node's mean as the logarithm of its
+//! linear mean: the sums stay linear, so `10^mean` times a cluster's area is its
+//! particles' light, as for the first attribute with `attribute_log10`.
 
 use std::ops::Range;
 
@@ -54,34 +58,54 @@ pub fn particle_ranges(levels: &[LevelRecord], nodes: &[NodeRecord]) -> Vec<Rang
     ranges
 }
 
-/// Lays out each of `columns` (a name and one value per particle, in the input's order)
-/// in `h`'s particle order, quantizes it over its range, and averages it over every
-/// node. `species` are the species the hierarchy was built with (their radii weigh the
+/// One column for [`extra_attributes`]: its name as the file gives it, one value per
+/// particle in the input's order, and whether the file keeps its base-10 logarithm
+/// (`AttributeInfo::log10`; the values must then be above 0).
+pub struct ExtraColumn<'a> {
+    pub name: &'a str,
+    pub values: &'a [f32],
+    pub log10: bool,
+}
+
+/// Lays out each of `columns` in `h`'s particle order, quantizes it over its range (of
+/// the logarithms, for a column kept as its logarithm), and averages it over every node.
+/// `species` are the species the hierarchy was built with (their radii weigh the
 /// particles without radii of their own). The nodes' particle runs and the particles'
 /// areas are found once for all the columns.
 pub fn extra_attributes(
     h: &Hierarchy,
-    columns: &[(&str, &[f32])],
+    columns: &[ExtraColumn],
     species: &[Species],
 ) -> Result<Vec<ExtraAttribute>, BuildError> {
     let mut infos = Vec::with_capacity(columns.len());
-    for (name, values) in columns {
-        check_finite(values)?;
-        let (min, max) = values
+    for c in columns {
+        check_finite(c.values)?;
+        if c.log10 {
+            check_positive(c.name, c.values)?;
+        }
+        let (min, max) = c
+            .values
             .iter()
             .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
                 (lo.min(v), hi.max(v))
             });
+        // (`log10` is monotonic: the logarithms' range is that of the ends'.)
+        let (min, max) = if c.log10 {
+            (min.log10(), max.log10())
+        } else {
+            (min, max)
+        };
         infos.push(AttributeInfo {
-            name: name.to_string(),
+            name: c.name.to_string(),
             min,
             max,
+            log10: c.log10,
         });
     }
     let over: Vec<(&AttributeInfo, &[f32])> = infos
         .iter()
         .zip(columns)
-        .map(|(i, (_, v))| (i, *v))
+        .map(|(i, c)| (i, c.values))
         .collect();
     Ok(extra_attributes_over(h, &over, species)?
         .into_iter()
@@ -157,6 +181,18 @@ pub fn extra_attributes_over(
         .collect()
 }
 
+/// The first value not above 0 of a column kept as its logarithm, as an error.
+fn check_positive(name: &str, values: &[f32]) -> Result<(), BuildError> {
+    match values.iter().position(|v| v.is_nan() || *v <= 0.0) {
+        Some(index) => Err(BuildError::NotPositiveAttribute {
+            name: name.to_string(),
+            index,
+            value: values[index],
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The first non-finite value, as an error.
 fn check_finite(values: &[f32]) -> Result<(), BuildError> {
     match values.iter().position(|v| !v.is_finite()) {
@@ -182,7 +218,12 @@ fn extra_attribute(
         .iter()
         .map(|&i| values[i as usize])
         .collect();
-    let quantized = ordered.iter().map(|&v| info.encode(v)).collect();
+    // A column kept as its logarithm stores the logarithms, and its means are the
+    // logarithms of the linear means (so that `10^mean` times a node's area is its
+    // particles' light).
+    let stored = |v: f32| if info.log10 { v.log10() } else { v };
+    let mean_of = |s: &MeanSums| stored(s.mean());
+    let quantized = ordered.iter().map(|&v| info.encode(stored(v))).collect();
     let sums_of = |r: &Range<u64>| {
         let run = r.start as usize..(r.end as usize).min(ordered.len());
         let mut s = MeanSums {
@@ -201,12 +242,12 @@ fn extra_attribute(
     // small values beside a large total), every level's nodes in parallel; the root's
     // (node 0, every particle) kept for a chunked build's top node.
     let root = runs.first().map(sums_of).unwrap_or_default();
-    let node_means = std::iter::once(root.mean())
+    let node_means = std::iter::once(mean_of(&root))
         .chain(
             runs.get(1..)
                 .unwrap_or_default()
                 .par_iter()
-                .map(|r| sums_of(r).mean())
+                .map(|r| mean_of(&sums_of(r)))
                 .collect::<Vec<f32>>(),
         )
         .take(runs.len())

@@ -124,6 +124,12 @@ pub enum BuildError {
     },
     #[error("particle {index} has a non-finite attribute value {value}")]
     NonFiniteAttribute { index: usize, value: f32 },
+    #[error("attribute {name}: particle {index} has the value {value}: its logarithm (--attribute-log10) needs values above 0")]
+    NotPositiveAttribute {
+        name: String,
+        index: usize,
+        value: f32,
+    },
     #[error("particle {index} at {position:?} lies beyond ±{MAX_COORDINATE:e}, where differences of single-precision coordinates overflow; convert it in larger length units")]
     OutOfRange { index: usize, position: [f32; 3] },
     #[error("species `{name}`: radius {radius:e}: the frame's {particles} particles at that radius would add up to squared radii of {sum:.2e}, beyond the {MAX_AREA_SUM:e} single precision holds (a bound over the whole frame, as the top node sums every particle); convert it in larger length units")]
@@ -274,6 +280,7 @@ impl Hierarchy {
                     name: "attribute".into(),
                     min: *min,
                     max: *max,
+                    log10: false,
                 })
             }
             (None, _) => {
