@@ -398,6 +398,14 @@ pub fn write_raw_arrays(
         format!("{stem}.type.u8"),
         format!("{stem}.{column}.f32"),
     ];
+    // A sidecar of an earlier generation goes first, and the new one is written last,
+    // through a temporary file renamed into place: arrays stopped half way are never
+    // described by a sidecar (a batch reads a frame by its sidecar).
+    let path = dir.join(format!("{stem}.raw.json"));
+    match std::fs::remove_file(&path) {
+        Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
+        _ => {}
+    }
     let create = |n: &str| {
         std::fs::File::create(dir.join(n)).map(|f| io::BufWriter::with_capacity(1 << 20, f))
     };
@@ -429,8 +437,9 @@ pub fn write_raw_arrays(
         },
         "timestep": 0,
     });
-    let path = dir.join(format!("{stem}.raw.json"));
-    std::fs::write(&path, serde_json::to_vec_pretty(&sidecar)?)?;
+    let temp = dir.join(format!(".{stem}.raw.json.tmp"));
+    std::fs::write(&temp, serde_json::to_vec_pretty(&sidecar)?)?;
+    std::fs::rename(&temp, &path)?;
     let bytes = names
         .iter()
         .map(|n| std::fs::metadata(dir.join(n)).map_or(0, |m| m.len()))
