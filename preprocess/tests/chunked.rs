@@ -1181,6 +1181,38 @@ fn gzip_pieces_are_opened_within_the_memory_limit_piece_by_piece() {
     );
 }
 
+/// Converts `path` to `out` (the last frame), checking no note says decades are lost.
+fn converted_saying_no_decades(path: &Path, out: &Path, read: &ReadOptions, opts: &ConvertOptions) {
+    let r = convert_file(path, out, FrameSelect::Last, read, opts, &NoProgress).unwrap();
+    assert!(
+        !r.notes.iter().any(|n| n.contains("decades")),
+        "{:?}",
+        r.notes
+    );
+}
+
+/// Every level's clusters of `f`, an attribute kept as its logarithm, their areas times
+/// 10^mean, add up to `total`, the particles' `Σ r² v` (what splats lit by the attribute
+/// draw): the means are the logarithms of the area-weighted means, not means of the
+/// logarithms.
+fn assert_light_adds_up(f: &MdlodFile, total: f64) {
+    assert!(f.metadata().attribute_log10);
+    for l in 0..f.level_count() - 1 {
+        let level = &f.levels()[l];
+        let first = level.node_first as usize;
+        let nodes = &f.nodes()[first..first + level.point_count as usize];
+        let sum: f64 = nodes
+            .iter()
+            .map(|n| f64::from(n.area_sum) * 10f64.powf(f64::from(n.attribute)))
+            .sum();
+        assert!(
+            (sum / total - 1.0).abs() < 1e-4,
+            "{}: level {l}: {sum} against {total}",
+            f.path().display()
+        );
+    }
+}
+
 /// `attribute_log10`: the attribute's logarithm is stored, named `log10(NAME)`, every
 /// decade in 16 bits alike, streamed out of core as in memory; a value not above 0 is an
 /// error naming the particle; without it, a note says the lowest decades lose digits.
@@ -1207,20 +1239,7 @@ fn an_attribute_spanning_decades_keeps_its_logarithm() {
     let mut opts = options(300);
     opts.attribute_log10 = true;
     let (streamed, whole) = (dir.path().join("s.mdlod"), dir.path().join("w.mdlod"));
-    let r = convert_file(
-        &path,
-        &streamed,
-        FrameSelect::Last,
-        &read,
-        &opts,
-        &NoProgress,
-    )
-    .unwrap();
-    assert!(
-        !r.notes.iter().any(|n| n.contains("decades")),
-        "{:?}",
-        r.notes
-    );
+    converted_saying_no_decades(&path, &streamed, &read, &opts);
     let dump = DumpFile::open(&path).unwrap();
     let frame = dump.read_frame(0, &read, &NoProgress).unwrap();
     convert_frame(
@@ -1262,20 +1281,7 @@ fn an_attribute_spanning_decades_keeps_its_logarithm() {
     assert!(f.metadata().attribute_log10);
     let r2 = f64::from(f.metadata().species[0].radius).powi(2);
     let total: f64 = (0..n).map(|i| r2 * rho(i)).sum();
-    let last = f.level_count() - 1;
-    for l in 0..last {
-        let level = &f.levels()[l];
-        let first = level.node_first as usize;
-        let nodes = &f.nodes()[first..first + level.point_count as usize];
-        let sum: f64 = nodes
-            .iter()
-            .map(|n| f64::from(n.area_sum) * 10f64.powf(f64::from(n.attribute)))
-            .sum();
-        assert!(
-            (sum / total - 1.0).abs() < 1e-4,
-            "level {l}: {sum} against {total}"
-        );
-    }
+    assert_light_adds_up(&f, total);
 
     // Stored as they are: a note, in memory and streamed.
     opts.attribute_log10 = false;
@@ -1584,20 +1590,7 @@ fn a_further_attribute_spanning_decades_keeps_its_logarithm() {
         dir.path().join("m.mdlod"),
         dir.path().join("w.mdlod"),
     );
-    let r = convert_file(
-        &path,
-        &streamed,
-        FrameSelect::Last,
-        &read,
-        &opts,
-        &NoProgress,
-    )
-    .unwrap();
-    assert!(
-        !r.notes.iter().any(|n| n.contains("decades")),
-        "{:?}",
-        r.notes
-    );
+    converted_saying_no_decades(&path, &streamed, &read, &opts);
     let convert_whole =
         |frame: &mdlod_preprocess::frame::Frame, out: &Path, opts: &ConvertOptions| {
             mdlod_preprocess::convert::convert_frame_with(
@@ -1673,20 +1666,7 @@ fn a_further_attribute_spanning_decades_keeps_its_logarithm() {
         let total: f64 = (0..n)
             .map(|i| if i % 2 == 0 { r1 * r1 } else { r2 * r2 } * sigma(i))
             .sum();
-        let last = s.level_count() - 1;
-        for l in 0..last {
-            let level = &s.levels()[l];
-            let from = level.node_first as usize;
-            let sum: f64 = s.nodes()[from..from + level.point_count as usize]
-                .iter()
-                .map(|n| f64::from(n.area_sum) * 10f64.powf(f64::from(n.attribute)))
-                .sum();
-            assert!(
-                (sum / total - 1.0).abs() < 1e-4,
-                "{}: level {l}: {sum} against {total}",
-                path.display()
-            );
-        }
+        assert_light_adds_up(&s, total);
 
         // A copy of the first, kept alike, holds its values and, node by node, its means.
         let copy = MdlodFile::open(path)
