@@ -211,7 +211,11 @@ pub struct AttributeInfo {
     /// of the values below it, as the metadata's `attribute_log10` says of the first
     /// attribute. Set in a further attribute's entry (`attributes`) only: the first's is
     /// `attribute_log10`, and a file setting it in `attribute` is refused.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    #[serde(
+        default,
+        skip_serializing_if = "std::ops::Not::not",
+        deserialize_with = "null_is_false"
+    )]
     pub log10: bool,
 }
 
@@ -296,6 +300,11 @@ fn null_is_empty<'de, D: serde::Deserializer<'de>, T: Deserialize<'de>>(
     Ok(Option::<Vec<T>>::deserialize(d)?.unwrap_or_default())
 }
 
+/// An optional flag whose absence means `false`: `null` is its absence too (section 7).
+fn null_is_false<'de, D: serde::Deserializer<'de>>(d: D) -> Result<bool, D::Error> {
+    Ok(Option::<bool>::deserialize(d)?.unwrap_or(false))
+}
+
 /// An optional integer whose absence means 0: `null` is its absence too (section 7: an
 /// optional field may be absent or `null`).
 fn null_is_zero<'de, D: serde::Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
@@ -365,7 +374,11 @@ pub struct Metadata {
     /// it, not the mean of their logarithms: so that `10^mean` times a cluster's area is
     /// the light of its particles (splats lit by the attribute). Files that store a
     /// logarithm without this flag hold means of logarithms.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    #[serde(
+        default,
+        skip_serializing_if = "std::ops::Not::not",
+        deserialize_with = "null_is_false"
+    )]
     pub attribute_log10: bool,
     /// Further per-particle attributes (version 1.2: the ATTRIBUTES and NODE_ATTRIBUTES
     /// sections), each quantized over its own range as `attribute` is; a reader of

@@ -1579,6 +1579,15 @@ fn further_attributes_are_checked() {
         .unwrap();
     assert!(picked.metadata().attribute_log10);
     assert!(!picked.metadata().attribute.as_ref().unwrap().log10);
+    // Optional flags given as `null` are absent (section 7), `false` in `attribute` too.
+    let p = with("null-flags.mdlod", &|_, m| {
+        m["attribute_log10"] = serde_json::Value::Null;
+        m["attributes"][0]["log10"] = serde_json::Value::Null;
+        m["attribute"]["log10"] = false.into();
+    });
+    expect_accepted(&p);
+    let f = MdlodFile::open(&p).unwrap();
+    assert!(!f.metadata().attribute_log10 && !f.metadata().attributes[0].log10);
     let p = with("nan-mean.mdlod", &|d, _| {
         d.section(SectionKind::NodeAttributes, 0)[..4].copy_from_slice(&f32::NAN.to_le_bytes());
     });
