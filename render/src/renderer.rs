@@ -442,13 +442,21 @@ impl SplatFrame {
             2.0 / v.max(f32::MIN_POSITIVE)
         });
         let bg = background_srgb.map(srgb_to_linear);
+        // The exposure is of the light in its units (the attribute's, where the points
+        // are lit by it), as [`Self::light`] gives it.
+        let unit = if self.by_attribute {
+            self.light_unit
+        } else {
+            1.0
+        };
         let mut image = RgbaImage::new(self.width, self.height);
         for (i, p) in self.hdr.iter().enumerate() {
             let px: [u8; 4] = [0, 1, 2, 3].map(|k| {
                 if k == 3 {
                     return 255;
                 }
-                let light = 1.0 - (-exposure * p[k].max(0.0)).exp();
+                let f = (f64::from(p[k].max(0.0)) * f64::from(unit)).min(f64::from(f32::MAX));
+                let light = 1.0 - (-exposure * f as f32).exp();
                 let v = bg[k] + (1.0 - bg[k]) * light;
                 (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
             });

@@ -1341,6 +1341,19 @@ fn the_automatic_exposure_of_attribute_light_is_chosen_from_that_light() {
     assert!((attr.total_light() - total).abs() < 1e-9 * total);
     // A given exposure is used as given.
     assert_eq!(attr.tone_map(Some(3.0), [0.0; 3]).1, 3.0);
+    // Light in the attribute's units, 1000 to an intensity of 1 (a column of 1000s): the
+    // same picture, exposed for light a thousand times as bright (it was near black,
+    // the exposure chosen for the light in units and applied to the intensities).
+    let thousands = SplatFrame {
+        light_unit: 1000.0,
+        ..frame(true)
+    };
+    let (big, e) = thousands.tone_map(None, [0.0; 3]);
+    assert!((e - 2.0 / 70.0).abs() < 1e-6, "{e}");
+    assert_eq!(big.data, img.data);
+    // A given exposure applies to the light in units.
+    let (dim, _) = thousands.tone_map(Some(2.0 / 70.0), [0.0; 3]);
+    assert_eq!(dim.data, img.data);
 }
 
 /// Hidden species: the cut draws no cluster holding any of their particles (a cluster of
