@@ -11318,6 +11318,18 @@ fn logarithms_of_named_columns_first_and_further() {
     args.extend(base);
     let out = ok(&args);
     assert!(out.contains("the projected sigma"), "{out}");
+    // A range of logarithms lights by the quantity less its low end, as a linear range
+    // does; linear values typed for logarithms are refused, saying so.
+    args.push("--attribute-range=2:3");
+    let out = ok(&args);
+    assert!(out.contains("the projected (sigma − 100)"), "{out}");
+    args.pop();
+    args.push("--attribute-range=0.01:1e4");
+    let e = fails(&args);
+    assert!(
+        e.contains("the range's ends are logarithms too, and 10000 stands for 10^10000"),
+        "{e}"
+    );
 
     let mut args = vec!["convert", s(&path), "-o", s(&file)];
     args.extend(columns);

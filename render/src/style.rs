@@ -756,9 +756,10 @@ pub struct AttributeScale {
 impl AttributeScale {
     /// For splats lit by an attribute stored as its logarithm (a file's
     /// `attribute_log10`, whose clusters hold the logarithm of their mean value): a
-    /// value `v` maps to `10^(v − hi)` and the light unit is `10^hi` (`hi` the range's
-    /// top), so that the light is the quantity `10^v` itself and sums over clusters as
-    /// over their particles.
+    /// value `v` maps to `10^(v − max)` and the light unit is `10^max`, so that the light
+    /// is the quantity `10^v` itself and sums over clusters as over their particles.
+    /// With a range `lo..hi` (logarithms), the light is `10^v` clamped to `10^lo..10^hi`,
+    /// less `10^lo`, as a linear range's light is the value less its low end.
     pub fn lighting_by_quantity(self) -> Self {
         AttributeScale {
             exp10: true,
@@ -770,6 +771,17 @@ impl AttributeScale {
     /// The top of the range a quantity's logarithm is lit up to ([`Self::exp10`]).
     fn exp10_top(&self) -> f64 {
         f64::from(self.shown.map_or(self.max, |[_, hi]| hi))
+    }
+
+    /// The quantities a logarithm's light starts and ends at ([`Self::exp10`]): with a
+    /// range `lo..hi` given, `10^lo` and `10^hi` (the light is the quantity clamped to
+    /// them, less `10^lo`, as a linear range's is the value less its low end); else 0
+    /// and `10^max`.
+    fn exp10_ends(&self) -> (f64, f64) {
+        match self.shown {
+            Some([lo, hi]) => (10f64.powf(f64::from(lo)), 10f64.powf(f64::from(hi))),
+            None => (0.0, 10f64.powf(f64::from(self.max))),
+        }
     }
     /// Ranges at most this many units in the last place of their values wide are
     /// rounding, not data.
@@ -858,8 +870,10 @@ impl AttributeScale {
     /// for and the factor of its 1 ([`Self::light_unit`], [`Self::light_zero`]).
     fn light_in_units(&self) -> Option<(f32, f32)> {
         if self.exp10 {
-            let unit = 10f64.powf(self.exp10_top()) as f32;
-            return (unit > 0.0 && unit.is_finite()).then_some((0.0, unit));
+            let (zero, top) = self.exp10_ends();
+            let (zero32, unit) = (zero as f32, (top - zero) as f32);
+            return (unit > 0.0 && unit.is_finite() && zero32.is_finite())
+                .then_some((zero32, unit));
         }
         if self.log_range().is_some() {
             return None;
@@ -877,7 +891,14 @@ impl AttributeScale {
     /// A value (a cluster's mean) in [0, 1].
     pub fn of_value(&self, v: f32) -> f32 {
         if self.exp10 {
-            let t = 10f64.powf(f64::from(v) - self.exp10_top());
+            // Without a range, relative to the top (no overflow for any logarithm).
+            let t = match self.shown {
+                None => 10f64.powf(f64::from(v) - self.exp10_top()),
+                Some(_) => {
+                    let (zero, top) = self.exp10_ends();
+                    (10f64.powf(f64::from(v)).clamp(zero, top) - zero) / (top - zero)
+                }
+            };
             return if t.is_nan() {
                 0.0
             } else {
@@ -1055,6 +1076,41 @@ fn linear_to_srgb_byte(v: f32) -> u32 {
 
 #[cfg(test)]
 mod tests {
+    /// Splats lit by a quantity kept as its logarithm: the light is `10^v` itself, in
+    /// units of `10^max`; with a range of logarithms, `10^v` clamped to its ends less the
+    /// low one, as a linear range's light is the value less its low end.
+    #[test]
+    fn a_logarithm_lights_by_its_quantity_less_a_ranges_low_end() {
+        use super::AttributeScale;
+        let info = mdlod_format::meta::AttributeInfo {
+            name: "log10(sigma)".into(),
+            min: -2.0,
+            max: 6.0,
+            log10: false,
+        };
+        let close = |a: f32, b: f64| (f64::from(a) - b).abs() <= 1e-6 * b.abs().max(1e-6);
+        let whole = AttributeScale::new(&info).lighting_by_quantity();
+        assert_eq!(whole.of_value(6.0), 1.0);
+        assert!(close(whole.of_value(4.0), 0.01));
+        assert!(close(whole.of_value(-2.0), 1e-8));
+        assert!(close(whole.light_unit(), 1e6));
+        assert_eq!(whole.light_zero(), Some(0.0));
+        let ranged = AttributeScale::with_range(&info, Some([2.0, 3.0])).lighting_by_quantity();
+        assert_eq!(ranged.of_value(1.0), 0.0);
+        assert_eq!(ranged.of_value(2.0), 0.0);
+        assert!(close(
+            ranged.of_value(2.5),
+            (10f64.powf(2.5) - 100.0) / 900.0
+        ));
+        assert_eq!(ranged.of_value(3.0), 1.0);
+        assert_eq!(ranged.of_value(5.0), 1.0);
+        assert!(close(ranged.light_unit(), 900.0));
+        assert_eq!(ranged.light_zero(), Some(100.0));
+        // A particle's stored value is mapped as a cluster's mean is.
+        assert_eq!(ranged.of_quantized(0), 0.0);
+        assert_eq!(ranged.of_quantized(u16::MAX), 1.0);
+    }
+
     /// The ranges chosen where none is given: splats lit from 0, a log scale from the
     /// smallest value above 0, a diverging map centred on 0; the values' own elsewhere.
     #[test]

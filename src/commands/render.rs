@@ -3568,22 +3568,22 @@ fn projected_light(
     let Some(a) = attribute.filter(|_| matches!(args.intensity, Intensity::Attribute)) else {
         return "projected flux".to_string();
     };
+    let (_, style) = mdlod_render::page_style(opts);
+    let scale = mdlod_render::style::AttributeScale::with_range(a, style.attribute_range);
     // A logarithm lights by its quantity (`log10(rho)`: the projected rho).
-    if let Some(inner) = a
+    let (name, scale) = match a
         .name
         .strip_prefix("log10(")
         .and_then(|s| s.strip_suffix(')'))
     {
-        return format!("projected {inner}");
-    }
-    let (_, style) = mdlod_render::page_style(opts);
-    let scale = mdlod_render::style::AttributeScale::with_range(a, style.attribute_range)
-        .with_log(style.log_scale);
+        Some(inner) => (inner, scale.lighting_by_quantity()),
+        None => (a.name.as_str(), scale.with_log(style.log_scale)),
+    };
     match scale.light_zero() {
-        Some(0.0) => format!("projected {}", a.name),
-        Some(lo) if lo < 0.0 => format!("projected ({} + {})", a.name, Num(-lo)),
-        Some(lo) => format!("projected ({} − {})", a.name, Num(lo)),
-        None => format!("projected flux ({} constant)", a.name),
+        Some(0.0) => format!("projected {name}"),
+        Some(lo) if lo < 0.0 => format!("projected ({name} + {})", Num(-lo)),
+        Some(lo) => format!("projected ({name} − {})", Num(lo)),
+        None => format!("projected flux ({name} constant)"),
     }
 }
 
@@ -3806,6 +3806,30 @@ fn check_not_logged(
             path.display(),
             a.name
         );
+    }
+    // A range of logarithms whose ends stand for no single-precision quantity: linear
+    // values typed for logarithms (`0.01:1e4`), most likely.
+    if let (Some([lo, hi]), Some(inner)) = (
+        style.attribute_range,
+        a.name
+            .strip_prefix("log10(")
+            .and_then(|s| s.strip_suffix(')')),
+    ) {
+        // (The logarithms of single precision's largest and smallest numbers.)
+        if let Some(end) = [lo, hi].into_iter().find(|e| !(-45.0..=38.5).contains(e)) {
+            anyhow::bail!(
+                "--attribute-range {}:{}: {} holds {}, logarithms (converted with \
+                 --attribute-log10), so the range's ends are logarithms too, and {} stands \
+                 for 10^{}, beyond single precision; for {inner} from 0.01 to 10000 give \
+                 -2:4",
+                Num(lo),
+                Num(hi),
+                path.display(),
+                a.name,
+                Num(end),
+                Num(end)
+            );
+        }
     }
     // (Splats lit by the quantity map their image's light on the log scale, not the
     // logarithms.)
