@@ -7397,7 +7397,7 @@ fn summaries_print_large_and_small_values_in_scientific_notation() {
             "--log-scale",
         ]);
         assert_eq!(
-            out.contains("convert with --attribute-log10 to keep them"),
+            out.contains("convert with --attribute-log10=mass to keep them"),
             says,
             "{out}"
         );
@@ -8930,12 +8930,19 @@ fn log_scales_ranges_and_fits_that_mean_nothing_are_refused_or_explained() {
     let out = ok(&run(
         &rho,
         &png,
-        &["--colour-map", "viridis", "--attribute-range", "100:1000"],
+        &["--colour-map", "viridis", "--attribute-range", "4:5"],
     ));
     assert!(
         out.contains("misses the file's values (log10(rho) from -3 to 3)"),
         "{out}"
     );
+    // Values typed for logarithms stand for no number single precision holds.
+    let e = fails(&run(
+        &rho,
+        &png,
+        &["--colour-map", "viridis", "--attribute-range", "100:1000"],
+    ));
+    assert!(e.contains("100 stands for 10^100"), "{e}");
     // A view file with its target and distance fits nothing.
     let view = dir.path().join("v.json");
     ok(&run(&vx, &png, &["--save-view", s(&view)]));
@@ -11333,6 +11340,10 @@ fn logarithms_of_named_columns_first_and_further() {
 
     let mut args = vec!["convert", s(&path), "-o", s(&file)];
     args.extend(columns);
+    args.push("--attribute-log10=");
+    let e = fails(&args);
+    assert!(e.contains("--attribute-log10= names no column"), "{e}");
+    args.pop();
     args.push("--attribute-log10=sigma,nope");
     let e = fails(&args);
     assert!(

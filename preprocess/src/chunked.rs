@@ -2020,9 +2020,10 @@ pub fn convert_chunked(
         file_size,
         notes: {
             let mut notes: Vec<String> = radius_notes;
+            let logged = crate::convert::logged_columns(&metadata);
             if let Some(a) = &metadata.attribute {
                 notes.extend(crate::convert::attribute_span_note(
-                    &a.name, a.min, a.max, options,
+                    &a.name, a.min, a.max, options, &logged,
                 ));
             }
             for (e, &whole) in metadata
@@ -2032,7 +2033,9 @@ pub fn convert_chunked(
                 .filter(|(e, _)| !e.log10)
             {
                 // Ids (of molecules) are told by their whole numbers, as for the first.
-                notes.extend(crate::convert::extra_range_note(&e.name, e.min, e.max, whole).0);
+                notes.extend(
+                    crate::convert::extra_range_note(&e.name, e.min, e.max, whole, &logged).0,
+                );
             }
             notes.extend(crate::convert::lj_elements_note(
                 metadata.units.as_deref(),

@@ -491,6 +491,20 @@ pub fn convert_frame_with(
         })?;
     let build_time = t0.elapsed();
     let mut notes = override_notes;
+    // The columns kept as logarithms, by their input names (a note's advice names them).
+    let logged: Vec<String> = frame
+        .attribute
+        .iter()
+        .filter(|_| options.attribute_log10)
+        .map(|a| a.name.clone())
+        .chain(
+            further
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| options.extra_logged(*k))
+                .map(|(_, e)| e.name.clone()),
+        )
+        .collect();
     if let (Some(a), Some((_, min, max))) = (&frame.attribute, &h.attribute) {
         // Ids (of molecules, clusters) are told by their whole numbers, which no
         // logarithm keeps apart either.
@@ -501,7 +515,7 @@ pub fn convert_frame_with(
             notes.extend(ids);
         } else {
             let mut said = Vec::new();
-            said.extend(attribute_span_note(&a.name, *min, *max, options));
+            said.extend(attribute_span_note(&a.name, *min, *max, options, &logged));
             if !options.attribute_log10 {
                 said.extend(below_step_note(&a.name, &a.values, *min, *max));
                 // How much of the area-weighted total (what splats by the attribute add
@@ -541,7 +555,7 @@ pub fn convert_frame_with(
         // Ids (of molecules) are told by their whole numbers, as for the first: no
         // logarithm to suggest.
         let whole = column.is_some_and(|c| c.values.iter().all(|v| v.fract() == 0.0));
-        let (note, ids) = extra_range_note(&e.info.name, e.info.min, e.info.max, whole);
+        let (note, ids) = extra_range_note(&e.info.name, e.info.min, e.info.max, whole, &logged);
         notes.extend(note);
         // A column from 0 whose values above 0 fall below a step, as for the first.
         if let (Some(column), false) = (column, ids) {
@@ -1219,16 +1233,52 @@ pub fn attribute_span_note(
     min: f32,
     max: f32,
     options: &ConvertOptions,
+    logged: &[String],
 ) -> Option<String> {
     if options.attribute_log10 {
         return None;
     }
+    // (Alone, the flag takes the first: an input's own attribute too, a raw sidecar's.)
+    let flag = match logged.is_empty() {
+        true => "--attribute-log10".to_string(),
+        false => format!("--attribute-log10={name},{}", logged.join(",")),
+    };
     span_note(
         name,
         min,
         max,
-        "--attribute-log10 keeps its logarithm, every decade alike",
+        &format!("{flag} keeps its logarithm, every decade alike"),
     )
+}
+
+/// The `--attribute-log10=` that keeps `name`'s logarithm beside those of `logged` (the
+/// columns, by their input names, a conversion keeps as logarithms): naming `name` alone
+/// would keep theirs linear.
+pub fn log10_flag(name: &str, logged: &[String]) -> String {
+    let mut names = logged.to_vec();
+    names.push(name.to_string());
+    format!("--attribute-log10={}", names.join(","))
+}
+
+/// The input names of the attributes `metadata` keeps as logarithms, the first's first.
+pub fn logged_columns(metadata: &Metadata) -> Vec<String> {
+    let inner = |n: &str| {
+        n.strip_prefix("log10(")
+            .and_then(|s| s.strip_suffix(')'))
+            .unwrap_or(n)
+            .to_string()
+    };
+    let first = metadata
+        .attribute
+        .iter()
+        .filter(|_| metadata.attribute_log10)
+        .map(|a| inner(&a.name));
+    let further = metadata
+        .attributes
+        .iter()
+        .filter(|a| a.log10)
+        .map(|a| inner(&a.name));
+    first.chain(further).collect()
 }
 
 /// The relative change 16-bit quantization over `[min, max]` makes to `Σ area(i) · v_i`
@@ -1340,23 +1390,27 @@ pub(crate) fn extra_range_note(
     min: f32,
     max: f32,
     whole: bool,
+    logged: &[String],
 ) -> (Option<String>, bool) {
     match whole
         .then(|| whole_numbers_note(name, &[], min, max))
         .flatten()
     {
         Some(ids) => (ids, true),
-        None => (extra_span_note(name, min, max), false),
+        None => (extra_span_note(name, min, max, logged), false),
     }
 }
 
 /// [`attribute_span_note`] of a further attribute (kept linearly).
-pub fn extra_span_note(name: &str, min: f32, max: f32) -> Option<String> {
+pub fn extra_span_note(name: &str, min: f32, max: f32, logged: &[String]) -> Option<String> {
     span_note(
         name,
         min,
         max,
-        &format!("--attribute-log10={name} keeps its logarithm, every decade alike"),
+        &format!(
+            "{} keeps its logarithm, every decade alike",
+            log10_flag(name, logged)
+        ),
     )
 }
 

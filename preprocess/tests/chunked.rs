@@ -1684,7 +1684,7 @@ fn a_further_attribute_spanning_decades_keeps_its_logarithm() {
         }
     }
 
-    // Kept as it is: the note says how to keep its decades.
+    // Kept as it is: the note says how to keep its decades, and the others' logarithms.
     let mut linear = opts.clone();
     linear.extra_log10 = vec![false, false, true];
     let r = convert_whole(&frame, &whole, &linear).unwrap();
@@ -1692,7 +1692,7 @@ fn a_further_attribute_spanning_decades_keeps_its_logarithm() {
         r.notes
             .iter()
             .any(|n| n.contains("attribute sigma spans 8.0 decades")
-                && n.contains("--attribute-log10=sigma keeps its logarithm")),
+                && n.contains("--attribute-log10=rho,copy,sigma keeps its logarithm")),
         "{:?}",
         r.notes
     );

@@ -223,6 +223,12 @@ impl BuildArgs {
         let mut first = names.is_empty();
         let mut further = vec![false; self.attribute.len().saturating_sub(1)];
         for name in names {
+            if name.is_empty() {
+                bail!(
+                    "--attribute-log10= names no column: give --attribute columns after the \
+                     equals sign (--attribute-log10=rho,sigma), or the flag alone for the first"
+                );
+            }
             match self.attribute.iter().position(|a| a == name) {
                 Some(0) => first = true,
                 Some(k) => further[k - 1] = true,

@@ -3878,8 +3878,9 @@ fn log_text(
         let empty = (step.min(hi) / lo).log10().clamp(0.0, all);
         let few = format!(
             "{empty:.0} of the scale's {all:.0} decades show no step of their own and those \
-             up to {} a few each (convert with --attribute-log10 to keep them)",
-            Num((step * 1000.0) as f32)
+             up to {} a few each (convert with --attribute-log10={} to keep them)",
+            Num((step * 1000.0) as f32),
+            a.name
         );
         // Where the file's lowest is the scale's start or below it, what is stored as it
         // takes the start's colour.
