@@ -11338,6 +11338,49 @@ fn logarithms_of_named_columns_first_and_further() {
         "{e}"
     );
 
+    // A movie of a projection on a log scale maps the image's light, not the
+    // logarithms (they were floored as if values from 0: "from 0.0067 to 6").
+    let frames = dir.path().join("movie-frames");
+    let mut args = vec!["batch", s(&path), "-o", s(&frames)];
+    args.extend(columns);
+    args.push("--attribute-log10=rho,sigma");
+    ok(&args);
+    let movie = dir.path().join("f-%03d.png");
+    let mut args = vec!["render", s(&frames), "-o", s(&movie), "--mode", "splat"];
+    args.extend(["--intensity", "attribute", "--attribute", "sigma"]);
+    args.extend(["--colour-map", "viridis", "--log-scale"]);
+    args.extend(base);
+    let out = ok(&args);
+    assert!(
+        out.contains("rendered 1 frame") && !out.contains("smallest value above 0"),
+        "{out}"
+    );
+    // A constant logarithm's note says its quantity too.
+    let flat = dir.path().join("flat.xyz");
+    let mut xyz = String::from("8\nProperties=species:S:1:pos:R:3:m:R:1\n");
+    for i in 0..8 {
+        xyz.push_str(&format!("H {} {} {} 3.54\n", i % 2, (i / 2) % 2, i / 4));
+    }
+    std::fs::write(&flat, xyz).unwrap();
+    let flat_file = dir.path().join("flat.mdlod");
+    ok(&[
+        "convert",
+        s(&flat),
+        "-o",
+        s(&flat_file),
+        "--attribute",
+        "m",
+        "--attribute-log10",
+    ]);
+    let mut args = vec!["render", s(&flat_file), "-o", s(&png), "--mode", "splat"];
+    args.extend(["--intensity", "attribute"]);
+    args.extend(base);
+    let out = ok(&args);
+    assert!(
+        out.contains("log10(m) is constant in this file (0.549") && out.contains(", m = 3.54):"),
+        "{out}"
+    );
+
     let mut args = vec!["convert", s(&path), "-o", s(&file)];
     args.extend(columns);
     args.push("--attribute-log10=");

@@ -2672,9 +2672,17 @@ pub fn run(mut args: Args) -> Result<()> {
                         "every particle takes the map's last colour, which means nothing on its own"
                     }
                 };
+                // A logarithm's quantity said beside it (`log10(m)` of 0.5486: m = 3.54).
+                let quantity = a
+                    .name
+                    .strip_prefix("log10(")
+                    .and_then(|s| s.strip_suffix(')'))
+                    .map(|inner| format!(", {inner} = {}", Num(10f64.powf(f64::from(lo)) as f32)))
+                    .unwrap_or_default();
                 println!(
-                    "  note: {} is constant in this file ({}): {fate}; --attribute-range \
-                     places the value on a scale (the range of the frames it is compared with)",
+                    "  note: {} is constant in this file ({}{quantity}): {fate}; \
+                     --attribute-range places the value on a scale (the range of the frames it \
+                     is compared with)",
                     a.name,
                     Num(lo)
                 );
@@ -4768,10 +4776,11 @@ fn render_frames(
     }
     let mut range_note = String::new();
     let chosen = attribute.and_then(|a| {
+        // (A projection's log is the image's, not the points', as for a still.)
         mdlod_render::style::default_range(
             [a.min, a.max],
             lit_linearly(args),
-            by_attribute(args),
+            by_attribute(args) && !projected(args),
             opts.style.log_scale,
             opts.style.colour_map,
             survey.log_floor(),
