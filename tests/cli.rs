@@ -11345,6 +11345,13 @@ fn logarithms_of_named_columns_first_and_further() {
     args.extend(columns);
     args.push("--attribute-log10=rho,sigma");
     ok(&args);
+    // Scripts read which attributes are logarithms, of a file and of a batch alike.
+    for of in [&file, &frames] {
+        let v: serde_json::Value = serde_json::from_str(&ok(&["info", s(of), "--json"])).unwrap();
+        assert_eq!(v["attribute"]["log10"], true, "{v}");
+        assert_eq!(v["attributes"][0].get("log10"), None, "{v}");
+        assert_eq!(v["attributes"][1]["log10"], true, "{v}");
+    }
     let movie = dir.path().join("f-%03d.png");
     let mut args = vec!["render", s(&frames), "-o", s(&movie), "--mode", "splat"];
     args.extend(["--intensity", "attribute", "--attribute", "sigma"]);

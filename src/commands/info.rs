@@ -189,6 +189,9 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     let mut attributes_differ = false;
     // Further attributes, each with its range over the frames that keep it.
     let mut extras: Vec<(String, f32, f32)> = Vec::new();
+    // The attributes some frame keeps as logarithms (the metadata's `attribute_log10`, an
+    // entry's `log10`), by name.
+    let mut logged: std::collections::BTreeSet<String> = Default::default();
     // How many frames keep each of `extras`, and how many frames opened.
     let mut extras_kept: Vec<usize> = Vec::new();
     let mut opened = 0usize;
@@ -212,6 +215,13 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
                 species.push(s.name.clone());
             }
         }
+        logged.extend(
+            meta.attribute
+                .iter()
+                .filter(|_| meta.attribute_log10)
+                .chain(meta.attributes.iter().filter(|a| a.log10))
+                .map(|a| a.name.clone()),
+        );
         for a in &meta.attributes {
             match extras.iter().position(|(n, _, _)| *n == a.name) {
                 Some(i) => {
@@ -254,6 +264,14 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
         .map_or(0, |e| e.saturating_sub(frames.len() as u64));
     let column = frames.iter().find_map(|f| f.species_column.clone());
     if args.json {
+        // An attribute's entry, with `log10` where it is a logarithm (as a file's entries).
+        let entry = |n: &String, lo: f32, hi: f32| {
+            let mut e = json!({ "name": n, "min": lo, "max": hi });
+            if logged.contains(n) {
+                e["log10"] = true.into();
+            }
+            e
+        };
         let v = json!({
             "ok": true,
             "kind": "batch",
@@ -267,12 +285,8 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
             "particles": [fewest, most],
             "species": species,
             "species_column": column,
-            "attribute": attribute.as_ref().map(|(n, lo, hi)| json!({
-                "name": n, "min": lo, "max": hi
-            })),
-            "attributes": extras.iter().map(|(n, lo, hi)| json!({
-                "name": n, "min": lo, "max": hi
-            })).collect::<Vec<_>>(),
+            "attribute": attribute.as_ref().map(|(n, lo, hi)| entry(n, *lo, *hi)),
+            "attributes": extras.iter().map(|(n, lo, hi)| entry(n, *lo, *hi)).collect::<Vec<_>>(),
             "bytes": bytes,
             "expected_frames": m.expected_frames,
             "failed": m.failed.iter().map(|f| json!({
@@ -604,7 +618,15 @@ pub fn run(args: Args) -> Result<()> {
             "level_points": levels,
             "nodes": f.nodes().len(),
             "species": m.species,
-            "attribute": m.attribute,
+            // (The first's logarithm, the metadata's `attribute_log10`, said in its entry as
+            // the further attributes' are.)
+            "attribute": m.attribute.as_ref().map(|a| {
+                let mut e = json!(a);
+                if m.attribute_log10 {
+                    e["log10"] = true.into();
+                }
+                e
+            }),
             "attributes": m.attributes,
             "radius": m.radius.map(|r| json!({
                 "min": r.min,
