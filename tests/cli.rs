@@ -11325,6 +11325,30 @@ fn logarithms_of_named_columns_first_and_further() {
     args.extend(base);
     let out = ok(&args);
     assert!(out.contains("the projected sigma"), "{out}");
+    // Ends given for the column by its own name are logarithms: said; by the stored
+    // name, not.
+    for (hide, says) in [("sigma=0.01:", true), ("log10(sigma)=0.01:", false)] {
+        let out = ok(&[
+            "render",
+            s(&file),
+            "-o",
+            s(&png),
+            "--width",
+            "48",
+            "--height",
+            "36",
+            "--hide-attribute",
+            hide,
+        ]);
+        assert_eq!(
+            out.contains(
+                "note: --hide-attribute sigma=0.01:: sigma is kept as log10(sigma), so the \
+                 range's ends are logarithms (0.01 stands for sigma = 1.02"
+            ),
+            says,
+            "{out}"
+        );
+    }
     // A range of logarithms lights by the quantity less its low end, as a linear range
     // does; linear values typed for logarithms are refused, saying so.
     args.push("--attribute-range=2:3");

@@ -709,12 +709,62 @@ fn hidden_ranges<'f>(
         .collect()
 }
 
-/// Says of each attribute `--hide-attribute` reads when its ranges all miss its values.
+/// Says of each attribute `--hide-attribute` reads when its ranges all miss its values,
+/// and of ranges given by a column's own name where the file keeps its logarithm.
 fn hides_nothing_notes(
     style: &mdlod_render::PointStyle,
     file: &mdlod_format::reader::MdlodFile,
 ) -> Vec<String> {
-    hides_nothing_text(&hidden_range_hits(style, file), "here")
+    let mut notes = logarithm_end_notes(style, file);
+    notes.extend(hides_nothing_text(&hidden_range_hits(style, file), "here"));
+    notes
+}
+
+/// Notes for ranges of an attribute named by its column (`sigma`) that the file keeps as
+/// `log10(sigma)`: their ends are logarithms, which a range of values typed as values
+/// (`--hide-attribute sigma=0.01:`) misreads silently.
+fn logarithm_end_notes(
+    style: &mdlod_render::PointStyle,
+    file: &mdlod_format::reader::MdlodFile,
+) -> Vec<String> {
+    let names = file.attribute_names();
+    let logged = |given: &str| {
+        let stored = mdlod_format::reader::attribute_named(&names, given)?;
+        (stored != given && stored == format!("log10({given})")).then_some(stored)
+    };
+    let mut ranges: Vec<(String, &str, [f32; 2])> = Vec::new();
+    for (given, range) in &style.hidden_named {
+        ranges.push((format!("--hide-attribute {given}="), given, *range));
+    }
+    // Unnamed ranges read `--hide-by`, else the attribute coloured by.
+    if let Some(given) = style.hide_by.as_ref().or(style.attribute.as_ref()) {
+        for range in &style.hidden_values {
+            ranges.push(("--hide-attribute ".to_string(), given, *range));
+        }
+    }
+    if let (Some(given), Some(range)) = (&style.attribute, style.attribute_range) {
+        ranges.push(("--attribute-range ".to_string(), given, range));
+    }
+    let mut notes = Vec::new();
+    for (flag, given, range) in ranges {
+        let Some(stored) = logged(given) else {
+            continue;
+        };
+        let Some(end) = range.into_iter().find(|v| v.is_finite()) else {
+            continue;
+        };
+        let note = format!(
+            "  note: {flag}{}: {given} is kept as {stored}, so the range's ends are logarithms \
+             ({} stands for {given} = {})",
+            range_text(range),
+            super::Num(end),
+            super::Num(10f64.powf(f64::from(end)) as f32)
+        );
+        if !notes.contains(&note) {
+            notes.push(note);
+        }
+    }
+    notes
 }
 
 /// Each attribute `--hide-attribute` reads in `file`, whether some range of it meets its
