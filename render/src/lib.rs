@@ -1432,11 +1432,21 @@ fn bounds_walk(
         }
         let child_level = usize::from(n.level) + 1;
         if child_level == last && file.delta_n() == 1 && file.check_children(id).is_ok() {
-            // The particles themselves, encoded relative to this node.
+            // The particles themselves, encoded relative to this node. Within a core, a
+            // sphere reaching past a quarter of the core's size (an SPH void particle's
+            // smoothing length, 30 times a galaxy's) frames that far only, counted as
+            // far: a handful of them made the galaxy a dot.
             for (p, r) in shown_particles(file, n, hidden) {
                 if inside(p, p) {
-                    lo = lo.min(p - r);
-                    hi = hi.max(p + r);
+                    let reach = match core {
+                        Some([a, b]) if r > 0.25 * (b - a).max_element() => {
+                            far += 1;
+                            0.25 * (b - a).max_element()
+                        }
+                        _ => r,
+                    };
+                    lo = lo.min(p - reach);
+                    hi = hi.max(p + reach);
                 } else {
                     far += 1;
                 }

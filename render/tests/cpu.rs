@@ -2096,6 +2096,49 @@ fn a_fitted_view_leaves_out_particles_far_from_the_rest() {
     assert_eq!((fit.bounds, fit.far_particles), (data_bounds(&f), 0));
 }
 
+/// Particles within the bulk whose spheres reach far past it (an SPH void's smoothing
+/// lengths, hundreds of times the rest's) are framed only to a quarter of the size of the
+/// region far particles are told from (the bulk grown by its margins), and counted:
+/// three of them made the material a dot.
+#[test]
+fn a_fitted_view_frames_huge_spheres_within_the_bulk_near_it() {
+    use mdlod_render::{data_bounds, fit_bounds};
+    let mut frame = fcc_frame(12); // 6912 atoms in a cube of 43 Å.
+    let mut radii = vec![1.28f32; frame.positions.len()];
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    let bulk = data_bounds(&f);
+    for i in [10, 3000, 6000] {
+        radii[i] = 10_000.0;
+    }
+    // (As a reader gives a species of particles of their own sizes.)
+    let n = radii.len();
+    let sum: f64 = radii.iter().map(|&r| f64::from(r)).sum();
+    let s = &mut frame.species[0];
+    s.radius = Some((sum / n as f64) as f32);
+    s.radius_range = Some((1.28, 10_000.0));
+    (s.sized_count, s.sized_sum) = (n as u64, sum);
+    frame.radii = Some(radii);
+    let (_d, _p, f) = make_file(&frame, small_build(), &[]);
+    assert!(data_bounds(&f).radius() > 5000.0);
+    let fit = fit_bounds(&f, mdlod_render::HiddenSet::default(), false);
+    assert_eq!(fit.far_particles, 3);
+    let (b, size) = (fit.bounds, (bulk.max - bulk.min).max_element());
+    assert!(
+        b.radius() < 2.0 * bulk.radius() && b.radius() > bulk.radius(),
+        "fit radius {} against the bulk's {}",
+        b.radius(),
+        bulk.radius()
+    );
+    assert!(
+        (b.min - bulk.min).cmpge(Vec3::splat(-0.75 * size)).all()
+            && (b.max - bulk.max).cmple(Vec3::splat(0.75 * size)).all(),
+        "{b:?} against {bulk:?}"
+    );
+    // With `all`, every sphere.
+    let all = fit_bounds(&f, mdlod_render::HiddenSet::default(), true);
+    assert_eq!((all.bounds, all.far_particles), (data_bounds(&f), 0));
+}
+
 /// A layer of `nx × ny` particles 1.1 apart in the plane normal to `axis`, at `level` on
 /// that axis (far from the origin, where bounds round).
 fn layer(axis: usize, nx: usize, ny: usize, level: f32) -> Vec<[f32; 3]> {

@@ -4016,8 +4016,9 @@ fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
     };
     Some(format!(
         "  note: {far} particle{s}{whose} far from the rest {verb} left out of the view's \
-         fit (they would shrink the material to a fraction of the image): --fit-all fits \
-         every particle, --zoom below 1 widens the view"
+         fit, or framed only near it where their spheres reach far past it (an SPH void's \
+         smoothing lengths) (they would shrink the material to a fraction of the image): \
+         --fit-all fits every particle, --zoom below 1 widens the view"
     ))
 }
 
