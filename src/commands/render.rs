@@ -3010,7 +3010,8 @@ pub fn run(mut args: Args) -> Result<()> {
         println!(
             "  splats: total flux {f:.4e} (the light summed over the image's pixels, each \
              splat's area in pixels times its intensity: it grows as the zoom enlarges the \
-             data, and stays with the screen error), exposure {e:.4e}"
+             data, and stays with the screen error while the splats fall within the image: \
+             a coarse cut's wide splats spill past its edges), exposure {e:.4e}"
         );
     }
     if let Some((run, all)) = r.density_stacks {
