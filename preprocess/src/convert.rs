@@ -551,14 +551,13 @@ pub fn convert_frame_with(
         if e.info.log10 {
             continue;
         }
-        let column = Some(column);
         // Ids (of molecules) are told by their whole numbers, as for the first: no
         // logarithm to suggest.
-        let whole = column.is_some_and(|c| c.values.iter().all(|v| v.fract() == 0.0));
+        let whole = column.values.iter().all(|v| v.fract() == 0.0);
         let (note, ids) = extra_range_note(&e.info.name, e.info.min, e.info.max, whole, &logged);
         notes.extend(note);
         // A column from 0 whose values above 0 fall below a step, as for the first.
-        if let (Some(column), false) = (column, ids) {
+        if !ids {
             notes.extend(below_step_note(
                 &e.info.name,
                 &column.values,
