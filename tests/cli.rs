@@ -11435,6 +11435,67 @@ fn logarithms_of_named_columns_first_and_further() {
     );
 }
 
+/// Density volume fractions are of spheres of the largest radius: one stray large atom
+/// beside a crystal of small ones makes their packing read high, said with the factor;
+/// species of one size say nothing. The absorption is an optical depth.
+#[test]
+fn volume_fractions_of_mixed_radii_say_their_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n217\nITEM: BOX BOUNDS pp pp pp\n0 40\n\
+         0 40\n0 40\nITEM: ATOMS id type x y z\n",
+    );
+    for i in 0..216 {
+        let (x, y, z) = (i % 6, (i / 6) % 6, i / 36);
+        text.push_str(&format!("{} 1 {} {} {}\n", i + 1, 2 * x, 2 * y, 2 * z));
+    }
+    text.push_str("217 2 30 30 30\n");
+    let dump = dir.path().join("mixed.dump");
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("mixed.mdlod");
+    let png = dir.path().join("d.png");
+    let render = |file: &Path| {
+        ok(&[
+            "render",
+            s(file),
+            "-o",
+            s(&png),
+            "--mode",
+            "density",
+            "--width",
+            "32",
+            "--height",
+            "24",
+        ])
+    };
+    for (big, says) in [("2=2", true), ("2=1", false)] {
+        ok(&[
+            "convert",
+            s(&dump),
+            "-o",
+            s(&file),
+            "--radius",
+            "1=1",
+            "--radius",
+            big,
+        ]);
+        let out = render(&file);
+        assert_eq!(
+            out.contains(
+                "volume fractions are of spheres of the largest radius, 2 (the density's \
+                 reference): a particle of radius r adds 2/r times its own volume, so a close \
+                 packing of species 1 (radius 1) reads 1.48"
+            ),
+            says,
+            "{out}"
+        );
+        assert!(
+            out.contains("optical depth 0.5 per radius at the top"),
+            "{out}"
+        );
+    }
+}
+
 /// A conversion that keeps no attribute names the dump's columns it leaves behind, and
 /// how to keep one (an OVITO user expects every column); keeping one says nothing.
 #[test]

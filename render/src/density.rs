@@ -62,7 +62,8 @@ pub struct DensitySettings {
     /// The transfer function takes the logarithm of φ between `density_min` and
     /// `density_max` (SPH and astrophysical densities spanning decades).
     pub log: bool,
-    /// Absorption: opacity per reference radius of path at `density_max`.
+    /// Absorption: the optical depth per reference radius of path at `density_max` (an
+    /// opacity of `1 − e^−absorption` over one radius).
     pub opacity: f32,
     /// Keep samples with `n · p ≤ d` (`[n.x, n.y, n.z, d]`, world units).
     pub clip: Option<[f32; 4]>,

@@ -123,7 +123,8 @@ pub struct Args {
     /// at and below it [default: 0; with --log-scale four decades below --density-max]
     #[arg(long)]
     pub density_min: Option<f32>,
-    /// density mode: absorption, opacity per reference radius of path at the top density.
+    /// density mode: absorption, the optical depth per reference radius of path at the top
+    /// density (an opacity of 1 − e^−A over one radius: 0.39 at 0.5).
     #[arg(long, default_value_t = 0.5)]
     pub absorption: f32,
     /// sndf mode: jittered rays per pixel accumulated into the S-NDFs.
@@ -3077,16 +3078,20 @@ pub fn run(mut args: Args) -> Result<()> {
                         "  colours: the attribute's mean at each sample, weighted by the \
                          particles' densities there, through the colour map (the colour map \
                          line); opacity: the volume fraction the particles' spheres fill, from \
-                         {lo} (clear) to {hi} (--density-max){log}, absorption {k} per radius"
+                         {lo} (clear) to {hi} (--density-max){log}, optical depth {k} per \
+                         radius at the top"
                     ),
                     None => println!(
                         "  colours: the volume fraction the particles' spheres fill (not an \
                          attribute), from {lo} (clear) through dark blue and red to yellow at \
                          {hi} (--density-max; 0.74: close-packed spheres of the largest \
-                         species){log}, absorption {k} per radius"
+                         species){log}, optical depth {k} per radius at the top"
                     ),
                 }
             }
+        }
+        if let Some(note) = reference_radius_note(&file) {
+            println!("{note}");
         }
     }
     let stream = match r.first_frame_time {
@@ -4021,6 +4026,34 @@ fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
          smoothing lengths) (they would shrink the material to a fraction of the image): \
          --fit-all fits every particle, --zoom below 1 widens the view"
     ))
+}
+
+/// A note where the density's reference radius (the largest particle's) is well above a
+/// species' radius: volume fractions are of spheres of that radius, so a packing of the
+/// smaller species reads high by the radii's ratio (one stray large atom doubled every
+/// value of a crystal of small ones).
+fn reference_radius_note(file: &mdlod_format::MdlodFile) -> Option<String> {
+    let r_ref = file.max_particle_radius();
+    let m = file.metadata();
+    let (name, r) = m
+        .species
+        .iter()
+        .map(|s| (&s.name, s.radius_range.map_or(s.radius, |[lo, _]| lo)))
+        .filter(|(_, r)| *r > 0.0)
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let ratio = r_ref / r;
+    (ratio >= 1.5 && ratio.is_finite()).then(|| {
+        format!(
+            "  note: volume fractions are of spheres of the largest radius, {} (the density's \
+             reference): a particle of radius r adds {}/r times its own volume, so a close \
+             packing of species {name} (radius {}) reads {:.2}, not 0.74 (--radius giving the \
+             species one size makes the values its packing's)",
+            Num(r_ref),
+            Num(r_ref),
+            Num(r),
+            0.7405 * ratio
+        )
+    })
 }
 
 /// A note where S-NDFs were sampled from cluster spheres wider than a pixel or two: their
