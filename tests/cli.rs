@@ -11999,6 +11999,17 @@ fn info_of_an_unmerged_sharded_batch_shows_each_shards_progress() {
             && text.contains("once every shard is complete"),
         "{text}"
     );
+    // Complete, but a shard built with another attribute: the merge would refuse it,
+    // and so says `info` (it said the merge joins them).
+    let other = dir.path().join("other");
+    let args = ["--shard", "1/2", "--attribute", "c_pe"];
+    ok(&[&["batch", s(&dump), "-o", s(&other)][..], &args[..]].concat());
+    ok(&["batch", s(&dump), "-o", s(&other), "--shard", "0/2"]);
+    let text = ok(&["info", s(&other)]);
+    assert!(
+        text.contains("every shard is complete, but a merge refuses them:"),
+        "{text}"
+    );
     ok(&["batch", s(&dump), "-o", s(&d), "--shard", "1/2"]);
     let text = ok(&["info", s(&d)]);
     assert!(

@@ -3936,6 +3936,25 @@ pub fn timesteps_text(steps: &std::collections::BTreeSet<u64>) -> String {
 /// Joins the shard manifests of `out_dir` into `dataset.json`: every shard `0..N` must be
 /// present, and every listed file must exist.
 pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
+    // Not while shards (or a whole run) still write the directory: they hold its lock,
+    // and a merge now would join manifests not yet complete ([`BatchError::Busy`]).
+    let _locks = match shard_manifests(out_dir)?.is_empty() {
+        true => Vec::new(),
+        false => lock_batch(out_dir, None)?,
+    };
+    let merged = merged_manifest(out_dir)?;
+    write_json(&out_dir.join(MANIFEST), &merged)?;
+    // The merged manifest a shard moved aside is superseded (its records too).
+    let previous = out_dir.join(PREVIOUS_MANIFEST);
+    match std::fs::remove_file(&previous) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(&previous)(e)),
+        _ => {}
+    }
+    Ok(merged)
+}
+
+/// The shard manifests of `out_dir`: shard, count and path, in no order.
+fn shard_manifests(out_dir: &Path) -> Result<Vec<(u32, u32, PathBuf)>, BatchError> {
     let mut shards: Vec<(u32, u32, PathBuf)> = Vec::new();
     let entries = std::fs::read_dir(out_dir).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => BatchError::Manifest {
@@ -3952,12 +3971,14 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
             shards.push((i, n, e.path()));
         }
     }
-    // Not while shards (or a whole run) still write the directory: they hold its lock,
-    // and a merge now would join manifests not yet complete ([`BatchError::Busy`]).
-    let _locks = match shards.is_empty() {
-        true => Vec::new(),
-        false => lock_batch(out_dir, None)?,
-    };
+    Ok(shards)
+}
+
+/// The manifest [`merge`] writes for `out_dir`, with every check it makes (shards
+/// complete, the same settings and inputs, no timestep twice), written nowhere: what
+/// `info` asks of shards before it says a merge joins them.
+pub fn merged_manifest(out_dir: &Path) -> Result<Manifest, BatchError> {
+    let mut shards = shard_manifests(out_dir)?;
     let manifest_err = |path: &Path, message: String| BatchError::Manifest {
         path: path.to_path_buf(),
         message,
@@ -4127,13 +4148,6 @@ pub fn merge(out_dir: &Path) -> Result<Manifest, BatchError> {
         },
         duplicates,
     };
-    write_json(&out_dir.join(MANIFEST), &merged)?;
-    // The merged manifest a shard moved aside is superseded (its records too).
-    let previous = out_dir.join(PREVIOUS_MANIFEST);
-    match std::fs::remove_file(&previous) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(&previous)(e)),
-        _ => {}
-    }
     Ok(merged)
 }
 

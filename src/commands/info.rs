@@ -168,10 +168,14 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
              same inputs"
         );
     } else if complete {
-        println!(
-            "  every shard is complete: `mdlod batch --merge {}` joins them",
-            dir.display()
-        );
+        // (Complete shards a merge still refuses: frames built with other settings.)
+        match mdlod_preprocess::batch::merged_manifest(dir) {
+            Ok(_) => println!(
+                "  every shard is complete: `mdlod batch --merge {}` joins them",
+                dir.display()
+            ),
+            Err(e) => println!("  every shard is complete, but a merge refuses them: {e}"),
+        }
     } else {
         println!(
             "  once every shard is complete, `mdlod batch --merge {}` joins them",
