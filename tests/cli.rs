@@ -11435,6 +11435,42 @@ fn logarithms_of_named_columns_first_and_further() {
     );
 }
 
+/// A movie of one frame with values hidden maps the values drawn, as a still of that
+/// frame does and as its legend says: the image took the file's whole range.
+#[test]
+fn a_movie_of_one_frame_maps_the_values_drawn_as_a_still() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut xyz = String::from("300\nProperties=species:S:1:pos:R:3:q6:R:1\n");
+    for i in 0..300 {
+        let q6 = 0.04 + 0.55 * ((i * 37) % 300) as f64 / 299.0;
+        xyz.push_str(&format!("C {} {} {} {q6}\n", i % 7, (i / 7) % 6, i / 42));
+    }
+    let path = dir.path().join("one.xyz");
+    std::fs::write(&path, xyz).unwrap();
+    let d = dir.path().join("one.d");
+    ok(&["batch", s(&path), "-o", s(&d), "--attribute", "q6"]);
+    let style = [
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--hide-attribute",
+        ":0.4",
+        "--colour-map",
+        "viridis",
+    ];
+    let movie = dir.path().join("m-%d.png");
+    ok(&[&["render", s(&d), "-o", s(&movie)][..], &style[..]].concat());
+    let m = mdlod_preprocess::batch::read_manifest(&d).unwrap();
+    let still = dir.path().join("still.png");
+    let frame = d.join(&m.frames[0].file);
+    ok(&[&["render", s(&frame), "-o", s(&still)][..], &style[..]].concat());
+    assert_eq!(
+        std::fs::read(dir.path().join("m-0.png")).unwrap(),
+        std::fs::read(&still).unwrap()
+    );
+}
+
 /// Density volume fractions are of spheres of the largest radius: one stray large atom
 /// beside a crystal of small ones makes their packing read high, said with the factor;
 /// species of one size say nothing. The absorption is an optical depth.

@@ -4886,17 +4886,19 @@ fn render_frames(
             Num(a.max)
         );
     }
+    // (Over the particles drawn where some are hidden or cut away: a movie of one frame
+    // too, as a still maps them, which its legend said while its image took the file's
+    // range.)
+    let partial = !opts.style.clip.is_empty()
+        || opts.style.hides_values()
+        || opts.style.species.iter().any(|st| st.hidden);
     if by_attribute(args) && opts.style.attribute_range.is_none() {
         // Where the frames' union is no range (a constant attribute), each frame keeps
         // its own constant look.
-        if let Some(a) = attribute.filter(|_| n > 1) {
+        if let Some(a) = attribute.filter(|_| n > 1 || partial) {
             if a.max > a.min {
                 opts.style.attribute_range = Some([a.min, a.max]);
-                // (Over the particles drawn where some are hidden or cut away.)
-                let whose = match opts.style.clip.is_empty()
-                    && !opts.style.hides_values()
-                    && !opts.style.species.iter().any(|st| st.hidden)
-                {
+                let whose = match !partial {
                     true => "every frame's range",
                     false => "every frame's particles drawn, those hidden or cut away left out",
                 };
