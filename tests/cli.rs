@@ -11435,6 +11435,55 @@ fn logarithms_of_named_columns_first_and_further() {
     );
 }
 
+/// A movie of a batch that left out an empty frame (a focus lost) says its images are
+/// numbered without it, so its time jumps there; a batch without gaps says nothing.
+#[test]
+fn a_movie_says_where_the_batch_left_frames_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames: Vec<String> = (0..4)
+        .map(|k| {
+            let n = if k == 2 { 0 } else { 20 };
+            let mut f = format!("{n}\nTime={}\n", 2.5 * k as f64);
+            for i in 0..n {
+                f.push_str(&format!("C {} {} {}\n", i % 3, (i / 3) % 3, i / 9));
+            }
+            f
+        })
+        .collect();
+    for (name, text, says) in [
+        ("gap", frames.concat(), true),
+        (
+            "whole",
+            [&frames[..2], &frames[3..]].concat().concat(),
+            false,
+        ),
+    ] {
+        let xyz = dir.path().join(format!("{name}.xyz"));
+        std::fs::write(&xyz, text).unwrap();
+        let d = dir.path().join(format!("{name}.d"));
+        ok(&["batch", s(&xyz), "-o", s(&d)]);
+        let movie = dir.path().join(format!("{name}-%d.png"));
+        let out = ok(&[
+            "render",
+            s(&d),
+            "-o",
+            s(&movie),
+            "--width",
+            "32",
+            "--height",
+            "24",
+        ]);
+        assert_eq!(
+            out.contains(
+                "note: the batch left out 1 frame without particles (timestep 2): the images \
+                 are numbered without them, so the movie's time jumps there"
+            ),
+            says,
+            "{out}"
+        );
+    }
+}
+
 /// A movie of one frame with values hidden maps the values drawn, as a still of that
 /// frame does and as its legend says: the image took the file's whole range.
 #[test]

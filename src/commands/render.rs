@@ -4028,6 +4028,45 @@ fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
     ))
 }
 
+/// A note where a batch left frames out (without particles, or failed): a movie's images
+/// are numbered without them, so its time jumps there (a focus lost for one frame of a
+/// microscope's series, a run's empty frames).
+fn missing_frames_note(m: &mdlod_preprocess::batch::Manifest) -> Option<String> {
+    // `3 frames without particles (timesteps 2, 5, 9)`, at most eight timesteps named.
+    let said = |count: usize, what: &str, t: Vec<u64>| {
+        let frames = if count == 1 { "frame" } else { "frames" };
+        let shown: Vec<String> = t.iter().take(8).map(u64::to_string).collect();
+        let more = match t.len() > 8 {
+            true => format!(" and {} more", t.len() - 8),
+            false => String::new(),
+        };
+        match t.len() {
+            0 => format!("{count} {frames} {what}"),
+            1 => format!("{count} {frames} {what} (timestep {})", shown[0]),
+            _ => format!(
+                "{count} {frames} {what} (timesteps {}{more})",
+                shown.join(", ")
+            ),
+        }
+    };
+    let mut parts = Vec::new();
+    if !m.empty.is_empty() {
+        let t = m.empty.iter().map(|e| e.timestep).collect();
+        parts.push(said(m.empty.len(), "without particles", t));
+    }
+    if !m.failed.is_empty() {
+        let t = m.failed.iter().filter_map(|f| f.timestep).collect();
+        parts.push(said(m.failed.len(), "that failed to convert", t));
+    }
+    (!parts.is_empty()).then(|| {
+        format!(
+            "  note: the batch left out {}: the images are numbered without them, so the \
+             movie's time jumps there (a {{time}} or {{timestep}} label shows it)",
+            parts.join(" and ")
+        )
+    })
+}
+
 /// A note where the density's reference radius (the largest particle's) is well above a
 /// species' radius: volume fractions are of spheres of that radius, so a packing of the
 /// smaller species reads high by the radii's ratio (one stray large atom doubled every
@@ -5173,6 +5212,9 @@ fn render_frames(
         "rendered {count} in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{radii_note}{limited}",
         t0.elapsed().as_secs_f64()
     );
+    if let Some(note) = missing_frames_note(&manifest) {
+        println!("{note}");
+    }
     // (A piece of a movie leaves the others' images alone.)
     if let Some(note) = stale_images_note(&args.output, n).filter(|_| args.frames.is_none()) {
         println!("{note}");
