@@ -11435,6 +11435,37 @@ fn logarithms_of_named_columns_first_and_further() {
     );
 }
 
+/// An XYZ comment's `units=` is kept, and species read as elements in a unit that is not
+/// ångströms are noted (silica colloids written `Si` in micrometres drew at 1.18 µm);
+/// in ångström units, not.
+#[test]
+fn elements_in_micrometres_are_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    for (units, says) in [("um", true), ("metal", false)] {
+        let xyz = dir.path().join(format!("{units}.xyz"));
+        std::fs::write(
+            &xyz,
+            format!(
+                "4\nProperties=species:S:1:pos:R:3 units={units}\nSi 0 0 0\nSi 1 0 0\n\
+                 Si 0 1 0\nSi 1 1 0\n"
+            ),
+        )
+        .unwrap();
+        let file = dir.path().join(format!("{units}.mdlod"));
+        let out = ok(&["convert", s(&xyz), "-o", s(&file)]);
+        assert_eq!(
+            out.contains(
+                "species Si (1.18): read as chemical elements, with their radii in ångströms, \
+                 while the input's lengths are in µm: --radius Si=R gives each its size in µm"
+            ),
+            says,
+            "{out}"
+        );
+        let info = ok(&["info", s(&file)]);
+        assert!(info.contains(&format!("units        {units}")), "{info}");
+    }
+}
+
 /// A movie of a batch that left out an empty frame (a focus lost) says its images are
 /// numbered without it, so its time jumps there; a batch without gaps says nothing.
 #[test]

@@ -2037,7 +2037,7 @@ pub fn convert_chunked(
                     crate::convert::extra_range_note(&e.name, e.min, e.max, whole, &logged).0,
                 );
             }
-            notes.extend(crate::convert::lj_elements_note(
+            notes.extend(crate::convert::elements_in_other_units_note(
                 metadata.units.as_deref(),
                 &metadata.species,
                 &options.radii,

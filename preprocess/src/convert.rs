@@ -566,7 +566,7 @@ pub fn convert_frame_with(
             ));
         }
     }
-    notes.extend(lj_elements_note(
+    notes.extend(elements_in_other_units_note(
         frame.units.as_deref(),
         &species,
         &options.radii,
@@ -1159,17 +1159,17 @@ pub fn radius_override_notes(names: &[SpeciesName], overrides: &[(String, f32)])
         .collect()
 }
 
-/// A note for species read as chemical elements, with radii in ångströms, in a dump
-/// whose lengths are Lennard-Jones' σ (`units lj`): bead names that happen to be element
-/// symbols (P, H, S, C) draw at an element's size, blobs of beads σ apart.
-pub(crate) fn lj_elements_note(
+/// A note for species read as chemical elements, with radii in ångströms, in an input
+/// whose lengths are in another unit: Lennard-Jones' σ (`units lj`), where bead names
+/// that happen to be element symbols (P, H, S, C) draw at an element's size, blobs of
+/// beads σ apart; micrometres (`units=um`), where silica colloids written `Si` drew 2.4
+/// times too large.
+pub(crate) fn elements_in_other_units_note(
     units: Option<&str>,
     species: &[mdlod_format::meta::Species],
     overrides: &[(String, f32)],
 ) -> Option<String> {
-    if !units.is_some_and(|u| u.trim().eq_ignore_ascii_case("lj")) {
-        return None;
-    }
+    let unit = units.and_then(non_angstrom_unit)?;
     let read: Vec<&mdlod_format::meta::Species> = species
         .iter()
         .filter(|s| {
@@ -1187,13 +1187,40 @@ pub(crate) fn lj_elements_note(
         0..=6 => read.join(", "),
         n => format!("{}, ... ({n} in all)", read[..5].join(", ")),
     };
+    if unit == "σ" {
+        return Some(format!(
+            "species {shown}: read as chemical elements, with their radii in ångströms, while \
+             the dump's units are lj (lengths in σ): if they are bead names, --radius {}=R \
+             gives each its size (0.5 for beads of diameter σ), or --species-name to a name \
+             that is no element's makes it a label, drawn at the default 0.5",
+            first.name
+        ));
+    }
     Some(format!(
         "species {shown}: read as chemical elements, with their radii in ångströms, while \
-         the dump's units are lj (lengths in σ): if they are bead names, --radius {}=R gives \
-         each its size (0.5 for beads of diameter σ), or --species-name to a name that is \
-         no element's makes it a label, drawn at the default 0.5",
+         the input's lengths are in {unit}: --radius {}=R gives each its size in {unit} (a \
+         colloid's, say), or --species-name to a name that is no element's makes it a label",
         first.name
     ))
+}
+
+/// The length unit of `units` (a LAMMPS unit style, or a unit a raw sidecar or an XYZ
+/// comment names) where it is known and not ångströms, as said in a note; `None` for
+/// ångström styles (`metal`, `real`) and for names not known.
+fn non_angstrom_unit(units: &str) -> Option<&'static str> {
+    Some(match units.trim().to_ascii_lowercase().as_str() {
+        "lj" => "σ",
+        "si" | "m" => "m",
+        "cgs" | "cm" => "cm",
+        "mm" => "mm",
+        "micro" | "um" | "µm" | "μm" | "micron" | "microns" | "micrometre" | "micrometer" => "µm",
+        "nano" | "nm" => "nm",
+        "electron" | "bohr" => "bohr",
+        "pc" => "pc",
+        "kpc" => "kpc",
+        "mpc" => "Mpc",
+        _ => return None,
+    })
 }
 
 /// Drops [`default_radius_note`] where the note on species drawn at the default radius

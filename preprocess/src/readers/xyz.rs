@@ -11,7 +11,8 @@
 //!   `Lattice="ax ay az bx by bz cx cy cz"` gives the cell vectors, `Origin="x y z"`
 //!   (OVITO) its origin, `pbc="T T F"` its periodicity (default `T T T` when a lattice is
 //!   given, as the extended-XYZ convention says), `Time=` the time, and `Timestep=` or
-//!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes) the timestep. Spaces
+//!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes) the timestep, `units=`
+//!   the length unit (`units=um`, a LAMMPS style such as `metal`, kept as written). Spaces
 //!   around `=` and a comma ending a number are allowed, as CP2K writes them
 //!   (`i = 0, time = 0.000, E = -17.16`), and a unit written after a time's number
 //!   (`Time=1.5fs`) is left out. A timestep that is no whole number (`1e2` is one) is
@@ -469,7 +470,11 @@ impl Index {
                 particles,
                 timestep: span.timestep,
                 time,
-                units: None,
+                // A `units=` key (`units=um`): what the positions are in.
+                units: get("units")
+                    .map(comment_value)
+                    .filter(|u| !u.is_empty())
+                    .map(str::to_string),
                 simulation_box,
                 columns: layout.columns.clone(),
             },
