@@ -239,7 +239,7 @@ pub struct Args {
     /// Draw a scale bar into the image: a round length of the world (about a fifth of
     /// the image's width, or --scale-bar-length) under its size in the file's units
     /// (`metal`, `real`: Å). Orthographic views only (in perspective, sizes depend on
-    /// depth); stills and movies
+    /// depth); stills, movies and turntables
     #[arg(long)]
     pub scale_bar: bool,
     /// The scale bar's length, in the data's units [default: a round length, about a
