@@ -1521,6 +1521,10 @@ pub fn convert_chunked(
     }
     // Whether each further attribute holds whole numbers only (ids).
     let mut extra_whole = vec![true; extra_names.len()];
+    // How the first and each further attribute's values spread over the octaves (for the
+    // note on decades lost, as a frame built whole says it).
+    let mut first_octaves = crate::convert::Octaves::default();
+    let mut extra_octaves = vec![crate::convert::Octaves::default(); extra_names.len()];
     let mut seen = 0usize;
     // The records are sorted into cells and written on a thread of their own while the
     // next window is read.
@@ -1682,6 +1686,9 @@ pub fn convert_chunked(
             if let Some((lo, hi)) = stored {
                 range = (range.0.min(lo), range.1.max(hi));
             }
+            if let Some(a) = f.attribute.as_ref().filter(|_| !options.attribute_log10) {
+                first_octaves.add(&crate::convert::Octaves::of(&a.values));
+            }
             for (info, a) in extra_infos.iter_mut().zip(&extras) {
                 if info.min > info.max {
                     // The name its reader gives (a magnitude's, say).
@@ -1704,6 +1711,9 @@ pub fn convert_chunked(
                 };
                 info.min = info.min.min(lo);
                 info.max = info.max.max(hi);
+            }
+            for (octaves, a) in extra_octaves.iter_mut().zip(&extras) {
+                octaves.add(&crate::convert::Octaves::of(&a.values));
             }
             for (whole, a) in extra_whole.iter_mut().zip(&extras) {
                 *whole = *whole && a.values.par_iter().all(|v| v.fract() == 0.0);
@@ -2023,18 +2033,27 @@ pub fn convert_chunked(
             let logged = crate::convert::logged_columns(&metadata);
             if let Some(a) = &metadata.attribute {
                 notes.extend(crate::convert::attribute_span_note(
-                    &a.name, a.min, a.max, options, &logged,
+                    &a.name,
+                    a.min,
+                    a.max,
+                    options,
+                    &logged,
+                    &first_octaves,
                 ));
             }
-            for (e, &whole) in metadata
+            for ((e, &whole), octaves) in metadata
                 .attributes
                 .iter()
                 .zip(&extra_whole)
-                .filter(|(e, _)| !e.log10)
+                .zip(&extra_octaves)
+                .filter(|((e, _), _)| !e.log10)
             {
                 // Ids (of molecules) are told by their whole numbers, as for the first.
                 notes.extend(
-                    crate::convert::extra_range_note(&e.name, e.min, e.max, whole, &logged).0,
+                    crate::convert::extra_range_note(
+                        &e.name, e.min, e.max, whole, &logged, octaves,
+                    )
+                    .0,
                 );
             }
             notes.extend(crate::convert::elements_in_other_units_note(

@@ -515,7 +515,14 @@ pub fn convert_frame_with(
             notes.extend(ids);
         } else {
             let mut said = Vec::new();
-            said.extend(attribute_span_note(&a.name, *min, *max, options, &logged));
+            said.extend(attribute_span_note(
+                &a.name,
+                *min,
+                *max,
+                options,
+                &logged,
+                &Octaves::of(&a.values),
+            ));
             if !options.attribute_log10 {
                 said.extend(below_step_note(&a.name, &a.values, *min, *max));
                 // How much of the area-weighted total (what splats by the attribute add
@@ -554,7 +561,15 @@ pub fn convert_frame_with(
         // Ids (of molecules) are told by their whole numbers, as for the first: no
         // logarithm to suggest.
         let whole = column.values.iter().all(|v| v.fract() == 0.0);
-        let (note, ids) = extra_range_note(&e.info.name, e.info.min, e.info.max, whole, &logged);
+        let octaves = Octaves::of(&column.values);
+        let (note, ids) = extra_range_note(
+            &e.info.name,
+            e.info.min,
+            e.info.max,
+            whole,
+            &logged,
+            &octaves,
+        );
         notes.extend(note);
         // A column from 0 whose values above 0 fall below a step, as for the first.
         if !ids {
@@ -1260,6 +1275,7 @@ pub fn attribute_span_note(
     max: f32,
     options: &ConvertOptions,
     logged: &[String],
+    octaves: &Octaves,
 ) -> Option<String> {
     if options.attribute_log10 {
         return None;
@@ -1274,6 +1290,7 @@ pub fn attribute_span_note(
         min,
         max,
         &format!("{flag} keeps its logarithm, every decade alike"),
+        octaves,
     )
 }
 
@@ -1417,18 +1434,25 @@ pub(crate) fn extra_range_note(
     max: f32,
     whole: bool,
     logged: &[String],
+    octaves: &Octaves,
 ) -> (Option<String>, bool) {
     match whole
         .then(|| whole_numbers_note(name, &[], min, max))
         .flatten()
     {
         Some(ids) => (ids, true),
-        None => (extra_span_note(name, min, max, logged), false),
+        None => (extra_span_note(name, min, max, logged, octaves), false),
     }
 }
 
 /// [`attribute_span_note`] of a further attribute (kept linearly).
-pub fn extra_span_note(name: &str, min: f32, max: f32, logged: &[String]) -> Option<String> {
+pub fn extra_span_note(
+    name: &str,
+    min: f32,
+    max: f32,
+    logged: &[String],
+    octaves: &Octaves,
+) -> Option<String> {
     span_note(
         name,
         min,
@@ -1437,13 +1461,18 @@ pub fn extra_span_note(name: &str, min: f32, max: f32, logged: &[String]) -> Opt
             "{} keeps its logarithm, every decade alike",
             log10_flag(name, logged)
         ),
+        octaves,
     )
 }
 
 /// [`attribute_span_note`] of a column kept linearly, with `remedy` said last.
-fn span_note(name: &str, min: f32, max: f32, remedy: &str) -> Option<String> {
+fn span_note(name: &str, min: f32, max: f32, remedy: &str, octaves: &Octaves) -> Option<String> {
     let decades = (f64::from(max) / f64::from(min)).log10();
-    (min > 0.0 && decades > 4.0).then(|| {
+    // Values below a hundred steps lose digits: said where they are more than a few (a
+    // score uniform from 0 to 1 reaches 1e-4 with a few values, which lose nothing much).
+    let lossy = (f64::from(max) - f64::from(min)) / 65535.0 * 100.0;
+    let many = octaves.share_below(lossy) >= 0.01;
+    (min > 0.0 && decades > 4.0 && many).then(|| {
         format!(
             "attribute {name} spans {decades:.1} decades ({min:e} to {max:e}), kept in 16-bit \
              steps of {:.2e}: the values below about {:.0e} lose their digits; {remedy}",
@@ -1451,6 +1480,70 @@ fn span_note(name: &str, min: f32, max: f32, remedy: &str) -> Option<String> {
             (f64::from(max) - f64::from(min)) / 65535.0 * 100.0
         )
     })
+}
+
+/// How many of a column's values lie in each binary octave (by their `f32` exponent),
+/// those not above 0 apart: enough to tell, once the range is known, whether the values
+/// below some level are a few or many, over a frame read whole or window by window.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Octaves {
+    counts: [u64; 256],
+    /// Values above 0, counted in `counts`.
+    positive: u64,
+}
+
+impl Default for Octaves {
+    fn default() -> Self {
+        Octaves {
+            counts: [0; 256],
+            positive: 0,
+        }
+    }
+}
+
+impl Octaves {
+    /// The octaves of `values`.
+    pub fn of(values: &[f32]) -> Octaves {
+        use rayon::prelude::*;
+        values
+            .par_chunks(1 << 16)
+            .map(|chunk| {
+                let mut o = Octaves::default();
+                for &v in chunk.iter().filter(|v| **v > 0.0) {
+                    o.counts[((v.to_bits() >> 23) & 0xff) as usize] += 1;
+                    o.positive += 1;
+                }
+                o
+            })
+            .reduce(Octaves::default, |mut a, b| {
+                a.add(&b);
+                a
+            })
+    }
+
+    /// Adds `other`'s counts (another window's).
+    pub fn add(&mut self, other: &Octaves) {
+        for (a, b) in self.counts.iter_mut().zip(&other.counts) {
+            *a += b;
+        }
+        self.positive += other.positive;
+    }
+
+    /// The share of the values above 0 that may lie below `x`: those of every octave
+    /// that begins below it (so at most twice as far below as the octave's width).
+    pub fn share_below(&self, x: f64) -> f64 {
+        if self.positive == 0 {
+            return 0.0;
+        }
+        let below: u64 = self
+            .counts
+            .iter()
+            .enumerate()
+            .filter(|(e, _)| f64::from(f32::from_bits((*e as u32) << 23)) < x)
+            .map(|(_, c)| c)
+            .sum();
+        below as f64 / self.positive as f64
+    }
 }
 
 /// The range of the base-10 logarithms of attribute values (of particles from `first`

@@ -1752,3 +1752,58 @@ fn a_further_attribute_spanning_decades_keeps_its_logarithm() {
     .to_string();
     assert!(e.contains("further attribute 4"), "{e}");
 }
+
+/// A column whose values spread over decades lose digits where many lie in the lowest:
+/// said, built whole or in chunks alike; a score from 0.5 to 1 with one value of 1e-6
+/// (a failed fit's) spans as many decades, but loses nothing worth a note.
+#[test]
+fn decades_lost_are_noted_where_many_values_lie_there() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1000;
+    let mut text = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{n}\nITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n\
+         0 10\nITEM: ATOMS id type x y z q r s\n"
+    );
+    for i in 0..n {
+        let (x, y, z) = (i % 10, (i / 10) % 10, i / 100);
+        let q = if i == 7 {
+            1e-6
+        } else {
+            0.5 + 0.5 * i as f64 / n as f64
+        };
+        let r = 10f64.powf(-6.0 + 6.0 * i as f64 / (n - 1) as f64);
+        text.push_str(&format!(
+            "{} 1 {x}.25 {y}.5 {z}.75 {q:e} {r:e} {q:e}\n",
+            i + 1
+        ));
+    }
+    let path = dir.path().join("scores.lammpstrj");
+    std::fs::write(&path, &text).unwrap();
+    let read = ReadOptions {
+        attribute: Some("q".into()),
+        extra_attributes: vec!["r".into(), "s".into()],
+        ..Default::default()
+    };
+    let out = dir.path().join("o.mdlod");
+    for chunk_points in [300, 1 << 20] {
+        let r = convert_file(
+            &path,
+            &out,
+            FrameSelect::Last,
+            &read,
+            &options(chunk_points),
+            &NoProgress,
+        )
+        .unwrap();
+        let said = |name: &str| {
+            r.notes
+                .iter()
+                .any(|n| n.contains(&format!("attribute {name} spans 6.0 decades")))
+        };
+        assert!(
+            said("r") && !said("q") && !said("s"),
+            "chunks of {chunk_points}: {:?}",
+            r.notes
+        );
+    }
+}
