@@ -619,3 +619,62 @@ fn categories_of_other_columns_take_the_palette_by_value() {
     assert_eq!(category_colour("c_cna", 3), bcc);
     assert_eq!(category_colour("c_cna", 5), Some([242, 242, 242]));
 }
+
+/// An `ITEM: ATOMS` line naming no columns (very old LAMMPS) is read as `dump atom`'s
+/// scaled `id type xs ys zs`; atom lines of another column count, or whose coordinates
+/// lie far outside the box (unscaled ones, which the box would multiply silently), are
+/// refused, saying how to name the columns.
+#[test]
+fn an_atoms_line_naming_no_columns_is_scaled_dump_atom_or_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n10\nITEM: BOX BOUNDS pp pp pp\n\
+                0 10\n0 10\n0 10\nITEM: ATOMS\n";
+    let lines = |f: &dyn Fn(usize) -> String| (0..10).map(f).collect::<String>();
+    // Scaled: read through the box.
+    let scaled = write(
+        dir.path(),
+        "scaled.dump",
+        &format!(
+            "{head}{}",
+            lines(&|i| format!("{} 1 0.{i} 0.5 0.25\n", i + 1))
+        ),
+    );
+    let frame = read(&scaled, None);
+    assert!(
+        close(frame.positions[3], [3.0, 5.0, 2.5]),
+        "{:?}",
+        frame.positions[3]
+    );
+    // Unscaled, as SPPARKS and old `dump custom` wrote them: refused.
+    let unscaled = write(
+        dir.path(),
+        "unscaled.dump",
+        &format!("{head}{}", lines(&|i| format!("{} 1 {i}.5 5 2.5\n", i + 1))),
+    );
+    let dump = DumpFile::open(&unscaled).unwrap();
+    let e = dump
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("10 of the first 10 atoms lie far outside the box")
+            && e.contains("the columns look unscaled")
+            && e.contains("ITEM: ATOMS id type x y z"),
+        "{e}"
+    );
+    // Eight columns (image flags): refused at the line.
+    let eight = write(
+        dir.path(),
+        "eight.dump",
+        &format!(
+            "{head}{}",
+            lines(&|i| format!("{} 1 0.{i} 0.5 0.25 0 0 0\n", i + 1))
+        ),
+    );
+    let dump = DumpFile::open(&eight).unwrap();
+    let e = dump
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("this atom line holds 8 columns"), "{e}");
+}

@@ -25,7 +25,9 @@
 //!   which handles triclinic boxes). Species come from `element` if present, else from
 //!   `type` (numeric types are sorted numerically and flagged `numeric_type`; type labels
 //!   keep first-appearance order), else every atom is one species. Any column can be the
-//!   attribute. An `ITEM: ATOMS` line without names (very old LAMMPS) means `id type xs ys zs`.
+//!   attribute. An `ITEM: ATOMS` line without names (very old LAMMPS) means `id type xs ys
+//!   zs`; atom lines of another column count, or more than a few of the first thousand
+//!   lying far outside the box (unscaled coordinates), are refused, as binary dumps are.
 //! - **Atoms.** The lines after `ITEM: ATOMS` up to the frame end go to the shared parallel
 //!   parser, which checks their count against `NUMBER OF ATOMS` and keeps their order.
 
@@ -435,6 +437,7 @@ impl Index {
                         .collect();
                     if names.is_empty() {
                         names = ["id", "type", "xs", "ys", "zs"].map(String::from).to_vec();
+                        check_assumed_columns(ctx, data, cursor.pos)?;
                     }
                     break (at, names);
                 }
@@ -600,6 +603,67 @@ fn parse_box(
         b.periodic = Some([flags[0] == b"pp", flags[1] == b"pp", flags[2] == b"pp"]);
     }
     Ok(b)
+}
+
+/// Refuses `dump atom`'s `id type xs ys zs`, assumed for an `ITEM: ATOMS` line that names
+/// no columns (very old LAMMPS, SPPARKS), where the atom lines (from offset `from`) hold
+/// another count of columns, or more than a few of the first thousand lie far outside
+/// the box (below −0.5 or above 1.5): unscaled coordinates taken for scaled ones would be
+/// multiplied by the box silently, as the binary reader refuses them too.
+fn check_assumed_columns(ctx: &Ctx<'_>, data: &[u8], from: usize) -> Result<(), ReadError> {
+    const SAMPLE: usize = 1000;
+    const FAR_ALLOWED: usize = 3;
+    let mut lines = Cursor::new(data, from);
+    let (mut seen, mut far, mut first_far) = (0usize, 0usize, None);
+    let mend = "write the names after `ITEM: ATOMS` (`sed -i 's/^ITEM: ATOMS *$/ITEM: ATOMS id \
+                type x y z/' DUMP` for unscaled positions)";
+    while seen < SAMPLE {
+        let Some((at, line)) = lines.next_line() else {
+            break;
+        };
+        if line.starts_with(b"ITEM:") {
+            break;
+        }
+        let tokens: Vec<&[u8]> = super::fields(line).collect();
+        if tokens.is_empty() {
+            continue;
+        }
+        if tokens.len() != 5 {
+            return Err(ctx.malformed(
+                at,
+                format!(
+                    "an `ITEM: ATOMS` line that names no columns (very old LAMMPS) is read as \
+                     `dump atom`'s `id type xs ys zs`, but this atom line holds {} columns: {mend}",
+                    tokens.len()
+                ),
+            ));
+        }
+        for (c, t) in tokens[2..].iter().enumerate() {
+            let v = std::str::from_utf8(t)
+                .ok()
+                .and_then(|t| t.parse::<f64>().ok());
+            if let Some(v) = v.filter(|v| v.is_finite() && !(-0.5..=1.5).contains(v)) {
+                far += 1;
+                first_far.get_or_insert((at, seen, c, v));
+                break;
+            }
+        }
+        seen += 1;
+    }
+    match first_far {
+        Some((at, i, c, v)) if far > FAR_ALLOWED => Err(ctx.malformed(
+            at,
+            format!(
+                "an `ITEM: ATOMS` line that names no columns (very old LAMMPS) is read as \
+                 `dump atom`'s scaled `id type xs ys zs`, but {far} of the first {seen} atoms \
+                 lie far outside the box (below -0.5 or above 1.5; atom {}: `{}` is {v}): the \
+                 columns look unscaled; {mend}",
+                i + 1,
+                ["xs", "ys", "zs"][c]
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 #[cfg(test)]
