@@ -678,3 +678,37 @@ fn an_atoms_line_naming_no_columns_is_scaled_dump_atom_or_refused() {
         .to_string();
     assert!(e.contains("this atom line holds 8 columns"), "{e}");
 }
+
+/// Runs of other units concatenated into one dump: LAMMPS writes `ITEM: UNITS` in the
+/// first frame of each file a dump command opens, so a frame takes the last before it
+/// (the second run's later frames were read in the first run's units).
+#[test]
+fn concatenated_runs_keep_each_runs_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = |units: Option<&str>, step: u64| {
+        let head = units.map_or(String::new(), |u| format!("ITEM: UNITS\n{u}\n"));
+        format!(
+            "{head}ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS pp pp pp\n\
+             0 1\n0 1\n0 1\nITEM: ATOMS id type x y z\n1 1 0.5 0.5 0.5\n"
+        )
+    };
+    let text = [
+        frame(Some("metal"), 0),
+        frame(None, 100),
+        frame(Some("lj"), 200),
+        frame(None, 300),
+    ]
+    .concat();
+    let path = write(dir.path(), "cat.dump", &text);
+    for pass in 0..2 {
+        // (The second open takes the frames from the index a batch keeps, where kept.)
+        let dump = DumpFile::open(&path).unwrap();
+        let units: Vec<Option<String>> =
+            (0..4).map(|k| dump.frame_info(k).unwrap().units).collect();
+        assert_eq!(
+            units,
+            ["metal", "metal", "lj", "lj"].map(|u| Some(u.to_string())),
+            "pass {pass}"
+        );
+    }
+}

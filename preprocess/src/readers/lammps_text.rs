@@ -54,8 +54,11 @@ struct Span {
 #[derive(Debug, PartialEq)]
 pub(crate) struct Index {
     frames: Vec<Span>,
-    /// `ITEM: UNITS`, which LAMMPS writes in the first frame only.
-    units: Option<String>,
+    /// Each `ITEM: UNITS` and the frame it heads, in order: LAMMPS writes it in the first
+    /// frame of each file a dump command opens, so a frame takes the last one before it
+    /// (runs of other units concatenated into one file), frames before the first the
+    /// first.
+    units: Vec<(usize, String)>,
 }
 
 /// Coordinate column triples in order of preference, and whether they are scaled.
@@ -176,7 +179,7 @@ impl Index {
     ) -> Result<Index, ReadError> {
         let data = ctx.data;
         let mut frames: Vec<Span> = Vec::new();
-        let mut units = None;
+        let mut units = Vec::new();
         let mut visit = |data: &[u8], p: usize| Index::visit(data, p, &mut frames, &mut units);
         let segment = segment.max(1);
         match file {
@@ -205,7 +208,7 @@ impl Index {
     }
 
     /// Records the frame whose `ITEM: TIMESTEP` may start at `p`.
-    fn visit(data: &[u8], p: usize, frames: &mut Vec<Span>, units: &mut Option<String>) {
+    fn visit(data: &[u8], p: usize, frames: &mut Vec<Span>, units: &mut Vec<(usize, String)>) {
         {
             // (A line that is `ITEM: TIMESTEP` from its first byte, as the scan finds them.)
             if (p > 0 && data[p - 1] != b'\n') || !data[p..].starts_with(TIMESTEP) {
@@ -231,9 +234,8 @@ impl Index {
                     break;
                 }
                 if item == b"ITEM: UNITS" {
-                    if units.is_none() {
-                        *units = Some(String::from_utf8_lossy(trim(value)).into_owned());
-                    }
+                    let value = String::from_utf8_lossy(trim(value)).into_owned();
+                    units.push((frames.len(), value));
                 } else if item != b"ITEM: TIME" {
                     break;
                 }
@@ -254,7 +256,7 @@ impl Index {
     fn finish(
         ctx: &Ctx<'_>,
         mut frames: Vec<Span>,
-        units: Option<String>,
+        units: Vec<(usize, String)>,
     ) -> Result<Index, ReadError> {
         let data = ctx.data;
         split_cut_header(data, &mut frames);
@@ -277,10 +279,21 @@ impl Index {
         Ok(Index { frames, units })
     }
 
+    /// The dump's first `ITEM: UNITS`.
+    fn first_units(&self) -> Option<String> {
+        self.units.first().map(|u| u.1.clone())
+    }
+
+    /// The units of frame `k`: the last `ITEM: UNITS` at or before it, else the first.
+    fn units_of(&self, k: usize) -> Option<String> {
+        let before = self.units.iter().rev().find(|(at, _)| *at <= k);
+        before.or(self.units.first()).map(|u| u.1.clone())
+    }
+
     /// The index as a cache keeps it ([`super::index_cache`]).
     pub fn to_cached(&self) -> super::index_cache::CachedFrames {
         super::index_cache::CachedFrames {
-            units: self.units.clone(),
+            units: self.first_units(),
             ..super::index_cache::CachedFrames::of(
                 "lammps",
                 self.frames.iter().map(|s| (s.start, s.end, s.timestep)),
@@ -306,7 +319,7 @@ impl Index {
             return None;
         }
         let mut frames: Vec<Span> = Vec::with_capacity(ranges.len());
-        let mut units = None;
+        let mut units = Vec::new();
         for (k, r) in ranges.iter().enumerate() {
             let mut cursor = Cursor::new(&data[..r.end], r.start);
             let mut at = None;
@@ -329,7 +342,7 @@ impl Index {
         }
         split_cut_header(data, &mut frames);
         let same = frames.len() == ranges.len()
-            && units == cached.units
+            && units.first().map(|u| &u.1) == cached.units.as_ref()
             && frames
                 .iter()
                 .zip(&ranges)
@@ -462,7 +475,7 @@ impl Index {
             )
         })?;
         if info.units.is_none() {
-            info.units = self.units.clone();
+            info.units = self.units_of(k);
         }
         let find = |name: &str| columns.iter().position(|c| c == name);
         let coords = COORDINATE_STYLES.iter().find_map(|(names, scaled)| {
@@ -697,7 +710,7 @@ mod tests {
         let whole = super::super::check_segmented_index(&ctx, 0, Index::build);
         assert_eq!(whole.len(), 3);
         assert_eq!(whole.timestep(2), Some(200));
-        assert_eq!(whole.units.as_deref(), Some("metal"));
+        assert_eq!(whole.first_units().as_deref(), Some("metal"));
         // A file that is not the one indexed (another size) is an error, not a guess.
         let other = dir.path().join("other");
         std::fs::write(&other, "ITEM: TIMESTEP\n0\n").unwrap();
