@@ -2767,6 +2767,18 @@ pub fn batch(
         }
     }
     let place = |j: &Job<'_>| format!("{} frame {}", j.input.display(), j.frame);
+    // An input's last frame cut short before its timestep could be read, beside frames
+    // that record theirs (a GSD file cut inside its last frame's step): numbered by its
+    // place, it is no restart and no twin, and is left for a rerun when it is read.
+    let timed: std::collections::HashSet<&Path> = jobs
+        .iter()
+        .filter(|j| j.own_timestep.is_some())
+        .map(|j| j.input)
+        .collect();
+    let (cut_unnumbered, numbered): (Vec<Job<'_>>, Vec<Job<'_>>) = jobs
+        .into_iter()
+        .partition(|j| j.own_timestep.is_none() && j.last_of_input && timed.contains(j.input));
+    let mut jobs = numbered;
     let mut duplicates = Vec::new();
     // Timesteps a restart supersedes (`--duplicate-timesteps last`): their frame files
     // from an earlier run are not listed as frames of gone dumps.
@@ -2888,6 +2900,8 @@ pub fn batch(
         }
         jobs = kept;
     }
+    jobs.extend(cut_unnumbered);
+    jobs.sort_by_key(|j| j.timestep);
     let frames_total = jobs.len();
     // Indexing alone ends here, its inputs checked as a shard's run would check them.
     if opts.index_only {

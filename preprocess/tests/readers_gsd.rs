@@ -1345,3 +1345,44 @@ fn a_chunk_written_twice_in_a_frame_is_an_error() {
         "{m}"
     );
 }
+
+/// A file cut inside its last frame's step (a copy in progress): that frame has no step
+/// to read, and a batch leaves it for a rerun and converts the others. Frame 0's step,
+/// taken for it, made it a duplicate of frame 0: the batch stopped, or with
+/// `--duplicate-timesteps last` dropped the good frames.
+#[test]
+fn a_last_frame_cut_inside_its_step_is_left_for_a_rerun() {
+    let good = std::fs::read(gsd_sample_path("hoomd_mixture.gsd")).unwrap();
+    let cut = chunk_data(&good, "configuration/step", 2) + 4;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cut.gsd");
+    std::fs::write(&path, &good[..cut]).unwrap();
+    let d = DumpFile::open(&path).unwrap();
+    assert_eq!(d.frame_info(2).ok().and_then(|i| i.timestep), None);
+    for duplicates in [None, Some(mdlod_preprocess::batch::Duplicates::Last)] {
+        let out = dir.path().join(format!("out-{duplicates:?}"));
+        let mut opts = mdlod_preprocess::batch::BatchOptions {
+            memory_limit: 1 << 30,
+            ..Default::default()
+        };
+        if let Some(d) = duplicates {
+            opts.duplicates = d;
+        }
+        let report =
+            mdlod_preprocess::batch::batch(std::slice::from_ref(&path), &out, &opts, &NoProgress)
+                .unwrap();
+        let m = mdlod_preprocess::batch::read_manifest(&out).unwrap();
+        let steps: Vec<u64> = m.frames.iter().map(|f| f.timestep).collect();
+        let want: Vec<u64> = (0..2)
+            .map(|k| {
+                DumpFile::open(&path)
+                    .unwrap()
+                    .frame_info(k)
+                    .unwrap()
+                    .timestep
+                    .unwrap()
+            })
+            .collect();
+        assert_eq!(steps, want, "{report:?}");
+    }
+}

@@ -471,7 +471,14 @@ impl Index {
         if k >= self.frames {
             return None;
         }
-        match self.chunk(k, "configuration/step") {
+        // A frame cut short whose step was cut with it has no step to read: frame 0's,
+        // taken for it, made it a duplicate of frame 0.
+        let cut = self.damaged.as_ref().is_some_and(|d| k >= d.0);
+        match self
+            .chunk(k, "configuration/step")
+            .filter(|e| !cut || e.frame == k as u64)
+        {
+            None if cut => None,
             Some(e) if e.ty == Ty::U64 && e.n * e.m >= 1 => Some(u64_at(data, e.location)),
             Some(_) => None,
             None => Some(0),
