@@ -1386,3 +1386,25 @@ fn a_last_frame_cut_inside_its_step_is_left_for_a_rerun() {
         assert_eq!(steps, want, "{report:?}");
     }
 }
+
+/// A frame that leaves out its positions (as a writer does where every particle is at the
+/// origin, the schema's default) is refused, saying why; frame 0 is not said to lack
+/// them beside itself.
+#[test]
+fn a_frame_without_positions_says_why_a_writer_leaves_them_out() {
+    let names = vec!["particles/N".to_string()];
+    let bytes = gsd_file(&names, &[(0, 3, 1, 1, 8u32.to_le_bytes().to_vec())]);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("origin.gsd");
+    std::fs::write(&path, bytes).unwrap();
+    let e = DumpFile::open(&path)
+        .unwrap()
+        .read_frame(0, &ReadOptions::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("frame 0 has no `particles/position` for its 8 particles: a writer leaves")
+            && !e.contains("and frame 0 has none"),
+        "{e}"
+    );
+}

@@ -673,8 +673,19 @@ impl<'a> FrameData<'a> {
                 path,
                 0,
                 format!(
-                    "frame {k} has no `{name}` for its {n} particles (and frame 0 has none for \
-                     as many)"
+                    "frame {k} has no `{name}` for its {n} particles{}{}",
+                    if k > 0 {
+                        " (and frame 0 has none for as many)"
+                    } else {
+                        ""
+                    },
+                    // (The schema's default, which a writer leaves out: all at the origin.)
+                    if name == "particles/position" {
+                        ": a writer leaves positions out where every particle is at the \
+                         origin, a frame with nothing to draw"
+                    } else {
+                        ""
+                    }
                 ),
             )),
             None => Ok(None),
