@@ -1296,6 +1296,28 @@ fn an_attribute_a_later_frame_takes_from_frame_0_is_noted() {
         "{:?}",
         notes(1)
     );
+    // A frame of another count takes the schema's default (0), not frame 0's: not said.
+    let three = f32s(&[0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+    let bytes = gsd_frames(
+        &names,
+        &[
+            (0, (0, 3, 1, 1, 2u32.to_le_bytes().to_vec())),
+            (0, (1, 9, 2, 3, f32s(&[0.0, 0.0, 0.0, 1.0, 2.0, 3.0]))),
+            (0, (2, 9, 2, 1, f32s(&[0.5, -0.5]))),
+            (1, (0, 3, 1, 1, 3u32.to_le_bytes().to_vec())),
+            (1, (1, 9, 3, 3, three)),
+        ],
+    );
+    let path = dir.path().join("grown.gsd");
+    std::fs::write(&path, &bytes).unwrap();
+    let dump = DumpFile::open(&path).unwrap();
+    let frame = dump.read_frame(1, &charge(), &NoProgress).unwrap();
+    assert_eq!(frame.attribute.unwrap().values, [0.0; 3]);
+    assert!(
+        dump.frame_notes(1, &charge()).is_empty(),
+        "{:?}",
+        dump.frame_notes(1, &charge())
+    );
 }
 
 /// A box length below 0 (a damaged file's Lx = -10) is refused naming the frame and the

@@ -394,13 +394,17 @@ impl Index {
     /// Whether frame `k` (past 0), holding positions of its own, takes chunk `name` from
     /// frame 0 (the schema's rule for a chunk a frame leaves out): HOOMD writes
     /// quantities outside its `dynamic` list in frame 0 only, so a velocity read for a
-    /// later frame is frame 0's.
-    pub(crate) fn takes_from_frame_0(&self, k: usize, name: &str) -> bool {
+    /// later frame is frame 0's. A frame of another particle count takes the schema's
+    /// default instead, as `gsd.hoomd` reads it (its particles are not frame 0's).
+    pub(crate) fn takes_from_frame_0(&self, data: &[u8], k: usize, name: &str) -> bool {
+        let n = |k: usize| self.particles(Path::new(""), data, k).ok();
         k > 0
             && self.chunk(k, name).is_some_and(|e| e.frame == 0)
             && self
                 .chunk(k, "particles/position")
                 .is_some_and(|e| e.frame == k as u64)
+            && n(k).is_some()
+            && n(k) == n(0)
     }
 
     /// The chunk `name` of frame `k`, else of frame 0 (the schema's rule).

@@ -1076,7 +1076,7 @@ impl DumpFile {
         // A GSD attribute a later frame takes from frame 0: the colours are frame 0's.
         if let (Index::Gsd(i), Some(name)) = (&self.index, &read.attribute) {
             let full = gsd::chunk_name(name);
-            if i.takes_from_frame_0(k, &full) {
+            if i.takes_from_frame_0(self.bytes(), k, &full) {
                 notes.push(format!(
                     "{}: `{full}` is written in frame 0 only (HOOMD writes quantities \
                      outside its `dynamic` list once), and later frames take frame 0's values \
