@@ -178,6 +178,10 @@ fn colour_size(c: u8) -> Option<usize> {
 struct FrameIndex {
     timestamp: Option<f32>,
     lists: Vec<List>,
+    /// Bytes between the end of the frame's lists and where the seek table says the
+    /// frame ends, which MegaMol passes over (it reads a frame from its seek entry to the
+    /// next): padding, or lists a header counting too few left out.
+    trailing: usize,
 }
 
 /// The frames of an MMPLD file and where their lists are.
@@ -508,7 +512,8 @@ impl Index {
             }
             // Where the seek table says the frame ends (the next frame's start, or for the
             // last frame the end entry writers add, where the table has room for it):
-            // lists ending before it mean a list count too low, whose lists were lost.
+            // lists ending before it leave bytes MegaMol passes over (padding, or the
+            // lists of a count too low), noted.
             let seek_end = match offsets.get(k + 1) {
                 Some(&next) => Some(next),
                 None if offsets.first().is_some_and(|&f| f >= table_end + 8) => {
@@ -534,20 +539,24 @@ impl Index {
                     ),
                 ));
             }
-            if let Some(seek_end) = seek_end.filter(|&e| c.at < e) {
-                return Err(err(
-                    path,
-                    lists_at,
-                    format!(
-                        "frame {k}: its lists ({count}, as the frame header counts them) end \
-                         at byte {}, but the seek table says the frame ends at byte \
-                         {seek_end} (wrong list count?)",
-                        c.at
-                    ),
-                ));
-            }
-            Ok((FrameIndex { timestamp, lists }, c.at))
+            // Bytes after the lists up to the frame's end: passed over, as MegaMol does,
+            // with a note ([`Index::trailing`]).
+            let trailing = seek_end.map_or(0, |e| e.saturating_sub(c.at));
+            Ok((
+                FrameIndex {
+                    timestamp,
+                    lists,
+                    trailing,
+                },
+                c.at + trailing,
+            ))
         }
+    }
+
+    /// The bytes between frame `k`'s lists and its end, which the reading passes over as
+    /// MegaMol does (0 for most files).
+    pub fn trailing(&self, k: usize) -> usize {
+        self.frames.get(k).map_or(0, |f| f.trailing)
     }
 
     /// The frames, the one cut short included ([`Index::cut`]).

@@ -1073,6 +1073,18 @@ impl DumpFile {
                 self.path.display()
             ));
         }
+        // Bytes after an MMPLD frame's lists, passed over as MegaMol does.
+        if let Index::Mmpld(m) = &self.index {
+            let bytes = m.trailing(k);
+            if bytes > 0 {
+                notes.push(format!(
+                    "{}: frame {k} holds {bytes} bytes after its lists, up to where the seek \
+                     table says it ends: passed over, as MegaMol reads a frame (padding; or \
+                     lists its header's count leaves out, if the file was written wrong)",
+                    self.path.display()
+                ));
+            }
+        }
         // A GSD attribute a later frame takes from frame 0: the colours are frame 0's.
         if let (Index::Gsd(i), Some(name)) = (&self.index, &read.attribute) {
             let full = gsd::chunk_name(name);
