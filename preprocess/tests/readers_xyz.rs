@@ -164,6 +164,15 @@ fn lammps_xyz_dump_timestep_and_crlf() {
     assert_eq!(f.positions, vec![[2.0; 3], [3.0; 3]]);
     assert_eq!(f.timestep, Some(600));
     assert_eq!(names(&f), vec!["1", "2"]);
+    assert_eq!(f.time, None);
+    // With `dump_modify time yes`: the time after the timestep.
+    let timed = write(
+        dir.path(),
+        "timed.xyz",
+        &text.replace("Timestep: 600", "Timestep: 600 Time: 0.25"),
+    );
+    let f = read_k(&timed, 1, None);
+    assert_eq!((f.timestep, f.time), (Some(600), Some(0.25)));
 }
 
 #[test]

@@ -11,7 +11,8 @@
 //!   `Lattice="ax ay az bx by bz cx cy cz"` gives the cell vectors, `Origin="x y z"`
 //!   (OVITO) its origin, `pbc="T T F"` its periodicity (default `T T T` when a lattice is
 //!   given, as the extended-XYZ convention says), `Time=` the time, and `Timestep=` or
-//!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes) the timestep, `units=`
+//!   `step=` (or the `Timestep: N` that LAMMPS `dump xyz` writes, and its `Time: T`
+//!   with `dump_modify time yes`) the timestep, `units=`
 //!   the length unit (`units=um`, a LAMMPS style such as `metal`, kept as written). Spaces
 //!   around `=` and a comma ending a number are allowed, as CP2K writes them
 //!   (`i = 0, time = 0.000, E = -17.16`), and a unit written after a time's number
@@ -427,6 +428,12 @@ impl Index {
             },
         };
 
+        // LAMMPS `dump xyz` with `time yes`: ` Atoms. Timestep: 100 Time: 0.25`.
+        let time = time.or_else(|| {
+            let mut words = comment_text.split_whitespace();
+            words.find(|w| w.eq_ignore_ascii_case("time:"))?;
+            time_value(words.next()?).ok().filter(|t| t.is_finite())
+        });
         let layout = match properties {
             Some(p) => properties_layout(p).map_err(bad)?,
             None => {
