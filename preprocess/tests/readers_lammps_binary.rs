@@ -263,6 +263,14 @@ fn truncated_and_corrupt_binary_dumps_are_errors_naming_the_byte() {
     let mut bad = good.clone();
     bad[18..22].copy_from_slice(&0x0100_0000i32.to_le_bytes());
     assert!(open_err(&bad).contains("other byte order"));
+    // A whole file written big-endian: its magic string's length reads huge.
+    let mut bad = good.clone();
+    bad[..8].copy_from_slice(&(-10i64).to_be_bytes());
+    let e = open_err(&bad);
+    assert!(
+        e.contains("byte 0: the magic string's length reads -10 in the other byte order: written on a big-endian machine"),
+        "{e}"
+    );
     let mut bad = good.clone();
     bad[22..26].copy_from_slice(&3i32.to_le_bytes());
     assert!(open_err(&bad).contains("revision 3"));

@@ -242,6 +242,19 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
             .filter(|&l| l <= 64)
             .ok_or_else(|| {
                 let len = first.unsigned_abs();
+                // A revised header's length read in the other byte order (-10 for
+                // `DUMPCUSTOM`, written big-endian): the whole file is.
+                let swapped = first.swap_bytes();
+                if (-64..0).contains(&swapped) {
+                    return r.err(
+                        start,
+                        format!(
+                            "the magic string's length reads {swapped} in the other byte \
+                             order: written on a big-endian machine, which this reader does \
+                             not read; convert it there with LAMMPS' binary2txt"
+                        ),
+                    );
+                }
                 r.err(start, format!("bad magic string length {len}"))
             })?;
         let at = r.pos;
