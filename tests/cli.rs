@@ -11435,6 +11435,20 @@ fn logarithms_of_named_columns_first_and_further() {
     );
 }
 
+/// A quoted pattern of files given to `convert` is said to be `batch`'s.
+#[test]
+fn convert_of_a_pattern_points_to_batch() {
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = dir.path().join("dump.*.lammpstrj");
+    let out = dir.path().join("x.mdlod");
+    let e = fails(&["convert", s(&pattern), "-o", s(&out)]);
+    assert!(
+        e.contains("no such file: convert takes one file")
+            && e.contains(&format!("`mdlod batch '{}' -o DIR`", pattern.display())),
+        "{e}"
+    );
+}
+
 /// An XYZ comment's `units=` is kept, and species read as elements in a unit that is not
 /// ångströms are noted (silica colloids written `Si` in micrometres drew at 1.18 µm);
 /// in ångström units, not.

@@ -472,6 +472,14 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     check_not_an_image(&args.output)?;
     check_replaces_only_mdlod(&args.output)?;
     super::check_input_file(&args.input)?;
+    // A quoted pattern of files (`'dump.*.lammpstrj'`), which `batch` expands.
+    let name = args.input.to_string_lossy();
+    if !args.input.exists() && (name.contains('*') || name.contains('?')) {
+        bail!(
+            "{name}: no such file: convert takes one file (or a `%` set of one timestep's \
+             pieces); a pattern of files, one frame each, is `mdlod batch '{name}' -o DIR`"
+        );
+    }
     args.build.check()?;
     let (mut options, read) = args.build.options();
     if let Some(limit) = args.memory_limit {
