@@ -4074,10 +4074,15 @@ fn missing_frames_note(m: &mdlod_preprocess::batch::Manifest) -> Option<String> 
 fn reference_radius_note(file: &mdlod_format::MdlodFile) -> Option<String> {
     let r_ref = file.max_particle_radius();
     let m = file.metadata();
+    // (Particles of their own sizes, an SPH run's, are said in the README: there the
+    // largest sets the scale by design.)
+    if m.radius.is_some() {
+        return None;
+    }
     let (name, r) = m
         .species
         .iter()
-        .map(|s| (&s.name, s.radius_range.map_or(s.radius, |[lo, _]| lo)))
+        .map(|s| (&s.name, s.radius))
         .filter(|(_, r)| *r > 0.0)
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     let ratio = r_ref / r;
