@@ -1430,3 +1430,32 @@ fn a_frame_without_positions_says_why_a_writer_leaves_them_out() {
         "{e}"
     );
 }
+
+/// Particles turned by `particles/orientation` are noted as drawn without it (spheres);
+/// identity quaternions, as HOOMD writes for spheres, say nothing.
+#[test]
+fn orientations_are_noted_as_not_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let quaternions = |q: [f32; 4]| -> Vec<u8> {
+        [q, [1.0, 0.0, 0.0, 0.0]]
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect()
+    };
+    for (q, says) in [([1.0, 0.0, 0.0, 0.0], false), ([0.6, 0.8, 0.0, 0.0], true)] {
+        let bytes = two_particles(&[("particles/orientation", 9, 4, quaternions(q))]);
+        let (path, f) = read_frame_0(dir.path(), &bytes, &ReadOptions::default());
+        assert_eq!(f.unwrap().len(), 2);
+        let notes = DumpFile::open(&path)
+            .unwrap()
+            .frame_notes(0, &ReadOptions::default());
+        assert_eq!(
+            notes.iter().any(|n| n.contains(
+                "frame 0: particles/orientation turns particles, which are drawn as spheres"
+            )),
+            says,
+            "{notes:?}"
+        );
+    }
+}

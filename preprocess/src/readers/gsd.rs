@@ -959,6 +959,33 @@ enum Shape {
     Unreadable,
 }
 
+/// A note where frame `k` turns particles (`particles/orientation`, its own or frame 0's
+/// taken for it, with some quaternion other than the identity): mdlod draws spheres, so
+/// the orientations of anisotropic shapes and rigid bodies are not shown. `None` where
+/// the frame cannot be read or turns none.
+pub(crate) fn orientation_note(
+    path: &Path,
+    data: &[u8],
+    index: &Index,
+    k: usize,
+) -> Option<String> {
+    let f = FrameData::new(path, data, index, k).ok()?;
+    let e = f.chunk("particles/orientation", 4, false).ok()??;
+    if !matches!(e.ty, Ty::F32 | Ty::F64) {
+        return None;
+    }
+    let bytes = data.get(e.location..e.location + f.n * 4 * e.ty.size())?;
+    let identity = [1.0, 0.0, 0.0, 0.0];
+    let turned = (0..f.n).any(|i| (0..4).any(|c| e.ty.get(bytes, 4 * i + c) != identity[c]));
+    turned.then(|| {
+        format!(
+            "{}: frame {k}: particles/orientation turns particles, which are drawn as \
+             spheres: the orientations of anisotropic shapes and rigid bodies are not shown",
+            path.display()
+        )
+    })
+}
+
 /// [`FrameData::shape_note`] of frame `k`, if the frame can be read.
 pub(crate) fn shape_note(path: &Path, data: &[u8], index: &Index, k: usize) -> Option<String> {
     FrameData::new(path, data, index, k).ok()?.shape_note()

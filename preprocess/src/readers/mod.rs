@@ -1169,6 +1169,7 @@ impl DumpFile {
         }
         if let Index::Gsd(i) = &self.index {
             notes.extend(gsd::shape_note(&self.path, self.bytes(), i, k));
+            notes.extend(gsd::orientation_note(&self.path, self.bytes(), i, k));
         }
         if let Index::Mmpld(i) = &self.index {
             let lists = i.coloured_lists(k);
