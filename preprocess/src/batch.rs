@@ -2347,6 +2347,10 @@ struct Job<'a> {
     /// Whether its input is the newest of the inputs ([`newest_inputs`]), the only one
     /// whose last frame may be cut short.
     newest: bool,
+    /// The units of an earlier input (LAMMPS text), for a frame that records none: a
+    /// `dump.*` set's `ITEM: UNITS` is in its first file only (LAMMPS writes it once per
+    /// dump command).
+    carried_units: Option<String>,
 }
 
 impl Job<'_> {
@@ -2704,6 +2708,9 @@ pub fn batch(
         });
     }
     let mut jobs: Vec<Job<'_>> = Vec::new();
+    // The last units an input (in the inputs' order) recorded, carried to those after it
+    // that record none.
+    let mut units: Option<String> = None;
     for ((((input, dump), format), frames), newest) in inputs
         .iter()
         .zip(&dumps)
@@ -2713,6 +2720,18 @@ pub fn batch(
     {
         // (A frame failed before it was listed is never an input's last.)
         let count = frames.last().map_or(0, |f| f.5 + 1);
+        let text = *format == InputFormat::LammpsText;
+        let own_units = dump
+            .as_ref()
+            .filter(|_| text)
+            .and_then(|d| d.frame_info(0).ok()?.units);
+        let carried_units = match own_units {
+            Some(u) => {
+                units = Some(u);
+                None
+            }
+            None => units.clone().filter(|_| text),
+        };
         for (own, timestep, particles, attribute, given, k) in frames {
             jobs.push(Job {
                 input,
@@ -2726,6 +2745,7 @@ pub fn batch(
                 given_radii: given,
                 last_of_input: k + 1 == count,
                 newest,
+                carried_units: carried_units.clone(),
             });
         }
     }
@@ -3570,13 +3590,13 @@ pub fn batch(
                     };
                     if let Some((src, info)) = streamed {
                         // Out of core: the frame is read a window at a time.
+                        let mut header = crate::convert::header_of(&info);
+                        if header.units.is_none() {
+                            header.units.clone_from(&job.carried_units);
+                        }
                         let report = crate::chunked::convert_chunked(
                             src.as_ref(),
-                            crate::convert::base_metadata(
-                                &crate::convert::header_of(&info),
-                                Some(source),
-                                convert,
-                            ),
+                            crate::convert::base_metadata(&header, Some(source), convert),
                             &out,
                             convert,
                             &quiet,
@@ -3597,7 +3617,10 @@ pub fn batch(
                                 },
                             )?;
                         }
-                        let frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
+                        let mut frame = dump.read_frame(job.frame, &opts.read, &quiet)?;
+                        if frame.units.is_none() {
+                            frame.units.clone_from(&job.carried_units);
+                        }
                         let further =
                             crate::convert::read_extra_attributes(dump, job.frame, &opts.read)?;
                         let report = crate::convert::convert_frame_with(

@@ -3968,3 +3968,52 @@ fn a_rerun_converts_again_a_frame_file_cut_short_or_damaged() {
             .unwrap();
     }
 }
+
+/// A `dump.*` set whose first file alone records `ITEM: UNITS` (LAMMPS writes it once
+/// per dump command): every frame of the set keeps those units, built whole or in
+/// chunks; a later file recording its own keeps them.
+#[test]
+fn a_file_sets_units_carry_to_its_later_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = |step: u64, units: Option<&str>| {
+        let head = units.map_or(String::new(), |u| format!("ITEM: UNITS\n{u}\n"));
+        let mut text = format!(
+            "{head}ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n40\nITEM: BOX BOUNDS pp pp \
+             pp\n0 4\n0 4\n0 4\nITEM: ATOMS id type x y z\n"
+        );
+        for i in 0..40 {
+            text.push_str(&format!("{} 1 {} {} 0.5\n", i + 1, i % 4, i / 4 % 4));
+        }
+        let path = dir.path().join(format!("dump.{step}.lammpstrj"));
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let inputs = vec![
+        file(0, Some("metal")),
+        file(100, None),
+        file(200, None),
+        file(300, Some("real")),
+        file(400, None),
+    ];
+    for chunk_points in [1 << 20, 16] {
+        let out = dir.path().join(format!("out-{chunk_points}"));
+        let mut o = opts();
+        o.convert.chunks.chunk_points = chunk_points;
+        o.convert.build.max_root_points = 8;
+        batch(&inputs, &out, &o, &NoProgress).unwrap();
+        let m = read_manifest(&out).unwrap();
+        let units: Vec<Option<String>> = m
+            .frames
+            .iter()
+            .map(|f| {
+                let file = MdlodFile::open(out.join(&f.file)).unwrap();
+                file.metadata().units.clone()
+            })
+            .collect();
+        assert_eq!(
+            units,
+            ["metal", "metal", "metal", "real", "real"].map(|u| Some(u.to_string())),
+            "chunks of {chunk_points}"
+        );
+    }
+}
