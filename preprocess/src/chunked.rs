@@ -1712,8 +1712,11 @@ pub fn convert_chunked(
                 info.min = info.min.min(lo);
                 info.max = info.max.max(hi);
             }
-            for (octaves, a) in extra_octaves.iter_mut().zip(&extras) {
-                octaves.add(&crate::convert::Octaves::of(&a.values));
+            // (Not of the columns kept as logarithms, which lose no decades.)
+            for ((octaves, a), info) in extra_octaves.iter_mut().zip(&extras).zip(&extra_infos) {
+                if !info.log10 {
+                    octaves.add(&crate::convert::Octaves::of(&a.values));
+                }
             }
             for (whole, a) in extra_whole.iter_mut().zip(&extras) {
                 *whole = *whole && a.values.par_iter().all(|v| v.fract() == 0.0);
@@ -2038,7 +2041,7 @@ pub fn convert_chunked(
                     a.max,
                     options,
                     &logged,
-                    &first_octaves,
+                    &|| first_octaves.clone(),
                 ));
             }
             for ((e, &whole), octaves) in metadata
@@ -2051,7 +2054,12 @@ pub fn convert_chunked(
                 // Ids (of molecules) are told by their whole numbers, as for the first.
                 notes.extend(
                     crate::convert::extra_range_note(
-                        &e.name, e.min, e.max, whole, &logged, octaves,
+                        &e.name,
+                        e.min,
+                        e.max,
+                        whole,
+                        &logged,
+                        &|| octaves.clone(),
                     )
                     .0,
                 );

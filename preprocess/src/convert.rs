@@ -521,7 +521,7 @@ pub fn convert_frame_with(
                 *max,
                 options,
                 &logged,
-                &Octaves::of(&a.values),
+                &|| Octaves::of(&a.values),
             ));
             if !options.attribute_log10 {
                 said.extend(below_step_note(&a.name, &a.values, *min, *max));
@@ -561,7 +561,7 @@ pub fn convert_frame_with(
         // Ids (of molecules) are told by their whole numbers, as for the first: no
         // logarithm to suggest.
         let whole = column.values.iter().all(|v| v.fract() == 0.0);
-        let octaves = Octaves::of(&column.values);
+        let octaves = || Octaves::of(&column.values);
         let (note, ids) = extra_range_note(
             &e.info.name,
             e.info.min,
@@ -1275,7 +1275,7 @@ pub fn attribute_span_note(
     max: f32,
     options: &ConvertOptions,
     logged: &[String],
-    octaves: &Octaves,
+    octaves: &dyn Fn() -> Octaves,
 ) -> Option<String> {
     if options.attribute_log10 {
         return None;
@@ -1434,7 +1434,7 @@ pub(crate) fn extra_range_note(
     max: f32,
     whole: bool,
     logged: &[String],
-    octaves: &Octaves,
+    octaves: &dyn Fn() -> Octaves,
 ) -> (Option<String>, bool) {
     match whole
         .then(|| whole_numbers_note(name, &[], min, max))
@@ -1451,7 +1451,7 @@ pub fn extra_span_note(
     min: f32,
     max: f32,
     logged: &[String],
-    octaves: &Octaves,
+    octaves: &dyn Fn() -> Octaves,
 ) -> Option<String> {
     span_note(
         name,
@@ -1466,13 +1466,20 @@ pub fn extra_span_note(
 }
 
 /// [`attribute_span_note`] of a column kept linearly, with `remedy` said last.
-fn span_note(name: &str, min: f32, max: f32, remedy: &str, octaves: &Octaves) -> Option<String> {
+fn span_note(
+    name: &str,
+    min: f32,
+    max: f32,
+    remedy: &str,
+    octaves: &dyn Fn() -> Octaves,
+) -> Option<String> {
     let decades = (f64::from(max) / f64::from(min)).log10();
     // Values below a hundred steps lose digits: said where they are more than a few (a
     // score uniform from 0 to 1 reaches 1e-4 with a few values, which lose nothing much).
     let lossy = (f64::from(max) - f64::from(min)) / 65535.0 * 100.0;
-    let many = octaves.share_below(lossy) >= 0.01;
-    (min > 0.0 && decades > 4.0 && many).then(|| {
+    // (The octaves counted only where the range itself calls for a note.)
+    let many = || octaves().share_below(lossy) >= 0.01;
+    (min > 0.0 && decades > 4.0 && many()).then(|| {
         format!(
             "attribute {name} spans {decades:.1} decades ({min:e} to {max:e}), kept in 16-bit \
              steps of {:.2e}: the values below about {:.0e} lose their digits; {remedy}",
