@@ -11626,6 +11626,47 @@ fn volume_fractions_of_mixed_radii_say_their_reference() {
     }
 }
 
+/// Grains of their own sizes within one species (a DEM run's `radius` column) say the
+/// reference too, by the smallest grain: a species' mean size hid it (the note was for
+/// species of one size only).
+#[test]
+fn volume_fractions_of_grains_of_their_own_sizes_say_their_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n217\nITEM: BOX BOUNDS pp pp pp\n0 40\n\
+         0 40\n0 40\nITEM: ATOMS id type x y z radius\n",
+    );
+    for i in 0..216 {
+        let (x, y, z) = (i % 6, (i / 6) % 6, i / 36);
+        text.push_str(&format!("{} 1 {} {} {} 0.5\n", i + 1, x, y, z));
+    }
+    text.push_str("217 1 30 30 30 2\n");
+    let dump = dir.path().join("grains.dump");
+    std::fs::write(&dump, text).unwrap();
+    let file = dir.path().join("grains.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file)]);
+    let out = ok(&[
+        "render",
+        s(&file),
+        "-o",
+        s(&dir.path().join("d.png")),
+        "--mode",
+        "density",
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+    assert!(
+        out.contains(
+            "volume fractions are of spheres of the largest radius, 2 (the density's \
+             reference): a particle of radius r adds 2/r times its own volume, so a close \
+             packing of particles of radius 0.5 (the smallest, of species 1) reads 2.96"
+        ),
+        "{out}"
+    );
+}
+
 /// A conversion that keeps no attribute names the dump's columns it leaves behind, and
 /// how to keep one (an OVITO user expects every column); keeping one says nothing.
 #[test]

@@ -4074,27 +4074,42 @@ fn missing_frames_note(m: &mdlod_preprocess::batch::Manifest) -> Option<String> 
 fn reference_radius_note(file: &mdlod_format::MdlodFile) -> Option<String> {
     let r_ref = file.max_particle_radius();
     let m = file.metadata();
-    // (Particles of their own sizes, an SPH run's, are said in the README: there the
-    // largest sets the scale by design.)
-    if m.radius.is_some() {
+    // Particles of their own sizes (grains of a DEM run) by the smallest of each species;
+    // sizes spanning a hundred times and more (an SPH run's smoothing lengths) have a
+    // note of their own.
+    let own = m.radius.is_some();
+    if m.radius
+        .is_some_and(|r| r.min > 0.0 && r.max / r.min >= 100.0)
+    {
         return None;
     }
     let (name, r) = m
         .species
         .iter()
-        .map(|s| (&s.name, s.radius))
+        .map(|s| (&s.name, if own { s.smallest_radius() } else { s.radius }))
         .filter(|(_, r)| *r > 0.0)
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     let ratio = r_ref / r;
+    let (what, mend) = match own {
+        true => (
+            format!(
+                "particles of radius {} (the smallest, of species {name})",
+                Num(r)
+            ),
+            "the particles' own sizes are kept, so no one size makes it a packing's",
+        ),
+        false => (
+            format!("species {name} (radius {})", Num(r)),
+            "--radius giving the species one size makes the values its packing's",
+        ),
+    };
     (ratio >= 1.5 && ratio.is_finite()).then(|| {
         format!(
             "  note: volume fractions are of spheres of the largest radius, {} (the density's \
              reference): a particle of radius r adds {}/r times its own volume, so a close \
-             packing of species {name} (radius {}) reads {:.2}, not 0.74 (--radius giving the \
-             species one size makes the values its packing's)",
+             packing of {what} reads {:.2}, not 0.74 ({mend})",
             Num(r_ref),
             Num(r_ref),
-            Num(r),
             0.7405 * ratio
         )
     })
