@@ -11626,6 +11626,47 @@ fn volume_fractions_of_mixed_radii_say_their_reference() {
     }
 }
 
+/// LIGGGHTS's `id type type x y z ... radius` (a column named twice, its copies equal)
+/// converts from the first copy, noted; copies that differ are refused at the line where
+/// they do, with the `sed` that renames the others (it was refused whatever the values).
+#[test]
+fn a_column_named_twice_is_read_where_its_copies_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n3\nITEM: BOX BOUNDS pp ff ff\n0 1\n\
+                0 1\n0 1\nITEM: ATOMS id type type x y z radius\n";
+    let dump = dir.path().join("lig.dump");
+    std::fs::write(
+        &dump,
+        format!("{head}1 1 1 0.2 0.5 0.5 0.05\n2 2 2 0.5 0.5 0.5 0.05\n3 1 1.0 0.8 0.5 0.5 0.05\n"),
+    )
+    .unwrap();
+    let file = dir.path().join("lig.mdlod");
+    let said = ok(&["convert", s(&dump), "-o", s(&file)]);
+    assert!(
+        said.contains(
+            "lig.dump: `ITEM: ATOMS` names `type` (columns 2 and 3) more than once (as LIGGGHTS \
+             writes `id type type`): the copies agree in all 3 atoms, and the first is read"
+        ),
+        "{said}"
+    );
+    let info = ok(&["info", s(&file)]);
+    assert!(info.contains("2 particles"), "{info}");
+    assert!(info.contains("1 particle\n"), "{info}");
+    std::fs::write(
+        &dump,
+        format!("{head}1 1 1 0.2 0.5 0.5 0.05\n2 2 1 0.5 0.5 0.5 0.05\n3 1 1 0.8 0.5 0.5 0.05\n"),
+    )
+    .unwrap();
+    let err = fails(&["convert", s(&dump), "-o", s(&file)]);
+    assert!(
+        err.contains(
+            "lig.dump:11: column `type` is named 2 times (columns 2 and 3), and they differ \
+             here (`2` in column 2, `1` in column 3)"
+        ) && err.contains("ITEM: ATOMS id type type_2 x y z radius/'"),
+        "{err}"
+    );
+}
+
 /// Grains of their own sizes within one species (a DEM run's `radius` column) say the
 /// reference too, by the smallest grain: a species' mean size hid it (the note was for
 /// species of one size only).

@@ -164,14 +164,24 @@ fn wrong_column_count() {
         .read_frame(0, &ReadOptions::default(), &NoProgress)
         .unwrap();
     assert_eq!(f.positions[2], [9.0, 1.0, 0.0]);
-    // A position column named twice: refused (the first used to be taken silently).
+    // A position column named twice, its copies differing: refused where they differ
+    // (the first used to be taken silently). Copies that agree are read (LIGGGHTS's `id
+    // type type`).
     let twice = HEAD.replace("x y z", "x y z x");
-    assert_error(
+    let (path, got) = error_k(
         "twice.lammpstrj",
-        &format!("{twice}1 1 0 0 0 5\n2 1 0 0 0 5\n3 1 0 0 0 5\n"),
+        &format!("{twice}1 1 0 0 0 0\n2 1 0 0 0 5\n3 1 0 0 0 5\n"),
+        0,
         None,
-        "9: column `x` is named 2 times (columns 3 and 6): which one holds the data cannot be \
-         told",
+    );
+    let path = path.display();
+    assert_eq!(
+        got,
+        format!(
+            "{path}:11: column `x` is named 2 times (columns 3 and 6), and they differ here (`0` \
+             in column 3, `5` in column 6): which one holds the data cannot be told; rename the \
+             others (`sed -i 's/^ITEM: ATOMS .*/ITEM: ATOMS id type x y z x_2/' {path}`)"
+        )
     );
     // A header naming twice the columns every line holds: every line is there, so it
     // is a column count, not a frame cut short (which a rerun would wait for).

@@ -686,9 +686,10 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("  nodes        {}", f.nodes().len());
     for (k, s) in m.species.iter().enumerate() {
-        let count = counts
-            .as_ref()
-            .map_or(String::new(), |c| format!("  {} particles", c[k]));
+        let count = counts.as_ref().map_or(String::new(), |c| match c[k] {
+            1 => "  1 particle".to_string(),
+            n => format!("  {n} particles"),
+        });
         // Polydisperse species: each particle drawn at its own radius where the file
         // keeps them (files of format 1.0 kept only the mean).
         let range = s.radius_range.map_or(String::new(), |[lo, hi]| {

@@ -1167,6 +1167,24 @@ impl DumpFile {
                 self.path.display()
             ));
         }
+        // Columns read that are named twice, their copies agreeing (LIGGGHTS).
+        if lammps_text {
+            if let Ok(header) = self.header(k) {
+                if let Ok((coords, _, attribute, size, layout)) =
+                    text_columns(&self.ctx(), &header, read)
+                {
+                    let read = coords
+                        .iter()
+                        .copied()
+                        .chain(layout.species)
+                        .chain(attribute)
+                        .chain(size.map(|(c, _)| c));
+                    if let Some(note) = copies_read_note(&header, read) {
+                        notes.push(format!("{}: `ITEM: ATOMS` {note}", self.path.display()));
+                    }
+                }
+            }
+        }
         if let Index::Gsd(i) = &self.index {
             notes.extend(gsd::shape_note(&self.path, self.bytes(), i, k));
             notes.extend(gsd::orientation_note(&self.path, self.bytes(), i, k));
@@ -1899,14 +1917,142 @@ fn text_columns<'h>(
             .chain(layout.species)
             .chain(attribute)
             .chain(size.map(|(c, _)| c));
-        if let Some(message) = named_twice(columns, read) {
+        // (Copies that agree are read from the first: LIGGGHTS's `id type type`.)
+        if let Some((at, message)) = disagreeing_copies(ctx, header, read) {
             return Err(ReadError::Malformed {
-                at: ctx.at(header.columns_at),
+                at: ctx.at(at),
                 message,
             });
         }
         Ok((coords, fractional, attribute, size, layout))
     }
+}
+
+/// How many atom lines of a text frame [`disagreeing_copies`] compares.
+pub(crate) const COPIES_SAMPLE: usize = 1000;
+
+/// The columns of `read` (indices into the frame's columns) that the text frame's header
+/// names more than once, each with every place it is named (0-based).
+fn copied_columns(header: &Header, read: impl IntoIterator<Item = usize>) -> Vec<Vec<usize>> {
+    let columns = &header.info.columns;
+    let mut copies: Vec<Vec<usize>> = Vec::new();
+    for c in read {
+        let Some(name) = columns.get(c) else { continue };
+        let at: Vec<usize> = (0..columns.len())
+            .filter(|&i| columns[i] == *name)
+            .collect();
+        if at.len() > 1 && !copies.contains(&at) {
+            copies.push(at);
+        }
+    }
+    copies
+}
+
+/// Of the columns `read` that a text frame names more than once (LIGGGHTS writes `id
+/// type type ...` in its examples), the first whose copies differ in the frame's first
+/// [`COPIES_SAMPLE`] atom lines, said with the line where they do and how to rename one;
+/// copies that agree there are read from the first.
+fn disagreeing_copies(
+    ctx: &Ctx<'_>,
+    header: &Header,
+    read: impl IntoIterator<Item = usize>,
+) -> Option<(usize, String)> {
+    let copies = copied_columns(header, read);
+    if copies.is_empty() {
+        return None;
+    }
+    let columns = &header.info.columns;
+    let value = |t: &[u8]| std::str::from_utf8(t).ok()?.parse::<f64>().ok();
+    let same =
+        |a: &[u8], b: &[u8]| a == b || matches!((value(a), value(b)), (Some(x), Some(y)) if x == y);
+    let end = header.atoms.end.min(ctx.data.len());
+    let mut lines = Cursor::new(&ctx.data[..end], header.atoms.start);
+    let mut seen = 0;
+    while seen < COPIES_SAMPLE {
+        let Some((at, line)) = lines.next_line() else {
+            break;
+        };
+        let tokens: Vec<&[u8]> = fields(line).collect();
+        if tokens.is_empty() {
+            continue;
+        }
+        seen += 1;
+        for at_columns in &copies {
+            let first = tokens.get(at_columns[0]).copied();
+            let other = at_columns[1..]
+                .iter()
+                .find(|&&c| match (first, tokens.get(c)) {
+                    (Some(a), Some(b)) => !same(a, b),
+                    _ => false,
+                });
+            if let (Some(a), Some(&c)) = (first, other) {
+                let name = &columns[at_columns[0]];
+                let renamed: Vec<String> = columns
+                    .iter()
+                    .enumerate()
+                    .map(|(i, n)| match at_columns.iter().position(|&k| k == i) {
+                        Some(k) if k > 0 => format!("{n}_{}", k + 1),
+                        _ => n.clone(),
+                    })
+                    .collect();
+                return Some((
+                    at,
+                    format!(
+                        "column `{name}` is named {} times (columns {}), and they differ here \
+                         (`{}` in column {}, `{}` in column {}): which one holds the data \
+                         cannot be told; rename the others (`sed -i 's/^ITEM: ATOMS .*/ITEM: \
+                         ATOMS {}/' {}`)",
+                        at_columns.len(),
+                        at_columns
+                            .iter()
+                            .map(|i| (i + 1).to_string())
+                            .collect::<Vec<_>>()
+                            .join(" and "),
+                        String::from_utf8_lossy(a),
+                        at_columns[0] + 1,
+                        String::from_utf8_lossy(tokens[c]),
+                        c + 1,
+                        renamed.join(" "),
+                        ctx.path.display()
+                    ),
+                ));
+            }
+        }
+    }
+    None
+}
+
+/// The note for a text frame whose columns read name a column more than once, their
+/// copies agreeing ([`disagreeing_copies`]): the first is read.
+pub(crate) fn copies_read_note(
+    header: &Header,
+    read: impl IntoIterator<Item = usize>,
+) -> Option<String> {
+    let columns = &header.info.columns;
+    let said: Vec<String> = copied_columns(header, read)
+        .iter()
+        .map(|at| {
+            format!(
+                "`{}` (columns {})",
+                columns[at[0]],
+                at.iter()
+                    .map(|i| (i + 1).to_string())
+                    .collect::<Vec<_>>()
+                    .join(" and ")
+            )
+        })
+        .collect();
+    let atoms = match header.info.particles {
+        n if n <= COPIES_SAMPLE => format!("all {n} atoms"),
+        _ => format!("the first {COPIES_SAMPLE} atoms"),
+    };
+    (!said.is_empty()).then(|| {
+        format!(
+            "names {} more than once (as LIGGGHTS writes `id type type`): the copies agree in \
+             {atoms}, and the first is read",
+            said.join(", ")
+        )
+    })
 }
 
 /// Of the columns `read` (indices into `columns`), the first that `columns` names more
