@@ -2035,14 +2035,19 @@ pub fn convert_chunked(
             let mut notes: Vec<String> = radius_notes;
             let logged = crate::convert::logged_columns(&metadata);
             if let Some(a) = &metadata.attribute {
-                notes.extend(crate::convert::attribute_span_note(
+                let span = crate::convert::attribute_span_note(
                     &a.name,
                     a.min,
                     a.max,
                     options,
                     &logged,
                     &|| first_octaves.clone(),
-                ));
+                );
+                // (Ids, whole numbers, have the note of their own whole frames give.)
+                let bulk = (span.is_none() && !options.attribute_log10)
+                    .then(|| crate::convert::bulk_note(&a.name, a.min, a.max, &first_octaves))
+                    .flatten();
+                notes.extend(span.into_iter().chain(bulk));
             }
             for ((e, &whole), octaves) in metadata
                 .attributes
@@ -2052,17 +2057,18 @@ pub fn convert_chunked(
                 .filter(|((e, _), _)| !e.log10)
             {
                 // Ids (of molecules) are told by their whole numbers, as for the first.
-                notes.extend(
-                    crate::convert::extra_range_note(
-                        &e.name,
-                        e.min,
-                        e.max,
-                        whole,
-                        &logged,
-                        &|| octaves.clone(),
-                    )
-                    .0,
+                let (note, ids) = crate::convert::extra_range_note(
+                    &e.name,
+                    e.min,
+                    e.max,
+                    whole,
+                    &logged,
+                    &|| octaves.clone(),
                 );
+                let bulk = (note.is_none() && !ids)
+                    .then(|| crate::convert::bulk_note(&e.name, e.min, e.max, octaves))
+                    .flatten();
+                notes.extend(note.into_iter().chain(bulk));
             }
             notes.extend(crate::convert::elements_in_other_units_note(
                 metadata.units.as_deref(),
