@@ -832,7 +832,7 @@ impl BatchError {
             match e {
                 ConvertError::Read(r) => r.cut_short(),
                 ConvertError::LastFrameIncomplete { .. } => true,
-                ConvertError::Decompressed { source, .. }
+                ConvertError::Decompressed { inner: source, .. }
                 | ConvertError::GzipCut { source, .. } => convert(source),
                 _ => false,
             }
@@ -865,7 +865,7 @@ impl BatchError {
                 | ConvertError::LastFrameEmpty { .. }
                 | ConvertError::Attributes { .. }
                 | ConvertError::UnusableRadius(_) => true,
-                ConvertError::Decompressed { source, .. }
+                ConvertError::Decompressed { inner: source, .. }
                 | ConvertError::GzipCut { source, .. } => convert(source),
                 _ => false,
             }

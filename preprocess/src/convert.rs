@@ -180,12 +180,13 @@ pub enum ConvertError {
         #[source]
         source: Box<ConvertError>,
     },
-    #[error("{}", decompressed_message(input, text, source))]
+    /// (Not the error's source: the message says it, the working file's path put as the
+    /// input's line, and a source would print that path again.)
+    #[error("{}", decompressed_message(input, text, inner))]
     Decompressed {
         input: std::path::PathBuf,
         text: std::path::PathBuf,
-        #[source]
-        source: Box<ConvertError>,
+        inner: Box<ConvertError>,
     },
 }
 
@@ -2074,7 +2075,7 @@ fn decompressed(input: &Path, text: Option<&Path>, e: ConvertError) -> ConvertEr
         Some(text) => ConvertError::Decompressed {
             input: input.to_path_buf(),
             text: text.to_path_buf(),
-            source: Box::new(e),
+            inner: Box::new(e),
         },
         None => e,
     }
@@ -2130,7 +2131,7 @@ impl ConvertError {
             ConvertError::Read(r) => {
                 r.cut_short() || matches!(r, crate::readers::ReadError::NoSuchFrame { .. })
             }
-            ConvertError::Decompressed { source, .. } => source.gzip_cut_shows(),
+            ConvertError::Decompressed { inner, .. } => inner.gzip_cut_shows(),
             _ => false,
         }
     }

@@ -820,7 +820,7 @@ fn a_large_gzip_dump_is_decompressed_into_a_working_file_and_read_in_windows() {
     );
     std::io::Write::write_all(&mut enc, &text).unwrap();
     enc.finish().unwrap();
-    let e = convert_file(
+    let err = convert_file(
         &bad,
         &dir.path().join("c.mdlod"),
         FrameSelect::Last,
@@ -828,8 +828,20 @@ fn a_large_gzip_dump_is_decompressed_into_a_working_file_and_read_in_windows() {
         &opts,
         &NoProgress,
     )
-    .unwrap_err()
-    .to_string();
+    .unwrap_err();
+    // No source either, whose message (printed after it by the binary) named the working
+    // copy's path.
+    let mut chain = vec![err.to_string()];
+    let mut cause = std::error::Error::source(&err);
+    while let Some(c) = cause {
+        chain.push(c.to_string());
+        cause = c.source();
+    }
+    assert!(
+        !chain.iter().any(|m| m.contains(".mdlod-convert")),
+        "{chain:?}"
+    );
+    let e = err.to_string();
     // The place as a line of the input's text, not of its working copy, gone by now.
     assert!(
         e.starts_with(&format!("{}: line ", bad.display()))

@@ -105,6 +105,19 @@ fn more_atom_lines_than_announced() {
     );
 }
 
+/// A `dump local` says what it is (it was "frame 0 ends before its `ITEM: ATOMS` line").
+#[test]
+fn a_dump_local_says_it_holds_entries() {
+    assert_error(
+        "local.dump",
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ENTRIES\n1\nITEM: BOX BOUNDS pp pp pp\n0 1\n\
+         0 1\n0 1\nITEM: ENTRIES index c_1[1] c_1[2]\n1 3 4\n",
+        None,
+        "3: frame 0 is a `dump local` one (`ITEM: NUMBER OF ENTRIES`): its lines are \
+         entries, such as bonds or pairs, not particles; `dump custom` writes the atoms",
+    );
+}
+
 /// A file cut inside an atom line says so; a short line followed by a newline is a
 /// wrong column count.
 #[test]

@@ -337,6 +337,34 @@ fn length_unit(units: Option<&str>) -> String {
     style.to_string()
 }
 
+/// A length below 1 of a metric `unit` (m, cm, mm) said with the prefix that makes it a
+/// number from 1 on: a DEM run's `units si` bar of 0.02 m reads 20 mm, 5e-6 m 5 µm (down
+/// to nm). Other lengths and units as they are.
+fn metric_length(length: f64, unit: &str) -> (f64, String) {
+    let metres = match unit {
+        "m" => 1.0,
+        "cm" => 1e-2,
+        "mm" => 1e-3,
+        _ => return (length, unit.to_string()),
+    };
+    if !(length > 0.0 && length < 1.0) {
+        return (length, unit.to_string());
+    }
+    let micro = match mdlod_render::font::has_glyph('µ') {
+        true => "µm",
+        false => "um",
+    };
+    let si = length * metres;
+    let prefixed = [(1e-3, "mm"), (1e-6, micro), (1e-9, "nm")]
+        .into_iter()
+        .find(|(m, _)| si >= m * (1.0 - 1e-9));
+    match prefixed {
+        // (Rounded: 0.02 m is 20.000000000000004 mm.)
+        Some((m, u)) => (((si / m) * 1e9).round() / 1e9, u.to_string()),
+        None => (length, unit.to_string()),
+    }
+}
+
 /// The scale bar of an orthographic `camera` in an image `width` × `height`: a length of
 /// `length` world units, else the largest of 1, 2 and 5 times a power of 10 within a
 /// fifth of the width, drawn at the legend scale the image takes. An error for a
@@ -379,10 +407,11 @@ fn scale_bar(
              --scale-bar-unit names it (Å for LAMMPS metal or real units, σ for lj)"
         );
     }
+    let (shown, shown_unit) = metric_length(world, &unit);
     let label = format!(
-        "{}{}{unit}",
-        super::Num(world as f32),
-        if unit.is_empty() { "" } else { " " }
+        "{}{}{shown_unit}",
+        super::Num(shown as f32),
+        if shown_unit.is_empty() { "" } else { " " }
     );
     // The legend's scale for this image, then the bar's length in legend pixels.
     let probe = mdlod_render::legend::Legend::Scale {
@@ -5484,6 +5513,19 @@ mod tests {
         assert_eq!(length_unit(Some("Mpc h^-1")), "Mpc h^-1");
         assert_eq!(length_unit(Some("a unit far too long")), "");
         assert_eq!(length_unit(None), "");
+        // Metric lengths below 1 take a prefix.
+        let shown = |l, u| {
+            let (v, u) = metric_length(l, u);
+            format!("{} {u}", crate::commands::Num(v as f32))
+        };
+        assert_eq!(shown(0.02, "m"), "20 mm");
+        assert_eq!(shown(5e-6, "m"), "5 µm");
+        assert_eq!(shown(0.5, "cm"), "5 mm");
+        assert_eq!(shown(2.0, "cm"), "2 cm");
+        assert_eq!(shown(0.001, "m"), "1 mm");
+        assert_eq!(shown(2e-12, "m"), "2e-12 m");
+        assert_eq!(shown(0.5, "nm"), "0.5 nm");
+        assert_eq!(shown(0.5, "Å"), "0.5 Å");
     }
 
     /// The kernel modes say that a periodic cell's faces do not wrap their kernels,

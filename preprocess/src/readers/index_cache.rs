@@ -18,13 +18,13 @@
 //! kept.
 //!
 //! The cache is a JSON file (`{"mdlod_frame_index": 1, "inputs": {...}}`), read with a
-//! size cap and taken as untrusted: an entry is used only when its ranges lie in order
-//! inside the file and each starts with the frame header it claims (an `ITEM: TIMESTEP`
-//! line with the timestep kept; an XYZ count line and a comment line giving the timestep
-//! kept, only blank lines between frames), else the input is scanned as if there were
-//! none; an unreadable or
-//! foreign file is an empty cache. It is written by temporary file and rename, so
-//! processes writing it at once (the shards of an array) each leave a whole file.
+//! size cap and taken as untrusted: an entry is used only when its checksum (of the
+//! entry as written) holds, its ranges lie in order inside the file and each starts with
+//! the frame header it claims (an `ITEM: TIMESTEP` line with the timestep kept; an XYZ
+//! count line and a comment line giving the timestep kept, only blank lines between
+//! frames), else the input is scanned as if there were none; an unreadable or foreign
+//! file is an empty cache. It is written by temporary file and rename, so processes
+//! writing it at once (the shards of an array) each leave a whole file.
 //!
 //! Readers find the cache through [`IndexCache::scope`], which makes it the one every
 //! [`super::DumpFile`] opened on this thread consults until the scope ends.
@@ -143,12 +143,46 @@ impl CachedFrames {
 struct Entry {
     identity: Identity,
     frames: CachedFrames,
+    /// [`Entry::checksum`] of the rest, as written: an entry whose ranges were altered
+    /// (a last range widened over the frame after it passes every check of the ranges,
+    /// and hid that frame) is not used.
+    #[serde(default)]
+    check: u64,
+}
+
+impl Entry {
+    fn new(identity: Identity, frames: CachedFrames) -> Entry {
+        let mut e = Entry {
+            identity,
+            frames,
+            check: 0,
+        };
+        e.check = e.checksum();
+        e
+    }
+
+    /// FNV-1a of `[identity, frames]` as JSON values ([`entry_checksum`]).
+    fn checksum(&self) -> u64 {
+        entry_checksum(
+            &serde_json::to_value(self.identity).unwrap_or_default(),
+            &serde_json::to_value(&self.frames).unwrap_or_default(),
+        )
+    }
 }
 
 #[derive(Serialize, Deserialize)]
 struct CacheFile {
     mdlod_frame_index: u32,
     inputs: BTreeMap<String, Entry>,
+}
+
+/// The checksum an entry of the cache file keeps (`check`): FNV-1a of the JSON text of
+/// `[identity, frames]`, its two other fields as JSON values.
+pub fn entry_checksum(identity: &serde_json::Value, frames: &serde_json::Value) -> u64 {
+    let bytes = serde_json::to_vec(&serde_json::json!([identity, frames])).unwrap_or_default();
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
 }
 
 /// Frame indexes of text inputs, read from and written to one file.
@@ -206,7 +240,10 @@ impl IndexCache {
             .and_then(|bytes| serde_json::from_slice::<CacheFile>(&bytes).ok())
             .filter(|c| c.mdlod_frame_index == VERSION)
             .map(|c| c.inputs)
-            .unwrap_or_default();
+            .unwrap_or_default()
+            .into_iter()
+            .filter(|(_, e)| e.check == e.checksum())
+            .collect();
         IndexCache {
             path: path.to_path_buf(),
             read,
@@ -331,13 +368,10 @@ impl IndexCache {
             self.unsettled.fetch_add(1, Ordering::Relaxed);
             return;
         }
-        self.kept.lock().unwrap_or_else(|e| e.into_inner()).insert(
-            key_of(path),
-            Entry {
-                identity: Identity::of(meta),
-                frames,
-            },
-        );
+        self.kept
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key_of(path), Entry::new(Identity::of(meta), frames));
     }
 
     /// Writes the inputs used or scanned since [`IndexCache::load`] (others are dropped)

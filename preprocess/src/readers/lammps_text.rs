@@ -372,8 +372,11 @@ impl Index {
             // The file ends inside the last frame's header (a run still writing it): told
             // apart from a malformed header by the `ITEM: ATOMS` line it has not reached.
             let text = &ctx.data[span.start..span.end];
-            let reached_atoms = memchr::memmem::find(text, b"ITEM: ATOMS")
-                .is_some_and(|at| text[at..].contains(&b'\n'));
+            // (A `dump local`'s entries are no atoms to come.)
+            let reached_atoms = ["ITEM: ATOMS", "ITEM: ENTRIES"].iter().any(|item| {
+                memchr::memmem::find(text, item.as_bytes())
+                    .is_some_and(|at| text[at..].contains(&b'\n'))
+            });
             if span.end == ctx.data.len()
                 && k + 1 == self.frames.len()
                 && !reached_atoms
@@ -443,6 +446,18 @@ impl Index {
                 }
                 _ if item.starts_with(b"BOX BOUNDS") => {
                     info.simulation_box = Some(parse_box(ctx, &mut cursor, at, &item[10..])?);
+                }
+                // `dump local`'s items: entries (bonds, pairs), not atoms.
+                _ if item == b"NUMBER OF ENTRIES" || item.starts_with(b"ENTRIES") => {
+                    return Err(ctx.malformed(
+                        at,
+                        format!(
+                            "frame {k} is a `dump local` one (`ITEM: {}`): its lines are \
+                             entries, such as bonds or pairs, not particles; `dump custom` \
+                             writes the atoms",
+                            String::from_utf8_lossy(item)
+                        ),
+                    ));
                 }
                 _ if item.starts_with(b"ATOMS") => {
                     let mut names: Vec<String> = fields(&item[5..])
