@@ -105,6 +105,20 @@ fn more_atom_lines_than_announced() {
     );
 }
 
+/// Numbers too long to print as written are shown in scientific notation (a bound of
+/// 1e308 printed 309 digits).
+#[test]
+fn huge_box_bounds_are_said_in_scientific_notation() {
+    assert_error(
+        "huge.dump",
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS pp pp pp\n1e308 -1e308\n\
+         0 1\n0 1\nITEM: ATOMS id type x y z\n1 1 0 0 0\n",
+        None,
+        "6: malformed BOX BOUNDS: `1e308 -1e308` has its lower bound 1e308 above its upper bound \
+         -1e308",
+    );
+}
+
 /// A `dump local` says what it is (it was "frame 0 ends before its `ITEM: ATOMS` line").
 #[test]
 fn a_dump_local_says_it_holds_entries() {

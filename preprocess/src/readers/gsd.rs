@@ -507,7 +507,10 @@ impl Index {
                     Err(err(
                         path,
                         e.location,
-                        format!("frame {k}: `particles/N` is {v}, not a particle count"),
+                        format!(
+                            "frame {k}: `particles/N` is {}, not a particle count",
+                            super::shown(v)
+                        ),
                     ))
                 }
             }

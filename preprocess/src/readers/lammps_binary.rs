@@ -351,8 +351,10 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
             return Err(r.err(
                 bounds_at + 16 * k,
                 format!(
-                    "box bounds of timestep {timestep}: {axis} from {lo} to {hi} (the lower \
-                     bound must be a number at most the upper)"
+                    "box bounds of timestep {timestep}: {axis} from {} to {} (the lower \
+                     bound must be a number at most the upper)",
+                    super::shown(lo),
+                    super::shown(hi)
                 ),
             ));
         }

@@ -594,8 +594,8 @@ fn parse_box(
                 format!(
                     "malformed BOX BOUNDS: `{}` has its lower bound {} above its upper bound {}",
                     shorten(line),
-                    row[0],
-                    row[1]
+                    super::shown(row[0]),
+                    super::shown(row[1])
                 ),
             ));
         }

@@ -1928,6 +1928,16 @@ fn text_columns<'h>(
     }
 }
 
+/// A number from a file as a message shows it: as written where that is short, else in
+/// scientific notation (a box bound of 1e308 printed 309 digits, a denormal 50).
+pub(crate) fn shown(v: f64) -> String {
+    let plain = v.to_string();
+    match plain.len() <= 16 {
+        true => plain,
+        false => format!("{v:e}"),
+    }
+}
+
 /// How many atom lines of a text frame [`disagreeing_copies`] compares.
 pub(crate) const COPIES_SAMPLE: usize = 1000;
 
