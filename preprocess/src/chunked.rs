@@ -2019,6 +2019,8 @@ pub fn convert_chunked(
     };
     let (levels, nodes, max_position_error) =
         assemble(&chunks, &metadata, output, params, progress)?;
+    let precision =
+        crate::convert::precision_note(max_position_error, params.position_bits, &metadata.species);
     let write_time = t2.elapsed();
     drop(work);
     let file_size = fs::metadata(output).map(|m| m.len()).unwrap_or(0);
@@ -2104,6 +2106,7 @@ pub fn convert_chunked(
             ));
             crate::convert::drop_default_radius_note_said_twice(&mut notes);
             notes.extend(crate::convert::delta_n_note(params.delta_n, levels));
+            notes.extend(precision);
             notes
         },
         frame: None,
