@@ -1645,7 +1645,11 @@ impl MdlodFile {
                     return Err(FormatError::corrupt(
                         &self.path,
                         format!("node {}", first + i),
-                        format!("parent {p} comes before its predecessor's parent {q}"),
+                        format!(
+                            "parent {p} comes before its predecessor's parent {q} (node {}'s \
+                             record, or this one's, is damaged)",
+                            first + i - 1
+                        ),
                     ));
                 }
             }

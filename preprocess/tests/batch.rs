@@ -3892,23 +3892,36 @@ fn a_frame_unread_from_an_indexed_dump_drops_the_dump_from_the_index() {
     let path = out.join(INDEX_CACHE);
     let mut index: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
-    let entry = index["inputs"]
-        .as_object_mut()
+    let key = index["inputs"]
+        .as_object()
         .unwrap()
-        .values_mut()
+        .keys()
         .next()
-        .unwrap();
-    let frames = &mut entry["frames"];
+        .unwrap()
+        .clone();
+    let frames = &mut index["inputs"][&key]["frames"];
     // Frames 0 and 1 as one.
     frames["ranges"][0][1] = frames["ranges"][1][1].clone();
     frames["ranges"].as_array_mut().unwrap().remove(1);
     frames["timesteps"].as_array_mut().unwrap().remove(1);
-    std::fs::write(&path, serde_json::to_vec(&index).unwrap()).unwrap();
-
     let keep = BatchOptions {
         keep_going: true,
         ..opts()
     };
+    // Its checksum untrue, the altered entry is passed over.
+    std::fs::write(&path, serde_json::to_vec(&index).unwrap()).unwrap();
+    let r = batch(std::slice::from_ref(&src), &out, &index_only, &NoProgress).unwrap();
+    assert_eq!((r.index.scanned, r.index.from_cache), (1, 0));
+    // Its checksum made true again (as a writer at fault would write it), it passes
+    // the checks of the ranges.
+    let entry = &mut index["inputs"][&key];
+    let check = mdlod_preprocess::readers::index_cache::entry_checksum(
+        &entry["identity"],
+        &entry["frames"],
+    );
+    entry["check"] = check.into();
+    std::fs::write(&path, serde_json::to_vec(&index).unwrap()).unwrap();
+
     let r = batch(std::slice::from_ref(&src), &out, &keep, &NoProgress).unwrap();
     assert_eq!(r.index.from_cache, 1, "the altered entry passes the checks");
     assert_eq!(r.failed.len(), 1, "{:?}", r.failed);

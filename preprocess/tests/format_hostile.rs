@@ -982,7 +982,9 @@ fn lazily_checked_blocks_stand_on_their_own() {
         msg.contains("interleaved.mdlod")
             && msg.contains(&format!("node {}:", below + a as usize + 1))
             && msg.contains(&format!(
-                "parent {p0} comes before its predecessor's parent {x}"
+                "parent {p0} comes before its predecessor's parent {x} (node {}'s record, or \
+                 this one's, is damaged)",
+                below + a as usize
             )),
         "{msg}"
     );

@@ -119,6 +119,21 @@ fn huge_box_bounds_are_said_in_scientific_notation() {
     );
 }
 
+/// A triclinic box whose tilts reach past its bounds is refused, as an orthogonal one
+/// whose lower bound is above its upper is (it was converted, its cell inverted).
+#[test]
+fn a_tilted_box_whose_tilts_reach_past_its_bounds_is_refused() {
+    assert_error(
+        "tilted.dump",
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS xy xz yz pp pp pp\n\
+         0 10 1e30\n0 10 -1e30\n0 10 1e30\nITEM: ATOMS id type x y z\n1 1 0 0 0\n",
+        None,
+        "5: malformed BOX BOUNDS: the tilts xy xz yz (1e30 -1e30 1e30) reach past the bounds: \
+         the box's x edge runs from 1e30 to -1e30 (the `_bound` values hold the tilted box, as \
+         LAMMPS writes them)",
+    );
+}
+
 /// A `dump local` says what it is (it was "frame 0 ends before its `ITEM: ATOMS` line").
 #[test]
 fn a_dump_local_says_it_holds_entries() {

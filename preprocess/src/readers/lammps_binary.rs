@@ -372,6 +372,12 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
             bounds[3] - 0f64.max(yz),
             bounds[5],
         ];
+        if let Some(problem) = super::tilted_box_problem(lo, hi, [xy, xz, yz]) {
+            return Err(r.err(
+                bounds_at,
+                format!("box bounds of timestep {timestep}: {problem}"),
+            ));
+        }
         SimulationBox::lammps(lo, hi, [xy, xz, yz])
     } else {
         SimulationBox::orthogonal(

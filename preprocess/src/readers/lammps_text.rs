@@ -620,6 +620,9 @@ fn parse_box(
             rows[1][1] - 0f64.max(yz),
             rows[2][1],
         ];
+        if let Some(problem) = super::tilted_box_problem(lo, hi, [xy, xz, yz]) {
+            return Err(ctx.malformed(item_at, format!("malformed BOX BOUNDS: {problem}")));
+        }
         SimulationBox::lammps(lo, hi, [xy, xz, yz])
     } else {
         SimulationBox::orthogonal(

@@ -1931,11 +1931,28 @@ fn text_columns<'h>(
 /// A number from a file as a message shows it: as written where that is short, else in
 /// scientific notation (a box bound of 1e308 printed 309 digits, a denormal 50).
 pub(crate) fn shown(v: f64) -> String {
-    let plain = v.to_string();
-    match plain.len() <= 16 {
-        true => plain,
+    match v == 0.0 || (1e-5..1e16).contains(&v.abs()) || !v.is_finite() {
+        true => v.to_string(),
         false => format!("{v:e}"),
     }
+}
+
+/// What is wrong with a triclinic LAMMPS box whose tilts reach past its `_bound` values,
+/// given as the box's `lo` and `hi` they make: an edge of negative length, which the
+/// tilts' own bounds would leave out (an orthogonal box's lower bound above its upper is
+/// refused the same way; this one was converted, its cell inverted).
+pub(crate) fn tilted_box_problem(lo: [f64; 3], hi: [f64; 3], tilts: [f64; 3]) -> Option<String> {
+    let k = (0..2).find(|&k| lo[k].partial_cmp(&hi[k]).is_none_or(|o| o.is_gt()))?;
+    Some(format!(
+        "the tilts xy xz yz ({} {} {}) reach past the bounds: the box's {} edge runs from {} to \
+         {} (the `_bound` values hold the tilted box, as LAMMPS writes them)",
+        shown(tilts[0]),
+        shown(tilts[1]),
+        shown(tilts[2]),
+        ["x", "y"][k],
+        shown(lo[k]),
+        shown(hi[k])
+    ))
 }
 
 /// How many atom lines of a text frame [`disagreeing_copies`] compares.
