@@ -11626,6 +11626,92 @@ fn volume_fractions_of_mixed_radii_say_their_reference() {
     }
 }
 
+/// Splats lit by a quantity whose logarithm the file keeps (a column density) add up to
+/// the particles drawn, whatever range mdlod chose for them: with values hidden, the
+/// image's light equals that of a file without the hidden particles, and a movie's frame
+/// equals its still. The light was `σ − 10^lo` over the drawn particles' range (their
+/// smallest `lo`), 18-36 % low, with no word.
+#[test]
+fn splats_of_a_logged_quantity_add_up_to_the_particles_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = |keep: &dyn Fn(f64) -> bool| {
+        let mut rows = Vec::new();
+        for i in 0..400u32 {
+            let (x, y, z) = (i % 20, (i / 20) % 20, (i % 7) as f32 * 0.3);
+            // Column densities from 1e-3 to 10.
+            let sigma = 10f64.powf(-3.0 + 4.0 * f64::from(i) / 399.0);
+            if keep(sigma) {
+                rows.push(format!("{} 1 {x} {y} {z} {sigma:e}", i + 1));
+            }
+        }
+        format!(
+            "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{}\nITEM: BOX BOUNDS ff ff ff\n-1 21\n\
+             -1 21\n-1 3\nITEM: ATOMS id type x y z sigma\n{}\n",
+            rows.len(),
+            rows.join("\n")
+        )
+    };
+    let convert = |name: &str, text: String| {
+        let path = dir.path().join(format!("{name}.dump"));
+        std::fs::write(&path, text).unwrap();
+        let file = dir.path().join(format!("{name}.mdlod"));
+        ok(&[
+            "convert",
+            s(&path),
+            "-o",
+            s(&file),
+            "--attribute",
+            "sigma",
+            "--attribute-log10",
+            "--radius",
+            "1=0.6",
+        ]);
+        file
+    };
+    let all = convert("all", dump(&|_| true));
+    let dense = convert("dense", dump(&|sigma| sigma > 0.01));
+    let view = dir.path().join("view.json");
+    let flux = |file: &Path, more: &[&str]| -> f64 {
+        let png = dir.path().join("s.png");
+        let out = ok(&[
+            &[
+                "render",
+                s(file),
+                "-o",
+                s(&png),
+                "--mode",
+                "splat",
+                "--intensity",
+                "attribute",
+                "--ortho",
+                "--look-along",
+                "0,0,-1",
+                "--width",
+                "96",
+                "--height",
+                "96",
+                "--screen-error",
+                "0",
+                "--json",
+            ][..],
+            more,
+        ]
+        .concat());
+        let line = out.lines().find(|l| l.starts_with('{')).unwrap();
+        let v: serde_json::Value = serde_json::from_str(line).unwrap();
+        v["total_flux"].as_f64().unwrap()
+    };
+    let whole = flux(&all, &["--save-view", s(&view)]);
+    let same = |a: f64, b: f64| (a / b - 1.0).abs() < 1e-4;
+    // A hidden range holding no value: the drawn particles' range is the file's.
+    let none_hidden = flux(&all, &["--view", s(&view), "--hide-attribute", "1e30:"]);
+    assert!(same(none_hidden, whole), "{none_hidden} against {whole}");
+    let hidden = flux(&all, &["--view", s(&view), "--hide-attribute", ":-2"]);
+    let without = flux(&dense, &["--view", s(&view)]);
+    assert!(same(hidden, without), "{hidden} against {without}");
+    assert!(hidden < whole);
+}
+
 /// LIGGGHTS's `id type type x y z ... radius` (a column named twice, its copies equal)
 /// converts from the first copy, noted; copies that differ are refused at the line where
 /// they do, with the `sed` that renames the others (it was refused whatever the values).

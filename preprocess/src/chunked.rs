@@ -2045,7 +2045,6 @@ pub fn convert_chunked(
                     &logged,
                     &|| first_octaves.clone(),
                 );
-                // (Ids, whole numbers, have the note of their own whole frames give.)
                 let bulk = (span.is_none() && !options.attribute_log10)
                     .then(|| crate::convert::bulk_note(&a.name, a.min, a.max, &first_octaves))
                     .flatten();

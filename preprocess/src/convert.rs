@@ -1567,7 +1567,7 @@ pub struct Octaves {
     positive: u64,
     /// Values below 0, by the octave of their magnitude.
     negative: [u64; 256],
-    /// Values of 0 (either sign), or not finite.
+    /// Values of 0 (either sign), or NaN.
     zero: u64,
 }
 
@@ -2747,8 +2747,6 @@ mod tests {
         );
     }
 
-    /// A kinetic energy with walls at rest: most grains' values far below a step are
-    /// said; a column whose small values are few, or all above 0, is not.
     /// 8-bit positions off by more than a twentieth of the smallest radius say so;
     /// 16-bit ones, and 8-bit ones within it, say nothing.
     #[test]
@@ -2825,6 +2823,8 @@ mod tests {
         assert_eq!(super::Octaves::of(&forces[..99]).bulk(), None);
     }
 
+    /// A kinetic energy with walls at rest: most grains' values far below a step are
+    /// said; a column whose small values are few, or all above 0, is not.
     #[test]
     fn values_below_a_step_of_a_range_from_zero_are_noted() {
         let mut ke = vec![0.0f32; 100];

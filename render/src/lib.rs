@@ -2112,6 +2112,7 @@ pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
             PointStyle {
                 attribute: opts.style.attribute.clone(),
                 attribute_range: opts.style.attribute_range,
+                range_derived: opts.style.range_derived,
                 // With a colour map the log is the image's (a projection's), not each
                 // point's.
                 log_scale: opts.style.log_scale && opts.style.colour_map.is_none(),

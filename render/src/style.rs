@@ -363,6 +363,12 @@ pub struct PointStyle {
     /// a trajectory, so that a colour means one value throughout a movie.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attribute_range: Option<[f32; 2]>,
+    /// `attribute_range` was chosen by mdlod (the particles drawn where some are hidden
+    /// or cut away, a movie's frames), not given: splats lit by the attribute keep the
+    /// light's zero where the file's own range puts it ([`Self::light_range`]), and only
+    /// the colours and the top follow the range.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub range_derived: bool,
     /// Map the attribute's logarithm instead of its value (densities, energies spanning
     /// decades); see [`AttributeScale::with_log`].
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
@@ -405,11 +411,31 @@ impl Default for PointStyle {
             hidden_values: Vec::new(),
             hide_by: None,
             hidden_named: Vec::new(),
+            range_derived: false,
         }
     }
 }
 
 impl PointStyle {
+    /// The range splats lit by the attribute `info` take their light from: the shown
+    /// range, except that one mdlod chose ([`Self::range_derived`]) keeps the light's
+    /// zero where the file's own range puts it: at 0 for a quantity whose logarithm the
+    /// file keeps (`quantity`; none then), at the file's smallest value for a linear one
+    /// (or the range's low end below it). The particles drawn of a column density with
+    /// its thin gas hidden lit `σ − 10^lo` with `lo` their smallest, and a movie's frames
+    /// lit less their union's smallest: totals 18-36 % low, with no word.
+    pub fn light_range(
+        &self,
+        info: &mdlod_format::meta::AttributeInfo,
+        quantity: bool,
+    ) -> Option<[f32; 2]> {
+        match (self.attribute_range, self.range_derived) {
+            (Some(_), true) if quantity => None,
+            (Some([lo, hi]), true) => Some([lo.min(info.min), hi]),
+            (range, _) => range,
+        }
+    }
+
     /// True when the style draws points at other sizes than the file's: occlusion
     /// culling, which assumes the file's radii, must then be off. (Hidden particles are
     /// left out of the cut by the traversal, which occludes with what it draws only.)
@@ -1645,6 +1671,7 @@ mod tests {
             colour_map: None,
             attribute: None,
             attribute_range: None,
+            range_derived: false,
             log_scale: false,
             clip: vec![],
             hidden_values: vec![],

@@ -986,6 +986,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             colour_map: map,
             attribute: None,
             attribute_range: None,
+            range_derived: false,
             log_scale: false,
             clip: vec![],
             hidden_values: vec![],

@@ -772,7 +772,9 @@ fn logarithm_end_notes(
             ranges.push(("--hide-attribute ".to_string(), given, *range));
         }
     }
-    if let (Some(given), Some(range)) = (&style.attribute, style.attribute_range) {
+    if let (Some(given), Some(range), false) =
+        (&style.attribute, style.attribute_range, style.range_derived)
+    {
         ranges.push(("--attribute-range ".to_string(), given, range));
     }
     let mut notes = Vec::new();
@@ -1524,6 +1526,7 @@ impl StyleArgs {
             attribute: self.attribute.clone(),
             radius_scale: self.radius_scale,
             attribute_range: self.attribute_range,
+            range_derived: false,
             log_scale: self.log_scale,
             clip: self.clip.clone(),
             hidden_values: self
@@ -3662,13 +3665,14 @@ fn projected_light(
         return "projected flux".to_string();
     };
     let (_, style) = mdlod_render::page_style(opts);
-    let scale = mdlod_render::style::AttributeScale::with_range(a, style.attribute_range);
     // A logarithm lights by its quantity (`log10(rho)`: the projected rho).
-    let (name, scale) = match a
+    let inner = a
         .name
         .strip_prefix("log10(")
-        .and_then(|s| s.strip_suffix(')'))
-    {
+        .and_then(|s| s.strip_suffix(')'));
+    let scale =
+        mdlod_render::style::AttributeScale::with_range(a, style.light_range(a, inner.is_some()));
+    let (name, scale) = match inner {
         Some(inner) => (inner, scale.lighting_by_quantity()),
         None => (a.name.as_str(), scale.with_log(style.log_scale)),
     };
@@ -3858,6 +3862,7 @@ pub fn derive_range(
         return Ok(None);
     };
     style.attribute_range = Some(range);
+    style.range_derived = true;
     Ok(Some(format!(
         "{}; the file's range is {} to {}",
         why.why(),
@@ -4125,18 +4130,18 @@ fn reference_radius_note(file: &mdlod_format::MdlodFile) -> Option<String> {
                 "particles of radius {} (the smallest, of species {name})",
                 Num(r)
             ),
-            "the particles' own sizes are kept, so no one size makes it a packing's",
+            "",
         ),
         false => (
             format!("species {name} (radius {})", Num(r)),
-            "--radius giving the species one size makes the values its packing's",
+            " (--radius giving the species one size makes the values its packing's)",
         ),
     };
     (ratio >= 1.5 && ratio.is_finite()).then(|| {
         format!(
             "  note: volume fractions are of spheres of the largest radius, {} (the density's \
              reference): a particle of radius r adds {}/r times its own volume, so a close \
-             packing of {what} reads {:.2}, not 0.74 ({mend})",
+             packing of {what} reads {:.2}, not 0.74{mend}",
             Num(r_ref),
             Num(r_ref),
             0.7405 * ratio
@@ -4963,6 +4968,7 @@ fn render_frames(
     if let Some((a, range, why)) = chosen.filter(|_| opts.style.attribute_range.is_none()) {
         // (Centred: a diverging map over signed values, white 0 in every frame.)
         opts.style.attribute_range = Some(range);
+        opts.style.range_derived = true;
         range_note = format!(
             ", {} from {} to {} ({}; every frame's range is {} to {}; --attribute-range sets \
              another)",
@@ -4986,6 +4992,7 @@ fn render_frames(
         if let Some(a) = attribute.filter(|_| n > 1 || partial) {
             if a.max > a.min {
                 opts.style.attribute_range = Some([a.min, a.max]);
+                opts.style.range_derived = true;
                 let whose = match !partial {
                     true => "every frame's range",
                     false => "every frame's particles drawn, those hidden or cut away left out",

@@ -442,7 +442,7 @@ impl AttrPacker {
     /// attribute; styled species must exist). `look` applies to spheres only.
     pub fn new(file: &MdlodFile, style: PackStyle, look: &PointStyle) -> Result<Self, RenderError> {
         // The attribute's shown range and scale serve the intensities of splats too.
-        let (range, log) = (look.attribute_range, look.log_scale);
+        let (range, log, derived) = (look.attribute_range, look.log_scale, look.range_derived);
         let default_look = PointStyle::default();
         let colours_only;
         let look = match style {
@@ -491,12 +491,27 @@ impl AttrPacker {
             Some(map) => Some((map, attribute("colour by")?)),
             None => None,
         };
-        // (A logarithm stored with its clusters' mean values lights by the quantity.)
+        // (A logarithm stored with its clusters' mean values lights by the quantity.) The
+        // light's range keeps its zero where mdlod chose the range.
+        let lit = |quantity: bool| -> Result<AttributeScale, RenderError> {
+            let shown = attribute("take intensities from")?;
+            let Some(info) = meta.attribute.as_ref() else {
+                return Ok(shown);
+            };
+            let ranged = PointStyle {
+                attribute_range: range,
+                range_derived: derived,
+                ..Default::default()
+            };
+            let scale = AttributeScale::with_range(info, ranged.light_range(info, quantity));
+            Ok(match quantity {
+                true => scale.lighting_by_quantity(),
+                false => scale.with_log(log),
+            })
+        };
         let intensity = match style {
-            PackStyle::FluxAttribute if meta.attribute_log10 => {
-                Some(attribute("take intensities from")?.lighting_by_quantity())
-            }
-            PackStyle::FluxAttribute => Some(attribute("take intensities from")?),
+            PackStyle::FluxAttribute if meta.attribute_log10 => Some(lit(true)?),
+            PackStyle::FluxAttribute => Some(lit(false)?),
             PackStyle::FluxValue => Some(attribute("colour by")?),
             _ => None,
         };
