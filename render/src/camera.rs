@@ -409,7 +409,10 @@ impl Camera {
 
     /// Rotates the view around the target.
     pub fn orbit(&mut self, d_azimuth_deg: f32, d_elevation_deg: f32) {
-        self.azimuth_deg = (self.azimuth_deg + d_azimuth_deg).rem_euclid(360.0);
+        // (`rem_euclid` of a value a rounding below 0 is 360 itself: said as 0, as a view
+        // file keeps it.)
+        let azimuth = (self.azimuth_deg + d_azimuth_deg).rem_euclid(360.0);
+        self.azimuth_deg = if azimuth >= 360.0 { 0.0 } else { azimuth };
         self.elevation_deg = (self.elevation_deg + d_elevation_deg).clamp(-90.0, 90.0);
     }
 
@@ -851,6 +854,30 @@ impl Camera {
 
 #[cfg(test)]
 mod tests {
+    /// Orbiting back to where a turn began gives an azimuth in [0, 360): a rounding below
+    /// 0 was kept as 360.
+    #[test]
+    fn orbits_keep_the_azimuth_below_360() {
+        let mut cam = Camera {
+            azimuth_deg: 0.1,
+            ..Camera::default()
+        };
+        cam.orbit(-0.1 - 1e-7, 0.0);
+        assert!(
+            (0.0..360.0).contains(&cam.azimuth_deg),
+            "{}",
+            cam.azimuth_deg
+        );
+        for _ in 0..7 {
+            cam.orbit(-51.428_57, 0.0);
+        }
+        assert!(
+            (0.0..360.0).contains(&cam.azimuth_deg),
+            "{}",
+            cam.azimuth_deg
+        );
+    }
+
     use super::*;
 
     fn close(a: Vec3, b: Vec3) -> bool {

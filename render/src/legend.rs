@@ -1197,13 +1197,7 @@ pub fn colour_bar(
                 true => format!("≤ {low}"),
                 false => low,
             };
-            bar(
-                &format!("{name} (log scale)"),
-                &colour,
-                &position,
-                &ticks,
-                [low, high],
-            )
+            bar(&log_titled(name), &colour, &position, &ticks, [low, high])
         }
         None => {
             let [lo, hi] = range.map(f64::from);
@@ -1252,6 +1246,15 @@ pub fn light_bar(
     colour_bar(map, &scale, title, [lo, hi], lit)
 }
 
+/// A log scale's bar title: `title (log scale)`, unless the title says so itself (a
+/// `--legend-title "E_kin (eV, log scale)"` read "... log scale) (log scale)").
+fn log_titled(title: &str) -> String {
+    match title.to_ascii_lowercase().contains("log") {
+        true => title.to_string(),
+        false => format!("{title} (log scale)"),
+    }
+}
+
 /// The density volume's transfer function: volume fraction φ from `density_min` (clear
 /// at and below it) to `density_max`, or its logarithm between them when `log`
 /// ([`crate::density::transfer_t`]), under `title` (by default "volume fraction φ").
@@ -1265,7 +1268,7 @@ pub fn density_bar(density_min: f32, density_max: f32, log: bool, title: Option<
         let span = (max / min).ln();
         // (Below the bottom the volume is clear, not the bottom's colour: no `≤`.)
         return bar(
-            &format!("{title} (log scale)"),
+            &log_titled(title),
             &colour,
             &|v| ((v / min).ln() / span) as f32,
             &ticks,
@@ -1672,6 +1675,10 @@ mod tests {
         };
         let svg = density_bar(s.density_min, s.density_max, true, None).svg();
         assert!(svg.contains("volume fraction φ (log scale)"), "{svg}");
+        // A title that says it is a log scale is kept as it is.
+        assert_eq!(log_titled("E_kin (eV, log scale)"), "E_kin (eV, log scale)");
+        assert_eq!(log_titled("log10 rho"), "log10 rho");
+        assert_eq!(log_titled("E_kin (eV)"), "E_kin (eV) (log scale)");
         assert!(
             svg.contains(">0.001</text>") && svg.contains(">≥ 10</text>"),
             "{svg}"
