@@ -1173,12 +1173,7 @@ impl DumpFile {
                 if let Ok((coords, _, attribute, size, layout)) =
                     text_columns(&self.ctx(), &header, read)
                 {
-                    let read = coords
-                        .iter()
-                        .copied()
-                        .chain(layout.species)
-                        .chain(attribute)
-                        .chain(size.map(|(c, _)| c));
+                    let read = columns_read(coords, layout.species, attribute, size);
                     if let Some(note) = copies_read_note(&header, read) {
                         notes.push(format!("{}: `ITEM: ATOMS` {note}", self.path.display()));
                     }
@@ -1911,12 +1906,7 @@ fn text_columns<'h>(
                 at: ctx.at(header.columns_at),
                 message,
             })?;
-        let read = coords
-            .iter()
-            .copied()
-            .chain(layout.species)
-            .chain(attribute)
-            .chain(size.map(|(c, _)| c));
+        let read = columns_read(coords, layout.species, attribute, size);
         // (Copies that agree are read from the first: LIGGGHTS's `id type type`.)
         if let Some((at, message)) = disagreeing_copies(ctx, header, read) {
             return Err(ReadError::Malformed {
@@ -2215,6 +2205,21 @@ fn species_layout(
 /// What [`text_columns`] finds: the coordinate columns, the box that unscales them
 /// (scaled coordinates), the attribute's column, the size column with its factor, and
 /// the layout the atom lines are read with (the species column [`species_layout`] gives).
+/// The columns a text frame's atoms are read from: the coordinates, then those of the
+/// species, the attribute and the size where read.
+fn columns_read(
+    coords: [usize; 3],
+    species: Option<usize>,
+    attribute: Option<usize>,
+    size: Option<(usize, f64)>,
+) -> impl Iterator<Item = usize> {
+    coords
+        .into_iter()
+        .chain(species)
+        .chain(attribute)
+        .chain(size.map(|(c, _)| c))
+}
+
 type TextColumns<'h> = (
     [usize; 3],
     Option<&'h SimulationBox>,
