@@ -11628,9 +11628,9 @@ fn volume_fractions_of_mixed_radii_say_their_reference() {
 
 /// Splats lit by a quantity whose logarithm the file keeps (a column density) add up to
 /// the particles drawn, whatever range mdlod chose for them: with values hidden, the
-/// image's light equals that of a file without the hidden particles, and a movie's frame
-/// equals its still. The light was `σ − 10^lo` over the drawn particles' range (their
-/// smallest `lo`), 18-36 % low, with no word.
+/// image's light equals that of a file without the hidden particles. The light was
+/// `σ − 10^lo` over the drawn particles' range (their smallest `lo`), 18-36 % low, with
+/// no word.
 #[test]
 fn splats_of_a_logged_quantity_add_up_to_the_particles_drawn() {
     let dir = tempfile::tempdir().unwrap();

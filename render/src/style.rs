@@ -365,8 +365,7 @@ pub struct PointStyle {
     pub attribute_range: Option<[f32; 2]>,
     /// `attribute_range` was chosen by mdlod (the particles drawn where some are hidden
     /// or cut away, a movie's frames), not given: splats lit by the attribute keep the
-    /// light's zero where the file's own range puts it ([`Self::light_range`]), and only
-    /// the colours and the top follow the range.
+    /// light's zero where the file's own range puts it ([`Self::light_range`]).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub range_derived: bool,
     /// Map the attribute's logarithm instead of its value (densities, energies spanning
