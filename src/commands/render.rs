@@ -2770,11 +2770,22 @@ pub fn run(mut args: Args) -> Result<()> {
                     Num(lo)
                 );
             }
-            if opts.style.log_scale
+            // (Of the particles drawn: values below 0 all hidden or cut away say nothing.)
+            let partial = !opts.style.clip.is_empty()
+                || opts.style.hides_values()
+                || opts.style.species.iter().any(|st| st.hidden);
+            let lowest = || match partial {
+                true => mdlod_render::shown_attribute_range(&file, &opts.style)
+                    .map_or(a.min, |[lo, _]| lo),
+                false => a.min,
+            };
+            let below = (opts.style.log_scale
                 && !projected(&args)
                 && a.min < 0.0
-                && log_applies(a, &opts.style)
-            {
+                && log_applies(a, &opts.style))
+            .then(lowest)
+            .filter(|lo| *lo < 0.0);
+            if let Some(lo) = below {
                 let fate = if args.mode == Mode::Splat {
                     "give no light"
                 } else {
@@ -2784,7 +2795,7 @@ pub fn run(mut args: Args) -> Result<()> {
                     "  note: {} takes values below 0 (down to {}): on a log scale they {fate}; \
                      a log scale suits quantities above 0 (cool-warm without it centres a \
                      signed one on 0)",
-                    a.name, a.min
+                    a.name, lo
                 );
             }
             if let Some([lo, hi]) = opts.style.attribute_range {
