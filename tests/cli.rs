@@ -11653,6 +11653,44 @@ fn volume_fractions_of_mixed_radii_say_their_reference() {
     }
 }
 
+/// `--radius '*=R'` sizes every species no `--radius` names (it was refused as an unknown
+/// species), in a conversion and in a batch, whose rerun redoes a frame when it changes.
+#[test]
+fn a_radius_for_every_species_not_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("sp.dump");
+    std::fs::write(
+        &dump,
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n4\nITEM: BOX BOUNDS pp pp pp\n0 10\n0 10\n\
+         0 10\nITEM: ATOMS id type x y z\n1 1 1 1 1\n2 2 3 3 3\n3 3 5 5 5\n4 3 7 7 7\n",
+    )
+    .unwrap();
+    let file = dir.path().join("sp.mdlod");
+    ok(&[
+        "convert",
+        s(&dump),
+        "-o",
+        s(&file),
+        "--radius",
+        "*=0.3",
+        "--radius",
+        "2=1",
+    ]);
+    let radii: Vec<f32> = mdlod_format::MdlodFile::open(&file)
+        .unwrap()
+        .metadata()
+        .species
+        .iter()
+        .map(|s| s.radius)
+        .collect();
+    assert_eq!(radii, [0.3, 1.0, 0.3]);
+    let out = dir.path().join("b");
+    let run = |r: &str| ok(&["batch", s(&dump), "-o", s(&out), "--radius", r]);
+    assert!(run("*=0.3").contains("1 converted"));
+    assert!(run("*=0.3").contains("0 converted, 1 already done"));
+    assert!(run("*=0.4").contains("1 converted"));
+}
+
 /// Splats lit by a quantity whose logarithm the file keeps (a column density) add up to
 /// the particles drawn, whatever range mdlod chose for them: with values hidden, the
 /// image's light equals that of a file without the hidden particles. The light was

@@ -2773,7 +2773,13 @@ pub fn batch(
                 });
             }
         }
-        for (name, radius) in opts.convert.radii.iter().filter(|(n, _)| !renamed_to(n)) {
+        let any = crate::species::ANY_SPECIES;
+        for (name, radius) in opts
+            .convert
+            .radii
+            .iter()
+            .filter(|(n, _)| !renamed_to(n) && n != any)
+        {
             let reasons: Option<Vec<String>> =
                 namings.iter().map(|n| n.excludes(name, *radius)).collect();
             if let Some(reason) = reasons.and_then(|r| r.into_iter().next()) {
@@ -3823,7 +3829,13 @@ pub fn batch(
         source: Box::new(e),
     };
     if whole && !seen.is_empty() && opts.read.species_column.is_none() {
-        if let Some((name, radius)) = opts.convert.radii.iter().find(|(n, _)| !seen.contains(n)) {
+        let any = crate::species::ANY_SPECIES;
+        if let Some((name, radius)) = opts
+            .convert
+            .radii
+            .iter()
+            .find(|(n, _)| !seen.contains(n) && n != any)
+        {
             return Err(unused(BatchError::Convert(ConvertError::Species(
                 Box::new(crate::species::UnknownSpecies {
                     name: name.clone(),

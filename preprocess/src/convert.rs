@@ -1194,7 +1194,7 @@ pub fn radius_override_notes(names: &[SpeciesName], overrides: &[(String, f32)])
     names
         .iter()
         .filter_map(|s| {
-            let r = crate::species::radius_override(overrides, &s.name)?;
+            let (by, r) = crate::species::radius_override_named(overrides, &s.name)?;
             let given = match (s.radius_range, s.radius) {
                 (Some((lo, hi)), _) if lo != hi => {
                     format!("the sizes the input gives its particles (radii {lo} to {hi})")
@@ -1205,9 +1205,9 @@ pub fn radius_override_notes(names: &[SpeciesName], overrides: &[(String, f32)])
                 _ => return None,
             };
             Some(format!(
-                "species {}: --radius {}={r} draws every particle of it at radius {r}, in \
-                 place of {given}; leave --radius {} out to keep the input's",
-                s.name, s.name, s.name
+                "species {}: --radius {by}={r} draws every particle of it at radius {r}, in \
+                 place of {given}; leave --radius {by} out to keep the input's",
+                s.name
             ))
         })
         .collect()
@@ -1228,7 +1228,7 @@ pub(crate) fn elements_in_other_units_note(
         .iter()
         .filter(|s| {
             s.radius_range.is_none()
-                && !overrides.iter().any(|(n, _)| n == &s.name)
+                && crate::species::radius_override(overrides, &s.name).is_none()
                 && crate::species::element(&s.name).is_some_and(|(r, _)| r == s.radius)
         })
         .collect();

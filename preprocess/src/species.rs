@@ -821,7 +821,7 @@ pub fn check_overrides(
 ) -> Result<(), Box<UnknownSpecies>> {
     match overrides
         .iter()
-        .find(|(n, _)| !names.iter().any(|s| &s.name == n))
+        .find(|(n, _)| n != ANY_SPECIES && !names.iter().any(|s| &s.name == n))
     {
         Some((name, radius)) => Err(Box::new(UnknownSpecies {
             name: name.clone(),
@@ -835,13 +835,25 @@ pub fn check_overrides(
     }
 }
 
-/// The radius `overrides` give species `name` (the last one naming it wins).
+/// The name an override gives every species no override names by its own
+/// (`--radius '*=0.05'`: seven kinds of dark-matter particle at one size).
+pub const ANY_SPECIES: &str = "*";
+
+/// The radius `overrides` give species `name` (the last one naming it wins, else the
+/// last [`ANY_SPECIES`] one).
 pub fn radius_override(overrides: &[(String, f32)], name: &str) -> Option<f32> {
-    overrides
-        .iter()
-        .rev()
-        .find(|(n, _)| n == name)
-        .map(|(_, r)| *r)
+    radius_override_named(overrides, name).map(|(_, r)| r)
+}
+
+/// [`radius_override`] with the name the override was given by (`name` or `*`).
+pub fn radius_override_named<'a>(
+    overrides: &'a [(String, f32)],
+    name: &str,
+) -> Option<(&'a str, f32)> {
+    let by = |want: &str| overrides.iter().rev().find(|(n, _)| n == want);
+    by(name)
+        .or_else(|| by(ANY_SPECIES))
+        .map(|(n, r)| (n.as_str(), *r))
 }
 
 /// Parses `FROM=TO` (`--species-name`): a species the input names `FROM` is called `TO`
@@ -1208,6 +1220,13 @@ mod tests {
             ..Default::default()
         });
         check_overrides(&names, &[("2".into(), 0.9)]).unwrap();
+        // `*` names every species no override names by its own.
+        let any = [("*".to_string(), 0.3), ("2".to_string(), 0.9)];
+        check_overrides(&names, &any).unwrap();
+        assert_eq!(radius_override(&any, "1"), Some(0.3));
+        assert_eq!(radius_override(&any, "2"), Some(0.9));
+        assert_eq!(radius_override_named(&any, "1"), Some(("*", 0.3)));
+        assert_eq!(radius_override(&any[1..], "1"), None);
         let e = check_overrides(&names, &[("2".into(), 0.9), ("Cu".into(), 1.28)])
             .unwrap_err()
             .to_string();

@@ -56,7 +56,7 @@ pub struct BuildArgs {
     /// Radius of a species, NAME=RADIUS, the species named as the input names it: by
     /// element symbol where a LAMMPS dump has an `element` column, else by type number
     /// (XYZ: its species column; GSD: type name), or by the name --species-name gives it;
-    /// repeatable.
+    /// `'*=R'` gives every species no --radius names its own; repeatable.
     #[arg(long = "radius", value_name = "NAME=R", value_parser = parse_radius_override)]
     pub radii: Vec<(String, f32)>,
     /// Give a species another name, NAME=NEW: a LAMMPS type number its element (`1=O`,
