@@ -1262,7 +1262,15 @@ pub(crate) fn elements_in_other_units_note(
 /// comment names) where it is known and not ångströms, as said in a note; `None` for
 /// ångström styles (`metal`, `real`) and for names not known.
 fn non_angstrom_unit(units: &str) -> Option<&'static str> {
+    length_unit_of(units).filter(|u| *u != "Å")
+}
+
+/// The length unit `units` names (a LAMMPS unit style, or a unit a raw sidecar or an XYZ
+/// comment names), as notes and scale bars say it; `None` for names not known (a
+/// sidecar's `Mpc/h`, which a scale bar shows as written).
+pub fn length_unit_of(units: &str) -> Option<&'static str> {
     Some(match units.trim().to_ascii_lowercase().as_str() {
+        "metal" | "real" | "angstrom" | "å" => "Å",
         "lj" => "σ",
         "si" | "m" => "m",
         "cgs" | "cm" => "cm",

@@ -481,6 +481,12 @@ impl PointStyle {
         !self.hidden_values.is_empty() || !self.hidden_named.is_empty()
     }
 
+    /// True when the style leaves particles out: hidden species or values, or clip
+    /// planes (the particles drawn may then span less than the file's range).
+    pub fn leaves_some_out(&self) -> bool {
+        !self.clip.is_empty() || self.hides_values() || self.species.iter().any(|s| s.hidden)
+    }
+
     /// The species table (linear colour, radius) after styling; hidden species get
     /// radius 0, which draws nothing. A style naming a species the file lacks is an
     /// error that lists the file's species.

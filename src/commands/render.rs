@@ -311,30 +311,25 @@ impl Args {
 /// `Mpc/h`) as it is where short and drawable; empty for none.
 fn length_unit(units: Option<&str>) -> String {
     let has = |c: char| mdlod_render::font::has_glyph(c);
-    let style = match units.map(str::to_ascii_lowercase).as_deref() {
-        Some("metal" | "real") if has('Å') => "Å",
-        Some("metal" | "real") => "A",
-        Some("lj") if has('σ') => "σ",
-        Some("lj") => "sigma",
-        Some("si") => "m",
-        Some("cgs") => "cm",
-        Some("nano") => "nm",
-        Some("micro") if has('µ') => "µm",
-        Some("micro") => "um",
-        Some("electron") => "bohr",
-        // Not a LAMMPS unit style: a length unit of its own (a raw sidecar's `Mpc/h`),
-        // as written where it is short and drawable.
-        Some(_) => {
-            let own = units.unwrap_or_default().trim();
-            return if own.chars().count() <= 12 && own.chars().all(|c| c == ' ' || has(c)) {
-                own.to_string()
-            } else {
-                String::new()
-            };
-        }
-        None => "",
+    let Some(units) = units else {
+        return String::new();
     };
-    style.to_string()
+    // (The converter's table, which its notes say the units by.)
+    match mdlod_preprocess::convert::length_unit_of(units) {
+        Some("Å") if !has('Å') => "A".to_string(),
+        Some("σ") if !has('σ') => "sigma".to_string(),
+        Some("µm") if !has('µ') => "um".to_string(),
+        Some(unit) => unit.to_string(),
+        // Not a unit the table knows: a length unit of its own (a raw sidecar's
+        // `Mpc/h`), as written where it is short and drawable.
+        None => {
+            let own = units.trim();
+            match own.chars().count() <= 12 && own.chars().all(|c| c == ' ' || has(c)) {
+                true => own.to_string(),
+                false => String::new(),
+            }
+        }
+    }
 }
 
 /// A length below 1 of a metric `unit` (m, cm, mm) said with the prefix that makes it a
@@ -2771,10 +2766,7 @@ pub fn run(mut args: Args) -> Result<()> {
                 );
             }
             // (Of the particles drawn: values below 0 all hidden or cut away say nothing.)
-            let partial = !opts.style.clip.is_empty()
-                || opts.style.hides_values()
-                || opts.style.species.iter().any(|st| st.hidden);
-            let lowest = || match partial {
+            let lowest = || match opts.style.leaves_some_out() {
                 true => mdlod_render::shown_attribute_range(&file, &opts.style)
                     .map_or(a.min, |[lo, _]| lo),
                 false => a.min,
@@ -4994,9 +4986,7 @@ fn render_frames(
     // (Over the particles drawn where some are hidden or cut away: a movie of one frame
     // too, as a still maps them, which its legend said while its image took the file's
     // range.)
-    let partial = !opts.style.clip.is_empty()
-        || opts.style.hides_values()
-        || opts.style.species.iter().any(|st| st.hidden);
+    let partial = opts.style.leaves_some_out();
     if by_attribute(args) && opts.style.attribute_range.is_none() {
         // Where the frames' union is no range (a constant attribute), each frame keeps
         // its own constant look.
