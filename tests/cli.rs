@@ -3786,6 +3786,58 @@ fn a_batch_directory_renders_every_frame_with_one_camera() {
     assert!(out.contains("3 coarsened by the point budget"), "{out}");
 }
 
+/// Two names no frame holds together (a solvent that evaporates, ions deposited where it
+/// was) take the same palette slot in their own frames' files: a movie and its legend
+/// still tell them apart. Here the second frame's ions stand where the first frame's
+/// solvent stood: its image must differ, and the legend's two swatches too.
+#[test]
+fn a_movie_tells_apart_species_that_never_share_a_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = |other: &str| {
+        let mut t = format!("{}\nframe\n", 2 * 64);
+        for i in 0..64 {
+            let p = [
+                (i % 4) as f32 * 2.0,
+                (i / 4 % 4) as f32 * 2.0,
+                (i / 16) as f32 * 2.0,
+            ];
+            t += &format!("LIP {} {} {}\n", p[0], p[1], p[2]);
+            t += &format!("{other} {} {} {}\n", p[0] + 10.0, p[1], p[2]);
+        }
+        t
+    };
+    let xyz = dir.path().join("depo.xyz");
+    std::fs::write(&xyz, frame("SOL") + &frame("ION")).unwrap();
+    let d = dir.path().join("depo.d");
+    ok(&["batch", s(&xyz), "-o", s(&d)]);
+    let pattern = dir.path().join("depo-%d.png");
+    let legend = dir.path().join("key.svg");
+    let out = ok(&[
+        "render",
+        s(&d),
+        "-o",
+        s(&pattern),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--legend",
+        s(&legend),
+    ]);
+    assert!(out.contains("(ION)"), "{out}");
+    let image = |i: u32| std::fs::read(dir.path().join(format!("depo-{i}.png"))).unwrap();
+    assert_ne!(image(0), image(1));
+    // The key's swatches: one colour per name.
+    let svg = std::fs::read_to_string(&legend).unwrap();
+    let swatches: Vec<&str> = svg
+        .split("<circle cx=\"14\"")
+        .skip(1)
+        .filter_map(|c| c.split("fill=\"").nth(1)?.split('"').next())
+        .collect();
+    let colours: std::collections::BTreeSet<&&str> = swatches.iter().collect();
+    assert_eq!((swatches.len(), colours.len()), (3, 3), "{svg}");
+}
+
 /// Frames converted apart can give one species name different looks (labels take the
 /// palette by their place in the frame's list): a movie draws each name with one look.
 /// Here the second frame lists the same particles in another order, B before A; its
@@ -3832,7 +3884,7 @@ fn a_movie_keeps_each_species_look_across_frames() {
         "0",
     ]);
     assert!(
-        out.contains("1 frame whose files read a species' name otherwise"),
+        out.contains("1 frame whose files gave a species another colour"),
         "{out}"
     );
     let image = |i: u32| std::fs::read(dir.path().join(format!("ab-{i}.png"))).unwrap();
@@ -9486,10 +9538,7 @@ fn a_movie_says_nothing_of_the_radii_of_hidden_species() {
     // Shown, B keeps one look (its later frames') throughout; hidden, its files' own
     // radii, which differ, are no concern of the picture's.
     let shown = ok(&args);
-    assert!(
-        shown.contains("drawn with its look in the rest (B)"),
-        "{shown}"
-    );
+    assert!(shown.contains("drawn with its one look (B)"), "{shown}");
     let hidden = ok(&[&args[..], &["--hide-species", "B"]].concat());
     assert!(!hidden.contains("radii change"), "{hidden}");
     assert!(!hidden.contains("every species is hidden"), "{hidden}");

@@ -457,6 +457,72 @@ impl Metadata {
     }
 }
 
+/// The converter's palette for numeric types and names of no element (sRGB): its first
+/// colours; further slots take
+/// [`palette_colour`]'s.
+const PALETTE: &[[u8; 3]] = &[
+    [230, 102, 51],
+    [102, 102, 255],
+    [255, 255, 0],
+    [255, 102, 255],
+    [51, 230, 51],
+    [0, 230, 230],
+    [255, 153, 0],
+    [153, 51, 204],
+    [128, 128, 128],
+    [51, 153, 102],
+];
+
+/// Palette slot `slot`'s colour as linear light, as a file's species table keeps it.
+pub fn palette_colour_linear(slot: usize) -> [f32; 3] {
+    srgb_to_linear(palette_colour(slot))
+}
+
+/// An sRGB colour (8 bits a channel) as linear light.
+pub fn srgb_to_linear(c: [u8; 3]) -> [f32; 3] {
+    c.map(|v| srgb_channel_to_linear(f32::from(v) / 255.0))
+}
+
+/// One sRGB channel in [0, 1] as linear light.
+pub fn srgb_channel_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// The sRGB colour of palette slot `slot` (a LAMMPS type's number less one): the fixed
+/// palette's first ten, then hues a golden angle (137.5°) apart at two brightnesses, so
+/// that a run with many types does not repeat its first ten colours (the palette used to
+/// be cycled: type 11 drew as type 1).
+pub fn palette_colour(slot: usize) -> [u8; 3] {
+    if let Some(c) = PALETTE.get(slot) {
+        return *c;
+    }
+    let k = slot - PALETTE.len();
+    let hue = (20.0 + 137.507_76 * k as f64).rem_euclid(360.0);
+    let (saturation, value) = if k.is_multiple_of(2) {
+        (0.55, 0.95)
+    } else {
+        (0.8, 0.7)
+    };
+    // HSV to RGB.
+    let c = value * saturation;
+    let h = hue / 60.0;
+    let x = c * (1.0 - (h.rem_euclid(2.0) - 1.0).abs());
+    let (r, g, b) = match h as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let m = value - c;
+    [r, g, b].map(|v| ((v + m) * 255.0).round().clamp(0.0, 255.0) as u8)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -130,51 +130,7 @@ const ELEMENTS: &[(&str, f32, [u8; 3])] = &[
     ("Og", 1.50, [235, 0, 38]),
 ];
 
-/// Palette for numeric types (sRGB): its first colours; further slots take
-/// [`palette_colour`]'s.
-const PALETTE: &[[u8; 3]] = &[
-    [230, 102, 51],
-    [102, 102, 255],
-    [255, 255, 0],
-    [255, 102, 255],
-    [51, 230, 51],
-    [0, 230, 230],
-    [255, 153, 0],
-    [153, 51, 204],
-    [128, 128, 128],
-    [51, 153, 102],
-];
-
-/// The sRGB colour of palette slot `slot` (a LAMMPS type's number less one): the fixed
-/// palette's first ten, then hues a golden angle (137.5°) apart at two brightnesses, so
-/// that a run with many types does not repeat its first ten colours (the palette used to
-/// be cycled: type 11 drew as type 1).
-pub fn palette_colour(slot: usize) -> [u8; 3] {
-    if let Some(c) = PALETTE.get(slot) {
-        return *c;
-    }
-    let k = slot - PALETTE.len();
-    let hue = (20.0 + 137.507_76 * k as f64).rem_euclid(360.0);
-    let (saturation, value) = if k.is_multiple_of(2) {
-        (0.55, 0.95)
-    } else {
-        (0.8, 0.7)
-    };
-    // HSV to RGB.
-    let c = value * saturation;
-    let h = hue / 60.0;
-    let x = c * (1.0 - (h.rem_euclid(2.0) - 1.0).abs());
-    let (r, g, b) = match h as u32 {
-        0 => (c, x, 0.0),
-        1 => (x, c, 0.0),
-        2 => (0.0, c, x),
-        3 => (0.0, x, c),
-        4 => (x, 0.0, c),
-        _ => (c, 0.0, x),
-    };
-    let m = value - c;
-    [r, g, b].map(|v| ((v + m) * 255.0).round().clamp(0.0, 255.0) as u8)
-}
+pub use mdlod_format::meta::{palette_colour, palette_colour_linear};
 
 /// The colour (sRGB) of a category of `--species-column` `column` by its value, the same
 /// in every frame. Structure types take the colours OVITO gives fcc (green), hcp (red),
@@ -318,18 +274,7 @@ pub fn category_notes(
 /// Radius of a numeric type or unknown name, in the simulation's length unit.
 pub const DEFAULT_RADIUS: f32 = 0.5;
 
-fn srgb_to_linear(c: [u8; 3]) -> [f32; 3] {
-    c.map(|v| srgb_channel_to_linear(f32::from(v) / 255.0))
-}
-
-/// One sRGB channel in [0, 1] as linear light.
-pub(crate) fn srgb_channel_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
+pub(crate) use mdlod_format::meta::{srgb_channel_to_linear, srgb_to_linear};
 
 /// One linear channel in [0, 1] as sRGB.
 pub(crate) fn linear_channel_to_srgb(v: f32) -> f32 {
@@ -1146,7 +1091,7 @@ mod tests {
                 })
                 .collect()
         };
-        let palette = |i: usize| srgb_to_linear(PALETTE[i]);
+        let palette = |i: usize| palette_colour_linear(i);
         let t = species_table(&named(&["A", "B", "C", "Cu"]), &[]);
         for (i, s) in t.iter().enumerate().take(3) {
             assert_eq!(
@@ -1170,7 +1115,7 @@ mod tests {
         // Many types: no two of the first 64 slots share a colour.
         let colours: std::collections::BTreeSet<[u8; 3]> = (0..64).map(palette_colour).collect();
         assert_eq!(colours.len(), 64);
-        assert_eq!(palette_colour(0), PALETTE[0]);
+        assert_eq!(palette_colour(0), [230, 102, 51]);
         assert!(!letters_are_labels(["B", "C", "Cu"]));
         // Iodine and yttrium are elements too (MAPbI3: Pb I C N H).
         assert!(!letters_are_labels(["Pb", "I", "C", "N", "H"]));
@@ -1303,7 +1248,7 @@ mod tests {
         assert_eq!((table[0].radius, table[0].colour), (o_radius, o_colour));
         assert_eq!(table[1].radius, element("H").unwrap().0);
         // The unrenamed type keeps the palette colour of its number.
-        assert_eq!(table[2].colour, srgb_to_linear(PALETTE[2]));
+        assert_eq!(table[2].colour, palette_colour_linear(2));
         assert_eq!(table[2].radius, DEFAULT_RADIUS);
         // Overrides name the new names.
         let table = species_table(&list, &[("O".into(), 1.7)]);

@@ -99,6 +99,11 @@ pub fn default_range(
 /// name takes its look in the frame holding the most species (the earliest of those),
 /// where the names are judged among the most others; names that frame lacks, in their
 /// first frame.
+///
+/// Two names no frame holds together may have taken the same palette slot (a solvent
+/// that evaporates, then ions deposited in its place, each third in its frames' lists):
+/// the later name takes the first palette colour no look has, so that a movie and its
+/// legend tell them apart. Colours a frame gives two of its own names are left alone.
 pub fn trajectory_looks(
     frames: &[&[mdlod_format::meta::Species]],
 ) -> Vec<mdlod_format::meta::Species> {
@@ -110,6 +115,31 @@ pub fn trajectory_looks(
             if !looks.iter().any(|l| l.name == s.name) {
                 looks.push(s.clone());
             }
+        }
+    }
+    let same = |a: [f32; 3], b: [f32; 3]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() <= 1e-4);
+    let together = |a: &str, b: &str| {
+        frames
+            .iter()
+            .any(|f| f.iter().any(|s| s.name == a) && f.iter().any(|s| s.name == b))
+    };
+    // (Past this many slots a colour is not the palette's: the slots a list of names
+    // that long takes, and ten more.)
+    let slots = looks.len() + 10;
+    let palette =
+        |c: [f32; 3]| (0..slots).any(|k| same(c, mdlod_format::meta::palette_colour_linear(k)));
+    for j in 1..looks.len() {
+        let clash = looks[..j]
+            .iter()
+            .any(|l| same(l.colour, looks[j].colour) && !together(&l.name, &looks[j].name));
+        if !clash || !palette(looks[j].colour) {
+            continue;
+        }
+        let free = (0..)
+            .map(mdlod_format::meta::palette_colour_linear)
+            .find(|&c| !looks.iter().any(|l| same(l.colour, c)));
+        if let Some(c) = free {
+            looks[j].colour = c;
         }
     }
     looks
@@ -162,6 +192,30 @@ pub fn keep_looks(
                 radius,
                 hidden: false,
             }),
+        }
+    }
+    out
+}
+
+/// The species styles one frame of a trajectory is drawn with: [`keep_looks`], and under
+/// a colour map only the colours the user named (a species' colour there pins it out of
+/// the map, and the looks' colours would pin the species whose palette colour moved in
+/// this frame). `mdlod render DIR` and the viewer's timesteps alike.
+pub fn frame_styles(
+    own: &[mdlod_format::meta::Species],
+    looks: &[mdlod_format::meta::Species],
+    styles: &[SpeciesStyle],
+    colour_map: bool,
+) -> Vec<SpeciesStyle> {
+    let mut out = keep_looks(own, looks, styles);
+    if colour_map {
+        for st in &mut out {
+            let named = styles
+                .iter()
+                .any(|u| u.name == st.name && u.colour.is_some());
+            if !named {
+                st.colour = None;
+            }
         }
     }
     out
@@ -1201,6 +1255,44 @@ mod tests {
             colour,
             radius_range: None,
         }
+    }
+
+    /// Names no frame holds together that took the same palette slot get apart: the
+    /// later one takes the first palette colour no look has. A frame's own two names of
+    /// one colour (given so) stay as they are.
+    #[test]
+    fn names_that_never_meet_do_not_share_a_palette_colour() {
+        let slot = mdlod_format::meta::palette_colour_linear;
+        // A solvent that evaporates, then ions: third in their frames' lists alike.
+        let f0 = [
+            look("LIP", slot(0), 0.5),
+            look("W", slot(1), 0.5),
+            look("SOL", slot(2), 0.5),
+        ];
+        let f1 = [
+            look("LIP", slot(0), 0.5),
+            look("W", slot(1), 0.5),
+            look("ION", slot(2), 0.5),
+        ];
+        let looks = trajectory_looks(&[&f0, &f1]);
+        let colours: Vec<[f32; 3]> = looks.iter().map(|s| s.colour).collect();
+        assert_eq!(colours, [slot(0), slot(1), slot(2), slot(3)]);
+        assert_eq!(looks[3].name, "ION");
+        // The ions' frame draws them in their look's colour.
+        let styled = keep_looks(&f1, &looks, &[]);
+        assert_eq!(styled.len(), 1);
+        assert_eq!(
+            (styled[0].name.as_str(), styled[0].colour),
+            ("ION", Some(slot(3)))
+        );
+        // Two names a frame gives one colour, or a colour not the palette's, stay.
+        let f2 = [look("A", slot(2), 0.5), look("B", slot(2), 0.5)];
+        let grey = [0.3, 0.3, 0.3];
+        let f3 = [look("C", grey, 0.5)];
+        let f4 = [look("D", grey, 0.5)];
+        let looks = trajectory_looks(&[&f2, &f3, &f4]);
+        let colours: Vec<[f32; 3]> = looks.iter().map(|s| s.colour).collect();
+        assert_eq!(colours, [slot(2), slot(2), grey, grey]);
     }
 
     /// A name keeps the look of the frame with the most species (the earliest of them),

@@ -5132,22 +5132,12 @@ fn render_frames(
         let path = dir.join(&f.file);
         let damaged = |e| damaged_frame(e, dir, (i, n), f, &path);
         let file = mdlod_render::open_styled(&path, &opts.style).map_err(|e| damaged(e.into()))?;
-        opts.style.species =
-            mdlod_render::style::keep_looks(&file.metadata().species, &looks, &style.species);
-        // Under a colour map only the colours the user named are kept (a species' colour
-        // there pins it out of the map): the looks' colours would pin the species whose
-        // palette colour moved in this frame.
-        if opts.style.colour_map.is_some() {
-            for st in &mut opts.style.species {
-                let named = style
-                    .species
-                    .iter()
-                    .any(|u| u.name == st.name && u.colour.is_some());
-                if !named {
-                    st.colour = None;
-                }
-            }
-        }
+        opts.style.species = mdlod_render::style::frame_styles(
+            &file.metadata().species,
+            &looks,
+            &style.species,
+            opts.style.colour_map.is_some(),
+        );
         let changed: Vec<String> = opts
             .style
             .species
@@ -5239,8 +5229,9 @@ fn render_frames(
         0 => String::new(),
         _ if !matches!(args.mode, Mode::Spheres | Mode::Sndf) => String::new(),
         k => format!(
-            "; {k} frame{} whose files read a species' name otherwise (another colour) drawn \
-             with its look in the rest ({})",
+            "; {k} frame{} whose files gave a species another colour (a name read \
+             otherwise, or a palette colour another species has in other frames) drawn with \
+             its one look ({})",
             if k == 1 { "" } else { "s" },
             restyled_names.into_iter().collect::<Vec<_>>().join(", ")
         ),

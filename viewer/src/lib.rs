@@ -145,6 +145,22 @@ pub fn first_view_bounds(first: &MdlodFile, frames: &[FrameInfo]) -> mdlod_rende
     }
 }
 
+/// The looks each species name keeps over a trajectory's frames, as `mdlod render DIR`
+/// gives them ([`mdlod_render::style::trajectory_looks`]); none for one file. Every
+/// frame's file is opened for its species table (about a millisecond each); a frame that
+/// cannot be opened is left out here and named when it is shown.
+pub fn trajectory_looks(frames: &[FrameInfo]) -> Vec<mdlod_format::meta::Species> {
+    if frames.len() < 2 {
+        return Vec::new();
+    }
+    let tables: Vec<Vec<mdlod_format::meta::Species>> = frames
+        .iter()
+        .filter_map(|f| MdlodFile::open(&f.path).ok())
+        .map(|f| f.metadata().species.clone())
+        .collect();
+    mdlod_render::style::trajectory_looks(&tables.iter().map(Vec::as_slice).collect::<Vec<_>>())
+}
+
 /// Opens the window and runs until it closes (or the script ends).
 pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     let script = match &opts.script {
@@ -172,14 +188,17 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     };
     let bounds = first_view_bounds(&first, &frames);
     let camera = mdlod_render::camera_for_bounds(&bounds, &view, w, h)?;
+    let looks = trajectory_looks(&frames);
     let mut state = ViewerState::new(frames, camera, bounds, [w, h]);
     state.settings.mode = opts.mode;
     let meta = first.metadata();
-    state.species = meta
-        .species
-        .iter()
-        .map(|s| (s.name.clone(), s.colour))
-        .collect();
+    state.species = match looks.is_empty() {
+        true => &meta.species,
+        false => &looks,
+    }
+    .iter()
+    .map(|s| (s.name.clone(), s.colour))
+    .collect();
     state.attributes = first
         .attribute_names()
         .iter()
@@ -191,7 +210,7 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     // window once there is one.
     let window: Arc<Mutex<Option<eframe::egui::Context>>> = Arc::new(Mutex::new(None));
     let wake = window.clone();
-    let worker = worker::Worker::start(opts.backends, opts.gpu_memory, move || {
+    let worker = worker::Worker::start(opts.backends, opts.gpu_memory, looks, move || {
         if let Some(ctx) = wake.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
             ctx.request_repaint();
         }

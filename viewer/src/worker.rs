@@ -173,6 +173,7 @@ impl Worker {
     pub fn start(
         backends: BackendChoice,
         gpu_memory: GpuMemory,
+        looks: Vec<mdlod_format::meta::Species>,
         wake: impl Fn() + Send + 'static,
     ) -> Result<Worker, RenderError> {
         let (tx, requests) = channel();
@@ -203,6 +204,7 @@ impl Worker {
                     bounds_sent: None,
                     cut: None,
                     range: None,
+                    looks,
                     progressive: None,
                     smip: None,
                     tiled: None,
@@ -321,6 +323,9 @@ struct Thread<'r> {
     /// The colour range chosen for a file and a look (log scale, map): see
     /// `with_default_range`.
     range: Option<KeptRange>,
+    /// A trajectory's species looks ([`mdlod_render::style::trajectory_looks`]; empty
+    /// for one file): each frame's file chose its colours alone.
+    looks: Vec<mdlod_format::meta::Species>,
     progressive: Option<Progressive>,
     /// The S-MIP cache of orthographic S-NDF views, and the view it shows.
     smip: Option<Smip>,
@@ -370,6 +375,16 @@ impl<'r> Thread<'r> {
     /// white at the middle of its range, not at 0). Kept per file and look: a log
     /// scale's floor reads up to 2^20 values, which every preview frame would repeat.
     fn with_default_range(&mut self, opts: &mut RenderOptions, file: &Arc<MdlodFile>) {
+        // A trajectory's frame keeps its species' looks over the frames, as `mdlod render
+        // DIR` draws them (their colours flickered from timestep to timestep).
+        if !self.looks.is_empty() {
+            opts.style.species = mdlod_render::style::frame_styles(
+                &file.metadata().species,
+                &self.looks,
+                &opts.style.species,
+                opts.style.colour_map.is_some(),
+            );
+        }
         let Some(map) = opts.style.colour_map else {
             return;
         };

@@ -92,6 +92,76 @@ fn render(w: &Worker, s: &ViewerState, id: u64) {
     });
 }
 
+/// The block of `make_block(dir, 3)` with label species (palette colours by their place
+/// in the list), listed in `order`, in a file of its own.
+fn make_labelled(dir: &Path, order: [&str; 2]) -> PathBuf {
+    let positions = mdlod_datasets::fcc_block([3, 3, 3], 3.615);
+    // Every seventh atom is NC3, wherever the list puts it.
+    let nc3 = u16::from(order[0] != "NC3");
+    let species_index = (0..positions.len())
+        .map(|i| if i % 7 == 0 { nc3 } else { 1 - nc3 })
+        .collect();
+    let species = order
+        .iter()
+        .map(|n| SpeciesName {
+            name: n.to_string(),
+            numeric_type: false,
+            radius: Some(1.2),
+            ..Default::default()
+        })
+        .collect();
+    let frame = Frame {
+        positions,
+        species_index,
+        species,
+        ..Default::default()
+    };
+    let path = dir.join(format!("{}.mdlod", order.join("-")));
+    convert_frame(&frame, None, &path, &ConvertOptions::default(), &NoProgress).unwrap();
+    path
+}
+
+/// A trajectory's frames keep each species' look, as `mdlod render DIR` draws them: two
+/// frames that list the same beads in another order (each file's palette follows its
+/// list) draw the same image; without the trajectory's looks they would swap colours.
+#[test]
+fn a_trajectory_keeps_its_species_colours_from_frame_to_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = make_labelled(dir.path(), ["NC3", "PO4"]);
+    let b = make_labelled(dir.path(), ["PO4", "NC3"]);
+    let frames: Vec<FrameInfo> = [&a, &b]
+        .iter()
+        .map(|p| FrameInfo {
+            path: p.to_path_buf(),
+            timestep: None,
+        })
+        .collect();
+    let looks = mdlod_viewer::trajectory_looks(&frames);
+    let names: Vec<&str> = looks.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["NC3", "PO4"]);
+    let s = state(&a, [48, 36]);
+    let draw = |w: &Worker, path: &Path, id: u64| {
+        w.send(Request::Render {
+            id,
+            path: path.to_path_buf(),
+            opts: s.render_options(s.size),
+            shade: s.settings.shade_lights(),
+            interactive: false,
+            coarsen: 0,
+            sphere_error_px: 1.0,
+        });
+        let (got, image, _, _) = next_image(w);
+        assert_eq!(got, id);
+        image
+    };
+    let w = Worker::start(backends(), GpuMemory::Direct, looks, || {}).unwrap();
+    let (first, second) = (draw(&w, &a, 1), draw(&w, &b, 2));
+    assert_eq!(first.data, second.data);
+    // Each file alone draws its own palette: the frames differ.
+    let plain = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
+    assert_ne!(draw(&plain, &a, 1).data, draw(&plain, &b, 2).data);
+}
+
 #[test]
 fn sndfs_refine_while_still_and_relight_without_sampling() {
     let dir = tempfile::tempdir().unwrap();
@@ -99,7 +169,7 @@ fn sndfs_refine_while_still_and_relight_without_sampling() {
     let mut s = state(&path, [64, 48]);
     s.apply(&Action::Mode { mode: Mode::Sndf });
     s.settings.sndf_iterations = 3 * SNDF_BATCH;
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     render(&w, &s, 1);
     // Refinement goes on by itself, batch after batch, until the target.
     let mut spps = vec![];
@@ -164,7 +234,7 @@ fn the_newest_render_request_wins_and_frames_match_the_headless_renderer() {
     let dir = tempfile::tempdir().unwrap();
     let path = make_file(dir.path());
     let mut s = state(&path, [80, 60]);
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     // Three requests at once: only the last is drawn.
     for (id, dx) in [(1, 10.0), (2, 20.0), (3, 30.0)] {
         s.apply(&Action::Orbit { dx, dy: 0.0 });
@@ -233,7 +303,7 @@ fn streamed_frames_refine_to_the_direct_image() {
     s.apply(&Action::Orbit { dx: 25.0, dy: 10.0 });
     let renderer = Renderer::new(GpuContext::with_backends(backends()).unwrap());
     let f = mdlod_format::MdlodFile::open(&path).unwrap();
-    let w = Worker::start(backends(), GpuMemory::Pool(64 << 20), || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Pool(64 << 20), vec![], || {}).unwrap();
     for (id, mode) in [(1, Mode::Standard), (2, Mode::Splat), (3, Mode::Iso)] {
         s.settings.mode = mode;
         render(&w, &s, id);
@@ -292,7 +362,7 @@ fn orthographic_sndf_views_pan_over_cached_smip_tiles() {
     s.apply(&Action::Zoom { factor: 3.0 });
     s.apply(&Action::Mode { mode: Mode::Sndf });
     s.settings.sndf_iterations = 2 * SNDF_BATCH;
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     let until_refined = |id: u64| -> (RgbaImage, Vec<u32>) {
         let mut spps = vec![];
         loop {
@@ -432,14 +502,14 @@ fn zooming_in_past_the_smip_level_0_samples_a_finer_level() {
             }
         }
     };
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     render(&w, &s, 1);
     until_refined(&w, 1);
     // Zoomed in: the S-MIP begun at the wider view must not show its level 0 enlarged.
     s.apply(&Action::Zoom { factor: 4.0 });
     render(&w, &s, 2);
     let zoomed = until_refined(&w, 2);
-    let fresh = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let fresh = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     render(&fresh, &s, 1);
     let direct = until_refined(&fresh, 1);
     let differ = zoomed
@@ -460,7 +530,7 @@ fn drawing_a_long_frame(dir: &Path, path: &Path) -> (Worker, PathBuf) {
     let mut s = state(path, [64, 48]);
     s.apply(&Action::Mode { mode: Mode::Sndf });
     s.settings.sndf_iterations = 64;
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     let out = dir.join("slow.png");
     w.send(Request::Screenshot {
         path: path.to_path_buf(),
@@ -531,7 +601,7 @@ fn a_new_request_ends_the_refinement_of_an_older_view() {
     let dir = tempfile::tempdir().unwrap();
     let path = make_file(dir.path());
     let mut s = state(&path, [64, 48]);
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     s.apply(&Action::Mode { mode: Mode::Sndf });
     // Far more rays than the test waits for.
     s.settings.sndf_iterations = 4096;
@@ -596,7 +666,7 @@ fn streamed_previews_are_previews_and_end_with_the_drag() {
     let mut s = state(&path, [80, 60]);
     s.apply(&Action::Mode { mode: Mode::Sndf });
     s.settings.sndf_iterations = 2 * SNDF_BATCH;
-    let w = Worker::start(backends(), GpuMemory::Pool(64 << 20), || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Pool(64 << 20), vec![], || {}).unwrap();
     // Dragging a perspective S-NDF view: streamed sphere previews.
     s.apply(&Action::Orbit { dx: 25.0, dy: 10.0 });
     w.send(Request::Render {
@@ -666,7 +736,7 @@ fn the_viewer_colours_by_the_attribute_chosen() {
     s.apply(&Action::ColourMap {
         map: Some(mdlod_render::ColourMap::Viridis),
     });
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     render(&w, &s, 1);
     let (_, by_x, _, _) = next_image(&w);
     s.apply(&Action::Attribute {
@@ -713,7 +783,7 @@ fn coarse_previews_are_drawn_smaller_and_show_the_full_size_picture() {
     let dir = tempfile::tempdir().unwrap();
     let path = make_block(dir.path(), 8);
     let s = state(&path, [160, 128]);
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     let preview = |s: &ViewerState, id| {
         w.send(Request::Render {
             id,
@@ -752,7 +822,7 @@ fn a_closing_window_waits_for_an_idle_render_thread_but_not_a_long_frame() {
     let dir = tempfile::tempdir().unwrap();
     let path = make_file(dir.path());
     let s = state(&path, [64, 48]);
-    let mut w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let mut w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     render(&w, &s, 1);
     assert!(w.finish_within(Duration::from_secs(60)));
     let t0 = std::time::Instant::now();
@@ -797,7 +867,7 @@ fn a_diverging_map_is_centred_on_zero_as_a_still_centres_it() {
     s.apply(&Action::ColourMap {
         map: Some(mdlod_render::ColourMap::CoolWarm),
     });
-    let w = Worker::start(backends(), GpuMemory::Direct, || {}).unwrap();
+    let w = Worker::start(backends(), GpuMemory::Direct, vec![], || {}).unwrap();
     render(&w, &s, 1);
     let (_, image, _, _) = next_image(&w);
     let renderer = Renderer::new(GpuContext::with_backends(backends()).unwrap());
