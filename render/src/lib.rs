@@ -2448,6 +2448,20 @@ pub fn render_file_to_png(
     opts: &RenderOptions,
 ) -> Result<RenderReport, RenderError> {
     let t0 = Instant::now();
+    let (image, mut report) = render_file_to_image(renderer, file, opts)?;
+    image.save_png(out)?;
+    report.total_time = t0.elapsed();
+    Ok(report)
+}
+
+/// [`render_file_to_png`]'s image, before it is written (a movie draws its panels into
+/// it first). The report's total time is the drawing's.
+pub fn render_file_to_image(
+    renderer: &Renderer,
+    file: MdlodFile,
+    opts: &RenderOptions,
+) -> Result<(RgbaImage, RenderReport), RenderError> {
+    let t0 = Instant::now();
     check_numbers(opts)?;
     check_before_drawing(&file)?;
     let file = std::sync::Arc::new(file);
@@ -2460,9 +2474,8 @@ pub fn render_file_to_png(
             path: file.path().to_path_buf(),
         });
     }
-    image.save_png(out)?;
     report.total_time = t0.elapsed();
-    Ok(report)
+    Ok((image, report))
 }
 
 /// Samples the S-NDFs of `file` as `opts` asks (its mode must be [`RenderMode::Sndf`])

@@ -1033,17 +1033,121 @@ fn draw_panel(
     background: Option<[u8; 3]>,
     text_scale: Option<u32>,
 ) -> Result<u64> {
-    let corner = legend_corner(corner);
     let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
+    let covered = draw_panel_in(
+        &mut png, image, panel, corner, option, background, text_scale,
+    )?;
+    png.save_png(image)?;
+    Ok(covered)
+}
+
+/// [`draw_panel`] into the image `png` in memory, which is to be written to `image`.
+fn draw_panel_in(
+    png: &mut mdlod_render::image::RgbaImage,
+    image: &Path,
+    panel: &mdlod_render::legend::Legend,
+    corner: LegendCorner,
+    option: &str,
+    background: Option<[u8; 3]>,
+    text_scale: Option<u32>,
+) -> Result<u64> {
+    let corner = legend_corner(corner);
     let scale = panel
         .scale_in(png.width, png.height, text_scale)
         .unwrap_or(1);
-    let covered = panel.covers(&png, corner, scale, background);
+    let covered = panel.covers(png, corner, scale, background);
     panel
-        .draw(&mut png, corner, scale)
+        .draw(png, corner, scale)
         .map_err(|e| anyhow::anyhow!("{option}: {}: {e}", image.display()))?;
-    png.save_png(image)?;
     Ok(covered)
+}
+
+/// The panels a movie draws into each image as it is rendered, before the image is
+/// written: its `--label` with the frame's values, `--scale-bar` and `--axes` (one PNG
+/// encoding per image; drawn into the written files, each panel took a decoding and an
+/// encoding more, about 85 ms a panel at 1280×720). What each covered, for the notes.
+struct FramePanels {
+    labels: Vec<mdlod_render::legend::Legend>,
+    missing: std::collections::BTreeSet<&'static str>,
+    bar: Option<mdlod_render::legend::Legend>,
+    axes: Option<mdlod_render::legend::Legend>,
+    /// Of the label, the scale bar and the axes.
+    covered: [Covered; 3],
+    glyphs: std::collections::BTreeSet<char>,
+}
+
+impl FramePanels {
+    /// The panels of images whose label values are `values` (in the order the images
+    /// are drawn), of a movie whose frames' values are `movie`.
+    fn new(
+        args: &Args,
+        values: &[&label::Values],
+        movie: &[&label::Values],
+        bar: Option<mdlod_render::legend::Legend>,
+        axes: Option<mdlod_render::legend::Legend>,
+    ) -> FramePanels {
+        let (labels, missing) = match args.label.is_empty() {
+            true => (Vec::new(), Default::default()),
+            false => label_panels(args, values, movie),
+        };
+        FramePanels {
+            labels,
+            missing,
+            bar,
+            axes,
+            covered: Default::default(),
+            glyphs: Default::default(),
+        }
+    }
+
+    /// Draws the `k`th image's panels into `png`, to be written to `image`.
+    fn draw(
+        &mut self,
+        args: &Args,
+        k: usize,
+        png: &mut mdlod_render::image::RgbaImage,
+        image: &Path,
+    ) -> Result<()> {
+        let panels = [
+            (self.labels.get(k), args.label_corner(), "--label"),
+            (self.bar.as_ref(), args.scale_bar_corner(), "--scale-bar"),
+            (self.axes.as_ref(), args.axes_corner(), "--axes"),
+        ];
+        for (j, (panel, corner, option)) in panels.into_iter().enumerate() {
+            if let Some(panel) = panel {
+                if j == 0 {
+                    self.glyphs.extend(panel.missing_glyphs());
+                }
+                let pixels = draw_panel_in(
+                    png,
+                    image,
+                    panel,
+                    corner,
+                    option,
+                    backdrop(args),
+                    args.text_scale,
+                )?;
+                self.covered[j].add(pixels);
+            }
+        }
+        Ok(())
+    }
+
+    /// The notes on what the panels of `images` images covered and lacked.
+    fn notes(&self, args: &Args, images: usize, movie: &[&label::Values]) {
+        for (covered, option) in self
+            .covered
+            .iter()
+            .zip(["--label", "--scale-bar", "--axes"])
+        {
+            if let Some(note) = covered.note(option, images, args) {
+                println!("{note}");
+            }
+        }
+        if !args.label.is_empty() {
+            label_notes(args, &self.missing, movie, &self.glyphs);
+        }
+    }
 }
 
 /// The `--label` panel of each image with its values (each frame's time the timestep
@@ -1147,8 +1251,20 @@ fn write_labels(
     if let Some(note) = covered.note("--label", images.len(), args) {
         println!("{note}");
     }
+    label_notes(args, &missing, &movie, &glyphs);
+    Ok(())
+}
+
+/// `--label`'s notes: the fields the files record no value of, a recorded time `--dt`
+/// replaces, and characters the font lacks.
+fn label_notes(
+    args: &Args,
+    missing: &std::collections::BTreeSet<&'static str>,
+    movie: &[&label::Values],
+    glyphs: &std::collections::BTreeSet<char>,
+) {
     for field in missing {
-        let hint = match field {
+        let hint = match *field {
             "time" => " (--dt DT gives it as the timestep times DT)",
             _ => "",
         };
@@ -1173,7 +1289,6 @@ fn write_labels(
             list.join(", ")
         );
     }
-    Ok(())
 }
 
 /// A species name of a list (`--hide-species W, NA`): trimmed; an empty one is a stray
@@ -5123,6 +5238,11 @@ fn render_frames(
             n - 1
         );
     }
+    // (Each image its own frame's values, also of a piece of the movie, whose times are
+    // written as the whole movie's.)
+    let movie_values: Vec<&label::Values> = frame_values.iter().collect();
+    let drawn_values: Vec<&label::Values> = selected.iter().map(|&i| &frame_values[i]).collect();
+    let mut panels = FramePanels::new(args, &drawn_values, &movie_values, bar, axes);
     for (i, f) in manifest.frames.iter().enumerate() {
         if args.frames.is_some_and(|sel| !sel.takes(i)) {
             continue;
@@ -5173,8 +5293,12 @@ fn render_frames(
                 periodic_kernels_note(args.mode, file.metadata().simulation_box.as_ref(), drawn)
             })
             .flatten();
-        let r = mdlod_render::render_file_to_png(&renderer, file, &out, &opts)
+        let started = std::time::Instant::now();
+        let (mut image, mut r) = mdlod_render::render_file_to_image(&renderer, file, &opts)
             .map_err(|e| damaged(e.into()))?;
+        panels.draw(args, written.len() - 1, &mut image, &out)?;
+        image.save_png(&out)?;
+        r.total_time = started.elapsed();
         drawn = drawn_names(&r, &species, drawn);
         // Splats: one exposure (a projection's map: one range) for every frame, or the
         // brightness drifts: the first frame that shows anything sets it.
@@ -5356,25 +5480,7 @@ fn render_frames(
         &drawn,
         &written,
     )?;
-    // (Each image its own frame's values, also of a piece of the movie.)
-    let drawn_values = frame_values
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| args.frames.is_none_or(|sel| sel.takes(*i)))
-        .map(|(_, v)| v.clone());
-    let labelled: Vec<(PathBuf, label::Values)> =
-        written.iter().cloned().zip(drawn_values).collect();
-    write_labels(args, &labelled, Some(&frame_values))?;
-    for (panel, corner, option) in [
-        (&bar, args.scale_bar_corner(), "--scale-bar"),
-        (&axes, args.axes_corner(), "--axes"),
-    ] {
-        if let Some(panel) = panel {
-            let images: Vec<(&Path, &mdlod_render::legend::Legend)> =
-                written.iter().map(|i| (i.as_path(), panel)).collect();
-            draw_panels(args, &images, corner, option)?;
-        }
-    }
+    panels.notes(args, written.len(), &movie_values);
     Ok(())
 }
 
