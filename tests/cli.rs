@@ -13200,3 +13200,103 @@ fn info_json_that_fails_says_so_in_json() {
         "{v}"
     );
 }
+
+/// A LAMMPS text dump of `positions` (one type) with an optional `radius` column, in a
+/// fixed box around them.
+fn awkward_dump(path: &Path, positions: &[[f64; 3]], radius: Option<f64>) {
+    let lo = [0, 1, 2].map(|k| positions.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min) - 1.0);
+    let hi = [0, 1, 2].map(|k| {
+        positions
+            .iter()
+            .map(|p| p[k])
+            .fold(f64::NEG_INFINITY, f64::max)
+            + 1.0
+    });
+    let mut t = format!(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{}\nITEM: BOX BOUNDS ff ff ff\n",
+        positions.len()
+    );
+    for k in 0..3 {
+        t += &format!("{:.17e} {:.17e}\n", lo[k], hi[k]);
+    }
+    t += match radius {
+        Some(_) => "ITEM: ATOMS id type x y z radius\n",
+        None => "ITEM: ATOMS id type x y z\n",
+    };
+    for (i, p) in positions.iter().enumerate() {
+        t += &format!("{} 1 {:.17e} {:.17e} {:.17e}", i + 1, p[0], p[1], p[2]);
+        if let Some(r) = radius {
+            t += &format!(" {r:e}");
+        }
+        t += "\n";
+    }
+    std::fs::write(path, t).unwrap();
+}
+
+/// Data of awkward shapes: particles piled on one spot are framed as one sphere (the
+/// fit left every one out as far from a bulk of no extent, and the image was empty);
+/// millimetre grains at UTM coordinates, which single precision cannot place, are said
+/// to be so when nothing draws (the note blamed view options never given), and `info`
+/// prints their extent with the digits that tell its ends apart; lengths of 10⁻²⁰ are
+/// noted as below what the renderer resolves; a line of particles is called a line.
+#[test]
+fn data_of_awkward_shapes_is_framed_and_described() {
+    let dir = tempfile::tempdir().unwrap();
+    let size = ["--width", "32", "--height", "24"];
+    // 50 particles at one spot.
+    let pile = dir.path().join("pile.dump");
+    awkward_dump(&pile, &[[1.0, 2.0, 3.0]; 50], None);
+    let f = dir.path().join("pile.mdlod");
+    ok(&["convert", s(&pile), "-o", s(&f)]);
+    let png = dir.path().join("pile.png");
+    let out = ok(&[&["render", s(&f), "-o", s(&png)][..], &size].concat());
+    assert!(!out.contains("far from the rest"), "{out}");
+    let (_, _, rgba) = read_png(&png);
+    let drawn = rgba.chunks(4).filter(|p| p[..3] != [255, 255, 255]).count();
+    // The one sphere fills a good part of the image, as a single particle's does.
+    assert!(drawn > 100, "{drawn} pixels drawn");
+    // Grains of 1 mm at UTM coordinates.
+    let utm: Vec<[f64; 3]> = (0..27)
+        .map(|i| {
+            let g = [i % 3, i / 3 % 3, i / 9].map(|v| f64::from(v) * 0.002);
+            [512345.678 + g[0], 4123456.789 + g[1], 123.456 + g[2]]
+        })
+        .collect();
+    let dump = dir.path().join("utm.dump");
+    awkward_dump(&dump, &utm, Some(0.0005));
+    let f = dir.path().join("utm.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&f)]);
+    let out = ok(&[&["render", s(&f), "-o", s(&png)][..], &size].concat());
+    assert!(
+        out.contains(
+            "finer than single precision (in which the view is worked out) resolves there"
+        ),
+        "{out}"
+    );
+    assert!(!out.contains("--target, --zoom or view file"), "{out}");
+    let info = ok(&["info", s(&f)]);
+    let extent = info.lines().find(|l| l.contains("extent")).unwrap();
+    assert!(
+        extent.contains("512345.") && extent.contains("4123456.8"),
+        "{extent}"
+    );
+    // Lengths of 10⁻²⁰.
+    let tiny: Vec<[f64; 3]> = (0..27)
+        .map(|i| [i % 3, i / 3 % 3, i / 9].map(|v| f64::from(v) * 1e-20))
+        .collect();
+    let dump = dir.path().join("tiny.dump");
+    awkward_dump(&dump, &tiny, Some(4e-21));
+    let out = ok(&["convert", s(&dump), "-o", s(&dir.path().join("tiny.mdlod"))]);
+    assert!(out.contains("lengths this small"), "{out}");
+    // A line of particles along x.
+    let line: Vec<[f64; 3]> = (0..40).map(|i| [f64::from(i), 0.0, 0.0]).collect();
+    let dump = dir.path().join("line.dump");
+    awkward_dump(&dump, &line, None);
+    let f = dir.path().join("line.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&f)]);
+    let info = ok(&["info", s(&f)]);
+    assert!(
+        info.contains("every particle's centre on one line"),
+        "{info}"
+    );
+}

@@ -817,7 +817,7 @@ fn oversized_note(
             let own = own_spacing(i)?;
             (f64::from(s.radius) > limit * own).then(|| {
                 (
-                    format!("{} ({})", s.name, s.radius),
+                    format!("{} ({:?})", s.name, s.radius),
                     f64::from(s.radius) / own,
                     own,
                 )
@@ -827,14 +827,6 @@ fn oversized_note(
     // The figures of the species most over its own spacing.
     let (_, ratio, spacing) = *over.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
     let over: Vec<String> = over.into_iter().take(3).map(|(s, _, _)| s).collect();
-    // Plain numbers where they read so (4.3, 1.157), powers of ten beyond.
-    let readable = |x: f64, digits: usize| {
-        if (1e-3..1e5).contains(&x.abs()) {
-            format!("{x:.digits$}")
-        } else {
-            format!("{x:.digits$e}")
-        }
-    };
     Some(format!(
         "the radi{} {} {} {} times the mean spacing of those particles ({}, from the box \
          around all of them): the spheres overlap into one blob. If the data is in other units than the \
@@ -887,6 +879,21 @@ fn mean_spacing(lo: [f32; 3], hi: [f32; 3], count: u64) -> Option<f64> {
         .map(|(_, spacing)| spacing)
 }
 
+/// Radii below this (and coordinates below ten times it) are noted as too small for the
+/// renderer's single precision: squared, with the view's arithmetic around them, they
+/// fall below its normal numbers.
+const TINY_LENGTH: f32 = 1e-18;
+
+/// `x` as a plain number where it reads so (4.3, 1.157), with `digits` decimals, and in
+/// powers of ten beyond (a spacing of 9.6e19 printed whole took twenty digits).
+fn readable(x: f64, digits: usize) -> String {
+    if (1e-3..1e5).contains(&x.abs()) {
+        format!("{x:.digits$}")
+    } else {
+        format!("{x:.digits$e}")
+    }
+}
+
 /// A note on species that took the default radius (named by type numbers or labels, no
 /// `--radius`) far below the particles' mean spacing: the picture shows scattered dots
 /// where the user expects a material.
@@ -917,15 +924,21 @@ fn undersized_note(
     let more = if small.len() > 4 { ", ..." } else { "" };
     let half = 0.5 * spacing;
     let digits = if half >= 10.0 { 0 } else { 1 };
+    let share = f64::from(default) / spacing;
     Some(format!(
-        "species {}{more}: drawn at the default radius {default}, {:.2} of the particles' \
-         mean spacing ({spacing:.3}, from the box around them), as scattered dots. If they \
+        "species {}{more}: drawn at the default radius {default}, {} of the particles' \
+         mean spacing ({}, from the box around them), as scattered dots. If they \
          are larger (coarse-grained beads in ångströms, a radius in other units), give each \
-         its size: --radius {}=R, about half the spacing ({half:.digits$}) for a dense \
+         its size: --radius {}=R, about half the spacing ({}) for a dense \
          material; a dilute gas is drawn as it is",
         shown.join(", "),
-        f64::from(default) / spacing,
+        match share >= 0.01 {
+            true => format!("{share:.2}"),
+            false => format!("{share:.1e}"),
+        },
+        readable(spacing, 3),
         shown[0],
+        readable(half, digits),
     ))
 }
 
@@ -1054,6 +1067,21 @@ pub(crate) fn position_notes(
              read and stored) holds steps of {step:.2e}, {share} the smallest radius \
              ({smallest_radius}): particles snap to a grid (the position error is measured \
              after it); {remedy}"
+        ));
+    }
+    // Lengths so small that their squares leave single precision's normal numbers
+    // (1.2e-38), in which the renderer intersects rays with spheres: metres of atoms
+    // (1e-10) draw, 1e-20 draws streaked and 1e-22 not at all, while the file verifies.
+    if smallest_radius.is_finite()
+        && smallest_radius > 0.0
+        && (smallest_radius < TINY_LENGTH || (largest > 0.0 && largest < 10.0 * TINY_LENGTH))
+    {
+        notes.push(format!(
+            "lengths this small (coordinates up to {largest:.3e}, radii from \
+             {smallest_radius:.3e}) square below single precision's normal numbers, in which \
+             the renderer works: spheres draw wrongly or not at all. Convert in a smaller \
+             length unit (nanometres or ångströms, not metres: the coordinates and radii \
+             times 1e9 or 1e10)"
         ));
     }
     if let Some(f) = far {
@@ -1235,7 +1263,7 @@ pub(crate) fn elements_in_other_units_note(
     let first = read.first()?;
     let read: Vec<String> = read
         .iter()
-        .map(|s| format!("{} ({})", s.name, s.radius))
+        .map(|s| format!("{} ({:?})", s.name, s.radius))
         .collect();
     let shown = match read.len() {
         0..=6 => read.join(", "),

@@ -1379,7 +1379,19 @@ fn trimmed_bounds(file: &MdlodFile, hidden: HiddenSet) -> Option<FitBounds> {
     };
     let [(x0, x1), (y0, y1), (z0, z1)] = [0, 1, 2].map(percentiles);
     let (lo, hi) = (glam::Vec3::new(x0, y0, z0), glam::Vec3::new(x1, y1, z1));
-    let margin = glam::Vec3::splat((hi - lo).max_element() * FIT_MARGIN);
+    // At least the largest sphere's radius (twice, and a little more for rounding): a
+    // bulk of no extent (particles piled on one spot, a line along an axis) otherwise
+    // left every sphere that reaches past its centres out as far, and the view was fitted
+    // to nothing.
+    let meta = file.metadata();
+    let largest = meta
+        .species
+        .iter()
+        .map(|s| s.radius)
+        .chain(meta.radius.map(|r| r.max))
+        .fold(0.0f32, f32::max);
+    let floor = 2.0 * largest + 1e-6 * lo.abs().max(hi.abs()).max_element();
+    let margin = glam::Vec3::splat(((hi - lo).max_element() * FIT_MARGIN).max(floor));
     let (bounds, far) = bounds_walk(file, hidden, Some([lo - margin, hi + margin]))?;
     Some(FitBounds {
         bounds,

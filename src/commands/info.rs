@@ -610,6 +610,23 @@ pub fn run(args: Args) -> Result<()> {
     let rounded_first = f64::from(spacing) / 2.0 > m.max_position_error;
     // Two-dimensional data (every centre in one plane), which views face square on.
     let flat = mdlod_render::flat_axis(&f);
+    // Or a line of them (the sphere's box no wider than the largest sphere across two
+    // axes), which views look across, along the flat axis.
+    let largest_radius = m
+        .species
+        .iter()
+        .map(|s| s.radius)
+        .chain(m.radius.map(|r| r.max))
+        .fold(0.0f32, f32::max);
+    let line = flat.is_some()
+        && extent.is_some_and(|(lo, hi)| {
+            let thin = |k: usize| {
+                hi[k] - lo[k]
+                    <= 2.0 * largest_radius * 1.001
+                        + 8.0 * f32::EPSILON * hi[k].abs().max(lo[k].abs())
+            };
+            (0..3).filter(|&k| thin(k)).count() >= 2
+        });
     if args.json {
         let mut v = json!({
             "ok": true,
@@ -797,9 +814,30 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     if let Some((lo, hi)) = extent {
-        // Six significant digits: the corners are sums in single precision (5.7200003).
-        let n = |x: f32| number(format!("{x:.5e}").parse().unwrap_or(f64::from(x)));
-        let v = |p: [f32; 3]| format!("[{}, {}, {}]", n(p[0]), n(p[1]), n(p[2]));
+        // Six significant digits (the corners are sums in single precision: 5.7200003),
+        // or more where the span along an axis is small beside its distance from the
+        // origin: three of the span's, up to single precision's nine (grains of a
+        // millimetre at UTM coordinates read as a box of no width, and 3 m off).
+        let digits: [usize; 3] = std::array::from_fn(|k| {
+            let (a, b) = (f64::from(lo[k]), f64::from(hi[k]));
+            let ratio = a.abs().max(b.abs()) / (b - a);
+            match (ratio.is_finite(), ratio > 0.0) {
+                (true, true) => (ratio.log10().ceil() as usize + 3).clamp(6, 9),
+                // No span away from 0: every digit the position has.
+                (false, true) => 9,
+                _ => 6,
+            }
+        });
+        let n =
+            |x: f32, d: usize| number(format!("{x:.*e}", d - 1).parse().unwrap_or(f64::from(x)));
+        let v = |p: [f32; 3]| {
+            format!(
+                "[{}, {}, {}]",
+                n(p[0], digits[0]),
+                n(p[1], digits[1]),
+                n(p[2], digits[2])
+            )
+        };
         // With radii of their own, the box also holds each particle's species' sphere
         // (what a reader of format 1.0 draws), so it may reach past the spheres drawn.
         let what = if m.radius.is_some() {
@@ -809,12 +847,18 @@ pub fn run(args: Args) -> Result<()> {
         };
         println!("  extent       {} to {} ({what})", v(lo), v(hi));
     }
-    if let Some(k) = flat {
-        println!(
+    match flat {
+        Some(k) if line => println!(
+            "  flat         every particle's centre on one line (one-dimensional data: the \
+             default view looks across it, along {})",
+            ["x", "y", "z"][k]
+        ),
+        Some(k) => println!(
             "  flat         every particle's centre at one {} (two-dimensional data: the \
              default view faces it square on)",
             ["x", "y", "z"][k]
-        );
+        ),
+        None => {}
     }
     if let Some(t) = m.timestep {
         println!("  timestep     {t}");
@@ -845,8 +889,9 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "  note: the error is measured from the positions in single precision, which \
              this far from the origin are {spacing:.3e} apart: an input of more digits (f64) \
-             was first rounded to them, by up to {:.3e}",
-            spacing / 2.0
+             was first rounded to them, by up to {:.3e} along each axis ({:.3e} in all)",
+            spacing / 2.0,
+            f64::from(spacing) / 2.0 * 3f64.sqrt()
         );
     }
     Ok(())
@@ -890,6 +935,8 @@ pub(crate) fn radius_range_text(lo: f32, hi: f32) -> String {
 /// form, others to 15 significant digits, the most an f64 holds exactly, so that
 /// rounding noise (LAMMPS writes `1.8075000000000003e+01`) does not show.
 fn number(x: f64) -> String {
+    // (−0, a two-dimensional cell's origin from −Lz/2 of Lz = 0, reads as 0.)
+    let x = if x == 0.0 { 0.0 } else { x };
     if !x.is_finite() {
         return format!("{x}");
     }

@@ -3052,10 +3052,25 @@ pub fn run(mut args: Args) -> Result<()> {
     let mut said_empty = false;
     if r.particles_drawn + r.nodes_drawn == 0 && !every_species_hidden {
         said_empty = true;
+        // Data far smaller than its distance from the origin: the view's single-precision
+        // arithmetic cannot place it (grains of a millimetre at UTM coordinates).
+        let b = mdlod_render::data_bounds(&file);
+        let (span, far) = (
+            (b.max - b.min).max_element(),
+            b.min.abs().max(b.max.abs()).max_element(),
+        );
+        let unplaced = format!(
+            "the data spans {:.3e} at {:.3e} from the origin, finer than single precision (in which \
+             the view is worked out) resolves there: shift the data near the origin \
+             (subtract its centre) before converting",
+            span,
+            far
+        );
         let why = match (
             opts.style.clip.is_empty(),
             r.nodes_occluded + r.particles_occluded,
         ) {
+            _ if span < far * 1e-5 => unplaced.as_str(),
             // Every sphere in view fell between pixel centres.
             (true, n) if n > 0 => {
                 "every sphere in view is narrower than the pixels and falls between their \

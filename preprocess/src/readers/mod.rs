@@ -316,9 +316,16 @@ pub fn wrap_positions(positions: &mut [[f32; 3]], cell: &mdlod_format::meta::Sim
             (m[0][0] * m[1][1] - m[0][1] * m[1][0]) / det,
         ],
     ];
-    for p in positions.iter_mut() {
+    let fractional = |p: [f32; 3]| {
         let d = [0, 1, 2].map(|k| f64::from(p[k]) - cell.origin[k]);
-        let mut f = [0, 1, 2].map(|r| inv[r][0] * d[0] + inv[r][1] * d[1] + inv[r][2] * d[2]);
+        [0, 1, 2].map(|r| inv[r][0] * d[0] + inv[r][1] * d[1] + inv[r][2] * d[2])
+    };
+    let place = |f: [f64; 3]| {
+        [0, 1, 2]
+            .map(|r| (cell.origin[r] + m[r][0] * f[0] + m[r][1] * f[1] + m[r][2] * f[2]) as f32)
+    };
+    for p in positions.iter_mut() {
+        let mut f = fractional(*p);
         let mut moved = false;
         for k in 0..3 {
             if periodic[k] && f[k].is_finite() && !(0.0..1.0).contains(&f[k]) {
@@ -331,9 +338,21 @@ pub fn wrap_positions(positions: &mut [[f32; 3]], cell: &mdlod_format::meta::Sim
             }
         }
         if moved {
-            *p = [0, 1, 2].map(|r| {
-                (cell.origin[r] + m[r][0] * f[0] + m[r][1] * f[1] + m[r][2] * f[2]) as f32
-            });
+            let mut q = place(f);
+            // Rounded to single precision, a point just inside the upper face can land on
+            // it (10 − 10⁻⁷ is 10.0 in a box of 10): the lower face is the same place.
+            let back = fractional(q);
+            let mut onto = false;
+            for k in 0..3 {
+                if periodic[k] && back[k] >= 1.0 {
+                    f[k] = 0.0;
+                    onto = true;
+                }
+            }
+            if onto {
+                q = place(f);
+            }
+            *p = q;
         }
     }
 }
@@ -3161,5 +3180,28 @@ mod gunzip_tests {
         assert_eq!(super::text_capacity(4_000, 1_000_003, u64::MAX), 1_000_003);
         assert_eq!(super::text_capacity(4_000, 1_000_003, 500_001), 500_001);
         assert_eq!(super::text_capacity(10, 0, u64::MAX), 40);
+    }
+}
+
+#[cfg(test)]
+mod wrap_tests {
+    /// A point a hair below the lower face wraps inside the cell, not onto its upper face,
+    /// where single precision would round it (10 − 10⁻⁷ is 10.0): the lower face is the
+    /// same place.
+    #[test]
+    fn a_wrapped_point_never_lands_on_the_upper_face() {
+        let cell = mdlod_format::meta::SimulationBox::orthogonal([0.0; 3], [10.0; 3]);
+        let mut positions = [
+            [-1e-7, 5.0, 5.0],
+            [10.0 + 1e-6, -3.0, 12.5],
+            [2.5, 5.0, 5.0],
+        ];
+        super::wrap_positions(&mut positions, &cell);
+        for p in positions {
+            assert!(p.iter().all(|&x| (0.0..10.0).contains(&x)), "{p:?}");
+        }
+        assert_eq!(positions[0], [0.0, 5.0, 5.0]);
+        assert_eq!(positions[1][1..], [7.0, 2.5]);
+        assert_eq!(positions[2], [2.5, 5.0, 5.0]);
     }
 }
