@@ -9764,11 +9764,13 @@ fn a_batch_that_keeps_going_ends_with_an_error_naming_the_bad_frame() {
     let rendered = ok(&args);
     assert!(
         rendered.contains(
-            "note: 1 frame the batch could not convert is missing from the images (timestep 400): \
-             `mdlod verify"
-        ),
+            "note: the batch left out 1 frame that failed to convert (timestep 400): the images \
+             are numbered without them"
+        ) && rendered.contains("says why the frame failed, and a rerun of the batch converts it"),
         "{rendered}"
     );
+    // (Said once.)
+    assert_eq!(rendered.matches("timestep 400").count(), 1, "{rendered}");
     let info = ok(&["info", s(&out)]);
     assert!(
         info.contains("failed       1 frame the batch could not convert: timestep 400"),

@@ -1328,7 +1328,16 @@ pub(crate) fn drop_default_radius_note_said_twice(notes: &mut Vec<String>) {
 /// (`species::default_radius_species`): a granular dump without its `diameter` column
 /// looks right at a glance, every grain of one size.
 pub fn default_radius_note(names: &[SpeciesName], overrides: &[(String, f32)]) -> Option<String> {
-    let plain = crate::species::default_radius_species(names, overrides);
+    let mut plain = crate::species::default_radius_species(names, overrides);
+    // In one order whatever order a frame lists them in (type numbers by value, then
+    // names): a batch gathers like notes of its frames, and beads listed in six orders
+    // gave six notes.
+    plain.sort_by_key(|n| {
+        (
+            n.parse::<u64>().map_or((1, u64::MAX), |v| (0, v)),
+            n.to_string(),
+        )
+    });
     let first = plain.first()?;
     // (A species column of molecule ids gives thousands.)
     let list = match plain.len() {

@@ -628,13 +628,17 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
             .iter()
             .filter(|f| f.listed_timestep.is_none())
             .count();
+    // (How many at a time only where something was converted.)
+    let jobs = match report.converted + report.failed.len() {
+        0 => String::new(),
+        _ => format!("; {} at a time", report.jobs),
+    };
     println!(
-        "{} frame{} in the inputs{kept}{share}: {} converted, {} already done{empty}; {} at a time; manifest {}",
+        "{} frame{} in the inputs{kept}{share}: {} converted, {} already done{empty}{jobs}; manifest {}",
         total,
         if total == 1 { "" } else { "s" },
         report.converted,
         report.skipped,
-        report.jobs,
         report.manifest.display()
     );
     // Nothing listed, every frame left for a rerun: said plainly (a file cut short that

@@ -1476,12 +1476,16 @@ fn parse_frames(s: &str) -> Result<FrameSelection, String> {
         ));
     }
     let number = |p: &str, what: &str| -> Result<Option<usize>, String> {
+        let kind = match what {
+            "STEP" => "no step between frames (1, 2, ...: a movie runs forward only)",
+            _ => "no frame position (0, 1, ...)",
+        };
         match p.trim() {
             "" => Ok(None),
             t => t
                 .parse::<usize>()
                 .map(Some)
-                .map_err(|_| format!("{s:?}: {what} {t:?} is no frame position (0, 1, ...)")),
+                .map_err(|_| format!("{s:?}: {what} {t:?} is {kind}")),
         }
     };
     let (start, end) = (number(parts[0], "START")?, number(parts[1], "END")?);
@@ -4198,7 +4202,7 @@ fn far_note(far: u64, frames: Option<usize>) -> Option<String> {
 /// A note where a batch left frames out (without particles, or failed): a movie's images
 /// are numbered without them, so its time jumps there (a focus lost for one frame of a
 /// microscope's series, a run's empty frames).
-fn missing_frames_note(m: &mdlod_preprocess::batch::Manifest) -> Option<String> {
+fn missing_frames_note(m: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Option<String> {
     // `3 frames without particles (timesteps 2, 5, 9)`, at most eight timesteps named.
     let said = |count: usize, what: &str, t: Vec<u64>| {
         let frames = if count == 1 { "frame" } else { "frames" };
@@ -4225,10 +4229,24 @@ fn missing_frames_note(m: &mdlod_preprocess::batch::Manifest) -> Option<String> 
         let t = m.failed.iter().filter_map(|f| f.timestep).collect();
         parts.push(said(m.failed.len(), "that failed to convert", t));
     }
+    // Failed frames: why, and how they come back.
+    let mend = match m.failed.len() {
+        0 => String::new(),
+        1 => format!(
+            "; `mdlod verify {}` says why the frame failed, and a rerun of the batch converts \
+             it once its input is mended",
+            dir.display()
+        ),
+        _ => format!(
+            "; `mdlod verify {}` says why the frames failed, and a rerun of the batch \
+             converts them once their inputs are mended",
+            dir.display()
+        ),
+    };
     (!parts.is_empty()).then(|| {
         format!(
             "  note: the batch left out {}: the images are numbered without them, so the \
-             movie's time jumps there (a {{time}} or {{timestep}} label shows it)",
+             movie's time jumps there (a {{time}} or {{timestep}} label shows it){mend}",
             parts.join(" and ")
         )
     })
@@ -4847,11 +4865,16 @@ fn render_turntable(
 }
 
 /// Notes on the frames a movie of the batch directory `dir` lacks, which would jump in
-/// time without a sign: those the batch could not convert (`--keep-going`) and those an
-/// unfinished run has yet to write.
-fn gaps_notes(manifest: &mdlod_preprocess::batch::Manifest, dir: &Path) -> Vec<String> {
+/// time without a sign: those the batch could not convert (`--keep-going`; unless
+/// [`missing_frames_note`] says so, `left_out_said`) and those an unfinished run has yet
+/// to write.
+fn gaps_notes(
+    manifest: &mdlod_preprocess::batch::Manifest,
+    dir: &Path,
+    left_out_said: bool,
+) -> Vec<String> {
     let mut notes = Vec::new();
-    if !manifest.failed.is_empty() {
+    if !manifest.failed.is_empty() && !left_out_said {
         notes.push(format!(
             "  note: {} frame{} the batch could not convert {} missing from the images ({}): \
              `mdlod verify {}` says why; a rerun of the batch converts {} once {} mended",
@@ -5023,7 +5046,12 @@ fn render_frames(
     let mut survey = mdlod_render::movie::Survey::new();
     // Whether each attribute's hidden ranges meet its values in some frame.
     let mut range_hits = Vec::new();
+    // (Every frame is opened first, about a millisecond each: seconds for thousands.)
+    let progress = crate::progress::Bar::new();
+    use mdlod_preprocess::Progress as _;
+    progress.stage("framing the frames", Some(n as u64), "frames");
     for (i, f) in manifest.frames.iter().enumerate() {
+        progress.advance(1);
         let path = dir.join(&f.file);
         // (Something else in its place, a directory say, the reader names.)
         if std::fs::symlink_metadata(&path).is_err() {
@@ -5067,6 +5095,7 @@ fn render_frames(
         join_range_hits(&mut range_hits, hidden_range_hits(&opts.style, &file));
         survey.add(&file, &opts);
     }
+    progress.finish_stage();
     for note in hides_nothing_text(&range_hits, "in any frame") {
         println!("{note}");
     }
@@ -5399,7 +5428,8 @@ fn render_frames(
         "rendered {count} in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{radii_note}{limited}",
         t0.elapsed().as_secs_f64()
     );
-    if let Some(note) = missing_frames_note(&manifest) {
+    let left_out = missing_frames_note(&manifest, dir);
+    if let Some(note) = &left_out {
         println!("{note}");
     }
     // (A piece of a movie leaves the others' images alone.)
@@ -5444,7 +5474,7 @@ fn render_frames(
     if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
         println!("{note}");
     }
-    for note in gaps_notes(&manifest, dir) {
+    for note in gaps_notes(&manifest, dir, left_out.is_some()) {
         println!("{note}");
     }
     let (far, far_frames) = survey.far();
