@@ -817,7 +817,7 @@ fn oversized_note(
             let own = own_spacing(i)?;
             (f64::from(s.radius) > limit * own).then(|| {
                 (
-                    format!("{} ({:?})", s.name, s.radius),
+                    format!("{} ({})", s.name, radius_text(s.radius)),
                     f64::from(s.radius) / own,
                     own,
                 )
@@ -883,6 +883,15 @@ fn mean_spacing(lo: [f32; 3], hi: [f32; 3], count: u64) -> Option<f64> {
 /// renderer's single precision: squared, with the view's arithmetic around them, they
 /// fall below its normal numbers.
 const TINY_LENGTH: f32 = 1e-18;
+
+/// A radius as written (5, 1.28), in powers of ten where plain digits would run long
+/// (4e-18, not 0.000000000000000004).
+fn radius_text(r: f32) -> String {
+    match (1e-4..1e7).contains(&r.abs()) || r == 0.0 {
+        true => format!("{r}"),
+        false => format!("{r:e}"),
+    }
+}
 
 /// `x` as a plain number where it reads so (4.3, 1.157), with `digits` decimals, and in
 /// powers of ten beyond (a spacing of 9.6e19 printed whole took twenty digits).
@@ -1263,7 +1272,7 @@ pub(crate) fn elements_in_other_units_note(
     let first = read.first()?;
     let read: Vec<String> = read
         .iter()
-        .map(|s| format!("{} ({:?})", s.name, s.radius))
+        .map(|s| format!("{} ({})", s.name, radius_text(s.radius)))
         .collect();
     let shown = match read.len() {
         0..=6 => read.join(", "),
