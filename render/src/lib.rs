@@ -1379,18 +1379,19 @@ fn trimmed_bounds(file: &MdlodFile, hidden: HiddenSet) -> Option<FitBounds> {
     };
     let [(x0, x1), (y0, y1), (z0, z1)] = [0, 1, 2].map(percentiles);
     let (lo, hi) = (glam::Vec3::new(x0, y0, z0), glam::Vec3::new(x1, y1, z1));
-    // At least the largest sphere's radius (twice, and a little more for rounding): a
-    // bulk of no extent (particles piled on one spot, a line along an axis) otherwise
-    // left every sphere that reaches past its centres out as far, and the view was fitted
-    // to nothing.
-    let meta = file.metadata();
-    let largest = meta
+    // At least the smallest sphere's diameter (and a little more for rounding): a bulk
+    // of no extent (particles piled on one spot) otherwise left every sphere that
+    // reaches past its centre out as far, and the view was fitted to nothing. (Not the
+    // largest: a few huge spheres among small ones are what the fit leaves out.)
+    let smallest = file
+        .metadata()
         .species
         .iter()
-        .map(|s| s.radius)
-        .chain(meta.radius.map(|r| r.max))
-        .fold(0.0f32, f32::max);
-    let floor = 2.0 * largest + 1e-6 * lo.abs().max(hi.abs()).max_element();
+        .map(mdlod_format::meta::Species::smallest_radius)
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .fold(f32::INFINITY, f32::min);
+    let smallest = if smallest.is_finite() { smallest } else { 0.0 };
+    let floor = 2.0 * smallest + 1e-6 * lo.abs().max(hi.abs()).max_element();
     let margin = glam::Vec3::splat(((hi - lo).max_element() * FIT_MARGIN).max(floor));
     let (bounds, far) = bounds_walk(file, hidden, Some([lo - margin, hi + margin]))?;
     Some(FitBounds {
