@@ -13302,3 +13302,28 @@ fn data_of_awkward_shapes_is_framed_and_described() {
         "{info}"
     );
 }
+
+/// `info` counts each species over the whole SPECIES section: a flipped byte there is
+/// refused by the section's checksum (it printed wrong counts, with success).
+#[test]
+fn info_refuses_a_species_section_that_fails_its_checksum() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cuag_alloy.unwrapped.dump");
+    let file = dir.path().join("a.mdlod");
+    ok(&["convert", s(&input), "-o", s(&file)]);
+    ok(&["info", s(&file)]);
+    let at = {
+        let f = MdlodFile::open(&file).unwrap();
+        let species = mdlod_format::layout::SectionKind::Species as u32;
+        let entry = f.sections().iter().find(|e| e.kind == species).unwrap();
+        (entry.offset + entry.length / 2) as usize
+    };
+    let mut bytes = std::fs::read(&file).unwrap();
+    bytes[at] ^= 1;
+    std::fs::write(&file, bytes).unwrap();
+    let err = fails(&["info", s(&file)]);
+    assert!(
+        err.contains("SPECIES") && err.contains("checksum mismatch"),
+        "{err}"
+    );
+}

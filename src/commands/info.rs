@@ -29,6 +29,9 @@ const COUNT_UP_TO: u64 = 20_000_000;
 /// The particles of each species; an index past the table is corruption, named (the
 /// counts would not add up to the particles).
 fn species_counts(f: &MdlodFile) -> Result<Vec<u64>, mdlod_format::FormatError> {
+    // (Counting reads the whole section: its checksum costs little more, and a flipped
+    // byte gave wrong counts.)
+    f.check_checksums_of(mdlod_format::layout::SectionKind::Species)?;
     let mut counts = vec![0u64; f.metadata().species.len()];
     for (k, &s) in f.species().iter().enumerate() {
         match counts.get_mut(usize::from(s)) {
