@@ -9613,6 +9613,49 @@ fn devices_fifos_and_odd_view_files_are_refused_plainly() {
         e.contains("lists frame-100.mdlod as timestep 0, but the file holds timestep 100"),
         "{e}"
     );
+    // A frame replaced by another conversion of the same timestep: the manifest's
+    // checksum (the file's section table's) tells, in a movie as in `verify`.
+    let d = dir.path().join("r");
+    ok(&["batch", s(&input), "-o", s(&d)]);
+    let frame = d.join("frame-100.mdlod");
+    ok(&[
+        "convert",
+        s(&input),
+        "--frame",
+        "1",
+        "-o",
+        s(&frame),
+        "--radius",
+        "1=0.7",
+    ]);
+    let e = fails(&[&["render", s(&d), "-o", s(&movie)][..], &size].concat());
+    assert!(
+        e.contains("lists frame-100.mdlod (timestep 100) with checksum")
+            && e.contains("it was replaced after the batch wrote the manifest"),
+        "{e}"
+    );
+    // A time edited in the manifest labels the images wrongly: `verify` and a movie
+    // refuse it.
+    let d = dir.path().join("t");
+    ok(&["batch", s(&input), "-o", s(&d)]);
+    let manifest = d.join("dataset.json");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    m["frames"][1]["time"] = 99.0.into();
+    std::fs::write(&manifest, m.to_string()).unwrap();
+    let run = mdlod(&["verify", s(&d)]);
+    let out =
+        String::from_utf8_lossy(&run.stdout).to_string() + &String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "{out}");
+    assert!(
+        out.contains("the file's time is not the one the manifest lists"),
+        "{out}"
+    );
+    let e = fails(&[&["render", s(&d), "-o", s(&movie)][..], &size].concat());
+    assert!(
+        e.contains("lists frame-100.mdlod with time 99, but the file holds"),
+        "{e}"
+    );
 }
 
 /// The spheres and S-NDF modes take a light (direction in view space, colour), the

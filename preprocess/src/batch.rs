@@ -4751,6 +4751,22 @@ pub fn verify_dir(dir: &Path, progress: &dyn Progress) -> Result<DirCheck, Batch
                             f.timestep,
                             f.particles
                         ))
+                    } else if m.time != f.time || m.simulation_box != f.simulation_box {
+                        // (A movie's labels and `info DIR` read the manifest's.)
+                        let what = if m.time != f.time { "time" } else { "box" };
+                        Some(format!(
+                            "{place}: the file's {what} is not the one the manifest lists for \
+                             it (file: {}, manifest: {}): the manifest was edited, or the \
+                             file replaced",
+                            match what {
+                                "time" => m.time.map_or("none".into(), |t| t.to_string()),
+                                _ => format!("{:?}", m.simulation_box),
+                            },
+                            match what {
+                                "time" => f.time.map_or("none".into(), |t| t.to_string()),
+                                _ => format!("{:?}", f.simulation_box),
+                            }
+                        ))
                     } else {
                         None
                     }

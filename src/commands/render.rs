@@ -5078,6 +5078,34 @@ fn render_frames(
                 dir.display()
             );
         }
+        // A frame file replaced after the batch listed it (another frame converted in its
+        // place): the manifest's checksum is its section table's, read on open.
+        let checksum = format!("{:016x}", file.header().section_table_checksum);
+        if checksum != f.checksum {
+            anyhow::bail!(
+                "{}: lists {} (timestep {}) with checksum {}, but the file's is {checksum}: \
+                 it was replaced after the batch wrote the manifest (`mdlod verify {}` \
+                 checks them all; delete it and rerun the batch to convert it again)",
+                dir.join(mdlod_preprocess::batch::MANIFEST).display(),
+                f.file,
+                f.timestep,
+                f.checksum,
+                dir.display()
+            );
+        }
+        // The labels' times come from the manifest: an edited one would label wrongly.
+        if file.metadata().time != f.time {
+            let time = |t: Option<f64>| t.map_or("none".to_string(), |t| format!("{t}"));
+            anyhow::bail!(
+                "{}: lists {} with time {}, but the file holds {}: the manifest and the \
+                 frame files disagree (`mdlod verify {}` checks them all)",
+                dir.join(mdlod_preprocess::batch::MANIFEST).display(),
+                f.file,
+                time(f.time),
+                time(file.metadata().time),
+                dir.display()
+            );
+        }
         if let Some(a) = file
             .metadata()
             .attribute
