@@ -255,7 +255,11 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
         .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("missing-view.json"), "{err}");
+    // (Named by the action that read it.)
+    assert!(
+        err.contains("script action 0 (load_view): ") && err.contains("missing-view.json"),
+        "{err}"
+    );
     assert!(
         t0.elapsed() < Duration::from_secs(120),
         "the failed script did not end"
@@ -275,7 +279,11 @@ fn a_scripted_session_orbits_relights_steps_and_screenshots() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("timed out"), "{err}");
+    assert!(
+        !out.status.success()
+            && err.contains("script action 0 (pause): the script ran past its --script-timeout"),
+        "{err}"
+    );
     drop(x);
 
     let start = png(&d.join("start.png"));

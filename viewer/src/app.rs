@@ -43,6 +43,8 @@ pub(crate) struct Script {
     pub actions: VecDeque<Action>,
     /// The next action's index in the script (for error messages).
     next: usize,
+    /// The action being played (`script action 3 (screenshot)`), which an error names.
+    current: Option<String>,
     waiting: Option<Wait>,
     deadline: Instant,
 }
@@ -52,6 +54,7 @@ impl Script {
         Script {
             actions: actions.into(),
             next: 0,
+            current: None,
             waiting: None,
             deadline: Instant::now()
                 .checked_add(timeout)
@@ -136,9 +139,16 @@ impl ViewerApp {
         self.script_failed(message);
     }
 
-    /// The first error of a script fails it.
+    /// The first error of a script fails it, named by the action being played (a view
+    /// file that cannot be read, a screenshot's directory missing).
     fn script_failed(&mut self, message: String) {
-        if self.script.is_some() {
+        if let Some(script) = &self.script {
+            let message = match &script.current {
+                Some(place) if !message.starts_with("script action ") => {
+                    format!("{place}: {message}")
+                }
+                _ => message,
+            };
             let mut o = self.outcome.lock().unwrap_or_else(|e| e.into_inner());
             o.get_or_insert(message);
         }
@@ -360,9 +370,15 @@ impl ViewerApp {
         if Instant::now() > script.deadline {
             let left = script.actions.len();
             // While the script is still set: the timeout fails the command.
-            self.fail(format!(
-                "the script timed out waiting for the view ({left} actions left)"
-            ));
+            let what = format!(
+                "the script ran past its --script-timeout here ({left} actions after it not \
+                 played)"
+            );
+            let message = match &script.current {
+                Some(place) => format!("{place}: {what}"),
+                None => what,
+            };
+            self.fail(message);
             // Exit now, not once the frame in progress is done.
             self.worker.abandon();
             self.script = None;
@@ -403,6 +419,7 @@ impl ViewerApp {
         };
         let index = script.next;
         script.next += 1;
+        script.current = Some(crate::state::script_place(index, &action));
         // Values `mdlod render` refuses fail the script (the panel's widgets clamp).
         if let Err(e) = self.state.check_script_action(index, &action) {
             self.fail(e);

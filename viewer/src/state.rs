@@ -699,14 +699,7 @@ impl ViewerState {
     /// Refuses a script's action whose values `mdlod render` would refuse (the window's
     /// own widgets clamp instead): `index` is the action's place in the script.
     pub fn check_script_action(&self, index: usize, action: &Action) -> Result<(), String> {
-        let refuse = |what: String| {
-            // The action's name, for a refusal only.
-            let name = serde_json::to_value(action)
-                .ok()
-                .and_then(|v| v.get("action").and_then(|a| a.as_str()).map(str::to_owned))
-                .unwrap_or_default();
-            Err(format!("script action {index} ({name}): {what}"))
-        };
+        let refuse = |what: String| Err(format!("{}: {what}", script_place(index, action)));
         let lights = self.settings.lights.len();
         let positive = |v: f32| v.is_finite() && v > 0.0;
         match action {
@@ -797,6 +790,67 @@ impl ViewerState {
             Action::Pause { seconds } if !(seconds.is_finite() && *seconds >= 0.0) => {
                 refuse(format!("pause of {seconds} seconds (must be 0 or more)"))
             }
+            // As `render --light` and `shade`: a direction, colours in 0..1, weights of 0
+            // and more, the explorer's angles.
+            Action::Light { direction, .. }
+            | Action::AddLight {
+                light: Light { direction, .. },
+            } if !(direction.iter().all(|v| v.is_finite())
+                && direction.iter().any(|&v| v != 0.0)) =>
+            {
+                refuse(format!("light direction {direction:?} points nowhere"))
+            }
+            Action::LightColour { colour, .. }
+            | Action::AddLight {
+                light: Light { colour, .. },
+            }
+            | Action::SpeciesColour { colour, .. }
+            | Action::Paint { colour, .. }
+                if !colour.iter().all(|v| (0.0..=1.0).contains(v)) =>
+            {
+                refuse(format!(
+                    "colour {colour:?}: linear RGB, each value from 0 to 1"
+                ))
+            }
+            Action::Brdf {
+                specular,
+                shininess,
+            } if !(specular.is_finite() && *specular >= 0.0 && positive(*shininess)) => {
+                refuse(format!(
+                    "specular {specular} and shininess {shininess}: a weight of 0 or more and \
+                     an exponent above 0"
+                ))
+            }
+            Action::Explorer {
+                slices: Some(0), ..
+            } => refuse("an explorer of 0 slices".into()),
+            Action::Explorer {
+                disk_deg: Some(d), ..
+            } if !(*d > 0.0 && *d <= 90.0) => {
+                refuse(format!("explorer disk of {d}°: above 0, at most 90"))
+            }
+            Action::Explorer {
+                tolerance_deg: Some(t),
+                ..
+            } if !(0.0..=45.0).contains(t) => {
+                refuse(format!("explorer border of {t}°: from 0 to 45"))
+            }
+            Action::Paint { x, y, radius, .. }
+                if !((-1.0..=1.0).contains(x) && (-1.0..=1.0).contains(y) && positive(*radius)) =>
+            {
+                refuse(format!(
+                    "paint at ({x}, {y}) with radius {radius}: a point of the normal disk \
+                     (x and y in -1..1) and a radius above 0"
+                ))
+            }
+            Action::TargetFrameMs { ms } if !positive(*ms) => {
+                refuse(format!("a target frame time of {ms} ms (must be above 0)"))
+            }
+            Action::ColourMap { map: Some(_) } if self.attributes.is_empty() => refuse(
+                "the data keeps no attribute to colour by (`mdlod convert --attribute NAME` \
+                 keeps one)"
+                    .into(),
+            ),
             _ => Ok(()),
         }
     }
@@ -1095,6 +1149,15 @@ pub fn paint(t: &mut TransferImage, x: f32, y: f32, radius: f32, colour: [f32; 3
     }
 }
 
+/// `script action 3 (screenshot)`: where in a script an error arose.
+pub fn script_place(index: usize, action: &Action) -> String {
+    let name = serde_json::to_value(action)
+        .ok()
+        .and_then(|v| v.get("action").and_then(|a| a.as_str()).map(str::to_owned))
+        .unwrap_or_default();
+    format!("script action {index} ({name})")
+}
+
 /// The style entry of species `name`, added when missing.
 fn style_of<'a>(style: &'a mut PointStyle, name: &str) -> &'a mut SpeciesStyle {
     let i = match style.species.iter().position(|s| s.name == name) {
@@ -1229,6 +1292,75 @@ mod tests {
             "a.jpg: screenshots are PNG images",
         );
         refused(Action::Pause { seconds: -1.0 }, "pause of -1 seconds");
+        // Lights, colours, the BRDF, the explorer and the brush, as render and shade
+        // refuse them.
+        refused(
+            Action::Light {
+                index: 0,
+                direction: [0.0; 3],
+            },
+            "(light): light direction [0.0, 0.0, 0.0] points nowhere",
+        );
+        refused(
+            Action::AddLight {
+                light: Light {
+                    direction: [1.0, 0.0, 0.0],
+                    colour: [2.0, -1.0, 0.0],
+                },
+            },
+            "colour [2.0, -1.0, 0.0]: linear RGB",
+        );
+        refused(
+            Action::SpeciesColour {
+                name: "Cu".into(),
+                colour: [0.5, 0.5, 1.5],
+            },
+            "(species_colour): colour",
+        );
+        refused(
+            Action::Brdf {
+                specular: -1.0,
+                shininess: 20.0,
+            },
+            "specular -1",
+        );
+        refused(
+            Action::Brdf {
+                specular: 0.5,
+                shininess: 0.0,
+            },
+            "shininess 0",
+        );
+        let explorer = |slices, disk_deg, tolerance_deg| Action::Explorer {
+            slices,
+            disk_deg,
+            tolerance_deg,
+        };
+        refused(explorer(Some(0), None, None), "0 slices");
+        refused(explorer(Some(6), Some(200.0), None), "disk of 200°");
+        refused(explorer(Some(6), None, Some(-5.0)), "border of -5°");
+        refused(
+            Action::Paint {
+                x: 5.0,
+                y: 0.0,
+                radius: 0.1,
+                colour: [1.0; 3],
+            },
+            "paint at (5, 0)",
+        );
+        refused(
+            Action::Paint {
+                x: 0.0,
+                y: 0.0,
+                radius: -1.0,
+                colour: [1.0; 3],
+            },
+            "radius -1",
+        );
+        refused(
+            Action::TargetFrameMs { ms: 0.0 },
+            "target frame time of 0 ms",
+        );
         for ok in [
             shot(None, None),
             shot(Some(64), Some(48)),
@@ -1239,9 +1371,26 @@ mod tests {
                 index: 0,
                 direction: [0.0, 0.0, 1.0],
             },
+            explorer(Some(6), Some(90.0), Some(0.0)),
+            explorer(None, None, None),
+            Action::Brdf {
+                specular: 0.0,
+                shininess: 1.0,
+            },
         ] {
             assert_eq!(s.check_script_action(0, &ok), Ok(()), "{ok:?}");
         }
+        // Colouring by an attribute the data does not keep.
+        let plain = state();
+        let e = plain
+            .check_script_action(
+                1,
+                &Action::ColourMap {
+                    map: Some(ColourMap::Viridis),
+                },
+            )
+            .unwrap_err();
+        assert!(e.contains("keeps no attribute to colour by"), "{e}");
     }
 
     #[test]
