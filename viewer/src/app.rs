@@ -326,7 +326,11 @@ impl ViewerApp {
                         refined,
                     });
                 }
-                Reply::Bounds { path, bounds } => self.state.set_frame_bounds(&path, bounds),
+                Reply::Bounds {
+                    path,
+                    bounds,
+                    boxes,
+                } => self.state.set_frame_bounds(&path, bounds, boxes),
                 Reply::Written { out, result } => {
                     self.pending_writes = self.pending_writes.saturating_sub(1);
                     match result {

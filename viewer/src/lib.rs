@@ -129,20 +129,40 @@ pub fn frames_of(path: &Path) -> Result<Vec<FrameInfo>, ViewerError> {
 /// every frame; opening every one of thousands would hold up the window.) A last frame
 /// that does not open is left out here and says so when it is shown.
 pub fn first_view_bounds(first: &MdlodFile, frames: &[FrameInfo]) -> mdlod_render::Bounds {
-    let fit = |f: &MdlodFile| {
-        mdlod_render::fit_bounds(f, mdlod_render::HiddenSet::default(), false).bounds
-    };
-    let bounds = fit(first);
+    first_view_framing(first, frames).0
+}
+
+/// [`first_view_bounds`] and the boxes that frame them: the first frame's clusters and,
+/// in a trajectory, the last's ([`framing`]), so that a file's first view is the one
+/// `mdlod render` fits.
+pub fn first_view_framing(
+    first: &MdlodFile,
+    frames: &[FrameInfo],
+) -> (mdlod_render::Bounds, Vec<mdlod_render::Framed>) {
+    let (bounds, mut boxes) = framing(first);
     match frames.last().filter(|_| frames.len() > 1) {
         Some(last) => match MdlodFile::open(&last.path) {
             Ok(f) => {
-                let b = fit(&f);
-                mdlod_render::Bounds::new(bounds.min.min(b.min), bounds.max.max(b.max))
+                let (b, more) = framing(&f);
+                boxes.extend(more);
+                let union = mdlod_render::Bounds::new(bounds.min.min(b.min), bounds.max.max(b.max));
+                (union, boxes)
             }
-            Err(_) => bounds,
+            Err(_) => (bounds, boxes),
         },
-        None => bounds,
+        None => (bounds, boxes),
     }
+}
+
+/// What a fitted view of `file` frames, as `mdlod render` fits it with default options:
+/// the bounds of the drawn spheres, less particles far from the rest
+/// ([`mdlod_render::fit_for`]), and the boxes of its clusters inside them
+/// ([`mdlod_render::framing_boxes`]), which frame data that does not fill its box.
+pub fn framing(file: &MdlodFile) -> (mdlod_render::Bounds, Vec<mdlod_render::Framed>) {
+    let opts = mdlod_render::RenderOptions::default();
+    let bounds = mdlod_render::fit_for(file, &opts).bounds;
+    let boxes = mdlod_render::framing_boxes(file, &opts, &bounds);
+    (bounds, boxes)
 }
 
 /// The looks each species name keeps over a trajectory's frames, as `mdlod render DIR`
@@ -186,10 +206,14 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         // Square on to flat (two-dimensional) data.
         None => ViewSpec::default().resolved(&first),
     };
-    let bounds = first_view_bounds(&first, &frames);
-    let camera = mdlod_render::camera_for_bounds(&bounds, &view, w, h)?;
+    let (bounds, boxes) = first_view_framing(&first, &frames);
+    let camera = mdlod_render::camera_for_framing(&bounds, &boxes, &view, w, h)?;
     let looks = trajectory_looks(&frames);
     let mut state = ViewerState::new(frames, camera, bounds, [w, h]);
+    // (A trajectory's first view frames its last frame too; `F` fits the frame shown.)
+    if state.frames.len() == 1 {
+        state.framing = boxes;
+    }
     state.settings.mode = opts.mode;
     let meta = first.metadata();
     state.species = match looks.is_empty() {

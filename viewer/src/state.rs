@@ -432,6 +432,10 @@ pub struct ViewerState {
     pub frame: usize,
     /// The shown frame's bounds (for fitting and zoom limits).
     pub bounds: Bounds,
+    /// The boxes that frame the shown frame's data where `mdlod render` fits it (its
+    /// clusters; [`crate::framing`]); empty until the render thread reports them, when
+    /// the bounds alone frame it.
+    pub framing: Vec<mdlod_render::Framed>,
     /// Each frame's bounds, once known (the render thread reports them as it opens the
     /// frames).
     pub frame_bounds: Vec<Option<Bounds>>,
@@ -469,6 +473,7 @@ impl ViewerState {
             frames,
             frame: 0,
             bounds,
+            framing: Vec::new(),
             frame_bounds,
             size,
             species: vec![],
@@ -521,7 +526,7 @@ impl ViewerState {
             }
             Action::Fit => {
                 let aspect = self.aspect();
-                self.camera.fit(&self.bounds, aspect);
+                self.camera.fit_boxes(&self.bounds, &self.framing, aspect);
                 self.fitted = Some((self.camera.target, self.camera.distance));
                 scene
             }
@@ -535,7 +540,7 @@ impl ViewerState {
                 if let Some((_, distance)) = unpanned {
                     let zoom = self.camera.distance / distance;
                     let aspect = self.aspect();
-                    self.camera.fit(&self.bounds, aspect);
+                    self.camera.fit_boxes(&self.bounds, &self.framing, aspect);
                     self.fitted = Some((self.camera.target, self.camera.distance));
                     let d = self.camera.distance * zoom;
                     if d.is_finite() && d > 0.0 {
@@ -864,6 +869,10 @@ impl ViewerState {
     /// Shows frame `index`, with its bounds when known (else the last frame's stand in
     /// until the render thread reports them).
     fn go_to(&mut self, index: usize) {
+        if index != self.frame {
+            // (The new frame's come with its bounds from the render thread.)
+            self.framing.clear();
+        }
         self.frame = index;
         if let Some(Some(b)) = self.frame_bounds.get(index) {
             self.bounds = *b;
@@ -872,7 +881,12 @@ impl ViewerState {
 
     /// The render thread opened `path`, whose data has these bounds: fitting, loading a
     /// view and the zoom limits use them while that frame is shown.
-    pub fn set_frame_bounds(&mut self, path: &Path, bounds: Bounds) {
+    pub fn set_frame_bounds(
+        &mut self,
+        path: &Path,
+        bounds: Bounds,
+        boxes: Vec<mdlod_render::Framed>,
+    ) {
         for (i, f) in self.frames.iter().enumerate() {
             if f.path == path {
                 if let Some(b) = self.frame_bounds.get_mut(i) {
@@ -880,6 +894,7 @@ impl ViewerState {
                 }
                 if i == self.frame {
                     self.bounds = bounds;
+                    self.framing = boxes.clone();
                 }
             }
         }
@@ -1735,7 +1750,7 @@ mod tests {
         let first = s.bounds;
         let second = Bounds::new([100.0, 0.0, 0.0], [140.0, 40.0, 40.0]);
         // The render thread reports frame 1's bounds (here before it is shown).
-        s.set_frame_bounds(Path::new("b.mdlod"), second);
+        s.set_frame_bounds(Path::new("b.mdlod"), second, vec![]);
         assert_eq!(s.bounds, first);
         s.apply(&Action::Step { delta: 1 });
         assert_eq!(s.bounds, second);
@@ -1745,7 +1760,7 @@ mod tests {
         s.apply(&Action::Step { delta: 1 });
         assert_eq!(s.bounds, second);
         let third = Bounds::new([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]);
-        s.set_frame_bounds(Path::new("c.mdlod"), third);
+        s.set_frame_bounds(Path::new("c.mdlod"), third, vec![]);
         assert_eq!(s.bounds, third);
         s.apply(&Action::Frame { index: 0 });
         assert_eq!(s.bounds, first);

@@ -105,9 +105,14 @@ pub enum Reply {
         /// supersampling, the final cut).
         refined: bool,
     },
-    /// The bounds of the data of `path`, sent when a render request opens another file
-    /// (fitting and zooming use the shown frame's).
-    Bounds { path: PathBuf, bounds: Bounds },
+    /// The bounds of the data of `path` and the boxes that frame it, as `mdlod render`
+    /// fits them ([`mdlod_render::fit_for`], [`mdlod_render::framing_boxes`]), sent when a
+    /// render request opens another file (fitting and zooming use the shown frame's).
+    Bounds {
+        path: PathBuf,
+        bounds: Bounds,
+        boxes: Vec<mdlod_render::Framed>,
+    },
     /// A screenshot or S-NDF file was written (or not).
     Written {
         out: PathBuf,
@@ -531,10 +536,11 @@ impl<'r> Thread<'r> {
         };
         if self.bounds_sent.as_deref() != Some(path) {
             self.bounds_sent = Some(path.to_path_buf());
+            let (bounds, boxes) = crate::framing(&file);
             self.reply(Reply::Bounds {
                 path: path.to_path_buf(),
-                bounds: mdlod_render::fit_bounds(&file, mdlod_render::HiddenSet::default(), false)
-                    .bounds,
+                bounds,
+                boxes,
             });
         }
         let mut opts = opts;

@@ -608,9 +608,15 @@ fn a_new_request_ends_the_refinement_of_an_older_view() {
     render(&w, &s, 1);
     // The render thread reports the bounds of the file it opened first.
     match reply_within(&w, 120_000).expect("a reply") {
-        Reply::Bounds { path: p, bounds } => {
+        Reply::Bounds {
+            path: p,
+            bounds,
+            boxes,
+        } => {
             assert_eq!(p, path);
+            // What `mdlod render` fits: the drawn spheres' bounds and the clusters.
             let f = mdlod_format::MdlodFile::open(&path).unwrap();
+            assert_eq!((bounds, boxes), mdlod_viewer::framing(&f));
             assert_eq!(bounds, mdlod_render::data_bounds(&f));
         }
         _ => panic!("expected the bounds first"),
@@ -927,4 +933,43 @@ fn the_first_view_frames_a_trajectorys_first_and_last_frames() {
     // A last frame that does not open is left out.
     std::fs::write(&frames[2].path, b"not a file").unwrap();
     assert_eq!(mdlod_viewer::first_view_bounds(&first, &frames), alone);
+}
+
+/// A file's first view in the viewer is the camera `mdlod render` fits with default
+/// options (it was the bounding box's fit, 17 % farther on a granular bed), and so is
+/// `fit` once the render thread has reported the frame's framing.
+#[test]
+fn the_first_view_and_fit_are_those_render_fits() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = make_file(dir.path());
+    let frames = vec![FrameInfo {
+        path: path.clone(),
+        timestep: None,
+    }];
+    let f = mdlod_format::MdlodFile::open(&path).unwrap();
+    let view = mdlod_render::ViewSpec::default().resolved(&f);
+    let (w, h) = (320, 240);
+    let (bounds, boxes) = mdlod_viewer::first_view_framing(&f, &frames);
+    let first = mdlod_render::camera_for_framing(&bounds, &boxes, &view, w, h).unwrap();
+    let rendered = camera_for(&f, &view, w, h).unwrap();
+    assert_eq!(first, rendered);
+    // `fit` after an orbit: render's fit from the new direction.
+    let mut s = ViewerState::new(frames, first, bounds, [w, h]);
+    s.set_frame_bounds(&path, bounds, boxes);
+    s.apply(&Action::Orbit { dx: 60.0, dy: 0.0 });
+    s.apply(&Action::Zoom { factor: 3.0 });
+    s.apply(&Action::Fit);
+    let turned = mdlod_render::ViewSpec::Orbit {
+        azimuth_deg: s.camera.azimuth_deg,
+        elevation_deg: s.camera.elevation_deg,
+        zoom: 1.0,
+        projection: s.camera.projection,
+    };
+    let want = camera_for(&f, &turned, w, h).unwrap();
+    assert!(
+        (s.camera.distance - want.distance).abs() <= 1e-4 * want.distance
+            && (s.camera.target - want.target).length() <= 1e-4 * want.distance,
+        "{:?} against {want:?}",
+        s.camera
+    );
 }
