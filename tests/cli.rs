@@ -13370,3 +13370,41 @@ fn info_refuses_a_species_section_that_fails_its_checksum() {
         "{err}"
     );
 }
+
+/// `convert` records its input as `batch` does: a `%` piece set's pieces, and a raw
+/// sidecar with the arrays it names (it recorded a piece set of size 0, and the sidecar
+/// alone, whose size does not change with new arrays behind it).
+#[test]
+fn convert_records_every_file_of_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = |f: &Path| {
+        let v: serde_json::Value = serde_json::from_str(&ok(&["info", s(f), "--json"])).unwrap();
+        v["source"]["size"].as_u64().unwrap()
+    };
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+    let lammps = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/lammps");
+    let pieces = lammps.join("cu_melt_mpi.%.dump");
+    let out = dir.path().join("pieces.mdlod");
+    ok(&["convert", s(&pieces), "-o", s(&out)]);
+    let whole = size(&lammps.join("cu_melt_mpi.0.dump")) + size(&lammps.join("cu_melt_mpi.1.dump"));
+    assert_eq!(source(&out), whole);
+    let sidecar = dir.path().join("small.raw.json");
+    generate(&["alloy", "-n", "2000", "--format", "raw"], &sidecar);
+    let out = dir.path().join("raw.mdlod");
+    ok(&["convert", s(&sidecar), "-o", s(&out)]);
+    let files: u64 = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .unwrap()
+                .to_str()
+                .unwrap()
+                .starts_with("small.")
+        })
+        .map(|p| size(&p))
+        .sum();
+    assert!(files > size(&sidecar));
+    assert_eq!(source(&out), files);
+}

@@ -888,7 +888,8 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> BatchError + '_ {
 
 /// Size and modification time of an input; for a `%` piece set, the total size and the
 /// latest modification of its pieces; for a raw sidecar, of it and the arrays it names
-/// (new arrays behind an unchanged sidecar are new data).
+/// (new arrays behind an unchanged sidecar are new data). `convert` records the same (it
+/// recorded a piece set's size as 0, and a sidecar's alone).
 pub fn fingerprint(input: &Path, frame: u64) -> SourceInfo {
     let files = match crate::readers::piece_paths(input) {
         Ok(p) if !input.exists() => p,

@@ -2361,7 +2361,7 @@ pub fn convert_dump(
             drop(dump);
             let metadata = base_metadata(
                 &header_of(&info),
-                Some(source_info(named, k as u64)),
+                Some(crate::batch::fingerprint(named, k as u64)),
                 options,
             );
             return convert_chunked(source.as_ref(), metadata, output, options, progress)
@@ -2387,7 +2387,7 @@ pub fn convert_dump(
     let mut report = convert_frame_with(
         &frame,
         &further,
-        Some(source_info(named, k as u64)),
+        Some(crate::batch::fingerprint(named, k as u64)),
         output,
         options,
         progress,
