@@ -13333,6 +13333,27 @@ fn data_of_awkward_shapes_is_framed_and_described() {
     awkward_dump(&dump, &tiny, Some(4e-21));
     let out = ok(&["convert", s(&dump), "-o", s(&dir.path().join("tiny.mdlod"))]);
     assert!(out.contains("lengths this small"), "{out}");
+    // A lattice of spacing 1 and three atoms lost far outside its box: the spacing is
+    // the lattice's (the lost atoms' bounds made it 53, and the note called the atoms
+    // scattered dots).
+    let mut text = String::from(
+        "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n8003\nITEM: BOX BOUNDS pp pp pp\n\
+         -0.5 19.5\n-0.5 19.5\n-0.5 19.5\nITEM: ATOMS id type x y z\n",
+    );
+    for i in 0..8000 {
+        text += &format!("{} 1 {} {} {}\n", i + 1, i % 20, i / 20 % 20, i / 400);
+    }
+    for (i, z) in [(8001, 3000), (8002, 2500), (8003, -900)] {
+        text += &format!("{i} 1 10 10 {z}\n");
+    }
+    let dump = dir.path().join("lost.dump");
+    std::fs::write(&dump, text).unwrap();
+    let out = ok(&["convert", s(&dump), "-o", s(&dir.path().join("lost.mdlod"))]);
+    assert!(
+        out.contains("3 particles lie more than 10 box lengths outside"),
+        "{out}"
+    );
+    assert!(!out.contains("scattered dots"), "{out}");
     // A line of particles along x.
     let line: Vec<[f64; 3]> = (0..40).map(|i| [f64::from(i), 0.0, 0.0]).collect();
     let dump = dir.path().join("line.dump");

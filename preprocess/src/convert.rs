@@ -982,8 +982,22 @@ pub(crate) fn position_notes(
     given_radii: &[(String, f32)],
 ) -> Vec<String> {
     let mut notes = Vec::new();
-    notes.extend(oversized_note(lo, hi, count, species, species_counts));
-    notes.extend(undersized_note(lo, hi, count, species, given_radii));
+    // Lost atoms far outside the box stretch the bounds the mean spacing is measured in
+    // (three of them put a lattice of spacing 1 at 53): the box's part of the bounds,
+    // and the particles less them, stand in.
+    let (slo, shi, scount) = match (far.as_ref().and_then(|f| f.count), simulation_box) {
+        (Some(lost), Some(b)) => {
+            let (blo, bhi) = crate::chunked::box_bounds(b);
+            (
+                std::array::from_fn(|k| lo[k].max(blo[k])),
+                std::array::from_fn(|k| hi[k].min(bhi[k])),
+                count.saturating_sub(lost as u64),
+            )
+        }
+        _ => (lo, hi, count),
+    };
+    notes.extend(oversized_note(slo, shi, scount, species, species_counts));
+    notes.extend(undersized_note(slo, shi, scount, species, given_radii));
     notes.extend(crate::species::atom_name_notes(
         species.iter().map(|s| s.name.as_str()),
     ));
