@@ -13354,8 +13354,9 @@ fn data_of_awkward_shapes_is_framed_and_described() {
         "{out}"
     );
     assert!(!out.contains("scattered dots"), "{out}");
-    // A line of particles along x.
-    let line: Vec<[f64; 3]> = (0..40).map(|i| [f64::from(i), 0.0, 0.0]).collect();
+    // A line of particles along x, far longer than the image is wide: its spheres miss
+    // every pixel centre, which is said.
+    let line: Vec<[f64; 3]> = (0..400).map(|i| [f64::from(i), 0.0, 0.0]).collect();
     let dump = dir.path().join("line.dump");
     awkward_dump(&dump, &line, None);
     let f = dir.path().join("line.mdlod");
@@ -13365,6 +13366,13 @@ fn data_of_awkward_shapes_is_framed_and_described() {
         info.contains("every particle's centre on one line"),
         "{info}"
     );
+    let out = ok(&[&["render", s(&f), "-o", s(&png)][..], &size].concat());
+    assert!(
+        out.contains("nothing shows: the spheres drawn are at most"),
+        "{out}"
+    );
+    let (_, _, rgba) = read_png(&png);
+    assert!(rgba.chunks(4).all(|p| p[..3] == [255, 255, 255]));
 }
 
 /// `info` counts each species over the whole SPECIES section: a flipped byte there is

@@ -3118,6 +3118,36 @@ pub fn run(mut args: Args) -> Result<()> {
     {
         println!("{note}");
     }
+    // Spheres all narrower than a pixel (a chain a thousand atoms long across the image)
+    // can miss every pixel centre: an empty image with nothing said. (The image is read
+    // back only then.)
+    if matches!(args.mode, Mode::Spheres | Mode::Sndf)
+        && !said_empty
+        && r.particles_drawn + r.nodes_drawn > 0
+    {
+        let c = &r.camera;
+        let depth = (c.distance - mdlod_render::data_bounds(&file).radius()).max(c.near);
+        let across = 2.0
+            * file.max_particle_radius()
+            * opts.style.radius_scale
+            * c.pixels_per_world(depth, r.height);
+        if across < 1.0 {
+            let bg = backdrop(&args);
+            let empty = mdlod_render::image::RgbaImage::load_png(&args.output).is_ok_and(|img| {
+                img.data.chunks(4).all(|p| match bg {
+                    Some(c) => p[..3].iter().zip(c).all(|(a, b)| a.abs_diff(b) <= 1),
+                    None => p[3] == 0,
+                })
+            });
+            if empty {
+                println!(
+                    "  note: nothing shows: the spheres drawn are at most {across:.2} px \
+                     across, narrower than the pixels, and fall between their centres \
+                     (--radius-scale, --zoom, --spp 16 or a larger image shows them)"
+                );
+            }
+        }
+    }
     if args.cell.is_some() && file.metadata().simulation_box.is_none() {
         println!("  note: the file records no simulation cell (its input gave none): --cell draws nothing");
     }
