@@ -79,10 +79,11 @@ fn streamed_equals_in_memory(input: &Path, read: &ReadOptions, chunk_points: usi
     // (`convert_file` records the species column of its read options; a frame read
     // here is converted with it given.)
     tight.species_column = read.species_column.clone();
+    // (And its input as a batch fingerprints it: every piece, a sidecar and its arrays.)
     mdlod_preprocess::convert::convert_frame_with(
         &frame,
         &further,
-        Some(source_info(input, k as u64)),
+        Some(mdlod_preprocess::batch::fingerprint(input, k as u64)),
         &whole,
         &tight,
         &NoProgress,

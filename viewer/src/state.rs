@@ -175,7 +175,8 @@ impl Settings {
     }
 
     /// The sphere renderer's lighting: its one light is the first of the list, with its
-    /// colour.
+    /// colour; with every light removed, the ambient alone, as the S-NDFs shade then
+    /// (the spheres fell back to the default white light).
     pub fn sphere_lighting(&self) -> Lighting {
         let direction = self
             .lights
@@ -185,7 +186,7 @@ impl Settings {
             .unwrap_or(Lighting::default().direction_view);
         Lighting {
             direction_view: direction,
-            colour: self.lights.first().map_or([1.0; 3], |l| l.colour),
+            colour: self.lights.first().map_or([0.0; 3], |l| l.colour),
             ambient: self.ambient,
             diffuse: self.diffuse,
             specular: self.specular,
@@ -1537,6 +1538,10 @@ mod tests {
             s.settings.sphere_lighting().direction_view,
             Vec3::new(1.0, 0.0, 0.0)
         );
+        // With no light left, the spheres take the ambient alone, as the S-NDFs do.
+        s.apply(&Action::RemoveLight { index: 0 });
+        assert!(s.settings.shade_lights().lights.is_empty());
+        assert_eq!(s.settings.sphere_lighting().colour, [0.0; 3]);
     }
 
     #[test]
