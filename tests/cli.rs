@@ -13437,3 +13437,39 @@ fn convert_records_every_file_of_its_input() {
     assert!(files > size(&sidecar));
     assert_eq!(source(&out), files);
 }
+
+/// The options that change what is read from the input are recorded in the file
+/// (`input_options`), shown by `info` and its JSON: a wrapped or renamed conversion is
+/// told from a plain one of the same dump.
+#[test]
+fn the_options_that_changed_the_data_are_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = lammps_sample_path("cuag_alloy.unwrapped.dump");
+    let plain = dir.path().join("plain.mdlod");
+    ok(&["convert", s(&input), "-o", s(&plain)]);
+    let changed = dir.path().join("changed.mdlod");
+    ok(&[
+        "convert",
+        s(&input),
+        "-o",
+        s(&changed),
+        "--wrap",
+        "--species-name",
+        "Ag=Au",
+    ]);
+    let options = |f: &Path| {
+        let v: serde_json::Value = serde_json::from_str(&ok(&["info", s(f), "--json"])).unwrap();
+        v["input_options"].clone()
+    };
+    assert_eq!(options(&plain), serde_json::json!([]));
+    assert_eq!(
+        options(&changed),
+        serde_json::json!(["--wrap", "--species-name Ag=Au"])
+    );
+    let info = ok(&["info", s(&changed)]);
+    assert!(
+        info.contains("read with    --wrap --species-name Ag=Au"),
+        "{info}"
+    );
+    assert!(!ok(&["info", s(&plain)]).contains("read with"));
+}

@@ -407,6 +407,11 @@ pub struct Metadata {
     pub max_position_error: f64,
     /// The program that wrote the file, e.g. `mdlod 0.1.0`.
     pub writer: String,
+    /// The options that changed what was read from the input, as given (`--wrap`,
+    /// `--no-sizes`, `--species-name W=SOL`, `--columns ...`, `--radius-column C`,
+    /// `--diameter-column C`): the data is the input's only with them. Absent: none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub input_options: Vec<String>,
 }
 
 impl Metadata {
@@ -614,6 +619,7 @@ mod tests {
                 chunk_points: None,
             },
             max_position_error: 1.5e-5,
+            input_options: Vec::new(),
             writer: "mdlod test".into(),
         }
     }

@@ -43,6 +43,10 @@ pub struct ConvertOptions {
     /// recorded in the metadata: [`convert_dump`] and batches fill it in from their read
     /// options; a caller of [`convert_frame`] sets it for a frame so read.
     pub species_column: Option<String>,
+    /// The options that changed what was read from the input, as the command line gave
+    /// them (`--wrap`, `--no-sizes`, `--species-name W=SOL`, ...), recorded in the
+    /// metadata (`input_options`): the file's data is its input's only with them.
+    pub input_options: Vec<String>,
 }
 
 /// What a conversion built.
@@ -1961,6 +1965,7 @@ pub fn base_metadata(
         },
         max_position_error: 0.0,
         writer: format!("mdlod {}", env!("CARGO_PKG_VERSION")),
+        input_options: options.input_options.clone(),
     }
 }
 

@@ -34,6 +34,7 @@ fn options(chunk_points: usize) -> ConvertOptions {
         attribute_log10: false,
         extra_log10: Vec::new(),
         species_column: None,
+        input_options: Vec::new(),
     }
 }
 

@@ -263,6 +263,32 @@ impl BuildArgs {
         )
     }
 
+    /// The options given that change what is read from the input, as the metadata
+    /// records them (`input_options`); those the file records otherwise (radii, the
+    /// species column, logarithms, the frame) are left out.
+    fn input_options(&self) -> Vec<String> {
+        let mut given = Vec::new();
+        if self.wrap {
+            given.push("--wrap".to_string());
+        }
+        if self.no_sizes {
+            given.push("--no-sizes".to_string());
+        }
+        for (old, new) in &self.species_names {
+            given.push(format!("--species-name {old}={new}"));
+        }
+        if let Some(c) = &self.columns {
+            given.push(format!("--columns {c:?}"));
+        }
+        if let Some(c) = &self.radius_column {
+            given.push(format!("--radius-column {c}"));
+        }
+        if let Some(c) = &self.diameter_column {
+            given.push(format!("--diameter-column {c}"));
+        }
+        given
+    }
+
     /// The library options these arguments ask for.
     pub fn options(&self) -> (ConvertOptions, ReadOptions) {
         let (species_names, radii) = self.named();
@@ -291,6 +317,7 @@ impl BuildArgs {
             attribute_log10,
             extra_log10,
             species_column: self.species_column.clone(),
+            input_options: self.input_options(),
         };
         let read = ReadOptions {
             attribute: self.attribute.first().cloned(),

@@ -669,6 +669,7 @@ pub fn run(args: Args) -> Result<()> {
             "max_position_error": m.max_position_error,
             "single_precision_spacing": spacing,
             "writer": m.writer,
+            "input_options": m.input_options,
         });
         // Radii, colours and the attribute's range are f32s: their shortest form, not
         // their f64 widening (1.28, not 1.2799999713897705).
@@ -879,6 +880,10 @@ pub fn run(args: Args) -> Result<()> {
             s.frame,
             s.size
         );
+    }
+    if !m.input_options.is_empty() {
+        let given: Vec<String> = m.input_options.iter().map(|o| shown(o)).collect();
+        println!("  read with    {}", given.join(" "));
     }
     let chunks = m.build.chunk_points.map_or(String::new(), |c| {
         format!(", built in chunks of {c} particles")
