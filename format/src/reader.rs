@@ -2558,17 +2558,23 @@ pub fn attribute_named<'a>(names: &[&'a str], name: &str) -> Option<&'a str> {
         }
     }
     let asked = unwrapped(name);
-    let mut by_part = names.iter().filter(|stored| {
-        let (log, bars, inner) = unwrapped(stored);
-        (log, bars) == (asked.0, asked.1)
-            && inner
-                .rsplit_once('/')
-                .is_some_and(|(_, last)| last == asked.2)
-    });
-    match (by_part.next(), by_part.next()) {
-        (Some(one), None) => Some(one),
-        _ => None,
-    }
+    // The same logarithm first; then, for a name asked without one, a column kept as its
+    // logarithm (`|velocity|` for `log10(|particles/velocity|)`, as `sigma` finds
+    // `log10(sigma)` above).
+    let by_part = |logged: bool| {
+        let mut found = names.iter().filter(move |stored| {
+            let (log, bars, inner) = unwrapped(stored);
+            (log, bars) == (logged, asked.1)
+                && inner
+                    .rsplit_once('/')
+                    .is_some_and(|(_, last)| last == asked.2)
+        });
+        match (found.next(), found.next()) {
+            (Some(one), None) => Some(*one),
+            _ => None,
+        }
+    };
+    by_part(asked.0).or_else(|| (!asked.0).then(|| by_part(true)).flatten())
 }
 
 #[cfg(test)]
@@ -2614,7 +2620,21 @@ mod tests {
             attribute_named(&logs, "log10(mass)"),
             Some("log10(particles/mass)")
         );
-        assert_eq!(attribute_named(&logs, "|velocity|"), None);
+        // By the last part and without the logarithm, as `sigma` finds `log10(sigma)`;
+        // a column kept as it is first.
+        assert_eq!(
+            attribute_named(&logs, "|velocity|"),
+            Some("log10(|particles/velocity|)")
+        );
+        assert_eq!(
+            attribute_named(&logs, "mass"),
+            Some("log10(particles/mass)")
+        );
+        let both = ["log10(|particles/velocity|)", "|particles/velocity|"];
+        assert_eq!(
+            attribute_named(&both, "|velocity|"),
+            Some("|particles/velocity|")
+        );
         // A column kept as its logarithm, by the column's own name; a column kept as it
         // is first.
         let kept = ["c_pe", "log10(sigma)", "log10(rho)", "rho"];
