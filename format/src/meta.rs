@@ -463,8 +463,7 @@ impl Metadata {
 }
 
 /// The converter's palette for numeric types and names of no element (sRGB): its first
-/// colours; further slots take
-/// [`palette_colour`]'s.
+/// colours; further slots take [`palette_colour`]'s.
 const PALETTE: &[[u8; 3]] = &[
     [230, 102, 51],
     [102, 102, 255],

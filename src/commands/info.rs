@@ -613,7 +613,7 @@ pub fn run(args: Args) -> Result<()> {
     let rounded_first = f64::from(spacing) / 2.0 > m.max_position_error;
     // Two-dimensional data (every centre in one plane), which views face square on.
     let flat = mdlod_render::flat_axis(&f);
-    // Or a line of them (the sphere's box no wider than the largest sphere across two
+    // Or a line of them (the spheres' box no wider than the largest sphere across two
     // axes), which views look across, along the flat axis.
     let largest_radius = m
         .species

@@ -4894,50 +4894,17 @@ fn render_turntable(
     Ok(())
 }
 
-/// Notes on the frames a movie of the batch directory `dir` lacks, which would jump in
-/// time without a sign: those the batch could not convert (`--keep-going`; unless
-/// [`missing_frames_note`] says so, `left_out_said`) and those an unfinished run has yet
-/// to write.
-fn gaps_notes(
-    manifest: &mdlod_preprocess::batch::Manifest,
-    dir: &Path,
-    left_out_said: bool,
-) -> Vec<String> {
-    let mut notes = Vec::new();
-    if !manifest.failed.is_empty() && !left_out_said {
-        notes.push(format!(
-            "  note: {} frame{} the batch could not convert {} missing from the images ({}): \
-             `mdlod verify {}` says why; a rerun of the batch converts {} once {} mended",
-            manifest.failed.len(),
-            if manifest.failed.len() == 1 { "" } else { "s" },
-            if manifest.failed.len() == 1 {
-                "is"
-            } else {
-                "are"
-            },
-            manifest.failed_names(),
-            dir.display(),
-            if manifest.failed.len() == 1 {
-                "it"
-            } else {
-                "them"
-            },
-            if manifest.failed.len() == 1 {
-                "its input is"
-            } else {
-                "their inputs are"
-            },
-        ));
-    }
+/// A note where a movie of a batch lacks frames an unfinished run has yet to write,
+/// which would jump in time or end early without a sign (the frames the batch left out,
+/// [`missing_frames_note`] names).
+fn unfinished_note(manifest: &mdlod_preprocess::batch::Manifest) -> Option<String> {
     let listed = manifest.frames.len() as u64;
-    if let Some(expected) = manifest.expected_frames.filter(|&e| e > listed) {
-        notes.push(format!(
-            "  note: the batch lists {listed} of the {expected} frames its run is to convert \
-             (still running, or stopped: rerun it to finish): the images show only those, \
-             with gaps in time or ending early"
-        ));
-    }
-    notes
+    let expected = manifest.expected_frames.filter(|&e| e > listed)?;
+    Some(format!(
+        "  note: the batch lists {listed} of the {expected} frames its run is to convert \
+         (still running, or stopped: rerun it to finish): the images show only those, \
+         with gaps in time or ending early"
+    ))
 }
 
 /// A file whose species are the values of a column (structure types) holds only those
@@ -5486,8 +5453,7 @@ fn render_frames(
         "rendered {count} in {:.1} s, one camera for all ({framing}){exposure}{range_note}{looks_note}{radii_note}{limited}",
         t0.elapsed().as_secs_f64()
     );
-    let left_out = missing_frames_note(&manifest, dir);
-    if let Some(note) = &left_out {
+    if let Some(note) = missing_frames_note(&manifest, dir) {
         println!("{note}");
     }
     // (A piece of a movie leaves the others' images alone.)
@@ -5532,7 +5498,7 @@ fn render_frames(
     if let Some(note) = worst_miss.and_then(|(m, n)| recolour_note(Some(m), n)) {
         println!("{note}");
     }
-    for note in gaps_notes(&manifest, dir, left_out.is_some()) {
+    if let Some(note) = unfinished_note(&manifest) {
         println!("{note}");
     }
     let (far, far_frames) = survey.far();
