@@ -22,16 +22,34 @@ fn make_file(dir: &Path) -> PathBuf {
 
 /// An FCC block of `n³` cells with two species.
 fn make_block(dir: &Path, n: usize) -> PathBuf {
+    block_file(
+        dir,
+        n,
+        &["Cu", "Ag"],
+        None,
+        |i| u16::from(i % 7 == 0),
+        "block.mdlod",
+    )
+}
+
+/// An FCC block of `n³` cells whose atom `i` is of species `names[kind(i)]` (radius
+/// `radius`, or the name's), converted by the real converter to `dir/file`.
+fn block_file(
+    dir: &Path,
+    n: usize,
+    names: &[&str],
+    radius: Option<f32>,
+    kind: impl Fn(usize) -> u16,
+    file: &str,
+) -> PathBuf {
     let positions = mdlod_datasets::fcc_block([n, n, n], 3.615);
-    let species_index = (0..positions.len())
-        .map(|i| u16::from(i % 7 == 0))
-        .collect();
-    let species = ["Cu", "Ag"]
+    let species_index = (0..positions.len()).map(kind).collect();
+    let species = names
         .iter()
         .map(|n| SpeciesName {
             name: n.to_string(),
             numeric_type: false,
-            radius: None,
+            radius,
             ..Default::default()
         })
         .collect();
@@ -41,7 +59,7 @@ fn make_block(dir: &Path, n: usize) -> PathBuf {
         species,
         ..Default::default()
     };
-    let path = dir.join("block.mdlod");
+    let path = dir.join(file);
     convert_frame(&frame, None, &path, &ConvertOptions::default(), &NoProgress).unwrap();
     path
 }
@@ -95,30 +113,16 @@ fn render(w: &Worker, s: &ViewerState, id: u64) {
 /// The block of `make_block(dir, 3)` with label species (palette colours by their place
 /// in the list), listed in `order`, in a file of its own.
 fn make_labelled(dir: &Path, order: [&str; 2]) -> PathBuf {
-    let positions = mdlod_datasets::fcc_block([3, 3, 3], 3.615);
     // Every seventh atom is NC3, wherever the list puts it.
     let nc3 = u16::from(order[0] != "NC3");
-    let species_index = (0..positions.len())
-        .map(|i| if i % 7 == 0 { nc3 } else { 1 - nc3 })
-        .collect();
-    let species = order
-        .iter()
-        .map(|n| SpeciesName {
-            name: n.to_string(),
-            numeric_type: false,
-            radius: Some(1.2),
-            ..Default::default()
-        })
-        .collect();
-    let frame = Frame {
-        positions,
-        species_index,
-        species,
-        ..Default::default()
-    };
-    let path = dir.join(format!("{}.mdlod", order.join("-")));
-    convert_frame(&frame, None, &path, &ConvertOptions::default(), &NoProgress).unwrap();
-    path
+    block_file(
+        dir,
+        3,
+        &order,
+        Some(1.2),
+        |i| if i % 7 == 0 { nc3 } else { 1 - nc3 },
+        &format!("{}.mdlod", order.join("-")),
+    )
 }
 
 /// A trajectory's frames keep each species' look, as `mdlod render DIR` draws them: two
