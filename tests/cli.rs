@@ -13473,3 +13473,38 @@ fn the_options_that_changed_the_data_are_recorded() {
     );
     assert!(!ok(&["info", s(&plain)]).contains("read with"));
 }
+
+/// A slab that keeps particles of hidden species only draws nothing: the note says so,
+/// not only that the planes may point the wrong way.
+#[test]
+fn a_slab_of_hidden_species_says_what_hides_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from("128\nProperties=species:S:1:pos:R:3\n");
+    for i in 0..64 {
+        let (y, z) = (f64::from(i % 8), f64::from(i / 8));
+        text += &format!("Cu {} {y} {z}\nAg {} {y} {z}\n", i % 4, 10 + i % 4);
+    }
+    let xyz = dir.path().join("two.xyz");
+    std::fs::write(&xyz, text).unwrap();
+    let f = dir.path().join("two.mdlod");
+    ok(&["convert", s(&xyz), "-o", s(&f)]);
+    let png = dir.path().join("slab.png");
+    let out = ok(&[
+        "render",
+        s(&f),
+        "-o",
+        s(&png),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--clip",
+        "1,0,0,4",
+        "--hide-species",
+        "Cu",
+    ]);
+    assert!(
+        out.contains("nothing is drawn: the --clip planes keep no particle that is not hidden"),
+        "{out}"
+    );
+}

@@ -1922,10 +1922,11 @@ pub fn chunked_magnitude_problem(
     (dump.format() != crate::readers::InputFormat::Gsd).then(|| {
         format!(
             "the magnitude |{inner}| is taken over whole frames, and this frame's {particles} \
-             particles are above the chunk size ({chunk_points}: --chunk-points sets it, \
-             within the memory limit); for frames this large, write the magnitude into the \
-             dump as a column of its own (LAMMPS: `variable speed atom \
-             sqrt(vx*vx+vy*vy+vz*vz)` and `v_speed` in the dump's columns)"
+             particles are above the chunk size ({chunk_points}): `--chunk-points \
+             {particles}` takes the frame whole where the memory limit allows it (it says so \
+             where not); for frames larger still, write the magnitude into the dump as a \
+             column of its own (LAMMPS: `variable speed atom sqrt(vx*vx+vy*vy+vz*vz)` and \
+             `v_speed` in the dump's columns)"
         )
     })
 }

@@ -240,15 +240,23 @@ pub fn category_notes(
             ),
         });
     }
-    for (name, radius) in radii.iter().filter(|(n, _)| !species.contains(&n.as_str())) {
+    // (`*` names every species no other `--radius` names, whichever there are.)
+    for (name, radius) in radii
+        .iter()
+        .filter(|(n, _)| n != ANY_SPECIES && !species.contains(&n.as_str()))
+    {
+        let renamed = match renames.is_empty() {
+            true => "",
+            false => ", renamed",
+        };
         notes.push(match one_frame {
             true => format!(
                 "--radius {name}={radius}: no species {name} here (the species are the values \
-                 of --species-column {column}, renamed: {list})"
+                 of --species-column {column}{renamed}: {list})"
             ),
             false => format!(
                 "--radius {name}={radius}: no frame has a species {name} (the species are the \
-                 values of --species-column {column}, renamed)"
+                 values of --species-column {column}{renamed})"
             ),
         });
     }
@@ -973,6 +981,25 @@ pub fn parse_radius_override(s: &str) -> Result<(String, f32), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `--radius '*=R'` gives every species of a `--species-column` its radius, so no
+    /// note says it names none here; a name that is none is noted, said renamed only
+    /// where `--species-name` renamed some.
+    #[test]
+    fn category_notes_pass_over_the_star_and_say_renamed_only_when_so() {
+        let radii = vec![("*".to_string(), 1.3f32), ("hcp".to_string(), 1.2f32)];
+        let notes = category_notes("c_cna", &[], &radii, &["1", "2", "5"], true);
+        assert_eq!(
+            notes,
+            [
+                "--radius hcp=1.2: no species hcp here (the species are the values of \
+              --species-column c_cna: 1, 2, 5)"
+            ]
+        );
+        let renames = vec![("2".to_string(), "hcp".to_string())];
+        let notes = category_notes("c_cna", &renames, &radii, &["1", "hcp", "5"], true);
+        assert!(notes.is_empty(), "{notes:?}");
+    }
 
     #[test]
     fn protein_atom_names_read_as_elements_are_noted() {

@@ -3089,6 +3089,14 @@ pub fn run(mut args: Args) -> Result<()> {
                 "none of the data is in view (a --target, --zoom or view file that looks \
                      elsewhere?)"
             }
+            // (A slab may keep particles of the hidden species only.)
+            (false, _)
+                if !args.style.hide_species.is_empty() || !args.style.hide_attribute.is_empty() =>
+            {
+                "the --clip planes keep no particle that is not hidden (--hide-species, \
+                 --hide-attribute), or cut every particle away (each keeps n·p ≤ d, d the \
+                 distance from the origin along the unit normal: check its sign)"
+            }
             (false, _) => CLIP_CUTS_ALL,
         };
         println!("  note: nothing is drawn: {why}");
