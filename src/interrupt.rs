@@ -168,6 +168,7 @@ pub fn work_dir(parent: &Path) -> std::io::Result<tempfile::TempDir> {
     tempfile::Builder::new()
         .prefix(&format!("{}{}-", work_dir_prefix(), std::process::id()))
         .tempdir_in(parent)
+        .map_err(mdlod_format::files::temp_error)
 }
 
 /// `.mdlod-convert-HOST-`: the start of this host's working directories.

@@ -241,9 +241,26 @@ fn info_json_has_the_promised_fields() {
     assert_eq!(batch["attribute"]["min"].as_f64().unwrap(), lowest);
     let text = ok(&["info", s(&d)]);
     assert!(text.contains("] over every frame"), "{text}");
-    // A frame gone: the ranges are over the frames read, and say so.
+    // A frame gone: the ranges are over the frames read, and say so, and the command
+    // fails (`ok` false in JSON, with the description).
     std::fs::remove_file(&frames[0]).unwrap();
-    let text = ok(&["info", s(&d)]);
+    let out = mdlod(&["info", s(&d)]);
+    assert_eq!(out.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("1 listed frame could not be read") && err.contains("mdlod verify"),
+        "{err}"
+    );
+    let out = mdlod(&["info", s(&d), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["ok"], false);
+    assert_eq!(json["unreadable"].as_array().unwrap().len(), 1);
+    assert!(json["error"]
+        .as_str()
+        .unwrap()
+        .contains("could not be read"));
     let read = format!(
         "] over the {} frames read (not the 1 unreadable)",
         frames.len() - 1
@@ -3493,7 +3510,7 @@ fn leftovers_of_killed_runs_on_this_host_are_removed_and_named_by_the_next_run()
     }
 
     // A conversion with --temp-dir: working directories there and in the output's
-    // directory, and the output's temporary file.
+    // directory, and outputs' temporary files.
     let temp = dir.path().join("temp");
     std::fs::create_dir(&temp).unwrap();
     let output = dir.path().join("out.mdlod");
@@ -3505,9 +3522,10 @@ fn leftovers_of_killed_runs_on_this_host_are_removed_and_named_by_the_next_run()
             10,
         ),
         file(dir.path(), format!(".out.mdlod.{host}-{dead}-abc123.tmp")),
+        // Another output's, whose conversion may never run again.
+        file(dir.path(), format!(".other.mdlod.{host}-{dead}-abc123.tmp")),
     ];
     let kept = [
-        file(dir.path(), format!(".other.mdlod.{host}-{dead}-abc123.tmp")),
         file(
             dir.path(),
             format!(".out.mdlod.{host}-{live_pid}-abc123.tmp"),
@@ -8756,6 +8774,15 @@ fn particle_sizes_edge_cases_are_refused_or_noted() {
         assert!(!run.join("frame-0.mdlod").exists());
         std::fs::remove_file(run.join("frame-4500.mdlod")).unwrap();
         ok(&["batch", s(&gran), "-o", s(&run)]);
+        // A batch directory that is a link to a directory not there (a scratch space not
+        // mounted): named, where creating it failed with "File exists".
+        std::os::unix::fs::symlink(d("unmounted/run"), d("scratch.d")).unwrap();
+        let e = fails(&["batch", s(&gran), "-o", s(&d("scratch.d"))]);
+        assert!(
+            e.contains("scratch.d: is a symbolic link to")
+                && e.contains("unmounted/run, which does not exist"),
+            "{e}"
+        );
         std::fs::create_dir(d("movie")).unwrap();
         std::os::unix::fs::symlink(d("iso.png"), d("movie/f-2.png")).unwrap();
         let e = fails(&[

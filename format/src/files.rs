@@ -34,8 +34,24 @@ pub fn check_kind(kind: std::fs::FileType) -> std::io::Result<()> {
 /// Refuses an output path that exists and is not a regular file: mdlod writes a whole
 /// new file and renames it over the path, which would put a regular file in place of a
 /// device (`-o /dev/null` run as root), a pipe, or a symbolic link (not the file it
-/// points at). A path that does not exist yet, or a regular file, is fine.
+/// points at). A path that does not exist yet, or a regular file, is fine, unless it is
+/// read-only: a result its owner protected so would be replaced by the rename, which
+/// needs only the directory to be writable ([`check_replaceable_kind`] leaves that to
+/// the writer).
 pub fn check_replaceable(path: &Path) -> std::io::Result<()> {
+    check_replaceable_kind(path)?;
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.permissions().readonly() => Err(std::io::Error::new(
+            std::io::ErrorKind::PermissionDenied,
+            "is read-only: make it writable (`chmod u+w`) or remove it to replace it",
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// [`check_replaceable`] of the kind of file alone, a read-only one passing: for a file
+/// that may be kept as it is (a batch's finished frame).
+pub fn check_replaceable_kind(path: &Path) -> std::io::Result<()> {
     let kind = match std::fs::symlink_metadata(path) {
         Ok(m) => m.file_type(),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
@@ -56,6 +72,28 @@ pub fn check_replaceable(path: &Path) -> std::io::Result<()> {
         std::io::ErrorKind::InvalidInput,
         format!("is {what}; the output must be a new or a regular file"),
     ))
+}
+
+/// Gives `new`, the file about to be renamed over `path`, the permissions of the file
+/// there, where there is one: a result made private (0600) or shared with a group stays
+/// so when a rerun replaces it. (Its owner becomes the one writing it, as with any
+/// program that replaces a file by renaming.)
+pub fn keep_permissions(path: &Path, new: &File) -> std::io::Result<()> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.is_file() => new.set_permissions(m.permissions()),
+        _ => Ok(()),
+    }
+}
+
+/// An error of creating a temporary file or directory, without the name of the hidden
+/// file it would have had (`tempfile` appends `at path ".../.mdlod-tmpXXXXXX"`): the
+/// messages name the output or the directory it goes to instead.
+pub fn temp_error(e: std::io::Error) -> std::io::Error {
+    let text = e.to_string();
+    match text.split_once(" at path \"") {
+        Some((what, _)) => std::io::Error::new(e.kind(), what.to_string()),
+        None => e,
+    }
 }
 
 /// Opens `path` for reading if it is a regular file ([`check_regular`]).
@@ -106,6 +144,23 @@ pub const MANIFEST_BYTES: u64 = 1 << 30;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The hidden temporary name `tempfile` appends to its errors is left out.
+    #[test]
+    fn temporary_files_errors_name_no_hidden_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("missing");
+        let e = tempfile::Builder::new()
+            .prefix(".mdlod-tmp")
+            .tempfile_in(&missing)
+            .unwrap_err();
+        assert!(e.to_string().contains(".mdlod-tmp"), "{e}");
+        let kind = e.kind();
+        let plain = temp_error(e);
+        assert_eq!(plain.kind(), kind);
+        assert!(!plain.to_string().contains(".mdlod-tmp"), "{plain}");
+        assert!(plain.to_string().contains("No such file"), "{plain}");
+    }
 
     #[test]
     fn only_regular_files_open_and_whole_reads_are_capped() {

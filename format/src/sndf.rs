@@ -357,9 +357,10 @@ impl SndfData {
             .prefix(".sndf.")
             .suffix(".tmp")
             .tempfile_in(dir)
-            .map_err(io)?;
+            .map_err(|e| io(crate::files::temp_error(e)))?;
         tmp.write_all(&out).map_err(io)?;
         tmp.as_file().sync_all().map_err(io)?;
+        crate::files::keep_permissions(path, tmp.as_file()).map_err(io)?;
         tmp.persist(path)
             .map_err(|e| FormatError::io(path, e.error))?;
         Ok(())

@@ -87,7 +87,7 @@ impl Writer {
             .prefix(&temp_prefix(&name))
             .suffix(".tmp")
             .tempfile_in(dir)
-            .map_err(|e| FormatError::io(dir, e))?;
+            .map_err(|e| FormatError::io(dir, crate::files::temp_error(e)))?;
         drop(gate);
         let mut out = open(tmp.path()).map_err(|e| FormatError::io(path, e))?;
         out.write_all(&[0u8; HEADER_SIZE])
@@ -205,6 +205,8 @@ impl Writer {
             .tmp
             .take()
             .expect("temporary file present until finish");
+        crate::files::keep_permissions(&self.path, tmp.as_file())
+            .map_err(|e| FormatError::io(&self.path, e))?;
         tmp.persist(&self.path)
             .map_err(|e| FormatError::io(&self.path, e.error))?;
         Ok(())
@@ -357,6 +359,18 @@ pub fn temp_file_owner(file_name: &str, name: &str) -> Option<u32> {
     pid_and_random(rest)
 }
 
+/// The process that wrote `file_name` where it is the temporary file of an output of any
+/// name (`.NAME.HOST-PID-XXXXXX.tmp` with this host's name, [`temp_file_owner`]): what a
+/// run killed outright left beside an output that no later run writes again.
+pub fn any_temp_file_owner(file_name: &str) -> Option<u32> {
+    let rest = file_name.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let at = rest.rfind(&format!(".{}-", host_name()))?;
+    if at == 0 {
+        return None;
+    }
+    pid_and_random(&rest[at + host_name().len() + 2..])
+}
+
 /// `PID-XXXXXX` (digits, then six random letters or digits, as `tempfile` makes them):
 /// the process id.
 pub fn pid_and_random(rest: &str) -> Option<u32> {
@@ -424,6 +438,17 @@ mod tests {
             format!(".out.mdlod.other{host}-12-abc123.tmp"),
         ] {
             assert_eq!(temp_file_owner(&other, "out.mdlod"), None, "{other}");
+            assert_eq!(any_temp_file_owner(&other), None, "{other}");
+        }
+        // Any output's name, a file of this host's.
+        for (name, owner) in [
+            (format!(".results v2.mdlod.{host}-12-aB3c9Z.tmp"), Some(12)),
+            (format!(".frame-100.mdlod.{host}-7-abc123.tmp"), Some(7)),
+            (format!(".dataset.{host}-7-abc123.tmp"), Some(7)),
+            (format!(".{host}-7-abc123.tmp"), None),
+            (format!("out.{host}-7-abc123.tmp"), None),
+        ] {
+            assert_eq!(any_temp_file_owner(&name), owner, "{name}");
         }
         assert_eq!(
             temp_file_owner(&format!(".out.mdlod.{host}-12-aB3c9Z.tmp"), "out.mdlod"),

@@ -91,3 +91,32 @@ fn bad_position_bits_and_missing_directory_are_errors_naming_the_path() {
     let msg = Writer::create(&missing, 16).err().unwrap().to_string();
     assert!(msg.contains("no-such-dir"), "{msg}");
 }
+
+/// A rerun replacing a result keeps the permissions its owner gave it (a private 0600
+/// file stayed world-readable 0644 after the rename), and a read-only result is refused
+/// before anything is written, where the rename would have replaced it.
+#[cfg(unix)]
+#[test]
+fn replacing_keeps_the_permissions_and_refuses_a_read_only_file() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("out.mdlod");
+    let write = |bytes: &[u8]| -> Result<(), FormatError> {
+        let mut w = Writer::create(&path, 16)?;
+        w.write_section(SectionKind::Metadata, 0, bytes)?;
+        w.finish()
+    };
+    write(b"{}").unwrap();
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    for private in [0o600, 0o640, 0o660] {
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(private)).unwrap();
+        write(b"{\"again\":1}").unwrap();
+        assert_eq!(mode(&path), private);
+    }
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o444)).unwrap();
+    let before = std::fs::read(&path).unwrap();
+    let e = write(b"{}").unwrap_err().to_string();
+    assert!(e.contains("out.mdlod") && e.contains("is read-only"), "{e}");
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+    assert_eq!(entries(dir.path()), ["out.mdlod"], "nothing left behind");
+}

@@ -756,6 +756,23 @@ pub enum BatchError {
         /// What the lock file says of its holder (`pid P on HOST`).
         holder: String,
     },
+    /// Frames whose files were converted from another input, which is still where it
+    /// was: the directory holds another run's frames (`-o` reused), or inputs numbered
+    /// by their place were left out or added. Replacing them would lose them unnoticed.
+    #[error(
+        "{}: {frame}: the directory holds the frames of other inputs; convert into \
+         another directory, or delete its frames (frame-*.mdlod and dataset.json) to \
+         convert into it afresh{renumbered}",
+        dir.display()
+    )]
+    OtherInputs {
+        dir: PathBuf,
+        /// The first such frame: `FILE holds timestep T of OLD, which is still there,
+        /// and this run would replace it with frame K of INPUT` (and how many more).
+        frame: String,
+        /// A word on renumbering where the new frame is numbered by its place.
+        renumbered: &'static str,
+    },
     /// A frame failed (the first error); the frames converted before it, or beside it
     /// on other workers, are in the manifest (no new frame starts after a failure).
     #[error(
@@ -1400,10 +1417,11 @@ fn write_bytes(path: &Path, text: &[u8]) -> Result<(), BatchError> {
         .prefix(&mdlod_format::writer::temp_prefix("dataset"))
         .suffix(".tmp")
         .tempfile_in(dir)
-        .map_err(io(dir))?;
+        .map_err(|e| io(dir)(mdlod_format::files::temp_error(e)))?;
     use std::io::Write;
     tmp.write_all(text).map_err(io(path))?;
     tmp.as_file().sync_all().map_err(io(path))?;
+    mdlod_format::files::keep_permissions(path, tmp.as_file()).map_err(io(path))?;
     tmp.persist(path).map_err(|e| BatchError::Io {
         path: path.to_path_buf(),
         source: e.error,
@@ -1597,14 +1615,43 @@ enum Verdict {
     Keep(MdlodFile, Option<SourceInfo>),
     /// Built with the same settings from an input that changed since: kept when the
     /// frame's bytes are unchanged.
-    CheckBytes(MdlodFile, FrameBytes),
+    /// As `CheckBytes`, with the other input it was converted from where that is still
+    /// there ([`other_input`]): refused if the bytes differ.
+    CheckBytes(MdlodFile, FrameBytes, Option<PathBuf>),
     Redo,
+    /// Converted from another input, which is still there ([`other_input`]): refused.
+    Other(PathBuf),
+}
+
+/// The input a frame file was converted from (`recorded`, its absolute path as a
+/// manifest records it), where that is another file than `input` and still there: a
+/// frame of another run, or of an input numbered by its place that now numbers another.
+/// A source that is gone (dumps moved, or deleted once converted) is not: its frames
+/// are converted again from the input given now.
+fn other_input(recorded: Option<&str>, input: &Path) -> Option<PathBuf> {
+    let old = PathBuf::from(recorded?);
+    if old == absolute_source(input) {
+        return None;
+    }
+    let present = if old.to_string_lossy().contains('%') {
+        crate::readers::piece_paths(&old).is_ok_and(|p| !p.is_empty())
+    } else {
+        // (The same file by another name, a link, is the same input.)
+        match (std::fs::canonicalize(&old), std::fs::canonicalize(input)) {
+            (Ok(a), Ok(b)) => a != b,
+            (Ok(_), Err(_)) => true,
+            (Err(_), _) => false,
+        }
+    };
+    present.then_some(old)
 }
 
 /// What a listed frame was converted with that its file does not record.
 struct Recorded {
     /// The source as the manifest lists it.
     source: SourceInfo,
+    /// Its absolute path, where the manifest records it ([`FrameEntry::source_abs`]).
+    source_abs: Option<String>,
     columns: Option<Vec<String>>,
     radii: Option<Vec<(String, f32)>>,
     species_names: Option<Vec<(String, String)>>,
@@ -1696,6 +1743,7 @@ fn recorded_entries(frames: &RecordMap) -> std::collections::HashMap<(String, St
             let f = f.clone();
             let r = Recorded {
                 source: f.source,
+                source_abs: f.source_abs,
                 columns: f.columns,
                 radii: f.radii,
                 species_names: f.species_names,
@@ -3083,6 +3131,8 @@ pub fn batch(
     let mut redone = Redone::default();
     // Outputs whose input changed, to be compared by their frames' bytes.
     let mut unsure = Vec::new();
+    // Frames converted from other inputs still there, with those inputs: refused.
+    let mut others: Vec<(Job<'_>, PathBuf)> = Vec::new();
     for mut job in mine.drain(..) {
         if let Some(dump) = job.dump {
             // (A header that cannot be read fails where the frame is converted.)
@@ -3103,7 +3153,7 @@ pub fn batch(
         let out = out_dir.join(frame_file_name(job.timestep));
         // A link, pipe or device in a frame file's place is refused before any frame is
         // converted (it would be replaced, not written through).
-        mdlod_format::files::check_replaceable(&out).map_err(io(&out))?;
+        mdlod_format::files::check_replaceable_kind(&out).map_err(io(&out))?;
         let want = indexed_source(job.input, job.frame);
         let columns = columns_for(&job);
         let verdict = MdlodFile::open_sparse(&out).ok().map(|f| {
@@ -3162,6 +3212,9 @@ pub fn batch(
                 match own.and_then(|s| s.bytes.clone().filter(|_| same_name(s, &want))) {
                     Some(b) => Some(Err(b)),
                     None => {
+                        if let Some(old) = other_input(recorded.source_abs.as_deref(), job.input) {
+                            return Verdict::Other(old);
+                        }
                         redone.source += 1;
                         note_count_change(&job, &f);
                         return Verdict::Redo;
@@ -3200,7 +3253,11 @@ pub fn batch(
             match source {
                 None => Verdict::Keep(f, None),
                 Some(Ok(listed)) => Verdict::Keep(f, Some(listed)),
-                Some(Err(bytes)) => Verdict::CheckBytes(f, bytes),
+                Some(Err(bytes)) => Verdict::CheckBytes(
+                    f,
+                    bytes,
+                    other_input(recorded.source_abs.as_deref(), job.input),
+                ),
             }
         });
         match verdict {
@@ -3220,7 +3277,8 @@ pub fn batch(
                 }
                 done.push(entry);
             }
-            Some(Verdict::CheckBytes(f, bytes)) => unsure.push((job, f, bytes, want)),
+            Some(Verdict::CheckBytes(f, bytes, other)) => unsure.push((job, f, bytes, want, other)),
+            Some(Verdict::Other(old)) => others.push((job, old)),
             Some(Verdict::Redo) | None => {
                 if job.particles == u64::MAX {
                     job.particles = 0;
@@ -3246,7 +3304,7 @@ pub fn batch(
             Some(total),
             "bytes",
         );
-        for (mut job, f, bytes, want) in unsure {
+        for (mut job, f, bytes, want, other) in unsure {
             let dump = job.dump;
             // Where the frame lies now: the same bytes moved (a line inserted in an
             // earlier frame) are the same frame.
@@ -3291,6 +3349,8 @@ pub fn batch(
                     ..want
                 };
                 done.push(entry);
+            } else if let Some(old) = other {
+                others.push((job, old));
             } else {
                 redone.source += 1;
                 note_count_change(&job, &f);
@@ -3303,6 +3363,32 @@ pub fn batch(
         progress.finish_stage();
         done.sort_by_key(|e| e.timestep);
         todo.sort_by_key(|j| j.timestep);
+    }
+    others.sort_by_key(|(j, _)| j.timestep);
+    if let Some((job, old)) = others.first() {
+        let more = match others.len() - 1 {
+            0 => String::new(),
+            1 => ", and 1 more frame so".into(),
+            n => format!(", and {n} more frames so"),
+        };
+        return Err(BatchError::OtherInputs {
+            dir: out_dir.to_path_buf(),
+            frame: format!(
+                "{} holds timestep {} of {}, which is still there, and this run would \
+                 replace it with frame {} of {}{more}",
+                frame_file_name(job.timestep),
+                job.timestep,
+                old.display(),
+                job.frame,
+                job.input.display()
+            ),
+            renumbered: if job.own_timestep.is_none() {
+                " (frames that give no timestep are numbered by their place among the \
+                 inputs: an input left out or added numbers those after it anew)"
+            } else {
+                ""
+            },
+        });
     }
     // The last frame of a text dump whose last line has no line end may be cut inside a
     // number: left for the rerun.
@@ -3405,6 +3491,7 @@ pub fn batch(
             .prefix(&mdlod_format::writer::temp_prefix("dataset"))
             .suffix(".tmp")
             .tempfile_in(out_dir)
+            .map_err(mdlod_format::files::temp_error)
             .map_err(|e| BatchError::Io {
                 path: out_dir.to_path_buf(),
                 source: std::io::Error::new(

@@ -1471,7 +1471,7 @@ pub fn convert_chunked(
     let work = tempfile::Builder::new()
         .prefix(".mdlod-convert-")
         .tempdir_in(&temp_dir)
-        .map_err(|e| temp_err(&temp_dir, e))?;
+        .map_err(|e| temp_err(&temp_dir, mdlod_format::files::temp_error(e)))?;
     let dir = work.path();
 
     // 1. Partition.

@@ -2116,7 +2116,7 @@ fn open_piece_bounded(
                 .tempdir_in(&parent)
                 .map_err(|e| ConvertError::Temp {
                     path: parent.clone(),
-                    source: e,
+                    source: mdlod_format::files::temp_error(e),
                 })?;
             work.insert(w)
         }

@@ -4030,3 +4030,72 @@ fn a_file_sets_units_carry_to_its_later_files() {
         );
     }
 }
+
+/// A batch directory reused for another run's dumps (`-o` given again), or inputs
+/// numbered by their place of which one was left out, would have frames replaced by
+/// other data with a note only: refused while the inputs the frames came from are still
+/// there, converted again once they are gone (dumps moved, or deleted once converted).
+#[test]
+fn frames_of_other_inputs_still_there_are_not_replaced() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    std::fs::create_dir_all(&a).unwrap();
+    std::fs::create_dir_all(&b).unwrap();
+    let first = input(&a);
+    // Another run's dump of the same timesteps, of the same name, one digit apart.
+    let mut other = std::fs::read(&first).unwrap();
+    let digit = (other.len() / 2..other.len())
+        .find(|&i| other[i] == b'1')
+        .unwrap();
+    other[digit] = b'2';
+    let second = b.join("melt.dump");
+    std::fs::write(&second, &other).unwrap();
+    // (Written a second later: two files written within one tick of the clock would
+    // share name, size and time, and be taken for one file moved.)
+    let f = std::fs::File::options().write(true).open(&second).unwrap();
+    f.set_modified(std::time::SystemTime::now() + std::time::Duration::from_secs(1))
+        .unwrap();
+    drop(f);
+    let out = dir.path().join("out");
+    batch(std::slice::from_ref(&first), &out, &opts(), &NoProgress).unwrap();
+    let before = read_manifest(&out).unwrap();
+    let e = batch(std::slice::from_ref(&second), &out, &opts(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("holds timestep") && e.contains("a/melt.dump, which is still there"),
+        "{e}"
+    );
+    assert!(e.contains("frame ") && e.contains("b/melt.dump"), "{e}");
+    assert_eq!(read_manifest(&out).unwrap(), before, "nothing replaced");
+    // The first run's dump gone: its frames are converted again from the one given.
+    std::fs::remove_file(&first).unwrap();
+    let r = batch(std::slice::from_ref(&second), &out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.redone.source), (1, 1), "{r:?}");
+
+    // Inputs numbered by their place: the first left out would shift the others.
+    let xyz: Vec<PathBuf> = (0..3)
+        .map(|i| {
+            let p = dir.path().join(format!("s.{i}.xyz"));
+            std::fs::write(&p, format!("2\nframe {i}\nC 0 0 {i}\nC 1 0 0\n")).unwrap();
+            p
+        })
+        .collect();
+    let xyz_out = dir.path().join("xyz");
+    batch(&xyz, &xyz_out, &opts(), &NoProgress).unwrap();
+    std::fs::rename(&xyz[0], dir.path().join("elsewhere.xyz")).unwrap();
+    let e = batch(&xyz[1..], &xyz_out, &opts(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("frame-1.mdlod holds timestep 1 of")
+            && e.contains("s.1.xyz, which is still there")
+            && e.contains("frame 0 of")
+            && e.contains("numbered by their place"),
+        "{e}"
+    );
+    // Given back, nothing is converted again.
+    std::fs::rename(dir.path().join("elsewhere.xyz"), &xyz[0]).unwrap();
+    let r = batch(&xyz, &xyz_out, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.skipped), (0, 3));
+}

@@ -401,7 +401,32 @@ fn unknown_format_and_unsupported_compression() {
     );
     let got = DumpFile::open(&path).unwrap_err().to_string();
     assert!(
-        got.starts_with(&format!("{}:1: zstd and bzip2", path.display())),
+        got.starts_with(&format!(
+            "{}:1: zstd-compressed dumps are not supported",
+            path.display()
+        )),
+        "{got}"
+    );
+    // xz (which was taken for text that no format starts with), and a gzip file
+    // compressed twice, name their compression.
+    let xz = [0xfd, b'7', b'z', b'X', b'Z', 0, 0, 4, 0xe6, 0xd6];
+    let path = write(dir.path(), "x.lammpstrj.xz", &xz);
+    let got = DumpFile::open(&path).unwrap_err().to_string();
+    assert!(
+        got.contains("xz-compressed dumps are not supported") && got.contains("gzip"),
+        "{got}"
+    );
+    let gz = |bytes: &[u8]| {
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(bytes).unwrap();
+        enc.finish().unwrap()
+    };
+    let twice = gz(&gz(dump("1 1 0 0 0\n").as_bytes()));
+    let path = write(dir.path(), "twice.lammpstrj.gz", &twice);
+    let got = DumpFile::open(&path).unwrap_err().to_string();
+    assert!(
+        got.starts_with(&path.display().to_string())
+            && got.contains("holds gzip-compressed data, not a dump: compressed twice?"),
         "{got}"
     );
 }

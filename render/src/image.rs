@@ -197,9 +197,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
     }
     let mut tmp = builder
         .tempfile_in(dir)
-        .map_err(|e| RenderError::io(path, e))?;
+        .map_err(|e| RenderError::io(path, mdlod_format::files::temp_error(e)))?;
     tmp.write_all(bytes)
         .and_then(|_| tmp.as_file().sync_all())
+        .map_err(|e| RenderError::io(path, e))?;
+    mdlod_format::files::keep_permissions(path, tmp.as_file())
         .map_err(|e| RenderError::io(path, e))?;
     tmp.persist(path)
         .map_err(|e| RenderError::io(path, e.error))?;

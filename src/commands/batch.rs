@@ -349,18 +349,10 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     let temp_parent = convert.chunks.temp_dir_for(&out.join("frame"));
     let temp_given = convert.chunks.temp_dir.is_some();
     // What runs killed outright left (no handler could remove it): working directories
-    // in the batch directory and the working one, and temporary frames
-    // (`.frame-<timestep>.mdlod.HOST-PID-XXXXXX.tmp`).
-    // (`.frame-<timestep>.mdlod.HOST-PID-XXXXXX.tmp`, and a manifest's
-    // `.dataset.HOST-PID-XXXXXX.tmp`.)
-    let temp_owner = |file: &str| {
-        if file.starts_with(".dataset.") {
-            return mdlod_format::writer::temp_file_owner(file, "dataset");
-        }
-        let timestep = file.strip_prefix(".frame-")?.split_once(".mdlod.")?.0;
-        timestep.parse::<u64>().ok()?;
-        mdlod_format::writer::temp_file_owner(file, &format!("frame-{timestep}.mdlod"))
-    };
+    // in the batch directory and the working one, and outputs' temporary files
+    // (`.frame-<timestep>.mdlod.HOST-PID-XXXXXX.tmp`, a manifest's
+    // `.dataset.HOST-PID-XXXXXX.tmp`, those of a `convert` killed there).
+    let temp_owner = mdlod_format::writer::any_temp_file_owner;
     crate::interrupt::remove_and_report_leftovers(&[out, &temp_parent], &temp_owner);
     // A directory of finished frames made read-only (an archive) still checks as current:
     // the working directory goes to the system's then (a frame that needs converting is

@@ -527,14 +527,10 @@ fn convert(args: &Args) -> Result<ConvertReport> {
     let temp_parent = options.chunks.temp_dir_for(&args.output);
     let temp_given = options.chunks.temp_dir.is_some();
     // What runs killed outright left (no handler could remove it): working directories
-    // in the output's directory and the working one, and the output's temporary file.
+    // in the output's directory and the working one, and outputs' temporary files (of
+    // this output or any other: a run killed outright may never be run again).
     let output_dir = ChunkOptions::default().temp_dir_for(&args.output);
-    let name = args
-        .output
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let temp_owner = move |file: &str| mdlod_format::writer::temp_file_owner(file, &name);
+    let temp_owner = mdlod_format::writer::any_temp_file_owner;
     crate::interrupt::remove_and_report_leftovers(&[&output_dir, &temp_parent], &temp_owner);
     let work = crate::interrupt::work_dir(&temp_parent)
         .with_context(|| super::work_dir_context(&temp_parent, temp_given))?;

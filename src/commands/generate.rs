@@ -234,12 +234,15 @@ fn generate_text(
         .prefix(&mdlod_format::writer::temp_prefix(&name))
         .suffix(".tmp")
         .tempfile_in(&dir)
+        .map_err(mdlod_format::files::temp_error)
         .with_context(|| format!("cannot create {}", output.display()))?;
     let summary = match format {
         OutputFormat::Xyz => write_xyz(opts, file.as_file_mut(), progress),
         _ => write_lammps_dump(opts, file.as_file_mut(), progress),
     }
     .with_context(|| format!("cannot write {}", output.display()))?;
+    mdlod_format::files::keep_permissions(output, file.as_file())
+        .with_context(|| format!("cannot write {}", output.display()))?;
     file.persist(output)
         .with_context(|| format!("cannot write {}", output.display()))?;
     if let Some(b) = bar {

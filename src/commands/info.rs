@@ -313,6 +313,13 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
         let mut v = v;
         shortest_f32(&mut v["attribute"]);
         shortest_f32(&mut v["attributes"]);
+        if let Some(e) = unreadable_error(dir, unreadable.len()) {
+            // The description, as a check's result that found faults.
+            v["ok"] = false.into();
+            v["error"] = e.clone().into();
+            crate::print_json(v);
+            bail!(e);
+        }
         v["ok"] = true.into();
         println!("{}", serde_json::to_string(&v)?);
         return Ok(());
@@ -454,7 +461,25 @@ fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
     for u in &unreadable {
         println!("  unreadable   {u}");
     }
-    Ok(())
+    match unreadable_error(dir, unreadable.len()) {
+        Some(e) => bail!(e),
+        None => Ok(()),
+    }
+}
+
+/// The failure of describing a batch directory some of whose listed frames could not be
+/// read (moved away, deleted, damaged): described as far as it could be, then an error,
+/// as a script reading its counts would take them for the whole data set's.
+fn unreadable_error(dir: &std::path::Path, unreadable: usize) -> Option<String> {
+    (unreadable > 0).then(|| {
+        format!(
+            "{}: {unreadable} listed frame{} could not be read (the counts and ranges are \
+             over the others); `mdlod verify {}` checks every frame",
+            dir.display(),
+            if unreadable == 1 { "" } else { "s" },
+            dir.display()
+        )
+    })
 }
 
 /// A `.sndf` file's header.

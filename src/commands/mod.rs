@@ -80,6 +80,7 @@ pub fn check_writable_beside(option: &str, output: &Path) -> Result<()> {
     if let Err(e) = tempfile::Builder::new()
         .prefix(".mdlod-probe-")
         .tempfile_in(dir)
+        .map_err(mdlod_format::files::temp_error)
     {
         bail!("{option} {}: cannot write there: {e}", output.display());
     }
@@ -157,6 +158,18 @@ pub fn check_input_file(input: &Path) -> Result<()> {
 /// and an input that lies in the output directory under a name the batch writes there
 /// (`frame-<timestep>.mdlod`, `dataset*.json`, temporary `*.tmp` files).
 pub fn check_batch_output(output: &Path, inputs: &[PathBuf]) -> Result<()> {
+    // A link to a directory that is not there (a scratch space not mounted, a run's
+    // directory removed): creating the directory would fail, "File exists".
+    if let Ok(target) = std::fs::read_link(output) {
+        if !output.exists() {
+            bail!(
+                "-o {}: is a symbolic link to {}, which does not exist: create that \
+                 directory, or give another output directory",
+                output.display(),
+                target.display()
+            );
+        }
+    }
     if output.exists() && !output.is_dir() {
         bail!(
             "-o {}: is not a directory (batch writes a directory of frames and a manifest)",

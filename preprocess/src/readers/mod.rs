@@ -42,7 +42,8 @@
 //! - **Per-processor pieces**: a LAMMPS file name with `%` opens all its pieces as one
 //!   dump (see `pieces.rs`).
 //! - Files are memory-mapped; gzip files (single or multi-member) are decompressed into
-//!   memory. zstd and bzip2 files are recognised and refused with a clear error.
+//!   memory. zstd, bzip2, xz, lz4 and zip files are recognised and refused with a clear
+//!   error, as is a gzip file compressed again inside.
 
 mod atoms;
 mod float;
@@ -196,12 +197,12 @@ pub enum InputFormat {
 }
 
 impl InputFormat {
-    /// The format implied by a file name, ignoring a `.gz`, `.bz2` or `.zst` suffix:
+    /// The format implied by a file name, ignoring a `.gz`, `.bz2`, `.zst` or `.xz` suffix:
     /// `.lammpstrj`, `.dump`, `.lammps` and `dump.*` are LAMMPS text; `.bin` is LAMMPS
     /// binary (as LAMMPS itself decides); `.gsd` is GSD; `.xyz` and `.extxyz` are XYZ.
     pub fn from_path(path: &Path) -> Option<InputFormat> {
         let name = path.file_name()?.to_str()?.to_ascii_lowercase();
-        let name = [".gz", ".bz2", ".zst"]
+        let name = [".gz", ".bz2", ".zst", ".xz"]
             .iter()
             .find_map(|s| name.strip_suffix(s))
             .unwrap_or(&name);
@@ -766,15 +767,36 @@ impl DumpFile {
                 }
                 None => return Ok(None),
             }
-        } else if map.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) || is_bzip2(&map) {
+        } else if let Some(kind) = other_compression(&map) {
             return Err(ReadError::Unsupported {
                 at: first_line(),
-                message: "zstd and bzip2 compressed dumps are not supported; decompress the file or recompress it with gzip".into(),
+                message: format!(
+                    "{kind}-compressed dumps are not supported (gzip is); decompress the \
+                     file or recompress it with gzip"
+                ),
             });
         } else {
             Bytes::Map(map)
         };
         let data = bytes.as_ref();
+        // A gzip file whose content is compressed again (gzipped twice, a `.tar.gz`'s
+        // members are not: a tar file is refused as no dump below).
+        if compressed {
+            let inner = if data.starts_with(&[0x1f, 0x8b]) {
+                Some("gzip")
+            } else {
+                other_compression(data)
+            };
+            if let Some(kind) = inner {
+                return Err(ReadError::Unsupported {
+                    at: first_line(),
+                    message: format!(
+                        "its gzip stream holds {kind}-compressed data, not a dump: \
+                         compressed twice? decompress it (`gunzip -c`) and read the result"
+                    ),
+                });
+            }
+        }
         if data.iter().all(|b| b.is_ascii_whitespace()) {
             return Err(ReadError::Empty { at: first_line() });
         }
@@ -2816,6 +2838,24 @@ pub fn is_piece_pattern(path: &Path) -> bool {
         .and_then(|n| n.to_str())
         .is_some_and(|n| n.contains('%'))
         && !path.exists()
+}
+
+/// The compression other than gzip that `data` starts with the signature of, where it
+/// does: zstd, bzip2, xz, lz4 (frame format) or zip.
+fn other_compression(data: &[u8]) -> Option<&'static str> {
+    if data.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) {
+        Some("zstd")
+    } else if is_bzip2(data) {
+        Some("bzip2")
+    } else if data.starts_with(&[0xfd, b'7', b'z', b'X', b'Z', 0x00]) {
+        Some("xz")
+    } else if data.starts_with(&[0x04, 0x22, 0x4d, 0x18]) {
+        Some("lz4")
+    } else if data.starts_with(b"PK\x03\x04") {
+        Some("zip")
+    } else {
+        None
+    }
 }
 
 fn is_bzip2(data: &[u8]) -> bool {
