@@ -8012,6 +8012,50 @@ fn iso_surfaces_and_volumes_are_coloured_by_the_attribute_through_a_map() {
     let key = std::fs::read_to_string(&svg).unwrap();
     assert!(key.contains(">c_pe</text>"), "{key}");
     ok(&[&base[..], &["-o", s(&plain)]].concat());
+    // The surface in a species colour given (it was refused, though the surface takes
+    // its species' colours): copper's reddish surface turns blue.
+    let info: serde_json::Value = serde_json::from_str(&ok(&["info", "--json", s(&file)])).unwrap();
+    let name = info["species"][0]["name"].as_str().unwrap().to_string();
+    let blue = d("b.png");
+    ok(&[
+        &base[..],
+        &[
+            "-o",
+            s(&blue),
+            "--species-colour",
+            &format!("{name}=#3050ff"),
+        ],
+    ]
+    .concat());
+    let mean = |px: &[u8]| {
+        let covered: Vec<&[u8]> = px
+            .chunks_exact(4)
+            .filter(|p| p[3] == 255 && p[..3] != [255, 255, 255])
+            .collect();
+        assert!(!covered.is_empty());
+        [0, 1, 2]
+            .map(|k| covered.iter().map(|p| f64::from(p[k])).sum::<f64>() / covered.len() as f64)
+    };
+    let (own, given) = (mean(&read_png(&plain).2), mean(&read_png(&blue).2));
+    assert!(
+        own[0] > own[2] && given[2] > 2.0 * given[0],
+        "{own:?} {given:?}"
+    );
+    let e = fails(
+        &[
+            &base[..],
+            &[
+                "-o",
+                s(&blue),
+                "--colour-map",
+                "magma",
+                "--species-colour",
+                &format!("{name}=red"),
+            ],
+        ]
+        .concat(),
+    );
+    assert!(e.contains("--species-colour") && e.contains("iso"), "{e}");
     let (mapped, species) = (read_png(&png).2, read_png(&plain).2);
     // Copper's one colour against the map's many: more distinct hues on the surface.
     let hues = |px: &[u8]| {

@@ -2147,7 +2147,25 @@ pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
                 ..Default::default()
             },
         ),
-        RenderMode::Density(_) => (PackStyle::FluxColour, PointStyle::default()),
+        // The iso-surface takes the species' colours given (the volume's colours are the
+        // transfer function's): colours alone, the radii and hiding being the density's.
+        RenderMode::Density(_) => (
+            PackStyle::FluxColour,
+            PointStyle {
+                species: opts
+                    .style
+                    .species
+                    .iter()
+                    .filter(|s| s.colour.is_some())
+                    .map(|s| style::SpeciesStyle {
+                        radius: None,
+                        hidden: false,
+                        ..s.clone()
+                    })
+                    .collect(),
+                ..Default::default()
+            },
+        ),
     }
 }
 

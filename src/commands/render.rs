@@ -1528,6 +1528,7 @@ pub fn parse_range(s: &str) -> Result<[f32; 2], String> {
 pub enum ColourMapArg {
     Viridis,
     Magma,
+    Cividis,
     CoolWarm,
     Grey,
 }
@@ -1538,6 +1539,7 @@ impl ColourMapArg {
         match self {
             ColourMapArg::Viridis => ColourMap::Viridis,
             ColourMapArg::Magma => ColourMap::Magma,
+            ColourMapArg::Cividis => ColourMap::Cividis,
             ColourMapArg::CoolWarm => ColourMap::CoolWarm,
             ColourMapArg::Grey => ColourMap::Grey,
         }
@@ -1900,7 +1902,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("light_range", &[Splat]),
         ("colour_map", &[Spheres, Sndf, Splat, Density, Iso]),
         ("radius_scale", STYLED),
-        ("species_colour", &[Spheres, Sndf, Splat, SplatOver]),
+        ("species_colour", &[Spheres, Sndf, Splat, SplatOver, Iso]),
         ("species_radius", STYLED),
         ("attribute_range", &[Spheres, Sndf, Splat, Density, Iso]),
         ("log_scale", &[Spheres, Sndf, Splat, Density, Iso]),
@@ -2119,6 +2121,15 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
              --colour-map colours each pixel's light, not the particles)"
         );
     }
+    if args.mode == Mode::Iso
+        && args.style.colour_map.is_some()
+        && !args.style.species_colour.is_empty()
+    {
+        anyhow::bail!(
+            "--species-colour has no effect on an iso-surface coloured by --colour-map: each \
+             point of it takes the map's colour of the attribute's mean around it"
+        );
+    }
     if lit_by_value(args) && !args.style.species_colour.is_empty() {
         anyhow::bail!(
             "--species-colour has no effect on splats lit by the attribute: their light has \
@@ -2176,7 +2187,10 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
     ] {
         if given && !by_attribute(args) {
             let density = match name {
-                "--log-scale" => ", or with --mode density (the volume fraction's logarithm)",
+                "--log-scale" => {
+                    "; with --mode density and no colour map it takes the volume \
+                     fraction's logarithm"
+                }
                 _ => "",
             };
             anyhow::bail!(
