@@ -8016,7 +8016,7 @@ fn iso_surfaces_and_volumes_are_coloured_by_the_attribute_through_a_map() {
     // its species' colours): copper's reddish surface turns blue.
     let info: serde_json::Value = serde_json::from_str(&ok(&["info", "--json", s(&file)])).unwrap();
     let name = info["species"][0]["name"].as_str().unwrap().to_string();
-    let blue = d("b.png");
+    let (blue, key) = (d("b.png"), d("b.svg"));
     ok(&[
         &base[..],
         &[
@@ -8024,9 +8024,14 @@ fn iso_surfaces_and_volumes_are_coloured_by_the_attribute_through_a_map() {
             s(&blue),
             "--species-colour",
             &format!("{name}=#3050ff"),
+            "--legend",
+            s(&key),
         ],
     ]
     .concat());
+    // Its key says the colour drawn, not the file's.
+    let key = std::fs::read_to_string(&key).unwrap();
+    assert!(key.to_lowercase().contains("#3050ff"), "{key}");
     let mean = |px: &[u8]| {
         let covered: Vec<&[u8]> = px
             .chunks_exact(4)
@@ -13577,5 +13582,64 @@ fn a_slab_of_hidden_species_says_what_hides_it() {
     assert!(
         out.contains("nothing is drawn: the --clip planes keep no particle that is not hidden"),
         "{out}"
+    );
+}
+
+/// `--palette okabe-ito` draws the palette's species in Okabe and Ito's colours, told
+/// apart with the common colour-vision deficiencies (the default's first two, orange
+/// and blue-violet, were close in grey print), keyed so; a colour given still wins, and
+/// beside a colour map, which replaces species colours, it is refused.
+#[test]
+fn the_okabe_ito_palette_colours_the_palette_species_and_their_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("a.lammpstrj");
+    generate(&["alloy", "-n", "3000"], &dump);
+    let file = dir.path().join("a.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file), "--attribute", "c_pe"]);
+    let (png, svg) = (dir.path().join("a.png"), dir.path().join("a.svg"));
+    let base = ["render", s(&file), "-o", s(&png), "--width", "64"];
+    let args = [&base[..], &["--height", "48", "--legend", s(&svg)]].concat();
+    ok(&[&args[..], &["--palette", "okabe-ito"]].concat());
+    let key = std::fs::read_to_string(&svg).unwrap().to_lowercase();
+    assert!(key.contains("#e69f00") && key.contains("#56b4e9"), "{key}");
+    // The pixels drawn: orange's hue (green over red 0.69 in sRGB) where the file's
+    // #e66633 has 0.44.
+    let orange = |png: &Path| {
+        read_png(png)
+            .2
+            .chunks_exact(4)
+            .filter(|p| {
+                let (r, g, b) = (f32::from(p[0]), f32::from(p[1]), f32::from(p[2]));
+                p[3] == 255 && r > 60.0 && g / r > 0.58 && g / r < 0.8 && b < 0.3 * r
+            })
+            .count()
+    };
+    let given = orange(&png);
+    ok(&args);
+    let own = orange(&png);
+    assert!(
+        given > 200 && own < given / 10,
+        "{given} against {own} orange pixels"
+    );
+    ok(&[
+        &args[..],
+        &["--palette", "okabe-ito", "--species-colour", "1=#00ff00"],
+    ]
+    .concat());
+    let key = std::fs::read_to_string(&svg).unwrap().to_lowercase();
+    assert!(
+        key.contains("#00ff00") && key.contains("#56b4e9") && !key.contains("#e69f00"),
+        "{key}"
+    );
+    let e = fails(
+        &[
+            &args[..],
+            &["--palette", "okabe-ito", "--colour-map", "viridis"],
+        ]
+        .concat(),
+    );
+    assert!(
+        e.contains("--palette has no effect with --colour-map"),
+        "{e}"
     );
 }

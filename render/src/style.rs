@@ -200,14 +200,24 @@ pub fn keep_looks(
 /// The species styles one frame of a trajectory is drawn with: [`keep_looks`], and under
 /// a colour map only the colours the user named (a species' colour there pins it out of
 /// the map, and the looks' colours would pin the species whose palette colour moved in
-/// this frame). `mdlod render DIR` and the viewer's timesteps alike.
+/// this frame). `mdlod render DIR` and the viewer's timesteps alike. A look's palette
+/// colour takes `palette`'s place for it, as the species' own colour would.
 pub fn frame_styles(
     own: &[mdlod_format::meta::Species],
     looks: &[mdlod_format::meta::Species],
     styles: &[SpeciesStyle],
     colour_map: bool,
+    palette: Palette,
 ) -> Vec<SpeciesStyle> {
     let mut out = keep_looks(own, looks, styles);
+    for st in &mut out {
+        let named = styles
+            .iter()
+            .any(|u| u.name == st.name && u.colour.is_some());
+        if !named {
+            st.colour = st.colour.map(|c| palette.colour(c));
+        }
+    }
     if colour_map {
         for st in &mut out {
             let named = styles
@@ -472,6 +482,59 @@ impl ColourMap {
     }
 }
 
+/// Which colours the species of mdlod's palette (type numbers, names of no element)
+/// take where no colour is given them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Palette {
+    /// The file's own colours.
+    #[default]
+    Default,
+    /// Okabe and Ito's seven colours (2008), told apart with the common colour-vision
+    /// deficiencies and in grey print by their lightness: palette slot `k` takes the
+    /// `k mod 7`th (black, their eighth, is left out: shaded black spheres show no
+    /// shape).
+    OkabeIto,
+}
+
+/// Okabe and Ito's colours, sRGB: orange, sky blue, bluish green, yellow, blue,
+/// vermilion, reddish purple.
+pub const OKABE_ITO: [[u8; 3]; 7] = [
+    [0xe6, 0x9f, 0x00],
+    [0x56, 0xb4, 0xe9],
+    [0x00, 0x9e, 0x73],
+    [0xf0, 0xe4, 0x42],
+    [0x00, 0x72, 0xb2],
+    [0xd5, 0x5e, 0x00],
+    [0xcc, 0x79, 0xa7],
+];
+
+/// Palette slots looked for in a file's colours (a file of more types than this keeps
+/// the others' colours).
+const PALETTE_SLOTS: usize = 256;
+
+impl Palette {
+    /// The colour (linear RGB) a species of `colour` in the file takes: under
+    /// [`Palette::OkabeIto`], palette slot `k`'s colour ([`mdlod_format::meta::palette_colour`])
+    /// becomes the `k mod 7`th of [`OKABE_ITO`]; any other colour (an element's) stays.
+    pub fn colour(self, colour: [f32; 3]) -> [f32; 3] {
+        match self {
+            Palette::Default => colour,
+            Palette::OkabeIto => palette_slot(colour).map_or(colour, |k| {
+                mdlod_format::meta::srgb_to_linear(OKABE_ITO[k % OKABE_ITO.len()])
+            }),
+        }
+    }
+}
+
+/// The palette slot whose colour `colour` is (linear RGB, as files keep it), if any.
+pub fn palette_slot(colour: [f32; 3]) -> Option<usize> {
+    (0..PALETTE_SLOTS).find(|&k| {
+        let p = mdlod_format::meta::palette_colour_linear(k);
+        (0..3).all(|i| (p[i] - colour[i]).abs() <= 1e-6)
+    })
+}
+
 /// The look of the points of a cut.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PointStyle {
@@ -481,6 +544,9 @@ pub struct PointStyle {
     pub radius_scale: f32,
     /// Colour by the scalar attribute instead of by species.
     pub colour_map: Option<ColourMap>,
+    /// The colours species of the palette take where `species` gives them none.
+    #[serde(default, skip_serializing_if = "is_default_palette")]
+    pub palette: Palette,
     /// Which of the file's attributes the colour map, splat intensities and hidden
     /// values read (a file of format 1.2 keeps several); `None`: the first. See
     /// [`crate::open_styled`].
@@ -525,12 +591,17 @@ pub struct PointStyle {
     pub hidden_named: Vec<(String, [f32; 2])>,
 }
 
+fn is_default_palette(p: &Palette) -> bool {
+    *p == Palette::Default
+}
+
 impl Default for PointStyle {
     fn default() -> Self {
         PointStyle {
             species: vec![],
             radius_scale: 1.0,
             colour_map: None,
+            palette: Palette::Default,
             attribute: None,
             attribute_range: None,
             log_scale: false,
@@ -657,7 +728,7 @@ impl PointStyle {
             .iter()
             .map(|s| {
                 let st = self.style_of(&s.name).cloned().unwrap_or_default();
-                let c = st.colour.unwrap_or(s.colour);
+                let c = st.colour.unwrap_or_else(|| self.palette.colour(s.colour));
                 let r = if st.hidden {
                     0.0
                 } else {
@@ -1516,6 +1587,46 @@ mod tests {
             .collect()
     }
 
+    /// `--palette okabe-ito`: palette colours (of any slot, the generated ones past the
+    /// tenth too) become Okabe and Ito's, an element's colour and a colour given stay,
+    /// and clusters are recoloured with them; a trajectory's looks map alike.
+    #[test]
+    fn the_okabe_ito_palette_replaces_palette_colours_only() {
+        use mdlod_format::meta::{palette_colour_linear, srgb_to_linear};
+        let copper = srgb_to_linear([0xc8, 0x80, 0x33]);
+        let file = species(&[
+            palette_colour_linear(0),
+            palette_colour_linear(1),
+            copper,
+            palette_colour_linear(12),
+        ]);
+        let oi = |k: usize| srgb_to_linear(OKABE_ITO[k]);
+        let style = PointStyle {
+            palette: Palette::OkabeIto,
+            ..style_of(&[(1, [0.0, 0.0, 0.0])])
+        };
+        let table = style.species_table(&file).unwrap();
+        let rgb = |t: [f32; 4]| [t[0], t[1], t[2]];
+        assert_eq!(rgb(table[0]), oi(0));
+        assert_eq!(rgb(table[1]), [0.0, 0.0, 0.0], "a colour given stays");
+        assert_eq!(rgb(table[2]), copper, "an element's colour stays");
+        assert_eq!(rgb(table[3]), oi(12 % 7));
+        assert_eq!(palette_slot(copper), None);
+        assert!(style.cluster_recolour(&file, &table).is_some());
+        // The default palette changes nothing.
+        let plain = PointStyle::default();
+        let table = plain.species_table(&file).unwrap();
+        assert!(file.iter().zip(&table).all(|(s, t)| s.colour == rgb(*t)));
+        assert_eq!(plain.cluster_recolour(&file, &table), None);
+        // A frame whose species took another palette slot in the trajectory's looks.
+        let own = species(&[palette_colour_linear(2)]);
+        let looks = species(&[palette_colour_linear(4)]);
+        let styled = frame_styles(&own, &looks, &[], false, Palette::OkabeIto);
+        assert_eq!(styled[0].colour, Some(oi(4)));
+        let styled = frame_styles(&own, &looks, &[], false, Palette::Default);
+        assert_eq!(styled[0].colour, Some(palette_colour_linear(4)));
+    }
+
     /// A style giving species `s{i}` colour `c` for each `(i, c)`.
     fn style_of(new: &[(usize, [f32; 3])]) -> PointStyle {
         PointStyle {
@@ -1840,6 +1951,7 @@ mod tests {
             ],
             radius_scale: 2.0,
             colour_map: None,
+            palette: Palette::Default,
             attribute: None,
             attribute_range: None,
             range_derived: false,

@@ -984,6 +984,7 @@ fn styles_recolour_resize_and_hide_points_when_packed() {
             ],
             radius_scale: 1.5,
             colour_map: map,
+            palette: Default::default(),
             attribute: None,
             attribute_range: None,
             range_derived: false,

@@ -132,6 +132,7 @@ pub fn run(args: Args) -> Result<()> {
             attribute: None,
             radius_scale: 1.0,
             species_colour: vec![],
+            palette: super::render::PaletteArg::Default,
             species_radius: vec![],
             hide_species: vec![],
             hide_attribute: vec![],

@@ -1323,6 +1323,12 @@ pub struct StyleArgs {
     /// coloured by speed; clusters mixing both take the map's colour of their mean)
     #[arg(long = "species-colour", value_name = "NAME=COLOUR")]
     pub species_colour: Vec<String>,
+    /// The colours of species that take mdlod's palette (type numbers, names of no
+    /// element) where --species-colour gives none: `okabe-ito`, Okabe and Ito's seven,
+    /// told apart with the common colour-vision deficiencies and in grey print (an
+    /// element's colour stays; types past the seventh repeat them)
+    #[arg(long, value_enum, default_value_t = PaletteArg::Default)]
+    pub palette: PaletteArg,
     /// A species' radius, e.g. `Ag=1.6`; repeatable. Particles of their own sizes keep
     /// their proportions (the species' mean becomes R).
     #[arg(long = "species-radius", value_name = "NAME=R")]
@@ -1533,6 +1539,12 @@ pub enum ColourMapArg {
     Grey,
 }
 
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PaletteArg {
+    Default,
+    OkabeIto,
+}
+
 impl ColourMapArg {
     pub fn map(self) -> mdlod_render::ColourMap {
         use mdlod_render::ColourMap;
@@ -1658,6 +1670,10 @@ impl StyleArgs {
                 .filter_map(|h| Some((h.by.clone()?, h.range)))
                 .collect(),
             colour_map: self.colour_map.map(ColourMapArg::map),
+            palette: match self.palette {
+                PaletteArg::Default => mdlod_render::style::Palette::Default,
+                PaletteArg::OkabeIto => mdlod_render::style::Palette::OkabeIto,
+            },
         })
     }
 }
@@ -1903,6 +1919,7 @@ const MODE_OPTIONS: &[(&str, &[Mode])] = {
         ("colour_map", &[Spheres, Sndf, Splat, Density, Iso]),
         ("radius_scale", STYLED),
         ("species_colour", &[Spheres, Sndf, Splat, SplatOver, Iso]),
+        ("palette", &[Spheres, Sndf, Splat, SplatOver, Iso]),
         ("species_radius", STYLED),
         ("attribute_range", &[Spheres, Sndf, Splat, Density, Iso]),
         ("log_scale", &[Spheres, Sndf, Splat, Density, Iso]),
@@ -2119,6 +2136,19 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
         anyhow::bail!(
             "--species-colour has no effect on a projection (--mode splat with \
              --colour-map colours each pixel's light, not the particles)"
+        );
+    }
+    if args.style.palette != PaletteArg::Default
+        && (args.style.colour_map.is_some() || lit_by_value(args))
+    {
+        anyhow::bail!(
+            "--palette has no effect with {}: it colours species, which the attribute's \
+             colours replace",
+            if args.style.colour_map.is_some() {
+                "--colour-map"
+            } else {
+                "--intensity attribute"
+            }
         );
     }
     if args.mode == Mode::Iso
@@ -3962,11 +3992,11 @@ fn build_legend(
             )
         }
         _ => {
-            // Spheres and S-NDFs draw the style's colours; splats and the iso-surface
-            // the file's.
+            // Spheres, S-NDFs, splats and the iso-surface draw the style's colours; the
+            // density volume the transfer function's (keyed by its bar).
             let styled = matches!(
                 args.mode,
-                Mode::Spheres | Mode::Sndf | Mode::Splat | Mode::SplatOver
+                Mode::Spheres | Mode::Sndf | Mode::Splat | Mode::SplatOver | Mode::Iso
             );
             let table = opts.style.species_table(species).ok();
             let mut shown: Vec<(String, [f32; 3])> = species
@@ -5348,6 +5378,7 @@ fn render_frames(
             &looks,
             &style.species,
             opts.style.colour_map.is_some(),
+            opts.style.palette,
         );
         let changed: Vec<String> = opts
             .style

@@ -388,6 +388,7 @@ impl<'r> Thread<'r> {
                 &self.looks,
                 &opts.style.species,
                 opts.style.colour_map.is_some(),
+                opts.style.palette,
             );
         }
         let Some(map) = opts.style.colour_map else {
