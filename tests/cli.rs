@@ -6410,7 +6410,7 @@ fn frames_count_from_the_end_and_the_summary_names_the_frame() {
     assert_ne!(t_second, t_last);
     let err = fails(&["convert", s(&input), "-o", s(&out), "--frame", "-4"]);
     assert!(
-        err.contains("frame -4 does not exist; the file has 3 frame(s)"),
+        err.contains("frame -4 does not exist; the file has 3 frames"),
         "{err}"
     );
     // A single-frame input says nothing of frames.
@@ -13642,4 +13642,37 @@ fn the_okabe_ito_palette_colours_the_palette_species_and_their_key() {
         e.contains("--palette has no effect with --colour-map"),
         "{e}"
     );
+}
+
+/// In a Slurm job array's task, `--shard none` converts every frame into dataset.json
+/// (an array of one task wrote a shard's manifest, which render refused until merged,
+/// and no option gave a whole run); the array's own shard names the merge.
+#[test]
+fn shard_none_makes_a_whole_run_inside_a_job_array() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = lammps_sample_path("cu_melt.custom.dump");
+    let run = |d: &Path, extra: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_mdlod"))
+            .args([&["batch", s(&dump), "-o", s(d)][..], extra].concat())
+            .env("SLURM_ARRAY_TASK_ID", "0")
+            .env("SLURM_ARRAY_TASK_COUNT", "1")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let (arrayed, whole) = (dir.path().join("a"), dir.path().join("w"));
+    let said = run(&arrayed, &[]);
+    assert!(arrayed.join("dataset.shard-0-of-1.json").exists());
+    assert!(
+        said.contains("from the Slurm job array's variables") && said.contains("--merge"),
+        "{said}"
+    );
+    run(&whole, &["--shard", "none"]);
+    assert!(whole.join("dataset.json").exists());
+    assert!(!whole.join("dataset.shard-0-of-1.json").exists());
 }

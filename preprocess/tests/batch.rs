@@ -4099,3 +4099,42 @@ fn frames_of_other_inputs_still_there_are_not_replaced() {
     let r = batch(&xyz, &xyz_out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (0, 3));
 }
+
+/// A binary dump of a set cut inside its frame's chunks fails with `--keep-going` under
+/// its own timestep, which its header gives (it was listed by its place among the
+/// inputs, timestep 1 for 250, so a script rerunning by timestep was misled).
+#[test]
+fn a_binary_frame_cut_inside_its_chunks_fails_under_its_own_timestep() {
+    let dir = tempfile::tempdir().unwrap();
+    let inputs: Vec<PathBuf> = [0, 250, 500]
+        .iter()
+        .map(|t| {
+            let p = dir.path().join(format!("cu.{t}.bin"));
+            std::fs::copy(lammps_sample_path(&format!("cu_melt.step.{t}.bin")), &p).unwrap();
+            p
+        })
+        .collect();
+    let f = std::fs::File::options()
+        .write(true)
+        .open(&inputs[1])
+        .unwrap();
+    f.set_len(5000).unwrap();
+    drop(f);
+    let out = dir.path().join("out");
+    let keep_going = BatchOptions {
+        keep_going: true,
+        ..opts()
+    };
+    let r = batch(&inputs, &out, &keep_going, &NoProgress).unwrap();
+    assert_eq!(r.converted, 2);
+    assert_eq!(r.failed.len(), 1, "{:?}", r.failed);
+    assert_eq!(
+        (r.failed[0].timestep, r.failed[0].listed_timestep),
+        (Some(250), Some(250))
+    );
+    let m = read_manifest(&out).unwrap();
+    assert_eq!(
+        m.failed.iter().map(|f| f.timestep).collect::<Vec<_>>(),
+        [Some(250)]
+    );
+}

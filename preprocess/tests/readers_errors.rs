@@ -484,7 +484,7 @@ fn missing_file_and_missing_frame() {
     assert_eq!(
         got,
         format!(
-            "{}: frame 1 does not exist; the file has 1 frame(s), counted from 0 (the last is \
+            "{}: frame 1 does not exist; the file has 1 frame, counted from 0 (the last is \
              0)",
             path.display()
         )

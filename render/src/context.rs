@@ -99,6 +99,11 @@ impl GpuContext {
     async fn open(choice: BackendChoice) -> Result<Self, RenderError> {
         let env_value = std::env::var("WGPU_BACKEND").ok();
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        // Set but empty (`WGPU_BACKEND= mdlod ...`, a script's unset variable): as unset.
+        let env_value = env_value.filter(|v| !v.trim().is_empty());
+        if env_value.is_none() {
+            desc.backends = wgpu::InstanceDescriptor::new_without_display_handle().backends;
+        }
         let env_note = match choice {
             BackendChoice::FromEnv => match &env_value {
                 Some(v) => format!(", WGPU_BACKEND={v}"),

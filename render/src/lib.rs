@@ -585,13 +585,14 @@ const NAMED_COLOURS: [(&str, &str); 27] = [
     ("indigo", "4b0082"),
 ];
 
-/// Parses a colour as `#rrggbb`, `rrggbb`, three numbers in [0, 1] separated by commas,
-/// or a name (`NAMED_COLOURS`: `red`, `grey`, ...).
+/// Parses a colour as `#rrggbb`, `rrggbb`, CSS's short `#rgb` (`#f00`: `#ff0000`),
+/// three numbers in [0, 1] separated by commas, or a name (`NAMED_COLOURS`: `red`,
+/// `grey`, ...).
 pub fn parse_colour(s: &str) -> Result<[f32; 3], RenderError> {
     let bad = || {
         let names: Vec<&str> = NAMED_COLOURS.iter().map(|(n, _)| *n).collect();
         RenderError::InvalidOptions(format!(
-            "colour {s:?} (use #rrggbb, r,g,b with each in 0..1, or one of {})",
+            "colour {s:?} (use #rrggbb, #rgb, r,g,b with each in 0..1, or one of {})",
             names.join(", ")
         ))
     };
@@ -604,6 +605,13 @@ pub fn parse_colour(s: &str) -> Result<[f32; 3], RenderError> {
     if hex.len() == 6 && hex.chars().all(|c| c.is_ascii_hexdigit()) {
         let v = u32::from_str_radix(hex, 16).map_err(|_| bad())?;
         return Ok([16, 8, 0].map(|sh| ((v >> sh) & 0xff) as f32 / 255.0));
+    }
+    // (Only with its `#`: three bare digits, `100`, are no colour.)
+    if let Some(short) = t.strip_prefix('#') {
+        if short.len() == 3 && short.chars().all(|c| c.is_ascii_hexdigit()) {
+            let v = u32::from_str_radix(short, 16).map_err(|_| bad())?;
+            return Ok([8, 4, 0].map(|sh| ((v >> sh) & 0xf) as f32 * 17.0 / 255.0));
+        }
     }
     let parts: Vec<f32> = t
         .split(',')
@@ -3093,6 +3101,11 @@ mod tests {
     fn colours_parse() {
         assert_eq!(parse_colour("#ff0080").unwrap(), [1.0, 0.0, 128.0 / 255.0]);
         assert_eq!(parse_colour("000000").unwrap(), [0.0; 3]);
+        assert_eq!(
+            parse_colour("#f08").unwrap(),
+            parse_colour("#ff0088").unwrap()
+        );
+        assert!(parse_colour("f08").is_err());
         assert_eq!(parse_colour("0.5, 1, 0").unwrap(), [0.5, 1.0, 0.0]);
         assert_eq!(parse_colour("Red").unwrap(), [1.0, 0.0, 0.0]);
         assert_eq!(parse_colour("lime").unwrap(), [0.0, 1.0, 0.0]);

@@ -31,10 +31,11 @@ pub struct Args {
     /// Join the shard manifests of this batch directory into dataset.json.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["inputs", "output", "shard"])]
     pub merge: Option<PathBuf>,
-    /// Convert only shard I of N (0-based), e.g. 3/16.
+    /// Convert only shard I of N (0-based), e.g. 3/16; `none`: every frame into
+    /// dataset.json, whatever a Slurm job array's variables say.
     #[arg(long, value_name = "I/N", allow_hyphen_values = true,
           value_parser = |s: &str| parse_shard(s).map_err(|e| format!("{e:#}")))]
-    pub shard: Option<(u32, u32)>,
+    pub shard: Option<ShardArg>,
     /// Memory all concurrent conversions may use together (e.g. 4G; default: half of
     /// the memory this process may have: the machine's, or the Slurm job's allocation).
     #[arg(long, value_parser = parse_bytes, allow_hyphen_values = true)]
@@ -46,7 +47,7 @@ pub struct Args {
     /// that overlap): an error, or convert the first or the last of each (in the order
     /// of the inputs and their frames) and leave the others out; with `last`, a restart
     /// also leaves out the earlier frames past its timestep that it did not reach.
-    #[arg(long, value_enum, default_value = "error")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "error")]
     pub duplicate_timesteps: DuplicatesArg,
     /// A frame that cannot be converted for what it holds (a NaN, a bad box, a damaged
     /// older file, an input that holds no dump) is reported and the others are
@@ -77,8 +78,19 @@ pub enum DuplicatesArg {
     Last,
 }
 
-/// Parses `I/N`.
-fn parse_shard(s: &str) -> Result<(u32, u32)> {
+/// `--shard`: one shard of N, or the whole run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShardArg {
+    /// `none`: the whole run, in a job array's task too.
+    Whole,
+    Part(u32, u32),
+}
+
+/// Parses `I/N`, or `none`.
+fn parse_shard(s: &str) -> Result<ShardArg> {
+    if s.trim() == "none" {
+        return Ok(ShardArg::Whole);
+    }
     let (i, n) = s
         .split_once('/')
         .with_context(|| format!("shard {s:?}: expected I/N, e.g. 3/16"))?;
@@ -90,7 +102,8 @@ fn parse_shard(s: &str) -> Result<(u32, u32)> {
             .parse()
             .with_context(|| format!("shard {s:?}: the count is not a number from 1"))?,
     );
-    check_shard(i, n).with_context(|| format!("shard {s:?}"))
+    let (i, n) = check_shard(i, n).with_context(|| format!("shard {s:?}"))?;
+    Ok(ShardArg::Part(i, n))
 }
 
 fn check_shard(i: u32, n: u32) -> Result<(u32, u32)> {
@@ -105,10 +118,11 @@ fn check_shard(i: u32, n: u32) -> Result<(u32, u32)> {
 
 /// The shard from the command line, else from a Slurm job array's environment.
 fn shard(args: &Args) -> Result<Option<(u32, u32)>> {
-    if let Some(s) = args.shard {
-        return Ok(Some(s));
+    match args.shard {
+        Some(ShardArg::Part(i, n)) => Ok(Some((i, n))),
+        Some(ShardArg::Whole) => Ok(None),
+        None => slurm_shard(|name| std::env::var(name).ok()),
     }
-    slurm_shard(|name| std::env::var(name).ok())
 }
 
 /// The shard of a Slurm job array task: the task's position in the array, of the array's
@@ -607,7 +621,11 @@ fn run_batch(args: &Args, out: &std::path::Path, shard: Option<(u32, u32)>) -> R
     // task a whole trajectory of its own converts only a share of it.)
     let share = opts.shard.map_or(String::new(), |(i, n)| {
         let from = match args.shard {
-            None => " (from the Slurm job array's variables; --shard 0/1 converts every frame)",
+            None => {
+                " (from the Slurm job array's variables: `mdlod batch --merge` joins the \
+                 shards' manifests once every task has ended; --shard none converts every \
+                 frame into dataset.json)"
+            }
             Some(_) => "",
         };
         format!(", {} in shard {i} of {n}{from}", report.frames_in_shard)
@@ -935,5 +953,11 @@ mod tests {
         assert!(e.contains("count must be at least 1"), "{e}");
         let e = format!("{:#}", super::parse_shard("4/4").unwrap_err());
         assert!(e.contains("index 4 must be below the count 4"), "{e}");
+        assert_eq!(
+            super::parse_shard("3/16").unwrap(),
+            super::ShardArg::Part(3, 16)
+        );
+        // `none`: the whole run, which a job array's task gets no other way.
+        assert_eq!(super::parse_shard("none").unwrap(), super::ShardArg::Whole);
     }
 }

@@ -130,20 +130,21 @@ pub struct BuildArgs {
     #[arg(long)]
     pub no_sizes: bool,
     /// Bits per quantized coordinate.
-    #[arg(long, value_enum, default_value = "u16")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "u16")]
     pub precision: Precision,
     /// A cluster is split while it holds more than this many points.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, value_parser = super::whole_number_u32)]
     pub cluster_size: u32,
     /// The coarsest level holds at most this many points.
-    #[arg(long, default_value_t = 4096)]
+    #[arg(long, default_value_t = 4096, value_parser = super::whole_number_u32)]
     pub root_points: u32,
     /// Levels between a node and the points it is drawn with (δn), 1 to 8.
     #[arg(long, default_value_t = 1)]
     pub delta_n: u32,
     /// Frames above this many particles are built out of core, in spatial chunks of at
     /// most this many (the choice is recorded in the file).
-    #[arg(long, default_value_t = mdlod_preprocess::chunked::DEFAULT_CHUNK_POINTS)]
+    #[arg(long, default_value_t = mdlod_preprocess::chunked::DEFAULT_CHUNK_POINTS,
+          value_parser = super::whole_number_usize)]
     pub chunk_points: usize,
     /// Directory for the working files of out-of-core builds (default: the output's
     /// directory); they are removed on success, on failure and on Ctrl-C or SIGTERM, and

@@ -15,7 +15,10 @@ use mdlod_format::MdlodFile;
 pub struct Args {
     /// Number of particles to generate.
     #[arg(long, short = 'n', default_value_t = 1_000_000,
-          value_parser = clap::value_parser!(u64).range(1..))]
+          value_parser = |s: &str| match super::whole_number(s)? {
+              0 => Err("at least 1 particle".to_string()),
+              n => Ok(n),
+          })]
     pub particles: u64,
     /// Where to put the generated dump and the .mdlod file.
     #[arg(long, default_value = "data/demo")]

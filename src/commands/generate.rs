@@ -13,20 +13,21 @@ use mdlod_datasets::{write_lammps_dump, write_xyz, GenerateOptions, Kind};
 /// liquid layer torn into droplets (droplets).
 #[derive(clap::Args)]
 #[command(
+    allow_negative_numbers = true,
     after_help = "Example:\n  mdlod generate crater --particles 1000000 -o data/crater.lammpstrj"
 )]
 pub struct Args {
     /// crater, alloy or droplets.
     pub kind: Kind,
     /// Number of particles per frame.
-    #[arg(long, short = 'n', default_value_t = 100_000)]
+    #[arg(long, short = 'n', default_value_t = 100_000, value_parser = super::whole_number)]
     pub particles: u64,
     /// The file to write: a LAMMPS dump, an extended XYZ file, or the NAME.raw.json
     /// sidecar of raw arrays (--format).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Random seed.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::whole_number)]
     pub seed: u64,
     /// Number of frames (timesteps 0, 100, 200, ...).
     #[arg(long, default_value_t = 1)]
@@ -34,7 +35,7 @@ pub struct Args {
     /// Output format: a LAMMPS text dump, extended XYZ (the same values, the type
     /// number as species), or raw arrays with a sidecar (give the output as
     /// NAME.raw.json; one frame; the fastest input for huge conversions).
-    #[arg(long, value_enum, default_value = "lammps")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "lammps")]
     pub format: OutputFormat,
 }
 
@@ -88,13 +89,14 @@ pub fn run(args: Args) -> Result<()> {
         OutputFormat::Raw => generate_raw(&opts, &args.output)?,
     };
     println!(
-        "wrote {}: {} frame(s) of {} particles ({} species, extra column {}), {:.1} MiB",
+        "wrote {}: {} frame{} of {} particles ({} species, extra column {}), {}",
         args.output.display(),
         summary.frames,
+        if summary.frames == 1 { "" } else { "s" },
         summary.particles,
         summary.species,
         summary.extra_column,
-        summary.bytes as f64 / (1 << 20) as f64
+        super::size_text(summary.bytes)
     );
     Ok(())
 }
@@ -135,8 +137,9 @@ fn check_room(args: &Args) -> Result<()> {
             b => format!("{:.1} MB", b / 1e6),
         };
         anyhow::bail!(
-            "{} frame(s) of {} particles need about {}, more than the {} free in {}",
+            "{} frame{} of {} particles need about {}, more than the {} free in {}",
             args.frames,
+            if args.frames == 1 { "" } else { "s" },
             args.particles,
             size(need),
             size(free as f64),

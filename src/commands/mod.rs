@@ -359,3 +359,81 @@ mod tests {
         check_batch_output(&dir.path().join("new.d"), std::slice::from_ref(&input)).unwrap();
     }
 }
+
+/// A count as scientists write one: `1000000`, `1_000_000` or `1e6` (a whole number in
+/// scientific notation); anything else, a decimal comma or separator included, is named
+/// with the forms that are (the standard parser said "invalid digit found in string").
+pub fn whole_number(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let bad = || {
+        format!(
+            "{s:?} is not a whole number from 0 (write 1000000, 1_000_000 or 1e6{})",
+            if t.contains(',') { "; no commas" } else { "" }
+        )
+    };
+    let digits: String = t.chars().filter(|&c| c != '_').collect();
+    if t.starts_with('_') || t.ends_with('_') || t.contains("__") {
+        return Err(bad());
+    }
+    if let Ok(n) = digits.parse::<u64>() {
+        return Ok(n);
+    }
+    // `1e6`, `2.5e6`: exact in a double up to 2^53, and whole.
+    let (m, e) = digits.split_once(['e', 'E']).ok_or_else(bad)?;
+    let exponent: u32 = e
+        .strip_prefix('+')
+        .unwrap_or(e)
+        .parse()
+        .map_err(|_| bad())?;
+    let mantissa: f64 = m.parse().map_err(|_| bad())?;
+    if !m.bytes().all(|b| b.is_ascii_digit() || b == b'.') || exponent > 19 {
+        return Err(bad());
+    }
+    let v = mantissa * 10f64.powi(exponent as i32);
+    if v.fract() != 0.0 || !(0.0..=9.007_199_254_740_992e15).contains(&v) {
+        return Err(format!("{s:?} is not a whole number below 2^53"));
+    }
+    Ok(v as u64)
+}
+
+/// [`whole_number`] for an option of 32 bits.
+pub fn whole_number_u32(s: &str) -> Result<u32, String> {
+    let n = whole_number(s)?;
+    u32::try_from(n).map_err(|_| format!("{s:?} is too large (at most {})", u32::MAX))
+}
+
+/// [`whole_number`] for an option of the machine's word.
+pub fn whole_number_usize(s: &str) -> Result<usize, String> {
+    let n = whole_number(s)?;
+    usize::try_from(n).map_err(|_| format!("{s:?} is too large (at most {})", usize::MAX))
+}
+
+#[cfg(test)]
+mod whole_number_tests {
+    use super::*;
+
+    #[test]
+    fn counts_take_separators_and_scientific_notation() {
+        for (s, n) in [
+            ("1000000", 1_000_000),
+            ("1_000_000", 1_000_000),
+            ("1e6", 1_000_000),
+            ("2.5E6", 2_500_000),
+            ("1e+3", 1000),
+            (" 42 ", 42),
+            ("0", 0),
+        ] {
+            assert_eq!(whole_number(s), Ok(n), "{s}");
+        }
+        for s in [
+            "1.5", "1e-3", "-1", "1,000", "1__0", "_1", "1e", "e6", "0x10", "1e20", "",
+        ] {
+            assert!(whole_number(s).is_err(), "{s}");
+        }
+        assert!(whole_number("1,000").unwrap_err().contains("no commas"));
+        assert_eq!(
+            whole_number_u32("5e9").unwrap_err(),
+            "\"5e9\" is too large (at most 4294967295)"
+        );
+    }
+}

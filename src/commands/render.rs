@@ -59,7 +59,7 @@ pub struct Args {
     pub diffuse: Option<f32>,
     /// Reflectance, spheres and S-NDF modes: Lambert only, or Lambert plus a Blinn-Phong
     /// highlight [default: blinn-phong].
-    #[arg(long, value_enum)]
+    #[arg(long, value_enum, ignore_case = true)]
     pub brdf: Option<super::shade::Brdf>,
     /// Blinn-Phong highlight weight (with --brdf blinn-phong) [default: 0.25].
     #[arg(long)]
@@ -90,7 +90,8 @@ pub struct Args {
     /// previews every tenth, `0:250` and `250:500` split a movie between two jobs. The
     /// camera, colour range and image numbers are those of the whole movie, so pieces
     /// rendered apart join up
-    #[arg(long, value_name = "START:END[:STEP]", value_parser = parse_frames)]
+    #[arg(long, value_name = "START:END[:STEP]", value_parser = parse_frames,
+          allow_hyphen_values = true)]
     pub frames: Option<FrameSelection>,
     /// Stream node data through a GPU memory pool of this size (e.g. 512M, 2G).
     #[arg(long, value_parser = parse_bytes)]
@@ -100,7 +101,7 @@ pub struct Args {
     /// over-blended, for data that needs depth order; spheres sampled into S-NDFs and
     /// shaded from them; the image-space density volume (density) or its iso-surface
     /// (iso).
-    #[arg(long, value_enum, default_value = "spheres")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "spheres")]
     pub mode: Mode,
     /// iso mode: the surface's volume fraction (φ: 0.74 in a close packing of the
     /// largest species' spheres).
@@ -134,21 +135,21 @@ pub struct Args {
     #[arg(long, default_value_t = 8)]
     pub bins: u32,
     /// sndf mode: how normals are binned.
-    #[arg(long, value_enum, default_value = "projected")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "projected")]
     pub binning: BinningArg,
     /// splat-over mode: the splats' peak opacity, in (0, 1].
     #[arg(long, default_value_t = 0.8)]
     pub opacity: f32,
     /// splat-over mode: the back-to-front order: the hierarchy's clusters bucket-sorted
     /// by depth with each cluster's points sorted (fast), or every point sorted (exact).
-    #[arg(long, value_enum, default_value = "clusters")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "clusters")]
     pub sort: SortArg,
     /// Splat mode: each point's light is its species colour, or its scalar attribute
     /// (the file's per-particle column: from 0, so that light is proportional to the
     /// value, where no value is below 0, else over the file's range; --attribute-range
     /// sets another; a constant column, equal-mass SPH particles say, gives every point
     /// its value).
-    #[arg(long, value_enum, default_value = "species")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "species")]
     pub intensity: Intensity,
     /// Splat mode: light added per unit of flux (default: chosen from the image's light,
     /// the attribute's with --intensity attribute).
@@ -1311,7 +1312,7 @@ fn species_name(s: &str) -> Result<String, String> {
 pub struct StyleArgs {
     /// Colour the particles by the file's scalar attribute through this colour map
     /// (clusters by their mean) instead of by species.
-    #[arg(long, value_enum)]
+    #[arg(long, value_enum, ignore_case = true)]
     pub colour_map: Option<ColourMapArg>,
     /// Multiply every radius by this (occlusion culling is then off).
     #[arg(long, default_value_t = 1.0)]
@@ -1327,7 +1328,7 @@ pub struct StyleArgs {
     /// element) where --species-colour gives none: `okabe-ito`, Okabe and Ito's seven,
     /// told apart with the common colour-vision deficiencies and in grey print (an
     /// element's colour stays; types past the seventh repeat them)
-    #[arg(long, value_enum, default_value_t = PaletteArg::Default)]
+    #[arg(long, value_enum, ignore_case = true, default_value_t = PaletteArg::Default)]
     pub palette: PaletteArg,
     /// A species' radius, e.g. `Ag=1.6`; repeatable. Particles of their own sizes keep
     /// their proportions (the species' mean becomes R).
@@ -1516,6 +1517,12 @@ pub fn parse_range(s: &str) -> Result<[f32; 2], String> {
     let (lo, hi) = s
         .split_once(':')
         .ok_or_else(|| format!("{s:?}: expected MIN:MAX, e.g. 0:2.5"))?;
+    if lo.trim().is_empty() || hi.trim().is_empty() {
+        return Err(format!(
+            "{s:?}: give both ends, MIN:MAX (no end is left open here; `mdlod info` prints \
+             the file's own range)"
+        ));
+    }
     let num = |v: &str| -> Result<f32, String> {
         v.trim()
             .parse::<f32>()
@@ -1536,6 +1543,7 @@ pub enum ColourMapArg {
     Magma,
     Cividis,
     CoolWarm,
+    #[value(alias = "gray")]
     Grey,
 }
 
@@ -1700,11 +1708,11 @@ pub struct ViewArgs {
     /// Orbit angle around the vertical axis (z), degrees [default: 30; with --view, the
     /// file's; without either angle here or in the file, data whose particles lie in one
     /// plane (a 2D simulation) is seen square on: straight down on an x-y layer].
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_hyphen_values = true)]
     pub azimuth: Option<f32>,
     /// Angle above the horizontal (the x-y plane), degrees [default: 20; with --view, the
     /// file's; flat data as for --azimuth].
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_hyphen_values = true)]
     pub elevation: Option<f32>,
     /// 1 fits the data; 2 is twice as close (with --view: twice as close as the saved
     /// view) [default: 1].
@@ -2340,10 +2348,9 @@ pub fn check_mode_options(args: &Args, matches: &clap::ArgMatches) -> Result<()>
 pub fn parse_budget(s: &str) -> Result<u64, String> {
     const ZERO: &str = "0 spheres draw nothing: the budget is at least 1 (1 draws the whole \
                         data set as one sphere)";
-    match s.trim().parse::<u64>() {
-        Ok(0) => Err(ZERO.into()),
-        Ok(n) => Ok(n),
-        Err(_) => Err(format!("{s:?} is not a whole number of spheres")),
+    match super::whole_number(s)? {
+        0 => Err(ZERO.into()),
+        n => Ok(n),
     }
 }
 
@@ -2827,14 +2834,16 @@ pub fn run(mut args: Args) -> Result<()> {
         String::new()
     };
     println!(
-        "wrote {} ({}x{}{samples}) on {} ({}): {} particles{hidden} and {} {points} in {} draw range{}{occluded}, error {:.2} px{limits}",
+        "wrote {} ({}x{}{samples}) on {} ({}): {} particle{}{hidden} and {} {} in {} draw range{}{occluded}, error {:.2} px{limits}",
         args.output.display(),
         r.width,
         r.height,
         r.adapter,
         r.backend,
         r.particles_drawn,
+        if r.particles_drawn == 1 { "" } else { "s" },
         r.nodes_drawn,
+        counted(points, r.nodes_drawn),
         r.ranges,
         if r.ranges == 1 { "" } else { "s" },
         r.error_px,
@@ -4044,6 +4053,15 @@ fn point_noun(mode: Mode) -> &'static str {
     }
 }
 
+/// `noun` (a plural, as [`point_noun`] gives it) for `n` of them: singular for one.
+fn counted(noun: &str, n: u64) -> &str {
+    if n == 1 {
+        noun.strip_suffix('s').unwrap_or(noun)
+    } else {
+        noun
+    }
+}
+
 /// A note when clusters took new species colours only approximately (`miss`: the
 /// largest channel error of [`mdlod_render::PointStyle::recolour_miss`]).
 fn recolour_note(miss: Option<f32>, species: usize) -> Option<String> {
@@ -4700,12 +4718,13 @@ fn image_line(
     coarsest: Option<u64>,
 ) -> String {
     format!(
-        "wrote {} ({which}): {} particles{} and {} {}{}, error {:.2} px, {:.0} ms",
+        "wrote {} ({which}): {} particle{}{} and {} {}{}, error {:.2} px, {:.0} ms",
         out.display(),
         r.particles_drawn,
+        if r.particles_drawn == 1 { "" } else { "s" },
         hidden_text(r, &args.style),
         r.nodes_drawn,
-        point_noun(args.mode),
+        counted(point_noun(args.mode), r.nodes_drawn),
         limits_text(r, coarsest, args.budget),
         r.error_px,
         r.total_time.as_secs_f64() * 1e3

@@ -55,7 +55,7 @@ pub struct Args {
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=32))]
     pub bins: u32,
     /// How normals are binned.
-    #[arg(long, value_enum, default_value = "projected")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "projected")]
     pub binning: super::render::BinningArg,
     /// Sample finer than the image (up to 16× per axis) until every particle sphere gets
     /// at least this many samples; `shade` then shows the image size by default.

@@ -11,8 +11,11 @@ use mdlod_render::sndf::ShadeLights;
 /// Shade a .sndf file (written by `mdlod sample`) under new lights, at its own resolution
 /// or a coarser S-MIP level, without the particles.
 #[derive(clap::Args)]
-#[command(after_help = "Example:\n  \
-    mdlod shade view.sndf -o lit.png --light -1,1,1 --light 1,0,0.5:#4060ff --brdf lambert")]
+#[command(
+    allow_negative_numbers = true,
+    after_help = "Example:\n  \
+    mdlod shade view.sndf -o lit.png --light -1,1,1 --light 1,0,0.5:#4060ff --brdf lambert"
+)]
 pub struct Args {
     /// The .sndf file to shade (written by `mdlod sample`).
     pub input: PathBuf,
@@ -35,7 +38,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0.85)]
     pub diffuse: f32,
     /// Reflectance: Lambert only, or Lambert plus a Blinn-Phong highlight.
-    #[arg(long, value_enum, default_value = "blinn-phong")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "blinn-phong")]
     pub brdf: Brdf,
     /// Blinn-Phong highlight weight (with --brdf blinn-phong).
     #[arg(long, default_value_t = 0.25)]

@@ -122,12 +122,13 @@ fn run_file(args: &Args) -> Result<()> {
         );
     }
     println!(
-        "{}: ok: {} sections ({}) checksummed, {} points decoded, {} nodes checked in {:.2} s",
+        "{}: ok: {} sections ({}) checksummed, {} points decoded, {} node{} checked in {:.2} s",
         args.file.display(),
         r.sections,
         super::size_text(r.bytes_hashed),
         r.points_decoded,
         f.nodes().len(),
+        if f.nodes().len() == 1 { "" } else { "s" },
         t.elapsed().as_secs_f64()
     );
     println!(

@@ -30,7 +30,7 @@ pub struct Args {
     /// How to draw the points at the start (keys 1-6 switch): ray-cast spheres
     /// (`standard`, also called `spheres`, as render names them), the same supersampled
     /// once the view is still, S-NDFs, splats, the density volume or its iso-surface.
-    #[arg(long, value_enum, default_value = "standard")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "standard")]
     pub mode: ModeArg,
     /// Play a script: a JSON array of actions (orbit, pan, zoom, mode, light, step,
     /// screenshot, save_sndf, save_view, ...), then close; any error fails the command.

@@ -85,6 +85,9 @@ pub(crate) struct Index {
 struct Cut {
     offset: usize,
     message: String,
+    /// Its timestep, where the file holds it (a frame cut inside its chunks): a batch
+    /// names the frame by it, not by its place among the inputs.
+    timestep: Option<u64>,
 }
 
 struct Reader<'a> {
@@ -174,7 +177,8 @@ impl Index {
         let mut cut = None;
         while r.pos < data.len() {
             let start = r.pos;
-            let mut h = match header(&mut r) {
+            let mut timestep = None;
+            let mut h = match header(&mut r, &mut timestep) {
                 Ok(h) => h,
                 // The file ends inside this frame (header or chunks): a run still
                 // writing it, or a copy that stopped.
@@ -182,6 +186,7 @@ impl Index {
                     cut = Some(Cut {
                         offset: start,
                         message,
+                        timestep,
                     });
                     break;
                 }
@@ -206,8 +211,13 @@ impl Index {
         self.frames.len() + usize::from(self.cut.is_some())
     }
 
+    /// Frame `k`'s timestep; of the frame the file ends inside, where it got that far.
     pub fn timestep(&self, k: usize) -> Option<u64> {
-        self.frames.get(k).map(|h| h.timestep)
+        match self.frames.get(k) {
+            Some(h) => Some(h.timestep),
+            None if k == self.frames.len() => self.cut.as_ref().and_then(|c| c.timestep),
+            None => None,
+        }
     }
 
     /// Frame `k`'s header; for the frame the file ends inside, the error saying so.
@@ -232,7 +242,9 @@ impl Index {
 }
 
 /// Reads one frame header at the reader's position and skips its chunks.
-fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
+/// A frame's header and the extent of its chunks; `timestep` is set once read, so that
+/// a frame the file ends inside is still named by it.
+fn header(r: &mut Reader<'_>, seen: &mut Option<u64>) -> Result<BinHeader, ReadError> {
     let start = r.pos;
     let first = r.i64("timestep")?;
     let mut revised = false;
@@ -315,6 +327,7 @@ fn header(r: &mut Reader<'_>) -> Result<BinHeader, ReadError> {
     };
     let timestep = u64::try_from(timestep)
         .map_err(|_| r.err(start, format!("negative timestep {timestep}")))?;
+    *seen = Some(timestep);
     let atoms_at = r.pos;
     let atoms = r.i64("atom count")?;
     let atoms = usize::try_from(atoms)

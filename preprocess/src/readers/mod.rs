@@ -98,13 +98,13 @@ pub enum ReadError {
     /// Not a format this module reads (or a compression it does not decompress).
     #[error("{at}: {message}")]
     Unsupported { at: Location, message: String },
-    #[error("{}: frame {frame} does not exist; the file has {count} frame(s), counted from 0 (the last is {})", path.display(), count.saturating_sub(1))]
+    #[error("{}: frame {frame} does not exist; the file has {count} frame{}, counted from 0 (the last is {})", path.display(), if *count == 1 { "" } else { "s" }, count.saturating_sub(1))]
     NoSuchFrame {
         path: PathBuf,
         frame: usize,
         count: usize,
     },
-    #[error("{}: frame -{back} does not exist; the file has {count} frame(s)", path.display())]
+    #[error("{}: frame -{back} does not exist; the file has {count} frame{}", path.display(), if *count == 1 { "" } else { "s" })]
     NoSuchFrameFromEnd {
         path: PathBuf,
         back: usize,
