@@ -858,8 +858,9 @@ fn batch_takes_its_shard_from_a_slurm_job_array() {
         );
         assert!(
             text.contains(&format!(
-                "in shard {} of 3 (from the Slurm job array's variables; --shard 0/1 converts \
-                 every frame)",
+                "in shard {} of 3 (from the Slurm job array's variables: `mdlod batch --merge` \
+                 joins the shards' manifests once every task has ended; --shard none converts \
+                 every frame into dataset.json)",
                 (id - 1) / 2
             )),
             "{text}"
@@ -2135,7 +2136,7 @@ fn options_the_chosen_mode_does_not_read_are_refused() {
         (
             vec!["--mode", "iso", "--log-scale"],
             "--log-scale has no effect without --colour-map (spheres, sndf, splat, density, iso) or \
-             --intensity attribute (splat), or with --mode density",
+             --intensity attribute (splat); with --mode density and no colour map it takes",
         ),
         (
             vec!["--density-min", "0.1"],
@@ -13601,7 +13602,7 @@ fn the_okabe_ito_palette_colours_the_palette_species_and_their_key() {
     let args = [&base[..], &["--height", "48", "--legend", s(&svg)]].concat();
     ok(&[&args[..], &["--palette", "okabe-ito"]].concat());
     let key = std::fs::read_to_string(&svg).unwrap().to_lowercase();
-    assert!(key.contains("#e69f00") && key.contains("#56b4e9"), "{key}");
+    assert!(key.contains("#e69f00") && key.contains("#0072b2"), "{key}");
     // The pixels drawn: orange's hue (green over red 0.69 in sRGB) where the file's
     // #e66633 has 0.44.
     let orange = |png: &Path| {
@@ -13628,7 +13629,7 @@ fn the_okabe_ito_palette_colours_the_palette_species_and_their_key() {
     .concat());
     let key = std::fs::read_to_string(&svg).unwrap().to_lowercase();
     assert!(
-        key.contains("#00ff00") && key.contains("#56b4e9") && !key.contains("#e69f00"),
+        key.contains("#00ff00") && key.contains("#0072b2") && !key.contains("#e69f00"),
         "{key}"
     );
     let e = fails(

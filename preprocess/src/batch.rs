@@ -1623,14 +1623,30 @@ enum Verdict {
     Other(PathBuf),
 }
 
-/// The input a frame file was converted from (`recorded`, its absolute path as a
-/// manifest records it), where that is another file than `input` and still there: a
-/// frame of another run, or of an input numbered by its place that now numbers another.
-/// A source that is gone (dumps moved, or deleted once converted) is not: its frames
-/// are converted again from the input given now.
-fn other_input(recorded: Option<&str>, input: &Path) -> Option<PathBuf> {
-    let old = PathBuf::from(recorded?);
-    if old == absolute_source(input) {
+/// The input a frame file was converted from (`recorded`, as a manifest records it),
+/// where that is another file than `input` (frame `own` of it, `now` its source now)
+/// and still there: a frame of another run, or of an input numbered by its place that
+/// now numbers another. Not so: a source that is gone (dumps moved, or deleted once
+/// converted), whose frames are converted again from the input given now; one of this
+/// run's own inputs (`run_inputs`) when the frame has a timestep of its own (a restart
+/// whose duplicate timesteps `--duplicate-timesteps last` takes from the later file);
+/// and a copy of an input whose frames' bytes are not recorded (a gzip dump: the same
+/// name and size, copied to scratch without its times; a copy of another input is
+/// told by its frames' bytes, which are the same).
+fn other_input(
+    recorded: &Recorded,
+    input: &Path,
+    own: Option<u64>,
+    now: &SourceInfo,
+    run_inputs: &std::collections::HashSet<(PathBuf, std::ffi::OsString)>,
+) -> Option<PathBuf> {
+    let old = PathBuf::from(recorded.source_abs.as_deref()?);
+    if old == absolute_source(input)
+        || (own.is_some() && run_inputs.contains(&input_key(&old)))
+        || (recorded.source.bytes.is_none()
+            && recorded.source.size == now.size
+            && same_name(&recorded.source, now))
+    {
         return None;
     }
     let present = if old.to_string_lossy().contains('%') {
@@ -3008,6 +3024,9 @@ pub fn batch(
     // Frame files no frame of these inputs is written to (a run over other or longer
     // inputs left them): named, left alone.
     let numbers: std::collections::HashSet<u64> = jobs.iter().map(|j| j.timestep).collect();
+    // This run's inputs, as [`other_input`] compares a frame's recorded source.
+    let run_inputs: std::collections::HashSet<(PathBuf, std::ffi::OsString)> =
+        jobs.iter().map(|j| input_key(j.input)).collect();
     let mut strays: Vec<String> = std::fs::read_dir(out_dir)
         .map_err(io(out_dir))?
         .flatten()
@@ -3212,7 +3231,9 @@ pub fn batch(
                 match own.and_then(|s| s.bytes.clone().filter(|_| same_name(s, &want))) {
                     Some(b) => Some(Err(b)),
                     None => {
-                        if let Some(old) = other_input(recorded.source_abs.as_deref(), job.input) {
+                        if let Some(old) =
+                            other_input(recorded, job.input, job.own_timestep, &want, &run_inputs)
+                        {
                             return Verdict::Other(old);
                         }
                         redone.source += 1;
@@ -3256,7 +3277,7 @@ pub fn batch(
                 Some(Err(bytes)) => Verdict::CheckBytes(
                     f,
                     bytes,
-                    other_input(recorded.source_abs.as_deref(), job.input),
+                    other_input(recorded, job.input, job.own_timestep, &want, &run_inputs),
                 ),
             }
         });
@@ -3503,6 +3524,12 @@ pub fn batch(
                     ),
                 ),
             })?;
+        // So are frame files made read-only that are to be replaced (a kept frame may
+        // stay so): refused before any frame is built, not when the first reaches them.
+        for job in &todo {
+            let out = out_dir.join(frame_file_name(job.timestep));
+            mdlod_format::files::check_replaceable(&out).map_err(io(&out))?;
+        }
     }
     let previous = read_manifest_bytes(&manifest_path).map_err(|e| e.kind());
     // (Best effort: without them a later run converts such frames again; a directory

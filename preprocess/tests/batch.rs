@@ -4098,6 +4098,69 @@ fn frames_of_other_inputs_still_there_are_not_replaced() {
     std::fs::rename(dir.path().join("elsewhere.xyz"), &xyz[0]).unwrap();
     let r = batch(&xyz, &xyz_out, &opts(), &NoProgress).unwrap();
     assert_eq!((r.converted, r.skipped), (0, 3));
+
+    // A restart into a file of its own, its repeated timesteps taken from it: the frames
+    // of the first file, one of this run's inputs, are replaced as asked.
+    let run = dir.path().join("run");
+    std::fs::create_dir_all(&run).unwrap();
+    let first = input(&run);
+    let text = std::fs::read_to_string(&first).unwrap();
+    let from = text.find("ITEM: TIMESTEP\n400\n").unwrap();
+    let restart = run.join("restart.dump");
+    std::fs::write(&restart, text[from..].replacen(" 1 ", " 2 ", 1)).unwrap();
+    let run_out = dir.path().join("run_out");
+    batch(std::slice::from_ref(&first), &run_out, &opts(), &NoProgress).unwrap();
+    let last = BatchOptions {
+        duplicates: mdlod_preprocess::batch::Duplicates::Last,
+        ..opts()
+    };
+    let r = batch(&[first.clone(), restart], &run_out, &last, &NoProgress).unwrap();
+    assert_eq!(r.redone.source, 2, "{r:?}");
+
+    // Dumps copied elsewhere without their times (`cp`, not `cp -p`), the originals
+    // still there: the same data, converted again, not refused.
+    let gz = dir.path().join("gz");
+    let copy = dir.path().join("copy");
+    std::fs::create_dir_all(&gz).unwrap();
+    std::fs::create_dir_all(&copy).unwrap();
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    std::io::Write::write_all(&mut enc, &std::fs::read(&first).unwrap()).unwrap();
+    let packed = enc.finish().unwrap();
+    std::fs::write(gz.join("melt.dump.gz"), &packed).unwrap();
+    let gz_out = dir.path().join("gz_out");
+    batch(&[gz.join("melt.dump.gz")], &gz_out, &opts(), &NoProgress).unwrap();
+    std::fs::write(copy.join("melt.dump.gz"), &packed).unwrap();
+    let f = std::fs::File::options()
+        .write(true)
+        .open(copy.join("melt.dump.gz"))
+        .unwrap();
+    f.set_modified(std::time::SystemTime::now() + std::time::Duration::from_secs(2))
+        .unwrap();
+    drop(f);
+    batch(&[copy.join("melt.dump.gz")], &gz_out, &opts(), &NoProgress).unwrap();
+
+    // A frame file made read-only that is to be replaced is refused before any frame is
+    // converted.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let frame = gz_out.join("frame-500.mdlod");
+        std::fs::set_permissions(&frame, std::fs::Permissions::from_mode(0o444)).unwrap();
+        std::fs::remove_file(gz_out.join("frame-0.mdlod")).unwrap();
+        let mut coarser = opts();
+        coarser.convert.build.position_bits = 8;
+        let e = batch(&[copy.join("melt.dump.gz")], &gz_out, &coarser, &NoProgress)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("frame-500.mdlod") && e.contains("read-only"),
+            "{e}"
+        );
+        assert!(
+            !gz_out.join("frame-0.mdlod").exists(),
+            "no frame converted first"
+        );
+    }
 }
 
 /// A binary dump of a set cut inside its frame's chunks fails with `--keep-going` under

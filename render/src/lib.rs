@@ -2171,6 +2171,7 @@ pub fn page_style(opts: &RenderOptions) -> (PackStyle, PointStyle) {
                         ..s.clone()
                     })
                     .collect(),
+                palette: opts.style.palette,
                 ..Default::default()
             },
         ),

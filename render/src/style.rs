@@ -126,8 +126,7 @@ pub fn trajectory_looks(
     // (Past this many slots a colour is not the palette's: the slots a list of names
     // that long takes, and ten more.)
     let slots = looks.len() + 10;
-    let palette =
-        |c: [f32; 3]| (0..slots).any(|k| same(c, mdlod_format::meta::palette_colour_linear(k)));
+    let palette = |c: [f32; 3]| palette_slot(c, slots).is_some();
     for j in 1..looks.len() {
         let clash = looks[..j]
             .iter()
@@ -497,15 +496,17 @@ pub enum Palette {
     OkabeIto,
 }
 
-/// Okabe and Ito's colours, sRGB: orange, sky blue, bluish green, yellow, blue,
-/// vermilion, reddish purple.
+/// Okabe and Ito's colours, sRGB, in an order whose first three differ most in
+/// lightness (CIE L* 71, 46 and 89), so that the common figures of two or three species
+/// also print in grey: orange, blue, yellow, vermilion, bluish green, sky blue, reddish
+/// purple. (In their own order the first two, orange and sky blue, are equally light.)
 pub const OKABE_ITO: [[u8; 3]; 7] = [
     [0xe6, 0x9f, 0x00],
-    [0x56, 0xb4, 0xe9],
-    [0x00, 0x9e, 0x73],
-    [0xf0, 0xe4, 0x42],
     [0x00, 0x72, 0xb2],
+    [0xf0, 0xe4, 0x42],
     [0xd5, 0x5e, 0x00],
+    [0x00, 0x9e, 0x73],
+    [0x56, 0xb4, 0xe9],
     [0xcc, 0x79, 0xa7],
 ];
 
@@ -520,18 +521,19 @@ impl Palette {
     pub fn colour(self, colour: [f32; 3]) -> [f32; 3] {
         match self {
             Palette::Default => colour,
-            Palette::OkabeIto => palette_slot(colour).map_or(colour, |k| {
+            Palette::OkabeIto => palette_slot(colour, PALETTE_SLOTS).map_or(colour, |k| {
                 mdlod_format::meta::srgb_to_linear(OKABE_ITO[k % OKABE_ITO.len()])
             }),
         }
     }
 }
 
-/// The palette slot whose colour `colour` is (linear RGB, as files keep it), if any.
-pub fn palette_slot(colour: [f32; 3]) -> Option<usize> {
-    (0..PALETTE_SLOTS).find(|&k| {
+/// The palette slot below `slots` whose colour `colour` is (linear RGB, as files keep
+/// it; within 1e-4 a channel), if any.
+pub fn palette_slot(colour: [f32; 3], slots: usize) -> Option<usize> {
+    (0..slots).find(|&k| {
         let p = mdlod_format::meta::palette_colour_linear(k);
-        (0..3).all(|i| (p[i] - colour[i]).abs() <= 1e-6)
+        (0..3).all(|i| (p[i] - colour[i]).abs() <= 1e-4)
     })
 }
 
@@ -1611,7 +1613,13 @@ mod tests {
         assert_eq!(rgb(table[1]), [0.0, 0.0, 0.0], "a colour given stays");
         assert_eq!(rgb(table[2]), copper, "an element's colour stays");
         assert_eq!(rgb(table[3]), oi(12 % 7));
-        assert_eq!(palette_slot(copper), None);
+        assert_eq!(palette_slot(copper, 256), None);
+        // The first three print apart in grey: Rec. 709 luminances at least 0.1 apart.
+        let luma = |c: [f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        let l: Vec<f32> = (0..3).map(|k| luma(oi(k))).collect();
+        for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+            assert!((l[a] - l[b]).abs() > 0.1, "{l:?}");
+        }
         assert!(style.cluster_recolour(&file, &table).is_some());
         // The default palette changes nothing.
         let plain = PointStyle::default();

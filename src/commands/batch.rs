@@ -15,7 +15,7 @@ use crate::progress::Bar;
 /// unchanged; frames without particles are skipped and reported.
 #[derive(clap::Args)]
 #[command(after_help = "Examples:\n  \
-    mdlod batch run/dump.*.lammpstrj -o run.mdlod.d --radius 1=1.28\n  \
+    mdlod batch run/dump.*.lammpstrj -o run.d --radius 1=1.28 --attribute c_ke\n  \
     mdlod batch traj.bin -o traj.d --shard 3/16        # one node of 16\n  \
     mdlod batch --merge traj.d                          # after all shards\n\n\
     In a Slurm job array the shard defaults to the task's position in the array \
@@ -88,7 +88,7 @@ pub enum ShardArg {
 
 /// Parses `I/N`, or `none`.
 fn parse_shard(s: &str) -> Result<ShardArg> {
-    if s.trim() == "none" {
+    if s.trim().eq_ignore_ascii_case("none") {
         return Ok(ShardArg::Whole);
     }
     let (i, n) = s
@@ -133,7 +133,8 @@ fn shard(args: &Args) -> Result<Option<(u32, u32)>> {
 /// not tell) is an error naming the variables: each task would otherwise convert every
 /// frame.
 fn slurm_shard(var: impl Fn(&str) -> Option<String>) -> Result<Option<(u32, u32)>> {
-    const HINT: &str = "give the shard with --shard I/N";
+    const HINT: &str =
+        "give the shard with --shard I/N, or --shard none to convert every frame into dataset.json";
     let number = |name: &str| -> Result<Option<u32>> {
         match var(name) {
             None => Ok(None),

@@ -371,29 +371,48 @@ pub fn whole_number(s: &str) -> Result<u64, String> {
             if t.contains(',') { "; no commas" } else { "" }
         )
     };
-    let digits: String = t.chars().filter(|&c| c != '_').collect();
     if t.starts_with('_') || t.ends_with('_') || t.contains("__") {
         return Err(bad());
     }
-    if let Ok(n) = digits.parse::<u64>() {
-        return Ok(n);
-    }
-    // `1e6`, `2.5e6`: exact in a double up to 2^53, and whole.
-    let (m, e) = digits.split_once(['e', 'E']).ok_or_else(bad)?;
-    let exponent: u32 = e
-        .strip_prefix('+')
-        .unwrap_or(e)
-        .parse()
-        .map_err(|_| bad())?;
-    let mantissa: f64 = m.parse().map_err(|_| bad())?;
-    if !m.bytes().all(|b| b.is_ascii_digit() || b == b'.') || exponent > 19 {
+    let (mantissa, exponent) = match t.split_once(['e', 'E']) {
+        Some((m, e)) => {
+            let e = e.strip_prefix('+').unwrap_or(e);
+            if e.is_empty() || !e.bytes().all(|b| b.is_ascii_digit()) {
+                return Err(bad());
+            }
+            (m, e.parse::<u32>().map_err(|_| bad())?)
+        }
+        None => (t, 0),
+    };
+    // `2.5e6`: the digits shifted by the exponent in decimal, exactly (a double's
+    // 1.1e5 is 110000.00000000001); what is left past the point must be zeros.
+    let digits: String = mantissa.chars().filter(|&c| c != '_').collect();
+    let (whole, fraction) = digits.split_once('.').unwrap_or((&digits, ""));
+    if whole.is_empty() && fraction.is_empty()
+        || !whole
+            .bytes()
+            .chain(fraction.bytes())
+            .all(|b| b.is_ascii_digit())
+    {
         return Err(bad());
     }
-    let v = mantissa * 10f64.powi(exponent as i32);
-    if v.fract() != 0.0 || !(0.0..=9.007_199_254_740_992e15).contains(&v) {
-        return Err(format!("{s:?} is not a whole number below 2^53"));
+    let shift = exponent as usize;
+    let (kept, rest) = fraction.split_at(shift.min(fraction.len()));
+    if !rest.bytes().all(|b| b == b'0') {
+        return Err(bad());
     }
-    Ok(v as u64)
+    let zeros = shift.saturating_sub(fraction.len());
+    if zeros > 20 {
+        return Err(format!("{s:?} is too large (at most {})", u64::MAX));
+    }
+    let number = format!("{whole}{kept}{}", "0".repeat(zeros));
+    let number = number.trim_start_matches('0');
+    if number.is_empty() {
+        return Ok(0);
+    }
+    number
+        .parse::<u64>()
+        .map_err(|_| format!("{s:?} is too large (at most {})", u64::MAX))
 }
 
 /// [`whole_number`] for an option of 32 bits.
@@ -426,9 +445,22 @@ mod whole_number_tests {
             assert_eq!(whole_number(s), Ok(n), "{s}");
         }
         for s in [
-            "1.5", "1e-3", "-1", "1,000", "1__0", "_1", "1e", "e6", "0x10", "1e20", "",
+            "1.5", "1e-3", "-1", "1,000", "1__0", "_1", "1e", "e6", "0x10", "", "1e_6", ".e3",
         ] {
             assert!(whole_number(s).is_err(), "{s}");
+        }
+        // Exactly, where a double's product is not whole.
+        for (s, n) in [
+            ("1.1e5", 110_000),
+            ("2.3e5", 230_000),
+            ("1.001e6", 1_001_000),
+            ("1.0", 1),
+            ("1e19", 10_000_000_000_000_000_000),
+        ] {
+            assert_eq!(whole_number(s), Ok(n), "{s}");
+        }
+        for s in ["1e20", "2e19"] {
+            assert!(whole_number(s).unwrap_err().contains("too large"), "{s}");
         }
         assert!(whole_number("1,000").unwrap_err().contains("no commas"));
         assert_eq!(

@@ -19,7 +19,7 @@ use crate::progress::Bar;
 #[derive(clap::Args)]
 #[command(
     allow_negative_numbers = true,
-    after_help = "Examples:\n  mdlod render frame.mdlod -o frame.png --azimuth 30 --elevation 20 --spp 4\n  mdlod render frame.mdlod -o close.png --view close.json --screen-error 0.5\n  mdlod render frame.mdlod -o big.png --gpu-memory 512M --save-view view.json\n  mdlod render traj.d -o movie/frame-%05d.png --colour-map viridis --attribute-range 0:2"
+    after_help = "Examples:\n  mdlod render frame.mdlod -o frame.png --azimuth 30 --elevation 20 --spp 4\n  mdlod render frame.mdlod -o close.png --zoom 4 --screen-error 0.5 --save-view close.json\n  mdlod render frame.mdlod -o close-lit.png --view close.json --spp 4 --light 1,0,1\n  mdlod render frame.mdlod -o big.png --gpu-memory 512M\n  mdlod render run.d -o movie/frame-%05d.png --colour-map viridis   # a batch's frames (batch --attribute)"
 )]
 pub struct Args {
     /// The .mdlod file to render, or a batch directory or its dataset.json (every frame
@@ -1326,8 +1326,8 @@ pub struct StyleArgs {
     pub species_colour: Vec<String>,
     /// The colours of species that take mdlod's palette (type numbers, names of no
     /// element) where --species-colour gives none: `okabe-ito`, Okabe and Ito's seven,
-    /// told apart with the common colour-vision deficiencies and in grey print (an
-    /// element's colour stays; types past the seventh repeat them)
+    /// told apart with the common colour-vision deficiencies, the first three also in
+    /// grey print (an element's colour stays; types past the seventh repeat them)
     #[arg(long, value_enum, ignore_case = true, default_value_t = PaletteArg::Default)]
     pub palette: PaletteArg,
     /// A species' radius, e.g. `Ag=1.6`; repeatable. Particles of their own sizes keep
@@ -3123,6 +3123,35 @@ pub fn run(mut args: Args) -> Result<()> {
             span,
             far
         );
+        // Where the data lies along each plane's normal, to set `d` from (a slab's
+        // coordinates from a larger data set of the same kind cut a smaller one away).
+        let spans: Vec<String> = opts
+            .style
+            .clip
+            .iter()
+            .map(|&[nx, ny, nz, d]| {
+                let n = mdlod_render::glam::Vec3::new(nx, ny, nz);
+                let (lo, hi) = (0..8).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), k| {
+                    let corner = mdlod_render::glam::Vec3::new(
+                        if k & 1 == 0 { b.min.x } else { b.max.x },
+                        if k & 2 == 0 { b.min.y } else { b.max.y },
+                        if k & 4 == 0 { b.min.z } else { b.max.z },
+                    );
+                    let v = n.dot(corner);
+                    (lo.min(v), hi.max(v))
+                });
+                format!(
+                    "n·p of the data runs from {} to {} for the plane {},{},{},{}",
+                    super::Num(lo),
+                    super::Num(hi),
+                    super::Num(nx),
+                    super::Num(ny),
+                    super::Num(nz),
+                    super::Num(d)
+                )
+            })
+            .collect();
+        let cut_all = format!("{CLIP_CUTS_ALL}; {}", spans.join("; "));
         let why = match (
             opts.style.clip.is_empty(),
             r.nodes_occluded + r.particles_occluded,
@@ -3150,7 +3179,7 @@ pub fn run(mut args: Args) -> Result<()> {
                  --hide-attribute), or cut every particle away (each keeps n·p ≤ d, d the \
                  distance from the origin along the unit normal: check its sign)"
             }
-            (false, _) => CLIP_CUTS_ALL,
+            (false, _) => cut_all.as_str(),
         };
         println!("  note: nothing is drawn: {why}");
     } else if let (Mode::Density | Mode::Iso, [[nx, ny, nz, d]]) = (args.mode, &args.style.clip[..])

@@ -241,9 +241,8 @@ impl Index {
     }
 }
 
-/// Reads one frame header at the reader's position and skips its chunks.
-/// A frame's header and the extent of its chunks; `timestep` is set once read, so that
-/// a frame the file ends inside is still named by it.
+/// Reads one frame header at the reader's position and skips its chunks; `seen` takes
+/// the timestep once read, so that a frame the file ends inside is still named by it.
 fn header(r: &mut Reader<'_>, seen: &mut Option<u64>) -> Result<BinHeader, ReadError> {
     let start = r.pos;
     let first = r.i64("timestep")?;

@@ -197,12 +197,13 @@ pub enum InputFormat {
 }
 
 impl InputFormat {
-    /// The format implied by a file name, ignoring a `.gz`, `.bz2`, `.zst` or `.xz` suffix:
+    /// The format implied by a file name, ignoring a compression's suffix (`.gz`, `.bz2`,
+    /// `.zst`, `.xz`, `.lz4`, `.zip`):
     /// `.lammpstrj`, `.dump`, `.lammps` and `dump.*` are LAMMPS text; `.bin` is LAMMPS
     /// binary (as LAMMPS itself decides); `.gsd` is GSD; `.xyz` and `.extxyz` are XYZ.
     pub fn from_path(path: &Path) -> Option<InputFormat> {
         let name = path.file_name()?.to_str()?.to_ascii_lowercase();
-        let name = [".gz", ".bz2", ".zst", ".xz"]
+        let name = [".gz", ".bz2", ".zst", ".xz", ".lz4", ".zip"]
             .iter()
             .find_map(|s| name.strip_suffix(s))
             .unwrap_or(&name);

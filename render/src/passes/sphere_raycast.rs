@@ -481,8 +481,8 @@ impl AttrPacker {
                 .ok_or_else(|| {
                     RenderError::InvalidOptions(format!(
                         "{} has no per-particle attribute to {what} (a file keeps the one \
-                         dump column `mdlod convert --attribute COLUMN` names, e.g. \
-                         --attribute c_pe)",
+                         dump column `mdlod convert --attribute COLUMN` or `mdlod batch \
+                         --attribute COLUMN` names, e.g. --attribute c_pe)",
                         file.path().display()
                     ))
                 })
