@@ -13632,6 +13632,15 @@ fn the_okabe_ito_palette_colours_the_palette_species_and_their_key() {
         key.contains("#00ff00") && key.contains("#0072b2") && !key.contains("#e69f00"),
         "{key}"
     );
+    // Splats and the iso-surface draw it too (their packing kept the file's colours
+    // while the key showed the palette's).
+    for mode in ["splat-over", "iso"] {
+        let mode_args = [&args[..], &["--mode", mode]].concat();
+        ok(&mode_args);
+        let own = std::fs::read(&png).unwrap();
+        ok(&[&mode_args[..], &["--palette", "okabe-ito"]].concat());
+        assert_ne!(std::fs::read(&png).unwrap(), own, "{mode}");
+    }
     let e = fails(
         &[
             &args[..],

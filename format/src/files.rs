@@ -80,7 +80,18 @@ pub fn check_replaceable_kind(path: &Path) -> std::io::Result<()> {
 /// program that replaces a file by renaming.)
 pub fn keep_permissions(path: &Path, new: &File) -> std::io::Result<()> {
     match std::fs::symlink_metadata(path) {
-        Ok(m) if m.is_file() => new.set_permissions(m.permissions()),
+        Ok(m) if m.is_file() => {
+            #[allow(unused_mut)]
+            let mut permissions = m.permissions();
+            // The read, write and execute bits only: a set-user-ID or set-group-ID bit
+            // is not handed to new contents (as `cp` without `-p` does not).
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::PermissionsExt;
+                permissions.set_mode(permissions.mode() & 0o777);
+            }
+            new.set_permissions(permissions)
+        }
         _ => Ok(()),
     }
 }

@@ -113,6 +113,13 @@ fn replacing_keeps_the_permissions_and_refuses_a_read_only_file() {
         write(b"{\"again\":1}").unwrap();
         assert_eq!(mode(&path), private);
     }
+    // A set-user-ID bit is not handed to the new contents.
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o4755)).unwrap();
+    write(b"{}").unwrap();
+    assert_eq!(
+        std::fs::metadata(&path).unwrap().permissions().mode() & 0o7777,
+        0o755
+    );
     std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o444)).unwrap();
     let before = std::fs::read(&path).unwrap();
     let e = write(b"{}").unwrap_err().to_string();

@@ -1654,12 +1654,29 @@ fn other_input(
     } else {
         // (The same file by another name, a link, is the same input.)
         match (std::fs::canonicalize(&old), std::fs::canonicalize(input)) {
-            (Ok(a), Ok(b)) => a != b,
+            (Ok(a), Ok(b)) => a != b && !same_inode(&a, &b),
             (Ok(_), Err(_)) => true,
             (Err(_), _) => false,
         }
     };
     present.then_some(old)
+}
+
+/// Whether `a` and `b` are one file under two names (hard links).
+fn same_inode(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (std::fs::metadata(a), std::fs::metadata(b)) {
+            (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (a, b);
+        false
+    }
 }
 
 /// What a listed frame was converted with that its file does not record.
@@ -3024,9 +3041,10 @@ pub fn batch(
     // Frame files no frame of these inputs is written to (a run over other or longer
     // inputs left them): named, left alone.
     let numbers: std::collections::HashSet<u64> = jobs.iter().map(|j| j.timestep).collect();
-    // This run's inputs, as [`other_input`] compares a frame's recorded source.
+    // This run's inputs, as [`other_input`] compares a frame's recorded source (those
+    // whose every frame a later input supersedes too).
     let run_inputs: std::collections::HashSet<(PathBuf, std::ffi::OsString)> =
-        jobs.iter().map(|j| input_key(j.input)).collect();
+        inputs.iter().map(|p| input_key(p)).collect();
     let mut strays: Vec<String> = std::fs::read_dir(out_dir)
         .map_err(io(out_dir))?
         .flatten()
@@ -3234,7 +3252,12 @@ pub fn batch(
                         if let Some(old) =
                             other_input(recorded, job.input, job.own_timestep, &want, &run_inputs)
                         {
-                            return Verdict::Other(old);
+                            // Under another name, the same bytes (a copy, a set joined
+                            // into one file) are kept as a moved frame's are.
+                            return match own.and_then(|s| s.bytes.clone()) {
+                                Some(b) => Verdict::CheckBytes(f, b, Some(old)),
+                                None => Verdict::Other(old),
+                            };
                         }
                         redone.source += 1;
                         note_count_change(&job, &f);

@@ -4114,8 +4114,32 @@ fn frames_of_other_inputs_still_there_are_not_replaced() {
         duplicates: mdlod_preprocess::batch::Duplicates::Last,
         ..opts()
     };
-    let r = batch(&[first.clone(), restart], &run_out, &last, &NoProgress).unwrap();
+    let r = batch(
+        &[first.clone(), restart.clone()],
+        &run_out,
+        &last,
+        &NoProgress,
+    )
+    .unwrap();
     assert_eq!(r.redone.source, 2, "{r:?}");
+    // A restart superseding every frame of an earlier input (one file per timestep).
+    let set = file_set(&run.join("set"));
+    let sets = dir.path().join("sets");
+    batch(&set, &sets, &opts(), &NoProgress).unwrap();
+    let with_restart: Vec<PathBuf> = set.iter().cloned().chain([restart]).collect();
+    let r = batch(&with_restart, &sets, &last, &NoProgress).unwrap();
+    assert_eq!(r.redone.source, 2, "{r:?}");
+    // The same bytes under another name (a copy, a hard link): kept, not refused.
+    let copies = dir.path().join("copies");
+    batch(std::slice::from_ref(&first), &copies, &opts(), &NoProgress).unwrap();
+    let copy = run.join("copy.dump");
+    std::fs::copy(&first, &copy).unwrap();
+    let r = batch(std::slice::from_ref(&copy), &copies, &opts(), &NoProgress).unwrap();
+    assert_eq!((r.converted, r.kept_unchanged), (0, 6), "{r:?}");
+    let linked = run.join("linked.dump");
+    std::fs::hard_link(&first, &linked).unwrap();
+    let r = batch(std::slice::from_ref(&linked), &copies, &opts(), &NoProgress).unwrap();
+    assert_eq!(r.converted, 0, "{r:?}");
 
     // Dumps copied elsewhere without their times (`cp`, not `cp -p`), the originals
     // still there: the same data, converted again, not refused.

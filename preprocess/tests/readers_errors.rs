@@ -421,6 +421,18 @@ fn unknown_format_and_unsupported_compression() {
         enc.write_all(bytes).unwrap();
         enc.finish().unwrap()
     };
+    // A tar archive, and one gzipped (a .tar.gz), are named as archives.
+    let mut tar = vec![0u8; 1024];
+    tar[..13].copy_from_slice(b"d.lammpstrj\0\0");
+    tar[257..263].copy_from_slice(b"ustar\0");
+    for (name, bytes) in [("a.tar", tar.clone()), ("a.lammpstrj.gz", gz(&tar))] {
+        let path = write(dir.path(), name, &bytes);
+        let got = DumpFile::open(&path).unwrap_err().to_string();
+        assert!(
+            got.contains("tar archive") && got.contains("tar -x"),
+            "{got}"
+        );
+    }
     let twice = gz(&gz(dump("1 1 0 0 0\n").as_bytes()));
     let path = write(dir.path(), "twice.lammpstrj.gz", &twice);
     let got = DumpFile::open(&path).unwrap_err().to_string();

@@ -139,7 +139,7 @@ pub struct BuildArgs {
     #[arg(long, default_value_t = 4096, value_parser = super::whole_number_u32)]
     pub root_points: u32,
     /// Levels between a node and the points it is drawn with (δn), 1 to 8.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::whole_number_u32)]
     pub delta_n: u32,
     /// Frames above this many particles are built out of core, in spatial chunks of at
     /// most this many (the choice is recorded in the file).

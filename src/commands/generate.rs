@@ -30,7 +30,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1, value_parser = super::whole_number)]
     pub seed: u64,
     /// Number of frames (timesteps 0, 100, 200, ...).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::whole_number_u32)]
     pub frames: u32,
     /// Output format: a LAMMPS text dump, extended XYZ (the same values, the type
     /// number as species), or raw arrays with a sidecar (give the output as

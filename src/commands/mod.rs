@@ -236,13 +236,12 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 pub const MAX_THREADS: usize = 1024;
 
 pub fn parse_threads(s: &str) -> Result<usize, String> {
-    match s.trim().parse::<usize>() {
-        Ok(0) => Err("at least 1 thread (leave --threads out for one per core)".into()),
-        Ok(n) if n > MAX_THREADS => Err(format!(
+    match whole_number(s)? {
+        0 => Err("at least 1 thread (leave --threads out for one per core)".into()),
+        n if n > MAX_THREADS as u64 => Err(format!(
             "at most {MAX_THREADS} threads (leave --threads out for one per core)"
         )),
-        Ok(n) => Ok(n),
-        Err(_) => Err(format!("{s:?} is no whole number of threads")),
+        n => Ok(n as usize),
     }
 }
 
@@ -365,6 +364,7 @@ mod tests {
 /// with the forms that are (the standard parser said "invalid digit found in string").
 pub fn whole_number(s: &str) -> Result<u64, String> {
     let t = s.trim();
+    let t = t.strip_prefix('+').unwrap_or(t);
     let bad = || {
         format!(
             "{s:?} is not a whole number from 0 (write 1000000, 1_000_000 or 1e6{})",
@@ -455,6 +455,7 @@ mod whole_number_tests {
             ("2.3e5", 230_000),
             ("1.001e6", 1_001_000),
             ("1.0", 1),
+            ("+100", 100),
             ("1e19", 10_000_000_000_000_000_000),
         ] {
             assert_eq!(whole_number(s), Ok(n), "{s}");

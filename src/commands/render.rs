@@ -31,7 +31,7 @@ pub struct Args {
     #[command(flatten)]
     pub camera: ViewArgs,
     /// Samples per pixel (jittered supersampling).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::whole_number_u32)]
     pub spp: u32,
     /// Largest on-screen size, in pixels, of a cluster drawn as one sphere.
     #[arg(long, default_value_t = 1.0)]
@@ -108,7 +108,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0.3)]
     pub iso_value: f32,
     /// density and iso modes: slices from the data's nearest to its farthest point.
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 256, value_parser = super::whole_number_u32)]
     pub slices: u32,
     /// How far a point's kernel reaches, in its radii [density and iso modes: 2.5;
     /// splat modes: 1.75, a Gaussian of sigma r/2 cut at 3.5 sigma]. For an SPH run
@@ -129,10 +129,10 @@ pub struct Args {
     #[arg(long, default_value_t = 0.5)]
     pub absorption: f32,
     /// sndf mode: jittered rays per pixel accumulated into the S-NDFs.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 16, value_parser = super::whole_number_u32)]
     pub iterations: u32,
     /// sndf mode: bins per axis of the normal parametrisation.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, value_parser = super::whole_number_u32)]
     pub bins: u32,
     /// sndf mode: how normals are binned.
     #[arg(long, value_enum, ignore_case = true, default_value = "projected")]

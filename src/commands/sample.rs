@@ -49,7 +49,7 @@ pub struct Args {
     #[command(flatten)]
     pub camera: ViewArgs,
     /// Jittered rays per pixel.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 64, value_parser = super::whole_number_u32)]
     pub iterations: u32,
     /// Bins per axis of the normal parametrisation (1 to 32).
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=32))]

@@ -771,10 +771,16 @@ impl DumpFile {
         } else if let Some(kind) = other_compression(&map) {
             return Err(ReadError::Unsupported {
                 at: first_line(),
-                message: format!(
-                    "{kind}-compressed dumps are not supported (gzip is); decompress the \
-                     file or recompress it with gzip"
-                ),
+                message: if kind == "tar" {
+                    "a tar archive, not a dump: unpack it (`tar -xf`) and give the dumps it \
+                     holds"
+                        .into()
+                } else {
+                    format!(
+                        "{kind}-compressed dumps are not supported (gzip is); decompress the \
+                         file or recompress it with gzip"
+                    )
+                },
             });
         } else {
             Bytes::Map(map)
@@ -791,10 +797,16 @@ impl DumpFile {
             if let Some(kind) = inner {
                 return Err(ReadError::Unsupported {
                     at: first_line(),
-                    message: format!(
-                        "its gzip stream holds {kind}-compressed data, not a dump: \
-                         compressed twice? decompress it (`gunzip -c`) and read the result"
-                    ),
+                    message: if kind == "tar" {
+                        "its gzip stream holds a tar archive (a .tar.gz), not a dump: unpack \
+                         it (`tar -xzf`) and give the dumps it holds"
+                            .into()
+                    } else {
+                        format!(
+                            "its gzip stream holds {kind}-compressed data, not a dump: \
+                             compressed twice? decompress it (`gunzip -c`) and read the result"
+                        )
+                    },
                 });
             }
         }
@@ -2842,7 +2854,8 @@ pub fn is_piece_pattern(path: &Path) -> bool {
 }
 
 /// The compression other than gzip that `data` starts with the signature of, where it
-/// does: zstd, bzip2, xz, lz4 (frame format) or zip.
+/// does: zstd, bzip2, xz, lz4 (frame format) or zip; or `tar` for a tar archive (its
+/// `ustar` mark at byte 257).
 fn other_compression(data: &[u8]) -> Option<&'static str> {
     if data.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) {
         Some("zstd")
@@ -2854,6 +2867,8 @@ fn other_compression(data: &[u8]) -> Option<&'static str> {
         Some("lz4")
     } else if data.starts_with(b"PK\x03\x04") {
         Some("zip")
+    } else if data.get(257..262) == Some(b"ustar") {
+        Some("tar")
     } else {
         None
     }

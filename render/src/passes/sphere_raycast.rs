@@ -459,6 +459,7 @@ impl AttrPacker {
                             ..s.clone()
                         })
                         .collect(),
+                    palette: look.palette,
                     ..Default::default()
                 };
                 &colours_only
