@@ -1614,9 +1614,8 @@ enum Verdict {
     /// that is newer than the file's own (see [`FrameBytes`]).
     Keep(MdlodFile, Option<SourceInfo>),
     /// Built with the same settings from an input that changed since: kept when the
-    /// frame's bytes are unchanged.
-    /// As `CheckBytes`, with the other input it was converted from where that is still
-    /// there ([`other_input`]): refused if the bytes differ.
+    /// frame's bytes are unchanged; with the other input it was converted from, where
+    /// that is still there ([`other_input`]), refused if they differ.
     CheckBytes(MdlodFile, FrameBytes, Option<PathBuf>),
     Redo,
     /// Converted from another input, which is still there ([`other_input`]): refused.
@@ -3249,19 +3248,19 @@ pub fn batch(
                 match own.and_then(|s| s.bytes.clone().filter(|_| same_name(s, &want))) {
                     Some(b) => Some(Err(b)),
                     None => {
-                        if let Some(old) =
-                            other_input(recorded, job.input, job.own_timestep, &want, &run_inputs)
-                        {
+                        let other =
+                            other_input(recorded, job.input, job.own_timestep, &want, &run_inputs);
+                        match (other, own.and_then(|s| s.bytes.clone())) {
                             // Under another name, the same bytes (a copy, a set joined
                             // into one file) are kept as a moved frame's are.
-                            return match own.and_then(|s| s.bytes.clone()) {
-                                Some(b) => Verdict::CheckBytes(f, b, Some(old)),
-                                None => Verdict::Other(old),
-                            };
+                            (Some(_), Some(b)) => Some(Err(b)),
+                            (Some(old), None) => return Verdict::Other(old),
+                            (None, _) => {
+                                redone.source += 1;
+                                note_count_change(&job, &f);
+                                return Verdict::Redo;
+                            }
                         }
-                        redone.source += 1;
-                        note_count_change(&job, &f);
-                        return Verdict::Redo;
                     }
                 }
             };

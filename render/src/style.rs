@@ -490,9 +490,9 @@ pub enum Palette {
     #[default]
     Default,
     /// Okabe and Ito's seven colours (2008), told apart with the common colour-vision
-    /// deficiencies and in grey print by their lightness: palette slot `k` takes the
-    /// `k mod 7`th (black, their eighth, is left out: shaded black spheres show no
-    /// shape).
+    /// deficiencies, the first three also in grey print ([`OKABE_ITO`]): palette slot
+    /// `k` takes the `k mod 7`th (black, their eighth, is left out: shaded black
+    /// spheres show no shape).
     OkabeIto,
 }
 
