@@ -78,7 +78,13 @@ fn write_json(mut value: serde_json::Value, result: bool) {
     use std::io::Write;
     if let serde_json::Value::Object(map) = &mut value {
         let notes = std::mem::take(&mut *NOTES.lock().unwrap_or_else(|e| e.into_inner()));
-        map.insert("notes".into(), notes.into());
+        // (Notes the object gives itself, `info`'s, come first.)
+        match map.get_mut("notes").and_then(|n| n.as_array_mut()) {
+            Some(own) => own.extend(notes.into_iter().map(Into::into)),
+            None => {
+                map.insert("notes".into(), notes.into());
+            }
+        }
     }
     // The flag is set under the lock of standard output, which the Ctrl-C handler
     // holds while it decides whether to print an object of its own: a run interrupted

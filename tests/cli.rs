@@ -12569,6 +12569,34 @@ fn info_of_an_unmerged_sharded_batch_shows_each_shards_progress() {
             .is_some_and(|n| n.contains("different shard counts (2, 3): a merge refuses them")),
         "{json}"
     );
+    // A frame file a shard lists, moved away: a fault (exit 1, `ok` false), named, with
+    // the shards' description and its notes still given.
+    let listed: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(d.join("dataset.shard-1-of-2.json")).unwrap(),
+    )
+    .unwrap();
+    let moved = d.join(listed["frames"][0]["file"].as_str().unwrap());
+    let aside = dir.path().join("aside.mdlod");
+    std::fs::rename(&moved, &aside).unwrap();
+    let out = mdlod(&["info", s(&d), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["ok"], false);
+    assert_eq!(json["missing_files"].as_array().unwrap().len(), 1);
+    assert!(json["error"]
+        .as_str()
+        .unwrap()
+        .contains("the shards list is not there"));
+    assert!(json["notes"][0]
+        .as_str()
+        .unwrap()
+        .contains("different shard counts"));
+    let e = fails(&["info", s(&d)]);
+    assert!(
+        e.contains("1 frame file the shards list is not there"),
+        "{e}"
+    );
+    std::fs::rename(&aside, &moved).unwrap();
     std::fs::remove_file(&stray).unwrap();
     ok(&["batch", "--merge", s(&d)]);
     let text = ok(&["info", s(&d)]);

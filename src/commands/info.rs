@@ -75,6 +75,9 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
     // The lists of input frames the shards split (a merge refuses shards that saw
     // different ones).
     let mut lists = std::collections::BTreeSet::new();
+    // Frame files a shard lists that are not there (moved away, deleted): a fault, as in
+    // a merged directory, not progress.
+    let mut gone: Vec<String> = Vec::new();
     for name in &names {
         let path = dir.join(name);
         let text = mdlod_format::files::read_capped(&path, mdlod_format::files::MANIFEST_BYTES)
@@ -86,6 +89,12 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
             lists.insert((l.count, l.xxh3.clone()));
         }
         let listed = m.frames.len() as u64;
+        gone.extend(
+            m.frames
+                .iter()
+                .filter(|f| !dir.join(&f.file).exists())
+                .map(|f| f.file.clone()),
+        );
         rows.push((i, n, listed, m.expected_frames, m.failed.len()));
     }
     // Shards of different array sizes (a task resubmitted alone runs as shard 0 of 1).
@@ -99,6 +108,19 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
                 .join(", ")
         )
     });
+    gone.sort_by(|a, b| mdlod_preprocess::batch::natural_cmp(a, b));
+    let gone_error = (!gone.is_empty()).then(|| {
+        format!(
+            "{}: {} frame file{} the shards list {} not there ({}): `mdlod verify {}` \
+             checks every frame",
+            dir.display(),
+            gone.len(),
+            if gone.len() == 1 { "" } else { "s" },
+            if gone.len() == 1 { "is" } else { "are" },
+            gone.join(", "),
+            dir.display()
+        )
+    });
     if args.json {
         let shards: Vec<serde_json::Value> = rows
             .iter()
@@ -107,17 +129,22 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
                         "failed": failed })
             })
             .collect();
-        println!(
-            "{}",
-            serde_json::to_string(&json!({
-                "ok": true,
-                "kind": "shards",
-                "merged": false,
-                "shards": shards,
-                "shard_counts": counts,
-                "notes": mixed.iter().collect::<Vec<_>>(),
-            }))?
-        );
+        let mut v = json!({
+            "ok": true,
+            "kind": "shards",
+            "merged": false,
+            "shards": shards,
+            "shard_counts": counts,
+            "missing_files": gone,
+            "notes": mixed.iter().collect::<Vec<_>>(),
+        });
+        if let Some(e) = gone_error {
+            v["ok"] = false.into();
+            v["error"] = e.clone().into();
+            crate::print_json(v);
+            bail!(e);
+        }
+        println!("{}", serde_json::to_string(&v)?);
         return Ok(true);
     }
     println!(
@@ -185,7 +212,10 @@ fn shards_info(dir: &std::path::Path, args: &Args) -> Result<bool> {
             dir.display()
         );
     }
-    Ok(true)
+    match gone_error {
+        Some(e) => bail!(e),
+        None => Ok(true),
+    }
 }
 
 fn batch_info(dir: &std::path::Path, args: &Args) -> Result<()> {
