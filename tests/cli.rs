@@ -13714,3 +13714,43 @@ fn shard_none_makes_a_whole_run_inside_a_job_array() {
     assert!(whole.join("dataset.json").exists());
     assert!(!whole.join("dataset.shard-0-of-1.json").exists());
 }
+
+/// `--dpi` records the resolution in every PNG written (a still, a turntable's views)
+/// as pixels per metre, for a journal's figure check; the pixels are those without it.
+#[test]
+fn dpi_is_recorded_in_every_png_and_changes_no_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("a.lammpstrj");
+    generate(&["alloy", "-n", "2000"], &dump);
+    let file = dir.path().join("a.mdlod");
+    ok(&["convert", s(&dump), "-o", s(&file)]);
+    let phys = |p: &Path| {
+        let png = std::fs::read(p).unwrap();
+        png.windows(4).position(|w| w == b"pHYs").map(|at| {
+            let at = at + 4;
+            let word = |k: usize| u32::from_be_bytes(png[at + k..at + k + 4].try_into().unwrap());
+            (word(0), word(4), png[at + 8])
+        })
+    };
+    let (plain, print) = (dir.path().join("plain.png"), dir.path().join("print.png"));
+    let base = ["render", s(&file), "--width", "48", "--height", "32"];
+    ok(&[&base[..], &["-o", s(&plain)]].concat());
+    ok(&[&base[..], &["-o", s(&print), "--dpi", "300"]].concat());
+    assert_eq!(phys(&plain), None);
+    assert_eq!(phys(&print), Some((11811, 11811, 1)));
+    assert_eq!(read_png(&plain).2, read_png(&print).2);
+    let turn = dir.path().join("t-%d.png");
+    ok(&[
+        &base[..],
+        &["-o", s(&turn), "--turntable", "2", "--dpi", "600"],
+    ]
+    .concat());
+    for i in 0..2 {
+        assert_eq!(
+            phys(&dir.path().join(format!("t-{i}.png"))),
+            Some((23622, 23622, 1))
+        );
+    }
+    let e = fails(&[&base[..], &["-o", s(&print), "--dpi", "0"]].concat());
+    assert!(e.contains("above 0"), "{e}");
+}

@@ -156,6 +156,7 @@ pub fn run(args: Args) -> Result<()> {
         scale_bar_length: None,
         scale_bar_corner: None,
         text_scale: None,
+        dpi: None,
         scale_bar_unit: None,
         axes: false,
         axes_corner: None,
