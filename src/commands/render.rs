@@ -1028,35 +1028,32 @@ fn coarse_range_notes(
 }
 
 /// Draws a legend or label panel into the PNG `image` at `corner`, enlarged as the
-/// image's size asks; `option` names what asked for it in an error. Returns how many
-/// pixels it covered that showed something other than `background` (sRGB; `None`:
-/// transparent), which is data under the panel.
+/// image's size and `--text-scale` ask; `option` names what asked for it in an error.
+/// Returns how many pixels it covered that showed something other than the background
+/// ([`backdrop`]), which is data under the panel.
 fn draw_panel(
+    args: &Args,
     image: &Path,
     panel: &mdlod_render::legend::Legend,
     corner: LegendCorner,
     option: &str,
-    background: Option<[u8; 3]>,
-    text_scale: Option<u32>,
 ) -> Result<u64> {
     let mut png = mdlod_render::image::RgbaImage::load_png(image)?;
-    let covered = draw_panel_in(
-        &mut png, image, panel, corner, option, background, text_scale,
-    )?;
+    let covered = draw_panel_in(args, &mut png, image, panel, corner, option)?;
     png.save_png(image)?;
     Ok(covered)
 }
 
 /// [`draw_panel`] into the image `png` in memory, which is to be written to `image`.
 fn draw_panel_in(
+    args: &Args,
     png: &mut mdlod_render::image::RgbaImage,
     image: &Path,
     panel: &mdlod_render::legend::Legend,
     corner: LegendCorner,
     option: &str,
-    background: Option<[u8; 3]>,
-    text_scale: Option<u32>,
 ) -> Result<u64> {
+    let (background, text_scale) = (backdrop(args), args.text_scale);
     let corner = legend_corner(corner);
     let scale = panel
         .scale_in(png.width, png.height, text_scale)
@@ -1124,15 +1121,7 @@ impl FramePanels {
                 if j == 0 {
                     self.glyphs.extend(panel.missing_glyphs());
                 }
-                let pixels = draw_panel_in(
-                    png,
-                    image,
-                    panel,
-                    corner,
-                    option,
-                    backdrop(args),
-                    args.text_scale,
-                )?;
+                let pixels = draw_panel_in(args, png, image, panel, corner, option)?;
                 self.covered[j].add(pixels);
             }
         }
@@ -1246,12 +1235,11 @@ fn write_labels(
     for ((image, _), label) in images.iter().zip(&panels) {
         glyphs.extend(label.missing_glyphs());
         covered.add(draw_panel(
+            args,
             image,
             label,
             args.label_corner(),
             "--label",
-            backdrop(args),
-            args.text_scale,
         )?);
     }
     if let Some(note) = covered.note("--label", images.len(), args) {
@@ -3480,14 +3468,7 @@ fn draw_panels(
 ) -> Result<()> {
     let mut covered = Covered::default();
     for (image, panel) in images {
-        covered.add(draw_panel(
-            image,
-            panel,
-            corner,
-            option,
-            backdrop(args),
-            args.text_scale,
-        )?);
+        covered.add(draw_panel(args, image, panel, corner, option)?);
     }
     if let Some(note) = covered.note(option, images.len(), args) {
         println!("{note}");
@@ -3571,12 +3552,11 @@ fn write_legend(
         let mut covered = Covered::default();
         for image in images {
             covered.add(draw_panel(
+                args,
                 image,
                 &drawn_legend,
                 corner,
                 "--legend-in-image",
-                backdrop(args),
-                args.text_scale,
             )?);
         }
         println!(
